@@ -1,0 +1,145 @@
+"""Pinhole camera fixed to the vehicle, looking at the ground plane z = 0 (SPEC section 5).
+
+Frames: vehicle (x forward, y left, z up) and camera (OpenCV: x right, y down, z forward).
+Pixel (col, row) covers [col, col + 1) x [row, row + 1); its centre is at +0.5.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    """Camera intrinsics and mounting.
+
+    Attributes:
+        width_px, height_px: image size [px].
+        hfov_deg: horizontal field of view [deg]; gives fx when ``fx`` is None.
+        fx, fy, cx, cy: intrinsics [px]; None derives them (fx = fy from hfov, principal
+            point at the image centre).
+        mount_height_m: height of the optical centre above the ground [m].
+        mount_forward_m: optical centre ahead of the vehicle origin [m].
+        pitch_deg: downward tilt of the optical axis [deg].
+        yaw_deg: optical axis yaw relative to the vehicle's heading, CCW [deg].
+        max_range_m: rays longer than this (from the optical centre) see nothing (255) [m].
+    """
+
+    width_px: int = 640
+    height_px: int = 480
+    hfov_deg: float = 90.0
+    fx: float | None = None
+    fy: float | None = None
+    cx: float | None = None
+    cy: float | None = None
+    mount_height_m: float = 1.0
+    mount_forward_m: float = 0.0
+    pitch_deg: float = 30.0
+    yaw_deg: float = 0.0
+    max_range_m: float = 30.0
+
+    def __post_init__(self) -> None:
+        if self.width_px <= 0 or self.height_px <= 0:
+            raise ValueError("image size must be > 0")
+        if not 0 < self.hfov_deg < 180:
+            raise ValueError("hfov_deg must be in (0, 180)")
+        if self.mount_height_m <= 0 or self.max_range_m <= 0:
+            raise ValueError("mount_height_m and max_range_m must be > 0")
+        if not -90 < self.pitch_deg < 90:
+            raise ValueError("pitch_deg must be in (-90, 90)")
+
+    @property
+    def intrinsics(self) -> tuple[float, float, float, float]:
+        """(fx, fy, cx, cy) [px]."""
+        fx = self.fx if self.fx is not None else (self.width_px / 2) / math.tan(math.radians(self.hfov_deg) / 2)
+        fy = self.fy if self.fy is not None else fx
+        cx = self.cx if self.cx is not None else self.width_px / 2
+        cy = self.cy if self.cy is not None else self.height_px / 2
+        return fx, fy, cx, cy
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> CameraConfig:
+        return cls(**data)
+
+
+class PinholeCamera:
+    """Projection between vehicle-frame ground points and pixels."""
+
+    def __init__(self, config: CameraConfig | None = None) -> None:
+        self.config = c = config or CameraConfig()
+        self.fx, self.fy, self.cx, self.cy = c.intrinsics
+        p, y = math.radians(c.pitch_deg), math.radians(c.yaw_deg)
+        forward = np.array([math.cos(p) * math.cos(y), math.cos(p) * math.sin(y), -math.sin(p)])
+        right = np.array([math.sin(y), -math.cos(y), 0.0])
+        down = np.cross(forward, right)
+        # Rows: the camera's axes in the vehicle frame, so p_cam = R @ (p_vehicle - t).
+        self.R = np.stack([right, down, forward])
+        self.t = np.array([c.mount_forward_m, 0.0, c.mount_height_m])
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """Image shape (rows, cols)."""
+        return self.config.height_px, self.config.width_px
+
+    def project_ground(self, points_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Project vehicle-frame ground points to pixel coordinates.
+
+        Args:
+            points_v: ground points (x forward, y left) [m], shape (..., 2).
+
+        Returns:
+            uv: continuous pixel coordinates (col, row), shape (..., 2); pixel (i, j) is
+                ``floor(uv)``.
+            visible: shape (...,), True where the point is in front of the camera, inside
+                the image and within ``max_range_m`` of the optical centre.
+        """
+        pts = np.asarray(points_v, dtype=float)
+        p3 = np.concatenate([pts, np.zeros(pts.shape[:-1] + (1,))], axis=-1) - self.t
+        cam = p3 @ self.R.T
+        z = cam[..., 2]
+        in_front = z > 1e-9
+        zs = np.where(in_front, z, 1.0)
+        u = self.fx * cam[..., 0] / zs + self.cx
+        v = self.fy * cam[..., 1] / zs + self.cy
+        c = self.config
+        visible = (
+            in_front
+            & (u >= 0) & (u < c.width_px) & (v >= 0) & (v < c.height_px)
+            & (np.linalg.norm(p3, axis=-1) <= c.max_range_m)
+        )
+        return np.stack([u, v], axis=-1), visible
+
+    def pixel_indices(self, points_v: np.ndarray) -> np.ndarray:
+        """Flat pixel index (row * width + col) of each ground point, -1 where not visible; shape (...,)."""
+        uv, visible = self.project_ground(points_v)
+        col = np.floor(uv[..., 0]).astype(np.int64)
+        row = np.floor(uv[..., 1]).astype(np.int64)
+        return np.where(visible, row * self.config.width_px + col, -1)
+
+    def rays(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Vehicle-frame ray directions through pixel coordinates (u, v), shape (..., 3), unnormalised."""
+        d = np.stack([(u - self.cx) / self.fx, (v - self.cy) / self.fy, np.ones(np.broadcast(u, v).shape)], axis=-1)
+        return d @ self.R
+
+    def back_project(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Ground points (vehicle frame, shape (..., 2)) seen at pixel coordinates ``uv`` (..., 2).
+
+        Returns the points and a mask of rays that hit the ground within range.
+        """
+        uv = np.asarray(uv, dtype=float)
+        d = self.rays(uv[..., 0], uv[..., 1])
+        down = d[..., 2] < -1e-12
+        s = np.where(down, -self.t[2] / np.where(down, d[..., 2], -1.0), 0.0)
+        ground = self.t + s[..., None] * d
+        ok = down & (s * np.linalg.norm(d, axis=-1) <= self.config.max_range_m)
+        return ground[..., :2], ok
+
+    def horizon_row(self) -> float:
+        """Image row of the horizon (meaningful for a level camera, yaw and roll aside)."""
+        return self.cy - self.fy * math.tan(math.radians(self.config.pitch_deg))

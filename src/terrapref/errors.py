@@ -1,0 +1,46 @@
+"""Errors a user can cause, carrying the file and the field they concern.
+
+The CLI prints each :class:`UserError` as one line per problem and exits with code 2; anything
+else reaching the user would be a bug.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One thing wrong with an input: ``field`` is a dotted path such as ``terrain[2].circle.radius``."""
+
+    field: str
+    message: str
+
+    def format(self, source: str) -> str:
+        where = f"{source}: " if source else ""
+        field = f"{self.field}: " if self.field else ""
+        return f"{where}{field}{self.message}"
+
+
+class UserError(Exception):
+    """An error in user input (a file, a flag, a model that does not fit the configuration)."""
+
+    def __init__(self, source: str, problems: Sequence[Problem] | str, field: str = "") -> None:
+        if isinstance(problems, str):
+            problems = [Problem(field, problems)]
+        self.source = source
+        self.problems: tuple[Problem, ...] = tuple(problems)
+        super().__init__("\n".join(self.lines()))
+
+    def lines(self) -> list[str]:
+        """One printable line per problem, each naming the file and the field."""
+        return [p.format(self.source) for p in self.problems]
+
+
+class ScenarioError(UserError):
+    """A scenario file that does not follow ``terrapref-scenario/1``."""
+
+
+class ConfigError(UserError):
+    """A configuration file or value that is invalid."""

@@ -1,0 +1,1 @@
+"""Drawing and reports: the only part of terrapref that imports matplotlib."""

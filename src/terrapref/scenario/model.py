@@ -1,0 +1,100 @@
+"""The typed scenario object (SPEC section 11)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from terrapref.scenario.shapes import Shape
+from terrapref.terrain import ClassTable, PreferenceProfile, default_classes
+
+AVOID = "avoid"
+BEST = "best"
+
+
+@dataclass(frozen=True)
+class TerrainPatch:
+    class_name: str
+    shape: Shape
+
+
+@dataclass(frozen=True)
+class Zone:
+    """A scored situation: what a driver should do inside ``shape`` (SPEC 11, 12)."""
+
+    id: str
+    shape: Shape
+    expect: str
+    label: str = ""
+
+    def resolve_expect(self, present: list[str], profile: PreferenceProfile, classes: ClassTable) -> str:
+        """The expectation as a concrete choice: ``avoid`` or a class name.
+
+        ``best`` becomes the most preferred non-background class in ``present`` (the classes
+        painted inside the zone); with none present it is ``avoid``. The background class
+        means ``avoid``.
+        """
+        if self.expect == BEST:
+            return profile.best(present) or AVOID
+        if self.expect == classes.background:
+            return AVOID
+        return self.expect
+
+
+@dataclass(frozen=True, eq=False)
+class Scenario:
+    """A terrain layout, a reference path, a start pose and the zones to score.
+
+    Attributes:
+        size_m: map extent (x, y) [m]; the lower-left corner is (0, 0).
+        resolution_m: raster cell size [m].
+        waypoints: reference path, shape (N, 2) [m].
+        start: start pose (x [m], y [m], yaw [rad]).
+    """
+
+    name: str
+    size_m: tuple[float, float]
+    resolution_m: float
+    background: str
+    terrain: tuple[TerrainPatch, ...]
+    waypoints: np.ndarray
+    start: tuple[float, float, float]
+    zones: tuple[Zone, ...] = ()
+    description: str = ""
+    source: str = ""
+    classes: ClassTable = field(default_factory=default_classes)
+
+    @property
+    def grid_shape(self) -> tuple[int, int]:
+        """Raster shape (rows along y, columns along x)."""
+        return grid_shape(self.size_m, self.resolution_m)
+
+    def path_length_m(self) -> float:
+        return float(np.linalg.norm(np.diff(self.waypoints, axis=0), axis=1).sum())
+
+    def to_dict(self) -> dict:
+        """The scenario as a ``terrapref-scenario/1`` mapping (round-trips through the loader)."""
+        out: dict = {
+            "format": "terrapref-scenario/1",
+            "name": self.name,
+            "world": {"size_m": list(self.size_m), "resolution_m": self.resolution_m, "background": self.background},
+            "terrain": [{"class": p.class_name, **p.shape.to_dict()} for p in self.terrain],
+            "path": {"waypoints": self.waypoints.tolist()},
+            "start": [self.start[0], self.start[1], math.degrees(self.start[2])],
+            "zones": [
+                {"id": z.id, **({"label": z.label} if z.label else {}), **z.shape.to_dict(), "expect": z.expect}
+                for z in self.zones
+            ],
+        }
+        if self.description:
+            out["description"] = self.description
+        return out
+
+
+def grid_shape(size_m: tuple[float, float], resolution_m: float) -> tuple[int, int]:
+    # A tiny tolerance keeps 100 m / 0.05 m at exactly 2000 cells despite float rounding.
+    nx = max(1, math.ceil(size_m[0] / resolution_m - 1e-9))
+    ny = max(1, math.ceil(size_m[1] / resolution_m - 1e-9))
+    return ny, nx

@@ -1,0 +1,70 @@
+"""Reference-path geometry: arc length, projection with a progress window, cross-track error."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class ReferencePath:
+    """A polyline of waypoints (N, 2) [m] with arc-length parametrisation."""
+
+    def __init__(self, waypoints: np.ndarray) -> None:
+        wp = np.asarray(waypoints, dtype=float)
+        keep = np.ones(len(wp), dtype=bool)
+        keep[1:] = np.any(np.diff(wp, axis=0) != 0, axis=1)  # drop repeated points
+        self.waypoints = wp[keep]
+        self._a = self.waypoints[:-1]
+        self._d = np.diff(self.waypoints, axis=0)
+        self._len = np.linalg.norm(self._d, axis=1)
+        self.s = np.concatenate([[0.0], np.cumsum(self._len)])  # arc length at each waypoint, (N,)
+
+    @property
+    def length_m(self) -> float:
+        return float(self.s[-1])
+
+    def point_at(self, s: float | np.ndarray) -> np.ndarray:
+        """Points (..., 2) at arc lengths ``s`` (clamped to the path)."""
+        s = np.clip(np.asarray(s, dtype=float), 0.0, self.length_m)
+        i = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, len(self._len) - 1)
+        f = (s - self.s[i]) / self._len[i]
+        return self._a[i] + f[..., None] * self._d[i]
+
+    def heading_at(self, s: float | np.ndarray) -> np.ndarray:
+        """Path direction [rad] at arc lengths ``s``."""
+        s = np.clip(np.asarray(s, dtype=float), 0.0, self.length_m)
+        i = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, len(self._len) - 1)
+        return np.arctan2(self._d[i, 1], self._d[i, 0])
+
+    def project(self, xy: np.ndarray, s_lo: float = -np.inf, s_hi: float = np.inf) -> tuple[float, float]:
+        """Nearest point of the path to ``xy`` among arc lengths in [s_lo, s_hi].
+
+        Returns:
+            (s [m], signed lateral offset [m], positive to the left of the path direction).
+        """
+        p = np.asarray(xy, dtype=float)
+        seg_lo, seg_hi = self.s[:-1], self.s[1:]
+        use = (seg_hi >= s_lo) & (seg_lo <= s_hi)
+        if not use.any():
+            use[:] = True
+        idx = np.flatnonzero(use)
+        a, d, ln = self._a[idx], self._d[idx], self._len[idx]
+        t = np.einsum("ij,ij->i", p - a, d) / ln**2
+        t_lo = np.clip((s_lo - seg_lo[idx]) / ln, 0.0, 1.0)
+        t_hi = np.clip((s_hi - seg_lo[idx]) / ln, 0.0, 1.0)
+        t = np.clip(t, t_lo, t_hi)
+        foot = a + t[:, None] * d
+        dist = np.linalg.norm(p - foot, axis=1)
+        k = int(np.argmin(dist))
+        cross = d[k, 0] * (p[1] - a[k, 1]) - d[k, 1] * (p[0] - a[k, 0])
+        return float(seg_lo[idx[k]] + t[k] * ln[k]), float(np.copysign(dist[k], cross))
+
+    def distance_to(self, points: np.ndarray, chunk: int = 4096) -> np.ndarray:
+        """Unsigned distance [m] of each point (N, 2) to the whole polyline, shape (N,)."""
+        pts = np.asarray(points, dtype=float).reshape(-1, 2)
+        out = np.empty(len(pts))
+        for i in range(0, len(pts), chunk):
+            p = pts[i : i + chunk, None, :]
+            t = np.clip(np.einsum("nmj,mj->nm", p - self._a, self._d) / self._len**2, 0.0, 1.0)
+            foot = self._a + t[..., None] * self._d
+            out[i : i + chunk] = np.linalg.norm(p - foot, axis=-1).min(axis=1)
+        return out

@@ -1,0 +1,187 @@
+"""The simulation loop: a vehicle ticking at 30 Hz and a camera frame, with its pose, at 10 Hz.
+
+Each camera frame is one decision: a driver sees the :class:`Frame` and returns a command,
+which the vehicle's controller holds until the next frame (SPEC section 4).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer
+from terrapref.scenario import Scenario
+from terrapref.scenario.path import ReferencePath
+from terrapref.vehicle import Command, Pose, Vehicle, VehicleConfig
+from terrapref.world import WorldMap, rasterise
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Loop timing and episode limits.
+
+    Attributes:
+        camera_rate_hz: segmentation frames (and decisions) per second [Hz]; must divide the
+            vehicle's control rate.
+        goal_radius_m: the run is complete within this distance of the last waypoint [m].
+        time_limit_s: episode time limit [s]; None gives 2 x path length / max speed + 60 s.
+        vehicle: the vehicle's controller rate and limits.
+    """
+
+    camera_rate_hz: float = 10.0
+    goal_radius_m: float = 2.0
+    time_limit_s: float | None = None
+    vehicle: VehicleConfig = field(default_factory=VehicleConfig)
+
+    def __post_init__(self) -> None:
+        ratio = self.vehicle.control_rate_hz / self.camera_rate_hz
+        if self.camera_rate_hz <= 0 or abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+            raise ValueError("camera_rate_hz must divide the vehicle's control rate")
+
+    @property
+    def ticks_per_frame(self) -> int:
+        return round(self.vehicle.control_rate_hz / self.camera_rate_hz)
+
+
+@dataclass(frozen=True)
+class Frame:
+    """What a driver receives at each camera frame.
+
+    Attributes:
+        index: frame number since reset.
+        time_s: simulation time [s].
+        image: segmentation image, shape (H, W) uint8 class ids.
+        pose: vehicle pose in the world frame.
+        waypoints: the reference path, shape (N, 2) [m].
+    """
+
+    index: int
+    time_s: float
+    image: np.ndarray
+    pose: Pose
+    waypoints: np.ndarray
+
+
+class Driver(Protocol):
+    """Anything that turns frames into commands: the synthetic demonstrator, a human, a planner."""
+
+    def reset(self, scenario: Scenario, rng: np.random.Generator) -> None: ...
+
+    def act(self, frame: Frame) -> Command: ...
+
+
+class Simulation:
+    """The world, the vehicle and the camera of one scenario, stepped one camera frame at a time."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        camera: CameraConfig | None = None,
+        config: SimConfig | None = None,
+        world: WorldMap | None = None,
+    ) -> None:
+        self.scenario = scenario
+        self.config = config or SimConfig()
+        self.world = world if world is not None else rasterise(scenario)
+        self.camera = PinholeCamera(camera)
+        self.renderer = SegmentationRenderer(self.camera, self.world)
+        self.path = ReferencePath(scenario.waypoints)
+        self._lethal = np.zeros(256, dtype=bool)
+        self._lethal[list(scenario.classes.lethal_ids)] = True
+        limit = self.config.time_limit_s
+        self.time_limit_s = limit if limit is not None else 2.0 * self.path.length_m / self.config.vehicle.max_speed_mps + 60.0
+        self.reset()
+
+    def reset(self, pose: Pose | None = None) -> Frame:
+        """Put the vehicle at ``pose`` (default: the scenario's start) and render the first frame."""
+        self.vehicle = Vehicle(Pose(*(pose or self.scenario.start)), self.config.vehicle)
+        self.tick = 0
+        self.frame_index = 0
+        self.collisions = 0
+        self.progress_s = self.path.project(self.vehicle.pose[:2], 0.0, 5.0)[0]
+        self._on_lethal = self._is_lethal(self.vehicle.pose)
+        self.trace: list[Pose] = [self.vehicle.pose]
+        self.commands: list[Command] = []
+        return self.frame()
+
+    @property
+    def time_s(self) -> float:
+        return self.tick / self.config.vehicle.control_rate_hz
+
+    def frame(self) -> Frame:
+        pose = self.vehicle.pose
+        return Frame(self.frame_index, self.time_s, self.renderer.render(pose), pose, self.scenario.waypoints)
+
+    def _is_lethal(self, pose: Pose) -> bool:
+        return bool(self._lethal[self.world.class_at(np.array(pose[:2]))])
+
+    def step(self, command: Command) -> Frame:
+        """Hold ``command`` for one camera period (several controller ticks) and render the next frame."""
+        self.vehicle.set_command(Command(*command))
+        self.commands.append(self.vehicle.command)
+        for _ in range(self.config.ticks_per_frame):
+            pose = self.vehicle.tick()
+            self.tick += 1
+            self.trace.append(pose)
+            lethal = self._is_lethal(pose)
+            if lethal and not self._on_lethal:
+                self.collisions += 1
+            self._on_lethal = lethal
+        # Progress along the path, searched in a window so a path passing near itself cannot capture it.
+        self.progress_s = max(self.progress_s, self.path.project(self.vehicle.pose[:2], self.progress_s - 2.0, self.progress_s + 10.0)[0])
+        self.frame_index += 1
+        return self.frame()
+
+    @property
+    def reached_goal(self) -> bool:
+        end = self.path.waypoints[-1]
+        x, y, _ = self.vehicle.pose
+        near = math.hypot(x - end[0], y - end[1]) <= self.config.goal_radius_m
+        return near and self.progress_s >= 0.5 * self.path.length_m
+
+    @property
+    def timed_out(self) -> bool:
+        return self.time_s >= self.time_limit_s
+
+    @property
+    def done(self) -> bool:
+        return self.reached_goal or self.timed_out
+
+
+@dataclass
+class EpisodeLog:
+    """A driven run: the 30 Hz pose trace and the per-frame commands.
+
+    Attributes:
+        trace: poses at every controller tick, shape (T, 3) [m, m, rad].
+        commands: command held after each frame, shape (F, 2) [m/s, rad/s].
+        completed: reached the last waypoint before the time limit.
+        collisions: entries onto lethal terrain.
+        duration_s: simulated time [s].
+    """
+
+    scenario: str
+    trace: np.ndarray
+    commands: np.ndarray
+    completed: bool
+    collisions: int
+    duration_s: float
+
+
+def run_episode(sim: Simulation, driver: Driver, rng: np.random.Generator, start: Pose | None = None) -> EpisodeLog:
+    """Drive one episode to the goal or the time limit."""
+    frame = sim.reset(start)
+    driver.reset(sim.scenario, rng)
+    while not sim.done:
+        frame = sim.step(driver.act(frame))
+    return EpisodeLog(
+        scenario=sim.scenario.name,
+        trace=np.array(sim.trace, dtype=float),
+        commands=np.array(sim.commands, dtype=float).reshape(-1, 2),
+        completed=sim.reached_goal,
+        collisions=sim.collisions,
+        duration_s=sim.time_s,
+    )

@@ -1,0 +1,50 @@
+"""Preference profiles: an ordered list of terrain classes, most preferred first."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+from terrapref.errors import ConfigError
+from terrapref.terrain.classes import ClassTable, default_classes
+
+
+@dataclass(frozen=True)
+class PreferenceProfile:
+    """Ordered feature classes, most preferred first; the background class beats them all (SPEC 3)."""
+
+    order: tuple[str, ...]
+
+    @classmethod
+    def parse(cls, text: str | Sequence[str], classes: ClassTable | None = None, source: str = "--profile") -> PreferenceProfile:
+        """Parse ``"mud,rock,water,non_traversable"`` (or a list) and check it against the class table.
+
+        The profile must name every feature class exactly once, so that any zone's ``best``
+        resolves to one class.
+        """
+        classes = classes or default_classes()
+        names = [s.strip() for s in text.split(",")] if isinstance(text, str) else list(text)
+        names = [n for n in names if n]
+        unknown = [n for n in names if n not in classes.feature_names]
+        if unknown:
+            raise ConfigError(source, f"unknown or background class {unknown[0]!r}; expected a permutation of {', '.join(classes.feature_names)}")
+        if sorted(names) != sorted(classes.feature_names):
+            raise ConfigError(source, f"must list each of {', '.join(classes.feature_names)} exactly once")
+        return cls(tuple(names))
+
+    @classmethod
+    def default(cls, classes: ClassTable | None = None) -> PreferenceProfile:
+        classes = classes or default_classes()
+        return cls(classes.profile)
+
+    def rank(self, name: str) -> int:
+        """0 for the most preferred class; lower is better."""
+        return self.order.index(name)
+
+    def best(self, present: Iterable[str]) -> str | None:
+        """The most preferred of ``present`` (feature classes), or None if none is present."""
+        candidates = [n for n in present if n in self.order]
+        return min(candidates, key=self.rank) if candidates else None
+
+    def __str__(self) -> str:
+        return ",".join(self.order)

@@ -1,0 +1,57 @@
+"""The control set A (SPEC section 6): m discrete (v, w) commands sharing one index with S."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class ControlSet:
+    """Discrete commands: one forward speed and a grid of yaw rates.
+
+    Attributes:
+        v_mps: forward speed of every command [m/s] (paper: 1 m/s).
+        w_rps: yaw rates [rad/s], ascending (paper: -1.0, -0.9, ..., 1.0).
+    """
+
+    v_mps: float = 1.0
+    w_rps: tuple[float, ...] = tuple(round(-1.0 + 0.1 * i, 10) for i in range(21))
+
+    def __post_init__(self) -> None:
+        w = np.asarray(self.w_rps)
+        if len(w) < 2 or np.any(np.diff(w) <= 0):
+            raise ValueError("w_rps must have at least 2 strictly ascending values")
+        if not self.v_mps > 0:
+            raise ValueError("v_mps must be > 0")
+
+    @classmethod
+    def uniform(cls, m: int = 21, v_mps: float = 1.0, w_max_rps: float = 1.0) -> ControlSet:
+        """m yaw rates evenly spaced over [-w_max, w_max]."""
+        return cls(v_mps, tuple(float(x) for x in np.round(np.linspace(-w_max_rps, w_max_rps, m), 10)))
+
+    @property
+    def m(self) -> int:
+        return len(self.w_rps)
+
+    def command(self, index: int) -> tuple[float, float]:
+        """(v [m/s], w [rad/s]) of one index."""
+        return self.v_mps, self.w_rps[index]
+
+    def label_of(self, w: float | np.ndarray) -> int | np.ndarray:
+        """Index of the nearest yaw rate to a continuous ``w``; ties go toward w = 0."""
+        grid = np.asarray(self.w_rps)
+        w_arr = np.asarray(w, dtype=float)
+        d = np.abs(w_arr[..., None] - grid)
+        # Among equally near grid values prefer the one with the smaller |w| (SPEC 6).
+        key = np.round(d, 9) * 1e3 + np.abs(grid) * 1e-3
+        idx = np.argmin(key, axis=-1)
+        return int(idx) if np.ndim(w) == 0 else idx
+
+    def to_dict(self) -> dict:
+        return {"v_mps": self.v_mps, "w_rps": list(self.w_rps)}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> ControlSet:
+        return cls(float(data["v_mps"]), tuple(float(w) for w in data["w_rps"]))

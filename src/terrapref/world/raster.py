@@ -1,0 +1,72 @@
+"""Rasterise a scenario's terrain shapes into a class-id grid and look classes up by position."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from terrapref.scenario.model import Scenario
+from terrapref.scenario.shapes import Shape
+from terrapref.terrain import UNKNOWN, ClassTable
+
+
+@dataclass(frozen=True, eq=False)
+class WorldMap:
+    """A class raster over the map ``[0, width] x [0, height]``.
+
+    Attributes:
+        raster: class ids, shape (ny, nx) uint8; row r covers y in [r*res, (r+1)*res),
+            column c covers x in [c*res, (c+1)*res) (row 0 is the southern edge).
+        resolution_m: cell size [m].
+        classes: the class table the ids refer to.
+    """
+
+    raster: np.ndarray
+    resolution_m: float
+    classes: ClassTable
+
+    @property
+    def size_m(self) -> tuple[float, float]:
+        ny, nx = self.raster.shape
+        return nx * self.resolution_m, ny * self.resolution_m
+
+    def cells_of(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Cell indices (row, col) of world points (..., 2) and a mask of those on the map."""
+        col = np.floor(xy[..., 0] / self.resolution_m).astype(np.int64)
+        row = np.floor(xy[..., 1] / self.resolution_m).astype(np.int64)
+        ny, nx = self.raster.shape
+        inside = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
+        return row, col, inside
+
+    def class_at(self, xy: np.ndarray) -> np.ndarray:
+        """Class id at world points (..., 2) [m]; 255 (unknown) off the map."""
+        row, col, inside = self.cells_of(np.asarray(xy, dtype=float))
+        out = np.full(row.shape, UNKNOWN, dtype=np.uint8)
+        out[inside] = self.raster[row[inside], col[inside]]
+        return out
+
+
+def paint(raster: np.ndarray, shape: Shape, class_id: int, resolution_m: float) -> None:
+    """Set every cell whose centre lies inside ``shape`` to ``class_id`` (in place)."""
+    ny, nx = raster.shape
+    x0, y0, x1, y1 = shape.bounds()
+    c0, c1 = max(0, math.floor(x0 / resolution_m)), min(nx, math.ceil(x1 / resolution_m) + 1)
+    r0, r1 = max(0, math.floor(y0 / resolution_m)), min(ny, math.ceil(y1 / resolution_m) + 1)
+    if c0 >= c1 or r0 >= r1:
+        return
+    cx = (np.arange(c0, c1) + 0.5) * resolution_m
+    cy = (np.arange(r0, r1) + 0.5) * resolution_m
+    gx, gy = np.meshgrid(cx, cy)
+    inside = shape.contains(np.stack([gx.ravel(), gy.ravel()], axis=1)).reshape(gx.shape)
+    raster[r0:r1, c0:c1][inside] = class_id
+
+
+def rasterise(scenario: Scenario) -> WorldMap:
+    """Paint the scenario's terrain, in order, over its background class."""
+    classes = scenario.classes
+    raster = np.full(scenario.grid_shape, classes.id_of(scenario.background), dtype=np.uint8)
+    for patch in scenario.terrain:
+        paint(raster, patch.shape, classes.id_of(patch.class_name), scenario.resolution_m)
+    return WorldMap(raster, scenario.resolution_m, classes)

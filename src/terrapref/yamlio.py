@@ -1,0 +1,59 @@
+"""Safe reading of YAML files, turning every parse failure into a one-line :class:`UserError`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from terrapref.errors import UserError
+
+MAX_FILE_BYTES = 50_000_000
+
+
+def read_yaml_mapping(path: str | Path, expected_format: str | None = None) -> dict[str, Any]:
+    """Read a YAML file whose top level is a mapping, optionally checking its ``format`` key.
+
+    Raises:
+        UserError: unreadable, empty, not UTF-8 text, malformed YAML, not a mapping, wrong format.
+    """
+    source = str(path)
+    try:
+        raw = Path(path).read_bytes()
+    except FileNotFoundError:
+        raise UserError(source, "no such file") from None
+    except IsADirectoryError:
+        raise UserError(source, "is a directory, expected a file") from None
+    except OSError as exc:
+        raise UserError(source, f"cannot read: {exc.strerror}") from None
+    if len(raw) > MAX_FILE_BYTES:
+        raise UserError(source, f"file too large ({len(raw)} bytes)")
+    if not raw.strip():
+        raise UserError(source, "empty file")
+    if b"\x00" in raw:
+        raise UserError(source, "binary data, expected a YAML text file")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise UserError(source, "not UTF-8 text, expected a YAML file") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        problem = getattr(exc, "problem", None) or "invalid syntax"
+        raise UserError(source, f"malformed YAML{where}: {problem}") from None
+    except RecursionError:
+        raise UserError(source, "malformed YAML: nested too deeply") from None
+    if not isinstance(data, dict):
+        raise UserError(source, f"expected a mapping at the top level, got {_type_name(data)}")
+    if expected_format is not None and data.get("format") != expected_format:
+        got = data.get("format")
+        msg = "missing" if got is None else f"{got!r} is not supported"
+        raise UserError(source, f"{msg}; expected {expected_format!r}", field="format")
+    return data
+
+
+def _type_name(value: object) -> str:
+    return {type(None): "nothing", list: "a list", str: "a string", int: "a number", float: "a number", bool: "a boolean"}.get(type(value), type(value).__name__)
