@@ -39,6 +39,8 @@ def _cmd_render(args: argparse.Namespace) -> int:
     from terrapref.vehicle import Pose
     from terrapref.world import rasterise
 
+    if args.pose is not None and not all(math.isfinite(v) for v in args.pose):
+        raise UserError("--pose", "X, Y and YAW_DEG must be finite numbers")
     scenario = resolve_scenario(args.scenario)
     x, y, yaw_deg = args.pose if args.pose is not None else (scenario.start[0], scenario.start[1], math.degrees(scenario.start[2]))
     renderer = SegmentationRenderer(PinholeCamera(), rasterise(scenario))

@@ -46,6 +46,9 @@ def read_yaml_mapping(path: str | Path, expected_format: str | None = None) -> d
         raise UserError(source, f"malformed YAML{where}: {problem}") from None
     except RecursionError:
         raise UserError(source, "malformed YAML: nested too deeply") from None
+    except (ValueError, TypeError, KeyError, AttributeError) as exc:
+        # PyYAML's constructors raise these for bad scalars such as `2020-13-45` or `!!int abc`.
+        raise UserError(source, f"malformed YAML: a value cannot be read ({type(exc).__name__}: {exc})") from None
     if not isinstance(data, dict):
         raise UserError(source, f"expected a mapping at the top level, got {_type_name(data)}")
     if expected_format is not None and data.get("format") != expected_format:

@@ -15,6 +15,8 @@ from terrapref.terrain import ClassTable
 def write_png_atomic(path: str | Path, image: np.ndarray, compress_level: int = 6) -> None:
     """Write a PNG via a temporary file and rename, so a reader never sees half a file."""
     path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(21, "is a directory, expected a file name", str(path))
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:

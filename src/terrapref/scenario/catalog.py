@@ -20,7 +20,7 @@ def packaged_scenarios() -> list[str]:
 def scenario_path(name_or_path: str) -> Path:
     """A packaged scenario's file, or ``name_or_path`` itself when it names an existing file."""
     p = Path(name_or_path)
-    if p.suffix in (".yaml", ".yml") or p.exists() or "/" in name_or_path:
+    if p.suffix in (".yaml", ".yml") or "/" in name_or_path or _exists(p):
         return p
     if name_or_path in packaged_scenarios():
         ref = resources.files("terrapref") / "data" / "scenarios" / f"{name_or_path}.yaml"
@@ -31,3 +31,11 @@ def scenario_path(name_or_path: str) -> Path:
 def resolve_scenario(name_or_path: str, classes: ClassTable | None = None) -> Scenario:
     """Load a scenario by packaged name (``train_course``) or by path."""
     return load_scenario(scenario_path(name_or_path), classes)
+
+
+def _exists(p: Path) -> bool:
+    # A name the OS refuses (too long, ...) is left for the loader to report as unreadable.
+    try:
+        return p.exists()
+    except OSError:
+        return True

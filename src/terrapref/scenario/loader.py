@@ -17,7 +17,7 @@ from terrapref.yamlio import read_yaml_mapping
 
 FORMAT = "terrapref-scenario/1"
 MAX_CELLS = 100_000_000
-_NAME = re.compile(r"^[A-Za-z0-9_-]+$")
+_NAME = re.compile(r"[A-Za-z0-9_-]+")
 _TOP_KEYS = {"format", "name", "description", "world", "terrain", "path", "start", "zones"}
 _SHAPE_KEYS = ("polygon", "circle", "rectangle")
 
@@ -39,8 +39,8 @@ class _Checker:
         for key in sorted(required - set(value), key=str):
             self.fail(_join(field, key), "missing")
             ok = False
-        for key in sorted(set(value) - required - set(optional), key=str):
-            self.fail(_join(field, str(key)), "unknown key")
+        for key in sorted(set(value) - required - set(optional), key=_key_text):
+            self.fail(_join(field, _key_text(key)), "unknown key")
             ok = False
         return value if ok else None
 
@@ -48,7 +48,11 @@ class _Checker:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             self.fail(field, f"expected a number, got {_describe(value)}")
             return None
-        x = float(value)
+        try:
+            x = float(value)
+        except OverflowError:  # an integer beyond the float range
+            self.fail(field, "is too large")
+            return None
         if not math.isfinite(x):
             self.fail(field, "must be finite (got NaN or infinity)")
             return None
@@ -97,10 +101,14 @@ class _Checker:
             pts = self.points(spec, f, 3)
             if pts is not None:
                 distinct = np.unique(pts, axis=0)
-                area = 0.5 * abs(float(np.dot(pts[:, 0], np.roll(pts[:, 1], -1)) - np.dot(pts[:, 1], np.roll(pts[:, 0], -1))))
+                # Rounding in the shoelace sum grows with the coordinates squared, so collinear
+                # vertices far from the origin leave a tiny area: judge it on scaled vertices.
+                scale = max(1.0, float(np.abs(pts).max()))
+                q = pts / scale
+                area = 0.5 * abs(float(np.dot(q[:, 0], np.roll(q[:, 1], -1)) - np.dot(q[:, 1], np.roll(q[:, 0], -1))))
                 if len(distinct) < 3:
                     self.fail(f, f"needs at least 3 distinct vertices, got {len(distinct)}")
-                elif area <= 1e-9:
+                elif area <= max(1e-12, 1e-9 / scale / scale):
                     self.fail(f, "has zero area (vertices are collinear)")
                 else:
                     shape = Polygon(pts)
@@ -131,13 +139,28 @@ def _join(field: str, key: str) -> str:
     return f"{field}.{key}" if field else key
 
 
+def _repr(value: Any) -> str:
+    """``repr(value)``, safe for integers too long to print (Python limits int-to-text conversion)."""
+    try:
+        return repr(value)
+    except ValueError:
+        return "a very large number"
+
+
+def _key_text(key: Any) -> str:
+    """A mapping key as it appears in a field path, kept on one printable line."""
+    text = key if isinstance(key, str) else _repr(key)
+    return text if text.isprintable() else repr(text)
+
+
 def _describe(value: Any) -> str:
     if value is None:
         return "nothing"
     if isinstance(value, bool):
         return f"boolean {value}"
     if isinstance(value, (int, float)):
-        return f"number {value}"
+        text = _repr(value)
+        return f"number {text}" if len(text) < 40 else "a very large number"
     if isinstance(value, str):
         return f"string {value!r}" if len(value) < 40 else "a string"
     if isinstance(value, list):
@@ -161,13 +184,13 @@ def parse_scenario(data: dict[str, Any], source: str = "", classes: ClassTable |
     c = _Checker()
     if data.get("format") != FORMAT:
         got = data.get("format")
-        c.fail("format", f"{'missing' if got is None else repr(got) + ' is not supported'}; expected {FORMAT!r}")
+        c.fail("format", f"{'missing' if got is None else _repr(got) + ' is not supported'}; expected {FORMAT!r}")
         raise ScenarioError(source, c.problems)
     top = c.mapping(data, "", {"format", "name", "world", "path"}, _TOP_KEYS - {"format", "name", "world", "path"})
     data = data if top is None else top
 
     name = c.text(data.get("name"), "name") if "name" in data else None
-    if name is not None and not _NAME.match(name):
+    if name is not None and not _NAME.fullmatch(name):
         c.fail("name", "must match [A-Za-z0-9_-]+")
     description = data.get("description", "")
     if not isinstance(description, str):
@@ -181,14 +204,19 @@ def parse_scenario(data: dict[str, Any], source: str = "", classes: ClassTable |
         resolution = c.number(world["resolution_m"], "world.resolution_m", positive=True)
         background = c.class_name(world["background"], "world.background", classes)
         if size is not None and resolution is not None:
-            ny, nx = grid_shape((size[0], size[1]), resolution)
-            if nx * ny > MAX_CELLS:
-                c.fail(
-                    "world",
-                    f"raster would have {nx} x {ny} = {nx * ny:,} cells ({nx * ny / 1e9:.1f} GB), more than the limit of {MAX_CELLS:,}; use a coarser resolution_m or a smaller size_m",
-                )
+            if size[0] / resolution * (size[1] / resolution) > 1e18:
+                # Past 10^18 an exact count is unreadable (and past ~10^308 it overflows); give the magnitude.
+                digits = math.log10(size[0]) + math.log10(size[1]) - 2 * math.log10(resolution)
+                c.fail("world", f"raster would have about 10^{digits:.0f} cells, more than the limit of {MAX_CELLS:,}; use a coarser resolution_m or a smaller size_m")
             else:
-                size_m = (size[0], size[1])
+                ny, nx = grid_shape((size[0], size[1]), resolution)
+                if nx * ny > MAX_CELLS:
+                    c.fail(
+                        "world",
+                        f"raster would have {nx} x {ny} = {nx * ny:,} cells ({nx * ny / 1e9:.1f} GB), more than the limit of {MAX_CELLS:,}; use a coarser resolution_m or a smaller size_m",
+                    )
+                else:
+                    size_m = (size[0], size[1])
 
     terrain: list[TerrainPatch] = []
     raw_terrain = data.get("terrain", [])
@@ -252,7 +280,7 @@ def parse_scenario(data: dict[str, Any], source: str = "", classes: ClassTable |
         if isinstance(zid, bool) or not isinstance(zid, (str, int)):
             c.fail(f"{f}.id", f"expected a string, got {_describe(zid)}")
             continue
-        zid = str(zid)
+        zid = zid if isinstance(zid, str) else _repr(zid)
         if zid in seen:
             c.fail(f"{f}.id", f"duplicate zone id {zid!r} (also zones[{seen[zid]}])")
             continue
@@ -262,7 +290,7 @@ def parse_scenario(data: dict[str, Any], source: str = "", classes: ClassTable |
             c.fail(f"{f}.label", f"expected a string, got {_describe(label)}")
         expect = item["expect"]
         if not isinstance(expect, str) or expect not in expect_ok:
-            c.fail(f"{f}.expect", f"{expect!r} is neither 'avoid', 'best' nor a known class ({', '.join(classes.names)})")
+            c.fail(f"{f}.expect", f"{_repr(expect)} is neither 'avoid', 'best' nor a known class ({', '.join(classes.names)})")
             expect = None
         shape = c.shape(item, f, size_m)
         if shape is not None and expect is not None and isinstance(label, str):

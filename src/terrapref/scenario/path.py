@@ -17,6 +17,7 @@ class ReferencePath:
         self._d = np.diff(self.waypoints, axis=0)
         self._len = np.linalg.norm(self._d, axis=1)
         self.s = np.concatenate([[0.0], np.cumsum(self._len)])  # arc length at each waypoint, (N,)
+        self._resampled: dict[float, tuple[np.ndarray, np.ndarray]] = {}
 
     @property
     def length_m(self) -> float:
@@ -24,10 +25,24 @@ class ReferencePath:
 
     def point_at(self, s: float | np.ndarray) -> np.ndarray:
         """Points (..., 2) at arc lengths ``s`` (clamped to the path)."""
+        if np.ndim(s) == 0:  # scalar fast path: used once per frame in the control loop
+            sf = min(max(float(s), 0.0), self.length_m)
+            i = min(max(int(np.searchsorted(self.s, sf, side="right")) - 1, 0), len(self._len) - 1)
+            return self._a[i] + ((sf - self.s[i]) / self._len[i]) * self._d[i]
         s = np.clip(np.asarray(s, dtype=float), 0.0, self.length_m)
         i = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, len(self._len) - 1)
         f = (s - self.s[i]) / self._len[i]
         return self._a[i] + f[..., None] * self._d[i]
+
+    def resampled(self, spacing_m: float) -> tuple[np.ndarray, np.ndarray]:
+        """Points every ``spacing_m`` along the path (and its end): (points (K, 2), arc lengths (K,)).
+
+        Cached per spacing; nearest-waypoint searches use these rather than sparse waypoints.
+        """
+        if spacing_m not in self._resampled:
+            s = np.append(np.arange(0.0, self.length_m, spacing_m), self.length_m)
+            self._resampled[spacing_m] = (self.point_at(s), s)
+        return self._resampled[spacing_m]
 
     def heading_at(self, s: float | np.ndarray) -> np.ndarray:
         """Path direction [rad] at arc lengths ``s``."""
@@ -68,3 +83,30 @@ class ReferencePath:
             foot = self._a + t[..., None] * self._d
             out[i : i + chunk] = np.linalg.norm(p - foot, axis=-1).min(axis=1)
         return out
+
+
+class PathTracker:
+    """Progress along a path for a moving vehicle: each update searches only a window round the
+    previous progress, so a path that passes near itself, or behind the vehicle, cannot capture it.
+
+    Args:
+        path: the reference path.
+        back_m, ahead_m: search window behind and ahead of the previous progress [m].
+    """
+
+    def __init__(self, path: ReferencePath, back_m: float = 2.0, ahead_m: float = 8.0) -> None:
+        self.path = path
+        self.back_m = back_m
+        self.ahead_m = ahead_m
+        self.s: float | None = None
+
+    def reset(self) -> None:
+        self.s = None
+
+    def update(self, xy: np.ndarray) -> float:
+        """New progress [m] for the vehicle at ``xy``; it never moves backwards."""
+        if self.s is None:
+            self.s = self.path.project(xy, 0.0, self.ahead_m)[0]
+        else:
+            self.s = max(self.s, self.path.project(xy, self.s - self.back_m, self.s + self.ahead_m)[0])
+        return self.s

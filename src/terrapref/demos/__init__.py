@@ -1,0 +1,1 @@
+"""Demonstrations: recordings, the synthetic driver standing in for a human, and featurisation."""

@@ -1,0 +1,193 @@
+"""The synthetic demonstrator: a stand-in for a human driver (SPEC 10).
+
+It drives the way a person with a gamepad does, not the way an optimal planner does:
+
+- It looks along the reference path only ``reaction_distance_m`` ahead (a person reacts to a
+  patch a few seconds away, not to the whole map), so that when it starts to turn, the reason
+  is already on the planner's trajectories (SPEC 15: a clairvoyant driver teaches nothing).
+- Within that window it picks one lateral offset from the path ("I'll pass left of the
+  puddle"), trading the terrain its 1.2 m wide footprint would cross, costed by its preference
+  profile, against a quadratic cost of leaving the path. It never re-plans into a circle: v is
+  fixed and it always commits to a side and drives forward.
+- It steers toward the offset path by pure pursuit, through a stick that rests at exactly zero
+  when no correction is needed, moves at a limited rate, lags by a reaction delay, and shakes a
+  little only while it is deflected.
+
+It reads the map (privileged knowledge) and never uses the planner's feature pipeline.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from terrapref.scenario import Scenario
+from terrapref.scenario.path import PathTracker, ReferencePath
+from terrapref.sim.loop import Frame
+from terrapref.terrain import PreferenceProfile
+from terrapref.vehicle import Command
+from terrapref.world import WorldMap, rasterise
+
+
+@dataclass(frozen=True)
+class ExpertConfig:
+    """Parameters of the synthetic driver.
+
+    Attributes:
+        profile: preferred feature classes, best first (the background class beats all).
+        speed_mps: forward speed [m/s] (the stick's v).
+        reaction_distance_m: terrain on the path closer than this ahead triggers a detour [m].
+        decision_extent_m: once triggered, the detour is planned over terrain this much
+            further ahead too, so that the whole patch, not its near edge, is weighed [m].
+        lookbehind_m: terrain this far behind the vehicle still holds the detour (the body) [m].
+        half_width_m: half the vehicle's footprint width [m].
+        lethal_margin_m: extra clearance kept from lethal terrain [m].
+        max_offset_m: largest lateral offset considered [m].
+        offset_step_m: resolution of the candidate offsets [m].
+        deviation_cost: cost per metre of detour per square metre of offset [1/m^2].
+        rank_cost: terrain cost per metre of the most preferred class; each later class in
+            the profile costs ``rank_growth`` times more; lethal classes cost ``lethal_cost``.
+        switch_margin: a new offset must be this much cheaper (relative) to replace the held one.
+        pursuit_lookahead_m: pure-pursuit look-ahead distance [m].
+        max_yaw_rate_rps: stick range [rad/s].
+        stick_rate_rps2: how fast the stick can move [rad/s per s].
+        deadzone_rps: corrections below this leave the stick at zero [rad/s].
+        reaction_delay_s: delay between seeing and the stick moving [s].
+        stick_noise_rps: std of the hand's tremor while the stick is deflected [rad/s].
+    """
+
+    profile: tuple[str, ...] = ("mud", "rock", "water", "non_traversable")
+    speed_mps: float = 1.0
+    reaction_distance_m: float = 5.0
+    decision_extent_m: float = 6.0
+    lookbehind_m: float = 1.0
+    half_width_m: float = 0.6
+    lethal_margin_m: float = 0.4
+    max_offset_m: float = 8.0
+    offset_step_m: float = 0.2
+    deviation_cost: float = 0.08
+    rank_cost: float = 1.0
+    rank_growth: float = 1.5
+    lethal_cost: float = 1000.0
+    switch_margin: float = 0.15
+    pursuit_lookahead_m: float = 2.5
+    max_yaw_rate_rps: float = 1.0
+    stick_rate_rps2: float = 4.0
+    deadzone_rps: float = 0.06
+    reaction_delay_s: float = 0.2
+    stick_noise_rps: float = 0.02
+
+    def to_dict(self) -> dict:
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
+
+
+class ExpertDriver:
+    """A seeded, human-like driver that follows the path and its terrain preference."""
+
+    sample_step_m = 0.25
+
+    def __init__(self, config: ExpertConfig | None = None, camera_rate_hz: float = 10.0) -> None:
+        self.config = config or ExpertConfig()
+        self.dt = 1.0 / camera_rate_hz
+        c = self.config
+        self.offsets = np.round(np.arange(-c.max_offset_m, c.max_offset_m + 1e-9, c.offset_step_m), 6)
+        foot = np.linspace(-c.half_width_m, c.half_width_m, 5)
+        lethal_foot = np.linspace(-c.half_width_m - c.lethal_margin_m, c.half_width_m + c.lethal_margin_m, 7)
+        self._foot, self._lethal_foot = foot, lethal_foot
+        self._s_rel = np.arange(-c.lookbehind_m, c.reaction_distance_m + c.decision_extent_m + 1e-9, self.sample_step_m)
+        self._in_reach = self._s_rel <= c.reaction_distance_m
+
+    # -- episode ---------------------------------------------------------------------------
+
+    def reset(self, scenario: Scenario, rng: np.random.Generator, world: WorldMap | None = None) -> None:
+        c = self.config
+        self.rng = rng
+        self.world = world if world is not None else rasterise(scenario)
+        self.path = ReferencePath(scenario.waypoints)
+        self.tracker = PathTracker(self.path, back_m=2.0, ahead_m=6.0)
+        classes = scenario.classes
+        profile = PreferenceProfile.parse(list(c.profile), classes, source="expert.profile")
+        cost = np.zeros(256)
+        cost[255] = c.lethal_cost  # off the map: never go there
+        for rank, name in enumerate(profile.order):
+            cost[classes.id_of(name)] = c.rank_cost * c.rank_growth**rank
+        lethal = np.zeros(256, dtype=bool)
+        lethal[list(classes.lethal_ids)] = True
+        lethal[255] = True
+        cost[lethal] = c.lethal_cost
+        self._cost, self._lethal = cost, lethal
+        self.offset = 0.0
+        self.stick = 0.0
+        self._queue: deque[float] = deque([0.0] * max(0, round(c.reaction_delay_s / self.dt)))
+
+    # -- decision --------------------------------------------------------------------------
+
+    def choose_offset(self, s_now: float) -> float:
+        """The lateral offset [m] (left positive) to hold over the terrain ahead."""
+        c = self.config
+        s = s_now + self._s_rel  # (S,)
+        valid = s <= self.path.length_m
+        s, in_reach = s[valid], self._in_reach[valid]
+        centre = self.path.point_at(s)  # (S, 2)
+        heading = self.path.heading_at(s)
+        normal = np.stack([-np.sin(heading), np.cos(heading)], axis=1)  # left of the path
+        lat = self.offsets[:, None] + self._foot[None, :]  # (O, F)
+        pts = centre[None, :, None, :] + lat[:, None, :, None] * normal[None, :, None, :]  # (O, S, F, 2)
+        cls = self.world.class_at(pts)
+        terrain = self._cost[cls].mean(axis=2).sum(axis=1) * self.sample_step_m  # (O,)
+        lat_l = self.offsets[:, None] + self._lethal_foot[None, :]
+        pts_l = centre[None, :, None, :] + lat_l[:, None, :, None] * normal[None, :, None, :]
+        hits_lethal = self._lethal[self.world.class_at(pts_l)].any(axis=(1, 2))
+        terrain = terrain + hits_lethal * c.lethal_cost
+        # A detour lasts as long as terrain lies on the path itself, plus the swerves in and out.
+        on_path = self._cost[self.world.class_at(centre[:, None, :] + self._foot[None, :, None] * normal[:, None, :])] > 0
+        blocked = np.flatnonzero(on_path.any(axis=1))
+        if not on_path.any(axis=1)[in_reach].any():
+            return 0.0
+        span = (blocked[-1] - blocked[0] + 1) * self.sample_step_m + 2.0 * c.pursuit_lookahead_m
+        total = terrain + c.deviation_cost * self.offsets**2 * span
+        best = float(total.min())
+        # Hold the current side unless another is clearly cheaper (no dithering); among equal
+        # candidates prefer the smaller offset, then a coin toss between left and right.
+        held = int(np.argmin(np.abs(self.offsets - self.offset)))
+        if self.offset != 0.0 and total[held] <= best * (1 + c.switch_margin) + 1e-6 and not hits_lethal[held]:
+            return float(self.offsets[held])
+        ties = np.flatnonzero(total <= best + 1e-6)
+        mags = np.abs(self.offsets[ties])
+        ties = ties[mags <= mags.min() + 1e-9]
+        same_side = ties[np.sign(self.offsets[ties]) == np.sign(self.offset)]
+        if self.offset != 0.0 and len(same_side):
+            ties = same_side  # keep to the side already taken
+        return float(self.offsets[ties[self.rng.integers(len(ties))]] if len(ties) > 1 else self.offsets[ties[0]])
+
+    def steer(self, pose: tuple[float, float, float], s_now: float, offset: float) -> float:
+        """Pure-pursuit yaw rate [rad/s] toward the path shifted sideways by ``offset``."""
+        c = self.config
+        s_t = s_now + c.pursuit_lookahead_m
+        heading = float(self.path.heading_at(s_t))
+        target = self.path.point_at(s_t) + offset * np.array([-math.sin(heading), math.cos(heading)])
+        x, y, yaw = pose
+        alpha = math.atan2(target[1] - y, target[0] - x) - yaw
+        alpha = (alpha + math.pi) % (2 * math.pi) - math.pi
+        dist = max(math.hypot(target[0] - x, target[1] - y), 1e-6)
+        return 2.0 * c.speed_mps * math.sin(alpha) / dist
+
+    def act(self, frame: Frame) -> Command:
+        c = self.config
+        s_now = self.tracker.update(np.array(frame.pose[:2]))
+        self.offset = self.choose_offset(s_now)
+        w = self.steer(frame.pose, s_now, self.offset)
+        w = 0.0 if abs(w) < c.deadzone_rps else w
+        self._queue.append(w)
+        wanted = self._queue.popleft()
+        step = c.stick_rate_rps2 * self.dt
+        self.stick = min(max(wanted, self.stick - step, -c.max_yaw_rate_rps), self.stick + step, c.max_yaw_rate_rps)
+        if wanted == 0.0 and abs(self.stick) <= step:
+            self.stick = 0.0  # a released stick springs back to exactly zero
+        out = self.stick
+        if out != 0.0 and c.stick_noise_rps > 0:
+            out = float(np.clip(out + self.rng.normal(0.0, c.stick_noise_rps), -c.max_yaw_rate_rps, c.max_yaw_rate_rps))
+        return Command(c.speed_mps, out)

@@ -1,0 +1,219 @@
+"""Crash-safe recordings of driven runs (SPEC 10), readable with standard tools.
+
+Layout of a recording directory::
+
+    meta.json        configuration: scenario, camera, control/preference set, classes, driver;
+                     "status" is "partial" until the run finishes, then "complete"
+    scenario.yaml    the scenario as driven (terrapref-scenario/1)
+    frames.jsonl     one JSON object per camera frame, appended and flushed as it happens:
+                     {"i", "t", "pose": [x, y, yaw_rad], "cmd": [v, w], "label", "image"}
+    images/NNNNNN.png  the segmentation frame, single-channel class ids
+
+A frame's image is written (atomically, via rename) before its line is appended, so if the
+process is killed, every line in ``frames.jsonl`` refers to a complete image and at most the
+last line is cut short; the reader drops a cut line and reports the recording as partial.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from terrapref.errors import UserError
+from terrapref.report.images import read_label_png, write_png_atomic
+
+FORMAT = "terrapref-recording/1"
+META = "meta.json"
+FRAMES = "frames.jsonl"
+SCENARIO = "scenario.yaml"
+IMAGES = "images"
+
+
+def write_json_atomic(path: Path, data: Any) -> None:
+    """Write JSON through a temporary file and a rename: readers see the old or the new file."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(data, fh, indent=2, sort_keys=False)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _is_recording(path: Path) -> bool:
+    return (path / META).exists() or (path / FRAMES).exists()
+
+
+class RecordingWriter:
+    """Appends frames to a new recording directory.
+
+    Args:
+        out_dir: directory to create; an existing recording there is refused unless
+            ``overwrite``; a non-empty directory that is not a recording is always refused.
+        meta: configuration to store (camera, control set, scenario name, driver...).
+        scenario: the scenario mapping (``Scenario.to_dict()``) to store beside it.
+    """
+
+    def __init__(self, out_dir: str | Path, meta: dict[str, Any], scenario: dict[str, Any], overwrite: bool = False) -> None:
+        self.dir = Path(out_dir)
+        if self.dir.exists():
+            if not self.dir.is_dir():
+                raise UserError(str(self.dir), "exists and is not a directory")
+            if _is_recording(self.dir):
+                if not overwrite:
+                    raise UserError(str(self.dir), "a recording already exists here; choose another --out or pass --force to replace it")
+                shutil.rmtree(self.dir)
+            elif any(self.dir.iterdir()):
+                raise UserError(str(self.dir), "directory is not empty and holds no recording; refusing to write into it")
+        (self.dir / IMAGES).mkdir(parents=True, exist_ok=True)
+        self.meta = {"format": FORMAT, "status": "partial", "created": datetime.now(timezone.utc).isoformat(timespec="seconds"), **meta}
+        with open(self.dir / SCENARIO, "w") as fh:
+            yaml.safe_dump(scenario, fh, sort_keys=False)
+        write_json_atomic(self.dir / META, self.meta)
+        self._frames = open(self.dir / FRAMES, "a", buffering=1)
+        self.count = 0
+
+    def append(self, time_s: float, pose: tuple[float, float, float], image: np.ndarray, command: tuple[float, float], label: int) -> None:
+        """Store one frame: its image first, then its line (flushed), so a kill never orphans a line."""
+        name = f"{IMAGES}/{self.count:06d}.png"
+        write_png_atomic(self.dir / name, image, compress_level=3)
+        line = {
+            "i": self.count,
+            "t": round(float(time_s), 6),
+            "pose": [float(pose[0]), float(pose[1]), float(pose[2])],
+            "cmd": [float(command[0]), float(command[1])],
+            "label": int(label),
+            "image": name,
+        }
+        self._frames.write(json.dumps(line) + "\n")
+        self._frames.flush()
+        self.count += 1
+
+    def close(self, summary: dict[str, Any] | None = None) -> None:
+        """Mark the recording complete (atomically) with an optional summary."""
+        self._frames.close()
+        self.meta.update(status="complete", frames=self.count, finished=datetime.now(timezone.utc).isoformat(timespec="seconds"))
+        if summary:
+            self.meta["summary"] = summary
+        write_json_atomic(self.dir / META, self.meta)
+
+    def abort(self) -> None:
+        """Stop writing and leave the recording marked partial."""
+        self._frames.close()
+
+    def __enter__(self) -> RecordingWriter:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is not None and not self._frames.closed:
+            self.abort()
+
+
+@dataclass(frozen=True)
+class Recording:
+    """A recording read back from disk.
+
+    Attributes:
+        times: frame times [s], shape (F,).
+        poses: poses (x, y, yaw) [m, m, rad], shape (F, 3).
+        commands: commands (v, w) held after each frame, shape (F, 2).
+        labels: control-set index of each command at record time, shape (F,).
+        complete: False if the run did not finish (crash, kill, interruption).
+    """
+
+    path: Path
+    meta: dict[str, Any]
+    scenario: dict[str, Any]
+    times: np.ndarray
+    poses: np.ndarray
+    commands: np.ndarray
+    labels: np.ndarray
+    image_files: tuple[str, ...]
+    complete: bool
+
+    def __len__(self) -> int:
+        return len(self.times)
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.times[-1] - self.times[0]) + 0.1 if len(self.times) else 0.0
+
+    def image(self, i: int) -> np.ndarray:
+        return read_label_png(self.path / self.image_files[i])
+
+    def images(self) -> np.ndarray:
+        """All frames, shape (F, H, W) uint8."""
+        return np.stack([self.image(i) for i in range(len(self))]) if len(self) else np.zeros((0, 0, 0), np.uint8)
+
+
+def read_recording(path: str | Path) -> Recording:
+    """Read a recording; a cut final line (the process was killed) is dropped.
+
+    Raises:
+        UserError: not a recording, unknown format, or a malformed line/field (named).
+    """
+    root = Path(path)
+    meta_path = root / META
+    if not root.is_dir():
+        raise UserError(str(root), "no such recording directory")
+    try:
+        meta = json.loads(meta_path.read_text())
+    except FileNotFoundError:
+        raise UserError(str(meta_path), "missing; not a terrapref recording") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise UserError(str(meta_path), f"not valid JSON ({exc})") from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise UserError(str(meta_path), f"expected {FORMAT!r}", field="format")
+    try:
+        scenario = yaml.safe_load((root / SCENARIO).read_text())
+    except (OSError, yaml.YAMLError):
+        raise UserError(str(root / SCENARIO), "missing or unreadable") from None
+    rows: list[dict] = []
+    frames_path = root / FRAMES
+    cut = False
+    text = frames_path.read_text() if frames_path.exists() else ""
+    lines = text.split("\n")
+    for n, line in enumerate(lines):
+        if not line.strip():
+            continue
+        try:
+            row = json.loads(line)
+            ok = isinstance(row, dict) and all(k in row for k in ("t", "pose", "cmd", "label", "image"))
+        except json.JSONDecodeError:
+            ok = False
+        if not ok:
+            if n == len(lines) - 1:  # a final line without its newline: cut by a kill
+                cut = True
+                break
+            raise UserError(str(frames_path), f"line {n + 1} is not a frame record", field=f"line {n + 1}")
+        if not (root / row["image"]).exists():
+            if n >= len(lines) - 2:
+                cut = True
+                break
+            raise UserError(str(frames_path), f"line {n + 1}: image {row['image']} is missing", field=f"line {n + 1}.image")
+        rows.append(row)
+    complete = meta.get("status") == "complete" and not cut
+    f = len(rows)
+    return Recording(
+        path=root,
+        meta=meta,
+        scenario=scenario,
+        times=np.array([r["t"] for r in rows], dtype=float),
+        poses=np.array([r["pose"] for r in rows], dtype=float).reshape(f, 3),
+        commands=np.array([r["cmd"] for r in rows], dtype=float).reshape(f, 2),
+        labels=np.array([r["label"] for r in rows], dtype=np.int64),
+        image_files=tuple(r["image"] for r in rows),
+        complete=complete,
+    )

@@ -1,0 +1,162 @@
+"""Utility features U(S, P) in R^{m x (K + 1)} (SPEC 7): K terrain shares and a distance utility.
+
+Terrain utility u^k(T) is the share of T's n points whose pixel shows class k; a point outside
+the image counts for no class but still counts in n. The distance utility scores where each
+trajectory ends relative to the reference path, normalised over the set:
+u^5 = 1 - (d - d_min) / (d_max - d_min), or 1 for all when the range is (near) zero.
+
+Three definitions of d, recorded with every dataset and model:
+- ``paper``: distance from the trajectory's end to the nearest path point, all of P.
+- ``window``: nearest path point among those ahead of the vehicle's progress, within
+  ``window_m``, so that a path passing near itself or behind the vehicle cannot capture it.
+- ``lookahead`` (default): distance to the single path point at progress + the trajectory's
+  travel distance (where a perfect follower would be). With the window starting at the
+  vehicle, the tightest arcs (w = +-1 over 6 m) curl back to end beside the vehicle, next to
+  the path, and get the best ``window`` score; the look-ahead point ranks them last.
+The path is resampled every ``path_spacing_m`` so that sparse waypoints still give a dense P.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from enum import Enum
+
+import numpy as np
+
+from terrapref.camera import PinholeCamera
+from terrapref.features.preference_set import PreferenceSet, PreferenceSetConfig
+from terrapref.scenario.path import ReferencePath
+from terrapref.terrain import ClassTable, default_classes
+from terrapref.vehicle import Pose
+
+
+class DistanceMode(str, Enum):
+    PAPER = "paper"
+    WINDOW = "window"
+    LOOKAHEAD = "lookahead"
+
+
+@dataclass(frozen=True)
+class FeatureConfig:
+    """How U is computed; carried with every dataset and model.
+
+    Attributes:
+        preference: the preference set S (control set, n, dt).
+        distance_mode: definition of d (see module docstring).
+        window_m: length of the candidate window ahead of the progress for ``window`` mode
+            [m]; None means twice the trajectory length.
+        path_spacing_m: resampling step of the reference path [m].
+        feature_classes: class names of the terrain columns, in order (the table's
+            non-background classes in id order).
+    """
+
+    preference: PreferenceSetConfig = field(default_factory=PreferenceSetConfig)
+    distance_mode: DistanceMode = DistanceMode.LOOKAHEAD
+    window_m: float | None = None
+    path_spacing_m: float = 0.25
+    feature_classes: tuple[str, ...] = field(default_factory=lambda: default_classes().feature_names)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "distance_mode", DistanceMode(self.distance_mode))
+        if not self.path_spacing_m > 0 or (self.window_m is not None and not self.window_m > 0):
+            raise ValueError("path_spacing_m and window_m must be > 0")
+
+    @property
+    def effective_window_m(self) -> float:
+        return self.window_m if self.window_m is not None else 2.0 * self.preference.horizon_m
+
+    @property
+    def n_features(self) -> int:
+        return len(self.feature_classes) + 1
+
+    @property
+    def column_names(self) -> tuple[str, ...]:
+        return (*self.feature_classes, "distance")
+
+    def to_dict(self) -> dict:
+        return {
+            "preference": self.preference.to_dict(),
+            "distance_mode": self.distance_mode.value,
+            "window_m": self.window_m,
+            "path_spacing_m": self.path_spacing_m,
+            "feature_classes": list(self.feature_classes),
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict) -> FeatureConfig:
+        return cls(
+            PreferenceSetConfig.from_dict(data["preference"]),
+            DistanceMode(data["distance_mode"]),
+            data.get("window_m"),
+            float(data["path_spacing_m"]),
+            tuple(data["feature_classes"]),
+        )
+
+
+class UtilityFeaturizer:
+    """Computes U from a segmentation image, the vehicle pose and the path (vectorised)."""
+
+    def __init__(self, config: FeatureConfig, camera: PinholeCamera, classes: ClassTable | None = None) -> None:
+        classes = classes or default_classes()
+        self.config = config
+        self.pset = PreferenceSet(config.preference, camera)
+        pix = self.pset.pixel_index
+        self._visible = pix >= 0
+        self._pix = np.where(self._visible, pix, 0)
+        k = len(config.feature_classes)
+        # Class id -> terrain column (k means "no feature": background, unknown, unlisted).
+        self._column = np.full(256, k, dtype=np.intp)
+        for j, name in enumerate(config.feature_classes):
+            self._column[classes.id_of(name)] = j
+        self._row_offset = (np.arange(self.pset.m) * (k + 1))[:, None]  # bincount bins per trajectory
+        self._n = config.preference.n_steps
+        self._ends = self.pset.endpoints  # (m, 2) vehicle frame
+
+    @property
+    def m(self) -> int:
+        return self.pset.m
+
+    def terrain(self, image: np.ndarray) -> np.ndarray:
+        """Terrain utilities, shape (m, K): share of each trajectory's points on each class."""
+        k = len(self.config.feature_classes)
+        cols = self._column[image.reshape(-1)[self._pix]]
+        cols[~self._visible] = k
+        counts = np.bincount((cols + self._row_offset).ravel(), minlength=self.pset.m * (k + 1))
+        return counts.reshape(self.pset.m, k + 1)[:, :k] / self._n
+
+    def distances(self, pose: Pose, path: ReferencePath, progress_s: float | None = None) -> np.ndarray:
+        """d(T^i, P) [m] for each trajectory, shape (m,)."""
+        x, y, yaw = pose
+        c, s = math.cos(yaw), math.sin(yaw)
+        ends = self._ends @ np.array([[c, s], [-s, c]]) + (x, y)  # endpoints in the world frame
+        mode = self.config.distance_mode
+        if mode is DistanceMode.LOOKAHEAD:
+            if progress_s is None:
+                raise ValueError("lookahead distance needs the vehicle's progress along the path")
+            tx, ty = path.point_at(progress_s + self.config.preference.horizon_m)
+            return np.hypot(ends[:, 0] - tx, ends[:, 1] - ty)
+        pts, arc = path.resampled(self.config.path_spacing_m)
+        if mode is DistanceMode.WINDOW:
+            if progress_s is None:
+                raise ValueError("windowed distance needs the vehicle's progress along the path")
+            lo = np.searchsorted(arc, progress_s, side="left")
+            hi = np.searchsorted(arc, progress_s + self.config.effective_window_m, side="right")
+            pts = pts[max(0, min(lo, len(pts) - 1)) : max(hi, lo + 1)]
+        diff = ends[:, None, :] - pts[None, :, :]
+        return np.sqrt(np.min(np.einsum("mpj,mpj->mp", diff, diff), axis=1))
+
+    @staticmethod
+    def normalise(d: np.ndarray, eps: float = 1e-9) -> np.ndarray:
+        """u^5 = 1 - (d - d_min) / (d_max - d_min); all ones when the range is below ``eps``."""
+        lo, hi = d.min(), d.max()
+        if hi - lo < eps:
+            return np.ones_like(d)
+        return 1.0 - (d - lo) / (hi - lo)
+
+    def __call__(self, image: np.ndarray, pose: Pose, path: ReferencePath, progress_s: float | None = None) -> np.ndarray:
+        """U, shape (m, K + 1) float32: terrain shares then the distance utility."""
+        u = np.empty((self.m, len(self.config.feature_classes) + 1), dtype=np.float32)
+        u[:, :-1] = self.terrain(image)
+        u[:, -1] = self.normalise(self.distances(pose, path, progress_s))
+        return u

@@ -1,0 +1,350 @@
+"""Tests for ``terrapref validate``, ``render`` and ``show``: one line per problem, exit code 2,
+never a traceback (STYLE convention 9)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from terrapref.cli import main
+from terrapref.scenario import packaged_scenarios, resolve_scenario
+from terrapref.terrain import UNKNOWN
+from terrapref.world import rasterise
+
+GOOD_YAML = """\
+format: terrapref-scenario/1
+name: tiny_course
+world:
+  size_m: [20.0, 10.0]
+  resolution_m: 0.1
+  background: grass
+terrain:
+  - {class: mud, circle: {center: [5.0, 5.0], radius: 1.0}}
+  - {class: rock, rectangle: {center: [10.0, 5.0], size: [2.0, 1.0], yaw_deg: 30.0}}
+  - {class: water, circle: {center: [15.0, 5.0], radius: 1.5}}
+  - {class: mud, polygon: [[14.0, 1.0], [16.0, 1.0], [15.0, 3.0]]}
+path:
+  waypoints: [[1.0, 5.0], [19.0, 5.0]]
+zones:
+  - {id: "1", rectangle: {center: [5.0, 5.0], size: [4.0, 4.0]}, expect: best}
+  - {id: "2", circle: {center: [15.0, 5.0], radius: 3.0}, expect: avoid}
+"""
+
+
+def edit(old: str, new: str) -> str:
+    assert old in GOOD_YAML, old
+    return GOOD_YAML.replace(old, new, 1)
+
+
+def write(folder: Path, name: str, content: str | bytes) -> Path:
+    path = folder / name
+    if isinstance(content, str):
+        path.write_text(content, encoding="utf-8")
+    else:
+        path.write_bytes(content)
+    return path
+
+
+def run_cli(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, list[str], list[str]]:
+    """Run ``terrapref ARGV`` in-process: (exit code, stdout lines, stderr lines)."""
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out.splitlines(), err.splitlines()
+
+
+def run_subprocess(cwd: Path, *argv: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "terrapref.cli", *argv], cwd=cwd, capture_output=True, text=True, check=False)
+
+
+# --- validate: good files -------------------------------------------------------------------
+
+
+def test_validate_good_file_prints_ok(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = write(tmp_path, "good.yaml", GOOD_YAML)
+    assert run_cli(capsys, "validate", str(path)) == (0, [f"{path}: ok"], [])
+
+
+def test_validate_several_good_files_and_a_packaged_name(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    a = write(tmp_path, "a.yaml", GOOD_YAML)
+    b = write(tmp_path, "b.yml", edit("name: tiny_course", "name: other"))
+    code, out, err = run_cli(capsys, "validate", str(a), str(b), "demo_course")
+    assert (code, out, err) == (0, [f"{a}: ok", f"{b}: ok", "demo_course: ok"], [])
+
+
+def test_validate_every_packaged_scenario(capsys: pytest.CaptureFixture[str]) -> None:
+    names = packaged_scenarios()
+    assert run_cli(capsys, "validate", *names) == (0, [f"{n}: ok" for n in names], [])
+
+
+def test_validate_a_relative_path(tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    write(tmp_path, "x.yaml", GOOD_YAML)
+    monkeypatch.chdir(tmp_path)
+    assert run_cli(capsys, "validate", "x.yaml") == (0, ["x.yaml: ok"], [])
+
+
+# --- validate: bad files, one problem each ------------------------------------------------------
+
+# (test id, file content, the expected line after "FILE: ").  An entry ending in "..." is a prefix.
+BAD_FILES: list[tuple[str, str | bytes, str]] = [
+    ("empty", b"", "empty file"),
+    ("binary-nul", bytes(np.random.default_rng(1).integers(0, 256, 2048, dtype=np.uint8)) + b"\x00", "binary data, expected a YAML text file"),
+    ("non-utf8", b"format: terrapref-scenario/1\nname: \xe9\xff\xfe\n", "not UTF-8 text, expected a YAML file"),
+    ("malformed", "format: terrapref-scenario/1\nworld: {size_m: [1, 2}\n", "malformed YAML at line 2..."),
+    ("bad-date", "format: terrapref-scenario/1\nname: 2020-13-45\n", "malformed YAML..."),
+    ("top-level-list", "- format\n- name\n", "expected a mapping at the top level, got a list"),
+    ("wrong-format", edit("terrapref-scenario/1", "terrapref-scenario/2"), "format: 'terrapref-scenario/2' is not supported; expected 'terrapref-scenario/1'"),
+    ("missing-format", edit("format: terrapref-scenario/1\n", ""), "format: missing; expected 'terrapref-scenario/1'"),
+    ("missing-name", edit("name: tiny_course\n", ""), "name: missing"),
+    ("missing-resolution", edit("  resolution_m: 0.1\n", ""), "world.resolution_m: missing"),
+    ("missing-waypoints", edit("  waypoints: [[1.0, 5.0], [19.0, 5.0]]\n", "  {}\n"), "path.waypoints: missing"),
+    ("unknown-top", GOOD_YAML + "colour: red\n", "colour: unknown key"),
+    ("unknown-world", edit("  background: grass\n", "  background: grass\n  origin: [0, 0]\n"), "world.origin: unknown key"),
+    ("unknown-terrain", edit("{class: rock,", "{class: rock, height: 1,"), "terrain[1].height: unknown key"),
+    ("unknown-circle", edit("radius: 1.0}", "radius: 1.0, r: 2}"), "terrain[0].circle.r: unknown key"),
+    ("unknown-rectangle", edit("yaw_deg: 30.0}", "yaw_deg: 30.0, pitch_deg: 1}"), "terrain[1].rectangle.pitch_deg: unknown key"),
+    ("unknown-zone", edit('{id: "1",', '{id: "1", weight: 2,'), "zones[0].weight: unknown key"),
+    ("string-number", edit("resolution_m: 0.1", "resolution_m: fine"), "world.resolution_m: expected a number, got string 'fine'"),
+    ("bool-number", edit("radius: 1.0", "radius: yes"), "terrain[0].circle.radius: expected a number, got boolean True"),
+    ("mapping-for-list", edit("size_m: [20.0, 10.0]", "size_m: {x: 20.0, y: 10.0}"), "world.size_m: expected a list of 2 numbers, got a mapping"),
+    ("nan", edit("radius: 1.0", "radius: .nan"), "terrain[0].circle.radius: must be finite (got NaN or infinity)"),
+    ("inf", edit("resolution_m: 0.1", "resolution_m: .inf"), "world.resolution_m: must be finite (got NaN or infinity)"),
+    ("minus-inf", edit("[19.0, 5.0]]", "[-.inf, 5.0]]"), "path.waypoints[1][0]: must be finite (got NaN or infinity)"),
+    ("huge-int", edit("radius: 1.0", "radius: 1" + "0" * 400), "terrain[0].circle.radius: is too large"),
+    ("unknown-class", edit("class: rock", "class: lava"), "terrain[1].class: unknown class 'lava'..."),
+    ("unknown-background", edit("background: grass", "background: snow"), "world.background: unknown class 'snow'..."),
+    ("polygon-2-distinct", edit("[[14.0, 1.0], [16.0, 1.0], [15.0, 3.0]]", "[[14.0, 1.0], [16.0, 1.0], [14.0, 1.0]]"), "terrain[3].polygon: needs at least 3 distinct vertices, got 2"),
+    ("polygon-2-vertices", edit("[[14.0, 1.0], [16.0, 1.0], [15.0, 3.0]]", "[[14.0, 1.0], [16.0, 1.0]]"), "terrain[3].polygon: expected a list of at least 3 [x, y] points, got a list of 2"),
+    ("polygon-collinear", edit("[[14.0, 1.0], [16.0, 1.0], [15.0, 3.0]]", "[[14.0, 1.0], [15.0, 2.0], [16.0, 3.0]]"), "terrain[3].polygon: has zero area (vertices are collinear)"),
+    ("shape-off-map", edit("center: [15.0, 5.0], radius: 1.5", "center: [35.0, 5.0], radius: 1.5"), "terrain[2].circle: lies wholly off the map..."),
+    ("waypoint-off-map", edit("[19.0, 5.0]]", "[19.0, 5.0], [25.0, 5.0]]"), "path.waypoints[2]: (25, 5) is off the map..."),
+    ("path-same-points", edit("[[1.0, 5.0], [19.0, 5.0]]", "[[1.0, 1.0], [1.0, 1.0]]"), "path.waypoints: needs at least 2 distinct points"),
+    ("path-one-point", edit("[[1.0, 5.0], [19.0, 5.0]]", "[[1.0, 1.0]]"), "path.waypoints: expected a list of at least 2 [x, y] points, got a list of 1"),
+    ("resolution-zero", edit("resolution_m: 0.1", "resolution_m: 0"), "world.resolution_m: must be > 0"),
+    ("resolution-negative", edit("resolution_m: 0.1", "resolution_m: -0.1"), "world.resolution_m: must be > 0"),
+    ("radius-zero", edit("radius: 1.0", "radius: 0"), "terrain[0].circle.radius: must be > 0"),
+    ("too-many-cells", edit("size_m: [20.0, 10.0]", "size_m: [2000.0, 1000.0]").replace("resolution_m: 0.1", "resolution_m: 0.05"), "world: raster would have 40000 x 20000 = 800,000,000 cells..."),
+    ("astronomical-cells", edit("size_m: [20.0, 10.0]", "size_m: [1.0e+300, 1.0e+300]"), "world: raster would have about 10^602 cells..."),
+    ("duplicate-zone", edit('{id: "2",', '{id: 1,'), "zones[1].id: duplicate zone id '1' (also zones[0])"),
+    ("bad-expect", edit("expect: avoid", "expect: maybe"), "zones[1].expect: 'maybe' is neither 'avoid', 'best' nor a known class..."),
+    ("bad-name", edit("name: tiny_course", "name: tiny course!"), "name: must match [A-Za-z0-9_-]+"),
+]
+
+
+@pytest.mark.parametrize(("content", "expected"), [c[1:] for c in BAD_FILES], ids=[c[0] for c in BAD_FILES])
+def test_validate_bad_file_prints_one_line_and_exits_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], content: str | bytes, expected: str
+) -> None:
+    path = write(tmp_path, "x.yaml", content)
+    code, out, err = run_cli(capsys, "validate", str(path))
+    assert code == 2
+    assert err == []
+    assert len(out) == 1, out
+    (line,) = out
+    if expected.endswith("..."):
+        assert line.startswith(f"{path}: {expected[:-3]}"), line
+    else:
+        assert line == f"{path}: {expected}"
+
+
+def test_validate_example_from_the_spec(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = write(tmp_path, "x.yaml", edit("radius: 1.5", "radius: -1.5"))
+    code, out, err = run_cli(capsys, "validate", str(path))
+    assert (code, out, err) == (2, [f"{path}: terrain[2].circle.radius: must be > 0"], [])
+
+
+def test_validate_nonexistent_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "missing.yaml"
+    assert run_cli(capsys, "validate", str(path)) == (2, [f"{path}: no such file"], [])
+
+
+def test_validate_unknown_name(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run_cli(capsys, "validate", "no_such_course")
+    assert code == 2 and err == []
+    (line,) = out
+    assert line.startswith("no_such_course: no such file and no packaged scenario of that name")
+
+
+def test_validate_directory(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    folder = tmp_path / "folder.yaml"
+    folder.mkdir()
+    for arg in (str(folder), str(tmp_path)):
+        assert run_cli(capsys, "validate", arg) == (2, [f"{arg}: is a directory, expected a file"], [])
+
+
+def test_validate_name_too_long_for_the_os(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    name = "n" * 300
+    code, out, err = run_cli(capsys, "validate", name, str(write(tmp_path, "good.yaml", GOOD_YAML)))
+    assert code == 2 and err == []
+    assert len(out) == 2
+    assert out[0].startswith(f"{name}: ")
+    assert out[1].endswith(": ok")
+
+
+def test_validate_reports_every_problem_in_a_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    text = (
+        edit("name: tiny_course", "name: tiny course")
+        .replace("resolution_m: 0.1", "resolution_m: 0")
+        .replace("radius: 1.0", "radius: -1")
+        .replace("class: rock", "class: lava")
+        .replace("expect: avoid", "expect: never")
+    )
+    path = write(tmp_path, "many.yaml", text)
+    code, out, err = run_cli(capsys, "validate", str(path))
+    assert code == 2 and err == []
+    assert sorted(line.split(": ")[1] for line in out) == [
+        "name",
+        "terrain[0].circle.radius",
+        "terrain[1].class",
+        "world.resolution_m",
+        "zones[1].expect",
+    ]
+    assert all(line.startswith(f"{path}: ") for line in out)
+    assert f"{path}: terrain[0].circle.radius: must be > 0" in out
+
+
+def test_validate_mixed_good_and_bad_files(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    good = write(tmp_path, "good.yaml", GOOD_YAML)
+    bad = write(tmp_path, "bad.yaml", edit("radius: 1.0", "radius: 0"))
+    empty = write(tmp_path, "empty.yaml", "")
+    good2 = write(tmp_path, "good2.yaml", GOOD_YAML)
+    code, out, err = run_cli(capsys, "validate", str(good), str(bad), str(empty), str(good2))
+    assert code == 2
+    assert err == []
+    assert out == [
+        f"{good}: ok",
+        f"{bad}: terrain[0].circle.radius: must be > 0",
+        f"{empty}: empty file",
+        f"{good2}: ok",
+    ]
+
+
+def test_validate_needs_a_file(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as info:
+        main(["validate"])
+    assert info.value.code == 2
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_validate_as_a_subprocess_exit_code_and_no_traceback(tmp_path: Path) -> None:
+    good = write(tmp_path, "good.yaml", GOOD_YAML)
+    write(tmp_path, "bad.yaml", edit("radius: 1.0", "radius: .nan"))
+    write(tmp_path, "garbage.yaml", bytes(range(256)) * 8)
+    write(tmp_path, "date.yaml", "format: terrapref-scenario/1\nname: 2020-02-30\n")
+    write(tmp_path, "huge.yaml", edit("size_m: [20.0, 10.0]", "size_m: [1.0e+200, 1.0e+200]"))
+    (tmp_path / "dir.yaml").mkdir()
+    files = [str(good), "bad.yaml", "garbage.yaml", "date.yaml", "huge.yaml", "dir.yaml", "missing.yaml", "demo_course"]
+    result = run_subprocess(tmp_path, "validate", *files)
+    assert result.returncode == 2
+    assert "Traceback" not in result.stdout
+    assert "Traceback" not in result.stderr
+    assert result.stderr == ""
+    lines = result.stdout.splitlines()
+    assert lines == [
+        f"{good}: ok",
+        "bad.yaml: terrain[0].circle.radius: must be finite (got NaN or infinity)",
+        "garbage.yaml: binary data, expected a YAML text file",
+        lines[3],
+        lines[4],
+        "dir.yaml: is a directory, expected a file",
+        "missing.yaml: no such file",
+        "demo_course: ok",
+    ]
+    assert lines[3].startswith("date.yaml: malformed YAML")
+    assert lines[4].startswith("huge.yaml: world: raster would have about 10^402 cells")
+
+
+def test_validate_as_a_subprocess_good_files_exit_0(tmp_path: Path) -> None:
+    write(tmp_path, "good.yaml", GOOD_YAML)
+    result = run_subprocess(tmp_path, "validate", "good.yaml", "demo_course")
+    assert (result.returncode, result.stdout, result.stderr) == (0, "good.yaml: ok\ndemo_course: ok\n", "")
+
+
+# --- render and show ----------------------------------------------------------------------------
+
+
+def test_render_writes_class_id_png_and_preview(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    seg, col = tmp_path / "seg.png", tmp_path / "col.png"
+    code, out, err = run_cli(capsys, "render", "demo_course", "--pose", "8", "10", "0", "--out", str(seg), "--preview", str(col))
+    assert code == 0 and err == []
+    assert len(out) == 2 and str(seg) in out[0] and str(col) in out[1]
+
+    with Image.open(seg) as im:
+        assert im.format == "PNG"
+        assert im.mode == "L"
+        assert im.size == (640, 480)
+        labels = np.asarray(im)
+    scenario = resolve_scenario("demo_course")
+    in_map = set(np.unique(rasterise(scenario).raster).tolist())
+    seen = set(np.unique(labels).tolist())
+    assert seen <= in_map | {UNKNOWN}
+    # At (8, 10) facing +x the water pond centred 4 m ahead fills part of the view.
+    classes = scenario.classes
+    assert {classes.id_of("grass"), classes.id_of("water")} <= seen
+
+    with Image.open(col) as im:
+        assert im.format == "PNG"
+        assert im.mode == "RGB"
+        assert im.size == (640, 480)
+        rgb = np.asarray(im)
+    np.testing.assert_array_equal(rgb, classes.palette()[labels])
+
+
+def test_render_defaults_to_the_start_pose(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = write(tmp_path, "s.yaml", GOOD_YAML)
+    seg = tmp_path / "seg.png"
+    code, _, err = run_cli(capsys, "render", str(path), "--out", str(seg))
+    assert code == 0 and err == []
+    with Image.open(seg) as im:
+        assert (im.mode, im.size) == ("L", (640, 480))
+
+
+def test_show_writes_a_png(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out_png = tmp_path / "map.png"
+    code, out, err = run_cli(capsys, "show", "demo_course", "--out", str(out_png))
+    assert code == 0 and err == []
+    (line,) = out
+    assert str(out_png) in line
+    with Image.open(out_png) as im:
+        assert im.format == "PNG"
+        assert im.size[0] > 0 and im.size[1] > 0
+
+
+@pytest.mark.parametrize("command", ["render", "show"])
+def test_bad_scenario_exits_2_with_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str) -> None:
+    bad = write(tmp_path, "bad.yaml", edit("radius: 1.0", "radius: 0"))
+    out_png = tmp_path / "out.png"
+    code, out, err = run_cli(capsys, command, str(bad), "--out", str(out_png))
+    assert code == 2
+    assert out == []
+    assert err == [f"error: {bad}: terrain[0].circle.radius: must be > 0"]
+    assert not out_png.exists()
+
+
+@pytest.mark.parametrize("command", ["render", "show"])
+def test_unknown_scenario_name_exits_2_with_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str) -> None:
+    code, out, err = run_cli(capsys, command, "no_such_course", "--out", str(tmp_path / "x.png"))
+    assert code == 2 and out == []
+    (line,) = err
+    assert line.startswith("error: no_such_course: ")
+
+
+def test_render_bad_scenario_as_a_subprocess(tmp_path: Path) -> None:
+    write(tmp_path, "bad.yaml", b"\x00\x01\x02 not yaml")
+    result = run_subprocess(tmp_path, "render", "bad.yaml", "--out", "seg.png")
+    assert result.returncode == 2
+    assert "Traceback" not in result.stdout + result.stderr
+    assert result.stderr == "error: bad.yaml: binary data, expected a YAML text file\n"
+    assert not (tmp_path / "seg.png").exists()
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+@pytest.mark.parametrize("pose", [("nan", "10", "0"), ("8", "10", "inf")], ids=["nan-x", "inf-yaw"])
+def test_render_non_finite_pose_is_a_user_error(tmp_path: Path, capsys: pytest.CaptureFixture[str], pose: tuple[str, str, str]) -> None:
+    code, _, err = run_cli(capsys, "render", "demo_course", "--pose", *pose, "--out", str(tmp_path / "seg.png"))
+    assert code == 2
+    assert len(err) == 1 and err[0].startswith("error: --pose: ")
