@@ -136,18 +136,26 @@ class ExpertDriver:
         normal = np.stack([-np.sin(heading), np.cos(heading)], axis=1)  # left of the path
         lat = self.offsets[:, None] + self._foot[None, :]  # (O, F)
         pts = centre[None, :, None, :] + lat[:, None, :, None] * normal[None, :, None, :]  # (O, S, F, 2)
-        cls = self.world.class_at(pts)
+        # A detour lasts as long as the obstacle ahead lies on the path itself (gaps under 1 m
+        # do not split it), plus the swerves in and out; later patches wait for their own turn.
+        on_path = (self._cost[self.world.class_at(centre[:, None, :] + self._foot[None, :, None] * normal[:, None, :])] > 0).any(axis=1)
+        reach = np.flatnonzero(on_path & in_reach)
+        if len(reach) == 0:
+            return 0.0
+        first = last = int(reach[0])
+        gap = round(1.0 / self.sample_step_m)
+        for i in np.flatnonzero(on_path[first:]) + first:
+            if i - last > gap:
+                break
+            last = int(i)
+        upto = min(len(s), last + 1 + round(c.pursuit_lookahead_m / self.sample_step_m))
+        cls = self.world.class_at(pts[:, :upto])
         terrain = self._cost[cls].mean(axis=2).sum(axis=1) * self.sample_step_m  # (O,)
         lat_l = self.offsets[:, None] + self._lethal_foot[None, :]
-        pts_l = centre[None, :, None, :] + lat_l[:, None, :, None] * normal[None, :, None, :]
+        pts_l = centre[None, :upto, None, :] + lat_l[:, None, :, None] * normal[None, :upto, None, :]
         hits_lethal = self._lethal[self.world.class_at(pts_l)].any(axis=(1, 2))
         terrain = terrain + hits_lethal * c.lethal_cost
-        # A detour lasts as long as terrain lies on the path itself, plus the swerves in and out.
-        on_path = self._cost[self.world.class_at(centre[:, None, :] + self._foot[None, :, None] * normal[:, None, :])] > 0
-        blocked = np.flatnonzero(on_path.any(axis=1))
-        if not on_path.any(axis=1)[in_reach].any():
-            return 0.0
-        span = (blocked[-1] - blocked[0] + 1) * self.sample_step_m + 2.0 * c.pursuit_lookahead_m
+        span = (last - first + 1) * self.sample_step_m + 2.0 * c.pursuit_lookahead_m
         total = terrain + c.deviation_cost * self.offsets**2 * span
         best = float(total.min())
         # Hold the current side unless another is clearly cheaper (no dithering); among equal
