@@ -73,6 +73,87 @@ def _cmd_list(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_record(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from terrapref.camera import CameraConfig
+    from terrapref.demos.expert import ExpertConfig, ExpertDriver
+    from terrapref.demos.recording import RecordingWriter
+    from terrapref.demos.session import record_run, recording_meta
+    from terrapref.features import PreferenceSetConfig
+    from terrapref.progress import Progress
+    from terrapref.scenario import resolve_scenario
+    from terrapref.sim import SimConfig, Simulation
+    from terrapref.terrain import PreferenceProfile
+
+    scenario = resolve_scenario(args.scenario)
+    profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile else PreferenceProfile.default(scenario.classes)
+    expert = ExpertConfig(profile=profile.order)
+    camera, preference, sim_config = CameraConfig(), PreferenceSetConfig(), SimConfig()
+    meta = recording_meta(scenario, camera, preference, sim_config, {"kind": "expert", "seed": args.seed, "config": expert.to_dict()}, profile)
+    sim = Simulation(scenario, camera, sim_config)
+    writer = RecordingWriter(args.out, meta, scenario.to_dict(), overwrite=args.force)
+    bar = Progress(f"record {scenario.name}", sim.path.length_m, enabled=not args.quiet)
+    try:
+        log = record_run(sim, ExpertDriver(expert, sim_config.camera_rate_hz), writer, preference, np.random.default_rng(args.seed),
+                         progress=lambda s: bar.update(s.progress_s, f"t={s.time_s:6.1f}s frames={writer.count}"))
+    except BaseException:
+        writer.abort()
+        raise
+    bar.close("done")
+    state = "reached the goal" if log.completed else "timed out"
+    print(f"wrote {args.out}: {writer.count} frames, {log.duration_s:.1f} s, {state}, {log.collisions} collisions (complete)")
+    return 0
+
+
+def _cmd_inspect(args: argparse.Namespace) -> int:
+    from terrapref.demos.inspect import save_driven_path, summarise
+    from terrapref.demos.recording import read_recording
+
+    rec = read_recording(args.recording)
+    summary = summarise(rec)
+    for line in summary.lines():
+        print(line)
+    out = args.out or rec.path / "driven_path.png"
+    save_driven_path(summary, rec, out)
+    print(f"wrote {out}")
+    return 0
+
+
+def _cmd_featurize(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from terrapref.camera import CameraConfig
+    from terrapref.demos.dataset import build_dataset, save_dataset
+    from terrapref.demos.recording import read_recording
+    from terrapref.features import FeatureConfig
+    from terrapref.progress import Progress
+
+    recordings = [read_recording(p) for p in args.recordings]
+    for r in recordings:
+        if not r.complete:
+            print(f"warning: {r.path} is partial; using its {len(r)} frames", file=sys.stderr)
+    features = FeatureConfig(distance_mode=args.distance_mode)
+    pref = features.preference
+    if args.n_steps is not None or args.dt is not None:
+        pref = replace(pref, n_steps=args.n_steps or pref.n_steps, dt_s=args.dt or pref.dt_s)
+        features = replace(features, preference=pref)
+    camera = None
+    if args.camera:
+        from terrapref.yamlio import read_yaml_mapping
+
+        try:
+            camera = CameraConfig(**read_yaml_mapping(args.camera))
+        except (TypeError, ValueError) as exc:
+            raise UserError(args.camera, f"invalid camera configuration: {exc}") from None
+    bar = Progress("featurize", len(recordings))
+    dataset = build_dataset(recordings, features, camera, progress=lambda k, n: bar.update(k, f"{k}/{n} recordings"))
+    bar.close()
+    save_dataset(dataset, args.out)
+    print(f"wrote {args.out}: {len(dataset)} samples from {len(recordings)} recordings (fingerprint {dataset.fingerprint})")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="terrapref", description="Learn off-road terrain preferences from a few minutes of driving.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -92,6 +173,30 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenario", metavar="SCENARIO")
     p.add_argument("--out", required=True, type=Path)
     p.set_defaults(func=_cmd_show)
+
+    p = sub.add_parser("record", help="record a demonstration with the synthetic driver")
+    p.add_argument("scenario", metavar="SCENARIO")
+    p.add_argument("--driver", choices=["expert"], default="expert", help="who drives (the synthetic expert)")
+    p.add_argument("--profile", help="preference order, best first, e.g. mud,rock,water,non_traversable")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", required=True, type=Path, help="recording directory to create")
+    p.add_argument("--force", action="store_true", help="replace an existing recording at --out")
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+    p.set_defaults(func=_cmd_record)
+
+    p = sub.add_parser("inspect", help="summarise a recording and draw its driven path")
+    p.add_argument("recording", metavar="DIR", type=Path)
+    p.add_argument("--out", type=Path, help="top-down PNG (default: DIR/driven_path.png)")
+    p.set_defaults(func=_cmd_inspect)
+
+    p = sub.add_parser("featurize", help="turn recordings into a training set (U, label)")
+    p.add_argument("recordings", nargs="+", metavar="DIR", type=Path)
+    p.add_argument("--out", required=True, type=Path, help="dataset file (.safetensors)")
+    p.add_argument("--distance-mode", choices=["lookahead", "window", "paper"], default="lookahead")
+    p.add_argument("--n-steps", type=int, help="trajectory points n (default 30)")
+    p.add_argument("--dt", type=float, help="trajectory time step [s] (default 0.2)")
+    p.add_argument("--camera", help="YAML file of camera parameters to re-render the frames with")
+    p.set_defaults(func=_cmd_featurize)
 
     p = sub.add_parser("scenarios", help="list the packaged scenarios")
     p.set_defaults(func=_cmd_list)

@@ -1,0 +1,165 @@
+"""Featurisation: recordings -> training sets of (U, label), saved without pickle (safetensors).
+
+A dataset carries the configuration that produced it (features, camera, classes, profile,
+source recordings) and a fingerprint of its contents, so a model trained on it can be checked
+against the planner's configuration later. A recording can be featurised under another camera
+(frames are re-rendered from its stored scenario at its stored poses) or another preference
+set (labels are re-derived from the recorded continuous w) without driving again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from safetensors import SafetensorError
+from safetensors.numpy import load_file, save_file
+
+from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer
+from terrapref.demos.recording import Recording
+from terrapref.errors import UserError
+from terrapref.features import FeatureConfig, UtilityFeaturizer
+from terrapref.scenario import parse_scenario
+from terrapref.scenario.path import PathTracker, ReferencePath
+from terrapref.terrain import ClassTable
+from terrapref.world import rasterise
+
+FORMAT = "terrapref-dataset/1"
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """Training samples and the configuration that produced them.
+
+    Attributes:
+        U: utility features, shape (N, m, K + 1) float32.
+        labels: demonstrated control-set index, shape (N,) int64.
+        w: demonstrated continuous yaw rate [rad/s], shape (N,) float32.
+        source: index of the recording each sample came from, shape (N,) int64.
+        meta: features, camera, classes, profile, recordings (JSON-serialisable).
+    """
+
+    U: np.ndarray
+    labels: np.ndarray
+    w: np.ndarray
+    source: np.ndarray
+    meta: dict
+
+    def __len__(self) -> int:
+        return len(self.labels)
+
+    @property
+    def feature_config(self) -> FeatureConfig:
+        return FeatureConfig.from_dict(self.meta["features"])
+
+    @property
+    def camera_config(self) -> CameraConfig:
+        return CameraConfig.from_dict(self.meta["camera"])
+
+    @property
+    def fingerprint(self) -> str:
+        h = hashlib.sha256()
+        for a in (self.U, self.labels):
+            h.update(np.ascontiguousarray(a).tobytes())
+        return h.hexdigest()[:16]
+
+
+def featurize_recording(recording: Recording, features: FeatureConfig, camera: CameraConfig | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """U (F, m, K + 1), labels (F,) and w (F,) for every frame of a recording.
+
+    Args:
+        camera: None uses the recorded frames; another configuration re-renders each frame from
+            the recording's scenario at its recorded pose.
+    """
+    classes = ClassTable.from_dict(recording.meta["classes"], str(recording.path / "meta.json"))
+    rec_camera = CameraConfig.from_dict(recording.meta["camera"])
+    camera = camera or rec_camera
+    scenario = parse_scenario(recording.scenario, str(recording.path / "scenario.yaml"), classes)
+    featurizer = UtilityFeaturizer(features, PinholeCamera(camera), classes)
+    path = ReferencePath(np.asarray(recording.meta.get("path", scenario.waypoints), dtype=float))
+    tracker = PathTracker(path)
+    renderer = None if camera == rec_camera else SegmentationRenderer(PinholeCamera(camera), rasterise(scenario))
+    n = len(recording)
+    U = np.empty((n, featurizer.m, features.n_features), dtype=np.float32)
+    for i in range(n):
+        pose = tuple(recording.poses[i])
+        image = renderer.render(pose) if renderer is not None else recording.image(i)
+        U[i] = featurizer(image, pose, path, tracker.update(recording.poses[i, :2]))
+    w = recording.commands[:, 1].astype(np.float32)
+    labels = np.asarray(features.preference.control.label_of(w), dtype=np.int64).reshape(n)
+    return U, labels, w
+
+
+def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: CameraConfig | None = None, progress=None) -> Dataset:
+    """Featurise several recordings into one dataset (they must share classes and profile)."""
+    if not recordings:
+        raise UserError("featurize", "no recordings given")
+    first = recordings[0]
+    for rec in recordings[1:]:
+        for key in ("classes", "profile"):
+            if rec.meta.get(key) != first.meta.get(key):
+                raise UserError(str(rec.path / "meta.json"), f"differs from {first.path} in {key}; featurise them separately", field=key)
+    parts = []
+    for k, rec in enumerate(recordings):
+        parts.append(featurize_recording(rec, features, camera))
+        if progress is not None:
+            progress(k + 1, len(recordings))
+    U = np.concatenate([p[0] for p in parts])
+    labels = np.concatenate([p[1] for p in parts])
+    w = np.concatenate([p[2] for p in parts])
+    source = np.concatenate([np.full(len(p[1]), k, dtype=np.int64) for k, p in enumerate(parts)])
+    meta = {
+        "format": FORMAT,
+        "features": features.to_dict(),
+        "camera": (camera or CameraConfig.from_dict(first.meta["camera"])).to_dict(),
+        "classes": first.meta["classes"],
+        "profile": first.meta.get("profile"),
+        "recordings": [
+            {"path": str(r.path), "scenario": r.meta.get("scenario"), "frames": len(r), "complete": r.complete, "driver": r.meta.get("driver")}
+            for r in recordings
+        ],
+    }
+    return Dataset(U, labels, w.astype(np.float32), source, meta)
+
+
+def save_dataset(dataset: Dataset, path: str | Path) -> Path:
+    """Write a dataset as safetensors (tensors plus JSON metadata), atomically."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    meta = {**dataset.meta, "fingerprint": dataset.fingerprint, "samples": len(dataset)}
+    save_file(
+        {"U": dataset.U, "labels": dataset.labels, "w": dataset.w, "source": dataset.source},
+        str(tmp),
+        metadata={"terrapref": json.dumps(meta)},
+    )
+    tmp.replace(path)
+    return path
+
+
+def load_dataset(path: str | Path) -> Dataset:
+    """Read a dataset written by :func:`save_dataset` (no code is executed on load)."""
+    source = str(path)
+    try:
+        tensors = load_file(source)
+        from safetensors import safe_open
+
+        with safe_open(source, framework="numpy") as fh:
+            header = fh.metadata() or {}
+    except FileNotFoundError:
+        raise UserError(source, "no such file") from None
+    except (SafetensorError, OSError, ValueError) as exc:
+        raise UserError(source, f"not a terrapref dataset ({exc})") from None
+    try:
+        meta = json.loads(header["terrapref"])
+    except (KeyError, json.JSONDecodeError):
+        raise UserError(source, "missing terrapref metadata", field="metadata") from None
+    if meta.get("format") != FORMAT:
+        raise UserError(source, f"expected {FORMAT!r}", field="format")
+    for key in ("U", "labels", "w", "source"):
+        if key not in tensors:
+            raise UserError(source, "missing tensor", field=key)
+    return Dataset(tensors["U"], tensors["labels"], tensors["w"], tensors["source"], meta)

@@ -1,0 +1,73 @@
+"""Summaries of recordings: what `terrapref inspect` prints and draws."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from terrapref.demos.recording import Recording
+from terrapref.evaluation.scoring import ZoneResult, score_zones
+from terrapref.scenario import Scenario, parse_scenario
+from terrapref.terrain import ClassTable, PreferenceProfile
+from terrapref.vehicle import ControlSet
+from terrapref.world import WorldMap, rasterise
+
+
+@dataclass(frozen=True)
+class RecordingSummary:
+    frames: int
+    duration_s: float
+    complete: bool
+    label_counts: np.ndarray  # (m,)
+    control: ControlSet
+    zones: list[tuple[ZoneResult, bool]]  # (result, reached)
+    scenario: Scenario
+    world: WorldMap
+
+    def lines(self) -> list[str]:
+        out = [
+            f"status     {'complete' if self.complete else 'partial'}",
+            f"frames     {self.frames}",
+            f"duration   {self.duration_s:.1f} s",
+            f"scenario   {self.scenario.name}",
+            "labels     (index: w [rad/s]  count)",
+        ]
+        peak = max(int(self.label_counts.max()), 1)
+        for i, n in enumerate(self.label_counts):
+            out.append(f"  {i:3d}: {self.control.w_rps[i]:+5.2f}  {int(n):6d}  {'#' * round(40 * int(n) / peak)}")
+        if self.zones:
+            out.append("zones      (id, label: expected -> choice)")
+            for z, reached in self.zones:
+                verdict = ("ok" if z.success else "MISS") if reached else "not reached"
+                out.append(f"  {z.id:>4s} {z.label:32s} {z.expect:>16s} -> {z.choice:<16s} {verdict}")
+            scored = [z for z, r in self.zones if r]
+            out.append(f"zone success {sum(z.success for z in scored)}/{len(scored)} reached ({len(self.zones)} zones)")
+        return out
+
+
+def summarise(recording: Recording) -> RecordingSummary:
+    """Label histogram and zone choices (SPEC 12) of a recording, under its own profile."""
+    meta = recording.meta
+    classes = ClassTable.from_dict(meta["classes"], str(recording.path / "meta.json"))
+    scenario = parse_scenario(recording.scenario, str(recording.path / "scenario.yaml"), classes)
+    world = rasterise(scenario)
+    profile = PreferenceProfile.parse(meta.get("profile") or list(classes.profile), classes, source=str(recording.path / "meta.json"))
+    control = ControlSet.from_dict(meta["preference_set"]["control"])
+    counts = np.bincount(recording.labels, minlength=control.m)[: control.m]
+    xy = recording.poses[:, :2]
+    zones = []
+    for z in score_zones(xy, scenario, world, profile):
+        zone = next(zz for zz in scenario.zones if zz.id == z.id)
+        reached = bool(len(xy) and zone.shape.contains(xy).any())
+        zones.append((z, reached))
+    return RecordingSummary(len(recording), recording.duration_s, recording.complete, counts, control, zones, scenario, world)
+
+
+def save_driven_path(summary: RecordingSummary, recording: Recording, out: str | Path) -> Path:
+    from terrapref.report.plots import save_map
+
+    status = "complete" if summary.complete else "partial"
+    return save_map(out, summary.scenario, summary.world, [("driven", recording.poses[:, :2], "red")],
+                    title=f"{summary.scenario.name}: {recording.path.name} ({status}, {summary.frames} frames)")
