@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Run the simulator benchmarks (render time per frame, simulation-loop frame rate) on one core.
+# Run the benchmarks on one core: render time per frame, simulation-loop frame rate,
+# utility features per frame, and recording train_course with the synthetic driver.
 # Extra arguments go to benchmarks/bench_sim.py (e.g. --poses 2000 --frames 3000).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -10,4 +11,5 @@ pin=()
 if command -v taskset >/dev/null 2>&1; then
   pin=(taskset -c 0)
 fi
-exec "${pin[@]}" .venv/bin/python benchmarks/bench_sim.py "$@"
+"${pin[@]}" .venv/bin/python benchmarks/bench_sim.py "$@"
+"${pin[@]}" .venv/bin/python benchmarks/bench_demos.py

@@ -109,7 +109,11 @@ class UtilityFeaturizer:
         self._column = np.full(256, k, dtype=np.intp)
         for j, name in enumerate(config.feature_classes):
             self._column[classes.id_of(name)] = j
-        self._row_offset = (np.arange(self.pset.m) * (k + 1))[:, None]  # bincount bins per trajectory
+        # bincount bins: k + 1 per trajectory; unseen points all fall in one extra, discarded row.
+        m = self.pset.m
+        self._bins = (m + 1) * (k + 1)
+        self._offset = np.where(self._visible, (np.arange(m) * (k + 1))[:, None], m * (k + 1)).ravel()
+        self._pix_flat = self._pix.ravel()
         self._n = config.preference.n_steps
         self._ends = self.pset.endpoints  # (m, 2) vehicle frame
 
@@ -120,22 +124,23 @@ class UtilityFeaturizer:
     def terrain(self, image: np.ndarray) -> np.ndarray:
         """Terrain utilities, shape (m, K): share of each trajectory's points on each class."""
         k = len(self.config.feature_classes)
-        cols = self._column[image.reshape(-1)[self._pix]]
-        cols[~self._visible] = k
-        counts = np.bincount((cols + self._row_offset).ravel(), minlength=self.pset.m * (k + 1))
-        return counts.reshape(self.pset.m, k + 1)[:, :k] / self._n
+        cols = self._column[image.reshape(-1)[self._pix_flat]]
+        counts = np.bincount(cols + self._offset, minlength=self._bins)
+        return counts.reshape(self.pset.m + 1, k + 1)[:-1, :k] * (1.0 / self._n)
 
     def distances(self, pose: Pose, path: ReferencePath, progress_s: float | None = None) -> np.ndarray:
         """d(T^i, P) [m] for each trajectory, shape (m,)."""
         x, y, yaw = pose
         c, s = math.cos(yaw), math.sin(yaw)
-        ends = self._ends @ np.array([[c, s], [-s, c]]) + (x, y)  # endpoints in the world frame
+        ex, ey = self._ends[:, 0], self._ends[:, 1]
         mode = self.config.distance_mode
         if mode is DistanceMode.LOOKAHEAD:
             if progress_s is None:
                 raise ValueError("lookahead distance needs the vehicle's progress along the path")
             tx, ty = path.point_at(progress_s + self.config.preference.horizon_m)
-            return np.hypot(ends[:, 0] - tx, ends[:, 1] - ty)
+            # Endpoint minus target, in the world frame, without building the (m, 2) array.
+            return np.hypot(ex * c - ey * s + (x - tx), ex * s + ey * c + (y - ty))
+        ends = self._ends @ np.array([[c, s], [-s, c]]) + (x, y)  # endpoints in the world frame
         pts, arc = path.resampled(self.config.path_spacing_m)
         if mode is DistanceMode.WINDOW:
             if progress_s is None:
@@ -152,7 +157,7 @@ class UtilityFeaturizer:
         lo, hi = d.min(), d.max()
         if hi - lo < eps:
             return np.ones_like(d)
-        return 1.0 - (d - lo) / (hi - lo)
+        return (hi - d) * (1.0 / (hi - lo))
 
     def __call__(self, image: np.ndarray, pose: Pose, path: ReferencePath, progress_s: float | None = None) -> np.ndarray:
         """U, shape (m, K + 1) float32: terrain shares then the distance utility."""

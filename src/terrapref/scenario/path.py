@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import bisect
+
 import numpy as np
 
 
@@ -17,6 +19,8 @@ class ReferencePath:
         self._d = np.diff(self.waypoints, axis=0)
         self._len = np.linalg.norm(self._d, axis=1)
         self.s = np.concatenate([[0.0], np.cumsum(self._len)])  # arc length at each waypoint, (N,)
+        self._s_list, self._len_list = self.s.tolist(), self._len.tolist()
+        self._a_list, self._d_list = self._a.tolist(), self._d.tolist()
         self._resampled: dict[float, tuple[np.ndarray, np.ndarray]] = {}
 
     @property
@@ -25,10 +29,13 @@ class ReferencePath:
 
     def point_at(self, s: float | np.ndarray) -> np.ndarray:
         """Points (..., 2) at arc lengths ``s`` (clamped to the path)."""
-        if np.ndim(s) == 0:  # scalar fast path: used once per frame in the control loop
+        if isinstance(s, (float, int)):  # scalar fast path: used once per frame in the control loop
             sf = min(max(float(s), 0.0), self.length_m)
-            i = min(max(int(np.searchsorted(self.s, sf, side="right")) - 1, 0), len(self._len) - 1)
-            return self._a[i] + ((sf - self.s[i]) / self._len[i]) * self._d[i]
+            i = min(max(bisect.bisect_right(self._s_list, sf) - 1, 0), len(self._len) - 1)
+            f = (sf - self._s_list[i]) / self._len_list[i]
+            ax, ay = self._a_list[i]
+            dx, dy = self._d_list[i]
+            return np.array([ax + f * dx, ay + f * dy])
         s = np.clip(np.asarray(s, dtype=float), 0.0, self.length_m)
         i = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, len(self._len) - 1)
         f = (s - self.s[i]) / self._len[i]

@@ -1,0 +1,81 @@
+"""Demonstration-side benchmarks: utility features per frame, and recording train_course.
+
+Run through ``scripts/bench.sh`` (one core); numbers go into ``docs/benchmarks.md``.
+
+(a) features: ``UtilityFeaturizer`` (m = 21, n = 30, look-ahead distance utility) on real
+    frames of ``train_course`` driven by the synthetic driver; each call timed on its own; the
+    median is reported. Target: <= 30 us median.
+(b) record: ``terrapref record train_course`` end to end through the library (simulation,
+    synthetic driver, PNG frames and the JSONL log written to a temporary directory), wall time.
+    Target: <= 20 s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from terrapref.camera import CameraConfig
+from terrapref.demos.expert import ExpertDriver
+from terrapref.demos.recording import RecordingWriter, read_recording
+from terrapref.demos.session import record_run, recording_meta
+from terrapref.features import FeatureConfig, PreferenceSetConfig, UtilityFeaturizer
+from terrapref.camera import PinholeCamera
+from terrapref.scenario import resolve_scenario
+from terrapref.scenario.path import PathTracker, ReferencePath
+from terrapref.sim import SimConfig, Simulation
+from terrapref.terrain import PreferenceProfile
+
+
+def bench_record(out: Path, seed: int) -> tuple[float, int, int]:
+    scenario = resolve_scenario("train_course")
+    camera, pref, sim_cfg = CameraConfig(), PreferenceSetConfig(), SimConfig()
+    meta = recording_meta(scenario, camera, pref, sim_cfg, {"kind": "expert", "seed": seed}, PreferenceProfile.default())
+    t0 = time.perf_counter()
+    sim = Simulation(scenario, camera, sim_cfg)
+    writer = RecordingWriter(out, meta, scenario.to_dict())
+    record_run(sim, ExpertDriver(), writer, pref, np.random.default_rng(seed))
+    wall = time.perf_counter() - t0
+    size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
+    return wall, writer.count, size
+
+
+def bench_features(rec_dir: Path, repeats: int) -> np.ndarray:
+    rec = read_recording(rec_dir)
+    images = [rec.image(i) for i in range(0, len(rec), max(1, len(rec) // 500))]
+    idx = list(range(0, len(rec), max(1, len(rec) // 500)))
+    featurizer = UtilityFeaturizer(FeatureConfig(), PinholeCamera(CameraConfig()))
+    path = ReferencePath(np.asarray(rec.meta["path"]))
+    tracker = PathTracker(path)
+    progress = [tracker.update(rec.poses[i, :2]) for i in idx]
+    times = []
+    for _ in range(repeats):
+        for image, i, s in zip(images, idx, progress):
+            pose = tuple(rec.poses[i])
+            t0 = time.perf_counter()
+            featurizer(image, pose, path, s)
+            times.append(time.perf_counter() - t0)
+    return np.array(times)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--repeats", type=int, default=5)
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "rec"
+        wall, frames, size = bench_record(out, args.seed)
+        t = bench_features(out, args.repeats)
+    print(f"{'benchmark':44s} {'median':>10s} {'p90':>10s} {'target':>10s}")
+    print(f"{'features U (m=21, n=30), per frame':44s} {np.median(t) * 1e6:8.1f}us {np.percentile(t, 90) * 1e6:8.1f}us {'<= 30us':>10s}   ({len(t)} calls)")
+    print(f"{'record train_course (synthetic driver)':44s} {wall:9.2f}s {'':>10s} {'<= 20s':>10s}   ({frames} frames, {size / 1e6:.1f} MB, {size / frames / 1e3:.1f} kB/frame)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
