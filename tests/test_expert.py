@@ -1,0 +1,155 @@
+"""The synthetic demonstrator (SPEC 10) drives the packaged courses cleanly, deterministically and
+like a person holding a gamepad, without looking at the planner's features."""
+
+from __future__ import annotations
+
+import ast
+import inspect
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+import terrapref.demos.expert as expert_module
+from terrapref.demos.expert import ExpertConfig, ExpertDriver
+from terrapref.evaluation import RunMetrics, score_run
+from terrapref.scenario import Scenario, resolve_scenario
+from terrapref.sim import EpisodeLog, SimConfig, Simulation, run_episode
+from terrapref.terrain import PreferenceProfile
+
+
+@dataclass
+class DrivenRun:
+    scenario: Scenario
+    sim: Simulation
+    log: EpisodeLog
+    metrics: RunMetrics
+
+    @property
+    def frame_poses(self) -> np.ndarray:
+        """Pose at each decision, shape (F, 3): the trace holds every controller tick."""
+        return self.log.trace[:: self.sim.config.ticks_per_frame][: len(self.log.commands)]
+
+
+def _drive(name: str, seed: int, config: SimConfig | None = None) -> DrivenRun:
+    scenario = resolve_scenario(name)
+    sim = Simulation(scenario, config=config)
+    log = run_episode(sim, ExpertDriver(), np.random.default_rng(seed))
+    metrics = score_run(
+        log.trace[:, :2], scenario, sim.world, PreferenceProfile.default(),
+        completed=log.completed, collisions=log.collisions, duration_s=log.duration_s,
+    )
+    return DrivenRun(scenario, sim, log, metrics)
+
+
+def _assert_clean(run: DrivenRun) -> None:
+    failed = [(z.id, z.label, f"chose {z.choice}, expected {z.expect}", z.distance_m) for z in run.metrics.zones if not z.success]
+    assert run.log.completed, f"did not reach the goal in {run.log.duration_s} s"
+    assert run.log.collisions == 0
+    assert len(run.metrics.zones) == len(run.scenario.zones) > 0
+    assert not failed, failed
+
+
+@pytest.fixture(scope="module")
+def train_seed0() -> DrivenRun:
+    return _drive("train_course", 0)
+
+
+# --- driving the courses ----------------------------------------------------------------------
+
+
+def test_train_course_every_zone_succeeds(train_seed0: DrivenRun):
+    _assert_clean(train_seed0)
+    assert len(train_seed0.metrics.zones) == 10
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(5))
+def test_train_course_every_zone_succeeds_for_every_seed(seed: int):
+    _assert_clean(_drive("train_course", seed))
+
+
+def test_test_course_every_zone_succeeds():
+    run = _drive("test_course", 0)
+    _assert_clean(run)
+    assert len(run.metrics.zones) == 7
+
+
+# --- driving like a person with a gamepad ------------------------------------------------------
+
+
+def test_commands_stay_in_the_joystick_range(train_seed0: DrivenRun):
+    cmd = train_seed0.log.commands
+    assert len(cmd) > 3000  # about 5.5 minutes at 10 Hz
+    np.testing.assert_array_equal(cmd[:, 0], 1.0)
+    assert np.all(np.abs(cmd[:, 1]) <= 1.0)
+
+
+def test_stick_rests_at_exactly_zero_on_a_clear_straight(train_seed0: DrivenRun):
+    # train_course starts at (5, 10) on a straight trail along +x; its first patch begins at x = 23.5.
+    poses = train_seed0.frame_poses
+    assert poses[0, 0] == pytest.approx(5.0) and poses[0, 2] == pytest.approx(0.0)
+    first_10_m = poses[:, 0] < 15.0
+    assert first_10_m.sum() >= 95  # 10 m at 1 m/s, 10 frames a second
+    w = train_seed0.log.commands[first_10_m, 1]
+    assert np.all(w == 0.0), f"stick moved on the clear straight: {w[w != 0.0][:5]}"
+    # ...and it does move for the patches later on.
+    assert np.any(train_seed0.log.commands[:, 1] != 0.0)
+
+
+def test_the_stick_returns_to_exactly_zero_after_a_detour(train_seed0: DrivenRun):
+    w = train_seed0.log.commands[:, 1]
+    moved = np.flatnonzero(w != 0.0)
+    after = w[moved[0]:]
+    # After the first detour the stick comes back to rest for whole seconds, not near-zero jitter.
+    zero_runs = np.diff(np.flatnonzero(np.diff(np.concatenate([[1], (after == 0.0).astype(int), [1]])) != 0))
+    assert np.any(after == 0.0) and zero_runs.size and zero_runs.max() >= 10
+
+
+# --- determinism (STYLE 6) ----------------------------------------------------------------------
+
+
+def test_same_seed_same_trace_other_seed_differs():
+    # The first 25 s of demo_course: a lone water patch and the mud-vs-rock pair, where the
+    # seeded tremor and side choices act.
+    config = SimConfig(time_limit_s=25.0)
+    a, b, c = (_drive("demo_course", seed, config).log for seed in (0, 0, 1))
+    np.testing.assert_array_equal(a.trace, b.trace)
+    np.testing.assert_array_equal(a.commands, b.commands)
+    assert a.trace.shape == c.trace.shape
+    assert not np.array_equal(a.commands, c.commands)
+    assert not np.array_equal(a.trace, c.trace)
+
+
+def test_reset_restarts_the_driver():
+    scenario = resolve_scenario("demo_course")
+    config = SimConfig(time_limit_s=15.0)
+    driver = ExpertDriver()
+    first = run_episode(Simulation(scenario, config=config), driver, np.random.default_rng(7))
+    again = run_episode(Simulation(scenario, config=config), driver, np.random.default_rng(7))
+    np.testing.assert_array_equal(first.trace, again.trace)
+
+
+# --- independence from the learner (SPEC 10) ---------------------------------------------------
+
+
+def test_driver_never_imports_the_feature_pipeline():
+    tree = ast.parse(inspect.getsource(expert_module))
+    imported: list[str] = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            imported += [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            imported.append(node.module or "")
+    assert imported  # the walk did find the imports
+    assert not [m for m in imported if m == "terrapref.features" or m.startswith("terrapref.features.")]
+    for name, value in vars(expert_module).items():
+        owner = getattr(value, "__module__", "") or ""
+        assert not owner.startswith("terrapref.features"), f"{name} comes from {owner}"
+
+
+def test_expert_config_to_dict_is_plain_data():
+    data = ExpertConfig().to_dict()
+    assert data["profile"] == ["mud", "rock", "water", "non_traversable"]
+    assert data["speed_mps"] == 1.0
+    assert all(isinstance(v, (int, float, str, list)) for v in data.values())
