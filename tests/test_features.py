@@ -254,9 +254,9 @@ def test_window_distance_ignores_the_returning_leg(camera: PinholeCamera):
     assert s == pytest.approx(0.0, abs=1e-9)  # the tracker starts at the path's start, not its end
     d = feat.distances(LOOP_POSE, path, s)
     window = feat.config.effective_window_m
-    assert window == pytest.approx(12.0)
-    # Closed form: only the path from s to s + 12 m, i.e. 3 m ahead then 9 m to the right.
-    ahead = ReferencePath(np.array([[0.0, 0.0], [3.0, 0.0], [3.0, -9.0]]))
+    assert window == pytest.approx(11.6)  # twice the 5.8 m travel to a trajectory's last point
+    # Closed form: only the path from s to s + 11.6 m, i.e. 3 m ahead then 8.6 m to the right.
+    ahead = ReferencePath(np.array([[0.0, 0.0], [3.0, 0.0], [3.0, -8.6]]))
     ends = feat.pset.endpoints
     np.testing.assert_allclose(d, ahead.distance_to(ends), atol=0.025 + 1e-9)
     w = np.asarray(feat.config.preference.control.w_rps)
@@ -272,14 +272,15 @@ def test_lookahead_distance_ignores_the_returning_leg(camera: PinholeCamera):
     path = ReferencePath(_to_world(LOOP_V, LOOP_POSE))
     s = _loop_progress(path)
     d = feat.distances(LOOP_POSE, path, s)
-    # Closed form: the look-ahead point 6 m along the path is (3, -3) in the vehicle frame.
-    assert feat.config.preference.horizon_m == pytest.approx(6.0)
+    # Closed form: the look-ahead point 5.8 m along the path (29 steps of 0.2 m) is (3, -2.8).
+    assert feat.config.preference.horizon_m == pytest.approx(5.8)
     ends = feat.pset.endpoints
-    np.testing.assert_allclose(d, np.hypot(ends[:, 0] - 3.0, ends[:, 1] + 3.0), atol=1e-9)
+    np.testing.assert_allclose(d, np.hypot(ends[:, 0] - 3.0, ends[:, 1] + 2.8), atol=1e-9)
     w = np.asarray(feat.config.preference.control.w_rps)
     u5 = feat(np.zeros((H, W), np.uint8), LOOP_POSE, path, s)[:, -1]
     best = int(np.argmax(u5))
-    assert w[best] == pytest.approx(-0.3)  # the endpoint nearest (3, -3)
+    assert w[best] == pytest.approx(w[int(np.argmin(np.hypot(ends[:, 0] - 3.0, ends[:, 1] + 2.8)))])  # the endpoint nearest (3, -2.8)
+    assert w[best] == pytest.approx(-0.3)
     assert np.all(u5[np.abs(w) == 1.0] < 0.5)
 
 
@@ -290,11 +291,6 @@ def test_window_and_lookahead_need_a_progress(camera: PinholeCamera):
             feat.distances(Pose(0.0, 0.0, 0.0), _straight_path(), None)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="horizon_m = v*dt*n_steps (6.0 m) but the first of the n points is the origin, so every "
-    "trajectory travels v*dt*(n_steps-1) = 5.8 m; the lookahead target sits one step beyond a perfect follower",
-)
 def test_lookahead_point_is_where_a_perfect_follower_ends(featurizer: UtilityFeaturizer):
     cfg = featurizer.config.preference
     straight = featurizer.pset.trajectories[cfg.control.w_rps.index(0.0)]

@@ -4,7 +4,7 @@ Trajectories live in the vehicle frame and the camera is fixed to the vehicle, s
 trajectory point's pixel is computed once per camera (SPEC 6).
 
 Default horizon, chosen by experiment (docs/design.md, "Trajectory horizon"): n = 30 steps of
-dt = 0.2 s, i.e. 6 m at 1 m/s. Shorter arcs (3 m) end before the point where a driver who must
+dt = 0.2 s, i.e. points out to 5.8 m at 1 m/s. Shorter arcs (3 m) end before the point where a driver who must
 clear a 2-4 m patch with a 1.2 m wide vehicle starts to turn, so the features would not show the
 reason for the turn; much longer ones run past the camera's useful range on the tight arcs and
 blur neighbouring situations together.
@@ -44,8 +44,8 @@ class PreferenceSetConfig:
 
     @property
     def horizon_m(self) -> float:
-        """Travel distance along every trajectory [m]."""
-        return self.control.v_mps * self.dt_s * self.n_steps
+        """Travel distance to each trajectory's last point [m]: point 1 is the origin, so n - 1 steps."""
+        return self.control.v_mps * self.dt_s * (self.n_steps - 1)
 
     def to_dict(self) -> dict:
         return {"control": self.control.to_dict(), "n_steps": self.n_steps, "dt_s": self.dt_s}

@@ -1,0 +1,278 @@
+"""Crash-safe recordings (SPEC 10): round trip, refusals, cut and unfinished files, a real kill,
+and the size of a five-minute demonstration."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from terrapref.demos.expert import ExpertDriver
+from terrapref.demos.recording import FRAMES, META, Recording, RecordingWriter, read_recording
+from terrapref.demos.session import record_run, recording_meta
+from terrapref.errors import UserError
+from terrapref.features import PreferenceSetConfig
+from terrapref.scenario import Scenario, resolve_scenario
+from terrapref.sim import EpisodeLog, Simulation
+from terrapref.terrain import PreferenceProfile
+
+H, W = 480, 640
+META_IN = {"scenario": "hand_made", "camera": {"width_px": W, "height_px": H}, "driver": {"kind": "test"}}
+SCENARIO_IN = {"format": "terrapref-scenario/1", "name": "hand_made", "path": {"waypoints": [[0.0, 0.0], [5.0, 0.0]]}}
+
+
+def _frames(n: int, seed: int = 0) -> list[tuple[float, tuple[float, float, float], np.ndarray, tuple[float, float], int]]:
+    rng = np.random.default_rng(seed)
+    ids = np.array([0, 1, 2, 3, 4, 255], dtype=np.uint8)
+    out = []
+    for i in range(n):
+        pose = (float(rng.uniform(0, 50)), float(rng.uniform(0, 30)), float(rng.uniform(-np.pi, np.pi)))
+        cmd = (1.0, float(rng.uniform(-1, 1)))
+        out.append((0.1 * i, pose, rng.choice(ids, size=(H, W)), cmd, int(rng.integers(0, 21))))
+    return out
+
+
+def _write(out: Path, frames: list, close: bool = True, **kwargs) -> RecordingWriter:
+    writer = RecordingWriter(out, META_IN, SCENARIO_IN, **kwargs)
+    for t, pose, image, cmd, label in frames:
+        writer.append(t, pose, image, cmd, label)
+    if close:
+        writer.close({"completed": True})
+    return writer
+
+
+def _assert_frames_equal(rec: Recording, frames: list) -> None:
+    assert len(rec) == len(frames)
+    np.testing.assert_allclose(rec.times, [f[0] for f in frames], atol=1e-6)
+    np.testing.assert_array_equal(rec.poses, np.array([f[1] for f in frames]))
+    np.testing.assert_array_equal(rec.commands, np.array([f[3] for f in frames]))
+    np.testing.assert_array_equal(rec.labels, [f[4] for f in frames])
+    for i, f in enumerate(frames):
+        np.testing.assert_array_equal(rec.image(i), f[2], err_msg=f"frame {i}")
+
+
+# --- round trip and refusals --------------------------------------------------------------------
+
+
+def test_round_trip(tmp_path: Path):
+    frames = _frames(5)
+    _write(tmp_path / "rec", frames)
+    rec = read_recording(tmp_path / "rec")
+    _assert_frames_equal(rec, frames)
+    assert rec.complete
+    assert rec.meta["status"] == "complete" and rec.meta["frames"] == 5
+    assert rec.meta["summary"] == {"completed": True}
+    assert {k: rec.meta[k] for k in META_IN} == META_IN
+    assert rec.scenario == SCENARIO_IN
+    images = rec.images()
+    assert images.shape == (5, H, W) and images.dtype == np.uint8
+
+
+def test_frames_file_is_plain_json_lines(tmp_path: Path):
+    _write(tmp_path / "rec", _frames(3))
+    lines = (tmp_path / "rec" / FRAMES).read_text().splitlines()
+    assert [json.loads(line)["i"] for line in lines] == [0, 1, 2]
+    assert all((tmp_path / "rec" / json.loads(line)["image"]).is_file() for line in lines)
+
+
+def test_existing_recording_is_refused_unless_overwrite(tmp_path: Path):
+    out = tmp_path / "rec"
+    _write(out, _frames(3))
+    with pytest.raises(UserError) as err:
+        RecordingWriter(out, META_IN, SCENARIO_IN)
+    assert str(out) in str(err.value)
+    assert len(read_recording(out)) == 3  # untouched
+    frames = _frames(2, seed=1)
+    _write(out, frames, overwrite=True)
+    rec = read_recording(out)
+    _assert_frames_equal(rec, frames)
+    assert sorted(p.name for p in (out / "images").iterdir()) == ["000000.png", "000001.png"]
+
+
+def test_partial_recording_is_also_refused_unless_overwrite(tmp_path: Path):
+    out = tmp_path / "rec"
+    _write(out, _frames(2), close=False)
+    with pytest.raises(UserError):
+        RecordingWriter(out, META_IN, SCENARIO_IN)
+
+
+@pytest.mark.parametrize("overwrite", [False, True])
+def test_non_empty_directory_that_is_no_recording_is_refused(tmp_path: Path, overwrite: bool):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("keep me")
+    with pytest.raises(UserError) as err:
+        RecordingWriter(out, META_IN, SCENARIO_IN, overwrite=overwrite)
+    assert str(out) in str(err.value)
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
+    assert (out / "notes.txt").read_text() == "keep me"
+
+
+def test_empty_directory_is_accepted(tmp_path: Path):
+    out = tmp_path / "empty"
+    out.mkdir()
+    _write(out, _frames(1))
+    assert read_recording(out).complete
+
+
+def test_reading_something_that_is_no_recording_is_a_user_error(tmp_path: Path):
+    with pytest.raises(UserError):
+        read_recording(tmp_path / "missing")
+    with pytest.raises(UserError):
+        read_recording(tmp_path)  # a directory without meta.json
+
+
+# --- cut and unfinished recordings ----------------------------------------------------------------
+
+
+def test_cut_last_line_is_dropped_and_reads_as_partial(tmp_path: Path):
+    out = tmp_path / "rec"
+    frames = _frames(4)
+    _write(out, frames)
+    path = out / FRAMES
+    text = path.read_text()
+    last_start = text.rstrip("\n").rfind("\n") + 1
+    path.write_text(text[: last_start + (len(text) - last_start) // 2])  # half of the last line
+    rec = read_recording(out)
+    assert not rec.complete
+    _assert_frames_equal(rec, frames[:3])
+
+
+def test_recording_never_closed_reads_as_partial(tmp_path: Path):
+    out = tmp_path / "rec"
+    frames = _frames(3)
+    writer = _write(out, frames, close=False)
+    rec = read_recording(out)  # while the writer is still open
+    assert not rec.complete and rec.meta["status"] == "partial"
+    _assert_frames_equal(rec, frames)
+    writer.abort()
+    assert not read_recording(out).complete
+
+
+def test_exception_inside_the_writer_context_leaves_it_partial(tmp_path: Path):
+    out = tmp_path / "rec"
+    frames = _frames(2)
+    with pytest.raises(RuntimeError):
+        with RecordingWriter(out, META_IN, SCENARIO_IN) as writer:
+            for t, pose, image, cmd, label in frames:
+                writer.append(t, pose, image, cmd, label)
+            raise RuntimeError("driver crashed")
+    rec = read_recording(out)
+    assert not rec.complete
+    _assert_frames_equal(rec, frames)
+
+
+def test_broken_line_in_the_middle_is_a_user_error_naming_it(tmp_path: Path):
+    out = tmp_path / "rec"
+    _write(out, _frames(3))
+    lines = (out / FRAMES).read_text().splitlines(keepends=True)
+    lines[1] = "{not json\n"
+    (out / FRAMES).write_text("".join(lines))
+    with pytest.raises(UserError) as err:
+        read_recording(out)
+    assert "line 2" in str(err.value) and FRAMES in str(err.value)
+
+
+CRASH_CHILD = """
+import sys
+import numpy as np
+from terrapref.demos.expert import ExpertDriver
+from terrapref.demos.recording import RecordingWriter
+from terrapref.demos.session import record_run, recording_meta
+from terrapref.features import PreferenceSetConfig
+from terrapref.scenario import resolve_scenario
+from terrapref.sim import Simulation
+from terrapref.terrain import PreferenceProfile
+
+scenario = resolve_scenario("demo_course")
+sim = Simulation(scenario)
+driver = ExpertDriver()
+preference = PreferenceSetConfig()
+meta = recording_meta(scenario, sim.camera.config, preference, sim.config, driver.config.to_dict(), PreferenceProfile.default())
+writer = RecordingWriter(sys.argv[1], meta, scenario.to_dict())
+record_run(sim, driver, writer, preference, np.random.default_rng(0))
+"""
+
+
+def test_recording_survives_sigkill(tmp_path: Path):
+    out = tmp_path / "rec"
+    frames_path = out / FRAMES
+    with open(tmp_path / "child.log", "wb") as log:
+        child = subprocess.Popen([sys.executable, "-c", CRASH_CHILD, str(out)], stdout=log, stderr=subprocess.STDOUT)
+        try:
+            # Wait (no time limit: the child either writes 30 frames or exits) until 30 lines are out.
+            while not (frames_path.exists() and frames_path.read_bytes().count(b"\n") >= 30):
+                if child.poll() is not None:
+                    pytest.fail(f"the recorder exited ({child.returncode}) before 30 frames: {(tmp_path / 'child.log').read_text()}")
+                time.sleep(0.002)
+            child.send_signal(signal.SIGKILL)
+        finally:
+            child.kill()
+            child.wait()
+    assert child.returncode == -signal.SIGKILL, "the recorder finished before it could be killed"
+    rec = read_recording(out)
+    assert len(rec) >= 30
+    assert not rec.complete and rec.meta["status"] == "partial"
+    for i in range(len(rec)):
+        image = rec.image(i)
+        assert image.shape == (H, W) and image.dtype == np.uint8
+    np.testing.assert_allclose(rec.times, 0.1 * np.arange(len(rec)), atol=1e-6)
+    assert rec.meta["scenario"] == "demo_course"
+
+
+# --- a full recording made by the session loop -------------------------------------------------
+
+
+@dataclass
+class FullRecording:
+    scenario: Scenario
+    sim: Simulation
+    log: EpisodeLog
+    rec: Recording
+
+
+@pytest.fixture(scope="module")
+def demo_recording(tmp_path_factory: pytest.TempPathFactory) -> FullRecording:
+    out = tmp_path_factory.mktemp("demo") / "rec"
+    scenario = resolve_scenario("demo_course")
+    sim = Simulation(scenario)
+    driver = ExpertDriver()
+    preference = PreferenceSetConfig()
+    meta = recording_meta(scenario, sim.camera.config, preference, sim.config, {"kind": "expert", "seed": 0}, PreferenceProfile.default())
+    log = record_run(sim, driver, RecordingWriter(out, meta, scenario.to_dict()), preference, np.random.default_rng(0))
+    return FullRecording(scenario, sim, log, read_recording(out))
+
+
+def test_recorded_run_matches_the_episode(demo_recording: FullRecording):
+    log, rec, sim = demo_recording.log, demo_recording.rec, demo_recording.sim
+    assert log.completed and rec.complete
+    assert len(rec) == len(log.commands) == rec.meta["frames"]
+    np.testing.assert_array_equal(rec.poses, log.trace[:: sim.config.ticks_per_frame][: len(rec)])
+    np.testing.assert_array_equal(rec.commands, log.commands)
+    np.testing.assert_array_equal(rec.labels, PreferenceSetConfig().control.label_of(rec.commands[:, 1]))
+    np.testing.assert_array_equal(rec.image(0), Simulation(demo_recording.scenario).reset().image)
+
+
+def test_recording_carries_what_featurising_again_needs(demo_recording: FullRecording):
+    meta, scenario = demo_recording.rec.meta, demo_recording.scenario
+    assert PreferenceSetConfig.from_dict(meta["preference_set"]) == PreferenceSetConfig()
+    assert meta["camera"] == demo_recording.sim.camera.config.to_dict()
+    assert np.array_equal(np.array(meta["path"]), scenario.waypoints)
+    assert meta["profile"] == list(PreferenceProfile.default().order)
+    assert demo_recording.rec.scenario == scenario.to_dict()
+
+
+def test_five_minutes_fit_in_100_mb(demo_recording: FullRecording):
+    rec = demo_recording.rec
+    total = sum(p.stat().st_size for p in rec.path.rglob("*") if p.is_file())
+    per_frame = total / len(rec)
+    estimate = per_frame * 3000  # 5 minutes at 10 Hz
+    assert estimate < 100e6, f"{per_frame / 1e3:.1f} kB per frame: 5 minutes (3000 frames) ~ {estimate / 1e6:.1f} MB"
+    assert (rec.path / META).is_file()
