@@ -106,6 +106,16 @@ def _cmd_record(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_drive(args: argparse.Namespace) -> int:
+    from terrapref.demos.teleop import run_teleop
+
+    result = run_teleop(args.scenario, args.record, overwrite=args.force, v_mps=args.speed)
+    where = f", recorded to {result.record_dir}" if result.record_dir else ""
+    state = "reached the goal" if result.completed else ("quit" if result.quit else "stopped")
+    print(f"drove {result.frames} frames, {state}, {result.collisions} collisions{where}")
+    return 0
+
+
 def _cmd_inspect(args: argparse.Namespace) -> int:
     from terrapref.demos.inspect import save_driven_path, summarise
     from terrapref.demos.recording import read_recording
@@ -183,6 +193,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="replace an existing recording at --out")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=_cmd_record)
+
+    p = sub.add_parser("drive", help="drive a scenario yourself (keyboard or gamepad), optionally recording")
+    p.add_argument("scenario", metavar="SCENARIO")
+    p.add_argument("--record", type=Path, metavar="DIR", help="record the drive into DIR")
+    p.add_argument("--force", action="store_true", help="replace an existing recording at DIR")
+    p.add_argument("--speed", type=float, default=1.0, help="forward speed [m/s] (default 1)")
+    p.set_defaults(func=_cmd_drive)
 
     p = sub.add_parser("inspect", help="summarise a recording and draw its driven path")
     p.add_argument("recording", metavar="DIR", type=Path)

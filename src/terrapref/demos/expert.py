@@ -183,12 +183,21 @@ class ExpertDriver:
         dist = max(math.hypot(target[0] - x, target[1] - y), 1e-6)
         return 2.0 * c.speed_mps * math.sin(alpha) / dist
 
-    def act(self, frame: Frame) -> Command:
+    def intent(self, frame: Frame) -> float:
+        """The yaw rate [rad/s] the driver wants now, before its hand's delay, rate limit and tremor.
+
+        Used alone when the driver corrects another driver (the planner) rather than driving.
+        """
         c = self.config
         s_now = self.tracker.update(np.array(frame.pose[:2]))
         self.offset = self.choose_offset(s_now)
         w = self.steer(frame.pose, s_now, self.offset)
         w = 0.0 if abs(w) < c.deadzone_rps else w
+        return float(np.clip(w, -c.max_yaw_rate_rps, c.max_yaw_rate_rps))
+
+    def act(self, frame: Frame) -> Command:
+        c = self.config
+        w = self.intent(frame)
         self._queue.append(w)
         wanted = self._queue.popleft()
         step = c.stick_rate_rps2 * self.dt

@@ -7,6 +7,8 @@ Layout of a recording directory::
     scenario.yaml    the scenario as driven (terrapref-scenario/1)
     frames.jsonl     one JSON object per camera frame, appended and flushed as it happens:
                      {"i", "t", "pose": [x, y, yaw_rad], "cmd": [v, w], "label", "image"}
+                     (+ "executed": [v, w] in correction sessions, where the planner drove
+                     and "cmd" is the demonstrator's correction)
     images/NNNNNN.png  the segmentation frame, single-channel class ids
 
 A frame's image is written (atomically, via rename) before its line is appended, so if the
@@ -85,8 +87,20 @@ class RecordingWriter:
         self._frames = open(self.dir / FRAMES, "a", buffering=1)
         self.count = 0
 
-    def append(self, time_s: float, pose: tuple[float, float, float], image: np.ndarray, command: tuple[float, float], label: int) -> None:
-        """Store one frame: its image first, then its line (flushed), so a kill never orphans a line."""
+    def append(
+        self,
+        time_s: float,
+        pose: tuple[float, float, float],
+        image: np.ndarray,
+        command: tuple[float, float],
+        label: int,
+        executed: tuple[float, float] | None = None,
+    ) -> None:
+        """Store one frame: its image first, then its line (flushed), so a kill never orphans a line.
+
+        ``command`` is the demonstrated command (the label's source); ``executed``, when given,
+        is what the vehicle actually did instead (a correction session: the planner drove).
+        """
         name = f"{IMAGES}/{self.count:06d}.png"
         write_png_atomic(self.dir / name, image, compress_level=3)
         line = {
@@ -97,6 +111,8 @@ class RecordingWriter:
             "label": int(label),
             "image": name,
         }
+        if executed is not None:
+            line["executed"] = [float(executed[0]), float(executed[1])]
         self._frames.write(json.dumps(line) + "\n")
         self._frames.flush()
         self.count += 1

@@ -1,0 +1,52 @@
+"""Correction sessions (DAgger): the planner drives, the demonstrator shows what it would do.
+
+After the first model is trained from plain demonstrations, the planner drives the training
+course itself; at every frame the demonstrator's intended command is recorded as the label,
+while the vehicle executes the planner's choice. The planner thus gets labels in exactly the
+situations its own mistakes lead to, which plain demonstrations never visit (SPEC 15: after the
+first miss, the planner is off the data's distribution). With a person, this is a ride-along:
+the operator holds the stick as if driving while the robot drives.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from terrapref.demos.expert import ExpertDriver
+from terrapref.demos.recording import RecordingWriter
+from terrapref.features import PreferenceSetConfig
+from terrapref.planner import PlannerDriver
+from terrapref.sim import EpisodeLog, Simulation
+from terrapref.vehicle import Command
+
+
+def record_corrections(
+    sim: Simulation,
+    planner: PlannerDriver,
+    expert: ExpertDriver,
+    writer: RecordingWriter,
+    preference: PreferenceSetConfig,
+    rng: np.random.Generator,
+    takeover: float = 0.0,
+) -> EpisodeLog:
+    """Drive with the planner, label every frame with the demonstrator's intent.
+
+    Args:
+        takeover: probability per frame that the demonstrator's command is executed instead
+            of the planner's (0: pure DAgger).
+    """
+    frame = sim.reset()
+    planner.reset(sim.scenario, rng)
+    expert.reset(sim.scenario, rng, world=sim.world)
+    control = preference.control
+    v = control.v_mps
+    while not sim.done:
+        w_label = expert.intent(frame)
+        executed = planner.act(frame)
+        if takeover > 0 and rng.random() < takeover:
+            executed = Command(v, w_label)
+        writer.append(frame.time_s, frame.pose, frame.image, (v, w_label), control.label_of(w_label), executed=executed)
+        frame = sim.step(executed)
+    log = EpisodeLog(sim.scenario.name, np.array(sim.trace), np.array(sim.commands).reshape(-1, 2), sim.reached_goal, sim.collisions, sim.time_s)
+    writer.close({"completed": log.completed, "collisions": log.collisions, "duration_s": round(log.duration_s, 3), "session": "corrections"})
+    return log

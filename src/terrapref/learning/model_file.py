@@ -1,0 +1,93 @@
+"""Model files: weights in safetensors, configuration and provenance in its JSON metadata.
+
+Loading reads tensors and a JSON header only; no code from the file is ever executed.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from safetensors import SafetensorError, safe_open
+from safetensors.numpy import save_file
+
+from terrapref.camera import CameraConfig
+from terrapref.errors import UserError
+from terrapref.features import FeatureConfig
+from terrapref.learning.network import ClassifierConfig
+from terrapref.terrain import ClassTable
+
+FORMAT = "terrapref-model/1"
+
+
+@dataclass(frozen=True)
+class LoadedModel:
+    """A trained classifier and everything it was trained under."""
+
+    path: str
+    classifier: ClassifierConfig
+    weights: dict[str, np.ndarray]
+    features: FeatureConfig
+    camera: CameraConfig
+    classes: ClassTable
+    profile: tuple[str, ...]
+    meta: dict
+
+
+def save_model(path: str | Path, classifier: ClassifierConfig, weights: dict[str, np.ndarray], meta: dict) -> Path:
+    """Write weights and metadata atomically. ``meta`` must hold features, camera, classes, profile."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    header = {"format": FORMAT, "classifier": classifier.to_dict(), **meta}
+    save_file({k: np.ascontiguousarray(v, dtype=np.float32) for k, v in weights.items()}, str(tmp), metadata={"terrapref": json.dumps(header)})
+    tmp.replace(path)
+    return path
+
+
+def load_model(path: str | Path) -> LoadedModel:
+    """Read a model file; every problem is a :class:`UserError` naming the file and the field."""
+    source = str(path)
+    if not Path(path).is_file():
+        raise UserError(source, "no such model file")
+    try:
+        with safe_open(source, framework="numpy") as fh:
+            header = fh.metadata() or {}
+            weights = {k: fh.get_tensor(k) for k in fh.keys()}
+    except (SafetensorError, OSError, ValueError) as exc:
+        raise UserError(source, f"not a safetensors model file ({exc})") from None
+    try:
+        meta = json.loads(header["terrapref"])
+    except (KeyError, json.JSONDecodeError):
+        raise UserError(source, "missing terrapref metadata", field="metadata") from None
+    if meta.get("format") != FORMAT:
+        raise UserError(source, f"expected {FORMAT!r}, got {meta.get('format')!r}", field="format")
+    try:
+        classifier = ClassifierConfig.from_dict(meta["classifier"])
+        features = FeatureConfig.from_dict(meta["features"])
+        camera = CameraConfig.from_dict(meta["camera"])
+        classes = ClassTable.from_dict(meta["classes"], source)
+        profile = tuple(meta["profile"])
+    except KeyError as exc:
+        raise UserError(source, "missing", field=str(exc.args[0])) from None
+    except (TypeError, ValueError) as exc:
+        raise UserError(source, f"invalid configuration: {exc}", field="metadata") from None
+    expected = {"compress.weight", "compress.bias"} if classifier.compress else set()
+    expected |= {f"layers.{i}.{p}" for i in range(classifier.depth + 1) for p in ("weight", "bias")}
+    if set(weights) != expected:
+        raise UserError(source, f"weights do not match the classifier (missing {sorted(expected - set(weights))}, extra {sorted(set(weights) - expected)})", field="weights")
+    if classifier.m != features.preference.m or classifier.n_features != features.n_features:
+        raise UserError(source, "classifier shape does not match its feature configuration", field="classifier")
+    return LoadedModel(source, classifier, weights, features, camera, classes, profile, meta)
+
+
+def check_compatible(model: LoadedModel, camera: CameraConfig, features: FeatureConfig | None = None) -> None:
+    """Refuse a model trained under another camera or preference set than the planner's."""
+    if model.camera != camera:
+        diff = [k for k, v in model.camera.to_dict().items() if camera.to_dict()[k] != v]
+        raise UserError(model.path, f"trained for another camera ({', '.join(diff)} differ); re-featurise the recordings with this camera and retrain", field="camera")
+    if features is not None and model.features != features:
+        diff = [k for k, v in model.features.to_dict().items() if features.to_dict()[k] != v]
+        raise UserError(model.path, f"trained with another preference set or feature configuration ({', '.join(diff)} differ)", field="features")

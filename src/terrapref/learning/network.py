@@ -1,0 +1,88 @@
+"""The classifier C (SPEC 8): a shared row-wise 5 -> 1 compression, three hidden layers, m logits.
+
+The network is defined twice on purpose: in PyTorch for training (:mod:`terrapref.learning.torch_net`)
+and here as a NumPy forward pass over the same named weights, which the planner uses in the
+control loop (about 10 us per decision, no torch import, no torch needed on the robot).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+ACTIVATIONS = ("relu", "tanh", "elu")
+
+
+@dataclass(frozen=True)
+class ClassifierConfig:
+    """Shape of C.
+
+    Attributes:
+        m: trajectories (logits).
+        n_features: utilities per trajectory (K terrain classes + distance).
+        hidden: width of each of the three hidden layers (our choice: 64).
+        activation: hidden activation, one of relu (default), tanh, elu.
+        depth: number of hidden layers (paper: 3).
+        compress: True for the paper's shared row-wise compression; False flattens U into
+            an m * n_features vector instead (an ablation).
+        skip: add the compressed scores to the logits (a residual path, so the identity
+            "pick the best-scored trajectory" is the starting point); False is the paper's C.
+    """
+
+    m: int = 21
+    n_features: int = 5
+    hidden: int = 64
+    activation: str = "relu"
+    depth: int = 3
+    compress: bool = True
+    skip: bool = False
+
+    def __post_init__(self) -> None:
+        if self.activation not in ACTIVATIONS:
+            raise ValueError(f"activation must be one of {', '.join(ACTIVATIONS)}")
+        if self.m < 2 or self.n_features < 1 or self.hidden < 1 or self.depth < 1:
+            raise ValueError("m >= 2, n_features >= 1, hidden >= 1, depth >= 1")
+        if self.skip and not self.compress:
+            raise ValueError("skip needs the row-wise compression")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> ClassifierConfig:
+        return cls(**data)
+
+
+def _act(name: str, x: np.ndarray) -> np.ndarray:
+    if name == "relu":
+        return np.maximum(x, 0.0, out=x)
+    if name == "tanh":
+        return np.tanh(x, out=x)
+    return np.where(x > 0, x, np.expm1(np.minimum(x, 0.0)))  # elu, alpha = 1
+
+
+def numpy_forward(config: ClassifierConfig, weights: dict[str, np.ndarray], U: np.ndarray) -> np.ndarray:
+    """Logits of C for U of shape (m, k) or (B, m, k); returns (m,) or (B, m).
+
+    ``weights`` uses the PyTorch state-dict names: compress.weight (1, k), compress.bias (1,),
+    layers.{i}.weight (out, in), layers.{i}.bias (out,).
+    """
+    single = U.ndim == 2
+    x = U[None] if single else U
+    if config.compress:
+        scores = x @ weights["compress.weight"][0] + weights["compress.bias"][0]  # (B, m)
+    else:
+        scores = x.reshape(len(x), -1)
+    h = scores
+    for i in range(config.depth):
+        h = _act(config.activation, h @ weights[f"layers.{i}.weight"].T + weights[f"layers.{i}.bias"])
+    logits = h @ weights[f"layers.{config.depth}.weight"].T + weights[f"layers.{config.depth}.bias"]
+    if config.skip:
+        logits = logits + scores
+    return logits[0] if single else logits
+
+
+def softmax(logits: np.ndarray) -> np.ndarray:
+    z = np.exp(logits - logits.max(axis=-1, keepdims=True))
+    return z / z.sum(axis=-1, keepdims=True)

@@ -1,0 +1,31 @@
+"""PyTorch definition of C for training; its state-dict names match :func:`numpy_forward`."""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from terrapref.learning.network import ClassifierConfig
+
+_ACT = {"relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU}
+
+
+class UtilityClassifier(nn.Module):
+    """C: U (B, m, k) -> logits (B, m)."""
+
+    def __init__(self, config: ClassifierConfig) -> None:
+        super().__init__()
+        self.config = config
+        width_in = config.m if config.compress else config.m * config.n_features
+        self.compress = nn.Linear(config.n_features, 1) if config.compress else None
+        dims = [width_in] + [config.hidden] * config.depth + [config.m]
+        self.layers = nn.ModuleList(nn.Linear(a, b) for a, b in zip(dims[:-1], dims[1:]))
+        self.act = _ACT[config.activation]()
+
+    def forward(self, U: torch.Tensor) -> torch.Tensor:
+        scores = self.compress(U).squeeze(-1) if self.compress is not None else U.flatten(1)
+        h = scores
+        for layer in self.layers[:-1]:
+            h = self.act(layer(h))
+        logits = self.layers[-1](h)
+        return logits + scores if self.config.skip else logits

@@ -1,0 +1,152 @@
+"""Training C on a featurised dataset (paper, section 5.2; SPEC 8).
+
+Paper recipe: 80/20 train/validation split, 15 epochs, learning rate 1e-3, batch 256, Adam
+(our assumption), a checkpoint every epoch; we keep the epoch with the lowest validation loss.
+Seeded and deterministic on CPU: the split, the initialisation and the batch order all come
+from one seed, and PyTorch runs single-threaded with deterministic algorithms.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import torch
+from torch import nn
+
+from terrapref.demos.dataset import Dataset
+from terrapref.learning.network import ClassifierConfig
+from terrapref.learning.torch_net import UtilityClassifier
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Training hyperparameters (defaults: the paper's recipe).
+
+    Attributes:
+        epochs: passes over the training split.
+        lr: Adam learning rate.
+        batch_size: samples per step.
+        val_fraction: share of samples held out for validation.
+        weight_decay: Adam L2 penalty.
+        class_balance: weight the loss by inverse label frequency (off in the paper's recipe).
+        seed: seeds the split, the initialisation and the batch order.
+        hidden, activation, depth, skip, compress: the classifier's shape (see ClassifierConfig).
+    """
+
+    epochs: int = 15
+    lr: float = 1e-3
+    batch_size: int = 256
+    val_fraction: float = 0.2
+    weight_decay: float = 0.0
+    class_balance: bool = False
+    seed: int = 0
+    hidden: int = 64
+    activation: str = "relu"
+    depth: int = 3
+    skip: bool = False
+    compress: bool = True
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class EpochMetrics:
+    epoch: int
+    train_loss: float
+    val_loss: float
+    train_acc: float
+    val_acc: float
+    val_top3: float
+
+
+@dataclass
+class TrainResult:
+    classifier: ClassifierConfig
+    weights: dict[str, np.ndarray]  # the chosen epoch's weights
+    history: list[EpochMetrics]
+    best_epoch: int
+    checkpoints: list[dict[str, np.ndarray]]
+    steps: int
+
+
+def _to_numpy(model: nn.Module) -> dict[str, np.ndarray]:
+    return {k: v.detach().cpu().numpy().copy() for k, v in model.state_dict().items()}
+
+
+def split_indices(n: int, val_fraction: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Random train/validation split of n samples."""
+    perm = rng.permutation(n)
+    n_val = max(1, int(round(n * val_fraction))) if n > 1 else 0
+    return np.sort(perm[n_val:]), np.sort(perm[:n_val])
+
+
+def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callable[[EpochMetrics], None] | None = None) -> TrainResult:
+    """Train C on ``dataset``; returns the lowest-validation-loss epoch's weights and the history."""
+    config = config or TrainConfig()
+    torch.use_deterministic_algorithms(True)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        return _train(dataset, config, progress)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetrics], None] | None) -> TrainResult:
+    n, m, k = dataset.U.shape
+    rng = np.random.default_rng(config.seed)
+    tr, va = split_indices(n, config.val_fraction, rng)
+    torch.manual_seed(config.seed)
+    classifier = ClassifierConfig(m, k, config.hidden, config.activation, config.depth, config.compress, config.skip)
+    model = UtilityClassifier(classifier)
+    opt = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    U = torch.from_numpy(np.ascontiguousarray(dataset.U, dtype=np.float32))
+    y = torch.from_numpy(dataset.labels.astype(np.int64))
+    weight = None
+    if config.class_balance:
+        counts = np.bincount(dataset.labels[tr], minlength=m).astype(np.float64)
+        w = np.where(counts > 0, counts.sum() / np.maximum(counts, 1) / m, 0.0)
+        weight = torch.tensor(np.sqrt(w), dtype=torch.float32)  # square root: balance without exploding rare bins
+    loss_fn = nn.CrossEntropyLoss(weight=weight)
+    plain = nn.CrossEntropyLoss()
+
+    def evaluate(idx: np.ndarray) -> tuple[float, float, float]:
+        if len(idx) == 0:
+            return math.nan, math.nan, math.nan
+        with torch.no_grad():
+            logits = model(U[idx])
+            loss = float(plain(logits, y[idx]))
+            top = logits.topk(min(3, m), dim=1).indices
+            acc = float((top[:, 0] == y[idx]).float().mean())
+            top3 = float((top == y[idx, None]).any(dim=1).float().mean())
+        return loss, acc, top3
+
+    history: list[EpochMetrics] = []
+    checkpoints: list[dict[str, np.ndarray]] = []
+    steps = 0
+    for epoch in range(1, config.epochs + 1):
+        model.train()
+        order = tr[rng.permutation(len(tr))]
+        for start in range(0, len(order), config.batch_size):
+            batch = order[start : start + config.batch_size]
+            loss = loss_fn(model(U[batch]), y[batch])
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            steps += 1
+        model.eval()
+        tl, ta, _ = evaluate(tr)
+        vl, vacc, vtop3 = evaluate(va)
+        metrics = EpochMetrics(epoch, tl, vl, ta, vacc, vtop3)
+        history.append(metrics)
+        checkpoints.append(_to_numpy(model))
+        if progress is not None:
+            progress(metrics)
+    losses = [h.val_loss if not math.isnan(h.val_loss) else h.train_loss for h in history]
+    best = int(np.argmin(losses))
+    return TrainResult(classifier, copy.deepcopy(checkpoints[best]), history, best + 1, checkpoints, steps)
