@@ -165,6 +165,66 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_train(args: argparse.Namespace) -> int:
+    from dataclasses import asdict
+
+    import numpy as np
+
+    from terrapref.demos.dataset import Dataset, load_dataset
+    from terrapref.learning.pipeline import train_and_save
+    from terrapref.learning.train import TrainConfig
+    from terrapref.report.plots import save_loss_curve
+
+    sets = [load_dataset(p) for p in args.data]
+    first = sets[0]
+    for path, d in zip(args.data[1:], sets[1:]):
+        for key in ("features", "camera", "classes", "profile"):
+            if d.meta.get(key) != first.meta.get(key):
+                raise UserError(str(path), f"differs from {args.data[0]} in {key}; featurise all recordings the same way", field=key)
+    data = first if len(sets) == 1 else Dataset(
+        np.concatenate([d.U for d in sets]), np.concatenate([d.labels for d in sets]), np.concatenate([d.w for d in sets]),
+        np.concatenate([d.source + 1000 * k for k, d in enumerate(sets)]),
+        {**first.meta, "recordings": [r for d in sets for r in d.meta.get("recordings", [])]},
+    )
+    try:
+        config = TrainConfig(epochs=args.epochs, lr=args.lr, batch_size=args.batch_size, seed=args.seed, hidden=args.hidden,
+                             activation=args.activation, skip=args.skip, class_balance=args.class_balance)
+    except ValueError as exc:
+        raise UserError("train", str(exc)) from None
+    print(f"training on {len(data)} samples ({len(args.data)} dataset file(s)), {config.epochs} epochs, batch {config.batch_size}, lr {config.lr}")
+    print(f"{'epoch':>5s} {'train loss':>10s} {'val loss':>9s} {'train acc':>9s} {'val acc':>8s} {'val top3':>8s}")
+    result = train_and_save(data, args.out, config, progress=lambda m: print(
+        f"{m.epoch:5d} {m.train_loss:10.4f} {m.val_loss:9.4f} {m.train_acc:9.3f} {m.val_acc:8.3f} {m.val_top3:8.3f}", flush=True))
+    curve = Path(args.out).with_suffix(".loss.png")
+    save_loss_curve(curve, [asdict(h) for h in result.history], result.best_epoch, title=f"{Path(args.out).name}: {len(data)} samples")
+    best = result.history[result.best_epoch - 1]
+    print(f"wrote {args.out} (epoch {result.best_epoch}: val loss {best.val_loss:.4f}, val acc {best.val_acc:.3f}), {curve}, checkpoints in {Path(args.out).with_name(Path(args.out).stem + '.checkpoints')}")
+    return 0
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from terrapref.evaluation.evaluate import evaluate_model
+    from terrapref.learning.model_file import load_model
+    from terrapref.progress import Progress
+    from terrapref.terrain import PreferenceProfile
+
+    model = load_model(args.model)
+    profile = PreferenceProfile.parse(args.profile, model.classes) if args.profile else None
+    frames = sorted({int(f) for f in args.frames.split(",") if f.strip()}) if args.frames else []
+    n_runs = len(args.scenarios) * args.seeds * (1 if args.no_driver else 2)
+    bar = Progress("evaluate", n_runs)
+    metrics = evaluate_model(args.model, args.scenarios, args.seeds, args.out, profile, not args.no_driver, frames, args.workers,
+                             progress=lambda k, n: bar.update(k, f"{k}/{n} runs"))
+    bar.close()
+    s = metrics["summary"]
+    print(f"planner: zone success {s['zone_success_rate']:.1%} over {s['zones']} zones, {s['collision_count']} collisions, completed {s['completed_rate']:.0%}")
+    if "driver_summary" in metrics:
+        d = metrics["driver_summary"]
+        print(f"driver:  zone success {d['zone_success_rate']:.1%} over {d['zones']} zones, {d['collision_count']} collisions")
+    print(f"wrote {Path(args.out) / 'metrics.json'} and figures in {args.out}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="terrapref", description="Learn off-road terrain preferences from a few minutes of driving.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -215,6 +275,30 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dt", type=float, help="trajectory time step [s] (default 0.2)")
     p.add_argument("--camera", help="YAML file of camera parameters to re-render the frames with")
     p.set_defaults(func=_cmd_featurize)
+
+    p = sub.add_parser("train", help="train the classifier on featurised datasets")
+    p.add_argument("data", nargs="+", metavar="DATA", type=Path, help="dataset files from `terrapref featurize`")
+    p.add_argument("--out", required=True, type=Path, help="model file (.safetensors)")
+    p.add_argument("--epochs", type=int, default=15)
+    p.add_argument("--lr", type=float, default=1e-3)
+    p.add_argument("--batch-size", type=int, default=256)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--hidden", type=int, default=64)
+    p.add_argument("--activation", choices=["relu", "tanh", "elu"], default="relu")
+    p.add_argument("--skip", action="store_true", help="add the compressed scores to the logits (residual path)")
+    p.add_argument("--class-balance", action="store_true", help="weight the loss by inverse label frequency")
+    p.set_defaults(func=_cmd_train)
+
+    p = sub.add_parser("evaluate", help="drive scenarios with a model, score every zone, write metrics.json and figures")
+    p.add_argument("model", metavar="MODEL")
+    p.add_argument("scenarios", nargs="+", metavar="SCENARIO")
+    p.add_argument("--seeds", type=int, default=3)
+    p.add_argument("--out", required=True, type=Path)
+    p.add_argument("--profile", help="resolve `best` zones under this profile instead of the model's")
+    p.add_argument("--frames", help="comma-separated frame numbers of seed 0 to draw as decision pictures")
+    p.add_argument("--no-driver", action="store_true", help="skip the synthetic driver's comparison runs")
+    p.add_argument("--workers", type=int, help="parallel processes (default: one per core)")
+    p.set_defaults(func=_cmd_evaluate)
 
     p = sub.add_parser("scenarios", help="list the packaged scenarios")
     p.set_defaults(func=_cmd_list)

@@ -61,3 +61,67 @@ def save_map(path: str | Path, scenario: Scenario, world: WorldMap,
     fig.savefig(path)
     plt.close(fig)
     return path
+
+
+def save_loss_curve(path: str | Path, history: Sequence[dict], best_epoch: int, title: str = "training") -> Path:
+    """Training and validation loss and accuracy per epoch (the paper's Fig. 4)."""
+    epochs = [h["epoch"] for h in history]
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 3.6), dpi=120)
+    ax1.plot(epochs, [h["train_loss"] for h in history], label="train")
+    ax1.plot(epochs, [h["val_loss"] for h in history], label="validation")
+    ax1.axvline(best_epoch, color="grey", ls=":", label=f"chosen epoch {best_epoch}")
+    ax1.set_xlabel("epoch")
+    ax1.set_ylabel("cross-entropy loss")
+    ax1.legend(fontsize=8)
+    ax2.plot(epochs, [h["train_acc"] for h in history], label="train top-1")
+    ax2.plot(epochs, [h["val_acc"] for h in history], label="validation top-1")
+    ax2.plot(epochs, [h["val_top3"] for h in history], label="validation top-3")
+    ax2.set_xlabel("epoch")
+    ax2.set_ylabel("accuracy")
+    ax2.set_ylim(0, 1)
+    ax2.legend(fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def save_decision(path: str | Path, rgb: np.ndarray, uv: np.ndarray, visible: np.ndarray, probs: np.ndarray,
+                  chosen: int, w_rps: Sequence[float], title: str = "") -> Path:
+    """The camera view with every trajectory coloured by its predicted probability, the chosen one marked.
+
+    Args:
+        rgb: colour image (H, W, 3).
+        uv: pixel coordinates of the trajectory points, (m, n, 2); visible: (m, n) mask.
+        probs: F_t, (m,).
+    """
+    h, w = rgb.shape[:2]
+    fig, ax = plt.subplots(figsize=(8, 6.4), dpi=100)
+    ax.imshow(rgb)
+    cmap = plt.get_cmap("plasma")
+    top = max(float(probs.max()), 1e-9)
+    for i in np.argsort(probs):
+        pts = uv[i][visible[i]]
+        if len(pts) < 2:
+            continue
+        lw = 4.0 if i == chosen else 1.5
+        ax.plot(pts[:, 0], pts[:, 1], color=cmap(float(probs[i]) / top), lw=lw, alpha=0.95)
+        if i == chosen:
+            ax.plot(pts[:, 0], pts[:, 1], color="white", lw=1.0, ls="--")
+            ax.text(pts[-1, 0], pts[-1, 1] - 8, f"chosen w={w_rps[i]:+.1f}\np={probs[i]:.2f}", color="white", fontsize=8, ha="center",
+                    bbox={"facecolor": "black", "alpha": 0.6, "pad": 1, "lw": 0})
+    sm = plt.cm.ScalarMappable(cmap=cmap, norm=matplotlib.colors.Normalize(0, top))
+    fig.colorbar(sm, ax=ax, fraction=0.035, label="predicted probability")
+    ax.set_xlim(0, w)
+    ax.set_ylim(h, 0)
+    ax.set_axis_off()
+    ax.set_title(title, fontsize=9)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
