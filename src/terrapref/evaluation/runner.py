@@ -37,6 +37,7 @@ class RunSpec:
     model_path: str | None
     profile: tuple[str, ...]
     keep_frames: tuple[int, ...] = ()
+    smoothing: float = 0.0
 
 
 def start_pose(start: tuple[float, float, float], seed: int) -> Pose:
@@ -55,7 +56,7 @@ def run_one(spec: RunSpec) -> dict:
     if spec.driver == PLANNER:
         model = load_model(spec.model_path)
         sim = Simulation(scenario, model.camera)
-        driver = PlannerDriver(Planner(model), keep=bool(spec.keep_frames))
+        driver = PlannerDriver(Planner(model, smoothing=spec.smoothing), keep=bool(spec.keep_frames))
     else:
         sim = Simulation(scenario)
         driver = ExpertDriver(ExpertConfig(profile=profile.order))

@@ -45,9 +45,17 @@ class Planner:
     Args:
         model: a loaded model file.
         camera: the robot's camera; a model trained for another camera is refused.
+        smoothing: weight of the previous frames in an exponential average of F_t before the
+            argmax (0: the paper's memoryless planner). When the classifier is unsure between
+            passing a patch left or right, a memoryless argmax can flip sides every frame and
+            average out to driving straight into it; the average lets it commit.
     """
 
-    def __init__(self, model: LoadedModel, camera: CameraConfig | None = None) -> None:
+    def __init__(self, model: LoadedModel, camera: CameraConfig | None = None, smoothing: float = 0.0) -> None:
+        if not 0.0 <= smoothing < 1.0:
+            raise ValueError("smoothing must be in [0, 1)")
+        self.smoothing = smoothing
+        self._avg: np.ndarray | None = None
         camera = camera or model.camera
         check_compatible(model, camera)
         self.model = model
@@ -62,6 +70,7 @@ class Planner:
         """Start following a new reference path."""
         self.path = ReferencePath(np.asarray(waypoints, dtype=float))
         self.tracker = PathTracker(self.path)
+        self._avg = None
 
     def decide(self, image: np.ndarray, pose: Pose) -> Decision:
         """Choose a trajectory for one segmentation frame (H, W) uint8 at ``pose``."""
@@ -70,6 +79,9 @@ class Planner:
         s = self.tracker.update(np.array(pose[:2]))
         U = self.featurizer(image, pose, self.path, s)
         probs = softmax(numpy_forward(self.model.classifier, self._weights, U))
+        if self.smoothing > 0:
+            self._avg = probs if self._avg is None else self.smoothing * self._avg + (1 - self.smoothing) * probs
+            probs = self._avg
         i = int(np.argmax(probs))
         return Decision(i, Command(*self.control.command(i)), probs, U, s)
 
