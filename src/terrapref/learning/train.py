@@ -33,6 +33,9 @@ class TrainConfig:
         val_fraction: share of samples held out for validation.
         weight_decay: Adam L2 penalty.
         class_balance: weight the loss by inverse label frequency (off in the paper's recipe).
+        decisive_weight: loss weight of the decisive frames, where terrain is on some
+            trajectory and the demonstrated one is not the one a pure path follower would take
+            (the highest distance utility): the frames that carry the preference. 1 is off.
         seed: seeds the split, the initialisation and the batch order.
         hidden, activation, depth, skip, compress: the classifier's shape (see ClassifierConfig).
     """
@@ -43,6 +46,7 @@ class TrainConfig:
     val_fraction: float = 0.2
     weight_decay: float = 0.0
     class_balance: bool = False
+    decisive_weight: float = 1.0
     seed: int = 0
     hidden: int = 64
     activation: str = "relu"
@@ -76,6 +80,17 @@ class TrainResult:
 
 def _to_numpy(model: nn.Module) -> dict[str, np.ndarray]:
     return {k: v.detach().cpu().numpy().copy() for k, v in model.state_dict().items()}
+
+
+def decisive_frames(U: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """Frames (N,) where terrain is on some trajectory and the label is not argmax of u5."""
+    terrain = (U[:, :, :-1].sum(axis=2) > 0).any(axis=1)
+    return terrain & (labels != np.argmax(U[:, :, -1], axis=1))
+
+
+def decisive_weights(U: np.ndarray, labels: np.ndarray, weight: float) -> np.ndarray:
+    """Per-sample loss weights (N,) float32: ``weight`` on decisive frames, 1 elsewhere."""
+    return np.where(decisive_frames(U, labels), weight, 1.0).astype(np.float32)
 
 
 def split_indices(n: int, val_fraction: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -112,8 +127,9 @@ def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetri
         counts = np.bincount(dataset.labels[tr], minlength=m).astype(np.float64)
         w = np.where(counts > 0, counts.sum() / np.maximum(counts, 1) / m, 0.0)
         weight = torch.tensor(np.sqrt(w), dtype=torch.float32)  # square root: balance without exploding rare bins
-    loss_fn = nn.CrossEntropyLoss(weight=weight)
+    loss_fn = nn.CrossEntropyLoss(weight=weight, reduction="none")
     plain = nn.CrossEntropyLoss()
+    sample_w = torch.from_numpy(decisive_weights(dataset.U, dataset.labels, config.decisive_weight))
 
     def evaluate(idx: np.ndarray) -> tuple[float, float, float]:
         if len(idx) == 0:
@@ -134,7 +150,8 @@ def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetri
         order = tr[rng.permutation(len(tr))]
         for start in range(0, len(order), config.batch_size):
             batch = order[start : start + config.batch_size]
-            loss = loss_fn(model(U[batch]), y[batch])
+            per = loss_fn(model(U[batch]), y[batch]) * sample_w[batch]
+            loss = per.sum() / sample_w[batch].sum()
             opt.zero_grad()
             loss.backward()
             opt.step()
