@@ -208,9 +208,14 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     from terrapref.progress import Progress
     from terrapref.terrain import PreferenceProfile
 
+    if args.seeds < 1:
+        raise UserError("--seeds", "must be >= 1")
+    try:
+        frames = sorted({int(f) for f in args.frames.split(",") if f.strip()}) if args.frames else []
+    except ValueError:
+        raise UserError("--frames", f"expected comma-separated frame numbers, got {args.frames!r}") from None
     model = load_model(args.model)
     profile = PreferenceProfile.parse(args.profile, model.classes) if args.profile else None
-    frames = sorted({int(f) for f in args.frames.split(",") if f.strip()}) if args.frames else []
     n_runs = len(args.scenarios) * args.seeds * (1 if args.no_driver else 2)
     bar = Progress("evaluate", n_runs)
     metrics = evaluate_model(args.model, args.scenarios, args.seeds, args.out, profile, not args.no_driver, frames, args.workers,
@@ -222,6 +227,23 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         d = metrics["driver_summary"]
         print(f"driver:  zone success {d['zone_success_rate']:.1%} over {d['zones']} zones, {d['collision_count']} collisions")
     print(f"wrote {Path(args.out) / 'metrics.json'} and figures in {args.out}")
+    return 0
+
+
+def _cmd_reproduce(args: argparse.Namespace) -> int:
+    import time
+
+    from terrapref.learning.recipe import PAPER
+    from terrapref.report.reproduce import OURS, reproduce
+    from terrapref.terrain import PreferenceProfile
+
+    if args.seeds < 1 or args.eval_seeds < 1:
+        raise UserError("--seeds", "must be >= 1")
+    profile = PreferenceProfile.parse(args.profile) if args.profile else None
+    recipes = {"both": (PAPER, OURS), "paper": (PAPER,), "ours": (OURS,)}[args.recipes]
+    t0 = time.perf_counter()
+    report = reproduce(args.out, args.seeds, args.eval_seeds, recipes, profile, args.workers, log=lambda m: print(m, flush=True))
+    print(f"wrote {report} ({time.perf_counter() - t0:.0f} s)")
     return 0
 
 
@@ -299,6 +321,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-driver", action="store_true", help="skip the synthetic driver's comparison runs")
     p.add_argument("--workers", type=int, help="parallel processes (default: one per core)")
     p.set_defaults(func=_cmd_evaluate)
+
+    p = sub.add_parser("reproduce", help="demonstrate, train and evaluate end to end; write REPORT.md with Tables 1 and 2")
+    p.add_argument("--out", required=True, type=Path)
+    p.add_argument("--seeds", type=int, default=5, help="training seeds per recipe (default 5)")
+    p.add_argument("--eval-seeds", type=int, default=1, help="evaluation runs per model and scenario")
+    p.add_argument("--recipes", choices=["both", "paper", "ours"], default="both")
+    p.add_argument("--profile", help="preference order for the demonstrations, best first")
+    p.add_argument("--workers", type=int, help="parallel processes (default: one per core)")
+    p.set_defaults(func=_cmd_reproduce)
 
     p = sub.add_parser("scenarios", help="list the packaged scenarios")
     p.set_defaults(func=_cmd_list)

@@ -130,7 +130,7 @@ def save_dataset(dataset: Dataset, path: str | Path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp")
-    meta = {**dataset.meta, "fingerprint": dataset.fingerprint, "samples": len(dataset)}
+    meta = {**dataset.meta, "format": FORMAT, "fingerprint": dataset.fingerprint, "samples": len(dataset)}
     save_file(
         {"U": dataset.U, "labels": dataset.labels, "w": dataset.w, "source": dataset.source},
         str(tmp),

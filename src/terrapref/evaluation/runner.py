@@ -8,6 +8,7 @@ Seed 0 starts exactly at the scenario's start; other seeds start up to 0.3 m to 
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from collections.abc import Callable
@@ -24,6 +25,7 @@ from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation, run_episode
 from terrapref.terrain import PreferenceProfile
 from terrapref.vehicle import Pose
+from terrapref.world import rasterise
 
 PLANNER = "planner"
 EXPERT = "driver"
@@ -49,16 +51,23 @@ def start_pose(start: tuple[float, float, float], seed: int) -> Pose:
     return Pose(x - lat * math.sin(yaw), y + lat * math.cos(yaw), yaw + dyaw)
 
 
+@functools.lru_cache(maxsize=16)
+def _scenario_and_world(name: str) -> tuple:
+    """Scenarios and rasters, cached per worker process: many runs share a handful of maps."""
+    scenario = resolve_scenario(name)
+    return scenario, rasterise(scenario)
+
+
 def run_one(spec: RunSpec) -> dict:
     """Drive one run and return its metrics (JSON-ready), its path and any kept decisions."""
-    scenario = resolve_scenario(spec.scenario)
+    scenario, world = _scenario_and_world(spec.scenario)
     profile = PreferenceProfile.parse(list(spec.profile), scenario.classes, source="--profile")
     if spec.driver == PLANNER:
         model = load_model(spec.model_path)
-        sim = Simulation(scenario, model.camera)
+        sim = Simulation(scenario, model.camera, world=world)
         driver = PlannerDriver(Planner(model, smoothing=spec.smoothing), keep=bool(spec.keep_frames))
     else:
-        sim = Simulation(scenario)
+        sim = Simulation(scenario, world=world)
         driver = ExpertDriver(ExpertConfig(profile=profile.order))
     log = run_episode(sim, driver, np.random.default_rng(spec.seed), start_pose(scenario.start, spec.seed))
     metrics = score_run(log.trace[:, :2], scenario, sim.world, profile, completed=log.completed, collisions=log.collisions, duration_s=log.duration_s)

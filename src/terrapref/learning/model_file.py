@@ -74,20 +74,45 @@ def load_model(path: str | Path) -> LoadedModel:
         raise UserError(source, "missing", field=str(exc.args[0])) from None
     except (TypeError, ValueError) as exc:
         raise UserError(source, f"invalid configuration: {exc}", field="metadata") from None
-    expected = {"compress.weight", "compress.bias"} if classifier.compress else set()
-    expected |= {f"layers.{i}.{p}" for i in range(classifier.depth + 1) for p in ("weight", "bias")}
-    if set(weights) != expected:
-        raise UserError(source, f"weights do not match the classifier (missing {sorted(expected - set(weights))}, extra {sorted(set(weights) - expected)})", field="weights")
+    expected = expected_shapes(classifier)
+    if set(weights) != set(expected):
+        raise UserError(source, f"weights do not match the classifier (missing {sorted(set(expected) - set(weights))}, extra {sorted(set(weights) - set(expected))})", field="weights")
+    for name, shape in expected.items():
+        if tuple(weights[name].shape) != shape:
+            raise UserError(source, f"has shape {tuple(weights[name].shape)}, expected {shape}", field=f"weights.{name}")
     if classifier.m != features.preference.m or classifier.n_features != features.n_features:
         raise UserError(source, "classifier shape does not match its feature configuration", field="classifier")
     return LoadedModel(source, classifier, weights, features, camera, classes, profile, meta)
 
 
+def expected_shapes(c: ClassifierConfig) -> dict[str, tuple[int, ...]]:
+    """Weight names and shapes of a classifier (PyTorch state-dict names)."""
+    shapes: dict[str, tuple[int, ...]] = {}
+    if c.compress:
+        shapes |= {"compress.weight": (1, c.n_features), "compress.bias": (1,)}
+    dims = [c.m if c.compress else c.m * c.n_features] + [c.hidden] * c.depth + [c.m]
+    for i, (a, b) in enumerate(zip(dims[:-1], dims[1:])):
+        shapes |= {f"layers.{i}.weight": (b, a), f"layers.{i}.bias": (b,)}
+    return shapes
+
+
+def _differences(a: dict, b: dict, prefix: str = "") -> list[str]:
+    """Dotted names of the leaves that differ between two nested mappings."""
+    out = []
+    for key in sorted(set(a) | set(b)):
+        va, vb = a.get(key), b.get(key)
+        if isinstance(va, dict) and isinstance(vb, dict):
+            out += _differences(va, vb, f"{prefix}{key}.")
+        elif va != vb:
+            out.append(f"{prefix}{key}")
+    return out
+
+
 def check_compatible(model: LoadedModel, camera: CameraConfig, features: FeatureConfig | None = None) -> None:
     """Refuse a model trained under another camera or preference set than the planner's."""
     if model.camera != camera:
-        diff = [k for k, v in model.camera.to_dict().items() if camera.to_dict()[k] != v]
+        diff = _differences(model.camera.to_dict(), camera.to_dict())
         raise UserError(model.path, f"trained for another camera ({', '.join(diff)} differ); re-featurise the recordings with this camera and retrain", field="camera")
     if features is not None and model.features != features:
-        diff = [k for k, v in model.features.to_dict().items() if features.to_dict()[k] != v]
+        diff = _differences(model.features.to_dict(), features.to_dict())
         raise UserError(model.path, f"trained with another preference set or feature configuration ({', '.join(diff)} differ)", field="features")

@@ -54,6 +54,21 @@ class TrainConfig:
     skip: bool = False
     compress: bool = True
 
+    def __post_init__(self) -> None:
+        checks = [
+            (self.epochs >= 1, "epochs must be >= 1"),
+            (self.batch_size >= 1, "batch_size must be >= 1"),
+            (self.lr > 0, "lr must be > 0"),
+            (0.0 <= self.val_fraction < 1.0, "val_fraction must be in [0, 1)"),
+            (self.weight_decay >= 0, "weight_decay must be >= 0"),
+            (self.decisive_weight > 0, "decisive_weight must be > 0"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(message)
+        # The classifier's own checks (hidden, depth, activation, skip with compress).
+        ClassifierConfig(2, 1, self.hidden, self.activation, self.depth, self.compress, self.skip)
+
     def to_dict(self) -> dict:
         return asdict(self)
 
@@ -96,20 +111,23 @@ def decisive_weights(U: np.ndarray, labels: np.ndarray, weight: float) -> np.nda
 def split_indices(n: int, val_fraction: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Random train/validation split of n samples."""
     perm = rng.permutation(n)
-    n_val = max(1, int(round(n * val_fraction))) if n > 1 else 0
+    n_val = min(n - 1, max(1, int(round(n * val_fraction)))) if n > 1 and val_fraction > 0 else 0
     return np.sort(perm[n_val:]), np.sort(perm[:n_val])
 
 
 def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callable[[EpochMetrics], None] | None = None) -> TrainResult:
     """Train C on ``dataset``; returns the lowest-validation-loss epoch's weights and the history."""
     config = config or TrainConfig()
-    torch.use_deterministic_algorithms(True)
+    deterministic = torch.are_deterministic_algorithms_enabled()
     threads = torch.get_num_threads()
+    torch.use_deterministic_algorithms(True)
     torch.set_num_threads(1)
     try:
-        return _train(dataset, config, progress)
+        with torch.random.fork_rng():  # seed torch locally; the caller's RNG state is restored
+            return _train(dataset, config, progress)
     finally:
         torch.set_num_threads(threads)
+        torch.use_deterministic_algorithms(deterministic)
 
 
 def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetrics], None] | None) -> TrainResult:

@@ -29,7 +29,15 @@ def scenario_path(name_or_path: str) -> Path:
 
 
 def resolve_scenario(name_or_path: str, classes: ClassTable | None = None) -> Scenario:
-    """Load a scenario by packaged name (``train_course``) or by path."""
+    """Load a scenario by packaged name (``train_course``), by path, or generate one (``gen:SEED``)."""
+    if name_or_path.startswith("gen:"):
+        from terrapref.scenario.generate import generate_course
+
+        try:
+            seed = int(name_or_path[4:])
+        except ValueError:
+            raise ScenarioError(name_or_path, "a generated course is named gen:SEED with an integer SEED") from None
+        return generate_course(seed, classes=classes)
     return load_scenario(scenario_path(name_or_path), classes)
 
 

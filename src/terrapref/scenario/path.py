@@ -112,8 +112,8 @@ class PathTracker:
 
     def update(self, xy: np.ndarray) -> float:
         """New progress [m] for the vehicle at ``xy``; it never moves backwards."""
-        if self.s is None:
-            self.s = self.path.project(xy, 0.0, self.ahead_m)[0]
+        if self.s is None:  # first fix: the nearest point of the whole path
+            self.s = self.path.project(xy)[0]
         else:
             self.s = max(self.s, self.path.project(xy, self.s - self.back_m, self.s + self.ahead_m)[0])
         return self.s

@@ -1,0 +1,128 @@
+"""Recipes: how demonstrations become a model, end to end (demonstrate, correct, train).
+
+``paper`` is the published recipe: one demonstration on the training course, 15 epochs of C.
+Other recipes add what a real user could do with a human driver too: more demonstration runs,
+correction sessions (the planner drives, the person shows what they would do), a residual path
+in C, more training steps, and loss weights for the frames that carry the preference.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from terrapref.camera import CameraConfig
+from terrapref.demos.corrections import record_corrections
+from terrapref.demos.dataset import build_dataset
+from terrapref.demos.expert import ExpertConfig, ExpertDriver
+from terrapref.demos.recording import Recording, RecordingWriter, read_recording
+from terrapref.demos.session import record_run, recording_meta
+from terrapref.features import FeatureConfig
+from terrapref.learning.model_file import load_model
+from terrapref.learning.pipeline import train_and_save
+from terrapref.learning.train import TrainConfig, TrainResult
+from terrapref.planner import Planner, PlannerDriver
+from terrapref.scenario import resolve_scenario
+from terrapref.sim import SimConfig, Simulation
+from terrapref.terrain import PreferenceProfile
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """One way of turning a person's driving into a model.
+
+    Attributes:
+        name: label in reports.
+        demonstrations: demonstration runs of the training course.
+        corrections: correction sessions after the first model (one run of the course each,
+            the model retrained on everything after each).
+        train: training hyperparameters.
+        smoothing: the planner's averaging of F_t over frames.
+    """
+
+    name: str
+    demonstrations: int = 1
+    corrections: int = 0
+    train: TrainConfig = field(default_factory=TrainConfig)
+    smoothing: float = 0.0
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+PAPER = Recipe("paper")
+
+
+@dataclass
+class RecipeOutput:
+    model: Path
+    recordings: list[Path]
+    result: TrainResult
+    demo_minutes: float
+    correction_minutes: float
+
+
+def run_recipe(
+    recipe: Recipe,
+    workdir: str | Path,
+    seed: int,
+    profile: PreferenceProfile | None = None,
+    course: str = "train_course",
+    features: FeatureConfig | None = None,
+    log: Callable[[str], None] | None = None,
+) -> RecipeOutput:
+    """Demonstrate (synthetic driver, seeds ``seed * 100 + k``), correct, train; write into ``workdir``.
+
+    Demonstrations go to ``workdir/demo_K`` and are reused when a complete one is already
+    there (so recipes sharing a seed share their demonstrations); corrections and the model go
+    to ``workdir/<recipe name>/``.
+    """
+    workdir = Path(workdir)
+    own = workdir / recipe.name.replace(" ", "_")
+    own.mkdir(parents=True, exist_ok=True)
+    scenario = resolve_scenario(course)
+    profile = profile or PreferenceProfile.default(scenario.classes)
+    features = features or FeatureConfig()
+    camera, sim_cfg = CameraConfig(), SimConfig()
+    expert_cfg = ExpertConfig(profile=profile.order)
+    sim = Simulation(scenario, camera, sim_cfg)
+    recordings: list[Recording] = []
+    paths: list[Path] = []
+    demo_s = corr_s = 0.0
+    for k in range(recipe.demonstrations):
+        demo_seed = seed * 100 + k
+        out = workdir / f"demo_{k}"
+        if (out / "meta.json").exists():
+            existing = read_recording(out)
+            if existing.complete and existing.meta.get("profile") == list(profile.order) and existing.meta["driver"].get("seed") == demo_seed:
+                recordings.append(existing)
+                paths.append(out)
+                demo_s += existing.duration_s
+                continue
+        meta = recording_meta(scenario, camera, features.preference, sim_cfg, {"kind": "expert", "seed": demo_seed, "config": expert_cfg.to_dict()}, profile)
+        writer = RecordingWriter(out, meta, scenario.to_dict(), overwrite=True)
+        run = record_run(sim, ExpertDriver(expert_cfg), writer, features.preference, np.random.default_rng(demo_seed))
+        demo_s += run.duration_s
+        recordings.append(read_recording(out))
+        paths.append(out)
+        if log:
+            log(f"demonstration {k + 1}/{recipe.demonstrations}: {len(recordings[-1])} frames")
+    train_cfg = replace(recipe.train, seed=seed)
+    model = own / "model.safetensors"
+    result = train_and_save(build_dataset(recordings, features), model, train_cfg, checkpoints=False)
+    for r in range(recipe.corrections):
+        out = own / f"corrections_{r}"
+        meta = recording_meta(scenario, camera, features.preference, sim_cfg, {"kind": "corrections", "round": r, "seed": seed}, profile)
+        writer = RecordingWriter(out, meta, scenario.to_dict(), overwrite=True)
+        planner = PlannerDriver(Planner(load_model(model), smoothing=recipe.smoothing))
+        run = record_corrections(sim, planner, ExpertDriver(expert_cfg), writer, features.preference, np.random.default_rng(seed * 100 + 50 + r))
+        corr_s += run.duration_s
+        recordings.append(read_recording(out))
+        paths.append(out)
+        result = train_and_save(build_dataset(recordings, features), model, train_cfg, checkpoints=False)
+        if log:
+            log(f"correction session {r + 1}/{recipe.corrections}: {len(recordings[-1])} frames, retrained")
+    return RecipeOutput(model, paths, result, demo_s / 60.0, corr_s / 60.0)

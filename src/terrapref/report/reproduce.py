@@ -1,0 +1,199 @@
+"""`terrapref reproduce`: demonstrations -> models -> closed-loop evaluation -> REPORT.md.
+
+For each training seed, the synthetic driver demonstrates on ``train_course`` and a model is
+trained by each recipe (the paper's, and ours); every model then drives ``train_course``,
+``test_course`` and the figure variations, and so does the synthetic driver. The report gives
+the paper's Table 1 and Table 2 with success over seeds, the figures, and each stage's time.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_many, summarise
+from terrapref.learning.recipe import PAPER, Recipe, run_recipe
+from terrapref.learning.train import TrainConfig
+from terrapref.scenario import packaged_scenarios, resolve_scenario
+from terrapref.terrain import PreferenceProfile
+
+OURS = Recipe("ours", demonstrations=2, corrections=2, train=TrainConfig(epochs=100, skip=True, class_balance=True))
+TEST_SET = ("test_course",)
+
+
+def variations() -> list[str]:
+    return [n for n in packaged_scenarios() if n.startswith("fig")]
+
+
+def _train_job(args: tuple[tuple[Recipe, ...], str, int, tuple[str, ...]]) -> list[dict]:
+    """All recipes of one seed, in one process, so that they share the seed's demonstrations."""
+    recipes, workdir, seed, profile = args
+    rows = []
+    for recipe in recipes:
+        t0 = time.perf_counter()
+        out = run_recipe(recipe, workdir, seed, PreferenceProfile(profile))
+        rows.append({
+            "recipe": recipe.name, "seed": seed, "model": str(out.model),
+            "history": [asdict(h) for h in out.result.history], "best_epoch": out.result.best_epoch,
+            "demo_minutes": out.demo_minutes, "correction_minutes": out.correction_minutes,
+            "seconds": time.perf_counter() - t0,
+        })
+    return rows
+
+
+def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes: tuple[Recipe, ...] = (PAPER, OURS),
+              profile: PreferenceProfile | None = None, workers: int | None = None, log: Callable[[str], None] = print) -> Path:
+    """Run the whole reproduction into ``out_dir`` and return the path of REPORT.md."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    profile = profile or PreferenceProfile.default()
+    workers = workers or os.cpu_count() or 1
+    timings: dict[str, float] = {}
+
+    t0 = time.perf_counter()
+    jobs = [(tuple(recipes), str(out / "work" / f"seed{s}"), s, profile.order) for s in range(seeds)]
+    log(f"[1/3] demonstrations, corrections and training: {len(recipes) * seeds} models ({', '.join(r.name for r in recipes)} x {seeds} seeds) ...")
+    if workers > 1 and seeds > 1:
+        import multiprocessing as mp
+
+        with ProcessPoolExecutor(max_workers=min(workers, seeds), mp_context=mp.get_context("fork")) as pool:
+            trained = [row for rows in pool.map(_train_job, jobs) for row in rows]
+    else:
+        trained = [row for j in jobs for row in _train_job(j)]
+    timings["demonstrate + correct + train"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    scenarios = ["train_course", *TEST_SET, *variations()]
+    specs = [RunSpec(sc, e, PLANNER, t["model"], profile.order, smoothing=next(r.smoothing for r in recipes if r.name == t["recipe"]))
+             for t in trained for sc in scenarios for e in range(eval_seeds)]
+    specs += [RunSpec(sc, s, EXPERT, None, profile.order) for sc in scenarios for s in range(seeds)]
+    log(f"[2/3] closed-loop evaluation: {len(specs)} runs ...")
+    done = [0]
+
+    def tick(k: int, n: int) -> None:
+        if k * 10 // n > done[0]:
+            done[0] = k * 10 // n
+            log(f"      {k}/{n} runs")
+
+    results = run_many(specs, workers, tick)
+    for r, spec in zip(results, specs):
+        r["recipe"] = next((t["recipe"] for t in trained if t["model"] == spec.model_path), "driver")
+        r["train_seed"] = next((t["seed"] for t in trained if t["model"] == spec.model_path), r["seed"])
+    timings["closed-loop evaluation"] = time.perf_counter() - t0
+
+    log("[3/3] figures and REPORT.md ...")
+    return _write_report(out, results, trained, recipes, seeds, eval_seeds, profile, scenarios, timings)
+
+
+def _zone_rows(results: list[dict], scenario: str, recipes: tuple[Recipe, ...]) -> list[str]:
+    s = resolve_scenario(scenario)
+    rows = []
+    for zone in s.zones:
+        def choices(recipe: str) -> list[tuple[str, bool, str]]:
+            out = []
+            for r in results:
+                if r["scenario"] == scenario and r["recipe"] == recipe:
+                    z = next(z for z in r["metrics"]["zones"] if z["id"] == zone.id)
+                    out.append((z["choice"], z["success"], z["expect"]))
+            return out
+
+        drv = choices("driver")
+        expect = drv[0][2] if drv else zone.expect
+        cells = [zone.id, zone.label or "", expect, _mode(drv)]
+        for recipe in recipes:
+            c = choices(recipe.name)
+            lethal = sum(ch == ex and not ok for ch, ok, ex in c)
+            note = f" ({lethal} touched non_traversable)" if lethal else ""
+            cells += [_mode(c), f"{sum(ok for _, ok, _ in c)}/{len(c)}{note}"]
+        rows.append("| " + " | ".join(cells) + " |")
+    return rows
+
+
+def _mode(choices: list[tuple[str, bool, str]]) -> str:
+    if not choices:
+        return "-"
+    names = [c for c, _, _ in choices]
+    top = max(set(names), key=names.count)
+    return top if names.count(top) == len(names) else f"{top} ({names.count(top)}/{len(names)})"
+
+
+def _write_report(out: Path, results, trained, recipes, seeds, eval_seeds, profile, scenarios, timings) -> Path:
+    from terrapref.report.plots import save_loss_curve, save_map
+    from terrapref.world import rasterise
+
+    t_fig = time.perf_counter()
+    figs = out / "figures"
+    figs.mkdir(exist_ok=True)
+    for sc in scenarios:
+        scenario = resolve_scenario(sc)
+        tracks = []
+        for r in results:
+            if r["scenario"] != sc or r["seed"] != 0:
+                continue
+            if r["recipe"] == "driver":
+                tracks.append(("driver (seed 0)", r["xy"], "deepskyblue"))
+            elif r["train_seed"] == 0:
+                color = "red" if r["recipe"] == recipes[-1].name else "orange"
+                tracks.append((f"planner, {r['recipe']} (seed 0)", r["xy"], color))
+        save_map(figs / f"{sc}.png", scenario, rasterise(scenario), tracks, title=f"{sc}: reference, driver and planner paths")
+    for t in trained:
+        if t["seed"] == 0:
+            save_loss_curve(figs / f"training_{t['recipe']}.png", t["history"], t["best_epoch"], title=f"training, recipe {t['recipe']}, seed 0")
+
+    def set_summary(recipe: str, names: list[str]) -> dict:
+        return summarise([r for r in results if r["recipe"] == recipe and r["scenario"] in names], PLANNER if recipe != "driver" else EXPERT)
+
+    test_names = [*TEST_SET, *variations()]
+    header = "| zone | terrains | expected | driver | " + " | ".join(f"{r.name} planner | {r.name} success" for r in recipes) + " |"
+    sep = "|" + "---|" * (4 + 2 * len(recipes))
+    lines = [
+        "# terrapref: reproduction of the paper's Tables 1 and 2",
+        "",
+        f"Preference profile: {profile} (grass preferred over every patch). Synthetic driver as the human;",
+        f"{seeds} training seeds per recipe (each seed: its own demonstrations and training initialisation),",
+        f"{eval_seeds} evaluation run(s) per model and scenario. Every number below comes from driving the simulator.",
+        "",
+        "Recipes:",
+    ]
+    for r in recipes:
+        lines.append(f"- **{r.name}**: {r.demonstrations} demonstration run(s) of train_course, {r.corrections} correction session(s), "
+                     f"{r.train.epochs} epochs, residual path {'on' if r.train.skip else 'off'}, class-balanced loss {'on' if r.train.class_balance else 'off'}, "
+                     f"decisive-frame weight {r.train.decisive_weight:g}, planner smoothing {r.smoothing:g}.")
+    lines += ["", "## Summary (test_course and the figure variations)", "", "| who | zone success | collisions | completed | runs |", "|---|---|---|---|---|"]
+    for name in [*(r.name for r in recipes), "driver"]:
+        s = set_summary(name, test_names)
+        lines.append(f"| {name} | {s['zone_success_rate']:.1%} of {s['zones']} | {s['collision_count']} | {s['completed_rate']:.0%} | {s['runs']} |")
+    for title, names in (("Table 1: training scenarios (train_course)", ["train_course"]), ("Table 2: test scenarios (test_course)", ["test_course"])):
+        lines += ["", f"## {title}", "", header, sep]
+        for sc in names:
+            lines += _zone_rows(results, sc, recipes)
+    lines += ["", "## Figure 7 and 8 variations", "", header.replace("| zone |", "| scenario |"), sep]
+    for sc in variations():
+        for row in _zone_rows(results, sc, recipes):
+            lines.append(row.replace("| 1 |", f"| {sc} |", 1))
+    lines += ["", "## Training", ""]
+    for r in recipes:
+        ts = [t for t in trained if t["recipe"] == r.name]
+        lines.append(f"- {r.name}: chosen epochs {[t['best_epoch'] for t in ts]}; validation accuracy at the chosen epoch "
+                     f"{[round(t['history'][t['best_epoch'] - 1]['val_acc'], 3) for t in ts]}; demonstration {np.mean([t['demo_minutes'] for t in ts]):.1f} min, "
+                     f"corrections {np.mean([t['correction_minutes'] for t in ts]):.1f} min per seed. Curve: `figures/training_{r.name}.png`.")
+    lines += ["", "## Figures", ""]
+    for sc in scenarios:
+        lines.append(f"- `figures/{sc}.png`")
+    timings["figures"] = time.perf_counter() - t_fig
+    lines += ["", "## Time per stage (wall clock)", "", "| stage | seconds |", "|---|---|"]
+    for k, v in timings.items():
+        lines.append(f"| {k} | {v:.1f} |")
+    lines.append(f"| total | {sum(timings.values()):.1f} |")
+    report = out / "REPORT.md"
+    report.write_text("\n".join(lines) + "\n")
+    slim = [{k: v for k, v in r.items() if k not in ("xy", "frames")} for r in results]
+    (out / "results.json").write_text(json.dumps({"runs": slim, "timings": timings}, indent=1))
+    return report

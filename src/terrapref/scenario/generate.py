@@ -1,0 +1,113 @@
+"""Procedurally generated courses: layouts never packaged, for choosing and checking recipes.
+
+Each course is a gently bending trail with a zone every ~26 m, each zone one of:
+- ``lone``: one patch of a random class and shape (circle, rotated rectangle or irregular
+  polygon, at most ~3.4 m across) on or near the path; expected ``avoid``;
+- ``pair``: two patches of different classes meeting near the path, each 5-6.5 m wide and
+  7-10 m long, on random sides; expected ``best``;
+- ``triple``: a 2.4-3.2 m wide patch on the path between two wide ones; expected ``best``.
+Sizes follow the packaged courses' rules (lone patches passable on grass, wide patches not),
+but shapes, sizes, sides, offsets, classes and the trail's bends are all drawn at random.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from terrapref.scenario.loader import parse_scenario
+from terrapref.scenario.model import Scenario
+from terrapref.terrain import ClassTable, default_classes
+
+ZONE_KINDS = ("lone", "pair", "triple")
+
+
+def _frame(wp: np.ndarray, s: float) -> tuple[np.ndarray, float]:
+    seg = np.linalg.norm(np.diff(wp, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    i = min(int(np.searchsorted(cum, s, side="right")) - 1, len(seg) - 1)
+    d = wp[i + 1] - wp[i]
+    return wp[i] + (s - cum[i]) / seg[i] * d, math.atan2(d[1], d[0])
+
+
+def _to_world(wp: np.ndarray, s: float, pts: np.ndarray) -> list[list[float]]:
+    p, h = _frame(wp, s)
+    c, sn = math.cos(h), math.sin(h)
+    return [[round(float(p[0] + a * c - l * sn), 3), round(float(p[1] + a * sn + l * c), 3)] for a, l in pts]
+
+
+def _blob(rng: np.random.Generator, radius: float, k: int) -> np.ndarray:
+    """An irregular convex-ish polygon (k vertices) of about ``radius`` round the origin."""
+    t = np.sort(rng.uniform(0, 2 * math.pi, k))
+    r = radius * rng.uniform(0.75, 1.1, k)
+    return np.stack([r * np.cos(t), r * np.sin(t)], axis=1)
+
+
+def _patch(rng: np.random.Generator, wp: np.ndarray, s: float, cls: str, centre: tuple[float, float], size: tuple[float, float]) -> dict:
+    """A patch of about ``size`` (along, across) centred at path coordinates ``centre``."""
+    a0, l0 = centre
+    kind = rng.choice(["rect", "polygon", "circle"]) if max(size) < 3.6 else rng.choice(["rect", "polygon"])
+    if kind == "circle":
+        (cx, cy), = _to_world(wp, s, np.array([[a0, l0]]))
+        return {"class": cls, "circle": {"center": [cx, cy], "radius": round(float(min(size)) / 2, 3)}}
+    if kind == "rect":
+        yaw = rng.uniform(-12, 12)
+        local = np.array([[-size[0] / 2, -size[1] / 2], [size[0] / 2, -size[1] / 2], [size[0] / 2, size[1] / 2], [-size[0] / 2, size[1] / 2]])
+        c, sn = math.cos(math.radians(yaw)), math.sin(math.radians(yaw))
+        local = local @ np.array([[c, sn], [-sn, c]]) + (a0, l0)
+        return {"class": cls, "polygon": _to_world(wp, s, local)}
+    blob = _blob(rng, 0.5, int(rng.integers(6, 10))) * np.array(size) + (a0, l0)
+    return {"class": cls, "polygon": _to_world(wp, s, blob)}
+
+
+def generate_course(seed: int, zones: int = 8, kinds: tuple[str, ...] = ZONE_KINDS, classes: ClassTable | None = None) -> Scenario:
+    """A random course named ``gen_<seed>`` with ``zones`` scored situations."""
+    classes = classes or default_classes()
+    rng = np.random.default_rng([seed, 4242])
+    spacing = 26.0
+    length = spacing * (zones + 1)
+    # A trail of 30 m legs, each turning by up to 20 degrees, kept inside a margin.
+    heading, pts = 0.0, [np.array([10.0, 0.0])]
+    while sum(np.linalg.norm(np.diff(np.array(pts), axis=0), axis=1)) < length:
+        heading = float(np.clip(heading + math.radians(rng.uniform(-20, 20)), -0.6, 0.6))
+        pts.append(pts[-1] + 30.0 * np.array([math.cos(heading), math.sin(heading)]))
+    wp = np.array(pts)
+    lo, hi = wp.min(axis=0), wp.max(axis=0)
+    wp = wp - lo + 20.0
+    size = (float(hi[0] - lo[0] + 40.0), float(hi[1] - lo[1] + 40.0))
+    names = list(classes.feature_names)
+    terrain, zone_list = [], []
+    for z in range(zones):
+        s = spacing * (z + 1)
+        kind = kinds[int(rng.integers(len(kinds)))]
+        if kind == "lone":
+            cls = names[int(rng.integers(len(names)))]
+            terrain.append(_patch(rng, wp, s, cls, (0.0, rng.uniform(-0.4, 0.4)), (rng.uniform(2.2, 3.4), rng.uniform(2.2, 3.0))))
+            expect, label, half = "avoid", f"lone {cls}", (6.0, 5.0)
+        elif kind == "pair":
+            a, b = rng.choice(names, 2, replace=False)
+            length_m, edge = rng.uniform(7.0, 10.0), rng.uniform(-0.3, 0.3)
+            for cls, side in ((a, 1.0), (b, -1.0)):
+                width = rng.uniform(5.0, 6.5)
+                terrain.append({"class": str(cls), "polygon": _to_world(wp, s, np.array(
+                    [[-length_m / 2, edge], [length_m / 2, edge], [length_m / 2, edge + side * width], [-length_m / 2, edge + side * width]]))})
+            expect, label, half = "best", f"{a} | {b}", (length_m / 2 + 2.0, 8.5)
+        else:
+            a, b, c = rng.choice(names, 3, replace=False)
+            length_m, mid = rng.uniform(6.0, 8.0), rng.uniform(2.4, 3.2)
+            for cls, l0, l1 in ((a, mid / 2, mid / 2 + 4.5), (b, -mid / 2, mid / 2), (c, -mid / 2 - 4.5, -mid / 2)):
+                terrain.append({"class": str(cls), "polygon": _to_world(wp, s, np.array([[-length_m / 2, l0], [length_m / 2, l0], [length_m / 2, l1], [-length_m / 2, l1]]))})
+            expect, label, half = "best", f"{a} | {b} | {c}", (length_m / 2 + 2.0, 8.5)
+        box = np.array([[-half[0], -half[1]], [half[0], -half[1]], [half[0], half[1]], [-half[0], half[1]]])
+        zone_list.append({"id": str(z + 1), "label": label, "polygon": _to_world(wp, s, box), "expect": expect})
+    data = {
+        "format": "terrapref-scenario/1",
+        "name": f"gen_{seed}",
+        "description": f"generated course, seed {seed}",
+        "world": {"size_m": [round(size[0], 1), round(size[1], 1)], "resolution_m": 0.05, "background": classes.background},
+        "terrain": terrain,
+        "path": {"waypoints": wp.round(3).tolist()},
+        "zones": zone_list,
+    }
+    return parse_scenario(data, f"gen_{seed}", classes)

@@ -1,0 +1,274 @@
+"""Closed-loop evaluation (SPEC 12) and the `train` / `evaluate` commands: metrics.json holds every
+run's scores, figures are written, `best` zones follow the profile, user errors are one line."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from terrapref.camera import CameraConfig
+from terrapref.cli import main
+from terrapref.demos.dataset import FORMAT as DATASET_FORMAT
+from terrapref.demos.dataset import Dataset, save_dataset
+from terrapref.evaluation.evaluate import evaluate_model
+from terrapref.features import FeatureConfig
+from terrapref.learning.model_file import load_model, save_model
+from terrapref.learning.network import ClassifierConfig
+from terrapref.scenario import resolve_scenario
+from terrapref.terrain import PreferenceProfile, default_classes
+
+PNG = b"\x89PNG\r\n\x1a\n"
+RUN_KEYS = {"completed", "collisions", "duration_s", "rms_cross_track_m", "max_cross_track_m", "distance_m", "zones"}
+ZONE_KEYS = {"id", "expect", "choice", "success"}
+ROCK_FIRST = "rock,mud,water,non_traversable"
+
+
+def _meta() -> dict:
+    classes = default_classes()
+    return {
+        "features": FeatureConfig().to_dict(),
+        "camera": CameraConfig().to_dict(),
+        "classes": classes.to_dict(),
+        "profile": list(classes.profile),
+    }
+
+
+def _linear_model(path: Path) -> Path:
+    """C reduced to its skip path, logits = U @ w: follows the path, shies from terrain; drives the
+    demo course to the end in about a minute of simulated time."""
+    config = ClassifierConfig(hidden=8, skip=True)
+    dims = [config.m] + [config.hidden] * config.depth + [config.m]
+    weights = {"compress.weight": np.array([[-8.0, -4.0, -2.0, -1.0, 6.0]], np.float32), "compress.bias": np.zeros(1, np.float32)}
+    for i, (a, b) in enumerate(zip(dims[:-1], dims[1:])):
+        weights[f"layers.{i}.weight"] = np.zeros((b, a), np.float32)
+        weights[f"layers.{i}.bias"] = np.zeros(b, np.float32)
+    return save_model(path, config, weights, _meta())
+
+
+def _dataset_file(path: Path, n: int = 300, seed: int = 0) -> Path:
+    rng = np.random.default_rng(seed)
+    meta = {"format": DATASET_FORMAT, **_meta()}
+    data = Dataset(rng.uniform(0, 1, (n, 21, 5)).astype(np.float32), rng.integers(0, 21, n), np.zeros(n, np.float32), np.zeros(n, np.int64), meta)
+    return save_dataset(data, path)
+
+
+@pytest.fixture(scope="module")
+def model_path(tmp_path_factory) -> Path:
+    return _linear_model(tmp_path_factory.mktemp("model") / "linear.safetensors")
+
+
+@pytest.fixture(scope="module")
+def evaluated(model_path: Path, tmp_path_factory) -> SimpleNamespace:
+    out = tmp_path_factory.mktemp("eval") / "ev"
+    metrics = evaluate_model(str(model_path), ["demo_course"], seeds=2, out_dir=out, workers=1, frames=(5,))
+    return SimpleNamespace(out=out, metrics=metrics)
+
+
+# --- evaluate_model ------------------------------------------------------------------------------------
+
+
+def test_metrics_file_is_what_was_returned(evaluated):
+    on_disk = json.loads((evaluated.out / "metrics.json").read_text())
+    assert on_disk == json.loads(json.dumps(evaluated.metrics))
+    assert on_disk["seeds"] == 2
+    assert on_disk["profile"] == list(default_classes().profile)
+    assert not [p.name for p in evaluated.out.iterdir() if p.name.endswith(".tmp")]
+
+
+@pytest.mark.parametrize("driver", ["planner", "driver"])
+def test_every_run_is_scored(evaluated, driver: str):
+    scenario = resolve_scenario("demo_course")
+    runs = evaluated.metrics["scenarios"]["demo_course"][driver]
+    assert sorted(runs) == ["0", "1"]
+    goal = scenario.waypoints[-1]
+    for seed, run in runs.items():
+        assert RUN_KEYS <= set(run), seed
+        assert isinstance(run["completed"], bool) and isinstance(run["collisions"], int) and run["collisions"] >= 0
+        assert 0 < run["duration_s"]
+        assert 0 <= run["rms_cross_track_m"] <= run["max_cross_track_m"]
+        assert set(run["distance_m"]) == set(default_classes().names)
+        assert all(v >= 0 for v in run["distance_m"].values())
+        driven = sum(run["distance_m"].values())
+        if run["completed"]:
+            # From the start to within the goal radius (2 m) of the last waypoint, at <= 1 m/s.
+            assert driven >= math.dist(scenario.start[:2], goal) - 2.0 - 0.5
+            assert driven <= run["duration_s"] * 1.0 + 0.5
+        assert [z["id"] for z in run["zones"]] == [z.id for z in scenario.zones]
+        for z in run["zones"]:
+            assert ZONE_KEYS <= set(z)
+            assert z["expect"] in ("avoid", *default_classes().feature_names)
+            assert z["choice"] in ("avoid", *default_classes().feature_names)
+            assert isinstance(z["success"], bool)
+            if z["choice"] != z["expect"]:
+                assert not z["success"]
+
+
+def test_the_synthetic_driver_drives_the_demo_course(evaluated):
+    for run in evaluated.metrics["scenarios"]["demo_course"]["driver"].values():
+        assert run["completed"] and run["collisions"] == 0
+
+
+def test_best_zone_resolves_under_the_models_profile(evaluated):
+    for driver in ("planner", "driver"):
+        for run in evaluated.metrics["scenarios"]["demo_course"][driver].values():
+            expect = {z["id"]: z["expect"] for z in run["zones"]}
+            assert expect == {"1": "avoid", "2": "mud", "3": "avoid"}
+
+
+@pytest.mark.parametrize("key, driver", [("summary", "planner"), ("driver_summary", "driver")])
+def test_summary_counts_the_runs(evaluated, key: str, driver: str):
+    summary = evaluated.metrics[key]
+    runs = list(evaluated.metrics["scenarios"]["demo_course"][driver].values())
+    zones = [z for r in runs for z in r["zones"]]
+    assert summary["runs"] == 2 and summary["zones"] == len(zones) == 6
+    assert summary["zone_success_rate"] == pytest.approx(sum(z["success"] for z in zones) / len(zones), abs=1e-4)
+    assert summary["collision_count"] == sum(r["collisions"] for r in runs)
+    assert summary["completed_rate"] == pytest.approx(sum(r["completed"] for r in runs) / len(runs))
+
+
+def test_figures_are_written(evaluated):
+    for name in ("demo_course.png", "demo_course_frame00005.png"):
+        data = (evaluated.out / name).read_bytes()
+        assert data.startswith(PNG) and len(data) > 1000, name
+    assert sorted(p.name for p in evaluated.out.glob("*.png")) == ["demo_course.png", "demo_course_frame00005.png"]
+
+
+def test_evaluation_is_deterministic(model_path: Path, evaluated, tmp_path: Path):
+    again = evaluate_model(str(model_path), ["demo_course"], seeds=2, out_dir=tmp_path, with_driver=False, workers=1)
+    assert again["scenarios"]["demo_course"]["planner"] == evaluated.metrics["scenarios"]["demo_course"]["planner"]
+    assert again["summary"] == evaluated.metrics["summary"]
+
+
+def test_without_the_driver(model_path: Path, tmp_path: Path):
+    metrics = evaluate_model(str(model_path), ["demo_course"], seeds=1, out_dir=tmp_path, with_driver=False, workers=1)
+    assert list(metrics["scenarios"]["demo_course"]) == ["planner"]
+    assert "driver_summary" not in metrics
+    assert json.loads((tmp_path / "metrics.json").read_text()) == json.loads(json.dumps(metrics))
+    assert (tmp_path / "demo_course.png").is_file() and not list(tmp_path.glob("*_frame*.png"))
+
+
+def test_profile_changes_how_best_resolves(model_path: Path, tmp_path: Path):
+    profile = PreferenceProfile.parse(ROCK_FIRST)
+    metrics = evaluate_model(str(model_path), ["demo_course"], seeds=1, out_dir=tmp_path, profile=profile, with_driver=False, workers=1)
+    assert metrics["profile"] == ROCK_FIRST.split(",")
+    zones = {z["id"]: z for z in metrics["scenarios"]["demo_course"]["planner"]["0"]["zones"]}
+    assert zones["2"]["expect"] == "rock"
+    assert zones["1"]["expect"] == zones["3"]["expect"] == "avoid"  # expect: avoid does not depend on the profile
+
+
+# --- terrapref evaluate ----------------------------------------------------------------------------------
+
+
+def test_cli_evaluate_with_a_profile(model_path: Path, tmp_path: Path, capsys):
+    out = tmp_path / "ev"
+    rc = main(["evaluate", str(model_path), "demo_course", "--seeds", "1", "--out", str(out), "--no-driver", "--workers", "1", "--profile", ROCK_FIRST])
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert {z["id"]: z["expect"] for z in metrics["scenarios"]["demo_course"]["planner"]["0"]["zones"]} == {"1": "avoid", "2": "rock", "3": "avoid"}
+    assert "driver" not in metrics["scenarios"]["demo_course"]
+    assert "planner: zone success" in captured.out and str(out / "metrics.json") in captured.out
+
+
+def _one_line_error(capsys, *words: str) -> str:
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), err
+    assert "Traceback" not in err and "internal error" not in err, err
+    for word in words:
+        assert word in lines[0], err
+    return lines[0]
+
+
+def test_cli_evaluate_missing_model(tmp_path: Path, capsys):
+    missing = tmp_path / "absent.safetensors"
+    rc = main(["evaluate", str(missing), "demo_course", "--seeds", "1", "--out", str(tmp_path / "ev"), "--workers", "1"])
+    assert rc == 2
+    _one_line_error(capsys, str(missing))
+    assert not (tmp_path / "ev").exists()
+
+
+def test_cli_evaluate_unknown_scenario(model_path: Path, tmp_path: Path, capsys):
+    rc = main(["evaluate", str(model_path), "no_such_course", "--seeds", "1", "--out", str(tmp_path / "ev"), "--workers", "1"])
+    assert rc == 2
+    _one_line_error(capsys, "no_such_course")
+    assert not (tmp_path / "ev").exists()
+
+
+def test_cli_evaluate_bad_profile(model_path: Path, tmp_path: Path, capsys):
+    rc = main(["evaluate", str(model_path), "demo_course", "--seeds", "1", "--out", str(tmp_path / "ev"), "--profile", "rock,mud"])
+    assert rc == 2
+    _one_line_error(capsys, "--profile")
+
+
+def test_cli_evaluate_zero_seeds_is_a_user_error(model_path: Path, tmp_path: Path, capsys):
+    rc = main(["evaluate", str(model_path), "demo_course", "--seeds", "0", "--out", str(tmp_path / "ev"), "--workers", "1"])
+    assert rc == 2
+    _one_line_error(capsys, "--seeds")
+
+
+def test_cli_evaluate_bad_frames_is_a_user_error(model_path: Path, tmp_path: Path, capsys):
+    rc = main(["evaluate", str(model_path), "demo_course", "--seeds", "1", "--out", str(tmp_path / "ev"), "--frames", "5,x", "--workers", "1"])
+    assert rc == 2
+    _one_line_error(capsys, "--frames")
+
+
+# --- terrapref train --------------------------------------------------------------------------------------
+
+
+def test_cli_train_writes_model_curve_and_checkpoints(tmp_path: Path, capsys):
+    data = _dataset_file(tmp_path / "data.safetensors")
+    out = tmp_path / "models" / "pref.safetensors"
+    rc = main(["train", str(data), "--out", str(out), "--epochs", "3", "--skip", "--class-balance", "--hidden", "16", "--seed", "2"])
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    model = load_model(out)
+    assert model.classifier.skip and model.classifier.hidden == 16
+    training = model.meta["training"]
+    assert training["epochs"] == 3 and training["class_balance"] and training["seed"] == 2
+    curve = tmp_path / "models" / "pref.loss.png"
+    assert curve.read_bytes().startswith(PNG)
+    folder = tmp_path / "models" / "pref.checkpoints"
+    assert sorted(p.name for p in folder.iterdir()) == [f"epoch_{i:03d}.safetensors" for i in (1, 2, 3)]
+    epoch_lines = [line for line in captured.out.splitlines() if re.fullmatch(r"\s*\d+(\s+\d+\.\d+){5}", line)]
+    assert [int(line.split()[0]) for line in epoch_lines] == [1, 2, 3]
+    # Each line is the history the model file records.
+    for line, h in zip(epoch_lines, model.meta["history"], strict=True):
+        assert float(line.split()[2]) == pytest.approx(h["val_loss"], abs=1e-4)
+    last = captured.out.strip().splitlines()[-1]
+    assert last.startswith(f"wrote {out}") and str(curve) in last and str(folder) in last
+    assert f"epoch {model.meta['best_epoch']}" in last
+
+
+def test_cli_train_on_two_dataset_files(tmp_path: Path, capsys):
+    a, b = _dataset_file(tmp_path / "a.safetensors", 120, 0), _dataset_file(tmp_path / "b.safetensors", 80, 1)
+    out = tmp_path / "m.safetensors"
+    assert main(["train", str(a), str(b), "--out", str(out), "--epochs", "1"]) == 0
+    assert load_model(out).meta["data"]["samples"] == 200
+    assert "training on 200 samples (2 dataset file(s))" in capsys.readouterr().out
+
+
+def test_cli_train_missing_dataset(tmp_path: Path, capsys):
+    missing = tmp_path / "absent.safetensors"
+    assert main(["train", str(missing), "--out", str(tmp_path / "m.safetensors")]) == 2
+    _one_line_error(capsys, str(missing))
+    assert not (tmp_path / "m.safetensors").exists()
+
+
+def test_cli_train_refuses_a_model_file_as_data(model_path: Path, tmp_path: Path, capsys):
+    assert main(["train", str(model_path), "--out", str(tmp_path / "m.safetensors")]) == 2
+    _one_line_error(capsys, str(model_path))
+
+
+@pytest.mark.parametrize("flag", [["--epochs", "0"], ["--batch-size", "0"], ["--hidden", "0"], ["--lr", "-1"]], ids=lambda f: f[0])
+def test_cli_train_bad_hyperparameter_is_a_user_error(tmp_path: Path, capsys, flag: list[str]):
+    data = _dataset_file(tmp_path / "data.safetensors", 50)
+    assert main(["train", str(data), "--out", str(tmp_path / "m.safetensors"), *flag]) == 2
+    line = _one_line_error(capsys)
+    assert re.search(flag[0].lstrip("-").replace("-", "[-_]"), line), line  # names the flag or the field
