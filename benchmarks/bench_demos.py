@@ -5,6 +5,9 @@ Run through ``scripts/bench.sh`` (one core); numbers go into ``docs/benchmarks.m
 (a) features: ``UtilityFeaturizer`` (m = 21, n = 30, look-ahead distance utility) on real
     frames of ``train_course`` driven by the synthetic driver; each call timed on its own; the
     median is reported. Target: <= 30 us median.
+(c) decision: ``Planner.decide`` (features + classifier C in NumPy + progress along the path)
+    on the same frames, with a model trained on the recording (paper recipe). Target:
+    <= 100 us median.
 (b) record: ``terrapref record train_course`` end to end through the library (simulation,
     synthetic driver, PNG frames and the JSONL log written to a temporary directory), wall time.
     Target: <= 20 s.
@@ -62,6 +65,30 @@ def bench_features(rec_dir: Path, repeats: int) -> np.ndarray:
     return np.array(times)
 
 
+def bench_decision(rec_dir: Path, repeats: int) -> np.ndarray:
+    from terrapref.demos.dataset import build_dataset
+    from terrapref.learning.model_file import load_model
+    from terrapref.learning.pipeline import train_and_save
+    from terrapref.learning.train import TrainConfig
+    from terrapref.planner import Planner
+
+    rec = read_recording(rec_dir)
+    model_path = rec_dir.parent / "model.safetensors"
+    train_and_save(build_dataset([rec], FeatureConfig()), model_path, TrainConfig(), checkpoints=False)
+    planner = Planner(load_model(model_path))
+    idx = list(range(0, len(rec), max(1, len(rec) // 500)))
+    images = [rec.image(i) for i in idx]
+    times = []
+    for _ in range(repeats):
+        planner.set_path(np.asarray(rec.meta["path"]))
+        for image, i in zip(images, idx):
+            pose = tuple(rec.poses[i])
+            t0 = time.perf_counter()
+            planner.decide(image, pose)
+            times.append(time.perf_counter() - t0)
+    return np.array(times)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seed", type=int, default=0)
@@ -71,8 +98,10 @@ def main() -> int:
         out = Path(tmp) / "rec"
         wall, frames, size = bench_record(out, args.seed)
         t = bench_features(out, args.repeats)
+        d = bench_decision(out, args.repeats)
     print(f"{'benchmark':44s} {'median':>10s} {'p90':>10s} {'target':>10s}")
     print(f"{'features U (m=21, n=30), per frame':44s} {np.median(t) * 1e6:8.1f}us {np.percentile(t, 90) * 1e6:8.1f}us {'<= 30us':>10s}   ({len(t)} calls)")
+    print(f"{'decision (features + C + progress), per frame':44s} {np.median(d) * 1e6:8.1f}us {np.percentile(d, 90) * 1e6:8.1f}us {'<= 100us':>10s}   ({len(d)} calls)")
     print(f"{'record train_course (synthetic driver)':44s} {wall:9.2f}s {'':>10s} {'<= 20s':>10s}   ({frames} frames, {size / 1e6:.1f} MB, {size / frames / 1e3:.1f} kB/frame)")
     return 0
 

@@ -29,6 +29,10 @@ RECIPES = [
     Recipe("long+skip+balanced, 1 demo", 1, 0, TrainConfig(epochs=100, skip=True, class_balance=True)),
     Recipe("long+skip+balanced, 2 demos, smoothing 0.5", 2, 0, TrainConfig(epochs=100, skip=True, class_balance=True), smoothing=0.5),
     Recipe("long+skip+balanced, 2 demos, 300 epochs", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True)),
+    Recipe("long+skip+balanced, 2 demos, 300 epochs, smoothing 0.5", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True), smoothing=0.5),
+    Recipe("long+skip+balanced, 2 demos, 300 epochs, lr 3e-3", 2, 0, TrainConfig(epochs=300, lr=3e-3, skip=True, class_balance=True)),
+    Recipe("long+skip+balanced, 2 demos, 300 epochs, lr 3e-3, smoothing 0.5", 2, 0,
+           TrainConfig(epochs=300, lr=3e-3, skip=True, class_balance=True), smoothing=0.5),
 ]
 
 
