@@ -33,6 +33,8 @@ RECIPES = [
     Recipe("long+skip+balanced, 2 demos, 300 epochs, lr 3e-3", 2, 0, TrainConfig(epochs=300, lr=3e-3, skip=True, class_balance=True)),
     Recipe("long+skip+balanced, 2 demos, 300 epochs, lr 3e-3, smoothing 0.5", 2, 0,
            TrainConfig(epochs=300, lr=3e-3, skip=True, class_balance=True), smoothing=0.5),
+    Recipe("long+skip+balanced, 2 demos, 300 epochs, mirrored", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True)),
+    Recipe("long+skip+balanced, 1 demo, 300 epochs, mirrored", 1, 0, TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True)),
 ]
 
 

@@ -514,3 +514,38 @@ def test_train_and_save_without_checkpoints(tmp_path: Path):
 def test_profile_of_the_model_parses(model_file):
     model = load_model(model_file[0])
     assert PreferenceProfile.parse(list(model.profile), model.classes).order == ODD_PROFILE
+
+
+# --- mirror augmentation ---------------------------------------------------------------------------------
+
+
+def test_mirror_learns_the_unseen_side():
+    """A dataset whose preference is only ever shown with the better arcs on the left is learned
+    for the right side too when mirrored copies are added (the preference has no side)."""
+    data = _linear_dataset(4000)
+    left = data.labels >= 10  # keep only decisions toward w >= 0
+    shown = _dataset(data.U[left], data.labels[left])
+    mirrored = _dataset(data.U[~left], data.labels[~left])  # the other side, never shown
+    cfg = dict(epochs=30, lr=3e-3, batch_size=64, skip=True)
+    plain = train(shown, TrainConfig(**cfg))
+    mirror = train(shown, TrainConfig(**cfg, mirror=True))
+
+    def acc(result) -> float:
+        pred = np.argmax(numpy_forward(result.classifier, result.weights, mirrored.U), axis=1)
+        return float((pred == mirrored.labels).mean())
+
+    assert acc(mirror) > 0.8 and acc(mirror) > acc(plain) + 0.2, (acc(plain), acc(mirror))
+
+
+def test_mirror_needs_a_symmetric_control_set():
+    from dataclasses import replace
+
+    from terrapref.features import FeatureConfig
+    from terrapref.vehicle import ControlSet
+
+    data = _linear_dataset(200)
+    fc = FeatureConfig()
+    skewed = replace(fc, preference=replace(fc.preference, control=ControlSet(1.0, tuple(np.linspace(-1.0, 0.6, 21).round(6)))))
+    data = Dataset(data.U, data.labels, data.w, data.source, {**data.meta, "features": skewed.to_dict()})
+    with pytest.raises(ValueError, match="symmetric"):
+        train(data, TrainConfig(epochs=1, mirror=True))

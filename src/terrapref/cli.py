@@ -188,7 +188,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     )
     try:
         config = TrainConfig(epochs=args.epochs, lr=args.lr, batch_size=args.batch_size, seed=args.seed, hidden=args.hidden,
-                             activation=args.activation, skip=args.skip, class_balance=args.class_balance)
+                             activation=args.activation, skip=args.skip, class_balance=args.class_balance, mirror=args.mirror)
     except ValueError as exc:
         raise UserError("train", str(exc)) from None
     print(f"training on {len(data)} samples ({len(args.data)} dataset file(s)), {config.epochs} epochs, batch {config.batch_size}, lr {config.lr}")
@@ -309,6 +309,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--activation", choices=["relu", "tanh", "elu"], default="relu")
     p.add_argument("--skip", action="store_true", help="add the compressed scores to the logits (residual path)")
     p.add_argument("--class-balance", action="store_true", help="weight the loss by inverse label frequency")
+    p.add_argument("--mirror", action="store_true", help="add left-right mirrored copies of the training samples")
     p.set_defaults(func=_cmd_train)
 
     p = sub.add_parser("evaluate", help="drive scenarios with a model, score every zone, write metrics.json and figures")

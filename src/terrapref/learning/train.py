@@ -18,6 +18,7 @@ import torch
 from torch import nn
 
 from terrapref.demos.dataset import Dataset
+from terrapref.features import FeatureConfig
 from terrapref.learning.network import ClassifierConfig
 from terrapref.learning.torch_net import UtilityClassifier
 
@@ -33,6 +34,9 @@ class TrainConfig:
         val_fraction: share of samples held out for validation.
         weight_decay: Adam L2 penalty.
         class_balance: weight the loss by inverse label frequency (off in the paper's recipe).
+        mirror: add every training sample mirrored left-right (trajectory i <-> m-1-i, label
+            likewise): the preference does not depend on the side a patch is on, and a
+            demonstration shows each pair on one side only. Needs a symmetric w grid.
         decisive_weight: loss weight of the decisive frames, where terrain is on some
             trajectory and the demonstrated one is not the one a pure path follower would take
             (the highest distance utility): the frames that carry the preference. 1 is off.
@@ -47,6 +51,7 @@ class TrainConfig:
     weight_decay: float = 0.0
     class_balance: bool = False
     decisive_weight: float = 1.0
+    mirror: bool = False
     seed: int = 0
     hidden: int = 64
     activation: str = "relu"
@@ -134,20 +139,29 @@ def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetri
     n, m, k = dataset.U.shape
     rng = np.random.default_rng(config.seed)
     tr, va = split_indices(n, config.val_fraction, rng)
+    U_np, y_np = dataset.U, dataset.labels
+    if config.mirror:
+        w = np.asarray(FeatureConfig.from_dict(dataset.meta["features"]).preference.control.w_rps)
+        if not np.allclose(w, -w[::-1]):
+            raise ValueError("mirror needs a w grid symmetric about zero")
+        # Mirrored copies are appended and join the training split only; validation stays real.
+        U_np = np.concatenate([U_np, U_np[tr][:, ::-1, :]])
+        y_np = np.concatenate([y_np, m - 1 - y_np[tr]])
+        tr = np.concatenate([tr, np.arange(n, n + len(tr))])
     torch.manual_seed(config.seed)
     classifier = ClassifierConfig(m, k, config.hidden, config.activation, config.depth, config.compress, config.skip)
     model = UtilityClassifier(classifier)
     opt = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
-    U = torch.from_numpy(np.ascontiguousarray(dataset.U, dtype=np.float32))
-    y = torch.from_numpy(dataset.labels.astype(np.int64))
+    U = torch.from_numpy(np.ascontiguousarray(U_np, dtype=np.float32))
+    y = torch.from_numpy(y_np.astype(np.int64))
     weight = None
     if config.class_balance:
-        counts = np.bincount(dataset.labels[tr], minlength=m).astype(np.float64)
+        counts = np.bincount(y_np[tr], minlength=m).astype(np.float64)
         w = np.where(counts > 0, counts.sum() / np.maximum(counts, 1) / m, 0.0)
         weight = torch.tensor(np.sqrt(w), dtype=torch.float32)  # square root: balance without exploding rare bins
     loss_fn = nn.CrossEntropyLoss(weight=weight, reduction="none")
     plain = nn.CrossEntropyLoss()
-    sample_w = torch.from_numpy(decisive_weights(dataset.U, dataset.labels, config.decisive_weight))
+    sample_w = torch.from_numpy(decisive_weights(U_np, y_np, config.decisive_weight))
 
     def evaluate(idx: np.ndarray) -> tuple[float, float, float]:
         if len(idx) == 0:
