@@ -281,3 +281,14 @@ def test_time_limit_truncates():
             break
     assert truncated and not terminated and step == 10
     assert Simulation(_scenario()).time_limit_s == pytest.approx(2 * 13.0 / 1.0 + 60.0)
+
+
+def test_reset_accepts_a_numpy_pose():
+    import numpy as np
+
+    from terrapref.scenario import resolve_scenario
+    from terrapref.sim import Simulation
+
+    sim = Simulation(resolve_scenario("demo_course"))
+    frame = sim.reset(np.array([5.0, 10.0, 0.25]))
+    assert tuple(frame.pose) == (5.0, 10.0, 0.25)

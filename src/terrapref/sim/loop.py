@@ -97,7 +97,7 @@ class Simulation:
 
     def reset(self, pose: Pose | None = None) -> Frame:
         """Put the vehicle at ``pose`` (default: the scenario's start) and render the first frame."""
-        self.vehicle = Vehicle(Pose(*(pose or self.scenario.start)), self.config.vehicle)
+        self.vehicle = Vehicle(Pose(*(self.scenario.start if pose is None else pose)), self.config.vehicle)
         self.tick = 0
         self.frame_index = 0
         self.collisions = 0
