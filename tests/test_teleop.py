@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
@@ -86,3 +88,54 @@ def test_refuses_to_overwrite_a_recording_unless_told(tmp_path):
         run_teleop("demo_course", out, realtime=False, max_frames=3)
     result = run_teleop("demo_course", out, realtime=False, max_frames=4, overwrite=True)
     assert len(read_recording(out)) == result.frames == 4
+
+
+# --- added with the teleop module: closed forms, user errors, import isolation ------------------
+
+
+def test_ramp_and_axis_closed_forms():
+    from terrapref.demos.teleop import axis_to_w, ramp_toward
+
+    assert ramp_toward(0.0, 1.0, 2.5, 0.1) == pytest.approx(0.25)  # 2.5 rad/s per s for one 10 Hz frame
+    assert ramp_toward(0.9, 1.0, 2.5, 0.1) == 1.0  # lands exactly on the target
+    assert ramp_toward(0.5, -1.0, 2.5, 0.1) == pytest.approx(0.25)
+    assert axis_to_w(0.05, 1.0) == 0.0  # inside the deadzone
+    assert axis_to_w(1.0, 1.0) == -1.0  # stick right turns right (w < 0)
+    assert axis_to_w(-0.5, 1.0) == pytest.approx(0.5)
+
+
+def test_keyboard_ramp_labels_and_screenshot(tmp_path):
+    out = tmp_path / "rec"
+    events = {2: [key(pygame.KEYDOWN, pygame.K_LEFT)], 8: [key(pygame.KEYUP, pygame.K_LEFT)], 10: [pygame.event.Event(pygame.QUIT)]}
+    result = run_teleop("demo_course", out, realtime=False, script=script_from(events), max_frames=40, screenshot=tmp_path / "shot.png")
+    assert result.frames == 10 and result.duration_s == pytest.approx(1.0)
+    rec = read_recording(out)
+    assert rec.meta["driver"] == {"kind": "human", "input": "keyboard/gamepad"}
+    assert rec.meta["summary"]["quit"] is True
+    # 0.25 rad/s per frame: 0.25 (a tie between 0.2 and 0.3, resolved toward 0), 0.5, 0.75 (tie), then full lock.
+    assert rec.commands[2:8, 1] == pytest.approx([0.25, 0.5, 0.75, 1.0, 1.0, 1.0])
+    assert list(rec.labels[2:8]) == [12, 15, 17, 20, 20, 20]
+    assert rec.poses[8, 2] > rec.poses[2, 2], "turning left raises the heading"
+    assert pygame.image.load(str(tmp_path / "shot.png")).get_size() == (640 + 256, 480 + 26)
+
+
+def test_bad_speed_is_a_user_error():
+    with pytest.raises(UserError, match="speed"):
+        run_teleop("demo_course", realtime=False, v_mps=0.0, max_frames=1)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="display detection by environment is Linux-specific")
+def test_no_display_is_a_user_error(monkeypatch, tmp_path):
+    for name in ("SDL_VIDEODRIVER", "DISPLAY", "WAYLAND_DISPLAY"):
+        monkeypatch.delenv(name, raising=False)
+    with pytest.raises(UserError, match="no display available"):
+        run_teleop("demo_course", tmp_path / "rec", realtime=False, max_frames=1)
+    assert not (tmp_path / "rec").exists(), "no recording is started without a window"
+
+
+def test_package_import_does_not_import_pygame():
+    code = (
+        "import sys, terrapref, terrapref.demos, terrapref.demos.recording, terrapref.demos.session, terrapref.cli; "
+        "sys.exit('pygame' in sys.modules)"
+    )
+    assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 0
