@@ -47,6 +47,6 @@ def record_corrections(
             executed = Command(v, w_label)
         writer.append(frame.time_s, frame.pose, frame.image, (v, w_label), control.label_of(w_label), executed=executed)
         frame = sim.step(executed)
-    log = EpisodeLog(sim.scenario.name, np.array(sim.trace), np.array(sim.commands).reshape(-1, 2), sim.reached_goal, sim.collisions, sim.time_s)
-    writer.close({"completed": log.completed, "collisions": log.collisions, "duration_s": round(log.duration_s, 3), "session": "corrections"})
+    log = EpisodeLog.of(sim)
+    writer.close({**log.summary(), "session": "corrections"})
     return log

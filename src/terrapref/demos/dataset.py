@@ -10,13 +10,10 @@ set (labels are re-derived from the recorded continuous w) without driving again
 from __future__ import annotations
 
 import hashlib
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from safetensors import SafetensorError
-from safetensors.numpy import load_file, save_file
 
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer
 from terrapref.demos.recording import Recording
@@ -24,6 +21,7 @@ from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
 from terrapref.scenario import parse_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
+from terrapref.tensorfile import read_tensor_file, write_tensor_file
 from terrapref.terrain import ClassTable
 from terrapref.world import rasterise
 
@@ -127,39 +125,14 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
 
 def save_dataset(dataset: Dataset, path: str | Path) -> Path:
     """Write a dataset as safetensors (tensors plus JSON metadata), atomically."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
     meta = {**dataset.meta, "format": FORMAT, "fingerprint": dataset.fingerprint, "samples": len(dataset)}
-    save_file(
-        {"U": dataset.U, "labels": dataset.labels, "w": dataset.w, "source": dataset.source},
-        str(tmp),
-        metadata={"terrapref": json.dumps(meta)},
-    )
-    tmp.replace(path)
-    return path
+    return write_tensor_file(path, {"U": dataset.U, "labels": dataset.labels, "w": dataset.w, "source": dataset.source}, meta)
 
 
 def load_dataset(path: str | Path) -> Dataset:
     """Read a dataset written by :func:`save_dataset` (no code is executed on load)."""
-    source = str(path)
-    try:
-        tensors = load_file(source)
-        from safetensors import safe_open
-
-        with safe_open(source, framework="numpy") as fh:
-            header = fh.metadata() or {}
-    except FileNotFoundError:
-        raise UserError(source, "no such file") from None
-    except (SafetensorError, OSError, ValueError) as exc:
-        raise UserError(source, f"not a terrapref dataset ({exc})") from None
-    try:
-        meta = json.loads(header["terrapref"])
-    except (KeyError, json.JSONDecodeError):
-        raise UserError(source, "missing terrapref metadata", field="metadata") from None
-    if meta.get("format") != FORMAT:
-        raise UserError(source, f"expected {FORMAT!r}", field="format")
+    tensors, meta = read_tensor_file(path, FORMAT, "no such file", "not a terrapref dataset")
     for key in ("U", "labels", "w", "source"):
         if key not in tensors:
-            raise UserError(source, "missing tensor", field=key)
+            raise UserError(str(path), "missing tensor", field=key)
     return Dataset(tensors["U"], tensors["labels"], tensors["w"], tensors["source"], meta)

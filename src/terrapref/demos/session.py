@@ -59,13 +59,6 @@ def record_run(
         frame = sim.step(command)
         if progress is not None:
             progress(sim)
-    log = EpisodeLog(
-        scenario=sim.scenario.name,
-        trace=np.array(sim.trace, dtype=float),
-        commands=np.array(sim.commands, dtype=float).reshape(-1, 2),
-        completed=sim.reached_goal,
-        collisions=sim.collisions,
-        duration_s=sim.time_s,
-    )
-    writer.close({"completed": log.completed, "collisions": log.collisions, "duration_s": round(log.duration_s, 3)})
+    log = EpisodeLog.of(sim)
+    writer.close(log.summary())
     return log

@@ -5,18 +5,16 @@ Loading reads tensors and a JSON header only; no code from the file is ever exec
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from safetensors import SafetensorError, safe_open
-from safetensors.numpy import save_file
 
 from terrapref.camera import CameraConfig
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
 from terrapref.learning.network import ClassifierConfig
+from terrapref.tensorfile import read_tensor_file, write_tensor_file
 from terrapref.terrain import ClassTable
 
 FORMAT = "terrapref-model/1"
@@ -38,32 +36,14 @@ class LoadedModel:
 
 def save_model(path: str | Path, classifier: ClassifierConfig, weights: dict[str, np.ndarray], meta: dict) -> Path:
     """Write weights and metadata atomically. ``meta`` must hold features, camera, classes, profile."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
     header = {"format": FORMAT, "classifier": classifier.to_dict(), **meta}
-    save_file({k: np.ascontiguousarray(v, dtype=np.float32) for k, v in weights.items()}, str(tmp), metadata={"terrapref": json.dumps(header)})
-    tmp.replace(path)
-    return path
+    return write_tensor_file(path, {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in weights.items()}, header)
 
 
 def load_model(path: str | Path) -> LoadedModel:
     """Read a model file; every problem is a :class:`UserError` naming the file and the field."""
     source = str(path)
-    if not Path(path).is_file():
-        raise UserError(source, "no such model file")
-    try:
-        with safe_open(source, framework="numpy") as fh:
-            header = fh.metadata() or {}
-            weights = {k: fh.get_tensor(k) for k in fh.keys()}
-    except (SafetensorError, OSError, ValueError) as exc:
-        raise UserError(source, f"not a safetensors model file ({exc})") from None
-    try:
-        meta = json.loads(header["terrapref"])
-    except (KeyError, json.JSONDecodeError):
-        raise UserError(source, "missing terrapref metadata", field="metadata") from None
-    if meta.get("format") != FORMAT:
-        raise UserError(source, f"expected {FORMAT!r}, got {meta.get('format')!r}", field="format")
+    weights, meta = read_tensor_file(path, FORMAT, "no such model file", "not a safetensors model file")
     try:
         classifier = ClassifierConfig.from_dict(meta["classifier"])
         features = FeatureConfig.from_dict(meta["features"])

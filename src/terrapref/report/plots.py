@@ -17,6 +17,15 @@ from terrapref.scenario.shapes import outline  # noqa: E402
 from terrapref.world import WorldMap  # noqa: E402
 
 
+def _save(fig: plt.Figure, path: str | Path) -> Path:
+    """Write a figure (creating its folder) and release it."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
 def draw_map(ax: plt.Axes, scenario: Scenario, world: WorldMap, zones: bool = True) -> list:
     """Top-down map with the reference path, the start and the labelled zones; returns legend handles."""
     classes = scenario.classes
@@ -56,11 +65,7 @@ def save_map(path: str | Path, scenario: Scenario, world: WorldMap,
     ax.legend(handles=class_handles + ax.get_legend_handles_labels()[0], loc="upper left", fontsize=7, framealpha=0.8)
     ax.set_title(title or scenario.name)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def save_loss_curve(path: str | Path, history: Sequence[dict], best_epoch: int, title: str = "training") -> Path:
@@ -82,11 +87,7 @@ def save_loss_curve(path: str | Path, history: Sequence[dict], best_epoch: int, 
     ax2.legend(fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def save_decision(path: str | Path, rgb: np.ndarray, uv: np.ndarray, visible: np.ndarray, probs: np.ndarray,
@@ -120,8 +121,4 @@ def save_decision(path: str | Path, rgb: np.ndarray, uv: np.ndarray, visible: np
     ax.set_axis_off()
     ax.set_title(title, fontsize=9)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _save(fig, path)

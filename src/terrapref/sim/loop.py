@@ -170,6 +170,22 @@ class EpisodeLog:
     collisions: int
     duration_s: float
 
+    @classmethod
+    def of(cls, sim: Simulation) -> EpisodeLog:
+        """The log of the episode ``sim`` has driven since its last reset."""
+        return cls(
+            scenario=sim.scenario.name,
+            trace=np.array(sim.trace, dtype=float),
+            commands=np.array(sim.commands, dtype=float).reshape(-1, 2),
+            completed=sim.reached_goal,
+            collisions=sim.collisions,
+            duration_s=sim.time_s,
+        )
+
+    def summary(self) -> dict:
+        """What a recording's metadata keeps of the run."""
+        return {"completed": self.completed, "collisions": self.collisions, "duration_s": round(self.duration_s, 3)}
+
 
 def run_episode(sim: Simulation, driver: Driver, rng: np.random.Generator, start: Pose | None = None) -> EpisodeLog:
     """Drive one episode to the goal or the time limit."""
@@ -177,11 +193,4 @@ def run_episode(sim: Simulation, driver: Driver, rng: np.random.Generator, start
     driver.reset(sim.scenario, rng)
     while not sim.done:
         frame = sim.step(driver.act(frame))
-    return EpisodeLog(
-        scenario=sim.scenario.name,
-        trace=np.array(sim.trace, dtype=float),
-        commands=np.array(sim.commands, dtype=float).reshape(-1, 2),
-        completed=sim.reached_goal,
-        collisions=sim.collisions,
-        duration_s=sim.time_s,
-    )
+    return EpisodeLog.of(sim)

@@ -1,0 +1,56 @@
+"""Tensor files: safetensors weights or arrays plus terrapref's JSON metadata in the header.
+
+Reading parses a JSON header and raw tensors only; nothing in a file is ever executed.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from safetensors import SafetensorError, safe_open
+from safetensors.numpy import save_file
+
+from terrapref.errors import UserError
+
+META_KEY = "terrapref"
+
+
+def write_tensor_file(path: str | Path, tensors: dict[str, np.ndarray], meta: dict) -> Path:
+    """Write tensors and ``meta`` atomically (temporary file, then rename)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    save_file(tensors, str(tmp), metadata={META_KEY: json.dumps(meta)})
+    tmp.replace(path)
+    return path
+
+
+def read_tensor_file(path: str | Path, fmt: str, missing: str, unreadable: str) -> tuple[dict[str, np.ndarray], dict]:
+    """Tensors and metadata of a file whose metadata declares ``format: fmt``.
+
+    Args:
+        missing, unreadable: the messages for an absent file and for one that is not
+            safetensors (the parser's reason is appended).
+
+    Raises:
+        UserError: naming the file, and the field where one is at fault.
+    """
+    source = str(path)
+    if not Path(path).is_file():
+        raise UserError(source, missing)
+    try:
+        with safe_open(source, framework="numpy") as fh:
+            header = fh.metadata() or {}
+            tensors = {k: fh.get_tensor(k) for k in fh.keys()}
+    except (SafetensorError, OSError, ValueError) as exc:
+        raise UserError(source, f"{unreadable} ({exc})") from None
+    try:
+        meta = json.loads(header[META_KEY])
+    except (KeyError, json.JSONDecodeError):
+        raise UserError(source, "missing terrapref metadata", field="metadata") from None
+    if not isinstance(meta, dict) or meta.get("format") != fmt:
+        got = meta.get("format") if isinstance(meta, dict) else None
+        raise UserError(source, f"expected {fmt!r}, got {got!r}", field="format")
+    return tensors, meta
