@@ -15,6 +15,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from terrapref.demos.session import DisturbanceConfig
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_many
 from terrapref.learning.recipe import PAPER, Recipe
 from terrapref.learning.train import TrainConfig
@@ -35,6 +36,20 @@ RECIPES = [
            TrainConfig(epochs=300, lr=3e-3, skip=True, class_balance=True), smoothing=0.5),
     Recipe("long+skip+balanced, 2 demos, 300 epochs, mirrored", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True)),
     Recipe("long+skip+balanced, 1 demo, 300 epochs, mirrored", 1, 0, TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True)),
+    Recipe("long+skip+balanced, 2 disturbed demos, 300 epochs", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True),
+           disturbance=DisturbanceConfig()),
+    Recipe("long+skip+balanced, 2 demos disturbed x2, 300 epochs", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True),
+           disturbance=DisturbanceConfig(rate_hz=0.3)),
+    Recipe("long+skip+balanced, 1 disturbed demo, 300 epochs", 1, 0, TrainConfig(epochs=300, skip=True, class_balance=True),
+           disturbance=DisturbanceConfig()),
+    Recipe("long+skip+balanced, 2 demos disturbed x3, 300 epochs", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True),
+           disturbance=DisturbanceConfig(rate_hz=0.5)),
+    Recipe("long+skip+balanced, 2 demos disturbed x2 up to 0.8, 300 epochs", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True),
+           disturbance=DisturbanceConfig(rate_hz=0.3, max_yaw_rate_rps=0.8)),
+    Recipe("long+skip+balanced, 2 demos disturbed x2, 300 epochs, mirrored", 2, 0,
+           TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True), disturbance=DisturbanceConfig(rate_hz=0.3)),
+    Recipe("long+skip+balanced, 2 demos disturbed x2, 500 epochs", 2, 0, TrainConfig(epochs=500, skip=True, class_balance=True),
+           disturbance=DisturbanceConfig(rate_hz=0.3)),
 ]
 
 

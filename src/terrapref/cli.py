@@ -247,6 +247,25 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_study(args: argparse.Namespace) -> int:
+    import time
+    from dataclasses import replace
+
+    from terrapref.report.study import FULL, QUICK, run_study
+
+    plan = QUICK if args.quick else FULL
+    if args.seeds is not None:
+        if args.seeds < 1:
+            raise UserError("--seeds", "must be >= 1")
+        plan = replace(plan, seeds=args.seeds)
+    if args.workers is not None and args.workers < 1:
+        raise UserError("--workers", "must be >= 1")
+    t0 = time.perf_counter()
+    path = run_study(args.out, plan, args.workers, log=lambda m: print(m, flush=True))
+    print(f"wrote {path} ({time.perf_counter() - t0:.0f} s)")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="terrapref", description="Learn off-road terrain preferences from a few minutes of driving.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -331,6 +350,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--profile", help="preference order for the demonstrations, best first")
     p.add_argument("--workers", type=int, help="parallel processes (default: one per core)")
     p.set_defaults(func=_cmd_reproduce)
+
+    p = sub.add_parser("study", help="baselines, data efficiency, profiles, robustness and ablations; write STUDY.md")
+    p.add_argument("--out", required=True, type=Path)
+    p.add_argument("--quick", action="store_true", help="one seed and fewer levels (about 3 minutes)")
+    p.add_argument("--seeds", type=int, help="training seeds (default: 3, or 1 with --quick)")
+    p.add_argument("--workers", type=int, help="parallel processes (default: one per core)")
+    p.set_defaults(func=_cmd_study)
 
     p = sub.add_parser("scenarios", help="list the packaged scenarios")
     p.set_defaults(func=_cmd_list)

@@ -19,16 +19,19 @@ import numpy as np
 
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.evaluation.scoring import score_run
-from terrapref.learning.model_file import load_model
+from terrapref.evaluation.perturb import PerturbedDriver, Perturbation
 from terrapref.planner import Planner, PlannerDriver
+from terrapref.planner.policy import CostPolicy, Policy, PurePursuitPolicy, load_policy
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation, run_episode
 from terrapref.terrain import PreferenceProfile
 from terrapref.vehicle import Pose
 from terrapref.world import rasterise
 
-PLANNER = "planner"
-EXPERT = "driver"
+PLANNER = "planner"  # a model file: C, or a learned baseline (linear, CNN)
+EXPERT = "driver"  # the synthetic demonstrator, for comparison
+PURE_PURSUIT = "pure_pursuit"  # baselines that need no model file
+HAND_COST = "hand_cost"
 
 
 @dataclass(frozen=True)
@@ -40,6 +43,7 @@ class RunSpec:
     profile: tuple[str, ...]
     keep_frames: tuple[int, ...] = ()
     smoothing: float = 0.0
+    perturb: Perturbation | None = None
 
 
 def start_pose(start: tuple[float, float, float], seed: int) -> Pose:
@@ -58,18 +62,37 @@ def _scenario_and_world(name: str) -> tuple:
     return scenario, rasterise(scenario)
 
 
+@functools.lru_cache(maxsize=8)
+def _policy_file(path: str) -> Policy:
+    return load_policy(path)
+
+
+def make_policy(spec: RunSpec) -> Policy:
+    """The policy a run drives with: a model file's, or a baseline that needs none."""
+    if spec.driver == PLANNER:
+        if spec.model_path is None:
+            raise ValueError("a planner run needs a model file")
+        return _policy_file(spec.model_path)
+    if spec.driver == PURE_PURSUIT:
+        return PurePursuitPolicy()
+    if spec.driver == HAND_COST:
+        return CostPolicy()
+    raise ValueError(f"unknown driver {spec.driver!r}")
+
+
 def run_one(spec: RunSpec) -> dict:
     """Drive one run and return its metrics (JSON-ready), its path and any kept decisions."""
     scenario, world = _scenario_and_world(spec.scenario)
     profile = PreferenceProfile.parse(list(spec.profile), scenario.classes, source="--profile")
-    if spec.driver == PLANNER:
-        model = load_model(spec.model_path)
-        sim = Simulation(scenario, model.camera, world=world)
-        driver = PlannerDriver(Planner(model, smoothing=spec.smoothing), keep=bool(spec.keep_frames))
-    else:
+    if spec.driver == EXPERT:
         sim = Simulation(scenario, world=world)
         driver = ExpertDriver(ExpertConfig(profile=profile.order))
-    log = run_episode(sim, driver, np.random.default_rng(spec.seed), start_pose(scenario.start, spec.seed))
+    else:
+        policy = make_policy(spec)
+        sim = Simulation(scenario, policy.camera, world=world)
+        driver = PlannerDriver(Planner(policy, smoothing=spec.smoothing), keep=bool(spec.keep_frames))
+    runner = PerturbedDriver(driver, spec.perturb, sim.config.camera_rate_hz) if spec.perturb is not None and spec.perturb.active else driver
+    log = run_episode(sim, runner, np.random.default_rng(spec.seed), start_pose(scenario.start, spec.seed))
     metrics = score_run(log.trace[:, :2], scenario, sim.world, profile, completed=log.completed, collisions=log.collisions, duration_s=log.duration_s)
     out = {"scenario": spec.scenario, "seed": spec.seed, "driver": spec.driver, "metrics": metrics.to_dict(), "xy": log.trace[::3, :2].astype(np.float32)}
     if spec.keep_frames and isinstance(driver, PlannerDriver):

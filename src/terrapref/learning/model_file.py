@@ -18,6 +18,7 @@ from terrapref.tensorfile import read_tensor_file, write_tensor_file
 from terrapref.terrain import ClassTable
 
 FORMAT = "terrapref-model/1"
+CLASSIFIER = "classifier"  # the metadata's "kind" of C; baselines write their own kinds
 
 
 @dataclass(frozen=True)
@@ -36,24 +37,30 @@ class LoadedModel:
 
 def save_model(path: str | Path, classifier: ClassifierConfig, weights: dict[str, np.ndarray], meta: dict) -> Path:
     """Write weights and metadata atomically. ``meta`` must hold features, camera, classes, profile."""
-    header = {"format": FORMAT, "classifier": classifier.to_dict(), **meta}
+    header = {"format": FORMAT, "kind": CLASSIFIER, "classifier": classifier.to_dict(), **meta}
     return write_tensor_file(path, {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in weights.items()}, header)
 
 
-def load_model(path: str | Path) -> LoadedModel:
-    """Read a model file; every problem is a :class:`UserError` naming the file and the field."""
-    source = str(path)
+def read_model_file(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
+    """Tensors and metadata of any model file (C or a baseline); ``meta["kind"]`` says which."""
     weights, meta = read_tensor_file(path, FORMAT, "no such model file", "not a safetensors model file")
+    meta.setdefault("kind", CLASSIFIER)
+    return weights, meta
+
+
+def load_model(path: str | Path) -> LoadedModel:
+    """Read a model file of C; every problem is a :class:`UserError` naming the file and the field."""
+    source = str(path)
+    weights, meta = read_model_file(path)
+    if meta["kind"] != CLASSIFIER:
+        raise UserError(source, f"holds a {meta['kind']!r} model, not the classifier C", field="kind")
+    features, camera, classes, profile = model_context(meta, source)
     try:
         classifier = ClassifierConfig.from_dict(meta["classifier"])
-        features = FeatureConfig.from_dict(meta["features"])
-        camera = CameraConfig.from_dict(meta["camera"])
-        classes = ClassTable.from_dict(meta["classes"], source)
-        profile = tuple(meta["profile"])
     except KeyError as exc:
         raise UserError(source, "missing", field=str(exc.args[0])) from None
     except (TypeError, ValueError) as exc:
-        raise UserError(source, f"invalid configuration: {exc}", field="metadata") from None
+        raise UserError(source, f"invalid configuration: {exc}", field="classifier") from None
     expected = expected_shapes(classifier)
     if set(weights) != set(expected):
         raise UserError(source, f"weights do not match the classifier (missing {sorted(set(expected) - set(weights))}, extra {sorted(set(weights) - set(expected))})", field="weights")
@@ -63,6 +70,20 @@ def load_model(path: str | Path) -> LoadedModel:
     if classifier.m != features.preference.m or classifier.n_features != features.n_features:
         raise UserError(source, "classifier shape does not match its feature configuration", field="classifier")
     return LoadedModel(source, classifier, weights, features, camera, classes, profile, meta)
+
+
+def model_context(meta: dict, source: str) -> tuple[FeatureConfig, CameraConfig, ClassTable, tuple[str, ...]]:
+    """The configuration every model file carries: features, camera, classes, profile."""
+    try:
+        features = FeatureConfig.from_dict(meta["features"])
+        camera = CameraConfig.from_dict(meta["camera"])
+        classes = ClassTable.from_dict(meta["classes"], source)
+        profile = tuple(meta["profile"])
+    except KeyError as exc:
+        raise UserError(source, "missing", field=str(exc.args[0])) from None
+    except (TypeError, ValueError) as exc:
+        raise UserError(source, f"invalid configuration: {exc}", field="metadata") from None
+    return features, camera, classes, profile
 
 
 def expected_shapes(c: ClassifierConfig) -> dict[str, tuple[int, ...]]:

@@ -28,6 +28,7 @@ class ClassifierConfig:
             an m * n_features vector instead (an ablation).
         skip: add the compressed scores to the logits (a residual path, so the identity
             "pick the best-scored trajectory" is the starting point); False is the paper's C.
+        ignore: indices of U's columns the classifier never sees (set to zero): an ablation.
     """
 
     m: int = 21
@@ -37,8 +38,12 @@ class ClassifierConfig:
     depth: int = 3
     compress: bool = True
     skip: bool = False
+    ignore: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "ignore", tuple(int(i) for i in self.ignore))
+        if any(not 0 <= i < self.n_features for i in self.ignore):
+            raise ValueError("ignore: column index out of range")
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"activation must be one of {', '.join(ACTIVATIONS)}")
         if self.m < 2 or self.n_features < 1 or self.hidden < 1 or self.depth < 1:
@@ -47,7 +52,7 @@ class ClassifierConfig:
             raise ValueError("skip needs the row-wise compression")
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        return {**asdict(self), "ignore": list(self.ignore)}
 
     @classmethod
     def from_dict(cls, data: dict) -> ClassifierConfig:
@@ -70,6 +75,9 @@ def numpy_forward(config: ClassifierConfig, weights: dict[str, np.ndarray], U: n
     """
     single = U.ndim == 2
     x = U[None] if single else U
+    if config.ignore:
+        x = x.copy()
+        x[..., list(config.ignore)] = 0.0
     if config.compress:
         scores = x @ weights["compress.weight"][0] + weights["compress.bias"][0]  # (B, m)
     else:

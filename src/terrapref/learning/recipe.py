@@ -19,7 +19,7 @@ from terrapref.demos.corrections import record_corrections
 from terrapref.demos.dataset import build_dataset
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.demos.recording import Recording, RecordingWriter, read_recording
-from terrapref.demos.session import record_run, recording_meta
+from terrapref.demos.session import DisturbanceConfig, record_run, recording_meta
 from terrapref.features import FeatureConfig
 from terrapref.learning.model_file import load_model
 from terrapref.learning.pipeline import train_and_save
@@ -41,6 +41,8 @@ class Recipe:
             the model retrained on everything after each).
         train: training hyperparameters.
         smoothing: the planner's averaging of F_t over frames.
+        disturbance: pushes injected while demonstrating, so that recoveries are shown
+            (None: the driver drives undisturbed).
     """
 
     name: str
@@ -48,6 +50,7 @@ class Recipe:
     corrections: int = 0
     train: TrainConfig = field(default_factory=TrainConfig)
     smoothing: float = 0.0
+    disturbance: DisturbanceConfig | None = None
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -63,6 +66,50 @@ class RecipeOutput:
     result: TrainResult
     demo_minutes: float
     correction_minutes: float
+
+
+def record_demonstrations(
+    recipe: Recipe,
+    workdir: str | Path,
+    seed: int,
+    profile: PreferenceProfile | None = None,
+    course: str = "train_course",
+    features: FeatureConfig | None = None,
+    log: Callable[[str], None] | None = None,
+) -> list[Path]:
+    """The recipe's demonstration runs (synthetic driver, seeds ``seed * 100 + k``) in ``workdir``.
+
+    They go to ``workdir/demo_K`` (``demo_K_disturbed`` with disturbances) and a complete one
+    recorded under the same driver, profile, seed and disturbances is reused, so recipes sharing
+    a seed share their demonstrations.
+    """
+    workdir = Path(workdir)
+    scenario = resolve_scenario(course)
+    profile = profile or PreferenceProfile.default(scenario.classes)
+    features = features or FeatureConfig()
+    camera, sim_cfg = CameraConfig(), SimConfig()
+    expert_cfg = ExpertConfig(profile=profile.order)
+    disturbance = recipe.disturbance.to_dict() if recipe.disturbance is not None else None
+    sim = Simulation(scenario, camera, sim_cfg)
+    paths: list[Path] = []
+    for k in range(recipe.demonstrations):
+        demo_seed = seed * 100 + k
+        out = workdir / (f"demo_{k}" if disturbance is None else f"demo_{k}_disturbed")
+        if (out / "meta.json").exists():
+            existing = read_recording(out)
+            driver = existing.meta["driver"]
+            if (existing.complete and existing.meta.get("profile") == list(profile.order) and driver.get("seed") == demo_seed
+                    and driver.get("disturbance") == disturbance and driver.get("config") == expert_cfg.to_dict()):
+                paths.append(out)
+                continue
+        meta = recording_meta(scenario, camera, features.preference, sim_cfg,
+                              {"kind": "expert", "seed": demo_seed, "config": expert_cfg.to_dict(), "disturbance": disturbance}, profile)
+        writer = RecordingWriter(out, meta, scenario.to_dict(), overwrite=True)
+        record_run(sim, ExpertDriver(expert_cfg), writer, features.preference, np.random.default_rng(demo_seed), disturbance=recipe.disturbance)
+        paths.append(out)
+        if log:
+            log(f"demonstration {k + 1}/{recipe.demonstrations}: {len(read_recording(out))} frames")
+    return paths
 
 
 def run_recipe(
@@ -89,27 +136,10 @@ def run_recipe(
     camera, sim_cfg = CameraConfig(), SimConfig()
     expert_cfg = ExpertConfig(profile=profile.order)
     sim = Simulation(scenario, camera, sim_cfg)
-    recordings: list[Recording] = []
-    paths: list[Path] = []
-    demo_s = corr_s = 0.0
-    for k in range(recipe.demonstrations):
-        demo_seed = seed * 100 + k
-        out = workdir / f"demo_{k}"
-        if (out / "meta.json").exists():
-            existing = read_recording(out)
-            if existing.complete and existing.meta.get("profile") == list(profile.order) and existing.meta["driver"].get("seed") == demo_seed:
-                recordings.append(existing)
-                paths.append(out)
-                demo_s += existing.duration_s
-                continue
-        meta = recording_meta(scenario, camera, features.preference, sim_cfg, {"kind": "expert", "seed": demo_seed, "config": expert_cfg.to_dict()}, profile)
-        writer = RecordingWriter(out, meta, scenario.to_dict(), overwrite=True)
-        run = record_run(sim, ExpertDriver(expert_cfg), writer, features.preference, np.random.default_rng(demo_seed))
-        demo_s += run.duration_s
-        recordings.append(read_recording(out))
-        paths.append(out)
-        if log:
-            log(f"demonstration {k + 1}/{recipe.demonstrations}: {len(recordings[-1])} frames")
+    paths = record_demonstrations(recipe, workdir, seed, profile, course, features, log)
+    recordings = [read_recording(p) for p in paths]
+    demo_s = sum(r.duration_s for r in recordings)
+    corr_s = 0.0
     train_cfg = replace(recipe.train, seed=seed)
     model = own / "model.safetensors"
     result = train_and_save(build_dataset(recordings, features), model, train_cfg, checkpoints=False)

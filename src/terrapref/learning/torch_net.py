@@ -23,6 +23,9 @@ class UtilityClassifier(nn.Module):
         self.act = _ACT[config.activation]()
 
     def forward(self, U: torch.Tensor) -> torch.Tensor:
+        if self.config.ignore:
+            U = U.clone()
+            U[..., list(self.config.ignore)] = 0.0
         scores = self.compress(U).squeeze(-1) if self.compress is not None else U.flatten(1)
         h = scores
         for layer in self.layers[:-1]:

@@ -40,6 +40,7 @@ class TrainConfig:
         decisive_weight: loss weight of the decisive frames, where terrain is on some
             trajectory and the demonstrated one is not the one a pure path follower would take
             (the highest distance utility): the frames that carry the preference. 1 is off.
+        ignore_features: utility columns (by name: "distance", "mud", ...) that C never sees.
         seed: seeds the split, the initialisation and the batch order.
         hidden, activation, depth, skip, compress: the classifier's shape (see ClassifierConfig).
     """
@@ -58,8 +59,10 @@ class TrainConfig:
     depth: int = 3
     skip: bool = False
     compress: bool = True
+    ignore_features: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "ignore_features", tuple(self.ignore_features))
         checks = [
             (self.epochs >= 1, "epochs must be >= 1"),
             (self.batch_size >= 1, "batch_size must be >= 1"),
@@ -75,7 +78,7 @@ class TrainConfig:
         ClassifierConfig(2, 1, self.hidden, self.activation, self.depth, self.compress, self.skip)
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        return {**asdict(self), "ignore_features": list(self.ignore_features)}
 
 
 @dataclass(frozen=True)
@@ -149,7 +152,12 @@ def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetri
         y_np = np.concatenate([y_np, m - 1 - y_np[tr]])
         tr = np.concatenate([tr, np.arange(n, n + len(tr))])
     torch.manual_seed(config.seed)
-    classifier = ClassifierConfig(m, k, config.hidden, config.activation, config.depth, config.compress, config.skip)
+    names = FeatureConfig.from_dict(dataset.meta["features"]).column_names
+    unknown = set(config.ignore_features) - set(names)
+    if unknown:
+        raise ValueError(f"ignore_features: no column {sorted(unknown)} (columns: {', '.join(names)})")
+    ignore = tuple(names.index(n) for n in config.ignore_features)
+    classifier = ClassifierConfig(m, k, config.hidden, config.activation, config.depth, config.compress, config.skip, ignore)
     model = UtilityClassifier(classifier)
     opt = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     U = torch.from_numpy(np.ascontiguousarray(U_np, dtype=np.float32))

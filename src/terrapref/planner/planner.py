@@ -6,6 +6,7 @@ It never reads the world map.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -13,7 +14,8 @@ import numpy as np
 from terrapref.camera import CameraConfig, PinholeCamera
 from terrapref.features import UtilityFeaturizer
 from terrapref.learning.model_file import LoadedModel, check_compatible
-from terrapref.learning.network import numpy_forward, softmax
+from terrapref.learning.network import softmax
+from terrapref.planner.policy import ClassifierPolicy, Observation, Policy
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim.loop import Frame
@@ -39,11 +41,14 @@ class Decision:
     progress_s: float
 
 
+PATH_AHEAD_M = np.arange(1.0, 9.0)  # where Observation.path_ahead samples the path [m]
+
+
 class Planner:
-    """A trained classifier driving by the preference set.
+    """A policy (the trained classifier C, or a baseline) driving by the preference set.
 
     Args:
-        model: a loaded model file.
+        model: a loaded model file (C) or any :class:`Policy`.
         camera: the robot's camera; a model trained for another camera is refused.
         smoothing: weight of the previous frames in an exponential average of F_t before the
             argmax (0: the paper's memoryless planner). When the classifier is unsure between
@@ -51,18 +56,21 @@ class Planner:
             average out to driving straight into it; the average lets it commit.
     """
 
-    def __init__(self, model: LoadedModel, camera: CameraConfig | None = None, smoothing: float = 0.0) -> None:
+    def __init__(self, model: LoadedModel | Policy, camera: CameraConfig | None = None, smoothing: float = 0.0) -> None:
         if not 0.0 <= smoothing < 1.0:
             raise ValueError("smoothing must be in [0, 1)")
         self.smoothing = smoothing
         self._avg: np.ndarray | None = None
-        camera = camera or model.camera
-        check_compatible(model, camera)
-        self.model = model
+        policy = model if isinstance(model, Policy) else ClassifierPolicy(model)
+        camera = camera or policy.camera
+        if isinstance(model, LoadedModel):
+            check_compatible(model, camera)
+        elif policy.camera != camera:
+            raise ValueError(f"{policy.name}: built for another camera")
+        self.policy = policy
         self.camera = PinholeCamera(camera)
-        self.featurizer = UtilityFeaturizer(model.features, self.camera, model.classes)
-        self.control = model.features.preference.control
-        self._weights = model.weights
+        self.featurizer = UtilityFeaturizer(policy.features, self.camera, policy.classes)
+        self.control = policy.features.preference.control
         self.path: ReferencePath | None = None
         self.tracker: PathTracker | None = None
 
@@ -78,12 +86,28 @@ class Planner:
             raise RuntimeError("call set_path() first")
         s = self.tracker.update(np.array(pose[:2]))
         U = self.featurizer(image, pose, self.path, s)
-        probs = softmax(numpy_forward(self.model.classifier, self._weights, U))
+        ahead = self.path_ahead(pose, s) if self.policy.uses_path_ahead else _NO_POINTS
+        probs = softmax(self.policy.logits(Observation(U, image, ahead)))
         if self.smoothing > 0:
             self._avg = probs if self._avg is None else self.smoothing * self._avg + (1 - self.smoothing) * probs
             probs = self._avg
         i = int(np.argmax(probs))
         return Decision(i, Command(*self.control.command(i)), probs, U, s)
+
+    def path_ahead(self, pose: Pose, progress_s: float) -> np.ndarray:
+        assert self.path is not None
+        return path_ahead(self.path, pose, progress_s)
+
+
+def path_ahead(path: ReferencePath, pose: Pose, progress_s: float) -> np.ndarray:
+    """The path 1, 2, ... m (PATH_AHEAD_M) ahead of ``progress_s`` in the vehicle frame (P, 2) [m]."""
+    x, y, yaw = pose
+    c, s = math.cos(yaw), math.sin(yaw)
+    d = path.point_at(progress_s + PATH_AHEAD_M) - (x, y)
+    return np.stack([d[:, 0] * c + d[:, 1] * s, -d[:, 0] * s + d[:, 1] * c], axis=1)
+
+
+_NO_POINTS = np.zeros((0, 2))
 
 
 class PlannerDriver:

@@ -122,3 +122,53 @@ def save_decision(path: str | Path, rgb: np.ndarray, uv: np.ndarray, visible: np
     ax.set_title(title, fontsize=9)
     fig.tight_layout()
     return _save(fig, path)
+
+
+def save_bars(path: str | Path, labels: Sequence[str], means: Sequence[float], stds: Sequence[float], ylabel: str,
+              target: float | None = None) -> Path:
+    """One bar per method with its spread over seeds."""
+    fig, ax = plt.subplots(figsize=(8, 3.8), dpi=120)
+    x = np.arange(len(labels))
+    ax.bar(x, means, yerr=stds, capsize=4, color="tab:blue")
+    if target is not None:
+        ax.axhline(target, color="grey", ls=":", label=f"{target:.0%}")
+        ax.legend(fontsize=8)
+    ax.set_xticks(x, labels, rotation=20, ha="right", fontsize=8)
+    ax.set_ylim(0, 1.05)
+    ax.set_ylabel(ylabel)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def save_curves(path: str | Path, series: dict[str, Sequence[tuple[float, float, float]]], xlabel: str, ylabel: str,
+                target: float | None = None, logx: bool = False) -> Path:
+    """Lines of (x, mean, std) per series, with the spread shaded."""
+    fig, ax = plt.subplots(figsize=(6.5, 4), dpi=120)
+    for name, pts in series.items():
+        x, y, e = (np.array(v, dtype=float) for v in zip(*pts))
+        ax.plot(x, y, marker="o", label=name)
+        ax.fill_between(x, y - e, y + e, alpha=0.2)
+    if target is not None:
+        ax.axhline(target, color="grey", ls=":", label=f"{target:.0%}")
+    if logx:
+        ax.set_xscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_ylim(0, 1.05)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def save_panels(path: str | Path, panels: dict[str, Sequence[tuple[float, float, float]]], ylabel: str) -> Path:
+    """One small (level, mean, std) plot per perturbation kind."""
+    n = max(len(panels), 1)
+    fig, axes = plt.subplots(1, n, figsize=(3.2 * n, 3.2), dpi=120, squeeze=False)
+    for ax, (name, pts) in zip(axes[0], panels.items()):
+        x, y, e = (np.array(v, dtype=float) for v in zip(*pts))
+        ax.errorbar(x, y, yerr=e, marker="o", capsize=3)
+        ax.set_title(name, fontsize=8)
+        ax.set_ylim(0, 1.05)
+        ax.set_ylabel(ylabel)
+    fig.tight_layout()
+    return _save(fig, path)

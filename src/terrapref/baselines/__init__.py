@@ -1,0 +1,1 @@
+"""Baselines the study compares C against (the simple ones live in terrapref.planner.policy)."""

@@ -1,0 +1,179 @@
+"""Policies: what scores the m trajectories at each frame, behind one planner interface.
+
+A policy sees what the planner sees (the utility features U, the segmentation image, and the
+reference path ahead in the vehicle frame) and returns one score per trajectory; the planner
+takes the argmax. The learned classifier C is one policy; the study's baselines are others:
+
+- ``ClassifierPolicy``: C (SPEC 8), the paper's method.
+- ``PurePursuitPolicy``: follows the path and ignores terrain.
+- ``CostPolicy``: a hand-tuned cost over the same features (a weight per terrain class and
+  one for the distance utility), the classic costmap approach.
+- ``LinearPolicy``: the same form with weights learned from demonstrations.
+- ``CnnPolicy`` (terrapref.baselines.cnn): end-to-end behaviour cloning from the image.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from terrapref.camera import CameraConfig
+from terrapref.features import FeatureConfig
+from terrapref.learning.linear import LinearUtility
+from pathlib import Path
+
+from terrapref.errors import UserError
+from terrapref.learning.model_file import CLASSIFIER, FORMAT, LoadedModel, load_model, model_context, read_model_file
+from terrapref.tensorfile import write_tensor_file
+from terrapref.learning.network import numpy_forward
+from terrapref.terrain import ClassTable, default_classes
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What a policy may look at in one frame.
+
+    Attributes:
+        U: utility features (m, K + 1).
+        image: the segmentation image (H, W) uint8.
+        path_ahead: reference-path points 1, 2, ..., P m ahead of the vehicle's progress, in
+            the vehicle frame (P, 2) [m] (x forward, y left); empty unless the policy asks.
+    """
+
+    U: np.ndarray
+    image: np.ndarray
+    path_ahead: np.ndarray
+
+
+class Policy:
+    """Scores trajectories. Subclasses set the configuration they were built for."""
+
+    name = "policy"
+    features: FeatureConfig
+    camera: CameraConfig
+    classes: ClassTable
+    profile: tuple[str, ...] | None = None
+    path: str = ""
+    uses_path_ahead = False  # the planner computes Observation.path_ahead only when asked
+
+    def logits(self, obs: Observation) -> np.ndarray:
+        """One score per trajectory, shape (m,); the planner drives the argmax."""
+        raise NotImplementedError
+
+
+class ClassifierPolicy(Policy):
+    """The learned classifier C from a model file."""
+
+    name = "classifier"
+
+    def __init__(self, model: LoadedModel) -> None:
+        self.model = model
+        self.features, self.camera, self.classes = model.features, model.camera, model.classes
+        self.profile, self.path = model.profile, model.path
+        self._config, self._weights = model.classifier, model.weights
+
+    def logits(self, obs: Observation) -> np.ndarray:
+        return numpy_forward(self._config, self._weights, obs.U)
+
+
+class LinearPolicy(Policy):
+    """Scores ``w . U_i + b_i``: the multi-criteria decision function (weights given or fitted)."""
+
+    name = "linear"
+
+    def __init__(self, utility: LinearUtility, features: FeatureConfig | None = None, camera: CameraConfig | None = None,
+                 classes: ClassTable | None = None, profile: tuple[str, ...] | None = None, path: str = "") -> None:
+        self.utility = utility
+        self.features = features or FeatureConfig()
+        self.camera = camera or CameraConfig()
+        self.classes = classes or default_classes()
+        self.profile, self.path = profile, path
+        if len(utility.w) != self.features.n_features or len(utility.b) != self.features.preference.m:
+            raise ValueError("linear utility does not match the feature configuration")
+
+    def logits(self, obs: Observation) -> np.ndarray:
+        return obs.U @ self.utility.w + self.utility.b
+
+
+# Hand-set costs of the classic approach: a cost per metre-share on each class, tuned by
+# hand for the default profile (mud < rock < water << non_traversable) against a pull back to
+# the path. The numbers are the result of a few minutes of trial on train_course only.
+HAND_COSTS = {"mud": 2.0, "rock": 4.0, "water": 8.0, "non_traversable": 50.0}
+HAND_DISTANCE_WEIGHT = 2.0
+
+
+class CostPolicy(LinearPolicy):
+    """The hand-tuned cost planner: -sum_k cost_k u^k + weight * u^5 (HAND_COSTS by default)."""
+
+    name = "hand_cost"
+
+    def __init__(self, costs: dict[str, float] | None = None, distance_weight: float = HAND_DISTANCE_WEIGHT,
+                 features: FeatureConfig | None = None, camera: CameraConfig | None = None, classes: ClassTable | None = None) -> None:
+        features = features or FeatureConfig()
+        costs = dict(HAND_COSTS if costs is None else costs)
+        unknown = set(costs) - set(features.feature_classes)
+        if unknown:
+            raise ValueError(f"no feature column for {sorted(unknown)}")
+        w = np.array([-costs.get(name, 0.0) for name in features.feature_classes] + [distance_weight])
+        super().__init__(LinearUtility(w, np.zeros(features.preference.m)), features, camera, classes)
+        self.costs, self.distance_weight = costs, distance_weight
+
+
+class PurePursuitPolicy(Policy):
+    """A path follower that ignores terrain: pure pursuit to a look-ahead point on the path,
+    then the trajectory whose yaw rate is nearest the pursuit command."""
+
+    name = "pure_pursuit"
+    uses_path_ahead = True
+
+    def __init__(self, lookahead_m: float = 2.5, features: FeatureConfig | None = None, camera: CameraConfig | None = None,
+                 classes: ClassTable | None = None) -> None:
+        self.features = features or FeatureConfig()
+        self.camera = camera or CameraConfig()
+        self.classes = classes or default_classes()
+        self.lookahead_m = lookahead_m
+        control = self.features.preference.control
+        self._w = np.asarray(control.w_rps, dtype=float)
+        self._v = float(control.v_mps)
+
+    def logits(self, obs: Observation) -> np.ndarray:
+        # Interpolate the look-ahead point from the path points 1 m apart.
+        d = np.hypot(obs.path_ahead[:, 0], obs.path_ahead[:, 1])
+        j = int(np.clip(np.searchsorted(d, self.lookahead_m), 0, len(d) - 1))
+        x, y = obs.path_ahead[j]
+        dist = max(math.hypot(x, y), 1e-6)
+        w = 2.0 * self._v * (y / dist) / dist  # 2 v sin(alpha) / L
+        return -np.abs(self._w - w)
+
+
+LINEAR = "linear"
+CNN = "cnn"
+
+
+def save_linear(path: str | Path, utility: LinearUtility, meta: dict) -> Path:
+    """Write a fitted linear utility model; ``meta`` holds features, camera, classes, profile."""
+    tensors = {"w": utility.w.astype(np.float32), "b": utility.b.astype(np.float32)}
+    return write_tensor_file(path, tensors, {"format": FORMAT, **meta, "kind": LINEAR})
+
+
+def load_policy(path: str | Path) -> Policy:
+    """Any model file (C, linear, CNN) as a policy; loading never runs code from the file."""
+    source = str(path)
+    tensors, meta = read_model_file(path)
+    kind = meta["kind"]
+    if kind == CLASSIFIER:
+        return ClassifierPolicy(load_model(path))
+    features, camera, classes, profile = model_context(meta, source)
+    if kind == LINEAR:
+        k, m = features.n_features, features.preference.m
+        for name, shape in (("w", (k,)), ("b", (m,))):
+            if name not in tensors or tuple(tensors[name].shape) != shape:
+                raise UserError(source, f"expected shape {shape}", field=f"weights.{name}")
+        return LinearPolicy(LinearUtility(tensors["w"].astype(float), tensors["b"].astype(float)), features, camera, classes, profile, source)
+    if kind == CNN:
+        from terrapref.baselines.cnn import CnnPolicy
+
+        return CnnPolicy.from_tensors(tensors, meta, features, camera, classes, profile, source)
+    raise UserError(source, f"unknown model kind {kind!r}", field="kind")

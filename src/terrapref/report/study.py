@@ -1,0 +1,300 @@
+"""`terrapref study`: the paper's claims as measured figures, over seeds, with one evaluation.
+
+Stages (each parallel across processes):
+1. Demonstrations: per training seed, the synthetic driver demonstrates on ``train_course``
+   with the protocol of the recipe ``ours`` (two runs with disturbances), once under the
+   default profile and once under another profile.
+2. Featurisation: utility features (and, for the ablation, other horizons) and the CNN's
+   downsampled images, each read from the recordings once.
+3. Training: C (recipe ``ours``), the linear utility model and the CNN on the same
+   recordings; the same three on the first 0.5 ... 10 minutes of them; C under the other
+   profile; C's ablations.
+4. Closed-loop evaluation on ``test_course`` and the figure variations: every model, pure
+   pursuit, the hand-tuned cost planner and the synthetic driver; C again under segmentation
+   noise, pose noise and dropped or delayed frames.
+5. STUDY.md with tables and figures, and study.json with every run's metrics.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from terrapref.evaluation.perturb import Perturbation
+from terrapref.evaluation.runner import EXPERT, HAND_COST, PLANNER, PURE_PURSUIT, RunSpec, run_many
+from terrapref.features import FeatureConfig
+from terrapref.report.reproduce import OURS, TEST_SET, variations
+from terrapref.terrain import PreferenceProfile
+
+ALT_PROFILE = ("rock", "mud", "water", "non_traversable")
+LEARNED = ("C", "linear", "cnn")  # methods trained from demonstrations
+METHOD_NAMES = {
+    "C": "C (ours)",
+    "linear": "linear utility (learned)",
+    "cnn": "end-to-end CNN",
+    HAND_COST: "hand-tuned cost",
+    PURE_PURSUIT: "pure pursuit",
+    EXPERT: "synthetic driver",
+}
+
+
+@dataclass(frozen=True)
+class StudyPlan:
+    """How much of everything a study runs.
+
+    Attributes:
+        seeds: training seeds (each: its own demonstrations and initialisation).
+        minutes: demonstration budgets for the data-efficiency curve [min].
+        epochs: C's training epochs (recipe ``ours`` uses 300).
+        cnn_epochs: the CNN's training epochs.
+        noise: perturbation levels, by kind (see :class:`Perturbation`).
+        horizons: trajectory lengths n for the horizon ablation (the default is always in).
+        widths: hidden widths for the width ablation.
+        courses: evaluation scenarios.
+    """
+
+    seeds: int = 3
+    minutes: tuple[float, ...] = (0.5, 1.0, 2.0, 5.0, 10.0)
+    epochs: int = 300
+    cnn_epochs: int = 40
+    noise: dict[str, tuple[float, ...]] = field(default_factory=lambda: {
+        "flip_rate": (0.05, 0.1, 0.2, 0.4),
+        "blobs": (1.0, 2.0, 4.0),
+        "pose_noise_m": (0.1, 0.25, 0.5),
+        "drop_rate": (0.2, 0.5, 0.8),
+        "delay_frames": (1.0, 3.0, 5.0),
+    })
+    horizons: tuple[int, ...] = (15, 45)
+    widths: tuple[int, ...] = (16, 256)
+    courses: tuple[str, ...] = ()
+
+    def scenarios(self) -> list[str]:
+        return list(self.courses) or [*TEST_SET, *variations()]
+
+
+FULL = StudyPlan()
+QUICK = StudyPlan(
+    seeds=1, minutes=(1.0, 5.0, 10.0), epochs=100, cnn_epochs=15,
+    noise={"flip_rate": (0.2,), "blobs": (2.0,), "pose_noise_m": (0.25,), "drop_rate": (0.5,), "delay_frames": (3.0,)},
+    horizons=(), widths=(16,),
+)
+
+# Pose noise's heading error grows with its position error: degrees per metre.
+POSE_DEG_PER_M = 10.0
+
+
+def perturbation(kind: str, level: float) -> Perturbation:
+    if kind == "pose_noise_m":
+        return Perturbation(pose_noise_m=level, pose_noise_deg=POSE_DEG_PER_M * level)
+    if kind == "delay_frames":
+        return Perturbation(delay_frames=int(level))
+    return Perturbation(**{kind: level})
+
+
+# -- jobs (module level: they run in worker processes) ---------------------------------------
+
+
+def _record_job(args: tuple[str, int, tuple[str, ...]]) -> list[str]:
+    from terrapref.learning.recipe import record_demonstrations
+
+    workdir, seed, profile = args
+    return [str(p) for p in record_demonstrations(OURS, workdir, seed, PreferenceProfile.parse(list(profile)))]
+
+
+def _featurise_job(args: tuple[list[str], str, str, int | None]) -> str:
+    """Featurise recordings into ``out``: a dataset (``kind`` "U", with horizon n) or CNN samples."""
+    from terrapref.demos.dataset import build_dataset, save_dataset
+    from terrapref.demos.recording import read_recording
+    from terrapref.tensorfile import write_tensor_file
+
+    recs, out, kind, n = args
+    recordings = [read_recording(r) for r in recs]
+    features = FeatureConfig()
+    if n is not None:
+        features = replace(features, preference=replace(features.preference, n_steps=n))
+    if kind == "U":
+        save_dataset(build_dataset(recordings, features), out)
+    else:
+        from terrapref.baselines.cnn import CnnConfig, cnn_samples
+
+        images, paths, labels = cnn_samples(recordings, features, CnnConfig().stride)
+        meta = {"format": "terrapref-cnn-samples/1", **{k: recordings[0].meta[k] for k in ("camera", "classes", "profile")}}
+        write_tensor_file(out, {"images": images, "paths": paths, "labels": labels}, meta)
+    return out
+
+
+def _frames_for(minutes: float | None, rate_hz: float = 10.0) -> int | None:
+    return None if minutes is None else int(round(minutes * 60.0 * rate_hz))
+
+
+def _train_job(job: dict) -> dict:
+    """Train one model (C, linear or CNN) on the first ``minutes`` of a featurised set."""
+    from terrapref.demos.dataset import Dataset, load_dataset
+    from terrapref.learning.linear import fit_linear_utility
+    from terrapref.learning.pipeline import train_and_save
+    from terrapref.learning.train import TrainConfig
+    from terrapref.planner.policy import save_linear
+    from terrapref.tensorfile import read_tensor_file
+
+    t0 = time.perf_counter()
+    n = _frames_for(job.get("minutes"))
+    if job["method"] == "cnn":
+        from terrapref.baselines.cnn import CnnConfig, save_cnn, train_cnn
+
+        tensors, meta = read_tensor_file(job["data"], "terrapref-cnn-samples/1", "no such file", "not CNN samples")
+        images, paths, labels = (tensors[k][:n] for k in ("images", "paths", "labels"))
+        config = CnnConfig(epochs=job["cnn_epochs"], seed=job["seed"])
+        result = train_cnn(images, paths, labels.astype(np.int64), FeatureConfig().preference.m, config)
+        meta = {k: meta[k] for k in ("camera", "classes", "profile")} | {"features": FeatureConfig().to_dict()}
+        save_cnn(job["out"], result, config, images.shape[1:], meta)
+        samples = len(labels)
+    else:
+        ds = load_dataset(job["data"])
+        if n is not None:
+            ds = Dataset(ds.U[:n], ds.labels[:n], ds.w[:n], ds.source[:n], ds.meta)
+        samples = len(ds)
+        meta = {k: ds.meta[k] for k in ("features", "camera", "classes", "profile")}
+        if job["method"] == "linear":
+            save_linear(job["out"], fit_linear_utility(ds.U, ds.labels), meta)
+        else:
+            config = TrainConfig(**{**OURS.train.to_dict(), "epochs": job["epochs"], "seed": job["seed"], **job.get("train", {})})
+            train_and_save(ds, job["out"], config, checkpoints=False)
+    return {**job, "samples": samples, "train_s": time.perf_counter() - t0}
+
+
+def _pool_map(fn: Callable, jobs: list, workers: int, log: Callable[[str], None], what: str) -> list:
+    """Map over jobs in worker processes (in order), logging progress."""
+    if not jobs:
+        return []
+    out: list = [None] * len(jobs)
+    if workers <= 1 or len(jobs) == 1:
+        for i, j in enumerate(jobs):
+            out[i] = fn(j)
+            log(f"      {what} {i + 1}/{len(jobs)}")
+        return out
+    import multiprocessing as mp
+    from concurrent.futures import as_completed
+
+    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=mp.get_context("fork")) as pool:
+        futures = {pool.submit(fn, j): i for i, j in enumerate(jobs)}
+        for k, fut in enumerate(as_completed(futures), start=1):
+            out[futures[fut]] = fut.result()
+            log(f"      {what} {k}/{len(jobs)}")
+    return out
+
+
+# -- the study -------------------------------------------------------------------------------
+
+
+def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None = None, log: Callable[[str], None] = print) -> Path:
+    """Run every stage into ``out_dir``; returns the path of STUDY.md."""
+    out = Path(out_dir)
+    work = out / "work"
+    work.mkdir(parents=True, exist_ok=True)
+    workers = workers or os.cpu_count() or 1
+    default = PreferenceProfile.default().order
+    timings: dict[str, float] = {}
+    seeds = list(range(plan.seeds))
+
+    t0 = time.perf_counter()
+    log(f"[1/5] demonstrations: {len(seeds)} seed(s) x 2 profiles x {OURS.demonstrations} runs ...")
+    rec_jobs = [(str(work / f"{tag}_s{s}"), s, prof) for s in seeds for tag, prof in (("default", default), ("alt", ALT_PROFILE))]
+    recs = dict(zip([(j[1], j[2]) for j in rec_jobs], _pool_map(_record_job, rec_jobs, workers, log, "demonstration set")))
+    timings["demonstrations"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    feat_jobs = []
+    for s in seeds:
+        base = work / f"default_s{s}"
+        feat_jobs += [(recs[(s, default)], str(base / "U.safetensors"), "U", None), (recs[(s, default)], str(base / "cnn.safetensors"), "cnn", None),
+                      (recs[(s, ALT_PROFILE)], str(work / f"alt_s{s}" / "U.safetensors"), "U", None)]
+        feat_jobs += [(recs[(s, default)], str(base / f"U_n{n}.safetensors"), "U", n) for n in plan.horizons]
+    log(f"[2/5] featurisation: {len(feat_jobs)} sets ...")
+    _pool_map(_featurise_job, feat_jobs, workers, log, "set")
+    timings["featurisation"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    jobs: list[dict] = []
+    models = work / "models"
+    models.mkdir(exist_ok=True)
+
+    def add(study: str, method: str, s: int, data: Path, tag: str, **extra) -> None:
+        jobs.append({"study": study, "method": method, "seed": s, "data": str(data), "out": str(models / f"{tag}_s{s}.safetensors"),
+                     "epochs": plan.epochs, "cnn_epochs": plan.cnn_epochs, "tag": tag, **extra})
+
+    for s in seeds:
+        base = work / f"default_s{s}"
+        for method in LEARNED:
+            add("baselines", method, s, base / ("cnn.safetensors" if method == "cnn" else "U.safetensors"), method)
+            for minutes in plan.minutes:
+                add("efficiency", method, s, base / ("cnn.safetensors" if method == "cnn" else "U.safetensors"), f"{method}_{minutes:g}min", minutes=minutes)
+        add("profile", "C", s, work / f"alt_s{s}" / "U.safetensors", "C_alt")
+        add("ablation", "C", s, base / "U.safetensors", "C_no_distance", train={"ignore_features": ["distance"]}, variant="without the distance utility")
+        add("ablation", "C", s, base / "U.safetensors", "C_flat", train={"compress": False, "skip": False}, variant="without the row-wise compression (flat MLP)")
+        for n in plan.horizons:
+            add("ablation", "C", s, base / f"U_n{n}.safetensors", f"C_n{n}", variant=f"horizon n = {n}")
+        for w in plan.widths:
+            add("ablation", "C", s, base / "U.safetensors", f"C_h{w}", train={"hidden": w}, variant=f"hidden width {w}")
+    jobs.sort(key=lambda j: -(j.get("minutes") or 99) * (3 if j["method"] != "linear" else 0.1))  # long jobs first
+    log(f"[3/5] training: {len(jobs)} models ...")
+    trained = _pool_map(_train_job, jobs, workers, log, "model")
+    timings["training"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    scenarios = plan.scenarios()
+    specs: list[RunSpec] = []
+    tags: list[dict] = []
+
+    def spec(run: RunSpec, **tag) -> None:
+        specs.append(run)
+        tags.append(tag)
+
+    for sc in scenarios:
+        for t in trained:
+            profile = ALT_PROFILE if t["study"] == "profile" else default
+            spec(RunSpec(sc, 0, PLANNER, t["out"], profile), study=t["study"], method=t["method"], seed=t["seed"], minutes=t.get("minutes"),
+                 variant=t.get("variant"), scored_under="model")
+            if t["study"] == "profile":  # the same run's choices, scored under the default profile
+                spec(RunSpec(sc, 0, PLANNER, t["out"], default), study="profile_cross", method="C", seed=t["seed"], scored_under="default")
+            if t["study"] == "baselines" and t["method"] == "C":
+                spec(RunSpec(sc, 0, PLANNER, t["out"], ALT_PROFILE), study="profile_cross", method="C_default", seed=t["seed"], scored_under="alt")
+                for kind, levels in plan.noise.items():
+                    for level in levels:
+                        spec(RunSpec(sc, 0, PLANNER, t["out"], default, perturb=perturbation(kind, level)),
+                             study="robustness", method="C", seed=t["seed"], kind=kind, level=level)
+        for s in seeds:
+            for method in (HAND_COST, PURE_PURSUIT, EXPERT):
+                spec(RunSpec(sc, s, method, None, default), study="baselines", method=method, seed=s)
+            spec(RunSpec(sc, s, EXPERT, None, ALT_PROFILE), study="profile", method=EXPERT, seed=s, scored_under="model")
+    log(f"[4/5] closed-loop evaluation: {len(specs)} runs over {len(scenarios)} scenarios ...")
+    done = [0]
+
+    def tick(k: int, n: int) -> None:
+        if k * 10 // n > done[0]:
+            done[0] = k * 10 // n
+            log(f"      {k}/{n} runs")
+
+    results = run_many(specs, workers, tick)
+    timings["evaluation"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    log("[5/5] tables, figures and STUDY.md ...")
+    runs = [{**tag, "scenario": r["scenario"], "metrics": r["metrics"]} for tag, r in zip(tags, results)]
+    (out / "study.json").write_text(json.dumps({"plan": _plan_dict(plan), "trained": trained, "runs": runs}, indent=1, default=float))
+    from terrapref.report.study_report import write_study
+
+    timings["report"] = time.perf_counter() - t0
+    return write_study(out, plan, trained, runs, timings)
+
+
+def _plan_dict(plan: StudyPlan) -> dict:
+    return {"seeds": plan.seeds, "minutes": list(plan.minutes), "epochs": plan.epochs, "cnn_epochs": plan.cnn_epochs,
+            "noise": {k: list(v) for k, v in plan.noise.items()}, "horizons": list(plan.horizons), "widths": list(plan.widths),
+            "scenarios": plan.scenarios()}

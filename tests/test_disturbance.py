@@ -1,0 +1,196 @@
+"""Disturbed demonstrations: random yaw-rate pushes on what the vehicle executes, while the
+label stays the demonstrator's own command."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from terrapref.demos.expert import ExpertDriver
+from terrapref.demos.recording import FRAMES, RecordingWriter, read_recording
+from terrapref.demos.session import DisturbanceConfig, Disturber, record_run, recording_meta
+from terrapref.features import PreferenceSetConfig
+from terrapref.scenario import resolve_scenario
+from terrapref.sim import Simulation
+from terrapref.terrain import PreferenceProfile
+from terrapref.vehicle import Command
+
+DT = 0.1  # 10 Hz camera frames
+
+
+# --- DisturbanceConfig ---------------------------------------------------------------------------
+
+
+def test_default_config_is_valid():
+    c = DisturbanceConfig()
+    assert c.rate_hz > 0 and c.min_yaw_rate_rps <= c.max_yaw_rate_rps and c.min_duration_s <= c.max_duration_s
+    assert DisturbanceConfig(**c.to_dict()) == c
+    DisturbanceConfig(rate_hz=0.0)  # off is allowed
+    DisturbanceConfig(min_yaw_rate_rps=0.4, max_yaw_rate_rps=0.4, min_duration_s=1.0, max_duration_s=1.0)  # fixed pushes
+
+
+@pytest.mark.parametrize("kw", [
+    {"rate_hz": -0.1},
+    {"min_yaw_rate_rps": -0.1},
+    {"min_yaw_rate_rps": 0.7, "max_yaw_rate_rps": 0.5},
+    {"min_duration_s": 2.0, "max_duration_s": 1.0},
+    {"min_duration_s": 0.0},
+    {"max_command_rps": 0.0},
+])
+def test_invalid_config_is_refused(kw: dict):
+    with pytest.raises(ValueError):
+        DisturbanceConfig(**kw)
+
+
+# --- Disturber -----------------------------------------------------------------------------------
+
+
+def test_rate_zero_never_pushes():
+    d = Disturber(DisturbanceConfig(rate_hz=0.0), np.random.default_rng(0), DT)
+    for i in range(500):
+        c = Command(1.0, 0.05 * (i % 21) - 0.5)
+        assert d(c) is c
+
+
+def _pushes(config: DisturbanceConfig, n: int, seed: int = 0, w: float = 0.0) -> tuple[list[SimpleNamespace], list[Command]]:
+    """Drive a Disturber for n frames with a constant command and collect the pushes it starts."""
+    d = Disturber(config, np.random.default_rng(seed), DT)
+    command = Command(1.0, w)
+    pushes: list[SimpleNamespace] = []
+    outputs = []
+    for _ in range(n):
+        before = d.left_s
+        out = d(command)
+        outputs.append(out)
+        if before <= 0.0 and out != command:  # a new push starts on this frame
+            pushes.append(SimpleNamespace(push=d.push, duration=d.left_s + DT, frames=1))
+        elif before > 0.0:  # a push goes on
+            assert out != command
+            pushes[-1].frames += 1
+    return pushes, outputs
+
+
+def test_pushes_stay_within_the_configured_ranges():
+    config = DisturbanceConfig(rate_hz=5.0, min_yaw_rate_rps=0.2, max_yaw_rate_rps=0.5, min_duration_s=0.3, max_duration_s=1.0)
+    pushes, outputs = _pushes(config, 3000)
+    assert len(pushes) > 100
+    mags = np.array([abs(p.push) for p in pushes])
+    assert np.all(mags >= 0.2) and np.all(mags <= 0.5)
+    assert mags.max() - mags.min() > 0.2  # drawn across the range, not fixed
+    signs = np.sign([p.push for p in pushes])
+    assert 0.3 < np.mean(signs > 0) < 0.7  # both directions
+    durations = np.array([p.duration for p in pushes])
+    assert np.all(durations >= 0.3 - 1e-9) and np.all(durations <= 1.0 + 1e-9)
+    for p in pushes[:-1]:  # the last may be cut by the end of the run
+        # A push is executed on every frame until its time is used up.
+        assert p.duration - 1e-9 <= p.frames * DT < p.duration + DT + 1e-9
+        assert 3 <= p.frames <= 10
+    # The executed yaw rate is the command plus the push (no clipping needed at w = 0); v is untouched.
+    assert all(isinstance(o, Command) and o.v == 1.0 for o in outputs)
+    pushed = [o[1] for o in outputs if o[1] != 0.0]
+    assert pushed and all(0.2 - 1e-12 <= abs(w) <= 0.5 + 1e-12 for w in pushed)
+    share = len(pushed) / len(outputs)
+    assert 0.5 < share < 1.0  # pushes cover most frames at this rate
+
+
+def test_push_rate_matches_rate_hz():
+    config = DisturbanceConfig(rate_hz=0.5, min_duration_s=0.1, max_duration_s=0.1)
+    pushes, _ = _pushes(config, 20000, seed=1)
+    rate = len(pushes) / (20000 * DT)
+    assert 0.4 < rate < 0.6
+
+
+def test_pushed_command_is_clipped():
+    config = DisturbanceConfig(rate_hz=50.0, min_yaw_rate_rps=0.6, max_yaw_rate_rps=0.6, max_command_rps=1.0)
+    _, outputs = _pushes(config, 500, w=0.9)
+    ws = np.array([o[1] for o in outputs])
+    assert np.all(np.abs(ws) <= 1.0 + 1e-12)
+    assert np.any(ws == 1.0)  # 0.9 + 0.6 clipped to the limit
+    assert np.any(np.isclose(ws, 0.3))  # 0.9 - 0.6
+    config = DisturbanceConfig(rate_hz=50.0, min_yaw_rate_rps=0.6, max_yaw_rate_rps=0.6, max_command_rps=0.7)
+    _, outputs = _pushes(config, 500, w=-0.5)
+    ws = np.array([o[1] for o in outputs])
+    assert np.all(np.abs(ws) <= 0.7 + 1e-12) and np.any(ws == -0.7) and np.any(np.isclose(ws, 0.1))
+
+
+def test_disturber_is_reproducible():
+    config = DisturbanceConfig(rate_hz=2.0)
+    a = _pushes(config, 300, seed=5)[1]
+    b = _pushes(config, 300, seed=5)[1]
+    c = _pushes(config, 300, seed=6)[1]
+    assert a == b and a != c
+
+
+# --- disturbed recordings ------------------------------------------------------------------------
+
+
+def _record(out: Path, seed: int, disturbance: DisturbanceConfig | None, time_limit_s: float | None = None):
+    """Record demo_course (the first ``time_limit_s`` seconds only, if given)."""
+    scenario = resolve_scenario("demo_course")
+    sim = Simulation(scenario)
+    if time_limit_s is not None:
+        sim.time_limit_s = time_limit_s
+    driver = ExpertDriver()
+    preference = PreferenceSetConfig()
+    meta = recording_meta(scenario, sim.camera.config, preference, sim.config, {"kind": "expert", "seed": seed}, PreferenceProfile.default())
+    log = record_run(sim, driver, RecordingWriter(out, meta, scenario.to_dict()), preference, np.random.default_rng(seed),
+                     disturbance=disturbance)
+    lines = [json.loads(line) for line in (out / FRAMES).read_text().splitlines()]
+    return SimpleNamespace(log=log, rec=read_recording(out), lines=lines, sim=sim, preference=preference)
+
+
+@pytest.fixture(scope="module")
+def disturbed(tmp_path_factory) -> SimpleNamespace:
+    return _record(tmp_path_factory.mktemp("rec") / "a", 0, DisturbanceConfig(rate_hz=1.0))
+
+
+def test_disturbed_recording_marks_the_executed_frames(disturbed):
+    lines, rec, log = disturbed.lines, disturbed.rec, disturbed.log
+    assert rec.complete and rec.meta["status"] == "complete"
+    assert len(lines) == len(rec) == len(log.commands) > 100
+    with_exec = [ln for ln in lines if "executed" in ln]
+    assert 0 < len(with_exec) < len(lines)
+    for ln in with_exec:
+        assert ln["executed"] != ln["cmd"]
+        assert ln["executed"][0] == ln["cmd"][0]  # only the yaw rate is pushed
+        assert abs(ln["executed"][1]) <= DisturbanceConfig().max_command_rps + 1e-12
+
+
+def test_disturbed_labels_come_from_the_demonstrated_command(disturbed):
+    lines, rec = disturbed.lines, disturbed.rec
+    control = disturbed.preference.control
+    np.testing.assert_array_equal(rec.labels, control.label_of(rec.commands[:, 1]))
+    executed_labels = [control.label_of(ln["executed"][1]) for ln in lines if "executed" in ln]
+    own_labels = [ln["label"] for ln in lines if "executed" in ln]
+    assert executed_labels != own_labels  # the executed command would have given other labels
+
+
+def test_the_vehicle_executes_the_pushed_command(disturbed):
+    """The simulation logged what the vehicle did: the executed command where there is one."""
+    executed = np.array([ln.get("executed", ln["cmd"]) for ln in disturbed.lines])
+    np.testing.assert_allclose(disturbed.log.commands, executed)
+    assert not np.allclose(disturbed.log.commands, disturbed.rec.commands)
+
+
+def test_disturbed_recording_is_deterministic(disturbed, tmp_path: Path):
+    again = _record(tmp_path / "b", 0, DisturbanceConfig(rate_hz=1.0), time_limit_s=20.0)
+    n = len(again.rec)
+    assert n == 200 and any("executed" in ln for ln in again.lines)
+    np.testing.assert_array_equal(again.rec.poses, disturbed.rec.poses[:n])
+    np.testing.assert_array_equal(again.rec.commands, disturbed.rec.commands[:n])
+    assert [ln.get("executed") for ln in again.lines] == [ln.get("executed") for ln in disturbed.lines[:n]]
+    other = _record(tmp_path / "e", 1, DisturbanceConfig(rate_hz=1.0), time_limit_s=20.0)
+    assert [ln.get("executed") for ln in other.lines] != [ln.get("executed") for ln in again.lines]  # the seed matters
+
+
+def test_disturbance_changes_the_drive(disturbed, tmp_path: Path):
+    clean = _record(tmp_path / "c", 0, None, time_limit_s=20.0)
+    assert not any("executed" in ln for ln in clean.lines)
+    n = len(clean.rec)
+    assert not np.array_equal(clean.rec.poses, disturbed.rec.poses[:n])
+    off = _record(tmp_path / "d", 0, DisturbanceConfig(rate_hz=0.0), time_limit_s=20.0)
+    np.testing.assert_array_equal(off.rec.poses, clean.rec.poses)  # rate 0 is no disturbance at all
