@@ -50,6 +50,10 @@ RECIPES = [
            TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True), disturbance=DisturbanceConfig(rate_hz=0.3)),
     Recipe("long+skip+balanced, 2 demos disturbed x2, 500 epochs", 2, 0, TrainConfig(epochs=500, skip=True, class_balance=True),
            disturbance=DisturbanceConfig(rate_hz=0.3)),
+    Recipe("long+skip+balanced, 2 demos disturbed x2, 100 epochs, mirrored", 2, 0,
+           TrainConfig(epochs=100, skip=True, class_balance=True, mirror=True), disturbance=DisturbanceConfig(rate_hz=0.3)),
+    Recipe("long+skip+balanced, 2 demos disturbed x2, 150 epochs, mirrored", 2, 0,
+           TrainConfig(epochs=150, skip=True, class_balance=True, mirror=True), disturbance=DisturbanceConfig(rate_hz=0.3)),
 ]
 
 

@@ -166,9 +166,11 @@ def _write_report(out: Path, results, trained, recipes, seeds, eval_seeds, profi
         "Recipes:",
     ]
     for r in recipes:
-        lines.append(f"- **{r.name}**: {r.demonstrations} demonstration run(s) of train_course, {r.corrections} correction session(s), "
+        pushes = (f"with disturbances ({r.disturbance.rate_hz:g} pushes/s of {r.disturbance.min_yaw_rate_rps:g}-{r.disturbance.max_yaw_rate_rps:g} rad/s)"
+                  if r.disturbance is not None else "undisturbed")
+        lines.append(f"- **{r.name}**: {r.demonstrations} demonstration run(s) of train_course, {pushes}, {r.corrections} correction session(s), "
                      f"{r.train.epochs} epochs, residual path {'on' if r.train.skip else 'off'}, class-balanced loss {'on' if r.train.class_balance else 'off'}, "
-                     f"decisive-frame weight {r.train.decisive_weight:g}, planner smoothing {r.smoothing:g}.")
+                     f"mirrored samples {'on' if r.train.mirror else 'off'}, decisive-frame weight {r.train.decisive_weight:g}, planner smoothing {r.smoothing:g}.")
     lines += ["", "## Summary (test_course and the figure variations)", "", "| who | zone success | collisions | completed | runs |", "|---|---|---|---|---|"]
     for name in [*(r.name for r in recipes), "driver"]:
         s = set_summary(name, test_names)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from collections import defaultdict
 from pathlib import Path
 
@@ -41,7 +42,9 @@ def _select(runs: list[dict], **keys) -> list[dict]:
     return [r for r in runs if all(r.get(k) == v for k, v in keys.items())]
 
 
-def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings: dict[str, float]) -> Path:
+def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings: dict[str, float],
+                report_started: float | None = None) -> Path:
+    """Write STUDY.md and the figures; ``report_started`` (perf_counter) times this stage in the table."""
     from terrapref.report.plots import save_bars, save_curves
     from terrapref.report.study import METHOD_NAMES
 
@@ -60,9 +63,13 @@ def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings:
     base = {m: _select(runs, study="baselines", method=m) for m in order}
     cells = {m: _cell(base[m]) for m in order}
     # -- data efficiency
+    from terrapref.report.study import ALL
+
+    full_minutes = _demo_minutes(trained)
+    points = [*plan.minutes, ALL]
     eff: dict[str, list[tuple[float, float, float]]] = {}
     for m in ("C", "linear", "cnn"):
-        eff[m] = [(mins, *_cell(_select(runs, study="efficiency", method=m, minutes=mins))[1:]) for mins in plan.minutes]
+        eff[m] = [(full_minutes if mins == ALL else mins, *_cell(_select(runs, study="efficiency", method=m, minutes=mins))[1:]) for mins in points]
     reach = {m: next((mins for mins, mean, _ in eff[m] if mean >= TARGET), None) for m in eff}
     # -- profiles
     alt_runs = _select(runs, study="profile", method="C")
@@ -74,7 +81,9 @@ def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings:
     clean = cells["C"]
 
     def answer_minutes(m: str) -> str:
-        return f"{reach[m]:g} min" if reach[m] is not None else f"not reached within {max(plan.minutes):g} min (best {max(e[1] for e in eff[m]):.0%})"
+        if reach[m] is not None:
+            return f"{reach[m]:.3g} min"
+        return f"not reached with all {full_minutes:.1f} min (best {max(e[1] for e in eff[m]):.0%})"
 
     lines += ["## Answers", ""]
     lines.append(f"- **Minutes of demonstration to reach {TARGET:.0%} zone success:** C {answer_minutes('C')}; "
@@ -83,9 +92,14 @@ def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings:
                  f"({(cells['C'][1] - cells[HAND_COST][1]) * 100:+.1f} points), learned linear utility {cells['linear'][0]} "
                  f"({(cells['C'][1] - cells['linear'][1]) * 100:+.1f} points); the end-to-end CNN {cells['cnn'][0]} "
                  f"({(cells['C'][1] - cells['cnn'][1]) * 100:+.1f} points).")
+    keep = disagreement_zones(runs)
+    a_ok, a_n = _zone_success(alt_runs, keep)
+    d_ok, d_n = _zone_success(_select(runs, study="profile_cross", method="C_default"), keep)
     lines.append(f"- **Another profile ({' > '.join(_alt())}) is learned:** C trained on demonstrations driven under it reaches "
-                 f"{alt_cell[0]} scored under that profile (the driver: {alt_driver[0]}); the same runs scored under the default "
-                 f"profile give {cross_alt_default[0]}, and the default-profile model scored under the other profile {cross_default_alt[0]}.")
+                 f"{alt_cell[0]} scored under that profile (the driver: {alt_driver[0]}). In the {len(keep)} test zones where the two "
+                 f"profiles expect different choices, it makes the other profile's choice in {a_ok}/{a_n} runs; the model trained "
+                 f"on the default profile does so in {d_ok}/{d_n}. (All zones: the other-profile model scored under the default "
+                 f"profile {cross_alt_default[0]}, the default model under the other profile {cross_default_alt[0]}.)")
     falls = []
     for kind, levels in plan.noise.items():
         pts = [(lv, _cell(_select(runs, study="robustness", kind=kind, level=lv))[1]) for lv in levels]
@@ -108,9 +122,11 @@ def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings:
 
     lines += ["## 2. Data efficiency", "", "The first N minutes of the same demonstrations.", "",
               "| minutes | " + " | ".join(METHOD_NAMES[m] for m in eff) + " |", "|---|" + "---|" * len(eff)]
-    for i, mins in enumerate(plan.minutes):
-        samples = next((t["samples"] for t in trained if t["study"] == "efficiency" and t.get("minutes") == mins and t["method"] == "C"), 0)
-        lines.append(f"| {mins:g} ({samples} frames) | " + " | ".join(f"{eff[m][i][1]:.1%} ± {eff[m][i][2]:.1%}" for m in eff) + " |")
+    for i, mins in enumerate(points):
+        study = "baselines" if mins == ALL else "efficiency"
+        samples = next((t["samples"] for t in trained if t["study"] == study and t.get("minutes") == (None if mins == ALL else mins) and t["method"] == "C"), 0)
+        label = f"all, {full_minutes:.1f}" if mins == ALL else f"{mins:g}"
+        lines.append(f"| {label} ({samples} frames) | " + " | ".join(f"{eff[m][i][1]:.1%} ± {eff[m][i][2]:.1%}" for m in eff) + " |")
     lines += ["", "![data efficiency](figures/data_efficiency.png)", ""]
     save_curves(figs / "data_efficiency.png", {METHOD_NAMES[m]: [(x, y, e) for x, y, e in eff[m]] for m in eff},
                 "minutes of demonstration", "zone success", target=TARGET, logx=True)
@@ -124,6 +140,7 @@ def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings:
               f"| C trained on the other profile | default | {cross_alt_default[0]} | — |",
               f"| C trained on the default profile | other | {cross_default_alt[0]} | — |", ""]
     lines += _choice_table(runs)
+    lines += _disagreement_table(runs)
 
     lines += ["## 4. Robustness", "", "C (recipe ours) under perturbations of what the planner receives. Dropped frames: the planner "
               "holds its last command for up to 0.5 s, then stops until frames return.", ""]
@@ -150,11 +167,19 @@ def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings:
     for v in variants:
         rr = _select(runs, study="ablation", variant=v)
         lines.append(f"| {v} | {_cell(rr)[0]} | {_collisions(rr)} |")
+    if report_started is not None:
+        timings = {**timings, "tables and figures": time.perf_counter() - report_started}
     lines += ["", "## Time per stage (wall clock)", "", "| stage | seconds |", "|---|---|"]
     lines += [f"| {k} | {v:.1f} |" for k, v in timings.items()] + [f"| total | {sum(timings.values()):.1f} |", ""]
     path = out / "STUDY.md"
     path.write_text("\n".join(lines))
     return path
+
+
+def _demo_minutes(trained: list[dict]) -> float:
+    """Minutes of demonstration behind the full-data models (frames at 10 Hz)."""
+    frames = [t["samples"] for t in trained if t["study"] == "baselines" and t["method"] == "C"]
+    return float(np.mean(frames)) / 600.0 if frames else float("nan")
 
 
 def _alt() -> tuple[str, ...]:
@@ -166,6 +191,38 @@ def _alt() -> tuple[str, ...]:
 def _kind_label(kind: str) -> str:
     return {"flip_rate": "label flips (share of pixels)", "blobs": "mislabelled blobs per frame", "pose_noise_m": "pose noise (m; 10 deg per m)",
             "drop_rate": "dropped frames (share)", "delay_frames": "frame delay (frames of 0.1 s)"}.get(kind, kind)
+
+
+def _zone_success(runs: list[dict], keep: set) -> tuple[int, int]:
+    zs = [z["success"] for r in runs for z in r["metrics"]["zones"] if (r["scenario"], z["id"]) in keep]
+    return int(sum(zs)), len(zs)
+
+
+def disagreement_zones(runs: list[dict]) -> set:
+    """(scenario, zone id) whose expected choice differs between the default and the other profile."""
+    def expects(rr: list[dict]) -> dict:
+        return {(r["scenario"], z["id"]): z["expect"] for r in rr for z in r["metrics"]["zones"]}
+
+    default = expects(_select(runs, study="baselines", method=EXPERT, seed=0))
+    other = expects(_select(runs, study="profile", method=EXPERT, seed=0))
+    return {k for k in default if k in other and default[k] != other[k]}
+
+
+def _disagreement_table(runs: list[dict]) -> list[str]:
+    keep = disagreement_zones(runs)
+    if not keep:
+        return []
+    rows = [(label, *_zone_success(rr, keep)) for label, rr in (
+        ("C trained on the other profile, scored under the other profile", _select(runs, study="profile", method="C")),
+        ("C trained on the default profile, scored under the other profile", _select(runs, study="profile_cross", method="C_default")),
+        ("C trained on the default profile, scored under the default profile", _select(runs, study="baselines", method="C")),
+        ("C trained on the other profile, scored under the default profile", _select(runs, study="profile_cross", method="C")),
+    )]
+    out = [f"The zones where the two profiles expect different choices ({len(keep)}: "
+           + ", ".join(f"{sc} {zid}" for sc, zid in sorted(keep)) + "):", "",
+           "| model and scoring | success in these zones |", "|---|---|"]
+    out += [f"| {label} | {ok}/{n} = {ok / max(n, 1):.0%} |" for label, ok, n in rows]
+    return out + [""]
 
 
 def _choice_table(runs: list[dict]) -> list[str]:

@@ -1,0 +1,396 @@
+"""`terrapref study`: the report's arithmetic over seeds (zone success per seed, mean ± std), the
+zones where two preference profiles disagree, the perturbation for each robustness kind, the
+report written from fabricated runs, one tiny end-to-end study (slow) and the command's flags."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+from terrapref.cli import main
+from terrapref.evaluation.perturb import Perturbation
+from terrapref.evaluation.runner import EXPERT, HAND_COST, PURE_PURSUIT
+from terrapref.report.study import ALL, ALT_PROFILE, FULL, LEARNED, METHOD_NAMES, POSE_DEG_PER_M, QUICK, StudyPlan, perturbation, run_study
+from terrapref.report.study_report import _cell, _per_seed, _rate, _select, _zone_success, disagreement_zones, write_study
+
+PNG = b"\x89PNG\r\n\x1a\n"
+METHODS = ("C", "linear", "cnn", HAND_COST, PURE_PURSUIT, EXPERT)
+SECTIONS = ("## Answers", "## 1. Baselines", "## 2. Data efficiency", "## 3. Another preference profile", "## 4. Robustness", "## 5. Ablations")
+
+
+def _zone(zid: str, expect: str, choice: str, success: bool | None = None) -> dict:
+    return {"id": zid, "label": f"zone {zid}", "expect": expect, "choice": choice, "success": expect == choice if success is None else success}
+
+
+def _run(study: str, method: str, seed: int, zones: list[dict], scenario: str = "sc", collisions: int = 0, completed: bool = True, **tag) -> dict:
+    return {"study": study, "method": method, "seed": seed, "minutes": tag.pop("minutes", None), "variant": tag.pop("variant", None),
+            "kind": tag.pop("kind", None), "level": tag.pop("level", None), "scenario": scenario, **tag,
+            "metrics": {"zones": zones, "collisions": collisions, "completed": completed}}
+
+
+def _successes(seed: int, flags: list[bool], study: str = "baselines", method: str = "C", **tag) -> dict:
+    return _run(study, method, seed, [_zone(str(i + 1), "mud", "mud", ok) for i, ok in enumerate(flags)], **tag)
+
+
+# --- zone success per seed, mean and spread ---------------------------------------------------------
+
+
+def test_rate_pools_zones_over_runs():
+    # run means would be 1/3 and 1 (mean 2/3); pooled over zones it is 2/4
+    runs = [_successes(0, [True, False, False]), _successes(0, [True])]
+    assert _rate(runs) == pytest.approx(0.5)
+    assert math.isnan(_rate([])) and math.isnan(_rate([_successes(0, [])]))
+
+
+def test_per_seed_groups_by_seed_in_seed_order():
+    runs = [_successes(1, [False, False]), _successes(0, [True, False, False]), _successes(2, [True, True]), _successes(0, [True])]
+    assert _per_seed(runs) == pytest.approx([0.5, 0.0, 1.0])
+    assert _per_seed([]) == []
+
+
+def test_cell_mean_and_population_std_over_seeds():
+    runs = [_successes(1, [False, False]), _successes(0, [True, False, False]), _successes(0, [True])]
+    text, mean, std = _cell(runs)  # per seed: 0.5, 0.0
+    assert mean == pytest.approx(0.25)
+    assert std == pytest.approx(0.25)  # np.std: over the seeds themselves (ddof 0)
+    assert text == "25.0% ± 25.0%"
+
+
+def test_cell_three_seeds():
+    runs = [_successes(0, [True, True, False]), _successes(1, [True, False, False]), _successes(2, [True, True, True])]
+    text, mean, std = _cell(runs)
+    assert mean == pytest.approx(2 / 3)
+    assert std == pytest.approx(math.sqrt(((2 / 3 - 2 / 3) ** 2 + (1 / 3 - 2 / 3) ** 2 + (1 - 2 / 3) ** 2) / 3))
+    assert text == "66.7% ± 27.2%"
+
+
+def test_cell_one_seed_has_no_spread_in_its_text():
+    text, mean, std = _cell([_successes(0, [True, False, True, True]), _successes(0, [True, True, True, True])])
+    assert (mean, std) == (pytest.approx(0.875), 0.0)
+    assert text == "87.5%"
+    assert "±" not in text
+
+
+def test_cell_of_nothing():
+    text, mean, std = _cell([])
+    assert text == "—"
+    assert math.isnan(mean) and math.isnan(std)
+
+
+def test_select_matches_every_key():
+    runs = [_successes(0, [True], study="efficiency", minutes=0.5), _successes(0, [True], study="efficiency", minutes=ALL),
+            _successes(1, [True], study="efficiency", minutes=0.5), _successes(0, [True], study="efficiency", method="cnn", minutes=0.5)]
+    assert _select(runs, study="efficiency", method="C", minutes=0.5) == [runs[0], runs[2]]
+    assert _select(runs, study="efficiency", minutes=ALL) == [runs[1]]
+    assert _select(runs, study="baselines") == []
+
+
+# --- the zones where the two profiles disagree -------------------------------------------------------
+
+
+def _profile_runs() -> list[dict]:
+    """The default-profile and other-profile driver runs over two scenarios, and distractors."""
+    return [
+        _run("baselines", EXPERT, 0, [_zone("1", "avoid", "avoid"), _zone("2", "mud", "mud"), _zone("3", "water", "water")], scenario="a"),
+        _run("baselines", EXPERT, 0, [_zone("1", "mud", "mud"), _zone("2", "avoid", "avoid"), _zone("9", "mud", "mud")], scenario="b"),
+        _run("profile", EXPERT, 0, [_zone("1", "avoid", "avoid"), _zone("2", "rock", "rock"), _zone("3", "water", "water")], scenario="a"),
+        _run("profile", EXPERT, 0, [_zone("1", "rock", "rock"), _zone("2", "avoid", "avoid")], scenario="b"),  # no zone 9
+        # not the seed-0 driver runs: ignored even though their expectations differ
+        _run("profile", EXPERT, 1, [_zone("3", "rock", "rock")], scenario="a"),
+        _run("baselines", EXPERT, 1, [_zone("2", "water", "water")], scenario="b"),
+        _run("profile", "C", 0, [_zone("3", "rock", "mud")], scenario="a"),
+        _run("baselines", "C", 0, [_zone("2", "rock", "rock")], scenario="b"),
+    ]
+
+
+def test_disagreement_zones_are_keyed_by_scenario_and_zone():
+    assert disagreement_zones(_profile_runs()) == {("a", "2"), ("b", "1")}
+
+
+def test_disagreement_zones_empty_without_both_driver_passes():
+    runs = _profile_runs()
+    assert disagreement_zones([r for r in runs if r["study"] != "profile"]) == set()
+    assert disagreement_zones([r for r in runs if r["study"] != "baselines"]) == set()
+    assert disagreement_zones([]) == set()
+
+
+def test_disagreement_zones_empty_when_profiles_agree():
+    same = [_zone("1", "avoid", "avoid"), _zone("2", "mud", "mud")]
+    runs = [_run("baselines", EXPERT, 0, same), _run("profile", EXPERT, 0, [dict(z) for z in same])]
+    assert disagreement_zones(runs) == set()
+
+
+def test_zone_success_counts_only_kept_zones():
+    runs = [
+        _run("profile", "C", 0, [_zone("1", "avoid", "water"), _zone("2", "rock", "rock"), _zone("3", "mud", "rock")], scenario="a"),
+        _run("profile", "C", 0, [_zone("1", "rock", "mud"), _zone("2", "avoid", "avoid")], scenario="b"),
+        _run("profile", "C", 1, [_zone("2", "rock", "rock")], scenario="a"),
+    ]
+    keep = {("a", "2"), ("b", "1")}
+    assert _zone_success(runs, keep) == (2, 3)  # a/2 twice (both right), b/1 once (wrong); b/2 and a/3 left out
+    assert _zone_success(runs, {("b", "2")}) == (1, 1)
+    assert _zone_success(runs, set()) == (0, 0)
+    assert _zone_success([], keep) == (0, 0)
+    ok, n = _zone_success(runs, keep)
+    assert isinstance(ok, int) and isinstance(n, int)
+
+
+# --- perturbation levels ------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("kind,level", [("flip_rate", 0.2), ("blobs", 2.0), ("drop_rate", 0.5)])
+def test_perturbation_sets_the_named_field_only(kind: str, level: float):
+    p = perturbation(kind, level)
+    assert getattr(p, kind) == level
+    assert p == Perturbation(**{kind: level})  # everything else at its default
+    assert p.active
+
+
+def test_perturbation_pose_noise_also_perturbs_the_heading():
+    p = perturbation("pose_noise_m", 0.25)
+    assert p.pose_noise_m == 0.25
+    assert p.pose_noise_deg == pytest.approx(POSE_DEG_PER_M * 0.25)
+    assert p.pose_noise_deg == pytest.approx(2.5)
+    assert p == Perturbation(pose_noise_m=0.25, pose_noise_deg=POSE_DEG_PER_M * 0.25)
+
+
+def test_perturbation_delay_is_whole_frames():
+    p = perturbation("delay_frames", 3.0)
+    assert p.delay_frames == 3
+    assert type(p.delay_frames) is int
+    assert p == Perturbation(delay_frames=3)
+
+
+def test_every_planned_noise_level_makes_a_valid_active_perturbation():
+    for plan in (FULL, QUICK):
+        assert set(plan.noise) == {"flip_rate", "blobs", "pose_noise_m", "drop_rate", "delay_frames"}
+        for kind, levels in plan.noise.items():
+            for level in levels:
+                p = perturbation(kind, level)
+                assert p.active, (kind, level)
+                assert getattr(p, kind) == level  # int(level) loses nothing for the planned delays
+
+
+def test_perturbation_out_of_range_level_is_refused():
+    with pytest.raises(ValueError):
+        perturbation("drop_rate", 1.5)
+
+
+# --- STUDY.md from fabricated runs (no simulation) ---------------------------------------------------
+
+
+def _fabricated(plan: StudyPlan) -> tuple[list[dict], list[dict]]:
+    """Runs and trained-model records shaped like run_study's, on one scenario with three zones.
+
+    Per seed (0, 1): C 3/3 and 1/3, linear 1/3 and 1/3, the CNN 0/3, the driver 3/3, the others 2/3.
+    Zone 2 is the one where the profiles disagree (mud under the default, rock under the other)."""
+    def zones(ok: int, expect2: str = "mud") -> list[dict]:
+        exp = ["avoid", expect2, "avoid"]
+        return [_zone(str(i + 1), e, e if i < ok else "water") for i, e in enumerate(exp)]
+
+    rates = {"C": (3, 1), "linear": (1, 1), "cnn": (0, 0), HAND_COST: (2, 2), PURE_PURSUIT: (2, 2), EXPERT: (3, 3)}
+    runs: list[dict] = []
+    trained: list[dict] = []
+    for s in range(plan.seeds):
+        for m in METHODS:
+            runs.append(_run("baselines", m, s, zones(rates[m][s]), collisions=1 if m == PURE_PURSUIT else 0))
+        for m in LEARNED:
+            trained.append({"study": "baselines", "method": m, "seed": s, "samples": 6600})
+            runs.append(_run("efficiency", m, s, zones(rates[m][s]), minutes=ALL))
+            for mins in plan.minutes:
+                trained.append({"study": "efficiency", "method": m, "seed": s, "minutes": mins, "samples": int(mins * 600)})
+                runs.append(_run("efficiency", m, s, zones(1), minutes=mins))
+        runs.append(_run("profile", EXPERT, s, zones(3, "rock")))
+        runs.append(_run("profile", "C", s, zones(3, "rock")))
+        runs.append(_run("profile_cross", "C", s, zones(1)))
+        runs.append(_run("profile_cross", "C_default", s, zones(1, "rock")))
+        for kind, levels in plan.noise.items():
+            for lv in levels:
+                runs.append(_run("robustness", "C", s, zones(2), kind=kind, level=lv))
+        for w in plan.widths:
+            runs.append(_run("ablation", "C", s, zones(0), variant=f"hidden width {w}", collisions=2))
+    return runs, trained
+
+
+@pytest.fixture(scope="module")
+def fabricated_study(tmp_path_factory) -> tuple[Path, list[dict]]:
+    plan = StudyPlan(seeds=2, minutes=(0.5, 2.0), noise={"drop_rate": (0.5,)}, horizons=(), widths=(16,), courses=("sc",))
+    runs, trained = _fabricated(plan)
+    out = tmp_path_factory.mktemp("fabricated")
+    path = write_study(out, plan, trained, runs, {"demonstrations": 1.0, "training": 2.5})
+    return path, runs
+
+
+def test_write_study_sections_and_figures(fabricated_study):
+    path, _ = fabricated_study
+    assert path.name == "STUDY.md"
+    text = path.read_text()
+    positions = [text.index(h) for h in SECTIONS]
+    assert positions == sorted(positions)
+    for name in ("baselines", "data_efficiency", "robustness"):
+        png = path.parent / "figures" / f"{name}.png"
+        assert png.read_bytes()[:8] == PNG
+        assert f"(figures/{name}.png)" in text
+
+
+def test_write_study_baseline_table_is_mean_and_std_over_seeds(fabricated_study):
+    text = fabricated_study[0].read_text()
+    assert "| C (ours) | 66.7% ± 33.3% | 0 | 100% |" in text
+    assert "| linear utility (learned) | 33.3% ± 0.0% | 0 | 100% |" in text
+    assert "| end-to-end CNN | 0.0% ± 0.0% | 0 | 100% |" in text
+    assert "| pure pursuit | 66.7% ± 0.0% | 2 | 100% |" in text  # collisions summed over both seeds
+    assert "| synthetic driver | 100.0% ± 0.0% | 0 | 100% |" in text
+    assert "(3 zones per pass)" in text
+
+
+def test_write_study_data_efficiency_rows(fabricated_study):
+    text = fabricated_study[0].read_text()
+    assert "| 0.5 (300 frames) | 33.3% ± 0.0% | 33.3% ± 0.0% | 33.3% ± 0.0% |" in text
+    assert "| 2 (1200 frames) |" in text
+    assert "| all, 11.0 (6600 frames) | 66.7% ± 33.3% | 33.3% ± 0.0% | 0.0% ± 0.0% |" in text  # 6600 frames at 10 Hz
+    assert "C not reached with all 11.0 min (best 67%)" in text
+
+
+def test_write_study_profile_disagreement(fabricated_study):
+    text = fabricated_study[0].read_text()
+    assert " > ".join(ALT_PROFILE) in text
+    assert "The zones where the two profiles expect different choices (1: sc 2)" in text
+    assert "| C trained on the other profile, scored under the other profile | 2/2 = 100% |" in text
+    assert "| C trained on the default profile, scored under the other profile | 0/2 = 0% |" in text
+    assert "In the 1 test zones where the two profiles expect different choices, it makes the other profile's choice in 2/2 runs" in text
+
+
+def test_write_study_robustness_and_ablations(fabricated_study):
+    text = fabricated_study[0].read_text()
+    assert "| 0.5 | 66.7% ± 0.0% | 0 | 100% |" in text
+    assert "dropped frames (share): 0.5 -> 67%" in text
+    assert "| hidden width 16 | 0.0% ± 0.0% | 4 |" in text
+    assert "| total | 3.5 |" in text
+
+
+# --- one tiny study, end to end -------------------------------------------------------------------
+
+
+TINY = StudyPlan(seeds=1, minutes=(0.5,), epochs=2, cnn_epochs=1, noise={"drop_rate": (0.5,)}, horizons=(), widths=(16,), courses=("demo_course",))
+
+
+@pytest.fixture(scope="module")
+def tiny_study(tmp_path_factory) -> tuple[Path, list[str]]:
+    out = tmp_path_factory.mktemp("study")
+    lines: list[str] = []
+    path = run_study(out, TINY, workers=2, log=lines.append)
+    return path, lines
+
+
+def _runs(path: Path) -> list[dict]:
+    return json.loads((path.parent / "study.json").read_text())["runs"]
+
+
+def _by(runs: list[dict], **keys) -> dict:
+    found = _select(runs, **keys)
+    assert len(found) == 1, keys
+    return found[0]
+
+
+@pytest.mark.slow
+def test_study_writes_report_and_figures(tiny_study):
+    path, _ = tiny_study
+    assert path == path.parent / "STUDY.md"
+    text = path.read_text()
+    for heading in SECTIONS:
+        assert heading in text, heading
+    for name in ("baselines", "data_efficiency", "robustness"):
+        assert (path.parent / "figures" / f"{name}.png").read_bytes()[:8] == PNG
+
+
+@pytest.mark.slow
+def test_study_json_has_every_part(tiny_study):
+    path, _ = tiny_study
+    data = json.loads((path.parent / "study.json").read_text())
+    assert data["plan"]["scenarios"] == ["demo_course"]
+    runs = data["runs"]
+    assert {r["method"] for r in _select(runs, study="baselines")} == set(METHODS)
+    assert all(r["scenario"] == "demo_course" for r in runs)
+    assert _select(runs, study="efficiency", minutes=0.5)
+    assert _select(runs, study="efficiency", minutes=ALL)
+    assert {r["method"] for r in _select(runs, study="efficiency", minutes=0.5)} == set(LEARNED)
+    assert {r["method"] for r in _select(runs, study="efficiency", minutes=ALL)} == set(LEARNED)
+    assert _select(runs, study="robustness", kind="drop_rate", level=0.5)
+    ablations = {r["variant"] for r in _select(runs, study="ablation")}
+    assert ablations == {"without the distance utility", "without the row-wise compression (flat MLP)", "hidden width 16"}
+    assert {r["method"] for r in _select(runs, study="profile")} == {"C", EXPERT}
+    assert {r["method"] for r in _select(runs, study="profile_cross")} == {"C", "C_default"}
+    for r in runs:
+        assert r["metrics"]["zones"], r
+        assert {"id", "expect", "choice", "success"} <= set(r["metrics"]["zones"][0])
+
+
+@pytest.mark.slow
+def test_study_trains_on_the_planned_minutes(tiny_study):
+    path, _ = tiny_study
+    trained = json.loads((path.parent / "study.json").read_text())["trained"]
+    short = [t for t in trained if t["study"] == "efficiency"]
+    assert {t["method"] for t in short} == set(LEARNED)
+    assert all(t["minutes"] == 0.5 and t["samples"] == 300 for t in short)  # 0.5 min at 10 Hz
+    full = [t for t in trained if t["study"] == "baselines"]
+    assert {t["method"] for t in full} == set(LEARNED)
+    assert all(t["samples"] > 300 for t in full)
+    assert all(Path(t["out"]).is_file() for t in trained)
+
+
+@pytest.mark.slow
+def test_study_runs_agree_with_each_other(tiny_study):
+    """The 'all' data-efficiency point is the baselines' model; the profile-cross runs are the same
+    drives scored under the other profile; the report's cells come from these runs."""
+    path, _ = tiny_study
+    runs = _runs(path)
+    for m in LEARNED:
+        assert _by(runs, study="efficiency", method=m, minutes=ALL)["metrics"]["zones"] == _by(runs, study="baselines", method=m)["metrics"]["zones"]
+
+    def choices(r: dict) -> list[str]:
+        return [z["choice"] for z in r["metrics"]["zones"]]
+
+    def expects(r: dict) -> list[str]:
+        return [z["expect"] for z in r["metrics"]["zones"]]
+
+    alt, alt_cross = _by(runs, study="profile", method="C"), _by(runs, study="profile_cross", method="C")
+    default, default_cross = _by(runs, study="baselines", method="C"), _by(runs, study="profile_cross", method="C_default")
+    assert choices(alt) == choices(alt_cross)
+    assert choices(default) == choices(default_cross)
+    assert expects(alt_cross) == expects(_by(runs, study="baselines", method=EXPERT))
+    assert expects(default_cross) == expects(_by(runs, study="profile", method=EXPERT))
+    assert disagreement_zones(runs)  # demo_course has a zone whose best patch depends on the profile
+
+    text = path.read_text()
+    for m in METHODS:
+        assert f"| {METHOD_NAMES[m]} | {_cell(_select(runs, study='baselines', method=m))[0]} |" in text
+
+
+@pytest.mark.slow
+def test_study_logs_five_stages_in_order(tiny_study):
+    _, lines = tiny_study
+    stages = [next(i for i, line in enumerate(lines) if line.startswith(f"[{k}/5]")) for k in range(1, 6)]
+    assert stages == sorted(stages)
+    assert sum(line.startswith("[") for line in lines) == 5
+    assert lines[stages[0]].startswith("[1/5] demonstrations: 1 seed(s) x 2 profiles")
+    assert lines[stages[2]] == "[3/5] training: 10 models ..."  # 3 learned + 3 at 0.5 min + profile + 3 ablations
+    assert lines[stages[3]] == "[4/5] closed-loop evaluation: 20 runs over 1 scenarios ..."
+
+
+# --- the command --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("flag", ["--seeds", "--workers"])
+@pytest.mark.parametrize("value", ["0", "-1"])
+def test_cli_study_refuses_non_positive_counts(tmp_path: Path, capsys, flag: str, value: str):
+    out = tmp_path / "study"
+    assert main(["study", "--out", str(out), flag, value]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1
+    assert lines[0].startswith("error: ") and flag in lines[0] and ">= 1" in lines[0]
+    assert captured.out == ""
+    assert not out.exists()  # refused before anything is written
