@@ -110,7 +110,7 @@ def test_keyboard_ramp_labels_and_screenshot(tmp_path):
     result = run_teleop("demo_course", out, realtime=False, script=script_from(events), max_frames=40, screenshot=tmp_path / "shot.png")
     assert result.frames == 10 and result.duration_s == pytest.approx(1.0)
     rec = read_recording(out)
-    assert rec.meta["driver"] == {"kind": "human", "input": "keyboard/gamepad"}
+    assert rec.meta["driver"] == {"kind": "human", "input": "keyboard/gamepad", "disturbance": None, "seed": 0}
     assert rec.meta["summary"]["quit"] is True
     # 0.25 rad/s per frame: 0.25 (a tie between 0.2 and 0.3, resolved toward 0), 0.5, 0.75 (tie), then full lock.
     assert rec.commands[2:8, 1] == pytest.approx([0.25, 0.5, 0.75, 1.0, 1.0, 1.0])
@@ -139,3 +139,20 @@ def test_package_import_does_not_import_pygame():
         "sys.exit('pygame' in sys.modules)"
     )
     assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 0
+
+
+def test_disturbances_push_the_executed_command_not_the_label(tmp_path):
+    from terrapref.demos.session import DisturbanceConfig
+
+    out = tmp_path / "rec"
+    run_teleop("demo_course", out, realtime=False, max_frames=120, disturbance=DisturbanceConfig(rate_hz=2.0), seed=3)
+    rec = read_recording(out)
+    lines = [__import__("json").loads(x) for x in (out / "frames.jsonl").read_text().splitlines()]
+    pushed = [x for x in lines if "executed" in x]
+    assert 0 < len(pushed) < len(lines)
+    # The stick rests at zero (no keys pressed): every label is the centre, whatever was executed.
+    assert set(rec.labels.tolist()) == {CENTRE}
+    assert all(x["executed"][1] != 0.0 for x in pushed)
+    assert rec.meta["driver"]["disturbance"]["rate_hz"] == 2.0
+    # Undisturbed, the vehicle drives straight; pushed, it does not.
+    assert abs(rec.poses[-1, 1] - rec.poses[0, 1]) > 1e-3

@@ -74,6 +74,15 @@ def _cmd_list(args: argparse.Namespace) -> int:
     return 0
 
 
+def _disturbance(rate_hz: float):
+    """--disturb RATE: pushes per second while demonstrating (0: none)."""
+    from terrapref.demos.session import DisturbanceConfig
+
+    if not (rate_hz >= 0):
+        raise UserError("--disturb", "must be >= 0 (pushes per second)")
+    return DisturbanceConfig(rate_hz=rate_hz) if rate_hz > 0 else None
+
+
 def _cmd_record(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -90,14 +99,16 @@ def _cmd_record(args: argparse.Namespace) -> int:
     scenario = resolve_scenario(args.scenario)
     profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile else PreferenceProfile.default(scenario.classes)
     expert = ExpertConfig(profile=profile.order)
+    disturbance = _disturbance(args.disturb)
     camera, preference, sim_config = CameraConfig(), PreferenceSetConfig(), SimConfig()
-    meta = recording_meta(scenario, camera, preference, sim_config, {"kind": "expert", "seed": args.seed, "config": expert.to_dict()}, profile)
+    driver = {"kind": "expert", "seed": args.seed, "config": expert.to_dict(), "disturbance": disturbance.to_dict() if disturbance else None}
+    meta = recording_meta(scenario, camera, preference, sim_config, driver, profile)
     sim = Simulation(scenario, camera, sim_config)
     writer = RecordingWriter(args.out, meta, scenario.to_dict(), overwrite=args.force)
     bar = Progress(f"record {scenario.name}", sim.path.length_m, enabled=not args.quiet)
     try:
         log = record_run(sim, ExpertDriver(expert, sim_config.camera_rate_hz), writer, preference, np.random.default_rng(args.seed),
-                         progress=lambda s: bar.update(s.progress_s, f"t={s.time_s:6.1f}s frames={writer.count}"))
+                         progress=lambda s: bar.update(s.progress_s, f"t={s.time_s:6.1f}s frames={writer.count}"), disturbance=disturbance)
     except BaseException:
         writer.abort()
         raise
@@ -110,7 +121,7 @@ def _cmd_record(args: argparse.Namespace) -> int:
 def _cmd_drive(args: argparse.Namespace) -> int:
     from terrapref.demos.teleop import run_teleop
 
-    result = run_teleop(args.scenario, args.record, overwrite=args.force, v_mps=args.speed)
+    result = run_teleop(args.scenario, args.record, overwrite=args.force, v_mps=args.speed, disturbance=_disturbance(args.disturb), seed=args.seed)
     where = f", recorded to {result.record_dir}" if result.record_dir else ""
     state = "reached the goal" if result.completed else ("quit" if result.quit else "stopped")
     print(f"drove {result.frames} frames, {state}, {result.collisions} collisions{where}")
@@ -294,6 +305,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, type=Path, help="recording directory to create")
     p.add_argument("--force", action="store_true", help="replace an existing recording at --out")
     p.add_argument("--quiet", action="store_true", help="no progress output")
+    p.add_argument("--disturb", type=float, default=0.0, metavar="RATE",
+                   help="push the executed yaw rate off the driver's command RATE times per second, so recoveries are shown (recipe ours: 0.3)")
     p.set_defaults(func=_cmd_record)
 
     p = sub.add_parser("drive", help="drive a scenario yourself (keyboard or gamepad), optionally recording")
@@ -301,6 +314,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--record", type=Path, metavar="DIR", help="record the drive into DIR")
     p.add_argument("--force", action="store_true", help="replace an existing recording at DIR")
     p.add_argument("--speed", type=float, default=1.0, help="forward speed [m/s] (default 1)")
+    p.add_argument("--disturb", type=float, default=0.0, metavar="RATE", help="pushes per second on the executed yaw rate (0: none)")
+    p.add_argument("--seed", type=int, default=0, help="seeds the pushes")
     p.set_defaults(func=_cmd_drive)
 
     p = sub.add_parser("inspect", help="summarise a recording and draw its driven path")

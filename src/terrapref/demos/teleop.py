@@ -32,7 +32,7 @@ import pygame  # noqa: E402  (the prompt variable must be set before the import)
 
 from terrapref.camera import CameraConfig  # noqa: E402
 from terrapref.demos.recording import RecordingWriter  # noqa: E402
-from terrapref.demos.session import recording_meta  # noqa: E402
+from terrapref.demos.session import DisturbanceConfig, Disturber, recording_meta  # noqa: E402
 from terrapref.errors import UserError  # noqa: E402
 from terrapref.features import PreferenceSet, PreferenceSetConfig  # noqa: E402
 from terrapref.scenario import Scenario, resolve_scenario  # noqa: E402
@@ -340,6 +340,8 @@ def run_teleop(
     script: Callable[[int], Sequence[Any]] | None = None,
     max_frames: int | None = None,
     screenshot: str | Path | None = None,
+    disturbance: DisturbanceConfig | None = None,
+    seed: int = 0,
 ) -> TeleopResult:
     """Drive ``scenario`` by keyboard or gamepad in a window, optionally recording every frame.
 
@@ -363,6 +365,8 @@ def run_teleop(
         max_frames: stop after this many loop iterations (paused ones included, so a paused
             scripted run still ends).
         screenshot: save the last drawn window image to this file (PNG by extension).
+        disturbance: pushes added to the executed yaw rate now and then, so that the recording
+            shows the driver's recoveries (the stick stays the label); drawn from ``seed``.
 
     Returns:
         How the run ended.
@@ -390,11 +394,13 @@ def run_teleop(
         window = _Window(sim, prefs, f"terrapref drive - {scenario.name}" + (f" -> {record_dir}" if record_dir else ""))
         if record_dir is not None:
             meta = recording_meta(
-                scenario, camera_cfg, preference_cfg, sim_cfg, {"kind": "human", "input": "keyboard/gamepad"},
+                scenario, camera_cfg, preference_cfg, sim_cfg,
+                {"kind": "human", "input": "keyboard/gamepad", "disturbance": disturbance.to_dict() if disturbance else None, "seed": seed},
                 PreferenceProfile.default(scenario.classes),
             )
             writer = RecordingWriter(record_dir, meta, scenario.to_dict(), overwrite=overwrite)
         stick = _Stick(w_max_rps=float(np.abs(control.w_rps).max()))
+        disturb = Disturber(disturbance, np.random.default_rng(seed), frame_dt) if disturbance and disturbance.rate_hz > 0 else None
         clock = pygame.time.Clock()
         frame = sim.reset()
         trace_px = [window.to_inset(frame.pose.x, frame.pose.y)]
@@ -419,9 +425,12 @@ def run_teleop(
             status = _status(sim.time_s, v_mps, w, label, control.m, recorded, sim.collisions, writer is not None, paused)
             window.draw(frame.image, w, label, trace_px, status, paused)
             if not paused:
+                command = Command(v_mps, w)
+                executed = disturb(command) if disturb is not None else command
                 if writer is not None:
-                    writer.append(frame.time_s, frame.pose, frame.image, (v_mps, w), label)
-                frame = sim.step(Command(v_mps, w))
+                    writer.append(frame.time_s, frame.pose, frame.image, command, label,
+                                  executed=executed if executed != command else None)
+                frame = sim.step(executed)
                 recorded += 1
                 trace_px.append(window.to_inset(frame.pose.x, frame.pose.y))
             i += 1

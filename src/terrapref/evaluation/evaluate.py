@@ -11,7 +11,7 @@ import numpy as np
 from terrapref.camera import PinholeCamera
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_many, summarise
 from terrapref.features import PreferenceSet
-from terrapref.learning.model_file import load_model
+from terrapref.planner.policy import load_policy
 from terrapref.scenario import resolve_scenario
 from terrapref.terrain import PreferenceProfile
 from terrapref.world import rasterise
@@ -34,7 +34,7 @@ def evaluate_model(
     Writes ``metrics.json``, one top-down figure per scenario and the decision pictures of
     ``frames`` (for seed 0) into ``out_dir``; returns the metrics.
     """
-    model = load_model(model_path)
+    model = load_policy(model_path)  # C, or a learned baseline (linear, CNN)
     for name in scenarios:
         resolve_scenario(name)  # fail early, with the file and field, before any run
     profile = profile or PreferenceProfile.parse(list(model.profile), model.classes, source=f"{model_path}: profile")

@@ -17,6 +17,7 @@ Stages (each parallel across processes):
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import time
@@ -35,7 +36,7 @@ from terrapref.terrain import PreferenceProfile
 
 ALT_PROFILE = ("rock", "mud", "water", "non_traversable")
 LEARNED = ("C", "linear", "cnn")  # methods trained from demonstrations
-ALL = "all"  # the data-efficiency point that uses every demonstrated minute (the baselines' models)
+ALL = "all"  # the data-efficiency point that uses every demonstrated minute: the baselines' runs
 METHOD_NAMES = {
     "C": "C (ours)",
     "linear": "linear utility (learned)",
@@ -65,13 +66,13 @@ class StudyPlan:
     seeds: int = 3
     minutes: tuple[float, ...] = (0.5, 1.0, 2.0, 5.0)
     epochs: int = 300
-    cnn_epochs: int = 40
+    cnn_epochs: int = 30
     noise: dict[str, tuple[float, ...]] = field(default_factory=lambda: {
-        "flip_rate": (0.05, 0.1, 0.2, 0.4),
-        "blobs": (1.0, 2.0, 4.0),
-        "pose_noise_m": (0.1, 0.25, 0.5),
-        "drop_rate": (0.2, 0.5, 0.8),
-        "delay_frames": (1.0, 3.0, 5.0),
+        "flip_rate": (0.1, 0.3, 0.5),
+        "blobs": (2.0, 6.0),
+        "pose_noise_m": (0.25, 0.5, 1.0),
+        "drop_rate": (0.5, 0.8),
+        "delay_frames": (2.0, 5.0),
     })
     horizons: tuple[int, ...] = (15, 45)
     widths: tuple[int, ...] = (16, 256)
@@ -83,7 +84,7 @@ class StudyPlan:
 
 FULL = StudyPlan()
 QUICK = StudyPlan(
-    seeds=1, minutes=(1.0, 5.0), epochs=100, cnn_epochs=15,
+    seeds=1, minutes=(2.0,), epochs=100, cnn_epochs=15,
     noise={"flip_rate": (0.2,), "blobs": (2.0,), "pose_noise_m": (0.25,), "drop_rate": (0.5,), "delay_frames": (3.0,)},
     horizons=(), widths=(16,),
 )
@@ -263,8 +264,6 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
             profile = ALT_PROFILE if t["study"] == "profile" else default
             spec(RunSpec(sc, 0, PLANNER, t["out"], profile), study=t["study"], method=t["method"], seed=t["seed"], minutes=t.get("minutes"),
                  variant=t.get("variant"), scored_under="model")
-            if t["study"] == "baselines":  # all the demonstration: the last point of the data-efficiency curve
-                spec(RunSpec(sc, 0, PLANNER, t["out"], profile), study="efficiency", method=t["method"], seed=t["seed"], minutes=ALL)
             if t["study"] == "profile":  # the same run's choices, scored under the default profile
                 spec(RunSpec(sc, 0, PLANNER, t["out"], default), study="profile_cross", method="C", seed=t["seed"], scored_under="default")
             if t["study"] == "baselines" and t["method"] == "C":
@@ -277,6 +276,9 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
             for method in (HAND_COST, PURE_PURSUIT, EXPERT):
                 spec(RunSpec(sc, s, method, None, default), study="baselines", method=method, seed=s)
             spec(RunSpec(sc, s, EXPERT, None, ALT_PROFILE), study="profile", method=EXPERT, seed=s, scored_under="model")
+    # Longest scenarios first, so that no worker is left with a long run at the end.
+    order = sorted(range(len(specs)), key=lambda i: -_length(specs[i].scenario))
+    specs, tags = [specs[i] for i in order], [tags[i] for i in order]
     log(f"[4/5] closed-loop evaluation: {len(specs)} runs over {len(scenarios)} scenarios ...")
     done = [0]
 
@@ -295,6 +297,14 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
     from terrapref.report.study_report import write_study
 
     return write_study(out, plan, trained, runs, timings, report_started=t0)
+
+
+@functools.lru_cache(maxsize=64)
+def _length(scenario: str) -> float:
+    from terrapref.scenario import resolve_scenario
+    from terrapref.scenario.path import ReferencePath
+
+    return ReferencePath(resolve_scenario(scenario).waypoints).length_m
 
 
 def _plan_dict(plan: StudyPlan) -> dict:

@@ -52,11 +52,13 @@ def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings:
     figs.mkdir(exist_ok=True)
     n_seeds = plan.seeds
     lines = ["# terrapref study: baselines, data efficiency, preference profiles, robustness, ablations", ""]
+    zones_per_pass = sum(len(r["metrics"]["zones"]) for r in _select(runs, study="baselines", method=EXPERT, seed=0))
     lines += [f"Every number comes from closed-loop runs in the simulator on {', '.join(plan.scenarios())} "
-              f"({sum(len(r['metrics']['zones']) for r in _select(runs, study='baselines', method=EXPERT, seed=0))} zones per pass), "
+              f"({zones_per_pass} zones per pass), "
               f"{n_seeds} training seed(s): each seed has its own demonstrations (2 runs of train_course with disturbances, "
               "about 11 minutes) and its own initialisation. Zone success is given as the mean over seeds ± its standard deviation; "
-              "collisions are summed over all runs.", ""]
+              "collisions are summed over all runs. One zone is "
+              f"{1 / max(zones_per_pass, 1):.1%} of a seed's score, so differences of a few points are within the spread between seeds.", ""]
 
     # -- baselines
     order = ["C", "linear", "cnn", HAND_COST, PURE_PURSUIT, EXPERT]
@@ -69,7 +71,8 @@ def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings:
     points = [*plan.minutes, ALL]
     eff: dict[str, list[tuple[float, float, float]]] = {}
     for m in ("C", "linear", "cnn"):
-        eff[m] = [(full_minutes if mins == ALL else mins, *_cell(_select(runs, study="efficiency", method=m, minutes=mins))[1:]) for mins in points]
+        eff[m] = [(full_minutes, *_cell(base[m])[1:]) if mins == ALL else (mins, *_cell(_select(runs, study="efficiency", method=m, minutes=mins))[1:])
+                  for mins in points]
     reach = {m: next((mins for mins, mean, _ in eff[m] if mean >= TARGET), None) for m in eff}
     # -- profiles
     alt_runs = _select(runs, study="profile", method="C")

@@ -1,0 +1,26 @@
+"""`terrapref record --disturb`: the recording carries the pushes and stays labelled by the driver."""
+
+from __future__ import annotations
+
+import json
+
+from terrapref.cli import main
+from terrapref.demos.recording import read_recording
+
+
+def test_record_with_disturbances(tmp_path, capsys):
+    out = tmp_path / "rec"
+    assert main(["record", "demo_course", "--seed", "1", "--out", str(out), "--disturb", "1.0", "--quiet"]) == 0
+    rec = read_recording(out)
+    assert rec.complete
+    assert rec.meta["driver"]["disturbance"]["rate_hz"] == 1.0
+    lines = [json.loads(x) for x in (out / "frames.jsonl").read_text().splitlines()]
+    assert any("executed" in x for x in lines) and not all("executed" in x for x in lines)
+    assert "complete" in capsys.readouterr().out
+
+
+def test_record_refuses_a_negative_rate(tmp_path, capsys):
+    assert main(["record", "demo_course", "--out", str(tmp_path / "rec"), "--disturb", "-1"]) == 2
+    err = capsys.readouterr().err
+    assert "--disturb" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "rec").exists()
