@@ -344,3 +344,21 @@ def test_torch_and_numpy_agree_with_ignore(kw: dict):
         t2 = net(torch.from_numpy(np.concatenate([U[..., :4], np.full_like(U[..., 4:], 9.0)], axis=-1))).numpy()
     np.testing.assert_allclose(numpy_forward(config, weights, U), t, atol=1e-5)
     np.testing.assert_allclose(t2, t, atol=1e-6)  # torch ignores the column too
+
+
+def test_evaluate_command_drives_a_linear_model_file(tmp_path, capsys):
+    """`terrapref evaluate` takes a baseline's model file as well as C's."""
+    from terrapref.cli import main
+    from terrapref.planner.policy import save_linear
+
+    features = FeatureConfig()
+    w = np.array([-50.0, -8.0, -4.0, -2.0, 2.0])
+    path = save_linear(tmp_path / "linear.safetensors", LinearUtility(w, np.zeros(features.preference.m)), _meta())
+    out = tmp_path / "eval"
+    assert main(["evaluate", str(path), "demo_course", "--seeds", "1", "--out", str(out), "--no-driver", "--workers", "1"]) == 0
+    import json
+
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["summary"]["runs"] == 1 and metrics["summary"]["zones"] > 0
+    assert (out / "demo_course.png").exists()
+    assert "zone success" in capsys.readouterr().out

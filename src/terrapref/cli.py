@@ -215,7 +215,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from terrapref.evaluation.evaluate import evaluate_model
-    from terrapref.learning.model_file import load_model
+    from terrapref.planner.policy import load_policy
     from terrapref.progress import Progress
     from terrapref.terrain import PreferenceProfile
 
@@ -225,7 +225,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         frames = sorted({int(f) for f in args.frames.split(",") if f.strip()}) if args.frames else []
     except ValueError:
         raise UserError("--frames", f"expected comma-separated frame numbers, got {args.frames!r}") from None
-    model = load_model(args.model)
+    model = load_policy(args.model)  # C, or a learned baseline's file (linear, CNN)
     profile = PreferenceProfile.parse(args.profile, model.classes) if args.profile else None
     n_runs = len(args.scenarios) * args.seeds * (1 if args.no_driver else 2)
     bar = Progress("evaluate", n_runs)
