@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable
 
 
 class Progress:
@@ -45,3 +46,15 @@ class Progress:
         if summary:
             sys.stderr.write(f"{self.label}: {summary} ({time.perf_counter() - self.start:.1f} s)\n")
         sys.stderr.flush()
+
+
+def every_tenth(log: Callable[[str], None], what: str = "runs") -> Callable[[int, int], None]:
+    """A ``(done, total)`` callback that logs ``done/total what`` each time another tenth is done."""
+    reached = [0]
+
+    def tick(done: int, total: int) -> None:
+        if done * 10 // total > reached[0]:
+            reached[0] = done * 10 // total
+            log(f"      {done}/{total} {what}")
+
+    return tick

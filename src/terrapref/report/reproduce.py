@@ -22,6 +22,7 @@ from terrapref.demos.session import DisturbanceConfig
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_many, summarise
 from terrapref.learning.recipe import PAPER, Recipe, run_recipe
 from terrapref.learning.train import TrainConfig
+from terrapref.progress import every_tenth
 from terrapref.scenario import packaged_scenarios, resolve_scenario
 from terrapref.terrain import PreferenceProfile
 
@@ -78,14 +79,7 @@ def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes:
              for t in trained for sc in scenarios for e in range(eval_seeds)]
     specs += [RunSpec(sc, s, EXPERT, None, profile.order) for sc in scenarios for s in range(seeds)]
     log(f"[2/3] closed-loop evaluation: {len(specs)} runs ...")
-    done = [0]
-
-    def tick(k: int, n: int) -> None:
-        if k * 10 // n > done[0]:
-            done[0] = k * 10 // n
-            log(f"      {k}/{n} runs")
-
-    results = run_many(specs, workers, tick)
+    results = run_many(specs, workers, every_tenth(log))
     for r, spec in zip(results, specs):
         r["recipe"] = next((t["recipe"] for t in trained if t["model"] == spec.model_path), "driver")
         r["train_seed"] = next((t["seed"] for t in trained if t["model"] == spec.model_path), r["seed"])

@@ -31,6 +31,7 @@ import numpy as np
 from terrapref.evaluation.perturb import Perturbation
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PLANNER, PURE_PURSUIT, RunSpec, run_many
 from terrapref.features import FeatureConfig
+from terrapref.progress import every_tenth
 from terrapref.report.reproduce import OURS, TEST_SET, variations
 from terrapref.terrain import PreferenceProfile
 
@@ -280,14 +281,7 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
     order = sorted(range(len(specs)), key=lambda i: -_length(specs[i].scenario))
     specs, tags = [specs[i] for i in order], [tags[i] for i in order]
     log(f"[4/5] closed-loop evaluation: {len(specs)} runs over {len(scenarios)} scenarios ...")
-    done = [0]
-
-    def tick(k: int, n: int) -> None:
-        if k * 10 // n > done[0]:
-            done[0] = k * 10 // n
-            log(f"      {k}/{n} runs")
-
-    results = run_many(specs, workers, tick)
+    results = run_many(specs, workers, every_tenth(log))
     timings["evaluation"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
