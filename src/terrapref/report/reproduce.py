@@ -8,6 +8,7 @@ the paper's Table 1 and Table 2 with success over seeds, the figures, and each s
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import time
@@ -37,7 +38,7 @@ def variations() -> list[str]:
 
 
 def _train_job(args: tuple[tuple[Recipe, ...], str, int, tuple[str, ...]]) -> list[dict]:
-    """All recipes of one seed, in one process, so that they share the seed's demonstrations."""
+    """Recipes of one seed that share demonstrations, in one process (they never record twice)."""
     recipes, workdir, seed, profile = args
     rows = []
     for recipe in recipes:
@@ -62,15 +63,24 @@ def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes:
     timings: dict[str, float] = {}
 
     t0 = time.perf_counter()
-    jobs = [(tuple(recipes), str(out / "work" / f"seed{s}"), s, profile.order) for s in range(seeds)]
+    # One job per seed and demonstration protocol (recipes recording the same demonstrations stay
+    # together), the costliest first, so that both cores stay busy to the end.
+    groups: dict = {}
+    for r in recipes:
+        groups.setdefault(r.disturbance, []).append(r)
+    cost = {key: max(r.demonstrations * (1 + r.train.epochs * (2 if r.train.mirror else 1) / 100) for r in g) for key, g in groups.items()}
+    jobs = [(tuple(g), str(out / "work" / f"seed{s}"), s, profile.order)
+            for key, g in sorted(groups.items(), key=lambda kv: -cost[kv[0]]) for s in range(seeds)]
     log(f"[1/3] demonstrations, corrections and training: {len(recipes) * seeds} models ({', '.join(r.name for r in recipes)} x {seeds} seeds) ...")
-    if workers > 1 and seeds > 1:
+    if workers > 1 and len(jobs) > 1:
         import multiprocessing as mp
 
-        with ProcessPoolExecutor(max_workers=min(workers, seeds), mp_context=mp.get_context("fork")) as pool:
+        with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=mp.get_context("fork")) as pool:
             trained = [row for rows in pool.map(_train_job, jobs) for row in rows]
     else:
         trained = [row for j in jobs for row in _train_job(j)]
+    order = {r.name: i for i, r in enumerate(recipes)}
+    trained.sort(key=lambda t: (t["seed"], order[t["recipe"]]))
     timings["demonstrate + correct + train"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -78,6 +88,7 @@ def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes:
     specs = [RunSpec(sc, e, PLANNER, t["model"], profile.order, smoothing=next(r.smoothing for r in recipes if r.name == t["recipe"]))
              for t in trained for sc in scenarios for e in range(eval_seeds)]
     specs += [RunSpec(sc, s, EXPERT, None, profile.order) for sc in scenarios for s in range(seeds)]
+    specs.sort(key=lambda sp: -scenario_length(sp.scenario))  # longest first: no core idles at the end
     log(f"[2/3] closed-loop evaluation: {len(specs)} runs ...")
     results = run_many(specs, workers, every_tenth(log))
     for r, spec in zip(results, specs):
@@ -87,6 +98,14 @@ def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes:
 
     log("[3/3] figures and REPORT.md ...")
     return _write_report(out, results, trained, recipes, seeds, eval_seeds, profile, scenarios, timings)
+
+
+@functools.lru_cache(maxsize=64)
+def scenario_length(scenario: str) -> float:
+    """Length of a scenario's reference path [m] (to start the longest runs first)."""
+    from terrapref.scenario.path import ReferencePath
+
+    return ReferencePath(resolve_scenario(scenario).waypoints).length_m
 
 
 def _zone_rows(results: list[dict], scenario: str, recipes: tuple[Recipe, ...]) -> list[str]:

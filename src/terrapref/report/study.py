@@ -17,7 +17,6 @@ Stages (each parallel across processes):
 
 from __future__ import annotations
 
-import functools
 import json
 import os
 import time
@@ -32,7 +31,7 @@ from terrapref.evaluation.perturb import Perturbation
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PLANNER, PURE_PURSUIT, RunSpec, run_many
 from terrapref.features import FeatureConfig
 from terrapref.progress import every_tenth
-from terrapref.report.reproduce import OURS, TEST_SET, variations
+from terrapref.report.reproduce import OURS, TEST_SET, scenario_length, variations
 from terrapref.terrain import PreferenceProfile
 
 ALT_PROFILE = ("rock", "mud", "water", "non_traversable")
@@ -278,7 +277,7 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
                 spec(RunSpec(sc, s, method, None, default), study="baselines", method=method, seed=s)
             spec(RunSpec(sc, s, EXPERT, None, ALT_PROFILE), study="profile", method=EXPERT, seed=s, scored_under="model")
     # Longest scenarios first, so that no worker is left with a long run at the end.
-    order = sorted(range(len(specs)), key=lambda i: -_length(specs[i].scenario))
+    order = sorted(range(len(specs)), key=lambda i: -scenario_length(specs[i].scenario))
     specs, tags = [specs[i] for i in order], [tags[i] for i in order]
     log(f"[4/5] closed-loop evaluation: {len(specs)} runs over {len(scenarios)} scenarios ...")
     results = run_many(specs, workers, every_tenth(log))
@@ -291,14 +290,6 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
     from terrapref.report.study_report import write_study
 
     return write_study(out, plan, trained, runs, timings, report_started=t0)
-
-
-@functools.lru_cache(maxsize=64)
-def _length(scenario: str) -> float:
-    from terrapref.scenario import resolve_scenario
-    from terrapref.scenario.path import ReferencePath
-
-    return ReferencePath(resolve_scenario(scenario).waypoints).length_m
 
 
 def _plan_dict(plan: StudyPlan) -> dict:
