@@ -89,8 +89,9 @@ class ExpertDriver:
 
     sample_step_m = 0.25
 
-    def __init__(self, config: ExpertConfig | None = None, camera_rate_hz: float = 10.0) -> None:
+    def __init__(self, config: ExpertConfig | None = None, camera_rate_hz: float = 10.0, world: WorldMap | None = None) -> None:
         self.config = config or ExpertConfig()
+        self._given_world = world  # the scenario's raster, when the caller already has it
         self.dt = 1.0 / camera_rate_hz
         c = self.config
         self.offsets = np.round(np.arange(-c.max_offset_m, c.max_offset_m + 1e-9, c.offset_step_m), 6)
@@ -105,7 +106,8 @@ class ExpertDriver:
     def reset(self, scenario: Scenario, rng: np.random.Generator, world: WorldMap | None = None) -> None:
         c = self.config
         self.rng = rng
-        self.world = world if world is not None else rasterise(scenario)
+        world = world if world is not None else self._given_world
+        self.world = world if world is not None and world.raster.shape == scenario.grid_shape else rasterise(scenario)
         self.path = ReferencePath(scenario.waypoints)
         self.tracker = PathTracker(self.path, back_m=2.0, ahead_m=6.0)
         classes = scenario.classes
@@ -208,3 +210,4 @@ class ExpertDriver:
         if out != 0.0 and c.stick_noise_rps > 0:
             out = float(np.clip(out + self.rng.normal(0.0, c.stick_noise_rps), -c.max_yaw_rate_rps, c.max_yaw_rate_rps))
         return Command(c.speed_mps, out)
+

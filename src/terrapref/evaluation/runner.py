@@ -86,7 +86,7 @@ def run_one(spec: RunSpec) -> dict:
     profile = PreferenceProfile.parse(list(spec.profile), scenario.classes, source="--profile")
     if spec.driver == EXPERT:
         sim = Simulation(scenario, world=world)
-        driver = ExpertDriver(ExpertConfig(profile=profile.order))
+        driver = ExpertDriver(ExpertConfig(profile=profile.order), world=world)  # the cached raster, not a new one
     else:
         policy = make_policy(spec)
         sim = Simulation(scenario, policy.camera, world=world)
