@@ -54,6 +54,10 @@ RECIPES = [
            TrainConfig(epochs=100, skip=True, class_balance=True, mirror=True), disturbance=DisturbanceConfig(rate_hz=0.3)),
     Recipe("long+skip+balanced, 2 demos disturbed x2, 150 epochs, mirrored", 2, 0,
            TrainConfig(epochs=150, skip=True, class_balance=True, mirror=True), disturbance=DisturbanceConfig(rate_hz=0.3)),
+    Recipe("ours, hidden width 16", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True, hidden=16),
+           disturbance=DisturbanceConfig(rate_hz=0.3)),
+    Recipe("ours, hidden width 256", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True, hidden=256),
+           disturbance=DisturbanceConfig(rate_hz=0.3)),
 ]
 
 
