@@ -21,7 +21,7 @@ from terrapref.camera import CameraConfig
 from terrapref.demos.recording import Recording
 from terrapref.features import FeatureConfig
 from terrapref.learning.model_file import FORMAT
-from terrapref.learning.train import split_indices
+from terrapref.learning.train import class_weights, split_indices
 from terrapref.planner.planner import PATH_AHEAD_M, path_ahead
 from terrapref.planner.policy import CNN, Observation, Policy
 from terrapref.scenario.path import PathTracker, ReferencePath
@@ -138,10 +138,7 @@ def _train(images, paths, labels, m, config, progress) -> CnnTrainResult:
     net = CnnNet(config, images.shape[1:], m)
     opt = torch.optim.Adam(net.parameters(), lr=config.lr)
     X, P, y = _onehot(images, config.n_classes), torch.from_numpy(paths), torch.from_numpy(labels)
-    weight = None
-    if config.class_balance:
-        counts = np.bincount(labels[tr], minlength=m).astype(np.float64)
-        weight = torch.tensor(np.sqrt(np.where(counts > 0, counts.sum() / np.maximum(counts, 1) / m, 0.0)), dtype=torch.float32)
+    weight = class_weights(labels[tr], m) if config.class_balance else None
     loss_fn, plain = nn.CrossEntropyLoss(weight=weight), nn.CrossEntropyLoss()
     best = (np.inf, 0, 0.0, None)
     for epoch in range(1, config.epochs + 1):

@@ -116,6 +116,14 @@ def decisive_weights(U: np.ndarray, labels: np.ndarray, weight: float) -> np.nda
     return np.where(decisive_frames(U, labels), weight, 1.0).astype(np.float32)
 
 
+def class_weights(labels: np.ndarray, m: int) -> torch.Tensor:
+    """Loss weight per class (m,): the square root of inverse label frequency, so that rare
+    labels count more without exploding; 0 for labels never seen."""
+    counts = np.bincount(labels, minlength=m).astype(np.float64)
+    w = np.where(counts > 0, counts.sum() / np.maximum(counts, 1) / m, 0.0)
+    return torch.tensor(np.sqrt(w), dtype=torch.float32)
+
+
 def split_indices(n: int, val_fraction: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Random train/validation split of n samples."""
     perm = rng.permutation(n)
@@ -162,11 +170,7 @@ def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetri
     opt = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     U = torch.from_numpy(np.ascontiguousarray(U_np, dtype=np.float32))
     y = torch.from_numpy(y_np.astype(np.int64))
-    weight = None
-    if config.class_balance:
-        counts = np.bincount(y_np[tr], minlength=m).astype(np.float64)
-        w = np.where(counts > 0, counts.sum() / np.maximum(counts, 1) / m, 0.0)
-        weight = torch.tensor(np.sqrt(w), dtype=torch.float32)  # square root: balance without exploding rare bins
+    weight = class_weights(y_np[tr], m) if config.class_balance else None
     loss_fn = nn.CrossEntropyLoss(weight=weight, reduction="none")
     plain = nn.CrossEntropyLoss()
     sample_w = torch.from_numpy(decisive_weights(U_np, y_np, config.decisive_weight))
