@@ -50,8 +50,12 @@ def read_model_file(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
 
 def load_model(path: str | Path) -> LoadedModel:
     """Read a model file of C; every problem is a :class:`UserError` naming the file and the field."""
-    source = str(path)
     weights, meta = read_model_file(path)
+    return classifier_from(weights, meta, str(path))
+
+
+def classifier_from(weights: dict[str, np.ndarray], meta: dict, source: str) -> LoadedModel:
+    """Check and assemble C from a model file's tensors and metadata (see :func:`read_model_file`)."""
     if meta["kind"] != CLASSIFIER:
         raise UserError(source, f"holds a {meta['kind']!r} model, not the classifier C", field="kind")
     features, camera, classes, profile = model_context(meta, source)

@@ -25,7 +25,7 @@ from terrapref.learning.linear import LinearUtility
 from pathlib import Path
 
 from terrapref.errors import UserError
-from terrapref.learning.model_file import CLASSIFIER, FORMAT, LoadedModel, load_model, model_context, read_model_file
+from terrapref.learning.model_file import CLASSIFIER, FORMAT, LoadedModel, classifier_from, model_context, read_model_file
 from terrapref.tensorfile import write_tensor_file
 from terrapref.learning.network import numpy_forward
 from terrapref.terrain import ClassTable, default_classes
@@ -164,7 +164,7 @@ def load_policy(path: str | Path) -> Policy:
     tensors, meta = read_model_file(path)
     kind = meta["kind"]
     if kind == CLASSIFIER:
-        return ClassifierPolicy(load_model(path))
+        return ClassifierPolicy(classifier_from(tensors, meta, source))
     features, camera, classes, profile = model_context(meta, source)
     if kind == LINEAR:
         k, m = features.n_features, features.preference.m
