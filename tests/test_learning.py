@@ -549,3 +549,18 @@ def test_mirror_needs_a_symmetric_control_set():
     data = Dataset(data.U, data.labels, data.w, data.source, {**data.meta, "features": skewed.to_dict()})
     with pytest.raises(ValueError, match="symmetric"):
         train(data, TrainConfig(epochs=1, mirror=True))
+
+
+def test_run_recipe_demonstrates_corrects_and_reuses_demonstrations(tmp_path):
+    from terrapref.learning.recipe import Recipe, run_recipe
+    from terrapref.learning.train import TrainConfig
+
+    recipe = Recipe("tiny", demonstrations=1, corrections=1, train=TrainConfig(epochs=2))
+    out = run_recipe(recipe, tmp_path, 0, course="demo_course")
+    assert out.model.exists()
+    assert [p.name for p in out.recordings] == ["demo_0", "corrections_0"]
+    assert out.demo_minutes > 0 and out.correction_minutes > 0
+    stamp = (tmp_path / "demo_0" / "meta.json").stat().st_mtime_ns
+    again = run_recipe(Recipe("plain", demonstrations=1, train=TrainConfig(epochs=2)), tmp_path, 0, course="demo_course")
+    assert again.recordings == [tmp_path / "demo_0"] and again.correction_minutes == 0
+    assert (tmp_path / "demo_0" / "meta.json").stat().st_mtime_ns == stamp  # reused, not recorded again

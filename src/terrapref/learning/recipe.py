@@ -121,11 +121,10 @@ def run_recipe(
     features: FeatureConfig | None = None,
     log: Callable[[str], None] | None = None,
 ) -> RecipeOutput:
-    """Demonstrate (synthetic driver, seeds ``seed * 100 + k``), correct, train; write into ``workdir``.
+    """Demonstrate, correct, train; write into ``workdir``.
 
-    Demonstrations go to ``workdir/demo_K`` and are reused when a complete one is already
-    there (so recipes sharing a seed share their demonstrations); corrections and the model go
-    to ``workdir/<recipe name>/``.
+    Demonstrations come from :func:`record_demonstrations` (shared by recipes with the same
+    seed and protocol); corrections and the model go to ``workdir/<recipe name>/``.
     """
     workdir = Path(workdir)
     own = workdir / recipe.name.replace(" ", "_")
@@ -133,9 +132,6 @@ def run_recipe(
     scenario = resolve_scenario(course)
     profile = profile or PreferenceProfile.default(scenario.classes)
     features = features or FeatureConfig()
-    camera, sim_cfg = CameraConfig(), SimConfig()
-    expert_cfg = ExpertConfig(profile=profile.order)
-    sim = Simulation(scenario, camera, sim_cfg)
     paths = record_demonstrations(recipe, workdir, seed, profile, course, features, log)
     recordings = [read_recording(p) for p in paths]
     demo_s = sum(r.duration_s for r in recordings)
@@ -143,6 +139,10 @@ def run_recipe(
     train_cfg = replace(recipe.train, seed=seed)
     model = own / "model.safetensors"
     result = train_and_save(build_dataset(recordings, features), model, train_cfg, checkpoints=False)
+    if recipe.corrections:  # the planner drives the course; only then is a simulation needed here
+        camera, sim_cfg = CameraConfig(), SimConfig()
+        expert_cfg = ExpertConfig(profile=profile.order)
+        sim = Simulation(scenario, camera, sim_cfg)
     for r in range(recipe.corrections):
         out = own / f"corrections_{r}"
         meta = recording_meta(scenario, camera, features.preference, sim_cfg, {"kind": "corrections", "round": r, "seed": seed}, profile)
