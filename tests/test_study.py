@@ -13,8 +13,8 @@ import pytest
 from terrapref.cli import main
 from terrapref.evaluation.perturb import Perturbation
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PURE_PURSUIT
-from terrapref.report.study import ALL, ALT_PROFILE, FULL, LEARNED, METHOD_NAMES, POSE_DEG_PER_M, QUICK, StudyPlan, perturbation, run_study
-from terrapref.report.study_report import _cell, _per_seed, _rate, _select, _zone_success, disagreement_zones, write_study
+from terrapref.report.study import FULL, LEARNED, POSE_DEG_PER_M, QUICK, StudyPlan, perturbation, run_study
+from terrapref.report.study_report import ALL, ALT_PROFILE, METHOD_NAMES, _cell, _per_seed, _rate, _select, _zone_success, disagreement_zones, write_study
 
 PNG = b"\x89PNG\r\n\x1a\n"
 METHODS = ("C", "linear", "cnn", HAND_COST, PURE_PURSUIT, EXPERT)

@@ -86,17 +86,13 @@ class Planner:
             raise RuntimeError("call set_path() first")
         s = self.tracker.update(np.array(pose[:2]))
         U = self.featurizer(image, pose, self.path, s)
-        ahead = self.path_ahead(pose, s) if self.policy.uses_path_ahead else _NO_POINTS
+        ahead = path_ahead(self.path, pose, s) if self.policy.uses_path_ahead else _NO_POINTS
         probs = softmax(self.policy.logits(Observation(U, image, ahead)))
         if self.smoothing > 0:
             self._avg = probs if self._avg is None else self.smoothing * self._avg + (1 - self.smoothing) * probs
             probs = self._avg
         i = int(np.argmax(probs))
         return Decision(i, Command(*self.control.command(i)), probs, U, s)
-
-    def path_ahead(self, pose: Pose, progress_s: float) -> np.ndarray:
-        assert self.path is not None
-        return path_ahead(self.path, pose, progress_s)
 
 
 def path_ahead(path: ReferencePath, pose: Pose, progress_s: float) -> np.ndarray:

@@ -32,19 +32,10 @@ from terrapref.evaluation.runner import EXPERT, HAND_COST, PLANNER, PURE_PURSUIT
 from terrapref.features import FeatureConfig
 from terrapref.progress import every_tenth
 from terrapref.report.reproduce import OURS, TEST_SET, scenario_length, variations
+from terrapref.report.study_report import ALT_PROFILE, write_study
 from terrapref.terrain import PreferenceProfile
 
-ALT_PROFILE = ("rock", "mud", "water", "non_traversable")
 LEARNED = ("C", "linear", "cnn")  # methods trained from demonstrations
-ALL = "all"  # the data-efficiency point that uses every demonstrated minute: the baselines' runs
-METHOD_NAMES = {
-    "C": "C (ours)",
-    "linear": "linear utility (learned)",
-    "cnn": "end-to-end CNN",
-    HAND_COST: "hand-tuned cost",
-    PURE_PURSUIT: "pure pursuit",
-    EXPERT: "synthetic driver",
-}
 
 
 @dataclass(frozen=True)
@@ -287,8 +278,6 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
     log("[5/5] tables, figures and STUDY.md ...")
     runs = [{**tag, "scenario": r["scenario"], "metrics": r["metrics"]} for tag, r in zip(tags, results)]
     (out / "study.json").write_text(json.dumps({"plan": _plan_dict(plan), "trained": trained, "runs": runs}, indent=1, default=float))
-    from terrapref.report.study_report import write_study
-
     return write_study(out, plan, trained, runs, timings, report_started=t0)
 
 

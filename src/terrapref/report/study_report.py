@@ -11,6 +11,16 @@ import numpy as np
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PURE_PURSUIT
 
 TARGET = 0.9  # the success level the data-efficiency question asks about
+ALT_PROFILE = ("rock", "mud", "water", "non_traversable")  # the study's other preference profile
+ALL = "all"  # the data-efficiency point that uses every demonstrated minute: the baselines' runs
+METHOD_NAMES = {
+    "C": "C (ours)",
+    "linear": "linear utility (learned)",
+    "cnn": "end-to-end CNN",
+    HAND_COST: "hand-tuned cost",
+    PURE_PURSUIT: "pure pursuit",
+    EXPERT: "synthetic driver",
+}
 
 
 def _rate(runs: list[dict]) -> float:
@@ -46,7 +56,6 @@ def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings:
                 report_started: float | None = None) -> Path:
     """Write STUDY.md and the figures; ``report_started`` (perf_counter) times this stage in the table."""
     from terrapref.report.plots import save_bars, save_curves
-    from terrapref.report.study import METHOD_NAMES
 
     figs = out / "figures"
     figs.mkdir(exist_ok=True)
@@ -65,8 +74,6 @@ def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings:
     base = {m: _select(runs, study="baselines", method=m) for m in order}
     cells = {m: _cell(base[m]) for m in order}
     # -- data efficiency
-    from terrapref.report.study import ALL
-
     full_minutes = _demo_minutes(trained)
     points = [*plan.minutes, ALL]
     eff: dict[str, list[tuple[float, float, float]]] = {}
@@ -98,7 +105,7 @@ def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings:
     keep = disagreement_zones(runs)
     a_ok, a_n = _zone_success(alt_runs, keep)
     d_ok, d_n = _zone_success(_select(runs, study="profile_cross", method="C_default"), keep)
-    lines.append(f"- **Another profile ({' > '.join(_alt())}) is learned:** C trained on demonstrations driven under it reaches "
+    lines.append(f"- **Another profile ({' > '.join(ALT_PROFILE)}) is learned:** C trained on demonstrations driven under it reaches "
                  f"{alt_cell[0]} scored under that profile (the driver: {alt_driver[0]}). In the {len(keep)} test zones where the two "
                  f"profiles expect different choices, it makes the other profile's choice in {a_ok}/{a_n} runs; the model trained "
                  f"on the default profile does so in {d_ok}/{d_n}. (All zones: the other-profile model scored under the default "
@@ -135,7 +142,7 @@ def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings:
                 "minutes of demonstration", "zone success", target=TARGET, logx=True)
 
     lines += ["## 3. Another preference profile", "",
-              f"Demonstrations driven under {' > '.join(_alt())} (the default is mud > rock > water > non_traversable); "
+              f"Demonstrations driven under {' > '.join(ALT_PROFILE)} (the default is mud > rock > water > non_traversable); "
               "`best` zones resolve under the profile the model carries.", "",
               "| model | scored under | zone success | collisions |", "|---|---|---|---|",
               f"| C trained on the other profile | its own | {alt_cell[0]} | {_collisions(alt_runs)} |",
@@ -183,12 +190,6 @@ def _demo_minutes(trained: list[dict]) -> float:
     """Minutes of demonstration behind the full-data models (frames at 10 Hz)."""
     frames = [t["samples"] for t in trained if t["study"] == "baselines" and t["method"] == "C"]
     return float(np.mean(frames)) / 600.0 if frames else float("nan")
-
-
-def _alt() -> tuple[str, ...]:
-    from terrapref.report.study import ALT_PROFILE
-
-    return ALT_PROFILE
 
 
 def _kind_label(kind: str) -> str:
