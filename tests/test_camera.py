@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer
+from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer, SegmentationView
 from terrapref.terrain import UNKNOWN, default_classes
 from terrapref.vehicle import Pose
 from terrapref.world import WorldMap
@@ -328,3 +328,38 @@ def test_render_does_not_reuse_a_returned_frame():
     kept = first.copy()
     renderer.render(Pose(10.0, 15.0, math.pi))
     np.testing.assert_array_equal(first, kept)
+
+
+# --- rendering only the pixels a driver reads ------------------------------------------------
+
+
+@pytest.mark.parametrize("config", [CameraConfig(), CameraConfig(pitch_deg=45.0, hfov_deg=60.0, mount_height_m=0.8, width_px=320, height_px=200)],
+                         ids=["default", "p45-small"])
+def test_pixels_equal_the_full_frame_at_random_poses(config):
+    rng = np.random.default_rng(11)
+    world = _blocks_world(rng)
+    renderer = SegmentationRenderer(PinholeCamera(config), world)
+    every = np.arange(config.width_px * config.height_px)
+    for _ in range(20):
+        # Poses on, near and off the map, so that clipping at the border is exercised too.
+        pose = Pose(rng.uniform(-8.0, 48.0), rng.uniform(-8.0, 33.0), rng.uniform(-math.pi, math.pi))
+        image = renderer.render(pose)
+        np.testing.assert_array_equal(renderer.pixels(pose, every), image.reshape(-1))
+        some = rng.integers(0, every.size, 700)
+        np.testing.assert_array_equal(renderer.pixels(pose, some), image.reshape(-1)[some])
+
+
+def test_view_renders_the_whole_frame_only_when_asked():
+    world = _grass_with_mud_square((15.0, 15.0), 1.0)
+    renderer = SegmentationRenderer(PinholeCamera(), world)
+    pose = Pose(12.0, 15.0, 0.0)
+    view = SegmentationView(renderer, pose)
+    idx = np.array([0, 240 * 640 + 320, 479 * 640 + 639])
+    assert view.pixels(idx)[0] == UNKNOWN and not view.rendered
+    full = renderer.render(pose)
+    np.testing.assert_array_equal(view.image, full)
+    assert view.rendered and view.image is view.image  # rendered once, then kept
+    np.testing.assert_array_equal(view.pixels(idx), full.reshape(-1)[idx])
+    np.testing.assert_array_equal(SegmentationView.of(full).pixels(idx), full.reshape(-1)[idx])
+    with pytest.raises(ValueError):
+        SegmentationView(renderer)

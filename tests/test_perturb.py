@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from terrapref.camera import SegmentationView
 from terrapref.evaluation.perturb import Perturbation, PerturbedDriver, corrupt_image
 from terrapref.evaluation.runner import PURE_PURSUIT, RunSpec, run_one
 from terrapref.sim.loop import Frame
@@ -23,7 +24,7 @@ def _image(value: int = 0) -> np.ndarray:
 
 def _frame(i: int, image: np.ndarray | None = None) -> Frame:
     img = _image() if image is None else image
-    return Frame(index=i, time_s=0.1 * i, image=img, pose=Pose(0.5 * i, 0.1 * i, 0.01 * i), waypoints=WAYPOINTS)
+    return Frame(index=i, time_s=0.1 * i, view=SegmentationView.of(img), pose=Pose(0.5 * i, 0.1 * i, 0.01 * i), waypoints=WAYPOINTS)
 
 
 class FakeDriver:

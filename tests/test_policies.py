@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import torch
 
-from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer
+from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer, SegmentationView
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
 from terrapref.learning.linear import LinearUtility, fit_linear_utility
@@ -38,7 +38,7 @@ from terrapref.terrain import default_classes
 from terrapref.vehicle import Pose
 
 M, K = 21, 5  # trajectories; utility columns (non_traversable, water, rock, mud, distance)
-NO_IMAGE = np.zeros((4, 4), np.uint8)
+NO_IMAGE = SegmentationView.of(np.zeros((4, 4), np.uint8))
 NO_POINTS = np.zeros((0, 2))
 
 

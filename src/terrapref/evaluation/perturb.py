@@ -16,6 +16,7 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
+from terrapref.camera import SegmentationView
 from terrapref.scenario import Scenario
 from terrapref.sim.loop import Frame
 from terrapref.vehicle import Command, Pose
@@ -50,6 +51,10 @@ class Perturbation:
             raise ValueError("perturbation rates must be in [0, 1] and the rest >= 0")
 
     @property
+    def corrupts_image(self) -> bool:
+        return bool(self.flip_rate or self.blobs)
+
+    @property
     def active(self) -> bool:
         return bool(self.flip_rate or self.blobs or self.pose_noise_m or self.pose_noise_deg or self.drop_rate or self.delay_frames)
 
@@ -59,7 +64,7 @@ class Perturbation:
 
 def corrupt_image(image: np.ndarray, p: Perturbation, rng: np.random.Generator) -> np.ndarray:
     """A copy of ``image`` with flips and blobs (the input is left alone)."""
-    if not (p.flip_rate or p.blobs):
+    if not p.corrupts_image:
         return image
     out = image.copy()
     h, w = out.shape
@@ -107,7 +112,8 @@ class PerturbedDriver:
             dyaw = np.radians(self.rng.normal(0.0, p.pose_noise_deg)) if p.pose_noise_deg else 0.0
             pose = Pose(pose[0] + dx, pose[1] + dy, pose[2] + dyaw)
         self.blind_s = 0.0
-        self.last = self.inner.act(replace(seen, image=corrupt_image(seen.image, p, self.rng), pose=pose))
+        view = SegmentationView.of(corrupt_image(seen.image, p, self.rng)) if p.corrupts_image else seen.view
+        self.last = self.inner.act(replace(seen, view=view, pose=pose))
         return self.last
 
     def _no_frame(self) -> Command:

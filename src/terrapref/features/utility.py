@@ -24,7 +24,7 @@ from enum import Enum
 
 import numpy as np
 
-from terrapref.camera import PinholeCamera
+from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.features.preference_set import PreferenceSet, PreferenceSetConfig
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable, default_classes
@@ -113,7 +113,8 @@ class UtilityFeaturizer:
         m = self.pset.m
         self._bins = (m + 1) * (k + 1)
         self._offset = np.where(self._visible, (np.arange(m) * (k + 1))[:, None], m * (k + 1)).ravel()
-        self._pix_flat = self._pix.ravel()
+        self._pix_flat = self._pix.ravel().copy()
+        self._pix_flat.flags.writeable = False  # read-only: a renderer may prepare it once
         self._n = config.preference.n_steps
         self._ends = self.pset.endpoints  # (m, 2) vehicle frame
 
@@ -121,10 +122,11 @@ class UtilityFeaturizer:
     def m(self) -> int:
         return self.pset.m
 
-    def terrain(self, image: np.ndarray) -> np.ndarray:
+    def terrain(self, image: np.ndarray | SegmentationView) -> np.ndarray:
         """Terrain utilities, shape (m, K): share of each trajectory's points on each class."""
         k = len(self.config.feature_classes)
-        cols = self._column[image.reshape(-1)[self._pix_flat]]
+        ids = image.pixels(self._pix_flat) if isinstance(image, SegmentationView) else image.reshape(-1)[self._pix_flat]
+        cols = self._column[ids]
         counts = np.bincount(cols + self._offset, minlength=self._bins)
         return counts.reshape(self.pset.m + 1, k + 1)[:-1, :k] * (1.0 / self._n)
 
@@ -159,7 +161,7 @@ class UtilityFeaturizer:
             return np.ones_like(d)
         return (hi - d) * (1.0 / (hi - lo))
 
-    def __call__(self, image: np.ndarray, pose: Pose, path: ReferencePath, progress_s: float | None = None) -> np.ndarray:
+    def __call__(self, image: np.ndarray | SegmentationView, pose: Pose, path: ReferencePath, progress_s: float | None = None) -> np.ndarray:
         """U, shape (m, K + 1) float32: terrain shares then the distance utility."""
         u = np.empty((self.m, len(self.config.feature_classes) + 1), dtype=np.float32)
         u[:, :-1] = self.terrain(image)

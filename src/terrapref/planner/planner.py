@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from terrapref.camera import CameraConfig, PinholeCamera
+from terrapref.camera import CameraConfig, PinholeCamera, SegmentationView, as_view
 from terrapref.features import UtilityFeaturizer
 from terrapref.learning.model_file import LoadedModel, check_compatible
 from terrapref.learning.network import softmax
@@ -80,14 +80,19 @@ class Planner:
         self.tracker = PathTracker(self.path)
         self._avg = None
 
-    def decide(self, image: np.ndarray, pose: Pose) -> Decision:
-        """Choose a trajectory for one segmentation frame (H, W) uint8 at ``pose``."""
+    def decide(self, image: np.ndarray | SegmentationView, pose: Pose) -> Decision:
+        """Choose a trajectory for one segmentation frame (H, W) uint8 at ``pose``.
+
+        ``image`` may be a :class:`SegmentationView`, of which only the pixels the policy reads
+        are rendered (the preference set's, for C).
+        """
         if self.path is None or self.tracker is None:
             raise RuntimeError("call set_path() first")
+        view = as_view(image)
         s = self.tracker.update(np.array(pose[:2]))
-        U = self.featurizer(image, pose, self.path, s)
+        U = self.featurizer(view, pose, self.path, s)
         ahead = path_ahead(self.path, pose, s) if self.policy.uses_path_ahead else _NO_POINTS
-        probs = softmax(self.policy.logits(Observation(U, image, ahead)))
+        probs = softmax(self.policy.logits(Observation(U, view, ahead)))
         if self.smoothing > 0:
             self._avg = probs if self._avg is None else self.smoothing * self._avg + (1 - self.smoothing) * probs
             probs = self._avg
@@ -119,7 +124,7 @@ class PlannerDriver:
         self.decisions = []
 
     def act(self, frame: Frame) -> Command:
-        d = self.planner.decide(frame.image, frame.pose)
+        d = self.planner.decide(frame.view, frame.pose)
         if self.keep:
             self.decisions.append(d)
         return d.command

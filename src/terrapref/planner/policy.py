@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from terrapref.camera import CameraConfig
+from terrapref.camera import CameraConfig, SegmentationView
 from terrapref.features import FeatureConfig
 from terrapref.learning.linear import LinearUtility
 from pathlib import Path
@@ -37,14 +37,20 @@ class Observation:
 
     Attributes:
         U: utility features (m, K + 1).
-        image: the segmentation image (H, W) uint8.
+        view: the segmentation image (``image`` renders it whole, for policies that read all
+            of it).
         path_ahead: reference-path points 1, 2, ..., P m ahead of the vehicle's progress, in
             the vehicle frame (P, 2) [m] (x forward, y left); empty unless the policy asks.
     """
 
     U: np.ndarray
-    image: np.ndarray
+    view: SegmentationView
     path_ahead: np.ndarray
+
+    @property
+    def image(self) -> np.ndarray:
+        """The segmentation image (H, W) uint8."""
+        return self.view.image
 
 
 class Policy:

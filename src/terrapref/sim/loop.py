@@ -12,7 +12,7 @@ from typing import Protocol
 
 import numpy as np
 
-from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer
+from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer, SegmentationView
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import ReferencePath
 from terrapref.vehicle import Command, Pose, Vehicle, VehicleConfig
@@ -53,16 +53,22 @@ class Frame:
     Attributes:
         index: frame number since reset.
         time_s: simulation time [s].
-        image: segmentation image, shape (H, W) uint8 class ids.
+        view: the segmentation image, rendered as far as a driver reads it (``image`` for the
+            whole frame).
         pose: vehicle pose in the world frame.
         waypoints: the reference path, shape (N, 2) [m].
     """
 
     index: int
     time_s: float
-    image: np.ndarray
+    view: SegmentationView
     pose: Pose
     waypoints: np.ndarray
+
+    @property
+    def image(self) -> np.ndarray:
+        """The segmentation image, shape (H, W) uint8 class ids."""
+        return self.view.image
 
 
 class Driver(Protocol):
@@ -113,7 +119,7 @@ class Simulation:
 
     def frame(self) -> Frame:
         pose = self.vehicle.pose
-        return Frame(self.frame_index, self.time_s, self.renderer.render(pose), pose, self.scenario.waypoints)
+        return Frame(self.frame_index, self.time_s, SegmentationView(self.renderer, pose), pose, self.scenario.waypoints)
 
     def _is_lethal(self, pose: Pose) -> bool:
         return bool(self._lethal[self.world.class_at(np.array(pose[:2]))])
