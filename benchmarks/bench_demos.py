@@ -8,6 +8,8 @@ Run through ``scripts/bench.sh`` (one core); numbers go into ``docs/benchmarks.m
 (c) decision: ``Planner.decide`` (features + classifier C in NumPy + progress along the path)
     on the same frames, with a model trained on the recording (paper recipe). Target:
     <= 100 us median.
+(d) closed loop: the planner (same model) driving ``train_course`` in the simulation, frames
+    rendered only where the planner reads them; simulated frames per second of wall time.
 (b) record: ``terrapref record train_course`` end to end through the library (simulation,
     synthetic driver, PNG frames and the JSONL log written to a temporary directory), wall time.
     Target: <= 20 s.
@@ -65,6 +67,18 @@ def bench_features(rec_dir: Path, repeats: int) -> np.ndarray:
     return np.array(times)
 
 
+def bench_closed_loop(model_path: Path) -> tuple[float, int]:
+    from terrapref.learning.model_file import load_model
+    from terrapref.planner import Planner, PlannerDriver
+    from terrapref.sim import run_episode
+
+    sim = Simulation(resolve_scenario("train_course"))
+    driver = PlannerDriver(Planner(load_model(model_path)))
+    t0 = time.perf_counter()
+    log = run_episode(sim, driver, np.random.default_rng(0))
+    return time.perf_counter() - t0, len(log.commands)
+
+
 def bench_decision(rec_dir: Path, repeats: int) -> np.ndarray:
     from terrapref.demos.dataset import build_dataset
     from terrapref.learning.model_file import load_model
@@ -99,9 +113,11 @@ def main() -> int:
         wall, frames, size = bench_record(out, args.seed)
         t = bench_features(out, args.repeats)
         d = bench_decision(out, args.repeats)
+        loop_s, loop_frames = bench_closed_loop(out.parent / "model.safetensors")
     print(f"{'benchmark':44s} {'median':>10s} {'p90':>10s} {'target':>10s}")
     print(f"{'features U (m=21, n=30), per frame':44s} {np.median(t) * 1e6:8.1f}us {np.percentile(t, 90) * 1e6:8.1f}us {'<= 30us':>10s}   ({len(t)} calls)")
     print(f"{'decision (features + C + progress), per frame':44s} {np.median(d) * 1e6:8.1f}us {np.percentile(d, 90) * 1e6:8.1f}us {'<= 100us':>10s}   ({len(d)} calls)")
+    print(f"{'planner driving train_course, closed loop':44s} {loop_s:9.2f}s {'':>10s} {'-':>10s}   ({loop_frames} frames, {loop_frames / loop_s:.0f} frames/s)")
     print(f"{'record train_course (synthetic driver)':44s} {wall:9.2f}s {'':>10s} {'<= 20s':>10s}   ({frames} frames, {size / 1e6:.1f} MB, {size / frames / 1e3:.1f} kB/frame)")
     return 0
 

@@ -58,6 +58,18 @@ RECIPES = [
            disturbance=DisturbanceConfig(rate_hz=0.3)),
     Recipe("ours, hidden width 256", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True, hidden=256),
            disturbance=DisturbanceConfig(rate_hz=0.3)),
+    Recipe("ours, 3 demos", 3, 0, TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True),
+           disturbance=DisturbanceConfig(rate_hz=0.3)),
+    Recipe("ours, 4 demos, 150 epochs", 4, 0, TrainConfig(epochs=150, skip=True, class_balance=True, mirror=True),
+           disturbance=DisturbanceConfig(rate_hz=0.3)),
+    Recipe("ours + 1 correction", 2, 1, TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True),
+           disturbance=DisturbanceConfig(rate_hz=0.3)),
+    Recipe("ours + 2 corrections", 2, 2, TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True),
+           disturbance=DisturbanceConfig(rate_hz=0.3)),
+    Recipe("ours, 2 channels per trajectory", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True, channels=2),
+           disturbance=DisturbanceConfig(rate_hz=0.3)),
+    Recipe("ours, 4 channels per trajectory", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True, channels=4),
+           disturbance=DisturbanceConfig(rate_hz=0.3)),
 ]
 
 

@@ -94,8 +94,8 @@ def expected_shapes(c: ClassifierConfig) -> dict[str, tuple[int, ...]]:
     """Weight names and shapes of a classifier (PyTorch state-dict names)."""
     shapes: dict[str, tuple[int, ...]] = {}
     if c.compress:
-        shapes |= {"compress.weight": (1, c.n_features), "compress.bias": (1,)}
-    dims = [c.m if c.compress else c.m * c.n_features] + [c.hidden] * c.depth + [c.m]
+        shapes |= {"compress.weight": (c.channels, c.n_features), "compress.bias": (c.channels,)}
+    dims = [c.width_in] + [c.hidden] * c.depth + [c.m]
     for i, (a, b) in enumerate(zip(dims[:-1], dims[1:])):
         shapes |= {f"layers.{i}.weight": (b, a), f"layers.{i}.bias": (b,)}
     return shapes

@@ -29,6 +29,9 @@ class ClassifierConfig:
         skip: add the compressed scores to the logits (a residual path, so the identity
             "pick the best-scored trajectory" is the starting point); False is the paper's C.
         ignore: indices of U's columns the classifier never sees (set to zero): an ablation.
+        channels: outputs of the row-wise compression per trajectory (1: the paper's 5 -> 1;
+            more lets the hidden layers weigh, say, terrain and distance apart); with
+            ``skip`` the first channel is the residual score.
     """
 
     m: int = 21
@@ -39,6 +42,7 @@ class ClassifierConfig:
     compress: bool = True
     skip: bool = False
     ignore: tuple[int, ...] = ()
+    channels: int = 1
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "ignore", tuple(int(i) for i in self.ignore))
@@ -46,13 +50,18 @@ class ClassifierConfig:
             raise ValueError("ignore: column index out of range")
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"activation must be one of {', '.join(ACTIVATIONS)}")
-        if self.m < 2 or self.n_features < 1 or self.hidden < 1 or self.depth < 1:
-            raise ValueError("m >= 2, n_features >= 1, hidden >= 1, depth >= 1")
+        if self.m < 2 or self.n_features < 1 or self.hidden < 1 or self.depth < 1 or self.channels < 1:
+            raise ValueError("m >= 2, n_features >= 1, hidden >= 1, depth >= 1, channels >= 1")
         if self.skip and not self.compress:
             raise ValueError("skip needs the row-wise compression")
 
     def to_dict(self) -> dict:
         return {**asdict(self), "ignore": list(self.ignore)}
+
+    @property
+    def width_in(self) -> int:
+        """Inputs of the first hidden layer."""
+        return self.m * self.channels if self.compress else self.m * self.n_features
 
     @classmethod
     def from_dict(cls, data: dict) -> ClassifierConfig:
@@ -70,19 +79,23 @@ def _act(name: str, x: np.ndarray) -> np.ndarray:
 def numpy_forward(config: ClassifierConfig, weights: dict[str, np.ndarray], U: np.ndarray) -> np.ndarray:
     """Logits of C for U of shape (m, k) or (B, m, k); returns (m,) or (B, m).
 
-    ``weights`` uses the PyTorch state-dict names: compress.weight (1, k), compress.bias (1,),
-    layers.{i}.weight (out, in), layers.{i}.bias (out,).
+    ``weights`` uses the PyTorch state-dict names: compress.weight (channels, k),
+    compress.bias (channels,), layers.{i}.weight (out, in), layers.{i}.bias (out,).
     """
     single = U.ndim == 2
     x = U[None] if single else U
     if config.ignore:
         x = x.copy()
         x[..., list(config.ignore)] = 0.0
-    if config.compress:
+    if config.channels == 1 and config.compress:
         scores = x @ weights["compress.weight"][0] + weights["compress.bias"][0]  # (B, m)
+        h = scores
+    elif config.compress:
+        per_row = x @ weights["compress.weight"].T + weights["compress.bias"]  # (B, m, channels)
+        scores = per_row[..., 0]
+        h = per_row.reshape(len(x), -1)
     else:
-        scores = x.reshape(len(x), -1)
-    h = scores
+        scores = h = x.reshape(len(x), -1)
     for i in range(config.depth):
         h = _act(config.activation, h @ weights[f"layers.{i}.weight"].T + weights[f"layers.{i}.bias"])
     logits = h @ weights[f"layers.{config.depth}.weight"].T + weights[f"layers.{config.depth}.bias"]

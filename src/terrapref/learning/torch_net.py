@@ -16,9 +16,8 @@ class UtilityClassifier(nn.Module):
     def __init__(self, config: ClassifierConfig) -> None:
         super().__init__()
         self.config = config
-        width_in = config.m if config.compress else config.m * config.n_features
-        self.compress = nn.Linear(config.n_features, 1) if config.compress else None
-        dims = [width_in] + [config.hidden] * config.depth + [config.m]
+        self.compress = nn.Linear(config.n_features, config.channels) if config.compress else None
+        dims = [config.width_in] + [config.hidden] * config.depth + [config.m]
         self.layers = nn.ModuleList(nn.Linear(a, b) for a, b in zip(dims[:-1], dims[1:]))
         self.act = _ACT[config.activation]()
 
@@ -26,8 +25,11 @@ class UtilityClassifier(nn.Module):
         if self.config.ignore:
             U = U.clone()
             U[..., list(self.config.ignore)] = 0.0
-        scores = self.compress(U).squeeze(-1) if self.compress is not None else U.flatten(1)
-        h = scores
+        if self.compress is not None:
+            per_row = self.compress(U)  # (B, m, channels)
+            scores, h = per_row[..., 0], per_row.flatten(1)
+        else:
+            scores = h = U.flatten(1)
         for layer in self.layers[:-1]:
             h = self.act(layer(h))
         logits = self.layers[-1](h)

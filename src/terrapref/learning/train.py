@@ -42,7 +42,8 @@ class TrainConfig:
             (the highest distance utility): the frames that carry the preference. 1 is off.
         ignore_features: utility columns (by name: "distance", "mud", ...) that C never sees.
         seed: seeds the split, the initialisation and the batch order.
-        hidden, activation, depth, skip, compress: the classifier's shape (see ClassifierConfig).
+        hidden, activation, depth, skip, compress, channels: the classifier's shape (see
+            ClassifierConfig).
     """
 
     epochs: int = 15
@@ -60,6 +61,7 @@ class TrainConfig:
     skip: bool = False
     compress: bool = True
     ignore_features: tuple[str, ...] = ()
+    channels: int = 1
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "ignore_features", tuple(self.ignore_features))
@@ -75,7 +77,7 @@ class TrainConfig:
             if not ok:
                 raise ValueError(message)
         # The classifier's own checks (hidden, depth, activation, skip with compress).
-        ClassifierConfig(2, 1, self.hidden, self.activation, self.depth, self.compress, self.skip)
+        ClassifierConfig(2, 1, self.hidden, self.activation, self.depth, self.compress, self.skip, channels=self.channels)
 
     def to_dict(self) -> dict:
         return {**asdict(self), "ignore_features": list(self.ignore_features)}
@@ -165,7 +167,7 @@ def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetri
     if unknown:
         raise ValueError(f"ignore_features: no column {sorted(unknown)} (columns: {', '.join(names)})")
     ignore = tuple(names.index(n) for n in config.ignore_features)
-    classifier = ClassifierConfig(m, k, config.hidden, config.activation, config.depth, config.compress, config.skip, ignore)
+    classifier = ClassifierConfig(m, k, config.hidden, config.activation, config.depth, config.compress, config.skip, ignore, config.channels)
     model = UtilityClassifier(classifier)
     opt = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     U = torch.from_numpy(np.ascontiguousarray(U_np, dtype=np.float32))
