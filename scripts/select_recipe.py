@@ -70,6 +70,10 @@ RECIPES = [
            disturbance=DisturbanceConfig(rate_hz=0.3)),
     Recipe("ours, 4 channels per trajectory", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True, channels=4),
            disturbance=DisturbanceConfig(rate_hz=0.3)),
+    Recipe("ours, decisive x3", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True, decisive_weight=3.0),
+           disturbance=DisturbanceConfig(rate_hz=0.3)),
+    Recipe("ours, weight decay 1e-4", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True, weight_decay=1e-4),
+           disturbance=DisturbanceConfig(rate_hz=0.3)),
 ]
 
 
