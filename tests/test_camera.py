@@ -363,3 +363,22 @@ def test_view_renders_the_whole_frame_only_when_asked():
     np.testing.assert_array_equal(SegmentationView.of(full).pixels(idx), full.reshape(-1)[idx])
     with pytest.raises(ValueError):
         SegmentationView(renderer)
+
+
+def test_pixels_reads_a_changed_index_array_afresh():
+    """Only an index array that owns its data and is read-only is prepared once; any other is
+    read anew on every call, so changing it between calls changes the answer."""
+    rng = np.random.default_rng(5)
+    renderer = SegmentationRenderer(PinholeCamera(), _blocks_world(rng))
+    pose = Pose(20.0, 12.0, 0.4)
+    full = renderer.render(pose).reshape(-1)
+    idx = rng.integers(300 * 640, full.size, 400)
+    np.testing.assert_array_equal(renderer.pixels(pose, idx), full[idx])
+    idx[:] = rng.integers(300 * 640, full.size, 400)
+    np.testing.assert_array_equal(renderer.pixels(pose, idx), full[idx])
+    frozen = idx.copy()
+    frozen.flags.writeable = False
+    view = frozen[:200]  # read-only but not its own data
+    np.testing.assert_array_equal(renderer.pixels(pose, frozen), full[frozen])
+    np.testing.assert_array_equal(renderer.pixels(pose, view), full[view])
+    np.testing.assert_array_equal(renderer.pixels(pose, frozen), full[frozen])

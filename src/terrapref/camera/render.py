@@ -114,8 +114,8 @@ class SegmentationRenderer:
         """Class ids of the pixels ``flat_index`` (row * width + col) of the image at ``pose``.
 
         Equal to ``render(pose).reshape(-1)[flat_index]``: the same float32 operations, on
-        those pixels only. A read-only index array (a preference set's, asked for every frame)
-        is prepared once and kept.
+        those pixels only. An index array that owns its data and is read-only (a preference
+        set's, asked for every frame) is prepared once and kept.
         """
         rows, u, seen = self._prepared(flat_index)
         A, B = self._cells(pose, rows)
@@ -130,7 +130,7 @@ class SegmentationRenderer:
         return out
 
     def _prepared(self, flat_index: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(block row, column offset, pixel index) of the seen pixels, and which pixels are seen."""
+        """Block row and column offset of each seen pixel, and which pixels are seen."""
         cached = self._prepared_for
         if cached is not None and cached[0] is flat_index:
             return cached[1]
@@ -138,7 +138,7 @@ class SegmentationRenderer:
         rows, cols = np.divmod(flat, self.camera.config.width_px)
         seen = self._valid_flat[flat]
         prepared = (rows[seen] - self._row0, self._u[cols[seen]], seen)
-        if isinstance(flat_index, np.ndarray) and not flat_index.flags.writeable:
+        if isinstance(flat_index, np.ndarray) and flat_index.base is None and not flat_index.flags.writeable:
             self._prepared_for = (flat_index, prepared)
         return prepared
 
