@@ -272,3 +272,29 @@ def test_cli_train_bad_hyperparameter_is_a_user_error(tmp_path: Path, capsys, fl
     assert main(["train", str(data), "--out", str(tmp_path / "m.safetensors"), *flag]) == 2
     line = _one_line_error(capsys)
     assert re.search(flag[0].lstrip("-").replace("-", "[-_]"), line), line  # names the flag or the field
+
+
+# --- errors raised in worker processes ------------------------------------------------------------
+
+
+def test_user_error_survives_the_trip_between_processes():
+    import pickle
+
+    from terrapref.errors import Problem, ScenarioError, UserError
+
+    for err in (UserError("model.safetensors", "not a model", field="format"),
+                ScenarioError("s.yaml", [Problem("terrain[0].circle.radius", "must be > 0"), Problem("path", "too short")])):
+        back = pickle.loads(pickle.dumps(err))
+        assert type(back) is type(err) and back.lines() == err.lines() and str(back) == str(err)
+
+
+def test_a_bad_model_in_a_worker_is_a_user_error_not_a_broken_pool(tmp_path: Path):
+    from terrapref.errors import UserError
+    from terrapref.evaluation.runner import PLANNER, RunSpec, run_many
+
+    bad = tmp_path / "model.safetensors"
+    bad.write_bytes(b"not a model at all")
+    specs = [RunSpec("demo_course", seed, PLANNER, str(bad), ("mud", "rock", "water", "non_traversable")) for seed in (0, 1)]
+    with pytest.raises(UserError) as info:
+        run_many(specs, workers=2)
+    assert str(bad) in str(info.value)

@@ -37,6 +37,11 @@ class UserError(Exception):
         """One printable line per problem, each naming the file and the field."""
         return [p.format(self.source) for p in self.problems]
 
+    def __reduce__(self):
+        # Rebuilt from its own arguments, so that an error raised in a worker process reaches
+        # the parent intact (and is printed as one line there) instead of breaking the pool.
+        return (type(self), (self.source, self.problems))
+
 
 class ScenarioError(UserError):
     """A scenario file that does not follow ``terrapref-scenario/1``."""
