@@ -12,31 +12,21 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from terrapref.camera import CameraConfig
 from terrapref.cli import main
 from terrapref.demos.dataset import FORMAT as DATASET_FORMAT
 from terrapref.demos.dataset import Dataset, save_dataset
 from terrapref.evaluation.evaluate import evaluate_model
-from terrapref.features import FeatureConfig
 from terrapref.learning.model_file import load_model, save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.scenario import resolve_scenario
 from terrapref.terrain import PreferenceProfile, default_classes
 
+from helpers import model_meta
+
 PNG = b"\x89PNG\r\n\x1a\n"
 RUN_KEYS = {"completed", "collisions", "duration_s", "rms_cross_track_m", "max_cross_track_m", "distance_m", "zones"}
 ZONE_KEYS = {"id", "expect", "choice", "success"}
 ROCK_FIRST = "rock,mud,water,non_traversable"
-
-
-def _meta() -> dict:
-    classes = default_classes()
-    return {
-        "features": FeatureConfig().to_dict(),
-        "camera": CameraConfig().to_dict(),
-        "classes": classes.to_dict(),
-        "profile": list(classes.profile),
-    }
 
 
 def _linear_model(path: Path) -> Path:
@@ -48,12 +38,12 @@ def _linear_model(path: Path) -> Path:
     for i, (a, b) in enumerate(zip(dims[:-1], dims[1:])):
         weights[f"layers.{i}.weight"] = np.zeros((b, a), np.float32)
         weights[f"layers.{i}.bias"] = np.zeros(b, np.float32)
-    return save_model(path, config, weights, _meta())
+    return save_model(path, config, weights, model_meta())
 
 
 def _dataset_file(path: Path, n: int = 300, seed: int = 0) -> Path:
     rng = np.random.default_rng(seed)
-    meta = {"format": DATASET_FORMAT, **_meta()}
+    meta = {"format": DATASET_FORMAT, **model_meta()}
     data = Dataset(rng.uniform(0, 1, (n, 21, 5)).astype(np.float32), rng.integers(0, 21, n), np.zeros(n, np.float32), np.zeros(n, np.int64), meta)
     return save_dataset(data, path)
 

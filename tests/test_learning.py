@@ -27,23 +27,15 @@ from terrapref.learning.torch_net import UtilityClassifier
 from terrapref.learning.train import TrainConfig, decisive_frames, split_indices, train
 from terrapref.terrain import PreferenceProfile, default_classes
 
+from helpers import model_meta
+
 M, K = 21, 5
 W_TRUE = np.array([-3.0, -1.5, -0.5, 0.5, 2.0], dtype=np.float32)  # a fixed linear utility over U's columns
 
 
-def _meta(features: FeatureConfig | None = None, camera: CameraConfig | None = None, profile: tuple[str, ...] | None = None) -> dict:
-    classes = default_classes()
-    return {
-        "features": (features or FeatureConfig()).to_dict(),
-        "camera": (camera or CameraConfig()).to_dict(),
-        "classes": classes.to_dict(),
-        "profile": list(profile or classes.profile),
-    }
-
-
 def _dataset(U: np.ndarray, labels: np.ndarray) -> Dataset:
     n = len(labels)
-    meta = {"format": DATASET_FORMAT, **_meta()}
+    meta = {"format": DATASET_FORMAT, **model_meta()}
     return Dataset(U.astype(np.float32), labels.astype(np.int64), np.zeros(n, np.float32), np.zeros(n, np.int64), meta)
 
 
@@ -304,7 +296,7 @@ ODD_PROFILE = ("mud", "rock", "water", "non_traversable")
 def model_file(tmp_path: Path) -> tuple[Path, ClassifierConfig, dict[str, np.ndarray]]:
     config = ClassifierConfig(hidden=16, activation="tanh", depth=2, skip=True, channels=2)
     weights = _random_weights(config)
-    path = save_model(tmp_path / "sub" / "model.safetensors", config, weights, {**_meta(ODD_FEATURES, ODD_CAMERA, ODD_PROFILE), "note": "kept"})
+    path = save_model(tmp_path / "sub" / "model.safetensors", config, weights, {**model_meta(ODD_FEATURES, ODD_CAMERA, ODD_PROFILE), "note": "kept"})
     return path, config, weights
 
 
@@ -413,7 +405,7 @@ def test_missing_metadata_is_refused(model_file, metadata: dict):
 
 def test_wrong_format_is_refused(model_file):
     path, config, weights = model_file
-    header = {"format": "terrapref-model/99", "classifier": config.to_dict(), **_meta()}
+    header = {"format": "terrapref-model/99", "classifier": config.to_dict(), **model_meta()}
     save_file(weights, str(path), metadata={"terrapref": json.dumps(header)})
     assert _expect_user_error(path, "terrapref-model/99").problems[0].field == "format"
 
@@ -421,7 +413,7 @@ def test_wrong_format_is_refused(model_file):
 @pytest.mark.parametrize("key", ["camera", "features", "classes", "profile", "classifier"])
 def test_missing_configuration_is_refused(model_file, key: str):
     path, config, weights = model_file
-    header = {"format": FORMAT, "classifier": config.to_dict(), **_meta()}
+    header = {"format": FORMAT, "classifier": config.to_dict(), **model_meta()}
     del header[key]
     save_file(weights, str(path), metadata={"terrapref": json.dumps(header)})
     assert _expect_user_error(path, key).problems[0].field == key
@@ -429,7 +421,7 @@ def test_missing_configuration_is_refused(model_file, key: str):
 
 def test_invalid_configuration_is_refused(model_file):
     path, config, weights = model_file
-    header = {"format": FORMAT, "classifier": {**config.to_dict(), "activation": "sigmoid"}, **_meta()}
+    header = {"format": FORMAT, "classifier": {**config.to_dict(), "activation": "sigmoid"}, **model_meta()}
     save_file(weights, str(path), metadata={"terrapref": json.dumps(header)})
     _expect_user_error(path, "activation")
 
@@ -442,7 +434,7 @@ def test_weights_not_matching_the_classifier_are_refused(model_file, change: str
         del weights[f"layers.{config.depth}.bias"]
     else:
         weights["layers.9.weight"] = np.zeros((2, 2), np.float32)
-    save_model(path, config, weights, _meta(ODD_FEATURES, ODD_CAMERA, ODD_PROFILE))
+    save_model(path, config, weights, model_meta(ODD_FEATURES, ODD_CAMERA, ODD_PROFILE))
     err = _expect_user_error(path, "layers.")
     assert err.problems[0].field == "weights"
 
@@ -451,14 +443,14 @@ def test_weights_not_matching_the_classifier_are_refused(model_file, change: str
 def test_weights_of_the_wrong_shape_are_refused(model_file, name: str):
     path, config, weights = model_file
     weights = {**weights, name: np.zeros(tuple(d + 1 for d in weights[name].shape), np.float32)}
-    save_model(path, config, weights, _meta(ODD_FEATURES, ODD_CAMERA, ODD_PROFILE))
+    save_model(path, config, weights, model_meta(ODD_FEATURES, ODD_CAMERA, ODD_PROFILE))
     err = _expect_user_error(path, name)
     assert err.problems[0].field == f"weights.{name}"
 
 
 def test_classifier_not_matching_the_features_is_refused(tmp_path: Path):
     config = ClassifierConfig(m=11)
-    path = save_model(tmp_path / "m.safetensors", config, _random_weights(config), _meta())
+    path = save_model(tmp_path / "m.safetensors", config, _random_weights(config), model_meta())
     assert _expect_user_error(path).problems[0].field == "classifier"
 
 
@@ -473,7 +465,7 @@ def test_check_compatible_refuses_another_camera(model_file):
 
 def test_check_compatible_refuses_a_default_model_under_pitch_25(tmp_path: Path):
     config = ClassifierConfig()
-    model = load_model(save_model(tmp_path / "m.safetensors", config, _random_weights(config), _meta()))
+    model = load_model(save_model(tmp_path / "m.safetensors", config, _random_weights(config), model_meta()))
     with pytest.raises(UserError) as err:
         check_compatible(model, CameraConfig(pitch_deg=25.0))
     assert str(tmp_path / "m.safetensors") in str(err.value) and "pitch_deg" in str(err.value)
@@ -481,7 +473,7 @@ def test_check_compatible_refuses_a_default_model_under_pitch_25(tmp_path: Path)
 
 def test_check_compatible_refuses_another_preference_set(tmp_path: Path):
     config = ClassifierConfig()
-    model = load_model(save_model(tmp_path / "m.safetensors", config, _random_weights(config), _meta()))
+    model = load_model(save_model(tmp_path / "m.safetensors", config, _random_weights(config), model_meta()))
     check_compatible(model, CameraConfig(), FeatureConfig())
     with pytest.raises(UserError) as err:
         check_compatible(model, CameraConfig(), FeatureConfig(PreferenceSetConfig(n_steps=20)))
@@ -491,7 +483,7 @@ def test_check_compatible_refuses_another_preference_set(tmp_path: Path):
 
 def test_check_compatible_names_the_differing_preference_field(tmp_path: Path):
     config = ClassifierConfig()
-    model = load_model(save_model(tmp_path / "m.safetensors", config, _random_weights(config), _meta()))
+    model = load_model(save_model(tmp_path / "m.safetensors", config, _random_weights(config), model_meta()))
     with pytest.raises(UserError) as err:
         check_compatible(model, CameraConfig(), FeatureConfig(PreferenceSetConfig(n_steps=20)))
     assert "n_steps" in str(err.value)

@@ -32,22 +32,14 @@ from terrapref.planner import Decision, Planner, PlannerDriver
 from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim import Frame, SimConfig, Simulation, run_episode
-from terrapref.terrain import PreferenceProfile, default_classes
+from terrapref.terrain import PreferenceProfile
 from terrapref.vehicle import Command, Pose
 from terrapref.world import WorldMap
 
+from helpers import model_meta
+
 # Columns of U: non_traversable, water, rock, mud, distance. Avoid terrain, follow the path.
 LINEAR_W = np.array([-8.0, -4.0, -2.0, -1.0, 6.0], dtype=np.float32)
-
-
-def _meta(camera: CameraConfig | None = None) -> dict:
-    classes = default_classes()
-    return {
-        "features": FeatureConfig().to_dict(),
-        "camera": (camera or CameraConfig()).to_dict(),
-        "classes": classes.to_dict(),
-        "profile": list(classes.profile),
-    }
 
 
 def _linear_weights(config: ClassifierConfig, w: np.ndarray = LINEAR_W) -> dict[str, np.ndarray]:
@@ -62,14 +54,14 @@ def _linear_weights(config: ClassifierConfig, w: np.ndarray = LINEAR_W) -> dict[
 
 def _linear_model(path: Path, camera: CameraConfig | None = None) -> LoadedModel:
     config = ClassifierConfig(hidden=8, skip=True)
-    return load_model(save_model(path, config, _linear_weights(config), _meta(camera)))
+    return load_model(save_model(path, config, _linear_weights(config), model_meta(camera=camera)))
 
 
 def _random_model(path: Path) -> LoadedModel:
     config = ClassifierConfig(hidden=16, activation="elu")
     torch.manual_seed(5)
     weights = {k: v.detach().numpy().copy() for k, v in UtilityClassifier(config).state_dict().items()}
-    return load_model(save_model(path, config, weights, _meta()))
+    return load_model(save_model(path, config, weights, model_meta()))
 
 
 @pytest.fixture(scope="module")

@@ -37,19 +37,11 @@ from terrapref.tensorfile import write_tensor_file
 from terrapref.terrain import default_classes
 from terrapref.vehicle import Pose
 
+from helpers import model_meta
+
 M, K = 21, 5  # trajectories; utility columns (non_traversable, water, rock, mud, distance)
 NO_IMAGE = SegmentationView.of(np.zeros((4, 4), np.uint8))
 NO_POINTS = np.zeros((0, 2))
-
-
-def _meta(camera: CameraConfig | None = None) -> dict:
-    classes = default_classes()
-    return {
-        "features": FeatureConfig().to_dict(),
-        "camera": (camera or CameraConfig()).to_dict(),
-        "classes": classes.to_dict(),
-        "profile": list(classes.profile),
-    }
 
 
 def _torch_weights(config: ClassifierConfig, seed: int = 3) -> dict[str, np.ndarray]:
@@ -189,14 +181,14 @@ def classifier_file(tmp_path_factory) -> SimpleNamespace:
     d = tmp_path_factory.mktemp("models")
     config = ClassifierConfig(hidden=8, activation="tanh")
     weights = _torch_weights(config)
-    path = save_model(d / "c.safetensors", config, weights, _meta())
+    path = save_model(d / "c.safetensors", config, weights, model_meta())
     return SimpleNamespace(path=path, config=config, weights=weights, model=load_model(path))
 
 
 def test_save_linear_load_policy_round_trip(tmp_path: Path):
     rng = np.random.default_rng(5)
     utility = LinearUtility(rng.normal(size=K), rng.normal(size=M))
-    path = save_linear(tmp_path / "lin.safetensors", utility, _meta())
+    path = save_linear(tmp_path / "lin.safetensors", utility, model_meta())
     assert path.is_file()
     policy = load_policy(path)
     assert type(policy) is LinearPolicy
@@ -218,7 +210,7 @@ def test_load_policy_of_a_classifier_file(classifier_file):
 
 
 def test_load_model_refuses_a_linear_file(tmp_path: Path):
-    path = save_linear(tmp_path / "lin.safetensors", LinearUtility(np.zeros(K), np.zeros(M)), _meta())
+    path = save_linear(tmp_path / "lin.safetensors", LinearUtility(np.zeros(K), np.zeros(M)), model_meta())
     with pytest.raises(UserError) as err:
         load_model(path)
     assert "linear" in str(err.value) and str(path) in str(err.value)
@@ -238,7 +230,7 @@ def test_load_policy_refuses_an_unknown_kind(tmp_path: Path, classifier_file):
 
 def test_load_policy_refuses_a_linear_file_with_wrong_shapes(tmp_path: Path):
     path = write_tensor_file(tmp_path / "lin.safetensors", {"w": np.zeros(K + 1, np.float32), "b": np.zeros(M, np.float32)},
-                             {"format": FORMAT, "kind": "linear", **_meta()})
+                             {"format": FORMAT, "kind": "linear", **model_meta()})
     with pytest.raises(UserError) as err:
         load_policy(path)
     assert err.value.problems[0].field == "weights.w"
@@ -328,7 +320,7 @@ def test_ignore_survives_to_dict_from_dict(tmp_path: Path):
     back = ClassifierConfig.from_dict(d)
     assert back == config and back.ignore == (4, 1)
     # And through a model file.
-    path = save_model(tmp_path / "c.safetensors", config, _torch_weights(config), _meta())
+    path = save_model(tmp_path / "c.safetensors", config, _torch_weights(config), model_meta())
     assert load_model(path).classifier.ignore == (4, 1)
 
 
@@ -353,7 +345,7 @@ def test_evaluate_command_drives_a_linear_model_file(tmp_path, capsys):
 
     features = FeatureConfig()
     w = np.array([-50.0, -8.0, -4.0, -2.0, 2.0])
-    path = save_linear(tmp_path / "linear.safetensors", LinearUtility(w, np.zeros(features.preference.m)), _meta())
+    path = save_linear(tmp_path / "linear.safetensors", LinearUtility(w, np.zeros(features.preference.m)), model_meta())
     out = tmp_path / "eval"
     assert main(["evaluate", str(path), "demo_course", "--seeds", "1", "--out", str(out), "--no-driver", "--workers", "1"]) == 0
     import json
