@@ -87,10 +87,7 @@ def numpy_forward(config: ClassifierConfig, weights: dict[str, np.ndarray], U: n
     if config.ignore:
         x = x.copy()
         x[..., list(config.ignore)] = 0.0
-    if config.channels == 1 and config.compress:
-        scores = x @ weights["compress.weight"][0] + weights["compress.bias"][0]  # (B, m)
-        h = scores
-    elif config.compress:
+    if config.compress:
         per_row = x @ weights["compress.weight"].T + weights["compress.bias"]  # (B, m, channels)
         scores = per_row[..., 0]
         h = per_row.reshape(len(x), -1)
