@@ -16,18 +16,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from terrapref.camera import CameraConfig, SegmentationView
+from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
 from terrapref.learning.linear import LinearUtility
-from pathlib import Path
-
-from terrapref.errors import UserError
 from terrapref.learning.model_file import CLASSIFIER, FORMAT, LoadedModel, classifier_from, model_context, read_model_file
-from terrapref.tensorfile import write_tensor_file
 from terrapref.learning.network import numpy_forward
+from terrapref.tensorfile import write_tensor_file
 from terrapref.terrain import ClassTable, default_classes
 
 
