@@ -210,4 +210,3 @@ class ExpertDriver:
         if out != 0.0 and c.stick_noise_rps > 0:
             out = float(np.clip(out + self.rng.normal(0.0, c.stick_noise_rps), -c.max_yaw_rate_rps, c.max_yaw_rate_rps))
         return Command(c.speed_mps, out)
-

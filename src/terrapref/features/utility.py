@@ -24,7 +24,7 @@ from enum import Enum
 
 import numpy as np
 
-from terrapref.camera import PinholeCamera, SegmentationView
+from terrapref.camera import PinholeCamera, SegmentationView, as_view
 from terrapref.features.preference_set import PreferenceSet, PreferenceSetConfig
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable, default_classes
@@ -125,8 +125,7 @@ class UtilityFeaturizer:
     def terrain(self, image: np.ndarray | SegmentationView) -> np.ndarray:
         """Terrain utilities, shape (m, K): share of each trajectory's points on each class."""
         k = len(self.config.feature_classes)
-        ids = image.pixels(self._pix_flat) if isinstance(image, SegmentationView) else image.reshape(-1)[self._pix_flat]
-        cols = self._column[ids]
+        cols = self._column[as_view(image).pixels(self._pix_flat)]
         counts = np.bincount(cols + self._offset, minlength=self._bins)
         return counts.reshape(self.pset.m + 1, k + 1)[:-1, :k] * (1.0 / self._n)
 
