@@ -33,7 +33,7 @@ def zone_kind(label: str) -> str:
 
 
 def commits(course: str, features: FeatureConfig, profile: tuple[str, ...]) -> list[tuple[str, list[str], dict[str, int]]]:
-    """(zone kind, the zone's classes left to right, points on the best trajectory per class) per commit."""
+    """Per commit: (zone kind, the zone's classes left to right, the most points any one trajectory has on each class)."""
     scenario = resolve_scenario(course)
     world = rasterise(scenario)
     camera = CameraConfig()
