@@ -25,7 +25,6 @@ from terrapref.learning.recipe import PAPER, Recipe, run_recipe
 from terrapref.learning.train import TrainConfig
 from terrapref.progress import every_tenth
 from terrapref.scenario import packaged_scenarios, resolve_scenario
-from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import PreferenceProfile
 
 # Chosen on generated courses, never on the packaged test set (docs/learning.md).
@@ -104,7 +103,7 @@ def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes:
 @functools.lru_cache(maxsize=64)
 def scenario_length(scenario: str) -> float:
     """Length of a scenario's reference path [m] (to start the longest runs first)."""
-    return ReferencePath(resolve_scenario(scenario).waypoints).length_m
+    return resolve_scenario(scenario).path_length_m()
 
 
 def _zone_rows(results: list[dict], scenario: str, recipes: tuple[Recipe, ...]) -> list[str]:
