@@ -43,20 +43,20 @@ def commits(course: str, features: FeatureConfig, profile: tuple[str, ...]) -> l
     frame = sim.reset()
     driver.reset(scenario, np.random.default_rng(0))
     names = list(features.feature_classes)
-    poses, shares, committed = [], [], []
+    poses, shares = [], {}  # shares only at the commit frames: frame index -> (K,)
     held = 0.0
     while not sim.done:
         command = driver.act(frame)
+        if held == 0.0 and driver.offset != 0.0:
+            shares[len(poses)] = featurizer.terrain(frame.view).max(axis=0)
         poses.append(frame.pose[:2])
-        shares.append(featurizer.terrain(frame.view).max(axis=0))
-        committed.append(held == 0.0 and driver.offset != 0.0)
         held = driver.offset
         frame = sim.step(command)
     poses_arr = np.array(poses)
     inside = {z.id: z.shape.contains(poses_arr) for z in scenario.zones}
     n = features.preference.n_steps
     out, used = [], set()
-    for i in np.flatnonzero(committed):
+    for i in sorted(shares):
         ahead = slice(i, i + ENTRY_WINDOW_FRAMES)
         entered = [(int(np.argmax(inside[z.id][ahead])), z) for z in scenario.zones if inside[z.id][ahead].any() and z.id not in used]
         if not entered:
