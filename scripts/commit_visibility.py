@@ -22,14 +22,11 @@ from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.features import FeatureConfig
 from terrapref.features.utility import UtilityFeaturizer
 from terrapref.scenario import resolve_scenario
+from terrapref.scenario.generate import zone_kind
 from terrapref.sim import SimConfig, Simulation
 from terrapref.world import rasterise
 
 ENTRY_WINDOW_FRAMES = 120  # a commit belongs to the zone entered within the next 12 s
-
-
-def zone_kind(label: str) -> str:
-    return "lone" if label.startswith("lone") else ("triple" if label.count("|") == 2 else "pair")
 
 
 def commits(course: str, features: FeatureConfig, profile: tuple[str, ...]) -> list[tuple[str, list[str], dict[str, int]]]:

@@ -7,6 +7,7 @@ driver misses is ambiguous under its own costs, and is left out).
 
     python scripts/select_recipe.py --seeds 2 --courses 4
     python scripts/select_recipe.py --seeds 3 --courses 16 --only 19 29   # the docs/learning.md runs
+    python scripts/select_recipe.py --seeds 5 --courses 32 --only 19 34   # + 2 practice courses, 5 seeds
 
 With closed-loop runs cheap, 16 courses (117 zones the driver meets) cost little more than 8;
 training is most of the time (about a minute per recipe and seed).
@@ -23,6 +24,8 @@ from terrapref.demos.session import DisturbanceConfig
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_many
 from terrapref.learning.recipe import PAPER, Recipe
 from terrapref.learning.train import TrainConfig
+from terrapref.scenario import resolve_scenario
+from terrapref.scenario.generate import ZONE_KINDS, zone_kind
 
 RECIPES = [
     PAPER,
@@ -78,6 +81,12 @@ RECIPES = [
            disturbance=DisturbanceConfig(rate_hz=0.3)),
     Recipe("ours, weight decay 1e-4", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True, weight_decay=1e-4),
            disturbance=DisturbanceConfig(rate_hz=0.3)),
+    Recipe("ours + 1 practice course", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True),
+           disturbance=DisturbanceConfig(rate_hz=0.3), practice=1),
+    Recipe("ours + 2 practice courses", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True),
+           disturbance=DisturbanceConfig(rate_hz=0.3), practice=2),
+    Recipe("ours + 2 practice courses, 150 epochs", 2, 0, TrainConfig(epochs=150, skip=True, class_balance=True, mirror=True),
+           disturbance=DisturbanceConfig(rate_hz=0.3), practice=2),
 ]
 
 
@@ -93,6 +102,7 @@ def main() -> int:
     profile = ("mud", "rock", "water", "non_traversable")
     driver = run_many([RunSpec(c, 0, EXPERT, None, profile) for c in courses])
     fair = {(r["scenario"], z["id"]) for r in driver for z in r["metrics"]["zones"] if z["success"]}
+    kind = {(c, z.id): zone_kind(z.label) for c in courses for z in resolve_scenario(c).zones}
     total = sum(len(r["metrics"]["zones"]) for r in driver)
     print(f"validation: {len(courses)} generated courses, {len(fair)}/{total} zones the driver meets")
     for i, recipe in enumerate(RECIPES):
@@ -100,6 +110,7 @@ def main() -> int:
             continue
         t0 = time.perf_counter()
         ok = n = collisions = 0
+        by_kind = {k: [0, 0] for k in ZONE_KINDS}
         with tempfile.TemporaryDirectory() as tmp:
             for seed in range(args.seeds):
                 out = run_recipe(recipe, Path(tmp) / f"s{seed}", seed)
@@ -110,7 +121,11 @@ def main() -> int:
                         if (r["scenario"], z["id"]) in fair:
                             n += 1
                             ok += z["success"]
-        print(f"[{i}] {recipe.name:52s} zone success {ok}/{n} = {ok / max(n, 1):.1%}, collisions {collisions}  ({time.perf_counter() - t0:.0f} s)", flush=True)
+                            by_kind[kind[r["scenario"], z["id"]]][0] += z["success"]
+                            by_kind[kind[r["scenario"], z["id"]]][1] += 1
+        kinds = ", ".join(f"{k} {a}/{b}" for k, (a, b) in by_kind.items())
+        print(f"[{i}] {recipe.name:52s} zone success {ok}/{n} = {ok / max(n, 1):.1%}, collisions {collisions} ({kinds})  ({time.perf_counter() - t0:.0f} s)",
+              flush=True)
     return 0
 
 

@@ -893,3 +893,20 @@ def test_parse_error_without_source_has_no_file_prefix() -> None:
         parse_scenario(scenario(name="bad name"))
     assert info.value.lines() == ["name: must match [A-Za-z0-9_-]+"]
 
+
+
+def test_generated_courses_are_deterministic_valid_and_labelled_by_kind() -> None:
+    from terrapref.scenario.generate import ZONE_KINDS, generate_course, zone_kind
+
+    a, b = resolve_scenario("gen:1000"), resolve_scenario("gen:1000")
+    assert a.name == "gen_1000" and a.to_dict() == b.to_dict()
+    assert resolve_scenario("gen:1001").to_dict() != a.to_dict()
+    for kinds in (("lone",), ("pair",), ("triple",)):
+        course = generate_course(7, zones=6, kinds=kinds)
+        assert len(course.zones) == 6
+        assert {zone_kind(z.label) for z in course.zones} == set(kinds)
+        assert {z.expect for z in course.zones} == ({AVOID} if kinds == ("lone",) else {BEST})
+    mixed = {zone_kind(z.label) for s in range(1000, 1004) for z in resolve_scenario(f"gen:{s}").zones}
+    assert mixed == set(ZONE_KINDS)
+    with pytest.raises(ScenarioError, match="gen:SEED"):
+        resolve_scenario("gen:abc")

@@ -2,8 +2,9 @@
 
 ``paper`` is the published recipe: one demonstration on the training course, 15 epochs of C.
 Other recipes add what a real user could do with a human driver too: more demonstration runs,
-correction sessions (the planner drives, the person shows what they would do), a residual path
-in C, more training steps, and loss weights for the frames that carry the preference.
+demonstrations on practice courses (other layouts of the same terrain classes), correction
+sessions (the planner drives, the person shows what they would do), a residual path in C, more
+training steps, and loss weights for the frames that carry the preference.
 """
 
 from __future__ import annotations
@@ -43,6 +44,8 @@ class Recipe:
         smoothing: the planner's averaging of F_t over frames.
         disturbance: pushes injected while demonstrating, so that recoveries are shown
             (None: the driver drives undisturbed).
+        practice: practice courses, demonstrated once each besides the training course (see
+            :func:`practice_courses`); they show compositions the training course lacks.
     """
 
     name: str
@@ -51,12 +54,28 @@ class Recipe:
     train: TrainConfig = field(default_factory=TrainConfig)
     smoothing: float = 0.0
     disturbance: DisturbanceConfig | None = None
+    practice: int = 0
+
+    def __post_init__(self) -> None:
+        if self.demonstrations < 1 or self.corrections < 0 or self.practice < 0:
+            raise ValueError("a recipe needs demonstrations >= 1, corrections >= 0 and practice >= 0")
 
     def to_dict(self) -> dict:
         return asdict(self)
 
 
 PAPER = Recipe("paper")
+
+PRACTICE_BASE = 3000
+
+
+def practice_courses(recipe: Recipe, seed: int) -> list[str]:
+    """Practice course ``k`` of training seed ``seed``: the generated layout ``gen:(10000 seed + 3000 + 2000 k)``.
+
+    Each training seed gets its own layouts, as each person would lay out their own. They stay
+    clear of ``gen:1000``-``gen:1999``, where recipes are chosen (scripts/select_recipe.py).
+    """
+    return [f"gen:{10000 * seed + PRACTICE_BASE + 2000 * k}" for k in range(recipe.practice)]
 
 
 @dataclass
@@ -68,6 +87,38 @@ class RecipeOutput:
     correction_minutes: float
 
 
+def _demonstrate(
+    course: str,
+    out: Path,
+    demo_seed: int,
+    disturbance: DisturbanceConfig | None,
+    profile: PreferenceProfile | None,
+    features: FeatureConfig,
+) -> bool:
+    """One synthetic-driver run of ``course`` into ``out``; False if a matching one was reused.
+
+    A complete recording of the same course under the same driver, profile, seed and
+    disturbances is reused, so recipes sharing a seed share their demonstrations.
+    """
+    scenario = resolve_scenario(course)
+    profile = profile or PreferenceProfile.default(scenario.classes)
+    camera, sim_cfg = CameraConfig(), SimConfig()
+    expert_cfg = ExpertConfig(profile=profile.order)
+    pushes = disturbance.to_dict() if disturbance is not None else None
+    if (out / "meta.json").exists():
+        existing = read_recording(out)
+        driver = existing.meta["driver"]
+        if (existing.complete and existing.meta.get("scenario") == scenario.name and existing.meta.get("profile") == list(profile.order)
+                and driver.get("seed") == demo_seed and driver.get("disturbance") == pushes and driver.get("config") == expert_cfg.to_dict()):
+            return False
+    meta = recording_meta(scenario, camera, features.preference, sim_cfg,
+                          {"kind": "expert", "seed": demo_seed, "config": expert_cfg.to_dict(), "disturbance": pushes}, profile)
+    writer = RecordingWriter(out, meta, scenario.to_dict(), overwrite=True)
+    record_run(Simulation(scenario, camera, sim_cfg), ExpertDriver(expert_cfg), writer, features.preference,
+               np.random.default_rng(demo_seed), disturbance=disturbance)
+    return True
+
+
 def record_demonstrations(
     recipe: Recipe,
     workdir: str | Path,
@@ -77,39 +128,23 @@ def record_demonstrations(
     features: FeatureConfig | None = None,
     log: Callable[[str], None] | None = None,
 ) -> list[Path]:
-    """The recipe's demonstration runs (synthetic driver, seeds ``seed * 100 + k``) in ``workdir``.
+    """The recipe's demonstration runs (synthetic driver) in ``workdir``.
 
-    They go to ``workdir/demo_K`` (``demo_K_disturbed`` with disturbances) and a complete one
-    recorded under the same driver, profile, seed and disturbances is reused, so recipes sharing
-    a seed share their demonstrations.
+    Run ``k`` of ``course`` (seed ``seed * 100 + k``) goes to ``workdir/demo_K``, then practice
+    course ``k`` (seed ``seed * 100 + 20 + k``) to ``workdir/practice_K``; both names end in
+    ``_disturbed`` with disturbances. A complete run recorded under the same course, driver,
+    profile, seed and disturbances is reused, so recipes sharing a seed share their
+    demonstrations.
     """
     workdir = Path(workdir)
-    scenario = resolve_scenario(course)
-    profile = profile or PreferenceProfile.default(scenario.classes)
     features = features or FeatureConfig()
-    camera, sim_cfg = CameraConfig(), SimConfig()
-    expert_cfg = ExpertConfig(profile=profile.order)
-    disturbance = recipe.disturbance.to_dict() if recipe.disturbance is not None else None
-    sim = Simulation(scenario, camera, sim_cfg)
-    paths: list[Path] = []
-    for k in range(recipe.demonstrations):
-        demo_seed = seed * 100 + k
-        out = workdir / (f"demo_{k}" if disturbance is None else f"demo_{k}_disturbed")
-        if (out / "meta.json").exists():
-            existing = read_recording(out)
-            driver = existing.meta["driver"]
-            if (existing.complete and existing.meta.get("profile") == list(profile.order) and driver.get("seed") == demo_seed
-                    and driver.get("disturbance") == disturbance and driver.get("config") == expert_cfg.to_dict()):
-                paths.append(out)
-                continue
-        meta = recording_meta(scenario, camera, features.preference, sim_cfg,
-                              {"kind": "expert", "seed": demo_seed, "config": expert_cfg.to_dict(), "disturbance": disturbance}, profile)
-        writer = RecordingWriter(out, meta, scenario.to_dict(), overwrite=True)
-        record_run(sim, ExpertDriver(expert_cfg), writer, features.preference, np.random.default_rng(demo_seed), disturbance=recipe.disturbance)
-        paths.append(out)
-        if log:
-            log(f"demonstration {k + 1}/{recipe.demonstrations}: {len(read_recording(out))} frames")
-    return paths
+    tail = "" if recipe.disturbance is None else "_disturbed"
+    runs = [(course, workdir / f"demo_{k}{tail}", seed * 100 + k) for k in range(recipe.demonstrations)]
+    runs += [(c, workdir / f"practice_{k}{tail}", seed * 100 + 20 + k) for k, c in enumerate(practice_courses(recipe, seed))]
+    for i, (name, out, demo_seed) in enumerate(runs):
+        if _demonstrate(name, out, demo_seed, recipe.disturbance, profile, features) and log:
+            log(f"demonstration {i + 1}/{len(runs)} ({name}): {len(read_recording(out))} frames")
+    return [out for _, out, _ in runs]
 
 
 def run_recipe(

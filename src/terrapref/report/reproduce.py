@@ -21,7 +21,7 @@ import numpy as np
 
 from terrapref.demos.session import DisturbanceConfig
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_many, summarise
-from terrapref.learning.recipe import PAPER, Recipe, run_recipe
+from terrapref.learning.recipe import PAPER, PRACTICE_BASE, Recipe, run_recipe
 from terrapref.learning.train import TrainConfig
 from terrapref.progress import every_tenth
 from terrapref.scenario import packaged_scenarios, resolve_scenario
@@ -68,7 +68,7 @@ def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes:
     groups: dict = {}
     for r in recipes:
         groups.setdefault(r.disturbance, []).append(r)
-    cost = {key: max(r.demonstrations * (1 + r.train.epochs * (2 if r.train.mirror else 1) / 100) for r in g) for key, g in groups.items()}
+    cost = {key: max((r.demonstrations + r.practice) * (1 + r.train.epochs * (2 if r.train.mirror else 1) / 100) for r in g) for key, g in groups.items()}
     jobs = [(tuple(g), str(out / "work" / f"seed{s}"), s, profile.order)
             for key, g in sorted(groups.items(), key=lambda kv: -cost[kv[0]]) for s in range(seeds)]
     log(f"[1/3] demonstrations, corrections and training: {len(recipes) * seeds} models ({', '.join(r.name for r in recipes)} x {seeds} seeds) ...")
@@ -179,7 +179,8 @@ def _write_report(out: Path, results, trained, recipes, seeds, eval_seeds, profi
     for r in recipes:
         pushes = (f"with disturbances ({r.disturbance.rate_hz:g} pushes/s of {r.disturbance.min_yaw_rate_rps:g}-{r.disturbance.max_yaw_rate_rps:g} rad/s)"
                   if r.disturbance is not None else "undisturbed")
-        lines.append(f"- **{r.name}**: {r.demonstrations} demonstration run(s) of train_course, {pushes}, {r.corrections} correction session(s), "
+        practice = f" and one of each of {r.practice} generated practice course(s) (gen:{PRACTICE_BASE} + 2000 k + 10000 x seed)" if r.practice else ""
+        lines.append(f"- **{r.name}**: {r.demonstrations} demonstration run(s) of train_course{practice}, {pushes}, {r.corrections} correction session(s), "
                      f"{r.train.epochs} epochs, residual path {'on' if r.train.skip else 'off'}, class-balanced loss {'on' if r.train.class_balance else 'off'}, "
                      f"mirrored samples {'on' if r.train.mirror else 'off'}, decisive-frame weight {r.train.decisive_weight:g}, planner smoothing {r.smoothing:g}.")
     lines += ["", "## Summary (test_course and the figure variations)", "", "| who | zone success | collisions | completed | runs |", "|---|---|---|---|---|"]

@@ -2,7 +2,8 @@
 
 Stages (each parallel across processes):
 1. Demonstrations: per training seed, the synthetic driver demonstrates on ``train_course``
-   with the protocol of the recipe ``ours`` (two runs with disturbances), once under the
+   with the protocol of the recipe ``ours`` (two runs with disturbances; its practice courses
+   left out, so that every method learns from the training course alone), once under the
    default profile and once under another profile.
 2. Featurisation: utility features (and, for the ablation, other horizons) and the CNN's
    downsampled images, each read from the recordings once.
@@ -36,6 +37,7 @@ from terrapref.report.study_report import ALT_PROFILE, write_study
 from terrapref.terrain import PreferenceProfile
 
 LEARNED = ("C", "linear", "cnn")  # methods trained from demonstrations
+DEMONSTRATIONS = replace(OURS, practice=0)  # the study's data: ours' train_course runs only
 
 
 @dataclass(frozen=True)
@@ -99,7 +101,7 @@ def _record_job(args: tuple[str, int, tuple[str, ...]]) -> list[str]:
     from terrapref.learning.recipe import record_demonstrations
 
     workdir, seed, profile = args
-    return [str(p) for p in record_demonstrations(OURS, workdir, seed, PreferenceProfile.parse(list(profile)))]
+    return [str(p) for p in record_demonstrations(DEMONSTRATIONS, workdir, seed, PreferenceProfile.parse(list(profile)))]
 
 
 def _featurise_job(args: tuple[list[str], str, str, int | None]) -> str:
@@ -198,7 +200,7 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
     seeds = list(range(plan.seeds))
 
     t0 = time.perf_counter()
-    log(f"[1/5] demonstrations: {len(seeds)} seed(s) x 2 profiles x {OURS.demonstrations} runs ...")
+    log(f"[1/5] demonstrations: {len(seeds)} seed(s) x 2 profiles x {DEMONSTRATIONS.demonstrations} runs ...")
     rec_jobs = [(str(work / f"{tag}_s{s}"), s, prof) for s in seeds for tag, prof in (("default", default), ("alt", ALT_PROFILE))]
     recs = dict(zip([(j[1], j[2]) for j in rec_jobs], _pool_map(_record_job, rec_jobs, workers, log, "demonstration set")))
     timings["demonstrations"] = time.perf_counter() - t0

@@ -61,6 +61,11 @@ def _patch(rng: np.random.Generator, wp: np.ndarray, s: float, cls: str, centre:
     return {"class": cls, "polygon": _to_world(wp, s, blob)}
 
 
+def zone_kind(label: str) -> str:
+    """The kind (``lone``, ``pair`` or ``triple``) of a generated zone, read from its label."""
+    return "lone" if label.startswith("lone ") else ("triple" if label.count("|") == 2 else "pair")
+
+
 def generate_course(seed: int, zones: int = 8, kinds: tuple[str, ...] = ZONE_KINDS, classes: ClassTable | None = None) -> Scenario:
     """A random course named ``gen_<seed>`` with ``zones`` scored situations."""
     classes = classes or default_classes()
