@@ -2,9 +2,9 @@
 
 Stages (each parallel across processes):
 1. Demonstrations: per training seed, the synthetic driver demonstrates on ``train_course``
-   with the protocol of the recipe ``ours`` (two runs with disturbances; its practice courses
-   left out, so that every method learns from the training course alone), once under the
-   default profile and once under another profile.
+   with the protocol of the recipe ``ours`` (two runs with disturbances; practice courses, if
+   the recipe has any, are left out, so that every method learns from the training course
+   alone), once under the default profile and once under another profile.
 2. Featurisation: utility features (and, for the ablation, other horizons) and the CNN's
    downsampled images, each read from the recordings once.
 3. Training: C (recipe ``ours``), the linear utility model and the CNN on the same
