@@ -118,11 +118,12 @@ def main() -> int:
                 for r in res:
                     collisions += r["metrics"]["collisions"]
                     for z in r["metrics"]["zones"]:
-                        if (r["scenario"], z["id"]) in fair:
+                        key = (r["scenario"], z["id"])
+                        if key in fair:
                             n += 1
                             ok += z["success"]
-                            by_kind[kind[r["scenario"], z["id"]]][0] += z["success"]
-                            by_kind[kind[r["scenario"], z["id"]]][1] += 1
+                            by_kind[kind[key]][0] += z["success"]
+                            by_kind[kind[key]][1] += 1
         kinds = ", ".join(f"{k} {a}/{b}" for k, (a, b) in by_kind.items())
         print(f"[{i}] {recipe.name:52s} zone success {ok}/{n} = {ok / max(n, 1):.1%}, collisions {collisions} ({kinds})  ({time.perf_counter() - t0:.0f} s)",
               flush=True)

@@ -21,7 +21,7 @@ import numpy as np
 
 from terrapref.demos.session import DisturbanceConfig
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_many, summarise
-from terrapref.learning.recipe import PAPER, PRACTICE_BASE, Recipe, run_recipe
+from terrapref.learning.recipe import PAPER, Recipe, practice_courses, run_recipe
 from terrapref.learning.train import TrainConfig
 from terrapref.progress import every_tenth
 from terrapref.scenario import packaged_scenarios, resolve_scenario
@@ -179,7 +179,7 @@ def _write_report(out: Path, results, trained, recipes, seeds, eval_seeds, profi
     for r in recipes:
         pushes = (f"with disturbances ({r.disturbance.rate_hz:g} pushes/s of {r.disturbance.min_yaw_rate_rps:g}-{r.disturbance.max_yaw_rate_rps:g} rad/s)"
                   if r.disturbance is not None else "undisturbed")
-        practice = f" and one of each of {r.practice} generated practice course(s) (gen:{PRACTICE_BASE} + 2000 k + 10000 x seed)" if r.practice else ""
+        practice = f" and one of each of {r.practice} practice course(s) per seed ({', '.join(c for s in range(seeds) for c in practice_courses(r, s))})" if r.practice else ""
         lines.append(f"- **{r.name}**: {r.demonstrations} demonstration run(s) of train_course{practice}, {pushes}, {r.corrections} correction session(s), "
                      f"{r.train.epochs} epochs, residual path {'on' if r.train.skip else 'off'}, class-balanced loss {'on' if r.train.class_balance else 'off'}, "
                      f"mirrored samples {'on' if r.train.mirror else 'off'}, decisive-frame weight {r.train.decisive_weight:g}, planner smoothing {r.smoothing:g}.")
