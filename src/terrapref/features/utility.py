@@ -14,6 +14,13 @@ Three definitions of d, recorded with every dataset and model:
   vehicle, the tightest arcs (w = +-1 over 6 m) curl back to end beside the vehicle, next to
   the path, and get the best ``window`` score; the look-ahead point ranks them last.
 The path is resampled every ``path_spacing_m`` so that sparse waypoints still give a dense P.
+
+Lanes (ours, off by default): with ``lane_m > 0``, U gains K more columns per trajectory, the
+share of each class on ``lane_points`` points along a straight lane of ``lane_m`` metres that
+continues from the trajectory's end parallel to the vehicle's heading. A driver commits to a
+side of a patch several metres before the trajectories reach the terrain there; the lanes show
+what lies beyond each trajectory's end (docs/learning.md). Like the trajectories' own points,
+the lane points are fixed in the vehicle frame, so their pixels are precomputed.
 """
 
 from __future__ import annotations
@@ -49,6 +56,9 @@ class FeatureConfig:
         path_spacing_m: resampling step of the reference path [m].
         feature_classes: class names of the terrain columns, in order (the table's
             non-background classes in id order).
+        lane_m: length of the lane beyond each trajectory's end [m]; 0 (the paper's U) adds
+            no lane columns.
+        lane_points: points sampled along each lane.
     """
 
     preference: PreferenceSetConfig = field(default_factory=PreferenceSetConfig)
@@ -56,11 +66,20 @@ class FeatureConfig:
     window_m: float | None = None
     path_spacing_m: float = 0.25
     feature_classes: tuple[str, ...] = field(default_factory=lambda: default_classes().feature_names)
+    lane_m: float = 0.0
+    lane_points: int = 12
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "distance_mode", DistanceMode(self.distance_mode))
         if not self.path_spacing_m > 0 or (self.window_m is not None and not self.window_m > 0):
             raise ValueError("path_spacing_m and window_m must be > 0")
+        if not self.lane_m >= 0 or self.lane_points < 1:
+            raise ValueError("lane_m must be >= 0 and lane_points >= 1")
+
+    @property
+    def lanes(self) -> bool:
+        """Whether U carries lane columns."""
+        return self.lane_m > 0
 
     @property
     def effective_window_m(self) -> float:
@@ -68,11 +87,12 @@ class FeatureConfig:
 
     @property
     def n_features(self) -> int:
-        return len(self.feature_classes) + 1
+        return len(self.column_names)
 
     @property
     def column_names(self) -> tuple[str, ...]:
-        return (*self.feature_classes, "distance")
+        lanes = tuple(f"lane_{c}" for c in self.feature_classes) if self.lanes else ()
+        return (*self.feature_classes, *lanes, "distance")
 
     def to_dict(self) -> dict:
         return {
@@ -81,6 +101,7 @@ class FeatureConfig:
             "window_m": self.window_m,
             "path_spacing_m": self.path_spacing_m,
             "feature_classes": list(self.feature_classes),
+            **({"lane_m": self.lane_m, "lane_points": self.lane_points} if self.lanes else {}),
         }
 
     @classmethod
@@ -91,6 +112,8 @@ class FeatureConfig:
             data.get("window_m"),
             float(data["path_spacing_m"]),
             tuple(data["feature_classes"]),
+            float(data.get("lane_m", 0.0)),
+            int(data.get("lane_points", 12)),
         )
 
 
@@ -101,21 +124,27 @@ class UtilityFeaturizer:
         classes = classes or default_classes()
         self.config = config
         self.pset = PreferenceSet(config.preference, camera)
-        pix = self.pset.pixel_index
-        self._visible = pix >= 0
-        self._pix = np.where(self._visible, pix, 0)
-        k = len(config.feature_classes)
-        # Class id -> terrain column (k means "no feature": background, unknown, unlisted).
-        self._column = np.full(256, k, dtype=np.intp)
+        m, k = self.pset.m, len(config.feature_classes)
+        blocks = [self.pset.pixel_index]  # (m, n): one row of pixels per trajectory
+        if config.lanes:
+            ends = self.pset.endpoints
+            d = np.linspace(config.lane_m / config.lane_points, config.lane_m, config.lane_points)
+            lane = np.stack([ends[:, None, 0] + d, np.broadcast_to(ends[:, None, 1], (m, len(d)))], axis=-1)
+            blocks.append(camera.pixel_indices(lane))  # (m, lane_points): rows m..2m-1
+        # Every row (a trajectory or a lane) gets k + 1 bincount bins; unseen points all fall
+        # in one extra, discarded row.
+        self._rows = m * len(blocks)
+        row = np.concatenate([np.repeat(np.arange(b * m, (b + 1) * m), blk.shape[1]) for b, blk in enumerate(blocks)])
+        pix = np.concatenate([blk.ravel() for blk in blocks])
+        self._column = np.full(256, k, dtype=np.intp)  # class id -> terrain column (k: none)
         for j, name in enumerate(config.feature_classes):
             self._column[classes.id_of(name)] = j
-        # bincount bins: k + 1 per trajectory; unseen points all fall in one extra, discarded row.
-        m = self.pset.m
-        self._bins = (m + 1) * (k + 1)
-        self._offset = np.where(self._visible, (np.arange(m) * (k + 1))[:, None], m * (k + 1)).ravel()
-        self._pix_flat = self._pix.ravel().copy()
+        self._bins = (self._rows + 1) * (k + 1)
+        self._offset = np.where(pix >= 0, row, self._rows) * (k + 1)
+        self._pix_flat = np.where(pix >= 0, pix, 0)
         self._pix_flat.flags.writeable = False  # read-only: a renderer may prepare it once
-        self._n = config.preference.n_steps
+        # Share per point: one number without lanes (the common, fastest case), else per row.
+        self._scale = 1.0 / blocks[0].shape[1] if len(blocks) == 1 else np.concatenate([np.full((m, 1), 1.0 / b.shape[1]) for b in blocks])
         self._ends = self.pset.endpoints  # (m, 2) vehicle frame
 
     @property
@@ -123,11 +152,14 @@ class UtilityFeaturizer:
         return self.pset.m
 
     def terrain(self, image: np.ndarray | SegmentationView) -> np.ndarray:
-        """Terrain utilities, shape (m, K): share of each trajectory's points on each class."""
+        """Terrain utilities, shape (m, K), or (m, 2K) with lanes (each lane's shares after the
+        trajectory's): the share of each row's points on each class."""
         k = len(self.config.feature_classes)
         cols = self._column[as_view(image).pixels(self._pix_flat)]
         counts = np.bincount(cols + self._offset, minlength=self._bins)
-        return counts.reshape(self.pset.m + 1, k + 1)[:-1, :k] * (1.0 / self._n)
+        shares = counts.reshape(self._rows + 1, k + 1)[:-1, :k] * self._scale
+        m = self.pset.m
+        return shares if self._rows == m else np.concatenate([shares[:m], shares[m:]], axis=1)
 
     def distances(self, pose: Pose, path: ReferencePath, progress_s: float | None = None) -> np.ndarray:
         """d(T^i, P) [m] for each trajectory, shape (m,)."""
@@ -161,8 +193,8 @@ class UtilityFeaturizer:
         return (hi - d) * (1.0 / (hi - lo))
 
     def __call__(self, image: np.ndarray | SegmentationView, pose: Pose, path: ReferencePath, progress_s: float | None = None) -> np.ndarray:
-        """U, shape (m, K + 1) float32: terrain shares then the distance utility."""
-        u = np.empty((self.m, len(self.config.feature_classes) + 1), dtype=np.float32)
+        """U, shape (m, n_features) float32: terrain shares, lane shares if any, then the distance utility."""
+        u = np.empty((self.m, self.config.n_features), dtype=np.float32)
         u[:, :-1] = self.terrain(image)
         u[:, -1] = self.normalise(self.distances(pose, path, progress_s))
         return u
