@@ -87,6 +87,13 @@ RECIPES = [
            disturbance=DisturbanceConfig(rate_hz=0.3), practice=2),
     Recipe("ours + 2 practice courses, 150 epochs", 2, 0, TrainConfig(epochs=150, skip=True, class_balance=True, mirror=True),
            disturbance=DisturbanceConfig(rate_hz=0.3), practice=2),
+    Recipe("ours + 2 practice courses + lanes", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True),
+           disturbance=DisturbanceConfig(rate_hz=0.3), practice=2, lane_m=6.0),
+    Recipe("ours + 2 practice + lanes, 2 members", 2, 0, TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True, members=2),
+           disturbance=DisturbanceConfig(rate_hz=0.3), practice=2, lane_m=6.0),
+    Recipe("ours + 2 practice + lanes, 2 members x 150 epochs", 2, 0,
+           TrainConfig(epochs=150, skip=True, class_balance=True, mirror=True, members=2),
+           disturbance=DisturbanceConfig(rate_hz=0.3), practice=2, lane_m=6.0),
 ]
 
 

@@ -244,6 +244,17 @@ def test_cli_train_on_two_dataset_files(tmp_path: Path, capsys):
     assert "training on 200 samples (2 dataset file(s))" in capsys.readouterr().out
 
 
+def test_cli_train_members_writes_an_ensemble(tmp_path: Path, capsys):
+    data = _dataset_file(tmp_path / "data.safetensors", 200)
+    out = tmp_path / "ens.safetensors"
+    assert main(["train", str(data), "--out", str(out), "--epochs", "2", "--hidden", "8", "--members", "2", "--seed", "4"]) == 0
+    text = capsys.readouterr().out
+    assert "2 members" in text and "member 1/2" in text and "member 2/2" in text
+    model = load_model(out)
+    assert model.classifier.members == 2 and [m["seed"] for m in model.meta["members"]] == [4, 1004]
+    assert len(list((tmp_path / "ens.checkpoints").iterdir())) == 2
+
+
 def test_cli_train_missing_dataset(tmp_path: Path, capsys):
     missing = tmp_path / "absent.safetensors"
     assert main(["train", str(missing), "--out", str(tmp_path / "m.safetensors")]) == 2
@@ -256,7 +267,7 @@ def test_cli_train_refuses_a_model_file_as_data(model_path: Path, tmp_path: Path
     _one_line_error(capsys, str(model_path))
 
 
-@pytest.mark.parametrize("flag", [["--epochs", "0"], ["--batch-size", "0"], ["--hidden", "0"], ["--lr", "-1"]], ids=lambda f: f[0])
+@pytest.mark.parametrize("flag", [["--epochs", "0"], ["--batch-size", "0"], ["--hidden", "0"], ["--lr", "-1"], ["--members", "0"]], ids=lambda f: f[0])
 def test_cli_train_bad_hyperparameter_is_a_user_error(tmp_path: Path, capsys, flag: list[str]):
     data = _dataset_file(tmp_path / "data.safetensors", 50)
     assert main(["train", str(data), "--out", str(tmp_path / "m.safetensors"), *flag]) == 2

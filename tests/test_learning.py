@@ -20,11 +20,11 @@ from terrapref.demos.dataset import FORMAT as DATASET_FORMAT
 from terrapref.demos.dataset import Dataset, load_dataset, save_dataset
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, PreferenceSetConfig
-from terrapref.learning.model_file import FORMAT, check_compatible, load_model, save_model
+from terrapref.learning.model_file import FORMAT, check_compatible, expected_shapes, load_model, save_model
 from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
 from terrapref.learning.pipeline import train_and_save
 from terrapref.learning.torch_net import UtilityClassifier
-from terrapref.learning.train import TrainConfig, decisive_frames, split_indices, train
+from terrapref.learning.train import MEMBER_SEED_STEP, TrainConfig, decisive_frames, split_indices, train
 from terrapref.terrain import PreferenceProfile, default_classes
 
 from helpers import model_meta
@@ -229,6 +229,67 @@ def test_one_checkpoint_per_epoch():
     assert len(result.checkpoints) == len(result.history) == 4
     for a, b in zip(result.checkpoints, result.checkpoints[1:]):
         assert _weights_differ(a, b)
+
+
+# --- ensembles: members trained apart, F_t averaged -------------------------------------------------
+
+
+def test_ensemble_forward_is_the_log_of_the_members_mean_softmax():
+    one = ClassifierConfig(hidden=8, skip=True)
+    members = [_random_weights(one, seed) for seed in (0, 1, 2)]
+    config = replace(one, members=3)
+    weights = {f"members.{j}.{k}": v for j, w in enumerate(members) for k, v in w.items()}
+    U = np.random.default_rng(2).uniform(0, 1, (4, M, K)).astype(np.float32)
+    mean = np.mean([softmax(numpy_forward(one, w, U)) for w in members], axis=0)
+    np.testing.assert_allclose(softmax(numpy_forward(config, weights, U)), mean, atol=1e-6)
+    np.testing.assert_allclose(softmax(numpy_forward(config, weights, U[1])), mean[1], atol=1e-6)
+    assert set(expected_shapes(config)) == set(weights)
+
+
+def test_members_train_apart_from_their_own_seeds():
+    data = _random_dataset(400)
+    config = TrainConfig(epochs=2, batch_size=64, hidden=16, seed=5, members=2)
+    result = train(data, config)
+    assert result.classifier.members == 2 and len(result.members) == 2
+    # Member j is exactly what training alone from seed + MEMBER_SEED_STEP * j gives.
+    for j, member in enumerate(result.members):
+        alone = train(data, replace(config, members=1, seed=5 + MEMBER_SEED_STEP * j))
+        _assert_weights_equal(member.weights, alone.weights)
+        _assert_weights_equal({k[len(f"members.{j}."):]: v for k, v in result.weights.items() if k.startswith(f"members.{j}.")}, alone.weights)
+    assert _weights_differ(result.members[0].weights, result.members[1].weights)
+    assert result.history == result.members[0].history and result.steps == sum(m.steps for m in result.members)
+    assert len(result.checkpoints) == 2 and set(result.checkpoints[0]) == set(result.weights)
+
+
+def test_an_ensemble_model_file_loads_and_records_its_members(tmp_path: Path):
+    data = _random_dataset(300)
+    config = TrainConfig(epochs=2, batch_size=64, hidden=8, seed=3, members=2)
+    path = tmp_path / "ens.safetensors"
+    result = train_and_save(data, path, config, checkpoints=False)
+    model = load_model(path)
+    assert model.classifier.members == 2 and model.meta["training"]["members"] == 2
+    assert [m["seed"] for m in model.meta["members"]] == [3, 3 + MEMBER_SEED_STEP]
+    assert [m["best_epoch"] for m in model.meta["members"]] == [r.best_epoch for r in result.members]
+    U = data.U[:5]
+    for b in range(5):
+        mean = np.mean([softmax(numpy_forward(r.classifier, r.weights, U[b])) for r in result.members], axis=0)
+        np.testing.assert_allclose(softmax(numpy_forward(model.classifier, model.weights, U[b])), mean, atol=1e-6)
+
+
+def test_an_ensemble_missing_a_member_is_refused(tmp_path: Path):
+    one = ClassifierConfig(hidden=8)
+    weights = {f"members.0.{k}": v for k, v in _random_weights(one).items()}
+    path = save_model(tmp_path / "m.safetensors", replace(one, members=2), weights, model_meta())
+    err = _expect_user_error(path, "weights")
+    assert "members.1." in str(err)
+
+
+@pytest.mark.parametrize("bad", [{"members": 0}])
+def test_members_must_be_positive(bad: dict):
+    with pytest.raises(ValueError, match="members"):
+        TrainConfig(**bad)
+    with pytest.raises(ValueError, match="members"):
+        ClassifierConfig(**bad)
 
 
 def test_decisive_frames_closed_form():

@@ -155,7 +155,10 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
     for r in recordings:
         if not r.complete:
             print(f"warning: {r.path} is partial; using its {len(r)} frames", file=sys.stderr)
-    features = FeatureConfig(distance_mode=args.distance_mode)
+    try:
+        features = FeatureConfig(distance_mode=args.distance_mode, lane_m=args.lanes)
+    except ValueError as exc:
+        raise UserError("featurize", str(exc), field="--lanes") from None
     pref = features.preference
     if args.n_steps is not None or args.dt is not None:
         pref = replace(pref, n_steps=args.n_steps or pref.n_steps, dt_s=args.dt or pref.dt_s)
@@ -199,13 +202,22 @@ def _cmd_train(args: argparse.Namespace) -> int:
     )
     try:
         config = TrainConfig(epochs=args.epochs, lr=args.lr, batch_size=args.batch_size, seed=args.seed, hidden=args.hidden,
-                             activation=args.activation, skip=args.skip, class_balance=args.class_balance, mirror=args.mirror)
+                             activation=args.activation, skip=args.skip, class_balance=args.class_balance, mirror=args.mirror,
+                             members=args.members)
     except ValueError as exc:
         raise UserError("train", str(exc)) from None
-    print(f"training on {len(data)} samples ({len(args.data)} dataset file(s)), {config.epochs} epochs, batch {config.batch_size}, lr {config.lr}")
-    print(f"{'epoch':>5s} {'train loss':>10s} {'val loss':>9s} {'train acc':>9s} {'val acc':>8s} {'val top3':>8s}")
-    result = train_and_save(data, args.out, config, progress=lambda m: print(
-        f"{m.epoch:5d} {m.train_loss:10.4f} {m.val_loss:9.4f} {m.train_acc:9.3f} {m.val_acc:8.3f} {m.val_top3:8.3f}", flush=True))
+    members = f", {config.members} members" if config.members > 1 else ""
+    print(f"training on {len(data)} samples ({len(args.data)} dataset file(s)), {config.epochs} epochs, batch {config.batch_size}, lr {config.lr}{members}")
+    header = f"{'epoch':>5s} {'train loss':>10s} {'val loss':>9s} {'train acc':>9s} {'val acc':>8s} {'val top3':>8s}"
+    started = [0]
+
+    def show(m) -> None:
+        if m.epoch == 1:
+            started[0] += 1
+            print(f"member {started[0]}/{config.members}\n{header}" if config.members > 1 else header)
+        print(f"{m.epoch:5d} {m.train_loss:10.4f} {m.val_loss:9.4f} {m.train_acc:9.3f} {m.val_acc:8.3f} {m.val_top3:8.3f}", flush=True)
+
+    result = train_and_save(data, args.out, config, progress=show)
     curve = Path(args.out).with_suffix(".loss.png")
     save_loss_curve(curve, [asdict(h) for h in result.history], result.best_epoch, title=f"{Path(args.out).name}: {len(data)} samples")
     best = result.history[result.best_epoch - 1]
@@ -330,6 +342,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--n-steps", type=int, help="trajectory points n (default 30)")
     p.add_argument("--dt", type=float, help="trajectory time step [s] (default 0.2)")
     p.add_argument("--camera", help="YAML file of camera parameters to re-render the frames with")
+    p.add_argument("--lanes", type=float, default=0.0, metavar="M",
+                   help="add lane columns: terrain shares on an M-metre lane beyond each trajectory's end (0: off, the paper's U)")
     p.set_defaults(func=_cmd_featurize)
 
     p = sub.add_parser("train", help="train the classifier on featurised datasets")
@@ -344,6 +358,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--skip", action="store_true", help="add the compressed scores to the logits (residual path)")
     p.add_argument("--class-balance", action="store_true", help="weight the loss by inverse label frequency")
     p.add_argument("--mirror", action="store_true", help="add left-right mirrored copies of the training samples")
+    p.add_argument("--members", type=int, default=1, help="networks trained from different seeds; the model averages their F_t")
     p.set_defaults(func=_cmd_train)
 
     p = sub.add_parser("evaluate", help="drive scenarios with a model, score every zone, write metrics.json and figures")

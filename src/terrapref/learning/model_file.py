@@ -5,7 +5,7 @@ Loading reads tensors and a JSON header only; no code from the file is ever exec
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +13,7 @@ import numpy as np
 from terrapref.camera import CameraConfig
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
-from terrapref.learning.network import ClassifierConfig
+from terrapref.learning.network import ClassifierConfig, member_prefix
 from terrapref.tensorfile import read_tensor_file, write_tensor_file
 from terrapref.terrain import ClassTable
 
@@ -91,7 +91,10 @@ def model_context(meta: dict, source: str) -> tuple[FeatureConfig, CameraConfig,
 
 
 def expected_shapes(c: ClassifierConfig) -> dict[str, tuple[int, ...]]:
-    """Weight names and shapes of a classifier (PyTorch state-dict names)."""
+    """Weight names and shapes of a classifier (PyTorch state-dict names, per member in an ensemble)."""
+    if c.members > 1:
+        one = expected_shapes(replace(c, members=1))
+        return {member_prefix(j) + name: shape for j in range(c.members) for name, shape in one.items()}
     shapes: dict[str, tuple[int, ...]] = {}
     if c.compress:
         shapes |= {"compress.weight": (c.channels, c.n_features), "compress.bias": (c.channels,)}

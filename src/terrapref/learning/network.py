@@ -32,6 +32,8 @@ class ClassifierConfig:
         channels: outputs of the row-wise compression per trajectory (1: the paper's 5 -> 1;
             more lets the hidden layers weigh, say, terrain and distance apart); with
             ``skip`` the first channel is the residual score.
+        members: networks of this shape, trained apart from different seeds; C's F_t is the
+            mean of their softmax outputs (1: the paper's single network).
     """
 
     m: int = 21
@@ -43,6 +45,7 @@ class ClassifierConfig:
     skip: bool = False
     ignore: tuple[int, ...] = ()
     channels: int = 1
+    members: int = 1
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "ignore", tuple(int(i) for i in self.ignore))
@@ -50,8 +53,8 @@ class ClassifierConfig:
             raise ValueError("ignore: column index out of range")
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"activation must be one of {', '.join(ACTIVATIONS)}")
-        if self.m < 2 or self.n_features < 1 or self.hidden < 1 or self.depth < 1 or self.channels < 1:
-            raise ValueError("m >= 2, n_features >= 1, hidden >= 1, depth >= 1, channels >= 1")
+        if self.m < 2 or self.n_features < 1 or self.hidden < 1 or self.depth < 1 or self.channels < 1 or self.members < 1:
+            raise ValueError("m >= 2, n_features >= 1, hidden >= 1, depth >= 1, channels >= 1, members >= 1")
         if self.skip and not self.compress:
             raise ValueError("skip needs the row-wise compression")
 
@@ -76,17 +79,35 @@ def _act(name: str, x: np.ndarray) -> np.ndarray:
     return np.where(x > 0, x, np.expm1(np.minimum(x, 0.0)))  # elu, alpha = 1
 
 
+def member_prefix(j: int) -> str:
+    """Weight-name prefix of member ``j`` of an ensemble (as an ``nn.ModuleList`` of members would name it)."""
+    return f"members.{j}."
+
+
 def numpy_forward(config: ClassifierConfig, weights: dict[str, np.ndarray], U: np.ndarray) -> np.ndarray:
     """Logits of C for U of shape (m, k) or (B, m, k); returns (m,) or (B, m).
 
     ``weights`` uses the PyTorch state-dict names: compress.weight (channels, k),
-    compress.bias (channels,), layers.{i}.weight (out, in), layers.{i}.bias (out,).
+    compress.bias (channels,), layers.{i}.weight (out, in), layers.{i}.bias (out,); each
+    prefixed by ``members.{j}.`` in an ensemble, whose logits are the log of the members' mean
+    softmax (so that the softmax of the result is that mean).
     """
     single = U.ndim == 2
     x = U[None] if single else U
     if config.ignore:
         x = x.copy()
         x[..., list(config.ignore)] = 0.0
+    if config.members == 1:
+        logits = _forward_one(config, weights, x)
+    else:
+        probs = sum(softmax(_forward_one(config, {k[len(p):]: v for k, v in weights.items() if k.startswith(p)}, x))
+                    for p in map(member_prefix, range(config.members)))
+        logits = np.log(probs * (1.0 / config.members) + 1e-30)
+    return logits[0] if single else logits
+
+
+def _forward_one(config: ClassifierConfig, weights: dict[str, np.ndarray], x: np.ndarray) -> np.ndarray:
+    """Logits (B, m) of one network for U (B, m, k), ignored columns already zeroed."""
     if config.compress:
         per_row = x @ weights["compress.weight"].T + weights["compress.bias"]  # (B, m, channels)
         scores = per_row[..., 0]
@@ -96,9 +117,7 @@ def numpy_forward(config: ClassifierConfig, weights: dict[str, np.ndarray], U: n
     for i in range(config.depth):
         h = _act(config.activation, h @ weights[f"layers.{i}.weight"].T + weights[f"layers.{i}.bias"])
     logits = h @ weights[f"layers.{config.depth}.weight"].T + weights[f"layers.{config.depth}.bias"]
-    if config.skip:
-        logits = logits + scores
-    return logits[0] if single else logits
+    return logits + scores if config.skip else logits
 
 
 def softmax(logits: np.ndarray) -> np.ndarray:

@@ -46,6 +46,8 @@ class Recipe:
             (None: the driver drives undisturbed).
         practice: practice courses, demonstrated once each besides the training course (see
             :func:`practice_courses`); they show compositions the training course lacks.
+        lane_m: lanes beyond each trajectory's end in U (``FeatureConfig.lane_m``; 0: the
+            paper's U).
     """
 
     name: str
@@ -55,10 +57,15 @@ class Recipe:
     smoothing: float = 0.0
     disturbance: DisturbanceConfig | None = None
     practice: int = 0
+    lane_m: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.demonstrations < 1 or self.corrections < 0 or self.practice < 0:
-            raise ValueError("a recipe needs demonstrations >= 1, corrections >= 0 and practice >= 0")
+        if self.demonstrations < 1 or self.corrections < 0 or self.practice < 0 or self.lane_m < 0:
+            raise ValueError("a recipe needs demonstrations >= 1, corrections >= 0, practice >= 0 and lane_m >= 0")
+
+    def features(self, base: FeatureConfig | None = None) -> FeatureConfig:
+        """The feature configuration this recipe trains with: ``base`` with its lanes."""
+        return replace(base or FeatureConfig(), lane_m=self.lane_m)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -166,7 +173,7 @@ def run_recipe(
     own.mkdir(parents=True, exist_ok=True)
     scenario = resolve_scenario(course)
     profile = profile or PreferenceProfile.default(scenario.classes)
-    features = features or FeatureConfig()
+    features = recipe.features(features)
     paths = record_demonstrations(recipe, workdir, seed, profile, course, features, log)
     recordings = [read_recording(p) for p in paths]
     demo_s = sum(r.duration_s for r in recordings)

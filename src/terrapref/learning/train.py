@@ -11,7 +11,7 @@ from __future__ import annotations
 import copy
 import math
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 import torch
@@ -19,7 +19,7 @@ from torch import nn
 
 from terrapref.demos.dataset import Dataset
 from terrapref.features import FeatureConfig
-from terrapref.learning.network import ClassifierConfig
+from terrapref.learning.network import ClassifierConfig, member_prefix
 from terrapref.learning.torch_net import UtilityClassifier
 
 
@@ -44,6 +44,8 @@ class TrainConfig:
         seed: seeds the split, the initialisation and the batch order.
         hidden, activation, depth, skip, compress, channels: the classifier's shape (see
             ClassifierConfig).
+        members: networks trained apart, member j from seed ``seed + MEMBER_SEED_STEP * j``
+            (its own split, initialisation and batch order); C averages their F_t.
     """
 
     epochs: int = 15
@@ -62,6 +64,7 @@ class TrainConfig:
     compress: bool = True
     ignore_features: tuple[str, ...] = ()
     channels: int = 1
+    members: int = 1
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "ignore_features", tuple(self.ignore_features))
@@ -72,6 +75,7 @@ class TrainConfig:
             (0.0 <= self.val_fraction < 1.0, "val_fraction must be in [0, 1)"),
             (self.weight_decay >= 0, "weight_decay must be >= 0"),
             (self.decisive_weight > 0, "decisive_weight must be > 0"),
+            (self.members >= 1, "members must be >= 1"),
         ]
         for ok, message in checks:
             if not ok:
@@ -95,12 +99,30 @@ class EpochMetrics:
 
 @dataclass
 class TrainResult:
+    """What training produced. For an ensemble, ``history`` and ``best_epoch`` are member 0's,
+    a checkpoint holds every member at that epoch, and ``members`` holds each member's result."""
+
     classifier: ClassifierConfig
     weights: dict[str, np.ndarray]  # the chosen epoch's weights
     history: list[EpochMetrics]
     best_epoch: int
     checkpoints: list[dict[str, np.ndarray]]
     steps: int
+    members: list[TrainResult] = field(default_factory=list)
+
+
+MEMBER_SEED_STEP = 1000  # member j of an ensemble trains from seed + MEMBER_SEED_STEP * j
+
+
+def _ensemble(results: list[TrainResult]) -> TrainResult:
+    """One result whose weights hold every member's, under ``members.{j}.`` names."""
+    def merged(per_member: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+        return {member_prefix(j) + name: v for j, w in enumerate(per_member) for name, v in w.items()}
+
+    first = results[0]
+    checkpoints = [merged(list(epoch)) for epoch in zip(*(r.checkpoints for r in results))]
+    return TrainResult(replace(first.classifier, members=len(results)), merged([r.weights for r in results]), first.history,
+                       first.best_epoch, checkpoints, sum(r.steps for r in results), results)
 
 
 def _to_numpy(model: nn.Module) -> dict[str, np.ndarray]:
@@ -142,7 +164,10 @@ def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callabl
     torch.set_num_threads(1)
     try:
         with torch.random.fork_rng():  # seed torch locally; the caller's RNG state is restored
-            return _train(dataset, config, progress)
+            if config.members == 1:
+                return _train(dataset, config, progress)
+            return _ensemble([_train(dataset, replace(config, seed=config.seed + MEMBER_SEED_STEP * j, members=1), progress)
+                              for j in range(config.members)])
     finally:
         torch.set_num_threads(threads)
         torch.use_deterministic_algorithms(deterministic)

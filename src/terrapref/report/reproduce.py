@@ -68,7 +68,8 @@ def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes:
     groups: dict = {}
     for r in recipes:
         groups.setdefault(r.disturbance, []).append(r)
-    cost = {key: max((r.demonstrations + r.practice) * (1 + r.train.epochs * (2 if r.train.mirror else 1) / 100) for r in g) for key, g in groups.items()}
+    cost = {key: max((r.demonstrations + r.practice) * (1 + r.train.members * r.train.epochs * (2 if r.train.mirror else 1) / 100) for r in g)
+            for key, g in groups.items()}
     jobs = [(tuple(g), str(out / "work" / f"seed{s}"), s, profile.order)
             for key, g in sorted(groups.items(), key=lambda kv: -cost[kv[0]]) for s in range(seeds)]
     log(f"[1/3] demonstrations, corrections and training: {len(recipes) * seeds} models ({', '.join(r.name for r in recipes)} x {seeds} seeds) ...")
@@ -182,7 +183,8 @@ def _write_report(out: Path, results, trained, recipes, seeds, eval_seeds, profi
         practice = f" and one of each of {r.practice} practice course(s) per seed ({', '.join(c for s in range(seeds) for c in practice_courses(r, s))})" if r.practice else ""
         lines.append(f"- **{r.name}**: {r.demonstrations} demonstration run(s) of train_course{practice}, {pushes}, {r.corrections} correction session(s), "
                      f"{r.train.epochs} epochs, residual path {'on' if r.train.skip else 'off'}, class-balanced loss {'on' if r.train.class_balance else 'off'}, "
-                     f"mirrored samples {'on' if r.train.mirror else 'off'}, decisive-frame weight {r.train.decisive_weight:g}, planner smoothing {r.smoothing:g}.")
+                     f"mirrored samples {'on' if r.train.mirror else 'off'}, decisive-frame weight {r.train.decisive_weight:g}, planner smoothing {r.smoothing:g}"
+                     + (f", lanes of {r.lane_m:g} m in U" if r.lane_m else "") + (f", {r.train.members} ensemble members" if r.train.members > 1 else "") + ".")
     lines += ["", "## Summary (test_course and the figure variations)", "", "| who | zone success | collisions | completed | runs |", "|---|---|---|---|---|"]
     for name in [*(r.name for r in recipes), "driver"]:
         s = set_summary(name, test_names)
