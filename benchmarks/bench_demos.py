@@ -79,7 +79,7 @@ def bench_closed_loop(model_path: Path) -> tuple[float, int]:
     return time.perf_counter() - t0, len(log.commands)
 
 
-def bench_decision(rec_dir: Path, repeats: int) -> np.ndarray:
+def bench_decision(rec_dir: Path, repeats: int, features: FeatureConfig | None = None, members: int = 1) -> np.ndarray:
     from terrapref.demos.dataset import build_dataset
     from terrapref.learning.model_file import load_model
     from terrapref.learning.pipeline import train_and_save
@@ -87,8 +87,9 @@ def bench_decision(rec_dir: Path, repeats: int) -> np.ndarray:
     from terrapref.planner import Planner
 
     rec = read_recording(rec_dir)
-    model_path = rec_dir.parent / "model.safetensors"
-    train_and_save(build_dataset([rec], FeatureConfig()), model_path, TrainConfig(), checkpoints=False)
+    features = features or FeatureConfig()
+    model_path = rec_dir.parent / ("model.safetensors" if features == FeatureConfig() and members == 1 else "variant.safetensors")
+    train_and_save(build_dataset([rec], features), model_path, TrainConfig(members=members), checkpoints=False)
     planner = Planner(load_model(model_path))
     idx = list(range(0, len(rec), max(1, len(rec) // 500)))
     images = [rec.image(i) for i in idx]
@@ -113,10 +114,12 @@ def main() -> int:
         wall, frames, size = bench_record(out, args.seed)
         t = bench_features(out, args.repeats)
         d = bench_decision(out, args.repeats)
+        d2 = bench_decision(out, args.repeats, FeatureConfig(lane_m=6.0), members=2)
         loop_s, loop_frames = bench_closed_loop(out.parent / "model.safetensors")
     print(f"{'benchmark':44s} {'median':>10s} {'p90':>10s} {'target':>10s}")
     print(f"{'features U (m=21, n=30), per frame':44s} {np.median(t) * 1e6:8.1f}us {np.percentile(t, 90) * 1e6:8.1f}us {'<= 30us':>10s}   ({len(t)} calls)")
     print(f"{'decision (features + C + progress), per frame':44s} {np.median(d) * 1e6:8.1f}us {np.percentile(d, 90) * 1e6:8.1f}us {'<= 100us':>10s}   ({len(d)} calls)")
+    print(f"{'decision, lanes + 2 members, per frame':44s} {np.median(d2) * 1e6:8.1f}us {np.percentile(d2, 90) * 1e6:8.1f}us {'-':>10s}   ({len(d2)} calls)")
     print(f"{'planner driving train_course, closed loop':44s} {loop_s:9.2f}s {'':>10s} {'-':>10s}   ({loop_frames} frames, {loop_frames / loop_s:.0f} frames/s)")
     print(f"{'record train_course (synthetic driver)':44s} {wall:9.2f}s {'':>10s} {'<= 20s':>10s}   ({frames} frames, {size / 1e6:.1f} MB, {size / frames / 1e3:.1f} kB/frame)")
     return 0

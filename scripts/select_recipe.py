@@ -8,6 +8,7 @@ driver misses is ambiguous under its own costs, and is left out).
     python scripts/select_recipe.py --seeds 2 --courses 4
     python scripts/select_recipe.py --seeds 3 --courses 16 --only 19 29   # the docs/learning.md runs
     python scripts/select_recipe.py --seeds 5 --courses 32 --only 19 34   # + 2 practice courses, 5 seeds
+    python scripts/select_recipe.py --seeds 5 --courses 32 --first-course 1032 --only 34   # confirm a choice on fresh courses
 
 With closed-loop runs cheap, 16 courses (117 zones the driver meets) cost little more than 8;
 training is most of the time (about a minute per recipe and seed).
@@ -104,8 +105,10 @@ def main() -> int:
     parser.add_argument("--seeds", type=int, default=2)
     parser.add_argument("--courses", type=int, default=4)
     parser.add_argument("--only", type=int, nargs="*", help="indices of RECIPES to run")
+    parser.add_argument("--first-course", type=int, default=1000,
+                        help="seed of the first generated course (1000: selection; 1032: the confirmation courses)")
     args = parser.parse_args()
-    courses = [f"gen:{1000 + i}" for i in range(args.courses)]
+    courses = [f"gen:{args.first_course + i}" for i in range(args.courses)]
     profile = ("mud", "rock", "water", "non_traversable")
     driver = run_many([RunSpec(c, 0, EXPERT, None, profile) for c in courses])
     fair = {(r["scenario"], z["id"]) for r in driver for z in r["metrics"]["zones"] if z["success"]}
