@@ -252,6 +252,10 @@ def test_cli_train_members_writes_an_ensemble(tmp_path: Path, capsys):
     assert "2 members" in text and "member 1/2" in text and "member 2/2" in text
     model = load_model(out)
     assert model.classifier.members == 2 and [m["seed"] for m in model.meta["members"]] == [4, 1004]
+    summary = next(line for line in text.splitlines() if line.startswith("wrote "))
+    for j, member in enumerate(model.meta["members"], start=1):  # each member's own chosen epoch
+        best = member["history"][member["best_epoch"] - 1]
+        assert f"member {j} epoch {member['best_epoch']}: val loss {best['val_loss']:.4f}" in summary
     assert len(list((tmp_path / "ens.checkpoints").iterdir())) == 2
 
 

@@ -365,9 +365,12 @@ def test_lanes_round_trip_and_leave_the_papers_configuration_as_it_was():
     assert FeatureConfig.from_dict(FeatureConfig().to_dict()) == FeatureConfig()
     config = FeatureConfig(lane_m=4.5, lane_points=7)
     assert FeatureConfig.from_dict(json.loads(json.dumps(config.to_dict()))) == config
+    # Without lanes the point count means nothing, and configurations that mean the same are equal.
+    assert FeatureConfig(lane_points=5) == FeatureConfig()
+    assert FeatureConfig.from_dict(FeatureConfig(lane_points=5).to_dict()) == FeatureConfig(lane_points=5)
 
 
-@pytest.mark.parametrize("bad", [{"lane_m": -1.0}, {"lane_points": 0}])
+@pytest.mark.parametrize("bad", [{"lane_m": -1.0}, {"lane_m": float("inf")}, {"lane_m": float("nan")}, {"lane_points": 0}])
 def test_bad_lane_configuration_is_refused(bad: dict):
     with pytest.raises(ValueError, match="lane"):
         FeatureConfig(**bad)

@@ -20,11 +20,12 @@ from terrapref.demos.dataset import FORMAT as DATASET_FORMAT
 from terrapref.demos.dataset import Dataset, load_dataset, save_dataset
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, PreferenceSetConfig
-from terrapref.learning.model_file import FORMAT, check_compatible, expected_shapes, load_model, save_model
+from terrapref.learning.model_file import FORMAT, check_compatible, expected_shapes, load_model, read_model_file, save_model
 from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
 from terrapref.learning.pipeline import train_and_save
 from terrapref.learning.torch_net import UtilityClassifier
 from terrapref.learning.train import MEMBER_SEED_STEP, TrainConfig, decisive_frames, split_indices, train
+from terrapref.tensorfile import write_tensor_file
 from terrapref.terrain import PreferenceProfile, default_classes
 
 from helpers import model_meta
@@ -276,12 +277,23 @@ def test_an_ensemble_model_file_loads_and_records_its_members(tmp_path: Path):
         np.testing.assert_allclose(softmax(numpy_forward(model.classifier, model.weights, U[b])), mean, atol=1e-6)
 
 
-def test_an_ensemble_missing_a_member_is_refused(tmp_path: Path):
+@pytest.mark.parametrize("claimed, held", [(2, 1), (3, 2), (3_000_000, 2), (1, 2)])
+def test_an_ensemble_whose_header_disagrees_with_its_members_is_refused(tmp_path: Path, claimed: int, held: int):
+    # Checked before any shape is built from the header, so a huge claimed count fails at once.
     one = ClassifierConfig(hidden=8)
-    weights = {f"members.0.{k}": v for k, v in _random_weights(one).items()}
+    weights = {f"members.{j}.{k}": v for j in range(held) for k, v in _random_weights(one, j).items()}
+    path = save_model(tmp_path / "m.safetensors", replace(one, members=claimed), weights, model_meta())
+    err = _expect_user_error(path, f"header says {claimed} member(s), the weights hold {held}")
+    assert err.problems[0].field == "classifier.members"
+
+
+def test_a_member_missing_a_weight_is_refused(tmp_path: Path):
+    one = ClassifierConfig(hidden=8)
+    weights = {f"members.{j}.{k}": v for j in range(2) for k, v in _random_weights(one, j).items()}
+    del weights["members.1.layers.2.bias"]
     path = save_model(tmp_path / "m.safetensors", replace(one, members=2), weights, model_meta())
-    err = _expect_user_error(path, "weights")
-    assert "members.1." in str(err)
+    err = _expect_user_error(path, "members.1.layers.2.bias")
+    assert err.problems[0].field == "weights"
 
 
 @pytest.mark.parametrize("bad", [{"members": 0}])
@@ -292,6 +304,24 @@ def test_members_must_be_positive(bad: dict):
         ClassifierConfig(**bad)
 
 
+@pytest.mark.parametrize("field", ["m", "n_features", "hidden", "depth", "channels", "members"])
+@pytest.mark.parametrize("value", [2.0, True, "2"])
+def test_classifier_sizes_must_be_integers(field: str, value):
+    with pytest.raises(ValueError, match="integers"):
+        ClassifierConfig(**{field: value})
+
+
+def test_a_model_header_with_a_fractional_size_is_refused(tmp_path: Path):
+    one = ClassifierConfig(hidden=8)
+    weights = {f"members.{j}.{k}": v for j in range(2) for k, v in _random_weights(one, j).items()}
+    path = save_model(tmp_path / "m.safetensors", replace(one, members=2), weights, model_meta())
+    weights, meta = read_model_file(path)
+    meta["classifier"]["members"] = 2.0
+    write_tensor_file(path, weights, meta)
+    err = _expect_user_error(path, "integers")
+    assert err.problems[0].field == "classifier"
+
+
 def test_decisive_frames_closed_form():
     U = np.zeros((3, M, K), np.float32)
     U[:, :, -1] = np.linspace(0, 1, M)  # the path follower's choice is the last trajectory
@@ -299,6 +329,17 @@ def test_decisive_frames_closed_form():
     labels = np.array([3, M - 1, 3])
     # frame 0: no terrain; frame 1: terrain, but the label is the path follower's; frame 2: decisive
     np.testing.assert_array_equal(decisive_frames(U, labels), [False, False, True])
+
+
+def test_terrain_seen_only_on_the_lanes_does_not_make_a_frame_decisive():
+    k = K - 1
+    U = np.zeros((2, M, 2 * k + 1), np.float32)
+    U[:, :, -1] = np.linspace(0, 1, M)
+    U[0, 4, k + 1] = 0.5  # frame 0: mud on a lane only
+    U[1, 4, 1] = 0.5  # frame 1: mud on a trajectory
+    labels = np.array([3, 3])
+    np.testing.assert_array_equal(decisive_frames(U, labels, n_terrain=k), [False, True])
+    np.testing.assert_array_equal(decisive_frames(U, labels), [True, True])  # counted as terrain without n_terrain
 
 
 def test_decisive_weight_one_is_the_default():

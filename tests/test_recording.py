@@ -292,7 +292,8 @@ def test_featurize_with_lanes_adds_the_lane_columns(demo_recording: FullRecordin
     np.testing.assert_array_equal(b.U[:, :, [0, 1, 2, 3, 8]], a.U)
     assert (b.U[:, :, 4:8] > 0).any()  # the course's patches show in some lane
     capsys.readouterr()
-    assert main(["featurize", str(demo_recording.rec.path), "--out", str(tmp_path / "bad.safetensors"), "--lanes", "-1"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--lanes" in err[0] and "lane_m" in err[0], err
-    assert not (tmp_path / "bad.safetensors").exists()
+    for bad in ("-1", "inf"):
+        assert main(["featurize", str(demo_recording.rec.path), "--out", str(tmp_path / "bad.safetensors"), "--lanes", bad]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--lanes" in err[0] and "lane_m" in err[0], err
+        assert not (tmp_path / "bad.safetensors").exists()

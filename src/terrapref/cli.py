@@ -219,9 +219,14 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
     result = train_and_save(data, args.out, config, progress=show)
     curve = Path(args.out).with_suffix(".loss.png")
-    save_loss_curve(curve, [asdict(h) for h in result.history], result.best_epoch, title=f"{Path(args.out).name}: {len(data)} samples")
-    best = result.history[result.best_epoch - 1]
-    print(f"wrote {args.out} (epoch {result.best_epoch}: val loss {best.val_loss:.4f}, val acc {best.val_acc:.3f}), {curve}, checkpoints in {Path(args.out).with_name(Path(args.out).stem + '.checkpoints')}")
+    first = f", member 1 of {config.members}" if config.members > 1 else ""
+    save_loss_curve(curve, [asdict(h) for h in result.history], result.best_epoch, title=f"{Path(args.out).name}: {len(data)} samples{first}")
+    chosen = []
+    for j, r in enumerate(result.members or [result]):
+        best = r.history[r.best_epoch - 1]
+        member = f"member {j + 1} " if config.members > 1 else ""
+        chosen.append(f"{member}epoch {r.best_epoch}: val loss {best.val_loss:.4f}, val acc {best.val_acc:.3f}")
+    print(f"wrote {args.out} ({'; '.join(chosen)}), {curve}, checkpoints in {Path(args.out).with_name(Path(args.out).stem + '.checkpoints')}")
     return 0
 
 

@@ -38,6 +38,9 @@ from terrapref.terrain import ClassTable, default_classes
 from terrapref.vehicle import Pose
 
 
+LANE_POINTS = 12  # default points per lane
+
+
 class DistanceMode(str, Enum):
     PAPER = "paper"
     WINDOW = "window"
@@ -67,14 +70,16 @@ class FeatureConfig:
     path_spacing_m: float = 0.25
     feature_classes: tuple[str, ...] = field(default_factory=lambda: default_classes().feature_names)
     lane_m: float = 0.0
-    lane_points: int = 12
+    lane_points: int = LANE_POINTS
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "distance_mode", DistanceMode(self.distance_mode))
         if not self.path_spacing_m > 0 or (self.window_m is not None and not self.window_m > 0):
             raise ValueError("path_spacing_m and window_m must be > 0")
-        if not self.lane_m >= 0 or self.lane_points < 1:
-            raise ValueError("lane_m must be >= 0 and lane_points >= 1")
+        if not (math.isfinite(self.lane_m) and self.lane_m >= 0) or self.lane_points < 1:
+            raise ValueError("lane_m must be finite and >= 0, and lane_points >= 1")
+        if not self.lanes:  # without lanes the point count means nothing: keep equal configs equal
+            object.__setattr__(self, "lane_points", LANE_POINTS)
 
     @property
     def lanes(self) -> bool:
@@ -84,6 +89,11 @@ class FeatureConfig:
     @property
     def effective_window_m(self) -> float:
         return self.window_m if self.window_m is not None else 2.0 * self.preference.horizon_m
+
+    @property
+    def n_terrain(self) -> int:
+        """Terrain columns: the shares on each trajectory's own points (lanes excluded)."""
+        return len(self.feature_classes)
 
     @property
     def n_features(self) -> int:
@@ -113,7 +123,7 @@ class FeatureConfig:
             float(data["path_spacing_m"]),
             tuple(data["feature_classes"]),
             float(data.get("lane_m", 0.0)),
-            int(data.get("lane_points", 12)),
+            int(data.get("lane_points", LANE_POINTS)),
         )
 
 

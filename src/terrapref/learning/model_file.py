@@ -13,7 +13,7 @@ import numpy as np
 from terrapref.camera import CameraConfig
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
-from terrapref.learning.network import ClassifierConfig, member_prefix
+from terrapref.learning.network import MEMBERS, ClassifierConfig, member_prefix
 from terrapref.tensorfile import read_tensor_file, write_tensor_file
 from terrapref.terrain import ClassTable
 
@@ -65,6 +65,10 @@ def classifier_from(weights: dict[str, np.ndarray], meta: dict, source: str) -> 
         raise UserError(source, "missing", field=str(exc.args[0])) from None
     except (TypeError, ValueError) as exc:
         raise UserError(source, f"invalid configuration: {exc}", field="classifier") from None
+    # The header's member count is checked against the weights before shapes are built from it.
+    members = {name.split(".")[1] for name in weights if name.startswith(f"{MEMBERS}.")}
+    if members != ({str(j) for j in range(classifier.members)} if classifier.members > 1 else set()):
+        raise UserError(source, f"header says {classifier.members} member(s), the weights hold {len(members) or 1}", field="classifier.members")
     expected = expected_shapes(classifier)
     if set(weights) != set(expected):
         raise UserError(source, f"weights do not match the classifier (missing {sorted(set(expected) - set(weights))}, extra {sorted(set(weights) - set(expected))})", field="weights")

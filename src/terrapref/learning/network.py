@@ -7,6 +7,7 @@ control loop (about 10 us per decision, no torch import, no torch needed on the 
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -49,6 +50,9 @@ class ClassifierConfig:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "ignore", tuple(int(i) for i in self.ignore))
+        sizes = (self.m, self.n_features, self.hidden, self.depth, self.channels, self.members)
+        if any(isinstance(v, bool) or not isinstance(v, numbers.Integral) for v in sizes):
+            raise ValueError("m, n_features, hidden, depth, channels and members must be integers")
         if any(not 0 <= i < self.n_features for i in self.ignore):
             raise ValueError("ignore: column index out of range")
         if self.activation not in ACTIVATIONS:
@@ -79,9 +83,12 @@ def _act(name: str, x: np.ndarray) -> np.ndarray:
     return np.where(x > 0, x, np.expm1(np.minimum(x, 0.0)))  # elu, alpha = 1
 
 
+MEMBERS = "members"  # weight names of an ensemble's members start with this
+
+
 def member_prefix(j: int) -> str:
     """Weight-name prefix of member ``j`` of an ensemble (as an ``nn.ModuleList`` of members would name it)."""
-    return f"members.{j}."
+    return f"{MEMBERS}.{j}."
 
 
 def numpy_forward(config: ClassifierConfig, weights: dict[str, np.ndarray], U: np.ndarray) -> np.ndarray:

@@ -18,7 +18,6 @@ import torch
 from torch import nn
 
 from terrapref.demos.dataset import Dataset
-from terrapref.features import FeatureConfig
 from terrapref.learning.network import ClassifierConfig, member_prefix
 from terrapref.learning.torch_net import UtilityClassifier
 
@@ -129,15 +128,19 @@ def _to_numpy(model: nn.Module) -> dict[str, np.ndarray]:
     return {k: v.detach().cpu().numpy().copy() for k, v in model.state_dict().items()}
 
 
-def decisive_frames(U: np.ndarray, labels: np.ndarray) -> np.ndarray:
-    """Frames (N,) where terrain is on some trajectory and the label is not argmax of u5."""
-    terrain = (U[:, :, :-1].sum(axis=2) > 0).any(axis=1)
+def decisive_frames(U: np.ndarray, labels: np.ndarray, n_terrain: int | None = None) -> np.ndarray:
+    """Frames (N,) where terrain is on some trajectory and the label is not argmax of u5.
+
+    ``n_terrain``: U's leading terrain columns (``FeatureConfig.n_terrain``); None: all but the
+    last, which holds without lanes. Terrain seen only on the lanes beyond does not count.
+    """
+    terrain = (U[:, :, : U.shape[2] - 1 if n_terrain is None else n_terrain].sum(axis=2) > 0).any(axis=1)
     return terrain & (labels != np.argmax(U[:, :, -1], axis=1))
 
 
-def decisive_weights(U: np.ndarray, labels: np.ndarray, weight: float) -> np.ndarray:
+def decisive_weights(U: np.ndarray, labels: np.ndarray, weight: float, n_terrain: int | None = None) -> np.ndarray:
     """Per-sample loss weights (N,) float32: ``weight`` on decisive frames, 1 elsewhere."""
-    return np.where(decisive_frames(U, labels), weight, 1.0).astype(np.float32)
+    return np.where(decisive_frames(U, labels, n_terrain), weight, 1.0).astype(np.float32)
 
 
 def class_weights(labels: np.ndarray, m: int) -> torch.Tensor:
@@ -175,11 +178,12 @@ def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callabl
 
 def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetrics], None] | None) -> TrainResult:
     n, m, k = dataset.U.shape
+    features = dataset.feature_config
     rng = np.random.default_rng(config.seed)
     tr, va = split_indices(n, config.val_fraction, rng)
     U_np, y_np = dataset.U, dataset.labels
     if config.mirror:
-        w = np.asarray(FeatureConfig.from_dict(dataset.meta["features"]).preference.control.w_rps)
+        w = np.asarray(features.preference.control.w_rps)
         if not np.allclose(w, -w[::-1]):
             raise ValueError("mirror needs a w grid symmetric about zero")
         # Mirrored copies are appended and join the training split only; validation stays real.
@@ -187,7 +191,7 @@ def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetri
         y_np = np.concatenate([y_np, m - 1 - y_np[tr]])
         tr = np.concatenate([tr, np.arange(n, n + len(tr))])
     torch.manual_seed(config.seed)
-    names = FeatureConfig.from_dict(dataset.meta["features"]).column_names
+    names = features.column_names
     unknown = set(config.ignore_features) - set(names)
     if unknown:
         raise ValueError(f"ignore_features: no column {sorted(unknown)} (columns: {', '.join(names)})")
@@ -200,7 +204,7 @@ def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetri
     weight = class_weights(y_np[tr], m) if config.class_balance else None
     loss_fn = nn.CrossEntropyLoss(weight=weight, reduction="none")
     plain = nn.CrossEntropyLoss()
-    sample_w = torch.from_numpy(decisive_weights(U_np, y_np, config.decisive_weight))
+    sample_w = torch.from_numpy(decisive_weights(U_np, y_np, config.decisive_weight, features.n_terrain))
 
     def evaluate(idx: np.ndarray) -> tuple[float, float, float]:
         if len(idx) == 0:
