@@ -246,6 +246,27 @@ def test_project_window_stops_a_path_that_loops_back_from_capturing_it():
     assert path.project(np.array([2.0, 0.9]), 15.0, 25.0) == pytest.approx((20.0, 1.1))
 
 
+def test_project_in_plain_floats_and_in_numpy_agree_exactly(monkeypatch):
+    # Short windows are searched in plain floats, long ones with NumPy: the same arithmetic,
+    # so the same progress to the last bit (the closed loop's decisions depend on it).
+    import terrapref.scenario.path as path_module
+
+    rng = np.random.default_rng(3)
+    path = ReferencePath(np.cumsum(rng.normal(size=(120, 2)), axis=0))  # winds and nears itself
+    queries = []
+    for _ in range(400):
+        xy = rng.uniform(path.waypoints.min(0) - 2, path.waypoints.max(0) + 2)
+        c = rng.uniform(-3, path.length_m + 3)
+        lo, hi = [(-np.inf, np.inf), (c - 2.0, c + 8.0), (c, c), (path.length_m + 1, path.length_m + 5)][rng.integers(4)]
+        queries.append((xy, lo, hi))
+    scalar = [path.project(xy, lo, hi) for xy, lo, hi in queries]
+    monkeypatch.setattr(path_module, "_SCALAR_SEGMENTS", 10**9)
+    assert [path.project(xy, lo, hi) for xy, lo, hi in queries] == scalar  # every window in plain floats
+    monkeypatch.setattr(path_module, "_SCALAR_SEGMENTS", 0)
+    assert [path.project(xy, lo, hi) for xy, lo, hi in queries] == scalar  # every window in NumPy
+    assert any(0 < len([1 for k in range(119) if path.s[k + 1] >= lo and path.s[k] <= hi]) <= 24 for _, lo, hi in queries)
+
+
 def test_distance_to_matches_brute_force():
     rng = np.random.default_rng(1)
     wp = np.array([[0.0, 0.0], [5.0, 1.0], [6.0, 6.0], [1.0, 4.0]])

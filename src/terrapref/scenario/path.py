@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 import bisect
+import math
 
 import numpy as np
+
+
+_SCALAR_SEGMENTS = 24  # project() windows up to this many segments in plain floats
 
 
 class ReferencePath:
@@ -64,21 +68,48 @@ class ReferencePath:
             (s [m], signed lateral offset [m], positive to the left of the path direction).
         """
         p = np.asarray(xy, dtype=float)
-        seg_lo, seg_hi = self.s[:-1], self.s[1:]
-        use = (seg_hi >= s_lo) & (seg_lo <= s_hi)
-        if not use.any():
-            use[:] = True
-        idx = np.flatnonzero(use)
-        a, d, ln = self._a[idx], self._d[idx], self._len[idx]
+        # The segments that meet [s_lo, s_hi] are contiguous (s only grows): segment i spans
+        # [s[i], s[i + 1]], so they run from the first i with s[i + 1] >= s_lo to the last with
+        # s[i] <= s_hi. Found by bisection, the window costs the same on a long path as a short one.
+        n_seg = len(self._len_list)
+        i0 = bisect.bisect_left(self._s_list, s_lo, 1, n_seg + 1) - 1
+        i1 = bisect.bisect_right(self._s_list, s_hi, 0, n_seg)
+        if i0 >= i1:  # no segment in the window: search them all
+            i0, i1 = 0, n_seg
+        if i1 - i0 <= _SCALAR_SEGMENTS:
+            return self._project_scalar(float(p[0]), float(p[1]), s_lo, s_hi, i0, i1)
+        seg_lo, a, d, ln = self.s[i0:i1], self._a[i0:i1], self._d[i0:i1], self._len[i0:i1]
         t = np.einsum("ij,ij->i", p - a, d) / ln**2
-        t_lo = np.clip((s_lo - seg_lo[idx]) / ln, 0.0, 1.0)
-        t_hi = np.clip((s_hi - seg_lo[idx]) / ln, 0.0, 1.0)
+        t_lo = np.clip((s_lo - seg_lo) / ln, 0.0, 1.0)
+        t_hi = np.clip((s_hi - seg_lo) / ln, 0.0, 1.0)
         t = np.clip(t, t_lo, t_hi)
         foot = a + t[:, None] * d
         dist = np.linalg.norm(p - foot, axis=1)
         k = int(np.argmin(dist))
         cross = d[k, 0] * (p[1] - a[k, 1]) - d[k, 1] * (p[0] - a[k, 0])
-        return float(seg_lo[idx[k]] + t[k] * ln[k]), float(np.copysign(dist[k], cross))
+        return float(seg_lo[k] + t[k] * ln[k]), float(np.copysign(dist[k], cross))
+
+    def _project_scalar(self, px: float, py: float, s_lo: float, s_hi: float, i0: int, i1: int) -> tuple[float, float]:
+        """:meth:`project` over segments i0..i1-1 in plain floats, the same arithmetic in the
+        same order (a control-loop window holds a few segments, where NumPy's per-call cost
+        dominates)."""
+        best = math.inf
+        for i in range(i0, i1):
+            ax, ay = self._a_list[i]
+            dx, dy = self._d_list[i]
+            ln, lo = self._len_list[i], self._s_list[i]
+            t = ((px - ax) * dx + (py - ay) * dy) / ln**2
+            t_lo = min(max((s_lo - lo) / ln, 0.0), 1.0)
+            t_hi = min(max((s_hi - lo) / ln, 0.0), 1.0)
+            t = min(max(t, t_lo), t_hi)
+            ex, ey = px - (ax + t * dx), py - (ay + t * dy)
+            dist = math.sqrt(ex * ex + ey * ey)
+            if dist < best:  # the first of equal distances, as argmin
+                best, k, tk = dist, i, t
+        ax, ay = self._a_list[k]
+        dx, dy = self._d_list[k]
+        cross = dx * (py - ay) - dy * (px - ax)
+        return self._s_list[k] + tk * self._len_list[k], math.copysign(best, cross)
 
     def distance_to(self, points: np.ndarray, chunk: int = 4096) -> np.ndarray:
         """Unsigned distance [m] of each point (N, 2) to the whole polyline, shape (N,)."""
