@@ -264,6 +264,12 @@ def test_project_in_plain_floats_and_in_numpy_agree_exactly(monkeypatch):
     assert [path.project(xy, lo, hi) for xy, lo, hi in queries] == scalar  # every window in plain floats
     monkeypatch.setattr(path_module, "_SCALAR_SEGMENTS", 0)
     assert [path.project(xy, lo, hi) for xy, lo, hi in queries] == scalar  # every window in NumPy
+    # A non-finite point or a NaN bound gives NumPy's answer (NaN progress), whatever the window.
+    odd = [(np.array([np.nan, 1.0]), 5.0, 15.0), (np.array([np.inf, 1.0]), 5.0, 15.0), (np.array([1.0, 1.0]), np.nan, np.nan)]
+    in_numpy = [repr(path.project(xy, lo, hi)) for xy, lo, hi in odd]
+    monkeypatch.setattr(path_module, "_SCALAR_SEGMENTS", 10**9)
+    assert [repr(path.project(xy, lo, hi)) for xy, lo, hi in odd] == in_numpy
+    assert "nan" in in_numpy[0] and "nan" in in_numpy[2]
     assert any(0 < len([1 for k in range(119) if path.s[k + 1] >= lo and path.s[k] <= hi]) <= 24 for _, lo, hi in queries)
 
 

@@ -76,8 +76,11 @@ class ReferencePath:
         i1 = bisect.bisect_right(self._s_list, s_hi, 0, n_seg)
         if i0 >= i1:  # no segment in the window: search them all
             i0, i1 = 0, n_seg
-        if i1 - i0 <= _SCALAR_SEGMENTS:
-            return self._project_scalar(float(p[0]), float(p[1]), s_lo, s_hi, i0, i1)
+        px, py = float(p[0]), float(p[1])
+        # Plain floats for a short window; NumPy for a long one, or for a non-finite point or a
+        # NaN bound, whose NaN results only NumPy's argmin and clip give as they always have.
+        if i1 - i0 <= _SCALAR_SEGMENTS and math.isfinite(px) and math.isfinite(py) and not (math.isnan(s_lo) or math.isnan(s_hi)):
+            return self._project_scalar(px, py, s_lo, s_hi, i0, i1)
         seg_lo, a, d, ln = self.s[i0:i1], self._a[i0:i1], self._d[i0:i1], self._len[i0:i1]
         t = np.einsum("ij,ij->i", p - a, d) / ln**2
         t_lo = np.clip((s_lo - seg_lo) / ln, 0.0, 1.0)
