@@ -107,23 +107,23 @@ def numpy_forward(config: ClassifierConfig, weights: dict[str, np.ndarray], U: n
     if config.members == 1:
         logits = _forward_one(config, weights, x)
     else:
-        probs = sum(softmax(_forward_one(config, {k[len(p):]: v for k, v in weights.items() if k.startswith(p)}, x))
-                    for p in map(member_prefix, range(config.members)))
+        probs = sum(softmax(_forward_one(config, weights, x, member_prefix(j))) for j in range(config.members))
         logits = np.log(probs * (1.0 / config.members) + 1e-30)
     return logits[0] if single else logits
 
 
-def _forward_one(config: ClassifierConfig, weights: dict[str, np.ndarray], x: np.ndarray) -> np.ndarray:
-    """Logits (B, m) of one network for U (B, m, k), ignored columns already zeroed."""
+def _forward_one(config: ClassifierConfig, weights: dict[str, np.ndarray], x: np.ndarray, prefix: str = "") -> np.ndarray:
+    """Logits (B, m) of one network, whose weight names start with ``prefix``, for U (B, m, k),
+    ignored columns already zeroed."""
     if config.compress:
-        per_row = x @ weights["compress.weight"].T + weights["compress.bias"]  # (B, m, channels)
+        per_row = x @ weights[f"{prefix}compress.weight"].T + weights[f"{prefix}compress.bias"]  # (B, m, channels)
         scores = per_row[..., 0]
         h = per_row.reshape(len(x), -1)
     else:
         scores = h = x.reshape(len(x), -1)
     for i in range(config.depth):
-        h = _act(config.activation, h @ weights[f"layers.{i}.weight"].T + weights[f"layers.{i}.bias"])
-    logits = h @ weights[f"layers.{config.depth}.weight"].T + weights[f"layers.{config.depth}.bias"]
+        h = _act(config.activation, h @ weights[f"{prefix}layers.{i}.weight"].T + weights[f"{prefix}layers.{i}.bias"])
+    logits = h @ weights[f"{prefix}layers.{config.depth}.weight"].T + weights[f"{prefix}layers.{config.depth}.bias"]
     return logits + scores if config.skip else logits
 
 
