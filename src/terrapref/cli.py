@@ -209,12 +209,13 @@ def _cmd_train(args: argparse.Namespace) -> int:
     members = f", {config.members} members" if config.members > 1 else ""
     print(f"training on {len(data)} samples ({len(args.data)} dataset file(s)), {config.epochs} epochs, batch {config.batch_size}, lr {config.lr}{members}")
     header = f"{'epoch':>5s} {'train loss':>10s} {'val loss':>9s} {'train acc':>9s} {'val acc':>8s} {'val top3':>8s}"
-    started = [0]
+    member = 0
 
     def show(m) -> None:
+        nonlocal member
         if m.epoch == 1:
-            started[0] += 1
-            print(f"member {started[0]}/{config.members}\n{header}" if config.members > 1 else header)
+            member += 1
+            print(f"member {member}/{config.members}\n{header}" if config.members > 1 else header)
         print(f"{m.epoch:5d} {m.train_loss:10.4f} {m.val_loss:9.4f} {m.train_acc:9.3f} {m.val_acc:8.3f} {m.val_top3:8.3f}", flush=True)
 
     result = train_and_save(data, args.out, config, progress=show)
@@ -224,8 +225,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     chosen = []
     for j, r in enumerate(result.members or [result]):
         best = r.history[r.best_epoch - 1]
-        member = f"member {j + 1} " if config.members > 1 else ""
-        chosen.append(f"{member}epoch {r.best_epoch}: val loss {best.val_loss:.4f}, val acc {best.val_acc:.3f}")
+        label = f"member {j + 1} " if config.members > 1 else ""
+        chosen.append(f"{label}epoch {r.best_epoch}: val loss {best.val_loss:.4f}, val acc {best.val_acc:.3f}")
     print(f"wrote {args.out} ({'; '.join(chosen)}), {curve}, checkpoints in {Path(args.out).with_name(Path(args.out).stem + '.checkpoints')}")
     return 0
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from terrapref.demos.dataset import Dataset
 from terrapref.learning.model_file import save_model
-from terrapref.learning.train import MEMBER_SEED_STEP, EpochMetrics, TrainConfig, TrainResult, train
+from terrapref.learning.train import EpochMetrics, TrainConfig, TrainResult, train
 
 
 def model_meta(dataset: Dataset, config: TrainConfig, result: TrainResult) -> dict:
@@ -22,8 +22,8 @@ def model_meta(dataset: Dataset, config: TrainConfig, result: TrainResult) -> di
         "history": [asdict(h) for h in result.history],
         "best_epoch": result.best_epoch,
         "steps": result.steps,
-        **({"members": [{"seed": config.seed + MEMBER_SEED_STEP * j, "best_epoch": r.best_epoch, "history": [asdict(h) for h in r.history]}
-                        for j, r in enumerate(result.members)]} if result.members else {}),
+        **({"members": [{"seed": seed, "best_epoch": r.best_epoch, "history": [asdict(h) for h in r.history]}
+                        for seed, r in zip(config.member_seeds, result.members)]} if result.members else {}),
     }
 
 

@@ -22,6 +22,9 @@ from terrapref.learning.network import ClassifierConfig, member_prefix
 from terrapref.learning.torch_net import UtilityClassifier
 
 
+MEMBER_SEED_STEP = 1000  # member j of an ensemble trains from seed + MEMBER_SEED_STEP * j
+
+
 @dataclass(frozen=True)
 class TrainConfig:
     """Training hyperparameters (defaults: the paper's recipe).
@@ -82,6 +85,11 @@ class TrainConfig:
         # The classifier's own checks (hidden, depth, activation, skip with compress).
         ClassifierConfig(2, 1, self.hidden, self.activation, self.depth, self.compress, self.skip, channels=self.channels)
 
+    @property
+    def member_seeds(self) -> tuple[int, ...]:
+        """The seed each member of an ensemble trains from (one: ``seed``)."""
+        return tuple(self.seed + MEMBER_SEED_STEP * j for j in range(self.members))
+
     def to_dict(self) -> dict:
         return {**asdict(self), "ignore_features": list(self.ignore_features)}
 
@@ -108,9 +116,6 @@ class TrainResult:
     checkpoints: list[dict[str, np.ndarray]]
     steps: int
     members: list[TrainResult] = field(default_factory=list)
-
-
-MEMBER_SEED_STEP = 1000  # member j of an ensemble trains from seed + MEMBER_SEED_STEP * j
 
 
 def _ensemble(results: list[TrainResult]) -> TrainResult:
@@ -169,8 +174,7 @@ def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callabl
         with torch.random.fork_rng():  # seed torch locally; the caller's RNG state is restored
             if config.members == 1:
                 return _train(dataset, config, progress)
-            return _ensemble([_train(dataset, replace(config, seed=config.seed + MEMBER_SEED_STEP * j, members=1), progress)
-                              for j in range(config.members)])
+            return _ensemble([_train(dataset, replace(config, seed=seed, members=1), progress) for seed in config.member_seeds])
     finally:
         torch.set_num_threads(threads)
         torch.use_deterministic_algorithms(deterministic)
