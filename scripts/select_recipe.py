@@ -9,6 +9,7 @@ driver misses is ambiguous under its own costs, and is left out).
     python scripts/select_recipe.py --seeds 3 --courses 16 --only 19 29   # the docs/learning.md runs
     python scripts/select_recipe.py --seeds 5 --courses 32 --only 19 34   # + 2 practice courses, 5 seeds
     python scripts/select_recipe.py --seeds 5 --courses 32 --first-course 1032 --only 34   # confirm a choice on fresh courses
+    python scripts/select_recipe.py --seeds 5 --courses 32 --only 39 40 41 42   # counter-pushes while demonstrating
 
 With closed-loop runs cheap, 16 courses (117 zones the driver meets) cost little more than 8;
 training is most of the time (about a minute per recipe and seed).
@@ -95,6 +96,18 @@ RECIPES = [
     Recipe("ours + 2 practice + lanes, 2 members x 150 epochs", 2, 0,
            TrainConfig(epochs=150, skip=True, class_balance=True, mirror=True, members=2),
            disturbance=DisturbanceConfig(rate_hz=0.3), practice=2, lane_m=6.0),
+    Recipe("ours, pushed the other way at half the detours, driver follows its side within 10%", 2, 0,
+           TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True),
+           disturbance=DisturbanceConfig(rate_hz=0.3, counter_share=0.5), follow_margin=0.1),
+    Recipe("ours + 2 practice, pushed the other way at half the detours, driver follows its side within 10%", 2, 0,
+           TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True),
+           disturbance=DisturbanceConfig(rate_hz=0.3, counter_share=0.5), practice=2, follow_margin=0.1),
+    Recipe("ours + 2 practice, pushed the other way at half the detours, driver follows its side within 30%", 2, 0,
+           TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True),
+           disturbance=DisturbanceConfig(rate_hz=0.3, counter_share=0.5), practice=2, follow_margin=0.3),
+    Recipe("ours + 2 practice, pushed the other way at a quarter of the detours, driver follows its side within 10%", 2, 0,
+           TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True),
+           disturbance=DisturbanceConfig(rate_hz=0.3, counter_share=0.25), practice=2, follow_margin=0.1),
 ]
 
 

@@ -400,7 +400,7 @@ def run_teleop(
             )
             writer = RecordingWriter(record_dir, meta, scenario.to_dict(), overwrite=overwrite)
         stick = _Stick(w_max_rps=float(np.abs(control.w_rps).max()))
-        disturb = Disturber(disturbance, np.random.default_rng(seed), frame_dt) if disturbance and disturbance.rate_hz > 0 else None
+        disturb = Disturber(disturbance, np.random.default_rng(seed), frame_dt) if disturbance and disturbance.active else None
         clock = pygame.time.Clock()
         frame = sim.reset()
         trace_px = [window.to_inset(frame.pose.x, frame.pose.y)]

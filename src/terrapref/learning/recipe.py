@@ -48,6 +48,9 @@ class Recipe:
             :func:`practice_courses`); they show compositions the training course lacks.
         lane_m: lanes beyond each trajectory's end in U (``FeatureConfig.lane_m``; 0: the
             paper's U).
+        follow_margin: the demonstrator takes the side of a patch the vehicle is headed for
+            when it costs at most this much more (``ExpertConfig.follow_margin``; 0: off).
+            Meant for demonstrations with counter-pushes (``DisturbanceConfig.counter_share``).
     """
 
     name: str
@@ -58,10 +61,11 @@ class Recipe:
     disturbance: DisturbanceConfig | None = None
     practice: int = 0
     lane_m: float = 0.0
+    follow_margin: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.demonstrations < 1 or self.corrections < 0 or self.practice < 0 or self.lane_m < 0:
-            raise ValueError("a recipe needs demonstrations >= 1, corrections >= 0, practice >= 0 and lane_m >= 0")
+        if self.demonstrations < 1 or self.corrections < 0 or self.practice < 0 or self.lane_m < 0 or self.follow_margin < 0:
+            raise ValueError("a recipe needs demonstrations >= 1, corrections >= 0, practice >= 0, lane_m >= 0 and follow_margin >= 0")
 
     def features(self, base: FeatureConfig | None = None) -> FeatureConfig:
         """The feature configuration this recipe trains with: ``base`` with its lanes."""
@@ -101,6 +105,7 @@ def _demonstrate(
     disturbance: DisturbanceConfig | None,
     profile: PreferenceProfile | None,
     features: FeatureConfig,
+    follow_margin: float = 0.0,
 ) -> bool:
     """One synthetic-driver run of ``course`` into ``out``; False if a matching one was reused.
 
@@ -110,7 +115,7 @@ def _demonstrate(
     scenario = resolve_scenario(course)
     profile = profile or PreferenceProfile.default(scenario.classes)
     camera, sim_cfg = CameraConfig(), SimConfig()
-    expert_cfg = ExpertConfig(profile=profile.order)
+    expert_cfg = ExpertConfig(profile=profile.order, follow_margin=follow_margin)
     pushes = disturbance.to_dict() if disturbance is not None else None
     if (out / "meta.json").exists():
         existing = read_recording(out)
@@ -149,7 +154,7 @@ def record_demonstrations(
     runs = [(course, workdir / f"demo_{k}{tail}", seed * 100 + k) for k in range(recipe.demonstrations)]
     runs += [(c, workdir / f"practice_{k}{tail}", seed * 100 + 20 + k) for k, c in enumerate(practice_courses(recipe, seed))]
     for i, (name, out, demo_seed) in enumerate(runs):
-        if _demonstrate(name, out, demo_seed, recipe.disturbance, profile, features) and log:
+        if _demonstrate(name, out, demo_seed, recipe.disturbance, profile, features, recipe.follow_margin) and log:
             log(f"demonstration {i + 1}/{len(runs)} ({name}): {len(read_recording(out))} frames")
     return [out for _, out, _ in runs]
 
