@@ -146,6 +146,12 @@ def test_a_counter_push_turns_the_vehicle_the_other_way_when_the_stick_leaves_re
     assert out[42:53] == [0.0] * 11 and out[53:58] == [0.4] * 5 and out[58:] == stick[58:]
 
 
+def test_a_counter_push_is_clipped_to_the_yaw_rate_limit():
+    config = DisturbanceConfig(rate_hz=0.0, counter_share=1.0, min_yaw_rate_rps=0.8, max_yaw_rate_rps=0.8, max_command_rps=0.5)
+    out = _countered(config, [0.0] * 12 + [-0.3] * 5)
+    assert out[12:17] == [0.5] * 5
+
+
 def test_counter_share_is_the_share_of_stick_movements_countered():
     config = DisturbanceConfig(rate_hz=0.0, counter_share=0.3, min_counter_s=0.1, max_counter_s=0.1)
     stick = ([0.0] * 11 + [0.4]) * 2000

@@ -9,7 +9,7 @@ import pytest
 
 from terrapref.scenario import Circle, Polygon, Rectangle, parse_scenario
 from terrapref.scenario.model import grid_shape
-from terrapref.scenario.path import ReferencePath
+from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.terrain import UNKNOWN, default_classes
 from terrapref.world import WorldMap, rasterise
 from terrapref.world.raster import paint
@@ -244,6 +244,16 @@ def test_project_window_stops_a_path_that_loops_back_from_capturing_it():
     assert path.project(np.array([8.0, 0.3]), 0.0, 5.0) == pytest.approx((5.0, math.hypot(3.0, 0.3)))
     # And on the way back, a window round s = 20 finds the return leg.
     assert path.project(np.array([2.0, 0.9]), 15.0, 25.0) == pytest.approx((20.0, 1.1))
+
+
+def test_tracker_keeps_the_offset_of_its_last_fix():
+    tracker = PathTracker(ReferencePath(np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]])))
+    assert tracker.update(np.array([4.0, 1.5])) == pytest.approx(4.0) and tracker.lateral_m == pytest.approx(1.5)
+    assert tracker.update(np.array([6.0, -0.5])) == pytest.approx(6.0) and tracker.lateral_m == pytest.approx(-0.5)
+    # Progress never moves back; the offset is still that of the nearest point in the window.
+    assert tracker.update(np.array([5.5, 2.0])) == pytest.approx(6.0) and tracker.lateral_m == pytest.approx(2.0)
+    tracker.reset()
+    assert tracker.s is None and tracker.lateral_m == 0.0
 
 
 def test_project_in_plain_floats_and_in_numpy_agree_exactly(monkeypatch):

@@ -215,9 +215,8 @@ class ExpertDriver:
         s_now = self.tracker.update(np.array(frame.pose[:2]))
         headed = 0.0
         if c.follow_margin > 0:
-            _, lateral = self.path.project(np.array(frame.pose[:2]), s_now - 1.0, s_now + 1.0)
             error = (frame.pose[2] - float(self.path.heading_at(s_now)) + math.pi) % (2 * math.pi) - math.pi
-            headed = lateral + HEADED_AHEAD_M * math.sin(error)
+            headed = self.tracker.lateral_m + HEADED_AHEAD_M * math.sin(error)
         self.offset = self.choose_offset(s_now, headed)
         w = self.steer(frame.pose, s_now, self.offset)
         w = 0.0 if abs(w) < c.deadzone_rps else w

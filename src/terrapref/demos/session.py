@@ -25,6 +25,9 @@ from terrapref.terrain import PreferenceProfile
 from terrapref.vehicle import Command
 
 
+COUNTER_REST_S = 1.0  # a counter-push may start only when the stick has rested longer than this [s]
+
+
 @dataclass(frozen=True)
 class DisturbanceConfig:
     """Random yaw-rate pushes added to the executed command while demonstrating.
@@ -81,9 +84,10 @@ class Disturber:
         """The command the vehicle executes instead of ``command`` (often ``command`` itself)."""
         c = self.config
         if c.counter_share > 0:
-            if self.rest_s > 1.0 + 0.5 * self.dt and command[1] != 0.0 and self.rng.random() < c.counter_share:
+            if self.rest_s > COUNTER_REST_S + 0.5 * self.dt and command[1] != 0.0 and self.rng.random() < c.counter_share:
                 self.counter_left_s = self.rng.uniform(c.min_counter_s, c.max_counter_s)
-                self.counter = -math.copysign(self.rng.uniform(c.min_yaw_rate_rps, c.max_yaw_rate_rps), command[1])
+                push = min(self.rng.uniform(c.min_yaw_rate_rps, c.max_yaw_rate_rps), c.max_command_rps)
+                self.counter = -math.copysign(push, command[1])
             self.rest_s = self.rest_s + self.dt if command[1] == 0.0 else 0.0
             if self.counter_left_s > 0.5 * self.dt:
                 self.counter_left_s -= self.dt

@@ -140,14 +140,17 @@ class PathTracker:
         self.back_m = back_m
         self.ahead_m = ahead_m
         self.s: float | None = None
+        self.lateral_m = 0.0  # signed offset of the last update's point from the path, left positive [m]
 
     def reset(self) -> None:
         self.s = None
+        self.lateral_m = 0.0
 
     def update(self, xy: np.ndarray) -> float:
         """New progress [m] for the vehicle at ``xy``; it never moves backwards."""
         if self.s is None:  # first fix: the nearest point of the whole path
-            self.s = self.path.project(xy)[0]
+            self.s, self.lateral_m = self.path.project(xy)
         else:
-            self.s = max(self.s, self.path.project(xy, self.s - self.back_m, self.s + self.ahead_m)[0])
+            s, self.lateral_m = self.path.project(xy, self.s - self.back_m, self.s + self.ahead_m)
+            self.s = max(self.s, s)
         return self.s
