@@ -7,7 +7,8 @@ Run through ``scripts/bench.sh`` (one core); numbers go into ``docs/benchmarks.m
     median is reported. Target: <= 30 us median.
 (c) decision: ``Planner.decide`` (features + classifier C in NumPy + progress along the path)
     on the same frames, with a model trained on the recording (paper recipe). Target:
-    <= 100 us median.
+    <= 100 us median. Two more lines: lanes with a 2-member ensemble, and the planner's
+    second stage (terrapref.planner.second_stage), as used by the recipe ``ours``.
 (d) closed loop: the planner (same model) driving ``train_course`` in the simulation, frames
     rendered only where the planner reads them; simulated frames per second of wall time.
 (b) record: ``terrapref record train_course`` end to end through the library (simulation,
@@ -79,7 +80,7 @@ def bench_closed_loop(model_path: Path) -> tuple[float, int]:
     return time.perf_counter() - t0, len(log.commands)
 
 
-def bench_decision(rec_dir: Path, repeats: int, features: FeatureConfig | None = None, members: int = 1) -> np.ndarray:
+def bench_decision(rec_dir: Path, repeats: int, features: FeatureConfig | None = None, members: int = 1, second_stage: bool = False) -> np.ndarray:
     from terrapref.demos.dataset import build_dataset
     from terrapref.learning.model_file import load_model
     from terrapref.learning.pipeline import train_and_save
@@ -88,8 +89,9 @@ def bench_decision(rec_dir: Path, repeats: int, features: FeatureConfig | None =
 
     rec = read_recording(rec_dir)
     features = features or FeatureConfig()
-    model_path = rec_dir.parent / ("model.safetensors" if features == FeatureConfig() and members == 1 else "variant.safetensors")
-    train_and_save(build_dataset([rec], features), model_path, TrainConfig(members=members), checkpoints=False)
+    plain = features == FeatureConfig() and members == 1 and not second_stage
+    model_path = rec_dir.parent / ("model.safetensors" if plain else "variant.safetensors")
+    train_and_save(build_dataset([rec], features), model_path, TrainConfig(members=members, utility=second_stage), checkpoints=False)
     planner = Planner(load_model(model_path))
     idx = list(range(0, len(rec), max(1, len(rec) // 500)))
     images = [rec.image(i) for i in idx]
@@ -115,11 +117,13 @@ def main() -> int:
         t = bench_features(out, args.repeats)
         d = bench_decision(out, args.repeats)
         d2 = bench_decision(out, args.repeats, FeatureConfig(lane_m=6.0), members=2)
+        d3 = bench_decision(out, args.repeats, second_stage=True)
         loop_s, loop_frames = bench_closed_loop(out.parent / "model.safetensors")
     print(f"{'benchmark':44s} {'median':>10s} {'p90':>10s} {'target':>10s}")
     print(f"{'features U (m=21, n=30), per frame':44s} {np.median(t) * 1e6:8.1f}us {np.percentile(t, 90) * 1e6:8.1f}us {'<= 30us':>10s}   ({len(t)} calls)")
     print(f"{'decision (features + C + progress), per frame':44s} {np.median(d) * 1e6:8.1f}us {np.percentile(d, 90) * 1e6:8.1f}us {'<= 100us':>10s}   ({len(d)} calls)")
     print(f"{'decision, lanes + 2 members, per frame':44s} {np.median(d2) * 1e6:8.1f}us {np.percentile(d2, 90) * 1e6:8.1f}us {'-':>10s}   ({len(d2)} calls)")
+    print(f"{'decision with the second stage, per frame':44s} {np.median(d3) * 1e6:8.1f}us {np.percentile(d3, 90) * 1e6:8.1f}us {'-':>10s}   ({len(d3)} calls)")
     print(f"{'planner driving train_course, closed loop':44s} {loop_s:9.2f}s {'':>10s} {'-':>10s}   ({loop_frames} frames, {loop_frames / loop_s:.0f} frames/s)")
     print(f"{'record train_course (synthetic driver)':44s} {wall:9.2f}s {'':>10s} {'<= 20s':>10s}   ({frames} frames, {size / 1e6:.1f} MB, {size / frames / 1e3:.1f} kB/frame)")
     return 0

@@ -10,6 +10,7 @@ driver misses is ambiguous under its own costs, and is left out).
     python scripts/select_recipe.py --seeds 5 --courses 32 --only 19 34   # + 2 practice courses, 5 seeds
     python scripts/select_recipe.py --seeds 5 --courses 32 --first-course 1032 --only 34   # confirm a choice on fresh courses
     python scripts/select_recipe.py --seeds 5 --courses 32 --only 39 40 41 42   # counter-pushes while demonstrating
+    python scripts/select_recipe.py --seeds 5 --courses 32 --only 43   # the planner's second stage (now `ours`)
 
 With closed-loop runs cheap, 16 courses (117 zones the driver meets) cost little more than 8;
 training is most of the time (about a minute per recipe and seed).
@@ -108,6 +109,8 @@ RECIPES = [
     Recipe("ours + 2 practice, pushed the other way at a quarter of the detours, driver follows its side within 10%", 2, 0,
            TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True),
            disturbance=DisturbanceConfig(rate_hz=0.3, counter_share=0.25), practice=2, follow_margin=0.1),
+    Recipe("ours + second stage (scored by the linear utility fitted with C)", 2, 0,
+           TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True, utility=True), disturbance=DisturbanceConfig(rate_hz=0.3)),
 ]
 
 

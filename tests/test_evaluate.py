@@ -16,6 +16,7 @@ from terrapref.cli import main
 from terrapref.demos.dataset import FORMAT as DATASET_FORMAT
 from terrapref.demos.dataset import Dataset, save_dataset
 from terrapref.evaluation.evaluate import evaluate_model
+from terrapref.features import FeatureConfig
 from terrapref.learning.model_file import load_model, save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.scenario import resolve_scenario
@@ -257,6 +258,29 @@ def test_cli_train_members_writes_an_ensemble(tmp_path: Path, capsys):
         best = member["history"][member["best_epoch"] - 1]
         assert f"member {j} epoch {member['best_epoch']}: val loss {best['val_loss']:.4f}" in summary
     assert len(list((tmp_path / "ens.checkpoints").iterdir())) == 2
+
+
+def test_cli_train_second_stage_stores_the_fitted_utility(tmp_path: Path, capsys):
+    data = _dataset_file(tmp_path / "data.safetensors", 200)
+    out = tmp_path / "m.safetensors"
+    assert main(["train", str(data), "--out", str(out), "--epochs", "1", "--mirror", "--second-stage"]) == 0
+    model = load_model(out)
+    assert model.meta["training"]["utility"] and model.utility is not None
+    assert model.utility.w.shape == (5,) and model.utility.b.shape == (21,)
+
+
+def test_cli_train_second_stage_refuses_lanes(tmp_path: Path, capsys):
+    rng = np.random.default_rng(0)
+    lanes = FeatureConfig(lane_m=6.0)
+    meta = {"format": DATASET_FORMAT, **model_meta(features=lanes)}
+    n = 50
+    data = save_dataset(Dataset(rng.uniform(0, 1, (n, 21, lanes.n_features)).astype(np.float32), rng.integers(0, 21, n),
+                                np.zeros(n, np.float32), np.zeros(n, np.int64), meta), tmp_path / "lanes.safetensors")
+    out = tmp_path / "m.safetensors"
+    assert main(["train", str(data), "--out", str(out), "--epochs", "1", "--second-stage"]) == 2
+    line = _one_line_error(capsys, str(data))
+    assert "--second-stage" in line and "lane" in line
+    assert not out.exists()
 
 
 def test_cli_train_missing_dataset(tmp_path: Path, capsys):

@@ -202,10 +202,12 @@ def _cmd_train(args: argparse.Namespace) -> int:
     )
     try:
         config = TrainConfig(epochs=args.epochs, lr=args.lr, batch_size=args.batch_size, seed=args.seed, hidden=args.hidden,
-                             activation=args.activation, skip=args.skip, class_balance=args.class_balance, mirror=args.mirror,
+                             activation=args.activation, skip=args.skip, class_balance=args.class_balance, mirror=args.mirror, utility=args.second_stage,
                              members=args.members)
     except ValueError as exc:
         raise UserError("train", str(exc)) from None
+    if config.utility and first.feature_config.lanes:
+        raise UserError(str(args.data[0]), "--second-stage needs U without lanes (featurize without --lanes)", field="features.lane_m")
     members = f", {config.members} members" if config.members > 1 else ""
     print(f"training on {len(data)} samples ({len(args.data)} dataset file(s)), {config.epochs} epochs, batch {config.batch_size}, lr {config.lr}{members}")
     header = f"{'epoch':>5s} {'train loss':>10s} {'val loss':>9s} {'train acc':>9s} {'val acc':>8s} {'val top3':>8s}"
@@ -365,6 +367,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--class-balance", action="store_true", help="weight the loss by inverse label frequency")
     p.add_argument("--mirror", action="store_true", help="add left-right mirrored copies of the training samples")
     p.add_argument("--members", type=int, default=1, help="networks trained from different seeds; the model averages their F_t")
+    p.add_argument("--second-stage", action="store_true",
+                   help="also fit the linear utility and store it with the model; the planner then scores a second stage of trajectories with it")
     p.set_defaults(func=_cmd_train)
 
     p = sub.add_parser("evaluate", help="drive scenarios with a model, score every zone, write metrics.json and figures")

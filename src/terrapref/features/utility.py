@@ -161,6 +161,11 @@ class UtilityFeaturizer:
     def m(self) -> int:
         return self.pset.m
 
+    @property
+    def class_columns(self) -> np.ndarray:
+        """Terrain column of each class id (256,); K (no column) for classes U does not count."""
+        return self._column
+
     def terrain(self, image: np.ndarray | SegmentationView) -> np.ndarray:
         """Terrain utilities, shape (m, K), or (m, 2K) with lanes (each lane's shares after the
         trajectory's): the share of each row's points on each class."""

@@ -13,6 +13,7 @@ import numpy as np
 from terrapref.camera import CameraConfig
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
+from terrapref.learning.linear import LinearUtility
 from terrapref.learning.network import MEMBERS, ClassifierConfig, member_prefix
 from terrapref.tensorfile import read_tensor_file, write_tensor_file
 from terrapref.terrain import ClassTable
@@ -33,6 +34,7 @@ class LoadedModel:
     classes: ClassTable
     profile: tuple[str, ...]
     meta: dict
+    utility: LinearUtility | None = None  # fitted with C for the planner's second stage (TrainConfig.utility)
 
 
 def save_model(path: str | Path, classifier: ClassifierConfig, weights: dict[str, np.ndarray], meta: dict) -> Path:
@@ -77,7 +79,24 @@ def classifier_from(weights: dict[str, np.ndarray], meta: dict, source: str) -> 
             raise UserError(source, f"has shape {tuple(weights[name].shape)}, expected {shape}", field=f"weights.{name}")
     if classifier.m != features.preference.m or classifier.n_features != features.n_features:
         raise UserError(source, "classifier shape does not match its feature configuration", field="classifier")
-    return LoadedModel(source, classifier, weights, features, camera, classes, profile, meta)
+    return LoadedModel(source, classifier, weights, features, camera, classes, profile, meta, _utility(meta, features, source))
+
+
+def _utility(meta: dict, features: FeatureConfig, source: str) -> LinearUtility | None:
+    """The linear utility the metadata carries (``utility``: ``w`` per column, ``b`` per trajectory), if any."""
+    data = meta.get("utility")
+    if data is None:
+        return None
+    arrays = {}
+    for name, size in (("w", features.n_features), ("b", features.preference.m)):
+        try:
+            value = np.asarray(data[name], dtype=float)
+        except (KeyError, TypeError, ValueError, IndexError):
+            value = None
+        if value is None or value.shape != (size,) or not np.isfinite(value).all():
+            raise UserError(source, f"expected {size} finite numbers", field=f"utility.{name}")
+        arrays[name] = value
+    return LinearUtility(arrays["w"], arrays["b"])
 
 
 def model_context(meta: dict, source: str) -> tuple[FeatureConfig, CameraConfig, ClassTable, tuple[str, ...]]:

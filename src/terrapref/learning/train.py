@@ -18,6 +18,7 @@ import torch
 from torch import nn
 
 from terrapref.demos.dataset import Dataset
+from terrapref.learning.linear import LinearUtility, fit_linear_utility
 from terrapref.learning.network import ClassifierConfig, member_prefix
 from terrapref.learning.torch_net import UtilityClassifier
 
@@ -48,6 +49,9 @@ class TrainConfig:
             ClassifierConfig).
         members: networks trained apart, member j from seed ``seed + MEMBER_SEED_STEP * j``
             (its own split, initialisation and batch order); C averages their F_t.
+        utility: also fit the linear utility model (terrapref.learning.linear) to every sample,
+            with the mirrored copies when ``mirror`` is on, and keep it with the model; the
+            planner's second stage scores with it (terrapref.planner.second_stage).
     """
 
     epochs: int = 15
@@ -67,6 +71,7 @@ class TrainConfig:
     ignore_features: tuple[str, ...] = ()
     channels: int = 1
     members: int = 1
+    utility: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "ignore_features", tuple(self.ignore_features))
@@ -116,6 +121,7 @@ class TrainResult:
     checkpoints: list[dict[str, np.ndarray]]
     steps: int
     members: list[TrainResult] = field(default_factory=list)
+    utility: LinearUtility | None = None  # the linear utility model, when TrainConfig.utility asks for it
 
 
 def _ensemble(results: list[TrainResult]) -> TrainResult:
@@ -166,6 +172,8 @@ def split_indices(n: int, val_fraction: float, rng: np.random.Generator) -> tupl
 def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callable[[EpochMetrics], None] | None = None) -> TrainResult:
     """Train C on ``dataset``; returns the lowest-validation-loss epoch's weights and the history."""
     config = config or TrainConfig()
+    if config.utility and dataset.feature_config.lanes:
+        raise ValueError("the second stage's utility needs U without lanes")
     deterministic = torch.are_deterministic_algorithms_enabled()
     threads = torch.get_num_threads()
     torch.use_deterministic_algorithms(True)
@@ -173,8 +181,15 @@ def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callabl
     try:
         with torch.random.fork_rng():  # seed torch locally; the caller's RNG state is restored
             if config.members == 1:
-                return _train(dataset, config, progress)
-            return _ensemble([_train(dataset, replace(config, seed=seed, members=1), progress) for seed in config.member_seeds])
+                result = _train(dataset, config, progress)
+            else:
+                result = _ensemble([_train(dataset, replace(config, seed=seed, members=1), progress) for seed in config.member_seeds])
+        if config.utility:
+            U, labels = dataset.U, dataset.labels
+            if config.mirror:  # _train has checked that the w grid is symmetric
+                U, labels = np.concatenate([U, U[:, ::-1, :]]), np.concatenate([labels, dataset.U.shape[1] - 1 - labels])
+            result.utility = fit_linear_utility(U, labels)
+        return result
     finally:
         torch.set_num_threads(threads)
         torch.use_deterministic_algorithms(deterministic)

@@ -15,6 +15,7 @@ from terrapref.camera import CameraConfig, PinholeCamera, SegmentationView, as_v
 from terrapref.features import UtilityFeaturizer
 from terrapref.learning.model_file import LoadedModel, check_compatible
 from terrapref.learning.network import softmax
+from terrapref.planner.second_stage import SecondStage, SecondStageConfig
 from terrapref.planner.policy import ClassifierPolicy, Observation, Policy
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
@@ -27,7 +28,7 @@ class Decision:
     """One planning step.
 
     Attributes:
-        index: chosen trajectory (argmax of ``probs``).
+        index: chosen trajectory (argmax of ``probs``, or of the second stage's scores).
         command: its (v [m/s], w [rad/s]).
         probs: F_t, shape (m,).
         U: utility features, shape (m, K + 1).
@@ -54,9 +55,13 @@ class Planner:
             argmax (0: the paper's memoryless planner). When the classifier is unsure between
             passing a patch left or right, a memoryless argmax can flip sides every frame and
             average out to driving straight into it; the average lets it commit.
+        second_stage: the second stage beyond the trajectories (terrapref.planner.second_stage),
+            used when the model file carries the linear utility it scores with (``terrapref
+            train --second-stage``); None never looks beyond the trajectories.
     """
 
-    def __init__(self, model: LoadedModel | Policy, camera: CameraConfig | None = None, smoothing: float = 0.0) -> None:
+    def __init__(self, model: LoadedModel | Policy, camera: CameraConfig | None = None, smoothing: float = 0.0,
+                 second_stage: SecondStageConfig | None = SecondStageConfig()) -> None:
         if not 0.0 <= smoothing < 1.0:
             raise ValueError("smoothing must be in [0, 1)")
         self.smoothing = smoothing
@@ -71,6 +76,8 @@ class Planner:
         self.camera = PinholeCamera(camera)
         self.featurizer = UtilityFeaturizer(policy.features, self.camera, policy.classes)
         self.control = policy.features.preference.control
+        utility = policy.stage_utility
+        self.second_stage = SecondStage(second_stage, self.featurizer, self.camera, utility) if second_stage is not None and utility is not None else None
         self.path: ReferencePath | None = None
         self.tracker: PathTracker | None = None
 
@@ -96,7 +103,11 @@ class Planner:
         if self.smoothing > 0:
             self._avg = probs if self._avg is None else self.smoothing * self._avg + (1 - self.smoothing) * probs
             probs = self._avg
-        i = int(np.argmax(probs))
+        if self.second_stage is None:
+            i = int(np.argmax(probs))
+        else:
+            with np.errstate(divide="ignore"):  # a probability of exactly 0 is -inf, never chosen
+                i = int(np.argmax(self.second_stage.scores(np.log(probs), view, pose, self.path, s)))
         return Decision(i, Command(*self.control.command(i)), probs, U, s)
 
 

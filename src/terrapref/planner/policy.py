@@ -62,6 +62,7 @@ class Policy:
     profile: tuple[str, ...] | None = None
     path: str = ""
     uses_path_ahead = False  # the planner computes Observation.path_ahead only when asked
+    stage_utility: LinearUtility | None = None  # what the planner's second stage scores with, if the model has one
 
     def logits(self, obs: Observation) -> np.ndarray:
         """One score per trajectory, shape (m,); the planner drives the argmax."""
@@ -78,6 +79,7 @@ class ClassifierPolicy(Policy):
         self.features, self.camera, self.classes = model.features, model.camera, model.classes
         self.profile, self.path = model.profile, model.path
         self._config, self._weights = model.classifier, model.weights
+        self.stage_utility = model.utility
 
     def logits(self, obs: Observation) -> np.ndarray:
         return numpy_forward(self._config, self._weights, obs.U)

@@ -28,7 +28,8 @@ from terrapref.scenario import packaged_scenarios, resolve_scenario
 from terrapref.terrain import PreferenceProfile
 
 # Chosen on generated courses, never on the packaged test set (docs/learning.md).
-OURS = Recipe("ours", demonstrations=2, corrections=0, train=TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True),
+OURS = Recipe("ours", demonstrations=2, corrections=0,
+              train=TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True, utility=True),
               disturbance=DisturbanceConfig(rate_hz=0.3))
 TEST_SET = ("test_course",)
 
@@ -184,7 +185,8 @@ def _write_report(out: Path, results, trained, recipes, seeds, eval_seeds, profi
         lines.append(f"- **{r.name}**: {r.demonstrations} demonstration run(s) of train_course{practice}, {pushes}, {r.corrections} correction session(s), "
                      f"{r.train.epochs} epochs, residual path {'on' if r.train.skip else 'off'}, class-balanced loss {'on' if r.train.class_balance else 'off'}, "
                      f"mirrored samples {'on' if r.train.mirror else 'off'}, decisive-frame weight {r.train.decisive_weight:g}, planner smoothing {r.smoothing:g}"
-                     + (f", lanes of {r.lane_m:g} m in U" if r.lane_m else "") + (f", {r.train.members} ensemble members" if r.train.members > 1 else "") + ".")
+                     + (f", lanes of {r.lane_m:g} m in U" if r.lane_m else "") + (f", {r.train.members} ensemble members" if r.train.members > 1 else "")
+                     + (", the planner scoring a second stage of trajectories beyond the first with the linear utility fitted to the same samples" if r.train.utility else "") + ".")
     lines += ["", "## Summary (test_course and the figure variations)", "", "| who | zone success | collisions | completed | runs |", "|---|---|---|---|---|"]
     for name in [*(r.name for r in recipes), "driver"]:
         s = set_summary(name, test_names)

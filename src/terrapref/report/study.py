@@ -7,7 +7,8 @@ Stages (each parallel across processes):
    alone), once under the default profile and once under another profile.
 2. Featurisation: utility features (and, for the ablation, other horizons) and the CNN's
    downsampled images, each read from the recordings once.
-3. Training: C (recipe ``ours``), the linear utility model and the CNN on the same
+3. Training: C (recipe ``ours``, without the planner's second stage: the study measures C
+   itself), the linear utility model and the CNN on the same
    recordings; the same three on the first 0.5 ... 10 minutes of them; C under the other
    profile; C's ablations.
 4. Closed-loop evaluation on ``test_course`` and the figure variations: every model, pure
@@ -160,7 +161,8 @@ def _train_job(job: dict) -> dict:
         if job["method"] == "linear":
             save_linear(job["out"], fit_linear_utility(ds.U, ds.labels), meta)
         else:
-            config = TrainConfig(**{**OURS.train.to_dict(), "epochs": job["epochs"], "seed": job["seed"], **job.get("train", {})})
+            # The study compares C itself with the baselines: its models drive without the second stage.
+            config = TrainConfig(**{**OURS.train.to_dict(), "utility": False, "epochs": job["epochs"], "seed": job["seed"], **job.get("train", {})})
             train_and_save(ds, job["out"], config, checkpoints=False)
     return {**job, "samples": samples, "train_s": time.perf_counter() - t0}
 

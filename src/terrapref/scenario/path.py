@@ -45,6 +45,19 @@ class ReferencePath:
         f = (s - self.s[i]) / self._len[i]
         return self._a[i] + f[..., None] * self._d[i]
 
+    def straight_between(self, s_lo: float, s_hi: float) -> tuple[float, float, float, float] | None:
+        """(x, y, ux, uy): the point at ``s_lo`` and the unit direction there, when the path runs
+        straight from ``s_lo`` to ``s_hi`` (one segment, both inside the path); else None."""
+        if not 0.0 <= s_lo <= s_hi <= self.length_m:
+            return None
+        i = min(max(bisect.bisect_right(self._s_list, s_lo) - 1, 0), len(self._len) - 1)
+        if s_hi > self._s_list[i + 1]:
+            return None
+        ln = self._len_list[i]
+        (ax, ay), (dx, dy) = self._a_list[i], self._d_list[i]
+        f = (s_lo - self._s_list[i]) / ln
+        return ax + f * dx, ay + f * dy, dx / ln, dy / ln
+
     def resampled(self, spacing_m: float) -> tuple[np.ndarray, np.ndarray]:
         """Points every ``spacing_m`` along the path (and its end): (points (K, 2), arc lengths (K,)).
 

@@ -1,0 +1,138 @@
+"""A second stage of trajectories beyond the first, scored by a learned linear utility.
+
+The trajectories end 5.8 m ahead, and a driver commits to a side of a patch about 5 m before it,
+weighing terrain further away (docs/learning.md). The second stage lets the planner see that far
+without changing S or C. For each of the ``candidates`` trajectories C ranks highest, it takes
+the pose reached after ``after_s`` seconds along that trajectory and lays the whole preference
+set out again from there. Every point of that second stage lies on the flat ground at a fixed
+place in the vehicle frame, so its pixel in the current frame is precomputed like the first
+stage's (a point outside the image counts for no class, as in U). The second stage gets its own utilities U' (terrain shares, and the
+distance utility against the path point one horizon beyond that pose), and its value is the
+best of its trajectories under the linear utility model ``w . U'_j + b_j`` fitted to the same
+demonstrations as C (terrapref.learning.linear). The planner then drives the argmax of
+
+    log F_t(i) + weight * max_j (w . U'_ij + b_j)
+
+over the candidates. The linear model is a softmax over trajectories too, so its scores are in
+the same units (log-probabilities up to a constant) as log F_t. With ``weight`` 0 the planner
+is the paper's argmax of F_t.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from terrapref.camera import PinholeCamera, SegmentationView
+from terrapref.features import UtilityFeaturizer
+from terrapref.learning.linear import LinearUtility
+from terrapref.scenario.path import ReferencePath
+from terrapref.vehicle import Pose
+
+
+@dataclass(frozen=True)
+class SecondStageConfig:
+    """The second stage's decision rule (defaults chosen on generated courses, docs/learning.md).
+
+    Attributes:
+        after_s: where along each candidate trajectory the second stage starts [s]; rounded to
+            a trajectory point (point j is j dt along; the last, (n - 1) dt).
+        weight: weight of the second stage's value against log F_t.
+        candidates: how many of C's highest-ranked trajectories are looked beyond.
+        stride: the second stage's terrain shares read every ``stride``-th point of each
+            trajectory, ending with its last.
+    """
+
+    after_s: float = 1.8
+    weight: float = 1.0
+    candidates: int = 7
+    stride: int = 2
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.after_s) and self.after_s > 0 and math.isfinite(self.weight) and self.weight >= 0
+                and self.candidates >= 1 and self.stride >= 1):
+            raise ValueError("the second stage needs after_s > 0, weight >= 0, candidates >= 1 and stride >= 1")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+class SecondStage:
+    """Precomputed second stage for one featurizer (preference set and camera) and utility."""
+
+    def __init__(self, config: SecondStageConfig, featurizer: UtilityFeaturizer, camera: PinholeCamera, utility: LinearUtility) -> None:
+        pset = featurizer.pset
+        step = int(round(config.after_s / featurizer.config.preference.dt_s))
+        if not 1 <= step < pset.config.n_steps:
+            raise ValueError(f"the second stage's after_s must be within the trajectories (1 to {pset.config.n_steps - 1} steps of dt)")
+        if featurizer.config.lanes:
+            raise ValueError("the second stage works on U without lanes")
+        m, k = pset.m, featurizer.config.n_terrain
+        if utility.w.shape != (k + 1,) or utility.b.shape != (m,):
+            raise ValueError("the linear utility does not match the feature configuration")
+        self.config = config
+        self.featurizer = featurizer
+        self.w, self.b = np.asarray(utility.w, dtype=float), np.asarray(utility.b, dtype=float)
+        self.starts = pset.trajectories[:, step].copy()  # (m, 3): the pose after_s along each trajectory
+        n = pset.config.n_steps
+        pts = pset.trajectories[:, n - 1 - (n - 1) // config.stride * config.stride :: config.stride, :2]  # (m, n', 2), own frame
+        x0, y0, yaw0 = (self.starts[:, j, None, None] for j in range(3))
+        c, s = np.cos(yaw0), np.sin(yaw0)
+        second = np.stack([x0 + pts[None, ..., 0] * c - pts[None, ..., 1] * s,
+                           y0 + pts[None, ..., 0] * s + pts[None, ..., 1] * c], axis=-1)  # (m, m, n, 2) vehicle frame
+        pix = camera.pixel_indices(second)  # (m, m, n)
+        self._pix = np.where(pix >= 0, pix, 0)
+        # One bincount holds every trajectory's second stage: K + 1 bins for each of its m
+        # trajectories (terrain classes and "none") and K + 1 more where its unseen points go.
+        self._slot = (m + 1) * (k + 1)
+        self._bin = np.where(pix >= 0, np.arange(m)[None, :, None] * (k + 1), m * (k + 1)) + np.arange(m)[:, None, None] * self._slot
+        self.ends = second[:, :, -1].copy()  # (m, m, 2): each second-stage trajectory's end, vehicle frame
+        self._ends = self.ends @ (1.0, 1j)  # the same as complex numbers
+        self._x_lo, self._x_hi = float(self.starts[:, 0].min()), float(self.starts[:, 0].max())
+        self._n = pts.shape[1]
+        self._k = k
+        self._column = featurizer.class_columns
+        self._horizon_m = featurizer.config.preference.horizon_m
+
+    def pixels_of(self, i: int) -> np.ndarray:
+        """Flat pixel indices (row * width + col) that trajectory ``i``'s second stage reads."""
+        return self._pix[i][self._bin[i] - i * self._slot < self.featurizer.m * (self._k + 1)]
+
+    def utilities(self, view: SegmentationView, pose: Pose, path: ReferencePath, progress_s: float, rows: np.ndarray) -> np.ndarray:
+        """U' of the second stage after each trajectory in ``rows``: shape (len(rows), m, K + 1)."""
+        m, k = self.featurizer.m, self._k
+        bins = np.take(self._column, view.pixels(self._pix[rows].ravel()))
+        bins += self._bin[rows].ravel()
+        counts = np.bincount(bins, minlength=m * self._slot).reshape(m, m + 1, k + 1)[rows]
+        U = np.empty((len(rows), m, k + 1))
+        U[..., :k] = counts[:, :m, :k] * (1.0 / self._n)
+        # Distance utility from each second-stage start: its end against the path point one horizon
+        # beyond the start's progress (the start's forward offset added to the vehicle's progress).
+        x, y, yaw = pose
+        targets = self._targets(path, progress_s + self._horizon_m, rows)
+        d = np.abs(self._ends[rows] * complex(math.cos(yaw), math.sin(yaw)) + (complex(x, y) - targets[:, None]))
+        lo, hi = d.min(axis=1, keepdims=True), d.max(axis=1, keepdims=True)
+        span = hi - lo
+        if (span < 1e-9).any():  # as UtilityFeaturizer.normalise: all ones where the range is nil
+            U[..., k] = np.where(span < 1e-9, 1.0, (hi - d) / np.where(span < 1e-9, 1.0, span))
+        else:
+            U[..., k] = (hi - d) / span
+        return U
+
+    def _targets(self, path: ReferencePath, s0: float, rows: np.ndarray) -> np.ndarray:
+        """Path points at ``s0`` plus each start's forward offset, world frame, complex (r,)."""
+        line = path.straight_between(s0 + self._x_lo, s0 + self._x_hi)
+        if line is None:
+            return path.point_at(s0 + self.starts[rows, 0]) @ (1.0, 1j)
+        x, y, ux, uy = line  # the usual case: one straight segment, points along it
+        return complex(x, y) + (self.starts[rows, 0] - self._x_lo) * complex(ux, uy)
+
+    def scores(self, log_probs: np.ndarray, view: SegmentationView, pose: Pose, path: ReferencePath, progress_s: float) -> np.ndarray:
+        """log F_t + weight * value of the second stage for the candidates; -inf elsewhere, shape (m,)."""
+        rows = np.argsort(-log_probs, kind="stable")[: self.config.candidates]
+        value = (self.utilities(view, pose, path, progress_s, rows) @ self.w + self.b).max(axis=1)
+        out = np.full(log_probs.shape, -np.inf)
+        out[rows] = log_probs[rows] + self.config.weight * value
+        return out

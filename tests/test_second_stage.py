@@ -1,0 +1,195 @@
+"""The planner's second stage (terrapref.planner.second_stage): trajectories laid out again from a
+point along each candidate, read from the current frame, scored by a linear utility the model
+file carries; off for models without one."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from terrapref.camera import PinholeCamera, SegmentationRenderer, SegmentationView
+from terrapref.demos.dataset import Dataset
+from terrapref.errors import UserError
+from terrapref.features import FeatureConfig, UtilityFeaturizer
+from terrapref.learning.linear import LinearUtility
+from terrapref.learning.model_file import load_model, save_model
+from terrapref.learning.network import ClassifierConfig
+from terrapref.learning.pipeline import train_and_save
+from terrapref.learning.train import TrainConfig
+from terrapref.planner import Planner
+from terrapref.planner.second_stage import SecondStage, SecondStageConfig
+from terrapref.scenario import resolve_scenario
+from terrapref.scenario.path import PathTracker, ReferencePath
+from terrapref.sim import Simulation
+from terrapref.terrain import default_classes
+from terrapref.vehicle import Pose
+
+from helpers import model_meta
+from test_planner import _linear_weights
+
+# Columns of U: non_traversable, water, rock, mud, distance.
+UTILITY = LinearUtility(np.array([-12.0, -5.0, -3.0, -1.0, 5.0]), np.linspace(-1.0, 1.0, 21) ** 2 * -4.0 + 2.0)
+
+
+@pytest.fixture(scope="module")
+def setup():
+    features = FeatureConfig()
+    camera = PinholeCamera()
+    featurizer = UtilityFeaturizer(features, camera)
+    return featurizer, camera, SecondStage(SecondStageConfig(), featurizer, camera, UTILITY)
+
+
+def _straight_path() -> ReferencePath:
+    return ReferencePath(np.array([[0.0, 0.0], [40.0, 0.0]]))
+
+
+def test_the_second_stage_starts_after_s_along_each_trajectory(setup):
+    featurizer, _, la = setup
+    step = round(SecondStageConfig().after_s / featurizer.config.preference.dt_s)
+    np.testing.assert_allclose(la.starts, featurizer.pset.trajectories[:, step])
+    straight = featurizer.m // 2
+    np.testing.assert_allclose(la.starts[straight], [SecondStageConfig().after_s, 0.0, 0.0], atol=1e-12)
+    # The straight continuation of the straight trajectory runs on along the x axis.
+    np.testing.assert_allclose(la.ends[straight, straight], [SecondStageConfig().after_s + featurizer.config.preference.horizon_m, 0.0], atol=1e-9)
+
+
+@pytest.mark.parametrize("stride", [1, 2, 3])
+def test_second_stage_utilities_are_those_of_the_pose_it_starts_from(setup, stride: int):
+    """U' equals U computed by hand at the start pose, with its points (every ``stride``-th,
+    ending with the last) projected into this frame."""
+    featurizer, camera, _ = setup
+    la = SecondStage(SecondStageConfig(stride=stride), featurizer, camera, UTILITY)
+    course = resolve_scenario("demo_course")
+    pose = Pose(16.0, 10.0, 0.1)
+    image = SegmentationRenderer(camera, Simulation(course).world).render(pose)
+    path = ReferencePath(np.vstack([[16.0, 10.0], course.waypoints[1:]]))
+    s = PathTracker(path).update(np.array(pose[:2]))
+    rows = np.array([3, 10, 16])
+    got = la.utilities(SegmentationView.of(image), pose, path, s, rows)
+    k = featurizer.config.n_terrain
+    ids = {name: default_classes().id_of(name) for name in featurizer.config.feature_classes}
+    for r, i in enumerate(rows):
+        x0, y0, th = la.starts[i]
+        pts = featurizer.pset.trajectories[:, ::-1][:, ::stride][:, ::-1, :2]  # every stride-th, ending with the last
+        here = np.stack([x0 + pts[..., 0] * math.cos(th) - pts[..., 1] * math.sin(th),
+                         y0 + pts[..., 0] * math.sin(th) + pts[..., 1] * math.cos(th)], axis=-1)
+        pix = camera.pixel_indices(here)
+        labels = np.where(pix >= 0, image.reshape(-1)[np.maximum(pix, 0)], 255)
+        for j, name in enumerate(featurizer.config.feature_classes):
+            np.testing.assert_allclose(got[r, :, j], (labels == ids[name]).mean(axis=1))
+        c, sn = math.cos(pose[2]), math.sin(pose[2])
+        start_world = Pose(pose[0] + x0 * c - y0 * sn, pose[1] + x0 * sn + y0 * c, pose[2] + th)
+        d = featurizer.distances(start_world, path, s + x0)
+        np.testing.assert_allclose(got[r, :, k], featurizer.normalise(d), atol=1e-9)
+    assert got[..., :k].sum() > 0  # the pair ahead is on some second stage
+
+
+def test_the_candidate_whose_second_stage_avoids_water_wins_a_tie(setup):
+    featurizer, _, la = setup
+    m = featurizer.m
+    left, right = 14, 6  # w = +0.4 and -0.4: mirror images
+    image = np.full(PinholeCamera().shape, default_classes().id_of("grass"), dtype=np.uint8)
+    flat = image.reshape(-1)
+    beyond = la.pixels_of(left)
+    flat[beyond] = default_classes().id_of("water")
+    log_probs = np.full(m, -5.0)
+    log_probs[[left, right]] = -1.0
+    scores = la.scores(log_probs, SegmentationView.of(image), Pose(0.0, 0.0, 0.0), _straight_path(), 0.0)
+    assert int(np.argmax(scores)) == right
+    assert np.isfinite(scores).sum() == SecondStageConfig().candidates  # only C's best few are looked beyond
+    # Without water the two are mirror images on a straight path: a tie.
+    grass = np.full_like(image, default_classes().id_of("grass"))
+    tie = la.scores(log_probs, SegmentationView.of(grass), Pose(0.0, 0.0, 0.0), _straight_path(), 0.0)
+    assert tie[left] == pytest.approx(tie[right])
+
+
+@pytest.mark.parametrize("config", [dict(after_s=0.0), dict(weight=-1.0), dict(candidates=0), dict(after_s=math.nan), dict(stride=0)])
+def test_invalid_second_stage_configs(config):
+    with pytest.raises(ValueError):
+        SecondStageConfig(**config)
+
+
+def test_a_second_stage_beyond_the_trajectories_is_refused(setup):
+    featurizer, camera, _ = setup
+    with pytest.raises(ValueError, match="within the trajectories"):
+        SecondStage(SecondStageConfig(after_s=10.0), featurizer, camera, UTILITY)
+
+
+def _model_with_utility(path: Path, utility: dict | None):
+    config = ClassifierConfig(hidden=8, skip=True)
+    meta = model_meta() | ({"utility": utility} if utility is not None else {})
+    return save_model(path, config, _linear_weights(config), meta)
+
+
+def test_the_planner_looks_ahead_only_with_a_utility(tmp_path: Path):
+    plain = Planner(load_model(_model_with_utility(tmp_path / "plain.safetensors", None)))
+    assert plain.second_stage is None
+    with_utility = load_model(_model_with_utility(tmp_path / "la.safetensors", {"w": UTILITY.w.tolist(), "b": UTILITY.b.tolist()}))
+    assert Planner(with_utility).second_stage is not None
+    assert Planner(with_utility, second_stage=None).second_stage is None
+
+
+def test_weight_zero_is_the_argmax_of_f(tmp_path: Path):
+    model = load_model(_model_with_utility(tmp_path / "la.safetensors", {"w": UTILITY.w.tolist(), "b": UTILITY.b.tolist()}))
+    course = resolve_scenario("demo_course")
+    renderer = SegmentationRenderer(PinholeCamera(), Simulation(course).world)
+    for x in (8.0, 12.0, 16.0):
+        pose = Pose(x, 10.0, 0.0)
+        image = renderer.render(pose)
+        planner = Planner(model, second_stage=SecondStageConfig(weight=0.0))
+        planner.set_path(np.vstack([[x, 10.0], course.waypoints[1:]]))
+        d = planner.decide(image, pose)
+        assert d.index == int(np.argmax(d.probs))
+
+
+@pytest.mark.parametrize("utility, field", [
+    ({"w": [1.0, 2.0], "b": [0.0] * 21}, "utility.w"),
+    ({"w": [0.0] * 5}, "utility.b"),
+    ({"w": [0.0] * 5, "b": [math.inf] * 21}, "utility.b"),
+    ("not a table", "utility.w"),
+])
+def test_a_broken_utility_is_refused_with_its_field(tmp_path: Path, utility, field: str):
+    path = _model_with_utility(tmp_path / "bad.safetensors", utility)
+    with pytest.raises(UserError) as err:
+        load_model(path)
+    assert err.value.problems[0].field == field and str(path) in str(err.value)
+
+
+def test_training_keeps_the_fitted_utility_with_the_model(tmp_path: Path):
+    """The fitted utility round-trips through the model file; mirrored training data gives
+    mirrored trajectory biases; without ``utility`` the file carries none."""
+    rng = np.random.default_rng(0)
+    n, m = 200, 21
+    dataset = Dataset(rng.uniform(0, 1, (n, m, 5)).astype(np.float32), rng.integers(0, m, n), np.zeros(n, np.float32),
+                      np.zeros(n, np.int64), model_meta())
+    out = tmp_path / "m.safetensors"
+    result = train_and_save(dataset, out, TrainConfig(epochs=1, mirror=True, utility=True), checkpoints=False)
+    assert result.utility is not None
+    np.testing.assert_allclose(result.utility.b, result.utility.b[::-1], atol=0.02)  # random labels: asymmetric without mirror
+    model = load_model(out)
+    np.testing.assert_allclose(model.meta["utility"]["w"], result.utility.w)
+    assert Planner(model).second_stage is not None
+    train_and_save(dataset, tmp_path / "p.safetensors", TrainConfig(epochs=1), checkpoints=False)
+    assert "utility" not in load_model(tmp_path / "p.safetensors").meta
+
+
+def test_the_planner_drives_the_best_second_stage_score(tmp_path: Path):
+    """With a utility, the decision is the argmax of the second stage's scores; F_t is still C's."""
+    model = load_model(_model_with_utility(tmp_path / "la.safetensors", {"w": UTILITY.w.tolist(), "b": UTILITY.b.tolist()}))
+    course = resolve_scenario("demo_course")
+    renderer = SegmentationRenderer(PinholeCamera(), Simulation(course).world)
+    plain = Planner(model, second_stage=None)
+    for x in (8.0, 12.0, 16.0):
+        pose = Pose(x, 10.0, 0.0)
+        image = renderer.render(pose)
+        waypoints = np.vstack([[x, 10.0], course.waypoints[1:]])
+        planner = Planner(model)
+        planner.set_path(waypoints)
+        plain.set_path(waypoints)
+        d, d0 = planner.decide(image, pose), plain.decide(image, pose)
+        np.testing.assert_array_equal(d.probs, d0.probs)
+        expected = planner.second_stage.scores(np.log(d.probs), SegmentationView.of(image), pose, planner.path, d.progress_s)
+        assert d.index == int(np.argmax(expected))
