@@ -6,10 +6,12 @@ without changing S or C. For each of the ``candidates`` trajectories C ranks hig
 the pose reached after ``after_s`` seconds along that trajectory and lays the whole preference
 set out again from there. Every point of that second stage lies on the flat ground at a fixed
 place in the vehicle frame, so its pixel in the current frame is precomputed like the first
-stage's (a point outside the image counts for no class, as in U). The second stage gets its own utilities U' (terrain shares, and the
-distance utility against the path point one horizon beyond that pose), and its value is the
-best of its trajectories under the linear utility model ``w . U'_j + b_j`` fitted to the same
-demonstrations as C (terrapref.learning.linear). The planner then drives the argmax of
+stage's (a point outside the image counts for no class, as in U). Each second stage gets its
+own utilities U': terrain shares, and the distance utility of its trajectories' ends against
+the path point one horizon beyond its start, normalised over all the second stages together,
+so that a candidate that has left the path scores lower than one that has not. Its value is
+the best of its trajectories under the linear utility model ``w . U'_j + b_j`` fitted to the
+same demonstrations as C (terrapref.learning.linear). The planner then drives the argmax of
 
     log F_t(i) + weight * max_j (w . U'_ij + b_j)
 
@@ -108,17 +110,14 @@ class SecondStage:
         counts = np.bincount(bins, minlength=m * self._slot).reshape(m, m + 1, k + 1)[rows]
         U = np.empty((len(rows), m, k + 1))
         U[..., :k] = counts[:, :m, :k] * (1.0 / self._n)
-        # Distance utility from each second-stage start: its end against the path point one horizon
-        # beyond the start's progress (the start's forward offset added to the vehicle's progress).
+        # Distance utility: each second-stage end against the path point one horizon beyond its
+        # start's progress (the start's forward offset added to the vehicle's progress).
         x, y, yaw = pose
         targets = self._targets(path, progress_s + self._horizon_m, rows)
         d = np.abs(self._ends[rows] * complex(math.cos(yaw), math.sin(yaw)) + (complex(x, y) - targets[:, None]))
-        lo, hi = d.min(axis=1, keepdims=True), d.max(axis=1, keepdims=True)
-        span = hi - lo
-        if (span < 1e-9).any():  # as UtilityFeaturizer.normalise: all ones where the range is nil
-            U[..., k] = np.where(span < 1e-9, 1.0, (hi - d) / np.where(span < 1e-9, 1.0, span))
-        else:
-            U[..., k] = (hi - d) / span
+        # One range for every second stage: they are compared with one another, and a candidate
+        # that has left the path must not find a continuation scored 1 as if it had not.
+        U[..., k] = UtilityFeaturizer.normalise(d)
         return U
 
     def _targets(self, path: ReferencePath, s0: float, rows: np.ndarray) -> np.ndarray:
