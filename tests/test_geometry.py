@@ -223,6 +223,17 @@ def test_arc_length_and_point_at():
     np.testing.assert_allclose(path.heading_at(np.array([1.0, 6.0])), [math.atan2(4.0, 3.0), math.pi / 2])
 
 
+def test_straight_between_gives_the_segment_both_ends_share():
+    path = ReferencePath(np.array([[0.0, 0.0], [3.0, 4.0], [3.0, 10.0]]))
+    x, y, ux, uy = path.straight_between(1.0, 4.0)
+    np.testing.assert_allclose([x, y, ux, uy], [0.6, 0.8, 0.6, 0.8])
+    for s in (1.0, 2.5, 4.0):  # the same points as point_at along the segment
+        np.testing.assert_allclose([x + (s - 1.0) * ux, y + (s - 1.0) * uy], path.point_at(s))
+    assert path.straight_between(4.0, 6.0) is None  # across the corner at s = 5
+    assert path.straight_between(10.0, 12.0) is None  # past the end
+    assert path.straight_between(-1.0, 1.0) is None  # before the start
+
+
 def test_project_gives_arc_length_and_signed_offset():
     path = ReferencePath(np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]]))
     assert path.project(np.array([4.0, 1.5])) == pytest.approx((4.0, 1.5))  # left of +x: positive

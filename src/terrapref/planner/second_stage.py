@@ -23,7 +23,7 @@ is the paper's argmax of F_t.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -57,9 +57,6 @@ class SecondStageConfig:
                 and self.candidates >= 1 and self.stride >= 1):
             raise ValueError("the second stage needs after_s > 0, weight >= 0, candidates >= 1 and stride >= 1")
 
-    def to_dict(self) -> dict:
-        return asdict(self)
-
 
 class SecondStage:
     """Precomputed second stage for one featurizer (preference set and camera) and utility."""
@@ -83,8 +80,8 @@ class SecondStage:
         x0, y0, yaw0 = (self.starts[:, j, None, None] for j in range(3))
         c, s = np.cos(yaw0), np.sin(yaw0)
         second = np.stack([x0 + pts[None, ..., 0] * c - pts[None, ..., 1] * s,
-                           y0 + pts[None, ..., 0] * s + pts[None, ..., 1] * c], axis=-1)  # (m, m, n, 2) vehicle frame
-        pix = camera.pixel_indices(second)  # (m, m, n)
+                           y0 + pts[None, ..., 0] * s + pts[None, ..., 1] * c], axis=-1)  # (m, m, n', 2) vehicle frame
+        pix = camera.pixel_indices(second)  # (m, m, n')
         self._pix = np.where(pix >= 0, pix, 0)
         # One bincount holds every trajectory's second stage: K + 1 bins for each of its m
         # trajectories (terrain classes and "none") and K + 1 more where its unseen points go.
