@@ -195,3 +195,22 @@ def test_the_planner_drives_the_best_second_stage_score(tmp_path: Path):
         np.testing.assert_array_equal(d.probs, d0.probs)
         expected = planner.second_stage.scores(np.log(d.probs), SegmentationView.of(image), pose, planner.path, d.progress_s)
         assert d.index == int(np.argmax(expected))
+
+
+def test_scores_are_the_linear_utility_of_the_second_stage_utilities(setup):
+    """scores() sums without building U'; it must equal log F + weight * max_j (U' @ w + b)."""
+    featurizer, camera, la = setup
+    course = resolve_scenario("demo_course")
+    renderer = SegmentationRenderer(camera, Simulation(course).world)
+    path = ReferencePath(np.vstack([[8.0, 10.0], course.waypoints[1:]]))
+    rng = np.random.default_rng(3)
+    for x in (8.0, 12.0, 16.0, 20.0):
+        pose = Pose(x, 10.0 + rng.uniform(-0.5, 0.5), rng.uniform(-0.2, 0.2))
+        view = SegmentationView.of(renderer.render(pose))
+        s = PathTracker(path).update(np.array(pose[:2]))
+        log_probs = np.log(rng.dirichlet(np.ones(featurizer.m)))
+        got = la.scores(log_probs, view, pose, path, s)
+        rows = np.argsort(-log_probs, kind="stable")[: la.config.candidates]
+        value = (la.utilities(view, pose, path, s, rows) @ UTILITY.w + UTILITY.b).max(axis=1)
+        np.testing.assert_allclose(got[rows], log_probs[rows] + la.config.weight * value, rtol=0, atol=1e-9)
+        assert np.isneginf(np.delete(got, rows)).all()
