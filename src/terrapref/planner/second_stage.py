@@ -47,8 +47,8 @@ class SecondStageConfig:
             trajectory, ending with its last.
     """
 
-    after_s: float = 1.8
-    weight: float = 1.0
+    after_s: float = 2.4
+    weight: float = 1.5
     candidates: int = 7
     stride: int = 2
 
