@@ -187,12 +187,18 @@ def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callabl
         if config.utility:
             U, labels = dataset.U, dataset.labels
             if config.mirror:  # _train has checked that the w grid is symmetric
-                U, labels = np.concatenate([U, U[:, ::-1, :]]), np.concatenate([labels, dataset.U.shape[1] - 1 - labels])
+                U_m, labels_m = mirrored(U, labels)
+                U, labels = np.concatenate([U, U_m]), np.concatenate([labels, labels_m])
             result.utility = fit_linear_utility(U, labels)
         return result
     finally:
         torch.set_num_threads(threads)
         torch.use_deterministic_algorithms(deterministic)
+
+
+def mirrored(U: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Samples (N, m, k) and labels mirrored left-right: trajectory i <-> m - 1 - i (a symmetric w grid)."""
+    return U[:, ::-1, :], U.shape[1] - 1 - labels
 
 
 def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetrics], None] | None) -> TrainResult:
@@ -206,8 +212,8 @@ def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetri
         if not np.allclose(w, -w[::-1]):
             raise ValueError("mirror needs a w grid symmetric about zero")
         # Mirrored copies are appended and join the training split only; validation stays real.
-        U_np = np.concatenate([U_np, U_np[tr][:, ::-1, :]])
-        y_np = np.concatenate([y_np, m - 1 - y_np[tr]])
+        U_m, y_m = mirrored(U_np[tr], y_np[tr])
+        U_np, y_np = np.concatenate([U_np, U_m]), np.concatenate([y_np, y_m])
         tr = np.concatenate([tr, np.arange(n, n + len(tr))])
     torch.manual_seed(config.seed)
     names = features.column_names

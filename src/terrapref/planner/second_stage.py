@@ -83,43 +83,41 @@ class SecondStage:
                            y0 + pts[None, ..., 0] * s + pts[None, ..., 1] * c], axis=-1)  # (m, m, n', 2) vehicle frame
         pix = camera.pixel_indices(second)  # (m, m, n')
         self._pix = np.where(pix >= 0, pix, 0)
-        # One bincount holds every trajectory's second stage: K + 1 bins for each of its m
-        # trajectories (terrain classes and "none") and K + 1 more where its unseen points go.
-        self._slot = (m + 1) * (k + 1)
-        self._bin = np.where(pix >= 0, np.arange(m)[None, :, None] * (k + 1), m * (k + 1)) + np.arange(m)[:, None, None] * self._slot
+        self._seen = (pix >= 0).astype(float)  # 1 where a point is in the image, 0 where it is not
         self.ends = second[:, :, -1].copy()  # (m, m, 2): each second-stage trajectory's end, vehicle frame
         self._ends = self.ends @ (1.0, 1j)  # the same as complex numbers
         self._x_lo, self._x_hi = float(self.starts[:, 0].min()), float(self.starts[:, 0].max())
         self._n = pts.shape[1]
         self._k = k
-        self._column = featurizer.class_columns
         self._horizon_m = featurizer.config.preference.horizon_m
-        # For the scores: each point's terrain weight w_k / n' by class id (0 off U's columns),
-        # and 1 where the point is seen, 0 where it is not.
-        self._point_weight = np.append(self.w[:k] / self._n, 0.0)[self._column]
-        self._seen = (pix >= 0).astype(float)
+        # By class id: each point's share of every terrain column (1 / n' in its own), and its
+        # terrain weight w_k / n' for the scores; 0 for classes U does not count.
+        self._point_share = np.eye(k + 1)[featurizer.class_columns, :k] / self._n
+        self._point_weight = np.append(self.w[:k] / self._n, 0.0)[featurizer.class_columns]
 
     def pixels_of(self, i: int) -> np.ndarray:
         """Flat pixel indices (row * width + col) that trajectory ``i``'s second stage reads."""
-        return self._pix[i][self._bin[i] - i * self._slot < self.featurizer.m * (self._k + 1)]
+        return self._pix[i][self._seen[i] > 0]
 
     def utilities(self, view: SegmentationView, pose: Pose, path: ReferencePath, progress_s: float, rows: np.ndarray) -> np.ndarray:
         """U' of the second stage after each trajectory in ``rows``: shape (len(rows), m, K + 1)."""
-        m, k = self.featurizer.m, self._k
-        bins = np.take(self._column, view.pixels(self._pix[rows].ravel()))
-        bins += self._bin[rows].ravel()
-        counts = np.bincount(bins, minlength=m * self._slot).reshape(m, m + 1, k + 1)[rows]
-        U = np.empty((len(rows), m, k + 1))
-        U[..., :k] = counts[:, :m, :k] * (1.0 / self._n)
-        # Distance utility: each second-stage end against the path point one horizon beyond its
-        # start's progress (the start's forward offset added to the vehicle's progress).
+        r, m, k = len(rows), self.featurizer.m, self._k
+        shares = np.take(self._point_share, view.pixels(self._pix[rows].ravel()), axis=0)
+        shares *= self._seen[rows].reshape(-1, 1)
+        U = np.empty((r, m, k + 1))
+        U[..., :k] = shares.reshape(r, m, self._n, k).sum(axis=2)
+        U[..., k] = self._distance_utility(pose, path, progress_s, rows)
+        return U
+
+    def _distance_utility(self, pose: Pose, path: ReferencePath, progress_s: float, rows: np.ndarray) -> np.ndarray:
+        """u^5 of the second stages after ``rows``, (r, m): each end against the path point one
+        horizon beyond its start's progress (the start's forward offset added to the vehicle's)."""
         x, y, yaw = pose
         targets = self._targets(path, progress_s + self._horizon_m, rows)
         d = np.abs(self._ends[rows] * complex(math.cos(yaw), math.sin(yaw)) + (complex(x, y) - targets[:, None]))
         # One range for every second stage: they are compared with one another, and a candidate
         # that has left the path must not find a continuation scored 1 as if it had not.
-        U[..., k] = UtilityFeaturizer.normalise(d)
-        return U
+        return UtilityFeaturizer.normalise(d)
 
     def _targets(self, path: ReferencePath, s0: float, rows: np.ndarray) -> np.ndarray:
         """Path points at ``s0`` plus each start's forward offset, world frame, complex (r,)."""
@@ -137,10 +135,8 @@ class SecondStage:
         r, m = len(rows), self.featurizer.m
         terrain = np.take(self._point_weight, view.pixels(self._pix[rows].ravel()))
         terrain *= self._seen[rows].ravel()
-        x, y, yaw = pose
-        targets = self._targets(path, progress_s + self._horizon_m, rows)
-        d = np.abs(self._ends[rows] * complex(math.cos(yaw), math.sin(yaw)) + (complex(x, y) - targets[:, None]))
-        value = (terrain.reshape(r, m, self._n).sum(axis=2) + self.w[self._k] * UtilityFeaturizer.normalise(d) + self.b).max(axis=1)
+        distance = self._distance_utility(pose, path, progress_s, rows)
+        value = (terrain.reshape(r, m, self._n).sum(axis=2) + self.w[self._k] * distance + self.b).max(axis=1)
         out = np.full(log_probs.shape, -np.inf)
         out[rows] = log_probs[rows] + self.config.weight * value
         return out
