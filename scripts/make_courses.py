@@ -144,6 +144,70 @@ def test_course() -> Course:
     return c
 
 
+# teach_course: the order of its situations. Every pair of feature classes meets on the path,
+# each class once on the left and once on the right; every class also lies alone on the path.
+TEACH_ZONES = [
+    ("mud", "rock"), ("water",), ("non_traversable", "water"), ("water", "rock"), ("mud",), ("rock", "non_traversable"),
+    ("mud", "water"), ("water", "non_traversable"), ("rock", "mud"), ("non_traversable", "mud"), ("water", "mud"),
+    ("rock",), ("rock", "water"), ("non_traversable",), ("mud", "non_traversable"), ("non_traversable", "rock"),
+]
+# Heading change [deg] at the bend after each situation: a horseshoe, so that the trail bends
+# between situations (keeping to the path is part of the lesson) and fits a compact map. The
+# sharper bends of the turn come between pairs; a lone patch sits between gentle ones.
+TEACH_TURNS = [10, -15, 10, -10, 15, 36, 36, 36, 36, 36, -10, 10, -10, 5, 5]
+
+
+def teach_course() -> Course:
+    """The product's demonstration course (SPEC 13): one drive shows every pair, both ways round, and every class alone.
+
+    Situations sit on straight legs of 16 m (a lone patch) or 20 m (a pair); the trail bends
+    between them. Lone patches are at most 3 m across (passed on grass); pair patches are
+    7.5-8.5 m long and 5-5.5 m wide and meet on the path, as on train_course.
+    """
+    half = {1: 8.0, 2: 10.0}  # half a leg [m] for a lone patch and a pair
+    s_start, s_end = 8.0, 6.0
+    lengths = [2 * half[len(z)] for z in TEACH_ZONES]
+    legs = [s_start + half[len(TEACH_ZONES[0])]] + [half[len(a)] + half[len(b)] for a, b in zip(TEACH_ZONES, TEACH_ZONES[1:])] + [half[len(TEACH_ZONES[-1])] + s_end]
+    # Waypoints at the start, at each bend (the middle of each gap between situations) and the end.
+    heading, point = 0.0, np.array([0.0, 0.0])
+    bends = [s_start + lengths[0]]
+    for length in lengths[1:]:
+        bends.append(bends[-1] + length)
+    points, s_prev = [point], 0.0
+    for k, s_bend in enumerate(bends[:-1]):
+        point = point + (s_bend - s_prev) * np.array([math.cos(heading), math.sin(heading)])
+        points.append(point)
+        heading += math.radians(TEACH_TURNS[k])
+        s_prev = s_bend
+    points.append(point + (bends[-1] + s_end - s_prev) * np.array([math.cos(heading), math.sin(heading)]))
+    wp = np.array(points)
+    wp = wp - wp.min(axis=0) + 12.0
+    size = tuple(float(math.ceil(v + 12.0)) for v in wp.max(axis=0))
+    c = Course("teach_course", "The demonstration course: every pair of terrain classes meets on the path, each class once on "
+               "each side, and every class lies alone on the path; one drive identifies any preference order.",
+               size, [tuple(p) for p in wp])
+    s = s_start
+    lone_shapes = {
+        "water": lambda s: c.rect("water", s, 0.0, 3.0, 2.6),
+        "mud": lambda s: c.polygon("mud", s, [(-1.6, -1.2), (1.4, -1.4), (1.6, 1.1), (-1.2, 1.4)]),
+        "rock": lambda s: c.circle("rock", s, 0.2, 1.4),
+        "non_traversable": lambda s: c.rect("non_traversable", s, -0.2, 2.8, 2.6),
+    }
+    pair_sizes = [(8.0, 5.0), (7.5, 5.5), (8.5, 5.0), (8.0, 5.5)]
+    pairs = 0
+    for k, zone in enumerate(TEACH_ZONES):
+        s += half[len(zone)]
+        if len(zone) == 1:
+            lone_shapes[zone[0]](s)
+            c.zone(str(k + 1), zone[0], s, 9.0, 9.0, "avoid")
+        else:
+            length, width = pair_sizes[pairs % len(pair_sizes)]
+            pairs += 1
+            c.pair(str(k + 1), zone[0], zone[1], s, length, width)
+        s += half[len(zone)]
+    return c
+
+
 def variation(name: str, description: str, build) -> Course:
     c = Course(name, description, (70.0, 30.0), [(5, 15), (30, 15), (40, 17), (65, 17)])
     build(c)
@@ -174,7 +238,7 @@ def variations() -> list[Course]:
 
 
 def main() -> int:
-    courses = [train_course(), test_course(), *variations()]
+    courses = [train_course(), test_course(), teach_course(), *variations()]
     for c in courses:
         print(c.write())
     return 0

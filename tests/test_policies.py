@@ -86,8 +86,9 @@ def test_fit_linear_utility_sample_weight_zero_ignores_samples():
     bad = np.argmin(U @ w_true, axis=1)  # the worst trajectory each time
     both = fit_linear_utility(np.concatenate([U, U]), np.concatenate([labels, bad]), steps=300,
                               sample_weight=np.concatenate([np.ones(300), np.zeros(300)]))
-    np.testing.assert_allclose(both.w, base.w, rtol=1e-6, atol=1e-9)
-    np.testing.assert_allclose(both.b, base.b, rtol=1e-6, atol=1e-9)
+    # Equal up to the fixed-point rounding of the exact products (twice the terms: one bit fewer).
+    np.testing.assert_allclose(both.w, base.w, rtol=1e-4, atol=1e-6)
+    np.testing.assert_allclose(both.b, base.b, rtol=1e-4, atol=1e-6)
 
 
 # --- linear and hand-cost policies -------------------------------------------------------------

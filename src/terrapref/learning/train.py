@@ -2,8 +2,9 @@
 
 Paper recipe: 80/20 train/validation split, 15 epochs, learning rate 1e-3, batch 256, Adam
 (our assumption), a checkpoint every epoch; we keep the epoch with the lowest validation loss.
-Seeded and deterministic on CPU: the split, the initialisation and the batch order all come
-from one seed, and PyTorch runs single-threaded with deterministic algorithms.
+Seeded and the same on every CPU: the split, the initialisation and the batch order all come
+from one seed, and the network trains in NumPy with arithmetic whose bits do not depend on the
+instruction set, the BLAS kernel or the thread count (terrapref.learning.mlp, .exact).
 """
 
 from __future__ import annotations
@@ -14,16 +15,16 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
-import torch
-from torch import nn
 
 from terrapref.demos.dataset import Dataset
+from terrapref.learning import exact
 from terrapref.learning.linear import LinearUtility, fit_linear_utility
+from terrapref.learning.mlp import Adam, TrainableClassifier, cross_entropy, init_weights, round_inputs
 from terrapref.learning.network import ClassifierConfig, member_prefix
-from terrapref.learning.torch_net import UtilityClassifier
 
 
 MEMBER_SEED_STEP = 1000  # member j of an ensemble trains from seed + MEMBER_SEED_STEP * j
+INIT_STREAM = 17  # the initial weights come from the stream (seed, INIT_STREAM), apart from the split's and batches'
 
 
 @dataclass(frozen=True)
@@ -135,10 +136,6 @@ def _ensemble(results: list[TrainResult]) -> TrainResult:
                        first.best_epoch, checkpoints, sum(r.steps for r in results), results)
 
 
-def _to_numpy(model: nn.Module) -> dict[str, np.ndarray]:
-    return {k: v.detach().cpu().numpy().copy() for k, v in model.state_dict().items()}
-
-
 def decisive_frames(U: np.ndarray, labels: np.ndarray, n_terrain: int | None = None) -> np.ndarray:
     """Frames (N,) where terrain is on some trajectory and the label is not argmax of u5.
 
@@ -154,12 +151,12 @@ def decisive_weights(U: np.ndarray, labels: np.ndarray, weight: float, n_terrain
     return np.where(decisive_frames(U, labels, n_terrain), weight, 1.0).astype(np.float32)
 
 
-def class_weights(labels: np.ndarray, m: int) -> torch.Tensor:
-    """Loss weight per class (m,): the square root of inverse label frequency, so that rare
-    labels count more without exploding; 0 for labels never seen."""
+def class_weights(labels: np.ndarray, m: int) -> np.ndarray:
+    """Loss weight per class (m,) float64: the square root of inverse label frequency, so that
+    rare labels count more without exploding; 0 for labels never seen."""
     counts = np.bincount(labels, minlength=m).astype(np.float64)
     w = np.where(counts > 0, counts.sum() / np.maximum(counts, 1) / m, 0.0)
-    return torch.tensor(np.sqrt(w), dtype=torch.float32)
+    return np.sqrt(w)
 
 
 def split_indices(n: int, val_fraction: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -170,30 +167,25 @@ def split_indices(n: int, val_fraction: float, rng: np.random.Generator) -> tupl
 
 
 def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callable[[EpochMetrics], None] | None = None) -> TrainResult:
-    """Train C on ``dataset``; returns the lowest-validation-loss epoch's weights and the history."""
+    """Train C on ``dataset``; returns the lowest-validation-loss epoch's weights and the history.
+
+    The same dataset and configuration give the same weights, bit for bit, on any CPU and
+    thread count (:mod:`terrapref.learning.exact`).
+    """
     config = config or TrainConfig()
     if config.utility and dataset.feature_config.lanes:
         raise ValueError("the second stage's utility needs U without lanes")
-    deterministic = torch.are_deterministic_algorithms_enabled()
-    threads = torch.get_num_threads()
-    torch.use_deterministic_algorithms(True)
-    torch.set_num_threads(1)
-    try:
-        with torch.random.fork_rng():  # seed torch locally; the caller's RNG state is restored
-            if config.members == 1:
-                result = _train(dataset, config, progress)
-            else:
-                result = _ensemble([_train(dataset, replace(config, seed=seed, members=1), progress) for seed in config.member_seeds])
-        if config.utility:
-            U, labels = dataset.U, dataset.labels
-            if config.mirror:  # _train has checked that the w grid is symmetric
-                U_m, labels_m = mirrored(U, labels)
-                U, labels = np.concatenate([U, U_m]), np.concatenate([labels, labels_m])
-            result.utility = fit_linear_utility(U, labels)
-        return result
-    finally:
-        torch.set_num_threads(threads)
-        torch.use_deterministic_algorithms(deterministic)
+    if config.members == 1:
+        result = _train(dataset, config, progress)
+    else:
+        result = _ensemble([_train(dataset, replace(config, seed=seed, members=1), progress) for seed in config.member_seeds])
+    if config.utility:
+        U, labels = dataset.U, dataset.labels
+        if config.mirror:  # _train has checked that the w grid is symmetric
+            U_m, labels_m = mirrored(U, labels)
+            U, labels = np.concatenate([U, U_m]), np.concatenate([labels, labels_m])
+        result.utility = fit_linear_utility(U, labels)
+    return result
 
 
 def mirrored(U: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -215,53 +207,51 @@ def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetri
         U_m, y_m = mirrored(U_np[tr], y_np[tr])
         U_np, y_np = np.concatenate([U_np, U_m]), np.concatenate([y_np, y_m])
         tr = np.concatenate([tr, np.arange(n, n + len(tr))])
-    torch.manual_seed(config.seed)
     names = features.column_names
     unknown = set(config.ignore_features) - set(names)
     if unknown:
         raise ValueError(f"ignore_features: no column {sorted(unknown)} (columns: {', '.join(names)})")
     ignore = tuple(names.index(n) for n in config.ignore_features)
     classifier = ClassifierConfig(m, k, config.hidden, config.activation, config.depth, config.compress, config.skip, ignore, config.channels)
-    model = UtilityClassifier(classifier)
-    opt = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
-    U = torch.from_numpy(np.ascontiguousarray(U_np, dtype=np.float32))
-    y = torch.from_numpy(y_np.astype(np.int64))
-    weight = class_weights(y_np[tr], m) if config.class_balance else None
-    loss_fn = nn.CrossEntropyLoss(weight=weight, reduction="none")
-    plain = nn.CrossEntropyLoss()
-    sample_w = torch.from_numpy(decisive_weights(U_np, y_np, config.decisive_weight, features.n_terrain))
+    net = TrainableClassifier(classifier, init_weights(classifier, np.random.default_rng([config.seed, INIT_STREAM])))
+    opt = Adam(net.weights, config.lr, config.weight_decay)
+    inputs = round_inputs(U_np)  # rounded once; batches index it
+    y = np.asarray(y_np, dtype=np.int64)
+    # Each sample's loss weight: its class's (class balance) times its own (decisive frames).
+    class_w = class_weights(y_np[tr], m) if config.class_balance else np.ones(m)
+    sample_w = decisive_weights(U_np, y_np, config.decisive_weight, features.n_terrain).astype(np.float64)
 
     def evaluate(idx: np.ndarray) -> tuple[float, float, float]:
         if len(idx) == 0:
             return math.nan, math.nan, math.nan
-        with torch.no_grad():
-            logits = model(U[idx])
-            loss = float(plain(logits, y[idx]))
-            top = logits.topk(min(3, m), dim=1).indices
-            acc = float((top[:, 0] == y[idx]).float().mean())
-            top3 = float((top == y[idx, None]).any(dim=1).float().mean())
-        return loss, acc, top3
+        logits, _ = net.forward(inputs._replace(ints=inputs.ints[idx]))
+        loss, _ = cross_entropy(logits, y[idx])
+        top = np.argsort(-logits, axis=1, kind="stable")[:, : min(3, m)]
+        acc = float(np.count_nonzero(top[:, 0] == y[idx]) / len(idx))
+        top3 = float(np.count_nonzero((top == y[idx, None]).any(axis=1)) / len(idx))
+        return exact.fsum(loss) / len(idx), acc, top3
 
     history: list[EpochMetrics] = []
     checkpoints: list[dict[str, np.ndarray]] = []
     steps = 0
     for epoch in range(1, config.epochs + 1):
-        model.train()
         order = tr[rng.permutation(len(tr))]
+        seen_loss, seen_hits = [], 0  # the training split's loss and accuracy, as the epoch's batches saw them
         for start in range(0, len(order), config.batch_size):
             batch = order[start : start + config.batch_size]
-            per = loss_fn(model(U[batch]), y[batch]) * sample_w[batch]
-            loss = per.sum() / sample_w[batch].sum()
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
+            logits, cache = net.forward(inputs._replace(ints=inputs.ints[batch]), keep=True)
+            loss, probs = cross_entropy(logits, y[batch])
+            seen_loss.append(loss)
+            seen_hits += int(np.count_nonzero(np.argmax(logits, axis=1) == y[batch]))
+            # d (sum_i s_i c_{y_i} CE_i / sum_i s_i) / d logits = s_i c_{y_i} (p_i - onehot_i) / sum_i s_i
+            scale = sample_w[batch] * class_w[y[batch]] / exact.fsum(sample_w[batch])
+            probs[np.arange(len(batch)), y[batch]] -= 1.0
+            opt.step(net.backward(cache, probs * scale[:, None]))
             steps += 1
-        model.eval()
-        tl, ta, _ = evaluate(tr)
         vl, vacc, vtop3 = evaluate(va)
-        metrics = EpochMetrics(epoch, tl, vl, ta, vacc, vtop3)
+        metrics = EpochMetrics(epoch, exact.fsum(np.concatenate(seen_loss)) / len(tr), vl, seen_hits / len(tr), vacc, vtop3)
         history.append(metrics)
-        checkpoints.append(_to_numpy(model))
+        checkpoints.append({name: v.astype(np.float32) for name, v in net.weights.items()})
         if progress is not None:
             progress(metrics)
     losses = [h.val_loss if not math.isnan(h.val_loss) else h.train_loss for h in history]

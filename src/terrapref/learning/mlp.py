@@ -1,0 +1,173 @@
+"""C for training: forward, backward and Adam in NumPy, with arithmetic that is the same on every CPU.
+
+The same network as :func:`terrapref.learning.network.numpy_forward` (and the same weight
+names, those of a PyTorch state dict), written out with its gradient by hand. Every product goes
+through :func:`terrapref.learning.exact.matmul` and every exponential through
+:func:`terrapref.learning.exact.exp`, so a training run gives the same weights, bit for bit,
+on any x86_64 or arm64 CPU, whatever BLAS kernel or thread count it has (docs/design.md).
+The network is a few thousand weights; NumPy trains it as fast as PyTorch did.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from terrapref.learning import exact
+from terrapref.learning.network import ClassifierConfig
+
+
+def init_weights(config: ClassifierConfig, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """Initial weights (float64) under the state-dict names: each layer U(-1/sqrt(fan_in), 1/sqrt(fan_in)).
+
+    The same bounds as PyTorch's ``nn.Linear`` default, drawn from ``rng`` (whose streams are
+    the same on every platform).
+    """
+    weights: dict[str, np.ndarray] = {}
+
+    def linear(name: str, fan_in: int, fan_out: int) -> None:
+        bound = 1.0 / math.sqrt(fan_in)
+        weights[f"{name}.weight"] = rng.uniform(-bound, bound, (fan_out, fan_in))
+        weights[f"{name}.bias"] = rng.uniform(-bound, bound, fan_out)
+
+    if config.compress:
+        linear("compress", config.n_features, config.channels)
+    dims = [config.width_in] + [config.hidden] * config.depth + [config.m]
+    for i, (a, b) in enumerate(zip(dims[:-1], dims[1:])):
+        linear(f"layers.{i}", a, b)
+    return weights
+
+
+INPUT_BITS = 20  # U's entries lie in [0, 1]: rounded to multiples of 2 ** -20
+
+
+def round_inputs(U: np.ndarray) -> exact.Rounded:
+    """U (B, m, k) on the fixed-point grid of C's inputs; round a dataset once and index it."""
+    top = float(np.max(np.abs(U))) if np.size(U) else 0.0
+    # One grid for every batch: relative to 1 (U's range), or to the largest entry if larger.
+    return exact.rounded(np.asarray(U, dtype=np.float64), INPUT_BITS) if top > 1.0 else exact.Rounded(
+        np.rint(np.asarray(U, dtype=np.float64) * 2.0**INPUT_BITS), 2.0**-INPUT_BITS, INPUT_BITS)
+
+
+def _activate(name: str, z: np.ndarray) -> np.ndarray:
+    if name == "relu":
+        return np.maximum(z, 0.0)
+    if name == "tanh":
+        return 1.0 - 2.0 / (exact.exp(2.0 * z) + 1.0)
+    return np.where(z > 0, z, exact.exp(np.minimum(z, 0.0)) - 1.0)  # elu, alpha = 1
+
+
+def _activation_slope(name: str, z: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """d act / d z at ``z``, given ``h = act(z)``."""
+    if name == "relu":
+        return (z > 0).astype(np.float64)
+    if name == "tanh":
+        return 1.0 - h * h
+    return np.where(z > 0, 1.0, h + 1.0)
+
+
+@dataclass
+class _Cache:
+    """What the backward pass needs from the forward pass of one batch."""
+
+    x: exact.Rounded  # (B * m, k) inputs, ignored columns zeroed
+    inputs: list[np.ndarray]  # input of each hidden and output layer
+    pre: list[np.ndarray]  # pre-activation of each hidden layer
+    post: list[np.ndarray]  # activation of each hidden layer
+
+
+class TrainableClassifier:
+    """C's weights (float64) with an exact forward pass and its gradient."""
+
+    def __init__(self, config: ClassifierConfig, weights: dict[str, np.ndarray]) -> None:
+        self.config = config
+        self.weights = weights
+
+    def forward(self, U: np.ndarray | exact.Rounded, keep: bool = False) -> tuple[np.ndarray, _Cache | None]:
+        """Logits (B, m) for U (B, m, k), or U already rounded (:func:`round_inputs`); with
+        ``keep``, also what :meth:`backward` needs."""
+        c, w = self.config, self.weights
+        if not isinstance(U, exact.Rounded):
+            U = round_inputs(U)
+        n = len(U.ints)
+        x = U._replace(ints=U.ints.reshape(n * c.m, c.n_features))
+        if c.ignore:
+            ints = x.ints.copy()
+            ints[:, list(c.ignore)] = 0.0
+            x = x._replace(ints=ints)
+        scores = None
+        if c.compress:
+            per_row = exact.matmul(x, w["compress.weight"].T) + w["compress.bias"]  # (B m, channels)
+            scores = per_row.reshape(n, c.m, c.channels)[:, :, 0]
+            h = per_row.reshape(n, c.m * c.channels)
+        else:
+            h = (x.ints * x.unit).reshape(n, c.m * c.n_features)
+        inputs, pre, post = [], [], []
+        for i in range(c.depth):
+            inputs.append(h)
+            z = exact.matmul(h, w[f"layers.{i}.weight"].T) + w[f"layers.{i}.bias"]
+            h = _activate(c.activation, z)
+            pre.append(z)
+            post.append(h)
+        inputs.append(h)
+        logits = exact.matmul(h, w[f"layers.{c.depth}.weight"].T) + w[f"layers.{c.depth}.bias"]
+        if c.skip:
+            logits = logits + scores
+        return logits, (_Cache(x, inputs, pre, post) if keep else None)
+
+    def backward(self, cache: _Cache, grad_logits: np.ndarray) -> dict[str, np.ndarray]:
+        """Gradients of the loss under the weight names, given d loss / d logits (B, m)."""
+        c, w = self.config, self.weights
+        n = len(grad_logits)
+        grads: dict[str, np.ndarray] = {}
+        g = grad_logits
+        for i in range(c.depth, -1, -1):
+            # The weight and bias gradients in one exact product: [inputs, 1]^T g.
+            inputs = cache.inputs[i]
+            both = exact.matmul(g.T, np.concatenate([inputs, np.ones((n, 1))], axis=1))
+            grads[f"layers.{i}.weight"], grads[f"layers.{i}.bias"] = both[:, :-1], both[:, -1]
+            dh = exact.matmul(g, w[f"layers.{i}.weight"])
+            g = dh * _activation_slope(c.activation, cache.pre[i - 1], cache.post[i - 1]) if i > 0 else dh
+        if c.compress:
+            per_row = g.reshape(n, c.m, c.channels)
+            if c.skip:
+                per_row = per_row.copy()
+                per_row[:, :, 0] += grad_logits
+            flat = per_row.reshape(n * c.m, c.channels)
+            grads["compress.weight"] = exact.matmul(flat.T, cache.x)
+            grads["compress.bias"] = exact.matmul(np.ones((1, len(flat))), flat)[0]
+        return grads
+
+
+class Adam:
+    """Adam (Kingma and Ba), with PyTorch's defaults and its L2 ``weight_decay``; elementwise only."""
+
+    def __init__(self, weights: dict[str, np.ndarray], lr: float, weight_decay: float = 0.0,
+                 betas: tuple[float, float] = (0.9, 0.999), eps: float = 1e-8) -> None:
+        self.weights, self.lr, self.weight_decay, self.betas, self.eps = weights, lr, weight_decay, betas, eps
+        self.m = {k: np.zeros_like(v) for k, v in weights.items()}
+        self.v = {k: np.zeros_like(v) for k, v in weights.items()}
+        self.power1 = self.power2 = 1.0  # beta ** t by repeated products (no pow(), whose last bit may vary)
+
+    def step(self, grads: dict[str, np.ndarray]) -> None:
+        b1, b2 = self.betas
+        self.power1 *= b1
+        self.power2 *= b2
+        step = self.lr / (1.0 - self.power1)
+        root2 = math.sqrt(1.0 - self.power2)
+        for name, p in self.weights.items():
+            g = grads[name] if self.weight_decay == 0 else grads[name] + self.weight_decay * p
+            m = self.m[name] = b1 * self.m[name] + (1.0 - b1) * g
+            v = self.v[name] = b2 * self.v[name] + (1.0 - b2) * (g * g)
+            p -= step * m / (np.sqrt(v) / root2 + self.eps)
+
+
+def cross_entropy(logits: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-sample cross entropy (B,) and the softmax (B, m), with CPU-independent exp and log."""
+    top = np.max(logits, axis=1, keepdims=True)
+    e = exact.exp(logits - top)
+    total = exact.row_sum(e)
+    loss = exact.log(total) + top[:, 0] - logits[np.arange(len(labels)), labels]
+    return loss, e / total[:, None]

@@ -1,0 +1,230 @@
+"""CPU-independent arithmetic (terrapref.learning.exact) and C's hand-written gradient.
+
+Training gives the same weights, bit for bit, whatever BLAS kernel, SIMD level or thread count
+the machine has: checked here by training in fresh processes under settings that change how
+plain NumPy products and exponentials come out.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import platform
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+
+from terrapref.learning import exact
+from terrapref.learning.mlp import Adam, TrainableClassifier, cross_entropy, init_weights, round_inputs
+from terrapref.learning.network import ClassifierConfig, numpy_forward
+from terrapref.learning.torch_net import UtilityClassifier
+
+
+# --- elementary functions ------------------------------------------------------------------------
+
+
+def test_exp_matches_numpy_to_the_last_bits():
+    rng = np.random.default_rng(0)
+    x = np.concatenate([rng.uniform(-700, 700, 20000), rng.uniform(-3, 3, 20000), [0.0, -0.0, 1e-300, -1e-300, 709.0, -740.0]])
+    np.testing.assert_allclose(exact.exp(x), np.exp(x), rtol=4.5e-16, atol=0)
+    assert exact.exp(np.array([0.0]))[0] == 1.0
+    assert 0.0 <= exact.exp(np.array([-1e4]))[0] < 1e-320  # far below the smallest normal float: no error
+
+
+def test_log_matches_numpy_and_handles_the_edges():
+    rng = np.random.default_rng(1)
+    x = np.concatenate([np.exp(rng.uniform(-700, 700, 20000)), rng.uniform(0.5, 2.0, 20000), [1.0, 2.0, 0.5, 1e-300, 1e300]])
+    np.testing.assert_allclose(exact.log(x), np.log(x), rtol=4.5e-16, atol=4.5e-16)
+    assert exact.log(np.array([1.0]))[0] == 0.0
+    out = exact.log(np.array([0.0, -1.0]))
+    assert out[0] == -np.inf and np.isnan(out[1])
+
+
+def test_fsum_and_row_sum_do_not_depend_on_order():
+    rng = np.random.default_rng(2)
+    v = rng.normal(size=1000) * 10.0 ** rng.integers(-8, 8, 1000)
+    assert exact.fsum(v) == exact.fsum(v[::-1]) == math.fsum(v.tolist())
+    x = rng.normal(size=(4, 21))
+    np.testing.assert_array_equal(exact.row_sum(x), [_left_to_right(x[i]) for i in range(4)])
+
+
+def _left_to_right(row: np.ndarray) -> float:
+    total = float(row[0])
+    for value in row[1:]:
+        total += float(value)
+    return total
+
+
+# --- exact products ------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("k", [1, 5, 64, 300, 5000])
+def test_matmul_is_the_exact_product_of_the_rounded_operands(k: int):
+    """Every entry equals the correctly rounded sum of exact products of the rounded operands,
+    which is what makes the result independent of the summation order."""
+    rng = np.random.default_rng(k)
+    a, b = rng.normal(size=(6, k)) * 3.0, rng.normal(size=(k, 4)) / 7.0
+    out = exact.matmul(a, b)
+    ra = exact.rounded(a, (53 - exact._sum_bits(k)) // 2)
+    rb = exact.rounded(b, min(26, 53 - exact._sum_bits(k) - ra.bits))
+    for i in range(6):
+        for j in range(4):
+            terms = (ra.ints[i] * rb.ints[:, j]).tolist()  # products of integers below 2 ** 53: exact
+            assert out[i, j] == math.fsum(terms) * (ra.unit * rb.unit)
+    # ... and close to the plain product: about 2 ** -(bits - 1) of the largest terms
+    scale = np.abs(a).max() * np.abs(b).max() * k
+    np.testing.assert_allclose(out, a @ b, rtol=0, atol=scale * 2.0 ** -16)
+
+
+def test_matmul_does_not_depend_on_the_order_of_the_terms():
+    rng = np.random.default_rng(3)
+    a, b = rng.normal(size=(50, 777)) * 10.0 ** rng.integers(-3, 3, (50, 1)), rng.normal(size=(777, 30))
+    perm = rng.permutation(777)
+    np.testing.assert_array_equal(exact.matmul(a, b), exact.matmul(a[:, perm], b[perm]))
+    # a plain float64 product generally does: the reason for all this
+    assert not np.array_equal(a @ b, a[:, perm] @ b[perm])
+
+
+def test_long_sums_are_cut_into_exact_chunks():
+    rng = np.random.default_rng(4)
+    k = exact.MAX_EXACT + 1000
+    a, b = rng.normal(size=(1, k)), rng.normal(size=(k, 2))
+    first = exact.matmul(a[:, : exact.MAX_EXACT], b[: exact.MAX_EXACT])
+    rest = exact.matmul(a[:, exact.MAX_EXACT :], b[exact.MAX_EXACT :])
+    np.testing.assert_array_equal(exact.matmul(a, b), first + rest)
+
+
+def test_a_pre_rounded_operand_is_used_as_it_is_and_checked():
+    rng = np.random.default_rng(5)
+    a, b = rng.uniform(size=(8, 5)), rng.normal(size=(5, 3))
+    ra = exact.rounded(a, 20)
+    np.testing.assert_allclose(exact.matmul(ra, b), a @ b, rtol=0, atol=1e-5)
+    with pytest.raises(ValueError, match="cannot be summed exactly"):
+        exact.matmul(exact.rounded(a, 30), exact.rounded(b, 30))
+    with pytest.raises(ValueError, match="needs"):
+        exact.matmul(a, b.T)
+
+
+def test_matmul_of_empty_and_zero_operands():
+    assert exact.matmul(np.zeros((3, 0)), np.zeros((0, 2))).shape == (3, 2)
+    np.testing.assert_array_equal(exact.matmul(np.zeros((2, 4)), np.ones((4, 3))), np.zeros((2, 3)))
+
+
+# --- C's gradient against PyTorch's autograd ------------------------------------------------------
+
+
+GRAD_CONFIGS = [
+    ClassifierConfig(hidden=16, skip=True),
+    ClassifierConfig(hidden=16, activation="tanh"),
+    ClassifierConfig(hidden=16, activation="elu", channels=2),
+    ClassifierConfig(hidden=16, compress=False),
+    ClassifierConfig(m=7, n_features=3, hidden=5, depth=4, activation="tanh", skip=True, ignore=(1,)),
+]
+
+
+@pytest.mark.parametrize("config", GRAD_CONFIGS, ids=lambda c: f"{c.activation}-skip{c.skip}-compress{c.compress}-ch{c.channels}")
+def test_forward_and_gradient_equal_pytorch(config: ClassifierConfig):
+    rng = np.random.default_rng(0)
+    weights = init_weights(config, rng)
+    net = TrainableClassifier(config, weights)
+    U = rng.uniform(0, 1, (40, config.m, config.n_features))
+    y = rng.integers(0, config.m, 40)
+    logits, cache = net.forward(U, keep=True)
+    loss, probs = cross_entropy(logits, y)
+    grad_logits = probs.copy()
+    grad_logits[np.arange(40), y] -= 1.0
+    grads = net.backward(cache, grad_logits / 40)
+
+    reference = UtilityClassifier(config).double()
+    reference.load_state_dict({k: torch.tensor(v) for k, v in weights.items()})
+    t_logits = reference(torch.tensor(U))
+    t_loss = torch.nn.functional.cross_entropy(t_logits, torch.tensor(y))
+    t_loss.backward()
+    np.testing.assert_allclose(logits, t_logits.detach().numpy(), rtol=0, atol=2e-6)
+    assert abs(float(np.mean(loss)) - float(t_loss.detach())) < 1e-7
+    for name, p in reference.named_parameters():
+        g = p.grad.numpy()
+        np.testing.assert_allclose(grads[name], g, rtol=0, atol=2e-5 * max(1e-3, np.abs(g).max()), err_msg=name)
+    # the planner's NumPy forward pass agrees as well
+    np.testing.assert_allclose(numpy_forward(config, weights, U), logits, rtol=0, atol=2e-6)
+
+
+def test_inputs_are_rounded_once_to_a_fixed_grid():
+    U = np.array([[[0.0, 0.5, 1.0]]])
+    r = round_inputs(U)
+    assert r.unit == 2.0**-20 and r.bits == 20
+    np.testing.assert_array_equal(r.ints * r.unit, U)
+    assert round_inputs(np.array([[[3.0]]])).ints[0, 0, 0] * round_inputs(np.array([[[3.0]]])).unit == 3.0
+
+
+def test_adam_follows_the_closed_form_first_step():
+    """Adam's first step moves every weight by lr against the sign of its gradient."""
+    w = {"a": np.array([1.0, -2.0, 0.5])}
+    Adam(w, lr=0.1).step({"a": np.array([3.0, -0.01, 0.0])})
+    np.testing.assert_allclose(w["a"], [0.9, -1.9, 0.5], atol=1e-6)
+
+
+def test_init_uses_the_fan_in_bounds():
+    w = init_weights(ClassifierConfig(hidden=64), np.random.default_rng(0))
+    assert np.abs(w["layers.1.weight"]).max() <= 1 / 8 and np.abs(w["layers.1.weight"]).max() > 0.12
+    assert np.abs(w["compress.weight"]).max() <= 1 / math.sqrt(5)
+
+
+# --- the same weights under every instruction set, BLAS kernel and thread count -------------------
+
+_TRAIN = """
+import hashlib, numpy as np
+from terrapref.demos.dataset import Dataset
+from terrapref.learning.train import TrainConfig, train
+import sys; sys.path.insert(0, {tests!r})
+from helpers import model_meta
+rng = np.random.default_rng(0)
+U = rng.uniform(0, 1, (500, 21, 5)).astype(np.float32)
+labels = np.argmax(U @ np.array([-3.0, -1.5, -0.5, 0.5, 2.0], np.float32), axis=1)
+data = Dataset(U, labels, np.zeros(500, np.float32), np.zeros(500, np.int64), {{"format": "terrapref-dataset/1", **model_meta()}})
+r = train(data, TrainConfig(epochs=4, batch_size=64, hidden=16, skip=True, class_balance=True, mirror=True, utility=True))
+h = hashlib.sha256()
+for name in sorted(r.weights):
+    h.update(r.weights[name].tobytes())
+h.update(r.utility.w.tobytes() + r.utility.b.tobytes())
+a, b = rng.normal(size=(256, 300)), rng.normal(size=(300, 64))
+plain = hashlib.sha256((a @ b).tobytes() + np.exp(rng.normal(size=10000)).tobytes()).hexdigest()
+print(h.hexdigest(), plain)
+"""
+
+
+def _settings() -> list[dict[str, str]]:
+    settings = [{}, {"OPENBLAS_NUM_THREADS": "1"}, {"OPENBLAS_NUM_THREADS": "2"}]
+    if platform.machine().lower() in ("x86_64", "amd64"):
+        # Kernels every x86_64 CPU can run (SSE3, AVX2), and NumPy without its AVX-512 code paths.
+        settings += [{"OPENBLAS_CORETYPE": "Prescott"}, {"NPY_DISABLE_CPU_FEATURES": "X86_V4,AVX512_ICL,AVX512_SPR"}]
+        if "avx2" in _cpu_flags():
+            settings.append({"OPENBLAS_CORETYPE": "Haswell"})
+    return settings
+
+
+def _cpu_flags() -> str:
+    try:
+        with open("/proc/cpuinfo") as f:
+            return f.read()
+    except OSError:
+        return ""
+
+
+def test_training_gives_the_same_bits_under_every_cpu_setting():
+    tests = os.path.dirname(__file__)
+    outputs = []
+    for extra in _settings():
+        env = {**os.environ, **extra}
+        done = subprocess.run([sys.executable, "-c", _TRAIN.format(tests=tests)], env=env, capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+        outputs.append((extra, *done.stdout.split()))
+    trained = {h for _, h, _ in outputs}
+    assert len(trained) == 1, outputs
+    if platform.machine().lower() in ("x86_64", "amd64"):
+        # The settings do change plain float64 products or exponentials: the check above has teeth.
+        assert len({p for _, _, p in outputs}) > 1, outputs
