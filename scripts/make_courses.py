@@ -145,32 +145,36 @@ def test_course() -> Course:
 
 
 # teach_course: the order of its situations. Every pair of feature classes meets on the path,
-# each class once on the left and once on the right; every class also lies alone on the path.
+# each class once on the left and once on the right; every class also lies alone on the path
+# twice, once a little left of it and once a little right. (lateral offset [m] of a lone patch)
 TEACH_ZONES = [
-    ("mud", "rock"), ("water",), ("non_traversable", "water"), ("water", "rock"), ("mud",), ("rock", "non_traversable"),
-    ("mud", "water"), ("water", "non_traversable"), ("rock", "mud"), ("non_traversable", "mud"), ("water", "mud"),
-    ("rock",), ("rock", "water"), ("non_traversable",), ("mud", "non_traversable"), ("non_traversable", "rock"),
+    ("mud", "rock"), ("water", 0.3), ("non_traversable", "water"), ("rock", -0.3), ("water", "rock"), ("mud", 0.3),
+    ("rock", "non_traversable"), ("non_traversable", -0.3),
+    ("mud", "water"), ("water", "non_traversable"), ("rock", "mud"), ("non_traversable", "mud"), ("water", "mud"), ("rock", "water"),
+    ("mud", -0.3), ("mud", "non_traversable"), ("water", -0.3), ("non_traversable", "rock"), ("non_traversable", 0.3), ("rock", 0.3),
 ]
 # Heading change [deg] at the bend after each situation: a horseshoe, so that the trail bends
 # between situations (keeping to the path is part of the lesson) and fits a compact map. The
 # sharper bends of the turn come between pairs; a lone patch sits between gentle ones.
-TEACH_TURNS = [10, -15, 10, -10, 15, 36, 36, 36, 36, 36, -10, 10, -10, 5, 5]
+TEACH_TURNS = [10, -15, 10, -10, 15, -10, 10, 0, 36, 36, 36, 36, 36, -10, 10, -10, 5, -5, 5]
+
+
+def _is_lone(zone: tuple) -> bool:
+    return not isinstance(zone[1], str)
 
 
 def teach_course() -> Course:
     """The product's demonstration course (SPEC 13): one drive shows every pair, both ways round, and every class alone.
 
-    Situations sit on straight legs of 16 m (a lone patch) or 20 m (a pair); the trail bends
+    Situations sit on straight legs of 12 m (a lone patch) or 17 m (a pair); the trail bends
     between them. Lone patches are at most 3 m across (passed on grass); pair patches are
-    7.5-8.5 m long and 5-5.5 m wide and meet on the path, as on train_course.
+    7-8 m long and 5-5.5 m wide and meet on the path, as on train_course.
     """
-    half = {1: 8.0, 2: 10.0}  # half a leg [m] for a lone patch and a pair
-    s_start, s_end = 8.0, 6.0
-    lengths = [2 * half[len(z)] for z in TEACH_ZONES]
-    legs = [s_start + half[len(TEACH_ZONES[0])]] + [half[len(a)] + half[len(b)] for a, b in zip(TEACH_ZONES, TEACH_ZONES[1:])] + [half[len(TEACH_ZONES[-1])] + s_end]
-    # Waypoints at the start, at each bend (the middle of each gap between situations) and the end.
+    half = {True: 6.0, False: 8.5}  # half a leg [m]: a lone patch, a pair
+    s_start, s_end = 8.0, 5.0
+    lengths = [2 * half[_is_lone(z)] for z in TEACH_ZONES]
     heading, point = 0.0, np.array([0.0, 0.0])
-    bends = [s_start + lengths[0]]
+    bends = [s_start + lengths[0]]  # the middle of each gap between situations
     for length in lengths[1:]:
         bends.append(bends[-1] + length)
     points, s_prev = [point], 0.0
@@ -184,27 +188,26 @@ def teach_course() -> Course:
     wp = wp - wp.min(axis=0) + 12.0
     size = tuple(float(math.ceil(v + 12.0)) for v in wp.max(axis=0))
     c = Course("teach_course", "The demonstration course: every pair of terrain classes meets on the path, each class once on "
-               "each side, and every class lies alone on the path; one drive identifies any preference order.",
+               "each side, and every class lies alone on the path twice; one drive identifies any preference order.",
                size, [tuple(p) for p in wp])
-    s = s_start
     lone_shapes = {
-        "water": lambda s: c.rect("water", s, 0.0, 3.0, 2.6),
-        "mud": lambda s: c.polygon("mud", s, [(-1.6, -1.2), (1.4, -1.4), (1.6, 1.1), (-1.2, 1.4)]),
-        "rock": lambda s: c.circle("rock", s, 0.2, 1.4),
-        "non_traversable": lambda s: c.rect("non_traversable", s, -0.2, 2.8, 2.6),
+        "water": lambda s, lat: c.rect("water", s, lat, 3.0, 2.6),
+        "mud": lambda s, lat: c.polygon("mud", s, [(-1.6, lat - 1.2), (1.4, lat - 1.4), (1.6, lat + 1.1), (-1.2, lat + 1.4)]),
+        "rock": lambda s, lat: c.circle("rock", s, lat, 1.4),
+        "non_traversable": lambda s, lat: c.rect("non_traversable", s, lat, 2.8, 2.6),
     }
-    pair_sizes = [(8.0, 5.0), (7.5, 5.5), (8.5, 5.0), (8.0, 5.5)]
-    pairs = 0
+    pair_sizes = [(8.0, 5.0), (7.0, 5.5), (7.5, 5.0), (8.0, 5.5)]
+    s, pairs = s_start, 0
     for k, zone in enumerate(TEACH_ZONES):
-        s += half[len(zone)]
-        if len(zone) == 1:
-            lone_shapes[zone[0]](s)
+        s += half[_is_lone(zone)]
+        if _is_lone(zone):
+            lone_shapes[zone[0]](s, zone[1])
             c.zone(str(k + 1), zone[0], s, 9.0, 9.0, "avoid")
         else:
             length, width = pair_sizes[pairs % len(pair_sizes)]
             pairs += 1
             c.pair(str(k + 1), zone[0], zone[1], s, length, width)
-        s += half[len(zone)]
+        s += half[_is_lone(zone)]
     return c
 
 

@@ -151,7 +151,9 @@ def test_weight_zero_is_the_argmax_of_f(tmp_path: Path):
     ({"w": [1.0, 2.0], "b": [0.0] * 21}, "utility.w"),
     ({"w": [0.0] * 5}, "utility.b"),
     ({"w": [0.0] * 5, "b": [math.inf] * 21}, "utility.b"),
-    ("not a table", "utility.w"),
+    ("not a table", "utility"),
+    ({"w": [0.0] * 5, "b": [0.0] * 21, "weight": -1.0}, "utility.weight"),
+    ({"w": [0.0] * 5, "b": [0.0] * 21, "weight": "heavy"}, "utility.weight"),
 ])
 def test_a_broken_utility_is_refused_with_its_field(tmp_path: Path, utility, field: str):
     path = _model_with_utility(tmp_path / "bad.safetensors", utility)

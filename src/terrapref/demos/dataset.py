@@ -15,10 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer
+from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer, SegmentationView
 from terrapref.demos.recording import Recording
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
+from terrapref.features.lookahead import Lookahead
 from terrapref.scenario import parse_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.tensorfile import read_tensor_file, write_tensor_file
@@ -38,6 +39,8 @@ class Dataset:
         w: demonstrated continuous yaw rate [rad/s], shape (N,) float32.
         source: index of the recording each sample came from, shape (N,) int64.
         meta: features, camera, classes, profile, recordings (JSON-serialisable).
+        U2: the look-ahead utilities of every frame, shape (N, m, m, K + 1) float16, when the
+            feature configuration asks for them (``FeatureConfig.lookahead``); else None.
     """
 
     U: np.ndarray
@@ -45,6 +48,7 @@ class Dataset:
     w: np.ndarray
     source: np.ndarray
     meta: dict
+    U2: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.labels)
@@ -60,13 +64,15 @@ class Dataset:
     @property
     def fingerprint(self) -> str:
         h = hashlib.sha256()
-        for a in (self.U, self.labels):
+        for a in (self.U, self.labels) if self.U2 is None else (self.U, self.labels, self.U2):
             h.update(np.ascontiguousarray(a).tobytes())
         return h.hexdigest()[:16]
 
 
-def featurize_recording(recording: Recording, features: FeatureConfig, camera: CameraConfig | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """U (F, m, K + 1), labels (F,) and w (F,) for every frame of a recording.
+def featurize_recording(recording: Recording, features: FeatureConfig, camera: CameraConfig | None = None
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """U (F, m, K + 1), labels (F,), w (F,) and, when ``features.lookahead`` asks, U2 (F, m, m, K + 1)
+    float16 for every frame of a recording.
 
     Args:
         camera: None uses the recorded frames; another configuration re-renders each frame from
@@ -80,15 +86,20 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
     path = ReferencePath(np.asarray(recording.meta.get("path", scenario.waypoints), dtype=float))
     tracker = PathTracker(path)
     renderer = None if camera == rec_camera else SegmentationRenderer(PinholeCamera(camera), rasterise(scenario))
-    n = len(recording)
-    U = np.empty((n, featurizer.m, features.n_features), dtype=np.float32)
+    lookahead = Lookahead(features.lookahead, featurizer, PinholeCamera(camera)) if features.lookahead is not None else None
+    n, m = len(recording), featurizer.m
+    U = np.empty((n, m, features.n_features), dtype=np.float32)
+    U2 = np.empty((n, m, m, features.n_terrain + 1), dtype=np.float16) if lookahead is not None else None
     for i in range(n):
         pose = tuple(recording.poses[i])
-        image = renderer.render(pose) if renderer is not None else recording.image(i)
-        U[i] = featurizer(image, pose, path, tracker.update(recording.poses[i, :2]))
+        view = SegmentationView.of(renderer.render(pose) if renderer is not None else recording.image(i))
+        s = tracker.update(recording.poses[i, :2])
+        U[i] = featurizer(view, pose, path, s)
+        if lookahead is not None:
+            U2[i] = lookahead.utilities(view, pose, path, s)
     w = recording.commands[:, 1].astype(np.float32)
     labels = np.asarray(features.preference.control.label_of(w), dtype=np.int64).reshape(n)
-    return U, labels, w
+    return U, labels, w, U2
 
 
 def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: CameraConfig | None = None, progress=None) -> Dataset:
@@ -108,6 +119,7 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
     U = np.concatenate([p[0] for p in parts])
     labels = np.concatenate([p[1] for p in parts])
     w = np.concatenate([p[2] for p in parts])
+    U2 = np.concatenate([p[3] for p in parts]) if features.lookahead is not None else None
     source = np.concatenate([np.full(len(p[1]), k, dtype=np.int64) for k, p in enumerate(parts)])
     meta = {
         "format": FORMAT,
@@ -120,13 +132,16 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
             for r in recordings
         ],
     }
-    return Dataset(U, labels, w.astype(np.float32), source, meta)
+    return Dataset(U, labels, w.astype(np.float32), source, meta, U2)
 
 
 def save_dataset(dataset: Dataset, path: str | Path) -> Path:
     """Write a dataset as safetensors (tensors plus JSON metadata), atomically."""
     meta = {**dataset.meta, "format": FORMAT, "fingerprint": dataset.fingerprint, "samples": len(dataset)}
-    return write_tensor_file(path, {"U": dataset.U, "labels": dataset.labels, "w": dataset.w, "source": dataset.source}, meta)
+    tensors = {"U": dataset.U, "labels": dataset.labels, "w": dataset.w, "source": dataset.source}
+    if dataset.U2 is not None:
+        tensors["U2"] = dataset.U2
+    return write_tensor_file(path, tensors, meta)
 
 
 def load_dataset(path: str | Path) -> Dataset:
@@ -135,4 +150,4 @@ def load_dataset(path: str | Path) -> Dataset:
     for key in ("U", "labels", "w", "source"):
         if key not in tensors:
             raise UserError(str(path), "missing tensor", field=key)
-    return Dataset(tensors["U"], tensors["labels"], tensors["w"], tensors["source"], meta)
+    return Dataset(tensors["U"], tensors["labels"], tensors["w"], tensors["source"], meta, tensors.get("U2"))

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -93,6 +93,29 @@ class ExpertConfig:
 
     def to_dict(self) -> dict:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
+
+    @classmethod
+    def styled(cls, style: str = "default", profile: tuple[str, ...] | None = None) -> ExpertConfig:
+        """The driver of a named style (:data:`STYLES`) with a preference ``profile``."""
+        if style not in STYLES:
+            raise ValueError(f"unknown driver style {style!r}; styles: {', '.join(STYLES)}")
+        base = cls() if profile is None else cls(profile=tuple(profile))
+        return replace(base, **STYLES[style][1])
+
+
+# Driver styles: different people, not only different orders. Each is the default driver with
+# a few parameters changed (description, changes); `terrapref record --style NAME`.
+STYLES: dict[str, tuple[str, dict]] = {
+    "default": ("reacts 5 m ahead, 0.6 m half-width, 0.4 m extra from lethal terrain", {}),
+    "wide": ("keeps wider margins: counts terrain 0.5 m beyond its sides, 0.8 m extra from lethal terrain",
+             {"half_width_m": 1.1, "lethal_margin_m": 0.8}),
+    "late": ("reacts later: terrain on the path 3.5 m ahead, not 5 m; a slower hand (0.35 s)",
+             {"reaction_distance_m": 3.5, "reaction_delay_s": 0.35}),
+    "shaky": ("a shakier hand: 0.08 rad/s of tremor while the stick is deflected, a wider deadzone",
+              {"stick_noise_rps": 0.08, "deadzone_rps": 0.1}),
+    "reluctant": ("leaves the path reluctantly: twice the cost per metre of detour",
+                  {"deviation_cost": 0.16}),
+}
 
 
 class ExpertDriver:

@@ -44,6 +44,7 @@ class RunSpec:
     keep_frames: tuple[int, ...] = ()
     smoothing: float = 0.0
     perturb: Perturbation | None = None
+    style: str = "default"  # the synthetic driver's style (terrapref.demos.expert.STYLES), for EXPERT runs
 
 
 def start_pose(start: tuple[float, float, float], seed: int) -> Pose:
@@ -86,7 +87,7 @@ def run_one(spec: RunSpec) -> dict:
     profile = PreferenceProfile.parse(list(spec.profile), scenario.classes, source="--profile")
     if spec.driver == EXPERT:
         sim = Simulation(scenario, world=world)
-        driver = ExpertDriver(ExpertConfig(profile=profile.order), world=world)  # the cached raster, not a new one
+        driver = ExpertDriver(ExpertConfig.styled(spec.style, profile.order), world=world)  # the cached raster, not a new one
     else:
         policy = make_policy(spec)
         sim = Simulation(scenario, policy.camera, world=world)

@@ -26,7 +26,7 @@ the lane points are fixed in the vehicle frame, so their pixels are precomputed.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from enum import Enum
 
 import numpy as np
@@ -48,6 +48,32 @@ class DistanceMode(str, Enum):
 
 
 @dataclass(frozen=True)
+class LookaheadConfig:
+    """Where the second pieces start and which of their points are read.
+
+    Attributes:
+        after_s: where along each first trajectory the second piece starts [s]; rounded to a
+            trajectory point (point j is j dt along; the last, (n - 1) dt).
+        stride: terrain shares read on every ``stride``-th point of each second piece, ending
+            with its last.
+    """
+
+    after_s: float = 2.4
+    stride: int = 2
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.after_s) and self.after_s > 0 and isinstance(self.stride, int) and self.stride >= 1):
+            raise ValueError("the look-ahead needs after_s > 0 and an integer stride >= 1")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> LookaheadConfig:
+        return cls(float(data["after_s"]), int(data["stride"]))
+
+
+@dataclass(frozen=True)
 class FeatureConfig:
     """How U is computed; carried with every dataset and model.
 
@@ -62,6 +88,15 @@ class FeatureConfig:
         lane_m: length of the lane beyond each trajectory's end [m]; 0 (the paper's U) adds
             no lane columns.
         lane_points: points sampled along each lane.
+        near_m: adds a near distance utility before ``distance``: the distance from each
+            trajectory's point ``near_m`` along it to the path point ``near_m`` ahead of the
+            vehicle's progress, normalised over the set like u^5 (0, the paper's U: no column).
+            At the horizon's end, an offset of a metre from the path hardly separates the
+            central arcs; near the vehicle it does, which is where a driver's small
+            corrections back to the path come from.
+        lookahead: with a configuration, datasets also carry the look-ahead utilities U' of
+            every frame (terrapref.features.lookahead), through which training fits the
+            planner's second stage; None (the paper's data): U only.
     """
 
     preference: PreferenceSetConfig = field(default_factory=PreferenceSetConfig)
@@ -71,6 +106,8 @@ class FeatureConfig:
     feature_classes: tuple[str, ...] = field(default_factory=lambda: default_classes().feature_names)
     lane_m: float = 0.0
     lane_points: int = LANE_POINTS
+    near_m: float = 0.0
+    lookahead: LookaheadConfig | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "distance_mode", DistanceMode(self.distance_mode))
@@ -78,6 +115,10 @@ class FeatureConfig:
             raise ValueError("path_spacing_m and window_m must be > 0")
         if not (math.isfinite(self.lane_m) and self.lane_m >= 0) or self.lane_points < 1:
             raise ValueError("lane_m must be finite and >= 0, and lane_points >= 1")
+        if not (math.isfinite(self.near_m) and 0 <= self.near_m <= self.preference.horizon_m):
+            raise ValueError("near_m must be in [0, the trajectories' length]")
+        if self.lookahead is not None and (self.lanes or not isinstance(self.lookahead, LookaheadConfig)):
+            raise ValueError("lookahead must be a LookaheadConfig, and U with lanes has no look-ahead")
         if not self.lanes:  # without lanes the point count means nothing: keep equal configs equal
             object.__setattr__(self, "lane_points", LANE_POINTS)
 
@@ -102,7 +143,8 @@ class FeatureConfig:
     @property
     def column_names(self) -> tuple[str, ...]:
         lanes = tuple(f"lane_{c}" for c in self.feature_classes) if self.lanes else ()
-        return (*self.feature_classes, *lanes, "distance")
+        near = ("near_distance",) if self.near_m > 0 else ()
+        return (*self.feature_classes, *lanes, *near, "distance")
 
     def to_dict(self) -> dict:
         return {
@@ -112,6 +154,8 @@ class FeatureConfig:
             "path_spacing_m": self.path_spacing_m,
             "feature_classes": list(self.feature_classes),
             **({"lane_m": self.lane_m, "lane_points": self.lane_points} if self.lanes else {}),
+            **({"near_m": self.near_m} if self.near_m > 0 else {}),
+            **({"lookahead": self.lookahead.to_dict()} if self.lookahead is not None else {}),
         }
 
     @classmethod
@@ -124,6 +168,8 @@ class FeatureConfig:
             tuple(data["feature_classes"]),
             float(data.get("lane_m", 0.0)),
             int(data.get("lane_points", LANE_POINTS)),
+            float(data.get("near_m", 0.0)),
+            LookaheadConfig.from_dict(data["lookahead"]) if data.get("lookahead") is not None else None,
         )
 
 
@@ -156,6 +202,9 @@ class UtilityFeaturizer:
         # Share per point: one number without lanes (the common, fastest case), else per row.
         self._scale = 1.0 / blocks[0].shape[1] if len(blocks) == 1 else np.concatenate([np.full((m, 1), 1.0 / b.shape[1]) for b in blocks])
         self._ends = self.pset.endpoints  # (m, 2) vehicle frame
+        if config.near_m > 0:  # the point near_m along each trajectory (all travel at v)
+            j = int(round(config.near_m / (config.preference.control.v_mps * config.preference.dt_s)))
+            self._near = self.pset.trajectories[:, j, :2].copy()
 
     @property
     def m(self) -> int:
@@ -210,6 +259,21 @@ class UtilityFeaturizer:
     def __call__(self, image: np.ndarray | SegmentationView, pose: Pose, path: ReferencePath, progress_s: float | None = None) -> np.ndarray:
         """U, shape (m, n_features) float32: terrain shares, lane shares if any, then the distance utility."""
         u = np.empty((self.m, self.config.n_features), dtype=np.float32)
-        u[:, :-1] = self.terrain(image)
+        if self.config.near_m > 0:
+            u[:, :-2] = self.terrain(image)
+            u[:, -2] = self.normalise(self.near_distances(pose, path, progress_s))
+        else:
+            u[:, :-1] = self.terrain(image)
         u[:, -1] = self.normalise(self.distances(pose, path, progress_s))
         return u
+
+    def near_distances(self, pose: Pose, path: ReferencePath, progress_s: float | None) -> np.ndarray:
+        """Distance [m] from each trajectory's point ``near_m`` along it to the path point
+        ``near_m`` ahead of the progress, shape (m,) (FeatureConfig.near_m)."""
+        if progress_s is None:
+            raise ValueError("the near distance needs the vehicle's progress along the path")
+        x, y, yaw = pose
+        c, s = math.cos(yaw), math.sin(yaw)
+        tx, ty = path.point_at(progress_s + self.config.near_m)
+        px, py = self._near[:, 0], self._near[:, 1]
+        return np.hypot(px * c - py * s + (x - tx), px * s + py * c + (y - ty))

@@ -5,6 +5,7 @@ Loading reads tensors and a JSON header only; no code from the file is ever exec
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -35,6 +36,7 @@ class LoadedModel:
     profile: tuple[str, ...]
     meta: dict
     utility: LinearUtility | None = None  # fitted with C for the planner's second stage (TrainConfig.utility)
+    stage_weight: float = 1.5  # the second stage's weight in the decision, as trained (TrainConfig.stage_weight)
 
 
 def save_model(path: str | Path, classifier: ClassifierConfig, weights: dict[str, np.ndarray], meta: dict) -> Path:
@@ -79,16 +81,23 @@ def classifier_from(weights: dict[str, np.ndarray], meta: dict, source: str) -> 
             raise UserError(source, f"has shape {tuple(weights[name].shape)}, expected {shape}", field=f"weights.{name}")
     if classifier.m != features.preference.m or classifier.n_features != features.n_features:
         raise UserError(source, "classifier shape does not match its feature configuration", field="classifier")
-    return LoadedModel(source, classifier, weights, features, camera, classes, profile, meta, _utility(meta, features, source))
+    utility, weight = _utility(meta, features, source)
+    return LoadedModel(source, classifier, weights, features, camera, classes, profile, meta, utility, weight)
 
 
-def _utility(meta: dict, features: FeatureConfig, source: str) -> LinearUtility | None:
-    """The linear utility the metadata carries (``utility``: ``w`` per column, ``b`` per trajectory), if any."""
+def _utility(meta: dict, features: FeatureConfig, source: str) -> tuple[LinearUtility | None, float]:
+    """The linear utility the metadata carries (``utility``: ``w`` per column, ``b`` per trajectory,
+    ``weight`` in the decision, 1.5 in files made before it was stored), if any."""
     data = meta.get("utility")
     if data is None:
-        return None
+        return None, 1.5
+    if not isinstance(data, dict):
+        raise UserError(source, "expected a mapping with w, b and weight", field="utility")
+    weight = data.get("weight", 1.5)
+    if isinstance(weight, bool) or not isinstance(weight, (int, float)) or not (math.isfinite(weight) and weight >= 0):
+        raise UserError(source, "expected a finite number >= 0", field="utility.weight")
     arrays = {}
-    for name, size in (("w", features.n_features), ("b", features.preference.m)):
+    for name, size in (("w", features.n_terrain + 1), ("b", features.preference.m)):
         try:
             value = np.asarray(data[name], dtype=float)
         except (KeyError, TypeError, ValueError, IndexError):
@@ -96,7 +105,7 @@ def _utility(meta: dict, features: FeatureConfig, source: str) -> LinearUtility 
         if value is None or value.shape != (size,) or not np.isfinite(value).all():
             raise UserError(source, f"expected {size} finite numbers", field=f"utility.{name}")
         arrays[name] = value
-    return LinearUtility(arrays["w"], arrays["b"])
+    return LinearUtility(arrays["w"], arrays["b"]), float(weight)
 
 
 def model_context(meta: dict, source: str) -> tuple[FeatureConfig, CameraConfig, ClassTable, tuple[str, ...]]:

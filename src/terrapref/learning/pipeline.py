@@ -22,7 +22,8 @@ def model_meta(dataset: Dataset, config: TrainConfig, result: TrainResult) -> di
         "history": [asdict(h) for h in result.history],
         "best_epoch": result.best_epoch,
         "steps": result.steps,
-        **({"utility": {"w": result.utility.w.tolist(), "b": result.utility.b.tolist()}} if result.utility is not None else {}),
+        **({"utility": {"w": result.utility.w.tolist(), "b": result.utility.b.tolist(), "weight": config.stage_weight,
+                        "fit": "lookahead" if dataset.U2 is not None else "frames"}} if result.utility is not None else {}),
         **({"members": [{"seed": seed, "best_epoch": r.best_epoch, "history": [asdict(h) for h in r.history]}
                         for seed, r in zip(config.member_seeds, result.members)]} if result.members else {}),
     }

@@ -21,7 +21,7 @@ from terrapref.demos.dataset import build_dataset
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.demos.recording import Recording, RecordingWriter, read_recording
 from terrapref.demos.session import DisturbanceConfig, record_run, recording_meta
-from terrapref.features import FeatureConfig
+from terrapref.features import FeatureConfig, LookaheadConfig
 from terrapref.learning.model_file import load_model
 from terrapref.learning.pipeline import train_and_save
 from terrapref.learning.train import TrainConfig, TrainResult
@@ -62,6 +62,8 @@ class Recipe:
     practice: int = 0
     lane_m: float = 0.0
     follow_margin: float = 0.0
+    near_m: float = 0.0
+    lookahead: bool = False
 
     def __post_init__(self) -> None:
         if self.demonstrations < 1 or self.corrections < 0 or self.practice < 0 or self.lane_m < 0 or self.follow_margin < 0:
@@ -69,7 +71,8 @@ class Recipe:
 
     def features(self, base: FeatureConfig | None = None) -> FeatureConfig:
         """The feature configuration this recipe trains with: ``base`` with its lanes."""
-        return replace(base or FeatureConfig(), lane_m=self.lane_m)
+        return replace(base or FeatureConfig(), lane_m=self.lane_m, near_m=self.near_m,
+                       lookahead=LookaheadConfig() if self.lookahead else None)
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -18,7 +18,7 @@ import numpy as np
 
 from terrapref.demos.dataset import Dataset
 from terrapref.learning import exact
-from terrapref.learning.linear import LinearUtility, fit_linear_utility
+from terrapref.learning.linear import LinearUtility, fit_linear_utility, fit_lookahead_utility
 from terrapref.learning.mlp import Adam, TrainableClassifier, cross_entropy, init_weights, round_inputs
 from terrapref.learning.network import ClassifierConfig, member_prefix
 
@@ -52,7 +52,11 @@ class TrainConfig:
             (its own split, initialisation and batch order); C averages their F_t.
         utility: also fit the linear utility model (terrapref.learning.linear) to every sample,
             with the mirrored copies when ``mirror`` is on, and keep it with the model; the
-            planner's second stage scores with it (terrapref.planner.second_stage).
+            planner's second stage scores with it (terrapref.planner.second_stage). When the
+            dataset carries the look-ahead utilities (``FeatureConfig.lookahead``), the fit
+            goes through the look-ahead (``fit_lookahead_utility``).
+        stage_weight: the weight of the second stage's value against log F_t in the planner's
+            decision, stored with the utility.
     """
 
     epochs: int = 15
@@ -73,6 +77,7 @@ class TrainConfig:
     channels: int = 1
     members: int = 1
     utility: bool = False
+    stage_weight: float = 1.5
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "ignore_features", tuple(self.ignore_features))
@@ -84,6 +89,7 @@ class TrainConfig:
             (self.weight_decay >= 0, "weight_decay must be >= 0"),
             (self.decisive_weight > 0, "decisive_weight must be > 0"),
             (self.members >= 1, "members must be >= 1"),
+            (math.isfinite(self.stage_weight) and self.stage_weight >= 0, "stage_weight must be finite and >= 0"),
         ]
         for ok, message in checks:
             if not ok:
@@ -180,12 +186,22 @@ def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callabl
     else:
         result = _ensemble([_train(dataset, replace(config, seed=seed, members=1), progress) for seed in config.member_seeds])
     if config.utility:
-        U, labels = dataset.U, dataset.labels
-        if config.mirror:  # _train has checked that the w grid is symmetric
-            U_m, labels_m = mirrored(U, labels)
-            U, labels = np.concatenate([U, U_m]), np.concatenate([labels, labels_m])
-        result.utility = fit_linear_utility(U, labels)
+        result.utility = _fit_utility(dataset, config.mirror)
     return result
+
+
+def _fit_utility(dataset: Dataset, mirror: bool) -> LinearUtility:
+    """The second stage's linear utility over the terrain columns and the distance utility: fitted
+    through the look-ahead when the data carry it (``Dataset.U2``), else frame by frame."""
+    features = dataset.feature_config
+    U, labels = dataset.U[..., [*range(features.n_terrain), features.n_features - 1]], dataset.labels
+    U2 = dataset.U2
+    if mirror:  # _train has checked that the w grid is symmetric
+        U_m, labels_m = mirrored(U, labels)
+        U, labels = np.concatenate([U, U_m]), np.concatenate([labels, labels_m])
+        U2 = None if U2 is None else np.concatenate([U2, U2[:, ::-1, ::-1]])
+    frames = fit_linear_utility(U, labels)
+    return frames if U2 is None else fit_lookahead_utility(U, U2, labels, start=frames).utility
 
 
 def mirrored(U: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -42,6 +42,7 @@ class Decision:
     progress_s: float
 
 
+MODEL = "model"  # Planner(second_stage=MODEL): the second stage as the model was trained for it
 PATH_AHEAD_M = np.arange(1.0, 9.0)  # where Observation.path_ahead samples the path [m]
 
 
@@ -57,11 +58,13 @@ class Planner:
             average out to driving straight into it; the average lets it commit.
         second_stage: the second stage beyond the trajectories (terrapref.planner.second_stage),
             used when the model file carries the linear utility it scores with (``terrapref
-            train --second-stage``); None never looks beyond the trajectories.
+            train --second-stage``); ``MODEL`` (the default): the weight the model was trained
+            with and the look-ahead its data were featurised with; None never looks beyond the
+            trajectories.
     """
 
     def __init__(self, model: LoadedModel | Policy, camera: CameraConfig | None = None, smoothing: float = 0.0,
-                 second_stage: SecondStageConfig | None = SecondStageConfig()) -> None:
+                 second_stage: SecondStageConfig | str | None = "model") -> None:
         if not 0.0 <= smoothing < 1.0:
             raise ValueError("smoothing must be in [0, 1)")
         self.smoothing = smoothing
@@ -77,6 +80,9 @@ class Planner:
         self.featurizer = UtilityFeaturizer(policy.features, self.camera, policy.classes)
         self.control = policy.features.preference.control
         utility = policy.stage_utility
+        if second_stage == MODEL:
+            look = policy.features.lookahead
+            second_stage = SecondStageConfig(weight=policy.stage_weight, **({"after_s": look.after_s, "stride": look.stride} if look else {}))
         self.second_stage = SecondStage(second_stage, self.featurizer, self.camera, utility) if second_stage is not None and utility is not None else None
         self.path: ReferencePath | None = None
         self.tracker: PathTracker | None = None

@@ -63,6 +63,7 @@ class Policy:
     path: str = ""
     uses_path_ahead = False  # the planner computes Observation.path_ahead only when asked
     stage_utility: LinearUtility | None = None  # what the planner's second stage scores with, if the model has one
+    stage_weight: float = 1.5  # and its weight in the decision
 
     def logits(self, obs: Observation) -> np.ndarray:
         """One score per trajectory, shape (m,); the planner drives the argmax."""
@@ -79,7 +80,7 @@ class ClassifierPolicy(Policy):
         self.features, self.camera, self.classes = model.features, model.camera, model.classes
         self.profile, self.path = model.profile, model.path
         self._config, self._weights = model.classifier, model.weights
-        self.stage_utility = model.utility
+        self.stage_utility, self.stage_weight = model.utility, model.stage_weight
 
     def logits(self, obs: Observation) -> np.ndarray:
         return numpy_forward(self._config, self._weights, obs.U)

@@ -1,0 +1,95 @@
+"""Look-ahead utilities U': the preference set laid out again from a point along each trajectory.
+
+The trajectories end 5.8 m ahead, and a driver commits to a side of a patch about 5 m before
+it, weighing terrain further away (docs/learning.md). For each trajectory i, take the pose
+reached after ``after_s`` seconds along it and lay the whole preference set out again from
+there: 21 x 21 two-piece paths. Every point of a second piece lies on the flat ground at a fixed
+place in the vehicle frame, so its pixel in the current frame is precomputed like the first
+stage's (a point outside the image counts for no class, as in U). Each second piece gets its
+own utilities: terrain shares, and the distance utility of its end against the path point one
+horizon beyond its start, normalised over all the second pieces together, so that a first
+trajectory that has left the path scores its continuations lower than one that has not.
+
+The planner's second stage (terrapref.planner.second_stage) scores these with a learned linear
+utility; training fits that utility through the same look-ahead (terrapref.learning.linear).
+"""
+
+from __future__ import annotations
+
+import math
+import numpy as np
+
+from terrapref.camera import PinholeCamera, SegmentationView
+from terrapref.features.utility import LookaheadConfig, UtilityFeaturizer
+from terrapref.scenario.path import ReferencePath
+from terrapref.vehicle import Pose
+
+
+class Lookahead:
+    """Precomputed second pieces for one featurizer (preference set and camera)."""
+
+    def __init__(self, config: LookaheadConfig, featurizer: UtilityFeaturizer, camera: PinholeCamera) -> None:
+        pset = featurizer.pset
+        step = int(round(config.after_s / featurizer.config.preference.dt_s))
+        if not 1 <= step < pset.config.n_steps:
+            raise ValueError(f"the look-ahead's after_s must be within the trajectories (1 to {pset.config.n_steps - 1} steps of dt)")
+        if featurizer.config.lanes:
+            raise ValueError("the look-ahead works on U without lanes")
+        m, k = pset.m, featurizer.config.n_terrain
+        self.config = config
+        self.featurizer = featurizer
+        self.starts = pset.trajectories[:, step].copy()  # (m, 3): the pose after_s along each trajectory
+        n = pset.config.n_steps
+        pts = pset.trajectories[:, n - 1 - (n - 1) // config.stride * config.stride :: config.stride, :2]  # (m, n', 2), own frame
+        x0, y0, yaw0 = (self.starts[:, j, None, None] for j in range(3))
+        c, s = np.cos(yaw0), np.sin(yaw0)
+        second = np.stack([x0 + pts[None, ..., 0] * c - pts[None, ..., 1] * s,
+                           y0 + pts[None, ..., 0] * s + pts[None, ..., 1] * c], axis=-1)  # (m, m, n', 2) vehicle frame
+        pix = camera.pixel_indices(second)  # (m, m, n')
+        self.pix = np.where(pix >= 0, pix, 0)
+        self.seen = (pix >= 0).astype(float)  # 1 where a point is in the image, 0 where it is not
+        self.ends = second[:, :, -1].copy()  # (m, m, 2): each second piece's end, vehicle frame
+        self._ends = self.ends @ (1.0, 1j)  # the same as complex numbers
+        self._x_lo, self._x_hi = float(self.starts[:, 0].min()), float(self.starts[:, 0].max())
+        self.points = pts.shape[1]  # points read per second piece
+        self.k = k
+        self._horizon_m = featurizer.config.preference.horizon_m
+        # By class id: each point's share of every terrain column (1 / n' in its own); 0 for classes U does not count.
+        self._point_share = np.eye(k + 1)[featurizer.class_columns, :k] / self.points
+
+    @property
+    def m(self) -> int:
+        return self.featurizer.m
+
+    def pixels_of(self, i: int) -> np.ndarray:
+        """Flat pixel indices (row * width + col) that trajectory ``i``'s second pieces read."""
+        return self.pix[i][self.seen[i] > 0]
+
+    def utilities(self, view: SegmentationView, pose: Pose, path: ReferencePath, progress_s: float, rows: np.ndarray | None = None) -> np.ndarray:
+        """U' of the second pieces after each trajectory in ``rows`` (all: None): shape (len(rows), m, K + 1)."""
+        rows = np.arange(self.m) if rows is None else rows
+        r, m, k = len(rows), self.m, self.k
+        shares = np.take(self._point_share, view.pixels(self.pix[rows].ravel()), axis=0)
+        shares *= self.seen[rows].reshape(-1, 1)
+        U = np.empty((r, m, k + 1))
+        U[..., :k] = shares.reshape(r, m, self.points, k).sum(axis=2)
+        U[..., k] = self.distance_utility(pose, path, progress_s, rows)
+        return U
+
+    def distance_utility(self, pose: Pose, path: ReferencePath, progress_s: float, rows: np.ndarray) -> np.ndarray:
+        """u^5 of the second pieces after ``rows``, (r, m): each end against the path point one
+        horizon beyond its start's progress (the start's forward offset added to the vehicle's)."""
+        x, y, yaw = pose
+        targets = self._targets(path, progress_s + self._horizon_m, rows)
+        d = np.abs(self._ends[rows] * complex(math.cos(yaw), math.sin(yaw)) + (complex(x, y) - targets[:, None]))
+        # One range for every second piece: they are compared with one another, and a first
+        # trajectory that has left the path must not find a continuation scored 1 as if it had not.
+        return UtilityFeaturizer.normalise(d)
+
+    def _targets(self, path: ReferencePath, s0: float, rows: np.ndarray) -> np.ndarray:
+        """Path points at ``s0`` plus each start's forward offset, world frame, complex (r,)."""
+        line = path.straight_between(s0 + self._x_lo, s0 + self._x_hi)
+        if line is None:
+            return path.point_at(s0 + self.starts[rows, 0]) @ (1.0, 1j)
+        x, y, ux, uy = line  # the usual case: one straight segment, points along it
+        return complex(x, y) + (self.starts[rows, 0] - self._x_lo) * complex(ux, uy)

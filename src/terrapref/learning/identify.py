@@ -1,0 +1,208 @@
+"""What a demonstration shows about a preference, and what it leaves open (identifiability).
+
+A demonstration teaches "mud rather than water" only if the driver was, at some moment, offered
+both and took one. This module reads that from the data the planner learns from, not from the
+course layout, so it works for any recording (a person's drive on any course, an imported log):
+
+- **Comparisons.** A frame *compares* class A with class B when, among the trajectories that
+  stay near the path (distance utility >= ``NEAR``), one runs mostly over A (share >= ``SHARE``,
+  less than half as much B) and another mostly over B, and the driver's trajectory is one of
+  them, or is clean of both. The frame is evidence for whichever the driver's trajectory holds
+  more of; a clean choice is evidence for grass over both. Grass against A is compared the same
+  way, with a trajectory clear of terrain in place of B. Each comparison is counted on the side
+  the chosen class lay (left: the trajectories turning left).
+- **The learned order.** The linear utility fitted to the same frames (terrapref.learning.linear)
+  gives each class a weight; the order of the weights is the order learned, and the difference of
+  two weights is the margin, with a standard error from the fit's Fisher information (a Wald
+  interval: the data's own uncertainty about the difference).
+
+A pair is *identified* when it was compared in at least ``MIN_FRAMES`` frames and its margin
+is more than twice its standard error; otherwise the planner's choice between the two is a
+guess, and :meth:`Identifiability.warnings` says so.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from terrapref.learning.linear import LinearUtility
+
+GRASS = "grass"  # the background, compared like a class
+SHARE = 0.2  # a trajectory "runs over" a class when at least this share of its points do
+NEAR = 0.5  # trajectories whose distance utility is below this have left the path: not an option
+MIN_FRAMES = 10  # fewer comparing frames than this leave a pair unidentified
+
+
+@dataclass(frozen=True)
+class PairEvidence:
+    """What the data say about one pair of classes (``first`` before ``second`` in the learned order).
+
+    Attributes:
+        first, second: class names (``grass`` for the background).
+        frames: frames that compared the two.
+        for_first, for_second: of those, the frames whose choice favoured each.
+        sides: comparing frames with ``first`` on the left and on the right (left, right).
+        margin: learned weight of ``first`` minus that of ``second`` (>= 0), in utility units;
+            None where no weight exists (grass has weight 0 by construction).
+        stderr: standard error of ``margin`` (Wald), None if unknown.
+    """
+
+    first: str
+    second: str
+    frames: int
+    for_first: int
+    for_second: int
+    sides: tuple[int, int]
+    margin: float
+    stderr: float | None
+
+    @property
+    def identified(self) -> bool:
+        return self.frames >= MIN_FRAMES and self.stderr is not None and self.margin > 2.0 * self.stderr
+
+    def describe(self) -> str:
+        interval = f" +- {1.96 * self.stderr:.2f}" if self.stderr is not None else ""
+        seen = f"compared in {self.frames} frames ({self.for_first} for {self.first}, {self.for_second} for {self.second}; " \
+               f"{self.first} on the left {self.sides[0]}, on the right {self.sides[1]})" if self.frames else "never compared"
+        return f"{self.first} > {self.second}: margin {self.margin:.2f}{interval}, {seen}"
+
+    def to_dict(self) -> dict:
+        return {"first": self.first, "second": self.second, "frames": self.frames, "for_first": self.for_first,
+                "for_second": self.for_second, "sides": list(self.sides), "margin": round(self.margin, 4),
+                "stderr": None if self.stderr is None else round(self.stderr, 4), "identified": self.identified}
+
+
+@dataclass(frozen=True)
+class Identifiability:
+    """The learned order of the classes (grass included) and the evidence for every pair."""
+
+    order: tuple[str, ...]  # best first
+    pairs: tuple[PairEvidence, ...]
+
+    def pair(self, a: str, b: str) -> PairEvidence | None:
+        return next((p for p in self.pairs if {p.first, p.second} == {a, b}), None)
+
+    def unidentified(self) -> list[PairEvidence]:
+        return [p for p in self.pairs if not p.identified]
+
+    def warnings(self) -> list[str]:
+        out = []
+        for p in self.unidentified():
+            why = "never compared" if p.frames == 0 else (f"compared in only {p.frames} frames" if p.frames < MIN_FRAMES
+                                                          else "compared, but the margin is within its uncertainty")
+            out.append(f"{p.first} vs {p.second}: {why}; the planner's choice between them is a guess")
+        return out
+
+    def lines(self) -> list[str]:
+        out = [f"learned order: {' > '.join(self.order)}"]
+        out += [f"  {p.describe()}{'' if p.identified else '  <- not identified'}" for p in self.pairs]
+        out += [f"warning: {w}" for w in self.warnings()]
+        return out
+
+    def to_dict(self) -> dict:
+        return {"order": list(self.order), "pairs": [p.to_dict() for p in self.pairs], "min_frames": MIN_FRAMES}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> Identifiability:
+        pairs = tuple(PairEvidence(p["first"], p["second"], int(p["frames"]), int(p["for_first"]), int(p["for_second"]),
+                                   (int(p["sides"][0]), int(p["sides"][1])), float(p["margin"]),
+                                   None if p["stderr"] is None else float(p["stderr"])) for p in data["pairs"])
+        return cls(tuple(data["order"]), pairs)
+
+
+def count_comparisons(U: np.ndarray, labels: np.ndarray, classes: tuple[str, ...]) -> dict[tuple[str, str], np.ndarray]:
+    """Per ordered pair (a, b): counts [a chosen with a on the left, a chosen on the right,
+    b chosen with b on the left, b chosen on the right] over the frames comparing them.
+
+    Args:
+        U: (N, m, K + 1) utilities: K terrain shares in ``classes`` order, the distance utility last.
+        labels: (N,) chosen trajectory per frame.
+        classes: the K terrain classes; ``grass`` is added as the class of clean trajectories.
+    """
+    n, m, _ = U.shape
+    k = len(classes)
+    terrain = U[:, :, :k]
+    clean = terrain.sum(axis=2) < 0.05  # (N, m): (almost) no terrain on the trajectory
+    near = U[:, :, -1] >= NEAR
+    shares = np.concatenate([terrain, clean[..., None].astype(float)], axis=2)  # grass as column k
+    names = (*classes, GRASS)
+    left = np.arange(m) > (m - 1) / 2  # trajectories turning left (w > 0)
+    chosen = shares[np.arange(n), labels]  # (N, K + 1)
+    out: dict[tuple[str, str], np.ndarray] = {}
+    for a, b in itertools.combinations(range(k + 1), 2):
+        over_a = near & (shares[:, :, a] >= SHARE) & (shares[:, :, b] < 0.5 * shares[:, :, a])
+        over_b = near & (shares[:, :, b] >= SHARE) & (shares[:, :, a] < 0.5 * shares[:, :, b])
+        offered = over_a.any(axis=1) & over_b.any(axis=1)
+        # Which side each lies on: the mean turn of the trajectories that run over it.
+        a_left = (over_a * left).sum(axis=1) * over_b.sum(axis=1) > (over_b * left).sum(axis=1) * over_a.sum(axis=1)
+        took_a = offered & (chosen[:, a] > chosen[:, b]) & (chosen[:, a] >= SHARE / 2)
+        took_b = offered & (chosen[:, b] > chosen[:, a]) & (chosen[:, b] >= SHARE / 2)
+        if b == k:  # against grass, a clean choice is grass (between two patches it favours neither)
+            took_b = offered & clean[np.arange(n), labels]
+        out[(names[a], names[b])] = np.array([(took_a & a_left).sum(), (took_a & ~a_left).sum(),
+                                              (took_b & ~a_left).sum(), (took_b & a_left).sum()])
+    return out
+
+
+def fisher_covariance(U: np.ndarray, labels: np.ndarray, utility: LinearUtility, U2: np.ndarray | None = None, gamma: float = 1.0) -> np.ndarray:
+    """Covariance of the linear utility's parameters (w, b[, gamma]) at the fit, from the Fisher
+    information of the softmax over trajectories (the pseudo-inverse where it is singular).
+
+    With look-ahead utilities ``U2`` (N, m, m, K + 1), trajectory i scores
+    ``f(U_i) + gamma * max_j f(U2_ij)`` (terrapref.learning.linear.fit_lookahead_utility); with
+    the best continuation j held fixed, that is linear in (w, b, gamma), which gives its design.
+    """
+    n, m, k = U.shape
+    X = np.concatenate([U, np.broadcast_to(np.eye(m), (n, m, m))], axis=2)  # (N, m, K + m)
+    if U2 is not None:
+        f2 = U2.astype(np.float64) @ utility.w + utility.b  # (N, m, m)
+        best = np.argmax(f2, axis=2)
+        value = np.take_along_axis(f2, best[..., None], axis=2)[..., 0]
+        cont = np.take_along_axis(U2.astype(np.float64), best[..., None, None], axis=2)[:, :, 0]  # (N, m, K)
+        X = X + gamma * np.concatenate([cont, np.eye(m)[best]], axis=2)
+        X = np.concatenate([X, value[..., None]], axis=2)
+        logits = U @ utility.w + utility.b + gamma * value
+    else:
+        logits = U @ utility.w + utility.b
+    p = np.exp(logits - logits.max(axis=1, keepdims=True))
+    p /= p.sum(axis=1, keepdims=True)
+    centred = X - np.einsum("nm,nmd->nd", p, X)[:, None, :]
+    info = np.einsum("nm,nmd,nme->de", p, centred, centred)
+    return np.linalg.pinv(info)
+
+
+def identifiability(U: np.ndarray, labels: np.ndarray, classes: tuple[str, ...], utility: LinearUtility,
+                    U2: np.ndarray | None = None, gamma: float = 1.0) -> Identifiability:
+    """The evidence and learned order for every pair of ``classes`` and grass.
+
+    Args:
+        U: (N, m, K + 1) utilities of the demonstrated frames (not mirrored): terrain shares, distance.
+        labels: (N,) the demonstrated trajectories.
+        classes: the K terrain classes, in U's column order.
+        utility: the linear utility fitted to these frames (or to them and their mirror images).
+        U2, gamma: the look-ahead utilities and weight, when ``utility`` was fitted through them.
+    """
+    counts = count_comparisons(U, labels, classes)
+    cov = fisher_covariance(U, labels, utility, U2, gamma)
+    weight = {name: float(utility.w[i]) for i, name in enumerate(classes)} | {GRASS: 0.0}
+    order = tuple(sorted(weight, key=lambda c: -weight[c]))
+    pairs = []
+    for a, b in itertools.combinations(order, 2):  # a before b in the learned order
+        key, flip = ((a, b), False) if (a, b) in counts else ((b, a), True)
+        c = counts[key]
+        for_a, for_b = (c[2] + c[3], c[0] + c[1]) if flip else (c[0] + c[1], c[2] + c[3])
+        a_left, a_right = (c[2] + c[1], c[3] + c[0]) if flip else (c[0] + c[3], c[1] + c[2])
+        grad = np.zeros(len(cov))
+        if a != GRASS:
+            grad[classes.index(a)] += 1.0
+        if b != GRASS:
+            grad[classes.index(b)] -= 1.0
+        var = float(grad @ cov @ grad)
+        stderr = math.sqrt(var) if var > 0 and math.isfinite(var) else None
+        pairs.append(PairEvidence(a, b, int(for_a + for_b), int(for_a), int(for_b), (int(a_left), int(a_right)),
+                                  weight[a] - weight[b], stderr))
+    return Identifiability(order, tuple(pairs))
