@@ -74,13 +74,19 @@ def _cmd_list(args: argparse.Namespace) -> int:
     return 0
 
 
-def _disturbance(rate_hz: float):
-    """--disturb RATE: pushes per second while demonstrating (0: none)."""
-    from terrapref.demos.session import DisturbanceConfig
+def _disturbance(rate_hz: float | None):
+    """--disturb RATE: pushes per second while demonstrating (0: none; not given: the recommended
+    protocol's, that of the default recipe)."""
+    from dataclasses import replace
 
-    if not (rate_hz >= 0):
-        raise UserError("--disturb", "must be >= 0 (pushes per second)")
-    return DisturbanceConfig(rate_hz=rate_hz) if rate_hz > 0 else None
+    from terrapref.learning.recipe import DEFAULT_RECIPE, RECIPES
+
+    protocol = RECIPES[DEFAULT_RECIPE].disturbance
+    if rate_hz is None:
+        return protocol
+    if not (math.isfinite(rate_hz) and rate_hz >= 0):
+        raise UserError("--disturb", "must be a number >= 0 (pushes per second)")
+    return replace(protocol, rate_hz=rate_hz) if rate_hz > 0 else None
 
 
 def _cmd_record(args: argparse.Namespace) -> int:
@@ -98,10 +104,14 @@ def _cmd_record(args: argparse.Namespace) -> int:
 
     scenario = resolve_scenario(args.scenario)
     profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile else PreferenceProfile.default(scenario.classes)
-    expert = ExpertConfig(profile=profile.order)
+    try:
+        expert = ExpertConfig.styled(args.style, profile.order)
+    except ValueError as exc:
+        raise UserError("--style", str(exc)) from None
     disturbance = _disturbance(args.disturb)
     camera, preference, sim_config = CameraConfig(), PreferenceSetConfig(), SimConfig()
-    driver = {"kind": "expert", "seed": args.seed, "config": expert.to_dict(), "disturbance": disturbance.to_dict() if disturbance else None}
+    driver = {"kind": "expert", "seed": args.seed, "style": args.style, "config": expert.to_dict(),
+              "disturbance": disturbance.to_dict() if disturbance else None}
     meta = recording_meta(scenario, camera, preference, sim_config, driver, profile)
     sim = Simulation(scenario, camera, sim_config)
     writer = RecordingWriter(args.out, meta, scenario.to_dict(), overwrite=args.force)
@@ -121,7 +131,13 @@ def _cmd_record(args: argparse.Namespace) -> int:
 def _cmd_drive(args: argparse.Namespace) -> int:
     from terrapref.demos.teleop import run_teleop
 
-    result = run_teleop(args.scenario, args.record, overwrite=args.force, v_mps=args.speed, disturbance=_disturbance(args.disturb), seed=args.seed)
+    from terrapref.scenario import resolve_scenario
+    from terrapref.terrain import PreferenceProfile
+
+    scenario = resolve_scenario(args.scenario)
+    profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile else None
+    result = run_teleop(scenario, args.record, overwrite=args.force, v_mps=args.speed, disturbance=_disturbance(args.disturb),
+                        seed=args.seed, profile=profile)
     where = f", recorded to {result.record_dir}" if result.record_dir else ""
     state = "reached the goal" if result.completed else ("quit" if result.quit else "stopped")
     print(f"drove {result.frames} frames, {state}, {result.collisions} collisions{where}")
@@ -148,15 +164,18 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
     from terrapref.camera import CameraConfig
     from terrapref.demos.dataset import build_dataset, save_dataset
     from terrapref.demos.recording import read_recording
-    from terrapref.features import FeatureConfig
     from terrapref.progress import Progress
 
     recordings = [read_recording(p) for p in args.recordings]
     for r in recordings:
         if not r.complete:
             print(f"warning: {r.path} is partial; using its {len(r)} frames", file=sys.stderr)
+    from terrapref.learning.recipe import DEFAULT_RECIPE, recipe_named
+
     try:
-        features = FeatureConfig(distance_mode=args.distance_mode, lane_m=args.lanes)
+        base = recipe_named(args.recipe or DEFAULT_RECIPE).features()
+        # lanes are an option of their own, without the look-ahead
+        features = replace(base, distance_mode=args.distance_mode, lane_m=args.lanes, lookahead=None if args.lanes else base.lookahead)
     except ValueError as exc:
         raise UserError("featurize", str(exc), field="--lanes") from None
     pref = features.preference
@@ -179,37 +198,47 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
     return 0
 
 
+TRAIN_OVERRIDES = ("epochs", "lr", "batch_size", "seed", "hidden", "activation", "members")  # numeric flags over the recipe's
+TRAIN_SWITCHES = {"skip": "skip", "class_balance": "class_balance", "mirror": "mirror", "second_stage": "utility"}
+
+
+def _train_config(args: argparse.Namespace, recipe):
+    """The recipe's training configuration with the flags given on the command line on top."""
+    from dataclasses import replace
+
+    changes = {k: getattr(args, k) for k in TRAIN_OVERRIDES if getattr(args, k) is not None}
+    changes |= {field: True for flag, field in TRAIN_SWITCHES.items() if getattr(args, flag)}
+    try:
+        return replace(recipe.train, **changes)
+    except ValueError as exc:
+        raise UserError("train", str(exc)) from None
+
+
 def _cmd_train(args: argparse.Namespace) -> int:
     from dataclasses import asdict
 
-    import numpy as np
-
-    from terrapref.demos.dataset import Dataset, load_dataset
+    from terrapref.demos.dataset import training_data
     from terrapref.learning.pipeline import train_and_save
-    from terrapref.learning.train import TrainConfig
+    from terrapref.learning.recipe import DEFAULT_RECIPE, recipe_named
+    from terrapref.progress import Progress
     from terrapref.report.plots import save_loss_curve
 
-    sets = [load_dataset(p) for p in args.data]
-    first = sets[0]
-    for path, d in zip(args.data[1:], sets[1:]):
-        for key in ("features", "camera", "classes", "profile"):
-            if d.meta.get(key) != first.meta.get(key):
-                raise UserError(str(path), f"differs from {args.data[0]} in {key}; featurise all recordings the same way", field=key)
-    data = first if len(sets) == 1 else Dataset(
-        np.concatenate([d.U for d in sets]), np.concatenate([d.labels for d in sets]), np.concatenate([d.w for d in sets]),
-        np.concatenate([d.source + 1000 * k for k, d in enumerate(sets)]),
-        {**first.meta, "recordings": [r for d in sets for r in d.meta.get("recordings", [])]},
-    )
-    try:
-        config = TrainConfig(epochs=args.epochs, lr=args.lr, batch_size=args.batch_size, seed=args.seed, hidden=args.hidden,
-                             activation=args.activation, skip=args.skip, class_balance=args.class_balance, mirror=args.mirror, utility=args.second_stage,
-                             members=args.members)
-    except ValueError as exc:
-        raise UserError("train", str(exc)) from None
-    if config.utility and first.feature_config.lanes:
+    recipe = recipe_named(args.recipe or DEFAULT_RECIPE)
+    config = _train_config(args, recipe)
+    recordings = [p for p in args.data if p.is_dir()]
+    bar = Progress("featurize", len(recordings), enabled=bool(recordings))
+    data = training_data(args.data, recipe.features(), progress=lambda k, n: bar.update(k, f"{k}/{n} recordings"))
+    bar.close()
+    if len(data) == 0:
+        raise UserError(str(args.data[0]), "holds no samples to train on", field="frames")
+    if config.utility and data.feature_config.lanes:
         raise UserError(str(args.data[0]), "--second-stage needs U without lanes (featurize without --lanes)", field="features.lane_m")
+    if config.utility and recipe.lookahead and data.U2 is None:
+        print(f"warning: {args.data[0]} carries no look-ahead utilities; the second stage is fitted frame by frame "
+              f"(train from the recordings, or featurize them with --recipe {recipe.name})", file=sys.stderr)
     members = f", {config.members} members" if config.members > 1 else ""
-    print(f"training on {len(data)} samples ({len(args.data)} dataset file(s)), {config.epochs} epochs, batch {config.batch_size}, lr {config.lr}{members}")
+    print(f"recipe {recipe.name}: training on {len(data)} samples ({len(args.data)} input(s)), {config.epochs} epochs, "
+          f"batch {config.batch_size}, lr {config.lr}{members}")
     header = f"{'epoch':>5s} {'train loss':>10s} {'val loss':>9s} {'train acc':>9s} {'val acc':>8s} {'val top3':>8s}"
     member = 0
 
@@ -218,9 +247,10 @@ def _cmd_train(args: argparse.Namespace) -> int:
         if m.epoch == 1:
             member += 1
             print(f"member {member}/{config.members}\n{header}" if config.members > 1 else header)
-        print(f"{m.epoch:5d} {m.train_loss:10.4f} {m.val_loss:9.4f} {m.train_acc:9.3f} {m.val_acc:8.3f} {m.val_top3:8.3f}", flush=True)
+        if args.verbose or m.epoch == config.epochs or m.epoch % max(1, config.epochs // 10) == 0:
+            print(f"{m.epoch:5d} {m.train_loss:10.4f} {m.val_loss:9.4f} {m.train_acc:9.3f} {m.val_acc:8.3f} {m.val_top3:8.3f}", flush=True)
 
-    result = train_and_save(data, args.out, config, progress=show)
+    result = train_and_save(data, args.out, config, progress=show, recipe=recipe.name)
     curve = Path(args.out).with_suffix(".loss.png")
     first = f", member 1 of {config.members}" if config.members > 1 else ""
     save_loss_curve(curve, [asdict(h) for h in result.history], result.best_epoch, title=f"{Path(args.out).name}: {len(data)} samples{first}")
@@ -229,6 +259,10 @@ def _cmd_train(args: argparse.Namespace) -> int:
         best = r.history[r.best_epoch - 1]
         label = f"member {j + 1} " if config.members > 1 else ""
         chosen.append(f"{label}epoch {r.best_epoch}: val loss {best.val_loss:.4f}, val acc {best.val_acc:.3f}")
+    if result.identifiability is not None:
+        print("what the demonstrations show (stored in the model):")
+        for line in result.identifiability.lines():
+            print(f"  {line}")
     print(f"wrote {args.out} ({'; '.join(chosen)}), {curve}, checkpoints in {Path(args.out).with_name(Path(args.out).stem + '.checkpoints')}")
     return 0
 
@@ -249,14 +283,28 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     profile = PreferenceProfile.parse(args.profile, model.classes) if args.profile else None
     n_runs = len(args.scenarios) * args.seeds * (1 if args.no_driver else 2)
     bar = Progress("evaluate", n_runs)
+    from terrapref.demos.expert import STYLES
+    from terrapref.evaluation.stats import rate_text
+
+    if args.style not in STYLES:
+        raise UserError("--style", f"unknown driver style {args.style!r}; styles: {', '.join(STYLES)}")
     metrics = evaluate_model(args.model, args.scenarios, args.seeds, args.out, profile, not args.no_driver, frames, args.workers,
-                             progress=lambda k, n: bar.update(k, f"{k}/{n} runs"))
+                             progress=lambda k, n: bar.update(k, f"{k}/{n} runs"), style=args.style)
     bar.close()
+    zones = [z for sc in metrics["scenarios"].values() for run in sc.get("planner", {}).values() for z in run["zones"]]
     s = metrics["summary"]
-    print(f"planner: zone success {s['zone_success_rate']:.1%} over {s['zones']} zones, {s['collision_count']} collisions, completed {s['completed_rate']:.0%}")
+    print(f"planner: zone success {rate_text(sum(z['success'] for z in zones), len(zones))}, {s['collision_count']} collisions, "
+          f"completed {s['completed_rate']:.0%}")
+    compared = [z for z in zones if "agrees" in z]
+    if compared:
+        print(f"planner: agreement with the driver ({args.style}) {rate_text(sum(z['agrees'] for z in compared), len(compared))}")
     if "driver_summary" in metrics:
         d = metrics["driver_summary"]
         print(f"driver:  zone success {d['zone_success_rate']:.1%} over {d['zones']} zones, {d['collision_count']} collisions")
+    guesses = [z for z in zones if z.get("rests_on_unidentified")]
+    if metrics.get("unidentified_pairs"):
+        print(f"note: the model's demonstrations did not identify {', '.join(metrics['unidentified_pairs'])}; "
+              f"{len(guesses)} of {len(zones)} zone runs rest on them (marked in metrics.json)")
     print(f"wrote {Path(args.out) / 'metrics.json'} and figures in {args.out}")
     return 0
 
@@ -264,8 +312,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 def _cmd_reproduce(args: argparse.Namespace) -> int:
     import time
 
-    from terrapref.learning.recipe import PAPER
-    from terrapref.report.reproduce import OURS, reproduce
+    from terrapref.learning.recipe import OURS, PAPER
+    from terrapref.report.reproduce import reproduce
     from terrapref.terrain import PreferenceProfile
 
     if args.seeds < 1 or args.eval_seeds < 1:
@@ -319,14 +367,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("record", help="record a demonstration with the synthetic driver")
     p.add_argument("scenario", metavar="SCENARIO")
-    p.add_argument("--driver", choices=["expert"], default="expert", help="who drives (the synthetic expert)")
-    p.add_argument("--profile", help="preference order, best first, e.g. mud,rock,water,non_traversable")
+    p.add_argument("--profile", help="preference order, best first, e.g. rock,mud,water,non_traversable (default: the class table's)")
+    p.add_argument("--style", default="default", help="the driver's style: default, wide, late, shaky, reluctant (`terrapref recipes` lists them)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True, type=Path, help="recording directory to create")
     p.add_argument("--force", action="store_true", help="replace an existing recording at --out")
     p.add_argument("--quiet", action="store_true", help="no progress output")
-    p.add_argument("--disturb", type=float, default=0.0, metavar="RATE",
-                   help="push the executed yaw rate off the driver's command RATE times per second, so recoveries are shown (recipe ours: 0.3)")
+    p.add_argument("--disturb", type=float, default=None, metavar="RATE",
+                   help="push the executed yaw rate off the driver's command RATE times per second, so recoveries are shown "
+                        "(default: the recommended protocol's 0.3; 0: none)")
     p.set_defaults(func=_cmd_record)
 
     p = sub.add_parser("drive", help="drive a scenario yourself (keyboard or gamepad), optionally recording")
@@ -334,8 +383,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--record", type=Path, metavar="DIR", help="record the drive into DIR")
     p.add_argument("--force", action="store_true", help="replace an existing recording at DIR")
     p.add_argument("--speed", type=float, default=1.0, help="forward speed [m/s] (default 1)")
-    p.add_argument("--disturb", type=float, default=0.0, metavar="RATE", help="pushes per second on the executed yaw rate (0: none)")
+    p.add_argument("--disturb", type=float, default=None, metavar="RATE",
+                   help="pushes per second on the executed yaw rate (default: the recommended protocol's 0.3; 0: none)")
     p.add_argument("--seed", type=int, default=0, help="seeds the pushes")
+    p.add_argument("--profile", help="your preference order, best first, stored with the recording (default: the class table's)")
     p.set_defaults(func=_cmd_drive)
 
     p = sub.add_parser("inspect", help="summarise a recording and draw its driven path")
@@ -352,23 +403,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--camera", help="YAML file of camera parameters to re-render the frames with")
     p.add_argument("--lanes", type=float, default=0.0, metavar="M",
                    help="add lane columns: terrain shares on an M-metre lane beyond each trajectory's end (0: off, the paper's U)")
+    p.add_argument("--recipe", metavar="NAME", help="featurise as this recipe trains (default: teach, with the look-ahead utilities)")
     p.set_defaults(func=_cmd_featurize)
 
-    p = sub.add_parser("train", help="train the classifier on featurised datasets")
-    p.add_argument("data", nargs="+", metavar="DATA", type=Path, help="dataset files from `terrapref featurize`")
+    p = sub.add_parser("train", help="train a planner from recordings or featurised datasets (recipe teach by default)")
+    p.add_argument("data", nargs="+", metavar="DATA", type=Path,
+                   help="recording directories (featurised as the recipe needs) or dataset files from `terrapref featurize`")
     p.add_argument("--out", required=True, type=Path, help="model file (.safetensors)")
-    p.add_argument("--epochs", type=int, default=15)
-    p.add_argument("--lr", type=float, default=1e-3)
-    p.add_argument("--batch-size", type=int, default=256)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--hidden", type=int, default=64)
-    p.add_argument("--activation", choices=["relu", "tanh", "elu"], default="relu")
+    p.add_argument("--recipe", default=None, metavar="NAME", help="a named recipe (`terrapref recipes`; default: teach)")
+    p.add_argument("--epochs", type=int, help="override the recipe's epochs")
+    p.add_argument("--lr", type=float, help="override the recipe's learning rate")
+    p.add_argument("--batch-size", type=int, help="override the recipe's batch size")
+    p.add_argument("--seed", type=int, help="training seed (default 0)")
+    p.add_argument("--hidden", type=int, help="override the recipe's hidden width")
+    p.add_argument("--activation", choices=["relu", "tanh", "elu"], help="override the recipe's activation")
+    p.add_argument("--members", type=int, help="networks trained from different seeds; the model averages their F_t")
     p.add_argument("--skip", action="store_true", help="add the compressed scores to the logits (residual path)")
     p.add_argument("--class-balance", action="store_true", help="weight the loss by inverse label frequency")
     p.add_argument("--mirror", action="store_true", help="add left-right mirrored copies of the training samples")
-    p.add_argument("--members", type=int, default=1, help="networks trained from different seeds; the model averages their F_t")
     p.add_argument("--second-stage", action="store_true",
                    help="also fit the linear utility and store it with the model; the planner then scores a second stage of trajectories with it")
+    p.add_argument("--verbose", action="store_true", help="print every epoch (default: every tenth)")
     p.set_defaults(func=_cmd_train)
 
     p = sub.add_parser("evaluate", help="drive scenarios with a model, score every zone, write metrics.json and figures")
@@ -379,6 +434,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--profile", help="resolve `best` zones under this profile instead of the model's")
     p.add_argument("--frames", help="comma-separated frame numbers of seed 0 to draw as decision pictures")
     p.add_argument("--no-driver", action="store_true", help="skip the synthetic driver's comparison runs")
+    p.add_argument("--style", default="default", help="the synthetic driver's style for the comparison runs (agreement)")
     p.add_argument("--workers", type=int, help="parallel processes (default: one per core)")
     p.set_defaults(func=_cmd_evaluate)
 

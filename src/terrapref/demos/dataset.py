@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer, SegmentationView
-from terrapref.demos.recording import Recording
+from terrapref.demos.recording import Recording, read_recording
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
 from terrapref.features.lookahead import Lookahead
@@ -151,3 +151,37 @@ def load_dataset(path: str | Path) -> Dataset:
         if key not in tensors:
             raise UserError(str(path), "missing tensor", field=key)
     return Dataset(tensors["U"], tensors["labels"], tensors["w"], tensors["source"], meta, tensors.get("U2"))
+
+
+def merge_datasets(sets: list[tuple[str, Dataset]]) -> Dataset:
+    """One dataset from several (named by their files), which must share features, camera, classes
+    and profile; samples keep their order, and ``source`` numbers the recordings across all."""
+    if not sets:
+        raise UserError("train", "no training data given")
+    first_name, first = sets[0]
+    for name, d in sets[1:]:
+        for key in ("features", "camera", "classes", "profile"):
+            if d.meta.get(key) != first.meta.get(key):
+                raise UserError(name, f"differs from {first_name} in {key}; featurise all recordings the same way", field=key)
+        if (d.U2 is None) != (first.U2 is None):
+            raise UserError(name, f"carries look-ahead utilities and {first_name} does not, or the other way round", field="U2")
+    if len(sets) == 1:
+        return first
+    offsets = np.cumsum([0] + [int(d.source.max()) + 1 if len(d) else 0 for _, d in sets[:-1]])
+    return Dataset(
+        np.concatenate([d.U for _, d in sets]), np.concatenate([d.labels for _, d in sets]), np.concatenate([d.w for _, d in sets]),
+        np.concatenate([d.source + off for off, (_, d) in zip(offsets, sets)]),
+        {**first.meta, "recordings": [r for _, d in sets for r in d.meta.get("recordings", [])]},
+        None if first.U2 is None else np.concatenate([d.U2 for _, d in sets]),
+    )
+
+
+def training_data(paths: list[Path], features: FeatureConfig, progress=None) -> Dataset:
+    """The samples of ``paths``: recording directories, featurised under ``features``, and dataset
+    files (from ``terrapref featurize``), loaded as they are; merged into one dataset."""
+    recordings = [read_recording(p) for p in paths if Path(p).is_dir()]
+    sets: list[tuple[str, Dataset]] = []
+    if recordings:
+        sets.append((str(recordings[0].path), build_dataset(recordings, features, progress=progress)))
+    sets += [(str(p), load_dataset(p)) for p in paths if not Path(p).is_dir()]
+    return merge_datasets(sets)

@@ -342,6 +342,7 @@ def run_teleop(
     screenshot: str | Path | None = None,
     disturbance: DisturbanceConfig | None = None,
     seed: int = 0,
+    profile: PreferenceProfile | None = None,
 ) -> TeleopResult:
     """Drive ``scenario`` by keyboard or gamepad in a window, optionally recording every frame.
 
@@ -367,6 +368,8 @@ def run_teleop(
         screenshot: save the last drawn window image to this file (PNG by extension).
         disturbance: pushes added to the executed yaw rate now and then, so that the recording
             shows the driver's recoveries (the stick stays the label); drawn from ``seed``.
+        profile: the driver's declared preference order, stored with the recording (default:
+            the class table's).
 
     Returns:
         How the run ended.
@@ -396,7 +399,7 @@ def run_teleop(
             meta = recording_meta(
                 scenario, camera_cfg, preference_cfg, sim_cfg,
                 {"kind": "human", "input": "keyboard/gamepad", "disturbance": disturbance.to_dict() if disturbance else None, "seed": seed},
-                PreferenceProfile.default(scenario.classes),
+                profile or PreferenceProfile.default(scenario.classes),
             )
             writer = RecordingWriter(record_dir, meta, scenario.to_dict(), overwrite=overwrite)
         stick = _Stick(w_max_rps=float(np.abs(control.w_rps).max()))

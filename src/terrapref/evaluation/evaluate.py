@@ -6,13 +6,15 @@ import json
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-import numpy as np
 
 from terrapref.camera import PinholeCamera
-from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_many, summarise
+from terrapref.errors import UserError
+from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, annotate_agreement, run_many, summarise
+from terrapref.evaluation.scoring import classes_in_zone
+from terrapref.learning.identify import GRASS, Identifiability
 from terrapref.features import PreferenceSet
 from terrapref.planner.policy import load_policy
-from terrapref.scenario import resolve_scenario
+from terrapref.scenario import AVOID, resolve_scenario
 from terrapref.terrain import PreferenceProfile
 from terrapref.world import rasterise
 
@@ -27,10 +29,14 @@ def evaluate_model(
     frames: Sequence[int] = (),
     workers: int | None = None,
     progress: Callable[[int, int], None] | None = None,
+    style: str = "default",
 ) -> dict:
     """Drive every scenario with the planner (and the synthetic driver) for seeds 0..N-1.
 
-    ``best`` zones resolve under the model's profile unless ``profile`` overrides it.
+    ``best`` zones resolve under the model's profile unless ``profile`` overrides it. Each
+    planner zone gets the choice the driver (of ``style``) made in the same run and whether the
+    planner agreed (SPEC 12), and, when the model's demonstrations left a pair of classes
+    unidentified (terrapref.learning.identify), the pairs its expected choice rests on.
     Writes ``metrics.json``, one top-down figure per scenario and the decision pictures of
     ``frames`` (for seed 0) into ``out_dir``; returns the metrics.
     """
@@ -40,14 +46,21 @@ def evaluate_model(
     profile = profile or PreferenceProfile.parse(list(model.profile), model.classes, source=f"{model_path}: profile")
     specs = [RunSpec(name, seed, PLANNER, model_path, profile.order, tuple(frames) if seed == 0 else ()) for name in scenarios for seed in range(seeds)]
     if with_driver:
-        specs += [RunSpec(name, seed, EXPERT, None, profile.order) for name in scenarios for seed in range(seeds)]
+        specs += [RunSpec(name, seed, EXPERT, None, profile.order, style=style) for name in scenarios for seed in range(seeds)]
     results = run_many(specs, workers, progress)
+    annotate_agreement(results)
+    identified = _identifiability(model)
+    if identified is not None:
+        for name in scenarios:
+            _mark_unidentified(results, name, identified)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     metrics: dict = {
         "model": str(model_path),
         "profile": list(profile.order),
         "seeds": seeds,
+        "driver_style": style,
+        "unidentified_pairs": [f"{p.first} vs {p.second}" for p in identified.unidentified()] if identified is not None else None,
         "scenarios": {},
         "summary": summarise(results, PLANNER),
     }
@@ -64,6 +77,35 @@ def evaluate_model(
     tmp.write_text(json.dumps(metrics, indent=2))
     tmp.replace(out / "metrics.json")
     return metrics
+
+
+def _identifiability(model) -> Identifiability | None:
+    """What the model's demonstrations showed, if its file says (models trained before it was stored do not)."""
+    data = getattr(getattr(model, "model", None), "meta", {}).get("identifiability")
+    try:
+        return Identifiability.from_dict(data) if data else None
+    except (KeyError, TypeError, ValueError, IndexError):
+        raise UserError(model.path, "malformed identifiability report", field="identifiability") from None
+
+
+def rests_on(expect: str, present: Sequence[str], identified: Identifiability) -> list[str]:
+    """The unidentified pairs a zone's expected choice depends on: the expected class against
+    every other class present (or grass against them all, for ``avoid``)."""
+    best = GRASS if expect == AVOID else expect
+    pairs = [identified.pair(best, other) for other in present if other != best]
+    if expect != AVOID:
+        pairs.append(identified.pair(best, GRASS))
+    return sorted({f"{p.first} vs {p.second}" for p in pairs if p is not None and not p.identified})
+
+
+def _mark_unidentified(results: list[dict], name: str, identified: Identifiability) -> None:
+    scenario = resolve_scenario(name)
+    world = rasterise(scenario)
+    present = {z.id: classes_in_zone(z, world) for z in scenario.zones}
+    for r in results:
+        if r["scenario"] == name and r["driver"] == PLANNER:
+            for z in r["metrics"]["zones"]:
+                z["rests_on_unidentified"] = rests_on(z["expect"], present[z["id"]], identified)
 
 
 def _figures(results: list[dict], scenarios: Sequence[str], out: Path, model, profile: PreferenceProfile) -> None:

@@ -19,6 +19,7 @@ import numpy as np
 
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.evaluation.scoring import score_run
+from terrapref.evaluation.stats import wilson
 from terrapref.evaluation.perturb import PerturbedDriver, Perturbation
 from terrapref.planner import Planner, PlannerDriver
 from terrapref.planner.policy import CostPolicy, Policy, PurePursuitPolicy, load_policy
@@ -130,14 +131,40 @@ def run_many(specs: list[RunSpec], workers: int | None = None, progress: Callabl
     return [r for r in results if r is not None]
 
 
+def zone_agrees(planner_zone: dict, driver_zone: dict) -> bool:
+    """The planner made the driver's choice in a zone (SPEC 12): the same class (or ``avoid``), and
+    no lethal terrain touched where the driver touched none."""
+    return planner_zone["choice"] == driver_zone["choice"] and not (planner_zone["touched_lethal"] and not driver_zone["touched_lethal"])
+
+
+def annotate_agreement(results: list[dict]) -> None:
+    """Give every planner zone the choice the synthetic driver made in the same run (scenario and
+    seed: the same start) as ``driver_choice`` and ``agrees``; zones without a driver run are left as they are."""
+    driver = {(r["scenario"], r["seed"]): r for r in results if r["driver"] == EXPERT}
+    for r in results:
+        ref = driver.get((r["scenario"], r["seed"]))
+        if r["driver"] == EXPERT or ref is None:
+            continue
+        by_id = {z["id"]: z for z in ref["metrics"]["zones"]}
+        for z in r["metrics"]["zones"]:
+            z["driver_choice"] = by_id[z["id"]]["choice"]
+            z["agrees"] = zone_agrees(z, by_id[z["id"]])
+
+
 def summarise(results: list[dict], driver: str) -> dict:
     runs = [r for r in results if r["driver"] == driver]
     zones = [z for r in runs for z in r["metrics"]["zones"]]
     n = len(zones)
+    ok = sum(z["success"] for z in zones)
+    compared = [z for z in zones if "agrees" in z]
+    agree = sum(z["agrees"] for z in compared)
     return {
         "runs": len(runs),
         "zones": n,
-        "zone_success_rate": round(sum(z["success"] for z in zones) / n, 4) if n else None,
+        "zone_success_rate": round(ok / n, 4) if n else None,
+        "zone_success_ci95": [round(v, 4) for v in wilson(ok, n)],
+        **({"agreement_rate": round(agree / len(compared), 4), "agreement_ci95": [round(v, 4) for v in wilson(agree, len(compared))],
+            "agreement_zones": len(compared)} if compared else {}),
         "collision_count": int(sum(r["metrics"]["collisions"] for r in runs)),
         "completed_rate": round(sum(r["metrics"]["completed"] for r in runs) / len(runs), 4) if runs else None,
         "mean_rms_cross_track_m": round(float(np.mean([r["metrics"]["rms_cross_track_m"] for r in runs])), 4) if runs else None,

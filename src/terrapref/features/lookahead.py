@@ -35,7 +35,7 @@ class Lookahead:
             raise ValueError(f"the look-ahead's after_s must be within the trajectories (1 to {pset.config.n_steps - 1} steps of dt)")
         if featurizer.config.lanes:
             raise ValueError("the look-ahead works on U without lanes")
-        m, k = pset.m, featurizer.config.n_terrain
+        k = featurizer.config.n_terrain
         self.config = config
         self.featurizer = featurizer
         self.starts = pset.trajectories[:, step].copy()  # (m, 3): the pose after_s along each trajectory

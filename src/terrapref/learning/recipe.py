@@ -1,10 +1,19 @@
 """Recipes: how demonstrations become a model, end to end (demonstrate, correct, train).
 
-``paper`` is the published recipe: one demonstration on the training course, 15 epochs of C.
-Other recipes add what a real user could do with a human driver too: more demonstration runs,
-demonstrations on practice courses (other layouts of the same terrain classes), correction
-sessions (the planner drives, the person shows what they would do), a residual path in C, more
-training steps, and loss weights for the frames that carry the preference.
+Named recipes (:data:`RECIPES`, ``terrapref recipes``; ``--recipe NAME`` in ``train``,
+``reproduce`` and ``study``):
+
+- ``teach`` (the default, :data:`DEFAULT_RECIPE`): the product's. One drive of ``teach_course``
+  with disturbances; C with a residual path, a class-balanced loss and mirrored samples, 300
+  epochs, an ensemble of three; the second stage's utility fitted through the look-ahead.
+- ``ours``: the paper's setting done well: two drives of ``train_course`` with disturbances,
+  the same C (one network), the second stage's utility fitted frame by frame. Used by
+  ``terrapref reproduce`` beside ``paper``.
+- ``paper``: the published recipe: one drive of ``train_course``, 15 epochs of the paper's C.
+
+A recipe also holds the options measured on the way (more drives, practice courses, correction
+sessions, lanes, decisive-frame weights; docs/learning.md), so that each measured row can be
+run again.
 """
 
 from __future__ import annotations
@@ -19,8 +28,9 @@ from terrapref.camera import CameraConfig
 from terrapref.demos.corrections import record_corrections
 from terrapref.demos.dataset import build_dataset
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
-from terrapref.demos.recording import Recording, RecordingWriter, read_recording
+from terrapref.demos.recording import RecordingWriter, read_recording
 from terrapref.demos.session import DisturbanceConfig, record_run, recording_meta
+from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, LookaheadConfig
 from terrapref.learning.model_file import load_model
 from terrapref.learning.pipeline import train_and_save
@@ -51,6 +61,11 @@ class Recipe:
         follow_margin: the demonstrator takes the side of a patch the vehicle is headed for
             when it costs at most this much more (``ExpertConfig.follow_margin``; 0: off).
             Meant for demonstrations with counter-pushes (``DisturbanceConfig.counter_share``).
+        near_m: the near distance utility (``FeatureConfig.near_m``; 0: off).
+        lookahead: datasets carry the look-ahead utilities, and the second stage's utility is
+            fitted through them (``FeatureConfig.lookahead``).
+        course: the demonstration course.
+        summary: one line on what the recipe is for and how it scored (``terrapref recipes``).
     """
 
     name: str
@@ -64,6 +79,8 @@ class Recipe:
     follow_margin: float = 0.0
     near_m: float = 0.0
     lookahead: bool = False
+    course: str = "train_course"
+    summary: str = ""
 
     def __post_init__(self) -> None:
         if self.demonstrations < 1 or self.corrections < 0 or self.practice < 0 or self.lane_m < 0 or self.follow_margin < 0:
@@ -78,7 +95,23 @@ class Recipe:
         return asdict(self)
 
 
-PAPER = Recipe("paper")
+PAPER = Recipe("paper", summary="the published recipe: one drive of train_course, 15 epochs of the paper's C (reproduction only)")
+OURS = Recipe("ours", demonstrations=2, train=TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True, utility=True),
+              disturbance=DisturbanceConfig(rate_hz=0.3),
+              summary="two drives of train_course: the paper's setting done well (the reproduction's Tables 1 and 2)")
+TEACH = Recipe("teach", course="teach_course", lookahead=True,
+               train=TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True, utility=True, members=3, stage_weight=5.0),
+               disturbance=DisturbanceConfig(rate_hz=0.3),
+               summary="one drive of teach_course: any preference order from five minutes (the default)")
+RECIPES: dict[str, Recipe] = {r.name: r for r in (TEACH, OURS, PAPER)}
+DEFAULT_RECIPE = TEACH.name
+
+
+def recipe_named(name: str) -> Recipe:
+    """A named recipe; an unknown name is a user error listing the known ones."""
+    if name not in RECIPES:
+        raise UserError("--recipe", f"unknown recipe {name!r}; recipes: {', '.join(RECIPES)}")
+    return RECIPES[name]
 
 PRACTICE_BASE = 3000
 
@@ -109,6 +142,7 @@ def _demonstrate(
     profile: PreferenceProfile | None,
     features: FeatureConfig,
     follow_margin: float = 0.0,
+    style: str = "default",
 ) -> bool:
     """One synthetic-driver run of ``course`` into ``out``; False if a matching one was reused.
 
@@ -118,7 +152,7 @@ def _demonstrate(
     scenario = resolve_scenario(course)
     profile = profile or PreferenceProfile.default(scenario.classes)
     camera, sim_cfg = CameraConfig(), SimConfig()
-    expert_cfg = ExpertConfig(profile=profile.order, follow_margin=follow_margin)
+    expert_cfg = replace(ExpertConfig.styled(style, profile.order), follow_margin=follow_margin)
     pushes = disturbance.to_dict() if disturbance is not None else None
     if (out / "meta.json").exists():
         existing = read_recording(out)
@@ -127,7 +161,7 @@ def _demonstrate(
                 and driver.get("seed") == demo_seed and driver.get("disturbance") == pushes and driver.get("config") == expert_cfg.to_dict()):
             return False
     meta = recording_meta(scenario, camera, features.preference, sim_cfg,
-                          {"kind": "expert", "seed": demo_seed, "config": expert_cfg.to_dict(), "disturbance": pushes}, profile)
+                          {"kind": "expert", "seed": demo_seed, "style": style, "config": expert_cfg.to_dict(), "disturbance": pushes}, profile)
     writer = RecordingWriter(out, meta, scenario.to_dict(), overwrite=True)
     record_run(Simulation(scenario, camera, sim_cfg), ExpertDriver(expert_cfg), writer, features.preference,
                np.random.default_rng(demo_seed), disturbance=disturbance)
@@ -139,9 +173,10 @@ def record_demonstrations(
     workdir: str | Path,
     seed: int,
     profile: PreferenceProfile | None = None,
-    course: str = "train_course",
+    course: str | None = None,
     features: FeatureConfig | None = None,
     log: Callable[[str], None] | None = None,
+    style: str = "default",
 ) -> list[Path]:
     """The recipe's demonstration runs (synthetic driver) in ``workdir``.
 
@@ -153,11 +188,12 @@ def record_demonstrations(
     """
     workdir = Path(workdir)
     features = features or FeatureConfig()
+    course = course or recipe.course
     tail = "" if recipe.disturbance is None else "_disturbed"
     runs = [(course, workdir / f"demo_{k}{tail}", seed * 100 + k) for k in range(recipe.demonstrations)]
     runs += [(c, workdir / f"practice_{k}{tail}", seed * 100 + 20 + k) for k, c in enumerate(practice_courses(recipe, seed))]
     for i, (name, out, demo_seed) in enumerate(runs):
-        if _demonstrate(name, out, demo_seed, recipe.disturbance, profile, features, recipe.follow_margin) and log:
+        if _demonstrate(name, out, demo_seed, recipe.disturbance, profile, features, recipe.follow_margin, style) and log:
             log(f"demonstration {i + 1}/{len(runs)} ({name}): {len(read_recording(out))} frames")
     return [out for _, out, _ in runs]
 
@@ -167,9 +203,10 @@ def run_recipe(
     workdir: str | Path,
     seed: int,
     profile: PreferenceProfile | None = None,
-    course: str = "train_course",
+    course: str | None = None,
     features: FeatureConfig | None = None,
     log: Callable[[str], None] | None = None,
+    style: str = "default",
 ) -> RecipeOutput:
     """Demonstrate, correct, train; write into ``workdir``.
 
@@ -179,19 +216,20 @@ def run_recipe(
     workdir = Path(workdir)
     own = workdir / recipe.name.replace(" ", "_")
     own.mkdir(parents=True, exist_ok=True)
+    course = course or recipe.course
     scenario = resolve_scenario(course)
     profile = profile or PreferenceProfile.default(scenario.classes)
     features = recipe.features(features)
-    paths = record_demonstrations(recipe, workdir, seed, profile, course, features, log)
+    paths = record_demonstrations(recipe, workdir, seed, profile, course, features, log, style)
     recordings = [read_recording(p) for p in paths]
     demo_s = sum(r.duration_s for r in recordings)
     corr_s = 0.0
     train_cfg = replace(recipe.train, seed=seed)
     model = own / "model.safetensors"
-    result = train_and_save(build_dataset(recordings, features), model, train_cfg, checkpoints=False)
+    result = train_and_save(build_dataset(recordings, features), model, train_cfg, checkpoints=False, recipe=recipe.name)
     if recipe.corrections:  # the planner drives the course; only then is a simulation needed here
         camera, sim_cfg = CameraConfig(), SimConfig()
-        expert_cfg = ExpertConfig(profile=profile.order)
+        expert_cfg = ExpertConfig.styled(style, profile.order)
         sim = Simulation(scenario, camera, sim_cfg)
     for r in range(recipe.corrections):
         out = own / f"corrections_{r}"
@@ -202,7 +240,7 @@ def run_recipe(
         corr_s += run.duration_s
         recordings.append(read_recording(out))
         paths.append(out)
-        result = train_and_save(build_dataset(recordings, features), model, train_cfg, checkpoints=False)
+        result = train_and_save(build_dataset(recordings, features), model, train_cfg, checkpoints=False, recipe=recipe.name)
         if log:
             log(f"correction session {r + 1}/{recipe.corrections}: {len(recordings[-1])} frames, retrained")
     return RecipeOutput(model, paths, result, demo_s / 60.0, corr_s / 60.0)

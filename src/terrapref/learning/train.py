@@ -18,6 +18,7 @@ import numpy as np
 
 from terrapref.demos.dataset import Dataset
 from terrapref.learning import exact
+from terrapref.learning.identify import Identifiability, identifiability
 from terrapref.learning.linear import LinearUtility, fit_linear_utility, fit_lookahead_utility
 from terrapref.learning.mlp import Adam, TrainableClassifier, cross_entropy, init_weights, round_inputs
 from terrapref.learning.network import ClassifierConfig, member_prefix
@@ -129,6 +130,7 @@ class TrainResult:
     steps: int
     members: list[TrainResult] = field(default_factory=list)
     utility: LinearUtility | None = None  # the linear utility model, when TrainConfig.utility asks for it
+    identifiability: Identifiability | None = None  # what the data show of the preference (terrapref.learning.identify)
 
 
 def _ensemble(results: list[TrainResult]) -> TrainResult:
@@ -185,23 +187,32 @@ def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callabl
         result = _train(dataset, config, progress)
     else:
         result = _ensemble([_train(dataset, replace(config, seed=seed, members=1), progress) for seed in config.member_seeds])
+    # The linear utility: the second stage's (when asked for), and the identifiability report's.
+    utility, gamma = _fit_utility(dataset, config.mirror)
     if config.utility:
-        result.utility = _fit_utility(dataset, config.mirror)
+        result.utility = utility
+    features = dataset.feature_config
+    U = dataset.U[..., [*range(features.n_terrain), features.n_features - 1]]
+    result.identifiability = identifiability(U, dataset.labels, tuple(features.feature_classes), utility, dataset.U2, gamma)
     return result
 
 
-def _fit_utility(dataset: Dataset, mirror: bool) -> LinearUtility:
-    """The second stage's linear utility over the terrain columns and the distance utility: fitted
-    through the look-ahead when the data carry it (``Dataset.U2``), else frame by frame."""
+def _fit_utility(dataset: Dataset, mirror: bool) -> tuple[LinearUtility, float]:
+    """The linear utility over the terrain columns and the distance utility, and the look-ahead's
+    weight in its fit: fitted through the look-ahead when the data carry it (``Dataset.U2``),
+    else frame by frame (weight 1, unused)."""
     features = dataset.feature_config
     U, labels = dataset.U[..., [*range(features.n_terrain), features.n_features - 1]], dataset.labels
     U2 = dataset.U2
-    if mirror:  # _train has checked that the w grid is symmetric
+    if mirror and features.preference.control.symmetric:
         U_m, labels_m = mirrored(U, labels)
         U, labels = np.concatenate([U, U_m]), np.concatenate([labels, labels_m])
         U2 = None if U2 is None else np.concatenate([U2, U2[:, ::-1, ::-1]])
     frames = fit_linear_utility(U, labels)
-    return frames if U2 is None else fit_lookahead_utility(U, U2, labels, start=frames).utility
+    if U2 is None:
+        return frames, 1.0
+    fit = fit_lookahead_utility(U, U2, labels, start=frames)
+    return fit.utility, fit.gamma
 
 
 def mirrored(U: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -216,8 +227,7 @@ def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetri
     tr, va = split_indices(n, config.val_fraction, rng)
     U_np, y_np = dataset.U, dataset.labels
     if config.mirror:
-        w = np.asarray(features.preference.control.w_rps)
-        if not np.allclose(w, -w[::-1]):
+        if not features.preference.control.symmetric:
             raise ValueError("mirror needs a w grid symmetric about zero")
         # Mirrored copies are appended and join the training split only; validation stays real.
         U_m, y_m = mirrored(U_np[tr], y_np[tr])

@@ -19,18 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
-from terrapref.demos.session import DisturbanceConfig
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_many, summarise
-from terrapref.learning.recipe import PAPER, Recipe, practice_courses, run_recipe
-from terrapref.learning.train import TrainConfig
+from terrapref.learning.recipe import OURS, PAPER, Recipe, practice_courses, run_recipe
 from terrapref.progress import every_tenth
 from terrapref.scenario import packaged_scenarios, resolve_scenario
 from terrapref.terrain import PreferenceProfile
 
-# Chosen on generated courses, never on the packaged test set (docs/learning.md).
-OURS = Recipe("ours", demonstrations=2, corrections=0,
-              train=TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True, utility=True),
-              disturbance=DisturbanceConfig(rate_hz=0.3))
 TEST_SET = ("test_course",)
 
 

@@ -33,7 +33,8 @@ from terrapref.evaluation.perturb import Perturbation
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PLANNER, PURE_PURSUIT, RunSpec, run_many
 from terrapref.features import FeatureConfig
 from terrapref.progress import every_tenth
-from terrapref.report.reproduce import OURS, TEST_SET, scenario_length, variations
+from terrapref.learning.recipe import OURS
+from terrapref.report.reproduce import TEST_SET, scenario_length, variations
 from terrapref.report.study_report import ALT_PROFILE, write_study
 from terrapref.terrain import PreferenceProfile
 

@@ -35,6 +35,12 @@ class ControlSet:
     def m(self) -> int:
         return len(self.w_rps)
 
+    @property
+    def symmetric(self) -> bool:
+        """Whether the w grid is symmetric about zero (so left and right can be mirrored)."""
+        w = np.asarray(self.w_rps, dtype=float)
+        return bool(np.allclose(w, -w[::-1]))
+
     def command(self, index: int) -> tuple[float, float]:
         """(v [m/s], w [rad/s]) of one index."""
         return self.v_mps, self.w_rps[index]
