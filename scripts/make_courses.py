@@ -159,20 +159,25 @@ TEACH_ZONES = [
 TEACH_TURNS = [10, -15, 10, -10, 15, -10, 10, 0, 36, 36, 36, 36, 36, -10, 10, -10, 5, -5, 5]
 
 
-def _is_lone(zone: tuple) -> bool:
-    return not isinstance(zone[1], str)
+def _kind(zone: tuple) -> str:
+    """``lone`` (class, lateral offset), ``pair`` (left, right) or ``triple`` (left, middle, right)."""
+    return "lone" if not isinstance(zone[1], str) else ("triple" if len(zone) == 3 else "pair")
 
 
-def teach_course() -> Course:
+def teach_course(zones: list[tuple] | None = None, turns: list[float] | None = None, half: dict[str, float] | None = None,
+                 s_start: float = 8.0, name: str = "teach_course") -> Course:
     """The product's demonstration course (SPEC 13): one drive shows every pair, both ways round, and every class alone.
 
-    Situations sit on straight legs of 12 m (a lone patch) or 17 m (a pair); the trail bends
-    between them. Lone patches are at most 3 m across (passed on grass); pair patches are
-    7-8 m long and 5-5.5 m wide and meet on the path, as on train_course.
+    Situations sit on straight legs (``2 * half[kind]`` m); the trail bends between them. Lone
+    patches are at most 3 m across (passed on grass); pair patches are 7-8 m long and 5-5.5 m
+    wide and meet on the path, as on train_course; a triple puts a 2.8 m wide patch on the path
+    between two wide ones, so that keeping to the path has a price in terrain.
     """
-    half = {True: 6.0, False: 8.5}  # half a leg [m]: a lone patch, a pair
-    s_start, s_end = 8.0, 5.0
-    lengths = [2 * half[_is_lone(z)] for z in TEACH_ZONES]
+    zones = zones or TEACH_ZONES
+    turns = turns or TEACH_TURNS
+    half = half or {"lone": 6.0, "pair": 8.5, "triple": 8.5}  # half a leg [m]
+    s_end = 5.0
+    lengths = [2 * half[_kind(z)] for z in zones]
     heading, point = 0.0, np.array([0.0, 0.0])
     bends = [s_start + lengths[0]]  # the middle of each gap between situations
     for length in lengths[1:]:
@@ -181,13 +186,13 @@ def teach_course() -> Course:
     for k, s_bend in enumerate(bends[:-1]):
         point = point + (s_bend - s_prev) * np.array([math.cos(heading), math.sin(heading)])
         points.append(point)
-        heading += math.radians(TEACH_TURNS[k])
+        heading += math.radians(turns[k])
         s_prev = s_bend
     points.append(point + (bends[-1] + s_end - s_prev) * np.array([math.cos(heading), math.sin(heading)]))
     wp = np.array(points)
     wp = wp - wp.min(axis=0) + 12.0
     size = tuple(float(math.ceil(v + 12.0)) for v in wp.max(axis=0))
-    c = Course("teach_course", "The demonstration course: every pair of terrain classes meets on the path, each class once on "
+    c = Course(name, "The demonstration course: every pair of terrain classes meets on the path, each class once on "
                "each side, and every class lies alone on the path twice; one drive identifies any preference order.",
                size, [tuple(p) for p in wp])
     lone_shapes = {
@@ -198,16 +203,23 @@ def teach_course() -> Course:
     }
     pair_sizes = [(8.0, 5.0), (7.0, 5.5), (7.5, 5.0), (8.0, 5.5)]
     s, pairs = s_start, 0
-    for k, zone in enumerate(TEACH_ZONES):
-        s += half[_is_lone(zone)]
-        if _is_lone(zone):
+    for k, zone in enumerate(zones):
+        kind = _kind(zone)
+        s += half[kind]
+        if kind == "lone":
             lone_shapes[zone[0]](s, zone[1])
             c.zone(str(k + 1), zone[0], s, 9.0, 9.0, "avoid")
-        else:
+        elif kind == "pair":
             length, width = pair_sizes[pairs % len(pair_sizes)]
             pairs += 1
             c.pair(str(k + 1), zone[0], zone[1], s, length, width)
-        s += half[_is_lone(zone)]
+        else:
+            left, middle, right = zone
+            c.rect(left, s, 1.4 + 2.25, 7.0, 4.5)
+            c.rect(middle, s, 0.0, 7.0, 2.8)
+            c.rect(right, s, -1.4 - 2.25, 7.0, 4.5)
+            c.zone(str(k + 1), f"{left} | {middle} | {right}", s, 11.0, 17.0, "best")
+        s += half[kind]
     return c
 
 

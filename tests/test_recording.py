@@ -4,6 +4,7 @@ and the size of a five-minute demonstration."""
 from __future__ import annotations
 
 import json
+import re
 import signal
 import subprocess
 import sys
@@ -297,3 +298,19 @@ def test_featurize_with_lanes_adds_the_lane_columns(demo_recording: FullRecordin
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "--lanes" in err[0] and "lane_m" in err[0], err
         assert not (tmp_path / "bad.safetensors").exists()
+
+
+def test_inspect_tells_what_the_drive_shows_of_the_preference(demo_recording: FullRecording, tmp_path: Path, capsys):
+    from terrapref.cli import main
+
+    rec = demo_recording.rec
+    assert main(["inspect", str(rec.path), "--out", str(tmp_path / "a.png")]) == 0
+    out = capsys.readouterr().out
+    assert f"what the drive shows (recipe teach's features, {len(rec)} frames):" in out
+    learned = next(line for line in out.splitlines() if "learned order:" in line)
+    assert learned.split(": ", 1)[1].split(" > ")[0] == "grass"  # the driver keeps to grass where it can
+    # demo_course never puts rock beside water: that pair is a guess, and the report says so
+    assert re.search(r"warning: (rock vs water|water vs rock): never compared; the planner's choice between them is a guess", out)
+    assert re.search(r"mud > rock: margin [0-9.]+ \+- [0-9.]+, compared in [1-9][0-9]* frames", out)
+    assert main(["inspect", str(rec.path), "--out", str(tmp_path / "b.png"), "--no-preference"]) == 0
+    assert "what the drive shows" not in capsys.readouterr().out

@@ -13,12 +13,13 @@ import pytest
 from terrapref.cli import main
 from terrapref.evaluation.perturb import Perturbation
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PURE_PURSUIT
-from terrapref.report.study import FULL, LEARNED, POSE_DEG_PER_M, QUICK, StudyPlan, perturbation, run_study
+from terrapref.report.study import FULL, LEARNED, POSE_DEG_PER_M, QUICK, TEACH_ORDERS, StudyPlan, perturbation, run_study
 from terrapref.report.study_report import ALL, ALT_PROFILE, METHOD_NAMES, _cell, _per_seed, _rate, _select, _zone_success, disagreement_zones, write_study
 
 PNG = b"\x89PNG\r\n\x1a\n"
 METHODS = ("C", "linear", "cnn", HAND_COST, PURE_PURSUIT, EXPERT)
-SECTIONS = ("## Answers", "## 1. Baselines", "## 2. Data efficiency", "## 3. Another preference profile", "## 4. Robustness", "## 5. Ablations")
+SECTIONS = ("## Answers", "## 1. Baselines", "## 2. Data efficiency", "## 3. Another preference profile", "## 4. Robustness", "## 5. Ablations",
+            "## 6. Any order, any driver")
 
 
 def _zone(zid: str, expect: str, choice: str, success: bool | None = None) -> dict:
@@ -56,7 +57,7 @@ def test_cell_mean_and_population_std_over_seeds():
     text, mean, std = _cell(runs)  # per seed: 0.5, 0.0
     assert mean == pytest.approx(0.25)
     assert std == pytest.approx(0.25)  # np.std: over the seeds themselves (ddof 0)
-    assert text == "25.0% ± 25.0%"
+    assert text == "25.0% ± 25.0% [10%-70%]"  # 2 of 6 zones pooled: Wilson
 
 
 def test_cell_three_seeds():
@@ -64,13 +65,13 @@ def test_cell_three_seeds():
     text, mean, std = _cell(runs)
     assert mean == pytest.approx(2 / 3)
     assert std == pytest.approx(math.sqrt(((2 / 3 - 2 / 3) ** 2 + (1 / 3 - 2 / 3) ** 2 + (1 - 2 / 3) ** 2) / 3))
-    assert text == "66.7% ± 27.2%"
+    assert text == "66.7% ± 27.2% [35%-88%]"
 
 
 def test_cell_one_seed_has_no_spread_in_its_text():
     text, mean, std = _cell([_successes(0, [True, False, True, True]), _successes(0, [True, True, True, True])])
     assert (mean, std) == (pytest.approx(0.875), 0.0)
-    assert text == "87.5%"
+    assert text == "87.5% [53%-98%]"
     assert "±" not in text
 
 
@@ -211,12 +212,35 @@ def _fabricated(plan: StudyPlan) -> tuple[list[dict], list[dict]]:
                 runs.append(_run("robustness", "C", s, zones(2), kind=kind, level=lv))
         for w in plan.widths:
             runs.append(_run("ablation", "C", s, zones(0), variant=f"hidden width {w}", collisions=2))
+        runs += _taught(plan, s)
     return runs, trained
+
+
+def _taught(plan: StudyPlan, seed: int) -> list[dict]:
+    """Section 6's runs on one layout "L" with two zones (a pair, then a lone patch to avoid).
+
+    The paper's order: the driver and its planner both take mud, then pass the patch (clearance
+    1.0 and 0.8 m). Rock first: the driver takes rock, its planner mud (half the zones agree).
+    The wide driver passes at 1.5 m, its planner at 1.4 m (the default style's planner at 0.8 m)."""
+    def run(method: str, order, style: str, first: str, clearance: float, xtrack: float) -> dict:
+        zs = [{**_zone("1", first, first), "clearance_m": 0.5, "touched_lethal": False},
+              {**_zone("2", "avoid", "avoid"), "clearance_m": clearance, "touched_lethal": False}]
+        r = _run("teach", method, seed if method == "C" else 0, zs, scenario="L", order=list(order), style=style)
+        r["metrics"]["rms_cross_track_m"] = xtrack
+        return r
+
+    paper, rock_first = plan.orders
+    runs = [run("C", paper, "default", "mud", 0.8, 0.4), run("C", rock_first, "default", "mud", 0.8, 0.4), run("C", paper, "wide", "mud", 1.4, 0.6)]
+    if seed == 0:
+        runs += [run(EXPERT, paper, "default", "mud", 1.0, 0.5), run(EXPERT, rock_first, "default", "rock", 1.0, 0.5),
+                 run(EXPERT, paper, "wide", "mud", 1.5, 0.7)]
+    return runs
 
 
 @pytest.fixture(scope="module")
 def fabricated_study(tmp_path_factory) -> tuple[Path, list[dict]]:
-    plan = StudyPlan(seeds=2, minutes=(0.5, 2.0), noise={"drop_rate": (0.5,)}, horizons=(), widths=(16,), courses=("sc",))
+    plan = StudyPlan(seeds=2, minutes=(0.5, 2.0), noise={"drop_rate": (0.5,)}, horizons=(), widths=(16,), courses=("sc",),
+                     orders=TEACH_ORDERS[:2], styles=("default", "wide"), layouts=("L",))
     runs, trained = _fabricated(plan)
     out = tmp_path_factory.mktemp("fabricated")
     path = write_study(out, plan, trained, runs, {"demonstrations": 1.0, "training": 2.5})
@@ -229,7 +253,7 @@ def test_write_study_sections_and_figures(fabricated_study):
     text = path.read_text()
     positions = [text.index(h) for h in SECTIONS]
     assert positions == sorted(positions)
-    for name in ("baselines", "data_efficiency", "robustness"):
+    for name in ("baselines", "data_efficiency", "robustness", "teaching"):
         png = path.parent / "figures" / f"{name}.png"
         assert png.read_bytes()[:8] == PNG
         assert f"(figures/{name}.png)" in text
@@ -237,19 +261,19 @@ def test_write_study_sections_and_figures(fabricated_study):
 
 def test_write_study_baseline_table_is_mean_and_std_over_seeds(fabricated_study):
     text = fabricated_study[0].read_text()
-    assert "| C (ours) | 66.7% ± 33.3% | 0 | 100% |" in text
-    assert "| linear utility (learned) | 33.3% ± 0.0% | 0 | 100% |" in text
-    assert "| end-to-end CNN | 0.0% ± 0.0% | 0 | 100% |" in text
-    assert "| pure pursuit | 66.7% ± 0.0% | 2 | 100% |" in text  # collisions summed over both seeds
-    assert "| synthetic driver | 100.0% ± 0.0% | 0 | 100% |" in text
+    assert "| C (ours) | 66.7% ± 33.3% [30%-90%] | 0 | 100% |" in text
+    assert "| linear utility (learned) | 33.3% ± 0.0% [10%-70%] | 0 | 100% |" in text
+    assert "| end-to-end CNN | 0.0% ± 0.0% [0%-39%] | 0 | 100% |" in text
+    assert "| pure pursuit | 66.7% ± 0.0% [30%-90%] | 2 | 100% |" in text  # collisions summed over both seeds
+    assert "| synthetic driver | 100.0% ± 0.0% [61%-100%] | 0 | 100% |" in text
     assert "(3 zones per pass)" in text
 
 
 def test_write_study_data_efficiency_rows(fabricated_study):
     text = fabricated_study[0].read_text()
-    assert "| 0.5 (300 frames) | 33.3% ± 0.0% | 33.3% ± 0.0% | 33.3% ± 0.0% |" in text
+    assert "| 0.5 (300 frames) | 33.3% ± 0.0% [10%-70%] | 33.3% ± 0.0% [10%-70%] | 33.3% ± 0.0% [10%-70%] |" in text
     assert "| 2 (1200 frames) |" in text
-    assert "| all, 11.0 (6600 frames) | 66.7% ± 33.3% | 33.3% ± 0.0% | 0.0% ± 0.0% |" in text  # 6600 frames at 10 Hz
+    assert "| all, 11.0 (6600 frames) | 66.7% ± 33.3% [30%-90%] | 33.3% ± 0.0% [10%-70%] | 0.0% ± 0.0% [0%-39%] |" in text  # 6600 frames at 10 Hz
     assert "C not reached with all 11.0 min (best 67%)" in text
 
 
@@ -257,23 +281,36 @@ def test_write_study_profile_disagreement(fabricated_study):
     text = fabricated_study[0].read_text()
     assert " > ".join(ALT_PROFILE) in text
     assert "The zones where the two profiles expect different choices (1: sc 2)" in text
-    assert "| C trained on the other profile, scored under the other profile | 2/2 = 100% |" in text
-    assert "| C trained on the default profile, scored under the other profile | 0/2 = 0% |" in text
+    assert "| C trained on the other profile, scored under the other profile | 100.0% (2/2, 95% CI 34.2%-100.0%) |" in text
+    assert "| C trained on the default profile, scored under the other profile | 0.0% (0/2, 95% CI 0.0%-65.8%) |" in text
     assert "In the 1 test zones where the two profiles expect different choices, it makes the other profile's choice in 2/2 runs" in text
 
 
 def test_write_study_robustness_and_ablations(fabricated_study):
     text = fabricated_study[0].read_text()
-    assert "| 0.5 | 66.7% ± 0.0% | 0 | 100% |" in text
+    assert "| 0.5 | 66.7% ± 0.0% [30%-90%] | 0 | 100% |" in text
     assert "dropped frames (share): 0.5 -> 67%" in text
-    assert "| hidden width 16 | 0.0% ± 0.0% | 4 |" in text
+    assert "| hidden width 16 | 0.0% ± 0.0% [0%-39%] | 4 |" in text
     assert "| total | 3.5 |" in text
+
+
+def test_write_study_teaching_agreement_per_order_and_style(fabricated_study):
+    text = fabricated_study[0].read_text()
+    # two seeds' planners against the one driver run per order: 4 zones each
+    assert "| mud > rock > water > non_traversable | 100.0% (4/4, 95% CI 51.0%-100.0%) |" in text
+    assert "| rock > mud > water > non_traversable | 50.0% (2/4, 95% CI 15.0%-85.0%) |" in text
+    wide = next(line for line in text.splitlines() if line.startswith("| wide ("))
+    # clearance: the driver 1.0 m on average; in the lone zone its own planner 0.1 m from it, the default style's 0.7 m
+    # (0 in the pair zone: means 0.05 and 0.35 m); cross-track 0.7 / 0.6 / 0.4 m
+    assert "| 1.00 m | 0.05 m | 0.35 m | 0.70 m | 0.60 m | 0.40 m |" in wide
+    assert "100.0% (4/4, 95% CI 51.0%-100.0%) (default)" in wide
 
 
 # --- one tiny study, end to end -------------------------------------------------------------------
 
 
-TINY = StudyPlan(seeds=1, minutes=(0.5,), epochs=2, cnn_epochs=1, noise={"drop_rate": (0.5,)}, horizons=(), widths=(16,), courses=("demo_course",))
+TINY = StudyPlan(seeds=1, minutes=(0.5,), epochs=2, cnn_epochs=1, noise={"drop_rate": (0.5,)}, horizons=(), widths=(16,), courses=("demo_course",),
+                 orders=TEACH_ORDERS[:1], styles=("default",), layouts=("demo_course",))
 
 
 @pytest.fixture(scope="module")
@@ -301,7 +338,7 @@ def test_study_writes_report_and_figures(tiny_study):
     text = path.read_text()
     for heading in SECTIONS:
         assert heading in text, heading
-    for name in ("baselines", "data_efficiency", "robustness"):
+    for name in ("baselines", "data_efficiency", "robustness", "teaching"):
         assert (path.parent / "figures" / f"{name}.png").read_bytes()[:8] == PNG
 
 
@@ -366,14 +403,16 @@ def test_study_runs_agree_with_each_other(tiny_study):
 
 
 @pytest.mark.slow
-def test_study_logs_five_stages_in_order(tiny_study):
+def test_study_logs_six_stages_in_order(tiny_study):
     _, lines = tiny_study
-    stages = [next(i for i, line in enumerate(lines) if line.startswith(f"[{k}/5]")) for k in range(1, 6)]
+    stages = [next(i for i, line in enumerate(lines) if line.startswith(f"[{k}/6]")) for k in range(1, 7)]
     assert stages == sorted(stages)
-    assert sum(line.startswith("[") for line in lines) == 5
-    assert lines[stages[0]].startswith("[1/5] demonstrations: 1 seed(s) x 2 profiles")
-    assert lines[stages[2]] == "[3/5] training: 10 models ..."  # 3 learned + 3 at 0.5 min + profile + 3 ablations
-    assert lines[stages[3]] == "[4/5] closed-loop evaluation: 17 runs over 1 scenarios ..."
+    assert sum(line.startswith("[") for line in lines) == 6
+    assert lines[stages[0]].startswith("[1/6] demonstrations: 1 seed(s) x 2 profiles")
+    assert lines[stages[2]] == "[3/6] training: 10 models ..."  # 3 learned + 3 at 0.5 min + profile + 3 ablations
+    assert lines[stages[3]].startswith("[4/6] teaching: 1 drives of teach_course")
+    # 17 as before, and the taught model and its driver on the one layout
+    assert lines[stages[4]] == "[5/6] closed-loop evaluation: 19 runs over 2 scenarios ..."
 
 
 # --- the command --------------------------------------------------------------------------------------

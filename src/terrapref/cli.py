@@ -155,7 +155,27 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
     out = args.out or rec.path / "driven_path.png"
     save_driven_path(summary, rec, out)
     print(f"wrote {out}")
+    if not args.no_preference:
+        _print_what_the_drive_shows(rec)
     return 0
+
+
+def _print_what_the_drive_shows(rec) -> None:
+    """The identifiability report of a recording (featurised as the default recipe would), before any training."""
+    from terrapref.demos.dataset import build_dataset
+    from terrapref.learning.recipe import DEFAULT_RECIPE, recipe_named
+    from terrapref.learning.train import identify
+    from terrapref.progress import Progress
+
+    if len(rec) == 0:
+        print("what the drive shows: nothing (no frames)")
+        return
+    bar = Progress("featurize", 1)
+    dataset = build_dataset([rec], recipe_named(DEFAULT_RECIPE).features(), progress=lambda k, n: bar.update(k, f"{len(rec)} frames"))
+    bar.close()
+    print(f"what the drive shows (recipe {DEFAULT_RECIPE}'s features, {len(dataset)} frames):")
+    for line in identify(dataset).lines():
+        print(f"  {line}")
 
 
 def _cmd_featurize(args: argparse.Namespace) -> int:
@@ -309,17 +329,33 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_recipes(args: argparse.Namespace) -> int:
+    from terrapref.learning.recipe import DEFAULT_RECIPE, RECIPES
+
+    for name, r in RECIPES.items():
+        tag = " (default)" if name == DEFAULT_RECIPE else ""
+        drives = f"{r.demonstrations} drive{'s' if r.demonstrations > 1 else ''} of {r.course}"
+        print(f"{name}{tag}: {drives}, {r.train.epochs} epochs{f', {r.train.members} members' if r.train.members > 1 else ''}")
+        print(f"    {r.summary}")
+    return 0
+
+
 def _cmd_reproduce(args: argparse.Namespace) -> int:
     import time
 
-    from terrapref.learning.recipe import OURS, PAPER
+    from terrapref.learning.recipe import recipe_named
     from terrapref.report.reproduce import reproduce
     from terrapref.terrain import PreferenceProfile
 
-    if args.seeds < 1 or args.eval_seeds < 1:
+    if args.seeds < 1:
         raise UserError("--seeds", "must be >= 1")
+    if args.eval_seeds < 1:
+        raise UserError("--eval-seeds", "must be >= 1")
     profile = PreferenceProfile.parse(args.profile) if args.profile else None
-    recipes = {"both": (PAPER, OURS), "paper": (PAPER,), "ours": (OURS,)}[args.recipes]
+    names = [n.strip() for n in args.recipes.split(",") if n.strip()]
+    if not names or len(set(names)) != len(names):
+        raise UserError("--recipes", f"expected distinct recipe names separated by commas, got {args.recipes!r}")
+    recipes = tuple(recipe_named(n, "--recipes") for n in names)
     t0 = time.perf_counter()
     report = reproduce(args.out, args.seeds, args.eval_seeds, recipes, profile, args.workers, log=lambda m: print(m, flush=True))
     print(f"wrote {report} ({time.perf_counter() - t0:.0f} s)")
@@ -392,6 +428,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("inspect", help="summarise a recording and draw its driven path")
     p.add_argument("recording", metavar="DIR", type=Path)
     p.add_argument("--out", type=Path, help="top-down PNG (default: DIR/driven_path.png)")
+    p.add_argument("--no-preference", action="store_true",
+                   help="skip what the drive shows of the driver's preference (it featurises every frame: seconds)")
     p.set_defaults(func=_cmd_inspect)
 
     p = sub.add_parser("featurize", help="turn recordings into a training set (U, label)")
@@ -442,7 +480,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, type=Path)
     p.add_argument("--seeds", type=int, default=5, help="training seeds per recipe (default 5)")
     p.add_argument("--eval-seeds", type=int, default=1, help="evaluation runs per model and scenario")
-    p.add_argument("--recipes", choices=["both", "paper", "ours"], default="both")
+    p.add_argument("--recipes", default="paper,ours,teach",
+                   help="recipes to compare, by name, separated by commas (default: paper,ours,teach; see `terrapref recipes`)")
     p.add_argument("--profile", help="preference order for the demonstrations, best first")
     p.add_argument("--workers", type=int, help="parallel processes (default: one per core)")
     p.set_defaults(func=_cmd_reproduce)
@@ -453,6 +492,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seeds", type=int, help="training seeds (default: 3, or 1 with --quick)")
     p.add_argument("--workers", type=int, help="parallel processes (default: one per core)")
     p.set_defaults(func=_cmd_study)
+
+    p = sub.add_parser("recipes", help="list the named training recipes (--recipe NAME in train and reproduce)")
+    p.set_defaults(func=_cmd_recipes)
 
     p = sub.add_parser("scenarios", help="list the packaged scenarios")
     p.set_defaults(func=_cmd_list)

@@ -4,7 +4,8 @@ A zone's choice: inside the zone, sum the distance the vehicle's reference point
 each non-background class; the largest sum, if above a tolerance (0.3 m), is the choice,
 otherwise ``avoid``. The zone succeeds when the choice equals the expectation (``best``
 resolved under the profile being tested) and no lethal cell was driven on inside it (unless a
-lethal class was expected).
+lethal class was expected). A zone's clearance is how close the reference point came to the
+terrain it did not choose (every patch, when it avoided them): the margin a driver keeps.
 """
 
 from __future__ import annotations
@@ -61,6 +62,8 @@ class ZoneResult:
     success: bool
     touched_lethal: bool
     distance_m: dict[str, float]
+    clearance_m: float | None = None  # closest approach to terrain not chosen; None: none in reach
+
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -86,8 +89,47 @@ def score_zones(xy: np.ndarray, scenario: Scenario, world: WorldMap, profile: Pr
         touched = bool(np.isin(cls[inside], list(lethal)).any())
         expected_lethal = expect in classes.lethal
         success = choice == expect and (not touched or expected_lethal)
-        results.append(ZoneResult(zone.id, zone.label, expect, choice, success, touched, dist))
+        clearance = _clearance(mid[inside], world, exclude=classes.id_of(choice) if choice != AVOID else None)
+        results.append(ZoneResult(zone.id, zone.label, expect, choice, success, touched, dist, clearance))
     return results
+
+
+CLEARANCE_REACH_M = 3.0  # terrain farther than this from the path in a zone does not count
+CLEARANCE_STEP_M = 0.1  # points of the path, this far apart, measured from
+
+
+def _clearance(points: np.ndarray, world: WorldMap, exclude: int | None) -> float | None:
+    """Distance [m] from ``points`` (the path inside a zone) to the nearest cell of a non-background
+    class other than ``exclude``, within reach; 0 where the path crossed such terrain.
+
+    Measured to the edge cells of that terrain only (a cell of it with a 4-neighbour outside it),
+    in a window around the points, so that it costs a few thousand distances per zone.
+    """
+    if len(points) == 0:
+        return None
+    points = points[:: max(1, int(round(CLEARANCE_STEP_M / 0.05)))]
+    res = world.resolution_m
+    ny, nx = world.raster.shape
+    lo, hi = points.min(axis=0) - CLEARANCE_REACH_M, points.max(axis=0) + CLEARANCE_REACH_M
+    c0, r0 = max(0, int(lo[0] / res)), max(0, int(lo[1] / res))
+    c1, r1 = min(nx, int(np.ceil(hi[0] / res))), min(ny, int(np.ceil(hi[1] / res)))
+    if c0 >= c1 or r0 >= r1:
+        return None
+    window = world.raster[r0:r1, c0:c1]
+    other = (window != world.classes.background_id) & (window != 255)
+    if exclude is not None:
+        other &= window != exclude
+    if not other.any():
+        return None
+    padded = np.pad(other, 1, constant_values=False)
+    interior = padded[:-2, 1:-1] & padded[2:, 1:-1] & padded[1:-1, :-2] & padded[1:-1, 2:]
+    rows, cols = np.nonzero(other & ~interior)
+    cells = np.stack([(cols + c0 + 0.5) * res, (rows + r0 + 0.5) * res], axis=1)
+    d = np.sqrt(((points[:, None, :] - cells[None, :, :]) ** 2).sum(axis=2)).min()
+    if d > CLEARANCE_REACH_M:
+        return None
+    inside = other[np.clip((points[:, 1] / res).astype(int) - r0, 0, r1 - r0 - 1), np.clip((points[:, 0] / res).astype(int) - c0, 0, c1 - c0 - 1)]
+    return 0.0 if inside.any() else round(float(d), 3)
 
 
 @dataclass(frozen=True)

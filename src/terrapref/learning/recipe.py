@@ -107,10 +107,10 @@ RECIPES: dict[str, Recipe] = {r.name: r for r in (TEACH, OURS, PAPER)}
 DEFAULT_RECIPE = TEACH.name
 
 
-def recipe_named(name: str) -> Recipe:
-    """A named recipe; an unknown name is a user error listing the known ones."""
+def recipe_named(name: str, flag: str = "--recipe") -> Recipe:
+    """A named recipe; an unknown name is a user error (naming ``flag``) listing the known ones."""
     if name not in RECIPES:
-        raise UserError("--recipe", f"unknown recipe {name!r}; recipes: {', '.join(RECIPES)}")
+        raise UserError(flag, f"unknown recipe {name!r}; recipes: {', '.join(RECIPES)}")
     return RECIPES[name]
 
 PRACTICE_BASE = 3000

@@ -191,10 +191,21 @@ def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callabl
     utility, gamma = _fit_utility(dataset, config.mirror)
     if config.utility:
         result.utility = utility
+    result.identifiability = _identifiability(dataset, utility, gamma)
+    return result
+
+
+def identify(dataset: Dataset, mirror: bool = True) -> Identifiability:
+    """What ``dataset`` shows of the driver's preference, without training C (``terrapref inspect``):
+    the same report ``train`` stores in the model."""
+    utility, gamma = _fit_utility(dataset, mirror)
+    return _identifiability(dataset, utility, gamma)
+
+
+def _identifiability(dataset: Dataset, utility: LinearUtility, gamma: float) -> Identifiability:
     features = dataset.feature_config
     U = dataset.U[..., [*range(features.n_terrain), features.n_features - 1]]
-    result.identifiability = identifiability(U, dataset.labels, tuple(features.feature_classes), utility, dataset.U2, gamma)
-    return result
+    return identifiability(U, dataset.labels, tuple(features.feature_classes), utility, dataset.U2, gamma)
 
 
 def _fit_utility(dataset: Dataset, mirror: bool) -> tuple[LinearUtility, float]:

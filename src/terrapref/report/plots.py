@@ -140,6 +140,27 @@ def save_bars(path: str | Path, labels: Sequence[str], means: Sequence[float], s
     return _save(fig, path)
 
 
+def save_intervals(path: str | Path, labels: Sequence[str], rates: Sequence[float], intervals: Sequence[tuple[float, float]], ylabel: str,
+                   target: float | None = None, title: str = "") -> Path:
+    """One bar per row with its 95% interval (asymmetric, e.g. Wilson), the rate written above it."""
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.9 * len(labels) + 2), 3.8), dpi=120)
+    x = np.arange(len(labels))
+    rates = np.asarray(rates, dtype=float)
+    lo, hi = (np.array(v, dtype=float) for v in zip(*intervals)) if len(intervals) else (np.zeros(0), np.zeros(0))
+    ax.bar(x, rates, yerr=np.stack([rates - lo, hi - rates]), capsize=4, color="tab:blue")
+    for xi, r in zip(x, rates):
+        ax.text(xi, 0.03, f"{r:.0%}", ha="center", va="bottom", color="white", fontsize=8, fontweight="bold")
+    if target is not None:
+        ax.axhline(target, color="grey", ls=":", label=f"target {target:.0%}")
+        ax.legend(fontsize=8, loc="lower right")
+    ax.set_xticks(x, labels, rotation=20, ha="right", fontsize=8)
+    ax.set_ylim(0, 1.05)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=9)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
 def save_curves(path: str | Path, series: dict[str, Sequence[tuple[float, float, float]]], xlabel: str, ylabel: str,
                 target: float | None = None, logx: bool = False) -> Path:
     """Lines of (x, mean, std) per series, with the spread shaded."""

@@ -1,9 +1,11 @@
 """`terrapref reproduce`: demonstrations -> models -> closed-loop evaluation -> REPORT.md.
 
-For each training seed, the synthetic driver demonstrates on ``train_course`` and a model is
-trained by each recipe (the paper's, and ours); every model then drives ``train_course``,
+For each training seed, the synthetic driver demonstrates on each recipe's course
+(``train_course`` for the paper's recipe and ``ours``, ``teach_course`` for the default recipe
+``teach``) and a model is trained by each recipe; every model then drives ``train_course``,
 ``test_course`` and the figure variations, and so does the synthetic driver. The report gives
-the paper's Table 1 and Table 2 with success over seeds, the figures, and each stage's time.
+the paper's Table 1 and Table 2 with success over seeds (and the planner's agreement with the
+driver), each rate with its 95% Wilson interval, the figures, and each stage's time.
 """
 
 from __future__ import annotations
@@ -19,13 +21,15 @@ from pathlib import Path
 
 import numpy as np
 
-from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_many, summarise
-from terrapref.learning.recipe import OURS, PAPER, Recipe, practice_courses, run_recipe
+from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, annotate_agreement, run_many, summarise
+from terrapref.evaluation.stats import rate_text
+from terrapref.learning.recipe import OURS, PAPER, TEACH, Recipe, practice_courses, run_recipe
 from terrapref.progress import every_tenth
 from terrapref.scenario import packaged_scenarios, resolve_scenario
 from terrapref.terrain import PreferenceProfile
 
 TEST_SET = ("test_course",)
+TRACK_COLOURS = ("orange", "red", "magenta", "limegreen")  # the planners' tracks, by recipe
 
 
 def variations() -> list[str]:
@@ -48,7 +52,7 @@ def _train_job(args: tuple[tuple[Recipe, ...], str, int, tuple[str, ...]]) -> li
     return rows
 
 
-def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes: tuple[Recipe, ...] = (PAPER, OURS),
+def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes: tuple[Recipe, ...] = (PAPER, OURS, TEACH),
               profile: PreferenceProfile | None = None, workers: int | None = None, log: Callable[[str], None] = print) -> Path:
     """Run the whole reproduction into ``out_dir`` and return the path of REPORT.md."""
     out = Path(out_dir)
@@ -62,7 +66,7 @@ def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes:
     # together), the costliest first, so that both cores stay busy to the end.
     groups: dict = {}
     for r in recipes:
-        groups.setdefault(r.disturbance, []).append(r)
+        groups.setdefault((r.course, r.disturbance), []).append(r)
     cost = {key: max((r.demonstrations + r.practice) * (1 + r.train.members * r.train.epochs * (2 if r.train.mirror else 1) / 100) for r in g)
             for key, g in groups.items()}
     jobs = [(tuple(g), str(out / "work" / f"seed{s}"), s, profile.order)
@@ -87,6 +91,7 @@ def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes:
     specs.sort(key=lambda sp: -scenario_length(sp.scenario))  # longest first: no core idles at the end
     log(f"[2/3] closed-loop evaluation: {len(specs)} runs ...")
     results = run_many(specs, workers, every_tenth(log))
+    annotate_agreement(results)
     for r, spec in zip(results, specs):
         r["recipe"] = next((t["recipe"] for t in trained if t["model"] == spec.model_path), "driver")
         r["train_seed"] = next((t["seed"] for t in trained if t["model"] == spec.model_path), r["seed"])
@@ -150,7 +155,7 @@ def _write_report(out: Path, results, trained, recipes, seeds, eval_seeds, profi
             if r["recipe"] == "driver":
                 tracks.append(("driver (seed 0)", r["xy"], "deepskyblue"))
             elif r["train_seed"] == 0:
-                color = "red" if r["recipe"] == recipes[-1].name else "orange"
+                color = TRACK_COLOURS[[x.name for x in recipes].index(r["recipe"]) % len(TRACK_COLOURS)]
                 tracks.append((f"planner, {r['recipe']} (seed 0)", r["xy"], color))
         save_map(figs / f"{sc}.png", scenario, rasterise(scenario), tracks, title=f"{sc}: reference, driver and planner paths")
     for t in trained:
@@ -176,15 +181,24 @@ def _write_report(out: Path, results, trained, recipes, seeds, eval_seeds, profi
         pushes = (f"with disturbances ({r.disturbance.rate_hz:g} pushes/s of {r.disturbance.min_yaw_rate_rps:g}-{r.disturbance.max_yaw_rate_rps:g} rad/s)"
                   if r.disturbance is not None else "undisturbed")
         practice = f" and one of each of {r.practice} practice course(s) per seed ({', '.join(c for s in range(seeds) for c in practice_courses(r, s))})" if r.practice else ""
-        lines.append(f"- **{r.name}**: {r.demonstrations} demonstration run(s) of train_course{practice}, {pushes}, {r.corrections} correction session(s), "
+        lines.append(f"- **{r.name}**: {r.demonstrations} demonstration run(s) of {r.course}{practice}, {pushes}, {r.corrections} correction session(s), "
                      f"{r.train.epochs} epochs, residual path {'on' if r.train.skip else 'off'}, class-balanced loss {'on' if r.train.class_balance else 'off'}, "
                      f"mirrored samples {'on' if r.train.mirror else 'off'}, decisive-frame weight {r.train.decisive_weight:g}, planner smoothing {r.smoothing:g}"
                      + (f", lanes of {r.lane_m:g} m in U" if r.lane_m else "") + (f", {r.train.members} ensemble members" if r.train.members > 1 else "")
-                     + (", the planner scoring a second stage of trajectories beyond the first with the linear utility fitted to the same samples" if r.train.utility else "") + ".")
-    lines += ["", "## Summary (test_course and the figure variations)", "", "| who | zone success | collisions | completed | runs |", "|---|---|---|---|---|"]
+                     + (", the planner scoring a second stage of trajectories beyond the first with the linear utility fitted to the same samples"
+                        + (" through the look-ahead" if r.lookahead else "") if r.train.utility else "") + ".")
+    lines += ["", "## Summary (test_course and the figure variations)", "",
+              "Zone success against the zones' expectations; agreement: the planner's choice equals the synthetic driver's in the same "
+              "zone of the same run (evaluation seed). 95% Wilson intervals over all zones of all training seeds.", "",
+              "| who | zone success | agreement with the driver | collisions | completed | runs |", "|---|---|---|---|---|---|"]
     for name in [*(r.name for r in recipes), "driver"]:
+        runs = [r for r in results if r["recipe"] == name and r["scenario"] in test_names]
+        zones = [z for r in runs for z in r["metrics"]["zones"]]
+        compared = [z for z in zones if "agrees" in z]
         s = set_summary(name, test_names)
-        lines.append(f"| {name} | {s['zone_success_rate']:.1%} of {s['zones']} | {s['collision_count']} | {s['completed_rate']:.0%} | {s['runs']} |")
+        agreement = rate_text(sum(z["agrees"] for z in compared), len(compared)) if compared else "—"
+        lines.append(f"| {name} | {rate_text(sum(z['success'] for z in zones), len(zones))} | {agreement} | {s['collision_count']} | "
+                     f"{s['completed_rate']:.0%} | {s['runs']} |")
     for title, names in (("Table 1: training scenarios (train_course)", ["train_course"]), ("Table 2: test scenarios (test_course)", ["test_course"])):
         lines += ["", f"## {title}", "", header, sep]
         for sc in names:

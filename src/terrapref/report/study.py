@@ -11,10 +11,14 @@ Stages (each parallel across processes):
    itself), the linear utility model and the CNN on the same
    recordings; the same three on the first 0.5 ... 10 minutes of them; C under the other
    profile; C's ablations.
-4. Closed-loop evaluation on ``test_course`` and the figure variations: every model, pure
+4. Teaching: per training seed, one drive of ``teach_course`` and a model by the default recipe
+   (``teach``), for each of several preference orders (default driver style) and for each
+   driver style (default order).
+5. Closed-loop evaluation on ``test_course`` and the figure variations: every model, pure
    pursuit, the hand-tuned cost planner and the synthetic driver; C again under segmentation
-   noise, pose noise and dropped or delayed frames.
-5. STUDY.md with tables and figures, and study.json with every run's metrics.
+   noise, pose noise and dropped or delayed frames. The taught models, and the driver of each
+   order and style, on generated layouts none of them has seen.
+6. STUDY.md with tables and figures, and study.json with every run's metrics.
 """
 
 from __future__ import annotations
@@ -33,12 +37,20 @@ from terrapref.evaluation.perturb import Perturbation
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PLANNER, PURE_PURSUIT, RunSpec, run_many
 from terrapref.features import FeatureConfig
 from terrapref.progress import every_tenth
-from terrapref.learning.recipe import OURS
+from terrapref.learning.recipe import OURS, TEACH
 from terrapref.report.reproduce import TEST_SET, scenario_length, variations
 from terrapref.report.study_report import ALT_PROFILE, write_study
 from terrapref.terrain import PreferenceProfile
 
 LEARNED = ("C", "linear", "cnn")  # methods trained from demonstrations
+# The orders the teaching study trains on: the paper's, then the others that put each of rock
+# and water first (non_traversable last: it is lethal to every driver).
+TEACH_ORDERS = (
+    ("mud", "rock", "water", "non_traversable"),
+    ("rock", "mud", "water", "non_traversable"),
+    ("water", "mud", "rock", "non_traversable"),
+    ("rock", "water", "mud", "non_traversable"),
+)
 DEMONSTRATIONS = replace(OURS, practice=0)  # the study's data: ours' train_course runs only
 
 
@@ -56,6 +68,10 @@ class StudyPlan:
         horizons: trajectory lengths n for the horizon ablation (the default is always in).
         widths: hidden widths for the width ablation.
         courses: evaluation scenarios.
+        orders: preference orders taught by one drive of teach_course (the default order first).
+        styles: driver styles taught the same way, under the default order ("default" first).
+        layouts: generated layouts the taught models are evaluated on (never used for choosing
+            the recipe, and apart from the final measurement's gen:2000-2031).
     """
 
     seeds: int = 3
@@ -72,6 +88,9 @@ class StudyPlan:
     horizons: tuple[int, ...] = (15, 45)
     widths: tuple[int, ...] = (16, 256)
     courses: tuple[str, ...] = ()
+    orders: tuple[tuple[str, ...], ...] = TEACH_ORDERS
+    styles: tuple[str, ...] = ("default", "wide", "late", "shaky", "reluctant")
+    layouts: tuple[str, ...] = tuple(f"gen:{5000 + i}" for i in range(8))
 
     def scenarios(self) -> list[str]:
         return list(self.courses) or [*TEST_SET, *variations()]
@@ -81,7 +100,7 @@ FULL = StudyPlan()
 QUICK = StudyPlan(
     seeds=1, minutes=(2.0,), epochs=100, cnn_epochs=15,
     noise={"flip_rate": (0.2,), "blobs": (2.0,), "pose_noise_m": (0.25,), "drop_rate": (0.5,), "delay_frames": (3.0,)},
-    horizons=(), widths=(16,),
+    horizons=(), widths=(16,), orders=TEACH_ORDERS[:2], styles=("default", "wide"), layouts=("gen:5000", "gen:5001"),
 )
 
 # Pose noise's heading error grows with its position error: degrees per metre.
@@ -168,6 +187,25 @@ def _train_job(job: dict) -> dict:
     return {**job, "samples": samples, "train_s": time.perf_counter() - t0}
 
 
+def _teach_job(job: dict) -> dict:
+    """One drive of teach_course by the synthetic driver of ``order`` and ``style``, and a model by the teach recipe."""
+    from terrapref.learning.recipe import run_recipe
+
+    t0 = time.perf_counter()
+    recipe = replace(TEACH, train=replace(TEACH.train, epochs=job["epochs"]))
+    out = run_recipe(recipe, job["workdir"], job["seed"], PreferenceProfile(tuple(job["order"])), style=job["style"])
+    return {**job, "out": str(out.model), "demo_minutes": out.demo_minutes, "train_s": time.perf_counter() - t0}
+
+
+def teach_jobs(plan: StudyPlan, work: Path) -> list[dict]:
+    """The teaching study's models: every order under the default style, every style under the default order."""
+    default = plan.orders[0]
+    combos = [(o, "default") for o in plan.orders] + [(default, st) for st in plan.styles if st != "default"]
+    return [{"study": "teach", "method": "C", "seed": s, "order": list(o), "style": st, "epochs": plan.epochs,
+             "workdir": str(work / "teach" / f"{'_'.join(c[:2] for c in o[:3])}_{st}_s{s}")}
+            for s in range(plan.seeds) for o, st in combos]
+
+
 def _pool_map(fn: Callable, jobs: list, workers: int, log: Callable[[str], None], what: str) -> list:
     """Map over jobs in worker processes (in order), logging progress."""
     if not jobs:
@@ -203,7 +241,7 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
     seeds = list(range(plan.seeds))
 
     t0 = time.perf_counter()
-    log(f"[1/5] demonstrations: {len(seeds)} seed(s) x 2 profiles x {DEMONSTRATIONS.demonstrations} runs ...")
+    log(f"[1/6] demonstrations: {len(seeds)} seed(s) x 2 profiles x {DEMONSTRATIONS.demonstrations} runs ...")
     rec_jobs = [(str(work / f"{tag}_s{s}"), s, prof) for s in seeds for tag, prof in (("default", default), ("alt", ALT_PROFILE))]
     recs = dict(zip([(j[1], j[2]) for j in rec_jobs], _pool_map(_record_job, rec_jobs, workers, log, "demonstration set")))
     timings["demonstrations"] = time.perf_counter() - t0
@@ -215,7 +253,7 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
         feat_jobs += [(recs[(s, default)], str(base / "U.safetensors"), "U", None), (recs[(s, default)], str(base / "cnn.safetensors"), "cnn", None),
                       (recs[(s, ALT_PROFILE)], str(work / f"alt_s{s}" / "U.safetensors"), "U", None)]
         feat_jobs += [(recs[(s, default)], str(base / f"U_n{n}.safetensors"), "U", n) for n in plan.horizons]
-    log(f"[2/5] featurisation: {len(feat_jobs)} sets ...")
+    log(f"[2/6] featurisation: {len(feat_jobs)} sets ...")
     _pool_map(_featurise_job, feat_jobs, workers, log, "set")
     timings["featurisation"] = time.perf_counter() - t0
 
@@ -242,9 +280,16 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
         for w in plan.widths:
             add("ablation", "C", s, base / "U.safetensors", f"C_h{w}", train={"hidden": w}, variant=f"hidden width {w}")
     jobs.sort(key=lambda j: -(j.get("minutes") or 99) * (3 if j["method"] != "linear" else 0.1))  # long jobs first
-    log(f"[3/5] training: {len(jobs)} models ...")
+    log(f"[3/6] training: {len(jobs)} models ...")
     trained = _pool_map(_train_job, jobs, workers, log, "model")
     timings["training"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    taught_jobs = teach_jobs(plan, work)
+    log(f"[4/6] teaching: {len(taught_jobs)} drives of teach_course and models (recipe teach; "
+        f"{len(plan.orders)} orders, {len(plan.styles)} driver styles, {plan.seeds} seed(s)) ...")
+    taught = _pool_map(_teach_job, taught_jobs, workers, log, "taught model")
+    timings["teaching"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     scenarios = plan.scenarios()
@@ -272,16 +317,22 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
             for method in (HAND_COST, PURE_PURSUIT, EXPERT):
                 spec(RunSpec(sc, s, method, None, default), study="baselines", method=method, seed=s)
             spec(RunSpec(sc, s, EXPERT, None, ALT_PROFILE), study="profile", method=EXPERT, seed=s, scored_under="model")
+    for layout in plan.layouts:
+        for t in taught:
+            spec(RunSpec(layout, 0, PLANNER, t["out"], tuple(t["order"])), study="teach", method="C", seed=t["seed"], order=t["order"], style=t["style"])
+        for order, style in sorted({(tuple(t["order"]), t["style"]) for t in taught}):
+            spec(RunSpec(layout, 0, EXPERT, None, order, style=style), study="teach", method=EXPERT, seed=0, order=list(order), style=style)
     # Longest scenarios first, so that no worker is left with a long run at the end.
     order = sorted(range(len(specs)), key=lambda i: -scenario_length(specs[i].scenario))
     specs, tags = [specs[i] for i in order], [tags[i] for i in order]
-    log(f"[4/5] closed-loop evaluation: {len(specs)} runs over {len(scenarios)} scenarios ...")
+    log(f"[5/6] closed-loop evaluation: {len(specs)} runs over {len(scenarios) + len(plan.layouts)} scenarios ...")
     results = run_many(specs, workers, every_tenth(log))
     timings["evaluation"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    log("[5/5] tables, figures and STUDY.md ...")
+    log("[6/6] tables, figures and STUDY.md ...")
     runs = [{**tag, "scenario": r["scenario"], "metrics": r["metrics"]} for tag, r in zip(tags, results)]
+    trained += taught
     (out / "study.json").write_text(json.dumps({"plan": _plan_dict(plan), "trained": trained, "runs": runs}, indent=1, default=float))
     return write_study(out, plan, trained, runs, timings, report_started=t0)
 
@@ -289,4 +340,4 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
 def _plan_dict(plan: StudyPlan) -> dict:
     return {"seeds": plan.seeds, "minutes": list(plan.minutes), "epochs": plan.epochs, "cnn_epochs": plan.cnn_epochs,
             "noise": {k: list(v) for k, v in plan.noise.items()}, "horizons": list(plan.horizons), "widths": list(plan.widths),
-            "scenarios": plan.scenarios()}
+            "scenarios": plan.scenarios(), "orders": [list(o) for o in plan.orders], "styles": list(plan.styles), "layouts": list(plan.layouts)}

@@ -8,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from terrapref.evaluation.runner import EXPERT, HAND_COST, PURE_PURSUIT
+from terrapref.evaluation.runner import EXPERT, HAND_COST, PURE_PURSUIT, zone_agrees
+from terrapref.evaluation.stats import rate_text, wilson
 
 TARGET = 0.9  # the success level the data-efficiency question asks about
 ALT_PROFILE = ("rock", "mud", "water", "non_traversable")  # the study's other preference profile
@@ -36,12 +37,15 @@ def _per_seed(runs: list[dict]) -> list[float]:
 
 
 def _cell(runs: list[dict]) -> tuple[str, float, float]:
-    """'mean ± std (n seeds)', the mean and the std of the per-seed zone success."""
+    """'mean ± std [lo-hi]': the mean and std of the per-seed zone success, and the 95% Wilson
+    interval of the success rate pooled over every zone of the runs."""
     rates = _per_seed(runs)
     if not rates:
         return "—", float("nan"), float("nan")
     m, s = float(np.mean(rates)), float(np.std(rates))
-    return (f"{m:.1%} ± {s:.1%}" if len(rates) > 1 else f"{m:.1%}"), m, s
+    zones = [z["success"] for r in runs for z in r["metrics"]["zones"]]
+    lo, hi = wilson(int(sum(zones)), len(zones))
+    return (f"{m:.1%} ± {s:.1%}" if len(rates) > 1 else f"{m:.1%}") + f" [{lo:.0%}-{hi:.0%}]", m, s
 
 
 def _collisions(runs: list[dict]) -> int:
@@ -66,7 +70,7 @@ def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings:
               f"({zones_per_pass} zones per pass), "
               f"{n_seeds} training seed(s): each seed has its own demonstrations (2 runs of train_course with disturbances, "
               "about 11 minutes) and its own initialisation. Zone success is given as the mean over seeds ± its standard deviation; "
-              "collisions are summed over all runs. One zone is "
+              "collisions are summed over all runs; brackets give the 95% Wilson interval of the rate pooled over all zones. One zone is "
               f"{1 / max(zones_per_pass, 1):.1%} of a seed's score, so differences of a few points are within the spread between seeds.", ""]
 
     # -- baselines
@@ -136,7 +140,8 @@ def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings:
         study = "baselines" if mins == ALL else "efficiency"
         samples = next((t["samples"] for t in trained if t["study"] == study and t.get("minutes") == (None if mins == ALL else mins) and t["method"] == "C"), 0)
         label = f"all, {full_minutes:.1f}" if mins == ALL else f"{mins:g}"
-        lines.append(f"| {label} ({samples} frames) | " + " | ".join(f"{eff[m][i][1]:.1%} ± {eff[m][i][2]:.1%}" for m in eff) + " |")
+        texts = [_cell(base[m] if mins == ALL else _select(runs, study="efficiency", method=m, minutes=mins))[0] for m in eff]
+        lines.append(f"| {label} ({samples} frames) | " + " | ".join(texts) + " |")
     lines += ["", "![data efficiency](figures/data_efficiency.png)", ""]
     save_curves(figs / "data_efficiency.png", {METHOD_NAMES[m]: [(x, y, e) for x, y, e in eff[m]] for m in eff},
                 "minutes of demonstration", "zone success", target=TARGET, logx=True)
@@ -177,6 +182,7 @@ def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings:
     for v in variants:
         rr = _select(runs, study="ablation", variant=v)
         lines.append(f"| {v} | {_cell(rr)[0]} | {_collisions(rr)} |")
+    lines += teaching_section(plan, runs, figs)
     if report_started is not None:
         timings = {**timings, "tables and figures": time.perf_counter() - report_started}
     lines += ["", "## Time per stage (wall clock)", "", "| stage | seconds |", "|---|---|"]
@@ -184,6 +190,91 @@ def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings:
     path = out / "STUDY.md"
     path.write_text("\n".join(lines))
     return path
+
+
+def _agreement(planner: list[dict], driver: list[dict]) -> tuple[int, int]:
+    """Zones (agreeing, compared) where the planner's runs made the choice of the driver's run on the same layout."""
+    by = {(r["scenario"], z["id"]): z for r in driver for z in r["metrics"]["zones"]}
+    pairs = [(z, by[(r["scenario"], z["id"])]) for r in planner for z in r["metrics"]["zones"] if (r["scenario"], z["id"]) in by]
+    return sum(zone_agrees(p, d) for p, d in pairs), len(pairs)
+
+
+def _clearance_gap(planner: list[dict], driver: list[dict]) -> float:
+    """Mean |planner's zone clearance - the driver's| over zones where both came near terrain they did not choose [m]."""
+    by = {(r["scenario"], z["id"]): z.get("clearance_m") for r in driver for z in r["metrics"]["zones"]}
+    gaps = [abs(z["clearance_m"] - by[(r["scenario"], z["id"])]) for r in planner for z in r["metrics"]["zones"]
+            if z.get("clearance_m") is not None and by.get((r["scenario"], z["id"])) is not None]
+    return float(np.mean(gaps)) if gaps else float("nan")
+
+
+def _mean_metric(runs: list[dict], key: str) -> float:
+    values = [r["metrics"][key] for r in runs if key in r["metrics"]]
+    return float(np.mean(values)) if values else float("nan")
+
+
+def _mean_clearance(runs: list[dict]) -> float:
+    values = [z["clearance_m"] for r in runs for z in r["metrics"]["zones"] if z.get("clearance_m") is not None]
+    return float(np.mean(values)) if values else float("nan")
+
+
+def teaching_section(plan, runs: list[dict], figs: Path) -> list[str]:
+    """Section 6: one drive of teach_course per order and per driver style; agreement with that driver on unseen layouts."""
+    from terrapref.report.plots import save_intervals
+
+    taught = _select(runs, study="teach")
+    if not taught:
+        return []
+    default = list(plan.orders[0])
+
+    def planner(order, style):
+        return _select(taught, method="C", order=list(order), style=style)
+
+    def driver(order, style):
+        return _select(taught, method=EXPERT, order=list(order), style=style)
+
+    lines = ["## 6. Any order, any driver: one drive of teach_course", "",
+             f"Per training seed, the synthetic driver drives teach_course once (recipe teach, {plan.epochs} epochs) for each order "
+             f"(default style) and each driver style (default order); every model then drives {len(plan.layouts)} generated layouts it "
+             f"has never seen ({', '.join(plan.layouts)}), and so does the driver it learned from. **Agreement**: the planner's zone "
+             "choice equals that driver's in the same zone of the same layout (touching non_traversable where the driver did not "
+             "counts against). Brackets: 95% Wilson interval over all zones and seeds.", "",
+             "| order | agreement with its driver | zone success | the driver's zone success | collisions |", "|---|---|---|---|---|"]
+    labels, rates, intervals = [], [], []
+    for order in plan.orders:
+        p, d = planner(order, "default"), driver(order, "default")
+        ok, n = _agreement(p, d)
+        succ = [z["success"] for r in p for z in r["metrics"]["zones"]]
+        dsucc = [z["success"] for r in d for z in r["metrics"]["zones"]]
+        lines.append(f"| {' > '.join(order)} | {rate_text(ok, n)} | {rate_text(int(sum(succ)), len(succ))} | "
+                     f"{rate_text(int(sum(dsucc)), len(dsucc))} | {_collisions(p)} |")
+        labels.append(" > ".join(o[:4] for o in order[:3]))
+        rates.append(ok / n if n else float("nan"))
+        intervals.append(wilson(ok, n))
+    lines += ["", "Driver styles (order " + " > ".join(default) + "): each style's planner against its own driver, and the "
+              "planner taught by another style against the same driver. Clearance: how close the reference point came to terrain "
+              "it did not choose, per zone; |Δ| is the mean gap to the driver's clearance in the same zone. Cross-track: RMS over "
+              "the run.", "",
+              "| driver style | agreement: own planner | agreement: planner of another style | clearance: driver | |Δ| own | |Δ| other | "
+              "cross-track: driver | own | other | collisions (own) |", "|---|---|---|---|---|---|---|---|---|---|"]
+    from terrapref.demos.expert import STYLES
+
+    for style in plan.styles:
+        other = "default" if style != "default" else next((s for s in plan.styles if s != "default"), None)
+        d, own = driver(default, style), planner(default, style)
+        theirs = planner(default, other) if other else []
+        ok, n = _agreement(own, d)
+        ok2, n2 = _agreement(theirs, d)
+        lines.append(f"| {style} ({STYLES[style][0]}) | {rate_text(ok, n)} | {rate_text(ok2, n2) + f' ({other})' if other else '—'} | "
+                     f"{_mean_clearance(d):.2f} m | {_clearance_gap(own, d):.2f} m | {_clearance_gap(theirs, d):.2f} m | "
+                     f"{_mean_metric(d, 'rms_cross_track_m'):.2f} m | {_mean_metric(own, 'rms_cross_track_m'):.2f} m | "
+                     f"{_mean_metric(theirs, 'rms_cross_track_m'):.2f} m | {_collisions(own)} |")
+        if style != "default":
+            labels.append(f"style {style}")
+            rates.append(ok / n if n else float("nan"))
+            intervals.append(wilson(ok, n))
+    save_intervals(figs / "teaching.png", labels, rates, intervals, "agreement with its driver", target=0.95,
+                   title="one drive of teach_course: agreement on unseen layouts, by order and driver style")
+    return lines + ["", "![teaching](figures/teaching.png)", ""]
 
 
 def _demo_minutes(trained: list[dict]) -> float:
@@ -225,7 +316,7 @@ def _disagreement_table(runs: list[dict]) -> list[str]:
     out = [f"The zones where the two profiles expect different choices ({len(keep)}: "
            + ", ".join(f"{sc} {zid}" for sc, zid in sorted(keep)) + "):", "",
            "| model and scoring | success in these zones |", "|---|---|"]
-    out += [f"| {label} | {ok}/{n} = {ok / max(n, 1):.0%} |" for label, ok, n in rows]
+    out += [f"| {label} | {rate_text(ok, n)} |" for label, ok, n in rows]
     return out + [""]
 
 
