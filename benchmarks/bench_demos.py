@@ -7,8 +7,10 @@ Run through ``scripts/bench.sh`` (one core); numbers go into ``docs/benchmarks.m
     median is reported. Target: <= 30 us median.
 (c) decision: ``Planner.decide`` (features + classifier C in NumPy + progress along the path)
     on the same frames, with a model trained on the recording (paper recipe). Target:
-    <= 100 us median. Two more lines: lanes with a 2-member ensemble, and the planner's
-    second stage (terrapref.planner.second_stage), as used by the recipe ``ours``.
+    <= 100 us median. Three more lines: lanes with a 2-member ensemble, the planner's second
+    stage (terrapref.planner.second_stage) as in recipe ``ours``, and the decision of recipe
+    ``teach`` (an ensemble of three with the second stage; the stage weight does not change
+    the cost).
 (d) closed loop: the planner (same model) driving ``train_course`` in the simulation, frames
     rendered only where the planner reads them; simulated frames per second of wall time.
 (b) record: ``terrapref record train_course`` end to end through the library (simulation,
@@ -118,12 +120,14 @@ def main() -> int:
         d = bench_decision(out, args.repeats)
         d2 = bench_decision(out, args.repeats, FeatureConfig(lane_m=6.0), members=2)
         d3 = bench_decision(out, args.repeats, second_stage=True)
+        d4 = bench_decision(out, args.repeats, members=3, second_stage=True)
         loop_s, loop_frames = bench_closed_loop(out.parent / "model.safetensors")
     print(f"{'benchmark':44s} {'median':>10s} {'p90':>10s} {'target':>10s}")
     print(f"{'features U (m=21, n=30), per frame':44s} {np.median(t) * 1e6:8.1f}us {np.percentile(t, 90) * 1e6:8.1f}us {'<= 30us':>10s}   ({len(t)} calls)")
     print(f"{'decision (features + C + progress), per frame':44s} {np.median(d) * 1e6:8.1f}us {np.percentile(d, 90) * 1e6:8.1f}us {'<= 100us':>10s}   ({len(d)} calls)")
     print(f"{'decision, lanes + 2 members, per frame':44s} {np.median(d2) * 1e6:8.1f}us {np.percentile(d2, 90) * 1e6:8.1f}us {'-':>10s}   ({len(d2)} calls)")
     print(f"{'decision with the second stage, per frame':44s} {np.median(d3) * 1e6:8.1f}us {np.percentile(d3, 90) * 1e6:8.1f}us {'-':>10s}   ({len(d3)} calls)")
+    print(f"{'decision of recipe teach (3 members, 2nd stage)':44s} {np.median(d4) * 1e6:8.1f}us {np.percentile(d4, 90) * 1e6:8.1f}us {'-':>10s}   ({len(d4)} calls)")
     print(f"{'planner driving train_course, closed loop':44s} {loop_s:9.2f}s {'':>10s} {'-':>10s}   ({loop_frames} frames, {loop_frames / loop_s:.0f} frames/s)")
     print(f"{'record train_course (synthetic driver)':44s} {wall:9.2f}s {'':>10s} {'<= 20s':>10s}   ({frames} frames, {size / 1e6:.1f} MB, {size / frames / 1e3:.1f} kB/frame)")
     return 0

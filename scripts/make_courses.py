@@ -165,7 +165,7 @@ def _kind(zone: tuple) -> str:
 
 
 def teach_course(zones: list[tuple] | None = None, turns: list[float] | None = None, half: dict[str, float] | None = None,
-                 s_start: float = 8.0, name: str = "teach_course") -> Course:
+                 s_start: float = 8.0, name: str = "teach_course", middle_m: float = 2.8) -> Course:
     """The product's demonstration course (SPEC 13): one drive shows every pair, both ways round, and every class alone.
 
     Situations sit on straight legs (``2 * half[kind]`` m); the trail bends between them. Lone
@@ -215,9 +215,9 @@ def teach_course(zones: list[tuple] | None = None, turns: list[float] | None = N
             c.pair(str(k + 1), zone[0], zone[1], s, length, width)
         else:
             left, middle, right = zone
-            c.rect(left, s, 1.4 + 2.25, 7.0, 4.5)
-            c.rect(middle, s, 0.0, 7.0, 2.8)
-            c.rect(right, s, -1.4 - 2.25, 7.0, 4.5)
+            c.rect(left, s, middle_m / 2 + 2.25, 7.0, 4.5)
+            c.rect(middle, s, 0.0, 7.0, middle_m)
+            c.rect(right, s, -middle_m / 2 - 2.25, 7.0, 4.5)
             c.zone(str(k + 1), f"{left} | {middle} | {right}", s, 11.0, 17.0, "best")
         s += half[kind]
     return c

@@ -6,7 +6,7 @@ zone success over the zones the synthetic driver itself gets right (a generated 
 driver misses is ambiguous under its own costs, and is left out).
 
     python scripts/select_recipe.py --seeds 2 --courses 4
-    python scripts/select_recipe.py --seeds 3 --courses 16 --only 19 29   # the docs/learning.md runs
+    python scripts/select_recipe.py --seeds 3 --courses 16 --only 19 29   # the docs/notebook.md runs
     python scripts/select_recipe.py --seeds 5 --courses 32 --only 19 34   # + 2 practice courses, 5 seeds
     python scripts/select_recipe.py --seeds 5 --courses 32 --first-course 1032 --only 34   # confirm a choice on fresh courses
     python scripts/select_recipe.py --seeds 5 --courses 32 --only 39 40 41 42   # counter-pushes while demonstrating

@@ -404,7 +404,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("record", help="record a demonstration with the synthetic driver")
     p.add_argument("scenario", metavar="SCENARIO")
     p.add_argument("--profile", help="preference order, best first, e.g. rock,mud,water,non_traversable (default: the class table's)")
-    p.add_argument("--style", default="default", help="the driver's style: default, wide, late, shaky, reluctant (`terrapref recipes` lists them)")
+    p.add_argument("--style", default="default", help="the driver's style: default, wide (wider margins), late (reacts later), shaky (a shakier hand), "
+                        "reluctant (leaves the path reluctantly)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True, type=Path, help="recording directory to create")
     p.add_argument("--force", action="store_true", help="replace an existing recording at --out")

@@ -19,7 +19,7 @@ Lanes (ours, off by default): with ``lane_m > 0``, U gains K more columns per tr
 share of each class on ``lane_points`` points along a straight lane of ``lane_m`` metres that
 continues from the trajectory's end parallel to the vehicle's heading. A driver commits to a
 side of a patch several metres before the trajectories reach the terrain there; the lanes show
-what lies beyond each trajectory's end (docs/learning.md). Like the trajectories' own points,
+what lies beyond each trajectory's end (docs/notebook.md). Like the trajectories' own points,
 the lane points are fixed in the vehicle frame, so their pixels are precomputed.
 """
 

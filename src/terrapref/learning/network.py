@@ -1,8 +1,10 @@
 """The classifier C (SPEC 8): a shared row-wise 5 -> 1 compression, three hidden layers, m logits.
 
-The network is defined twice on purpose: in PyTorch for training (:mod:`terrapref.learning.torch_net`)
-and here as a NumPy forward pass over the same named weights, which the planner uses in the
-control loop (about 10 us per decision, no torch import, no torch needed on the robot).
+This is the NumPy forward pass the planner uses in the control loop (about 10 us per decision,
+no torch needed on the robot). Training runs its own NumPy forward and backward pass with
+CPU-independent arithmetic (:mod:`terrapref.learning.mlp`) over the same named weights; the
+PyTorch definition (:mod:`terrapref.learning.torch_net`) remains as an independent reference
+that the tests check both against.
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ Named recipes (:data:`RECIPES`, ``terrapref recipes``; ``--recipe NAME`` in ``tr
 - ``paper``: the published recipe: one drive of ``train_course``, 15 epochs of the paper's C.
 
 A recipe also holds the options measured on the way (more drives, practice courses, correction
-sessions, lanes, decisive-frame weights; docs/learning.md), so that each measured row can be
+sessions, lanes, decisive-frame weights; docs/notebook.md), so that each measured row can be
 run again.
 """
 

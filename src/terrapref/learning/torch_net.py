@@ -1,4 +1,4 @@
-"""PyTorch definition of C for training; its state-dict names match :func:`numpy_forward`."""
+"""PyTorch definition of C, the tests' independent reference; its state-dict names match :func:`numpy_forward`."""
 
 from __future__ import annotations
 

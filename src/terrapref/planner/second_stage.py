@@ -30,7 +30,7 @@ from terrapref.vehicle import Pose
 
 @dataclass(frozen=True)
 class SecondStageConfig:
-    """The second stage's decision rule (defaults chosen on generated courses, docs/learning.md).
+    """The second stage's decision rule (defaults chosen on generated courses, docs/notebook.md).
 
     Attributes:
         after_s: where along each candidate trajectory the second stage starts [s]
