@@ -7,7 +7,6 @@ plain NumPy products and exponentials come out.
 
 from __future__ import annotations
 
-import hashlib
 import math
 import os
 import platform

@@ -167,7 +167,10 @@ def merge_datasets(sets: list[tuple[str, Dataset]]) -> Dataset:
             raise UserError(name, f"carries look-ahead utilities and {first_name} does not, or the other way round", field="U2")
     if len(sets) == 1:
         return first
-    offsets = np.cumsum([0] + [int(d.source.max()) + 1 if len(d) else 0 for _, d in sets[:-1]])
+    # Each dataset's recordings are numbered after those of the datasets before it: by the
+    # recordings it lists (a recording may have left no samples), else by its highest source.
+    counts = [len(d.meta.get("recordings") or []) or (int(d.source.max()) + 1 if len(d) else 0) for _, d in sets[:-1]]
+    offsets = np.cumsum([0] + counts)
     return Dataset(
         np.concatenate([d.U for _, d in sets]), np.concatenate([d.labels for _, d in sets]), np.concatenate([d.w for _, d in sets]),
         np.concatenate([d.source + off for off, (_, d) in zip(offsets, sets)]),

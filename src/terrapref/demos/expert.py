@@ -48,6 +48,8 @@ class ExpertConfig:
             further ahead too, so that the whole patch, not its near edge, is weighed [m].
         lookbehind_m: terrain this far behind the vehicle still holds the detour (the body) [m].
         half_width_m: half the vehicle's footprint width [m].
+        margin_m: terrain this close beside the footprint costs as if half of it were driven on,
+            so that the driver gives patches a wider berth (0: off) [m].
         lethal_margin_m: extra clearance kept from lethal terrain [m].
         max_offset_m: largest lateral offset considered [m].
         offset_step_m: resolution of the candidate offsets [m].
@@ -75,6 +77,7 @@ class ExpertConfig:
     decision_extent_m: float = 6.0
     lookbehind_m: float = 1.0
     half_width_m: float = 0.6
+    margin_m: float = 0.0
     lethal_margin_m: float = 0.4
     max_offset_m: float = 8.0
     offset_step_m: float = 0.2
@@ -107,8 +110,8 @@ class ExpertConfig:
 # a few parameters changed (description, changes); `terrapref record --style NAME`.
 STYLES: dict[str, tuple[str, dict]] = {
     "default": ("reacts 5 m ahead, 0.6 m half-width, 0.4 m extra from lethal terrain", {}),
-    "wide": ("keeps wider margins: counts terrain 0.5 m beyond its sides, 0.8 m extra from lethal terrain",
-             {"half_width_m": 1.1, "lethal_margin_m": 0.8}),
+    "wide": ("keeps wider margins: terrain within 0.5 m beside it costs half as if driven on, 0.8 m extra from lethal terrain",
+             {"margin_m": 0.5, "lethal_margin_m": 0.8}),
     "late": ("reacts later: terrain on the path 3.5 m ahead, not 5 m; a slower hand (0.35 s)",
              {"reaction_distance_m": 3.5, "reaction_delay_s": 0.35}),
     "shaky": ("a shakier hand: 0.08 rad/s of tremor while the stick is deflected, a wider deadzone",
@@ -132,6 +135,8 @@ class ExpertDriver:
         foot = np.linspace(-c.half_width_m, c.half_width_m, 5)
         lethal_foot = np.linspace(-c.half_width_m - c.lethal_margin_m, c.half_width_m + c.lethal_margin_m, 7)
         self._foot, self._lethal_foot = foot, lethal_foot
+        edge = c.half_width_m + c.margin_m * np.array([0.5, 1.0])
+        self._margin_foot = np.concatenate([-edge[::-1], edge]) if c.margin_m > 0 else None
         self._s_rel = np.arange(-c.lookbehind_m, c.reaction_distance_m + c.decision_extent_m + 1e-9, self.sample_step_m)
         self._in_reach = self._s_rel <= c.reaction_distance_m
 
@@ -191,6 +196,10 @@ class ExpertDriver:
         upto = min(len(s), last + 1 + round(c.pursuit_lookahead_m / self.sample_step_m))
         cls = self.world.class_at(pts[:, :upto])
         terrain = self._cost[cls].mean(axis=2).sum(axis=1) * self.sample_step_m  # (O,)
+        if self._margin_foot is not None:  # the berth beside the footprint: half the cost of driving on it
+            lat_m = self.offsets[:, None] + self._margin_foot[None, :]
+            pts_m = centre[None, :upto, None, :] + lat_m[:, None, :, None] * normal[None, :upto, None, :]
+            terrain = terrain + 0.5 * self._cost[self.world.class_at(pts_m)].mean(axis=2).sum(axis=1) * self.sample_step_m
         lat_l = self.offsets[:, None] + self._lethal_foot[None, :]
         pts_l = centre[None, :upto, None, :] + lat_l[:, None, :, None] * normal[None, :upto, None, :]
         hits_lethal = self._lethal[self.world.class_at(pts_l)].any(axis=(1, 2))

@@ -20,7 +20,7 @@ def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
 
 
 def rate_text(successes: int, n: int) -> str:
-    """``"96.0% (72/75, 95% CI 88.9-98.6%)"``."""
+    """``"96.0% (72/75, 95% CI 88.9%-98.6%)"``."""
     if n <= 0:
         return "- (0 zones)"
     lo, hi = wilson(successes, n)

@@ -46,8 +46,8 @@ class PairEvidence:
         frames: frames that compared the two.
         for_first, for_second: of those, the frames whose choice favoured each.
         sides: comparing frames with ``first`` on the left and on the right (left, right).
-        margin: learned weight of ``first`` minus that of ``second`` (>= 0), in utility units;
-            None where no weight exists (grass has weight 0 by construction).
+        margin: learned weight of ``first`` minus that of ``second`` (>= 0), in utility units
+            (grass has weight 0 by construction).
         stderr: standard error of ``margin`` (Wald), None if unknown.
     """
 
@@ -72,8 +72,8 @@ class PairEvidence:
 
     def to_dict(self) -> dict:
         return {"first": self.first, "second": self.second, "frames": self.frames, "for_first": self.for_first,
-                "for_second": self.for_second, "sides": list(self.sides), "margin": round(self.margin, 4),
-                "stderr": None if self.stderr is None else round(self.stderr, 4), "identified": self.identified}
+                "for_second": self.for_second, "sides": list(self.sides), "margin": self.margin,
+                "stderr": self.stderr, "identified": self.identified}
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,281 @@
+"""The named recipes, the synthetic driver's styles, and merging training data: what each recipe
+holds, what each style changes, and which datasets can be trained on together."""
+
+from __future__ import annotations
+
+from dataclasses import fields, replace
+
+import numpy as np
+import pytest
+
+from terrapref.camera import CameraConfig
+from terrapref.demos.dataset import FORMAT as DATASET_FORMAT
+from terrapref.demos.dataset import Dataset, merge_datasets, save_dataset, training_data
+from terrapref.demos.expert import STYLES, ExpertConfig, ExpertDriver
+from terrapref.demos.session import DisturbanceConfig
+from terrapref.errors import UserError
+from terrapref.features import FeatureConfig, LookaheadConfig
+from terrapref.learning.recipe import DEFAULT_RECIPE, RECIPES, Recipe, practice_courses, recipe_named
+from terrapref.learning.train import TrainConfig
+from terrapref.scenario import parse_scenario
+from terrapref.terrain import default_classes
+
+from helpers import model_meta
+
+# --- the named recipes -------------------------------------------------------------------------------
+
+
+def test_the_recipes_and_the_default():
+    assert list(RECIPES) == ["teach", "ours", "paper"]
+    assert DEFAULT_RECIPE == "teach"
+    assert all(recipe.name == name and recipe.summary for name, recipe in RECIPES.items())
+
+
+def test_recipe_named():
+    assert recipe_named("paper") is RECIPES["paper"]
+    assert recipe_named(DEFAULT_RECIPE).course == "teach_course"
+
+
+@pytest.mark.parametrize("flag", ["--recipe", "--recipes"])
+def test_an_unknown_recipe_is_a_user_error_naming_the_flag_and_the_recipes(flag: str):
+    with pytest.raises(UserError) as caught:
+        recipe_named("bogus", flag)
+    assert not isinstance(caught.value, ValueError)  # a UserError, not a ValueError
+    assert caught.value.lines() == [f"{flag}: unknown recipe 'bogus'; recipes: teach, ours, paper"]
+
+
+def test_the_paper_recipe_is_the_published_one():
+    paper = RECIPES["paper"]
+    assert paper.train == TrainConfig()
+    assert (paper.train.epochs, paper.train.lr, paper.train.batch_size, paper.train.val_fraction) == (15, 1e-3, 256, 0.2)
+    assert not (paper.train.skip or paper.train.class_balance or paper.train.mirror or paper.train.utility)
+    assert (paper.demonstrations, paper.corrections, paper.practice, paper.course) == (1, 0, 0, "train_course")
+    assert paper.disturbance is None and paper.smoothing == 0.0
+    assert paper.features() == FeatureConfig()  # the paper's U: no lanes, no near distance, no look-ahead
+
+
+def test_ours_drives_train_course_twice_with_pushes():
+    ours = RECIPES["ours"]
+    assert (ours.demonstrations, ours.course, ours.disturbance) == (2, "train_course", DisturbanceConfig(rate_hz=0.3))
+    assert (ours.train.epochs, ours.train.members) == (300, 1)
+    assert ours.train.skip and ours.train.class_balance and ours.train.mirror and ours.train.utility
+    assert ours.features().lookahead is None
+
+
+def test_teach_drives_teach_course_once_and_fits_through_the_lookahead():
+    teach = RECIPES["teach"]
+    assert (teach.demonstrations, teach.course, teach.disturbance) == (1, "teach_course", DisturbanceConfig(rate_hz=0.3))
+    assert (teach.train.epochs, teach.train.members, teach.train.stage_weight) == (300, 3, 5.0)
+    assert teach.train.skip and teach.train.class_balance and teach.train.mirror and teach.train.utility
+    features = teach.features()
+    assert features.lookahead == LookaheadConfig()
+    assert features == replace(FeatureConfig(), lookahead=LookaheadConfig())
+
+
+def test_features_keep_the_base_and_set_the_recipes_own():
+    base = FeatureConfig(path_spacing_m=0.5, lane_m=2.0)
+    lanes = Recipe("lanes", lane_m=3.0, near_m=1.0)
+    assert lanes.features(base) == replace(base, lane_m=3.0, near_m=1.0)
+    assert RECIPES["paper"].features(base) == replace(base, lane_m=0.0)
+
+
+@pytest.mark.parametrize("bad", [dict(demonstrations=0), dict(corrections=-1), dict(practice=-1), dict(lane_m=-1.0), dict(follow_margin=-0.1)])
+def test_recipes_are_validated(bad: dict):
+    with pytest.raises(ValueError):
+        Recipe("bad", **bad)
+
+
+def test_practice_courses_are_the_seeds_own_layouts():
+    recipe = Recipe("practice", practice=3)
+    assert practice_courses(recipe, 0) == ["gen:3000", "gen:5000", "gen:7000"]
+    assert practice_courses(recipe, 2) == ["gen:23000", "gen:25000", "gen:27000"]
+    assert practice_courses(RECIPES["teach"], 2) == []
+
+
+def test_to_dict_is_plain_data():
+    data = RECIPES["teach"].to_dict()
+    assert data["name"] == "teach" and data["train"]["epochs"] == 300 and data["disturbance"]["rate_hz"] == 0.3
+
+
+# --- the driver's styles -------------------------------------------------------------------------------
+
+PROFILE = ("water", "rock", "mud", "non_traversable")
+
+# What each style is meant to change, and which way: +1 more than the default, -1 less.
+MEANT = {
+    "default": {},
+    "wide": {"margin_m": +1, "lethal_margin_m": +1},
+    "late": {"reaction_distance_m": -1, "reaction_delay_s": +1},
+    "shaky": {"stick_noise_rps": +1, "deadzone_rps": +1},
+    "reluctant": {"deviation_cost": +1},
+}
+
+
+def test_every_style_is_described_and_listed_here():
+    assert set(STYLES) == set(MEANT)
+    assert all(description for description, _ in STYLES.values())
+
+
+@pytest.mark.parametrize("style", list(STYLES))
+def test_a_style_is_the_default_driver_with_its_own_changes(style: str):
+    default, styled = ExpertConfig(profile=PROFILE), ExpertConfig.styled(style, PROFILE)
+    assert styled.profile == PROFILE
+    changed = {f.name: (getattr(default, f.name), getattr(styled, f.name)) for f in fields(ExpertConfig)
+               if getattr(default, f.name) != getattr(styled, f.name)}
+    assert set(changed) == set(MEANT[style])
+    for name, (before, after) in changed.items():
+        assert (after - before) * MEANT[style][name] > 0, (name, before, after)
+    ExpertDriver(styled)  # builds its footprint and offsets from the config
+
+
+def test_the_style_without_a_profile_keeps_the_default_profile():
+    assert ExpertConfig.styled("late").profile == ExpertConfig().profile
+    assert ExpertConfig.styled() == ExpertConfig()
+
+
+def test_the_numbers_in_the_descriptions_are_the_configs():
+    default, wide, late = ExpertConfig(), ExpertConfig.styled("wide"), ExpertConfig.styled("late")
+    assert f"reacts {default.reaction_distance_m:g} m ahead, {default.half_width_m:g} m half-width" in STYLES["default"][0]
+    assert f"terrain within {wide.margin_m:g} m beside it costs half" in STYLES["wide"][0]
+    assert f"{wide.lethal_margin_m:g} m extra from lethal terrain" in STYLES["wide"][0]
+    assert f"{late.reaction_distance_m:g} m ahead, not {default.reaction_distance_m:g} m" in STYLES["late"][0]
+    assert f"{ExpertConfig.styled('shaky').stick_noise_rps:g} rad/s of tremor" in STYLES["shaky"][0]
+    assert ExpertConfig.styled("reluctant").deviation_cost == 2 * default.deviation_cost  # "twice the cost"
+
+
+def test_an_unknown_style_is_refused_naming_the_styles():
+    with pytest.raises(ValueError, match=r"unknown driver style 'sleepy'; styles: default, wide, late, shaky, reluctant"):
+        ExpertConfig.styled("sleepy")
+
+
+def _patch(cls: str, radius_m: float = 1.6):
+    """A straight trail along y = 10 from x = 2 with one circular patch at x = 15."""
+    return parse_scenario({
+        "format": "terrapref-scenario/1",
+        "name": "one_patch",
+        "world": {"size_m": [30.0, 20.0], "resolution_m": 0.05, "background": "grass"},
+        "terrain": [{"class": cls, "circle": {"center": [15.0, 10.0], "radius": radius_m}}],
+        "path": {"waypoints": [[2.0, 10.0], [28.0, 10.0]]},
+    })
+
+
+def _offset(style: str, scenario, s_m: float) -> float:
+    driver = ExpertDriver(ExpertConfig.styled(style))
+    driver.reset(scenario, np.random.default_rng(0))
+    return driver.choose_offset(s_m)
+
+
+def test_the_late_driver_reacts_nearer_the_patch():
+    water = _patch("water")  # its near edge at s = 11.4
+    assert _offset("default", water, 7.0) > 0.0 == _offset("late", water, 7.0)  # 4.4 m ahead
+    assert _offset("late", water, 8.5) == _offset("default", water, 8.5) > 0.0  # 2.9 m ahead
+
+
+def test_the_reluctant_driver_swerves_less():
+    water = _patch("water")
+    assert 0.0 < _offset("reluctant", water, 9.0) < _offset("default", water, 9.0)
+
+
+def test_the_wide_driver_keeps_further_from_lethal_terrain():
+    wall = _patch("non_traversable")
+    assert _offset("wide", wall, 9.0) >= _offset("default", wall, 9.0) + 0.2
+
+
+@pytest.mark.parametrize("cls, radius_m", [("water", 0.8), ("water", 1.6), ("rock", 1.4)])
+def test_the_wide_driver_passes_a_patch_further_out(cls: str, radius_m: float):
+    patch = _patch(cls, radius_m)
+    assert abs(_offset("wide", patch, 9.0)) >= abs(_offset("default", patch, 9.0)) + 0.2 > 0.2
+
+
+# --- merging training data -------------------------------------------------------------------------------
+
+
+def _dataset(n: int, recordings: int, seed: int, lookahead: bool = False, **meta) -> Dataset:
+    """``n`` random samples from ``recordings`` recordings (source 0, 1, ... in turn)."""
+    rng = np.random.default_rng(seed)
+    m, k = 21, 5
+    source = np.sort(np.arange(n) % recordings).astype(np.int64)
+    meta = {"format": DATASET_FORMAT, **model_meta(), "recordings": [{"path": f"rec{seed}_{i}"} for i in range(recordings)], **meta}
+    U2 = rng.uniform(0, 1, (n, m, m, k)).astype(np.float16) if lookahead else None
+    return Dataset(rng.uniform(0, 1, (n, m, k)).astype(np.float32), rng.integers(0, m, n), rng.uniform(-1, 1, n).astype(np.float32),
+                   source, meta, U2)
+
+
+def test_merging_concatenates_and_numbers_the_recordings_across_all():
+    a, b, c = _dataset(4, 2, 0), _dataset(3, 1, 1), _dataset(2, 2, 2)
+    merged = merge_datasets([("a.safetensors", a), ("b.safetensors", b), ("c.safetensors", c)])
+    assert len(merged) == 9
+    np.testing.assert_array_equal(merged.U, np.concatenate([a.U, b.U, c.U]))
+    np.testing.assert_array_equal(merged.labels, np.concatenate([a.labels, b.labels, c.labels]))
+    np.testing.assert_array_equal(merged.w, np.concatenate([a.w, b.w, c.w]))
+    np.testing.assert_array_equal(merged.source, [0, 0, 1, 1, 2, 2, 2, 3, 4])
+    assert [r["path"] for r in merged.meta["recordings"]] == ["rec0_0", "rec0_1", "rec1_0", "rec2_0", "rec2_1"]
+    assert merged.U2 is None
+    assert merged.meta["profile"] == a.meta["profile"]
+
+
+def test_merging_numbers_by_the_recordings_listed_even_without_samples():
+    a, b = _dataset(4, 2, 0), _dataset(3, 1, 1)
+    a = Dataset(a.U, a.labels, a.w, np.zeros(4, np.int64), a.meta)  # its second recording left no samples
+    merged = merge_datasets([("a.safetensors", a), ("b.safetensors", b)])
+    np.testing.assert_array_equal(merged.source, [0, 0, 0, 0, 2, 2, 2])
+    assert merged.meta["recordings"][2]["path"] == "rec1_0"
+
+
+def test_merging_keeps_the_lookahead_utilities():
+    a, b = _dataset(3, 1, 0, lookahead=True), _dataset(2, 1, 1, lookahead=True)
+    merged = merge_datasets([("a", a), ("b", b)])
+    assert merged.U2.shape == (5, 21, 21, 5) and merged.U2.dtype == np.float16
+    np.testing.assert_array_equal(merged.U2, np.concatenate([a.U2, b.U2]))
+
+
+def test_one_dataset_is_returned_as_it_is():
+    a = _dataset(3, 1, 0)
+    assert merge_datasets([("a", a)]) is a
+
+
+def test_no_datasets_is_a_user_error():
+    with pytest.raises(UserError, match="no training data given"):
+        merge_datasets([])
+
+
+@pytest.mark.parametrize("field, value", [
+    ("profile", ["water", "rock", "mud", "non_traversable"]),
+    ("features", FeatureConfig(lane_m=2.0).to_dict()),
+    ("camera", CameraConfig(hfov_deg=60.0).to_dict()),
+    ("classes", {**default_classes().to_dict(), "background": "mud"}),
+])
+def test_datasets_made_differently_are_refused_naming_the_file_and_field(field: str, value):
+    a, b = _dataset(3, 1, 0), _dataset(3, 1, 1, **{field: value})
+    with pytest.raises(UserError) as caught:
+        merge_datasets([("first.safetensors", a), ("second.safetensors", b)])
+    error = caught.value
+    assert error.source == "second.safetensors" and [p.field for p in error.problems] == [field]
+    assert error.lines() == [f"second.safetensors: {field}: differs from first.safetensors in {field}; featurise all recordings the same way"]
+
+
+@pytest.mark.parametrize("first, second", [(False, True), (True, False)])
+def test_datasets_with_and_without_lookahead_are_refused(first: bool, second: bool):
+    a, b = _dataset(3, 1, 0, lookahead=first), _dataset(3, 1, 1, lookahead=second)
+    with pytest.raises(UserError) as caught:
+        merge_datasets([("first.safetensors", a), ("second.safetensors", b)])
+    assert caught.value.source == "second.safetensors" and [p.field for p in caught.value.problems] == ["U2"]
+    assert "first.safetensors" in str(caught.value)
+
+
+def test_training_data_merges_dataset_files(tmp_path):
+    a, b = _dataset(4, 2, 0), _dataset(3, 1, 1)
+    paths = [save_dataset(a, tmp_path / "a.safetensors"), save_dataset(b, tmp_path / "b.safetensors")]
+    merged = training_data(paths, FeatureConfig())
+    np.testing.assert_array_equal(merged.U, np.concatenate([a.U, b.U]))
+    np.testing.assert_array_equal(merged.labels, np.concatenate([a.labels, b.labels]))
+    np.testing.assert_array_equal(merged.source, [0, 0, 1, 1, 2, 2, 2])
+
+
+def test_training_data_names_the_file_that_differs(tmp_path):
+    a, b = _dataset(4, 2, 0), _dataset(3, 1, 1, profile=["water", "rock", "mud", "non_traversable"])
+    paths = [save_dataset(a, tmp_path / "a.safetensors"), save_dataset(b, tmp_path / "b.safetensors")]
+    with pytest.raises(UserError) as caught:
+        training_data(paths, FeatureConfig())
+    assert caught.value.source == str(paths[1]) and caught.value.problems[0].field == "profile"
+    assert str(paths[0]) in caught.value.problems[0].message
