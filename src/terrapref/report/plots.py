@@ -142,21 +142,30 @@ def save_bars(path: str | Path, labels: Sequence[str], means: Sequence[float], s
 
 def save_intervals(path: str | Path, labels: Sequence[str], rates: Sequence[float], intervals: Sequence[tuple[float, float]], ylabel: str,
                    target: float | None = None, title: str = "") -> Path:
-    """One bar per row with its 95% interval (asymmetric, e.g. Wilson), the rate written above it."""
-    fig, ax = plt.subplots(figsize=(max(6.0, 0.9 * len(labels) + 2), 3.8), dpi=120)
+    """One point per row with its 95% interval (asymmetric, e.g. Wilson) and the rate written beside it.
+
+    Points rather than bars: the axis can then start near the data without bars that begin
+    nowhere, and differences of a few points stay visible.
+    """
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(labels) + 2), 3.8), dpi=120)
     x = np.arange(len(labels))
     rates = np.asarray(rates, dtype=float)
     lo, hi = (np.array(v, dtype=float) for v in zip(*intervals)) if len(intervals) else (np.zeros(0), np.zeros(0))
-    ax.bar(x, rates, yerr=np.stack([rates - lo, hi - rates]), capsize=4, color="tab:blue")
-    for xi, r in zip(x, rates):
-        ax.text(xi, 0.03, f"{r:.0%}", ha="center", va="bottom", color="white", fontsize=8, fontweight="bold")
+    ax.errorbar(x, rates, yerr=np.stack([rates - lo, hi - rates]), fmt="o", color="tab:blue", capsize=5, lw=1.5)
+    for xi, r, h in zip(x, rates, hi):
+        ax.text(xi + 0.08, r, f"{r:.1%}", ha="left", va="center", fontsize=8)
+    bottom = float(np.nanmin(lo)) if len(lo) else 0.0
     if target is not None:
-        ax.axhline(target, color="grey", ls=":", label=f"target {target:.0%}")
-        ax.legend(fontsize=8, loc="lower right")
-    ax.set_xticks(x, labels, rotation=20, ha="right", fontsize=8)
-    ax.set_ylim(0, 1.05)
+        ax.axhline(target, color="grey", ls=":")
+        ax.text(len(labels) - 0.5, target, f"target {target:.0%}", ha="right", va="bottom", fontsize=8, color="dimgrey")
+        bottom = min(bottom, target)
+    ax.set_xticks(x, labels, rotation=15, ha="right", fontsize=8)
+    ax.set_xlim(-0.5, len(labels) - 0.5)
+    ax.set_ylim(max(0.0, bottom - 0.05), 1.0)
+    ax.yaxis.set_major_formatter(matplotlib.ticker.PercentFormatter(1.0))
     ax.set_ylabel(ylabel)
     ax.set_title(title, fontsize=9)
+    ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
     return _save(fig, path)
 
