@@ -35,3 +35,11 @@ def test_reproduce_names_the_flag_it_refuses(tmp_path, capsys):
     assert main(["reproduce", "--out", str(tmp_path / "rep"), "--eval-seeds", "0"]) == 2
     err = capsys.readouterr().err.strip()
     assert "--eval-seeds" in err and "--seeds:" not in err
+
+
+def test_study_refuses_an_unknown_recipe_before_any_work(tmp_path, capsys):
+    out = tmp_path / "study"
+    assert main(["study", "--out", str(out), "--quick", "--recipe", "bogus"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--recipe" in err[0] and "unknown recipe 'bogus'" in err[0], err
+    assert not out.exists()

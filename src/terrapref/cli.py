@@ -375,6 +375,10 @@ def _cmd_study(args: argparse.Namespace) -> int:
         plan = replace(plan, seeds=args.seeds)
     if args.workers is not None and args.workers < 1:
         raise UserError("--workers", "must be >= 1")
+    if args.recipe is not None:
+        from terrapref.learning.recipe import recipe_named
+
+        plan = replace(plan, recipe=recipe_named(args.recipe).name)
     t0 = time.perf_counter()
     path = run_study(args.out, plan, args.workers, log=lambda m: print(m, flush=True))
     print(f"wrote {path} ({time.perf_counter() - t0:.0f} s)")
@@ -491,6 +495,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, type=Path)
     p.add_argument("--quick", action="store_true", help="one seed and fewer levels (about 3 minutes)")
     p.add_argument("--seeds", type=int, help="training seeds (default: 3, or 1 with --quick)")
+    p.add_argument("--recipe", metavar="NAME", help="the recipe section 6 teaches every order and style with (default: teach)")
     p.add_argument("--workers", type=int, help="parallel processes (default: one per core)")
     p.set_defaults(func=_cmd_study)
 

@@ -72,6 +72,7 @@ class StudyPlan:
         styles: driver styles taught the same way, under the default order ("default" first).
         layouts: generated layouts the taught models are evaluated on (never used for choosing
             the recipe, and apart from the final measurement's gen:2000-2031).
+        recipe: the named recipe the teaching section trains (its epochs set by ``epochs``).
     """
 
     seeds: int = 3
@@ -91,6 +92,7 @@ class StudyPlan:
     orders: tuple[tuple[str, ...], ...] = TEACH_ORDERS
     styles: tuple[str, ...] = ("default", "wide", "late", "shaky", "reluctant")
     layouts: tuple[str, ...] = tuple(f"gen:{5000 + i}" for i in range(8))
+    recipe: str = TEACH.name
 
     def scenarios(self) -> list[str]:
         return list(self.courses) or [*TEST_SET, *variations()]
@@ -188,11 +190,12 @@ def _train_job(job: dict) -> dict:
 
 
 def _teach_job(job: dict) -> dict:
-    """One drive of teach_course by the synthetic driver of ``order`` and ``style``, and a model by the teach recipe."""
-    from terrapref.learning.recipe import run_recipe
+    """The recipe's drive(s) by the synthetic driver of ``order`` and ``style``, and its model."""
+    from terrapref.learning.recipe import recipe_named, run_recipe
 
     t0 = time.perf_counter()
-    recipe = replace(TEACH, train=replace(TEACH.train, epochs=job["epochs"]))
+    named = recipe_named(job["recipe"])
+    recipe = replace(named, train=replace(named.train, epochs=job["epochs"]))
     out = run_recipe(recipe, job["workdir"], job["seed"], PreferenceProfile(tuple(job["order"])), style=job["style"])
     return {**job, "out": str(out.model), "demo_minutes": out.demo_minutes, "train_s": time.perf_counter() - t0}
 
@@ -201,7 +204,7 @@ def teach_jobs(plan: StudyPlan, work: Path) -> list[dict]:
     """The teaching study's models: every order under the default style, every style under the default order."""
     default = plan.orders[0]
     combos = [(o, "default") for o in plan.orders] + [(default, st) for st in plan.styles if st != "default"]
-    return [{"study": "teach", "method": "C", "seed": s, "order": list(o), "style": st, "epochs": plan.epochs,
+    return [{"study": "teach", "method": "C", "seed": s, "order": list(o), "style": st, "epochs": plan.epochs, "recipe": plan.recipe,
              "workdir": str(work / "teach" / f"{'_'.join(c[:2] for c in o[:3])}_{st}_s{s}")}
             for s in range(plan.seeds) for o, st in combos]
 
@@ -286,7 +289,9 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
 
     t0 = time.perf_counter()
     taught_jobs = teach_jobs(plan, work)
-    log(f"[4/6] teaching: {len(taught_jobs)} drives of teach_course and models (recipe teach; "
+    from terrapref.learning.recipe import recipe_named
+
+    log(f"[4/6] teaching: {len(taught_jobs)} drives of {recipe_named(plan.recipe).course} and models (recipe {plan.recipe}; "
         f"{len(plan.orders)} orders, {len(plan.styles)} driver styles, {plan.seeds} seed(s)) ...")
     taught = _pool_map(_teach_job, taught_jobs, workers, log, "taught model")
     timings["teaching"] = time.perf_counter() - t0
@@ -340,4 +345,5 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
 def _plan_dict(plan: StudyPlan) -> dict:
     return {"seeds": plan.seeds, "minutes": list(plan.minutes), "epochs": plan.epochs, "cnn_epochs": plan.cnn_epochs,
             "noise": {k: list(v) for k, v in plan.noise.items()}, "horizons": list(plan.horizons), "widths": list(plan.widths),
-            "scenarios": plan.scenarios(), "orders": [list(o) for o in plan.orders], "styles": list(plan.styles), "layouts": list(plan.layouts)}
+            "scenarios": plan.scenarios(), "orders": [list(o) for o in plan.orders], "styles": list(plan.styles), "layouts": list(plan.layouts),
+            "recipe": plan.recipe}

@@ -232,8 +232,8 @@ def teaching_section(plan, runs: list[dict], figs: Path) -> list[str]:
     def driver(order, style):
         return _select(taught, method=EXPERT, order=list(order), style=style)
 
-    lines = ["## 6. Any order, any driver: one drive of teach_course", "",
-             f"Per training seed, the synthetic driver drives teach_course once (recipe teach, {plan.epochs} epochs) for each order "
+    lines = [f"## 6. Any order, any driver: one drive by recipe {plan.recipe}", "",
+             f"Per training seed, the synthetic driver demonstrates (recipe {plan.recipe}, {plan.epochs} epochs) for each order "
              f"(default style) and each driver style (default order); every model then drives {len(plan.layouts)} generated layouts it "
              f"has never seen ({', '.join(plan.layouts)}), and so does the driver it learned from. **Agreement**: the planner's zone "
              "choice equals that driver's in the same zone of the same layout (touching non_traversable where the driver did not "
