@@ -138,7 +138,7 @@ def _train(images, paths, labels, m, config, progress) -> CnnTrainResult:
     net = CnnNet(config, images.shape[1:], m)
     opt = torch.optim.Adam(net.parameters(), lr=config.lr)
     X, P, y = _onehot(images, config.n_classes), torch.from_numpy(paths), torch.from_numpy(labels)
-    weight = class_weights(labels[tr], m) if config.class_balance else None
+    weight = torch.as_tensor(class_weights(labels[tr], m), dtype=torch.float32) if config.class_balance else None
     loss_fn, plain = nn.CrossEntropyLoss(weight=weight), nn.CrossEntropyLoss()
     best = (np.inf, 0, 0.0, None)
     for epoch in range(1, config.epochs + 1):
