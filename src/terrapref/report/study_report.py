@@ -247,7 +247,7 @@ def teaching_section(plan, runs: list[dict], figs: Path) -> list[str]:
         dsucc = [z["success"] for r in d for z in r["metrics"]["zones"]]
         lines.append(f"| {' > '.join(order)} | {rate_text(ok, n)} | {rate_text(int(sum(succ)), len(succ))} | "
                      f"{rate_text(int(sum(dsucc)), len(dsucc))} | {_collisions(p)} |")
-        labels.append(" > ".join(o[:4] for o in order[:3]))
+        labels.append(" > ".join(order[:3]))
         rates.append(ok / n if n else float("nan"))
         intervals.append(wilson(ok, n))
     lines += ["", "Driver styles (order " + " > ".join(default) + "): each style's planner against its own driver, and the "
