@@ -1,5 +1,5 @@
-"""Agreement with the driver after one drive of teach_course, per preference order (issue: any
-driver's preference from one five-minute drive).
+"""Agreement with the driver after one drive of teach_course, per preference order: does one
+five-minute drive teach any driver's preference?
 
 For every order and training seed, the synthetic driver of that order drives the demonstration
 course once (recipe ``teach`` unless --recipe says otherwise), a model is trained, and the model
