@@ -1,19 +1,14 @@
-"""The simulation loop and the Gymnasium environments: API, timing, determinism, collisions, goal."""
+"""The simulation loop: timing, determinism, collisions, goal (the Gymnasium environments: test_gym_env.py)."""
 
 from __future__ import annotations
 
-import doctest
 import math
 
-import gymnasium as gym
 import numpy as np
 import pytest
-from gymnasium.utils.env_checker import check_env
 
-import terrapref.sim.env
 from terrapref.scenario import Scenario, parse_scenario
 from terrapref.sim import Frame, SimConfig, Simulation, run_episode
-from terrapref.sim.env import ENV_ID, ENV_ID_CONTINUOUS, OffRoadNavEnv
 from terrapref.vehicle import Command, Pose, VehicleConfig
 
 
@@ -48,79 +43,6 @@ class PursuitDriver:
         tx, ty = wp[self.target]
         error = (math.atan2(ty - y, tx - x) - yaw + math.pi) % (2 * math.pi) - math.pi
         return Command(1.0, float(np.clip(2.0 * error + self.rng.normal(0.0, self.noise_rps), -1.0, 1.0)))
-
-
-# --- Gymnasium API ----------------------------------------------------------------------------
-
-
-@pytest.mark.parametrize("env_id", [ENV_ID, ENV_ID_CONTINUOUS])
-def test_check_env_passes(env_id):
-    env = gym.make(env_id)
-    check_env(env.unwrapped)
-    env.close()
-
-
-def test_env_docstring_example_runs():
-    result = doctest.testmod(terrapref.sim.env, verbose=False)
-    assert result.attempted > 0
-    assert result.failed == 0
-
-
-@pytest.mark.parametrize("env_id,actions", [(ENV_ID, [10, 0, 20, 13, 7] * 4), (ENV_ID_CONTINUOUS, [[1.0, 0.0], [0.5, -1.0], [1.0, 0.7]] * 6)])
-def test_seeded_resets_give_identical_episodes(env_id, actions):
-    env = gym.make(env_id, scenario="demo_course", start_jitter_m=0.5)
-    runs = []
-    for _ in range(2):
-        obs, _ = env.reset(seed=123)
-        record = [obs]
-        for a in actions:
-            obs, reward, terminated, truncated, info = env.step(np.asarray(a, dtype=np.float32) if env_id == ENV_ID_CONTINUOUS else a)
-            record.append((obs, reward, terminated, truncated, info["collisions"]))
-        runs.append(record)
-    first, second = runs
-    for a, b in zip(first, second):
-        np.testing.assert_equal(a, b)
-    # The seed matters: another one jitters the start elsewhere.
-    other, _ = env.reset(seed=124)
-    assert not np.array_equal(other["pose"], first[0]["pose"])
-    env.close()
-
-
-def test_observation_contents():
-    scenario = _scenario()
-    env = OffRoadNavEnv(scenario, n_waypoints=4, waypoint_spacing_m=2.0)
-    obs, info = env.reset(seed=0)
-    assert obs["image"].shape == (480, 640) and obs["image"].dtype == np.uint8
-    np.testing.assert_allclose(obs["pose"], [2.0, 5.0, 0.0])
-    np.testing.assert_allclose(obs["waypoints"], [[4.0, 5.0], [6.0, 5.0], [8.0, 5.0], [10.0, 5.0]])
-    assert info == {"collisions": 0, "progress_m": 0.0, "time_s": 0.0}
-    obs, reward, terminated, truncated, info = env.step(10)  # straight on: 0.1 m of progress
-    assert reward == pytest.approx(0.1, abs=1e-9)
-    assert info["time_s"] == pytest.approx(0.1) and info["progress_m"] == pytest.approx(0.1)
-    assert not terminated and not truncated
-    assert env.observation_space.contains(obs)
-
-
-def test_continuous_actions_are_clipped_like_the_joystick():
-    env = OffRoadNavEnv(_scenario(), action_type="continuous")
-    env.reset(seed=0)
-    env.step(np.array([5.0, 0.0], dtype=np.float32))
-    assert env.sim.vehicle.command == Command(1.0, 0.0)
-    assert env.sim.vehicle.pose.x == pytest.approx(2.1)
-
-
-def test_rgb_render():
-    env = OffRoadNavEnv(_scenario(), render_mode="rgb_array")
-    env.reset(seed=0)
-    rgb = env.render()
-    assert rgb.shape == (480, 640, 3) and rgb.dtype == np.uint8
-    grass = np.array(env.scenario.classes.palette()[0])
-    assert (rgb[-1] == grass).all()
-
-
-def test_bad_action_type_is_rejected():
-    with pytest.raises(ValueError):
-        OffRoadNavEnv(_scenario(), action_type="joystick")
 
 
 # --- timing -----------------------------------------------------------------------------------
@@ -228,33 +150,6 @@ def test_non_lethal_terrain_is_no_collision():
     assert sim.collisions == 0
 
 
-def test_env_penalises_a_collision_once():
-    env = OffRoadNavEnv(_scenario(terrain=[LETHAL_STRIP]), collision_penalty=10.0, cross_track_weight=0.0)
-    env.reset(seed=0)
-    rewards = []
-    for _ in range(60):
-        _, reward, _, _, info = env.step(10)
-        rewards.append(reward)
-    assert info["collisions"] == 1
-    assert sum(r < 0 for r in rewards) == 1
-    assert sum(rewards) == pytest.approx(6.0 - 10.0, abs=1e-9)  # 6 m of progress, one penalty
-
-
-def test_reaching_the_goal_terminates():
-    env = OffRoadNavEnv(_scenario())  # straight path from (2, 5) to (15, 5), goal radius 2 m
-    env.reset(seed=0)
-    for step in range(1, 200):
-        _, _, terminated, truncated, _ = env.step(10)
-        x = env.sim.vehicle.pose.x
-        assert not truncated
-        if terminated:
-            break
-        assert 15.0 - x > 2.0 - 1e-9
-    assert terminated and env.sim.reached_goal
-    assert 15.0 - x <= 2.0
-    assert step in (110, 111)  # 11 m at 1 m/s, 10 frames a second
-
-
 def test_run_episode_reaches_the_goal_and_stops():
     sim = Simulation(_scenario())
     log = run_episode(sim, PursuitDriver(noise_rps=0.0), np.random.default_rng(0))
@@ -272,15 +167,14 @@ def test_being_near_the_end_too_early_is_not_the_goal():
     assert math.hypot(2.0 - 2.0, 6.5 - 5.0) <= sim.config.goal_radius_m
 
 
-def test_time_limit_truncates():
-    env = OffRoadNavEnv(_scenario(), sim=SimConfig(time_limit_s=1.0))
-    env.reset(seed=0)
-    for step in range(1, 20):
-        _, _, terminated, truncated, _ = env.step(0)
-        if truncated:
-            break
-    assert truncated and not terminated and step == 10
+def test_default_time_limit():
     assert Simulation(_scenario()).time_limit_s == pytest.approx(2 * 13.0 / 1.0 + 60.0)
+    sim = Simulation(_scenario(), config=SimConfig(time_limit_s=1.0))
+    for _ in range(9):
+        sim.step(Command(0.0, 0.0))
+    assert not sim.timed_out
+    sim.step(Command(0.0, 0.0))
+    assert sim.timed_out and sim.done
 
 
 def test_reset_accepts_a_numpy_pose():

@@ -1,152 +1,374 @@
-"""Gymnasium environment over the simulation loop.
+"""Gymnasium environments over the simulation loop.
 
-Registered as ``terrapref/OffRoadNav-v0`` (discrete actions: an index into the control set)
-and ``terrapref/OffRoadNavContinuous-v0`` (actions (v [m/s], w [rad/s])). One step is one camera
-frame (0.1 s at the default 10 Hz).
+Registered as ``terrapref/OffRoadNav-v1`` (discrete actions: an index into the control set)
+and ``terrapref/OffRoadNavContinuous-v1`` (actions in [-1, 1]^2 scaled to (v, w)). One step is
+one camera frame (0.1 s at the default 10 Hz). The spaces do not depend on the course, so one
+policy and one vector env serve every course (README, "Python and Gymnasium").
 
 Example:
     >>> import gymnasium as gym
     >>> import terrapref.sim.env  # registers the ids
-    >>> env = gym.make("terrapref/OffRoadNav-v0", scenario="demo_course")
+    >>> env = gym.make("terrapref/OffRoadNav-v1", scenario="demo_course")
     >>> obs, info = env.reset(seed=0)
     >>> obs["image"].shape, obs["image"].dtype.name
-    ((480, 640), 'uint8')
+    ((120, 160, 1), 'uint8')
     >>> obs, reward, terminated, truncated, info = env.step(10)  # straight ahead
+    >>> sorted(info["reward_terms"])
+    ['collision', 'cross_track', 'goal', 'off_map', 'progress', 'terrain']
 """
 
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
+from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from gymnasium.error import InvalidAction, ResetNeeded
 
 from terrapref.camera import CameraConfig
 from terrapref.scenario import Scenario, resolve_scenario
-from terrapref.sim.loop import Frame, SimConfig, Simulation
+from terrapref.sim.loop import SimConfig, Simulation
+from terrapref.terrain.profile import PreferenceProfile
 from terrapref.vehicle import Command, ControlSet, Pose
 
-ENV_ID = "terrapref/OffRoadNav-v0"
-ENV_ID_CONTINUOUS = "terrapref/OffRoadNavContinuous-v0"
+ENV_ID = "terrapref/OffRoadNav-v1"
+ENV_ID_CONTINUOUS = "terrapref/OffRoadNavContinuous-v1"
+MAX_EPISODE_STEPS = 7200  # 12 simulated minutes at 10 Hz: twice the longest packaged course at 1 m/s, plus a minute
+RANDOM_COURSE = "gen:*"  # a freshly generated course at every reset
+RANDOM_COURSE_SEEDS = (1_000_000, 2_000_000)  # far from the layouts the docs choose and measure on (below 10,000)
+WAYPOINT_RANGE_M = 50.0  # waypoints and offsets are clipped to this, so the spaces are course-independent
+TOP_DOWN_SPAN_M = 30.0  # side of the square around the vehicle that the top-down view shows
+_SIM_CACHE = 4  # simulations kept for courses seen recently (rasterising one costs 50-130 ms)
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """The reward, term by term; each step's terms are in ``info["reward_terms"]``.
+
+    Attributes:
+        progress_weight: per metre that the vehicle's projection on the path advanced this step.
+            The advance is bounded by the distance the vehicle drove, counts backwards as well
+            as forwards, and is zero while the vehicle is farther than ``corridor_m`` from the
+            path or off the map.
+        corridor_m: progress is credited only within this distance of the path [m].
+        cross_track_weight: per metre of distance from the path, every step.
+        collision_penalty: per entry onto lethal terrain.
+        off_map_penalty: once, on leaving the map.
+        goal_reward: once, on reaching the goal.
+        terrain_weight: per unit of terrain cost: each metre driven on the class ranked ``r``
+            (0 = most preferred) in the env's profile costs ``terrain_growth ** r``; the
+            background and lethal classes cost nothing here (lethal terrain is a collision).
+            0 (the default) leaves terrain preference out of the reward.
+        terrain_growth: how much each later class in the profile costs per metre, relative to
+            the one before (the synthetic driver's default, 1.5).
+    """
+
+    progress_weight: float = 1.0
+    corridor_m: float = 5.0
+    cross_track_weight: float = 0.01
+    collision_penalty: float = 10.0
+    off_map_penalty: float = 10.0
+    goal_reward: float = 10.0
+    terrain_weight: float = 0.0
+    terrain_growth: float = 1.5
+
+    def __post_init__(self) -> None:
+        for name, value in vars(self).items():
+            if not math.isfinite(value):
+                raise ValueError(f"RewardConfig.{name} must be finite, got {value!r}")
+        if self.corridor_m <= 0 or self.terrain_growth <= 0:
+            raise ValueError("RewardConfig.corridor_m and terrain_growth must be positive")
 
 
 class OffRoadNavEnv(gym.Env):
     """Follow a reference path across terrain, seeing only a segmentation camera.
 
-    Observation (dict):
-        image: segmentation image, (H, W) uint8 class ids (255 unknown).
-        pose: (x [m], y [m], yaw [rad]) in the world frame, float32.
-        waypoints: the next ``n_waypoints`` path points ahead of the vehicle's progress,
-            (n_waypoints, 2) [m] world frame, float32 (the last one repeated near the end).
-    Reward: metres of progress along the path, minus ``collision_penalty`` per entry onto
-    lethal terrain and ``cross_track_weight`` x |cross-track error| [m] per step.
-    Terminated at the goal; truncated at the time limit.
+    Observation (dict; the same spaces on every course):
+        image: the segmentation image sampled to ``image_size`` by nearest pixel (class ids are
+            never interpolated), channels last, uint8. ``image_encoding="ids"``: one channel of
+            class ids (255 unknown). ``"onehot"``: one channel per class of the class table (in
+            table order), 255 where the pixel is of that class, else 0.
+        pose: (signed distance from the path [m], left positive; heading relative to the
+            path's direction [rad]; share of the path done, 0-1), float32.
+        waypoints: the next ``n_waypoints`` path points, ``waypoint_spacing_m`` apart ahead of
+            the vehicle's progress, in the vehicle frame (x forward, y left) [m], flattened to
+            (x0, y0, x1, y1, ...), float32. Distances are clipped to +-50 m.
+    Action: discrete, an index 0..20 into the control set; continuous, (a_v, a_w) in [-1, 1],
+        v = (a_v + 1) / 2 x max speed, w = a_w x max yaw rate.
+    Reward: :class:`RewardConfig`. Terminated at the goal (``info["is_success"]``), on entering
+    lethal terrain and on leaving the map (each configurable); truncated only by the
+    registered ``max_episode_steps`` (Gymnasium's TimeLimit).
+    Reset: ``scenario`` may name several courses (one is drawn per reset) or ``"gen:*"`` (a new
+    generated course per reset); the start is jittered by up to ``start_jitter_m`` and
+    ``start_yaw_jitter_rad``. ``reset(options={"scenario": ..., "start": (x, y, yaw)})``
+    overrides both for one episode.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
     def __init__(
         self,
-        scenario: str | Scenario = "demo_course",
+        scenario: str | Scenario | Sequence[str | Scenario] = "demo_course",
         action_type: Literal["discrete", "continuous"] = "discrete",
+        image_size: tuple[int, int] | None = (120, 160),
+        image_encoding: Literal["ids", "onehot"] = "ids",
+        n_waypoints: int = 10,
+        waypoint_spacing_m: float = 2.0,
+        reward: RewardConfig | None = None,
+        profile: str | Sequence[str] | PreferenceProfile | None = None,
+        terminate_on_lethal: bool = True,
+        terminate_off_map: bool = True,
+        start_jitter_m: float = 0.5,
+        start_yaw_jitter_rad: float = 0.1,
         control_set: ControlSet | None = None,
         camera: CameraConfig | None = None,
         sim: SimConfig | None = None,
-        n_waypoints: int = 10,
-        waypoint_spacing_m: float = 2.0,
-        collision_penalty: float = 10.0,
-        cross_track_weight: float = 0.01,
-        start_jitter_m: float = 0.0,
         render_mode: str | None = None,
     ) -> None:
-        self.scenario = resolve_scenario(scenario) if isinstance(scenario, str) else scenario
-        self.sim = Simulation(self.scenario, camera, sim)
-        self.control_set = control_set or ControlSet()
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+        if action_type not in ("discrete", "continuous"):
+            raise ValueError(f"action_type must be 'discrete' or 'continuous', got {action_type!r}")
+        if image_encoding not in ("ids", "onehot"):
+            raise ValueError(f"image_encoding must be 'ids' or 'onehot', got {image_encoding!r}")
+        if n_waypoints < 1 or not waypoint_spacing_m > 0:
+            raise ValueError("n_waypoints must be >= 1 and waypoint_spacing_m > 0")
+        if not (start_jitter_m >= 0 and start_yaw_jitter_rad >= 0):
+            raise ValueError("start_jitter_m and start_yaw_jitter_rad must be >= 0")
+        self.courses: tuple[str | Scenario, ...] = (scenario,) if isinstance(scenario, (str, Scenario)) else tuple(scenario)
+        if not self.courses:
+            raise ValueError("scenario: name at least one course")
         self.action_type = action_type
-        self.n_waypoints = n_waypoints
-        self.waypoint_spacing_m = waypoint_spacing_m
-        self.collision_penalty = collision_penalty
-        self.cross_track_weight = cross_track_weight
-        self.start_jitter_m = start_jitter_m
+        self.control_set = control_set or ControlSet()
+        self.reward_config = reward or RewardConfig()
+        self.terminate_on_lethal, self.terminate_off_map = terminate_on_lethal, terminate_off_map
+        self.start_jitter_m, self.start_yaw_jitter_rad = start_jitter_m, start_yaw_jitter_rad
+        self.n_waypoints, self.waypoint_spacing_m = n_waypoints, waypoint_spacing_m
+        self.image_encoding = image_encoding
         self.render_mode = render_mode
-        h, w = self.sim.camera.shape
-        sx, sy = self.scenario.size_m
-        reach = 1e3  # poses may leave the map; keep the space finite but generous
+        self._camera_config, self._sim_config = camera, sim
+        self._sims: OrderedDict[Any, Simulation] = OrderedDict()
+
+        # The first course fixes the class table and the camera; every later course must share them.
+        first = self._simulation(self.courses[0] if self.courses[0] != RANDOM_COURSE else "gen:0")
+        self.sim = first
+        self.classes = first.scenario.classes
+        self.profile = profile if isinstance(profile, PreferenceProfile) else (
+            PreferenceProfile.parse(profile, self.classes, "profile") if profile is not None else PreferenceProfile.default(self.classes))
+        self._terrain_cost = np.zeros(256)
+        for rank, name in enumerate(self.profile.order):
+            if name not in self.classes.lethal:
+                self._terrain_cost[self.classes.id_of(name)] = self.reward_config.terrain_growth**rank
+        self._class_ids = np.array([c.id for c in self.classes.classes], dtype=np.uint8)
+
+        cam_h, cam_w = first.camera.shape
+        h, w = (cam_h, cam_w) if image_size is None else (int(image_size[0]), int(image_size[1]))
+        if not (1 <= h <= cam_h and 1 <= w <= cam_w):
+            raise ValueError(f"image_size must be within the camera's {cam_h} x {cam_w}, got {image_size!r}")
+        rows = ((np.arange(h) + 0.5) * cam_h / h).astype(np.int64)
+        cols = ((np.arange(w) + 0.5) * cam_w / w).astype(np.int64)
+        self._full_image = (h, w) == (cam_h, cam_w)
+        self._pixel_index = (rows[:, None] * cam_w + cols[None, :]).reshape(-1)
+        self._image_hw = (h, w)
+        channels = 1 if image_encoding == "ids" else len(self._class_ids)
+        r = WAYPOINT_RANGE_M
         self.observation_space = spaces.Dict(
             {
-                "image": spaces.Box(0, 255, (h, w), np.uint8),
-                "pose": spaces.Box(
-                    np.array([-reach, -reach, -math.pi], np.float32),
-                    np.array([sx + reach, sy + reach, math.pi], np.float32),
-                    dtype=np.float32,
-                ),
-                "waypoints": spaces.Box(np.float32(-reach), np.float32(max(sx, sy) + reach), (n_waypoints, 2), np.float32),
+                "image": spaces.Box(0, 255, (h, w, channels), np.uint8),
+                "pose": spaces.Box(np.array([-r, -math.pi, 0.0], np.float32), np.array([r, math.pi, 1.0], np.float32), dtype=np.float32),
+                "waypoints": spaces.Box(np.float32(-r), np.float32(r), (2 * n_waypoints,), np.float32),
             }
         )
         if action_type == "discrete":
             self.action_space: spaces.Space = spaces.Discrete(self.control_set.m)
-        elif action_type == "continuous":
-            vc = self.sim.config.vehicle
-            self.action_space = spaces.Box(
-                np.array([0.0, -vc.max_yaw_rate_rps], np.float32), np.array([vc.max_speed_mps, vc.max_yaw_rate_rps], np.float32), dtype=np.float32
-            )
         else:
-            raise ValueError(f"action_type must be 'discrete' or 'continuous', got {action_type!r}")
-        self._frame: Frame | None = None
+            self.action_space = spaces.Box(np.float32(-1.0), np.float32(1.0), (2,), np.float32)
+        self._progress_s = 0.0
+        self._started = False
+        self._ended = False
 
-    def _observation(self, frame: Frame) -> dict[str, np.ndarray]:
-        s = self.sim.progress_s + self.waypoint_spacing_m * np.arange(1, self.n_waypoints + 1)
-        x, y, yaw = frame.pose
-        yaw = (yaw + math.pi) % (2 * math.pi) - math.pi
-        return {
-            "image": frame.image,
-            "pose": np.array([x, y, yaw], np.float32),
-            "waypoints": self.sim.path.point_at(s).astype(np.float32),
-        }
+    # --- courses ------------------------------------------------------------------------------
 
-    def _info(self) -> dict[str, Any]:
-        return {"collisions": self.sim.collisions, "progress_m": self.sim.progress_s, "time_s": self.sim.time_s}
+    def _simulation(self, course: str | Scenario) -> Simulation:
+        """The simulation of ``course``, from the cache of recent ones when it is there."""
+        key = course if isinstance(course, str) else ("scenario", id(course))
+        if key in self._sims:
+            self._sims.move_to_end(key)
+            return self._sims[key]
+        scenario = resolve_scenario(course) if isinstance(course, str) else course
+        sim = Simulation(scenario, self._camera_config, self._sim_config)
+        if hasattr(self, "classes") and scenario.classes != self.classes:
+            raise ValueError(f"scenario {scenario.name!r}: its class table differs from the first course's; one env needs one table")
+        self._sims[key] = sim
+        while len(self._sims) > _SIM_CACHE:
+            self._sims.popitem(last=False)
+        return sim
+
+    def _draw_course(self) -> str | Scenario:
+        course = self.courses[int(self.np_random.integers(len(self.courses)))] if len(self.courses) > 1 else self.courses[0]
+        if course == RANDOM_COURSE:
+            return f"gen:{int(self.np_random.integers(*RANDOM_COURSE_SEEDS))}"
+        return course
+
+    # --- Gymnasium API ------------------------------------------------------------------------
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
         super().reset(seed=seed)
-        x, y, yaw = self.scenario.start
-        if self.start_jitter_m > 0:
-            dx, dy = self.np_random.uniform(-self.start_jitter_m, self.start_jitter_m, 2)
-            x, y = x + dx, y + dy
-        self._frame = self.sim.reset(Pose(x, y, yaw))
-        return self._observation(self._frame), self._info()
+        options = dict(options or {})
+        unknown = set(options) - {"scenario", "start"}
+        if unknown:
+            raise ValueError(f"reset options: unknown key {sorted(unknown)[0]!r}; expected 'scenario' and/or 'start'")
+        course = options.get("scenario")
+        self.sim = self._simulation(course if course is not None and course != RANDOM_COURSE else self._draw_course())
+        if options.get("start") is not None:
+            start = np.asarray(options["start"], dtype=float)
+            if start.shape != (3,) or not np.isfinite(start).all():
+                raise ValueError(f"reset options: 'start' must be three finite numbers (x [m], y [m], yaw [rad]), got {options['start']!r}")
+            pose = Pose(*map(float, start))
+        else:
+            x, y, yaw = self.sim.scenario.start
+            dx, dy = self.np_random.uniform(-1.0, 1.0, 2) * self.start_jitter_m
+            dyaw = self.np_random.uniform(-1.0, 1.0) * self.start_yaw_jitter_rad
+            pose = Pose(x + dx, y + dy, yaw + dyaw)
+        frame = self.sim.reset(pose)
+        self._progress_s = self.sim.path.project(np.array(pose[:2]), 0.0, 5.0)[0]
+        self._started, self._ended = True, False
+        terms = dict.fromkeys(("progress", "cross_track", "collision", "off_map", "goal", "terrain"), 0.0)
+        return self._observation(frame.view, frame.pose), self._info(terms, success=False, off_map=False)
 
     def step(self, action: Any) -> tuple[dict, float, bool, bool, dict]:
-        if self._frame is None:
-            raise RuntimeError("call reset() before step()")
-        if self.action_type == "discrete":
-            cmd = Command(*self.control_set.command(int(action)))
-        else:
-            a = np.asarray(action, dtype=float)
-            cmd = Command(float(a[0]), float(a[1]))
-        progress0, collisions0 = self.sim.progress_s, self.sim.collisions
-        self._frame = self.sim.step(cmd)
-        _, offset = self.sim.path.project(self._frame.pose[:2], self.sim.progress_s - 2.0, self.sim.progress_s + 2.0)
-        reward = (
-            (self.sim.progress_s - progress0)
-            - self.collision_penalty * (self.sim.collisions - collisions0)
-            - self.cross_track_weight * abs(offset)
-        )
-        return self._observation(self._frame), float(reward), self.sim.reached_goal, self.sim.timed_out and not self.sim.reached_goal, self._info()
+        if not self._started:
+            raise ResetNeeded("call reset() before step()")
+        if self._ended:
+            raise ResetNeeded("the episode has ended (goal, lethal terrain or off the map); call reset() before step()")
+        command = self._command(action)  # checked before anything changes, so a bad action leaves the env as it was
+        sim, cfg = self.sim, self.reward_config
+        tick0, collisions0 = len(sim.trace) - 1, sim.collisions
+        frame = sim.step(command)
+        trace = np.array(sim.trace[tick0:], dtype=float)
+        hops = np.hypot(*np.diff(trace[:, :2], axis=0).T)
+        travelled = float(hops.sum())
+        sx, sy = sim.scenario.size_m
+        xy = trace[1:, :2]
+        off_map = bool(((xy < 0.0) | (xy > (sx, sy))).any())
+
+        s_near, offset = sim.path.project(trace[-1, :2], self._progress_s - 2.0, self._progress_s + 10.0 + travelled)
+        advance = 0.0
+        if abs(offset) <= cfg.corridor_m and not off_map:
+            advance = min(max(s_near - self._progress_s, -travelled), travelled)
+            self._progress_s += advance
+        collided = sim.collisions - collisions0
+        end = sim.path.waypoints[-1]
+        success = math.hypot(trace[-1, 0] - end[0], trace[-1, 1] - end[1]) <= sim.config.goal_radius_m and self._progress_s >= 0.5 * sim.path.length_m
+        terrain_cost = float((self._terrain_cost[sim.world.class_at(xy)] * hops).sum())
+        terms = {
+            "progress": cfg.progress_weight * advance,
+            "cross_track": -cfg.cross_track_weight * abs(offset),
+            "collision": -cfg.collision_penalty * collided,
+            "off_map": -cfg.off_map_penalty * off_map,
+            "goal": cfg.goal_reward * success,
+            "terrain": -cfg.terrain_weight * terrain_cost,
+        }
+        terminated = bool(success or (self.terminate_on_lethal and collided > 0) or (self.terminate_off_map and off_map))
+        self._ended = terminated
+        return self._observation(frame.view, frame.pose), float(sum(terms.values())), terminated, False, self._info(terms, success, off_map)
 
     def render(self) -> np.ndarray | None:
-        if self.render_mode != "rgb_array" or self._frame is None:
+        """``rgb_array``: a top-down view around the vehicle (path white, vehicle black with a red
+        heading) beside the camera's segmentation in the class colours, (480, 1120, 3) uint8."""
+        if self.render_mode != "rgb_array" or not self._started:
             return None
-        return self.scenario.classes.palette()[self._frame.image]
+        palette = self.classes.palette()
+        camera = palette[self.sim.frame().image]
+        return np.concatenate([self._top_down(camera.shape[0]), camera], axis=1)
+
+    # --- pieces -------------------------------------------------------------------------------
+
+    def _command(self, action: Any) -> Command:
+        a = np.asarray(action)
+        if self.action_type == "discrete":
+            n = self.control_set.m
+            if a.shape != () or a.dtype.kind not in "iu":
+                raise InvalidAction(f"a discrete action is one integer in 0..{n - 1}, got {action!r}")
+            index = int(a)
+            if not 0 <= index < n:
+                raise InvalidAction(f"a discrete action is one integer in 0..{n - 1}, got {index}")
+            return Command(*self.control_set.command(index))
+        if a.shape != (2,) or a.dtype.kind not in "iuf":
+            raise InvalidAction(f"a continuous action is two numbers (a_v, a_w) in [-1, 1], got {action!r}")
+        a = a.astype(float)
+        if not np.isfinite(a).all():
+            raise InvalidAction(f"a continuous action must be finite, got {action!r}")
+        a = np.clip(a, -1.0, 1.0)
+        vc = self.sim.config.vehicle
+        return Command(0.5 * (a[0] + 1.0) * vc.max_speed_mps, a[1] * vc.max_yaw_rate_rps)
+
+    def _observation(self, view, pose: Pose) -> dict[str, np.ndarray]:
+        ids = view.image.reshape(-1) if self._full_image else view.pixels(self._pixel_index)
+        ids = ids.reshape(self._image_hw)
+        if self.image_encoding == "ids":
+            image = ids[:, :, None].copy()
+        else:
+            image = (ids[:, :, None] == self._class_ids).astype(np.uint8) * np.uint8(255)
+        x, y, yaw = pose
+        path, r = self.sim.path, WAYPOINT_RANGE_M
+        _, offset = path.project(np.array([x, y]), self._progress_s - 2.0, self._progress_s + 10.0)
+        heading = (yaw - float(path.heading_at(self._progress_s)) + math.pi) % (2 * math.pi) - math.pi
+        s = self._progress_s + self.waypoint_spacing_m * np.arange(1, self.n_waypoints + 1)
+        d = path.point_at(s) - (x, y)
+        c, sn = math.cos(yaw), math.sin(yaw)
+        local = np.stack([c * d[:, 0] + sn * d[:, 1], -sn * d[:, 0] + c * d[:, 1]], axis=1)
+        return {
+            "image": image,
+            "pose": np.array([np.clip(offset, -r, r), np.clip(heading, -math.pi, math.pi), min(max(self._progress_s / path.length_m, 0.0), 1.0)], np.float32),
+            "waypoints": np.clip(local, -r, r).reshape(-1).astype(np.float32),
+        }
+
+    def _info(self, terms: dict[str, float], success: bool, off_map: bool) -> dict[str, Any]:
+        return {
+            "scenario": self.sim.scenario.name,
+            "is_success": bool(success),
+            "collisions": self.sim.collisions,
+            "off_map": off_map,
+            "progress_m": self._progress_s,
+            "time_s": self.sim.time_s,
+            "reward_terms": terms,
+        }
+
+    def _top_down(self, size: int) -> np.ndarray:
+        sim = self.sim
+        x, y, yaw = sim.vehicle.pose
+        step = TOP_DOWN_SPAN_M / size
+        u = (np.arange(size) + 0.5) * step - TOP_DOWN_SPAN_M / 2
+        grid = np.stack(np.meshgrid(x + u, y - u), axis=-1)  # rows run north to south
+        view = self.classes.palette()[sim.world.class_at(grid)]
+
+        def to_pixels(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            col = np.floor((pts[:, 0] - x + TOP_DOWN_SPAN_M / 2) / step).astype(np.int64)
+            row = np.floor((y + TOP_DOWN_SPAN_M / 2 - pts[:, 1]) / step).astype(np.int64)
+            keep = (col >= 0) & (col < size) & (row >= 0) & (row < size)
+            return row[keep], col[keep]
+
+        path = sim.path.point_at(np.arange(0.0, sim.path.length_m, step))
+        view[to_pixels(path)] = (255, 255, 255)
+        ang = np.linspace(0.0, 2 * math.pi, 64)
+        body = np.concatenate([np.stack([x + r * np.cos(ang), y + r * np.sin(ang)], axis=1) for r in np.arange(0.0, 0.6, step / 2)])
+        view[to_pixels(body)] = (0, 0, 0)
+        reach = np.arange(0.0, 1.5, step / 2)
+        view[to_pixels(np.stack([x + reach * math.cos(yaw), y + reach * math.sin(yaw)], axis=1))] = (220, 30, 30)
+        return view
 
 
 def register_envs() -> None:
     """Register the environment ids with Gymnasium (idempotent)."""
     for env_id, action_type in ((ENV_ID, "discrete"), (ENV_ID_CONTINUOUS, "continuous")):
         if env_id not in gym.registry:
-            gym.register(id=env_id, entry_point="terrapref.sim.env:OffRoadNavEnv", kwargs={"action_type": action_type})
+            gym.register(id=env_id, entry_point="terrapref.sim.env:OffRoadNavEnv", kwargs={"action_type": action_type}, max_episode_steps=MAX_EPISODE_STEPS)
 
 
 register_envs()
