@@ -329,6 +329,21 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_export(args: argparse.Namespace) -> int:
+    from terrapref.interop.onnx_export import export_onnx
+    from terrapref.learning.model_file import load_model
+
+    out = Path(args.out)
+    if out.resolve() == Path(args.input).resolve():
+        raise UserError(args.out, "is the input; choose another output file", field="--out")
+    if out.is_dir():
+        raise UserError(args.out, "is a folder; expected a file name", field="--out")
+    model = load_model(args.input)
+    export_onnx(model, out)
+    print(f"wrote {out} (ONNX: input utilities float32 [N, {model.classifier.m}, {model.classifier.n_features}], output logits float32 [N, {model.classifier.m}])")
+    return 0
+
+
 def _cmd_recipes(args: argparse.Namespace) -> int:
     from terrapref.learning.recipe import DEFAULT_RECIPE, RECIPES
 
@@ -498,6 +513,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--recipe", metavar="NAME", help="the recipe section 6 teaches every order and style with (default: teach)")
     p.add_argument("--workers", type=int, help="parallel processes (default: one per core)")
     p.set_defaults(func=_cmd_study)
+
+    p = sub.add_parser("export", help="export a trained model as ONNX (the classifier C, its configuration in the metadata)")
+    p.add_argument("input", help="model file (terrapref train)")
+    p.add_argument("--format", choices=["onnx"], required=True, help="output format")
+    p.add_argument("--out", required=True, help="output file")
+    p.set_defaults(func=_cmd_export)
 
     p = sub.add_parser("recipes", help="list the named training recipes (--recipe NAME in train and reproduce)")
     p.set_defaults(func=_cmd_recipes)

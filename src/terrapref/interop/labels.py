@@ -1,0 +1,101 @@
+"""Label maps (``terrapref-labels/1``): a segmentation network's label ids onto terrapref's classes.
+
+A map is keyed by id, never by colour (SPEC 14)::
+
+    format: terrapref-labels/1
+    name: my_network
+    ids:
+      0: unknown
+      3: grass
+      33: mud
+
+Ids the map does not list are unknown (255), and importing reports their share.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from terrapref.errors import ConfigError, Problem
+from terrapref.terrain import ClassTable
+from terrapref.terrain.classes import UNKNOWN
+from terrapref.yamlio import read_yaml_mapping
+
+LABELS_FORMAT = "terrapref-labels/1"
+UNKNOWN_NAME = "unknown"
+MAX_ID = 65535  # mono16 label images
+_KEYS = {"format", "name", "description", "ids"}
+
+
+@dataclass(frozen=True)
+class LabelMap:
+    """Source label id -> terrapref class name (or ``unknown``)."""
+
+    name: str
+    ids: dict[int, str]
+    source: str = ""
+
+    def lut(self, classes: ClassTable) -> np.ndarray:
+        """Lookup table (65536,) uint8: source id -> class id of ``classes`` (255 unknown)."""
+        missing = sorted({n for n in self.ids.values() if n != UNKNOWN_NAME} - set(classes.names))
+        if missing:
+            raise ConfigError(self.source or self.name, f"class {missing[0]!r} is not in the class table ({', '.join(classes.names)})", field="ids")
+        lut = np.full(MAX_ID + 1, UNKNOWN, dtype=np.uint8)
+        for source_id, name in self.ids.items():
+            if name != UNKNOWN_NAME:
+                lut[source_id] = classes.id_of(name)
+        return lut
+
+    def listed(self) -> np.ndarray:
+        """Mask (65536,) of the ids the map lists (``unknown`` included)."""
+        mask = np.zeros(MAX_ID + 1, dtype=bool)
+        mask[list(self.ids)] = True
+        return mask
+
+
+def parse_label_map(data: dict, source: str) -> LabelMap:
+    """Check a parsed ``terrapref-labels/1`` mapping; every problem names its field."""
+    problems = [Problem(k, f"unknown key; expected {', '.join(sorted(_KEYS))}") for k in data if k not in _KEYS]
+    name = data.get("name", Path(source).stem)
+    if not isinstance(name, str) or not name:
+        problems.append(Problem("name", "expected a non-empty string"))
+    ids = data.get("ids")
+    out: dict[int, str] = {}
+    if not isinstance(ids, dict) or not ids:
+        problems.append(Problem("ids", "expected a mapping of label ids to class names"))
+        ids = {}
+    for key, value in ids.items():
+        if isinstance(key, bool) or not isinstance(key, int) or not 0 <= key <= MAX_ID:
+            problems.append(Problem(f"ids.{key}", f"a label id must be an integer in 0..{MAX_ID}"))
+        elif not isinstance(value, str) or not value:
+            problems.append(Problem(f"ids.{key}", "expected a class name (or unknown)"))
+        else:
+            out[key] = value
+    if problems:
+        raise ConfigError(source, problems)
+    return LabelMap(name, out, source)
+
+
+def packaged_label_maps() -> list[str]:
+    """Names of the label maps that ship with terrapref."""
+    return sorted(p.name.removesuffix(".yaml") for p in resources.files("terrapref.data").joinpath("labels").iterdir() if p.name.endswith(".yaml"))
+
+
+def load_label_map(name_or_path: str | Path, classes: ClassTable | None = None, source: str = "labels") -> LabelMap:
+    """A packaged map by name (``rellis3d``) or a ``terrapref-labels/1`` file; with ``classes``,
+    every class it names is checked against that table."""
+    text = str(name_or_path)
+    if text in packaged_label_maps():
+        path = Path(str(resources.files("terrapref.data").joinpath("labels").joinpath(f"{text}.yaml")))
+    elif Path(text).suffix in (".yaml", ".yml") or Path(text).exists():
+        path = Path(text)
+    else:
+        raise ConfigError(source, f"{text!r} is neither a packaged label map ({', '.join(packaged_label_maps())}) nor a file")
+    labels = parse_label_map(read_yaml_mapping(path, LABELS_FORMAT), str(path))
+    if classes is not None:
+        labels.lut(classes)
+    return labels

@@ -1,0 +1,125 @@
+"""The classifier C as an ONNX graph, for runtimes on the robot.
+
+Input ``utilities``, float32 (N, m, k): each frame's utility features U (SPEC 7; k = the
+terrain classes + distance). Output ``logits``, float32 (N, m): C's scores, whose softmax is
+F_t (an ensemble's logits are the log of its members' mean softmax, as in
+:func:`terrapref.learning.numpy_forward`). Everything the model was trained under (preference
+set, camera, classes, profile, feature configuration, the second stage's linear utility) is in
+the model's metadata as JSON strings under ``terrapref.*`` keys.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import onnx
+from onnx import TensorProto, helper, numpy_helper
+
+from terrapref.fileio import write_bytes_atomic
+from terrapref.learning.model_file import LoadedModel
+from terrapref.learning.network import ClassifierConfig, member_prefix
+
+ONNX_FORMAT = "terrapref-onnx/1"
+OPSET = 17  # widely supported by runtimes; every operator used here exists since opset 13
+INPUT, OUTPUT = "utilities", "logits"
+
+
+class _Graph:
+    """Nodes and constants of one graph, with unique names."""
+
+    def __init__(self) -> None:
+        self.nodes: list[onnx.NodeProto] = []
+        self.constants: list[onnx.TensorProto] = []
+        self._n = 0
+
+    def name(self, stem: str) -> str:
+        self._n += 1
+        return f"{stem}_{self._n}"
+
+    def const(self, stem: str, value: np.ndarray) -> str:
+        name = self.name(stem)
+        self.constants.append(numpy_helper.from_array(np.asarray(value), name))
+        return name
+
+    def op(self, op_type: str, inputs: list[str], stem: str | None = None, **attrs) -> str:
+        out = self.name(stem or op_type.lower())
+        self.nodes.append(helper.make_node(op_type, inputs, [out], name=out, **attrs))
+        return out
+
+
+def _member(g: _Graph, c: ClassifierConfig, weights: dict[str, np.ndarray], x: str, prefix: str) -> str:
+    """Logits (N, m) of one network for U (N, m, k) named ``x``; mirrors network._forward_one."""
+    w = lambda name: np.asarray(weights[f"{prefix}{name}"], dtype=np.float32)  # noqa: E731
+    if c.compress:
+        per_row = g.op("Add", [g.op("MatMul", [x, g.const("compress_wT", w("compress.weight").T)]), g.const("compress_b", w("compress.bias"))])
+        scores = g.op("Gather", [per_row, g.const("channel0", np.array(0, np.int64))], axis=2)  # (N, m)
+        h = g.op("Reshape", [per_row, g.const("flat", np.array([0, c.m * c.channels], np.int64))])
+    else:
+        scores = None
+        h = g.op("Reshape", [x, g.const("flat", np.array([0, c.m * c.n_features], np.int64))])
+    activation = {"relu": ("Relu", {}), "tanh": ("Tanh", {}), "elu": ("Elu", {"alpha": 1.0})}[c.activation]
+    for i in range(c.depth + 1):
+        h = g.op("Gemm", [h, g.const(f"layer{i}_w", w(f"layers.{i}.weight")), g.const(f"layer{i}_b", w(f"layers.{i}.bias"))], transB=1)
+        if i < c.depth:
+            h = g.op(activation[0], [h], **activation[1])
+    return g.op("Add", [h, scores]) if c.skip else h
+
+
+def classifier_graph(config: ClassifierConfig, weights: dict[str, np.ndarray]) -> onnx.ModelProto:
+    """An ONNX model computing C's logits for a batch of U."""
+    g = _Graph()
+    x = INPUT
+    if config.ignore:
+        keep = np.ones(config.n_features, np.float32)
+        keep[list(config.ignore)] = 0.0
+        x = g.op("Mul", [x, g.const("ignore_mask", keep)])
+    if config.members == 1:
+        logits = _member(g, config, weights, x, "")
+    else:
+        probs = [g.op("Softmax", [_member(g, config, weights, x, member_prefix(j))], axis=-1) for j in range(config.members)]
+        mean = g.op("Mul", [g.op("Sum", probs), g.const("one_over_members", np.array(1.0 / config.members, np.float32))])
+        logits = g.op("Log", [g.op("Add", [mean, g.const("tiny", np.array(1e-30, np.float32))])])
+    g.nodes.append(helper.make_node("Identity", [logits], [OUTPUT], name=OUTPUT))
+    graph = helper.make_graph(
+        g.nodes,
+        "terrapref_classifier",
+        [helper.make_tensor_value_info(INPUT, TensorProto.FLOAT, ["N", config.m, config.n_features])],
+        [helper.make_tensor_value_info(OUTPUT, TensorProto.FLOAT, ["N", config.m])],
+        initializer=g.constants,
+    )
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)], producer_name="terrapref")
+    model.ir_version = 8  # readable by runtimes from onnxruntime 1.10 on
+    onnx.checker.check_model(model, full_check=True)
+    return model
+
+
+def export_onnx(model: LoadedModel, out: str | Path) -> Path:
+    """Write ``model``'s classifier to ``out`` as ONNX, with its configuration in the metadata."""
+    proto = classifier_graph(model.classifier, model.weights)
+    meta = model.meta
+    props = {
+        "format": ONNX_FORMAT,
+        "classifier": model.classifier.to_dict(),
+        "features": model.features.to_dict(),
+        "preference_set": {"v_mps": model.features.preference.control.v_mps, "w_rps": list(model.features.preference.control.w_rps),
+                           "n_steps": model.features.preference.n_steps, "dt_s": model.features.preference.dt_s},
+        "camera": model.camera.to_dict(),
+        "classes": model.classes.to_dict(),
+        "profile": list(model.profile),
+        "feature_classes": list(model.features.feature_classes),
+    }
+    if model.utility is not None:
+        props["utility"] = {"w": model.utility.w.tolist(), "b": model.utility.b.tolist(), "weight": model.stage_weight}
+    for key in ("recipe", "identifiability", "created", "sources", "fingerprint"):
+        if key in meta:
+            props[key] = meta[key]
+    helper.set_model_props(proto, {f"terrapref.{k}": json.dumps(v) for k, v in props.items()})
+    return write_bytes_atomic(out, proto.SerializeToString())
+
+
+def read_onnx_metadata(path: str | Path) -> dict:
+    """The ``terrapref.*`` metadata of an exported model, decoded (no graph is run)."""
+    proto = onnx.load(str(path), load_external_data=False)
+    return {p.key.removeprefix("terrapref."): json.loads(p.value) for p in proto.metadata_props if p.key.startswith("terrapref.")}

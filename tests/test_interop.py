@@ -1,0 +1,221 @@
+"""Models out (ONNX), label maps in, and the runtime a robot's node wraps."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import onnxruntime as ort
+import pytest
+from helpers import model_meta
+
+from terrapref.camera import CameraConfig
+from terrapref.cli import main
+from terrapref.errors import UserError
+from terrapref.interop.labels import load_label_map, packaged_label_maps
+from terrapref.interop.onnx_export import export_onnx, read_onnx_metadata
+from terrapref.learning import ClassifierConfig, load_model, numpy_forward, save_model
+from terrapref.learning.mlp import init_weights
+from terrapref.learning.network import member_prefix
+from terrapref.planner.planner import Planner
+from terrapref.runtime import STOP, PlannerRuntime
+from terrapref.scenario import resolve_scenario
+from terrapref.sim import Simulation
+from terrapref.terrain import default_classes
+from terrapref.vehicle import Command
+
+CONFIGS = [
+    ClassifierConfig(),  # the paper's C
+    ClassifierConfig(skip=True, members=3),  # recipe teach: residual path, an ensemble of 3
+    ClassifierConfig(activation="tanh", channels=3, skip=True, depth=2),
+    ClassifierConfig(compress=False, activation="elu", ignore=(1,)),
+]
+
+
+def _model(path: Path, config: ClassifierConfig, seed: int = 0, utility: bool = False) -> Path:
+    rng = np.random.default_rng(seed)
+    if config.members == 1:
+        weights = init_weights(config, rng)
+    else:
+        weights = {member_prefix(j) + k: v for j in range(config.members) for k, v in init_weights(config, rng).items()}
+    meta = model_meta()
+    if utility:
+        meta["utility"] = {"w": [-1.0, -2.0, -3.0, -9.0, 4.0], "b": [0.0] * 21, "weight": 5.0}
+    return save_model(path, config, weights, meta)
+
+
+def _linear_model(path: Path) -> Path:
+    """C reduced to its skip path (logits = U @ w): follows the path and shies from terrain."""
+    config = ClassifierConfig(hidden=8, skip=True)
+    dims = [config.m] + [config.hidden] * config.depth + [config.m]
+    weights = {"compress.weight": np.array([[-8.0, -4.0, -2.0, -1.0, 6.0]], np.float32), "compress.bias": np.zeros(1, np.float32)}
+    for i, (a, b) in enumerate(zip(dims[:-1], dims[1:])):
+        weights[f"layers.{i}.weight"] = np.zeros((b, a), np.float32)
+        weights[f"layers.{i}.bias"] = np.zeros(b, np.float32)
+    return save_model(path, config, weights, model_meta())
+
+
+# --- ONNX ------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("config", CONFIGS, ids=["paper", "teach", "tanh-channels", "flat-elu-ignore"])
+def test_onnxruntime_gives_numpy_forwards_logits(tmp_path: Path, config: ClassifierConfig):
+    model = load_model(_model(tmp_path / "m.safetensors", config))
+    out = export_onnx(model, tmp_path / "m.onnx")
+    session = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])
+    assert [(i.name, i.shape) for i in session.get_inputs()] == [("utilities", ["N", 21, 5])]
+    assert [(o.name, o.shape) for o in session.get_outputs()] == [("logits", ["N", 21])]
+    U = np.random.default_rng(1).uniform(0.0, 1.0, (256, 21, 5)).astype(np.float32)
+    logits = session.run(["logits"], {"utilities": U})[0]
+    assert logits.dtype == np.float32 and logits.shape == (256, 21)
+    np.testing.assert_allclose(logits, numpy_forward(model.classifier, model.weights, U), atol=1e-5, rtol=0)
+    single = session.run(["logits"], {"utilities": U[:1]})[0]
+    np.testing.assert_allclose(single[0], logits[0], atol=1e-6)
+
+
+def test_onnx_metadata_carries_the_configuration(tmp_path: Path):
+    model = load_model(_model(tmp_path / "m.safetensors", CONFIGS[1], utility=True))
+    meta = read_onnx_metadata(export_onnx(model, tmp_path / "m.onnx"))
+    assert meta["format"] == "terrapref-onnx/1"
+    assert meta["camera"] == model.camera.to_dict() and meta["features"] == model.features.to_dict()
+    assert meta["classes"] == model.classes.to_dict() and meta["profile"] == list(model.profile)
+    assert meta["classifier"] == model.classifier.to_dict()
+    assert meta["preference_set"]["w_rps"] == list(model.features.preference.control.w_rps) and len(meta["preference_set"]["w_rps"]) == 21
+    assert meta["utility"]["weight"] == 5.0 and meta["utility"]["w"] == [-1.0, -2.0, -3.0, -9.0, 4.0]
+
+
+def test_cli_export_onnx(tmp_path: Path, capsys):
+    src = _model(tmp_path / "m.safetensors", CONFIGS[0])
+    assert main(["export", str(src), "--format", "onnx", "--out", str(tmp_path / "out" / "m.onnx")]) == 0
+    assert "wrote" in capsys.readouterr().out and (tmp_path / "out" / "m.onnx").is_file()
+    assert not list((tmp_path / "out").glob(".*tmp"))  # no temporary file left behind
+    assert main(["export", str(src), "--format", "onnx", "--out", str(src)]) == 2
+    assert "is the input" in capsys.readouterr().err
+    (tmp_path / "junk.safetensors").write_bytes(b"not a model")
+    assert main(["export", str(tmp_path / "junk.safetensors"), "--format", "onnx", "--out", str(tmp_path / "j.onnx")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "junk.safetensors" in err[0] and not (tmp_path / "j.onnx").exists()
+
+
+# --- label maps ------------------------------------------------------------------------------
+
+
+def test_rellis3d_maps_as_the_spec_says():
+    classes = default_classes()
+    assert "rellis3d" in packaged_label_maps()
+    lut = load_label_map("rellis3d", classes).lut(classes)
+    spec = {
+        "water": [6, 31], "rock": [34], "mud": [33],
+        "non_traversable": [4, 5, 8, 9, 12, 15, 17, 18, 19, 27],
+        "grass": [1, 3, 10, 23],
+    }
+    for name, ids in spec.items():
+        assert (lut[ids] == classes.id_of(name)).all(), name
+    assert (lut[[0, 7]] == 255).all()  # void and sky: unknown
+    assert lut[2] == 255 and lut[1000] == 255  # ids the map does not list
+
+
+@pytest.mark.parametrize("text,field", [
+    ("format: terrapref-labels/1\nids: {3: grass}\ncolours: {}\n", "colours"),
+    ("format: terrapref-labels/1\nids: {3: gravel}\n", "ids"),
+    ("format: terrapref-labels/1\nids: {-1: grass}\n", "ids.-1"),
+    ("format: terrapref-labels/1\nids: {70000: grass}\n", "ids.70000"),
+    ("format: terrapref-labels/1\nids: []\n", "ids"),
+    ("format: terrapref-labels/2\nids: {3: grass}\n", "format"),
+    ("ids: {3: grass}\n", "format"),
+])
+def test_a_bad_label_map_is_one_line_naming_file_and_field(tmp_path: Path, text: str, field: str):
+    path = tmp_path / "labels.yaml"
+    path.write_text(text)
+    with pytest.raises(UserError) as info:
+        load_label_map(path, default_classes())
+    lines = info.value.lines()
+    assert len(lines) == 1 and str(path) in lines[0] and f"{field}:" in lines[0]
+
+
+def test_a_user_label_map(tmp_path: Path):
+    path = tmp_path / "mine.yaml"
+    path.write_text("format: terrapref-labels/1\nname: mine\nids:\n  0: unknown\n  7: mud\n  300: rock\n")
+    labels = load_label_map(path, default_classes())
+    assert labels.name == "mine" and labels.lut(default_classes())[[7, 300, 0, 5]].tolist() == [4, 3, 255, 255]
+    with pytest.raises(UserError, match="neither a packaged label map"):
+        load_label_map("no_such_map")
+
+
+# --- the runtime -----------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def linear_model(tmp_path_factory) -> Path:
+    return _linear_model(tmp_path_factory.mktemp("runtime") / "linear.safetensors")
+
+
+def test_runtime_drives_as_the_planner_decides(linear_model: Path):
+    scenario = resolve_scenario("demo_course")
+    sim = Simulation(scenario)
+    runtime = PlannerRuntime(linear_model)
+    runtime.set_path(scenario.waypoints)
+    planner = Planner(load_model(linear_model))
+    planner.set_path(scenario.waypoints)
+    frame = sim.reset()
+    indices = set()
+    for _ in range(400):
+        decision = runtime.decide(frame.image, frame.time_s, frame.pose)
+        expected = planner.decide(frame.image, frame.pose)
+        assert decision.index == expected.index and decision.command == expected.command
+        np.testing.assert_array_equal(decision.probs, expected.probs)
+        assert runtime.command_at(frame.time_s + 0.1) == decision.command
+        indices.add(decision.index)
+        frame = sim.step(runtime.command_at(frame.time_s + 0.1))
+    assert len(indices) > 1  # it steered
+
+
+def test_runtime_holds_then_stops(linear_model: Path):
+    runtime = PlannerRuntime(linear_model, hold_s=0.3)
+    scenario = resolve_scenario("demo_course")
+    runtime.set_path(scenario.waypoints)
+    assert runtime.command_at(0.0) == STOP  # nothing decided yet
+    image = Simulation(scenario).reset().image
+    d = runtime.decide(image, 10.0, scenario.start)
+    assert d.command != STOP
+    assert runtime.command_at(10.2) == d.command and runtime.command_at(10.29) == d.command
+    assert runtime.command_at(10.31) == STOP  # the camera went quiet: stop
+    assert runtime.decide(image, 9.9, scenario.start) is None  # out of order: ignored
+    assert runtime.last is d
+    assert runtime.command_at(float("nan")) == STOP
+
+
+def test_runtime_refuses_what_it_cannot_drive_on(linear_model: Path):
+    runtime = PlannerRuntime(linear_model)
+    with pytest.raises(RuntimeError, match="set_path"):
+        runtime.decide(np.zeros((480, 640), np.uint8), 0.0, (0.0, 0.0, 0.0))
+    runtime.set_path(np.array([[0.0, 0.0], [10.0, 0.0]]))
+    with pytest.raises(ValueError, match="shape"):
+        runtime.decide(np.zeros((240, 320), np.uint8), 0.0, (0.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match="dtype"):
+        runtime.decide(np.zeros((480, 640), np.uint16), 0.0, (0.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match="finite"):
+        runtime.decide(np.zeros((480, 640), np.uint8), 0.0, (0.0, float("nan"), 0.0))
+    with pytest.raises(ValueError, match="path"):
+        runtime.set_path(np.array([[0.0, 0.0]]))
+    with pytest.raises(UserError, match="another camera"):
+        PlannerRuntime(linear_model, camera=CameraConfig(pitch_deg=20.0))
+
+
+def test_runtime_maps_a_networks_label_ids(linear_model: Path):
+    classes = default_classes()
+    labels = load_label_map("rellis3d", classes)
+    runtime = PlannerRuntime(linear_model, labels=labels)
+    plain = PlannerRuntime(linear_model)
+    scenario = resolve_scenario("demo_course")
+    for r in (runtime, plain):
+        r.set_path(scenario.waypoints)
+    image = Simulation(scenario).reset(scenario.start).image
+    # The same scene as RELLIS-3D ids: grass -> 3, mud -> 33, rock -> 34, water -> 6, lethal -> 19, unknown -> 7.
+    to_rellis = np.full(256, 7, np.uint16)
+    for name, rid in (("grass", 3), ("mud", 33), ("rock", 34), ("water", 6), ("non_traversable", 19)):
+        to_rellis[classes.id_of(name)] = rid
+    a = runtime.decide(to_rellis[image], 0.0, scenario.start)
+    b = plain.decide(image, 0.0, scenario.start)
+    assert a.index == b.index and np.array_equal(a.probs, b.probs)
+    assert runtime.command_at(0.1) == Command(*b.command)
