@@ -131,7 +131,7 @@ def test_no_progress_off_the_corridor():
     for _ in range(50):
         _, _, _, _, info = env.step(10)
         assert info["reward_terms"]["progress"] == 0.0
-    assert info["progress_m"] == 0.0
+    assert info["progress_m"] == pytest.approx(5.0, abs=1e-6)  # where it is along the path, though nothing was credited
 
 
 def test_random_driving_earns_no_more_progress_than_it_drove():
@@ -345,3 +345,48 @@ def test_sb3_ppo_trains_on_two_courses_through_make_vec_env():
     assert model.num_timesteps == 32
     action, _ = model.predict(venv.reset(), deterministic=True)
     assert action.shape == (2,) and all(0 <= a < 21 for a in action)
+
+
+# --- what a review found -------------------------------------------------------------------------
+
+
+def test_progress_resumes_after_a_detour_outside_the_corridor():
+    env = gym.make(ENV_ID, scenario="demo_course", image_size=SMALL, start_jitter_m=0.0, start_yaw_jitter_rad=0.0).unwrapped
+    env.reset(options={"start": (2.0, 16.0, 0.0)})  # 6 m left of the path, driving along it
+    credited = 0.0
+    for a in [10] * 200 + [0] * 15 + [10] * 45 + [20] * 15 + [10] * 80:
+        obs, _, terminated, _, info = env.step(a)
+        credited += info["reward_terms"]["progress"]
+        if terminated:
+            break
+    s_true, offset = env.sim.path.project(np.array(env.sim.vehicle.pose[:2]))
+    assert info["progress_m"] == pytest.approx(s_true, abs=0.05)  # followed even outside the corridor
+    assert abs(obs["pose"][0] - offset) < 0.05 and obs["waypoints"][0] > 0.0  # the path ahead, not behind
+    assert 0.0 < credited < s_true - 2.0  # the stretch driven outside the corridor earned nothing
+
+
+def test_a_start_anywhere_along_the_path():
+    env = gym.make(ENV_ID, scenario="test_course", image_size=SMALL).unwrapped
+    path = env.sim.path
+    x, y = path.point_at(100.0)
+    obs, info = env.reset(options={"start": (x, y, float(path.heading_at(100.0)))})
+    assert info["progress_m"] == pytest.approx(100.0, abs=1e-6) and abs(obs["pose"][0]) < 1e-6
+    for _ in range(30):
+        _, _, _, _, info = env.step(10)
+    assert info["progress_m"] > 102.0
+    with pytest.raises(ValueError, match="off the"):
+        env.reset(options={"start": (-50.0, -50.0, 0.0)})
+
+
+def test_the_off_map_penalty_is_charged_once_per_exit():
+    env = _env(terminate_off_map=False)
+    env.reset(options={"start": (1.0, 5.0, math.pi)})  # 1 m from the western edge, facing it
+    penalties = [env.step(10)[4]["reward_terms"]["off_map"] for _ in range(30)]
+    assert penalties.count(-10.0) == 1 and sum(penalties) == -10.0
+
+
+def test_reset_options_draw_a_generated_course():
+    env = gym.make(ENV_ID, scenario="demo_course", image_size=SMALL)
+    assert env.reset(seed=0, options={"scenario": "gen:*"})[1]["scenario"].startswith("gen_")
+    with pytest.raises(ValueError, match="course name or a Scenario"):
+        env.reset(options={"scenario": ["demo_course"]})

@@ -53,12 +53,13 @@ class RewardConfig:
     Attributes:
         progress_weight: per metre that the vehicle's projection on the path advanced this step.
             The advance is bounded by the distance the vehicle drove, counts backwards as well
-            as forwards, and is zero while the vehicle is farther than ``corridor_m`` from the
-            path or off the map.
+            as forwards, and is zero unless the vehicle was within ``corridor_m`` of the path and
+            on the map before and after the step (the projection follows it everywhere, so a
+            detour earns nothing for the stretch it skipped).
         corridor_m: progress is credited only within this distance of the path [m].
         cross_track_weight: per metre of distance from the path, every step.
         collision_penalty: per entry onto lethal terrain.
-        off_map_penalty: once, on leaving the map.
+        off_map_penalty: each time the vehicle leaves the map.
         goal_reward: once, on reaching the goal.
         terrain_weight: per unit of terrain cost: each metre driven on the class ranked ``r``
             (0 = most preferred) in the env's profile costs ``terrain_growth ** r``; the
@@ -189,6 +190,8 @@ class OffRoadNavEnv(gym.Env):
         else:
             self.action_space = spaces.Box(np.float32(-1.0), np.float32(1.0), (2,), np.float32)
         self._progress_s = 0.0
+        self._in_corridor = True
+        self._off_map = False
         self._started = False
         self._ended = False
 
@@ -224,20 +227,30 @@ class OffRoadNavEnv(gym.Env):
         if unknown:
             raise ValueError(f"reset options: unknown key {sorted(unknown)[0]!r}; expected 'scenario' and/or 'start'")
         course = options.get("scenario")
-        self.sim = self._simulation(course if course is not None and course != RANDOM_COURSE else self._draw_course())
+        if course is not None and not isinstance(course, (str, Scenario)):
+            raise ValueError(f"reset options: 'scenario' must be a course name or a Scenario, got {type(course).__name__}")
+        if course == RANDOM_COURSE:
+            course = f"gen:{int(self.np_random.integers(*RANDOM_COURSE_SEEDS))}"
+        self.sim = self._simulation(course if course is not None else self._draw_course())
+        path = self.sim.path
         if options.get("start") is not None:
             start = np.asarray(options["start"], dtype=float)
             if start.shape != (3,) or not np.isfinite(start).all():
                 raise ValueError(f"reset options: 'start' must be three finite numbers (x [m], y [m], yaw [rad]), got {options['start']!r}")
+            sx, sy = self.sim.scenario.size_m
+            if not (0.0 <= start[0] <= sx and 0.0 <= start[1] <= sy):
+                raise ValueError(f"reset options: 'start' ({start[0]:g}, {start[1]:g}) is off the {sx:g} x {sy:g} m map")
             pose = Pose(*map(float, start))
+            self._progress_s = path.project(start[:2])[0]  # anywhere along the path
         else:
             x, y, yaw = self.sim.scenario.start
             dx, dy = self.np_random.uniform(-1.0, 1.0, 2) * self.start_jitter_m
             dyaw = self.np_random.uniform(-1.0, 1.0) * self.start_yaw_jitter_rad
             pose = Pose(x + dx, y + dy, yaw + dyaw)
+            self._progress_s = path.project(np.array(pose[:2]), 0.0, 5.0)[0]
         frame = self.sim.reset(pose)
-        self._progress_s = self.sim.path.project(np.array(pose[:2]), 0.0, 5.0)[0]
-        self._started, self._ended = True, False
+        self._started, self._ended, self._off_map = True, False, False
+        self._in_corridor = abs(path.project(np.array(pose[:2]), self._progress_s - 2.0, self._progress_s + 2.0)[1]) <= self.reward_config.corridor_m
         terms = dict.fromkeys(("progress", "cross_track", "collision", "off_map", "goal", "terrain"), 0.0)
         return self._observation(frame.view, frame.pose), self._info(terms, success=False, off_map=False)
 
@@ -257,11 +270,15 @@ class OffRoadNavEnv(gym.Env):
         xy = trace[1:, :2]
         off_map = bool(((xy < 0.0) | (xy > (sx, sy))).any())
 
-        s_near, offset = sim.path.project(trace[-1, :2], self._progress_s - 2.0, self._progress_s + 10.0 + travelled)
-        advance = 0.0
-        if abs(offset) <= cfg.corridor_m and not off_map:
-            advance = min(max(s_near - self._progress_s, -travelled), travelled)
-            self._progress_s += advance
+        # Where the vehicle is along the path, followed even off the corridor (so observations stay
+        # true); credit is the advance of that point, bounded by the distance driven, and only
+        # while the vehicle stays in the corridor and on the map.
+        s_before, in_before = self._progress_s, self._in_corridor
+        self._progress_s, offset = sim.path.project(trace[-1, :2], s_before - 2.0 - travelled, s_before + 10.0 + travelled)
+        self._in_corridor = abs(offset) <= cfg.corridor_m and not off_map
+        advance = min(max(self._progress_s - s_before, -travelled), travelled) if (in_before and self._in_corridor) else 0.0
+        left_map = off_map and not self._off_map
+        self._off_map = off_map
         collided = sim.collisions - collisions0
         end = sim.path.waypoints[-1]
         success = math.hypot(trace[-1, 0] - end[0], trace[-1, 1] - end[1]) <= sim.config.goal_radius_m and self._progress_s >= 0.5 * sim.path.length_m
@@ -270,7 +287,7 @@ class OffRoadNavEnv(gym.Env):
             "progress": cfg.progress_weight * advance,
             "cross_track": -cfg.cross_track_weight * abs(offset),
             "collision": -cfg.collision_penalty * collided,
-            "off_map": -cfg.off_map_penalty * off_map,
+            "off_map": -cfg.off_map_penalty * left_map,
             "goal": cfg.goal_reward * success,
             "terrain": -cfg.terrain_weight * terrain_cost,
         }
