@@ -329,6 +329,18 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_import(args: argparse.Namespace) -> int:
+    from terrapref.interop.bag_import import import_bag
+    from terrapref.interop.robot import load_robot
+
+    robot = load_robot(args.robot)
+    report = import_bag(args.bag, robot, args.out, rate_hz=args.rate, force=args.force)
+    for line in report.lines():
+        print(line)
+    print(f"wrote {args.out} (terrapref inspect / featurize / train accept it)")
+    return 0
+
+
 def _cmd_export(args: argparse.Namespace) -> int:
     from terrapref.interop.onnx_export import export_onnx
     from terrapref.learning.model_file import load_model
@@ -513,6 +525,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--recipe", metavar="NAME", help="the recipe section 6 teaches every order and style with (default: teach)")
     p.add_argument("--workers", type=int, help="parallel processes (default: one per core)")
     p.set_defaults(func=_cmd_study)
+
+    p = sub.add_parser("import", help="turn a ROS 1 bag, ROS 2 bag (sqlite3 or MCAP) of a drive into a recording")
+    p.add_argument("bag", help="a .bag file, a ROS 2 bag folder, or a .mcap / .db3 file")
+    p.add_argument("--robot", required=True, help="terrapref-robot/1 file: topics, camera mounting, label map")
+    p.add_argument("--out", required=True, help="recording folder to create")
+    p.add_argument("--rate", type=float, default=10.0, help="frames per second to keep (default 10, the planner's rate)")
+    p.add_argument("--force", action="store_true", help="replace an existing recording at --out (only once the import succeeds)")
+    p.set_defaults(func=_cmd_import)
 
     p = sub.add_parser("export", help="export a trained model as ONNX (the classifier C, its configuration in the metadata)")
     p.add_argument("input", help="model file (terrapref train)")

@@ -1,0 +1,439 @@
+"""ROS 1 and ROS 2 bags (sqlite3 or MCAP) to terrapref recordings, read with ``rosbags``.
+
+Two passes over the bag. The first reads the small topics (odometry, commands, the path, the
+camera's calibration) into memory; the second streams the label images one at a time, so memory
+stays flat however large the bag. Each kept image becomes a frame whose pose is the odometry
+interpolated to the image's header stamp and whose label is the operator's command in force at
+that stamp (zero-order hold: commands may come at their own rate or only on change).
+
+What real logs contain is handled and reported: topics at their own rates (images are thinned
+to ``rate_hz``), stamp jitter, out-of-order images (a short reorder buffer; older stragglers are
+dropped), gaps in odometry (frames inside a gap are skipped), label ids the label map does not
+list (their share is reported), the operator stopped or reversing (no trajectory choice: skipped).
+Commands at speeds other than the preference set's are labelled by curvature: w x v_set / v.
+
+The recording is written to a temporary folder beside ``out`` and renamed into place only when
+complete; an error leaves nothing behind.
+"""
+
+from __future__ import annotations
+
+import heapq
+import io
+import math
+import shutil
+import tempfile
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from PIL import Image as PILImage
+
+from terrapref.camera import CameraConfig
+from terrapref.demos.recording import RecordingWriter, _is_recording
+from terrapref.errors import UserError
+from terrapref.features import PreferenceSetConfig
+from terrapref.interop.robot import RobotConfig, load_waypoints
+from terrapref.progress import Progress
+from terrapref.terrain import ClassTable, default_classes
+from terrapref.terrain.classes import UNKNOWN
+
+TYPES = {
+    "segmentation": ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"),
+    "camera_info": ("sensor_msgs/msg/CameraInfo",),
+    "odometry": ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped"),
+    "command": ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped"),
+    "path": ("nav_msgs/msg/Path",),
+}
+REORDER_FRAMES = 16  # images held back to put slightly out-of-order stamps right
+MIN_SPEED_MPS = 0.1  # slower than this the operator is stopped: no trajectory choice
+MAP_MARGIN_M = 15.0
+PATH_SMOOTHING_M = 5.0  # half-width of the moving average that turns driven odometry into a path
+
+
+@dataclass
+class ImportReport:
+    """What an import kept, skipped and noticed."""
+
+    bag: str
+    images: int = 0
+    frames: int = 0
+    skipped: Counter = field(default_factory=Counter)
+    unmapped_share: float = 0.0  # pixels whose id the label map does not list
+    unknown_share: float = 0.0  # pixels that are unknown after mapping (listed as unknown, or unlisted)
+    image_gaps: int = 0
+    longest_gap_s: float = 0.0
+    path_source: str = ""
+    duration_s: float = 0.0
+    notes: list[str] = field(default_factory=list)
+
+    def lines(self) -> list[str]:
+        out = [f"images read      {self.images}", f"frames kept      {self.frames} ({self.duration_s:.1f} s)"]
+        out += [f"skipped          {n} {reason}" for reason, n in sorted(self.skipped.items())]
+        out.append(f"label ids        {100 * self.unmapped_share:.2f}% of pixels not in the label map; {100 * self.unknown_share:.1f}% unknown after mapping")
+        if self.image_gaps:
+            out.append(f"image gaps       {self.image_gaps} longer than max_gap_s (longest {self.longest_gap_s:.2f} s); frames on either side kept")
+        out.append(f"path             {self.path_source}")
+        out += [f"note             {n}" for n in self.notes]
+        return out
+
+
+def _stamp(msg, fallback_ns: int) -> float:
+    stamp = msg.header.stamp
+    ns = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+    return (ns if ns > 0 else fallback_ns) * 1e-9
+
+
+def _yaw(q) -> float:
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def _field(msg, *names):
+    for name in names:
+        if hasattr(msg, name):
+            return getattr(msg, name)
+    raise AttributeError(names[0])
+
+
+class _Bag:
+    """The bag, opened with rosbags; every failure of the reader is a one-line UserError."""
+
+    def __init__(self, path: Path) -> None:
+        from rosbags.highlevel import AnyReader
+        from rosbags.typesys import Stores, get_typestore
+
+        self.source = str(path)
+        if not path.exists():
+            raise UserError(self.source, "no such bag")
+        try:
+            self.reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+            self.reader.open()
+        except Exception as exc:  # the reader's errors on a damaged or foreign file are many kinds
+            raise UserError(self.source, f"not a readable ROS 1 bag, ROS 2 bag or MCAP file ({type(exc).__name__}: {exc})") from None
+
+    def connections(self, topic: str, role: str, source: str) -> list:
+        conns = [c for c in self.reader.connections if c.topic == topic]
+        if not conns:
+            have = sorted({c.topic for c in self.reader.connections})
+            shown = ", ".join(have[:12]) + (" ..." if len(have) > 12 else "")
+            raise UserError(self.source, f"topic {topic} (topics.{role} in {source}) is not in the bag; it has {shown or 'no topics'}", field=f"topics.{role}")
+        for c in conns:
+            if c.msgtype not in TYPES[role]:
+                raise UserError(self.source, f"topic {topic} has type {c.msgtype}; topics.{role} expects {' or '.join(TYPES[role])}", field=f"topics.{role}")
+        if sum(c.msgcount for c in conns) == 0:
+            raise UserError(self.source, f"topic {topic} (topics.{role}) has no messages", field=f"topics.{role}")
+        return conns
+
+    def messages(self, conns: list):
+        """(connection, bag time [ns], message), deserialised; a damaged message is a UserError."""
+        it = self.reader.messages(connections=conns)
+        n = 0
+        while True:
+            try:
+                conn, t_ns, raw = next(it)
+                msg = self.reader.deserialize(raw, conn.msgtype)
+            except StopIteration:
+                return
+            except Exception as exc:  # damaged chunk or message: the reader's own error types vary
+                raise UserError(self.source, f"message {n + 1} after the start of the read is damaged ({type(exc).__name__}: {exc})") from None
+            n += 1
+            yield conn, t_ns, msg
+
+    def close(self) -> None:
+        try:
+            self.reader.close()
+        except Exception:  # closing a half-read damaged file must not hide the real error
+            pass
+
+
+@dataclass
+class _Streams:
+    odom_t: np.ndarray
+    odom: np.ndarray  # (N, 3) x, y, yaw
+    cmd_t: np.ndarray
+    cmd: np.ndarray  # (N, 2) v, w
+    path: np.ndarray | None
+    info: object
+
+
+def _read_small_topics(bag: _Bag, robot: RobotConfig) -> _Streams:
+    topics = robot.topics
+    wanted = ["odometry", "command", "camera_info"] + (["path"] if robot.path_topic else [])
+    by_role = {role: bag.connections(topics[role], role, robot.source) for role in wanted}  # each checked for its own type
+    roles = {topics[role]: role for role in wanted}
+    conns = list({id(c): c for cs in by_role.values() for c in cs}.values())
+    odom_t, odom, cmd_t, cmd = [], [], [], []
+    path, info = None, None
+    for conn, t_ns, msg in bag.messages(conns):
+        role = roles[conn.topic]
+        try:
+            if role == "odometry":
+                pose = msg.pose.pose if conn.msgtype != "geometry_msgs/msg/PoseStamped" else msg.pose
+                odom_t.append(_stamp(msg, t_ns))
+                odom.append((pose.position.x, pose.position.y, _yaw(pose.orientation)))
+            elif role == "command":
+                twist = msg.twist if conn.msgtype == "geometry_msgs/msg/TwistStamped" else msg
+                cmd_t.append(_stamp(msg, t_ns) if conn.msgtype == "geometry_msgs/msg/TwistStamped" else t_ns * 1e-9)
+                cmd.append((twist.linear.x, twist.angular.z))
+            elif role == "path" and path is None and len(msg.poses) >= 2:
+                path = np.array([(p.pose.position.x, p.pose.position.y) for p in msg.poses], dtype=float)
+            elif role == "camera_info" and info is None:
+                info = msg
+        except (AttributeError, TypeError, ValueError) as exc:
+            raise UserError(bag.source, f"topic {conn.topic}: a {conn.msgtype} without the expected fields ({exc})", field=f"topics.{role}") from None
+    if info is None:
+        raise UserError(bag.source, f"topic {topics['camera_info']} holds no camera calibration", field="topics.camera_info")
+    if len(odom_t) < 2:
+        raise UserError(bag.source, f"topic {topics['odometry']} has fewer than two poses", field="topics.odometry")
+    o_t, o = np.array(odom_t), np.array(odom, dtype=float)
+    c_t, c = np.array(cmd_t), np.array(cmd, dtype=float)
+    if not (np.isfinite(o).all() and np.isfinite(o_t).all()):
+        keep = np.isfinite(o).all(axis=1) & np.isfinite(o_t)
+        o_t, o = o_t[keep], o[keep]
+    keep = np.isfinite(c).all(axis=1) & np.isfinite(c_t)
+    c_t, c = c_t[keep], c[keep]
+    order = np.argsort(o_t, kind="stable")
+    o_t, o = o_t[order], o[order]
+    o[:, 2] = np.unwrap(o[:, 2])  # so interpolation between stamps never spins the long way round
+    order = np.argsort(c_t, kind="stable")
+    return _Streams(o_t, o, c_t[order], c[order], path, info)
+
+
+def camera_from_info(info, robot: RobotConfig, source: str) -> tuple[CameraConfig, np.ndarray | None]:
+    """The camera (CameraConfig) and, for a distorted lens, the nearest-pixel undistortion map."""
+    try:
+        width, height = int(info.width), int(info.height)
+        k = np.asarray(_field(info, "k", "K"), dtype=float).reshape(3, 3)
+        d = np.asarray(_field(info, "d", "D"), dtype=float)
+        model = str(info.distortion_model)
+    except (AttributeError, TypeError, ValueError) as exc:
+        raise UserError(source, f"camera_info unreadable ({exc})", field="topics.camera_info") from None
+    fx, fy, cx, cy = k[0, 0], k[1, 1], k[0, 2], k[1, 2]
+    if width <= 0 or height <= 0 or not (fx > 0 and fy > 0 and np.isfinite([fx, fy, cx, cy]).all()):
+        raise UserError(source, f"camera_info: image {width} x {height}, K {k.ravel().tolist()} is not a calibration", field="topics.camera_info")
+    cam = robot.camera
+    camera = CameraConfig(width_px=width, height_px=height, hfov_deg=math.degrees(2 * math.atan(width / (2 * fx))), fx=fx, fy=fy, cx=cx, cy=cy,
+                          mount_height_m=cam["height_m"], mount_forward_m=cam["forward_m"], pitch_deg=cam["pitch_deg"], yaw_deg=cam["yaw_deg"],
+                          max_range_m=cam["max_range_m"])
+    if not d.size or not np.any(d):
+        return camera, None
+    if model not in ("plumb_bob", "rational_polynomial") or d.size < 4:
+        raise UserError(source, f"camera_info: distortion model {model!r} is not supported (plumb_bob is)", field="topics.camera_info")
+    k1, k2, p1, p2 = d[:4]
+    k3 = d[4] if d.size > 4 else 0.0
+    v, u = np.mgrid[0:height, 0:width].astype(float)
+    x, y = (u - cx) / fx, (v - cy) / fy
+    r2 = x * x + y * y
+    radial = 1 + k1 * r2 + k2 * r2**2 + k3 * r2**3
+    xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    ud, vd = np.rint(fx * xd + cx).astype(np.int64), np.rint(fy * yd + cy).astype(np.int64)
+    inside = (ud >= 0) & (ud < width) & (vd >= 0) & (vd < height)
+    index = np.where(inside, vd * width + ud, -1)  # -1: the pinhole pixel falls outside the lens's image
+    return camera, index
+
+
+def _decode(conn, msg, source: str) -> np.ndarray:
+    """Label ids (H, W) uint8 or uint16 of one segmentation message."""
+    if conn.msgtype == "sensor_msgs/msg/CompressedImage":
+        if "png" not in str(msg.format).lower():
+            raise UserError(source, f"topic {conn.topic}: CompressedImage format {msg.format!r}; label ids need lossless png", field="topics.segmentation")
+        with PILImage.open(io.BytesIO(bytes(msg.data))) as im:
+            if im.mode not in ("L", "I;16", "I;16B", "I"):
+                raise UserError(source, f"topic {conn.topic}: png of mode {im.mode}; expected single-channel label ids", field="topics.segmentation")
+            ids = np.asarray(im)
+        return ids.astype(np.uint16) if ids.dtype != np.uint8 else ids
+    encoding = str(msg.encoding).lower()
+    h, w, step = int(msg.height), int(msg.width), int(msg.step)
+    if encoding in ("mono8", "8uc1"):
+        dtype = np.dtype(np.uint8)
+    elif encoding in ("mono16", "16uc1"):
+        dtype = np.dtype(">u2" if msg.is_bigendian else "<u2")
+    else:
+        raise UserError(source, f"topic {conn.topic}: image encoding {msg.encoding!r}; label ids come as mono8 or mono16", field="topics.segmentation")
+    data = np.frombuffer(bytes(msg.data), dtype=np.uint8)
+    if step < w * dtype.itemsize or len(data) < step * h:
+        raise UserError(source, f"topic {conn.topic}: image data of {len(data)} bytes does not hold {h} rows of {step}", field="topics.segmentation")
+    rows = data[: step * h].reshape(h, step)[:, : w * dtype.itemsize]
+    return np.ascontiguousarray(rows).view(dtype).reshape(h, w).astype(np.uint16 if dtype.itemsize == 2 else np.uint8)
+
+
+def smooth_path(xy: np.ndarray, spacing_m: float = 1.0) -> np.ndarray:
+    """A path along driven positions: resampled by arc length, averaged over +-PATH_SMOOTHING_M."""
+    steps = np.hypot(*np.diff(xy, axis=0).T)
+    s = np.concatenate([[0.0], np.cumsum(steps)])
+    if s[-1] < 2 * spacing_m:
+        raise ValueError("the drive is too short to make a path of")
+    grid = np.arange(0.0, s[-1], 0.25)
+    pts = np.stack([np.interp(grid, s, xy[:, 0]), np.interp(grid, s, xy[:, 1])], axis=1)
+    half = min(int(PATH_SMOOTHING_M / 0.25), len(pts) - 1)
+    # Odd reflection at both ends: the path starts and ends where the drive did, and straight runs stay straight.
+    padded = np.concatenate([2 * pts[0] - pts[half:0:-1], pts, 2 * pts[-1] - pts[-2:-half - 2:-1]])
+    kernel = np.ones(2 * half + 1) / (2 * half + 1)
+    smooth = np.stack([np.convolve(padded[:, k], kernel, mode="valid") for k in range(2)], axis=1)
+    take = np.arange(0, len(smooth), int(spacing_m / 0.25))
+    return smooth[np.unique(np.concatenate([take, [len(smooth) - 1]]))]
+
+
+def _scenario(name: str, path: np.ndarray, start: tuple[float, float, float], size: tuple[float, float], classes: ClassTable) -> dict:
+    return {
+        "format": "terrapref-scenario/1",
+        "name": name,
+        "description": "imported from a robot log: the path and the driven poses, no terrain map and no zones",
+        "world": {"size_m": [round(float(size[0]), 3), round(float(size[1]), 3)], "resolution_m": 0.5, "background": classes.background},
+        "terrain": [],
+        "path": {"waypoints": path.round(4).tolist()},
+        "start": [round(float(start[0]), 4), round(float(start[1]), 4), round(math.degrees(float(start[2])), 4)],
+    }
+
+
+def import_bag(bag_path: str | Path, robot: RobotConfig, out: str | Path, rate_hz: float = 10.0, force: bool = False,
+               show_progress: bool = True, classes: ClassTable | None = None) -> ImportReport:
+    """Turn a bag into a recording at ``out`` that inspect, featurize and train accept."""
+    bag_path, out = Path(bag_path), Path(out)
+    classes = classes or default_classes()
+    if not (math.isfinite(rate_hz) and 0 < rate_hz <= 100):
+        raise UserError("--rate", "expected frames per second in (0, 100]")
+    if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not (force and _is_recording(out)))):
+        raise UserError(str(out), "exists; choose another --out (or --force to replace a recording)", field="--out")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    bag = _Bag(bag_path)
+    report = ImportReport(str(bag_path))
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".importing", dir=out.parent))
+    try:
+        _import(bag, robot, tmp / "rec", rate_hz, show_progress, classes, report)
+        if out.exists():
+            old = out.with_name(f".{out.name}.replaced")
+            out.rename(old)
+            (tmp / "rec").rename(out)
+            shutil.rmtree(old)
+        else:
+            (tmp / "rec").rename(out)
+    finally:
+        bag.close()
+        shutil.rmtree(tmp, ignore_errors=True)
+    return report
+
+
+def _import(bag: _Bag, robot: RobotConfig, out: Path, rate_hz: float, show_progress: bool, classes: ClassTable, report: ImportReport) -> None:
+    seg_conns = bag.connections(robot.topics["segmentation"], "segmentation", robot.source)
+    streams = _read_small_topics(bag, robot)
+    if len(streams.cmd_t) == 0:
+        raise UserError(bag.source, f"topic {robot.topics['command']} holds no usable command", field="topics.command")
+    camera, undistort = camera_from_info(streams.info, robot, bag.source)
+    if streams.path is not None:
+        path, report.path_source = streams.path, f"{robot.path_topic} ({len(streams.path)} poses)"
+    elif robot.path_file is not None:
+        path, report.path_source = load_waypoints(robot.path_file, robot.source), f"{robot.path_file} (path_file)"
+    else:
+        try:
+            path = smooth_path(streams.odom[:, :2])
+        except ValueError as exc:
+            raise UserError(bag.source, f"no path topic or path_file, and {exc}", field="topics.path") from None
+        report.path_source = f"the driven odometry, smoothed over {2 * PATH_SMOOTHING_M:g} m ({len(path)} points)"
+    everything = np.concatenate([streams.odom[:, :2], path])
+    lo, hi = everything.min(axis=0) - MAP_MARGIN_M, everything.max(axis=0) + MAP_MARGIN_M
+    shift = -lo  # the odometry frame may start anywhere (often at the robot); the recording's map starts at 0
+    preference = PreferenceSetConfig()
+    control = preference.control
+    lut = robot.labels.lut(classes)
+    listed = robot.labels.listed()
+
+    x0, y0, yaw0 = streams.odom[0]
+    scenario = _scenario(bag_path_name(bag.source), path + shift, (x0 + shift[0], y0 + shift[1], yaw0), tuple(hi - lo), classes)
+    meta = {
+        "scenario": scenario["name"],
+        "camera": camera.to_dict(),
+        "preference_set": preference.to_dict(),
+        "sim": {"camera_rate_hz": rate_hz},
+        "classes": classes.to_dict(),
+        "profile": list(robot.profile.order),
+        "driver": {"kind": "imported", "bag": bag.source, "robot": robot.source, "labels": robot.labels.name},
+        "path": (path + shift).tolist(),
+        "origin_shift_m": [float(v) for v in shift],
+    }
+    total = sum(c.msgcount for c in seg_conns)
+    progress = Progress("import", total, enabled=show_progress)
+    writer = RecordingWriter(out, meta, scenario)
+    pixels = unmapped = unknown = 0
+    heap: list = []
+    last_t, last_image_t, t_first = -math.inf, None, None
+    shape = (camera.height_px, camera.width_px)
+
+    def emit(t: float, ids: np.ndarray) -> None:
+        nonlocal pixels, unmapped, unknown, last_t, t_first
+        if t <= last_t:
+            report.skipped["images out of order beyond the reorder buffer"] += 1
+            return
+        if t - last_t < 0.75 / rate_hz:  # a quarter period of slack for stamp jitter
+            report.skipped[f"images thinned to {rate_hz:g} Hz"] += 1
+            return
+        j = int(np.searchsorted(streams.odom_t, t))
+        if j == 0 or j == len(streams.odom_t):
+            report.skipped["images outside the odometry's time span"] += 1
+            return
+        t0, t1 = streams.odom_t[j - 1], streams.odom_t[j]
+        if t1 - t0 > robot.max_gap_s:
+            report.skipped["images in an odometry gap"] += 1
+            return
+        k = int(np.searchsorted(streams.cmd_t, t, side="right")) - 1
+        if k < 0:
+            report.skipped["images before the first command"] += 1
+            return
+        v, w = streams.cmd[k]
+        if v < MIN_SPEED_MPS:
+            report.skipped["images while stopped or reversing"] += 1
+            return
+        f = (t - t0) / (t1 - t0) if t1 > t0 else 0.0
+        x, y, yaw = streams.odom[j - 1] + f * (streams.odom[j] - streams.odom[j - 1])
+        yaw = (yaw + math.pi) % (2 * math.pi) - math.pi
+        w_set = float(np.clip(w * control.v_mps / v, min(control.w_rps), max(control.w_rps)))  # same curvature at the set's speed
+        image = lut[ids]
+        if undistort is not None:
+            image = np.where(undistort >= 0, image.reshape(-1)[np.maximum(undistort, 0)], UNKNOWN).astype(np.uint8)
+        pixels += ids.size
+        unmapped += int(np.count_nonzero(~listed[ids]))
+        unknown += int(np.count_nonzero(image == UNKNOWN))
+        if t_first is None:
+            t_first = t
+        writer.append(t - t_first, (x + shift[0], y + shift[1], yaw), image, (control.v_mps, w_set), int(control.label_of(w_set)))
+        last_t = t
+
+    seq = 0
+    for conn, t_ns, msg in bag.messages(seg_conns):
+        try:
+            t = _stamp(msg, t_ns)
+        except AttributeError as exc:
+            raise UserError(bag.source, f"topic {conn.topic}: no header stamp ({exc})", field="topics.segmentation") from None
+        ids = _decode(conn, msg, bag.source)
+        report.images += 1
+        if ids.shape != shape:
+            raise UserError(bag.source, f"topic {conn.topic}: image {ids.shape[1]} x {ids.shape[0]}, camera_info says {shape[1]} x {shape[0]}", field="topics.segmentation")
+        if last_image_t is not None and t - last_image_t > robot.max_gap_s:
+            report.image_gaps += 1
+            report.longest_gap_s = max(report.longest_gap_s, t - last_image_t)
+        last_image_t = t if last_image_t is None else max(last_image_t, t)
+        heapq.heappush(heap, (t, seq, ids))
+        seq += 1
+        if len(heap) > REORDER_FRAMES:
+            emit(*heapq.heappop(heap)[::2])
+        progress.update(report.images, f"{writer.count} frames")
+    while heap:
+        emit(*heapq.heappop(heap)[::2])
+    progress.close(f"{writer.count} frames from {report.images} images")
+    if writer.count == 0:
+        writer.abort()
+        raise UserError(bag.source, f"no usable frame: {', '.join(f'{n} {r}' for r, n in report.skipped.items()) or 'no images'}", field="topics.segmentation")
+    report.frames = writer.count
+    report.duration_s = float(last_t - t_first) + 1.0 / rate_hz
+    report.unmapped_share = unmapped / max(pixels, 1)
+    report.unknown_share = unknown / max(pixels, 1)
+    writer.close({"completed": True, "collisions": 0, "duration_s": round(report.duration_s, 3), "import": report.lines()})
+
+
+def bag_path_name(source: str) -> str:
+    """A scenario name from a bag's file name."""
+    stem = Path(source.rstrip("/")).name.split(".")[0] or "bag"
+    name = "".join(ch if ch.isalnum() or ch == "_" else "_" for ch in stem)
+    return name if name[0].isalpha() else f"bag_{name}"

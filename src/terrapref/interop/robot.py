@@ -1,0 +1,151 @@
+"""Robot files (``terrapref-robot/1``): which topics of a bag hold what, and how the camera sits.
+
+::
+
+    format: terrapref-robot/1
+    topics:
+      segmentation: /warthog/seg/labels        # sensor_msgs/Image (mono8/mono16 ids) or CompressedImage (png)
+      camera_info: /warthog/camera/camera_info # sensor_msgs/CameraInfo (K; plumb_bob distortion)
+      odometry: /warthog/odom                  # nav_msgs/Odometry or geometry_msgs/PoseStamped
+      command: /warthog/cmd_vel                # geometry_msgs/Twist or TwistStamped: the label
+      path: /route/plan                        # nav_msgs/Path; optional (see path_file)
+    camera:
+      height_m: 1.0                            # optical centre above the ground [m]
+      pitch_deg: 30.0                          # downward tilt [deg]
+      forward_m: 0.0                           # optional: ahead of base_link [m]
+      yaw_deg: 0.0                             # optional: left of the heading [deg]
+      max_range_m: 30.0                        # optional: farther ground is not used
+    labels: rellis3d                           # a packaged label map, or a terrapref-labels/1 file
+    path_file: route.yaml                      # optional: waypoints [[x, y], ...] in the odometry frame
+    profile: [mud, rock, water, non_traversable]  # optional: the operator's declared order
+    max_gap_s: 0.5                             # optional: longer gaps in odometry or images are skipped
+
+Without ``topics.path`` or ``path_file`` the reference path is the driven odometry, smoothed.
+Relative file names are relative to the robot file.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from terrapref.errors import ConfigError, Problem, UserError
+from terrapref.interop.labels import LabelMap, load_label_map
+from terrapref.terrain import ClassTable, default_classes
+from terrapref.terrain.profile import PreferenceProfile
+from terrapref.yamlio import read_yaml_mapping
+
+ROBOT_FORMAT = "terrapref-robot/1"
+_TOP = {"format", "topics", "camera", "labels", "path_file", "profile", "max_gap_s", "description"}
+_TOPICS_REQUIRED = ("segmentation", "camera_info", "odometry", "command")
+_TOPICS = set(_TOPICS_REQUIRED) | {"path"}
+_CAMERA = {"height_m": (0.05, 10.0), "pitch_deg": (-89.0, 89.0), "forward_m": (-10.0, 10.0), "yaw_deg": (-180.0, 180.0), "max_range_m": (1.0, 500.0)}
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """A checked robot file."""
+
+    source: str
+    topics: dict[str, str]
+    camera: dict[str, float]
+    labels: LabelMap
+    profile: PreferenceProfile
+    path_file: Path | None
+    max_gap_s: float
+
+    @property
+    def path_topic(self) -> str | None:
+        return self.topics.get("path")
+
+
+def _number(value: object) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return None
+    return float(value)
+
+
+def load_robot(path: str | Path, classes: ClassTable | None = None) -> RobotConfig:
+    """Read and check a robot file; every problem names the file and the field (exit 2 in the CLI)."""
+    classes = classes or default_classes()
+    source = str(path)
+    data = read_yaml_mapping(path, ROBOT_FORMAT)
+    problems = [Problem(k, f"unknown key; expected {', '.join(sorted(_TOP))}") for k in data if k not in _TOP]
+    topics = data.get("topics")
+    out_topics: dict[str, str] = {}
+    if not isinstance(topics, dict):
+        problems.append(Problem("topics", f"expected a mapping with {', '.join(_TOPICS_REQUIRED)} (and optionally path)"))
+        topics = {}
+    for key, value in topics.items():
+        if key not in _TOPICS:
+            problems.append(Problem(f"topics.{key}", f"unknown key; expected {', '.join(sorted(_TOPICS))}"))
+        elif not isinstance(value, str) or not value.startswith("/"):
+            problems.append(Problem(f"topics.{key}", "expected a topic name such as /robot/odom"))
+        else:
+            out_topics[key] = value
+    problems += [Problem(f"topics.{k}", "missing") for k in _TOPICS_REQUIRED if k not in topics]
+    camera = data.get("camera")
+    out_camera = {"forward_m": 0.0, "yaw_deg": 0.0, "max_range_m": 30.0}
+    if not isinstance(camera, dict):
+        problems.append(Problem("camera", "expected a mapping with height_m and pitch_deg"))
+        camera = {}
+    for key, value in camera.items():
+        if key not in _CAMERA:
+            problems.append(Problem(f"camera.{key}", f"unknown key; expected {', '.join(_CAMERA)}"))
+            continue
+        lo, hi = _CAMERA[key]
+        number = _number(value)
+        if number is None or not lo <= number <= hi:
+            problems.append(Problem(f"camera.{key}", f"expected a number in [{lo:g}, {hi:g}]"))
+        else:
+            out_camera[key] = number
+    problems += [Problem(f"camera.{k}", "missing") for k in ("height_m", "pitch_deg") if k not in camera]
+    max_gap = data.get("max_gap_s", 0.5)
+    if _number(max_gap) is None or not 0.05 <= max_gap <= 60:
+        problems.append(Problem("max_gap_s", "expected a number of seconds in [0.05, 60]"))
+    path_file = data.get("path_file")
+    if path_file is not None and (not isinstance(path_file, str) or not path_file):
+        problems.append(Problem("path_file", "expected a file name"))
+    if "labels" not in data or not isinstance(data["labels"], str):
+        problems.append(Problem("labels", "expected a packaged label map name (rellis3d) or a terrapref-labels/1 file"))
+    if problems:
+        raise ConfigError(source, problems)
+    here = Path(path).parent
+    labels_ref = data["labels"]
+    if Path(labels_ref).suffix in (".yaml", ".yml") and not Path(labels_ref).is_absolute():
+        labels_ref = str(here / labels_ref)
+    try:
+        labels = load_label_map(labels_ref, classes, source=f"{source}: labels")
+    except UserError as exc:
+        raise ConfigError(source, exc.lines()[0], field="labels") from None
+    profile_data = data.get("profile")
+    profile = PreferenceProfile.parse(profile_data, classes, f"{source}: profile") if profile_data is not None else PreferenceProfile.default(classes)
+    resolved = None
+    if path_file is not None:
+        resolved = Path(path_file) if Path(path_file).is_absolute() else here / path_file
+    return RobotConfig(source, out_topics, out_camera, labels, profile, resolved, float(max_gap))
+
+
+def load_waypoints(path: Path, source: str) -> np.ndarray:
+    """Waypoints (N, 2) from a YAML file: a list of [x, y], or a mapping with ``waypoints``."""
+    data = None
+    try:
+        import yaml
+
+        data = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise UserError(source, f"{path}: no such file", field="path_file") from None
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise UserError(source, f"{path}: unreadable ({exc})", field="path_file") from None
+    if isinstance(data, dict):
+        data = data.get("waypoints")
+    try:
+        points = np.asarray(data, dtype=float)
+    except (TypeError, ValueError):
+        points = np.zeros((0,))
+    if points.ndim != 2 or points.shape[1] != 2 or len(points) < 2 or not np.isfinite(points).all():
+        raise UserError(source, f"{path}: expected at least two finite [x, y] waypoints", field="path_file")
+    return points

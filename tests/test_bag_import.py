@@ -1,0 +1,197 @@
+"""Robot logs in: ROS 1 bags, ROS 2 sqlite3 and MCAP bags made from simulator drives, imported
+into recordings that inspect, featurize and train accept; every bad bag or robot file is one line."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from terrapref.cli import main
+from terrapref.demos.dataset import featurize_recording
+from terrapref.demos.inspect import summarise
+from terrapref.demos.recording import read_recording
+from terrapref.errors import UserError
+from terrapref.features import FeatureConfig
+from terrapref.interop.bag_import import import_bag, smooth_path
+from terrapref.interop.robot import load_robot
+from terrapref.interop.synthetic_bag import TOPICS, robot_yaml, write_synthetic_bag
+from terrapref.scenario import resolve_scenario
+from terrapref.sim import Simulation
+
+SECONDS = 12.0
+FORMATS = [("mcap", "mono8", "drive.mcapbag"), ("rosbag1", "mono16", "drive.bag"), ("sqlite3", "png", "drive.db3bag")]
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory) -> dict:
+    root = tmp_path_factory.mktemp("bags")
+    (root / "robot.yaml").write_text(robot_yaml())
+    bags = {storage: write_synthetic_bag(root / name, storage, encoding=encoding, max_seconds=SECONDS) for storage, encoding, name in FORMATS}
+    return {"root": root, "robot": root / "robot.yaml", "bags": bags}
+
+
+@pytest.fixture(scope="module")
+def imported(logs) -> dict:
+    robot = load_robot(logs["robot"])
+    out = {}
+    for storage, bag in logs["bags"].items():
+        dest = logs["root"] / f"rec_{storage}"
+        out[storage] = (import_bag(bag, robot, dest, show_progress=False), read_recording(dest))
+    return out
+
+
+def test_every_format_imports_to_the_same_recording(imported):
+    (report, rec), *others = imported.values()
+    assert rec.complete and len(rec) == report.frames > 0.8 * SECONDS * 10
+    for other_report, other in others:
+        assert other_report.frames == report.frames
+        np.testing.assert_allclose(other.poses, rec.poses, atol=1e-9)
+        np.testing.assert_array_equal(other.labels, rec.labels)
+        np.testing.assert_array_equal(other.image(len(rec) // 2), rec.image(len(rec) // 2))
+
+
+def test_the_quirks_are_handled_and_reported(imported):
+    report, rec = imported["mcap"]
+    assert report.skipped["images in an odometry gap"] > 0  # the synthetic log loses a second of odometry
+    assert 0.0 < report.unmapped_share < 0.01  # a few pixels carry an id the label map does not list
+    assert report.path_source.startswith(TOPICS["path"])
+    assert np.all(np.diff(rec.times) > 0.07)  # out-of-order stamps put right, thinned to 10 Hz
+    assert rec.meta["driver"]["kind"] == "imported" and rec.meta["origin_shift_m"]
+    assert (rec.poses[:, :2] > 0).all()  # the odometry frame started at the robot; the map starts at 0
+    assert set(np.unique(rec.image(len(rec) - 1))) <= {0, 1, 2, 3, 4, 255}
+    text = "\n".join(report.lines())
+    assert "odometry gap" in text and "not in the label map" in text
+
+
+def test_an_undisturbed_clean_log_reproduces_the_simulator_run(tmp_path: Path, logs):
+    bag = write_synthetic_bag(tmp_path / "clean.mcap", "mcap", quirks=False, max_seconds=6.0)
+    rec = read_recording(tmp_path / "rec") if import_bag(bag, load_robot(logs["robot"]), tmp_path / "rec", show_progress=False) else None
+    # The same drive in the simulator: the driver, its pushes and the camera, frame by frame.
+    sim = Simulation(resolve_scenario("demo_course"))
+    shift = np.array(rec.meta["origin_shift_m"])
+    for i in (0, len(rec) // 2, len(rec) - 1):
+        pose = rec.poses[i] - (*shift, 0.0)
+        np.testing.assert_array_equal(rec.image(i), sim.renderer.render(tuple(pose)))
+    assert len(rec) >= 55
+    features = FeatureConfig()
+    U, labels, _, _ = featurize_recording(rec, features)
+    assert U.shape == (len(rec), 21, 5) and np.isfinite(U).all() and len(set(labels.tolist())) > 1
+
+
+def test_inspect_and_featurize_accept_an_imported_recording(imported, capsys):
+    _, rec = imported["rosbag1"]
+    summary = summarise(rec)
+    assert summary.frames == len(rec) and summary.zones == []
+    assert main(["inspect", str(rec.path), "--no-preference"]) == 0
+    assert (rec.path / "driven_path.png").is_file()
+    out = rec.path.parent / "ds.safetensors"
+    assert main(["featurize", str(rec.path), "--out", str(out)]) == 0 and out.is_file()
+
+
+def test_without_a_path_the_driven_odometry_is_smoothed(tmp_path: Path, logs):
+    robot = tmp_path / "robot.yaml"
+    robot.write_text(robot_yaml(path_topic=False))
+    report = import_bag(logs["bags"]["mcap"], load_robot(robot), tmp_path / "rec", show_progress=False)
+    assert report.path_source.startswith("the driven odometry")
+    straight = smooth_path(np.stack([np.linspace(0, 30, 301), 0.2 * np.sin(np.linspace(0, 30, 301) * 5)], axis=1))
+    interior = (straight[:, 0] > 5.0) & (straight[:, 0] < 25.0)
+    assert np.abs(straight[interior, 1]).max() < 0.02  # a 0.2 m weave averaged away
+    assert straight[0] == pytest.approx([0.0, 0.0], abs=1e-9) and straight[-1, 0] == pytest.approx(30.0, abs=0.3)
+
+
+def test_cli_import(tmp_path: Path, logs, capsys):
+    out = tmp_path / "rec"
+    assert main(["import", str(logs["bags"]["mcap"]), "--robot", str(logs["robot"]), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "frames kept" in text and "wrote" in text and read_recording(out).complete
+    assert main(["import", str(logs["bags"]["mcap"]), "--robot", str(logs["robot"]), "--out", str(out)]) == 2  # exists
+    assert "--force" in capsys.readouterr().err
+    assert main(["import", str(logs["bags"]["rosbag1"]), "--robot", str(logs["robot"]), "--out", str(out), "--force"]) == 0
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary folder left
+
+
+# --- refusals -------------------------------------------------------------------------------
+
+
+def _one_line(capsys, *names: str) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and all(n in err[0] for n in names), err
+    assert "internal error" not in err[0] and "Traceback" not in err[0]
+    return err[0]
+
+
+def test_a_missing_topic_or_a_wrong_type_names_the_bag_and_the_field(tmp_path: Path, logs, capsys):
+    bag = str(logs["bags"]["mcap"])
+    robot = tmp_path / "robot.yaml"
+    robot.write_text(robot_yaml().replace(TOPICS["odometry"], "/warthog/odom"))
+    assert main(["import", bag, "--robot", str(robot), "--out", str(tmp_path / "a")]) == 2
+    _one_line(capsys, bag, "topics.odometry", "/warthog/odom", "is not in the bag")
+    robot.write_text(robot_yaml().replace(f"odometry: {TOPICS['odometry']}", f"odometry: {TOPICS['command']}"))
+    assert main(["import", bag, "--robot", str(robot), "--out", str(tmp_path / "b")]) == 2
+    _one_line(capsys, bag, "topics.odometry", "geometry_msgs/msg/Twist")
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+@pytest.mark.parametrize("damage", ["garbage", "truncated", "empty", "missing"])
+def test_a_damaged_bag_is_one_line_and_leaves_nothing(tmp_path: Path, logs, capsys, damage: str):
+    source = logs["bags"]["rosbag1"]
+    bag = tmp_path / "broken.bag"
+    if damage == "garbage":
+        bag.write_bytes(b"#ROSBAG V2.0\n" + bytes(range(256)) * 40)
+    elif damage == "truncated":
+        bag.write_bytes(source.read_bytes()[: source.stat().st_size // 3])
+    elif damage == "empty":
+        bag.write_bytes(b"")
+    out = tmp_path / "rec"
+    assert main(["import", str(bag), "--robot", str(logs["robot"]), "--out", str(out)]) == 2
+    _one_line(capsys, str(bag))
+    assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_a_failed_force_import_keeps_the_old_recording(tmp_path: Path, logs, capsys):
+    out = tmp_path / "rec"
+    shutil.copytree(logs["root"] / "rec_mcap", out)
+    before = (out / "frames.jsonl").read_bytes()
+    (tmp_path / "broken.bag").write_bytes(b"not a bag")
+    assert main(["import", str(tmp_path / "broken.bag"), "--robot", str(logs["robot"]), "--out", str(out), "--force"]) == 2
+    assert (out / "frames.jsonl").read_bytes() == before and read_recording(out).complete
+
+
+@pytest.mark.parametrize("edit,field", [
+    (lambda t: t + "speed: 3\n", "speed"),
+    (lambda t: t.replace("  pitch_deg: 30.0\n", ""), "camera.pitch_deg"),
+    (lambda t: t.replace("height_m: 1.0", "height_m: -1"), "camera.height_m"),
+    (lambda t: t.replace(f"  command: {TOPICS['command']}\n", ""), "topics.command"),
+    (lambda t: t.replace(TOPICS["segmentation"], "seg"), "topics.segmentation"),
+    (lambda t: t.replace("labels: rellis3d", "labels: cityscapes"), "labels"),
+    (lambda t: t.replace("terrapref-robot/1", "terrapref-robot/9"), "format"),
+])
+def test_a_bad_robot_file_is_one_line_naming_file_and_field(tmp_path: Path, edit, field: str):
+    robot = tmp_path / "robot.yaml"
+    robot.write_text(edit(robot_yaml()))
+    with pytest.raises(UserError) as info:
+        load_robot(robot)
+    lines = info.value.lines()
+    assert len(lines) == 1 and str(robot) in lines[0] and f"{field}:" in lines[0], lines
+
+
+def test_the_issue_example_robot_file_is_accepted(tmp_path: Path):
+    robot = tmp_path / "warthog.yaml"
+    robot.write_text("""format: terrapref-robot/1
+topics:
+  segmentation: /warthog/seg/labels        # sensor_msgs/Image
+  camera_info: /warthog/camera/camera_info # sensor_msgs/CameraInfo
+  odometry: /warthog/odom                  # nav_msgs/Odometry
+  command: /warthog/cmd_vel                # geometry_msgs/Twist
+  path: /route/plan                        # nav_msgs/Path
+camera:
+  height_m: 1.0
+  pitch_deg: 30.0
+labels: rellis3d
+""")
+    config = load_robot(robot)
+    assert config.topics["odometry"] == "/warthog/odom" and config.path_topic == "/route/plan"
+    assert config.camera["height_m"] == 1.0 and config.labels.name == "rellis3d"
