@@ -195,3 +195,42 @@ labels: rellis3d
     config = load_robot(robot)
     assert config.topics["odometry"] == "/warthog/odom" and config.path_topic == "/route/plan"
     assert config.camera["height_m"] == 1.0 and config.labels.name == "rellis3d"
+
+
+# --- recordings and runs out, as MCAP ----------------------------------------------------------
+
+
+def _topics(path: Path) -> dict[str, tuple[str, int]]:
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([path]) as reader:
+        return {c.topic: (c.msgtype, c.msgcount) for c in reader.connections}
+
+
+def test_an_exported_recording_imports_to_the_same_dataset(tmp_path: Path, imported, capsys):
+    from terrapref.demos.dataset import build_dataset
+    from terrapref.learning.recipe import DEFAULT_RECIPE, recipe_named
+
+    _, rec = imported["mcap"]
+    out = tmp_path / "run.mcap"
+    assert main(["export", str(rec.path), "--format", "mcap", "--out", str(out)]) == 0
+    topics = _topics(out)
+    assert topics["/terrapref/labels"] == ("sensor_msgs/msg/CompressedImage", len(rec))
+    assert topics["/terrapref/trajectories"] == ("visualization_msgs/msg/MarkerArray", len(rec))
+    assert {"/tf", "/tf_static", "/terrapref/odom", "/terrapref/cmd_vel", "/terrapref/path", "/terrapref/camera_info", "/terrapref/labels_color"} <= set(topics)
+    assert main(["import", str(out), "--robot", f"{out}.robot.yaml", "--out", str(tmp_path / "back")]) == 0
+    back = read_recording(tmp_path / "back")
+    features = recipe_named(DEFAULT_RECIPE).features()
+    assert build_dataset([back], features).fingerprint == build_dataset([rec], features).fingerprint
+
+
+def test_evaluate_writes_each_run_as_mcap(tmp_path: Path, capsys):
+    from test_interop import _linear_model
+
+    model = _linear_model(tmp_path / "linear.safetensors")
+    out = tmp_path / "ev"
+    assert main(["evaluate", str(model), "fig7_rock_vs_non_traversable_left", "--seeds", "1", "--no-driver", "--workers", "1", "--out", str(out), "--mcap"]) == 0
+    run = out / "runs" / "fig7_rock_vs_non_traversable_left_seed0.mcap"
+    topics = _topics(run)
+    frames = topics["/terrapref/labels"][1]
+    assert frames > 50 and topics["/terrapref/trajectories"][1] == frames and topics["/terrapref/odom"][1] == frames

@@ -309,7 +309,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if args.style not in STYLES:
         raise UserError("--style", f"unknown driver style {args.style!r}; styles: {', '.join(STYLES)}")
     metrics = evaluate_model(args.model, args.scenarios, args.seeds, args.out, profile, not args.no_driver, frames, args.workers,
-                             progress=lambda k, n: bar.update(k, f"{k}/{n} runs"), style=args.style)
+                             progress=lambda k, n: bar.update(k, f"{k}/{n} runs"), style=args.style, mcap=args.mcap)
     bar.close()
     zones = [z for sc in metrics["scenarios"].values() for run in sc.get("planner", {}).values() for z in run["zones"]]
     s = metrics["summary"]
@@ -325,7 +325,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if metrics.get("unidentified_pairs"):
         print(f"note: the model's demonstrations did not identify {', '.join(metrics['unidentified_pairs'])}; "
               f"{len(guesses)} of {len(zones)} zone runs rest on them (marked in metrics.json)")
-    print(f"wrote {Path(args.out) / 'metrics.json'} and figures in {args.out}")
+    print(f"wrote {Path(args.out) / 'metrics.json'} and figures in {args.out}" + (f"; runs as MCAP in {Path(args.out) / 'runs'}" if args.mcap else ""))
     return 0
 
 
@@ -342,14 +342,27 @@ def _cmd_import(args: argparse.Namespace) -> int:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from terrapref.interop.onnx_export import export_onnx
-    from terrapref.learning.model_file import load_model
-
     out = Path(args.out)
     if out.resolve() == Path(args.input).resolve():
         raise UserError(args.out, "is the input; choose another output file", field="--out")
     if out.is_dir():
         raise UserError(args.out, "is a folder; expected a file name", field="--out")
+    if args.format == "mcap":
+        from terrapref.demos.recording import read_recording
+        from terrapref.interop.mcap_export import recording_frames, write_mcap
+        from terrapref.progress import Progress
+
+        rec = read_recording(args.input)
+        if len(rec) == 0:
+            raise UserError(args.input, "holds no frames", field="frames.jsonl")
+        bar = Progress("export", len(rec))
+        write_mcap(out, recording_frames(rec), progress=lambda done, total: bar.update(done))
+        bar.close(f"{len(rec)} frames")
+        print(f"wrote {out} (ROS 2 MCAP; open it in Foxglove) and {out.name}.robot.yaml (terrapref import {out} --robot {out}.robot.yaml)")
+        return 0
+    from terrapref.interop.onnx_export import export_onnx
+    from terrapref.learning.model_file import load_model
+
     model = load_model(args.input)
     export_onnx(model, out)
     print(f"wrote {out} (ONNX: input utilities float32 [N, {model.classifier.m}, {model.classifier.n_features}], output logits float32 [N, {model.classifier.m}])")
@@ -506,6 +519,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-driver", action="store_true", help="skip the synthetic driver's comparison runs")
     p.add_argument("--style", default="default", help="the synthetic driver's style for the comparison runs (agreement)")
     p.add_argument("--workers", type=int, help="parallel processes (default: one per core)")
+    p.add_argument("--mcap", action="store_true", help="also write each planner run as ROS 2 MCAP in OUT/runs (Foxglove, RViz)")
     p.set_defaults(func=_cmd_evaluate)
 
     p = sub.add_parser("reproduce", help="demonstrate, train and evaluate end to end; write REPORT.md with Tables 1 and 2")
@@ -534,9 +548,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="replace an existing recording at --out (only once the import succeeds)")
     p.set_defaults(func=_cmd_import)
 
-    p = sub.add_parser("export", help="export a trained model as ONNX (the classifier C, its configuration in the metadata)")
-    p.add_argument("input", help="model file (terrapref train)")
-    p.add_argument("--format", choices=["onnx"], required=True, help="output format")
+    p = sub.add_parser("export", help="export a model as ONNX, or a recording as ROS 2 MCAP (Foxglove, RViz)")
+    p.add_argument("input", help="model file (--format onnx) or recording folder (--format mcap)")
+    p.add_argument("--format", choices=["onnx", "mcap"], required=True, help="onnx: the classifier C; mcap: the recording's frames as ROS 2 messages")
     p.add_argument("--out", required=True, help="output file")
     p.set_defaults(func=_cmd_export)
 

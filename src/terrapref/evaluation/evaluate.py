@@ -6,6 +6,7 @@ import json
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+import numpy as np
 
 from terrapref.camera import PinholeCamera
 from terrapref.errors import UserError
@@ -16,6 +17,7 @@ from terrapref.features import PreferenceSet
 from terrapref.planner.policy import load_policy
 from terrapref.scenario import AVOID, resolve_scenario
 from terrapref.terrain import PreferenceProfile
+from terrapref.vehicle import Pose
 from terrapref.world import rasterise
 
 
@@ -30,6 +32,7 @@ def evaluate_model(
     workers: int | None = None,
     progress: Callable[[int, int], None] | None = None,
     style: str = "default",
+    mcap: bool = False,
 ) -> dict:
     """Drive every scenario with the planner (and the synthetic driver) for seeds 0..N-1.
 
@@ -38,13 +41,15 @@ def evaluate_model(
     planner agreed (SPEC 12), and, when the model's demonstrations left a pair of classes
     unidentified (terrapref.learning.identify), the pairs its expected choice rests on.
     Writes ``metrics.json``, one top-down figure per scenario and the decision pictures of
-    ``frames`` (for seed 0) into ``out_dir``; returns the metrics.
+    ``frames`` (for seed 0) into ``out_dir``, and with ``mcap`` every planner run as ROS 2 MCAP
+    (``runs/SCENARIO_seedN.mcap``: the camera, the pose, the 21 trajectories and the one chosen);
+    returns the metrics.
     """
     model = load_policy(model_path)  # C, or a learned baseline (linear, CNN)
     for name in scenarios:
         resolve_scenario(name)  # fail early, with the file and field, before any run
     profile = profile or PreferenceProfile.parse(list(model.profile), model.classes, source=f"{model_path}: profile")
-    specs = [RunSpec(name, seed, PLANNER, model_path, profile.order, tuple(frames) if seed == 0 else ()) for name in scenarios for seed in range(seeds)]
+    specs = [RunSpec(name, seed, PLANNER, model_path, profile.order, tuple(frames) if seed == 0 else (), keep_run=mcap) for name in scenarios for seed in range(seeds)]
     if with_driver:
         specs += [RunSpec(name, seed, EXPERT, None, profile.order, style=style) for name in scenarios for seed in range(seeds)]
     results = run_many(specs, workers, progress)
@@ -73,10 +78,30 @@ def evaluate_model(
                 entry.setdefault(r["driver"], {})[str(r["seed"])] = r["metrics"]
         metrics["scenarios"][name] = entry
     _figures(results, scenarios, out, model, profile)
+    if mcap:
+        _write_runs(results, out / "runs", model)
     tmp = out / ".metrics.json.tmp"
     tmp.write_text(json.dumps(metrics, indent=2))
     tmp.replace(out / "metrics.json")
     return metrics
+
+
+def _write_runs(results: list[dict], folder: Path, model) -> None:
+    """Each planner run as an MCAP file, its camera frames rendered again at the poses driven."""
+    from terrapref.interop.mcap_export import RunFrames, write_mcap
+    from terrapref.sim import Simulation
+
+    for r in results:
+        run = r.get("run")
+        if r["driver"] != PLANNER or run is None:
+            continue
+        scenario = resolve_scenario(r["scenario"])
+        sim = Simulation(scenario, model.camera)
+        poses = run["poses"]
+        frames = RunFrames(times=0.1 * np.arange(len(poses)), poses=poses, commands=run["commands"],
+                           image=lambda i, poses=poses, sim=sim: sim.renderer.render(Pose(*poses[i])), chosen=run["index"],
+                           path=scenario.waypoints, camera=model.camera, classes=model.classes, preference=model.features.preference, probs=run["probs"])
+        write_mcap(folder / f"{r['scenario'].replace(':', '_')}_seed{r['seed']}.mcap", frames, robot_file=False)
 
 
 def _identifiability(model) -> Identifiability | None:

@@ -46,6 +46,7 @@ class RunSpec:
     smoothing: float = 0.0
     perturb: Perturbation | None = None
     style: str = "default"  # the synthetic driver's style (terrapref.demos.expert.STYLES), for EXPERT runs
+    keep_run: bool = False  # keep every decision (pose, choice, F_t) of a planner run, for an MCAP of it
 
 
 def start_pose(start: tuple[float, float, float], seed: int) -> Pose:
@@ -92,7 +93,7 @@ def run_one(spec: RunSpec) -> dict:
     else:
         policy = make_policy(spec)
         sim = Simulation(scenario, policy.camera, world=world)
-        driver = PlannerDriver(Planner(policy, smoothing=spec.smoothing), keep=bool(spec.keep_frames))
+        driver = PlannerDriver(Planner(policy, smoothing=spec.smoothing), keep=bool(spec.keep_frames) or spec.keep_run)
     runner = PerturbedDriver(driver, spec.perturb, sim.config.camera_rate_hz) if spec.perturb is not None and spec.perturb.active else driver
     log = run_episode(sim, runner, np.random.default_rng(spec.seed), start_pose(scenario.start, spec.seed))
     metrics = score_run(log.trace[:, :2], scenario, sim.world, profile, completed=log.completed, collisions=log.collisions, duration_s=log.duration_s)
@@ -105,6 +106,10 @@ def run_one(spec: RunSpec) -> dict:
                 pose = tuple(log.trace[3 * i])
                 frames[i] = {"pose": pose, "probs": d.probs, "index": d.index, "image": sim.renderer.render(Pose(*pose))}
         out["frames"] = frames
+    if spec.keep_run and isinstance(driver, PlannerDriver) and driver.decisions:
+        n = len(driver.decisions)
+        out["run"] = {"poses": log.trace[: 3 * n : 3].copy(), "index": np.array([d.index for d in driver.decisions]),
+                      "probs": np.stack([d.probs for d in driver.decisions]).astype(np.float32), "commands": log.commands[:n].copy()}
     return out
 
 

@@ -333,15 +333,18 @@ def _import(bag: _Bag, robot: RobotConfig, out: Path, rate_hz: float, show_progr
             raise UserError(bag.source, f"no path topic or path_file, and {exc}", field="topics.path") from None
         report.path_source = f"the driven odometry, smoothed over {2 * PATH_SMOOTHING_M:g} m ({len(path)} points)"
     everything = np.concatenate([streams.odom[:, :2], path])
-    lo, hi = everything.min(axis=0) - MAP_MARGIN_M, everything.max(axis=0) + MAP_MARGIN_M
-    shift = -lo  # the odometry frame may start anywhere (often at the robot); the recording's map starts at 0
+    # The odometry frame may start anywhere (often at the robot); the recording's map starts at 0,
+    # so an axis with negative coordinates is shifted (coordinates already >= 0 stay as they are).
+    low = everything.min(axis=0)
+    shift = np.where(low >= 0.0, 0.0, MAP_MARGIN_M - low)
+    hi = everything.max(axis=0) + shift + MAP_MARGIN_M
     preference = PreferenceSetConfig()
     control = preference.control
     lut = robot.labels.lut(classes)
     listed = robot.labels.listed()
 
     x0, y0, yaw0 = streams.odom[0]
-    scenario = _scenario(bag_path_name(bag.source), path + shift, (x0 + shift[0], y0 + shift[1], yaw0), tuple(hi - lo), classes)
+    scenario = _scenario(bag_path_name(bag.source), path + shift, (x0 + shift[0], y0 + shift[1], yaw0), tuple(hi), classes)
     meta = {
         "scenario": scenario["name"],
         "camera": camera.to_dict(),
@@ -369,12 +372,14 @@ def _import(bag: _Bag, robot: RobotConfig, out: Path, rate_hz: float, show_progr
         if t - last_t < 0.75 / rate_hz:  # a quarter period of slack for stamp jitter
             report.skipped[f"images thinned to {rate_hz:g} Hz"] += 1
             return
-        j = int(np.searchsorted(streams.odom_t, t))
+        j = int(np.searchsorted(streams.odom_t, t, side="right"))  # odom_t[j - 1] <= t < odom_t[j]
+        if j == len(streams.odom_t) and t == streams.odom_t[-1]:
+            j -= 1  # exactly on the last pose
         if j == 0 or j == len(streams.odom_t):
             report.skipped["images outside the odometry's time span"] += 1
             return
         t0, t1 = streams.odom_t[j - 1], streams.odom_t[j]
-        if t1 - t0 > robot.max_gap_s:
+        if t1 - t0 > robot.max_gap_s and t != t0 and t != t1:  # a pose at the very stamp needs no interpolation
             report.skipped["images in an odometry gap"] += 1
             return
         k = int(np.searchsorted(streams.cmd_t, t, side="right")) - 1
@@ -385,9 +390,12 @@ def _import(bag: _Bag, robot: RobotConfig, out: Path, rate_hz: float, show_progr
         if v < MIN_SPEED_MPS:
             report.skipped["images while stopped or reversing"] += 1
             return
-        f = (t - t0) / (t1 - t0) if t1 > t0 else 0.0
-        x, y, yaw = streams.odom[j - 1] + f * (streams.odom[j] - streams.odom[j - 1])
-        yaw = (yaw + math.pi) % (2 * math.pi) - math.pi
+        if t == t1 or t == t0:  # a pose at the image's own stamp is taken as it is, bit for bit
+            x, y, yaw = streams.odom[j if t == t1 else j - 1]
+        else:
+            x, y, yaw = streams.odom[j - 1] + (t - t0) / (t1 - t0) * (streams.odom[j] - streams.odom[j - 1])
+        if abs(yaw) > math.pi:  # unwrapped for the interpolation; wrapped back only where needed
+            yaw = (yaw + math.pi) % (2 * math.pi) - math.pi
         w_set = float(np.clip(w * control.v_mps / v, min(control.w_rps), max(control.w_rps)))  # same curvature at the set's speed
         image = lut[ids]
         if undistort is not None:
