@@ -117,9 +117,10 @@ def test_cli_import(tmp_path: Path, logs, capsys):
 
 
 def _one_line(capsys, *names: str) -> str:
-    err = capsys.readouterr().err.strip().splitlines()
+    text = capsys.readouterr().err
+    err = [line for line in text.splitlines() if line.startswith("error:")]  # besides progress lines
     assert len(err) == 1 and all(n in err[0] for n in names), err
-    assert "internal error" not in err[0] and "Traceback" not in err[0]
+    assert "internal error" not in text and "Traceback" not in text
     return err[0]
 
 
@@ -234,3 +235,29 @@ def test_evaluate_writes_each_run_as_mcap(tmp_path: Path, capsys):
     topics = _topics(run)
     frames = topics["/terrapref/labels"][1]
     assert frames > 50 and topics["/terrapref/trajectories"][1] == frames and topics["/terrapref/odom"][1] == frames
+
+
+def test_replay_reports_agreement_with_the_operator(tmp_path: Path, logs, capsys):
+    from test_interop import _linear_model
+
+    model = _linear_model(tmp_path / "linear.safetensors")
+    out = tmp_path / "replay"
+    assert main(["replay", str(logs["bags"]["sqlite3"]), "--robot", str(logs["robot"]), "--model", str(model), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "planner, all frames" in text and "C alone" in text
+    import json
+
+    result = json.loads((out / "replay.json").read_text())
+    o = result["overall"]
+    assert o["frames"] == len(read_recording(out / "recording")) and 0.0 <= o["top1"] <= o["top3"] <= 1.0
+    assert result["terrain_in_view"]["frames"] < o["frames"] and (out / "replay.png").stat().st_size > 10_000
+    # A model for another camera is refused in one line.
+    from helpers import model_meta
+    from terrapref.camera import CameraConfig
+    from terrapref.learning import load_model, save_model
+
+    other = load_model(model)
+    meta = model_meta(camera=CameraConfig(pitch_deg=20.0))
+    save_model(tmp_path / "other.safetensors", other.classifier, other.weights, meta)
+    assert main(["replay", str(logs["bags"]["sqlite3"]), "--robot", str(logs["robot"]), "--model", str(tmp_path / "other.safetensors"), "--out", str(tmp_path / "r2")]) == 2
+    _one_line(capsys, "other.safetensors", "another camera")

@@ -341,6 +341,38 @@ def _cmd_import(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from terrapref.demos.recording import read_recording
+    from terrapref.interop.bag_import import import_bag
+    from terrapref.interop.replay import replay, write_replay
+    from terrapref.interop.robot import load_robot
+    from terrapref.learning.model_file import load_model
+    from terrapref.progress import Progress
+
+    model = load_model(args.model)
+    robot = load_robot(args.robot, model.classes)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UserError(args.out, "exists and is not a folder", field="--out")
+    rec_dir = out / "recording"
+    report = import_bag(args.bag, robot, rec_dir, rate_hz=args.rate, force=True)
+    print(f"imported {report.frames} frames ({report.duration_s:.0f} s) into {rec_dir}")
+    rec = read_recording(rec_dir)
+    bar = Progress("replay", len(rec))
+    result = replay(model, rec, progress=lambda k, n: bar.update(k, f"{k}/{n} frames"))
+    bar.close()
+    write_replay(result, out, f"{Path(args.model).name} on {Path(args.bag).name}")
+    for name, key in (("planner, all frames", "overall"), ("planner, terrain", "terrain_in_view"), ("C alone, all", "classifier_overall"),
+                      ("C alone, terrain", "classifier_terrain_in_view")):
+        r = result[key]
+        if r["frames"]:
+            print(f"{name:20s} top-1 {r['top1']:.1%}, top-3 {r['top3']:.1%}, mean |w| error {r['mean_abs_w_error_rps']:.3f} rad/s over {r['frames']} frames")
+        else:
+            print(f"{name:20s} no frames")
+    print(f"wrote {out / 'replay.json'} and {out / 'replay.png'}")
+    return 0
+
+
 def _cmd_export(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.resolve() == Path(args.input).resolve():
@@ -547,6 +579,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rate", type=float, default=10.0, help="frames per second to keep (default 10, the planner's rate)")
     p.add_argument("--force", action="store_true", help="replace an existing recording at --out (only once the import succeeds)")
     p.set_defaults(func=_cmd_import)
+
+    p = sub.add_parser("replay", help="run a model open-loop over a held-out bag: how often it makes the operator's choice")
+    p.add_argument("bag", help="a .bag file, a ROS 2 bag folder, or a .mcap / .db3 file")
+    p.add_argument("--robot", required=True, help="terrapref-robot/1 file")
+    p.add_argument("--model", required=True, help="model file (terrapref train)")
+    p.add_argument("--out", required=True, help="folder for replay.json, replay.png and the imported recording")
+    p.add_argument("--rate", type=float, default=10.0, help="frames per second to replay (default 10)")
+    p.set_defaults(func=_cmd_replay)
 
     p = sub.add_parser("export", help="export a model as ONNX, or a recording as ROS 2 MCAP (Foxglove, RViz)")
     p.add_argument("input", help="model file (--format onnx) or recording folder (--format mcap)")

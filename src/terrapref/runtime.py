@@ -37,6 +37,7 @@ class RuntimeDecision:
         index: the chosen trajectory (0..m-1, the control set's order).
         probs: C's F_t over the m trajectories.
         progress_m: progress along the path [m].
+        U: the frame's utility features (m, K + 1), as C saw them.
     """
 
     stamp_s: float
@@ -44,6 +45,7 @@ class RuntimeDecision:
     index: int
     probs: np.ndarray
     progress_m: float
+    U: np.ndarray
 
 
 class PlannerRuntime:
@@ -100,7 +102,7 @@ class PlannerRuntime:
         if self.last is not None and stamp_s <= self.last.stamp_s:
             return None
         d = self.planner.decide(image, pose)
-        self.last = RuntimeDecision(float(stamp_s), d.command, d.index, d.probs, d.progress_s)
+        self.last = RuntimeDecision(float(stamp_s), d.command, d.index, d.probs, d.progress_s, d.U)
         return self.last
 
     def command_at(self, now_s: float) -> Command:

@@ -213,9 +213,14 @@ def camera_from_info(info, robot: RobotConfig, source: str) -> tuple[CameraConfi
     if width <= 0 or height <= 0 or not (fx > 0 and fy > 0 and np.isfinite([fx, fy, cx, cy]).all()):
         raise UserError(source, f"camera_info: image {width} x {height}, K {k.ravel().tolist()} is not a calibration", field="topics.camera_info")
     cam = robot.camera
-    camera = CameraConfig(width_px=width, height_px=height, hfov_deg=math.degrees(2 * math.atan(width / (2 * fx))), fx=fx, fy=fy, cx=cx, cy=cy,
-                          mount_height_m=cam["height_m"], mount_forward_m=cam["forward_m"], pitch_deg=cam["pitch_deg"], yaw_deg=cam["yaw_deg"],
-                          max_range_m=cam["max_range_m"])
+    mount = dict(mount_height_m=cam["height_m"], mount_forward_m=cam["forward_m"], pitch_deg=cam["pitch_deg"], yaw_deg=cam["yaw_deg"], max_range_m=cam["max_range_m"])
+    hfov = math.degrees(2 * math.atan(width / (2 * fx)))
+    camera = CameraConfig(width_px=width, height_px=height, hfov_deg=hfov, fx=fx, fy=fy, cx=cx, cy=cy, **mount)
+    # A centred pinhole with square pixels is written by its field of view, as terrapref's own
+    # cameras are, so that a model trained in the simulator and a log of the same camera match.
+    plain = CameraConfig(width_px=width, height_px=height, hfov_deg=round(hfov, 6), **mount)
+    if plain.intrinsics == (fx, fy, cx, cy):
+        camera = plain
     if not d.size or not np.any(d):
         return camera, None
     if model not in ("plumb_bob", "rational_polynomial") or d.size < 4:

@@ -1,0 +1,116 @@
+"""Open-loop replay: the runtime over a held-out log, against what the operator did.
+
+For every frame of the log the model decides from the same label image, stamp and pose as the
+operator had, and the replay counts how often its trajectory is the operator's (top-1), among
+its three most probable (top-3), and how far its yaw rate is from the operator's (mean |w|
+error), over all frames and over the frames where terrain lies on some trajectory (where the
+preference matters). The check a team makes before putting a model on the robot.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from terrapref.camera import CameraConfig
+from terrapref.demos.recording import Recording
+from terrapref.fileio import write_bytes_atomic
+from terrapref.learning.model_file import LoadedModel
+from terrapref.runtime import PlannerRuntime
+
+
+def _rates(hit1: np.ndarray, hit3: np.ndarray, werr: np.ndarray) -> dict:
+    n = int(len(hit1))
+    return {"frames": n, "top1": float(hit1.mean()) if n else None, "top3": float(hit3.mean()) if n else None,
+            "mean_abs_w_error_rps": float(werr.mean()) if n else None}
+
+
+def replay(model: LoadedModel, rec: Recording, progress=None) -> dict:
+    """Decide on every frame of ``rec`` with ``model``; the metrics and the per-frame series.
+
+    A model trained for another camera than the log's is refused (UserError).
+    """
+    runtime = PlannerRuntime(model, camera=CameraConfig.from_dict(rec.meta["camera"]))
+    path = np.asarray(rec.meta.get("path") or rec.scenario["path"]["waypoints"], dtype=float)
+    runtime.set_path(path)
+    control = model.features.preference.control
+    w_grid = np.asarray(control.w_rps)
+    n_terrain = model.features.n_terrain
+    chosen = np.empty(len(rec), dtype=np.int64)
+    c_best = np.empty(len(rec), dtype=np.int64)
+    top3 = np.empty(len(rec), dtype=bool)
+    terrain = np.empty(len(rec), dtype=bool)
+    for i in range(len(rec)):
+        d = runtime.decide(rec.image(i), float(rec.times[i]), tuple(rec.poses[i]))
+        if d is None:  # a recording's times only grow; kept for safety with hand-made ones
+            d = runtime.last
+        chosen[i] = d.index
+        c_best[i] = int(np.argmax(d.probs))
+        top3[i] = rec.labels[i] in np.argsort(d.probs)[-3:]
+        terrain[i] = bool((d.U[:, :n_terrain] > 0).any())
+        if progress is not None:
+            progress(i + 1, len(rec))
+    hit1 = chosen == rec.labels
+    werr = np.abs(w_grid[chosen] - rec.commands[:, 1])
+    c_hit1 = c_best == rec.labels
+    c_werr = np.abs(w_grid[c_best] - rec.commands[:, 1])
+    return {
+        "overall": _rates(hit1, top3, werr),
+        "terrain_in_view": _rates(hit1[terrain], top3[terrain], werr[terrain]),
+        # C's own argmax, as training's accuracy measures it (top-3 is F_t's either way); the
+        # planner's second stage looks further ahead and departs from the operator's next command more often.
+        "classifier_overall": _rates(c_hit1, top3, c_werr),
+        "classifier_terrain_in_view": _rates(c_hit1[terrain], top3[terrain], c_werr[terrain]),
+        "series": {"t": rec.times.tolist(), "w_operator": rec.commands[:, 1].tolist(), "w_model": w_grid[chosen].tolist(),
+                   "terrain": terrain.tolist(), "top1": hit1.tolist(), "xy": rec.poses[:, :2].tolist()},
+    }
+
+
+def write_replay(result: dict, out: Path, title: str) -> tuple[Path, Path]:
+    """``replay.json`` (metrics and series) and ``replay.png`` (the drive at a glance)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out.mkdir(parents=True, exist_ok=True)
+    s = result["series"]
+    t, terrain, hit = np.asarray(s["t"]), np.asarray(s["terrain"]), np.asarray(s["top1"], dtype=float)
+    fig = plt.figure(figsize=(14, 8), constrained_layout=True)
+    grid = fig.add_gridspec(3, 1, height_ratios=[1.2, 1, 1.1])
+    ax = fig.add_subplot(grid[0, 0])
+    for k in np.flatnonzero(terrain):
+        ax.axvspan(t[k] - 0.05, t[k] + 0.05, color="#f3e2c7", lw=0)
+    ax.plot(t, s["w_operator"], color="black", lw=1.2, label="operator")
+    ax.plot(t, s["w_model"], color="tab:red", lw=0.9, alpha=0.8, label="planner")
+    ax.set_ylabel("yaw rate w [rad/s]")
+    ax.set_title("commands along the drive (shaded: terrain on some trajectory)")
+    ax.legend(loc="upper right")
+    ax2 = fig.add_subplot(grid[1, 0], sharex=ax)
+    window = max(1, min(len(hit), 50))
+    rolling = np.convolve(hit, np.ones(window) / window, mode="same")
+    ax2.plot(t, rolling, color="tab:blue")
+    ax2.set_ylim(0, 1.02)
+    ax2.set_xlabel("time [s]")
+    ax2.set_ylabel(f"top-1 agreement ({window / 10:g} s window)")
+    o, v = result["overall"], result["terrain_in_view"]
+    fmt = lambda r: "n/a" if r["top1"] is None else f"top-1 {r['top1']:.0%}, top-3 {r['top3']:.0%}, |w| error {r['mean_abs_w_error_rps']:.3f} rad/s ({r['frames']} frames)"  # noqa: E731
+    c = result["classifier_overall"]
+    ax2.set_title(f"planner, all frames: {fmt(o)}\nplanner, terrain in view: {fmt(v)}\nC alone (argmax F_t), all frames: {fmt(c)}", fontsize=9)
+    ax3 = fig.add_subplot(grid[2, 0])
+    xy = np.asarray(s["xy"])
+    ax3.scatter(xy[:, 0], xy[:, 1], c=np.where(hit > 0, "tab:green", "tab:red"), s=4)
+    ax3.set_aspect("equal")
+    ax3.set_title("driven path: the planner makes the operator's choice (green) or not (red)")
+    ax3.set_xlabel("x [m]")
+    ax3.set_ylabel("y [m]")
+    fig.suptitle(title)
+    png = out / "replay.png"
+    tmp = out / ".replay.png.tmp.png"
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    tmp.replace(png)
+    js = write_bytes_atomic(out / "replay.json", json.dumps(result, indent=1).encode())
+    return js, png
