@@ -261,3 +261,20 @@ def test_replay_reports_agreement_with_the_operator(tmp_path: Path, logs, capsys
     save_model(tmp_path / "other.safetensors", other.classifier, other.weights, meta)
     assert main(["replay", str(logs["bags"]["sqlite3"]), "--robot", str(logs["robot"]), "--model", str(tmp_path / "other.safetensors"), "--out", str(tmp_path / "r2")]) == 2
     _one_line(capsys, "other.safetensors", "another camera")
+
+
+def test_colour_segmentation_through_the_label_maps_colour_table(tmp_path: Path, imported):
+    from terrapref.interop.synthetic_bag import colour_label_map
+
+    (tmp_path / "colours.yaml").write_text(colour_label_map())
+    (tmp_path / "robot.yaml").write_text(robot_yaml(labels="colours.yaml"))
+    bag = write_synthetic_bag(tmp_path / "rgb.mcap", "mcap", encoding="rgb8", max_seconds=SECONDS)
+    report = import_bag(bag, load_robot(tmp_path / "robot.yaml"), tmp_path / "rec", show_progress=False)
+    rec = read_recording(tmp_path / "rec")
+    _, ids_rec = imported["mcap"]
+    assert len(rec) == len(ids_rec)
+    np.testing.assert_array_equal(rec.image(len(rec) // 2), ids_rec.image(len(rec) // 2))  # the same classes as from ids
+    assert 0.0 < report.unmapped_share < 0.01  # the unlisted id has no colour: unknown, and counted
+    (tmp_path / "robot.yaml").write_text(robot_yaml())  # rellis3d has no colour table
+    with pytest.raises(UserError, match="colour table"):
+        import_bag(bag, load_robot(tmp_path / "robot.yaml"), tmp_path / "rec2", show_progress=False)

@@ -123,6 +123,8 @@ def test_rellis3d_maps_as_the_spec_says():
     ("format: terrapref-labels/1\nids: []\n", "ids"),
     ("format: terrapref-labels/2\nids: {3: grass}\n", "format"),
     ("ids: {3: grass}\n", "format"),
+    ("format: terrapref-labels/1\nids: {3: grass}\ncolors: {3: [0, 300, 0]}\n", "colors.3"),
+    ("format: terrapref-labels/1\nids: {3: grass, 4: mud}\ncolors: {3: [1, 2, 3], 4: [1, 2, 3]}\n", "colors.4"),
 ])
 def test_a_bad_label_map_is_one_line_naming_file_and_field(tmp_path: Path, text: str, field: str):
     path = tmp_path / "labels.yaml"

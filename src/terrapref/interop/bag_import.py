@@ -239,8 +239,9 @@ def camera_from_info(info, robot: RobotConfig, source: str) -> tuple[CameraConfi
     return camera, index
 
 
-def _decode(conn, msg, source: str) -> np.ndarray:
-    """Label ids (H, W) uint8 or uint16 of one segmentation message."""
+def _decode(conn, msg, source: str, labels=None) -> np.ndarray:
+    """Label ids (H, W) uint8 or uint16 of one segmentation message (rgb8 through the label
+    map's colour table)."""
     if conn.msgtype == "sensor_msgs/msg/CompressedImage":
         if "png" not in str(msg.format).lower():
             raise UserError(source, f"topic {conn.topic}: CompressedImage format {msg.format!r}; label ids need lossless png", field="topics.segmentation")
@@ -255,8 +256,16 @@ def _decode(conn, msg, source: str) -> np.ndarray:
         dtype = np.dtype(np.uint8)
     elif encoding in ("mono16", "16uc1"):
         dtype = np.dtype(">u2" if msg.is_bigendian else "<u2")
+    elif encoding in ("rgb8", "bgr8"):
+        if labels is None or not labels.colors:
+            raise UserError(source, f"topic {conn.topic}: {msg.encoding} colour images need a colour table (colors) in the label map", field="labels")
+        data = np.frombuffer(bytes(msg.data), dtype=np.uint8)
+        if step < 3 * w or len(data) < step * h:
+            raise UserError(source, f"topic {conn.topic}: image data of {len(data)} bytes does not hold {h} rows of {step}", field="topics.segmentation")
+        rgb = data[: step * h].reshape(h, step)[:, : 3 * w].reshape(h, w, 3)
+        return labels.decode_rgb(rgb[..., ::-1] if encoding == "bgr8" else rgb)
     else:
-        raise UserError(source, f"topic {conn.topic}: image encoding {msg.encoding!r}; label ids come as mono8 or mono16", field="topics.segmentation")
+        raise UserError(source, f"topic {conn.topic}: image encoding {msg.encoding!r}; label ids come as mono8 or mono16 (or rgb8 with a colour table)", field="topics.segmentation")
     data = np.frombuffer(bytes(msg.data), dtype=np.uint8)
     if step < w * dtype.itemsize or len(data) < step * h:
         raise UserError(source, f"topic {conn.topic}: image data of {len(data)} bytes does not hold {h} rows of {step}", field="topics.segmentation")
@@ -419,7 +428,7 @@ def _import(bag: _Bag, robot: RobotConfig, out: Path, rate_hz: float, show_progr
             t = _stamp(msg, t_ns)
         except AttributeError as exc:
             raise UserError(bag.source, f"topic {conn.topic}: no header stamp ({exc})", field="topics.segmentation") from None
-        ids = _decode(conn, msg, bag.source)
+        ids = _decode(conn, msg, bag.source, robot.labels)
         report.images += 1
         if ids.shape != shape:
             raise UserError(bag.source, f"topic {conn.topic}: image {ids.shape[1]} x {ids.shape[0]}, camera_info says {shape[1]} x {shape[0]}", field="topics.segmentation")

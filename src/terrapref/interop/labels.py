@@ -9,7 +9,14 @@ A map is keyed by id, never by colour (SPEC 14)::
       3: grass
       33: mud
 
-Ids the map does not list are unknown (255), and importing reports their share.
+Ids the map does not list are unknown (255), and importing reports their share. A network
+that publishes colour images (rgb8) instead of ids adds its colour table, again keyed by id::
+
+    colors:
+      3: [0, 102, 0]
+      33: [255, 128, 0]
+
+Pixels of a colour not in the table are unknown, and counted as ids the map does not list.
 """
 
 from __future__ import annotations
@@ -28,7 +35,8 @@ from terrapref.yamlio import read_yaml_mapping
 LABELS_FORMAT = "terrapref-labels/1"
 UNKNOWN_NAME = "unknown"
 MAX_ID = 65535  # mono16 label images
-_KEYS = {"format", "name", "description", "ids"}
+_KEYS = {"format", "name", "description", "ids", "colors"}
+NO_ID = MAX_ID  # what a colour missing from the table decodes to (never listed)
 
 
 @dataclass(frozen=True)
@@ -38,6 +46,19 @@ class LabelMap:
     name: str
     ids: dict[int, str]
     source: str = ""
+    colors: dict[int, tuple[int, int, int]] | None = None  # id -> (r, g, b), for rgb8 images
+
+    def decode_rgb(self, rgb: np.ndarray) -> np.ndarray:
+        """Label ids (H, W) uint16 of an (H, W, 3) uint8 colour image, by the colour table."""
+        if not self.colors:
+            raise ValueError("this label map has no colour table (colors) to decode colour images with")
+        keys = np.array([(r << 16) | (g << 8) | b for r, g, b in self.colors.values()], dtype=np.int64)
+        ids = np.array(list(self.colors), dtype=np.uint16)
+        order = np.argsort(keys)
+        keys, ids = keys[order], ids[order]
+        packed = (rgb[..., 0].astype(np.int64) << 16) | (rgb[..., 1].astype(np.int64) << 8) | rgb[..., 2]
+        at = np.clip(np.searchsorted(keys, packed), 0, len(keys) - 1)
+        return np.where(keys[at] == packed, ids[at], NO_ID).astype(np.uint16)
 
     def lut(self, classes: ClassTable) -> np.ndarray:
         """Lookup table (65536,) uint8: source id -> class id of ``classes`` (255 unknown)."""
@@ -75,9 +96,25 @@ def parse_label_map(data: dict, source: str) -> LabelMap:
             problems.append(Problem(f"ids.{key}", "expected a class name (or unknown)"))
         else:
             out[key] = value
+    colors = data.get("colors")
+    out_colors: dict[int, tuple[int, int, int]] | None = None
+    if colors is not None:
+        out_colors = {}
+        if not isinstance(colors, dict) or not colors:
+            problems.append(Problem("colors", "expected a mapping of label ids to [r, g, b]"))
+            colors = {}
+        for key, value in colors.items():
+            if isinstance(key, bool) or not isinstance(key, int) or not 0 <= key < MAX_ID:
+                problems.append(Problem(f"colors.{key}", f"a label id must be an integer in 0..{MAX_ID - 1}"))
+            elif not (isinstance(value, list) and len(value) == 3 and all(isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 255 for v in value)):
+                problems.append(Problem(f"colors.{key}", "expected [r, g, b] with integers 0..255"))
+            elif tuple(value) in out_colors.values():
+                problems.append(Problem(f"colors.{key}", f"colour {value} is already another id's"))
+            else:
+                out_colors[key] = (value[0], value[1], value[2])
     if problems:
         raise ConfigError(source, problems)
-    return LabelMap(name, out, source)
+    return LabelMap(name, out, source, out_colors)
 
 
 def packaged_label_maps() -> list[str]:

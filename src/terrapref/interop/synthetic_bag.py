@@ -31,6 +31,15 @@ TOPICS = {"segmentation": "/robot/seg/labels", "camera_info": "/robot/camera/cam
 EPOCH_S = 1_700_000_000
 RELLIS = {"grass": 3, "mud": 33, "rock": 34, "water": 6, "non_traversable": 19}  # and unknown (sky) -> 7
 UNLISTED_ID = 50  # an id the rellis3d map does not list
+COLORS = {3: (0, 102, 0), 33: (255, 128, 0), 34: (170, 170, 170), 6: (0, 128, 255), 19: (204, 153, 255), 7: (135, 206, 235)}  # for rgb8 logs
+
+
+def colour_label_map() -> str:
+    """A terrapref-labels/1 file with rellis3d's ids and :data:`COLORS` as its colour table."""
+    names = {0: "unknown", 3: "grass", 33: "mud", 34: "rock", 6: "water", 19: "non_traversable", 7: "unknown"}
+    ids = "\n".join(f"  {k}: {v}" for k, v in names.items())
+    colors = "\n".join(f"  {k}: [{r}, {g}, {b}]" for k, (r, g, b) in COLORS.items())
+    return f"format: terrapref-labels/1\nname: colour_rellis\nids:\n{ids}\ncolors:\n{colors}\n"
 
 
 def robot_yaml(labels: str = "rellis3d", path_topic: bool = True) -> str:
@@ -40,7 +49,7 @@ def robot_yaml(labels: str = "rellis3d", path_topic: bool = True) -> str:
 
 
 def write_synthetic_bag(out: str | Path, storage: Storage = "mcap", scenario: str = "demo_course", seed: int = 0,
-                        profile: tuple[str, ...] | None = None, encoding: Literal["mono8", "mono16", "png"] = "mono8",
+                        profile: tuple[str, ...] | None = None, encoding: Literal["mono8", "mono16", "png", "rgb8"] = "mono8",
                         quirks: bool = True, max_seconds: float | None = None, repeat_images: int = 1) -> Path:
     """Drive ``scenario`` with the synthetic driver and write the log; returns the bag's path.
 
@@ -105,6 +114,12 @@ def write_synthetic_bag(out: str | Path, storage: Storage = "mcap", scenario: st
             buf = io.BytesIO()
             PILImage.fromarray(ids.astype(np.uint8)).save(buf, format="PNG", compress_level=1)
             return "sensor_msgs/msg/CompressedImage", T["sensor_msgs/msg/CompressedImage"](header=header(t_s, "camera"), format="mono8; png compressed", data=np.frombuffer(buf.getvalue(), np.uint8))
+        if encoding == "rgb8":  # a colour segmentation: the RELLIS ids through COLORS
+            rgb = np.zeros((*ids.shape, 3), np.uint8)
+            for rid, colour in COLORS.items():
+                rgb[ids == rid] = colour
+            return "sensor_msgs/msg/Image", T["sensor_msgs/msg/Image"](header=header(t_s, "camera"), height=h, width=w, encoding="rgb8", is_bigendian=0,
+                                                                   step=3 * w, data=rgb.reshape(-1))
         data = ids.astype("<u2" if encoding == "mono16" else np.uint8)
         return "sensor_msgs/msg/Image", T["sensor_msgs/msg/Image"](header=header(t_s, "camera"), height=h, width=w, encoding=encoding, is_bigendian=0,
                                                                step=w * data.itemsize, data=np.frombuffer(data.tobytes(), np.uint8))
