@@ -278,3 +278,18 @@ def test_colour_segmentation_through_the_label_maps_colour_table(tmp_path: Path,
     (tmp_path / "robot.yaml").write_text(robot_yaml())  # rellis3d has no colour table
     with pytest.raises(UserError, match="colour table"):
         import_bag(bag, load_robot(tmp_path / "robot.yaml"), tmp_path / "rec2", show_progress=False)
+
+
+def test_the_camera_mounting_from_tf_static(tmp_path: Path, logs, imported):
+    robot = tmp_path / "robot.yaml"
+    robot.write_text(robot_yaml().replace("  height_m: 1.0\n  pitch_deg: 30.0\n", "  tf: base_link\n"))
+    import_bag(logs["bags"]["rosbag1"], load_robot(robot), tmp_path / "rec", show_progress=False)
+    rec, given = read_recording(tmp_path / "rec"), imported["rosbag1"][1]
+    for key in ("mount_height_m", "mount_forward_m", "pitch_deg", "yaw_deg", "hfov_deg"):
+        assert rec.meta["camera"][key] == pytest.approx(given.meta["camera"][key], abs=1e-9), key
+    robot.write_text(robot_yaml().replace("  height_m: 1.0\n  pitch_deg: 30.0\n", "  tf: chassis\n"))
+    with pytest.raises(UserError, match="no static transform chain from chassis"):
+        import_bag(logs["bags"]["rosbag1"], load_robot(robot), tmp_path / "rec2", show_progress=False)
+    robot.write_text(robot_yaml().replace("  pitch_deg: 30.0\n", "  tf: base_link\n"))
+    with pytest.raises(UserError, match="either tf or height_m"):
+        load_robot(robot)

@@ -155,6 +155,42 @@ class _Streams:
     cmd: np.ndarray  # (N, 2) v, w
     path: np.ndarray | None
     info: object
+    static: dict[str, tuple[str, np.ndarray, np.ndarray]] = field(default_factory=dict)  # child -> (parent, t, R)
+
+
+def _rotation(q) -> np.ndarray:
+    x, y, z, w = q.x, q.y, q.z, q.w
+    n = math.sqrt(x * x + y * y + z * z + w * w) or 1.0
+    x, y, z, w = x / n, y / n, z / n, w / n
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def camera_mount_from_tf(static: dict, base: str, camera_frame: str, source: str, notes: list[str]) -> dict[str, float]:
+    """height_m, forward_m, pitch_deg, yaw_deg of the camera from the static transforms base -> camera.
+
+    The optical axis is the camera frame's z for an optical frame (REP 103: its name ends in
+    ``optical`` or ``optical_frame``), else its x.
+    """
+    chain, frame = [], camera_frame
+    while frame != base:
+        if frame not in static or len(chain) > 32:
+            have = ", ".join(sorted(f"{p} -> {c}" for c, (p, _, _) in static.items())) or "none"
+            raise UserError(source, f"no static transform chain from {base} to the camera frame {camera_frame!r} in /tf_static (transforms: {have})", field="camera.tf")
+        parent, t, r = static[frame]
+        chain.append((t, r))
+        frame = parent
+    t_total, r_total = np.zeros(3), np.eye(3)
+    for t, r in reversed(chain):  # base -> ... -> camera
+        t_total = t_total + r_total @ t
+        r_total = r_total @ r
+    optical = camera_frame.rstrip("/").endswith(("optical", "optical_frame"))
+    axis = r_total @ (np.array([0.0, 0.0, 1.0]) if optical else np.array([1.0, 0.0, 0.0]))
+    if abs(t_total[1]) > 0.05:
+        notes.append(f"the camera sits {t_total[1]:+.2f} m to the side of {base}; terrapref's camera model ignores a lateral offset")
+    return {"height_m": float(t_total[2]), "forward_m": float(t_total[0]), "pitch_deg": math.degrees(math.asin(float(np.clip(-axis[2], -1, 1)))),
+            "yaw_deg": math.degrees(math.atan2(axis[1], axis[0]))}
 
 
 def _read_small_topics(bag: _Bag, robot: RobotConfig) -> _Streams:
@@ -163,6 +199,13 @@ def _read_small_topics(bag: _Bag, robot: RobotConfig) -> _Streams:
     by_role = {role: bag.connections(topics[role], role, robot.source) for role in wanted}  # each checked for its own type
     roles = {topics[role]: role for role in wanted}
     conns = list({id(c): c for cs in by_role.values() for c in cs}.values())
+    if "tf" in robot.camera:
+        tf_conns = [c for c in bag.reader.connections if c.topic == "/tf_static" and c.msgtype == "tf2_msgs/msg/TFMessage"]
+        if not tf_conns:
+            raise UserError(bag.source, "camera.tf asks for /tf_static, which the bag does not hold", field="camera.tf")
+        roles["/tf_static"] = "tf_static"
+        conns += tf_conns
+    static: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
     odom_t, odom, cmd_t, cmd = [], [], [], []
     path, info = None, None
     for conn, t_ns, msg in bag.messages(conns):
@@ -180,6 +223,10 @@ def _read_small_topics(bag: _Bag, robot: RobotConfig) -> _Streams:
                 path = np.array([(p.pose.position.x, p.pose.position.y) for p in msg.poses], dtype=float)
             elif role == "camera_info" and info is None:
                 info = msg
+            elif role == "tf_static":
+                for tr in msg.transforms:
+                    v = tr.transform.translation
+                    static[str(tr.child_frame_id).lstrip("/")] = (str(tr.header.frame_id).lstrip("/"), np.array([v.x, v.y, v.z]), _rotation(tr.transform.rotation))
         except (AttributeError, TypeError, ValueError) as exc:
             raise UserError(bag.source, f"topic {conn.topic}: a {conn.msgtype} without the expected fields ({exc})", field=f"topics.{role}") from None
     if info is None:
@@ -197,11 +244,12 @@ def _read_small_topics(bag: _Bag, robot: RobotConfig) -> _Streams:
     o_t, o = o_t[order], o[order]
     o[:, 2] = np.unwrap(o[:, 2])  # so interpolation between stamps never spins the long way round
     order = np.argsort(c_t, kind="stable")
-    return _Streams(o_t, o, c_t[order], c[order], path, info)
+    return _Streams(o_t, o, c_t[order], c[order], path, info, static)
 
 
-def camera_from_info(info, robot: RobotConfig, source: str) -> tuple[CameraConfig, np.ndarray | None]:
-    """The camera (CameraConfig) and, for a distorted lens, the nearest-pixel undistortion map."""
+def camera_from_info(info, robot: RobotConfig, source: str, static: dict | None = None, notes: list[str] | None = None) -> tuple[CameraConfig, np.ndarray | None]:
+    """The camera (CameraConfig) and, for a distorted lens, the nearest-pixel undistortion map;
+    the mounting from the robot file, or from ``static`` transforms when it says ``tf``."""
     try:
         width, height = int(info.width), int(info.height)
         k = np.asarray(_field(info, "k", "K"), dtype=float).reshape(3, 3)
@@ -212,7 +260,11 @@ def camera_from_info(info, robot: RobotConfig, source: str) -> tuple[CameraConfi
     fx, fy, cx, cy = k[0, 0], k[1, 1], k[0, 2], k[1, 2]
     if width <= 0 or height <= 0 or not (fx > 0 and fy > 0 and np.isfinite([fx, fy, cx, cy]).all()):
         raise UserError(source, f"camera_info: image {width} x {height}, K {k.ravel().tolist()} is not a calibration", field="topics.camera_info")
-    cam = robot.camera
+    cam = dict(robot.camera)
+    if "tf" in cam:
+        cam.update(camera_mount_from_tf(static or {}, str(cam["tf"]).lstrip("/"), str(info.header.frame_id).lstrip("/"), source, notes if notes is not None else []))
+        if not (0.05 <= cam["height_m"] <= 10.0 and -89.0 <= cam["pitch_deg"] <= 89.0):
+            raise UserError(source, f"/tf_static puts the camera {cam['height_m']:.2f} m high, pitched {cam['pitch_deg']:.1f} deg: not a ground-looking camera", field="camera.tf")
     mount = dict(mount_height_m=cam["height_m"], mount_forward_m=cam["forward_m"], pitch_deg=cam["pitch_deg"], yaw_deg=cam["yaw_deg"], max_range_m=cam["max_range_m"])
     hfov = math.degrees(2 * math.atan(width / (2 * fx)))
     camera = CameraConfig(width_px=width, height_px=height, hfov_deg=hfov, fx=fx, fy=fy, cx=cx, cy=cy, **mount)
@@ -335,7 +387,7 @@ def _import(bag: _Bag, robot: RobotConfig, out: Path, rate_hz: float, show_progr
     streams = _read_small_topics(bag, robot)
     if len(streams.cmd_t) == 0:
         raise UserError(bag.source, f"topic {robot.topics['command']} holds no usable command", field="topics.command")
-    camera, undistort = camera_from_info(streams.info, robot, bag.source)
+    camera, undistort = camera_from_info(streams.info, robot, bag.source, streams.static, report.notes)
     if streams.path is not None:
         path, report.path_source = streams.path, f"{robot.path_topic} ({len(streams.path)} poses)"
     elif robot.path_file is not None:

@@ -12,6 +12,9 @@
     camera:
       height_m: 1.0                            # optical centre above the ground [m]
       pitch_deg: 30.0                          # downward tilt [deg]
+      # tf: base_link                          # instead of height_m and pitch_deg (and forward_m,
+      #                                        # yaw_deg): the bag's /tf_static from this frame to
+      #                                        # the camera_info's frame
       forward_m: 0.0                           # optional: ahead of base_link [m]
       yaw_deg: 0.0                             # optional: left of the heading [deg]
       max_range_m: 30.0                        # optional: farther ground is not used
@@ -51,7 +54,7 @@ class RobotConfig:
 
     source: str
     topics: dict[str, str]
-    camera: dict[str, float]
+    camera: dict[str, float | str]  # height_m, pitch_deg, forward_m, yaw_deg, max_range_m; or tf (a base frame) and max_range_m
     labels: LabelMap
     profile: PreferenceProfile
     path_file: Path | None
@@ -92,9 +95,16 @@ def load_robot(path: str | Path, classes: ClassTable | None = None) -> RobotConf
     if not isinstance(camera, dict):
         problems.append(Problem("camera", "expected a mapping with height_m and pitch_deg"))
         camera = {}
+    tf_frame = camera.get("tf")
+    if tf_frame is not None and (not isinstance(tf_frame, str) or not tf_frame):
+        problems.append(Problem("camera.tf", "expected the robot's base frame name, such as base_link"))
     for key, value in camera.items():
+        if key == "tf":
+            if isinstance(tf_frame, str) and tf_frame and set(camera) & {"height_m", "pitch_deg", "forward_m", "yaw_deg"}:
+                problems.append(Problem("camera.tf", "give either tf or height_m and pitch_deg, not both"))
+            continue
         if key not in _CAMERA:
-            problems.append(Problem(f"camera.{key}", f"unknown key; expected {', '.join(_CAMERA)}"))
+            problems.append(Problem(f"camera.{key}", f"unknown key; expected {', '.join(_CAMERA)} or tf"))
             continue
         lo, hi = _CAMERA[key]
         number = _number(value)
@@ -102,7 +112,10 @@ def load_robot(path: str | Path, classes: ClassTable | None = None) -> RobotConf
             problems.append(Problem(f"camera.{key}", f"expected a number in [{lo:g}, {hi:g}]"))
         else:
             out_camera[key] = number
-    problems += [Problem(f"camera.{k}", "missing") for k in ("height_m", "pitch_deg") if k not in camera]
+    if tf_frame is None:
+        problems += [Problem(f"camera.{k}", "missing (or give tf: BASE_FRAME)") for k in ("height_m", "pitch_deg") if k not in camera]
+    else:
+        out_camera["tf"] = tf_frame
     max_gap = data.get("max_gap_s", 0.5)
     if _number(max_gap) is None or not 0.05 <= max_gap <= 60:
         problems.append(Problem("max_gap_s", "expected a number of seconds in [0.05, 60]"))

@@ -63,6 +63,10 @@ def write_synthetic_bag(out: str | Path, storage: Storage = "mcap", scenario: st
     out = Path(out)
     ros1 = storage == "rosbag1"
     ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    if "tf2_msgs/msg/TFMessage" not in ts.fielddefs:  # not in rosbags' ROS 1 store: registered from its definition
+        from rosbags.typesys import get_types_from_msg
+
+        ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
     T = ts.types
     classes = default_classes()
     to_ids = np.full(256, 7, np.uint16)
@@ -103,7 +107,7 @@ def write_synthetic_bag(out: str | Path, storage: Storage = "mcap", scenario: st
     h, w = cam.height_px, cam.width_px
 
     def camera_info(t_s: float):
-        kw = dict(header=header(t_s, "camera"), height=h, width=w, distortion_model="plumb_bob",
+        kw = dict(header=header(t_s, "camera_optical"), height=h, width=w, distortion_model="plumb_bob",
                   binning_x=0, binning_y=0, roi=T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False))
         arrays = {"d": np.zeros(5), "k": np.array([fx, 0, cx, 0, fy, cy, 0, 0, 1.0]), "r": np.eye(3).ravel(), "p": np.array([fx, 0, cx, 0, 0, fy, cy, 0, 0, 0, 1.0, 0])}
         kw.update({(k.upper() if ros1 else k): v for k, v in arrays.items()})
@@ -113,15 +117,15 @@ def write_synthetic_bag(out: str | Path, storage: Storage = "mcap", scenario: st
         if encoding == "png":
             buf = io.BytesIO()
             PILImage.fromarray(ids.astype(np.uint8)).save(buf, format="PNG", compress_level=1)
-            return "sensor_msgs/msg/CompressedImage", T["sensor_msgs/msg/CompressedImage"](header=header(t_s, "camera"), format="mono8; png compressed", data=np.frombuffer(buf.getvalue(), np.uint8))
+            return "sensor_msgs/msg/CompressedImage", T["sensor_msgs/msg/CompressedImage"](header=header(t_s, "camera_optical"), format="mono8; png compressed", data=np.frombuffer(buf.getvalue(), np.uint8))
         if encoding == "rgb8":  # a colour segmentation: the RELLIS ids through COLORS
             rgb = np.zeros((*ids.shape, 3), np.uint8)
             for rid, colour in COLORS.items():
                 rgb[ids == rid] = colour
-            return "sensor_msgs/msg/Image", T["sensor_msgs/msg/Image"](header=header(t_s, "camera"), height=h, width=w, encoding="rgb8", is_bigendian=0,
+            return "sensor_msgs/msg/Image", T["sensor_msgs/msg/Image"](header=header(t_s, "camera_optical"), height=h, width=w, encoding="rgb8", is_bigendian=0,
                                                                    step=3 * w, data=rgb.reshape(-1))
         data = ids.astype("<u2" if encoding == "mono16" else np.uint8)
-        return "sensor_msgs/msg/Image", T["sensor_msgs/msg/Image"](header=header(t_s, "camera"), height=h, width=w, encoding=encoding, is_bigendian=0,
+        return "sensor_msgs/msg/Image", T["sensor_msgs/msg/Image"](header=header(t_s, "camera_optical"), height=h, width=w, encoding=encoding, is_bigendian=0,
                                                                step=w * data.itemsize, data=np.frombuffer(data.tobytes(), np.uint8))
 
     if ros1:
@@ -137,6 +141,7 @@ def write_synthetic_bag(out: str | Path, storage: Storage = "mcap", scenario: st
             "command": writer.add_connection(TOPICS["command"], "geometry_msgs/msg/Twist", typestore=ts),
             "path": writer.add_connection(TOPICS["path"], "nav_msgs/msg/Path", typestore=ts),
             "other": writer.add_connection("/diagnostics/status", "std_msgs/msg/String", typestore=ts),
+            "tf_static": writer.add_connection("/tf_static", "tf2_msgs/msg/TFMessage", typestore=ts),
         }
         queue: list[tuple[float, str, object, str]] = []  # (bag time, role, message, type), flushed in bag-time order
 
@@ -154,6 +159,16 @@ def write_synthetic_bag(out: str | Path, storage: Storage = "mcap", scenario: st
         put(0.0, "path", T["nav_msgs/msg/Path"](header=header(0.0, "odom"), poses=[
             T["geometry_msgs/msg/PoseStamped"](header=header(0.0, "odom"), pose=T["geometry_msgs/msg/Pose"](position=point(x, y), orientation=quat(0.0)))
             for x, y in path_odom]), "nav_msgs/msg/Path")
+        # The camera's mounting as a robot publishes it: base_link -> camera_link (x forward,
+        # pitched down) -> camera_optical (z forward), the frame the images are stamped in.
+        def transform(parent: str, child: str, xyz: tuple[float, float, float], q: tuple[float, float, float, float]):
+            Q = T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3])
+            return T["geometry_msgs/msg/TransformStamped"](header=header(0.0, parent), child_frame_id=child,
+                                                            transform=T["geometry_msgs/msg/Transform"](translation=T["geometry_msgs/msg/Vector3"](x=xyz[0], y=xyz[1], z=xyz[2]), rotation=Q))
+        p2 = math.radians(cam.pitch_deg) / 2
+        put(0.0, "tf_static", T["tf2_msgs/msg/TFMessage"](transforms=[
+            transform("base_link", "camera_link", (cam.mount_forward_m, 0.0, cam.mount_height_m), (0.0, math.sin(p2), 0.0, math.cos(p2))),
+            transform("camera_link", "camera_optical", (0.0, 0.0, 0.0), (-0.5, 0.5, -0.5, 0.5))]), "tf2_msgs/msg/TFMessage")
         frame = sim.reset()
         driver.reset(sc, rng)  # then the pushes' stream, in the order `terrapref record` draws them: the same drive
         disturb = Disturber(protocol, np.random.default_rng(rng.integers(2**63)), 0.1) if protocol is not None else None
