@@ -136,7 +136,11 @@ def test_a_missing_topic_or_a_wrong_type_names_the_bag_and_the_field(tmp_path: P
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
 
 
-@pytest.mark.parametrize("damage", ["garbage", "truncated", "empty", "missing"])
+def _mcap_file(folder: Path) -> Path:
+    return next(folder.glob("*.mcap"))
+
+
+@pytest.mark.parametrize("damage", ["garbage", "truncated", "empty", "missing", "truncated mcap", "garbage mcap", "truncated sqlite3"])
 def test_a_damaged_bag_is_one_line_and_leaves_nothing(tmp_path: Path, logs, capsys, damage: str):
     source = logs["bags"]["rosbag1"]
     bag = tmp_path / "broken.bag"
@@ -146,6 +150,16 @@ def test_a_damaged_bag_is_one_line_and_leaves_nothing(tmp_path: Path, logs, caps
         bag.write_bytes(source.read_bytes()[: source.stat().st_size // 3])
     elif damage == "empty":
         bag.write_bytes(b"")
+    elif damage.endswith("mcap"):
+        mcap = _mcap_file(logs["bags"]["mcap"])
+        bag = tmp_path / "broken.mcap"
+        data = mcap.read_bytes()
+        bag.write_bytes(data[: len(data) // 2] if damage.startswith("truncated") else data[:64] + bytes(range(256)) * 100)
+    elif damage == "truncated sqlite3":
+        bag = tmp_path / "broken_sqlite3"
+        shutil.copytree(logs["bags"]["sqlite3"], bag)
+        db = next(bag.glob("*.db3"))
+        db.write_bytes(db.read_bytes()[: db.stat().st_size // 2])
     out = tmp_path / "rec"
     assert main(["import", str(bag), "--robot", str(logs["robot"]), "--out", str(out)]) == 2
     _one_line(capsys, str(bag))
@@ -293,3 +307,26 @@ def test_the_camera_mounting_from_tf_static(tmp_path: Path, logs, imported):
     robot.write_text(robot_yaml().replace("  pitch_deg: 30.0\n", "  tf: base_link\n"))
     with pytest.raises(UserError, match="either tf or height_m"):
         load_robot(robot)
+
+
+@pytest.mark.slow
+def test_a_model_taught_by_an_imported_log_drives_like_one_taught_by_the_simulator_recording(tmp_path: Path):
+    """One drive of teach_course, as a quirky MCAP log and as the simulator recorded it: both
+    taught with the default recipe, both scored on generated layouts against the same driver."""
+    import json
+
+    (tmp_path / "robot.yaml").write_text(robot_yaml())
+    bag = write_synthetic_bag(tmp_path / "teach.mcap", "mcap", scenario="teach_course", seed=0, encoding="png")
+    assert main(["import", str(bag), "--robot", str(tmp_path / "robot.yaml"), "--out", str(tmp_path / "rec_bag")]) == 0
+    assert main(["record", "teach_course", "--seed", "0", "--out", str(tmp_path / "rec_sim")]) == 0
+    agreement = {}
+    layouts = ["gen:2000", "gen:2001", "gen:2002", "gen:2003"]
+    for name in ("bag", "sim"):
+        model = tmp_path / f"{name}.safetensors"
+        assert main(["train", str(tmp_path / f"rec_{name}"), "--out", str(model)]) == 0
+        assert main(["evaluate", str(model), *layouts, "--seeds", "1", "--out", str(tmp_path / f"ev_{name}")]) == 0
+        metrics = json.loads((tmp_path / f"ev_{name}" / "metrics.json").read_text())
+        zones = [z for sc in metrics["scenarios"].values() for run in sc["planner"].values() for z in run["zones"] if "agrees" in z]
+        agreement[name] = sum(z["agrees"] for z in zones) / len(zones)
+        assert metrics["summary"]["collision_count"] == 0
+    assert agreement["bag"] >= 0.8 and abs(agreement["bag"] - agreement["sim"]) <= 0.15, agreement
