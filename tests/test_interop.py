@@ -68,9 +68,24 @@ def test_onnxruntime_gives_numpy_forwards_logits(tmp_path: Path, config: Classif
     U = np.random.default_rng(1).uniform(0.0, 1.0, (256, 21, 5)).astype(np.float32)
     logits = session.run(["logits"], {"utilities": U})[0]
     assert logits.dtype == np.float32 and logits.shape == (256, 21)
-    np.testing.assert_allclose(logits, numpy_forward(model.classifier, model.weights, U), atol=1e-5, rtol=0)
+    np.testing.assert_allclose(logits, numpy_forward(model.classifier, model.weights, U.astype(np.float64)), atol=1e-5, rtol=0)
     single = session.run(["logits"], {"utilities": U[:1]})[0]
     np.testing.assert_allclose(single[0], logits[0], atol=1e-6)
+
+
+def test_onnx_parity_holds_for_the_tiny_probabilities_of_a_trained_ensemble(tmp_path: Path):
+    """A trained model's rare trajectories have logits near log(1e-30) = -69, where float32
+    arithmetic alone would be off by 1e-5; the graph computes in float64."""
+    config = CONFIGS[1]
+    path = _model(tmp_path / "m.safetensors", config)
+    model = load_model(path)
+    sharp = {k: (v * 600.0 if k.endswith(f"layers.{config.depth}.weight") else v) for k, v in model.weights.items()}
+    model = load_model(save_model(tmp_path / "sharp.safetensors", config, sharp, model_meta()))
+    session = ort.InferenceSession(str(export_onnx(model, tmp_path / "m.onnx")), providers=["CPUExecutionProvider"])
+    U = np.random.default_rng(2).uniform(0.0, 1.0, (512, 21, 5)).astype(np.float32)
+    expected = numpy_forward(model.classifier, model.weights, U.astype(np.float64))
+    assert expected.min() < -60.0  # rare trajectories, as in trained models
+    np.testing.assert_allclose(session.run(["logits"], {"utilities": U})[0], expected, atol=1e-5, rtol=0)
 
 
 def test_onnx_metadata_carries_the_configuration(tmp_path: Path):

@@ -2,7 +2,7 @@
 
 Input ``utilities``, float32 (N, m, k): each frame's utility features U (SPEC 7; k = the
 terrain classes + distance). Output ``logits``, float32 (N, m): C's scores, whose softmax is
-F_t (an ensemble's logits are the log of its members' mean softmax, as in
+F_t, computed in float64 inside the graph like the planner's own forward pass (an ensemble's logits are the log of its members' mean softmax, as in
 :func:`terrapref.learning.numpy_forward`). Everything the model was trained under (preference
 set, camera, classes, profile, feature configuration, the second stage's linear utility) is in
 the model's metadata as JSON strings under ``terrapref.*`` keys.
@@ -51,7 +51,7 @@ class _Graph:
 
 def _member(g: _Graph, c: ClassifierConfig, weights: dict[str, np.ndarray], x: str, prefix: str) -> str:
     """Logits (N, m) of one network for U (N, m, k) named ``x``; mirrors network._forward_one."""
-    w = lambda name: np.asarray(weights[f"{prefix}{name}"], dtype=np.float32)  # noqa: E731
+    w = lambda name: np.asarray(weights[f"{prefix}{name}"], dtype=np.float64)  # noqa: E731  (the file's float32 values, exactly)
     if c.compress:
         per_row = g.op("Add", [g.op("MatMul", [x, g.const("compress_wT", w("compress.weight").T)]), g.const("compress_b", w("compress.bias"))])
         scores = g.op("Gather", [per_row, g.const("channel0", np.array(0, np.int64))], axis=2)  # (N, m)
@@ -59,29 +59,37 @@ def _member(g: _Graph, c: ClassifierConfig, weights: dict[str, np.ndarray], x: s
     else:
         scores = None
         h = g.op("Reshape", [x, g.const("flat", np.array([0, c.m * c.n_features], np.int64))])
-    activation = {"relu": ("Relu", {}), "tanh": ("Tanh", {}), "elu": ("Elu", {"alpha": 1.0})}[c.activation]
     for i in range(c.depth + 1):
         h = g.op("Gemm", [h, g.const(f"layer{i}_w", w(f"layers.{i}.weight")), g.const(f"layer{i}_b", w(f"layers.{i}.bias"))], transB=1)
         if i < c.depth:
-            h = g.op(activation[0], [h], **activation[1])
+            if c.activation == "relu":
+                h = g.op("Relu", [h])
+            elif c.activation == "tanh":
+                h = g.op("Tanh", [h])
+            else:  # elu (alpha 1) from primitives: runtimes' Elu kernels are float32 only
+                zero = g.const("zero", np.array(0.0))
+                negative = g.op("Sub", [g.op("Exp", [g.op("Min", [h, zero])]), g.const("one", np.array(1.0))])
+                h = g.op("Where", [g.op("Greater", [h, zero]), h, negative])
     return g.op("Add", [h, scores]) if c.skip else h
 
 
 def classifier_graph(config: ClassifierConfig, weights: dict[str, np.ndarray]) -> onnx.ModelProto:
     """An ONNX model computing C's logits for a batch of U."""
     g = _Graph()
-    x = INPUT
+    # The arithmetic is float64, as the planner's own (float32 weights applied to float64
+    # features): logits of rare trajectories reach -69, where float32 alone loses 1e-5.
+    x = g.op("Cast", [INPUT], to=TensorProto.DOUBLE)
     if config.ignore:
-        keep = np.ones(config.n_features, np.float32)
+        keep = np.ones(config.n_features)
         keep[list(config.ignore)] = 0.0
         x = g.op("Mul", [x, g.const("ignore_mask", keep)])
     if config.members == 1:
         logits = _member(g, config, weights, x, "")
     else:
         probs = [g.op("Softmax", [_member(g, config, weights, x, member_prefix(j))], axis=-1) for j in range(config.members)]
-        mean = g.op("Mul", [g.op("Sum", probs), g.const("one_over_members", np.array(1.0 / config.members, np.float32))])
-        logits = g.op("Log", [g.op("Add", [mean, g.const("tiny", np.array(1e-30, np.float32))])])
-    g.nodes.append(helper.make_node("Identity", [logits], [OUTPUT], name=OUTPUT))
+        mean = g.op("Mul", [g.op("Sum", probs), g.const("one_over_members", np.array(1.0 / config.members))])
+        logits = g.op("Log", [g.op("Add", [mean, g.const("tiny", np.array(1e-30))])])
+    g.nodes.append(helper.make_node("Cast", [logits], [OUTPUT], name=OUTPUT, to=TensorProto.FLOAT))
     graph = helper.make_graph(
         g.nodes,
         "terrapref_classifier",
