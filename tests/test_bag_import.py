@@ -222,6 +222,22 @@ def _topics(path: Path) -> dict[str, tuple[str, int]]:
         return {c.topic: (c.msgtype, c.msgcount) for c in reader.connections}
 
 
+def _check_with_the_reference_mcap_reader(path: Path, frames: int) -> None:
+    """What Foxglove needs: the ros2 profile, every schema a ros2msg definition, CDR messages,
+    a summary whose counts match, and every message readable."""
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as fh:
+        reader = make_reader(fh)
+        assert reader.get_header().profile == "ros2"
+        summary = reader.get_summary()
+        assert summary is not None and all(sc.encoding == "ros2msg" and sc.data for sc in summary.schemas.values())
+        assert all(ch.message_encoding == "cdr" for ch in summary.channels.values())
+        counts = {ch.topic: summary.statistics.channel_message_counts[ch.id] for ch in summary.channels.values()}
+        assert counts["/terrapref/labels"] == counts["/terrapref/trajectories"] == frames
+        assert sum(1 for _ in reader.iter_messages()) == sum(counts.values())
+
+
 def test_an_exported_recording_imports_to_the_same_dataset(tmp_path: Path, imported, capsys):
     from terrapref.demos.dataset import build_dataset
     from terrapref.learning.recipe import DEFAULT_RECIPE, recipe_named
@@ -233,6 +249,7 @@ def test_an_exported_recording_imports_to_the_same_dataset(tmp_path: Path, impor
     assert topics["/terrapref/labels"] == ("sensor_msgs/msg/CompressedImage", len(rec))
     assert topics["/terrapref/trajectories"] == ("visualization_msgs/msg/MarkerArray", len(rec))
     assert {"/tf", "/tf_static", "/terrapref/odom", "/terrapref/cmd_vel", "/terrapref/path", "/terrapref/camera_info", "/terrapref/labels_color"} <= set(topics)
+    _check_with_the_reference_mcap_reader(out, len(rec))
     assert main(["import", str(out), "--robot", f"{out}.robot.yaml", "--out", str(tmp_path / "back")]) == 0
     back = read_recording(tmp_path / "back")
     features = recipe_named(DEFAULT_RECIPE).features()
@@ -249,6 +266,7 @@ def test_evaluate_writes_each_run_as_mcap(tmp_path: Path, capsys):
     topics = _topics(run)
     frames = topics["/terrapref/labels"][1]
     assert frames > 50 and topics["/terrapref/trajectories"][1] == frames and topics["/terrapref/odom"][1] == frames
+    _check_with_the_reference_mcap_reader(run, frames)
 
 
 def test_replay_reports_agreement_with_the_operator(tmp_path: Path, logs, capsys):
