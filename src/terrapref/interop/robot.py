@@ -89,11 +89,12 @@ def load_robot(path: str | Path, classes: ClassTable | None = None) -> RobotConf
             problems.append(Problem(f"topics.{key}", "expected a topic name such as /robot/odom"))
         else:
             out_topics[key] = value
-    problems += [Problem(f"topics.{k}", "missing") for k in _TOPICS_REQUIRED if k not in topics]
+    if isinstance(data.get("topics"), dict):  # a missing mapping is one problem, not one per topic
+        problems += [Problem(f"topics.{k}", "missing") for k in _TOPICS_REQUIRED if k not in topics]
     camera = data.get("camera")
     out_camera = {"forward_m": 0.0, "yaw_deg": 0.0, "max_range_m": 30.0}
     if not isinstance(camera, dict):
-        problems.append(Problem("camera", "expected a mapping with height_m and pitch_deg"))
+        problems.append(Problem("camera", "expected a mapping with height_m and pitch_deg (or tf: BASE_FRAME)"))
         camera = {}
     tf_frame = camera.get("tf")
     if tf_frame is not None and (not isinstance(tf_frame, str) or not tf_frame):
@@ -112,7 +113,7 @@ def load_robot(path: str | Path, classes: ClassTable | None = None) -> RobotConf
             problems.append(Problem(f"camera.{key}", f"expected a number in [{lo:g}, {hi:g}]"))
         else:
             out_camera[key] = number
-    if tf_frame is None:
+    if tf_frame is None and isinstance(data.get("camera"), dict):
         problems += [Problem(f"camera.{k}", "missing (or give tf: BASE_FRAME)") for k in ("height_m", "pitch_deg") if k not in camera]
     else:
         out_camera["tf"] = tf_frame
