@@ -314,3 +314,29 @@ def test_inspect_tells_what_the_drive_shows_of_the_preference(demo_recording: Fu
     assert re.search(r"mud > rock: margin [0-9.]+ \+- [0-9.]+, compared in [1-9][0-9]* frames", out)
     assert main(["inspect", str(rec.path), "--out", str(tmp_path / "b.png"), "--no-preference"]) == 0
     assert "what the drive shows" not in capsys.readouterr().out
+
+
+def test_force_keeps_the_old_recording_until_the_new_one_is_complete(tmp_path: Path):
+    from terrapref.demos.recording import RecordingWriter, read_recording
+
+    out = tmp_path / "rec"
+    first = RecordingWriter(out, {"scenario": "a"}, {"name": "a"})
+    first.append(0.0, (1.0, 2.0, 0.0), np.zeros((4, 4), np.uint8), (1.0, 0.0), 10)
+    first.close()
+    # A replacement that ends early: the old recording is untouched, the new one is kept beside it.
+    second = RecordingWriter(out, {"scenario": "b"}, {"name": "b"}, overwrite=True)
+    for i in range(3):
+        second.append(0.1 * i, (0.0, 0.0, 0.0), np.ones((4, 4), np.uint8), (1.0, 0.1), 11)
+    second.abort()
+    old = read_recording(out)
+    assert old.complete and len(old) == 1 and old.meta["scenario"] == "a"
+    partial = read_recording(second.partial_dir)
+    assert second.partial_dir == tmp_path / "rec.partial" and not partial.complete and len(partial) == 3
+    # A replacement that finishes is swapped in whole, with nothing left beside it.
+    third = RecordingWriter(out, {"scenario": "c"}, {"name": "c"}, overwrite=True)
+    third.append(0.0, (0.0, 0.0, 0.0), np.ones((4, 4), np.uint8), (1.0, 0.0), 10)
+    assert read_recording(out).meta["scenario"] == "a"  # still the old one while the new one is written
+    third.close()
+    new = read_recording(out)
+    assert new.complete and new.meta["scenario"] == "c" and len(new) == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec", "rec.partial"]

@@ -121,6 +121,8 @@ def _cmd_record(args: argparse.Namespace) -> int:
                          progress=lambda s: bar.update(s.progress_s, f"t={s.time_s:6.1f}s frames={writer.count}"), disturbance=disturbance)
     except BaseException:
         writer.abort()
+        if writer.partial_dir is not None:
+            print(f"note: {args.out} keeps the recording it held; the unfinished new one is in {writer.partial_dir}", file=sys.stderr)
         raise
     bar.close("done")
     state = "reached the goal" if log.completed else "timed out"
@@ -234,6 +236,22 @@ def _train_config(args: argparse.Namespace, recipe):
         raise UserError("train", str(exc)) from None
 
 
+def _check_output(out: str | Path, flag: str, inputs: Sequence[str | Path] = (), folder: bool = False) -> None:
+    """Refuse an output before any work: one that is an input, a file where a folder goes (or
+    the reverse), or a place that cannot be written."""
+    out = Path(out)
+    for given in inputs:
+        if Path(given).exists() and out.resolve() == Path(given).resolve():
+            raise UserError(str(out), f"is also an input; {flag} must name a new file", field=flag)
+    if out.exists() and out.is_dir() != folder:
+        raise UserError(str(out), "exists and is a " + ("file; expected a folder" if folder else "folder; expected a file name"), field=flag)
+    parent = out if folder and out.exists() else out.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise UserError(str(out), f"cannot be written ({parent} is not writable)", field=flag)
+
+
 def _cmd_train(args: argparse.Namespace) -> int:
     from dataclasses import asdict
 
@@ -245,6 +263,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
     recipe = recipe_named(args.recipe or DEFAULT_RECIPE)
     config = _train_config(args, recipe)
+    _check_output(args.out, "--out", args.data)
     recordings = [p for p in args.data if p.is_dir()]
     bar = Progress("featurize", len(recordings), enabled=bool(recordings))
     data = training_data(args.data, recipe.features(), progress=lambda k, n: bar.update(k, f"{k}/{n} recordings"))
@@ -295,6 +314,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
     if args.seeds < 1:
         raise UserError("--seeds", "must be >= 1")
+    _check_output(args.out, "--out", [args.model], folder=True)
     try:
         frames = sorted({int(f) for f in args.frames.split(",") if f.strip()}) if args.frames else []
     except ValueError:

@@ -1,9 +1,17 @@
-"""Writing files so that a reader never sees half of one: a unique temporary name, then a rename."""
+"""Writing files so that a reader never sees half of one: a unique temporary name in the same
+folder, then a rename. Every file terrapref writes goes through here.
+
+The temporary name is unique (two writers of the same target cannot collide), keeps the
+target's suffix (writers such as matplotlib choose the format by it), and the finished file's
+mode follows the umask like any other new file (temporary files are created 0600).
+"""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 
@@ -13,18 +21,40 @@ def _umask() -> int:
     return mask
 
 
-def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
-    """Write ``data`` to ``path`` through a unique temporary file in the same folder, renamed into
-    place only once complete; the file's mode follows the umask like any other new file."""
+@contextlib.contextmanager
+def atomic_path(path: str | Path, fsync: bool = False) -> Iterator[Path]:
+    """A temporary path to write ``path``'s content to; renamed to ``path`` when the block ends
+    without an exception, removed otherwise.
+
+    Raises:
+        IsADirectoryError: ``path`` is a folder.
+    """
     path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(21, "is a directory, expected a file name", str(path))
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=f".tmp{path.suffix}")
+    os.close(fd)
+    tmp = Path(name)
     try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
+        yield tmp
+        if fsync:
+            with open(tmp, "rb") as fh:
+                os.fsync(fh.fileno())
         os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
-    return path
+
+
+def write_bytes_atomic(path: str | Path, data: bytes, fsync: bool = False) -> Path:
+    """Write ``data`` to ``path`` atomically (see :func:`atomic_path`)."""
+    with atomic_path(path, fsync) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
+
+
+def write_text_atomic(path: str | Path, text: str, fsync: bool = False) -> Path:
+    """Write UTF-8 ``text`` to ``path`` atomically."""
+    return write_bytes_atomic(path, text.encode("utf-8"), fsync)

@@ -13,18 +13,16 @@ from safetensors import SafetensorError, safe_open
 from safetensors.numpy import save_file
 
 from terrapref.errors import UserError
+from terrapref.fileio import atomic_path
 
 META_KEY = "terrapref"
 
 
 def write_tensor_file(path: str | Path, tensors: dict[str, np.ndarray], meta: dict) -> Path:
     """Write tensors and ``meta`` atomically (temporary file, then rename)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    save_file(tensors, str(tmp), metadata={META_KEY: json.dumps(meta)})
-    tmp.replace(path)
-    return path
+    with atomic_path(path) as tmp:
+        save_file(tensors, str(tmp), metadata={META_KEY: json.dumps(meta)})
+    return Path(path)
 
 
 def read_tensor_file(path: str | Path, fmt: str, missing: str, unreadable: str) -> tuple[dict[str, np.ndarray], dict]:

@@ -31,6 +31,7 @@ import numpy as np
 import yaml
 
 from terrapref.errors import UserError
+from terrapref.fileio import write_text_atomic
 from terrapref.report.images import read_label_png, write_png_atomic
 
 FORMAT = "terrapref-recording/1"
@@ -42,16 +43,7 @@ IMAGES = "images"
 
 def write_json_atomic(path: Path, data: Any) -> None:
     """Write JSON through a temporary file and a rename: readers see the old or the new file."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(data, fh, indent=2, sort_keys=False)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_text_atomic(path, json.dumps(data, indent=2, sort_keys=False), fsync=True)
 
 
 def _is_recording(path: Path) -> bool:
@@ -64,21 +56,26 @@ class RecordingWriter:
     Args:
         out_dir: directory to create; an existing recording there is refused unless
             ``overwrite``; a non-empty directory that is not a recording is always refused.
+            With ``overwrite`` the old recording stays untouched until the new one is
+            complete: the new one is written beside it and swapped in by :meth:`close`; if the
+            run ends early (:meth:`abort`) it is kept as ``OUT.partial`` and the old one stays.
         meta: configuration to store (camera, control set, scenario name, driver...).
         scenario: the scenario mapping (``Scenario.to_dict()``) to store beside it.
     """
 
     def __init__(self, out_dir: str | Path, meta: dict[str, Any], scenario: dict[str, Any], overwrite: bool = False) -> None:
-        self.dir = Path(out_dir)
-        if self.dir.exists():
-            if not self.dir.is_dir():
-                raise UserError(str(self.dir), "exists and is not a directory")
-            if _is_recording(self.dir):
+        self.target = Path(out_dir)
+        self.dir = self.target
+        self.partial_dir: Path | None = None  # where an aborted replacement was left
+        if self.target.exists():
+            if not self.target.is_dir():
+                raise UserError(str(self.target), "exists and is not a directory")
+            if _is_recording(self.target):
                 if not overwrite:
-                    raise UserError(str(self.dir), "a recording already exists here; choose another --out or pass --force to replace it")
-                shutil.rmtree(self.dir)
-            elif any(self.dir.iterdir()):
-                raise UserError(str(self.dir), "directory is not empty and holds no recording; refusing to write into it")
+                    raise UserError(str(self.target), "a recording already exists here; choose another --out or pass --force to replace it")
+                self.dir = Path(tempfile.mkdtemp(prefix=f".{self.target.name}.", suffix=".new", dir=self.target.parent))
+            elif any(self.target.iterdir()):
+                raise UserError(str(self.target), "directory is not empty and holds no recording; refusing to write into it")
         (self.dir / IMAGES).mkdir(parents=True, exist_ok=True)
         self.meta = {"format": FORMAT, "status": "partial", "created": datetime.now(timezone.utc).isoformat(timespec="seconds"), **meta}
         with open(self.dir / SCENARIO, "w") as fh:
@@ -124,10 +121,23 @@ class RecordingWriter:
         if summary:
             self.meta["summary"] = summary
         write_json_atomic(self.dir / META, self.meta)
+        if self.dir != self.target:  # the replacement is complete: swap it in
+            old = Path(tempfile.mkdtemp(prefix=f".{self.target.name}.", suffix=".old", dir=self.target.parent))
+            os.replace(self.target, old / "rec")
+            os.replace(self.dir, self.target)
+            shutil.rmtree(old, ignore_errors=True)
+            self.dir = self.target
 
     def abort(self) -> None:
-        """Stop writing and leave the recording marked partial."""
+        """Stop writing and leave the recording marked partial (a replacement beside the old
+        recording, as ``OUT.partial``)."""
         self._frames.close()
+        if self.dir != self.target:
+            partial = self.target.with_name(self.target.name + ".partial")
+            if partial.exists():
+                shutil.rmtree(partial)
+            os.replace(self.dir, partial)
+            self.dir = self.partial_dir = partial
 
     def __enter__(self) -> RecordingWriter:
         return self

@@ -461,6 +461,8 @@ def run_teleop(
     except BaseException:
         if writer is not None:
             writer.abort()
+            if writer.partial_dir is not None:
+                print(f"note: {writer.target} keeps the recording it held; the unfinished new one is in {writer.partial_dir}", file=sys.stderr)
         raise
     finally:
         pygame.quit()

@@ -10,6 +10,7 @@ import numpy as np
 
 from terrapref.camera import PinholeCamera
 from terrapref.errors import UserError
+from terrapref.fileio import write_text_atomic
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, annotate_agreement, run_many, summarise
 from terrapref.evaluation.scoring import classes_in_zone
 from terrapref.learning.identify import GRASS, Identifiability
@@ -80,9 +81,7 @@ def evaluate_model(
     _figures(results, scenarios, out, model, profile)
     if mcap:
         _write_runs(results, out / "runs", model)
-    tmp = out / ".metrics.json.tmp"
-    tmp.write_text(json.dumps(metrics, indent=2))
-    tmp.replace(out / "metrics.json")
+    write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=2))
     return metrics
 
 

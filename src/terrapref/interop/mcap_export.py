@@ -31,6 +31,7 @@ from PIL import Image as PILImage
 from terrapref.camera import CameraConfig
 from terrapref.features import PreferenceSetConfig
 from terrapref.features.preference_set import forward_simulate
+from terrapref.fileio import write_text_atomic
 from terrapref.terrain import ClassTable
 
 EPOCH_S = 1_700_000_000
@@ -199,7 +200,8 @@ def write_mcap(out: str | Path, run: RunFrames, robot_file: bool = True, progres
         shutil.rmtree(tmpdir, ignore_errors=True)
     if robot_file:
         robot = out.with_name(out.name + ".robot.yaml")
-        robot.write_text(
+        write_text_atomic(
+            robot,
             "format: terrapref-robot/1\n"
             f"topics:\n  segmentation: {PREFIX}/labels\n  camera_info: {PREFIX}/camera_info\n  odometry: {PREFIX}/odom\n"
             f"  command: {PREFIX}/cmd_vel\n  path: {PREFIX}/path\n"

@@ -16,7 +16,7 @@ import numpy as np
 
 from terrapref.camera import CameraConfig
 from terrapref.demos.recording import Recording
-from terrapref.fileio import write_bytes_atomic
+from terrapref.fileio import atomic_path, write_bytes_atomic
 from terrapref.learning.model_file import LoadedModel
 from terrapref.runtime import PlannerRuntime
 
@@ -108,9 +108,10 @@ def write_replay(result: dict, out: Path, title: str) -> tuple[Path, Path]:
     ax3.set_ylabel("y [m]")
     fig.suptitle(title)
     png = out / "replay.png"
-    tmp = out / ".replay.png.tmp.png"
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(png)
+    try:
+        with atomic_path(png) as tmp:
+            fig.savefig(tmp, dpi=110)
+    finally:
+        plt.close(fig)
     js = write_bytes_atomic(out / "replay.json", json.dumps(result, indent=1).encode())
     return js, png

@@ -2,30 +2,19 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
 
+from terrapref.fileio import atomic_path
 from terrapref.terrain import ClassTable
 
 
 def write_png_atomic(path: str | Path, image: np.ndarray, compress_level: int = 6) -> None:
     """Write a PNG via a temporary file and rename, so a reader never sees half a file."""
-    path = Path(path)
-    if path.is_dir():
-        raise IsADirectoryError(21, "is a directory, expected a file name", str(path))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            Image.fromarray(image).save(fh, format="PNG", compress_level=compress_level)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_path(path) as tmp:
+        Image.fromarray(image).save(tmp, format="PNG", compress_level=compress_level)
 
 
 def colorise(labels: np.ndarray, classes: ClassTable) -> np.ndarray:

@@ -12,6 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
+from terrapref.fileio import atomic_path  # noqa: E402
 from terrapref.scenario import Scenario  # noqa: E402
 from terrapref.scenario.shapes import outline  # noqa: E402
 from terrapref.world import WorldMap  # noqa: E402
@@ -20,9 +21,11 @@ from terrapref.world import WorldMap  # noqa: E402
 def _save(fig: plt.Figure, path: str | Path) -> Path:
     """Write a figure (creating its folder) and release it."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp)
+    finally:
+        plt.close(fig)
     return path
 
 

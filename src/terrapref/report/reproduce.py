@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from terrapref.fileio import write_text_atomic
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, annotate_agreement, run_many, summarise
 from terrapref.evaluation.stats import rate_text
 from terrapref.learning.recipe import OURS, PAPER, TEACH, Recipe, practice_courses, run_recipe
@@ -221,8 +222,6 @@ def _write_report(out: Path, results, trained, recipes, seeds, eval_seeds, profi
     for k, v in timings.items():
         lines.append(f"| {k} | {v:.1f} |")
     lines.append(f"| total | {sum(timings.values()):.1f} |")
-    report = out / "REPORT.md"
-    report.write_text("\n".join(lines) + "\n")
     slim = [{k: v for k, v in r.items() if k not in ("xy", "frames")} for r in results]
-    (out / "results.json").write_text(json.dumps({"runs": slim, "timings": timings}, indent=1))
-    return report
+    write_text_atomic(out / "results.json", json.dumps({"runs": slim, "timings": timings}, indent=1))
+    return write_text_atomic(out / "REPORT.md", "\n".join(lines) + "\n")

@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from terrapref.fileio import write_text_atomic
 from terrapref.evaluation.perturb import Perturbation
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PLANNER, PURE_PURSUIT, RunSpec, run_many
 from terrapref.features import FeatureConfig
@@ -338,7 +339,7 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
     log("[6/6] tables, figures and STUDY.md ...")
     runs = [{**tag, "scenario": r["scenario"], "metrics": r["metrics"]} for tag, r in zip(tags, results)]
     trained += taught
-    (out / "study.json").write_text(json.dumps({"plan": _plan_dict(plan), "trained": trained, "runs": runs}, indent=1, default=float))
+    write_text_atomic(out / "study.json", json.dumps({"plan": _plan_dict(plan), "trained": trained, "runs": runs}, indent=1, default=float))
     return write_study(out, plan, trained, runs, timings, report_started=t0)
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from terrapref.fileio import write_text_atomic
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PURE_PURSUIT, zone_agrees
 from terrapref.evaluation.stats import rate_text, wilson
 
@@ -187,9 +188,7 @@ def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings:
         timings = {**timings, "tables and figures": time.perf_counter() - report_started}
     lines += ["", "## Time per stage (wall clock)", "", "| stage | seconds |", "|---|---|"]
     lines += [f"| {k} | {v:.1f} |" for k, v in timings.items()] + [f"| total | {sum(timings.values()):.1f} |", ""]
-    path = out / "STUDY.md"
-    path.write_text("\n".join(lines))
-    return path
+    return write_text_atomic(out / "STUDY.md", "\n".join(lines))
 
 
 def _agreement(planner: list[dict], driver: list[dict]) -> tuple[int, int]:

@@ -1,0 +1,53 @@
+"""Outputs are checked before any work: never an input, never the wrong kind, always writable."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+from test_evaluate import _dataset_file, _linear_model
+
+from terrapref.cli import main
+
+
+def _error(capsys) -> str:
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error:")]
+    assert len(err) == 1, err
+    return err[0]
+
+
+def test_train_refuses_to_overwrite_its_own_input(tmp_path: Path, capsys):
+    data = _dataset_file(tmp_path / "train.safetensors")
+    before = data.read_bytes()
+    assert main(["train", str(data), "--out", str(data), "--epochs", "1"]) == 2
+    assert "is also an input" in _error(capsys) and data.read_bytes() == before
+
+
+def test_train_refuses_a_folder_as_its_model_file(tmp_path: Path, capsys):
+    data = _dataset_file(tmp_path / "train.safetensors")
+    (tmp_path / "models").mkdir()
+    assert main(["train", str(data), "--out", str(tmp_path / "models"), "--epochs", "1"]) == 2
+    assert "expected a file name" in _error(capsys)
+
+
+def test_evaluate_refuses_a_file_as_its_folder_before_driving(tmp_path: Path, capsys):
+    model = _linear_model(tmp_path / "m.safetensors")
+    (tmp_path / "eval").write_text("not a folder")
+    assert main(["evaluate", str(model), "demo_course", "--seeds", "1", "--out", str(tmp_path / "eval")]) == 2
+    assert "expected a folder" in _error(capsys) and (tmp_path / "eval").read_text() == "not a folder"
+    assert main(["evaluate", str(model), "demo_course", "--seeds", "1", "--out", str(model)]) == 2
+    assert "is also an input" in _error(capsys)
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root may write anywhere")
+def test_an_unwritable_output_is_refused_before_training(tmp_path: Path, capsys):
+    data = _dataset_file(tmp_path / "train.safetensors")
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o555)
+    try:
+        assert main(["train", str(data), "--out", str(locked / "m.safetensors"), "--epochs", "1"]) == 2
+        assert "cannot be written" in _error(capsys)
+    finally:
+        locked.chmod(0o755)
