@@ -705,3 +705,41 @@ def test_run_recipe_demonstrates_the_practice_courses_and_rerecords_a_course_mis
     record_demonstrations(Recipe("p", demonstrations=1, practice=1), tmp_path, 0, course="demo_course", log=logged.append)
     assert read_recording(tmp_path / "practice_0").meta["scenario"] == "demo_course"
     assert len(logged) == 1 and "(demo_course)" in logged[0] and logged[0].startswith("demonstration 2/2")  # demo_0 reused
+
+
+def test_an_interrupted_training_leaves_its_best_so_far_and_touches_nothing_else(tmp_path: Path):
+    from terrapref.learning.pipeline import interrupted_path
+
+    data = _interrupt_dataset()
+    out = tmp_path / "model.safetensors"
+    config = TrainConfig(epochs=4, members=3, hidden=8, batch_size=64)
+    train_and_save(data, out, replace(config, members=1))  # an earlier model and its checkpoints
+    before = out.read_bytes()
+    old_checkpoints = sorted(p.name for p in (tmp_path / "model.checkpoints").iterdir())
+    seen = []
+
+    def stop(m) -> None:
+        seen.append(m.epoch)
+        if len(seen) == 6:  # member 2, epoch 2
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        train_and_save(data, out, config, progress=stop)
+    assert out.read_bytes() == before  # the earlier model is untouched
+    assert sorted(p.name for p in (tmp_path / "model.checkpoints").iterdir()) == old_checkpoints
+    partial = load_model(interrupted_path(out))
+    assert partial.meta["status"] == "interrupted" and partial.classifier.members == 2  # member 1 whole, member 2 so far
+    assert partial.meta["interrupted"]["members_reached"] == 2
+    assert sorted(p.name for p in (tmp_path / "model.checkpoints.interrupted").iterdir()) == ["member_1", "member_2"]
+    assert len(list((tmp_path / "model.checkpoints.interrupted" / "member_2").iterdir())) == 2
+    # A complete retrain replaces the old checkpoints wholly: none of another run is left beside.
+    train_and_save(data, out, replace(config, members=2, epochs=2))
+    assert sorted(p.name for p in (tmp_path / "model.checkpoints").iterdir()) == ["member_1", "member_2"]
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def _interrupt_dataset() -> Dataset:
+    rng = np.random.default_rng(0)
+    n = 200
+    return Dataset(rng.uniform(0, 1, (n, 21, 5)).astype(np.float32), rng.integers(0, 21, n), np.zeros(n, np.float32), np.zeros(n, np.int64),
+                   {"format": DATASET_FORMAT, **model_meta()})

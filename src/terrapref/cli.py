@@ -289,7 +289,15 @@ def _cmd_train(args: argparse.Namespace) -> int:
         if args.verbose or m.epoch == config.epochs or m.epoch % max(1, config.epochs // 10) == 0:
             print(f"{m.epoch:5d} {m.train_loss:10.4f} {m.val_loss:9.4f} {m.train_acc:9.3f} {m.val_acc:8.3f} {m.val_top3:8.3f}", flush=True)
 
-    result = train_and_save(data, args.out, config, progress=show, recipe=recipe.name)
+    try:
+        result = train_and_save(data, args.out, config, progress=show, recipe=recipe.name)
+    except KeyboardInterrupt:
+        from terrapref.learning.pipeline import interrupted_path
+
+        if interrupted_path(args.out).exists():
+            print(f"note: the best epochs so far are in {interrupted_path(args.out)} (marked interrupted: no second stage); "
+                  f"{args.out} is untouched", file=sys.stderr)
+        raise
     curve = Path(args.out).with_suffix(".loss.png")
     first = f", member 1 of {config.members}" if config.members > 1 else ""
     save_loss_curve(curve, [asdict(h) for h in result.history], result.best_epoch, title=f"{Path(args.out).name}: {len(data)} samples{first}")

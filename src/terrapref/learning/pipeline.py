@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import math
+import os
+import shutil
+import tempfile
 from collections.abc import Callable
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 from terrapref.demos.dataset import Dataset
 from terrapref.learning.model_file import save_model
+from terrapref.learning.network import ClassifierConfig, member_prefix
 from terrapref.learning.train import EpochMetrics, TrainConfig, TrainResult, train
 
 
@@ -31,16 +36,89 @@ def model_meta(dataset: Dataset, config: TrainConfig, result: TrainResult, recip
     }
 
 
+def interrupted_path(out: str | Path) -> Path:
+    """Where an interrupted training leaves its best model so far: beside ``out``, never over it."""
+    out = Path(out)
+    return out.with_name(f"{out.stem}.interrupted{out.suffix}")
+
+
+class _Checkpoints:
+    """Every epoch written as it is made, into a fresh folder beside the model's; swapped in for
+    the old one only when training completes, so a retrain never mixes two runs' checkpoints.
+    Also the best epoch so far of each member, for an interrupted run."""
+
+    def __init__(self, out: Path, meta: dict, write: bool) -> None:
+        self.final = out.with_name(out.stem + ".checkpoints")
+        self.meta, self.write = meta, write
+        self.folder = Path(tempfile.mkdtemp(prefix=f".{self.final.name}.", dir=out.parent)) if write else None
+        self.best: dict[int, tuple[float, int, ClassifierConfig, dict]] = {}  # member -> (loss, epoch, classifier, weights)
+
+    def __call__(self, member: int, classifier: ClassifierConfig, weights: dict, m: EpochMetrics) -> None:
+        loss = m.val_loss if not math.isnan(m.val_loss) else m.train_loss
+        if member not in self.best or loss < self.best[member][0]:
+            self.best[member] = (loss, m.epoch, classifier, weights)
+        if self.write:
+            name = f"epoch_{m.epoch:03d}.safetensors" if self.meta["members"] == 1 else f"member_{member + 1}/epoch_{m.epoch:03d}.safetensors"
+            save_model(self.folder / name, classifier, weights, {**self.meta, "member": member + 1, "epoch": m.epoch, "status": "checkpoint"})
+
+    def finish(self) -> None:
+        if self.folder is None:
+            return
+        if self.final.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{self.final.name}.", suffix=".old", dir=self.final.parent))
+            os.replace(self.final, old / "checkpoints")
+            shutil.rmtree(old, ignore_errors=True)
+        os.replace(self.folder, self.final)
+
+    def keep_partial(self) -> None:
+        """An interrupted run's checkpoints stay, beside the old ones, as ``.checkpoints.interrupted``."""
+        if self.folder is not None and self.folder.exists():
+            target = self.final.with_name(self.final.name + ".interrupted")
+            shutil.rmtree(target, ignore_errors=True)
+            os.replace(self.folder, target)
+
+    def interrupted_model(self, out: Path) -> Path | None:
+        """The best epochs so far (every member reached) as one model, clearly marked."""
+        if not self.best:
+            return None
+        members = [self.best[j] for j in sorted(self.best)]
+        classifier = members[0][2]
+        if len(members) == 1:
+            weights = members[0][3]
+        else:
+            classifier = replace(classifier, members=len(members))
+            weights = {member_prefix(j) + k: v for j, (_, _, _, w) in enumerate(members) for k, v in w.items()}
+        meta = {**self.meta, "status": "interrupted",
+                "interrupted": {"members_reached": len(members), "best_epochs": [e for _, e, _, _ in members],
+                                "note": "training was interrupted: the best epochs so far, without the second stage or the identifiability report"}}
+        meta.pop("members", None)
+        return save_model(interrupted_path(out), classifier, weights, meta)
+
+
 def train_and_save(dataset: Dataset, out: str | Path, config: TrainConfig, checkpoints: bool = True,
                    progress: Callable[[EpochMetrics], None] | None = None, recipe: str | None = None) -> TrainResult:
-    """Train, write the chosen epoch as the model, every epoch as a checkpoint beside it;
-    ``recipe`` (its name) is recorded in the model's metadata."""
-    result = train(dataset, config, progress)
-    meta = model_meta(dataset, config, result, recipe)
+    """Train, write every epoch as a checkpoint as it is made and the chosen epoch as the model;
+    ``recipe`` (its name) is recorded in the model's metadata.
+
+    Interrupted (Ctrl-C, or any error) after at least one epoch, the best epochs so far are
+    written as ``NAME.interrupted.safetensors`` beside ``out`` (metadata ``status:
+    interrupted``), its checkpoints as ``NAME.checkpoints.interrupted``; ``out`` and its old
+    checkpoints are left as they were.
+    """
     out = Path(out)
-    if checkpoints:
-        folder = out.with_name(out.stem + ".checkpoints")
-        for i, weights in enumerate(result.checkpoints, start=1):
-            save_model(folder / f"epoch_{i:03d}.safetensors", result.classifier, weights, {**meta, "epoch": i})
+    out.parent.mkdir(parents=True, exist_ok=True)
+    base = {**({"recipe": recipe} if recipe else {}), "features": dataset.meta["features"], "camera": dataset.meta["camera"],
+            "classes": dataset.meta["classes"], "profile": dataset.meta["profile"], "training": config.to_dict(),
+            "data": {"fingerprint": dataset.fingerprint, "samples": len(dataset), "recordings": dataset.meta.get("recordings", [])},
+            "members": config.members}
+    saver = _Checkpoints(out, base, checkpoints)
+    try:
+        result = train(dataset, config, progress, on_epoch=saver)
+    except BaseException:
+        saver.keep_partial()
+        saver.interrupted_model(out)
+        raise
+    saver.finish()
+    meta = model_meta(dataset, config, result, recipe)
     save_model(out, result.classifier, result.weights, {**meta, "epoch": result.best_epoch})
     return result

@@ -174,19 +174,25 @@ def split_indices(n: int, val_fraction: float, rng: np.random.Generator) -> tupl
     return np.sort(perm[n_val:]), np.sort(perm[:n_val])
 
 
-def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callable[[EpochMetrics], None] | None = None) -> TrainResult:
+EpochHook = Callable[[int, ClassifierConfig, dict[str, np.ndarray], EpochMetrics], None]  # (member, classifier, weights, metrics)
+
+
+def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callable[[EpochMetrics], None] | None = None,
+          on_epoch: EpochHook | None = None) -> TrainResult:
     """Train C on ``dataset``; returns the lowest-validation-loss epoch's weights and the history.
 
-    The same dataset and configuration give the same weights, bit for bit, on any CPU and
-    thread count (:mod:`terrapref.learning.exact`).
+    ``on_epoch`` sees every epoch's weights as they are made (member by member), so that a
+    caller can write checkpoints as training goes. The same dataset and configuration give the
+    same weights, bit for bit, on any CPU and thread count (:mod:`terrapref.learning.exact`).
     """
     config = config or TrainConfig()
     if config.utility and dataset.feature_config.lanes:
         raise ValueError("the second stage's utility needs U without lanes")
     if config.members == 1:
-        result = _train(dataset, config, progress)
+        result = _train(dataset, config, progress, on_epoch and (lambda *a: on_epoch(0, *a)))
     else:
-        result = _ensemble([_train(dataset, replace(config, seed=seed, members=1), progress) for seed in config.member_seeds])
+        result = _ensemble([_train(dataset, replace(config, seed=seed, members=1), progress, on_epoch and (lambda *a, j=j: on_epoch(j, *a)))
+                            for j, seed in enumerate(config.member_seeds)])
     # The linear utility: the second stage's (when asked for), and the identifiability report's.
     utility, gamma = _fit_utility(dataset, config.mirror)
     if config.utility:
@@ -231,7 +237,8 @@ def mirrored(U: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return U[:, ::-1, :], U.shape[1] - 1 - labels
 
 
-def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetrics], None] | None) -> TrainResult:
+def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetrics], None] | None,
+           on_epoch: Callable[[ClassifierConfig, dict[str, np.ndarray], EpochMetrics], None] | None = None) -> TrainResult:
     n, m, k = dataset.U.shape
     features = dataset.feature_config
     rng = np.random.default_rng(config.seed)
@@ -289,6 +296,8 @@ def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetri
         metrics = EpochMetrics(epoch, exact.fsum(np.concatenate(seen_loss)) / len(tr), vl, seen_hits / len(tr), vacc, vtop3)
         history.append(metrics)
         checkpoints.append({name: v.astype(np.float32) for name, v in net.weights.items()})
+        if on_epoch is not None:
+            on_epoch(classifier, checkpoints[-1], metrics)
         if progress is not None:
             progress(metrics)
     losses = [h.val_loss if not math.isnan(h.val_loss) else h.train_loss for h in history]
