@@ -59,6 +59,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
     from terrapref.scenario import resolve_scenario
     from terrapref.world import rasterise
 
+    _check_figure(args.out, "--out")
     scenario = resolve_scenario(args.scenario)
     save_map(args.out, scenario, rasterise(scenario))
     print(f"wrote {args.out} ({scenario.name}: {len(scenario.terrain)} patches, {len(scenario.zones)} zones, path {scenario.path_length_m():.0f} m)")
@@ -102,6 +103,8 @@ def _cmd_record(args: argparse.Namespace) -> int:
     from terrapref.sim import SimConfig, Simulation
     from terrapref.terrain import PreferenceProfile
 
+    if args.seed < 0:
+        raise UserError("--seed", f"must be an integer >= 0, got {args.seed}")
     scenario = resolve_scenario(args.scenario)
     profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile else PreferenceProfile.default(scenario.classes)
     try:
@@ -155,6 +158,7 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
     for line in summary.lines():
         print(line)
     out = args.out or rec.path / "driven_path.png"
+    _check_figure(out, "--out")
     save_driven_path(summary, rec, out)
     print(f"wrote {out}")
     if not args.no_preference:
@@ -202,7 +206,11 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
         raise UserError("featurize", str(exc), field="--lanes") from None
     pref = features.preference
     if args.n_steps is not None or args.dt is not None:
-        pref = replace(pref, n_steps=args.n_steps or pref.n_steps, dt_s=args.dt or pref.dt_s)
+        if args.n_steps is not None and args.n_steps < 1:
+            raise UserError("--n-steps", f"must be an integer >= 1, got {args.n_steps}")
+        if args.dt is not None and not (math.isfinite(args.dt) and args.dt > 0):
+            raise UserError("--dt", f"must be a finite number of seconds > 0, got {args.dt}")
+        pref = replace(pref, n_steps=args.n_steps if args.n_steps is not None else pref.n_steps, dt_s=args.dt if args.dt is not None else pref.dt_s)
         features = replace(features, preference=pref)
     camera = None
     if args.camera:
@@ -234,6 +242,15 @@ def _train_config(args: argparse.Namespace, recipe):
         return replace(recipe.train, **changes)
     except ValueError as exc:
         raise UserError("train", str(exc)) from None
+
+
+FIGURE_FORMATS = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".tif", ".tiff", ".webp", ".eps", ".ps")
+
+
+def _check_figure(out: str | Path, flag: str) -> None:
+    """A figure's file name must say a format the plotting library writes."""
+    if Path(out).suffix.lower() not in FIGURE_FORMATS:
+        raise UserError(str(out), f"a figure needs one of the suffixes {', '.join(FIGURE_FORMATS)}", field=flag)
 
 
 def _check_output(out: str | Path, flag: str, inputs: Sequence[str | Path] = (), folder: bool = False) -> None:

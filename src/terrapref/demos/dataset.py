@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer, SegmentationView
-from terrapref.demos.recording import Recording, read_recording
+from terrapref.demos.recording import Recording, read_recording, require_meta
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
 from terrapref.features.lookahead import Lookahead
@@ -78,6 +78,7 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
         camera: None uses the recorded frames; another configuration re-renders each frame from
             the recording's scenario at its recorded pose.
     """
+    require_meta(recording, "classes", "camera")
     classes = ClassTable.from_dict(recording.meta["classes"], str(recording.path / "meta.json"))
     rec_camera = CameraConfig.from_dict(recording.meta["camera"])
     camera = camera or rec_camera
@@ -88,11 +89,23 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
     renderer = None if camera == rec_camera else SegmentationRenderer(PinholeCamera(camera), rasterise(scenario))
     lookahead = Lookahead(features.lookahead, featurizer, PinholeCamera(camera)) if features.lookahead is not None else None
     n, m = len(recording), featurizer.m
+    if n == 0:
+        raise UserError(str(recording.path / "frames.jsonl"), "holds no frames to featurise", field="frames")
+    known = np.zeros(256, dtype=bool)
+    known[[c.id for c in classes.classes]] = True
+    known[255] = True
+    shape = (rec_camera.height_px, rec_camera.width_px)
     U = np.empty((n, m, features.n_features), dtype=np.float32)
     U2 = np.empty((n, m, m, features.n_terrain + 1), dtype=np.float16) if lookahead is not None else None
     for i in range(n):
         pose = tuple(recording.poses[i])
-        view = SegmentationView.of(renderer.render(pose) if renderer is not None else recording.image(i))
+        if renderer is None:
+            image = recording.image(i)
+            if image.shape != shape or not known[image].all():
+                what = f"is {image.shape[1]} x {image.shape[0]}, the camera's {shape[1]} x {shape[0]}" if image.shape != shape else \
+                    f"holds class ids {sorted(set(np.unique(image).tolist()) - set(np.flatnonzero(known).tolist()))[:5]} that the class table does not have"
+                raise UserError(str(recording.path / recording.image_files[i]), what)
+        view = SegmentationView.of(renderer.render(pose) if renderer is not None else image)
         s = tracker.update(recording.poses[i, :2])
         U[i] = featurizer(view, pose, path, s)
         if lookahead is not None:

@@ -19,6 +19,7 @@ last line is cut short; the reader drops a cut line and reports the recording as
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import tempfile
@@ -177,11 +178,73 @@ class Recording:
         return float(self.times[-1] - self.times[0]) + 0.1 if len(self.times) else 0.0
 
     def image(self, i: int) -> np.ndarray:
-        return read_label_png(self.path / self.image_files[i])
+        """Frame ``i``'s class ids (H, W) uint8; an unreadable or foreign image is a UserError."""
+        path = self.path / self.image_files[i]
+        try:
+            return read_label_png(path)
+        except (OSError, ValueError, SyntaxError) as exc:  # Pillow's errors on damaged or foreign files
+            raise UserError(str(path), f"not a single-channel 8-bit class-id PNG ({exc})") from None
 
     def images(self) -> np.ndarray:
         """All frames, shape (F, H, W) uint8."""
         return np.stack([self.image(i) for i in range(len(self))]) if len(self) else np.zeros((0, 0, 0), np.uint8)
+
+
+def _frame_problem(row: dict) -> tuple[str, str] | None:
+    """(field, message) of the first thing wrong with one frame record, or None."""
+    def finite(v: object) -> bool:
+        return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+    if not finite(row["t"]):
+        return "t", "expected a finite time [s]"
+    for key, size in (("pose", 3), ("cmd", 2)):
+        v = row[key]
+        if not (isinstance(v, list) and len(v) == size and all(finite(x) for x in v)):
+            return key, f"expected {size} finite numbers"
+    if isinstance(row["label"], bool) or not isinstance(row["label"], int) or row["label"] < 0:
+        return "label", "expected an integer >= 0"
+    image = row["image"]
+    if not isinstance(image, str) or not image.startswith(f"{IMAGES}/") or ".." in image:
+        return "image", f"expected a file name under {IMAGES}/"
+    return None
+
+
+def _check_meta(meta: dict, path: Path) -> None:
+    """The configuration a recording must carry, parsed once here so every later use is safe."""
+    from terrapref.camera import CameraConfig
+    from terrapref.features import PreferenceSetConfig
+    from terrapref.terrain import ClassTable
+
+    for key, parse in (("camera", CameraConfig.from_dict), ("preference_set", PreferenceSetConfig.from_dict), ("classes", lambda d: ClassTable.from_dict(d, str(path)))):
+        if key not in meta:
+            continue  # what needs it says so (featurising: require_meta)
+        value = meta[key]
+        if not isinstance(value, dict):
+            raise UserError(str(path), f"expected a mapping, got {type(value).__name__}", field=key)
+        try:
+            parse(value)
+        except UserError:
+            raise
+        except (TypeError, ValueError, KeyError, AttributeError) as exc:
+            raise UserError(str(path), f"invalid ({type(exc).__name__}: {exc})", field=key) from None
+    profile = meta.get("profile")
+    if profile is not None and not (isinstance(profile, list) and all(isinstance(p, str) for p in profile)):
+        raise UserError(str(path), "expected a list of class names", field="profile")
+    for key in ("path",):
+        if key in meta:
+            try:
+                points = np.asarray(meta[key], dtype=float)
+            except (TypeError, ValueError):
+                points = np.zeros(0)
+            if points.ndim != 2 or points.shape[1:] != (2,) or len(points) < 2 or not np.isfinite(points).all():
+                raise UserError(str(path), "expected at least two finite [x, y] points", field=key)
+
+
+def require_meta(recording: Recording, *keys: str) -> None:
+    """Refuse a recording whose meta.json lacks what a use of it needs."""
+    for key in keys:
+        if key not in recording.meta:
+            raise UserError(str(recording.path / META), "missing; the recording cannot be featurised without it", field=key)
 
 
 def read_recording(path: str | Path) -> Recording:
@@ -204,8 +267,11 @@ def read_recording(path: str | Path) -> Recording:
         raise UserError(str(meta_path), f"expected {FORMAT!r}", field="format")
     try:
         scenario = yaml.safe_load((root / SCENARIO).read_text())
-    except (OSError, yaml.YAMLError):
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
         raise UserError(str(root / SCENARIO), "missing or unreadable") from None
+    if not isinstance(scenario, dict):
+        raise UserError(str(root / SCENARIO), f"expected a terrapref-scenario/1 mapping, got {type(scenario).__name__}")
+    _check_meta(meta, meta_path)
     rows: list[dict] = []
     frames_path = root / FRAMES
     cut = False
@@ -224,6 +290,11 @@ def read_recording(path: str | Path) -> Recording:
                 cut = True
                 break
             raise UserError(str(frames_path), f"line {n + 1} is not a frame record", field=f"line {n + 1}")
+        problem = _frame_problem(row)
+        if problem:
+            raise UserError(str(frames_path), problem[1], field=f"line {n + 1}.{problem[0]}")
+        if rows and not row["t"] > rows[-1]["t"]:
+            raise UserError(str(frames_path), f"time {row['t']} does not follow {rows[-1]['t']}; frames must be in time order", field=f"line {n + 1}.t")
         if not (root / row["image"]).exists():
             if n >= len(lines) - 2:
                 cut = True
@@ -232,6 +303,9 @@ def read_recording(path: str | Path) -> Recording:
         rows.append(row)
     complete = meta.get("status") == "complete" and not cut
     f = len(rows)
+    declared = meta.get("frames")
+    if complete and isinstance(declared, int) and declared != f:
+        raise UserError(str(frames_path), f"holds {f} frames; meta.json says the complete run has {declared} (truncated or edited?)", field="frames")
     return Recording(
         path=root,
         meta=meta,

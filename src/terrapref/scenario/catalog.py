@@ -37,6 +37,8 @@ def resolve_scenario(name_or_path: str, classes: ClassTable | None = None) -> Sc
             seed = int(name_or_path[4:])
         except ValueError:
             raise ScenarioError(name_or_path, "a generated course is named gen:SEED with an integer SEED") from None
+        if not 0 <= seed < 2**63:
+            raise ScenarioError(name_or_path, "a generated course's SEED is an integer >= 0")
         return generate_course(seed, classes=classes)
     return load_scenario(scenario_path(name_or_path), classes)
 

@@ -1,0 +1,96 @@
+"""Broken inputs a user can give: each is one error line naming the file or flag, exit 2,
+never an internal error."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from terrapref.cli import main
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("rec") / "r0"
+    assert main(["record", "fig7_rock_vs_non_traversable_left", "--out", str(out), "--quiet", "--disturb", "0"]) == 0
+    return out
+
+
+def _one_error(capsys, *needles: str) -> str:
+    text = capsys.readouterr().err
+    errors = [line for line in text.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1, text
+    assert "internal error" not in text and "Traceback" not in text
+    assert all(n in errors[0] for n in needles), errors[0]
+    return errors[0]
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["show", "gen:-1", "--out", "m.png"], "gen:-1"),
+    (["record", "demo_course", "--seed", "-1", "--out", "r1"], "--seed"),
+    (["show", "demo_course", "--out", "map.xyz"], "--out"),
+])
+def test_bad_flags(tmp_path: Path, capsys, monkeypatch, argv, needle):
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    _one_error(capsys, needle)
+
+
+@pytest.mark.parametrize("flags,needle", [(["--n-steps", "-5"], "--n-steps"), (["--dt", "nan"], "--dt")])
+def test_bad_featurize_flags(tmp_path: Path, capsys, recording, flags, needle):
+    assert main(["featurize", str(recording), "--out", str(tmp_path / "d.safetensors"), *flags]) == 2
+    _one_error(capsys, needle)
+    assert not (tmp_path / "d.safetensors").exists()
+
+
+def _damage(rec: Path, how: str) -> None:
+    frames = rec / "frames.jsonl"
+    lines = frames.read_text().splitlines()
+    if how == "truncated":
+        frames.write_text("\n".join(lines[:20]) + "\n")
+    elif how == "reversed":
+        frames.write_text("\n".join(reversed(lines)) + "\n")
+    elif how == "nan pose":
+        row = json.loads(lines[5])
+        row["pose"][0] = float("nan")
+        lines[5] = json.dumps(row)
+        frames.write_text("\n".join(lines) + "\n")
+    elif how == "empty":
+        frames.write_text("")
+        meta = json.loads((rec / "meta.json").read_text())
+        meta.pop("frames", None)
+        (rec / "meta.json").write_text(json.dumps(meta))
+    elif how == "scenario list":
+        (rec / "scenario.yaml").write_text("- a\n- b\n")
+    elif how == "camera str":
+        meta = json.loads((rec / "meta.json").read_text())
+        meta["camera"] = "x"
+        (rec / "meta.json").write_text(json.dumps(meta))
+    elif how == "class 200":
+        path = rec / "images" / "000003.png"
+        image = np.asarray(Image.open(path)).copy()
+        image[0, 0] = 200
+        Image.fromarray(image).save(path)
+    elif how == "rgb frame":
+        Image.fromarray(np.zeros((480, 640, 3), np.uint8)).save(rec / "images" / "000003.png")
+    elif how == "small frame":
+        Image.fromarray(np.zeros((48, 64), np.uint8)).save(rec / "images" / "000003.png")
+
+
+@pytest.mark.parametrize("how,needle", [
+    ("truncated", "frames.jsonl"), ("reversed", "frames.jsonl"), ("nan pose", "line 6.pose"), ("empty", "frames.jsonl"),
+    ("scenario list", "scenario.yaml"), ("camera str", "camera"), ("class 200", "000003.png"), ("rgb frame", "000003.png"),
+    ("small frame", "000003.png"),
+])
+def test_a_broken_recording_is_refused_by_featurize(tmp_path: Path, capsys, recording, how, needle):
+    rec = tmp_path / "rec"
+    shutil.copytree(recording, rec)
+    _damage(rec, how)
+    assert main(["featurize", str(rec), "--out", str(tmp_path / "d.safetensors")]) == 2
+    _one_error(capsys, needle)
+    assert not (tmp_path / "d.safetensors").exists()
