@@ -340,6 +340,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if args.seeds < 1:
         raise UserError("--seeds", "must be >= 1")
     _check_output(args.out, "--out", [args.model], folder=True)
+    if args.workers is not None and args.workers < 1:
+        raise UserError("--workers", f"must be an integer >= 1, got {args.workers}")
     try:
         frames = sorted({int(f) for f in args.frames.split(",") if f.strip()}) if args.frames else []
     except ValueError:
@@ -415,6 +417,17 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         else:
             print(f"{name:20s} no frames")
     print(f"wrote {out / 'replay.json'} and {out / 'replay.png'}")
+    return 0
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    from terrapref.report.info import info_lines
+
+    for i, path in enumerate(args.files):
+        if i:
+            print()
+        for line in info_lines(path):
+            print(line)
     return 0
 
 
@@ -503,7 +516,10 @@ def _cmd_study(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from terrapref import __version__
+
     parser = argparse.ArgumentParser(prog="terrapref", description="Learn off-road terrain preferences from a few minutes of driving.")
+    parser.add_argument("--version", action="version", version=f"terrapref {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser("validate", help="check scenario files against terrapref-scenario/1")
@@ -638,6 +654,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--format", choices=["onnx", "mcap"], required=True, help="onnx: the classifier C; mcap: the recording's frames as ROS 2 messages")
     p.add_argument("--out", required=True, help="output file")
     p.set_defaults(func=_cmd_export)
+
+    p = sub.add_parser("info", help="what a recording, dataset, model or ONNX file holds (camera, profile, data, history, identifiability)")
+    p.add_argument("files", nargs="+", metavar="FILE")
+    p.set_defaults(func=_cmd_info)
 
     p = sub.add_parser("recipes", help="list the named training recipes (--recipe NAME in train and reproduce)")
     p.set_defaults(func=_cmd_recipes)

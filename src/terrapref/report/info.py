@@ -1,0 +1,117 @@
+"""`terrapref info FILE`: what a recording, dataset, model or exported ONNX model holds, read from
+its metadata alone (no tensor is used, no code from the file is run)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from terrapref.errors import UserError
+
+
+def _camera(c: dict) -> str:
+    intr = f"fx {c['fx']:.1f}" if c.get("fx") is not None else f"{c.get('hfov_deg')} deg field of view"
+    return (f"{c.get('width_px')}x{c.get('height_px')}, {intr}, {c.get('mount_height_m')} m high, "
+            f"pitched {c.get('pitch_deg')} deg, {c.get('max_range_m')} m range")
+
+
+def _preference(p: dict) -> str:
+    control = p.get("control", {})
+    w = control.get("w_rps", [])
+    return f"{len(w)} trajectories at {control.get('v_mps')} m/s, w {min(w, default=0):g}..{max(w, default=0):g} rad/s, n {p.get('n_steps')}, dt {p.get('dt_s')} s"
+
+
+def _common(meta: dict) -> list[str]:
+    out = []
+    if isinstance(meta.get("camera"), dict):
+        out.append(f"camera          {_camera(meta['camera'])}")
+    features = meta.get("features")
+    pref = features.get("preference") if isinstance(features, dict) else meta.get("preference_set")
+    if isinstance(pref, dict):
+        out.append(f"preference set  {_preference(pref)}")
+    if isinstance(meta.get("profile"), list):
+        out.append(f"profile         {' > '.join(meta['profile'])}")
+    classes = meta.get("classes")
+    if isinstance(classes, dict) and isinstance(classes.get("classes"), list):
+        out.append(f"classes         {', '.join(str(c.get('name')) for c in classes['classes'])} (background {classes.get('background')})")
+    return out
+
+
+def _identifiability(meta: dict) -> list[str]:
+    data = meta.get("identifiability")
+    if not isinstance(data, dict):
+        return []
+    from terrapref.learning.identify import Identifiability
+
+    try:
+        report = Identifiability.from_dict(data)
+    except (KeyError, TypeError, ValueError):
+        return ["identifiability (unreadable)"]
+    return ["what the demonstrations show:"] + [f"  {line}" for line in report.lines()]
+
+
+def info_lines(path: str | Path) -> list[str]:
+    """A summary of ``path`` for people; every problem is a UserError naming the file."""
+    p = Path(path)
+    if p.is_dir():
+        from terrapref.demos.recording import read_recording
+
+        rec = read_recording(p)
+        m = rec.meta
+        driver = m.get("driver") if isinstance(m.get("driver"), dict) else {}
+        lines = [f"{p}: terrapref recording ({'complete' if rec.complete else 'partial'})",
+                 f"frames          {len(rec)} ({rec.duration_s:.1f} s)",
+                 f"scenario        {m.get('scenario')}",
+                 f"driver          {driver.get('kind', '?')}" + (f", style {driver['style']}" if driver.get("style") else "")
+                 + (f", seed {driver['seed']}" if driver.get("seed") is not None else "") + (f", from {driver['bag']}" if driver.get("bag") else ""),
+                 f"created         {m.get('created', '?')}"]
+        return lines + _common(m)
+    if p.suffix == ".onnx":
+        from terrapref.interop.onnx_export import read_onnx_metadata
+
+        try:
+            meta = read_onnx_metadata(p)
+        except Exception as exc:  # onnx's parser raises several kinds on a foreign or damaged file
+            raise UserError(str(p), f"not an ONNX model terrapref can read ({type(exc).__name__})") from None
+        c = meta.get("classifier", {})
+        return [f"{p}: C exported as ONNX ({meta.get('format', 'no terrapref metadata')})",
+                f"network         {c.get('members', 1)} member(s), hidden {c.get('hidden')}, {c.get('activation')}, skip {c.get('skip')}",
+                f"second stage    {'weight ' + str(meta['utility']['weight']) if 'utility' in meta else 'none'}"] + _common(meta) + _identifiability(meta)
+    from terrapref.tensorfile import META_KEY
+
+    if not p.is_file():
+        raise UserError(str(p), "no such file or recording folder")
+    from safetensors import SafetensorError, safe_open
+
+    try:
+        with safe_open(str(p), framework="numpy") as fh:
+            header = fh.metadata() or {}
+            shapes = {k: tuple(fh.get_slice(k).get_shape()) for k in fh.keys()}
+        meta = json.loads(header[META_KEY])
+    except (SafetensorError, OSError, ValueError, KeyError):
+        raise UserError(str(p), "not a terrapref recording, dataset, model or ONNX file") from None
+    if not isinstance(meta, dict):
+        raise UserError(str(p), "metadata is not a mapping", field="metadata")
+    fmt = meta.get("format")
+    if fmt == "terrapref-dataset/1":
+        n = shapes.get("U", (0,))[0]
+        recs = meta.get("recordings", [])
+        return ([f"{p}: terrapref dataset", f"samples         {n} from {len(recs)} recording(s)",
+                 f"look-ahead      {'yes' if 'U2' in shapes else 'no'}"]
+                + [f"  {r.get('path')}: {r.get('frames')} frames, {r.get('scenario')}" for r in recs if isinstance(r, dict)] + _common(meta))
+    if fmt == "terrapref-model/1":
+        c = meta.get("classifier", {}) if isinstance(meta.get("classifier"), dict) else {}
+        data = meta.get("data", {}) if isinstance(meta.get("data"), dict) else {}
+        history = meta.get("history", []) if isinstance(meta.get("history"), list) else []
+        best = meta.get("best_epoch")
+        chosen = history[best - 1] if isinstance(best, int) and 0 < best <= len(history) else None
+        lines = [f"{p}: terrapref model ({meta.get('kind', 'classifier')}" + (", INTERRUPTED: the best epochs so far, no second stage" if meta.get("status") == "interrupted" else "")
+                 + (f", checkpoint of epoch {meta.get('epoch')}" if meta.get("status") == "checkpoint" else "") + ")",
+                 f"recipe          {meta.get('recipe', '?')}",
+                 f"network         {c.get('members', 1)} member(s), hidden {c.get('hidden')}, {c.get('activation')}, skip {c.get('skip')}",
+                 f"second stage    {'weight ' + str(meta['utility'].get('weight')) if isinstance(meta.get('utility'), dict) else 'none'}",
+                 f"data            {data.get('samples', '?')} samples, fingerprint {data.get('fingerprint', '?')}, {len(data.get('recordings', []) or [])} recording(s)"]
+        if chosen:
+            lines.append(f"training        {len(history)} epochs, chose epoch {best}: val loss {chosen.get('val_loss', float('nan')):.4f}, val acc {chosen.get('val_acc', float('nan')):.3f}")
+        return lines + _common(meta) + _identifiability(meta)
+    raise UserError(str(p), f"format {fmt!r} is not a terrapref recording, dataset or model", field="format")

@@ -1,0 +1,39 @@
+"""`terrapref info` and `terrapref --version`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from test_evaluate import _dataset_file, _linear_model
+
+from terrapref import __version__
+from terrapref.cli import main
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["--version"])
+    assert exit_.value.code == 0 and capsys.readouterr().out.strip() == f"terrapref {__version__}"
+
+
+def test_info_on_a_model_a_dataset_an_onnx_file_and_a_recording(tmp_path: Path, capsys):
+    model = _linear_model(tmp_path / "m.safetensors")
+    data = _dataset_file(tmp_path / "d.safetensors")
+    assert main(["export", str(model), "--format", "onnx", "--out", str(tmp_path / "m.onnx")]) == 0
+    assert main(["record", "fig7_rock_vs_non_traversable_left", "--out", str(tmp_path / "rec"), "--quiet", "--disturb", "0"]) == 0
+    capsys.readouterr()
+    assert main(["info", str(model), str(data), str(tmp_path / "m.onnx"), str(tmp_path / "rec")]) == 0
+    out = capsys.readouterr().out
+    assert "terrapref model" in out and "terrapref dataset" in out and "exported as ONNX" in out and "terrapref recording (complete)" in out
+    assert out.count("camera          640x480") == 4 and "profile         mud > rock > water > non_traversable" in out
+    assert "samples         300" in out and "driver          expert" in out
+
+
+@pytest.mark.parametrize("content", [b"", b"not safetensors at all", b"\x00" * 64])
+def test_info_on_a_foreign_file_is_one_line(tmp_path: Path, capsys, content: bytes):
+    path = tmp_path / "x.safetensors"
+    path.write_bytes(content)
+    assert main(["info", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(path) in err[0] and "internal error" not in err[0]
