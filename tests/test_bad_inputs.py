@@ -94,3 +94,45 @@ def test_a_broken_recording_is_refused_by_featurize(tmp_path: Path, capsys, reco
     assert main(["featurize", str(rec), "--out", str(tmp_path / "d.safetensors")]) == 2
     _one_error(capsys, needle)
     assert not (tmp_path / "d.safetensors").exists()
+
+
+def _dataset_with(tmp_path: Path, **change) -> Path:
+    from helpers import model_meta
+
+    from terrapref.demos.dataset import FORMAT
+    from terrapref.tensorfile import write_tensor_file
+
+    rng = np.random.default_rng(0)
+    n = 50
+    tensors = {"U": rng.uniform(0, 1, (n, 21, 5)).astype(np.float32), "labels": rng.integers(0, 21, n), "w": np.zeros(n, np.float32),
+               "source": np.zeros(n, np.int64)}
+    tensors.update(change)
+    return write_tensor_file(tmp_path / "d.safetensors", tensors, {"format": FORMAT, **model_meta()})
+
+
+@pytest.mark.parametrize("change,needle", [
+    ({"U": np.full((50, 21, 5), np.nan, np.float32)}, "U:"),
+    ({"U": np.zeros((50, 105), np.float32)}, "U:"),
+    ({"labels": np.full(50, 30)}, "labels:"),
+    ({"labels": np.zeros(49, np.int64)}, "labels:"),
+    ({"w": np.full(50, np.inf, np.float32)}, "w:"),
+    ({"labels": np.full(50, 10)}, "same label"),
+])
+def test_a_broken_or_degenerate_dataset_is_refused_before_training(tmp_path: Path, capsys, change, needle):
+    data = _dataset_with(tmp_path, **change)
+    assert main(["train", str(data), "--out", str(tmp_path / "m.safetensors"), "--epochs", "1"]) == 2
+    _one_error(capsys, str(data), needle)
+    assert not (tmp_path / "m.safetensors").exists()
+
+
+def test_a_model_with_nan_weights_is_refused(tmp_path: Path, capsys):
+    from helpers import model_meta
+
+    from terrapref.learning import ClassifierConfig, save_model
+    from terrapref.learning.mlp import init_weights
+
+    weights = init_weights(ClassifierConfig(), np.random.default_rng(0))
+    weights["layers.1.weight"][0, 0] = np.nan
+    path = save_model(tmp_path / "m.safetensors", ClassifierConfig(), weights, model_meta())
+    assert main(["evaluate", str(path), "demo_course", "--seeds", "1", "--out", str(tmp_path / "e")]) == 2
+    _one_error(capsys, str(path), "weights.layers.1.weight")

@@ -287,6 +287,10 @@ def _cmd_train(args: argparse.Namespace) -> int:
     bar.close()
     if len(data) == 0:
         raise UserError(str(args.data[0]), "holds no samples to train on", field="frames")
+    import numpy as np
+
+    if len(np.unique(data.labels)) < 2:
+        raise UserError(str(args.data[0]), f"every sample has the same label ({int(data.labels[0])}): the drive never steered, there is no choice to learn", field="labels")
     if config.utility and data.feature_config.lanes:
         raise UserError(str(args.data[0]), "--second-stage needs U without lanes (featurize without --lanes)", field="features.lane_m")
     if config.utility and recipe.lookahead and data.U2 is None:

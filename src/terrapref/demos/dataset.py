@@ -163,7 +163,40 @@ def load_dataset(path: str | Path) -> Dataset:
     for key in ("U", "labels", "w", "source"):
         if key not in tensors:
             raise UserError(str(path), "missing tensor", field=key)
+    _check_tensors(tensors, str(path))
+    try:
+        FeatureConfig.from_dict(meta["features"])
+        CameraConfig.from_dict(meta["camera"])
+        ClassTable.from_dict(meta["classes"], str(path))
+    except KeyError as exc:
+        raise UserError(str(path), "missing", field=str(exc.args[0])) from None
+    except (TypeError, ValueError, AttributeError) as exc:
+        raise UserError(str(path), f"invalid configuration ({type(exc).__name__}: {exc})", field="metadata") from None
+    if not isinstance(meta.get("profile"), list):
+        raise UserError(str(path), "expected a list of class names", field="profile")
     return Dataset(tensors["U"], tensors["labels"], tensors["w"], tensors["source"], meta, tensors.get("U2"))
+
+
+def _check_tensors(t: dict[str, np.ndarray], source: str) -> None:
+    """Shapes, dtypes and finiteness of a dataset's tensors; every problem names the tensor."""
+    U = t["U"]
+    if U.ndim != 3 or U.dtype.kind != "f":
+        raise UserError(source, f"expected floats of shape (N, m, k), got {U.dtype} {U.shape}", field="U")
+    n, m = U.shape[:2]
+    if not np.isfinite(U).all():
+        raise UserError(source, "holds NaN or infinite utilities", field="U")
+    for key, kinds in (("labels", "iu"), ("w", "f"), ("source", "iu")):
+        if t[key].shape != (n,) or t[key].dtype.kind not in kinds:
+            raise UserError(source, f"expected {n} {'integers' if kinds == 'iu' else 'floats'}, got {t[key].dtype} {t[key].shape}", field=key)
+    if n and (t["labels"].min() < 0 or t["labels"].max() >= m):
+        raise UserError(source, f"labels must index the {m} trajectories", field="labels")
+    if not np.isfinite(t["w"]).all():
+        raise UserError(source, "holds NaN or infinite yaw rates", field="w")
+    if n and t["source"].min() < 0:
+        raise UserError(source, "recording numbers must be >= 0", field="source")
+    U2 = t.get("U2")
+    if U2 is not None and (U2.ndim != 4 or U2.shape[:3] != (n, m, m) or U2.dtype.kind != "f" or not np.isfinite(U2).all()):
+        raise UserError(source, f"expected finite floats of shape ({n}, {m}, {m}, k), got {U2.dtype} {U2.shape}", field="U2")
 
 
 def merge_datasets(sets: list[tuple[str, Dataset]]) -> Dataset:

@@ -79,6 +79,8 @@ def classifier_from(weights: dict[str, np.ndarray], meta: dict, source: str) -> 
     for name, shape in expected.items():
         if tuple(weights[name].shape) != shape:
             raise UserError(source, f"has shape {tuple(weights[name].shape)}, expected {shape}", field=f"weights.{name}")
+        if weights[name].dtype.kind != "f" or not np.isfinite(weights[name]).all():
+            raise UserError(source, f"expected finite floats, got {weights[name].dtype}" + (" with NaN or infinite values" if weights[name].dtype.kind == "f" else ""), field=f"weights.{name}")
     if classifier.m != features.preference.m or classifier.n_features != features.n_features:
         raise UserError(source, "classifier shape does not match its feature configuration", field="classifier")
     utility, weight = _utility(meta, features, source)
