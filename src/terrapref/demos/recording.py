@@ -275,7 +275,12 @@ def read_recording(path: str | Path) -> Recording:
     rows: list[dict] = []
     frames_path = root / FRAMES
     cut = False
-    text = frames_path.read_text() if frames_path.exists() else ""
+    try:
+        text = frames_path.read_bytes().decode("utf-8") if frames_path.exists() else ""
+    except UnicodeDecodeError as exc:
+        raise UserError(str(frames_path), f"not UTF-8 text (byte {exc.start}); expected one JSON object per line") from None
+    except OSError as exc:
+        raise UserError(str(frames_path), f"unreadable ({exc.strerror or exc})") from None
     lines = text.split("\n")
     for n, line in enumerate(lines):
         if not line.strip():
