@@ -382,3 +382,33 @@ def test_pixels_reads_a_changed_index_array_afresh():
     np.testing.assert_array_equal(renderer.pixels(pose, frozen), full[frozen])
     np.testing.assert_array_equal(renderer.pixels(pose, view), full[view])
     np.testing.assert_array_equal(renderer.pixels(pose, frozen), full[frozen])
+
+
+def test_camera_files_terrapref_and_ros_camera_info(tmp_path):
+    from terrapref.camera.files import load_camera
+    from terrapref.errors import UserError
+
+    (tmp_path / "cam.yaml").write_text("width_px: 320\nheight_px: 240\nhfov_deg: 80\npitch_deg: 25\n")
+    cam = load_camera(tmp_path / "cam.yaml")
+    assert (cam.width_px, cam.pitch_deg, cam.hfov_deg) == (320, 25, 80)
+    ros = """image_width: 640
+image_height: 480
+camera_name: front
+camera_matrix: {rows: 3, cols: 3, data: [320.0, 0.0, 320.0, 0.0, 320.0, 240.0, 0.0, 0.0, 1.0]}
+distortion_model: plumb_bob
+distortion_coefficients: {rows: 1, cols: 5, data: [0.0, 0.0, 0.0, 0.0, 0.0]}
+rectification_matrix: {rows: 3, cols: 3, data: [1, 0, 0, 0, 1, 0, 0, 0, 1]}
+projection_matrix: {rows: 3, cols: 4, data: [320.0, 0.0, 320.0, 0.0, 0.0, 320.0, 240.0, 0.0, 0.0, 0.0, 1.0, 0.0]}
+mount_height_m: 1.2
+pitch_deg: 20.0
+"""
+    (tmp_path / "ros.yaml").write_text(ros)
+    cam = load_camera(tmp_path / "ros.yaml")
+    assert cam.intrinsics == (320.0, 320.0, 320.0, 240.0) and cam.mount_height_m == 1.2 and cam.pitch_deg == 20.0
+    for text, field in ((ros.replace("data: [0.0, 0.0, 0.0, 0.0, 0.0]", "data: [0.1, 0.0, 0.0, 0.0, 0.0]"), "distortion_coefficients"),
+                        (ros.replace("image_width: 640", "image_width: -4"), "image_width"),
+                        (ros + "lens: wide\n", "lens"), ("width_px: 320\nzoom: 2\n", "zoom"), ("pitch_deg: .nan\n", "pitch_deg")):
+        (tmp_path / "bad.yaml").write_text(text)
+        with pytest.raises(UserError) as info:
+            load_camera(tmp_path / "bad.yaml")
+        assert any(str(tmp_path / "bad.yaml") in line and f"{field}:" in line for line in info.value.lines()), info.value.lines()

@@ -1,5 +1,5 @@
-"""Property-based fuzzing of every reader: recordings, datasets, model files, scenarios, robot files
-and label maps, mutated byte by byte and field by field. Whatever the input, a reader returns a
+"""Property-based fuzzing of every reader: recordings, datasets, model files, scenarios, camera
+files, robot files and label maps, mutated byte by byte and field by field. Whatever the input, a reader returns a
 result or raises a UserError that names the file; nothing else escapes.
 
 The default run uses a fast, derandomised profile (a couple of hundred cases per reader); the
@@ -19,6 +19,7 @@ from helpers import model_meta
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from terrapref.camera.files import load_camera
 from terrapref.demos.dataset import FORMAT as DATASET_FORMAT
 from terrapref.demos.dataset import featurize_recording, load_dataset
 from terrapref.demos.recording import RecordingWriter, read_recording
@@ -96,6 +97,9 @@ def base(tmp_path_factory) -> dict:
     save_model(root / "model.safetensors", ClassifierConfig(hidden=4), init_weights(ClassifierConfig(hidden=4), rng), model_meta())
     (root / "scenario.yaml").write_text(yaml.safe_dump(resolve_scenario("fig7_rock_vs_non_traversable_left").to_dict(), sort_keys=False))
     (root / "robot.yaml").write_text(robot_yaml())
+    (root / "camera.yaml").write_text("image_width: 640\nimage_height: 480\ncamera_matrix: {rows: 3, cols: 3, data: [320.0, 0.0, 320.0, 0.0, 320.0, 240.0, 0.0, 0.0, 1.0]}\n"
+                                      "distortion_model: plumb_bob\ndistortion_coefficients: {rows: 1, cols: 5, data: [0.0, 0.0, 0.0, 0.0, 0.0]}\n"
+                                      "mount_height_m: 1.0\npitch_deg: 30.0\n")
     (root / "labels.yaml").write_text("format: terrapref-labels/1\nname: mine\nids:\n  0: unknown\n  3: grass\n  33: mud\ncolors:\n  3: [0, 102, 0]\n")
     return {"root": root}
 
@@ -239,6 +243,8 @@ READERS = {
     "scenario fields": lambda b, f: yaml_fields(b, f, "scenario.yaml", load_scenario),
     "robot file bytes": lambda b, f: file_bytes(b, f, "robot.yaml", load_robot),
     "robot file fields": lambda b, f: yaml_fields(b, f, "robot.yaml", load_robot),
+    "camera file bytes": lambda b, f: file_bytes(b, f, "camera.yaml", load_camera),
+    "camera file fields": lambda b, f: yaml_fields(b, f, "camera.yaml", load_camera),
     "label map bytes": lambda b, f: file_bytes(b, f, "labels.yaml", load_label_map),
     "label map fields": lambda b, f: yaml_fields(b, f, "labels.yaml", load_label_map),
 }

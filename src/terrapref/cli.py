@@ -187,7 +187,6 @@ def _print_what_the_drive_shows(rec) -> None:
 def _cmd_featurize(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from terrapref.camera import CameraConfig
     from terrapref.demos.dataset import build_dataset, save_dataset
     from terrapref.demos.recording import read_recording
     from terrapref.progress import Progress
@@ -214,12 +213,9 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
         features = replace(features, preference=pref)
     camera = None
     if args.camera:
-        from terrapref.yamlio import read_yaml_mapping
+        from terrapref.camera.files import load_camera
 
-        try:
-            camera = CameraConfig(**read_yaml_mapping(args.camera))
-        except (TypeError, ValueError) as exc:
-            raise UserError(args.camera, f"invalid camera configuration: {exc}") from None
+        camera = load_camera(args.camera)
     bar = Progress("featurize", len(recordings))
     dataset = build_dataset(recordings, features, camera, progress=lambda k, n: bar.update(k, f"{k}/{n} recordings"))
     bar.close()
@@ -580,7 +576,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--distance-mode", choices=["lookahead", "window", "paper"], default="lookahead")
     p.add_argument("--n-steps", type=int, help="trajectory points n (default 30)")
     p.add_argument("--dt", type=float, help="trajectory time step [s] (default 0.2)")
-    p.add_argument("--camera", help="YAML file of camera parameters to re-render the frames with")
+    p.add_argument("--camera", help="camera file to re-render the frames with: CameraConfig's fields, or a ROS camera_info YAML (with mount_height_m, pitch_deg)")
     p.add_argument("--lanes", type=float, default=0.0, metavar="M",
                    help="add lane columns: terrain shares on an M-metre lane beyond each trajectory's end (0: off, the paper's U)")
     p.add_argument("--recipe", metavar="NAME", help="featurise as this recipe trains (default: teach, with the look-ahead utilities)")
