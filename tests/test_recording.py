@@ -340,3 +340,26 @@ def test_force_keeps_the_old_recording_until_the_new_one_is_complete(tmp_path: P
     new = read_recording(out)
     assert new.complete and new.meta["scenario"] == "c" and len(new) == 1
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rec", "rec.partial"]
+
+
+def test_inspect_says_quit_and_not_reached(tmp_path: Path):
+    from terrapref.camera import CameraConfig
+    from terrapref.demos.inspect import summarise
+    from terrapref.features import PreferenceSetConfig
+    from terrapref.scenario import resolve_scenario
+    from terrapref.sim import SimConfig, Simulation
+    from terrapref.terrain import PreferenceProfile
+
+    scenario = resolve_scenario("demo_course")
+    meta = recording_meta(scenario, CameraConfig(), PreferenceSetConfig(), SimConfig(), {"kind": "human"}, PreferenceProfile.default())
+    writer = RecordingWriter(tmp_path / "rec", meta, scenario.to_dict())
+    sim = Simulation(scenario)
+    frame = sim.reset()
+    for _ in range(20):  # 2 m: the person pressed Esc long before the first zone
+        writer.append(frame.time_s, frame.pose, frame.image, (1.0, 0.0), 10)
+        frame = sim.step((1.0, 0.0))
+    writer.close({"completed": False, "quit": True})
+    lines = summarise(read_recording(tmp_path / "rec")).lines()
+    assert lines[0].endswith("quit by the driver")
+    zone_lines = [line for line in lines if line.endswith("not reached")]
+    assert zone_lines and all(" -> -" in line for line in zone_lines)

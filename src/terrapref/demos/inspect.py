@@ -25,10 +25,17 @@ class RecordingSummary:
     zones: list[tuple[ZoneResult, bool]]  # (result, reached)
     scenario: Scenario
     world: WorldMap
+    quit: bool = False  # the person ended the drive (Esc) before the goal
+
+    @property
+    def status(self) -> str:
+        if not self.complete:
+            return "partial"
+        return "quit by the driver" if self.quit else "complete"
 
     def lines(self) -> list[str]:
         out = [
-            f"status     {'complete' if self.complete else 'partial'}",
+            f"status     {self.status}",
             f"frames     {self.frames}",
             f"duration   {self.duration_s:.1f} s",
             f"scenario   {self.scenario.name}",
@@ -41,7 +48,7 @@ class RecordingSummary:
             out.append("zones      (id, label: expected -> choice)")
             for z, reached in self.zones:
                 verdict = ("ok" if z.success else "MISS") if reached else "not reached"
-                out.append(f"  {z.id:>4s} {z.label:32s} {z.expect:>16s} -> {z.choice:<16s} {verdict}")
+                out.append(f"  {z.id:>4s} {z.label:32s} {z.expect:>16s} -> {z.choice if reached else '-':<16s} {verdict}")
             scored = [z for z, r in self.zones if r]
             out.append(f"zone success {sum(z.success for z in scored)}/{len(scored)} reached ({len(self.zones)} zones)")
         return out
@@ -62,12 +69,13 @@ def summarise(recording: Recording) -> RecordingSummary:
         zone = next(zz for zz in scenario.zones if zz.id == z.id)
         reached = bool(len(xy) and zone.shape.contains(xy).any())
         zones.append((z, reached))
-    return RecordingSummary(len(recording), recording.duration_s, recording.complete, counts, control, zones, scenario, world)
+    run = meta.get("summary") if isinstance(meta.get("summary"), dict) else {}
+    return RecordingSummary(len(recording), recording.duration_s, recording.complete, counts, control, zones, scenario, world, quit=bool(run.get("quit")))
 
 
 def save_driven_path(summary: RecordingSummary, recording: Recording, out: str | Path) -> Path:
     from terrapref.report.plots import save_map
 
-    status = "complete" if summary.complete else "partial"
+    status = summary.status
     return save_map(out, summary.scenario, summary.world, [("driven", recording.poses[:, :2], "red")],
                     title=f"{summary.scenario.name}: {recording.path.name} ({status}, {summary.frames} frames)")
