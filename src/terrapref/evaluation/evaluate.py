@@ -133,28 +133,28 @@ def _mark_unidentified(results: list[dict], name: str, identified: Identifiabili
 
 
 def _figures(results: list[dict], scenarios: Sequence[str], out: Path, model, profile: PreferenceProfile) -> None:
-    from terrapref.report.plots import save_decision, save_map
+    from terrapref.report.plots import save_decision, save_evaluation
 
     pset = PreferenceSet(model.features.preference, PinholeCamera(model.camera))
     uv, visible = pset.camera.project_ground(pset.trajectories[..., :2])
     for name in scenarios:
         scenario = resolve_scenario(name)
         world = rasterise(scenario)
-        tracks = []
-        for r in results:
-            if r["scenario"] != name:
-                continue
-            if r["driver"] == EXPERT and r["seed"] == 0:
-                tracks.append(("driver (seed 0)", r["xy"], "deepskyblue"))
-            elif r["driver"] == PLANNER:
-                tracks.append((f"planner (seed {r['seed']})" if r["seed"] == 0 else None, r["xy"], "red"))
         planner_runs = [r for r in results if r["scenario"] == name and r["driver"] == PLANNER]
-        ok = sum(z["success"] for r in planner_runs for z in r["metrics"]["zones"])
-        n = sum(len(r["metrics"]["zones"]) for r in planner_runs)
-        save_map(out / f"{name}.png", scenario, world, [(lbl or "_", xy, c) for lbl, xy, c in tracks],
-                 title=f"{name}: planner zone success {ok}/{n}, profile {profile}")
+        driver_runs = [r for r in results if r["scenario"] == name and r["driver"] == EXPERT]
+        per_zone: dict[str, tuple[int, int]] = {}
+        for r in planner_runs:
+            for z in r["metrics"]["zones"]:
+                ok, n = per_zone.get(z["id"], (0, 0))
+                per_zone[z["id"]] = (ok + bool(z["success"]), n + 1)
+        ok = sum(v[0] for v in per_zone.values())
+        n = sum(v[1] for v in per_zone.values())
+        save_evaluation(out / f"{name}.png", scenario, world, [r["xy"] for r in driver_runs], [r["xy"] for r in planner_runs], per_zone,
+                        title=f"{name}: planner zone success {ok}/{n} over {len(planner_runs)} run(s), profile {profile}")
         for r in planner_runs:
             for i, f in r.get("frames", {}).items():
                 rgb = model.classes.palette()[f["image"]]
+                x, y, yaw = f["pose"]
                 save_decision(out / f"{name}_frame{int(i):05d}.png", rgb, uv, visible, f["probs"], f["index"],
-                              model.features.preference.control.w_rps, title=f"{name}, frame {i}, pose ({f['pose'][0]:.1f}, {f['pose'][1]:.1f})")
+                              model.features.preference.control.w_rps, classes=model.classes,
+                              title=f"{name}, frame {i}, pose ({x:.1f} m, {y:.1f} m, yaw {np.degrees(yaw):.0f} deg)")

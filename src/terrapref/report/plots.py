@@ -10,6 +10,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
 from terrapref.fileio import atomic_path  # noqa: E402
@@ -94,35 +95,103 @@ def save_loss_curve(path: str | Path, history: Sequence[dict], best_epoch: int, 
 
 
 def save_decision(path: str | Path, rgb: np.ndarray, uv: np.ndarray, visible: np.ndarray, probs: np.ndarray,
-                  chosen: int, w_rps: Sequence[float], title: str = "") -> Path:
-    """The camera view with every trajectory coloured by its predicted probability, the chosen one marked.
+                  chosen: int, w_rps: Sequence[float], title: str = "", classes=None) -> Path:
+    """The camera view with every trajectory coloured by its predicted probability on an absolute
+    0-1 scale, C's own best and the planner's choice marked apart (they differ when the second
+    stage overrules C), and a legend of the terrain classes.
 
     Args:
         rgb: colour image (H, W, 3).
         uv: pixel coordinates of the trajectory points, (m, n, 2); visible: (m, n) mask.
         probs: F_t, (m,).
+        chosen: the planner's choice (after the second stage, where there is one).
+        classes: the class table, for the terrain legend.
     """
     h, w = rgb.shape[:2]
-    fig, ax = plt.subplots(figsize=(8, 6.4), dpi=100)
+    fig, ax = plt.subplots(figsize=(8.6, 6.4), dpi=100)
     ax.imshow(rgb)
     cmap = plt.get_cmap("plasma")
-    top = max(float(probs.max()), 1e-9)
+    best = int(np.argmax(probs))
     for i in np.argsort(probs):
         pts = uv[i][visible[i]]
         if len(pts) < 2:
             continue
-        lw = 4.0 if i == chosen else 1.5
-        ax.plot(pts[:, 0], pts[:, 1], color=cmap(float(probs[i]) / top), lw=lw, alpha=0.95)
+        lw = 4.0 if i == chosen else (2.5 if i == best else 1.5)
+        ax.plot(pts[:, 0], pts[:, 1], color=cmap(float(probs[i])), lw=lw, alpha=0.95)
         if i == chosen:
             ax.plot(pts[:, 0], pts[:, 1], color="white", lw=1.0, ls="--")
             ax.text(pts[-1, 0], pts[-1, 1] - 8, f"chosen w={w_rps[i]:+.1f}\np={probs[i]:.2f}", color="white", fontsize=8, ha="center",
                     bbox={"facecolor": "black", "alpha": 0.6, "pad": 1, "lw": 0})
-    sm = plt.cm.ScalarMappable(cmap=cmap, norm=matplotlib.colors.Normalize(0, top))
-    fig.colorbar(sm, ax=ax, fraction=0.035, label="predicted probability")
+        elif i == best:
+            ax.plot(pts[:, 0], pts[:, 1], color="cyan", lw=1.0, ls=":")
+            ax.text(pts[-1, 0], pts[-1, 1] + 14, f"C's best w={w_rps[i]:+.1f}\np={probs[i]:.2f}", color="cyan", fontsize=8, ha="center",
+                    bbox={"facecolor": "black", "alpha": 0.6, "pad": 1, "lw": 0})
+    sm = plt.cm.ScalarMappable(cmap=cmap, norm=matplotlib.colors.Normalize(0.0, 1.0))
+    fig.colorbar(sm, ax=ax, fraction=0.035, label="predicted probability F_t (absolute scale)")
+    handles = [Line2D([], [], color="white", lw=3, ls="--", label="planner's choice")]
+    if best != chosen:
+        handles.append(Line2D([], [], color="cyan", lw=2, ls=":", label="C's best (second stage overruled it)"))
+    if classes is not None:
+        handles += [Patch(color=np.array(c.color) / 255, label=c.name) for c in classes.classes]
+    ax.legend(handles=handles, loc="lower left", fontsize=7, framealpha=0.8)
     ax.set_xlim(0, w)
     ax.set_ylim(h, 0)
     ax.set_axis_off()
     ax.set_title(title, fontsize=9)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def save_evaluation(path: str | Path, scenario: Scenario, world: WorldMap, driver: Sequence[np.ndarray], planner: Sequence[np.ndarray],
+                    zone_success: dict[str, tuple[int, int]], title: str) -> Path:
+    """An evaluation at a glance: the whole course with each zone numbered and outlined green
+    (every planner run met it) or red (some run missed it), and below it one inset per zone at a
+    legible scale with the driver's tracks (blue, dashed) and the planner's (red)."""
+    zones = list(scenario.zones)
+    cols = 4
+    rows = (len(zones) + cols - 1) // cols
+    sx, sy = world.size_m
+    overview_h = max(2.6, min(7.0, 13.0 * sy / sx))
+    fig = plt.figure(figsize=(13, overview_h + 3.3 * rows + 0.6), dpi=110)
+    grid = fig.add_gridspec(1 + rows, cols, height_ratios=[overview_h] + [3.3] * rows)
+    ax = fig.add_subplot(grid[0, :])
+    class_handles = draw_map(ax, scenario, world, zones=False)
+    for xy in driver:
+        ax.plot(xy[:, 0], xy[:, 1], color="deepskyblue", lw=1.0, ls="--")
+    for xy in planner:
+        ax.plot(xy[:, 0], xy[:, 1], color="red", lw=0.9, alpha=0.8)
+    for z in zones:
+        ok, n = zone_success.get(z.id, (0, 0))
+        o = outline(z.shape)
+        colour = "lime" if n and ok == n else "red"
+        ax.plot(o[:, 0], o[:, 1], color=colour, lw=1.4)
+        c = o.mean(axis=0)
+        ax.text(c[0], c[1], z.id, color="black", fontsize=7, ha="center", va="center", bbox={"facecolor": colour, "alpha": 0.85, "pad": 1, "lw": 0})
+    tracks = [Line2D([], [], color="deepskyblue", ls="--", label="driver"), Line2D([], [], color="red", label="planner"),
+              Patch(facecolor="none", edgecolor="lime", label="zone met in every run"), Patch(facecolor="none", edgecolor="red", label="zone missed in some run")]
+    ax.legend(handles=class_handles + tracks, loc="upper left", fontsize=7, framealpha=0.8, ncol=2)
+    ax.set_title(title)
+    for k, z in enumerate(zones):
+        zax = fig.add_subplot(grid[1 + k // cols, k % cols])
+        draw_map(zax, scenario, world, zones=False)
+        o = outline(z.shape)
+        lo, hi = o.min(axis=0) - 4.0, o.max(axis=0) + 4.0
+        half = max(hi - lo) / 2
+        mid = (lo + hi) / 2
+        ok, n = zone_success.get(z.id, (0, 0))
+        colour = "lime" if n and ok == n else "red"
+        zax.plot(o[:, 0], o[:, 1], color=colour, lw=1.2)
+        for xy in driver:
+            zax.plot(xy[:, 0], xy[:, 1], color="deepskyblue", lw=1.4, ls="--")
+        for xy in planner:
+            zax.plot(xy[:, 0], xy[:, 1], color="red", lw=1.1, alpha=0.8)
+        zax.set_xlim(mid[0] - half, mid[0] + half)
+        zax.set_ylim(mid[1] - half, mid[1] + half)
+        zax.set_xlabel("")
+        zax.set_ylabel("")
+        zax.tick_params(labelsize=6)
+        verdict = f"{ok}/{n} met" if n else "not scored"
+        zax.set_title(f"{z.id}: {z.label or z.expect} ({verdict})", fontsize=8, color="darkred" if colour == "red" else "black")
     fig.tight_layout()
     return _save(fig, path)
 
