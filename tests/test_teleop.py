@@ -34,6 +34,7 @@ def test_left_then_release_then_right_is_recorded_and_labelled(tmp_path):
     events = {
         5: [key(pygame.KEYDOWN, pygame.K_LEFT)],
         15: [key(pygame.KEYUP, pygame.K_LEFT)],
+        20: [key(pygame.KEYDOWN, pygame.K_DOWN)],
         25: [key(pygame.KEYDOWN, pygame.K_RIGHT)],
         32: [key(pygame.KEYUP, pygame.K_RIGHT)],
         40: [pygame.event.Event(pygame.QUIT)],
@@ -49,7 +50,8 @@ def test_left_then_release_then_right_is_recorded_and_labelled(tmp_path):
     held_left = w[6:15]
     assert (held_left > 0).all() and (held_left[1:] >= held_left[:-1]).all(), "holding LEFT moves w up"
     assert (rec.labels[8:15] > CENTRE).all()
-    assert (rec.labels[18:25] == CENTRE).all() and (w[18:25] == 0.0).all(), "a released stick rests at exactly zero"
+    assert (w[15:20] == w[14]).all() and w[14] > 0, "a released key leaves the stick where it was: a gentle curve held"
+    assert (rec.labels[20:25] == CENTRE).all() and (w[20:25] == 0.0).all(), "Down centres the stick at exactly zero"
     assert (w[27:32] < 0).all() and (rec.labels[27:32] < CENTRE).all()
     assert (rec.labels == ControlSet().label_of(w)).all(), "labels are the nearest control-set bins of w"
     assert (rec.commands[:, 0] == 1.0).all()
@@ -110,11 +112,11 @@ def test_keyboard_ramp_labels_and_screenshot(tmp_path):
     result = run_teleop("demo_course", out, realtime=False, script=script_from(events), max_frames=40, screenshot=tmp_path / "shot.png")
     assert result.frames == 10 and result.duration_s == pytest.approx(1.0)
     rec = read_recording(out)
-    assert rec.meta["driver"] == {"kind": "human", "input": "keyboard/gamepad", "disturbance": None, "seed": 0}
+    assert rec.meta["driver"] == {"kind": "human", "input": "keyboard/mouse/gamepad", "disturbance": None, "seed": 0}
     assert rec.meta["summary"]["quit"] is True
-    # 0.25 rad/s per frame: 0.25 (a tie between 0.2 and 0.3, resolved toward 0), 0.5, 0.75 (tie), then full lock.
-    assert rec.commands[2:8, 1] == pytest.approx([0.25, 0.5, 0.75, 1.0, 1.0, 1.0])
-    assert list(rec.labels[2:8]) == [12, 15, 17, 20, 20, 20]
+    # 0.1 rad/s per frame, one control-set bin a frame; released at frame 8, the stick stays at 0.6.
+    assert rec.commands[2:10, 1] == pytest.approx([0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.6, 0.6])
+    assert list(rec.labels[2:8]) == [11, 12, 13, 14, 15, 16]
     assert rec.poses[8, 2] > rec.poses[2, 2], "turning left raises the heading"
     assert pygame.image.load(str(tmp_path / "shot.png")).get_size() == (640 + 256, 480 + 26)
 
@@ -156,3 +158,23 @@ def test_disturbances_push_the_executed_command_not_the_label(tmp_path):
     assert rec.meta["driver"]["disturbance"]["rate_hz"] == 2.0
     # Undisturbed, the vehicle drives straight; pushed, it does not.
     assert abs(rec.poses[-1, 1] - rec.poses[0, 1]) > 1e-3
+
+
+def test_the_keyboard_shows_a_gentle_curve_and_the_mouse_steers(tmp_path):
+    """A tap of LEFT is one control-set step; the mouse sets w by the pointer's position."""
+    out = tmp_path / "rec"
+    events = {
+        3: [key(pygame.KEYDOWN, pygame.K_LEFT)],
+        4: [key(pygame.KEYUP, pygame.K_LEFT)],
+        10: [pygame.event.Event(pygame.MOUSEBUTTONDOWN, pos=(160, 240), button=1)],
+        14: [pygame.event.Event(pygame.MOUSEMOTION, pos=(480, 240), rel=(320, 0), buttons=(1, 0, 0))],
+        18: [pygame.event.Event(pygame.MOUSEBUTTONUP, pos=(480, 240), button=1)],
+        22: [pygame.event.Event(pygame.QUIT)],
+    }
+    run_teleop("demo_course", out, realtime=False, script=script_from(events), max_frames=100)
+    rec = read_recording(out)
+    w = rec.commands[:, 1]
+    assert w[5] == pytest.approx(0.1) and rec.labels[5] == CENTRE + 1, "one frame of LEFT: the next bin, and it stays"
+    assert (w[5:10] == w[5]).all()
+    assert w[11] == pytest.approx(0.5) and w[15] == pytest.approx(-0.5), "pointer a quarter from the left: half left lock, and back"
+    assert (w[18:22] == w[17]).all(), "released, the stick stays where the pointer left it"

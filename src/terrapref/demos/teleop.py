@@ -10,9 +10,12 @@ sees which discrete command each stick position is recorded as. A top-down inset
 shows the reference path, the vehicle and its trace, and a status line shows time, w, label,
 frames recorded, pause and collisions.
 
-Controls: Left/Right steer (holding an arrow ramps w toward +w_max / -w_max; releasing returns
-it to exactly 0, a stick resting at zero), gamepad axis 0 sets w continuously, Space or P pauses,
-Esc or Q quits. The stick is sampled once per camera frame, as the simulated vehicle is.
+Controls: Left/Right move the stick (holding an arrow moves w toward +w_max / -w_max at
+KEY_RATE_RPS2; releasing leaves it where it is, so a keyboard can hold a gentle curve), Down or C
+centres it (exactly 0), holding the left mouse button over the camera view sets w by the
+pointer's horizontal position (centre: straight; edges: full lock), gamepad axis 0 sets w
+continuously, Space or P pauses, Esc or Q quits. The input last used drives. The stick is
+sampled once per camera frame, as the simulated vehicle is.
 """
 
 from __future__ import annotations
@@ -43,8 +46,9 @@ from terrapref.vehicle import Command, ControlSet  # noqa: E402
 SOURCE = "terrapref drive"
 NO_DISPLAY = "no display available; set SDL_VIDEODRIVER=dummy for a headless run or run on a desktop"
 
-KEY_RATE_RPS2 = 2.5
-"""How fast a held arrow key moves w [rad/s per s]: full lock (1 rad/s) in 0.4 s, i.e. 4 frames."""
+KEY_RATE_RPS2 = 1.0
+"""How fast a held arrow key moves w [rad/s per s]: one control-set step (0.1 rad/s) per frame,
+full lock (1 rad/s) in 1 s; released, the stick stays where it was left."""
 AXIS_DEADZONE = 0.08
 """Gamepad axis values within this of 0 read as a centred stick (worn sticks rest slightly off 0)."""
 
@@ -103,14 +107,18 @@ def axis_to_w(axis: float, w_max_rps: float, deadzone: float = AXIS_DEADZONE) ->
 
 
 class _Stick:
-    """The driver's input: arrow keys held (tracked from events) and the first gamepad axis."""
+    """The driver's input: arrow keys (a stick that holds where it is left), the mouse over the
+    camera view, and the first gamepad axis; the one used last drives."""
 
-    def __init__(self, w_max_rps: float, rate_rps2: float = KEY_RATE_RPS2) -> None:
+    def __init__(self, w_max_rps: float, rate_rps2: float = KEY_RATE_RPS2, view_width_px: int = 640) -> None:
         self.w_max = w_max_rps
         self.rate = rate_rps2
+        self.view_width = view_width_px
         self.w = 0.0
         self.left = False
         self.right = False
+        self.mouse_x: float | None = None  # pointer x while the left button is held over the view
+        self.source = "keys"
         self.joystick: Any = None
         self._open_joystick()
 
@@ -123,12 +131,21 @@ class _Stick:
         if event.type in (pygame.KEYDOWN, pygame.KEYUP):
             down = event.type == pygame.KEYDOWN
             if event.key == pygame.K_LEFT:
-                self.left = down
+                self.left, self.source = down, "keys"
             elif event.key == pygame.K_RIGHT:
-                self.right = down
+                self.right, self.source = down, "keys"
+            elif down and event.key in (pygame.K_DOWN, pygame.K_c):
+                self.w, self.source = 0.0, "keys"
+        elif event.type == pygame.MOUSEBUTTONDOWN and event.button == 1 and event.pos[0] < self.view_width:
+            self.mouse_x, self.source = float(event.pos[0]), "mouse"
+        elif event.type == pygame.MOUSEMOTION and self.mouse_x is not None:
+            self.mouse_x = float(min(max(event.pos[0], 0), self.view_width))
+        elif event.type == pygame.MOUSEBUTTONUP and event.button == 1:
+            self.mouse_x = None  # the stick stays where the pointer left it
         elif event.type == pygame.WINDOWFOCUSLOST:
             # A key released while another window has focus never sends KEYUP here.
             self.left = self.right = False
+            self.mouse_x = None
         elif event.type == pygame.JOYDEVICEADDED:
             self._open_joystick()
         elif event.type == pygame.JOYDEVICEREMOVED:
@@ -136,13 +153,17 @@ class _Stick:
 
     def update(self, dt_s: float) -> float:
         """Sample the stick for one frame of ``dt_s`` [s]; returns w [rad/s]."""
+        pad = self.joystick.get_axis(0) if self.joystick is not None and self.joystick.get_numaxes() > 0 else 0.0
+        if abs(pad) > AXIS_DEADZONE:
+            self.source = "pad"
         if self.left != self.right:
             target = self.w_max if self.left else -self.w_max
             self.w = ramp_toward(self.w, target, self.rate, dt_s)
-        elif self.joystick is not None and self.joystick.get_numaxes() > 0:
-            self.w = axis_to_w(self.joystick.get_axis(0), self.w_max)
-        else:
-            self.w = 0.0
+        elif self.source == "mouse" and self.mouse_x is not None:
+            centre = self.view_width / 2
+            self.w = float(np.clip((centre - self.mouse_x) / centre * self.w_max, -self.w_max, self.w_max))
+        elif self.source == "pad":
+            self.w = axis_to_w(pad, self.w_max)
         return self.w
 
 
@@ -301,7 +322,7 @@ class _Window:
             screen.blit(self.font.render(c.name, True, TEXT_COLOR), (x0 + 18, y))
             y += 18
         y += 8
-        for line in ("Left/Right  steer", "Space / P   pause", "Esc / Q     quit"):
+        for line in ("Left/Right  move the stick", "Down / C    centre it", "mouse drag  steer", "Space / P   pause", "Esc / Q     quit"):
             screen.blit(self.font.render(line, True, DIM_TEXT), (x0, y))
             y += 18
 
@@ -398,11 +419,11 @@ def run_teleop(
         if record_dir is not None:
             meta = recording_meta(
                 scenario, camera_cfg, preference_cfg, sim_cfg,
-                {"kind": "human", "input": "keyboard/gamepad", "disturbance": disturbance.to_dict() if disturbance else None, "seed": seed},
+                {"kind": "human", "input": "keyboard/mouse/gamepad", "disturbance": disturbance.to_dict() if disturbance else None, "seed": seed},
                 profile or PreferenceProfile.default(scenario.classes),
             )
             writer = RecordingWriter(record_dir, meta, scenario.to_dict(), overwrite=overwrite)
-        stick = _Stick(w_max_rps=float(np.abs(control.w_rps).max()))
+        stick = _Stick(w_max_rps=float(np.abs(control.w_rps).max()), view_width_px=window.view_size[0])
         disturb = Disturber(disturbance, np.random.default_rng(seed), frame_dt) if disturbance and disturbance.active else None
         clock = pygame.time.Clock()
         frame = sim.reset()
