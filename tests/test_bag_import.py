@@ -257,9 +257,9 @@ def test_an_exported_recording_imports_to_the_same_dataset(tmp_path: Path, impor
 
 
 def test_evaluate_writes_each_run_as_mcap(tmp_path: Path, capsys):
-    from test_interop import _linear_model
+    from helpers import linear_model
 
-    model = _linear_model(tmp_path / "linear.safetensors")
+    model = linear_model(tmp_path / "linear.safetensors")
     out = tmp_path / "ev"
     assert main(["evaluate", str(model), "fig7_rock_vs_non_traversable_left", "--seeds", "1", "--no-driver", "--workers", "1", "--out", str(out), "--mcap"]) == 0
     run = out / "runs" / "fig7_rock_vs_non_traversable_left_seed0.mcap"
@@ -270,9 +270,9 @@ def test_evaluate_writes_each_run_as_mcap(tmp_path: Path, capsys):
 
 
 def test_replay_reports_agreement_with_the_operator(tmp_path: Path, logs, capsys):
-    from test_interop import _linear_model
+    from helpers import linear_model
 
-    model = _linear_model(tmp_path / "linear.safetensors")
+    model = linear_model(tmp_path / "linear.safetensors")
     out = tmp_path / "replay"
     assert main(["replay", str(logs["bags"]["sqlite3"]), "--robot", str(logs["robot"]), "--model", str(model), "--out", str(out)]) == 0
     text = capsys.readouterr().out

@@ -6,7 +6,8 @@ import os
 from pathlib import Path
 
 import pytest
-from test_evaluate import _dataset_file, _linear_model
+from helpers import linear_model
+from test_evaluate import _dataset_file
 
 from terrapref.cli import main
 
@@ -32,7 +33,7 @@ def test_train_refuses_a_folder_as_its_model_file(tmp_path: Path, capsys):
 
 
 def test_evaluate_refuses_a_file_as_its_folder_before_driving(tmp_path: Path, capsys):
-    model = _linear_model(tmp_path / "m.safetensors")
+    model = linear_model(tmp_path / "m.safetensors")
     (tmp_path / "eval").write_text("not a folder")
     assert main(["evaluate", str(model), "demo_course", "--seeds", "1", "--out", str(tmp_path / "eval")]) == 2
     assert "expected a folder" in _error(capsys) and (tmp_path / "eval").read_text() == "not a folder"

@@ -17,29 +17,16 @@ from terrapref.demos.dataset import FORMAT as DATASET_FORMAT
 from terrapref.demos.dataset import Dataset, save_dataset
 from terrapref.evaluation.evaluate import evaluate_model
 from terrapref.features import FeatureConfig
-from terrapref.learning.model_file import load_model, save_model
-from terrapref.learning.network import ClassifierConfig
+from terrapref.learning.model_file import load_model
 from terrapref.scenario import resolve_scenario
 from terrapref.terrain import PreferenceProfile, default_classes
 
-from helpers import model_meta
+from helpers import linear_model, model_meta
 
 PNG = b"\x89PNG\r\n\x1a\n"
 RUN_KEYS = {"completed", "collisions", "duration_s", "rms_cross_track_m", "max_cross_track_m", "distance_m", "zones"}
 ZONE_KEYS = {"id", "expect", "choice", "success"}
 ROCK_FIRST = "rock,mud,water,non_traversable"
-
-
-def _linear_model(path: Path) -> Path:
-    """C reduced to its skip path, logits = U @ w: follows the path, shies from terrain; drives the
-    demo course to the end in about a minute of simulated time."""
-    config = ClassifierConfig(hidden=8, skip=True)
-    dims = [config.m] + [config.hidden] * config.depth + [config.m]
-    weights = {"compress.weight": np.array([[-8.0, -4.0, -2.0, -1.0, 6.0]], np.float32), "compress.bias": np.zeros(1, np.float32)}
-    for i, (a, b) in enumerate(zip(dims[:-1], dims[1:])):
-        weights[f"layers.{i}.weight"] = np.zeros((b, a), np.float32)
-        weights[f"layers.{i}.bias"] = np.zeros(b, np.float32)
-    return save_model(path, config, weights, model_meta())
 
 
 def _dataset_file(path: Path, n: int = 300, seed: int = 0) -> Path:
@@ -51,7 +38,7 @@ def _dataset_file(path: Path, n: int = 300, seed: int = 0) -> Path:
 
 @pytest.fixture(scope="module")
 def model_path(tmp_path_factory) -> Path:
-    return _linear_model(tmp_path_factory.mktemp("model") / "linear.safetensors")
+    return linear_model(tmp_path_factory.mktemp("model") / "linear.safetensors")
 
 
 @pytest.fixture(scope="module")

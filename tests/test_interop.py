@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import onnxruntime as ort
 import pytest
-from helpers import model_meta
+from helpers import linear_model, model_meta
 
 from terrapref.camera import CameraConfig
 from terrapref.cli import main
@@ -43,16 +43,6 @@ def _model(path: Path, config: ClassifierConfig, seed: int = 0, utility: bool = 
         meta["utility"] = {"w": [-1.0, -2.0, -3.0, -9.0, 4.0], "b": [0.0] * 21, "weight": 5.0}
     return save_model(path, config, weights, meta)
 
-
-def _linear_model(path: Path) -> Path:
-    """C reduced to its skip path (logits = U @ w): follows the path and shies from terrain."""
-    config = ClassifierConfig(hidden=8, skip=True)
-    dims = [config.m] + [config.hidden] * config.depth + [config.m]
-    weights = {"compress.weight": np.array([[-8.0, -4.0, -2.0, -1.0, 6.0]], np.float32), "compress.bias": np.zeros(1, np.float32)}
-    for i, (a, b) in enumerate(zip(dims[:-1], dims[1:])):
-        weights[f"layers.{i}.weight"] = np.zeros((b, a), np.float32)
-        weights[f"layers.{i}.bias"] = np.zeros(b, np.float32)
-    return save_model(path, config, weights, model_meta())
 
 
 # --- ONNX ------------------------------------------------------------------------------------
@@ -163,16 +153,16 @@ def test_a_user_label_map(tmp_path: Path):
 
 
 @pytest.fixture(scope="module")
-def linear_model(tmp_path_factory) -> Path:
-    return _linear_model(tmp_path_factory.mktemp("runtime") / "linear.safetensors")
+def linear_model_file(tmp_path_factory) -> Path:
+    return linear_model(tmp_path_factory.mktemp("runtime") / "linear.safetensors")
 
 
-def test_runtime_drives_as_the_planner_decides(linear_model: Path):
+def test_runtime_drives_as_the_planner_decides(linear_model_file: Path):
     scenario = resolve_scenario("demo_course")
     sim = Simulation(scenario)
-    runtime = PlannerRuntime(linear_model)
+    runtime = PlannerRuntime(linear_model_file)
     runtime.set_path(scenario.waypoints)
-    planner = Planner(load_model(linear_model))
+    planner = Planner(load_model(linear_model_file))
     planner.set_path(scenario.waypoints)
     frame = sim.reset()
     indices = set()
@@ -187,8 +177,8 @@ def test_runtime_drives_as_the_planner_decides(linear_model: Path):
     assert len(indices) > 1  # it steered
 
 
-def test_runtime_holds_then_stops(linear_model: Path):
-    runtime = PlannerRuntime(linear_model, hold_s=0.3)
+def test_runtime_holds_then_stops(linear_model_file: Path):
+    runtime = PlannerRuntime(linear_model_file, hold_s=0.3)
     scenario = resolve_scenario("demo_course")
     runtime.set_path(scenario.waypoints)
     assert runtime.command_at(0.0) == STOP  # nothing decided yet
@@ -202,8 +192,8 @@ def test_runtime_holds_then_stops(linear_model: Path):
     assert runtime.command_at(float("nan")) == STOP
 
 
-def test_runtime_refuses_what_it_cannot_drive_on(linear_model: Path):
-    runtime = PlannerRuntime(linear_model)
+def test_runtime_refuses_what_it_cannot_drive_on(linear_model_file: Path):
+    runtime = PlannerRuntime(linear_model_file)
     with pytest.raises(RuntimeError, match="set_path"):
         runtime.decide(np.zeros((480, 640), np.uint8), 0.0, (0.0, 0.0, 0.0))
     runtime.set_path(np.array([[0.0, 0.0], [10.0, 0.0]]))
@@ -216,14 +206,14 @@ def test_runtime_refuses_what_it_cannot_drive_on(linear_model: Path):
     with pytest.raises(ValueError, match="path"):
         runtime.set_path(np.array([[0.0, 0.0]]))
     with pytest.raises(UserError, match="another camera"):
-        PlannerRuntime(linear_model, camera=CameraConfig(pitch_deg=20.0))
+        PlannerRuntime(linear_model_file, camera=CameraConfig(pitch_deg=20.0))
 
 
-def test_runtime_maps_a_networks_label_ids(linear_model: Path):
+def test_runtime_maps_a_networks_label_ids(linear_model_file: Path):
     classes = default_classes()
     labels = load_label_map("rellis3d", classes)
-    runtime = PlannerRuntime(linear_model, labels=labels)
-    plain = PlannerRuntime(linear_model)
+    runtime = PlannerRuntime(linear_model_file, labels=labels)
+    plain = PlannerRuntime(linear_model_file)
     scenario = resolve_scenario("demo_course")
     for r in (runtime, plain):
         r.set_path(scenario.waypoints)
