@@ -95,7 +95,7 @@ def test_cli_export_onnx(tmp_path: Path, capsys):
     assert "wrote" in capsys.readouterr().out and (tmp_path / "out" / "m.onnx").is_file()
     assert not list((tmp_path / "out").glob(".*tmp"))  # no temporary file left behind
     assert main(["export", str(src), "--format", "onnx", "--out", str(src)]) == 2
-    assert "is the input" in capsys.readouterr().err
+    assert "is also an input" in capsys.readouterr().err
     (tmp_path / "junk.safetensors").write_bytes(b"not a model")
     assert main(["export", str(tmp_path / "junk.safetensors"), "--format", "onnx", "--out", str(tmp_path / "j.onnx")]) == 2
     err = capsys.readouterr().err.strip().splitlines()

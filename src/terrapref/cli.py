@@ -399,8 +399,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     model = load_model(args.model)
     robot = load_robot(args.robot, model.classes)
     out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise UserError(args.out, "exists and is not a folder", field="--out")
+    _check_output(out, "--out", [args.bag, args.model, args.robot], folder=True)
     rec_dir = out / "recording"
     report = import_bag(args.bag, robot, rec_dir, rate_hz=args.rate, force=True)
     print(f"imported {report.frames} frames ({report.duration_s:.0f} s) into {rec_dir}")
@@ -433,10 +432,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 def _cmd_export(args: argparse.Namespace) -> int:
     out = Path(args.out)
-    if out.resolve() == Path(args.input).resolve():
-        raise UserError(args.out, "is the input; choose another output file", field="--out")
-    if out.is_dir():
-        raise UserError(args.out, "is a folder; expected a file name", field="--out")
+    _check_output(out, "--out", [args.input])
     if args.format == "mcap":
         from terrapref.demos.recording import read_recording
         from terrapref.interop.mcap_export import recording_frames, write_mcap

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -46,6 +47,21 @@ def atomic_path(path: str | Path, fsync: bool = False) -> Iterator[Path]:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def replace_dir(new: str | Path, target: str | Path) -> Path:
+    """Put the folder ``new`` at ``target``, replacing what was there: the old folder is first
+    moved aside under a unique temporary name, so ``target`` is never missing half-way through a
+    delete, and removed once the new one is in place."""
+    new, target = Path(new), Path(target)
+    if target.exists():
+        aside = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".old", dir=target.parent))
+        os.replace(target, aside / "old")
+        os.replace(new, target)
+        shutil.rmtree(aside, ignore_errors=True)
+    else:
+        os.replace(new, target)
+    return target
 
 
 def write_bytes_atomic(path: str | Path, data: bytes, fsync: bool = False) -> Path:

@@ -20,8 +20,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import shutil
 import tempfile
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -32,7 +30,7 @@ import numpy as np
 import yaml
 
 from terrapref.errors import UserError
-from terrapref.fileio import write_text_atomic
+from terrapref.fileio import replace_dir, write_text_atomic
 from terrapref.report.images import read_label_png, write_png_atomic
 
 FORMAT = "terrapref-recording/1"
@@ -123,22 +121,14 @@ class RecordingWriter:
             self.meta["summary"] = summary
         write_json_atomic(self.dir / META, self.meta)
         if self.dir != self.target:  # the replacement is complete: swap it in
-            old = Path(tempfile.mkdtemp(prefix=f".{self.target.name}.", suffix=".old", dir=self.target.parent))
-            os.replace(self.target, old / "rec")
-            os.replace(self.dir, self.target)
-            shutil.rmtree(old, ignore_errors=True)
-            self.dir = self.target
+            self.dir = replace_dir(self.dir, self.target)
 
     def abort(self) -> None:
         """Stop writing and leave the recording marked partial (a replacement beside the old
         recording, as ``OUT.partial``)."""
         self._frames.close()
         if self.dir != self.target:
-            partial = self.target.with_name(self.target.name + ".partial")
-            if partial.exists():
-                shutil.rmtree(partial)
-            os.replace(self.dir, partial)
-            self.dir = self.partial_dir = partial
+            self.dir = self.partial_dir = replace_dir(self.dir, self.target.with_name(self.target.name + ".partial"))
 
     def __enter__(self) -> RecordingWriter:
         return self

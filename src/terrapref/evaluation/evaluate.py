@@ -11,7 +11,7 @@ import numpy as np
 from terrapref.camera import PinholeCamera
 from terrapref.errors import UserError
 from terrapref.fileio import write_text_atomic
-from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, annotate_agreement, run_many, summarise
+from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, annotate_agreement, run_many, scenario_and_world, summarise
 from terrapref.evaluation.scoring import classes_in_zone
 from terrapref.learning.identify import GRASS, Identifiability
 from terrapref.features import PreferenceSet
@@ -87,18 +87,19 @@ def evaluate_model(
 
 def _write_runs(results: list[dict], folder: Path, model) -> None:
     """Each planner run as an MCAP file, its camera frames rendered again at the poses driven."""
+    from terrapref.camera import SegmentationRenderer
     from terrapref.interop.mcap_export import RunFrames, write_mcap
-    from terrapref.sim import Simulation
 
+    camera = PinholeCamera(model.camera)
     for r in results:
         run = r.get("run")
         if r["driver"] != PLANNER or run is None:
             continue
-        scenario = resolve_scenario(r["scenario"])
-        sim = Simulation(scenario, model.camera)
+        scenario, world = scenario_and_world(r["scenario"])  # cached: the runs of one course share a raster
+        renderer = SegmentationRenderer(camera, world)
         poses = run["poses"]
         frames = RunFrames(times=0.1 * np.arange(len(poses)), poses=poses, commands=run["commands"],
-                           image=lambda i, poses=poses, sim=sim: sim.renderer.render(Pose(*poses[i])), chosen=run["index"],
+                           image=lambda i, poses=poses, renderer=renderer: renderer.render(Pose(*poses[i])), chosen=run["index"],
                            path=scenario.waypoints, camera=model.camera, classes=model.classes, preference=model.features.preference, probs=run["probs"])
         write_mcap(folder / f"{r['scenario'].replace(':', '_')}_seed{r['seed']}.mcap", frames, robot_file=False)
 
@@ -138,8 +139,7 @@ def _figures(results: list[dict], scenarios: Sequence[str], out: Path, model, pr
     pset = PreferenceSet(model.features.preference, PinholeCamera(model.camera))
     uv, visible = pset.camera.project_ground(pset.trajectories[..., :2])
     for name in scenarios:
-        scenario = resolve_scenario(name)
-        world = rasterise(scenario)
+        scenario, world = scenario_and_world(name)  # the raster the runs used, not a new one
         planner_runs = [r for r in results if r["scenario"] == name and r["driver"] == PLANNER]
         driver_runs = [r for r in results if r["scenario"] == name and r["driver"] == EXPERT]
         per_zone: dict[str, tuple[int, int]] = {}

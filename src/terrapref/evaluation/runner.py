@@ -59,7 +59,7 @@ def start_pose(start: tuple[float, float, float], seed: int) -> Pose:
 
 
 @functools.lru_cache(maxsize=16)
-def _scenario_and_world(name: str) -> tuple:
+def scenario_and_world(name: str) -> tuple:
     """Scenarios and rasters, cached per worker process: many runs share a handful of maps."""
     scenario = resolve_scenario(name)
     return scenario, rasterise(scenario)
@@ -85,7 +85,7 @@ def make_policy(spec: RunSpec) -> Policy:
 
 def run_one(spec: RunSpec) -> dict:
     """Drive one run and return its metrics (JSON-ready), its path and any kept decisions."""
-    scenario, world = _scenario_and_world(spec.scenario)
+    scenario, world = scenario_and_world(spec.scenario)
     profile = PreferenceProfile.parse(list(spec.profile), scenario.classes, source="--profile")
     if spec.driver == EXPERT:
         sim = Simulation(scenario, world=world)

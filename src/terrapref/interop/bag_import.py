@@ -34,6 +34,7 @@ from terrapref.camera import CameraConfig
 from terrapref.demos.recording import RecordingWriter, _is_recording
 from terrapref.errors import UserError
 from terrapref.features import PreferenceSetConfig
+from terrapref.fileio import replace_dir
 from terrapref.interop.robot import RobotConfig, load_waypoints
 from terrapref.progress import Progress
 from terrapref.terrain import ClassTable, default_classes
@@ -369,13 +370,7 @@ def import_bag(bag_path: str | Path, robot: RobotConfig, out: str | Path, rate_h
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".importing", dir=out.parent))
     try:
         _import(bag, robot, tmp / "rec", rate_hz, show_progress, classes, report)
-        if out.exists():
-            old = out.with_name(f".{out.name}.replaced")
-            out.rename(old)
-            (tmp / "rec").rename(out)
-            shutil.rmtree(old)
-        else:
-            (tmp / "rec").rename(out)
+        replace_dir(tmp / "rec", out)
     finally:
         bag.close()
         shutil.rmtree(tmp, ignore_errors=True)

@@ -43,9 +43,7 @@ def replay(model: LoadedModel, rec: Recording, progress=None) -> dict:
     top3 = np.empty(len(rec), dtype=bool)
     terrain = np.empty(len(rec), dtype=bool)
     for i in range(len(rec)):
-        d = runtime.decide(rec.image(i), float(rec.times[i]), tuple(rec.poses[i]))
-        if d is None:  # a recording's times only grow; kept for safety with hand-made ones
-            d = runtime.last
+        d = runtime.decide(rec.image(i), float(rec.times[i]), tuple(rec.poses[i]))  # never None: read_recording refuses times that do not grow
         chosen[i] = d.index
         c_best[i] = int(np.argmax(d.probs))
         top3[i] = rec.labels[i] in np.argsort(d.probs)[-3:]

@@ -3,20 +3,20 @@
 from __future__ import annotations
 
 import math
-import os
-import shutil
 import tempfile
 from collections.abc import Callable
 from dataclasses import asdict, replace
 from pathlib import Path
 
 from terrapref.demos.dataset import Dataset
+from terrapref.fileio import replace_dir
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig, member_prefix
 from terrapref.learning.train import EpochMetrics, TrainConfig, TrainResult, train
 
 
-def model_meta(dataset: Dataset, config: TrainConfig, result: TrainResult, recipe: str | None = None) -> dict:
+def _source_meta(dataset: Dataset, config: TrainConfig, recipe: str | None) -> dict:
+    """What every file of one training carries, known before it starts: recipe, configuration, data."""
     return {
         **({"recipe": recipe} if recipe else {}),
         "features": dataset.meta["features"],
@@ -25,6 +25,13 @@ def model_meta(dataset: Dataset, config: TrainConfig, result: TrainResult, recip
         "profile": dataset.meta["profile"],
         "training": config.to_dict(),
         "data": {"fingerprint": dataset.fingerprint, "samples": len(dataset), "recordings": dataset.meta.get("recordings", [])},
+    }
+
+
+def model_meta(dataset: Dataset, config: TrainConfig, result: TrainResult, source: dict) -> dict:
+    """A model's metadata: ``source`` (:func:`_source_meta`) and what the training produced."""
+    return {
+        **source,
         "history": [asdict(h) for h in result.history],
         "best_epoch": result.best_epoch,
         "steps": result.steps,
@@ -62,20 +69,13 @@ class _Checkpoints:
             save_model(self.folder / name, classifier, weights, {**self.meta, "member": member + 1, "epoch": m.epoch, "status": "checkpoint"})
 
     def finish(self) -> None:
-        if self.folder is None:
-            return
-        if self.final.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{self.final.name}.", suffix=".old", dir=self.final.parent))
-            os.replace(self.final, old / "checkpoints")
-            shutil.rmtree(old, ignore_errors=True)
-        os.replace(self.folder, self.final)
+        if self.folder is not None:
+            replace_dir(self.folder, self.final)
 
     def keep_partial(self) -> None:
         """An interrupted run's checkpoints stay, beside the old ones, as ``.checkpoints.interrupted``."""
         if self.folder is not None and self.folder.exists():
-            target = self.final.with_name(self.final.name + ".interrupted")
-            shutil.rmtree(target, ignore_errors=True)
-            os.replace(self.folder, target)
+            replace_dir(self.folder, self.final.with_name(self.final.name + ".interrupted"))
 
     def interrupted_model(self, out: Path) -> Path | None:
         """The best epochs so far (every member reached) as one model, clearly marked."""
@@ -107,11 +107,8 @@ def train_and_save(dataset: Dataset, out: str | Path, config: TrainConfig, check
     """
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    base = {**({"recipe": recipe} if recipe else {}), "features": dataset.meta["features"], "camera": dataset.meta["camera"],
-            "classes": dataset.meta["classes"], "profile": dataset.meta["profile"], "training": config.to_dict(),
-            "data": {"fingerprint": dataset.fingerprint, "samples": len(dataset), "recordings": dataset.meta.get("recordings", [])},
-            "members": config.members}
-    saver = _Checkpoints(out, base, checkpoints)
+    source = _source_meta(dataset, config, recipe)  # the data's fingerprint hashes every sample: once
+    saver = _Checkpoints(out, {**source, "members": config.members}, checkpoints)
     try:
         result = train(dataset, config, progress, on_epoch=saver)
     except BaseException:
@@ -119,6 +116,6 @@ def train_and_save(dataset: Dataset, out: str | Path, config: TrainConfig, check
         saver.interrupted_model(out)
         raise
     saver.finish()
-    meta = model_meta(dataset, config, result, recipe)
+    meta = model_meta(dataset, config, result, source)
     save_model(out, result.classifier, result.weights, {**meta, "epoch": result.best_epoch})
     return result
