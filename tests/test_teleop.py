@@ -14,7 +14,7 @@ import pytest
 pygame = pytest.importorskip("pygame")
 
 from terrapref.demos.recording import read_recording  # noqa: E402
-from terrapref.demos.teleop import run_teleop  # noqa: E402
+from terrapref.demos.teleop import COUNTDOWN_S, run_teleop  # noqa: E402
 from terrapref.errors import UserError  # noqa: E402
 from terrapref.vehicle import ControlSet  # noqa: E402
 
@@ -26,7 +26,7 @@ def key(kind: int, k: int) -> pygame.event.Event:
 
 
 def script_from(events: dict[int, list]) -> callable:
-    return lambda i: events.get(i, [])
+    return lambda state: events.get(state.index, [])
 
 
 def test_left_then_release_then_right_is_recorded_and_labelled(tmp_path):
@@ -39,7 +39,7 @@ def test_left_then_release_then_right_is_recorded_and_labelled(tmp_path):
         32: [key(pygame.KEYUP, pygame.K_RIGHT)],
         40: [pygame.event.Event(pygame.QUIT)],
     }
-    result = run_teleop("demo_course", out, realtime=False, script=script_from(events), max_frames=200,
+    result = run_teleop("demo_course", out, realtime=False, wait_for_start=False, script=script_from(events), max_frames=200,
                         screenshot=tmp_path / "shot.png")
     assert result.quit and not result.completed
     rec = read_recording(out)
@@ -63,32 +63,35 @@ def test_pause_records_nothing_and_stops_time(tmp_path):
     events = {
         10: [key(pygame.KEYDOWN, pygame.K_SPACE)],
         20: [key(pygame.KEYDOWN, pygame.K_SPACE)],
-        30: [pygame.event.Event(pygame.QUIT)],
+        60: [pygame.event.Event(pygame.QUIT)],
     }
-    result = run_teleop("demo_course", out, realtime=False, script=script_from(events), max_frames=100)
+    result = run_teleop("demo_course", out, realtime=False, wait_for_start=False, script=script_from(events), max_frames=100)
     rec = read_recording(out)
-    assert result.frames == len(rec) == 20  # iterations 10..19 were paused
+    countdown = round(COUNTDOWN_S * 10)
+    assert countdown == 30
+    # Iterations 10..19 were paused and 20..49 counted down before driving resumed.
+    assert result.frames == len(rec) == 10 + (60 - 20 - countdown)
     dt = rec.times[1:] - rec.times[:-1]
     assert dt.max() == pytest.approx(0.1, abs=1e-6), "time does not advance while paused"
 
 
 def test_max_frames_stops_the_run(tmp_path):
-    result = run_teleop("demo_course", tmp_path / "rec", realtime=False, max_frames=12)
+    result = run_teleop("demo_course", tmp_path / "rec", realtime=False, wait_for_start=False, max_frames=12)
     assert result.frames == 12 and not result.quit
     assert len(read_recording(tmp_path / "rec")) == 12
 
 
 def test_driving_without_recording(tmp_path):
-    result = run_teleop("demo_course", None, realtime=False, max_frames=5)
+    result = run_teleop("demo_course", None, realtime=False, wait_for_start=False, max_frames=5)
     assert result.record_dir is None and result.frames == 5
 
 
 def test_refuses_to_overwrite_a_recording_unless_told(tmp_path):
     out = tmp_path / "rec"
-    run_teleop("demo_course", out, realtime=False, max_frames=3)
+    run_teleop("demo_course", out, realtime=False, wait_for_start=False, max_frames=3)
     with pytest.raises(UserError):
-        run_teleop("demo_course", out, realtime=False, max_frames=3)
-    result = run_teleop("demo_course", out, realtime=False, max_frames=4, overwrite=True)
+        run_teleop("demo_course", out, realtime=False, wait_for_start=False, max_frames=3)
+    result = run_teleop("demo_course", out, realtime=False, wait_for_start=False, max_frames=4, overwrite=True)
     assert len(read_recording(out)) == result.frames == 4
 
 
@@ -109,7 +112,7 @@ def test_ramp_and_axis_closed_forms():
 def test_keyboard_ramp_labels_and_screenshot(tmp_path):
     out = tmp_path / "rec"
     events = {2: [key(pygame.KEYDOWN, pygame.K_LEFT)], 8: [key(pygame.KEYUP, pygame.K_LEFT)], 10: [pygame.event.Event(pygame.QUIT)]}
-    result = run_teleop("demo_course", out, realtime=False, script=script_from(events), max_frames=40, screenshot=tmp_path / "shot.png")
+    result = run_teleop("demo_course", out, realtime=False, wait_for_start=False, script=script_from(events), max_frames=40, screenshot=tmp_path / "shot.png")
     assert result.frames == 10 and result.duration_s == pytest.approx(1.0)
     rec = read_recording(out)
     assert rec.meta["driver"] == {"kind": "human", "input": "keyboard/mouse/gamepad", "disturbance": None, "seed": 0}
@@ -123,7 +126,7 @@ def test_keyboard_ramp_labels_and_screenshot(tmp_path):
 
 def test_bad_speed_is_a_user_error():
     with pytest.raises(UserError, match="speed"):
-        run_teleop("demo_course", realtime=False, v_mps=0.0, max_frames=1)
+        run_teleop("demo_course", realtime=False, wait_for_start=False, v_mps=0.0, max_frames=1)
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="display detection by environment is Linux-specific")
@@ -131,7 +134,7 @@ def test_no_display_is_a_user_error(monkeypatch, tmp_path):
     for name in ("SDL_VIDEODRIVER", "DISPLAY", "WAYLAND_DISPLAY"):
         monkeypatch.delenv(name, raising=False)
     with pytest.raises(UserError, match="no display available"):
-        run_teleop("demo_course", tmp_path / "rec", realtime=False, max_frames=1)
+        run_teleop("demo_course", tmp_path / "rec", realtime=False, wait_for_start=False, max_frames=1)
     assert not (tmp_path / "rec").exists(), "no recording is started without a window"
 
 
@@ -147,7 +150,7 @@ def test_disturbances_push_the_executed_command_not_the_label(tmp_path):
     from terrapref.demos.session import DisturbanceConfig
 
     out = tmp_path / "rec"
-    run_teleop("demo_course", out, realtime=False, max_frames=120, disturbance=DisturbanceConfig(rate_hz=2.0), seed=3)
+    run_teleop("demo_course", out, realtime=False, wait_for_start=False, max_frames=120, disturbance=DisturbanceConfig(rate_hz=2.0), seed=3)
     rec = read_recording(out)
     lines = [__import__("json").loads(x) for x in (out / "frames.jsonl").read_text().splitlines()]
     pushed = [x for x in lines if "executed" in x]
@@ -171,10 +174,160 @@ def test_the_keyboard_shows_a_gentle_curve_and_the_mouse_steers(tmp_path):
         18: [pygame.event.Event(pygame.MOUSEBUTTONUP, pos=(480, 240), button=1)],
         22: [pygame.event.Event(pygame.QUIT)],
     }
-    run_teleop("demo_course", out, realtime=False, script=script_from(events), max_frames=100)
+    run_teleop("demo_course", out, realtime=False, wait_for_start=False, script=script_from(events), max_frames=100)
     rec = read_recording(out)
     w = rec.commands[:, 1]
     assert w[5] == pytest.approx(0.1) and rec.labels[5] == CENTRE + 1, "one frame of LEFT: the next bin, and it stays"
     assert (w[5:10] == w[5]).all()
     assert w[11] == pytest.approx(0.5) and w[15] == pytest.approx(-0.5), "pointer a quarter from the left: half left lock, and back"
     assert (w[18:22] == w[17]).all(), "released, the stick stays where the pointer left it"
+
+
+def _tiny(terrain: list[dict] | None = None, start: list[float] | None = None):
+    from terrapref.scenario import parse_scenario
+
+    data = {
+        "format": "terrapref-scenario/1",
+        "name": "tiny_drive",
+        "world": {"size_m": [30.0, 12.0], "resolution_m": 0.05, "background": "grass"},
+        "terrain": terrain or [],
+        "path": {"waypoints": [[2.0, 6.0], [28.0, 6.0]]},
+    }
+    if start is not None:
+        data["start"] = start
+    return parse_scenario(data)
+
+
+def test_the_window_opens_waiting_and_records_only_after_the_countdown(tmp_path):
+    out = tmp_path / "rec"
+    events = {
+        4: [key(pygame.KEYDOWN, pygame.K_LEFT)],  # the stick may be set before the start
+        6: [key(pygame.KEYUP, pygame.K_LEFT)],
+        10: [key(pygame.KEYDOWN, pygame.K_SPACE)],
+        50: [pygame.event.Event(pygame.QUIT)],
+    }
+    phases: list[str] = []
+
+    def script(state):
+        phases.append(state.phase)
+        return events.get(state.index, [])
+
+    result = run_teleop("demo_course", out, realtime=False, script=script, max_frames=200, screenshot=tmp_path / "shot.png")
+    rec = read_recording(out)
+    countdown = round(COUNTDOWN_S * 10)
+    # The key's frame is the countdown's first; the vehicle moves on frame 10 + countdown.
+    assert phases[:11] == ["waiting"] * 11 and phases[11:10 + countdown] == ["countdown"] * (countdown - 1)
+    assert phases[10 + countdown] == "driving"
+    assert result.frames == len(rec) == 50 - 10 - countdown
+    assert rec.times[0] == 0.0, "nothing moved before the countdown ended"
+    assert rec.commands[0, 1] == pytest.approx(0.2), "the stick set while waiting holds"
+
+
+def test_the_map_edge_stops_the_vehicle_and_is_not_recorded(tmp_path):
+    from terrapref.demos.teleop.guide import EDGE_MARGIN_M
+
+    out = tmp_path / "rec"
+    # Start 3 m from the west edge, heading west (at it; the start yaw is in degrees).
+    events = {45: [key(pygame.KEYDOWN, pygame.K_LEFT)], 120: [pygame.event.Event(pygame.QUIT)]}
+    result = run_teleop(_tiny(start=[3.0, 6.0, 180.0]), out, realtime=False, wait_for_start=False,
+                        script=script_from(events), max_frames=200)
+    rec = read_recording(out)
+    assert result.edge_frames > 0
+    assert len(rec) == result.frames == 120 - result.edge_frames
+    assert (rec.poses[:, 0] >= EDGE_MARGIN_M).all(), "no frame at or beyond the edge is recorded"
+    frames = (out / "frames.jsonl").read_text().splitlines()
+    assert len(frames) == len(rec)
+    # Held at the edge, it turned on the spot with the stick and drove away once facing inward.
+    assert rec.poses[-1, 0] > rec.poses[:, 0].min() + 0.3
+    assert rec.meta["summary"]["edge_frames"] == result.edge_frames
+
+
+def test_a_resized_window_scales_the_view_and_the_mouse_follows(tmp_path):
+    out = tmp_path / "rec"
+    # Twice the canvas size (896 x 506): the pointer at window x = 320 is canvas x = 160, a
+    # quarter from the left of the camera view: half left lock.
+    events = {
+        2: [pygame.event.Event(pygame.VIDEORESIZE, size=(1792, 1012), w=1792, h=1012)],
+        4: [pygame.event.Event(pygame.MOUSEBUTTONDOWN, pos=(320, 480), button=1)],
+        8: [pygame.event.Event(pygame.QUIT)],
+    }
+    run_teleop("demo_course", out, realtime=False, wait_for_start=False, script=script_from(events), max_frames=20,
+               screenshot=tmp_path / "shot.png")
+    rec = read_recording(out)
+    assert rec.commands[5, 1] == pytest.approx(0.5)
+    shot = pygame.image.load(str(tmp_path / "shot.png"))
+    assert shot.get_size() == (1792, 1012)
+
+
+def test_the_guide_reads_progress_the_next_patch_and_the_terrain_underneath():
+    from terrapref.demos.teleop.guide import CourseGuide
+    from terrapref.features import PreferenceSet, PreferenceSetConfig
+    from terrapref.sim import Simulation
+    from terrapref.vehicle import Pose
+
+    scenario = _tiny([{"class": "mud", "rectangle": {"center": [13.5, 6.0], "size": [3.0, 2.0]}},
+                      {"class": "water", "rectangle": {"center": [21.0, 8.75], "size": [2.0, 1.5]}}])
+    sim = Simulation(scenario)
+    prefs = PreferenceSet(PreferenceSetConfig(), sim.camera)
+    guide = CourseGuide(sim.world, sim.path, prefs)
+    r = guide.readout(Pose(4.0, 6.0, 0.0), 2.0, label=10)
+    assert (r.next_patch, r.under, r.turn_deg) == ("mud", "grass", 0.0)
+    assert r.next_patch_m == pytest.approx(8.0, abs=0.5)  # the mud begins at x = 12 m, s = 10 m
+    assert r.lines()[0].startswith("path   2.0 / 26 m")
+    on_mud = guide.readout(Pose(13.0, 6.0, 0.0), 11.0, label=10)
+    assert (on_mud.under, on_mud.next_patch, on_mud.next_patch_m) == ("mud", "mud", 0.0)
+    assert "patch here: mud" in on_mud.lines()
+    # Water 2-3.5 m beside the path counts; nothing after it.
+    after_mud = guide.readout(Pose(16.0, 6.0, 0.0), 14.0, label=10)
+    assert after_mud.next_patch == "water" and after_mud.next_patch_m == pytest.approx(4.0, abs=0.5)
+    assert guide.readout(Pose(25.0, 6.0, 0.0), 23.0, label=10).next_patch is None
+    left, right = guide.readout(Pose(4.0, 6.0, 0.0), 2.0, label=15), guide.readout(Pose(4.0, 6.0, 0.0), 2.0, label=5)
+    assert left.turn_deg > 0 > right.turn_deg and left.turn_deg == pytest.approx(-right.turn_deg)
+    assert "left" in left.lines()[3] and "right" in right.lines()[3]
+
+
+def test_riding_along_records_only_the_takeover_and_train_accepts_it(tmp_path):
+    """The planner drives; Left takes over from the planner's command; 1.5 s untouched hands back."""
+    from helpers import linear_model
+
+    from terrapref.cli import main
+    from terrapref.demos.teleop import HANDBACK_S
+
+    model = linear_model(tmp_path / "m.safetensors")
+    out = tmp_path / "corrections"
+    events = {20: [key(pygame.KEYDOWN, pygame.K_LEFT)], 23: [key(pygame.KEYUP, pygame.K_LEFT)], 80: [pygame.event.Event(pygame.QUIT)]}
+    drivers: list[str] = []
+    stick: list[float] = []
+
+    def script(state):
+        drivers.append(state.driver)
+        stick.append(state.w)
+        return events.get(state.index, [])
+
+    result = run_teleop("demo_course", out, realtime=False, wait_for_start=False, script=script, max_frames=200, model=model)
+    handback = round(HANDBACK_S * 10)
+    # State is seen before each frame: the driver steers frames 20-22 (Left held) and 15 more untouched.
+    assert drivers[:21] == ["planner"] * 21 and drivers[21:24 + handback] == ["you"] * (3 + handback)
+    assert drivers[24 + handback] == "planner"
+    rec = read_recording(out)
+    assert result.frames == len(rec) == 3 + handback and result.planner_frames == 80 - len(rec)
+    assert rec.meta["driver"]["kind"] == "corrections" and rec.meta["driver"]["model"] == str(model)
+    w = rec.commands[:, 1]
+    assert w[0] == pytest.approx(stick[20] + 0.1), "the takeover starts from the planner's command, one step left"
+    assert (w[3:] == w[2]).all(), "released, the stick holds until it hands back"
+    assert (rec.labels == ControlSet().label_of(w)).all()
+    assert rec.times[0] == pytest.approx(2.0) and (rec.times[1:] - rec.times[:-1]).max() == pytest.approx(0.1)
+    # A demonstration and the corrections train together.
+    demo = tmp_path / "demo"
+    run_teleop("demo_course", demo, realtime=False, wait_for_start=False, max_frames=60,
+               script=script_from({10: [key(pygame.KEYDOWN, pygame.K_RIGHT)], 14: [key(pygame.KEYUP, pygame.K_RIGHT)]}))
+    assert main(["train", str(demo), str(out), "--out", str(tmp_path / "m2.safetensors"), "--epochs", "1"]) == 0
+
+
+def test_riding_along_with_a_missing_model_is_one_line(tmp_path, capsys):
+    from terrapref.cli import main
+
+    assert main(["drive", "demo_course", "--model", str(tmp_path / "none.safetensors"), "--record", str(tmp_path / "rec")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "none.safetensors" in err[0]
+    assert not (tmp_path / "rec").exists()

@@ -141,11 +141,18 @@ def _cmd_drive(args: argparse.Namespace) -> int:
 
     scenario = resolve_scenario(args.scenario)
     profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile else None
+    if args.record is not None:
+        _check_output(args.record, "--record", [args.model] if args.model else [], folder=True)
     result = run_teleop(scenario, args.record, overwrite=args.force, v_mps=args.speed, disturbance=_disturbance(args.disturb),
-                        seed=args.seed, profile=profile)
+                        seed=args.seed, profile=profile, model=args.model)
     where = f", recorded to {result.record_dir}" if result.record_dir else ""
     state = "reached the goal" if result.completed else ("quit" if result.quit else "stopped")
-    print(f"drove {result.frames} frames, {state}, {result.collisions} collisions{where}")
+    edge = f", {result.edge_frames} frames held at the map's edge (not recorded)" if result.edge_frames else ""
+    if args.model is not None:
+        print(f"rode along: the planner drove {result.planner_frames} frames, you {result.frames} (corrections){where}; "
+              f"{state}, {result.collisions} collisions{edge}")
+    else:
+        print(f"drove {result.frames} frames, {state}, {result.collisions} collisions{where}{edge}")
     return 0
 
 
@@ -557,6 +564,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="pushes per second on the executed yaw rate (default: the recommended protocol's 0.3; 0: none)")
     p.add_argument("--seed", type=int, default=0, help="seeds the pushes")
     p.add_argument("--profile", help="your preference order, best first, stored with the recording (default: the class table's)")
+    p.add_argument("--model", type=Path, metavar="MODEL",
+                   help="ride along: MODEL drives, any stick input takes over, and the frames you steer are recorded as "
+                        "corrections that train accepts beside demonstrations")
     p.set_defaults(func=_cmd_drive)
 
     p = sub.add_parser("inspect", help="summarise a recording and draw its driven path")

@@ -1,0 +1,24 @@
+"""The driving window in which a person records demonstrations and corrections (SPEC 10).
+
+This package is the only part of terrapref that imports pygame, and nothing imports it at
+package import time: the CLI loads it when ``terrapref drive`` runs, so the rest of the project
+works without pygame installed (``pip install terrapref[teleop]`` adds it).
+
+The window shows what the learner will see, the camera's segmentation image, with the preference
+set S drawn on it and the trajectory of the current stick's label highlighted, so the driver
+sees which discrete command each stick position is recorded as; a heads-up display with the
+progress along the path, the next patch, the terrain under the vehicle and the label as a turn;
+a top-down inset of the map with the reference path, the vehicle and its trace; a stick gauge,
+the terrain legend and the controls.
+
+- ``stick``: keyboard, mouse and gamepad input.
+- ``guide``: what the display says about the course, and where the map ends.
+- ``window``: drawing, on a canvas scaled to the (resizable) window.
+- ``loop``: the session (start, countdown, pause, riding along with a model, recording).
+- ``keyboard``: a simulated person at a keyboard, for tests and the keyboard study.
+"""
+
+from terrapref.demos.teleop.loop import COUNTDOWN_S, HANDBACK_S, TeleopResult, TeleopState, run_teleop
+from terrapref.demos.teleop.stick import AXIS_DEADZONE, KEY_RATE_RPS2, Stick, axis_to_w, ramp_toward
+
+__all__ = ["AXIS_DEADZONE", "COUNTDOWN_S", "HANDBACK_S", "KEY_RATE_RPS2", "Stick", "TeleopResult", "TeleopState", "axis_to_w", "ramp_toward", "run_teleop"]

@@ -1,0 +1,431 @@
+"""The driving session: input, the vehicle, the planner when riding along, and the recording.
+
+One loop iteration is one camera frame: handle input, sample the stick, draw, then (while
+driving) record the frame with the command (v, w) and its label and step the simulation by one
+camera period. A session goes through these phases:
+
+- ``waiting``: the window is open and nothing moves; the instructions are on screen. Space,
+  Enter, P or a gamepad button starts the countdown.
+- ``countdown``: three seconds in which the driver can already set the stick; nothing moves.
+- ``driving``: the vehicle moves and frames are recorded. Space/P (or a gamepad button) pauses.
+- ``paused``: nothing moves; resuming counts down again.
+
+The map's edge is a boundary: when the next frame would bring the vehicle within
+:data:`~terrapref.demos.teleop.guide.EDGE_MARGIN_M` of it, the vehicle stops (it may still turn
+on the spot, v = 0) and the frame is not recorded, so a recording never holds frames taken off or
+at the edge of the map.
+
+Riding along with a model: the planner drives; any stick input (an arrow, Down/C, the mouse
+button over the view, the pad off centre) takes over from the planner's current command, and the
+frames the driver steers are recorded as corrections (label: the driver's command); after
+:data:`HANDBACK_S` without stick input the planner drives again. Only the driver's frames are
+recorded: those are the situations in which the planner did what the driver would not.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pygame
+
+from terrapref.camera import CameraConfig
+from terrapref.demos.recording import RecordingWriter
+from terrapref.demos.session import DisturbanceConfig, Disturber, recording_meta
+from terrapref.demos.teleop.guide import CourseGuide, stays_on_map
+from terrapref.demos.teleop.stick import Stick
+from terrapref.demos.teleop.window import ALERT_COLOR, HIGHLIGHT_COLOR, PLANNER_COLOR, Banner, Window
+from terrapref.errors import UserError
+from terrapref.features import PreferenceSet, PreferenceSetConfig
+from terrapref.scenario import Scenario, resolve_scenario
+from terrapref.sim import Frame, SimConfig, Simulation
+from terrapref.terrain import PreferenceProfile
+from terrapref.vehicle import Command
+
+SOURCE = "terrapref drive"
+NO_DISPLAY = "no display available; set SDL_VIDEODRIVER=dummy for a headless run or run on a desktop"
+
+COUNTDOWN_S = 3.0
+"""From the start key to the first recorded frame, and again when resuming from a pause [s]."""
+HANDBACK_S = 1.5
+"""Riding along, the planner drives again after this long without stick input [s]."""
+
+START_KEYS = (pygame.K_SPACE, pygame.K_RETURN, pygame.K_KP_ENTER, pygame.K_p)
+QUIT_KEYS = (pygame.K_ESCAPE, pygame.K_q)
+
+INSTRUCTIONS = (
+    "Space/Enter  start, pause",
+    "Left/Right   move the stick",
+    "Down / C     centre it",
+    "mouse drag   steer",
+    "Esc / Q      quit",
+)
+RIDE_ALONG_INSTRUCTIONS = ("stick input takes over", f"{HANDBACK_S:g} s untouched: hands back")
+
+
+@dataclass(frozen=True)
+class TeleopResult:
+    """How a driving session ended.
+
+    Attributes:
+        frames: frames recorded (when recording) or driven by the person: paused, waiting,
+            edge and (riding along) planner frames excluded.
+        completed: the vehicle reached the goal.
+        collisions: entries onto lethal terrain.
+        quit: the driver quit (Esc, Q or the window's close button) before the run ended.
+        record_dir: the recording's directory, or None when not recording.
+        duration_s: simulated time driven [s].
+        edge_frames: frames the vehicle was held at the map's edge.
+        planner_frames: frames the planner drove (riding along).
+    """
+
+    frames: int
+    completed: bool
+    collisions: int
+    quit: bool
+    record_dir: Path | None
+    duration_s: float = 0.0
+    edge_frames: int = 0
+    planner_frames: int = 0
+
+
+@dataclass(frozen=True)
+class TeleopState:
+    """What a scripted input (tests, the simulated keyboard driver) sees before a frame.
+
+    Attributes:
+        index: loop iteration (0-based).
+        frame: the camera frame on screen.
+        w: the stick [rad/s] after the last frame.
+        phase: ``waiting``, ``countdown``, ``driving`` or ``paused``.
+        driver: ``you`` or (riding along) ``planner``.
+    """
+
+    index: int
+    frame: Frame
+    w: float
+    phase: str
+    driver: str
+
+
+Script = Callable[[TeleopState], Sequence[Any]]
+
+
+def _check_display() -> None:
+    """Refuse to open a window nobody can see: SDL would silently fall back to an offscreen one."""
+    if os.environ.get("SDL_VIDEODRIVER"):
+        return
+    if sys.platform.startswith(("linux", "freebsd", "openbsd", "netbsd")) and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise UserError(SOURCE, NO_DISPLAY)
+
+
+def _open_display() -> None:
+    _check_display()
+    try:
+        pygame.display.init()
+    except pygame.error:
+        raise UserError(SOURCE, NO_DISPLAY) from None
+    if not os.environ.get("SDL_VIDEODRIVER") and pygame.display.get_driver() in ("offscreen", "dummy"):
+        pygame.display.quit()
+        raise UserError(SOURCE, NO_DISPLAY)
+    pygame.font.init()
+    pygame.joystick.init()
+
+
+class _Session:
+    """One driving session's state; :func:`run_teleop` builds it and runs :meth:`run`."""
+
+    def __init__(self, sim: Simulation, prefs: PreferenceSet, window: Window, writer: RecordingWriter | None, v_mps: float,
+                 disturber: Disturber | None, planner: Any, wait_for_start: bool) -> None:
+        self.sim, self.window, self.writer, self.v = sim, window, writer, v_mps
+        self.control = prefs.config.control
+        self.frame_dt = 1.0 / sim.config.camera_rate_hz
+        self.guide = CourseGuide(sim.world, sim.path, prefs)
+        self.stick = Stick(w_max_rps=float(np.abs(self.control.w_rps).max()), view_width_px=window.view_size[0])
+        self.disturb = disturber
+        self.planner = planner
+        self.driver = "planner" if planner is not None else "you"
+        self.idle_s = 0.0
+        self.phase = "waiting" if wait_for_start else "driving"
+        self.countdown_left = 0
+        self.quit = False
+        self.at_edge = False
+        self.recorded = self.edge_frames = self.planner_frames = 0
+        self.frame = sim.reset()
+        if planner is not None:
+            planner.set_path(sim.scenario.waypoints)
+        self.decision = self._decide()
+        self.trace_px = [window.to_inset(self.frame.pose.x, self.frame.pose.y)]
+
+    def _decide(self) -> Any:
+        """The planner's decision on the current frame (once per frame, so its path tracker keeps up)."""
+        return self.planner.decide(self.frame.view, self.frame.pose) if self.planner is not None else None
+
+    # --- input --------------------------------------------------------------------------------
+
+    def _toggle(self) -> None:
+        if self.phase in ("waiting", "paused"):
+            self.phase, self.countdown_left = "countdown", round(COUNTDOWN_S / self.frame_dt)
+        elif self.phase == "driving":
+            self.phase = "paused"
+
+    def handle_events(self) -> None:
+        if self.driver == "planner":
+            self.stick.follow(float(self.decision.command[1]))
+        for event in pygame.event.get():
+            if event.type == pygame.QUIT or (event.type == pygame.KEYDOWN and event.key in QUIT_KEYS):
+                self.quit = True
+            elif event.type == pygame.VIDEORESIZE:
+                self.window.resize(event.size)
+            elif (event.type == pygame.KEYDOWN and event.key in START_KEYS) or event.type == pygame.JOYBUTTONDOWN:
+                self._toggle()
+            elif event.type in (pygame.MOUSEBUTTONDOWN, pygame.MOUSEBUTTONUP, pygame.MOUSEMOTION):
+                self.stick.handle(pygame.event.Event(event.type, {**event.dict, "pos": self.window.to_canvas(event.pos)}))
+            else:
+                self.stick.handle(event)
+
+    def _who_drives(self) -> None:
+        """Riding along: stick input takes the vehicle over; a stick left alone hands it back."""
+        if self.planner is None:
+            return
+        used = self.stick.touched or self.stick.active
+        self.stick.touched = False
+        if self.phase != "driving":
+            return
+        if self.driver == "planner" and used:
+            self.driver, self.idle_s = "you", 0.0
+        elif self.driver == "you":
+            if used:
+                self.idle_s = 0.0
+            elif self.idle_s >= HANDBACK_S - 0.5 * self.frame_dt:  # the driver's last HANDBACK_S were untouched
+                self.driver = "planner"
+                self.stick.follow(float(self.decision.command[1]))
+            else:
+                self.idle_s += self.frame_dt
+
+    # --- one frame ----------------------------------------------------------------------------
+
+    def tick(self) -> None:
+        self.handle_events()
+        if self.quit:
+            return
+        w = self.stick.update(self.frame_dt)
+        self._who_drives()
+        if self.driver == "planner":
+            w = float(self.decision.command[1])
+        label = int(self.control.label_of(w))
+        self.draw(w, label)
+        if self.phase == "countdown":
+            self.countdown_left -= 1
+            if self.countdown_left <= 0:
+                self.phase = "driving"
+        elif self.phase == "driving":
+            self.drive(w, label)
+
+    def drive(self, w: float, label: int) -> None:
+        command = Command(self.v, w) if self.driver == "you" else Command(*self.decision.command)
+        executed = self.disturb(command) if self.disturb is not None else command
+        self.at_edge = not stays_on_map(self.sim.world, self.frame.pose, executed, self.frame_dt)
+        if self.at_edge:
+            executed = Command(0.0, executed[1])  # held at the edge: it may turn on the spot
+            self.edge_frames += 1
+        elif self.driver == "you":
+            if self.writer is not None:
+                self.writer.append(self.frame.time_s, self.frame.pose, self.frame.image, command, label,
+                                   executed=executed if executed != command else None)
+            self.recorded += 1
+        else:
+            self.planner_frames += 1
+        self.frame = self.sim.step(executed)
+        self.decision = self._decide()
+        self.trace_px.append(self.window.to_inset(self.frame.pose.x, self.frame.pose.y))
+
+    # --- drawing ----------------------------------------------------------------------------
+
+    def banner(self) -> Banner | None:
+        if self.phase == "waiting":
+            what = ("The planner drives; steer to correct it." if self.planner is not None
+                    else "Drive along the white path the way you like to drive.")
+            return Banner("Press Space to start", HIGHLIGHT_COLOR, (
+                what,
+                f"The vehicle moves at {self.v:g} m/s; you steer.",
+                "Left/Right move the stick, which stays where you leave it;",
+                "Down or C centres it. Or hold the left mouse button over",
+                "this view (the pointer's position steers), or use a gamepad.",
+                "Recording starts after a 3 s countdown. Space pauses.",
+            ))
+        if self.phase == "countdown":
+            return Banner(str(max(1, math.ceil(self.countdown_left * self.frame_dt))), HIGHLIGHT_COLOR)
+        if self.phase == "paused":
+            return Banner("PAUSED", ALERT_COLOR, ("Space to resume (after a countdown)",))
+        if self.at_edge:
+            return Banner("MAP EDGE", ALERT_COLOR, ("The vehicle stopped: turn back onto the map.", "Frames here are not recorded."))
+        return None
+
+    def draw(self, w: float, label: int, end_banner: Banner | None = None, note: str = "") -> None:
+        readout = self.guide.readout(self.frame.pose, self.sim.progress_s, label, self.at_edge)
+        mode = None
+        if self.planner is not None:
+            mode = ("PLANNER DRIVING", PLANNER_COLOR) if self.driver == "planner" else ("YOU DRIVE: recording corrections", HIGHLIGHT_COLOR)
+        status = _status(self.sim.time_s, self.v, w, label, self.control.m, self.recorded, self.sim.collisions, self.writer is not None, self.phase)
+        self.window.draw(self.frame.image, w, label, self.trace_px, status + note, readout.lines(), end_banner or self.banner(), mode)
+
+    def run(self, max_frames: int | None, script: Script | None, realtime: bool) -> None:
+        clock = pygame.time.Clock()
+        i = 0
+        while not self.sim.done and (max_frames is None or i < max_frames):
+            if script is not None:
+                for event in script(TeleopState(i, self.frame, self.stick.w, self.phase, self.driver)):
+                    pygame.event.post(event)
+            self.tick()
+            if self.quit:
+                break
+            i += 1
+            if realtime:
+                clock.tick(self.sim.config.camera_rate_hz)
+
+
+def run_teleop(
+    scenario: Scenario | str,
+    record_dir: str | Path | None = None,
+    *,
+    overwrite: bool = False,
+    camera: CameraConfig | None = None,
+    preference: PreferenceSetConfig | None = None,
+    sim_config: SimConfig | None = None,
+    v_mps: float = 1.0,
+    realtime: bool = True,
+    script: Script | None = None,
+    max_frames: int | None = None,
+    screenshot: str | Path | None = None,
+    disturbance: DisturbanceConfig | None = None,
+    seed: int = 0,
+    profile: PreferenceProfile | None = None,
+    model: str | Path | None = None,
+    wait_for_start: bool = True,
+) -> TeleopResult:
+    """Drive ``scenario`` by keyboard, mouse or gamepad in a window, optionally recording.
+
+    The run ends at the goal, at the time limit, on quit, or after ``max_frames`` loop
+    iterations (waiting, countdown and paused ones included, so a scripted run always ends). The
+    recording is closed complete in all those cases (its summary says which); an exception
+    leaves the old recording in place and the unfinished one beside it (``RecordingWriter``).
+
+    Args:
+        scenario: a Scenario, or a packaged scenario name or a path.
+        record_dir: directory for the recording; None drives without recording.
+        overwrite: replace an existing recording in ``record_dir`` (only once this one is complete).
+        camera: camera configuration (default: the model's when riding along, else SPEC 5).
+        preference: preference/control set configuration; its control set labels w (default:
+            the model's when riding along).
+        sim_config: loop timing and limits.
+        v_mps: forward speed held throughout [m/s], in (0, vehicle max speed].
+        realtime: pace the loop at the camera rate for a person; False runs as fast as it can.
+        script: ``TeleopState -> events`` posted before each iteration's events are handled
+            (tests and the simulated keyboard driver inject key and mouse events this way).
+        max_frames: stop after this many loop iterations.
+        screenshot: save the last drawn window image to this file (PNG by extension).
+        disturbance: pushes added to the executed yaw rate now and then, so that the recording
+            shows the driver's recoveries (the stick stays the label); drawn from ``seed``.
+        profile: the driver's declared preference order, stored with the recording (default:
+            the class table's).
+        model: ride along with this model file: the planner drives, the driver's takeovers are
+            recorded as corrections.
+        wait_for_start: open paused and start after a key and a countdown (False: drive from
+            the first frame, as scripted tests do).
+
+    Returns:
+        How the run ended.
+
+    Raises:
+        UserError: no display, a bad speed, an unreadable model, or a recording that already
+            exists (without ``overwrite``).
+    """
+    scenario = resolve_scenario(scenario) if isinstance(scenario, str) else scenario
+    sim_cfg = sim_config or SimConfig()
+    if not 0.0 < v_mps <= sim_cfg.vehicle.max_speed_mps:
+        raise UserError(SOURCE, f"speed must be in (0, {sim_cfg.vehicle.max_speed_mps:g}] m/s, got {v_mps:g}", field="v_mps")
+    if max_frames is not None and max_frames < 0:
+        raise UserError(SOURCE, "max_frames must be >= 0", field="max_frames")
+    planner = None
+    if model is not None:
+        from terrapref.learning.model_file import load_model
+        from terrapref.planner import Planner
+
+        loaded = load_model(model)
+        camera = camera or loaded.camera
+        preference = preference or loaded.features.preference
+        try:
+            planner = Planner(loaded, camera)
+        except ValueError as exc:
+            raise UserError(str(model), str(exc), field="camera") from None
+    camera_cfg = camera or CameraConfig()
+    preference_cfg = preference or PreferenceSetConfig()
+    frame_dt = 1.0 / sim_cfg.camera_rate_hz
+
+    _open_display()
+    writer: RecordingWriter | None = None
+    try:
+        sim = Simulation(scenario, camera_cfg, sim_cfg)
+        prefs = PreferenceSet(preference_cfg, sim.camera)
+        instructions = INSTRUCTIONS + (RIDE_ALONG_INSTRUCTIONS if planner is not None else ())
+        window = Window(sim, prefs, f"terrapref drive - {scenario.name}" + (f" -> {record_dir}" if record_dir else ""), instructions)
+        if record_dir is not None:
+            driver = {"kind": "corrections" if planner is not None else "human", "input": "keyboard/mouse/gamepad",
+                      "disturbance": disturbance.to_dict() if disturbance else None, "seed": seed}
+            if planner is not None:
+                driver["model"] = str(model)
+            meta = recording_meta(scenario, camera_cfg, preference_cfg, sim_cfg, driver, profile or PreferenceProfile.default(scenario.classes))
+            writer = RecordingWriter(record_dir, meta, scenario.to_dict(), overwrite=overwrite)
+        disturber = Disturber(disturbance, np.random.default_rng(seed), frame_dt) if disturbance and disturbance.active else None
+        session = _Session(sim, prefs, window, writer, v_mps, disturber, planner, wait_for_start)
+        session.run(max_frames, script, realtime)
+        end = Banner("GOAL") if sim.reached_goal else Banner("TIME UP", ALERT_COLOR) if sim.timed_out else None
+        session.draw(session.stick.w, int(session.control.label_of(session.stick.w)), end, "   quit" if session.quit else "   done")
+        if screenshot is not None:
+            window.save(str(screenshot))
+        result = TeleopResult(
+            frames=session.recorded,
+            completed=sim.reached_goal,
+            collisions=sim.collisions,
+            quit=session.quit,
+            record_dir=Path(record_dir) if record_dir is not None else None,
+            duration_s=sim.time_s,
+            edge_frames=session.edge_frames,
+            planner_frames=session.planner_frames,
+        )
+        if writer is not None:
+            writer.close({"completed": result.completed, "collisions": result.collisions, "duration_s": round(result.duration_s, 3),
+                          "quit": result.quit, "edge_frames": result.edge_frames, "planner_frames": result.planner_frames})
+            writer = None
+        if realtime and end is not None:
+            pygame.time.wait(1000)  # let the driver see how the run ended before the window closes
+        return result
+    except BaseException:
+        if writer is not None:
+            writer.abort()
+            if writer.partial_dir is not None:
+                print(f"note: {writer.target} keeps the recording it held; the unfinished new one is in {writer.partial_dir}", file=sys.stderr)
+        raise
+    finally:
+        pygame.quit()
+
+
+def _status(time_s: float, v: float, w: float, label: int, m: int, frames: int, collisions: int, recording: bool, phase: str) -> str:
+    parts = [
+        f"t {time_s:6.1f} s",
+        f"v {v:.2f} m/s",
+        f"w {w:+.2f} rad/s",
+        f"label {label:2d}/{m - 1}",
+        f"{'rec' if recording else 'frames'} {frames}",
+        f"collisions {collisions}",
+    ]
+    if phase != "driving":
+        parts.append(phase.upper())
+    return "   ".join(parts)
