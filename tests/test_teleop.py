@@ -331,3 +331,68 @@ def test_riding_along_with_a_missing_model_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "none.safetensors" in err[0]
     assert not (tmp_path / "rec").exists()
+
+
+def test_frames_taken_off_the_map_are_not_training_data(tmp_path):
+    """A recording made before the edge stopped the vehicle (or imported) keeps its off-map frames; featurising leaves them out."""
+    import json
+
+    from terrapref.demos.dataset import build_dataset
+    from terrapref.features import FeatureConfig
+
+    out = tmp_path / "rec"
+    run_teleop("demo_course", out, realtime=False, wait_for_start=False, max_frames=10)
+    lines = [json.loads(x) for x in (out / "frames.jsonl").read_text().splitlines()]
+    for row in lines[6:]:
+        row["pose"][1] = -3.0  # south of the map
+    (out / "frames.jsonl").write_text("".join(json.dumps(x) + "\n" for x in lines))
+    data = build_dataset([read_recording(out)], FeatureConfig())
+    assert len(data) == 6 and data.meta["recordings"][0]["frames_used"] == 6
+    for row in lines:
+        row["pose"][1] = -3.0
+    (out / "frames.jsonl").write_text("".join(json.dumps(x) + "\n" for x in lines))
+    with pytest.raises(UserError, match="off the"):
+        build_dataset([read_recording(out)], FeatureConfig())
+
+
+def test_a_simulated_keyboard_person_drives_the_course_through_the_window(tmp_path):
+    """Key presses from the synthetic driver's intent, 0.3 s late: the course driven with gentle curves, no collision."""
+    import numpy as np
+
+    from terrapref.demos.expert import ExpertConfig, ExpertDriver
+    from terrapref.demos.teleop.keyboard import KeyboardPerson, START_AFTER_FRAMES
+    from terrapref.scenario import resolve_scenario
+
+    scenario = resolve_scenario("demo_course")
+    person = KeyboardPerson(ExpertDriver(ExpertConfig()), scenario, np.random.default_rng(0))
+    out = tmp_path / "rec"
+    result = run_teleop(scenario, out, realtime=False, script=person, max_frames=2000)
+    rec = read_recording(out)
+    assert result.completed and result.collisions == 0 and not result.quit
+    assert len(rec) == result.frames and rec.times[0] == 0.0
+    assert result.frames + START_AFTER_FRAMES + round(COUNTDOWN_S * 10) <= 2000
+    w = rec.commands[:, 1]
+    steps = np.round(np.abs(np.diff(w)), 6)
+    assert ((steps == 0.0) | (steps == 0.1) | (w[1:] == 0.0)).all(), "the stick moves one step per frame, or Down centres it"
+    assert len(set(rec.labels.tolist())) >= 5 and 0.2 < np.mean(w == 0.0) < 0.9, "curves of several widths, and straight stretches"
+    assert person.presses > 10
+
+
+@pytest.mark.slow
+def test_a_keyboard_demonstration_teaches_beside_a_stick(tmp_path):
+    """The keyboard study on one seed and a few unseen layouts (scripts/keyboard_demo.py; README has the full run)."""
+    import importlib.util
+    import json
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location("keyboard_demo", Path(__file__).parents[1] / "scripts" / "keyboard_demo.py")
+    study = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(study)
+    assert study.main(["--seeds", "1", "--courses", "4", "--out", str(tmp_path / "kb"), "--workers", "2"]) == 0
+    saved = json.loads((tmp_path / "kb" / "keyboard.json").read_text())
+    by_input = {k: [z for z in saved["zones"] if z["input"] == k] for k in ("stick", "keyboard")}
+    assert all(len(v) >= 16 for v in by_input.values())
+    success = {k: sum(z["success"] for z in v) / len(v) for k, v in by_input.items()}
+    assert success["keyboard"] >= 0.8, f"a keyboard demonstration teaches: {success}"
+    assert saved["drives"]["keyboard_s0"]["frames"] > 3000
+    assert (tmp_path / "kb" / "keyboard.png").stat().st_size > 0 and "keyboard" in (tmp_path / "kb" / "KEYBOARD.md").read_text()

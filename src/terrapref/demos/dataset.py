@@ -20,7 +20,7 @@ from terrapref.demos.recording import Recording, read_recording, require_meta
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
 from terrapref.features.lookahead import Lookahead
-from terrapref.scenario import parse_scenario
+from terrapref.scenario import Scenario, parse_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.tensorfile import read_tensor_file, write_tensor_file
 from terrapref.terrain import ClassTable
@@ -72,7 +72,7 @@ class Dataset:
 def featurize_recording(recording: Recording, features: FeatureConfig, camera: CameraConfig | None = None
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
     """U (F, m, K + 1), labels (F,), w (F,) and, when ``features.lookahead`` asks, U2 (F, m, m, K + 1)
-    float16 for every frame of a recording.
+    float16 for every frame of a recording taken on the map (frames off it are left out).
 
     Args:
         camera: None uses the recorded frames; another configuration re-renders each frame from
@@ -88,16 +88,19 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
     tracker = PathTracker(path)
     renderer = None if camera == rec_camera else SegmentationRenderer(PinholeCamera(camera), rasterise(scenario))
     lookahead = Lookahead(features.lookahead, featurizer, PinholeCamera(camera)) if features.lookahead is not None else None
-    n, m = len(recording), featurizer.m
-    if n == 0:
+    if len(recording) == 0:
         raise UserError(str(recording.path / "frames.jsonl"), "holds no frames to featurise", field="frames")
+    keep = np.flatnonzero(on_map(recording.poses, scenario))  # frames taken off the map are not training data
+    if len(keep) == 0:
+        raise UserError(str(recording.path / "frames.jsonl"), f"every frame was taken off the {scenario.size_m[0]:g} x {scenario.size_m[1]:g} m map", field="pose")
+    n, m = len(keep), featurizer.m
     known = np.zeros(256, dtype=bool)
     known[[c.id for c in classes.classes]] = True
     known[255] = True
     shape = (rec_camera.height_px, rec_camera.width_px)
     U = np.empty((n, m, features.n_features), dtype=np.float32)
     U2 = np.empty((n, m, m, features.n_terrain + 1), dtype=np.float16) if lookahead is not None else None
-    for i in range(n):
+    for j, i in enumerate(keep):
         pose = tuple(recording.poses[i])
         if renderer is None:
             image = recording.image(i)
@@ -107,12 +110,19 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
                 raise UserError(str(recording.path / recording.image_files[i]), what)
         view = SegmentationView.of(renderer.render(pose) if renderer is not None else image)
         s = tracker.update(recording.poses[i, :2])
-        U[i] = featurizer(view, pose, path, s)
+        U[j] = featurizer(view, pose, path, s)
         if lookahead is not None:
-            U2[i] = lookahead.utilities(view, pose, path, s)
-    w = recording.commands[:, 1].astype(np.float32)
+            U2[j] = lookahead.utilities(view, pose, path, s)
+    w = recording.commands[keep, 1].astype(np.float32)
     labels = np.asarray(features.preference.control.label_of(w), dtype=np.int64).reshape(n)
     return U, labels, w, U2
+
+
+def on_map(poses: np.ndarray, scenario: Scenario) -> np.ndarray:
+    """Which poses (F, 3) lie on the scenario's map, (F,) bool."""
+    w_m, h_m = scenario.size_m
+    x, y = poses[:, 0], poses[:, 1]
+    return (x >= 0) & (x <= w_m) & (y >= 0) & (y <= h_m)
 
 
 def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: CameraConfig | None = None, progress=None) -> Dataset:
@@ -141,8 +151,9 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
         "classes": first.meta["classes"],
         "profile": first.meta.get("profile"),
         "recordings": [
-            {"path": str(r.path), "scenario": r.meta.get("scenario"), "frames": len(r), "complete": r.complete, "driver": r.meta.get("driver")}
-            for r in recordings
+            {"path": str(r.path), "scenario": r.meta.get("scenario"), "frames": len(r), "frames_used": len(p[1]), "complete": r.complete,
+             "driver": r.meta.get("driver")}
+            for r, p in zip(recordings, parts, strict=True)
         ],
     }
     return Dataset(U, labels, w.astype(np.float32), source, meta, U2)

@@ -53,6 +53,7 @@ class Window:
     def __init__(self, sim: Simulation, prefs: PreferenceSet, title: str, instructions: Sequence[str]) -> None:
         self.sim = sim
         self.palette = sim.world.classes.palette()
+        self.palette_list = [tuple(int(v) for v in rgb) for rgb in self.palette]
         rows, cols = sim.camera.shape
         self.view_size = (cols, rows)
         self.panel_x = cols
@@ -160,8 +161,9 @@ class Window:
         """Draw one frame and show it. ``mode``: who drives (ride-along), drawn top right of the view."""
         canvas = self.canvas
         canvas.fill(PANEL_BG)
-        rgb = np.ascontiguousarray(self.palette[image])
-        canvas.blit(pygame.image.frombuffer(rgb.tobytes(), self.view_size, "RGB"), (0, 0))
+        view = pygame.image.frombuffer(np.ascontiguousarray(image, dtype=np.uint8), self.view_size, "P")  # class ids, 8-bit
+        view.set_palette(self.palette_list)  # SDL colours it while blitting: no (H, W, 3) array per frame
+        canvas.blit(view, (0, 0))
         self._draw_trajectories(label)
         self._draw_hud(hud)
         if mode is not None:

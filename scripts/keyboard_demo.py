@@ -1,0 +1,169 @@
+"""Does a keyboard demonstration teach as well as a stick? One drive of teach_course each way.
+
+For every training seed, the same synthetic driver (default style, the paper's order unless
+--profile says otherwise) demonstrates teach_course twice, with the recommended pushes of the
+default recipe:
+
+- *stick*: its own continuous stick (``terrapref record``);
+- *keyboard*: through the teleop window's own event handling (SDL's dummy video driver), as a
+  person at a keyboard would: it wants what the driver wants (its intent), reacts 0.3 s later,
+  and can only hold Left/Right (one control-set step per frame) or tap Down
+  (terrapref.demos.teleop.keyboard).
+
+A model is trained from each drive with the default recipe, and every model and the driver drive
+the generated layouts. Reported per input: zone success and agreement with the driver, with 95%
+Wilson intervals over all zones, and collisions.
+
+    .venv/bin/python scripts/keyboard_demo.py --out runs/keyboard                  # 5 seeds x gen:2000-2031
+    .venv/bin/python scripts/keyboard_demo.py --seeds 1 --courses 4 --out runs/kb_smoke
+
+Writes KEYBOARD.md, keyboard.json (every zone) and keyboard.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import replace
+from pathlib import Path
+
+os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
+
+import numpy as np  # noqa: E402
+
+from terrapref.demos.dataset import build_dataset  # noqa: E402
+from terrapref.demos.recording import read_recording  # noqa: E402
+from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_many, zone_agrees  # noqa: E402
+from terrapref.evaluation.stats import rate_text, wilson  # noqa: E402
+from terrapref.learning.pipeline import train_and_save  # noqa: E402
+from terrapref.learning.recipe import DEFAULT_RECIPE, record_demonstrations, recipe_named  # noqa: E402
+from terrapref.report.plots import save_intervals  # noqa: E402
+from terrapref.scenario import resolve_scenario  # noqa: E402
+from terrapref.terrain import PreferenceProfile  # noqa: E402
+
+INPUTS = ("stick", "keyboard")
+
+
+def _demonstrate(job: tuple[str, str, int, tuple[str, ...]]) -> tuple[str, str, int, float]:
+    """One drive and its model: (input, model path, seed, seconds)."""
+    kind, workdir, seed, order = job
+    t0 = time.perf_counter()
+    recipe = recipe_named(DEFAULT_RECIPE)
+    profile = PreferenceProfile(order)
+    work = Path(workdir)
+    if kind == "stick":
+        rec = record_demonstrations(recipe, work, seed, profile)[0]
+    else:
+        from terrapref.demos.expert import ExpertConfig, ExpertDriver
+        from terrapref.demos.teleop import run_teleop
+        from terrapref.demos.teleop.keyboard import KeyboardPerson
+
+        scenario = resolve_scenario(recipe.course)
+        rec = work / "demo_keyboard"
+        person = KeyboardPerson(ExpertDriver(ExpertConfig.styled("default", order)), scenario, np.random.default_rng(seed * 100))
+        # The same seeds as the stick's drive: the same pushes (recipe.disturbance) at the same moments.
+        run_teleop(scenario, rec, overwrite=True, realtime=False, script=person, disturbance=recipe.disturbance, seed=seed * 100,
+                   profile=profile)
+    model = work / f"model_{kind}.safetensors"
+    train_and_save(build_dataset([read_recording(rec)], recipe.features()), model, replace(recipe.train, seed=seed),
+                   checkpoints=False, recipe=recipe.name)
+    return kind, str(model), seed, time.perf_counter() - t0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", required=True, type=Path)
+    ap.add_argument("--profile", default="mud,rock,water,non_traversable")
+    ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--first", type=int, default=2000, help="first generated layout")
+    ap.add_argument("--courses", type=int, default=32)
+    ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    args = ap.parse_args(argv)
+    order = tuple(args.profile.split(","))
+    layouts = [f"gen:{args.first + i}" for i in range(args.courses)]
+    args.out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    jobs = [(kind, str(args.out / "work" / f"{kind}_s{s}"), s, order) for s in range(args.seeds) for kind in INPUTS]
+    models: dict[tuple[str, int], str] = {}
+    with ProcessPoolExecutor(args.workers, mp_context=mp.get_context("spawn")) as pool:
+        futures = [pool.submit(_demonstrate, j) for j in jobs]
+        for k, fut in enumerate(as_completed(futures), start=1):
+            kind, model, seed, seconds = fut.result()
+            models[(kind, seed)] = model
+            print(f"demonstrated and trained {k}/{len(jobs)} ({kind}, seed {seed}, {seconds:.0f} s)", file=sys.stderr, flush=True)
+    t_train = time.perf_counter() - t0
+
+    keys = sorted(models)
+    specs = [RunSpec(c, 0, PLANNER, models[key], order) for key in keys for c in layouts]
+    specs += [RunSpec(c, 0, EXPERT, None, order) for c in layouts]
+    results = run_many(specs, args.workers, lambda k, n: print(f"run {k}/{n}", file=sys.stderr, flush=True) if k % 20 == 0 or k == n else None)
+    t_eval = time.perf_counter() - t0 - t_train
+
+    driver = {(r["scenario"], z["id"]): z for r in results if r["driver"] == EXPERT for z in r["metrics"]["zones"]}
+    kind_of = {models[key]: key for key in keys}
+    rows = []
+    collisions = dict.fromkeys(INPUTS, 0)
+    for spec, r in zip(specs, results, strict=True):
+        if r["driver"] != PLANNER:
+            continue
+        kind, seed = kind_of[spec.model_path]
+        collisions[kind] += r["metrics"]["collisions"]
+        for z in r["metrics"]["zones"]:
+            d = driver[(r["scenario"], z["id"])]
+            rows.append({"input": kind, "seed": seed, "scenario": r["scenario"], "zone": z["id"], "choice": z["choice"],
+                         "driver_choice": d["choice"], "agrees": zone_agrees(z, d), "success": z["success"]})
+    drives = {}
+    for key in keys:
+        kind, seed = key
+        rec = read_recording(Path(models[key]).parent / ("demo_keyboard" if kind == "keyboard" else _stick_demo(Path(models[key]).parent)))
+        w = rec.commands[:, 1]
+        drives[f"{kind}_s{seed}"] = {"frames": len(rec), "minutes": rec.duration_s / 60, "straight_share": float(np.mean(w == 0.0)),
+                                     "collisions": rec.meta.get("summary", {}).get("collisions")}
+    (args.out / "keyboard.json").write_text(json.dumps({"profile": order, "layouts": layouts, "zones": rows, "collisions": collisions, "drives": drives,
+                                                        "train_s": t_train, "eval_s": t_eval}, indent=0))
+    write_report(args.out, order, layouts, rows, collisions, drives, t_train, t_eval, args.workers)
+    return 0
+
+
+def _stick_demo(work: Path) -> str:
+    return next(p.name for p in sorted(work.iterdir()) if p.is_dir() and p.name.startswith("demo_"))
+
+
+def write_report(out: Path, order, layouts, rows, collisions, drives, t_train: float, t_eval: float, workers: int) -> None:
+    seeds = sorted({r["seed"] for r in rows})
+    lines = ["# A keyboard demonstration against a stick: one drive of teach_course each", "",
+             f"Driver: the synthetic driver, default style, order {' > '.join(order)}; {len(seeds)} training seed(s); every model "
+             f"drives {len(layouts)} generated layouts ({layouts[0]} to {layouts[-1]}). Rates with 95% Wilson intervals over all zones.", "",
+             "| demonstration | zone success | agreement with the driver | collisions | drive: frames at w = 0 | drive: collisions | per seed (agreement) |",
+             "|---|---|---|---|---|---|---|"]
+    labels, rates, intervals = [], [], []
+    for kind in INPUTS:
+        sel = [r for r in rows if r["input"] == kind]
+        if not sel:
+            continue
+        ds = [d for k, d in drives.items() if k.startswith(kind + "_")]
+        per_seed = ", ".join(f"{np.mean([r['agrees'] for r in sel if r['seed'] == s]):.0%}" for s in seeds)
+        lines.append(f"| {kind} | {rate_text(sum(r['success'] for r in sel), len(sel))} | {rate_text(sum(r['agrees'] for r in sel), len(sel))} | "
+                     f"{collisions[kind]} | {np.mean([d['straight_share'] for d in ds]):.0%} | "
+                     f"{sum(d['collisions'] or 0 for d in ds)} | {per_seed} |")
+        for key, name in (("success", "zone success"), ("agrees", "agreement")):
+            ok = sum(r[key] for r in sel)
+            labels.append(f"{kind}: {name}")
+            rates.append(ok / len(sel))
+            intervals.append(wilson(ok, len(sel)))
+    lines += ["", f"Demonstrating and training {t_train:.0f} s, evaluation {t_eval:.0f} s (wall, {workers} workers).", "",
+              "![keyboard](keyboard.png)", ""]
+    save_intervals(out / "keyboard.png", labels, rates, intervals, "share of zones", target=0.95,
+                   title=f"one drive of teach_course by stick or keyboard, {len(layouts)} unseen layouts x {len(seeds)} seeds; 95% intervals")
+    (out / "KEYBOARD.md").write_text("\n".join(lines))
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,79 @@
+"""A simulated person at a keyboard: the synthetic driver's intent, typed through the window.
+
+The window is driven through its own event handling (a :data:`~terrapref.demos.teleop.loop.Script`):
+the person sees the scene, wants what the synthetic driver wants (its intended yaw rate, before
+that driver's own hand), reacts ``reaction_s`` later, and can only hold Left or Right (the stick
+moves one control-set step per frame) or tap Down (centre). What a keyboard loses against a
+stick (steps instead of a continuous w, a late and coarse return to straight) is therefore in the
+recording, as it would be with a person.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+import pygame
+
+from terrapref.demos.expert import ExpertDriver
+from terrapref.demos.teleop.loop import TeleopState
+from terrapref.demos.teleop.stick import KEY_RATE_RPS2
+from terrapref.scenario import Scenario
+from terrapref.world import WorldMap
+
+REACTION_S = 0.3
+"""A person's reaction time from seeing to pressing [s]."""
+START_AFTER_FRAMES = 5
+"""The person presses Space this many frames after the window opens."""
+
+
+def _key(kind: int, key: int) -> pygame.event.Event:
+    return pygame.event.Event(kind, key=key, mod=0, unicode="", scancode=0)
+
+
+class KeyboardPerson:
+    """Key presses from the synthetic driver's intent, at a person's reaction time.
+
+    Args:
+        expert: the driver whose intent the person has (its preference and style).
+        scenario: the course driven; ``world`` its raster when the caller already has it.
+        rng: seeds the expert's tie-breaks.
+        camera_rate_hz: the window's frame rate.
+        reaction_s: the delay from a frame to the key press it causes [s].
+    """
+
+    def __init__(self, expert: ExpertDriver, scenario: Scenario, rng: np.random.Generator, camera_rate_hz: float = 10.0,
+                 reaction_s: float = REACTION_S, world: WorldMap | None = None) -> None:
+        self.expert = expert
+        self.expert.reset(scenario, rng, world=world)
+        self.step = KEY_RATE_RPS2 / camera_rate_hz  # how far one frame of a held arrow moves the stick [rad/s]
+        self.queue: deque[float] = deque([0.0] * max(0, round(reaction_s * camera_rate_hz)))
+        self.held: int | None = None  # the arrow held down, if any
+        self.presses = 0
+
+    def __call__(self, state: TeleopState) -> list[pygame.event.Event]:
+        if state.phase == "waiting":
+            return [_key(pygame.KEYDOWN, pygame.K_SPACE)] if state.index >= START_AFTER_FRAMES else []
+        if state.phase != "driving":
+            return []
+        self.queue.append(self.expert.intent(state.frame))
+        target = self.queue.popleft()
+        events = []
+        want: int | None = None
+        centre = False
+        if abs(target - state.w) > 0.5 * self.step:
+            if target == 0.0 and abs(state.w) <= 1.5 * self.step:
+                centre = True  # nearly straight and straight is wanted: one tap of Down
+            else:
+                want = pygame.K_LEFT if target > state.w else pygame.K_RIGHT
+        if self.held is not None and self.held != want:
+            events.append(_key(pygame.KEYUP, self.held))
+            self.held = None
+        if want is not None and self.held is None:
+            events.append(_key(pygame.KEYDOWN, want))
+            self.held = want
+            self.presses += 1
+        if centre:
+            events += [_key(pygame.KEYDOWN, pygame.K_DOWN), _key(pygame.KEYUP, pygame.K_DOWN)]
+            self.presses += 1
+        return events
