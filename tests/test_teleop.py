@@ -396,3 +396,28 @@ def test_a_keyboard_demonstration_teaches_beside_a_stick(tmp_path):
     assert success["keyboard"] >= 0.8, f"a keyboard demonstration teaches: {success}"
     assert saved["drives"]["keyboard_s0"]["frames"] > 3000
     assert (tmp_path / "kb" / "keyboard.png").stat().st_size > 0 and "keyboard" in (tmp_path / "kb" / "KEYBOARD.md").read_text()
+
+
+def test_the_gamepad_stick_springs_back_and_takes_over_from_the_keys():
+    from terrapref.demos.teleop import AXIS_DEADZONE, Stick
+
+    class Pad:
+        axis = 0.0
+
+        def get_numaxes(self) -> int:
+            return 2
+
+        def get_axis(self, i: int) -> float:
+            return self.axis if i == 0 else 0.0
+
+    pygame.init()
+    stick = Stick(w_max_rps=1.0)
+    stick.joystick = pad = Pad()
+    stick.follow(0.3)  # the planner's command while it drives
+    assert stick.update(0.1) == 0.3 and not stick.touched and not stick.active
+    pad.axis = 0.5  # pushed half right
+    assert stick.update(0.1) == pytest.approx(-0.5) and stick.source == "pad" and stick.touched and stick.active
+    pad.axis = AXIS_DEADZONE / 2  # released: a spring stick returns to straight
+    assert stick.update(0.1) == 0.0 and not stick.active
+    stick.handle(key(pygame.KEYDOWN, pygame.K_LEFT))
+    assert stick.update(0.1) == pytest.approx(0.1) and stick.source == "keys", "the input used last drives"

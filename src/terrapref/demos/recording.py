@@ -165,7 +165,11 @@ class Recording:
 
     @property
     def duration_s(self) -> float:
-        return float(self.times[-1] - self.times[0]) + 0.1 if len(self.times) else 0.0
+        """Time the frames cover [s]: frames x the frame period (gaps, as between a ride-along's
+        corrections, do not count)."""
+        if len(self.times) < 2:
+            return 0.1 * len(self.times)
+        return float(len(self.times) * np.median(np.diff(self.times)))
 
     def image(self, i: int) -> np.ndarray:
         """Frame ``i``'s class ids (H, W) uint8; an unreadable or foreign image is a UserError."""

@@ -63,7 +63,7 @@ def info_lines(path: str | Path) -> list[str]:
                  f"frames          {len(rec)} ({rec.duration_s:.1f} s)",
                  f"scenario        {m.get('scenario')}",
                  f"driver          {driver.get('kind', '?')}" + (f", style {driver['style']}" if driver.get("style") else "")
-                 + (f", seed {driver['seed']}" if driver.get("seed") is not None else "") + (f", from {driver['bag']}" if driver.get("bag") else ""),
+                 + (f", seed {driver['seed']}" if driver.get("seed") is not None else "") + (f", from {driver['bag']}" if driver.get("bag") else "") + (f", riding along with {driver['model']}" if driver.get("model") else ""),
                  f"created         {m.get('created', '?')}"]
         return lines + _common(m)
     if p.suffix == ".onnx":
