@@ -13,6 +13,7 @@ import pytest
 from terrapref.cli import main
 from terrapref.evaluation.perturb import Perturbation
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PURE_PURSUIT
+from terrapref.grid import Engine
 from terrapref.report.study import FULL, LEARNED, POSE_DEG_PER_M, QUICK, TEACH_ORDERS, StudyPlan, perturbation, run_study
 from terrapref.report.study_report import ALL, ALT_PROFILE, METHOD_NAMES, _cell, _per_seed, _rate, _select, _zone_success, disagreement_zones, write_study
 
@@ -317,7 +318,7 @@ TINY = StudyPlan(seeds=1, minutes=(0.5,), epochs=2, cnn_epochs=1, noise={"drop_r
 def tiny_study(tmp_path_factory) -> tuple[Path, list[str]]:
     out = tmp_path_factory.mktemp("study")
     lines: list[str] = []
-    path = run_study(out, TINY, workers=2, log=lines.append)
+    path = run_study(out, TINY, Engine(workers=2), log=lines.append)
     return path, lines
 
 

@@ -14,6 +14,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from terrapref.errors import UserError
+from terrapref.grid import ENGINES, Engine, GridError
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
@@ -347,8 +348,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if args.seeds < 1:
         raise UserError("--seeds", "must be >= 1")
     _check_output(args.out, "--out", [args.model], folder=True)
-    if args.workers is not None and args.workers < 1:
-        raise UserError("--workers", f"must be an integer >= 1, got {args.workers}")
+    engine = _engine(args)
     try:
         frames = sorted({int(f) for f in args.frames.split(",") if f.strip()}) if args.frames else []
     except ValueError:
@@ -362,7 +362,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
     if args.style not in STYLES:
         raise UserError("--style", f"unknown driver style {args.style!r}; styles: {', '.join(STYLES)}")
-    metrics = evaluate_model(args.model, args.scenarios, args.seeds, args.out, profile, not args.no_driver, frames, args.workers,
+    metrics = evaluate_model(args.model, args.scenarios, args.seeds, args.out, profile, not args.no_driver, frames, engine,
                              progress=lambda k, n: bar.update(k, f"{k}/{n} runs"), style=args.style, mcap=args.mcap)
     bar.close()
     zones = [z for sc in metrics["scenarios"].values() for run in sc.get("planner", {}).values() for z in run["zones"]]
@@ -489,8 +489,9 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     if not names or len(set(names)) != len(names):
         raise UserError("--recipes", f"expected distinct recipe names separated by commas, got {args.recipes!r}")
     recipes = tuple(recipe_named(n, "--recipes") for n in names)
+    engine = _engine(args)
     t0 = time.perf_counter()
-    report = reproduce(args.out, args.seeds, args.eval_seeds, recipes, profile, args.workers, log=lambda m: print(m, flush=True))
+    report = reproduce(args.out, args.seeds, args.eval_seeds, recipes, profile, engine, log=lambda m: print(m, flush=True))
     print(f"wrote {report} ({time.perf_counter() - t0:.0f} s)")
     return 0
 
@@ -506,16 +507,36 @@ def _cmd_study(args: argparse.Namespace) -> int:
         if args.seeds < 1:
             raise UserError("--seeds", "must be >= 1")
         plan = replace(plan, seeds=args.seeds)
-    if args.workers is not None and args.workers < 1:
-        raise UserError("--workers", "must be >= 1")
+    engine = _engine(args)
     if args.recipe is not None:
         from terrapref.learning.recipe import recipe_named
 
         plan = replace(plan, recipe=recipe_named(args.recipe).name)
     t0 = time.perf_counter()
-    path = run_study(args.out, plan, args.workers, log=lambda m: print(m, flush=True))
+    path = run_study(args.out, plan, engine, log=lambda m: print(m, flush=True))
     print(f"wrote {path} ({time.perf_counter() - t0:.0f} s)")
     return 0
+
+
+def _engine(args: argparse.Namespace) -> Engine:
+    """The grid engine of ``--engine``, ``--workers`` and ``--address``, checked before any work."""
+    if args.workers is not None and args.workers < 1:
+        raise UserError("--workers", f"must be an integer >= 1, got {args.workers}")
+    if args.address is not None and args.engine != "ray":
+        raise UserError("--address", "is the address of a Ray cluster; add --engine ray")
+    if args.engine == "ray":
+        import importlib.util
+
+        if importlib.util.find_spec("ray") is None:
+            raise UserError("--engine", "ray is not installed in this environment (bash scripts/setup.sh installs it)")
+    return Engine(args.engine, args.workers, args.address)
+
+
+def _add_engine_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--workers", type=int, help="parallel jobs on this machine (default: one per core)")
+    p.add_argument("--engine", choices=ENGINES, default="local",
+                   help="where the jobs run: local processes (default) or Ray (a local instance, or the cluster at --address)")
+    p.add_argument("--address", metavar="HOST:PORT", help="a Ray cluster to run the jobs on (ray start --head on one machine); with --engine ray")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -617,7 +638,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", help="comma-separated frame numbers of seed 0 to draw as decision pictures")
     p.add_argument("--no-driver", action="store_true", help="skip the synthetic driver's comparison runs")
     p.add_argument("--style", default="default", help="the synthetic driver's style for the comparison runs (agreement)")
-    p.add_argument("--workers", type=int, help="parallel processes (default: one per core)")
+    _add_engine_args(p)
     p.add_argument("--mcap", action="store_true", help="also write each planner run as ROS 2 MCAP in OUT/runs (Foxglove, RViz)")
     p.set_defaults(func=_cmd_evaluate)
 
@@ -628,7 +649,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--recipes", default="paper,ours,teach",
                    help="recipes to compare, by name, separated by commas (default: paper,ours,teach; see `terrapref recipes`)")
     p.add_argument("--profile", help="preference order for the demonstrations, best first")
-    p.add_argument("--workers", type=int, help="parallel processes (default: one per core)")
+    _add_engine_args(p)
     p.set_defaults(func=_cmd_reproduce)
 
     p = sub.add_parser("study", help="baselines, data efficiency, profiles, robustness and ablations; write STUDY.md")
@@ -636,7 +657,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true", help="one seed and fewer levels (about 3 minutes)")
     p.add_argument("--seeds", type=int, help="training seeds (default: 3, or 1 with --quick)")
     p.add_argument("--recipe", metavar="NAME", help="the recipe section 6 teaches every order and style with (default: teach)")
-    p.add_argument("--workers", type=int, help="parallel processes (default: one per core)")
+    _add_engine_args(p)
     p.set_defaults(func=_cmd_study)
 
     p = sub.add_parser("import", help="turn a ROS 1 bag, ROS 2 bag (sqlite3 or MCAP) of a drive into a recording")
@@ -692,6 +713,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as exc:
         print(f"error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
         return 2
+    except GridError as exc:  # jobs of a grid failed: each named by its inputs
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
     except Exception as exc:  # a bug, not a user error: one line unless asked for the traceback
         if os.environ.get("TERRAPREF_DEBUG"):
             raise

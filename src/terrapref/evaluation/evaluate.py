@@ -11,6 +11,7 @@ import numpy as np
 from terrapref.camera import PinholeCamera
 from terrapref.errors import UserError
 from terrapref.fileio import write_text_atomic
+from terrapref.grid import Engine
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, annotate_agreement, run_many, scenario_and_world, summarise
 from terrapref.evaluation.scoring import classes_in_zone
 from terrapref.learning.identify import GRASS, Identifiability
@@ -30,7 +31,7 @@ def evaluate_model(
     profile: PreferenceProfile | None = None,
     with_driver: bool = True,
     frames: Sequence[int] = (),
-    workers: int | None = None,
+    engine: Engine | None = None,
     progress: Callable[[int, int], None] | None = None,
     style: str = "default",
     mcap: bool = False,
@@ -44,7 +45,7 @@ def evaluate_model(
     Writes ``metrics.json``, one top-down figure per scenario and the decision pictures of
     ``frames`` (for seed 0) into ``out_dir``, and with ``mcap`` every planner run as ROS 2 MCAP
     (``runs/SCENARIO_seedN.mcap``: the camera, the pose, the 21 trajectories and the one chosen);
-    returns the metrics.
+    returns the metrics. ``engine``: where the runs go (default: local processes, one per core).
     """
     model = load_policy(model_path)  # C, or a learned baseline (linear, CNN)
     for name in scenarios:
@@ -53,7 +54,7 @@ def evaluate_model(
     specs = [RunSpec(name, seed, PLANNER, model_path, profile.order, tuple(frames) if seed == 0 else (), keep_run=mcap) for name in scenarios for seed in range(seeds)]
     if with_driver:
         specs += [RunSpec(name, seed, EXPERT, None, profile.order, style=style) for name in scenarios for seed in range(seeds)]
-    results = run_many(specs, workers, progress)
+    results = run_many(specs, progress=progress, engine=engine)
     annotate_agreement(results)
     identified = _identifiability(model)
     if identified is not None:

@@ -1,7 +1,8 @@
 """Closed-loop evaluation: drive scenarios with the planner (and the synthetic driver for
 comparison) over seeds, score every zone (SPEC 12), and collect the paths for figures.
 
-Each (scenario, seed, driver) run is independent, so runs are spread over worker processes.
+Each (scenario, seed, driver) run is independent, so runs are spread over worker processes
+or a Ray cluster (terrapref.grid).
 Seed 0 starts exactly at the scenario's start; other seeds start up to 0.3 m to the side and
 3 degrees off, and seed the synthetic driver's noise.
 """
@@ -12,7 +13,6 @@ import functools
 import math
 import os
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +21,7 @@ from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.evaluation.scoring import score_run
 from terrapref.evaluation.stats import wilson
 from terrapref.evaluation.perturb import PerturbedDriver, Perturbation
+from terrapref.grid import Engine, run_grid
 from terrapref.planner import Planner, PlannerDriver
 from terrapref.planner.policy import CostPolicy, Policy, PurePursuitPolicy, load_policy
 from terrapref.scenario import resolve_scenario
@@ -113,27 +114,17 @@ def run_one(spec: RunSpec) -> dict:
     return out
 
 
-def run_many(specs: list[RunSpec], workers: int | None = None, progress: Callable[[int, int], None] | None = None) -> list[dict]:
-    """Run specs (in parallel where there is more than one core); results in the order given."""
-    workers = workers if workers is not None else min(len(specs), os.cpu_count() or 1)
-    results: list[dict | None] = [None] * len(specs)
-    if workers <= 1:
-        for i, spec in enumerate(specs):
-            results[i] = run_one(spec)
-            if progress:
-                progress(i + 1, len(specs))
-    else:
-        import multiprocessing as mp
+def run_many(specs: list[RunSpec], workers: int | None = None, progress: Callable[[int, int], None] | None = None,
+             engine: Engine | None = None) -> list[dict]:
+    """Run specs on ``engine`` (default: local processes, ``workers`` of them); results in the order given."""
+    engine = engine or Engine(workers=workers if workers is not None else min(len(specs), os.cpu_count() or 1) or 1)
+    return run_grid(run_one, specs, engine, progress, describe=describe_spec)
 
-        with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork")) as pool:
-            futures = {pool.submit(run_one, spec): i for i, spec in enumerate(specs)}
-            from concurrent.futures import as_completed
 
-            for done, fut in enumerate(as_completed(futures), start=1):
-                results[futures[fut]] = fut.result()
-                if progress:
-                    progress(done, len(specs))
-    return [r for r in results if r is not None]
+def describe_spec(spec: RunSpec) -> str:
+    """A run's inputs, for a report that it failed."""
+    who = f"model {spec.model_path}" if spec.model_path else spec.driver
+    return f"{who} on {spec.scenario}, seed {spec.seed}"
 
 
 def zone_agrees(planner_zone: dict, driver_zone: dict) -> bool:

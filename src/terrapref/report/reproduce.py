@@ -12,16 +12,15 @@ from __future__ import annotations
 
 import functools
 import json
-import os
 import time
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
 from terrapref.fileio import write_text_atomic
+from terrapref.grid import Engine, run_grid
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, annotate_agreement, run_many, summarise
 from terrapref.evaluation.stats import rate_text
 from terrapref.learning.recipe import OURS, PAPER, TEACH, Recipe, practice_courses, run_recipe
@@ -54,12 +53,13 @@ def _train_job(args: tuple[tuple[Recipe, ...], str, int, tuple[str, ...]]) -> li
 
 
 def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes: tuple[Recipe, ...] = (PAPER, OURS, TEACH),
-              profile: PreferenceProfile | None = None, workers: int | None = None, log: Callable[[str], None] = print) -> Path:
-    """Run the whole reproduction into ``out_dir`` and return the path of REPORT.md."""
+              profile: PreferenceProfile | None = None, engine: Engine | None = None, log: Callable[[str], None] = print) -> Path:
+    """Run the whole reproduction into ``out_dir`` and return the path of REPORT.md; ``engine``
+    runs its jobs (default: local processes, one per core)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     profile = profile or PreferenceProfile.default()
-    workers = workers or os.cpu_count() or 1
+    engine = engine or Engine()
     timings: dict[str, float] = {}
 
     t0 = time.perf_counter()
@@ -73,13 +73,9 @@ def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes:
     jobs = [(tuple(g), str(out / "work" / f"seed{s}"), s, profile.order)
             for key, g in sorted(groups.items(), key=lambda kv: -cost[kv[0]]) for s in range(seeds)]
     log(f"[1/3] demonstrations, corrections and training: {len(recipes) * seeds} models ({', '.join(r.name for r in recipes)} x {seeds} seeds) ...")
-    if workers > 1 and len(jobs) > 1:
-        import multiprocessing as mp
-
-        with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=mp.get_context("fork")) as pool:
-            trained = [row for rows in pool.map(_train_job, jobs) for row in rows]
-    else:
-        trained = [row for j in jobs for row in _train_job(j)]
+    done = run_grid(_train_job, jobs, engine, lambda k, n: log(f"      trained {k}/{n} job(s)"),
+                    describe=lambda j: f"recipes {', '.join(r.name for r in j[0])}, seed {j[2]}")
+    trained = [row for rows in done for row in rows]
     order = {r.name: i for i, r in enumerate(recipes)}
     trained.sort(key=lambda t: (t["seed"], order[t["recipe"]]))
     timings["demonstrate + correct + train"] = time.perf_counter() - t0
@@ -91,7 +87,7 @@ def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes:
     specs += [RunSpec(sc, s, EXPERT, None, profile.order) for sc in scenarios for s in range(seeds)]
     specs.sort(key=lambda sp: -scenario_length(sp.scenario))  # longest first: no core idles at the end
     log(f"[2/3] closed-loop evaluation: {len(specs)} runs ...")
-    results = run_many(specs, workers, every_tenth(log))
+    results = run_many(specs, progress=every_tenth(log), engine=engine)
     annotate_agreement(results)
     for r, spec in zip(results, specs):
         r["recipe"] = next((t["recipe"] for t in trained if t["model"] == spec.model_path), "driver")

@@ -24,10 +24,8 @@ Stages (each parallel across processes):
 from __future__ import annotations
 
 import json
-import os
 import time
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -35,6 +33,7 @@ import numpy as np
 
 from terrapref.fileio import write_text_atomic
 from terrapref.evaluation.perturb import Perturbation
+from terrapref.grid import Engine, run_grid
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PLANNER, PURE_PURSUIT, RunSpec, run_many
 from terrapref.features import FeatureConfig
 from terrapref.progress import every_tenth
@@ -210,36 +209,21 @@ def teach_jobs(plan: StudyPlan, work: Path) -> list[dict]:
             for s in range(plan.seeds) for o, st in combos]
 
 
-def _pool_map(fn: Callable, jobs: list, workers: int, log: Callable[[str], None], what: str) -> list:
-    """Map over jobs in worker processes (in order), logging progress."""
-    if not jobs:
-        return []
-    out: list = [None] * len(jobs)
-    if workers <= 1 or len(jobs) == 1:
-        for i, j in enumerate(jobs):
-            out[i] = fn(j)
-            log(f"      {what} {i + 1}/{len(jobs)}")
-        return out
-    import multiprocessing as mp
-    from concurrent.futures import as_completed
-
-    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=mp.get_context("fork")) as pool:
-        futures = {pool.submit(fn, j): i for i, j in enumerate(jobs)}
-        for k, fut in enumerate(as_completed(futures), start=1):
-            out[futures[fut]] = fut.result()
-            log(f"      {what} {k}/{len(jobs)}")
-    return out
+def _pool_map(fn: Callable, jobs: list, engine: Engine, log: Callable[[str], None], what: str) -> list:
+    """Map over jobs on ``engine`` (in order), logging progress."""
+    return run_grid(fn, jobs, engine, lambda k, n: log(f"      {what} {k}/{n}"), describe=lambda j: f"{what} {j!r}")
 
 
 # -- the study -------------------------------------------------------------------------------
 
 
-def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None = None, log: Callable[[str], None] = print) -> Path:
-    """Run every stage into ``out_dir``; returns the path of STUDY.md."""
+def run_study(out_dir: str | Path, plan: StudyPlan = FULL, engine: Engine | None = None, log: Callable[[str], None] = print) -> Path:
+    """Run every stage into ``out_dir`` on ``engine`` (default: local processes, one per core);
+    returns the path of STUDY.md."""
     out = Path(out_dir)
     work = out / "work"
     work.mkdir(parents=True, exist_ok=True)
-    workers = workers or os.cpu_count() or 1
+    engine = engine or Engine()
     default = PreferenceProfile.default().order
     timings: dict[str, float] = {}
     seeds = list(range(plan.seeds))
@@ -247,7 +231,7 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
     t0 = time.perf_counter()
     log(f"[1/6] demonstrations: {len(seeds)} seed(s) x 2 profiles x {DEMONSTRATIONS.demonstrations} runs ...")
     rec_jobs = [(str(work / f"{tag}_s{s}"), s, prof) for s in seeds for tag, prof in (("default", default), ("alt", ALT_PROFILE))]
-    recs = dict(zip([(j[1], j[2]) for j in rec_jobs], _pool_map(_record_job, rec_jobs, workers, log, "demonstration set")))
+    recs = dict(zip([(j[1], j[2]) for j in rec_jobs], _pool_map(_record_job, rec_jobs, engine, log, "demonstration set")))
     timings["demonstrations"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -258,7 +242,7 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
                       (recs[(s, ALT_PROFILE)], str(work / f"alt_s{s}" / "U.safetensors"), "U", None)]
         feat_jobs += [(recs[(s, default)], str(base / f"U_n{n}.safetensors"), "U", n) for n in plan.horizons]
     log(f"[2/6] featurisation: {len(feat_jobs)} sets ...")
-    _pool_map(_featurise_job, feat_jobs, workers, log, "set")
+    _pool_map(_featurise_job, feat_jobs, engine, log, "set")
     timings["featurisation"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -285,7 +269,7 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
             add("ablation", "C", s, base / "U.safetensors", f"C_h{w}", train={"hidden": w}, variant=f"hidden width {w}")
     jobs.sort(key=lambda j: -(j.get("minutes") or 99) * (3 if j["method"] != "linear" else 0.1))  # long jobs first
     log(f"[3/6] training: {len(jobs)} models ...")
-    trained = _pool_map(_train_job, jobs, workers, log, "model")
+    trained = _pool_map(_train_job, jobs, engine, log, "model")
     timings["training"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -294,7 +278,7 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
 
     log(f"[4/6] teaching: {len(taught_jobs)} drives of {recipe_named(plan.recipe).course} and models (recipe {plan.recipe}; "
         f"{len(plan.orders)} orders, {len(plan.styles)} driver styles, {plan.seeds} seed(s)) ...")
-    taught = _pool_map(_teach_job, taught_jobs, workers, log, "taught model")
+    taught = _pool_map(_teach_job, taught_jobs, engine, log, "taught model")
     timings["teaching"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -332,7 +316,7 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, workers: int | None =
     order = sorted(range(len(specs)), key=lambda i: -scenario_length(specs[i].scenario))
     specs, tags = [specs[i] for i in order], [tags[i] for i in order]
     log(f"[5/6] closed-loop evaluation: {len(specs)} runs over {len(scenarios) + len(plan.layouts)} scenarios ...")
-    results = run_many(specs, workers, every_tenth(log))
+    results = run_many(specs, progress=every_tenth(log), engine=engine)
     timings["evaluation"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

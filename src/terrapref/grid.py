@@ -1,0 +1,181 @@
+"""Running a grid of independent jobs: local worker processes, or a Ray cluster.
+
+Every command that runs many independent jobs (evaluation runs, the reproduction's and the
+study's demonstrations and trainings) maps one function over a list of jobs through
+:func:`run_grid`. The engine decides where the jobs run:
+
+- ``local`` (the default): forked worker processes on this machine, one per core unless
+  ``workers`` says otherwise; one worker runs the jobs in this process.
+- ``ray``: Ray tasks. With no ``address`` a Ray instance is started on this machine with
+  ``workers`` CPUs; with ``address`` (``ray start --head`` on one machine, ``ray start --address
+  HEAD:6379`` on the others) the jobs go to that cluster. Jobs pass files by path, so on a
+  cluster the output folder must be on storage every node sees, and terrapref must be installed
+  on every node.
+
+Results come back in the jobs' order whatever order they finish in, so a grid gives the same
+results on either engine and any number of workers. Progress is reported as jobs finish. A job
+that fails does not stop the others; once all have run, a bad input is raised as the
+:class:`UserError` it is, and any other failure as a :class:`GridError` naming every failed job
+by its inputs (``TERRAPREF_DEBUG=1`` prints their tracebacks).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+from terrapref.errors import UserError
+
+J = TypeVar("J")
+R = TypeVar("R")
+
+ENGINES = ("local", "ray")
+
+
+class GridError(RuntimeError):
+    """Some jobs of a grid failed; ``failures`` holds (job description, error text) for each."""
+
+    def __init__(self, failures: list[tuple[str, str]], total: int) -> None:
+        self.failures = failures
+        shown = "; ".join(f"{what}: {error}" for what, error in failures[:3])
+        more = f" (and {len(failures) - 3} more)" if len(failures) > 3 else ""
+        super().__init__(f"{len(failures)} of {total} jobs failed: {shown}{more}")
+
+
+@dataclass(frozen=True)
+class Engine:
+    """Where a grid's jobs run.
+
+    Attributes:
+        kind: ``local`` or ``ray``.
+        workers: parallel jobs on this machine (local processes, or the CPUs of a Ray instance
+            started here); None is one per core. Ignored with ``address`` (the cluster's CPUs).
+        address: a Ray cluster's address (``HOST:6379`` or ``auto``); None starts one here.
+    """
+
+    kind: str = "local"
+    workers: int | None = None
+    address: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in ENGINES:
+            raise ValueError(f"unknown engine {self.kind!r}; engines: {', '.join(ENGINES)}")
+        if self.workers is not None and self.workers < 1:
+            raise ValueError("workers must be >= 1")
+        if self.address is not None and self.kind != "ray":
+            raise ValueError("an address is for the ray engine")
+
+    @property
+    def n_workers(self) -> int:
+        return self.workers if self.workers is not None else os.cpu_count() or 1
+
+    def describe(self) -> str:
+        if self.kind == "local":
+            return f"local, {self.n_workers} worker{'s' if self.n_workers > 1 else ''}"
+        return f"ray, cluster at {self.address}" if self.address else f"ray, a local instance with {self.n_workers} CPUs"
+
+
+LOCAL = Engine()
+
+
+def _guarded(fn: Callable[[J], R], job: J) -> tuple[bool, Any]:
+    """Run one job; an exception comes back as a value rather than ending the grid: a
+    :class:`UserError` as itself (it names the file at fault), any other as its text and traceback."""
+    try:
+        return True, fn(job)
+    except UserError as exc:
+        return False, exc
+    except Exception as exc:  # noqa: BLE001 - reported with the job's inputs by run_grid
+        return False, (f"{type(exc).__name__}: {exc}", traceback.format_exc())
+
+
+def run_grid(
+    fn: Callable[[J], R],
+    jobs: Sequence[J],
+    engine: Engine = LOCAL,
+    progress: Callable[[int, int], None] | None = None,
+    describe: Callable[[J], str] = repr,
+) -> list[R]:
+    """``[fn(job) for job in jobs]`` on ``engine``; ``progress(done, total)`` as jobs finish.
+
+    ``fn`` must be a module-level function (it is sent to other processes); ``describe(job)``
+    names a failed job in the error.
+
+    Raises:
+        GridError: after every job has run, when any failed.
+    """
+    jobs = list(jobs)
+    if not jobs:
+        return []
+    if engine.kind == "ray":
+        outcomes = _run_ray(fn, jobs, engine, progress)
+    elif engine.n_workers <= 1 or len(jobs) == 1:
+        outcomes = []
+        for i, job in enumerate(jobs):
+            outcomes.append(_guarded(fn, job))
+            if progress:
+                progress(i + 1, len(jobs))
+    else:
+        outcomes = _run_local(fn, jobs, engine.n_workers, progress)
+    failed = [(job, value) for job, (ok, value) in zip(jobs, outcomes, strict=True) if not ok]
+    for _, value in failed:
+        if isinstance(value, UserError):
+            raise value  # bad input: the user's to fix, and the error says where
+    if failed:
+        if os.environ.get("TERRAPREF_DEBUG"):
+            for job, (_, trace) in failed:
+                print(f"--- {describe(job)}\n{trace}", file=sys.stderr)
+        raise GridError([(describe(job), text) for job, (text, _) in failed], len(jobs))
+    return [value for _, value in outcomes]
+
+
+def _run_local(fn: Callable, jobs: list, workers: int, progress: Callable[[int, int], None] | None) -> list[tuple[bool, Any]]:
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from functools import partial
+
+    outcomes: list[tuple[bool, Any] | None] = [None] * len(jobs)
+    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=mp.get_context("fork")) as pool:
+        futures = {pool.submit(partial(_guarded, fn), job): i for i, job in enumerate(jobs)}
+        for done, fut in enumerate(as_completed(futures), start=1):
+            outcomes[futures[fut]] = fut.result()
+            if progress:
+                progress(done, len(jobs))
+    return outcomes  # type: ignore[return-value]
+
+
+def _run_ray(fn: Callable, jobs: list, engine: Engine, progress: Callable[[int, int], None] | None) -> list[tuple[bool, Any]]:
+    import ray
+
+    started_here = not ray.is_initialized()
+    if started_here:
+        os.environ.setdefault("RAY_AUTH_MODE", "disabled")  # a local instance, or a cluster the user set up
+        # Ray runs its workers at nice 15 unless told otherwise: on a busy machine they would then
+        # wait behind everything else. These jobs are the work asked for.
+        os.environ.setdefault("RAY_worker_niceness", "0")
+        kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
+        if engine.address is None:
+            kwargs["num_cpus"] = engine.n_workers
+        ray.init(address=engine.address, **kwargs)
+    try:
+        task = ray.remote(num_cpus=1)(_guarded)
+        refs = [task.remote(fn, job) for job in jobs]
+        index = {ref: i for i, ref in enumerate(refs)}
+        outcomes: list[tuple[bool, Any] | None] = [None] * len(jobs)
+        pending = list(refs)
+        done = 0
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=1)
+            for ref in ready:
+                outcomes[index[ref]] = ray.get(ref)
+                done += 1
+                if progress:
+                    progress(done, len(jobs))
+        return outcomes  # type: ignore[return-value]
+    finally:
+        if started_here:
+            ray.shutdown()

@@ -1,0 +1,88 @@
+"""Grids of jobs on local processes and on Ray: the same results in the jobs' order, progress as
+they finish, and failures reported with their inputs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from helpers import linear_model
+
+from terrapref.cli import main
+from terrapref.errors import UserError
+from terrapref.grid import Engine, GridError, run_grid
+
+def square(x: int) -> int:
+    return x * x
+
+
+def fails_on_three(x: int) -> int:
+    if x == 3:
+        raise ZeroDivisionError("three is not allowed")
+    return x
+
+
+def bad_input(x: int) -> int:
+    raise UserError(f"input_{x}.yaml", "not a scenario", field="format")
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_local_grids_keep_the_jobs_order_and_report_progress(workers):
+    seen = []
+    assert run_grid(square, range(7), Engine(workers=workers), progress=lambda k, n: seen.append((k, n))) == [x * x for x in range(7)]
+    assert seen == [(k, 7) for k in range(1, 8)]
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_failed_job_is_reported_with_its_inputs_after_the_others_ran(workers):
+    done = []
+    with pytest.raises(GridError) as info:
+        run_grid(fails_on_three, range(6), Engine(workers=workers), progress=lambda k, n: done.append(k), describe=lambda x: f"job x={x}")
+    assert done[-1] == 6, "every job ran"
+    assert info.value.failures == [("job x=3", "ZeroDivisionError: three is not allowed")]
+    assert str(info.value).startswith("1 of 6 jobs failed: job x=3: ZeroDivisionError")
+
+
+def test_a_bad_input_in_a_job_is_the_users_error_naming_the_file():
+    with pytest.raises(UserError, match="input_0.yaml"):
+        run_grid(bad_input, [0, 1], Engine(workers=2))
+
+
+def test_engines_are_validated():
+    with pytest.raises(ValueError, match="unknown engine"):
+        Engine("spark")
+    with pytest.raises(ValueError, match="address"):
+        Engine("local", address="10.0.0.1:6379")
+    with pytest.raises(ValueError, match="workers"):
+        Engine(workers=0)
+
+
+def test_cli_engine_flags_are_checked_before_any_work(tmp_path, capsys):
+    model = linear_model(tmp_path / "m.safetensors")
+    out = tmp_path / "eval"
+    assert main(["evaluate", str(model), "demo_course", "--out", str(out), "--address", "10.0.0.1:6379"]) == 2
+    assert "--engine ray" in capsys.readouterr().err
+    assert main(["study", "--out", str(tmp_path / "s"), "--workers", "0"]) == 2
+    with pytest.raises(SystemExit) as info:  # argparse's own refusal of an unknown choice
+        main(["reproduce", "--out", str(tmp_path / "r"), "--engine", "spark"])
+    assert info.value.code == 2
+    assert not out.exists()
+
+
+def test_ray_reports_a_failed_job_with_its_inputs():
+    """A Ray instance started for the grid (2 CPUs) and shut down after it."""
+    import math
+
+    with pytest.raises(GridError) as info:
+        run_grid(math.sqrt, [4.0, -1.0, 9.0], Engine("ray", workers=2), describe=lambda x: f"sqrt({x})")
+    assert info.value.failures == [("sqrt(-1.0)", "ValueError: math domain error")]
+
+
+def test_cli_evaluate_on_ray_gives_the_local_engines_results(tmp_path, capsys):
+    """The planner and the driver on a local Ray instance with 2 CPUs: the same runs, the same numbers."""
+    model = str(linear_model(tmp_path / "m.safetensors"))
+    assert main(["evaluate", model, "demo_course", "--seeds", "2", "--out", str(tmp_path / "local"), "--workers", "2"]) == 0
+    assert main(["evaluate", model, "demo_course", "--seeds", "2", "--out", str(tmp_path / "ray"), "--engine", "ray", "--workers", "2"]) == 0
+    a, b = (json.loads(Path(tmp_path / d / "metrics.json").read_text()) for d in ("local", "ray"))
+    assert a["summary"]["zones"] > 0 and a == b
