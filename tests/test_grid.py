@@ -86,3 +86,24 @@ def test_cli_evaluate_on_ray_gives_the_local_engines_results(tmp_path, capsys):
     assert main(["evaluate", model, "demo_course", "--seeds", "2", "--out", str(tmp_path / "ray"), "--engine", "ray", "--workers", "2"]) == 0
     a, b = (json.loads(Path(tmp_path / d / "metrics.json").read_text()) for d in ("local", "ray"))
     assert a["summary"]["zones"] > 0 and a == b
+
+
+def test_select_refuses_bad_flags_before_any_work(tmp_path, capsys):
+    out = tmp_path / "sel"
+    for argv, flag in ((["--recipes", "teach,nope"], "--recipes"), (["--orders", "mud,lava"], "--orders"), (["--seeds", "0"], "--seeds"),
+                       (["--style", "sleepy"], "--style"), (["--first", "-1"], "--first"), (["--address", "h:1"], "--address")):
+        assert main(["select", "--out", str(out), *argv]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and flag in err[0]
+    assert not out.exists()
+
+
+@pytest.mark.slow
+def test_select_on_ray_gives_the_local_engines_table(tmp_path):
+    """The paper's recipe (quick to train), one order, one seed, two layouts, on both engines."""
+    argv = ["select", "--recipes", "paper", "--orders", "rock,mud,water", "--seeds", "1", "--courses", "2", "--workers", "2"]
+    assert main([*argv, "--out", str(tmp_path / "local")]) == 0
+    assert main([*argv, "--out", str(tmp_path / "ray"), "--engine", "ray"]) == 0
+    a, b = (json.loads((tmp_path / d / "select.json").read_text()) for d in ("local", "ray"))
+    assert len(a["zones"]) >= 8 and a["zones"] == b["zones"] and a["runs"] == b["runs"]
+    assert "| paper | rock > mud > water > non_traversable |" in (tmp_path / "ray" / "SELECT.md").read_text()

@@ -518,6 +518,36 @@ def _cmd_study(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_select(args: argparse.Namespace) -> int:
+    import time
+
+    from terrapref.demos.expert import STYLES
+    from terrapref.learning.recipe import recipe_named
+    from terrapref.report.select import Selection, parse_orders, run_selection
+    from terrapref.terrain import PreferenceProfile
+
+    names = [n.strip() for n in args.recipes.split(",") if n.strip()]
+    if not names or len(set(names)) != len(names):
+        raise UserError("--recipes", f"expected distinct recipe names separated by commas, got {args.recipes!r}")
+    for n in names:
+        recipe_named(n, "--recipes")
+    orders = parse_orders(args.orders)
+    for o in orders:
+        PreferenceProfile.parse(list(o), source="--orders")
+    if args.style not in STYLES:
+        raise UserError("--style", f"unknown driver style {args.style!r}; styles: {', '.join(STYLES)}")
+    for flag, value, low in (("--seeds", args.seeds, 1), ("--courses", args.courses, 1), ("--first", args.first, 0)):
+        if value < low:
+            raise UserError(flag, f"must be an integer >= {low}, got {value}")
+    _check_output(args.out, "--out", folder=True)
+    engine = _engine(args)
+    t0 = time.perf_counter()
+    path = run_selection(args.out, Selection(tuple(names), orders, args.seeds, args.first, args.courses, args.style), engine,
+                         log=lambda m: print(m, flush=True))
+    print(f"done ({time.perf_counter() - t0:.0f} s): {path}")
+    return 0
+
+
 def _engine(args: argparse.Namespace) -> Engine:
     """The grid engine of ``--engine``, ``--workers`` and ``--address``, checked before any work."""
     if args.workers is not None and args.workers < 1:
@@ -685,6 +715,18 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("info", help="what a recording, dataset, model or ONNX file holds (camera, profile, data, history, identifiability)")
     p.add_argument("files", nargs="+", metavar="FILE")
     p.set_defaults(func=_cmd_info)
+
+    p = sub.add_parser("select", help="compare recipes: train each for every order and seed, drive generated layouts, report agreement with the driver")
+    p.add_argument("--out", required=True, type=Path, help="folder for SELECT.md, select.json, select.png and the work")
+    p.add_argument("--recipes", default="teach", help="recipe names separated by commas (terrapref recipes)")
+    p.add_argument("--orders", default="all",
+                   help="'all' (the six orders with non_traversable last) or orders separated by ';', e.g. 'rock,mud,water;water,mud,rock'")
+    p.add_argument("--style", default="default", help="the synthetic driver's style")
+    p.add_argument("--seeds", type=int, default=5, help="training seeds per recipe and order")
+    p.add_argument("--first", type=int, default=1000, help="first generated layout (1000-1999: for choosing; 2000 on: for confirming)")
+    p.add_argument("--courses", type=int, default=32, help="generated layouts")
+    _add_engine_args(p)
+    p.set_defaults(func=_cmd_select)
 
     p = sub.add_parser("recipes", help="list the named training recipes (--recipe NAME in train and reproduce)")
     p.set_defaults(func=_cmd_recipes)

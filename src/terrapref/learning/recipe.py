@@ -120,7 +120,7 @@ def practice_courses(recipe: Recipe, seed: int) -> list[str]:
     """Practice course ``k`` of training seed ``seed``: the generated layout ``gen:(10000 seed + 3000 + 2000 k)``.
 
     Each training seed gets its own layouts, as each person would lay out their own. They stay
-    clear of ``gen:1000``-``gen:1999``, where recipes are chosen (scripts/select_recipe.py).
+    clear of ``gen:1000``-``gen:1999``, where recipes are chosen (``terrapref select``).
     """
     return [f"gen:{10000 * seed + PRACTICE_BASE + 2000 * k}" for k in range(recipe.practice)]
 

@@ -1,0 +1,166 @@
+"""Choosing a recipe: every candidate taught by every driver, judged on generated layouts.
+
+For each recipe, preference order and training seed, the synthetic driver of that order (and
+style) demonstrates the recipe's course, a model is trained (terrapref.learning.recipe), and the
+model and the same driver drive every generated layout. A zone agrees when the planner's choice
+equals the driver's in the same zone of the same layout (terrapref.evaluation.runner.zone_agrees).
+
+Layouts ``gen:1000``-``gen:1999`` are where recipes are chosen; a choice is confirmed on layouts
+no choice has seen (``gen:2000`` and on, docs/learning.md). Both the trainings and the runs are
+grids (terrapref.grid), so ``--engine ray`` spreads them over a cluster.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_many, zone_agrees
+from terrapref.evaluation.stats import rate_text, wilson
+from terrapref.grid import Engine, run_grid
+from terrapref.learning.recipe import recipe_named, run_recipe
+from terrapref.progress import every_tenth
+from terrapref.report.plots import save_intervals
+from terrapref.scenario.generate import zone_kind
+from terrapref.terrain import PreferenceProfile
+
+LETHAL_LAST = "non_traversable"
+ALL_ORDERS = tuple((*p, LETHAL_LAST) for p in itertools.permutations(("mud", "rock", "water")))
+TARGET = 0.95
+
+
+@dataclass(frozen=True)
+class Selection:
+    """What to compare: recipes x orders x seeds, on layouts ``gen:first`` .. ``gen:first + courses - 1``."""
+
+    recipes: tuple[str, ...]
+    orders: tuple[tuple[str, ...], ...]
+    seeds: int = 5
+    first: int = 1000
+    courses: int = 32
+    style: str = "default"
+
+    @property
+    def layouts(self) -> list[str]:
+        return [f"gen:{self.first + i}" for i in range(self.courses)]
+
+
+def parse_orders(text: str) -> tuple[tuple[str, ...], ...]:
+    """``all`` (the six orders with non_traversable last) or ``a,b,c;d,e,f`` (non_traversable appended if missing)."""
+    if text == "all":
+        return ALL_ORDERS
+    orders = []
+    for item in text.split(";"):
+        names = tuple(n.strip() for n in item.split(",") if n.strip())
+        orders.append(names if LETHAL_LAST in names else (*names, LETHAL_LAST))
+    return tuple(orders)
+
+
+def _train(job: dict) -> list[str]:
+    """Every recipe for one order and seed, one after another: they share the work folder's demonstrations."""
+    profile = PreferenceProfile(tuple(job["order"]))
+    return [str(run_recipe(recipe_named(r), job["workdir"], job["seed"], profile, style=job["style"]).model) for r in job["recipes"]]
+
+
+def _describe(job: dict) -> str:
+    return f"recipes {', '.join(job['recipes'])}, order {'>'.join(job['order'][:3])}, seed {job['seed']}"
+
+
+def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None, log: Callable[[str], None] = print) -> Path:
+    """Train and drive everything; write SELECT.md, select.json (every zone) and select.png into ``out``."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    engine = engine or Engine()
+    t0 = time.perf_counter()
+    # One job per order and seed: its recipes share the demonstrations recorded in its work folder.
+    jobs = [{"recipes": list(sel.recipes), "order": list(o), "seed": s, "style": sel.style,
+             "workdir": str(out / "work" / f"{'_'.join(c[:2] for c in o[:3])}_s{s}")}
+            for o in sel.orders for s in range(sel.seeds)]
+    log(f"[1/2] demonstrations and training: {len(jobs) * len(sel.recipes)} models ({len(sel.recipes)} recipes x {len(sel.orders)} orders "
+        f"x {sel.seeds} seeds) on {engine.describe()} ...")
+    trained = run_grid(_train, jobs, engine, lambda k, n: log(f"      trained {k}/{n} order-and-seed jobs"), describe=_describe)
+    t_train = time.perf_counter() - t0
+
+    layouts = sel.layouts
+    job_of = {m: {**j, "recipe": r} for j, ms in zip(jobs, trained, strict=True) for r, m in zip(j["recipes"], ms, strict=True)}
+    specs = [RunSpec(c, 0, PLANNER, m, tuple(j["order"])) for m, j in job_of.items() for c in layouts]
+    specs += [RunSpec(c, 0, EXPERT, None, o, style=sel.style) for o in sel.orders for c in layouts]
+    log(f"[2/2] closed-loop runs: {len(specs)} on {len(layouts)} layouts ...")
+    results = run_many(specs, progress=every_tenth(log), engine=engine)
+    t_eval = time.perf_counter() - t0 - t_train
+
+    driver = {(tuple(s.profile), r["scenario"], z["id"]): z for s, r in zip(specs, results, strict=True) if r["driver"] == EXPERT
+              for z in r["metrics"]["zones"]}
+    rows, runs = [], []
+    for spec, r in zip(specs, results, strict=True):
+        if r["driver"] != PLANNER:
+            continue
+        job = job_of[spec.model_path]
+        runs.append({"recipe": job["recipe"], "order": job["order"], "seed": job["seed"], "scenario": r["scenario"], "collisions": r["metrics"]["collisions"]})
+        for z in r["metrics"]["zones"]:
+            d = driver[(tuple(spec.profile), r["scenario"], z["id"])]
+            rows.append({"recipe": job["recipe"], "order": job["order"], "seed": job["seed"], "scenario": r["scenario"], "zone": z["id"],
+                         "kind": zone_kind(z["label"]), "choice": z["choice"], "driver_choice": d["choice"], "agrees": zone_agrees(z, d),
+                         "success": z["success"], "driver_success": d["success"]})
+    saved = {"selection": {"recipes": list(sel.recipes), "orders": [list(o) for o in sel.orders], "seeds": sel.seeds, "layouts": layouts,
+                           "style": sel.style},
+             "engine": engine.describe(), "zones": rows, "runs": runs, "train_s": round(t_train, 1), "eval_s": round(t_eval, 1)}
+    (out / "select.json").write_text(json.dumps(saved, indent=0))
+    path = write_selection_report(out, saved)
+    log(f"wrote {path}")
+    return path
+
+
+def _rate(rows: Sequence[dict], key: str) -> str:
+    return rate_text(sum(r[key] for r in rows), len(rows))
+
+
+def write_selection_report(out: Path, saved: dict) -> Path:
+    """SELECT.md and select.png from select.json's content."""
+    sel, rows, runs = saved["selection"], saved["zones"], saved["runs"]
+    kinds = sorted({r["kind"] for r in rows})
+    layouts = sel["layouts"]
+    lines = ["# Recipe selection: agreement with the driver on generated layouts", "",
+             f"{len(sel['recipes'])} recipe(s) x {len(sel['orders'])} order(s) x {sel['seeds']} training seed(s), one drive each; every model and "
+             f"its driver (style {sel['style']}) drive {len(layouts)} generated layouts ({layouts[0]} to {layouts[-1]}). Rates with 95% Wilson "
+             "intervals over all zones.", "",
+             "| recipe | order | agreement with the driver | " + " | ".join(f"agreement, {k} zones" for k in kinds)
+             + " | zone success | the driver's zone success | collisions | per seed |",
+             "|---|---|---|" + "---|" * len(kinds) + "---|---|---|---|"]
+    labels, rates, intervals = [], [], []
+    for recipe in sel["recipes"]:
+        for order in [*sel["orders"], None]:
+            sub = [r for r in rows if r["recipe"] == recipe and (order is None or r["order"] == order)]
+            if not sub:
+                continue
+            coll = sum(r["collisions"] for r in runs if r["recipe"] == recipe and (order is None or r["order"] == order))
+            per_seed = {}
+            for r in sub:
+                per_seed.setdefault(r["seed"], []).append(r["agrees"])
+            seeds = ", ".join(f"{sum(v) / len(v):.0%}" for v in per_seed.values()) if order is not None else "-"
+            name = "**all**" if order is None else " > ".join(order)
+            lines.append(f"| {recipe} | {name} | {_rate(sub, 'agrees')} | " + " | ".join(_rate([r for r in sub if r["kind"] == k], "agrees") for k in kinds)
+                         + f" | {_rate(sub, 'success')} | {_rate(sub, 'driver_success')} | {coll} | {seeds} |")
+            if order is None or len(sel["recipes"]) == 1:
+                ok = sum(r["agrees"] for r in sub)
+                labels.append(recipe if order is None else " > ".join(order[:3]))
+                rates.append(ok / len(sub))
+                intervals.append(wilson(ok, len(sub)))
+    misses: dict[tuple, int] = {}
+    for r in rows:
+        if not r["agrees"]:
+            key = (r["recipe"], r["kind"], r["choice"], r["driver_choice"])
+            misses[key] = misses.get(key, 0) + 1
+    if misses:
+        lines += ["", "Disagreements (recipe, zone kind: planner's choice / driver's choice, count): "
+                  + "; ".join(f"{rc}, {k}: {p} / {d}, {n}" for (rc, k, p, d), n in sorted(misses.items(), key=lambda kv: -kv[1]))]
+    lines += ["", f"Training {saved['train_s']:.0f} s, runs {saved['eval_s']:.0f} s (wall; {saved['engine']}).", "", "![selection](select.png)", ""]
+    save_intervals(out / "select.png", labels, rates, intervals, "agreement with the driver", target=TARGET,
+                   title=f"one drive per model, {len(layouts)} layouts x {sel['seeds']} seeds; 95% intervals")
+    path = out / "SELECT.md"
+    path.write_text("\n".join(lines))
+    return path
