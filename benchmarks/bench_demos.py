@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from reference import reference_ms  # benchmarks/reference.py (the script's folder is on sys.path)
 
 from terrapref.camera import CameraConfig
 from terrapref.demos.expert import ExpertDriver
@@ -122,14 +123,23 @@ def main() -> int:
         d3 = bench_decision(out, args.repeats, second_stage=True)
         d4 = bench_decision(out, args.repeats, members=3, second_stage=True)
         loop_s, loop_frames = bench_closed_loop(out.parent / "model.safetensors")
-    print(f"{'benchmark':44s} {'median':>10s} {'p90':>10s} {'target':>10s}")
-    print(f"{'features U (m=21, n=30), per frame':44s} {np.median(t) * 1e6:8.1f}us {np.percentile(t, 90) * 1e6:8.1f}us {'<= 30us':>10s}   ({len(t)} calls)")
-    print(f"{'decision (features + C + progress), per frame':44s} {np.median(d) * 1e6:8.1f}us {np.percentile(d, 90) * 1e6:8.1f}us {'<= 100us':>10s}   ({len(d)} calls)")
-    print(f"{'decision, lanes + 2 members, per frame':44s} {np.median(d2) * 1e6:8.1f}us {np.percentile(d2, 90) * 1e6:8.1f}us {'-':>10s}   ({len(d2)} calls)")
-    print(f"{'decision with the second stage, per frame':44s} {np.median(d3) * 1e6:8.1f}us {np.percentile(d3, 90) * 1e6:8.1f}us {'-':>10s}   ({len(d3)} calls)")
-    print(f"{'decision of recipe teach (3 members, 2nd stage)':44s} {np.median(d4) * 1e6:8.1f}us {np.percentile(d4, 90) * 1e6:8.1f}us {'-':>10s}   ({len(d4)} calls)")
-    print(f"{'planner driving train_course, closed loop':44s} {loop_s:9.2f}s {'':>10s} {'-':>10s}   ({loop_frames} frames, {loop_frames / loop_s:.0f} frames/s)")
-    print(f"{'record train_course (synthetic driver)':44s} {wall:9.2f}s {'':>10s} {'<= 20s':>10s}   ({frames} frames, {size / 1e6:.1f} MB, {size / frames / 1e3:.1f} kB/frame)")
+    ref_s = reference_ms() / 1e3
+
+    def line(name: str, samples: np.ndarray, target: str) -> None:
+        med = float(np.median(samples))
+        print(f"{name:48s} {med * 1e6:8.1f}us {np.percentile(samples, 90) * 1e6:8.1f}us {med / ref_s:10.5f} {target:>10s}   ({len(samples)} calls)")
+
+    print(f"{'benchmark':48s} {'median':>10s} {'p90':>10s} {'/reference':>10s} {'target':>10s}")
+    print(f"{'reference: naive NumPy render (reference.py)':48s} {ref_s * 1e3:8.2f}ms {'':>10s} {1:10d} {'-':>10s}")
+    line("features U (m=21, n=30), per frame", t, "<= 30us")
+    line("decision (features + C + progress), per frame", d, "-")
+    line("decision, lanes + 2 members, per frame", d2, "-")
+    line("decision with the second stage, per frame", d3, "-")
+    line("decision of recipe teach (3 members, 2nd stage)", d4, "<= 60us")
+    print(f"{'planner driving train_course, closed loop':48s} {loop_s:9.2f}s {'':>10s} {loop_s / ref_s:10.1f} {'-':>10s}   "
+          f"({loop_frames} frames, {loop_frames / loop_s:.0f} frames/s)")
+    print(f"{'record train_course (synthetic driver)':48s} {wall:9.2f}s {'':>10s} {wall / ref_s:10.1f} {'<= 20s':>10s}   "
+          f"({frames} frames, {size / 1e6:.1f} MB, {size / frames / 1e3:.1f} kB/frame)")
     return 0
 
 
