@@ -160,7 +160,7 @@ def write_report(out: Path, order, layouts, rows, collisions, drives, t_train: f
     lines += ["", f"Demonstrating and training {t_train:.0f} s, evaluation {t_eval:.0f} s (wall, {workers} workers).", "",
               "![keyboard](keyboard.png)", ""]
     save_intervals(out / "keyboard.png", labels, rates, intervals, "share of zones", target=0.95,
-                   title=f"one drive of teach_course by stick or keyboard, {len(layouts)} unseen layouts x {len(seeds)} seeds; 95% intervals")
+                   title=f"stick or keyboard, one drive each: {len(layouts)} layouts x {len(seeds)} seeds, 95% CI")
     (out / "KEYBOARD.md").write_text("\n".join(lines))
     print("\n".join(lines))
 
