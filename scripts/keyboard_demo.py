@@ -24,11 +24,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import multiprocessing as mp
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import replace
 from pathlib import Path
 
@@ -41,6 +39,7 @@ from terrapref.demos.dataset import build_dataset  # noqa: E402
 from terrapref.demos.recording import read_recording  # noqa: E402
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_many, zone_agrees  # noqa: E402
 from terrapref.evaluation.stats import rate_text, wilson  # noqa: E402
+from terrapref.grid import Engine, run_grid  # noqa: E402
 from terrapref.learning.pipeline import train_and_save  # noqa: E402
 from terrapref.learning.recipe import DEFAULT_RECIPE, record_demonstrations, recipe_named  # noqa: E402
 from terrapref.report.plots import save_intervals  # noqa: E402
@@ -90,13 +89,10 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     jobs = [(kind, str(args.out / "work" / f"{kind}_s{s}"), s, order) for s in range(args.seeds) for kind in INPUTS]
-    models: dict[tuple[str, int], str] = {}
-    with ProcessPoolExecutor(args.workers, mp_context=mp.get_context("spawn")) as pool:
-        futures = [pool.submit(_demonstrate, j) for j in jobs]
-        for k, fut in enumerate(as_completed(futures), start=1):
-            kind, model, seed, seconds = fut.result()
-            models[(kind, seed)] = model
-            print(f"demonstrated and trained {k}/{len(jobs)} ({kind}, seed {seed}, {seconds:.0f} s)", file=sys.stderr, flush=True)
+    done = run_grid(_demonstrate, jobs, Engine(workers=args.workers),
+                    lambda k, n: print(f"demonstrated and trained {k}/{n}", file=sys.stderr, flush=True),
+                    describe=lambda j: f"{j[0]} drive, seed {j[2]}")
+    models = {(kind, seed): model for kind, model, seed, _ in done}
     t_train = time.perf_counter() - t0
 
     keys = sorted(models)
