@@ -8,7 +8,7 @@ default recipe:
 - *keyboard*: through the teleop window's own event handling (SDL's dummy video driver), as a
   person at a keyboard would: it wants what the driver wants (its intent), reacts 0.3 s later,
   and can only hold Left/Right (one control-set step per frame) or tap Down
-  (terrapref.demos.teleop.keyboard).
+  (terrapref.teleop.keyboard).
 
 A model is trained from each drive with the default recipe, and every model and the driver drive
 the generated layouts. Reported per input: zone success and agreement with the driver, with 95%
@@ -41,8 +41,8 @@ from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_many, zone
 from terrapref.evaluation.stats import rate_text, wilson  # noqa: E402
 from terrapref.grid import Engine, run_grid  # noqa: E402
 from terrapref.learning.pipeline import train_and_save  # noqa: E402
-from terrapref.learning.recipe import DEFAULT_RECIPE, record_demonstrations, recipe_named  # noqa: E402
-from terrapref.report.plots import save_intervals  # noqa: E402
+from terrapref.recipes import DEFAULT_RECIPE, record_demonstrations, recipe_named  # noqa: E402
+from terrapref.plots import save_intervals  # noqa: E402
 from terrapref.scenario import resolve_scenario  # noqa: E402
 from terrapref.terrain import PreferenceProfile  # noqa: E402
 
@@ -60,8 +60,8 @@ def _demonstrate(job: tuple[str, str, int, tuple[str, ...]]) -> tuple[str, str, 
         rec = record_demonstrations(recipe, work, seed, profile)[0]
     else:
         from terrapref.demos.expert import ExpertConfig, ExpertDriver
-        from terrapref.demos.teleop import run_teleop
-        from terrapref.demos.teleop.keyboard import KeyboardPerson
+        from terrapref.teleop import run_teleop
+        from terrapref.teleop.keyboard import KeyboardPerson
 
         scenario = resolve_scenario(recipe.course)
         rec = work / "demo_keyboard"

@@ -1,7 +1,7 @@
 """Choose a recipe on generated layouts (never on the packaged test course).
 
 For each recipe and each training seed: demonstrate on train_course, correct, train (see
-terrapref.learning.recipe); then drive generated validation courses (gen:1000...) and count
+terrapref.recipes); then drive generated validation courses (gen:1000...) and count
 zone success over the zones the synthetic driver itself gets right (a generated zone the
 driver misses is ambiguous under its own costs, and is left out).
 
@@ -25,7 +25,7 @@ from pathlib import Path
 
 from terrapref.demos.session import DisturbanceConfig
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_many
-from terrapref.learning.recipe import PAPER, Recipe
+from terrapref.recipes import PAPER, Recipe
 from terrapref.learning.train import TrainConfig
 from terrapref.scenario import resolve_scenario
 from terrapref.scenario.generate import ZONE_KINDS, zone_kind
@@ -115,7 +115,7 @@ RECIPES = [
 
 
 def main() -> int:
-    from terrapref.learning.recipe import run_recipe
+    from terrapref.recipes import run_recipe
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=2)

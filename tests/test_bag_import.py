@@ -11,7 +11,7 @@ import pytest
 
 from terrapref.cli import main
 from terrapref.demos.dataset import featurize_recording
-from terrapref.demos.inspect import summarise
+from terrapref.report.inspect import summarise
 from terrapref.demos.recording import read_recording
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
@@ -240,7 +240,7 @@ def _check_with_the_reference_mcap_reader(path: Path, frames: int) -> None:
 
 def test_an_exported_recording_imports_to_the_same_dataset(tmp_path: Path, imported, capsys):
     from terrapref.demos.dataset import build_dataset
-    from terrapref.learning.recipe import DEFAULT_RECIPE, recipe_named
+    from terrapref.recipes import DEFAULT_RECIPE, recipe_named
 
     _, rec = imported["mcap"]
     out = tmp_path / "run.mcap"

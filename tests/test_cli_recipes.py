@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from terrapref.cli import main
-from terrapref.learning.recipe import DEFAULT_RECIPE, RECIPES
+from terrapref.recipes import DEFAULT_RECIPE, RECIPES
 
 
 def test_recipes_lists_every_recipe_with_what_it_is_for(capsys):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from terrapref.fileio import atomic_path, write_bytes_atomic, write_text_atomic
-from terrapref.report.images import write_png_atomic
+from terrapref.pngio import write_png_atomic
 from terrapref.tensorfile import write_tensor_file
 
 
@@ -35,7 +35,7 @@ def test_every_writer_leaves_a_readable_file_and_no_temporary(tmp_path: Path, um
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from terrapref.report.plots import _save
+    from terrapref.plots import _save
 
     fig, _ = plt.subplots()
     _save(fig, tmp_path / "e.png")

@@ -657,7 +657,7 @@ def test_mirror_needs_a_symmetric_control_set():
 
 
 def test_run_recipe_demonstrates_corrects_and_reuses_demonstrations(tmp_path):
-    from terrapref.learning.recipe import Recipe, run_recipe
+    from terrapref.recipes import Recipe, run_recipe
     from terrapref.learning.train import TrainConfig
 
     recipe = Recipe("tiny", demonstrations=1, corrections=1, train=TrainConfig(epochs=2))
@@ -672,7 +672,7 @@ def test_run_recipe_demonstrates_corrects_and_reuses_demonstrations(tmp_path):
 
 
 def test_practice_courses_are_generated_per_training_seed_outside_the_selection_range():
-    from terrapref.learning.recipe import Recipe, practice_courses
+    from terrapref.recipes import Recipe, practice_courses
     from terrapref.scenario import resolve_scenario
 
     recipe = Recipe("p", demonstrations=1, practice=2)
@@ -687,9 +687,9 @@ def test_practice_courses_are_generated_per_training_seed_outside_the_selection_
 
 
 def test_run_recipe_demonstrates_the_practice_courses_and_rerecords_a_course_mismatch(tmp_path, monkeypatch):
-    import terrapref.learning.recipe as recipe_mod
+    import terrapref.recipes as recipe_mod
     from terrapref.demos.recording import read_recording
-    from terrapref.learning.recipe import Recipe, record_demonstrations, run_recipe
+    from terrapref.recipes import Recipe, record_demonstrations, run_recipe
 
     monkeypatch.setattr(recipe_mod, "practice_courses", lambda recipe, seed: ["demo_course"] * recipe.practice)
     recipe = Recipe("practised", demonstrations=1, practice=1, train=TrainConfig(epochs=2))

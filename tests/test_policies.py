@@ -18,6 +18,7 @@ from terrapref.learning.linear import LinearUtility, fit_linear_utility
 from terrapref.learning.model_file import FORMAT, load_model, save_model
 from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
 from terrapref.learning.torch_net import UtilityClassifier
+from terrapref.evaluation.policies import load_policy
 from terrapref.planner import Planner
 from terrapref.planner.policy import (
     HAND_COSTS,
@@ -28,7 +29,6 @@ from terrapref.planner.policy import (
     Observation,
     Policy,
     PurePursuitPolicy,
-    load_policy,
     save_linear,
 )
 from terrapref.scenario import resolve_scenario

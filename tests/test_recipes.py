@@ -15,7 +15,7 @@ from terrapref.demos.expert import STYLES, ExpertConfig, ExpertDriver
 from terrapref.demos.session import DisturbanceConfig
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, LookaheadConfig
-from terrapref.learning.recipe import DEFAULT_RECIPE, RECIPES, Recipe, practice_courses, recipe_named
+from terrapref.recipes import DEFAULT_RECIPE, RECIPES, Recipe, practice_courses, recipe_named
 from terrapref.learning.train import TrainConfig
 from terrapref.scenario import parse_scenario
 from terrapref.terrain import default_classes

@@ -344,7 +344,7 @@ def test_force_keeps_the_old_recording_until_the_new_one_is_complete(tmp_path: P
 
 def test_inspect_says_quit_and_not_reached(tmp_path: Path):
     from terrapref.camera import CameraConfig
-    from terrapref.demos.inspect import summarise
+    from terrapref.report.inspect import summarise
     from terrapref.features import PreferenceSetConfig
     from terrapref.scenario import resolve_scenario
     from terrapref.sim import SimConfig, Simulation

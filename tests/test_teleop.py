@@ -14,7 +14,7 @@ import pytest
 pygame = pytest.importorskip("pygame")
 
 from terrapref.demos.recording import read_recording  # noqa: E402
-from terrapref.demos.teleop import COUNTDOWN_S, run_teleop  # noqa: E402
+from terrapref.teleop import COUNTDOWN_S, run_teleop  # noqa: E402
 from terrapref.errors import UserError  # noqa: E402
 from terrapref.vehicle import ControlSet  # noqa: E402
 
@@ -99,7 +99,7 @@ def test_refuses_to_overwrite_a_recording_unless_told(tmp_path):
 
 
 def test_ramp_and_axis_closed_forms():
-    from terrapref.demos.teleop import axis_to_w, ramp_toward
+    from terrapref.teleop import axis_to_w, ramp_toward
 
     assert ramp_toward(0.0, 1.0, 2.5, 0.1) == pytest.approx(0.25)  # 2.5 rad/s per s for one 10 Hz frame
     assert ramp_toward(0.9, 1.0, 2.5, 0.1) == 1.0  # lands exactly on the target
@@ -224,7 +224,7 @@ def test_the_window_opens_waiting_and_records_only_after_the_countdown(tmp_path)
 
 
 def test_the_map_edge_stops_the_vehicle_and_is_not_recorded(tmp_path):
-    from terrapref.demos.teleop.guide import EDGE_MARGIN_M
+    from terrapref.teleop.guide import EDGE_MARGIN_M
 
     out = tmp_path / "rec"
     # Start 3 m from the west edge, heading west (at it; the start yaw is in degrees).
@@ -260,7 +260,7 @@ def test_a_resized_window_scales_the_view_and_the_mouse_follows(tmp_path):
 
 
 def test_the_guide_reads_progress_the_next_patch_and_the_terrain_underneath():
-    from terrapref.demos.teleop.guide import CourseGuide
+    from terrapref.teleop.guide import CourseGuide
     from terrapref.features import PreferenceSet, PreferenceSetConfig
     from terrapref.sim import Simulation
     from terrapref.vehicle import Pose
@@ -291,7 +291,7 @@ def test_riding_along_records_only_the_takeover_and_train_accepts_it(tmp_path):
     from helpers import linear_model
 
     from terrapref.cli import main
-    from terrapref.demos.teleop import HANDBACK_S
+    from terrapref.teleop import HANDBACK_S
 
     model = linear_model(tmp_path / "m.safetensors")
     out = tmp_path / "corrections"
@@ -360,7 +360,7 @@ def test_a_simulated_keyboard_person_drives_the_course_through_the_window(tmp_pa
     import numpy as np
 
     from terrapref.demos.expert import ExpertConfig, ExpertDriver
-    from terrapref.demos.teleop.keyboard import KeyboardPerson, START_AFTER_FRAMES
+    from terrapref.teleop.keyboard import KeyboardPerson, START_AFTER_FRAMES
     from terrapref.scenario import resolve_scenario
 
     scenario = resolve_scenario("demo_course")
@@ -400,7 +400,7 @@ def test_a_keyboard_demonstration_teaches_beside_a_stick(tmp_path, monkeypatch):
 
 
 def test_the_gamepad_stick_springs_back_and_takes_over_from_the_keys():
-    from terrapref.demos.teleop import AXIS_DEADZONE, Stick
+    from terrapref.teleop import AXIS_DEADZONE, Stick
 
     class Pad:
         axis = 0.0

@@ -36,7 +36,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
 def _cmd_render(args: argparse.Namespace) -> int:
     from terrapref.camera import PinholeCamera, SegmentationRenderer
-    from terrapref.report.images import colorise, write_png_atomic
+    from terrapref.pngio import colorise, write_png_atomic
     from terrapref.scenario import resolve_scenario
     from terrapref.vehicle import Pose
     from terrapref.world import rasterise
@@ -56,7 +56,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
 
 
 def _cmd_show(args: argparse.Namespace) -> int:
-    from terrapref.report.plots import save_map
+    from terrapref.plots import save_map
     from terrapref.scenario import resolve_scenario
     from terrapref.world import rasterise
 
@@ -81,7 +81,7 @@ def _disturbance(rate_hz: float | None):
     protocol's, that of the default recipe)."""
     from dataclasses import replace
 
-    from terrapref.learning.recipe import DEFAULT_RECIPE, RECIPES
+    from terrapref.recipes import DEFAULT_RECIPE, RECIPES
 
     protocol = RECIPES[DEFAULT_RECIPE].disturbance
     if rate_hz is None:
@@ -135,7 +135,7 @@ def _cmd_record(args: argparse.Namespace) -> int:
 
 
 def _cmd_drive(args: argparse.Namespace) -> int:
-    from terrapref.demos.teleop import run_teleop
+    from terrapref.teleop import run_teleop
 
     from terrapref.scenario import resolve_scenario
     from terrapref.terrain import PreferenceProfile
@@ -158,7 +158,7 @@ def _cmd_drive(args: argparse.Namespace) -> int:
 
 
 def _cmd_inspect(args: argparse.Namespace) -> int:
-    from terrapref.demos.inspect import save_driven_path, summarise
+    from terrapref.report.inspect import save_driven_path, summarise
     from terrapref.demos.recording import read_recording
 
     rec = read_recording(args.recording)
@@ -177,7 +177,7 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
 def _print_what_the_drive_shows(rec) -> None:
     """The identifiability report of a recording (featurised as the default recipe would), before any training."""
     from terrapref.demos.dataset import build_dataset
-    from terrapref.learning.recipe import DEFAULT_RECIPE, recipe_named
+    from terrapref.recipes import DEFAULT_RECIPE, recipe_named
     from terrapref.learning.train import identify
     from terrapref.progress import Progress
 
@@ -203,7 +203,7 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
     for r in recordings:
         if not r.complete:
             print(f"warning: {r.path} is partial; using its {len(r)} frames", file=sys.stderr)
-    from terrapref.learning.recipe import DEFAULT_RECIPE, recipe_named
+    from terrapref.recipes import DEFAULT_RECIPE, recipe_named
 
     try:
         base = recipe_named(args.recipe or DEFAULT_RECIPE).features()
@@ -278,9 +278,9 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
     from terrapref.demos.dataset import training_data
     from terrapref.learning.pipeline import train_and_save
-    from terrapref.learning.recipe import DEFAULT_RECIPE, recipe_named
+    from terrapref.recipes import DEFAULT_RECIPE, recipe_named
     from terrapref.progress import Progress
-    from terrapref.report.plots import save_loss_curve
+    from terrapref.plots import save_loss_curve
 
     recipe = recipe_named(args.recipe or DEFAULT_RECIPE)
     config = _train_config(args, recipe)
@@ -341,7 +341,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from terrapref.evaluation.evaluate import evaluate_model
-    from terrapref.planner.policy import load_policy
+    from terrapref.evaluation.policies import load_policy
     from terrapref.progress import Progress
     from terrapref.terrain import PreferenceProfile
 
@@ -463,7 +463,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def _cmd_recipes(args: argparse.Namespace) -> int:
-    from terrapref.learning.recipe import DEFAULT_RECIPE, RECIPES
+    from terrapref.recipes import DEFAULT_RECIPE, RECIPES
 
     for name, r in RECIPES.items():
         tag = " (default)" if name == DEFAULT_RECIPE else ""
@@ -476,7 +476,7 @@ def _cmd_recipes(args: argparse.Namespace) -> int:
 def _cmd_reproduce(args: argparse.Namespace) -> int:
     import time
 
-    from terrapref.learning.recipe import recipe_named
+    from terrapref.recipes import recipe_named
     from terrapref.report.reproduce import reproduce
     from terrapref.terrain import PreferenceProfile
 
@@ -509,7 +509,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
         plan = replace(plan, seeds=args.seeds)
     engine = _engine(args)
     if args.recipe is not None:
-        from terrapref.learning.recipe import recipe_named
+        from terrapref.recipes import recipe_named
 
         plan = replace(plan, recipe=recipe_named(args.recipe).name)
     t0 = time.perf_counter()
@@ -522,7 +522,7 @@ def _cmd_select(args: argparse.Namespace) -> int:
     import time
 
     from terrapref.demos.expert import STYLES
-    from terrapref.learning.recipe import recipe_named
+    from terrapref.recipes import recipe_named
     from terrapref.report.select import Selection, parse_orders, run_selection
     from terrapref.terrain import PreferenceProfile
 

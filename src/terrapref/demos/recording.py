@@ -31,7 +31,7 @@ import yaml
 
 from terrapref.errors import UserError
 from terrapref.fileio import replace_dir, write_text_atomic
-from terrapref.report.images import read_label_png, write_png_atomic
+from terrapref.pngio import read_label_png, write_png_atomic
 
 FORMAT = "terrapref-recording/1"
 META = "meta.json"

@@ -16,7 +16,7 @@ from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, annotate_agree
 from terrapref.evaluation.scoring import classes_in_zone
 from terrapref.learning.identify import GRASS, Identifiability
 from terrapref.features import PreferenceSet
-from terrapref.planner.policy import load_policy
+from terrapref.evaluation.policies import load_policy
 from terrapref.scenario import AVOID, resolve_scenario
 from terrapref.terrain import PreferenceProfile
 from terrapref.vehicle import Pose
@@ -135,7 +135,7 @@ def _mark_unidentified(results: list[dict], name: str, identified: Identifiabili
 
 
 def _figures(results: list[dict], scenarios: Sequence[str], out: Path, model, profile: PreferenceProfile) -> None:
-    from terrapref.report.plots import save_decision, save_evaluation
+    from terrapref.plots import save_decision, save_evaluation
 
     pset = PreferenceSet(model.features.preference, PinholeCamera(model.camera))
     uv, visible = pset.camera.project_ground(pset.trajectories[..., :2])

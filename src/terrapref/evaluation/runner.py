@@ -23,7 +23,8 @@ from terrapref.evaluation.stats import wilson
 from terrapref.evaluation.perturb import PerturbedDriver, Perturbation
 from terrapref.grid import Engine, run_grid
 from terrapref.planner import Planner, PlannerDriver
-from terrapref.planner.policy import CostPolicy, Policy, PurePursuitPolicy, load_policy
+from terrapref.evaluation.policies import load_policy
+from terrapref.planner.policy import CostPolicy, Policy, PurePursuitPolicy
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation, run_episode
 from terrapref.terrain import PreferenceProfile

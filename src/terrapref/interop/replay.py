@@ -18,7 +18,7 @@ from terrapref.camera import CameraConfig
 from terrapref.demos.recording import Recording
 from terrapref.fileio import atomic_path, write_bytes_atomic
 from terrapref.learning.model_file import LoadedModel
-from terrapref.runtime import PlannerRuntime
+from terrapref.interop.runtime import PlannerRuntime
 
 
 def _rates(hit1: np.ndarray, hit3: np.ndarray, werr: np.ndarray) -> dict:

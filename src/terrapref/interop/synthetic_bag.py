@@ -20,7 +20,7 @@ from PIL import Image as PILImage
 
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.demos.session import Disturber
-from terrapref.learning.recipe import DEFAULT_RECIPE, RECIPES
+from terrapref.recipes import DEFAULT_RECIPE, RECIPES
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation
 from terrapref.terrain import default_classes

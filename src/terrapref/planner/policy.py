@@ -10,6 +10,8 @@ takes the argmax. The learned classifier C is one policy; the study's baselines 
   one for the distance utility), the classic costmap approach.
 - ``LinearPolicy``: the same form with weights learned from demonstrations.
 - ``CnnPolicy`` (terrapref.baselines.cnn): end-to-end behaviour cloning from the image.
+
+A model file of any kind is loaded as its policy by ``terrapref.evaluation.policies.load_policy``.
 """
 
 from __future__ import annotations
@@ -21,10 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from terrapref.camera import CameraConfig, SegmentationView
-from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
 from terrapref.learning.linear import LinearUtility
-from terrapref.learning.model_file import CLASSIFIER, FORMAT, LoadedModel, classifier_from, model_context, read_model_file
+from terrapref.learning.model_file import FORMAT, LoadedModel
 from terrapref.learning.network import numpy_forward
 from terrapref.tensorfile import write_tensor_file
 from terrapref.terrain import ClassTable, default_classes
@@ -164,24 +165,3 @@ def save_linear(path: str | Path, utility: LinearUtility, meta: dict) -> Path:
     """Write a fitted linear utility model; ``meta`` holds features, camera, classes, profile."""
     tensors = {"w": utility.w.astype(np.float32), "b": utility.b.astype(np.float32)}
     return write_tensor_file(path, tensors, {"format": FORMAT, **meta, "kind": LINEAR})
-
-
-def load_policy(path: str | Path) -> Policy:
-    """Any model file (C, linear, CNN) as a policy; loading never runs code from the file."""
-    source = str(path)
-    tensors, meta = read_model_file(path)
-    kind = meta["kind"]
-    if kind == CLASSIFIER:
-        return ClassifierPolicy(classifier_from(tensors, meta, source))
-    features, camera, classes, profile = model_context(meta, source)
-    if kind == LINEAR:
-        k, m = features.n_features, features.preference.m
-        for name, shape in (("w", (k,)), ("b", (m,))):
-            if name not in tensors or tuple(tensors[name].shape) != shape:
-                raise UserError(source, f"expected shape {shape}", field=f"weights.{name}")
-        return LinearPolicy(LinearUtility(tensors["w"].astype(float), tensors["b"].astype(float)), features, camera, classes, profile, source)
-    if kind == CNN:
-        from terrapref.baselines.cnn import CnnPolicy
-
-        return CnnPolicy.from_tensors(tensors, meta, features, camera, classes, profile, source)
-    raise UserError(source, f"unknown model kind {kind!r}", field="kind")

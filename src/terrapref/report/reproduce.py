@@ -23,7 +23,7 @@ from terrapref.fileio import write_text_atomic
 from terrapref.grid import Engine, run_grid
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, annotate_agreement, run_many, summarise
 from terrapref.evaluation.stats import rate_text
-from terrapref.learning.recipe import OURS, PAPER, TEACH, Recipe, practice_courses, run_recipe
+from terrapref.recipes import OURS, PAPER, TEACH, Recipe, practice_courses, run_recipe
 from terrapref.progress import every_tenth
 from terrapref.scenario import packaged_scenarios, resolve_scenario
 from terrapref.terrain import PreferenceProfile
@@ -137,7 +137,7 @@ def _mode(choices: list[tuple[str, bool, str]]) -> str:
 
 
 def _write_report(out: Path, results, trained, recipes, seeds, eval_seeds, profile, scenarios, timings) -> Path:
-    from terrapref.report.plots import save_loss_curve, save_map
+    from terrapref.plots import save_loss_curve, save_map
     from terrapref.world import rasterise
 
     t_fig = time.perf_counter()

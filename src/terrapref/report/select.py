@@ -1,7 +1,7 @@
 """Choosing a recipe: every candidate taught by every driver, judged on generated layouts.
 
 For each recipe, preference order and training seed, the synthetic driver of that order (and
-style) demonstrates the recipe's course, a model is trained (terrapref.learning.recipe), and the
+style) demonstrates the recipe's course, a model is trained (terrapref.recipes), and the
 model and the same driver drive every generated layout. A zone agrees when the planner's choice
 equals the driver's in the same zone of the same layout (terrapref.evaluation.runner.zone_agrees).
 
@@ -22,9 +22,9 @@ from pathlib import Path
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_many, zone_agrees
 from terrapref.evaluation.stats import rate_text, wilson
 from terrapref.grid import Engine, run_grid
-from terrapref.learning.recipe import recipe_named, run_recipe
+from terrapref.recipes import recipe_named, run_recipe
 from terrapref.progress import every_tenth
-from terrapref.report.plots import save_intervals
+from terrapref.plots import save_intervals
 from terrapref.scenario.generate import zone_kind
 from terrapref.terrain import PreferenceProfile
 

@@ -37,7 +37,7 @@ from terrapref.grid import Engine, run_grid
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PLANNER, PURE_PURSUIT, RunSpec, run_many
 from terrapref.features import FeatureConfig
 from terrapref.progress import every_tenth
-from terrapref.learning.recipe import OURS, TEACH
+from terrapref.recipes import OURS, TEACH
 from terrapref.report.reproduce import TEST_SET, scenario_length, variations
 from terrapref.report.study_report import ALT_PROFILE, write_study
 from terrapref.terrain import PreferenceProfile
@@ -121,7 +121,7 @@ def perturbation(kind: str, level: float) -> Perturbation:
 
 
 def _record_job(args: tuple[str, int, tuple[str, ...]]) -> list[str]:
-    from terrapref.learning.recipe import record_demonstrations
+    from terrapref.recipes import record_demonstrations
 
     workdir, seed, profile = args
     return [str(p) for p in record_demonstrations(DEMONSTRATIONS, workdir, seed, PreferenceProfile.parse(list(profile)))]
@@ -191,7 +191,7 @@ def _train_job(job: dict) -> dict:
 
 def _teach_job(job: dict) -> dict:
     """The recipe's drive(s) by the synthetic driver of ``order`` and ``style``, and its model."""
-    from terrapref.learning.recipe import recipe_named, run_recipe
+    from terrapref.recipes import recipe_named, run_recipe
 
     t0 = time.perf_counter()
     named = recipe_named(job["recipe"])
@@ -274,7 +274,7 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, engine: Engine | None
 
     t0 = time.perf_counter()
     taught_jobs = teach_jobs(plan, work)
-    from terrapref.learning.recipe import recipe_named
+    from terrapref.recipes import recipe_named
 
     log(f"[4/6] teaching: {len(taught_jobs)} drives of {recipe_named(plan.recipe).course} and models (recipe {plan.recipe}; "
         f"{len(plan.orders)} orders, {len(plan.styles)} driver styles, {plan.seeds} seed(s)) ...")

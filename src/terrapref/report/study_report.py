@@ -60,7 +60,7 @@ def _select(runs: list[dict], **keys) -> list[dict]:
 def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings: dict[str, float],
                 report_started: float | None = None) -> Path:
     """Write STUDY.md and the figures; ``report_started`` (perf_counter) times this stage in the table."""
-    from terrapref.report.plots import save_bars, save_curves
+    from terrapref.plots import save_bars, save_curves
 
     figs = out / "figures"
     figs.mkdir(exist_ok=True)
@@ -172,7 +172,7 @@ def write_study(out: Path, plan, trained: list[dict], runs: list[dict], timings:
             lines.append(f"| {lv:g} | {c[0]} | {_collisions(rr)} | {np.mean([r['metrics']['completed'] for r in rr]):.0%} |")
         curves[kind] = pts
         lines.append("")
-    from terrapref.report.plots import save_panels
+    from terrapref.plots import save_panels
 
     save_panels(figs / "robustness.png", {_kind_label(k): v for k, v in curves.items()}, "zone success")
     lines += ["![robustness](figures/robustness.png)", ""]
@@ -218,7 +218,7 @@ def _mean_clearance(runs: list[dict]) -> float:
 
 def teaching_section(plan, runs: list[dict], figs: Path) -> list[str]:
     """Section 6: one drive of teach_course per order and per driver style; agreement with that driver on unseen layouts."""
-    from terrapref.report.plots import save_intervals
+    from terrapref.plots import save_intervals
 
     taught = _select(runs, study="teach")
     if not taught:

@@ -22,7 +22,7 @@ import os
 
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")  # before any submodule imports pygame
 
-from terrapref.demos.teleop.loop import COUNTDOWN_S, HANDBACK_S, TeleopResult, TeleopState, run_teleop  # noqa: E402
-from terrapref.demos.teleop.stick import AXIS_DEADZONE, KEY_RATE_RPS2, Stick, axis_to_w, ramp_toward  # noqa: E402
+from terrapref.teleop.loop import COUNTDOWN_S, HANDBACK_S, TeleopResult, TeleopState, run_teleop  # noqa: E402
+from terrapref.teleop.stick import AXIS_DEADZONE, KEY_RATE_RPS2, Stick, axis_to_w, ramp_toward  # noqa: E402
 
 __all__ = ["AXIS_DEADZONE", "COUNTDOWN_S", "HANDBACK_S", "KEY_RATE_RPS2", "Stick", "TeleopResult", "TeleopState", "axis_to_w", "ramp_toward", "run_teleop"]

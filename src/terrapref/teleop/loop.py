@@ -11,7 +11,7 @@ camera period. A session goes through these phases:
 - ``paused``: nothing moves; resuming counts down again.
 
 The map's edge is a boundary: when the next frame would bring the vehicle within
-:data:`~terrapref.demos.teleop.guide.EDGE_MARGIN_M` of it, the vehicle stops (it may still turn
+:data:`~terrapref.teleop.guide.EDGE_MARGIN_M` of it, the vehicle stops (it may still turn
 on the spot, v = 0) and the frame is not recorded, so a recording never holds frames taken off or
 at the edge of the map.
 
@@ -38,9 +38,9 @@ import pygame
 from terrapref.camera import CameraConfig
 from terrapref.demos.recording import RecordingWriter
 from terrapref.demos.session import DisturbanceConfig, Disturber, recording_meta
-from terrapref.demos.teleop.guide import CourseGuide, stays_on_map
-from terrapref.demos.teleop.stick import Stick
-from terrapref.demos.teleop.window import ALERT_COLOR, HIGHLIGHT_COLOR, PLANNER_COLOR, Banner, Window
+from terrapref.teleop.guide import CourseGuide, stays_on_map
+from terrapref.teleop.stick import Stick
+from terrapref.teleop.window import ALERT_COLOR, HIGHLIGHT_COLOR, PLANNER_COLOR, Banner, Window
 from terrapref.errors import UserError
 from terrapref.features import PreferenceSet, PreferenceSetConfig
 from terrapref.scenario import Scenario, resolve_scenario

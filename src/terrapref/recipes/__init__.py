@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from terrapref.camera import CameraConfig
-from terrapref.demos.corrections import record_corrections
+from terrapref.recipes.corrections import record_corrections
 from terrapref.demos.dataset import build_dataset
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.demos.recording import RecordingWriter, read_recording

@@ -74,7 +74,7 @@ def summarise(recording: Recording) -> RecordingSummary:
 
 
 def save_driven_path(summary: RecordingSummary, recording: Recording, out: str | Path) -> Path:
-    from terrapref.report.plots import save_map
+    from terrapref.plots import save_map
 
     status = summary.status
     return save_map(out, summary.scenario, summary.world, [("driven", recording.poses[:, :2], "red")],

@@ -1,6 +1,6 @@
 """A simulated person at a keyboard: the synthetic driver's intent, typed through the window.
 
-The window is driven through its own event handling (a :data:`~terrapref.demos.teleop.loop.Script`):
+The window is driven through its own event handling (a :data:`~terrapref.teleop.loop.Script`):
 the person sees the scene, wants what the synthetic driver wants (its intended yaw rate, before
 that driver's own hand), reacts ``reaction_s`` later, and can only hold Left or Right (the stick
 moves one control-set step per frame) or tap Down (centre). What a keyboard loses against a
@@ -16,8 +16,8 @@ import numpy as np
 import pygame
 
 from terrapref.demos.expert import ExpertDriver
-from terrapref.demos.teleop.loop import TeleopState
-from terrapref.demos.teleop.stick import KEY_RATE_RPS2
+from terrapref.teleop.loop import TeleopState
+from terrapref.teleop.stick import KEY_RATE_RPS2
 from terrapref.scenario import Scenario
 from terrapref.world import WorldMap
 
