@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 from helpers import linear_model
-from test_evaluate import _dataset_file
+from helpers import dataset_file
 
 from terrapref.cli import main
 
@@ -19,14 +19,14 @@ def _error(capsys) -> str:
 
 
 def test_train_refuses_to_overwrite_its_own_input(tmp_path: Path, capsys):
-    data = _dataset_file(tmp_path / "train.safetensors")
+    data = dataset_file(tmp_path / "train.safetensors")
     before = data.read_bytes()
     assert main(["train", str(data), "--out", str(data), "--epochs", "1"]) == 2
     assert "is also an input" in _error(capsys) and data.read_bytes() == before
 
 
 def test_train_refuses_a_folder_as_its_model_file(tmp_path: Path, capsys):
-    data = _dataset_file(tmp_path / "train.safetensors")
+    data = dataset_file(tmp_path / "train.safetensors")
     (tmp_path / "models").mkdir()
     assert main(["train", str(data), "--out", str(tmp_path / "models"), "--epochs", "1"]) == 2
     assert "expected a file name" in _error(capsys)
@@ -43,7 +43,7 @@ def test_evaluate_refuses_a_file_as_its_folder_before_driving(tmp_path: Path, ca
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root may write anywhere")
 def test_an_unwritable_output_is_refused_before_training(tmp_path: Path, capsys):
-    data = _dataset_file(tmp_path / "train.safetensors")
+    data = dataset_file(tmp_path / "train.safetensors")
     locked = tmp_path / "locked"
     locked.mkdir()
     locked.chmod(0o555)

@@ -1,40 +1,27 @@
-"""Closed-loop evaluation (SPEC 12) and the `train` / `evaluate` commands: metrics.json holds every
-run's scores, figures are written, `best` zones follow the profile, user errors are one line."""
+"""Closed-loop evaluation (SPEC 12) and the `evaluate` command: metrics.json holds every run's
+scores, figures are written, `best` zones follow the profile, user errors are one line."""
 
 from __future__ import annotations
 
 import json
 import math
-import re
 from pathlib import Path
 from types import SimpleNamespace
 
-import numpy as np
 import pytest
 
 from terrapref.cli import main
-from terrapref.demos.dataset import FORMAT as DATASET_FORMAT
-from terrapref.demos.dataset import Dataset, save_dataset
 from terrapref.evaluation.evaluate import evaluate_model
-from terrapref.features import FeatureConfig
 from terrapref.grid import Engine
-from terrapref.learning.model_file import load_model
 from terrapref.scenario import resolve_scenario
 from terrapref.terrain import PreferenceProfile, default_classes
 
-from helpers import linear_model, model_meta
+from helpers import linear_model, one_line_error
 
 PNG = b"\x89PNG\r\n\x1a\n"
 RUN_KEYS = {"completed", "collisions", "duration_s", "rms_cross_track_m", "max_cross_track_m", "distance_m", "zones"}
 ZONE_KEYS = {"id", "expect", "choice", "success"}
 ROCK_FIRST = "rock,mud,water,non_traversable"
-
-
-def _dataset_file(path: Path, n: int = 300, seed: int = 0) -> Path:
-    rng = np.random.default_rng(seed)
-    meta = {"format": DATASET_FORMAT, **model_meta()}
-    data = Dataset(rng.uniform(0, 1, (n, 21, 5)).astype(np.float32), rng.integers(0, 21, n), np.zeros(n, np.float32), np.zeros(n, np.int64), meta)
-    return save_dataset(data, path)
 
 
 @pytest.fixture(scope="module")
@@ -161,144 +148,40 @@ def test_cli_evaluate_with_a_profile(model_path: Path, tmp_path: Path, capsys):
     assert "planner: zone success" in captured.out and str(out / "metrics.json") in captured.out
 
 
-def _one_line_error(capsys, *words: str) -> str:
-    err = capsys.readouterr().err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: "), err
-    assert "Traceback" not in err and "internal error" not in err, err
-    for word in words:
-        assert word in lines[0], err
-    return lines[0]
-
-
 def test_cli_evaluate_missing_model(tmp_path: Path, capsys):
     missing = tmp_path / "absent.safetensors"
     rc = main(["evaluate", str(missing), "demo_course", "--seeds", "1", "--out", str(tmp_path / "ev"), "--workers", "1"])
     assert rc == 2
-    _one_line_error(capsys, str(missing))
+    one_line_error(capsys, str(missing))
     assert not (tmp_path / "ev").exists()
 
 
 def test_cli_evaluate_unknown_scenario(model_path: Path, tmp_path: Path, capsys):
     rc = main(["evaluate", str(model_path), "no_such_course", "--seeds", "1", "--out", str(tmp_path / "ev"), "--workers", "1"])
     assert rc == 2
-    _one_line_error(capsys, "no_such_course")
+    one_line_error(capsys, "no_such_course")
     assert not (tmp_path / "ev").exists()
 
 
 def test_cli_evaluate_bad_profile(model_path: Path, tmp_path: Path, capsys):
     rc = main(["evaluate", str(model_path), "demo_course", "--seeds", "1", "--out", str(tmp_path / "ev"), "--profile", "rock,mud"])
     assert rc == 2
-    _one_line_error(capsys, "--profile")
+    one_line_error(capsys, "--profile")
 
 
 def test_cli_evaluate_zero_seeds_is_a_user_error(model_path: Path, tmp_path: Path, capsys):
     rc = main(["evaluate", str(model_path), "demo_course", "--seeds", "0", "--out", str(tmp_path / "ev"), "--workers", "1"])
     assert rc == 2
-    _one_line_error(capsys, "--seeds")
+    one_line_error(capsys, "--seeds")
 
 
 def test_cli_evaluate_bad_frames_is_a_user_error(model_path: Path, tmp_path: Path, capsys):
     rc = main(["evaluate", str(model_path), "demo_course", "--seeds", "1", "--out", str(tmp_path / "ev"), "--frames", "5,x", "--workers", "1"])
     assert rc == 2
-    _one_line_error(capsys, "--frames")
+    one_line_error(capsys, "--frames")
 
 
 # --- terrapref train --------------------------------------------------------------------------------------
-
-
-def test_cli_train_writes_model_curve_and_checkpoints(tmp_path: Path, capsys):
-    data = _dataset_file(tmp_path / "data.safetensors")
-    out = tmp_path / "models" / "pref.safetensors"
-    rc = main(["train", str(data), "--out", str(out), "--epochs", "3", "--skip", "--class-balance", "--hidden", "16", "--seed", "2",
-               "--members", "1"])
-    captured = capsys.readouterr()
-    assert rc == 0, captured.err
-    model = load_model(out)
-    assert model.classifier.skip and model.classifier.hidden == 16
-    training = model.meta["training"]
-    assert training["epochs"] == 3 and training["class_balance"] and training["seed"] == 2
-    curve = tmp_path / "models" / "pref.loss.png"
-    assert curve.read_bytes().startswith(PNG)
-    folder = tmp_path / "models" / "pref.checkpoints"
-    assert sorted(p.name for p in folder.iterdir()) == [f"epoch_{i:03d}.safetensors" for i in (1, 2, 3)]
-    epoch_lines = [line for line in captured.out.splitlines() if re.fullmatch(r"\s*\d+(\s+\d+\.\d+){5}", line)]
-    assert [int(line.split()[0]) for line in epoch_lines] == [1, 2, 3]
-    # Each line is the history the model file records.
-    for line, h in zip(epoch_lines, model.meta["history"], strict=True):
-        assert float(line.split()[2]) == pytest.approx(h["val_loss"], abs=1e-4)
-    last = captured.out.strip().splitlines()[-1]
-    assert last.startswith(f"wrote {out}") and str(curve) in last and str(folder) in last
-    assert f"epoch {model.meta['best_epoch']}" in last
-
-
-def test_cli_train_on_two_dataset_files(tmp_path: Path, capsys):
-    a, b = _dataset_file(tmp_path / "a.safetensors", 120, 0), _dataset_file(tmp_path / "b.safetensors", 80, 1)
-    out = tmp_path / "m.safetensors"
-    assert main(["train", str(a), str(b), "--out", str(out), "--epochs", "1"]) == 0
-    assert load_model(out).meta["data"]["samples"] == 200
-    assert "training on 200 samples (2 input(s))" in capsys.readouterr().out
-
-
-def test_cli_train_members_writes_an_ensemble(tmp_path: Path, capsys):
-    data = _dataset_file(tmp_path / "data.safetensors", 200)
-    out = tmp_path / "ens.safetensors"
-    assert main(["train", str(data), "--out", str(out), "--epochs", "2", "--hidden", "8", "--members", "2", "--seed", "4"]) == 0
-    text = capsys.readouterr().out
-    assert "2 members" in text and "member 1/2" in text and "member 2/2" in text
-    model = load_model(out)
-    assert model.classifier.members == 2 and [m["seed"] for m in model.meta["members"]] == [4, 1004]
-    summary = next(line for line in text.splitlines() if line.startswith("wrote "))
-    for j, member in enumerate(model.meta["members"], start=1):  # each member's own chosen epoch
-        best = member["history"][member["best_epoch"] - 1]
-        assert f"member {j} epoch {member['best_epoch']}: val loss {best['val_loss']:.4f}" in summary
-    assert len(list((tmp_path / "ens.checkpoints").iterdir())) == 2
-
-
-def test_cli_train_second_stage_stores_the_fitted_utility(tmp_path: Path, capsys):
-    data = _dataset_file(tmp_path / "data.safetensors", 200)
-    out = tmp_path / "m.safetensors"
-    assert main(["train", str(data), "--out", str(out), "--epochs", "1", "--mirror", "--second-stage"]) == 0
-    model = load_model(out)
-    assert model.meta["training"]["utility"] and model.utility is not None
-    assert model.utility.w.shape == (5,) and model.utility.b.shape == (21,)
-
-
-def test_cli_train_second_stage_refuses_lanes(tmp_path: Path, capsys):
-    rng = np.random.default_rng(0)
-    lanes = FeatureConfig(lane_m=6.0)
-    meta = {"format": DATASET_FORMAT, **model_meta(features=lanes)}
-    n = 50
-    data = save_dataset(Dataset(rng.uniform(0, 1, (n, 21, lanes.n_features)).astype(np.float32), rng.integers(0, 21, n),
-                                np.zeros(n, np.float32), np.zeros(n, np.int64), meta), tmp_path / "lanes.safetensors")
-    out = tmp_path / "m.safetensors"
-    assert main(["train", str(data), "--out", str(out), "--epochs", "1", "--second-stage"]) == 2
-    line = _one_line_error(capsys, str(data))
-    assert "--second-stage" in line and "lane" in line
-    assert not out.exists()
-
-
-def test_cli_train_missing_dataset(tmp_path: Path, capsys):
-    missing = tmp_path / "absent.safetensors"
-    assert main(["train", str(missing), "--out", str(tmp_path / "m.safetensors")]) == 2
-    _one_line_error(capsys, str(missing))
-    assert not (tmp_path / "m.safetensors").exists()
-
-
-def test_cli_train_refuses_a_model_file_as_data(model_path: Path, tmp_path: Path, capsys):
-    assert main(["train", str(model_path), "--out", str(tmp_path / "m.safetensors")]) == 2
-    _one_line_error(capsys, str(model_path))
-
-
-@pytest.mark.parametrize("flag", [["--epochs", "0"], ["--batch-size", "0"], ["--hidden", "0"], ["--lr", "-1"], ["--members", "0"]], ids=lambda f: f[0])
-def test_cli_train_bad_hyperparameter_is_a_user_error(tmp_path: Path, capsys, flag: list[str]):
-    data = _dataset_file(tmp_path / "data.safetensors", 50)
-    assert main(["train", str(data), "--out", str(tmp_path / "m.safetensors"), *flag]) == 2
-    line = _one_line_error(capsys)
-    assert re.search(flag[0].lstrip("-").replace("-", "[-_]"), line), line  # names the flag or the field
-
-
-# --- errors raised in worker processes ------------------------------------------------------------
 
 
 def test_user_error_survives_the_trip_between_processes():

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 from helpers import linear_model
-from test_evaluate import _dataset_file
+from helpers import dataset_file
 
 from terrapref import __version__
 from terrapref.cli import main
@@ -20,7 +20,7 @@ def test_version(capsys):
 
 def test_info_on_a_model_a_dataset_an_onnx_file_and_a_recording(tmp_path: Path, capsys):
     model = linear_model(tmp_path / "m.safetensors")
-    data = _dataset_file(tmp_path / "d.safetensors")
+    data = dataset_file(tmp_path / "d.safetensors")
     assert main(["export", str(model), "--format", "onnx", "--out", str(tmp_path / "m.onnx")]) == 0
     assert main(["record", "fig7_rock_vs_non_traversable_left", "--out", str(tmp_path / "rec"), "--quiet", "--disturb", "0"]) == 0
     capsys.readouterr()

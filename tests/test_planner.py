@@ -36,25 +36,11 @@ from terrapref.terrain import PreferenceProfile
 from terrapref.vehicle import Command, Pose
 from terrapref.world import WorldMap
 
-from helpers import model_meta
+from helpers import LINEAR_W, linear_model, model_meta
 
 # Columns of U: non_traversable, water, rock, mud, distance. Avoid terrain, follow the path.
-LINEAR_W = np.array([-8.0, -4.0, -2.0, -1.0, 6.0], dtype=np.float32)
-
-
-def _linear_weights(config: ClassifierConfig, w: np.ndarray = LINEAR_W) -> dict[str, np.ndarray]:
-    """C reduced to its skip path: logits = U @ w exactly (the hidden layers output zero)."""
-    dims = [config.m] + [config.hidden] * config.depth + [config.m]
-    weights = {"compress.weight": w[None].astype(np.float32), "compress.bias": np.zeros(1, np.float32)}
-    for i, (a, b) in enumerate(zip(dims[:-1], dims[1:])):
-        weights[f"layers.{i}.weight"] = np.zeros((b, a), np.float32)
-        weights[f"layers.{i}.bias"] = np.zeros(b, np.float32)
-    return weights
-
-
 def _linear_model(path: Path, camera: CameraConfig | None = None) -> LoadedModel:
-    config = ClassifierConfig(hidden=8, skip=True)
-    return load_model(save_model(path, config, _linear_weights(config), model_meta(camera=camera)))
+    return load_model(linear_model(path, camera))
 
 
 def _random_model(path: Path) -> LoadedModel:

@@ -3,6 +3,7 @@ holds, what each style changes, and which datasets can be trained on together.""
 
 from __future__ import annotations
 
+import json
 from dataclasses import fields, replace
 
 import numpy as np
@@ -279,3 +280,54 @@ def test_training_data_names_the_file_that_differs(tmp_path):
         training_data(paths, FeatureConfig())
     assert caught.value.source == str(paths[1]) and caught.value.problems[0].field == "profile"
     assert str(paths[0]) in caught.value.problems[0].message
+
+
+def test_run_recipe_demonstrates_corrects_and_reuses_demonstrations(tmp_path):
+    from terrapref.recipes import Recipe, run_recipe
+    from terrapref.learning.train import TrainConfig
+
+    recipe = Recipe("tiny", demonstrations=1, corrections=1, train=TrainConfig(epochs=2))
+    out = run_recipe(recipe, tmp_path, 0, course="demo_course")
+    assert out.model.exists()
+    assert [p.name for p in out.recordings] == ["demo_0", "corrections_0"]
+    assert out.demo_minutes > 0 and out.correction_minutes > 0
+    stamp = (tmp_path / "demo_0" / "meta.json").stat().st_mtime_ns
+    again = run_recipe(Recipe("plain", demonstrations=1, train=TrainConfig(epochs=2)), tmp_path, 0, course="demo_course")
+    assert again.recordings == [tmp_path / "demo_0"] and again.correction_minutes == 0
+    assert (tmp_path / "demo_0" / "meta.json").stat().st_mtime_ns == stamp  # reused, not recorded again
+
+
+def test_practice_courses_are_generated_per_training_seed_outside_the_selection_range():
+    from terrapref.recipes import Recipe, practice_courses
+    from terrapref.scenario import resolve_scenario
+
+    recipe = Recipe("p", demonstrations=1, practice=2)
+    assert practice_courses(recipe, 0) == ["gen:3000", "gen:5000"]
+    assert practice_courses(recipe, 4) == ["gen:43000", "gen:45000"]
+    assert practice_courses(Recipe("none"), 3) == []
+    names = {c for s in range(5) for c in practice_courses(recipe, s)}
+    assert len(names) == 10 and not any(1000 <= int(c[4:]) < 2000 for c in names)
+    assert len(resolve_scenario("gen:3000").zones) > 0
+    with pytest.raises(ValueError, match="practice"):
+        Recipe("bad", practice=-1)
+
+
+def test_run_recipe_demonstrates_the_practice_courses_and_rerecords_a_course_mismatch(tmp_path, monkeypatch):
+    import terrapref.recipes as recipe_mod
+    from terrapref.demos.recording import read_recording
+    from terrapref.recipes import Recipe, record_demonstrations, run_recipe
+
+    monkeypatch.setattr(recipe_mod, "practice_courses", lambda recipe, seed: ["demo_course"] * recipe.practice)
+    recipe = Recipe("practised", demonstrations=1, practice=1, train=TrainConfig(epochs=2))
+    out = run_recipe(recipe, tmp_path, 0, course="demo_course")
+    assert [p.name for p in out.recordings] == ["demo_0", "practice_0"]
+    practice = read_recording(tmp_path / "practice_0")
+    assert practice.complete and practice.meta["driver"]["seed"] == 20  # its own seed, not demo_0's
+    assert out.demo_minutes > 0
+    # A recording of another course in the practice slot is not taken for the practice run.
+    meta_path = tmp_path / "practice_0" / "meta.json"
+    meta_path.write_text(json.dumps({**json.loads(meta_path.read_text()), "scenario": "another_course"}))
+    logged: list[str] = []
+    record_demonstrations(Recipe("p", demonstrations=1, practice=1), tmp_path, 0, course="demo_course", log=logged.append)
+    assert read_recording(tmp_path / "practice_0").meta["scenario"] == "demo_course"
+    assert len(logged) == 1 and "(demo_course)" in logged[0] and logged[0].startswith("demonstration 2/2")  # demo_0 reused

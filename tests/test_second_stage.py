@@ -27,8 +27,7 @@ from terrapref.sim import Simulation
 from terrapref.terrain import default_classes
 from terrapref.vehicle import Pose
 
-from helpers import model_meta
-from test_planner import _linear_weights
+from helpers import model_meta, skip_path_weights
 
 # Columns of U: non_traversable, water, rock, mud, distance.
 UTILITY = LinearUtility(np.array([-12.0, -5.0, -3.0, -1.0, 5.0]), np.linspace(-1.0, 1.0, 21) ** 2 * -4.0 + 2.0)
@@ -123,7 +122,7 @@ def test_a_second_stage_beyond_the_trajectories_is_refused(setup):
 def _model_with_utility(path: Path, utility: dict | None):
     config = ClassifierConfig(hidden=8, skip=True)
     meta = model_meta() | ({"utility": utility} if utility is not None else {})
-    return save_model(path, config, _linear_weights(config), meta)
+    return save_model(path, config, skip_path_weights(config), meta)
 
 
 def test_the_planner_looks_ahead_only_with_a_utility(tmp_path: Path):

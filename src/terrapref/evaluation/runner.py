@@ -72,17 +72,26 @@ def _policy_file(path: str) -> Policy:
     return load_policy(path)
 
 
+def _model_policy(spec: RunSpec) -> Policy:
+    if spec.model_path is None:
+        raise ValueError("a planner run needs a model file")
+    return _policy_file(spec.model_path)
+
+
+POLICY_DRIVERS: dict[str, Callable[[RunSpec], Policy]] = {
+    PLANNER: _model_policy,
+    PURE_PURSUIT: lambda spec: PurePursuitPolicy(),
+    HAND_COST: lambda spec: CostPolicy(),
+}
+"""Driver kinds that drive through the planner -> the policy a run of that kind drives with
+(``EXPERT``, the synthetic driver, drives itself)."""
+
+
 def make_policy(spec: RunSpec) -> Policy:
     """The policy a run drives with: a model file's, or a baseline that needs none."""
-    if spec.driver == PLANNER:
-        if spec.model_path is None:
-            raise ValueError("a planner run needs a model file")
-        return _policy_file(spec.model_path)
-    if spec.driver == PURE_PURSUIT:
-        return PurePursuitPolicy()
-    if spec.driver == HAND_COST:
-        return CostPolicy()
-    raise ValueError(f"unknown driver {spec.driver!r}")
+    if spec.driver not in POLICY_DRIVERS:
+        raise ValueError(f"unknown driver {spec.driver!r}; drivers: {', '.join([EXPERT, *POLICY_DRIVERS])}")
+    return POLICY_DRIVERS[spec.driver](spec)
 
 
 def run_one(spec: RunSpec) -> dict:

@@ -1,0 +1,275 @@
+"""Model and dataset files: safetensors without pickle, round trips, and refusals of anything
+they cannot vouch for (damage, missing or wrong metadata, weights of the wrong shape, a model
+for another camera or preference set)."""
+
+from __future__ import annotations
+
+import json
+import pickle
+import struct
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from safetensors.numpy import save_file
+
+from terrapref.camera import CameraConfig
+from terrapref.demos.dataset import Dataset, load_dataset, save_dataset
+from terrapref.errors import UserError
+from terrapref.features import FeatureConfig, PreferenceSetConfig
+from terrapref.learning.model_file import FORMAT, check_compatible, load_model, read_model_file, save_model
+from terrapref.learning.network import ClassifierConfig
+from terrapref.tensorfile import write_tensor_file
+from terrapref.terrain import PreferenceProfile, default_classes
+
+from helpers import assert_weights_equal, decisive_dataset, model_meta, random_dataset, random_weights
+
+
+# --- model files -------------------------------------------------------------------------------------
+
+
+ODD_FEATURES = FeatureConfig(PreferenceSetConfig(n_steps=20, dt_s=0.25), distance_mode="window", window_m=9.0, path_spacing_m=0.5)
+ODD_CAMERA = CameraConfig(pitch_deg=25.0, max_range_m=20.0, mount_height_m=1.2)
+ODD_PROFILE = ("mud", "rock", "water", "non_traversable")
+
+
+@pytest.fixture
+def model_file(tmp_path: Path) -> tuple[Path, ClassifierConfig, dict[str, np.ndarray]]:
+    config = ClassifierConfig(hidden=16, activation="tanh", depth=2, skip=True, channels=2)
+    weights = random_weights(config)
+    path = save_model(tmp_path / "sub" / "model.safetensors", config, weights, {**model_meta(ODD_FEATURES, ODD_CAMERA, ODD_PROFILE), "note": "kept"})
+    return path, config, weights
+
+
+def test_model_file_round_trip(model_file):
+    path, config, weights = model_file
+    model = load_model(path)
+    assert model.path == str(path)
+    assert model.classifier == config
+    assert_weights_equal(model.weights, weights)
+    assert model.features == ODD_FEATURES
+    assert model.camera == ODD_CAMERA
+    assert model.classes.to_dict() == default_classes().to_dict()
+    assert model.profile == ODD_PROFILE
+    assert model.meta["format"] == FORMAT and model.meta["note"] == "kept"
+    assert not any(p.name.endswith(".tmp") for p in path.parent.iterdir())  # written atomically
+
+
+def test_model_file_is_safetensors_without_pickle(model_file, monkeypatch):
+    path, _, weights = model_file
+    raw = path.read_bytes()
+    (n,) = struct.unpack("<Q", raw[:8])
+    assert raw[8:9] == b"{"
+    header = json.loads(raw[8 : 8 + n])
+    assert json.loads(header["__metadata__"]["terrapref"])["format"] == FORMAT
+    tensors = {k: v for k, v in header.items() if k != "__metadata__"}
+    assert set(tensors) == set(weights)
+    assert len(raw) == 8 + n + max(v["data_offsets"][1] for v in tensors.values())  # nothing else in the file
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("loading a model must not unpickle")
+
+    for name in ("load", "loads", "Unpickler"):
+        monkeypatch.setattr(pickle, name, refuse)
+    monkeypatch.setattr(torch, "load", refuse)
+    assert load_model(path).classifier.skip
+
+
+def _expect_user_error(path: Path, *words: str) -> UserError:
+    with pytest.raises(UserError) as err:
+        load_model(path)
+    assert err.value.source == str(path)
+    text = str(err.value)
+    assert str(path) in text and "\n" not in text
+    for word in words:
+        assert word in text, text
+    return err.value
+
+
+def test_missing_file_and_directory_are_refused(tmp_path: Path):
+    _expect_user_error(tmp_path / "absent.safetensors")
+    _expect_user_error(tmp_path)
+
+
+@pytest.mark.parametrize("damage", ["truncated", "garbage", "empty", "header_too_long", "pickle"])
+def test_corrupted_model_file_is_refused(model_file, damage: str):
+    path = model_file[0]
+    raw = path.read_bytes()
+    if damage == "truncated":
+        path.write_bytes(raw[: len(raw) - 100])
+    elif damage == "garbage":
+        path.write_bytes(np.random.default_rng(0).integers(0, 256, 4000, dtype=np.uint8).tobytes())
+    elif damage == "empty":
+        path.write_bytes(b"")
+    elif damage == "header_too_long":
+        path.write_bytes(struct.pack("<Q", 10**9) + raw[8:])
+    else:
+        path.write_bytes(pickle.dumps({"compress.weight": np.zeros((1, 5))}))
+    _expect_user_error(path)
+
+
+def test_non_model_safetensors_is_refused(tmp_path: Path):
+    path = tmp_path / "weights.safetensors"
+    save_file({"x": np.zeros(3, np.float32)}, str(path))
+    err = _expect_user_error(path, "metadata")
+    assert err.problems[0].field == "metadata"
+
+
+def test_dataset_file_round_trip(tmp_path: Path):
+    data = decisive_dataset(50)
+    back = load_dataset(save_dataset(data, tmp_path / "d.safetensors"))
+    for name in ("U", "labels", "w", "source"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(data, name))
+    assert back.fingerprint == data.fingerprint and back.meta["samples"] == 50
+    assert back.feature_config == data.feature_config and back.camera_config == data.camera_config
+
+
+def test_dataset_without_format_in_meta_round_trips(tmp_path: Path):
+    data = random_dataset(20)
+    data = Dataset(data.U, data.labels, data.w, data.source, {k: v for k, v in data.meta.items() if k != "format"})
+    back = load_dataset(save_dataset(data, tmp_path / "d.safetensors"))
+    np.testing.assert_array_equal(back.U, data.U)
+
+
+def test_dataset_file_is_not_a_model(tmp_path: Path):
+    path = save_dataset(random_dataset(10), tmp_path / "data.safetensors")
+    err = _expect_user_error(path, FORMAT)
+    assert err.problems[0].field == "format"
+
+
+@pytest.mark.parametrize("metadata", [{"other": "x"}, {"terrapref": "{not json"}], ids=["no-terrapref-key", "bad-json"])
+def test_missing_metadata_is_refused(model_file, metadata: dict):
+    path, _, weights = model_file
+    save_file(weights, str(path), metadata=metadata)
+    assert _expect_user_error(path, "metadata").problems[0].field == "metadata"
+
+
+def test_wrong_format_is_refused(model_file):
+    path, config, weights = model_file
+    header = {"format": "terrapref-model/99", "classifier": config.to_dict(), **model_meta()}
+    save_file(weights, str(path), metadata={"terrapref": json.dumps(header)})
+    assert _expect_user_error(path, "terrapref-model/99").problems[0].field == "format"
+
+
+@pytest.mark.parametrize("key", ["camera", "features", "classes", "profile", "classifier"])
+def test_missing_configuration_is_refused(model_file, key: str):
+    path, config, weights = model_file
+    header = {"format": FORMAT, "classifier": config.to_dict(), **model_meta()}
+    del header[key]
+    save_file(weights, str(path), metadata={"terrapref": json.dumps(header)})
+    assert _expect_user_error(path, key).problems[0].field == key
+
+
+def test_invalid_configuration_is_refused(model_file):
+    path, config, weights = model_file
+    header = {"format": FORMAT, "classifier": {**config.to_dict(), "activation": "sigmoid"}, **model_meta()}
+    save_file(weights, str(path), metadata={"terrapref": json.dumps(header)})
+    _expect_user_error(path, "activation")
+
+
+@pytest.mark.parametrize("change", ["missing", "extra"])
+def test_weights_not_matching_the_classifier_are_refused(model_file, change: str):
+    path, config, weights = model_file
+    weights = dict(weights)
+    if change == "missing":
+        del weights[f"layers.{config.depth}.bias"]
+    else:
+        weights["layers.9.weight"] = np.zeros((2, 2), np.float32)
+    save_model(path, config, weights, model_meta(ODD_FEATURES, ODD_CAMERA, ODD_PROFILE))
+    err = _expect_user_error(path, "layers.")
+    assert err.problems[0].field == "weights"
+
+
+@pytest.mark.parametrize("name", ["compress.weight", "layers.0.weight", "layers.2.bias"])
+def test_weights_of_the_wrong_shape_are_refused(model_file, name: str):
+    path, config, weights = model_file
+    weights = {**weights, name: np.zeros(tuple(d + 1 for d in weights[name].shape), np.float32)}
+    save_model(path, config, weights, model_meta(ODD_FEATURES, ODD_CAMERA, ODD_PROFILE))
+    err = _expect_user_error(path, name)
+    assert err.problems[0].field == f"weights.{name}"
+
+
+def test_classifier_not_matching_the_features_is_refused(tmp_path: Path):
+    config = ClassifierConfig(m=11)
+    path = save_model(tmp_path / "m.safetensors", config, random_weights(config), model_meta())
+    assert _expect_user_error(path).problems[0].field == "classifier"
+
+
+def test_check_compatible_refuses_another_camera(model_file):
+    model = load_model(model_file[0])
+    check_compatible(model, ODD_CAMERA, ODD_FEATURES)  # its own configuration passes
+    with pytest.raises(UserError) as err:
+        check_compatible(model, replace(ODD_CAMERA, pitch_deg=30.0))
+    assert err.value.source == model.path and err.value.problems[0].field == "camera"
+    assert "pitch_deg" in str(err.value) and "mount_height_m" not in str(err.value)
+
+
+def test_check_compatible_refuses_a_default_model_under_pitch_25(tmp_path: Path):
+    config = ClassifierConfig()
+    model = load_model(save_model(tmp_path / "m.safetensors", config, random_weights(config), model_meta()))
+    with pytest.raises(UserError) as err:
+        check_compatible(model, CameraConfig(pitch_deg=25.0))
+    assert str(tmp_path / "m.safetensors") in str(err.value) and "pitch_deg" in str(err.value)
+
+
+def test_check_compatible_refuses_another_preference_set(tmp_path: Path):
+    config = ClassifierConfig()
+    model = load_model(save_model(tmp_path / "m.safetensors", config, random_weights(config), model_meta()))
+    check_compatible(model, CameraConfig(), FeatureConfig())
+    with pytest.raises(UserError) as err:
+        check_compatible(model, CameraConfig(), FeatureConfig(PreferenceSetConfig(n_steps=20)))
+    assert err.value.source == model.path and err.value.problems[0].field == "features"
+    assert "preference" in str(err.value)
+
+
+def test_check_compatible_names_the_differing_preference_field(tmp_path: Path):
+    config = ClassifierConfig()
+    model = load_model(save_model(tmp_path / "m.safetensors", config, random_weights(config), model_meta()))
+    with pytest.raises(UserError) as err:
+        check_compatible(model, CameraConfig(), FeatureConfig(PreferenceSetConfig(n_steps=20)))
+    assert "n_steps" in str(err.value)
+
+
+# --- ensembles and sizes in a model file -----------------------------------------------------------
+
+
+@pytest.mark.parametrize("claimed, held", [(2, 1), (3, 2), (3_000_000, 2), (1, 2)])
+def test_an_ensemble_whose_header_disagrees_with_its_members_is_refused(tmp_path: Path, claimed: int, held: int):
+    # Checked before any shape is built from the header, so a huge claimed count fails at once.
+    one = ClassifierConfig(hidden=8)
+    weights = {f"members.{j}.{k}": v for j in range(held) for k, v in random_weights(one, j).items()}
+    path = save_model(tmp_path / "m.safetensors", replace(one, members=claimed), weights, model_meta())
+    err = _expect_user_error(path, f"header says {claimed} member(s), the weights hold {held}")
+    assert err.problems[0].field == "classifier.members"
+
+
+def test_a_member_missing_a_weight_is_refused(tmp_path: Path):
+    one = ClassifierConfig(hidden=8)
+    weights = {f"members.{j}.{k}": v for j in range(2) for k, v in random_weights(one, j).items()}
+    del weights["members.1.layers.2.bias"]
+    path = save_model(tmp_path / "m.safetensors", replace(one, members=2), weights, model_meta())
+    err = _expect_user_error(path, "members.1.layers.2.bias")
+    assert err.problems[0].field == "weights"
+
+
+def test_a_model_header_with_a_fractional_size_is_refused(tmp_path: Path):
+    one = ClassifierConfig(hidden=8)
+    weights = {f"members.{j}.{k}": v for j in range(2) for k, v in random_weights(one, j).items()}
+    path = save_model(tmp_path / "m.safetensors", replace(one, members=2), weights, model_meta())
+    weights, meta = read_model_file(path)
+    meta["classifier"]["members"] = 2.0
+    write_tensor_file(path, weights, meta)
+    err = _expect_user_error(path, "integers")
+    assert err.problems[0].field == "classifier"
+
+
+def test_profile_of_the_model_parses(model_file):
+    model = load_model(model_file[0])
+    assert PreferenceProfile.parse(list(model.profile), model.classes).order == ODD_PROFILE
+
+
+
+
+# --- mirror augmentation ---------------------------------------------------------------------------------

@@ -1,0 +1,94 @@
+"""The classifier C (SPEC 8): the NumPy forward pass against the PyTorch network, the skip path,
+channels, softmax, and its configuration's checks."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
+from terrapref.learning.torch_net import UtilityClassifier
+
+from helpers import K, M, assert_weights_equal
+
+
+# --- the NumPy forward pass is the PyTorch network ------------------------------------------------
+
+
+CONFIGS = [
+    ClassifierConfig(),
+    ClassifierConfig(activation="tanh"),
+    ClassifierConfig(activation="elu"),
+    ClassifierConfig(skip=True),
+    ClassifierConfig(activation="tanh", skip=True),
+    ClassifierConfig(activation="elu", skip=True, hidden=17, depth=2),
+    ClassifierConfig(compress=False),
+    ClassifierConfig(activation="elu", compress=False, depth=1),
+    ClassifierConfig(m=7, n_features=3, hidden=5, depth=4, activation="tanh", skip=True),
+    ClassifierConfig(channels=3),
+    ClassifierConfig(channels=2, skip=True, activation="elu"),
+]
+
+
+@pytest.mark.parametrize("config", CONFIGS, ids=lambda c: f"{c.activation}-d{c.depth}-h{c.hidden}-m{c.m}k{c.n_features}c{c.channels}{'-skip' if c.skip else ''}{'' if c.compress else '-flat'}")
+def test_numpy_forward_equals_torch(config: ClassifierConfig):
+    torch.manual_seed(3)
+    net = UtilityClassifier(config).eval()
+    weights = {k: v.detach().numpy().copy() for k, v in net.state_dict().items()}
+    # Wider than [0, 1] so that every activation's negative side is exercised.
+    U = np.random.default_rng(1).uniform(-2, 2, (9, config.m, config.n_features)).astype(np.float32)
+    U_before, w_before = U.copy(), {k: v.copy() for k, v in weights.items()}
+    with torch.no_grad():
+        expected = net(torch.from_numpy(U)).numpy()
+    batch = numpy_forward(config, weights, U)
+    assert batch.shape == (9, config.m)
+    np.testing.assert_allclose(batch, expected, atol=1e-5, rtol=0)
+    for b in range(len(U)):
+        single = numpy_forward(config, weights, U[b])
+        assert single.shape == (config.m,)
+        np.testing.assert_allclose(single, expected[b], atol=1e-5, rtol=0)
+    # The forward pass works in place on its own buffers, never on the caller's.
+    np.testing.assert_array_equal(U, U_before)
+    assert_weights_equal(weights, w_before)
+
+
+def test_skip_adds_the_compressed_scores_to_the_logits():
+    config = ClassifierConfig(skip=True, hidden=4)
+    torch.manual_seed(0)
+    weights = {k: v.detach().numpy().copy() for k, v in UtilityClassifier(config).state_dict().items()}
+    U = np.random.default_rng(0).uniform(0, 1, (M, K)).astype(np.float32)
+    plain = numpy_forward(replace(config, skip=False), weights, U)
+    scores = U @ weights["compress.weight"][0] + weights["compress.bias"][0]
+    np.testing.assert_allclose(numpy_forward(config, weights, U), plain + scores, atol=1e-6)
+
+
+def test_channels_compress_each_row_to_several_scores():
+    """Each trajectory's row becomes ``channels`` numbers, laid out trajectory by trajectory;
+    the residual path adds the first channel."""
+    config = ClassifierConfig(channels=2, skip=True, hidden=4, depth=1)
+    torch.manual_seed(0)
+    weights = {k: v.detach().numpy().copy() for k, v in UtilityClassifier(config).state_dict().items()}
+    assert weights["compress.weight"].shape == (2, K) and weights["layers.0.weight"].shape == (4, 2 * M)
+    U = np.random.default_rng(0).uniform(0, 1, (M, K)).astype(np.float32)
+    per_row = U @ weights["compress.weight"].T + weights["compress.bias"]  # (m, 2)
+    h = np.maximum(per_row.reshape(-1) @ weights["layers.0.weight"].T + weights["layers.0.bias"], 0.0)
+    expected = h @ weights["layers.1.weight"].T + weights["layers.1.bias"] + per_row[:, 0]
+    np.testing.assert_allclose(numpy_forward(config, weights, U), expected, atol=1e-5)
+
+
+def test_softmax_is_a_distribution_over_the_last_axis():
+    logits = np.array([[1000.0, 1000.0, 0.0], [-5.0, 0.0, 5.0]])
+    p = softmax(logits)
+    assert np.all(np.isfinite(p))  # no overflow for huge logits
+    np.testing.assert_allclose(p.sum(axis=-1), 1.0)
+    np.testing.assert_allclose(p[0], [0.5, 0.5, 0.0], atol=1e-12)
+    np.testing.assert_array_equal(np.argmax(p, axis=-1), np.argmax(logits, axis=-1))
+
+
+@pytest.mark.parametrize("bad", [dict(activation="sigmoid"), dict(m=1), dict(hidden=0), dict(depth=0), dict(skip=True, compress=False), dict(channels=0)])
+def test_classifier_config_is_validated(bad: dict):
+    with pytest.raises(ValueError):
+        ClassifierConfig(**bad)
