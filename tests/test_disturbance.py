@@ -40,10 +40,6 @@ def test_default_config_is_valid():
     {"min_duration_s": 2.0, "max_duration_s": 1.0},
     {"min_duration_s": 0.0},
     {"max_command_rps": 0.0},
-    {"counter_share": -0.1},
-    {"counter_share": 1.5},
-    {"min_counter_s": 0.0},
-    {"min_counter_s": 2.0, "max_counter_s": 1.0},
 ])
 def test_invalid_config_is_refused(kw: dict):
     with pytest.raises(ValueError):
@@ -127,38 +123,6 @@ def test_disturber_is_reproducible():
     b = _pushes(config, 300, seed=5)[1]
     c = _pushes(config, 300, seed=6)[1]
     assert a == b and a != c
-
-
-def _countered(config: DisturbanceConfig, stick: list[float], seed: int = 0) -> list[float]:
-    d = Disturber(config, np.random.default_rng(seed), DT)
-    return [d(Command(1.0, w))[1] for w in stick]
-
-
-def test_a_counter_push_turns_the_vehicle_the_other_way_when_the_stick_leaves_rest():
-    config = DisturbanceConfig(rate_hz=0.0, counter_share=1.0, min_yaw_rate_rps=0.4, max_yaw_rate_rps=0.4,
-                               min_counter_s=0.5, max_counter_s=0.5)
-    assert config.active and not DisturbanceConfig(rate_hz=0.0).active
-    stick = [0.0] * 12 + [0.3] * 10 + [0.0] * 10 + [0.3] * 10 + [0.0] * 11 + [-0.2] * 10
-    out = _countered(config, stick)
-    assert out[:12] == [0.0] * 12
-    assert out[12:17] == [-0.4] * 5 and out[17:22] == stick[17:22]  # 0.5 s the other way, then the stick
-    assert out[22:42] == stick[22:42]  # the stick rested only 1 s: no new push
-    assert out[42:53] == [0.0] * 11 and out[53:58] == [0.4] * 5 and out[58:] == stick[58:]
-
-
-def test_a_counter_push_is_clipped_to_the_yaw_rate_limit():
-    config = DisturbanceConfig(rate_hz=0.0, counter_share=1.0, min_yaw_rate_rps=0.8, max_yaw_rate_rps=0.8, max_command_rps=0.5)
-    out = _countered(config, [0.0] * 12 + [-0.3] * 5)
-    assert out[12:17] == [0.5] * 5
-
-
-def test_counter_share_is_the_share_of_stick_movements_countered():
-    config = DisturbanceConfig(rate_hz=0.0, counter_share=0.3, min_counter_s=0.1, max_counter_s=0.1)
-    stick = ([0.0] * 11 + [0.4]) * 2000
-    out = _countered(config, stick, seed=3)
-    countered = sum(1 for w, o in zip(stick, out) if w != 0.0 and o != w)
-    assert 0.25 < countered / 2000 < 0.35
-    assert _countered(DisturbanceConfig(rate_hz=0.0), stick) == stick
 
 
 # --- disturbed recordings ------------------------------------------------------------------------

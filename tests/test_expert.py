@@ -13,7 +13,7 @@ import pytest
 import terrapref.demos.expert as expert_module
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.evaluation import RunMetrics, score_run
-from terrapref.scenario import Scenario, parse_scenario, resolve_scenario
+from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.sim import EpisodeLog, SimConfig, Simulation, run_episode
 from terrapref.terrain import PreferenceProfile
 
@@ -153,43 +153,3 @@ def test_expert_config_to_dict_is_plain_data():
     assert data["profile"] == ["mud", "rock", "water", "non_traversable"]
     assert data["speed_mps"] == 1.0
     assert all(isinstance(v, (int, float, str, list)) for v in data.values())
-
-
-# --- following the vehicle's side (for demonstrations with counter-pushes) ------------------------
-
-
-def _one_patch(*extra: dict):
-    """A straight trail along y = 10 from x = 2 with a water circle (radius 1.6 m) at x = 15."""
-    return parse_scenario({
-        "format": "terrapref-scenario/1",
-        "name": "one_patch",
-        "world": {"size_m": [30.0, 20.0], "resolution_m": 0.05, "background": "grass"},
-        "terrain": [{"class": "water", "circle": {"center": [15.0, 10.0], "radius": 1.6}}, *extra],
-        "path": {"waypoints": [[2.0, 10.0], [28.0, 10.0]]},
-    })
-
-
-def _offset(config: ExpertConfig, scenario, headed: float, seed: int = 0) -> float:
-    driver = ExpertDriver(config)
-    driver.reset(scenario, np.random.default_rng(seed))
-    return driver.choose_offset(9.0, headed)  # at x = 11, the patch 2.4 m ahead
-
-
-def test_by_default_the_driver_ignores_where_the_vehicle_is_headed():
-    scenario = _one_patch()
-    for seed in range(4):
-        assert _offset(ExpertConfig(), scenario, 1.0, seed) == _offset(ExpertConfig(), scenario, -1.0, seed) != 0.0
-
-
-def test_the_driver_follows_the_vehicle_to_a_side_that_costs_about_the_same():
-    scenario, follow = _one_patch(), ExpertConfig(follow_margin=0.1)
-    for seed in range(4):
-        assert _offset(follow, scenario, 1.0, seed) > 0.0 > _offset(follow, scenario, -1.0, seed)
-    assert _offset(follow, scenario, 0.2) == _offset(ExpertConfig(), scenario, 0.2)  # not headed anywhere yet
-
-
-def test_the_driver_does_not_follow_the_vehicle_onto_a_costlier_side():
-    rock_right = {"class": "rock", "rectangle": {"center": [15.0, 6.0], "size": [8.0, 4.0]}}
-    scenario, follow = _one_patch(rock_right), ExpertConfig(follow_margin=0.1)
-    for seed in range(4):
-        assert _offset(follow, scenario, -1.0, seed) > 0.0

@@ -80,7 +80,7 @@ def test_features_keep_the_base_and_set_the_recipes_own():
     assert RECIPES["paper"].features(base) == replace(base, lane_m=0.0)
 
 
-@pytest.mark.parametrize("bad", [dict(demonstrations=0), dict(corrections=-1), dict(practice=-1), dict(lane_m=-1.0), dict(follow_margin=-0.1)])
+@pytest.mark.parametrize("bad", [dict(demonstrations=0), dict(corrections=-1), dict(practice=-1), dict(lane_m=-1.0)])
 def test_recipes_are_validated(bad: dict):
     with pytest.raises(ValueError):
         Recipe("bad", **bad)

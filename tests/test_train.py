@@ -16,7 +16,7 @@ from terrapref.demos.dataset import Dataset
 from terrapref.learning.model_file import expected_shapes, load_model
 from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
 from terrapref.learning.pipeline import train_and_save
-from terrapref.learning.train import MEMBER_SEED_STEP, TrainConfig, decisive_frames, split_indices, train
+from terrapref.learning.train import MEMBER_SEED_STEP, TrainConfig, split_indices, train
 
 from helpers import K, M, W_TRUE, assert_weights_equal, dataset_of, decisive_dataset, linear_dataset, model_meta, random_dataset, random_weights, weights_differ
 
@@ -27,7 +27,7 @@ from helpers import K, M, W_TRUE, assert_weights_equal, dataset_of, decisive_dat
 def test_defaults_are_the_papers_recipe():
     c = TrainConfig()
     assert (c.epochs, c.lr, c.batch_size, c.val_fraction) == (15, 1e-3, 256, 0.2)
-    assert c.decisive_weight == 1.0 and not c.class_balance and not c.skip and c.depth == 3
+    assert not c.class_balance and not c.skip and c.depth == 3
 
 
 def test_paper_budget_is_an_80_20_split_and_135_adam_steps():
@@ -146,38 +146,6 @@ def test_members_must_be_positive(bad: dict):
 def test_classifier_sizes_must_be_integers(field: str, value):
     with pytest.raises(ValueError, match="integers"):
         ClassifierConfig(**{field: value})
-
-
-def test_decisive_frames_closed_form():
-    U = np.zeros((3, M, K), np.float32)
-    U[:, :, -1] = np.linspace(0, 1, M)  # the path follower's choice is the last trajectory
-    U[1:, 4, 2] = 0.5  # terrain in view in frames 1 and 2
-    labels = np.array([3, M - 1, 3])
-    # frame 0: no terrain; frame 1: terrain, but the label is the path follower's; frame 2: decisive
-    np.testing.assert_array_equal(decisive_frames(U, labels), [False, False, True])
-
-
-def test_terrain_seen_only_on_the_lanes_does_not_make_a_frame_decisive():
-    k = K - 1
-    U = np.zeros((2, M, 2 * k + 1), np.float32)
-    U[:, :, -1] = np.linspace(0, 1, M)
-    U[0, 4, k + 1] = 0.5  # frame 0: mud on a lane only
-    U[1, 4, 1] = 0.5  # frame 1: mud on a trajectory
-    labels = np.array([3, 3])
-    np.testing.assert_array_equal(decisive_frames(U, labels, n_terrain=k), [False, True])
-    np.testing.assert_array_equal(decisive_frames(U, labels), [True, True])  # counted as terrain without n_terrain
-
-
-def test_decisive_weight_one_is_the_default():
-    data = decisive_dataset(500)
-    assert decisive_frames(data.U, data.labels).sum() > 20
-    config = TrainConfig(epochs=3, batch_size=64, hidden=16)
-    a, b = train(data, config), train(data, replace(config, decisive_weight=1.0))
-    assert_weights_equal(a.weights, b.weights)
-    assert a.history == b.history
-    # ... and the knob is connected: another weight changes the result on this data.
-    c = train(data, replace(config, decisive_weight=5.0))
-    assert weights_differ(a.weights, c.weights)
 
 
 def test_class_balance_changes_the_loss_only_when_asked():

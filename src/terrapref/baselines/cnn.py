@@ -201,14 +201,3 @@ class CnnPolicy(Policy):
         with torch.no_grad():
             out = self.net(_onehot(small, self.config.n_classes), torch.from_numpy((obs.path_ahead.ravel() / PATH_SCALE_M)[None].astype(np.float32)))
         return out[0].numpy().astype(np.float64)
-
-
-def fit_cnn_policy(recordings: list[Recording], features: FeatureConfig, config: CnnConfig, out: str | Path,
-                   dataset_meta: dict, samples: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> CnnTrainResult:
-    """Build samples (or take given ones), train and save; ``dataset_meta`` carries camera, classes, profile."""
-    images, paths, labels = samples if samples is not None else cnn_samples(recordings, features, config.stride)
-    result = train_cnn(images, paths, labels, features.preference.m, config)
-    meta = {k: dataset_meta[k] for k in ("camera", "classes", "profile")} | {"features": features.to_dict()}
-    save_cnn(out, result, config, images.shape[1:], meta)
-    return result
-

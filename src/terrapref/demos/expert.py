@@ -32,8 +32,6 @@ from terrapref.vehicle import Command
 from terrapref.world import WorldMap, rasterise
 
 
-HEADED_AHEAD_M = 3.0  # where the vehicle is headed: its offset this far ahead on its heading [m]
-HEADED_MIN_M = 0.3  # nearer the path than this, it is headed for neither side [m]
 
 
 @dataclass(frozen=True)
@@ -63,12 +61,6 @@ class ExpertConfig:
         deadzone_rps: corrections below this leave the stick at zero [rad/s].
         reaction_delay_s: delay between seeing and the stick moving [s].
         stick_noise_rps: std of the hand's tremor while the stick is deflected [rad/s].
-        follow_margin: when the vehicle is headed for the other side of a patch than the
-            planned one, and that side costs at most this much more (relative), the driver
-            takes it instead of crossing back, as a person whose vehicle slid toward the
-            other side of a puddle would (0 is off). Where the vehicle is headed: its lateral
-            offset plus HEADED_AHEAD_M times the sine of its heading error, once that is
-            more than HEADED_MIN_M.
     """
 
     profile: tuple[str, ...] = ("mud", "rock", "water", "non_traversable")
@@ -92,7 +84,6 @@ class ExpertConfig:
     deadzone_rps: float = 0.06
     reaction_delay_s: float = 0.2
     stick_noise_rps: float = 0.02
-    follow_margin: float = 0.0
 
     def to_dict(self) -> dict:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
@@ -166,12 +157,8 @@ class ExpertDriver:
 
     # -- decision --------------------------------------------------------------------------
 
-    def choose_offset(self, s_now: float, headed: float = 0.0) -> float:
-        """The lateral offset [m] (left positive) to hold over the terrain ahead.
-
-        ``headed``: where the vehicle is headed, as a lateral offset [m] (used with
-        ``follow_margin``).
-        """
+    def choose_offset(self, s_now: float) -> float:
+        """The lateral offset [m] (left positive) to hold over the terrain ahead."""
         c = self.config
         s = s_now + self._s_rel  # (S,)
         valid = s <= self.path.length_m
@@ -207,12 +194,6 @@ class ExpertDriver:
         span = (last - first + 1) * self.sample_step_m + 2.0 * c.pursuit_lookahead_m
         total = terrain + c.deviation_cost * self.offsets**2 * span
         best = float(total.min())
-        if c.follow_margin > 0 and abs(headed) > HEADED_MIN_M:
-            side = np.flatnonzero((np.sign(self.offsets) == np.sign(headed)) & ~hits_lethal)
-            if len(side):
-                j = side[np.argmin(total[side])]
-                if total[j] <= best * (1 + c.follow_margin) + 1e-6 and np.sign(self.offsets[j]) != np.sign(self.offset):
-                    return float(self.offsets[j])
         # Hold the current side unless another is clearly cheaper (no dithering); among equal
         # candidates prefer the smaller offset, then a coin toss between left and right.
         held = int(np.argmin(np.abs(self.offsets - self.offset)))
@@ -245,11 +226,7 @@ class ExpertDriver:
         """
         c = self.config
         s_now = self.tracker.update(np.array(frame.pose[:2]))
-        headed = 0.0
-        if c.follow_margin > 0:
-            error = (frame.pose[2] - float(self.path.heading_at(s_now)) + math.pi) % (2 * math.pi) - math.pi
-            headed = self.tracker.lateral_m + HEADED_AHEAD_M * math.sin(error)
-        self.offset = self.choose_offset(s_now, headed)
+        self.offset = self.choose_offset(s_now)
         w = self.steer(frame.pose, s_now, self.offset)
         w = 0.0 if abs(w) < c.deadzone_rps else w
         return float(np.clip(w, -c.max_yaw_rate_rps, c.max_yaw_rate_rps))

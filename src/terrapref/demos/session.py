@@ -25,9 +25,6 @@ from terrapref.terrain import PreferenceProfile
 from terrapref.vehicle import Command
 
 
-COUNTER_REST_S = 1.0  # a counter-push may start only when the stick has rested longer than this [s]
-
-
 @dataclass(frozen=True)
 class DisturbanceConfig:
     """Random yaw-rate pushes added to the executed command while demonstrating.
@@ -38,13 +35,6 @@ class DisturbanceConfig:
             a coin toss.
         min_duration_s, max_duration_s: how long a push lasts [s].
         max_command_rps: the vehicle's yaw-rate limit; the pushed command is clipped to it.
-        counter_share: share of the moments the stick leaves a rest of more than 1 s at which
-            the vehicle is pushed the other way instead, with a yaw rate drawn like a push's,
-            for ``min_counter_s``-``max_counter_s`` (0 is off). The driver has begun a detour and
-            the vehicle heads for the other side, as a planner that picked the wrong side
-            does; the recording shows what the driver does from there (see
-            ``ExpertConfig.follow_margin``).
-        min_counter_s, max_counter_s: how long a counter-push lasts [s].
     """
 
     rate_hz: float = 0.15
@@ -53,20 +43,15 @@ class DisturbanceConfig:
     min_duration_s: float = 0.3
     max_duration_s: float = 1.5
     max_command_rps: float = 1.0
-    counter_share: float = 0.0
-    min_counter_s: float = 0.5
-    max_counter_s: float = 1.0
 
     @property
     def active(self) -> bool:
-        return self.rate_hz > 0 or self.counter_share > 0
+        return self.rate_hz > 0
 
     def __post_init__(self) -> None:
         if not (self.rate_hz >= 0 and 0 <= self.min_yaw_rate_rps <= self.max_yaw_rate_rps
                 and 0 < self.min_duration_s <= self.max_duration_s and self.max_command_rps > 0):
             raise ValueError("disturbance: rate >= 0, 0 <= min <= max yaw rate, 0 < min <= max duration")
-        if not (0 <= self.counter_share <= 1 and 0 < self.min_counter_s <= self.max_counter_s):
-            raise ValueError("disturbance: counter_share in [0, 1], 0 < min_counter_s <= max_counter_s")
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -78,20 +63,10 @@ class Disturber:
     def __init__(self, config: DisturbanceConfig, rng: np.random.Generator, dt: float) -> None:
         self.config, self.rng, self.dt = config, rng, dt
         self.left_s, self.push = 0.0, 0.0
-        self.counter_left_s, self.counter, self.rest_s = 0.0, 0.0, math.inf
 
     def __call__(self, command: Command) -> Command:
         """The command the vehicle executes instead of ``command`` (often ``command`` itself)."""
         c = self.config
-        if c.counter_share > 0:
-            if self.rest_s > COUNTER_REST_S + 0.5 * self.dt and command[1] != 0.0 and self.rng.random() < c.counter_share:
-                self.counter_left_s = self.rng.uniform(c.min_counter_s, c.max_counter_s)
-                push = min(self.rng.uniform(c.min_yaw_rate_rps, c.max_yaw_rate_rps), c.max_command_rps)
-                self.counter = -math.copysign(push, command[1])
-            self.rest_s = self.rest_s + self.dt if command[1] == 0.0 else 0.0
-            if self.counter_left_s > 0.5 * self.dt:
-                self.counter_left_s -= self.dt
-                return Command(command[0], self.counter)
         if self.left_s <= 0.0 and self.rng.random() < -math.expm1(-c.rate_hz * self.dt):
             self.left_s = self.rng.uniform(c.min_duration_s, c.max_duration_s)
             self.push = float(self.rng.choice((-1.0, 1.0)) * self.rng.uniform(c.min_yaw_rate_rps, c.max_yaw_rate_rps))

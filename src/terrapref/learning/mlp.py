@@ -142,11 +142,10 @@ class TrainableClassifier:
 
 
 class Adam:
-    """Adam (Kingma and Ba), with PyTorch's defaults and its L2 ``weight_decay``; elementwise only."""
+    """Adam (Kingma and Ba), with PyTorch's defaults; elementwise only."""
 
-    def __init__(self, weights: dict[str, np.ndarray], lr: float, weight_decay: float = 0.0,
-                 betas: tuple[float, float] = (0.9, 0.999), eps: float = 1e-8) -> None:
-        self.weights, self.lr, self.weight_decay, self.betas, self.eps = weights, lr, weight_decay, betas, eps
+    def __init__(self, weights: dict[str, np.ndarray], lr: float, betas: tuple[float, float] = (0.9, 0.999), eps: float = 1e-8) -> None:
+        self.weights, self.lr, self.betas, self.eps = weights, lr, betas, eps
         self.m = {k: np.zeros_like(v) for k, v in weights.items()}
         self.v = {k: np.zeros_like(v) for k, v in weights.items()}
         self.power1 = self.power2 = 1.0  # beta ** t by repeated products (no pow(), whose last bit may vary)
@@ -158,7 +157,7 @@ class Adam:
         step = self.lr / (1.0 - self.power1)
         root2 = math.sqrt(1.0 - self.power2)
         for name, p in self.weights.items():
-            g = grads[name] if self.weight_decay == 0 else grads[name] + self.weight_decay * p
+            g = grads[name]
             m = self.m[name] = b1 * self.m[name] + (1.0 - b1) * g
             v = self.v[name] = b2 * self.v[name] + (1.0 - b2) * (g * g)
             p -= step * m / (np.sqrt(v) / root2 + self.eps)

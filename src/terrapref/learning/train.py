@@ -37,14 +37,10 @@ class TrainConfig:
         lr: Adam learning rate.
         batch_size: samples per step.
         val_fraction: share of samples held out for validation.
-        weight_decay: Adam L2 penalty.
         class_balance: weight the loss by inverse label frequency (off in the paper's recipe).
         mirror: add every training sample mirrored left-right (trajectory i <-> m-1-i, label
             likewise): the preference does not depend on the side a patch is on, and a
             demonstration shows each pair on one side only. Needs a symmetric w grid.
-        decisive_weight: loss weight of the decisive frames, where terrain is on some
-            trajectory and the demonstrated one is not the one a pure path follower would take
-            (the highest distance utility): the frames that carry the preference. 1 is off.
         ignore_features: utility columns (by name: "distance", "mud", ...) that C never sees.
         seed: seeds the split, the initialisation and the batch order.
         hidden, activation, depth, skip, compress, channels: the classifier's shape (see
@@ -64,9 +60,7 @@ class TrainConfig:
     lr: float = 1e-3
     batch_size: int = 256
     val_fraction: float = 0.2
-    weight_decay: float = 0.0
     class_balance: bool = False
-    decisive_weight: float = 1.0
     mirror: bool = False
     seed: int = 0
     hidden: int = 64
@@ -87,8 +81,6 @@ class TrainConfig:
             (self.batch_size >= 1, "batch_size must be >= 1"),
             (self.lr > 0, "lr must be > 0"),
             (0.0 <= self.val_fraction < 1.0, "val_fraction must be in [0, 1)"),
-            (self.weight_decay >= 0, "weight_decay must be >= 0"),
-            (self.decisive_weight > 0, "decisive_weight must be > 0"),
             (self.members >= 1, "members must be >= 1"),
             (math.isfinite(self.stage_weight) and self.stage_weight >= 0, "stage_weight must be finite and >= 0"),
         ]
@@ -142,21 +134,6 @@ def _ensemble(results: list[TrainResult]) -> TrainResult:
     checkpoints = [merged(list(epoch)) for epoch in zip(*(r.checkpoints for r in results))]
     return TrainResult(replace(first.classifier, members=len(results)), merged([r.weights for r in results]), first.history,
                        first.best_epoch, checkpoints, sum(r.steps for r in results), results)
-
-
-def decisive_frames(U: np.ndarray, labels: np.ndarray, n_terrain: int | None = None) -> np.ndarray:
-    """Frames (N,) where terrain is on some trajectory and the label is not argmax of u5.
-
-    ``n_terrain``: U's leading terrain columns (``FeatureConfig.n_terrain``); None: all but the
-    last, which holds without lanes. Terrain seen only on the lanes beyond does not count.
-    """
-    terrain = (U[:, :, : U.shape[2] - 1 if n_terrain is None else n_terrain].sum(axis=2) > 0).any(axis=1)
-    return terrain & (labels != np.argmax(U[:, :, -1], axis=1))
-
-
-def decisive_weights(U: np.ndarray, labels: np.ndarray, weight: float, n_terrain: int | None = None) -> np.ndarray:
-    """Per-sample loss weights (N,) float32: ``weight`` on decisive frames, 1 elsewhere."""
-    return np.where(decisive_frames(U, labels, n_terrain), weight, 1.0).astype(np.float32)
 
 
 def class_weights(labels: np.ndarray, m: int) -> np.ndarray:
@@ -258,12 +235,11 @@ def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetri
     ignore = tuple(names.index(n) for n in config.ignore_features)
     classifier = ClassifierConfig(m, k, config.hidden, config.activation, config.depth, config.compress, config.skip, ignore, config.channels)
     net = TrainableClassifier(classifier, init_weights(classifier, np.random.default_rng([config.seed, INIT_STREAM])))
-    opt = Adam(net.weights, config.lr, config.weight_decay)
+    opt = Adam(net.weights, config.lr)
     inputs = round_inputs(U_np)  # rounded once; batches index it
     y = np.asarray(y_np, dtype=np.int64)
-    # Each sample's loss weight: its class's (class balance) times its own (decisive frames).
+    # Each sample's loss weight: its class's (class balance; 1 without).
     class_w = class_weights(y_np[tr], m) if config.class_balance else np.ones(m)
-    sample_w = decisive_weights(U_np, y_np, config.decisive_weight, features.n_terrain).astype(np.float64)
 
     def evaluate(idx: np.ndarray) -> tuple[float, float, float]:
         if len(idx) == 0:
@@ -287,8 +263,8 @@ def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetri
             loss, probs = cross_entropy(logits, y[batch])
             seen_loss.append(loss)
             seen_hits += int(np.count_nonzero(np.argmax(logits, axis=1) == y[batch]))
-            # d (sum_i s_i c_{y_i} CE_i / sum_i s_i) / d logits = s_i c_{y_i} (p_i - onehot_i) / sum_i s_i
-            scale = sample_w[batch] * class_w[y[batch]] / exact.fsum(sample_w[batch])
+            # d (sum_i c_{y_i} CE_i / n) / d logits = c_{y_i} (p_i - onehot_i) / n
+            scale = class_w[y[batch]] / float(len(batch))
             probs[np.arange(len(batch)), y[batch]] -= 1.0
             opt.step(net.backward(cache, probs * scale[:, None]))
             steps += 1

@@ -58,9 +58,6 @@ class Recipe:
             :func:`practice_courses`); they show compositions the training course lacks.
         lane_m: lanes beyond each trajectory's end in U (``FeatureConfig.lane_m``; 0: the
             paper's U).
-        follow_margin: the demonstrator takes the side of a patch the vehicle is headed for
-            when it costs at most this much more (``ExpertConfig.follow_margin``; 0: off).
-            Meant for demonstrations with counter-pushes (``DisturbanceConfig.counter_share``).
         near_m: the near distance utility (``FeatureConfig.near_m``; 0: off).
         lookahead: datasets carry the look-ahead utilities, and the second stage's utility is
             fitted through them (``FeatureConfig.lookahead``).
@@ -76,15 +73,14 @@ class Recipe:
     disturbance: DisturbanceConfig | None = None
     practice: int = 0
     lane_m: float = 0.0
-    follow_margin: float = 0.0
     near_m: float = 0.0
     lookahead: bool = False
     course: str = "train_course"
     summary: str = ""
 
     def __post_init__(self) -> None:
-        if self.demonstrations < 1 or self.corrections < 0 or self.practice < 0 or self.lane_m < 0 or self.follow_margin < 0:
-            raise ValueError("a recipe needs demonstrations >= 1, corrections >= 0, practice >= 0, lane_m >= 0 and follow_margin >= 0")
+        if self.demonstrations < 1 or self.corrections < 0 or self.practice < 0 or self.lane_m < 0:
+            raise ValueError("a recipe needs demonstrations >= 1, corrections >= 0, practice >= 0 and lane_m >= 0")
 
     def features(self, base: FeatureConfig | None = None) -> FeatureConfig:
         """The feature configuration this recipe trains with: ``base`` with its lanes."""
@@ -141,7 +137,6 @@ def _demonstrate(
     disturbance: DisturbanceConfig | None,
     profile: PreferenceProfile | None,
     features: FeatureConfig,
-    follow_margin: float = 0.0,
     style: str = "default",
 ) -> bool:
     """One synthetic-driver run of ``course`` into ``out``; False if a matching one was reused.
@@ -152,7 +147,7 @@ def _demonstrate(
     scenario = resolve_scenario(course)
     profile = profile or PreferenceProfile.default(scenario.classes)
     camera, sim_cfg = CameraConfig(), SimConfig()
-    expert_cfg = replace(ExpertConfig.styled(style, profile.order), follow_margin=follow_margin)
+    expert_cfg = ExpertConfig.styled(style, profile.order)
     pushes = disturbance.to_dict() if disturbance is not None else None
     if (out / "meta.json").exists():
         existing = read_recording(out)
@@ -193,7 +188,7 @@ def record_demonstrations(
     runs = [(course, workdir / f"demo_{k}{tail}", seed * 100 + k) for k in range(recipe.demonstrations)]
     runs += [(c, workdir / f"practice_{k}{tail}", seed * 100 + 20 + k) for k, c in enumerate(practice_courses(recipe, seed))]
     for i, (name, out, demo_seed) in enumerate(runs):
-        if _demonstrate(name, out, demo_seed, recipe.disturbance, profile, features, recipe.follow_margin, style) and log:
+        if _demonstrate(name, out, demo_seed, recipe.disturbance, profile, features, style) and log:
             log(f"demonstration {i + 1}/{len(runs)} ({name}): {len(read_recording(out))} frames")
     return [out for _, out, _ in runs]
 
