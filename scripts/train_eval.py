@@ -1,6 +1,6 @@
 """Exploratory study: featurise recordings, train C with a given recipe, drive every packaged course.
 
-    python scripts/train_eval.py REC_DIR[,REC_DIR...] '{"epochs": 100, "skip": true}' [--smoothing 0.7] [--seeds 1]
+    python scripts/train_eval.py REC_DIR[,REC_DIR...] '{"epochs": 100, "skip": true}' [--seeds 1]
 
 Prints each course's zone choices and the summary over the test set (test_course and the
 figure variations). For diagnosis only: choosing a recipe by these numbers tunes it to the
@@ -27,7 +27,6 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("recordings")
     parser.add_argument("config", help="TrainConfig fields as JSON")
-    parser.add_argument("--smoothing", type=float, default=0.0)
     parser.add_argument("--seeds", type=int, default=1)
     parser.add_argument("--profile", default="mud,rock,water,non_traversable")
     args = parser.parse_args()
@@ -40,7 +39,7 @@ def main() -> int:
         print(f"epoch {r.best_epoch}: val loss {best.val_loss:.3f}, val acc {best.val_acc:.3f}, top-3 {best.val_top3:.3f}, {r.steps} steps")
         names = [n for n in packaged_scenarios() if n != "demo_course"]
         profile = tuple(args.profile.split(","))
-        res = run_many([RunSpec(n, s, PLANNER, model, profile, smoothing=args.smoothing) for n in names for s in range(args.seeds)])
+        res = run_many([RunSpec(n, s, PLANNER, model, profile) for n in names for s in range(args.seeds)])
     for x in res:
         m = x["metrics"]
         zones = " ".join(f'{z["id"]}:{z["expect"]}->{z["choice"]}{"" if z["success"] else "(X)"}' for z in m["zones"])

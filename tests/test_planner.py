@@ -1,5 +1,5 @@
 """The planner (SPEC 9): one decision per frame from the image, the pose and the path; it never
-reads the world map; its memory (smoothing) is off unless asked; it refuses a model trained for
+reads the world map; it refuses a model trained for
 another camera."""
 
 from __future__ import annotations
@@ -117,12 +117,6 @@ def test_decide_needs_a_path(models, views):
         Planner(models.linear).decide(views.start_image, views.start)
 
 
-@pytest.mark.parametrize("smoothing", [-0.1, 1.0, 1.5])
-def test_smoothing_must_be_in_0_1(models, smoothing: float):
-    with pytest.raises(ValueError):
-        Planner(models.linear, smoothing=smoothing)
-
-
 # --- memory -------------------------------------------------------------------------------------------
 
 
@@ -136,24 +130,6 @@ def test_memoryless_by_default(models, course, views):
     np.testing.assert_array_equal(again.probs, fresh.probs)
     assert again.index == fresh.index
     np.testing.assert_array_equal(planner.decide(views.near_image, views.near).probs, fresh.probs)
-
-
-def test_smoothing_averages_over_frames(models, course, views):
-    alpha = 0.6
-    grass = np.zeros_like(views.near_image)
-    raw_grass = _planner(models.random, course).decide(grass, views.near).probs
-    raw_near = _planner(models.random, course).decide(views.near_image, views.near).probs
-    planner = _planner(models.random, course, smoothing=alpha)
-    first = planner.decide(grass, views.near)
-    np.testing.assert_allclose(first.probs, raw_grass, atol=1e-12)  # nothing to average yet
-    second = planner.decide(views.near_image, views.near)
-    np.testing.assert_allclose(second.probs, alpha * raw_grass + (1 - alpha) * raw_near, atol=1e-12)
-    assert not np.allclose(second.probs, raw_near)
-    assert math.isclose(float(second.probs.sum()), 1.0, abs_tol=1e-6)
-    assert second.index == int(np.argmax(second.probs))
-    # A new path forgets the average.
-    planner.set_path(_rest_of_course(course))
-    np.testing.assert_allclose(planner.decide(views.near_image, views.near).probs, raw_near, atol=1e-12)
 
 
 # --- the planner has no map -------------------------------------------------------------------------

@@ -16,7 +16,7 @@ from terrapref.demos.expert import STYLES, ExpertConfig, ExpertDriver
 from terrapref.demos.session import DisturbanceConfig
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, LookaheadConfig
-from terrapref.recipes import DEFAULT_RECIPE, RECIPES, Recipe, practice_courses, recipe_named
+from terrapref.recipes import DEFAULT_RECIPE, RECIPES, Recipe, recipe_named
 from terrapref.learning.train import TrainConfig
 from terrapref.scenario import parse_scenario
 from terrapref.terrain import default_classes
@@ -50,8 +50,8 @@ def test_the_paper_recipe_is_the_published_one():
     assert paper.train == TrainConfig()
     assert (paper.train.epochs, paper.train.lr, paper.train.batch_size, paper.train.val_fraction) == (15, 1e-3, 256, 0.2)
     assert not (paper.train.skip or paper.train.class_balance or paper.train.mirror or paper.train.utility)
-    assert (paper.demonstrations, paper.corrections, paper.practice, paper.course) == (1, 0, 0, "train_course")
-    assert paper.disturbance is None and paper.smoothing == 0.0
+    assert (paper.demonstrations, paper.corrections, paper.course) == (1, 0, "train_course")
+    assert paper.disturbance is None
     assert paper.features() == FeatureConfig()  # the paper's U: no lanes, no near distance, no look-ahead
 
 
@@ -80,17 +80,10 @@ def test_features_keep_the_base_and_set_the_recipes_own():
     assert RECIPES["paper"].features(base) == replace(base, lane_m=0.0)
 
 
-@pytest.mark.parametrize("bad", [dict(demonstrations=0), dict(corrections=-1), dict(practice=-1), dict(lane_m=-1.0)])
+@pytest.mark.parametrize("bad", [dict(demonstrations=0), dict(corrections=-1), dict(lane_m=-1.0)])
 def test_recipes_are_validated(bad: dict):
     with pytest.raises(ValueError):
         Recipe("bad", **bad)
-
-
-def test_practice_courses_are_the_seeds_own_layouts():
-    recipe = Recipe("practice", practice=3)
-    assert practice_courses(recipe, 0) == ["gen:3000", "gen:5000", "gen:7000"]
-    assert practice_courses(recipe, 2) == ["gen:23000", "gen:25000", "gen:27000"]
-    assert practice_courses(RECIPES["teach"], 2) == []
 
 
 def test_to_dict_is_plain_data():
@@ -297,37 +290,17 @@ def test_run_recipe_demonstrates_corrects_and_reuses_demonstrations(tmp_path):
     assert (tmp_path / "demo_0" / "meta.json").stat().st_mtime_ns == stamp  # reused, not recorded again
 
 
-def test_practice_courses_are_generated_per_training_seed_outside_the_selection_range():
-    from terrapref.recipes import Recipe, practice_courses
-    from terrapref.scenario import resolve_scenario
-
-    recipe = Recipe("p", demonstrations=1, practice=2)
-    assert practice_courses(recipe, 0) == ["gen:3000", "gen:5000"]
-    assert practice_courses(recipe, 4) == ["gen:43000", "gen:45000"]
-    assert practice_courses(Recipe("none"), 3) == []
-    names = {c for s in range(5) for c in practice_courses(recipe, s)}
-    assert len(names) == 10 and not any(1000 <= int(c[4:]) < 2000 for c in names)
-    assert len(resolve_scenario("gen:3000").zones) > 0
-    with pytest.raises(ValueError, match="practice"):
-        Recipe("bad", practice=-1)
-
-
-def test_run_recipe_demonstrates_the_practice_courses_and_rerecords_a_course_mismatch(tmp_path, monkeypatch):
-    import terrapref.recipes as recipe_mod
+def test_a_recorded_demonstration_of_another_course_is_recorded_again(tmp_path):
     from terrapref.demos.recording import read_recording
-    from terrapref.recipes import Recipe, record_demonstrations, run_recipe
+    from terrapref.recipes import record_demonstrations
 
-    monkeypatch.setattr(recipe_mod, "practice_courses", lambda recipe, seed: ["demo_course"] * recipe.practice)
-    recipe = Recipe("practised", demonstrations=1, practice=1, train=TrainConfig(epochs=2))
-    out = run_recipe(recipe, tmp_path, 0, course="demo_course")
-    assert [p.name for p in out.recordings] == ["demo_0", "practice_0"]
-    practice = read_recording(tmp_path / "practice_0")
-    assert practice.complete and practice.meta["driver"]["seed"] == 20  # its own seed, not demo_0's
-    assert out.demo_minutes > 0
-    # A recording of another course in the practice slot is not taken for the practice run.
-    meta_path = tmp_path / "practice_0" / "meta.json"
-    meta_path.write_text(json.dumps({**json.loads(meta_path.read_text()), "scenario": "another_course"}))
+    recipe = Recipe("one", demonstrations=2)
     logged: list[str] = []
-    record_demonstrations(Recipe("p", demonstrations=1, practice=1), tmp_path, 0, course="demo_course", log=logged.append)
-    assert read_recording(tmp_path / "practice_0").meta["scenario"] == "demo_course"
-    assert len(logged) == 1 and "(demo_course)" in logged[0] and logged[0].startswith("demonstration 2/2")  # demo_0 reused
+    record_demonstrations(recipe, tmp_path, 0, course="demo_course", log=logged.append)
+    assert len(logged) == 2
+    meta_path = tmp_path / "demo_1" / "meta.json"
+    meta_path.write_text(json.dumps({**json.loads(meta_path.read_text()), "scenario": "another_course"}))
+    logged.clear()
+    record_demonstrations(recipe, tmp_path, 0, course="demo_course", log=logged.append)
+    assert read_recording(tmp_path / "demo_1").meta["scenario"] == "demo_course"
+    assert len(logged) == 1 and logged[0].startswith("demonstration 2/2 (demo_course)"), "demo_0 reused, demo_1 recorded again"

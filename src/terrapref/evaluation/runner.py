@@ -45,7 +45,6 @@ class RunSpec:
     model_path: str | None
     profile: tuple[str, ...]
     keep_frames: tuple[int, ...] = ()
-    smoothing: float = 0.0
     perturb: Perturbation | None = None
     style: str = "default"  # the synthetic driver's style (terrapref.demos.expert.STYLES), for EXPERT runs
     keep_run: bool = False  # keep every decision (pose, choice, F_t) of a planner run, for an MCAP of it
@@ -104,7 +103,7 @@ def run_one(spec: RunSpec) -> dict:
     else:
         policy = make_policy(spec)
         sim = Simulation(scenario, policy.camera, world=world)
-        driver = PlannerDriver(Planner(policy, smoothing=spec.smoothing), keep=bool(spec.keep_frames) or spec.keep_run)
+        driver = PlannerDriver(Planner(policy), keep=bool(spec.keep_frames) or spec.keep_run)
     runner = PerturbedDriver(driver, spec.perturb, sim.config.camera_rate_hz) if spec.perturb is not None and spec.perturb.active else driver
     log = run_episode(sim, runner, np.random.default_rng(spec.seed), start_pose(scenario.start, spec.seed))
     metrics = score_run(log.trace[:, :2], scenario, sim.world, profile, completed=log.completed, collisions=log.collisions, duration_s=log.duration_s)

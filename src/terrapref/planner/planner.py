@@ -52,10 +52,6 @@ class Planner:
     Args:
         model: a loaded model file (C) or any :class:`Policy`.
         camera: the robot's camera; a model trained for another camera is refused.
-        smoothing: weight of the previous frames in an exponential average of F_t before the
-            argmax (0: the paper's memoryless planner). When the classifier is unsure between
-            passing a patch left or right, a memoryless argmax can flip sides every frame and
-            average out to driving straight into it; the average lets it commit.
         second_stage: the second stage beyond the trajectories (terrapref.planner.second_stage),
             used when the model file carries the linear utility it scores with (``terrapref
             train --second-stage``); ``MODEL`` (the default): the weight the model was trained
@@ -63,12 +59,8 @@ class Planner:
             trajectories.
     """
 
-    def __init__(self, model: LoadedModel | Policy, camera: CameraConfig | None = None, smoothing: float = 0.0,
+    def __init__(self, model: LoadedModel | Policy, camera: CameraConfig | None = None,
                  second_stage: SecondStageConfig | str | None = "model") -> None:
-        if not 0.0 <= smoothing < 1.0:
-            raise ValueError("smoothing must be in [0, 1)")
-        self.smoothing = smoothing
-        self._avg: np.ndarray | None = None
         policy = model if isinstance(model, Policy) else ClassifierPolicy(model)
         camera = camera or policy.camera
         if isinstance(model, LoadedModel):
@@ -91,7 +83,6 @@ class Planner:
         """Start following a new reference path."""
         self.path = ReferencePath(np.asarray(waypoints, dtype=float))
         self.tracker = PathTracker(self.path)
-        self._avg = None
 
     def decide(self, image: np.ndarray | SegmentationView, pose: Pose) -> Decision:
         """Choose a trajectory for one segmentation frame (H, W) uint8 at ``pose``.
@@ -106,9 +97,6 @@ class Planner:
         U = self.featurizer(view, pose, self.path, s)
         ahead = path_ahead(self.path, pose, s) if self.policy.uses_path_ahead else _NO_POINTS
         probs = softmax(self.policy.logits(Observation(U, view, ahead)))
-        if self.smoothing > 0:
-            self._avg = probs if self._avg is None else self.smoothing * self._avg + (1 - self.smoothing) * probs
-            probs = self._avg
         if self.second_stage is None:
             i = int(np.argmax(probs))
         else:

@@ -11,9 +11,9 @@ Named recipes (:data:`RECIPES`, ``terrapref recipes``; ``--recipe NAME`` in ``tr
   ``terrapref reproduce`` beside ``paper``.
 - ``paper``: the published recipe: one drive of ``train_course``, 15 epochs of the paper's C.
 
-A recipe also holds the options measured on the way (more drives, practice courses, correction
-sessions, lanes, decisive-frame weights; docs/notebook.md), so that each measured row can be
-run again.
+A recipe also holds the options a user may still choose on purpose (more drives, correction
+sessions, lanes); options that lost their experiment have left the code (docs/notebook.md names
+the commit where their rows still run).
 """
 
 from __future__ import annotations
@@ -51,11 +51,8 @@ class Recipe:
         corrections: correction sessions after the first model (one run of the course each,
             the model retrained on everything after each).
         train: training hyperparameters.
-        smoothing: the planner's averaging of F_t over frames.
         disturbance: pushes injected while demonstrating, so that recoveries are shown
             (None: the driver drives undisturbed).
-        practice: practice courses, demonstrated once each besides the training course (see
-            :func:`practice_courses`); they show compositions the training course lacks.
         lane_m: lanes beyond each trajectory's end in U (``FeatureConfig.lane_m``; 0: the
             paper's U).
         near_m: the near distance utility (``FeatureConfig.near_m``; 0: off).
@@ -69,9 +66,7 @@ class Recipe:
     demonstrations: int = 1
     corrections: int = 0
     train: TrainConfig = field(default_factory=TrainConfig)
-    smoothing: float = 0.0
     disturbance: DisturbanceConfig | None = None
-    practice: int = 0
     lane_m: float = 0.0
     near_m: float = 0.0
     lookahead: bool = False
@@ -79,8 +74,8 @@ class Recipe:
     summary: str = ""
 
     def __post_init__(self) -> None:
-        if self.demonstrations < 1 or self.corrections < 0 or self.practice < 0 or self.lane_m < 0:
-            raise ValueError("a recipe needs demonstrations >= 1, corrections >= 0, practice >= 0 and lane_m >= 0")
+        if self.demonstrations < 1 or self.corrections < 0 or self.lane_m < 0:
+            raise ValueError("a recipe needs demonstrations >= 1, corrections >= 0 and lane_m >= 0")
 
     def features(self, base: FeatureConfig | None = None) -> FeatureConfig:
         """The feature configuration this recipe trains with: ``base`` with its lanes."""
@@ -108,18 +103,6 @@ def recipe_named(name: str, flag: str = "--recipe") -> Recipe:
     if name not in RECIPES:
         raise UserError(flag, f"unknown recipe {name!r}; recipes: {', '.join(RECIPES)}")
     return RECIPES[name]
-
-PRACTICE_BASE = 3000
-
-
-def practice_courses(recipe: Recipe, seed: int) -> list[str]:
-    """Practice course ``k`` of training seed ``seed``: the generated layout ``gen:(10000 seed + 3000 + 2000 k)``.
-
-    Each training seed gets its own layouts, as each person would lay out their own. They stay
-    clear of ``gen:1000``-``gen:1999``, where recipes are chosen (``terrapref select``).
-    """
-    return [f"gen:{10000 * seed + PRACTICE_BASE + 2000 * k}" for k in range(recipe.practice)]
-
 
 @dataclass
 class RecipeOutput:
@@ -175,9 +158,8 @@ def record_demonstrations(
 ) -> list[Path]:
     """The recipe's demonstration runs (synthetic driver) in ``workdir``.
 
-    Run ``k`` of ``course`` (seed ``seed * 100 + k``) goes to ``workdir/demo_K``, then practice
-    course ``k`` (seed ``seed * 100 + 20 + k``) to ``workdir/practice_K``; both names end in
-    ``_disturbed`` with disturbances. A complete run recorded under the same course, driver,
+    Run ``k`` of ``course`` (seed ``seed * 100 + k``) goes to ``workdir/demo_K``, a name that
+    ends in ``_disturbed`` with disturbances. A complete run recorded under the same course, driver,
     profile, seed and disturbances is reused, so recipes sharing a seed share their
     demonstrations.
     """
@@ -186,7 +168,6 @@ def record_demonstrations(
     course = course or recipe.course
     tail = "" if recipe.disturbance is None else "_disturbed"
     runs = [(course, workdir / f"demo_{k}{tail}", seed * 100 + k) for k in range(recipe.demonstrations)]
-    runs += [(c, workdir / f"practice_{k}{tail}", seed * 100 + 20 + k) for k, c in enumerate(practice_courses(recipe, seed))]
     for i, (name, out, demo_seed) in enumerate(runs):
         if _demonstrate(name, out, demo_seed, recipe.disturbance, profile, features, style) and log:
             log(f"demonstration {i + 1}/{len(runs)} ({name}): {len(read_recording(out))} frames")
@@ -230,7 +211,7 @@ def run_recipe(
         out = own / f"corrections_{r}"
         meta = recording_meta(scenario, camera, features.preference, sim_cfg, {"kind": "corrections", "round": r, "seed": seed}, profile)
         writer = RecordingWriter(out, meta, scenario.to_dict(), overwrite=True)
-        planner = PlannerDriver(Planner(load_model(model), smoothing=recipe.smoothing))
+        planner = PlannerDriver(Planner(load_model(model)))
         run = record_corrections(sim, planner, ExpertDriver(expert_cfg), writer, features.preference, np.random.default_rng(seed * 100 + 50 + r))
         corr_s += run.duration_s
         recordings.append(read_recording(out))

@@ -23,7 +23,7 @@ from terrapref.fileio import write_text_atomic
 from terrapref.grid import Engine, run_grid
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, annotate_agreement, run_many, summarise
 from terrapref.evaluation.stats import rate_text
-from terrapref.recipes import OURS, PAPER, TEACH, Recipe, practice_courses, run_recipe
+from terrapref.recipes import OURS, PAPER, TEACH, Recipe, run_recipe
 from terrapref.progress import every_tenth
 from terrapref.scenario import packaged_scenarios, resolve_scenario
 from terrapref.terrain import PreferenceProfile
@@ -68,7 +68,7 @@ def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes:
     groups: dict = {}
     for r in recipes:
         groups.setdefault((r.course, r.disturbance), []).append(r)
-    cost = {key: max((r.demonstrations + r.practice) * (1 + r.train.members * r.train.epochs * (2 if r.train.mirror else 1) / 100) for r in g)
+    cost = {key: max(r.demonstrations * (1 + r.train.members * r.train.epochs * (2 if r.train.mirror else 1) / 100) for r in g)
             for key, g in groups.items()}
     jobs = [(tuple(g), str(out / "work" / f"seed{s}"), s, profile.order)
             for key, g in sorted(groups.items(), key=lambda kv: -cost[kv[0]]) for s in range(seeds)]
@@ -82,7 +82,7 @@ def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes:
 
     t0 = time.perf_counter()
     scenarios = ["train_course", *TEST_SET, *variations()]
-    specs = [RunSpec(sc, e, PLANNER, t["model"], profile.order, smoothing=next(r.smoothing for r in recipes if r.name == t["recipe"]))
+    specs = [RunSpec(sc, e, PLANNER, t["model"], profile.order)
              for t in trained for sc in scenarios for e in range(eval_seeds)]
     specs += [RunSpec(sc, s, EXPERT, None, profile.order) for sc in scenarios for s in range(seeds)]
     specs.sort(key=lambda sp: -scenario_length(sp.scenario))  # longest first: no core idles at the end
@@ -177,10 +177,9 @@ def _write_report(out: Path, results, trained, recipes, seeds, eval_seeds, profi
     for r in recipes:
         pushes = (f"with disturbances ({r.disturbance.rate_hz:g} pushes/s of {r.disturbance.min_yaw_rate_rps:g}-{r.disturbance.max_yaw_rate_rps:g} rad/s)"
                   if r.disturbance is not None else "undisturbed")
-        practice = f" and one of each of {r.practice} practice course(s) per seed ({', '.join(c for s in range(seeds) for c in practice_courses(r, s))})" if r.practice else ""
-        lines.append(f"- **{r.name}**: {r.demonstrations} demonstration run(s) of {r.course}{practice}, {pushes}, {r.corrections} correction session(s), "
+        lines.append(f"- **{r.name}**: {r.demonstrations} demonstration run(s) of {r.course}, {pushes}, {r.corrections} correction session(s), "
                      f"{r.train.epochs} epochs, residual path {'on' if r.train.skip else 'off'}, class-balanced loss {'on' if r.train.class_balance else 'off'}, "
-                     f"mirrored samples {'on' if r.train.mirror else 'off'}, planner smoothing {r.smoothing:g}"
+                     f"mirrored samples {'on' if r.train.mirror else 'off'}"
                      + (f", lanes of {r.lane_m:g} m in U" if r.lane_m else "") + (f", {r.train.members} ensemble members" if r.train.members > 1 else "")
                      + (", the planner scoring a second stage of trajectories beyond the first with the linear utility fitted to the same samples"
                         + (" through the look-ahead" if r.lookahead else "") if r.train.utility else "") + ".")

@@ -2,9 +2,8 @@
 
 Stages (each parallel across processes):
 1. Demonstrations: per training seed, the synthetic driver demonstrates on ``train_course``
-   with the protocol of the recipe ``ours`` (two runs with disturbances; practice courses, if
-   the recipe has any, are left out, so that every method learns from the training course
-   alone), once under the default profile and once under another profile.
+   with the protocol of the recipe ``ours`` (two runs with disturbances), once under the
+   default profile and once under another profile.
 2. Featurisation: utility features (and, for the ablation, other horizons) and the CNN's
    downsampled images, each read from the recordings once.
 3. Training: C (recipe ``ours``, without the planner's second stage: the study measures C
@@ -51,7 +50,7 @@ TEACH_ORDERS = (
     ("water", "mud", "rock", "non_traversable"),
     ("rock", "water", "mud", "non_traversable"),
 )
-DEMONSTRATIONS = replace(OURS, practice=0)  # the study's data: ours' train_course runs only
+DEMONSTRATIONS = OURS  # the study's data: ours' runs of train_course
 
 
 @dataclass(frozen=True)
