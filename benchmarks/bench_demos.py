@@ -7,7 +7,7 @@ Run through ``scripts/bench.sh`` (one core); numbers go into ``docs/benchmarks.m
     median is reported. Target: <= 30 us median.
 (c) decision: ``Planner.decide`` (features + classifier C in NumPy + progress along the path)
     on the same frames, with a model trained on the recording (paper recipe). Target:
-    <= 100 us median. Three more lines: lanes with a 2-member ensemble, the planner's second
+    <= 100 us median. Three more lines: a 2-member ensemble, the planner's second
     stage (terrapref.planner.second_stage) as in recipe ``ours``, and the decision of recipe
     ``teach`` (an ensemble of three with the second stage; the stage weight does not change
     the cost).
@@ -119,7 +119,7 @@ def main() -> int:
         wall, frames, size = bench_record(out, args.seed)
         t = bench_features(out, args.repeats)
         d = bench_decision(out, args.repeats)
-        d2 = bench_decision(out, args.repeats, FeatureConfig(lane_m=6.0), members=2)
+        d2 = bench_decision(out, args.repeats, members=2)
         d3 = bench_decision(out, args.repeats, second_stage=True)
         d4 = bench_decision(out, args.repeats, members=3, second_stage=True)
         loop_s, loop_frames = bench_closed_loop(out.parent / "model.safetensors")
@@ -133,7 +133,7 @@ def main() -> int:
     print(f"{'reference: naive NumPy render (reference.py)':48s} {ref_s * 1e3:8.2f}ms {'':>10s} {1:10d} {'-':>10s}")
     line("features U (m=21, n=30), per frame", t, "<= 30us")
     line("decision (features + C + progress), per frame", d, "-")
-    line("decision, lanes + 2 members, per frame", d2, "-")
+    line("decision, 2 members, per frame", d2, "-")
     line("decision with the second stage, per frame", d3, "-")
     line("decision of recipe teach (3 members, 2nd stage)", d4, "<= 60us")
     print(f"{'planner driving train_course, closed loop':48s} {loop_s:9.2f}s {'':>10s} {loop_s / ref_s:10.1f} {'-':>10s}   "

@@ -333,88 +333,12 @@ def test_distance_mode_accepts_its_string_value():
         PreferenceSetConfig(n_steps=0)
 
 
-# --- lanes beyond each trajectory's end (ours) -------------------------------------------------------
+# --- lanes (removed) ----------------------------------------------------------------------------
 
 
-LANES = FeatureConfig(lane_m=6.0, lane_points=12)
-
-
-@pytest.fixture(scope="module")
-def lane_featurizer(camera: PinholeCamera) -> UtilityFeaturizer:
-    return UtilityFeaturizer(LANES, camera, CLASSES)
-
-
-def _lane_points(featurizer: UtilityFeaturizer) -> np.ndarray:
-    """The lane points (m, lane_points, 2) in the vehicle frame, by their definition."""
-    ends = featurizer.pset.endpoints
-    d = np.linspace(0.5, 6.0, 12)
-    return np.stack([ends[:, None, 0] + d, np.repeat(ends[:, None, 1], 12, axis=1)], axis=-1)
-
-
-def test_lane_columns_sit_between_the_terrain_and_the_distance_columns():
-    assert FeatureConfig().column_names == (*FEATURE_NAMES, "distance")
-    assert LANES.column_names == (*FEATURE_NAMES, *(f"lane_{c}" for c in FEATURE_NAMES), "distance")
-    assert (FeatureConfig().n_features, LANES.n_features) == (5, 9)
-    assert not FeatureConfig().lanes and LANES.lanes
-
-
-def test_lanes_round_trip_and_leave_the_papers_configuration_as_it_was():
-    # Without lanes the configuration serialises exactly as before lanes existed, so the data
-    # and model files recorded then keep their meaning and fingerprints.
-    assert "lane_m" not in FeatureConfig().to_dict() and "lane_points" not in FeatureConfig().to_dict()
-    assert FeatureConfig.from_dict(FeatureConfig().to_dict()) == FeatureConfig()
-    config = FeatureConfig(lane_m=4.5, lane_points=7)
-    assert FeatureConfig.from_dict(json.loads(json.dumps(config.to_dict()))) == config
-    # Without lanes the point count means nothing, and configurations that mean the same are equal.
-    assert FeatureConfig(lane_points=5) == FeatureConfig()
-    assert FeatureConfig.from_dict(FeatureConfig(lane_points=5).to_dict()) == FeatureConfig(lane_points=5)
-
-
-@pytest.mark.parametrize("bad", [{"lane_m": -1.0}, {"lane_m": float("inf")}, {"lane_m": float("nan")}, {"lane_points": 0}])
-def test_bad_lane_configuration_is_refused(bad: dict):
-    with pytest.raises(ValueError, match="lane"):
-        FeatureConfig(**bad)
-
-
-def test_lanes_leave_the_papers_columns_unchanged(featurizer: UtilityFeaturizer, lane_featurizer: UtilityFeaturizer):
-    image = np.random.default_rng(4).choice([GRASS, MUD, CLASSES.id_of("water"), CLASSES.id_of("rock")], size=(H, W)).astype(np.uint8)
-    pose, path = Pose(0.0, 0.3, 0.1), _straight_path()
-    plain = featurizer(image, pose, path, S_ORIGIN)
-    lanes = lane_featurizer(image, pose, path, S_ORIGIN)
-    assert lanes.shape == (21, 9) and lanes.dtype == np.float32
-    np.testing.assert_array_equal(lanes[:, [0, 1, 2, 3, 8]], plain)
-
-
-def test_mud_beyond_the_straight_trajectory_shows_in_its_lane_only(camera: PinholeCamera, lane_featurizer: UtilityFeaturizer):
-    lane = _lane_points(lane_featurizer)[10]  # w = 0
-    pix = camera.pixel_indices(lane)
-    assert np.all(pix >= 0)  # 6.3-11.8 m straight ahead is in view
-    image = np.full((H, W), GRASS, dtype=np.uint8)
-    image.ravel()[pix] = MUD
-    u = lane_featurizer(image, Pose(0.0, 0.0, 0.0), _straight_path(), S_ORIGIN)
-    mud, lane_mud = FEATURE_NAMES.index("mud"), 4 + FEATURE_NAMES.index("mud")
-    assert u[10, lane_mud] == pytest.approx(1.0)
-    assert np.all(u[:, :4] == 0.0)  # no trajectory reaches that far
-    others = np.delete(np.arange(21), 10)
-    assert np.all(u[others, lane_mud] < 0.5)
-    assert np.all(np.delete(u[:, 4:8], FEATURE_NAMES.index("mud"), axis=1) == 0.0)
-    assert u[10, mud] == 0.0
-
-
-def test_uniform_image_gives_each_lanes_visible_fraction(camera: PinholeCamera, lane_featurizer: UtilityFeaturizer):
-    image = np.full((H, W), CLASSES.id_of("rock"), dtype=np.uint8)
-    u = lane_featurizer(image, Pose(0.0, 0.0, 0.0), _straight_path(), S_ORIGIN)
-    visible = (camera.pixel_indices(_lane_points(lane_featurizer)) >= 0).mean(axis=1)
-    assert 0.0 < visible.min() and visible.max() == 1.0  # the curled arcs' lanes leave the view
-    np.testing.assert_allclose(u[:, 4 + FEATURE_NAMES.index("rock")], visible, atol=1e-6)
-
-
-def test_lanes_of_mirrored_trajectories_are_mirror_images(camera: PinholeCamera, lane_featurizer: UtilityFeaturizer):
-    # The image mirrored about the optical axis (column 319.5 <-> 320.5) swaps left and right
-    # ground points exactly, so trajectory i's lane reads what trajectory m-1-i's read before.
-    image = np.random.default_rng(5).choice([GRASS, MUD, CLASSES.id_of("water")], size=(H, W)).astype(np.uint8)
-    a = lane_featurizer.terrain(image)
-    b = lane_featurizer.terrain(image[:, ::-1].copy())
-    # The straight lane itself lies on the boundary between columns 319 and 320; leave it out.
-    sides = np.delete(np.arange(21), 10)
-    np.testing.assert_allclose(b[sides, 4:], a[::-1][sides, 4:], atol=1e-6)
+def test_a_file_with_lane_columns_is_refused_and_one_without_loads():
+    """Lanes beyond the trajectories' ends left the code; files that recorded lane_m 0 still load."""
+    plain = FeatureConfig().to_dict()
+    assert FeatureConfig.from_dict({**plain, "lane_m": 0.0, "lane_points": 12}) == FeatureConfig()
+    with pytest.raises(ValueError, match="lane columns .* no longer supported"):
+        FeatureConfig.from_dict({**plain, "lane_m": 6.0, "lane_points": 12})

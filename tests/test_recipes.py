@@ -74,13 +74,13 @@ def test_teach_drives_teach_course_once_and_fits_through_the_lookahead():
 
 
 def test_features_keep_the_base_and_set_the_recipes_own():
-    base = FeatureConfig(path_spacing_m=0.5, lane_m=2.0)
-    lanes = Recipe("lanes", lane_m=3.0, near_m=1.0)
-    assert lanes.features(base) == replace(base, lane_m=3.0, near_m=1.0)
-    assert RECIPES["paper"].features(base) == replace(base, lane_m=0.0)
+    base = FeatureConfig(path_spacing_m=0.5, near_m=2.0)
+    near = Recipe("near", near_m=1.0)
+    assert near.features(base) == replace(base, near_m=1.0)
+    assert RECIPES["paper"].features(base) == replace(base, near_m=0.0)
 
 
-@pytest.mark.parametrize("bad", [dict(demonstrations=0), dict(corrections=-1), dict(lane_m=-1.0)])
+@pytest.mark.parametrize("bad", [dict(demonstrations=0), dict(corrections=-1)])
 def test_recipes_are_validated(bad: dict):
     with pytest.raises(ValueError):
         Recipe("bad", **bad)
@@ -235,7 +235,7 @@ def test_no_datasets_is_a_user_error():
 
 @pytest.mark.parametrize("field, value", [
     ("profile", ["water", "rock", "mud", "non_traversable"]),
-    ("features", FeatureConfig(lane_m=2.0).to_dict()),
+    ("features", FeatureConfig(near_m=2.0).to_dict()),
     ("camera", CameraConfig(hfov_deg=60.0).to_dict()),
     ("classes", {**default_classes().to_dict(), "background": "mud"}),
 ])

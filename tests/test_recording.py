@@ -279,27 +279,6 @@ def test_five_minutes_fit_in_100_mb(demo_recording: FullRecording):
     assert (rec.path / META).is_file()
 
 
-def test_featurize_with_lanes_adds_the_lane_columns(demo_recording: FullRecording, tmp_path: Path, capsys):
-    from terrapref.cli import main
-    from terrapref.demos.dataset import load_dataset
-    from terrapref.features import FeatureConfig
-
-    plain, lanes = tmp_path / "plain.safetensors", tmp_path / "lanes.safetensors"
-    assert main(["featurize", str(demo_recording.rec.path), "--out", str(plain)]) == 0
-    assert main(["featurize", str(demo_recording.rec.path), "--out", str(lanes), "--lanes", "6"]) == 0
-    a, b = load_dataset(plain), load_dataset(lanes)
-    assert FeatureConfig.from_dict(b.meta["features"]) == FeatureConfig(lane_m=6.0)
-    assert a.U.shape[2] == 5 and b.U.shape[2] == 9
-    np.testing.assert_array_equal(b.U[:, :, [0, 1, 2, 3, 8]], a.U)
-    assert (b.U[:, :, 4:8] > 0).any()  # the course's patches show in some lane
-    capsys.readouterr()
-    for bad in ("-1", "inf"):
-        assert main(["featurize", str(demo_recording.rec.path), "--out", str(tmp_path / "bad.safetensors"), "--lanes", bad]) == 2
-        err = capsys.readouterr().err.strip().splitlines()
-        assert len(err) == 1 and "--lanes" in err[0] and "lane_m" in err[0], err
-        assert not (tmp_path / "bad.safetensors").exists()
-
-
 def test_inspect_tells_what_the_drive_shows_of_the_preference(demo_recording: FullRecording, tmp_path: Path, capsys):
     from terrapref.cli import main
 

@@ -205,12 +205,7 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
             print(f"warning: {r.path} is partial; using its {len(r)} frames", file=sys.stderr)
     from terrapref.recipes import DEFAULT_RECIPE, recipe_named
 
-    try:
-        base = recipe_named(args.recipe or DEFAULT_RECIPE).features()
-        # lanes are an option of their own, without the look-ahead
-        features = replace(base, distance_mode=args.distance_mode, lane_m=args.lanes, lookahead=None if args.lanes else base.lookahead)
-    except ValueError as exc:
-        raise UserError("featurize", str(exc), field="--lanes") from None
+    features = replace(recipe_named(args.recipe or DEFAULT_RECIPE).features(), distance_mode=args.distance_mode)
     pref = features.preference
     if args.n_steps is not None or args.dt is not None:
         if args.n_steps is not None and args.n_steps < 1:
@@ -295,8 +290,6 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
     if len(np.unique(data.labels)) < 2:
         raise UserError(str(args.data[0]), f"every sample has the same label ({int(data.labels[0])}): the drive never steered, there is no choice to learn", field="labels")
-    if config.utility and data.feature_config.lanes:
-        raise UserError(str(args.data[0]), "--second-stage needs U without lanes (featurize without --lanes)", field="features.lane_m")
     if config.utility and recipe.lookahead and data.U2 is None:
         print(f"warning: {args.data[0]} carries no look-ahead utilities; the second stage is fitted frame by frame "
               f"(train from the recordings, or featurize them with --recipe {recipe.name})", file=sys.stderr)
@@ -634,8 +627,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--n-steps", type=int, help="trajectory points n (default 30)")
     p.add_argument("--dt", type=float, help="trajectory time step [s] (default 0.2)")
     p.add_argument("--camera", help="camera file to re-render the frames with: CameraConfig's fields, or a ROS camera_info YAML (with mount_height_m, pitch_deg)")
-    p.add_argument("--lanes", type=float, default=0.0, metavar="M",
-                   help="add lane columns: terrain shares on an M-metre lane beyond each trajectory's end (0: off, the paper's U)")
     p.add_argument("--recipe", metavar="NAME", help="featurise as this recipe trains (default: teach, with the look-ahead utilities)")
     p.set_defaults(func=_cmd_featurize)
 

@@ -33,8 +33,6 @@ class Lookahead:
         step = int(round(config.after_s / featurizer.config.preference.dt_s))
         if not 1 <= step < pset.config.n_steps:
             raise ValueError(f"the look-ahead's after_s must be within the trajectories (1 to {pset.config.n_steps - 1} steps of dt)")
-        if featurizer.config.lanes:
-            raise ValueError("the look-ahead works on U without lanes")
         k = featurizer.config.n_terrain
         self.config = config
         self.featurizer = featurizer

@@ -14,13 +14,6 @@ Three definitions of d, recorded with every dataset and model:
   vehicle, the tightest arcs (w = +-1 over 6 m) curl back to end beside the vehicle, next to
   the path, and get the best ``window`` score; the look-ahead point ranks them last.
 The path is resampled every ``path_spacing_m`` so that sparse waypoints still give a dense P.
-
-Lanes (ours, off by default): with ``lane_m > 0``, U gains K more columns per trajectory, the
-share of each class on ``lane_points`` points along a straight lane of ``lane_m`` metres that
-continues from the trajectory's end parallel to the vehicle's heading. A driver commits to a
-side of a patch several metres before the trajectories reach the terrain there; the lanes show
-what lies beyond each trajectory's end (docs/notebook.md). Like the trajectories' own points,
-the lane points are fixed in the vehicle frame, so their pixels are precomputed.
 """
 
 from __future__ import annotations
@@ -38,7 +31,6 @@ from terrapref.terrain import ClassTable, default_classes
 from terrapref.vehicle import Pose
 
 
-LANE_POINTS = 12  # default points per lane
 
 
 class DistanceMode(str, Enum):
@@ -85,9 +77,6 @@ class FeatureConfig:
         path_spacing_m: resampling step of the reference path [m].
         feature_classes: class names of the terrain columns, in order (the table's
             non-background classes in id order).
-        lane_m: length of the lane beyond each trajectory's end [m]; 0 (the paper's U) adds
-            no lane columns.
-        lane_points: points sampled along each lane.
         near_m: adds a near distance utility before ``distance``: the distance from each
             trajectory's point ``near_m`` along it to the path point ``near_m`` ahead of the
             vehicle's progress, normalised over the set like u^5 (0, the paper's U: no column).
@@ -104,8 +93,6 @@ class FeatureConfig:
     window_m: float | None = None
     path_spacing_m: float = 0.25
     feature_classes: tuple[str, ...] = field(default_factory=lambda: default_classes().feature_names)
-    lane_m: float = 0.0
-    lane_points: int = LANE_POINTS
     near_m: float = 0.0
     lookahead: LookaheadConfig | None = None
 
@@ -113,19 +100,10 @@ class FeatureConfig:
         object.__setattr__(self, "distance_mode", DistanceMode(self.distance_mode))
         if not self.path_spacing_m > 0 or (self.window_m is not None and not self.window_m > 0):
             raise ValueError("path_spacing_m and window_m must be > 0")
-        if not (math.isfinite(self.lane_m) and self.lane_m >= 0) or self.lane_points < 1:
-            raise ValueError("lane_m must be finite and >= 0, and lane_points >= 1")
         if not (math.isfinite(self.near_m) and 0 <= self.near_m <= self.preference.horizon_m):
             raise ValueError("near_m must be in [0, the trajectories' length]")
-        if self.lookahead is not None and (self.lanes or not isinstance(self.lookahead, LookaheadConfig)):
-            raise ValueError("lookahead must be a LookaheadConfig, and U with lanes has no look-ahead")
-        if not self.lanes:  # without lanes the point count means nothing: keep equal configs equal
-            object.__setattr__(self, "lane_points", LANE_POINTS)
-
-    @property
-    def lanes(self) -> bool:
-        """Whether U carries lane columns."""
-        return self.lane_m > 0
+        if self.lookahead is not None and not isinstance(self.lookahead, LookaheadConfig):
+            raise ValueError("lookahead must be a LookaheadConfig")
 
     @property
     def effective_window_m(self) -> float:
@@ -133,7 +111,7 @@ class FeatureConfig:
 
     @property
     def n_terrain(self) -> int:
-        """Terrain columns: the shares on each trajectory's own points (lanes excluded)."""
+        """Terrain columns: the shares of each class on each trajectory's points."""
         return len(self.feature_classes)
 
     @property
@@ -142,9 +120,8 @@ class FeatureConfig:
 
     @property
     def column_names(self) -> tuple[str, ...]:
-        lanes = tuple(f"lane_{c}" for c in self.feature_classes) if self.lanes else ()
         near = ("near_distance",) if self.near_m > 0 else ()
-        return (*self.feature_classes, *lanes, *near, "distance")
+        return (*self.feature_classes, *near, "distance")
 
     def to_dict(self) -> dict:
         return {
@@ -153,21 +130,22 @@ class FeatureConfig:
             "window_m": self.window_m,
             "path_spacing_m": self.path_spacing_m,
             "feature_classes": list(self.feature_classes),
-            **({"lane_m": self.lane_m, "lane_points": self.lane_points} if self.lanes else {}),
             **({"near_m": self.near_m} if self.near_m > 0 else {}),
             **({"lookahead": self.lookahead.to_dict()} if self.lookahead is not None else {}),
         }
 
     @classmethod
     def from_dict(cls, data: dict) -> FeatureConfig:
+        if float(data.get("lane_m", 0.0)) != 0.0:
+            # Lanes beyond the trajectories' ends lost their experiment and left the code
+            # (docs/notebook.md names the commit that still reads such files).
+            raise ValueError(f"lane columns (lane_m {data['lane_m']}) are no longer supported; featurise the recordings again")
         return cls(
             PreferenceSetConfig.from_dict(data["preference"]),
             DistanceMode(data["distance_mode"]),
             data.get("window_m"),
             float(data["path_spacing_m"]),
             tuple(data["feature_classes"]),
-            float(data.get("lane_m", 0.0)),
-            int(data.get("lane_points", LANE_POINTS)),
             float(data.get("near_m", 0.0)),
             LookaheadConfig.from_dict(data["lookahead"]) if data.get("lookahead") is not None else None,
         )
@@ -181,17 +159,12 @@ class UtilityFeaturizer:
         self.config = config
         self.pset = PreferenceSet(config.preference, camera)
         m, k = self.pset.m, len(config.feature_classes)
-        blocks = [self.pset.pixel_index]  # (m, n): one row of pixels per trajectory
-        if config.lanes:
-            ends = self.pset.endpoints
-            d = np.linspace(config.lane_m / config.lane_points, config.lane_m, config.lane_points)
-            lane = np.stack([ends[:, None, 0] + d, np.broadcast_to(ends[:, None, 1], (m, len(d)))], axis=-1)
-            blocks.append(camera.pixel_indices(lane))  # (m, lane_points): rows m..2m-1
-        # Every row (a trajectory or a lane) gets k + 1 bincount bins; unseen points all fall
-        # in one extra, discarded row.
-        self._rows = m * len(blocks)
-        row = np.concatenate([np.repeat(np.arange(b * m, (b + 1) * m), blk.shape[1]) for b, blk in enumerate(blocks)])
-        pix = np.concatenate([blk.ravel() for blk in blocks])
+        pix = self.pset.pixel_index  # (m, n): one row of pixels per trajectory
+        # Every trajectory gets k + 1 bincount bins; unseen points all fall in one extra,
+        # discarded row.
+        self._rows = m
+        row = np.repeat(np.arange(m), pix.shape[1])
+        pix = pix.ravel()
         self._column = np.full(256, k, dtype=np.intp)  # class id -> terrain column (k: none)
         for j, name in enumerate(config.feature_classes):
             self._column[classes.id_of(name)] = j
@@ -199,8 +172,7 @@ class UtilityFeaturizer:
         self._offset = np.where(pix >= 0, row, self._rows) * (k + 1)
         self._pix_flat = np.where(pix >= 0, pix, 0)
         self._pix_flat.flags.writeable = False  # read-only: a renderer may prepare it once
-        # Share per point: one number without lanes (the common, fastest case), else per row.
-        self._scale = 1.0 / blocks[0].shape[1] if len(blocks) == 1 else np.concatenate([np.full((m, 1), 1.0 / b.shape[1]) for b in blocks])
+        self._scale = 1.0 / self.pset.pixel_index.shape[1]  # the share of one point
         self._ends = self.pset.endpoints  # (m, 2) vehicle frame
         if config.near_m > 0:  # the point near_m along each trajectory (all travel at v)
             j = int(round(config.near_m / (config.preference.control.v_mps * config.preference.dt_s)))
@@ -216,14 +188,11 @@ class UtilityFeaturizer:
         return self._column
 
     def terrain(self, image: np.ndarray | SegmentationView) -> np.ndarray:
-        """Terrain utilities, shape (m, K), or (m, 2K) with lanes (each lane's shares after the
-        trajectory's): the share of each row's points on each class."""
+        """Terrain utilities, shape (m, K): the share of each trajectory's points on each class."""
         k = len(self.config.feature_classes)
         cols = self._column[as_view(image).pixels(self._pix_flat)]
         counts = np.bincount(cols + self._offset, minlength=self._bins)
-        shares = counts.reshape(self._rows + 1, k + 1)[:-1, :k] * self._scale
-        m = self.pset.m
-        return shares if self._rows == m else np.concatenate([shares[:m], shares[m:]], axis=1)
+        return counts.reshape(self._rows + 1, k + 1)[:-1, :k] * self._scale
 
     def distances(self, pose: Pose, path: ReferencePath, progress_s: float | None = None) -> np.ndarray:
         """d(T^i, P) [m] for each trajectory, shape (m,)."""
@@ -257,7 +226,7 @@ class UtilityFeaturizer:
         return (hi - d) * (1.0 / (hi - lo))
 
     def __call__(self, image: np.ndarray | SegmentationView, pose: Pose, path: ReferencePath, progress_s: float | None = None) -> np.ndarray:
-        """U, shape (m, n_features) float32: terrain shares, lane shares if any, then the distance utility."""
+        """U, shape (m, n_features) float32: terrain shares, the near distance utility if any, then the distance utility."""
         u = np.empty((self.m, self.config.n_features), dtype=np.float32)
         if self.config.near_m > 0:
             u[:, :-2] = self.terrain(image)

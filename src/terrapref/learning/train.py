@@ -163,8 +163,6 @@ def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callabl
     same weights, bit for bit, on any CPU and thread count (:mod:`terrapref.learning.exact`).
     """
     config = config or TrainConfig()
-    if config.utility and dataset.feature_config.lanes:
-        raise ValueError("the second stage's utility needs U without lanes")
     if config.members == 1:
         result = _train(dataset, config, progress, on_epoch and (lambda *a: on_epoch(0, *a)))
     else:

@@ -12,7 +12,7 @@ Named recipes (:data:`RECIPES`, ``terrapref recipes``; ``--recipe NAME`` in ``tr
 - ``paper``: the published recipe: one drive of ``train_course``, 15 epochs of the paper's C.
 
 A recipe also holds the options a user may still choose on purpose (more drives, correction
-sessions, lanes); options that lost their experiment have left the code (docs/notebook.md names
+sessions); options that lost their experiment have left the code (docs/notebook.md names
 the commit where their rows still run).
 """
 
@@ -53,8 +53,6 @@ class Recipe:
         train: training hyperparameters.
         disturbance: pushes injected while demonstrating, so that recoveries are shown
             (None: the driver drives undisturbed).
-        lane_m: lanes beyond each trajectory's end in U (``FeatureConfig.lane_m``; 0: the
-            paper's U).
         near_m: the near distance utility (``FeatureConfig.near_m``; 0: off).
         lookahead: datasets carry the look-ahead utilities, and the second stage's utility is
             fitted through them (``FeatureConfig.lookahead``).
@@ -67,19 +65,18 @@ class Recipe:
     corrections: int = 0
     train: TrainConfig = field(default_factory=TrainConfig)
     disturbance: DisturbanceConfig | None = None
-    lane_m: float = 0.0
     near_m: float = 0.0
     lookahead: bool = False
     course: str = "train_course"
     summary: str = ""
 
     def __post_init__(self) -> None:
-        if self.demonstrations < 1 or self.corrections < 0 or self.lane_m < 0:
-            raise ValueError("a recipe needs demonstrations >= 1, corrections >= 0 and lane_m >= 0")
+        if self.demonstrations < 1 or self.corrections < 0:
+            raise ValueError("a recipe needs demonstrations >= 1 and corrections >= 0")
 
     def features(self, base: FeatureConfig | None = None) -> FeatureConfig:
-        """The feature configuration this recipe trains with: ``base`` with its lanes."""
-        return replace(base or FeatureConfig(), lane_m=self.lane_m, near_m=self.near_m,
+        """The feature configuration this recipe trains with: ``base`` with its near distance and look-ahead."""
+        return replace(base or FeatureConfig(), near_m=self.near_m,
                        lookahead=LookaheadConfig() if self.lookahead else None)
 
     def to_dict(self) -> dict:

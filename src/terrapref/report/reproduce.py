@@ -180,7 +180,7 @@ def _write_report(out: Path, results, trained, recipes, seeds, eval_seeds, profi
         lines.append(f"- **{r.name}**: {r.demonstrations} demonstration run(s) of {r.course}, {pushes}, {r.corrections} correction session(s), "
                      f"{r.train.epochs} epochs, residual path {'on' if r.train.skip else 'off'}, class-balanced loss {'on' if r.train.class_balance else 'off'}, "
                      f"mirrored samples {'on' if r.train.mirror else 'off'}"
-                     + (f", lanes of {r.lane_m:g} m in U" if r.lane_m else "") + (f", {r.train.members} ensemble members" if r.train.members > 1 else "")
+                     + (f", {r.train.members} ensemble members" if r.train.members > 1 else "")
                      + (", the planner scoring a second stage of trajectories beyond the first with the linear utility fitted to the same samples"
                         + (" through the look-ahead" if r.lookahead else "") if r.train.utility else "") + ".")
     lines += ["", "## Summary (test_course and the figure variations)", "",
