@@ -132,7 +132,7 @@ def main() -> int:
     print(f"{'benchmark':48s} {'median':>10s} {'p90':>10s} {'/reference':>10s} {'target':>10s}")
     print(f"{'reference: naive NumPy render (reference.py)':48s} {ref_s * 1e3:8.2f}ms {'':>10s} {1:10d} {'-':>10s}")
     line("features U (m=21, n=30), per frame", t, "<= 30us")
-    line("decision (features + C + progress), per frame", d, "-")
+    line("decision (features + C + progress), per frame", d, "<= 100us")
     line("decision, 2 members, per frame", d2, "-")
     line("decision with the second stage, per frame", d3, "-")
     line("decision of recipe teach (3 members, 2nd stage)", d4, "<= 60us")

@@ -66,7 +66,8 @@ def _demonstrate(job: tuple[str, str, int, tuple[str, ...]]) -> tuple[str, str, 
         scenario = resolve_scenario(recipe.course)
         rec = work / "demo_keyboard"
         person = KeyboardPerson(ExpertDriver(ExpertConfig.styled("default", order)), scenario, np.random.default_rng(seed * 100))
-        # The same seeds as the stick's drive: the same pushes (recipe.disturbance) at the same moments.
+        # Pushes with the default recipe's protocol (recipe.disturbance), drawn from their own
+        # stream: the same kind of pushes as the stick's drive, not at the same moments.
         run_teleop(scenario, rec, overwrite=True, realtime=False, script=person, disturbance=recipe.disturbance, seed=seed * 100,
                    profile=profile)
     model = work / f"model_{kind}.safetensors"

@@ -19,7 +19,7 @@ from terrapref.demos.recording import read_recording
 from terrapref.evaluation.runner import PLANNER, RunSpec, run_many, summarise
 from terrapref.features import FeatureConfig
 from terrapref.learning.pipeline import train_and_save
-from terrapref.learning.train import TrainConfig, decisive_frames
+from terrapref.learning.train import TrainConfig
 from terrapref.scenario import packaged_scenarios
 
 
@@ -31,7 +31,7 @@ def main() -> int:
     parser.add_argument("--profile", default="mud,rock,water,non_traversable")
     args = parser.parse_args()
     ds = build_dataset([read_recording(r) for r in args.recordings.split(",")], FeatureConfig())
-    print(f"{len(ds)} samples, decisive share {decisive_frames(ds.U, ds.labels).mean():.3f}")
+    print(f"{len(ds)} samples")
     with tempfile.TemporaryDirectory() as tmp:
         model = str(Path(tmp) / "model.safetensors")
         r = train_and_save(ds, model, TrainConfig(**json.loads(args.config)), checkpoints=False)

@@ -100,8 +100,8 @@ def linear_dataset(n: int, margin: float = 0.5, seed: int = 0) -> Dataset:
     return dataset_of(U, np.argmax(U @ W_TRUE, axis=1))
 
 
-def decisive_dataset(n: int, seed: int = 0) -> Dataset:
-    """Sparse terrain and a distance peak, labels sometimes away from the peak: has decisive frames."""
+def sparse_terrain_dataset(n: int, seed: int = 0) -> Dataset:
+    """Sparse terrain and a distance peak, labels sometimes away from the peak (where terrain is in view)."""
     rng = np.random.default_rng(seed)
     U = np.zeros((n, M, K), np.float32)
     peak = rng.integers(0, M, n)

@@ -64,6 +64,7 @@ def test_cli_engine_flags_are_checked_before_any_work(tmp_path, capsys):
     assert main(["evaluate", str(model), "demo_course", "--out", str(out), "--address", "10.0.0.1:6379"]) == 2
     assert "--engine ray" in capsys.readouterr().err
     assert main(["study", "--out", str(tmp_path / "s"), "--workers", "0"]) == 2
+    assert "--workers" in capsys.readouterr().err
     with pytest.raises(SystemExit) as info:  # argparse's own refusal of an unknown choice
         main(["reproduce", "--out", str(tmp_path / "r"), "--engine", "spark"])
     assert info.value.code == 2
@@ -91,6 +92,7 @@ def test_cli_evaluate_on_ray_gives_the_local_engines_results(tmp_path, capsys):
 def test_select_refuses_bad_flags_before_any_work(tmp_path, capsys):
     out = tmp_path / "sel"
     for argv, flag in ((["--recipes", "teach,nope"], "--recipes"), (["--orders", "mud,lava"], "--orders"), (["--seeds", "0"], "--seeds"),
+                       (["--orders", "mud,rock,water;mud,rock,water,non_traversable"], "--orders"),
                        (["--style", "sleepy"], "--style"), (["--first", "-1"], "--first"), (["--address", "h:1"], "--address")):
         assert main(["select", "--out", str(out), *argv]) == 2
         err = capsys.readouterr().err.strip().splitlines()
@@ -107,3 +109,17 @@ def test_select_on_ray_gives_the_local_engines_table(tmp_path):
     a, b = (json.loads((tmp_path / d / "select.json").read_text()) for d in ("local", "ray"))
     assert len(a["zones"]) >= 8 and a["zones"] == b["zones"] and a["runs"] == b["runs"]
     assert "| paper | rock > mud > water > non_traversable |" in (tmp_path / "ray" / "SELECT.md").read_text()
+
+
+def test_a_ray_address_where_nothing_answers_is_refused_in_one_line(tmp_path, capsys):
+    import socket
+
+    with socket.socket() as s:  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    model = linear_model(tmp_path / "m.safetensors")
+    for address, words in ((f"127.0.0.1:{port}", "no Ray head answers"), ("nonsense", "HOST:PORT")):
+        assert main(["evaluate", str(model), "demo_course", "--out", str(tmp_path / "e"), "--engine", "ray", "--address", address]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--address" in err[0] and words in err[0], err
+    assert not (tmp_path / "e").exists()

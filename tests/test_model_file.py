@@ -24,7 +24,7 @@ from terrapref.learning.network import ClassifierConfig
 from terrapref.tensorfile import write_tensor_file
 from terrapref.terrain import PreferenceProfile, default_classes
 
-from helpers import assert_weights_equal, decisive_dataset, model_meta, random_dataset, random_weights
+from helpers import assert_weights_equal, sparse_terrain_dataset, model_meta, random_dataset, random_weights
 
 
 # --- model files -------------------------------------------------------------------------------------
@@ -118,7 +118,7 @@ def test_non_model_safetensors_is_refused(tmp_path: Path):
 
 
 def test_dataset_file_round_trip(tmp_path: Path):
-    data = decisive_dataset(50)
+    data = sparse_terrain_dataset(50)
     back = load_dataset(save_dataset(data, tmp_path / "d.safetensors"))
     for name in ("U", "labels", "w", "source"):
         np.testing.assert_array_equal(getattr(back, name), getattr(data, name))

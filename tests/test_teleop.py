@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 import sys
@@ -422,3 +423,62 @@ def test_the_gamepad_stick_springs_back_and_takes_over_from_the_keys():
     assert stick.update(0.1) == 0.0 and not stick.active
     stick.handle(key(pygame.KEYDOWN, pygame.K_LEFT))
     assert stick.update(0.1) == pytest.approx(0.1) and stick.source == "keys", "the input used last drives"
+
+
+def test_frames_after_a_gap_get_the_features_of_a_recording_without_one(tmp_path):
+    """A ride-along records only the takeovers: the path progress must jump the gap, so that
+    the frames after it are featurised as they would be in one continuous recording."""
+    import json
+    import shutil
+
+    import numpy as np
+
+    from terrapref.demos.dataset import featurize_recording
+    from terrapref.features import FeatureConfig
+
+    from terrapref.cli import main
+
+    full = tmp_path / "full"
+    assert main(["record", "demo_course", "--out", str(full), "--quiet"]) == 0  # the synthetic driver, along the path
+    gappy = tmp_path / "gappy"
+    shutil.copytree(full, gappy)
+    lines = (gappy / "frames.jsonl").read_text().splitlines()
+    kept = list(range(20)) + list(range(300, 330))  # 28 s (about 28 m) of path missing
+    (gappy / "frames.jsonl").write_text("".join(lines[i] + "\n" for i in kept))
+    meta = json.loads((gappy / "meta.json").read_text())
+    (gappy / "meta.json").write_text(json.dumps({**meta, "frames": len(kept)}))
+    U_full = featurize_recording(read_recording(full), FeatureConfig())[0]
+    U_gap = featurize_recording(read_recording(gappy), FeatureConfig())[0]
+    np.testing.assert_array_equal(U_gap, U_full[kept])
+
+
+def test_a_window_resized_in_one_direction_is_letterboxed_and_the_mouse_follows(tmp_path):
+    """896 x 506 canvas in a 1000 x 506 window: scale 1, the picture centred with 52 px either side."""
+    out = tmp_path / "rec"
+    events = {
+        2: [pygame.event.Event(pygame.VIDEORESIZE, size=(1000, 506), w=1000, h=506)],
+        4: [pygame.event.Event(pygame.MOUSEBUTTONDOWN, pos=(52 + 160, 240), button=1)],
+        6: [pygame.event.Event(pygame.MOUSEBUTTONUP, pos=(52 + 160, 240), button=1)],
+        7: [pygame.event.Event(pygame.MOUSEBUTTONDOWN, pos=(52 + 600, 495), button=1)],  # the status bar: not the view
+        9: [pygame.event.Event(pygame.QUIT)],
+    }
+    run_teleop("demo_course", out, realtime=False, wait_for_start=False, script=script_from(events), max_frames=20,
+               screenshot=tmp_path / "shot.png")
+    w = read_recording(out).commands[:, 1]
+    assert w[5] == pytest.approx(0.5), "a quarter from the left of the view as the driver sees it"
+    assert w[8] == pytest.approx(0.5), "a click below the camera view does not steer"
+    shot = pygame.image.load(str(tmp_path / "shot.png"))
+    assert shot.get_size() == (1000, 506)
+    assert tuple(shot.get_at((10, 200)))[:3] == (0, 0, 0) and tuple(shot.get_at((990, 200)))[:3] == (0, 0, 0), "dark margins"
+    assert tuple(shot.get_at((60, 300)))[:3] != (0, 0, 0), "the camera view starts after the margin"
+
+
+def test_a_vehicle_within_the_edge_margin_may_drive_back_in():
+    from terrapref.teleop.guide import stays_on_map
+    from terrapref.vehicle import Command, Pose
+    from terrapref.world import rasterise
+
+    world = rasterise(_tiny())
+    assert not stays_on_map(world, Pose(0.5, 6.0, math.pi), Command(1.0, 0.0), 0.1), "further out: held"
+    assert stays_on_map(world, Pose(0.5, 6.0, 0.0), Command(1.0, 0.0), 0.1), "back toward the map: allowed"
+    assert not stays_on_map(world, Pose(1.05, 6.0, math.pi), Command(1.0, 0.0), 0.1), "into the margin: held"

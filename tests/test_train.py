@@ -18,7 +18,7 @@ from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
 from terrapref.learning.pipeline import train_and_save
 from terrapref.learning.train import MEMBER_SEED_STEP, TrainConfig, split_indices, train
 
-from helpers import K, M, W_TRUE, assert_weights_equal, dataset_of, decisive_dataset, linear_dataset, model_meta, random_dataset, random_weights, weights_differ
+from helpers import K, M, W_TRUE, assert_weights_equal, dataset_of, sparse_terrain_dataset, linear_dataset, model_meta, random_dataset, random_weights, weights_differ
 
 
 # --- the paper's recipe ----------------------------------------------------------------------------
@@ -149,7 +149,7 @@ def test_classifier_sizes_must_be_integers(field: str, value):
 
 
 def test_class_balance_changes_the_loss_only_when_asked():
-    data = decisive_dataset(500)
+    data = sparse_terrain_dataset(500)
     config = TrainConfig(epochs=2, batch_size=64, hidden=16)
     a, b = train(data, config), train(data, replace(config, class_balance=True))
     assert weights_differ(a.weights, b.weights)

@@ -527,6 +527,8 @@ def _cmd_select(args: argparse.Namespace) -> int:
     orders = parse_orders(args.orders)
     for o in orders:
         PreferenceProfile.parse(list(o), source="--orders")
+    if len(set(orders)) != len(orders):
+        raise UserError("--orders", f"names an order twice: {args.orders!r}")
     if args.style not in STYLES:
         raise UserError("--style", f"unknown driver style {args.style!r}; styles: {', '.join(STYLES)}")
     for flag, value, low in (("--seeds", args.seeds, 1), ("--courses", args.courses, 1), ("--first", args.first, 0)):
@@ -552,7 +554,29 @@ def _engine(args: argparse.Namespace) -> Engine:
 
         if importlib.util.find_spec("ray") is None:
             raise UserError("--engine", "ray is not installed in this environment (bash scripts/setup.sh installs it)")
+        if args.address not in (None, "auto"):
+            _check_ray_address(args.address)
+    if args.engine == "ray":
+        # Jobs pass files by path; a cluster's workers do not start in this folder.
+        for name in ("out", "model"):
+            value = getattr(args, name, None)
+            if isinstance(value, (str, Path)) and str(value):
+                setattr(args, name, type(value)(Path(value).resolve()))
     return Engine(args.engine, args.workers, args.address)
+
+
+def _check_ray_address(address: str) -> None:
+    """Refuse, in a few seconds, an address where no Ray head answers (Ray itself retries for minutes)."""
+    import socket
+
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    if not host or not port.isdigit():
+        raise UserError("--address", f"expected HOST:PORT of a Ray head (ray start --head), got {address!r}")
+    try:
+        with socket.create_connection((host, int(port)), timeout=5.0):
+            pass
+    except OSError as exc:
+        raise UserError("--address", f"no Ray head answers at {address} ({exc.strerror or exc}); start one with ray start --head") from None
 
 
 def _add_engine_args(p: argparse.ArgumentParser) -> None:

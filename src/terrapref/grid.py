@@ -160,7 +160,10 @@ def _run_ray(fn: Callable, jobs: list, engine: Engine, progress: Callable[[int, 
         kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
         if engine.address is None:
             kwargs["num_cpus"] = engine.n_workers
-        ray.init(address=engine.address, **kwargs)
+        try:
+            ray.init(address=engine.address, **kwargs)
+        except (ConnectionError, RuntimeError, ValueError) as exc:
+            raise UserError("--address" if engine.address else "--engine", f"Ray did not start: {str(exc).splitlines()[0]}") from None
     try:
         task = ray.remote(num_cpus=1)(_guarded)
         refs = [task.remote(fn, job) for job in jobs]

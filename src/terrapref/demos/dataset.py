@@ -10,6 +10,7 @@ set (labels are re-derived from the recorded continuous w) without driving again
 from __future__ import annotations
 
 import hashlib
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -100,6 +101,11 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
     shape = (rec_camera.height_px, rec_camera.width_px)
     U = np.empty((n, m, features.n_features), dtype=np.float32)
     U2 = np.empty((n, m, m, features.n_terrain + 1), dtype=np.float16) if lookahead is not None else None
+    # Between frames that are not consecutive (a ride-along's corrections, frames left out off
+    # the map) the vehicle may have gone further than the tracker's window: widen it by what
+    # the vehicle could have driven in the gap.
+    period = float(np.median(np.diff(recording.times))) if len(recording) > 1 else 0.0
+    v_max = _max_speed(recording.meta)
     for j, i in enumerate(keep):
         pose = tuple(recording.poses[i])
         if renderer is None:
@@ -109,13 +115,22 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
                     f"holds class ids {sorted(set(np.unique(image).tolist()) - set(np.flatnonzero(known).tolist()))[:5]} that the class table does not have"
                 raise UserError(str(recording.path / recording.image_files[i]), what)
         view = SegmentationView.of(renderer.render(pose) if renderer is not None else image)
-        s = tracker.update(recording.poses[i, :2])
+        gap_s = recording.times[i] - recording.times[keep[j - 1]] if j > 0 else 0.0
+        s = tracker.update(recording.poses[i, :2], ahead_m=v_max * gap_s + 2.0 if gap_s > 1.5 * period else None)
         U[j] = featurizer(view, pose, path, s)
         if lookahead is not None:
             U2[j] = lookahead.utilities(view, pose, path, s)
     w = recording.commands[keep, 1].astype(np.float32)
     labels = np.asarray(features.preference.control.label_of(w), dtype=np.int64).reshape(n)
     return U, labels, w, U2
+
+
+def _max_speed(meta: dict) -> float:
+    """The recorded vehicle's top speed [m/s] (1 when the recording does not say)."""
+    sim = meta.get("sim")
+    vehicle = sim.get("vehicle") if isinstance(sim, dict) else None
+    v = vehicle.get("max_speed_mps") if isinstance(vehicle, dict) else None
+    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0 else 1.0
 
 
 def on_map(poses: np.ndarray, scenario: Scenario) -> np.ndarray:

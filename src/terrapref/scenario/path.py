@@ -159,11 +159,16 @@ class PathTracker:
         self.s = None
         self.lateral_m = 0.0
 
-    def update(self, xy: np.ndarray) -> float:
-        """New progress [m] for the vehicle at ``xy``; it never moves backwards."""
+    def update(self, xy: np.ndarray, ahead_m: float | None = None) -> float:
+        """New progress [m] for the vehicle at ``xy``; it never moves backwards.
+
+        ``ahead_m`` widens the search ahead for this update (after a gap in the frames, when
+        the vehicle may have gone further than ``self.ahead_m``).
+        """
         if self.s is None:  # first fix: the nearest point of the whole path
             self.s, self.lateral_m = self.path.project(xy)
         else:
-            s, self.lateral_m = self.path.project(xy, self.s - self.back_m, self.s + self.ahead_m)
+            ahead = self.ahead_m if ahead_m is None else max(self.ahead_m, ahead_m)
+            s, self.lateral_m = self.path.project(xy, self.s - self.back_m, self.s + ahead)
             self.s = max(self.s, s)
         return self.s

@@ -106,7 +106,14 @@ class CourseGuide:
 
 
 def stays_on_map(world: WorldMap, pose: Pose, command: Command, period_s: float, margin_m: float = EDGE_MARGIN_M) -> bool:
-    """Whether holding ``command`` for ``period_s`` keeps the vehicle's centre ``margin_m`` inside the map."""
-    x, y, _ = integrate_unicycle(pose, command, period_s)
+    """Whether holding ``command`` for ``period_s`` keeps the vehicle's centre ``margin_m`` inside
+    the map, or at least takes it no nearer the edge (a vehicle already within the margin may
+    drive back in)."""
     w_m, h_m = world.size_m
-    return margin_m <= x <= w_m - margin_m and margin_m <= y <= h_m - margin_m
+
+    def clearance(x: float, y: float) -> float:
+        return min(x, w_m - x, y, h_m - y)
+
+    x, y, _ = integrate_unicycle(pose, command, period_s)
+    after = clearance(x, y)
+    return after >= margin_m or after >= clearance(pose[0], pose[1])

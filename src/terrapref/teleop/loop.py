@@ -147,7 +147,7 @@ class _Session:
         self.control = prefs.config.control
         self.frame_dt = 1.0 / sim.config.camera_rate_hz
         self.guide = CourseGuide(sim.world, sim.path, prefs)
-        self.stick = Stick(w_max_rps=float(np.abs(self.control.w_rps).max()), view_width_px=window.view_size[0])
+        self.stick = Stick(w_max_rps=float(np.abs(self.control.w_rps).max()), view_width_px=window.view_size[0], view_height_px=window.view_size[1])
         self.disturb = disturber
         self.planner = planner
         self.driver = "planner" if planner is not None else "you"

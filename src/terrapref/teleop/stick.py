@@ -42,10 +42,11 @@ class Stick:
     along with a model, either takes the vehicle over, and a stick left alone hands it back.
     """
 
-    def __init__(self, w_max_rps: float, rate_rps2: float = KEY_RATE_RPS2, view_width_px: int = 640) -> None:
+    def __init__(self, w_max_rps: float, rate_rps2: float = KEY_RATE_RPS2, view_width_px: int = 640, view_height_px: int = 480) -> None:
         self.w_max = w_max_rps
         self.rate = rate_rps2
         self.view_width = view_width_px
+        self.view_height = view_height_px
         self.w = 0.0
         self.left = False
         self.right = False
@@ -81,7 +82,7 @@ class Stick:
                 self.touched |= down
             elif down and event.key in (pygame.K_DOWN, pygame.K_c):
                 self.w, self.source, self.touched = 0.0, "keys", True
-        elif event.type == pygame.MOUSEBUTTONDOWN and event.button == 1 and 0 <= event.pos[0] < self.view_width:
+        elif event.type == pygame.MOUSEBUTTONDOWN and event.button == 1 and 0 <= event.pos[0] < self.view_width and 0 <= event.pos[1] < self.view_height:
             self.mouse_x, self.source, self.touched = float(event.pos[0]), "mouse", True
         elif event.type == pygame.MOUSEMOTION and self.mouse_x is not None:
             self.mouse_x = float(min(max(event.pos[0], 0), self.view_width))

@@ -89,13 +89,13 @@ class Window:
         return (pos[0] - ox) / scale, (pos[1] - oy) / scale
 
     def _present(self) -> None:
-        scale, ox, oy = self._fit()
-        if scale == 1.0:
+        if self.screen.get_size() == self.size:
             self.screen.blit(self.canvas, (0, 0))
         else:
-            self.screen.fill((0, 0, 0))
+            scale, ox, oy = self._fit()
+            self.screen.fill((0, 0, 0))  # the margins of a window of another shape
             size = (max(1, round(self.size[0] * scale)), max(1, round(self.size[1] * scale)))
-            self.screen.blit(pygame.transform.smoothscale(self.canvas, size), (ox, oy))
+            self.screen.blit(self.canvas if size == self.size else pygame.transform.smoothscale(self.canvas, size), (ox, oy))
         pygame.display.flip()
 
     # --- computed once -----------------------------------------------------------------------------
