@@ -623,7 +623,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default: the recommended protocol's 0.3; 0: none)")
     p.set_defaults(func=_cmd_record)
 
-    p = sub.add_parser("drive", help="drive a scenario yourself (keyboard or gamepad), optionally recording")
+    p = sub.add_parser("drive", help="drive a scenario yourself (keyboard, mouse or gamepad), optionally recording, or ride along with a model (--model)")
     p.add_argument("scenario", metavar="SCENARIO")
     p.add_argument("--record", type=Path, metavar="DIR", help="record the drive into DIR")
     p.add_argument("--force", action="store_true", help="replace an existing recording at DIR")
