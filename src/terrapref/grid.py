@@ -148,22 +148,31 @@ def _run_local(fn: Callable, jobs: list, workers: int, progress: Callable[[int, 
     return outcomes  # type: ignore[return-value]
 
 
+def start_ray(engine: Engine) -> bool:
+    """Connect to ``engine``'s Ray (start a local instance, or join the cluster at its address)
+    unless this process already is; True when this call started the connection."""
+    import ray
+
+    if ray.is_initialized():
+        return False
+    os.environ.setdefault("RAY_AUTH_MODE", "disabled")  # a local instance, or a cluster the user set up
+    # Ray runs its workers at nice 15 unless told otherwise: on a busy machine they would then
+    # wait behind everything else. These jobs are the work asked for.
+    os.environ.setdefault("RAY_worker_niceness", "0")
+    kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
+    if engine.address is None:
+        kwargs["num_cpus"] = engine.n_workers
+    try:
+        ray.init(address=engine.address, **kwargs)
+    except (ConnectionError, RuntimeError, ValueError) as exc:
+        raise UserError("--address" if engine.address else "--engine", f"Ray did not start: {str(exc).splitlines()[0]}") from None
+    return True
+
+
 def _run_ray(fn: Callable, jobs: list, engine: Engine, progress: Callable[[int, int], None] | None) -> list[tuple[bool, Any]]:
     import ray
 
-    started_here = not ray.is_initialized()
-    if started_here:
-        os.environ.setdefault("RAY_AUTH_MODE", "disabled")  # a local instance, or a cluster the user set up
-        # Ray runs its workers at nice 15 unless told otherwise: on a busy machine they would then
-        # wait behind everything else. These jobs are the work asked for.
-        os.environ.setdefault("RAY_worker_niceness", "0")
-        kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
-        if engine.address is None:
-            kwargs["num_cpus"] = engine.n_workers
-        try:
-            ray.init(address=engine.address, **kwargs)
-        except (ConnectionError, RuntimeError, ValueError) as exc:
-            raise UserError("--address" if engine.address else "--engine", f"Ray did not start: {str(exc).splitlines()[0]}") from None
+    started_here = start_ray(engine)
     try:
         task = ray.remote(num_cpus=1)(_guarded)
         refs = [task.remote(fn, job) for job in jobs]

@@ -104,7 +104,7 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
     # Between frames that are not consecutive (a ride-along's corrections, frames left out off
     # the map) the vehicle may have gone further than the tracker's window: widen it by what
     # the vehicle could have driven in the gap.
-    period = float(np.median(np.diff(recording.times))) if len(recording) > 1 else 0.0
+    period = recording.frame_period_s
     v_max = _max_speed(recording.meta)
     for j, i in enumerate(keep):
         pose = tuple(recording.poses[i])

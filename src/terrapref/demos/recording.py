@@ -164,12 +164,15 @@ class Recording:
         return len(self.times)
 
     @property
+    def frame_period_s(self) -> float:
+        """The usual time between frames [s]: the median step (0.1, the camera's 10 Hz, with fewer than two frames)."""
+        return float(np.median(np.diff(self.times))) if len(self.times) > 1 else 0.1
+
+    @property
     def duration_s(self) -> float:
         """Time the frames cover [s]: frames x the frame period (gaps, as between a ride-along's
         corrections, do not count)."""
-        if len(self.times) < 2:
-            return 0.1 * len(self.times)
-        return float(len(self.times) * np.median(np.diff(self.times)))
+        return len(self.times) * self.frame_period_s
 
     def image(self, i: int) -> np.ndarray:
         """Frame ``i``'s class ids (H, W) uint8; an unreadable or foreign image is a UserError."""

@@ -180,11 +180,15 @@ class Window:
         """The window as the driver sees it, at its current size."""
         pygame.image.save(self.screen, path)
 
+    def _shade(self, rect: pygame.Rect, rgba: tuple[int, int, int, int] = (0, 0, 0, 170)) -> None:
+        """Darken ``rect`` of the canvas, so that text over the camera view stays readable."""
+        shade = pygame.Surface(rect.size, pygame.SRCALPHA)
+        shade.fill(rgba)
+        self.canvas.blit(shade, rect)
+
     def _draw_box(self, text: pygame.Surface, anchor: str) -> None:
         box = text.get_rect(topright=(self.view_size[0] - 10, 10)) if anchor == "topright" else text.get_rect(topleft=(10, 10))
-        shade = pygame.Surface(box.inflate(12, 8).size, pygame.SRCALPHA)
-        shade.fill((0, 0, 0, 170))
-        self.canvas.blit(shade, box.inflate(12, 8))
+        self._shade(box.inflate(12, 8))
         self.canvas.blit(text, box)
 
     def _draw_hud(self, hud: Sequence[str]) -> None:
@@ -193,9 +197,7 @@ class Window:
         lines = [self.hud_font.render(line, True, TEXT_COLOR) for line in hud]
         width = max(s.get_width() for s in lines) + 16
         height = sum(s.get_height() + 3 for s in lines) + 10
-        shade = pygame.Surface((width, height), pygame.SRCALPHA)
-        shade.fill((0, 0, 0, 170))
-        self.canvas.blit(shade, (4, 4))
+        self._shade(pygame.Rect(4, 4, width, height))
         y = 9
         for s in lines:
             self.canvas.blit(s, (12, y))
@@ -208,9 +210,7 @@ class Window:
         height = text.get_height() + sum(s.get_height() + 4 for s in small) + 24
         box = pygame.Rect(0, 0, width, height)
         box.center = (self.view_size[0] // 2, self.view_size[1] // 2 if small else self.view_size[1] // 3)
-        shade = pygame.Surface(box.size, pygame.SRCALPHA)
-        shade.fill((10, 10, 10, 215))
-        self.canvas.blit(shade, box)
+        self._shade(box, (10, 10, 10, 215))
         self.canvas.blit(text, text.get_rect(midtop=(box.centerx, box.top + 10)))
         y = box.top + 16 + text.get_height()
         for s in small:
