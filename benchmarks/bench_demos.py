@@ -87,14 +87,15 @@ def bench_decision(rec_dir: Path, repeats: int, features: FeatureConfig | None =
     from terrapref.demos.dataset import build_dataset
     from terrapref.learning.model_file import load_model
     from terrapref.learning.pipeline import train_and_save
-    from terrapref.learning.train import TrainConfig
+    from terrapref.learning.network import ClassifierConfig
+    from terrapref.learning.train import SecondStageConfig, TrainConfig
     from terrapref.planner import Planner
 
     rec = read_recording(rec_dir)
     features = features or FeatureConfig()
     plain = features == FeatureConfig() and members == 1 and not second_stage
     model_path = rec_dir.parent / ("model.safetensors" if plain else "variant.safetensors")
-    train_and_save(build_dataset([rec], features), model_path, TrainConfig(members=members, utility=second_stage), checkpoints=False)
+    train_and_save(build_dataset([rec], features), model_path, TrainConfig(classifier=ClassifierConfig(members=members), second_stage=SecondStageConfig() if second_stage else None), checkpoints=False)
     planner = Planner(load_model(model_path))
     idx = list(range(0, len(rec), max(1, len(rec) // 500)))
     images = [rec.image(i) for i in idx]

@@ -37,7 +37,7 @@ import numpy as np  # noqa: E402
 
 from terrapref.demos.dataset import build_dataset  # noqa: E402
 from terrapref.demos.recording import read_recording  # noqa: E402
-from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_many, zone_agrees  # noqa: E402
+from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, run_many, zone_agrees  # noqa: E402
 from terrapref.evaluation.stats import rate_text, wilson  # noqa: E402
 from terrapref.grid import Engine, run_grid  # noqa: E402
 from terrapref.learning.pipeline import train_and_save  # noqa: E402
@@ -102,30 +102,41 @@ def main(argv: list[str] | None = None) -> int:
     results = run_many(specs, args.workers, lambda k, n: print(f"run {k}/{n}", file=sys.stderr, flush=True) if k % 20 == 0 or k == n else None)
     t_eval = time.perf_counter() - t0 - t_train
 
-    driver = {(r["scenario"], z["id"]): z for r in results if r["driver"] == EXPERT for z in r["metrics"]["zones"]}
-    kind_of = {models[key]: key for key in keys}
+    rows, collisions = _zone_rows(specs, results, {models[key]: key for key in keys})
+    drives = _drives(models)
+    (args.out / "keyboard.json").write_text(json.dumps({"profile": order, "layouts": layouts, "zones": rows, "collisions": collisions, "drives": drives,
+                                                        "train_s": t_train, "eval_s": t_eval}, indent=0))
+    write_report(args.out, order, layouts, rows, collisions, drives, t_train, t_eval, args.workers)
+    return 0
+
+
+def _zone_rows(specs: list[RunSpec], results: list[RunResult], kind_of: dict[str, tuple[str, int]]) -> tuple[list[dict], dict[str, int]]:
+    """Every planner zone beside the driver's choice in the same zone (keyboard.json's rows), and each input's collisions."""
+    driver = {(r.scenario, z.id): z for r in results if r.driver == EXPERT for z in r.metrics.zones}
     rows = []
     collisions = dict.fromkeys(INPUTS, 0)
     for spec, r in zip(specs, results, strict=True):
-        if r["driver"] != PLANNER:
+        if r.driver != PLANNER:
             continue
         kind, seed = kind_of[spec.model_path]
-        collisions[kind] += r["metrics"]["collisions"]
-        for z in r["metrics"]["zones"]:
-            d = driver[(r["scenario"], z["id"])]
-            rows.append({"input": kind, "seed": seed, "scenario": r["scenario"], "zone": z["id"], "choice": z["choice"],
-                         "driver_choice": d["choice"], "agrees": zone_agrees(z, d), "success": z["success"]})
+        collisions[kind] += r.metrics.collisions
+        for z in r.metrics.zones:
+            d = driver[(r.scenario, z.id)]
+            rows.append({"input": kind, "seed": seed, "scenario": r.scenario, "zone": z.id, "choice": z.choice,
+                         "driver_choice": d.choice, "agrees": zone_agrees(z, d), "success": z.success})
+    return rows, collisions
+
+
+def _drives(models: dict[tuple[str, int], str]) -> dict[str, dict]:
+    """Each demonstration drive: its frames, minutes, share of frames driven straight (w = 0) and collisions."""
     drives = {}
-    for key in keys:
+    for key in sorted(models):
         kind, seed = key
         rec = read_recording(Path(models[key]).parent / ("demo_keyboard" if kind == "keyboard" else _stick_demo(Path(models[key]).parent)))
         w = rec.commands[:, 1]
         drives[f"{kind}_s{seed}"] = {"frames": len(rec), "minutes": rec.duration_s / 60, "straight_share": float(np.mean(w == 0.0)),
                                      "collisions": rec.meta.get("summary", {}).get("collisions")}
-    (args.out / "keyboard.json").write_text(json.dumps({"profile": order, "layouts": layouts, "zones": rows, "collisions": collisions, "drives": drives,
-                                                        "train_s": t_train, "eval_s": t_eval}, indent=0))
-    write_report(args.out, order, layouts, rows, collisions, drives, t_train, t_eval, args.workers)
-    return 0
+    return drives
 
 
 def _stick_demo(work: Path) -> str:

@@ -26,7 +26,7 @@ from terrapref.scenario import packaged_scenarios
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("recordings")
-    parser.add_argument("config", help="TrainConfig fields as JSON")
+    parser.add_argument("config", help='TrainConfig changes as JSON, part by part, e.g. {"optimiser": {"epochs": 300}, "classifier": {"skip": true}}')
     parser.add_argument("--seeds", type=int, default=1)
     parser.add_argument("--profile", default="mud,rock,water,non_traversable")
     args = parser.parse_args()
@@ -34,18 +34,18 @@ def main() -> int:
     print(f"{len(ds)} samples")
     with tempfile.TemporaryDirectory() as tmp:
         model = str(Path(tmp) / "model.safetensors")
-        r = train_and_save(ds, model, TrainConfig(**json.loads(args.config)), checkpoints=False)
+        r = train_and_save(ds, model, TrainConfig().updated(json.loads(args.config)), checkpoints=False)
         best = r.history[r.best_epoch - 1]
         print(f"epoch {r.best_epoch}: val loss {best.val_loss:.3f}, val acc {best.val_acc:.3f}, top-3 {best.val_top3:.3f}, {r.steps} steps")
         names = [n for n in packaged_scenarios() if n != "demo_course"]
         profile = tuple(args.profile.split(","))
         res = run_many([RunSpec(n, s, PLANNER, model, profile) for n in names for s in range(args.seeds)])
     for x in res:
-        m = x["metrics"]
-        zones = " ".join(f'{z["id"]}:{z["expect"]}->{z["choice"]}{"" if z["success"] else "(X)"}' for z in m["zones"])
-        print(f'{x["scenario"]:42s} seed {x["seed"]} collisions {m["collisions"]}  {zones}')
-    print("test set:", summarise([x for x in res if x["scenario"] != "train_course"], PLANNER))
-    print("train_course:", summarise([x for x in res if x["scenario"] == "train_course"], PLANNER))
+        m = x.metrics
+        zones = " ".join(f'{z.id}:{z.expect}->{z.choice}{"" if z.success else "(X)"}' for z in m.zones)
+        print(f'{x.scenario:42s} seed {x.seed} collisions {m.collisions}  {zones}')
+    print("test set:", summarise([x for x in res if x.scenario != "train_course"], PLANNER).to_dict())
+    print("train_course:", summarise([x for x in res if x.scenario == "train_course"], PLANNER).to_dict())
     return 0
 
 

@@ -28,13 +28,15 @@ def test_cli_train_writes_model_curve_and_checkpoints(tmp_path: Path, capsys):
     data = dataset_file(tmp_path / "data.safetensors")
     out = tmp_path / "models" / "pref.safetensors"
     rc = main(["train", str(data), "--out", str(out), "--epochs", "3", "--skip", "--class-balance", "--hidden", "16", "--seed", "2",
-               "--members", "1"])
+               "--members", "1", "--no-mirror", "--stage-weight", "2.5"])
     captured = capsys.readouterr()
     assert rc == 0, captured.err
     model = load_model(out)
     assert model.classifier.skip and model.classifier.hidden == 16
     training = model.meta["training"]
-    assert training["epochs"] == 3 and training["class_balance"] and training["seed"] == 2
+    assert training["optimiser"]["epochs"] == 3 and training["data"]["class_balance"] and training["seed"] == 2
+    # Flags override the recipe's value field by field; the rest is the recipe's (teach: mirrored samples, the second stage).
+    assert not training["data"]["mirror"] and training["second_stage"] == {"weight": 2.5} and model.stage_weight == 2.5
     curve = tmp_path / "models" / "pref.loss.png"
     assert curve.read_bytes().startswith(PNG)
     folder = tmp_path / "models" / "pref.checkpoints"
@@ -77,22 +79,22 @@ def test_cli_train_second_stage_stores_the_fitted_utility(tmp_path: Path, capsys
     out = tmp_path / "m.safetensors"
     assert main(["train", str(data), "--out", str(out), "--epochs", "1", "--mirror", "--second-stage"]) == 0
     model = load_model(out)
-    assert model.meta["training"]["utility"] and model.utility is not None
+    assert model.meta["training"]["second_stage"] == {"weight": 5.0} and model.utility is not None
     assert model.utility.w.shape == (5,) and model.utility.b.shape == (21,)
 
 
-def test_cli_train_refuses_a_dataset_with_lane_columns_in_one_line(tmp_path: Path, capsys):
-    """Lanes left the code: a dataset featurised with them is refused, naming the file."""
+@pytest.mark.parametrize("features", [{"lane_m": 6.0, "lane_points": 12}, {"near_m": 2.0}], ids=["lanes", "near"])
+def test_cli_train_refuses_a_dataset_with_columns_that_left_in_one_line(tmp_path: Path, capsys, features: dict):
+    """Columns that lost their experiment (lanes, a near distance) left the code: a dataset featurised with them is refused."""
     rng = np.random.default_rng(0)
     meta = {"format": DATASET_FORMAT, **model_meta()}
-    meta["features"] = {**meta["features"], "lane_m": 6.0, "lane_points": 12}
+    meta["features"] = {**meta["features"], **features}
     n = 50
-    data = save_dataset(Dataset(rng.uniform(0, 1, (n, 21, 9)).astype(np.float32), rng.integers(0, 21, n),
-                                np.zeros(n, np.float32), np.zeros(n, np.int64), meta), tmp_path / "lanes.safetensors")
+    data = save_dataset(Dataset(rng.uniform(0, 1, (n, 21, 6)).astype(np.float32), rng.integers(0, 21, n),
+                                np.zeros(n, np.float32), np.zeros(n, np.int64), meta), tmp_path / "old.safetensors")
     out = tmp_path / "m.safetensors"
     assert main(["train", str(data), "--out", str(out), "--epochs", "1"]) == 2
-    line = one_line_error(capsys, str(data))
-    assert "lane" in line
+    assert "no longer supported" in one_line_error(capsys, str(data))
     assert not out.exists()
 
 

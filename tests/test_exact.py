@@ -119,13 +119,13 @@ def test_matmul_of_empty_and_zero_operands():
 GRAD_CONFIGS = [
     ClassifierConfig(hidden=16, skip=True),
     ClassifierConfig(hidden=16, activation="tanh"),
-    ClassifierConfig(hidden=16, activation="elu", channels=2),
+    ClassifierConfig(hidden=16, activation="elu", depth=2),
     ClassifierConfig(hidden=16, compress=False),
     ClassifierConfig(m=7, n_features=3, hidden=5, depth=4, activation="tanh", skip=True, ignore=(1,)),
 ]
 
 
-@pytest.mark.parametrize("config", GRAD_CONFIGS, ids=lambda c: f"{c.activation}-skip{c.skip}-compress{c.compress}-ch{c.channels}")
+@pytest.mark.parametrize("config", GRAD_CONFIGS, ids=lambda c: f"{c.activation}-skip{c.skip}-compress{c.compress}-d{c.depth}")
 def test_forward_and_gradient_equal_pytorch(config: ClassifierConfig):
     rng = np.random.default_rng(0)
     weights = init_weights(config, rng)
@@ -180,12 +180,12 @@ import hashlib, numpy as np
 from terrapref.demos.dataset import Dataset
 from terrapref.learning.train import TrainConfig, train
 import sys; sys.path.insert(0, {tests!r})
-from helpers import model_meta
+from helpers import model_meta, train_config
 rng = np.random.default_rng(0)
 U = rng.uniform(0, 1, (500, 21, 5)).astype(np.float32)
 labels = np.argmax(U @ np.array([-3.0, -1.5, -0.5, 0.5, 2.0], np.float32), axis=1)
 data = Dataset(U, labels, np.zeros(500, np.float32), np.zeros(500, np.int64), {{"format": "terrapref-dataset/1", **model_meta()}})
-r = train(data, TrainConfig(epochs=4, batch_size=64, hidden=16, skip=True, class_balance=True, mirror=True, utility=True))
+r = train(data, train_config(epochs=4, batch_size=64, hidden=16, skip=True, class_balance=True, mirror=True, utility=True))
 h = hashlib.sha256()
 for name in sorted(r.weights):
     h.update(r.weights[name].tobytes())

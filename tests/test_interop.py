@@ -27,7 +27,7 @@ from terrapref.vehicle import Command
 CONFIGS = [
     ClassifierConfig(),  # the paper's C
     ClassifierConfig(skip=True, members=3),  # recipe teach: residual path, an ensemble of 3
-    ClassifierConfig(activation="tanh", channels=3, skip=True, depth=2),
+    ClassifierConfig(activation="tanh", skip=True, depth=2),
     ClassifierConfig(compress=False, activation="elu", ignore=(1,)),
 ]
 
@@ -48,7 +48,7 @@ def _model(path: Path, config: ClassifierConfig, seed: int = 0, utility: bool = 
 # --- ONNX ------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("config", CONFIGS, ids=["paper", "teach", "tanh-channels", "flat-elu-ignore"])
+@pytest.mark.parametrize("config", CONFIGS, ids=["paper", "teach", "tanh-skip", "flat-elu-ignore"])
 def test_onnxruntime_gives_numpy_forwards_logits(tmp_path: Path, config: ClassifierConfig):
     model = load_model(_model(tmp_path / "m.safetensors", config))
     out = export_onnx(model, tmp_path / "m.onnx")

@@ -83,3 +83,37 @@ def test_no_import_cycle_between_files():
 def test_the_cycle_finder_finds_one():
     assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert _cycle({"a": {"b"}, "b": {"c"}}) is None
+
+
+# The package's layers, bottom first: a package may import only from layers below its own, so
+# that the folder list reads as the data flow (scenario -> world -> vehicle and camera ->
+# simulation -> features -> demonstrations -> learning -> planner -> evaluation -> report) with
+# the command line on top.
+LAYERS = [
+    {"errors"},
+    {"yamlio", "fileio", "progress", "configargs", "grid"},
+    {"tensorfile", "terrain"},
+    {"pngio", "scenario"},
+    {"world"},
+    {"vehicle", "plots"},
+    {"camera"},
+    {"sim"},
+    {"features"},
+    {"demos"},
+    {"learning"},
+    {"planner"},
+    {"baselines", "recipes"},
+    {"interop"},
+    {"evaluation", "teleop"},
+    {"report"},
+    {"cli", "runtime"},
+]
+
+
+def test_packages_import_only_from_the_layers_below_their_own():
+    level = {name: i for i, layer in enumerate(LAYERS) for name in layer}
+    edges = _package_imports()
+    unplaced = (set(edges) | {t for ts in edges.values() for t in ts}) - set(level) - {"__init__", "__main__", "data"}
+    assert not unplaced, f"packages missing from LAYERS: {sorted(unplaced)}"
+    upward = sorted(f"{a} -> {b}" for a, targets in edges.items() for b in targets if b in level and level[b] >= level.get(a, len(LAYERS)))
+    assert not upward, "imports against the layer order: " + ", ".join(upward)

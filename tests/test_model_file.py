@@ -37,7 +37,7 @@ ODD_PROFILE = ("mud", "rock", "water", "non_traversable")
 
 @pytest.fixture
 def model_file(tmp_path: Path) -> tuple[Path, ClassifierConfig, dict[str, np.ndarray]]:
-    config = ClassifierConfig(hidden=16, activation="tanh", depth=2, skip=True, channels=2)
+    config = ClassifierConfig(hidden=16, activation="tanh", depth=2, skip=True)
     weights = random_weights(config)
     path = save_model(tmp_path / "sub" / "model.safetensors", config, weights, {**model_meta(ODD_FEATURES, ODD_CAMERA, ODD_PROFILE), "note": "kept"})
     return path, config, weights

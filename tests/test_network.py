@@ -1,5 +1,5 @@
 """The classifier C (SPEC 8): the NumPy forward pass against the PyTorch network, the skip path,
-channels, softmax, and its configuration's checks."""
+softmax, and its configuration's checks."""
 
 from __future__ import annotations
 
@@ -28,12 +28,10 @@ CONFIGS = [
     ClassifierConfig(compress=False),
     ClassifierConfig(activation="elu", compress=False, depth=1),
     ClassifierConfig(m=7, n_features=3, hidden=5, depth=4, activation="tanh", skip=True),
-    ClassifierConfig(channels=3),
-    ClassifierConfig(channels=2, skip=True, activation="elu"),
 ]
 
 
-@pytest.mark.parametrize("config", CONFIGS, ids=lambda c: f"{c.activation}-d{c.depth}-h{c.hidden}-m{c.m}k{c.n_features}c{c.channels}{'-skip' if c.skip else ''}{'' if c.compress else '-flat'}")
+@pytest.mark.parametrize("config", CONFIGS, ids=lambda c: f"{c.activation}-d{c.depth}-h{c.hidden}-m{c.m}k{c.n_features}{'-skip' if c.skip else ''}{'' if c.compress else '-flat'}")
 def test_numpy_forward_equals_torch(config: ClassifierConfig):
     torch.manual_seed(3)
     net = UtilityClassifier(config).eval()
@@ -65,18 +63,13 @@ def test_skip_adds_the_compressed_scores_to_the_logits():
     np.testing.assert_allclose(numpy_forward(config, weights, U), plain + scores, atol=1e-6)
 
 
-def test_channels_compress_each_row_to_several_scores():
-    """Each trajectory's row becomes ``channels`` numbers, laid out trajectory by trajectory;
-    the residual path adds the first channel."""
-    config = ClassifierConfig(channels=2, skip=True, hidden=4, depth=1)
-    torch.manual_seed(0)
-    weights = {k: v.detach().numpy().copy() for k, v in UtilityClassifier(config).state_dict().items()}
-    assert weights["compress.weight"].shape == (2, K) and weights["layers.0.weight"].shape == (4, 2 * M)
-    U = np.random.default_rng(0).uniform(0, 1, (M, K)).astype(np.float32)
-    per_row = U @ weights["compress.weight"].T + weights["compress.bias"]  # (m, 2)
-    h = np.maximum(per_row.reshape(-1) @ weights["layers.0.weight"].T + weights["layers.0.bias"], 0.0)
-    expected = h @ weights["layers.1.weight"].T + weights["layers.1.bias"] + per_row[:, 0]
-    np.testing.assert_allclose(numpy_forward(config, weights, U), expected, atol=1e-5)
+def test_headers_of_older_files_with_one_channel_load_and_others_are_refused():
+    """Model files from before the compression's ``channels`` option left say ``channels: 1``
+    (what C is); any other count names the field."""
+    header = {**ClassifierConfig(skip=True).to_dict(), "channels": 1}
+    assert ClassifierConfig.from_dict(header) == ClassifierConfig(skip=True)
+    with pytest.raises(ValueError, match="channels"):
+        ClassifierConfig.from_dict({**header, "channels": 2})
 
 
 def test_softmax_is_a_distribution_over_the_last_axis():
@@ -88,7 +81,7 @@ def test_softmax_is_a_distribution_over_the_last_axis():
     np.testing.assert_array_equal(np.argmax(p, axis=-1), np.argmax(logits, axis=-1))
 
 
-@pytest.mark.parametrize("bad", [dict(activation="sigmoid"), dict(m=1), dict(hidden=0), dict(depth=0), dict(skip=True, compress=False), dict(channels=0)])
+@pytest.mark.parametrize("bad", [dict(activation="sigmoid"), dict(m=1), dict(hidden=0), dict(depth=0), dict(skip=True, compress=False)])
 def test_classifier_config_is_validated(bad: dict):
     with pytest.raises(ValueError):
         ClassifierConfig(**bad)

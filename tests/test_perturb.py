@@ -294,13 +294,13 @@ def test_perturbed_run_one():
     spec = RunSpec(scenario="demo_course", seed=0, driver=PURE_PURSUIT, model_path=None, profile=PROFILE,
                    perturb=Perturbation(drop_rate=0.3))
     out = run_one(spec)
-    assert out["scenario"] == "demo_course" and out["driver"] == PURE_PURSUIT and out["seed"] == 0
-    m = out["metrics"]
+    assert out.scenario == "demo_course" and out.driver == PURE_PURSUIT and out.seed == 0
+    m = out.metrics
     assert {"completed", "collisions", "duration_s", "rms_cross_track_m", "max_cross_track_m",
-            "rms_cross_track_outside_zones_m", "distance_m", "zones"} <= set(m)
-    assert m["completed"] and m["duration_s"] > 0 and len(m["zones"]) > 0
-    assert out["xy"].ndim == 2 and out["xy"].shape[1] == 2
+            "rms_cross_track_outside_zones_m", "distance_m", "zones"} <= set(out.to_dict()["metrics"])
+    assert m.completed and m.duration_s > 0 and len(m.zones) > 0
+    assert out.xy.ndim == 2 and out.xy.shape[1] == 2
     clean = run_one(RunSpec(scenario="demo_course", seed=0, driver=PURE_PURSUIT, model_path=None, profile=PROFILE))
-    assert not np.array_equal(out["xy"], clean["xy"])  # the drops did change the drive
+    assert not np.array_equal(out.xy, clean.xy)  # the drops did change the drive
     again = run_one(spec)
-    np.testing.assert_array_equal(out["xy"], again["xy"])  # and reproducibly
+    np.testing.assert_array_equal(out.xy, again.xy)  # and reproducibly

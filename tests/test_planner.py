@@ -26,7 +26,6 @@ from terrapref.features import FeatureConfig, UtilityFeaturizer
 from terrapref.learning.model_file import LoadedModel, load_model, save_model
 from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
 from terrapref.learning.pipeline import train_and_save
-from terrapref.learning.train import TrainConfig
 from terrapref.learning.torch_net import UtilityClassifier
 from terrapref.planner import Decision, Planner, PlannerDriver
 from terrapref.scenario import Scenario, resolve_scenario
@@ -36,7 +35,7 @@ from terrapref.terrain import PreferenceProfile
 from terrapref.vehicle import Command, Pose
 from terrapref.world import WorldMap
 
-from helpers import LINEAR_W, linear_model, model_meta
+from helpers import LINEAR_W, linear_model, model_meta, train_config
 
 # Columns of U: non_traversable, water, rock, mud, distance. Avoid terrain, follow the path.
 def _linear_model(path: Path, camera: CameraConfig | None = None) -> LoadedModel:
@@ -264,7 +263,7 @@ def demo(tmp_path_factory, course) -> SimpleNamespace:
     record_run(Simulation(course, camera), ExpertDriver(ExpertConfig(profile=profile.order)), writer, features.preference, np.random.default_rng(0))
     recording = read_recording(d / "rec")
     dataset = build_dataset([recording], features)
-    result = train_and_save(dataset, d / "model.safetensors", TrainConfig(epochs=3, skip=True), checkpoints=False)
+    result = train_and_save(dataset, d / "model.safetensors", train_config(epochs=3, skip=True), checkpoints=False)
     return SimpleNamespace(recording=recording, dataset=dataset, result=result, model=load_model(d / "model.safetensors"))
 
 

@@ -18,7 +18,7 @@ from terrapref.learning.linear import LinearUtility, fit_linear_utility
 from terrapref.learning.model_file import FORMAT, load_model, save_model
 from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
 from terrapref.learning.torch_net import UtilityClassifier
-from terrapref.evaluation.policies import load_policy
+from terrapref.planner.registry import load_policy
 from terrapref.planner import Planner
 from terrapref.planner.policy import (
     HAND_COSTS,
@@ -355,3 +355,48 @@ def test_evaluate_command_drives_a_linear_model_file(tmp_path, capsys):
     assert metrics["summary"]["runs"] == 1 and metrics["summary"]["zones"] > 0
     assert (out / "demo_course.png").exists()
     assert "zone success" in capsys.readouterr().out
+
+
+# --- the registry of policies --------------------------------------------------------------------
+
+
+def test_policies_are_registered_by_name_and_built_or_loaded_by_it(tmp_path: Path):
+    import doctest
+
+    import terrapref.planner.registry as registry
+    from terrapref.planner.policy import Policy, PurePursuitPolicy
+
+    assert doctest.testmod(registry, verbose=False).failed == 0
+    assert registry.kinds(from_file=True) == ["classifier", "linear", "cnn"]
+    assert registry.kinds(from_file=False) == ["pure_pursuit", "hand_cost"]
+    assert isinstance(registry.make("pure_pursuit"), PurePursuitPolicy)
+    with pytest.raises(ValueError, match="unknown policy 'linear'"):
+        registry.make("linear")  # a file kind is loaded, not made
+    with pytest.raises(ValueError, match="already registered"):
+        registry.register("pure_pursuit", PurePursuitPolicy)
+    with pytest.raises(TypeError):
+        Policy()  # the interface is abstract: a policy must score trajectories
+
+
+def test_only_a_policy_trained_with_a_second_stage_brings_one(classifier_file):
+    from terrapref.planner.policy import ClassifierPolicy, CostPolicy
+
+    from terrapref.learning.linear import LinearUtility
+    from terrapref.learning.model_file import LoadedModel
+
+    assert CostPolicy().stage_utility() is None
+    assert ClassifierPolicy(classifier_file.model).stage_utility() is None  # trained without one
+    utility = LinearUtility(np.arange(5.0), np.zeros(21))
+    with_stage = LoadedModel(**{**vars(classifier_file.model), "utility": utility, "stage_weight": 5.0})
+    stage = ClassifierPolicy(with_stage).stage_utility()
+    assert stage.utility is utility and stage.weight == 5.0
+
+
+def test_drivers_are_registered_by_name_like_policies():
+    from terrapref.evaluation.runner import RunSpec, drivers, register_driver, run_one
+
+    assert drivers() == ["driver", "planner", "pure_pursuit", "hand_cost"]
+    with pytest.raises(ValueError, match="already registered"):
+        register_driver("driver", lambda *a: None)
+    with pytest.raises(ValueError, match="unknown driver 'bogus'; drivers: driver, planner, pure_pursuit, hand_cost"):
+        run_one(RunSpec("demo_course", 0, "bogus", None, ("mud", "rock", "water", "non_traversable")))

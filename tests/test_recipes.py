@@ -21,7 +21,7 @@ from terrapref.learning.train import TrainConfig
 from terrapref.scenario import parse_scenario
 from terrapref.terrain import default_classes
 
-from helpers import model_meta
+from helpers import model_meta, train_config
 
 # --- the named recipes -------------------------------------------------------------------------------
 
@@ -48,36 +48,37 @@ def test_an_unknown_recipe_is_a_user_error_naming_the_flag_and_the_recipes(flag:
 def test_the_paper_recipe_is_the_published_one():
     paper = RECIPES["paper"]
     assert paper.train == TrainConfig()
-    assert (paper.train.epochs, paper.train.lr, paper.train.batch_size, paper.train.val_fraction) == (15, 1e-3, 256, 0.2)
-    assert not (paper.train.skip or paper.train.class_balance or paper.train.mirror or paper.train.utility)
+    opt = paper.train.optimiser
+    assert (opt.epochs, opt.lr, opt.batch_size, opt.val_fraction) == (15, 1e-3, 256, 0.2)
+    assert not (paper.train.classifier.skip or paper.train.data.class_balance or paper.train.data.mirror)
+    assert paper.train.second_stage is None and paper.train.classifier.members == 1
     assert (paper.demonstrations, paper.corrections, paper.course) == (1, 0, "train_course")
     assert paper.disturbance is None
-    assert paper.features() == FeatureConfig()  # the paper's U: no lanes, no near distance, no look-ahead
+    assert paper.features() == FeatureConfig()  # the paper's U: no look-ahead
 
 
 def test_ours_drives_train_course_twice_with_pushes():
     ours = RECIPES["ours"]
     assert (ours.demonstrations, ours.course, ours.disturbance) == (2, "train_course", DisturbanceConfig(rate_hz=0.3))
-    assert (ours.train.epochs, ours.train.members) == (300, 1)
-    assert ours.train.skip and ours.train.class_balance and ours.train.mirror and ours.train.utility
+    assert (ours.train.optimiser.epochs, ours.train.classifier.members) == (300, 1)
+    assert ours.train.classifier.skip and ours.train.data.class_balance and ours.train.data.mirror and ours.train.second_stage is not None
     assert ours.features().lookahead is None
 
 
 def test_teach_drives_teach_course_once_and_fits_through_the_lookahead():
     teach = RECIPES["teach"]
     assert (teach.demonstrations, teach.course, teach.disturbance) == (1, "teach_course", DisturbanceConfig(rate_hz=0.3))
-    assert (teach.train.epochs, teach.train.members, teach.train.stage_weight) == (300, 3, 5.0)
-    assert teach.train.skip and teach.train.class_balance and teach.train.mirror and teach.train.utility
+    assert (teach.train.optimiser.epochs, teach.train.classifier.members, teach.train.second_stage.weight) == (300, 3, 5.0)
+    assert teach.train.classifier.skip and teach.train.data.class_balance and teach.train.data.mirror and teach.train.second_stage is not None
     features = teach.features()
     assert features.lookahead == LookaheadConfig()
     assert features == replace(FeatureConfig(), lookahead=LookaheadConfig())
 
 
 def test_features_keep_the_base_and_set_the_recipes_own():
-    base = FeatureConfig(path_spacing_m=0.5, near_m=2.0)
-    near = Recipe("near", near_m=1.0)
-    assert near.features(base) == replace(base, near_m=1.0)
-    assert RECIPES["paper"].features(base) == replace(base, near_m=0.0)
+    base = FeatureConfig(path_spacing_m=0.5, lookahead=LookaheadConfig())
+    assert RECIPES["teach"].features(base) == base
+    assert RECIPES["paper"].features(base) == replace(base, lookahead=None)
 
 
 @pytest.mark.parametrize("bad", [dict(demonstrations=0), dict(corrections=-1)])
@@ -88,7 +89,7 @@ def test_recipes_are_validated(bad: dict):
 
 def test_to_dict_is_plain_data():
     data = RECIPES["teach"].to_dict()
-    assert data["name"] == "teach" and data["train"]["epochs"] == 300 and data["disturbance"]["rate_hz"] == 0.3
+    assert data["name"] == "teach" and data["train"]["optimiser"]["epochs"] == 300 and data["disturbance"]["rate_hz"] == 0.3
 
 
 # --- the driver's styles -------------------------------------------------------------------------------
@@ -235,7 +236,7 @@ def test_no_datasets_is_a_user_error():
 
 @pytest.mark.parametrize("field, value", [
     ("profile", ["water", "rock", "mud", "non_traversable"]),
-    ("features", FeatureConfig(near_m=2.0).to_dict()),
+    ("features", FeatureConfig(path_spacing_m=0.5).to_dict()),
     ("camera", CameraConfig(hfov_deg=60.0).to_dict()),
     ("classes", {**default_classes().to_dict(), "background": "mud"}),
 ])
@@ -277,15 +278,14 @@ def test_training_data_names_the_file_that_differs(tmp_path):
 
 def test_run_recipe_demonstrates_corrects_and_reuses_demonstrations(tmp_path):
     from terrapref.recipes import Recipe, run_recipe
-    from terrapref.learning.train import TrainConfig
 
-    recipe = Recipe("tiny", demonstrations=1, corrections=1, train=TrainConfig(epochs=2))
+    recipe = Recipe("tiny", demonstrations=1, corrections=1, train=train_config(epochs=2))
     out = run_recipe(recipe, tmp_path, 0, course="demo_course")
     assert out.model.exists()
     assert [p.name for p in out.recordings] == ["demo_0", "corrections_0"]
     assert out.demo_minutes > 0 and out.correction_minutes > 0
     stamp = (tmp_path / "demo_0" / "meta.json").stat().st_mtime_ns
-    again = run_recipe(Recipe("plain", demonstrations=1, train=TrainConfig(epochs=2)), tmp_path, 0, course="demo_course")
+    again = run_recipe(Recipe("plain", demonstrations=1, train=train_config(epochs=2)), tmp_path, 0, course="demo_course")
     assert again.recordings == [tmp_path / "demo_0"] and again.correction_minutes == 0
     assert (tmp_path / "demo_0" / "meta.json").stat().st_mtime_ns == stamp  # reused, not recorded again
 

@@ -910,3 +910,12 @@ def test_generated_courses_are_deterministic_valid_and_labelled_by_kind() -> Non
     assert mixed == set(ZONE_KINDS)
     with pytest.raises(ScenarioError, match="gen:SEED"):
         resolve_scenario("gen:abc")
+
+
+@pytest.mark.parametrize("data", [[1, 2], "x", None, 3])
+def test_parse_scenario_refuses_what_is_not_a_mapping_in_one_line(data) -> None:
+    """Parsed data that is not a mapping (a recording's scenario, an imported one) is a user error, not a crash."""
+    with pytest.raises(ScenarioError) as caught:
+        parse_scenario(data, "s.yaml")
+    lines = caught.value.lines()
+    assert len(lines) == 1 and lines[0].startswith("s.yaml: expected a mapping of scenario fields")

@@ -18,7 +18,6 @@ from terrapref.learning.linear import LinearUtility
 from terrapref.learning.model_file import load_model, save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.learning.pipeline import train_and_save
-from terrapref.learning.train import TrainConfig
 from terrapref.planner import Planner
 from terrapref.planner.second_stage import SecondStage, SecondStageConfig
 from terrapref.scenario import resolve_scenario
@@ -27,7 +26,7 @@ from terrapref.sim import Simulation
 from terrapref.terrain import default_classes
 from terrapref.vehicle import Pose
 
-from helpers import model_meta, skip_path_weights
+from helpers import model_meta, skip_path_weights, train_config
 
 # Columns of U: non_traversable, water, rock, mud, distance.
 UTILITY = LinearUtility(np.array([-12.0, -5.0, -3.0, -1.0, 5.0]), np.linspace(-1.0, 1.0, 21) ** 2 * -4.0 + 2.0)
@@ -169,13 +168,13 @@ def test_training_keeps_the_fitted_utility_with_the_model(tmp_path: Path):
     dataset = Dataset(rng.uniform(0, 1, (n, m, 5)).astype(np.float32), rng.integers(0, m, n), np.zeros(n, np.float32),
                       np.zeros(n, np.int64), model_meta())
     out = tmp_path / "m.safetensors"
-    result = train_and_save(dataset, out, TrainConfig(epochs=1, mirror=True, utility=True), checkpoints=False)
+    result = train_and_save(dataset, out, train_config(epochs=1, mirror=True, utility=True), checkpoints=False)
     assert result.utility is not None
     np.testing.assert_allclose(result.utility.b, result.utility.b[::-1], atol=0.02)  # random labels: asymmetric without mirror
     model = load_model(out)
     np.testing.assert_allclose(model.meta["utility"]["w"], result.utility.w)
     assert Planner(model).second_stage is not None
-    train_and_save(dataset, tmp_path / "p.safetensors", TrainConfig(epochs=1), checkpoints=False)
+    train_and_save(dataset, tmp_path / "p.safetensors", train_config(epochs=1), checkpoints=False)
     assert "utility" not in load_model(tmp_path / "p.safetensors").meta
 
 

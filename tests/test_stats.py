@@ -7,7 +7,10 @@ import math
 
 import pytest
 
-from terrapref.evaluation.runner import EXPERT, PLANNER, PURE_PURSUIT, annotate_agreement, summarise, zone_agrees
+import numpy as np
+
+from terrapref.evaluation.runner import EXPERT, PLANNER, PURE_PURSUIT, RunResult, annotate_agreement, summarise, zone_agrees
+from terrapref.evaluation.scoring import RunMetrics, ZoneResult
 from terrapref.evaluation.stats import rate_text, wilson
 
 Z = 1.96
@@ -77,17 +80,16 @@ def test_rate_text():
 # --- agreement with the synthetic driver -------------------------------------------------------------
 
 
-def _zone(id: str, choice: str, success: bool = True, touched_lethal: bool = False) -> dict:
-    """A zone as ``ZoneResult.to_dict`` writes it."""
-    return {"id": id, "label": id, "expect": choice if success else "avoid", "choice": choice, "success": success,
-            "touched_lethal": touched_lethal, "distance_m": {}, "clearance_m": None}
+def _zone(id: str, choice: str, success: bool = True, touched_lethal: bool = False) -> ZoneResult:
+    """A scored zone, expected ``choice`` when it succeeded and ``avoid`` otherwise."""
+    return ZoneResult(id, id, choice if success else "avoid", choice, success, touched_lethal, {})
 
 
-def _run(scenario: str, seed: int, driver: str, zones: list[dict], collisions: int = 0, completed: bool = True,
-         rms: float = 0.1) -> dict:
-    """A result as ``run_one`` returns it (less the path)."""
-    return {"scenario": scenario, "seed": seed, "driver": driver,
-            "metrics": {"zones": zones, "collisions": collisions, "completed": completed, "rms_cross_track_m": rms}}
+def _run(scenario: str, seed: int, driver: str, zones: list[ZoneResult], collisions: int = 0, completed: bool = True,
+         rms: float = 0.1) -> RunResult:
+    """A result as ``run_one`` returns it, with an empty path."""
+    metrics = RunMetrics(completed, collisions, 60.0, rms, 2 * rms, rms, {}, zones)
+    return RunResult(scenario, seed, driver, metrics, np.zeros((0, 2), np.float32))
 
 
 @pytest.mark.parametrize("planner, driver, agrees", [
@@ -104,7 +106,7 @@ def test_zone_agrees(planner: tuple[str, bool], driver: tuple[str, bool], agrees
 
 
 @pytest.fixture
-def results() -> list[dict]:
+def results() -> list[RunResult]:
     return [
         _run("course", 0, EXPERT, [_zone("a", "mud"), _zone("b", "rock"), _zone("c", "avoid")]),
         # The driver's zones in another order: matched by id.
@@ -116,28 +118,39 @@ def results() -> list[dict]:
     ]
 
 
-def test_annotate_agreement_gives_planner_zones_the_drivers_choice(results: list[dict]):
-    annotate_agreement(results)
-    planner = {z["id"]: z for z in results[1]["metrics"]["zones"]}
-    assert {k: (z["driver_choice"], z["agrees"]) for k, z in planner.items()} == {
+def _agreement(r: RunResult) -> dict[str, tuple[str, bool]]:
+    """Zone id -> (the driver's choice, agreed)."""
+    assert r.agreement is not None
+    return {z.id: (a.driver_choice, a.agrees) for z, a in zip(r.metrics.zones, r.agreement, strict=True)}
+
+
+def test_annotate_agreement_gives_planner_zones_the_drivers_choice(results: list[RunResult]):
+    annotated = annotate_agreement(results)
+    assert _agreement(annotated[1]) == {
         "a": ("mud", False),  # the same choice, but lethal terrain touched where the driver touched none
         "b": ("rock", False),
         "c": ("avoid", True),
     }
-    baseline = results[4]["metrics"]["zones"]
-    assert [(z["driver_choice"], z["agrees"]) for z in baseline] == [("mud", False), ("rock", True), ("avoid", True)]
+    assert list(_agreement(annotated[4]).values()) == [("mud", False), ("rock", True), ("avoid", True)]
+    assert all(r.agreement is None for r in results)  # the results given are left as they were
 
 
-def test_annotate_agreement_leaves_runs_without_a_driver_run_and_the_driver_alone(results: list[dict]):
-    annotate_agreement(results)
-    for r in (results[0], results[2], results[3]):
-        for z in r["metrics"]["zones"]:
-            assert "driver_choice" not in z and "agrees" not in z, (r["scenario"], r["seed"], r["driver"])
+def test_annotate_agreement_leaves_runs_without_a_driver_run_and_the_driver_alone(results: list[RunResult]):
+    annotated = annotate_agreement(results)
+    for before, r in zip(results, annotated, strict=True):
+        if r.driver == EXPERT or r.seed == 1 or r.scenario == "other":
+            assert r is before and r.agreement is None, (r.scenario, r.seed, r.driver)
+            assert "driver_choice" not in r.zone_dicts()[0] and "agrees" not in r.zone_dicts()[0]
 
 
-def test_summarise_the_planner(results: list[dict]):
-    annotate_agreement(results)
-    s = summarise(results, PLANNER)
+def test_annotated_zones_are_written_with_the_drivers_choice(results: list[RunResult]):
+    zones = annotate_agreement(results)[1].to_dict()["metrics"]["zones"]
+    assert list(zones[1]) == ["id", "label", "expect", "choice", "success", "touched_lethal", "distance_m", "clearance_m", "driver_choice", "agrees"]
+    assert (zones[1]["driver_choice"], zones[1]["agrees"]) == ("mud", False)
+
+
+def test_summarise_the_planner(results: list[RunResult]):
+    s = summarise(annotate_agreement(results), PLANNER).to_dict()
     assert s == {
         "runs": 3,
         "zones": 7,
@@ -152,19 +165,18 @@ def test_summarise_the_planner(results: list[dict]):
     }
 
 
-def test_summarise_the_driver_has_no_agreement(results: list[dict]):
-    annotate_agreement(results)
-    s = summarise(results, EXPERT)
+def test_summarise_the_driver_has_no_agreement(results: list[RunResult]):
+    s = summarise(annotate_agreement(results), EXPERT).to_dict()
     assert (s["runs"], s["zones"], s["zone_success_rate"], s["collision_count"], s["completed_rate"]) == (1, 3, 1.0, 0, 1.0)
     assert s["zone_success_ci95"] == [round(_wilson_by_hand(3, 3)[0], 4), 1.0]
     assert not {"agreement_rate", "agreement_ci95", "agreement_zones"} & set(s)
 
 
-def test_summarise_without_annotation_has_no_agreement(results: list[dict]):
-    assert "agreement_rate" not in summarise(results, PLANNER)
+def test_summarise_without_annotation_has_no_agreement(results: list[RunResult]):
+    assert "agreement_rate" not in summarise(results, PLANNER).to_dict()
 
 
 def test_summarise_a_driver_with_no_runs():
-    s = summarise([_run("course", 0, EXPERT, [_zone("a", "mud")])], PLANNER)
+    s = summarise([_run("course", 0, EXPERT, [_zone("a", "mud")])], PLANNER).to_dict()
     assert s == {"runs": 0, "zones": 0, "zone_success_rate": None, "zone_success_ci95": [0.0, 1.0], "collision_count": 0,
                  "completed_rate": None, "mean_rms_cross_track_m": None}

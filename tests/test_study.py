@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -13,9 +14,12 @@ import pytest
 from terrapref.cli import main
 from terrapref.evaluation.perturb import Perturbation
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PURE_PURSUIT
+from terrapref.evaluation.scoring import RunMetrics, ZoneResult
 from terrapref.grid import Engine
-from terrapref.report.study import FULL, LEARNED, POSE_DEG_PER_M, QUICK, TEACH_ORDERS, StudyPlan, perturbation, run_study
-from terrapref.report.study_report import ALL, ALT_PROFILE, METHOD_NAMES, _cell, _per_seed, _rate, _select, _zone_success, disagreement_zones, write_study
+from terrapref.report.study import LEARNED, POSE_DEG_PER_M, perturbation, run_study
+from terrapref.report.study_plan import FULL, QUICK, TEACH_ORDERS, StudyPlan, TrainedModel, TrainJob
+from terrapref.report.study_report import (ALL, ALT_PROFILE, METHOD_NAMES, ModelVariant, RunTag, StudyRun, _cell, _per_seed, _rate, _select,
+                                           _zone_success, disagreement_zones, write_study)
 
 PNG = b"\x89PNG\r\n\x1a\n"
 METHODS = ("C", "linear", "cnn", HAND_COST, PURE_PURSUIT, EXPERT)
@@ -23,17 +27,24 @@ SECTIONS = ("## Answers", "## 1. Baselines", "## 2. Data efficiency", "## 3. Ano
             "## 6. Any order, any driver")
 
 
-def _zone(zid: str, expect: str, choice: str, success: bool | None = None) -> dict:
-    return {"id": zid, "label": f"zone {zid}", "expect": expect, "choice": choice, "success": expect == choice if success is None else success}
+def _zone(zid: str, expect: str, choice: str, success: bool | None = None) -> ZoneResult:
+    return ZoneResult(zid, f"zone {zid}", expect, choice, expect == choice if success is None else success, False, {})
 
 
-def _run(study: str, method: str, seed: int, zones: list[dict], scenario: str = "sc", collisions: int = 0, completed: bool = True, **tag) -> dict:
-    return {"study": study, "method": method, "seed": seed, "minutes": tag.pop("minutes", None), "variant": tag.pop("variant", None),
-            "kind": tag.pop("kind", None), "level": tag.pop("level", None), "scenario": scenario, **tag,
-            "metrics": {"zones": zones, "collisions": collisions, "completed": completed}}
+def _run(study: str, method: str, seed: int, zones: list[ZoneResult], scenario: str = "sc", collisions: int = 0, completed: bool = True,
+         rms: float = 0.0, minutes=None, variant: str | None = None, order=None, **tag) -> StudyRun:
+    """A run as run_study tags it; ``minutes`` or ``variant`` make it a trained model's own run."""
+    model = ModelVariant(minutes, variant) if minutes is not None or variant is not None else None
+    run_tag = RunTag(study, method, seed, model, order=tuple(order) if order is not None else None, **tag)
+    return StudyRun(run_tag, scenario, RunMetrics(completed, collisions, 60.0, rms, rms, rms, {}, zones))
 
 
-def _successes(seed: int, flags: list[bool], study: str = "baselines", method: str = "C", **tag) -> dict:
+def _trained(study: str, method: str, seed: int, samples: int, minutes: float | None = None) -> TrainedModel:
+    """A trained model's record as run_study keeps it; only the fields the report reads matter."""
+    return TrainedModel(TrainJob(study, method, seed, "U.safetensors", f"{method}_s{seed}.safetensors", 1, 1, method, minutes=minutes), samples, 1.0)
+
+
+def _successes(seed: int, flags: list[bool], study: str = "baselines", method: str = "C", **tag) -> StudyRun:
     return _run(study, method, seed, [_zone(str(i + 1), "mud", "mud", ok) for i, ok in enumerate(flags)], **tag)
 
 
@@ -93,7 +104,7 @@ def test_select_matches_every_key():
 # --- the zones where the two profiles disagree -------------------------------------------------------
 
 
-def _profile_runs() -> list[dict]:
+def _profile_runs() -> list[StudyRun]:
     """The default-profile and other-profile driver runs over two scenarios, and distractors."""
     return [
         _run("baselines", EXPERT, 0, [_zone("1", "avoid", "avoid"), _zone("2", "mud", "mud"), _zone("3", "water", "water")], scenario="a"),
@@ -114,14 +125,14 @@ def test_disagreement_zones_are_keyed_by_scenario_and_zone():
 
 def test_disagreement_zones_empty_without_both_driver_passes():
     runs = _profile_runs()
-    assert disagreement_zones([r for r in runs if r["study"] != "profile"]) == set()
-    assert disagreement_zones([r for r in runs if r["study"] != "baselines"]) == set()
+    assert disagreement_zones([r for r in runs if r.tag.study != "profile"]) == set()
+    assert disagreement_zones([r for r in runs if r.tag.study != "baselines"]) == set()
     assert disagreement_zones([]) == set()
 
 
 def test_disagreement_zones_empty_when_profiles_agree():
     same = [_zone("1", "avoid", "avoid"), _zone("2", "mud", "mud")]
-    runs = [_run("baselines", EXPERT, 0, same), _run("profile", EXPERT, 0, [dict(z) for z in same])]
+    runs = [_run("baselines", EXPERT, 0, same), _run("profile", EXPERT, 0, list(same))]
     assert disagreement_zones(runs) == set()
 
 
@@ -184,25 +195,25 @@ def test_perturbation_out_of_range_level_is_refused():
 # --- STUDY.md from fabricated runs (no simulation) ---------------------------------------------------
 
 
-def _fabricated(plan: StudyPlan) -> tuple[list[dict], list[dict]]:
+def _fabricated(plan: StudyPlan) -> tuple[list[StudyRun], list[TrainedModel]]:
     """Runs and trained-model records shaped like run_study's, on one scenario with three zones.
 
     Per seed (0, 1): C 3/3 and 1/3, linear 1/3 and 1/3, the CNN 0/3, the driver 3/3, the others 2/3.
     Zone 2 is the one where the profiles disagree (mud under the default, rock under the other)."""
-    def zones(ok: int, expect2: str = "mud") -> list[dict]:
+    def zones(ok: int, expect2: str = "mud") -> list[ZoneResult]:
         exp = ["avoid", expect2, "avoid"]
         return [_zone(str(i + 1), e, e if i < ok else "water") for i, e in enumerate(exp)]
 
     rates = {"C": (3, 1), "linear": (1, 1), "cnn": (0, 0), HAND_COST: (2, 2), PURE_PURSUIT: (2, 2), EXPERT: (3, 3)}
-    runs: list[dict] = []
-    trained: list[dict] = []
+    runs: list[StudyRun] = []
+    trained: list[TrainedModel] = []
     for s in range(plan.seeds):
         for m in METHODS:
             runs.append(_run("baselines", m, s, zones(rates[m][s]), collisions=1 if m == PURE_PURSUIT else 0))
         for m in LEARNED:
-            trained.append({"study": "baselines", "method": m, "seed": s, "samples": 6600})
+            trained.append(_trained("baselines", m, s, 6600))
             for mins in plan.minutes:
-                trained.append({"study": "efficiency", "method": m, "seed": s, "minutes": mins, "samples": int(mins * 600)})
+                trained.append(_trained("efficiency", m, s, int(mins * 600), minutes=mins))
                 runs.append(_run("efficiency", m, s, zones(1), minutes=mins))
         runs.append(_run("profile", EXPERT, s, zones(3, "rock")))
         runs.append(_run("profile", "C", s, zones(3, "rock")))
@@ -217,18 +228,15 @@ def _fabricated(plan: StudyPlan) -> tuple[list[dict], list[dict]]:
     return runs, trained
 
 
-def _taught(plan: StudyPlan, seed: int) -> list[dict]:
+def _taught(plan: StudyPlan, seed: int) -> list[StudyRun]:
     """Section 6's runs on one layout "L" with two zones (a pair, then a lone patch to avoid).
 
     The paper's order: the driver and its planner both take mud, then pass the patch (clearance
     1.0 and 0.8 m). Rock first: the driver takes rock, its planner mud (half the zones agree).
     The wide driver passes at 1.5 m, its planner at 1.4 m (the default style's planner at 0.8 m)."""
-    def run(method: str, order, style: str, first: str, clearance: float, xtrack: float) -> dict:
-        zs = [{**_zone("1", first, first), "clearance_m": 0.5, "touched_lethal": False},
-              {**_zone("2", "avoid", "avoid"), "clearance_m": clearance, "touched_lethal": False}]
-        r = _run("teach", method, seed if method == "C" else 0, zs, scenario="L", order=list(order), style=style)
-        r["metrics"]["rms_cross_track_m"] = xtrack
-        return r
+    def run(method: str, order, style: str, first: str, clearance: float, xtrack: float) -> StudyRun:
+        zs = [replace(_zone("1", first, first), clearance_m=0.5), replace(_zone("2", "avoid", "avoid"), clearance_m=clearance)]
+        return _run("teach", method, seed if method == "C" else 0, zs, scenario="L", rms=xtrack, order=order, style=style)
 
     paper, rock_first = plan.orders
     runs = [run("C", paper, "default", "mud", 0.8, 0.4), run("C", rock_first, "default", "mud", 0.8, 0.4), run("C", paper, "wide", "mud", 1.4, 0.6)]
@@ -239,7 +247,7 @@ def _taught(plan: StudyPlan, seed: int) -> list[dict]:
 
 
 @pytest.fixture(scope="module")
-def fabricated_study(tmp_path_factory) -> tuple[Path, list[dict]]:
+def fabricated_study(tmp_path_factory) -> tuple[Path, list[StudyRun]]:
     plan = StudyPlan(seeds=2, minutes=(0.5, 2.0), noise={"drop_rate": (0.5,)}, horizons=(), widths=(16,), courses=("sc",),
                      orders=TEACH_ORDERS[:2], styles=("default", "wide"), layouts=("L",))
     runs, trained = _fabricated(plan)
@@ -322,11 +330,11 @@ def tiny_study(tmp_path_factory) -> tuple[Path, list[str]]:
     return path, lines
 
 
-def _runs(path: Path) -> list[dict]:
-    return json.loads((path.parent / "study.json").read_text())["runs"]
+def _runs(path: Path) -> list[StudyRun]:
+    return [StudyRun.from_dict(r) for r in json.loads((path.parent / "study.json").read_text())["runs"]]
 
 
-def _by(runs: list[dict], **keys) -> dict:
+def _by(runs: list[StudyRun], **keys) -> StudyRun:
     found = _select(runs, **keys)
     assert len(found) == 1, keys
     return found[0]
@@ -348,18 +356,19 @@ def test_study_json_has_every_part(tiny_study):
     path, _ = tiny_study
     data = json.loads((path.parent / "study.json").read_text())
     assert data["plan"]["scenarios"] == ["demo_course"]
-    runs = data["runs"]
-    assert {r["method"] for r in _select(runs, study="baselines")} == set(METHODS)
-    assert all(r["scenario"] == "demo_course" for r in runs)
+    runs = [StudyRun.from_dict(r) for r in data["runs"]]
+    assert [r.to_dict() for r in runs] == data["runs"]
+    assert {r.tag.method for r in _select(runs, study="baselines")} == set(METHODS)
+    assert all(r.scenario == "demo_course" for r in runs)
     assert _select(runs, study="efficiency", minutes=0.5)
     assert not _select(runs, study="efficiency", minutes=ALL)  # the last point reuses the baselines' runs
-    assert {r["method"] for r in _select(runs, study="efficiency", minutes=0.5)} == set(LEARNED)
+    assert {r.tag.method for r in _select(runs, study="efficiency", minutes=0.5)} == set(LEARNED)
     assert _select(runs, study="robustness", kind="drop_rate", level=0.5)
-    ablations = {r["variant"] for r in _select(runs, study="ablation")}
+    ablations = {r.tag.variant for r in _select(runs, study="ablation")}
     assert ablations == {"without the distance utility", "without the row-wise compression (flat MLP)", "hidden width 16"}
-    assert {r["method"] for r in _select(runs, study="profile")} == {"C", EXPERT}
-    assert {r["method"] for r in _select(runs, study="profile_cross")} == {"C", "C_default"}
-    for r in runs:
+    assert {r.tag.method for r in _select(runs, study="profile")} == {"C", EXPERT}
+    assert {r.tag.method for r in _select(runs, study="profile_cross")} == {"C", "C_default"}
+    for r in data["runs"]:
         assert r["metrics"]["zones"], r
         assert {"id", "expect", "choice", "success"} <= set(r["metrics"]["zones"][0])
 
@@ -384,11 +393,11 @@ def test_study_runs_agree_with_each_other(tiny_study):
     path, _ = tiny_study
     runs = _runs(path)
 
-    def choices(r: dict) -> list[str]:
-        return [z["choice"] for z in r["metrics"]["zones"]]
+    def choices(r: StudyRun) -> list[str]:
+        return [z.choice for z in r.metrics.zones]
 
-    def expects(r: dict) -> list[str]:
-        return [z["expect"] for z in r["metrics"]["zones"]]
+    def expects(r: StudyRun) -> list[str]:
+        return [z.expect for z in r.metrics.zones]
 
     alt, alt_cross = _by(runs, study="profile", method="C"), _by(runs, study="profile_cross", method="C")
     default, default_cross = _by(runs, study="baselines", method="C"), _by(runs, study="profile_cross", method="C_default")

@@ -42,11 +42,11 @@ def test_every_class_lies_alone_twice():
 @pytest.mark.parametrize("order", [("mud", "rock", "water", LETHAL), ("water", "rock", "mud", LETHAL)])
 def test_the_synthetic_driver_shows_it_in_at_most_five_and_a_half_minutes(order):
     run = run_one(RunSpec("teach_course", 0, EXPERT, None, order))
-    m = run["metrics"]
-    assert m["completed"] and m["collisions"] == 0
-    assert m["duration_s"] <= 330.0  # simulated time at 1 m/s, not wall clock
-    zones = {z["label"]: z for z in m["zones"]}
+    m = run.metrics
+    assert m.completed and m.collisions == 0
+    assert m.duration_s <= 330.0  # simulated time at 1 m/s, not wall clock
+    zones = {z.label: z for z in m.zones}
     best = PreferenceProfile(order).order
     for left, right in _pairs(list(zones)):
-        assert zones[f"{left} vs {right}"]["choice"] == min((left, right), key=best.index)
-    assert all(z["choice"] == "avoid" for z in m["zones"] if z["expect"] == "avoid")
+        assert zones[f"{left} vs {right}"].choice == min((left, right), key=best.index)
+    assert all(z.choice == "avoid" for z in m.zones if z.expect == "avoid")

@@ -334,6 +334,15 @@ def test_riding_along_with_a_missing_model_is_one_line(tmp_path, capsys):
     assert not (tmp_path / "rec").exists()
 
 
+def test_a_negative_seed_for_the_pushes_is_one_line(tmp_path, capsys):
+    from terrapref.cli import main
+
+    assert main(["drive", "demo_course", "--seed", "-1", "--disturb", "0.3", "--record", str(tmp_path / "rec")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["error: --seed: must be an integer >= 0, got -1"]
+    assert not (tmp_path / "rec").exists()
+
+
 def test_frames_taken_off_the_map_are_not_training_data(tmp_path):
     """A recording made before the edge stopped the vehicle (or imported) keeps its off-map frames; featurising leaves them out."""
     import json

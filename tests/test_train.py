@@ -18,7 +18,7 @@ from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
 from terrapref.learning.pipeline import train_and_save
 from terrapref.learning.train import MEMBER_SEED_STEP, TrainConfig, split_indices, train
 
-from helpers import K, M, W_TRUE, assert_weights_equal, dataset_of, sparse_terrain_dataset, linear_dataset, model_meta, random_dataset, random_weights, weights_differ
+from helpers import K, M, W_TRUE, assert_weights_equal, dataset_of, sparse_terrain_dataset, linear_dataset, model_meta, random_dataset, random_weights, train_config, weights_differ
 
 
 # --- the paper's recipe ----------------------------------------------------------------------------
@@ -26,8 +26,8 @@ from helpers import K, M, W_TRUE, assert_weights_equal, dataset_of, sparse_terra
 
 def test_defaults_are_the_papers_recipe():
     c = TrainConfig()
-    assert (c.epochs, c.lr, c.batch_size, c.val_fraction) == (15, 1e-3, 256, 0.2)
-    assert not c.class_balance and not c.skip and c.depth == 3
+    assert (c.optimiser.epochs, c.optimiser.lr, c.optimiser.batch_size, c.optimiser.val_fraction) == (15, 1e-3, 256, 0.2)
+    assert not c.data.class_balance and not c.classifier.skip and c.classifier.depth == 3 and c.second_stage is None
 
 
 def test_paper_budget_is_an_80_20_split_and_135_adam_steps():
@@ -49,12 +49,12 @@ def test_val_fraction_zero_holds_out_nothing():
 @pytest.mark.parametrize("bad", [dict(epochs=0), dict(batch_size=0), dict(lr=0.0), dict(val_fraction=1.0), dict(activation="sigmoid")])
 def test_train_config_is_validated(bad: dict):
     with pytest.raises(ValueError):
-        TrainConfig(**bad)
+        train_config(**bad)
 
 
 def test_training_is_deterministic_per_seed():
     data = random_dataset(600)
-    config = TrainConfig(epochs=3, batch_size=64, hidden=16)
+    config = train_config(epochs=3, batch_size=64, hidden=16)
     a, b = train(data, config), train(data, config)
     assert_weights_equal(a.weights, b.weights)
     assert a.history == b.history and a.best_epoch == b.best_epoch and a.steps == b.steps
@@ -68,13 +68,13 @@ def test_training_is_deterministic_per_seed():
 def test_training_does_not_touch_torch():
     """C trains in NumPy: PyTorch's global settings (threads, determinism) are never read or set."""
     threads, deterministic = torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()
-    train(random_dataset(100), TrainConfig(epochs=1))
+    train(random_dataset(100), train_config(epochs=1))
     assert torch.get_num_threads() == threads and torch.are_deterministic_algorithms_enabled() == deterministic
 
 
 def test_chosen_epoch_is_the_lowest_validation_loss():
     # Random labels and a high learning rate: the network memorises, so validation loss turns up.
-    result = train(random_dataset(600), TrainConfig(epochs=12, lr=1e-2, batch_size=32, hidden=64))
+    result = train(random_dataset(600), train_config(epochs=12, lr=1e-2, batch_size=32, hidden=64))
     losses = [h.val_loss for h in result.history]
     assert result.best_epoch == int(np.argmin(losses)) + 1
     assert result.best_epoch < len(losses)  # the interesting case: not simply the last epoch
@@ -82,7 +82,7 @@ def test_chosen_epoch_is_the_lowest_validation_loss():
 
 
 def test_one_checkpoint_per_epoch():
-    result = train(random_dataset(300), TrainConfig(epochs=4, batch_size=64))
+    result = train(random_dataset(300), train_config(epochs=4, batch_size=64))
     assert len(result.checkpoints) == len(result.history) == 4
     for a, b in zip(result.checkpoints, result.checkpoints[1:]):
         assert weights_differ(a, b)
@@ -105,12 +105,12 @@ def test_ensemble_forward_is_the_log_of_the_members_mean_softmax():
 
 def test_members_train_apart_from_their_own_seeds():
     data = random_dataset(400)
-    config = TrainConfig(epochs=2, batch_size=64, hidden=16, seed=5, members=2)
+    config = train_config(epochs=2, batch_size=64, hidden=16, seed=5, members=2)
     result = train(data, config)
     assert result.classifier.members == 2 and len(result.members) == 2
     # Member j is exactly what training alone from seed + MEMBER_SEED_STEP * j gives.
     for j, member in enumerate(result.members):
-        alone = train(data, replace(config, members=1, seed=5 + MEMBER_SEED_STEP * j))
+        alone = train(data, train_config(config, members=1, seed=5 + MEMBER_SEED_STEP * j))
         assert_weights_equal(member.weights, alone.weights)
         assert_weights_equal({k[len(f"members.{j}."):]: v for k, v in result.weights.items() if k.startswith(f"members.{j}.")}, alone.weights)
     assert weights_differ(result.members[0].weights, result.members[1].weights)
@@ -120,11 +120,11 @@ def test_members_train_apart_from_their_own_seeds():
 
 def test_an_ensemble_model_file_loads_and_records_its_members(tmp_path: Path):
     data = random_dataset(300)
-    config = TrainConfig(epochs=2, batch_size=64, hidden=8, seed=3, members=2)
+    config = train_config(epochs=2, batch_size=64, hidden=8, seed=3, members=2)
     path = tmp_path / "ens.safetensors"
     result = train_and_save(data, path, config, checkpoints=False)
     model = load_model(path)
-    assert model.classifier.members == 2 and model.meta["training"]["members"] == 2
+    assert model.classifier.members == 2 and model.meta["training"]["classifier"]["members"] == 2
     assert [m["seed"] for m in model.meta["members"]] == [3, 3 + MEMBER_SEED_STEP]
     assert [m["best_epoch"] for m in model.meta["members"]] == [r.best_epoch for r in result.members]
     U = data.U[:5]
@@ -136,12 +136,12 @@ def test_an_ensemble_model_file_loads_and_records_its_members(tmp_path: Path):
 @pytest.mark.parametrize("bad", [{"members": 0}])
 def test_members_must_be_positive(bad: dict):
     with pytest.raises(ValueError, match="members"):
-        TrainConfig(**bad)
+        train_config(**bad)
     with pytest.raises(ValueError, match="members"):
         ClassifierConfig(**bad)
 
 
-@pytest.mark.parametrize("field", ["m", "n_features", "hidden", "depth", "channels", "members"])
+@pytest.mark.parametrize("field", ["m", "n_features", "hidden", "depth", "members"])
 @pytest.mark.parametrize("value", [2.0, True, "2"])
 def test_classifier_sizes_must_be_integers(field: str, value):
     with pytest.raises(ValueError, match="integers"):
@@ -150,8 +150,8 @@ def test_classifier_sizes_must_be_integers(field: str, value):
 
 def test_class_balance_changes_the_loss_only_when_asked():
     data = sparse_terrain_dataset(500)
-    config = TrainConfig(epochs=2, batch_size=64, hidden=16)
-    a, b = train(data, config), train(data, replace(config, class_balance=True))
+    config = train_config(epochs=2, batch_size=64, hidden=16)
+    a, b = train(data, config), train(data, train_config(config, class_balance=True))
     assert weights_differ(a.weights, b.weights)
     assert np.isfinite([h.train_loss for h in b.history]).all()
 
@@ -162,7 +162,7 @@ def test_a_linear_preference_is_learned():
     data = linear_dataset(4000)
     majority = np.bincount(data.labels).max() / len(data)
     assert majority < 0.2
-    result = train(data, TrainConfig(epochs=30, lr=3e-3, batch_size=64, skip=True))
+    result = train(data, train_config(epochs=30, lr=3e-3, batch_size=64, skip=True))
     best = result.history[result.best_epoch - 1]
     assert best.val_acc > 0.9, [round(h.val_acc, 3) for h in result.history]
     assert best.val_top3 > best.val_acc
@@ -183,13 +183,13 @@ def test_a_linear_preference_is_learned():
 def test_train_and_save_writes_the_model_and_every_checkpoint(tmp_path: Path):
     data = random_dataset(400)
     out = tmp_path / "models" / "pref.safetensors"
-    result = train_and_save(data, out, TrainConfig(epochs=3, batch_size=64, hidden=16))
+    result = train_and_save(data, out, train_config(epochs=3, batch_size=64, hidden=16))
     model = load_model(out)
     assert_weights_equal(model.weights, result.weights)
     assert model.classifier == result.classifier
     assert model.meta["best_epoch"] == model.meta["epoch"] == result.best_epoch
     assert model.meta["steps"] == result.steps
-    assert model.meta["training"]["hidden"] == 16
+    assert model.meta["training"]["classifier"]["hidden"] == 16
     assert model.meta["data"]["samples"] == 400 and model.meta["data"]["fingerprint"] == data.fingerprint
     assert [h["val_loss"] for h in model.meta["history"]] == [h.val_loss for h in result.history]
     assert model.features == data.feature_config and model.camera == data.camera_config
@@ -203,7 +203,7 @@ def test_train_and_save_writes_the_model_and_every_checkpoint(tmp_path: Path):
 
 def test_train_and_save_without_checkpoints(tmp_path: Path):
     out = tmp_path / "pref.safetensors"
-    train_and_save(random_dataset(100), out, TrainConfig(epochs=1), checkpoints=False)
+    train_and_save(random_dataset(100), out, train_config(epochs=1), checkpoints=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["pref.safetensors"]
 
 
@@ -215,8 +215,8 @@ def test_mirror_learns_the_unseen_side():
     shown = dataset_of(data.U[left], data.labels[left])
     mirrored = dataset_of(data.U[~left], data.labels[~left])  # the other side, never shown
     cfg = dict(epochs=30, lr=3e-3, batch_size=64, skip=True)
-    plain = train(shown, TrainConfig(**cfg))
-    mirror = train(shown, TrainConfig(**cfg, mirror=True))
+    plain = train(shown, train_config(**cfg))
+    mirror = train(shown, train_config(**cfg, mirror=True))
 
     def acc(result) -> float:
         pred = np.argmax(numpy_forward(result.classifier, result.weights, mirrored.U), axis=1)
@@ -236,7 +236,7 @@ def test_mirror_needs_a_symmetric_control_set():
     skewed = replace(fc, preference=replace(fc.preference, control=ControlSet(1.0, tuple(np.linspace(-1.0, 0.6, 21).round(6)))))
     data = Dataset(data.U, data.labels, data.w, data.source, {**data.meta, "features": skewed.to_dict()})
     with pytest.raises(ValueError, match="symmetric"):
-        train(data, TrainConfig(epochs=1, mirror=True))
+        train(data, train_config(epochs=1, mirror=True))
 
 
 
@@ -246,8 +246,8 @@ def test_an_interrupted_training_leaves_its_best_so_far_and_touches_nothing_else
 
     data = _interrupt_dataset()
     out = tmp_path / "model.safetensors"
-    config = TrainConfig(epochs=4, members=3, hidden=8, batch_size=64)
-    train_and_save(data, out, replace(config, members=1))  # an earlier model and its checkpoints
+    config = train_config(epochs=4, members=3, hidden=8, batch_size=64)
+    train_and_save(data, out, train_config(config, members=1))  # an earlier model and its checkpoints
     before = out.read_bytes()
     old_checkpoints = sorted(p.name for p in (tmp_path / "model.checkpoints").iterdir())
     seen = []
@@ -267,7 +267,7 @@ def test_an_interrupted_training_leaves_its_best_so_far_and_touches_nothing_else
     assert sorted(p.name for p in (tmp_path / "model.checkpoints.interrupted").iterdir()) == ["member_1", "member_2"]
     assert len(list((tmp_path / "model.checkpoints.interrupted" / "member_2").iterdir())) == 2
     # A complete retrain replaces the old checkpoints wholly: none of another run is left beside.
-    train_and_save(data, out, replace(config, members=2, epochs=2))
+    train_and_save(data, out, train_config(config, members=2, epochs=2))
     assert sorted(p.name for p in (tmp_path / "model.checkpoints").iterdir()) == ["member_1", "member_2"]
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
 

@@ -135,17 +135,18 @@ def _cmd_record(args: argparse.Namespace) -> int:
 
 
 def _cmd_drive(args: argparse.Namespace) -> int:
-    from terrapref.teleop import run_teleop
-
     from terrapref.scenario import resolve_scenario
+    from terrapref.teleop import TeleopOptions, run_session
     from terrapref.terrain import PreferenceProfile
 
+    if args.seed < 0:
+        raise UserError("--seed", f"must be an integer >= 0, got {args.seed}")
     scenario = resolve_scenario(args.scenario)
     profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile else None
     if args.record is not None:
         _check_output(args.record, "--record", [args.model] if args.model else [], folder=True)
-    result = run_teleop(scenario, args.record, overwrite=args.force, v_mps=args.speed, disturbance=_disturbance(args.disturb),
-                        seed=args.seed, profile=profile, model=args.model)
+    result = run_session(scenario, TeleopOptions(record_dir=args.record, overwrite=args.force, v_mps=args.speed, disturbance=_disturbance(args.disturb),
+                                                 seed=args.seed, profile=profile, model=args.model))
     where = f", recorded to {result.record_dir}" if result.record_dir else ""
     state = "reached the goal" if result.completed else ("quit" if result.quit else "stopped")
     edge = f", {result.edge_frames} frames held at the map's edge (not recorded)" if result.edge_frames else ""
@@ -227,18 +228,12 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
     return 0
 
 
-TRAIN_OVERRIDES = ("epochs", "lr", "batch_size", "seed", "hidden", "activation", "members")  # numeric flags over the recipe's
-TRAIN_SWITCHES = {"skip": "skip", "class_balance": "class_balance", "mirror": "mirror", "second_stage": "utility"}
-
-
 def _train_config(args: argparse.Namespace, recipe):
     """The recipe's training configuration with the flags given on the command line on top."""
-    from dataclasses import replace
+    from terrapref.configargs import apply_arguments
 
-    changes = {k: getattr(args, k) for k in TRAIN_OVERRIDES if getattr(args, k) is not None}
-    changes |= {field: True for flag, field in TRAIN_SWITCHES.items() if getattr(args, flag)}
     try:
-        return replace(recipe.train, **changes)
+        return apply_arguments(args, recipe.train)
     except ValueError as exc:
         raise UserError("train", str(exc)) from None
 
@@ -268,73 +263,92 @@ def _check_output(out: str | Path, flag: str, inputs: Sequence[str | Path] = (),
         raise UserError(str(out), f"cannot be written ({parent} is not writable)", field=flag)
 
 
-def _cmd_train(args: argparse.Namespace) -> int:
-    from dataclasses import asdict
+def _training_data(args: argparse.Namespace, recipe):
+    """The samples to train on: recordings featurised as the recipe needs, and datasets; refused when
+    there is nothing to learn."""
+    import numpy as np
 
     from terrapref.demos.dataset import training_data
-    from terrapref.learning.pipeline import train_and_save
-    from terrapref.recipes import DEFAULT_RECIPE, recipe_named
     from terrapref.progress import Progress
-    from terrapref.plots import save_loss_curve
 
-    recipe = recipe_named(args.recipe or DEFAULT_RECIPE)
-    config = _train_config(args, recipe)
-    _check_output(args.out, "--out", args.data)
     recordings = [p for p in args.data if p.is_dir()]
     bar = Progress("featurize", len(recordings), enabled=bool(recordings))
     data = training_data(args.data, recipe.features(), progress=lambda k, n: bar.update(k, f"{k}/{n} recordings"))
     bar.close()
     if len(data) == 0:
         raise UserError(str(args.data[0]), "holds no samples to train on", field="frames")
-    import numpy as np
-
     if len(np.unique(data.labels)) < 2:
         raise UserError(str(args.data[0]), f"every sample has the same label ({int(data.labels[0])}): the drive never steered, there is no choice to learn", field="labels")
-    if config.utility and recipe.lookahead and data.U2 is None:
-        print(f"warning: {args.data[0]} carries no look-ahead utilities; the second stage is fitted frame by frame "
-              f"(train from the recordings, or featurize them with --recipe {recipe.name})", file=sys.stderr)
-    members = f", {config.members} members" if config.members > 1 else ""
-    print(f"recipe {recipe.name}: training on {len(data)} samples ({len(args.data)} input(s)), {config.epochs} epochs, "
-          f"batch {config.batch_size}, lr {config.lr}{members}")
+    return data
+
+
+def _epoch_printer(config, verbose: bool) -> Callable:
+    """Prints a table of epochs (every tenth, the last, or all when ``verbose``), one per ensemble member."""
     header = f"{'epoch':>5s} {'train loss':>10s} {'val loss':>9s} {'train acc':>9s} {'val acc':>8s} {'val top3':>8s}"
+    members, epochs = config.classifier.members, config.optimiser.epochs
     member = 0
 
     def show(m) -> None:
         nonlocal member
         if m.epoch == 1:
             member += 1
-            print(f"member {member}/{config.members}\n{header}" if config.members > 1 else header)
-        if args.verbose or m.epoch == config.epochs or m.epoch % max(1, config.epochs // 10) == 0:
+            print(f"member {member}/{members}\n{header}" if members > 1 else header)
+        if verbose or m.epoch == epochs or m.epoch % max(1, epochs // 10) == 0:
             print(f"{m.epoch:5d} {m.train_loss:10.4f} {m.val_loss:9.4f} {m.train_acc:9.3f} {m.val_acc:8.3f} {m.val_top3:8.3f}", flush=True)
 
-    try:
-        result = train_and_save(data, args.out, config, progress=show, recipe=recipe.name)
-    except KeyboardInterrupt:
-        from terrapref.learning.pipeline import interrupted_path
+    return show
 
-        if interrupted_path(args.out).exists():
-            print(f"note: the best epochs so far are in {interrupted_path(args.out)} (marked interrupted: no second stage); "
-                  f"{args.out} is untouched", file=sys.stderr)
-        raise
+
+def _report_training(args: argparse.Namespace, config, data, result) -> None:
+    """The loss curve beside the model, the chosen epochs and what the demonstrations show."""
+    from dataclasses import asdict
+
+    from terrapref.plots import save_loss_curve
+
+    members = config.classifier.members
     curve = Path(args.out).with_suffix(".loss.png")
-    first = f", member 1 of {config.members}" if config.members > 1 else ""
+    first = f", member 1 of {members}" if members > 1 else ""
     save_loss_curve(curve, [asdict(h) for h in result.history], result.best_epoch, title=f"{Path(args.out).name}: {len(data)} samples{first}")
     chosen = []
     for j, r in enumerate(result.members or [result]):
         best = r.history[r.best_epoch - 1]
-        label = f"member {j + 1} " if config.members > 1 else ""
+        label = f"member {j + 1} " if members > 1 else ""
         chosen.append(f"{label}epoch {r.best_epoch}: val loss {best.val_loss:.4f}, val acc {best.val_acc:.3f}")
     if result.identifiability is not None:
         print("what the demonstrations show (stored in the model):")
         for line in result.identifiability.lines():
             print(f"  {line}")
     print(f"wrote {args.out} ({'; '.join(chosen)}), {curve}, checkpoints in {Path(args.out).with_name(Path(args.out).stem + '.checkpoints')}")
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+    from terrapref.learning.pipeline import interrupted_path, train_and_save
+    from terrapref.recipes import DEFAULT_RECIPE, recipe_named
+
+    recipe = recipe_named(args.recipe or DEFAULT_RECIPE)
+    config = _train_config(args, recipe)
+    _check_output(args.out, "--out", args.data)
+    data = _training_data(args, recipe)
+    if config.second_stage is not None and recipe.lookahead and data.U2 is None:
+        print(f"warning: {args.data[0]} carries no look-ahead utilities; the second stage is fitted frame by frame "
+              f"(train from the recordings, or featurize them with --recipe {recipe.name})", file=sys.stderr)
+    opt, members = config.optimiser, config.classifier.members
+    print(f"recipe {recipe.name}: training on {len(data)} samples ({len(args.data)} input(s)), {opt.epochs} epochs, "
+          f"batch {opt.batch_size}, lr {opt.lr}{f', {members} members' if members > 1 else ''}")
+    try:
+        result = train_and_save(data, args.out, config, progress=_epoch_printer(config, args.verbose), recipe=recipe.name)
+    except KeyboardInterrupt:
+        if interrupted_path(args.out).exists():
+            print(f"note: the best epochs so far are in {interrupted_path(args.out)} (marked interrupted: no second stage); "
+                  f"{args.out} is untouched", file=sys.stderr)
+        raise
+    _report_training(args, config, data, result)
     return 0
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from terrapref.evaluation.evaluate import evaluate_model
-    from terrapref.evaluation.policies import load_policy
+    from terrapref.planner.registry import load_policy
     from terrapref.progress import Progress
     from terrapref.terrain import PreferenceProfile
 
@@ -461,7 +475,7 @@ def _cmd_recipes(args: argparse.Namespace) -> int:
     for name, r in RECIPES.items():
         tag = " (default)" if name == DEFAULT_RECIPE else ""
         drives = f"{r.demonstrations} drive{'s' if r.demonstrations > 1 else ''} of {r.course}"
-        print(f"{name}{tag}: {drives}, {r.train.epochs} epochs{f', {r.train.members} members' if r.train.members > 1 else ''}")
+        print(f"{name}{tag}: {drives}, {r.train.optimiser.epochs} epochs{f', {r.train.classifier.members} members' if r.train.classifier.members > 1 else ''}")
         print(f"    {r.summary}")
     return 0
 
@@ -493,7 +507,8 @@ def _cmd_study(args: argparse.Namespace) -> int:
     import time
     from dataclasses import replace
 
-    from terrapref.report.study import FULL, QUICK, run_study
+    from terrapref.report.study import run_study
+    from terrapref.report.study_plan import FULL, QUICK
 
     plan = QUICK if args.quick else FULL
     if args.seeds is not None:
@@ -586,17 +601,13 @@ def _add_engine_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--address", metavar="HOST:PORT", help="a Ray cluster to run the jobs on (ray start --head on one machine); with --engine ray")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    from terrapref import __version__
-
-    parser = argparse.ArgumentParser(prog="terrapref", description="Learn off-road terrain preferences from a few minutes of driving.")
-    parser.add_argument("--version", action="version", version=f"terrapref {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-
+def _validate_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("validate", help="check scenario files against terrapref-scenario/1")
     p.add_argument("files", nargs="+", metavar="FILE")
     p.set_defaults(func=_cmd_validate)
 
+
+def _render_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("render", help="render the segmentation camera image at a pose")
     p.add_argument("scenario", metavar="SCENARIO", help="packaged scenario name or file")
     p.add_argument("--pose", nargs=3, type=float, metavar=("X", "Y", "YAW_DEG"), help="vehicle pose [m, m, deg]; default: the start")
@@ -604,11 +615,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--preview", type=Path, help="also write a colour preview PNG")
     p.set_defaults(func=_cmd_render)
 
+
+def _show_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("show", help="draw the map top-down with the path, the start and the zones")
     p.add_argument("scenario", metavar="SCENARIO")
     p.add_argument("--out", required=True, type=Path)
     p.set_defaults(func=_cmd_show)
 
+
+def _record_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("record", help="record a demonstration with the synthetic driver")
     p.add_argument("scenario", metavar="SCENARIO")
     p.add_argument("--profile", help="preference order, best first, e.g. rock,mud,water,non_traversable (default: the class table's)")
@@ -623,6 +638,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default: the recommended protocol's 0.3; 0: none)")
     p.set_defaults(func=_cmd_record)
 
+
+def _drive_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("drive", help="drive a scenario yourself (keyboard, mouse or gamepad), optionally recording, or ride along with a model (--model)")
     p.add_argument("scenario", metavar="SCENARIO")
     p.add_argument("--record", type=Path, metavar="DIR", help="record the drive into DIR")
@@ -637,6 +654,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "corrections that train accepts beside demonstrations")
     p.set_defaults(func=_cmd_drive)
 
+
+def _inspect_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("inspect", help="summarise a recording and draw its driven path")
     p.add_argument("recording", metavar="DIR", type=Path)
     p.add_argument("--out", type=Path, help="top-down PNG (default: DIR/driven_path.png)")
@@ -644,6 +663,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="skip what the drive shows of the driver's preference (it featurises every frame: seconds)")
     p.set_defaults(func=_cmd_inspect)
 
+
+def _featurize_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("featurize", help="turn recordings into a training set (U, label)")
     p.add_argument("recordings", nargs="+", metavar="DIR", type=Path)
     p.add_argument("--out", required=True, type=Path, help="dataset file (.safetensors)")
@@ -654,26 +675,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--recipe", metavar="NAME", help="featurise as this recipe trains (default: teach, with the look-ahead utilities)")
     p.set_defaults(func=_cmd_featurize)
 
+
+def _train_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("train", help="train a planner from recordings or featurised datasets (recipe teach by default)")
     p.add_argument("data", nargs="+", metavar="DATA", type=Path,
                    help="recording directories (featurised as the recipe needs) or dataset files from `terrapref featurize`")
     p.add_argument("--out", required=True, type=Path, help="model file (.safetensors)")
     p.add_argument("--recipe", default=None, metavar="NAME", help="a named recipe (`terrapref recipes`; default: teach)")
-    p.add_argument("--epochs", type=int, help="override the recipe's epochs")
-    p.add_argument("--lr", type=float, help="override the recipe's learning rate")
-    p.add_argument("--batch-size", type=int, help="override the recipe's batch size")
-    p.add_argument("--seed", type=int, help="training seed (default 0)")
-    p.add_argument("--hidden", type=int, help="override the recipe's hidden width")
-    p.add_argument("--activation", choices=["relu", "tanh", "elu"], help="override the recipe's activation")
-    p.add_argument("--members", type=int, help="networks trained from different seeds; the model averages their F_t")
-    p.add_argument("--skip", action="store_true", help="add the compressed scores to the logits (residual path)")
-    p.add_argument("--class-balance", action="store_true", help="weight the loss by inverse label frequency")
-    p.add_argument("--mirror", action="store_true", help="add left-right mirrored copies of the training samples")
-    p.add_argument("--second-stage", action="store_true",
-                   help="also fit the linear utility and store it with the model; the planner then scores a second stage of trajectories with it")
+    from terrapref.configargs import add_arguments
+    from terrapref.learning.train import TrainConfig
+    from terrapref.recipes import DEFAULT_RECIPE, recipe_named
+
+    add_arguments(p.add_argument_group("training (defaults shown: recipe teach's; each flag overrides the chosen recipe's value)"), TrainConfig, recipe_named(DEFAULT_RECIPE).train)
     p.add_argument("--verbose", action="store_true", help="print every epoch (default: every tenth)")
     p.set_defaults(func=_cmd_train)
 
+
+def _evaluate_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("evaluate", help="drive scenarios with a model, score every zone, write metrics.json and figures")
     p.add_argument("model", metavar="MODEL")
     p.add_argument("scenarios", nargs="+", metavar="SCENARIO")
@@ -687,6 +705,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mcap", action="store_true", help="also write each planner run as ROS 2 MCAP in OUT/runs (Foxglove, RViz)")
     p.set_defaults(func=_cmd_evaluate)
 
+
+def _reproduce_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("reproduce", help="demonstrate, train and evaluate end to end; write REPORT.md with Tables 1 and 2")
     p.add_argument("--out", required=True, type=Path)
     p.add_argument("--seeds", type=int, default=5, help="training seeds per recipe (default 5)")
@@ -697,6 +717,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_engine_args(p)
     p.set_defaults(func=_cmd_reproduce)
 
+
+def _study_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("study", help="baselines, data efficiency, profiles, robustness and ablations; write STUDY.md")
     p.add_argument("--out", required=True, type=Path)
     p.add_argument("--quick", action="store_true", help="one seed and fewer levels (about 3 minutes)")
@@ -705,6 +727,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_engine_args(p)
     p.set_defaults(func=_cmd_study)
 
+
+def _import_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("import", help="turn a ROS 1 bag, ROS 2 bag (sqlite3 or MCAP) of a drive into a recording")
     p.add_argument("bag", help="a .bag file, a ROS 2 bag folder, or a .mcap / .db3 file")
     p.add_argument("--robot", required=True, help="terrapref-robot/1 file: topics, camera mounting, label map")
@@ -713,6 +737,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="replace an existing recording at --out (only once the import succeeds)")
     p.set_defaults(func=_cmd_import)
 
+
+def _replay_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("replay", help="run a model open-loop over a held-out bag: how often it makes the operator's choice")
     p.add_argument("bag", help="a .bag file, a ROS 2 bag folder, or a .mcap / .db3 file")
     p.add_argument("--robot", required=True, help="terrapref-robot/1 file")
@@ -721,16 +747,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rate", type=float, default=10.0, help="frames per second to replay (default 10)")
     p.set_defaults(func=_cmd_replay)
 
+
+def _export_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("export", help="export a model as ONNX, or a recording as ROS 2 MCAP (Foxglove, RViz)")
     p.add_argument("input", help="model file (--format onnx) or recording folder (--format mcap)")
     p.add_argument("--format", choices=["onnx", "mcap"], required=True, help="onnx: the classifier C; mcap: the recording's frames as ROS 2 messages")
     p.add_argument("--out", required=True, help="output file")
     p.set_defaults(func=_cmd_export)
 
+
+def _info_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("info", help="what a recording, dataset, model or ONNX file holds (camera, profile, data, history, identifiability)")
     p.add_argument("files", nargs="+", metavar="FILE")
     p.set_defaults(func=_cmd_info)
 
+
+def _select_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("select", help="compare recipes: train each for every order and seed, drive generated layouts, report agreement with the driver")
     p.add_argument("--out", required=True, type=Path, help="folder for SELECT.md, select.json, select.png and the work")
     p.add_argument("--recipes", default="teach", help="recipe names separated by commas (terrapref recipes)")
@@ -743,11 +775,48 @@ def build_parser() -> argparse.ArgumentParser:
     _add_engine_args(p)
     p.set_defaults(func=_cmd_select)
 
+
+def _recipes_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("recipes", help="list the named training recipes (--recipe NAME in train and reproduce)")
     p.set_defaults(func=_cmd_recipes)
 
+
+def _scenarios_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("scenarios", help="list the packaged scenarios")
     p.set_defaults(func=_cmd_list)
+
+
+COMMANDS = (
+    _validate_parser,
+    _render_parser,
+    _show_parser,
+    _record_parser,
+    _drive_parser,
+    _inspect_parser,
+    _featurize_parser,
+    _train_parser,
+    _evaluate_parser,
+    _reproduce_parser,
+    _study_parser,
+    _import_parser,
+    _replay_parser,
+    _export_parser,
+    _info_parser,
+    _select_parser,
+    _recipes_parser,
+    _scenarios_parser,
+)
+"""Each command's parser, in the order `terrapref --help` lists them."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from terrapref import __version__
+
+    parser = argparse.ArgumentParser(prog="terrapref", description="Learn off-road terrain preferences from a few minutes of driving.")
+    parser.add_argument("--version", action="version", version=f"terrapref {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for add in COMMANDS:
+        add(sub)
     return parser
 
 

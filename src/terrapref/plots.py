@@ -14,7 +14,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
 from terrapref.fileio import atomic_path  # noqa: E402
-from terrapref.scenario import Scenario  # noqa: E402
+from terrapref.scenario import Scenario, Zone  # noqa: E402
 from terrapref.scenario.shapes import outline  # noqa: E402
 from terrapref.world import WorldMap  # noqa: E402
 
@@ -172,28 +172,34 @@ def save_evaluation(path: str | Path, scenario: Scenario, world: WorldMap, drive
     ax.legend(handles=class_handles + tracks, loc="upper left", fontsize=7, framealpha=0.8, ncol=2)
     ax.set_title(title)
     for k, z in enumerate(zones):
-        zax = fig.add_subplot(grid[1 + k // cols, k % cols])
-        draw_map(zax, scenario, world, zones=False)
-        o = outline(z.shape)
-        lo, hi = o.min(axis=0) - 4.0, o.max(axis=0) + 4.0
-        half = max(hi - lo) / 2
-        mid = (lo + hi) / 2
-        ok, n = zone_success.get(z.id, (0, 0))
-        colour = "lime" if n and ok == n else "red"
-        zax.plot(o[:, 0], o[:, 1], color=colour, lw=1.2)
-        for xy in driver:
-            zax.plot(xy[:, 0], xy[:, 1], color="deepskyblue", lw=1.4, ls="--")
-        for xy in planner:
-            zax.plot(xy[:, 0], xy[:, 1], color="red", lw=1.1, alpha=0.8)
-        zax.set_xlim(mid[0] - half, mid[0] + half)
-        zax.set_ylim(mid[1] - half, mid[1] + half)
-        zax.set_xlabel("")
-        zax.set_ylabel("")
-        zax.tick_params(labelsize=6)
-        verdict = f"{ok}/{n} met" if n else "not scored"
-        zax.set_title(f"{z.id}: {z.label or z.expect} ({verdict})", fontsize=8, color="darkred" if colour == "red" else "black")
+        _draw_zone_inset(fig.add_subplot(grid[1 + k // cols, k % cols]), scenario, world, z, driver, planner, zone_success.get(z.id, (0, 0)))
     fig.tight_layout()
     return _save(fig, path)
+
+
+def _draw_zone_inset(zax: plt.Axes, scenario: Scenario, world: WorldMap, z: Zone, driver: Sequence[np.ndarray], planner: Sequence[np.ndarray],
+                     success: tuple[int, int]) -> None:
+    """One zone at a legible scale (4 m around it): its outline green when every planner run met it
+    (``success``: runs that met it, runs scored), and the driver's and the planner's tracks."""
+    draw_map(zax, scenario, world, zones=False)
+    o = outline(z.shape)
+    lo, hi = o.min(axis=0) - 4.0, o.max(axis=0) + 4.0
+    half = max(hi - lo) / 2
+    mid = (lo + hi) / 2
+    ok, n = success
+    colour = "lime" if n and ok == n else "red"
+    zax.plot(o[:, 0], o[:, 1], color=colour, lw=1.2)
+    for xy in driver:
+        zax.plot(xy[:, 0], xy[:, 1], color="deepskyblue", lw=1.4, ls="--")
+    for xy in planner:
+        zax.plot(xy[:, 0], xy[:, 1], color="red", lw=1.1, alpha=0.8)
+    zax.set_xlim(mid[0] - half, mid[0] + half)
+    zax.set_ylim(mid[1] - half, mid[1] + half)
+    zax.set_xlabel("")
+    zax.set_ylabel("")
+    zax.tick_params(labelsize=6)
+    verdict = f"{ok}/{n} met" if n else "not scored"
+    zax.set_title(f"{z.id}: {z.label or z.expect} ({verdict})", fontsize=8, color="darkred" if colour == "red" else "black")
 
 
 def save_bars(path: str | Path, labels: Sequence[str], means: Sequence[float], stds: Sequence[float], ylabel: str,

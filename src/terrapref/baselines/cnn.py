@@ -20,7 +20,7 @@ from torch import nn
 from terrapref.camera import CameraConfig
 from terrapref.demos.recording import Recording
 from terrapref.features import FeatureConfig
-from terrapref.learning.model_file import FORMAT
+from terrapref.learning.model_file import FORMAT, model_context
 from terrapref.learning.train import class_weights, split_indices
 from terrapref.planner.planner import PATH_AHEAD_M, path_ahead
 from terrapref.planner.policy import CNN, Observation, Policy
@@ -179,8 +179,8 @@ class CnnPolicy(Policy):
 
     def __init__(self, net: CnnNet, config: CnnConfig, features: FeatureConfig, camera: CameraConfig, classes: ClassTable,
                  profile: tuple[str, ...] | None = None, path: str = "") -> None:
+        super().__init__(features, camera, classes, profile, path)
         self.net, self.config = net.eval(), config
-        self.features, self.camera, self.classes, self.profile, self.path = features, camera, classes, profile, path
 
     @classmethod
     def from_tensors(cls, tensors: dict[str, np.ndarray], meta: dict, features: FeatureConfig, camera: CameraConfig,
@@ -201,3 +201,10 @@ class CnnPolicy(Policy):
         with torch.no_grad():
             out = self.net(_onehot(small, self.config.n_classes), torch.from_numpy((obs.path_ahead.ravel() / PATH_SCALE_M)[None].astype(np.float32)))
         return out[0].numpy().astype(np.float64)
+
+
+
+def cnn_from_file(tensors: dict[str, np.ndarray], meta: dict, source: str) -> CnnPolicy:
+    """The CNN of a model file (kind ``cnn``; registered in terrapref.planner.registry)."""
+    features, camera, classes, profile = model_context(meta, source)
+    return CnnPolicy.from_tensors(tensors, meta, features, camera, classes, profile, source)

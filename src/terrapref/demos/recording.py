@@ -251,63 +251,12 @@ def read_recording(path: str | Path) -> Recording:
         UserError: not a recording, unknown format, or a malformed line/field (named).
     """
     root = Path(path)
-    meta_path = root / META
-    if not root.is_dir():
-        raise UserError(str(root), "no such recording directory")
-    try:
-        meta = json.loads(meta_path.read_text())
-    except FileNotFoundError:
-        raise UserError(str(meta_path), "missing; not a terrapref recording") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise UserError(str(meta_path), f"not valid JSON ({exc})") from None
-    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-        raise UserError(str(meta_path), f"expected {FORMAT!r}", field="format")
-    try:
-        scenario = yaml.safe_load((root / SCENARIO).read_text())
-    except (OSError, UnicodeDecodeError, yaml.YAMLError):
-        raise UserError(str(root / SCENARIO), "missing or unreadable") from None
-    if not isinstance(scenario, dict):
-        raise UserError(str(root / SCENARIO), f"expected a terrapref-scenario/1 mapping, got {type(scenario).__name__}")
-    _check_meta(meta, meta_path)
-    rows: list[dict] = []
-    frames_path = root / FRAMES
-    cut = False
-    try:
-        text = frames_path.read_bytes().decode("utf-8") if frames_path.exists() else ""
-    except UnicodeDecodeError as exc:
-        raise UserError(str(frames_path), f"not UTF-8 text (byte {exc.start}); expected one JSON object per line") from None
-    except OSError as exc:
-        raise UserError(str(frames_path), f"unreadable ({exc.strerror or exc})") from None
-    lines = text.split("\n")
-    for n, line in enumerate(lines):
-        if not line.strip():
-            continue
-        try:
-            row = json.loads(line)
-            ok = isinstance(row, dict) and all(k in row for k in ("t", "pose", "cmd", "label", "image"))
-        except json.JSONDecodeError:
-            ok = False
-        if not ok:
-            if n == len(lines) - 1:  # a final line without its newline: cut by a kill
-                cut = True
-                break
-            raise UserError(str(frames_path), f"line {n + 1} is not a frame record", field=f"line {n + 1}")
-        problem = _frame_problem(row)
-        if problem:
-            raise UserError(str(frames_path), problem[1], field=f"line {n + 1}.{problem[0]}")
-        if rows and not row["t"] > rows[-1]["t"]:
-            raise UserError(str(frames_path), f"time {row['t']} does not follow {rows[-1]['t']}; frames must be in time order", field=f"line {n + 1}.t")
-        if not (root / row["image"]).exists():
-            if n >= len(lines) - 2:
-                cut = True
-                break
-            raise UserError(str(frames_path), f"line {n + 1}: image {row['image']} is missing", field=f"line {n + 1}.image")
-        rows.append(row)
-    complete = meta.get("status") == "complete" and not cut
-    f = len(rows)
-    declared = meta.get("frames")
-    if complete and isinstance(declared, int) and declared != f:
-        raise UserError(str(frames_path), f"holds {f} frames; meta.json says the complete run has {declared} (truncated or edited?)", field="frames")
+    meta = _read_meta(root)
+    scenario = _read_scenario(root)
+    _check_meta(meta, root / META)
+    frames = _read_frames(root)
+    complete = _is_complete(meta, frames, root / FRAMES)
+    rows, f = frames.rows, len(frames.rows)
     return Recording(
         path=root,
         meta=meta,
@@ -319,3 +268,103 @@ def read_recording(path: str | Path) -> Recording:
         image_files=tuple(r["image"] for r in rows),
         complete=complete,
     )
+
+
+@dataclass(frozen=True)
+class _Frames:
+    """The frame records read from frames.jsonl, in order.
+
+    Attributes:
+        rows: one parsed, checked record per frame whose image is on disk.
+        cut: True if reading stopped at a last line (or image) that a kill left incomplete.
+    """
+
+    rows: tuple[dict, ...]
+    cut: bool
+
+
+def _read_meta(root: Path) -> dict:
+    """The recording's meta.json, which must declare this format."""
+    meta_path = root / META
+    if not root.is_dir():
+        raise UserError(str(root), "no such recording directory")
+    try:
+        meta = json.loads(meta_path.read_text())
+    except FileNotFoundError:
+        raise UserError(str(meta_path), "missing; not a terrapref recording") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise UserError(str(meta_path), f"not valid JSON ({exc})") from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise UserError(str(meta_path), f"expected {FORMAT!r}", field="format")
+    return meta
+
+
+def _read_scenario(root: Path) -> dict:
+    """The scenario mapping stored beside the frames (checked when it is parsed, not here)."""
+    try:
+        scenario = yaml.safe_load((root / SCENARIO).read_text())
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        raise UserError(str(root / SCENARIO), "missing or unreadable") from None
+    if not isinstance(scenario, dict):
+        raise UserError(str(root / SCENARIO), f"expected a terrapref-scenario/1 mapping, got {type(scenario).__name__}")
+    return scenario
+
+
+def _frames_text(frames_path: Path) -> str:
+    """The text of frames.jsonl ("" if there is none yet: the run stopped before its first frame)."""
+    try:
+        return frames_path.read_bytes().decode("utf-8") if frames_path.exists() else ""
+    except UnicodeDecodeError as exc:
+        raise UserError(str(frames_path), f"not UTF-8 text (byte {exc.start}); expected one JSON object per line") from None
+    except OSError as exc:
+        raise UserError(str(frames_path), f"unreadable ({exc.strerror or exc})") from None
+
+
+def _read_frames(root: Path) -> _Frames:
+    """Every frame record, checked, up to the first one a kill cut short (which is dropped)."""
+    frames_path = root / FRAMES
+    lines = _frames_text(frames_path).split("\n")
+    rows: list[dict] = []
+    for n, line in enumerate(lines):
+        if not line.strip():
+            continue
+        row = _frame_record(line)
+        if row is None:
+            if n == len(lines) - 1:  # a final line without its newline: cut by a kill
+                return _Frames(tuple(rows), cut=True)
+            raise UserError(str(frames_path), f"line {n + 1} is not a frame record", field=f"line {n + 1}")
+        _check_frame(row, rows[-1] if rows else None, frames_path, n + 1)
+        if not (root / row["image"]).exists():
+            if n >= len(lines) - 2:
+                return _Frames(tuple(rows), cut=True)
+            raise UserError(str(frames_path), f"line {n + 1}: image {row['image']} is missing", field=f"line {n + 1}.image")
+        rows.append(row)
+    return _Frames(tuple(rows), cut=False)
+
+
+def _frame_record(line: str) -> dict | None:
+    """One line parsed as a frame record with every key present, or None."""
+    try:
+        row = json.loads(line)
+    except json.JSONDecodeError:
+        return None
+    return row if isinstance(row, dict) and all(k in row for k in ("t", "pose", "cmd", "label", "image")) else None
+
+
+def _check_frame(row: dict, previous: dict | None, frames_path: Path, line_no: int) -> None:
+    """Refuse a malformed record, or one whose time does not follow the ``previous`` record's."""
+    problem = _frame_problem(row)
+    if problem:
+        raise UserError(str(frames_path), problem[1], field=f"line {line_no}.{problem[0]}")
+    if previous is not None and not row["t"] > previous["t"]:
+        raise UserError(str(frames_path), f"time {row['t']} does not follow {previous['t']}; frames must be in time order", field=f"line {line_no}.t")
+
+
+def _is_complete(meta: dict, frames: _Frames, frames_path: Path) -> bool:
+    """Whether the run finished; a finished run must hold the frames its meta.json declares."""
+    complete = meta.get("status") == "complete" and not frames.cut
+    f = len(frames.rows)
+    declared = meta.get("frames")
+    if complete and isinstance(declared, int) and declared != f:
+        raise UserError(str(frames_path), f"holds {f} frames; meta.json says the complete run has {declared} (truncated or edited?)", field="frames")
+    return complete

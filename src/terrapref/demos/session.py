@@ -10,6 +10,7 @@ line has never seen how to get back to it, and a planner is never exactly on tha
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -20,9 +21,9 @@ from terrapref.camera import CameraConfig
 from terrapref.demos.recording import RecordingWriter
 from terrapref.features import PreferenceSetConfig
 from terrapref.scenario import Scenario
-from terrapref.sim import Driver, EpisodeLog, SimConfig, Simulation
+from terrapref.sim import Driver, EpisodeLog, Frame, SimConfig, Simulation
 from terrapref.terrain import PreferenceProfile
-from terrapref.vehicle import Command
+from terrapref.vehicle import Command, ControlSet
 
 
 @dataclass(frozen=True)
@@ -97,6 +98,53 @@ def recording_meta(
     }
 
 
+class RecordLoop:
+    """The per-frame recording every driver shares: push, write, step; and the closing summary.
+
+    A driver (the synthetic one in :func:`record_run`, a person in the teleop window) decides a
+    command on each camera frame; :meth:`executed` adds the run's pushes to it,
+    :meth:`record_step` writes the frame with the command and its label and steps the
+    simulation by one camera period, and :meth:`close` marks the recording complete.
+
+    Args:
+        sim: the simulation driven, already reset.
+        writer: the recording, or None to drive without one.
+        control: the control set whose indices label the frames.
+        disturb: the run's pushes, or None for none.
+    """
+
+    def __init__(self, sim: Simulation, writer: RecordingWriter | None, control: ControlSet, disturb: Disturber | None = None) -> None:
+        self.sim, self.writer, self.control, self.disturb = sim, writer, control, disturb
+
+    def executed(self, command: Command) -> Command:
+        """What the vehicle executes this frame instead of ``command`` (often ``command`` itself)."""
+        return self.disturb(command) if self.disturb is not None else command
+
+    def record_step(self, frame: Frame, command: Command, executed: Command, record: bool = True) -> Frame:
+        """Write ``frame`` with the driver's ``command`` and its label, then drive ``executed`` for one
+        camera period; returns the next frame.
+
+        ``record`` False (or no recording) only steps: frames a recording must not hold.
+        """
+        if record and self.writer is not None:
+            self.writer.append(frame.time_s, frame.pose, frame.image, command, self.control.label_of(command[1]),
+                               executed=executed if executed != command else None)
+        return self.sim.step(executed)
+
+    def close(self, summary: dict[str, Any]) -> None:
+        """Mark the recording complete with the run's ``summary`` (nothing without a recording)."""
+        if self.writer is not None:
+            self.writer.close(summary)
+
+
+def abort_recording(writer: RecordingWriter) -> None:
+    """Leave ``writer``'s recording partial after a run that ended in an exception, and say where
+    an unfinished replacement of an older recording was kept."""
+    writer.abort()
+    if writer.partial_dir is not None:
+        print(f"note: {writer.target} keeps the recording it held; the unfinished new one is in {writer.partial_dir}", file=sys.stderr)
+
+
 def record_run(
     sim: Simulation,
     driver: Driver,
@@ -115,18 +163,20 @@ def record_run(
     """
     frame = sim.reset()
     driver.reset(sim.scenario, rng)
-    control = preference.control
-    disturb = None
-    if disturbance is not None and disturbance.active:
-        disturb = Disturber(disturbance, np.random.default_rng(rng.integers(2**63)), 1.0 / sim.config.camera_rate_hz)
+    loop = RecordLoop(sim, writer, preference.control, _run_disturber(disturbance, rng, sim))
     while not sim.done:
         command = driver.act(frame)
-        executed = disturb(command) if disturb is not None else command
-        writer.append(frame.time_s, frame.pose, frame.image, command, control.label_of(command[1]),
-                      executed=executed if executed != command else None)
-        frame = sim.step(executed)
+        frame = loop.record_step(frame, command, loop.executed(command))
         if progress is not None:
             progress(sim)
     log = EpisodeLog.of(sim)
-    writer.close(log.summary())
+    loop.close(log.summary())
     return log
+
+
+def _run_disturber(disturbance: DisturbanceConfig | None, rng: np.random.Generator, sim: Simulation) -> Disturber | None:
+    """The run's pushes on their own stream, seeded from ``rng`` (drawn from only when pushes are on,
+    so that a run without them leaves the driver's stream untouched)."""
+    if disturbance is None or not disturbance.active:
+        return None
+    return Disturber(disturbance, np.random.default_rng(rng.integers(2**63)), 1.0 / sim.config.camera_rate_hz)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -12,15 +13,14 @@ from terrapref.camera import PinholeCamera
 from terrapref.errors import UserError
 from terrapref.fileio import write_text_atomic
 from terrapref.grid import Engine
-from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, annotate_agreement, run_many, scenario_and_world, summarise
+from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, annotate_agreement, run_many, scenario_and_world, summarise
 from terrapref.evaluation.scoring import classes_in_zone
 from terrapref.learning.identify import GRASS, Identifiability
 from terrapref.features import PreferenceSet
-from terrapref.evaluation.policies import load_policy
+from terrapref.planner.registry import load_policy
 from terrapref.scenario import AVOID, resolve_scenario
 from terrapref.terrain import PreferenceProfile
 from terrapref.vehicle import Pose
-from terrapref.world import rasterise
 
 
 def evaluate_model(
@@ -51,34 +51,12 @@ def evaluate_model(
     for name in scenarios:
         resolve_scenario(name)  # fail early, with the file and field, before any run
     profile = profile or PreferenceProfile.parse(list(model.profile), model.classes, source=f"{model_path}: profile")
-    specs = [RunSpec(name, seed, PLANNER, model_path, profile.order, tuple(frames) if seed == 0 else (), keep_run=mcap) for name in scenarios for seed in range(seeds)]
-    if with_driver:
-        specs += [RunSpec(name, seed, EXPERT, None, profile.order, style=style) for name in scenarios for seed in range(seeds)]
-    results = run_many(specs, progress=progress, engine=engine)
-    annotate_agreement(results)
-    identified = _identifiability(model)
-    if identified is not None:
-        for name in scenarios:
-            _mark_unidentified(results, name, identified)
+    ev = _Evaluation(model_path, tuple(scenarios), seeds, profile, style, with_driver)
+    results = annotate_agreement(run_many(ev.specs(frames, mcap), progress=progress, engine=engine))
+    evidence = _evidence(model, scenarios)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    metrics: dict = {
-        "model": str(model_path),
-        "profile": list(profile.order),
-        "seeds": seeds,
-        "driver_style": style,
-        "unidentified_pairs": [f"{p.first} vs {p.second}" for p in identified.unidentified()] if identified is not None else None,
-        "scenarios": {},
-        "summary": summarise(results, PLANNER),
-    }
-    if with_driver:
-        metrics["driver_summary"] = summarise(results, EXPERT)
-    for name in scenarios:
-        entry: dict = {}
-        for r in results:
-            if r["scenario"] == name:
-                entry.setdefault(r["driver"], {})[str(r["seed"])] = r["metrics"]
-        metrics["scenarios"][name] = entry
+    metrics = _metrics(ev, results, evidence)
     _figures(results, scenarios, out, model, profile)
     if mcap:
         _write_runs(results, out / "runs", model)
@@ -86,23 +64,99 @@ def evaluate_model(
     return metrics
 
 
-def _write_runs(results: list[dict], folder: Path, model) -> None:
+@dataclass(frozen=True)
+class _Evaluation:
+    """What an evaluation drives: a model over courses and seeds 0..N-1, its zones resolved under
+    ``profile``, and (``with_driver``) the synthetic driver of ``style`` on the same runs."""
+
+    model_path: str
+    scenarios: tuple[str, ...]
+    seeds: int
+    profile: PreferenceProfile
+    style: str
+    with_driver: bool
+
+    def specs(self, frames: Sequence[int], mcap: bool) -> list[RunSpec]:
+        """The planner's runs (seed 0 keeping ``frames``; every run kept with ``mcap``), then the driver's."""
+        specs = [RunSpec(name, seed, PLANNER, self.model_path, self.profile.order, tuple(frames) if seed == 0 else (), keep_run=mcap)
+                 for name in self.scenarios for seed in range(self.seeds)]
+        if self.with_driver:
+            specs += [RunSpec(name, seed, EXPERT, None, self.profile.order, style=self.style) for name in self.scenarios for seed in range(self.seeds)]
+        return specs
+
+
+@dataclass(frozen=True)
+class _Evidence:
+    """What the model's demonstrations showed, and the classes present in every zone of the courses driven."""
+
+    identified: Identifiability
+    present: dict[str, dict[str, list[str]]]  # scenario -> zone id -> classes
+
+    def rests_on(self, scenario: str, zone: dict) -> list[str]:
+        """The unidentified pairs a zone's expected choice rests on (:func:`rests_on`)."""
+        return rests_on(zone["expect"], self.present[scenario][zone["id"]], self.identified)
+
+
+def _evidence(model, scenarios: Sequence[str]) -> _Evidence | None:
+    """The model's identifiability report and the classes of every zone; None for a model without one."""
+    identified = _identifiability(model)
+    if identified is None:
+        return None
+    present: dict[str, dict[str, list[str]]] = {}
+    for name in scenarios:
+        scenario, world = scenario_and_world(name)
+        present[name] = {z.id: classes_in_zone(z, world) for z in scenario.zones}
+    return _Evidence(identified, present)
+
+
+def _metrics(ev: _Evaluation, results: list[RunResult], evidence: _Evidence | None) -> dict:
+    """metrics.json: what was evaluated, every run's metrics by course, driver and seed, and the summaries."""
+    metrics: dict = {
+        "model": str(ev.model_path),
+        "profile": list(ev.profile.order),
+        "seeds": ev.seeds,
+        "driver_style": ev.style,
+        "unidentified_pairs": [f"{p.first} vs {p.second}" for p in evidence.identified.unidentified()] if evidence is not None else None,
+        "scenarios": {name: _course_runs(results, name, evidence) for name in ev.scenarios},
+        "summary": summarise(results, PLANNER).to_dict(),
+    }
+    if ev.with_driver:
+        metrics["driver_summary"] = summarise(results, EXPERT).to_dict()
+    return metrics
+
+
+def _course_runs(results: list[RunResult], name: str, evidence: _Evidence | None) -> dict:
+    """One course's runs as metrics.json holds them: by driver, then by seed; a planner zone also
+    names the unidentified pairs its expected choice rests on, where the model's file says."""
+    entry: dict = {}
+    for r in results:
+        if r.scenario != name:
+            continue
+        metrics = r.metrics_dict()
+        if evidence is not None and r.driver == PLANNER:
+            for z in metrics["zones"]:
+                z["rests_on_unidentified"] = evidence.rests_on(name, z)
+        entry.setdefault(r.driver, {})[str(r.seed)] = metrics
+    return entry
+
+
+def _write_runs(results: list[RunResult], folder: Path, model) -> None:
     """Each planner run as an MCAP file, its camera frames rendered again at the poses driven."""
     from terrapref.camera import SegmentationRenderer
     from terrapref.interop.mcap_export import RunFrames, write_mcap
 
     camera = PinholeCamera(model.camera)
     for r in results:
-        run = r.get("run")
-        if r["driver"] != PLANNER or run is None:
+        run = r.run
+        if r.driver != PLANNER or run is None:
             continue
-        scenario, world = scenario_and_world(r["scenario"])  # cached: the runs of one course share a raster
+        scenario, world = scenario_and_world(r.scenario)  # cached: the runs of one course share a raster
         renderer = SegmentationRenderer(camera, world)
-        poses = run["poses"]
-        frames = RunFrames(times=0.1 * np.arange(len(poses)), poses=poses, commands=run["commands"],
-                           image=lambda i, poses=poses, renderer=renderer: renderer.render(Pose(*poses[i])), chosen=run["index"],
-                           path=scenario.waypoints, camera=model.camera, classes=model.classes, preference=model.features.preference, probs=run["probs"])
-        write_mcap(folder / f"{r['scenario'].replace(':', '_')}_seed{r['seed']}.mcap", frames, robot_file=False)
+        poses = run.poses
+        frames = RunFrames(times=0.1 * np.arange(len(poses)), poses=poses, commands=run.commands,
+                           image=lambda i, poses=poses, renderer=renderer: renderer.render(Pose(*poses[i])), chosen=run.index,
+                           path=scenario.waypoints, camera=model.camera, classes=model.classes, preference=model.features.preference, probs=run.probs)
+        write_mcap(folder / f"{r.scenario.replace(':', '_')}_seed{r.seed}.mcap", frames, robot_file=False)
 
 
 def _identifiability(model) -> Identifiability | None:
@@ -124,38 +178,35 @@ def rests_on(expect: str, present: Sequence[str], identified: Identifiability) -
     return sorted({f"{p.first} vs {p.second}" for p in pairs if p is not None and not p.identified})
 
 
-def _mark_unidentified(results: list[dict], name: str, identified: Identifiability) -> None:
-    scenario = resolve_scenario(name)
-    world = rasterise(scenario)
-    present = {z.id: classes_in_zone(z, world) for z in scenario.zones}
-    for r in results:
-        if r["scenario"] == name and r["driver"] == PLANNER:
-            for z in r["metrics"]["zones"]:
-                z["rests_on_unidentified"] = rests_on(z["expect"], present[z["id"]], identified)
-
-
-def _figures(results: list[dict], scenarios: Sequence[str], out: Path, model, profile: PreferenceProfile) -> None:
+def _figures(results: list[RunResult], scenarios: Sequence[str], out: Path, model, profile: PreferenceProfile) -> None:
+    """Per course, the top-down evaluation figure; per kept frame, its decision picture."""
     from terrapref.plots import save_decision, save_evaluation
 
     pset = PreferenceSet(model.features.preference, PinholeCamera(model.camera))
     uv, visible = pset.camera.project_ground(pset.trajectories[..., :2])
     for name in scenarios:
         scenario, world = scenario_and_world(name)  # the raster the runs used, not a new one
-        planner_runs = [r for r in results if r["scenario"] == name and r["driver"] == PLANNER]
-        driver_runs = [r for r in results if r["scenario"] == name and r["driver"] == EXPERT]
-        per_zone: dict[str, tuple[int, int]] = {}
-        for r in planner_runs:
-            for z in r["metrics"]["zones"]:
-                ok, n = per_zone.get(z["id"], (0, 0))
-                per_zone[z["id"]] = (ok + bool(z["success"]), n + 1)
+        planner_runs = [r for r in results if r.scenario == name and r.driver == PLANNER]
+        driver_runs = [r for r in results if r.scenario == name and r.driver == EXPERT]
+        per_zone = _zone_successes(planner_runs)
         ok = sum(v[0] for v in per_zone.values())
         n = sum(v[1] for v in per_zone.values())
-        save_evaluation(out / f"{name}.png", scenario, world, [r["xy"] for r in driver_runs], [r["xy"] for r in planner_runs], per_zone,
+        save_evaluation(out / f"{name}.png", scenario, world, [r.xy for r in driver_runs], [r.xy for r in planner_runs], per_zone,
                         title=f"{name}: planner zone success {ok}/{n} over {len(planner_runs)} run(s), profile {profile}")
         for r in planner_runs:
-            for i, f in r.get("frames", {}).items():
-                rgb = model.classes.palette()[f["image"]]
-                x, y, yaw = f["pose"]
-                save_decision(out / f"{name}_frame{int(i):05d}.png", rgb, uv, visible, f["probs"], f["index"],
+            for f in r.frames:
+                rgb = model.classes.palette()[f.image]
+                x, y, yaw = f.pose
+                save_decision(out / f"{name}_frame{f.number:05d}.png", rgb, uv, visible, f.probs, f.index,
                               model.features.preference.control.w_rps, classes=model.classes,
-                              title=f"{name}, frame {i}, pose ({x:.1f} m, {y:.1f} m, yaw {np.degrees(yaw):.0f} deg)")
+                              title=f"{name}, frame {f.number}, pose ({x:.1f} m, {y:.1f} m, yaw {np.degrees(yaw):.0f} deg)")
+
+
+def _zone_successes(runs: list[RunResult]) -> dict[str, tuple[int, int]]:
+    """Zone id -> (runs that met it, runs that were scored in it)."""
+    per_zone: dict[str, tuple[int, int]] = {}
+    for r in runs:
+        for z in r.metrics.zones:
+            ok, n = per_zone.get(z.id, (0, 0))
+            per_zone[z.id] = (ok + bool(z.success), n + 1)
+    return per_zone

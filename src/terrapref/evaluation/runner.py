@@ -13,27 +13,27 @@ import functools
 import math
 import os
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
-from terrapref.evaluation.scoring import score_run
+from terrapref.evaluation.scoring import RunMetrics, ZoneResult, score_run
 from terrapref.evaluation.stats import wilson
 from terrapref.evaluation.perturb import PerturbedDriver, Perturbation
 from terrapref.grid import Engine, run_grid
 from terrapref.planner import Planner, PlannerDriver
-from terrapref.evaluation.policies import load_policy
-from terrapref.planner.policy import CostPolicy, Policy, PurePursuitPolicy
-from terrapref.scenario import resolve_scenario
-from terrapref.sim import Simulation, run_episode
+from terrapref.planner.policy import Policy
+from terrapref.planner.registry import load_policy, make as make_policy
+from terrapref.scenario import Scenario, resolve_scenario
+from terrapref.sim import EpisodeLog, Simulation, run_episode
 from terrapref.terrain import PreferenceProfile
 from terrapref.vehicle import Pose
-from terrapref.world import rasterise
+from terrapref.world import WorldMap, rasterise
 
 PLANNER = "planner"  # a model file: C, or a learned baseline (linear, CNN)
 EXPERT = "driver"  # the synthetic demonstrator, for comparison
-PURE_PURSUIT = "pure_pursuit"  # baselines that need no model file
+PURE_PURSUIT = "pure_pursuit"  # baselines that need no model file (policies registered in terrapref.planner.registry)
 HAND_COST = "hand_cost"
 
 
@@ -41,13 +41,98 @@ HAND_COST = "hand_cost"
 class RunSpec:
     scenario: str
     seed: int
-    driver: str  # PLANNER or EXPERT
+    driver: str  # a registered driver kind (drivers()): PLANNER, EXPERT, or a baseline that needs no file
     model_path: str | None
     profile: tuple[str, ...]
     keep_frames: tuple[int, ...] = ()
     perturb: Perturbation | None = None
     style: str = "default"  # the synthetic driver's style (terrapref.demos.expert.STYLES), for EXPERT runs
     keep_run: bool = False  # keep every decision (pose, choice, F_t) of a planner run, for an MCAP of it
+
+
+@dataclass(frozen=True)
+class KeptFrame:
+    """One planner decision kept for a picture (``RunSpec.keep_frames``)."""
+
+    number: int  # the decision's place in the run (frames at the camera's rate)
+    pose: tuple[float, float, float]  # x [m], y [m], yaw [rad] when it was taken
+    probs: np.ndarray  # F_t, (m,)
+    index: int  # the trajectory chosen
+    image: np.ndarray  # the class image the camera saw, (H, W)
+
+
+@dataclass(frozen=True)
+class KeptRun:
+    """Every decision of a planner run (``RunSpec.keep_run``), for an MCAP of it."""
+
+    poses: np.ndarray  # (n, 3): x [m], y [m], yaw [rad] at each decision
+    index: np.ndarray  # (n,): the trajectories chosen
+    probs: np.ndarray  # (n, m) float32: F_t
+    commands: np.ndarray  # (n, 2): v [m/s], w [rad/s] sent
+
+
+@dataclass(frozen=True)
+class ZoneAgreement:
+    """The synthetic driver's choice in a zone of the same run, and whether the planner made it (SPEC 12)."""
+
+    driver_choice: str
+    agrees: bool
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """One run's outcome: which run it was, its scores, its path and what was kept of its decisions.
+
+    Plain arrays and frozen records, so that it travels between processes (terrapref.grid).
+    """
+
+    scenario: str
+    seed: int
+    driver: str
+    metrics: RunMetrics
+    xy: np.ndarray  # (T, 2) float32: the reference point at every third controller tick [m]
+    frames: tuple[KeptFrame, ...] = ()
+    run: KeptRun | None = None
+    agreement: tuple[ZoneAgreement, ...] | None = None  # per zone of ``metrics.zones``; see annotate_agreement
+
+    def zone_dicts(self) -> list[dict]:
+        """The zones as JSON, each with the driver's choice and the agreement where they were compared."""
+        zones = [z.to_dict() for z in self.metrics.zones]
+        if self.agreement is None:
+            return zones
+        return [z | asdict(a) for z, a in zip(zones, self.agreement, strict=True)]
+
+    def metrics_dict(self) -> dict:
+        """The metrics as JSON, the zones as :meth:`zone_dicts` writes them."""
+        return self.metrics.to_dict() | {"zones": self.zone_dicts()}
+
+    def to_dict(self) -> dict:
+        """Which run and its metrics, as JSON (the path and the kept decisions are arrays, not written)."""
+        return {"scenario": self.scenario, "seed": self.seed, "driver": self.driver, "metrics": self.metrics_dict()}
+
+
+@dataclass(frozen=True)
+class Summary:
+    """One driver's runs summed up (SPEC 12); rates rounded to 4 places, None where nothing was counted."""
+
+    runs: int
+    zones: int
+    zone_success_rate: float | None
+    zone_success_ci95: tuple[float, float]
+    collision_count: int
+    completed_rate: float | None
+    mean_rms_cross_track_m: float | None
+    agreement_zones: int = 0  # zones compared with the driver's; the agreement fields are None without any
+    agreement_rate: float | None = None
+    agreement_ci95: tuple[float, float] | None = None
+
+    def to_dict(self) -> dict:
+        """As JSON; the agreement only where zones were compared."""
+        agreement = {"agreement_rate": self.agreement_rate, "agreement_ci95": list(self.agreement_ci95 or ()),
+                     "agreement_zones": self.agreement_zones} if self.agreement_zones else {}
+        return {"runs": self.runs, "zones": self.zones, "zone_success_rate": self.zone_success_rate,
+                "zone_success_ci95": list(self.zone_success_ci95), **agreement, "collision_count": self.collision_count,
+                "completed_rate": self.completed_rate, "mean_rms_cross_track_m": self.mean_rms_cross_track_m}
 
 
 def start_pose(start: tuple[float, float, float], seed: int) -> Pose:
@@ -71,60 +156,100 @@ def _policy_file(path: str) -> Policy:
     return load_policy(path)
 
 
-def _model_policy(spec: RunSpec) -> Policy:
+Driver = ExpertDriver | PlannerDriver
+DriverFactory = Callable[[RunSpec, Scenario, WorldMap, PreferenceProfile], tuple[Simulation, Driver]]
+_DRIVERS: dict[str, DriverFactory] = {}
+
+
+def register_driver(kind: str, factory: DriverFactory) -> None:
+    """Name who can drive a run (``RunSpec.driver``): ``factory(spec, scenario, world, profile)``
+    gives the run's simulation and its driver."""
+    if kind in _DRIVERS:
+        raise ValueError(f"driver {kind!r} is already registered")
+    _DRIVERS[kind] = factory
+
+
+def drivers() -> list[str]:
+    """The registered driver kinds, in the order registered."""
+    return list(_DRIVERS)
+
+
+def _expert(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: PreferenceProfile) -> tuple[Simulation, Driver]:
+    """The synthetic driver of the run's profile and style, on the cached raster (not a new one)."""
+    return Simulation(scenario, world=world), ExpertDriver(ExpertConfig.styled(spec.style, profile.order), world=world)
+
+
+def _through_planner(policy: Policy, spec: RunSpec, scenario: Scenario, world: WorldMap) -> tuple[Simulation, Driver]:
+    """The planner driving with ``policy``, seeing through the camera the policy was built for."""
+    sim = Simulation(scenario, policy.camera, world=world)
+    return sim, PlannerDriver(Planner(policy), keep=bool(spec.keep_frames) or spec.keep_run)
+
+
+def _model_file(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: PreferenceProfile) -> tuple[Simulation, Driver]:
+    """The planner with the policy of the run's model file (C, or a learned baseline)."""
     if spec.model_path is None:
         raise ValueError("a planner run needs a model file")
-    return _policy_file(spec.model_path)
+    return _through_planner(_policy_file(spec.model_path), spec, scenario, world)
 
 
-POLICY_DRIVERS: dict[str, Callable[[RunSpec], Policy]] = {
-    PLANNER: _model_policy,
-    PURE_PURSUIT: lambda spec: PurePursuitPolicy(),
-    HAND_COST: lambda spec: CostPolicy(),
-}
-"""Driver kinds that drive through the planner -> the policy a run of that kind drives with
-(``EXPERT``, the synthetic driver, drives itself)."""
+def _baseline(kind: str) -> DriverFactory:
+    """The planner with a registered policy that needs no file (terrapref.planner.registry)."""
+    def factory(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: PreferenceProfile) -> tuple[Simulation, Driver]:
+        return _through_planner(make_policy(kind), spec, scenario, world)
+
+    return factory
 
 
-def make_policy(spec: RunSpec) -> Policy:
-    """The policy a run drives with: a model file's, or a baseline that needs none."""
-    if spec.driver not in POLICY_DRIVERS:
-        raise ValueError(f"unknown driver {spec.driver!r}; drivers: {', '.join([EXPERT, *POLICY_DRIVERS])}")
-    return POLICY_DRIVERS[spec.driver](spec)
+register_driver(EXPERT, _expert)
+register_driver(PLANNER, _model_file)
+register_driver(PURE_PURSUIT, _baseline(PURE_PURSUIT))
+register_driver(HAND_COST, _baseline(HAND_COST))
 
 
-def run_one(spec: RunSpec) -> dict:
-    """Drive one run and return its metrics (JSON-ready), its path and any kept decisions."""
+def run_one(spec: RunSpec) -> RunResult:
+    """Drive one run and return its scores, its path and any kept decisions."""
     scenario, world = scenario_and_world(spec.scenario)
     profile = PreferenceProfile.parse(list(spec.profile), scenario.classes, source="--profile")
-    if spec.driver == EXPERT:
-        sim = Simulation(scenario, world=world)
-        driver = ExpertDriver(ExpertConfig.styled(spec.style, profile.order), world=world)  # the cached raster, not a new one
-    else:
-        policy = make_policy(spec)
-        sim = Simulation(scenario, policy.camera, world=world)
-        driver = PlannerDriver(Planner(policy), keep=bool(spec.keep_frames) or spec.keep_run)
+    sim, driver = _sim_and_driver(spec, scenario, world, profile)
     runner = PerturbedDriver(driver, spec.perturb, sim.config.camera_rate_hz) if spec.perturb is not None and spec.perturb.active else driver
     log = run_episode(sim, runner, np.random.default_rng(spec.seed), start_pose(scenario.start, spec.seed))
     metrics = score_run(log.trace[:, :2], scenario, sim.world, profile, completed=log.completed, collisions=log.collisions, duration_s=log.duration_s)
-    out = {"scenario": spec.scenario, "seed": spec.seed, "driver": spec.driver, "metrics": metrics.to_dict(), "xy": log.trace[::3, :2].astype(np.float32)}
-    if spec.keep_frames and isinstance(driver, PlannerDriver):
-        frames = {}
-        for i in spec.keep_frames:
-            if 0 <= i < len(driver.decisions):
-                d = driver.decisions[i]
-                pose = tuple(log.trace[3 * i])
-                frames[i] = {"pose": pose, "probs": d.probs, "index": d.index, "image": sim.renderer.render(Pose(*pose))}
-        out["frames"] = frames
-    if spec.keep_run and isinstance(driver, PlannerDriver) and driver.decisions:
-        n = len(driver.decisions)
-        out["run"] = {"poses": log.trace[: 3 * n : 3].copy(), "index": np.array([d.index for d in driver.decisions]),
-                      "probs": np.stack([d.probs for d in driver.decisions]).astype(np.float32), "commands": log.commands[:n].copy()}
-    return out
+    planner = driver if isinstance(driver, PlannerDriver) else None
+    return RunResult(spec.scenario, spec.seed, spec.driver, metrics, log.trace[::3, :2].astype(np.float32),
+                     frames=_kept_frames(spec, planner, log, sim), run=_kept_run(spec, planner, log))
+
+
+def _sim_and_driver(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: PreferenceProfile) -> tuple[Simulation, Driver]:
+    """The simulation of a run and who drives it, by the run's registered driver kind."""
+    if spec.driver not in _DRIVERS:
+        raise ValueError(f"unknown driver {spec.driver!r}; drivers: {', '.join(_DRIVERS)}")
+    return _DRIVERS[spec.driver](spec, scenario, world, profile)
+
+
+def _kept_frames(spec: RunSpec, planner: PlannerDriver | None, log: EpisodeLog, sim: Simulation) -> tuple[KeptFrame, ...]:
+    """The decisions ``spec.keep_frames`` asks for that the run reached, with the class image seen at each."""
+    if planner is None:
+        return ()
+    frames = []
+    for i in spec.keep_frames:
+        if 0 <= i < len(planner.decisions):
+            d = planner.decisions[i]
+            pose = tuple(log.trace[3 * i])
+            frames.append(KeptFrame(i, pose, d.probs, d.index, sim.renderer.render(Pose(*pose))))
+    return tuple(frames)
+
+
+def _kept_run(spec: RunSpec, planner: PlannerDriver | None, log: EpisodeLog) -> KeptRun | None:
+    """Every decision of a planner run, where ``spec.keep_run`` asks for them and it made any."""
+    if not spec.keep_run or planner is None or not planner.decisions:
+        return None
+    n = len(planner.decisions)
+    return KeptRun(log.trace[: 3 * n : 3].copy(), np.array([d.index for d in planner.decisions]),
+                   np.stack([d.probs for d in planner.decisions]).astype(np.float32), log.commands[:n].copy())
 
 
 def run_many(specs: list[RunSpec], workers: int | None = None, progress: Callable[[int, int], None] | None = None,
-             engine: Engine | None = None) -> list[dict]:
+             engine: Engine | None = None) -> list[RunResult]:
     """Run specs on ``engine`` (default: local processes, ``workers`` of them); results in the order given."""
     engine = engine or Engine(workers=workers if workers is not None else min(len(specs), os.cpu_count() or 1) or 1)
     return run_grid(run_one, specs, engine, progress, describe=describe_spec)
@@ -136,41 +261,51 @@ def describe_spec(spec: RunSpec) -> str:
     return f"{who} on {spec.scenario}, seed {spec.seed}"
 
 
-def zone_agrees(planner_zone: dict, driver_zone: dict) -> bool:
+def zone_agrees(planner_zone: ZoneResult, driver_zone: ZoneResult) -> bool:
     """The planner made the driver's choice in a zone (SPEC 12): the same class (or ``avoid``), and
     no lethal terrain touched where the driver touched none."""
-    return planner_zone["choice"] == driver_zone["choice"] and not (planner_zone["touched_lethal"] and not driver_zone["touched_lethal"])
+    return planner_zone.choice == driver_zone.choice and not (planner_zone.touched_lethal and not driver_zone.touched_lethal)
 
 
-def annotate_agreement(results: list[dict]) -> None:
-    """Give every planner zone the choice the synthetic driver made in the same run (scenario and
-    seed: the same start) as ``driver_choice`` and ``agrees``; zones without a driver run are left as they are."""
-    driver = {(r["scenario"], r["seed"]): r for r in results if r["driver"] == EXPERT}
-    for r in results:
-        ref = driver.get((r["scenario"], r["seed"]))
-        if r["driver"] == EXPERT or ref is None:
-            continue
-        by_id = {z["id"]: z for z in ref["metrics"]["zones"]}
-        for z in r["metrics"]["zones"]:
-            z["driver_choice"] = by_id[z["id"]]["choice"]
-            z["agrees"] = zone_agrees(z, by_id[z["id"]])
+def annotate_agreement(results: list[RunResult]) -> list[RunResult]:
+    """The results, every planner run given the choice the synthetic driver made in each zone of the
+    same run (scenario and seed: the same start) and whether it agreed; runs without a driver run,
+    and the driver's own, come back as they were."""
+    driver = {(r.scenario, r.seed): r for r in results if r.driver == EXPERT}
+    return [r if r.driver == EXPERT else _with_agreement(r, driver.get((r.scenario, r.seed))) for r in results]
 
 
-def summarise(results: list[dict], driver: str) -> dict:
-    runs = [r for r in results if r["driver"] == driver]
-    zones = [z for r in runs for z in r["metrics"]["zones"]]
+def _with_agreement(run: RunResult, ref: RunResult | None) -> RunResult:
+    """``run`` with its agreement with the driver's run ``ref`` (None: nothing to compare with)."""
+    if ref is None:
+        return run
+    by_id = {z.id: z for z in ref.metrics.zones}
+    agreement = tuple(ZoneAgreement(by_id[z.id].choice, zone_agrees(z, by_id[z.id])) for z in run.metrics.zones)
+    return replace(run, agreement=agreement)
+
+
+def summarise(results: list[RunResult], driver: str) -> Summary:
+    """Zone success, agreement (where annotated), collisions, completion and cross-track error of ``driver``'s runs."""
+    runs = [r for r in results if r.driver == driver]
+    zones = [z for r in runs for z in r.metrics.zones]
     n = len(zones)
-    ok = sum(z["success"] for z in zones)
-    compared = [z for z in zones if "agrees" in z]
-    agree = sum(z["agrees"] for z in compared)
-    return {
-        "runs": len(runs),
-        "zones": n,
-        "zone_success_rate": round(ok / n, 4) if n else None,
-        "zone_success_ci95": [round(v, 4) for v in wilson(ok, n)],
-        **({"agreement_rate": round(agree / len(compared), 4), "agreement_ci95": [round(v, 4) for v in wilson(agree, len(compared))],
-            "agreement_zones": len(compared)} if compared else {}),
-        "collision_count": int(sum(r["metrics"]["collisions"] for r in runs)),
-        "completed_rate": round(sum(r["metrics"]["completed"] for r in runs) / len(runs), 4) if runs else None,
-        "mean_rms_cross_track_m": round(float(np.mean([r["metrics"]["rms_cross_track_m"] for r in runs])), 4) if runs else None,
-    }
+    ok = sum(z.success for z in zones)
+    compared = [a for r in runs if r.agreement is not None for a in r.agreement]
+    agree = sum(a.agrees for a in compared)
+    return Summary(
+        runs=len(runs),
+        zones=n,
+        zone_success_rate=round(ok / n, 4) if n else None,
+        zone_success_ci95=_rounded(wilson(ok, n)),
+        collision_count=int(sum(r.metrics.collisions for r in runs)),
+        completed_rate=round(sum(r.metrics.completed for r in runs) / len(runs), 4) if runs else None,
+        mean_rms_cross_track_m=round(float(np.mean([r.metrics.rms_cross_track_m for r in runs])), 4) if runs else None,
+        agreement_zones=len(compared),
+        agreement_rate=round(agree / len(compared), 4) if compared else None,
+        agreement_ci95=_rounded(wilson(agree, len(compared))) if compared else None,
+    )
+
+
+def _rounded(interval: tuple[float, float]) -> tuple[float, float]:
+    lo, hi = interval
+    return round(lo, 4), round(hi, 4)

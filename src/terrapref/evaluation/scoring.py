@@ -10,7 +10,7 @@ terrain it did not choose (every patch, when it avoided them): the margin a driv
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
 
@@ -67,6 +67,11 @@ class ZoneResult:
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> ZoneResult:
+        """A zone as :meth:`to_dict` wrote it; keys a report added (the driver's choice) are left out."""
+        return cls(**{f.name: data[f.name] for f in fields(cls) if f.name in data})
 
 
 def score_zones(xy: np.ndarray, scenario: Scenario, world: WorldMap, profile: PreferenceProfile, tolerance_m: float = 0.3) -> list[ZoneResult]:
@@ -153,6 +158,12 @@ class RunMetrics:
         d = asdict(self)
         d["zones"] = [z.to_dict() for z in self.zones]
         return d
+
+    @classmethod
+    def from_dict(cls, data: dict) -> RunMetrics:
+        """Metrics as :meth:`to_dict` wrote them."""
+        scalars = {f.name: data[f.name] for f in fields(cls) if f.name != "zones"}
+        return cls(**scalars, zones=[ZoneResult.from_dict(z) for z in data["zones"]])
 
 
 def score_run(

@@ -77,12 +77,6 @@ class FeatureConfig:
         path_spacing_m: resampling step of the reference path [m].
         feature_classes: class names of the terrain columns, in order (the table's
             non-background classes in id order).
-        near_m: adds a near distance utility before ``distance``: the distance from each
-            trajectory's point ``near_m`` along it to the path point ``near_m`` ahead of the
-            vehicle's progress, normalised over the set like u^5 (0, the paper's U: no column).
-            At the horizon's end, an offset of a metre from the path hardly separates the
-            central arcs; near the vehicle it does, which is where a driver's small
-            corrections back to the path come from.
         lookahead: with a configuration, datasets also carry the look-ahead utilities U' of
             every frame (terrapref.features.lookahead), through which training fits the
             planner's second stage; None (the paper's data): U only.
@@ -93,15 +87,12 @@ class FeatureConfig:
     window_m: float | None = None
     path_spacing_m: float = 0.25
     feature_classes: tuple[str, ...] = field(default_factory=lambda: default_classes().feature_names)
-    near_m: float = 0.0
     lookahead: LookaheadConfig | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "distance_mode", DistanceMode(self.distance_mode))
         if not self.path_spacing_m > 0 or (self.window_m is not None and not self.window_m > 0):
             raise ValueError("path_spacing_m and window_m must be > 0")
-        if not (math.isfinite(self.near_m) and 0 <= self.near_m <= self.preference.horizon_m):
-            raise ValueError("near_m must be in [0, the trajectories' length]")
         if self.lookahead is not None and not isinstance(self.lookahead, LookaheadConfig):
             raise ValueError("lookahead must be a LookaheadConfig")
 
@@ -120,8 +111,7 @@ class FeatureConfig:
 
     @property
     def column_names(self) -> tuple[str, ...]:
-        near = ("near_distance",) if self.near_m > 0 else ()
-        return (*self.feature_classes, *near, "distance")
+        return (*self.feature_classes, "distance")
 
     def to_dict(self) -> dict:
         return {
@@ -130,7 +120,6 @@ class FeatureConfig:
             "window_m": self.window_m,
             "path_spacing_m": self.path_spacing_m,
             "feature_classes": list(self.feature_classes),
-            **({"near_m": self.near_m} if self.near_m > 0 else {}),
             **({"lookahead": self.lookahead.to_dict()} if self.lookahead is not None else {}),
         }
 
@@ -140,13 +129,14 @@ class FeatureConfig:
             # Lanes beyond the trajectories' ends lost their experiment and left the code
             # (docs/notebook.md names the commit that still reads such files).
             raise ValueError(f"lane columns (lane_m {data['lane_m']}) are no longer supported; featurise the recordings again")
+        if float(data.get("near_m", 0.0)) != 0.0:  # likewise the near distance column
+            raise ValueError(f"the near distance column (near_m {data['near_m']}) is no longer supported; featurise the recordings again")
         return cls(
             PreferenceSetConfig.from_dict(data["preference"]),
             DistanceMode(data["distance_mode"]),
             data.get("window_m"),
             float(data["path_spacing_m"]),
             tuple(data["feature_classes"]),
-            float(data.get("near_m", 0.0)),
             LookaheadConfig.from_dict(data["lookahead"]) if data.get("lookahead") is not None else None,
         )
 
@@ -174,9 +164,6 @@ class UtilityFeaturizer:
         self._pix_flat.flags.writeable = False  # read-only: a renderer may prepare it once
         self._scale = 1.0 / self.pset.pixel_index.shape[1]  # the share of one point
         self._ends = self.pset.endpoints  # (m, 2) vehicle frame
-        if config.near_m > 0:  # the point near_m along each trajectory (all travel at v)
-            j = int(round(config.near_m / (config.preference.control.v_mps * config.preference.dt_s)))
-            self._near = self.pset.trajectories[:, j, :2].copy()
 
     @property
     def m(self) -> int:
@@ -226,23 +213,8 @@ class UtilityFeaturizer:
         return (hi - d) * (1.0 / (hi - lo))
 
     def __call__(self, image: np.ndarray | SegmentationView, pose: Pose, path: ReferencePath, progress_s: float | None = None) -> np.ndarray:
-        """U, shape (m, n_features) float32: terrain shares, the near distance utility if any, then the distance utility."""
+        """U, shape (m, n_features) float32: terrain shares, then the distance utility."""
         u = np.empty((self.m, self.config.n_features), dtype=np.float32)
-        if self.config.near_m > 0:
-            u[:, :-2] = self.terrain(image)
-            u[:, -2] = self.normalise(self.near_distances(pose, path, progress_s))
-        else:
-            u[:, :-1] = self.terrain(image)
+        u[:, :-1] = self.terrain(image)
         u[:, -1] = self.normalise(self.distances(pose, path, progress_s))
         return u
-
-    def near_distances(self, pose: Pose, path: ReferencePath, progress_s: float | None) -> np.ndarray:
-        """Distance [m] from each trajectory's point ``near_m`` along it to the path point
-        ``near_m`` ahead of the progress, shape (m,) (FeatureConfig.near_m)."""
-        if progress_s is None:
-            raise ValueError("the near distance needs the vehicle's progress along the path")
-        x, y, yaw = pose
-        c, s = math.cos(yaw), math.sin(yaw)
-        tx, ty = path.point_at(progress_s + self.config.near_m)
-        px, py = self._near[:, 0], self._near[:, 1]
-        return np.hypot(px * c - py * s + (x - tx), px * s + py * c + (y - ty))

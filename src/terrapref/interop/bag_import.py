@@ -39,6 +39,7 @@ from terrapref.interop.robot import RobotConfig, load_waypoints
 from terrapref.progress import Progress
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.terrain.classes import UNKNOWN
+from terrapref.vehicle import ControlSet
 
 TYPES = {
     "segmentation": ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"),
@@ -195,6 +196,7 @@ def camera_mount_from_tf(static: dict, base: str, camera_frame: str, source: str
 
 
 def _read_small_topics(bag: _Bag, robot: RobotConfig) -> _Streams:
+    """Odometry, commands, the path, the calibration and (for ``camera.tf``) /tf_static, read whole."""
     topics = robot.topics
     wanted = ["odometry", "command", "camera_info"] + (["path"] if robot.path_topic else [])
     by_role = {role: bag.connections(topics[role], role, robot.source) for role in wanted}  # each checked for its own type
@@ -206,46 +208,65 @@ def _read_small_topics(bag: _Bag, robot: RobotConfig) -> _Streams:
             raise UserError(bag.source, "camera.tf asks for /tf_static, which the bag does not hold", field="camera.tf")
         roles["/tf_static"] = "tf_static"
         conns += tf_conns
-    static: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
-    odom_t, odom, cmd_t, cmd = [], [], [], []
-    path, info = None, None
+    read = _SmallTopics()
     for conn, t_ns, msg in bag.messages(conns):
         role = roles[conn.topic]
         try:
-            if role == "odometry":
-                pose = msg.pose.pose if conn.msgtype != "geometry_msgs/msg/PoseStamped" else msg.pose
-                odom_t.append(_stamp(msg, t_ns))
-                odom.append((pose.position.x, pose.position.y, _yaw(pose.orientation)))
-            elif role == "command":
-                twist = msg.twist if conn.msgtype == "geometry_msgs/msg/TwistStamped" else msg
-                cmd_t.append(_stamp(msg, t_ns) if conn.msgtype == "geometry_msgs/msg/TwistStamped" else t_ns * 1e-9)
-                cmd.append((twist.linear.x, twist.angular.z))
-            elif role == "path" and path is None and len(msg.poses) >= 2:
-                path = np.array([(p.pose.position.x, p.pose.position.y) for p in msg.poses], dtype=float)
-            elif role == "camera_info" and info is None:
-                info = msg
-            elif role == "tf_static":
-                for tr in msg.transforms:
-                    v = tr.transform.translation
-                    static[str(tr.child_frame_id).lstrip("/")] = (str(tr.header.frame_id).lstrip("/"), np.array([v.x, v.y, v.z]), _rotation(tr.transform.rotation))
+            read.take(role, conn, t_ns, msg)
         except (AttributeError, TypeError, ValueError) as exc:
             raise UserError(bag.source, f"topic {conn.topic}: a {conn.msgtype} without the expected fields ({exc})", field=f"topics.{role}") from None
-    if info is None:
+    if read.info is None:
         raise UserError(bag.source, f"topic {topics['camera_info']} holds no camera calibration", field="topics.camera_info")
-    if len(odom_t) < 2:
+    if len(read.odom_t) < 2:
         raise UserError(bag.source, f"topic {topics['odometry']} has fewer than two poses", field="topics.odometry")
-    o_t, o = np.array(odom_t), np.array(odom, dtype=float)
-    c_t, c = np.array(cmd_t), np.array(cmd, dtype=float)
-    if not (np.isfinite(o).all() and np.isfinite(o_t).all()):
-        keep = np.isfinite(o).all(axis=1) & np.isfinite(o_t)
-        o_t, o = o_t[keep], o[keep]
-    keep = np.isfinite(c).all(axis=1) & np.isfinite(c_t)
-    c_t, c = c_t[keep], c[keep]
-    order = np.argsort(o_t, kind="stable")
-    o_t, o = o_t[order], o[order]
-    o[:, 2] = np.unwrap(o[:, 2])  # so interpolation between stamps never spins the long way round
-    order = np.argsort(c_t, kind="stable")
-    return _Streams(o_t, o, c_t[order], c[order], path, info, static)
+    return read.streams()
+
+
+@dataclass
+class _SmallTopics:
+    """The small topics as they are read, in bag order."""
+
+    odom_t: list[float] = field(default_factory=list)
+    odom: list[tuple[float, float, float]] = field(default_factory=list)
+    cmd_t: list[float] = field(default_factory=list)
+    cmd: list[tuple[float, float]] = field(default_factory=list)
+    path: np.ndarray | None = None  # the first path of two or more poses
+    info: object = None  # the first camera_info
+    static: dict[str, tuple[str, np.ndarray, np.ndarray]] = field(default_factory=dict)  # child -> (parent, t, R)
+
+    def take(self, role: str, conn, t_ns: int, msg) -> None:
+        """Keep what ``msg`` (of ``role``, from ``conn``, at bag time ``t_ns`` [ns]) says."""
+        if role == "odometry":
+            pose = msg.pose.pose if conn.msgtype != "geometry_msgs/msg/PoseStamped" else msg.pose
+            self.odom_t.append(_stamp(msg, t_ns))
+            self.odom.append((pose.position.x, pose.position.y, _yaw(pose.orientation)))
+        elif role == "command":
+            twist = msg.twist if conn.msgtype == "geometry_msgs/msg/TwistStamped" else msg
+            self.cmd_t.append(_stamp(msg, t_ns) if conn.msgtype == "geometry_msgs/msg/TwistStamped" else t_ns * 1e-9)
+            self.cmd.append((twist.linear.x, twist.angular.z))
+        elif role == "path" and self.path is None and len(msg.poses) >= 2:
+            self.path = np.array([(p.pose.position.x, p.pose.position.y) for p in msg.poses], dtype=float)
+        elif role == "camera_info" and self.info is None:
+            self.info = msg
+        elif role == "tf_static":
+            for tr in msg.transforms:
+                v = tr.transform.translation
+                self.static[str(tr.child_frame_id).lstrip("/")] = (str(tr.header.frame_id).lstrip("/"), np.array([v.x, v.y, v.z]), _rotation(tr.transform.rotation))
+
+    def streams(self) -> _Streams:
+        """The streams without non-finite samples, each sorted by time, yaw unwrapped."""
+        o_t, o = np.array(self.odom_t), np.array(self.odom, dtype=float)
+        c_t, c = np.array(self.cmd_t), np.array(self.cmd, dtype=float)
+        if not (np.isfinite(o).all() and np.isfinite(o_t).all()):
+            keep = np.isfinite(o).all(axis=1) & np.isfinite(o_t)
+            o_t, o = o_t[keep], o[keep]
+        keep = np.isfinite(c).all(axis=1) & np.isfinite(c_t)
+        c_t, c = c_t[keep], c[keep]
+        order = np.argsort(o_t, kind="stable")
+        o_t, o = o_t[order], o[order]
+        o[:, 2] = np.unwrap(o[:, 2])  # so interpolation between stamps never spins the long way round
+        order = np.argsort(c_t, kind="stable")
+        return _Streams(o_t, o, c_t[order], c[order], self.path, self.info, self.static)
 
 
 def camera_from_info(info, robot: RobotConfig, source: str, static: dict | None = None, notes: list[str] | None = None) -> tuple[CameraConfig, np.ndarray | None]:
@@ -355,6 +376,16 @@ def _scenario(name: str, path: np.ndarray, start: tuple[float, float, float], si
     }
 
 
+@dataclass(frozen=True)
+class _Request:
+    """One import: the bag, the robot file that reads it, and the recording's classes and frame rate [Hz]."""
+
+    bag: _Bag
+    robot: RobotConfig
+    classes: ClassTable
+    rate_hz: float
+
+
 def import_bag(bag_path: str | Path, robot: RobotConfig, out: str | Path, rate_hz: float = 10.0, force: bool = False,
                show_progress: bool = True, classes: ClassTable | None = None) -> ImportReport:
     """Turn a bag into a recording at ``out`` that inspect, featurize and train accept."""
@@ -369,7 +400,7 @@ def import_bag(bag_path: str | Path, robot: RobotConfig, out: str | Path, rate_h
     report = ImportReport(str(bag_path))
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".importing", dir=out.parent))
     try:
-        _import(bag, robot, tmp / "rec", rate_hz, show_progress, classes, report)
+        _import(_Request(bag, robot, classes, rate_hz), tmp / "rec", show_progress, report)
         replace_dir(tmp / "rec", out)
     finally:
         bag.close()
@@ -377,128 +408,224 @@ def import_bag(bag_path: str | Path, robot: RobotConfig, out: str | Path, rate_h
     return report
 
 
-def _import(bag: _Bag, robot: RobotConfig, out: Path, rate_hz: float, show_progress: bool, classes: ClassTable, report: ImportReport) -> None:
+def _import(req: _Request, out: Path, show_progress: bool, report: ImportReport) -> None:
+    """The recording of ``req.bag`` at ``out``: the small topics read first, then the images streamed."""
+    bag, robot = req.bag, req.robot
     seg_conns = bag.connections(robot.topics["segmentation"], "segmentation", robot.source)
     streams = _read_small_topics(bag, robot)
     if len(streams.cmd_t) == 0:
         raise UserError(bag.source, f"topic {robot.topics['command']} holds no usable command", field="topics.command")
     camera, undistort = camera_from_info(streams.info, robot, bag.source, streams.static, report.notes)
-    if streams.path is not None:
-        path, report.path_source = streams.path, f"{robot.path_topic} ({len(streams.path)} poses)"
-    elif robot.path_file is not None:
-        path, report.path_source = load_waypoints(robot.path_file, robot.source), f"{robot.path_file} (path_file)"
-    else:
-        try:
-            path = smooth_path(streams.odom[:, :2])
-        except ValueError as exc:
-            raise UserError(bag.source, f"no path topic or path_file, and {exc}", field="topics.path") from None
-        report.path_source = f"the driven odometry, smoothed over {2 * PATH_SMOOTHING_M:g} m ({len(path)} points)"
-    everything = np.concatenate([streams.odom[:, :2], path])
-    # The odometry frame may start anywhere (often at the robot); the recording's map starts at 0,
-    # so an axis with negative coordinates is shifted (coordinates already >= 0 stay as they are).
-    low = everything.min(axis=0)
-    shift = np.where(low >= 0.0, 0.0, MAP_MARGIN_M - low)
-    hi = everything.max(axis=0) + shift + MAP_MARGIN_M
+    placement = _Placement.of(streams.odom[:, :2], _reference_path(req, streams, report))
     preference = PreferenceSetConfig()
-    control = preference.control
-    lut = robot.labels.lut(classes)
-    listed = robot.labels.listed()
+    conversion = _Conversion(req.rate_hz, robot.max_gap_s, preference.control, robot.labels.lut(req.classes), robot.labels.listed(),
+                             undistort, placement.shift)
+    scenario = _scenario(bag_path_name(bag.source), placement.path, placement.start(streams.odom[0]), tuple(placement.size), req.classes)
+    meta = _meta(req, scenario, camera, preference, placement)
+    progress = Progress("import", sum(c.msgcount for c in seg_conns), enabled=show_progress)
+    frames = _Frames(streams, conversion, RecordingWriter(out, meta, scenario), report)
+    _stream_images(req, seg_conns, (camera.height_px, camera.width_px), frames, progress)
+    frames.close(bag.source, progress)
 
-    x0, y0, yaw0 = streams.odom[0]
-    scenario = _scenario(bag_path_name(bag.source), path + shift, (x0 + shift[0], y0 + shift[1], yaw0), tuple(hi), classes)
-    meta = {
+
+def _reference_path(req: _Request, streams: _Streams, report: ImportReport) -> np.ndarray:
+    """The path (N, 2) [m] in the odometry frame: the path topic's, the path file's, or else the
+    driven odometry smoothed; where it came from goes in the report."""
+    robot = req.robot
+    if streams.path is not None:
+        report.path_source = f"{robot.path_topic} ({len(streams.path)} poses)"
+        return streams.path
+    if robot.path_file is not None:
+        path = load_waypoints(robot.path_file, robot.source)
+        report.path_source = f"{robot.path_file} (path_file)"
+        return path
+    try:
+        path = smooth_path(streams.odom[:, :2])
+    except ValueError as exc:
+        raise UserError(req.bag.source, f"no path topic or path_file, and {exc}", field="topics.path") from None
+    report.path_source = f"the driven odometry, smoothed over {2 * PATH_SMOOTHING_M:g} m ({len(path)} points)"
+    return path
+
+
+@dataclass(frozen=True)
+class _Placement:
+    """Where the odometry frame lies in the recording's map, which starts at 0."""
+
+    shift: np.ndarray  # (2,) [m] added to odometry x and y
+    size: np.ndarray  # (2,) [m] the map's extent
+    path: np.ndarray  # (N, 2) [m] the reference path, shifted
+
+    @classmethod
+    def of(cls, odom_xy: np.ndarray, path: np.ndarray) -> _Placement:
+        """The map around the driven positions ``odom_xy`` (N, 2) and ``path`` (M, 2) [m]."""
+        everything = np.concatenate([odom_xy, path])
+        # The odometry frame may start anywhere (often at the robot); the recording's map starts at 0,
+        # so an axis with negative coordinates is shifted (coordinates already >= 0 stay as they are).
+        low = everything.min(axis=0)
+        shift = np.where(low >= 0.0, 0.0, MAP_MARGIN_M - low)
+        return cls(shift, everything.max(axis=0) + shift + MAP_MARGIN_M, path + shift)
+
+    def start(self, odom_pose: np.ndarray) -> tuple[float, float, float]:
+        """An odometry pose (x, y [m], yaw [rad]) in the map."""
+        x0, y0, yaw0 = odom_pose
+        return x0 + self.shift[0], y0 + self.shift[1], yaw0
+
+
+def _meta(req: _Request, scenario: dict, camera: CameraConfig, preference: PreferenceSetConfig, placement: _Placement) -> dict:
+    """The recording's meta.json entries of an import."""
+    return {
         "scenario": scenario["name"],
         "camera": camera.to_dict(),
         "preference_set": preference.to_dict(),
-        "sim": {"camera_rate_hz": rate_hz},
-        "classes": classes.to_dict(),
-        "profile": list(robot.profile.order),
-        "driver": {"kind": "imported", "bag": bag.source, "robot": robot.source, "labels": robot.labels.name},
-        "path": (path + shift).tolist(),
-        "origin_shift_m": [float(v) for v in shift],
+        "sim": {"camera_rate_hz": req.rate_hz},
+        "classes": req.classes.to_dict(),
+        "profile": list(req.robot.profile.order),
+        "driver": {"kind": "imported", "bag": req.bag.source, "robot": req.robot.source, "labels": req.robot.labels.name},
+        "path": placement.path.tolist(),
+        "origin_shift_m": [float(v) for v in placement.shift],
     }
-    total = sum(c.msgcount for c in seg_conns)
-    progress = Progress("import", total, enabled=show_progress)
-    writer = RecordingWriter(out, meta, scenario)
-    pixels = unmapped = unknown = 0
+
+
+def _stream_images(req: _Request, seg_conns: list, shape: tuple[int, int], frames: _Frames, progress: Progress) -> None:
+    """Decode the segmentation images one at a time, put back in stamp order through a short
+    reorder buffer, and hand each to ``frames``; ``shape`` is the camera's (H, W)."""
+    bag, report = req.bag, frames.report
     heap: list = []
-    last_t, last_image_t, t_first = -math.inf, None, None
-    shape = (camera.height_px, camera.width_px)
-
-    def emit(t: float, ids: np.ndarray) -> None:
-        nonlocal pixels, unmapped, unknown, last_t, t_first
-        if t <= last_t:
-            report.skipped["images out of order beyond the reorder buffer"] += 1
-            return
-        if t - last_t < 0.75 / rate_hz:  # a quarter period of slack for stamp jitter
-            report.skipped[f"images thinned to {rate_hz:g} Hz"] += 1
-            return
-        j = int(np.searchsorted(streams.odom_t, t, side="right"))  # odom_t[j - 1] <= t < odom_t[j]
-        if j == len(streams.odom_t) and t == streams.odom_t[-1]:
-            j -= 1  # exactly on the last pose
-        if j == 0 or j == len(streams.odom_t):
-            report.skipped["images outside the odometry's time span"] += 1
-            return
-        t0, t1 = streams.odom_t[j - 1], streams.odom_t[j]
-        if t1 - t0 > robot.max_gap_s and t != t0 and t != t1:  # a pose at the very stamp needs no interpolation
-            report.skipped["images in an odometry gap"] += 1
-            return
-        k = int(np.searchsorted(streams.cmd_t, t, side="right")) - 1
-        if k < 0:
-            report.skipped["images before the first command"] += 1
-            return
-        v, w = streams.cmd[k]
-        if v < MIN_SPEED_MPS:
-            report.skipped["images while stopped or reversing"] += 1
-            return
-        if t == t1 or t == t0:  # a pose at the image's own stamp is taken as it is, bit for bit
-            x, y, yaw = streams.odom[j if t == t1 else j - 1]
-        else:
-            x, y, yaw = streams.odom[j - 1] + (t - t0) / (t1 - t0) * (streams.odom[j] - streams.odom[j - 1])
-        if abs(yaw) > math.pi:  # unwrapped for the interpolation; wrapped back only where needed
-            yaw = (yaw + math.pi) % (2 * math.pi) - math.pi
-        w_set = float(np.clip(w * control.v_mps / v, min(control.w_rps), max(control.w_rps)))  # same curvature at the set's speed
-        image = lut[ids]
-        if undistort is not None:
-            image = np.where(undistort >= 0, image.reshape(-1)[np.maximum(undistort, 0)], UNKNOWN).astype(np.uint8)
-        pixels += ids.size
-        unmapped += int(np.count_nonzero(~listed[ids]))
-        unknown += int(np.count_nonzero(image == UNKNOWN))
-        if t_first is None:
-            t_first = t
-        writer.append(t - t_first, (x + shift[0], y + shift[1], yaw), image, (control.v_mps, w_set), int(control.label_of(w_set)))
-        last_t = t
-
-    seq = 0
-    for conn, t_ns, msg in bag.messages(seg_conns):
+    last_image_t = None
+    for seq, (conn, t_ns, msg) in enumerate(bag.messages(seg_conns)):
         try:
             t = _stamp(msg, t_ns)
         except AttributeError as exc:
             raise UserError(bag.source, f"topic {conn.topic}: no header stamp ({exc})", field="topics.segmentation") from None
-        ids = _decode(conn, msg, bag.source, robot.labels)
+        ids = _decode(conn, msg, bag.source, req.robot.labels)
         report.images += 1
         if ids.shape != shape:
-            raise UserError(bag.source, f"topic {conn.topic}: image {ids.shape[1]} x {ids.shape[0]}, camera_info says {shape[1]} x {shape[0]}", field="topics.segmentation")
-        if last_image_t is not None and t - last_image_t > robot.max_gap_s:
+            raise UserError(bag.source, f"topic {conn.topic}: image {ids.shape[1]} x {ids.shape[0]}, camera_info says {shape[1]} x {shape[0]}",
+                            field="topics.segmentation")
+        if last_image_t is not None and t - last_image_t > req.robot.max_gap_s:
             report.image_gaps += 1
             report.longest_gap_s = max(report.longest_gap_s, t - last_image_t)
         last_image_t = t if last_image_t is None else max(last_image_t, t)
         heapq.heappush(heap, (t, seq, ids))
-        seq += 1
         if len(heap) > REORDER_FRAMES:
-            emit(*heapq.heappop(heap)[::2])
-        progress.update(report.images, f"{writer.count} frames")
+            frames.emit(*heapq.heappop(heap)[::2])
+        progress.update(report.images, f"{frames.writer.count} frames")
     while heap:
-        emit(*heapq.heappop(heap)[::2])
-    progress.close(f"{writer.count} frames from {report.images} images")
-    if writer.count == 0:
-        writer.abort()
-        raise UserError(bag.source, f"no usable frame: {', '.join(f'{n} {r}' for r, n in report.skipped.items()) or 'no images'}", field="topics.segmentation")
-    report.frames = writer.count
-    report.duration_s = float(last_t - t_first) + 1.0 / rate_hz
-    report.unmapped_share = unmapped / max(pixels, 1)
-    report.unknown_share = unknown / max(pixels, 1)
-    writer.close({"completed": True, "collisions": 0, "duration_s": round(report.duration_s, 3), "import": report.lines()})
+        frames.emit(*heapq.heappop(heap)[::2])
+
+
+@dataclass(frozen=True)
+class _Conversion:
+    """How a label image at a stamp becomes a frame of the recording."""
+
+    rate_hz: float  # the recording's frame rate; faster images are thinned
+    max_gap_s: float  # longer gaps in odometry hold no frame
+    control: ControlSet
+    lut: np.ndarray  # (65536,) uint8: label id -> class id
+    listed: np.ndarray  # (65536,) bool: the ids the label map lists
+    undistort: np.ndarray | None  # (H, W) flat index of each pinhole pixel in the lens's image (-1: outside); None: no distortion
+    shift: np.ndarray  # (2,) [m] odometry frame -> map
+
+
+@dataclass
+class _Frames:
+    """The recording being written: each image kept gets the odometry pose interpolated at its
+    stamp and the command in force then; what is skipped is counted in the report."""
+
+    streams: _Streams
+    conversion: _Conversion
+    writer: RecordingWriter
+    report: ImportReport
+    pixels: int = 0
+    unmapped: int = 0  # pixels whose id the label map does not list
+    unknown: int = 0  # pixels unknown after mapping
+    last_t: float = -math.inf  # the stamp of the last frame kept [s]
+    t_first: float | None = None  # the stamp of the first frame kept [s]
+
+    def emit(self, t: float, ids: np.ndarray) -> None:
+        """The image ``ids`` (H, W) stamped ``t`` [s] as the next frame, unless it is skipped."""
+        reason = self._skip_reason(t)
+        if reason is not None:
+            self.report.skipped[reason] += 1
+            return
+        c = self.conversion
+        v, w = self.streams.cmd[self._command_index(t)]
+        w_set = float(np.clip(w * c.control.v_mps / v, min(c.control.w_rps), max(c.control.w_rps)))  # same curvature at the set's speed
+        pose = self._pose_at(t)
+        image = self._classes(ids)
+        if self.t_first is None:
+            self.t_first = t
+        self.writer.append(t - self.t_first, pose, image, (c.control.v_mps, w_set), int(c.control.label_of(w_set)))
+        self.last_t = t
+
+    def _skip_reason(self, t: float) -> str | None:
+        """Why the image stamped ``t`` [s] makes no frame, or None."""
+        rate_hz, odom_t = self.conversion.rate_hz, self.streams.odom_t
+        if t <= self.last_t:
+            return "images out of order beyond the reorder buffer"
+        if t - self.last_t < 0.75 / rate_hz:  # a quarter period of slack for stamp jitter
+            return f"images thinned to {rate_hz:g} Hz"
+        j = self._odom_index(t)
+        if j == 0 or j == len(odom_t):
+            return "images outside the odometry's time span"
+        t0, t1 = odom_t[j - 1], odom_t[j]
+        if t1 - t0 > self.conversion.max_gap_s and t != t0 and t != t1:  # a pose at the very stamp needs no interpolation
+            return "images in an odometry gap"
+        k = self._command_index(t)
+        if k < 0:
+            return "images before the first command"
+        if self.streams.cmd[k][0] < MIN_SPEED_MPS:
+            return "images while stopped or reversing"
+        return None
+
+    def _odom_index(self, t: float) -> int:
+        """j with odom_t[j - 1] <= t < odom_t[j] (or t on the last pose)."""
+        odom_t = self.streams.odom_t
+        j = int(np.searchsorted(odom_t, t, side="right"))
+        if j == len(odom_t) and t == odom_t[-1]:
+            j -= 1  # exactly on the last pose
+        return j
+
+    def _command_index(self, t: float) -> int:
+        """The command in force at ``t`` [s] (zero-order hold); -1 before the first."""
+        return int(np.searchsorted(self.streams.cmd_t, t, side="right")) - 1
+
+    def _pose_at(self, t: float) -> tuple[float, float, float]:
+        """The pose (x, y [m], yaw [rad]) in the map at ``t`` [s], interpolated between odometry poses."""
+        odom_t, odom, shift = self.streams.odom_t, self.streams.odom, self.conversion.shift
+        j = self._odom_index(t)
+        t0, t1 = odom_t[j - 1], odom_t[j]
+        if t == t1 or t == t0:  # a pose at the image's own stamp is taken as it is, bit for bit
+            x, y, yaw = odom[j if t == t1 else j - 1]
+        else:
+            x, y, yaw = odom[j - 1] + (t - t0) / (t1 - t0) * (odom[j] - odom[j - 1])
+        if abs(yaw) > math.pi:  # unwrapped for the interpolation; wrapped back only where needed
+            yaw = (yaw + math.pi) % (2 * math.pi) - math.pi
+        return x + shift[0], y + shift[1], yaw
+
+    def _classes(self, ids: np.ndarray) -> np.ndarray:
+        """Class ids (H, W) uint8 of the label ids ``ids``, undistorted; the pixels counted."""
+        c = self.conversion
+        image = c.lut[ids]
+        if c.undistort is not None:
+            image = np.where(c.undistort >= 0, image.reshape(-1)[np.maximum(c.undistort, 0)], UNKNOWN).astype(np.uint8)
+        self.pixels += ids.size
+        self.unmapped += int(np.count_nonzero(~c.listed[ids]))
+        self.unknown += int(np.count_nonzero(image == UNKNOWN))
+        return image
+
+    def close(self, source: str, progress: Progress) -> None:
+        """Finish the recording and the report; with no frame kept, an error about ``source`` (the bag)."""
+        writer, report = self.writer, self.report
+        progress.close(f"{writer.count} frames from {report.images} images")
+        if writer.count == 0:
+            writer.abort()
+            raise UserError(source, f"no usable frame: {', '.join(f'{n} {r}' for r, n in report.skipped.items()) or 'no images'}", field="topics.segmentation")
+        report.frames = writer.count
+        report.duration_s = float(self.last_t - self.t_first) + 1.0 / self.conversion.rate_hz
+        report.unmapped_share = self.unmapped / max(self.pixels, 1)
+        report.unknown_share = self.unknown / max(self.pixels, 1)
+        writer.close({"completed": True, "collisions": 0, "duration_s": round(report.duration_s, 3), "import": report.lines()})
 
 
 def bag_path_name(source: str) -> str:

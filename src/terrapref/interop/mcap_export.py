@@ -17,24 +17,27 @@ gives back the same frames, so it featurises to the same dataset.
 
 from __future__ import annotations
 
-import io
 import math
 import shutil
 import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-from PIL import Image as PILImage
 
 from terrapref.camera import CameraConfig
 from terrapref.features import PreferenceSetConfig
 from terrapref.features.preference_set import forward_simulate
 from terrapref.fileio import write_text_atomic
+from terrapref.interop.ros_messages import (EPOCH_S, Message, Topics, add_topics, camera_info, compressed_image, header, odometry, path_message,
+                                            png, point, pose, rpy_quaternion, tf_message, transform, twist, typestore, vector3, zeroed)
 from terrapref.terrain import ClassTable
 
-EPOCH_S = 1_700_000_000
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
+
 PREFIX = "/terrapref"
 
 
@@ -54,162 +57,141 @@ class RunFrames:
     probs: np.ndarray | None = None  # (F, m) F_t, when a planner drove
 
 
-def _defaults(ts, msgtype: str):
-    """A message of ``msgtype`` with every field at its zero value (nested types included)."""
-    from rosbags.typesys.store import Nodetype
-
-    numeric = {"bool": bool, "byte": np.uint8, "char": np.uint8, "int8": np.int8, "uint8": np.uint8, "int16": np.int16, "uint16": np.uint16,
-               "int32": np.int32, "uint32": np.uint32, "int64": np.int64, "uint64": np.uint64, "float32": np.float32, "float64": np.float64}
-
-    def value(node):
-        kind, detail = node
-        if kind == Nodetype.BASE:
-            name = detail[0]
-            return "" if name == "string" else (False if name == "bool" else (0.0 if name.startswith("float") else 0))
-        if kind == Nodetype.NAME:
-            return _defaults(ts, detail)
-        sub, length = detail
-        if sub[0] == Nodetype.BASE and sub[1][0] in numeric:
-            return np.zeros(length if kind == Nodetype.ARRAY else 0, dtype=numeric[sub[1][0]])
-        return [value(sub) for _ in range(length)] if kind == Nodetype.ARRAY else []
-
-    _, fields = ts.fielddefs[msgtype]
-    return ts.types[msgtype](**{name: value(node) for name, node in fields})
+_TOPICS = {  # role: (topic, type), in the order the file lists them
+    "labels": (f"{PREFIX}/labels", "sensor_msgs/msg/CompressedImage"),
+    "labels_color": (f"{PREFIX}/labels_color", "sensor_msgs/msg/CompressedImage"),
+    "camera_info": (f"{PREFIX}/camera_info", "sensor_msgs/msg/CameraInfo"),
+    "odom": (f"{PREFIX}/odom", "nav_msgs/msg/Odometry"),
+    "cmd_vel": (f"{PREFIX}/cmd_vel", "geometry_msgs/msg/Twist"),
+    "path": (f"{PREFIX}/path", "nav_msgs/msg/Path"),
+    "trajectories": (f"{PREFIX}/trajectories", "visualization_msgs/msg/MarkerArray"),
+    "tf": ("/tf", "tf2_msgs/msg/TFMessage"),
+    "tf_static": ("/tf_static", "tf2_msgs/msg/TFMessage"),
+}
 
 
-def _png(ids: np.ndarray, palette: np.ndarray | None = None) -> np.ndarray:
-    """A single-channel png of ``ids``; with ``palette`` (256, 3), an indexed-colour one that
-    viewers show in the class colours (a third of the work of an RGB image)."""
-    buf = io.BytesIO()
-    image = PILImage.fromarray(ids)
-    if palette is not None:
-        image.putpalette(palette.astype(np.uint8).ravel().tolist())
-    image.save(buf, format="PNG", compress_level=1)
-    return np.frombuffer(buf.getvalue(), dtype=np.uint8)
+@dataclass(frozen=True)
+class _Scene:
+    """What every frame of one file shares: the types, the clock's origin, the colours and the
+    trajectory markers (fixed in base_link: restamped and recoloured per frame)."""
+
+    ts: Typestore
+    run: RunFrames
+    t0_s: float  # the first frame's time: bag time 0 on the epoch-like clock
+    palette: np.ndarray  # (256, 3) class colours
+    markers: list[Message]  # one visualization_msgs/Marker per trajectory
+    marker_array: Message
+
+    @classmethod
+    def of(cls, ts: Typestore, run: RunFrames) -> _Scene:
+        """The shared part of ``run``'s file, in the types of ``ts``."""
+        c = run.preference.control
+        trajectories = forward_simulate(np.full(c.m, c.v_mps), np.asarray(c.w_rps), run.preference.n_steps, run.preference.dt_s)
+        lifetime = ts.types["builtin_interfaces/msg/Duration"](sec=0, nanosec=200_000_000)
+        markers = [zeroed(ts, "visualization_msgs/msg/Marker", ns="trajectories", id=j, type=4, action=0,
+                          pose=zeroed(ts, "geometry_msgs/msg/Pose", orientation=rpy_quaternion(ts, 0, 0, 0)), lifetime=lifetime,
+                          points=[point(ts, px, py, 0.02) for px, py in trajectories[j, :, :2]]) for j in range(c.m)]
+        t0_s = float(run.times[0]) if len(run.times) else 0.0
+        return cls(ts, run, t0_s, run.classes.palette(), markers, ts.types["visualization_msgs/msg/MarkerArray"](markers=markers))
+
+    def bag_ns(self, t_s: float) -> int:
+        """Bag time [ns] of the run's time ``t_s`` [s]."""
+        return int(round((EPOCH_S + t_s - self.t0_s) * 1e9))
 
 
 def write_mcap(out: str | Path, run: RunFrames, robot_file: bool = True, progress: Callable[[int, int], None] | None = None) -> Path:
     """Write ``run`` as a ROS 2 MCAP file at ``out`` (atomically); with ``robot_file``, also the
     terrapref-robot/1 file that imports it back (``out`` with ``.robot.yaml``)."""
-    from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.typesys import Stores, get_typestore
-
     out = Path(out)
-    ts = get_typestore(Stores.ROS2_HUMBLE)
-    T = ts.types
+    _write_atomically(out, lambda bag_dir: _write_bag(bag_dir, run, progress))
+    if robot_file:
+        write_text_atomic(out.with_name(out.name + ".robot.yaml"), _robot_yaml(run.camera))
+    return out
 
-    def make(msgtype: str, **fields):
-        msg = _defaults(ts, msgtype)
-        for k, v in fields.items():
-            setattr(msg, k, v)
-        return msg
 
-    def stamp(t: float):
-        ns = int(round((EPOCH_S + t) * 1e9))
-        return T["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
-
-    def header(t: float, frame: str):
-        return T["std_msgs/msg/Header"](stamp=stamp(t), frame_id=frame)
-
-    def quat(roll: float, pitch: float, yaw: float):
-        cr, sr, cp, sp, cy, sy = math.cos(roll / 2), math.sin(roll / 2), math.cos(pitch / 2), math.sin(pitch / 2), math.cos(yaw / 2), math.sin(yaw / 2)
-        return T["geometry_msgs/msg/Quaternion"](x=sr * cp * cy - cr * sp * sy, y=cr * sp * cy + sr * cp * sy, z=cr * cp * sy - sr * sp * cy, w=cr * cp * cy + sr * sp * sy)
-
-    def point(x: float, y: float, z: float = 0.0):
-        return T["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=float(z))
-
-    def vec(x: float = 0.0, y: float = 0.0, z: float = 0.0):
-        return T["geometry_msgs/msg/Vector3"](x=float(x), y=float(y), z=float(z))
-
-    def color(r: float, g: float, b: float, a: float = 1.0):
-        return T["std_msgs/msg/ColorRGBA"](r=float(r), g=float(g), b=float(b), a=float(a))
-
-    cam = run.camera
-    fx, fy, cx, cy = cam.intrinsics
-    palette = run.classes.palette()
-    c = run.preference.control
-    trajectories = forward_simulate(np.full(c.m, c.v_mps), np.asarray(c.w_rps), run.preference.n_steps, run.preference.dt_s)
-    t0 = float(run.times[0]) if len(run.times) else 0.0
-
-    def bag_ns(t: float) -> int:
-        return int(round((EPOCH_S + t - t0) * 1e9))
-
+def _write_atomically(out: Path, write: Callable[[Path], None]) -> None:
+    """Have ``write`` make a ROS 2 MCAP bag in a temporary folder, then move its file to ``out``."""
     tmpdir = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".writing", dir=out.parent if out.parent.exists() else None))
     try:
-        with Writer(tmpdir / "bag", version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-            topics = {
-                "labels": ("sensor_msgs/msg/CompressedImage", "labels"), "labels_color": ("sensor_msgs/msg/CompressedImage", "labels_color"),
-                "camera_info": ("sensor_msgs/msg/CameraInfo", "camera_info"), "odom": ("nav_msgs/msg/Odometry", "odom"),
-                "cmd_vel": ("geometry_msgs/msg/Twist", "cmd_vel"), "path": ("nav_msgs/msg/Path", "path"),
-                "trajectories": ("visualization_msgs/msg/MarkerArray", "trajectories"),
-            }
-            conns = {k: writer.add_connection(f"{PREFIX}/{name}", msgtype, typestore=ts) for k, (msgtype, name) in topics.items()}
-            conns["tf"] = writer.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=ts)
-            conns["tf_static"] = writer.add_connection("/tf_static", "tf2_msgs/msg/TFMessage", typestore=ts)
-
-            def put(key: str, t_ns: int, msg, msgtype: str) -> None:
-                writer.write(conns[key], t_ns, ts.serialize_cdr(msg, msgtype))
-
-            first = bag_ns(t0)
-            path_msg = make("nav_msgs/msg/Path", header=header(0.0, "odom"), poses=[
-                make("geometry_msgs/msg/PoseStamped", header=header(0.0, "odom"), pose=make("geometry_msgs/msg/Pose", position=point(x, y), orientation=quat(0, 0, 0)))
-                for x, y in run.path])
-            put("path", first, path_msg, "nav_msgs/msg/Path")
-            mount = make("geometry_msgs/msg/TransformStamped", header=header(0.0, "base_link"), child_frame_id="camera",
-                         transform=T["geometry_msgs/msg/Transform"](translation=vec(cam.mount_forward_m, 0.0, cam.mount_height_m),
-                                                                     rotation=quat(0.0, math.radians(cam.pitch_deg), math.radians(cam.yaw_deg))))
-            put("tf_static", first, T["tf2_msgs/msg/TFMessage"](transforms=[mount]), "tf2_msgs/msg/TFMessage")
-            info = make("sensor_msgs/msg/CameraInfo", height=cam.height_px, width=cam.width_px, distortion_model="plumb_bob",
-                        d=np.zeros(5), k=np.array([fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0]), r=np.eye(3).ravel(),
-                        p=np.array([fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]))
-            # The trajectories are fixed in base_link: one marker each, restamped and recoloured per frame.
-            markers = [make("visualization_msgs/msg/Marker", ns="trajectories", id=j, type=4, action=0, pose=make("geometry_msgs/msg/Pose", orientation=quat(0, 0, 0)),
-                            lifetime=T["builtin_interfaces/msg/Duration"](sec=0, nanosec=200_000_000),
-                            points=[point(px, py, 0.02) for px, py in trajectories[j, :, :2]]) for j in range(c.m)]
-            marker_array = T["visualization_msgs/msg/MarkerArray"](markers=markers)
-            for i in range(len(run.times)):
-                t = float(run.times[i]) - t0
-                ns = bag_ns(float(run.times[i]))
-                x, y, yaw = (float(v) for v in run.poses[i])
-                ids = run.image(i)
-                info.header = header(t, "camera")
-                put("camera_info", ns, info, "sensor_msgs/msg/CameraInfo")
-                put("labels", ns, make("sensor_msgs/msg/CompressedImage", header=header(t, "camera"), format="mono8; png compressed class ids", data=_png(ids)), "sensor_msgs/msg/CompressedImage")
-                put("labels_color", ns, make("sensor_msgs/msg/CompressedImage", header=header(t, "camera"), format="png", data=_png(ids, palette)), "sensor_msgs/msg/CompressedImage")
-                pose = make("geometry_msgs/msg/PoseWithCovariance", pose=make("geometry_msgs/msg/Pose", position=point(x, y), orientation=quat(0, 0, yaw)))
-                put("odom", ns, make("nav_msgs/msg/Odometry", header=header(t, "odom"), child_frame_id="base_link", pose=pose), "nav_msgs/msg/Odometry")
-                tf = make("geometry_msgs/msg/TransformStamped", header=header(t, "odom"), child_frame_id="base_link",
-                          transform=T["geometry_msgs/msg/Transform"](translation=vec(x, y, 0.0), rotation=quat(0, 0, yaw)))
-                put("tf", ns, T["tf2_msgs/msg/TFMessage"](transforms=[tf]), "tf2_msgs/msg/TFMessage")
-                v, w = (float(u) for u in run.commands[i])
-                put("cmd_vel", ns, T["geometry_msgs/msg/Twist"](linear=vec(x=v), angular=vec(z=w)), "geometry_msgs/msg/Twist")
-                frame_header = header(t, "base_link")
-                for j, marker in enumerate(markers):
-                    chosen = j == int(run.chosen[i])
-                    p = float(run.probs[i, j]) if run.probs is not None else 0.0
-                    marker.header = frame_header
-                    marker.scale = vec(x=0.08 if chosen else 0.03)
-                    marker.color = color(0.1, 0.9, 0.2) if chosen else color(1.0, 1.0 - p, 1.0 - p, 0.4 + 0.6 * p)
-                put("trajectories", ns, marker_array, "visualization_msgs/msg/MarkerArray")
-                if progress is not None:
-                    progress(i + 1, len(run.times))
+        write(tmpdir / "bag")
         written = next((tmpdir / "bag").glob("*.mcap"))
         out.parent.mkdir(parents=True, exist_ok=True)
         written.replace(out)
     finally:
         shutil.rmtree(tmpdir, ignore_errors=True)
-    if robot_file:
-        robot = out.with_name(out.name + ".robot.yaml")
-        write_text_atomic(
-            robot,
-            "format: terrapref-robot/1\n"
-            f"topics:\n  segmentation: {PREFIX}/labels\n  camera_info: {PREFIX}/camera_info\n  odometry: {PREFIX}/odom\n"
-            f"  command: {PREFIX}/cmd_vel\n  path: {PREFIX}/path\n"
-            f"camera:\n  height_m: {cam.mount_height_m!r}\n  pitch_deg: {cam.pitch_deg!r}\n  forward_m: {cam.mount_forward_m!r}\n"
-            f"  yaw_deg: {cam.yaw_deg!r}\n  max_range_m: {cam.max_range_m!r}\n"
-            "labels: terrapref   # the ids are terrapref's own classes\n"
-        )
-    return out
+
+
+def _write_bag(bag_dir: Path, run: RunFrames, progress: Callable[[int, int], None] | None) -> None:
+    """The bag of ``run`` at ``bag_dir``: the path and the camera's mounting once, then each frame."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    ts = typestore()
+    scene = _Scene.of(ts, run)
+    with Writer(bag_dir, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        topics = add_topics(writer, ts, _TOPICS)
+        _write_fixed(topics, scene)
+        for i in range(len(run.times)):
+            _write_frame(topics, scene, i)
+            if progress is not None:
+                progress(i + 1, len(run.times))
+
+
+def _write_fixed(topics: Topics, scene: _Scene) -> None:
+    """The reference path and the camera's mounting (base_link -> camera), at the first frame."""
+    ts, cam = scene.ts, scene.run.camera
+    first = scene.bag_ns(scene.t0_s)
+    topics.write("path", first, path_message(ts, scene.run.path))
+    mount = transform(ts, header(ts, 0.0, "base_link"), "camera", (cam.mount_forward_m, 0.0, cam.mount_height_m),
+                      rpy_quaternion(ts, 0.0, math.radians(cam.pitch_deg), math.radians(cam.yaw_deg)))
+    topics.write("tf_static", first, tf_message(ts, [mount]))
+
+
+def _write_frame(topics: Topics, scene: _Scene, i: int) -> None:
+    """Frame ``i``: calibration, class ids and their colours, pose, command and trajectories."""
+    ts, run = scene.ts, scene.run
+    t = float(run.times[i]) - scene.t0_s
+    ns = scene.bag_ns(float(run.times[i]))
+    x, y, yaw = (float(v) for v in run.poses[i])
+    ids = run.image(i)
+    topics.write("camera_info", ns, camera_info(ts, header(ts, t, "camera"), run.camera))
+    topics.write("labels", ns, compressed_image(ts, header(ts, t, "camera"), "mono8; png compressed class ids", png(ids)))
+    topics.write("labels_color", ns, compressed_image(ts, header(ts, t, "camera"), "png", png(ids, scene.palette)))
+    topics.write("odom", ns, odometry(ts, header(ts, t, "odom"), pose(ts, x, y, rpy_quaternion(ts, 0, 0, yaw))))
+    base = transform(ts, header(ts, t, "odom"), "base_link", (x, y, 0.0), rpy_quaternion(ts, 0, 0, yaw))
+    topics.write("tf", ns, tf_message(ts, [base]))
+    v, w = (float(u) for u in run.commands[i])
+    topics.write("cmd_vel", ns, twist(ts, v, w))
+    _restyle_markers(scene, i, header(ts, t, "base_link"))
+    topics.write("trajectories", ns, scene.marker_array)
+
+
+def _restyle_markers(scene: _Scene, i: int, stamped: Message) -> None:
+    """The markers for frame ``i``: the chosen trajectory thick and green, the others white to
+    red, more opaque the likelier the planner found them (F_t, when a planner drove)."""
+    run = scene.run
+    for j, marker in enumerate(scene.markers):
+        chosen = j == int(run.chosen[i])
+        p = float(run.probs[i, j]) if run.probs is not None else 0.0
+        marker.header = stamped
+        marker.scale = vector3(scene.ts, x=0.08 if chosen else 0.03)
+        marker.color = _color(scene.ts, 0.1, 0.9, 0.2) if chosen else _color(scene.ts, 1.0, 1.0 - p, 1.0 - p, 0.4 + 0.6 * p)
+
+
+def _color(ts: Typestore, r: float, g: float, b: float, a: float = 1.0) -> Message:
+    """std_msgs/ColorRGBA, each channel in [0, 1]."""
+    return ts.types["std_msgs/msg/ColorRGBA"](r=float(r), g=float(g), b=float(b), a=float(a))
+
+
+def _robot_yaml(cam: CameraConfig) -> str:
+    """The terrapref-robot/1 file that imports the exported topics back with ``cam``'s mounting."""
+    return (
+        "format: terrapref-robot/1\n"
+        f"topics:\n  segmentation: {PREFIX}/labels\n  camera_info: {PREFIX}/camera_info\n  odometry: {PREFIX}/odom\n"
+        f"  command: {PREFIX}/cmd_vel\n  path: {PREFIX}/path\n"
+        f"camera:\n  height_m: {cam.mount_height_m!r}\n  pitch_deg: {cam.pitch_deg!r}\n  forward_m: {cam.mount_forward_m!r}\n"
+        f"  yaw_deg: {cam.yaw_deg!r}\n  max_range_m: {cam.max_range_m!r}\n"
+        "labels: terrapref   # the ids are terrapref's own classes\n"
+    )
 
 
 def recording_frames(rec) -> RunFrames:

@@ -55,7 +55,7 @@ def _member(g: _Graph, c: ClassifierConfig, weights: dict[str, np.ndarray], x: s
     if c.compress:
         per_row = g.op("Add", [g.op("MatMul", [x, g.const("compress_wT", w("compress.weight").T)]), g.const("compress_b", w("compress.bias"))])
         scores = g.op("Gather", [per_row, g.const("channel0", np.array(0, np.int64))], axis=2)  # (N, m)
-        h = g.op("Reshape", [per_row, g.const("flat", np.array([0, c.m * c.channels], np.int64))])
+        h = g.op("Reshape", [per_row, g.const("flat", np.array([0, c.m], np.int64))])
     else:
         scores = None
         h = g.op("Reshape", [x, g.const("flat", np.array([0, c.m * c.n_features], np.int64))])

@@ -77,46 +77,79 @@ def load_robot(path: str | Path, classes: ClassTable | None = None) -> RobotConf
     source = str(path)
     data = read_yaml_mapping(path, ROBOT_FORMAT)
     problems = [Problem(k, f"unknown key; expected {', '.join(sorted(_TOP))}") for k in data if k not in _TOP]
-    topics = data.get("topics")
-    out_topics: dict[str, str] = {}
-    if not isinstance(topics, dict):
+    topics = _check_topics(data.get("topics"), problems)
+    camera = _check_camera(data.get("camera"), problems)
+    problems += _other_problems(data)
+    if problems:
+        raise ConfigError(source, problems)
+    here = Path(path).parent
+    labels = _load_labels(data["labels"], here, classes, source)
+    profile_data = data.get("profile")
+    profile = PreferenceProfile.parse(profile_data, classes, f"{source}: profile") if profile_data is not None else PreferenceProfile.default(classes)
+    path_file = data.get("path_file")
+    resolved = None
+    if path_file is not None:
+        resolved = Path(path_file) if Path(path_file).is_absolute() else here / path_file
+    return RobotConfig(source, topics, camera, labels, profile, resolved, float(data.get("max_gap_s", 0.5)))
+
+
+def _check_topics(topics: object, problems: list[Problem]) -> dict[str, str]:
+    """The topic of each role in ``topics`` (the file's ``topics``); what is wrong goes in ``problems``."""
+    if not isinstance(topics, dict):  # one problem, not one per topic
         problems.append(Problem("topics", f"expected a mapping with {', '.join(_TOPICS_REQUIRED)} (and optionally path)"))
-        topics = {}
+        return {}
+    out: dict[str, str] = {}
     for key, value in topics.items():
         if key not in _TOPICS:
             problems.append(Problem(f"topics.{key}", f"unknown key; expected {', '.join(sorted(_TOPICS))}"))
         elif not isinstance(value, str) or not value.startswith("/"):
             problems.append(Problem(f"topics.{key}", "expected a topic name such as /robot/odom"))
         else:
-            out_topics[key] = value
-    if isinstance(data.get("topics"), dict):  # a missing mapping is one problem, not one per topic
-        problems += [Problem(f"topics.{k}", "missing") for k in _TOPICS_REQUIRED if k not in topics]
-    camera = data.get("camera")
-    out_camera = {"forward_m": 0.0, "yaw_deg": 0.0, "max_range_m": 30.0}
+            out[key] = value
+    problems += [Problem(f"topics.{k}", "missing") for k in _TOPICS_REQUIRED if k not in topics]
+    return out
+
+
+def _check_camera(camera: object, problems: list[Problem]) -> dict[str, float | str]:
+    """The camera's mounting from ``camera`` (the file's ``camera``), optional entries at their
+    defaults, or its base frame as ``tf``; what is wrong goes in ``problems``."""
+    out: dict[str, float | str] = {"forward_m": 0.0, "yaw_deg": 0.0, "max_range_m": 30.0}
     if not isinstance(camera, dict):
         problems.append(Problem("camera", "expected a mapping with height_m and pitch_deg (or tf: BASE_FRAME)"))
-        camera = {}
+        return out
     tf_frame = camera.get("tf")
     if tf_frame is not None and (not isinstance(tf_frame, str) or not tf_frame):
         problems.append(Problem("camera.tf", "expected the robot's base frame name, such as base_link"))
     for key, value in camera.items():
-        if key == "tf":
-            if isinstance(tf_frame, str) and tf_frame and set(camera) & {"height_m", "pitch_deg", "forward_m", "yaw_deg"}:
-                problems.append(Problem("camera.tf", "give either tf or height_m and pitch_deg, not both"))
-            continue
-        if key not in _CAMERA:
-            problems.append(Problem(f"camera.{key}", f"unknown key; expected {', '.join(_CAMERA)} or tf"))
-            continue
-        lo, hi = _CAMERA[key]
-        number = _number(value)
-        if number is None or not lo <= number <= hi:
-            problems.append(Problem(f"camera.{key}", f"expected a number in [{lo:g}, {hi:g}]"))
-        else:
-            out_camera[key] = number
-    if tf_frame is None and isinstance(data.get("camera"), dict):
+        if key != "tf":
+            number = _camera_number(key, value, problems)
+            if number is not None:
+                out[key] = number
+        elif isinstance(tf_frame, str) and tf_frame and set(camera) & {"height_m", "pitch_deg", "forward_m", "yaw_deg"}:
+            problems.append(Problem("camera.tf", "give either tf or height_m and pitch_deg, not both"))
+    if tf_frame is None:
         problems += [Problem(f"camera.{k}", "missing (or give tf: BASE_FRAME)") for k in ("height_m", "pitch_deg") if k not in camera]
     else:
-        out_camera["tf"] = tf_frame
+        out["tf"] = tf_frame
+    return out
+
+
+def _camera_number(key: str, value: object, problems: list[Problem]) -> float | None:
+    """The number ``camera.<key>`` holds, or None with the problem appended to ``problems``."""
+    if key not in _CAMERA:
+        problems.append(Problem(f"camera.{key}", f"unknown key; expected {', '.join(_CAMERA)} or tf"))
+        return None
+    lo, hi = _CAMERA[key]
+    number = _number(value)
+    if number is None or not lo <= number <= hi:
+        problems.append(Problem(f"camera.{key}", f"expected a number in [{lo:g}, {hi:g}]"))
+        return None
+    return number
+
+
+def _other_problems(data: dict) -> list[Problem]:
+    """What is wrong with the file's max_gap_s, path_file and labels."""
+    problems = []
     max_gap = data.get("max_gap_s", 0.5)
     if _number(max_gap) is None or not 0.05 <= max_gap <= 60:
         problems.append(Problem("max_gap_s", "expected a number of seconds in [0.05, 60]"))
@@ -125,22 +158,18 @@ def load_robot(path: str | Path, classes: ClassTable | None = None) -> RobotConf
         problems.append(Problem("path_file", "expected a file name"))
     if "labels" not in data or not isinstance(data["labels"], str):
         problems.append(Problem("labels", "expected a packaged label map name (rellis3d) or a terrapref-labels/1 file"))
-    if problems:
-        raise ConfigError(source, problems)
-    here = Path(path).parent
-    labels_ref = data["labels"]
-    if Path(labels_ref).suffix in (".yaml", ".yml") and not Path(labels_ref).is_absolute():
-        labels_ref = str(here / labels_ref)
+    return problems
+
+
+def _load_labels(ref: str, here: Path, classes: ClassTable, source: str) -> LabelMap:
+    """The label map ``ref`` names: a packaged one, or a file (a relative name is in ``here``,
+    the robot file's folder)."""
+    if Path(ref).suffix in (".yaml", ".yml") and not Path(ref).is_absolute():
+        ref = str(here / ref)
     try:
-        labels = load_label_map(labels_ref, classes, source=f"{source}: labels")
+        return load_label_map(ref, classes, source=f"{source}: labels")
     except UserError as exc:
         raise ConfigError(source, exc.lines()[0], field="labels") from None
-    profile_data = data.get("profile")
-    profile = PreferenceProfile.parse(profile_data, classes, f"{source}: profile") if profile_data is not None else PreferenceProfile.default(classes)
-    resolved = None
-    if path_file is not None:
-        resolved = Path(path_file) if Path(path_file).is_absolute() else here / path_file
-    return RobotConfig(source, out_topics, out_camera, labels, profile, resolved, float(max_gap))
 
 
 def load_waypoints(path: Path, source: str) -> np.ndarray:

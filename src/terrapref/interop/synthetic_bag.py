@@ -10,28 +10,39 @@ one-second gap in the odometry. Used by the tests and the import benchmark; not 
 
 from __future__ import annotations
 
-import io
 import math
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
-from PIL import Image as PILImage
 
+from terrapref.camera import CameraConfig
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.demos.session import Disturber
+from terrapref.interop.ros_messages import (Message, Topics, add_topics, camera_info, compressed_image, epoch_ns, header, odometry, path_message,
+                                            png, pose, quaternion, tf_message, transform, twist, typestore, yaw_quaternion)
 from terrapref.recipes import DEFAULT_RECIPE, RECIPES
-from terrapref.scenario import resolve_scenario
-from terrapref.sim import Simulation
+from terrapref.scenario import Scenario, resolve_scenario
+from terrapref.sim import Frame, Simulation
 from terrapref.terrain import default_classes
+from terrapref.vehicle import Command, Pose
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
 
 Storage = Literal["rosbag1", "sqlite3", "mcap"]
+Encoding = Literal["mono8", "mono16", "png", "rgb8"]
 TOPICS = {"segmentation": "/robot/seg/labels", "camera_info": "/robot/camera/camera_info", "odometry": "/robot/odom",
           "command": "/robot/cmd_vel", "path": "/route/plan"}
-EPOCH_S = 1_700_000_000
 RELLIS = {"grass": 3, "mud": 33, "rock": 34, "water": 6, "non_traversable": 19}  # and unknown (sky) -> 7
 UNLISTED_ID = 50  # an id the rellis3d map does not list
 COLORS = {3: (0, 102, 0), 33: (255, 128, 0), 34: (170, 170, 170), 6: (0, 128, 255), 19: (204, 153, 255), 7: (135, 206, 235)}  # for rgb8 logs
+ODOMETRY_RATE_HZ = 30.0
+ODOMETRY_GAP_S = (8.0, 9.0)  # with quirks, no odometry in this span of the drive
+# With quirks, what a robot's clocks and transport add: image and odometry stamps arrive this much
+# after the moment they stamp, and image stamps scatter by the jitter's standard deviation.
+IMAGE_DELAY_S, ODOMETRY_DELAY_S, STAMP_JITTER_S = 0.03, 0.004, 0.003
 
 
 def colour_label_map() -> str:
@@ -48,176 +59,248 @@ def robot_yaml(labels: str = "rellis3d", path_topic: bool = True) -> str:
     return f"format: terrapref-robot/1\ntopics:\n{topics}\ncamera:\n  height_m: 1.0\n  pitch_deg: 30.0\nlabels: {labels}\n"
 
 
+@dataclass(frozen=True)
+class _LogOptions:
+    """What the drive's log holds besides the messages themselves: see :func:`write_synthetic_bag`."""
+
+    quirks: bool
+    max_seconds: float | None
+    repeat_images: int
+
+
 def write_synthetic_bag(out: str | Path, storage: Storage = "mcap", scenario: str = "demo_course", seed: int = 0,
-                        profile: tuple[str, ...] | None = None, encoding: Literal["mono8", "mono16", "png", "rgb8"] = "mono8",
+                        profile: tuple[str, ...] | None = None, encoding: Encoding = "mono8",
                         quirks: bool = True, max_seconds: float | None = None, repeat_images: int = 1) -> Path:
     """Drive ``scenario`` with the synthetic driver and write the log; returns the bag's path.
 
     ``repeat_images`` > 1 publishes each frame that many times per 0.1 s (a faster camera), to
     make large logs for benchmarks.
     """
+    out = Path(out)
+    options = _LogOptions(quirks, max_seconds, repeat_images)
+    ros1 = storage == "rosbag1"
+    sc = resolve_scenario(scenario)
+    sim = Simulation(sc)
+    messages = _Messages(typestore(ros1), ros1, encoding, sim.camera.config)
+    odom = _OdomFrame(*(sc.start if quirks else (0.0, 0.0, 0.0)))
+    with _open_writer(out, storage) as writer:
+        log = _Log(messages, _Queue(add_topics(writer, messages.ts, _topics(encoding), ros1)), odom, options)
+        _put_fixed(log, [odom.pose(x, y, 0.0)[:2] for x, y in sc.waypoints])
+        _drive(sim, sc, seed, profile, log)
+        log.queue.flush(math.inf)
+    return out
+
+
+def _open_writer(out: Path, storage: Storage) -> Any:
+    """A rosbags writer (not yet open) of a ROS 1 bag, or a ROS 2 bag in MCAP or sqlite3."""
     from rosbags.rosbag1 import Writer as Writer1
     from rosbags.rosbag2 import StoragePlugin, Writer as Writer2
-    from rosbags.typesys import Stores, get_typestore
 
-    out = Path(out)
-    ros1 = storage == "rosbag1"
-    ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
-    if "tf2_msgs/msg/TFMessage" not in ts.fielddefs:  # not in rosbags' ROS 1 store: registered from its definition
-        from rosbags.typesys import get_types_from_msg
+    if storage == "rosbag1":
+        return Writer1(out)
+    return Writer2(out, version=9, storage_plugin=StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3)
 
-        ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
-    T = ts.types
+
+def _topics(encoding: Encoding) -> dict[str, tuple[str, str]]:
+    """The log's roles as (topic, type), in the order the bag lists them."""
+    seg_type = "sensor_msgs/msg/CompressedImage" if encoding == "png" else "sensor_msgs/msg/Image"
+    return {
+        "segmentation": (TOPICS["segmentation"], seg_type),
+        "camera_info": (TOPICS["camera_info"], "sensor_msgs/msg/CameraInfo"),
+        "odometry": (TOPICS["odometry"], "nav_msgs/msg/Odometry"),
+        "command": (TOPICS["command"], "geometry_msgs/msg/Twist"),
+        "path": (TOPICS["path"], "nav_msgs/msg/Path"),
+        "other": ("/diagnostics/status", "std_msgs/msg/String"),
+        "tf_static": ("/tf_static", "tf2_msgs/msg/TFMessage"),
+    }
+
+
+@dataclass(frozen=True)
+class _Messages:
+    """The log's own messages: ROS 1 or ROS 2 types, the segmentation's encoding, the camera."""
+
+    ts: Typestore
+    ros1: bool
+    encoding: Encoding
+    camera: CameraConfig
+
+    def header(self, t_s: float, frame_id: str) -> Message:
+        """std_msgs/Header stamped ``t_s`` [s] in ``frame_id``."""
+        return header(self.ts, t_s, frame_id, self.ros1)
+
+    def camera_info(self, t_s: float) -> Message:
+        """The camera's calibration, stamped ``t_s`` [s] in the optical frame."""
+        return camera_info(self.ts, self.header(t_s, "camera_optical"), self.camera, self.ros1)
+
+    def image(self, t_s: float, ids: np.ndarray) -> Message:
+        """The segmentation ``ids`` (H, W) in RELLIS-3D ids, in the log's encoding."""
+        stamped = self.header(t_s, "camera_optical")
+        if self.encoding == "png":
+            return compressed_image(self.ts, stamped, "mono8; png compressed", png(ids.astype(np.uint8)))
+        if self.encoding == "rgb8":  # a colour segmentation: the RELLIS ids through COLORS
+            rgb = np.zeros((*ids.shape, 3), np.uint8)
+            for rid, colour in COLORS.items():
+                rgb[ids == rid] = colour
+            return self._raw_image(stamped, 3 * self.camera.width_px, rgb.reshape(-1))
+        data = ids.astype("<u2" if self.encoding == "mono16" else np.uint8)
+        return self._raw_image(stamped, self.camera.width_px * data.itemsize, np.frombuffer(data.tobytes(), np.uint8))
+
+    def _raw_image(self, stamped: Message, step: int, data: np.ndarray) -> Message:
+        """sensor_msgs/Image of rows of ``step`` bytes, little-endian."""
+        return self.ts.types["sensor_msgs/msg/Image"](header=stamped, height=self.camera.height_px, width=self.camera.width_px,
+                                                      encoding=self.encoding, is_bigendian=0, step=step, data=data)
+
+    def odometry(self, t_s: float, x: float, y: float, yaw: float) -> Message:
+        """Odometry of base_link at (x, y [m], yaw [rad]) in the odom frame, stamped ``t_s``."""
+        return odometry(self.ts, self.header(t_s, "odom"), pose(self.ts, x, y, yaw_quaternion(self.ts, yaw)))
+
+
+class _Queue:
+    """Messages held until the log's time passes them, then written in bag-time order (messages
+    of one time in the order they were put)."""
+
+    def __init__(self, topics: Topics) -> None:
+        self.topics = topics
+        self.held: list[tuple[float, str, Message]] = []  # (bag time [s], role, message)
+
+    def put(self, bag_t_s: float, role: str, msg: Message) -> None:
+        """Hold ``msg`` for ``role`` until bag time ``bag_t_s`` [s] is flushed."""
+        self.held.append((bag_t_s, role, msg))
+
+    def flush(self, upto_s: float) -> None:
+        """Write every message held of bag time up to ``upto_s`` [s]."""
+        self.held.sort(key=lambda q: q[0])
+        while self.held and self.held[0][0] <= upto_s:
+            bag_t_s, role, msg = self.held.pop(0)
+            self.topics.write(role, epoch_ns(bag_t_s), msg)
+
+
+@dataclass(frozen=True)
+class _OdomFrame:
+    """The odometry frame: it starts at the pose (x, y [m], yaw [rad]) of the world frame."""
+
+    x_m: float
+    y_m: float
+    yaw_rad: float
+
+    def pose(self, x: float, y: float, yaw: float) -> tuple[float, float, float]:
+        """The world pose (x, y [m], yaw [rad]) in this frame."""
+        c, s = math.cos(self.yaw_rad), math.sin(self.yaw_rad)
+        dx, dy = x - self.x_m, y - self.y_m
+        return c * dx + s * dy, -s * dx + c * dy, yaw - self.yaw_rad
+
+
+@dataclass(frozen=True)
+class _Log:
+    """Where a drive's messages go, and how."""
+
+    messages: _Messages
+    queue: _Queue
+    odom: _OdomFrame
+    options: _LogOptions
+
+
+@dataclass
+class _DriveState:
+    """What the drive carries from one frame to the next."""
+
+    last_command: Command | None = None  # the last command published
+    swap_stamp_s: float | None = None  # a held-back image stamp, given to the next image
+    tick: int = 0  # vehicle steps published as odometry
+
+
+def _put_fixed(log: _Log, path_xy: list[tuple[float, float]]) -> None:
+    """The path (``path_xy`` [m] in the odom frame), and the camera's mounting."""
+    messages, cam = log.messages, log.messages.camera
+    ts = messages.ts
+    log.queue.put(0.0, "path", path_message(ts, path_xy, messages.ros1))
+    # The camera's mounting as a robot publishes it: base_link -> camera_link (x forward,
+    # pitched down) -> camera_optical (z forward), the frame the images are stamped in.
+    p2 = math.radians(cam.pitch_deg) / 2
+    mount = transform(ts, messages.header(0.0, "base_link"), "camera_link", (cam.mount_forward_m, 0.0, cam.mount_height_m),
+                      quaternion(ts, (0.0, math.sin(p2), 0.0, math.cos(p2))))
+    optical = transform(ts, messages.header(0.0, "camera_link"), "camera_optical", (0.0, 0.0, 0.0), quaternion(ts, (-0.5, 0.5, -0.5, 0.5)))
+    log.queue.put(0.0, "tf_static", tf_message(ts, [mount, optical]))
+
+
+def _drive(sim: Simulation, sc: Scenario, seed: int, profile: tuple[str, ...] | None, log: _Log) -> None:
+    """Drive ``sc`` as ``terrapref record`` does, publishing each step as it goes."""
+    rng = np.random.default_rng(seed)
+    driver = ExpertDriver(ExpertConfig.styled("default", profile), world=sim.world)
+    protocol = RECIPES[DEFAULT_RECIPE].disturbance
+    frame = sim.reset()
+    driver.reset(sc, rng)  # then the pushes' stream, in the order `terrapref record` draws them: the same drive
+    disturb = Disturber(protocol, np.random.default_rng(rng.integers(2**63)), 0.1) if protocol is not None else None
+    jitter = np.random.default_rng(seed + 1)
+    to_ids = _rellis_ids()
+    state = _DriveState()
+    max_seconds = log.options.max_seconds
+    while not sim.done and (max_seconds is None or frame.time_s < max_seconds):
+        command = driver.act(frame)
+        _put_camera(log, frame, to_ids[frame.image], jitter, state)
+        _put_command(log, frame.time_s, command, state)
+        frame = sim.step(disturb(command) if disturb is not None else command)
+        _put_odometry(log, sim.trace, state)
+        log.queue.flush(frame.time_s - 0.2)
+
+
+def _rellis_ids() -> np.ndarray:
+    """(256,) uint16: terrapref class id -> RELLIS-3D id (7, unknown, for any id not in RELLIS)."""
     classes = default_classes()
     to_ids = np.full(256, 7, np.uint16)
     for name, rid in RELLIS.items():
         to_ids[classes.id_of(name)] = rid
+    return to_ids
 
-    sc = resolve_scenario(scenario)
-    sim = Simulation(sc)
-    rng = np.random.default_rng(seed)
-    driver = ExpertDriver(ExpertConfig.styled("default", profile), world=sim.world)
-    protocol = RECIPES[DEFAULT_RECIPE].disturbance
-    sx, sy, syaw = sc.start if quirks else (0.0, 0.0, 0.0)
-    c, s = math.cos(syaw), math.sin(syaw)
 
-    def to_odom(x: float, y: float, yaw: float) -> tuple[float, float, float]:  # the frame that starts at the robot
-        dx, dy = x - sx, y - sy
-        return c * dx + s * dy, -s * dx + c * dy, yaw - syaw
+def _put_camera(log: _Log, frame: Frame, ids: np.ndarray, jitter: np.random.Generator, state: _DriveState) -> None:
+    """The frame's segmentation ``ids`` (H, W) in RELLIS-3D ids (with quirks, a corner of ids no
+    map lists, and now and then no image), and every tenth frame the calibration and the
+    unrelated topic."""
+    quirks, t = log.options.quirks, frame.time_s
+    if quirks:
+        ids[:4, :40] = UNLISTED_ID
+    stamp = t + (jitter.normal(0.0, STAMP_JITTER_S) if quirks else 0.0)
+    if not (quirks and frame.index % 50 == 49):  # else a dropped image
+        _put_images(log, frame.index, ids, stamp, state)
+    if frame.index % 10 == 0:
+        log.queue.put(t + 0.001, "camera_info", log.messages.camera_info(t))
+        log.queue.put(t + 0.002, "other", log.messages.ts.types["std_msgs/msg/String"](data="ok"))
 
-    def time(t_s: float):
-        ns = int(round((EPOCH_S + t_s) * 1e9))
-        return T["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
-    def header(t_s: float, frame: str):
-        H = T["std_msgs/msg/Header"]
-        return H(seq=0, stamp=time(t_s), frame_id=frame) if ros1 else H(stamp=time(t_s), frame_id=frame)
+def _put_images(log: _Log, index: int, ids: np.ndarray, stamp: float, state: _DriveState) -> None:
+    """Frame ``index``'s image ``repeat_images`` times over 0.1 s; with quirks, now and then
+    a pair whose stamps arrive out of order."""
+    quirks, repeat, image = log.options.quirks, log.options.repeat_images, log.messages.image
+    for r in range(repeat):
+        st = stamp + r * 0.1 / repeat
+        if quirks and index % 37 == 5 and r == 0:
+            state.swap_stamp_s = st  # this image's stamp goes to the next one: a pair out of order
+            continue
+        if state.swap_stamp_s is not None:
+            log.queue.put(state.swap_stamp_s + IMAGE_DELAY_S, "segmentation", image(st, ids))
+            log.queue.put(st + IMAGE_DELAY_S, "segmentation", image(state.swap_stamp_s, ids))
+            state.swap_stamp_s = None
+            continue
+        log.queue.put(st + (IMAGE_DELAY_S if quirks else 0.0), "segmentation", image(st, ids))
 
-    def quat(yaw: float):
-        return T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))
 
-    def point(x: float, y: float):
-        return T["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=0.0)
+def _put_command(log: _Log, t_s: float, command: Command, state: _DriveState) -> None:
+    """The operator's command (with quirks, only when it changes)."""
+    if command != state.last_command or not log.options.quirks:
+        log.queue.put(t_s + 0.005, "command", twist(log.messages.ts, command[0], command[1]))
+        state.last_command = command
 
-    def vec(x: float = 0.0, z: float = 0.0):
-        return T["geometry_msgs/msg/Vector3"](x=float(x), y=0.0, z=float(z))
 
-    cam = sim.camera.config
-    fx, fy, cx, cy = sim.camera.config.intrinsics
-    h, w = cam.height_px, cam.width_px
-
-    def camera_info(t_s: float):
-        kw = dict(header=header(t_s, "camera_optical"), height=h, width=w, distortion_model="plumb_bob",
-                  binning_x=0, binning_y=0, roi=T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False))
-        arrays = {"d": np.zeros(5), "k": np.array([fx, 0, cx, 0, fy, cy, 0, 0, 1.0]), "r": np.eye(3).ravel(), "p": np.array([fx, 0, cx, 0, 0, fy, cy, 0, 0, 0, 1.0, 0])}
-        kw.update({(k.upper() if ros1 else k): v for k, v in arrays.items()})
-        return T["sensor_msgs/msg/CameraInfo"](**kw)
-
-    def image(t_s: float, ids: np.ndarray):
-        if encoding == "png":
-            buf = io.BytesIO()
-            PILImage.fromarray(ids.astype(np.uint8)).save(buf, format="PNG", compress_level=1)
-            return "sensor_msgs/msg/CompressedImage", T["sensor_msgs/msg/CompressedImage"](header=header(t_s, "camera_optical"), format="mono8; png compressed", data=np.frombuffer(buf.getvalue(), np.uint8))
-        if encoding == "rgb8":  # a colour segmentation: the RELLIS ids through COLORS
-            rgb = np.zeros((*ids.shape, 3), np.uint8)
-            for rid, colour in COLORS.items():
-                rgb[ids == rid] = colour
-            return "sensor_msgs/msg/Image", T["sensor_msgs/msg/Image"](header=header(t_s, "camera_optical"), height=h, width=w, encoding="rgb8", is_bigendian=0,
-                                                                   step=3 * w, data=rgb.reshape(-1))
-        data = ids.astype("<u2" if encoding == "mono16" else np.uint8)
-        return "sensor_msgs/msg/Image", T["sensor_msgs/msg/Image"](header=header(t_s, "camera_optical"), height=h, width=w, encoding=encoding, is_bigendian=0,
-                                                               step=w * data.itemsize, data=np.frombuffer(data.tobytes(), np.uint8))
-
-    if ros1:
-        writer = Writer1(out)
-    else:
-        writer = Writer2(out, version=9, storage_plugin=StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3)
-    with writer:
-        seg_type = "sensor_msgs/msg/CompressedImage" if encoding == "png" else "sensor_msgs/msg/Image"
-        conns = {
-            "segmentation": writer.add_connection(TOPICS["segmentation"], seg_type, typestore=ts),
-            "camera_info": writer.add_connection(TOPICS["camera_info"], "sensor_msgs/msg/CameraInfo", typestore=ts),
-            "odometry": writer.add_connection(TOPICS["odometry"], "nav_msgs/msg/Odometry", typestore=ts),
-            "command": writer.add_connection(TOPICS["command"], "geometry_msgs/msg/Twist", typestore=ts),
-            "path": writer.add_connection(TOPICS["path"], "nav_msgs/msg/Path", typestore=ts),
-            "other": writer.add_connection("/diagnostics/status", "std_msgs/msg/String", typestore=ts),
-            "tf_static": writer.add_connection("/tf_static", "tf2_msgs/msg/TFMessage", typestore=ts),
-        }
-        queue: list[tuple[float, str, object, str]] = []  # (bag time, role, message, type), flushed in bag-time order
-
-        def put(bag_t: float, role: str, msg, msgtype: str) -> None:
-            queue.append((bag_t, role, msg, msgtype))
-
-        def flush(upto: float) -> None:
-            queue.sort(key=lambda q: q[0])
-            while queue and queue[0][0] <= upto:
-                bag_t, role, msg, msgtype = queue.pop(0)
-                data = ts.serialize_ros1(msg, msgtype) if ros1 else ts.serialize_cdr(msg, msgtype)
-                writer.write(conns[role], int(round((EPOCH_S + bag_t) * 1e9)), data)
-
-        path_odom = [to_odom(x, y, 0.0)[:2] for x, y in sc.waypoints]
-        put(0.0, "path", T["nav_msgs/msg/Path"](header=header(0.0, "odom"), poses=[
-            T["geometry_msgs/msg/PoseStamped"](header=header(0.0, "odom"), pose=T["geometry_msgs/msg/Pose"](position=point(x, y), orientation=quat(0.0)))
-            for x, y in path_odom]), "nav_msgs/msg/Path")
-        # The camera's mounting as a robot publishes it: base_link -> camera_link (x forward,
-        # pitched down) -> camera_optical (z forward), the frame the images are stamped in.
-        def transform(parent: str, child: str, xyz: tuple[float, float, float], q: tuple[float, float, float, float]):
-            Q = T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3])
-            return T["geometry_msgs/msg/TransformStamped"](header=header(0.0, parent), child_frame_id=child,
-                                                            transform=T["geometry_msgs/msg/Transform"](translation=T["geometry_msgs/msg/Vector3"](x=xyz[0], y=xyz[1], z=xyz[2]), rotation=Q))
-        p2 = math.radians(cam.pitch_deg) / 2
-        put(0.0, "tf_static", T["tf2_msgs/msg/TFMessage"](transforms=[
-            transform("base_link", "camera_link", (cam.mount_forward_m, 0.0, cam.mount_height_m), (0.0, math.sin(p2), 0.0, math.cos(p2))),
-            transform("camera_link", "camera_optical", (0.0, 0.0, 0.0), (-0.5, 0.5, -0.5, 0.5))]), "tf2_msgs/msg/TFMessage")
-        frame = sim.reset()
-        driver.reset(sc, rng)  # then the pushes' stream, in the order `terrapref record` draws them: the same drive
-        disturb = Disturber(protocol, np.random.default_rng(rng.integers(2**63)), 0.1) if protocol is not None else None
-        jitter = np.random.default_rng(seed + 1)
-        last_cmd = None
-        swap_next = None
-        gap = (8.0, 9.0) if quirks else (math.inf, math.inf)
-        tick = 0
-        while not sim.done and (max_seconds is None or frame.time_s < max_seconds):
-            t = frame.time_s
-            command = driver.act(frame)
-            ids = to_ids[frame.image]
-            if quirks:
-                ids[:4, :40] = UNLISTED_ID
-            stamp = t + (jitter.normal(0.0, 0.003) if quirks else 0.0)
-            drop = quirks and frame.index % 50 == 49
-            if not drop:
-                for r in range(repeat_images):
-                    st = stamp + r * 0.1 / repeat_images
-                    if quirks and frame.index % 37 == 5 and r == 0:
-                        swap_next = st  # this image's stamp goes to the next one: a pair out of order
-                        continue
-                    if swap_next is not None:
-                        msgtype, msg = image(st, ids)
-                        put(swap_next + 0.03, "segmentation", msg, msgtype)
-                        msgtype, msg = image(swap_next, ids)
-                        put(st + 0.03, "segmentation", msg, msgtype)
-                        swap_next = None
-                        continue
-                    msgtype, msg = image(st, ids)
-                    put(st + (0.03 if quirks else 0.0), "segmentation", msg, msgtype)
-            if frame.index % 10 == 0:
-                put(t + 0.001, "camera_info", camera_info(t), "sensor_msgs/msg/CameraInfo")
-                put(t + 0.002, "other", T["std_msgs/msg/String"](data="ok"), "std_msgs/msg/String")
-            if command != last_cmd or not quirks:
-                put(t + 0.005, "command", T["geometry_msgs/msg/Twist"](linear=vec(x=command[0]), angular=vec(z=command[1])), "geometry_msgs/msg/Twist")
-                last_cmd = command
-            executed = disturb(command) if disturb is not None else command
-            frame = sim.step(executed)
-            for x, y, yaw in sim.trace[tick + 1:]:
-                tick += 1
-                t_odom = tick / 30.0
-                if gap[0] <= t_odom < gap[1]:
-                    continue
-                ox, oy, oyaw = to_odom(x, y, yaw)
-                pose = T["geometry_msgs/msg/PoseWithCovariance"](pose=T["geometry_msgs/msg/Pose"](position=point(ox, oy), orientation=quat(oyaw)), covariance=np.zeros(36))
-                twist = T["geometry_msgs/msg/TwistWithCovariance"](twist=T["geometry_msgs/msg/Twist"](linear=vec(), angular=vec()), covariance=np.zeros(36))
-                put(t_odom + (0.004 if quirks else 0.0), "odometry",
-                    T["nav_msgs/msg/Odometry"](header=header(t_odom, "odom"), child_frame_id="base_link", pose=pose, twist=twist), "nav_msgs/msg/Odometry")
-            flush(frame.time_s - 0.2)
-        flush(math.inf)
-    return out
+def _put_odometry(log: _Log, trace: list[Pose], state: _DriveState) -> None:
+    """The vehicle's steps since the last call, in the odom frame at ODOMETRY_RATE_HZ (with
+    quirks, delayed, and none in ODOMETRY_GAP_S)."""
+    quirks = log.options.quirks
+    gap = ODOMETRY_GAP_S if quirks else (math.inf, math.inf)
+    for x, y, yaw in trace[state.tick + 1:]:
+        state.tick += 1
+        t_odom = state.tick / ODOMETRY_RATE_HZ
+        if gap[0] <= t_odom < gap[1]:
+            continue
+        ox, oy, oyaw = log.odom.pose(x, y, yaw)
+        log.queue.put(t_odom + (ODOMETRY_DELAY_S if quirks else 0.0), "odometry", log.messages.odometry(t_odom, ox, oy, oyaw))

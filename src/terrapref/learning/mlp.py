@@ -33,7 +33,7 @@ def init_weights(config: ClassifierConfig, rng: np.random.Generator) -> dict[str
         weights[f"{name}.bias"] = rng.uniform(-bound, bound, fan_out)
 
     if config.compress:
-        linear("compress", config.n_features, config.channels)
+        linear("compress", config.n_features, 1)
     dims = [config.width_in] + [config.hidden] * config.depth + [config.m]
     for i, (a, b) in enumerate(zip(dims[:-1], dims[1:])):
         linear(f"layers.{i}", a, b)
@@ -99,9 +99,9 @@ class TrainableClassifier:
             x = x._replace(ints=ints)
         scores = None
         if c.compress:
-            per_row = exact.matmul(x, w["compress.weight"].T) + w["compress.bias"]  # (B m, channels)
-            scores = per_row.reshape(n, c.m, c.channels)[:, :, 0]
-            h = per_row.reshape(n, c.m * c.channels)
+            per_row = exact.matmul(x, w["compress.weight"].T) + w["compress.bias"]  # (B m, 1)
+            scores = per_row.reshape(n, c.m, 1)[:, :, 0]
+            h = per_row.reshape(n, c.m)
         else:
             h = (x.ints * x.unit).reshape(n, c.m * c.n_features)
         inputs, pre, post = [], [], []
@@ -131,11 +131,11 @@ class TrainableClassifier:
             dh = exact.matmul(g, w[f"layers.{i}.weight"])
             g = dh * _activation_slope(c.activation, cache.pre[i - 1], cache.post[i - 1]) if i > 0 else dh
         if c.compress:
-            per_row = g.reshape(n, c.m, c.channels)
+            per_row = g.reshape(n, c.m, 1)
             if c.skip:
                 per_row = per_row.copy()
                 per_row[:, :, 0] += grad_logits
-            flat = per_row.reshape(n * c.m, c.channels)
+            flat = per_row.reshape(n * c.m, 1)
             grads["compress.weight"] = exact.matmul(flat.T, cache.x)
             grads["compress.bias"] = exact.matmul(np.ones((1, len(flat))), flat)[0]
         return grads

@@ -131,7 +131,7 @@ def expected_shapes(c: ClassifierConfig) -> dict[str, tuple[int, ...]]:
         return {member_prefix(j) + name: shape for j in range(c.members) for name, shape in one.items()}
     shapes: dict[str, tuple[int, ...]] = {}
     if c.compress:
-        shapes |= {"compress.weight": (c.channels, c.n_features), "compress.bias": (c.channels,)}
+        shapes |= {"compress.weight": (1, c.n_features), "compress.bias": (1,)}
     dims = [c.width_in] + [c.hidden] * c.depth + [c.m]
     for i, (a, b) in enumerate(zip(dims[:-1], dims[1:])):
         shapes |= {f"layers.{i}.weight": (b, a), f"layers.{i}.bias": (b,)}

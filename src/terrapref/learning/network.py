@@ -14,6 +14,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from terrapref.configargs import option
+
 ACTIVATIONS = ("relu", "tanh", "elu")
 
 
@@ -32,35 +34,31 @@ class ClassifierConfig:
         skip: add the compressed scores to the logits (a residual path, so the identity
             "pick the best-scored trajectory" is the starting point); False is the paper's C.
         ignore: indices of U's columns the classifier never sees (set to zero): an ablation.
-        channels: outputs of the row-wise compression per trajectory (1: the paper's 5 -> 1;
-            more lets the hidden layers weigh, say, terrain and distance apart); with
-            ``skip`` the first channel is the residual score.
         members: networks of this shape, trained apart from different seeds; C's F_t is the
             mean of their softmax outputs (1: the paper's single network).
     """
 
     m: int = 21
     n_features: int = 5
-    hidden: int = 64
-    activation: str = "relu"
+    hidden: int = option(64, "width of each hidden layer")
+    activation: str = option("relu", "hidden activation", choices=ACTIVATIONS)
     depth: int = 3
     compress: bool = True
-    skip: bool = False
+    skip: bool = option(False, "add the compressed scores to the logits (a residual path)")
     ignore: tuple[int, ...] = ()
-    channels: int = 1
-    members: int = 1
+    members: int = option(1, "networks trained from different seeds; the model averages their F_t")
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "ignore", tuple(int(i) for i in self.ignore))
-        sizes = (self.m, self.n_features, self.hidden, self.depth, self.channels, self.members)
+        sizes = (self.m, self.n_features, self.hidden, self.depth, self.members)
         if any(isinstance(v, bool) or not isinstance(v, numbers.Integral) for v in sizes):
-            raise ValueError("m, n_features, hidden, depth, channels and members must be integers")
+            raise ValueError("m, n_features, hidden, depth and members must be integers")
         if any(not 0 <= i < self.n_features for i in self.ignore):
             raise ValueError("ignore: column index out of range")
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"activation must be one of {', '.join(ACTIVATIONS)}")
-        if self.m < 2 or self.n_features < 1 or self.hidden < 1 or self.depth < 1 or self.channels < 1 or self.members < 1:
-            raise ValueError("m >= 2, n_features >= 1, hidden >= 1, depth >= 1, channels >= 1, members >= 1")
+        if self.m < 2 or self.n_features < 1 or self.hidden < 1 or self.depth < 1 or self.members < 1:
+            raise ValueError("m >= 2, n_features >= 1, hidden >= 1, depth >= 1, members >= 1")
         if self.skip and not self.compress:
             raise ValueError("skip needs the row-wise compression")
 
@@ -70,10 +68,16 @@ class ClassifierConfig:
     @property
     def width_in(self) -> int:
         """Inputs of the first hidden layer."""
-        return self.m * self.channels if self.compress else self.m * self.n_features
+        return self.m if self.compress else self.m * self.n_features
 
     @classmethod
     def from_dict(cls, data: dict) -> ClassifierConfig:
+        """The configuration a model file's header holds. Files written before the row-wise
+        compression lost its ``channels`` option say ``channels: 1``, which is what C is."""
+        data = dict(data)
+        if data.get("channels", 1) != 1:
+            raise ValueError(f"channels: {data['channels']!r} is not supported (1 only)")
+        data.pop("channels", None)
         return cls(**data)
 
 
@@ -96,8 +100,8 @@ def member_prefix(j: int) -> str:
 def numpy_forward(config: ClassifierConfig, weights: dict[str, np.ndarray], U: np.ndarray) -> np.ndarray:
     """Logits of C for U of shape (m, k) or (B, m, k); returns (m,) or (B, m).
 
-    ``weights`` uses the PyTorch state-dict names: compress.weight (channels, k),
-    compress.bias (channels,), layers.{i}.weight (out, in), layers.{i}.bias (out,); each
+    ``weights`` uses the PyTorch state-dict names: compress.weight (1, k),
+    compress.bias (1,), layers.{i}.weight (out, in), layers.{i}.bias (out,); each
     prefixed by ``members.{j}.`` in an ensemble, whose logits are the log of the members' mean
     softmax (so that the softmax of the result is that mean).
     """
@@ -118,7 +122,7 @@ def _forward_one(config: ClassifierConfig, weights: dict[str, np.ndarray], x: np
     """Logits (B, m) of one network, whose weight names start with ``prefix``, for U (B, m, k),
     ignored columns already zeroed."""
     if config.compress:
-        per_row = x @ weights[f"{prefix}compress.weight"].T + weights[f"{prefix}compress.bias"]  # (B, m, channels)
+        per_row = x @ weights[f"{prefix}compress.weight"].T + weights[f"{prefix}compress.bias"]  # (B, m, 1)
         scores = per_row[..., 0]
         h = per_row.reshape(len(x), -1)
     else:

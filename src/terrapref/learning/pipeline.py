@@ -36,7 +36,7 @@ def model_meta(dataset: Dataset, config: TrainConfig, result: TrainResult, sourc
         "best_epoch": result.best_epoch,
         "steps": result.steps,
         **({"identifiability": result.identifiability.to_dict()} if result.identifiability is not None else {}),
-        **({"utility": {"w": result.utility.w.tolist(), "b": result.utility.b.tolist(), "weight": config.stage_weight,
+        **({"utility": {"w": result.utility.w.tolist(), "b": result.utility.b.tolist(), "weight": config.second_stage.weight,
                         "fit": "lookahead" if dataset.U2 is not None else "frames"}} if result.utility is not None else {}),
         **({"members": [{"seed": seed, "best_epoch": r.best_epoch, "history": [asdict(h) for h in r.history]}
                         for seed, r in zip(config.member_seeds, result.members)]} if result.members else {}),
@@ -108,7 +108,7 @@ def train_and_save(dataset: Dataset, out: str | Path, config: TrainConfig, check
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     source = _source_meta(dataset, config, recipe)  # the data's fingerprint hashes every sample: once
-    saver = _Checkpoints(out, {**source, "members": config.members}, checkpoints)
+    saver = _Checkpoints(out, {**source, "members": config.classifier.members}, checkpoints)
     try:
         result = train(dataset, config, progress, on_epoch=saver)
     except BaseException:

@@ -16,7 +16,7 @@ class UtilityClassifier(nn.Module):
     def __init__(self, config: ClassifierConfig) -> None:
         super().__init__()
         self.config = config
-        self.compress = nn.Linear(config.n_features, config.channels) if config.compress else None
+        self.compress = nn.Linear(config.n_features, 1) if config.compress else None
         dims = [config.width_in] + [config.hidden] * config.depth + [config.m]
         self.layers = nn.ModuleList(nn.Linear(a, b) for a, b in zip(dims[:-1], dims[1:]))
         self.act = _ACT[config.activation]()
@@ -26,7 +26,7 @@ class UtilityClassifier(nn.Module):
             U = U.clone()
             U[..., list(self.config.ignore)] = 0.0
         if self.compress is not None:
-            per_row = self.compress(U)  # (B, m, channels)
+            per_row = self.compress(U)  # (B, m, 1)
             scores, h = per_row[..., 0], per_row.flatten(1)
         else:
             scores = h = U.flatten(1)

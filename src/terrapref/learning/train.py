@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, replace
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, dataclass, field, is_dataclass, replace
+from typing import Any
 
 import numpy as np
 
+from terrapref.configargs import option
 from terrapref.demos.dataset import Dataset
 from terrapref.learning import exact
 from terrapref.learning.identify import Identifiability, identifiability
@@ -29,74 +31,116 @@ INIT_STREAM = 17  # the initial weights come from the stream (seed, INIT_STREAM)
 
 
 @dataclass(frozen=True)
-class TrainConfig:
-    """Training hyperparameters (defaults: the paper's recipe).
+class OptimiserConfig:
+    """Adam over shuffled mini-batches; the epoch with the lowest validation loss is kept.
 
     Attributes:
-        epochs: passes over the training split.
-        lr: Adam learning rate.
-        batch_size: samples per step.
-        val_fraction: share of samples held out for validation.
+        epochs: passes over the training split (paper: 15).
+        lr: Adam's learning rate (paper: 1e-3).
+        batch_size: samples per step (paper: 256).
+        val_fraction: share of the samples held out for validation (paper: 0.2).
+    """
+
+    epochs: int = option(15, "passes over the training split")
+    lr: float = option(1e-3, "Adam's learning rate")
+    batch_size: int = option(256, "samples per step")
+    val_fraction: float = 0.2
+
+    def __post_init__(self) -> None:
+        _check([(self.epochs >= 1, "epochs must be >= 1"), (self.batch_size >= 1, "batch_size must be >= 1"),
+                (self.lr > 0, "lr must be > 0"), (0.0 <= self.val_fraction < 1.0, "val_fraction must be in [0, 1)")])
+
+
+@dataclass(frozen=True)
+class DataOptions:
+    """How the samples are weighted and augmented before C sees them.
+
+    Attributes:
         class_balance: weight the loss by inverse label frequency (off in the paper's recipe).
         mirror: add every training sample mirrored left-right (trajectory i <-> m-1-i, label
             likewise): the preference does not depend on the side a patch is on, and a
             demonstration shows each pair on one side only. Needs a symmetric w grid.
         ignore_features: utility columns (by name: "distance", "mud", ...) that C never sees.
-        seed: seeds the split, the initialisation and the batch order.
-        hidden, activation, depth, skip, compress, channels: the classifier's shape (see
-            ClassifierConfig).
-        members: networks trained apart, member j from seed ``seed + MEMBER_SEED_STEP * j``
-            (its own split, initialisation and batch order); C averages their F_t.
-        utility: also fit the linear utility model (terrapref.learning.linear) to every sample,
-            with the mirrored copies when ``mirror`` is on, and keep it with the model; the
-            planner's second stage scores with it (terrapref.planner.second_stage). When the
-            dataset carries the look-ahead utilities (``FeatureConfig.lookahead``), the fit
-            goes through the look-ahead (``fit_lookahead_utility``).
-        stage_weight: the weight of the second stage's value against log F_t in the planner's
-            decision, stored with the utility.
     """
 
-    epochs: int = 15
-    lr: float = 1e-3
-    batch_size: int = 256
-    val_fraction: float = 0.2
-    class_balance: bool = False
-    mirror: bool = False
-    seed: int = 0
-    hidden: int = 64
-    activation: str = "relu"
-    depth: int = 3
-    skip: bool = False
-    compress: bool = True
+    class_balance: bool = option(False, "weight the loss by inverse label frequency")
+    mirror: bool = option(False, "add left-right mirrored copies of the training samples")
     ignore_features: tuple[str, ...] = ()
-    channels: int = 1
-    members: int = 1
-    utility: bool = False
-    stage_weight: float = 1.5
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "ignore_features", tuple(self.ignore_features))
-        checks = [
-            (self.epochs >= 1, "epochs must be >= 1"),
-            (self.batch_size >= 1, "batch_size must be >= 1"),
-            (self.lr > 0, "lr must be > 0"),
-            (0.0 <= self.val_fraction < 1.0, "val_fraction must be in [0, 1)"),
-            (self.members >= 1, "members must be >= 1"),
-            (math.isfinite(self.stage_weight) and self.stage_weight >= 0, "stage_weight must be finite and >= 0"),
-        ]
-        for ok, message in checks:
-            if not ok:
-                raise ValueError(message)
-        # The classifier's own checks (hidden, depth, activation, skip with compress).
-        ClassifierConfig(2, 1, self.hidden, self.activation, self.depth, self.compress, self.skip, channels=self.channels)
+
+
+@dataclass(frozen=True)
+class SecondStageConfig:
+    """The linear utility model (terrapref.learning.linear), fitted to every sample (with the
+    mirrored copies when ``DataOptions.mirror`` is on) and kept with the model; the planner's
+    second stage scores with it (terrapref.planner.second_stage). When the dataset carries the
+    look-ahead utilities (``FeatureConfig.lookahead``), the fit goes through the look-ahead.
+
+    Attributes:
+        weight: the second stage's value against log F_t in the planner's decision.
+    """
+
+    weight: float = option(1.5, "the second stage's weight against log F_t in the decision", flag="stage-weight")
+
+    def __post_init__(self) -> None:
+        _check([(math.isfinite(self.weight) and self.weight >= 0, "stage weight must be finite and >= 0")])
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """How C is trained (defaults: the paper's recipe), in its parts.
+
+    Attributes:
+        optimiser: epochs, learning rate, batches, the validation split.
+        classifier: C's shape (hidden width, activation, depth, residual path, ensemble
+            members); its ``m``, ``n_features`` and ``ignore`` are set from the data.
+        data: loss weighting and augmentation.
+        second_stage: also fit the linear utility for the planner's second stage (None: C alone).
+        seed: seeds the split, the initialisation and the batch order; member j of an ensemble
+            trains from ``seed + MEMBER_SEED_STEP * j`` (its own split, initialisation and order).
+    """
+
+    optimiser: OptimiserConfig = field(default_factory=OptimiserConfig)
+    classifier: ClassifierConfig = field(default_factory=ClassifierConfig)
+    data: DataOptions = field(default_factory=DataOptions)
+    second_stage: SecondStageConfig | None = option(None, "also fit the linear utility and store it with the model; "
+                                                          "the planner then scores a second stage of trajectories with it")
+    seed: int = option(0, "seeds the split, the initialisation and the batch order")
 
     @property
     def member_seeds(self) -> tuple[int, ...]:
         """The seed each member of an ensemble trains from (one: ``seed``)."""
-        return tuple(self.seed + MEMBER_SEED_STEP * j for j in range(self.members))
+        return tuple(self.seed + MEMBER_SEED_STEP * j for j in range(self.classifier.members))
+
+    def with_epochs(self, epochs: int) -> TrainConfig:
+        """The same configuration, trained for ``epochs``."""
+        return replace(self, optimiser=replace(self.optimiser, epochs=epochs))
+
+    def updated(self, changes: Mapping[str, Any]) -> TrainConfig:
+        """This configuration with ``changes`` applied part by part, e.g. ``{"classifier":
+        {"hidden": 16}, "seed": 3}`` (a variant named in data, such as a study's ablation)."""
+        return _updated(self, changes)
 
     def to_dict(self) -> dict:
-        return {**asdict(self), "ignore_features": list(self.ignore_features)}
+        return {"optimiser": asdict(self.optimiser), "classifier": self.classifier.to_dict(),
+                "data": {**asdict(self.data), "ignore_features": list(self.data.ignore_features)},
+                "second_stage": None if self.second_stage is None else asdict(self.second_stage), "seed": self.seed}
+
+
+def _updated(config: Any, changes: Mapping[str, Any]) -> Any:
+    parts = {}
+    for name, value in changes.items():
+        current = getattr(config, name)
+        parts[name] = _updated(current, value) if is_dataclass(current) and isinstance(value, Mapping) else value
+    return replace(config, **parts)
+
+
+def _check(checks: list[tuple[bool, str]]) -> None:
+    for ok, message in checks:
+        if not ok:
+            raise ValueError(message)
 
 
 @dataclass(frozen=True)
@@ -163,14 +207,15 @@ def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callabl
     same weights, bit for bit, on any CPU and thread count (:mod:`terrapref.learning.exact`).
     """
     config = config or TrainConfig()
-    if config.members == 1:
+    if config.classifier.members == 1:
         result = _train(dataset, config, progress, on_epoch and (lambda *a: on_epoch(0, *a)))
     else:
-        result = _ensemble([_train(dataset, replace(config, seed=seed, members=1), progress, on_epoch and (lambda *a, j=j: on_epoch(j, *a)))
+        one = replace(config.classifier, members=1)
+        result = _ensemble([_train(dataset, replace(config, seed=seed, classifier=one), progress, on_epoch and (lambda *a, j=j: on_epoch(j, *a)))
                             for j, seed in enumerate(config.member_seeds)])
     # The linear utility: the second stage's (when asked for), and the identifiability report's.
-    utility, gamma = _fit_utility(dataset, config.mirror)
-    if config.utility:
+    utility, gamma = _fit_utility(dataset, config.data.mirror)
+    if config.second_stage is not None:
         result.utility = utility
     result.identifiability = _identifiability(dataset, utility, gamma)
     return result
@@ -212,62 +257,94 @@ def mirrored(U: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return U[:, ::-1, :], U.shape[1] - 1 - labels
 
 
-def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetrics], None] | None,
-           on_epoch: Callable[[ClassifierConfig, dict[str, np.ndarray], EpochMetrics], None] | None = None) -> TrainResult:
-    n, m, k = dataset.U.shape
-    features = dataset.feature_config
-    rng = np.random.default_rng(config.seed)
-    tr, va = split_indices(n, config.val_fraction, rng)
+@dataclass(frozen=True)
+class _Samples:
+    """The training data as C's arithmetic sees it: inputs rounded once (batches index them),
+    labels, the two splits (mirrored copies appended to the training split only), and each
+    class's loss weight."""
+
+    inputs: exact.Rounded
+    labels: np.ndarray  # (N,) int64
+    train: np.ndarray  # indices
+    val: np.ndarray
+    class_w: np.ndarray  # (m,)
+
+
+def _samples(dataset: Dataset, config: TrainConfig, rng: np.random.Generator) -> _Samples:
+    """Split (from ``rng``), mirror the training split if asked, and weight the classes."""
+    n, m, _ = dataset.U.shape
+    tr, va = split_indices(n, config.optimiser.val_fraction, rng)
     U_np, y_np = dataset.U, dataset.labels
-    if config.mirror:
-        if not features.preference.control.symmetric:
+    if config.data.mirror:
+        if not dataset.feature_config.preference.control.symmetric:
             raise ValueError("mirror needs a w grid symmetric about zero")
         # Mirrored copies are appended and join the training split only; validation stays real.
         U_m, y_m = mirrored(U_np[tr], y_np[tr])
         U_np, y_np = np.concatenate([U_np, U_m]), np.concatenate([y_np, y_m])
         tr = np.concatenate([tr, np.arange(n, n + len(tr))])
-    names = features.column_names
-    unknown = set(config.ignore_features) - set(names)
+    class_w = class_weights(y_np[tr], m) if config.data.class_balance else np.ones(m)
+    return _Samples(round_inputs(U_np), np.asarray(y_np, dtype=np.int64), tr, va, class_w)
+
+
+def _classifier_for(dataset: Dataset, config: TrainConfig) -> ClassifierConfig:
+    """C's shape for this data: the configured one with the data's m and k and the ignored columns."""
+    _, m, k = dataset.U.shape
+    names = dataset.feature_config.column_names
+    unknown = set(config.data.ignore_features) - set(names)
     if unknown:
         raise ValueError(f"ignore_features: no column {sorted(unknown)} (columns: {', '.join(names)})")
-    ignore = tuple(names.index(n) for n in config.ignore_features)
-    classifier = ClassifierConfig(m, k, config.hidden, config.activation, config.depth, config.compress, config.skip, ignore, config.channels)
+    ignore = tuple(names.index(n) for n in config.data.ignore_features)
+    return replace(config.classifier, m=m, n_features=k, ignore=ignore)
+
+
+def _evaluate(net: TrainableClassifier, data: _Samples, idx: np.ndarray) -> tuple[float, float, float]:
+    """Loss, accuracy and top-3 accuracy of ``net`` on the samples ``idx`` (NaN for none)."""
+    if len(idx) == 0:
+        return math.nan, math.nan, math.nan
+    y = data.labels
+    logits, _ = net.forward(data.inputs._replace(ints=data.inputs.ints[idx]))
+    loss, _ = cross_entropy(logits, y[idx])
+    top = np.argsort(-logits, axis=1, kind="stable")[:, : min(3, logits.shape[1])]
+    acc = float(np.count_nonzero(top[:, 0] == y[idx]) / len(idx))
+    top3 = float(np.count_nonzero((top == y[idx, None]).any(axis=1)) / len(idx))
+    return exact.fsum(loss) / len(idx), acc, top3
+
+
+def _epoch(net: TrainableClassifier, opt: Adam, data: _Samples, order: np.ndarray, batch_size: int) -> tuple[float, float, int]:
+    """One pass over ``order`` in batches; the training loss and accuracy as the batches saw them, and the steps."""
+    y = data.labels
+    seen_loss, seen_hits, steps = [], 0, 0
+    for start in range(0, len(order), batch_size):
+        batch = order[start : start + batch_size]
+        logits, cache = net.forward(data.inputs._replace(ints=data.inputs.ints[batch]), keep=True)
+        loss, probs = cross_entropy(logits, y[batch])
+        seen_loss.append(loss)
+        seen_hits += int(np.count_nonzero(np.argmax(logits, axis=1) == y[batch]))
+        # d (sum_i c_{y_i} CE_i / n) / d logits = c_{y_i} (p_i - onehot_i) / n
+        scale = data.class_w[y[batch]] / float(len(batch))
+        probs[np.arange(len(batch)), y[batch]] -= 1.0
+        opt.step(net.backward(cache, probs * scale[:, None]))
+        steps += 1
+    n = len(order)
+    return exact.fsum(np.concatenate(seen_loss)) / n, seen_hits / n, steps
+
+
+def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetrics], None] | None,
+           on_epoch: Callable[[ClassifierConfig, dict[str, np.ndarray], EpochMetrics], None] | None = None) -> TrainResult:
+    """One network: split, initialise, train every epoch, keep the lowest-validation-loss one."""
+    rng = np.random.default_rng(config.seed)
+    data = _samples(dataset, config, rng)
+    classifier = _classifier_for(dataset, config)
     net = TrainableClassifier(classifier, init_weights(classifier, np.random.default_rng([config.seed, INIT_STREAM])))
-    opt = Adam(net.weights, config.lr)
-    inputs = round_inputs(U_np)  # rounded once; batches index it
-    y = np.asarray(y_np, dtype=np.int64)
-    # Each sample's loss weight: its class's (class balance; 1 without).
-    class_w = class_weights(y_np[tr], m) if config.class_balance else np.ones(m)
-
-    def evaluate(idx: np.ndarray) -> tuple[float, float, float]:
-        if len(idx) == 0:
-            return math.nan, math.nan, math.nan
-        logits, _ = net.forward(inputs._replace(ints=inputs.ints[idx]))
-        loss, _ = cross_entropy(logits, y[idx])
-        top = np.argsort(-logits, axis=1, kind="stable")[:, : min(3, m)]
-        acc = float(np.count_nonzero(top[:, 0] == y[idx]) / len(idx))
-        top3 = float(np.count_nonzero((top == y[idx, None]).any(axis=1)) / len(idx))
-        return exact.fsum(loss) / len(idx), acc, top3
-
+    opt = Adam(net.weights, config.optimiser.lr)
     history: list[EpochMetrics] = []
     checkpoints: list[dict[str, np.ndarray]] = []
     steps = 0
-    for epoch in range(1, config.epochs + 1):
-        order = tr[rng.permutation(len(tr))]
-        seen_loss, seen_hits = [], 0  # the training split's loss and accuracy, as the epoch's batches saw them
-        for start in range(0, len(order), config.batch_size):
-            batch = order[start : start + config.batch_size]
-            logits, cache = net.forward(inputs._replace(ints=inputs.ints[batch]), keep=True)
-            loss, probs = cross_entropy(logits, y[batch])
-            seen_loss.append(loss)
-            seen_hits += int(np.count_nonzero(np.argmax(logits, axis=1) == y[batch]))
-            # d (sum_i c_{y_i} CE_i / n) / d logits = c_{y_i} (p_i - onehot_i) / n
-            scale = class_w[y[batch]] / float(len(batch))
-            probs[np.arange(len(batch)), y[batch]] -= 1.0
-            opt.step(net.backward(cache, probs * scale[:, None]))
-            steps += 1
-        vl, vacc, vtop3 = evaluate(va)
-        metrics = EpochMetrics(epoch, exact.fsum(np.concatenate(seen_loss)) / len(tr), vl, seen_hits / len(tr), vacc, vtop3)
+    for epoch in range(1, config.optimiser.epochs + 1):
+        train_loss, train_acc, batches = _epoch(net, opt, data, data.train[rng.permutation(len(data.train))], config.optimiser.batch_size)
+        steps += batches
+        vl, vacc, vtop3 = _evaluate(net, data, data.val)
+        metrics = EpochMetrics(epoch, train_loss, vl, train_acc, vacc, vtop3)
         history.append(metrics)
         checkpoints.append({name: v.astype(np.float32) for name, v in net.weights.items()})
         if on_epoch is not None:

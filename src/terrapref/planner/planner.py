@@ -71,11 +71,11 @@ class Planner:
         self.camera = PinholeCamera(camera)
         self.featurizer = UtilityFeaturizer(policy.features, self.camera, policy.classes)
         self.control = policy.features.preference.control
-        utility = policy.stage_utility
-        if second_stage == MODEL:
+        stage = policy.stage_utility()
+        if second_stage == MODEL and stage is not None:
             look = policy.features.lookahead
-            second_stage = SecondStageConfig(weight=policy.stage_weight, **({"after_s": look.after_s, "stride": look.stride} if look else {}))
-        self.second_stage = SecondStage(second_stage, self.featurizer, self.camera, utility) if second_stage is not None and utility is not None else None
+            second_stage = SecondStageConfig(weight=stage.weight, **({"after_s": look.after_s, "stride": look.stride} if look else {}))
+        self.second_stage = SecondStage(second_stage, self.featurizer, self.camera, stage.utility) if second_stage is not None and stage is not None else None
         self.path: ReferencePath | None = None
         self.tracker: PathTracker | None = None
 

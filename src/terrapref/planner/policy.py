@@ -11,13 +11,16 @@ takes the argmax. The learned classifier C is one policy; the study's baselines 
 - ``LinearPolicy``: the same form with weights learned from demonstrations.
 - ``CnnPolicy`` (terrapref.baselines.cnn): end-to-end behaviour cloning from the image.
 
-A model file of any kind is loaded as its policy by ``terrapref.evaluation.policies.load_policy``.
+Kinds are registered by name and built or loaded by ``terrapref.planner.registry`` (``make``,
+``load_policy``).
 """
 
 from __future__ import annotations
 
+import abc
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +32,7 @@ from terrapref.learning.model_file import FORMAT, LoadedModel
 from terrapref.learning.network import numpy_forward
 from terrapref.tensorfile import write_tensor_file
 from terrapref.terrain import ClassTable, default_classes
+from terrapref.vehicle import pure_pursuit_yaw_rate
 
 
 @dataclass(frozen=True)
@@ -53,22 +57,49 @@ class Observation:
         return self.view.image
 
 
-class Policy:
-    """Scores trajectories. Subclasses set the configuration they were built for."""
+@dataclass(frozen=True)
+class StageUtility:
+    """What a policy's second stage scores with (terrapref.planner.second_stage): the linear
+    utility fitted with it and its weight against log F_t in the decision."""
 
-    name = "policy"
-    features: FeatureConfig
-    camera: CameraConfig
-    classes: ClassTable
-    profile: tuple[str, ...] | None = None
-    path: str = ""
-    uses_path_ahead = False  # the planner computes Observation.path_ahead only when asked
-    stage_utility: LinearUtility | None = None  # what the planner's second stage scores with, if the model has one
-    stage_weight: float = 1.5  # and its weight in the decision
+    utility: LinearUtility
+    weight: float
 
+
+class Policy(abc.ABC):
+    """Scores the m trajectories of a frame; the planner drives the best.
+
+    A policy is built for one feature configuration, camera and class table (the planner
+    refuses a camera it was not built for), and may name the preference order it learned
+    (``profile``) and the file it came from (``path``). Kinds are registered by name in
+    :mod:`terrapref.planner.registry`.
+
+    Args:
+        features: the utility features U it reads (and the preference set).
+        camera: the camera it was built for.
+        classes: the class table of the images it reads.
+        profile: the preference order it was trained under, best first, if any.
+        path: the model file it was loaded from ("" for none).
+    """
+
+    name: ClassVar[str] = "policy"
+    uses_path_ahead: ClassVar[bool] = False  # the planner computes Observation.path_ahead only when asked
+
+    def __init__(self, features: FeatureConfig | None = None, camera: CameraConfig | None = None, classes: ClassTable | None = None,
+                 profile: tuple[str, ...] | None = None, path: str = "") -> None:
+        self.features = features or FeatureConfig()
+        self.camera = camera or CameraConfig()
+        self.classes = classes or default_classes()
+        self.profile, self.path = profile, path
+
+    @abc.abstractmethod
     def logits(self, obs: Observation) -> np.ndarray:
         """One score per trajectory, shape (m,); the planner drives the argmax."""
-        raise NotImplementedError
+
+    def stage_utility(self) -> StageUtility | None:
+        """What a second stage beyond the trajectories scores with, for a policy trained with
+        one (None: the planner decides by ``logits`` alone)."""
+        return None
 
 
 class ClassifierPolicy(Policy):
@@ -77,14 +108,15 @@ class ClassifierPolicy(Policy):
     name = "classifier"
 
     def __init__(self, model: LoadedModel) -> None:
+        super().__init__(model.features, model.camera, model.classes, model.profile, model.path)
         self.model = model
-        self.features, self.camera, self.classes = model.features, model.camera, model.classes
-        self.profile, self.path = model.profile, model.path
         self._config, self._weights = model.classifier, model.weights
-        self.stage_utility, self.stage_weight = model.utility, model.stage_weight
 
     def logits(self, obs: Observation) -> np.ndarray:
         return numpy_forward(self._config, self._weights, obs.U)
+
+    def stage_utility(self) -> StageUtility | None:
+        return None if self.model.utility is None else StageUtility(self.model.utility, self.model.stage_weight)
 
 
 class LinearPolicy(Policy):
@@ -94,11 +126,8 @@ class LinearPolicy(Policy):
 
     def __init__(self, utility: LinearUtility, features: FeatureConfig | None = None, camera: CameraConfig | None = None,
                  classes: ClassTable | None = None, profile: tuple[str, ...] | None = None, path: str = "") -> None:
+        super().__init__(features, camera, classes, profile, path)
         self.utility = utility
-        self.features = features or FeatureConfig()
-        self.camera = camera or CameraConfig()
-        self.classes = classes or default_classes()
-        self.profile, self.path = profile, path
         if len(utility.w) != self.features.n_features or len(utility.b) != self.features.preference.m:
             raise ValueError("linear utility does not match the feature configuration")
 
@@ -139,21 +168,18 @@ class PurePursuitPolicy(Policy):
 
     def __init__(self, lookahead_m: float = 2.5, features: FeatureConfig | None = None, camera: CameraConfig | None = None,
                  classes: ClassTable | None = None) -> None:
-        self.features = features or FeatureConfig()
-        self.camera = camera or CameraConfig()
-        self.classes = classes or default_classes()
+        super().__init__(features, camera, classes)
         self.lookahead_m = lookahead_m
         control = self.features.preference.control
         self._w = np.asarray(control.w_rps, dtype=float)
         self._v = float(control.v_mps)
 
     def logits(self, obs: Observation) -> np.ndarray:
-        # Interpolate the look-ahead point from the path points 1 m apart.
+        # The path point (1 m apart) nearest the look-ahead distance.
         d = np.hypot(obs.path_ahead[:, 0], obs.path_ahead[:, 1])
         j = int(np.clip(np.searchsorted(d, self.lookahead_m), 0, len(d) - 1))
         x, y = obs.path_ahead[j]
-        dist = max(math.hypot(x, y), 1e-6)
-        w = 2.0 * self._v * (y / dist) / dist  # 2 v sin(alpha) / L
+        w = pure_pursuit_yaw_rate(self._v, math.atan2(y, x), max(math.hypot(x, y), 1e-6))
         return -np.abs(self._w - w)
 
 

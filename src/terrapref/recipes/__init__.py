@@ -34,7 +34,8 @@ from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, LookaheadConfig
 from terrapref.learning.model_file import load_model
 from terrapref.learning.pipeline import train_and_save
-from terrapref.learning.train import TrainConfig, TrainResult
+from terrapref.learning.network import ClassifierConfig
+from terrapref.learning.train import DataOptions, OptimiserConfig, SecondStageConfig, TrainConfig, TrainResult
 from terrapref.planner import Planner, PlannerDriver
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import SimConfig, Simulation
@@ -53,7 +54,6 @@ class Recipe:
         train: training hyperparameters.
         disturbance: pushes injected while demonstrating, so that recoveries are shown
             (None: the driver drives undisturbed).
-        near_m: the near distance utility (``FeatureConfig.near_m``; 0: off).
         lookahead: datasets carry the look-ahead utilities, and the second stage's utility is
             fitted through them (``FeatureConfig.lookahead``).
         course: the demonstration course.
@@ -65,7 +65,6 @@ class Recipe:
     corrections: int = 0
     train: TrainConfig = field(default_factory=TrainConfig)
     disturbance: DisturbanceConfig | None = None
-    near_m: float = 0.0
     lookahead: bool = False
     course: str = "train_course"
     summary: str = ""
@@ -75,20 +74,22 @@ class Recipe:
             raise ValueError("a recipe needs demonstrations >= 1 and corrections >= 0")
 
     def features(self, base: FeatureConfig | None = None) -> FeatureConfig:
-        """The feature configuration this recipe trains with: ``base`` with its near distance and look-ahead."""
-        return replace(base or FeatureConfig(), near_m=self.near_m,
-                       lookahead=LookaheadConfig() if self.lookahead else None)
+        """The feature configuration this recipe trains with: ``base`` with or without the look-ahead."""
+        return replace(base or FeatureConfig(), lookahead=LookaheadConfig() if self.lookahead else None)
 
     def to_dict(self) -> dict:
         return asdict(self)
 
 
 PAPER = Recipe("paper", summary="the published recipe: one drive of train_course, 15 epochs of the paper's C (reproduction only)")
-OURS = Recipe("ours", demonstrations=2, train=TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True, utility=True),
+# What recipes ours and teach train: 300 epochs of C with the residual path, a class-balanced
+# loss and mirrored samples, and the linear utility for the second stage.
+_RECOMMENDED = TrainConfig(OptimiserConfig(epochs=300), ClassifierConfig(skip=True), DataOptions(class_balance=True, mirror=True), SecondStageConfig())
+OURS = Recipe("ours", demonstrations=2, train=_RECOMMENDED,
               disturbance=DisturbanceConfig(rate_hz=0.3),
               summary="two drives of train_course: the paper's setting done well (the reproduction's Tables 1 and 2)")
 TEACH = Recipe("teach", course="teach_course", lookahead=True,
-               train=TrainConfig(epochs=300, skip=True, class_balance=True, mirror=True, utility=True, members=3, stage_weight=5.0),
+               train=replace(_RECOMMENDED, classifier=ClassifierConfig(skip=True, members=3), second_stage=SecondStageConfig(weight=5.0)),
                disturbance=DisturbanceConfig(rate_hz=0.3),
                summary="one drive of teach_course: any preference order from five minutes (the default)")
 RECIPES: dict[str, Recipe] = {r.name: r for r in (TEACH, OURS, PAPER)}

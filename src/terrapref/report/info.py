@@ -54,29 +54,56 @@ def info_lines(path: str | Path) -> list[str]:
     """A summary of ``path`` for people; every problem is a UserError naming the file."""
     p = Path(path)
     if p.is_dir():
-        from terrapref.demos.recording import read_recording
-
-        rec = read_recording(p)
-        m = rec.meta
-        driver = m.get("driver") if isinstance(m.get("driver"), dict) else {}
-        lines = [f"{p}: terrapref recording ({'complete' if rec.complete else 'partial'})",
-                 f"frames          {len(rec)} ({rec.duration_s:.1f} s)",
-                 f"scenario        {m.get('scenario')}",
-                 f"driver          {driver.get('kind', '?')}" + (f", style {driver['style']}" if driver.get("style") else "")
-                 + (f", seed {driver['seed']}" if driver.get("seed") is not None else "") + (f", from {driver['bag']}" if driver.get("bag") else "") + (f", riding along with {driver['model']}" if driver.get("model") else ""),
-                 f"created         {m.get('created', '?')}"]
-        return lines + _common(m)
+        return _recording_lines(p)
     if p.suffix == ".onnx":
-        from terrapref.interop.onnx_export import read_onnx_metadata
+        return _onnx_lines(p)
+    meta, shapes = _tensor_file_header(p)
+    fmt = meta.get("format")
+    if fmt == "terrapref-dataset/1":
+        return _dataset_lines(p, meta, shapes)
+    if fmt == "terrapref-model/1":
+        return _model_lines(p, meta)
+    raise UserError(str(p), f"format {fmt!r} is not a terrapref recording, dataset or model", field="format")
 
-        try:
-            meta = read_onnx_metadata(p)
-        except Exception as exc:  # onnx's parser raises several kinds on a foreign or damaged file
-            raise UserError(str(p), f"not an ONNX model terrapref can read ({type(exc).__name__})") from None
-        c = meta.get("classifier", {})
-        return [f"{p}: C exported as ONNX ({meta.get('format', 'no terrapref metadata')})",
-                f"network         {c.get('members', 1)} member(s), hidden {c.get('hidden')}, {c.get('activation')}, skip {c.get('skip')}",
-                f"second stage    {'weight ' + str(meta['utility']['weight']) if 'utility' in meta else 'none'}"] + _common(meta) + _identifiability(meta)
+
+def _recording_lines(p: Path) -> list[str]:
+    """A recording folder: completeness, frames, course, driver."""
+    from terrapref.demos.recording import read_recording
+
+    rec = read_recording(p)
+    m = rec.meta
+    driver = m.get("driver") if isinstance(m.get("driver"), dict) else {}
+    lines = [f"{p}: terrapref recording ({'complete' if rec.complete else 'partial'})",
+             f"frames          {len(rec)} ({rec.duration_s:.1f} s)",
+             f"scenario        {m.get('scenario')}",
+             f"driver          {_driver(driver)}",
+             f"created         {m.get('created', '?')}"]
+    return lines + _common(m)
+
+
+def _driver(driver: dict) -> str:
+    """Who drove: the kind, then whichever of style, seed, source bag and ridden-along model it names."""
+    return (f"{driver.get('kind', '?')}" + (f", style {driver['style']}" if driver.get("style") else "")
+            + (f", seed {driver['seed']}" if driver.get("seed") is not None else "") + (f", from {driver['bag']}" if driver.get("bag") else "")
+            + (f", riding along with {driver['model']}" if driver.get("model") else ""))
+
+
+def _onnx_lines(p: Path) -> list[str]:
+    """An exported ONNX model, from the terrapref metadata stored in it."""
+    from terrapref.interop.onnx_export import read_onnx_metadata
+
+    try:
+        meta = read_onnx_metadata(p)
+    except Exception as exc:  # onnx's parser raises several kinds on a foreign or damaged file
+        raise UserError(str(p), f"not an ONNX model terrapref can read ({type(exc).__name__})") from None
+    c = meta.get("classifier", {})
+    return [f"{p}: C exported as ONNX ({meta.get('format', 'no terrapref metadata')})",
+            f"network         {c.get('members', 1)} member(s), hidden {c.get('hidden')}, {c.get('activation')}, skip {c.get('skip')}",
+            f"second stage    {'weight ' + str(meta['utility']['weight']) if 'utility' in meta else 'none'}"] + _common(meta) + _identifiability(meta)
+
+
+def _tensor_file_header(p: Path) -> tuple[dict, dict[str, tuple[int, ...]]]:
+    """The terrapref metadata of a safetensors file and the shape of each tensor (none is read)."""
     from terrapref.tensorfile import META_KEY
 
     if not p.is_file():
@@ -92,26 +119,36 @@ def info_lines(path: str | Path) -> list[str]:
         raise UserError(str(p), "not a terrapref recording, dataset, model or ONNX file") from None
     if not isinstance(meta, dict):
         raise UserError(str(p), "metadata is not a mapping", field="metadata")
-    fmt = meta.get("format")
-    if fmt == "terrapref-dataset/1":
-        n = shapes.get("U", (0,))[0]
-        recs = meta.get("recordings", [])
-        return ([f"{p}: terrapref dataset", f"samples         {n} from {len(recs)} recording(s)",
-                 f"look-ahead      {'yes' if 'U2' in shapes else 'no'}"]
-                + [f"  {r.get('path')}: {r.get('frames')} frames, {r.get('scenario')}" for r in recs if isinstance(r, dict)] + _common(meta))
-    if fmt == "terrapref-model/1":
-        c = meta.get("classifier", {}) if isinstance(meta.get("classifier"), dict) else {}
-        data = meta.get("data", {}) if isinstance(meta.get("data"), dict) else {}
-        history = meta.get("history", []) if isinstance(meta.get("history"), list) else []
-        best = meta.get("best_epoch")
-        chosen = history[best - 1] if isinstance(best, int) and 0 < best <= len(history) else None
-        lines = [f"{p}: terrapref model ({meta.get('kind', 'classifier')}" + (", INTERRUPTED: the best epochs so far, no second stage" if meta.get("status") == "interrupted" else "")
-                 + (f", checkpoint of epoch {meta.get('epoch')}" if meta.get("status") == "checkpoint" else "") + ")",
-                 f"recipe          {meta.get('recipe', '?')}",
-                 f"network         {c.get('members', 1)} member(s), hidden {c.get('hidden')}, {c.get('activation')}, skip {c.get('skip')}",
-                 f"second stage    {'weight ' + str(meta['utility'].get('weight')) if isinstance(meta.get('utility'), dict) else 'none'}",
-                 f"data            {data.get('samples', '?')} samples, fingerprint {data.get('fingerprint', '?')}, {len(data.get('recordings', []) or [])} recording(s)"]
-        if chosen:
-            lines.append(f"training        {len(history)} epochs, chose epoch {best}: val loss {chosen.get('val_loss', float('nan')):.4f}, val acc {chosen.get('val_acc', float('nan')):.3f}")
-        return lines + _common(meta) + _identifiability(meta)
-    raise UserError(str(p), f"format {fmt!r} is not a terrapref recording, dataset or model", field="format")
+    return meta, shapes
+
+
+def _dataset_lines(p: Path, meta: dict, shapes: dict[str, tuple[int, ...]]) -> list[str]:
+    """A dataset: samples, whether it holds look-ahead utilities, and the recordings it came from."""
+    n = shapes.get("U", (0,))[0]
+    recs = meta.get("recordings", [])
+    return ([f"{p}: terrapref dataset", f"samples         {n} from {len(recs)} recording(s)",
+             f"look-ahead      {'yes' if 'U2' in shapes else 'no'}"]
+            + [f"  {r.get('path')}: {r.get('frames')} frames, {r.get('scenario')}" for r in recs if isinstance(r, dict)] + _common(meta))
+
+
+def _model_lines(p: Path, meta: dict) -> list[str]:
+    """A model: its state, recipe, network, second stage, training data and chosen epoch."""
+    c = meta.get("classifier", {}) if isinstance(meta.get("classifier"), dict) else {}
+    data = meta.get("data", {}) if isinstance(meta.get("data"), dict) else {}
+    lines = [f"{p}: terrapref model ({meta.get('kind', 'classifier')}" + (", INTERRUPTED: the best epochs so far, no second stage" if meta.get("status") == "interrupted" else "")
+             + (f", checkpoint of epoch {meta.get('epoch')}" if meta.get("status") == "checkpoint" else "") + ")",
+             f"recipe          {meta.get('recipe', '?')}",
+             f"network         {c.get('members', 1)} member(s), hidden {c.get('hidden')}, {c.get('activation')}, skip {c.get('skip')}",
+             f"second stage    {'weight ' + str(meta['utility'].get('weight')) if isinstance(meta.get('utility'), dict) else 'none'}",
+             f"data            {data.get('samples', '?')} samples, fingerprint {data.get('fingerprint', '?')}, {len(data.get('recordings', []) or [])} recording(s)"]
+    return lines + _training(meta) + _common(meta) + _identifiability(meta)
+
+
+def _training(meta: dict) -> list[str]:
+    """The epoch training chose and its validation scores, if the history records it."""
+    history = meta.get("history", []) if isinstance(meta.get("history"), list) else []
+    best = meta.get("best_epoch")
+    chosen = history[best - 1] if isinstance(best, int) and 0 < best <= len(history) else None
+    if not chosen:
+        return []
+    return [f"training        {len(history)} epochs, chose epoch {best}: val loss {chosen.get('val_loss', float('nan')):.4f}, val acc {chosen.get('val_acc', float('nan')):.3f}"]

@@ -14,19 +14,23 @@ import functools
 import json
 import time
 from collections.abc import Callable
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from terrapref.fileio import write_text_atomic
 from terrapref.grid import Engine, run_grid
-from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, annotate_agreement, run_many, summarise
+from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, annotate_agreement, run_many, summarise
 from terrapref.evaluation.stats import rate_text
 from terrapref.recipes import OURS, PAPER, TEACH, Recipe, run_recipe
 from terrapref.progress import every_tenth
 from terrapref.scenario import packaged_scenarios, resolve_scenario
 from terrapref.terrain import PreferenceProfile
+
+if TYPE_CHECKING:
+    from terrapref.learning.train import EpochMetrics
 
 TEST_SET = ("test_course",)
 TRACK_COLOURS = ("orange", "red", "magenta", "limegreen")  # the planners' tracks, by recipe
@@ -36,19 +40,54 @@ def variations() -> list[str]:
     return [n for n in packaged_scenarios() if n.startswith("fig")]
 
 
-def _train_job(args: tuple[tuple[Recipe, ...], str, int, tuple[str, ...]]) -> list[dict]:
+@dataclass(frozen=True)
+class RecipeModel:
+    """A model one recipe trained for one seed, and how its training went."""
+
+    recipe: str
+    seed: int
+    model: str  # the model file
+    history: tuple[EpochMetrics, ...]  # per epoch (for an ensemble, member 0's)
+    best_epoch: int
+    demo_minutes: float
+    correction_minutes: float
+    seconds: float  # demonstrating, correcting and training, wall clock
+
+
+@dataclass(frozen=True)
+class RecipeRun:
+    """A run of the reproduction: which recipe's model drove (``driver``: the synthetic driver)
+    and the seed it was trained with (the driver's: its run's seed)."""
+
+    result: RunResult
+    recipe: str
+    train_seed: int
+
+    def to_dict(self) -> dict:
+        """As results.json holds it: the run's metrics, without its path."""
+        return self.result.to_dict() | {"recipe": self.recipe, "train_seed": self.train_seed}
+
+
+@dataclass(frozen=True)
+class _Setup:
+    """What a reproduction runs: the recipes, the training and evaluation seeds, the profile and the courses driven."""
+
+    recipes: tuple[Recipe, ...]
+    seeds: int
+    eval_seeds: int
+    profile: PreferenceProfile
+    scenarios: tuple[str, ...]
+
+
+def _train_job(args: tuple[tuple[Recipe, ...], str, int, tuple[str, ...]]) -> list[RecipeModel]:
     """Recipes of one seed that share demonstrations, in one process (they never record twice)."""
     recipes, workdir, seed, profile = args
     rows = []
     for recipe in recipes:
         t0 = time.perf_counter()
         out = run_recipe(recipe, workdir, seed, PreferenceProfile(profile))
-        rows.append({
-            "recipe": recipe.name, "seed": seed, "model": str(out.model),
-            "history": [asdict(h) for h in out.result.history], "best_epoch": out.result.best_epoch,
-            "demo_minutes": out.demo_minutes, "correction_minutes": out.correction_minutes,
-            "seconds": time.perf_counter() - t0,
-        })
+        rows.append(RecipeModel(recipe.name, seed, str(out.model), tuple(out.result.history), out.result.best_epoch,
+                                out.demo_minutes, out.correction_minutes, time.perf_counter() - t0))
     return rows
 
 
@@ -58,44 +97,53 @@ def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes:
     runs its jobs (default: local processes, one per core)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    profile = profile or PreferenceProfile.default()
+    setup = _Setup(tuple(recipes), seeds, eval_seeds, profile or PreferenceProfile.default(), ("train_course", *TEST_SET, *variations()))
     engine = engine or Engine()
     timings: dict[str, float] = {}
-
     t0 = time.perf_counter()
+    trained = _train_all(setup, out, engine, log)
+    timings["demonstrate + correct + train"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    runs = _evaluate(setup, trained, engine, log)
+    timings["closed-loop evaluation"] = time.perf_counter() - t0
+    log("[3/3] figures and REPORT.md ...")
+    return _write_report(out, setup, runs, trained, timings)
+
+
+def _train_all(setup: _Setup, out: Path, engine: Engine, log: Callable[[str], None]) -> list[RecipeModel]:
+    """Stage 1: every recipe's model for every seed, by seed and then in the recipes' order."""
     # One job per seed and demonstration protocol (recipes recording the same demonstrations stay
     # together), the costliest first, so that both cores stay busy to the end.
     groups: dict = {}
-    for r in recipes:
+    for r in setup.recipes:
         groups.setdefault((r.course, r.disturbance), []).append(r)
-    cost = {key: max(r.demonstrations * (1 + r.train.members * r.train.epochs * (2 if r.train.mirror else 1) / 100) for r in g)
+    cost = {key: max(r.demonstrations * (1 + r.train.classifier.members * r.train.optimiser.epochs * (2 if r.train.data.mirror else 1) / 100) for r in g)
             for key, g in groups.items()}
-    jobs = [(tuple(g), str(out / "work" / f"seed{s}"), s, profile.order)
-            for key, g in sorted(groups.items(), key=lambda kv: -cost[kv[0]]) for s in range(seeds)]
-    log(f"[1/3] demonstrations, corrections and training: {len(recipes) * seeds} models ({', '.join(r.name for r in recipes)} x {seeds} seeds) ...")
+    jobs = [(tuple(g), str(out / "work" / f"seed{s}"), s, setup.profile.order)
+            for key, g in sorted(groups.items(), key=lambda kv: -cost[kv[0]]) for s in range(setup.seeds)]
+    log(f"[1/3] demonstrations, corrections and training: {len(setup.recipes) * setup.seeds} models "
+        f"({', '.join(r.name for r in setup.recipes)} x {setup.seeds} seeds) ...")
     done = run_grid(_train_job, jobs, engine, lambda k, n: log(f"      trained {k}/{n} job(s)"),
                     describe=lambda j: f"recipes {', '.join(r.name for r in j[0])}, seed {j[2]}")
-    trained = [row for rows in done for row in rows]
-    order = {r.name: i for i, r in enumerate(recipes)}
-    trained.sort(key=lambda t: (t["seed"], order[t["recipe"]]))
-    timings["demonstrate + correct + train"] = time.perf_counter() - t0
+    order = {r.name: i for i, r in enumerate(setup.recipes)}
+    return sorted((row for rows in done for row in rows), key=lambda t: (t.seed, order[t.recipe]))
 
-    t0 = time.perf_counter()
-    scenarios = ["train_course", *TEST_SET, *variations()]
-    specs = [RunSpec(sc, e, PLANNER, t["model"], profile.order)
-             for t in trained for sc in scenarios for e in range(eval_seeds)]
-    specs += [RunSpec(sc, s, EXPERT, None, profile.order) for sc in scenarios for s in range(seeds)]
+
+def _evaluate(setup: _Setup, trained: list[RecipeModel], engine: Engine, log: Callable[[str], None]) -> list[RecipeRun]:
+    """Stage 2: every model and the synthetic driver on every course, the planners' agreement with the driver."""
+    specs = [RunSpec(sc, e, PLANNER, t.model, setup.profile.order)
+             for t in trained for sc in setup.scenarios for e in range(setup.eval_seeds)]
+    specs += [RunSpec(sc, s, EXPERT, None, setup.profile.order) for sc in setup.scenarios for s in range(setup.seeds)]
     specs.sort(key=lambda sp: -scenario_length(sp.scenario))  # longest first: no core idles at the end
     log(f"[2/3] closed-loop evaluation: {len(specs)} runs ...")
-    results = run_many(specs, progress=every_tenth(log), engine=engine)
-    annotate_agreement(results)
-    for r, spec in zip(results, specs):
-        r["recipe"] = next((t["recipe"] for t in trained if t["model"] == spec.model_path), "driver")
-        r["train_seed"] = next((t["seed"] for t in trained if t["model"] == spec.model_path), r["seed"])
-    timings["closed-loop evaluation"] = time.perf_counter() - t0
+    results = annotate_agreement(run_many(specs, progress=every_tenth(log), engine=engine))
+    return [_recipe_run(r, spec, trained) for r, spec in zip(results, specs, strict=True)]
 
-    log("[3/3] figures and REPORT.md ...")
-    return _write_report(out, results, trained, recipes, seeds, eval_seeds, profile, scenarios, timings)
+
+def _recipe_run(result: RunResult, spec: RunSpec, trained: list[RecipeModel]) -> RecipeRun:
+    """A run with the recipe and training seed of the model that drove it (the driver's: ``driver`` and the run's seed)."""
+    model = next((t for t in trained if t.model == spec.model_path), None)
+    return RecipeRun(result, model.recipe, model.seed) if model is not None else RecipeRun(result, "driver", result.seed)
 
 
 @functools.lru_cache(maxsize=64)
@@ -104,28 +152,31 @@ def scenario_length(scenario: str) -> float:
     return resolve_scenario(scenario).path_length_m()
 
 
-def _zone_rows(results: list[dict], scenario: str, recipes: tuple[Recipe, ...]) -> list[str]:
+def _zone_rows(runs: list[RecipeRun], scenario: str, recipes: tuple[Recipe, ...]) -> list[str]:
+    """One table row per zone of ``scenario``: its expectation, the driver's choice, each recipe's choice and successes."""
     s = resolve_scenario(scenario)
     rows = []
     for zone in s.zones:
-        def choices(recipe: str) -> list[tuple[str, bool, str]]:
-            out = []
-            for r in results:
-                if r["scenario"] == scenario and r["recipe"] == recipe:
-                    z = next(z for z in r["metrics"]["zones"] if z["id"] == zone.id)
-                    out.append((z["choice"], z["success"], z["expect"]))
-            return out
-
-        drv = choices("driver")
+        drv = _choices(runs, scenario, "driver", zone.id)
         expect = drv[0][2] if drv else zone.expect
         cells = [zone.id, zone.label or "", expect, _mode(drv)]
         for recipe in recipes:
-            c = choices(recipe.name)
+            c = _choices(runs, scenario, recipe.name, zone.id)
             lethal = sum(ch == ex and not ok for ch, ok, ex in c)
             note = f" ({lethal} touched non_traversable)" if lethal else ""
             cells += [_mode(c), f"{sum(ok for _, ok, _ in c)}/{len(c)}{note}"]
         rows.append("| " + " | ".join(cells) + " |")
     return rows
+
+
+def _choices(runs: list[RecipeRun], scenario: str, recipe: str, zone_id: str) -> list[tuple[str, bool, str]]:
+    """(choice, success, expectation) in one zone of every run of ``recipe`` (or ``driver``) on ``scenario``."""
+    out = []
+    for r in runs:
+        if r.result.scenario == scenario and r.recipe == recipe:
+            z = next(z for z in r.result.metrics.zones if z.id == zone_id)
+            out.append((z.choice, z.success, z.expect))
+    return out
 
 
 def _mode(choices: list[tuple[str, bool, str]]) -> str:
@@ -136,87 +187,117 @@ def _mode(choices: list[tuple[str, bool, str]]) -> str:
     return top if names.count(top) == len(names) else f"{top} ({names.count(top)}/{len(names)})"
 
 
-def _write_report(out: Path, results, trained, recipes, seeds, eval_seeds, profile, scenarios, timings) -> Path:
-    from terrapref.plots import save_loss_curve, save_map
-    from terrapref.world import rasterise
-
+def _write_report(out: Path, setup: _Setup, runs: list[RecipeRun], trained: list[RecipeModel], timings: dict[str, float]) -> Path:
+    """REPORT.md, its figures and results.json (every run's metrics and the time per stage)."""
     t_fig = time.perf_counter()
     figs = out / "figures"
     figs.mkdir(exist_ok=True)
-    for sc in scenarios:
+    _draw_figures(figs, setup, runs, trained)
+    lines = _introduction(setup) + _summary_table(setup.recipes, runs) + _zone_tables(setup.recipes, runs) + _training_lines(setup.recipes, trained)
+    lines += ["", "## Figures", ""] + [f"- `figures/{sc}.png`" for sc in setup.scenarios]
+    timings = {**timings, "figures": time.perf_counter() - t_fig}
+    lines += ["", "## Time per stage (wall clock)", "", "| stage | seconds |", "|---|---|"]
+    lines += [f"| {k} | {v:.1f} |" for k, v in timings.items()] + [f"| total | {sum(timings.values()):.1f} |"]
+    write_text_atomic(out / "results.json", json.dumps({"runs": [r.to_dict() for r in runs], "timings": timings}, indent=1))
+    return write_text_atomic(out / "REPORT.md", "\n".join(lines) + "\n")
+
+
+def _draw_figures(figs: Path, setup: _Setup, runs: list[RecipeRun], trained: list[RecipeModel]) -> None:
+    """Each course with the driver's and the planners' seed-0 paths; each recipe's seed-0 training curve."""
+    from terrapref.plots import save_loss_curve, save_map
+    from terrapref.world import rasterise
+
+    for sc in setup.scenarios:
         scenario = resolve_scenario(sc)
-        tracks = []
-        for r in results:
-            if r["scenario"] != sc or r["seed"] != 0:
-                continue
-            if r["recipe"] == "driver":
-                tracks.append(("driver (seed 0)", r["xy"], "deepskyblue"))
-            elif r["train_seed"] == 0:
-                color = TRACK_COLOURS[[x.name for x in recipes].index(r["recipe"]) % len(TRACK_COLOURS)]
-                tracks.append((f"planner, {r['recipe']} (seed 0)", r["xy"], color))
-        save_map(figs / f"{sc}.png", scenario, rasterise(scenario), tracks, title=f"{sc}: reference, driver and planner paths")
+        save_map(figs / f"{sc}.png", scenario, rasterise(scenario), _tracks(runs, sc, setup.recipes), title=f"{sc}: reference, driver and planner paths")
     for t in trained:
-        if t["seed"] == 0:
-            save_loss_curve(figs / f"training_{t['recipe']}.png", t["history"], t["best_epoch"], title=f"training, recipe {t['recipe']}, seed 0")
+        if t.seed == 0:
+            save_loss_curve(figs / f"training_{t.recipe}.png", [asdict(h) for h in t.history], t.best_epoch, title=f"training, recipe {t.recipe}, seed 0")
 
-    def set_summary(recipe: str, names: list[str]) -> dict:
-        return summarise([r for r in results if r["recipe"] == recipe and r["scenario"] in names], PLANNER if recipe != "driver" else EXPERT)
 
-    test_names = [*TEST_SET, *variations()]
-    header = "| zone | terrains | expected | driver | " + " | ".join(f"{r.name} planner | {r.name} success" for r in recipes) + " |"
-    sep = "|" + "---|" * (4 + 2 * len(recipes))
+def _tracks(runs: list[RecipeRun], scenario: str, recipes: tuple[Recipe, ...]) -> list[tuple[str, np.ndarray, str]]:
+    """(label, path, colour) of the driver's and of every recipe's seed-0 model's seed-0 run on ``scenario``."""
+    tracks = []
+    for r in runs:
+        if r.result.scenario != scenario or r.result.seed != 0:
+            continue
+        if r.recipe == "driver":
+            tracks.append(("driver (seed 0)", r.result.xy, "deepskyblue"))
+        elif r.train_seed == 0:
+            color = TRACK_COLOURS[[x.name for x in recipes].index(r.recipe) % len(TRACK_COLOURS)]
+            tracks.append((f"planner, {r.recipe} (seed 0)", r.result.xy, color))
+    return tracks
+
+
+def _introduction(setup: _Setup) -> list[str]:
+    """The title, the setting and one line per recipe."""
     lines = [
         "# terrapref: reproduction of the paper's Tables 1 and 2",
         "",
-        f"Preference profile: {profile} (grass preferred over every patch). Synthetic driver as the human;",
-        f"{seeds} training seeds per recipe (each seed: its own demonstrations and training initialisation),",
-        f"{eval_seeds} evaluation run(s) per model and scenario. Every number below comes from driving the simulator.",
+        f"Preference profile: {setup.profile} (grass preferred over every patch). Synthetic driver as the human;",
+        f"{setup.seeds} training seeds per recipe (each seed: its own demonstrations and training initialisation),",
+        f"{setup.eval_seeds} evaluation run(s) per model and scenario. Every number below comes from driving the simulator.",
         "",
         "Recipes:",
     ]
+    return lines + _recipe_lines(setup.recipes)
+
+
+def _recipe_lines(recipes: tuple[Recipe, ...]) -> list[str]:
+    """One line per recipe: its demonstrations, pushes, corrections and training."""
+    lines = []
     for r in recipes:
         pushes = (f"with disturbances ({r.disturbance.rate_hz:g} pushes/s of {r.disturbance.min_yaw_rate_rps:g}-{r.disturbance.max_yaw_rate_rps:g} rad/s)"
                   if r.disturbance is not None else "undisturbed")
         lines.append(f"- **{r.name}**: {r.demonstrations} demonstration run(s) of {r.course}, {pushes}, {r.corrections} correction session(s), "
-                     f"{r.train.epochs} epochs, residual path {'on' if r.train.skip else 'off'}, class-balanced loss {'on' if r.train.class_balance else 'off'}, "
-                     f"mirrored samples {'on' if r.train.mirror else 'off'}"
-                     + (f", {r.train.members} ensemble members" if r.train.members > 1 else "")
+                     f"{r.train.optimiser.epochs} epochs, residual path {'on' if r.train.classifier.skip else 'off'}, class-balanced loss {'on' if r.train.data.class_balance else 'off'}, "
+                     f"mirrored samples {'on' if r.train.data.mirror else 'off'}"
+                     + (f", {r.train.classifier.members} ensemble members" if r.train.classifier.members > 1 else "")
                      + (", the planner scoring a second stage of trajectories beyond the first with the linear utility fitted to the same samples"
-                        + (" through the look-ahead" if r.lookahead else "") if r.train.utility else "") + ".")
-    lines += ["", "## Summary (test_course and the figure variations)", "",
-              "Zone success against the zones' expectations; agreement: the planner's choice equals the synthetic driver's in the same "
-              "zone of the same run (evaluation seed). 95% Wilson intervals over all zones of all training seeds.", "",
-              "| who | zone success | agreement with the driver | collisions | completed | runs |", "|---|---|---|---|---|---|"]
+                        + (" through the look-ahead" if r.lookahead else "") if r.train.second_stage is not None else "") + ".")
+    return lines
+
+
+def _summary_table(recipes: tuple[Recipe, ...], runs: list[RecipeRun]) -> list[str]:
+    """Each recipe's and the driver's zone success, agreement, collisions and completion over the test courses."""
+    test_names = [*TEST_SET, *variations()]
+    lines = ["", "## Summary (test_course and the figure variations)", "",
+             "Zone success against the zones' expectations; agreement: the planner's choice equals the synthetic driver's in the same "
+             "zone of the same run (evaluation seed). 95% Wilson intervals over all zones of all training seeds.", "",
+             "| who | zone success | agreement with the driver | collisions | completed | runs |", "|---|---|---|---|---|---|"]
     for name in [*(r.name for r in recipes), "driver"]:
-        runs = [r for r in results if r["recipe"] == name and r["scenario"] in test_names]
-        zones = [z for r in runs for z in r["metrics"]["zones"]]
-        compared = [z for z in zones if "agrees" in z]
-        s = set_summary(name, test_names)
-        agreement = rate_text(sum(z["agrees"] for z in compared), len(compared)) if compared else "—"
-        lines.append(f"| {name} | {rate_text(sum(z['success'] for z in zones), len(zones))} | {agreement} | {s['collision_count']} | "
-                     f"{s['completed_rate']:.0%} | {s['runs']} |")
+        chosen = [r.result for r in runs if r.recipe == name and r.result.scenario in test_names]
+        zones = [z for r in chosen for z in r.metrics.zones]
+        compared = [a for r in chosen if r.agreement is not None for a in r.agreement]
+        s = summarise(chosen, PLANNER if name != "driver" else EXPERT)
+        agreement = rate_text(sum(a.agrees for a in compared), len(compared)) if compared else "—"
+        lines.append(f"| {name} | {rate_text(sum(z.success for z in zones), len(zones))} | {agreement} | {s.collision_count} | "
+                     f"{s.completed_rate:.0%} | {s.runs} |")
+    return lines
+
+
+def _zone_tables(recipes: tuple[Recipe, ...], runs: list[RecipeRun]) -> list[str]:
+    """Table 1 (train_course), Table 2 (test_course) and the figure variations, zone by zone."""
+    header = "| zone | terrains | expected | driver | " + " | ".join(f"{r.name} planner | {r.name} success" for r in recipes) + " |"
+    sep = "|" + "---|" * (4 + 2 * len(recipes))
+    lines = []
     for title, names in (("Table 1: training scenarios (train_course)", ["train_course"]), ("Table 2: test scenarios (test_course)", ["test_course"])):
         lines += ["", f"## {title}", "", header, sep]
         for sc in names:
-            lines += _zone_rows(results, sc, recipes)
+            lines += _zone_rows(runs, sc, recipes)
     lines += ["", "## Figure 7 and 8 variations", "", header.replace("| zone |", "| scenario |"), sep]
     for sc in variations():
-        for row in _zone_rows(results, sc, recipes):
+        for row in _zone_rows(runs, sc, recipes):
             lines.append(row.replace("| 1 |", f"| {sc} |", 1))
-    lines += ["", "## Training", ""]
+    return lines
+
+
+def _training_lines(recipes: tuple[Recipe, ...], trained: list[RecipeModel]) -> list[str]:
+    """Per recipe: the epochs chosen, the validation accuracy there, and the minutes demonstrated and corrected."""
+    lines = ["", "## Training", ""]
     for r in recipes:
-        ts = [t for t in trained if t["recipe"] == r.name]
-        lines.append(f"- {r.name}: chosen epochs {[t['best_epoch'] for t in ts]}; validation accuracy at the chosen epoch "
-                     f"{[round(t['history'][t['best_epoch'] - 1]['val_acc'], 3) for t in ts]}; demonstration {np.mean([t['demo_minutes'] for t in ts]):.1f} min, "
-                     f"corrections {np.mean([t['correction_minutes'] for t in ts]):.1f} min per seed. Curve: `figures/training_{r.name}.png`.")
-    lines += ["", "## Figures", ""]
-    for sc in scenarios:
-        lines.append(f"- `figures/{sc}.png`")
-    timings["figures"] = time.perf_counter() - t_fig
-    lines += ["", "## Time per stage (wall clock)", "", "| stage | seconds |", "|---|---|"]
-    for k, v in timings.items():
-        lines.append(f"| {k} | {v:.1f} |")
-    lines.append(f"| total | {sum(timings.values()):.1f} |")
-    slim = [{k: v for k, v in r.items() if k not in ("xy", "frames")} for r in results]
-    write_text_atomic(out / "results.json", json.dumps({"runs": slim, "timings": timings}, indent=1))
-    return write_text_atomic(out / "REPORT.md", "\n".join(lines) + "\n")
+        ts = [t for t in trained if t.recipe == r.name]
+        lines.append(f"- {r.name}: chosen epochs {[t.best_epoch for t in ts]}; validation accuracy at the chosen epoch "
+                     f"{[round(t.history[t.best_epoch - 1].val_acc, 3) for t in ts]}; demonstration {np.mean([t.demo_minutes for t in ts]):.1f} min, "
+                     f"corrections {np.mean([t.correction_minutes for t in ts]):.1f} min per seed. Curve: `figures/training_{r.name}.png`.")
+    return lines

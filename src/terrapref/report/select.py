@@ -19,7 +19,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_many, zone_agrees
+from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, run_many, zone_agrees
 from terrapref.evaluation.stats import rate_text, wilson
 from terrapref.grid import Engine, run_grid
 from terrapref.recipes import recipe_named, run_recipe
@@ -60,14 +60,33 @@ def parse_orders(text: str) -> tuple[tuple[str, ...], ...]:
     return tuple(orders)
 
 
-def _train(job: dict) -> list[str]:
+@dataclass(frozen=True)
+class _OrderJob:
+    """Every recipe for one order and seed, trained one after another in one work folder: they share its demonstrations."""
+
+    recipes: tuple[str, ...]
+    order: tuple[str, ...]
+    seed: int
+    style: str
+    workdir: str
+
+
+@dataclass(frozen=True)
+class _Model:
+    """A trained model: its recipe, and the order-and-seed job that trained it."""
+
+    recipe: str
+    job: _OrderJob
+
+
+def _train(job: _OrderJob) -> list[str]:
     """Every recipe for one order and seed, one after another: they share the work folder's demonstrations."""
-    profile = PreferenceProfile(tuple(job["order"]))
-    return [str(run_recipe(recipe_named(r), job["workdir"], job["seed"], profile, style=job["style"]).model) for r in job["recipes"]]
+    profile = PreferenceProfile(job.order)
+    return [str(run_recipe(recipe_named(r), job.workdir, job.seed, profile, style=job.style).model) for r in job.recipes]
 
 
-def _describe(job: dict) -> str:
-    return f"recipes {', '.join(job['recipes'])}, order {'>'.join(job['order'][:3])}, seed {job['seed']}"
+def _describe(job: _OrderJob) -> str:
+    return f"recipes {', '.join(job.recipes)}, order {'>'.join(job.order[:3])}, seed {job.seed}"
 
 
 def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None, log: Callable[[str], None] = print) -> Path:
@@ -76,36 +95,17 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
     out.mkdir(parents=True, exist_ok=True)
     engine = engine or Engine()
     t0 = time.perf_counter()
-    # One job per order and seed: its recipes share the demonstrations recorded in its work folder.
-    jobs = [{"recipes": list(sel.recipes), "order": list(o), "seed": s, "style": sel.style,
-             "workdir": str(out / "work" / f"{'_'.join(c[:2] for c in o[:3])}_s{s}")}
-            for o in sel.orders for s in range(sel.seeds)]
-    log(f"[1/2] demonstrations and training: {len(jobs) * len(sel.recipes)} models ({len(sel.recipes)} recipes x {len(sel.orders)} orders "
-        f"x {sel.seeds} seeds) on {engine.describe()} ...")
-    trained = run_grid(_train, jobs, engine, lambda k, n: log(f"      trained {k}/{n} order-and-seed jobs"), describe=_describe)
+    models = _train_all(out, sel, engine, log)
     t_train = time.perf_counter() - t0
 
     layouts = sel.layouts
-    job_of = {m: {**j, "recipe": r} for j, ms in zip(jobs, trained, strict=True) for r, m in zip(j["recipes"], ms, strict=True)}
-    specs = [RunSpec(c, 0, PLANNER, m, tuple(j["order"])) for m, j in job_of.items() for c in layouts]
+    specs = [RunSpec(c, 0, PLANNER, path, m.job.order) for path, m in models.items() for c in layouts]
     specs += [RunSpec(c, 0, EXPERT, None, o, style=sel.style) for o in sel.orders for c in layouts]
     log(f"[2/2] closed-loop runs: {len(specs)} on {len(layouts)} layouts ...")
     results = run_many(specs, progress=every_tenth(log), engine=engine)
     t_eval = time.perf_counter() - t0 - t_train
 
-    driver = {(tuple(s.profile), r["scenario"], z["id"]): z for s, r in zip(specs, results, strict=True) if r["driver"] == EXPERT
-              for z in r["metrics"]["zones"]}
-    rows, runs = [], []
-    for spec, r in zip(specs, results, strict=True):
-        if r["driver"] != PLANNER:
-            continue
-        job = job_of[spec.model_path]
-        runs.append({"recipe": job["recipe"], "order": job["order"], "seed": job["seed"], "scenario": r["scenario"], "collisions": r["metrics"]["collisions"]})
-        for z in r["metrics"]["zones"]:
-            d = driver[(tuple(spec.profile), r["scenario"], z["id"])]
-            rows.append({"recipe": job["recipe"], "order": job["order"], "seed": job["seed"], "scenario": r["scenario"], "zone": z["id"],
-                         "kind": zone_kind(z["label"]), "choice": z["choice"], "driver_choice": d["choice"], "agrees": zone_agrees(z, d),
-                         "success": z["success"], "driver_success": d["success"]})
+    rows, runs = _zones_and_runs(specs, results, models)
     saved = {"selection": {"recipes": list(sel.recipes), "orders": [list(o) for o in sel.orders], "seeds": sel.seeds, "layouts": layouts,
                            "style": sel.style},
              "engine": engine.describe(), "zones": rows, "runs": runs, "train_s": round(t_train, 1), "eval_s": round(t_eval, 1)}
@@ -113,6 +113,35 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
     path = write_selection_report(out, saved)
     log(f"wrote {path}")
     return path
+
+
+def _train_all(out: Path, sel: Selection, engine: Engine, log: Callable[[str], None]) -> dict[str, _Model]:
+    """Every recipe for every order and seed; model file -> the model, in the order trained."""
+    # One job per order and seed: its recipes share the demonstrations recorded in its work folder.
+    jobs = [_OrderJob(tuple(sel.recipes), tuple(o), s, sel.style, str(out / "work" / f"{'_'.join(c[:2] for c in o[:3])}_s{s}"))
+            for o in sel.orders for s in range(sel.seeds)]
+    log(f"[1/2] demonstrations and training: {len(jobs) * len(sel.recipes)} models ({len(sel.recipes)} recipes x {len(sel.orders)} orders "
+        f"x {sel.seeds} seeds) on {engine.describe()} ...")
+    trained = run_grid(_train, jobs, engine, lambda k, n: log(f"      trained {k}/{n} order-and-seed jobs"), describe=_describe)
+    return {m: _Model(r, j) for j, ms in zip(jobs, trained, strict=True) for r, m in zip(j.recipes, ms, strict=True)}
+
+
+def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict[str, _Model]) -> tuple[list[dict], list[dict]]:
+    """select.json's rows: every planner zone beside the same order's driver in the same zone, and every planner run's collisions."""
+    driver = {(tuple(s.profile), r.scenario, z.id): z for s, r in zip(specs, results, strict=True) if r.driver == EXPERT
+              for z in r.metrics.zones}
+    rows, runs = [], []
+    for spec, r in zip(specs, results, strict=True):
+        if r.driver != PLANNER:
+            continue
+        model = models[spec.model_path]
+        who = {"recipe": model.recipe, "order": list(model.job.order), "seed": model.job.seed, "scenario": r.scenario}
+        runs.append({**who, "collisions": r.metrics.collisions})
+        for z in r.metrics.zones:
+            d = driver[(tuple(spec.profile), r.scenario, z.id)]
+            rows.append({**who, "zone": z.id, "kind": zone_kind(z.label), "choice": z.choice, "driver_choice": d.choice,
+                         "agrees": zone_agrees(z, d), "success": z.success, "driver_success": d.success})
+    return rows, runs
 
 
 def _rate(rows: Sequence[dict], key: str) -> str:

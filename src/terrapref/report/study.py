@@ -24,9 +24,11 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -36,73 +38,19 @@ from terrapref.grid import Engine, run_grid
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PLANNER, PURE_PURSUIT, RunSpec, run_many
 from terrapref.features import FeatureConfig
 from terrapref.progress import every_tenth
-from terrapref.recipes import OURS, TEACH
-from terrapref.report.reproduce import TEST_SET, scenario_length, variations
-from terrapref.report.study_report import ALT_PROFILE, write_study
+from terrapref.recipes import OURS
+from terrapref.report.reproduce import scenario_length
+from terrapref.report.study_plan import FULL, StudyPlan, TrainedModel, TrainJob
+from terrapref.report.study_report import ALT_PROFILE, ModelVariant, RunTag, StudyRun, write_study
 from terrapref.terrain import PreferenceProfile
 
+if TYPE_CHECKING:
+    from terrapref.learning.train import TrainConfig
+    from terrapref.recipes import Recipe
+
 LEARNED = ("C", "linear", "cnn")  # methods trained from demonstrations
-# The orders the teaching study trains on: the paper's, then the others that put each of rock
-# and water first (non_traversable last: it is lethal to every driver).
-TEACH_ORDERS = (
-    ("mud", "rock", "water", "non_traversable"),
-    ("rock", "mud", "water", "non_traversable"),
-    ("water", "mud", "rock", "non_traversable"),
-    ("rock", "water", "mud", "non_traversable"),
-)
 DEMONSTRATIONS = OURS  # the study's data: ours' runs of train_course
 
-
-@dataclass(frozen=True)
-class StudyPlan:
-    """How much of everything a study runs.
-
-    Attributes:
-        seeds: training seeds (each: its own demonstrations and initialisation).
-        minutes: demonstration budgets for the data-efficiency curve [min]; the curve ends with
-            all of it (two runs of train_course, about 11 min).
-        epochs: C's training epochs (recipe ``ours`` uses 300).
-        cnn_epochs: the CNN's training epochs.
-        noise: perturbation levels, by kind (see :class:`Perturbation`).
-        horizons: trajectory lengths n for the horizon ablation (the default is always in).
-        widths: hidden widths for the width ablation.
-        courses: evaluation scenarios.
-        orders: preference orders taught by one drive of teach_course (the default order first).
-        styles: driver styles taught the same way, under the default order ("default" first).
-        layouts: generated layouts the taught models are evaluated on (never used for choosing
-            the recipe, and apart from the final measurement's gen:2000-2031).
-        recipe: the named recipe the teaching section trains (its epochs set by ``epochs``).
-    """
-
-    seeds: int = 3
-    minutes: tuple[float, ...] = (0.5, 1.0, 2.0, 5.0)
-    epochs: int = 300
-    cnn_epochs: int = 30
-    noise: dict[str, tuple[float, ...]] = field(default_factory=lambda: {
-        "flip_rate": (0.1, 0.3, 0.5),
-        "blobs": (2.0, 6.0),
-        "pose_noise_m": (0.25, 0.5, 1.0),
-        "drop_rate": (0.5, 0.8),
-        "delay_frames": (2.0, 5.0),
-    })
-    horizons: tuple[int, ...] = (15, 45)
-    widths: tuple[int, ...] = (16, 256)
-    courses: tuple[str, ...] = ()
-    orders: tuple[tuple[str, ...], ...] = TEACH_ORDERS
-    styles: tuple[str, ...] = ("default", "wide", "late", "shaky", "reluctant")
-    layouts: tuple[str, ...] = tuple(f"gen:{5000 + i}" for i in range(8))
-    recipe: str = TEACH.name
-
-    def scenarios(self) -> list[str]:
-        return list(self.courses) or [*TEST_SET, *variations()]
-
-
-FULL = StudyPlan()
-QUICK = StudyPlan(
-    seeds=1, minutes=(2.0,), epochs=100, cnn_epochs=15,
-    noise={"flip_rate": (0.2,), "blobs": (2.0,), "pose_noise_m": (0.25,), "drop_rate": (0.5,), "delay_frames": (3.0,)},
-    horizons=(), widths=(16,), orders=TEACH_ORDERS[:2], styles=("default", "wide"), layouts=("gen:5000", "gen:5001"),
-)
 
 # Pose noise's heading error grows with its position error: degrees per metre.
 POSE_DEG_PER_M = 10.0
@@ -152,68 +100,135 @@ def _frames_for(minutes: float | None, rate_hz: float = 10.0) -> int | None:
     return None if minutes is None else int(round(minutes * 60.0 * rate_hz))
 
 
-def _train_job(job: dict) -> dict:
+@dataclass(frozen=True)
+class TeachJob:
+    """One drive of the teaching recipe's course by the driver of ``order`` and ``style``, and its model (stage 4)."""
+
+    seed: int
+    order: tuple[str, ...]
+    style: str
+    epochs: int
+    recipe: str
+    workdir: str
+
+    def to_dict(self) -> dict:
+        """As study.json holds it, as the teaching part's C."""
+        return {"study": "teach", "method": "C", "seed": self.seed, "order": list(self.order), "style": self.style, "epochs": self.epochs,
+                "recipe": self.recipe, "workdir": self.workdir}
+
+
+@dataclass(frozen=True)
+class TaughtModel:
+    """A taught model: its job, the model file, the minutes demonstrated and the wall time it took [s]."""
+
+    job: TeachJob
+    out: str
+    demo_minutes: float
+    train_s: float
+
+    def to_dict(self) -> dict:
+        return {**self.job.to_dict(), "out": self.out, "demo_minutes": self.demo_minutes, "train_s": self.train_s}
+
+
+def _train_job(job: TrainJob) -> TrainedModel:
     """Train one model (C, linear or CNN) on the first ``minutes`` of a featurised set."""
+    t0 = time.perf_counter()
+    samples = _train_cnn(job) if job.method == "cnn" else _train_on_utilities(job)
+    return TrainedModel(job, samples, time.perf_counter() - t0)
+
+
+def _train_cnn(job: TrainJob) -> int:
+    """Train the CNN on the job's samples; returns how many it learned from."""
+    from terrapref.baselines.cnn import CnnConfig, save_cnn, train_cnn
+    from terrapref.tensorfile import read_tensor_file
+
+    n = _frames_for(job.minutes)
+    tensors, meta = read_tensor_file(job.data, "terrapref-cnn-samples/1", "no such file", "not CNN samples")
+    images, paths, labels = (tensors[k][:n] for k in ("images", "paths", "labels"))
+    config = CnnConfig(epochs=job.cnn_epochs, seed=job.seed)
+    result = train_cnn(images, paths, labels.astype(np.int64), FeatureConfig().preference.m, config)
+    meta = {k: meta[k] for k in ("camera", "classes", "profile")} | {"features": FeatureConfig().to_dict()}
+    save_cnn(job.out, result, config, images.shape[1:], meta)
+    return len(labels)
+
+
+def _train_on_utilities(job: TrainJob) -> int:
+    """Fit the linear utility, or train C, on the job's utilities; returns how many samples it learned from."""
     from terrapref.demos.dataset import Dataset, load_dataset
     from terrapref.learning.linear import fit_linear_utility
     from terrapref.learning.pipeline import train_and_save
-    from terrapref.learning.train import TrainConfig
     from terrapref.planner.policy import save_linear
-    from terrapref.tensorfile import read_tensor_file
 
-    t0 = time.perf_counter()
-    n = _frames_for(job.get("minutes"))
-    if job["method"] == "cnn":
-        from terrapref.baselines.cnn import CnnConfig, save_cnn, train_cnn
-
-        tensors, meta = read_tensor_file(job["data"], "terrapref-cnn-samples/1", "no such file", "not CNN samples")
-        images, paths, labels = (tensors[k][:n] for k in ("images", "paths", "labels"))
-        config = CnnConfig(epochs=job["cnn_epochs"], seed=job["seed"])
-        result = train_cnn(images, paths, labels.astype(np.int64), FeatureConfig().preference.m, config)
-        meta = {k: meta[k] for k in ("camera", "classes", "profile")} | {"features": FeatureConfig().to_dict()}
-        save_cnn(job["out"], result, config, images.shape[1:], meta)
-        samples = len(labels)
+    n = _frames_for(job.minutes)
+    ds = load_dataset(job.data)
+    if n is not None:
+        ds = Dataset(ds.U[:n], ds.labels[:n], ds.w[:n], ds.source[:n], ds.meta)
+    meta = {k: ds.meta[k] for k in ("features", "camera", "classes", "profile")}
+    if job.method == "linear":
+        save_linear(job.out, fit_linear_utility(ds.U, ds.labels), meta)
     else:
-        ds = load_dataset(job["data"])
-        if n is not None:
-            ds = Dataset(ds.U[:n], ds.labels[:n], ds.w[:n], ds.source[:n], ds.meta)
-        samples = len(ds)
-        meta = {k: ds.meta[k] for k in ("features", "camera", "classes", "profile")}
-        if job["method"] == "linear":
-            save_linear(job["out"], fit_linear_utility(ds.U, ds.labels), meta)
-        else:
-            # The study compares C itself with the baselines: its models drive without the second stage.
-            config = TrainConfig(**{**OURS.train.to_dict(), "utility": False, "epochs": job["epochs"], "seed": job["seed"], **job.get("train", {})})
-            train_and_save(ds, job["out"], config, checkpoints=False)
-    return {**job, "samples": samples, "train_s": time.perf_counter() - t0}
+        train_and_save(ds, job.out, _c_config(job), checkpoints=False)
+    return len(ds)
 
 
-def _teach_job(job: dict) -> dict:
+def _c_config(job: TrainJob) -> TrainConfig:
+    """C's training settings for a job: recipe ours's, with the job's seed, epochs and changes."""
+    # The study compares C itself with the baselines: its models drive without the second stage.
+    return OURS.train.updated({"second_stage": None, "seed": job.seed, "optimiser": {"epochs": job.epochs}, **(job.train or {})})
+
+
+def _teach_job(job: TeachJob) -> TaughtModel:
     """The recipe's drive(s) by the synthetic driver of ``order`` and ``style``, and its model."""
-    from terrapref.recipes import recipe_named, run_recipe
+    from terrapref.recipes import run_recipe
 
     t0 = time.perf_counter()
-    named = recipe_named(job["recipe"])
-    recipe = replace(named, train=replace(named.train, epochs=job["epochs"]))
-    out = run_recipe(recipe, job["workdir"], job["seed"], PreferenceProfile(tuple(job["order"])), style=job["style"])
-    return {**job, "out": str(out.model), "demo_minutes": out.demo_minutes, "train_s": time.perf_counter() - t0}
+    recipe = _teach_recipe(job)
+    out = run_recipe(recipe, job.workdir, job.seed, PreferenceProfile(job.order), style=job.style)
+    return TaughtModel(job, str(out.model), out.demo_minutes, time.perf_counter() - t0)
 
 
-def teach_jobs(plan: StudyPlan, work: Path) -> list[dict]:
+def _teach_recipe(job: TeachJob) -> Recipe:
+    """The named recipe of a teaching job, trained for the job's epochs."""
+    from terrapref.recipes import recipe_named
+
+    named = recipe_named(job.recipe)
+    return replace(named, train=named.train.with_epochs(job.epochs))
+
+
+def teach_jobs(plan: StudyPlan, work: Path) -> list[TeachJob]:
     """The teaching study's models: every order under the default style, every style under the default order."""
     default = plan.orders[0]
     combos = [(o, "default") for o in plan.orders] + [(default, st) for st in plan.styles if st != "default"]
-    return [{"study": "teach", "method": "C", "seed": s, "order": list(o), "style": st, "epochs": plan.epochs, "recipe": plan.recipe,
-             "workdir": str(work / "teach" / f"{'_'.join(c[:2] for c in o[:3])}_{st}_s{s}")}
+    return [TeachJob(s, tuple(o), st, plan.epochs, plan.recipe, str(work / "teach" / f"{'_'.join(c[:2] for c in o[:3])}_{st}_s{s}"))
             for s in range(plan.seeds) for o, st in combos]
 
 
-def _pool_map(fn: Callable, jobs: list, engine: Engine, log: Callable[[str], None], what: str) -> list:
-    """Map over jobs on ``engine`` (in order), logging progress."""
-    return run_grid(fn, jobs, engine, lambda k, n: log(f"      {what} {k}/{n}"), describe=lambda j: f"{what} {j!r}")
-
-
 # -- the study -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Workspace:
+    """What every stage of a study shares: the plan, the work folder, where the jobs run, the log."""
+
+    plan: StudyPlan
+    work: Path
+    engine: Engine
+    log: Callable[[str], None]
+
+    def map(self, fn: Callable, jobs: list, what: str) -> list:
+        """Map ``fn`` over ``jobs`` on the engine (results in order), logging progress; a failed job is named by its inputs."""
+        def describe(job: object) -> str:
+            return f"{what} {job.to_dict() if isinstance(job, (TrainJob, TeachJob)) else job!r}"
+
+        return run_grid(fn, jobs, self.engine, lambda k, n: self.log(f"      {what} {k}/{n}"), describe=describe)
+
+
+@contextmanager
+def _timed(timings: dict[str, float], stage: str) -> Iterator[None]:
+    """Record the wall time of the ``with`` block as ``timings[stage]`` [s]."""
+    t0 = time.perf_counter()
+    yield
+    timings[stage] = time.perf_counter() - t0
 
 
 def run_study(out_dir: str | Path, plan: StudyPlan = FULL, engine: Engine | None = None, log: Callable[[str], None] = print) -> Path:
@@ -222,108 +237,142 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, engine: Engine | None
     out = Path(out_dir)
     work = out / "work"
     work.mkdir(parents=True, exist_ok=True)
-    engine = engine or Engine()
-    default = PreferenceProfile.default().order
+    ws = _Workspace(plan, work, engine or Engine(), log)
     timings: dict[str, float] = {}
-    seeds = list(range(plan.seeds))
+    with _timed(timings, "demonstrations"):
+        recordings = _demonstrate(ws)
+    with _timed(timings, "featurisation"):
+        _featurise(ws, recordings)
+    with _timed(timings, "training"):
+        trained = _train(ws)
+    with _timed(timings, "teaching"):
+        taught = _teach(ws)
+    with _timed(timings, "evaluation"):
+        runs = _evaluate(ws, trained, taught)
+    report_started = time.perf_counter()
+    log("[6/6] tables, figures and STUDY.md ...")
+    study = {"plan": _plan_dict(plan), "trained": [t.to_dict() for t in [*trained, *taught]], "runs": [r.to_dict() for r in runs]}
+    write_text_atomic(out / "study.json", json.dumps(study, indent=1, default=float))
+    return write_study(out, plan, trained, runs, timings, report_started=report_started)
 
-    t0 = time.perf_counter()
-    log(f"[1/6] demonstrations: {len(seeds)} seed(s) x 2 profiles x {DEMONSTRATIONS.demonstrations} runs ...")
-    rec_jobs = [(str(work / f"{tag}_s{s}"), s, prof) for s in seeds for tag, prof in (("default", default), ("alt", ALT_PROFILE))]
-    recs = dict(zip([(j[1], j[2]) for j in rec_jobs], _pool_map(_record_job, rec_jobs, engine, log, "demonstration set")))
-    timings["demonstrations"] = time.perf_counter() - t0
 
-    t0 = time.perf_counter()
-    feat_jobs = []
-    for s in seeds:
-        base = work / f"default_s{s}"
-        feat_jobs += [(recs[(s, default)], str(base / "U.safetensors"), "U", None), (recs[(s, default)], str(base / "cnn.safetensors"), "cnn", None),
-                      (recs[(s, ALT_PROFILE)], str(work / f"alt_s{s}" / "U.safetensors"), "U", None)]
-        feat_jobs += [(recs[(s, default)], str(base / f"U_n{n}.safetensors"), "U", n) for n in plan.horizons]
-    log(f"[2/6] featurisation: {len(feat_jobs)} sets ...")
-    _pool_map(_featurise_job, feat_jobs, engine, log, "set")
-    timings["featurisation"] = time.perf_counter() - t0
+def _demonstrate(ws: _Workspace) -> dict[tuple[int, tuple[str, ...]], list[str]]:
+    """Stage 1: per seed, the demonstrations under the default profile and under the other; (seed, profile) -> recordings."""
+    default = PreferenceProfile.default().order
+    seeds = range(ws.plan.seeds)
+    ws.log(f"[1/6] demonstrations: {len(seeds)} seed(s) x 2 profiles x {DEMONSTRATIONS.demonstrations} runs ...")
+    jobs = [(str(ws.work / f"{tag}_s{s}"), s, prof) for s in seeds for tag, prof in (("default", default), ("alt", ALT_PROFILE))]
+    return dict(zip([(s, prof) for _, s, prof in jobs], ws.map(_record_job, jobs, "demonstration set")))
 
-    t0 = time.perf_counter()
-    jobs: list[dict] = []
+
+def _featurise(ws: _Workspace, recs: dict[tuple[int, tuple[str, ...]], list[str]]) -> None:
+    """Stage 2: per seed, the utilities and the CNN's samples of the default demonstrations, the
+    utilities of the other profile's, and the utilities at every ablated horizon."""
+    default = PreferenceProfile.default().order
+    jobs = []
+    for s in range(ws.plan.seeds):
+        base = ws.work / f"default_s{s}"
+        jobs += [(recs[(s, default)], str(base / "U.safetensors"), "U", None), (recs[(s, default)], str(base / "cnn.safetensors"), "cnn", None),
+                 (recs[(s, ALT_PROFILE)], str(ws.work / f"alt_s{s}" / "U.safetensors"), "U", None)]
+        jobs += [(recs[(s, default)], str(base / f"U_n{n}.safetensors"), "U", n) for n in ws.plan.horizons]
+    ws.log(f"[2/6] featurisation: {len(jobs)} sets ...")
+    ws.map(_featurise_job, jobs, "set")
+
+
+def _train(ws: _Workspace) -> list[TrainedModel]:
+    """Stage 3: every model trained from demonstrations."""
+    jobs = _train_jobs(ws.plan, ws.work)
+    ws.log(f"[3/6] training: {len(jobs)} models ...")
+    return ws.map(_train_job, jobs, "model")
+
+
+def _train_jobs(plan: StudyPlan, work: Path) -> list[TrainJob]:
+    """Per seed: each learned method on all and on the first minutes of the demonstrations, C on the
+    other profile's, and C's ablations; the longest to train first."""
+    jobs: list[TrainJob] = []
     models = work / "models"
     models.mkdir(exist_ok=True)
 
     def add(study: str, method: str, s: int, data: Path, tag: str, **extra) -> None:
-        jobs.append({"study": study, "method": method, "seed": s, "data": str(data), "out": str(models / f"{tag}_s{s}.safetensors"),
-                     "epochs": plan.epochs, "cnn_epochs": plan.cnn_epochs, "tag": tag, **extra})
+        jobs.append(TrainJob(study, method, s, str(data), str(models / f"{tag}_s{s}.safetensors"), plan.epochs, plan.cnn_epochs, tag, **extra))
 
-    for s in seeds:
+    for s in range(plan.seeds):
         base = work / f"default_s{s}"
         for method in LEARNED:
             add("baselines", method, s, base / ("cnn.safetensors" if method == "cnn" else "U.safetensors"), method)
             for minutes in plan.minutes:
                 add("efficiency", method, s, base / ("cnn.safetensors" if method == "cnn" else "U.safetensors"), f"{method}_{minutes:g}min", minutes=minutes)
         add("profile", "C", s, work / f"alt_s{s}" / "U.safetensors", "C_alt")
-        add("ablation", "C", s, base / "U.safetensors", "C_no_distance", train={"ignore_features": ["distance"]}, variant="without the distance utility")
-        add("ablation", "C", s, base / "U.safetensors", "C_flat", train={"compress": False, "skip": False}, variant="without the row-wise compression (flat MLP)")
+        add("ablation", "C", s, base / "U.safetensors", "C_no_distance", train={"data": {"ignore_features": ["distance"]}}, variant="without the distance utility")
+        add("ablation", "C", s, base / "U.safetensors", "C_flat", train={"classifier": {"compress": False, "skip": False}}, variant="without the row-wise compression (flat MLP)")
         for n in plan.horizons:
             add("ablation", "C", s, base / f"U_n{n}.safetensors", f"C_n{n}", variant=f"horizon n = {n}")
         for w in plan.widths:
-            add("ablation", "C", s, base / "U.safetensors", f"C_h{w}", train={"hidden": w}, variant=f"hidden width {w}")
-    jobs.sort(key=lambda j: -(j.get("minutes") or 99) * (3 if j["method"] != "linear" else 0.1))  # long jobs first
-    log(f"[3/6] training: {len(jobs)} models ...")
-    trained = _pool_map(_train_job, jobs, engine, log, "model")
-    timings["training"] = time.perf_counter() - t0
+            add("ablation", "C", s, base / "U.safetensors", f"C_h{w}", train={"classifier": {"hidden": w}}, variant=f"hidden width {w}")
+    jobs.sort(key=lambda j: -(j.minutes or 99) * (3 if j.method != "linear" else 0.1))  # long jobs first
+    return jobs
 
-    t0 = time.perf_counter()
-    taught_jobs = teach_jobs(plan, work)
+
+def _teach(ws: _Workspace) -> list[TaughtModel]:
+    """Stage 4: the teaching recipe's drive and model for every order and driver style."""
     from terrapref.recipes import recipe_named
 
-    log(f"[4/6] teaching: {len(taught_jobs)} drives of {recipe_named(plan.recipe).course} and models (recipe {plan.recipe}; "
-        f"{len(plan.orders)} orders, {len(plan.styles)} driver styles, {plan.seeds} seed(s)) ...")
-    taught = _pool_map(_teach_job, taught_jobs, engine, log, "taught model")
-    timings["teaching"] = time.perf_counter() - t0
+    plan = ws.plan
+    jobs = teach_jobs(plan, ws.work)
+    ws.log(f"[4/6] teaching: {len(jobs)} drives of {recipe_named(plan.recipe).course} and models (recipe {plan.recipe}; "
+           f"{len(plan.orders)} orders, {len(plan.styles)} driver styles, {plan.seeds} seed(s)) ...")
+    return ws.map(_teach_job, jobs, "taught model")
 
-    t0 = time.perf_counter()
-    scenarios = plan.scenarios()
-    specs: list[RunSpec] = []
-    tags: list[dict] = []
 
-    def spec(run: RunSpec, **tag) -> None:
-        specs.append(run)
-        tags.append(tag)
+def _evaluate(ws: _Workspace, trained: list[TrainedModel], taught: list[TaughtModel]) -> list[StudyRun]:
+    """Stage 5: every closed-loop run, tagged with its place in the study."""
+    planned = _evaluation_runs(ws.plan, trained, taught)
+    ws.log(f"[5/6] closed-loop evaluation: {len(planned)} runs over {len(ws.plan.scenarios()) + len(ws.plan.layouts)} scenarios ...")
+    results = run_many([spec for spec, _ in planned], progress=every_tenth(ws.log), engine=ws.engine)
+    return [StudyRun(tag, r.scenario, r.metrics) for (_, tag), r in zip(planned, results, strict=True)]
 
-    for sc in scenarios:
-        for t in trained:
-            profile = ALT_PROFILE if t["study"] == "profile" else default
-            spec(RunSpec(sc, 0, PLANNER, t["out"], profile), study=t["study"], method=t["method"], seed=t["seed"], minutes=t.get("minutes"),
-                 variant=t.get("variant"), scored_under="model")
-            if t["study"] == "profile":  # the same run's choices, scored under the default profile
-                spec(RunSpec(sc, 0, PLANNER, t["out"], default), study="profile_cross", method="C", seed=t["seed"], scored_under="default")
-            if t["study"] == "baselines" and t["method"] == "C":
-                spec(RunSpec(sc, 0, PLANNER, t["out"], ALT_PROFILE), study="profile_cross", method="C_default", seed=t["seed"], scored_under="alt")
-                for kind, levels in plan.noise.items():
-                    for level in levels:
-                        spec(RunSpec(sc, 0, PLANNER, t["out"], default, perturb=perturbation(kind, level)),
-                             study="robustness", method="C", seed=t["seed"], kind=kind, level=level)
-        for s in seeds:
-            for method in (HAND_COST, PURE_PURSUIT, EXPERT):
-                spec(RunSpec(sc, s, method, None, default), study="baselines", method=method, seed=s)
-            spec(RunSpec(sc, s, EXPERT, None, ALT_PROFILE), study="profile", method=EXPERT, seed=s, scored_under="model")
-    for layout in plan.layouts:
-        for t in taught:
-            spec(RunSpec(layout, 0, PLANNER, t["out"], tuple(t["order"])), study="teach", method="C", seed=t["seed"], order=t["order"], style=t["style"])
-        for order, style in sorted({(tuple(t["order"]), t["style"]) for t in taught}):
-            spec(RunSpec(layout, 0, EXPERT, None, order, style=style), study="teach", method=EXPERT, seed=0, order=list(order), style=style)
-    # Longest scenarios first, so that no worker is left with a long run at the end.
-    order = sorted(range(len(specs)), key=lambda i: -scenario_length(specs[i].scenario))
-    specs, tags = [specs[i] for i in order], [tags[i] for i in order]
-    log(f"[5/6] closed-loop evaluation: {len(specs)} runs over {len(scenarios) + len(plan.layouts)} scenarios ...")
-    results = run_many(specs, progress=every_tenth(log), engine=engine)
-    timings["evaluation"] = time.perf_counter() - t0
 
-    t0 = time.perf_counter()
-    log("[6/6] tables, figures and STUDY.md ...")
-    runs = [{**tag, "scenario": r["scenario"], "metrics": r["metrics"]} for tag, r in zip(tags, results)]
-    trained += taught
-    write_text_atomic(out / "study.json", json.dumps({"plan": _plan_dict(plan), "trained": trained, "runs": runs}, indent=1, default=float))
-    return write_study(out, plan, trained, runs, timings, report_started=t0)
+def _evaluation_runs(plan: StudyPlan, trained: list[TrainedModel], taught: list[TaughtModel]) -> list[tuple[RunSpec, RunTag]]:
+    """Every run with its tag: the evaluation courses, then the teaching layouts; the longest courses
+    first, so that no worker is left with a long run at the end."""
+    runs = [run for sc in plan.scenarios() for run in _course_runs(plan, sc, trained)]
+    runs += [run for layout in plan.layouts for run in _layout_runs(layout, taught)]
+    return sorted(runs, key=lambda run: -scenario_length(run[0].scenario))
+
+
+def _course_runs(plan: StudyPlan, sc: str, trained: list[TrainedModel]) -> list[tuple[RunSpec, RunTag]]:
+    """One evaluation course: every trained model's runs, then per seed the drivers without a model,
+    and the synthetic driver under the other profile."""
+    default = PreferenceProfile.default().order
+    runs = [run for t in trained for run in _model_runs(plan, sc, t.job, default)]
+    for s in range(plan.seeds):
+        runs += [(RunSpec(sc, s, method, None, default), RunTag("baselines", method, s)) for method in (HAND_COST, PURE_PURSUIT, EXPERT)]
+        runs.append((RunSpec(sc, s, EXPERT, None, ALT_PROFILE), RunTag("profile", EXPERT, s, scored_under="model")))
+    return runs
+
+
+def _model_runs(plan: StudyPlan, sc: str, job: TrainJob, default: tuple[str, ...]) -> list[tuple[RunSpec, RunTag]]:
+    """A trained model's run on a course under the profile it learned; the other profile's C again
+    under the default profile, and the default C under the other profile and under every perturbation."""
+    own = ALT_PROFILE if job.study == "profile" else default
+    runs = [(RunSpec(sc, 0, PLANNER, job.out, own),
+             RunTag(job.study, job.method, job.seed, ModelVariant(job.minutes, job.variant), scored_under="model"))]
+    if job.study == "profile":  # the same run's choices, scored under the default profile
+        runs.append((RunSpec(sc, 0, PLANNER, job.out, default), RunTag("profile_cross", "C", job.seed, scored_under="default")))
+    if job.study == "baselines" and job.method == "C":
+        runs.append((RunSpec(sc, 0, PLANNER, job.out, ALT_PROFILE), RunTag("profile_cross", "C_default", job.seed, scored_under="alt")))
+        runs += [(RunSpec(sc, 0, PLANNER, job.out, default, perturb=perturbation(kind, level)),
+                  RunTag("robustness", "C", job.seed, kind=kind, level=level)) for kind, levels in plan.noise.items() for level in levels]
+    return runs
+
+
+def _layout_runs(layout: str, taught: list[TaughtModel]) -> list[tuple[RunSpec, RunTag]]:
+    """One teaching layout: every taught model, and the driver of every order and style taught."""
+    runs = [(RunSpec(layout, 0, PLANNER, t.out, t.job.order), RunTag("teach", "C", t.job.seed, order=t.job.order, style=t.job.style))
+            for t in taught]
+    runs += [(RunSpec(layout, 0, EXPERT, None, order, style=style), RunTag("teach", EXPERT, 0, order=order, style=style))
+             for order, style in sorted({(t.job.order, t.job.style) for t in taught})]
+    return runs
 
 
 def _plan_dict(plan: StudyPlan) -> dict:

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Mapping
+from collections.abc import Set as AbstractSet
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +21,8 @@ from terrapref.yamlio import read_yaml_mapping
 FORMAT = "terrapref-scenario/1"
 MAX_CELLS = 100_000_000
 _NAME = re.compile(r"[A-Za-z0-9_-]+")
-_TOP_KEYS = {"format", "name", "description", "world", "terrain", "path", "start", "zones"}
+_TOP_KEYS = frozenset({"format", "name", "description", "world", "terrain", "path", "start", "zones"})
+_REQUIRED_KEYS = frozenset({"format", "name", "world", "path"})
 _SHAPE_KEYS = ("polygon", "circle", "rectangle")
 
 
@@ -31,7 +35,7 @@ class _Checker:
     def fail(self, field: str, message: str) -> None:
         self.problems.append(Problem(field, message))
 
-    def mapping(self, value: Any, field: str, required: set[str], optional: set[str] = frozenset()) -> dict | None:
+    def mapping(self, value: Any, field: str, required: AbstractSet[str], optional: AbstractSet[str] = frozenset()) -> dict | None:
         if not isinstance(value, dict):
             self.fail(field, f"expected a mapping, got {_describe(value)}")
             return None
@@ -182,129 +186,23 @@ def parse_scenario(data: dict[str, Any], source: str = "", classes: ClassTable |
     """
     classes = classes or default_classes()
     c = _Checker()
-    if data.get("format") != FORMAT:
-        got = data.get("format")
-        c.fail("format", f"{'missing' if got is None else _repr(got) + ' is not supported'}; expected {FORMAT!r}")
-        raise ScenarioError(source, c.problems)
-    top = c.mapping(data, "", {"format", "name", "world", "path"}, _TOP_KEYS - {"format", "name", "world", "path"})
-    data = data if top is None else top
-
-    name = c.text(data.get("name"), "name") if "name" in data else None
-    if name is not None and not _NAME.fullmatch(name):
-        c.fail("name", "must match [A-Za-z0-9_-]+")
-    description = data.get("description", "")
-    if not isinstance(description, str):
-        c.fail("description", f"expected a string, got {_describe(description)}")
-
-    size_m: tuple[float, float] | None = None
-    resolution = background = None
-    world = c.mapping(data["world"], "world", {"size_m", "resolution_m", "background"}) if "world" in data else None
-    if world is not None:
-        size = c.vector(world["size_m"], "world.size_m", 2, positive=True)
-        resolution = c.number(world["resolution_m"], "world.resolution_m", positive=True)
-        background = c.class_name(world["background"], "world.background", classes)
-        if size is not None and resolution is not None:
-            if size[0] / resolution * (size[1] / resolution) > 1e18:
-                # Past 10^18 an exact count is unreadable (and past ~10^308 it overflows); give the magnitude.
-                digits = math.log10(size[0]) + math.log10(size[1]) - 2 * math.log10(resolution)
-                c.fail("world", f"raster would have about 10^{digits:.0f} cells, more than the limit of {MAX_CELLS:,}; use a coarser resolution_m or a smaller size_m")
-            else:
-                ny, nx = grid_shape((size[0], size[1]), resolution)
-                if nx * ny > MAX_CELLS:
-                    c.fail(
-                        "world",
-                        f"raster would have {nx} x {ny} = {nx * ny:,} cells ({nx * ny / 1e9:.1f} GB), more than the limit of {MAX_CELLS:,}; use a coarser resolution_m or a smaller size_m",
-                    )
-                else:
-                    size_m = (size[0], size[1])
-
-    terrain: list[TerrainPatch] = []
-    raw_terrain = data.get("terrain", [])
-    if not isinstance(raw_terrain, list):
-        c.fail("terrain", f"expected a list, got {_describe(raw_terrain)}")
-        raw_terrain = []
-    for i, item in enumerate(raw_terrain):
-        f = f"terrain[{i}]"
-        item = c.mapping(item, f, {"class"}, set(_SHAPE_KEYS))
-        if item is None:
-            continue
-        cls_name = c.class_name(item["class"], f"{f}.class", classes)
-        shape = c.shape(item, f, size_m)
-        if cls_name is not None and shape is not None:
-            terrain.append(TerrainPatch(cls_name, shape))
-
-    waypoints = None
-    path = c.mapping(data["path"], "path", {"waypoints"}) if "path" in data else None
-    if path is not None:
-        waypoints = c.points(path["waypoints"], "path.waypoints", 2)
-        if waypoints is not None:
-            if len(np.unique(waypoints, axis=0)) < 2:
-                c.fail("path.waypoints", "needs at least 2 distinct points")
-                waypoints = None
-            elif size_m is not None:
-                off = np.flatnonzero(~_on_map(waypoints, size_m))
-                if len(off):
-                    i = int(off[0])
-                    c.fail(f"path.waypoints[{i}]", f"({waypoints[i, 0]:g}, {waypoints[i, 1]:g}) is off the map (0..{size_m[0]:g} x 0..{size_m[1]:g}); {len(off)} waypoint(s) off the map")
-                    waypoints = None
-
-    start: tuple[float, float, float] | None = None
-    if "start" in data:
-        s = c.vector(data["start"], "start", 3)
-        if s is not None:
-            if size_m is not None and not _on_map(np.array(s[:2]), size_m):
-                c.fail("start", f"({s[0]:g}, {s[1]:g}) is off the map")
-            else:
-                start = (s[0], s[1], math.radians(s[2]))
-    elif waypoints is not None:
-        # Default: the first waypoint, facing the next distinct one.
-        first = waypoints[0]
-        nxt = next(p for p in waypoints[1:] if not np.array_equal(p, first))
-        start = (float(first[0]), float(first[1]), math.atan2(nxt[1] - first[1], nxt[0] - first[0]))
-
-    zones: list[Zone] = []
-    raw_zones = data.get("zones", [])
-    if raw_zones is None:
-        raw_zones = []
-    if not isinstance(raw_zones, list):
-        c.fail("zones", f"expected a list, got {_describe(raw_zones)}")
-        raw_zones = []
-    seen: dict[str, int] = {}
-    expect_ok = {AVOID, BEST, *classes.names}
-    for i, item in enumerate(raw_zones):
-        f = f"zones[{i}]"
-        item = c.mapping(item, f, {"id", "expect"}, {"label", *_SHAPE_KEYS})
-        if item is None:
-            continue
-        zid = item["id"]
-        if isinstance(zid, bool) or not isinstance(zid, (str, int)):
-            c.fail(f"{f}.id", f"expected a string, got {_describe(zid)}")
-            continue
-        zid = zid if isinstance(zid, str) else _repr(zid)
-        if zid in seen:
-            c.fail(f"{f}.id", f"duplicate zone id {zid!r} (also zones[{seen[zid]}])")
-            continue
-        seen[zid] = i
-        label = item.get("label", "")
-        if not isinstance(label, str):
-            c.fail(f"{f}.label", f"expected a string, got {_describe(label)}")
-        expect = item["expect"]
-        if not isinstance(expect, str) or expect not in expect_ok:
-            c.fail(f"{f}.expect", f"{_repr(expect)} is neither 'avoid', 'best' nor a known class ({', '.join(classes.names)})")
-            expect = None
-        shape = c.shape(item, f, size_m)
-        if shape is not None and expect is not None and isinstance(label, str):
-            zones.append(Zone(zid, shape, expect, label))
-
+    data = _header(c, data, source)
+    name = _name(c, data)
+    description = _description(c, data)
+    world = _world(c, data, classes)
+    terrain = _terrain(c, data.get("terrain", []), world.size_m, classes)
+    waypoints = _waypoints(c, data, world.size_m)
+    start = _start(c, data, waypoints, world.size_m)
+    zones = _zones(c, data.get("zones", []), world.size_m, classes)
     if c.problems:
         raise ScenarioError(source, c.problems)
-    assert name is not None and size_m is not None and resolution is not None and background is not None
+    assert name is not None and world.size_m is not None and world.resolution_m is not None and world.background is not None
     assert waypoints is not None and start is not None
     return Scenario(
         name=name,
-        size_m=size_m,
-        resolution_m=resolution,
-        background=background,
+        size_m=world.size_m,
+        resolution_m=world.resolution_m,
+        background=world.background,
         terrain=tuple(terrain),
         waypoints=waypoints,
         start=start,
@@ -313,6 +211,186 @@ def parse_scenario(data: dict[str, Any], source: str = "", classes: ClassTable |
         source=source,
         classes=classes,
     )
+
+
+@dataclass(frozen=True)
+class _World:
+    """The checked ``world`` block; a field is None where its value was invalid.
+
+    Attributes:
+        size_m: map size (x, y) [m]; also None when its raster would exceed ``MAX_CELLS``.
+        resolution_m: raster cell side [m].
+        background: class name of every cell no patch covers.
+    """
+
+    size_m: tuple[float, float] | None = None
+    resolution_m: float | None = None
+    background: str | None = None
+
+
+def _header(c: _Checker, data: dict[str, Any], source: str) -> dict[str, Any]:
+    """Check the format and the top-level keys; a foreign format is refused at once, alone."""
+    if not isinstance(data, Mapping):
+        c.fail("", f"expected a mapping of scenario fields, got {_describe(data)}")
+        raise ScenarioError(source, c.problems)
+    if data.get("format") != FORMAT:
+        got = data.get("format")
+        c.fail("format", f"{'missing' if got is None else _repr(got) + ' is not supported'}; expected {FORMAT!r}")
+        raise ScenarioError(source, c.problems)
+    top = c.mapping(data, "", _REQUIRED_KEYS, _TOP_KEYS - _REQUIRED_KEYS)
+    return data if top is None else top
+
+
+def _name(c: _Checker, data: dict[str, Any]) -> str | None:
+    """The scenario's name, which must be usable in file names."""
+    name = c.text(data.get("name"), "name") if "name" in data else None
+    if name is not None and not _NAME.fullmatch(name):
+        c.fail("name", "must match [A-Za-z0-9_-]+")
+    return name
+
+
+def _description(c: _Checker, data: dict[str, Any]) -> Any:
+    """The optional free-text description ("" when absent)."""
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        c.fail("description", f"expected a string, got {_describe(description)}")
+    return description
+
+
+def _world(c: _Checker, data: dict[str, Any], classes: ClassTable) -> _World:
+    """The ``world`` block: map size, raster resolution and background class."""
+    world = c.mapping(data["world"], "world", {"size_m", "resolution_m", "background"}) if "world" in data else None
+    if world is None:
+        return _World()
+    size = c.vector(world["size_m"], "world.size_m", 2, positive=True)
+    resolution = c.number(world["resolution_m"], "world.resolution_m", positive=True)
+    background = c.class_name(world["background"], "world.background", classes)
+    size_m = _raster_size(c, size, resolution) if size is not None and resolution is not None else None
+    return _World(size_m, resolution, background)
+
+
+def _raster_size(c: _Checker, size: tuple[float, ...], resolution_m: float) -> tuple[float, float] | None:
+    """``size`` [m] as the map size, or None when its raster would exceed ``MAX_CELLS`` cells."""
+    if size[0] / resolution_m * (size[1] / resolution_m) > 1e18:
+        # Past 10^18 an exact count is unreadable (and past ~10^308 it overflows); give the magnitude.
+        digits = math.log10(size[0]) + math.log10(size[1]) - 2 * math.log10(resolution_m)
+        c.fail("world", f"raster would have about 10^{digits:.0f} cells, more than the limit of {MAX_CELLS:,}; use a coarser resolution_m or a smaller size_m")
+        return None
+    ny, nx = grid_shape((size[0], size[1]), resolution_m)
+    if nx * ny > MAX_CELLS:
+        c.fail(
+            "world",
+            f"raster would have {nx} x {ny} = {nx * ny:,} cells ({nx * ny / 1e9:.1f} GB), more than the limit of {MAX_CELLS:,}; use a coarser resolution_m or a smaller size_m",
+        )
+        return None
+    return (size[0], size[1])
+
+
+def _terrain(c: _Checker, raw: Any, size_m: tuple[float, float] | None, classes: ClassTable) -> list[TerrainPatch]:
+    """The ``terrain`` list: one class and one shape per patch."""
+    if not isinstance(raw, list):
+        c.fail("terrain", f"expected a list, got {_describe(raw)}")
+        return []
+    patches: list[TerrainPatch] = []
+    for i, item in enumerate(raw):
+        f = f"terrain[{i}]"
+        item = c.mapping(item, f, {"class"}, set(_SHAPE_KEYS))
+        if item is None:
+            continue
+        cls_name = c.class_name(item["class"], f"{f}.class", classes)
+        shape = c.shape(item, f, size_m)
+        if cls_name is not None and shape is not None:
+            patches.append(TerrainPatch(cls_name, shape))
+    return patches
+
+
+def _waypoints(c: _Checker, data: dict[str, Any], size_m: tuple[float, float] | None) -> np.ndarray | None:
+    """The reference path's waypoints, shape (n, 2) [m]: at least two distinct, all on the map."""
+    path = c.mapping(data["path"], "path", {"waypoints"}) if "path" in data else None
+    if path is None:
+        return None
+    waypoints = c.points(path["waypoints"], "path.waypoints", 2)
+    if waypoints is None:
+        return None
+    if len(np.unique(waypoints, axis=0)) < 2:
+        c.fail("path.waypoints", "needs at least 2 distinct points")
+        return None
+    if size_m is not None:
+        off = np.flatnonzero(~_on_map(waypoints, size_m))
+        if len(off):
+            i = int(off[0])
+            c.fail(f"path.waypoints[{i}]", f"({waypoints[i, 0]:g}, {waypoints[i, 1]:g}) is off the map (0..{size_m[0]:g} x 0..{size_m[1]:g}); {len(off)} waypoint(s) off the map")
+            return None
+    return waypoints
+
+
+def _start(
+    c: _Checker, data: dict[str, Any], waypoints: np.ndarray | None, size_m: tuple[float, float] | None
+) -> tuple[float, float, float] | None:
+    """The start pose (x [m], y [m], yaw [rad]); the file gives yaw in degrees."""
+    if "start" not in data:
+        if waypoints is None:
+            return None
+        # Default: the first waypoint, facing the next distinct one.
+        first = waypoints[0]
+        nxt = next(p for p in waypoints[1:] if not np.array_equal(p, first))
+        return (float(first[0]), float(first[1]), math.atan2(nxt[1] - first[1], nxt[0] - first[0]))
+    s = c.vector(data["start"], "start", 3)
+    if s is None:
+        return None
+    if size_m is not None and not _on_map(np.array(s[:2]), size_m):
+        c.fail("start", f"({s[0]:g}, {s[1]:g}) is off the map")
+        return None
+    return (s[0], s[1], math.radians(s[2]))
+
+
+def _zones(c: _Checker, raw: Any, size_m: tuple[float, float] | None, classes: ClassTable) -> list[Zone]:
+    """The ``zones`` list (``null`` is an empty one), each zone with an id unique in the file."""
+    if raw is None:
+        raw = []
+    if not isinstance(raw, list):
+        c.fail("zones", f"expected a list, got {_describe(raw)}")
+        return []
+    zones: list[Zone] = []
+    seen: dict[str, int] = {}
+    for i, item in enumerate(raw):
+        f = f"zones[{i}]"
+        item = c.mapping(item, f, {"id", "expect"}, {"label", *_SHAPE_KEYS})
+        zid = _zone_id(c, item["id"], f, seen) if item is not None else None
+        if zid is None:
+            continue
+        seen[zid] = i
+        zone = _zone(c, item, f, zid, size_m, classes)
+        if zone is not None:
+            zones.append(zone)
+    return zones
+
+
+def _zone_id(c: _Checker, raw: Any, field: str, seen: dict[str, int]) -> str | None:
+    """A zone's id as text (an integer id is accepted), or None if invalid or already in ``seen``."""
+    if isinstance(raw, bool) or not isinstance(raw, (str, int)):
+        c.fail(f"{field}.id", f"expected a string, got {_describe(raw)}")
+        return None
+    zid = raw if isinstance(raw, str) else _repr(raw)
+    if zid in seen:
+        c.fail(f"{field}.id", f"duplicate zone id {zid!r} (also zones[{seen[zid]}])")
+        return None
+    return zid
+
+
+def _zone(c: _Checker, item: dict, field: str, zid: str, size_m: tuple[float, float] | None, classes: ClassTable) -> Zone | None:
+    """One zone with a checked id: its label, what the planner should do there, and its shape."""
+    label = item.get("label", "")
+    if not isinstance(label, str):
+        c.fail(f"{field}.label", f"expected a string, got {_describe(label)}")
+    expect = item["expect"]
+    if not isinstance(expect, str) or expect not in {AVOID, BEST, *classes.names}:
+        c.fail(f"{field}.expect", f"{_repr(expect)} is neither 'avoid', 'best' nor a known class ({', '.join(classes.names)})")
+        expect = None
+    shape = c.shape(item, field, size_m)
+    if shape is not None and expect is not None and isinstance(label, str):
+        return Zone(zid, shape, expect, label)
+    return None
 
 
 def load_scenario(path: str | Path, classes: ClassTable | None = None) -> Scenario:

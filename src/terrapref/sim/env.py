@@ -33,6 +33,7 @@ from gymnasium.error import InvalidAction, ResetNeeded
 from terrapref.camera import CameraConfig
 from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.sim.loop import SimConfig, Simulation
+from terrapref.terrain import ClassTable
 from terrapref.terrain.profile import PreferenceProfile
 from terrapref.vehicle import Command, ControlSet, Pose
 
@@ -131,19 +132,9 @@ class OffRoadNavEnv(gym.Env):
         sim: SimConfig | None = None,
         render_mode: str | None = None,
     ) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
-        if action_type not in ("discrete", "continuous"):
-            raise ValueError(f"action_type must be 'discrete' or 'continuous', got {action_type!r}")
-        if image_encoding not in ("ids", "onehot"):
-            raise ValueError(f"image_encoding must be 'ids' or 'onehot', got {image_encoding!r}")
-        if n_waypoints < 1 or not waypoint_spacing_m > 0:
-            raise ValueError("n_waypoints must be >= 1 and waypoint_spacing_m > 0")
-        if not (start_jitter_m >= 0 and start_yaw_jitter_rad >= 0):
-            raise ValueError("start_jitter_m and start_yaw_jitter_rad must be >= 0")
-        self.courses: tuple[str | Scenario, ...] = (scenario,) if isinstance(scenario, (str, Scenario)) else tuple(scenario)
-        if not self.courses:
-            raise ValueError("scenario: name at least one course")
+        self._check_modes(render_mode, action_type, image_encoding)
+        _check_waypoints_and_jitter(n_waypoints, waypoint_spacing_m, start_jitter_m, start_yaw_jitter_rad)
+        self.courses = _courses(scenario)
         self.action_type = action_type
         self.control_set = control_set or ControlSet()
         self.reward_config = reward or RewardConfig()
@@ -159,41 +150,57 @@ class OffRoadNavEnv(gym.Env):
         first = self._simulation(self.courses[0] if self.courses[0] != RANDOM_COURSE else "gen:0")
         self.sim = first
         self.classes = first.scenario.classes
-        self.profile = profile if isinstance(profile, PreferenceProfile) else (
-            PreferenceProfile.parse(profile, self.classes, "profile") if profile is not None else PreferenceProfile.default(self.classes))
-        self._terrain_cost = np.zeros(256)
-        for rank, name in enumerate(self.profile.order):
-            if name not in self.classes.lethal:
-                self._terrain_cost[self.classes.id_of(name)] = self.reward_config.terrain_growth**rank
+        self.profile = _profile(profile, self.classes)
+        self._terrain_cost = self._terrain_costs()
         self._class_ids = np.array([c.id for c in self.classes.classes], dtype=np.uint8)
-
-        cam_h, cam_w = first.camera.shape
-        h, w = (cam_h, cam_w) if image_size is None else (int(image_size[0]), int(image_size[1]))
-        if not (1 <= h <= cam_h and 1 <= w <= cam_w):
-            raise ValueError(f"image_size must be within the camera's {cam_h} x {cam_w}, got {image_size!r}")
-        rows = ((np.arange(h) + 0.5) * cam_h / h).astype(np.int64)
-        cols = ((np.arange(w) + 0.5) * cam_w / w).astype(np.int64)
-        self._full_image = (h, w) == (cam_h, cam_w)
-        self._pixel_index = (rows[:, None] * cam_w + cols[None, :]).reshape(-1)
-        self._image_hw = (h, w)
-        channels = 1 if image_encoding == "ids" else len(self._class_ids)
-        r = WAYPOINT_RANGE_M
-        self.observation_space = spaces.Dict(
-            {
-                "image": spaces.Box(0, 255, (h, w, channels), np.uint8),
-                "pose": spaces.Box(np.array([-r, -math.pi, 0.0], np.float32), np.array([r, math.pi, 1.0], np.float32), dtype=np.float32),
-                "waypoints": spaces.Box(np.float32(-r), np.float32(r), (2 * n_waypoints,), np.float32),
-            }
-        )
-        if action_type == "discrete":
-            self.action_space: spaces.Space = spaces.Discrete(self.control_set.m)
-        else:
-            self.action_space = spaces.Box(np.float32(-1.0), np.float32(1.0), (2,), np.float32)
+        self._image_hw, self._pixel_index = _image_sampling(first.camera.shape, image_size)
+        self._full_image = self._image_hw == first.camera.shape
+        self.observation_space = self._observation_space()
+        self.action_space: spaces.Space = self._action_space()
         self._progress_s = 0.0
         self._in_corridor = True
         self._off_map = False
         self._started = False
         self._ended = False
+
+    # --- construction -------------------------------------------------------------------------
+
+    def _check_modes(self, render_mode: str | None, action_type: str, image_encoding: str) -> None:
+        """Refuse a mode this env does not offer."""
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+        if action_type not in ("discrete", "continuous"):
+            raise ValueError(f"action_type must be 'discrete' or 'continuous', got {action_type!r}")
+        if image_encoding not in ("ids", "onehot"):
+            raise ValueError(f"image_encoding must be 'ids' or 'onehot', got {image_encoding!r}")
+
+    def _terrain_costs(self) -> np.ndarray:
+        """Cost per metre driven on each class id, shape (256,): ``terrain_growth ** rank`` in the
+        profile; 0 for the background, lethal classes and ids of no class."""
+        cost = np.zeros(256)
+        for rank, name in enumerate(self.profile.order):
+            if name not in self.classes.lethal:
+                cost[self.classes.id_of(name)] = self.reward_config.terrain_growth**rank
+        return cost
+
+    def _observation_space(self) -> spaces.Dict:
+        """The observation's spaces, the same on every course (see the class docstring)."""
+        h, w = self._image_hw
+        channels = 1 if self.image_encoding == "ids" else len(self._class_ids)
+        r = WAYPOINT_RANGE_M
+        return spaces.Dict(
+            {
+                "image": spaces.Box(0, 255, (h, w, channels), np.uint8),
+                "pose": spaces.Box(np.array([-r, -math.pi, 0.0], np.float32), np.array([r, math.pi, 1.0], np.float32), dtype=np.float32),
+                "waypoints": spaces.Box(np.float32(-r), np.float32(r), (2 * self.n_waypoints,), np.float32),
+            }
+        )
+
+    def _action_space(self) -> spaces.Space:
+        """An index into the control set, or (a_v, a_w) in [-1, 1]^2."""
+        if self.action_type == "discrete":
+            return spaces.Discrete(self.control_set.m)
+        return spaces.Box(np.float32(-1.0), np.float32(1.0), (2,), np.float32)
 
     # --- courses ------------------------------------------------------------------------------
 
@@ -379,6 +386,41 @@ class OffRoadNavEnv(gym.Env):
         reach = np.arange(0.0, 1.5, step / 2)
         view[to_pixels(np.stack([x + reach * math.cos(yaw), y + reach * math.sin(yaw)], axis=1))] = (220, 30, 30)
         return view
+
+
+def _check_waypoints_and_jitter(n_waypoints: int, waypoint_spacing_m: float, start_jitter_m: float, start_yaw_jitter_rad: float) -> None:
+    """Refuse an empty or backward waypoint observation and a negative start jitter."""
+    if n_waypoints < 1 or not waypoint_spacing_m > 0:
+        raise ValueError("n_waypoints must be >= 1 and waypoint_spacing_m > 0")
+    if not (start_jitter_m >= 0 and start_yaw_jitter_rad >= 0):
+        raise ValueError("start_jitter_m and start_yaw_jitter_rad must be >= 0")
+
+
+def _courses(scenario: str | Scenario | Sequence[str | Scenario]) -> tuple[str | Scenario, ...]:
+    """The courses a reset draws from: one, or several; never none."""
+    courses = (scenario,) if isinstance(scenario, (str, Scenario)) else tuple(scenario)
+    if not courses:
+        raise ValueError("scenario: name at least one course")
+    return courses
+
+
+def _profile(profile: str | Sequence[str] | PreferenceProfile | None, classes: ClassTable) -> PreferenceProfile:
+    """The preference profile the terrain reward follows: as given, parsed, or the table's default."""
+    if isinstance(profile, PreferenceProfile):
+        return profile
+    return PreferenceProfile.parse(profile, classes, "profile") if profile is not None else PreferenceProfile.default(classes)
+
+
+def _image_sampling(camera_hw: tuple[int, int], image_size: tuple[int, int] | None) -> tuple[tuple[int, int], np.ndarray]:
+    """The observed image's (h, w) and, for each of its pixels, the flat index of the nearest
+    camera pixel, shape (h * w,); ``image_size`` None keeps the camera's size."""
+    cam_h, cam_w = camera_hw
+    h, w = (cam_h, cam_w) if image_size is None else (int(image_size[0]), int(image_size[1]))
+    if not (1 <= h <= cam_h and 1 <= w <= cam_w):
+        raise ValueError(f"image_size must be within the camera's {cam_h} x {cam_w}, got {image_size!r}")
+    rows = ((np.arange(h) + 0.5) * cam_h / h).astype(np.int64)
+    cols = ((np.arange(w) + 0.5) * cam_w / w).astype(np.int64)
+    return (h, w), (rows[:, None] * cam_w + cols[None, :]).reshape(-1)
 
 
 def register_envs() -> None:

@@ -2,7 +2,8 @@
 
 One loop iteration is one camera frame: handle input, sample the stick, draw, then (while
 driving) record the frame with the command (v, w) and its label and step the simulation by one
-camera period. A session goes through these phases:
+camera period, through the record loop the synthetic driver uses too
+(:class:`~terrapref.demos.session.RecordLoop`). A session goes through these phases:
 
 - ``waiting``: the window is open and nothing moves; the instructions are on screen. Space,
   Enter, P or a gamepad button starts the countdown.
@@ -37,7 +38,7 @@ import pygame
 
 from terrapref.camera import CameraConfig
 from terrapref.demos.recording import RecordingWriter
-from terrapref.demos.session import DisturbanceConfig, Disturber, recording_meta
+from terrapref.demos.session import DisturbanceConfig, Disturber, RecordLoop, abort_recording, recording_meta
 from terrapref.teleop.guide import CourseGuide, stays_on_map
 from terrapref.teleop.stick import Stick
 from terrapref.teleop.window import ALERT_COLOR, HIGHLIGHT_COLOR, PLANNER_COLOR, Banner, Window
@@ -117,6 +118,62 @@ class TeleopState:
 Script = Callable[[TeleopState], Sequence[Any]]
 
 
+@dataclass(frozen=True)
+class TeleopOptions:
+    """How a driving session runs: the keywords of :func:`run_teleop`.
+
+    Attributes:
+        record_dir: directory for the recording; None drives without recording.
+        overwrite: replace an existing recording in ``record_dir`` (only once this one is complete).
+        camera: camera configuration (default: the model's when riding along, else SPEC 5).
+        preference: preference/control set configuration; its control set labels w (default:
+            the model's when riding along).
+        sim_config: loop timing and limits.
+        v_mps: forward speed held throughout [m/s], in (0, vehicle max speed].
+        realtime: pace the loop at the camera rate for a person; False runs as fast as it can.
+        script: ``TeleopState -> events`` posted before each iteration's events are handled
+            (tests and the simulated keyboard driver inject key and mouse events this way).
+        max_frames: stop after this many loop iterations.
+        screenshot: save the last drawn window image to this file (PNG by extension).
+        disturbance: pushes added to the executed yaw rate now and then, so that the recording
+            shows the driver's recoveries (the stick stays the label); drawn from ``seed``.
+        seed: seeds the pushes' stream.
+        profile: the driver's declared preference order, stored with the recording (default:
+            the class table's).
+        model: ride along with this model file: the planner drives, the driver's takeovers are
+            recorded as corrections.
+        wait_for_start: open paused and start after a key and a countdown (False: drive from
+            the first frame, as scripted tests do).
+    """
+
+    record_dir: str | Path | None = None
+    overwrite: bool = False
+    camera: CameraConfig | None = None
+    preference: PreferenceSetConfig | None = None
+    sim_config: SimConfig | None = None
+    v_mps: float = 1.0
+    realtime: bool = True
+    script: Script | None = None
+    max_frames: int | None = None
+    screenshot: str | Path | None = None
+    disturbance: DisturbanceConfig | None = None
+    seed: int = 0
+    profile: PreferenceProfile | None = None
+    model: str | Path | None = None
+    wait_for_start: bool = True
+
+
+@dataclass(frozen=True)
+class _Setup:
+    """A session's configuration with its defaults filled in, and the planner riding along (or None)."""
+
+    scenario: Scenario
+    camera: CameraConfig
+    preference: PreferenceSetConfig
+    sim: SimConfig
+    planner: Any
+
+
 def _check_display() -> None:
     """Refuse to open a window nobody can see: SDL would silently fall back to an offscreen one."""
     if os.environ.get("SDL_VIDEODRIVER"):
@@ -139,20 +196,21 @@ def _open_display() -> None:
 
 
 class _Session:
-    """One driving session's state; :func:`run_teleop` builds it and runs :meth:`run`."""
+    """One driving session's state: what a person adds to the record loop (phases, window
+    events, the stick, riding along, the map's edge). :func:`run_session` builds it and runs
+    :meth:`run`."""
 
-    def __init__(self, sim: Simulation, prefs: PreferenceSet, window: Window, writer: RecordingWriter | None, v_mps: float,
-                 disturber: Disturber | None, planner: Any, wait_for_start: bool) -> None:
-        self.sim, self.window, self.writer, self.v = sim, window, writer, v_mps
+    def __init__(self, recorder: RecordLoop, prefs: PreferenceSet, window: Window, planner: Any, options: TeleopOptions) -> None:
+        sim = recorder.sim
+        self.recorder, self.sim, self.window, self.v = recorder, sim, window, options.v_mps
         self.control = prefs.config.control
         self.frame_dt = 1.0 / sim.config.camera_rate_hz
         self.guide = CourseGuide(sim.world, sim.path, prefs)
         self.stick = Stick(w_max_rps=float(np.abs(self.control.w_rps).max()), view_width_px=window.view_size[0], view_height_px=window.view_size[1])
-        self.disturb = disturber
         self.planner = planner
         self.driver = "planner" if planner is not None else "you"
         self.idle_s = 0.0
-        self.phase = "waiting" if wait_for_start else "driving"
+        self.phase = "waiting" if options.wait_for_start else "driving"
         self.countdown_left = 0
         self.quit = False
         self.at_edge = False
@@ -226,23 +284,23 @@ class _Session:
             if self.countdown_left <= 0:
                 self.phase = "driving"
         elif self.phase == "driving":
-            self.drive(w, label)
+            self.drive(w)
 
-    def drive(self, w: float, label: int) -> None:
+    def drive(self, w: float) -> None:
+        """One driven frame: the driver's command (the stick's ``w`` [rad/s] or the planner's),
+        held at the map's edge where it must be, recorded only where the person steered."""
         command = Command(self.v, w) if self.driver == "you" else Command(*self.decision.command)
-        executed = self.disturb(command) if self.disturb is not None else command
+        executed = self.recorder.executed(command)
         self.at_edge = not stays_on_map(self.sim.world, self.frame.pose, executed, self.frame_dt)
+        steered = self.driver == "you" and not self.at_edge
         if self.at_edge:
             executed = Command(0.0, executed[1])  # held at the edge: it may turn on the spot
             self.edge_frames += 1
-        elif self.driver == "you":
-            if self.writer is not None:
-                self.writer.append(self.frame.time_s, self.frame.pose, self.frame.image, command, label,
-                                   executed=executed if executed != command else None)
+        elif steered:
             self.recorded += 1
         else:
             self.planner_frames += 1
-        self.frame = self.sim.step(executed)
+        self.frame = self.recorder.record_step(self.frame, command, executed, record=steered)
         self.decision = self._decide()
         self.trace_px.append(self.window.to_inset(self.frame.pose.x, self.frame.pose.y))
 
@@ -273,10 +331,12 @@ class _Session:
         mode = None
         if self.planner is not None:
             mode = ("PLANNER DRIVING", PLANNER_COLOR) if self.driver == "planner" else ("YOU DRIVE: recording corrections", HIGHLIGHT_COLOR)
-        status = _status(self.sim.time_s, self.v, w, label, self.control.m, self.recorded, self.sim.collisions, self.writer is not None, self.phase)
+        status = _status(self.sim.time_s, self.v, w, label, self.control.m, self.recorded, self.sim.collisions,
+                         self.recorder.writer is not None, self.phase)
         self.window.draw(self.frame.image, w, label, self.trace_px, status + note, readout.lines(), end_banner or self.banner(), mode)
 
     def run(self, max_frames: int | None, script: Script | None, realtime: bool) -> None:
+        """Loop over camera frames until the run ends, the driver quits or ``max_frames`` iterations have passed."""
         clock = pygame.time.Clock()
         i = 0
         while not self.sim.done and (max_frames is None or i < max_frames):
@@ -289,6 +349,33 @@ class _Session:
             i += 1
             if realtime:
                 clock.tick(self.sim.config.camera_rate_hz)
+
+    def show_end(self, screenshot: str | Path | None) -> Banner | None:
+        """Draw how the run ended and save the window to ``screenshot``; returns the end banner (None: neither goal nor time up)."""
+        end = Banner("GOAL") if self.sim.reached_goal else Banner("TIME UP", ALERT_COLOR) if self.sim.timed_out else None
+        self.draw(self.stick.w, int(self.control.label_of(self.stick.w)), end, "   quit" if self.quit else "   done")
+        if screenshot is not None:
+            self.window.save(str(screenshot))
+        return end
+
+    def result(self, record_dir: str | Path | None) -> TeleopResult:
+        """How the session ended."""
+        return TeleopResult(
+            frames=self.recorded,
+            completed=self.sim.reached_goal,
+            collisions=self.sim.collisions,
+            quit=self.quit,
+            record_dir=Path(record_dir) if record_dir is not None else None,
+            duration_s=self.sim.time_s,
+            edge_frames=self.edge_frames,
+            planner_frames=self.planner_frames,
+        )
+
+
+def _summary(result: TeleopResult) -> dict[str, Any]:
+    """What the recording's metadata keeps of the session."""
+    return {"completed": result.completed, "collisions": result.collisions, "duration_s": round(result.duration_s, 3),
+            "quit": result.quit, "edge_frames": result.edge_frames, "planner_frames": result.planner_frames}
 
 
 def run_teleop(
@@ -312,109 +399,116 @@ def run_teleop(
 ) -> TeleopResult:
     """Drive ``scenario`` by keyboard, mouse or gamepad in a window, optionally recording.
 
-    The run ends at the goal, at the time limit, on quit, or after ``max_frames`` loop
+    Args:
+        scenario: a Scenario, or a packaged scenario name or a path.
+        record_dir: directory for the recording; None drives without recording.
+        overwrite, camera, preference, sim_config, v_mps, realtime, script, max_frames,
+            screenshot, disturbance, seed, profile, model, wait_for_start: the session's
+            options, documented as :class:`TeleopOptions`' fields.
+
+    Returns:
+        How the run ended; :func:`run_session` says when it ends and what it raises.
+    """
+    return run_session(scenario, TeleopOptions(
+        record_dir=record_dir, overwrite=overwrite, camera=camera, preference=preference, sim_config=sim_config,
+        v_mps=v_mps, realtime=realtime, script=script, max_frames=max_frames, screenshot=screenshot,
+        disturbance=disturbance, seed=seed, profile=profile, model=model, wait_for_start=wait_for_start,
+    ))
+
+
+def run_session(scenario: Scenario | str, options: TeleopOptions) -> TeleopResult:
+    """Drive ``scenario`` in a window as ``options`` say, recording to ``options.record_dir`` if set.
+
+    The run ends at the goal, at the time limit, on quit, or after ``options.max_frames`` loop
     iterations (waiting, countdown and paused ones included, so a scripted run always ends). The
     recording is closed complete in all those cases (its summary says which); an exception
     leaves the old recording in place and the unfinished one beside it (``RecordingWriter``).
 
-    Args:
-        scenario: a Scenario, or a packaged scenario name or a path.
-        record_dir: directory for the recording; None drives without recording.
-        overwrite: replace an existing recording in ``record_dir`` (only once this one is complete).
-        camera: camera configuration (default: the model's when riding along, else SPEC 5).
-        preference: preference/control set configuration; its control set labels w (default:
-            the model's when riding along).
-        sim_config: loop timing and limits.
-        v_mps: forward speed held throughout [m/s], in (0, vehicle max speed].
-        realtime: pace the loop at the camera rate for a person; False runs as fast as it can.
-        script: ``TeleopState -> events`` posted before each iteration's events are handled
-            (tests and the simulated keyboard driver inject key and mouse events this way).
-        max_frames: stop after this many loop iterations.
-        screenshot: save the last drawn window image to this file (PNG by extension).
-        disturbance: pushes added to the executed yaw rate now and then, so that the recording
-            shows the driver's recoveries (the stick stays the label); drawn from ``seed``.
-        profile: the driver's declared preference order, stored with the recording (default:
-            the class table's).
-        model: ride along with this model file: the planner drives, the driver's takeovers are
-            recorded as corrections.
-        wait_for_start: open paused and start after a key and a countdown (False: drive from
-            the first frame, as scripted tests do).
-
-    Returns:
-        How the run ended.
-
     Raises:
         UserError: no display, a bad speed, an unreadable model, or a recording that already
-            exists (without ``overwrite``).
+            exists (without ``options.overwrite``).
     """
-    scenario = resolve_scenario(scenario) if isinstance(scenario, str) else scenario
-    sim_cfg = sim_config or SimConfig()
-    if not 0.0 < v_mps <= sim_cfg.vehicle.max_speed_mps:
-        raise UserError(SOURCE, f"speed must be in (0, {sim_cfg.vehicle.max_speed_mps:g}] m/s, got {v_mps:g}", field="v_mps")
-    if max_frames is not None and max_frames < 0:
-        raise UserError(SOURCE, "max_frames must be >= 0", field="max_frames")
-    planner = None
-    if model is not None:
-        from terrapref.learning.model_file import load_model
-        from terrapref.planner import Planner
-
-        loaded = load_model(model)
-        camera = camera or loaded.camera
-        preference = preference or loaded.features.preference
-        try:
-            planner = Planner(loaded, camera)
-        except ValueError as exc:
-            raise UserError(str(model), str(exc), field="camera") from None
-    camera_cfg = camera or CameraConfig()
-    preference_cfg = preference or PreferenceSetConfig()
-    frame_dt = 1.0 / sim_cfg.camera_rate_hz
-
+    setup = _resolve(scenario, options)
     _open_display()
     writer: RecordingWriter | None = None
     try:
-        sim = Simulation(scenario, camera_cfg, sim_cfg)
-        prefs = PreferenceSet(preference_cfg, sim.camera)
-        instructions = INSTRUCTIONS + (RIDE_ALONG_INSTRUCTIONS if planner is not None else ())
-        window = Window(sim, prefs, f"terrapref drive - {scenario.name}" + (f" -> {record_dir}" if record_dir else ""), instructions)
-        if record_dir is not None:
-            driver = {"kind": "corrections" if planner is not None else "human", "input": "keyboard/mouse/gamepad",
-                      "disturbance": disturbance.to_dict() if disturbance else None, "seed": seed}
-            if planner is not None:
-                driver["model"] = str(model)
-            meta = recording_meta(scenario, camera_cfg, preference_cfg, sim_cfg, driver, profile or PreferenceProfile.default(scenario.classes))
-            writer = RecordingWriter(record_dir, meta, scenario.to_dict(), overwrite=overwrite)
-        disturber = Disturber(disturbance, np.random.default_rng(seed), frame_dt) if disturbance and disturbance.active else None
-        session = _Session(sim, prefs, window, writer, v_mps, disturber, planner, wait_for_start)
-        session.run(max_frames, script, realtime)
-        end = Banner("GOAL") if sim.reached_goal else Banner("TIME UP", ALERT_COLOR) if sim.timed_out else None
-        session.draw(session.stick.w, int(session.control.label_of(session.stick.w)), end, "   quit" if session.quit else "   done")
-        if screenshot is not None:
-            window.save(str(screenshot))
-        result = TeleopResult(
-            frames=session.recorded,
-            completed=sim.reached_goal,
-            collisions=sim.collisions,
-            quit=session.quit,
-            record_dir=Path(record_dir) if record_dir is not None else None,
-            duration_s=sim.time_s,
-            edge_frames=session.edge_frames,
-            planner_frames=session.planner_frames,
-        )
-        if writer is not None:
-            writer.close({"completed": result.completed, "collisions": result.collisions, "duration_s": round(result.duration_s, 3),
-                          "quit": result.quit, "edge_frames": result.edge_frames, "planner_frames": result.planner_frames})
-            writer = None
-        if realtime and end is not None:
+        sim, prefs, window = _open_window(setup, options.record_dir)
+        writer = _open_recording(setup, options)
+        recorder = RecordLoop(sim, writer, prefs.config.control, _disturber(options, 1.0 / setup.sim.camera_rate_hz))
+        session = _Session(recorder, prefs, window, setup.planner, options)
+        session.run(options.max_frames, options.script, options.realtime)
+        end = session.show_end(options.screenshot)
+        result = session.result(options.record_dir)
+        recorder.close(_summary(result))
+        writer = None
+        if options.realtime and end is not None:
             pygame.time.wait(1000)  # let the driver see how the run ended before the window closes
         return result
     except BaseException:
         if writer is not None:
-            writer.abort()
-            if writer.partial_dir is not None:
-                print(f"note: {writer.target} keeps the recording it held; the unfinished new one is in {writer.partial_dir}", file=sys.stderr)
+            abort_recording(writer)
         raise
     finally:
         pygame.quit()
+
+
+def _resolve(scenario: Scenario | str, options: TeleopOptions) -> _Setup:
+    """The scenario and configurations the session drives with, checked, and the planner riding along."""
+    scenario = resolve_scenario(scenario) if isinstance(scenario, str) else scenario
+    sim_cfg = options.sim_config or SimConfig()
+    if not 0.0 < options.v_mps <= sim_cfg.vehicle.max_speed_mps:
+        raise UserError(SOURCE, f"speed must be in (0, {sim_cfg.vehicle.max_speed_mps:g}] m/s, got {options.v_mps:g}", field="v_mps")
+    if options.max_frames is not None and options.max_frames < 0:
+        raise UserError(SOURCE, "max_frames must be >= 0", field="max_frames")
+    camera, preference, planner = options.camera, options.preference, None
+    if options.model is not None:
+        camera, preference, planner = _load_planner(options.model, camera, preference)
+    return _Setup(scenario, camera or CameraConfig(), preference or PreferenceSetConfig(), sim_cfg, planner)
+
+
+def _load_planner(model: str | Path, camera: CameraConfig | None,
+                  preference: PreferenceSetConfig | None) -> tuple[CameraConfig, PreferenceSetConfig, Any]:
+    """The planner of the model file ``model``, with the camera and preference set it needs where not given."""
+    from terrapref.learning.model_file import load_model
+    from terrapref.planner import Planner
+
+    loaded = load_model(model)
+    camera = camera or loaded.camera
+    preference = preference or loaded.features.preference
+    try:
+        return camera, preference, Planner(loaded, camera)
+    except ValueError as exc:
+        raise UserError(str(model), str(exc), field="camera") from None
+
+
+def _open_window(setup: _Setup, record_dir: str | Path | None) -> tuple[Simulation, PreferenceSet, Window]:
+    """The simulation, its preference set and the window that shows them."""
+    sim = Simulation(setup.scenario, setup.camera, setup.sim)
+    prefs = PreferenceSet(setup.preference, sim.camera)
+    instructions = INSTRUCTIONS + (RIDE_ALONG_INSTRUCTIONS if setup.planner is not None else ())
+    title = f"terrapref drive - {setup.scenario.name}" + (f" -> {record_dir}" if record_dir else "")
+    return sim, prefs, Window(sim, prefs, title, instructions)
+
+
+def _open_recording(setup: _Setup, options: TeleopOptions) -> RecordingWriter | None:
+    """The recording the session writes, with who drove and how in its metadata; None when not recording."""
+    if options.record_dir is None:
+        return None
+    riding_along = setup.planner is not None
+    driver = {"kind": "corrections" if riding_along else "human", "input": "keyboard/mouse/gamepad",
+              "disturbance": options.disturbance.to_dict() if options.disturbance else None, "seed": options.seed}
+    if riding_along:
+        driver["model"] = str(options.model)
+    scenario = setup.scenario
+    profile = options.profile or PreferenceProfile.default(scenario.classes)
+    meta = recording_meta(scenario, setup.camera, setup.preference, setup.sim, driver, profile)
+    return RecordingWriter(options.record_dir, meta, scenario.to_dict(), overwrite=options.overwrite)
+
+
+def _disturber(options: TeleopOptions, frame_dt_s: float) -> Disturber | None:
+    """The session's pushes, drawn from ``options.seed``; None when off."""
+    disturbance = options.disturbance
+    return Disturber(disturbance, np.random.default_rng(options.seed), frame_dt_s) if disturbance and disturbance.active else None
 
 
 def _status(time_s: float, v: float, w: float, label: int, m: int, frames: int, collisions: int, recording: bool, phase: str) -> str:

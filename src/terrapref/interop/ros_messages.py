@@ -1,0 +1,196 @@
+"""ROS messages built with ``rosbags``: the stamps, headers, poses, transforms, images and camera
+calibration that the synthetic robot logs and the MCAP export both write, and the connections
+they are written to.
+
+Every builder takes the typestore whose message classes it makes, so the same builders serve
+ROS 1 (``ros1=True``: headers with ``seq``, CameraInfo's matrices in upper case) and ROS 2.
+Stamps come from an epoch-like clock: time 0 [s] is :data:`EPOCH_S` seconds after 1970.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from PIL import Image as PILImage
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
+
+    from terrapref.camera import CameraConfig
+
+Message = Any  # an instance of a message class that rosbags makes at run time from the typestore
+EPOCH_S = 1_700_000_000
+_NUMERIC = {"bool": bool, "byte": np.uint8, "char": np.uint8, "int8": np.int8, "uint8": np.uint8, "int16": np.int16, "uint16": np.uint16,
+            "int32": np.int32, "uint32": np.uint32, "int64": np.int64, "uint64": np.uint64, "float32": np.float32, "float64": np.float64}
+
+
+def typestore(ros1: bool = False) -> Typestore:
+    """ROS 1 Noetic's or ROS 2 Humble's message types, tf2_msgs/TFMessage among them."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    if "tf2_msgs/msg/TFMessage" not in ts.fielddefs:  # not in rosbags' ROS 1 store: registered from its definition
+        ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
+    return ts
+
+
+@dataclass(frozen=True)
+class Topics:
+    """A bag writer's connections by role; each message is serialised for its connection's type."""
+
+    writer: Any  # a rosbags rosbag1 or rosbag2 Writer, open
+    typestore: Typestore
+    connections: dict[str, Any]
+    ros1: bool = False
+
+    def write(self, role: str, t_ns: int, msg: Message) -> None:
+        """Write ``msg`` on the connection of ``role`` at bag time ``t_ns`` [ns]."""
+        conn = self.connections[role]
+        data = self.typestore.serialize_ros1(msg, conn.msgtype) if self.ros1 else self.typestore.serialize_cdr(msg, conn.msgtype)
+        self.writer.write(conn, t_ns, data)
+
+
+def add_topics(writer: Any, ts: Typestore, topics: dict[str, tuple[str, str]], ros1: bool = False) -> Topics:
+    """Connections for ``{role: (topic, msgtype)}``, added to ``writer`` in that order."""
+    connections = {role: writer.add_connection(topic, msgtype, typestore=ts) for role, (topic, msgtype) in topics.items()}
+    return Topics(writer, ts, connections, ros1)
+
+
+def zeroed(ts: Typestore, msgtype: str, **fields: Any) -> Message:
+    """A message of ``msgtype`` with ``fields`` set and every other field at its zero value
+    (nested messages included)."""
+    _, defs = ts.fielddefs[msgtype]
+    msg = ts.types[msgtype](**{name: _zero(ts, node) for name, node in defs})
+    for name, value in fields.items():
+        setattr(msg, name, value)
+    return msg
+
+
+def _zero(ts: Typestore, node: tuple) -> Any:
+    """The zero value of one field definition of rosbags' typestore."""
+    from rosbags.typesys.store import Nodetype
+
+    kind, detail = node
+    if kind == Nodetype.BASE:
+        name = detail[0]
+        return "" if name == "string" else (False if name == "bool" else (0.0 if name.startswith("float") else 0))
+    if kind == Nodetype.NAME:
+        return zeroed(ts, detail)
+    sub, length = detail
+    if sub[0] == Nodetype.BASE and sub[1][0] in _NUMERIC:
+        return np.zeros(length if kind == Nodetype.ARRAY else 0, dtype=_NUMERIC[sub[1][0]])
+    return [_zero(ts, sub) for _ in range(length)] if kind == Nodetype.ARRAY else []
+
+
+def epoch_ns(t_s: float) -> int:
+    """Time ``t_s`` [s] on the epoch-like clock, in ns."""
+    return int(round((EPOCH_S + t_s) * 1e9))
+
+
+def stamp(ts: Typestore, t_s: float) -> Message:
+    """builtin_interfaces/Time of ``t_s`` [s] on the epoch-like clock."""
+    ns = epoch_ns(t_s)
+    return ts.types["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def header(ts: Typestore, t_s: float, frame_id: str, ros1: bool = False) -> Message:
+    """std_msgs/Header stamped ``t_s`` [s] in ``frame_id`` (with ``seq`` 0 in ROS 1)."""
+    H = ts.types["std_msgs/msg/Header"]
+    return H(seq=0, stamp=stamp(ts, t_s), frame_id=frame_id) if ros1 else H(stamp=stamp(ts, t_s), frame_id=frame_id)
+
+
+def point(ts: Typestore, x: float, y: float, z: float = 0.0) -> Message:
+    """geometry_msgs/Point at (x, y, z) [m]."""
+    return ts.types["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=float(z))
+
+
+def vector3(ts: Typestore, x: float = 0.0, y: float = 0.0, z: float = 0.0) -> Message:
+    """geometry_msgs/Vector3 (x, y, z)."""
+    return ts.types["geometry_msgs/msg/Vector3"](x=float(x), y=float(y), z=float(z))
+
+
+def quaternion(ts: Typestore, xyzw: tuple[float, float, float, float]) -> Message:
+    """geometry_msgs/Quaternion of the components (x, y, z, w) as given."""
+    return ts.types["geometry_msgs/msg/Quaternion"](x=xyzw[0], y=xyzw[1], z=xyzw[2], w=xyzw[3])
+
+
+def yaw_quaternion(ts: Typestore, yaw_rad: float) -> Message:
+    """geometry_msgs/Quaternion of a turn by ``yaw_rad`` about z."""
+    return quaternion(ts, (0.0, 0.0, math.sin(yaw_rad / 2), math.cos(yaw_rad / 2)))
+
+
+def rpy_quaternion(ts: Typestore, roll_rad: float, pitch_rad: float, yaw_rad: float) -> Message:
+    """geometry_msgs/Quaternion of roll about x, then pitch about y, then yaw about z (fixed axes)."""
+    cr, sr, cp, sp = math.cos(roll_rad / 2), math.sin(roll_rad / 2), math.cos(pitch_rad / 2), math.sin(pitch_rad / 2)
+    cy, sy = math.cos(yaw_rad / 2), math.sin(yaw_rad / 2)
+    return quaternion(ts, (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy))
+
+
+def pose(ts: Typestore, x: float, y: float, orientation: Message) -> Message:
+    """geometry_msgs/Pose at (x, y, 0) [m] turned by ``orientation`` (a Quaternion)."""
+    return ts.types["geometry_msgs/msg/Pose"](position=point(ts, x, y), orientation=orientation)
+
+
+def path_message(ts: Typestore, xy: Iterable[tuple[float, float]], ros1: bool = False) -> Message:
+    """nav_msgs/Path through the points ``xy`` [m] of the odom frame, stamped at time 0."""
+    PoseStamped = ts.types["geometry_msgs/msg/PoseStamped"]
+    poses = [PoseStamped(header=header(ts, 0.0, "odom", ros1), pose=pose(ts, x, y, yaw_quaternion(ts, 0.0))) for x, y in xy]
+    return ts.types["nav_msgs/msg/Path"](header=header(ts, 0.0, "odom", ros1), poses=poses)
+
+
+def transform(ts: Typestore, parent: Message, child_frame_id: str, xyz: tuple[float, float, float], rotation: Message) -> Message:
+    """geometry_msgs/TransformStamped from the frame of the header ``parent`` to ``child_frame_id``:
+    the child's origin at ``xyz`` [m], turned by ``rotation`` (a Quaternion)."""
+    moved = ts.types["geometry_msgs/msg/Transform"](translation=vector3(ts, *xyz), rotation=rotation)
+    return ts.types["geometry_msgs/msg/TransformStamped"](header=parent, child_frame_id=child_frame_id, transform=moved)
+
+
+def tf_message(ts: Typestore, transforms: list[Message]) -> Message:
+    """tf2_msgs/TFMessage holding ``transforms``."""
+    return ts.types["tf2_msgs/msg/TFMessage"](transforms=transforms)
+
+
+def twist(ts: Typestore, v_mps: float, w_rps: float) -> Message:
+    """geometry_msgs/Twist of forward speed ``v_mps`` [m/s] and turn rate ``w_rps`` [rad/s]."""
+    return ts.types["geometry_msgs/msg/Twist"](linear=vector3(ts, x=v_mps), angular=vector3(ts, z=w_rps))
+
+
+def odometry(ts: Typestore, stamped: Message, base_pose: Message) -> Message:
+    """nav_msgs/Odometry of base_link at ``base_pose`` in the frame of the header ``stamped``;
+    zero covariances and twist."""
+    T = ts.types
+    at = T["geometry_msgs/msg/PoseWithCovariance"](pose=base_pose, covariance=np.zeros(36))
+    still = T["geometry_msgs/msg/TwistWithCovariance"](twist=T["geometry_msgs/msg/Twist"](linear=vector3(ts), angular=vector3(ts)), covariance=np.zeros(36))
+    return T["nav_msgs/msg/Odometry"](header=stamped, child_frame_id="base_link", pose=at, twist=still)
+
+
+def camera_info(ts: Typestore, stamped: Message, camera: CameraConfig, ros1: bool = False) -> Message:
+    """sensor_msgs/CameraInfo of ``camera``: its image size and K, no distortion."""
+    fx, fy, cx, cy = camera.intrinsics
+    roi = ts.types["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
+    matrices = {"d": np.zeros(5), "k": np.array([fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0]), "r": np.eye(3).ravel(),
+                "p": np.array([fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0])}
+    return ts.types["sensor_msgs/msg/CameraInfo"](header=stamped, height=camera.height_px, width=camera.width_px, distortion_model="plumb_bob",
+                                                  binning_x=0, binning_y=0, roi=roi, **{(k.upper() if ros1 else k): v for k, v in matrices.items()})
+
+
+def png(ids: np.ndarray, palette: np.ndarray | None = None) -> np.ndarray:
+    """The bytes (as uint8) of a single-channel png of ``ids`` (H, W) uint8; with ``palette``
+    (256, 3), an indexed-colour one that viewers show in its colours (a third of the work of
+    an RGB image)."""
+    buf = io.BytesIO()
+    image = PILImage.fromarray(ids)
+    if palette is not None:
+        image.putpalette(palette.astype(np.uint8).ravel().tolist())
+    image.save(buf, format="PNG", compress_level=1)
+    return np.frombuffer(buf.getvalue(), dtype=np.uint8)
+
+
+def compressed_image(ts: Typestore, stamped: Message, image_format: str, data: np.ndarray) -> Message:
+    """sensor_msgs/CompressedImage of the encoded bytes ``data`` (uint8) in ``image_format``."""
+    return ts.types["sensor_msgs/msg/CompressedImage"](header=stamped, format=image_format, data=data)

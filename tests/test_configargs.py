@@ -1,0 +1,88 @@
+"""Command-line flags made from typed configurations (terrapref.configargs)."""
+
+from __future__ import annotations
+
+import argparse
+import doctest
+from dataclasses import dataclass, field
+
+import pytest
+
+import terrapref.configargs
+from terrapref.configargs import add_arguments, apply_arguments, option
+from terrapref.learning.train import SecondStageConfig, TrainConfig
+from terrapref.recipes import RECIPES
+
+
+def test_the_module_examples_run():
+    assert doctest.testmod(terrapref.configargs, verbose=False).failed == 0
+
+
+@dataclass(frozen=True)
+class Inner:
+    weight: float = option(1.5, "a weight", flag="inner-weight")
+
+
+@dataclass(frozen=True)
+class Part:
+    scale: float = option(1.0, "a scale")
+
+
+@dataclass(frozen=True)
+class Outer:
+    epochs: int = option(15, "passes")
+    name: str = option("relu", "an activation", choices=("relu", "tanh"))
+    hidden: int = 3  # no help text: not a flag
+    inner: Inner | None = option(None, "turn the inner part on")
+    always: Part = field(default_factory=Part)
+
+
+def _parse(argv: list[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser()
+    add_arguments(parser, Outer)
+    return parser.parse_args(argv)
+
+
+def test_only_given_flags_change_the_base():
+    base = Outer(epochs=300, inner=Inner(2.0))
+    assert apply_arguments(_parse([]), base) == base
+    assert apply_arguments(_parse(["--epochs", "4", "--name", "tanh"]), base) == Outer(4, "tanh", 3, Inner(2.0), Part())
+
+
+def test_an_optional_part_is_a_switch_and_its_fields_apply_when_on():
+    assert apply_arguments(_parse(["--inner"]), Outer()).inner == Inner()
+    assert apply_arguments(_parse(["--inner", "--inner-weight", "4"]), Outer()).inner == Inner(4.0)
+    assert apply_arguments(_parse(["--no-inner"]), Outer(inner=Inner(2.0))).inner is None
+    assert apply_arguments(_parse(["--inner-weight", "4"]), Outer()).inner is None  # off stays off
+    # A nested part without a help text of its own is walked: its fields' flags set it.
+    assert apply_arguments(_parse(["--scale", "4"]), Outer()).always == Part(4.0)
+
+
+def test_fields_without_help_and_bad_choices_are_not_flags():
+    with pytest.raises(SystemExit):
+        _parse(["--hidden", "4"])
+    with pytest.raises(SystemExit):
+        _parse(["--name", "sigmoid"])
+
+
+def test_the_train_flags_cover_every_documented_training_field():
+    parser = argparse.ArgumentParser()
+    add_arguments(parser, TrainConfig)
+    flags = {a.option_strings[0] for a in parser._actions if a.option_strings and a.option_strings[0] != "-h"}
+    assert flags == {"--epochs", "--lr", "--batch-size", "--hidden", "--activation", "--skip", "--members", "--class-balance",
+                     "--mirror", "--second-stage", "--stage-weight", "--seed"}
+    args = parser.parse_args(["--no-second-stage", "--members", "1"])
+    config = apply_arguments(args, RECIPES["teach"].train)
+    assert config.second_stage is None and config.classifier.members == 1
+    assert config.optimiser == RECIPES["teach"].train.optimiser and config.data == RECIPES["teach"].train.data
+    on = apply_arguments(parser.parse_args(["--second-stage", "--stage-weight", "3"]), RECIPES["paper"].train)
+    assert on.second_stage == SecondStageConfig(weight=3.0)
+
+
+def test_a_configuration_changed_part_by_part():
+    base = RECIPES["teach"].train
+    changed = base.updated({"classifier": {"hidden": 16}, "seed": 4, "second_stage": None})
+    assert changed.classifier.hidden == 16 and changed.classifier.members == base.classifier.members
+    assert changed.seed == 4 and changed.second_stage is None and changed.optimiser == base.optimiser
+    with pytest.raises(ValueError):
+        base.updated({"optimiser": {"epochs": 0}})
