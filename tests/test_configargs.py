@@ -53,9 +53,23 @@ def test_an_optional_part_is_a_switch_and_its_fields_apply_when_on():
     assert apply_arguments(_parse(["--inner"]), Outer()).inner == Inner()
     assert apply_arguments(_parse(["--inner", "--inner-weight", "4"]), Outer()).inner == Inner(4.0)
     assert apply_arguments(_parse(["--no-inner"]), Outer(inner=Inner(2.0))).inner is None
-    assert apply_arguments(_parse(["--inner-weight", "4"]), Outer()).inner is None  # off stays off
+    with pytest.raises(ValueError, match="--inner-weight needs --inner"):
+        apply_arguments(_parse(["--inner-weight", "4"]), Outer())  # off, so the weight would change nothing
+    with pytest.raises(ValueError, match="--inner-weight needs --inner"):
+        apply_arguments(_parse(["--no-inner", "--inner-weight", "4"]), Outer(inner=Inner(2.0)))
     # A nested part without a help text of its own is walked: its fields' flags set it.
     assert apply_arguments(_parse(["--scale", "4"]), Outer()).always == Part(4.0)
+
+
+def test_a_percent_sign_in_help_and_a_float_field_with_an_int_default():
+    @dataclass(frozen=True)
+    class Odd:
+        share: float = option(1, "share of the data in %")
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser, Odd)
+    assert "share of the data in %" in parser.format_help()
+    assert apply_arguments(parser.parse_args(["--share", "0.5"]), Odd()) == Odd(0.5)
 
 
 def test_fields_without_help_and_bad_choices_are_not_flags():

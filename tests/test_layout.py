@@ -117,3 +117,24 @@ def test_packages_import_only_from_the_layers_below_their_own():
     assert not unplaced, f"packages missing from LAYERS: {sorted(unplaced)}"
     upward = sorted(f"{a} -> {b}" for a, targets in edges.items() for b in targets if b in level and level[b] >= level.get(a, len(LAYERS)))
     assert not upward, "imports against the layer order: " + ", ".join(upward)
+
+
+# Registered entry points ("module:attribute", resolved on first use, as Gymnasium's are) are
+# imports too, made late. The one that points up the layers, and why:
+LATE_ENTRY_POINTS = {
+    ("planner", "baselines"): "the CNN baseline's file loader: loading any model file must not import torch unless it holds a CNN",
+}
+
+
+def test_entry_points_that_point_up_the_layers_are_the_named_ones():
+    import re
+
+    level = {name: i for i, layer in enumerate(LAYERS) for name in layer}
+    found = set()
+    for path in ROOT.rglob("*.py"):
+        part = path.relative_to(ROOT).parts[0].removesuffix(".py")
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and (m := re.fullmatch(r"terrapref\.(\w+)[\w.]*:\w+", node.value)):
+                if m.group(1) != part and level[m.group(1)] >= level[part]:
+                    found.add((part, m.group(1)))
+    assert found == set(LATE_ENTRY_POINTS)

@@ -273,3 +273,20 @@ def test_profile_of_the_model_parses(model_file):
 
 
 # --- mirror augmentation ---------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("channels", [1, 2])
+def test_a_header_from_before_channels_left_loads_with_one_and_is_refused_with_more(tmp_path: Path, channels: int):
+    """Model files written while the compression had a ``channels`` option say ``channels: 1``
+    (what C is) and load as they are; a file with more is refused in one line naming the field."""
+    config = ClassifierConfig(hidden=8, skip=True)
+    weights = random_weights(config)
+    header = {"format": FORMAT, "kind": "classifier", "classifier": {**config.to_dict(), "channels": channels}, **model_meta()}
+    path = write_tensor_file(tmp_path / "old.safetensors", {k: np.asarray(v, np.float32) for k, v in weights.items()}, header)
+    if channels == 1:
+        assert load_model(path).classifier == config
+        return
+    with pytest.raises(UserError) as caught:
+        load_model(path)
+    lines = caught.value.lines()
+    assert len(lines) == 1 and "classifier.channels" in lines[0] and "train the model again" in lines[0], lines

@@ -12,9 +12,15 @@ import os
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from terrapref.errors import UserError
 from terrapref.grid import ENGINES, Engine, GridError
+
+if TYPE_CHECKING:  # for the hints only: the command line imports what a command needs when it runs
+    from terrapref.demos.dataset import Dataset
+    from terrapref.learning.train import EpochMetrics, TrainConfig, TrainResult
+    from terrapref.recipes import Recipe
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
@@ -228,14 +234,17 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
     return 0
 
 
-def _train_config(args: argparse.Namespace, recipe):
+def _train_config(args: argparse.Namespace, recipe: Recipe) -> TrainConfig:
     """The recipe's training configuration with the flags given on the command line on top."""
     from terrapref.configargs import apply_arguments
 
     try:
         return apply_arguments(args, recipe.train)
     except ValueError as exc:
-        raise UserError("train", str(exc)) from None
+        # Name the flag where the configuration's check names a field that has one.
+        head, _, rest = str(exc).partition(" ")
+        flag = head if head.startswith("--") else f"--{head.replace('_', '-')}" if getattr(args, head, None) is not None else None
+        raise UserError(flag or "train", rest if flag else str(exc)) from None
 
 
 FIGURE_FORMATS = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".tif", ".tiff", ".webp", ".eps", ".ps")
@@ -263,7 +272,7 @@ def _check_output(out: str | Path, flag: str, inputs: Sequence[str | Path] = (),
         raise UserError(str(out), f"cannot be written ({parent} is not writable)", field=flag)
 
 
-def _training_data(args: argparse.Namespace, recipe):
+def _training_data(args: argparse.Namespace, recipe: Recipe) -> Dataset:
     """The samples to train on: recordings featurised as the recipe needs, and datasets; refused when
     there is nothing to learn."""
     import numpy as np
@@ -282,7 +291,7 @@ def _training_data(args: argparse.Namespace, recipe):
     return data
 
 
-def _epoch_printer(config, verbose: bool) -> Callable:
+def _epoch_printer(config: TrainConfig, verbose: bool) -> Callable[[EpochMetrics], None]:
     """Prints a table of epochs (every tenth, the last, or all when ``verbose``), one per ensemble member."""
     header = f"{'epoch':>5s} {'train loss':>10s} {'val loss':>9s} {'train acc':>9s} {'val acc':>8s} {'val top3':>8s}"
     members, epochs = config.classifier.members, config.optimiser.epochs
@@ -299,7 +308,7 @@ def _epoch_printer(config, verbose: bool) -> Callable:
     return show
 
 
-def _report_training(args: argparse.Namespace, config, data, result) -> None:
+def _report_training(args: argparse.Namespace, config: TrainConfig, data: Dataset, result: TrainResult) -> None:
     """The loss curve beside the model, the chosen epochs and what the demonstrations show."""
     from dataclasses import asdict
 
@@ -676,19 +685,23 @@ def _featurize_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_cmd_featurize)
 
 
-def _train_parser(sub: argparse._SubParsersAction) -> None:
+def _train_parser(sub: argparse._SubParsersAction, flags: bool = True) -> None:
+    """``train``; its training flags come from TrainConfig's fields (``flags``: built only when
+    the command line is a training, since they need the recipes and NumPy)."""
     p = sub.add_parser("train", help="train a planner from recordings or featurised datasets (recipe teach by default)")
     p.add_argument("data", nargs="+", metavar="DATA", type=Path,
                    help="recording directories (featurised as the recipe needs) or dataset files from `terrapref featurize`")
     p.add_argument("--out", required=True, type=Path, help="model file (.safetensors)")
     p.add_argument("--recipe", default=None, metavar="NAME", help="a named recipe (`terrapref recipes`; default: teach)")
-    from terrapref.configargs import add_arguments
-    from terrapref.learning.train import TrainConfig
-    from terrapref.recipes import DEFAULT_RECIPE, recipe_named
-
-    add_arguments(p.add_argument_group("training (defaults shown: recipe teach's; each flag overrides the chosen recipe's value)"), TrainConfig, recipe_named(DEFAULT_RECIPE).train)
     p.add_argument("--verbose", action="store_true", help="print every epoch (default: every tenth)")
     p.set_defaults(func=_cmd_train)
+    if flags:
+        from terrapref.configargs import add_arguments
+        from terrapref.learning.train import TrainConfig
+        from terrapref.recipes import DEFAULT_RECIPE, recipe_named
+
+        group = p.add_argument_group("training (defaults shown: recipe teach's; each flag overrides the chosen recipe's value)")
+        add_arguments(group, TrainConfig, recipe_named(DEFAULT_RECIPE).train)
 
 
 def _evaluate_parser(sub: argparse._SubParsersAction) -> None:
@@ -809,19 +822,22 @@ COMMANDS = (
 """Each command's parser, in the order `terrapref --help` lists them."""
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(train_flags: bool = True) -> argparse.ArgumentParser:
+    """The ``terrapref`` command line (``train_flags``: with train's training flags)."""
     from terrapref import __version__
 
     parser = argparse.ArgumentParser(prog="terrapref", description="Learn off-road terrain preferences from a few minutes of driving.")
     parser.add_argument("--version", action="version", version=f"terrapref {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for add in COMMANDS:
-        add(sub)
+        add(sub, flags=train_flags) if add is _train_parser else add(sub)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    command = next((a for a in argv if not a.startswith("-")), None)
+    parser = build_parser(train_flags=command == "train")
     args = parser.parse_args(argv)
     func: Callable[[argparse.Namespace], int] = args.func
     try:

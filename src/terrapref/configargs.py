@@ -21,7 +21,7 @@ Fit(epochs=300, mirror=False)
 
 A field whose value is an optional configuration (``SecondStageConfig | None``) becomes an
 on/off switch (``--second-stage`` / ``--no-second-stage``); its own fields' flags apply
-when it is on.
+when it is on, and are refused (``ValueError``) when it is off.
 """
 
 from __future__ import annotations
@@ -58,6 +58,15 @@ def _nested(cls: type, f: dataclasses.Field) -> type | None:
     return None
 
 
+def _scalar(cls: type, f: dataclasses.Field) -> type:
+    """The type a flag's value is parsed as: the field's (``X | None`` gives X)."""
+    hint = typing.get_type_hints(cls)[f.name]
+    kinds = [a for a in (hint, *typing.get_args(hint)) if a in (int, float, str)]
+    if not kinds:
+        raise TypeError(f"{cls.__name__}.{f.name}: a flag needs an int, float or str field")
+    return kinds[0]
+
+
 def _fields(cls: type) -> Iterator[tuple[dataclasses.Field, type | None]]:
     for f in dataclasses.fields(cls):
         yield f, _nested(cls, f)
@@ -74,11 +83,11 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type, defaults: Any = No
         if HELP not in f.metadata:
             continue
         shown = ("on" if current else "off") if nested is not None or isinstance(f.default, bool) else current
-        text = f"{f.metadata[HELP]} (default: {shown})"
+        text = f"{f.metadata[HELP]} (default: {shown})".replace("%", "%%")
         if nested is not None or isinstance(f.default, bool):
             parser.add_argument(f"--{_flag(f)}", dest=_dest(f), action=argparse.BooleanOptionalAction, default=None, help=text)
         else:
-            parser.add_argument(f"--{_flag(f)}", dest=_dest(f), type=type(f.default), default=None,
+            parser.add_argument(f"--{_flag(f)}", dest=_dest(f), type=_scalar(cls, f), default=None,
                                 choices=f.metadata.get(CHOICES), help=text)
         if nested is not None:
             add_arguments(parser, nested, current if dataclasses.is_dataclass(current) else None)
@@ -94,13 +103,22 @@ def apply_arguments(args: argparse.Namespace, base: Any) -> Any:
     for f, nested in _fields(type(base)):
         value = getattr(base, f.name)
         given = getattr(args, _dest(f), None) if HELP in f.metadata else None
-        if nested is not None:
-            if given is False:
-                changes[f.name] = None
-                continue
-            inner = value if value is not None else (nested() if given else None)
-            if inner is not None:
-                changes[f.name] = apply_arguments(args, inner)
-        elif given is not None:
-            changes[f.name] = given
+        if nested is None:
+            if given is not None:
+                changes[f.name] = given
+            continue
+        inner = None if given is False else value if value is not None else (nested() if given else None)
+        if inner is not None:
+            changes[f.name] = apply_arguments(args, inner)
+        elif value is not None or given is False:
+            changes[f.name] = None
+        if inner is None:
+            _refuse_given(args, nested, f)
     return dataclasses.replace(base, **changes)
+
+
+def _refuse_given(args: argparse.Namespace, cls: type, switch: dataclasses.Field) -> None:
+    """A flag of an optional part that is off would change nothing: say so rather than drop it."""
+    for f, _ in _fields(cls):
+        if HELP in f.metadata and getattr(args, _dest(f), None) is not None:
+            raise ValueError(f"--{_flag(f)} needs --{_flag(switch)} (the configuration trains without it)")

@@ -203,7 +203,6 @@ class CnnPolicy(Policy):
         return out[0].numpy().astype(np.float64)
 
 
-
 def cnn_from_file(tensors: dict[str, np.ndarray], meta: dict, source: str) -> CnnPolicy:
     """The CNN of a model file (kind ``cnn``; registered in terrapref.planner.registry)."""
     features, camera, classes, profile = model_context(meta, source)

@@ -217,7 +217,7 @@ class ExpertDriver:
         alpha = math.atan2(target[1] - y, target[0] - x) - yaw
         alpha = (alpha + math.pi) % (2 * math.pi) - math.pi
         dist = max(math.hypot(target[0] - x, target[1] - y), 1e-6)
-        return pure_pursuit_yaw_rate(c.speed_mps, alpha, dist)
+        return pure_pursuit_yaw_rate(c.speed_mps, math.sin(alpha), dist)
 
     def intent(self, frame: Frame) -> float:
         """The yaw rate [rad/s] the driver wants now, before its hand's delay, rate limit and tremor.

@@ -50,7 +50,7 @@ class RunSpec:
     keep_run: bool = False  # keep every decision (pose, choice, F_t) of a planner run, for an MCAP of it
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # arrays inside: compared field by field where needed
 class KeptFrame:
     """One planner decision kept for a picture (``RunSpec.keep_frames``)."""
 
@@ -61,7 +61,7 @@ class KeptFrame:
     image: np.ndarray  # the class image the camera saw, (H, W)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # arrays inside: compared field by field where needed
 class KeptRun:
     """Every decision of a planner run (``RunSpec.keep_run``), for an MCAP of it."""
 
@@ -79,7 +79,7 @@ class ZoneAgreement:
     agrees: bool
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # arrays inside: compared field by field where needed
 class RunResult:
     """One run's outcome: which run it was, its scores, its path and what was kept of its decisions.
 

@@ -35,8 +35,8 @@ class LoadedModel:
     classes: ClassTable
     profile: tuple[str, ...]
     meta: dict
-    utility: LinearUtility | None = None  # fitted with C for the planner's second stage (TrainConfig.utility)
-    stage_weight: float = 1.5  # the second stage's weight in the decision, as trained (TrainConfig.stage_weight)
+    utility: LinearUtility | None = None  # fitted with C for the planner's second stage (TrainConfig.second_stage)
+    stage_weight: float = 1.5  # the second stage's weight in the decision, as trained (SecondStageConfig.weight)
 
 
 def save_model(path: str | Path, classifier: ClassifierConfig, weights: dict[str, np.ndarray], meta: dict) -> Path:
@@ -68,7 +68,8 @@ def classifier_from(weights: dict[str, np.ndarray], meta: dict, source: str) -> 
     except KeyError as exc:
         raise UserError(source, "missing", field=str(exc.args[0])) from None
     except (TypeError, ValueError) as exc:
-        raise UserError(source, f"invalid configuration: {exc}", field="classifier") from None
+        field = "classifier.channels" if "channels" in str(exc) else "classifier"
+        raise UserError(source, f"invalid configuration: {exc}", field=field) from None
     # The header's member count is checked against the weights before shapes are built from it.
     members = {name.split(".")[1] for name in weights if name.startswith(f"{MEMBERS}.")}
     if members != ({str(j) for j in range(classifier.members)} if classifier.members > 1 else set()):

@@ -57,8 +57,9 @@ class ClassifierConfig:
             raise ValueError("ignore: column index out of range")
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"activation must be one of {', '.join(ACTIVATIONS)}")
-        if self.m < 2 or self.n_features < 1 or self.hidden < 1 or self.depth < 1 or self.members < 1:
-            raise ValueError("m >= 2, n_features >= 1, hidden >= 1, depth >= 1, members >= 1")
+        for name, low in (("m", 2), ("n_features", 1), ("hidden", 1), ("depth", 1), ("members", 1)):
+            if getattr(self, name) < low:
+                raise ValueError(f"{name} must be >= {low}")
         if self.skip and not self.compress:
             raise ValueError("skip needs the row-wise compression")
 
@@ -76,7 +77,7 @@ class ClassifierConfig:
         compression lost its ``channels`` option say ``channels: 1``, which is what C is."""
         data = dict(data)
         if data.get("channels", 1) != 1:
-            raise ValueError(f"channels: {data['channels']!r} is not supported (1 only)")
+            raise ValueError(f"channels {data['channels']!r}: more than one compression output per trajectory is no longer supported; train the model again")
         data.pop("channels", None)
         return cls(**data)
 

@@ -12,8 +12,8 @@ from __future__ import annotations
 import copy
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, field, is_dataclass, replace
-from typing import Any
+from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
+from typing import Any, get_args, get_type_hints
 
 import numpy as np
 
@@ -109,6 +109,12 @@ class TrainConfig:
                                                           "the planner then scores a second stage of trajectories with it")
     seed: int = option(0, "seeds the split, the initialisation and the batch order")
 
+    def __post_init__(self) -> None:
+        parts = [(self.optimiser, OptimiserConfig, "optimiser"), (self.classifier, ClassifierConfig, "classifier"), (self.data, DataOptions, "data")]
+        _check([(isinstance(part, kind), f"{name}: expected {kind.__name__}") for part, kind, name in parts]
+               + [(self.second_stage is None or isinstance(self.second_stage, SecondStageConfig), "second_stage must be a SecondStageConfig or None"),
+                  (isinstance(self.seed, int) and not isinstance(self.seed, bool) and self.seed >= 0, "seed must be an integer >= 0")])
+
     @property
     def member_seeds(self) -> tuple[int, ...]:
         """The seed each member of an ensemble trains from (one: ``seed``)."""
@@ -120,21 +126,43 @@ class TrainConfig:
 
     def updated(self, changes: Mapping[str, Any]) -> TrainConfig:
         """This configuration with ``changes`` applied part by part, e.g. ``{"classifier":
-        {"hidden": 16}, "seed": 3}`` (a variant named in data, such as a study's ablation)."""
+        {"hidden": 16}, "seed": 3}`` (a variant named in data, such as a study's ablation); a
+        part that is off (``second_stage`` None) is built from its defaults first.
+
+        Raises:
+            ValueError: an unknown name, or a value the configuration's checks refuse.
+        """
         return _updated(self, changes)
 
     def to_dict(self) -> dict:
-        return {"optimiser": asdict(self.optimiser), "classifier": self.classifier.to_dict(),
+        """As a model's metadata holds it (``training``); the classifier's m, n_features and
+        ignored columns come from the data and are in the model's ``classifier``."""
+        shape = {k: v for k, v in self.classifier.to_dict().items() if k not in ("m", "n_features", "ignore")}
+        return {"optimiser": asdict(self.optimiser), "classifier": shape,
                 "data": {**asdict(self.data), "ignore_features": list(self.data.ignore_features)},
                 "second_stage": None if self.second_stage is None else asdict(self.second_stage), "seed": self.seed}
 
 
 def _updated(config: Any, changes: Mapping[str, Any]) -> Any:
+    names = {f.name: f for f in fields(config)}
     parts = {}
     for name, value in changes.items():
+        if name not in names:
+            raise ValueError(f"{type(config).__name__} has no {name!r} (it has {', '.join(names)})")
         current = getattr(config, name)
-        parts[name] = _updated(current, value) if is_dataclass(current) and isinstance(value, Mapping) else value
+        if isinstance(value, Mapping):
+            part = current if current is not None else _part_type(type(config), name)()
+            if not is_dataclass(part):
+                raise ValueError(f"{type(config).__name__}.{name} is not a part with fields")
+            value = _updated(part, value)
+        parts[name] = value
     return replace(config, **parts)
+
+
+def _part_type(cls: type, name: str) -> type:
+    """The configuration class a field holds (``X | None`` gives X)."""
+    hint = get_type_hints(cls)[name]
+    return next(a for a in (hint, *get_args(hint)) if is_dataclass(a))
 
 
 def _check(checks: list[tuple[bool, str]]) -> None:
@@ -165,7 +193,7 @@ class TrainResult:
     checkpoints: list[dict[str, np.ndarray]]
     steps: int
     members: list[TrainResult] = field(default_factory=list)
-    utility: LinearUtility | None = None  # the linear utility model, when TrainConfig.utility asks for it
+    utility: LinearUtility | None = None  # the linear utility model, when TrainConfig.second_stage asks for it
     identifiability: Identifiability | None = None  # what the data show of the preference (terrapref.learning.identify)
 
 

@@ -179,7 +179,8 @@ class PurePursuitPolicy(Policy):
         d = np.hypot(obs.path_ahead[:, 0], obs.path_ahead[:, 1])
         j = int(np.clip(np.searchsorted(d, self.lookahead_m), 0, len(d) - 1))
         x, y = obs.path_ahead[j]
-        w = pure_pursuit_yaw_rate(self._v, math.atan2(y, x), max(math.hypot(x, y), 1e-6))
+        dist = max(math.hypot(x, y), 1e-6)
+        w = pure_pursuit_yaw_rate(self._v, y / dist, dist)
         return -np.abs(self._w - w)
 
 

@@ -27,14 +27,14 @@ def wrap_angle(a: float) -> float:
     return (a + math.pi) % (2 * math.pi) - math.pi
 
 
-def pure_pursuit_yaw_rate(speed_mps: float, alpha_rad: float, distance_m: float) -> float:
+def pure_pursuit_yaw_rate(speed_mps: float, sin_alpha: float, distance_m: float) -> float:
     """Yaw rate [rad/s] that drives a unicycle at ``speed_mps`` along the circle through a target
-    ``distance_m`` away at bearing ``alpha_rad`` from its heading: 2 v sin(alpha) / L.
+    ``distance_m`` away, whose bearing from the heading has the sine ``sin_alpha``: 2 v sin(alpha) / L.
 
-    >>> round(pure_pursuit_yaw_rate(1.0, math.pi / 6, 2.0), 6)  # 30 deg off, 2 m away: a 2 m radius
+    >>> pure_pursuit_yaw_rate(1.0, 0.5, 2.0)  # 30 deg off, 2 m away: a circle of 2 m radius
     0.5
     """
-    return 2.0 * speed_mps * math.sin(alpha_rad) / distance_m
+    return 2.0 * speed_mps * sin_alpha / distance_m
 
 
 def integrate_unicycle(pose: Pose, cmd: Command, dt: float) -> Pose:
