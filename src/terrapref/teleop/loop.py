@@ -120,7 +120,7 @@ Script = Callable[[TeleopState], Sequence[Any]]
 
 @dataclass(frozen=True)
 class TeleopOptions:
-    """How a driving session runs: the keywords of :func:`run_teleop`.
+    """How a driving session runs (:func:`run_session`; by name in :func:`run_teleop`).
 
     Attributes:
         record_dir: directory for the recording; None drives without recording.
@@ -378,42 +378,12 @@ def _summary(result: TeleopResult) -> dict[str, Any]:
             "quit": result.quit, "edge_frames": result.edge_frames, "planner_frames": result.planner_frames}
 
 
-def run_teleop(
-    scenario: Scenario | str,
-    record_dir: str | Path | None = None,
-    *,
-    overwrite: bool = False,
-    camera: CameraConfig | None = None,
-    preference: PreferenceSetConfig | None = None,
-    sim_config: SimConfig | None = None,
-    v_mps: float = 1.0,
-    realtime: bool = True,
-    script: Script | None = None,
-    max_frames: int | None = None,
-    screenshot: str | Path | None = None,
-    disturbance: DisturbanceConfig | None = None,
-    seed: int = 0,
-    profile: PreferenceProfile | None = None,
-    model: str | Path | None = None,
-    wait_for_start: bool = True,
-) -> TeleopResult:
-    """Drive ``scenario`` by keyboard, mouse or gamepad in a window, optionally recording.
-
-    Args:
-        scenario: a Scenario, or a packaged scenario name or a path.
-        record_dir: directory for the recording; None drives without recording.
-        overwrite, camera, preference, sim_config, v_mps, realtime, script, max_frames,
-            screenshot, disturbance, seed, profile, model, wait_for_start: the session's
-            options, documented as :class:`TeleopOptions`' fields.
-
-    Returns:
-        How the run ended; :func:`run_session` says when it ends and what it raises.
+def run_teleop(scenario: Scenario | str, record_dir: str | Path | None = None, **options: Any) -> TeleopResult:
+    """Drive ``scenario`` by keyboard, mouse or gamepad in a window, recording into ``record_dir``
+    if given; ``options`` are :class:`TeleopOptions`' other fields, by name (a shorthand for
+    :func:`run_session`, which says when the run ends and what it raises).
     """
-    return run_session(scenario, TeleopOptions(
-        record_dir=record_dir, overwrite=overwrite, camera=camera, preference=preference, sim_config=sim_config,
-        v_mps=v_mps, realtime=realtime, script=script, max_frames=max_frames, screenshot=screenshot,
-        disturbance=disturbance, seed=seed, profile=profile, model=model, wait_for_start=wait_for_start,
-    ))
+    return run_session(scenario, TeleopOptions(record_dir=record_dir, **options))
 
 
 def run_session(scenario: Scenario | str, options: TeleopOptions) -> TeleopResult:
