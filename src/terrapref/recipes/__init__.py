@@ -81,17 +81,21 @@ class Recipe:
         return asdict(self)
 
 
-PAPER = Recipe("paper", summary="the published recipe: one drive of train_course, 15 epochs of the paper's C (reproduction only)")
+PAPER = Recipe("paper", summary="the published recipe: one drive of train_course, 15 epochs of the paper's C (reproduction only); "
+                       "scored 6.7% of test zones (5/75), 25 collisions in terrapref reproduce")
 # What recipes ours and teach train: 300 epochs of C with the residual path, a class-balanced
 # loss and mirrored samples, and the linear utility for the second stage.
 _RECOMMENDED = TrainConfig(OptimiserConfig(epochs=300), ClassifierConfig(skip=True), DataOptions(class_balance=True, mirror=True), SecondStageConfig())
 OURS = Recipe("ours", demonstrations=2, train=_RECOMMENDED,
               disturbance=DisturbanceConfig(rate_hz=0.3),
-              summary="two drives of train_course: the paper's setting done well (the reproduction's Tables 1 and 2)")
+              summary="two drives of train_course: the paper's setting done well (the reproduction's Tables 1 and 2); "
+                      "scored 94.7% of test zones (71/75), 0 collisions in terrapref reproduce")
 TEACH = Recipe("teach", course="teach_course", lookahead=True,
                train=replace(_RECOMMENDED, classifier=ClassifierConfig(skip=True, members=3), second_stage=SecondStageConfig(weight=5.0)),
                disturbance=DisturbanceConfig(rate_hz=0.3),
-               summary="one drive of teach_course: any preference order from five minutes (the default)")
+               summary="one drive of teach_course: any preference order from five minutes (the default); scored "
+                       "98.7% of test zones (74/75) in terrapref reproduce, and the driver's choice in 92.8% of zones "
+                       "on 32 unseen layouts over 6 orders x 5 seeds (docs/learning.md)")
 RECIPES: dict[str, Recipe] = {r.name: r for r in (TEACH, OURS, PAPER)}
 DEFAULT_RECIPE = TEACH.name
 
