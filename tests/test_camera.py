@@ -330,6 +330,55 @@ def test_render_does_not_reuse_a_returned_frame():
     np.testing.assert_array_equal(first, kept)
 
 
+# --- the compiled loops against the vectorised NumPy form ----------------------------------------
+
+
+def _numpy_render(renderer: SegmentationRenderer, pose: Pose) -> np.ndarray:
+    """The renderer's formula as a dozen vectorised NumPy passes (how it rendered before its loops
+    were compiled): the compiled kernels must give these class ids, pixel for pixel."""
+    A, B = renderer._cells(pose)
+    ny, nx = renderer.world.raster.shape
+    u = renderer._u
+    gx = np.clip(np.multiply.outer(B[:, 0], u) + A[:, 0:1], 0.0, nx + 2 - 1e-2)
+    gy = np.clip(np.multiply.outer(B[:, 1], u) + A[:, 1:2], 0.0, ny + 2 - 1e-2)
+    assert gx.dtype == np.float32 and gy.dtype == np.float32
+    out = np.full(renderer.shape, UNKNOWN, dtype=np.uint8)
+    block = renderer._flat[gy.astype(np.int32) * (nx + 2) + gx.astype(np.int32)]
+    row0 = renderer._row0
+    out[row0:] = np.where(renderer._valid_flat.reshape(renderer.shape)[row0:], block, UNKNOWN)
+    return out
+
+
+@pytest.mark.parametrize("config", [CameraConfig(), CameraConfig(pitch_deg=45.0, hfov_deg=60.0, mount_height_m=0.8, width_px=320, height_px=200)],
+                         ids=["default", "p45-small"])
+def test_compiled_render_equals_the_numpy_form_pixel_for_pixel(config):
+    rng = np.random.default_rng(23)
+    # Every cell its own random class, so a pixel read from a neighbouring cell would show.
+    world = _world(rng.integers(0, 5, (500, 700)).astype(np.uint8), 0.05)
+    renderer = SegmentationRenderer(PinholeCamera(config), world)
+    every = np.arange(config.width_px * config.height_px)
+    on_map = 0
+    for _ in range(60):
+        pose = Pose(rng.uniform(-8.0, 43.0), rng.uniform(-8.0, 33.0), rng.uniform(-math.pi, math.pi))
+        expected = _numpy_render(renderer, pose)
+        np.testing.assert_array_equal(renderer.render(pose), expected)
+        np.testing.assert_array_equal(renderer.pixels(pose, every), expected.reshape(-1))
+        on_map += int(np.count_nonzero(expected != UNKNOWN))
+    assert on_map > 60 * every.size * 0.2  # most poses saw the map
+
+
+def test_render_and_pixels_refuse_a_pose_that_is_not_finite_or_a_pixel_off_the_image():
+    renderer = SegmentationRenderer(PinholeCamera(), _grass_with_mud_square((15.0, 15.0), 1.0))
+    for pose in (Pose(math.nan, 1.0, 0.0), Pose(1.0, math.inf, 0.0), Pose(1.0, 1.0, math.nan)):
+        with pytest.raises(ValueError, match="finite"):
+            renderer.render(pose)
+        with pytest.raises(ValueError, match="finite"):
+            renderer.pixels(pose, np.array([0]))
+    for bad in (-1, 640 * 480):
+        with pytest.raises(IndexError):
+            renderer.pixels(Pose(10.0, 15.0, 0.0), np.array([5, bad]))
+
+
 # --- rendering only the pixels a driver reads ------------------------------------------------
 
 

@@ -51,6 +51,68 @@ def test_fsum_and_row_sum_do_not_depend_on_order():
     np.testing.assert_array_equal(exact.row_sum(x), [_left_to_right(x[i]) for i in range(4)])
 
 
+# The NumPy forms of the compiled loops, as exact.py computed them before they were compiled: the
+# loops must give the same bits (training's weights, and so every model, depend on them).
+
+
+def _numpy_exp(x: np.ndarray) -> np.ndarray:
+    x = np.clip(np.asarray(x, dtype=np.float64), -740.0, 709.0)
+    k = np.rint(x * exact._INV_LN2)
+    r = (x - k * exact._LN2_HI) - k * exact._LN2_LO
+    p = np.full_like(r, exact._EXP_COEF[-1])
+    for c in exact._EXP_COEF[-2::-1]:
+        p = p * r + c
+    return np.ldexp(p, k.astype(np.int64))
+
+
+def _numpy_log(x: np.ndarray) -> np.ndarray:
+    f, e = np.frexp(np.where(x > 0, x, 1.0))
+    low = f < exact._SQRT_HALF
+    f = np.where(low, f * 2.0, f)
+    e = np.where(low, e - 1, e).astype(np.float64)
+    s = (f - 1.0) / (f + 1.0)
+    series = np.full_like(s, 1.0 / 21.0)
+    for j in range(19, 0, -2):
+        series = series * (s * s) + 1.0 / j
+    out = 2.0 * s * series + e * exact._LN2_LO + e * exact._LN2_HI
+    return np.where(x > 0, out, np.where(x == 0, -np.inf, np.nan))
+
+
+def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    return a.shape == b.shape and np.array_equal(a.view(np.int64), b.view(np.int64))
+
+
+def test_compiled_loops_give_the_numpy_forms_bits():
+    rng = np.random.default_rng(7)
+    x = np.concatenate([rng.standard_normal(30000) * scale for scale in (1.0, 30.0, 400.0)]
+                       + [[0.0, -0.0, 709.0, 709.5, -740.0, -745.0, 1e-310, -1e-310, np.inf, -np.inf]])
+    with np.errstate(invalid="ignore"):
+        assert _same_bits(exact.exp(x), _numpy_exp(x))
+        assert _same_bits(exact.exp(x.reshape(-1, 10)[:, ::2]), _numpy_exp(x.reshape(-1, 10)[:, ::2]))  # any shape and strides
+        assert np.isnan(exact.exp(np.array([np.nan]))[0])
+        y = np.concatenate([np.abs(x), rng.random(1000) * 1e-300, [5e-324, 1e308, -1.0, np.nan]])
+        np.testing.assert_array_equal(exact.log(y), _numpy_log(y))  # NaN where NaN
+        assert _same_bits(exact.log(y[y > 0]), _numpy_log(y[y > 0]))
+        assert np.signbit(exact.log(np.array([-0.0, 0.0]))).all()  # -inf for both zeros
+    for bits in (8, 18, 26):
+        for a in (x[:3000].reshape(30, 100), x[:3000].reshape(30, 100)[:, ::3], rng.random((3, 4, 5)) - 0.7, -np.ones((2, 2))):
+            got = exact.rounded(a, bits)
+            top = max(float(a.max()), -float(a.min()))
+            e = math.frexp(top)[1]
+            assert _same_bits(got.ints, np.rint(a * math.ldexp(1.0, bits - e))) and got.unit == math.ldexp(1.0, e - bits)
+    nan_in = exact.rounded(np.array([1.0, np.nan]), 10)
+    assert np.isnan(nan_in.ints[1]) and nan_in.unit == math.ldexp(1.0, -10)  # as NumPy's max: NaN wins, frexp(NaN) has exponent 0
+    z = rng.normal(size=(5, 3, 21))
+    assert _same_bits(exact.row_sum(z), _numpy_row_sum(z))
+
+
+def _numpy_row_sum(x: np.ndarray) -> np.ndarray:
+    total = x[..., 0].copy()
+    for j in range(1, x.shape[-1]):
+        total = total + x[..., j]
+    return total
+
+
 def _left_to_right(row: np.ndarray) -> float:
     total = float(row[0])
     for value in row[1:]:

@@ -3,8 +3,8 @@
 The camera has no roll, so every image row sees a straight line on the ground, and the ground
 point of pixel (col, row) is affine in col: ``g = P[row] + Q[row] * (col + 0.5 - cx)`` in the
 vehicle frame. P and Q are precomputed once per camera; per frame they are rotated into map
-cells and expanded with one outer product per axis, so a frame costs about a dozen vectorised
-passes over the visible rows and no trigonometry per pixel.
+cells, and each pixel's cell is one float32 multiply-add away, with no trigonometry per pixel.
+The per-pixel loops are compiled (:mod:`terrapref.camera.kernels`); a frame is one pass.
 
 A planner reads only the few hundred pixels its trajectories project to, so
 ``SegmentationRenderer.pixels`` computes any set of pixels alone, with the same float32
@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 
+from terrapref.camera.kernels import pixels_at, render_rows
 from terrapref.camera.pinhole import PinholeCamera
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose
@@ -47,10 +48,13 @@ class SegmentationRenderer:
 
         any_valid = np.flatnonzero(valid.any(axis=1))
         self._row0 = int(any_valid[0]) if len(any_valid) else height
-        block_valid = valid[self._row0 :]
-        self._invalid_in_block = np.flatnonzero(~block_valid.ravel())
         self._valid_flat = valid.ravel()
-        self._prepared_for: tuple[np.ndarray, tuple] | None = None
+        # Along a row the ray length is convex in the column, so the columns in range are one run.
+        block = valid[self._row0 :]
+        self._first = np.where(block.any(axis=1), block.argmax(axis=1), 0).astype(np.int64)
+        self._last = self._first + block.sum(axis=1)
+        if not all(block[r, self._first[r] : self._last[r]].all() for r in range(len(block))):  # pragma: no cover
+            raise ValueError("the renderer needs the visible columns of each row to be one run")
         self._P = (camera.t[:2] + s[:, None] * b[:, :2])[self._row0 :]  # (rows, 2) [m]
         self._Q = (s[:, None] * a[:2])[self._row0 :]  # (rows, 2) [m per px]
         self._u = u.astype(np.float32)
@@ -60,25 +64,22 @@ class SegmentationRenderer:
         padded = np.full((ny + 2, nx + 2), UNKNOWN, dtype=np.uint8)
         padded[1:-1, 1:-1] = world.raster
         self._flat = padded.ravel()
-        self._nx_pad, self._ny_pad = nx + 2, ny + 2
-        n = height - self._row0
-        self._gx = np.empty((n, width), np.float32)
-        self._gy = np.empty((n, width), np.float32)
-        self._ix = np.empty((n, width), np.int32)
-        self._iy = np.empty((n, width), np.int32)
+        self._nx_pad = nx + 2
+        # Cell coordinates are clipped to just inside the padded raster (in float32, as NumPy's
+        # clip of a float32 array by a Python float).
+        self._x_max, self._y_max = np.float32(nx + 2 - 1e-2), np.float32(ny + 2 - 1e-2)
 
     @property
     def shape(self) -> tuple[int, int]:
         return self.camera.shape
 
-    def _cells(self, pose: Pose, rows: np.ndarray | slice = slice(None)) -> tuple[np.ndarray, np.ndarray]:
-        """For ``rows`` (of the visible block), the padded-raster cell of column offset 0 and the
-        change per column, (n, 2) float32 each; elementwise, so a subset of rows gives exactly
-        the values of the whole block."""
+    def _cells(self, pose: Pose) -> tuple[np.ndarray, np.ndarray]:
+        """For each visible row, the padded-raster cell of column offset 0 and the change per
+        column, (n, 2) float32 each (``kernels.pixels_at`` computes the same per pixel)."""
         x, y, yaw = pose
         res = self.world.resolution_m
         c, s = math.cos(yaw), math.sin(yaw)
-        P, Q = self._P[rows], self._Q[rows]
+        P, Q = self._P, self._Q
         A = np.empty(P.shape, np.float32)
         B = np.empty(Q.shape, np.float32)
         # Rotate by the yaw into the world frame, then to cells (+1 for the border).
@@ -90,57 +91,31 @@ class SegmentationRenderer:
 
     def render(self, pose: Pose) -> np.ndarray:
         """Segmentation image at ``pose``: class ids, shape (height, width) uint8."""
-        A, B = self._cells(pose)
+        A, B = self._cells(_finite(pose))
         out = np.empty(self.camera.shape, dtype=np.uint8)
         out[: self._row0] = UNKNOWN
-        block = out[self._row0 :]
-        if block.size:
-            gx, gy, ix, iy = self._gx, self._gy, self._ix, self._iy
-            np.multiply.outer(B[:, 0], self._u, out=gx)
-            gx += A[:, 0:1]
-            np.clip(gx, 0.0, self._nx_pad - 1e-2, out=gx)
-            np.multiply.outer(B[:, 1], self._u, out=gy)
-            gy += A[:, 1:2]
-            np.clip(gy, 0.0, self._ny_pad - 1e-2, out=gy)
-            np.copyto(ix, gx, casting="unsafe")  # truncation == floor: all values are >= 0
-            np.copyto(iy, gy, casting="unsafe")
-            iy *= self._nx_pad
-            iy += ix
-            np.take(self._flat, iy, out=block)
-            block.reshape(-1)[self._invalid_in_block] = UNKNOWN
+        render_rows(A, B, self._u, self._first, self._last, self._flat, self._nx_pad, self._x_max, self._y_max, UNKNOWN, out[self._row0 :])
         return out
 
     def pixels(self, pose: Pose, flat_index: np.ndarray) -> np.ndarray:
         """Class ids of the pixels ``flat_index`` (row * width + col) of the image at ``pose``.
 
         Equal to ``render(pose).reshape(-1)[flat_index]``: the same float32 operations, on
-        those pixels only. An index array that owns its data and is read-only (a preference
-        set's, asked for every frame) is prepared once and kept.
+        those pixels only.
         """
-        rows, u, seen = self._prepared(flat_index)
-        A, B = self._cells(pose, rows)
-        gx = B[:, 0] * u
-        gx += A[:, 0]
-        np.clip(gx, 0.0, self._nx_pad - 1e-2, out=gx)
-        gy = B[:, 1] * u
-        gy += A[:, 1]
-        np.clip(gy, 0.0, self._ny_pad - 1e-2, out=gy)
-        out = np.full(seen.shape, UNKNOWN, dtype=np.uint8)
-        out[seen] = self._flat[gy.astype(np.int32) * self._nx_pad + gx.astype(np.int32)]
-        return out
+        x, y, yaw = _finite(pose)
+        flat = np.asarray(flat_index, dtype=np.int64).reshape(-1)
+        ids = pixels_at(flat, self.camera.config.width_px, self._row0, self._valid_flat, self._P, self._Q, self._u,
+                        float(x), float(y), math.cos(yaw), math.sin(yaw), self.world.resolution_m,
+                        self._flat, self._nx_pad, self._x_max, self._y_max, UNKNOWN)
+        return ids.reshape(np.shape(flat_index))
 
-    def _prepared(self, flat_index: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Block row and column offset of each seen pixel, and which pixels are seen."""
-        cached = self._prepared_for
-        if cached is not None and cached[0] is flat_index:
-            return cached[1]
-        flat = np.asarray(flat_index, dtype=np.intp)
-        rows, cols = np.divmod(flat, self.camera.config.width_px)
-        seen = self._valid_flat[flat]
-        prepared = (rows[seen] - self._row0, self._u[cols[seen]], seen)
-        if isinstance(flat_index, np.ndarray) and flat_index.base is None and not flat_index.flags.writeable:
-            self._prepared_for = (flat_index, prepared)
-        return prepared
+
+def _finite(pose: Pose) -> Pose:
+    """``pose``, refused if any part is not finite (a cell index is computed from it)."""
+    if not all(math.isfinite(v) for v in pose):
+        raise ValueError(f"a pose must be finite, got {tuple(pose)}")
+    return pose
 
 
 class SegmentationView:

@@ -20,6 +20,11 @@ the library picks for the CPU. Three tools remove that dependence:
 
 Elementwise +, -, *, /, sqrt, comparisons and ``rint`` are correctly rounded by IEEE 754 and need
 nothing more; NumPy never fuses two ufunc calls into one multiply-add.
+
+The elementwise chains (exp's and log's polynomials, a row's sum, an operand's rounding) run as
+compiled loops (Numba, without fast-math, so nothing is reassociated or fused): each element
+goes through exactly the operations, in exactly the order, that the NumPy form written in their
+comments would apply, in one pass instead of a dozen (tests/test_exact.py compares the two).
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ import math
 from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 
 MAX_EXACT = 1 << 17  # longest sum done in one exact product (18 bits per operand)
 
@@ -51,9 +57,32 @@ class Rounded(NamedTuple):
 def rounded(x: np.ndarray, bits: int) -> Rounded:
     """``x`` rounded to ``bits`` significant bits relative to its largest magnitude."""
     x = np.asarray(x, dtype=np.float64)
-    top = max(float(x.max()), -float(x.min())) if x.size else 0.0
+    flat = np.ascontiguousarray(x).reshape(-1)
+    hi, lo = _extremes(flat) if x.size else (0.0, 0.0)  # x.max(), x.min()
+    top = max(hi, -lo)
     _, e = math.frexp(top)  # top < 2 ** e, exactly
-    return Rounded(np.rint(x * math.ldexp(1.0, bits - e)), math.ldexp(1.0, e - bits), bits)  # powers of two: exact
+    # np.rint(x * 2 ** (bits - e)): powers of two, so the scaling is exact.
+    return Rounded(_scaled_rint(flat, math.ldexp(1.0, bits - e)).reshape(x.shape), math.ldexp(1.0, e - bits), bits)
+
+
+@njit(cache=True, nogil=True)
+def _extremes(x: np.ndarray) -> tuple[float, float]:
+    """(x.max(), x.min()) of a non-empty array in one pass; NaN for both if any entry is NaN."""
+    hi = lo = x[0]
+    for v in x:
+        if v != v:
+            return v, v
+        hi = max(hi, v)
+        lo = min(lo, v)
+    return hi, lo
+
+
+@njit(cache=True, nogil=True)
+def _scaled_rint(x: np.ndarray, scale: float) -> np.ndarray:
+    out = np.empty_like(x)
+    for i in range(x.shape[0]):
+        out[i] = np.rint(x[i] * scale)
+    return out
 
 
 def _sum_bits(k: int) -> int:
@@ -109,13 +138,29 @@ def exp(x: np.ndarray) -> np.ndarray:
     Range reduction x = k ln 2 + r with |r| <= ln(2) / 2, a degree-13 Taylor polynomial for
     e ** r, and an exact scaling by 2 ** k.
     """
-    x = np.clip(np.asarray(x, dtype=np.float64), -740.0, 709.0)
-    k = np.rint(x * _INV_LN2)
-    r = (x - k * _LN2_HI) - k * _LN2_LO
-    p = np.full_like(r, _EXP_COEF[-1])
-    for c in _EXP_COEF[-2::-1]:
-        p = p * r + c
-    return np.ldexp(p, k.astype(np.int64))
+    x = np.asarray(x, dtype=np.float64)
+    return _exp(np.ascontiguousarray(x).reshape(-1), np.array(_EXP_COEF)).reshape(x.shape)
+
+
+@njit(cache=True, nogil=True)
+def _exp(x: np.ndarray, coef: np.ndarray) -> np.ndarray:
+    """Per element, the NumPy form:
+    ``x = clip(x, -740, 709); k = rint(x / ln 2); r = (x - k ln2_hi) - k ln2_lo;
+    p = coef[-1]; p = p * r + c for c in coef[-2::-1]; ldexp(p, k)``."""
+    out = np.empty_like(x)
+    for i in range(x.shape[0]):
+        v = x[i]
+        if v != v:  # NaN stays NaN
+            out[i] = v
+            continue
+        v = min(max(v, -740.0), 709.0)
+        k = np.rint(v * _INV_LN2)
+        r = (v - k * _LN2_HI) - k * _LN2_LO
+        p = coef[-1]
+        for j in range(coef.shape[0] - 2, -1, -1):
+            p = p * r + coef[j]
+        out[i] = np.ldexp(p, np.int64(k))
+    return out
 
 
 def log(x: np.ndarray) -> np.ndarray:
@@ -125,25 +170,50 @@ def log(x: np.ndarray) -> np.ndarray:
     its series (|s| < 0.172, 11 terms). Non-positive input gives -inf (0) or nan (< 0).
     """
     x = np.asarray(x, dtype=np.float64)
-    f, e = np.frexp(np.where(x > 0, x, 1.0))  # non-positive input: answered at the end
-    low = f < _SQRT_HALF
-    f = np.where(low, f * 2.0, f)
-    e = np.where(low, e - 1, e).astype(np.float64)
-    s = (f - 1.0) / (f + 1.0)
-    s2 = s * s
-    series = np.full_like(s, 1.0 / 21.0)
-    for j in range(19, 0, -2):
-        series = series * s2 + 1.0 / j
-    out = 2.0 * s * series + e * _LN2_LO + e * _LN2_HI
-    return np.where(x > 0, out, np.where(x == 0, -np.inf, np.nan))
+    return _log(np.ascontiguousarray(x).reshape(-1)).reshape(x.shape)
+
+
+@njit(cache=True, nogil=True)
+def _log(x: np.ndarray) -> np.ndarray:
+    """Per element, the NumPy form: ``f, e = frexp(x); f, e = (2 f, e - 1) if f < sqrt(1/2);
+    s = (f - 1) / (f + 1); series = 1/21; series = series * s**2 + 1/j for j = 19, 17, ..., 1;
+    2 s series + e ln2_lo + e ln2_hi``."""
+    out = np.empty_like(x)
+    for i in range(x.shape[0]):
+        v = x[i]
+        if not v > 0:
+            out[i] = -np.inf if v == 0 else np.nan
+            continue
+        f, e = math.frexp(v)
+        if f < _SQRT_HALF:
+            f = f * 2.0
+            e = e - 1
+        s = (f - 1.0) / (f + 1.0)
+        s2 = s * s
+        series = 1.0 / 21.0
+        for j in range(19, 0, -2):
+            series = series * s2 + 1.0 / j
+        ef = np.float64(e)
+        out[i] = 2.0 * s * series + ef * _LN2_LO + ef * _LN2_HI
+    return out
 
 
 def row_sum(x: np.ndarray) -> np.ndarray:
     """Sum over the last axis, added left to right: the same order, so the same bits, everywhere."""
-    total = x[..., 0].copy()
-    for j in range(1, x.shape[-1]):
-        total = total + x[..., j]
-    return total
+    x = np.asarray(x, dtype=np.float64)
+    rows = np.ascontiguousarray(x).reshape(-1, x.shape[-1])
+    return _row_sum(rows).reshape(x.shape[:-1])
+
+
+@njit(cache=True, nogil=True)
+def _row_sum(x: np.ndarray) -> np.ndarray:
+    out = np.empty(x.shape[0])
+    for i in range(x.shape[0]):
+        total = x[i, 0]
+        for j in range(1, x.shape[1]):
+            total = total + x[i, j]
+        out[i] = total
+    return out
 
 
 def fsum(values: np.ndarray) -> float:

@@ -1,0 +1,81 @@
+"""The renderer's two inner loops, compiled (Numba): a whole frame, and any set of its pixels.
+
+The arithmetic is the row-affine formula of :mod:`terrapref.camera.render`, written out per
+pixel with exactly the IEEE 754 operations, types and order of its vectorised NumPy form: the
+cell of column offset 0 and the change per column in float64 and then rounded to float32, the
+pixel's cell ``B * u + A`` in float32, clipped into the padded raster and truncated. Numba
+compiles without fast-math, so nothing is reassociated or fused into a multiply-add, and the
+class ids are the same, pixel for pixel, as the NumPy form gives (tests/test_camera.py keeps that
+form and compares). One pass per frame instead of a dozen, and no index arrays: the frame is
+written once, and the raster read once per pixel.
+
+Compiled on first use and cached beside this file, so later processes load it in milliseconds.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True)
+def render_rows(A: np.ndarray, B: np.ndarray, u: np.ndarray, first: np.ndarray, last: np.ndarray,
+                raster: np.ndarray, nx: int, x_max: np.float32, y_max: np.float32, unknown: int, out: np.ndarray) -> None:
+    """Fill ``out`` (n, W) uint8, the visible rows of a frame.
+
+    Args:
+        A, B: (n, 2) float32, each row's padded-raster cell at column offset 0 and its change
+            per column.
+        u: (W,) float32 column offsets from the principal point.
+        first, last: (n,) the columns that see the ground within range, ``first[r]:last[r]``;
+            the others are ``unknown``.
+        raster: the padded class raster, flat (ny * nx,) uint8.
+        nx: its row length.
+        x_max, y_max: the largest cell coordinates clipped to (just inside the border).
+    """
+    n, width = out.shape
+    zero = np.float32(0.0)
+    for r in range(n):
+        a0, a1, b0, b1 = A[r, 0], A[r, 1], B[r, 0], B[r, 1]
+        lo, hi = first[r], last[r]
+        for j in range(lo):
+            out[r, j] = unknown
+        for j in range(lo, hi):
+            gx = min(max(b0 * u[j] + a0, zero), x_max)
+            gy = min(max(b1 * u[j] + a1, zero), y_max)
+            out[r, j] = raster[np.int64(gy) * nx + np.int64(gx)]
+        for j in range(hi, width):
+            out[r, j] = unknown
+
+
+@njit(cache=True, nogil=True)
+def pixels_at(flat_index: np.ndarray, width: int, row0: int, valid: np.ndarray, P: np.ndarray, Q: np.ndarray, u: np.ndarray,
+              x: float, y: float, c: float, s: float, res: float,
+              raster: np.ndarray, nx: int, x_max: np.float32, y_max: np.float32, unknown: int) -> np.ndarray:
+    """Class ids (len(flat_index),) uint8 of the pixels ``flat_index`` (row * width + col).
+
+    ``valid`` (H * W,) says which pixels see the ground within range; ``P`` and ``Q`` (n, 2)
+    float64 are the visible rows' ground point at column offset 0 and its change per column in
+    the vehicle frame [m] (row ``row0`` first); ``(x, y)``, ``c``, ``s`` the pose's position and
+    the cosine and sine of its yaw; ``res`` the raster's cell size [m].
+    """
+    out = np.empty(flat_index.shape[0], np.uint8)
+    zero = np.float32(0.0)
+    for i in range(flat_index.shape[0]):
+        k = flat_index[i]
+        if k < 0 or k >= valid.shape[0]:
+            raise IndexError("a pixel index is outside the image")
+        if not valid[k]:
+            out[i] = unknown
+            continue
+        r = k // width - row0
+        uj = u[k % width]
+        # The cell of the row's column offset 0 and its change per column, as render.py's _cells.
+        a0 = np.float32((x + (P[r, 0] * c - P[r, 1] * s)) / res + 1.0)
+        a1 = np.float32((y + (P[r, 0] * s + P[r, 1] * c)) / res + 1.0)
+        b0 = np.float32((Q[r, 0] * c - Q[r, 1] * s) / res)
+        b1 = np.float32((Q[r, 0] * s + Q[r, 1] * c) / res)
+        gx = min(max(b0 * uj + a0, zero), x_max)
+        gy = min(max(b1 * uj + a1, zero), y_max)
+        out[i] = raster[np.int64(gy) * nx + np.int64(gx)]
+    return out
