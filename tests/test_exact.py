@@ -229,6 +229,29 @@ def test_adam_follows_the_closed_form_first_step():
     np.testing.assert_allclose(w["a"], [0.9, -1.9, 0.5], atol=1e-6)
 
 
+def test_adam_gives_the_numpy_forms_bits_over_many_steps():
+    rng = np.random.default_rng(3)
+    w = {"a": rng.normal(size=(4, 5)), "b": rng.normal(size=7)}
+    ref = {k: v.copy() for k, v in w.items()}
+    m = {k: np.zeros_like(v) for k, v in w.items()}
+    v2 = {k: np.zeros_like(v) for k, v in w.items()}
+    opt = Adam(w, lr=0.01)
+    power1 = power2 = 1.0
+    for _ in range(50):
+        grads = {"a": rng.normal(size=(5, 4)).T, "b": rng.normal(size=7) * 1e-3}  # a transposed (strided) gradient too
+        opt.step(grads)
+        power1, power2 = power1 * 0.9, power2 * 0.999
+        step, root2 = 0.01 / (1.0 - power1), math.sqrt(1.0 - power2)
+        for k, g in grads.items():  # the NumPy form
+            m[k] = 0.9 * m[k] + (1.0 - 0.9) * g
+            v2[k] = 0.999 * v2[k] + (1.0 - 0.999) * (g * g)
+            ref[k] -= step * m[k] / (np.sqrt(v2[k]) / root2 + 1e-8)
+    for k in w:
+        assert np.array_equal(w[k], ref[k])
+    with pytest.raises(ValueError, match="C-contiguous"):
+        Adam({"a": np.ones((3, 2)).T}, lr=0.1)
+
+
 def test_init_uses_the_fan_in_bounds():
     w = init_weights(ClassifierConfig(hidden=64), np.random.default_rng(0))
     assert np.abs(w["layers.1.weight"]).max() <= 1 / 8 and np.abs(w["layers.1.weight"]).max() > 0.12

@@ -57,24 +57,11 @@ class Rounded(NamedTuple):
 def rounded(x: np.ndarray, bits: int) -> Rounded:
     """``x`` rounded to ``bits`` significant bits relative to its largest magnitude."""
     x = np.asarray(x, dtype=np.float64)
-    flat = np.ascontiguousarray(x).reshape(-1)
-    hi, lo = _extremes(flat) if x.size else (0.0, 0.0)  # x.max(), x.min()
-    top = max(hi, -lo)
+    top = max(float(x.max()), -float(x.min())) if x.size else 0.0
     _, e = math.frexp(top)  # top < 2 ** e, exactly
-    # np.rint(x * 2 ** (bits - e)): powers of two, so the scaling is exact.
-    return Rounded(_scaled_rint(flat, math.ldexp(1.0, bits - e)).reshape(x.shape), math.ldexp(1.0, e - bits), bits)
-
-
-@njit(cache=True, nogil=True)
-def _extremes(x: np.ndarray) -> tuple[float, float]:
-    """(x.max(), x.min()) of a non-empty array in one pass; NaN for both if any entry is NaN."""
-    hi = lo = x[0]
-    for v in x:
-        if v != v:
-            return v, v
-        hi = max(hi, v)
-        lo = min(lo, v)
-    return hi, lo
+    # np.rint(x * 2 ** (bits - e)) in one pass: powers of two, so the scaling is exact.
+    ints = _scaled_rint(np.ascontiguousarray(x).reshape(-1), math.ldexp(1.0, bits - e)).reshape(x.shape)
+    return Rounded(ints, math.ldexp(1.0, e - bits), bits)
 
 
 @njit(cache=True, nogil=True)
@@ -139,28 +126,34 @@ def exp(x: np.ndarray) -> np.ndarray:
     e ** r, and an exact scaling by 2 ** k.
     """
     x = np.asarray(x, dtype=np.float64)
-    return _exp(np.ascontiguousarray(x).reshape(-1), np.array(_EXP_COEF)).reshape(x.shape)
+    return _exp(np.ascontiguousarray(x).reshape(-1)).reshape(x.shape)
+
+
+_EXP_HORNER = tuple(_EXP_COEF[-2::-1])  # a constant tuple, so the compiled polynomial is unrolled
 
 
 @njit(cache=True, nogil=True)
-def _exp(x: np.ndarray, coef: np.ndarray) -> np.ndarray:
+def _exp(x: np.ndarray) -> np.ndarray:
     """Per element, the NumPy form:
     ``x = clip(x, -740, 709); k = rint(x / ln 2); r = (x - k ln2_hi) - k ln2_lo;
-    p = coef[-1]; p = p * r + c for c in coef[-2::-1]; ldexp(p, k)``."""
-    out = np.empty_like(x)
-    for i in range(x.shape[0]):
+    p = coef[-1]; p = p * r + c for c in coef[-2::-1]; ldexp(p, k)``;
+    the polynomial in a first loop (vectorised by the compiler), the scaling in a second."""
+    n = x.shape[0]
+    p, k = np.empty(n), np.empty(n)
+    for i in range(n):
         v = x[i]
-        if v != v:  # NaN stays NaN
-            out[i] = v
-            continue
-        v = min(max(v, -740.0), 709.0)
-        k = np.rint(v * _INV_LN2)
-        r = (v - k * _LN2_HI) - k * _LN2_LO
-        p = coef[-1]
-        for j in range(coef.shape[0] - 2, -1, -1):
-            p = p * r + coef[j]
-        out[i] = np.ldexp(p, np.int64(k))
-    return out
+        v = -740.0 if v < -740.0 else v  # NaN passes through both
+        v = 709.0 if v > 709.0 else v
+        k[i] = np.rint(v * _INV_LN2)
+        r = (v - k[i] * _LN2_HI) - k[i] * _LN2_LO
+        q = _EXP_COEF[-1]
+        for c in _EXP_HORNER:
+            q = q * r + c
+        p[i] = q
+    for i in range(n):
+        if k[i] == k[i]:  # NaN stays NaN
+            p[i] = np.ldexp(p[i], np.int64(k[i]))
+    return p
 
 
 def log(x: np.ndarray) -> np.ndarray:

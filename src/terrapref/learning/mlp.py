@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from terrapref.learning import exact
 from terrapref.learning.network import ClassifierConfig
@@ -146,6 +147,8 @@ class Adam:
 
     def __init__(self, weights: dict[str, np.ndarray], lr: float, betas: tuple[float, float] = (0.9, 0.999), eps: float = 1e-8) -> None:
         self.weights, self.lr, self.betas, self.eps = weights, lr, betas, eps
+        if not all(w.dtype == np.float64 and w.flags.c_contiguous and w.flags.writeable for w in weights.values()):
+            raise ValueError("Adam updates the weights in place: they must be writeable C-contiguous float64 arrays")
         self.m = {k: np.zeros_like(v) for k, v in weights.items()}
         self.v = {k: np.zeros_like(v) for k, v in weights.items()}
         self.power1 = self.power2 = 1.0  # beta ** t by repeated products (no pow(), whose last bit may vary)
@@ -157,10 +160,18 @@ class Adam:
         step = self.lr / (1.0 - self.power1)
         root2 = math.sqrt(1.0 - self.power2)
         for name, p in self.weights.items():
-            g = grads[name]
-            m = self.m[name] = b1 * self.m[name] + (1.0 - b1) * g
-            v = self.v[name] = b2 * self.v[name] + (1.0 - b2) * (g * g)
-            p -= step * m / (np.sqrt(v) / root2 + self.eps)
+            g = np.ascontiguousarray(grads[name], dtype=np.float64).reshape(-1)
+            _adam_update(p.reshape(-1), self.m[name].reshape(-1), self.v[name].reshape(-1), g, b1, b2, step, root2, self.eps)
+
+
+@njit(cache=True, nogil=True)
+def _adam_update(p: np.ndarray, m: np.ndarray, v: np.ndarray, g: np.ndarray, b1: float, b2: float, step: float, root2: float, eps: float) -> None:
+    """In place, per element, the NumPy form ``m = b1 m + (1 - b1) g; v = b2 v + (1 - b2) g g;
+    p -= step m / (sqrt(v) / root2 + eps)``, in one pass (the same operations in the same order)."""
+    for i in range(p.shape[0]):
+        m[i] = b1 * m[i] + (1.0 - b1) * g[i]
+        v[i] = b2 * v[i] + (1.0 - b2) * (g[i] * g[i])
+        p[i] -= step * m[i] / (math.sqrt(v[i]) / root2 + eps)
 
 
 def cross_entropy(logits: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
