@@ -342,3 +342,51 @@ def test_a_file_with_lane_columns_is_refused_and_one_without_loads():
     assert FeatureConfig.from_dict({**plain, "lane_m": 0.0, "lane_points": 12}) == FeatureConfig()
     with pytest.raises(ValueError, match="lane columns .* no longer supported"):
         FeatureConfig.from_dict({**plain, "lane_m": 6.0, "lane_points": 12})
+
+
+# --- the compiled per-frame loops against their NumPy forms -------------------------------------
+
+
+def test_compiled_features_give_the_numpy_forms_bits(featurizer: UtilityFeaturizer):
+    """terrapref.features.kernels: the same bits as the NumPy forms the featurizer used before."""
+    rng = np.random.default_rng(4)
+    pix = featurizer.pset.pixel_index
+    m, n = pix.shape
+    k = featurizer.config.n_terrain
+    offset = np.where(pix.ravel() >= 0, np.repeat(np.arange(m), n), m) * (k + 1)
+    path = ReferencePath(np.array([[0.0, 0.0], [30.0, 4.0], [60.0, -5.0]]))
+    for _ in range(40):
+        image = rng.integers(0, 6, (480, 640)).astype(np.uint8)
+        image[rng.random((480, 640)) < 0.1] = UNKNOWN
+        ids = image.reshape(-1)[featurizer._pix_flat]
+        expected = np.bincount(featurizer.class_columns[ids] + offset, minlength=(m + 1) * (k + 1)).reshape(m + 1, k + 1)[:-1, :k] * (1.0 / n)
+        np.testing.assert_array_equal(featurizer.terrain(image), expected)
+        pose = Pose(rng.uniform(0, 60), rng.uniform(-5, 5), rng.uniform(-math.pi, math.pi))
+        s = float(rng.uniform(0, 60))
+        ends = featurizer.pset.endpoints
+        c, sn = math.cos(pose.yaw), math.sin(pose.yaw)
+        tx, ty = path.point_at(s + featurizer.config.preference.horizon_m)
+        d = np.hypot(ends[:, 0] * c - ends[:, 1] * sn + (pose.x - tx), ends[:, 0] * sn + ends[:, 1] * c + (pose.y - ty))
+        got = featurizer.distances(pose, path, s)
+        assert np.array_equal(got.view(np.int64), d.view(np.int64))
+        norm = (d.max() - d) * (1.0 / (d.max() - d.min()))
+        assert np.array_equal(featurizer.normalise(d).view(np.int64), norm.view(np.int64))
+    assert (featurizer.normalise(np.full((2, 3), 4.0)) == 1.0).all()
+
+
+@pytest.mark.parametrize("n", [1, 5, 7, 8, 9, 15, 16, 30, 128])
+def test_numpy_sum_adds_in_numpys_order(n: int):
+    from terrapref.features.kernels import numpy_sum
+
+    rng = np.random.default_rng(n)
+    # Terms over many magnitudes, so that another order would round differently somewhere.
+    x = rng.standard_normal((3000, n)) * 10.0 ** rng.integers(-6, 6, (3000, n))
+    got = np.array([numpy_sum(row) for row in x])
+    assert np.array_equal(got.view(np.int64), x.sum(axis=1).view(np.int64))
+
+
+def test_numpy_sum_refuses_more_terms_than_it_can_follow():
+    from terrapref.features.kernels import numpy_sum
+
+    with pytest.raises(ValueError):
+        numpy_sum(np.ones(129))

@@ -214,3 +214,37 @@ def test_scores_are_the_linear_utility_of_the_second_stage_utilities(setup):
         value = (la.utilities(view, pose, path, s, rows) @ UTILITY.w + UTILITY.b).max(axis=1)
         np.testing.assert_allclose(got[rows], log_probs[rows] + la.config.weight * value, rtol=0, atol=1e-9)
         assert np.isneginf(np.delete(got, rows)).all()
+
+
+def _numpy_scores(stage: SecondStage, log_probs: np.ndarray, image: np.ndarray, pose: Pose, path: ReferencePath, s: float) -> np.ndarray:
+    """SecondStage.scores as NumPy computed it before its loop was compiled."""
+    rows = np.argsort(-log_probs, kind="stable")[: stage.config.candidates]
+    r, m = len(rows), stage.m
+    terrain = np.take(stage._point_weight, image.reshape(-1)[stage.pix[rows].ravel()])
+    terrain *= stage.seen[rows].ravel()
+    x, y, yaw = pose
+    targets = stage._targets(path, s + stage._horizon_m, rows)
+    d = np.abs(stage._ends[rows] * complex(math.cos(yaw), math.sin(yaw)) + (complex(x, y) - targets[:, None]))
+    lo, hi = d.min(), d.max()
+    distance = np.ones_like(d) if hi - lo < 1e-9 else (hi - d) * (1.0 / (hi - lo))
+    value = (terrain.reshape(r, m, stage.points).sum(axis=2) + stage.w[stage.k] * distance + stage.b).max(axis=1)
+    out = np.full(log_probs.shape, -np.inf)
+    out[rows] = log_probs[rows] + stage.config.weight * value
+    return out
+
+
+def test_the_compiled_stage_gives_the_numpy_forms_bits(setup):
+    featurizer, camera, stage = setup
+    rng = np.random.default_rng(9)
+    paths = [_straight_path(), ReferencePath(np.array([[0.0, 0.0], [6.0, 3.0], [9.0, -4.0], [40.0, 2.0]]))]
+    for trial in range(60):
+        image = rng.integers(0, 6, (480, 640)).astype(np.uint8)
+        log_probs = np.log(rng.dirichlet(np.ones(21)))
+        if trial % 3 == 0:
+            log_probs[rng.integers(0, 21, 4)] = -np.inf  # probabilities of exactly 0
+        pose = Pose(rng.uniform(0, 12), rng.uniform(-3, 3), rng.uniform(-0.8, 0.8))
+        path = paths[trial % 2]
+        s = float(rng.uniform(0, 12))
+        expected = _numpy_scores(stage, log_probs, image, pose, path, s)
+        got = stage.scores(log_probs, SegmentationView.of(image), pose, path, s)
+        assert np.array_equal(got.view(np.int64), expected.view(np.int64)), trial

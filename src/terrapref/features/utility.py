@@ -25,12 +25,16 @@ from enum import Enum
 import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView, as_view
+from terrapref.features import kernels
 from terrapref.features.preference_set import PreferenceSet, PreferenceSetConfig
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.vehicle import Pose
 
 
+
+
+NORMALISE_EPS = 1e-9  # a distance range below this normalises to all ones
 
 
 class DistanceMode(str, Enum):
@@ -158,8 +162,7 @@ class UtilityFeaturizer:
         self._column = np.full(256, k, dtype=np.intp)  # class id -> terrain column (k: none)
         for j, name in enumerate(config.feature_classes):
             self._column[classes.id_of(name)] = j
-        self._bins = (self._rows + 1) * (k + 1)
-        self._offset = np.where(pix >= 0, row, self._rows) * (k + 1)
+        self._point_row = np.where(pix >= 0, row, self._rows)  # m: a point outside the image
         self._pix_flat = np.where(pix >= 0, pix, 0)
         self._pix_flat.flags.writeable = False  # read-only: a renderer may prepare it once
         self._scale = 1.0 / self.pset.pixel_index.shape[1]  # the share of one point
@@ -176,10 +179,8 @@ class UtilityFeaturizer:
 
     def terrain(self, image: np.ndarray | SegmentationView) -> np.ndarray:
         """Terrain utilities, shape (m, K): the share of each trajectory's points on each class."""
-        k = len(self.config.feature_classes)
-        cols = self._column[as_view(image).pixels(self._pix_flat)]
-        counts = np.bincount(cols + self._offset, minlength=self._bins)
-        return counts.reshape(self._rows + 1, k + 1)[:-1, :k] * self._scale
+        ids = as_view(image).pixels(self._pix_flat)
+        return kernels.terrain_shares(ids, self._column, self._point_row, self._rows, len(self.config.feature_classes), self._scale)
 
     def distances(self, pose: Pose, path: ReferencePath, progress_s: float | None = None) -> np.ndarray:
         """d(T^i, P) [m] for each trajectory, shape (m,)."""
@@ -192,7 +193,7 @@ class UtilityFeaturizer:
                 raise ValueError("lookahead distance needs the vehicle's progress along the path")
             tx, ty = path.point_at(progress_s + self.config.preference.horizon_m)
             # Endpoint minus target, in the world frame, without building the (m, 2) array.
-            return np.hypot(ex * c - ey * s + (x - tx), ex * s + ey * c + (y - ty))
+            return kernels.end_distances(ex, ey, c, s, x - tx, y - ty)
         ends = self._ends @ np.array([[c, s], [-s, c]]) + (x, y)  # endpoints in the world frame
         pts, arc = path.resampled(self.config.path_spacing_m)
         if mode is DistanceMode.WINDOW:
@@ -205,12 +206,9 @@ class UtilityFeaturizer:
         return np.sqrt(np.min(np.einsum("mpj,mpj->mp", diff, diff), axis=1))
 
     @staticmethod
-    def normalise(d: np.ndarray, eps: float = 1e-9) -> np.ndarray:
+    def normalise(d: np.ndarray, eps: float = NORMALISE_EPS) -> np.ndarray:
         """u^5 = 1 - (d - d_min) / (d_max - d_min); all ones when the range is below ``eps``."""
-        lo, hi = d.min(), d.max()
-        if hi - lo < eps:
-            return np.ones_like(d)
-        return (hi - d) * (1.0 / (hi - lo))
+        return kernels.normalise(np.asarray(d, dtype=np.float64), eps)
 
     def __call__(self, image: np.ndarray | SegmentationView, pose: Pose, path: ReferencePath, progress_s: float | None = None) -> np.ndarray:
         """U, shape (m, n_features) float32: terrain shares, then the distance utility."""

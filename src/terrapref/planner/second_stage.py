@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView
-from terrapref.features import UtilityFeaturizer
+from terrapref.features import UtilityFeaturizer, kernels
 from terrapref.features.lookahead import Lookahead
 from terrapref.features.utility import LookaheadConfig
 from terrapref.learning.linear import LinearUtility
@@ -72,13 +72,11 @@ class SecondStage(Lookahead):
     def scores(self, log_probs: np.ndarray, view: SegmentationView, pose: Pose, path: ReferencePath, progress_s: float) -> np.ndarray:
         """log F_t + weight * value of the second stage for the candidates; -inf elsewhere, shape (m,)."""
         rows = np.argsort(-log_probs, kind="stable")[: self.config.candidates]
-        # w . U'_ij + b_j without building U' (the same sums as utilities() @ w + b, in fewer
-        # NumPy calls): terrain weights summed point by point, then the distance term.
-        r, m = len(rows), self.m
-        terrain = np.take(self._point_weight, view.pixels(self.pix[rows].ravel()))
-        terrain *= self.seen[rows].ravel()
+        # w . U'_ij + b_j without building U' (the same sums as utilities() @ w + b, the terrain
+        # weights summed point by point in one compiled pass), then the best continuation.
+        ids = view.pixels(self.pix[rows].ravel())
         distance = self.distance_utility(pose, path, progress_s, rows)
-        value = (terrain.reshape(r, m, self.points).sum(axis=2) + self.w[self.k] * distance + self.b).max(axis=1)
+        value = kernels.stage_values(rows, ids, self._point_weight, self.seen, distance, float(self.w[self.k]), self.b)
         out = np.full(log_probs.shape, -np.inf)
         out[rows] = log_probs[rows] + self.config.weight * value
         return out

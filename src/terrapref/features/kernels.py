@@ -1,0 +1,133 @@
+"""The utility features' per-frame arithmetic, compiled (Numba) for the planner's control loop.
+
+On one frame the features are a few hundred pixels and a few dozen distances: NumPy's call
+overhead, not its arithmetic, set their cost. Each loop here does, element by element, exactly
+the IEEE 754 operations of the NumPy form its docstring gives, in the same order (compiled
+without fast-math: nothing is reassociated or fused into a multiply-add), so the features, and
+every decision made from them, are the same bits as before (tests/test_features.py compares).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True)
+def terrain_shares(ids: np.ndarray, column: np.ndarray, row: np.ndarray, m: int, k: int, scale: float) -> np.ndarray:
+    """Terrain utilities (m, k) float64: per trajectory, ``scale`` times the count of its points
+    on each terrain column.
+
+    The NumPy form: ``bincount(column[ids] + row * (k + 1)).reshape(m + 1, k + 1)[:-1, :k] * scale``.
+
+    Args:
+        ids: (m * n,) class id of every point's pixel.
+        column: (256,) terrain column of each class id (k: none).
+        row: (m * n,) the trajectory of every point; m for a point outside the image.
+    """
+    counts = np.zeros((m + 1, k + 1), dtype=np.int64)
+    for i in range(ids.shape[0]):
+        counts[row[i], column[ids[i]]] += 1
+    out = np.empty((m, k))
+    for i in range(m):
+        for j in range(k):
+            out[i, j] = counts[i, j] * scale
+    return out
+
+
+@njit(cache=True, nogil=True)
+def end_distances(ex: np.ndarray, ey: np.ndarray, c: float, s: float, dx: float, dy: float) -> np.ndarray:
+    """Distances (m,) of endpoints (ex, ey) rotated by (c, s) and shifted by (dx, dy) from the origin.
+
+    The NumPy form: ``np.hypot(ex * c - ey * s + dx, ex * s + ey * c + dy)``.
+    """
+    out = np.empty(ex.shape[0])
+    for i in range(ex.shape[0]):
+        out[i] = math.hypot(ex[i] * c - ey[i] * s + dx, ex[i] * s + ey[i] * c + dy)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def normalise(d: np.ndarray, eps: float) -> np.ndarray:
+    """``1 - (d - d_min) / (d_max - d_min)``, all ones when the range is below ``eps``; any shape.
+
+    The NumPy form: ``(d.max() - d) * (1.0 / (d.max() - d.min()))``.
+    """
+    flat = d.ravel()
+    lo, hi = flat.min(), flat.max()
+    if hi - lo < eps:
+        return np.ones_like(d)
+    inv = 1.0 / (hi - lo)
+    out = np.empty_like(flat)
+    for i in range(flat.shape[0]):
+        out[i] = (hi - flat[i]) * inv
+    return out.reshape(d.shape)
+
+
+@njit(cache=True, nogil=True)
+def numpy_sum(a: np.ndarray) -> float:
+    """``a.sum()`` of a 1-D float64 array as NumPy adds it: from 0, in eight interleaved partial
+    sums added pairwise, then the last ``n % 8`` terms in order (its pairwise summation for
+    n <= 128; longer arrays are not summed here)."""
+    n = a.shape[0]
+    if n > 128:
+        raise ValueError("numpy_sum follows NumPy's summation order for at most 128 terms")
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[i]
+        return 0.0 + res
+    r0, r1, r2, r3, r4, r5, r6, r7 = a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]
+    i = 8
+    while i < n - n % 8:
+        r0 += a[i]
+        r1 += a[i + 1]
+        r2 += a[i + 2]
+        r3 += a[i + 3]
+        r4 += a[i + 4]
+        r5 += a[i + 5]
+        r6 += a[i + 6]
+        r7 += a[i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[i]
+        i += 1
+    return 0.0 + res
+
+
+@njit(cache=True, nogil=True)
+def stage_values(rows: np.ndarray, ids: np.ndarray, point_weight: np.ndarray, seen: np.ndarray, distance: np.ndarray,
+                 w_distance: float, b: np.ndarray) -> np.ndarray:
+    """The second stage's value of each candidate: the best of its second pieces' linear utilities, (r,).
+
+    The NumPy form (terrapref.planner.second_stage)::
+
+        terrain = point_weight[ids] * seen[rows].ravel()                            # (r * m * n',)
+        (terrain.reshape(r, m, n').sum(axis=2) + w_distance * distance + b).max(axis=1)
+
+    Args:
+        rows: (r,) the candidate trajectories.
+        ids: (r * m * n',) class id of each of their second pieces' points.
+        point_weight: (256,) each class's weight per point.
+        seen: (m, m, n') 1 where a point is in the image, else 0.
+        distance: (r, m) the distance utility of each second piece.
+    """
+    r, m, n = rows.shape[0], seen.shape[1], seen.shape[2]
+    terms = np.empty(n)
+    value = np.empty(r)
+    for a in range(r):
+        best = -np.inf
+        for j in range(m):
+            base = (a * m + j) * n
+            for p in range(n):
+                terms[p] = point_weight[ids[base + p]] * seen[rows[a], j, p]
+            v = numpy_sum(terms) + w_distance * distance[a, j] + b[j]
+            if v > best or v != v:  # NumPy's max: the largest, NaN if any is NaN
+                best = v
+                if v != v:
+                    break
+        value[a] = best
+    return value
