@@ -116,6 +116,18 @@ def test_decide_needs_a_path(models, views):
         Planner(models.linear).decide(views.start_image, views.start)
 
 
+def test_warm_up_decides_once_and_forgets_it(models, course, views):
+    cold = Planner(models.random)
+    cold.warm_up()
+    with pytest.raises(RuntimeError):  # no path was set, and the warm-up's is gone
+        cold.decide(views.start_image, views.start)
+    planner, fresh = _planner(models.random, course), _planner(models.random, course)
+    first = planner.decide(views.near_image, views.near)
+    planner.warm_up()  # mid-drive: the path and the progress along it are kept
+    assert planner.decide(views.near_image, views.near).probs.tolist() == fresh.decide(views.near_image, views.near).probs.tolist() == first.probs.tolist()
+    assert planner.tracker is not None and planner.path is not None
+
+
 # --- memory -------------------------------------------------------------------------------------------
 
 

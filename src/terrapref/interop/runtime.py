@@ -66,6 +66,7 @@ class PlannerRuntime:
             raise ValueError("hold_s must be a finite number >= 0")
         self.model = model if isinstance(model, LoadedModel) else load_model(model)
         self.planner = Planner(self.model, camera)  # refuses a camera the model was not trained for
+        self.planner.warm_up()  # the compiled loops ready before the first frame
         self.shape = self.planner.camera.shape
         self.lut = labels.lut(self.model.classes) if labels is not None else None
         self.hold_s = hold_s

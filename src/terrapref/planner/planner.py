@@ -20,6 +20,7 @@ from terrapref.planner.policy import ClassifierPolicy, Observation, Policy
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim.loop import Frame
+from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Command, Pose
 
 
@@ -83,6 +84,17 @@ class Planner:
         """Start following a new reference path."""
         self.path = ReferencePath(np.asarray(waypoints, dtype=float))
         self.tracker = PathTracker(self.path)
+
+    def warm_up(self) -> None:
+        """Decide once on a blank frame along a straight path, then forget that path.
+
+        The compiled loops (docs/design.md) are loaded now, or compiled if this machine has no
+        cached copy yet, instead of in the first step of a control loop.
+        """
+        path, tracker = self.path, self.tracker
+        self.set_path(np.array([[0.0, 0.0], [20.0, 0.0]]))
+        self.decide(np.full(self.camera.shape, UNKNOWN, dtype=np.uint8), Pose(0.0, 0.0, 0.0))
+        self.path, self.tracker = path, tracker
 
     def decide(self, image: np.ndarray | SegmentationView, pose: Pose) -> Decision:
         """Choose a trajectory for one segmentation frame (H, W) uint8 at ``pose``.
