@@ -85,3 +85,55 @@ def test_softmax_is_a_distribution_over_the_last_axis():
 def test_classifier_config_is_validated(bad: dict):
     with pytest.raises(ValueError):
         ClassifierConfig(**bad)
+
+
+# --- the members stacked give each member's own bits ---------------------------------------------
+
+
+def _per_member_forward(config: ClassifierConfig, weights: dict[str, np.ndarray], U: np.ndarray) -> np.ndarray:
+    """numpy_forward as it was before the members were stacked: one network at a time."""
+    from terrapref.learning.network import _act, member_prefix
+
+    single = U.ndim == 2
+    x = U[None] if single else U
+    if config.ignore:
+        x = x.copy()
+        x[..., list(config.ignore)] = 0.0
+
+    def one(prefix: str) -> np.ndarray:
+        if config.compress:
+            per_row = x @ weights[f"{prefix}compress.weight"].T + weights[f"{prefix}compress.bias"]
+            scores, h = per_row[..., 0], per_row.reshape(len(x), -1)
+        else:
+            scores = h = x.reshape(len(x), -1)
+        for i in range(config.depth):
+            h = _act(config.activation, h @ weights[f"{prefix}layers.{i}.weight"].T + weights[f"{prefix}layers.{i}.bias"])
+        logits = h @ weights[f"{prefix}layers.{config.depth}.weight"].T + weights[f"{prefix}layers.{config.depth}.bias"]
+        return logits + scores if config.skip else logits
+
+    if config.members == 1:
+        logits = one("")
+    else:
+        probs = sum(softmax(one(member_prefix(j))) for j in range(config.members))
+        logits = np.log(probs * (1.0 / config.members) + 1e-30)
+    return logits[0] if single else logits
+
+
+@pytest.mark.parametrize("config", [*CONFIGS[:7], ClassifierConfig(members=3, skip=True), ClassifierConfig(members=2, activation="tanh", ignore=(1, 3)),
+                                    ClassifierConfig(members=3, compress=False, activation="elu"), ClassifierConfig(members=1, ignore=(0,))],
+                         ids=lambda c: f"{c.activation}-d{c.depth}-M{c.members}{'-skip' if c.skip else ''}{'' if c.compress else '-flat'}{'-ignore' if c.ignore else ''}")
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_stacked_members_give_the_per_member_bits(config: ClassifierConfig, dtype):
+    rng = np.random.default_rng(8)
+    weights: dict[str, np.ndarray] = {}
+    for j in range(config.members):
+        torch.manual_seed(j)
+        prefix = f"members.{j}." if config.members > 1 else ""
+        member = UtilityClassifier(replace(config, members=1))
+        weights.update({prefix + k: v.detach().numpy().copy() for k, v in member.state_dict().items()})
+    for _ in range(30):
+        U = (rng.uniform(-0.5, 1.5, (config.m, config.n_features)) * (rng.random((config.m, config.n_features)) < 0.6)).astype(dtype)
+        for x in (U, np.stack([U, U[::-1], U * 0.5])):
+            got, expected = numpy_forward(config, weights, x), _per_member_forward(config, weights, x)
+            assert got.dtype == expected.dtype and got.shape == expected.shape
+            assert np.array_equal(got, expected), "the stacked forward pass moved a bit"

@@ -50,7 +50,7 @@ class _Graph:
 
 
 def _member(g: _Graph, c: ClassifierConfig, weights: dict[str, np.ndarray], x: str, prefix: str) -> str:
-    """Logits (N, m) of one network for U (N, m, k) named ``x``; mirrors network._forward_one."""
+    """Logits (N, m) of one network for U (N, m, k) named ``x``; mirrors network.stacked_forward for one member."""
     w = lambda name: np.asarray(weights[f"{prefix}{name}"], dtype=np.float64)  # noqa: E731  (the file's float32 values, exactly)
     if c.compress:
         per_row = g.op("Add", [g.op("MatMul", [x, g.const("compress_wT", w("compress.weight").T)]), g.const("compress_b", w("compress.bias"))])

@@ -104,34 +104,73 @@ def numpy_forward(config: ClassifierConfig, weights: dict[str, np.ndarray], U: n
     ``weights`` uses the PyTorch state-dict names: compress.weight (1, k),
     compress.bias (1,), layers.{i}.weight (out, in), layers.{i}.bias (out,); each
     prefixed by ``members.{j}.`` in an ensemble, whose logits are the log of the members' mean
-    softmax (so that the softmax of the result is that mean).
+    softmax (so that the softmax of the result is that mean). A caller that runs the same
+    weights on many frames builds their :class:`StackedWeights` once and calls
+    :func:`stacked_forward`.
     """
+    return stacked_forward(config, StackedWeights.of(config, weights), U)
+
+
+@dataclass(frozen=True)
+class StackedWeights:
+    """C's weights with the members stacked on a first axis, transposed as the forward pass
+    multiplies them: every member's product is then one slice of one batched ``matmul``, the
+    same BLAS call on the same strided operands as a member on its own (so the same bits).
+
+    Attributes:
+        compress: (M, k, 1) and (M, 1), the row-wise compression's weight and bias (None
+            without the compression).
+        layers: per layer, (M, in, out) and (M, out).
+    """
+
+    compress: tuple[np.ndarray, np.ndarray] | None
+    layers: tuple[tuple[np.ndarray, np.ndarray], ...]
+
+    @classmethod
+    def of(cls, config: ClassifierConfig, weights: dict[str, np.ndarray]) -> StackedWeights:
+        prefixes = [member_prefix(j) for j in range(config.members)] if config.members > 1 else [""]
+
+        def stack(name: str) -> np.ndarray:
+            return np.stack([weights[p + name] for p in prefixes])
+
+        def transposed(name: str) -> np.ndarray:
+            return stack(name).transpose(0, 2, 1)  # (M, in, out): each slice a view like W.T
+
+        compress = (transposed("compress.weight"), stack("compress.bias")) if config.compress else None
+        return cls(compress, tuple((transposed(f"layers.{i}.weight"), stack(f"layers.{i}.bias")) for i in range(config.depth + 1)))
+
+
+def stacked_forward(config: ClassifierConfig, stacked: StackedWeights, U: np.ndarray) -> np.ndarray:
+    """:func:`numpy_forward` with the weights already stacked."""
     single = U.ndim == 2
     x = U[None] if single else U
     if config.ignore:
         x = x.copy()
         x[..., list(config.ignore)] = 0.0
-    if config.members == 1:
-        logits = _forward_one(config, weights, x)
-    else:
-        probs = sum(softmax(_forward_one(config, weights, x, member_prefix(j))) for j in range(config.members))
-        logits = np.log(probs * (1.0 / config.members) + 1e-30)
-    return logits[0] if single else logits
-
-
-def _forward_one(config: ClassifierConfig, weights: dict[str, np.ndarray], x: np.ndarray, prefix: str = "") -> np.ndarray:
-    """Logits (B, m) of one network, whose weight names start with ``prefix``, for U (B, m, k),
-    ignored columns already zeroed."""
-    if config.compress:
-        per_row = x @ weights[f"{prefix}compress.weight"].T + weights[f"{prefix}compress.bias"]  # (B, m, 1)
+    n = len(x)
+    members = len(stacked.layers[0][0])
+    if stacked.compress is not None:
+        w, b = stacked.compress
+        per_row = x[None] @ w[:, None] + b[:, None, None, :]  # (M, B, m, 1)
         scores = per_row[..., 0]
-        h = per_row.reshape(len(x), -1)
+        h = per_row.reshape(members, n, -1)
     else:
-        scores = h = x.reshape(len(x), -1)
-    for i in range(config.depth):
-        h = _act(config.activation, h @ weights[f"{prefix}layers.{i}.weight"].T + weights[f"{prefix}layers.{i}.bias"])
-    logits = h @ weights[f"{prefix}layers.{config.depth}.weight"].T + weights[f"{prefix}layers.{config.depth}.bias"]
-    return logits + scores if config.skip else logits
+        scores = h = np.broadcast_to(x.reshape(1, n, -1), (members, n, x.shape[1] * x.shape[2]))
+    for w, b in stacked.layers[:-1]:
+        h = _act(config.activation, h @ w + b[:, None, :])
+    w, b = stacked.layers[-1]
+    logits = h @ w + b[:, None, :]  # (M, B, m)
+    if config.skip:
+        logits = logits + scores
+    if members == 1:
+        logits = logits[0]
+    else:
+        p = softmax(logits)
+        probs = p[0]
+        for j in range(1, members):  # added in member order, as the members' mean was before
+            probs = probs + p[j]
+        logits = np.log(probs * (1.0 / members) + 1e-30)
+    return logits[0] if single else logits
 
 
 def softmax(logits: np.ndarray) -> np.ndarray:

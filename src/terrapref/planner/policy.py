@@ -29,7 +29,7 @@ from terrapref.camera import CameraConfig, SegmentationView
 from terrapref.features import FeatureConfig
 from terrapref.learning.linear import LinearUtility
 from terrapref.learning.model_file import FORMAT, LoadedModel
-from terrapref.learning.network import numpy_forward
+from terrapref.learning.network import StackedWeights, stacked_forward
 from terrapref.tensorfile import write_tensor_file
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.vehicle import pure_pursuit_yaw_rate
@@ -110,10 +110,10 @@ class ClassifierPolicy(Policy):
     def __init__(self, model: LoadedModel) -> None:
         super().__init__(model.features, model.camera, model.classes, model.profile, model.path)
         self.model = model
-        self._config, self._weights = model.classifier, model.weights
+        self._config, self._stacked = model.classifier, StackedWeights.of(model.classifier, model.weights)
 
     def logits(self, obs: Observation) -> np.ndarray:
-        return numpy_forward(self._config, self._weights, obs.U)
+        return stacked_forward(self._config, self._stacked, obs.U)
 
     def stage_utility(self) -> StageUtility | None:
         return None if self.model.utility is None else StageUtility(self.model.utility, self.model.stage_weight)
