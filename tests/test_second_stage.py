@@ -242,6 +242,8 @@ def test_the_compiled_stage_gives_the_numpy_forms_bits(setup):
         log_probs = np.log(rng.dirichlet(np.ones(21)))
         if trial % 3 == 0:
             log_probs[rng.integers(0, 21, 4)] = -np.inf  # probabilities of exactly 0
+        if trial % 2:
+            log_probs = log_probs.astype(np.float32)  # as the planner's, from C's float32 logits
         pose = Pose(rng.uniform(0, 12), rng.uniform(-3, 3), rng.uniform(-0.8, 0.8))
         path = paths[trial % 2]
         s = float(rng.uniform(0, 12))

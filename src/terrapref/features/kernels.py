@@ -99,16 +99,20 @@ def numpy_sum(a: np.ndarray) -> float:
 
 
 @njit(cache=True, nogil=True)
-def stage_values(rows: np.ndarray, ids: np.ndarray, point_weight: np.ndarray, seen: np.ndarray, distance: np.ndarray,
-                 w_distance: float, b: np.ndarray) -> np.ndarray:
-    """The second stage's value of each candidate: the best of its second pieces' linear utilities, (r,).
+def stage_scores(log_probs: np.ndarray, weight: float, rows: np.ndarray, ids: np.ndarray, point_weight: np.ndarray,
+                 seen: np.ndarray, distance: np.ndarray, w_distance: float, b: np.ndarray) -> np.ndarray:
+    """The second stage's scores (m,): ``log_probs + weight * value`` for the candidates, where a
+    candidate's value is the best of its second pieces' linear utilities; -inf elsewhere.
 
     The NumPy form (terrapref.planner.second_stage)::
 
         terrain = point_weight[ids] * seen[rows].ravel()                            # (r * m * n',)
-        (terrain.reshape(r, m, n').sum(axis=2) + w_distance * distance + b).max(axis=1)
+        value = (terrain.reshape(r, m, n').sum(axis=2) + w_distance * distance + b).max(axis=1)
+        out = np.full(m, -np.inf); out[rows] = log_probs[rows] + weight * value
 
     Args:
+        log_probs: (m,) log F_t.
+        weight: the second stage's weight against log F_t.
         rows: (r,) the candidate trajectories.
         ids: (r * m * n',) class id of each of their second pieces' points.
         point_weight: (256,) each class's weight per point.
@@ -117,7 +121,7 @@ def stage_values(rows: np.ndarray, ids: np.ndarray, point_weight: np.ndarray, se
     """
     r, m, n = rows.shape[0], seen.shape[1], seen.shape[2]
     terms = np.empty(n)
-    value = np.empty(r)
+    out = np.full(log_probs.shape[0], -np.inf)
     for a in range(r):
         best = -np.inf
         for j in range(m):
@@ -129,5 +133,5 @@ def stage_values(rows: np.ndarray, ids: np.ndarray, point_weight: np.ndarray, se
                 best = v
                 if v != v:
                     break
-        value[a] = best
-    return value
+        out[rows[a]] = log_probs[rows[a]] + weight * best
+    return out

@@ -76,7 +76,4 @@ class SecondStage(Lookahead):
         # weights summed point by point in one compiled pass), then the best continuation.
         ids = view.pixels(self.pix[rows].ravel())
         distance = self.distance_utility(pose, path, progress_s, rows)
-        value = kernels.stage_values(rows, ids, self._point_weight, self.seen, distance, float(self.w[self.k]), self.b)
-        out = np.full(log_probs.shape, -np.inf)
-        out[rows] = log_probs[rows] + self.config.weight * value
-        return out
+        return kernels.stage_scores(log_probs, self.config.weight, rows, ids, self._point_weight, self.seen, distance, float(self.w[self.k]), self.b)
