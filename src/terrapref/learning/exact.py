@@ -194,6 +194,8 @@ def _log(x: np.ndarray) -> np.ndarray:
 def row_sum(x: np.ndarray) -> np.ndarray:
     """Sum over the last axis, added left to right: the same order, so the same bits, everywhere."""
     x = np.asarray(x, dtype=np.float64)
+    if x.ndim == 0 or x.shape[-1] == 0:
+        raise ValueError(f"row_sum needs at least one column, got shape {x.shape}")
     rows = np.ascontiguousarray(x).reshape(-1, x.shape[-1])
     return _row_sum(rows).reshape(x.shape[:-1])
 

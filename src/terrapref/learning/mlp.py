@@ -161,6 +161,8 @@ class Adam:
         root2 = math.sqrt(1.0 - self.power2)
         for name, p in self.weights.items():
             g = np.ascontiguousarray(grads[name], dtype=np.float64).reshape(-1)
+            if g.size != p.size:
+                raise ValueError(f"gradient of {name}: {g.size} values for {p.size} weights")
             _adam_update(p.reshape(-1), self.m[name].reshape(-1), self.v[name].reshape(-1), g, b1, b2, step, root2, self.eps)
 
 
