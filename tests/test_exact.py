@@ -90,6 +90,9 @@ def test_compiled_loops_give_the_numpy_forms_bits():
         assert _same_bits(exact.exp(x), _numpy_exp(x))
         assert _same_bits(exact.exp(x.reshape(-1, 10)[:, ::2]), _numpy_exp(x.reshape(-1, 10)[:, ::2]))  # any shape and strides
         assert np.isnan(exact.exp(np.array([np.nan]))[0])
+        # Every scaling the range reduction can ask for, results subnormal ones included.
+        sweep = np.concatenate([np.linspace(-745.0, -700.0, 200001), np.linspace(700.0, 710.0, 20001), np.arange(-1068, 1024) * math.log(2)])
+        assert _same_bits(exact.exp(sweep), _numpy_exp(sweep))
         y = np.concatenate([np.abs(x), rng.random(1000) * 1e-300, [5e-324, 1e308, -1.0, np.nan]])
         np.testing.assert_array_equal(exact.log(y), _numpy_log(y))  # NaN where NaN
         assert _same_bits(exact.log(y[y > 0]), _numpy_log(y[y > 0]))

@@ -130,29 +130,30 @@ def exp(x: np.ndarray) -> np.ndarray:
 
 
 _EXP_HORNER = tuple(_EXP_COEF[-2::-1])  # a constant tuple, so the compiled polynomial is unrolled
+# 2 ** e for every e a scaling can need (k in [-1068, 1023]), each exact (the smallest are
+# subnormal powers of two): p * 2 ** k is one correctly rounded product, ldexp(p, k)'s bits.
+_POW2 = np.array([math.ldexp(1.0, e) for e in range(-1074, 1024)])
 
 
 @njit(cache=True, nogil=True)
 def _exp(x: np.ndarray) -> np.ndarray:
     """Per element, the NumPy form:
     ``x = clip(x, -740, 709); k = rint(x / ln 2); r = (x - k ln2_hi) - k ln2_lo;
-    p = coef[-1]; p = p * r + c for c in coef[-2::-1]; ldexp(p, k)``;
-    the polynomial in a first loop (vectorised by the compiler), the scaling in a second."""
+    p = coef[-1]; p = p * r + c for c in coef[-2::-1]; ldexp(p, k)``,
+    the scaling as a product with the exact power of two from a table (a library ldexp call
+    per element cost as much as the rest)."""
     n = x.shape[0]
-    p, k = np.empty(n), np.empty(n)
+    p = np.empty(n)
     for i in range(n):
         v = x[i]
         v = -740.0 if v < -740.0 else v  # NaN passes through both
         v = 709.0 if v > 709.0 else v
-        k[i] = np.rint(v * _INV_LN2)
-        r = (v - k[i] * _LN2_HI) - k[i] * _LN2_LO
+        k = np.rint(v * _INV_LN2)
+        r = (v - k * _LN2_HI) - k * _LN2_LO
         q = _EXP_COEF[-1]
         for c in _EXP_HORNER:
             q = q * r + c
-        p[i] = q
-    for i in range(n):
-        if k[i] == k[i]:  # NaN stays NaN
-            p[i] = np.ldexp(p[i], np.int64(k[i]))
+        p[i] = q * _POW2[np.int64(k) + 1074] if k == k else q  # NaN stays NaN
     return p
 
 
@@ -214,3 +215,107 @@ def _row_sum(x: np.ndarray) -> np.ndarray:
 def fsum(values: np.ndarray) -> float:
     """The correctly rounded sum of ``values``: one answer whatever the order or the CPU."""
     return math.fsum(np.asarray(values, dtype=np.float64).ravel().tolist())
+
+
+# --- the exact product inside compiled loops -------------------------------------------------------
+# The same grids, bit counts and chunks as :func:`matmul`, for loops that run a whole fit in
+# compiled code. Each sum of exact products is exact, so the loops may add in any order and still
+# give :func:`matmul`'s bits.
+
+
+@njit(cache=True, nogil=True)
+def _top(x: np.ndarray) -> float:
+    """``max(x.max(), -x.min())`` of a flat array, NaN if any entry is NaN (as :func:`rounded`)."""
+    hi = lo = x[0]
+    for i in range(1, x.shape[0]):
+        v = x[i]
+        if v > hi or v != v:
+            hi = v
+        if v < lo or v != v:
+            lo = v
+    if hi != hi or lo != lo:
+        return np.nan
+    return hi if hi >= -lo else -lo
+
+
+@njit(cache=True, nogil=True)
+def round_into(x: np.ndarray, bits: int, out: np.ndarray) -> float:
+    """:func:`rounded` of a flat array into ``out`` (the integers); returns the grid's unit."""
+    e = math.frexp(_top(x))[1] if x.shape[0] else 0
+    scale = math.ldexp(1.0, bits - e)
+    for i in range(x.shape[0]):
+        out[i] = np.rint(x[i] * scale)
+    return math.ldexp(1.0, e - bits)
+
+
+@njit(cache=True, nogil=True)
+def _chunk_bits(k: int) -> int:
+    """Bits left to the operands of an exact sum of ``k`` products (``53 - _sum_bits(k)``)."""
+    bits, top = 0, k - 1
+    while top > 0:
+        bits += 1
+        top >>= 1
+    return 53 - bits
+
+
+@njit(cache=True, nogil=True)
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    """Sum of ``a[i] * b[i]`` over two equal-length arrays of integers whose every partial sum is
+    exact: eight running sums (independent chains the CPU overlaps), then added; exact, so the
+    grouping does not change the result."""
+    n = a.shape[0]
+    s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = 0.0
+    top = n - n % 8
+    for i in range(0, top, 8):
+        s0 += a[i] * b[i]
+        s1 += a[i + 1] * b[i + 1]
+        s2 += a[i + 2] * b[i + 2]
+        s3 += a[i + 3] * b[i + 3]
+        s4 += a[i + 4] * b[i + 4]
+        s5 += a[i + 5] * b[i + 5]
+        s6 += a[i + 6] * b[i + 6]
+        s7 += a[i + 7] * b[i + 7]
+    for i in range(top, n):
+        s0 += a[i] * b[i]
+    return ((s0 + s1) + (s2 + s3)) + ((s4 + s5) + (s6 + s7))
+
+
+@njit(cache=True, nogil=True)
+def vec_mat_rounded(a: np.ndarray, b_columns: np.ndarray, b_unit: float, b_bits: int, out: np.ndarray) -> None:
+    """``matmul(a[None], Rounded(b_columns.T, b_unit, b_bits))[0]`` into ``out`` (p,), with the
+    rounded operand's integers given by columns, (p, K): ``a`` (K,) is rounded chunk by chunk to
+    what ``b`` leaves, each chunk's sum is exact, and chunks are added in order."""
+    p, k = b_columns.shape
+    ints = np.empty(min(k, MAX_EXACT))
+    for start in range(0, k, MAX_EXACT):
+        stop = min(k, start + MAX_EXACT)
+        bits = min(26, _chunk_bits(stop - start) - b_bits)
+        unit = round_into(a[start:stop], bits, ints) * b_unit
+        for j in range(p):
+            part = _dot(ints[: stop - start], b_columns[j, start:stop]) * unit
+            out[j] = part if start == 0 else out[j] + part
+
+
+@njit(cache=True, nogil=True)
+def vec_mat(a: np.ndarray, b: np.ndarray, p: int, out: np.ndarray) -> None:
+    """``matmul(a[None], b.reshape(K, p))[0]`` into ``out`` (p,) for two plain operands, ``a`` (K,)
+    and ``b`` (K * p,) row-major: per chunk, ``a`` to half the room and ``b`` (relative to the
+    chunk's largest entry) to what is left."""
+    k = a.shape[0]
+    a_ints = np.empty(min(k, MAX_EXACT))
+    b_ints = np.empty(min(k, MAX_EXACT) * p)
+    acc = np.empty(p)
+    for start in range(0, k, MAX_EXACT):
+        stop = min(k, start + MAX_EXACT)
+        room = _chunk_bits(stop - start)
+        a_bits = room // 2
+        a_unit = round_into(a[start:stop], a_bits, a_ints)
+        b_unit = round_into(b[start * p : stop * p], min(26, room - a_bits), b_ints)
+        unit = a_unit * b_unit
+        acc[:] = 0.0
+        for i in range(stop - start):
+            ai = a_ints[i]
+            for j in range(p):
+                acc[j] += ai * b_ints[i * p + j]
+        for j in range(p):
+            out[j] = acc[j] * unit if start == 0 else out[j] + acc[j] * unit

@@ -1,17 +1,20 @@
 """The linear utility model: one weight per utility, a bias per trajectory, softmax over the set.
 
 It scores trajectory i with ``w . U_i + b_i``: the multi-criteria decision function with learned
-weights. Fitted by full-batch Adam on the cross entropy (NumPy, the same bits on every CPU; a few
-seconds for minutes of driving). Used three ways: to check that demonstrations identify the preference
+weights. Fitted by full-batch Adam on the cross entropy, with :mod:`terrapref.learning.exact`'s
+arithmetic (the same bits on every CPU), each fit one compiled loop over its steps (Numba,
+without fast-math; tests/test_linear.py holds the NumPy form and compares the bits). Used three ways: to check that demonstrations identify the preference
 (the weights come out in the profile's order), as a baseline planner, and to initialise C's
 row-wise compression so that training starts from a utility that already ranks the terrain.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from terrapref.learning import exact
 
@@ -38,23 +41,89 @@ def fit_linear_utility(U: np.ndarray, labels: np.ndarray, steps: int = 1500, lr:
     rows = exact.rounded(U.reshape(n * m, k), 18)  # constant: rounded once, 18 bits leave room for sums of 2 ** 17
     sw = np.ones(n) if sample_weight is None else np.asarray(sample_weight, dtype=np.float64)
     sw = sw / exact.fsum(sw)
-    params = np.zeros(k + m)
-    mom, vel = np.zeros_like(params), np.zeros_like(params)
-    power1 = power2 = 1.0  # 0.9 ** t and 0.999 ** t by repeated products
-    at_label = (np.arange(n), labels)
-    ones = np.ones((1, n))
-    for _ in range(steps):
-        logits = exact.matmul(rows, params[:k, None]).reshape(n, m) + params[k:]
-        p = exact.exp(logits - np.max(logits, axis=1, keepdims=True))
-        p /= exact.row_sum(p)[:, None]
-        p[at_label] -= 1.0
-        g = p * sw[:, None]  # d loss / d logits, (n, m)
-        grad = np.concatenate([exact.matmul(g.reshape(1, n * m), rows)[0], exact.matmul(ones, g)[0]])
-        power1, power2 = power1 * 0.9, power2 * 0.999
-        mom = 0.9 * mom + 0.1 * grad
-        vel = 0.999 * vel + 0.001 * (grad * grad)
-        params -= lr * (mom / (1 - power1)) / (np.sqrt(vel / (1 - power2)) + 1e-8)
+    params = _fit_frames(np.ascontiguousarray(rows.ints.T), rows.unit, rows.bits, np.asarray(labels, dtype=np.int64), sw, m, steps, lr)
     return LinearUtility(params[:k].copy(), params[k:].copy())
+
+
+@njit(cache=True, nogil=True)
+def _fit_frames(rows: np.ndarray, unit: float, bits: int, labels: np.ndarray, sw: np.ndarray, m: int, steps: int, lr: float) -> np.ndarray:
+    """The frame-by-frame fit's full-batch Adam, compiled: ``params`` (K + 1 + m,) = w, then b.
+
+    ``rows`` holds the rounded utilities by columns, (K + 1, N m). Per step, the NumPy form
+    (the exact products as :func:`exact.matmul` rounds and sums them)::
+
+        logits = matmul(rows.T, params[:k, None]).reshape(n, m) + params[k:]
+        p = exp(logits - logits.max(axis=1, keepdims=True)); p /= row_sum(p)[:, None]
+        p[arange(n), labels] -= 1.0; g = p * sw[:, None]
+        grad = concatenate([matmul(g.reshape(1, n m), rows.T)[0], matmul(ones((1, n)), g)[0]])
+        power1, power2 = power1 * 0.9, power2 * 0.999
+        mom = 0.9 mom + 0.1 grad; vel = 0.999 vel + 0.001 (grad grad)
+        params -= lr (mom / (1 - power1)) / (sqrt(vel / (1 - power2)) + 1e-8)
+    """
+    k, nm = rows.shape
+    n = nm // m
+    params, mom, vel = np.zeros(k + m), np.zeros(k + m), np.zeros(k + m)
+    power1 = power2 = 1.0
+    w_bits = min(26, exact._chunk_bits(k) - bits)
+    w_ints, logits, grad, ones = np.empty(k), np.empty(nm), np.empty(k + m), np.ones(n)
+    for _ in range(steps):
+        u = exact.round_into(params[:k], w_bits, w_ints) * unit
+        _exact_scores(rows, w_ints, logits)
+        for i in range(n):
+            for j in range(m):
+                logits[i * m + j] = logits[i * m + j] * u + params[k + j]
+        g = _softmax_minus_label(logits, labels, m)
+        for i in range(n):
+            for j in range(m):
+                g[i * m + j] = g[i * m + j] * sw[i]
+        exact.vec_mat_rounded(g, rows, unit, bits, grad[:k])
+        exact.vec_mat(ones, g, m, grad[k:])
+        power1, power2 = power1 * 0.9, power2 * 0.999
+        _adam_step(params, mom, vel, grad, lr, power1, power2)
+    return params
+
+
+@njit(cache=True, nogil=True)
+def _exact_scores(columns: np.ndarray, w_ints: np.ndarray, out: np.ndarray) -> None:
+    """``out[r] = sum_c columns[c, r] * w_ints[c]``, every sum exact (integers on their grids)."""
+    out[:] = 0.0
+    for c in range(columns.shape[0]):
+        wc = w_ints[c]
+        for r in range(columns.shape[1]):
+            out[r] += columns[c, r] * wc
+
+
+@njit(cache=True, nogil=True)
+def _softmax_minus_label(z: np.ndarray, labels: np.ndarray, m: int) -> np.ndarray:
+    """Per row of ``z`` (n m,): ``p = exp(z - max); p /= row_sum(p); p[label] -= 1`` (flat, n m)."""
+    n = z.shape[0] // m
+    shifted = np.empty_like(z)
+    for i in range(n):
+        top = z[i * m]
+        for j in range(1, m):
+            v = z[i * m + j]
+            if v > top or v != v:
+                top = v
+        for j in range(m):
+            shifted[i * m + j] = z[i * m + j] - top
+    p = exact._exp(shifted)
+    for i in range(n):
+        total = p[i * m]
+        for j in range(1, m):
+            total = total + p[i * m + j]
+        for j in range(m):
+            p[i * m + j] = p[i * m + j] / total
+        p[i * m + labels[i]] -= 1.0
+    return p
+
+
+@njit(cache=True, nogil=True)
+def _adam_step(params: np.ndarray, mom: np.ndarray, vel: np.ndarray, grad: np.ndarray, lr: float, power1: float, power2: float) -> None:
+    """The fits' Adam update in place (betas 0.9 and 0.999, eps 1e-8), element by element."""
+    for q in range(params.shape[0]):
+        mom[q] = 0.9 * mom[q] + 0.1 * grad[q]
+        vel[q] = 0.999 * vel[q] + 0.001 * (grad[q] * grad[q])
+        params[q] -= lr * (mom[q] / (1 - power1)) / (np.sqrt(vel[q] / (1 - power2)) + 1e-8)
 
 
 @dataclass(frozen=True)
@@ -90,30 +159,109 @@ def fit_lookahead_utility(U: np.ndarray, U2: np.ndarray, labels: np.ndarray, ste
         raise ValueError(f"U2 must have shape {(n, m, m, k)}, got {U2.shape}")
     start = start or fit_linear_utility(U, labels)
     first = exact.rounded(U.reshape(n * m, k), 18)
-    second = exact.rounded(np.asarray(U2, dtype=np.float64).reshape(n * m * m, k), 18)
+    # U2 rounded as exact.rounded(U2, 18) would, held as int32 columns (k, N m m): what each step reads.
+    second = np.asarray(U2, dtype=np.float32).reshape(n * m * m, k)
+    second_unit, second_ints = _round_columns(second, 18)
     params = np.concatenate([start.w, start.b, [1.0]])
+    params = _fit_through(np.ascontiguousarray(first.ints.T), first.unit, second_ints, second_unit, 18, np.asarray(labels, dtype=np.int64),
+                          params, m, steps, lr)
+    return LookaheadFit(LinearUtility(params[:k].copy(), params[k : k + m].copy()), float(params[-1]))
+
+
+def _round_columns(x: np.ndarray, bits: int) -> tuple[float, np.ndarray]:
+    """``exact.rounded(x, bits)`` of an (R, k) float32 array, its integers transposed to (k, R) int32."""
+    top = max(float(x.max()), -float(x.min())) if x.size else 0.0
+    _, e = math.frexp(top)
+    return math.ldexp(1.0, e - bits), _scaled_rint_columns(x, math.ldexp(1.0, bits - e))
+
+
+@njit(cache=True, nogil=True)
+def _scaled_rint_columns(x: np.ndarray, scale: float) -> np.ndarray:
+    """``np.rint(x.astype(float64) * scale).T`` as int32 (|values| <= 2 ** 26)."""
+    out = np.empty((x.shape[1], x.shape[0]), np.int32)
+    for i in range(x.shape[0]):
+        for c in range(x.shape[1]):
+            out[c, i] = np.int32(np.rint(np.float64(x[i, c]) * scale))
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _fit_through(first: np.ndarray, first_unit: float, second: np.ndarray, second_unit: float, bits: int, labels: np.ndarray,
+                 params: np.ndarray, m: int, steps: int, lr: float) -> np.ndarray:
+    """The fit through the look-ahead, compiled: ``params`` (K + 1 + m + 1,) = w, b, gamma.
+
+    ``first`` and ``second`` hold the rounded utilities (N m) and look-ahead utilities (N m m)
+    by columns, (K + 1, .). Per step, the NumPy form (the exact products as
+    :func:`exact.matmul` rounds and sums them)::
+
+        f2 = matmul(second.T, w[:, None]).reshape(n m, m) + b
+        best = argmax(f2, axis=1); value = f2[arange(n m), best].reshape(n, m)
+        z = matmul(first.T, w[:, None]).reshape(n, m) + b + gamma * value
+        p = softmax of z by rows; p[arange(n), labels] -= 1.0; d = p / n
+        chosen = second.T[arange(n m) * m + best]
+        grad_w = matmul(d.reshape(1, n m), first.T)[0] + gamma * matmul(d.reshape(1, n m), chosen)[0]
+        grad_b = matmul(ones((1, n)), d)[0] + gamma * bincount(best, weights=d.ravel(), minlength=m)
+        grad = concatenate([grad_w, grad_b, matmul(d.reshape(1, n m), value.reshape(n m, 1))[0]])
+        then Adam as in _fit_frames
+    """
+    k, nm = first.shape
+    n = nm // m
+    params = params.copy()
     mom, vel = np.zeros_like(params), np.zeros_like(params)
     power1 = power2 = 1.0
-    at_label = (np.arange(n), labels)
-    ones = np.ones((1, n))
-    flat = np.arange(n * m) * m
+    w_bits = min(26, exact._chunk_bits(k) - bits)
+    w_ints, grad, ones = np.empty(k), np.empty(params.shape[0]), np.ones(n)
+    best, value, z = np.empty(nm, np.int64), np.empty(nm), np.empty(nm)
+    chosen, spare, counts = np.empty((k, nm)), np.empty(k), np.empty(m)
     for _ in range(steps):
-        w, b, gamma = params[:k], params[k : k + m], params[-1]
-        f2 = exact.matmul(second, w[:, None]).reshape(n * m, m) + b
-        best = np.argmax(f2, axis=1)  # the best continuation of every (frame, trajectory)
-        value = f2[np.arange(n * m), best].reshape(n, m)
-        z = exact.matmul(first, w[:, None]).reshape(n, m) + b + gamma * value
-        p = exact.exp(z - np.max(z, axis=1, keepdims=True))
-        p /= exact.row_sum(p)[:, None]
-        p[at_label] -= 1.0
-        d = p / n  # d loss / d z, (n, m)
-        chosen = exact.Rounded(second.ints[flat + best], second.unit, second.bits)
-        grad_w = exact.matmul(d.reshape(1, n * m), first)[0] + gamma * exact.matmul(d.reshape(1, n * m), chosen)[0]
-        # bincount adds its weights one by one in index order: the same order on every CPU
-        grad_b = exact.matmul(ones, d)[0] + gamma * np.bincount(best, weights=d.ravel(), minlength=m)
-        grad = np.concatenate([grad_w, grad_b, exact.matmul(d.reshape(1, n * m), value.reshape(n * m, 1))[0]])
+        gamma = params[-1]
+        w_unit = exact.round_into(params[:k], w_bits, w_ints)
+        _best_continuations(second, w_ints, second_unit * w_unit, params[k : k + m], best, value)
+        _exact_scores(first, w_ints, z)
+        u1 = first_unit * w_unit
+        for i in range(n):
+            for j in range(m):
+                r = i * m + j
+                z[r] = (z[r] * u1 + params[k + j]) + gamma * value[r]
+        d = _softmax_minus_label(z, labels, m)
+        counts[:] = 0.0
+        for r in range(nm):
+            d[r] = d[r] / n
+            counts[best[r]] += d[r]
+        for c in range(k):
+            for r in range(nm):
+                chosen[c, r] = second[c, r * m + best[r]]
+        exact.vec_mat_rounded(d, first, first_unit, bits, grad[:k])
+        exact.vec_mat_rounded(d, chosen, second_unit, bits, spare)
+        exact.vec_mat(ones, d, m, grad[k : k + m])
+        exact.vec_mat(d, value, 1, grad[k + m :])
+        for c in range(k):
+            grad[c] = grad[c] + gamma * spare[c]
+        for j in range(m):
+            grad[k + j] = grad[k + j] + gamma * counts[j]
         power1, power2 = power1 * 0.9, power2 * 0.999
-        mom = 0.9 * mom + 0.1 * grad
-        vel = 0.999 * vel + 0.001 * (grad * grad)
-        params -= lr * (mom / (1 - power1)) / (np.sqrt(vel / (1 - power2)) + 1e-8)
-    return LookaheadFit(LinearUtility(params[:k].copy(), params[k : k + m].copy()), float(params[-1]))
+        _adam_step(params, mom, vel, grad, lr, power1, power2)
+    return params
+
+
+@njit(cache=True, nogil=True)
+def _best_continuations(second: np.ndarray, w_ints: np.ndarray, unit: float, b: np.ndarray, best: np.ndarray, value: np.ndarray) -> None:
+    """For each row r of (N m) first pieces: the first argmax over j of ``f2 = (second[:, r m + j] .
+    w_ints) unit + b[j]`` into ``best[r]`` and its score into ``value[r]`` (NumPy's argmax: the
+    first of equal maxima, the first NaN if any)."""
+    k = second.shape[0]
+    m = b.shape[0]
+    f2 = np.empty(m)
+    for r in range(best.shape[0]):
+        base = r * m
+        f2[:] = 0.0
+        for c in range(k):
+            wc = w_ints[c]
+            for j in range(m):
+                f2[j] += second[c, base + j] * wc
+        top = 0
+        for j in range(m):
+            f2[j] = f2[j] * unit + b[j]
+            if j > 0 and (f2[j] > f2[top] or (f2[j] != f2[j] and f2[top] == f2[top])):
+                top = j
+        best[r], value[r] = top, f2[top]
