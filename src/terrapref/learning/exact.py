@@ -57,19 +57,14 @@ class Rounded(NamedTuple):
 def rounded(x: np.ndarray, bits: int) -> Rounded:
     """``x`` rounded to ``bits`` significant bits relative to its largest magnitude."""
     x = np.asarray(x, dtype=np.float64)
-    top = max(float(x.max()), -float(x.min())) if x.size else 0.0
-    _, e = math.frexp(top)  # top < 2 ** e, exactly
-    # np.rint(x * 2 ** (bits - e)) in one pass: powers of two, so the scaling is exact.
-    ints = _scaled_rint(np.ascontiguousarray(x).reshape(-1), math.ldexp(1.0, bits - e)).reshape(x.shape)
-    return Rounded(ints, math.ldexp(1.0, e - bits), bits)
-
-
-@njit(cache=True, nogil=True)
-def _scaled_rint(x: np.ndarray, scale: float) -> np.ndarray:
-    out = np.empty_like(x)
-    for i in range(x.shape[0]):
-        out[i] = np.rint(x[i] * scale)
-    return out
+    if not x.size:
+        return Rounded(x.copy(), math.ldexp(1.0, -bits), bits)
+    flat = np.ascontiguousarray(x).reshape(-1)
+    ints = np.empty_like(flat)
+    # Per element rint(x * 2 ** (bits - e)), e the exponent of the largest magnitude: powers of
+    # two, so the scaling is exact (one compiled pass for the largest entry, one for the integers).
+    unit = round_into(flat, bits, ints)
+    return Rounded(ints.reshape(x.shape), unit, bits)
 
 
 def _sum_bits(k: int) -> int:
@@ -223,19 +218,25 @@ def fsum(values: np.ndarray) -> float:
 # give :func:`matmul`'s bits.
 
 
+_ABS_BITS = np.int64(0x7FFFFFFFFFFFFFFF)  # a float64's bits without its sign
+_INF_BITS = np.int64(0x7FF0000000000000)  # +inf's; any larger magnitude's bits are a NaN's
+
+
 @njit(cache=True, nogil=True)
 def _top(x: np.ndarray) -> float:
-    """``max(x.max(), -x.min())`` of a flat array, NaN if any entry is NaN (as :func:`rounded`)."""
-    hi = lo = x[0]
-    for i in range(1, x.shape[0]):
-        v = x[i]
-        if v > hi or v != v:
-            hi = v
-        if v < lo or v != v:
-            lo = v
-    if hi != hi or lo != lo:
+    """``max(x.max(), -x.min())`` of a flat array, NaN if any entry is NaN (as :func:`rounded`).
+
+    Non-negative floats order as their bit patterns do, and a NaN's magnitude bits exceed
+    infinity's, so the largest magnitude is an integer maximum (which the compiler vectorises;
+    a float maximum with NaN checks it does not). Only its exponent is used."""
+    bits = x.view(np.int64)
+    top = np.int64(0)
+    for i in range(bits.shape[0]):
+        b = bits[i] & _ABS_BITS
+        top = b if b > top else top
+    if top > _INF_BITS:
         return np.nan
-    return hi if hi >= -lo else -lo
+    return np.array([top]).view(np.float64)[0]
 
 
 @njit(cache=True, nogil=True)

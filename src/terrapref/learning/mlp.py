@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from terrapref.learning import exact
+from terrapref.learning import exact, kernels
 from terrapref.learning.network import ClassifierConfig
 
 
@@ -80,7 +80,12 @@ class _Cache:
 
 
 class TrainableClassifier:
-    """C's weights (float64) with an exact forward pass and its gradient."""
+    """C's weights (float64) with an exact forward pass and its gradient.
+
+    Each product is :func:`exact.matmul`'s (operands rounded to their grids, integers multiplied
+    in BLAS, exact in any order); the rounding and the elementwise work around the products run
+    as compiled loops (:mod:`terrapref.learning.kernels`), with the bits of the NumPy forms.
+    """
 
     def __init__(self, config: ClassifierConfig, weights: dict[str, np.ndarray]) -> None:
         self.config = config
@@ -93,53 +98,97 @@ class TrainableClassifier:
         if not isinstance(U, exact.Rounded):
             U = round_inputs(U)
         n = len(U.ints)
-        x = U._replace(ints=U.ints.reshape(n * c.m, c.n_features))
+        x = U._replace(ints=np.ascontiguousarray(U.ints, dtype=np.float64).reshape(n * c.m, c.n_features))
         if c.ignore:
             ints = x.ints.copy()
             ints[:, list(c.ignore)] = 0.0
             x = x._replace(ints=ints)
-        scores = None
+        scores = _NO_ROWS
         if c.compress:
-            per_row = exact.matmul(x, w["compress.weight"].T) + w["compress.bias"]  # (B m, 1)
-            scores = per_row.reshape(n, c.m, 1)[:, :, 0]
-            h = per_row.reshape(n, c.m)
+            h = scores = kernels.compress_forward(x.ints, x.unit, x.bits, w["compress.weight"], w["compress.bias"]).reshape(n, c.m)
         else:
             h = (x.ints * x.unit).reshape(n, c.m * c.n_features)
         inputs, pre, post = [], [], []
         for i in range(c.depth):
             inputs.append(h)
-            z = exact.matmul(h, w[f"layers.{i}.weight"].T) + w[f"layers.{i}.bias"]
-            h = _activate(c.activation, z)
+            z, h = self._layer(h, i, c.activation, _NO_ROWS)
             pre.append(z)
             post.append(h)
         inputs.append(h)
-        logits = exact.matmul(h, w[f"layers.{c.depth}.weight"].T) + w[f"layers.{c.depth}.bias"]
-        if c.skip:
-            logits = logits + scores
+        logits, _ = self._layer(h, c.depth, None, scores if c.skip else _NO_ROWS)
         return logits, (_Cache(x, inputs, pre, post) if keep else None)
+
+    def _layer(self, h: np.ndarray, i: int, activation: str | None, skip: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``z = matmul(h, W_i.T) + b_i (+ skip)`` and the activation of z (z itself for the output layer)."""
+        weight, bias = self.weights[f"layers.{i}.weight"], self.weights[f"layers.{i}.bias"]
+        z, out = kernels.affine(*_product(h, weight, transposed=True), bias, activation == "relu", skip)
+        if activation is not None and activation != "relu":
+            out = _activate(activation, z)
+        return z, out
 
     def backward(self, cache: _Cache, grad_logits: np.ndarray) -> dict[str, np.ndarray]:
         """Gradients of the loss under the weight names, given d loss / d logits (B, m)."""
         c, w = self.config, self.weights
         n = len(grad_logits)
         grads: dict[str, np.ndarray] = {}
-        g = grad_logits
+        g = np.ascontiguousarray(grad_logits, dtype=np.float64)
         for i in range(c.depth, -1, -1):
             # The weight and bias gradients in one exact product: [inputs, 1]^T g.
-            inputs = cache.inputs[i]
-            both = exact.matmul(g.T, np.concatenate([inputs, np.ones((n, 1))], axis=1))
-            grads[f"layers.{i}.weight"], grads[f"layers.{i}.bias"] = both[:, :-1], both[:, -1]
-            dh = exact.matmul(g, w[f"layers.{i}.weight"])
-            g = dh * _activation_slope(c.activation, cache.pre[i - 1], cache.post[i - 1]) if i > 0 else dh
+            grads[f"layers.{i}.weight"], grads[f"layers.{i}.bias"] = _weight_grads(g, cache.inputs[i])
+            # d loss / d the layer's input, through the activation below it.
+            product, unit = _product(g, w[f"layers.{i}.weight"], transposed=False)
+            if i == 0:
+                g = product * unit
+            elif c.activation == "relu":
+                g = kernels.scaled_slope(product, unit, cache.pre[i - 1])
+            else:
+                g = (product * unit) * _activation_slope(c.activation, cache.pre[i - 1], cache.post[i - 1])
         if c.compress:
-            per_row = g.reshape(n, c.m, 1)
-            if c.skip:
-                per_row = per_row.copy()
-                per_row[:, :, 0] += grad_logits
-            flat = per_row.reshape(n * c.m, 1)
-            grads["compress.weight"] = exact.matmul(flat.T, cache.x)
-            grads["compress.bias"] = exact.matmul(np.ones((1, len(flat))), flat)[0]
+            per_row = g + grad_logits if c.skip else g
+            columns = np.ascontiguousarray(cache.x.ints.T)
+            grads["compress.weight"], grads["compress.bias"] = kernels.compress_grads(np.ascontiguousarray(per_row).reshape(-1), columns, cache.x.unit, cache.x.bits)
         return grads
+
+
+_NO_ROWS = np.zeros((0, 0))  # kernels.affine: no residual path to add
+
+
+def _product(a: np.ndarray, b: np.ndarray, transposed: bool) -> tuple[np.ndarray, float]:
+    """``exact.matmul(a, b.T if transposed else b)`` as an integer product and its unit.
+
+    Both operands are rounded as :func:`exact.matmul` rounds two plain arrays: ``a`` to half the
+    room a sum of K exact products leaves, ``b`` to the rest (at most 26 bits); ``b`` is rounded
+    as it is, since transposing does not change its largest entry. A sum longer than one exact
+    chunk goes through :func:`exact.matmul` itself (unit 1).
+    """
+    k = a.shape[1]
+    if k > exact.MAX_EXACT:
+        return exact.matmul(a, b.T if transposed else b), 1.0
+    room = 53 - exact._sum_bits(k)
+    a_bits = room // 2
+    ra, rb = _rounded(a, a_bits), _rounded(b, min(26, room - a_bits))
+    return ra.ints @ (rb.ints.T if transposed else rb.ints), ra.unit * rb.unit
+
+
+def _rounded(x: np.ndarray, bits: int) -> exact.Rounded:
+    """:func:`exact.rounded` of a float64 array, in one compiled call."""
+    flat = np.ascontiguousarray(x, dtype=np.float64).reshape(-1)
+    ints = np.empty_like(flat)
+    return exact.Rounded(ints.reshape(x.shape), exact.round_into(flat, bits, ints), bits)
+
+
+def _weight_grads(g: np.ndarray, inputs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``both = exact.matmul(g.T, concatenate([inputs, ones((B, 1))], axis=1))``, split into the
+    weight (out, in) and bias (out,) gradients."""
+    n = len(g)
+    if n > exact.MAX_EXACT:  # a batch longer than one exact sum: exact.matmul cuts it into chunks
+        both = exact.matmul(g.T, np.concatenate([inputs, np.ones((n, 1))], axis=1))
+        return both[:, :-1], both[:, -1]
+    room = 53 - exact._sum_bits(n)
+    a = _rounded(g, room // 2)
+    ones_ints, ones_unit = kernels.round_with_ones(np.ascontiguousarray(inputs, dtype=np.float64), min(26, room - room // 2))
+    both = (a.ints.T @ ones_ints) * (a.unit * ones_unit)
+    return both[:, :-1], both[:, -1]
 
 
 class Adam:

@@ -19,7 +19,7 @@ import numpy as np
 
 from terrapref.configargs import option
 from terrapref.demos.dataset import Dataset
-from terrapref.learning import exact
+from terrapref.learning import exact, kernels
 from terrapref.learning.identify import Identifiability, identifiability
 from terrapref.learning.linear import LinearUtility, fit_linear_utility, fit_lookahead_utility
 from terrapref.learning.mlp import Adam, TrainableClassifier, cross_entropy, init_weights, round_inputs
@@ -345,13 +345,11 @@ def _epoch(net: TrainableClassifier, opt: Adam, data: _Samples, order: np.ndarra
     for start in range(0, len(order), batch_size):
         batch = order[start : start + batch_size]
         logits, cache = net.forward(data.inputs._replace(ints=data.inputs.ints[batch]), keep=True)
-        loss, probs = cross_entropy(logits, y[batch])
-        seen_loss.append(loss)
-        seen_hits += int(np.count_nonzero(np.argmax(logits, axis=1) == y[batch]))
         # d (sum_i c_{y_i} CE_i / n) / d logits = c_{y_i} (p_i - onehot_i) / n
-        scale = data.class_w[y[batch]] / float(len(batch))
-        probs[np.arange(len(batch)), y[batch]] -= 1.0
-        opt.step(net.backward(cache, probs * scale[:, None]))
+        loss, grad, hits = kernels.cross_entropy_grad(logits, y[batch], data.class_w)
+        seen_loss.append(loss)
+        seen_hits += hits
+        opt.step(net.backward(cache, grad))
         steps += 1
     n = len(order)
     return exact.fsum(np.concatenate(seen_loss)) / n, seen_hits / n, steps
