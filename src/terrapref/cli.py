@@ -507,7 +507,8 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     recipes = tuple(recipe_named(n, "--recipes") for n in names)
     engine = _engine(args)
     t0 = time.perf_counter()
-    report = reproduce(args.out, args.seeds, args.eval_seeds, recipes, profile, engine, log=lambda m: print(m, flush=True))
+    report = reproduce(args.out, args.seeds, args.eval_seeds, recipes, profile, engine, log=lambda m: print(m, flush=True),
+                       write_recordings=args.write_recordings)
     print(f"wrote {report} ({time.perf_counter() - t0:.0f} s)")
     return 0
 
@@ -727,6 +728,8 @@ def _reproduce_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--recipes", default="paper,ours,teach",
                    help="recipes to compare, by name, separated by commas (default: paper,ours,teach; see `terrapref recipes`)")
     p.add_argument("--profile", help="preference order for the demonstrations, best first")
+    p.add_argument("--write-recordings", action="store_true",
+                   help="also write the synthetic driver's demonstrations as recordings in OUT/work (they are featurised as they are driven)")
     _add_engine_args(p)
     p.set_defaults(func=_cmd_reproduce)
 

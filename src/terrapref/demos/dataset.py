@@ -108,13 +108,7 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
     v_max = _max_speed(recording.meta)
     for j, i in enumerate(keep):
         pose = tuple(recording.poses[i])
-        if renderer is None:
-            image = recording.image(i)
-            if image.shape != shape or not known[image].all():
-                what = f"is {image.shape[1]} x {image.shape[0]}, the camera's {shape[1]} x {shape[0]}" if image.shape != shape else \
-                    f"holds class ids {sorted(set(np.unique(image).tolist()) - set(np.flatnonzero(known).tolist()))[:5]} that the class table does not have"
-                raise UserError(str(recording.path / recording.image_files[i]), what)
-        view = SegmentationView.of(renderer.render(pose) if renderer is not None else image)
+        view = _frame_view(recording, i, renderer, pose, shape, known)
         gap_s = recording.times[i] - recording.times[keep[j - 1]] if j > 0 else 0.0
         s = tracker.update(recording.poses[i, :2], ahead_m=v_max * gap_s + 2.0 if gap_s > 1.5 * period else None)
         U[j] = featurizer(view, pose, path, s)
@@ -123,6 +117,23 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
     w = recording.commands[keep, 1].astype(np.float32)
     labels = np.asarray(features.preference.control.label_of(w), dtype=np.int64).reshape(n)
     return U, labels, w, U2
+
+
+def _frame_view(recording: Recording, i: int, renderer: SegmentationRenderer | None, pose: tuple, shape: tuple[int, int],
+                known: np.ndarray) -> SegmentationView:
+    """Frame ``i`` as the featurizer reads it: re-rendered under another camera, the simulation's
+    own view for a recording kept in memory (only the pixels read are rendered), or the recorded
+    image, refused when its size or class ids do not fit the recording's camera and classes."""
+    if renderer is not None:
+        return SegmentationView.of(renderer.render(pose))
+    if recording.views is not None:
+        return recording.views[i]
+    image = recording.image(i)
+    if image.shape != shape or not known[image].all():
+        what = f"is {image.shape[1]} x {image.shape[0]}, the camera's {shape[1]} x {shape[0]}" if image.shape != shape else \
+            f"holds class ids {sorted(set(np.unique(image).tolist()) - set(np.flatnonzero(known).tolist()))[:5]} that the class table does not have"
+        raise UserError(str(recording.path / recording.image_files[i]), what)
+    return SegmentationView.of(image)
 
 
 def _max_speed(meta: dict) -> float:
@@ -167,7 +178,7 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
         "profile": first.meta.get("profile"),
         "recordings": [
             {"path": str(r.path), "scenario": r.meta.get("scenario"), "frames": len(r), "frames_used": len(p[1]), "complete": r.complete,
-             "driver": r.meta.get("driver")}
+             "driver": r.meta.get("driver"), **({"written": False} if r.in_memory else {})}
             for r, p in zip(recordings, parts, strict=True)
         ],
     }

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from terrapref.camera import SegmentationView, as_view
 from terrapref.errors import UserError
 from terrapref.fileio import replace_dir, write_text_atomic
 from terrapref.pngio import read_label_png, write_png_atomic
@@ -87,7 +88,7 @@ class RecordingWriter:
         self,
         time_s: float,
         pose: tuple[float, float, float],
-        image: np.ndarray,
+        image: np.ndarray | SegmentationView,
         command: tuple[float, float],
         label: int,
         executed: tuple[float, float] | None = None,
@@ -98,7 +99,7 @@ class RecordingWriter:
         is what the vehicle actually did instead (a correction session: the planner drove).
         """
         name = f"{IMAGES}/{self.count:06d}.png"
-        write_png_atomic(self.dir / name, image, compress_level=3)
+        write_png_atomic(self.dir / name, as_view(image).image, compress_level=3)
         line = {
             "i": self.count,
             "t": round(float(time_s), 6),
@@ -138,6 +139,61 @@ class RecordingWriter:
             self.abort()
 
 
+class MemoryRecordingWriter:
+    """A :class:`RecordingWriter` that keeps the run in memory: the same frames, labels and
+    metadata, with each frame's segmentation as the simulation's view (rendered only as far as
+    it is read), and no files. For the synthetic driver's demonstrations inside a job that only
+    featurises them: :meth:`recording` gives the :class:`Recording` to featurise.
+
+    Args:
+        target: where the recording would have been written (its name in datasets and models).
+        meta, scenario: as :class:`RecordingWriter`'s.
+    """
+
+    def __init__(self, target: str | Path, meta: dict[str, Any], scenario: dict[str, Any]) -> None:
+        self.target = Path(target)
+        self.partial_dir: Path | None = None
+        self.meta = {"format": FORMAT, "status": "partial", **meta}
+        self.scenario = scenario
+        self._rows: list[tuple[float, tuple[float, float, float], tuple[float, float], int]] = []
+        self._views: list[SegmentationView] = []
+
+    @property
+    def count(self) -> int:
+        return len(self._rows)
+
+    def append(self, time_s: float, pose: tuple[float, float, float], image: np.ndarray | SegmentationView, command: tuple[float, float],
+               label: int, executed: tuple[float, float] | None = None) -> None:
+        """Keep one frame as :meth:`RecordingWriter.append` writes it (time rounded to the
+        microsecond); ``executed``, which a recording read back does not hold either, is not kept."""
+        self._rows.append((round(float(time_s), 6), (float(pose[0]), float(pose[1]), float(pose[2])), (float(command[0]), float(command[1])), int(label)))
+        self._views.append(as_view(image))
+
+    def close(self, summary: dict[str, Any] | None = None) -> None:
+        self.meta.update(status="complete", frames=self.count)
+        if summary:
+            self.meta["summary"] = summary
+
+    def abort(self) -> None:
+        """Nothing was written: nothing to keep."""
+
+    def recording(self) -> Recording:
+        """The run as a recording (complete once :meth:`close` ran)."""
+        f = self.count
+        return Recording(
+            path=self.target,
+            meta=self.meta,
+            scenario=self.scenario,
+            times=np.array([r[0] for r in self._rows], dtype=float),
+            poses=np.array([r[1] for r in self._rows], dtype=float).reshape(f, 3),
+            commands=np.array([r[2] for r in self._rows], dtype=float).reshape(f, 2),
+            labels=np.array([r[3] for r in self._rows], dtype=np.int64),
+            image_files=(),
+            complete=self.meta["status"] == "complete",
+            views=tuple(self._views),
+        )
+
+
 @dataclass(frozen=True)
 class Recording:
     """A recording read back from disk.
@@ -148,6 +204,8 @@ class Recording:
         commands: commands (v, w) held after each frame, shape (F, 2).
         labels: control-set index of each command at record time, shape (F,).
         complete: False if the run did not finish (crash, kill, interruption).
+        views: for a recording kept in memory (:class:`MemoryRecordingWriter`), each frame's
+            segmentation as the simulation rendered it; None for one read from disk.
     """
 
     path: Path
@@ -159,6 +217,7 @@ class Recording:
     labels: np.ndarray
     image_files: tuple[str, ...]
     complete: bool
+    views: tuple[SegmentationView, ...] | None = None
 
     def __len__(self) -> int:
         return len(self.times)
@@ -174,8 +233,15 @@ class Recording:
         corrections, do not count)."""
         return len(self.times) * self.frame_period_s
 
+    @property
+    def in_memory(self) -> bool:
+        """Whether the frames are the simulation's own (:class:`MemoryRecordingWriter`), not files."""
+        return self.views is not None
+
     def image(self, i: int) -> np.ndarray:
         """Frame ``i``'s class ids (H, W) uint8; an unreadable or foreign image is a UserError."""
+        if self.views is not None:
+            return self.views[i].image
         path = self.path / self.image_files[i]
         try:
             return read_label_png(path)

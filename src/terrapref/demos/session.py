@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from terrapref.camera import CameraConfig
-from terrapref.demos.recording import RecordingWriter
+from terrapref.demos.recording import MemoryRecordingWriter, RecordingWriter
 from terrapref.features import PreferenceSetConfig
 from terrapref.scenario import Scenario
 from terrapref.sim import Driver, EpisodeLog, Frame, SimConfig, Simulation
@@ -108,12 +108,12 @@ class RecordLoop:
 
     Args:
         sim: the simulation driven, already reset.
-        writer: the recording, or None to drive without one.
+        writer: the recording (on disk, or kept in memory), or None to drive without one.
         control: the control set whose indices label the frames.
         disturb: the run's pushes, or None for none.
     """
 
-    def __init__(self, sim: Simulation, writer: RecordingWriter | None, control: ControlSet, disturb: Disturber | None = None) -> None:
+    def __init__(self, sim: Simulation, writer: RecordingWriter | MemoryRecordingWriter | None, control: ControlSet, disturb: Disturber | None = None) -> None:
         self.sim, self.writer, self.control, self.disturb = sim, writer, control, disturb
 
     def executed(self, command: Command) -> Command:
@@ -127,7 +127,7 @@ class RecordLoop:
         ``record`` False (or no recording) only steps: frames a recording must not hold.
         """
         if record and self.writer is not None:
-            self.writer.append(frame.time_s, frame.pose, frame.image, command, self.control.label_of(command[1]),
+            self.writer.append(frame.time_s, frame.pose, frame.view, command, self.control.label_of(command[1]),
                                executed=executed if executed != command else None)
         return self.sim.step(executed)
 
@@ -148,7 +148,7 @@ def abort_recording(writer: RecordingWriter) -> None:
 def record_run(
     sim: Simulation,
     driver: Driver,
-    writer: RecordingWriter,
+    writer: RecordingWriter | MemoryRecordingWriter,
     preference: PreferenceSetConfig,
     rng: np.random.Generator,
     progress: Callable[[Simulation], None] | None = None,

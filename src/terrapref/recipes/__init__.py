@@ -28,7 +28,7 @@ from terrapref.camera import CameraConfig
 from terrapref.recipes.corrections import record_corrections
 from terrapref.demos.dataset import build_dataset
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
-from terrapref.demos.recording import RecordingWriter, read_recording
+from terrapref.demos.recording import MemoryRecordingWriter, Recording, RecordingWriter, read_recording
 from terrapref.demos.session import DisturbanceConfig, record_run, recording_meta
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, LookaheadConfig
@@ -106,8 +106,14 @@ def recipe_named(name: str, flag: str = "--recipe") -> Recipe:
         raise UserError(flag, f"unknown recipe {name!r}; recipes: {', '.join(RECIPES)}")
     return RECIPES[name]
 
+
+
 @dataclass
 class RecipeOutput:
+    """What :func:`run_recipe` made: the model, the recordings it wrote (none when the
+    demonstrations were kept in memory), how training went, and the minutes demonstrated and
+    corrected."""
+
     model: Path
     recordings: list[Path]
     result: TrainResult
@@ -115,40 +121,46 @@ class RecipeOutput:
     correction_minutes: float
 
 
-def _demonstrate(
-    course: str,
-    out: Path,
-    demo_seed: int,
-    disturbance: DisturbanceConfig | None,
-    profile: PreferenceProfile | None,
-    features: FeatureConfig,
-    style: str = "default",
-) -> bool:
-    """One synthetic-driver run of ``course`` into ``out``; False if a matching one was reused.
+@dataclass(frozen=True)
+class _Drive:
+    """One synthetic-driver run of a course: where its recording goes, and how it is driven."""
 
-    A complete recording of the same course under the same driver, profile, seed and
-    disturbances is reused, so recipes sharing a seed share their demonstrations.
+    course: str
+    out: Path
+    seed: int
+    disturbance: DisturbanceConfig | None
+    profile: PreferenceProfile | None
+    style: str
+
+
+def _drive(drive: _Drive, features: FeatureConfig, write: bool) -> tuple[Recording, bool]:
+    """The run's recording, and whether it was driven now (False: a matching recording on disk was reused).
+
+    Written to ``drive.out`` with ``write``, else kept in memory (the same frames and labels,
+    featurised from the simulation's own views). A complete recording on disk of the same
+    course under the same driver, profile, seed and disturbances is reused either way, so
+    recipes sharing a seed share their demonstrations.
     """
-    scenario = resolve_scenario(course)
-    profile = profile or PreferenceProfile.default(scenario.classes)
+    scenario = resolve_scenario(drive.course)
+    profile = drive.profile or PreferenceProfile.default(scenario.classes)
     camera, sim_cfg = CameraConfig(), SimConfig()
-    expert_cfg = ExpertConfig.styled(style, profile.order)
-    pushes = disturbance.to_dict() if disturbance is not None else None
-    if (out / "meta.json").exists():
-        existing = read_recording(out)
+    expert_cfg = ExpertConfig.styled(drive.style, profile.order)
+    pushes = drive.disturbance.to_dict() if drive.disturbance is not None else None
+    if (drive.out / "meta.json").exists():
+        existing = read_recording(drive.out)
         driver = existing.meta["driver"]
         if (existing.complete and existing.meta.get("scenario") == scenario.name and existing.meta.get("profile") == list(profile.order)
-                and driver.get("seed") == demo_seed and driver.get("disturbance") == pushes and driver.get("config") == expert_cfg.to_dict()):
-            return False
+                and driver.get("seed") == drive.seed and driver.get("disturbance") == pushes and driver.get("config") == expert_cfg.to_dict()):
+            return existing, False
     meta = recording_meta(scenario, camera, features.preference, sim_cfg,
-                          {"kind": "expert", "seed": demo_seed, "style": style, "config": expert_cfg.to_dict(), "disturbance": pushes}, profile)
-    writer = RecordingWriter(out, meta, scenario.to_dict(), overwrite=True)
+                          {"kind": "expert", "seed": drive.seed, "style": drive.style, "config": expert_cfg.to_dict(), "disturbance": pushes}, profile)
+    writer = RecordingWriter(drive.out, meta, scenario.to_dict(), overwrite=True) if write else MemoryRecordingWriter(drive.out, meta, scenario.to_dict())
     record_run(Simulation(scenario, camera, sim_cfg), ExpertDriver(expert_cfg), writer, features.preference,
-               np.random.default_rng(demo_seed), disturbance=disturbance)
-    return True
+               np.random.default_rng(drive.seed), disturbance=drive.disturbance)
+    return (read_recording(drive.out) if write else writer.recording()), True
 
 
-def record_demonstrations(
+def demonstrate(
     recipe: Recipe,
     workdir: str | Path,
     seed: int,
@@ -157,23 +169,33 @@ def record_demonstrations(
     features: FeatureConfig | None = None,
     log: Callable[[str], None] | None = None,
     style: str = "default",
-) -> list[Path]:
-    """The recipe's demonstration runs (synthetic driver) in ``workdir``.
+    write: bool = True,
+) -> list[Recording]:
+    """The recipe's demonstration runs by the synthetic driver.
 
-    Run ``k`` of ``course`` (seed ``seed * 100 + k``) goes to ``workdir/demo_K``, a name that
-    ends in ``_disturbed`` with disturbances. A complete run recorded under the same course, driver,
-    profile, seed and disturbances is reused, so recipes sharing a seed share their
-    demonstrations.
+    Run ``k`` of ``course`` (seed ``seed * 100 + k``) is recorded as ``workdir/COURSE_K`` (a name
+    that ends in ``_disturbed`` with disturbances) with ``write``; without, it is kept in memory
+    under that name. A complete run already on disk under the same course, driver, profile,
+    seed and disturbances is reused, so recipes sharing a seed share their demonstrations.
     """
     workdir = Path(workdir)
     features = features or FeatureConfig()
     course = course or recipe.course
     tail = "" if recipe.disturbance is None else "_disturbed"
-    runs = [(course, workdir / f"demo_{k}{tail}", seed * 100 + k) for k in range(recipe.demonstrations)]
-    for i, (name, out, demo_seed) in enumerate(runs):
-        if _demonstrate(name, out, demo_seed, recipe.disturbance, profile, features, style) and log:
-            log(f"demonstration {i + 1}/{len(runs)} ({name}): {len(read_recording(out))} frames")
-    return [out for _, out, _ in runs]
+    drives = [_Drive(course, workdir / f"{course}_{k}{tail}", seed * 100 + k, recipe.disturbance, profile, style) for k in range(recipe.demonstrations)]
+    recordings = []
+    for i, drive in enumerate(drives):
+        recording, driven = _drive(drive, features, write)
+        recordings.append(recording)
+        if driven and log:
+            log(f"demonstration {i + 1}/{len(drives)} ({course}): {len(recording)} frames")
+    return recordings
+
+
+def record_demonstrations(recipe: Recipe, workdir: str | Path, seed: int, profile: PreferenceProfile | None = None, course: str | None = None,
+                          features: FeatureConfig | None = None, log: Callable[[str], None] | None = None, style: str = "default") -> list[Path]:
+    """The recipe's demonstration runs (:func:`demonstrate`), written as recordings in ``workdir``; their folders."""
+    return [r.path for r in demonstrate(recipe, workdir, seed, profile, course, features, log, style, write=True)]
 
 
 def run_recipe(
@@ -185,11 +207,13 @@ def run_recipe(
     features: FeatureConfig | None = None,
     log: Callable[[str], None] | None = None,
     style: str = "default",
+    write_recordings: bool = False,
 ) -> RecipeOutput:
     """Demonstrate, correct, train; write into ``workdir``.
 
-    Demonstrations come from :func:`record_demonstrations` (shared by recipes with the same
-    seed and protocol); corrections and the model go to ``workdir/<recipe name>/``.
+    Demonstrations come from :func:`demonstrate` (shared by recipes with the same seed and
+    protocol, through the recordings on disk), kept in memory unless ``write_recordings``;
+    corrections and the model go to ``workdir/<recipe name>/``.
     """
     workdir = Path(workdir)
     own = workdir / recipe.name.replace(" ", "_")
@@ -198,8 +222,8 @@ def run_recipe(
     scenario = resolve_scenario(course)
     profile = profile or PreferenceProfile.default(scenario.classes)
     features = recipe.features(features)
-    paths = record_demonstrations(recipe, workdir, seed, profile, course, features, log, style)
-    recordings = [read_recording(p) for p in paths]
+    recordings = demonstrate(recipe, workdir, seed, profile, course, features, log, style, write=write_recordings)
+    paths = [r.path for r in recordings if not r.in_memory]
     demo_s = sum(r.duration_s for r in recordings)
     corr_s = 0.0
     train_cfg = replace(recipe.train, seed=seed)

@@ -77,27 +77,32 @@ class _Setup:
     eval_seeds: int
     profile: PreferenceProfile
     scenarios: tuple[str, ...]
+    write_recordings: bool = False
 
 
-def _train_job(args: tuple[tuple[Recipe, ...], str, int, tuple[str, ...]]) -> list[RecipeModel]:
+def _train_job(args: tuple[tuple[Recipe, ...], str, int, tuple[str, ...], bool]) -> list[RecipeModel]:
     """Recipes of one seed that share demonstrations, in one process (they never record twice)."""
-    recipes, workdir, seed, profile = args
+    recipes, workdir, seed, profile, write = args
     rows = []
     for recipe in recipes:
         t0 = time.perf_counter()
-        out = run_recipe(recipe, workdir, seed, PreferenceProfile(profile))
+        out = run_recipe(recipe, workdir, seed, PreferenceProfile(profile), write_recordings=write)
         rows.append(RecipeModel(recipe.name, seed, str(out.model), tuple(out.result.history), out.result.best_epoch,
                                 out.demo_minutes, out.correction_minutes, time.perf_counter() - t0))
     return rows
 
 
 def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes: tuple[Recipe, ...] = (PAPER, OURS, TEACH),
-              profile: PreferenceProfile | None = None, engine: Engine | None = None, log: Callable[[str], None] = print) -> Path:
+              profile: PreferenceProfile | None = None, engine: Engine | None = None, log: Callable[[str], None] = print,
+              write_recordings: bool = False) -> Path:
     """Run the whole reproduction into ``out_dir`` and return the path of REPORT.md; ``engine``
-    runs its jobs (default: local processes, one per core)."""
+    runs its jobs (default: local processes, one per core). The synthetic driver's
+    demonstrations are featurised as they are driven and kept in memory, or also written as
+    recordings under ``out_dir/work`` with ``write_recordings``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    setup = _Setup(tuple(recipes), seeds, eval_seeds, profile or PreferenceProfile.default(), ("train_course", *TEST_SET, *variations()))
+    setup = _Setup(tuple(recipes), seeds, eval_seeds, profile or PreferenceProfile.default(), ("train_course", *TEST_SET, *variations()),
+                   write_recordings)
     engine = engine or Engine()
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -119,7 +124,7 @@ def _train_all(setup: _Setup, out: Path, engine: Engine, log: Callable[[str], No
         groups.setdefault((r.course, r.disturbance), []).append(r)
     cost = {key: max(r.demonstrations * (1 + r.train.classifier.members * r.train.optimiser.epochs * (2 if r.train.data.mirror else 1) / 100) for r in g)
             for key, g in groups.items()}
-    jobs = [(tuple(g), str(out / "work" / f"seed{s}"), s, setup.profile.order)
+    jobs = [(tuple(g), str(out / "work" / f"seed{s}"), s, setup.profile.order, setup.write_recordings)
             for key, g in sorted(groups.items(), key=lambda kv: -cost[kv[0]]) for s in range(setup.seeds)]
     log(f"[1/3] demonstrations, corrections and training: {len(setup.recipes) * setup.seeds} models "
         f"({', '.join(r.name for r in setup.recipes)} x {setup.seeds} seeds) ...")
