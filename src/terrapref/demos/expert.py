@@ -23,11 +23,12 @@ from collections import deque
 from dataclasses import asdict, dataclass, replace
 
 import numpy as np
+from numba import njit
 
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim.loop import Frame
-from terrapref.terrain import PreferenceProfile
+from terrapref.terrain import UNKNOWN, PreferenceProfile
 from terrapref.vehicle import Command, pure_pursuit_yaw_rate
 from terrapref.world import WorldMap, rasterise
 
@@ -125,9 +126,13 @@ class ExpertDriver:
         self.offsets = np.round(np.arange(-c.max_offset_m, c.max_offset_m + 1e-9, c.offset_step_m), 6)
         foot = np.linspace(-c.half_width_m, c.half_width_m, 5)
         lethal_foot = np.linspace(-c.half_width_m - c.lethal_margin_m, c.half_width_m + c.lethal_margin_m, 7)
-        self._foot, self._lethal_foot = foot, lethal_foot
+        self._foot = foot
         edge = c.half_width_m + c.margin_m * np.array([0.5, 1.0])
-        self._margin_foot = np.concatenate([-edge[::-1], edge]) if c.margin_m > 0 else None
+        margin_foot = np.concatenate([-edge[::-1], edge]) if c.margin_m > 0 else None
+        # Each candidate offset's footprint points, its berth and its lethal clearance (O, F) [m].
+        self._lat = self.offsets[:, None] + foot[None, :]
+        self._margin_lat = self.offsets[:, None] + margin_foot[None, :] if margin_foot is not None else None
+        self._lethal_lat = self.offsets[:, None] + lethal_foot[None, :]
         self._s_rel = np.arange(-c.lookbehind_m, c.reaction_distance_m + c.decision_extent_m + 1e-9, self.sample_step_m)
         self._in_reach = self._s_rel <= c.reaction_distance_m
 
@@ -166,11 +171,9 @@ class ExpertDriver:
         centre = self.path.point_at(s)  # (S, 2)
         heading = self.path.heading_at(s)
         normal = np.stack([-np.sin(heading), np.cos(heading)], axis=1)  # left of the path
-        lat = self.offsets[:, None] + self._foot[None, :]  # (O, F)
-        pts = centre[None, :, None, :] + lat[:, None, :, None] * normal[None, :, None, :]  # (O, S, F, 2)
         # A detour lasts as long as the obstacle ahead lies on the path itself (gaps under 1 m
         # do not split it), plus the swerves in and out; later patches wait for their own turn.
-        on_path = (self._cost[self.world.class_at(centre[:, None, :] + self._foot[None, :, None] * normal[:, None, :])] > 0).any(axis=1)
+        on_path = (self._cost[self._classes(centre, normal, self._foot[None, :], len(s))[0]] > 0).any(axis=1)
         reach = np.flatnonzero(on_path & in_reach)
         if len(reach) == 0:
             return 0.0
@@ -181,15 +184,11 @@ class ExpertDriver:
                 break
             last = int(i)
         upto = min(len(s), last + 1 + round(c.pursuit_lookahead_m / self.sample_step_m))
-        cls = self.world.class_at(pts[:, :upto])
+        cls = self._classes(centre, normal, self._lat, upto)
         terrain = self._cost[cls].mean(axis=2).sum(axis=1) * self.sample_step_m  # (O,)
-        if self._margin_foot is not None:  # the berth beside the footprint: half the cost of driving on it
-            lat_m = self.offsets[:, None] + self._margin_foot[None, :]
-            pts_m = centre[None, :upto, None, :] + lat_m[:, None, :, None] * normal[None, :upto, None, :]
-            terrain = terrain + 0.5 * self._cost[self.world.class_at(pts_m)].mean(axis=2).sum(axis=1) * self.sample_step_m
-        lat_l = self.offsets[:, None] + self._lethal_foot[None, :]
-        pts_l = centre[None, :upto, None, :] + lat_l[:, None, :, None] * normal[None, :upto, None, :]
-        hits_lethal = self._lethal[self.world.class_at(pts_l)].any(axis=(1, 2))
+        if self._margin_lat is not None:  # the berth beside the footprint: half the cost of driving on it
+            terrain = terrain + 0.5 * self._cost[self._classes(centre, normal, self._margin_lat, upto)].mean(axis=2).sum(axis=1) * self.sample_step_m
+        hits_lethal = self._lethal[self._classes(centre, normal, self._lethal_lat, upto)].any(axis=(1, 2))
         terrain = terrain + hits_lethal * c.lethal_cost
         span = (last - first + 1) * self.sample_step_m + 2.0 * c.pursuit_lookahead_m
         total = terrain + c.deviation_cost * self.offsets**2 * span
@@ -206,6 +205,15 @@ class ExpertDriver:
         if self.offset != 0.0 and len(same_side):
             ties = same_side  # keep to the side already taken
         return float(self.offsets[ties[self.rng.integers(len(ties))]] if len(ties) > 1 else self.offsets[ties[0]])
+
+    def _classes(self, centre: np.ndarray, normal: np.ndarray, lat: np.ndarray, upto: int) -> np.ndarray:
+        """Class ids (O, upto, F) of the points ``centre + lat * normal`` for the first ``upto`` samples along the path.
+
+        ``lat`` (O, F) are lateral offsets [m] (left positive) of the footprint's points; the
+        same arithmetic as ``world.class_at(centre[None, :upto, None] + lat[:, None, :, None] *
+        normal[None, :upto, None])``, point by point in one compiled pass.
+        """
+        return _offset_classes(centre, normal, lat, upto, self.world.raster, self.world.resolution_m)
 
     def steer(self, pose: tuple[float, float, float], s_now: float, offset: float) -> float:
         """Pure-pursuit yaw rate [rad/s] toward the path shifted sideways by ``offset``."""
@@ -244,3 +252,18 @@ class ExpertDriver:
         if out != 0.0 and c.stick_noise_rps > 0:
             out = float(np.clip(out + self.rng.normal(0.0, c.stick_noise_rps), -c.max_yaw_rate_rps, c.max_yaw_rate_rps))
         return Command(c.speed_mps, out)
+
+
+@njit(cache=True, nogil=True)
+def _offset_classes(centre: np.ndarray, normal: np.ndarray, lat: np.ndarray, upto: int, raster: np.ndarray, res: float) -> np.ndarray:
+    """Class id (O, upto, F) uint8 of every point ``centre[s] + lat[o, f] * normal[s]`` (255 off the
+    map): per point the NumPy form of :meth:`WorldMap.class_at`, ``floor(x / res)`` to a cell."""
+    ny, nx = raster.shape
+    out = np.empty((lat.shape[0], upto, lat.shape[1]), np.uint8)
+    for o in range(lat.shape[0]):
+        for k in range(upto):
+            for f in range(lat.shape[1]):
+                col = np.int64(math.floor((centre[k, 0] + lat[o, f] * normal[k, 0]) / res))
+                row = np.int64(math.floor((centre[k, 1] + lat[o, f] * normal[k, 1]) / res))
+                out[o, k, f] = raster[row, col] if 0 <= col < nx and 0 <= row < ny else UNKNOWN
+    return out
