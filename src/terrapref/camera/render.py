@@ -61,6 +61,8 @@ class SegmentationRenderer:
 
         # A one-cell border of 255 round the raster: clipped indices off the map read "unknown".
         ny, nx = world.raster.shape
+        if (ny + 2) * (nx + 2) >= 2**31:  # the frame's cells are 32-bit indices (a scenario holds at most 10^8)
+            raise ValueError(f"a {nx} x {ny} raster is too large for the renderer (at most 2^31 cells)")
         padded = np.full((ny + 2, nx + 2), UNKNOWN, dtype=np.uint8)
         padded[1:-1, 1:-1] = world.raster
         self._flat = padded.ravel()
