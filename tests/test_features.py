@@ -371,6 +371,10 @@ def test_compiled_features_give_the_numpy_forms_bits(featurizer: UtilityFeaturiz
         assert np.array_equal(got.view(np.int64), d.view(np.int64))
         norm = (d.max() - d) * (1.0 / (d.max() - d.min()))
         assert np.array_equal(featurizer.normalise(d).view(np.int64), norm.view(np.int64))
+        # The whole U in one call: the same float32 values as assembling it from the parts.
+        U = np.empty((m, k + 1), np.float32)
+        U[:, :-1], U[:, -1] = expected, norm
+        assert np.array_equal(featurizer(image, pose, path, s).view(np.int32), U.view(np.int32))
     assert (featurizer.normalise(np.full((2, 3), 4.0)) == 1.0).all()
 
 

@@ -207,7 +207,10 @@ def test_load_policy_of_a_classifier_file(classifier_file):
     assert isinstance(policy, ClassifierPolicy)
     assert policy.path == str(classifier_file.path)
     U = np.random.default_rng(6).uniform(size=(M, K))
-    np.testing.assert_allclose(policy.logits(_obs(U)), numpy_forward(classifier_file.config, classifier_file.weights, U), atol=1e-6)
+    expected = softmax(numpy_forward(classifier_file.config, classifier_file.weights, U))
+    np.testing.assert_allclose(policy.probabilities(_obs(U)), expected, atol=1e-6)
+    # logits are log F_t: the same scores up to a constant, so the same argmax and softmax
+    np.testing.assert_allclose(softmax(policy.logits(_obs(U))), expected, atol=1e-6)
 
 
 def test_load_model_refuses_a_linear_file(tmp_path: Path):

@@ -222,15 +222,52 @@ def _numpy_scores(stage: SecondStage, log_probs: np.ndarray, image: np.ndarray, 
     r, m = len(rows), stage.m
     terrain = np.take(stage._point_weight, image.reshape(-1)[stage.pix[rows].ravel()])
     terrain *= stage.seen[rows].ravel()
-    x, y, yaw = pose
-    targets = stage._targets(path, s + stage._horizon_m, rows)
-    d = np.abs(stage._ends[rows] * complex(math.cos(yaw), math.sin(yaw)) + (complex(x, y) - targets[:, None]))
+    d = _distances(stage, pose, path, s, rows)
     lo, hi = d.min(), d.max()
     distance = np.ones_like(d) if hi - lo < 1e-9 else (hi - d) * (1.0 / (hi - lo))
     value = (terrain.reshape(r, m, stage.points).sum(axis=2) + stage.w[stage.k] * distance + stage.b).max(axis=1)
     out = np.full(log_probs.shape, -np.inf)
     out[rows] = log_probs[rows] + stage.config.weight * value
     return out
+
+
+def _targets(stage: SecondStage, path: ReferencePath, s0: float, rows: np.ndarray) -> np.ndarray:
+    """Each candidate's target, (r, 2): the path point at s0 plus its start's forward offset."""
+    line = path.straight_between(s0 + stage._x_lo, s0 + stage._x_hi)
+    if line is None:
+        return path.point_at(s0 + stage.starts[rows, 0])
+    x, y, ux, uy = line
+    t = stage.starts[rows, 0] - stage._x_lo
+    return np.stack([x + t * ux, y + t * uy], axis=1)
+
+
+def _distances(stage: SecondStage, pose: Pose, path: ReferencePath, s: float, rows: np.ndarray) -> np.ndarray:
+    """The second pieces' end distances (r, m) as written out: the complex product by its
+    formula, hypot from the C library (NumPy's, and the compiled loop's; not NumPy's SIMD complex
+    ``abs``, which rounds differently per CPU)."""
+    x, y, yaw = pose
+    c, sn = math.cos(yaw), math.sin(yaw)
+    targets = _targets(stage, path, s + stage._horizon_m, rows)
+    ex, ey = stage.ends[rows, :, 0], stage.ends[rows, :, 1]
+    re = (ex * c - ey * sn) + (x - targets[:, 0])[:, None]
+    im = (ex * sn + ey * c) + (y - targets[:, 1])[:, None]
+    return np.hypot(re, im)
+
+
+def test_the_distances_are_numpys_complex_ones_to_the_last_bits(setup):
+    """The written-out distances differ from NumPy's complex arithmetic (whose SIMD versions
+    round differently per CPU) by a few units in the last place at most."""
+    _, _, stage = setup
+    rng = np.random.default_rng(8)
+    path = ReferencePath(np.array([[0.0, 0.0], [6.0, 3.0], [9.0, -4.0], [40.0, 2.0]]))
+    for _ in range(40):
+        pose = Pose(rng.uniform(0, 12), rng.uniform(-3, 3), rng.uniform(-math.pi, math.pi))
+        s = float(rng.uniform(0, 12))
+        rows = rng.permutation(21)[:7]
+        targets = _targets(stage, path, s + stage._horizon_m, rows)
+        numpy_form = np.abs((stage.ends[rows] @ (1.0, 1j)) * complex(math.cos(pose.yaw), math.sin(pose.yaw))
+                            + (complex(pose.x, pose.y) - (targets @ (1.0, 1j))[:, None]))
+        np.testing.assert_allclose(_distances(stage, pose, path, s, rows), numpy_form, rtol=4e-16 * 8, atol=1e-14)
 
 
 def test_the_compiled_stage_gives_the_numpy_forms_bits(setup):

@@ -70,10 +70,14 @@ def pixels_at(flat_index: np.ndarray, width: int, row0: int, valid: np.ndarray, 
     ``valid`` (H * W,) says which pixels see the ground within range; ``P`` and ``Q`` (n, 2)
     float64 are the visible rows' ground point at column offset 0 and its change per column in
     the vehicle frame [m] (row ``row0`` first); ``(x, y)``, ``c``, ``s`` the pose's position and
-    the cosine and sine of its yaw; ``res`` the raster's cell size [m].
+    the cosine and sine of its yaw; ``res`` the raster's cell size [m]. A row's cell and change
+    per column are computed once, when its first pixel is read.
     """
     out = np.empty(flat_index.shape[0], np.uint8)
     zero = np.float32(0.0)
+    rows = P.shape[0]
+    cells = np.empty((rows, 4), np.float32)
+    done = np.zeros(rows, np.bool_)
     for i in range(flat_index.shape[0]):
         k = flat_index[i]
         if k < 0 or k >= valid.shape[0]:
@@ -82,13 +86,29 @@ def pixels_at(flat_index: np.ndarray, width: int, row0: int, valid: np.ndarray, 
             out[i] = unknown
             continue
         r = k // width - row0
+        if not done[r]:
+            # The cell of the row's column offset 0 and its change per column, as render.py's _cells.
+            cells[r, 0] = np.float32((x + (P[r, 0] * c - P[r, 1] * s)) / res + 1.0)
+            cells[r, 1] = np.float32((y + (P[r, 0] * s + P[r, 1] * c)) / res + 1.0)
+            cells[r, 2] = np.float32((Q[r, 0] * c - Q[r, 1] * s) / res)
+            cells[r, 3] = np.float32((Q[r, 0] * s + Q[r, 1] * c) / res)
+            done[r] = True
         uj = u[k % width]
-        # The cell of the row's column offset 0 and its change per column, as render.py's _cells.
-        a0 = np.float32((x + (P[r, 0] * c - P[r, 1] * s)) / res + 1.0)
-        a1 = np.float32((y + (P[r, 0] * s + P[r, 1] * c)) / res + 1.0)
-        b0 = np.float32((Q[r, 0] * c - Q[r, 1] * s) / res)
-        b1 = np.float32((Q[r, 0] * s + Q[r, 1] * c) / res)
-        gx = min(max(b0 * uj + a0, zero), x_max)
-        gy = min(max(b1 * uj + a1, zero), y_max)
+        gx = min(max(cells[r, 2] * uj + cells[r, 0], zero), x_max)
+        gy = min(max(cells[r, 3] * uj + cells[r, 1], zero), y_max)
         out[i] = raster[np.int64(gy) * nx + np.int64(gx)]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def take(image: np.ndarray, flat_index: np.ndarray) -> np.ndarray:
+    """``image.reshape(-1)[flat_index]`` of a C-contiguous (H, W) uint8 image, any index shape flattened."""
+    flat = image.reshape(-1)
+    index = flat_index.reshape(-1)
+    out = np.empty(index.shape[0], np.uint8)
+    for i in range(index.shape[0]):
+        k = index[i]
+        if k < 0 or k >= flat.shape[0]:
+            raise IndexError("a pixel index is outside the image")
+        out[i] = flat[k]
     return out

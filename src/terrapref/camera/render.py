@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from terrapref.camera.kernels import pixels_at, render_rows
+from terrapref.camera.kernels import pixels_at, render_rows, take
 from terrapref.camera.pinhole import PinholeCamera
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose
@@ -154,7 +154,10 @@ class SegmentationView:
     def pixels(self, flat_index: np.ndarray) -> np.ndarray:
         """Class ids at ``flat_index`` (row * width + col)."""
         if self._image is not None:
-            return self._image.reshape(-1)[flat_index]
+            image = self._image
+            if image.dtype == np.uint8 and image.ndim == 2 and image.flags.c_contiguous and flat_index.dtype.kind == "i":
+                return take(image, flat_index).reshape(np.shape(flat_index))  # NumPy's fancy indexing, without its overhead
+            return image.reshape(-1)[flat_index]
         return self._renderer.pixels(self._pose, flat_index)
 
 

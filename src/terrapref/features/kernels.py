@@ -67,6 +67,23 @@ def normalise(d: np.ndarray, eps: float) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
+def utilities(ids: np.ndarray, column: np.ndarray, row: np.ndarray, k: int, scale: float, ex: np.ndarray, ey: np.ndarray,
+              c: float, s: float, dx: float, dy: float, eps: float) -> np.ndarray:
+    """U (m, k + 1) float32 of one frame with the look-ahead distance: :func:`terrain_shares`,
+    then :func:`normalise` of :func:`end_distances`, each converted to float32 as NumPy assigns
+    float64 into a float32 array (one call where the features made five)."""
+    m = ex.shape[0]
+    out = np.empty((m, k + 1), np.float32)
+    shares = terrain_shares(ids, column, row, m, k, scale)
+    u = normalise(end_distances(ex, ey, c, s, dx, dy), eps)
+    for i in range(m):
+        for j in range(k):
+            out[i, j] = np.float32(shares[i, j])
+        out[i, k] = np.float32(u[i])
+    return out
+
+
+@njit(cache=True, nogil=True)
 def numpy_sum(a: np.ndarray) -> float:
     """``a.sum()`` of a 1-D float64 array as NumPy adds it: from 0, in eight interleaved partial
     sums added pairwise, then the last ``n % 8`` terms in order (its pairwise summation for
@@ -135,3 +152,34 @@ def stage_scores(log_probs: np.ndarray, weight: float, rows: np.ndarray, ids: np
                     break
         out[rows[a]] = log_probs[rows[a]] + weight * best
     return out
+
+
+@njit(cache=True, nogil=True)
+def stage_distances(rows: np.ndarray, ends_x: np.ndarray, ends_y: np.ndarray, start_x: np.ndarray, x_lo: float, line: tuple[float, float, float, float],
+                    targets: np.ndarray, c: float, s: float, x: float, y: float, eps: float) -> np.ndarray:
+    """The second pieces' distance utility (r, m) after the trajectories ``rows``, normalised over
+    all of them together (:func:`normalise`).
+
+    Each end (``ends_x``, ``ends_y`` (m, m), vehicle frame) is rotated by the yaw's (c, s), moved
+    to the pose (x, y) and measured against its first trajectory's target: ``targets[a]`` (r, 2),
+    or, when ``targets`` is empty, the point ``(tx + t ux, ty + t uy)`` of the straight ``line``
+    (tx, ty, ux, uy), ``t = start_x[i] - x_lo``. The arithmetic: ``hypot((ex c - ey s) + (x - tx),
+    (ex s + ey c) + (y - ty))``, the product of complex numbers written out (NumPy's complex
+    product and absolute value pick SIMD versions per CPU whose last bits differ; these are the
+    same everywhere).
+    """
+    r, m = rows.shape[0], ends_x.shape[1]
+    d = np.empty((r, m))
+    lx, ly, ux, uy = line
+    for a in range(r):
+        i = rows[a]
+        if targets.shape[0]:
+            tx, ty = targets[a, 0], targets[a, 1]
+        else:
+            t = start_x[i] - x_lo
+            tx, ty = lx + t * ux, ly + t * uy
+        dx, dy = x - tx, y - ty
+        for j in range(m):
+            ex, ey = ends_x[i, j], ends_y[i, j]
+            d[a, j] = math.hypot((ex * c - ey * s) + dx, (ex * s + ey * c) + dy)
+    return normalise(d, eps)

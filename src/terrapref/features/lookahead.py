@@ -20,9 +20,14 @@ import math
 import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView
-from terrapref.features.utility import LookaheadConfig, UtilityFeaturizer
+from terrapref.features import kernels
+from terrapref.features.utility import NORMALISE_EPS, LookaheadConfig, UtilityFeaturizer
 from terrapref.scenario.path import ReferencePath
 from terrapref.vehicle import Pose
+
+
+_NO_TARGETS = np.zeros((0, 2))
+_NO_LINE = (0.0, 0.0, 0.0, 0.0)
 
 
 class Lookahead:
@@ -47,8 +52,9 @@ class Lookahead:
         self.pix = np.where(pix >= 0, pix, 0)
         self.seen = (pix >= 0).astype(float)  # 1 where a point is in the image, 0 where it is not
         self.ends = second[:, :, -1].copy()  # (m, m, 2): each second piece's end, vehicle frame
-        self._ends = self.ends @ (1.0, 1j)  # the same as complex numbers
+        self._ends_x, self._ends_y = np.ascontiguousarray(self.ends[..., 0]), np.ascontiguousarray(self.ends[..., 1])
         self._x_lo, self._x_hi = float(self.starts[:, 0].min()), float(self.starts[:, 0].max())
+        self._start_x = np.ascontiguousarray(self.starts[:, 0])
         self.points = pts.shape[1]  # points read per second piece
         self.k = k
         self._horizon_m = featurizer.config.preference.horizon_m
@@ -76,18 +82,16 @@ class Lookahead:
 
     def distance_utility(self, pose: Pose, path: ReferencePath, progress_s: float, rows: np.ndarray) -> np.ndarray:
         """u^5 of the second pieces after ``rows``, (r, m): each end against the path point one
-        horizon beyond its start's progress (the start's forward offset added to the vehicle's)."""
-        x, y, yaw = pose
-        targets = self._targets(path, progress_s + self._horizon_m, rows)
-        d = np.abs(self._ends[rows] * complex(math.cos(yaw), math.sin(yaw)) + (complex(x, y) - targets[:, None]))
-        # One range for every second piece: they are compared with one another, and a first
-        # trajectory that has left the path must not find a continuation scored 1 as if it had not.
-        return UtilityFeaturizer.normalise(d)
+        horizon beyond its start's progress (the start's forward offset added to the vehicle's).
 
-    def _targets(self, path: ReferencePath, s0: float, rows: np.ndarray) -> np.ndarray:
-        """Path points at ``s0`` plus each start's forward offset, world frame, complex (r,)."""
+        One range normalises every second piece: they are compared with one another, and a first
+        trajectory that has left the path must not find a continuation scored 1 as if it had not.
+        """
+        x, y, yaw = pose
+        # Each start's target: the path point at s0 plus the start's forward offset. Usually the
+        # path runs straight there and the kernel places the targets along that line itself.
+        s0 = progress_s + self._horizon_m
         line = path.straight_between(s0 + self._x_lo, s0 + self._x_hi)
-        if line is None:
-            return path.point_at(s0 + self.starts[rows, 0]) @ (1.0, 1j)
-        x, y, ux, uy = line  # the usual case: one straight segment, points along it
-        return complex(x, y) + (self.starts[rows, 0] - self._x_lo) * complex(ux, uy)
+        targets = path.point_at(s0 + self.starts[rows, 0]) if line is None else _NO_TARGETS
+        return kernels.stage_distances(rows, self._ends_x, self._ends_y, self._start_x, self._x_lo, line or _NO_LINE, targets,
+                                       math.cos(yaw), math.sin(yaw), x, y, NORMALISE_EPS)

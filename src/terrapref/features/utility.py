@@ -167,6 +167,7 @@ class UtilityFeaturizer:
         self._pix_flat.flags.writeable = False  # read-only: a renderer may prepare it once
         self._scale = 1.0 / self.pset.pixel_index.shape[1]  # the share of one point
         self._ends = self.pset.endpoints  # (m, 2) vehicle frame
+        self._ex, self._ey = np.ascontiguousarray(self._ends[:, 0]), np.ascontiguousarray(self._ends[:, 1])
 
     @property
     def m(self) -> int:
@@ -212,6 +213,12 @@ class UtilityFeaturizer:
 
     def __call__(self, image: np.ndarray | SegmentationView, pose: Pose, path: ReferencePath, progress_s: float | None = None) -> np.ndarray:
         """U, shape (m, n_features) float32: terrain shares, then the distance utility."""
+        if self.config.distance_mode is DistanceMode.LOOKAHEAD and progress_s is not None:  # the usual case, in one compiled call
+            x, y, yaw = pose
+            tx, ty = path.point_at(progress_s + self.config.preference.horizon_m)
+            ids = as_view(image).pixels(self._pix_flat)
+            return kernels.utilities(ids, self._column, self._point_row, len(self.config.feature_classes), self._scale, self._ex, self._ey,
+                                     math.cos(yaw), math.sin(yaw), x - tx, y - ty, NORMALISE_EPS)
         u = np.empty((self.m, self.config.n_features), dtype=np.float32)
         u[:, :-1] = self.terrain(image)
         u[:, -1] = self.normalise(self.distances(pose, path, progress_s))

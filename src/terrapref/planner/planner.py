@@ -14,7 +14,7 @@ import numpy as np
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationView, as_view
 from terrapref.features import UtilityFeaturizer
 from terrapref.learning.model_file import LoadedModel, check_compatible
-from terrapref.learning.network import softmax
+from terrapref.learning import exact
 from terrapref.planner.second_stage import SecondStage, SecondStageConfig
 from terrapref.planner.policy import ClassifierPolicy, Observation, Policy
 from terrapref.scenario import Scenario
@@ -108,12 +108,11 @@ class Planner:
         s = self.tracker.update(np.array(pose[:2]))
         U = self.featurizer(view, pose, self.path, s)
         ahead = path_ahead(self.path, pose, s) if self.policy.uses_path_ahead else _NO_POINTS
-        probs = softmax(self.policy.logits(Observation(U, view, ahead)))
+        probs = self.policy.probabilities(Observation(U, view, ahead))
         if self.second_stage is None:
             i = int(np.argmax(probs))
-        else:
-            with np.errstate(divide="ignore"):  # a probability of exactly 0 is -inf, never chosen
-                i = int(np.argmax(self.second_stage.scores(np.log(probs), view, pose, self.path, s)))
+        else:  # a probability of exactly 0 is -inf, never chosen
+            i = int(np.argmax(self.second_stage.scores(exact.log(probs), view, pose, self.path, s)))
         return Decision(i, Command(*self.control.command(i)), probs, U, s)
 
 

@@ -29,7 +29,10 @@ from terrapref.camera import CameraConfig, SegmentationView
 from terrapref.features import FeatureConfig
 from terrapref.learning.linear import LinearUtility
 from terrapref.learning.model_file import FORMAT, LoadedModel
-from terrapref.learning.network import StackedWeights, stacked_forward
+from terrapref.learning import exact
+from terrapref.learning.forward import PackedNetwork
+from terrapref.learning.forward import probabilities as forward_probabilities
+from terrapref.learning.network import softmax
 from terrapref.tensorfile import write_tensor_file
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.vehicle import pure_pursuit_yaw_rate
@@ -96,6 +99,10 @@ class Policy(abc.ABC):
     def logits(self, obs: Observation) -> np.ndarray:
         """One score per trajectory, shape (m,); the planner drives the argmax."""
 
+    def probabilities(self, obs: Observation) -> np.ndarray:
+        """F_t, shape (m,): the softmax of :meth:`logits` (what the planner reads)."""
+        return softmax(self.logits(obs))
+
     def stage_utility(self) -> StageUtility | None:
         """What a second stage beyond the trajectories scores with, for a policy trained with
         one (None: the planner decides by ``logits`` alone)."""
@@ -110,10 +117,16 @@ class ClassifierPolicy(Policy):
     def __init__(self, model: LoadedModel) -> None:
         super().__init__(model.features, model.camera, model.classes, model.profile, model.path)
         self.model = model
-        self._config, self._stacked = model.classifier, StackedWeights.of(model.classifier, model.weights)
+        self._packed = PackedNetwork.of(model.classifier, model.weights)
 
     def logits(self, obs: Observation) -> np.ndarray:
-        return stacked_forward(self._config, self._stacked, obs.U)
+        """log F_t (-inf where a probability is exactly 0)."""
+        return exact.log(self.probabilities(obs))
+
+    def probabilities(self, obs: Observation) -> np.ndarray:
+        """F_t of C (the mean of an ensemble's members' softmaxes) in one compiled call, the same
+        bits on every CPU (:mod:`terrapref.learning.forward`)."""
+        return forward_probabilities(self._packed, obs.U)
 
     def stage_utility(self) -> StageUtility | None:
         return None if self.model.utility is None else StageUtility(self.model.utility, self.model.stage_weight)

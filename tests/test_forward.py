@@ -1,0 +1,105 @@
+"""C's compiled forward pass (terrapref.learning.forward): what the planner decides with.
+
+It must agree with the readable NumPy form (numpy_forward) to float32 rounding, give the same
+bits whatever the CPU offers, and leave the planner's decisions exactly as they were before it
+replaced the NumPy form: tests/data/planner_decisions.json holds closed-loop decisions made then
+(tests/data/make_planner_decisions.py, commit 7a92879), of models trained here.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from terrapref.demos.dataset import build_dataset
+from terrapref.learning.forward import PackedNetwork, probabilities
+from terrapref.learning.mlp import init_weights
+from terrapref.learning.model_file import load_model
+from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
+from terrapref.learning.pipeline import train_and_save
+from terrapref.planner import Planner, PlannerDriver
+from terrapref.recipes import PAPER, TEACH, demonstrate
+from terrapref.scenario import resolve_scenario
+from terrapref.sim import Simulation, run_episode
+
+DATA = Path(__file__).parent / "data"
+
+CONFIGS = [
+    ClassifierConfig(skip=True, members=3),
+    ClassifierConfig(),
+    ClassifierConfig(hidden=16, activation="tanh", depth=2),
+    ClassifierConfig(hidden=16, activation="elu", skip=True, members=2),
+    ClassifierConfig(hidden=8, compress=False),
+    ClassifierConfig(m=7, n_features=3, hidden=5, depth=4, skip=True, ignore=(1,)),
+]
+
+
+def _ensemble_weights(config: ClassifierConfig, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    one = replace(config, members=1)
+    if config.members == 1:
+        return {k: v.astype(np.float32) for k, v in init_weights(one, rng).items()}
+    return {f"members.{j}.{k}": v.astype(np.float32) for j in range(config.members) for k, v in init_weights(one, rng).items()}
+
+
+@pytest.mark.parametrize("config", CONFIGS, ids=lambda c: f"{c.activation}-h{c.hidden}-m{c.members}-skip{c.skip}-compress{c.compress}")
+def test_compiled_forward_agrees_with_the_numpy_form(config: ClassifierConfig):
+    rng = np.random.default_rng(5)
+    weights = _ensemble_weights(config, rng)
+    net = PackedNetwork.of(config, weights)
+    for _ in range(20):
+        U = (rng.random((config.m, config.n_features)) * (rng.random((config.m, config.n_features)) < 0.4)).astype(np.float32)
+        got = probabilities(net, U)
+        want = softmax(numpy_forward(config, weights, U).astype(np.float64))
+        assert got.dtype == np.float64 and abs(got.sum() - 1.0) < 1e-12
+        np.testing.assert_allclose(got, want, rtol=2e-5, atol=1e-7)
+
+
+_BITS = """
+import hashlib, numpy as np
+from terrapref.learning.forward import PackedNetwork, probabilities
+from terrapref.learning.mlp import init_weights
+from terrapref.learning.network import ClassifierConfig
+config = ClassifierConfig(skip=True, members=3)
+rng = np.random.default_rng(1)
+w = {f"members.{j}.{k}": v.astype(np.float32) for j in range(3) for k, v in init_weights(ClassifierConfig(skip=True), rng).items()}
+net = PackedNetwork.of(config, w)
+h = hashlib.sha256()
+for _ in range(50):
+    h.update(probabilities(net, rng.random((21, 5)).astype(np.float32)).tobytes())
+print(h.hexdigest())
+"""
+
+
+def test_compiled_forward_gives_the_same_bits_under_other_cpu_settings():
+    settings = [{}, {"NPY_DISABLE_CPU_FEATURES": "X86_V4,AVX512_ICL,AVX512_SPR"}, {"OPENBLAS_CORETYPE": "Prescott"}, {"NUMBA_CPU_NAME": "generic"}]
+    hashes = set()
+    for extra in settings:
+        done = subprocess.run([sys.executable, "-c", _BITS], env={**os.environ, **extra}, capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+        hashes.add(done.stdout.strip())
+    assert len(hashes) == 1
+
+
+def test_the_planner_makes_the_decisions_it_made_before_the_forward_pass_was_compiled(tmp_path):
+    golden = json.loads((DATA / "planner_decisions.json").read_text())
+    # (recipe, epochs, demonstration course, courses driven): as make_planner_decisions.py made them
+    for recipe, epochs, course, driven in [(TEACH, 40, "teach_course", ("test_course", "fig8_water_mud_rock_mud_left")), (PAPER, 15, "train_course", ("test_course",))]:
+        recipe = replace(recipe, train=recipe.train.with_epochs(epochs))
+        features = recipe.features()
+        recordings = demonstrate(recipe, tmp_path / recipe.name, 7, course=course, features=features, write=False)
+        model = tmp_path / f"{recipe.name}.safetensors"
+        train_and_save(build_dataset(recordings, features), model, replace(recipe.train, seed=7), checkpoints=False)
+        for name in driven:
+            driver = PlannerDriver(Planner(load_model(model)), keep=True)
+            run_episode(Simulation(resolve_scenario(name)), driver, np.random.default_rng(0))
+            made = [d.index for d in driver.decisions]
+            want = golden[f"{recipe.name}/{name}"]
+            first = next((i for i, (a, b) in enumerate(zip(made, want)) if a != b), None)
+            assert made == want, f"{recipe.name} on {name}: {len(made)} decisions against {len(want)}, first difference at {first}"
