@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from terrapref.learning import exact, kernels
-from terrapref.learning.mlp import TrainableClassifier, _activate, _activation_slope, cross_entropy, init_weights, round_inputs
+from terrapref.learning.mlp import Adam, TrainableClassifier, _activate, _activation_slope, cross_entropy, init_weights, round_inputs
 from terrapref.learning.network import ClassifierConfig
 
 
@@ -126,3 +126,29 @@ def test_a_batch_longer_than_one_exact_sum_of_compression_terms():
     grads = net.backward(cache, grad)
     want = _numpy_backward(config, weights, _numpy_forward(config, weights, U)[1], grad)
     assert all(_same_bits(grads[k], want[k]) for k in want)
+
+
+def test_flat_gradient_and_adam_give_the_named_forms_bits():
+    """Training updates every weight in one pass over the flat buffer: the same bits as by name."""
+    config = ClassifierConfig(hidden=16, skip=True)
+    rng = np.random.default_rng(4)
+    weights = init_weights(config, rng)
+    by_name = TrainableClassifier(config, {k: v.copy() for k, v in weights.items()})
+    flat = TrainableClassifier(config, {k: v.copy() for k, v in weights.items()})
+    assert all(np.shares_memory(flat.weights[k], flat.params) for k in weights)
+    named_opt, flat_opt = Adam(by_name.weights, lr=0.01), Adam(flat.params, lr=0.01)
+    for _ in range(5):
+        U = round_inputs(rng.uniform(0, 1, (64, 21, 5)))
+        y = rng.integers(0, 21, 64)
+        for net, opt in ((by_name, named_opt), (flat, flat_opt)):
+            logits, cache = net.forward(U, keep=True)
+            _, grad, _ = kernels.cross_entropy_grad(logits, y, np.ones(21))
+            if opt is named_opt:
+                opt.step(net.backward(cache, grad))
+            else:
+                buffer = net.gradient(cache, grad)
+                assert all(_same_bits(buffer[net._at[k] : net._at[k] + v.size], net.backward(cache, grad)[k].ravel()) for k, v in net.weights.items())
+                opt.step(buffer)
+    assert all(_same_bits(by_name.weights[k], flat.weights[k]) for k in weights)
+    with pytest.raises(ValueError, match="values for"):
+        flat_opt.step(np.zeros(3))

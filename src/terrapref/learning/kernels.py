@@ -10,6 +10,8 @@ themselves stay in BLAS on integers (:mod:`terrapref.learning.exact`), exact in 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -37,10 +39,13 @@ def compress_forward(x: np.ndarray, x_unit: float, x_bits: int, weight: np.ndarr
 
 
 @njit(cache=True, nogil=True)
-def affine(product: np.ndarray, unit: float, bias: np.ndarray, relu: bool, skip: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def affine(product: np.ndarray, unit: float, bias: np.ndarray, relu: bool, skip: np.ndarray, next_bits: int
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """A layer's output from its exact integer product (B, out): ``z = product * unit + bias``
     (``+ skip`` when ``skip`` has rows, the residual path) and, with ``relu``,
-    ``np.maximum(z, 0.0)`` (z where z > 0 or NaN, else +0.0); without, the second array is ``z``."""
+    ``h = np.maximum(z, 0.0)`` (z where z > 0 or NaN, else +0.0; without, ``h`` is ``z``); with
+    ``next_bits`` > 0 also ``h`` on the grid of the next layer's product
+    (``exact.rounded(h, next_bits)``: its integers and unit; else an empty array and 0)."""
     n, p = product.shape
     z = np.empty((n, p))
     h = np.empty((n, p)) if relu else z
@@ -53,7 +58,55 @@ def affine(product: np.ndarray, unit: float, bias: np.ndarray, relu: bool, skip:
             z[i, j] = v
             if relu:
                 h[i, j] = v if (v > 0.0 or v != v) else 0.0
-    return z, h
+    if next_bits <= 0:
+        return z, h, np.empty((0, 0)), 0.0
+    ints = np.empty((n, p))
+    return z, h, ints, exact.round_into(h.reshape(-1), next_bits, ints.reshape(-1))
+
+
+@njit(cache=True, nogil=True)
+def round_twice(x: np.ndarray, bits_a: int, bits_b: int) -> tuple[np.ndarray, float, np.ndarray, float]:
+    """``exact.rounded(x, bits_a)`` and ``exact.rounded(x, bits_b)`` of a C-contiguous array: both
+    grids relative to the one largest magnitude, in one pass for it and one for the integers."""
+    flat = x.reshape(-1)
+    e = math.frexp(exact._top(flat))[1] if flat.shape[0] else 0
+    scale_a, scale_b = math.ldexp(1.0, bits_a - e), math.ldexp(1.0, bits_b - e)
+    a, b = np.empty(x.shape), np.empty(x.shape)
+    fa, fb = a.reshape(-1), b.reshape(-1)
+    for i in range(flat.shape[0]):
+        fa[i] = np.rint(flat[i] * scale_a)
+        fb[i] = np.rint(flat[i] * scale_b)
+    return a, math.ldexp(1.0, e - bits_a), b, math.ldexp(1.0, e - bits_b)
+
+
+@njit(cache=True, nogil=True)
+def round_spans(params: np.ndarray, spans: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every span of ``params`` on its own grid: ``spans`` (S, 3) holds (start, stop, bits); the
+    integers of span s are ``out[offset_s : offset_s + stop - start]`` (spans in order) and its
+    unit ``units[s]``, as ``exact.rounded(params[start:stop], bits)``."""
+    total = 0
+    for s in range(spans.shape[0]):
+        total += spans[s, 1] - spans[s, 0]
+    out = np.empty(total)
+    units = np.empty(spans.shape[0])
+    at = 0
+    for s in range(spans.shape[0]):
+        size = spans[s, 1] - spans[s, 0]
+        units[s] = exact.round_into(params[spans[s, 0] : spans[s, 1]], spans[s, 2], out[at : at + size])
+        at += size
+    return out, units
+
+
+@njit(cache=True, nogil=True)
+def scale_into(product: np.ndarray, unit: float, grads: np.ndarray, w_at: int, b_at: int) -> None:
+    """A layer's weight and bias gradients from ``[inputs, 1]^T g``'s exact integer product (out,
+    in + 1): ``product * unit``, its first ``in`` columns to ``grads[w_at:]`` (row-major (out, in)),
+    the last to ``grads[b_at:]``."""
+    n_out, n_in = product.shape[0], product.shape[1] - 1
+    for o in range(n_out):
+        for i in range(n_in):
+            grads[w_at + o * n_in + i] = product[o, i] * unit
+        grads[b_at + o] = product[o, n_in] * unit
 
 
 @njit(cache=True, nogil=True)
@@ -71,13 +124,15 @@ def round_with_ones(x: np.ndarray, bits: int) -> tuple[np.ndarray, float]:
 
 
 @njit(cache=True, nogil=True)
-def scaled_slope(product: np.ndarray, unit: float, pre: np.ndarray) -> np.ndarray:
-    """The gradient below a ReLU layer: ``(product * unit) * (pre > 0).astype(float64)``."""
+def scaled_slope(product: np.ndarray, unit: float, pre: np.ndarray, slope: np.ndarray) -> np.ndarray:
+    """The gradient below a hidden layer: ``(product * unit) * slope``, the slope of a ReLU
+    ``(pre > 0).astype(float64)`` when ``slope`` is empty, else ``slope`` as given."""
     n, p = product.shape
     out = np.empty((n, p))
+    relu = slope.shape[0] == 0
     for i in range(n):
         for j in range(p):
-            out[i, j] = (product[i, j] * unit) * (1.0 if pre[i, j] > 0.0 else 0.0)
+            out[i, j] = (product[i, j] * unit) * ((1.0 if pre[i, j] > 0.0 else 0.0) if relu else slope[i, j])
     return out
 
 

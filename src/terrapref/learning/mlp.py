@@ -77,6 +77,14 @@ class _Cache:
     inputs: list[np.ndarray]  # input of each hidden and output layer
     pre: list[np.ndarray]  # pre-activation of each hidden layer
     post: list[np.ndarray]  # activation of each hidden layer
+    weights: list[tuple[exact.Rounded, exact.Rounded]]  # each layer's weight on its forward and its backward grid
+
+
+def _bits(k: int) -> tuple[int, int]:
+    """The bits :func:`exact.matmul` gives two plain operands of a sum of ``k`` exact products:
+    the first half the room the sum leaves, the second the rest (at most 26)."""
+    room = 53 - exact._sum_bits(k)
+    return room // 2, min(26, room - room // 2)
 
 
 class TrainableClassifier:
@@ -85,11 +93,35 @@ class TrainableClassifier:
     Each product is :func:`exact.matmul`'s (operands rounded to their grids, integers multiplied
     in BLAS, exact in any order); the rounding and the elementwise work around the products run
     as compiled loops (:mod:`terrapref.learning.kernels`), with the bits of the NumPy forms.
+    The weights live in one flat buffer, ``params``; ``weights`` holds a view of each under its
+    state-dict name, and :meth:`gradient` fills a buffer laid out the same way, so that Adam
+    updates all of them in one pass.
     """
 
     def __init__(self, config: ClassifierConfig, weights: dict[str, np.ndarray]) -> None:
         self.config = config
-        self.weights = weights
+        self.params = np.concatenate([np.asarray(w, dtype=np.float64).ravel() for w in weights.values()])
+        self._shapes = {name: tuple(np.shape(w)) for name, w in weights.items()}
+        sizes = [int(np.prod(shape)) for shape in self._shapes.values()]
+        self._at = dict(zip(self._shapes, np.cumsum([0] + sizes[:-1]).tolist()))  # each weight's offset in params
+        self.weights = self._views(self.params, self._shapes)
+        # Every layer's weight is rounded twice a step: for the forward product (K = its inputs)
+        # and for the backward one (K = its outputs).
+        spans = []
+        for i in range(config.depth + 1):
+            out, inp = self._shapes[f"layers.{i}.weight"]
+            at = self._at[f"layers.{i}.weight"]
+            spans += [(at, at + out * inp, _bits(inp)[1]), (at, at + out * inp, _bits(out)[1])]
+        self._spans = np.array(spans, dtype=np.int64)
+
+    @staticmethod
+    def _views(buffer: np.ndarray, shapes: dict[str, tuple[int, ...]]) -> dict[str, np.ndarray]:
+        views, at = {}, 0
+        for name, shape in shapes.items():
+            size = int(np.prod(shape))
+            views[name] = buffer[at : at + size].reshape(shape)
+            at += size
+        return views
 
     def forward(self, U: np.ndarray | exact.Rounded, keep: bool = False) -> tuple[np.ndarray, _Cache | None]:
         """Logits (B, m) for U (B, m, k), or U already rounded (:func:`round_inputs`); with
@@ -108,66 +140,98 @@ class TrainableClassifier:
             h = scores = kernels.compress_forward(x.ints, x.unit, x.bits, w["compress.weight"], w["compress.bias"]).reshape(n, c.m)
         else:
             h = (x.ints * x.unit).reshape(n, c.m * c.n_features)
+        layers = self._rounded_weights()
         inputs, pre, post = [], [], []
+        rounded = _rounded(h, _bits(h.shape[1])[0]) if h.shape[1] <= exact.MAX_EXACT else None
         for i in range(c.depth):
             inputs.append(h)
-            z, h = self._layer(h, i, c.activation, _NO_ROWS)
+            z, h, rounded = self._layer(h, rounded, layers[i][0], i, c.activation, _NO_ROWS)
             pre.append(z)
             post.append(h)
         inputs.append(h)
-        logits, _ = self._layer(h, c.depth, None, scores if c.skip else _NO_ROWS)
-        return logits, (_Cache(x, inputs, pre, post) if keep else None)
+        logits, _, _ = self._layer(h, rounded, layers[c.depth][0], c.depth, None, scores if c.skip else _NO_ROWS)
+        return logits, (_Cache(x, inputs, pre, post, layers) if keep else None)
 
-    def _layer(self, h: np.ndarray, i: int, activation: str | None, skip: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``z = matmul(h, W_i.T) + b_i (+ skip)`` and the activation of z (z itself for the output layer)."""
-        weight, bias = self.weights[f"layers.{i}.weight"], self.weights[f"layers.{i}.bias"]
-        z, out = kernels.affine(*_product(h, weight, transposed=True), bias, activation == "relu", skip)
-        if activation is not None and activation != "relu":
+    def _rounded_weights(self) -> list[tuple[exact.Rounded, exact.Rounded]]:
+        """Each layer's weight (out, in) on its forward and its backward grid, in one compiled call."""
+        ints, units = kernels.round_spans(self.params, self._spans)
+        out, at = [], 0
+        for i in range(self.config.depth + 1):
+            shape = self._shapes[f"layers.{i}.weight"]
+            size = shape[0] * shape[1]
+            pair = tuple(exact.Rounded(ints[at + j * size : at + (j + 1) * size].reshape(shape), float(units[2 * i + j]), int(self._spans[2 * i + j, 2]))
+                         for j in range(2))
+            out.append(pair)
+            at += 2 * size
+        return out
+
+    def _layer(self, h: np.ndarray, rounded: exact.Rounded | None, weight: exact.Rounded, i: int, activation: str | None,
+               skip: np.ndarray) -> tuple[np.ndarray, np.ndarray, exact.Rounded | None]:
+        """``z = matmul(h, W_i.T) + b_i (+ skip)``, the activation of z (z itself for the output
+        layer) and that activation on the next layer's grid (``rounded`` is ``h`` on this one's)."""
+        bias = self.weights[f"layers.{i}.bias"]
+        if rounded is None:  # a sum longer than one exact chunk: exact.matmul cuts it
+            product, unit = exact.matmul(h, self.weights[f"layers.{i}.weight"].T), 1.0
+        else:
+            product, unit = rounded.ints @ weight.ints.T, rounded.unit * weight.unit
+        width = weight.ints.shape[0]
+        next_bits = _bits(width)[0] if activation is not None and width <= exact.MAX_EXACT else 0
+        relu = activation == "relu"
+        z, out, ints, out_unit = kernels.affine(product, unit, bias, relu, skip, next_bits if relu else 0)
+        if activation is not None and not relu:
             out = _activate(activation, z)
-        return z, out
+            return z, out, _rounded(out, next_bits) if next_bits else None
+        return z, out, exact.Rounded(ints, out_unit, next_bits) if next_bits else None
 
     def backward(self, cache: _Cache, grad_logits: np.ndarray) -> dict[str, np.ndarray]:
         """Gradients of the loss under the weight names, given d loss / d logits (B, m)."""
-        c, w = self.config, self.weights
-        n = len(grad_logits)
-        grads: dict[str, np.ndarray] = {}
+        return self._views(self.gradient(cache, grad_logits), self._shapes)
+
+    def gradient(self, cache: _Cache, grad_logits: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """The gradient as one flat buffer laid out as ``params`` (into ``out`` when given)."""
+        c = self.config
+        grads = np.empty_like(self.params) if out is None else out
         g = np.ascontiguousarray(grad_logits, dtype=np.float64)
+        batch = len(g)
         for i in range(c.depth, -1, -1):
-            # The weight and bias gradients in one exact product: [inputs, 1]^T g.
-            grads[f"layers.{i}.weight"], grads[f"layers.{i}.bias"] = _weight_grads(g, cache.inputs[i])
+            out_i = cache.weights[i][1].ints.shape[0]
+            # The weight and bias gradients in one exact product, [inputs, 1]^T g, into the buffer.
+            self._weight_grads(g, cache.inputs[i], i, grads)
             # d loss / d the layer's input, through the activation below it.
-            product, unit = _product(g, w[f"layers.{i}.weight"], transposed=False)
+            if out_i > exact.MAX_EXACT:  # a sum longer than one exact chunk: exact.matmul cuts it
+                product, unit = exact.matmul(g, self.weights[f"layers.{i}.weight"]), 1.0
+            else:
+                a = _rounded(g, _bits(out_i)[0])
+                weight = cache.weights[i][1]
+                product, unit = a.ints @ weight.ints, a.unit * weight.unit
             if i == 0:
                 g = product * unit
-            elif c.activation == "relu":
-                g = kernels.scaled_slope(product, unit, cache.pre[i - 1])
             else:
-                g = (product * unit) * _activation_slope(c.activation, cache.pre[i - 1], cache.post[i - 1])
+                slope = _NO_ROWS if c.activation == "relu" else _activation_slope(c.activation, cache.pre[i - 1], cache.post[i - 1])
+                g = kernels.scaled_slope(product, unit, cache.pre[i - 1], slope)
         if c.compress:
             per_row = g + grad_logits if c.skip else g
             columns = np.ascontiguousarray(cache.x.ints.T)
-            grads["compress.weight"], grads["compress.bias"] = kernels.compress_grads(np.ascontiguousarray(per_row).reshape(-1), columns, cache.x.unit, cache.x.bits)
+            weight, bias = kernels.compress_grads(np.ascontiguousarray(per_row).reshape(-1), columns, cache.x.unit, cache.x.bits)
+            grads[self._at["compress.weight"] : self._at["compress.weight"] + weight.size] = weight.ravel()
+            grads[self._at["compress.bias"]] = bias[0]
         return grads
 
+    def _weight_grads(self, g: np.ndarray, inputs: np.ndarray, i: int, grads: np.ndarray) -> None:
+        """``exact.matmul(g.T, concatenate([inputs, ones((B, 1))], axis=1))`` split into layer i's
+        weight (out, in) and bias (out,) gradients, written into ``grads``."""
+        n = len(g)
+        w_at, b_at = self._at[f"layers.{i}.weight"], self._at[f"layers.{i}.bias"]
+        if n > exact.MAX_EXACT:  # a batch longer than one exact sum: exact.matmul cuts it into chunks
+            kernels.scale_into(exact.matmul(g.T, np.concatenate([inputs, np.ones((n, 1))], axis=1)), 1.0, grads, w_at, b_at)
+            return
+        a_bits, b_bits = _bits(n)
+        a = _rounded(g, a_bits)
+        ones_ints, ones_unit = kernels.round_with_ones(np.ascontiguousarray(inputs, dtype=np.float64), b_bits)
+        kernels.scale_into(a.ints.T @ ones_ints, a.unit * ones_unit, grads, w_at, b_at)
 
-_NO_ROWS = np.zeros((0, 0))  # kernels.affine: no residual path to add
 
-
-def _product(a: np.ndarray, b: np.ndarray, transposed: bool) -> tuple[np.ndarray, float]:
-    """``exact.matmul(a, b.T if transposed else b)`` as an integer product and its unit.
-
-    Both operands are rounded as :func:`exact.matmul` rounds two plain arrays: ``a`` to half the
-    room a sum of K exact products leaves, ``b`` to the rest (at most 26 bits); ``b`` is rounded
-    as it is, since transposing does not change its largest entry. A sum longer than one exact
-    chunk goes through :func:`exact.matmul` itself (unit 1).
-    """
-    k = a.shape[1]
-    if k > exact.MAX_EXACT:
-        return exact.matmul(a, b.T if transposed else b), 1.0
-    room = 53 - exact._sum_bits(k)
-    a_bits = room // 2
-    ra, rb = _rounded(a, a_bits), _rounded(b, min(26, room - a_bits))
-    return ra.ints @ (rb.ints.T if transposed else rb.ints), ra.unit * rb.unit
+_NO_ROWS = np.zeros((0, 0))  # kernels.affine: no residual path to add; kernels.scaled_slope: a ReLU's slope
 
 
 def _rounded(x: np.ndarray, bits: int) -> exact.Rounded:
@@ -177,37 +241,40 @@ def _rounded(x: np.ndarray, bits: int) -> exact.Rounded:
     return exact.Rounded(ints.reshape(x.shape), exact.round_into(flat, bits, ints), bits)
 
 
-def _weight_grads(g: np.ndarray, inputs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``both = exact.matmul(g.T, concatenate([inputs, ones((B, 1))], axis=1))``, split into the
-    weight (out, in) and bias (out,) gradients."""
-    n = len(g)
-    if n > exact.MAX_EXACT:  # a batch longer than one exact sum: exact.matmul cuts it into chunks
-        both = exact.matmul(g.T, np.concatenate([inputs, np.ones((n, 1))], axis=1))
-        return both[:, :-1], both[:, -1]
-    room = 53 - exact._sum_bits(n)
-    a = _rounded(g, room // 2)
-    ones_ints, ones_unit = kernels.round_with_ones(np.ascontiguousarray(inputs, dtype=np.float64), min(26, room - room // 2))
-    both = (a.ints.T @ ones_ints) * (a.unit * ones_unit)
-    return both[:, :-1], both[:, -1]
-
-
 class Adam:
-    """Adam (Kingma and Ba), with PyTorch's defaults; elementwise only."""
+    """Adam (Kingma and Ba), with PyTorch's defaults; elementwise only.
 
-    def __init__(self, weights: dict[str, np.ndarray], lr: float, betas: tuple[float, float] = (0.9, 0.999), eps: float = 1e-8) -> None:
+    Args:
+        weights: the weights it updates in place, by name (writeable C-contiguous float64
+            arrays), or one flat buffer of them (``TrainableClassifier.params``), which it then
+            updates in one pass from a flat gradient.
+    """
+
+    def __init__(self, weights: dict[str, np.ndarray] | np.ndarray, lr: float, betas: tuple[float, float] = (0.9, 0.999), eps: float = 1e-8) -> None:
         self.weights, self.lr, self.betas, self.eps = weights, lr, betas, eps
-        if not all(w.dtype == np.float64 and w.flags.c_contiguous and w.flags.writeable for w in weights.values()):
+        arrays = [weights] if isinstance(weights, np.ndarray) else list(weights.values())
+        if not all(w.dtype == np.float64 and w.flags.c_contiguous and w.flags.writeable for w in arrays):
             raise ValueError("Adam updates the weights in place: they must be writeable C-contiguous float64 arrays")
-        self.m = {k: np.zeros_like(v) for k, v in weights.items()}
-        self.v = {k: np.zeros_like(v) for k, v in weights.items()}
+        if isinstance(weights, np.ndarray):
+            self.m, self.v = np.zeros_like(weights), np.zeros_like(weights)
+        else:
+            self.m = {k: np.zeros_like(v) for k, v in weights.items()}
+            self.v = {k: np.zeros_like(v) for k, v in weights.items()}
         self.power1 = self.power2 = 1.0  # beta ** t by repeated products (no pow(), whose last bit may vary)
 
-    def step(self, grads: dict[str, np.ndarray]) -> None:
+    def step(self, grads: dict[str, np.ndarray] | np.ndarray) -> None:
+        """One update from the gradients: by name, or one flat buffer for a flat buffer of weights."""
         b1, b2 = self.betas
         self.power1 *= b1
         self.power2 *= b2
         step = self.lr / (1.0 - self.power1)
         root2 = math.sqrt(1.0 - self.power2)
+        if isinstance(self.weights, np.ndarray):
+            g = np.ascontiguousarray(grads, dtype=np.float64).reshape(-1)
+            if g.size != self.weights.size:
+                raise ValueError(f"gradient: {g.size} values for {self.weights.size} weights")
+            _adam_update(self.weights.reshape(-1), self.m.reshape(-1), self.v.reshape(-1), g, b1, b2, step, root2, self.eps)
+            return
         for name, p in self.weights.items():
             g = np.ascontiguousarray(grads[name], dtype=np.float64).reshape(-1)
             if g.size != p.size:

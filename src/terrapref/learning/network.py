@@ -1,7 +1,8 @@
 """The classifier C (SPEC 8): a shared row-wise 5 -> 1 compression, three hidden layers, m logits.
 
-This is the NumPy forward pass the planner uses in the control loop (about 10 us per decision,
-no torch needed on the robot). Training runs its own NumPy forward and backward pass with
+This is C's readable NumPy forward pass (the ONNX export's reference, and the tests'); the
+planner's control loop runs the same network as one compiled loop
+(:mod:`terrapref.learning.forward`, the same F_t on every CPU). Training runs its own forward and backward pass with
 CPU-independent arithmetic (:mod:`terrapref.learning.mlp`) over the same named weights; the
 PyTorch definition (:mod:`terrapref.learning.torch_net`) remains as an independent reference
 that the tests check both against.

@@ -342,6 +342,7 @@ def _epoch(net: TrainableClassifier, opt: Adam, data: _Samples, order: np.ndarra
     """One pass over ``order`` in batches; the training loss and accuracy as the batches saw them, and the steps."""
     y = data.labels
     seen_loss, seen_hits, steps = [], 0, 0
+    buffer = np.empty_like(net.params)  # each step's gradient, laid out as the weights
     for start in range(0, len(order), batch_size):
         batch = order[start : start + batch_size]
         logits, cache = net.forward(data.inputs._replace(ints=data.inputs.ints[batch]), keep=True)
@@ -349,7 +350,7 @@ def _epoch(net: TrainableClassifier, opt: Adam, data: _Samples, order: np.ndarra
         loss, grad, hits = kernels.cross_entropy_grad(logits, y[batch], data.class_w)
         seen_loss.append(loss)
         seen_hits += hits
-        opt.step(net.backward(cache, grad))
+        opt.step(net.gradient(cache, grad, out=buffer))
         steps += 1
     n = len(order)
     return exact.fsum(np.concatenate(seen_loss)) / n, seen_hits / n, steps
@@ -362,7 +363,7 @@ def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetri
     data = _samples(dataset, config, rng)
     classifier = _classifier_for(dataset, config)
     net = TrainableClassifier(classifier, init_weights(classifier, np.random.default_rng([config.seed, INIT_STREAM])))
-    opt = Adam(net.weights, config.optimiser.lr)
+    opt = Adam(net.params, config.optimiser.lr)  # all weights in one pass
     history: list[EpochMetrics] = []
     checkpoints: list[dict[str, np.ndarray]] = []
     steps = 0
