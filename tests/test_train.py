@@ -277,3 +277,14 @@ def _interrupt_dataset() -> Dataset:
     n = 200
     return Dataset(rng.uniform(0, 1, (n, 21, 5)).astype(np.float32), rng.integers(0, 21, n), np.zeros(n, np.float32), np.zeros(n, np.int64),
                    {"format": DATASET_FORMAT, **model_meta()})
+
+
+def test_training_without_the_identifiability_report_trains_the_same_weights():
+    ds = random_dataset(120, seed=3)
+    config = train_config(epochs=3)
+    full, bare = train(ds, config), train(ds, config, identify=False)
+    assert full.identifiability is not None and bare.identifiability is None and bare.utility is None
+    assert_weights_equal(full.weights, bare.weights)
+    # a second stage needs the fit: it is made whatever identify says
+    staged = train(ds, train_config(epochs=3, utility=True), identify=False)
+    assert staged.utility is not None

@@ -96,9 +96,9 @@ class _Checkpoints:
 
 
 def train_and_save(dataset: Dataset, out: str | Path, config: TrainConfig, checkpoints: bool = True,
-                   progress: Callable[[EpochMetrics], None] | None = None, recipe: str | None = None) -> TrainResult:
+                   progress: Callable[[EpochMetrics], None] | None = None, recipe: str | None = None, identify: bool = True) -> TrainResult:
     """Train, write every epoch as a checkpoint as it is made and the chosen epoch as the model;
-    ``recipe`` (its name) is recorded in the model's metadata.
+    ``recipe`` (its name) is recorded in the model's metadata; ``identify`` as :func:`train`'s.
 
     Interrupted (Ctrl-C, or any error) after at least one epoch, the best epochs so far are
     written as ``NAME.interrupted.safetensors`` beside ``out`` (metadata ``status:
@@ -110,7 +110,7 @@ def train_and_save(dataset: Dataset, out: str | Path, config: TrainConfig, check
     source = _source_meta(dataset, config, recipe)  # the data's fingerprint hashes every sample: once
     saver = _Checkpoints(out, {**source, "members": config.classifier.members}, checkpoints)
     try:
-        result = train(dataset, config, progress, on_epoch=saver)
+        result = train(dataset, config, progress, on_epoch=saver, identify=identify)
     except BaseException:
         saver.keep_partial()
         saver.interrupted_model(out)

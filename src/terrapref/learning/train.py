@@ -227,12 +227,15 @@ EpochHook = Callable[[int, ClassifierConfig, dict[str, np.ndarray], EpochMetrics
 
 
 def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callable[[EpochMetrics], None] | None = None,
-          on_epoch: EpochHook | None = None) -> TrainResult:
+          on_epoch: EpochHook | None = None, identify: bool = True) -> TrainResult:
     """Train C on ``dataset``; returns the lowest-validation-loss epoch's weights and the history.
 
     ``on_epoch`` sees every epoch's weights as they are made (member by member), so that a
     caller can write checkpoints as training goes. The same dataset and configuration give the
     same weights, bit for bit, on any CPU and thread count (:mod:`terrapref.learning.exact`).
+    Without ``identify`` (and without a second stage) the linear utility is not fitted and the
+    result carries no identifiability report: for a caller that trains many models to compare C
+    alone (the study).
     """
     config = config or TrainConfig()
     if config.classifier.members == 1:
@@ -241,6 +244,8 @@ def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callabl
         one = replace(config.classifier, members=1)
         result = _ensemble([_train(dataset, replace(config, seed=seed, classifier=one), progress, on_epoch and (lambda *a, j=j: on_epoch(j, *a)))
                             for j, seed in enumerate(config.member_seeds)])
+    if not identify and config.second_stage is None:
+        return result
     # The linear utility: the second stage's (when asked for), and the identifiability report's.
     utility, gamma = _fit_utility(dataset, config.data.mirror)
     if config.second_stage is not None:
