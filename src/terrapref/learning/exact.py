@@ -130,6 +130,19 @@ _EXP_HORNER = tuple(_EXP_COEF[-2::-1])  # a constant tuple, so the compiled poly
 _POW2 = np.array([math.ldexp(1.0, e) for e in range(-1074, 1024)])
 
 
+@njit(cache=True, nogil=True, inline="always")
+def exp1(v: float) -> float:
+    """One element of :func:`exp` (for compiled loops that take their exponentials one at a time)."""
+    v = -740.0 if v < -740.0 else v  # NaN passes through both
+    v = 709.0 if v > 709.0 else v
+    k = np.rint(v * _INV_LN2)
+    r = (v - k * _LN2_HI) - k * _LN2_LO
+    q = _EXP_COEF[-1]
+    for c in _EXP_HORNER:
+        q = q * r + c
+    return q * _POW2[np.int64(k) + 1074] if k == k else q  # NaN stays NaN
+
+
 @njit(cache=True, nogil=True)
 def _exp(x: np.ndarray) -> np.ndarray:
     """Per element, the NumPy form:
@@ -140,15 +153,7 @@ def _exp(x: np.ndarray) -> np.ndarray:
     n = x.shape[0]
     p = np.empty(n)
     for i in range(n):
-        v = x[i]
-        v = -740.0 if v < -740.0 else v  # NaN passes through both
-        v = 709.0 if v > 709.0 else v
-        k = np.rint(v * _INV_LN2)
-        r = (v - k * _LN2_HI) - k * _LN2_LO
-        q = _EXP_COEF[-1]
-        for c in _EXP_HORNER:
-            q = q * r + c
-        p[i] = q * _POW2[np.int64(k) + 1074] if k == k else q  # NaN stays NaN
+        p[i] = exp1(x[i])
     return p
 
 

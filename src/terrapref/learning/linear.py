@@ -41,7 +41,8 @@ def fit_linear_utility(U: np.ndarray, labels: np.ndarray, steps: int = 1500, lr:
     rows = exact.rounded(U.reshape(n * m, k), 18)  # constant: rounded once, 18 bits leave room for sums of 2 ** 17
     sw = np.ones(n) if sample_weight is None else np.asarray(sample_weight, dtype=np.float64)
     sw = sw / exact.fsum(sw)
-    params = _fit_frames(np.ascontiguousarray(rows.ints.T), rows.unit, rows.bits, np.asarray(labels, dtype=np.int64), sw, m, steps, lr)
+    columns = np.ascontiguousarray(rows.ints.T, dtype=np.float32)  # exact: integers of at most 18 bits
+    params = _fit_frames(columns, rows.unit, rows.bits, np.asarray(labels, dtype=np.int64), sw, m, steps, lr)
     return LinearUtility(params[:k].copy(), params[k:].copy())
 
 
@@ -49,8 +50,9 @@ def fit_linear_utility(U: np.ndarray, labels: np.ndarray, steps: int = 1500, lr:
 def _fit_frames(rows: np.ndarray, unit: float, bits: int, labels: np.ndarray, sw: np.ndarray, m: int, steps: int, lr: float) -> np.ndarray:
     """The frame-by-frame fit's full-batch Adam, compiled: ``params`` (K + 1 + m,) = w, then b.
 
-    ``rows`` holds the rounded utilities by columns, (K + 1, N m). Per step, the NumPy form
-    (the exact products as :func:`exact.matmul` rounds and sums them)::
+    ``rows`` holds the rounded utilities by columns, (K + 1, N m) (integers of at most 18 bits,
+    exact in float32). Per step, the NumPy form (the exact products as :func:`exact.matmul`
+    rounds and sums them)::
 
         logits = matmul(rows.T, params[:k, None]).reshape(n, m) + params[k:]
         p = exp(logits - logits.max(axis=1, keepdims=True)); p /= row_sum(p)[:, None]
@@ -59,28 +61,112 @@ def _fit_frames(rows: np.ndarray, unit: float, bits: int, labels: np.ndarray, sw
         power1, power2 = power1 * 0.9, power2 * 0.999
         mom = 0.9 mom + 0.1 grad; vel = 0.999 vel + 0.001 (grad grad)
         params -= lr (mom / (1 - power1)) / (sqrt(vel / (1 - power2)) + 1e-8)
+
+    g is made a block of frames at a time (the block's arrays stay in the cache and its loops
+    are vectorised), then rounded and summed into both products in one more pass.
     """
     k, nm = rows.shape
     n = nm // m
     params, mom, vel = np.zeros(k + m), np.zeros(k + m), np.zeros(k + m)
     power1 = power2 = 1.0
     w_bits = min(26, exact._chunk_bits(k) - bits)
-    w_ints, logits, grad, ones = np.empty(k), np.empty(nm), np.empty(k + m), np.ones(n)
+    w_ints, g, grad = np.empty(k), np.empty(nm), np.empty(k + m)
     for _ in range(steps):
         u = exact.round_into(params[:k], w_bits, w_ints) * unit
-        _exact_scores(rows, w_ints, logits)
-        for i in range(n):
-            for j in range(m):
-                logits[i * m + j] = logits[i * m + j] * u + params[k + j]
-        g = _softmax_minus_label(logits, labels, m)
-        for i in range(n):
-            for j in range(m):
-                g[i * m + j] = g[i * m + j] * sw[i]
-        exact.vec_mat_rounded(g, rows, unit, bits, grad[:k])
-        exact.vec_mat(ones, g, m, grad[k:])
+        _frame_gradients(rows, w_ints, u, params[k:], labels, sw, m, g)
+        _fit_products(g, rows, unit, bits, m, grad)
         power1, power2 = power1 * 0.9, power2 * 0.999
         _adam_step(params, mom, vel, grad, lr, power1, power2)
     return params
+
+
+_BLOCK_FRAMES = 64  # frames whose arrays a step works on together (64 x 21 x 8 bytes per array)
+
+
+@njit(cache=True, nogil=True)
+def _frame_gradients(rows: np.ndarray, w_ints: np.ndarray, u: float, b: np.ndarray, labels: np.ndarray, sw: np.ndarray, m: int,
+                     g: np.ndarray) -> None:
+    """g (N m,): ``softmax(rows.T @ w_ints * u + b by frames) - onehot(labels)``, times each frame's
+    weight (see :func:`_fit_frames`); the products of integers are exact, so summed in any order."""
+    k, n = rows.shape[0], rows.shape[1] // m
+    size = _BLOCK_FRAMES * m
+    z, e = np.empty(size), np.empty(size)
+    for f0 in range(0, n, _BLOCK_FRAMES):
+        f1 = min(n, f0 + _BLOCK_FRAMES)
+        r0, length = f0 * m, (f1 - f0) * m
+        z[:length] = 0.0
+        for c in range(k):
+            wc = w_ints[c]
+            for t in range(length):
+                z[t] += np.float64(rows[c, r0 + t]) * wc
+        for f in range(f1 - f0):
+            base = f * m
+            for j in range(m):
+                z[base + j] = z[base + j] * u + b[j]
+            top = z[base]
+            for j in range(1, m):
+                if z[base + j] > top or z[base + j] != z[base + j]:
+                    top = z[base + j]
+            for j in range(m):
+                e[base + j] = z[base + j] - top
+        for t in range(length):
+            e[t] = exact.exp1(e[t])
+        for f in range(f1 - f0):
+            base = f * m
+            total = e[base]
+            for j in range(1, m):
+                total = total + e[base + j]
+            weight = sw[f0 + f]
+            for j in range(m):
+                p = e[base + j] / total
+                if j == labels[f0 + f]:
+                    p -= 1.0
+                g[r0 + base + j] = p * weight
+
+
+@njit(cache=True, nogil=True)
+def _fit_products(g: np.ndarray, rows: np.ndarray, unit: float, bits: int, m: int, grad: np.ndarray) -> None:
+    """``grad`` (K + 1 + m,) = ``matmul(g[None], Rounded(rows.T, unit, bits))[0]`` then
+    ``matmul(ones((1, N)), g.reshape(N, m))[0]``: g rounded chunk by chunk as
+    :func:`exact.matmul` rounds it, every sum of products exact."""
+    k, nm = rows.shape
+    n = nm // m
+    block, column, totals = np.empty(_BLOCK_FRAMES * m), np.empty(_BLOCK_FRAMES * m), np.empty(k)
+    for chunk_start in range(0, nm, exact.MAX_EXACT):  # the weights' product: N m terms
+        chunk_stop = min(nm, chunk_start + exact.MAX_EXACT)
+        a_bits = min(26, exact._chunk_bits(chunk_stop - chunk_start) - bits)
+        e = math.frexp(exact._top(g[chunk_start:chunk_stop]))[1]
+        scale, a_unit = math.ldexp(1.0, a_bits - e), math.ldexp(1.0, e - a_bits)
+        totals[:] = 0.0
+        for r0 in range(chunk_start, chunk_stop, block.shape[0]):
+            length = min(block.shape[0], chunk_stop - r0)
+            for t in range(length):
+                block[t] = np.rint(g[r0 + t] * scale)
+            for c in range(k):
+                for t in range(length):
+                    column[t] = rows[c, r0 + t]
+                totals[c] += exact._dot(block[:length], column[:length])
+        for c in range(k):
+            part = totals[c] * (a_unit * unit)
+            grad[c] = part if chunk_start == 0 else grad[c] + part
+    sums = np.empty(m)
+    for f_start in range(0, n, exact.MAX_EXACT):  # the biases' product: N terms per trajectory
+        f_stop = min(n, f_start + exact.MAX_EXACT)
+        room = exact._chunk_bits(f_stop - f_start)
+        one_bits = room // 2
+        # 1 on its grid is 2 ** (bits - 1) units of 2 ** (1 - bits): a power of two, so it
+        # multiplies the exact sum of g's integers instead of each term, with the same result.
+        one = math.ldexp(1.0, one_bits - 1)
+        e = math.frexp(exact._top(g[f_start * m : f_stop * m]))[1]
+        g_bits = min(26, room - one_bits)
+        scale, g_unit = math.ldexp(1.0, g_bits - e), math.ldexp(1.0, e - g_bits)
+        sums[:] = 0.0
+        for f in range(f_start, f_stop):
+            for j in range(m):
+                sums[j] += np.rint(g[f * m + j] * scale)
+        for j in range(m):
+            part = (sums[j] * one) * (math.ldexp(1.0, 1 - one_bits) * g_unit)
+            grad[k + j] = part if f_start == 0 else grad[k + j] + part
 
 
 @njit(cache=True, nogil=True)
