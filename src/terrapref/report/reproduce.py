@@ -112,7 +112,7 @@ def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes:
     runs = _evaluate(setup, trained, engine, log)
     timings["closed-loop evaluation"] = time.perf_counter() - t0
     log("[3/3] figures and REPORT.md ...")
-    return _write_report(out, setup, runs, trained, timings)
+    return _write_report(out, setup, runs, trained, timings, engine)
 
 
 def _train_all(setup: _Setup, out: Path, engine: Engine, log: Callable[[str], None]) -> list[RecipeModel]:
@@ -192,12 +192,13 @@ def _mode(choices: list[tuple[str, bool, str]]) -> str:
     return top if names.count(top) == len(names) else f"{top} ({names.count(top)}/{len(names)})"
 
 
-def _write_report(out: Path, setup: _Setup, runs: list[RecipeRun], trained: list[RecipeModel], timings: dict[str, float]) -> Path:
+def _write_report(out: Path, setup: _Setup, runs: list[RecipeRun], trained: list[RecipeModel], timings: dict[str, float],
+                  engine: Engine) -> Path:
     """REPORT.md, its figures and results.json (every run's metrics and the time per stage)."""
     t_fig = time.perf_counter()
     figs = out / "figures"
     figs.mkdir(exist_ok=True)
-    _draw_figures(figs, setup, runs, trained)
+    _draw_figures(figs, setup, runs, trained, engine)
     lines = _introduction(setup) + _summary_table(setup.recipes, runs) + _zone_tables(setup.recipes, runs) + _training_lines(setup.recipes, trained)
     lines += ["", "## Figures", ""] + [f"- `figures/{sc}.png`" for sc in setup.scenarios]
     timings = {**timings, "figures": time.perf_counter() - t_fig}
@@ -207,17 +208,28 @@ def _write_report(out: Path, setup: _Setup, runs: list[RecipeRun], trained: list
     return write_text_atomic(out / "REPORT.md", "\n".join(lines) + "\n")
 
 
-def _draw_figures(figs: Path, setup: _Setup, runs: list[RecipeRun], trained: list[RecipeModel]) -> None:
-    """Each course with the driver's and the planners' seed-0 paths; each recipe's seed-0 training curve."""
+def _draw_figures(figs: Path, setup: _Setup, runs: list[RecipeRun], trained: list[RecipeModel], engine: Engine) -> None:
+    """Each course with the driver's and the planners' seed-0 paths; each recipe's seed-0 training
+    curve; drawn as a grid of jobs (a dozen figures of half a second each)."""
+    jobs: list[tuple] = [("map", str(figs / f"{sc}.png"), sc, _tracks(runs, sc, setup.recipes)) for sc in setup.scenarios]
+    jobs += [("curve", str(figs / f"training_{t.recipe}.png"), t.recipe, ([asdict(h) for h in t.history], t.best_epoch))
+             for t in trained if t.seed == 0]
+    run_grid(_figure_job, jobs, engine, describe=lambda j: f"figure {j[1]}")
+
+
+def _figure_job(job: tuple) -> str:
+    """Draw one of the reproduction's figures: a course's map with its tracks, or a training curve."""
     from terrapref.plots import save_loss_curve, save_map
     from terrapref.world import rasterise
 
-    for sc in setup.scenarios:
-        scenario = resolve_scenario(sc)
-        save_map(figs / f"{sc}.png", scenario, rasterise(scenario), _tracks(runs, sc, setup.recipes), title=f"{sc}: reference, driver and planner paths")
-    for t in trained:
-        if t.seed == 0:
-            save_loss_curve(figs / f"training_{t.recipe}.png", [asdict(h) for h in t.history], t.best_epoch, title=f"training, recipe {t.recipe}, seed 0")
+    kind, path, name, content = job
+    if kind == "map":
+        scenario = resolve_scenario(name)
+        save_map(path, scenario, rasterise(scenario), content, title=f"{name}: reference, driver and planner paths")
+    else:
+        history, best = content
+        save_loss_curve(path, history, best, title=f"training, recipe {name}, seed 0")
+    return path
 
 
 def _tracks(runs: list[RecipeRun], scenario: str, recipes: tuple[Recipe, ...]) -> list[tuple[str, np.ndarray, str]]:
