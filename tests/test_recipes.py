@@ -60,7 +60,7 @@ def test_the_paper_recipe_is_the_published_one():
 def test_ours_drives_train_course_twice_with_pushes():
     ours = RECIPES["ours"]
     assert (ours.demonstrations, ours.course, ours.disturbance) == (2, "train_course", DisturbanceConfig(rate_hz=0.3))
-    assert (ours.train.optimiser.epochs, ours.train.classifier.members) == (300, 1)
+    assert (ours.train.optimiser.epochs, ours.train.optimiser.lr, ours.train.classifier.members) == (100, 3e-3, 1)
     assert ours.train.classifier.skip and ours.train.data.class_balance and ours.train.data.mirror and ours.train.second_stage is not None
     assert ours.features().lookahead is None
 
@@ -68,7 +68,7 @@ def test_ours_drives_train_course_twice_with_pushes():
 def test_teach_drives_teach_course_once_and_fits_through_the_lookahead():
     teach = RECIPES["teach"]
     assert (teach.demonstrations, teach.course, teach.disturbance) == (1, "teach_course", DisturbanceConfig(rate_hz=0.3))
-    assert (teach.train.optimiser.epochs, teach.train.classifier.members, teach.train.second_stage.weight) == (300, 3, 5.0)
+    assert (teach.train.optimiser.epochs, teach.train.optimiser.lr, teach.train.classifier.members, teach.train.second_stage.weight) == (100, 3e-3, 3, 5.0)
     assert teach.train.classifier.skip and teach.train.data.class_balance and teach.train.data.mirror and teach.train.second_stage is not None
     features = teach.features()
     assert features.lookahead == LookaheadConfig()
@@ -89,7 +89,7 @@ def test_recipes_are_validated(bad: dict):
 
 def test_to_dict_is_plain_data():
     data = RECIPES["teach"].to_dict()
-    assert data["name"] == "teach" and data["train"]["optimiser"]["epochs"] == 300 and data["disturbance"]["rate_hz"] == 0.3
+    assert data["name"] == "teach" and data["train"]["optimiser"]["epochs"] == 100 and data["disturbance"]["rate_hz"] == 0.3
 
 
 # --- the driver's styles -------------------------------------------------------------------------------

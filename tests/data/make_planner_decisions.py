@@ -32,7 +32,8 @@ CASES = [(TEACH, 40, "teach_course", ("test_course", "fig8_water_mud_rock_mud_le
 def decisions(work: Path) -> dict:
     out = {}
     for recipe, epochs, course, driven in CASES:
-        recipe = replace(recipe, train=recipe.train.with_epochs(epochs))
+        # the training schedule pinned as it was when the file was made (teach trained at lr 1e-3 then)
+        recipe = replace(recipe, train=replace(recipe.train, optimiser=replace(recipe.train.optimiser, epochs=epochs, lr=1e-3)))
         features = recipe.features()
         paths = record_demonstrations(recipe, work / recipe.name, 7, course=course, features=features)
         model = work / f"{recipe.name}.safetensors"

@@ -26,7 +26,7 @@ class StudyPlan:
         seeds: training seeds (each: its own demonstrations and initialisation).
         minutes: demonstration budgets for the data-efficiency curve [min]; the curve ends with
             all of it (two runs of train_course, about 11 min).
-        epochs: C's training epochs (recipe ``ours`` uses 300).
+        epochs: C's training epochs (recipes ``ours`` and ``teach`` use 100).
         cnn_epochs: the CNN's training epochs.
         noise: perturbation levels, by kind (see :class:`Perturbation`).
         horizons: trajectory lengths n for the horizon ablation (the default is always in).
@@ -41,7 +41,7 @@ class StudyPlan:
 
     seeds: int = 3
     minutes: tuple[float, ...] = (0.5, 1.0, 2.0, 5.0)
-    epochs: int = 300
+    epochs: int = 100
     cnn_epochs: int = 30
     noise: dict[str, tuple[float, ...]] = field(default_factory=lambda: {
         "flip_rate": (0.1, 0.3, 0.5),
