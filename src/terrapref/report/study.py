@@ -244,14 +244,12 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, engine: Engine | None
         recordings = _demonstrate(ws)
     with _timed(timings, "featurisation"):
         _featurise(ws, recordings)
-    with _timed(timings, "training"):
-        trained = _train(ws)
-    with _timed(timings, "teaching"):
-        taught = _teach(ws)
+    with _timed(timings, "training and teaching"):
+        trained, taught = _train_and_teach(ws)
     with _timed(timings, "evaluation"):
         runs = _evaluate(ws, trained, taught)
     report_started = time.perf_counter()
-    log("[6/6] tables, figures and STUDY.md ...")
+    log("[5/5] tables, figures and STUDY.md ...")
     study = {"plan": _plan_dict(plan), "trained": [t.to_dict() for t in [*trained, *taught]], "runs": [r.to_dict() for r in runs]}
     write_text_atomic(out / "study.json", json.dumps(study, indent=1, default=float))
     return write_study(out, plan, trained, runs, timings, report_started=report_started)
@@ -261,7 +259,7 @@ def _demonstrate(ws: _Workspace) -> dict[tuple[int, tuple[str, ...]], list[str]]
     """Stage 1: per seed, the demonstrations under the default profile and under the other; (seed, profile) -> recordings."""
     default = PreferenceProfile.default().order
     seeds = range(ws.plan.seeds)
-    ws.log(f"[1/6] demonstrations: {len(seeds)} seed(s) x 2 profiles x {DEMONSTRATIONS.demonstrations} runs ...")
+    ws.log(f"[1/5] demonstrations: {len(seeds)} seed(s) x 2 profiles x {DEMONSTRATIONS.demonstrations} runs ...")
     jobs = [(str(ws.work / f"{tag}_s{s}"), s, prof) for s in seeds for tag, prof in (("default", default), ("alt", ALT_PROFILE))]
     return dict(zip([(s, prof) for _, s, prof in jobs], ws.map(_record_job, jobs, "demonstration set")))
 
@@ -276,15 +274,27 @@ def _featurise(ws: _Workspace, recs: dict[tuple[int, tuple[str, ...]], list[str]
         jobs += [(recs[(s, default)], str(base / "U.safetensors"), "U", None), (recs[(s, default)], str(base / "cnn.safetensors"), "cnn", None),
                  (recs[(s, ALT_PROFILE)], str(ws.work / f"alt_s{s}" / "U.safetensors"), "U", None)]
         jobs += [(recs[(s, default)], str(base / f"U_n{n}.safetensors"), "U", n) for n in ws.plan.horizons]
-    ws.log(f"[2/6] featurisation: {len(jobs)} sets ...")
+    ws.log(f"[2/5] featurisation: {len(jobs)} sets ...")
     ws.map(_featurise_job, jobs, "set")
 
 
-def _train(ws: _Workspace) -> list[TrainedModel]:
-    """Stage 3: every model trained from demonstrations."""
-    jobs = _train_jobs(ws.plan, ws.work)
-    ws.log(f"[3/6] training: {len(jobs)} models ...")
-    return ws.map(_train_job, jobs, "model")
+def _train_and_teach(ws: _Workspace) -> tuple[list[TrainedModel], list[TaughtModel]]:
+    """Stage 3: every model trained from the demonstrations, and (section 6) every drive of the
+    teaching recipe's course and its model: one grid, so that neither kind waits for the other's
+    last job."""
+    from terrapref.recipes import recipe_named
+
+    plan = ws.plan
+    train, teach = _train_jobs(plan, ws.work), teach_jobs(plan, ws.work)
+    ws.log(f"[3/5] training and teaching: {len(train)} models, and {len(teach)} drives of {recipe_named(plan.recipe).course} and "
+           f"their models (recipe {plan.recipe}; {len(plan.orders)} orders, {len(plan.styles)} driver styles, {plan.seeds} seed(s)) ...")
+    done = ws.map(_model_job, [*teach, *train], "model")  # the drives and their recipe's training first: the longest jobs
+    return done[len(teach) :], done[: len(teach)]
+
+
+def _model_job(job: TrainJob | TeachJob) -> TrainedModel | TaughtModel:
+    """A job of stage 3: a model trained from the demonstrations, or a drive taught by the recipe."""
+    return _teach_job(job) if isinstance(job, TeachJob) else _train_job(job)
 
 
 def _train_jobs(plan: StudyPlan, work: Path) -> list[TrainJob]:
@@ -314,21 +324,10 @@ def _train_jobs(plan: StudyPlan, work: Path) -> list[TrainJob]:
     return jobs
 
 
-def _teach(ws: _Workspace) -> list[TaughtModel]:
-    """Stage 4: the teaching recipe's drive and model for every order and driver style."""
-    from terrapref.recipes import recipe_named
-
-    plan = ws.plan
-    jobs = teach_jobs(plan, ws.work)
-    ws.log(f"[4/6] teaching: {len(jobs)} drives of {recipe_named(plan.recipe).course} and models (recipe {plan.recipe}; "
-           f"{len(plan.orders)} orders, {len(plan.styles)} driver styles, {plan.seeds} seed(s)) ...")
-    return ws.map(_teach_job, jobs, "taught model")
-
-
 def _evaluate(ws: _Workspace, trained: list[TrainedModel], taught: list[TaughtModel]) -> list[StudyRun]:
-    """Stage 5: every closed-loop run, tagged with its place in the study."""
+    """Stage 4: every closed-loop run, tagged with its place in the study."""
     planned = _evaluation_runs(ws.plan, trained, taught)
-    ws.log(f"[5/6] closed-loop evaluation: {len(planned)} runs over {len(ws.plan.scenarios()) + len(ws.plan.layouts)} scenarios ...")
+    ws.log(f"[4/5] closed-loop evaluation: {len(planned)} runs over {len(ws.plan.scenarios()) + len(ws.plan.layouts)} scenarios ...")
     results = run_many([spec for spec, _ in planned], progress=every_tenth(ws.log), engine=ws.engine)
     return [StudyRun(tag, r.scenario, r.metrics) for (_, tag), r in zip(planned, results, strict=True)]
 
