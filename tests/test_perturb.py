@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from terrapref.camera import SegmentationView
-from terrapref.evaluation.perturb import Perturbation, PerturbedDriver, corrupt_image
+from terrapref.evaluation.perturb import FrameNoise, NoisyView, Perturbation, PerturbedDriver, corrupt_image
 from terrapref.evaluation.runner import PURE_PURSUIT, RunSpec, run_one
 from terrapref.sim.loop import Frame
 from terrapref.vehicle import Command, Pose
@@ -158,6 +158,48 @@ def test_blob_is_one_class_and_a_filled_region():
             assert xs.max() - xs.min() <= 20 and ys.max() - ys.min() <= 20
             assert changed.sum() >= 3.14 * 10 * 4 * 0.7 or xs.min() == 0 or xs.max() == W - 1 or ys.max() == H - 1
     assert seen > 3
+
+
+# --- noise applied to the pixels read -------------------------------------------------------------
+
+
+def _rendered_view(pose: Pose = Pose(8.0, 10.0, 0.2)) -> SegmentationView:
+    from terrapref.camera import PinholeCamera, SegmentationRenderer
+    from terrapref.scenario import resolve_scenario
+    from terrapref.world import rasterise
+
+    renderer = SegmentationRenderer(PinholeCamera(), rasterise(resolve_scenario("demo_course")))
+    return SegmentationView(renderer, pose)
+
+
+def test_a_noisy_view_gives_its_pixels_the_whole_frames_values_in_any_order():
+    p = Perturbation(flip_rate=0.3, blobs=3.0)
+    rng = np.random.default_rng(8)
+    for _ in range(5):
+        state = rng.bit_generator.state
+        lazy = NoisyView(_rendered_view(), FrameNoise.draw(p, rng, (480, 640)))
+        rng.bit_generator.state = state
+        whole = NoisyView(_rendered_view(), FrameNoise.draw(p, rng, (480, 640)))
+        idx = rng.integers(0, 480 * 640, 3000)
+        first = lazy.pixels(idx)  # only these pixels: the frame is not rendered
+        assert not lazy.rendered
+        np.testing.assert_array_equal(first, whole.image.reshape(-1)[idx])
+        np.testing.assert_array_equal(lazy.pixels(idx[::-1]), first[::-1])
+        np.testing.assert_array_equal(lazy.image, whole.image)
+        clean = _rendered_view().image
+        changed = float(np.mean(whole.image != clean))
+        assert 0.2 < changed < 0.6  # 30% redrawn (a fifth to the same class) and the blobs
+
+
+def test_blobs_are_the_ellipses_drawn():
+    """Each blob paints ((y - cy) / ry)^2 + ((x - cx) / rx)^2 <= 1, a later blob over an earlier one."""
+    noise = FrameNoise(0, 0.0, 5, np.array([[60.0, 50.0, 10.0, 20.0, 3.0], [65.0, 60.0, 5.0, 5.0, 1.0]]))
+    out = noise.apply(_image(0), np.arange(H * W), W).reshape(H, W)
+    yy, xx = np.mgrid[0:H, 0:W]
+    want = np.zeros((H, W), np.uint8)
+    for cy, cx, ry, rx, cls in noise.blobs:
+        want[((yy - cy) / ry) ** 2 + ((xx - cx) / rx) ** 2 <= 1.0] = cls
+    np.testing.assert_array_equal(out, want)
 
 
 # --- PerturbedDriver -----------------------------------------------------------------------------

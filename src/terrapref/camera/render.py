@@ -151,6 +151,11 @@ class SegmentationView:
         """Whether the whole image exists yet."""
         return self._image is not None
 
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(height, width) of the frame, without rendering it."""
+        return self._image.shape if self._image is not None else self._renderer.shape
+
     def pixels(self, flat_index: np.ndarray) -> np.ndarray:
         """Class ids at ``flat_index`` (row * width + col)."""
         if self._image is not None:

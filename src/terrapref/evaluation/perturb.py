@@ -2,7 +2,8 @@
 
 - Segmentation noise: independent label flips (a share of pixels gets a random class), and
   blob-shaped mislabels, the way a segmentation network errs (whole regions of the ground
-  painted with a wrong class for one frame).
+  painted with a wrong class for one frame); drawn per frame and applied to the pixels a
+  policy reads (:class:`NoisyView`), so a planner's run does not corrupt whole frames.
 - Pose noise: Gaussian error on the position and heading the planner is told.
 - Dropped frames: a frame does not arrive; the planner holds its last command for up to
   ``hold_s`` and then stops the vehicle until frames return (it never drives blind for long).
@@ -15,6 +16,7 @@ from collections import deque
 from dataclasses import asdict, dataclass, replace
 
 import numpy as np
+from numba import njit
 
 from terrapref.camera import SegmentationView
 from terrapref.scenario import Scenario
@@ -62,24 +64,102 @@ class Perturbation:
         return asdict(self)
 
 
+@dataclass(frozen=True, eq=False)
+class FrameNoise:
+    """One frame's segmentation noise, drawn once and applied to any pixel on demand.
+
+    Flips are independent per pixel (each relabelled with probability ``flip_rate`` to a class
+    drawn uniformly from 0 .. n_classes - 1), drawn from a counter-based hash of the frame's
+    ``seed`` and the pixel's index, so a pixel gets the same draw whether the whole frame or only
+    the planner's few thousand pixels are read, in any order. Blobs then paint over: ``blobs``
+    (B, 5) holds each one's centre row and column, radii (rows, columns) [px] and class, a later
+    blob over an earlier one.
+    """
+
+    seed: int
+    flip_rate: float
+    n_classes: int
+    blobs: np.ndarray
+
+    @classmethod
+    def draw(cls, p: Perturbation, rng: np.random.Generator, shape: tuple[int, int]) -> FrameNoise:
+        h, w = shape
+        seed = int(rng.integers(2**63)) if p.flip_rate else 0
+        blobs = []
+        for _ in range(rng.poisson(p.blobs) if p.blobs else 0):
+            r = int(rng.integers(p.blob_radius_px[0], p.blob_radius_px[1] + 1))
+            cy, cx = int(rng.integers(h // 2, h)), int(rng.integers(0, w))  # on the ground part of the view
+            ry, rx = max(1, int(r * rng.uniform(0.4, 1.0))), r
+            blobs.append((cy, cx, ry, rx, int(rng.integers(0, p.n_classes))))
+        return cls(seed, p.flip_rate, p.n_classes, np.array(blobs, dtype=np.float64).reshape(-1, 5))
+
+    def apply(self, ids: np.ndarray, flat_index: np.ndarray, width: int) -> np.ndarray:
+        """The class ids ``ids`` of the pixels ``flat_index`` (row * width + col) with this noise."""
+        return _noisy(np.ascontiguousarray(ids, dtype=np.uint8).reshape(-1), np.asarray(flat_index, dtype=np.int64).reshape(-1), width,
+                      np.uint64(self.seed), self.flip_rate, self.n_classes, self.blobs).reshape(np.shape(ids))
+
+
 def corrupt_image(image: np.ndarray, p: Perturbation, rng: np.random.Generator) -> np.ndarray:
     """A copy of ``image`` with flips and blobs (the input is left alone)."""
     if not p.corrupts_image:
         return image
-    out = image.copy()
-    h, w = out.shape
-    if p.flip_rate:
-        n = rng.binomial(out.size, p.flip_rate)
-        idx = rng.choice(out.size, size=n, replace=False)
-        out.reshape(-1)[idx] = rng.integers(0, p.n_classes, size=n, dtype=out.dtype)
-    for _ in range(rng.poisson(p.blobs) if p.blobs else 0):
-        r = int(rng.integers(p.blob_radius_px[0], p.blob_radius_px[1] + 1))
-        cy, cx = int(rng.integers(h // 2, h)), int(rng.integers(0, w))  # on the ground part of the view
-        ry, rx = max(1, int(r * rng.uniform(0.4, 1.0))), r
-        y0, y1, x0, x1 = max(0, cy - ry), min(h, cy + ry + 1), max(0, cx - rx), min(w, cx + rx + 1)
-        yy, xx = np.ogrid[y0:y1, x0:x1]
-        mask = ((yy - cy) / ry) ** 2 + ((xx - cx) / rx) ** 2 <= 1.0
-        out[y0:y1, x0:x1][mask] = rng.integers(0, p.n_classes)
+    noise = FrameNoise.draw(p, rng, image.shape)
+    return noise.apply(image, np.arange(image.size), image.shape[1]).reshape(image.shape)
+
+
+class NoisyView(SegmentationView):
+    """A frame's segmentation with a :class:`FrameNoise`, rendered as far as it is read: the
+    planner's pixels alone, or the whole frame for a policy that reads it (the same values)."""
+
+    __slots__ = ("_base", "_noise")
+
+    def __init__(self, base: SegmentationView, noise: FrameNoise) -> None:
+        self._image, self._renderer, self._pose = None, None, None
+        self._base, self._noise = base, noise
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self._base.shape
+
+    @property
+    def image(self) -> np.ndarray:
+        if self._image is None:
+            clean = self._base.image
+            self._image = self._noise.apply(clean, np.arange(clean.size), clean.shape[1]).reshape(clean.shape)
+        return self._image
+
+    def pixels(self, flat_index: np.ndarray) -> np.ndarray:
+        if self._image is not None:
+            return super().pixels(flat_index)
+        return self._noise.apply(self._base.pixels(flat_index), flat_index, self.shape[1])
+
+
+@njit(cache=True, nogil=True)
+def _mix(z: np.uint64) -> np.uint64:
+    """splitmix64's finaliser: a well-mixed 64-bit value of ``z``."""
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
+
+
+@njit(cache=True, nogil=True)
+def _noisy(ids: np.ndarray, flat_index: np.ndarray, width: int, seed: np.uint64, flip_rate: float, n_classes: int,
+           blobs: np.ndarray) -> np.ndarray:
+    """Per pixel: a flip with probability ``flip_rate`` (to a uniform class), then the blobs in order."""
+    out = ids.copy()
+    golden = np.uint64(0x9E3779B97F4A7C15)
+    for i in range(flat_index.shape[0]):
+        k = flat_index[i]
+        if flip_rate > 0.0:
+            z = _mix(seed + np.uint64(k + 1) * golden)
+            if np.float64(z >> np.uint64(11)) * 2.0**-53 < flip_rate:
+                out[i] = np.uint8((_mix(z) >> np.uint64(32)) * np.uint64(n_classes) >> np.uint64(32))
+        if blobs.shape[0]:
+            y, x = k // width, k % width
+            for b in range(blobs.shape[0]):
+                dy, dx = (y - blobs[b, 0]) / blobs[b, 2], (x - blobs[b, 1]) / blobs[b, 3]
+                if dy * dy + dx * dx <= 1.0:
+                    out[i] = np.uint8(blobs[b, 4])
     return out
 
 
@@ -112,7 +192,7 @@ class PerturbedDriver:
             dyaw = np.radians(self.rng.normal(0.0, p.pose_noise_deg)) if p.pose_noise_deg else 0.0
             pose = Pose(pose[0] + dx, pose[1] + dy, pose[2] + dyaw)
         self.blind_s = 0.0
-        view = SegmentationView.of(corrupt_image(seen.image, p, self.rng)) if p.corrupts_image else seen.view
+        view = NoisyView(seen.view, FrameNoise.draw(p, self.rng, seen.view.shape)) if p.corrupts_image else seen.view
         self.last = self.inner.act(replace(seen, view=view, pose=pose))
         return self.last
 
