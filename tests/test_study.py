@@ -413,16 +413,16 @@ def test_study_runs_agree_with_each_other(tiny_study):
 
 
 @pytest.mark.slow
-def test_study_logs_five_stages_in_order(tiny_study):
+def test_study_logs_four_stages_in_order(tiny_study):
     _, lines = tiny_study
-    stages = [next(i for i, line in enumerate(lines) if line.startswith(f"[{k}/5]")) for k in range(1, 6)]
+    stages = [next(i for i, line in enumerate(lines) if line.startswith(f"[{k}/4]")) for k in range(1, 5)]
     assert stages == sorted(stages)
-    assert sum(line.startswith("[") for line in lines) == 5
-    assert lines[stages[0]].startswith("[1/5] demonstrations: 1 seed(s) x 2 profiles")
+    assert sum(line.startswith("[") for line in lines) == 4
+    assert lines[stages[0]].startswith("[1/4] demonstrations and featurisation: 1 seed(s) x 2 profiles")
     # 3 learned + 3 at 0.5 min + profile + 3 ablations, and the one drive of the teaching recipe
-    assert lines[stages[2]].startswith("[3/5] training and teaching: 10 models, and 1 drives of teach_course")
+    assert lines[stages[1]].startswith("[2/4] training and teaching: 10 models, and 1 drives of teach_course")
     # 17 as before, and the taught model and its driver on the one layout
-    assert lines[stages[3]] == "[4/5] closed-loop evaluation: 19 runs over 2 scenarios ..."
+    assert lines[stages[2]] == "[3/4] closed-loop evaluation: 19 runs over 2 scenarios ..."
 
 
 # --- the command --------------------------------------------------------------------------------------

@@ -17,7 +17,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from terrapref.camera import CameraConfig
+from terrapref.camera import CameraConfig, SegmentationView
 from terrapref.demos.recording import Recording
 from terrapref.features import FeatureConfig
 from terrapref.learning.model_file import FORMAT, model_context
@@ -83,6 +83,19 @@ def downsample(images: np.ndarray, stride: int) -> np.ndarray:
     return np.ascontiguousarray(images[..., o::stride, o::stride])
 
 
+def _grid(shape: tuple[int, int], stride: int) -> tuple[np.ndarray, tuple[int, int]]:
+    """The flat pixel indices :func:`downsample` keeps of a (H, W) frame, and the downsampled shape."""
+    h, w = shape
+    rows, cols = np.arange(h)[stride // 2 :: stride], np.arange(w)[stride // 2 :: stride]
+    return (rows[:, None] * w + cols[None, :]).ravel(), (len(rows), len(cols))
+
+
+def _downsampled_view(view: SegmentationView, stride: int) -> np.ndarray:
+    """:func:`downsample` of a view's frame, reading only the pixels kept."""
+    grid, small = _grid(view.shape, stride)
+    return view.pixels(grid).reshape(small)
+
+
 def _onehot(small: np.ndarray, n_classes: int) -> torch.Tensor:
     """(B, h, w) uint8 -> (B, n_classes, h, w) float32."""
     ids = torch.from_numpy(small.astype(np.int64))
@@ -105,7 +118,8 @@ def cnn_samples(recordings: list[Recording], features: FeatureConfig, stride: in
         for i in range(len(rec)):
             pose = tuple(rec.poses[i])
             s = tracker.update(rec.poses[i, :2])
-            images.append(downsample(rec.image(i), stride))
+            # a recording kept in memory renders only the pixels kept (the same values)
+            images.append(_downsampled_view(rec.views[i], stride) if rec.in_memory else downsample(rec.image(i), stride))
             paths.append(path_ahead(path, pose, s).ravel() / PATH_SCALE_M)
         labels.append(np.asarray(control.label_of(rec.commands[:, 1]), dtype=np.int64).reshape(-1))
     return np.stack(images), np.asarray(paths, dtype=np.float32), np.concatenate(labels)
@@ -182,9 +196,7 @@ class CnnPolicy(Policy):
         super().__init__(features, camera, classes, profile, path)
         self.net, self.config = net.eval(), config
         # The pixels downsample() keeps, as flat indices: a frame is read only there.
-        h, w = self.camera.height_px, self.camera.width_px
-        rows, cols = np.arange(h)[config.stride // 2 :: config.stride], np.arange(w)[config.stride // 2 :: config.stride]
-        self._grid, self._small_hw = (rows[:, None] * w + cols[None, :]).ravel(), (len(rows), len(cols))
+        self._grid, self._small_hw = _grid((self.camera.height_px, self.camera.width_px), config.stride)
 
     @classmethod
     def from_tensors(cls, tensors: dict[str, np.ndarray], meta: dict, features: FeatureConfig, camera: CameraConfig,

@@ -67,24 +67,25 @@ def perturbation(kind: str, level: float) -> Perturbation:
 # -- jobs (module level: they run in worker processes) ---------------------------------------
 
 
-def _record_job(args: tuple[str, int, tuple[str, ...]]) -> list[str]:
-    from terrapref.recipes import record_demonstrations
+def _demonstration_job(args: tuple[str, int, tuple[str, ...], tuple[tuple[str, str, int | None], ...]]) -> list[str]:
+    """One seed's demonstrations under one profile, kept in memory, featurised into ``sets``:
+    (file, kind, horizon) each, a dataset (``kind`` "U", with horizon n) or the CNN's samples."""
+    from terrapref.recipes import demonstrate
 
-    workdir, seed, profile = args
-    return [str(p) for p in record_demonstrations(DEMONSTRATIONS, workdir, seed, PreferenceProfile.parse(list(profile)))]
+    workdir, seed, profile, sets = args
+    recordings = demonstrate(DEMONSTRATIONS, workdir, seed, PreferenceProfile.parse(list(profile)), write=False)
+    return [_featurise_set(recordings, out, kind, n) for out, kind, n in sets]
 
 
-def _featurise_job(args: tuple[list[str], str, str, int | None]) -> str:
+def _featurise_set(recordings: list, out: str, kind: str, n: int | None) -> str:
     """Featurise recordings into ``out``: a dataset (``kind`` "U", with horizon n) or CNN samples."""
     from terrapref.demos.dataset import build_dataset, save_dataset
-    from terrapref.demos.recording import read_recording
     from terrapref.tensorfile import write_tensor_file
 
-    recs, out, kind, n = args
-    recordings = [read_recording(r) for r in recs]
     features = FeatureConfig()
     if n is not None:
         features = replace(features, preference=replace(features.preference, n_steps=n))
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
     if kind == "U":
         save_dataset(build_dataset(recordings, features), out)
     else:
@@ -240,53 +241,44 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, engine: Engine | None
     work.mkdir(parents=True, exist_ok=True)
     ws = _Workspace(plan, work, engine or Engine(), log)
     timings: dict[str, float] = {}
-    with _timed(timings, "demonstrations"):
-        recordings = _demonstrate(ws)
-    with _timed(timings, "featurisation"):
-        _featurise(ws, recordings)
+    with _timed(timings, "demonstrations and featurisation"):
+        _demonstrate(ws)
     with _timed(timings, "training and teaching"):
         trained, taught = _train_and_teach(ws)
     with _timed(timings, "evaluation"):
         runs = _evaluate(ws, trained, taught)
     report_started = time.perf_counter()
-    log("[5/5] tables, figures and STUDY.md ...")
+    log("[4/4] tables, figures and STUDY.md ...")
     study = {"plan": _plan_dict(plan), "trained": [t.to_dict() for t in [*trained, *taught]], "runs": [r.to_dict() for r in runs]}
     write_text_atomic(out / "study.json", json.dumps(study, indent=1, default=float))
     return write_study(out, plan, trained, runs, timings, report_started=report_started)
 
 
-def _demonstrate(ws: _Workspace) -> dict[tuple[int, tuple[str, ...]], list[str]]:
-    """Stage 1: per seed, the demonstrations under the default profile and under the other; (seed, profile) -> recordings."""
-    default = PreferenceProfile.default().order
-    seeds = range(ws.plan.seeds)
-    ws.log(f"[1/5] demonstrations: {len(seeds)} seed(s) x 2 profiles x {DEMONSTRATIONS.demonstrations} runs ...")
-    jobs = [(str(ws.work / f"{tag}_s{s}"), s, prof) for s in seeds for tag, prof in (("default", default), ("alt", ALT_PROFILE))]
-    return dict(zip([(s, prof) for _, s, prof in jobs], ws.map(_record_job, jobs, "demonstration set")))
-
-
-def _featurise(ws: _Workspace, recs: dict[tuple[int, tuple[str, ...]], list[str]]) -> None:
-    """Stage 2: per seed, the utilities and the CNN's samples of the default demonstrations, the
-    utilities of the other profile's, and the utilities at every ablated horizon."""
+def _demonstrate(ws: _Workspace) -> None:
+    """Stage 1: per seed, the demonstrations under the default profile and under the other (kept in
+    memory, as the reproduction's are), and from them the utilities and the CNN's samples of the
+    default ones, the utilities of the other profile's, and the utilities at every ablated horizon."""
     default = PreferenceProfile.default().order
     jobs = []
     for s in range(ws.plan.seeds):
         base = ws.work / f"default_s{s}"
-        jobs += [(recs[(s, default)], str(base / "U.safetensors"), "U", None), (recs[(s, default)], str(base / "cnn.safetensors"), "cnn", None),
-                 (recs[(s, ALT_PROFILE)], str(ws.work / f"alt_s{s}" / "U.safetensors"), "U", None)]
-        jobs += [(recs[(s, default)], str(base / f"U_n{n}.safetensors"), "U", n) for n in ws.plan.horizons]
-    ws.log(f"[2/5] featurisation: {len(jobs)} sets ...")
-    ws.map(_featurise_job, jobs, "set")
+        sets = ((str(base / "U.safetensors"), "U", None), (str(base / "cnn.safetensors"), "cnn", None),
+                *((str(base / f"U_n{n}.safetensors"), "U", n) for n in ws.plan.horizons))
+        jobs += [(str(base), s, default, sets), (str(ws.work / f"alt_s{s}"), s, ALT_PROFILE, ((str(ws.work / f"alt_s{s}" / "U.safetensors"), "U", None),))]
+    ws.log(f"[1/4] demonstrations and featurisation: {ws.plan.seeds} seed(s) x 2 profiles x {DEMONSTRATIONS.demonstrations} runs, "
+           f"{sum(len(j[3]) for j in jobs)} sets ...")
+    ws.map(_demonstration_job, jobs, "demonstration set")
 
 
 def _train_and_teach(ws: _Workspace) -> tuple[list[TrainedModel], list[TaughtModel]]:
-    """Stage 3: every model trained from the demonstrations, and (section 6) every drive of the
+    """Stage 2: every model trained from the demonstrations, and (section 6) every drive of the
     teaching recipe's course and its model: one grid, so that neither kind waits for the other's
     last job."""
     from terrapref.recipes import recipe_named
 
     plan = ws.plan
     train, teach = _train_jobs(plan, ws.work), teach_jobs(plan, ws.work)
-    ws.log(f"[3/5] training and teaching: {len(train)} models, and {len(teach)} drives of {recipe_named(plan.recipe).course} and "
+    ws.log(f"[2/4] training and teaching: {len(train)} models, and {len(teach)} drives of {recipe_named(plan.recipe).course} and "
            f"their models (recipe {plan.recipe}; {len(plan.orders)} orders, {len(plan.styles)} driver styles, {plan.seeds} seed(s)) ...")
     done = ws.map(_model_job, [*teach, *train], "model")  # the drives and their recipe's training first: the longest jobs
     return done[len(teach) :], done[: len(teach)]
@@ -325,9 +317,9 @@ def _train_jobs(plan: StudyPlan, work: Path) -> list[TrainJob]:
 
 
 def _evaluate(ws: _Workspace, trained: list[TrainedModel], taught: list[TaughtModel]) -> list[StudyRun]:
-    """Stage 4: every closed-loop run, tagged with its place in the study."""
+    """Stage 3: every closed-loop run, tagged with its place in the study."""
     planned = _evaluation_runs(ws.plan, trained, taught)
-    ws.log(f"[4/5] closed-loop evaluation: {len(planned)} runs over {len(ws.plan.scenarios()) + len(ws.plan.layouts)} scenarios ...")
+    ws.log(f"[3/4] closed-loop evaluation: {len(planned)} runs over {len(ws.plan.scenarios()) + len(ws.plan.layouts)} scenarios ...")
     results = run_many([spec for spec, _ in planned], progress=every_tenth(ws.log), engine=ws.engine)
     return [StudyRun(tag, r.scenario, r.metrics) for (_, tag), r in zip(planned, results, strict=True)]
 
