@@ -341,6 +341,17 @@ def _by(runs: list[StudyRun], **keys) -> StudyRun:
 
 
 @pytest.mark.slow
+def test_the_study_on_ray_gives_the_local_engines_results(tiny_study, tmp_path):
+    """The tiny study again on a local Ray instance with 2 CPUs: every run and model the same."""
+    path, _ = tiny_study
+    ray_path = run_study(tmp_path / "ray", TINY, Engine("ray", workers=2), log=lambda _: None)
+    local, on_ray = (json.loads((p.parent / "study.json").read_text()) for p in (path, ray_path))
+    assert len(local["runs"]) > 10 and local["runs"] == on_ray["runs"]
+    kept = ("study", "method", "seed", "tag", "samples", "epochs", "order", "style")
+    assert [{k: t.get(k) for k in kept} for t in local["trained"]] == [{k: t.get(k) for k in kept} for t in on_ray["trained"]]
+
+
+@pytest.mark.slow
 def test_study_writes_report_and_figures(tiny_study):
     path, _ = tiny_study
     assert path == path.parent / "STUDY.md"

@@ -737,7 +737,7 @@ def _reproduce_parser(sub: argparse._SubParsersAction) -> None:
 def _study_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("study", help="baselines, data efficiency, profiles, robustness and ablations; write STUDY.md")
     p.add_argument("--out", required=True, type=Path)
-    p.add_argument("--quick", action="store_true", help="one seed and fewer levels (about 3 minutes)")
+    p.add_argument("--quick", action="store_true", help="one seed and fewer levels (about a minute on 2 cores)")
     p.add_argument("--seeds", type=int, help="training seeds (default: 3, or 1 with --quick)")
     p.add_argument("--recipe", metavar="NAME", help="the recipe section 6 teaches every order and style with (default: teach)")
     _add_engine_args(p)
