@@ -13,5 +13,7 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   echo "setting up .venv (pinned dependencies from requirements.lock) ..."
   .venv/bin/python -m pip install --quiet --disable-pip-version-check "torch==2.13.0"
   .venv/bin/python -m pip install --quiet --disable-pip-version-check -c requirements.lock -e ".[test]"
+  # Compile the numerical loops now (kept beside their sources) rather than in the first job.
+  .venv/bin/python -m terrapref.warm_up
   echo "$want" > "$stamp"
 fi

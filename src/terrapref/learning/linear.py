@@ -131,7 +131,7 @@ def _fit_products(g: np.ndarray, rows: np.ndarray, unit: float, bits: int, m: in
     :func:`exact.matmul` rounds it, every sum of products exact."""
     k, nm = rows.shape
     n = nm // m
-    block, column, totals = np.empty(_BLOCK_FRAMES * m), np.empty(_BLOCK_FRAMES * m), np.empty(k)
+    block, totals = np.empty(_BLOCK_FRAMES * m), np.empty(k)
     for chunk_start in range(0, nm, exact.MAX_EXACT):  # the weights' product: N m terms
         chunk_stop = min(nm, chunk_start + exact.MAX_EXACT)
         a_bits = min(26, exact._chunk_bits(chunk_stop - chunk_start) - bits)
@@ -143,9 +143,7 @@ def _fit_products(g: np.ndarray, rows: np.ndarray, unit: float, bits: int, m: in
             for t in range(length):
                 block[t] = np.rint(g[r0 + t] * scale)
             for c in range(k):
-                for t in range(length):
-                    column[t] = rows[c, r0 + t]
-                totals[c] += exact._dot(block[:length], column[:length])
+                totals[c] += exact._dot(block[:length], rows[c, r0 : r0 + length])
         for c in range(k):
             part = totals[c] * (a_unit * unit)
             grad[c] = part if chunk_start == 0 else grad[c] + part
