@@ -84,7 +84,7 @@ def test_the_train_flags_cover_every_documented_training_field():
     add_arguments(parser, TrainConfig)
     flags = {a.option_strings[0] for a in parser._actions if a.option_strings and a.option_strings[0] != "-h"}
     assert flags == {"--epochs", "--lr", "--batch-size", "--hidden", "--activation", "--skip", "--members", "--class-balance",
-                     "--mirror", "--second-stage", "--stage-weight", "--seed"}
+                     "--mirror", "--steady-labels", "--second-stage", "--stage-weight", "--seed"}
     args = parser.parse_args(["--no-second-stage", "--members", "1"])
     config = apply_arguments(args, RECIPES["teach"].train)
     assert config.second_stage is None and config.classifier.members == 1

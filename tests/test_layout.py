@@ -106,7 +106,7 @@ LAYERS = [
     {"interop"},
     {"evaluation", "teleop"},
     {"report"},
-    {"cli", "runtime"},
+    {"cli", "runtime", "warm_up"},
 ]
 
 

@@ -195,7 +195,8 @@ def _print_what_the_drive_shows(rec) -> None:
     dataset = build_dataset([rec], recipe_named(DEFAULT_RECIPE).features(), progress=lambda k, n: bar.update(k, f"{len(rec)} frames"))
     bar.close()
     print(f"what the drive shows (recipe {DEFAULT_RECIPE}'s features, {len(dataset)} frames):")
-    for line in identify(dataset).lines():
+    recipe = recipe_named(DEFAULT_RECIPE)
+    for line in identify(dataset, steady=recipe.train.data.steady_labels).lines():
         print(f"  {line}")
 
 
@@ -323,6 +324,8 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
         best = r.history[r.best_epoch - 1]
         label = f"member {j + 1} " if members > 1 else ""
         chosen.append(f"{label}epoch {r.best_epoch}: val loss {best.val_loss:.4f}, val acc {best.val_acc:.3f}")
+    if result.steadying is not None:
+        print(result.steadying.line())
     if result.identifiability is not None:
         print("what the demonstrations show (stored in the model):")
         for line in result.identifiability.lines():

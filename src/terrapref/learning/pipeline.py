@@ -36,6 +36,7 @@ def model_meta(dataset: Dataset, config: TrainConfig, result: TrainResult, sourc
         "best_epoch": result.best_epoch,
         "steps": result.steps,
         **({"identifiability": result.identifiability.to_dict()} if result.identifiability is not None else {}),
+        **({"steadying": result.steadying.to_dict()} if result.steadying is not None else {}),
         **({"utility": {"w": result.utility.w.tolist(), "b": result.utility.b.tolist(), "weight": config.second_stage.weight,
                         "fit": "lookahead" if dataset.U2 is not None else "frames"}} if result.utility is not None else {}),
         **({"members": [{"seed": seed, "best_epoch": r.best_epoch, "history": [asdict(h) for h in r.history]}

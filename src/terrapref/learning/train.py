@@ -23,6 +23,7 @@ from terrapref.learning import exact, kernels
 from terrapref.learning.identify import Identifiability, identifiability
 from terrapref.learning.linear import LinearUtility, fit_linear_utility, fit_lookahead_utility
 from terrapref.learning.mlp import Adam, TrainableClassifier, cross_entropy, init_weights, round_inputs
+from terrapref.learning.steady import Steadying, steady_labels
 from terrapref.learning.network import ClassifierConfig, member_prefix
 
 
@@ -61,10 +62,14 @@ class DataOptions:
             likewise): the preference does not depend on the side a patch is on, and a
             demonstration shows each pair on one side only. Needs a symmetric w grid.
         ignore_features: utility columns (by name: "distance", "mud", ...) that C never sees.
+        steady_labels: when the demonstrating hand's tremor exceeds half the spacing of the
+            control set's yaw rates, take the labels from a moving average of w
+            (terrapref.learning.steady); a steadier hand's labels stay as recorded.
     """
 
     class_balance: bool = option(False, "weight the loss by inverse label frequency")
     mirror: bool = option(False, "add left-right mirrored copies of the training samples")
+    steady_labels: bool = option(False, "labels from a moving average of w when the hand shakes more than half the w grid's spacing")
     ignore_features: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
@@ -195,6 +200,7 @@ class TrainResult:
     members: list[TrainResult] = field(default_factory=list)
     utility: LinearUtility | None = None  # the linear utility model, when TrainConfig.second_stage asks for it
     identifiability: Identifiability | None = None  # what the data show of the preference (terrapref.learning.identify)
+    steadying: Steadying | None = None  # the hand's tremor and what was done about it, with DataOptions.steady_labels
 
 
 def _ensemble(results: list[TrainResult]) -> TrainResult:
@@ -238,12 +244,11 @@ def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callabl
     alone (the study).
     """
     config = config or TrainConfig()
-    if config.classifier.members == 1:
-        result = _train(dataset, config, progress, on_epoch and (lambda *a: on_epoch(0, *a)))
-    else:
-        one = replace(config.classifier, members=1)
-        result = _ensemble([_train(dataset, replace(config, seed=seed, classifier=one), progress, on_epoch and (lambda *a, j=j: on_epoch(j, *a)))
-                            for j, seed in enumerate(config.member_seeds)])
+    steadying = None
+    if config.data.steady_labels:
+        dataset, steadying = steady_labels(dataset)
+    result = _train_classifier(dataset, config, progress, on_epoch)
+    result.steadying = steadying
     if not identify and config.second_stage is None:
         return result
     # The linear utility: the second stage's (when asked for), and the identifiability report's.
@@ -254,9 +259,23 @@ def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callabl
     return result
 
 
-def identify(dataset: Dataset, mirror: bool = True) -> Identifiability:
+def _train_classifier(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetrics], None] | None,
+                      on_epoch: EpochHook | None) -> TrainResult:
+    """C alone: one network, or an ensemble of members trained one after another."""
+    if config.classifier.members == 1:
+        result = _train(dataset, config, progress, on_epoch and (lambda *a: on_epoch(0, *a)))
+    else:
+        one = replace(config.classifier, members=1)
+        result = _ensemble([_train(dataset, replace(config, seed=seed, classifier=one), progress, on_epoch and (lambda *a, j=j: on_epoch(j, *a)))
+                            for j, seed in enumerate(config.member_seeds)])
+    return result
+
+
+def identify(dataset: Dataset, mirror: bool = True, steady: bool = False) -> Identifiability:
     """What ``dataset`` shows of the driver's preference, without training C (``terrapref inspect``):
-    the same report ``train`` stores in the model."""
+    the same report ``train`` stores in the model (``steady``: labels as ``DataOptions.steady_labels`` makes them)."""
+    if steady:
+        dataset, _ = steady_labels(dataset)
     utility, gamma = _fit_utility(dataset, mirror)
     return _identifiability(dataset, utility, gamma)
 

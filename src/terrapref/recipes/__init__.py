@@ -5,7 +5,8 @@ Named recipes (:data:`RECIPES`, ``terrapref recipes``; ``--recipe NAME`` in ``tr
 
 - ``teach`` (the default, :data:`DEFAULT_RECIPE`): the product's. One drive of ``teach_course``
   with disturbances; C with a residual path, a class-balanced loss and mirrored samples, 100
-  epochs at learning rate 3e-3, an ensemble of three; the second stage's utility fitted through the look-ahead.
+  epochs at learning rate 3e-3, an ensemble of three; the second stage's utility fitted through the look-ahead;
+  labels from a moving average of w when the hand shakes (terrapref.learning.steady).
 - ``ours``: the paper's setting done well: two drives of ``train_course`` with disturbances,
   the same C (one network), the second stage's utility fitted frame by frame. Used by
   ``terrapref reproduce`` beside ``paper``.
@@ -94,7 +95,8 @@ OURS = Recipe("ours", demonstrations=2, train=_RECOMMENDED,
               summary="two drives of train_course: the paper's setting done well (the reproduction's Tables 1 and 2); "
                       "scored 94.7% of test zones (71/75), 0 collisions in terrapref reproduce")
 TEACH = Recipe("teach", course="teach_course", lookahead=True,
-               train=replace(_RECOMMENDED, classifier=ClassifierConfig(skip=True, members=3), second_stage=SecondStageConfig(weight=5.0)),
+               train=replace(_RECOMMENDED, classifier=ClassifierConfig(skip=True, members=3), second_stage=SecondStageConfig(weight=5.0),
+                             data=replace(_RECOMMENDED.data, steady_labels=True)),
                disturbance=DisturbanceConfig(rate_hz=0.3),
                summary="one drive of teach_course: any preference order from five minutes (the default); scored "
                        "98.7% of test zones (74/75) in terrapref reproduce, and the driver's choice in 93.2% of zones "
