@@ -127,44 +127,10 @@ def _frame_gradients(rows: np.ndarray, w_ints: np.ndarray, u: float, b: np.ndarr
 @njit(cache=True, nogil=True)
 def _fit_products(g: np.ndarray, rows: np.ndarray, unit: float, bits: int, m: int, grad: np.ndarray) -> None:
     """``grad`` (K + 1 + m,) = ``matmul(g[None], Rounded(rows.T, unit, bits))[0]`` then
-    ``matmul(ones((1, N)), g.reshape(N, m))[0]``: g rounded chunk by chunk as
-    :func:`exact.matmul` rounds it, every sum of products exact."""
-    k, nm = rows.shape
-    n = nm // m
-    block, totals = np.empty(_BLOCK_FRAMES * m), np.empty(k)
-    for chunk_start in range(0, nm, exact.MAX_EXACT):  # the weights' product: N m terms
-        chunk_stop = min(nm, chunk_start + exact.MAX_EXACT)
-        a_bits = min(26, exact._chunk_bits(chunk_stop - chunk_start) - bits)
-        e = math.frexp(exact._top(g[chunk_start:chunk_stop]))[1]
-        scale, a_unit = math.ldexp(1.0, a_bits - e), math.ldexp(1.0, e - a_bits)
-        totals[:] = 0.0
-        for r0 in range(chunk_start, chunk_stop, block.shape[0]):
-            length = min(block.shape[0], chunk_stop - r0)
-            for t in range(length):
-                block[t] = np.rint(g[r0 + t] * scale)
-            for c in range(k):
-                totals[c] += exact._dot(block[:length], rows[c, r0 : r0 + length])
-        for c in range(k):
-            part = totals[c] * (a_unit * unit)
-            grad[c] = part if chunk_start == 0 else grad[c] + part
-    sums = np.empty(m)
-    for f_start in range(0, n, exact.MAX_EXACT):  # the biases' product: N terms per trajectory
-        f_stop = min(n, f_start + exact.MAX_EXACT)
-        room = exact._chunk_bits(f_stop - f_start)
-        one_bits = room // 2
-        # 1 on its grid is 2 ** (bits - 1) units of 2 ** (1 - bits): a power of two, so it
-        # multiplies the exact sum of g's integers instead of each term, with the same result.
-        one = math.ldexp(1.0, one_bits - 1)
-        e = math.frexp(exact._top(g[f_start * m : f_stop * m]))[1]
-        g_bits = min(26, room - one_bits)
-        scale, g_unit = math.ldexp(1.0, g_bits - e), math.ldexp(1.0, e - g_bits)
-        sums[:] = 0.0
-        for f in range(f_start, f_stop):
-            for j in range(m):
-                sums[j] += np.rint(g[f * m + j] * scale)
-        for j in range(m):
-            part = (sums[j] * one) * (math.ldexp(1.0, 1 - one_bits) * g_unit)
-            grad[k + j] = part if f_start == 0 else grad[k + j] + part
+    ``matmul(ones((1, N)), g.reshape(N, m))[0]``, as :func:`exact.matmul` rounds and sums them."""
+    k = rows.shape[0]
+    exact.vec_mat_rounded(g, rows, unit, bits, grad[:k])
+    exact.vec_mat(np.ones(g.shape[0] // m), g, m, grad[k:])
 
 
 @njit(cache=True, nogil=True)
