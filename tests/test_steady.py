@@ -74,7 +74,7 @@ def test_a_steady_hand_keeps_its_labels_and_its_model_bit_for_bit():
 
 def test_a_shaky_hands_labels_come_from_its_intent():
     data = _with_hand(0.08)
-    intent = moving_average(data.w, data.source, 1)  # as recorded
+    as_recorded = moving_average(data.w, data.source, 1)  # a 1-frame average is w itself
     steadied, report = steady_labels(data)
     assert report.window > 1 and 0.0 < report.changed < 1.0
     assert report.tremor_rps == pytest.approx(0.08, rel=0.2)
@@ -82,6 +82,6 @@ def test_a_shaky_hands_labels_come_from_its_intent():
     assert np.array_equal(steadied.U, data.U) and not np.array_equal(steadied.labels, data.labels)
     # Averaging removes label noise: fewer frame-to-frame label changes than recorded.
     assert np.count_nonzero(np.diff(steadied.labels)) < np.count_nonzero(np.diff(data.labels))
-    assert np.array_equal(intent, data.w.astype(np.float64))
+    assert np.array_equal(as_recorded, data.w.astype(np.float64))
     result = train(data, train_config(epochs=1, steady_labels=True), identify=False)
     assert result.steadying == report

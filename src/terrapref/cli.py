@@ -191,11 +191,11 @@ def _print_what_the_drive_shows(rec) -> None:
     if len(rec) == 0:
         print("what the drive shows: nothing (no frames)")
         return
+    recipe = recipe_named(DEFAULT_RECIPE)
     bar = Progress("featurize", 1)
-    dataset = build_dataset([rec], recipe_named(DEFAULT_RECIPE).features(), progress=lambda k, n: bar.update(k, f"{len(rec)} frames"))
+    dataset = build_dataset([rec], recipe.features(), progress=lambda k, n: bar.update(k, f"{len(rec)} frames"))
     bar.close()
     print(f"what the drive shows (recipe {DEFAULT_RECIPE}'s features, {len(dataset)} frames):")
-    recipe = recipe_named(DEFAULT_RECIPE)
     for line in identify(dataset, steady=recipe.train.data.steady_labels).lines():
         print(f"  {line}")
 

@@ -98,10 +98,10 @@ def steady_labels(dataset: Dataset) -> tuple[Dataset, Steadying]:
     dataset itself, unchanged, otherwise."""
     control = dataset.feature_config.preference.control
     grid = np.sort(np.asarray(control.w_rps, dtype=np.float64))
-    spacing = float(np.min(np.diff(grid))) if len(grid) > 1 else math.inf
+    spacing = float(np.min(np.diff(grid)))  # a control set has at least two yaw rates
     tremor = hand_tremor(dataset.w, dataset.source)
     window = window_for(tremor, spacing)
-    if window == 1 or len(dataset) == 0:
+    if window == 1:  # includes an empty dataset (no tremor to read)
         return dataset, Steadying(tremor, spacing, 1, 0.0)
     labels = np.asarray(control.label_of(moving_average(dataset.w, dataset.source, window)), dtype=np.int64).reshape(len(dataset))
     changed = float(np.mean(labels != dataset.labels))

@@ -112,7 +112,6 @@ def recipe_named(name: str, flag: str = "--recipe") -> Recipe:
     return RECIPES[name]
 
 
-
 @dataclass
 class RecipeOutput:
     """What :func:`run_recipe` made: the model, the recordings it wrote (none when the
