@@ -20,6 +20,7 @@ import numpy as np
 
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_many
 from terrapref.grid import Engine
+from terrapref.report.select import job_folder
 from terrapref.scenario import resolve_scenario
 from terrapref.scenario.generate import zone_kind
 from terrapref.scenario.path import ReferencePath
@@ -27,20 +28,26 @@ from terrapref.scenario.path import ReferencePath
 STRADDLE_M = (0.5, 1.5)  # a distance from the path that leaves the footprint across a middle patch's edge
 
 
-def largest_offsets(course: str, xy: np.ndarray, window_m: float) -> dict[str, float]:
-    """Per triple zone of ``course``: the largest |distance from the path| [m] of ``xy`` within ``window_m`` of the zone's centre."""
-    scenario = resolve_scenario(course)
-    path = ReferencePath(scenario.waypoints)
-    along = np.array([path.project(p) for p in xy])  # (T, 2): arc length, signed distance
-    out = {}
-    for zone in scenario.zones:
-        if zone_kind(zone.label) != "triple":
-            continue
-        centre = zone.shape.vertices.mean(axis=0) if hasattr(zone.shape, "vertices") else np.asarray(zone.shape.center)
-        s0, _ = path.project(np.asarray(centre, dtype=float))
-        near = np.abs(along[:, 0] - s0) <= window_m
-        out[zone.id] = float(np.abs(along[near, 1]).max()) if near.any() else float("nan")
-    return out
+class Layout:
+    """One layout's reference path and where along it each triple zone's centre lies."""
+
+    def __init__(self, course: str) -> None:
+        scenario = resolve_scenario(course)
+        self.path = ReferencePath(scenario.waypoints)
+        self.triples: dict[str, float] = {}  # zone id -> arc length of its centre [m]
+        for zone in scenario.zones:
+            if zone_kind(zone.label) == "triple":
+                centre = zone.shape.vertices.mean(axis=0) if hasattr(zone.shape, "vertices") else np.asarray(zone.shape.center)
+                self.triples[zone.id] = self.path.project(np.asarray(centre, dtype=float))[0]
+
+    def largest_offsets(self, xy: np.ndarray, window_m: float) -> dict[str, float]:
+        """Per triple zone: the largest |distance from the path| [m] of ``xy`` within ``window_m`` of the zone's centre."""
+        along = np.array([self.path.project(p) for p in xy])  # (T, 2): arc length, signed distance
+        out = {}
+        for zone, s0 in self.triples.items():
+            near = np.abs(along[:, 0] - s0) <= window_m
+            out[zone] = float(np.abs(along[near, 1]).max()) if near.any() else float("nan")
+        return out
 
 
 def main() -> None:
@@ -56,23 +63,24 @@ def main() -> None:
     layouts, style = sel["layouts"], sel.get("style", "default")
     rows = [r for r in saved["zones"] if r["recipe"] == args.recipe and r["kind"] == "triple"]
     agrees = {(tuple(r["order"]), r["seed"], r["scenario"], r["zone"]): r["agrees"] for r in rows}
+    seed_of: dict[str, int] = {}  # model file -> its training seed
     specs = []
     for order in map(tuple, sel["orders"]):
-        job = "_".join(c[:2] for c in order[:3])
         for seed in range(sel["seeds"]):
-            model = args.selection / "work" / f"{job}_s{seed}" / args.recipe / "model.safetensors"
-            specs += [RunSpec(c, 0, PLANNER, str(model), order) for c in layouts]
+            model = str(job_folder(args.selection, order, seed) / args.recipe / "model.safetensors")
+            seed_of[model] = seed
+            specs += [RunSpec(c, 0, PLANNER, model, order) for c in layouts]
     specs += [RunSpec(c, 0, EXPERT, None, tuple(o), style=style) for o in sel["orders"] for c in layouts]
     results = run_many(specs, engine=Engine(workers=args.workers))
-    driver = {(s.profile, s.scenario): largest_offsets(s.scenario, r.xy, args.window)
+    courses = {c: Layout(c) for c in layouts}
+    driver = {(s.profile, s.scenario): courses[s.scenario].largest_offsets(r.xy, args.window)
               for s, r in zip(specs, results, strict=True) if s.driver == EXPERT}
     groups: dict[bool, list[tuple[float, float]]] = {True: [], False: []}
     for spec, r in zip(specs, results, strict=True):
         if spec.driver != PLANNER:
             continue
-        seed = int(Path(spec.model_path).parent.parent.name.rsplit("_s", 1)[1])
-        for zone, offset in largest_offsets(spec.scenario, r.xy, args.window).items():
-            groups[agrees[(spec.profile, seed, spec.scenario, zone)]].append((driver[(spec.profile, spec.scenario)][zone], offset))
+        for zone, offset in courses[spec.scenario].largest_offsets(r.xy, args.window).items():
+            groups[agrees[(spec.profile, seed_of[spec.model_path], spec.scenario, zone)]].append((driver[(spec.profile, spec.scenario)][zone], offset))
     lo, hi = STRADDLE_M
     print(f"| triple zones | driver: median (quartiles) | driver between {lo} and {hi} m | planner: median (quartiles) |")
     print("|---|---|---|---|")

@@ -85,6 +85,12 @@ def _train(job: _OrderJob) -> list[str]:
     return [str(run_recipe(recipe_named(r), job.workdir, job.seed, profile, style=job.style).model) for r in job.recipes]
 
 
+def job_folder(out: Path, order: Sequence[str], seed: int) -> Path:
+    """The work folder of one order and seed in a selection's ``out``: its demonstrations, and
+    each recipe's model in ``<recipe>/model.safetensors``."""
+    return out / "work" / f"{'_'.join(c[:2] for c in order[:3])}_s{seed}"
+
+
 def _describe(job: _OrderJob) -> str:
     return f"recipes {', '.join(job.recipes)}, order {'>'.join(job.order[:3])}, seed {job.seed}"
 
@@ -118,8 +124,7 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
 def _train_all(out: Path, sel: Selection, engine: Engine, log: Callable[[str], None]) -> dict[str, _Model]:
     """Every recipe for every order and seed; model file -> the model, in the order trained."""
     # One job per order and seed: its recipes share the demonstrations recorded in its work folder.
-    jobs = [_OrderJob(tuple(sel.recipes), tuple(o), s, sel.style, str(out / "work" / f"{'_'.join(c[:2] for c in o[:3])}_s{s}"))
-            for o in sel.orders for s in range(sel.seeds)]
+    jobs = [_OrderJob(tuple(sel.recipes), tuple(o), s, sel.style, str(job_folder(out, o, s))) for o in sel.orders for s in range(sel.seeds)]
     log(f"[1/2] demonstrations and training: {len(jobs) * len(sel.recipes)} models ({len(sel.recipes)} recipes x {len(sel.orders)} orders "
         f"x {sel.seeds} seeds) on {engine.describe()} ...")
     trained = run_grid(_train, jobs, engine, lambda k, n: log(f"      trained {k}/{n} order-and-seed jobs"), describe=_describe)
