@@ -90,10 +90,10 @@ def _grid(shape: tuple[int, int], stride: int) -> tuple[np.ndarray, tuple[int, i
     return (rows[:, None] * w + cols[None, :]).ravel(), (len(rows), len(cols))
 
 
-def _downsampled_view(view: SegmentationView, stride: int) -> np.ndarray:
-    """:func:`downsample` of a view's frame, reading only the pixels kept."""
-    grid, small = _grid(view.shape, stride)
-    return view.pixels(grid).reshape(small)
+def _read_grid(view: SegmentationView, grid: tuple[np.ndarray, tuple[int, int]]) -> np.ndarray:
+    """:func:`downsample` of a view's frame, reading only the pixels kept (``grid``: :func:`_grid`'s)."""
+    flat, small = grid
+    return view.pixels(flat).reshape(small)
 
 
 def _onehot(small: np.ndarray, n_classes: int) -> torch.Tensor:
@@ -115,11 +115,12 @@ def cnn_samples(recordings: list[Recording], features: FeatureConfig, stride: in
     for rec in recordings:
         path = ReferencePath(np.asarray(rec.meta["path"], dtype=float))
         tracker = PathTracker(path)
+        # a recording kept in memory renders only the pixels kept (the same values)
+        grid = _grid(rec.views[0].shape, stride) if rec.in_memory and len(rec) else None
         for i in range(len(rec)):
             pose = tuple(rec.poses[i])
             s = tracker.update(rec.poses[i, :2])
-            # a recording kept in memory renders only the pixels kept (the same values)
-            images.append(_downsampled_view(rec.views[i], stride) if rec.in_memory else downsample(rec.image(i), stride))
+            images.append(_read_grid(rec.views[i], grid) if grid is not None else downsample(rec.image(i), stride))
             paths.append(path_ahead(path, pose, s).ravel() / PATH_SCALE_M)
         labels.append(np.asarray(control.label_of(rec.commands[:, 1]), dtype=np.int64).reshape(-1))
     return np.stack(images), np.asarray(paths, dtype=np.float32), np.concatenate(labels)
@@ -195,8 +196,8 @@ class CnnPolicy(Policy):
                  profile: tuple[str, ...] | None = None, path: str = "") -> None:
         super().__init__(features, camera, classes, profile, path)
         self.net, self.config = net.eval(), config
-        # The pixels downsample() keeps, as flat indices: a frame is read only there.
-        self._grid, self._small_hw = _grid((self.camera.height_px, self.camera.width_px), config.stride)
+        # The pixels downsample() keeps (flat indices, and the downsampled shape): a frame is read only there.
+        self._grid = _grid((self.camera.height_px, self.camera.width_px), config.stride)
 
     @classmethod
     def from_tensors(cls, tensors: dict[str, np.ndarray], meta: dict, features: FeatureConfig, camera: CameraConfig,
@@ -212,7 +213,7 @@ class CnnPolicy(Policy):
         return cls(net, config, features, camera, classes, profile, source)
 
     def logits(self, obs: Observation) -> np.ndarray:
-        small = obs.view.pixels(self._grid).reshape(self._small_hw)[None]  # downsample(obs.image, stride), not rendering the rest
+        small = _read_grid(obs.view, self._grid)[None]  # downsample(obs.image, stride), not rendering the rest
         torch.set_num_threads(1)
         with torch.no_grad():
             out = self.net(_onehot(small, self.config.n_classes), torch.from_numpy((obs.path_ahead.ravel() / PATH_SCALE_M)[None].astype(np.float32)))
