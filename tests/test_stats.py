@@ -11,7 +11,7 @@ import numpy as np
 
 from terrapref.evaluation.runner import EXPERT, PLANNER, PURE_PURSUIT, RunResult, annotate_agreement, summarise, zone_agrees
 from terrapref.evaluation.scoring import RunMetrics, ZoneResult
-from terrapref.evaluation.stats import rate_text, wilson
+from terrapref.evaluation.stats import cluster_bootstrap, rate_text, wilson
 
 Z = 1.96
 
@@ -180,3 +180,37 @@ def test_summarise_a_driver_with_no_runs():
     s = summarise([_run("course", 0, EXPERT, [_zone("a", "mud")])], PLANNER).to_dict()
     assert s == {"runs": 0, "zones": 0, "zone_success_rate": None, "zone_success_ci95": [0.0, 1.0], "collision_count": 0,
                  "completed_rate": None, "mean_rms_cross_track_m": None}
+
+
+# --- the cluster bootstrap of a mean -------------------------------------------------------------
+
+
+def test_cluster_bootstrap_of_identical_groups_is_exact():
+    mean, lo, hi = cluster_bootstrap([[0.2], [0.2, 0.2], [0.2]])
+    assert (mean, lo, hi) == pytest.approx((0.2, 0.2, 0.2))
+
+
+def test_cluster_bootstrap_pools_values_and_brackets_the_mean():
+    groups = [[1.0, 1.0], [0.0], [2.0, 0.0, 1.0], [3.0]]
+    mean, lo, hi = cluster_bootstrap(groups)
+    assert mean == pytest.approx(8.0 / 7.0)  # every value counts once, not every group
+    assert 0.0 <= lo < mean < hi <= 3.0
+
+
+def test_cluster_bootstrap_resamples_groups_not_values():
+    """Ten groups of alike values: the interval is as wide as ten draws allow, not as narrow as 1,000 values would make it."""
+    groups = [[float(k % 2)] * 100 for k in range(10)]
+    _, lo, hi = cluster_bootstrap(groups)
+    assert hi - lo > 0.4
+    _, lo1, hi1 = cluster_bootstrap([[v] for g in groups for v in g])
+    assert hi1 - lo1 < 0.1
+
+
+def test_cluster_bootstrap_is_repeatable_and_seeded():
+    groups = [[float(k)] for k in range(12)]
+    assert cluster_bootstrap(groups) == cluster_bootstrap(groups)
+    assert cluster_bootstrap(groups, seed=1) != cluster_bootstrap(groups)
+
+
+def test_cluster_bootstrap_of_nothing_is_nan():
+    assert all(math.isnan(v) for v in cluster_bootstrap([[], []]))

@@ -315,6 +315,20 @@ def test_write_study_teaching_agreement_per_order_and_style(fabricated_study):
     assert "100.0% (4/4, 95% CI 51.0%-100.0%) (default)" in wide
 
 
+def test_write_study_teaching_imitation_is_paired_per_layout_and_seed(fabricated_study):
+    text = fabricated_study[0].read_text()
+    wide = next(line for line in text.splitlines() if line.startswith("| wide | default |"))
+    # both seeds alike: agreement 0 (both planners take mud, as the wide driver does); cross-track
+    # |0.4 - 0.7| - |0.6 - 0.7| = 0.2 m; clearance (0 in the pair zone, 0.7 - 0.1 in the lone one) 0.3 m
+    assert wide == ("| wide | default | 2 | +0.0 pts (+0.0 to +0.0), not shown | +0.20 m (+0.20 to +0.20), **own** | "
+                    "+0.30 m (+0.30 to +0.30), **own** |")
+    default = next(line for line in text.splitlines() if line.startswith("| default | wide |"))
+    # against the default driver (cross-track 0.5 m, lone-patch clearance 1.0 m): its own planner
+    # 0.4 m and 0.8 m, the wide style's 0.6 m and 1.4 m: as close in cross-track, 0.2 m closer in clearance
+    assert default == ("| default | wide | 2 | +0.0 pts (+0.0 to +0.0), not shown | +0.00 m (+0.00 to +0.00), not shown | "
+                       "+0.10 m (+0.10 to +0.10), **own** |")
+
+
 # --- one tiny study, end to end -------------------------------------------------------------------
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from collections import defaultdict
 from collections.abc import Sequence
@@ -13,7 +14,7 @@ import numpy as np
 from terrapref.fileio import write_text_atomic
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PURE_PURSUIT, zone_agrees
 from terrapref.evaluation.scoring import RunMetrics
-from terrapref.evaluation.stats import rate_text, wilson
+from terrapref.evaluation.stats import cluster_bootstrap, rate_text, wilson
 from terrapref.report.study_plan import StudyPlan, TrainedModel
 
 TARGET = 0.9  # the success level the data-efficiency question asks about
@@ -395,7 +396,7 @@ def teaching_section(plan: StudyPlan, runs: list[StudyRun], figs: Path) -> list[
              "the run.", "",
              "| driver style | agreement: own planner | agreement: planner of another style | clearance: driver | |Δ| own | |Δ| other | "
              "cross-track: driver | own | other | collisions (own) |", "|---|---|---|---|---|---|---|---|---|---|",
-             *style_rows]
+             *style_rows, "", *_imitation_table(plan, taught)]
     save_intervals(figs / "teaching.png", [label for label, _, _ in points], [ok / n if n else float("nan") for _, ok, n in points],
                    [wilson(ok, n) for _, ok, n in points], "agreement with its driver", target=0.95,
                    title="one drive of teach_course: agreement on unseen layouts, by order and driver style")
@@ -424,7 +425,7 @@ def _style_rows(plan: StudyPlan, taught: list[StudyRun]) -> tuple[list[str], lis
     default = plan.orders[0]
     rows, points = [], []
     for style in plan.styles:
-        other = "default" if style != "default" else next((s for s in plan.styles if s != "default"), None)
+        other = _other_style(plan, style)
         d, own = _taught(taught, EXPERT, default, style), _taught(taught, "C", default, style)
         theirs = _taught(taught, "C", default, other) if other else []
         ok, n = _agreement(own, d)
@@ -436,6 +437,63 @@ def _style_rows(plan: StudyPlan, taught: list[StudyRun]) -> tuple[list[str], lis
         if style != "default":
             points.append((f"style {style}", ok, n))
     return rows, points
+
+
+def _imitation_table(plan: StudyPlan, taught: list[StudyRun]) -> list[str]:
+    """Does each style's planner imitate its own driver better than another style's planner does?
+
+    Paired on the same layout and training seed: agreement (own minus other), and how much
+    closer the own planner's cross-track RMS and zone clearances come to the driver's than the
+    other's (|other - driver| - |own - driver|). Positive favours the own planner; the interval
+    resamples (layout, seed) runs."""
+    rows = []
+    for style in plan.styles:
+        other = _other_style(plan, style)
+        if other is None:
+            continue
+        default = plan.orders[0]
+        driver = {r.scenario: r for r in _taught(taught, EXPERT, default, style)}
+        theirs = {(r.scenario, r.tag.seed): r for r in _taught(taught, "C", default, other)}
+        pairs = [(r, theirs[(r.scenario, r.tag.seed)], driver[r.scenario]) for r in _taught(taught, "C", default, style)
+                 if (r.scenario, r.tag.seed) in theirs and r.scenario in driver]
+        agree, track, clear = [], [], []
+        for own, oth, drv in pairs:
+            d = {z.id: z for z in drv.metrics.zones}
+            o = {z.id: z for z in oth.metrics.zones}
+            zs = [(z, o[z.id], d[z.id]) for z in own.metrics.zones if z.id in o and z.id in d]
+            agree.append([100.0 * (float(zone_agrees(a, c)) - float(zone_agrees(b, c))) for a, b, c in zs])
+            track.append([abs(oth.metrics.rms_cross_track_m - drv.metrics.rms_cross_track_m)
+                          - abs(own.metrics.rms_cross_track_m - drv.metrics.rms_cross_track_m)])
+            clear.append([abs(b.clearance_m - c.clearance_m) - abs(a.clearance_m - c.clearance_m) for a, b, c in zs
+                          if None not in (a.clearance_m, b.clearance_m, c.clearance_m)])
+        cells = [_difference_text(cluster_bootstrap(g), unit) for g, unit in ((agree, " pts"), (track, " m"), (clear, " m"))]
+        rows.append(f"| {style} | {other} | {len(pairs)} | " + " | ".join(cells) + " |")
+    if not rows:
+        return []
+    return ["Does each style's planner imitate its own driver better than the other style's planner? Paired on the same layout and "
+            "training seed: agreement with the driver (own minus other, percentage points), and how much closer the own planner "
+            "comes to the driver's cross-track RMS and zone clearances than the other does (|other - driver| - |own - driver|). "
+            "Positive favours the own planner; brackets: 95% interval resampling (layout, seed) runs (2,000 draws); **own** or "
+            "**other** where the interval as printed excludes 0, else not shown.", "",
+            "| driver style | other planner | runs | agreement: own - other | cross-track: own closer by | clearance: own closer by |",
+            "|---|---|---|---|---|---|", *rows]
+
+
+def _other_style(plan: StudyPlan, style: str) -> str | None:
+    """The style whose planner a style's own is compared with: the default's, or for the default the first other style."""
+    return "default" if style != "default" else next((s for s in plan.styles if s != "default"), None)
+
+
+def _difference_text(estimate: tuple[float, float, float], unit: str) -> str:
+    """``"+0.12 m (0.03 to 0.20), **own**"``: a paired difference, its interval and which side it favours."""
+    mean, lo, hi = estimate
+    if math.isnan(mean):
+        return "—"
+    digits = 1 if unit == " pts" else 2
+    # judged on the interval as printed, so that no verdict rests on a bound that reads as 0
+    lo, hi = round(lo, digits), round(hi, digits)
+    verdict = ", **own**" if lo > 0 else (", **other**" if hi < 0 else ", not shown")
+    return f"{mean:+.{digits}f}{unit} ({lo:+.{digits}f} to {hi:+.{digits}f}){verdict}"
 
 
 def _demo_minutes(trained: Sequence[TrainedModel]) -> float:
