@@ -446,12 +446,11 @@ def _imitation_table(plan: StudyPlan, taught: list[StudyRun]) -> list[str]:
     closer the own planner's cross-track RMS and zone clearances come to the driver's than the
     other's (|other - driver| - |own - driver|). Positive favours the own planner; the interval
     resamples (layout, seed) runs."""
-    rows = []
+    default, rows = plan.orders[0], []
     for style in plan.styles:
         other = _other_style(plan, style)
         if other is None:
             continue
-        default = plan.orders[0]
         driver = {r.scenario: r for r in _taught(taught, EXPERT, default, style)}
         theirs = {(r.scenario, r.tag.seed): r for r in _taught(taught, "C", default, other)}
         pairs = [(r, theirs[(r.scenario, r.tag.seed)], driver[r.scenario]) for r in _taught(taught, "C", default, style)
@@ -485,7 +484,7 @@ def _other_style(plan: StudyPlan, style: str) -> str | None:
 
 
 def _difference_text(estimate: tuple[float, float, float], unit: str) -> str:
-    """``"+0.12 m (0.03 to 0.20), **own**"``: a paired difference, its interval and which side it favours."""
+    """``"+0.12 m (+0.03 to +0.20), **own**"``: a paired difference, its interval and which side it favours."""
     mean, lo, hi = estimate
     if math.isnan(mean):
         return "—"
