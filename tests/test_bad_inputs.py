@@ -136,3 +136,18 @@ def test_a_model_with_nan_weights_is_refused(tmp_path: Path, capsys):
     path = save_model(tmp_path / "m.safetensors", ClassifierConfig(), weights, model_meta())
     assert main(["evaluate", str(path), "demo_course", "--seeds", "1", "--out", str(tmp_path / "e")]) == 2
     _one_error(capsys, str(path), "weights.layers.1.weight")
+
+
+@pytest.mark.parametrize("argv, needles", [
+    (["evaluate", "m.safetensors", "demo_course", "--seeds", "abc", "--out", "e"], ("terrapref evaluate", "--seeds", "'abc'")),
+    (["render", "demo_course", "--pose", "8", "10", "--out", "s.png"], ("terrapref render", "--pose", "expected 3 arguments")),
+    (["record", "teach_course"], ("terrapref record", "--out")),
+    (["drive-it"], ("terrapref", "invalid choice", "'drive-it'")),
+])
+def test_the_command_lines_own_refusals_are_one_line(capsys, argv: list[str], needles: tuple[str, ...]):
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 2
+    text = capsys.readouterr().err
+    assert text.count("\n") == 1 and text.startswith("error: ") and "usage:" not in text, text
+    assert all(n in text for n in needles) and "--help)" in text, text

@@ -52,3 +52,13 @@ def test_an_unwritable_output_is_refused_before_training(tmp_path: Path, capsys)
         assert "cannot be written" in _error(capsys)
     finally:
         locked.chmod(0o755)
+
+
+def test_an_output_that_no_file_can_be_made_beside_is_refused_before_training(tmp_path: Path, capsys):
+    # Checked by making a file there, not from permission bits, so it holds for root too.
+    data = dataset_file(tmp_path / "train.safetensors")
+    (tmp_path / "notes.txt").write_text("a file where a folder would be")
+    assert main(["train", str(data), "--out", str(tmp_path / "notes.txt" / "m.safetensors"), "--epochs", "1"]) == 2
+    error = _error(capsys)
+    assert "cannot be written (no file can be made in" in error and "notes.txt" in error
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt", "train.safetensors"]

@@ -11,7 +11,7 @@ from types import SimpleNamespace
 import pytest
 
 from terrapref.cli import main
-from terrapref.evaluation.evaluate import evaluate_model
+from terrapref.evaluation.evaluate import evaluate_model, file_stem
 from terrapref.grid import Engine
 from terrapref.scenario import resolve_scenario
 from terrapref.terrain import PreferenceProfile, default_classes
@@ -205,3 +205,9 @@ def test_a_bad_model_in_a_worker_is_a_user_error_not_a_broken_pool(tmp_path: Pat
     with pytest.raises(UserError) as info:
         run_many(specs, workers=2)
     assert str(bad) in str(info.value)
+
+
+@pytest.mark.parametrize("scenario, stem", [("demo_course", "demo_course"), ("gen:7", "gen_7"), ("courses/my.yaml", "courses_my"),
+                                            ("/abs/path/x.yml", "abs_path_x"), ("C:\\runs\\a b.yaml", "C_runs_a_b")])
+def test_figures_are_named_for_any_file_system(scenario: str, stem: str):
+    assert file_stem(scenario) == stem

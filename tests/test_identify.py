@@ -238,6 +238,22 @@ def test_lines_give_the_order_every_pair_and_the_warnings(report: Identifiabilit
     assert lines[-1] == "warning: mud vs water: never compared; the planner's choice between them is a guess"
 
 
+def test_a_profile_the_drive_agrees_with_is_said_to_agree(report: Identifiability):
+    line = "the profile stored with the drive: mud > rock > water: the drive agrees on all 3 pairs (2 identified)"
+    assert report.against(["mud", "rock", "water"]) == [line]
+    assert report.lines(["mud", "rock", "water"]) == [*report.lines(), line]
+    assert report.lines(None) == report.lines()
+
+
+def test_a_profile_the_drive_contradicts_names_each_reversed_pair(report: Identifiability):
+    # Declared water first: the drive put water last, identified against rock and a guess against mud.
+    lines = report.against(["water", "mud", "rock", "non_traversable"])  # a class the report lacks is left out
+    mw, rw = report.pair("mud", "water"), report.pair("rock", "water")
+    assert lines == ["the profile stored with the drive: water > mud > rock: the drive orders 2 of 3 pairs the other way round",
+                     f"  water > mud in the profile, mud > water in the drive (margin {mw.margin:.2f}, not identified)",
+                     f"  water > rock in the profile, rock > water in the drive (margin {rw.margin:.2f}, identified)"]
+
+
 def test_the_report_counts_each_choice_for_its_class_and_each_frame_on_its_side():
     """Hand-counted frames; grass comes first in the learned order, so its pair with mud is
     read the other way round from the counts (mud, grass)."""

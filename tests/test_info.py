@@ -38,3 +38,15 @@ def test_info_on_a_foreign_file_is_one_line(tmp_path: Path, capsys, content: byt
     assert main(["info", str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(path) in err[0] and "internal error" not in err[0]
+
+
+def test_info_gives_every_ensemble_members_chosen_epoch(tmp_path: Path, capsys):
+    data = dataset_file(tmp_path / "d.safetensors")
+    model = tmp_path / "m.safetensors"
+    assert main(["train", str(data), "--out", str(model), "--recipe", "paper", "--epochs", "2", "--members", "2"]) == 0
+    capsys.readouterr()
+    assert main(["info", str(model)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    first = next(i for i, line in enumerate(lines) if line.startswith("training "))
+    assert lines[first].startswith("training        member 1: 2 epochs, chose epoch ")
+    assert lines[first + 1].startswith("                member 2: 2 epochs, chose epoch ")

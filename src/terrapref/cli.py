@@ -10,9 +10,10 @@ import argparse
 import math
 import os
 import sys
+import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NoReturn
 
 from terrapref.errors import UserError
 from terrapref.grid import ENGINES, Engine, GridError
@@ -76,9 +77,11 @@ def _cmd_show(args: argparse.Namespace) -> int:
 def _cmd_list(args: argparse.Namespace) -> int:
     from terrapref.scenario import packaged_scenarios, resolve_scenario
 
-    for name in packaged_scenarios():
+    names = packaged_scenarios()
+    width = max(map(len, names), default=0)
+    for name in names:
         s = resolve_scenario(name)
-        print(f"{name:28s} {s.size_m[0]:5.0f} x {s.size_m[1]:<4.0f} m  path {s.path_length_m():5.0f} m  {len(s.zones):2d} zones  {s.description}")
+        print(f"{name:{width}s} {s.size_m[0]:5.0f} x {s.size_m[1]:<4.0f} m  path {s.path_length_m():5.0f} m  {len(s.zones):2d} zones  {s.description}")
     return 0
 
 
@@ -196,7 +199,7 @@ def _print_what_the_drive_shows(rec) -> None:
     dataset = build_dataset([rec], recipe.features(), progress=lambda k, n: bar.update(k, f"{len(rec)} frames"))
     bar.close()
     print(f"what the drive shows (recipe {DEFAULT_RECIPE}'s features, {len(dataset)} frames):")
-    for line in identify(dataset, steady=recipe.train.data.steady_labels).lines():
+    for line in identify(dataset, steady=recipe.train.data.steady_labels).lines(rec.meta.get("profile")):
         print(f"  {line}")
 
 
@@ -269,8 +272,11 @@ def _check_output(out: str | Path, flag: str, inputs: Sequence[str | Path] = (),
     parent = out if folder and out.exists() else out.parent
     while not parent.exists() and parent != parent.parent:
         parent = parent.parent
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise UserError(str(out), f"cannot be written ({parent} is not writable)", field=flag)
+    try:  # a file made and removed at once: permissions alone miss read-only and virtual file systems
+        with tempfile.TemporaryFile(dir=parent):
+            pass
+    except OSError as exc:
+        raise UserError(str(out), f"cannot be written (no file can be made in {parent}: {exc.strerror or exc})", field=flag) from None
 
 
 def _training_data(args: argparse.Namespace, recipe: Recipe) -> Dataset:
@@ -328,7 +334,7 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
         print(result.steadying.line())
     if result.identifiability is not None:
         print("what the demonstrations show (stored in the model):")
-        for line in result.identifiability.lines():
+        for line in result.identifiability.lines(data.meta.get("profile")):
             print(f"  {line}")
     print(f"wrote {args.out} ({'; '.join(chosen)}), {curve}, checkpoints in {Path(args.out).with_name(Path(args.out).stem + '.checkpoints')}")
 
@@ -642,7 +648,7 @@ def _record_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--profile", help="preference order, best first, e.g. rock,mud,water,non_traversable (default: the class table's)")
     p.add_argument("--style", default="default", help="the driver's style: default, wide (wider margins), late (reacts later), shaky (a shakier hand), "
                         "reluctant (leaves the path reluctantly)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seeds the driver's hand and the pushes (default 0)")
     p.add_argument("--out", required=True, type=Path, help="recording directory to create")
     p.add_argument("--force", action="store_true", help="replace an existing recording at --out")
     p.add_argument("--quiet", action="store_true", help="no progress output")
@@ -712,8 +718,9 @@ def _evaluate_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("evaluate", help="drive scenarios with a model, score every zone, write metrics.json and figures")
     p.add_argument("model", metavar="MODEL")
     p.add_argument("scenarios", nargs="+", metavar="SCENARIO")
-    p.add_argument("--seeds", type=int, default=3)
-    p.add_argument("--out", required=True, type=Path)
+    p.add_argument("--seeds", type=int, default=3, help="runs per scenario (default 3): seed 0 starts at the scenario's start, "
+                        "the others up to 0.3 m and 3 degrees off it")
+    p.add_argument("--out", required=True, type=Path, help="folder for metrics.json and the figures")
     p.add_argument("--profile", help="resolve `best` zones under this profile instead of the model's")
     p.add_argument("--frames", help="comma-separated frame numbers of seed 0 to draw as decision pictures")
     p.add_argument("--no-driver", action="store_true", help="skip the synthetic driver's comparison runs")
@@ -796,7 +803,7 @@ def _select_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _recipes_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("recipes", help="list the named training recipes (--recipe NAME in train and reproduce)")
+    p = sub.add_parser("recipes", help="list the named training recipes (--recipe NAME in train, --recipes in reproduce and select)")
     p.set_defaults(func=_cmd_recipes)
 
 
@@ -828,11 +835,19 @@ COMMANDS = (
 """Each command's parser, in the order `terrapref --help` lists them."""
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, with its refusals (a missing argument, a value of the wrong type, an unknown
+    choice) as one line on stderr and exit code 2, like every other error of the command line."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"error: {self.prog}: {message} (see {self.prog} --help)\n")
+
+
 def build_parser(train_flags: bool = True) -> argparse.ArgumentParser:
     """The ``terrapref`` command line (``train_flags``: with train's training flags)."""
     from terrapref import __version__
 
-    parser = argparse.ArgumentParser(prog="terrapref", description="Learn off-road terrain preferences from a few minutes of driving.")
+    parser = _Parser(prog="terrapref", description="Learn off-road terrain preferences from a few minutes of driving.")
     parser.add_argument("--version", action="version", version=f"terrapref {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for add in COMMANDS:

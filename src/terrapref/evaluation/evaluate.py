@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -156,7 +157,14 @@ def _write_runs(results: list[RunResult], folder: Path, model) -> None:
         frames = RunFrames(times=0.1 * np.arange(len(poses)), poses=poses, commands=run.commands,
                            image=lambda i, poses=poses, renderer=renderer: renderer.render(Pose(*poses[i])), chosen=run.index,
                            path=scenario.waypoints, camera=model.camera, classes=model.classes, preference=model.features.preference, probs=run.probs)
-        write_mcap(folder / f"{r.scenario.replace(':', '_')}_seed{r.seed}.mcap", frames, robot_file=False)
+        write_mcap(folder / f"{file_stem(r.scenario)}_seed{r.seed}.mcap", frames, robot_file=False)
+
+
+def file_stem(scenario: str) -> str:
+    """A scenario's name as a file name any file system takes, in the output folder itself:
+    ``gen:7`` -> ``gen_7``, ``courses/my.yaml`` -> ``courses_my``."""
+    name = re.sub(r"\.ya?ml$", "", scenario)
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("_.") or "scenario"
 
 
 def _identifiability(model) -> Identifiability | None:
@@ -191,13 +199,13 @@ def _figures(results: list[RunResult], scenarios: Sequence[str], out: Path, mode
         per_zone = _zone_successes(planner_runs)
         ok = sum(v[0] for v in per_zone.values())
         n = sum(v[1] for v in per_zone.values())
-        save_evaluation(out / f"{name}.png", scenario, world, [r.xy for r in driver_runs], [r.xy for r in planner_runs], per_zone,
+        save_evaluation(out / f"{file_stem(name)}.png", scenario, world, [r.xy for r in driver_runs], [r.xy for r in planner_runs], per_zone,
                         title=f"{name}: planner zone success {ok}/{n} over {len(planner_runs)} run(s), profile {profile}")
         for r in planner_runs:
             for f in r.frames:
                 rgb = model.classes.palette()[f.image]
                 x, y, yaw = f.pose
-                save_decision(out / f"{name}_frame{f.number:05d}.png", rgb, uv, visible, f.probs, f.index,
+                save_decision(out / f"{file_stem(name)}_frame{f.number:05d}.png", rgb, uv, visible, f.probs, f.index,
                               model.features.preference.control.w_rps, classes=model.classes,
                               title=f"{name}, frame {f.number}, pose ({x:.1f} m, {y:.1f} m, yaw {np.degrees(yaw):.0f} deg)")
 

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -97,11 +98,28 @@ class Identifiability:
             out.append(f"{p.first} vs {p.second}: {why}; the planner's choice between them is a guess")
         return out
 
-    def lines(self) -> list[str]:
+    def lines(self, profile: Sequence[str] | None = None) -> list[str]:
+        """The report; with ``profile`` (the order stored with the data, best first), also how the
+        learned order compares with it (:meth:`against`)."""
         out = [f"learned order: {' > '.join(self.order)}"]
         out += [f"  {p.describe()}{'' if p.identified else '  <- not identified'}" for p in self.pairs]
         out += [f"warning: {w}" for w in self.warnings()]
-        return out
+        return out + (self.against(profile) if profile else [])
+
+    def against(self, profile: Sequence[str]) -> list[str]:
+        """How the learned order compares with ``profile``, pair by pair of the classes both name:
+        the pairs learned the other way round, each with its margin and whether the data identify
+        it; or that every pair agrees, and how many of them the data identify."""
+        named = [c for c in profile if c in self.order]
+        head = f"the profile stored with the drive: {' > '.join(named)}"
+        evidence = [self.pair(a, b) for i, a in enumerate(named) for b in named[i + 1:]]  # a before b in the profile
+        reversed_ = [p for p in evidence if named.index(p.first) > named.index(p.second)]
+        if not reversed_:
+            identified = sum(p.identified for p in evidence)
+            return [f"{head}: the drive agrees on all {len(evidence)} pairs ({identified} identified)"]
+        return [f"{head}: the drive orders {len(reversed_)} of {len(evidence)} pairs the other way round",
+                *(f"  {p.second} > {p.first} in the profile, {p.first} > {p.second} in the drive (margin {p.margin:.2f}, "
+                  f"{'identified' if p.identified else 'not identified'})" for p in reversed_)]
 
     def to_dict(self) -> dict:
         return {"order": list(self.order), "pairs": [p.to_dict() for p in self.pairs], "min_frames": MIN_FRAMES}

@@ -47,7 +47,8 @@ def _identifiability(meta: dict) -> list[str]:
         report = Identifiability.from_dict(data)
     except (KeyError, TypeError, ValueError):
         return ["identifiability (unreadable)"]
-    return ["what the demonstrations show:"] + [f"  {line}" for line in report.lines()]
+    profile = meta.get("profile") if isinstance(meta.get("profile"), list) else None
+    return ["what the demonstrations show:"] + [f"  {line}" for line in report.lines(profile)]
 
 
 def info_lines(path: str | Path) -> list[str]:
@@ -145,10 +146,22 @@ def _model_lines(p: Path, meta: dict) -> list[str]:
 
 
 def _training(meta: dict) -> list[str]:
-    """The epoch training chose and its validation scores, if the history records it."""
-    history = meta.get("history", []) if isinstance(meta.get("history"), list) else []
-    best = meta.get("best_epoch")
+    """The epoch training chose and its validation scores, if the history records it; for an
+    ensemble, each member's."""
+    members = meta.get("members") if isinstance(meta.get("members"), list) else None
+    if not members:
+        chosen = _chosen_epoch(meta)
+        return [f"training        {chosen}"] if chosen else []
+    chosen = [_chosen_epoch(m) if isinstance(m, dict) else None for m in members]
+    return [f"training        member {j + 1}: {c}" if j == 0 else f"                member {j + 1}: {c}"
+            for j, c in enumerate(chosen) if c]
+
+
+def _chosen_epoch(record: dict) -> str | None:
+    """A history and its best epoch as one line: epochs run, the epoch chosen and its validation scores."""
+    history = record.get("history", []) if isinstance(record.get("history"), list) else []
+    best = record.get("best_epoch")
     chosen = history[best - 1] if isinstance(best, int) and 0 < best <= len(history) else None
-    if not chosen:
-        return []
-    return [f"training        {len(history)} epochs, chose epoch {best}: val loss {chosen.get('val_loss', float('nan')):.4f}, val acc {chosen.get('val_acc', float('nan')):.3f}"]
+    if not isinstance(chosen, dict):
+        return None
+    return f"{len(history)} epochs, chose epoch {best}: val loss {chosen.get('val_loss', float('nan')):.4f}, val acc {chosen.get('val_acc', float('nan')):.3f}"
