@@ -152,9 +152,8 @@ def _training(meta: dict) -> list[str]:
     if not members:
         chosen = _chosen_epoch(meta)
         return [f"training        {chosen}"] if chosen else []
-    chosen = [_chosen_epoch(m) if isinstance(m, dict) else None for m in members]
-    return [f"training        member {j + 1}: {c}" if j == 0 else f"                member {j + 1}: {c}"
-            for j, c in enumerate(chosen) if c]
+    chosen = [f"member {j + 1}: {c}" for j, m in enumerate(members) if isinstance(m, dict) and (c := _chosen_epoch(m))]
+    return [("training        " if i == 0 else " " * 16) + line for i, line in enumerate(chosen)]
 
 
 def _chosen_epoch(record: dict) -> str | None:
