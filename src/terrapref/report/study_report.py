@@ -465,7 +465,7 @@ def _imitation_table(plan: StudyPlan, taught: list[StudyRun]) -> list[str]:
                           - abs(own.metrics.rms_cross_track_m - drv.metrics.rms_cross_track_m)])
             clear.append([abs(b.clearance_m - c.clearance_m) - abs(a.clearance_m - c.clearance_m) for a, b, c in zs
                           if None not in (a.clearance_m, b.clearance_m, c.clearance_m)])
-        cells = [_difference_text(cluster_bootstrap(g), unit) for g, unit in ((agree, " pts"), (track, " m"), (clear, " m"))]
+        cells = [_difference_text(cluster_bootstrap(g), unit, digits) for g, unit, digits in ((agree, " pts", 1), (track, " m", 2), (clear, " m", 2))]
         rows.append(f"| {style} | {other} | {len(pairs)} | " + " | ".join(cells) + " |")
     if not rows:
         return []
@@ -483,12 +483,12 @@ def _other_style(plan: StudyPlan, style: str) -> str | None:
     return "default" if style != "default" else next((s for s in plan.styles if s != "default"), None)
 
 
-def _difference_text(estimate: tuple[float, float, float], unit: str) -> str:
-    """``"+0.12 m (+0.03 to +0.20), **own**"``: a paired difference, its interval and which side it favours."""
+def _difference_text(estimate: tuple[float, float, float], unit: str, digits: int) -> str:
+    """``"+0.12 m (+0.03 to +0.20), **own**"``: a paired difference, its interval (``digits``
+    decimals) and which side it favours."""
     mean, lo, hi = estimate
     if math.isnan(mean):
         return "—"
-    digits = 1 if unit == " pts" else 2
     # judged on the interval as printed, so that no verdict rests on a bound that reads as 0
     lo, hi = round(lo, digits), round(hi, digits)
     verdict = ", **own**" if lo > 0 else (", **other**" if hi < 0 else ", not shown")
