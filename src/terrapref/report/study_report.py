@@ -422,12 +422,9 @@ def _style_rows(plan: StudyPlan, taught: list[StudyRun]) -> tuple[list[str], lis
     its driver; each style but the default's (label, agreeing zones, zones) for the figure."""
     from terrapref.demos.expert import STYLES
 
-    default = plan.orders[0]
     rows, points = [], []
     for style in plan.styles:
-        other = _other_style(plan, style)
-        d, own = _taught(taught, EXPERT, default, style), _taught(taught, "C", default, style)
-        theirs = _taught(taught, "C", default, other) if other else []
+        other, d, own, theirs = _style_runs(plan, taught, style)
         ok, n = _agreement(own, d)
         ok2, n2 = _agreement(theirs, d)
         rows.append(f"| {style} ({STYLES[style][0]}) | {rate_text(ok, n)} | {rate_text(ok2, n2) + f' ({other})' if other else '—'} | "
@@ -446,14 +443,14 @@ def _imitation_table(plan: StudyPlan, taught: list[StudyRun]) -> list[str]:
     closer the own planner's cross-track RMS and zone clearances come to the driver's than the
     other's (|other - driver| - |own - driver|). Positive favours the own planner; the interval
     resamples (layout, seed) runs."""
-    default, rows = plan.orders[0], []
+    rows = []
     for style in plan.styles:
-        other = _other_style(plan, style)
+        other, driver_runs, own_runs, other_runs = _style_runs(plan, taught, style)
         if other is None:
             continue
-        driver = {r.scenario: r for r in _taught(taught, EXPERT, default, style)}
-        theirs = {(r.scenario, r.tag.seed): r for r in _taught(taught, "C", default, other)}
-        pairs = [(r, theirs[(r.scenario, r.tag.seed)], driver[r.scenario]) for r in _taught(taught, "C", default, style)
+        driver = {r.scenario: r for r in driver_runs}
+        theirs = {(r.scenario, r.tag.seed): r for r in other_runs}
+        pairs = [(r, theirs[(r.scenario, r.tag.seed)], driver[r.scenario]) for r in own_runs
                  if (r.scenario, r.tag.seed) in theirs and r.scenario in driver]
         agree, track, clear = [], [], []
         for own, oth, drv in pairs:
@@ -478,9 +475,14 @@ def _imitation_table(plan: StudyPlan, taught: list[StudyRun]) -> list[str]:
             "|---|---|---|---|---|---|", *rows]
 
 
-def _other_style(plan: StudyPlan, style: str) -> str | None:
-    """The style whose planner a style's own is compared with: the default's, or for the default the first other style."""
-    return "default" if style != "default" else next((s for s in plan.styles if s != "default"), None)
+def _style_runs(plan: StudyPlan, taught: list[StudyRun], style: str) -> tuple[str | None, list[StudyRun], list[StudyRun], list[StudyRun]]:
+    """For one driver style in the default order: the style whose planner its own is compared with
+    (the default's, or for the default the first other style; None if there is none), and the
+    runs of its driver, of its own planner and of that other planner."""
+    default = plan.orders[0]
+    other = "default" if style != "default" else next((s for s in plan.styles if s != "default"), None)
+    theirs = _taught(taught, "C", default, other) if other else []
+    return other, _taught(taught, EXPERT, default, style), _taught(taught, "C", default, style), theirs
 
 
 def _difference_text(estimate: tuple[float, float, float], unit: str, digits: int) -> str:
