@@ -144,14 +144,19 @@ def test_course() -> Course:
     return c
 
 
-# teach_course: the order of its situations. Every pair of feature classes meets on the path,
-# each class once on the left and once on the right; every class also lies alone on the path
-# twice, once a little left of it and once a little right. (lateral offset [m] of a lone patch)
+# teach_course: the order of its situations. Every pair of the three non-lethal feature classes
+# meets on the path, each class once on the left and once on the right. Each of them also lies on
+# the path as a 2.8 m strip with non_traversable on one side and another class on the other
+# (once with the trees on the left, once on the right): the driver stays on the strip or moves
+# over, which shows how much worse one class is than another against a 2 m detour, and puts
+# non_traversable beside every class. Every class lies alone on the path twice, once a little
+# left of it and once a little right. (lateral offset [m] of a lone patch)
 TEACH_ZONES = [
-    ("mud", "rock"), ("water", 0.3), ("non_traversable", "water"), ("rock", -0.3), ("water", "rock"), ("mud", 0.3),
-    ("rock", "non_traversable"), ("non_traversable", -0.3),
-    ("mud", "water"), ("water", "non_traversable"), ("rock", "mud"), ("non_traversable", "mud"), ("water", "mud"), ("rock", "water"),
-    ("mud", -0.3), ("mud", "non_traversable"), ("water", -0.3), ("non_traversable", "rock"), ("non_traversable", 0.3), ("rock", 0.3),
+    ("mud", "rock"), ("water", 0.3), ("non_traversable", "mud", "water"), ("rock", -0.3), ("water", "rock"), ("mud", 0.3),
+    ("rock", "mud", "non_traversable"), ("non_traversable", -0.3),
+    ("mud", "water"), ("water", "rock", "non_traversable"), ("rock", "mud"), ("non_traversable", "rock", "mud"), ("water", "mud"),
+    ("rock", "water"), ("mud", -0.3), ("mud", "water", "non_traversable"), ("water", -0.3), ("non_traversable", "water", "rock"),
+    ("non_traversable", 0.3), ("rock", 0.3),
 ]
 # Heading change [deg] at the bend after each situation: a horseshoe, so that the trail bends
 # between situations (keeping to the path is part of the lesson) and fits a compact map. The
@@ -170,8 +175,8 @@ def teach_course(zones: list[tuple] | None = None, turns: list[float] | None = N
 
     Situations sit on straight legs (``2 * half[kind]`` m); the trail bends between them. Lone
     patches are at most 3 m across (passed on grass); pair patches are 7-8 m long and 5-5.5 m
-    wide and meet on the path, as on train_course; a triple puts a 2.8 m wide patch on the path
-    between two wide ones, so that keeping to the path has a price in terrain.
+    wide and meet on the path, as on train_course; a triple puts a 2.8 m wide strip on the path
+    between two wide patches (7 m long), so that keeping to the path has a price in terrain.
     """
     zones = zones or TEACH_ZONES
     turns = turns or TEACH_TURNS
@@ -192,8 +197,9 @@ def teach_course(zones: list[tuple] | None = None, turns: list[float] | None = N
     wp = np.array(points)
     wp = wp - wp.min(axis=0) + 12.0
     size = tuple(float(math.ceil(v + 12.0)) for v in wp.max(axis=0))
-    c = Course(name, "The demonstration course: every pair of terrain classes meets on the path, each class once on "
-               "each side, and every class lies alone on the path twice; one drive identifies any preference order.",
+    c = Course(name, "The demonstration course: every pair of terrain classes side by side, each class once on each "
+               "side, every class as a strip on the path between trees and another class, and every class alone on "
+               "the path twice; one drive identifies any preference order.",
                size, [tuple(p) for p in wp])
     lone_shapes = {
         "water": lambda s, lat: c.rect("water", s, lat, 3.0, 2.6),

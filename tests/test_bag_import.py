@@ -77,7 +77,7 @@ def test_an_undisturbed_clean_log_reproduces_the_simulator_run(tmp_path: Path, l
         np.testing.assert_array_equal(rec.image(i), sim.renderer.render(tuple(pose)))
     assert len(rec) >= 55
     features = FeatureConfig()
-    U, labels, _, _ = featurize_recording(rec, features)
+    U, labels = featurize_recording(rec, features)[:2]
     assert U.shape == (len(rec), 21, 5) and np.isfinite(U).all() and len(set(labels.tolist())) > 1
 
 

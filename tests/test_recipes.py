@@ -16,6 +16,7 @@ from terrapref.demos.expert import STYLES, ExpertConfig, ExpertDriver
 from terrapref.demos.session import DisturbanceConfig
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, LookaheadConfig
+from terrapref.features.corridor import CorridorConfig
 from terrapref.recipes import DEFAULT_RECIPE, RECIPES, Recipe, recipe_named
 from terrapref.learning.train import TrainConfig
 from terrapref.scenario import parse_scenario
@@ -71,14 +72,14 @@ def test_teach_drives_teach_course_once_and_fits_through_the_lookahead():
     assert (teach.train.optimiser.epochs, teach.train.optimiser.lr, teach.train.classifier.members, teach.train.second_stage.weight) == (100, 3e-3, 3, 5.0)
     assert teach.train.classifier.skip and teach.train.data.class_balance and teach.train.data.mirror and teach.train.second_stage is not None
     features = teach.features()
-    assert features.lookahead == LookaheadConfig()
-    assert features == replace(FeatureConfig(), lookahead=LookaheadConfig())
+    assert features.lookahead == LookaheadConfig() and features.corridor == CorridorConfig()
+    assert features == replace(FeatureConfig(), lookahead=LookaheadConfig(), corridor=CorridorConfig())
 
 
 def test_features_keep_the_base_and_set_the_recipes_own():
-    base = FeatureConfig(path_spacing_m=0.5, lookahead=LookaheadConfig())
+    base = FeatureConfig(path_spacing_m=0.5, lookahead=LookaheadConfig(), corridor=CorridorConfig())
     assert RECIPES["teach"].features(base) == base
-    assert RECIPES["paper"].features(base) == replace(base, lookahead=None)
+    assert RECIPES["paper"].features(base) == replace(base, lookahead=None, corridor=None)
 
 
 @pytest.mark.parametrize("bad", [dict(demonstrations=0), dict(corrections=-1)])

@@ -25,12 +25,23 @@ def _pairs(labels: list[str]) -> list[tuple[str, str]]:
     return [tuple(label.split(" vs ")) for label in labels if " vs " in label]
 
 
+def _triples(labels: list[str]) -> list[tuple[str, str, str]]:
+    return [tuple(label.split(" | ")) for label in labels if label.count(" | ") == 2]
+
+
 def test_every_pair_meets_on_both_sides(labels):
-    pairs = _pairs(labels)
-    assert sorted(pairs) == sorted(itertools.permutations(CLASSES, 2))  # each ordered (left, right) once
-    for x in CLASSES:
-        if x != LETHAL:
-            assert (x, LETHAL) in pairs and (LETHAL, x) in pairs
+    safe = [c for c in CLASSES if c != LETHAL]
+    assert sorted(_pairs(labels)) == sorted(itertools.permutations(safe, 2))  # each ordered (left, right) once
+    # Beside non_traversable: every class as the strip on the path, once with the trees on each
+    # side, and every class on the other side once on each side too.
+    triples = _triples(labels)
+    assert all(LETHAL in (left, right) and middle != LETHAL for left, middle, right in triples)
+    strips = Counter((middle, "left" if left == LETHAL else "right") for left, middle, right in triples)
+    assert strips == {(c, side): 1 for c in safe for side in ("left", "right")}
+    beside = Counter((right if left == LETHAL else left, "right" if left == LETHAL else "left") for left, middle, right in triples)
+    assert beside == {(c, side): 1 for c in safe for side in ("left", "right")}
+    # Each strip has each other class beside it once: every ordered (strip, other) pair.
+    assert sorted((m, r if l == LETHAL else l) for l, m, r in triples) == sorted(itertools.permutations(safe, 2))
 
 
 def test_every_class_lies_alone_twice():
@@ -49,4 +60,6 @@ def test_the_synthetic_driver_shows_it_in_at_most_five_and_a_half_minutes(order)
     best = PreferenceProfile(order).order
     for left, right in _pairs(list(zones)):
         assert zones[f"{left} vs {right}"].choice == min((left, right), key=best.index)
+    for left, middle, right in _triples(list(zones)):  # never the trees; the strip or the class beside it
+        assert zones[f"{left} | {middle} | {right}"].choice in (middle, right if left == LETHAL else left)
     assert all(z.choice == "avoid" for z in m.zones if z.expect == "avoid")

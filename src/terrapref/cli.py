@@ -332,6 +332,11 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
         chosen.append(f"{label}epoch {r.best_epoch}: val loss {best.val_loss:.4f}, val acc {best.val_acc:.3f}")
     if result.steadying is not None:
         print(result.steadying.line())
+    if result.corridor is not None:
+        fit, classes = result.corridor, data.feature_config.feature_classes
+        prices = ", ".join(f"{c} {w / fit.weights[len(classes) + 1]:.1f}" for c, w in zip(classes, fit.weights))
+        print(f"offset stage: fitted to {fit.samples} frames, near distance {fit.near_m:g} m; each class's price per metre, "
+              f"relative to the detour's per m^2 of offset per metre: {prices}")
     if result.identifiability is not None:
         print("what the demonstrations show (stored in the model):")
         for line in result.identifiability.lines(data.meta.get("profile")):
@@ -349,6 +354,9 @@ def _cmd_train(args: argparse.Namespace) -> int:
     data = _training_data(args, recipe)
     if config.second_stage is not None and recipe.lookahead and data.U2 is None:
         print(f"warning: {args.data[0]} carries no look-ahead utilities; the second stage is fitted frame by frame "
+              f"(train from the recordings, or featurize them with --recipe {recipe.name})", file=sys.stderr)
+    if recipe.corridor and data.corridor is None:
+        print(f"warning: {args.data[0]} carries no corridor data; the planner will drive C's trajectories, not the offset stage "
               f"(train from the recordings, or featurize them with --recipe {recipe.name})", file=sys.stderr)
     opt, members = config.optimiser, config.classifier.members
     print(f"recipe {recipe.name}: training on {len(data)} samples ({len(args.data)} input(s)), {opt.epochs} epochs, "

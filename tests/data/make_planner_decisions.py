@@ -25,8 +25,9 @@ from terrapref.recipes import PAPER, TEACH, record_demonstrations
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation, run_episode
 
-# (recipe, epochs, demonstration course, courses driven)
-CASES = [(TEACH, 40, "teach_course", ("test_course", "fig8_water_mud_rock_mud_left")), (PAPER, 15, "train_course", ("test_course",))]
+# (recipe, epochs, demonstration course, courses driven); teach_course as it was when the file was made
+CASES = [(TEACH, 40, str(Path(__file__).with_name("teach_course_pairs.yaml")), ("test_course", "fig8_water_mud_rock_mud_left")),
+         (PAPER, 15, "train_course", ("test_course",))]
 
 
 def decisions(work: Path) -> dict:
@@ -39,7 +40,7 @@ def decisions(work: Path) -> dict:
         model = work / f"{recipe.name}.safetensors"
         train_and_save(build_dataset([read_recording(p) for p in paths], features), model, replace(recipe.train, seed=7), checkpoints=False)
         for name in driven:
-            driver = PlannerDriver(Planner(load_model(model)), keep=True)
+            driver = PlannerDriver(Planner(load_model(model), offset=None), keep=True)
             run_episode(Simulation(resolve_scenario(name)), driver, np.random.default_rng(0))
             out[f"{recipe.name}/{name}"] = [d.index for d in driver.decisions]
     return out

@@ -13,6 +13,7 @@ import hashlib
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -20,6 +21,7 @@ from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer, 
 from terrapref.demos.recording import Recording, read_recording, require_meta
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
+from terrapref.features.corridor import CorridorFeatures, GroundMap, intent_offsets
 from terrapref.features.lookahead import Lookahead
 from terrapref.scenario import Scenario, parse_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
@@ -28,6 +30,23 @@ from terrapref.terrain import ClassTable
 from terrapref.world import rasterise
 
 FORMAT = "terrapref-dataset/1"
+
+
+class CorridorData(NamedTuple):
+    """Each frame's offset corridor (terrapref.features.corridor) and what the driver steered for.
+
+    Attributes:
+        features: metres per terrain class, never seen, and the detour's price, per candidate
+            offset, shape (N, O, K + 2) float32.
+        near_m: distance along the path to the first terrain on it, shape (N,) float32 [m]
+            (inf: none within the corridor).
+        intent_m: the offset the driver was steering for, shape (N,) float32 [m] (NaN: the
+            recording ends before its reaction time has passed).
+    """
+
+    features: np.ndarray
+    near_m: np.ndarray
+    intent_m: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -42,6 +61,8 @@ class Dataset:
         meta: features, camera, classes, profile, recordings (JSON-serialisable).
         U2: the look-ahead utilities of every frame, shape (N, m, m, K + 1) float16, when the
             feature configuration asks for them (``FeatureConfig.lookahead``); else None.
+        corridor: every frame's offset corridor and intended offset, when the feature
+            configuration asks for them (``FeatureConfig.corridor``); else None.
     """
 
     U: np.ndarray
@@ -50,6 +71,7 @@ class Dataset:
     source: np.ndarray
     meta: dict
     U2: np.ndarray | None = None
+    corridor: CorridorData | None = None
 
     def __len__(self) -> int:
         return len(self.labels)
@@ -65,15 +87,26 @@ class Dataset:
     @property
     def fingerprint(self) -> str:
         h = hashlib.sha256()
-        for a in (self.U, self.labels) if self.U2 is None else (self.U, self.labels, self.U2):
+        extra = (() if self.U2 is None else (self.U2,)) + (() if self.corridor is None else tuple(self.corridor))
+        for a in (self.U, self.labels, *extra):
             h.update(np.ascontiguousarray(a).tobytes())
         return h.hexdigest()[:16]
 
 
-def featurize_recording(recording: Recording, features: FeatureConfig, camera: CameraConfig | None = None
-                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+class Featurised(NamedTuple):
+    """One recording's samples (:class:`Dataset`'s arrays, without ``source``)."""
+
+    U: np.ndarray
+    labels: np.ndarray
+    w: np.ndarray
+    U2: np.ndarray | None
+    corridor: CorridorData | None
+
+
+def featurize_recording(recording: Recording, features: FeatureConfig, camera: CameraConfig | None = None) -> Featurised:
     """U (F, m, K + 1), labels (F,), w (F,) and, when ``features.lookahead`` asks, U2 (F, m, m, K + 1)
-    float16 for every frame of a recording taken on the map (frames off it are left out).
+    float16, and when ``features.corridor`` asks, the corridor data, for every frame of a
+    recording taken on the map (frames off it are left out).
 
     Args:
         camera: None uses the recorded frames; another configuration re-renders each frame from
@@ -106,6 +139,7 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
     # the vehicle could have driven in the gap.
     period = recording.frame_period_s
     v_max = _max_speed(recording.meta)
+    corridor = _CorridorReader(features, featurizer, PinholeCamera(camera), n) if features.corridor is not None else None
     for j, i in enumerate(keep):
         pose = tuple(recording.poses[i])
         view = _frame_view(recording, i, renderer, pose, shape, known)
@@ -114,9 +148,45 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
         U[j] = featurizer(view, pose, path, s)
         if lookahead is not None:
             U2[j] = lookahead.utilities(view, pose, path, s)
+        if corridor is not None:
+            corridor.read(j, view, pose, path, s)
     w = recording.commands[keep, 1].astype(np.float32)
     labels = np.asarray(features.preference.control.label_of(w), dtype=np.int64).reshape(n)
-    return U, labels, w, U2
+    return Featurised(U, labels, w, U2, corridor.data(recording, keep, path) if corridor is not None else None)
+
+
+class _CorridorReader:
+    """The corridor of each frame of one recording, read in order (the ground map gathers them)."""
+
+    def __init__(self, features: FeatureConfig, featurizer: UtilityFeaturizer, camera: PinholeCamera, n: int) -> None:
+        config, k = features.corridor, features.n_terrain
+        self.config = config
+        self.map = GroundMap(camera, featurizer.class_columns, k, config)
+        self.corridor = CorridorFeatures(config, k)
+        self.features = np.empty((n, len(self.corridor.offsets), k + 2), dtype=np.float32)
+        self.near = np.empty(n, dtype=np.float32)
+        self.lateral = np.empty(n)
+        self.progress = np.empty(n)
+
+    def read(self, j: int, view: SegmentationView, pose: tuple, path: ReferencePath, s: float) -> None:
+        self.map.update(view, pose)
+        frame = self.corridor(self.map, path, s)
+        self.features[j], self.near[j] = frame.features, frame.near_m
+        self.lateral[j] = path.project(np.asarray(pose[:2]), max(s - 1.0, 0.0), min(s + 1.0, path.length_m))[1]
+        self.progress[j] = s
+
+    def data(self, recording: Recording, keep: np.ndarray, path: ReferencePath) -> CorridorData:
+        """The corridor data, with each frame's intended offset read from the command one reaction time later."""
+        delay = round(self.config.intent_delay_s / recording.frame_period_s)
+        later = np.full((len(keep), 2), np.nan)
+        ahead = keep + delay
+        ok = ahead < len(recording)
+        # Only where the frame that much later is the next ones' in time (not across a gap).
+        ok[ok] &= np.abs(recording.times[ahead[ok]] - recording.times[keep[ok]] - delay * recording.frame_period_s) < 0.5 * recording.frame_period_s
+        later[ok] = recording.commands[ahead[ok]]
+        intent = intent_offsets(recording.poses[keep], later, self.lateral, self.progress, path, self.corridor.offsets,
+                                self.config.intent_lookahead_m)
+        return CorridorData(self.features, self.near, intent.astype(np.float32))
 
 
 def _frame_view(recording: Recording, i: int, renderer: SegmentationRenderer | None, pose: tuple, shape: tuple[int, int],
@@ -168,7 +238,8 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
     U = np.concatenate([p[0] for p in parts])
     labels = np.concatenate([p[1] for p in parts])
     w = np.concatenate([p[2] for p in parts])
-    U2 = np.concatenate([p[3] for p in parts]) if features.lookahead is not None else None
+    U2 = np.concatenate([p.U2 for p in parts]) if features.lookahead is not None else None
+    corridor = CorridorData(*(np.concatenate(a) for a in zip(*(p.corridor for p in parts)))) if features.corridor is not None else None
     source = np.concatenate([np.full(len(p[1]), k, dtype=np.int64) for k, p in enumerate(parts)])
     meta = {
         "format": FORMAT,
@@ -182,7 +253,7 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
             for r, p in zip(recordings, parts, strict=True)
         ],
     }
-    return Dataset(U, labels, w.astype(np.float32), source, meta, U2)
+    return Dataset(U, labels, w.astype(np.float32), source, meta, U2, corridor)
 
 
 def save_dataset(dataset: Dataset, path: str | Path) -> Path:
@@ -191,6 +262,8 @@ def save_dataset(dataset: Dataset, path: str | Path) -> Path:
     tensors = {"U": dataset.U, "labels": dataset.labels, "w": dataset.w, "source": dataset.source}
     if dataset.U2 is not None:
         tensors["U2"] = dataset.U2
+    if dataset.corridor is not None:
+        tensors |= {f"corridor.{name}": a for name, a in zip(CorridorData._fields, dataset.corridor)}
     return write_tensor_file(path, tensors, meta)
 
 
@@ -211,7 +284,8 @@ def load_dataset(path: str | Path) -> Dataset:
         raise UserError(str(path), f"invalid configuration ({type(exc).__name__}: {exc})", field="metadata") from None
     if not isinstance(meta.get("profile"), list):
         raise UserError(str(path), "expected a list of class names", field="profile")
-    return Dataset(tensors["U"], tensors["labels"], tensors["w"], tensors["source"], meta, tensors.get("U2"))
+    corridor = CorridorData(*(tensors[f"corridor.{name}"] for name in CorridorData._fields)) if "corridor.features" in tensors else None
+    return Dataset(tensors["U"], tensors["labels"], tensors["w"], tensors["source"], meta, tensors.get("U2"), corridor)
 
 
 def _check_tensors(t: dict[str, np.ndarray], source: str) -> None:
@@ -234,6 +308,18 @@ def _check_tensors(t: dict[str, np.ndarray], source: str) -> None:
     U2 = t.get("U2")
     if U2 is not None and (U2.ndim != 4 or U2.shape[:3] != (n, m, m) or U2.dtype.kind != "f" or not np.isfinite(U2).all()):
         raise UserError(source, f"expected finite floats of shape ({n}, {m}, {m}, k), got {U2.dtype} {U2.shape}", field="U2")
+    names = [f"corridor.{name}" for name in CorridorData._fields]
+    present = [name in t for name in names]
+    if any(present) and not all(present):
+        raise UserError(source, "missing tensor", field=names[present.index(False)])
+    if all(present):
+        features, near, intent = (t[name] for name in names)
+        if features.ndim != 3 or len(features) != n or features.dtype.kind != "f" or not np.isfinite(features).all() or (features < 0).any():
+            raise UserError(source, f"expected finite metres >= 0 of shape ({n}, offsets, k + 2), got {features.dtype} {features.shape}", field=names[0])
+        if near.shape != (n,) or near.dtype.kind != "f" or np.isnan(near).any():
+            raise UserError(source, f"expected {n} distances (inf allowed, NaN not), got {near.dtype} {near.shape}", field=names[1])
+        if intent.shape != (n,) or intent.dtype.kind != "f" or np.isinf(intent).any():
+            raise UserError(source, f"expected {n} offsets (NaN allowed, inf not), got {intent.dtype} {intent.shape}", field=names[2])
 
 
 def merge_datasets(sets: list[tuple[str, Dataset]]) -> Dataset:
@@ -248,6 +334,8 @@ def merge_datasets(sets: list[tuple[str, Dataset]]) -> Dataset:
                 raise UserError(name, f"differs from {first_name} in {key}; featurise all recordings the same way", field=key)
         if (d.U2 is None) != (first.U2 is None):
             raise UserError(name, f"carries look-ahead utilities and {first_name} does not, or the other way round", field="U2")
+        if (d.corridor is None) != (first.corridor is None):
+            raise UserError(name, f"carries corridor data and {first_name} does not, or the other way round", field="corridor")
     if len(sets) == 1:
         return first
     # Each dataset's recordings are numbered after those of the datasets before it: by the
@@ -259,6 +347,7 @@ def merge_datasets(sets: list[tuple[str, Dataset]]) -> Dataset:
         np.concatenate([d.source + off for off, (_, d) in zip(offsets, sets)]),
         {**first.meta, "recordings": [r for _, d in sets for r in d.meta.get("recordings", [])]},
         None if first.U2 is None else np.concatenate([d.U2 for _, d in sets]),
+        None if first.corridor is None else CorridorData(*(np.concatenate(a) for a in zip(*(d.corridor for _, d in sets)))),
     )
 
 

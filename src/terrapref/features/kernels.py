@@ -183,3 +183,53 @@ def stage_distances(rows: np.ndarray, ends_x: np.ndarray, ends_y: np.ndarray, st
             ex, ey = ends_x[i, j], ends_y[i, j]
             d[a, j] = math.hypot((ex * c - ey * s) + dx, (ex * s + ey * c) + dy)
     return normalise(d, eps)
+
+
+@njit(cache=True, nogil=True)
+def map_write(cells: np.ndarray, ox: float, oy: float, inv_res: float, x: float, y: float, c: float, s: float,
+              vx: np.ndarray, vy: np.ndarray, cols: np.ndarray) -> None:
+    """Write each ground sample's column into the ground map's cells (rows y, columns x), in order.
+
+    The NumPy form: ``i = floor((x - ox + vx * c - vy * s) * inv_res)``, ``j = floor((y - oy +
+    vx * s + vy * c) * inv_res)``, ``cells[j[ok], i[ok]] = cols[ok]`` for the samples inside.
+    """
+    n_rows, n_cols = cells.shape
+    for p in range(vx.shape[0]):
+        i = math.floor((x - ox + vx[p] * c - vy[p] * s) * inv_res)
+        j = math.floor((y - oy + vx[p] * s + vy[p] * c) * inv_res)
+        if 0 <= i < n_cols and 0 <= j < n_rows:
+            cells[j, i] = cols[p]
+
+
+@njit(cache=True, nogil=True)
+def map_read(cells: np.ndarray, ox: float, oy: float, inv_res: float, px: np.ndarray, py: np.ndarray, never: int) -> np.ndarray:
+    """The ground map's column at each point (flat arrays ``px``, ``py``); ``never`` outside it.
+
+    The NumPy form: ``cells[floor((py - oy) * inv_res), floor((px - ox) * inv_res)]`` where inside.
+    """
+    n_rows, n_cols = cells.shape
+    out = np.empty(px.shape[0], np.uint8)
+    for p in range(px.shape[0]):
+        i = math.floor((px[p] - ox) * inv_res)
+        j = math.floor((py[p] - oy) * inv_res)
+        out[p] = cells[j, i] if 0 <= i < n_cols and 0 <= j < n_rows else never
+    return out
+
+
+@njit(cache=True, nogil=True)
+def map_read_beside(cells: np.ndarray, ox: float, oy: float, inv_res: float, centre: np.ndarray, normal: np.ndarray, lat: np.ndarray,
+                    never: int) -> np.ndarray:
+    """The ground map's column (O, S, F) at the points ``centre[s] + lat[o, f] * normal[s]``.
+
+    The NumPy form: :func:`map_read` of ``centre[None, :, None, :] + lat[:, None, :, None] * normal[None, :, None, :]``.
+    """
+    n_rows, n_cols = cells.shape
+    n_off, n_st, n_f = lat.shape[0], centre.shape[0], lat.shape[1]
+    out = np.empty((n_off, n_st, n_f), np.uint8)
+    for o in range(n_off):
+        for s in range(n_st):
+            for f in range(n_f):
+                i = math.floor((centre[s, 0] + lat[o, f] * normal[s, 0] - ox) * inv_res)
+                j = math.floor((centre[s, 1] + lat[o, f] * normal[s, 1] - oy) * inv_res)
+                out[o, s, f] = cells[j, i] if 0 <= i < n_cols and 0 <= j < n_rows else never
+    return out

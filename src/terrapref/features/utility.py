@@ -26,6 +26,7 @@ import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView, as_view
 from terrapref.features import kernels
+from terrapref.features.corridor import CorridorConfig
 from terrapref.features.preference_set import PreferenceSet, PreferenceSetConfig
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable, default_classes
@@ -84,6 +85,9 @@ class FeatureConfig:
         lookahead: with a configuration, datasets also carry the look-ahead utilities U' of
             every frame (terrapref.features.lookahead), through which training fits the
             planner's second stage; None (the paper's data): U only.
+        corridor: with a configuration, datasets also carry each frame's offset corridor and
+            the offset the driver steered for (terrapref.features.corridor), to which training
+            fits the planner's offset stage; None: not.
     """
 
     preference: PreferenceSetConfig = field(default_factory=PreferenceSetConfig)
@@ -92,6 +96,7 @@ class FeatureConfig:
     path_spacing_m: float = 0.25
     feature_classes: tuple[str, ...] = field(default_factory=lambda: default_classes().feature_names)
     lookahead: LookaheadConfig | None = None
+    corridor: CorridorConfig | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "distance_mode", DistanceMode(self.distance_mode))
@@ -99,6 +104,8 @@ class FeatureConfig:
             raise ValueError("path_spacing_m and window_m must be > 0")
         if self.lookahead is not None and not isinstance(self.lookahead, LookaheadConfig):
             raise ValueError("lookahead must be a LookaheadConfig")
+        if self.corridor is not None and not isinstance(self.corridor, CorridorConfig):
+            raise ValueError("corridor must be a CorridorConfig")
 
     @property
     def effective_window_m(self) -> float:
@@ -125,6 +132,7 @@ class FeatureConfig:
             "path_spacing_m": self.path_spacing_m,
             "feature_classes": list(self.feature_classes),
             **({"lookahead": self.lookahead.to_dict()} if self.lookahead is not None else {}),
+            **({"corridor": self.corridor.to_dict()} if self.corridor is not None else {}),
         }
 
     @classmethod
@@ -142,6 +150,7 @@ class FeatureConfig:
             float(data["path_spacing_m"]),
             tuple(data["feature_classes"]),
             LookaheadConfig.from_dict(data["lookahead"]) if data.get("lookahead") is not None else None,
+            CorridorConfig.from_dict(data["corridor"]) if data.get("corridor") is not None else None,
         )
 
 

@@ -14,6 +14,7 @@ import numpy as np
 from terrapref.camera import CameraConfig
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
+from terrapref.learning.corridor import CorridorUtility
 from terrapref.learning.linear import LinearUtility
 from terrapref.learning.network import MEMBERS, ClassifierConfig, member_prefix
 from terrapref.tensorfile import read_tensor_file, write_tensor_file
@@ -37,6 +38,7 @@ class LoadedModel:
     meta: dict
     utility: LinearUtility | None = None  # fitted with C for the planner's second stage (TrainConfig.second_stage)
     stage_weight: float = 1.5  # the second stage's weight in the decision, as trained (SecondStageConfig.weight)
+    corridor: CorridorUtility | None = None  # the offset stage's utility, when trained on corridor data (terrapref.planner.offset)
 
 
 def save_model(path: str | Path, classifier: ClassifierConfig, weights: dict[str, np.ndarray], meta: dict) -> Path:
@@ -85,7 +87,29 @@ def classifier_from(weights: dict[str, np.ndarray], meta: dict, source: str) -> 
     if classifier.m != features.preference.m or classifier.n_features != features.n_features:
         raise UserError(source, "classifier shape does not match its feature configuration", field="classifier")
     utility, weight = _utility(meta, features, source)
-    return LoadedModel(source, classifier, weights, features, camera, classes, profile, meta, utility, weight)
+    return LoadedModel(source, classifier, weights, features, camera, classes, profile, meta, utility, weight, _corridor(meta, features, source))
+
+
+def _corridor(meta: dict, features: FeatureConfig, source: str) -> CorridorUtility | None:
+    """The corridor utility the metadata carries (``corridor``: ``weights``, ``near_m``), if any."""
+    data = meta.get("corridor")
+    if data is None:
+        return None
+    if not isinstance(data, dict):
+        raise UserError(source, "expected a mapping with weights and near_m", field="corridor")
+    if features.corridor is None:
+        raise UserError(source, "a corridor utility, but the feature configuration has no corridor", field="corridor")
+    size = features.n_terrain + 3
+    try:
+        weights = np.asarray(data["weights"], dtype=float)
+    except (KeyError, TypeError, ValueError):
+        weights = None
+    if weights is None or weights.shape != (size,) or not np.isfinite(weights).all():
+        raise UserError(source, f"expected {size} finite numbers", field="corridor.weights")
+    near = data.get("near_m")
+    if isinstance(near, bool) or not isinstance(near, (int, float)) or not (math.isfinite(near) and near > 0):
+        raise UserError(source, "expected a finite distance > 0", field="corridor.near_m")
+    return CorridorUtility(weights, float(near), features.corridor)
 
 
 def _utility(meta: dict, features: FeatureConfig, source: str) -> tuple[LinearUtility | None, float]:

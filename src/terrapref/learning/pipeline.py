@@ -39,6 +39,8 @@ def model_meta(dataset: Dataset, config: TrainConfig, result: TrainResult, sourc
         **({"steadying": result.steadying.to_dict()} if result.steadying is not None else {}),
         **({"utility": {"w": result.utility.w.tolist(), "b": result.utility.b.tolist(), "weight": config.second_stage.weight,
                         "fit": "lookahead" if dataset.U2 is not None else "frames"}} if result.utility is not None else {}),
+        **({"corridor": {"weights": result.corridor.weights.tolist(), "near_m": result.corridor.near_m, "loss": result.corridor.loss,
+                         "samples": result.corridor.samples}} if result.corridor is not None else {}),
         **({"members": [{"seed": seed, "best_epoch": r.best_epoch, "history": [asdict(h) for h in r.history]}
                         for seed, r in zip(config.member_seeds, result.members)]} if result.members else {}),
     }

@@ -21,6 +21,7 @@ from terrapref.configargs import option
 from terrapref.demos.dataset import Dataset
 from terrapref.learning import exact, kernels
 from terrapref.learning.identify import Identifiability, identifiability
+from terrapref.learning.corridor import CorridorFit, fit_corridor
 from terrapref.learning.linear import LinearUtility, fit_linear_utility, fit_lookahead_utility
 from terrapref.learning.mlp import Adam, TrainableClassifier, cross_entropy, init_weights, round_inputs
 from terrapref.learning.steady import Steadying, steady_labels
@@ -201,6 +202,7 @@ class TrainResult:
     utility: LinearUtility | None = None  # the linear utility model, when TrainConfig.second_stage asks for it
     identifiability: Identifiability | None = None  # what the data show of the preference (terrapref.learning.identify)
     steadying: Steadying | None = None  # the hand's tremor and what was done about it, with DataOptions.steady_labels
+    corridor: CorridorFit | None = None  # the offset stage's corridor utility, when the dataset carries corridor data
 
 
 def _ensemble(results: list[TrainResult]) -> TrainResult:
@@ -249,6 +251,8 @@ def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callabl
         dataset, steadying = steady_labels(dataset)
     result = _train_classifier(dataset, config, progress, on_epoch)
     result.steadying = steadying
+    if dataset.corridor is not None:
+        result.corridor = _fit_corridor(dataset)
     if not identify and config.second_stage is None:
         return result
     # The linear utility: the second stage's (when asked for), and the identifiability report's.
@@ -257,6 +261,13 @@ def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callabl
         result.utility = utility
     result.identifiability = _identifiability(dataset, utility, gamma)
     return result
+
+
+def _fit_corridor(dataset: Dataset) -> CorridorFit:
+    """The offset stage's corridor utility, fitted to the offsets the driver steered for."""
+    corridor = dataset.corridor
+    offsets = dataset.feature_config.corridor.offsets
+    return fit_corridor(corridor.features, corridor.near_m, corridor.intent_m, offsets)
 
 
 def _train_classifier(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetrics], None] | None,

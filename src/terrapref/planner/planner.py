@@ -15,6 +15,7 @@ from terrapref.camera import CameraConfig, PinholeCamera, SegmentationView, as_v
 from terrapref.features import UtilityFeaturizer
 from terrapref.learning.model_file import LoadedModel, check_compatible
 from terrapref.learning import exact
+from terrapref.planner.offset import OffsetConfig, OffsetStage
 from terrapref.planner.second_stage import SecondStage, SecondStageConfig
 from terrapref.planner.policy import ClassifierPolicy, Observation, Policy
 from terrapref.scenario import Scenario
@@ -58,10 +59,14 @@ class Planner:
             train --second-stage``); ``MODEL`` (the default): the weight the model was trained
             with and the look-ahead its data were featurised with; None never looks beyond the
             trajectories.
+        offset: the offset stage (terrapref.planner.offset), used when the model file carries
+            the corridor utility it scores offsets with: the planner then steers toward the
+            offset it holds, and C's distribution is still computed for every frame. ``MODEL``
+            (the default): with the default :class:`OffsetConfig`; None: drive C's trajectories.
     """
 
     def __init__(self, model: LoadedModel | Policy, camera: CameraConfig | None = None,
-                 second_stage: SecondStageConfig | str | None = "model") -> None:
+                 second_stage: SecondStageConfig | str | None = "model", offset: OffsetConfig | str | None = "model") -> None:
         policy = model if isinstance(model, Policy) else ClassifierPolicy(model)
         camera = camera or policy.camera
         if isinstance(model, LoadedModel):
@@ -77,13 +82,21 @@ class Planner:
             look = policy.features.lookahead
             second_stage = SecondStageConfig(weight=stage.weight, **({"after_s": look.after_s, "stride": look.stride} if look else {}))
         self.second_stage = SecondStage(second_stage, self.featurizer, self.camera, stage.utility) if second_stage is not None and stage is not None else None
+        corridor = policy.corridor_utility()
+        self.offset_stage = None
+        if offset is not None and corridor is not None:
+            lethal = np.array(sorted({int(self.featurizer.class_columns[i]) for i in policy.classes.lethal_ids}), dtype=np.int64)
+            self.offset_stage = OffsetStage(corridor, self.camera, self.featurizer.class_columns, policy.features.n_terrain, lethal,
+                                            self.control.v_mps, None if offset == MODEL else offset)
         self.path: ReferencePath | None = None
         self.tracker: PathTracker | None = None
 
     def set_path(self, waypoints: np.ndarray) -> None:
-        """Start following a new reference path."""
+        """Start following a new reference path (the offset stage forgets the ground it has seen)."""
         self.path = ReferencePath(np.asarray(waypoints, dtype=float))
         self.tracker = PathTracker(self.path)
+        if self.offset_stage is not None:
+            self.offset_stage.reset()
 
     def warm_up(self) -> None:
         """Decide once on a blank frame along a straight path, then forget that path.
@@ -109,6 +122,10 @@ class Planner:
         U = self.featurizer(view, pose, self.path, s)
         ahead = path_ahead(self.path, pose, s) if self.policy.uses_path_ahead else _NO_POINTS
         probs = self.policy.probabilities(Observation(U, view, ahead))
+        if self.offset_stage is not None:
+            # Steered continuously within the stick's range; the index names the nearest trajectory.
+            w = float(np.clip(self.offset_stage.decide(view, pose, self.path, s), self.control.w_rps[0], self.control.w_rps[-1]))
+            return Decision(int(self.control.label_of(w)), Command(self.control.v_mps, w), probs, U, s)
         if self.second_stage is None:
             i = int(np.argmax(probs))
         else:  # a probability of exactly 0 is -inf, never chosen

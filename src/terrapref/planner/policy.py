@@ -27,6 +27,7 @@ import numpy as np
 
 from terrapref.camera import CameraConfig, SegmentationView
 from terrapref.features import FeatureConfig
+from terrapref.learning.corridor import CorridorUtility
 from terrapref.learning.linear import LinearUtility
 from terrapref.learning.model_file import FORMAT, LoadedModel
 from terrapref.learning import exact
@@ -108,6 +109,11 @@ class Policy(abc.ABC):
         one (None: the planner decides by ``logits`` alone)."""
         return None
 
+    def corridor_utility(self) -> CorridorUtility | None:
+        """What the offset stage (terrapref.planner.offset) scores offsets with, for a policy
+        trained with one (None: the planner drives a trajectory)."""
+        return None
+
 
 class ClassifierPolicy(Policy):
     """The learned classifier C from a model file."""
@@ -130,6 +136,9 @@ class ClassifierPolicy(Policy):
 
     def stage_utility(self) -> StageUtility | None:
         return None if self.model.utility is None else StageUtility(self.model.utility, self.model.stage_weight)
+
+    def corridor_utility(self) -> CorridorUtility | None:
+        return self.model.corridor
 
 
 class LinearPolicy(Policy):

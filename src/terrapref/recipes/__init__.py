@@ -33,6 +33,7 @@ from terrapref.demos.recording import MemoryRecordingWriter, Recording, Recordin
 from terrapref.demos.session import DisturbanceConfig, record_run, recording_meta
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, LookaheadConfig
+from terrapref.features.corridor import CorridorConfig
 from terrapref.learning.model_file import load_model
 from terrapref.learning.pipeline import train_and_save
 from terrapref.learning.network import ClassifierConfig
@@ -57,6 +58,8 @@ class Recipe:
             (None: the driver drives undisturbed).
         lookahead: datasets carry the look-ahead utilities, and the second stage's utility is
             fitted through them (``FeatureConfig.lookahead``).
+        corridor: datasets carry each frame's offset corridor, and training fits the planner's
+            offset stage to it (``FeatureConfig.corridor``).
         course: the demonstration course.
         summary: one line on what the recipe is for and how it scored (``terrapref recipes``).
     """
@@ -67,6 +70,7 @@ class Recipe:
     train: TrainConfig = field(default_factory=TrainConfig)
     disturbance: DisturbanceConfig | None = None
     lookahead: bool = False
+    corridor: bool = False
     course: str = "train_course"
     summary: str = ""
 
@@ -76,7 +80,8 @@ class Recipe:
 
     def features(self, base: FeatureConfig | None = None) -> FeatureConfig:
         """The feature configuration this recipe trains with: ``base`` with or without the look-ahead."""
-        return replace(base or FeatureConfig(), lookahead=LookaheadConfig() if self.lookahead else None)
+        return replace(base or FeatureConfig(), lookahead=LookaheadConfig() if self.lookahead else None,
+                       corridor=CorridorConfig() if self.corridor else None)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -94,7 +99,7 @@ OURS = Recipe("ours", demonstrations=2, train=_RECOMMENDED,
               disturbance=DisturbanceConfig(rate_hz=0.3),
               summary="two drives of train_course: the paper's setting done well (the reproduction's Tables 1 and 2); "
                       "scored 94.7% of test zones (71/75), 0 collisions in terrapref reproduce")
-TEACH = Recipe("teach", course="teach_course", lookahead=True,
+TEACH = Recipe("teach", course="teach_course", lookahead=True, corridor=True,
                train=replace(_RECOMMENDED, classifier=ClassifierConfig(skip=True, members=3), second_stage=SecondStageConfig(weight=5.0),
                              data=replace(_RECOMMENDED.data, steady_labels=True)),
                disturbance=DisturbanceConfig(rate_hz=0.3),

@@ -31,6 +31,12 @@ class ReferencePath:
     def length_m(self) -> float:
         return float(self.s[-1])
 
+    @property
+    def segments(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each segment's start (N - 1, 2), vector (N - 1, 2) and length (N - 1,) [m]; with :attr:`s`,
+        what a compiled loop needs to walk the path as :meth:`point_at` and :meth:`heading_at` do."""
+        return self._a, self._d, self._len
+
     def point_at(self, s: float | np.ndarray) -> np.ndarray:
         """Points (..., 2) at arc lengths ``s`` (clamped to the path)."""
         if isinstance(s, (float, int)):  # scalar fast path: used once per frame in the control loop

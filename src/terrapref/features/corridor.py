@@ -1,0 +1,288 @@
+"""The offset corridor: what driving beside the path at a lateral offset would cross.
+
+A person facing a patch on the trail does not pick a 6 m arc; they pick a side and how far out
+to hold it until the patch is behind them. The corridor features describe exactly that choice.
+For each candidate offset d (left positive) from the reference path, the footprint is laid
+along the path shifted by d, over stations from just behind the vehicle to ``stations_m[1]``
+ahead, and the ground under it is read from a :class:`GroundMap`: the camera's views, gathered
+over the last frames, so that a patch the vehicle is already beside still counts.
+
+Features per offset (:meth:`CorridorFeatures.base`, shape (O, K + 2)):
+
+- metres driven on each of the K terrain classes (footprint points averaged);
+- metres over ground never seen;
+- d^2 * (on-path length + ``span_m``): the price of a detour that lasts as long as the patch on
+  the path, plus the swerves in and out;
+
+and one gated column (:func:`gated`): d^2 while nothing lies on the path within the near
+distance, so that a utility can learn to keep to the path until a patch is close. Only the
+first patch on the path (gaps under ``gap_m`` do not split it) and ``span_m / 2`` beyond it
+are weighed; later patches wait for their own turn.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from terrapref.camera import PinholeCamera, SegmentationView
+from terrapref.features import kernels
+from terrapref.scenario.path import ReferencePath
+from terrapref.vehicle import Pose, pure_pursuit_yaw_rate
+
+
+@dataclass(frozen=True)
+class CorridorConfig:
+    """Geometry of the offset corridor and of the ground map behind it.
+
+    Attributes:
+        max_offset_m: candidate offsets run from -max to +max [m].
+        offset_step_m: spacing of the candidate offsets [m].
+        stations_m: first and last station read along the path, from the vehicle's progress [m].
+        station_step_m: spacing of the stations [m].
+        half_width_m: half the footprint's width; 5 points across it [m].
+        span_m: metres added to the on-path length in the detour's price (swerving in and out) [m].
+        gap_m: gaps along the path shorter than this do not split a patch [m].
+        map_resolution_m: cell size of the ground map [m].
+        map_half_size_m: the ground map covers this much around its centre, each way [m].
+        sample_step_m: spacing of the ground points read from each image [m].
+        sample_range_m: ground read up to this far ahead of the camera [m].
+        intent_delay_s: a demonstrator's command is read as what it meant this long before (its
+            reaction time) [s] ...
+        intent_lookahead_m: ... and inverted through pure pursuit this far ahead along the path
+            into the offset it was steering for [m] (terrapref.learning.corridor).
+    """
+
+    max_offset_m: float = 3.0
+    offset_step_m: float = 0.2
+    stations_m: tuple[float, float] = (-1.0, 11.0)
+    station_step_m: float = 0.25
+    half_width_m: float = 0.6
+    span_m: float = 5.0
+    gap_m: float = 1.0
+    map_resolution_m: float = 0.1
+    map_half_size_m: float = 32.0
+    sample_step_m: float = 0.1
+    sample_range_m: float = 14.0
+    intent_delay_s: float = 0.2
+    intent_lookahead_m: float = 2.5
+
+    def __post_init__(self) -> None:
+        positive = (self.max_offset_m, self.offset_step_m, self.station_step_m, self.half_width_m, self.map_resolution_m,
+                    self.map_half_size_m, self.sample_step_m, self.sample_range_m, self.intent_lookahead_m)
+        if not all(math.isfinite(v) and v > 0 for v in positive) or not (self.span_m >= 0 and self.gap_m >= 0 and self.intent_delay_s >= 0):
+            raise ValueError("the corridor needs positive sizes and steps, and span_m, gap_m and intent_delay_s >= 0")
+        if not self.map_half_size_m > self.sample_range_m + 1.0 or not self.stations_m[1] < self.sample_range_m:
+            raise ValueError("the ground map must reach past the camera's sample range by more than 1 m, and that past the corridor")
+        if not self.stations_m[0] < self.stations_m[1]:
+            raise ValueError("the corridor's stations_m must run forward")
+
+    @property
+    def offsets(self) -> np.ndarray:
+        """Candidate lateral offsets (O,) [m], left positive, symmetric about 0."""
+        n = round(self.max_offset_m / self.offset_step_m)
+        return np.arange(-n, n + 1) * self.offset_step_m
+
+    @property
+    def stations(self) -> np.ndarray:
+        """Stations (S,) [m] along the path from the vehicle's progress."""
+        n = round((self.stations_m[1] - self.stations_m[0]) / self.station_step_m)
+        return self.stations_m[0] + np.arange(n + 1) * self.station_step_m
+
+    @property
+    def footprint(self) -> np.ndarray:
+        """Lateral positions (5,) [m] of the footprint's points about its centre line."""
+        return np.linspace(-self.half_width_m, self.half_width_m, 5)
+
+    def to_dict(self) -> dict:
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> CorridorConfig:
+        data = dict(data)
+        if "stations_m" in data:
+            data["stations_m"] = tuple(data["stations_m"])
+        return cls(**data)
+
+
+class GroundMap:
+    """The terrain column last seen at each cell of the ground around the vehicle.
+
+    A square of ``2 * map_half_size_m`` in the world frame, re-centred on the vehicle before
+    the ground the camera sees (``sample_range_m`` ahead) could leave it; cells that leave it
+    are forgotten. Cells hold
+    a terrain column (0..K-1), K for ground that is none of the K classes, K + 1 for ground
+    never seen.
+
+    Args:
+        camera: the camera whose images update the map.
+        columns: terrain column of each class id (256,), as :attr:`UtilityFeaturizer.class_columns`.
+        k: the number of terrain classes K.
+        config: the corridor's configuration (map resolution and size, image sampling).
+    """
+
+    def __init__(self, camera: PinholeCamera, columns: np.ndarray, k: int, config: CorridorConfig | None = None) -> None:
+        self.config = c = config or CorridorConfig()
+        self.k = k
+        self.columns = np.asarray(columns, dtype=np.uint8)
+        # The ground points read from each image: a vehicle-frame grid, those the camera sees.
+        xs = np.arange(0.2, c.sample_range_m, c.sample_step_m)
+        ys = np.arange(-8.0, 8.0, c.sample_step_m)
+        grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1).reshape(-1, 2)
+        pix = camera.pixel_indices(grid)
+        seen = pix >= 0
+        self._pix = pix[seen]
+        self._vx, self._vy = grid[seen, 0].copy(), grid[seen, 1].copy()
+        self._n = int(round(2 * c.map_half_size_m / c.map_resolution_m))
+        self.cells = np.full((self._n, self._n), k + 1, dtype=np.uint8)  # (row: y, col: x)
+        self.origin: np.ndarray | None = None  # world position of cell (0, 0)'s corner [m]
+
+    def reset(self) -> None:
+        """Forget everything seen."""
+        self.cells.fill(self.k + 1)
+        self.origin = None
+
+    def _recentre(self, x: float, y: float) -> None:
+        c = self.config
+        centre = np.array([x, y]) - c.map_half_size_m
+        # Re-centred while all the camera writes and the corridor reads stays inside.
+        if self.origin is not None and np.abs(self.origin - centre).max() < c.map_half_size_m - c.sample_range_m - 1.0:
+            return
+        new = np.floor(centre / c.map_resolution_m).astype(np.int64)
+        cells = np.full_like(self.cells, self.k + 1)
+        if self.origin is not None:  # keep what the old square and the new one share
+            old = np.round(self.origin / c.map_resolution_m).astype(np.int64)
+            dx, dy = int(new[0] - old[0]), int(new[1] - old[1])
+            n = self._n
+            if abs(dx) < n and abs(dy) < n:
+                cells[max(0, -dy):n - max(0, dy), max(0, -dx):n - max(0, dx)] = self.cells[max(0, dy):n - max(0, -dy), max(0, dx):n - max(0, -dx)]
+        self.cells = cells
+        self.origin = new * c.map_resolution_m
+
+    def update(self, view: SegmentationView, pose: Pose) -> None:
+        """Write what ``view``, taken at ``pose``, shows of the ground."""
+        x, y, yaw = pose
+        self._recentre(x, y)
+        cols = self.columns[view.pixels(self._pix)]
+        kernels.map_write(self.cells, float(self.origin[0]), float(self.origin[1]), 1.0 / self.config.map_resolution_m,
+                          float(x), float(y), math.cos(yaw), math.sin(yaw), self._vx, self._vy, cols)
+
+    def beside(self, path: ReferencePath, s: np.ndarray, lat: np.ndarray) -> np.ndarray:
+        """Terrain column (O, S, F) at the points ``lat`` (O, F) [m] left of the path at arc lengths ``s`` (S,)."""
+        heading = path.heading_at(s)
+        normal = np.ascontiguousarray(np.stack([-np.sin(heading), np.cos(heading)], axis=-1))
+        centre = np.ascontiguousarray(path.point_at(s))
+        if self.origin is None:
+            return np.full((lat.shape[0], len(s), lat.shape[1]), self.k + 1, dtype=np.uint8)
+        return kernels.map_read_beside(self.cells, float(self.origin[0]), float(self.origin[1]), 1.0 / self.config.map_resolution_m,
+                                       centre, normal, np.ascontiguousarray(lat, dtype=np.float64), self.k + 1)
+
+    def lookup(self, points: np.ndarray) -> np.ndarray:
+        """Terrain column at each world point (..., 2); K + 1 (never seen) outside the map."""
+        if self.origin is None:
+            return np.full(points.shape[:-1], self.k + 1, dtype=np.uint8)
+        px = np.ascontiguousarray(points[..., 0], dtype=np.float64).reshape(-1)
+        py = np.ascontiguousarray(points[..., 1], dtype=np.float64).reshape(-1)
+        out = kernels.map_read(self.cells, float(self.origin[0]), float(self.origin[1]), 1.0 / self.config.map_resolution_m, px, py, self.k + 1)
+        return out.reshape(points.shape[:-1])
+
+
+@dataclass(frozen=True)
+class CorridorView:
+    """The corridor at one frame.
+
+    Attributes:
+        features: per offset, metres on each terrain class, metres never seen and the detour's
+            price, shape (O, K + 2).
+        near_m: distance along the path to the first terrain on it [m] (inf: none in reach).
+    """
+
+    features: np.ndarray
+    near_m: float
+
+
+class CorridorFeatures:
+    """Corridor features (module docstring) read from a ground map along a path."""
+
+    def __init__(self, config: CorridorConfig, k: int) -> None:
+        self.config, self.k = config, k
+        self.offsets = config.offsets
+        self.stations = config.stations
+        self._lat = self.offsets[:, None] + config.footprint[None, :]  # (O, F)
+        self._centre = int(np.argmin(np.abs(self.offsets)))
+        self._gap = round(config.gap_m / config.station_step_m)
+        self._beyond = round(config.span_m / 2 / config.station_step_m)
+
+    def columns(self, gmap: GroundMap, path: ReferencePath, progress_s: float) -> np.ndarray:
+        """Terrain column under every footprint point, shape (O, S, F)."""
+        return gmap.beside(path, np.minimum(progress_s + self.stations, path.length_m), self._lat)
+
+    def __call__(self, gmap: GroundMap, path: ReferencePath, progress_s: float) -> CorridorView:
+        k, step = self.k, self.config.station_step_m
+        col = self.columns(gmap, path, progress_s)
+        on = (col[self._centre] < k).any(axis=1)  # (S,): terrain on the path itself
+        upto, on_path_m, near_m = len(self.stations), 0.0, math.inf
+        if on.any():
+            idx = np.flatnonzero(on)
+            first = last = int(idx[0])
+            for i in idx[1:]:
+                if i - last > self._gap:
+                    break
+                last = int(i)
+            upto = min(len(self.stations), last + 1 + self._beyond)
+            on_path_m = (last - first + 1) * step
+            near_m = float(self.stations[first])
+        n_off = len(self.offsets)
+        flat = col[:, :upto].reshape(n_off, -1).astype(np.int64)
+        counts = np.bincount((np.arange(n_off)[:, None] * (k + 2) + flat).ravel(), minlength=n_off * (k + 2)).reshape(n_off, k + 2)
+        metres = counts * (step / col.shape[2])
+        detour = self.offsets**2 * (on_path_m + self.config.span_m)
+        return CorridorView(np.concatenate([metres[:, :k], metres[:, k + 1:], detour[:, None]], axis=1), near_m)
+
+
+def gated(view: CorridorView, offsets: np.ndarray, near_m: float) -> np.ndarray:
+    """The corridor's features with the gate column: d^2 while nothing is on the path within ``near_m``, (O, K + 3)."""
+    gate = offsets**2 * float(view.near_m > near_m)
+    return np.concatenate([view.features, gate[:, None]], axis=1)
+
+
+def steer(path: ReferencePath, pose: Pose, progress_s: float, offset_m: np.ndarray | float, lookahead_m: float, v_mps: float,
+          clip: bool = True) -> np.ndarray:
+    """Pure-pursuit yaw rate [rad/s] toward the path shifted by ``offset_m`` (left positive), ``lookahead_m`` ahead
+    of ``progress_s``; clipped to the stick's +-1 rad/s with ``clip``. Broadcasts over offsets and poses."""
+    s = min(progress_s + lookahead_m, path.length_m)
+    heading = float(path.heading_at(s))
+    target = path.point_at(s)
+    x, y, yaw = pose
+    tx = target[0] - np.asarray(offset_m) * math.sin(heading) - x
+    ty = target[1] + np.asarray(offset_m) * math.cos(heading) - y
+    alpha = (np.arctan2(ty, tx) - yaw + math.pi) % (2 * math.pi) - math.pi
+    w = pure_pursuit_yaw_rate(v_mps, np.sin(alpha), np.maximum(np.hypot(tx, ty), 1e-6))
+    return np.clip(w, -1.0, 1.0) if clip else w
+
+
+def intent_offsets(poses: np.ndarray, later: np.ndarray, lateral_m: np.ndarray, progress_s: np.ndarray, path: ReferencePath,
+                   offsets: np.ndarray, lookahead_m: float) -> np.ndarray:
+    """The offset [m] each frame's driver was steering for, (F,); NaN where ``later`` is NaN.
+
+    Args:
+        poses: (F, 3) the vehicle's poses.
+        later: (F, 2) the command (v [m/s], w [rad/s]) recorded one reaction time after each frame.
+        lateral_m: (F,) the vehicle's signed offset from the path (left positive) [m].
+        progress_s: (F,) its progress along the path [m].
+        path: the reference path.
+        offsets: the candidate offsets (O,) [m].
+        lookahead_m: the driver's pure-pursuit look-ahead [m].
+    """
+    out = np.full(len(poses), np.nan)
+    for i, (v, w) in enumerate(later):
+        if not (math.isfinite(v) and math.isfinite(w)):
+            continue
+        if w == 0.0:  # the stick at rest: the driver holds where it is
+            out[i] = lateral_m[i]
+            continue
+        yaw_rate = steer(path, tuple(poses[i]), progress_s[i], offsets, lookahead_m, v, clip=False)
+        out[i] = offsets[int(np.argmin(np.abs(yaw_rate - w)))]
+    return out

@@ -1,0 +1,120 @@
+"""Fitting the corridor utility (terrapref.planner.offset) to the offsets a demonstrator steered for.
+
+Each frame's label is the offset the driver was steering for: its command ``delay`` later (its
+reaction time) inverted through pure pursuit ``lookahead`` ahead, the offset whose pure-pursuit
+yaw rate is nearest the command; with the stick at rest, where the vehicle is. A softmax over
+the candidate offsets, ``p(d) ~ exp(weights . gated(features)(d))``, is fitted to Gaussian soft
+labels (``label_sigma_m``) around that offset by Newton's method with a small ridge, once for
+each candidate near distance; the near distance of the lowest loss is kept.
+
+Float64 NumPy throughout, with fixed reduction order: the same data give the same weights on
+any machine.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from terrapref.features.corridor import CorridorConfig
+
+NEAR_CANDIDATES_M = (2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 6.0, 7.0, 8.0)
+
+
+@dataclass(frozen=True)
+class CorridorUtility:
+    """A fitted corridor utility: ``weights . gated(features)`` per offset.
+
+    Attributes:
+        weights: one per column of :func:`terrapref.features.corridor.gated`, shape (K + 3,):
+            K terrain classes, never seen, the detour's price, the gate.
+        near_m: the gate's near distance [m].
+        config: the corridor's geometry.
+    """
+
+    weights: np.ndarray
+    near_m: float
+    config: CorridorConfig = field(default_factory=CorridorConfig)
+
+
+@dataclass(frozen=True)
+class CorridorFit:
+    """A fitted corridor utility and how well it fitted.
+
+    Attributes:
+        weights: (K + 3,), the columns of :func:`terrapref.features.corridor.gated`.
+        near_m: the chosen near distance [m].
+        loss: mean cross-entropy of the soft labels at that near distance.
+        losses: the loss at every candidate near distance.
+        samples: frames fitted.
+    """
+
+    weights: np.ndarray
+    near_m: float
+    loss: float
+    losses: dict[float, float]
+    samples: int
+
+
+def soft_labels(intent: np.ndarray, offsets: np.ndarray, sigma_m: float) -> np.ndarray:
+    """Gaussian weights (F, O) over the offsets around each frame's intended offset, rows summing to 1."""
+    y = np.exp(-0.5 * ((offsets[None, :] - intent[:, None]) / sigma_m) ** 2)
+    return y / y.sum(axis=1, keepdims=True)
+
+
+def fit_softmax(X: np.ndarray, Y: np.ndarray, l2: float = 1e-3, iterations: int = 50) -> tuple[np.ndarray, float]:
+    """Weights (P,) maximising the soft-label log-likelihood of ``softmax(X @ weights)`` less ``l2 |weights|^2``.
+
+    ``X`` (N, O, P) features, ``Y`` (N, O) soft labels. Newton steps with a backtracking line
+    search; the problem is convex, so the result does not depend on where it starts.
+    """
+    n, _, p = X.shape
+
+    def evaluate(theta: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        z = X @ theta
+        z = z - z.max(axis=1, keepdims=True)
+        logp = z - np.log(np.exp(z).sum(axis=1, keepdims=True))
+        prob = np.exp(logp)
+        loss = -(Y * logp).sum() / n + l2 * theta @ theta
+        grad = np.einsum("nop,no->p", X, prob - Y) / n + 2 * l2 * theta
+        mean = np.einsum("nop,no->np", X, prob)
+        hess = (np.einsum("nop,noq,no->pq", X, X, prob) - mean.T @ mean) / n + 2 * l2 * np.eye(p)
+        return loss, grad, hess
+
+    theta = np.zeros(p)
+    loss = math.inf
+    for _ in range(iterations):
+        loss, grad, hess = evaluate(theta)
+        if np.abs(grad).max() < 1e-7:
+            break
+        step = np.linalg.solve(hess, grad)
+        t = 1.0
+        while t > 1e-4:
+            trial = evaluate(theta - t * step)[0]
+            if trial <= loss - 1e-4 * t * grad @ step:
+                break
+            t /= 2
+        theta = theta - t * step
+    return theta, float(evaluate(theta)[0])
+
+
+def fit_corridor(features: np.ndarray, near_m: np.ndarray, intent: np.ndarray, offsets: np.ndarray, sigma_m: float = 0.3,
+                 l2: float = 1e-3, near_candidates: tuple[float, ...] = NEAR_CANDIDATES_M) -> CorridorFit:
+    """Fit the corridor utility to frames' corridor features (N, O, K + 2), near distances (N,)
+    and intended offsets (N,); frames without an intended offset (NaN) are left out."""
+    keep = np.isfinite(intent)
+    if not keep.any():
+        raise ValueError("no frame has an intended offset to fit")
+    X, near, Y = features[keep].astype(np.float64), near_m[keep], soft_labels(intent[keep], offsets, sigma_m)
+    best: tuple[np.ndarray, float, float] | None = None
+    losses = {}
+    for candidate in near_candidates:
+        gate = (offsets**2)[None, :, None] * (near > candidate)[:, None, None]
+        theta, loss = fit_softmax(np.concatenate([X, gate], axis=2), Y, l2)
+        losses[candidate] = loss
+        if best is None or loss < best[1] - 1e-9:
+            best = (theta, loss, candidate)
+    theta, loss, chosen = best
+    return CorridorFit(theta, chosen, loss, losses, int(keep.sum()))

@@ -1,0 +1,63 @@
+"""The offset stage's per-frame loops, compiled (Numba) for the planner's control loop.
+
+Each follows the NumPy form its docstring gives, element by element, without fast-math.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True)
+def _segment(path_s: np.ndarray, n_seg: int, s: float) -> tuple[int, float]:
+    """The path's segment at arc length ``s`` (clamped to the path), as ``ReferencePath.point_at``."""
+    s = min(max(s, 0.0), path_s[-1])
+    i = np.searchsorted(path_s, s, side="right") - 1
+    return min(max(i, 0), n_seg - 1), s
+
+
+@njit(cache=True, nogil=True)
+def swept_blocked(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progress_s: float, v: float, dt: float, steps: int,
+                  lookahead_m: float, path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray,
+                  clear: np.ndarray, cells: np.ndarray, ox: float, oy: float, inv_res: float, lethal: np.ndarray, never: int) -> np.ndarray:
+    """Per offset (O,): does pure pursuit toward the path shifted by it, driven for ``steps`` steps
+    of ``dt`` from the pose, bring a point across the footprint (``clear``, every other step)
+    onto a lethal column of the map (``lethal`` by column, ``never`` for cells outside the map)?
+
+    The NumPy form: :func:`terrapref.features.corridor.steer` (clipped to +-1 rad/s) toward
+    every offset at progress ``progress_s + step * dt * v``, then ``yaw += w dt``, ``x += v
+    cos(yaw) dt``, ``y += v sin(yaw) dt``.
+    """
+    n_seg = path_len.shape[0]
+    n_rows, n_cols = cells.shape
+    out = np.zeros(offsets.shape[0], np.bool_)
+    for o in range(offsets.shape[0]):
+        x, y, yaw = x0, y0, yaw0
+        for k in range(steps):
+            i, s = _segment(path_s, n_seg, min(progress_s + k * dt * v + lookahead_m, path_s[-1]))
+            f = (s - path_s[i]) / path_len[i]
+            heading = math.atan2(path_d[i, 1], path_d[i, 0])
+            tx = path_a[i, 0] + f * path_d[i, 0] - offsets[o] * math.sin(heading) - x
+            ty = path_a[i, 1] + f * path_d[i, 1] + offsets[o] * math.cos(heading) - y
+            alpha = (math.atan2(ty, tx) - yaw + math.pi) % (2 * math.pi) - math.pi
+            w = 2.0 * v * math.sin(alpha) / max(math.hypot(tx, ty), 1e-6)
+            w = min(max(w, -1.0), 1.0)
+            yaw = yaw + w * dt
+            x = x + v * math.cos(yaw) * dt
+            y = y + v * math.sin(yaw) * dt
+            if k % 2 == 0:
+                for c in range(clear.shape[0]):
+                    px = x - clear[c] * math.sin(yaw)
+                    py = y + clear[c] * math.cos(yaw)
+                    ci = math.floor((px - ox) * inv_res)
+                    cj = math.floor((py - oy) * inv_res)
+                    col = cells[cj, ci] if 0 <= ci < n_cols and 0 <= cj < n_rows else never
+                    if lethal[col]:
+                        out[o] = True
+                        break
+            if out[o]:
+                break
+    return out

@@ -1,0 +1,142 @@
+"""The offset stage: choose a lateral offset from the path with a learned corridor utility, hold it, steer to it.
+
+Each frame the ground map (terrapref.features.corridor) takes in the camera's view and the
+corridor utility ``weights . features(d)`` scores every candidate offset d. The stage then:
+
+1. rules out offsets whose way there, pure pursuit toward them for ``lethal_horizon_m``, brings
+   the footprint (plus ``lethal_margin_m``) onto lethal terrain, whenever any lethal terrain lies
+   near the corridor (the class table says which classes are lethal; that is not learned);
+2. goes back to the path while nothing lies on it within the utility's near distance;
+3. otherwise keeps the offset it holds while that offset's cost is within ``switch_margin`` of
+   the best one's, and takes the best one when not, so that it does not dither between sides;
+4. steers toward the path shifted by the held offset, ``pursuit_lookahead_m`` ahead.
+
+Ground never seen is priced at the mean of the non-lethal classes' weights: a fit sees too
+little unseen ground beside patches to price it, and an unknown cell is, on average, one of them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from terrapref.camera import PinholeCamera, SegmentationView
+from terrapref.features.corridor import CorridorFeatures, GroundMap, gated, steer
+from terrapref.learning.corridor import CorridorUtility
+from terrapref.planner.kernels import swept_blocked
+from terrapref.scenario.path import ReferencePath
+from terrapref.vehicle import Pose
+
+
+@dataclass(frozen=True)
+class OffsetConfig:
+    """How the offset stage holds and reaches an offset.
+
+    Attributes:
+        switch_margin: the held offset is kept while its cost is at most this much (relative)
+            above the best offset's.
+        pursuit_lookahead_m: pure-pursuit look-ahead along the path [m].
+        lethal_margin_m: clearance kept from lethal terrain beside the footprint [m].
+        lethal_horizon_m: how far ahead the way to each offset is checked for lethal terrain [m].
+        dt_s: time step of that check [s].
+    """
+
+    switch_margin: float = 0.15
+    pursuit_lookahead_m: float = 2.5
+    lethal_margin_m: float = 0.3
+    lethal_horizon_m: float = 6.0
+    dt_s: float = 0.1
+
+    def __post_init__(self) -> None:
+        values = (self.switch_margin, self.pursuit_lookahead_m, self.lethal_margin_m, self.lethal_horizon_m, self.dt_s)
+        if not all(math.isfinite(v) for v in values) or self.switch_margin < 0 or self.lethal_margin_m < 0 \
+                or self.pursuit_lookahead_m <= 0 or self.lethal_horizon_m <= 0 or self.dt_s <= 0:
+            raise ValueError("the offset stage needs switch_margin >= 0, lethal_margin_m >= 0 and positive distances and step")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+class OffsetStage:
+    """The offset stage (module docstring) of one camera, class table and corridor utility.
+
+    Args:
+        utility: the fitted corridor utility.
+        camera: the robot's camera.
+        columns: terrain column of each class id (256,).
+        k: the number of terrain classes K.
+        lethal_columns: the terrain columns of lethal classes.
+        v_mps: the vehicle's forward speed [m/s].
+        config: how offsets are held and reached.
+    """
+
+    def __init__(self, utility: CorridorUtility, camera: PinholeCamera, columns: np.ndarray, k: int, lethal_columns: np.ndarray,
+                 v_mps: float, config: OffsetConfig | None = None) -> None:
+        if utility.weights.shape != (k + 3,):
+            raise ValueError(f"the corridor utility has {utility.weights.shape[0]} weights, expected {k + 3}")
+        self.utility, self.config, self.k, self.v_mps = utility, config or OffsetConfig(), k, v_mps
+        self.lethal = np.zeros(k + 2, dtype=bool)
+        self.lethal[np.asarray(lethal_columns, dtype=np.int64)] = True
+        weights = np.array(utility.weights, dtype=float)
+        safe = [j for j in range(k) if not self.lethal[j]]
+        if safe:
+            weights[k] = weights[safe].mean()
+        self.weights = weights
+        self.map = GroundMap(camera, columns, k, utility.config)
+        self.corridor = CorridorFeatures(utility.config, k)
+        self.offsets = self.corridor.offsets
+        m = utility.config.half_width_m + self.config.lethal_margin_m
+        self._clear = np.linspace(-m, m, 7)  # the footprint and its clearance, across [m]
+        self._lines = self.offsets[:, None] + self._clear[None, :]  # (O, 7)
+        self._line_stations = np.arange(-0.5, self.config.lethal_horizon_m + 1e-9, 0.25)
+        self.held = 0.0
+
+    def reset(self) -> None:
+        """Start a new run: forget the map and the held offset."""
+        self.map.reset()
+        self.held = 0.0
+
+    def decide(self, view: SegmentationView, pose: Pose, path: ReferencePath, progress_s: float) -> float:
+        """The yaw rate [rad/s] toward the offset held after this frame."""
+        self.map.update(view, pose)
+        corridor = self.corridor(self.map, path, progress_s)
+        value = gated(corridor, self.offsets, self.utility.near_m) @ self.weights
+        if self.lethal[: self.k].any():
+            blocked = self._blocked(pose, path, progress_s)
+            if not blocked.all():
+                value = np.where(blocked, -np.inf, value)
+        best = int(np.argmax(value))
+        held = int(np.argmin(np.abs(self.offsets - self.held)))
+        if corridor.near_m > self.utility.near_m:
+            self.held = 0.0
+        elif self.held == 0.0 or not value[held] >= value[best] * (1 + self.config.switch_margin):
+            self.held = float(self.offsets[best])
+        return float(steer(path, pose, progress_s, self.held, self.config.pursuit_lookahead_m, self.v_mps))
+
+    def _blocked(self, pose: Pose, path: ReferencePath, progress_s: float) -> np.ndarray:
+        """Offsets (O,) ruled out by lethal terrain.
+
+        First each offset's line parallel to the path, from 0.5 m behind to the horizon, with the
+        footprint and its clearance. Where some line meets lethal terrain, the way to every
+        offset is followed too, and offsets whose way there meets it are also ruled out; unless
+        that would rule out all of them (already close beside lethal terrain, every way brushes
+        its clearance), when the lines alone decide.
+        """
+        s = np.minimum(progress_s + self._line_stations, path.length_m)
+        lines = self.lethal[self.map.beside(path, s, self._lines)].any(axis=(1, 2))
+        if not lines.any():
+            return lines
+        both = lines | self._swept(pose, path, progress_s)
+        return lines if both.all() else both
+
+    def _swept(self, pose: Pose, path: ReferencePath, progress_s: float) -> np.ndarray:
+        """Offsets (O,) that pure pursuit toward them, over the horizon, drives onto lethal terrain."""
+        c, gmap = self.config, self.map
+        steps = round(c.lethal_horizon_m / (self.v_mps * c.dt_s))
+        a, d, length = path.segments
+        return swept_blocked(float(pose[0]), float(pose[1]), float(pose[2]), self.offsets, float(progress_s), self.v_mps, c.dt_s,
+                                     steps, c.pursuit_lookahead_m, path.s, a, d, length, self._clear, gmap.cells,
+                                     float(gmap.origin[0]), float(gmap.origin[1]), 1.0 / gmap.config.map_resolution_m,
+                                     self.lethal, self.k + 1)

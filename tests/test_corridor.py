@@ -1,0 +1,262 @@
+"""The offset corridor (terrapref.features.corridor), its fit (terrapref.learning.corridor) and the
+planner's offset stage (terrapref.planner.offset): closed-form geometry on tiny scenarios."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from terrapref.camera import PinholeCamera, SegmentationRenderer, SegmentationView
+from terrapref.demos.dataset import CorridorData, Dataset, load_dataset, save_dataset
+from terrapref.demos.dataset import FORMAT as DATASET_FORMAT
+from terrapref.errors import UserError
+from terrapref.features import FeatureConfig, UtilityFeaturizer
+from terrapref.features.corridor import CorridorConfig, CorridorFeatures, GroundMap, gated, intent_offsets, steer
+from terrapref.learning.corridor import CorridorUtility, fit_corridor, fit_softmax, soft_labels
+from terrapref.learning.model_file import load_model, save_model
+from terrapref.learning.network import ClassifierConfig
+from terrapref.planner import Planner
+from terrapref.planner.offset import OffsetStage
+from terrapref.scenario import parse_scenario
+from terrapref.scenario.path import ReferencePath
+from terrapref.terrain import default_classes
+from terrapref.vehicle import Command, integrate_unicycle
+
+from helpers import model_meta, skip_path_weights
+
+K = len(default_classes().feature_names)  # columns: non_traversable, water, rock, mud
+# The synthetic driver's own costs relative to its detour price (per metre 1, 1.5, 2.25 by rank
+# for mud > rock > water, 30 for non_traversable, 0.08 per m^2 per metre of detour), scaled.
+DRIVER_LIKE = np.array([-25.5, -1.9125, -1.275, -0.85, 0.0, -0.068, -1.3])
+
+
+def _scenario(terrain: list[dict]):
+    return parse_scenario({
+        "format": "terrapref-scenario/1",
+        "name": "corridor_test",
+        "world": {"size_m": [40.0, 20.0], "resolution_m": 0.05, "background": "grass"},
+        "terrain": terrain,
+        "path": {"waypoints": [[2.0, 10.0], [38.0, 10.0]]},
+    })
+
+
+MUD = {"class": "mud", "rectangle": {"center": [12.1, 10.0], "size": [3.0, 2.0]}}  # 8.6-11.6 m along the path, 1 m each side
+TREES = {"class": "non_traversable", "rectangle": {"center": [14.1, 10.2], "size": [2.0, 2.2]}}
+
+
+@pytest.fixture(scope="module")
+def camera() -> PinholeCamera:
+    return PinholeCamera()
+
+
+def _columns() -> np.ndarray:
+    return UtilityFeaturizer(FeatureConfig(), PinholeCamera()).class_columns
+
+
+def _seen_from(scenario, camera: PinholeCamera, pose) -> SegmentationView:
+    from terrapref.world import rasterise
+    return SegmentationView.of(SegmentationRenderer(camera, rasterise(scenario)).render(pose))
+
+
+def test_offsets_and_stations_are_symmetric_grids():
+    c = CorridorConfig()
+    assert len(c.offsets) == 31 and c.offsets[15] == 0.0
+    np.testing.assert_allclose(c.offsets, -c.offsets[::-1])
+    assert c.stations[0] == -1.0 and c.stations[-1] == 11.0 and len(c.stations) == 49
+    assert CorridorConfig.from_dict(c.to_dict()) == c
+    with pytest.raises(ValueError):
+        CorridorConfig(offset_step_m=0.0)
+    with pytest.raises(ValueError):
+        CorridorConfig(stations_m=(5.0, 1.0))
+
+
+def test_a_patch_ahead_on_the_path_is_metres_on_its_class_and_sets_the_near_distance(camera):
+    scenario = _scenario([MUD])
+    gmap = GroundMap(camera, _columns(), K)
+    gmap.update(_seen_from(scenario, camera, (2.0, 10.0, 0.0)), (2.0, 10.0, 0.0))
+    corridor = CorridorFeatures(CorridorConfig(), K)
+    view = corridor(gmap, ReferencePath(scenario.waypoints), 0.0)
+    offsets = corridor.offsets
+    mud = view.features[:, 3]
+    centre = int(np.argmin(np.abs(offsets)))
+    # Stations 8.75 ... 11.0 lie on the mud (the corridor ends 11 m ahead): 10 x 0.25 m.
+    assert mud[centre] == pytest.approx(2.5, abs=0.3)
+    assert view.near_m == pytest.approx(8.75, abs=0.3)
+    # 1.4 m aside or more, the 1.2 m footprint is off the 2 m wide patch.
+    assert (mud[np.abs(offsets) >= 1.6 + 1e-9] == 0).all()
+    # The detour's price: d^2 * (on-path length + 5 m).
+    on_path = view.features[centre + 5, 5] / offsets[centre + 5] ** 2 - 5.0
+    assert on_path == pytest.approx(2.5, abs=0.3)
+    # Behind the camera nothing has been seen: the first metres of every offset are unseen.
+    assert (view.features[:, 4] >= 1.0).all()
+    gate = gated(view, offsets, near_m=5.0)
+    assert (gate[:, -1] == offsets**2).all()  # nothing on the path within 5 m
+    assert (gated(view, offsets, near_m=10.0)[:, -1] == 0).all()
+
+
+def test_the_ground_map_keeps_the_world_fixed_when_it_recentres(camera):
+    scenario = _scenario([MUD])
+    gmap = GroundMap(camera, _columns(), K)
+    gmap.update(_seen_from(scenario, camera, (2.0, 10.0, 0.0)), (2.0, 10.0, 0.0))
+    points = np.stack(np.meshgrid(np.arange(0.0, 20.0, 0.07), np.arange(5.0, 15.0, 0.07)), axis=-1)
+    before = gmap.lookup(points)
+    origin = gmap.origin.copy()
+    gmap.update(SegmentationView.of(np.full(camera.shape, 255, np.uint8)), (20.0, 9.0, 0.0))  # far enough to recentre; sees nothing
+    assert not np.allclose(gmap.origin, origin)
+    after = gmap.lookup(points)
+    kept = after != K + 1
+    assert (after[kept] == before[kept]).all() and kept.sum() > 0.5 * (before != K + 1).sum()
+
+
+def test_steering_toward_an_offset_is_pure_pursuit():
+    path = ReferencePath(np.array([[0.0, 0.0], [30.0, 0.0]]))
+    w = steer(path, (0.0, 0.0, 0.0), 0.0, np.array([0.0, 1.0, -1.0]), 2.5, 1.0)
+    # Target 2.5 m ahead, 1 m aside: w = 2 v sin(alpha) / L = 2 * 1 / L^2 with L^2 = 7.25.
+    np.testing.assert_allclose(w, [0.0, 2.0 / 7.25, -2.0 / 7.25])
+
+
+def test_the_intended_offset_inverts_pure_pursuit():
+    path = ReferencePath(np.array([[0.0, 0.0], [30.0, 0.0]]))
+    offsets = CorridorConfig().offsets
+    poses = np.array([[5.0, 0.0, 0.0], [6.0, 0.3, 0.0], [7.0, 0.0, 0.0]])
+    w = steer(path, tuple(poses[0]), 5.0, 1.2, 2.5, 1.0)
+    later = np.array([[1.0, float(w)], [1.0, 0.0], [np.nan, np.nan]])
+    intent = intent_offsets(poses, later, np.array([0.0, 0.3, 0.0]), np.array([5.0, 6.0, 7.0]), path, offsets, 2.5)
+    assert intent[0] == pytest.approx(1.2)
+    assert intent[1] == pytest.approx(0.3)  # the stick at rest: where the vehicle is
+    assert np.isnan(intent[2])
+
+
+def test_the_softmax_fit_recovers_the_weights_that_made_the_labels():
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(4000, 9, 3))
+    truth = np.array([1.5, -0.7, 0.3])
+    z = X @ truth
+    Y = np.exp(z - z.max(axis=1, keepdims=True))
+    Y /= Y.sum(axis=1, keepdims=True)
+    theta, _ = fit_softmax(X, Y, l2=0.0)
+    np.testing.assert_allclose(theta, truth, atol=1e-6)
+
+
+def test_the_corridor_fit_picks_the_near_distance_that_explains_the_labels():
+    """Frames where the driver keeps to the path while a patch is far and swerves once it is near."""
+    rng = np.random.default_rng(1)
+    c = CorridorConfig()
+    offsets = c.offsets
+    n = 600
+    near = rng.uniform(1.0, 10.0, n)
+    features = np.zeros((n, len(offsets), K + 2))
+    features[:, :, 3] = np.where(np.abs(offsets) < 1.0, 2.0, 0.0)  # 2 m of mud near the path, on every frame
+    features[:, :, 5] = offsets**2 * 7.0
+    intent = np.where(near > 4.0, 0.0, 1.4 * rng.choice([-1.0, 1.0], n))
+    fit = fit_corridor(features, near, intent, offsets)
+    assert fit.near_m == 4.0 and fit.samples == n
+    assert fit.weights[3] < 0 and fit.weights[-1] < 0  # mud costs; far from a patch, so does leaving the path
+    assert soft_labels(np.array([0.0]), offsets, 0.3).sum() == pytest.approx(1.0)
+    with pytest.raises(ValueError):
+        fit_corridor(features, near, np.full(n, np.nan), offsets)
+
+
+def _drive(stage: OffsetStage, scenario, camera: PinholeCamera, seconds: float) -> np.ndarray:
+    from terrapref.scenario.path import PathTracker
+    from terrapref.world import rasterise
+    renderer = SegmentationRenderer(camera, rasterise(scenario))
+    path = ReferencePath(scenario.waypoints)
+    tracker = PathTracker(path)
+    pose = (2.0, 10.0, 0.0)
+    poses = []
+    for _ in range(round(seconds * 10)):
+        s = tracker.update(np.array(pose[:2]))
+        w = stage.decide(SegmentationView.of(renderer.render(pose)), pose, path, s)
+        pose = integrate_unicycle(pose, Command(1.0, w), 0.1)
+        poses.append(pose)
+    return np.array(poses)
+
+
+def test_the_offset_stage_goes_round_trees_on_the_path_and_comes_back(camera):
+    scenario = _scenario([TREES])
+    lethal = np.array([0])
+    stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, lethal, 1.0)
+    poses = _drive(stage, scenario, camera, 30.0)
+    # Clear of the 2 x 2.2 m trees (x 13.1-15.1, y 9.1-11.3) by the half-width 0.6 m at least.
+    beside = (poses[:, 0] > 13.1 - 0.6) & (poses[:, 0] < 15.1 + 0.6)
+    gap = np.minimum(np.abs(poses[beside, 1] - 9.1), np.abs(poses[beside, 1] - 11.3))
+    outside = (poses[beside, 1] < 9.1) | (poses[beside, 1] > 11.3)
+    assert outside.all() and gap.min() > 0.6
+    assert abs(poses[-1, 1] - 10.0) < 0.3  # back on the path
+    stage.reset()
+    assert stage.held == 0.0 and (stage.map.lookup(np.array([[14.0, 10.0]])) == K + 1).all()
+
+
+def test_ground_never_seen_is_priced_at_the_mean_of_the_non_lethal_classes(camera):
+    stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), 1.0)
+    assert stage.weights[K] == pytest.approx(DRIVER_LIKE[1:K].mean())
+    with pytest.raises(ValueError):
+        OffsetStage(CorridorUtility(DRIVER_LIKE[:-1], 5.0), camera, _columns(), K, np.array([0]), 1.0)
+
+
+def _corridor_meta(weights, near_m=5.0) -> dict:
+    features = FeatureConfig(corridor=CorridorConfig())
+    return {**model_meta(features=features), "corridor": {"weights": list(weights), "near_m": near_m}}
+
+
+def test_a_model_file_with_a_corridor_utility_drives_by_the_offset_stage(tmp_path):
+    config = ClassifierConfig(hidden=8, skip=True)
+    path = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
+    model = load_model(path)
+    assert model.corridor is not None and model.corridor.near_m == 5.0
+    assert Planner(model).offset_stage is not None
+    assert Planner(model, offset=None).offset_stage is None
+    for weights, near, field in ((DRIVER_LIKE[:-1], 5.0, "corridor.weights"), ([math.nan] * 7, 5.0, "corridor.weights"),
+                                 (DRIVER_LIKE, -1.0, "corridor.near_m")):
+        bad = save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), _corridor_meta(weights, near))
+        with pytest.raises(UserError) as exc:
+            load_model(bad)
+        assert exc.value.problems[0].field == field
+
+
+def _corridor_dataset(n: int = 40) -> Dataset:
+    rng = np.random.default_rng(2)
+    features = FeatureConfig(corridor=CorridorConfig())
+    o = len(CorridorConfig().offsets)
+    corridor = CorridorData(rng.uniform(0, 3, (n, o, K + 2)).astype(np.float32), np.full(n, np.inf, np.float32),
+                            np.append(rng.uniform(-1, 1, n - 2), [np.nan, np.nan]).astype(np.float32))
+    return Dataset(rng.uniform(0, 1, (n, 21, 5)).astype(np.float32), rng.integers(0, 21, n), np.zeros(n, np.float32),
+                   np.zeros(n, np.int64), {"format": DATASET_FORMAT, **model_meta(features=features)}, None, corridor)
+
+
+def test_corridor_data_survive_a_dataset_file_and_bad_values_are_refused(tmp_path):
+    data = _corridor_dataset()
+    back = load_dataset(save_dataset(data, tmp_path / "d.safetensors"))
+    for a, b in zip(data.corridor, back.corridor):
+        np.testing.assert_array_equal(a, b)
+    assert back.fingerprint == data.fingerprint
+    broken = data.corridor.features.copy()
+    broken[3, 4, 1] = np.nan
+    bad = Dataset(data.U, data.labels, data.w, data.source, data.meta, None, data.corridor._replace(features=broken))
+    with pytest.raises(UserError) as exc:
+        load_dataset(save_dataset(bad, tmp_path / "bad.safetensors"))
+    assert exc.value.problems[0].field == "corridor.features"
+
+
+def test_the_compiled_swept_check_is_the_numpy_form(camera):
+    """The way to each offset, stepped by pure pursuit in NumPy, meets the trees where the kernel says."""
+    scenario = _scenario([TREES])
+    stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), 1.0)
+    path = ReferencePath(scenario.waypoints)
+    for pose, s in (((8.0, 10.0, 0.0), 6.0), ((9.0, 10.5, 0.2), 7.0), ((10.0, 9.3, -0.3), 8.0)):
+        stage.map.update(_seen_from(scenario, camera, pose), pose)
+        n = len(stage.offsets)
+        x, y, yaw = (np.full(n, v) for v in pose)
+        blocked = np.zeros(n, dtype=bool)
+        for i in range(60):
+            w = steer(path, (x, y, yaw), s + i * 0.1, stage.offsets, 2.5, 1.0)
+            yaw = yaw + w * 0.1
+            x, y = x + np.cos(yaw) * 0.1, y + np.sin(yaw) * 0.1
+            if i % 2 == 0:
+                points = np.stack([x[:, None] - stage._clear * np.sin(yaw)[:, None], y[:, None] + stage._clear * np.cos(yaw)[:, None]], -1)
+                blocked |= (stage.map.lookup(points) == 0).any(axis=1)
+        assert blocked.any() and not blocked.all()
+        np.testing.assert_array_equal(stage._swept(pose, path, s), blocked)
