@@ -4,6 +4,9 @@ planner's offset stage (terrapref.planner.offset): closed-form geometry on tiny 
 from __future__ import annotations
 
 import math
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -25,6 +28,7 @@ from terrapref.terrain import default_classes
 from terrapref.vehicle import Command, integrate_unicycle
 
 from helpers import model_meta, skip_path_weights
+from test_exact import _settings
 
 K = len(default_classes().feature_names)  # columns: non_traversable, water, rock, mud
 # The synthetic driver's own costs relative to its detour price (per metre 1, 1.5, 2.25 by rank
@@ -252,7 +256,12 @@ def test_the_compiled_swept_check_is_the_numpy_form(camera):
         x, y, yaw = (np.full(n, v) for v in pose)
         blocked = np.zeros(n, dtype=bool)
         for i in range(60):
-            w = steer(path, (x, y, yaw), s + i * 0.1, stage.offsets, 2.5, 1.0)
+            ahead = s + i * 0.1 + 2.5
+            heading = float(path.heading_at(ahead))
+            tx = path.point_at(ahead)[0] - stage.offsets * math.sin(heading) - x
+            ty = path.point_at(ahead)[1] + stage.offsets * math.cos(heading) - y
+            alpha = (np.arctan2(ty, tx) - yaw + math.pi) % (2 * math.pi) - math.pi
+            w = np.clip(2.0 * np.sin(alpha) / np.maximum(np.hypot(tx, ty), 1e-6), -1.0, 1.0)
             yaw = yaw + w * 0.1
             x, y = x + np.cos(yaw) * 0.1, y + np.sin(yaw) * 0.1
             if i % 2 == 0:
@@ -260,3 +269,35 @@ def test_the_compiled_swept_check_is_the_numpy_form(camera):
                 blocked |= (stage.map.lookup(points) == 0).any(axis=1)
         assert blocked.any() and not blocked.all()
         np.testing.assert_array_equal(stage._swept(pose, path, s), blocked)
+
+
+_FIT = """
+import sys, hashlib
+import numpy as np
+sys.path.insert(0, {tests!r})
+from test_corridor import _fit_case
+print(hashlib.sha256(_fit_case().tobytes()).hexdigest())
+"""
+
+
+def _fit_case() -> np.ndarray:
+    """Weights of a corridor fit to random frames, with labels from a known utility."""
+    rng = np.random.default_rng(3)
+    offsets = CorridorConfig().offsets
+    n = 800
+    features = rng.uniform(0.0, 3.0, (n, len(offsets), K + 2)) * (rng.uniform(size=(n, 1, K + 2)) < 0.5)
+    features[:, :, K + 1] = offsets**2 * rng.uniform(5.0, 12.0, (n, 1))
+    near = rng.uniform(1.0, 12.0, n)
+    value = np.concatenate([features, (offsets**2)[None, :, None] * (near > 5.0)[:, None, None]], axis=2) @ DRIVER_LIKE
+    intent = offsets[np.argmax(value + rng.gumbel(size=value.shape), axis=1)]
+    return fit_corridor(features, near, intent, offsets).weights
+
+
+def test_the_corridor_fit_gives_the_same_weights_under_every_cpu_setting():
+    tests = os.path.dirname(__file__)
+    hashes = set()
+    for extra in _settings():
+        done = subprocess.run([sys.executable, "-c", _FIT.format(tests=tests)], env={**os.environ, **extra}, capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+        hashes.add(done.stdout.strip())
+    assert len(hashes) == 1

@@ -319,3 +319,12 @@ def test_a_fitted_report_survives_a_model_files_json_exactly(report: Identifiabi
     back = Identifiability.from_dict(json.loads(json.dumps(report.to_dict())))
     assert back == report  # margins and standard errors stored unrounded: no pair changes status on loading
     assert back.unidentified() == [back.pair("mud", "water")]
+
+
+def test_an_unordered_pair_with_a_lethal_class_is_left_to_the_class_table():
+    pairs = (PairEvidence("water", "non_traversable", 7, 2, 5, (7, 0), 3.4, 2.4), PairEvidence("mud", "water", 0, 0, 0, (0, 0), 0.1, None))
+    report = Identifiability(("mud", "water", "non_traversable"), pairs, ("non_traversable",))
+    lethal, plain = report.warnings()
+    assert "non_traversable is lethal" in lethal and "offset stage never drives onto it" in lethal
+    assert plain == "mud vs water: never compared; the planner's choice between them is a guess"
+    assert Identifiability.from_dict(report.to_dict()) == report

@@ -320,6 +320,7 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
     from dataclasses import asdict
 
     from terrapref.plots import save_loss_curve
+    from terrapref.terrain import ClassTable
 
     members = config.classifier.members
     curve = Path(args.out).with_suffix(".loss.png")
@@ -334,7 +335,9 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
         print(result.steadying.line())
     if result.corridor is not None:
         fit, classes = result.corridor, data.feature_config.feature_classes
-        prices = ", ".join(f"{c} {w / fit.weights[len(classes) + 1]:.1f}" for c, w in zip(classes, fit.weights))
+        lethal = set(ClassTable.from_dict(data.meta["classes"], str(args.data[0])).lethal)
+        prices = ", ".join(f"{c} {w / fit.weights[len(classes) + 1]:.1f}{' (lethal: ruled out)' if c in lethal else ''}"
+                           for c, w in zip(classes, fit.weights))
         print(f"offset stage: fitted to {fit.samples} frames, near distance {fit.near_m:g} m; each class's price per metre, "
               f"relative to the detour's per m^2 of offset per metre: {prices}")
     if result.identifiability is not None:

@@ -171,8 +171,8 @@ class GroundMap:
 
     def beside(self, path: ReferencePath, s: np.ndarray, lat: np.ndarray) -> np.ndarray:
         """Terrain column (O, S, F) at the points ``lat`` (O, F) [m] left of the path at arc lengths ``s`` (S,)."""
-        heading = path.heading_at(s)
-        normal = np.ascontiguousarray(np.stack([-np.sin(heading), np.cos(heading)], axis=-1))
+        u = path.direction_at(s)
+        normal = np.ascontiguousarray(np.stack([-u[:, 1], u[:, 0]], axis=-1))
         centre = np.ascontiguousarray(path.point_at(s))
         if self.origin is None:
             return np.full((lat.shape[0], len(s), lat.shape[1]), self.k + 1, dtype=np.uint8)
@@ -251,16 +251,23 @@ def gated(view: CorridorView, offsets: np.ndarray, near_m: float) -> np.ndarray:
 def steer(path: ReferencePath, pose: Pose, progress_s: float, offset_m: np.ndarray | float, lookahead_m: float, v_mps: float,
           clip: bool = True) -> np.ndarray:
     """Pure-pursuit yaw rate [rad/s] toward the path shifted by ``offset_m`` (left positive), ``lookahead_m`` ahead
-    of ``progress_s``; clipped to the stick's +-1 rad/s with ``clip``. Broadcasts over offsets and poses."""
+    of ``progress_s``; clipped to the stick's +-1 rad/s with ``clip``. One value per offset, ``offset_m``'s shape.
+
+    Scalar ``math`` throughout (NumPy's vectorised trigonometry may pick CPU-specific code whose
+    last bits differ), so that the command, and the run it steers, is the same on every machine.
+    """
     s = min(progress_s + lookahead_m, path.length_m)
-    heading = float(path.heading_at(s))
-    target = path.point_at(s)
-    x, y, yaw = pose
-    tx = target[0] - np.asarray(offset_m) * math.sin(heading) - x
-    ty = target[1] + np.asarray(offset_m) * math.cos(heading) - y
-    alpha = (np.arctan2(ty, tx) - yaw + math.pi) % (2 * math.pi) - math.pi
-    w = pure_pursuit_yaw_rate(v_mps, np.sin(alpha), np.maximum(np.hypot(tx, ty), 1e-6))
-    return np.clip(w, -1.0, 1.0) if clip else w
+    cos_h, sin_h = (float(v) for v in path.direction_at(s))
+    tx0, ty0 = (float(v) for v in path.point_at(s))
+    x, y, yaw = (float(v) for v in pose)
+    offsets = np.asarray(offset_m, dtype=float)
+    out = np.empty(offsets.shape)
+    for k, d in enumerate(offsets.flat):
+        tx, ty = tx0 - d * sin_h - x, ty0 + d * cos_h - y
+        alpha = (math.atan2(ty, tx) - yaw + math.pi) % (2 * math.pi) - math.pi
+        w = pure_pursuit_yaw_rate(v_mps, math.sin(alpha), max(math.hypot(tx, ty), 1e-6))
+        out.flat[k] = min(max(w, -1.0), 1.0) if clip else w
+    return out
 
 
 def intent_offsets(poses: np.ndarray, later: np.ndarray, lateral_m: np.ndarray, progress_s: np.ndarray, path: ReferencePath,

@@ -1,14 +1,15 @@
 """Fitting the corridor utility (terrapref.planner.offset) to the offsets a demonstrator steered for.
 
-Each frame's label is the offset the driver was steering for: its command ``delay`` later (its
-reaction time) inverted through pure pursuit ``lookahead`` ahead, the offset whose pure-pursuit
-yaw rate is nearest the command; with the stick at rest, where the vehicle is. A softmax over
-the candidate offsets, ``p(d) ~ exp(weights . gated(features)(d))``, is fitted to Gaussian soft
-labels (``label_sigma_m``) around that offset by Newton's method with a small ridge, once for
-each candidate near distance; the near distance of the lowest loss is kept.
+Each frame's label is the offset the driver was steering for, read when the recording is
+featurised (:func:`terrapref.features.corridor.intent_offsets`). A softmax over the candidate
+offsets, ``p(d) ~ exp(weights . gated(features)(d))``, is fitted to Gaussian soft labels
+(``sigma_m``) around that offset by Newton's method with a small ridge, once for each candidate
+near distance; the near distance of the lowest loss is kept.
 
-Float64 NumPy throughout, with fixed reduction order: the same data give the same weights on
-any machine.
+Float64 NumPy throughout, and the problem is convex: NumPy's exp and sums may differ in their
+last bits between CPUs, the Newton steps do not amplify that, and the weights are kept to 12
+decimals, so the same data give the same weights on any machine (tests/test_corridor.py runs
+the fit under NumPy's and OpenBLAS's CPU settings).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import numpy as np
 
 from terrapref.features.corridor import CorridorConfig
 
+WEIGHT_DECIMALS = 12  # fitted weights are kept to this many decimals
 NEAR_CANDIDATES_M = (2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 6.0, 7.0, 8.0)
 
 
@@ -117,4 +119,6 @@ def fit_corridor(features: np.ndarray, near_m: np.ndarray, intent: np.ndarray, o
         if best is None or loss < best[1] - 1e-9:
             best = (theta, loss, candidate)
     theta, loss, chosen = best
-    return CorridorFit(theta, chosen, loss, losses, int(keep.sum()))
+    # NumPy's exp and sums may differ in the last bits between CPUs; the convex fit does not
+    # amplify them, and rounding leaves the same weights everywhere but at a rounding boundary.
+    return CorridorFit(np.round(theta, WEIGHT_DECIMALS), chosen, loss, losses, int(keep.sum()))

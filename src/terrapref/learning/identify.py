@@ -83,6 +83,7 @@ class Identifiability:
 
     order: tuple[str, ...]  # best first
     pairs: tuple[PairEvidence, ...]
+    lethal: tuple[str, ...] = ()  # the class table's lethal classes, which the offset stage never drives onto
 
     def pair(self, a: str, b: str) -> PairEvidence | None:
         return next((p for p in self.pairs if {p.first, p.second} == {a, b}), None)
@@ -95,7 +96,12 @@ class Identifiability:
         for p in self.unidentified():
             why = "never compared" if p.frames == 0 else (f"compared in only {p.frames} frames" if p.frames < MIN_FRAMES
                                                           else "compared, but the margin is within its uncertainty")
-            out.append(f"{p.first} vs {p.second}: {why}; the planner's choice between them is a guess")
+            lethal = next((c for c in (p.first, p.second) if c in self.lethal), None)
+            if lethal is not None:  # the class table, not the drive, keeps the offset stage off it
+                out.append(f"{p.first} vs {p.second}: {why}; {lethal} is lethal, so the offset stage never drives onto it "
+                           f"whatever the drive shows, but C's ranking of the two is a guess")
+            else:
+                out.append(f"{p.first} vs {p.second}: {why}; the planner's choice between them is a guess")
         return out
 
     def lines(self, profile: Sequence[str] | None = None) -> list[str]:
@@ -122,14 +128,14 @@ class Identifiability:
                   f"{'identified' if p.identified else 'not identified'})" for p in reversed_)]
 
     def to_dict(self) -> dict:
-        return {"order": list(self.order), "pairs": [p.to_dict() for p in self.pairs], "min_frames": MIN_FRAMES}
+        return {"order": list(self.order), "pairs": [p.to_dict() for p in self.pairs], "min_frames": MIN_FRAMES, "lethal": list(self.lethal)}
 
     @classmethod
     def from_dict(cls, data: dict) -> Identifiability:
         pairs = tuple(PairEvidence(p["first"], p["second"], int(p["frames"]), int(p["for_first"]), int(p["for_second"]),
                                    (int(p["sides"][0]), int(p["sides"][1])), float(p["margin"]),
                                    None if p["stderr"] is None else float(p["stderr"])) for p in data["pairs"])
-        return cls(tuple(data["order"]), pairs)
+        return cls(tuple(data["order"]), pairs, tuple(data.get("lethal", ())))
 
 
 def count_comparisons(U: np.ndarray, labels: np.ndarray, classes: tuple[str, ...]) -> dict[tuple[str, str], np.ndarray]:
@@ -194,7 +200,7 @@ def fisher_covariance(U: np.ndarray, labels: np.ndarray, utility: LinearUtility,
 
 
 def identifiability(U: np.ndarray, labels: np.ndarray, classes: tuple[str, ...], utility: LinearUtility,
-                    U2: np.ndarray | None = None, gamma: float = 1.0) -> Identifiability:
+                    U2: np.ndarray | None = None, gamma: float = 1.0, lethal: tuple[str, ...] = ()) -> Identifiability:
     """The evidence and learned order for every pair of ``classes`` and grass.
 
     Args:
@@ -203,6 +209,7 @@ def identifiability(U: np.ndarray, labels: np.ndarray, classes: tuple[str, ...],
         classes: the K terrain classes, in U's column order.
         utility: the linear utility fitted to these frames (or to them and their mirror images).
         U2, gamma: the look-ahead utilities and weight, when ``utility`` was fitted through them.
+        lethal: the class table's lethal classes (their pairs are warned about differently).
     """
     counts = count_comparisons(U, labels, classes)
     cov = fisher_covariance(U, labels, utility, U2, gamma)
@@ -223,4 +230,4 @@ def identifiability(U: np.ndarray, labels: np.ndarray, classes: tuple[str, ...],
         stderr = math.sqrt(var) if var > 0 and math.isfinite(var) else None
         pairs.append(PairEvidence(a, b, int(for_a + for_b), int(for_a), int(for_b), (int(a_left), int(a_right)),
                                   weight[a] - weight[b], stderr))
-    return Identifiability(order, tuple(pairs))
+    return Identifiability(order, tuple(pairs), tuple(lethal))

@@ -26,6 +26,7 @@ from terrapref.learning.linear import LinearUtility, fit_linear_utility, fit_loo
 from terrapref.learning.mlp import Adam, TrainableClassifier, cross_entropy, init_weights, round_inputs
 from terrapref.learning.steady import Steadying, steady_labels
 from terrapref.learning.network import ClassifierConfig, member_prefix
+from terrapref.terrain import ClassTable
 
 
 MEMBER_SEED_STEP = 1000  # member j of an ensemble trains from seed + MEMBER_SEED_STEP * j
@@ -294,7 +295,8 @@ def identify(dataset: Dataset, mirror: bool = True, steady: bool = False) -> Ide
 def _identifiability(dataset: Dataset, utility: LinearUtility, gamma: float) -> Identifiability:
     features = dataset.feature_config
     U = dataset.U[..., [*range(features.n_terrain), features.n_features - 1]]
-    return identifiability(U, dataset.labels, tuple(features.feature_classes), utility, dataset.U2, gamma)
+    lethal = tuple(ClassTable.from_dict(dataset.meta["classes"], "dataset").lethal)
+    return identifiability(U, dataset.labels, tuple(features.feature_classes), utility, dataset.U2, gamma, lethal)
 
 
 def _fit_utility(dataset: Dataset, mirror: bool) -> tuple[LinearUtility, float]:

@@ -39,9 +39,9 @@ def swept_blocked(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progre
         for k in range(steps):
             i, s = _segment(path_s, n_seg, min(progress_s + k * dt * v + lookahead_m, path_s[-1]))
             f = (s - path_s[i]) / path_len[i]
-            heading = math.atan2(path_d[i, 1], path_d[i, 0])
-            tx = path_a[i, 0] + f * path_d[i, 0] - offsets[o] * math.sin(heading) - x
-            ty = path_a[i, 1] + f * path_d[i, 1] + offsets[o] * math.cos(heading) - y
+            cos_h, sin_h = path_d[i, 0] / path_len[i], path_d[i, 1] / path_len[i]
+            tx = path_a[i, 0] + f * path_d[i, 0] - offsets[o] * sin_h - x
+            ty = path_a[i, 1] + f * path_d[i, 1] + offsets[o] * cos_h - y
             alpha = (math.atan2(ty, tx) - yaw + math.pi) % (2 * math.pi) - math.pi
             w = 2.0 * v * math.sin(alpha) / max(math.hypot(tx, ty), 1e-6)
             w = min(max(w, -1.0), 1.0)

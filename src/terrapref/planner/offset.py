@@ -102,7 +102,7 @@ class OffsetStage:
         """The yaw rate [rad/s] toward the offset held after this frame."""
         self.map.update(view, pose)
         corridor = self.corridor(self.map, path, progress_s)
-        value = gated(corridor, self.offsets, self.utility.near_m) @ self.weights
+        value = _weighted(gated(corridor, self.offsets, self.utility.near_m), self.weights)
         if self.lethal[: self.k].any():
             blocked = self._blocked(pose, path, progress_s)
             if not blocked.all():
@@ -140,3 +140,12 @@ class OffsetStage:
                                      steps, c.pursuit_lookahead_m, path.s, a, d, length, self._clear, gmap.cells,
                                      float(gmap.origin[0]), float(gmap.origin[1]), 1.0 / gmap.config.map_resolution_m,
                                      self.lethal, self.k + 1)
+
+
+def _weighted(features: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """``features @ weights`` (O,), column by column in a fixed order: elementwise products and sums
+    round the same on every CPU, a BLAS product's order of additions may not."""
+    value = features[:, 0] * weights[0]
+    for j in range(1, len(weights)):
+        value = value + features[:, j] * weights[j]
+    return value

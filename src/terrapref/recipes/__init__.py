@@ -4,8 +4,9 @@ Named recipes (:data:`RECIPES`, ``terrapref recipes``; ``--recipe NAME`` in ``tr
 ``reproduce`` and ``study``):
 
 - ``teach`` (the default, :data:`DEFAULT_RECIPE`): the product's. One drive of ``teach_course``
-  with disturbances; C with a residual path, a class-balanced loss and mirrored samples, 100
-  epochs at learning rate 3e-3, an ensemble of three; the second stage's utility fitted through the look-ahead;
+  with disturbances; the offset stage's corridor utility, which drives (terrapref.planner.offset);
+  and C with a residual path, a class-balanced loss and mirrored samples, 100 epochs at learning
+  rate 3e-3, an ensemble of three; the second stage's utility fitted through the look-ahead;
   labels from a moving average of w when the hand shakes (terrapref.learning.steady).
 - ``ours``: the paper's setting done well: two drives of ``train_course`` with disturbances,
   the same C (one network), the second stage's utility fitted frame by frame. Used by
@@ -79,7 +80,7 @@ class Recipe:
             raise ValueError("a recipe needs demonstrations >= 1 and corrections >= 0")
 
     def features(self, base: FeatureConfig | None = None) -> FeatureConfig:
-        """The feature configuration this recipe trains with: ``base`` with or without the look-ahead."""
+        """The feature configuration this recipe trains with: ``base`` with or without the look-ahead and the corridor."""
         return replace(base or FeatureConfig(), lookahead=LookaheadConfig() if self.lookahead else None,
                        corridor=CorridorConfig() if self.corridor else None)
 

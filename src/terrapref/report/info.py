@@ -100,7 +100,15 @@ def _onnx_lines(p: Path) -> list[str]:
     c = meta.get("classifier", {})
     return [f"{p}: C exported as ONNX ({meta.get('format', 'no terrapref metadata')})",
             f"network         {c.get('members', 1)} member(s), hidden {c.get('hidden')}, {c.get('activation')}, skip {c.get('skip')}",
-            f"second stage    {'weight ' + str(meta['utility']['weight']) if 'utility' in meta else 'none'}"] + _common(meta) + _identifiability(meta)
+            f"second stage    {'weight ' + str(meta['utility']['weight']) if 'utility' in meta else 'none'}",
+            f"offset stage    {_offset_stage(meta.get('corridor'))}" + (" (in the metadata, not the graph)" if "corridor" in meta else "")] + _common(meta) + _identifiability(meta)
+
+
+def _offset_stage(corridor: object) -> str:
+    """The offset stage's line: it drives, with its near distance; or none."""
+    if not isinstance(corridor, dict):
+        return "none (C's trajectories drive)"
+    return f"drives (corridor utility, near distance {corridor.get('near_m', '?')} m)"
 
 
 def _tensor_file_header(p: Path) -> tuple[dict, dict[str, tuple[int, ...]]]:
@@ -128,7 +136,8 @@ def _dataset_lines(p: Path, meta: dict, shapes: dict[str, tuple[int, ...]]) -> l
     n = shapes.get("U", (0,))[0]
     recs = meta.get("recordings", [])
     return ([f"{p}: terrapref dataset", f"samples         {n} from {len(recs)} recording(s)",
-             f"look-ahead      {'yes' if 'U2' in shapes else 'no'}"]
+             f"look-ahead      {'yes' if 'U2' in shapes else 'no'}",
+             f"corridor        {'yes' if 'corridor.features' in shapes else 'no'}"]
             + [f"  {r.get('path')}: {r.get('frames')} frames, {r.get('scenario')}" for r in recs if isinstance(r, dict)] + _common(meta))
 
 
@@ -141,6 +150,7 @@ def _model_lines(p: Path, meta: dict) -> list[str]:
              f"recipe          {meta.get('recipe', '?')}",
              f"network         {c.get('members', 1)} member(s), hidden {c.get('hidden')}, {c.get('activation')}, skip {c.get('skip')}",
              f"second stage    {'weight ' + str(meta['utility'].get('weight')) if isinstance(meta.get('utility'), dict) else 'none'}",
+             f"offset stage    {_offset_stage(meta.get('corridor'))}",
              f"data            {data.get('samples', '?')} samples, fingerprint {data.get('fingerprint', '?')}, {len(data.get('recordings', []) or [])} recording(s)"]
     return lines + _training(meta) + _common(meta) + _identifiability(meta)
 

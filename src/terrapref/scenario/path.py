@@ -80,6 +80,13 @@ class ReferencePath:
         i = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, len(self._len) - 1)
         return np.arctan2(self._d[i, 1], self._d[i, 0])
 
+    def direction_at(self, s: float | np.ndarray) -> np.ndarray:
+        """Unit path directions (..., 2) at arc lengths ``s`` (clamped): each segment's vector over
+        its length, so the same bits on every CPU (no trigonometry)."""
+        s = np.clip(np.asarray(s, dtype=float), 0.0, self.length_m)
+        i = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, len(self._len) - 1)
+        return self._d[i] / self._len[i, None] if np.ndim(s) else self._d[i] / self._len[i]
+
     def project(self, xy: np.ndarray, s_lo: float = -np.inf, s_hi: float = np.inf) -> tuple[float, float]:
         """Nearest point of the path to ``xy`` among arc lengths in [s_lo, s_hi].
 
