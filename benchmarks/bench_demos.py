@@ -9,7 +9,8 @@ Run through ``scripts/bench.sh`` (one core); numbers go into ``docs/benchmarks.m
     on the same frames, with a model trained on the recording (paper recipe). Target:
     <= 100 us median. Three more lines: a 2-member ensemble, the planner's second
     stage (terrapref.planner.second_stage) as in recipe ``ours``, and the decision of recipe
-    ``teach`` (an ensemble of three with the second stage; the stage weight does not change
+    ``teach`` (an ensemble of three with the second stage, then with the offset stage too, which
+    drives recipe ``teach`` since 2026-11-25; the stage weight does not change
     the cost).
 (d) closed loop: the planner (same model) driving ``train_course`` in the simulation, frames
     rendered only where the planner reads them; simulated frames per second of wall time.
@@ -33,6 +34,7 @@ from terrapref.demos.expert import ExpertDriver
 from terrapref.demos.recording import RecordingWriter, read_recording
 from terrapref.demos.session import record_run, recording_meta
 from terrapref.features import FeatureConfig, PreferenceSetConfig, UtilityFeaturizer
+from terrapref.features.corridor import CorridorConfig
 from terrapref.camera import PinholeCamera
 from terrapref.scenario import resolve_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
@@ -123,6 +125,7 @@ def main() -> int:
         d2 = bench_decision(out, args.repeats, members=2)
         d3 = bench_decision(out, args.repeats, second_stage=True)
         d4 = bench_decision(out, args.repeats, members=3, second_stage=True)
+        d5 = bench_decision(out, args.repeats, FeatureConfig(corridor=CorridorConfig()), members=3, second_stage=True)
         loop_s, loop_frames = bench_closed_loop(out.parent / "model.safetensors")
     ref_s = reference_ms() / 1e3
 
@@ -137,6 +140,7 @@ def main() -> int:
     line("decision, 2 members, per frame", d2, "-")
     line("decision with the second stage, per frame", d3, "-")
     line("decision of recipe teach (3 members, 2nd stage)", d4, "<= 60us")
+    line("the same, with the offset stage driving", d5, "-")
     print(f"{'planner driving train_course, closed loop':48s} {loop_s:9.2f}s {'':>10s} {loop_s / ref_s:10.1f} {'-':>10s}   "
           f"({loop_frames} frames, {loop_frames / loop_s:.0f} frames/s)")
     print(f"{'record train_course (synthetic driver)':48s} {wall:9.2f}s {'':>10s} {wall / ref_s:10.1f} {'<= 20s':>10s}   "

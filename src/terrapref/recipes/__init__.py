@@ -104,9 +104,9 @@ TEACH = Recipe("teach", course="teach_course", lookahead=True, corridor=True,
                train=replace(_RECOMMENDED, classifier=ClassifierConfig(skip=True, members=3), second_stage=SecondStageConfig(weight=5.0),
                              data=replace(_RECOMMENDED.data, steady_labels=True)),
                disturbance=DisturbanceConfig(rate_hz=0.3),
-               summary="one drive of teach_course: any preference order from five minutes (the default); scored "
-                       "98.7% of test zones (74/75) in terrapref reproduce, and the driver's choice in 93.2% of zones "
-                       "on 32 unseen layouts over 6 orders x 5 seeds (docs/learning.md)")
+               summary="one drive of teach_course: any preference order from five minutes (the default); the offset stage "
+                       "drives; the driver's choice in 96.6% of zones on 32 unseen layouts over 6 orders x 5 seeds, "
+                       "no collision (docs/learning.md)")
 RECIPES: dict[str, Recipe] = {r.name: r for r in (TEACH, OURS, PAPER)}
 DEFAULT_RECIPE = TEACH.name
 
