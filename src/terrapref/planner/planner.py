@@ -108,6 +108,8 @@ class Planner:
         self.set_path(np.array([[0.0, 0.0], [20.0, 0.0]]))
         self.decide(np.full(self.camera.shape, UNKNOWN, dtype=np.uint8), Pose(0.0, 0.0, 0.0))
         self.path, self.tracker = path, tracker
+        if self.offset_stage is not None:  # the blank frame is not ground seen
+            self.offset_stage.reset()
 
     def decide(self, image: np.ndarray | SegmentationView, pose: Pose) -> Decision:
         """Choose a trajectory for one segmentation frame (H, W) uint8 at ``pose``.
