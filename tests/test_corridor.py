@@ -66,7 +66,7 @@ def _seen_from(scenario, camera: PinholeCamera, pose) -> SegmentationView:
 
 def test_offsets_and_stations_are_symmetric_grids():
     c = CorridorConfig()
-    assert len(c.offsets) == 51 and c.offsets[25] == 0.0
+    assert len(c.offsets) == 31 and c.offsets[15] == 0.0
     np.testing.assert_allclose(c.offsets, -c.offsets[::-1])
     assert c.stations[0] == -1.0 and c.stations[-1] == 11.0 and len(c.stations) == 49
     assert CorridorConfig.from_dict(c.to_dict()) == c

@@ -55,7 +55,7 @@ class CorridorConfig:
             into the offset it was steering for [m] (terrapref.learning.corridor).
     """
 
-    max_offset_m: float = 5.0
+    max_offset_m: float = 3.0
     offset_step_m: float = 0.2
     stations_m: tuple[float, float] = (-1.0, 11.0)
     station_step_m: float = 0.25
