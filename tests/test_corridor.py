@@ -21,7 +21,7 @@ from terrapref.learning.corridor import CorridorUtility, fit_corridor, fit_softm
 from terrapref.learning.model_file import load_model, save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.planner import Planner
-from terrapref.planner.offset import OffsetStage
+from terrapref.planner.offset import OffsetConfig, OffsetStage
 from terrapref.scenario import parse_scenario
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import default_classes
@@ -194,6 +194,25 @@ def test_the_offset_stage_goes_round_trees_on_the_path_and_comes_back(camera):
     assert stage.held == 0.0 and (stage.map.lookup(np.array([[14.0, 10.0]])) == K + 1).all()
 
 
+def _clearance(poses: np.ndarray, centre: tuple[float, float], size: tuple[float, float]) -> float:
+    """Least distance [m] from the driven centre line to an axis-aligned rectangle."""
+    dx = np.maximum(np.abs(poses[:, 0] - centre[0]) - size[0] / 2, 0.0)
+    dy = np.maximum(np.abs(poses[:, 1] - centre[1]) - size[1] / 2, 0.0)
+    return float(np.hypot(dx, dy).min())
+
+
+def test_trees_wider_than_every_fitted_offset_are_escaped_beyond_them(camera):
+    # 7 m across: the fitted offsets reach 3 m, getting round needs 3.5 + 0.6 + 0.3 = 4.4 m or more.
+    wide = {"class": "non_traversable", "rectangle": {"center": [16.0, 10.0], "size": [2.5, 7.0]}}
+    scenario = _scenario([wide])
+    stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), 1.0)
+    poses = _drive(stage, scenario, camera, 34.0)
+    assert _clearance(poses, (16.0, 10.0), (2.5, 7.0)) > 0.6 + 0.3
+    assert abs(poses[-1, 1] - 10.0) < 0.3 and stage.held == 0.0  # back on the path
+    stuck = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), 1.0, OffsetConfig(escape_factor=1.0))
+    assert _clearance(_drive(stuck, scenario, camera, 34.0), (16.0, 10.0), (2.5, 7.0)) == 0.0  # without escape it drives in
+
+
 def test_ground_never_seen_is_priced_at_the_mean_of_the_non_lethal_classes(camera):
     stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), 1.0)
     assert stage.weights[K] == pytest.approx(DRIVER_LIKE[1:K].mean())
@@ -268,7 +287,7 @@ def test_the_compiled_swept_check_is_the_numpy_form(camera):
                 points = np.stack([x[:, None] - stage._clear * np.sin(yaw)[:, None], y[:, None] + stage._clear * np.cos(yaw)[:, None]], -1)
                 blocked |= (stage.map.lookup(points) == 0).any(axis=1)
         assert blocked.any() and not blocked.all()
-        np.testing.assert_array_equal(stage._swept(pose, path, s), blocked)
+        np.testing.assert_array_equal(stage._swept(stage.offsets, pose, path, s), blocked)
 
 
 _FIT = """

@@ -9,7 +9,12 @@ corridor utility ``weights . features(d)`` scores every candidate offset d. The 
 2. goes back to the path while nothing lies on it within the utility's near distance;
 3. otherwise keeps the offset it holds while that offset's cost is within ``switch_margin`` of
    the best one's, and takes the best one when not, so that it does not dither between sides;
-4. steers toward the path shifted by the held offset, ``pursuit_lookahead_m`` ahead.
+4. but first, when lethal terrain lies across every offset the utility was fitted on, as far
+   ahead as the corridor reads (a lethal patch wider than they reach), takes the nearest offset
+   beyond them, up to ``escape_factor`` times as far, that is clear of it, and holds it while it
+   stays clear; the utility cannot price those offsets, so they serve only to get round lethal
+   terrain;
+5. steers toward the path shifted by the held offset, ``pursuit_lookahead_m`` ahead.
 
 Ground never seen is priced at the mean of the non-lethal classes' weights: a fit sees too
 little unseen ground beside patches to price it, and an unknown cell is, on average, one of them.
@@ -41,6 +46,8 @@ class OffsetConfig:
         lethal_margin_m: clearance kept from lethal terrain beside the footprint [m].
         lethal_horizon_m: how far ahead the way to each offset is checked for lethal terrain [m].
         dt_s: time step of that check [s].
+        escape_factor: escape offsets, used only when lethal terrain rules out every fitted
+            offset, reach this many times the fitted offsets' reach (1 = no escape).
     """
 
     switch_margin: float = 0.15
@@ -48,12 +55,15 @@ class OffsetConfig:
     lethal_margin_m: float = 0.3
     lethal_horizon_m: float = 6.0
     dt_s: float = 0.1
+    escape_factor: float = 2.0
 
     def __post_init__(self) -> None:
-        values = (self.switch_margin, self.pursuit_lookahead_m, self.lethal_margin_m, self.lethal_horizon_m, self.dt_s)
+        values = (self.switch_margin, self.pursuit_lookahead_m, self.lethal_margin_m, self.lethal_horizon_m, self.dt_s,
+                  self.escape_factor)
         if not all(math.isfinite(v) for v in values) or self.switch_margin < 0 or self.lethal_margin_m < 0 \
-                or self.pursuit_lookahead_m <= 0 or self.lethal_horizon_m <= 0 or self.dt_s <= 0:
-            raise ValueError("the offset stage needs switch_margin >= 0, lethal_margin_m >= 0 and positive distances and step")
+                or self.pursuit_lookahead_m <= 0 or self.lethal_horizon_m <= 0 or self.dt_s <= 0 or self.escape_factor < 1:
+            raise ValueError("the offset stage needs switch_margin >= 0, lethal_margin_m >= 0, escape_factor >= 1 "
+                             "and positive distances and step")
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -89,8 +99,11 @@ class OffsetStage:
         self.offsets = self.corridor.offsets
         m = utility.config.half_width_m + self.config.lethal_margin_m
         self._clear = np.linspace(-m, m, 7)  # the footprint and its clearance, across [m]
-        self._lines = self.offsets[:, None] + self._clear[None, :]  # (O, 7)
         self._line_stations = np.arange(-0.5, self.config.lethal_horizon_m + 1e-9, 0.25)
+        self._far_stations = np.arange(-0.5, utility.config.stations_m[1] + 1e-9, 0.25)
+        reach, step = utility.config.max_offset_m, utility.config.offset_step_m
+        beyond = np.arange(reach + step, reach * self.config.escape_factor + 1e-9, step)
+        self.escapes = np.concatenate([-beyond[::-1], beyond])  # (E,) offsets only for getting round lethal terrain [m]
         self.held = 0.0
 
     def reset(self) -> None:
@@ -103,20 +116,41 @@ class OffsetStage:
         self.map.update(view, pose)
         corridor = self.corridor(self.map, path, progress_s)
         value = _weighted(gated(corridor, self.offsets, self.utility.near_m), self.weights)
+        escape = None
         if self.lethal[: self.k].any():
-            blocked = self._blocked(pose, path, progress_s)
+            if self._lines(self.offsets, path, progress_s, self._far_stations).all():
+                escape = self._escape(value, path, progress_s)
+            blocked = self._blocked(self.offsets, pose, path, progress_s)
             if not blocked.all():
                 value = np.where(blocked, -np.inf, value)
         best = int(np.argmax(value))
         held = int(np.argmin(np.abs(self.offsets - self.held)))
-        if corridor.near_m > self.utility.near_m:
+        if escape is not None:
+            self.held = escape
+        elif corridor.near_m > self.utility.near_m:
             self.held = 0.0
-        elif self.held == 0.0 or not value[held] >= value[best] * (1 + self.config.switch_margin):
+        elif self.held == 0.0 or abs(self.held) > self.offsets[-1] or not value[held] >= value[best] * (1 + self.config.switch_margin):
             self.held = float(self.offsets[best])
         return float(steer(path, pose, progress_s, self.held, self.config.pursuit_lookahead_m, self.v_mps))
 
-    def _blocked(self, pose: Pose, path: ReferencePath, progress_s: float) -> np.ndarray:
-        """Offsets (O,) ruled out by lethal terrain.
+    def _escape(self, value: np.ndarray, path: ReferencePath, progress_s: float) -> float | None:
+        """The escape offset to hold when lethal terrain lies across every fitted offset, or None
+        if none is clear as far as the corridor reads. The one held is kept while clear; otherwise
+        the nearest clear one, and of two as near, the one on the side whose outermost fitted
+        offset the utility prefers."""
+        if self.escapes.size == 0:
+            return None
+        clear = ~self._lines(self.escapes, path, progress_s, self._far_stations)
+        if not clear.any():
+            return None
+        if abs(self.held) > self.offsets[-1] and clear[np.argmin(np.abs(self.escapes - self.held))]:
+            return self.held
+        side = np.where(self.escapes > 0, value[-1], value[0])
+        order = np.lexsort((-side, np.abs(self.escapes)))  # nearest first, then the preferred side
+        return float(self.escapes[order[np.argmax(clear[order])]])
+
+    def _blocked(self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_s: float) -> np.ndarray:
+        """Which of ``offsets`` (O,) lethal terrain rules out.
 
         First each offset's line parallel to the path, from 0.5 m behind to the horizon, with the
         footprint and its clearance. Where some line meets lethal terrain, the way to every
@@ -124,19 +158,24 @@ class OffsetStage:
         that would rule out all of them (already close beside lethal terrain, every way brushes
         its clearance), when the lines alone decide.
         """
-        s = np.minimum(progress_s + self._line_stations, path.length_m)
-        lines = self.lethal[self.map.beside(path, s, self._lines)].any(axis=(1, 2))
+        lines = self._lines(offsets, path, progress_s, self._line_stations)
         if not lines.any():
             return lines
-        both = lines | self._swept(pose, path, progress_s)
+        both = lines | self._swept(offsets, pose, path, progress_s)
         return lines if both.all() else both
 
-    def _swept(self, pose: Pose, path: ReferencePath, progress_s: float) -> np.ndarray:
-        """Offsets (O,) that pure pursuit toward them, over the horizon, drives onto lethal terrain."""
+    def _lines(self, offsets: np.ndarray, path: ReferencePath, progress_s: float, stations: np.ndarray) -> np.ndarray:
+        """Which of ``offsets`` (O,) have lethal terrain on their line parallel to the path, at
+        ``stations`` (S,) from the vehicle's progress, across the footprint and its clearance."""
+        s = np.minimum(progress_s + stations, path.length_m)
+        return self.lethal[self.map.beside(path, s, offsets[:, None] + self._clear[None, :])].any(axis=(1, 2))
+
+    def _swept(self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_s: float) -> np.ndarray:
+        """Which of ``offsets`` (O,) pure pursuit toward them, over the horizon, drives onto lethal terrain."""
         c, gmap = self.config, self.map
         steps = round(c.lethal_horizon_m / (self.v_mps * c.dt_s))
         a, d, length = path.segments
-        return swept_blocked(float(pose[0]), float(pose[1]), float(pose[2]), self.offsets, float(progress_s), self.v_mps, c.dt_s,
+        return swept_blocked(float(pose[0]), float(pose[1]), float(pose[2]), offsets, float(progress_s), self.v_mps, c.dt_s,
                                      steps, c.pursuit_lookahead_m, path.s, a, d, length, self._clear, gmap.cells,
                                      float(gmap.origin[0]), float(gmap.origin[1]), 1.0 / gmap.config.map_resolution_m,
                                      self.lethal, self.k + 1)
