@@ -124,12 +124,13 @@ def test_steering_toward_an_offset_is_pure_pursuit():
 def test_the_intended_offset_inverts_pure_pursuit():
     path = ReferencePath(np.array([[0.0, 0.0], [30.0, 0.0]]))
     offsets = CorridorConfig().offsets
-    poses = np.array([[5.0, 0.0, 0.0], [6.0, 0.3, 0.0], [7.0, 0.0, 0.0]])
+    # Heading 0.2 rad to the left at 0.3 m: straight ahead, 2.5 m on, is 0.3 + 2.5 tan(0.2) = 0.807 m.
+    poses = np.array([[5.0, 0.0, 0.0], [6.0, 0.3, 0.2], [7.0, 0.0, 0.0]])
     w = steer(path, tuple(poses[0]), 5.0, 1.2, 2.5, 1.0)
     later = np.array([[1.0, float(w)], [1.0, 0.0], [np.nan, np.nan]])
-    intent = intent_offsets(poses, later, np.array([0.0, 0.3, 0.0]), np.array([5.0, 6.0, 7.0]), path, offsets, 2.5)
+    intent = intent_offsets(poses, later, np.array([5.0, 6.0, 7.0]), path, offsets, 2.5)
     assert intent[0] == pytest.approx(1.2)
-    assert intent[1] == pytest.approx(0.3)  # the stick at rest: where the vehicle is
+    assert intent[1] == pytest.approx(0.8)  # the stick at rest: the offset it is heading for, not where it is
     assert np.isnan(intent[2])
 
 

@@ -165,14 +165,12 @@ class _CorridorReader:
         self.corridor = CorridorFeatures(config, k)
         self.features = np.empty((n, len(self.corridor.offsets), k + 2), dtype=np.float32)
         self.near = np.empty(n, dtype=np.float32)
-        self.lateral = np.empty(n)
         self.progress = np.empty(n)
 
     def read(self, j: int, view: SegmentationView, pose: tuple, path: ReferencePath, s: float) -> None:
         self.map.update(view, pose)
         frame = self.corridor(self.map, path, s)
         self.features[j], self.near[j] = frame.features, frame.near_m
-        self.lateral[j] = path.project(np.asarray(pose[:2]), max(s - 1.0, 0.0), min(s + 1.0, path.length_m))[1]
         self.progress[j] = s
 
     def data(self, recording: Recording, keep: np.ndarray, path: ReferencePath) -> CorridorData:
@@ -184,7 +182,7 @@ class _CorridorReader:
         # Only where the frame that much later is the next ones' in time (not across a gap).
         ok[ok] &= np.abs(recording.times[ahead[ok]] - recording.times[keep[ok]] - delay * recording.frame_period_s) < 0.5 * recording.frame_period_s
         later[ok] = recording.commands[ahead[ok]]
-        intent = intent_offsets(recording.poses[keep], later, self.lateral, self.progress, path, self.corridor.offsets,
+        intent = intent_offsets(recording.poses[keep], later, self.progress, path, self.corridor.offsets,
                                 self.config.intent_lookahead_m)
         return CorridorData(self.features, self.near, intent.astype(np.float32))
 
