@@ -214,6 +214,25 @@ def test_trees_wider_than_every_fitted_offset_are_escaped_beyond_them(camera):
     assert _clearance(_drive(stuck, scenario, camera, 34.0), (16.0, 10.0), (2.5, 7.0)) == 0.0  # without escape it drives in
 
 
+def test_the_stage_goes_back_to_the_path_only_when_the_way_back_is_clear(camera):
+    # A thin strip of trees 0.65-1.0 m right of the path: off the footprint of offset 0 (0.6 m
+    # each side) but inside its clearance (0.9 m), so nothing lies on the path, yet the way
+    # back from 1.4 m left is ruled out.
+    strip = {"class": "non_traversable", "rectangle": {"center": [11.0, 9.175], "size": [4.0, 0.35]}}
+    scenario = _scenario([strip])
+    path = ReferencePath(scenario.waypoints)
+    stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), 1.0)
+    pose = (9.0, 11.4, 0.0)
+    stage.held = 1.4
+    stage.decide(_seen_from(scenario, camera, pose), pose, path, 7.0)
+    assert stage.held > 0.0
+    free = _scenario([])
+    stage.reset()
+    stage.held = 1.4
+    stage.decide(_seen_from(free, camera, pose), pose, path, 7.0)
+    assert stage.held == 0.0  # with nothing there it goes back
+
+
 def test_ground_never_seen_is_priced_at_the_mean_of_the_non_lethal_classes(camera):
     stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), 1.0)
     assert stage.weights[K] == pytest.approx(DRIVER_LIKE[1:K].mean())

@@ -6,7 +6,8 @@ corridor utility ``weights . features(d)`` scores every candidate offset d. The 
 1. rules out offsets whose way there, pure pursuit toward them for ``lethal_horizon_m``, brings
    the footprint (plus ``lethal_margin_m``) onto lethal terrain, whenever any lethal terrain lies
    near the corridor (the class table says which classes are lethal; that is not learned);
-2. goes back to the path while nothing lies on it within the utility's near distance;
+2. goes back to the path while nothing lies on it within the utility's near distance, unless
+   the way back is ruled out (then it takes the best offset that is not);
 3. otherwise keeps the offset it holds while that offset's cost is within ``switch_margin`` of
    the best one's, and takes the best one when not, so that it does not dither between sides;
 4. but first, when lethal terrain lies across every offset the utility was fitted on, as far
@@ -104,6 +105,8 @@ class OffsetStage:
         reach, step = utility.config.max_offset_m, utility.config.offset_step_m
         beyond = np.arange(reach + step, reach * self.config.escape_factor + 1e-9, step)
         self.escapes = np.concatenate([-beyond[::-1], beyond])  # (E,) offsets only for getting round lethal terrain [m]
+        self._outermost = self.offsets[[0, -1]]
+        self._centre = int(np.argmin(np.abs(self.offsets)))
         self.held = 0.0
 
     def reset(self) -> None:
@@ -118,7 +121,8 @@ class OffsetStage:
         value = _weighted(gated(corridor, self.offsets, self.utility.near_m), self.weights)
         escape = None
         if self.lethal[: self.k].any():
-            if self._lines(self.offsets, path, progress_s, self._far_stations).all():
+            if self._lines(self._outermost, path, progress_s, self._far_stations).all() \
+                    and self._lines(self.offsets, path, progress_s, self._far_stations).all():  # the outermost two first: cheaper
                 escape = self._escape(value, path, progress_s)
             blocked = self._blocked(self.offsets, pose, path, progress_s)
             if not blocked.all():
@@ -127,8 +131,8 @@ class OffsetStage:
         held = int(np.argmin(np.abs(self.offsets - self.held)))
         if escape is not None:
             self.held = escape
-        elif corridor.near_m > self.utility.near_m:
-            self.held = 0.0
+        elif corridor.near_m > self.utility.near_m and np.isfinite(value[self._centre]):
+            self.held = 0.0  # nothing near and the way back clear of lethal terrain
         elif self.held == 0.0 or abs(self.held) > self.offsets[-1] or not value[held] >= value[best] * (1 + self.config.switch_margin):
             self.held = float(self.offsets[best])
         return float(steer(path, pose, progress_s, self.held, self.config.pursuit_lookahead_m, self.v_mps))
