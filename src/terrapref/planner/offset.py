@@ -47,8 +47,9 @@ class OffsetConfig:
         lethal_margin_m: clearance kept from lethal terrain beside the footprint [m].
         lethal_horizon_m: how far ahead the way to each offset is checked for lethal terrain [m].
         dt_s: time step of that check [s].
-        escape_factor: escape offsets, used only when lethal terrain rules out every fitted
-            offset, reach this many times the fitted offsets' reach (1 = no escape).
+        escape_factor: escape offsets, used only when lethal terrain lies across every fitted
+            offset as far as the corridor reads, reach this many times as far as the fitted
+            offsets do (1 = no escape).
     """
 
     switch_margin: float = 0.15
