@@ -162,6 +162,14 @@ def test_missing_configuration_is_refused(model_file, key: str):
     assert _expect_user_error(path, key).problems[0].field == key
 
 
+@pytest.mark.parametrize("key", ["camera", "features", "classes"])
+def test_a_configuration_that_is_not_a_mapping_is_refused(model_file, key: str):
+    path, config, weights = model_file
+    header = {"format": FORMAT, "classifier": config.to_dict(), **model_meta(), key: None}
+    save_file(weights, str(path), metadata={"terrapref": json.dumps(header)})
+    assert _expect_user_error(path, "expected a mapping").problems[0].field == key
+
+
 def test_invalid_configuration_is_refused(model_file):
     path, config, weights = model_file
     header = {"format": FORMAT, "classifier": {**config.to_dict(), "activation": "sigmoid"}, **model_meta()}

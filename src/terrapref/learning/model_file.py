@@ -137,6 +137,9 @@ def _utility(meta: dict, features: FeatureConfig, source: str) -> tuple[LinearUt
 
 def model_context(meta: dict, source: str) -> tuple[FeatureConfig, CameraConfig, ClassTable, tuple[str, ...]]:
     """The configuration every model file carries: features, camera, classes, profile."""
+    for key in ("features", "camera", "classes"):
+        if key in meta and not isinstance(meta[key], dict):
+            raise UserError(source, "expected a mapping", field=key)
     try:
         features = FeatureConfig.from_dict(meta["features"])
         camera = CameraConfig.from_dict(meta["camera"])
