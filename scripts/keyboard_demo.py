@@ -49,8 +49,8 @@ from terrapref.terrain import PreferenceProfile  # noqa: E402
 INPUTS = ("stick", "keyboard")
 
 
-def _demonstrate(job: tuple[str, str, int, tuple[str, ...]]) -> tuple[str, str, int, float]:
-    """One drive and its model: (input, model path, seed, seconds)."""
+def _demonstrate(job: tuple[str, str, int, tuple[str, ...]]) -> tuple[str, str, int, float, str]:
+    """One drive and its model: (input, model path, seed, seconds, recording folder)."""
     kind, workdir, seed, order = job
     t0 = time.perf_counter()
     recipe = recipe_named(DEFAULT_RECIPE)
@@ -73,7 +73,7 @@ def _demonstrate(job: tuple[str, str, int, tuple[str, ...]]) -> tuple[str, str, 
     model = work / f"model_{kind}.safetensors"
     train_and_save(build_dataset([read_recording(rec)], recipe.features()), model, replace(recipe.train, seed=seed),
                    checkpoints=False, recipe=recipe.name)
-    return kind, str(model), seed, time.perf_counter() - t0
+    return kind, str(model), seed, time.perf_counter() - t0, str(rec)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -93,7 +93,8 @@ def main(argv: list[str] | None = None) -> int:
     done = run_grid(_demonstrate, jobs, Engine(workers=args.workers),
                     lambda k, n: print(f"demonstrated and trained {k}/{n}", file=sys.stderr, flush=True),
                     describe=lambda j: f"{j[0]} drive, seed {j[2]}")
-    models = {(kind, seed): model for kind, model, seed, _ in done}
+    models = {(kind, seed): model for kind, model, seed, _, _ in done}
+    recordings = {(kind, seed): rec for kind, _, seed, _, rec in done}
     t_train = time.perf_counter() - t0
 
     keys = sorted(models)
@@ -103,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
     t_eval = time.perf_counter() - t0 - t_train
 
     rows, collisions = _zone_rows(specs, results, {models[key]: key for key in keys})
-    drives = _drives(models)
+    drives = _drives(recordings)
     (args.out / "keyboard.json").write_text(json.dumps({"profile": order, "layouts": layouts, "zones": rows, "collisions": collisions, "drives": drives,
                                                         "train_s": t_train, "eval_s": t_eval}, indent=0))
     write_report(args.out, order, layouts, rows, collisions, drives, t_train, t_eval, args.workers)
@@ -127,20 +128,16 @@ def _zone_rows(specs: list[RunSpec], results: list[RunResult], kind_of: dict[str
     return rows, collisions
 
 
-def _drives(models: dict[tuple[str, int], str]) -> dict[str, dict]:
+def _drives(recordings: dict[tuple[str, int], str]) -> dict[str, dict]:
     """Each demonstration drive: its frames, minutes, share of frames driven straight (w = 0) and collisions."""
     drives = {}
-    for key in sorted(models):
+    for key in sorted(recordings):
         kind, seed = key
-        rec = read_recording(Path(models[key]).parent / ("demo_keyboard" if kind == "keyboard" else _stick_demo(Path(models[key]).parent)))
+        rec = read_recording(recordings[key])
         w = rec.commands[:, 1]
         drives[f"{kind}_s{seed}"] = {"frames": len(rec), "minutes": rec.duration_s / 60, "straight_share": float(np.mean(w == 0.0)),
                                      "collisions": rec.meta.get("summary", {}).get("collisions")}
     return drives
-
-
-def _stick_demo(work: Path) -> str:
-    return next(p.name for p in sorted(work.iterdir()) if p.is_dir() and p.name.startswith("demo_"))
 
 
 def write_report(out: Path, order, layouts, rows, collisions, drives, t_train: float, t_eval: float, workers: int) -> None:
