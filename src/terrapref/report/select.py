@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, run_many, zone_agrees
-from terrapref.evaluation.stats import rate_text, wilson
+from terrapref.evaluation.stats import cluster_bootstrap, rate_text
 from terrapref.grid import Engine, run_grid
 from terrapref.recipes import recipe_named, run_recipe
 from terrapref.progress import every_tenth
@@ -153,6 +153,20 @@ def _rate(rows: Sequence[dict], key: str) -> str:
     return rate_text(sum(r[key] for r in rows), len(rows))
 
 
+def layout_interval(rows: Sequence[dict]) -> tuple[float, float, float]:
+    """Agreement of ``rows`` and its 95% interval resampling whole layouts (a cluster bootstrap).
+
+    A layout's zones are alike across training seeds (the same patch geometry makes the same
+    near-tie for every model), so the zones are not independent draws; resampling layouts
+    gives the spread a new set of layouts would show, which the Wilson interval over zones
+    understates.
+    """
+    by_layout: dict[str, list[bool]] = {}
+    for r in rows:
+        by_layout.setdefault(r["scenario"], []).append(r["agrees"])
+    return cluster_bootstrap(list(by_layout.values()))
+
+
 def write_selection_report(out: Path, saved: dict) -> Path:
     """SELECT.md and select.png from select.json's content."""
     sel, rows, runs = saved["selection"], saved["zones"], saved["runs"]
@@ -161,10 +175,11 @@ def write_selection_report(out: Path, saved: dict) -> Path:
     lines = ["# Recipe selection: agreement with the driver on generated layouts", "",
              f"{len(sel['recipes'])} recipe(s) x {len(sel['orders'])} order(s) x {sel['seeds']} training seed(s), one drive each; every model and "
              f"its driver (style {sel['style']}) drive {len(layouts)} generated layouts ({layouts[0]} to {layouts[-1]}). Rates with 95% Wilson "
-             "intervals over all zones.", "",
-             "| recipe | order | agreement with the driver | " + " | ".join(f"agreement, {k} zones" for k in kinds)
+             "intervals over all zones; the layouts column resamples whole layouts instead (a cluster bootstrap: a layout's zones are "
+             "alike across seeds), the spread another set of layouts would show.", "",
+             "| recipe | order | agreement with the driver | agreement, layouts resampled | " + " | ".join(f"agreement, {k} zones" for k in kinds)
              + " | zone success | the driver's zone success | collisions | per seed |",
-             "|---|---|---|" + "---|" * len(kinds) + "---|---|---|---|"]
+             "|---|---|---|---|" + "---|" * len(kinds) + "---|---|---|---|"]
     labels, rates, intervals = [], [], []
     for recipe in sel["recipes"]:
         for order in [*sel["orders"], None]:
@@ -177,13 +192,13 @@ def write_selection_report(out: Path, saved: dict) -> Path:
                 per_seed.setdefault(r["seed"], []).append(r["agrees"])
             seeds = ", ".join(f"{sum(v) / len(v):.0%}" for v in per_seed.values()) if order is not None else "-"
             name = "**all**" if order is None else " > ".join(order)
-            lines.append(f"| {recipe} | {name} | {_rate(sub, 'agrees')} | " + " | ".join(_rate([r for r in sub if r["kind"] == k], "agrees") for k in kinds)
+            rate, lo, hi = layout_interval(sub)
+            lines.append(f"| {recipe} | {name} | {_rate(sub, 'agrees')} | {rate:.1%} (95% CI {lo:.1%}-{hi:.1%}) | " + " | ".join(_rate([r for r in sub if r["kind"] == k], "agrees") for k in kinds)
                          + f" | {_rate(sub, 'success')} | {_rate(sub, 'driver_success')} | {coll} | {seeds} |")
             if order is None or len(sel["recipes"]) == 1:
-                ok = sum(r["agrees"] for r in sub)
-                labels.append(recipe if order is None else " > ".join(order[:3]))
-                rates.append(ok / len(sub))
-                intervals.append(wilson(ok, len(sub)))
+                labels.append(f"{recipe}, all orders" if order is None else " > ".join(order[:3]))
+                rates.append(rate)
+                intervals.append((lo, hi))
     misses: dict[tuple, int] = {}
     for r in rows:
         if not r["agrees"]:
@@ -194,7 +209,7 @@ def write_selection_report(out: Path, saved: dict) -> Path:
                   + "; ".join(f"{rc}, {k}: {p} / {d}, {n}" for (rc, k, p, d), n in sorted(misses.items(), key=lambda kv: -kv[1]))]
     lines += ["", f"Training {saved['train_s']:.0f} s, runs {saved['eval_s']:.0f} s (wall; {saved['engine']}).", "", "![selection](select.png)", ""]
     save_intervals(out / "select.png", labels, rates, intervals, "agreement with the driver", target=TARGET,
-                   title=f"one drive per model, {len(layouts)} layouts x {sel['seeds']} seeds; 95% intervals")
+                   title=f"one drive per model, {len(layouts)} layouts x {sel['seeds']} seeds; 95% intervals, layouts resampled")
     path = out / "SELECT.md"
     path.write_text("\n".join(lines))
     return path
