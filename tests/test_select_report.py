@@ -27,7 +27,7 @@ def test_misses_gathered_on_a_few_layouts_widen_the_layout_interval_beyond_wilso
     w_lo, w_hi = wilson(sum(r["agrees"] for r in gathered), len(gathered))
     assert g_hi - g_lo > 1.5 * (w_hi - w_lo)  # 24 misses on 2 of 20 layouts: the set of layouts decides the rate
     s_rate, s_lo, s_hi = layout_interval(spread)
-    assert s_hi - s_lo < g_hi - g_lo  # one miss on every layout: any set of layouts gives about the same rate
+    assert s_hi - s_lo < g_hi - g_lo  # a miss or two on every layout: any set of layouts gives about the same rate
 
 
 def test_the_layout_interval_resamples_layouts_not_zones():
