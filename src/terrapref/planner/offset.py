@@ -122,10 +122,14 @@ class OffsetStage:
         value = _weighted(gated(corridor, self.offsets, self.utility.near_m), self.weights)
         escape = None
         if self.lethal[: self.k].any():
-            if self._lines(self._outermost, path, progress_s, self._far_stations).all() \
-                    and self._lines(self.offsets, path, progress_s, self._far_stations).all():  # the outermost two first: cheaper
-                escape = self._escape(value, path, progress_s)
-            blocked = self._blocked(self.offsets, pose, path, progress_s)
+            lines = None  # the offsets' lines to the horizon, when the far read below already holds them
+            if self._lines(self._outermost, path, progress_s, self._far_stations).all():  # the outermost two first: cheaper
+                far = self._hits(self.offsets, path, progress_s, self._far_stations)
+                if far.any(axis=1).all():
+                    escape = self._escape(value, path, progress_s)
+                if len(self._line_stations) <= far.shape[1]:
+                    lines = far[:, :len(self._line_stations)].any(axis=1)  # the same stations, from the same start and step
+            blocked = self._blocked(self.offsets, pose, path, progress_s, lines)
             if not blocked.all():
                 value = np.where(blocked, -np.inf, value)
         best = int(np.argmax(value))
@@ -154,16 +158,18 @@ class OffsetStage:
         order = np.lexsort((-side, np.abs(self.escapes)))  # nearest first, then the preferred side
         return float(self.escapes[order[np.argmax(clear[order])]])
 
-    def _blocked(self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_s: float) -> np.ndarray:
+    def _blocked(self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_s: float,
+                 lines: np.ndarray | None = None) -> np.ndarray:
         """Which of ``offsets`` (O,) lethal terrain rules out.
 
         First each offset's line parallel to the path, from 0.5 m behind to the horizon, with the
-        footprint and its clearance. Where some line meets lethal terrain, the way to every
-        offset is followed too, and offsets whose way there meets it are also ruled out; unless
-        that would rule out all of them (already close beside lethal terrain, every way brushes
-        its clearance), when the lines alone decide.
+        footprint and its clearance (``lines``, when already read). Where some line meets lethal
+        terrain, the way to every offset is followed too, and offsets whose way there meets it
+        are also ruled out; unless that would rule out all of them (already close beside lethal
+        terrain, every way brushes its clearance), when the lines alone decide.
         """
-        lines = self._lines(offsets, path, progress_s, self._line_stations)
+        if lines is None:
+            lines = self._lines(offsets, path, progress_s, self._line_stations)
         if not lines.any():
             return lines
         both = lines | self._swept(offsets, pose, path, progress_s)
@@ -172,8 +178,12 @@ class OffsetStage:
     def _lines(self, offsets: np.ndarray, path: ReferencePath, progress_s: float, stations: np.ndarray) -> np.ndarray:
         """Which of ``offsets`` (O,) have lethal terrain on their line parallel to the path, at
         ``stations`` (S,) from the vehicle's progress, across the footprint and its clearance."""
+        return self._hits(offsets, path, progress_s, stations).any(axis=1)
+
+    def _hits(self, offsets: np.ndarray, path: ReferencePath, progress_s: float, stations: np.ndarray) -> np.ndarray:
+        """:meth:`_lines` station by station, (O, S)."""
         s = np.minimum(progress_s + stations, path.length_m)
-        return self.lethal[self.map.beside(path, s, offsets[:, None] + self._clear[None, :])].any(axis=(1, 2))
+        return self.lethal[self.map.beside(path, s, offsets[:, None] + self._clear[None, :])].any(axis=2)
 
     def _swept(self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_s: float) -> np.ndarray:
         """Which of ``offsets`` (O,) pure pursuit toward them, over the horizon, drives onto lethal terrain."""
