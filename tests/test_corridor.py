@@ -114,6 +114,67 @@ def test_the_ground_map_keeps_the_world_fixed_when_it_recentres(camera):
     assert (after[kept] == before[kept]).all() and kept.sum() > 0.5 * (before != K + 1).sum()
 
 
+def _noisy_views(scenario, camera: PinholeCamera, pose, errors, frames: int, seed: int = 0):
+    """``frames`` views of ``scenario`` from ``pose``, each with its own draw of the label errors ``errors``."""
+    from terrapref.perception import LabelErrors
+    from terrapref.perception.labels import LabelledView, LabelNoise
+    from terrapref.world import rasterise
+
+    renderer = SegmentationRenderer(camera, rasterise(scenario))
+    noise = LabelNoise(LabelErrors(**errors), camera, scenario.classes)
+    rng = np.random.default_rng(seed)
+    noise.reset(rng)
+    return [LabelledView(SegmentationView(renderer, pose), noise.draw(rng, k)) for k in range(frames)]
+
+
+def test_the_ground_map_outvotes_labels_a_few_frames_get_wrong(camera):
+    """With 20% of pixels flipped in every frame (a fifth of them to trees), a map of the last view
+    shows trees all over; the votes of thirty frames show the mud where it is and no tree at all."""
+    scenario = _scenario([MUD])
+    pose = (2.0, 10.0, 0.0)
+    truth = GroundMap(camera, _columns(), K, lethal_columns=[0])
+    truth.update(_seen_from(scenario, camera, pose), pose)
+    voted = GroundMap(camera, _columns(), K, lethal_columns=[0])
+    for view in _noisy_views(scenario, camera, pose, {"flip_rate": 0.2}, 30):
+        voted.update(view, pose)
+    last = GroundMap(camera, _columns(), K, CorridorConfig(map_fade=0.0), lethal_columns=[0])
+    last.update(view, pose)
+    seen = truth.cells != K + 1
+    assert (voted.cells[seen] == truth.cells[seen]).mean() > 0.999
+    assert (voted.cells == 0).sum() == 0  # not one cell of phantom trees
+    assert (last.cells[seen] == 0).mean() > 0.02  # the last view alone: trees everywhere
+
+
+def test_a_lethal_share_of_the_evidence_makes_a_cell_lethal(camera):
+    """Trees seen in 40% of the frames are lethal at a lethal share of 0.35, not at 0.5; mud seen as
+    often (and grass the rest) is terrain at a terrain share of 0.35, and grass at 0.5."""
+    pose = (2.0, 10.0, 0.0)
+    views = {c: _seen_from(_scenario([{"class": c, "rectangle": {"center": [12.1, 10.0], "size": [3.0, 2.0]}}]), camera, pose)
+             for c in ("non_traversable", "mud")}
+    plain = _seen_from(_scenario([]), camera, pose)
+    centre = np.array([[12.1, 10.0]])
+    for patch, share, expect in (("non_traversable", dict(map_lethal_share=0.35), 0), ("non_traversable", dict(map_lethal_share=0.5), K),
+                                 ("mud", dict(map_terrain_share=0.35), 3), ("mud", dict(map_terrain_share=0.5), K)):
+        gmap = GroundMap(camera, _columns(), K, CorridorConfig(map_fade=1.0, **share), lethal_columns=[0])
+        for k in range(10):
+            view = views[patch] if k % 5 in (1, 3) else plain
+            gmap.update(view, pose)
+        assert gmap.lookup(centre)[0] == expect, (patch, share)
+
+
+def test_the_ground_map_waits_for_enough_evidence_before_a_cell_counts_as_seen(camera):
+    scenario = _scenario([MUD])
+    pose = (2.0, 10.0, 0.0)
+    view = _seen_from(scenario, camera, pose)
+    gmap = GroundMap(camera, _columns(), K, CorridorConfig(map_min_evidence=0.5))
+    gmap.update(view, pose)
+    near, far = np.array([[4.0, 10.0]]), np.array([[14.5, 10.0]])  # 2 m ahead: a vote of 0.8; 12.5 m: 0.09
+    assert gmap.lookup(near)[0] == K and gmap.lookup(far)[0] == K + 1
+    for _ in range(6):
+        gmap.update(view, pose)
+    assert gmap.lookup(far)[0] == K
+
+
 def test_steering_toward_an_offset_is_pure_pursuit():
     path = ReferencePath(np.array([[0.0, 0.0], [30.0, 0.0]]))
     w = steer(path, (0.0, 0.0, 0.0), 0.0, np.array([0.0, 1.0, -1.0]), 2.5, 1.0)

@@ -1,5 +1,5 @@
 """`terrapref study`: the report's arithmetic over seeds (zone success per seed, mean ± std), the
-zones where two preference profiles disagree, the perturbation for each robustness kind, the
+zones where two preference profiles disagree, the perception model of each robustness sweep, the
 report written from fabricated runs, one tiny end-to-end study (slow) and the command's flags."""
 
 from __future__ import annotations
@@ -12,11 +12,11 @@ from pathlib import Path
 import pytest
 
 from terrapref.cli import main
-from terrapref.evaluation.perturb import Perturbation
+from terrapref.perception import load_perception
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PURE_PURSUIT
 from terrapref.evaluation.scoring import RunMetrics, ZoneResult
 from terrapref.grid import Engine
-from terrapref.report.study import LEARNED, POSE_DEG_PER_M, perturbation, run_study
+from terrapref.report.study import LEARNED, PARTS, run_study, swept
 from terrapref.report.study_plan import FULL, QUICK, TEACH_ORDERS, StudyPlan, TrainedModel, TrainJob
 from terrapref.report.study_report import (ALL, ALT_PROFILE, METHOD_NAMES, ModelVariant, RunTag, StudyRun, _cell, _per_seed, _rate, _select,
                                            _zone_success, disagreement_zones, write_study)
@@ -151,45 +151,26 @@ def test_zone_success_counts_only_kept_zones():
     assert isinstance(ok, int) and isinstance(n, int)
 
 
-# --- perturbation levels ------------------------------------------------------------------------------
+# --- the robustness sweep's perception models ---------------------------------------------------------
 
 
-@pytest.mark.parametrize("kind,level", [("flip_rate", 0.2), ("blobs", 2.0), ("drop_rate", 0.5)])
-def test_perturbation_sets_the_named_field_only(kind: str, level: float):
-    p = perturbation(kind, level)
-    assert getattr(p, kind) == level
-    assert p == Perturbation(**{kind: level})  # everything else at its default
-    assert p.active
+def test_a_swept_model_is_one_part_of_the_base_preset_scaled():
+    field = load_perception("field")
+    for part in PARTS:
+        once = swept(FULL, part, 1.0)
+        assert getattr(once, part) == getattr(field, part)
+        assert [getattr(once, other).active for other in PARTS if other != part] == [False, False, False]
+    twice = swept(FULL, "pose", 2.0)
+    assert twice.pose.noise_m == 2 * field.pose.noise_m and twice.pose.drift_deg_per_m == 2 * field.pose.drift_deg_per_m
+    assert swept(FULL, "frames", 4.0).frames.delay == 4 * field.frames.delay
 
 
-def test_perturbation_pose_noise_also_perturbs_the_heading():
-    p = perturbation("pose_noise_m", 0.25)
-    assert p.pose_noise_m == 0.25
-    assert p.pose_noise_deg == pytest.approx(POSE_DEG_PER_M * 0.25)
-    assert p.pose_noise_deg == pytest.approx(2.5)
-    assert p == Perturbation(pose_noise_m=0.25, pose_noise_deg=POSE_DEG_PER_M * 0.25)
-
-
-def test_perturbation_delay_is_whole_frames():
-    p = perturbation("delay_frames", 3.0)
-    assert p.delay_frames == 3
-    assert type(p.delay_frames) is int
-    assert p == Perturbation(delay_frames=3)
-
-
-def test_every_planned_noise_level_makes_a_valid_active_perturbation():
+def test_every_plan_sweeps_rising_levels_of_a_preset():
     for plan in (FULL, QUICK):
-        assert set(plan.noise) == {"flip_rate", "blobs", "pose_noise_m", "drop_rate", "delay_frames"}
-        for kind, levels in plan.noise.items():
-            for level in levels:
-                p = perturbation(kind, level)
-                assert p.active, (kind, level)
-                assert getattr(p, kind) == level  # int(level) loses nothing for the planned delays
-
-
-def test_perturbation_out_of_range_level_is_refused():
-    with pytest.raises(ValueError):
-        perturbation("drop_rate", 1.5)
+        assert list(plan.sweep) == sorted(plan.sweep) and plan.sweep[0] >= 1.0
+        assert "clean" in plan.presets
+        for name in plan.presets:
+            load_perception(name)
 
 
 # --- STUDY.md from fabricated runs (no simulation) ---------------------------------------------------
@@ -219,9 +200,6 @@ def _fabricated(plan: StudyPlan) -> tuple[list[StudyRun], list[TrainedModel]]:
         runs.append(_run("profile", "C", s, zones(3, "rock")))
         runs.append(_run("profile_cross", "C", s, zones(1)))
         runs.append(_run("profile_cross", "C_default", s, zones(1, "rock")))
-        for kind, levels in plan.noise.items():
-            for lv in levels:
-                runs.append(_run("robustness", "C", s, zones(2), kind=kind, level=lv))
         for w in plan.widths:
             runs.append(_run("ablation", "C", s, zones(0), variant=f"hidden width {w}", collisions=2))
         runs += _taught(plan, s)
@@ -240,6 +218,14 @@ def _taught(plan: StudyPlan, seed: int) -> list[StudyRun]:
 
     paper, rock_first = plan.orders
     runs = [run("C", paper, "default", "mud", 0.8, 0.4), run("C", rock_first, "default", "mud", 0.8, 0.4), run("C", paper, "wide", "mud", 1.4, 0.6)]
+    # Section 4: under field the paper's order's planner takes water in the pair zone (half its zones
+    # agree; rock first: none); the pose sweep agrees in every zone at x1 and in half at x2.
+    for order, first in ((paper, "water"), (rock_first, "water")):
+        zs = [_zone("1", first, first), _zone("2", "avoid", "avoid")]
+        runs.append(_run("robustness", "C", seed, zs, scenario="L", order=order, style="default", kind="field", collisions=1))
+        for level, first2 in ((1.0, "mud" if order == paper else "rock"), (2.0, "water")):
+            zs = [_zone("1", first2, first2), _zone("2", "avoid", "avoid")]
+            runs.append(_run("robustness", "C", seed, zs, scenario="L", order=order, style="default", kind="pose", level=level))
     if seed == 0:
         runs += [run(EXPERT, paper, "default", "mud", 1.0, 0.5), run(EXPERT, rock_first, "default", "rock", 1.0, 0.5),
                  run(EXPERT, paper, "wide", "mud", 1.5, 0.7)]
@@ -248,7 +234,7 @@ def _taught(plan: StudyPlan, seed: int) -> list[StudyRun]:
 
 @pytest.fixture(scope="module")
 def fabricated_study(tmp_path_factory) -> tuple[Path, list[StudyRun]]:
-    plan = StudyPlan(seeds=2, minutes=(0.5, 2.0), noise={"drop_rate": (0.5,)}, horizons=(), widths=(16,), courses=("sc",),
+    plan = StudyPlan(seeds=2, minutes=(0.5, 2.0), presets=("clean", "field"), sweep=(1.0, 2.0), horizons=(), widths=(16,), courses=("sc",),
                      orders=TEACH_ORDERS[:2], styles=("default", "wide"), layouts=("L",))
     runs, trained = _fabricated(plan)
     out = tmp_path_factory.mktemp("fabricated")
@@ -297,8 +283,12 @@ def test_write_study_profile_disagreement(fabricated_study):
 
 def test_write_study_robustness_and_ablations(fabricated_study):
     text = fabricated_study[0].read_text()
-    assert "| 0.5 | 66.7% ± 0.0% [30%-90%] | 0 | 100% |" in text
-    assert "dropped frames (share): 0.5 -> 67%" in text
+    # clean: the teaching runs (paper 2 x 2 zones agree, rock first 2 of 4); field: the lone patch's zone of every run
+    assert "| clean | 75.0% (6/8, 95% CI 40.9%-92.9%) | 100.0% ± 0.0% [68%-100%] | 0 |" in text
+    assert "| field | 50.0% (4/8, 95% CI 21.5%-78.5%) | 100.0% ± 0.0% [68%-100%] | 4 |" in text
+    assert "| pose | 1 | 100.0% (8/8, 95% CI 67.6%-100.0%) | 0 |" in text
+    assert "| pose | 2 | 50.0% (4/8, 95% CI 21.5%-78.5%) | 0 |" in text
+    assert "90% holds for pose to x1, below at x2" in text
     assert "| hidden width 16 | 0.0% ± 0.0% [0%-39%] | 4 |" in text
     assert "| total | 3.5 |" in text
 
@@ -332,7 +322,7 @@ def test_write_study_teaching_imitation_is_paired_per_layout_and_seed(fabricated
 # --- one tiny study, end to end -------------------------------------------------------------------
 
 
-TINY = StudyPlan(seeds=1, minutes=(0.5,), epochs=2, cnn_epochs=1, noise={"drop_rate": (0.5,)}, horizons=(), widths=(16,), courses=("demo_course",),
+TINY = StudyPlan(seeds=1, minutes=(0.5,), epochs=2, cnn_epochs=1, presets=("clean", "field"), sweep=(1.0,), horizons=(), widths=(16,), courses=("demo_course",),
                  orders=TEACH_ORDERS[:1], styles=("default",), layouts=("demo_course",))
 
 
@@ -388,7 +378,8 @@ def test_study_json_has_every_part(tiny_study):
     assert _select(runs, study="efficiency", minutes=0.5)
     assert not _select(runs, study="efficiency", minutes=ALL)  # the last point reuses the baselines' runs
     assert {r.tag.method for r in _select(runs, study="efficiency", minutes=0.5)} == set(LEARNED)
-    assert _select(runs, study="robustness", kind="drop_rate", level=0.5)
+    assert _select(runs, study="robustness", kind="field", level=None)
+    assert {r.tag.kind for r in _select(runs, study="robustness", level=1.0)} == set(PARTS)
     ablations = {r.tag.variant for r in _select(runs, study="ablation")}
     assert ablations == {"without the distance utility", "without the row-wise compression (flat MLP)", "hidden width 16"}
     assert {r.tag.method for r in _select(runs, study="profile")} == {"C", EXPERT}

@@ -122,16 +122,18 @@ def _cmd_record(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise UserError("--style", str(exc)) from None
     disturbance = _disturbance(args.disturb)
+    perception = _perception(args.perception, classes=scenario.classes)
     camera, preference, sim_config = CameraConfig(), PreferenceSetConfig(), SimConfig()
     driver = {"kind": "expert", "seed": args.seed, "style": args.style, "config": expert.to_dict(),
               "disturbance": disturbance.to_dict() if disturbance else None}
-    meta = recording_meta(scenario, camera, preference, sim_config, driver, profile)
+    meta = recording_meta(scenario, camera, preference, sim_config, driver, profile, perception)
     sim = Simulation(scenario, camera, sim_config)
     writer = RecordingWriter(args.out, meta, scenario.to_dict(), overwrite=args.force)
     bar = Progress(f"record {scenario.name}", sim.path.length_m, enabled=not args.quiet)
     try:
         log = record_run(sim, ExpertDriver(expert, sim_config.camera_rate_hz), writer, preference, np.random.default_rng(args.seed),
-                         progress=lambda s: bar.update(s.progress_s, f"t={s.time_s:6.1f}s frames={writer.count}"), disturbance=disturbance)
+                         progress=lambda s: bar.update(s.progress_s, f"t={s.time_s:6.1f}s frames={writer.count}"), disturbance=disturbance,
+                         perception=perception)
     except BaseException:
         writer.abort()
         if writer.partial_dir is not None:
@@ -139,7 +141,8 @@ def _cmd_record(args: argparse.Namespace) -> int:
         raise
     bar.close("done")
     state = "reached the goal" if log.completed else "timed out"
-    print(f"wrote {args.out}: {writer.count} frames, {log.duration_s:.1f} s, {state}, {log.collisions} collisions (complete)")
+    seen = f"; the frames are what the robot received under perception {perception.name}" if perception is not None and perception.active else ""
+    print(f"wrote {args.out}: {writer.count} frames, {log.duration_s:.1f} s, {state}, {log.collisions} collisions (complete){seen}")
     return 0
 
 
@@ -154,8 +157,9 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile else None
     if args.record is not None:
         _check_output(args.record, "--record", [args.model] if args.model else [], folder=True)
+    perception = _perception(args.perception, classes=scenario.classes)
     result = run_session(scenario, TeleopOptions(record_dir=args.record, overwrite=args.force, v_mps=args.speed, disturbance=_disturbance(args.disturb),
-                                                 seed=args.seed, profile=profile, model=args.model))
+                                                 seed=args.seed, profile=profile, model=args.model, perception=perception))
     where = f", recorded to {result.record_dir}" if result.record_dir else ""
     state = "reached the goal" if result.completed else ("quit" if result.quit else "stopped")
     edge = f", {result.edge_frames} frames held at the map's edge (not recorded)" if result.edge_frames else ""
@@ -391,6 +395,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         raise UserError("--frames", f"expected comma-separated frame numbers, got {args.frames!r}") from None
     model = load_policy(args.model)  # C, or a learned baseline's file (linear, CNN)
     profile = PreferenceProfile.parse(args.profile, model.classes) if args.profile else None
+    perception = _perception(args.perception, classes=model.classes)
     n_runs = len(args.scenarios) * args.seeds * (1 if args.no_driver else 2)
     bar = Progress("evaluate", n_runs)
     from terrapref.demos.expert import STYLES
@@ -399,8 +404,10 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if args.style not in STYLES:
         raise UserError("--style", f"unknown driver style {args.style!r}; styles: {', '.join(STYLES)}")
     metrics = evaluate_model(args.model, args.scenarios, args.seeds, args.out, profile, not args.no_driver, frames, engine,
-                             progress=lambda k, n: bar.update(k, f"{k}/{n} runs"), style=args.style, mcap=args.mcap)
+                             progress=lambda k, n: bar.update(k, f"{k}/{n} runs"), style=args.style, mcap=args.mcap, perception=perception)
     bar.close()
+    if perception is not None and perception.active:
+        print(f"perception: {perception.name} ({perception.summary()}); the driver sees the truth")
     zones = [z for sc in metrics["scenarios"].values() for run in sc.get("planner", {}).values() for z in run["zones"]]
     s = metrics["summary"]
     print(f"planner: zone success {rate_text(sum(z['success'] for z in zones), len(zones))}, {s['collision_count']} collisions, "
@@ -498,6 +505,26 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_perception(args: argparse.Namespace) -> int:
+    import yaml
+
+    from terrapref.perception import PRESETS, load_perception
+
+    if not args.models:
+        for name in PRESETS:
+            model = load_perception(name)
+            print(f"{name}: {model.summary()}")
+        print("(terrapref perception NAME|FILE prints one in full; --perception takes a preset, a file, or NAME:PART "
+              "for one part alone: labels, pose, camera or frames)")
+        return 0
+    for i, spec in enumerate(args.models):
+        model = load_perception(spec)
+        if i:
+            print("---")
+        print(yaml.safe_dump(model.to_dict(), sort_keys=False, default_flow_style=None).rstrip())
+    return 0
+
+
 def _cmd_recipes(args: argparse.Namespace) -> int:
     from terrapref.recipes import DEFAULT_RECIPE, RECIPES
 
@@ -525,10 +552,14 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     if not names or len(set(names)) != len(names):
         raise UserError("--recipes", f"expected distinct recipe names separated by commas, got {args.recipes!r}")
     recipes = tuple(recipe_named(n, "--recipes") for n in names)
+    specs = [n.strip() for n in args.perception.split(",") if n.strip()]
+    perceptions = tuple(_perception(n) for n in specs)
+    if len({p.name for p in perceptions}) != len(perceptions):
+        raise UserError("--perception", f"names a perception model twice: {args.perception!r}")
     engine = _engine(args)
     t0 = time.perf_counter()
     report = reproduce(args.out, args.seeds, args.eval_seeds, recipes, profile, engine, log=lambda m: print(m, flush=True),
-                       write_recordings=args.write_recordings)
+                       write_recordings=args.write_recordings, perceptions=perceptions)
     print(f"wrote {report} ({time.perf_counter() - t0:.0f} s)")
     return 0
 
@@ -580,12 +611,32 @@ def _cmd_select(args: argparse.Namespace) -> int:
         if value < low:
             raise UserError(flag, f"must be an integer >= {low}, got {value}")
     _check_output(args.out, "--out", folder=True)
+    perception = _perception(args.perception)
+    taught_under = perception if args.taught_under == "same" else _perception(args.taught_under, "--taught-under")
     engine = _engine(args)
     t0 = time.perf_counter()
-    path = run_selection(args.out, Selection(tuple(names), orders, args.seeds, args.first, args.courses, args.style), engine,
-                         log=lambda m: print(m, flush=True))
+    path = run_selection(args.out, Selection(tuple(names), orders, args.seeds, args.first, args.courses, args.style, perception, taught_under),
+                         engine, log=lambda m: print(m, flush=True))
     print(f"done ({time.perf_counter() - t0:.0f} s): {path}")
     return 0
+
+
+def _perception(spec: str | None, flag: str = "--perception", classes=None):
+    """The perception model of ``--perception PRESET|FILE`` (None when not given), checked before any work."""
+    if spec is None:
+        return None
+    from terrapref.perception import load_perception
+
+    try:
+        return load_perception(spec, classes)
+    except UserError as exc:
+        if exc.source == "--perception" and flag != "--perception":
+            raise UserError(flag, exc.problems) from None
+        raise
+
+
+PERCEPTION_HELP = ("what the planner receives instead of the truth: a preset (clean, rellis, field; terrapref perception lists them) "
+                   "or a terrapref-perception/1 file")
 
 
 def _engine(args: argparse.Namespace) -> Engine:
@@ -666,6 +717,9 @@ def _record_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--disturb", type=float, default=None, metavar="RATE",
                    help="push the executed yaw rate off the driver's command RATE times per second, so recoveries are shown "
                         "(default: the recommended protocol's 0.3; 0: none)")
+    p.add_argument("--perception", metavar="PRESET|FILE",
+                   help="the driver sees the truth; the recording holds what the robot's camera and localisation gave through this "
+                        "perception model (a preset: clean, rellis, field; or a terrapref-perception/1 file)")
     p.set_defaults(func=_cmd_record)
 
 
@@ -682,6 +736,9 @@ def _drive_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--model", type=Path, metavar="MODEL",
                    help="ride along: MODEL drives, any stick input takes over, and the frames you steer are recorded as "
                         "corrections that train accepts beside demonstrations")
+    p.add_argument("--perception", metavar="PRESET|FILE",
+                   help="you see the truth; the recording (and a riding-along model) gets what the robot's camera and localisation "
+                        "gave through this perception model")
     p.set_defaults(func=_cmd_drive)
 
 
@@ -738,6 +795,7 @@ def _evaluate_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--style", default="default", help="the synthetic driver's style for the comparison runs (agreement)")
     _add_engine_args(p)
     p.add_argument("--mcap", action="store_true", help="also write each planner run as ROS 2 MCAP in OUT/runs (Foxglove, RViz)")
+    p.add_argument("--perception", metavar="PRESET|FILE", help=PERCEPTION_HELP + " (default: clean); the driver always sees the truth")
     p.set_defaults(func=_cmd_evaluate)
 
 
@@ -751,6 +809,9 @@ def _reproduce_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--profile", help="preference order for the demonstrations, best first")
     p.add_argument("--write-recordings", action="store_true",
                    help="also write the synthetic driver's demonstrations as recordings in OUT/work (they are featurised as they are driven)")
+    p.add_argument("--perception", default="clean,rellis,field", metavar="P1,P2,...",
+                   help="perception models (presets or files, separated by commas) every recipe's models drive the test courses under, "
+                        "for the report's table of what a robot sees (default: clean,rellis,field)")
     _add_engine_args(p)
     p.set_defaults(func=_cmd_reproduce)
 
@@ -809,8 +870,17 @@ def _select_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seeds", type=int, default=5, help="training seeds per recipe and order")
     p.add_argument("--first", type=int, default=1000, help="first generated layout (1000-1999: for choosing; 2000 on: for confirming)")
     p.add_argument("--courses", type=int, default=32, help="generated layouts")
+    p.add_argument("--perception", metavar="PRESET|FILE", help=PERCEPTION_HELP + " while the models drive the layouts (default: clean)")
+    p.add_argument("--taught-under", metavar="PRESET|FILE|same", default=None,
+                   help="record the demonstrations through this perception model instead of the truth ('same': --perception's)")
     _add_engine_args(p)
     p.set_defaults(func=_cmd_select)
+
+
+def _perception_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("perception", help="list the perception presets (what a robot's planner gets instead of the truth), or print one in full")
+    p.add_argument("models", nargs="*", metavar="PRESET|FILE", help="print these in full (checked as --perception checks them)")
+    p.set_defaults(func=_cmd_perception)
 
 
 def _recipes_parser(sub: argparse._SubParsersAction) -> None:
@@ -840,6 +910,7 @@ COMMANDS = (
     _export_parser,
     _info_parser,
     _select_parser,
+    _perception_parser,
     _recipes_parser,
     _scenarios_parser,
 )

@@ -266,17 +266,3 @@ def save_curves(path: str | Path, series: dict[str, Sequence[tuple[float, float,
     ax.legend(fontsize=8)
     fig.tight_layout()
     return _save(fig, path)
-
-
-def save_panels(path: str | Path, panels: dict[str, Sequence[tuple[float, float, float]]], ylabel: str) -> Path:
-    """One small (level, mean, std) plot per perturbation kind."""
-    n = max(len(panels), 1)
-    fig, axes = plt.subplots(1, n, figsize=(3.2 * n, 3.2), dpi=120, squeeze=False)
-    for ax, (name, pts) in zip(axes[0], panels.items()):
-        x, y, e = (np.array(v, dtype=float) for v in zip(*pts))
-        ax.errorbar(x, y, yerr=e, marker="o", capsize=3)
-        ax.set_title(name, fontsize=8)
-        ax.set_ylim(0, 1.05)
-        ax.set_ylabel(ylabel)
-    fig.tight_layout()
-    return _save(fig, path)

@@ -14,6 +14,8 @@ Compiled on first use and cached beside this file, so later processes load it in
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -111,4 +113,39 @@ def take(image: np.ndarray, flat_index: np.ndarray) -> np.ndarray:
         if k < 0 or k >= flat.shape[0]:
             raise IndexError("a pixel index is outside the image")
         out[i] = flat[k]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def ray_pixels(flat_index: np.ndarray, width: int, fx: float, fy: float, cx: float, cy: float, axes: np.ndarray, t: np.ndarray,
+               max_range_m: float, x: float, y: float, c: float, s: float, res: float,
+               raster: np.ndarray, nx: int, x_max: np.float32, y_max: np.float32, unknown: int) -> np.ndarray:
+    """Class ids (len(flat_index),) uint8 of the pixels ``flat_index`` of a camera at any attitude.
+
+    Each pixel's ray through its centre, ``axes`` (3, 3) rows (right, down, forward in the
+    vehicle frame) weighted by the pixel's offsets, meets the ground z = 0 from the optical
+    centre ``t`` (3,); ``unknown`` where it does not, or farther than ``max_range_m``. The point
+    goes to the world at the pose ((x, y), cosine ``c`` and sine ``s`` of the yaw) and to a cell
+    of the padded raster as the row-affine renderer clips it. Used for a camera whose attitude
+    is off its mount (roll breaks the row-affine form); float64 throughout.
+    """
+    out = np.empty(flat_index.shape[0], np.uint8)
+    for i in range(flat_index.shape[0]):
+        k = flat_index[i]
+        a = (k % width + 0.5 - cx) / fx
+        b = (k // width + 0.5 - cy) / fy
+        dx = a * axes[0, 0] + b * axes[1, 0] + axes[2, 0]
+        dy = a * axes[0, 1] + b * axes[1, 1] + axes[2, 1]
+        dz = a * axes[0, 2] + b * axes[1, 2] + axes[2, 2]
+        if dz >= -1e-12:
+            out[i] = unknown
+            continue
+        scale = -t[2] / dz
+        if scale * math.sqrt(dx * dx + dy * dy + dz * dz) > max_range_m:
+            out[i] = unknown
+            continue
+        gx, gy = t[0] + scale * dx, t[1] + scale * dy
+        wx = min(max((x + gx * c - gy * s) / res + 1.0, 0.0), np.float64(x_max))
+        wy = min(max((y + gx * s + gy * c) / res + 1.0, 0.0), np.float64(y_max))
+        out[i] = raster[np.int64(wy) * nx + np.int64(wx)]
     return out

@@ -82,6 +82,19 @@ class PinholeCamera:
         self.R = np.stack([right, down, forward])
         self.t = np.array([c.mount_forward_m, 0.0, c.mount_height_m])
 
+    def tilted(self, dpitch_rad: float, droll_rad: float) -> np.ndarray:
+        """The camera's axes (rows: right, down, forward in the vehicle frame, as :attr:`R`) when
+        its attitude is off the mount by ``dpitch_rad`` (more downward) and ``droll_rad`` (about the
+        optical axis, clockwise as the camera looks), shape (3, 3)."""
+        c = self.config
+        p, y = math.radians(c.pitch_deg) + dpitch_rad, math.radians(c.yaw_deg)
+        forward = np.array([math.cos(p) * math.cos(y), math.cos(p) * math.sin(y), -math.sin(p)])
+        right = np.array([math.sin(y), -math.cos(y), 0.0])
+        down = np.cross(forward, right)
+        cr, sr = math.cos(droll_rad), math.sin(droll_rad)
+        right, down = cr * right + sr * down, -sr * right + cr * down
+        return np.stack([right, down, forward])
+
     @property
     def shape(self) -> tuple[int, int]:
         """Image shape (rows, cols)."""

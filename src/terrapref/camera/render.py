@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from terrapref.camera.kernels import pixels_at, render_rows, take
+from terrapref.camera.kernels import pixels_at, ray_pixels, render_rows, take
 from terrapref.camera.pinhole import PinholeCamera
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose
@@ -110,6 +110,21 @@ class SegmentationRenderer:
         ids = pixels_at(flat, self.camera.config.width_px, self._row0, self._valid_flat, self._P, self._Q, self._u,
                         float(x), float(y), math.cos(yaw), math.sin(yaw), self.world.resolution_m,
                         self._flat, self._nx_pad, self._x_max, self._y_max, UNKNOWN)
+        return ids.reshape(np.shape(flat_index))
+
+
+    def pixels_tilted(self, pose: Pose, flat_index: np.ndarray, dpitch_rad: float, droll_rad: float) -> np.ndarray:
+        """Class ids of the pixels ``flat_index`` that the camera sees when its attitude is off the
+        mount by ``dpitch_rad`` and ``droll_rad`` (:meth:`PinholeCamera.tilted`); each pixel's ray is
+        followed to the ground (kernels.ray_pixels)."""
+        x, y, yaw = _finite(pose)
+        cam, c = self.camera, self.camera.config
+        flat = np.asarray(flat_index, dtype=np.int64).reshape(-1)
+        if flat.size and (flat.min() < 0 or flat.max() >= c.width_px * c.height_px):
+            raise IndexError("a pixel index is outside the image")
+        ids = ray_pixels(flat, c.width_px, cam.fx, cam.fy, cam.cx, cam.cy, cam.tilted(dpitch_rad, droll_rad), cam.t, c.max_range_m,
+                         float(x), float(y), math.cos(yaw), math.sin(yaw), self.world.resolution_m,
+                         self._flat, self._nx_pad, self._x_max, self._y_max, UNKNOWN)
         return ids.reshape(np.shape(flat_index))
 
 

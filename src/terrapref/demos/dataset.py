@@ -139,7 +139,7 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
     # the vehicle could have driven in the gap.
     period = recording.frame_period_s
     v_max = _max_speed(recording.meta)
-    corridor = _CorridorReader(features, featurizer, PinholeCamera(camera), n) if features.corridor is not None else None
+    corridor = _CorridorReader(features, featurizer, PinholeCamera(camera), classes, n) if features.corridor is not None else None
     for j, i in enumerate(keep):
         pose = tuple(recording.poses[i])
         view = _frame_view(recording, i, renderer, pose, shape, known)
@@ -158,10 +158,11 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
 class _CorridorReader:
     """The corridor of each frame of one recording, read in order (the ground map gathers them)."""
 
-    def __init__(self, features: FeatureConfig, featurizer: UtilityFeaturizer, camera: PinholeCamera, n: int) -> None:
+    def __init__(self, features: FeatureConfig, featurizer: UtilityFeaturizer, camera: PinholeCamera, classes: ClassTable, n: int) -> None:
         config, k = features.corridor, features.n_terrain
         self.config = config
-        self.map = GroundMap(camera, featurizer.class_columns, k, config)
+        lethal = sorted({int(featurizer.class_columns[i]) for i in classes.lethal_ids})
+        self.map = GroundMap(camera, featurizer.class_columns, k, config, lethal)
         self.corridor = CorridorFeatures(config, k)
         self.features = np.empty((n, len(self.corridor.offsets), k + 2), dtype=np.float32)
         self.near = np.empty(n, dtype=np.float32)

@@ -20,6 +20,7 @@ import numpy as np
 from terrapref.camera import CameraConfig
 from terrapref.demos.recording import MemoryRecordingWriter, RecordingWriter
 from terrapref.features import PreferenceSetConfig
+from terrapref.perception import PerceptionModel, Perceiver
 from terrapref.scenario import Scenario
 from terrapref.sim import Driver, EpisodeLog, Frame, SimConfig, Simulation
 from terrapref.terrain import PreferenceProfile
@@ -84,8 +85,10 @@ def recording_meta(
     sim: SimConfig,
     driver: dict[str, Any],
     profile: PreferenceProfile,
+    perception: PerceptionModel | None = None,
 ) -> dict[str, Any]:
-    """Everything a recording must carry to be featurised again later (SPEC 10)."""
+    """Everything a recording must carry to be featurised again later (SPEC 10), and the perception
+    model its frames went through (``perception``; None: the truth)."""
     return {
         "scenario": scenario.name,
         "camera": camera.to_dict(),
@@ -95,6 +98,7 @@ def recording_meta(
         "profile": list(profile.order),
         "driver": driver,
         "path": scenario.waypoints.tolist(),
+        "perception": (perception or PerceptionModel()).to_dict(),
     }
 
 
@@ -106,28 +110,45 @@ class RecordLoop:
     :meth:`record_step` writes the frame with the command and its label and steps the
     simulation by one camera period, and :meth:`close` marks the recording complete.
 
+    With a perceiver (terrapref.perception), the driver still sees the truth and the recording
+    holds what the robot would have logged: each period, the frame that reached the robot then
+    (:meth:`perceive`: its labels, its pose as the robot's localisation gave it, taken that period
+    or earlier), with the driver's command of that period; a period in which no frame arrived
+    writes nothing.
+
     Args:
         sim: the simulation driven, already reset.
         writer: the recording (on disk, or kept in memory), or None to drive without one.
         control: the control set whose indices label the frames.
         disturb: the run's pushes, or None for none.
+        perceiver: what the robot receives instead of the truth, already reset; None: the truth.
     """
 
-    def __init__(self, sim: Simulation, writer: RecordingWriter | MemoryRecordingWriter | None, control: ControlSet, disturb: Disturber | None = None) -> None:
-        self.sim, self.writer, self.control, self.disturb = sim, writer, control, disturb
+    def __init__(self, sim: Simulation, writer: RecordingWriter | MemoryRecordingWriter | None, control: ControlSet, disturb: Disturber | None = None,
+                 perceiver: Perceiver | None = None) -> None:
+        self.sim, self.writer, self.control, self.disturb, self.perceiver = sim, writer, control, disturb, perceiver
+        self._perceived: tuple[int, Frame | None] | None = None  # (the period, what reached the robot in it)
 
     def executed(self, command: Command) -> Command:
         """What the vehicle executes this frame instead of ``command`` (often ``command`` itself)."""
         return self.disturb(command) if self.disturb is not None else command
 
+    def perceive(self, frame: Frame) -> Frame | None:
+        """What reaches the robot in ``frame``'s period (``frame`` itself without a perceiver; None
+        when no frame arrives); asked again in the same period, the same answer."""
+        if self._perceived is None or self._perceived[0] != frame.index:
+            self._perceived = (frame.index, self.perceiver(frame) if self.perceiver is not None else frame)
+        return self._perceived[1]
+
     def record_step(self, frame: Frame, command: Command, executed: Command, record: bool = True) -> Frame:
-        """Write ``frame`` with the driver's ``command`` and its label, then drive ``executed`` for one
-        camera period; returns the next frame.
+        """Write what reached the robot in ``frame``'s period with the driver's ``command`` and its
+        label, then drive ``executed`` for one camera period; returns the next frame.
 
         ``record`` False (or no recording) only steps: frames a recording must not hold.
         """
-        if record and self.writer is not None:
-            self.writer.append(frame.time_s, frame.pose, frame.view, command, self.control.label_of(command[1]),
+        got = self.perceive(frame)
+        if record and self.writer is not None and got is not None:
+            self.writer.append(frame.time_s, got.pose, got.view, command, self.control.label_of(command[1]),
                                executed=executed if executed != command else None)
         return self.sim.step(executed)
 
@@ -153,17 +174,20 @@ def record_run(
     rng: np.random.Generator,
     progress: Callable[[Simulation], None] | None = None,
     disturbance: DisturbanceConfig | None = None,
+    perception: PerceptionModel | None = None,
 ) -> EpisodeLog:
     """Drive ``sim`` with ``driver`` to the goal or the time limit, writing every frame.
 
     The recording is marked complete only when the loop ends normally; an exception or a kill
     leaves it partial with every frame written so far readable. With ``disturbance``, pushes
     drawn from a stream seeded by ``rng`` are added to what the vehicle executes (the label
-    stays the driver's command).
+    stays the driver's command). With ``perception``, the recording holds what the robot would
+    have logged (:class:`RecordLoop`), drawn from a stream seeded by ``rng`` after the pushes'.
     """
     frame = sim.reset()
     driver.reset(sim.scenario, rng)
-    loop = RecordLoop(sim, writer, preference.control, _run_disturber(disturbance, rng, sim))
+    disturber = _run_disturber(disturbance, rng, sim)
+    loop = RecordLoop(sim, writer, preference.control, disturber, run_perceiver(perception, sim, rng))
     while not sim.done:
         command = driver.act(frame)
         frame = loop.record_step(frame, command, loop.executed(command))
@@ -172,6 +196,16 @@ def record_run(
     log = EpisodeLog.of(sim)
     loop.close(log.summary())
     return log
+
+
+def run_perceiver(perception: PerceptionModel | None, sim: Simulation, rng: np.random.Generator) -> Perceiver | None:
+    """A run's perceiver, on its own stream seeded from ``rng`` (drawn from only when the model is
+    active, so that a clean run leaves the driver's stream untouched); None for the truth."""
+    if perception is None or not perception.active:
+        return None
+    perceiver = Perceiver(perception, sim.renderer, sim.scenario.classes, sim.config.camera_rate_hz)
+    perceiver.reset(np.random.default_rng(rng.integers(2**63)))
+    return perceiver
 
 
 def _run_disturber(disturbance: DisturbanceConfig | None, rng: np.random.Generator, sim: Simulation) -> Disturber | None:

@@ -17,6 +17,7 @@ from terrapref.grid import Engine
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, annotate_agreement, run_many, scenario_and_world, summarise
 from terrapref.evaluation.scoring import classes_in_zone
 from terrapref.learning.identify import GRASS, Identifiability
+from terrapref.perception import PerceptionModel
 from terrapref.features import PreferenceSet
 from terrapref.planner.registry import load_policy
 from terrapref.scenario import AVOID, resolve_scenario
@@ -36,6 +37,7 @@ def evaluate_model(
     progress: Callable[[int, int], None] | None = None,
     style: str = "default",
     mcap: bool = False,
+    perception: PerceptionModel | None = None,
 ) -> dict:
     """Drive every scenario with the planner (and the synthetic driver) for seeds 0..N-1.
 
@@ -47,18 +49,20 @@ def evaluate_model(
     ``frames`` (for seed 0) into ``out_dir``, and with ``mcap`` every planner run as ROS 2 MCAP
     (``runs/SCENARIO_seedN.mcap``: the camera, the pose, the 21 trajectories and the one chosen);
     returns the metrics. ``engine``: where the runs go (default: local processes, one per core).
+    With ``perception``, the planner receives what a robot would (terrapref.perception) while the
+    driver and the scoring see the truth; metrics.json names the model.
     """
     model = load_policy(model_path)  # C, or a learned baseline (linear, CNN)
     for name in scenarios:
         resolve_scenario(name)  # fail early, with the file and field, before any run
     profile = profile or PreferenceProfile.parse(list(model.profile), model.classes, source=f"{model_path}: profile")
-    ev = _Evaluation(model_path, tuple(scenarios), seeds, profile, style, with_driver)
+    ev = _Evaluation(model_path, tuple(scenarios), seeds, profile, style, with_driver, perception or PerceptionModel())
     results = annotate_agreement(run_many(ev.specs(frames, mcap), progress=progress, engine=engine))
     evidence = _evidence(model, scenarios)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     metrics = _metrics(ev, results, evidence)
-    _figures(results, scenarios, out, model, profile)
+    _figures(results, scenarios, out, model, profile, ev.perception)
     if mcap:
         _write_runs(results, out / "runs", model)
     write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=2))
@@ -76,11 +80,12 @@ class _Evaluation:
     profile: PreferenceProfile
     style: str
     with_driver: bool
+    perception: PerceptionModel
 
     def specs(self, frames: Sequence[int], mcap: bool) -> list[RunSpec]:
         """The planner's runs (seed 0 keeping ``frames``; every run kept with ``mcap``), then the driver's."""
-        specs = [RunSpec(name, seed, PLANNER, self.model_path, self.profile.order, tuple(frames) if seed == 0 else (), keep_run=mcap)
-                 for name in self.scenarios for seed in range(self.seeds)]
+        specs = [RunSpec(name, seed, PLANNER, self.model_path, self.profile.order, tuple(frames) if seed == 0 else (), keep_run=mcap,
+                         perception=self.perception) for name in self.scenarios for seed in range(self.seeds)]
         if self.with_driver:
             specs += [RunSpec(name, seed, EXPERT, None, self.profile.order, style=self.style) for name in self.scenarios for seed in range(self.seeds)]
         return specs
@@ -117,6 +122,7 @@ def _metrics(ev: _Evaluation, results: list[RunResult], evidence: _Evidence | No
         "profile": list(ev.profile.order),
         "seeds": ev.seeds,
         "driver_style": ev.style,
+        "perception": ev.perception.to_dict(),
         "unidentified_pairs": [f"{p.first} vs {p.second}" for p in evidence.identified.unidentified()] if evidence is not None else None,
         "scenarios": {name: _course_runs(results, name, evidence) for name in ev.scenarios},
         "summary": summarise(results, PLANNER).to_dict(),
@@ -186,8 +192,8 @@ def rests_on(expect: str, present: Sequence[str], identified: Identifiability) -
     return sorted({f"{p.first} vs {p.second}" for p in pairs if p is not None and not p.identified})
 
 
-def _figures(results: list[RunResult], scenarios: Sequence[str], out: Path, model, profile: PreferenceProfile) -> None:
-    """Per course, the top-down evaluation figure; per kept frame, its decision picture."""
+def _figures(results: list[RunResult], scenarios: Sequence[str], out: Path, model, profile: PreferenceProfile, perception: PerceptionModel) -> None:
+    """Per course, the top-down evaluation figure; per kept frame, its decision picture (the frame the planner received)."""
     from terrapref.plots import save_decision, save_evaluation
 
     pset = PreferenceSet(model.features.preference, PinholeCamera(model.camera))
@@ -200,7 +206,8 @@ def _figures(results: list[RunResult], scenarios: Sequence[str], out: Path, mode
         ok = sum(v[0] for v in per_zone.values())
         n = sum(v[1] for v in per_zone.values())
         save_evaluation(out / f"{file_stem(name)}.png", scenario, world, [r.xy for r in driver_runs], [r.xy for r in planner_runs], per_zone,
-                        title=f"{name}: planner zone success {ok}/{n} over {len(planner_runs)} run(s), profile {profile}")
+                        title=f"{name}: planner zone success {ok}/{n} over {len(planner_runs)} run(s), profile {profile}"
+                              + (f", perception {perception.name}" if perception.active else ""))
         for r in planner_runs:
             for f in r.frames:
                 rgb = model.classes.palette()[f.image]

@@ -20,8 +20,8 @@ import numpy as np
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.evaluation.scoring import RunMetrics, ZoneResult, score_run
 from terrapref.evaluation.stats import wilson
-from terrapref.evaluation.perturb import PerturbedDriver, Perturbation
 from terrapref.grid import Engine, run_grid
+from terrapref.perception import PerceivedDriver, PerceptionModel, Perceiver
 from terrapref.planner import Planner, PlannerDriver
 from terrapref.planner.policy import Policy
 from terrapref.planner.registry import load_policy, make as make_policy
@@ -45,7 +45,7 @@ class RunSpec:
     model_path: str | None
     profile: tuple[str, ...]
     keep_frames: tuple[int, ...] = ()
-    perturb: Perturbation | None = None
+    perception: PerceptionModel | None = None  # what the planner receives instead of the truth (the driver sees the truth)
     style: str = "default"  # the synthetic driver's style (terrapref.demos.expert.STYLES), for EXPERT runs
     keep_run: bool = False  # keep every decision (pose, choice, F_t) of a planner run, for an MCAP of it
 
@@ -182,7 +182,7 @@ def _expert(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: Prefere
 def _through_planner(policy: Policy, spec: RunSpec, scenario: Scenario, world: WorldMap) -> tuple[Simulation, Driver]:
     """The planner driving with ``policy``, seeing through the camera the policy was built for."""
     sim = Simulation(scenario, policy.camera, world=world)
-    return sim, PlannerDriver(Planner(policy), keep=bool(spec.keep_frames) or spec.keep_run)
+    return sim, PlannerDriver(Planner(policy), keep=bool(spec.keep_frames) or spec.keep_run, images=spec.keep_frames)
 
 
 def _model_file(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: PreferenceProfile) -> tuple[Simulation, Driver]:
@@ -211,12 +211,13 @@ def run_one(spec: RunSpec) -> RunResult:
     scenario, world = scenario_and_world(spec.scenario)
     profile = PreferenceProfile.parse(list(spec.profile), scenario.classes, source="--profile")
     sim, driver = _sim_and_driver(spec, scenario, world, profile)
-    runner = PerturbedDriver(driver, spec.perturb, sim.config.camera_rate_hz) if spec.perturb is not None and spec.perturb.active else driver
+    perceived = spec.perception is not None and spec.perception.active and spec.driver != EXPERT
+    runner = PerceivedDriver(driver, Perceiver(spec.perception, sim.renderer, scenario.classes, sim.config.camera_rate_hz)) if perceived else driver
     log = run_episode(sim, runner, np.random.default_rng(spec.seed), start_pose(scenario.start, spec.seed))
     metrics = score_run(log.trace[:, :2], scenario, sim.world, profile, completed=log.completed, collisions=log.collisions, duration_s=log.duration_s)
     planner = driver if isinstance(driver, PlannerDriver) else None
     return RunResult(spec.scenario, spec.seed, spec.driver, metrics, log.trace[::3, :2].astype(np.float32),
-                     frames=_kept_frames(spec, planner, log, sim), run=_kept_run(spec, planner, log))
+                     frames=_kept_frames(planner, log), run=_kept_run(spec, planner, log))
 
 
 def _sim_and_driver(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: PreferenceProfile) -> tuple[Simulation, Driver]:
@@ -226,26 +227,24 @@ def _sim_and_driver(spec: RunSpec, scenario: Scenario, world: WorldMap, profile:
     return _DRIVERS[spec.driver](spec, scenario, world, profile)
 
 
-def _kept_frames(spec: RunSpec, planner: PlannerDriver | None, log: EpisodeLog, sim: Simulation) -> tuple[KeptFrame, ...]:
-    """The decisions ``spec.keep_frames`` asks for that the run reached, with the class image seen at each."""
+def _kept_frames(planner: PlannerDriver | None, log: EpisodeLog) -> tuple[KeptFrame, ...]:
+    """The decisions the run's spec asked to keep (by frame number) that it reached, each with
+    the class image it was decided on (what the planner received, under a perception model)."""
     if planner is None:
         return ()
-    frames = []
-    for i in spec.keep_frames:
-        if 0 <= i < len(planner.decisions):
-            d = planner.decisions[i]
-            pose = tuple(log.trace[3 * i])
-            frames.append(KeptFrame(i, pose, d.probs, d.index, sim.renderer.render(Pose(*pose))))
-    return tuple(frames)
+    frames = [KeptFrame(number, tuple(log.trace[3 * number]), d.probs, d.index, planner.image_of[number])
+              for number, d in zip(planner.frames, planner.decisions, strict=True) if number in planner.image_of]
+    return tuple(sorted(frames, key=lambda f: f.number))
 
 
 def _kept_run(spec: RunSpec, planner: PlannerDriver | None, log: EpisodeLog) -> KeptRun | None:
-    """Every decision of a planner run, where ``spec.keep_run`` asks for them and it made any."""
+    """Every decision of a planner run, where ``spec.keep_run`` asks for them and it made any: the
+    pose at its frame, the trajectory chosen, F_t, and the command the vehicle held after that frame."""
     if not spec.keep_run or planner is None or not planner.decisions:
         return None
-    n = len(planner.decisions)
-    return KeptRun(log.trace[: 3 * n : 3].copy(), np.array([d.index for d in planner.decisions]),
-                   np.stack([d.probs for d in planner.decisions]).astype(np.float32), log.commands[:n].copy())
+    numbers = np.array(planner.frames, dtype=np.int64)
+    return KeptRun(log.trace[3 * numbers].copy(), np.array([d.index for d in planner.decisions]),
+                   np.stack([d.probs for d in planner.decisions]).astype(np.float32), log.commands[numbers].copy())
 
 
 def run_many(specs: list[RunSpec], workers: int | None = None, progress: Callable[[int, int], None] | None = None,

@@ -30,6 +30,7 @@ import numpy as np
 from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.features import kernels
 from terrapref.scenario.path import ReferencePath
+from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose, pure_pursuit_yaw_rate
 
 
@@ -53,6 +54,18 @@ class CorridorConfig:
             reaction time) [s] ...
         intent_lookahead_m: ... and inverted through pure pursuit this far ahead along the path
             into the offset it was steering for [m] (terrapref.learning.corridor).
+        map_range_m: a ground sample's vote in the map weighs 1 / (1 + (r / map_range_m)^2) at r
+            metres from the vehicle: near ground is seen sharper and placed better [m].
+        map_fade: each frame a cell is not voted on, its evidence fades by this factor, so that
+            recent views count more than old ones (0: the last view alone).
+        map_lethal_share: a cell is lethal when lethal classes hold at least this share of its
+            evidence ...
+        map_terrain_share: ... else terrain (its class with the most evidence) when the K
+            terrain classes hold at least this share, else background: a segmentation network
+            misses a patch into the ground around it far more often than it sees a patch in plain
+            ground, and a patch blurred over frames must not vanish into the ground around it.
+        map_min_evidence: a cell counts as seen once its evidence totals this much (a vote at
+            0 m weighs 1).
     """
 
     max_offset_m: float = 3.0
@@ -68,6 +81,11 @@ class CorridorConfig:
     sample_range_m: float = 14.0
     intent_delay_s: float = 0.2
     intent_lookahead_m: float = 2.5
+    map_range_m: float = 4.0
+    map_fade: float = 0.97
+    map_lethal_share: float = 0.35
+    map_terrain_share: float = 0.5
+    map_min_evidence: float = 0.0
 
     def __post_init__(self) -> None:
         positive = (self.max_offset_m, self.offset_step_m, self.station_step_m, self.half_width_m, self.map_resolution_m,
@@ -78,6 +96,10 @@ class CorridorConfig:
             raise ValueError("the ground map must reach past the camera's sample range by more than 1 m, and that past the corridor")
         if not self.stations_m[0] < self.stations_m[1]:
             raise ValueError("the corridor's stations_m must run forward")
+        if not (math.isfinite(self.map_range_m) and self.map_range_m > 0 and 0 <= self.map_fade <= 1 and 0 < self.map_lethal_share <= 1
+                and 0 < self.map_terrain_share <= 1 and 0 <= self.map_min_evidence < 1e3):
+            raise ValueError("the ground map needs map_range_m > 0, map_fade in [0, 1], map_lethal_share and map_terrain_share in (0, 1] "
+                             "and map_min_evidence >= 0")
 
     @property
     def offsets(self) -> np.ndarray:
@@ -108,25 +130,37 @@ class CorridorConfig:
 
 
 class GroundMap:
-    """The terrain column last seen at each cell of the ground around the vehicle.
+    """What the camera has shown of the ground around the vehicle, gathered over frames.
 
     A square of ``2 * map_half_size_m`` in the world frame, re-centred on the vehicle before
     the ground the camera sees (``sample_range_m`` ahead) could leave it; cells that leave it
-    are forgotten. Cells hold
-    a terrain column (0..K-1), K for ground that is none of the K classes, K + 1 for ground
-    never seen.
+    are forgotten. Every frame, each ground sample the camera sees votes for its terrain column
+    in its cell, weighted by how near it is (``map_range_m``), and a cell's older votes fade
+    (``map_fade``); the cell holds the column with the most evidence, or a lethal one where
+    lethal classes hold ``map_lethal_share`` of it. So a label that a few frames get wrong (a
+    segmentation network's flips, a blob, a region mislabelled for a moment, a pose or a camera
+    attitude a little off) is outvoted by the frames that got it right, and lethal terrain is
+    neither entered nor seen where it is not because of a few frames.
+
+    Cells hold a terrain column (0..K-1), K for ground that is none of the K classes, K + 1 for
+    ground never seen.
 
     Args:
         camera: the camera whose images update the map.
         columns: terrain column of each class id (256,), as :attr:`UtilityFeaturizer.class_columns`.
         k: the number of terrain classes K.
-        config: the corridor's configuration (map resolution and size, image sampling).
+        config: the corridor's configuration (map resolution, size and voting, image sampling).
+        lethal_columns: the terrain columns of lethal classes.
     """
 
-    def __init__(self, camera: PinholeCamera, columns: np.ndarray, k: int, config: CorridorConfig | None = None) -> None:
+    def __init__(self, camera: PinholeCamera, columns: np.ndarray, k: int, config: CorridorConfig | None = None,
+                 lethal_columns: np.ndarray | tuple[int, ...] = ()) -> None:
         self.config = c = config or CorridorConfig()
         self.k = k
-        self.columns = np.asarray(columns, dtype=np.uint8)
+        self.columns = np.asarray(columns, dtype=np.uint8).copy()
+        self.columns[UNKNOWN] = k + 1  # a pixel that sees no ground casts no vote
+        self.lethal = np.zeros(k + 2, dtype=np.bool_)
+        self.lethal[np.asarray(lethal_columns, dtype=np.int64)] = True
         # The ground points read from each image: a vehicle-frame grid, those the camera sees.
         xs = np.arange(0.2, c.sample_range_m, c.sample_step_m)
         ys = np.arange(-8.0, 8.0, c.sample_step_m)
@@ -135,13 +169,24 @@ class GroundMap:
         seen = pix >= 0
         self._pix = pix[seen]
         self._vx, self._vy = grid[seen, 0].copy(), grid[seen, 1].copy()
+        self._weight = (1.0 / (1.0 + (self._vx**2 + self._vy**2) / c.map_range_m**2)).astype(np.float32)
+        fade = np.ones(64, dtype=np.float32)
+        for g in range(1, len(fade)):  # by repeated products: the same bits on every CPU
+            fade[g] = fade[g - 1] * np.float32(c.map_fade)
+        self._fade = fade
         self._n = int(round(2 * c.map_half_size_m / c.map_resolution_m))
         self.cells = np.full((self._n, self._n), k + 1, dtype=np.uint8)  # (row: y, col: x)
+        self.evidence = np.zeros((self._n, self._n, k + 1), dtype=np.float32)
+        self.stamp = np.zeros((self._n, self._n), dtype=np.int64)
+        self.frame = 0
         self.origin: np.ndarray | None = None  # world position of cell (0, 0)'s corner [m]
 
     def reset(self) -> None:
         """Forget everything seen."""
         self.cells.fill(self.k + 1)
+        self.evidence.fill(0.0)
+        self.stamp.fill(0)
+        self.frame = 0
         self.origin = None
 
     def _recentre(self, x: float, y: float) -> None:
@@ -151,23 +196,24 @@ class GroundMap:
         if self.origin is not None and np.abs(self.origin - centre).max() < c.map_half_size_m - c.sample_range_m - 1.0:
             return
         new = np.floor(centre / c.map_resolution_m).astype(np.int64)
-        cells = np.full_like(self.cells, self.k + 1)
         if self.origin is not None:  # keep what the old square and the new one share
             old = np.round(self.origin / c.map_resolution_m).astype(np.int64)
             dx, dy = int(new[0] - old[0]), int(new[1] - old[1])
-            n = self._n
-            if abs(dx) < n and abs(dy) < n:
-                cells[max(0, -dy):n - max(0, dy), max(0, -dx):n - max(0, dx)] = self.cells[max(0, dy):n - max(0, -dy), max(0, dx):n - max(0, -dx)]
-        self.cells = cells
+            self.cells = _shifted(self.cells, dx, dy, self.k + 1)
+            self.evidence = _shifted(self.evidence, dx, dy, 0.0)
+            self.stamp = _shifted(self.stamp, dx, dy, 0)
         self.origin = new * c.map_resolution_m
 
     def update(self, view: SegmentationView, pose: Pose) -> None:
-        """Write what ``view``, taken at ``pose``, shows of the ground."""
+        """Add what ``view``, taken at ``pose``, shows of the ground."""
         x, y, yaw = pose
+        c = self.config
         self._recentre(x, y)
+        self.frame += 1
         cols = self.columns[view.pixels(self._pix)]
-        kernels.map_write(self.cells, float(self.origin[0]), float(self.origin[1]), 1.0 / self.config.map_resolution_m,
-                          float(x), float(y), math.cos(yaw), math.sin(yaw), self._vx, self._vy, cols)
+        kernels.map_vote(self.evidence, self.stamp, self.cells, float(self.origin[0]), float(self.origin[1]), 1.0 / c.map_resolution_m,
+                         float(x), float(y), math.cos(yaw), math.sin(yaw), self._vx, self._vy, self._weight, cols, self.frame, self._fade,
+                         self.lethal, np.float32(c.map_lethal_share), np.float32(c.map_terrain_share), np.float32(c.map_min_evidence))
 
     def beside(self, path: ReferencePath, s: np.ndarray, lat: np.ndarray) -> np.ndarray:
         """Terrain column (O, S, F) at the points ``lat`` (O, F) [m] left of the path at arc lengths ``s`` (S,)."""
@@ -240,6 +286,15 @@ class CorridorFeatures:
         metres = counts * (step / col.shape[2])
         detour = self.offsets**2 * (on_path_m + self.config.span_m)
         return CorridorView(np.concatenate([metres[:, :k], metres[:, k + 1:], detour[:, None]], axis=1), near_m)
+
+
+def _shifted(a: np.ndarray, dx: int, dy: int, fill: float) -> np.ndarray:
+    """``a`` (rows y, columns x, ...) moved so that what was at cell (i + dx, j + dy) is at (i, j); ``fill`` where nothing was."""
+    out = np.full_like(a, fill)
+    n = a.shape[0]
+    if abs(dx) < n and abs(dy) < n:
+        out[max(0, -dy):n - max(0, dy), max(0, -dx):n - max(0, dx)] = a[max(0, dy):n - max(0, -dy), max(0, dx):n - max(0, -dx)]
+    return out
 
 
 def gated(view: CorridorView, offsets: np.ndarray, near_m: float) -> np.ndarray:

@@ -202,6 +202,63 @@ def map_write(cells: np.ndarray, ox: float, oy: float, inv_res: float, x: float,
 
 
 @njit(cache=True, nogil=True)
+def map_vote(evidence: np.ndarray, stamp: np.ndarray, cells: np.ndarray, ox: float, oy: float, inv_res: float, x: float, y: float,
+             c: float, s: float, vx: np.ndarray, vy: np.ndarray, weight: np.ndarray, cols: np.ndarray, frame: int, fade: np.ndarray,
+             lethal: np.ndarray, lethal_share: float, terrain_share: float, min_evidence: float) -> None:
+    """Add each ground sample's vote to the evidence of its cell, and set the cell's column.
+
+    A cell's evidence (``evidence[j, i]``, one float32 per column 0..K, K the background) fades by
+    ``fade[g]`` when it is next voted on ``g`` frames later (``stamp`` holds the frame of its last
+    vote; gaps beyond the table fade by its last entry), then gains the sample's ``weight`` in the
+    sample's column. Samples of column K + 1 (nothing seen) cast no vote. The cell's column
+    (``cells``): K + 1 (never seen) while its evidence totals less than ``min_evidence``; else the
+    lethal column with the most evidence when the lethal columns hold at least ``lethal_share`` of
+    it; else the terrain column with the most when the K terrain columns hold at least
+    ``terrain_share``; else K. Ties go to the lowest column. Cells are found as in
+    :func:`map_write`; float32 sums in a fixed order, so every CPU agrees.
+    """
+    n_rows, n_cols = cells.shape
+    k = evidence.shape[2] - 1
+    for p in range(vx.shape[0]):
+        col = cols[p]
+        if col > k:
+            continue
+        i = math.floor((x - ox + vx[p] * c - vy[p] * s) * inv_res)
+        j = math.floor((y - oy + vx[p] * s + vy[p] * c) * inv_res)
+        if not (0 <= i < n_cols and 0 <= j < n_rows):
+            continue
+        gap = frame - stamp[j, i]
+        if gap != 0:
+            f = fade[min(gap, fade.shape[0] - 1)]
+            for q in range(k + 1):
+                evidence[j, i, q] *= f
+            stamp[j, i] = frame
+        evidence[j, i, col] += weight[p]
+        total = evidence[j, i, k]
+        deadly = np.float32(0.0)
+        terrain = np.float32(0.0)
+        best_lethal, best_terrain = -1, -1
+        for q in range(k):
+            e = evidence[j, i, q]
+            total += e
+            terrain += e
+            if lethal[q]:
+                deadly += e
+                if best_lethal < 0 or e > evidence[j, i, best_lethal]:
+                    best_lethal = q
+            if best_terrain < 0 or e > evidence[j, i, best_terrain]:
+                best_terrain = q
+        if total < min_evidence:
+            cells[j, i] = k + 1
+        elif best_lethal >= 0 and deadly >= lethal_share * total:
+            cells[j, i] = best_lethal
+        elif best_terrain >= 0 and terrain >= terrain_share * total:
+            cells[j, i] = best_terrain
+        else:
+            cells[j, i] = k
+
+
+@njit(cache=True, nogil=True)
 def map_read(cells: np.ndarray, ox: float, oy: float, inv_res: float, px: np.ndarray, py: np.ndarray, never: int) -> np.ndarray:
     """The ground map's column at each point (flat arrays ``px``, ``py``); ``never`` outside it.
 

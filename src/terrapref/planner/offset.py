@@ -96,7 +96,7 @@ class OffsetStage:
         if safe:
             weights[k] = weights[safe].mean()
         self.weights = weights
-        self.map = GroundMap(camera, columns, k, utility.config)
+        self.map = GroundMap(camera, columns, k, utility.config, lethal_columns)
         self.corridor = CorridorFeatures(utility.config, k)
         self.offsets = self.corridor.offsets
         m = utility.config.half_width_m + self.config.lethal_margin_m

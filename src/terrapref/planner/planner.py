@@ -147,19 +147,27 @@ _NO_POINTS = np.zeros((0, 2))
 
 
 class PlannerDriver:
-    """The planner as a :class:`terrapref.sim.Driver`; keeps its decisions for later pictures."""
+    """The planner as a :class:`terrapref.sim.Driver`; with ``keep``, keeps its decisions for later
+    pictures with the number of the frame each was made on (``frames``), and the image decided on
+    for the frame numbers in ``images`` (``image_of``)."""
 
-    def __init__(self, planner: Planner, keep: bool = False) -> None:
+    def __init__(self, planner: Planner, keep: bool = False, images: tuple[int, ...] = ()) -> None:
         self.planner = planner
         self.keep = keep
+        self.images = frozenset(images)
         self.decisions: list[Decision] = []
+        self.frames: list[int] = []
+        self.image_of: dict[int, np.ndarray] = {}
 
     def reset(self, scenario: Scenario, rng: np.random.Generator) -> None:
         self.planner.set_path(scenario.waypoints)
-        self.decisions = []
+        self.decisions, self.frames, self.image_of = [], [], {}
 
     def act(self, frame: Frame) -> Command:
         d = self.planner.decide(frame.view, frame.pose)
         if self.keep:
             self.decisions.append(d)
+            self.frames.append(frame.index)
+            if frame.index in self.images:
+                self.image_of[frame.index] = frame.view.image.copy()
         return d.command

@@ -39,6 +39,7 @@ from terrapref.learning.model_file import load_model
 from terrapref.learning.pipeline import train_and_save
 from terrapref.learning.network import ClassifierConfig
 from terrapref.learning.train import DataOptions, OptimiserConfig, SecondStageConfig, TrainConfig, TrainResult
+from terrapref.perception import PerceptionModel
 from terrapref.planner import Planner, PlannerDriver
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import SimConfig, Simulation
@@ -141,6 +142,7 @@ class _Drive:
     disturbance: DisturbanceConfig | None
     profile: PreferenceProfile | None
     style: str
+    perception: PerceptionModel | None = None
 
 
 def _drive(drive: _Drive, features: FeatureConfig, write: bool) -> tuple[Recording, bool]:
@@ -148,25 +150,28 @@ def _drive(drive: _Drive, features: FeatureConfig, write: bool) -> tuple[Recordi
 
     Written to ``drive.out`` with ``write``, else kept in memory (the same frames and labels,
     featurised from the simulation's own views). A complete recording on disk of the same
-    course under the same driver, profile, seed and disturbances is reused either way, so
-    recipes sharing a seed share their demonstrations.
+    course under the same driver, profile, seed, disturbances and perception is reused either
+    way, so recipes sharing a seed share their demonstrations.
     """
     scenario = resolve_scenario(drive.course)
     profile = drive.profile or PreferenceProfile.default(scenario.classes)
     camera, sim_cfg = CameraConfig(), SimConfig()
     expert_cfg = ExpertConfig.styled(drive.style, profile.order)
     pushes = drive.disturbance.to_dict() if drive.disturbance is not None else None
+    perception = drive.perception or PerceptionModel()
     if (drive.out / "meta.json").exists():
         existing = read_recording(drive.out)
         driver = existing.meta["driver"]
         if (existing.complete and existing.meta.get("scenario") == scenario.name and existing.meta.get("profile") == list(profile.order)
-                and driver.get("seed") == drive.seed and driver.get("disturbance") == pushes and driver.get("config") == expert_cfg.to_dict()):
+                and driver.get("seed") == drive.seed and driver.get("disturbance") == pushes and driver.get("config") == expert_cfg.to_dict()
+                and existing.meta.get("perception", PerceptionModel().to_dict()) == perception.to_dict()):
             return existing, False
     meta = recording_meta(scenario, camera, features.preference, sim_cfg,
-                          {"kind": "expert", "seed": drive.seed, "style": drive.style, "config": expert_cfg.to_dict(), "disturbance": pushes}, profile)
+                          {"kind": "expert", "seed": drive.seed, "style": drive.style, "config": expert_cfg.to_dict(), "disturbance": pushes}, profile,
+                          perception)
     writer = RecordingWriter(drive.out, meta, scenario.to_dict(), overwrite=True) if write else MemoryRecordingWriter(drive.out, meta, scenario.to_dict())
     record_run(Simulation(scenario, camera, sim_cfg), ExpertDriver(expert_cfg), writer, features.preference,
-               np.random.default_rng(drive.seed), disturbance=drive.disturbance)
+               np.random.default_rng(drive.seed), disturbance=drive.disturbance, perception=perception)
     return (read_recording(drive.out) if write else writer.recording()), True
 
 
@@ -180,19 +185,24 @@ def demonstrate(
     log: Callable[[str], None] | None = None,
     style: str = "default",
     write: bool = True,
+    perception: PerceptionModel | None = None,
 ) -> list[Recording]:
     """The recipe's demonstration runs by the synthetic driver.
 
     Run ``k`` of ``course`` (seed ``seed * 100 + k``) is recorded as ``workdir/COURSE_K`` (a name
-    that ends in ``_disturbed`` with disturbances) with ``write``; without, it is kept in memory
-    under that name. A complete run already on disk under the same course, driver, profile,
-    seed and disturbances is reused, so recipes sharing a seed share their demonstrations.
+    that ends in ``_disturbed`` with disturbances, and then ``_perceived`` when its frames went through
+    an active ``perception`` model) with ``write``; without, it is kept in memory under that name. A
+    complete run already on disk under the same course, driver, profile, seed, disturbances and
+    perception is reused, so recipes sharing a seed share their demonstrations.
     """
     workdir = Path(workdir)
     features = features or FeatureConfig()
     course = course or recipe.course
     tail = "" if recipe.disturbance is None else "_disturbed"
-    drives = [_Drive(course, workdir / f"{course}_{k}{tail}", seed * 100 + k, recipe.disturbance, profile, style) for k in range(recipe.demonstrations)]
+    if perception is not None and perception.active:
+        tail += "_perceived"
+    drives = [_Drive(course, workdir / f"{course}_{k}{tail}", seed * 100 + k, recipe.disturbance, profile, style, perception)
+              for k in range(recipe.demonstrations)]
     recordings = []
     for i, drive in enumerate(drives):
         recording, driven = _drive(drive, features, write)
@@ -218,6 +228,7 @@ def run_recipe(
     log: Callable[[str], None] | None = None,
     style: str = "default",
     write_recordings: bool = False,
+    perception: PerceptionModel | None = None,
 ) -> RecipeOutput:
     """Demonstrate, correct, train; write into ``workdir``.
 
@@ -232,7 +243,7 @@ def run_recipe(
     scenario = resolve_scenario(course)
     profile = profile or PreferenceProfile.default(scenario.classes)
     features = recipe.features(features)
-    recordings = demonstrate(recipe, workdir, seed, profile, course, features, log, style, write=write_recordings)
+    recordings = demonstrate(recipe, workdir, seed, profile, course, features, log, style, write=write_recordings, perception=perception)
     paths = [r.path for r in recordings if not r.in_memory]
     demo_s = sum(r.duration_s for r in recordings)
     corr_s = 0.0

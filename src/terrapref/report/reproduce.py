@@ -5,7 +5,9 @@ For each training seed, the synthetic driver demonstrates on each recipe's cours
 ``teach``) and a model is trained by each recipe; every model then drives ``train_course``,
 ``test_course`` and the figure variations, and so does the synthetic driver. The report gives
 the paper's Table 1 and Table 2 with success over seeds (and the planner's agreement with the
-driver), each rate with its 95% Wilson interval, the figures, and each stage's time.
+driver), each rate with its 95% Wilson interval, the figures, and each stage's time; then every
+recipe's models once more on the test courses under each perception model asked for (the planner
+receives what a robot would; the driver sees the truth), in one table.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from terrapref.fileio import write_text_atomic
 from terrapref.grid import Engine, run_grid
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, annotate_agreement, run_many, summarise
 from terrapref.evaluation.stats import rate_text
+from terrapref.perception import PerceptionModel
 from terrapref.recipes import OURS, PAPER, TEACH, Recipe, run_recipe
 from terrapref.progress import every_tenth
 from terrapref.scenario import packaged_scenarios, resolve_scenario
@@ -62,10 +65,11 @@ class RecipeRun:
     result: RunResult
     recipe: str
     train_seed: int
+    perception: str = "clean"  # the perception model's name (what the planner received)
 
     def to_dict(self) -> dict:
         """As results.json holds it: the run's metrics, without its path."""
-        return self.result.to_dict() | {"recipe": self.recipe, "train_seed": self.train_seed}
+        return self.result.to_dict() | {"recipe": self.recipe, "train_seed": self.train_seed, "perception": self.perception}
 
 
 @dataclass(frozen=True)
@@ -78,6 +82,7 @@ class _Setup:
     profile: PreferenceProfile
     scenarios: tuple[str, ...]
     write_recordings: bool = False
+    perceptions: tuple[PerceptionModel, ...] = ()  # the test courses again under each active one
 
 
 def _train_job(args: tuple[tuple[Recipe, ...], str, int, tuple[str, ...], bool]) -> list[RecipeModel]:
@@ -94,15 +99,16 @@ def _train_job(args: tuple[tuple[Recipe, ...], str, int, tuple[str, ...], bool])
 
 def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes: tuple[Recipe, ...] = (PAPER, OURS, TEACH),
               profile: PreferenceProfile | None = None, engine: Engine | None = None, log: Callable[[str], None] = print,
-              write_recordings: bool = False) -> Path:
+              write_recordings: bool = False, perceptions: tuple[PerceptionModel, ...] = ()) -> Path:
     """Run the whole reproduction into ``out_dir`` and return the path of REPORT.md; ``engine``
     runs its jobs (default: local processes, one per core). The synthetic driver's
     demonstrations are featurised as they are driven and kept in memory, or also written as
-    recordings under ``out_dir/work`` with ``write_recordings``."""
+    recordings under ``out_dir/work`` with ``write_recordings``. Each of ``perceptions`` (the clean
+    model among them adds nothing: the runs above are clean) drives the test courses once more."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     setup = _Setup(tuple(recipes), seeds, eval_seeds, profile or PreferenceProfile.default(), ("train_course", *TEST_SET, *variations()),
-                   write_recordings)
+                   write_recordings, tuple(perceptions))
     engine = engine or Engine()
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -138,6 +144,8 @@ def _evaluate(setup: _Setup, trained: list[RecipeModel], engine: Engine, log: Ca
     """Stage 2: every model and the synthetic driver on every course, the planners' agreement with the driver."""
     specs = [RunSpec(sc, e, PLANNER, t.model, setup.profile.order)
              for t in trained for sc in setup.scenarios for e in range(setup.eval_seeds)]
+    specs += [RunSpec(sc, e, PLANNER, t.model, setup.profile.order, perception=p)
+              for p in setup.perceptions if p.active for t in trained for sc in (*TEST_SET, *variations()) for e in range(setup.eval_seeds)]
     specs += [RunSpec(sc, s, EXPERT, None, setup.profile.order) for sc in setup.scenarios for s in range(setup.seeds)]
     specs.sort(key=lambda sp: -scenario_length(sp.scenario))  # longest first: no core idles at the end
     log(f"[2/3] closed-loop evaluation: {len(specs)} runs ...")
@@ -148,7 +156,8 @@ def _evaluate(setup: _Setup, trained: list[RecipeModel], engine: Engine, log: Ca
 def _recipe_run(result: RunResult, spec: RunSpec, trained: list[RecipeModel]) -> RecipeRun:
     """A run with the recipe and training seed of the model that drove it (the driver's: ``driver`` and the run's seed)."""
     model = next((t for t in trained if t.model == spec.model_path), None)
-    return RecipeRun(result, model.recipe, model.seed) if model is not None else RecipeRun(result, "driver", result.seed)
+    seen = spec.perception.name if spec.perception is not None and spec.perception.active else "clean"
+    return RecipeRun(result, model.recipe, model.seed, seen) if model is not None else RecipeRun(result, "driver", result.seed)
 
 
 @functools.lru_cache(maxsize=64)
@@ -198,8 +207,10 @@ def _write_report(out: Path, setup: _Setup, runs: list[RecipeRun], trained: list
     t_fig = time.perf_counter()
     figs = out / "figures"
     figs.mkdir(exist_ok=True)
-    _draw_figures(figs, setup, runs, trained, engine)
-    lines = _introduction(setup) + _summary_table(setup.recipes, runs) + _zone_tables(setup.recipes, runs) + _training_lines(setup.recipes, trained)
+    clean = [r for r in runs if r.perception == "clean"]
+    _draw_figures(figs, setup, clean, trained, engine)
+    lines = _introduction(setup) + _summary_table(setup.recipes, clean) + _perception_table(setup, runs)
+    lines += _zone_tables(setup.recipes, clean) + _training_lines(setup.recipes, trained)
     lines += ["", "## Figures", ""] + [f"- `figures/{sc}.png`" for sc in setup.scenarios]
     timings = {**timings, "figures": time.perf_counter() - t_fig}
     lines += ["", "## Time per stage (wall clock)", "", "| stage | seconds |", "|---|---|"]
@@ -292,6 +303,30 @@ def _summary_table(recipes: tuple[Recipe, ...], runs: list[RecipeRun]) -> list[s
         agreement = rate_text(sum(a.agrees for a in compared), len(compared)) if compared else "—"
         lines.append(f"| {name} | {rate_text(sum(z.success for z in zones), len(zones))} | {agreement} | {s.collision_count} | "
                      f"{s.completed_rate:.0%} | {s.runs} |")
+    return lines
+
+
+def _perception_table(setup: _Setup, runs: list[RecipeRun]) -> list[str]:
+    """Each recipe on the test courses under each perception model: agreement with the driver (who sees
+    the truth), zone success and collisions."""
+    names = ["clean", *(p.name for p in setup.perceptions if p.active)]
+    if len(names) == 1:
+        return []
+    test_names = {*TEST_SET, *variations()}
+    lines = ["", "## Under what a robot sees (test_course and the figure variations)", "",
+             "The same models, each planner receiving what a robot's segmentation, localisation and camera would give instead of "
+             "the truth (terrapref.perception; `terrapref perception` lists the presets, docs/perception.md derives them); the "
+             "driver sees the truth. Each cell: agreement with the driver, zone success, collisions; 95% Wilson intervals.", "",
+             "| recipe | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    for recipe in setup.recipes:
+        cells = []
+        for name in names:
+            chosen = [r.result for r in runs if r.recipe == recipe.name and r.perception == name and r.result.scenario in test_names]
+            compared = [a for r in chosen if r.agreement is not None for a in r.agreement]
+            zones = [z for r in chosen for z in r.metrics.zones]
+            cells.append(f"{rate_text(sum(a.agrees for a in compared), len(compared))}; success {rate_text(sum(z.success for z in zones), len(zones))}; "
+                         f"{sum(r.metrics.collisions for r in chosen)} collisions")
+        lines.append(f"| {recipe.name} | " + " | ".join(cells) + " |")
     return lines
 
 

@@ -22,6 +22,7 @@ from pathlib import Path
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, run_many, zone_agrees
 from terrapref.evaluation.stats import cluster_bootstrap, rate_text
 from terrapref.grid import Engine, run_grid
+from terrapref.perception import PRESETS, PerceptionModel
 from terrapref.recipes import recipe_named, run_recipe
 from terrapref.progress import every_tenth
 from terrapref.plots import save_intervals
@@ -43,6 +44,8 @@ class Selection:
     first: int = 1000
     courses: int = 32
     style: str = "default"
+    perception: PerceptionModel | None = None  # what the planner sees driving the layouts (None: the truth)
+    taught_under: PerceptionModel | None = None  # what the demonstrations recorded (None: the truth)
 
     @property
     def layouts(self) -> list[str]:
@@ -69,6 +72,7 @@ class _OrderJob:
     seed: int
     style: str
     workdir: str
+    perception: PerceptionModel | None = None  # what the demonstrations recorded
 
 
 @dataclass(frozen=True)
@@ -82,13 +86,22 @@ class _Model:
 def _train(job: _OrderJob) -> list[str]:
     """Every recipe for one order and seed, one after another: they share the work folder's demonstrations."""
     profile = PreferenceProfile(job.order)
-    return [str(run_recipe(recipe_named(r), job.workdir, job.seed, profile, style=job.style).model) for r in job.recipes]
+    return [str(run_recipe(recipe_named(r), job.workdir, job.seed, profile, style=job.style, perception=job.perception).model)
+            for r in job.recipes]
 
 
-def job_folder(out: Path, order: Sequence[str], seed: int) -> Path:
+def job_folder(out: Path, order: Sequence[str], seed: int, taught_under: PerceptionModel | None = None) -> Path:
     """The work folder of one order and seed in a selection's ``out``: its demonstrations, and
-    each recipe's model in ``<recipe>/model.safetensors``."""
-    return out / "work" / f"{'_'.join(c[:2] for c in order[:3])}_s{seed}"
+    each recipe's model in ``<recipe>/model.safetensors`` (drives recorded under a perception
+    model in a folder of their own)."""
+    tail = f"_{perception_tag(taught_under)}" if taught_under is not None and taught_under.active else ""
+    return out / "work" / f"{'_'.join(c[:2] for c in order[:3])}_s{seed}{tail}"
+
+
+def perception_tag(model: PerceptionModel) -> str:
+    """A short name of a perception model for folder names: a preset's name, else a file's stem."""
+    name = Path(model.name).stem if model.name not in PRESETS else model.name
+    return "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in name.replace(":", "-"))
 
 
 def _describe(job: _OrderJob) -> str:
@@ -105,7 +118,7 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
     t_train = time.perf_counter() - t0
 
     layouts = sel.layouts
-    specs = [RunSpec(c, 0, PLANNER, path, m.job.order) for path, m in models.items() for c in layouts]
+    specs = [RunSpec(c, 0, PLANNER, path, m.job.order, perception=sel.perception) for path, m in models.items() for c in layouts]
     specs += [RunSpec(c, 0, EXPERT, None, o, style=sel.style) for o in sel.orders for c in layouts]
     log(f"[2/2] closed-loop runs: {len(specs)} on {len(layouts)} layouts ...")
     results = run_many(specs, progress=every_tenth(log), engine=engine)
@@ -113,7 +126,8 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
 
     rows, runs = _zones_and_runs(specs, results, models)
     saved = {"selection": {"recipes": list(sel.recipes), "orders": [list(o) for o in sel.orders], "seeds": sel.seeds, "layouts": layouts,
-                           "style": sel.style},
+                           "style": sel.style, "perception": (sel.perception or PerceptionModel()).to_dict(),
+                           "taught_under": (sel.taught_under or PerceptionModel()).to_dict()},
              "engine": engine.describe(), "zones": rows, "runs": runs, "train_s": round(t_train, 1), "eval_s": round(t_eval, 1)}
     (out / "select.json").write_text(json.dumps(saved, indent=0))
     path = write_selection_report(out, saved)
@@ -124,7 +138,8 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
 def _train_all(out: Path, sel: Selection, engine: Engine, log: Callable[[str], None]) -> dict[str, _Model]:
     """Every recipe for every order and seed; model file -> the model, in the order trained."""
     # One job per order and seed: its recipes share the demonstrations recorded in its work folder.
-    jobs = [_OrderJob(tuple(sel.recipes), tuple(o), s, sel.style, str(job_folder(out, o, s))) for o in sel.orders for s in range(sel.seeds)]
+    jobs = [_OrderJob(tuple(sel.recipes), tuple(o), s, sel.style, str(job_folder(out, o, s, sel.taught_under)), sel.taught_under)
+            for o in sel.orders for s in range(sel.seeds)]
     log(f"[1/2] demonstrations and training: {len(jobs) * len(sel.recipes)} models ({len(sel.recipes)} recipes x {len(sel.orders)} orders "
         f"x {sel.seeds} seeds) on {engine.describe()} ...")
     trained = run_grid(_train, jobs, engine, lambda k, n: log(f"      trained {k}/{n} order-and-seed jobs"), describe=_describe)
@@ -167,6 +182,13 @@ def layout_interval(rows: Sequence[dict]) -> tuple[float, float, float]:
     return cluster_bootstrap(list(by_layout.values()))
 
 
+def _perception_line(model: dict | None) -> str:
+    """A perception model as select.json holds it, in a few words."""
+    if not model or model.get("name", "clean") == "clean":
+        return "the truth (clean)"
+    return f"{model['name']}"
+
+
 def write_selection_report(out: Path, saved: dict) -> Path:
     """SELECT.md and select.png from select.json's content."""
     sel, rows, runs = saved["selection"], saved["zones"], saved["runs"]
@@ -177,6 +199,8 @@ def write_selection_report(out: Path, saved: dict) -> Path:
              f"its driver (style {sel['style']}) drive {len(layouts)} generated layouts ({layouts[0]} to {layouts[-1]}). Rates with 95% Wilson "
              "intervals over all zones; the layouts column resamples whole layouts instead (a cluster bootstrap: a layout's zones are "
              "alike across seeds), the spread another set of layouts would show.", "",
+             f"Perception while driving the layouts: {_perception_line(sel.get('perception'))}. The demonstrations recorded: "
+             f"{_perception_line(sel.get('taught_under'))}. The driver always sees the truth.", "",
              "| recipe | order | agreement with the driver | agreement, layouts resampled | " + " | ".join(f"agreement, {k} zones" for k in kinds)
              + " | zone success | the driver's zone success | collisions | per seed |",
              "|---|---|---|---|" + "---|" * len(kinds) + "---|---|---|---|"]

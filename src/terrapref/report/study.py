@@ -14,10 +14,13 @@ Stages (each parallel across processes):
    (``teach``), for each of several preference orders (default driver style) and for each
    driver style (default order).
 5. Closed-loop evaluation on ``test_course`` and the figure variations: every model, pure
-   pursuit, the hand-tuned cost planner and the synthetic driver; C again under segmentation
-   noise, pose noise and dropped or delayed frames. The taught models, and the driver of each
-   order and style, on generated layouts none of them has seen.
-6. STUDY.md with tables and figures, and study.json with every run's metrics.
+   pursuit, the hand-tuned cost planner and the synthetic driver. The taught models, and the
+   driver of each order and style, on generated layouts none of them has seen; the default
+   style's taught models again under each perception preset (terrapref.perception).
+6. Robustness sweep: the default style's taught models under each part of a preset alone
+   (labels, pose, camera, frames), at rising multiples of it, until agreement with the driver
+   falls below 90%.
+7. STUDY.md with tables and figures, and study.json with every run's metrics.
 """
 
 from __future__ import annotations
@@ -33,15 +36,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from terrapref.fileio import write_text_atomic
-from terrapref.evaluation.perturb import Perturbation
 from terrapref.grid import Engine, run_grid
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PLANNER, PURE_PURSUIT, RunSpec, run_many
 from terrapref.features import FeatureConfig
+from terrapref.perception import PerceptionModel, load_perception
 from terrapref.progress import every_tenth
 from terrapref.recipes import OURS
 from terrapref.report.reproduce import scenario_length
 from terrapref.report.study_plan import FULL, StudyPlan, TrainedModel, TrainJob
-from terrapref.report.study_report import ALT_PROFILE, ModelVariant, RunTag, StudyRun, write_study
+from terrapref.report.study_report import ALT_PROFILE, ModelVariant, RunTag, StudyRun, agreement, write_study
 from terrapref.terrain import PreferenceProfile
 
 if TYPE_CHECKING:
@@ -52,16 +55,13 @@ LEARNED = ("C", "linear", "cnn")  # methods trained from demonstrations
 DEMONSTRATIONS = OURS  # the study's data: ours' runs of train_course
 
 
-# Pose noise's heading error grows with its position error: degrees per metre.
-POSE_DEG_PER_M = 10.0
+PARTS = ("labels", "pose", "camera", "frames")  # the parts of a perception model the robustness sweep varies one at a time
+SWEEP_FLOOR = 0.9  # a part's sweep stops at the first level where agreement falls below this
 
 
-def perturbation(kind: str, level: float) -> Perturbation:
-    if kind == "pose_noise_m":
-        return Perturbation(pose_noise_m=level, pose_noise_deg=POSE_DEG_PER_M * level)
-    if kind == "delay_frames":
-        return Perturbation(delay_frames=int(level))
-    return Perturbation(**{kind: level})
+def swept(plan: StudyPlan, part: str, level: float) -> PerceptionModel:
+    """The robustness sweep's perception model: one part of the plan's base preset alone, ``level`` times as large."""
+    return load_perception(plan.sweep_base).part(part).scaled(level)
 
 
 # -- jobs (module level: they run in worker processes) ---------------------------------------
@@ -247,8 +247,10 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, engine: Engine | None
         trained, taught = _train_and_teach(ws)
     with _timed(timings, "evaluation"):
         runs = _evaluate(ws, trained, taught)
+    with _timed(timings, "robustness sweep"):
+        runs += _sweep(ws, taught, runs)
     report_started = time.perf_counter()
-    log("[4/4] tables, figures and STUDY.md ...")
+    log("[5/5] tables, figures and STUDY.md ...")
     study = {"plan": _plan_dict(plan), "trained": [t.to_dict() for t in [*trained, *taught]], "runs": [r.to_dict() for r in runs]}
     write_text_atomic(out / "study.json", json.dumps(study, indent=1, default=float))
     return write_study(out, plan, trained, runs, timings, report_started=report_started)
@@ -328,7 +330,7 @@ def _evaluation_runs(plan: StudyPlan, trained: list[TrainedModel], taught: list[
     """Every run with its tag: the evaluation courses, then the teaching layouts; the longest courses
     first, so that no worker is left with a long run at the end."""
     runs = [run for sc in plan.scenarios() for run in _course_runs(plan, sc, trained)]
-    runs += [run for layout in plan.layouts for run in _layout_runs(layout, taught)]
+    runs += [run for layout in plan.layouts for run in _layout_runs(plan, layout, taught)]
     return sorted(runs, key=lambda run: -scenario_length(run[0].scenario))
 
 
@@ -353,22 +355,53 @@ def _model_runs(plan: StudyPlan, sc: str, job: TrainJob, default: tuple[str, ...
         runs.append((RunSpec(sc, 0, PLANNER, job.out, default), RunTag("profile_cross", "C", job.seed, scored_under="default")))
     if job.study == "baselines" and job.method == "C":
         runs.append((RunSpec(sc, 0, PLANNER, job.out, ALT_PROFILE), RunTag("profile_cross", "C_default", job.seed, scored_under="alt")))
-        runs += [(RunSpec(sc, 0, PLANNER, job.out, default, perturb=perturbation(kind, level)),
-                  RunTag("robustness", "C", job.seed, kind=kind, level=level)) for kind, levels in plan.noise.items() for level in levels]
     return runs
 
 
-def _layout_runs(layout: str, taught: list[TaughtModel]) -> list[tuple[RunSpec, RunTag]]:
-    """One teaching layout: every taught model, and the driver of every order and style taught."""
+def _layout_runs(plan: StudyPlan, layout: str, taught: list[TaughtModel]) -> list[tuple[RunSpec, RunTag]]:
+    """One teaching layout: every taught model, and the driver of every order and style taught; the
+    default style's models again under every perception preset but clean."""
     runs = [(RunSpec(layout, 0, PLANNER, t.out, t.job.order), RunTag("teach", "C", t.job.seed, order=t.job.order, style=t.job.style))
             for t in taught]
     runs += [(RunSpec(layout, 0, EXPERT, None, order, style=style), RunTag("teach", EXPERT, 0, order=order, style=style))
              for order, style in sorted({(t.job.order, t.job.style) for t in taught})]
+    for name in plan.presets:
+        model = load_perception(name)
+        if model.active:
+            runs += [(RunSpec(layout, 0, PLANNER, t.out, t.job.order, perception=model),
+                      RunTag("robustness", "C", t.job.seed, kind=name, order=t.job.order, style=t.job.style))
+                     for t in taught if t.job.style == "default"]
     return runs
+
+
+def _sweep(ws: _Workspace, taught: list[TaughtModel], runs: list[StudyRun]) -> list[StudyRun]:
+    """Stage 4: each part of the plan's base preset alone, at each level of the sweep in turn, on the
+    default style's taught models; a part drops out after the first level where agreement with
+    the driver (the teaching section's driver runs) falls below SWEEP_FLOOR."""
+    plan = ws.plan
+    models = [t for t in taught if t.job.style == "default"]
+    driver = [r for r in runs if r.tag.study == "teach" and r.tag.method == EXPERT and r.tag.style == "default"]
+    left, swept_runs = list(PARTS), []
+    for level in plan.sweep:
+        if not left or not models:
+            break
+        planned = [(RunSpec(layout, 0, PLANNER, t.out, t.job.order, perception=swept(plan, part, level)),
+                    RunTag("robustness", "C", t.job.seed, kind=part, level=level, order=t.job.order, style="default"))
+                   for part in left for layout in plan.layouts for t in models]
+        ws.log(f"[4/5] robustness sweep at {level:g} x {plan.sweep_base}'s: {', '.join(left)} ({len(planned)} runs) ...")
+        results = run_many([spec for spec, _ in planned], progress=every_tenth(ws.log), engine=ws.engine)
+        done = [StudyRun(tag, r.scenario, r.metrics) for (_, tag), r in zip(planned, results, strict=True)]
+        swept_runs += done
+        for part in list(left):
+            ok, n = agreement([r for r in done if r.tag.kind == part], driver)
+            if n and ok / n < SWEEP_FLOOR:
+                left.remove(part)
+    return swept_runs
 
 
 def _plan_dict(plan: StudyPlan) -> dict:
     return {"seeds": plan.seeds, "minutes": list(plan.minutes), "epochs": plan.epochs, "cnn_epochs": plan.cnn_epochs,
-            "noise": {k: list(v) for k, v in plan.noise.items()}, "horizons": list(plan.horizons), "widths": list(plan.widths),
+            "presets": list(plan.presets), "sweep_base": plan.sweep_base, "sweep": list(plan.sweep),
+            "horizons": list(plan.horizons), "widths": list(plan.widths),
             "scenarios": plan.scenarios(), "orders": [list(o) for o in plan.orders], "styles": list(plan.styles), "layouts": list(plan.layouts),
             "recipe": plan.recipe}

@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from terrapref.recipes import TEACH
 from terrapref.report.reproduce import TEST_SET, variations
@@ -28,7 +28,11 @@ class StudyPlan:
             all of it (two runs of train_course, about 11 min).
         epochs: C's training epochs (recipes ``ours`` and ``teach`` use 100).
         cnn_epochs: the CNN's training epochs.
-        noise: perturbation levels, by kind (see :class:`Perturbation`).
+        presets: perception presets the default style's taught models drive the layouts under
+            (terrapref.perception; ``clean`` is the teaching section's own runs).
+        sweep_base: the preset whose parts (labels, pose, camera, frames) are swept one at a time.
+        sweep: the levels of each part, as multiples of the base preset's, in rising order; a
+            part's sweep stops at the first level where agreement falls below 90%.
         horizons: trajectory lengths n for the horizon ablation (the default is always in).
         widths: hidden widths for the width ablation.
         courses: evaluation scenarios.
@@ -43,13 +47,9 @@ class StudyPlan:
     minutes: tuple[float, ...] = (0.5, 1.0, 2.0, 5.0)
     epochs: int = 100
     cnn_epochs: int = 30
-    noise: dict[str, tuple[float, ...]] = field(default_factory=lambda: {
-        "flip_rate": (0.1, 0.3, 0.5),
-        "blobs": (2.0, 6.0),
-        "pose_noise_m": (0.25, 0.5, 1.0),
-        "drop_rate": (0.5, 0.8),
-        "delay_frames": (2.0, 5.0),
-    })
+    presets: tuple[str, ...] = ("clean", "rellis", "field")
+    sweep_base: str = "field"
+    sweep: tuple[float, ...] = (1.0, 2.0, 4.0, 8.0)
     horizons: tuple[int, ...] = (15, 45)
     widths: tuple[int, ...] = (16, 256)
     courses: tuple[str, ...] = ()
@@ -65,7 +65,7 @@ class StudyPlan:
 FULL = StudyPlan()
 QUICK = StudyPlan(
     seeds=1, minutes=(2.0,), epochs=100, cnn_epochs=15,
-    noise={"flip_rate": (0.2,), "blobs": (2.0,), "pose_noise_m": (0.25,), "drop_rate": (0.5,), "delay_frames": (3.0,)},
+    presets=("clean", "field"), sweep=(1.0, 4.0),
     horizons=(), widths=(16,), orders=TEACH_ORDERS[:2], styles=("default", "wide"), layouts=("gen:5000", "gen:5001"),
 )
 

@@ -50,7 +50,7 @@ class RunTag:
     seed: int  # the training seed; for drivers without a model, the evaluation seed
     model: ModelVariant | None = None  # a trained model's own run, scored under the profile it learned
     scored_under: str | None = None  # "model", "default" or "alt": the profile its zones resolve under
-    kind: str | None = None  # robustness: the perturbation's kind and level
+    kind: str | None = None  # robustness: the perception preset, or the part swept and its level (x the preset's)
     level: float | None = None
     order: tuple[str, ...] | None = None  # teaching: the preference order and style of the driver
     style: str | None = None
@@ -202,7 +202,7 @@ def write_study(out: Path, plan: StudyPlan, trained: Sequence[TrainedModel], run
     lines += _baselines_section(base, figs)
     lines += _efficiency_section(trained, runs, base, efficiency, figs)
     lines += _profile_section(runs)
-    lines += _robustness_section(plan, runs, base, figs)
+    lines += _robustness_section(plan, runs, figs)
     lines += _ablation_section(runs, base)
     lines += teaching_section(plan, runs, figs)
     if report_started is not None:
@@ -235,11 +235,7 @@ def _answers(plan: StudyPlan, runs: list[StudyRun], base: _Baselines, efficiency
                  f"({(cells['C'][1] - cells['linear'][1]) * 100:+.1f} points); the end-to-end CNN {cells['cnn'][0]} "
                  f"({(cells['C'][1] - cells['cnn'][1]) * 100:+.1f} points).")
     lines.append(_profile_answer(runs))
-    falls = []
-    for kind, levels in plan.noise.items():
-        pts = [(lv, _cell(_select(runs, study="robustness", kind=kind, level=lv))[1]) for lv in levels]
-        falls.append(f"{_kind_label(kind)}: " + ", ".join(f"{lv:g} -> {m:.0%}" for lv, m in pts))
-    lines.append(f"- **How fast success falls with noise** (clean: {cells['C'][0]}): " + "; ".join(falls) + ".")
+    lines.append(_Robustness.of(plan, runs).answer())
     lines.append("")
     return lines
 
@@ -307,27 +303,72 @@ def _profile_section(runs: list[StudyRun]) -> list[str]:
     return lines + _choice_table(runs) + _disagreement_table(runs)
 
 
-def _robustness_section(plan: StudyPlan, runs: list[StudyRun], base: _Baselines, figs: Path) -> list[str]:
-    """Section 4: C under each perturbation kind and level, a table per kind and a panel per kind."""
-    from terrapref.plots import save_panels
+def _robustness_section(plan: StudyPlan, runs: list[StudyRun], figs: Path) -> list[str]:
+    """Section 4: the default style's taught models under each perception preset, and each part of
+    the sweep's base preset alone at rising levels; tables, and agreement against level per part."""
+    from terrapref.plots import save_curves
 
-    lines = ["## 4. Robustness", "", "C (recipe ours) under perturbations of what the planner receives. Dropped frames: the planner "
-             "holds its last command for up to 0.5 s, then stops until frames return.", ""]
-    clean = base.cells["C"]
+    rob = _Robustness.of(plan, runs)
+    lines = ["## 4. Robustness: what a real robot sees", "",
+             f"The models of section 6 taught by the default-style driver of every order ({rob.models} models), driving the same "
+             f"{len(plan.layouts)} layouts while they receive what a robot would instead of the truth (terrapref.perception; presets in "
+             f"docs/perception.md). The driver always sees the truth. Then each part of `{plan.sweep_base}` alone, at rising "
+             "multiples of it, until agreement with the driver falls below 90%. Rates with 95% Wilson intervals over zones.", "",
+             "| perception | agreement with the driver | zone success | collisions |", "|---|---|---|---|"]
+    for name, rr in rob.presets.items():
+        ok, n = agreement(rr, rob.driver)
+        lines.append(f"| {name} | {rate_text(ok, n)} | {_cell(rr)[0]} | {_collisions(rr)} |")
+    lines += ["", f"| part of `{plan.sweep_base}` alone | x level | agreement with the driver | collisions |", "|---|---|---|---|"]
     curves = {}
-    for kind, levels in plan.noise.items():
-        lines += [f"| {_kind_label(kind)} | zone success | collisions | completed |", "|---|---|---|---|",
-                  f"| 0 | {clean[0]} | {_collisions(base.runs['C'])} | {_completed(base.runs['C']):.0%} |"]
-        pts = [(0.0, clean[1], clean[2])]
-        for lv in levels:
-            rr = _select(runs, study="robustness", kind=kind, level=lv)
-            c = _cell(rr)
-            pts.append((lv, c[1], c[2]))
-            lines.append(f"| {lv:g} | {c[0]} | {_collisions(rr)} | {_completed(rr):.0%} |")
-        curves[kind] = pts
-        lines.append("")
-    save_panels(figs / "robustness.png", {_kind_label(k): v for k, v in curves.items()}, "zone success")
-    return lines + ["![robustness](figures/robustness.png)", ""]
+    for part, levels in rob.sweep.items():
+        pts = []
+        for level, rr in levels.items():
+            ok, n = agreement(rr, rob.driver)
+            pts.append((level, ok / n if n else float("nan"), 0.0))
+            lines.append(f"| {part} | {level:g} | {rate_text(ok, n)} | {_collisions(rr)} |")
+        curves[part] = pts
+    lines += ["", "![robustness](figures/robustness.png)", ""]
+    save_curves(figs / "robustness.png", curves, f"level (multiples of {plan.sweep_base}'s)", "agreement with the driver", target=0.9, logx=True)
+    return lines
+
+
+@dataclass(frozen=True)
+class _Robustness:
+    """Section 4's runs: per preset the default style's taught models (clean: the teaching runs), per
+    part of the sweep and level its runs, the driver runs they are compared with, and how many models."""
+
+    presets: dict[str, list[StudyRun]]
+    sweep: dict[str, dict[float, list[StudyRun]]]
+    driver: list[StudyRun]
+    models: int
+
+    @classmethod
+    def of(cls, plan: StudyPlan, runs: list[StudyRun]) -> _Robustness:
+        clean = _select(runs, study="teach", method="C", style="default")
+        presets = {name: clean if name == "clean" else _select(runs, study="robustness", kind=name, level=None) for name in plan.presets}
+        sweep: dict[str, dict[float, list[StudyRun]]] = {}
+        for r in runs:
+            if r.tag.study == "robustness" and r.tag.level is not None:
+                sweep.setdefault(r.tag.kind, {}).setdefault(r.tag.level, []).append(r)
+        sweep = {part: dict(sorted(levels.items())) for part, levels in sweep.items()}
+        models = len({(r.tag.order, r.tag.seed) for r in clean})
+        return cls(presets, sweep, _select(runs, study="teach", method=EXPERT, style="default"), models)
+
+    def answer(self) -> str:
+        """One bullet: agreement under each preset, and how far each part holds 90%."""
+        presets = ", ".join(f"{name} {rate_text(*agreement(rr, self.driver))} ({_collisions(rr)} collisions)" for name, rr in self.presets.items())
+        holds = []
+        for part, levels in self.sweep.items():
+            kept = [lv for lv, rr in levels.items() if _ratio(agreement(rr, self.driver)) >= 0.9]
+            below = [lv for lv in levels if lv not in kept]
+            holds.append(f"{part} {'to x' + format(max(kept), 'g') if kept else 'not at x' + format(min(levels), 'g')}"
+                         + (f", below at x{min(below):g}" if below else ""))
+        return f"- **Under what a robot sees** (agreement with the driver): {presets}. 90% holds for " + "; ".join(holds) + "."
+
+
+def _ratio(counts: tuple[int, int]) -> float:
+    ok, n = counts
+    return ok / n if n else float("nan")
 
 
 def _ablation_section(runs: list[StudyRun], base: _Baselines) -> list[str]:
@@ -341,10 +382,11 @@ def _ablation_section(runs: list[StudyRun], base: _Baselines) -> list[str]:
     return lines
 
 
-def _agreement(planner: list[StudyRun], driver: list[StudyRun]) -> tuple[int, int]:
-    """Zones (agreeing, compared) where the planner's runs made the choice of the driver's run on the same layout."""
-    by = {(r.scenario, z.id): z for r in driver for z in r.metrics.zones}
-    pairs = [(z, by[(r.scenario, z.id)]) for r in planner for z in r.metrics.zones if (r.scenario, z.id) in by]
+def agreement(planner: list[StudyRun], driver: list[StudyRun]) -> tuple[int, int]:
+    """Zones (agreeing, compared) where the planner's runs made the choice of the driver's run of the
+    same preference order on the same layout."""
+    by = {(r.tag.order, r.scenario, z.id): z for r in driver for z in r.metrics.zones}
+    pairs = [(z, by[(r.tag.order, r.scenario, z.id)]) for r in planner for z in r.metrics.zones if (r.tag.order, r.scenario, z.id) in by]
     return sum(zone_agrees(p, d) for p, d in pairs), len(pairs)
 
 
@@ -408,7 +450,7 @@ def _order_rows(plan: StudyPlan, taught: list[StudyRun]) -> tuple[list[str], lis
     rows, points = [], []
     for order in plan.orders:
         p, d = _taught(taught, "C", order, "default"), _taught(taught, EXPERT, order, "default")
-        ok, n = _agreement(p, d)
+        ok, n = agreement(p, d)
         succ = [z.success for r in p for z in r.metrics.zones]
         dsucc = [z.success for r in d for z in r.metrics.zones]
         rows.append(f"| {' > '.join(order)} | {rate_text(ok, n)} | {rate_text(int(sum(succ)), len(succ))} | "
@@ -425,8 +467,8 @@ def _style_rows(plan: StudyPlan, taught: list[StudyRun]) -> tuple[list[str], lis
     rows, points = [], []
     for style in plan.styles:
         other, d, own, theirs = _style_runs(plan, taught, style)
-        ok, n = _agreement(own, d)
-        ok2, n2 = _agreement(theirs, d)
+        ok, n = agreement(own, d)
+        ok2, n2 = agreement(theirs, d)
         rows.append(f"| {style} ({STYLES[style][0]}) | {rate_text(ok, n)} | {rate_text(ok2, n2) + f' ({other})' if other else '—'} | "
                     f"{_mean_clearance(d):.2f} m | {_clearance_gap(own, d):.2f} m | {_clearance_gap(theirs, d):.2f} m | "
                     f"{_mean_cross_track(d):.2f} m | {_mean_cross_track(own):.2f} m | "
@@ -501,11 +543,6 @@ def _demo_minutes(trained: Sequence[TrainedModel]) -> float:
     """Minutes of demonstration behind the full-data models (frames at 10 Hz)."""
     frames = [t.samples for t in trained if t.job.study == "baselines" and t.job.method == "C"]
     return float(np.mean(frames)) / 600.0 if frames else float("nan")
-
-
-def _kind_label(kind: str) -> str:
-    return {"flip_rate": "label flips (share of pixels)", "blobs": "mislabelled blobs per frame", "pose_noise_m": "pose noise (m; 10 deg per m)",
-            "drop_rate": "dropped frames (share)", "delay_frames": "frame delay (frames of 0.1 s)"}.get(kind, kind)
 
 
 def _zone_success(runs: list[StudyRun], keep: set) -> tuple[int, int]:

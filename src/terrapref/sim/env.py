@@ -31,6 +31,7 @@ from gymnasium import spaces
 from gymnasium.error import InvalidAction, ResetNeeded
 
 from terrapref.camera import CameraConfig
+from terrapref.perception import PerceptionModel, Perceiver, load_perception
 from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.sim.loop import SimConfig, Simulation
 from terrapref.terrain import ClassTable
@@ -109,6 +110,10 @@ class OffRoadNavEnv(gym.Env):
     generated course per reset); the start is jittered by up to ``start_jitter_m`` and
     ``start_yaw_jitter_rad``. ``reset(options={"scenario": ..., "start": (x, y, yaw)})``
     overrides both for one episode.
+    Perception: ``perception`` (a terrapref.perception model, a preset's name or a file) makes
+    the image and the pose-derived observations what a robot's segmentation and localisation
+    would give; a step in which no frame arrives (late or lost) observes the last one again. The
+    reward, the termination and ``info`` stay the truth's.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -131,6 +136,7 @@ class OffRoadNavEnv(gym.Env):
         camera: CameraConfig | None = None,
         sim: SimConfig | None = None,
         render_mode: str | None = None,
+        perception: PerceptionModel | str | None = None,
     ) -> None:
         self._check_modes(render_mode, action_type, image_encoding)
         _check_waypoints_and_jitter(n_waypoints, waypoint_spacing_m, start_jitter_m, start_yaw_jitter_rad)
@@ -145,6 +151,9 @@ class OffRoadNavEnv(gym.Env):
         self.render_mode = render_mode
         self._camera_config, self._sim_config = camera, sim
         self._sims: OrderedDict[Any, Simulation] = OrderedDict()
+        self.perception = load_perception(perception)
+        self._perceiver: Perceiver | None = None
+        self._last_obs: dict[str, np.ndarray] | None = None
 
         # The first course fixes the class table and the camera; every later course must share them.
         first = self._simulation(self.courses[0] if self.courses[0] != RANDOM_COURSE else "gen:0")
@@ -256,10 +265,17 @@ class OffRoadNavEnv(gym.Env):
             pose = Pose(x + dx, y + dy, yaw + dyaw)
             self._progress_s = path.project(np.array(pose[:2]), 0.0, 5.0)[0]
         frame = self.sim.reset(pose)
+        if self.perception.active:
+            # The first observation is the first frame as the robot's camera and localisation give
+            # it; its timing applies from the first step on.
+            self._perceiver = Perceiver(self.perception, self.sim.renderer, self.classes, self.sim.config.camera_rate_hz)
+            self._perceiver.reset(np.random.default_rng(self.np_random.integers(2**63)))
+            frame = self._perceiver.captured(frame)
         self._started, self._ended, self._off_map = True, False, False
         self._in_corridor = abs(path.project(np.array(pose[:2]), self._progress_s - 2.0, self._progress_s + 2.0)[1]) <= self.reward_config.corridor_m
         terms = dict.fromkeys(("progress", "cross_track", "collision", "off_map", "goal", "terrain"), 0.0)
-        return self._observation(frame.view, frame.pose), self._info(terms, success=False, off_map=False)
+        self._last_obs = self._observation(frame.view, frame.pose)
+        return self._last_obs, self._info(terms, success=False, off_map=False)
 
     def step(self, action: Any) -> tuple[dict, float, bool, bool, dict]:
         if not self._started:
@@ -300,7 +316,7 @@ class OffRoadNavEnv(gym.Env):
         }
         terminated = bool(success or (self.terminate_on_lethal and collided > 0) or (self.terminate_off_map and off_map))
         self._ended = terminated
-        return self._observation(frame.view, frame.pose), float(sum(terms.values())), terminated, False, self._info(terms, success, off_map)
+        return self._observe(frame), float(sum(terms.values())), terminated, False, self._info(terms, success, off_map)
 
     def render(self) -> np.ndarray | None:
         """``rgb_array``: a top-down view around the vehicle (path white, vehicle black with a red
@@ -331,6 +347,14 @@ class OffRoadNavEnv(gym.Env):
         a = np.clip(a, -1.0, 1.0)
         vc = self.sim.config.vehicle
         return Command(0.5 * (a[0] + 1.0) * vc.max_speed_mps, a[1] * vc.max_yaw_rate_rps)
+
+    def _observe(self, frame) -> dict[str, np.ndarray]:
+        """The observation of the frame that reached the agent this step; under a perception model
+        whose frames come late or not at all, the last one again when none did."""
+        got = self._perceiver(frame) if self._perceiver is not None and self.perception.active else frame
+        if got is not None:
+            self._last_obs = self._observation(got.view, got.pose)
+        return {k: v.copy() for k, v in self._last_obs.items()}
 
     def _observation(self, view, pose: Pose) -> dict[str, np.ndarray]:
         ids = view.image.reshape(-1) if self._full_image else view.pixels(self._pixel_index)

@@ -38,12 +38,13 @@ import pygame
 
 from terrapref.camera import CameraConfig
 from terrapref.demos.recording import RecordingWriter
-from terrapref.demos.session import DisturbanceConfig, Disturber, RecordLoop, abort_recording, recording_meta
+from terrapref.demos.session import DisturbanceConfig, Disturber, RecordLoop, abort_recording, recording_meta, run_perceiver
 from terrapref.teleop.guide import CourseGuide, stays_on_map
 from terrapref.teleop.stick import Stick
 from terrapref.teleop.window import ALERT_COLOR, HIGHLIGHT_COLOR, PLANNER_COLOR, Banner, Window
 from terrapref.errors import UserError
 from terrapref.features import PreferenceSet, PreferenceSetConfig
+from terrapref.perception import PerceptionModel
 from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.sim import Frame, SimConfig, Simulation
 from terrapref.terrain import PreferenceProfile
@@ -144,6 +145,8 @@ class TeleopOptions:
             recorded as corrections.
         wait_for_start: open paused and start after a key and a countdown (False: drive from
             the first frame, as scripted tests do).
+        perception: the driver sees the truth; the recording, and a model riding along, get what
+            the robot's camera and localisation gave through this model (terrapref.perception).
     """
 
     record_dir: str | Path | None = None
@@ -160,6 +163,7 @@ class TeleopOptions:
     seed: int = 0
     profile: PreferenceProfile | None = None
     model: str | Path | None = None
+    perception: PerceptionModel | None = None
     wait_for_start: bool = True
 
 
@@ -195,6 +199,16 @@ def _open_display() -> None:
     pygame.joystick.init()
 
 
+@dataclass(frozen=True)
+class _Held:
+    """What a riding-along planner commands before its first frame has reached it: a stop."""
+
+    command: Command = Command(0.0, 0.0)
+
+
+_NOTHING_YET = _Held()
+
+
 class _Session:
     """One driving session's state: what a person adds to the record loop (phases, window
     events, the stick, riding along, the map's edge). :func:`run_session` builds it and runs
@@ -218,12 +232,18 @@ class _Session:
         self.frame = sim.reset()
         if planner is not None:
             planner.set_path(sim.scenario.waypoints)
+        self.decision: Any = _NOTHING_YET
         self.decision = self._decide()
         self.trace_px = [window.to_inset(self.frame.pose.x, self.frame.pose.y)]
 
     def _decide(self) -> Any:
-        """The planner's decision on the current frame (once per frame, so its path tracker keeps up)."""
-        return self.planner.decide(self.frame.view, self.frame.pose) if self.planner is not None else None
+        """The planner's decision on the frame that reached the robot in this period (once per
+        period, so its path tracker keeps up); the last one while none arrives."""
+        if self.planner is None:
+            return None
+        got = self.recorder.perceive(self.frame)
+        return self.planner.decide(got.view, got.pose) if got is not None else self.decision
+
 
     # --- input --------------------------------------------------------------------------------
 
@@ -404,7 +424,8 @@ def run_session(scenario: Scenario | str, options: TeleopOptions) -> TeleopResul
     try:
         sim, prefs, window = _open_window(setup, options.record_dir)
         writer = _open_recording(setup, options)
-        recorder = RecordLoop(sim, writer, prefs.config.control, _disturber(options, 1.0 / setup.sim.camera_rate_hz))
+        recorder = RecordLoop(sim, writer, prefs.config.control, _disturber(options, 1.0 / setup.sim.camera_rate_hz),
+                              run_perceiver(options.perception, sim, np.random.default_rng([options.seed, 1])))
         session = _Session(recorder, prefs, window, setup.planner, options)
         session.run(options.max_frames, options.script, options.realtime)
         end = session.show_end(options.screenshot)
@@ -471,7 +492,7 @@ def _open_recording(setup: _Setup, options: TeleopOptions) -> RecordingWriter | 
         driver["model"] = str(options.model)
     scenario = setup.scenario
     profile = options.profile or PreferenceProfile.default(scenario.classes)
-    meta = recording_meta(scenario, setup.camera, setup.preference, setup.sim, driver, profile)
+    meta = recording_meta(scenario, setup.camera, setup.preference, setup.sim, driver, profile, options.perception)
     return RecordingWriter(options.record_dir, meta, scenario.to_dict(), overwrite=options.overwrite)
 
 

@@ -1,0 +1,181 @@
+"""A run's frames as the robot receives them: through a perception model, in time or late or not at all.
+
+:class:`Perceiver` turns each true frame of a run into what the robot's computer gets:
+
+- the camera's attitude wanders (an Ornstein-Uhlenbeck process per axis), so the frame shows
+  the ground a tilted camera sees, while the planner still assumes the nominal mount;
+- the segmentation labels it with errors (terrapref.perception.labels);
+- the pose it is told carries white noise and a slowly drifting offset;
+- it arrives ``delay`` camera periods after it was taken (a share of frames one more), or never;
+  a frame older than one already delivered is stale and dropped, as
+  :class:`terrapref.interop.runtime.PlannerRuntime` drops it.
+
+Each part draws from its own random stream, so switching one part on or off leaves the others'
+draws as they were. :class:`PerceivedDriver` puts a planner behind a perceiver and holds its
+last command for ``COMMAND_HOLD_S`` after the frame's stamp, then stops the vehicle, as the
+runtime does; a demonstration is recorded through a perceiver by
+terrapref.demos.session.RecordLoop.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from typing import Any, Protocol
+
+import numpy as np
+
+from terrapref.camera import SegmentationRenderer, SegmentationView
+from terrapref.perception.labels import LabelledView, LabelNoise
+from terrapref.perception.model import PerceptionModel
+from terrapref.terrain import ClassTable
+from terrapref.vehicle import Command, Pose
+
+COMMAND_HOLD_S = 0.3
+"""How long a decision's command stays in force after its frame's stamp [s]; then the vehicle stops."""
+
+STOP = Command(0.0, 0.0)
+
+
+class Frame(Protocol):
+    """A camera frame as the simulation hands it to a driver (:class:`terrapref.sim.Frame`, a dataclass)."""
+
+    index: int  # frame number since the run began
+    time_s: float  # when it was taken [s]
+    view: SegmentationView
+    pose: Pose
+
+
+class Driver(Protocol):
+    """Anything that turns frames into commands (:class:`terrapref.sim.Driver`)."""
+
+    def reset(self, scenario: Any, rng: np.random.Generator) -> None: ...
+
+    def act(self, frame: Any) -> Command: ...
+
+
+class TiltedView(SegmentationView):
+    """The true ground through the camera at an attitude off its mount, rendered as far as it is read."""
+
+    __slots__ = ("_tilt",)
+
+    def __init__(self, renderer: SegmentationRenderer, pose: Pose, dpitch_rad: float, droll_rad: float) -> None:
+        super().__init__(renderer, pose)
+        self._tilt = (dpitch_rad, droll_rad)
+
+    @property
+    def image(self) -> np.ndarray:
+        if self._image is None:
+            h, w = self._renderer.shape
+            self._image = self._renderer.pixels_tilted(self._pose, np.arange(h * w, dtype=np.int64), *self._tilt).reshape(h, w)
+        return self._image
+
+    def pixels(self, flat_index: np.ndarray) -> np.ndarray:
+        if self._image is not None:
+            return super().pixels(flat_index)
+        return self._renderer.pixels_tilted(self._pose, flat_index, *self._tilt)
+
+
+class Perceiver:
+    """What the robot receives of one run's frames under ``model``.
+
+    Args:
+        model: the perception model.
+        renderer: the run's renderer (the true world through the robot's camera).
+        classes: the class table (label errors draw from it).
+        camera_rate_hz: frames per second [Hz].
+    """
+
+    def __init__(self, model: PerceptionModel, renderer: SegmentationRenderer, classes: ClassTable, camera_rate_hz: float = 10.0) -> None:
+        self.model, self.renderer = model, renderer
+        self.labels = LabelNoise(model.labels, renderer.camera, classes) if model.labels.active else None
+        cam = model.camera
+        self._rho = math.exp(-1.0 / (camera_rate_hz * cam.jitter_time_s)) if cam.jitter_time_s > 0 else 0.0
+        self._sigma = np.radians([cam.pitch_jitter_deg, cam.roll_jitter_deg])
+        self.reset(np.random.default_rng(0))
+
+    def reset(self, rng: np.random.Generator) -> None:
+        """Start a run: every part's random stream seeded from ``rng``, no drift, no frame pending."""
+        self._rng_labels, self._rng_pose, self._rng_camera, self._rng_frames = (np.random.default_rng(rng.integers(2**63)) for _ in range(4))
+        if self.labels is not None:
+            self.labels.reset(self._rng_labels)
+        self._drift = np.zeros(3)  # x [m], y [m], yaw [rad]
+        self._last_xy: tuple[float, float] | None = None
+        self._attitude = self._rng_camera.normal(0.0, 1.0, 2) * self._sigma if self.model.camera.active else np.zeros(2)
+        self._pending: list[tuple[int, Any]] = []  # (period it arrives in, the frame as captured)
+        self._delivered = -1  # the index of the newest frame delivered
+
+    def captured(self, frame: Frame) -> Any:
+        """``frame`` as the robot's camera, segmentation and localisation give it (before its timing)."""
+        m = self.model
+        view = frame.view
+        if m.camera.active:
+            self._attitude = self._rho * self._attitude + math.sqrt(1.0 - self._rho**2) * self._sigma * self._rng_camera.normal(0.0, 1.0, 2)
+            view = TiltedView(self.renderer, frame.pose, float(self._attitude[0]), float(self._attitude[1]))
+        if self.labels is not None:
+            view = LabelledView(view, self.labels.draw(self._rng_labels, frame.index))
+        return replace(frame, view=view, pose=self._told(frame.pose))
+
+    def _told(self, pose: Pose) -> Pose:
+        """The pose the robot's localisation gives at ``pose``: the drift walked over the distance
+        driven since the last frame, plus this frame's white noise."""
+        p = self.model.pose
+        if not p.active:
+            return pose
+        x, y, yaw = (float(v) for v in pose)
+        if p.drift_m_per_m or p.drift_deg_per_m:
+            driven = 0.0 if self._last_xy is None else math.hypot(x - self._last_xy[0], y - self._last_xy[1])
+            scale = math.sqrt(driven)
+            step = self._rng_pose.normal(0.0, 1.0, 3) * scale
+            self._drift += step * (p.drift_m_per_m, p.drift_m_per_m, math.radians(p.drift_deg_per_m))
+        self._last_xy = (x, y)
+        noise = self._rng_pose.normal(0.0, 1.0, 3) * (p.noise_m, p.noise_m, math.radians(p.noise_deg))
+        e = self._drift + noise
+        return Pose(x + float(e[0]), y + float(e[1]), yaw + float(e[2]))
+
+    def __call__(self, frame: Frame) -> Any:
+        """The frame that reaches the robot in ``frame``'s period (the newest due, taken then or
+        earlier), or None when none does."""
+        timing = self.model.frames
+        got = self.captured(frame)
+        lost = timing.drop_rate > 0 and self._rng_frames.random() < timing.drop_rate
+        late = timing.late_rate > 0 and self._rng_frames.random() < timing.late_rate
+        if not lost:
+            self._pending.append((frame.index + timing.delay + int(late), got))
+        due = [f for when, f in self._pending if when <= frame.index]
+        if not due:
+            return None
+        self._pending = [(when, f) for when, f in self._pending if when > frame.index]
+        newest = max(due, key=lambda f: f.index)
+        if newest.index <= self._delivered:  # stale: a newer frame was already delivered
+            return None
+        self._delivered = newest.index
+        return newest
+
+
+class PerceivedDriver:
+    """A driver (a planner) seeing through a :class:`Perceiver` (a :class:`terrapref.sim.Driver`).
+
+    A frame that arrives is decided on; when none does, the last command is held while its
+    frame is at most ``hold_s`` old, and the vehicle stops after that, until a frame arrives.
+    """
+
+    def __init__(self, inner: Driver, perceiver: Perceiver, hold_s: float = COMMAND_HOLD_S) -> None:
+        self.inner, self.perceiver, self.hold_s = inner, perceiver, hold_s
+        self.stops = 0  # periods the vehicle was stopped for want of a fresh frame
+        self._last: Command | None = None
+        self._stamp_s = -math.inf
+
+    def reset(self, scenario: Any, rng: np.random.Generator) -> None:
+        self.inner.reset(scenario, rng)
+        self.perceiver.reset(np.random.default_rng(rng.integers(2**63)))
+        self._last, self._stamp_s, self.stops = None, -math.inf, 0
+
+    def act(self, frame: Frame) -> Command:
+        got = self.perceiver(frame)
+        if got is not None:
+            self._last, self._stamp_s = self.inner.act(got), got.time_s
+        if self._last is not None and frame.time_s - self._stamp_s <= self.hold_s + 1e-9:
+            return self._last
+        self.stops += 1
+        return STOP
