@@ -345,3 +345,33 @@ def test_a_perceived_run_is_reproducible_and_differs_from_the_clean_one():
     np.testing.assert_array_equal(a.xy, b.xy)
     assert not np.array_equal(a.xy, clean.xy)
     assert a.metrics.completed
+
+
+# --- the planner's reading of the camera's attitude from the sky line ----------------------------------
+
+
+def test_the_sky_line_gives_the_cameras_pitch_and_roll(renderer):
+    """Five frames at the mount's attitude set the reference; a frame tilted by a known pitch and
+    roll is read back within a tenth of a degree; a frame at the mount reads as no tilt at all."""
+    from terrapref.features.attitude import HorizonAttitude
+
+    estimate = HorizonAttitude(renderer.camera)
+    pose = Pose(20.0, 15.0, 0.3)
+    for _ in range(5):
+        assert estimate(TiltedView(renderer, pose, 0.0, 0.0)) == (0.0, 0.0)
+    for dp, dr in ((2.0, 0.0), (-1.5, 1.0), (0.5, -2.5)):
+        got = estimate(TiltedView(renderer, pose, math.radians(dp), math.radians(dr)))
+        assert abs(math.degrees(got[0]) - dp) < 0.1 and abs(math.degrees(got[1]) - dr) < 0.15, (dp, dr, np.degrees(got))
+    estimate.reset()
+    for _ in range(6):
+        assert estimate(SegmentationView(renderer, pose)) == (0.0, 0.0)
+
+
+def test_a_sky_line_the_map_cuts_short_gives_no_estimate(renderer):
+    from terrapref.features.attitude import HorizonAttitude
+
+    estimate = HorizonAttitude(renderer.camera)
+    for _ in range(5):
+        estimate(SegmentationView(renderer, Pose(20.0, 15.0, 0.0)))
+    # Facing the map's edge 3 m away: the sky line is the map's edge, far below the reference.
+    assert estimate(SegmentationView(renderer, Pose(57.0, 15.0, 0.0))) == (0.0, 0.0)

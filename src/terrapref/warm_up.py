@@ -5,8 +5,9 @@ sources; a fresh checkout has none, and ``terrapref reproduce`` would otherwise 
 ten seconds of its first run compiling them in every worker. ``python -m terrapref.warm_up``
 (run by ``scripts/setup.sh``) drives the same code paths on a short course with tiny settings:
 a demonstration with disturbances, featurising with and without the look-ahead, training each
-named recipe for one epoch (both utility fits), and one closed-loop run of each model and of
-the synthetic driver. What it writes goes to a temporary folder and is removed.
+named recipe for one epoch (both utility fits), one closed-loop run of each model and of the
+synthetic driver, and one run through the ``field`` perception model (label errors, a tilted
+camera). What it writes goes to a temporary folder and is removed.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_one
+from terrapref.perception import load_perception
 from terrapref.recipes import RECIPES, run_recipe
 from terrapref.terrain import PreferenceProfile
 
@@ -33,6 +35,7 @@ def warm_up(log=print) -> float:
                             train=replace(recipe.train, optimiser=replace(recipe.train.optimiser, epochs=1)))
             out = run_recipe(small, Path(tmp) / "work", 0, profile, course=COURSE)
             run_one(RunSpec(COURSE, 1, PLANNER, str(out.model), profile.order))
+        run_one(RunSpec(COURSE, 1, PLANNER, str(out.model), profile.order, perception=load_perception("field")))
         run_one(RunSpec(COURSE, 1, EXPERT, None, profile.order))
     seconds = time.perf_counter() - t0
     log(f"compiled loops ready ({seconds:.0f} s)")

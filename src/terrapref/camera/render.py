@@ -113,16 +113,19 @@ class SegmentationRenderer:
         return ids.reshape(np.shape(flat_index))
 
 
-    def pixels_tilted(self, pose: Pose, flat_index: np.ndarray, dpitch_rad: float, droll_rad: float) -> np.ndarray:
+    def pixels_tilted(self, pose: Pose, flat_index: np.ndarray, dpitch_rad: float, droll_rad: float,
+                      max_range_m: float | None = None) -> np.ndarray:
         """Class ids of the pixels ``flat_index`` that the camera sees when its attitude is off the
         mount by ``dpitch_rad`` and ``droll_rad`` (:meth:`PinholeCamera.tilted`); each pixel's ray is
-        followed to the ground (kernels.ray_pixels)."""
+        followed to the ground (kernels.ray_pixels), up to ``max_range_m`` or the camera's range
+        if that is nearer."""
         x, y, yaw = _finite(pose)
         cam, c = self.camera, self.camera.config
         flat = np.asarray(flat_index, dtype=np.int64).reshape(-1)
         if flat.size and (flat.min() < 0 or flat.max() >= c.width_px * c.height_px):
             raise IndexError("a pixel index is outside the image")
-        ids = ray_pixels(flat, c.width_px, cam.fx, cam.fy, cam.cx, cam.cy, cam.tilted(dpitch_rad, droll_rad), cam.t, c.max_range_m,
+        reach = c.max_range_m if max_range_m is None else min(c.max_range_m, max_range_m)
+        ids = ray_pixels(flat, c.width_px, cam.fx, cam.fy, cam.cx, cam.cy, cam.tilted(dpitch_rad, droll_rad), cam.t, reach,
                          float(x), float(y), math.cos(yaw), math.sin(yaw), self.world.resolution_m,
                          self._flat, self._nx_pad, self._x_max, self._y_max, UNKNOWN)
         return ids.reshape(np.shape(flat_index))

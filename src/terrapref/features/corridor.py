@@ -29,6 +29,7 @@ import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.features import kernels
+from terrapref.features.attitude import HorizonAttitude
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose, pure_pursuit_yaw_rate
@@ -66,6 +67,9 @@ class CorridorConfig:
             ground, and a patch blurred over frames must not vanish into the ground around it.
         map_min_evidence: a cell counts as seen once its evidence totals this much (a vote at
             0 m weighs 1).
+        map_sky_attitude: place the ground samples with the camera's pitch and roll off its mount
+            as the sky line of each frame shows them (terrapref.features.attitude), not with the
+            mount's.
     """
 
     max_offset_m: float = 3.0
@@ -86,6 +90,7 @@ class CorridorConfig:
     map_lethal_share: float = 0.35
     map_terrain_share: float = 0.5
     map_min_evidence: float = 0.0
+    map_sky_attitude: bool = True
 
     def __post_init__(self) -> None:
         positive = (self.max_offset_m, self.offset_step_m, self.station_step_m, self.half_width_m, self.map_resolution_m,
@@ -169,6 +174,13 @@ class GroundMap:
         seen = pix >= 0
         self._pix = pix[seen]
         self._vx, self._vy = grid[seen, 0].copy(), grid[seen, 1].copy()
+        self.camera = camera
+        self.attitude = HorizonAttitude(camera) if c.map_sky_attitude else None
+        # The ray through each sample's pixel centre (camera frame, z = 1), and where the mount's
+        # camera sees it meet the ground: a tilted camera moves each sample by where its ray lands.
+        cols, rows = self._pix % camera.config.width_px, self._pix // camera.config.width_px
+        self._ray = np.stack([(cols + 0.5 - camera.cx) / camera.fx, (rows + 0.5 - camera.cy) / camera.fy], axis=1)
+        self._ground0 = _ground(self._ray, camera.R, camera.t)
         self._weight = (1.0 / (1.0 + (self._vx**2 + self._vy**2) / c.map_range_m**2)).astype(np.float32)
         fade = np.ones(64, dtype=np.float32)
         for g in range(1, len(fade)):  # by repeated products: the same bits on every CPU
@@ -188,6 +200,8 @@ class GroundMap:
         self.stamp.fill(0)
         self.frame = 0
         self.origin = None
+        if self.attitude is not None:
+            self.attitude.reset()
 
     def _recentre(self, x: float, y: float) -> None:
         c = self.config
@@ -211,8 +225,16 @@ class GroundMap:
         self._recentre(x, y)
         self.frame += 1
         cols = self.columns[view.pixels(self._pix)]
+        vx, vy = self._vx, self._vy
+        if self.attitude is not None:
+            dpitch, droll = self.attitude(view)
+            if dpitch or droll:
+                moved = _ground(self._ray, self.camera.tilted(dpitch, droll), self.camera.t) - self._ground0
+                vx, vy = vx + moved[:, 0], vy + moved[:, 1]
+                cols = np.where(np.isfinite(vx) & np.isfinite(vy), cols, self.k + 1)  # rays that no longer meet the ground
+                vx, vy = np.nan_to_num(vx), np.nan_to_num(vy)
         kernels.map_vote(self.evidence, self.stamp, self.cells, float(self.origin[0]), float(self.origin[1]), 1.0 / c.map_resolution_m,
-                         float(x), float(y), math.cos(yaw), math.sin(yaw), self._vx, self._vy, self._weight, cols, self.frame, self._fade,
+                         float(x), float(y), math.cos(yaw), math.sin(yaw), vx, vy, self._weight, cols, self.frame, self._fade,
                          self.lethal, np.float32(c.map_lethal_share), np.float32(c.map_terrain_share), np.float32(c.map_min_evidence))
 
     def beside(self, path: ReferencePath, s: np.ndarray, lat: np.ndarray) -> np.ndarray:
@@ -286,6 +308,17 @@ class CorridorFeatures:
         metres = counts * (step / col.shape[2])
         detour = self.offsets**2 * (on_path_m + self.config.span_m)
         return CorridorView(np.concatenate([metres[:, :k], metres[:, k + 1:], detour[:, None]], axis=1), near_m)
+
+
+def _ground(ray: np.ndarray, axes: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Where rays (N, 2) of a camera at ``t`` with ``axes`` (rows right, down, forward in the vehicle
+    frame) meet the ground, (N, 2) in the vehicle frame [m]; NaN for rays that do not.
+
+    Elementwise products and sums in a fixed order (no matrix product): the same bits on every CPU."""
+    d = [ray[:, 0] * axes[0, i] + ray[:, 1] * axes[1, i] + axes[2, i] for i in range(3)]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = np.where(d[2] < -1e-12, -t[2] / d[2], np.nan)
+    return np.stack([t[0] + scale * d[0], t[1] + scale * d[1]], axis=1)
 
 
 def _shifted(a: np.ndarray, dx: int, dy: int, fill: float) -> np.ndarray:

@@ -213,7 +213,7 @@ def map_vote(evidence: np.ndarray, stamp: np.ndarray, cells: np.ndarray, ox: flo
     sample's column. Samples of column K + 1 (nothing seen) cast no vote. The cell's column
     (``cells``): K + 1 (never seen) while its evidence totals less than ``min_evidence``; else the
     lethal column with the most evidence when the lethal columns hold at least ``lethal_share`` of
-    it; else the terrain column with the most when the K terrain columns hold at least
+    it; else the other terrain column with the most when those columns hold at least
     ``terrain_share``; else K. Ties go to the lowest column. Cells are found as in
     :func:`map_write`; float32 sums in a fixed order, so every CPU agrees.
     """
@@ -241,13 +241,14 @@ def map_vote(evidence: np.ndarray, stamp: np.ndarray, cells: np.ndarray, ox: flo
         for q in range(k):
             e = evidence[j, i, q]
             total += e
-            terrain += e
             if lethal[q]:
                 deadly += e
                 if best_lethal < 0 or e > evidence[j, i, best_lethal]:
                     best_lethal = q
-            if best_terrain < 0 or e > evidence[j, i, best_terrain]:
-                best_terrain = q
+            else:
+                terrain += e
+                if best_terrain < 0 or e > evidence[j, i, best_terrain]:
+                    best_terrain = q
         if total < min_evidence:
             cells[j, i] = k + 1
         elif best_lethal >= 0 and deadly >= lethal_share * total:

@@ -10,7 +10,8 @@ Per pixel, in order (terrapref.perception.model.LabelErrors):
 
 1. boundary: the pixel reads the true class of a pixel up to ``boundary_px`` away, drawn at
    random, so pixels near a class border take the neighbour's class at random;
-2. range: ground farther than ``max_range_m`` from the camera is unknown (255);
+2. range: ground farther than ``max_range_m`` from the camera is unknown (255) (a tilted camera's
+   view applies it itself, along its own rays: terrapref.perception.perceiver.TiltedView);
 3. confusion: within each image tile of ``region_px`` (and for ``persist_frames`` frames in a
    row), all pixels of a true class are seen as the same class, drawn from its confusion row;
 4. blobs: ellipses on the ground part of the image painted one class;
@@ -38,9 +39,12 @@ class LabelNoise:
         errors: the perception model's label errors.
         camera: the robot's camera (image size, and the range of each pixel).
         classes: the class table (flips and blobs draw from its ids; the confusion names its classes).
+        range_in_view: the views these errors apply to have cut the ground at ``max_range_m``
+            already (a tilted camera's do, along their own rays), so the nominal camera's cut is
+            not applied again.
     """
 
-    def __init__(self, errors: LabelErrors, camera: PinholeCamera, classes: ClassTable) -> None:
+    def __init__(self, errors: LabelErrors, camera: PinholeCamera, classes: ClassTable, range_in_view: bool = False) -> None:
         self.errors = errors
         self.height, self.width = camera.shape
         self.ids = np.array([c.id for c in classes.classes], dtype=np.uint8)
@@ -54,7 +58,8 @@ class LabelNoise:
             self.conf_n[t] = len(row)
             self.conf_cum[t, : len(row)] = np.cumsum([p for _, p in row])
             self.conf_to[t, : len(row)] = [classes.id_of(seen) for seen, _ in row]
-        self.far = far_pixels(camera.config, errors.max_range_m) if errors.max_range_m is not None else np.zeros(0, dtype=np.bool_)
+        cut = errors.max_range_m is not None and not range_in_view
+        self.far = far_pixels(camera.config, errors.max_range_m) if cut else np.zeros(0, dtype=np.bool_)
         self._conf_base = 0
 
     def reset(self, rng: np.random.Generator) -> None:

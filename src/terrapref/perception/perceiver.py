@@ -55,13 +55,14 @@ class Driver(Protocol):
 
 
 class TiltedView(SegmentationView):
-    """The true ground through the camera at an attitude off its mount, rendered as far as it is read."""
+    """The true ground through the camera at an attitude off its mount, up to ``max_range_m`` along
+    each ray (None: the camera's own range), rendered as far as it is read."""
 
     __slots__ = ("_tilt",)
 
-    def __init__(self, renderer: SegmentationRenderer, pose: Pose, dpitch_rad: float, droll_rad: float) -> None:
+    def __init__(self, renderer: SegmentationRenderer, pose: Pose, dpitch_rad: float, droll_rad: float, max_range_m: float | None = None) -> None:
         super().__init__(renderer, pose)
-        self._tilt = (dpitch_rad, droll_rad)
+        self._tilt = (dpitch_rad, droll_rad, max_range_m)
 
     @property
     def image(self) -> np.ndarray:
@@ -88,7 +89,7 @@ class Perceiver:
 
     def __init__(self, model: PerceptionModel, renderer: SegmentationRenderer, classes: ClassTable, camera_rate_hz: float = 10.0) -> None:
         self.model, self.renderer = model, renderer
-        self.labels = LabelNoise(model.labels, renderer.camera, classes) if model.labels.active else None
+        self.labels = LabelNoise(model.labels, renderer.camera, classes, range_in_view=model.camera.active) if model.labels.active else None
         cam = model.camera
         self._rho = math.exp(-1.0 / (camera_rate_hz * cam.jitter_time_s)) if cam.jitter_time_s > 0 else 0.0
         self._sigma = np.radians([cam.pitch_jitter_deg, cam.roll_jitter_deg])
@@ -111,7 +112,7 @@ class Perceiver:
         view = frame.view
         if m.camera.active:
             self._attitude = self._rho * self._attitude + math.sqrt(1.0 - self._rho**2) * self._sigma * self._rng_camera.normal(0.0, 1.0, 2)
-            view = TiltedView(self.renderer, frame.pose, float(self._attitude[0]), float(self._attitude[1]))
+            view = TiltedView(self.renderer, frame.pose, float(self._attitude[0]), float(self._attitude[1]), m.labels.max_range_m)
         if self.labels is not None:
             view = LabelledView(view, self.labels.draw(self._rng_labels, frame.index))
         return replace(frame, view=view, pose=self._told(frame.pose))
