@@ -346,7 +346,7 @@ def test_corridor_data_survive_a_dataset_file_and_bad_values_are_refused(tmp_pat
 
 
 def test_the_compiled_swept_check_is_the_numpy_form(camera):
-    """The way to each offset, stepped by pure pursuit in NumPy, meets the trees where the kernel says."""
+    """The way to each offset, stepped by pure pursuit in NumPy, meets the trees at the step the kernel says."""
     scenario = _scenario([TREES])
     stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), 1.0)
     path = ReferencePath(scenario.waypoints)
@@ -354,7 +354,7 @@ def test_the_compiled_swept_check_is_the_numpy_form(camera):
         stage.map.update(_seen_from(scenario, camera, pose), pose)
         n = len(stage.offsets)
         x, y, yaw = (np.full(n, v) for v in pose)
-        blocked = np.zeros(n, dtype=bool)
+        first = np.full(n, 60)  # the step where each way first meets the trees
         for i in range(60):
             ahead = s + i * 0.1 + 2.5
             heading = float(path.heading_at(ahead))
@@ -366,9 +366,10 @@ def test_the_compiled_swept_check_is_the_numpy_form(camera):
             x, y = x + np.cos(yaw) * 0.1, y + np.sin(yaw) * 0.1
             if i % 2 == 0:
                 points = np.stack([x[:, None] - stage._clear * np.sin(yaw)[:, None], y[:, None] + stage._clear * np.cos(yaw)[:, None]], -1)
-                blocked |= (stage.map.lookup(points) == 0).any(axis=1)
-        assert blocked.any() and not blocked.all()
-        np.testing.assert_array_equal(stage._swept(stage.offsets, pose, path, s), blocked)
+                hit = (stage.map.lookup(points) == 0).any(axis=1)
+                first = np.where(hit & (first == 60), i, first)
+        assert (first < 60).any() and not (first < 60).all()
+        np.testing.assert_array_equal(stage._swept(stage.offsets, pose, path, s), first)
 
 
 _FIT = """

@@ -375,3 +375,69 @@ def test_a_sky_line_the_map_cuts_short_gives_no_estimate(renderer):
         estimate(SegmentationView(renderer, Pose(20.0, 15.0, 0.0)))
     # Facing the map's edge 3 m away: the sky line is the map's edge, far below the reference.
     assert estimate(SegmentationView(renderer, Pose(57.0, 15.0, 0.0))) == (0.0, 0.0)
+
+
+# --- perceived recordings, evaluations and environments -------------------------------------------------
+
+
+def test_a_recording_under_perception_holds_what_the_robot_received(tmp_path, capsys):
+    """The driver sees the truth (the same drive as without perception); the recording holds the
+    frames that reached the robot (fewer, late, their labels and poses off the truth) and names
+    the model; it is featurised and trained from as any recording."""
+    import json
+
+    from terrapref.cli import main
+    from terrapref.demos.recording import read_recording
+    from terrapref.perception.model import from_dict
+
+    clean, seen = tmp_path / "clean", tmp_path / "seen"
+    assert main(["record", "demo_course", "--out", str(clean), "--quiet"]) == 0
+    assert main(["record", "demo_course", "--out", str(seen), "--quiet", "--perception", "field"]) == 0
+    assert "under perception field" in capsys.readouterr().out
+    a, b = read_recording(clean), read_recording(seen)
+    assert a.meta["perception"]["name"] == "clean" and from_dict(b.meta["perception"], "meta", default_classes()) == load_perception("field")
+    assert a.meta["summary"] == b.meta["summary"]  # the same drive
+    assert 0.8 * len(a) < len(b) < len(a)  # lost and stale frames are not written
+    times = b.times
+    assert (np.diff(times) > 0).all()
+    lines = [json.loads(x) for x in (seen / "frames.jsonl").read_text().splitlines()]
+    first = lines[0]
+    # The first frame arrives one period late: the robot logged frame 0's image and pose at 0.1 s.
+    assert first["t"] == pytest.approx(0.1) and first["pose"] == pytest.approx(list(a.poses[0]), abs=1.0)
+    differ = [not np.array_equal(a.image(i), b.image(i)) for i in range(0, min(len(a), len(b)), 50)]
+    assert all(differ)
+
+
+def test_evaluate_under_a_perception_preset_names_it_in_metrics_json(tmp_path, capsys):
+    import json
+
+    from helpers import linear_model
+    from terrapref.cli import main
+
+    model = linear_model(tmp_path / "m.safetensors")
+    out = tmp_path / "ev"
+    assert main(["evaluate", str(model), "demo_course", "--seeds", "1", "--out", str(out), "--perception", "field", "--workers", "1"]) == 0
+    assert "perception: field" in capsys.readouterr().out
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["perception"] == load_perception("field").to_dict()
+    assert metrics["summary"]["runs"] == 1 and metrics["driver_summary"]["runs"] == 1
+
+
+def test_the_gymnasium_env_observes_what_the_robot_would(tmp_path):
+    from terrapref.sim.env import OffRoadNavEnv
+
+    clean, seen = OffRoadNavEnv("demo_course"), OffRoadNavEnv("demo_course", perception="field")
+    a, _ = clean.reset(seed=3)
+    b, _ = seen.reset(seed=3)
+    assert not np.array_equal(a["image"], b["image"]) and not np.array_equal(a["pose"], b["pose"])
+    again, _ = OffRoadNavEnv("demo_course", perception="field").reset(seed=3)
+    assert all(np.array_equal(b[k], again[k]) for k in b)
+    repeats = 0
+    last = b
+    for _ in range(60):
+        obs, *_ = seen.step(10)
+        repeats += all(np.array_equal(obs[k], last[k]) for k in obs)  # a period in which no frame arrived
+        last = obs
+    assert 0 < repeats < 20
+    with pytest.raises(UserError):
+        OffRoadNavEnv("demo_course", perception="nowhere")

@@ -182,7 +182,7 @@ def record_run(
     leaves it partial with every frame written so far readable. With ``disturbance``, pushes
     drawn from a stream seeded by ``rng`` are added to what the vehicle executes (the label
     stays the driver's command). With ``perception``, the recording holds what the robot would
-    have logged (:class:`RecordLoop`), drawn from a stream seeded by ``rng`` after the pushes'.
+    have logged (:class:`RecordLoop`), drawn from a stream spawned from ``rng``.
     """
     frame = sim.reset()
     driver.reset(sim.scenario, rng)
@@ -199,12 +199,12 @@ def record_run(
 
 
 def run_perceiver(perception: PerceptionModel | None, sim: Simulation, rng: np.random.Generator) -> Perceiver | None:
-    """A run's perceiver, on its own stream seeded from ``rng`` (drawn from only when the model is
-    active, so that a clean run leaves the driver's stream untouched); None for the truth."""
+    """A run's perceiver, on a stream spawned from ``rng`` (which leaves ``rng``'s own draws as they
+    were: the driver drives the same run with or without perception); None for the truth."""
     if perception is None or not perception.active:
         return None
     perceiver = Perceiver(perception, sim.renderer, sim.scenario.classes, sim.config.camera_rate_hz)
-    perceiver.reset(np.random.default_rng(rng.integers(2**63)))
+    perceiver.reset(rng.spawn(1)[0])
     return perceiver
 
 

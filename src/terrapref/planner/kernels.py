@@ -20,12 +20,13 @@ def _segment(path_s: np.ndarray, n_seg: int, s: float) -> tuple[int, float]:
 
 
 @njit(cache=True, nogil=True)
-def swept_blocked(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progress_s: float, v: float, dt: float, steps: int,
-                  lookahead_m: float, path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray,
-                  clear: np.ndarray, cells: np.ndarray, ox: float, oy: float, inv_res: float, lethal: np.ndarray, never: int) -> np.ndarray:
-    """Per offset (O,): does pure pursuit toward the path shifted by it, driven for ``steps`` steps
-    of ``dt`` from the pose, bring a point across the footprint (``clear``, every other step)
-    onto a lethal column of the map (``lethal`` by column, ``never`` for cells outside the map)?
+def swept_reach(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progress_s: float, v: float, dt: float, steps: int,
+                lookahead_m: float, path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray,
+                clear: np.ndarray, cells: np.ndarray, ox: float, oy: float, inv_res: float, lethal: np.ndarray, never: int) -> np.ndarray:
+    """Per offset (O,): the step at which pure pursuit toward the path shifted by it, driven for
+    ``steps`` steps of ``dt`` from the pose, first brings a point across the footprint (``clear``,
+    every other step) onto a lethal column of the map (``lethal`` by column, ``never`` for cells
+    outside the map); ``steps`` where it never does.
 
     The NumPy form: :func:`terrapref.features.corridor.steer` (clipped to +-1 rad/s) toward
     every offset at progress ``progress_s + step * dt * v``, then ``yaw += w dt``, ``x += v
@@ -33,7 +34,7 @@ def swept_blocked(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progre
     """
     n_seg = path_len.shape[0]
     n_rows, n_cols = cells.shape
-    out = np.zeros(offsets.shape[0], np.bool_)
+    out = np.full(offsets.shape[0], steps, np.int64)
     for o in range(offsets.shape[0]):
         x, y, yaw = x0, y0, yaw0
         for k in range(steps):
@@ -56,8 +57,8 @@ def swept_blocked(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progre
                     cj = math.floor((py - oy) * inv_res)
                     col = cells[cj, ci] if 0 <= ci < n_cols and 0 <= cj < n_rows else never
                     if lethal[col]:
-                        out[o] = True
+                        out[o] = k
                         break
-            if out[o]:
+            if out[o] < steps:
                 break
     return out

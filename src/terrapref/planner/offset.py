@@ -5,7 +5,8 @@ corridor utility ``weights . features(d)`` scores every candidate offset d. The 
 
 1. rules out offsets whose way there, pure pursuit toward them for ``lethal_horizon_m``, brings
    the footprint (plus ``lethal_margin_m``) onto lethal terrain, whenever any lethal terrain lies
-   near the corridor (the class table says which classes are lethal; that is not learned);
+   near the corridor (the class table says which classes are lethal; that is not learned); when
+   that rules out every offset, keeps those whose way runs farthest before lethal terrain;
 2. goes back to the path while nothing lies on it within the utility's near distance, unless
    the way back is ruled out (then it takes the best offset that is not);
 3. otherwise keeps the offset it holds while that offset's cost is within ``switch_margin`` of
@@ -31,7 +32,7 @@ import numpy as np
 from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.features.corridor import CorridorFeatures, GroundMap, gated, steer
 from terrapref.learning.corridor import CorridorUtility
-from terrapref.planner.kernels import swept_blocked
+from terrapref.planner.kernels import swept_reach
 from terrapref.scenario.path import ReferencePath
 from terrapref.vehicle import Pose
 
@@ -103,6 +104,7 @@ class OffsetStage:
         self._clear = np.linspace(-m, m, 7)  # the footprint and its clearance, across [m]
         self._line_stations = np.arange(-0.5, self.config.lethal_horizon_m + 1e-9, 0.25)
         self._far_stations = np.arange(-0.5, utility.config.stations_m[1] + 1e-9, 0.25)
+        self._steps = round(self.config.lethal_horizon_m / (v_mps * self.config.dt_s))
         reach, step = utility.config.max_offset_m, utility.config.offset_step_m
         beyond = np.arange(reach + step, reach * self.config.escape_factor + 1e-9, step)
         self.escapes = np.concatenate([-beyond[::-1], beyond])  # (E,) offsets only for getting round lethal terrain [m]
@@ -165,15 +167,22 @@ class OffsetStage:
         First each offset's line parallel to the path, from 0.5 m behind to the horizon, with the
         footprint and its clearance (``lines``, when already read). Where some line meets lethal
         terrain, the way to every offset is followed too, and offsets whose way there meets it
-        are also ruled out; unless that would rule out all of them (already close beside lethal
-        terrain, every way brushes its clearance), when the lines alone decide.
+        are also ruled out. When that would rule out all of them (beside lethal terrain, every
+        way brushes its clearance; or lethal terrain, seen or misread, lies across every way),
+        those whose way there runs farthest before it stay, and of those the ones whose line is
+        clear if any is: never an offset whose way crosses lethal terrain sooner than another's.
         """
         if lines is None:
             lines = self._lines(offsets, path, progress_s, self._line_stations)
         if not lines.any():
             return lines
-        both = lines | self._swept(offsets, pose, path, progress_s)
-        return lines if both.all() else both
+        reach = self._swept(offsets, pose, path, progress_s)
+        both = lines | (reach < self._steps)
+        if not both.all():
+            return both
+        farthest = reach == reach.max()
+        keep = farthest & ~lines if (farthest & ~lines).any() else farthest
+        return ~keep
 
     def _lines(self, offsets: np.ndarray, path: ReferencePath, progress_s: float, stations: np.ndarray) -> np.ndarray:
         """Which of ``offsets`` (O,) have lethal terrain on their line parallel to the path, at
@@ -186,14 +195,14 @@ class OffsetStage:
         return self.lethal[self.map.beside(path, s, offsets[:, None] + self._clear[None, :])].any(axis=2)
 
     def _swept(self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_s: float) -> np.ndarray:
-        """Which of ``offsets`` (O,) pure pursuit toward them, over the horizon, drives onto lethal terrain."""
+        """For each of ``offsets`` (O,), the step of ``dt_s`` at which pure pursuit toward it first drives
+        the footprint onto lethal terrain, ``self._steps`` where it does not within the horizon."""
         c, gmap = self.config, self.map
-        steps = round(c.lethal_horizon_m / (self.v_mps * c.dt_s))
         a, d, length = path.segments
-        return swept_blocked(float(pose[0]), float(pose[1]), float(pose[2]), offsets, float(progress_s), self.v_mps, c.dt_s,
-                                     steps, c.pursuit_lookahead_m, path.s, a, d, length, self._clear, gmap.cells,
-                                     float(gmap.origin[0]), float(gmap.origin[1]), 1.0 / gmap.config.map_resolution_m,
-                                     self.lethal, self.k + 1)
+        return swept_reach(float(pose[0]), float(pose[1]), float(pose[2]), offsets, float(progress_s), self.v_mps, c.dt_s,
+                           self._steps, c.pursuit_lookahead_m, path.s, a, d, length, self._clear, gmap.cells,
+                           float(gmap.origin[0]), float(gmap.origin[1]), 1.0 / gmap.config.map_resolution_m,
+                           self.lethal, self.k + 1)
 
 
 def _weighted(features: np.ndarray, weights: np.ndarray) -> np.ndarray:
