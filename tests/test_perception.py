@@ -441,3 +441,56 @@ def test_the_gymnasium_env_observes_what_the_robot_would(tmp_path):
     assert 0 < repeats < 20
     with pytest.raises(UserError):
         OffRoadNavEnv("demo_course", perception="nowhere")
+
+
+def test_a_recordings_perception_is_checked_when_it_is_read(tmp_path):
+    import json
+
+    from terrapref.cli import main
+    from terrapref.demos.recording import read_recording
+
+    out = tmp_path / "rec"
+    assert main(["record", "demo_course", "--out", str(out), "--quiet", "--perception", "rellis"]) == 0
+    meta = json.loads((out / "meta.json").read_text())
+    meta["perception"]["labels"]["flip_rate"] = 7
+    (out / "meta.json").write_text(json.dumps(meta))
+    with pytest.raises(UserError) as err:
+        read_recording(out)
+    assert err.value.lines() == [f"{out / 'meta.json'}: perception.labels.flip_rate: must be in [0, 1], got 7"]
+    meta["perception"] = "field"
+    (out / "meta.json").write_text(json.dumps(meta))
+    with pytest.raises(UserError, match="perception: expected a mapping"):
+        read_recording(out)
+
+
+def test_select_drives_the_same_models_under_several_perception_models(tmp_path):
+    """The paper's recipe (quick to train) taught from a drive recorded under field, driving one
+    layout on clean frames and under rellis: one table each, every zone tagged."""
+    import json
+
+    from terrapref.cli import main
+
+    out = tmp_path / "sel"
+    argv = ["select", "--recipes", "paper", "--orders", "rock,mud,water", "--seeds", "1", "--courses", "1", "--workers", "2",
+            "--perception", "clean,rellis", "--taught-under", "field", "--out", str(out)]
+    assert main(argv) == 0
+    saved = json.loads((out / "select.json").read_text())
+    assert [p["name"] for p in saved["selection"]["perceptions"]] == ["clean", "rellis"]
+    assert saved["selection"]["taught_under"]["name"] == "field"
+    assert {r["perception"] for r in saved["zones"]} == {"clean", "rellis"}
+    assert len([r for r in saved["zones"] if r["perception"] == "clean"]) == len([r for r in saved["zones"] if r["perception"] == "rellis"]) > 0
+    text = (out / "SELECT.md").read_text()
+    assert "## Perception `clean`" in text and "## Perception `rellis`" in text and "The demonstrations recorded: field" in text
+    assert list((out / "work").iterdir())[0].name.endswith("_field")
+
+
+def test_select_and_reproduce_refuse_a_bad_perception_before_any_work(tmp_path, capsys):
+    from terrapref.cli import main
+
+    for argv, flag in ((["select", "--perception", "fog"], "--perception"), (["select", "--perception", "clean,clean"], "--perception"),
+                       (["select", "--taught-under", "fog"], "--taught-under"), (["select", "--perception", "clean,field", "--taught-under", "same"], "--taught-under"),
+                       (["reproduce", "--perception", "rellis,fog"], "--perception")):
+        assert main([*argv, "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and flag in err[0], err
+    assert not (tmp_path / "o").exists()

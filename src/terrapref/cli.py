@@ -611,11 +611,15 @@ def _cmd_select(args: argparse.Namespace) -> int:
         if value < low:
             raise UserError(flag, f"must be an integer >= {low}, got {value}")
     _check_output(args.out, "--out", folder=True)
-    perception = _perception(args.perception)
-    taught_under = perception if args.taught_under == "same" else _perception(args.taught_under, "--taught-under")
+    perceptions = tuple(_perception(n) for n in (x.strip() for x in (args.perception or "clean").split(",")) if n)
+    if len({p.name for p in perceptions}) != len(perceptions):
+        raise UserError("--perception", f"names a perception model twice: {args.perception!r}")
+    if args.taught_under == "same" and len(perceptions) != 1:
+        raise UserError("--taught-under", "'same' needs exactly one --perception model")
+    taught_under = perceptions[0] if args.taught_under == "same" else _perception(args.taught_under, "--taught-under")
     engine = _engine(args)
     t0 = time.perf_counter()
-    path = run_selection(args.out, Selection(tuple(names), orders, args.seeds, args.first, args.courses, args.style, perception, taught_under),
+    path = run_selection(args.out, Selection(tuple(names), orders, args.seeds, args.first, args.courses, args.style, perceptions, taught_under),
                          engine, log=lambda m: print(m, flush=True))
     print(f"done ({time.perf_counter() - t0:.0f} s): {path}")
     return 0
@@ -870,7 +874,9 @@ def _select_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seeds", type=int, default=5, help="training seeds per recipe and order")
     p.add_argument("--first", type=int, default=1000, help="first generated layout (1000-1999: for choosing; 2000 on: for confirming)")
     p.add_argument("--courses", type=int, default=32, help="generated layouts")
-    p.add_argument("--perception", metavar="PRESET|FILE", help=PERCEPTION_HELP + " while the models drive the layouts (default: clean)")
+    p.add_argument("--perception", metavar="P1,P2,...",
+                   help="perception models (presets, files or NAME:PART, separated by commas) the models drive the layouts under, each "
+                        "in turn, for a table each (default: clean): " + PERCEPTION_HELP)
     p.add_argument("--taught-under", metavar="PRESET|FILE|same", default=None,
                    help="record the demonstrations through this perception model instead of the truth ('same': --perception's)")
     _add_engine_args(p)

@@ -88,12 +88,13 @@ class PinholeCamera:
         optical axis, clockwise as the camera looks), shape (3, 3)."""
         c = self.config
         p, y = math.radians(c.pitch_deg) + dpitch_rad, math.radians(c.yaw_deg)
-        forward = np.array([math.cos(p) * math.cos(y), math.cos(p) * math.sin(y), -math.sin(p)])
-        right = np.array([math.sin(y), -math.cos(y), 0.0])
-        down = np.cross(forward, right)
+        cp, sp, cy, sy = math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+        forward = (cp * cy, cp * sy, -sp)
+        right = (sy, -cy, 0.0)
+        down = (forward[1] * right[2] - forward[2] * right[1], forward[2] * right[0] - forward[0] * right[2],
+                forward[0] * right[1] - forward[1] * right[0])  # forward x right, as the mount's axes are made
         cr, sr = math.cos(droll_rad), math.sin(droll_rad)
-        right, down = cr * right + sr * down, -sr * right + cr * down
-        return np.stack([right, down, forward])
+        return np.array([[cr * r + sr * d for r, d in zip(right, down)], [-sr * r + cr * d for r, d in zip(right, down)], forward])
 
     @property
     def shape(self) -> tuple[int, int]:

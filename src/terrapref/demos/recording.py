@@ -293,6 +293,8 @@ def _check_meta(meta: dict, path: Path) -> None:
     profile = meta.get("profile")
     if profile is not None and not (isinstance(profile, list) and all(isinstance(p, str) for p in profile)):
         raise UserError(str(path), "expected a list of class names", field="profile")
+    if "perception" in meta:
+        _check_perception(meta, path)
     for key in ("path",):
         if key in meta:
             try:
@@ -301,6 +303,22 @@ def _check_meta(meta: dict, path: Path) -> None:
                 points = np.zeros(0)
             if points.ndim != 2 or points.shape[1:] != (2,) or len(points) < 2 or not np.isfinite(points).all():
                 raise UserError(str(path), "expected at least two finite [x, y] points", field=key)
+
+
+def _check_perception(meta: dict, path: Path) -> None:
+    """The perception model a recording's frames went through (terrapref.perception), as it was written."""
+    from terrapref.errors import Problem
+    from terrapref.perception.model import from_dict
+    from terrapref.terrain import ClassTable, default_classes
+
+    value = meta["perception"]
+    if not isinstance(value, dict):
+        raise UserError(str(path), f"expected a mapping, got {type(value).__name__}", field="perception")
+    classes = ClassTable.from_dict(meta["classes"], str(path)) if isinstance(meta.get("classes"), dict) else default_classes()
+    try:
+        from_dict(value, str(path), classes)
+    except UserError as exc:
+        raise UserError(str(path), [Problem(f"perception.{p.field}" if p.field else "perception", p.message) for p in exc.problems]) from None
 
 
 def require_meta(recording: Recording, *keys: str) -> None:

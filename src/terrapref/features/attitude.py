@@ -24,6 +24,8 @@ import numpy as np
 from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.terrain import UNKNOWN
 
+REFERENCE_EVERY = 4  # frames between updates of the reference line (it moves slowly; its median is the costly part)
+
 
 class HorizonAttitude:
     """Estimates a camera's pitch and roll off its mount from each label frame's sky line.
@@ -53,10 +55,14 @@ class HorizonAttitude:
         self.max_rad = math.radians(max_deg)
         self._u = self.cols + 0.5 - self.cx
         self._history: deque[np.ndarray] = deque(maxlen=memory)
+        self._reference: np.ndarray | None = None
+        self._frames = 0
 
     def reset(self) -> None:
         """Start a new run: forget the reference line."""
         self._history.clear()
+        self._reference = None
+        self._frames = 0
 
     def line(self, view: SegmentationView) -> np.ndarray:
         """The first row of each column read below which the camera sees ground (the next rows
@@ -76,11 +82,13 @@ class HorizonAttitude:
         the fit is not supported."""
         now = self.line(view)
         self._history.append(now)
-        if len(self._history) < 5:
+        self._frames += 1
+        if self._frames < 5:
             return 0.0, 0.0
-        with np.errstate(all="ignore"):
-            reference = np.nanmedian(np.stack(self._history), axis=0)
-        return self._fit(now - reference, reference)
+        if self._reference is None or self._frames % REFERENCE_EVERY == 0 or self._frames < 2 * REFERENCE_EVERY:
+            with np.errstate(all="ignore"):
+                self._reference = np.nanmedian(np.stack(self._history), axis=0)
+        return self._fit(now - self._reference, self._reference)
 
     def _fit(self, departure: np.ndarray, reference: np.ndarray) -> tuple[float, float]:
         """Least squares of the columns' departures [rows] against a small pitch's and roll's image

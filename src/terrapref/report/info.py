@@ -78,8 +78,16 @@ def _recording_lines(p: Path) -> list[str]:
              f"frames          {len(rec)} ({rec.duration_s:.1f} s)",
              f"scenario        {m.get('scenario')}",
              f"driver          {_driver(driver)}",
+             f"perception      {_perception(m.get('perception'))}",
              f"created         {m.get('created', '?')}"]
     return lines + _common(m)
+
+
+def _perception(model: object) -> str:
+    """The perception model a recording's frames went through, by name (the truth when none is named)."""
+    if not isinstance(model, dict) or model.get("name", "clean") == "clean":
+        return "clean (the simulator's own labels and poses)"
+    return f"{model.get('name')} (what the robot's camera and localisation would have given; the driver saw the truth)"
 
 
 def _driver(driver: dict) -> str:
@@ -138,7 +146,8 @@ def _dataset_lines(p: Path, meta: dict, shapes: dict[str, tuple[int, ...]]) -> l
     return ([f"{p}: terrapref dataset", f"samples         {n} from {len(recs)} recording(s)",
              f"look-ahead      {'yes' if 'U2' in shapes else 'no'}",
              f"corridor        {'yes' if 'corridor.features' in shapes else 'no'}"]
-            + [f"  {r.get('path')}: {r.get('frames')} frames, {r.get('scenario')}" for r in recs if isinstance(r, dict)] + _common(meta))
+            + [f"  {r.get('path')}: {r.get('frames')} frames, {r.get('scenario')}" + (f", perception {r['perception']}" if r.get("perception", "clean") != "clean" else "")
+               for r in recs if isinstance(r, dict)] + _common(meta))
 
 
 def _model_lines(p: Path, meta: dict) -> list[str]:

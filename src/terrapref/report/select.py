@@ -44,8 +44,13 @@ class Selection:
     first: int = 1000
     courses: int = 32
     style: str = "default"
-    perception: PerceptionModel | None = None  # what the planner sees driving the layouts (None: the truth)
+    perceptions: tuple[PerceptionModel, ...] = ()  # what the planner receives driving the layouts, each in turn (none: the truth)
     taught_under: PerceptionModel | None = None  # what the demonstrations recorded (None: the truth)
+
+    @property
+    def driven_under(self) -> tuple[PerceptionModel, ...]:
+        """The perception models every model drives the layouts under (the truth when none is given)."""
+        return self.perceptions or (PerceptionModel(),)
 
     @property
     def layouts(self) -> list[str]:
@@ -118,7 +123,7 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
     t_train = time.perf_counter() - t0
 
     layouts = sel.layouts
-    specs = [RunSpec(c, 0, PLANNER, path, m.job.order, perception=sel.perception) for path, m in models.items() for c in layouts]
+    specs = [RunSpec(c, 0, PLANNER, path, m.job.order, perception=p) for p in sel.driven_under for path, m in models.items() for c in layouts]
     specs += [RunSpec(c, 0, EXPERT, None, o, style=sel.style) for o in sel.orders for c in layouts]
     log(f"[2/2] closed-loop runs: {len(specs)} on {len(layouts)} layouts ...")
     results = run_many(specs, progress=every_tenth(log), engine=engine)
@@ -126,7 +131,7 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
 
     rows, runs = _zones_and_runs(specs, results, models)
     saved = {"selection": {"recipes": list(sel.recipes), "orders": [list(o) for o in sel.orders], "seeds": sel.seeds, "layouts": layouts,
-                           "style": sel.style, "perception": (sel.perception or PerceptionModel()).to_dict(),
+                           "style": sel.style, "perceptions": [p.to_dict() for p in sel.driven_under],
                            "taught_under": (sel.taught_under or PerceptionModel()).to_dict()},
              "engine": engine.describe(), "zones": rows, "runs": runs, "train_s": round(t_train, 1), "eval_s": round(t_eval, 1)}
     (out / "select.json").write_text(json.dumps(saved, indent=0))
@@ -155,7 +160,8 @@ def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict
         if r.driver != PLANNER:
             continue
         model = models[spec.model_path]
-        who = {"recipe": model.recipe, "order": list(model.job.order), "seed": model.job.seed, "scenario": r.scenario}
+        who = {"recipe": model.recipe, "order": list(model.job.order), "seed": model.job.seed, "scenario": r.scenario,
+               "perception": spec.perception.name if spec.perception is not None else "clean"}
         runs.append({**who, "collisions": r.metrics.collisions})
         for z in r.metrics.zones:
             d = driver[(tuple(spec.profile), r.scenario, z.id)]
@@ -192,19 +198,43 @@ def _perception_line(model: dict | None) -> str:
 def write_selection_report(out: Path, saved: dict) -> Path:
     """SELECT.md and select.png from select.json's content."""
     sel, rows, runs = saved["selection"], saved["zones"], saved["runs"]
-    kinds = sorted({r["kind"] for r in rows})
     layouts = sel["layouts"]
+    seen = [p["name"] for p in sel.get("perceptions", [{"name": "clean"}])]
     lines = ["# Recipe selection: agreement with the driver on generated layouts", "",
              f"{len(sel['recipes'])} recipe(s) x {len(sel['orders'])} order(s) x {sel['seeds']} training seed(s), one drive each; every model and "
              f"its driver (style {sel['style']}) drive {len(layouts)} generated layouts ({layouts[0]} to {layouts[-1]}). Rates with 95% Wilson "
              "intervals over all zones; the layouts column resamples whole layouts instead (a cluster bootstrap: a layout's zones are "
              "alike across seeds), the spread another set of layouts would show.", "",
-             f"Perception while driving the layouts: {_perception_line(sel.get('perception'))}. The demonstrations recorded: "
-             f"{_perception_line(sel.get('taught_under'))}. The driver always sees the truth.", "",
-             "| recipe | order | agreement with the driver | agreement, layouts resampled | " + " | ".join(f"agreement, {k} zones" for k in kinds)
+             f"The demonstrations recorded: {_perception_line(sel.get('taught_under'))}. The models drive the layouts receiving "
+             + ", then ".join(f"`{name}`" for name in seen) + " (terrapref.perception); the driver always sees the truth.", ""]
+    labels, rates, intervals = [], [], []
+    for name in seen:
+        part = [r for r in rows if r.get("perception", "clean") == name]
+        part_runs = [r for r in runs if r.get("perception", "clean") == name]
+        if len(seen) > 1:
+            lines += [f"## Perception `{name}`", ""]
+        table, bars = _selection_table(sel, part, part_runs)
+        lines += table + [""]
+        for label, rate, interval in bars:
+            labels.append(f"{label}, {name}" if len(seen) > 1 else label)
+            rates.append(rate)
+            intervals.append(interval)
+    lines += [f"Training {saved['train_s']:.0f} s, runs {saved['eval_s']:.0f} s (wall; {saved['engine']}).", "", "![selection](select.png)", ""]
+    save_intervals(out / "select.png", labels, rates, intervals, "agreement with the driver", target=TARGET,
+                   title=f"one drive per model, {len(layouts)} layouts x {sel['seeds']} seeds; 95% intervals, layouts resampled")
+    path = out / "SELECT.md"
+    path.write_text("\n".join(lines))
+    return path
+
+
+def _selection_table(sel: dict, rows: list[dict], runs: list[dict]) -> tuple[list[str], list[tuple[str, float, tuple[float, float]]]]:
+    """One perception's table (per recipe and order, then all orders) and its disagreements; and the
+    bars of the figure: (label, agreement, its interval resampling layouts)."""
+    kinds = sorted({r["kind"] for r in rows})
+    lines = ["| recipe | order | agreement with the driver | agreement, layouts resampled | " + " | ".join(f"agreement, {k} zones" for k in kinds)
              + " | zone success | the driver's zone success | collisions | per seed |",
              "|---|---|---|---|" + "---|" * len(kinds) + "---|---|---|---|"]
-    labels, rates, intervals = [], [], []
+    bars = []
     for recipe in sel["recipes"]:
         for order in [*sel["orders"], None]:
             sub = [r for r in rows if r["recipe"] == recipe and (order is None or r["order"] == order)]
@@ -220,9 +250,7 @@ def write_selection_report(out: Path, saved: dict) -> Path:
             lines.append(f"| {recipe} | {name} | {_rate(sub, 'agrees')} | {rate:.1%} (95% CI {lo:.1%}-{hi:.1%}) | " + " | ".join(_rate([r for r in sub if r["kind"] == k], "agrees") for k in kinds)
                          + f" | {_rate(sub, 'success')} | {_rate(sub, 'driver_success')} | {coll} | {seeds} |")
             if order is None or len(sel["recipes"]) == 1:
-                labels.append(f"{recipe}, all orders" if order is None else " > ".join(order[:3]))
-                rates.append(rate)
-                intervals.append((lo, hi))
+                bars.append((f"{recipe}, all orders" if order is None else " > ".join(order[:3]), rate, (lo, hi)))
     misses: dict[tuple, int] = {}
     for r in rows:
         if not r["agrees"]:
@@ -231,9 +259,4 @@ def write_selection_report(out: Path, saved: dict) -> Path:
     if misses:
         lines += ["", "Disagreements (recipe, zone kind: planner's choice / driver's choice, count): "
                   + "; ".join(f"{rc}, {k}: {p} / {d}, {n}" for (rc, k, p, d), n in sorted(misses.items(), key=lambda kv: -kv[1]))]
-    lines += ["", f"Training {saved['train_s']:.0f} s, runs {saved['eval_s']:.0f} s (wall; {saved['engine']}).", "", "![selection](select.png)", ""]
-    save_intervals(out / "select.png", labels, rates, intervals, "agreement with the driver", target=TARGET,
-                   title=f"one drive per model, {len(layouts)} layouts x {sel['seeds']} seeds; 95% intervals, layouts resampled")
-    path = out / "SELECT.md"
-    path.write_text("\n".join(lines))
-    return path
+    return lines, bars
