@@ -20,7 +20,7 @@ import numpy as np
 from terrapref.camera import CameraConfig
 from terrapref.demos.recording import MemoryRecordingWriter, RecordingWriter
 from terrapref.features import PreferenceSetConfig
-from terrapref.perception import PerceptionModel, Perceiver
+from terrapref.perception import PerceptionModel, Perceiver, run_stream
 from terrapref.scenario import Scenario
 from terrapref.sim import Driver, EpisodeLog, Frame, SimConfig, Simulation
 from terrapref.terrain import PreferenceProfile
@@ -204,7 +204,7 @@ def run_perceiver(perception: PerceptionModel | None, sim: Simulation, rng: np.r
     if perception is None or not perception.active:
         return None
     perceiver = Perceiver(perception, sim.renderer, sim.scenario.classes, sim.config.camera_rate_hz)
-    perceiver.reset(rng.spawn(1)[0])
+    perceiver.reset(run_stream(rng.spawn(1)[0], sim.scenario.name))
     return perceiver
 
 

@@ -16,7 +16,7 @@ from terrapref.perception.model import (
     load_perception,
     preset,
 )
-from terrapref.perception.perceiver import COMMAND_HOLD_S, PerceivedDriver, Perceiver
+from terrapref.perception.perceiver import COMMAND_HOLD_S, PerceivedDriver, Perceiver, run_stream
 
 __all__ = ["COMMAND_HOLD_S", "FORMAT", "PRESETS", "CameraJitter", "FrameTiming", "LabelErrors", "PerceivedDriver", "PerceptionModel",
-           "Perceiver", "PoseErrors", "load_perception", "preset"]
+           "Perceiver", "PoseErrors", "load_perception", "preset", "run_stream"]

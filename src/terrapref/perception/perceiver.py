@@ -20,6 +20,7 @@ terrapref.demos.session.RecordLoop.
 from __future__ import annotations
 
 import math
+import zlib
 from dataclasses import replace
 from typing import Any, Protocol
 
@@ -154,6 +155,13 @@ class Perceiver:
         return newest
 
 
+def run_stream(rng: np.random.Generator, scenario_name: str) -> np.random.Generator:
+    """A run's perception stream: one draw from ``rng`` keyed by the scenario's name, so that runs
+    with the same seed on different layouts see different errors (one drift, one set of
+    mislabelled frames shared by every layout of a study would bias all of them alike)."""
+    return np.random.default_rng([int(rng.integers(2**63)), zlib.crc32(scenario_name.encode())])
+
+
 class PerceivedDriver:
     """A driver (a planner) seeing through a :class:`Perceiver` (a :class:`terrapref.sim.Driver`).
 
@@ -169,7 +177,7 @@ class PerceivedDriver:
 
     def reset(self, scenario: Any, rng: np.random.Generator) -> None:
         self.inner.reset(scenario, rng)
-        self.perceiver.reset(np.random.default_rng(rng.integers(2**63)))
+        self.perceiver.reset(run_stream(rng, getattr(scenario, "name", "")))
         self._last, self._stamp_s, self.stops = None, -math.inf, 0
 
     def act(self, frame: Frame) -> Command:
