@@ -513,3 +513,29 @@ def test_select_and_reproduce_refuse_a_bad_perception_before_any_work(tmp_path, 
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and flag in err[0], err
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.slow
+def test_reproduce_reports_each_recipe_under_each_perception_model(tmp_path):
+    """REPORT.md holds a row per recipe and a column per perception model, each cell from runs
+    driven under that model (the field cell is not the clean one)."""
+    from terrapref.recipes import TEACH
+    from terrapref.report.reproduce import reproduce
+
+    import json
+
+    report_path = reproduce(tmp_path / "rep", seeds=1, recipes=(TEACH,), perceptions=(load_perception("clean"), load_perception("field")),
+                            log=lambda _: None)
+    report = report_path.read_text()
+    table = report.split("## Under what a robot sees")[1].split("\n## ")[0]
+    header = next(line for line in table.splitlines() if line.startswith("| recipe |"))
+    assert header == "| recipe | clean | field |"
+    row = next(line for line in table.splitlines() if line.startswith("| teach |"))
+    clean, field = row.split(" | ")[1:3]
+    assert "collisions" in clean and "collisions" in field
+    runs = json.loads((report_path.parent / "results.json").read_text())["runs"]
+    seen = {r["perception"] for r in runs}
+    assert seen == {"clean", "field"}
+    # The same test courses driven under each: the field runs are runs of their own, not the clean ones relabelled.
+    tracks = {r["perception"]: [z["distance_m"] for z in r["metrics"]["zones"]] for r in runs if r["scenario"] == "test_course"}
+    assert tracks["clean"] != tracks["field"]

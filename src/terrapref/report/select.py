@@ -216,6 +216,8 @@ def write_selection_report(out: Path, saved: dict) -> Path:
         table, bars = _selection_table(sel, part, part_runs)
         lines += table + [""]
         for label, rate, interval in bars:
+            if len(seen) > 1 and not label.endswith("all orders"):
+                continue  # several perception models: a bar per recipe and model (the orders are in the tables)
             labels.append(f"{label}, {name}" if len(seen) > 1 else label)
             rates.append(rate)
             intervals.append(interval)
