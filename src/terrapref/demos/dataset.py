@@ -120,7 +120,7 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
     featurizer = UtilityFeaturizer(features, PinholeCamera(camera), classes)
     path = ReferencePath(np.asarray(recording.meta.get("path", scenario.waypoints), dtype=float))
     tracker = PathTracker(path)
-    perceived = (recording.meta.get("perception") or {}).get("name", "clean")
+    perceived = recording.perception
     if camera != rec_camera and perceived != "clean":
         raise UserError(str(recording.path / "meta.json"), f"its frames are what the robot received under perception {perceived!r}; "
                         "rendering them again under another camera would give the simulator's truth instead", field="perception")
@@ -252,7 +252,7 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
         "profile": first.meta.get("profile"),
         "recordings": [
             {"path": str(r.path), "scenario": r.meta.get("scenario"), "frames": len(r), "frames_used": len(p[1]), "complete": r.complete,
-             "driver": r.meta.get("driver"), "perception": (r.meta.get("perception") or {}).get("name", "clean"),
+             "driver": r.meta.get("driver"), "perception": r.perception,
              **({"written": False} if r.in_memory else {})}
             for r, p in zip(recordings, parts, strict=True)
         ],

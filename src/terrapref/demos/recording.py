@@ -234,6 +234,12 @@ class Recording:
         return len(self.times) * self.frame_period_s
 
     @property
+    def perception(self) -> str:
+        """The name of the perception model the frames went through ('clean': the simulator's truth)."""
+        model = self.meta.get("perception")
+        return str(model.get("name", "clean")) if isinstance(model, dict) else "clean"
+
+    @property
     def in_memory(self) -> bool:
         """Whether the frames are the simulation's own (:class:`MemoryRecordingWriter`), not files."""
         return self.views is not None

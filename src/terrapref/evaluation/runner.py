@@ -49,6 +49,11 @@ class RunSpec:
     style: str = "default"  # the synthetic driver's style (terrapref.demos.expert.STYLES), for EXPERT runs
     keep_run: bool = False  # keep every decision (pose, choice, F_t) of a planner run, for an MCAP of it
 
+    @property
+    def perceived_as(self) -> str:
+        """The name of the perception model the planner receives ('clean' when none is given: the truth)."""
+        return self.perception.name if self.perception is not None else "clean"
+
 
 @dataclass(frozen=True, eq=False)  # arrays inside: compared field by field where needed
 class KeptFrame:

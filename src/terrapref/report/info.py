@@ -78,16 +78,16 @@ def _recording_lines(p: Path) -> list[str]:
              f"frames          {len(rec)} ({rec.duration_s:.1f} s)",
              f"scenario        {m.get('scenario')}",
              f"driver          {_driver(driver)}",
-             f"perception      {_perception(m.get('perception'))}",
+             f"perception      {_perception(rec.perception)}",
              f"created         {m.get('created', '?')}"]
     return lines + _common(m)
 
 
-def _perception(model: object) -> str:
-    """The perception model a recording's frames went through, by name (the truth when none is named)."""
-    if not isinstance(model, dict) or model.get("name", "clean") == "clean":
+def _perception(name: str) -> str:
+    """The perception model a recording's frames went through, said in words."""
+    if name == "clean":
         return "clean (the simulator's own labels and poses)"
-    return f"{model.get('name')} (what the robot's camera and localisation would have given; the driver saw the truth)"
+    return f"{name} (what the robot's camera and localisation would have given; the driver saw the truth)"
 
 
 def _driver(driver: dict) -> str:

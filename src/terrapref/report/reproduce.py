@@ -156,8 +156,7 @@ def _evaluate(setup: _Setup, trained: list[RecipeModel], engine: Engine, log: Ca
 def _recipe_run(result: RunResult, spec: RunSpec, trained: list[RecipeModel]) -> RecipeRun:
     """A run with the recipe and training seed of the model that drove it (the driver's: ``driver`` and the run's seed)."""
     model = next((t for t in trained if t.model == spec.model_path), None)
-    seen = spec.perception.name if spec.perception is not None and spec.perception.active else "clean"
-    return RecipeRun(result, model.recipe, model.seed, seen) if model is not None else RecipeRun(result, "driver", result.seed)
+    return RecipeRun(result, model.recipe, model.seed, spec.perceived_as) if model is not None else RecipeRun(result, "driver", result.seed)
 
 
 @functools.lru_cache(maxsize=64)

@@ -161,7 +161,7 @@ def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict
             continue
         model = models[spec.model_path]
         who = {"recipe": model.recipe, "order": list(model.job.order), "seed": model.job.seed, "scenario": r.scenario,
-               "perception": spec.perception.name if spec.perception is not None else "clean"}
+               "perception": spec.perceived_as}
         runs.append({**who, "collisions": r.metrics.collisions})
         for z in r.metrics.zones:
             d = driver[(tuple(spec.profile), r.scenario, z.id)]
@@ -213,11 +213,10 @@ def write_selection_report(out: Path, saved: dict) -> Path:
         part_runs = [r for r in runs if r.get("perception", "clean") == name]
         if len(seen) > 1:
             lines += [f"## Perception `{name}`", ""]
-        table, bars = _selection_table(sel, part, part_runs)
+        # Several perception models: a bar per recipe and model in the figure (the orders are in the tables).
+        table, bars = _selection_table(sel, part, part_runs, order_bars=len(seen) == 1)
         lines += table + [""]
         for label, rate, interval in bars:
-            if len(seen) > 1 and not label.endswith("all orders"):
-                continue  # several perception models: a bar per recipe and model (the orders are in the tables)
             labels.append(f"{label}, {name}" if len(seen) > 1 else label)
             rates.append(rate)
             intervals.append(interval)
@@ -229,9 +228,11 @@ def write_selection_report(out: Path, saved: dict) -> Path:
     return path
 
 
-def _selection_table(sel: dict, rows: list[dict], runs: list[dict]) -> tuple[list[str], list[tuple[str, float, tuple[float, float]]]]:
+def _selection_table(sel: dict, rows: list[dict], runs: list[dict],
+                     order_bars: bool = True) -> tuple[list[str], list[tuple[str, float, tuple[float, float]]]]:
     """One perception's table (per recipe and order, then all orders) and its disagreements; and the
-    bars of the figure: (label, agreement, its interval resampling layouts)."""
+    bars of the figure: (label, agreement, its interval resampling layouts), each recipe's over all
+    orders, and with ``order_bars`` each order's too when there is one recipe."""
     kinds = sorted({r["kind"] for r in rows})
     lines = ["| recipe | order | agreement with the driver | agreement, layouts resampled | " + " | ".join(f"agreement, {k} zones" for k in kinds)
              + " | zone success | the driver's zone success | collisions | per seed |",
@@ -251,7 +252,7 @@ def _selection_table(sel: dict, rows: list[dict], runs: list[dict]) -> tuple[lis
             rate, lo, hi = layout_interval(sub)
             lines.append(f"| {recipe} | {name} | {_rate(sub, 'agrees')} | {rate:.1%} (95% CI {lo:.1%}-{hi:.1%}) | " + " | ".join(_rate([r for r in sub if r["kind"] == k], "agrees") for k in kinds)
                          + f" | {_rate(sub, 'success')} | {_rate(sub, 'driver_success')} | {coll} | {seeds} |")
-            if order is None or len(sel["recipes"]) == 1:
+            if order is None or (order_bars and len(sel["recipes"]) == 1):
                 bars.append((f"{recipe}, all orders" if order is None else " > ".join(order[:3]), rate, (lo, hi)))
     misses: dict[tuple, int] = {}
     for r in rows:
