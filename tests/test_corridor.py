@@ -294,6 +294,30 @@ def test_the_stage_goes_back_to_the_path_only_when_the_way_back_is_clear(camera)
     assert stage.held == 0.0  # with nothing there it goes back
 
 
+def test_a_side_only_the_margin_rules_out_is_kept_rather_than_a_way_across_lethal_terrain(camera):
+    # Trees on the path, 2.5 m across (1.25 m each side), from 1.5 m ahead. The vehicle is 1.8 m
+    # left of the path: its footprint (0.6 m each side) passes them, its clearance (0.9 m) does
+    # not, so the way to every offset brushes the clearance. The ways to the right offsets touch
+    # it later (only once they are across), which is no reason to cross the trees.
+    trees = {"class": "non_traversable", "rectangle": {"center": [16.0, 10.0], "size": [8.0, 2.5]}}
+    scenario = _scenario([trees])
+    path = ReferencePath(scenario.waypoints)
+    stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), 1.0)
+    pose = (10.5, 11.8, 0.0)
+    stage.map.update(_seen_from(scenario, camera, pose), pose)
+    assert (stage._swept(stage.offsets, pose, path, 8.5) < stage._steps).all()  # every way brushes the clearance
+    stage.reset()
+    stage.held = 2.8
+    poses = []
+    while pose[0] < 20.0:  # until past the trees
+        s = path.project(np.array(pose[:2]))[0]
+        w = stage.decide(_seen_from(scenario, camera, pose), pose, path, s)
+        pose = integrate_unicycle(pose, Command(1.0, w), 0.1)
+        poses.append(pose)
+        assert stage.held > 0.0  # never the way across
+    assert _clearance(np.array(poses), (16.0, 10.0), (8.0, 2.5)) > 0.6
+
+
 def test_ground_never_seen_is_priced_at_the_mean_of_the_non_lethal_classes(camera):
     stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), 1.0)
     assert stage.weights[K] == pytest.approx(DRIVER_LIKE[1:K].mean())

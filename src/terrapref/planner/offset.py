@@ -6,7 +6,9 @@ corridor utility ``weights . features(d)`` scores every candidate offset d. The 
 1. rules out offsets whose way there, pure pursuit toward them for ``lethal_horizon_m``, brings
    the footprint (plus ``lethal_margin_m``) onto lethal terrain, whenever any lethal terrain lies
    near the corridor (the class table says which classes are lethal; that is not learned); when
-   that rules out every offset, keeps those whose way runs farthest before lethal terrain;
+   that rules out every offset, checks again with the footprint alone, without the margin, and
+   keeps the offsets whose way is clear of it; when none is, those whose way runs farthest
+   before lethal terrain;
 2. goes back to the path while nothing lies on it within the utility's near distance, unless
    the way back is ruled out (then it takes the best offset that is not);
 3. otherwise keeps the offset it holds while that offset's cost is within ``switch_margin`` of
@@ -102,6 +104,7 @@ class OffsetStage:
         self.offsets = self.corridor.offsets
         m = utility.config.half_width_m + self.config.lethal_margin_m
         self._clear = np.linspace(-m, m, 7)  # the footprint and its clearance, across [m]
+        self._bare = np.linspace(-utility.config.half_width_m, utility.config.half_width_m, 5)  # the footprint alone [m]
         self._line_stations = np.arange(-0.5, self.config.lethal_horizon_m + 1e-9, 0.25)
         self._far_stations = np.arange(-0.5, utility.config.stations_m[1] + 1e-9, 0.25)
         self._steps = round(self.config.lethal_horizon_m / (v_mps * self.config.dt_s))
@@ -168,9 +171,13 @@ class OffsetStage:
         footprint and its clearance (``lines``, when already read). Where some line meets lethal
         terrain, the way to every offset is followed too, and offsets whose way there meets it
         are also ruled out. When that would rule out all of them (beside lethal terrain, every
-        way brushes its clearance; or lethal terrain, seen or misread, lies across every way),
-        those whose way there runs farthest before it stay, and of those the ones whose line is
-        clear if any is: never an offset whose way crosses lethal terrain sooner than another's.
+        way brushes its clearance), the lines and ways are checked again with the footprint
+        alone, and those clear of it stay: a side that only the margin rules out is kept rather
+        than traded, on which way brushes the margin a step later (noise decides that), for a
+        way across the lethal patch. When even the footprint meets lethal terrain on every way
+        (lethal terrain, seen or misread, lies across them all), those whose way runs farthest
+        before it stay: never an offset whose way crosses lethal terrain sooner than another's.
+        Of those that stay, the ones whose line is clear with the margin, if any is.
         """
         if lines is None:
             lines = self._lines(offsets, path, progress_s, self._line_stations)
@@ -180,27 +187,35 @@ class OffsetStage:
         both = lines | (reach < self._steps)
         if not both.all():
             return both
-        farthest = reach == reach.max()
-        keep = farthest & ~lines if (farthest & ~lines).any() else farthest
-        return ~keep
+        reach = self._swept(offsets, pose, path, progress_s, self._bare)
+        keep = ~self._hits(offsets, path, progress_s, self._line_stations, self._bare).any(axis=1) & (reach == self._steps)
+        if not keep.any():
+            keep = reach == reach.max()
+        return ~(keep & ~lines if (keep & ~lines).any() else keep)
 
     def _lines(self, offsets: np.ndarray, path: ReferencePath, progress_s: float, stations: np.ndarray) -> np.ndarray:
         """Which of ``offsets`` (O,) have lethal terrain on their line parallel to the path, at
         ``stations`` (S,) from the vehicle's progress, across the footprint and its clearance."""
         return self._hits(offsets, path, progress_s, stations).any(axis=1)
 
-    def _hits(self, offsets: np.ndarray, path: ReferencePath, progress_s: float, stations: np.ndarray) -> np.ndarray:
-        """:meth:`_lines` station by station, (O, S)."""
+    def _hits(self, offsets: np.ndarray, path: ReferencePath, progress_s: float, stations: np.ndarray,
+              across: np.ndarray | None = None) -> np.ndarray:
+        """:meth:`_lines` station by station, (O, S); ``across`` the points across each line (the
+        footprint and its clearance by default)."""
+        across = self._clear if across is None else across
         s = np.minimum(progress_s + stations, path.length_m)
-        return self.lethal[self.map.beside(path, s, offsets[:, None] + self._clear[None, :])].any(axis=2)
+        return self.lethal[self.map.beside(path, s, offsets[:, None] + across[None, :])].any(axis=2)
 
-    def _swept(self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_s: float) -> np.ndarray:
+    def _swept(self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_s: float,
+               across: np.ndarray | None = None) -> np.ndarray:
         """For each of ``offsets`` (O,), the step of ``dt_s`` at which pure pursuit toward it first drives
-        the footprint onto lethal terrain, ``self._steps`` where it does not within the horizon."""
+        the footprint (``across``, with its clearance by default) onto lethal terrain, ``self._steps``
+        where it does not within the horizon."""
+        across = self._clear if across is None else across
         c, gmap = self.config, self.map
         a, d, length = path.segments
         return swept_reach(float(pose[0]), float(pose[1]), float(pose[2]), offsets, float(progress_s), self.v_mps, c.dt_s,
-                           self._steps, c.pursuit_lookahead_m, path.s, a, d, length, self._clear, gmap.cells,
+                           self._steps, c.pursuit_lookahead_m, path.s, a, d, length, across, gmap.cells,
                            float(gmap.origin[0]), float(gmap.origin[1]), 1.0 / gmap.config.map_resolution_m,
                            self.lethal, self.k + 1)
 
