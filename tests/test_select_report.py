@@ -47,3 +47,18 @@ def test_select_md_gives_both_intervals_per_order(tmp_path):
     assert "96.2% (154/160, 95% CI" in row
     assert f"| {rate:.1%} (95% CI {lo:.1%}-{hi:.1%}) |" in row
     assert (tmp_path / "select.png").stat().st_size > 0
+
+
+def test_the_figure_marks_each_row_with_its_own_target(tmp_path, monkeypatch):
+    import terrapref.report.select as select_report
+    rows = [dict(r, perception=name) for name in ("clean", "field") for r in _zones({"gen:0": 1, "gen:1": 0})]
+    saved = {"selection": {"recipes": ["teach"], "orders": [ORDER], "seeds": 5, "layouts": ["gen:0", "gen:1"], "style": "default",
+                           "perceptions": [{"name": "clean"}, {"name": "field"}]},
+             "zones": rows, "runs": [{"recipe": "teach", "order": ORDER, "seed": 0, "scenario": "gen:0", "collisions": 0, "perception": p}
+                                     for p in ("clean", "field")],
+             "engine": "local, 1 worker", "train_s": 1.0, "eval_s": 2.0}
+    drawn = {}
+    monkeypatch.setattr(select_report, "save_intervals", lambda path, labels, *args, target=None, **kw: drawn.update(labels=labels, target=target))
+    write_selection_report(tmp_path, saved)
+    assert drawn["labels"] == ["teach, all orders, clean", "teach, all orders, field"]
+    assert drawn["target"] == [select_report.TARGET, select_report.PERCEIVED_TARGET]  # 95% on clean frames, 90% under errors

@@ -219,8 +219,9 @@ def save_bars(path: str | Path, labels: Sequence[str], means: Sequence[float], s
 
 
 def save_intervals(path: str | Path, labels: Sequence[str], rates: Sequence[float], intervals: Sequence[tuple[float, float]], ylabel: str,
-                   target: float | None = None, title: str = "") -> Path:
-    """One point per row with its 95% interval (asymmetric, e.g. Wilson) and the rate written beside it.
+                   target: float | Sequence[float] | None = None, title: str = "") -> Path:
+    """One point per row with its 95% interval (asymmetric, e.g. Wilson) and the rate written beside it;
+    ``target`` a line across, or one per row (a short line at each point, its value written where it changes).
 
     Points rather than bars: the axis can then start near the data without bars that begin
     nowhere, and differences of a few points stay visible.
@@ -233,10 +234,17 @@ def save_intervals(path: str | Path, labels: Sequence[str], rates: Sequence[floa
     for xi, r, h in zip(x, rates, hi):
         ax.text(xi + 0.08, r, f"{r:.1%}", ha="left", va="center", fontsize=8)
     bottom = float(np.nanmin(lo)) if len(lo) else 0.0
-    if target is not None:
+    if isinstance(target, (int, float)):
         ax.axhline(target, color="grey", ls=":")
         ax.text(len(labels) - 0.5, target, f"target {target:.0%}", ha="right", va="bottom", fontsize=8, color="dimgrey")
         bottom = min(bottom, target)
+    elif target is not None:
+        targets = [float(t) for t in target]
+        for i, t in enumerate(targets):
+            ax.hlines(t, i - 0.45, i + 0.45, color="grey", ls=":")
+            if i == 0 or t != targets[i - 1]:
+                ax.text(i - 0.45, t, f"target {t:.0%}", ha="left", va="bottom", fontsize=7, color="dimgrey")
+        bottom = min([bottom, *targets])
     ax.set_xticks(x, labels, rotation=15, ha="right", fontsize=8)
     ax.set_xlim(-0.5, len(labels) - 0.5)
     ax.set_ylim(max(0.0, bottom - 0.05), 1.0)

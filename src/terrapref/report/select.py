@@ -31,7 +31,8 @@ from terrapref.terrain import PreferenceProfile
 
 LETHAL_LAST = "non_traversable"
 ALL_ORDERS = tuple((*p, LETHAL_LAST) for p in itertools.permutations(("mud", "rock", "water")))
-TARGET = 0.95
+TARGET = 0.95  # agreement the default recipe must keep on clean frames
+PERCEIVED_TARGET = 0.90  # and under a perception model's errors (docs/perception.md)
 
 
 @dataclass(frozen=True)
@@ -207,7 +208,7 @@ def write_selection_report(out: Path, saved: dict) -> Path:
              "alike across seeds), the spread another set of layouts would show.", "",
              f"The demonstrations recorded: {_perception_line(sel.get('taught_under'))}. The models drive the layouts receiving "
              + ", then ".join(f"`{name}`" for name in seen) + " (terrapref.perception); the driver always sees the truth.", ""]
-    labels, rates, intervals = [], [], []
+    labels, rates, intervals, targets = [], [], [], []
     for name in seen:
         part = [r for r in rows if r.get("perception", "clean") == name]
         part_runs = [r for r in runs if r.get("perception", "clean") == name]
@@ -220,8 +221,10 @@ def write_selection_report(out: Path, saved: dict) -> Path:
             labels.append(f"{label}, {name}" if len(seen) > 1 else label)
             rates.append(rate)
             intervals.append(interval)
+            targets.append(TARGET if name == "clean" else PERCEIVED_TARGET)
     lines += [f"Training {saved['train_s']:.0f} s, runs {saved['eval_s']:.0f} s (wall; {saved['engine']}).", "", "![selection](select.png)", ""]
-    save_intervals(out / "select.png", labels, rates, intervals, "agreement with the driver", target=TARGET,
+    save_intervals(out / "select.png", labels, rates, intervals, "agreement with the driver",
+                   target=targets if len(set(targets)) > 1 else targets[0] if targets else TARGET,
                    title=f"one drive per model, {len(layouts)} layouts x {sel['seeds']} seeds; 95% intervals, layouts resampled")
     path = out / "SELECT.md"
     path.write_text("\n".join(lines))
