@@ -221,7 +221,8 @@ def save_bars(path: str | Path, labels: Sequence[str], means: Sequence[float], s
 def save_intervals(path: str | Path, labels: Sequence[str], rates: Sequence[float], intervals: Sequence[tuple[float, float]], ylabel: str,
                    target: float | Sequence[float] | None = None, title: str = "") -> Path:
     """One point per row with its 95% interval (asymmetric, e.g. Wilson) and the rate written beside it;
-    ``target`` a line across, or one per row (a short line at each point, its value written where it changes).
+    ``target`` a line across, or one per row (a short line at each point, its value written where it
+    changes; a line across when every row's is the same).
 
     Points rather than bars: the axis can then start near the data without bars that begin
     nowhere, and differences of a few points stay visible.
@@ -234,6 +235,8 @@ def save_intervals(path: str | Path, labels: Sequence[str], rates: Sequence[floa
     for xi, r, h in zip(x, rates, hi):
         ax.text(xi + 0.08, r, f"{r:.1%}", ha="left", va="center", fontsize=8)
     bottom = float(np.nanmin(lo)) if len(lo) else 0.0
+    if target is not None and not isinstance(target, (int, float)) and len(set(target)) == 1:
+        target = float(target[0])
     if isinstance(target, (int, float)):
         ax.axhline(target, color="grey", ls=":")
         ax.text(len(labels) - 0.5, target, f"target {target:.0%}", ha="right", va="bottom", fontsize=8, color="dimgrey")

@@ -188,15 +188,17 @@ class OffsetStage:
         if not both.all():
             return both
         reach = self._swept(offsets, pose, path, progress_s, self._bare)
-        keep = ~self._hits(offsets, path, progress_s, self._line_stations, self._bare).any(axis=1) & (reach == self._steps)
+        keep = ~self._lines(offsets, path, progress_s, self._line_stations, self._bare) & (reach == self._steps)
         if not keep.any():
             keep = reach == reach.max()
         return ~(keep & ~lines if (keep & ~lines).any() else keep)
 
-    def _lines(self, offsets: np.ndarray, path: ReferencePath, progress_s: float, stations: np.ndarray) -> np.ndarray:
+    def _lines(self, offsets: np.ndarray, path: ReferencePath, progress_s: float, stations: np.ndarray,
+               across: np.ndarray | None = None) -> np.ndarray:
         """Which of ``offsets`` (O,) have lethal terrain on their line parallel to the path, at
-        ``stations`` (S,) from the vehicle's progress, across the footprint and its clearance."""
-        return self._hits(offsets, path, progress_s, stations).any(axis=1)
+        ``stations`` (S,) from the vehicle's progress, across the footprint and its clearance
+        (``across``, by default)."""
+        return self._hits(offsets, path, progress_s, stations, across).any(axis=1)
 
     def _hits(self, offsets: np.ndarray, path: ReferencePath, progress_s: float, stations: np.ndarray,
               across: np.ndarray | None = None) -> np.ndarray:

@@ -224,7 +224,7 @@ def write_selection_report(out: Path, saved: dict) -> Path:
             targets.append(TARGET if name == "clean" else PERCEIVED_TARGET)
     lines += [f"Training {saved['train_s']:.0f} s, runs {saved['eval_s']:.0f} s (wall; {saved['engine']}).", "", "![selection](select.png)", ""]
     save_intervals(out / "select.png", labels, rates, intervals, "agreement with the driver",
-                   target=targets if len(set(targets)) > 1 else targets[0] if targets else TARGET,
+                   target=targets or TARGET,
                    title=f"one drive per model, {len(layouts)} layouts x {sel['seeds']} seeds; 95% intervals, layouts resampled")
     path = out / "SELECT.md"
     path.write_text("\n".join(lines))
