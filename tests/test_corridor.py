@@ -318,6 +318,27 @@ def test_a_side_only_the_margin_rules_out_is_kept_rather_than_a_way_across_letha
     assert _clearance(np.array(poses), (16.0, 10.0), (8.0, 2.5)) > 0.6
 
 
+def test_when_lethal_terrain_lies_across_every_way_the_side_held_is_kept(camera):
+    # A slanted non_traversable strip across the whole corridor, nearer on the left: the footprint
+    # meets it on the way to every offset, and the ways to the right run farthest before it.
+    # Holding a left offset, the stage keeps to the left rather than swinging across in front of
+    # the strip (which way runs farthest turns on a step of pose noise); holding none, it takes
+    # the farthest way.
+    strip = {"class": "non_traversable", "polygon": [[14.5, 18.0], [15.1, 18.0], [16.9, 2.0], [16.3, 2.0]]}
+    scenario = _scenario([strip])
+    path = ReferencePath(scenario.waypoints)
+    stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), 1.0)
+    pose = (10.5, 10.0, 0.0)
+    stage.map.update(_seen_from(scenario, camera, pose), pose)
+    reach = stage._swept(stage.offsets, pose, path, 8.5, stage._bare)
+    assert (reach < stage._steps).all()  # even the footprint alone meets the strip on every way
+    assert stage.offsets[np.argmax(reach)] < 0.0  # the farthest way is on the right
+    for held, side in ((1.0, 1.0), (-1.0, -1.0), (0.0, -1.0)):
+        stage.held = held
+        kept = stage.offsets[~stage._blocked(stage.offsets, pose, path, 8.5)]
+        assert kept.size > 0 and (np.sign(kept) == side).all(), (held, kept)
+
+
 def test_ground_never_seen_is_priced_at_the_mean_of_the_non_lethal_classes(camera):
     stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), 1.0)
     assert stage.weights[K] == pytest.approx(DRIVER_LIKE[1:K].mean())

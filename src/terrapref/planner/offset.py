@@ -176,7 +176,8 @@ class OffsetStage:
         than traded, on which way brushes the margin a step later (noise decides that), for a
         way across the lethal patch. When even the footprint meets lethal terrain on every way
         (lethal terrain, seen or misread, lies across them all), those whose way runs farthest
-        before it stay: never an offset whose way crosses lethal terrain sooner than another's.
+        before it stay, on the side of the offset held if it holds one: which way runs farthest
+        changes with each step of pose noise, and a swap of sides then heads across the patch.
         Of those that stay, the ones whose line is clear with the margin, if any is.
         """
         if lines is None:
@@ -190,7 +191,9 @@ class OffsetStage:
         reach = self._swept(offsets, pose, path, progress_s, self._bare)
         keep = ~self._lines(offsets, path, progress_s, self._line_stations, self._bare) & (reach == self._steps)
         if not keep.any():
-            keep = reach == reach.max()
+            side = np.sign(offsets) == np.sign(self.held) if self.held != 0.0 else np.ones(len(offsets), bool)
+            side = side if side.any() else np.ones(len(offsets), bool)
+            keep = side & (reach == reach[side].max())
         return ~(keep & ~lines if (keep & ~lines).any() else keep)
 
     def _lines(self, offsets: np.ndarray, path: ReferencePath, progress_s: float, stations: np.ndarray,
