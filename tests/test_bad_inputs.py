@@ -138,6 +138,43 @@ def test_a_model_with_nan_weights_is_refused(tmp_path: Path, capsys):
     _one_error(capsys, str(path), "weights.layers.1.weight")
 
 
+def _contents(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.mark.parametrize("argv", [
+    ["featurize", "REC", "--out", "REC/frames.jsonl"],
+    ["featurize", "REC", "--out", "REC/new.safetensors"],
+    ["train", "REC", "--out", "REC/meta.json"],
+    ["export", "REC", "--format", "mcap", "--out", "REC/frames.jsonl"],
+    ["inspect", "REC", "--out", "REC/images/000000.png"],
+    ["import", "REC", "--robot", "robot.yaml", "--out", "REC/imported"],
+])
+def test_an_output_inside_an_input_is_refused_before_any_work(tmp_path: Path, capsys, recording, argv):
+    rec = shutil.copytree(recording, tmp_path / "rec")
+    before = _contents(rec)
+    argv = [a.replace("REC", str(rec)) for a in argv]
+    assert main(argv) == 2
+    _one_error(capsys, "--out", str(rec))
+    assert _contents(rec) == before
+
+
+def test_an_output_that_is_a_device_or_a_fifo_is_refused_and_left_as_it_was(tmp_path: Path, capsys, recording):
+    import os
+    import stat
+
+    os.mkfifo(tmp_path / "fifo.png")
+    (tmp_path / "dev.safetensors").symlink_to("/dev/null")
+    for argv, kind in ((["show", "demo_course", "--out", str(tmp_path / "fifo.png")], "FIFO"),
+                       (["train", str(recording), "--out", str(tmp_path / "dev.safetensors")], "character device"),
+                       (["export", str(recording), "--format", "mcap", "--out", str(tmp_path / "fifo.png")], "FIFO"),
+                       (["render", "demo_course", "--out", str(tmp_path / "dev.safetensors")], "character device")):
+        assert main(argv) == 2
+        _one_error(capsys, "--out", kind)
+    assert stat.S_ISFIFO((tmp_path / "fifo.png").stat().st_mode)
+    assert stat.S_ISCHR(os.stat("/dev/null").st_mode) and (tmp_path / "dev.safetensors").is_symlink()
+
+
 @pytest.mark.parametrize("argv, needles", [
     (["evaluate", "m.safetensors", "demo_course", "--seeds", "abc", "--out", "e"], ("terrapref evaluate", "--seeds", "'abc'")),
     (["render", "demo_course", "--pose", "8", "10", "--out", "s.png"], ("terrapref render", "--pose", "expected 3 arguments")),

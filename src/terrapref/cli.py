@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import stat
 import sys
 import tempfile
 from collections.abc import Callable, Sequence
@@ -50,6 +51,9 @@ def _cmd_render(args: argparse.Namespace) -> int:
 
     if args.pose is not None and not all(math.isfinite(v) for v in args.pose):
         raise UserError("--pose", "X, Y and YAW_DEG must be finite numbers")
+    _check_output(args.out, "--out", [args.scenario])
+    if args.preview:
+        _check_output(args.preview, "--preview", [args.scenario, args.out])
     scenario = resolve_scenario(args.scenario)
     x, y, yaw_deg = args.pose if args.pose is not None else (scenario.start[0], scenario.start[1], math.degrees(scenario.start[2]))
     renderer = SegmentationRenderer(PinholeCamera(), rasterise(scenario))
@@ -68,6 +72,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
     from terrapref.world import rasterise
 
     _check_figure(args.out, "--out")
+    _check_output(args.out, "--out", [args.scenario])
     scenario = resolve_scenario(args.scenario)
     save_map(args.out, scenario, rasterise(scenario))
     print(f"wrote {args.out} ({scenario.name}: {len(scenario.terrain)} patches, {len(scenario.zones)} zones, path {scenario.path_length_m():.0f} m)")
@@ -115,6 +120,7 @@ def _cmd_record(args: argparse.Namespace) -> int:
 
     if args.seed < 0:
         raise UserError("--seed", f"must be an integer >= 0, got {args.seed}")
+    _check_output(args.out, "--out", [args.scenario], folder=True)
     scenario = resolve_scenario(args.scenario)
     profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile else PreferenceProfile.default(scenario.classes)
     try:
@@ -156,7 +162,7 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     scenario = resolve_scenario(args.scenario)
     profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile else None
     if args.record is not None:
-        _check_output(args.record, "--record", [args.model] if args.model else [], folder=True)
+        _check_output(args.record, "--record", [args.scenario, *([args.model] if args.model else [])], folder=True)
     perception = _perception(args.perception, classes=scenario.classes)
     result = run_session(scenario, TeleopOptions(record_dir=args.record, overwrite=args.force, v_mps=args.speed, disturbance=_disturbance(args.disturb),
                                                  seed=args.seed, profile=profile, model=args.model, perception=perception))
@@ -175,6 +181,9 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
     from terrapref.report.inspect import save_driven_path, summarise
     from terrapref.demos.recording import read_recording
 
+    if args.out is not None:
+        _check_figure(args.out, "--out")
+        _check_output(args.out, "--out", [args.recording])
     rec = read_recording(args.recording)
     summary = summarise(rec)
     for line in summary.lines():
@@ -214,6 +223,7 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
     from terrapref.demos.recording import read_recording
     from terrapref.progress import Progress
 
+    _check_output(args.out, "--out", [*args.recordings, *([args.camera] if args.camera else [])])
     recordings = [read_recording(p) for p in args.recordings]
     for r in recordings:
         if not r.complete:
@@ -265,12 +275,20 @@ def _check_figure(out: str | Path, flag: str) -> None:
 
 
 def _check_output(out: str | Path, flag: str, inputs: Sequence[str | Path] = (), folder: bool = False) -> None:
-    """Refuse an output before any work: one that is an input, a file where a folder goes (or
-    the reverse), or a place that cannot be written."""
+    """Refuse an output before any work: one that is an input or lies inside one, a device, FIFO
+    or socket, a file where a folder goes (or the reverse), or a place that cannot be written."""
     out = Path(out)
-    for given in inputs:
-        if Path(given).exists() and out.resolve() == Path(given).resolve():
-            raise UserError(str(out), f"is also an input; {flag} must name a new file", field=flag)
+    target = out.resolve()
+    for given in map(Path, inputs):
+        if not given.exists():
+            continue
+        if target == given.resolve():
+            raise UserError(str(out), f"is also an input; {flag} must name a new {'folder' if folder else 'file'}", field=flag)
+        if given.is_dir() and target.is_relative_to(given.resolve()):
+            raise UserError(str(out), f"lies inside the input {given}; {flag} must name a place outside it", field=flag)
+    special = _special_file(out)
+    if special:
+        raise UserError(str(out), f"is a {special}; {flag} must name a {'folder' if folder else 'regular file'}", field=flag)
     if out.exists() and out.is_dir() != folder:
         raise UserError(str(out), "exists and is a " + ("file; expected a folder" if folder else "folder; expected a file name"), field=flag)
     parent = out if folder and out.exists() else out.parent
@@ -281,6 +299,17 @@ def _check_output(out: str | Path, flag: str, inputs: Sequence[str | Path] = (),
             pass
     except OSError as exc:
         raise UserError(str(out), f"cannot be written (no file can be made in {parent}: {exc.strerror or exc})", field=flag) from None
+
+
+def _special_file(path: Path) -> str | None:
+    """What ``path`` is when it exists and is neither a regular file nor a folder (links followed):
+    writing over it would replace a device node or block on a pipe."""
+    try:
+        mode = path.stat().st_mode
+    except OSError:
+        return None
+    kinds = ((stat.S_ISCHR, "character device"), (stat.S_ISBLK, "block device"), (stat.S_ISFIFO, "FIFO"), (stat.S_ISSOCK, "socket"))
+    return next((name for test, name in kinds if test(mode)), None)
 
 
 def _training_data(args: argparse.Namespace, recipe: Recipe) -> Dataset:
@@ -387,7 +416,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
     if args.seeds < 1:
         raise UserError("--seeds", "must be >= 1")
-    _check_output(args.out, "--out", [args.model], folder=True)
+    _check_output(args.out, "--out", [args.model, *args.scenarios], folder=True)
     engine = _engine(args)
     try:
         frames = sorted({int(f) for f in args.frames.split(",") if f.strip()}) if args.frames else []
@@ -430,6 +459,7 @@ def _cmd_import(args: argparse.Namespace) -> int:
     from terrapref.interop.bag_import import import_bag
     from terrapref.interop.robot import load_robot
 
+    _check_output(args.out, "--out", [args.bag, args.robot], folder=True)
     robot = load_robot(args.robot)
     report = import_bag(args.bag, robot, args.out, rate_hz=args.rate, force=args.force)
     for line in report.lines():
@@ -484,6 +514,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
     out = Path(args.out)
     _check_output(out, "--out", [args.input])
     if args.format == "mcap":
+        _check_output(Path(f"{out}.robot.yaml"), "--out", [args.input])
         from terrapref.demos.recording import read_recording
         from terrapref.interop.mcap_export import recording_frames, write_mcap
         from terrapref.progress import Progress
@@ -556,6 +587,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     perceptions = tuple(_perception(n) for n in specs)
     if len({p.name for p in perceptions}) != len(perceptions):
         raise UserError("--perception", f"names a perception model twice: {args.perception!r}")
+    _check_output(args.out, "--out", folder=True)
     engine = _engine(args)
     t0 = time.perf_counter()
     report = reproduce(args.out, args.seeds, args.eval_seeds, recipes, profile, engine, log=lambda m: print(m, flush=True),
@@ -576,6 +608,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
         if args.seeds < 1:
             raise UserError("--seeds", "must be >= 1")
         plan = replace(plan, seeds=args.seeds)
+    _check_output(args.out, "--out", folder=True)
     engine = _engine(args)
     if args.recipe is not None:
         from terrapref.recipes import recipe_named
