@@ -175,6 +175,79 @@ def test_an_output_that_is_a_device_or_a_fifo_is_refused_and_left_as_it_was(tmp_
     assert stat.S_ISCHR(os.stat("/dev/null").st_mode) and (tmp_path / "dev.safetensors").is_symlink()
 
 
+_ROBOT = ("format: terrapref-robot/1\ntopics: {segmentation: /seg, camera_info: /info, odometry: /odom, command: /cmd}\n"
+          "camera: {height_m: 1.0, pitch_deg: 30.0}\n")
+
+
+@pytest.mark.parametrize("kind", ["scenario", "perception", "robot", "label map", "class table"])
+def test_a_yaml_file_with_a_key_given_twice_is_refused_naming_the_key_and_its_lines(tmp_path: Path, capsys, kind):
+    # PyYAML keeps the last of two equal keys; RELLIS grass (3) would be imported as mud.
+    files = {
+        "scenario": ("s.yaml", "format: terrapref-scenario/1\nname: a\nname: b\n", ["validate", "s.yaml"]),
+        "perception": ("p.yaml", "format: terrapref-perception/1\nlabels:\n  flip_rate: 0.1\n  flip_rate: 0.0\n", ["perception", "p.yaml"]),
+        "robot": ("r.yaml", _ROBOT + "labels: rellis3d\nlabels: terrapref\n", ["import", "x.bag", "--robot", "r.yaml", "--out", "o"]),
+        "label map": ("l.yaml", "format: terrapref-labels/1\nids:\n  3: grass\n  0x3: mud\n", ["import", "x.bag", "--robot", "r.yaml", "--out", "o"]),
+        "class table": ("c.yaml", "format: terrapref-classes/1\nclasses: []\nclasses: []\n", None),
+    }
+    name, text, argv = files[kind]
+    (tmp_path / name).write_text(text)
+    if not (tmp_path / "r.yaml").exists():
+        (tmp_path / "r.yaml").write_text(_ROBOT + "labels: l.yaml\n")
+    if argv is None:
+        from terrapref.errors import UserError
+        from terrapref.terrain.classes import load_classes
+
+        with pytest.raises(UserError, match="given twice"):
+            load_classes(tmp_path / name)
+        return
+    argv = [str(tmp_path / a) if a.endswith(".yaml") else a for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr()
+    assert "given twice (first at line" in err.err + err.out and "Traceback" not in err.err
+
+
+@pytest.mark.parametrize("text", [
+    "fx: 0.0\n",
+    "fx: -300.0\nfy: 300.0\n",
+    "image_width: 640\nimage_height: 480\ncamera_matrix: {rows: 3, cols: 3, data: [-300, 0, 320, 0, 300, 240, 0, 0, 1]}\n",
+])
+def test_a_camera_file_with_a_focal_length_that_is_not_positive_is_refused(tmp_path: Path, capsys, recording, text):
+    (tmp_path / "cam.yaml").write_text(text)
+    assert main(["featurize", str(recording), "--camera", str(tmp_path / "cam.yaml"), "--out", str(tmp_path / "d.safetensors")]) == 2
+    _one_error(capsys, "cam.yaml", "fx must be a focal length > 0")
+    assert not (tmp_path / "d.safetensors").exists()
+
+
+def test_a_recording_whose_camera_has_no_focal_length_is_refused(tmp_path: Path, capsys, recording):
+    rec = shutil.copytree(recording, tmp_path / "rec")
+    meta = json.loads((rec / "meta.json").read_text())
+    meta["camera"]["fy"] = 0.0
+    (rec / "meta.json").write_text(json.dumps(meta))
+    assert main(["featurize", str(rec), "--out", str(tmp_path / "d.safetensors")]) == 2
+    _one_error(capsys, "meta.json", "camera", "fy must be a focal length > 0")
+
+
+@pytest.mark.parametrize("argv, needles", [
+    (["record", "demo_course", "--profile", "", "--out", "OUT/r"], ("--profile", "exactly once")),
+    (["train", "REC", "--hidden", "100000000", "--out", "OUT/m.safetensors"], ("--hidden", "weights", "at most")),
+    (["render", "demo_course", "--pose", "1e308", "0", "0", "--out", "OUT/s.png"], ("--pose", "within 30 m")),
+    (["evaluate", "M", "demo_course", "--frames", "5,99999", "--out", "OUT/e"], ("--frames", "99999", "time limit")),
+    (["train", "REC", "REC", "--out", "OUT/m.safetensors"], ("REC", "given twice")),
+    (["featurize", "REC", "REC/", "--out", "OUT/d.safetensors"], ("REC", "given twice")),
+    (["evaluate", "M", "demo_course", "demo_course", "--out", "OUT/e"], ("demo_course", "given twice")),
+])
+def test_values_that_cannot_be_right_and_inputs_given_twice_are_refused_before_any_work(tmp_path: Path, capsys, recording, argv, needles):
+    out = tmp_path / "out"
+    out.mkdir()
+    model = tmp_path / "m.safetensors"
+    model.write_bytes(b"")  # refused before the model is read
+    swap = {"REC": str(recording), "REC/": f"{recording}/", "OUT": str(out), "M": str(model)}
+    argv = [swap.get(a, a).replace("OUT", str(out)) for a in argv]
+    assert main(argv) == 2
+    _one_error(capsys, *(swap.get(n, n) for n in needles))
+    assert not any(out.iterdir())
+
+
 @pytest.mark.parametrize("argv, needles", [
     (["evaluate", "m.safetensors", "demo_course", "--seeds", "abc", "--out", "e"], ("terrapref evaluate", "--seeds", "'abc'")),
     (["render", "demo_course", "--pose", "8", "10", "--out", "s.png"], ("terrapref render", "--pose", "expected 3 arguments")),

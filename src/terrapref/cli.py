@@ -56,7 +56,12 @@ def _cmd_render(args: argparse.Namespace) -> int:
         _check_output(args.preview, "--preview", [args.scenario, args.out])
     scenario = resolve_scenario(args.scenario)
     x, y, yaw_deg = args.pose if args.pose is not None else (scenario.start[0], scenario.start[1], math.degrees(scenario.start[2]))
-    renderer = SegmentationRenderer(PinholeCamera(), rasterise(scenario))
+    camera = PinholeCamera()
+    (w, h), reach = scenario.size_m, camera.config.max_range_m
+    if not (-reach <= x <= w + reach and -reach <= y <= h + reach and abs(yaw_deg) <= 1e6):
+        raise UserError("--pose", f"({x:g}, {y:g}, {yaw_deg:g} deg) is not a pose the camera sees {scenario.name}'s {w:g} x {h:g} m world from "
+                        f"(x and y within {reach:g} m of it, |yaw| <= 1e6 deg)")
+    renderer = SegmentationRenderer(camera, rasterise(scenario))
     image = renderer.render(Pose(x, y, math.radians(yaw_deg)))
     write_png_atomic(args.out, image)
     print(f"wrote {args.out} ({image.shape[1]}x{image.shape[0]} class ids)")
@@ -122,7 +127,7 @@ def _cmd_record(args: argparse.Namespace) -> int:
         raise UserError("--seed", f"must be an integer >= 0, got {args.seed}")
     _check_output(args.out, "--out", [args.scenario], folder=True)
     scenario = resolve_scenario(args.scenario)
-    profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile else PreferenceProfile.default(scenario.classes)
+    profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile is not None else PreferenceProfile.default(scenario.classes)
     try:
         expert = ExpertConfig.styled(args.style, profile.order)
     except ValueError as exc:
@@ -160,7 +165,7 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     if args.seed < 0:
         raise UserError("--seed", f"must be an integer >= 0, got {args.seed}")
     scenario = resolve_scenario(args.scenario)
-    profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile else None
+    profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile is not None else None
     if args.record is not None:
         _check_output(args.record, "--record", [args.scenario, *([args.model] if args.model else [])], folder=True)
     perception = _perception(args.perception, classes=scenario.classes)
@@ -223,6 +228,7 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
     from terrapref.demos.recording import read_recording
     from terrapref.progress import Progress
 
+    _check_distinct(args.recordings, "recording")
     _check_output(args.out, "--out", [*args.recordings, *([args.camera] if args.camera else [])])
     recordings = [read_recording(p) for p in args.recordings]
     for r in recordings:
@@ -299,6 +305,18 @@ def _check_output(out: str | Path, flag: str, inputs: Sequence[str | Path] = (),
             pass
     except OSError as exc:
         raise UserError(str(out), f"cannot be written (no file can be made in {parent}: {exc.strerror or exc})", field=flag) from None
+
+
+def _check_distinct(inputs: Sequence[str | Path], what: str) -> None:
+    """Refuse an input given twice (by the same name, or two names of one file): its frames would
+    count twice, or land in training and validation both."""
+    seen: dict[object, str] = {}
+    for given in map(str, inputs):
+        key = Path(given).resolve() if Path(given).exists() else given
+        if key in seen:
+            same = "" if seen[key] == given else f" (the same as {seen[key]})"
+            raise UserError(given, f"is given twice{same}; give each {what} once")
+        seen[key] = given
 
 
 def _special_file(path: Path) -> str | None:
@@ -386,6 +404,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
     recipe = recipe_named(args.recipe or DEFAULT_RECIPE)
     config = _train_config(args, recipe)
+    _check_distinct(args.data, "recording or dataset")
     _check_output(args.out, "--out", args.data)
     data = _training_data(args, recipe)
     if config.second_stage is not None and recipe.lookahead and data.U2 is None:
@@ -416,14 +435,16 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
     if args.seeds < 1:
         raise UserError("--seeds", "must be >= 1")
+    _check_distinct(args.scenarios, "scenario")
     _check_output(args.out, "--out", [args.model, *args.scenarios], folder=True)
     engine = _engine(args)
     try:
         frames = sorted({int(f) for f in args.frames.split(",") if f.strip()}) if args.frames else []
     except ValueError:
         raise UserError("--frames", f"expected comma-separated frame numbers, got {args.frames!r}") from None
+    _check_frames(frames, args.scenarios)
     model = load_policy(args.model)  # C, or a learned baseline's file (linear, CNN)
-    profile = PreferenceProfile.parse(args.profile, model.classes) if args.profile else None
+    profile = PreferenceProfile.parse(args.profile, model.classes) if args.profile is not None else None
     perception = _perception(args.perception, classes=model.classes)
     n_runs = len(args.scenarios) * args.seeds * (1 if args.no_driver else 2)
     bar = Progress("evaluate", n_runs)
@@ -447,12 +468,32 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if "driver_summary" in metrics:
         d = metrics["driver_summary"]
         print(f"driver:  zone success {d['zone_success_rate']:.1%} over {d['zones']} zones, {d['collision_count']} collisions")
+    for name, numbers in metrics.get("frames_beyond_the_run", {}).items():
+        print(f"note: --frames {','.join(map(str, numbers))}: {name}'s run (seed 0) ended before them; no picture", file=sys.stderr)
     guesses = [z for z in zones if z.get("rests_on_unidentified")]
     if metrics.get("unidentified_pairs"):
         print(f"note: the model's demonstrations did not identify {', '.join(metrics['unidentified_pairs'])}; "
               f"{len(guesses)} of {len(zones)} zone runs rest on them (marked in metrics.json)")
     print(f"wrote {Path(args.out) / 'metrics.json'} and figures in {args.out}" + (f"; runs as MCAP in {Path(args.out) / 'runs'}" if args.mcap else ""))
     return 0
+
+
+def _check_frames(frames: Sequence[int], scenarios: Sequence[str]) -> None:
+    """Refuse a frame number no run of these scenarios can reach: the shortest's time limit caps its frames."""
+    from terrapref.scenario import resolve_scenario
+    from terrapref.scenario.path import ReferencePath
+    from terrapref.sim import SimConfig
+
+    if not frames:
+        return
+    if frames[0] < 0:
+        raise UserError("--frames", f"frame numbers start at 0, got {frames[0]}")
+    config = SimConfig()
+    for name in scenarios:
+        scenario = resolve_scenario(name)
+        last = int(config.time_limit(ReferencePath(scenario.waypoints).length_m) * config.camera_rate_hz)
+        if frames[-1] > last:
+            raise UserError("--frames", f"frame {frames[-1]} lies beyond any run of {scenario.name} (its time limit ends at frame {last})")
 
 
 def _cmd_import(args: argparse.Namespace) -> int:
@@ -578,7 +619,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         raise UserError("--seeds", "must be >= 1")
     if args.eval_seeds < 1:
         raise UserError("--eval-seeds", "must be >= 1")
-    profile = PreferenceProfile.parse(args.profile) if args.profile else None
+    profile = PreferenceProfile.parse(args.profile) if args.profile is not None else None
     names = [n.strip() for n in args.recipes.split(",") if n.strip()]
     if not names or len(set(names)) != len(names):
         raise UserError("--recipes", f"expected distinct recipe names separated by commas, got {args.recipes!r}")

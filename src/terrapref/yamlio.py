@@ -12,6 +12,29 @@ from terrapref.errors import UserError
 MAX_FILE_BYTES = 50_000_000
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, refusing a mapping that gives a key twice (PyYAML keeps the last)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
+        first: dict[Any, int] = {}
+        for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":
+                continue
+            key = self.construct_object(key_node, deep=True)
+            try:
+                line = first.setdefault(key, key_node.start_mark.line + 1)
+            except TypeError:  # an unhashable key: the base loader says so
+                continue
+            if line != key_node.start_mark.line + 1:
+                raise yaml.constructor.ConstructorError(None, None, f"key {key!r} given twice (first at line {line})", key_node.start_mark)
+        return super().construct_mapping(node, deep)
+
+
+def load_yaml_text(text: str) -> Any:
+    """``yaml.safe_load``, except that a mapping with a key given twice is a YAMLError."""
+    return yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
+
+
 def read_yaml_mapping(path: str | Path, expected_format: str | None = None) -> dict[str, Any]:
     """Read a YAML file whose top level is a mapping, optionally checking its ``format`` key.
 
@@ -38,7 +61,7 @@ def read_yaml_mapping(path: str | Path, expected_format: str | None = None) -> d
     except UnicodeDecodeError:
         raise UserError(source, "not UTF-8 text, expected a YAML file") from None
     try:
-        data = yaml.safe_load(text)
+        data = load_yaml_text(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""

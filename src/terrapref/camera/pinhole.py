@@ -50,6 +50,14 @@ class CameraConfig:
             raise ValueError("mount_height_m and max_range_m must be > 0")
         if not -90 < self.pitch_deg < 90:
             raise ValueError("pitch_deg must be in (-90, 90)")
+        for name in ("fx", "fy"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a focal length > 0 [px], got {value}")
+        for name in ("cx", "cy"):
+            value = getattr(self, name)
+            if value is not None and not math.isfinite(value):
+                raise ValueError(f"{name} must be a finite number [px], got {value}")
 
     @property
     def intrinsics(self) -> tuple[float, float, float, float]:

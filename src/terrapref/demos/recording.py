@@ -33,6 +33,7 @@ from terrapref.camera import SegmentationView, as_view
 from terrapref.errors import UserError
 from terrapref.fileio import replace_dir, write_text_atomic
 from terrapref.pngio import read_label_png, write_png_atomic
+from terrapref.yamlio import load_yaml_text
 
 FORMAT = "terrapref-recording/1"
 META = "meta.json"
@@ -392,9 +393,12 @@ def _read_meta(root: Path) -> dict:
 def _read_scenario(root: Path) -> dict:
     """The scenario mapping stored beside the frames (checked when it is parsed, not here)."""
     try:
-        scenario = yaml.safe_load((root / SCENARIO).read_text())
-    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        scenario = load_yaml_text((root / SCENARIO).read_text())
+    except (OSError, UnicodeDecodeError):
         raise UserError(str(root / SCENARIO), "missing or unreadable") from None
+    except yaml.YAMLError as exc:
+        problem = getattr(exc, "problem", None) or "invalid syntax"
+        raise UserError(str(root / SCENARIO), f"malformed YAML: {problem}") from None
     if not isinstance(scenario, dict):
         raise UserError(str(root / SCENARIO), f"expected a terrapref-scenario/1 mapping, got {type(scenario).__name__}")
     return scenario

@@ -62,6 +62,9 @@ def evaluate_model(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     metrics = _metrics(ev, results, evidence)
+    beyond = {r.scenario: sorted(set(frames) - {f.number for f in r.frames}) for r in results if r.driver == PLANNER and r.seed == 0}
+    if any(beyond.values()):
+        metrics["frames_beyond_the_run"] = {name: numbers for name, numbers in beyond.items() if numbers}
     _figures(results, scenarios, out, model, profile, ev.perception)
     if mcap:
         _write_runs(results, out / "runs", model)

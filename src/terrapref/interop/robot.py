@@ -34,12 +34,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from terrapref.errors import ConfigError, Problem, UserError
 from terrapref.interop.labels import LabelMap, load_label_map
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.terrain.profile import PreferenceProfile
-from terrapref.yamlio import read_yaml_mapping
+from terrapref.yamlio import load_yaml_text, read_yaml_mapping
 
 ROBOT_FORMAT = "terrapref-robot/1"
 _TOP = {"format", "topics", "camera", "labels", "path_file", "profile", "max_gap_s", "description"}
@@ -176,12 +177,10 @@ def load_waypoints(path: Path, source: str) -> np.ndarray:
     """Waypoints (N, 2) from a YAML file: a list of [x, y], or a mapping with ``waypoints``."""
     data = None
     try:
-        import yaml
-
-        data = yaml.safe_load(path.read_text())
+        data = load_yaml_text(path.read_text())
     except FileNotFoundError:
         raise UserError(source, f"{path}: no such file", field="path_file") from None
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
+    except (OSError, UnicodeDecodeError, ValueError, yaml.YAMLError) as exc:
         raise UserError(source, f"{path}: unreadable ({exc})", field="path_file") from None
     if isinstance(data, dict):
         data = data.get("waypoints")

@@ -18,6 +18,7 @@ import numpy as np
 from terrapref.configargs import option
 
 ACTIVATIONS = ("relu", "tanh", "elu")
+MAX_WEIGHTS = 50_000_000  # 200 MB of float32 per model; C has about 10,000
 
 
 @dataclass(frozen=True)
@@ -63,6 +64,20 @@ class ClassifierConfig:
                 raise ValueError(f"{name} must be >= {low}")
         if self.skip and not self.compress:
             raise ValueError("skip needs the row-wise compression")
+
+    def check_trainable(self) -> None:
+        """Refuse, before anything is allocated, networks too large to train (a header read from
+        a file is checked against the weights it holds instead)."""
+        if self.weight_count > MAX_WEIGHTS:
+            raise ValueError(f"hidden {self.hidden} x depth {self.depth} x members {self.members} gives about {self.weight_count:,} weights "
+                             f"({self.weight_count * 4 / 2**30:,.1f} GiB); at most {MAX_WEIGHTS:,}")
+
+    @property
+    def weight_count(self) -> int:
+        """How many weights the networks hold (all members), before any is allocated."""
+        h = self.hidden
+        per_member = self.width_in * h + h + (self.depth - 1) * (h * h + h) + h * self.m + self.m
+        return self.members * per_member
 
     def to_dict(self) -> dict:
         return {**asdict(self), "ignore": list(self.ignore)}

@@ -121,6 +121,7 @@ class TrainConfig:
         _check([(isinstance(part, kind), f"{name}: expected {kind.__name__}") for part, kind, name in parts]
                + [(self.second_stage is None or isinstance(self.second_stage, SecondStageConfig), "second_stage must be a SecondStageConfig or None"),
                   (isinstance(self.seed, int) and not isinstance(self.seed, bool) and self.seed >= 0, "seed must be an integer >= 0")])
+        self.classifier.check_trainable()
 
     @property
     def member_seeds(self) -> tuple[int, ...]:

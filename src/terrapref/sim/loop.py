@@ -36,6 +36,10 @@ class SimConfig:
     time_limit_s: float | None = None
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
 
+    def time_limit(self, path_length_m: float) -> float:
+        """The episode time limit [s] on a path this long."""
+        return self.time_limit_s if self.time_limit_s is not None else 2.0 * path_length_m / self.vehicle.max_speed_mps + 60.0
+
     def __post_init__(self) -> None:
         ratio = self.vehicle.control_rate_hz / self.camera_rate_hz
         if self.camera_rate_hz <= 0 or abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
@@ -97,8 +101,7 @@ class Simulation:
         self.path = ReferencePath(scenario.waypoints)
         self._lethal = np.zeros(256, dtype=bool)
         self._lethal[list(scenario.classes.lethal_ids)] = True
-        limit = self.config.time_limit_s
-        self.time_limit_s = limit if limit is not None else 2.0 * self.path.length_m / self.config.vehicle.max_speed_mps + 60.0
+        self.time_limit_s = self.config.time_limit(self.path.length_m)
         self.reset()
 
     def reset(self, pose: Pose | None = None) -> Frame:
