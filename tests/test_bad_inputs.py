@@ -248,6 +248,53 @@ def test_values_that_cannot_be_right_and_inputs_given_twice_are_refused_before_a
     assert not any(out.iterdir())
 
 
+def _full_disk_after(writes: int):
+    """A stand-in for a writer that fills the disk: ``writes`` calls succeed, the next fail as a
+    full file system does (safetensors reports it in its own exception's text)."""
+    from safetensors import SafetensorError
+    from safetensors.numpy import save_file
+
+    calls = []
+
+    def write(tensors, filename, metadata=None):
+        calls.append(filename)
+        if len(calls) > writes:
+            raise SafetensorError("Error while serializing: I/O error: No space left on device (os error 28)")
+        save_file(tensors, filename, metadata=metadata)
+    return write
+
+
+@pytest.mark.parametrize("command, writes", [("train", 0), ("train", 5), ("featurize", 0)])
+def test_a_full_disk_is_one_error_naming_the_output_and_leaves_nothing_behind(tmp_path: Path, capsys, monkeypatch, recording, command, writes):
+    monkeypatch.setattr("terrapref.tensorfile.save_file", _full_disk_after(writes))
+    out = tmp_path / "out"
+    out.mkdir()
+    name = "m.safetensors" if command == "train" else "d.safetensors"
+    assert main([command, str(recording), "--out", str(out / name), *(["--epochs", "3"] if command == "train" else [])]) == 2
+    _one_error(capsys, str(out / name), "No space left on device")
+    assert not any(out.iterdir()), list(out.iterdir())  # no model, checkpoints or .interrupted
+
+
+def test_record_onto_a_full_disk_keeps_the_recording_it_replaces_and_no_hidden_folder(tmp_path: Path, capsys, monkeypatch, recording):
+    import errno
+
+    from terrapref.demos import recording as recording_module
+
+    rec = shutil.copytree(recording, tmp_path / "rec")
+    before = _contents(rec)
+    real, calls = recording_module.write_png_atomic, []
+
+    def write(path, image, **kwargs):
+        calls.append(path)
+        if len(calls) > 10:
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        return real(path, image, **kwargs)
+    monkeypatch.setattr(recording_module, "write_png_atomic", write)
+    assert main(["record", "demo_course", "--out", str(rec), "--force", "--quiet"]) == 2
+    _one_error(capsys, "No space left on device")
+    assert _contents(rec) == before and sorted(p.name for p in tmp_path.iterdir()) == ["rec"]
+
+
 @pytest.mark.parametrize("argv, needles", [
     (["evaluate", "m.safetensors", "demo_course", "--seeds", "abc", "--out", "e"], ("terrapref evaluate", "--seeds", "'abc'")),
     (["render", "demo_course", "--pose", "8", "10", "--out", "s.png"], ("terrapref render", "--pose", "expected 3 arguments")),

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import shutil
 import stat
 import sys
 import tempfile
@@ -145,10 +146,15 @@ def _cmd_record(args: argparse.Namespace) -> int:
         log = record_run(sim, ExpertDriver(expert, sim_config.camera_rate_hz), writer, preference, np.random.default_rng(args.seed),
                          progress=lambda s: bar.update(s.progress_s, f"t={s.time_s:6.1f}s frames={writer.count}"), disturbance=disturbance,
                          perception=perception)
-    except BaseException:
+    except BaseException as exc:
         writer.abort()
-        if writer.partial_dir is not None:
+        if writer.partial_dir is not None and isinstance(exc, OSError):  # a full disk: the unfinished replacement goes
+            shutil.rmtree(writer.partial_dir, ignore_errors=True)
+            print(f"note: {args.out} keeps the recording it held", file=sys.stderr)
+        elif writer.partial_dir is not None:
             print(f"note: {args.out} keeps the recording it held; the unfinished new one is in {writer.partial_dir}", file=sys.stderr)
+        elif isinstance(exc, OSError):
+            print(f"note: {args.out} keeps the {writer.count} frames recorded before the write failed (partial)", file=sys.stderr)
         raise
     bar.close("done")
     state = "reached the goal" if log.completed else "timed out"

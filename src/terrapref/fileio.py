@@ -44,6 +44,11 @@ def atomic_path(path: str | Path, fsync: bool = False) -> Iterator[Path]:
                 os.fsync(fh.fileno())
         os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
+    except OSError as exc:  # a full disk, most often: said of the file asked for, not the temporary one
+        tmp.unlink(missing_ok=True)
+        if exc.filename not in (None, str(tmp), name):
+            raise
+        raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise

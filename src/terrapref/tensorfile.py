@@ -6,6 +6,8 @@ Reading parses a JSON header and raw tensors only; nothing in a file is ever exe
 from __future__ import annotations
 
 import json
+import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +23,13 @@ META_KEY = "terrapref"
 def write_tensor_file(path: str | Path, tensors: dict[str, np.ndarray], meta: dict) -> Path:
     """Write tensors and ``meta`` atomically (temporary file, then rename)."""
     with atomic_path(path) as tmp:
-        save_file(tensors, str(tmp), metadata={META_KEY: json.dumps(meta)})
+        try:
+            save_file(tensors, str(tmp), metadata={META_KEY: json.dumps(meta)})
+        except SafetensorError as exc:  # the library's I/O errors carry the OS error's number in their text
+            code = re.search(r"os error (\d+)", str(exc))
+            if code is None:
+                raise
+            raise OSError(int(code.group(1)), os.strerror(int(code.group(1))), str(tmp)) from None
     return Path(path)
 
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 import tempfile
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -77,12 +78,17 @@ class RecordingWriter:
                 self.dir = Path(tempfile.mkdtemp(prefix=f".{self.target.name}.", suffix=".new", dir=self.target.parent))
             elif any(self.target.iterdir()):
                 raise UserError(str(self.target), "directory is not empty and holds no recording; refusing to write into it")
-        (self.dir / IMAGES).mkdir(parents=True, exist_ok=True)
         self.meta = {"format": FORMAT, "status": "partial", "created": datetime.now(timezone.utc).isoformat(timespec="seconds"), **meta}
-        with open(self.dir / SCENARIO, "w") as fh:
-            yaml.safe_dump(scenario, fh, sort_keys=False)
-        write_json_atomic(self.dir / META, self.meta)
-        self._frames = open(self.dir / FRAMES, "a", buffering=1)
+        made = not self.dir.exists() or self.dir != self.target
+        try:
+            (self.dir / IMAGES).mkdir(parents=True, exist_ok=True)
+            write_text_atomic(self.dir / SCENARIO, yaml.safe_dump(scenario, sort_keys=False))
+            write_json_atomic(self.dir / META, self.meta)
+            self._frames = open(self.dir / FRAMES, "a", buffering=1)
+        except OSError as exc:  # a full disk before the first frame: nothing is left behind
+            if made:
+                shutil.rmtree(self.dir, ignore_errors=True)
+            raise OSError(exc.errno, exc.strerror or str(exc), str(self.target)) from None
         self.count = 0
 
     def append(
@@ -111,8 +117,11 @@ class RecordingWriter:
         }
         if executed is not None:
             line["executed"] = [float(executed[0]), float(executed[1])]
-        self._frames.write(json.dumps(line) + "\n")
-        self._frames.flush()
+        try:
+            self._frames.write(json.dumps(line) + "\n")
+            self._frames.flush()
+        except OSError as exc:
+            raise OSError(exc.errno, exc.strerror or str(exc), str(self.dir / FRAMES)) from None
         self.count += 1
 
     def close(self, summary: dict[str, Any] | None = None) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import shutil
 import tempfile
 from collections.abc import Callable
 from dataclasses import asdict, replace
@@ -75,6 +76,11 @@ class _Checkpoints:
         if self.folder is not None:
             replace_dir(self.folder, self.final)
 
+    def discard(self) -> None:
+        """A run that could not write its files leaves none of them."""
+        if self.folder is not None:
+            shutil.rmtree(self.folder, ignore_errors=True)
+
     def keep_partial(self) -> None:
         """An interrupted run's checkpoints stay, beside the old ones, as ``.checkpoints.interrupted``."""
         if self.folder is not None and self.folder.exists():
@@ -103,10 +109,11 @@ def train_and_save(dataset: Dataset, out: str | Path, config: TrainConfig, check
     """Train, write every epoch as a checkpoint as it is made and the chosen epoch as the model;
     ``recipe`` (its name) is recorded in the model's metadata; ``identify`` as :func:`train`'s.
 
-    Interrupted (Ctrl-C, or any error) after at least one epoch, the best epochs so far are
-    written as ``NAME.interrupted.safetensors`` beside ``out`` (metadata ``status:
-    interrupted``), its checkpoints as ``NAME.checkpoints.interrupted``; ``out`` and its old
-    checkpoints are left as they were.
+    Interrupted (Ctrl-C, or any error but a failed write) after at least one epoch, the best
+    epochs so far are written as ``NAME.interrupted.safetensors`` beside ``out`` (metadata
+    ``status: interrupted``), its checkpoints as ``NAME.checkpoints.interrupted``; ``out`` and
+    its old checkpoints are left as they were. A write that fails (a full disk) leaves nothing of
+    this run behind.
     """
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -114,11 +121,16 @@ def train_and_save(dataset: Dataset, out: str | Path, config: TrainConfig, check
     saver = _Checkpoints(out, {**source, "members": config.classifier.members}, checkpoints)
     try:
         result = train(dataset, config, progress, on_epoch=saver, identify=identify)
+        meta = model_meta(dataset, config, result, source)
+        save_model(out, result.classifier, result.weights, {**meta, "epoch": result.best_epoch})
+    except OSError as exc:  # a file could not be written (a full disk): nothing of this run is left to fill it further
+        saver.discard()
+        written = Path(exc.filename) if exc.filename else out
+        raise OSError(exc.errno, f"{exc.strerror or exc} (writing {'a checkpoint' if written != out else 'the model'}; nothing of this run is kept)",
+                      str(out)) from None
     except BaseException:
         saver.keep_partial()
         saver.interrupted_model(out)
         raise
     saver.finish()
-    meta = model_meta(dataset, config, result, source)
-    save_model(out, result.classifier, result.weights, {**meta, "epoch": result.best_epoch})
     return result

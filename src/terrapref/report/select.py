@@ -21,6 +21,7 @@ from pathlib import Path
 
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, run_many, zone_agrees
 from terrapref.evaluation.stats import cluster_bootstrap, rate_text
+from terrapref.fileio import write_text_atomic
 from terrapref.grid import Engine, run_grid
 from terrapref.perception import PRESETS, PerceptionModel
 from terrapref.recipes import recipe_named, run_recipe
@@ -135,7 +136,7 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
                            "style": sel.style, "perceptions": [p.to_dict() for p in sel.driven_under],
                            "taught_under": (sel.taught_under or PerceptionModel()).to_dict()},
              "engine": engine.describe(), "zones": rows, "runs": runs, "train_s": round(t_train, 1), "eval_s": round(t_eval, 1)}
-    (out / "select.json").write_text(json.dumps(saved, indent=0))
+    write_text_atomic(out / "select.json", json.dumps(saved, indent=0))
     path = write_selection_report(out, saved)
     log(f"wrote {path}")
     return path
@@ -227,7 +228,7 @@ def write_selection_report(out: Path, saved: dict) -> Path:
                    target=targets or TARGET,
                    title=f"one drive per model, {len(layouts)} layouts x {sel['seeds']} seeds; 95% intervals, layouts resampled")
     path = out / "SELECT.md"
-    path.write_text("\n".join(lines))
+    write_text_atomic(path, "\n".join(lines))
     return path
 
 
