@@ -293,6 +293,7 @@ def test_replay_reports_agreement_with_the_operator(tmp_path: Path, logs, capsys
     save_model(tmp_path / "other.safetensors", other.classifier, other.weights, meta)
     assert main(["replay", str(logs["bags"]["sqlite3"]), "--robot", str(logs["robot"]), "--model", str(tmp_path / "other.safetensors"), "--out", str(tmp_path / "r2")]) == 2
     _one_line(capsys, "other.safetensors", "another camera")
+    assert not (tmp_path / "r2").exists()  # refused as soon as the log's camera is known, nothing left half-made
 
 
 def test_colour_segmentation_through_the_label_maps_colour_table(tmp_path: Path, imported):

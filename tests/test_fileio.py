@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from terrapref.fileio import atomic_path, write_bytes_atomic, write_text_atomic
+from terrapref.fileio import atomic_path, new_folder, write_bytes_atomic, write_text_atomic
 from terrapref.pngio import write_png_atomic
 from terrapref.tensorfile import write_tensor_file
 
@@ -67,3 +67,21 @@ def test_two_writers_of_one_target_do_not_share_a_temporary(tmp_path: Path):
 def test_a_folder_is_not_a_file_name(tmp_path: Path):
     with pytest.raises(IsADirectoryError):
         write_bytes_atomic(tmp_path, b"x")
+
+
+def test_folders_written_to_replace_others_follow_the_umask(tmp_path):
+    # A temporary folder is 0700; a recording replaced with --force, a .partial one and a model's
+    # checkpoints are folders a user keeps, with the permissions any other folder gets.
+    from terrapref.cli import main
+
+    old = os.umask(0o022)
+    try:
+        assert stat.S_IMODE(new_folder(tmp_path / "x", ".new").stat().st_mode) == 0o755
+        out = tmp_path / "rec"
+        for _ in range(2):  # the second replaces the first
+            assert main(["record", "fig7_rock_vs_non_traversable_left", "--out", str(out), "--quiet", "--force"]) == 0
+        assert stat.S_IMODE(out.stat().st_mode) == 0o755
+        assert main(["train", str(out), "--epochs", "2", "--out", str(tmp_path / "m.safetensors")]) == 0
+        assert stat.S_IMODE((tmp_path / "m.checkpoints").stat().st_mode) == 0o755
+    finally:
+        os.umask(old)

@@ -342,3 +342,38 @@ def test_inspect_says_quit_and_not_reached(tmp_path: Path):
     assert lines[0].endswith("quit by the driver")
     zone_lines = [line for line in lines if line.endswith("not reached")]
     assert zone_lines and all(" -> -" in line for line in zone_lines)
+
+
+def test_sigterm_during_record_force_says_so_and_keeps_the_old_recording(tmp_path):
+    # As after Ctrl-C: the old recording stays as it was, the unfinished one is OUT.partial (not
+    # a hidden folder beside it), and the command says it was terminated.
+    from terrapref.cli import main
+
+    out = tmp_path / "rec"
+    assert main(["record", "fig7_rock_vs_non_traversable_left", "--out", str(out), "--quiet", "--disturb", "0"]) == 0
+    before = (out / "frames.jsonl").read_bytes()
+    command = [sys.executable, "-c", "import sys; from terrapref.cli import main; sys.exit(main())",
+               "record", "demo_course", "--out", str(out), "--force", "--quiet"]
+    child = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        # Wait (no time limit: the child either writes 20 frames or exits) for the replacement's frames.
+        while not any(p.name.endswith(".new") and len(list((p / "images").glob("*.png"))) >= 20 for p in tmp_path.iterdir()):
+            if child.poll() is not None:
+                pytest.fail(f"the recorder exited ({child.returncode}) before 20 frames: {child.stderr.read()}")
+            time.sleep(0.005)
+        child.send_signal(signal.SIGTERM)
+        _, err = child.communicate()
+    finally:
+        child.kill()
+        child.wait()
+    assert child.returncode == 143 and "terminated" in err and "Traceback" not in err, err
+    assert (out / "frames.jsonl").read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec", "rec.partial"]
+    assert read_recording(tmp_path / "rec.partial").complete is False
+
+
+def test_a_run_stopped_before_its_first_frame_leaves_no_recording(tmp_path):
+    out = tmp_path / "rec"
+    writer = RecordingWriter(out, {"camera": {}}, {"format": "terrapref-scenario/1"})
+    writer.abort()
+    assert not out.exists()

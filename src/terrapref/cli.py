@@ -10,9 +10,11 @@ import argparse
 import math
 import os
 import shutil
+import signal
 import stat
 import sys
 import tempfile
+import threading
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
@@ -520,7 +522,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     from terrapref.interop.bag_import import import_bag
     from terrapref.interop.replay import replay, write_replay
     from terrapref.interop.robot import load_robot
-    from terrapref.learning.model_file import load_model
+    from terrapref.learning.model_file import check_compatible, load_model
     from terrapref.progress import Progress
 
     model = load_model(args.model)
@@ -528,7 +530,13 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     out = Path(args.out)
     _check_output(out, "--out", [args.bag, args.model, args.robot], folder=True)
     rec_dir = out / "recording"
-    report = import_bag(args.bag, robot, rec_dir, rate_hz=args.rate, force=True)
+    made = not out.exists()
+    try:
+        report = import_bag(args.bag, robot, rec_dir, rate_hz=args.rate, force=True, check_camera=lambda camera: check_compatible(model, camera))
+    except BaseException:
+        if made:  # refused (another camera) or stopped: no half-made OUT is left
+            shutil.rmtree(out, ignore_errors=True)
+        raise
     print(f"imported {report.frames} frames ({report.duration_s:.0f} s) into {rec_dir}")
     rec = read_recording(rec_dir)
     bar = Progress("replay", len(rec))
@@ -1023,21 +1031,38 @@ def build_parser(train_flags: bool = True) -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the command was, so that it cleans up as after Ctrl-C."""
+
+
+def _on_sigterm(pid: int) -> Callable[[int, object], None]:
+    def handler(signum: int, frame: object) -> None:
+        if os.getpid() != pid:  # a forked worker: end as SIGTERM ends a process, the command cleans up
+            signal.signal(signum, signal.SIG_DFL)
+            os.kill(os.getpid(), signum)
+            return
+        raise Terminated()
+    return handler
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((a for a in argv if not a.startswith("-")), None)
     parser = build_parser(train_flags=command == "train")
     args = parser.parse_args(argv)
     func: Callable[[argparse.Namespace], int] = args.func
+    on_main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _on_sigterm(os.getpid())) if on_main_thread else None
     try:
         return func(args)
     except UserError as exc:
         for line in exc.lines():
             print(f"error: {line}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        terminated = isinstance(exc, Terminated)
+        print("terminated" if terminated else "interrupted", file=sys.stderr)
+        return 143 if terminated else 130
     except BrokenPipeError:  # output piped into `head` and the like: stop quietly
         sys.stderr.close()
         return 0
@@ -1052,6 +1077,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         print(f"error: internal error ({type(exc).__name__}: {exc}); set TERRAPREF_DEBUG=1 for the traceback", file=sys.stderr)
         return 1
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

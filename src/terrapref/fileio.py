@@ -54,6 +54,14 @@ def atomic_path(path: str | Path, fsync: bool = False) -> Iterator[Path]:
         raise
 
 
+def new_folder(beside: Path, suffix: str) -> Path:
+    """A new hidden folder in ``beside``'s folder, named after it, for writing what will replace
+    it; with the permissions the umask gives any folder (a temporary folder's are 0700)."""
+    folder = Path(tempfile.mkdtemp(prefix=f".{beside.name}.", suffix=suffix, dir=beside.parent))
+    os.chmod(folder, 0o777 & ~_umask())
+    return folder
+
+
 def replace_dir(new: str | Path, target: str | Path) -> Path:
     """Put the folder ``new`` at ``target``, replacing what was there: the old folder is first
     moved aside under a unique temporary name, so ``target`` is never missing half-way through a

@@ -21,7 +21,6 @@ from __future__ import annotations
 import json
 import math
 import shutil
-import tempfile
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -32,7 +31,7 @@ import yaml
 
 from terrapref.camera import SegmentationView, as_view
 from terrapref.errors import UserError
-from terrapref.fileio import replace_dir, write_text_atomic
+from terrapref.fileio import new_folder, replace_dir, write_text_atomic
 from terrapref.pngio import read_label_png, write_png_atomic
 from terrapref.yamlio import load_yaml_text
 
@@ -75,7 +74,7 @@ class RecordingWriter:
             if _is_recording(self.target):
                 if not overwrite:
                     raise UserError(str(self.target), "a recording already exists here; choose another --out or pass --force to replace it")
-                self.dir = Path(tempfile.mkdtemp(prefix=f".{self.target.name}.", suffix=".new", dir=self.target.parent))
+                self.dir = new_folder(self.target, ".new")
             elif any(self.target.iterdir()):
                 raise UserError(str(self.target), "directory is not empty and holds no recording; refusing to write into it")
         self.meta = {"format": FORMAT, "status": "partial", "created": datetime.now(timezone.utc).isoformat(timespec="seconds"), **meta}
@@ -90,6 +89,7 @@ class RecordingWriter:
                 shutil.rmtree(self.dir, ignore_errors=True)
             raise OSError(exc.errno, exc.strerror or str(exc), str(self.target)) from None
         self.count = 0
+        self._made = made
 
     def append(
         self,
@@ -136,8 +136,12 @@ class RecordingWriter:
 
     def abort(self) -> None:
         """Stop writing and leave the recording marked partial (a replacement beside the old
-        recording, as ``OUT.partial``)."""
+        recording, as ``OUT.partial``); one that holds no frame yet is removed, when this
+        writer made its folder."""
         self._frames.close()
+        if self.count == 0 and self._made:
+            shutil.rmtree(self.dir, ignore_errors=True)
+            return
         if self.dir != self.target:
             self.dir = self.partial_dir = replace_dir(self.dir, self.target.with_name(self.target.name + ".partial"))
 

@@ -22,8 +22,8 @@ import heapq
 import io
 import math
 import shutil
-import tempfile
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -34,7 +34,7 @@ from terrapref.camera import CameraConfig
 from terrapref.demos.recording import RecordingWriter, _is_recording
 from terrapref.errors import UserError
 from terrapref.features import PreferenceSetConfig
-from terrapref.fileio import replace_dir
+from terrapref.fileio import new_folder, replace_dir
 from terrapref.interop.robot import RobotConfig, load_waypoints
 from terrapref.progress import Progress
 from terrapref.terrain import ClassTable, default_classes
@@ -384,11 +384,14 @@ class _Request:
     robot: RobotConfig
     classes: ClassTable
     rate_hz: float
+    check_camera: Callable[[CameraConfig], None] | None = None
 
 
 def import_bag(bag_path: str | Path, robot: RobotConfig, out: str | Path, rate_hz: float = 10.0, force: bool = False,
-               show_progress: bool = True, classes: ClassTable | None = None) -> ImportReport:
-    """Turn a bag into a recording at ``out`` that inspect, featurize and train accept."""
+               show_progress: bool = True, classes: ClassTable | None = None,
+               check_camera: Callable[[CameraConfig], None] | None = None) -> ImportReport:
+    """Turn a bag into a recording at ``out`` that inspect, featurize and train accept;
+    ``check_camera`` may refuse the log's camera (raising) before any image is read."""
     bag_path, out = Path(bag_path), Path(out)
     classes = classes or default_classes()
     if not (math.isfinite(rate_hz) and 0 < rate_hz <= 100):
@@ -398,9 +401,9 @@ def import_bag(bag_path: str | Path, robot: RobotConfig, out: str | Path, rate_h
     out.parent.mkdir(parents=True, exist_ok=True)
     bag = _Bag(bag_path)
     report = ImportReport(str(bag_path))
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".importing", dir=out.parent))
+    tmp = new_folder(out, ".importing")
     try:
-        _import(_Request(bag, robot, classes, rate_hz), tmp / "rec", show_progress, report)
+        _import(_Request(bag, robot, classes, rate_hz, check_camera), tmp / "rec", show_progress, report)
         replace_dir(tmp / "rec", out)
     finally:
         bag.close()
@@ -416,6 +419,8 @@ def _import(req: _Request, out: Path, show_progress: bool, report: ImportReport)
     if len(streams.cmd_t) == 0:
         raise UserError(bag.source, f"topic {robot.topics['command']} holds no usable command", field="topics.command")
     camera, undistort = camera_from_info(streams.info, robot, bag.source, streams.static, report.notes)
+    if req.check_camera is not None:
+        req.check_camera(camera)
     placement = _Placement.of(streams.odom[:, :2], _reference_path(req, streams, report))
     preference = PreferenceSetConfig()
     conversion = _Conversion(req.rate_hz, robot.max_gap_s, preference.control, robot.labels.lut(req.classes), robot.labels.listed(),

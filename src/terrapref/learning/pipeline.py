@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import math
 import shutil
-import tempfile
 from collections.abc import Callable
 from dataclasses import asdict, replace
 from pathlib import Path
 
 from terrapref.demos.dataset import Dataset
-from terrapref.fileio import replace_dir
+from terrapref.fileio import new_folder, replace_dir
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig, member_prefix
 from terrapref.learning.train import EpochMetrics, TrainConfig, TrainResult, train
@@ -61,7 +60,7 @@ class _Checkpoints:
     def __init__(self, out: Path, meta: dict, write: bool) -> None:
         self.final = out.with_name(out.stem + ".checkpoints")
         self.meta, self.write = meta, write
-        self.folder = Path(tempfile.mkdtemp(prefix=f".{self.final.name}.", dir=out.parent)) if write else None
+        self.folder = new_folder(self.final, "") if write else None
         self.best: dict[int, tuple[float, int, ClassifierConfig, dict]] = {}  # member -> (loss, epoch, classifier, weights)
 
     def __call__(self, member: int, classifier: ClassifierConfig, weights: dict, m: EpochMetrics) -> None:
