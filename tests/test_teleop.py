@@ -491,3 +491,26 @@ def test_a_vehicle_within_the_edge_margin_may_drive_back_in():
     assert not stays_on_map(world, Pose(0.5, 6.0, math.pi), Command(1.0, 0.0), 0.1), "further out: held"
     assert stays_on_map(world, Pose(0.5, 6.0, 0.0), Command(1.0, 0.0), 0.1), "back toward the map: allowed"
     assert not stays_on_map(world, Pose(1.05, 6.0, math.pi), Command(1.0, 0.0), 0.1), "into the margin: held"
+
+
+def test_sigterm_before_the_first_frame_of_drive_leaves_no_recording(tmp_path):
+    # SDL turns SIGTERM into a quit event when no handler is set, which closed a 0-frame recording
+    # as complete; terrapref's handler ends the command as Ctrl-C does, and an empty one is removed.
+    import signal
+    import time
+
+    out = tmp_path / "rec"
+    command = [sys.executable, "-c", "import sys; from terrapref.cli import main; sys.exit(main())", "drive", "demo_course", "--record", str(out)]
+    child = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        while not (out / "meta.json").exists():  # no time limit: the window opens its recording or the child exits
+            if child.poll() is not None:
+                pytest.fail(f"drive exited ({child.returncode}) before opening its recording: {child.stderr.read()}")
+            time.sleep(0.01)
+        child.send_signal(signal.SIGTERM)
+        _, err = child.communicate()
+    finally:
+        child.kill()
+        child.wait()
+    assert child.returncode == 143 and "terminated" in err, err
+    assert not out.exists()
