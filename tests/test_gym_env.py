@@ -131,15 +131,17 @@ def test_no_progress_off_the_corridor():
     for _ in range(50):
         _, _, _, _, info = env.step(10)
         assert info["reward_terms"]["progress"] == 0.0
-    assert info["progress_m"] == pytest.approx(5.0, abs=1e-6)  # where it is along the path, though nothing was credited
+    assert info["path_position_m"] == pytest.approx(5.0, abs=1e-6)  # where it is along the path,
+    assert info["progress_m"] == 0.0  # though nothing was credited
 
 
 def test_random_driving_earns_no_more_progress_than_it_drove():
     env = gym.make(ENV_ID, scenario="demo_course", image_size=SMALL)
     env.action_space.seed(3)
     for seed in range(3):
-        env.reset(seed=seed)
+        _, info = env.reset(seed=seed)
         earned = driven = 0.0
+        last = info["progress_m"]
         for _ in range(600):
             before = np.array(env.unwrapped.sim.vehicle.pose[:2])
             obs, _, terminated, truncated, info = env.step(env.action_space.sample())
@@ -148,6 +150,8 @@ def test_random_driving_earns_no_more_progress_than_it_drove():
             if info["reward_terms"]["progress"] != 0.0:  # credited only within the 5 m corridor and on the map
                 assert abs(obs["pose"][0]) <= 5.0 and not info["off_map"]
             earned += info["reward_terms"]["progress"]
+            assert abs(info["progress_m"] - last) <= 0.1 + 1e-9  # the credited progress never jumps
+            last = info["progress_m"]
             driven += step
             if terminated or truncated:
                 break
@@ -360,7 +364,8 @@ def test_progress_resumes_after_a_detour_outside_the_corridor():
         if terminated:
             break
     s_true, offset = env.sim.path.project(np.array(env.sim.vehicle.pose[:2]))
-    assert info["progress_m"] == pytest.approx(s_true, abs=0.05)  # followed even outside the corridor
+    assert info["path_position_m"] == pytest.approx(s_true, abs=0.05)  # followed even outside the corridor
+    assert info["progress_m"] == pytest.approx(credited, abs=1e-9)  # what the reward credited
     assert abs(obs["pose"][0] - offset) < 0.05 and obs["waypoints"][0] > 0.0  # the path ahead, not behind
     assert 0.0 < credited < s_true - 2.0  # the stretch driven outside the corridor earned nothing
 

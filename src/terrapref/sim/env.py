@@ -103,6 +103,11 @@ class OffRoadNavEnv(gym.Env):
             (x0, y0, x1, y1, ...), float32. Distances are clipped to +-50 m.
     Action: discrete, an index 0..20 into the control set; continuous, (a_v, a_w) in [-1, 1],
         v = (a_v + 1) / 2 x max speed, w = a_w x max yaw rate.
+    Info: ``progress_m``, the progress the reward credits, summed from the start's place on the
+        path (it grows by at most the distance driven in a step, and not at all outside the
+        corridor); ``path_position_m``, where the vehicle projects onto the path now (it follows
+        the vehicle off the corridor and may jump where the path passes near itself);
+        ``reward_terms``, ``is_success``, ``collisions``, ``off_map``, ``time_s``, ``scenario``.
     Reward: :class:`RewardConfig`. Terminated at the goal (``info["is_success"]``), on entering
     lethal terrain and on leaving the map (each configurable); truncated only by the
     registered ``max_episode_steps`` (Gymnasium's TimeLimit).
@@ -167,6 +172,7 @@ class OffRoadNavEnv(gym.Env):
         self.observation_space = self._observation_space()
         self.action_space: spaces.Space = self._action_space()
         self._progress_s = 0.0
+        self._credited_m = 0.0  # progress the reward credited this episode, from the start's place on the path [m]
         self._in_corridor = True
         self._off_map = False
         self._started = False
@@ -273,6 +279,7 @@ class OffRoadNavEnv(gym.Env):
             frame = self._perceiver.captured(frame)
         self._started, self._ended, self._off_map = True, False, False
         self._in_corridor = abs(path.project(np.array(pose[:2]), self._progress_s - 2.0, self._progress_s + 2.0)[1]) <= self.reward_config.corridor_m
+        self._credited_m = self._progress_s
         terms = dict.fromkeys(("progress", "cross_track", "collision", "off_map", "goal", "terrain"), 0.0)
         self._last_obs = self._observation(frame.view, frame.pose)
         return self._last_obs, self._info(terms, success=False, off_map=False)
@@ -300,6 +307,7 @@ class OffRoadNavEnv(gym.Env):
         self._progress_s, offset = sim.path.project(trace[-1, :2], s_before - 2.0 - travelled, s_before + 10.0 + travelled)
         self._in_corridor = abs(offset) <= cfg.corridor_m and not off_map
         advance = min(max(self._progress_s - s_before, -travelled), travelled) if (in_before and self._in_corridor) else 0.0
+        self._credited_m += advance
         left_map = off_map and not self._off_map
         self._off_map = off_map
         collided = sim.collisions - collisions0
@@ -383,7 +391,8 @@ class OffRoadNavEnv(gym.Env):
             "is_success": bool(success),
             "collisions": self.sim.collisions,
             "off_map": off_map,
-            "progress_m": self._progress_s,
+            "progress_m": self._credited_m,
+            "path_position_m": self._progress_s,
             "time_s": self.sim.time_s,
             "reward_terms": terms,
         }
