@@ -136,6 +136,49 @@ def test_a_missing_topic_or_a_wrong_type_names_the_bag_and_the_field(tmp_path: P
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
 
 
+def test_every_missing_or_mistyped_topic_is_named_in_one_message(tmp_path: Path, logs, capsys):
+    bag = str(logs["bags"]["mcap"])
+    robot = tmp_path / "robot.yaml"
+    robot.write_text(robot_yaml().replace(TOPICS["odometry"], "/warthog/odom").replace(f"command: {TOPICS['command']}", f"command: {TOPICS['path']}"))
+    assert main(["import", bag, "--robot", str(robot), "--out", str(tmp_path / "a")]) == 2
+    _one_line(capsys, bag, "topics.odometry /warthog/odom is not in the bag", f"topics.command {TOPICS['path']} has type nav_msgs/msg/Path")
+
+
+def _with_service_events(mcap: Path, out: Path) -> Path:
+    """``mcap`` with a service-event channel as ``ros2 bag record -a`` writes it: its schema
+    holds the raw service definition, which no message parser reads as the event type."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with open(mcap, "rb") as source, open(out, "wb") as sink:
+        reader, writer = make_reader(source), Writer(sink)
+        writer.start(profile="ros2", library="terrapref tests")
+        summary = reader.get_summary()
+        schemas = {i: writer.register_schema(s.name, s.encoding, s.data) for i, s in summary.schemas.items()}
+        channels = {i: writer.register_channel(c.topic, c.message_encoding, schemas[c.schema_id], c.metadata) for i, c in summary.channels.items()}
+        raw = b"=" * 80 + b"\nSRV: example_interfaces/srv/AddTwoInts\nint64 a\nint64 b\n---\nint64 sum\n"
+        event = writer.register_channel("/add_two_ints/_service_event", "cdr", writer.register_schema("example_interfaces/srv/AddTwoInts_Event", "ros2msg", raw), {})
+        for i, (_, channel, message) in enumerate(reader.iter_messages()):
+            writer.add_message(channels[channel.id], message.log_time, message.data, message.publish_time)
+            if i % 50 == 0:
+                writer.add_message(event, message.log_time, bytes(48), message.publish_time)
+        writer.finish()
+    return out
+
+
+def test_a_log_with_service_events_imports_and_says_what_it_left_out(tmp_path: Path, logs, imported, capsys):
+    bag = _with_service_events(_mcap_file(logs["bags"]["mcap"]), tmp_path / "with_services.mcap")
+    assert main(["import", str(bag), "--robot", str(logs["robot"]), "--out", str(tmp_path / "rec")]) == 0
+    out = capsys.readouterr().out
+    assert "left out 1 topic(s) whose message definition in the log cannot be read: /add_two_ints/_service_event" in out
+    assert len(read_recording(tmp_path / "rec")) == len(imported["mcap"][1])
+    # Asked for as a topic the planner needs, it is one line naming the topic and its type.
+    robot = tmp_path / "robot.yaml"
+    robot.write_text(robot_yaml().replace(TOPICS["command"], "/add_two_ints/_service_event"))
+    assert main(["import", str(bag), "--robot", str(robot), "--out", str(tmp_path / "b")]) == 2
+    _one_line(capsys, "/add_two_ints/_service_event", "AddTwoInts_Event", "cannot be read")
+
+
 def _mcap_file(folder: Path) -> Path:
     return next(folder.glob("*.mcap"))
 

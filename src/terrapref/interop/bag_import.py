@@ -23,7 +23,7 @@ import io
 import math
 import shutil
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -98,34 +98,58 @@ def _field(msg, *names):
     raise AttributeError(names[0])
 
 
+def _one_line(exc: BaseException, limit: int = 160) -> str:
+    """An exception's text on one line (a reader's errors quote whole message definitions)."""
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text[:limit]}{'...' if len(text) > limit else ''}"
+
+
 class _Bag:
-    """The bag, opened with rosbags; every failure of the reader is a one-line UserError."""
+    """The bag, opened with rosbags; every failure of the reader is a one-line UserError.
+
+    A topic whose message definition in the log cannot be read (``ros2 bag record -a`` stores
+    service events' ``*_Event`` types as the raw service definition) is left out and listed in
+    ``unreadable``; only a topic the robot file asks for makes that an error."""
 
     def __init__(self, path: Path) -> None:
-        from rosbags.highlevel import AnyReader
-        from rosbags.typesys import Stores, get_typestore
-
         self.source = str(path)
         if not path.exists():
             raise UserError(self.source, "no such bag")
         try:
-            self.reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
-            self.reader.open()
+            self.reader = _open_reader(path)
         except Exception as exc:  # the reader's errors on a damaged or foreign file are many kinds
-            raise UserError(self.source, f"not a readable ROS 1 bag, ROS 2 bag or MCAP file ({type(exc).__name__}: {exc})") from None
+            raise UserError(self.source, f"not a readable ROS 1 bag, ROS 2 bag or MCAP file ({_one_line(exc)})") from None
+        self.unreadable: dict[str, tuple[str, str]] = self.reader.unreadable  # topic -> (type, why)
 
-    def connections(self, topic: str, role: str, source: str) -> list:
-        conns = [c for c in self.reader.connections if c.topic == topic]
-        if not conns:
+    def check_topics(self, robot: RobotConfig, roles: Sequence[str]) -> None:
+        """Every topic of ``roles`` in the robot file is in the bag, of a type it may have, with
+        messages; what is not is said at once, every topic in one message."""
+        problems = [p for role in roles if (p := self._topic_problem(robot.topics[role], role))]
+        if problems:
             have = sorted({c.topic for c in self.reader.connections})
             shown = ", ".join(have[:12]) + (" ..." if len(have) > 12 else "")
-            raise UserError(self.source, f"topic {topic} (topics.{role} in {source}) is not in the bag; it has {shown or 'no topics'}", field=f"topics.{role}")
-        for c in conns:
-            if c.msgtype not in TYPES[role]:
-                raise UserError(self.source, f"topic {topic} has type {c.msgtype}; topics.{role} expects {' or '.join(TYPES[role])}", field=f"topics.{role}")
+            raise UserError(self.source, f"{'; '.join(problems)} (topics in {robot.source}; the bag has {shown or 'no topics'})",
+                            field="topics")
+
+    def _topic_problem(self, topic: str, role: str) -> str | None:
+        conns = [c for c in self.reader.connections if c.topic == topic]
+        if not conns and topic in self.unreadable:
+            msgtype, why = self.unreadable[topic]
+            return f"topics.{role} {topic} has type {msgtype}, whose definition in the log cannot be read ({why})"
+        if not conns:
+            return f"topics.{role} {topic} is not in the bag"
+        wrong = sorted({c.msgtype for c in conns if c.msgtype not in TYPES[role]})
+        if wrong:
+            return f"topics.{role} {topic} has type {', '.join(wrong)}, expected {' or '.join(TYPES[role])}"
         if sum(c.msgcount for c in conns) == 0:
-            raise UserError(self.source, f"topic {topic} (topics.{role}) has no messages", field=f"topics.{role}")
-        return conns
+            return f"topics.{role} {topic} has no messages"
+        return None
+
+    def connections(self, topic: str, role: str, source: str) -> list:
+        problem = self._topic_problem(topic, role)
+        if problem:
+            raise UserError(self.source, f"{problem} (topics in {source})", field=f"topics.{role}")
+        return [c for c in self.reader.connections if c.topic == topic]
 
     def messages(self, conns: list):
         """(connection, bag time [ns], message), deserialised; a damaged message is a UserError."""
@@ -138,7 +162,7 @@ class _Bag:
             except StopIteration:
                 return
             except Exception as exc:  # damaged chunk or message: the reader's own error types vary
-                raise UserError(self.source, f"message {n + 1} after the start of the read is damaged ({type(exc).__name__}: {exc})") from None
+                raise UserError(self.source, f"message {n + 1} after the start of the read is damaged ({_one_line(exc)})") from None
             n += 1
             yield conn, t_ns, msg
 
@@ -193,6 +217,63 @@ def camera_mount_from_tf(static: dict, base: str, camera_frame: str, source: str
         notes.append(f"the camera sits {t_total[1]:+.2f} m to the side of {base}; terrapref's camera model ignores a lateral offset")
     return {"height_m": float(t_total[2]), "forward_m": float(t_total[0]), "pitch_deg": math.degrees(math.asin(float(np.clip(-axis[2], -1, 1)))),
             "yaw_deg": math.degrees(math.atan2(axis[1], axis[0]))}
+
+
+def _definition_types(connection) -> dict:
+    """The message types a connection's own definition declares (none when it carries none)."""
+    from rosbags.interfaces import MessageDefinitionFormat
+    from rosbags.typesys import get_types_from_idl, get_types_from_msg
+
+    definition = connection.msgdef
+    if definition.format == MessageDefinitionFormat.MSG:
+        return get_types_from_msg(definition.data, connection.msgtype)
+    if definition.format == MessageDefinitionFormat.IDL:
+        sep = "=" * 80 + "\n"
+        parts = [p.split("\n", 1)[1] for p in definition.data.split(sep)[1:]] if definition.data.startswith(f"{sep}IDL: ") else [definition.data]
+        types: dict = {}
+        for idl in parts:
+            types.update(get_types_from_idl(idl))
+        return types
+    return {}
+
+
+def _open_reader(path: Path):
+    """rosbags' AnyReader over ``path``, opened, except that a connection whose message definition
+    cannot be parsed (or whose hash does not match it) is left out, in ``unreadable``, instead of
+    failing the whole log. As AnyReader, the ROS 2 Humble types serve a log that carries no
+    definitions at all."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.interfaces import MessageDefinitionFormat
+    from rosbags.typesys import Stores, get_typestore
+
+    class TolerantReader(AnyReader):
+        def _open(self) -> None:
+            for reader in self.readers:
+                self.stack.enter_context(reader)
+            connections = [c for reader in self.readers for c in reader.connections]
+            defined = any(c.msgdef.format != MessageDefinitionFormat.NONE for c in connections)
+            types = {} if defined else dict(self.default_typestore.fielddefs)
+            self.unreadable, self.connections = {}, []
+            for connection in connections:
+                try:
+                    own = _definition_types(connection)
+                    if own and connection.digest:  # a definition and its hash: checked against each other
+                        trial = get_typestore(Stores.EMPTY)
+                        trial.register({**types, **own})
+                        digest = trial.hash_rihs01(connection.msgtype) if self.is2 else trial.generate_msgdef(connection.msgtype)[1]
+                        if digest != connection.digest:
+                            raise ValueError("its hash does not match its definition")
+                except Exception as exc:  # the type system's errors vary with the definition's flaw
+                    self.unreadable[connection.topic] = (connection.msgtype, _one_line(exc, 80))
+                    continue
+                types.update(own)
+                self.connections.append(connection)
+            self.typestore = get_typestore(Stores.EMPTY)
+            self.typestore.register(types)
+
+    reader = TolerantReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+    reader.open()
+    return reader
 
 
 def _read_small_topics(bag: _Bag, robot: RobotConfig) -> _Streams:
@@ -414,6 +495,11 @@ def import_bag(bag_path: str | Path, robot: RobotConfig, out: str | Path, rate_h
 def _import(req: _Request, out: Path, show_progress: bool, report: ImportReport) -> None:
     """The recording of ``req.bag`` at ``out``: the small topics read first, then the images streamed."""
     bag, robot = req.bag, req.robot
+    bag.check_topics(robot, ["segmentation", "odometry", "command", "camera_info"] + (["path"] if robot.path_topic else []))
+    if bag.unreadable:
+        shown = ", ".join(f"{topic} ({msgtype})" for topic, (msgtype, _) in sorted(bag.unreadable.items())[:4])
+        report.notes.append(f"left out {len(bag.unreadable)} topic(s) whose message definition in the log cannot be read: {shown}"
+                            + (" ..." if len(bag.unreadable) > 4 else ""))
     seg_conns = bag.connections(robot.topics["segmentation"], "segmentation", robot.source)
     streams = _read_small_topics(bag, robot)
     if len(streams.cmd_t) == 0:
