@@ -392,3 +392,39 @@ def test_a_model_taught_by_an_imported_log_drives_like_one_taught_by_the_simulat
         agreement[name] = sum(z["agrees"] for z in zones) / len(zones)
         assert metrics["summary"]["collision_count"] == 0
     assert agreement["bag"] >= 0.8 and abs(agreement["bag"] - agreement["sim"]) <= 0.15, agreement
+
+
+def _compressed(fmt: str, data: bytes):
+    from types import SimpleNamespace
+
+    return SimpleNamespace(topic="/seg", msgtype="sensor_msgs/msg/CompressedImage"), SimpleNamespace(format=fmt, data=data)
+
+
+def test_a_png_that_cannot_be_decoded_names_the_log_the_topic_and_the_time(tmp_path: Path):
+    from terrapref.errors import UserError
+    from terrapref.interop.bag_import import _decode
+
+    conn, msg = _compressed("mono8; png compressed", b"\x89PNG\r\n\x1a\n" + bytes(100))
+    with pytest.raises(UserError) as err:
+        _decode(conn, msg, "drive.bag", t_s=12.3)
+    line = err.value.lines()[0]
+    assert "drive.bag" in line and "/seg" in line and "12.300 s into the log" in line and "not a decodable png" in line
+
+
+def test_compressed_depth_png_of_label_ids_is_read_and_of_depth_refused_by_name():
+    import io
+
+    from PIL import Image
+
+    from terrapref.errors import UserError
+    from terrapref.interop.bag_import import COMPRESSED_DEPTH_HEADER, _decode
+
+    ids = (np.arange(12 * 16).reshape(12, 16) % 40).astype(np.uint16)
+    png = io.BytesIO()
+    Image.fromarray(ids).save(png, format="PNG")
+    header = bytes(COMPRESSED_DEPTH_HEADER)  # format enum and two quantisation floats
+    conn, msg = _compressed("16UC1; compressedDepth png", header + png.getvalue())
+    np.testing.assert_array_equal(_decode(conn, msg, "drive.bag", t_s=1.0), ids)
+    conn, msg = _compressed("32FC1; compressedDepth png", header + png.getvalue())
+    with pytest.raises(UserError, match="compressedDepth of '32FC1' holds depth"):
+        _decode(conn, msg, "drive.bag", t_s=1.0)

@@ -394,17 +394,14 @@ def camera_from_info(info, robot: RobotConfig, source: str, static: dict | None 
     return camera, index
 
 
-def _decode(conn, msg, source: str, labels=None) -> np.ndarray:
+COMPRESSED_DEPTH_HEADER = 12  # compressed_depth_image_transport's ConfigHeader before the png: format, two floats
+
+
+def _decode(conn, msg, source: str, labels=None, t_s: float | None = None) -> np.ndarray:
     """Label ids (H, W) uint8 or uint16 of one segmentation message (rgb8 through the label
-    map's colour table)."""
+    map's colour table); ``t_s``, when the log received it from its start [s], names it in an error."""
     if conn.msgtype == "sensor_msgs/msg/CompressedImage":
-        if "png" not in str(msg.format).lower():
-            raise UserError(source, f"topic {conn.topic}: CompressedImage format {msg.format!r}; label ids need lossless png", field="topics.segmentation")
-        with PILImage.open(io.BytesIO(bytes(msg.data))) as im:
-            if im.mode not in ("L", "I;16", "I;16B", "I"):
-                raise UserError(source, f"topic {conn.topic}: png of mode {im.mode}; expected single-channel label ids", field="topics.segmentation")
-            ids = np.asarray(im)
-        return ids.astype(np.uint16) if ids.dtype != np.uint8 else ids
+        return _decode_png(conn, msg, source, t_s)
     encoding = str(msg.encoding).lower()
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
     if encoding in ("mono8", "8uc1"):
@@ -426,6 +423,29 @@ def _decode(conn, msg, source: str, labels=None) -> np.ndarray:
         raise UserError(source, f"topic {conn.topic}: image data of {len(data)} bytes does not hold {h} rows of {step}", field="topics.segmentation")
     rows = data[: step * h].reshape(h, step)[:, : w * dtype.itemsize]
     return np.ascontiguousarray(rows).view(dtype).reshape(h, w).astype(np.uint16 if dtype.itemsize == 2 else np.uint8)
+
+
+def _decode_png(conn, msg, source: str, t_s: float | None) -> np.ndarray:
+    """Label ids of a png CompressedImage, plain or as compressedDepth (16UC1 only: a 32FC1
+    depth png holds quantised inverse depth, not ids)."""
+    fmt = str(msg.format).lower()
+    data = bytes(msg.data)
+    where = f"topic {conn.topic}, message received {t_s:.3f} s into the log" if t_s is not None else f"topic {conn.topic}"
+    if "png" not in fmt:
+        raise UserError(source, f"{where}: CompressedImage format {msg.format!r}; label ids need lossless png", field="topics.segmentation")
+    if "compresseddepth" in fmt:
+        if not fmt.startswith(("16uc1", "mono16")):
+            raise UserError(source, f"{where}: compressedDepth of {msg.format.split(';')[0].strip()!r} holds depth, not label ids; "
+                                    "publish the ids as 16UC1 (or mono8/mono16 png)", field="topics.segmentation")
+        data = data[COMPRESSED_DEPTH_HEADER:]
+    try:
+        with PILImage.open(io.BytesIO(data)) as im:
+            if im.mode not in ("L", "I;16", "I;16B", "I"):
+                raise UserError(source, f"{where}: png of mode {im.mode}; expected single-channel label ids", field="topics.segmentation")
+            ids = np.asarray(im)
+    except (OSError, ValueError, SyntaxError) as exc:  # PIL's errors on data that is not a png (UnidentifiedImageError is an OSError)
+        raise UserError(source, f"{where}: not a decodable png ({_one_line(exc, 80)})", field="topics.segmentation") from None
+    return ids.astype(np.uint16) if ids.dtype != np.uint8 else ids
 
 
 def smooth_path(xy: np.ndarray, spacing_m: float = 1.0) -> np.ndarray:
@@ -588,7 +608,7 @@ def _stream_images(req: _Request, seg_conns: list, shape: tuple[int, int], frame
             t = _stamp(msg, t_ns)
         except AttributeError as exc:
             raise UserError(bag.source, f"topic {conn.topic}: no header stamp ({exc})", field="topics.segmentation") from None
-        ids = _decode(conn, msg, bag.source, req.robot.labels)
+        ids = _decode(conn, msg, bag.source, req.robot.labels, (t_ns - bag.reader.start_time) * 1e-9)
         report.images += 1
         if ids.shape != shape:
             raise UserError(bag.source, f"topic {conn.topic}: image {ids.shape[1]} x {ids.shape[0]}, camera_info says {shape[1]} x {shape[0]}",
