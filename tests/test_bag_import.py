@@ -144,12 +144,15 @@ def test_every_missing_or_mistyped_topic_is_named_in_one_message(tmp_path: Path,
     _one_line(capsys, bag, "topics.odometry /warthog/odom is not in the bag", f"topics.command {TOPICS['path']} has type nav_msgs/msg/Path")
 
 
-def _with_service_events(mcap: Path, out: Path) -> Path:
-    """``mcap`` with a service-event channel as ``ros2 bag record -a`` writes it: its schema
-    holds the raw service definition, which no message parser reads as the event type."""
+def _rewritten(mcap: Path, out: Path, service_events: bool = False, receive_shift_s: float = 0.0) -> Path:
+    """``mcap`` written again, with a service-event channel as ``ros2 bag record -a`` writes it
+    (its schema holds the raw service definition, which no message parser reads as the event
+    type), or with every message received ``receive_shift_s`` later than its header stamp says
+    (simulated time stamped, wall time received)."""
     from mcap.reader import make_reader
     from mcap.writer import Writer
 
+    shift_ns = int(round(receive_shift_s * 1e9))
     with open(mcap, "rb") as source, open(out, "wb") as sink:
         reader, writer = make_reader(source), Writer(sink)
         writer.start(profile="ros2", library="terrapref tests")
@@ -159,15 +162,15 @@ def _with_service_events(mcap: Path, out: Path) -> Path:
         raw = b"=" * 80 + b"\nSRV: example_interfaces/srv/AddTwoInts\nint64 a\nint64 b\n---\nint64 sum\n"
         event = writer.register_channel("/add_two_ints/_service_event", "cdr", writer.register_schema("example_interfaces/srv/AddTwoInts_Event", "ros2msg", raw), {})
         for i, (_, channel, message) in enumerate(reader.iter_messages()):
-            writer.add_message(channels[channel.id], message.log_time, message.data, message.publish_time)
-            if i % 50 == 0:
+            writer.add_message(channels[channel.id], message.log_time + shift_ns, message.data, message.publish_time + shift_ns)
+            if service_events and i % 50 == 0:
                 writer.add_message(event, message.log_time, bytes(48), message.publish_time)
         writer.finish()
     return out
 
 
 def test_a_log_with_service_events_imports_and_says_what_it_left_out(tmp_path: Path, logs, imported, capsys):
-    bag = _with_service_events(_mcap_file(logs["bags"]["mcap"]), tmp_path / "with_services.mcap")
+    bag = _rewritten(_mcap_file(logs["bags"]["mcap"]), tmp_path / "with_services.mcap", service_events=True)
     assert main(["import", str(bag), "--robot", str(logs["robot"]), "--out", str(tmp_path / "rec")]) == 0
     out = capsys.readouterr().out
     assert "left out 1 topic(s) whose message definition in the log cannot be read: /add_two_ints/_service_event" in out
@@ -177,6 +180,19 @@ def test_a_log_with_service_events_imports_and_says_what_it_left_out(tmp_path: P
     robot.write_text(robot_yaml().replace(TOPICS["command"], "/add_two_ints/_service_event"))
     assert main(["import", str(bag), "--robot", str(robot), "--out", str(tmp_path / "b")]) == 2
     _one_line(capsys, "/add_two_ints/_service_event", "AddTwoInts_Event", "cannot be read")
+
+
+def test_stamps_in_simulated_time_and_unstamped_commands_in_wall_time_are_paired_on_one_clock(tmp_path: Path, logs, imported, capsys):
+    # Header stamps from a simulator's clock, receive times from the wall clock 1000 s on: the
+    # Twist commands (no stamp) are timed by receive time, and are moved onto the stamps' clock.
+    bag = _rewritten(_mcap_file(logs["bags"]["mcap"]), tmp_path / "sim_time.mcap", receive_shift_s=1000.0)
+    assert main(["import", str(bag), "--robot", str(logs["robot"]), "--out", str(tmp_path / "rec")]) == 0
+    assert "header stamps run -1000.0 s from when the log received the messages" in capsys.readouterr().out
+    rec, plain = read_recording(tmp_path / "rec"), imported["mcap"][1]
+    assert len(rec) == len(plain)
+    # The clocks' offset is measured on the odometry, whose receive times lag its stamps by the
+    # log's latency: a command near a change may land one frame off.
+    assert np.mean(rec.labels == plain.labels) >= 0.9 and np.abs(rec.labels - plain.labels).max() <= 1
 
 
 def _mcap_file(folder: Path) -> Path:

@@ -81,10 +81,15 @@ class ImportReport:
         return out
 
 
-def _stamp(msg, fallback_ns: int) -> float:
+CLOCK_TOLERANCE_S = 5.0  # header stamps this far from the log's receive times are on another clock (simulated time)
+
+
+def _stamp(msg, fallback_ns: int, shift_s: float = 0.0) -> float:
+    """The header stamp [s]; an unstamped message is timed by when the log received it, moved by
+    ``shift_s`` onto the stamps' clock."""
     stamp = msg.header.stamp
     ns = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-    return (ns if ns > 0 else fallback_ns) * 1e-9
+    return ns * 1e-9 if ns > 0 else fallback_ns * 1e-9 + shift_s
 
 
 def _yaw(q) -> float:
@@ -182,6 +187,7 @@ class _Streams:
     path: np.ndarray | None
     info: object
     static: dict[str, tuple[str, np.ndarray, np.ndarray]] = field(default_factory=dict)  # child -> (parent, t, R)
+    receive_shift_s: float = 0.0  # added to a receive time to put it on the header stamps' clock
 
 
 def _rotation(q) -> np.ndarray:
@@ -314,16 +320,23 @@ class _SmallTopics:
     path: np.ndarray | None = None  # the first path of two or more poses
     info: object = None  # the first camera_info
     static: dict[str, tuple[str, np.ndarray, np.ndarray]] = field(default_factory=dict)  # child -> (parent, t, R)
+    stamp_minus_receive: list[float] = field(default_factory=list)  # of stamped odometry [s]
+    cmd_received: list[bool] = field(default_factory=list)  # each command timed by receive time (Twist carries no stamp)
 
     def take(self, role: str, conn, t_ns: int, msg) -> None:
         """Keep what ``msg`` (of ``role``, from ``conn``, at bag time ``t_ns`` [ns]) says."""
         if role == "odometry":
             pose = msg.pose.pose if conn.msgtype != "geometry_msgs/msg/PoseStamped" else msg.pose
+            stamp = _stamp(msg, 0)
+            if stamp > 0:
+                self.stamp_minus_receive.append(stamp - t_ns * 1e-9)
             self.odom_t.append(_stamp(msg, t_ns))
             self.odom.append((pose.position.x, pose.position.y, _yaw(pose.orientation)))
         elif role == "command":
             twist = msg.twist if conn.msgtype == "geometry_msgs/msg/TwistStamped" else msg
-            self.cmd_t.append(_stamp(msg, t_ns) if conn.msgtype == "geometry_msgs/msg/TwistStamped" else t_ns * 1e-9)
+            stamp = _stamp(msg, 0) if conn.msgtype == "geometry_msgs/msg/TwistStamped" else 0.0
+            self.cmd_t.append(stamp if stamp > 0 else t_ns * 1e-9)
+            self.cmd_received.append(stamp <= 0)
             self.cmd.append((twist.linear.x, twist.angular.z))
         elif role == "path" and self.path is None and len(msg.poses) >= 2:
             self.path = np.array([(p.pose.position.x, p.pose.position.y) for p in msg.poses], dtype=float)
@@ -338,6 +351,11 @@ class _SmallTopics:
         """The streams without non-finite samples, each sorted by time, yaw unwrapped."""
         o_t, o = np.array(self.odom_t), np.array(self.odom, dtype=float)
         c_t, c = np.array(self.cmd_t), np.array(self.cmd, dtype=float)
+        # Stamps on another clock than the log's (simulated time recorded by wall clock): what
+        # is timed by receive time is moved onto the stamps' clock, by the odometry's offset.
+        offset = float(np.median(self.stamp_minus_receive)) if self.stamp_minus_receive else 0.0
+        shift = offset if abs(offset) > CLOCK_TOLERANCE_S else 0.0
+        c_t = c_t + shift * np.array(self.cmd_received, dtype=bool)
         if not (np.isfinite(o).all() and np.isfinite(o_t).all()):
             keep = np.isfinite(o).all(axis=1) & np.isfinite(o_t)
             o_t, o = o_t[keep], o[keep]
@@ -347,7 +365,7 @@ class _SmallTopics:
         o_t, o = o_t[order], o[order]
         o[:, 2] = np.unwrap(o[:, 2])  # so interpolation between stamps never spins the long way round
         order = np.argsort(c_t, kind="stable")
-        return _Streams(o_t, o, c_t[order], c[order], self.path, self.info, self.static)
+        return _Streams(o_t, o, c_t[order], c[order], self.path, self.info, self.static, shift)
 
 
 def camera_from_info(info, robot: RobotConfig, source: str, static: dict | None = None, notes: list[str] | None = None) -> tuple[CameraConfig, np.ndarray | None]:
@@ -524,6 +542,9 @@ def _import(req: _Request, out: Path, show_progress: bool, report: ImportReport)
     streams = _read_small_topics(bag, robot)
     if len(streams.cmd_t) == 0:
         raise UserError(bag.source, f"topic {robot.topics['command']} holds no usable command", field="topics.command")
+    if streams.receive_shift_s:
+        report.notes.append(f"header stamps run {streams.receive_shift_s:+.1f} s from when the log received the messages (simulated time?); "
+                            "unstamped messages (a Twist command) are moved onto the stamps' clock")
     camera, undistort = camera_from_info(streams.info, robot, bag.source, streams.static, report.notes)
     if req.check_camera is not None:
         req.check_camera(camera)
@@ -605,7 +626,7 @@ def _stream_images(req: _Request, seg_conns: list, shape: tuple[int, int], frame
     last_image_t = None
     for seq, (conn, t_ns, msg) in enumerate(bag.messages(seg_conns)):
         try:
-            t = _stamp(msg, t_ns)
+            t = _stamp(msg, t_ns, frames.streams.receive_shift_s)
         except AttributeError as exc:
             raise UserError(bag.source, f"topic {conn.topic}: no header stamp ({exc})", field="topics.segmentation") from None
         ids = _decode(conn, msg, bag.source, req.robot.labels, (t_ns - bag.reader.start_time) * 1e-9)
@@ -652,9 +673,11 @@ class _Frames:
     unknown: int = 0  # pixels unknown after mapping
     last_t: float = -math.inf  # the stamp of the last frame kept [s]
     t_first: float | None = None  # the stamp of the first frame kept [s]
+    image_span: tuple[float, float] = (math.inf, -math.inf)  # the images' first and last stamps [s]
 
     def emit(self, t: float, ids: np.ndarray) -> None:
         """The image ``ids`` (H, W) stamped ``t`` [s] as the next frame, unless it is skipped."""
+        self.image_span = (min(self.image_span[0], t), max(self.image_span[1], t))
         reason = self._skip_reason(t)
         if reason is not None:
             self.report.skipped[reason] += 1
@@ -731,7 +754,10 @@ class _Frames:
         progress.close(f"{writer.count} frames from {report.images} images")
         if writer.count == 0:
             writer.abort()
-            raise UserError(source, f"no usable frame: {', '.join(f'{n} {r}' for r, n in report.skipped.items()) or 'no images'}", field="topics.segmentation")
+            spans = [(name, t) for name, t in (("images", self.image_span), ("odometry", self.streams.odom_t), ("commands", self.streams.cmd_t)) if len(t)]
+            when = "; ".join(f"{name} {min(t):.1f}-{max(t):.1f} s" for name, t in spans if np.isfinite(min(t)))
+            raise UserError(source, f"no usable frame: {', '.join(f'{n} {r}' for r, n in report.skipped.items()) or 'no images'}"
+                                    + (f" (stamps: {when})" if when else ""), field="topics.segmentation")
         report.frames = writer.count
         report.duration_s = float(self.last_t - self.t_first) + 1.0 / self.conversion.rate_hz
         report.unmapped_share = self.unmapped / max(self.pixels, 1)
