@@ -62,3 +62,15 @@ def test_an_output_that_no_file_can_be_made_beside_is_refused_before_training(tm
     error = _error(capsys)
     assert "cannot be written (no file can be made in" in error and "notes.txt" in error
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt", "train.safetensors"]
+
+
+def test_every_argument_of_every_command_says_what_it_is():
+    import argparse
+
+    from terrapref.cli import build_parser
+
+    parser = build_parser(train_flags=True)
+    commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
+    silent = [f"{name} {a.dest}" for name, sub in commands.items() for a in sub._actions
+              if not isinstance(a, argparse._HelpAction) and not a.help]
+    assert not silent, silent

@@ -727,6 +727,7 @@ def _perception(spec: str | None, flag: str = "--perception", classes=None):
         raise
 
 
+SCENARIO_HELP = "a packaged scenario's name (terrapref scenarios lists them), gen:N for generated layout N, or a scenario file"
 PERCEPTION_HELP = ("what the planner receives instead of the truth: a preset (clean, rellis, field; terrapref perception lists them) "
                    "or a terrapref-perception/1 file")
 
@@ -776,7 +777,7 @@ def _add_engine_args(p: argparse.ArgumentParser) -> None:
 
 def _validate_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("validate", help="check scenario files against terrapref-scenario/1")
-    p.add_argument("files", nargs="+", metavar="FILE")
+    p.add_argument("files", nargs="+", metavar="FILE", help="scenario files (YAML) to check")
     p.set_defaults(func=_cmd_validate)
 
 
@@ -791,14 +792,14 @@ def _render_parser(sub: argparse._SubParsersAction) -> None:
 
 def _show_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("show", help="draw the map top-down with the path, the start and the zones")
-    p.add_argument("scenario", metavar="SCENARIO")
-    p.add_argument("--out", required=True, type=Path)
+    p.add_argument("scenario", metavar="SCENARIO", help=SCENARIO_HELP)
+    p.add_argument("--out", required=True, type=Path, help="figure file (.png, .pdf or .svg)")
     p.set_defaults(func=_cmd_show)
 
 
 def _record_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("record", help="record a demonstration with the synthetic driver")
-    p.add_argument("scenario", metavar="SCENARIO")
+    p.add_argument("scenario", metavar="SCENARIO", help=SCENARIO_HELP)
     p.add_argument("--profile", help="preference order, best first, e.g. rock,mud,water,non_traversable (default: the class table's)")
     p.add_argument("--style", default="default", help="the driver's style: default, wide (wider margins), late (reacts later), shaky (a shakier hand), "
                         "reluctant (leaves the path reluctantly)")
@@ -817,7 +818,7 @@ def _record_parser(sub: argparse._SubParsersAction) -> None:
 
 def _drive_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("drive", help="drive a scenario yourself (keyboard, mouse or gamepad), optionally recording, or ride along with a model (--model)")
-    p.add_argument("scenario", metavar="SCENARIO")
+    p.add_argument("scenario", metavar="SCENARIO", help=SCENARIO_HELP)
     p.add_argument("--record", type=Path, metavar="DIR", help="record the drive into DIR")
     p.add_argument("--force", action="store_true", help="replace an existing recording at DIR")
     p.add_argument("--speed", type=float, default=1.0, help="forward speed [m/s] (default 1)")
@@ -836,7 +837,7 @@ def _drive_parser(sub: argparse._SubParsersAction) -> None:
 
 def _inspect_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("inspect", help="summarise a recording and draw its driven path")
-    p.add_argument("recording", metavar="DIR", type=Path)
+    p.add_argument("recording", metavar="DIR", type=Path, help="a recording folder (from record, drive or import)")
     p.add_argument("--out", type=Path, help="top-down PNG (default: DIR/driven_path.png)")
     p.add_argument("--no-preference", action="store_true",
                    help="skip what the drive shows of the driver's preference (it featurises every frame: seconds)")
@@ -845,9 +846,11 @@ def _inspect_parser(sub: argparse._SubParsersAction) -> None:
 
 def _featurize_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("featurize", help="turn recordings into a training set (U, label)")
-    p.add_argument("recordings", nargs="+", metavar="DIR", type=Path)
+    p.add_argument("recordings", nargs="+", metavar="DIR", type=Path, help="recording folders (from record, drive or import)")
     p.add_argument("--out", required=True, type=Path, help="dataset file (.safetensors)")
-    p.add_argument("--distance-mode", choices=["lookahead", "window", "paper"], default="lookahead")
+    p.add_argument("--distance-mode", choices=["lookahead", "window", "paper"], default="lookahead",
+                   help="how each trajectory's distance to the path is measured: lookahead (default) to the path ahead of the vehicle, "
+                        "window to the nearest path point within a window, paper as the paper writes it")
     p.add_argument("--n-steps", type=int, help="trajectory points n (default 30)")
     p.add_argument("--dt", type=float, help="trajectory time step [s] (default 0.2)")
     p.add_argument("--camera", help="camera file to re-render the frames with: CameraConfig's fields, or a ROS camera_info YAML (with mount_height_m, pitch_deg)")
@@ -876,8 +879,8 @@ def _train_parser(sub: argparse._SubParsersAction, flags: bool = True) -> None:
 
 def _evaluate_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("evaluate", help="drive scenarios with a model, score every zone, write metrics.json and figures")
-    p.add_argument("model", metavar="MODEL")
-    p.add_argument("scenarios", nargs="+", metavar="SCENARIO")
+    p.add_argument("model", metavar="MODEL", help="a model file from train (or a learned baseline's)")
+    p.add_argument("scenarios", nargs="+", metavar="SCENARIO", help=SCENARIO_HELP)
     p.add_argument("--seeds", type=int, default=3, help="runs per scenario (default 3): seed 0 starts at the scenario's start, "
                         "the others up to 0.3 m and 3 degrees off it")
     p.add_argument("--out", required=True, type=Path, help="folder for metrics.json and the figures")
@@ -893,7 +896,7 @@ def _evaluate_parser(sub: argparse._SubParsersAction) -> None:
 
 def _reproduce_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("reproduce", help="demonstrate, train and evaluate end to end; write REPORT.md with Tables 1 and 2")
-    p.add_argument("--out", required=True, type=Path)
+    p.add_argument("--out", required=True, type=Path, help="folder for REPORT.md, its figures and the work")
     p.add_argument("--seeds", type=int, default=5, help="training seeds per recipe (default 5)")
     p.add_argument("--eval-seeds", type=int, default=1, help="evaluation runs per model and scenario")
     p.add_argument("--recipes", default="paper,ours,teach",
@@ -910,7 +913,7 @@ def _reproduce_parser(sub: argparse._SubParsersAction) -> None:
 
 def _study_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("study", help="baselines, data efficiency, profiles, robustness and ablations; write STUDY.md")
-    p.add_argument("--out", required=True, type=Path)
+    p.add_argument("--out", required=True, type=Path, help="folder for STUDY.md, its figures and the work")
     p.add_argument("--quick", action="store_true", help="one seed and fewer levels (about a minute on 2 cores)")
     p.add_argument("--seeds", type=int, help="training seeds (default: 3, or 1 with --quick)")
     p.add_argument("--recipe", metavar="NAME", help="the recipe section 6 teaches every order and style with (default: teach)")
@@ -948,7 +951,7 @@ def _export_parser(sub: argparse._SubParsersAction) -> None:
 
 def _info_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("info", help="what a recording, dataset, model or ONNX file holds (camera, profile, data, history, identifiability)")
-    p.add_argument("files", nargs="+", metavar="FILE")
+    p.add_argument("files", nargs="+", metavar="FILE", help="recording folders, dataset or model files (.safetensors), ONNX files")
     p.set_defaults(func=_cmd_info)
 
 
