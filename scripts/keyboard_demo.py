@@ -7,7 +7,7 @@ default recipe:
 - *stick*: its own continuous stick (``terrapref record``);
 - *keyboard*: through the teleop window's own event handling (SDL's dummy video driver), as a
   person at a keyboard would: it wants what the driver wants (its intent), reacts 0.3 s later,
-  and can only hold Left/Right (one control-set step per frame) or tap Down
+  and can only hold Left/Right (a step at the press, then gently on) or tap Down
   (terrapref.teleop.keyboard).
 
 A model is trained from each drive with the default recipe, and every model and the driver drive

@@ -118,11 +118,26 @@ def test_keyboard_ramp_labels_and_screenshot(tmp_path):
     rec = read_recording(out)
     assert rec.meta["driver"] == {"kind": "human", "input": "keyboard/mouse/gamepad", "disturbance": None, "seed": 0}
     assert rec.meta["summary"]["quit"] is True
-    # 0.1 rad/s per frame, one control-set bin a frame; released at frame 8, the stick stays at 0.6.
-    assert rec.commands[2:10, 1] == pytest.approx([0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.6, 0.6])
-    assert list(rec.labels[2:8]) == [11, 12, 13, 14, 15, 16]
+    # The press moves one control-set step, the hold 0.05 rad/s a frame; released at frame 8, the stick stays at 0.35.
+    assert rec.commands[2:10, 1] == pytest.approx([0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.35, 0.35])
+    assert rec.labels[2] == 11 and rec.labels[4] == 12 and rec.labels[6] == 13
     assert rec.poses[8, 2] > rec.poses[2, 2], "turning left raises the heading"
     assert pygame.image.load(str(tmp_path / "shot.png")).get_size() == (640 + 256, 480 + 26)
+
+
+def test_an_arrow_held_for_a_second_makes_a_gentle_curve_not_full_lock():
+    from terrapref.teleop import Stick
+
+    pygame.init()
+    stick = Stick(1.0)
+    stick.handle(key(pygame.KEYDOWN, pygame.K_LEFT))
+    w = [stick.update(0.1) for _ in range(20)]
+    assert w[0] == pytest.approx(0.1)  # the press: one step
+    assert 0.4 < w[9] < 0.6  # held 1 s
+    assert w[15] == pytest.approx(1.0)  # full lock after about 1.5 s
+    stick.handle(key(pygame.KEYUP, pygame.K_LEFT))
+    stick.handle(key(pygame.KEYDOWN, pygame.K_RIGHT))
+    assert stick.update(0.1) == pytest.approx(0.9)  # a new press starts gently again
 
 
 def test_bad_speed_is_a_user_error():
@@ -221,7 +236,7 @@ def test_the_window_opens_waiting_and_records_only_after_the_countdown(tmp_path)
     assert phases[10 + countdown] == "driving"
     assert result.frames == len(rec) == 50 - 10 - countdown
     assert rec.times[0] == 0.0, "nothing moved before the countdown ended"
-    assert rec.commands[0, 1] == pytest.approx(0.2), "the stick set while waiting holds"
+    assert rec.commands[0, 1] == pytest.approx(0.15), "the stick set while waiting holds"
 
 
 def test_the_map_edge_stops_the_vehicle_and_is_not_recorded(tmp_path):
@@ -272,7 +287,7 @@ def test_the_guide_reads_progress_the_next_patch_and_the_terrain_underneath():
     prefs = PreferenceSet(PreferenceSetConfig(), sim.camera)
     guide = CourseGuide(sim.world, sim.path, prefs)
     r = guide.readout(Pose(4.0, 6.0, 0.0), 2.0, label=10)
-    assert (r.next_patch, r.under, r.turn_deg) == ("mud", "grass", 0.0)
+    assert (r.next_patch, r.under, r.turn_deg_s) == ("mud", "grass", 0.0) and r.lines()[3] == "label 10: straight"
     assert r.next_patch_m == pytest.approx(8.0, abs=0.5)  # the mud begins at x = 12 m, s = 10 m
     assert r.lines()[0].startswith("path   2.0 / 26 m")
     on_mud = guide.readout(Pose(13.0, 6.0, 0.0), 11.0, label=10)
@@ -283,8 +298,9 @@ def test_the_guide_reads_progress_the_next_patch_and_the_terrain_underneath():
     assert after_mud.next_patch == "water" and after_mud.next_patch_m == pytest.approx(4.0, abs=0.5)
     assert guide.readout(Pose(25.0, 6.0, 0.0), 23.0, label=10).next_patch is None
     left, right = guide.readout(Pose(4.0, 6.0, 0.0), 2.0, label=15), guide.readout(Pose(4.0, 6.0, 0.0), 2.0, label=5)
-    assert left.turn_deg > 0 > right.turn_deg and left.turn_deg == pytest.approx(-right.turn_deg)
-    assert "left" in left.lines()[3] and "right" in right.lines()[3]
+    assert left.turn_deg_s > 0 > right.turn_deg_s and left.turn_deg_s == pytest.approx(-right.turn_deg_s)
+    assert left.lines()[3] == "label 15: left 29 deg/s, a 2.0 m radius" and right.lines()[3].startswith("label 5: right 29 deg/s")
+    assert guide.readout(Pose(4.0, 6.0, 0.0), 2.0, label=20).lines()[3] == "label 20: left 57 deg/s, a 1.0 m radius"  # was 332 deg left
 
 
 def test_riding_along_records_only_the_takeover_and_train_accepts_it(tmp_path):
@@ -383,7 +399,7 @@ def test_a_simulated_keyboard_person_drives_the_course_through_the_window(tmp_pa
     assert result.frames + START_AFTER_FRAMES + round(COUNTDOWN_S * 10) <= 2000
     w = rec.commands[:, 1]
     steps = np.round(np.abs(np.diff(w)), 6)
-    assert ((steps == 0.0) | (steps == 0.1) | (w[1:] == 0.0)).all(), "the stick moves one step per frame, or Down centres it"
+    assert ((steps == 0.0) | (steps == 0.05) | (steps == 0.1) | (w[1:] == 0.0)).all(), "a press moves a step, a hold less at first, or Down centres it"
     assert len(set(rec.labels.tolist())) >= 5 and 0.2 < np.mean(w == 0.0) < 0.9, "curves of several widths, and straight stretches"
     assert person.presses > 10
 

@@ -32,9 +32,8 @@ class Readout:
         next_patch: the class of the next patch on the way, or None past the last one.
         next_patch_m: distance along the path to it [m] (0 while beside it).
         label: the current label (the control set's index).
-        turn_deg: the label's trajectory, its heading change over the preference set's
-            horizon [deg], positive to the left.
-        horizon_m: the length of the preference set's trajectories [m].
+        turn_deg_s: the label's turn rate [deg/s], positive to the left.
+        radius_m: the label's turn radius at the control set's speed [m] (inf: straight).
         at_edge: the vehicle is held at the map's edge.
     """
 
@@ -44,8 +43,8 @@ class Readout:
     next_patch: str | None
     next_patch_m: float
     label: int
-    turn_deg: float
-    horizon_m: float
+    turn_deg_s: float
+    radius_m: float
     at_edge: bool = False
 
     def lines(self) -> list[str]:
@@ -56,8 +55,8 @@ class Readout:
             patch = f"patch here: {self.next_patch}"
         else:
             patch = f"next patch: {self.next_patch} in {self.next_patch_m:.0f} m"
-        side = "left" if self.turn_deg > 0.5 else "right" if self.turn_deg < -0.5 else ""
-        turn = f"label {self.label}: {f'{abs(self.turn_deg):.0f} deg {side}' if side else 'straight'} over {self.horizon_m:.1f} m"
+        side = "left" if self.turn_deg_s > 0.05 else "right" if self.turn_deg_s < -0.05 else ""
+        turn = f"label {self.label}: {f'{side} {abs(self.turn_deg_s):.0f} deg/s, a {self.radius_m:.1f} m radius' if side else 'straight'}"
         return [f"path {self.progress_m:5.1f} / {self.length_m:.0f} m ({share:.0%})", patch, f"under the vehicle: {self.under}", turn]
 
 
@@ -87,10 +86,11 @@ class CourseGuide:
         for i in range(len(s) - 1, -1, -1):
             nxt[i] = i if self.cls[i] >= 0 else nxt[i + 1]
         self.next_index = nxt[:-1]
-        end_yaw = prefs.trajectories[:, -1, 2]
-        self.turn_deg = np.degrees(end_yaw)
-        steps = np.diff(prefs.trajectories[0, :, :2], axis=0)
-        self.horizon_m = float(np.hypot(steps[:, 0], steps[:, 1]).sum())
+        control = prefs.config.control
+        w = np.asarray(control.w_rps, dtype=float)
+        self.turn_deg_s = np.degrees(w)
+        with np.errstate(divide="ignore"):
+            self.radius_m = np.where(w != 0.0, control.v_mps / np.abs(w), np.inf)
 
     def readout(self, pose: Pose, progress_m: float, label: int, at_edge: bool = False) -> Readout:
         i = min(int(math.ceil(progress_m / SAMPLE_STEP_M - 1e-9)), len(self.s) - 1)
@@ -102,7 +102,7 @@ class CourseGuide:
             name, dist = self.names.get(int(self.cls[j]), "?"), max(0.0, float(self.s[j]) - progress_m)
         under_id = int(self.world.class_at(np.array(pose[:2])))
         under = "off the map" if under_id == 255 else self.names.get(under_id, "?")
-        return Readout(progress_m, self.path.length_m, under, name, dist, label, float(self.turn_deg[label]), self.horizon_m, at_edge)
+        return Readout(progress_m, self.path.length_m, under, name, dist, label, float(self.turn_deg_s[label]), float(self.radius_m[label]), at_edge)
 
 
 def stays_on_map(world: WorldMap, pose: Pose, command: Command, period_s: float, margin_m: float = EDGE_MARGIN_M) -> bool:

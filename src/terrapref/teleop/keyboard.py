@@ -3,7 +3,7 @@
 The window is driven through its own event handling (a :data:`~terrapref.teleop.loop.Script`):
 the person sees the scene, wants what the synthetic driver wants (its intended yaw rate, before
 that driver's own hand), reacts ``reaction_s`` later, and can only hold Left or Right (the stick
-moves one control-set step per frame) or tap Down (centre). What a keyboard loses against a
+moves one control-set step at the press, then gently on, terrapref.teleop.stick) or tap Down (centre). What a keyboard loses against a
 stick (steps instead of a continuous w, a late and coarse return to straight) is therefore in the
 recording, as it would be with a person.
 """
@@ -17,7 +17,7 @@ import pygame
 
 from terrapref.demos.expert import ExpertDriver
 from terrapref.teleop.loop import TeleopState
-from terrapref.teleop.stick import KEY_RATE_RPS2
+from terrapref.teleop.stick import KEY_STEP_RPS
 from terrapref.scenario import Scenario
 from terrapref.world import WorldMap
 
@@ -46,7 +46,7 @@ class KeyboardPerson:
                  reaction_s: float = REACTION_S, world: WorldMap | None = None) -> None:
         self.expert = expert
         self.expert.reset(scenario, rng, world=world)
-        self.step = KEY_RATE_RPS2 / camera_rate_hz  # how far one frame of a held arrow moves the stick [rad/s]
+        self.step = KEY_STEP_RPS  # how far a press moves the stick [rad/s]; holding it, less per frame at first
         self.queue: deque[float] = deque([0.0] * max(0, round(reaction_s * camera_rate_hz)))
         self.held: int | None = None  # the arrow held down, if any
         self.presses = 0

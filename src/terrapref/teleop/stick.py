@@ -8,9 +8,15 @@ from typing import Any
 import numpy as np
 import pygame
 
-KEY_RATE_RPS2 = 1.0
-"""How fast a held arrow key moves w [rad/s per s]: one control-set step (0.1 rad/s) per frame,
-full lock (1 rad/s) in 1 s; released, the stick stays where it was left."""
+KEY_STEP_RPS = 0.1
+"""How far one press of an arrow key moves w at once [rad/s]: one control-set step."""
+KEY_RATE_RPS2 = 0.5
+"""How fast an arrow key held for up to ``KEY_SLOW_S`` goes on moving w [rad/s per s]: after
+the press's step, a gentle curve builds (0.55 rad/s after 1 s) rather than full lock."""
+KEY_SLOW_S = 1.0
+KEY_FAST_RPS2 = 1.0
+"""How fast it moves w once held longer than ``KEY_SLOW_S`` (full lock, 1 rad/s, after about
+1.5 s); released, the stick stays where it was left."""
 AXIS_DEADZONE = 0.08
 """Gamepad axis values within this of 0 read as a centred stick (worn sticks rest slightly off 0)."""
 
@@ -45,6 +51,7 @@ class Stick:
     def __init__(self, w_max_rps: float, rate_rps2: float = KEY_RATE_RPS2, view_width_px: int = 640, view_height_px: int = 480) -> None:
         self.w_max = w_max_rps
         self.rate = rate_rps2
+        self.held_s: float | None = None  # how long the arrow now down has been held (None: pressed, not yet moved)
         self.view_width = view_width_px
         self.view_height = view_height_px
         self.w = 0.0
@@ -74,12 +81,15 @@ class Stick:
         """Take one input event; mouse positions are in canvas pixels (see ``Window.to_canvas``)."""
         if event.type in (pygame.KEYDOWN, pygame.KEYUP):
             down = event.type == pygame.KEYDOWN
-            if event.key == pygame.K_LEFT:
-                self.left, self.source = down, "keys"
+            if event.key in (pygame.K_LEFT, pygame.K_RIGHT):
+                if event.key == pygame.K_LEFT:
+                    self.left = down
+                else:
+                    self.right = down
+                self.source = "keys"
                 self.touched |= down
-            elif event.key == pygame.K_RIGHT:
-                self.right, self.source = down, "keys"
-                self.touched |= down
+                if down:
+                    self.held_s = None  # the next frame moves one step, then the hold ramps
             elif down and event.key in (pygame.K_DOWN, pygame.K_c):
                 self.w, self.source, self.touched = 0.0, "keys", True
         elif event.type == pygame.MOUSEBUTTONDOWN and event.button == 1 and 0 <= event.pos[0] < self.view_width and 0 <= event.pos[1] < self.view_height:
@@ -104,7 +114,11 @@ class Stick:
             self.source, self.touched = "pad", True
         if self.left != self.right:
             target = self.w_max if self.left else -self.w_max
-            self.w = ramp_toward(self.w, target, self.rate, dt_s)
+            if self.held_s is None:  # the press itself: one step
+                self.w, self.held_s = ramp_toward(self.w, target, KEY_STEP_RPS, 1.0), 0.0
+            else:
+                self.held_s += dt_s
+                self.w = ramp_toward(self.w, target, self.rate if self.held_s <= KEY_SLOW_S else KEY_FAST_RPS2, dt_s)
         elif self.source == "mouse" and self.mouse_x is not None:
             centre = self.view_width / 2
             self.w = float(np.clip((centre - self.mouse_x) / centre * self.w_max, -self.w_max, self.w_max))
