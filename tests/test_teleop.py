@@ -530,3 +530,17 @@ def test_sigterm_before_the_first_frame_of_drive_leaves_no_recording(tmp_path):
         child.wait()
     assert child.returncode == 143 and "terminated" in err, err
     assert not out.exists()
+
+
+def test_the_route_is_drawn_on_the_ground_in_the_camera_view(tmp_path):
+    # The 21 arcs are the turns on offer; the route to follow is drawn in its own colour.
+    import numpy as np
+
+    from terrapref.teleop.window import PATH_COLOR
+
+    events = {5: [pygame.event.Event(pygame.QUIT)]}
+    run_teleop("demo_course", None, realtime=False, wait_for_start=False, script=script_from(events), max_frames=20, screenshot=tmp_path / "shot.png")
+    shot = pygame.surfarray.array3d(pygame.image.load(str(tmp_path / "shot.png"))).transpose(1, 0, 2)  # (H, W, 3)
+    view = shot[:480, :640].astype(int)
+    on_route = (np.abs(view - np.array(PATH_COLOR)).sum(axis=2) < 30)
+    assert on_route.sum() > 150 and on_route[:, 300:340].sum() > 0.8 * on_route.sum()  # straight ahead, down the middle

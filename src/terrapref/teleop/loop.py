@@ -329,9 +329,10 @@ class _Session:
     def banner(self) -> Banner | None:
         if self.phase == "waiting":
             what = ("The planner drives; steer to correct it." if self.planner is not None
-                    else "Drive along the white path the way you like to drive.")
+                    else "Drive along the magenta path the way you like to drive.")
             return Banner("Press Space to start", HIGHLIGHT_COLOR, (
                 what,
+                "The white arcs are the turns you can take; yours is yellow.",
                 f"The vehicle moves at {self.v:g} m/s; you steer.",
                 "Left/Right move the stick, which stays where you leave it;",
                 "Down or C centres it. Or hold the left mouse button over",

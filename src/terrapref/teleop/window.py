@@ -31,8 +31,9 @@ OUTLINE_COLOR = (20, 20, 20)
 PANEL_BG = (28, 30, 34)
 TEXT_COLOR = (230, 230, 230)
 DIM_TEXT = (150, 154, 160)
-PATH_COLOR = (255, 255, 255)
-TRACE_COLOR = (232, 40, 200)
+PATH_COLOR = (240, 40, 210)  # the route to follow, on the ground in the view and on the map
+PATH_AHEAD_M = (-1.0, 25.0)  # the stretch of the route drawn in the camera view, from the vehicle's place on it [m]
+TRACE_COLOR = (255, 255, 255)
 VEHICLE_COLOR = (255, 226, 0)
 ALERT_COLOR = (255, 90, 70)
 PLANNER_COLOR = (90, 200, 255)
@@ -164,6 +165,7 @@ class Window:
         view = pygame.image.frombuffer(np.ascontiguousarray(image, dtype=np.uint8), self.view_size, "P")  # class ids, 8-bit
         view.set_palette(self.palette_list)  # SDL colours it while blitting: no (H, W, 3) array per frame
         canvas.blit(view, (0, 0))
+        self._draw_route()
         self._draw_trajectories(label)
         self._draw_hud(hud)
         if mode is not None:
@@ -217,6 +219,22 @@ class Window:
             self.canvas.blit(s, (box.left + 16, y))
             y += s.get_height() + 4
 
+    def _draw_route(self) -> None:
+        """The reference path on the ground in the camera view, where it is in sight."""
+        sim = self.sim
+        x, y, yaw = sim.vehicle.pose
+        s0, _ = sim.path.project(np.array([x, y]))
+        s = np.clip(np.arange(s0 + PATH_AHEAD_M[0], s0 + PATH_AHEAD_M[1], 0.25), 0.0, sim.path.length_m)
+        d = sim.path.point_at(s) - (x, y)
+        c, sn = math.cos(yaw), math.sin(yaw)
+        local = np.stack([c * d[:, 0] + sn * d[:, 1], -sn * d[:, 0] + c * d[:, 1]], axis=1)
+        uv, visible = sim.camera.project_ground(local)
+        for run in np.split(np.arange(len(s)), np.flatnonzero(np.diff(visible.astype(int))) + 1):
+            if visible[run[0]] and len(run) > 1:
+                points = [(float(u), float(v)) for u, v in uv[run]]
+                pygame.draw.lines(self.canvas, OUTLINE_COLOR, False, points, 6)
+                pygame.draw.lines(self.canvas, PATH_COLOR, False, points, 3)
+
     def _draw_trajectories(self, label: int) -> None:
         for i, runs in enumerate(self.segments):
             if i == label:
@@ -242,7 +260,7 @@ class Window:
         canvas.set_clip(pygame.Rect(ox, oy, *self.inset_size))
         if len(self.path_px) > 1:
             pygame.draw.lines(canvas, OUTLINE_COLOR, False, self.path_px, 3)
-            pygame.draw.lines(canvas, PATH_COLOR, False, self.path_px, 1)
+            pygame.draw.lines(canvas, PATH_COLOR, False, self.path_px, 2)
         pygame.draw.circle(canvas, PATH_COLOR, self.path_px[-1], 4, 1)
         if len(trace_px) > 1:
             pygame.draw.lines(canvas, TRACE_COLOR, False, trace_px, 2)
@@ -290,7 +308,11 @@ class Window:
             x, y = x0 + (i // half) * column, y0 + (i % half) * 18
             pygame.draw.rect(canvas, c.color, pygame.Rect(x, y + 2, 12, 12))
             canvas.blit(self.font.render(c.name, True, TEXT_COLOR), (x + 18, y))
-        y = y0 + half * 18 + 8
+        y = y0 + half * 18
+        for colour, name, x in ((PATH_COLOR, "route to follow", x0), (TRACE_COLOR, "your trace", x0 + column)):
+            pygame.draw.line(canvas, colour, (x, y + 8), (x + 12, y + 8), 3)
+            canvas.blit(self.font.render(name, True, TEXT_COLOR), (x + 18, y))
+        y += 18 + 8
         for line in self.instructions:
             canvas.blit(self.font.render(line, True, DIM_TEXT), (x0, y))
             y += 17
