@@ -239,7 +239,7 @@ def test_lines_give_the_order_every_pair_and_the_warnings(report: Identifiabilit
 
 
 def test_a_profile_the_drive_agrees_with_is_said_to_agree(report: Identifiability):
-    line = "the profile stored with the drive: mud > rock > water: the drive agrees on all 3 pairs (2 identified)"
+    line = "the profile stored with the drive: mud > rock > water: the drive agrees on all 3 pairs it orders (2 identified)"
     assert report.against(["mud", "rock", "water"]) == [line]
     assert report.lines(["mud", "rock", "water"]) == [*report.lines(), line]
     assert report.lines(None) == report.lines()
@@ -252,6 +252,14 @@ def test_a_profile_the_drive_contradicts_names_each_reversed_pair(report: Identi
     assert lines == ["the profile stored with the drive: water > mud > rock: the drive orders 2 of 3 pairs the other way round",
                      f"  water > mud in the profile, mud > water in the drive (margin {mw.margin:.2f}, not identified)",
                      f"  water > rock in the profile, rock > water in the drive (margin {rw.margin:.2f}, identified)"]
+
+
+def test_a_drive_that_orders_nothing_states_no_order():
+    # One frame, no choice between two classes: every weight 0, no learned order, no pair "the other way round".
+    order = ("non_traversable", "water", "rock", "mud", "grass")
+    empty = Identifiability(order, tuple(PairEvidence(a, b, 0, 0, 0, (0, 0), 0.0, None) for i, a in enumerate(order) for b in order[i + 1:]))
+    assert empty.lines()[0] == "learned order: none (the drive sets no class above another)"
+    assert empty.against(["rock", "mud", "water"]) == ["the profile stored with the drive: rock > mud > water: the drive orders none of its 3 pairs"]
 
 
 def test_the_report_counts_each_choice_for_its_class_and_each_frame_on_its_side():

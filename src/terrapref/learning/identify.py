@@ -107,8 +107,11 @@ class Identifiability:
     def lines(self, profile: Sequence[str] | None = None) -> list[str]:
         """The report; with ``profile`` (the order stored with the data, best first), also how the
         learned order compares with it (:meth:`against`)."""
-        out = [f"learned order: {' > '.join(self.order)}"]
-        out += [f"  {p.describe()}{'' if p.identified else '  <- not identified'}" for p in self.pairs]
+        if not any(p.margin > 0 for p in self.pairs):
+            out = ["learned order: none (the drive sets no class above another)"]
+        else:
+            out = [f"learned order: {' > '.join(self.order)}"]
+            out += [f"  {p.describe()}{'' if p.identified else '  <- not identified'}" for p in self.pairs]
         out += [f"warning: {w}" for w in self.warnings()]
         return out + (self.against(profile) if profile else [])
 
@@ -118,12 +121,16 @@ class Identifiability:
         it; or that every pair agrees, and how many of them the data identify."""
         named = [c for c in profile if c in self.order]
         head = f"the profile stored with the drive: {' > '.join(named)}"
-        evidence = [self.pair(a, b) for i, a in enumerate(named) for b in named[i + 1:]]  # a before b in the profile
+        pairs = [self.pair(a, b) for i, a in enumerate(named) for b in named[i + 1:]]  # a before b in the profile
+        evidence = [p for p in pairs if p.margin > 0]  # a tie (no weight learned between them) orders nothing
+        unseen = f"; {len(pairs) - len(evidence)} tied" if len(evidence) < len(pairs) else ""
         reversed_ = [p for p in evidence if named.index(p.first) > named.index(p.second)]
+        if not evidence:
+            return [f"{head}: the drive orders none of its {len(pairs)} pairs"]
         if not reversed_:
             identified = sum(p.identified for p in evidence)
-            return [f"{head}: the drive agrees on all {len(evidence)} pairs ({identified} identified)"]
-        return [f"{head}: the drive orders {len(reversed_)} of {len(evidence)} pairs the other way round",
+            return [f"{head}: the drive agrees on all {len(evidence)} pairs it orders ({identified} identified){unseen}"]
+        return [f"{head}: the drive orders {len(reversed_)} of {len(evidence)} pairs the other way round{unseen}",
                 *(f"  {p.second} > {p.first} in the profile, {p.first} > {p.second} in the drive (margin {p.margin:.2f}, "
                   f"{'identified' if p.identified else 'not identified'})" for p in reversed_)]
 
