@@ -12,6 +12,7 @@ import pytest
 from PIL import Image
 
 from terrapref.cli import main
+from terrapref.pngio import LEGEND_WIDTH_PX
 from terrapref.scenario import packaged_scenarios, resolve_scenario
 from terrapref.terrain import UNKNOWN
 from terrapref.world import rasterise
@@ -289,9 +290,12 @@ def test_render_writes_class_id_png_and_preview(tmp_path: Path, capsys: pytest.C
     with Image.open(col) as im:
         assert im.format == "PNG"
         assert im.mode == "RGB"
-        assert im.size == (640, 480)
+        assert im.size == (640 + LEGEND_WIDTH_PX, 480)
         rgb = np.asarray(im)
-    np.testing.assert_array_equal(rgb, classes.palette()[labels])
+    np.testing.assert_array_equal(rgb[:, :640], classes.palette()[labels])  # the image, exactly
+    band = rgb[:, 640:].reshape(-1, 3)
+    for c in classes.classes:  # and a legend swatch of every class beside it
+        assert (band == c.color).all(axis=1).sum() >= 100, c.name
 
 
 def test_render_defaults_to_the_start_pose(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -47,7 +47,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
 def _cmd_render(args: argparse.Namespace) -> int:
     from terrapref.camera import PinholeCamera, SegmentationRenderer
-    from terrapref.pngio import colorise, write_png_atomic
+    from terrapref.pngio import preview_with_legend, write_png_atomic
     from terrapref.scenario import resolve_scenario
     from terrapref.vehicle import Pose
     from terrapref.world import rasterise
@@ -69,8 +69,8 @@ def _cmd_render(args: argparse.Namespace) -> int:
     write_png_atomic(args.out, image)
     print(f"wrote {args.out} ({image.shape[1]}x{image.shape[0]} class ids)")
     if args.preview:
-        write_png_atomic(args.preview, colorise(image, scenario.classes))
-        print(f"wrote {args.preview} (colour preview)")
+        write_png_atomic(args.preview, preview_with_legend(image, scenario.classes))
+        print(f"wrote {args.preview} (colour preview, the image and a legend beside it)")
     return 0
 
 
@@ -383,8 +383,8 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
 
     members = config.classifier.members
     curve = Path(args.out).with_suffix(".loss.png")
-    first = f", member 1 of {members}" if members > 1 else ""
-    save_loss_curve(curve, [asdict(h) for h in result.history], result.best_epoch, title=f"{Path(args.out).name}: {len(data)} samples{first}")
+    save_loss_curve(curve, [([asdict(h) for h in r.history], r.best_epoch) for r in result.members or [result]],
+                    title=f"{Path(args.out).name}: {len(data)} samples{f', {members} members' if members > 1 else ''}")
     chosen = []
     for j, r in enumerate(result.members or [result]):
         best = r.history[r.best_epoch - 1]
@@ -403,11 +403,11 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
         print("what the demonstrations show (stored in the model):")
         for line in result.identifiability.lines(data.meta.get("profile")):
             print(f"  {line}")
-    print(f"wrote {args.out} ({'; '.join(chosen)}), {curve}, checkpoints in {Path(args.out).with_name(Path(args.out).stem + '.checkpoints')}")
     m = len(data.feature_config.preference.control.w_rps)
     print(f"val acc: the share of held-out frames ({config.optimiser.val_fraction:.0%}) whose driven trajectory C ranks first of {m} "
           f"(chance {1 / m:.3f}); neighbours differ by one step of steering, so val top3 and, for the planner, the agreement "
           "`terrapref evaluate` measures say more (one synthetic drive of teach_course: val acc about 0.45, val top3 about 0.84)")
+    print(f"wrote {args.out} ({'; '.join(chosen)}), {curve}, checkpoints in {Path(args.out).with_name(Path(args.out).stem + '.checkpoints')}")
 
 
 def _cmd_train(args: argparse.Namespace) -> int:

@@ -10,6 +10,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib import patheffects  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
@@ -30,65 +31,102 @@ def _save(fig: plt.Figure, path: str | Path) -> Path:
     return path
 
 
-def draw_map(ax: plt.Axes, scenario: Scenario, world: WorldMap, zones: bool = True) -> list:
-    """Top-down map with the reference path, the start and the labelled zones; returns legend handles."""
+def draw_map(ax: plt.Axes, scenario: Scenario, world: WorldMap, zones: bool = True, marks: dict[str, str] | None = None) -> list:
+    """Top-down map with the reference path, the start and the labelled zones, each label placed
+    clear of the others; ``marks`` (zone id -> text, a missed zone's expected and chosen) are
+    added to their zones' labels in red. Returns the legend handles."""
     classes = scenario.classes
     rgb = classes.palette()[world.raster]
     sx, sy = world.size_m
     ax.imshow(rgb, origin="lower", extent=(0, sx, 0, sy), interpolation="nearest")
     wp = scenario.waypoints
-    ax.plot(wp[:, 0], wp[:, 1], color="white", lw=1.5, ls="--", label="reference path")
+    ax.plot(wp[:, 0], wp[:, 1], color="white", lw=1.5, ls="--", label="reference path",
+            path_effects=[patheffects.withStroke(linewidth=3, foreground="black")])  # seen on any ground, and in the legend
     x, y, yaw = scenario.start
     ax.annotate("", xy=(x + 2.5 * np.cos(yaw), y + 2.5 * np.sin(yaw)), xytext=(x, y), arrowprops={"arrowstyle": "-|>", "color": "black", "lw": 1.5})
     ax.plot([x], [y], "o", color="black", ms=5, label="start")
-    if zones:
-        for z in scenario.zones:
-            o = outline(z.shape)
-            ax.plot(o[:, 0], o[:, 1], color="yellow", lw=1.0)
-            top = o[np.argmax(o[:, 1])]
-            text = z.id + (f": {z.label}" if z.label else "")
-            ax.text(top[0], top[1] + 0.5, text, color="yellow", fontsize=7, ha="center", va="bottom",
-                    bbox={"facecolor": "black", "alpha": 0.5, "pad": 1, "lw": 0})
     ax.set_xlim(0, sx)
     ax.set_ylim(0, sy)
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
+    if zones:
+        _label_zones(ax, scenario.zones, marks or {})
     return [Patch(color=np.array(c.color) / 255, label=c.name) for c in classes.classes]
 
 
+def _label_zones(ax: plt.Axes, zones: Sequence[Zone], marks: dict[str, str]) -> None:
+    """Each zone's outline and label; a label goes above its zone, else below, right or left,
+    whichever first overlaps no label placed before it (else the least overlapping)."""
+    renderer = ax.figure.canvas.get_renderer()
+    frame = ax.get_window_extent(renderer)
+    placed: list = []  # the labels' boxes in display coordinates
+    for z in zones:
+        o = outline(z.shape)
+        ax.plot(o[:, 0], o[:, 1], color="yellow", lw=1.0)
+        (x0, y0), (x1, y1) = o.min(axis=0), o.max(axis=0)
+        text = z.id + (f": {z.label}" if z.label else "") + (f"\n{marks[z.id]}" if z.id in marks else "")
+        style = {"color": "red" if z.id in marks else "yellow", "fontsize": 7, "bbox": {"facecolor": "black", "alpha": 0.6, "pad": 1, "lw": 0}}
+        best = None
+        for x, y, ha, va in (((x0 + x1) / 2, y1 + 0.5, "center", "bottom"), ((x0 + x1) / 2, y0 - 0.5, "center", "top"),
+                             (x1 + 0.5, (y0 + y1) / 2, "left", "center"), (x0 - 0.5, (y0 + y1) / 2, "right", "center")):
+            label = ax.text(x, y, text, ha=ha, va=va, **style)
+            box = label.get_window_extent(renderer).expanded(1.05, 1.1)
+            inside = max(0.0, min(box.x1, frame.x1) - max(box.x0, frame.x0)) * max(0.0, min(box.y1, frame.y1) - max(box.y0, frame.y0))
+            overlap = sum(max(0.0, min(box.x1, b.x1) - max(box.x0, b.x0)) * max(0.0, min(box.y1, b.y1) - max(box.y0, b.y0)) for b in placed)
+            overlap += box.width * box.height - inside  # beyond the map counts as overlap too
+            if best is None or overlap < best[0]:
+                if best is not None:
+                    best[1].remove()
+                best = (overlap, label, box)
+            else:
+                label.remove()
+            if overlap == 0.0:
+                break
+        placed.append(best[2])
+
+
 def save_map(path: str | Path, scenario: Scenario, world: WorldMap,
-             tracks: Sequence[tuple[str, np.ndarray, str]] = (), title: str | None = None) -> Path:
-    """Write a top-down PNG of the map; ``tracks`` are (label, xy (N, 2), colour) drawn on top."""
+             tracks: Sequence[tuple[str, np.ndarray, str]] = (), title: str | None = None, marks: dict[str, str] | None = None) -> Path:
+    """Write a top-down PNG of the map; ``tracks`` are (label, xy (N, 2), colour) drawn on top,
+    ``marks`` (zone id -> text) added to those zones' labels in red."""
     sx, sy = world.size_m
-    width = 10.0
-    fig, ax = plt.subplots(figsize=(width, max(3.0, width * sy / sx * 0.95)), dpi=120)
-    class_handles = draw_map(ax, scenario, world)
+    width = 11.5
+    fig, ax = plt.subplots(figsize=(width, max(3.0, (width - 1.5) * sy / sx * 0.95)), dpi=120)
+    class_handles = draw_map(ax, scenario, world, marks=marks)
     for label, xy, color in tracks:
         ax.plot(xy[:, 0], xy[:, 1], color=color, lw=1.6, label=label)
-    ax.legend(handles=class_handles + ax.get_legend_handles_labels()[0], loc="upper left", fontsize=7, framealpha=0.8)
+    ax.legend(handles=class_handles + ax.get_legend_handles_labels()[0], loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7,
+              framealpha=0.8, borderaxespad=0.0)  # beside the map: never over the start or a zone
     ax.set_title(title or scenario.name)
     fig.tight_layout()
     return _save(fig, path)
 
 
-def save_loss_curve(path: str | Path, history: Sequence[dict], best_epoch: int, title: str = "training") -> Path:
-    """Training and validation loss and accuracy per epoch (the paper's Fig. 4)."""
-    epochs = [h["epoch"] for h in history]
+def save_loss_curve(path: str | Path, members: Sequence[tuple[Sequence[dict], int]], title: str = "training") -> Path:
+    """Training and validation loss and accuracy per epoch (the paper's Fig. 4), every member of
+    an ensemble in its own colour; ``members``: (history, chosen epoch) each."""
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 3.6), dpi=120)
-    ax1.plot(epochs, [h["train_loss"] for h in history], label="train")
-    ax1.plot(epochs, [h["val_loss"] for h in history], label="validation")
-    ax1.axvline(best_epoch, color="grey", ls=":", label=f"chosen epoch {best_epoch}")
+    for j, (history, best_epoch) in enumerate(members):
+        colour = f"C{j}"
+        epochs = [h["epoch"] for h in history]
+        ax1.plot(epochs, [h["train_loss"] for h in history], color=colour, lw=1.0, alpha=0.6)
+        ax1.plot(epochs, [h["val_loss"] for h in history], color=colour, lw=1.6, ls="--")
+        ax1.axvline(best_epoch, color=colour, ls=":", lw=1.0)
+        ax2.plot(epochs, [h["train_acc"] for h in history], color=colour, lw=1.0, alpha=0.6)
+        ax2.plot(epochs, [h["val_acc"] for h in history], color=colour, lw=1.6, ls="--")
+        ax2.plot(epochs, [h["val_top3"] for h in history], color=colour, lw=1.6, ls=":")
+    who = [Line2D([], [], color=f"C{j}", lw=3, label=f"member {j + 1}: epoch {best} chosen" if len(members) > 1 else f"epoch {best} chosen")
+           for j, (_, best) in enumerate(members)]
+    key = [Line2D([], [], color="grey", lw=1.0, label="train"), Line2D([], [], color="grey", lw=1.6, ls="--", label="validation")]
+    ax1.legend(handles=who + key + [Line2D([], [], color="grey", ls=":", label="chosen epoch")], fontsize=7, loc="upper right")
     ax1.set_xlabel("epoch")
     ax1.set_ylabel("cross-entropy loss")
-    ax1.legend(fontsize=8)
-    ax2.plot(epochs, [h["train_acc"] for h in history], label="train top-1")
-    ax2.plot(epochs, [h["val_acc"] for h in history], label="validation top-1")
-    ax2.plot(epochs, [h["val_top3"] for h in history], label="validation top-3")
+    ax2.legend(handles=[Line2D([], [], color="grey", lw=1.0, label="train top-1"), Line2D([], [], color="grey", lw=1.6, ls="--", label="validation top-1"),
+                        Line2D([], [], color="grey", lw=1.6, ls=":", label="validation top-3")], fontsize=7, loc="lower right")
     ax2.set_xlabel("epoch")
-    ax2.set_ylabel("accuracy")
+    ax2.set_ylabel("accuracy (chance 1 in 21)")
     ax2.set_ylim(0, 1)
-    ax2.legend(fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
     return _save(fig, path)

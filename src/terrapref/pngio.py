@@ -22,6 +22,28 @@ def colorise(labels: np.ndarray, classes: ClassTable) -> np.ndarray:
     return classes.palette()[labels]
 
 
+LEGEND_WIDTH_PX = 170
+
+
+def preview_with_legend(labels: np.ndarray, classes: ClassTable) -> np.ndarray:
+    """The colour preview (H, W, 3) of a class-id image with a legend band to its right: the
+    image's pixels are :func:`colorise`'s, the band names each class's colour and unknown (255)."""
+    from PIL import ImageDraw
+
+    rgb = colorise(labels, classes)
+    h = rgb.shape[0]
+    band = Image.new("RGB", (LEGEND_WIDTH_PX, h), (245, 245, 245))
+    draw = ImageDraw.Draw(band)
+    palette = classes.palette()
+    entries = [(c.name + (" (lethal)" if c.name in classes.lethal else ""), tuple(int(v) for v in c.color)) for c in classes.classes]
+    entries.append(("unknown: sky, far, off map", tuple(int(v) for v in palette[255])))
+    for i, (name, colour) in enumerate(entries):
+        y = 10 + 20 * i
+        draw.rectangle((10, y, 24, y + 14), fill=colour, outline=(60, 60, 60))
+        draw.text((32, y + 1), name, fill=(20, 20, 20))
+    return np.concatenate([rgb, np.asarray(band)], axis=1)
+
+
 def read_label_png(path: str | Path) -> np.ndarray:
     """A single-channel 8-bit PNG as a (H, W) uint8 array."""
     with Image.open(path) as im:

@@ -77,5 +77,6 @@ def save_driven_path(summary: RecordingSummary, recording: Recording, out: str |
     from terrapref.plots import save_map
 
     status = summary.status
+    missed = {z.id: f"missed: expected {z.expect}, drove {z.choice}" for z, reached in summary.zones if reached and not z.success}
     return save_map(out, summary.scenario, summary.world, [("driven", recording.poses[:, :2], "red")],
-                    title=f"{summary.scenario.name}: {recording.path.name} ({status}, {summary.frames} frames)")
+                    title=f"{summary.scenario.name}: {recording.path.name} ({status}, {summary.frames} frames)", marks=missed)

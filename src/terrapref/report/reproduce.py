@@ -55,6 +55,7 @@ class RecipeModel:
     demo_minutes: float
     correction_minutes: float
     seconds: float  # demonstrating, correcting and training, wall clock
+    members: tuple[tuple[tuple[EpochMetrics, ...], int], ...] = ()  # an ensemble's members: (history, chosen epoch) each
 
 
 @dataclass(frozen=True)
@@ -92,8 +93,9 @@ def _train_job(args: tuple[tuple[Recipe, ...], str, int, tuple[str, ...], bool])
     for recipe in recipes:
         t0 = time.perf_counter()
         out = run_recipe(recipe, workdir, seed, PreferenceProfile(profile), write_recordings=write)
+        members = tuple((tuple(m.history), m.best_epoch) for m in out.result.members or [out.result])
         rows.append(RecipeModel(recipe.name, seed, str(out.model), tuple(out.result.history), out.result.best_epoch,
-                                out.demo_minutes, out.correction_minutes, time.perf_counter() - t0))
+                                out.demo_minutes, out.correction_minutes, time.perf_counter() - t0, members))
     return rows
 
 
@@ -222,7 +224,7 @@ def _draw_figures(figs: Path, setup: _Setup, runs: list[RecipeRun], trained: lis
     """Each course with the driver's and the planners' seed-0 paths; each recipe's seed-0 training
     curve; drawn as a grid of jobs (a dozen figures of half a second each)."""
     jobs: list[tuple] = [("map", str(figs / f"{sc}.png"), sc, _tracks(runs, sc, setup.recipes)) for sc in setup.scenarios]
-    jobs += [("curve", str(figs / f"training_{t.recipe}.png"), t.recipe, ([asdict(h) for h in t.history], t.best_epoch))
+    jobs += [("curve", str(figs / f"training_{t.recipe}.png"), t.recipe, [([asdict(h) for h in history], best) for history, best in t.members])
              for t in trained if t.seed == 0]
     run_grid(_figure_job, jobs, engine, describe=lambda j: f"figure {j[1]}")
 
@@ -237,8 +239,7 @@ def _figure_job(job: tuple) -> str:
         scenario = resolve_scenario(name)
         save_map(path, scenario, rasterise(scenario), content, title=f"{name}: reference, driver and planner paths")
     else:
-        history, best = content
-        save_loss_curve(path, history, best, title=f"training, recipe {name}, seed 0")
+        save_loss_curve(path, content, title=f"training, recipe {name}, seed 0")
     return path
 
 
