@@ -1,5 +1,5 @@
 """Property-based fuzzing of every reader: recordings, datasets, model files, scenarios, camera
-files, robot files and label maps, mutated byte by byte and field by field. Whatever the input, a reader returns a
+files, robot files, label maps, perception files and class tables, mutated byte by byte and field by field. Whatever the input, a reader returns a
 result or raises a UserError that names the file; nothing else escapes.
 
 The default run uses a fast, derandomised profile (a couple of hundred cases per reader); the
@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -30,9 +31,11 @@ from terrapref.interop.robot import load_robot
 from terrapref.interop.synthetic_bag import robot_yaml
 from terrapref.learning import ClassifierConfig, load_model, save_model
 from terrapref.learning.mlp import init_weights
+from terrapref.perception import load_perception
 from terrapref.scenario import load_scenario, resolve_scenario
 from terrapref.sim import Simulation
 from terrapref.tensorfile import write_tensor_file
+from terrapref.terrain.classes import load_classes
 
 COMMON = dict(deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 FAST = settings(max_examples=120, derandomize=True, **COMMON)
@@ -101,6 +104,9 @@ def base(tmp_path_factory) -> dict:
                                       "distortion_model: plumb_bob\ndistortion_coefficients: {rows: 1, cols: 5, data: [0.0, 0.0, 0.0, 0.0, 0.0]}\n"
                                       "mount_height_m: 1.0\npitch_deg: 30.0\n")
     (root / "labels.yaml").write_text("format: terrapref-labels/1\nname: mine\nids:\n  0: unknown\n  3: grass\n  33: mud\ncolors:\n  3: [0, 102, 0]\n")
+    data = resources.files("terrapref.data")
+    (root / "perception.yaml").write_text(data.joinpath("perception").joinpath("field.yaml").read_text())
+    (root / "classes.yaml").write_text(data.joinpath("classes.yaml").read_text())
     return {"root": root}
 
 
@@ -247,6 +253,10 @@ READERS = {
     "camera file fields": lambda b, f: yaml_fields(b, f, "camera.yaml", load_camera),
     "label map bytes": lambda b, f: file_bytes(b, f, "labels.yaml", load_label_map),
     "label map fields": lambda b, f: yaml_fields(b, f, "labels.yaml", load_label_map),
+    "perception file bytes": lambda b, f: file_bytes(b, f, "perception.yaml", load_perception),
+    "perception file fields": lambda b, f: yaml_fields(b, f, "perception.yaml", load_perception),
+    "class table bytes": lambda b, f: file_bytes(b, f, "classes.yaml", load_classes),
+    "class table fields": lambda b, f: yaml_fields(b, f, "classes.yaml", load_classes),
 }
 
 

@@ -135,12 +135,12 @@ class ClassTable:
             classes.append(TerrainClass(cid, name, (color[0], color[1], color[2])))
         names = {c.name for c in classes}
         background = data.get("background")
-        if background not in names:
+        if not isinstance(background, str) or background not in names:
             problems.append(Problem("background", f"unknown class {background!r}"))
         lethal = data.get("lethal", [])
         profile = data.get("profile", [])
         for key, value in (("lethal", lethal), ("profile", profile)):
-            if not isinstance(value, list) or any(v not in names for v in value):
+            if not isinstance(value, list) or any(not isinstance(v, str) or v not in names for v in value):
                 problems.append(Problem(key, "must be a list of known class names"))
         if problems:
             raise ConfigError(source, problems)
