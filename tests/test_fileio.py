@@ -72,16 +72,20 @@ def test_a_folder_is_not_a_file_name(tmp_path: Path):
 def test_folders_written_to_replace_others_follow_the_umask(tmp_path):
     # A temporary folder is 0700; a recording replaced with --force, a .partial one and a model's
     # checkpoints are folders a user keeps, with the permissions any other folder gets.
-    from terrapref.cli import main
+    from terrapref.demos.recording import RecordingWriter
+    from terrapref.learning.pipeline import _Checkpoints
 
     old = os.umask(0o022)
     try:
         assert stat.S_IMODE(new_folder(tmp_path / "x", ".new").stat().st_mode) == 0o755
         out = tmp_path / "rec"
-        for _ in range(2):  # the second replaces the first
-            assert main(["record", "fig7_rock_vs_non_traversable_left", "--out", str(out), "--quiet", "--force"]) == 0
+        for _ in range(2):  # the second replaces the first through a new folder beside it
+            writer = RecordingWriter(out, {}, {"format": "terrapref-scenario/1"}, overwrite=True)
+            writer.append(0.0, (0.0, 0.0, 0.0), np.zeros((4, 4), np.uint8), (1.0, 0.0), 10)
+            writer.close()
         assert stat.S_IMODE(out.stat().st_mode) == 0o755
-        assert main(["train", str(out), "--epochs", "2", "--out", str(tmp_path / "m.safetensors")]) == 0
+        checkpoints = _Checkpoints(tmp_path / "m.safetensors", {"members": 1}, True)
+        checkpoints.finish()
         assert stat.S_IMODE((tmp_path / "m.checkpoints").stat().st_mode) == 0o755
     finally:
         os.umask(old)
