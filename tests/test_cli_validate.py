@@ -147,34 +147,34 @@ def test_validate_bad_file_prints_one_line_and_exits_2(
     assert len(out) == 1, out
     (line,) = out
     if expected.endswith("..."):
-        assert line.startswith(f"{path}: {expected[:-3]}"), line
+        assert line.startswith(f"error: {path}: {expected[:-3]}"), line
     else:
-        assert line == f"{path}: {expected}"
+        assert line == f"error: {path}: {expected}"
 
 
 def test_validate_example_from_the_spec(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = write(tmp_path, "x.yaml", edit("radius: 1.5", "radius: -1.5"))
     code, out, err = run_cli(capsys, "validate", str(path))
-    assert (code, out, err) == (2, [f"{path}: terrain[2].circle.radius: must be > 0"], [])
+    assert (code, out, err) == (2, [f"error: {path}: terrain[2].circle.radius: must be > 0"], [])
 
 
 def test_validate_nonexistent_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "missing.yaml"
-    assert run_cli(capsys, "validate", str(path)) == (2, [f"{path}: no such file"], [])
+    assert run_cli(capsys, "validate", str(path)) == (2, [f"error: {path}: no such file"], [])
 
 
 def test_validate_unknown_name(capsys: pytest.CaptureFixture[str]) -> None:
     code, out, err = run_cli(capsys, "validate", "no_such_course")
     assert code == 2 and err == []
     (line,) = out
-    assert line.startswith("no_such_course: no such file and no packaged scenario of that name")
+    assert line.startswith("error: no_such_course: no such file and no packaged scenario of that name")
 
 
 def test_validate_directory(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     folder = tmp_path / "folder.yaml"
     folder.mkdir()
     for arg in (str(folder), str(tmp_path)):
-        assert run_cli(capsys, "validate", arg) == (2, [f"{arg}: is a directory, expected a file"], [])
+        assert run_cli(capsys, "validate", arg) == (2, [f"error: {arg}: is a directory, expected a file"], [])
 
 
 def test_validate_name_too_long_for_the_os(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -182,7 +182,7 @@ def test_validate_name_too_long_for_the_os(tmp_path: Path, capsys: pytest.Captur
     code, out, err = run_cli(capsys, "validate", name, str(write(tmp_path, "good.yaml", GOOD_YAML)))
     assert code == 2 and err == []
     assert len(out) == 2
-    assert out[0].startswith(f"{name}: ")
+    assert out[0].startswith(f"error: {name}: ")
     assert out[1].endswith(": ok")
 
 
@@ -197,15 +197,15 @@ def test_validate_reports_every_problem_in_a_file(tmp_path: Path, capsys: pytest
     path = write(tmp_path, "many.yaml", text)
     code, out, err = run_cli(capsys, "validate", str(path))
     assert code == 2 and err == []
-    assert sorted(line.split(": ")[1] for line in out) == [
+    assert sorted(line.split(": ")[2] for line in out) == [  # error: FILE: FIELD: ...
         "name",
         "terrain[0].circle.radius",
         "terrain[1].class",
         "world.resolution_m",
         "zones[1].expect",
     ]
-    assert all(line.startswith(f"{path}: ") for line in out)
-    assert f"{path}: terrain[0].circle.radius: must be > 0" in out
+    assert all(line.startswith(f"error: {path}: ") for line in out)
+    assert f"error: {path}: terrain[0].circle.radius: must be > 0" in out
 
 
 def test_validate_mixed_good_and_bad_files(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -218,8 +218,8 @@ def test_validate_mixed_good_and_bad_files(tmp_path: Path, capsys: pytest.Captur
     assert err == []
     assert out == [
         f"{good}: ok",
-        f"{bad}: terrain[0].circle.radius: must be > 0",
-        f"{empty}: empty file",
+        f"error: {bad}: terrain[0].circle.radius: must be > 0",
+        f"error: {empty}: empty file",
         f"{good2}: ok",
     ]
 
@@ -247,16 +247,16 @@ def test_validate_as_a_subprocess_exit_code_and_no_traceback(tmp_path: Path) -> 
     lines = result.stdout.splitlines()
     assert lines == [
         f"{good}: ok",
-        "bad.yaml: terrain[0].circle.radius: must be finite (got NaN or infinity)",
-        "garbage.yaml: binary data, expected a YAML text file",
+        "error: bad.yaml: terrain[0].circle.radius: must be finite (got NaN or infinity)",
+        "error: garbage.yaml: binary data, expected a YAML text file",
         lines[3],
         lines[4],
-        "dir.yaml: is a directory, expected a file",
-        "missing.yaml: no such file",
+        "error: dir.yaml: is a directory, expected a file",
+        "error: missing.yaml: no such file",
         "demo_course: ok",
     ]
-    assert lines[3].startswith("date.yaml: malformed YAML")
-    assert lines[4].startswith("huge.yaml: world: raster would have about 10^402 cells")
+    assert lines[3].startswith("error: date.yaml: malformed YAML")
+    assert lines[4].startswith("error: huge.yaml: world: raster would have about 10^402 cells")
 
 
 def test_validate_as_a_subprocess_good_files_exit_0(tmp_path: Path) -> None:

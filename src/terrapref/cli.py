@@ -38,7 +38,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
             load_scenario(scenario_path(name))
         except UserError as exc:
             for line in exc.lines():
-                print(line)
+                print(f"error: {line}")  # in the report's order, beside the files that are ok
             status = 2
         else:
             print(f"{name}: ok")
