@@ -21,6 +21,7 @@ import numpy as np
 from terrapref.camera import CameraConfig
 from terrapref.interop.labels import LabelMap
 from terrapref.learning.model_file import LoadedModel, load_model
+from terrapref.planner.costmap import Costmap
 from terrapref.planner.planner import Planner
 from terrapref.vehicle import Command, Pose
 
@@ -105,6 +106,18 @@ class PlannerRuntime:
         d = self.planner.decide(image, pose)
         self.last = RuntimeDecision(float(stamp_s), d.command, d.index, d.probs, d.progress_s, d.U)
         return self.last
+
+    def costmap(self) -> Costmap:
+        """The learned preference over the ground seen so far, in the frame of the poses given
+        (terrapref.planner.costmap): 0-99 by learned price, 100 lethal, -1 never seen.
+
+        Raises:
+            ValueError: the model's planner keeps no ground map (it has no offset stage).
+        """
+        stage = self.planner.offset_stage
+        if stage is None:
+            raise ValueError("this model's planner keeps no ground map (no offset stage: recipe teach has one)")
+        return stage.costmap(self.model.features.feature_classes)
 
     def command_at(self, now_s: float) -> Command:
         """The command to send at ``now_s``: the last decision's while it is fresh, else a stop."""

@@ -34,6 +34,7 @@ import numpy as np
 from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.features.corridor import CorridorFeatures, GroundMap, gated, steer
 from terrapref.learning.corridor import CorridorUtility
+from terrapref.planner.costmap import Costmap, costmap_of
 from terrapref.planner.kernels import swept_reach
 from terrapref.scenario.path import ReferencePath
 from terrapref.vehicle import Pose
@@ -146,6 +147,11 @@ class OffsetStage:
         elif self.held == 0.0 or abs(self.held) > self.offsets[-1] or not value[held] >= value[best] * (1 + self.config.switch_margin):
             self.held = float(self.offsets[best])
         return float(steer(path, pose, progress_s, self.held, self.config.pursuit_lookahead_m, self.v_mps))
+
+    def costmap(self, names: tuple[str, ...]) -> Costmap:
+        """The ground map seen so far priced by the learned utility (terrapref.planner.costmap);
+        ``names``, the classes of the K terrain columns."""
+        return costmap_of(self.map.cells, self.map.origin, self.map.config.map_resolution_m, self.utility.weights, self.lethal, names)
 
     def _escape(self, value: np.ndarray, path: ReferencePath, progress_s: float) -> float | None:
         """The escape offset to hold when lethal terrain lies across every fitted offset, or None

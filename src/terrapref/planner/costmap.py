@@ -1,0 +1,81 @@
+"""The learned preference as a costmap: what other planners (Nav2, MPPI, move_base) read.
+
+The offset stage keeps a ground map of what the camera has shown (terrapref.features.corridor,
+``GroundMap``): each cell holds a terrain class, ground that is none of them, or ground never
+seen. The costmap prices every cell with the corridor utility the model learned from the drive:
+a class's price is what driving a metre on it costs against driving a metre on the background
+(the weight the utility gives it, negated), so the cells keep the driver's order. Lethal classes
+are lethal, ground never seen is unknown. Costs follow ``nav_msgs/OccupancyGrid``: 0 (the
+background, or a class liked at least as well) to 99 (the dearest class), 100 lethal, -1
+unknown.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+LETHAL_COST = 100
+UNKNOWN_COST = -1
+MAX_COST = 99  # the dearest non-lethal class
+
+
+@dataclass(frozen=True)
+class Costmap:
+    """A grid of costs in the frame the poses are given in (the odometry frame on a robot).
+
+    Attributes:
+        cost: (H, W) int8, row i at y = origin[1] + (i + 0.5) * resolution_m, column j at
+            x = origin[0] + (j + 0.5) * resolution_m: 0-99 by learned price, 100 lethal, -1 never seen.
+        resolution_m: the side of a cell [m].
+        origin: the corner of cell (0, 0) [m].
+        prices: each class's learned price per metre (against the background), by name; the
+            costs are these scaled to 0-99.
+    """
+
+    cost: np.ndarray
+    resolution_m: float
+    origin: tuple[float, float]
+    prices: dict[str, float]
+
+    def cell_of(self, x: float, y: float) -> tuple[int, int] | None:
+        """(row, column) of the cell holding (x, y) [m], or None off the grid."""
+        j = int(np.floor((x - self.origin[0]) / self.resolution_m))
+        i = int(np.floor((y - self.origin[1]) / self.resolution_m))
+        h, w = self.cost.shape
+        return (i, j) if 0 <= i < h and 0 <= j < w else None
+
+    def at(self, x: float, y: float) -> int:
+        """The cost at (x, y) [m]; unknown off the grid."""
+        cell = self.cell_of(x, y)
+        return UNKNOWN_COST if cell is None else int(self.cost[cell])
+
+
+def class_costs(weights: np.ndarray, lethal: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The cost (K + 2,) int8 of each map cell value (K terrain columns, K: the background,
+    K + 1: never seen) and the price per metre (K,) of each terrain column, from the corridor
+    utility's ``weights`` (K + 3,; the first K price a metre on each class, as utilities) and the
+    ``lethal`` columns (K + 2,)."""
+    prices = -np.asarray(weights[:k], dtype=float)
+    costs = np.zeros(k + 2, dtype=np.int8)
+    safe = ~lethal[:k]
+    top = prices[safe].max() if safe.any() else 0.0
+    if top > 0:
+        costs[:k] = np.clip(np.round(MAX_COST * prices / top), 0, MAX_COST).astype(np.int8)
+    costs[:k][lethal[:k]] = LETHAL_COST
+    costs[k] = 0
+    costs[k + 1] = UNKNOWN_COST
+    return costs, prices
+
+
+def costmap_of(cells: np.ndarray, origin: np.ndarray | None, resolution_m: float, weights: np.ndarray, lethal: np.ndarray,
+               names: tuple[str, ...]) -> Costmap:
+    """The costmap of a ground map's ``cells`` (values 0..K + 1, rows along y) whose cell (0, 0)
+    has its corner at ``origin`` (None: nothing seen yet, every cell unknown); ``names``, the K
+    terrain columns' classes."""
+    k = len(names)
+    costs, prices = class_costs(weights, lethal, k)
+    grid = costs[cells] if origin is not None else np.full(cells.shape, UNKNOWN_COST, dtype=np.int8)
+    corner = (float(origin[0]), float(origin[1])) if origin is not None else (0.0, 0.0)
+    return Costmap(grid, float(resolution_m), corner, {n: float(p) for n, p in zip(names, prices, strict=True)})
