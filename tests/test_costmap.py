@@ -77,3 +77,23 @@ def test_a_planner_without_a_ground_map_says_so(tmp_path):
     runtime = PlannerRuntime(save_model(tmp_path / "c.safetensors", config, skip_path_weights(config), model_meta()))
     with pytest.raises(ValueError, match="keeps no ground map"):
         runtime.costmap()
+
+
+def test_an_evaluated_run_carries_its_costmap_as_an_occupancy_grid(tmp_path):
+    from rosbags.highlevel import AnyReader
+
+    from terrapref.cli import main
+
+    config = ClassifierConfig(hidden=8, skip=True)
+    model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
+    out = tmp_path / "ev"
+    assert main(["evaluate", str(model), "fig7_rock_vs_non_traversable_left", "--seeds", "1", "--no-driver", "--workers", "1",
+                 "--out", str(out), "--mcap"]) == 0
+    with AnyReader([out / "runs" / "fig7_rock_vs_non_traversable_left_seed0.mcap"]) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+        grids = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages() if c.topic == "/terrapref/costmap"]
+    assert counts["/terrapref/costmap"] == -(-counts["/terrapref/labels"] // 10)  # once a second
+    last = grids[-1]
+    cost = np.asarray(last.data, dtype=np.int8).reshape(last.info.height, last.info.width)
+    assert last.header.frame_id == "odom" and last.info.resolution > 0
+    assert (cost == LETHAL_COST).any() and (cost == UNKNOWN_COST).any() and ((cost > 0) & (cost < LETHAL_COST)).any()  # trees, unseen, rock

@@ -5,5 +5,6 @@ its public name.
 """
 
 from terrapref.interop.runtime import STOP, PlannerRuntime, RuntimeDecision
+from terrapref.planner.costmap import Costmap
 
-__all__ = ["STOP", "PlannerRuntime", "RuntimeDecision"]
+__all__ = ["STOP", "Costmap", "PlannerRuntime", "RuntimeDecision"]

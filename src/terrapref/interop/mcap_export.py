@@ -9,6 +9,8 @@ Topics (all in the ``odom`` frame, the recording's world frame; stamps from an e
     /terrapref/cmd_vel          geometry_msgs/Twist           the command (label) of each frame
     /terrapref/path             nav_msgs/Path                 the reference path, once
     /terrapref/trajectories     visualization_msgs/MarkerArray the 21 trajectories, the chosen one green
+    /terrapref/costmap          nav_msgs/OccupancyGrid        the learned preference over the ground seen
+                                                              (a planner's run with an offset stage; 1 Hz)
     /tf, /tf_static             tf2_msgs/TFMessage            odom -> base_link, base_link -> camera
 
 Importing an exported recording with the robot file written beside it (``FILE.robot.yaml``)
@@ -31,8 +33,9 @@ from terrapref.camera import CameraConfig
 from terrapref.features import PreferenceSetConfig
 from terrapref.features.preference_set import forward_simulate
 from terrapref.fileio import write_text_atomic
-from terrapref.interop.ros_messages import (EPOCH_S, Message, Topics, add_topics, camera_info, compressed_image, header, odometry, path_message,
-                                            png, point, pose, rpy_quaternion, tf_message, transform, twist, typestore, vector3, zeroed)
+from terrapref.interop.ros_messages import (EPOCH_S, Message, Topics, add_topics, camera_info, compressed_image, header, occupancy_grid, odometry,
+                                            path_message, png, point, pose, rpy_quaternion, tf_message, transform, twist, typestore, vector3, zeroed)
+from terrapref.planner.costmap import Costmap
 from terrapref.terrain import ClassTable
 
 if TYPE_CHECKING:
@@ -55,8 +58,10 @@ class RunFrames:
     classes: ClassTable
     preference: PreferenceSetConfig
     probs: np.ndarray | None = None  # (F, m) F_t, when a planner drove
+    costmap: Callable[[int, np.ndarray], Costmap | None] | None = None  # frame, its class ids -> the costmap to publish then
 
 
+COSTMAP_TOPIC = (f"{PREFIX}/costmap", "nav_msgs/msg/OccupancyGrid")
 _TOPICS = {  # role: (topic, type), in the order the file lists them
     "labels": (f"{PREFIX}/labels", "sensor_msgs/msg/CompressedImage"),
     "labels_color": (f"{PREFIX}/labels_color", "sensor_msgs/msg/CompressedImage"),
@@ -128,7 +133,7 @@ def _write_bag(bag_dir: Path, run: RunFrames, progress: Callable[[int, int], Non
     ts = typestore()
     scene = _Scene.of(ts, run)
     with Writer(bag_dir, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-        topics = add_topics(writer, ts, _TOPICS)
+        topics = add_topics(writer, ts, _TOPICS if run.costmap is None else {**_TOPICS, "costmap": COSTMAP_TOPIC})
         _write_fixed(topics, scene)
         for i in range(len(run.times)):
             _write_frame(topics, scene, i)
@@ -157,6 +162,9 @@ def _write_frame(topics: Topics, scene: _Scene, i: int) -> None:
     topics.write("labels", ns, compressed_image(ts, header(ts, t, "camera"), "mono8; png compressed class ids", png(ids)))
     topics.write("labels_color", ns, compressed_image(ts, header(ts, t, "camera"), "png", png(ids, scene.palette)))
     topics.write("odom", ns, odometry(ts, header(ts, t, "odom"), pose(ts, x, y, rpy_quaternion(ts, 0, 0, yaw))))
+    grid = run.costmap(i, ids) if run.costmap is not None else None
+    if grid is not None:
+        topics.write("costmap", ns, occupancy_grid(ts, header(ts, t, "odom"), grid.cost, grid.resolution_m, grid.origin))
     base = transform(ts, header(ts, t, "odom"), "base_link", (x, y, 0.0), rpy_quaternion(ts, 0, 0, yaw))
     topics.write("tf", ns, tf_message(ts, [base]))
     v, w = (float(u) for u in run.commands[i])

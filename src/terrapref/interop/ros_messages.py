@@ -160,6 +160,16 @@ def twist(ts: Typestore, v_mps: float, w_rps: float) -> Message:
     return ts.types["geometry_msgs/msg/Twist"](linear=vector3(ts, x=v_mps), angular=vector3(ts, z=w_rps))
 
 
+def occupancy_grid(ts: Typestore, stamped: Message, cost: np.ndarray, resolution_m: float, origin: tuple[float, float]) -> Message:
+    """nav_msgs/OccupancyGrid of ``cost`` (H, W) int8 (row i along y, 0-100, -1 unknown) with
+    cell (0, 0)'s corner at ``origin`` [m] in the frame of the header ``stamped``."""
+    T = ts.types
+    h, w = cost.shape
+    info = T["nav_msgs/msg/MapMetaData"](map_load_time=stamped.stamp, resolution=float(resolution_m), width=w, height=h,
+                                         origin=pose(ts, float(origin[0]), float(origin[1]), rpy_quaternion(ts, 0.0, 0.0, 0.0)))
+    return T["nav_msgs/msg/OccupancyGrid"](header=stamped, info=info, data=np.ascontiguousarray(cost, dtype=np.int8).ravel())
+
+
 def odometry(ts: Typestore, stamped: Message, base_pose: Message) -> Message:
     """nav_msgs/Odometry of base_link at ``base_pose`` in the frame of the header ``stamped``;
     zero covariances and twist."""
