@@ -17,3 +17,5 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   .venv/bin/python -m terrapref.warm_up
   echo "$want" > "$stamp"
 fi
+# ROS 1 (Debian's packages) for `terrapref ros1` and its test; never fails the set-up.
+bash scripts/setup_ros1.sh

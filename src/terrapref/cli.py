@@ -558,6 +558,15 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_ros1(args: argparse.Namespace) -> int:
+    from terrapref.interop.ros1 import run_node
+
+    if not (math.isfinite(args.rate) and 0 < args.rate <= 200):
+        raise UserError("--rate", f"expected commands per second in (0, 200], got {args.rate}")
+    run_node(args.model, args.robot, stamped=args.stamped, rate_hz=args.rate, path_file=args.path_file, cmd_topic=args.cmd_topic)
+    return 0
+
+
 def _cmd_info(args: argparse.Namespace) -> int:
     from terrapref.report.info import info_lines
 
@@ -953,6 +962,17 @@ def _export_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_cmd_export)
 
 
+def _ros1_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("ros1", help="run the planner as a ROS 1 node (rospy; Debian's ros-core and python3-rospy)")
+    p.add_argument("--model", required=True, help="a model file from train")
+    p.add_argument("--robot", required=True, help="the robot file: topics, camera mounting, label map (terrapref-robot/1)")
+    p.add_argument("--stamped", action="store_true", help="publish geometry_msgs/TwistStamped (stamped with the frame decided on) instead of Twist")
+    p.add_argument("--rate", type=float, default=20.0, help="commands per second between decisions (default 20)")
+    p.add_argument("--path-file", help="waypoints (YAML) of the reference path in the odometry frame, instead of the path topic")
+    p.add_argument("--cmd-topic", help="where to publish the command (default: the robot file's command topic)")
+    p.set_defaults(func=_cmd_ros1)
+
+
 def _info_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("info", help="what a recording, dataset, model or ONNX file holds (camera, profile, data, history, identifiability)")
     p.add_argument("files", nargs="+", metavar="FILE", help="recording folders, dataset or model files (.safetensors), ONNX files")
@@ -1009,6 +1029,7 @@ COMMANDS = (
     _import_parser,
     _replay_parser,
     _export_parser,
+    _ros1_parser,
     _info_parser,
     _select_parser,
     _perception_parser,

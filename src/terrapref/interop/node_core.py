@@ -1,0 +1,137 @@
+"""What a ROS node of the planner does with its messages, without ROS (the ROS 1 node and the
+README's rclpy node both wrap it).
+
+Messages come in as they would from rospy or rclpy (attribute access: ``header.stamp``,
+``pose.pose``, ``data``, ...). The calibration makes the planner (a model trained for another
+camera is refused); odometry is kept for the last seconds and interpolated to each image's
+stamp; the reference path comes from a Path message or a waypoint file; each label image is
+decoded through the robot file's label map and decided on by :class:`PlannerRuntime`, which
+ignores frames older than the last one and holds a command for ``hold_s`` after its frame.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from types import SimpleNamespace
+
+import numpy as np
+
+from terrapref.interop.bag_import import _decode, camera_from_info
+from terrapref.interop.robot import RobotConfig
+from terrapref.interop.runtime import PlannerRuntime, RuntimeDecision
+from terrapref.learning.model_file import LoadedModel
+from terrapref.planner.costmap import Costmap
+from terrapref.vehicle import Command, Pose
+
+ODOMETRY_KEPT_S = 5.0  # how far back odometry is kept for interpolating to an image's stamp [s]
+
+
+def stamp_s(header) -> float:
+    """A header's stamp [s] (ROS 1's ``secs``/``nsecs`` or ROS 2's ``sec``/``nanosec``)."""
+    stamp = header.stamp
+    sec = getattr(stamp, "sec", None)
+    if sec is None:
+        sec = stamp.secs
+    nsec = getattr(stamp, "nanosec", None)
+    if nsec is None:
+        nsec = stamp.nsecs
+    return int(sec) + int(nsec) * 1e-9
+
+
+def _yaw(q) -> float:
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+class PlannerNodeCore:
+    """The planner behind a ROS node: messages in, decisions, commands and costmaps out.
+
+    Args:
+        model: the model the node drives with.
+        robot: the robot file (topics, camera mounting, label map, the odometry's gaps).
+        path: the reference path (N, 2) [m] in the odometry frame, when it comes from a file;
+            otherwise the first Path message sets it.
+        hold_s: how long a decision's command stays in force after its frame's stamp [s].
+    """
+
+    def __init__(self, model: LoadedModel, robot: RobotConfig, path: np.ndarray | None = None, hold_s: float = 0.3) -> None:
+        self.model, self.robot, self.hold_s = model, robot, hold_s
+        self.runtime: PlannerRuntime | None = None
+        self.path = None if path is None else np.asarray(path, dtype=float)
+        self.odometry: deque[tuple[float, float, float, float]] = deque()  # (stamp [s], x, y, yaw)
+        self.skipped = {"before the calibration or the path": 0, "without odometry at the stamp": 0, "out of order": 0}
+
+    @property
+    def ready(self) -> bool:
+        return self.runtime is not None and self.path is not None
+
+    def on_camera_info(self, info) -> None:
+        """The first calibration makes the planner; a model for another camera is refused (UserError)."""
+        if self.runtime is not None:
+            return
+        camera, _ = camera_from_info(info, self.robot, self.robot.source)
+        self.runtime = PlannerRuntime(self.model, camera, labels=self.robot.labels, hold_s=self.hold_s)
+        if self.path is not None:
+            self.runtime.set_path(self.path)
+
+    def on_path(self, msg) -> None:
+        """A nav_msgs/Path of two poses or more (re)sets the reference path."""
+        xy = np.array([(p.pose.position.x, p.pose.position.y) for p in msg.poses], dtype=float)
+        if len(xy) >= 2 and np.isfinite(xy).all():
+            self.path = xy
+            if self.runtime is not None:
+                self.runtime.set_path(xy)
+
+    def on_odometry(self, msg) -> None:
+        """nav_msgs/Odometry, or a PoseStamped / PoseWithCovarianceStamped."""
+        p = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
+        t = stamp_s(msg.header)
+        if self.odometry and t < self.odometry[-1][0]:
+            return  # an older pose than one kept: odometry arrives in order or not at all
+        self.odometry.append((t, float(p.position.x), float(p.position.y), _yaw(p.orientation)))
+        while self.odometry and self.odometry[0][0] < t - ODOMETRY_KEPT_S:
+            self.odometry.popleft()
+
+    def pose_at(self, t: float) -> Pose | None:
+        """The odometry interpolated to ``t`` [s]; None outside what is kept or across a gap."""
+        if not self.odometry:
+            return None
+        times = np.array([o[0] for o in self.odometry])
+        j = int(np.searchsorted(times, t, side="right"))
+        if j == 0 or (j == len(times) and t > times[-1]):
+            return None
+        if j == len(times) or times[j - 1] == t:
+            return Pose(*self.odometry[j - 1][1:])
+        (t0, x0, y0, a0), (t1, x1, y1, a1) = self.odometry[j - 1], self.odometry[j]
+        if t1 - t0 > self.robot.max_gap_s:
+            return None
+        f = (t - t0) / (t1 - t0)
+        da = (a1 - a0 + math.pi) % (2 * math.pi) - math.pi
+        return Pose(x0 + f * (x1 - x0), y0 + f * (y1 - y0), a0 + f * da)
+
+    def on_image(self, msgtype: str, msg, topic: str = "") -> RuntimeDecision | None:
+        """A label image (``sensor_msgs/msg/Image`` or ``.../CompressedImage``): the decision on
+        it, or None when it is skipped (counted in :attr:`skipped`)."""
+        if not self.ready:
+            self.skipped["before the calibration or the path"] += 1
+            return None
+        t = stamp_s(msg.header)
+        pose = self.pose_at(t)
+        if pose is None:
+            self.skipped["without odometry at the stamp"] += 1
+            return None
+        ids = _decode(SimpleNamespace(topic=topic, msgtype=msgtype), msg, self.robot.source, self.robot.labels, t)
+        decision = self.runtime.decide(ids, t, pose)
+        if decision is None:
+            self.skipped["out of order"] += 1
+        return decision
+
+    def command_at(self, now_s: float) -> Command:
+        """The command to send now: the last decision's while fresh, else a stop."""
+        return self.runtime.command_at(now_s) if self.runtime is not None else Command(0.0, 0.0)
+
+    def costmap(self) -> Costmap | None:
+        """The learned preference over the ground seen, when the planner keeps a ground map."""
+        if self.runtime is None or self.runtime.planner.offset_stage is None:
+            return None
+        return self.runtime.costmap()

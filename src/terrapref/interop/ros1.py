@@ -1,0 +1,167 @@
+"""``terrapref ros1``: the planner as a ROS 1 node (rospy), around :class:`PlannerNodeCore`.
+
+Subscribes to the robot file's label image, camera calibration, odometry and (without a path
+file) path topics; publishes the command on the robot file's command topic (``Twist``, or
+``TwistStamped`` with ``--stamped``, stamped with the frame it was decided on) at the control
+rate and at once on each decision, the 21 trajectories with F_t and the chosen one
+(``~trajectories``, ``visualization_msgs/MarkerArray``) on each decision, and the learned costmap
+(``~costmap``, ``nav_msgs/OccupancyGrid``) once a second.
+
+ROS 1's Python packages come from Debian (``ros-core``, ``python3-rospy`` and the message
+packages) and live in its Python 3.11 ``dist-packages``: where ``rospy`` is not importable from
+terrapref's own environment, that folder is added to the import path.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from terrapref.errors import UserError
+
+DEBIAN_DIST_PACKAGES = Path("/usr/lib/python3/dist-packages")
+ROS_PACKAGES = "ros-core python3-rospy python3-geometry-msgs python3-sensor-msgs python3-nav-msgs python3-visualization-msgs python3-std-msgs"
+COSTMAP_PERIOD_S = 1.0
+
+
+def import_rospy():
+    """rospy, from this environment or Debian's; a clear error where ROS 1 is not installed."""
+    try:
+        return importlib.import_module("rospy")
+    except ImportError:
+        if DEBIAN_DIST_PACKAGES.is_dir() and str(DEBIAN_DIST_PACKAGES) not in sys.path:
+            sys.path.append(str(DEBIAN_DIST_PACKAGES))
+            try:
+                return importlib.import_module("rospy")
+            except ImportError:
+                pass
+    raise UserError("ros1", f"ROS 1's Python packages are not installed (Debian: apt install {ROS_PACKAGES})")
+
+
+def run_node(model_path: str, robot_path: str, stamped: bool = False, rate_hz: float = 20.0, path_file: str | None = None,
+             cmd_topic: str | None = None) -> None:
+    """Run the node until ROS shuts it down."""
+    rospy = import_rospy()
+    from geometry_msgs.msg import Twist, TwistStamped
+    from nav_msgs.msg import OccupancyGrid, Odometry, Path as PathMsg
+    from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+    from visualization_msgs.msg import MarkerArray
+
+    from terrapref.interop.node_core import PlannerNodeCore
+    from terrapref.interop.robot import load_robot, load_waypoints
+    from terrapref.learning.model_file import load_model
+
+    model = load_model(model_path)
+    robot = load_robot(robot_path, model.classes)
+    path = load_waypoints(Path(path_file), "--path-file") if path_file else (load_waypoints(robot.path_file, robot.source) if robot.path_file else None)
+    core = PlannerNodeCore(model, robot, path)
+    rospy.init_node("terrapref", anonymous=False)
+    cmd_pub = rospy.Publisher(cmd_topic or robot.topics["command"], TwistStamped if stamped else Twist, queue_size=10)
+    traj_pub = rospy.Publisher("~trajectories", MarkerArray, queue_size=2)
+    cost_pub = rospy.Publisher("~costmap", OccupancyGrid, queue_size=1, latch=True)
+    markers = _TrajectoryMarkers(model, rospy)
+    last = {"stamp": None}
+
+    def publish_command(stamp_s: float, now_s: float) -> None:
+        v, w = core.command_at(now_s)
+        twist = Twist()
+        twist.linear.x, twist.angular.z = float(v), float(w)
+        if stamped:
+            msg = TwistStamped()
+            msg.header.stamp = rospy.Time.from_sec(stamp_s)
+            msg.header.frame_id = "base_link"
+            msg.twist = twist
+            cmd_pub.publish(msg)
+        else:
+            cmd_pub.publish(twist)
+
+    def on_image(msgtype: str):
+        def handle(msg) -> None:
+            decision = core.on_image(msgtype, msg, robot.topics["segmentation"])
+            if decision is None:
+                return
+            last["stamp"] = decision.stamp_s
+            publish_command(decision.stamp_s, decision.stamp_s)
+            traj_pub.publish(markers.of(decision, msg.header.stamp))
+        return handle
+
+    image_sub = robot.topics["segmentation"]
+    failure: list[UserError] = []
+
+    def on_camera_info(msg) -> None:
+        try:
+            core.on_camera_info(msg)
+        except UserError as exc:  # a model for another camera: said once, and the node stops
+            failure.append(exc)
+            rospy.signal_shutdown(exc.lines()[0])
+
+    rospy.Subscriber(robot.topics["camera_info"], CameraInfo, on_camera_info, queue_size=1)
+    rospy.Subscriber(robot.topics["odometry"], Odometry, core.on_odometry, queue_size=50)
+    if path is None and robot.path_topic:
+        rospy.Subscriber(robot.path_topic, PathMsg, core.on_path, queue_size=1)
+    rospy.Subscriber(image_sub, Image, on_image("sensor_msgs/msg/Image"), queue_size=1)
+    rospy.Subscriber(image_sub + "/compressed", CompressedImage, on_image("sensor_msgs/msg/CompressedImage"), queue_size=1)
+
+    def tick(event) -> None:
+        now = rospy.get_time()
+        if last["stamp"] is not None:
+            publish_command(now, now)
+
+    def publish_costmap(event) -> None:
+        grid = core.costmap()
+        if grid is not None:
+            cost_pub.publish(_occupancy_grid(grid, OccupancyGrid, rospy))
+
+    rospy.Timer(rospy.Duration(1.0 / rate_hz), tick)
+    rospy.Timer(rospy.Duration(COSTMAP_PERIOD_S), publish_costmap)
+    rospy.spin()
+    if failure:
+        raise failure[0]
+
+
+class _TrajectoryMarkers:
+    """The 21 trajectories as line strips in base_link, shaded by F_t, the chosen one green."""
+
+    def __init__(self, model, rospy) -> None:
+        from terrapref.features.preference_set import forward_simulate
+
+        pref = model.features.preference
+        c = pref.control
+        self.paths = forward_simulate(np.full(c.m, c.v_mps), np.asarray(c.w_rps), pref.n_steps, pref.dt_s)[..., :2]
+        self.rospy = rospy
+
+    def of(self, decision, stamp):
+        from geometry_msgs.msg import Point
+        from std_msgs.msg import ColorRGBA
+        from visualization_msgs.msg import Marker, MarkerArray
+
+        out = MarkerArray()
+        top = float(np.max(decision.probs)) or 1.0
+        for j, pts in enumerate(self.paths):
+            m = Marker()
+            m.header.stamp, m.header.frame_id = stamp, "base_link"
+            m.ns, m.id, m.type, m.action = "trajectories", j, Marker.LINE_STRIP, Marker.ADD
+            m.pose.orientation.w = 1.0
+            m.scale.x = 0.06 if j == decision.index else 0.03
+            shade = float(decision.probs[j]) / top
+            m.color = ColorRGBA(0.1, 0.9, 0.2, 1.0) if j == decision.index else ColorRGBA(1.0, 1.0, 1.0, 0.2 + 0.8 * shade)
+            m.points = [Point(float(x), float(y), 0.02) for x, y in pts]
+            m.lifetime = self.rospy.Duration(0.5)
+            out.markers.append(m)
+        return out
+
+
+def _occupancy_grid(grid, OccupancyGrid, rospy):
+    msg = OccupancyGrid()
+    msg.header.stamp = rospy.Time.now()
+    msg.header.frame_id = "odom"
+    h, w = grid.cost.shape
+    msg.info.resolution = grid.resolution_m
+    msg.info.width, msg.info.height = w, h
+    msg.info.origin.position.x, msg.info.origin.position.y = grid.origin
+    msg.info.origin.orientation.w = 1.0
+    msg.data = grid.cost.ravel().tolist()
+    return msg
