@@ -19,7 +19,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
-from terrapref.errors import UserError
+from terrapref.errors import Terminated, UserError
 from terrapref.grid import ENGINES, Engine, GridError
 
 if TYPE_CHECKING:  # for the hints only: the command line imports what a command needs when it runs
@@ -1059,10 +1059,6 @@ def build_parser(train_flags: bool = True) -> argparse.ArgumentParser:
     return parser
 
 
-class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised where the command was, so that it cleans up as after Ctrl-C."""
-
-
 def _on_sigterm(pid: int) -> Callable[[int, object], None]:
     def handler(signum: int, frame: object) -> None:
         if os.getpid() != pid:  # a forked worker: end as SIGTERM ends a process, the command cleans up
@@ -1088,9 +1084,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"error: {line}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:
-        terminated = isinstance(exc, Terminated)
-        print("terminated" if terminated else "interrupted", file=sys.stderr)
-        return 143 if terminated else 130
+        if isinstance(exc, Terminated):  # cleaned up on the way here; end now, before libraries' exit handlers (SDL's can wait)
+            print("terminated", file=sys.stderr, flush=True)
+            sys.stdout.flush()
+            os._exit(143)
+        print("interrupted", file=sys.stderr)
+        return 130
     except BrokenPipeError:  # output piped into `head` and the like: stop quietly
         sys.stderr.close()
         return 0

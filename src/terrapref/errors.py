@@ -49,3 +49,8 @@ class ScenarioError(UserError):
 
 class ConfigError(UserError):
     """A configuration file or value that is invalid."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the command was (terrapref.cli installs the handler), so that it
+    cleans up as after Ctrl-C."""

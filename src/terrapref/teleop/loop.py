@@ -42,7 +42,7 @@ from terrapref.demos.session import DisturbanceConfig, Disturber, RecordLoop, ab
 from terrapref.teleop.guide import CourseGuide, stays_on_map
 from terrapref.teleop.stick import Stick
 from terrapref.teleop.window import ALERT_COLOR, HIGHLIGHT_COLOR, PLANNER_COLOR, Banner, Window
-from terrapref.errors import UserError
+from terrapref.errors import Terminated, UserError
 from terrapref.features import PreferenceSet, PreferenceSetConfig
 from terrapref.perception import PerceptionModel
 from terrapref.scenario import Scenario, resolve_scenario
@@ -422,6 +422,7 @@ def run_session(scenario: Scenario | str, options: TeleopOptions) -> TeleopResul
     setup = _resolve(scenario, options)
     _open_display()
     writer: RecordingWriter | None = None
+    ending = False
     try:
         sim, prefs, window = _open_window(setup, options.record_dir)
         writer = _open_recording(setup, options)
@@ -436,12 +437,14 @@ def run_session(scenario: Scenario | str, options: TeleopOptions) -> TeleopResul
         if options.realtime and end is not None:
             pygame.time.wait(1000)  # let the driver see how the run ended before the window closes
         return result
-    except BaseException:
+    except BaseException as exc:
         if writer is not None:
             abort_recording(writer)
+        ending = isinstance(exc, Terminated)  # SIGTERM: the process is ending; SDL's teardown can wait on its timer thread
         raise
     finally:
-        pygame.quit()
+        if not ending:
+            pygame.quit()
 
 
 def _resolve(scenario: Scenario | str, options: TeleopOptions) -> _Setup:
