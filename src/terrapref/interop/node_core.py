@@ -17,7 +17,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from terrapref.interop.bag_import import _decode, camera_from_info
+from terrapref.interop.bag_import import _decode, _yaw, camera_from_info
 from terrapref.interop.robot import RobotConfig
 from terrapref.interop.runtime import PlannerRuntime, RuntimeDecision
 from terrapref.learning.model_file import LoadedModel
@@ -37,10 +37,6 @@ def stamp_s(header) -> float:
     if nsec is None:
         nsec = stamp.nsecs
     return int(sec) + int(nsec) * 1e-9
-
-
-def _yaw(q) -> float:
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
 
 class PlannerNodeCore:
