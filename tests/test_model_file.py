@@ -214,6 +214,16 @@ def test_check_compatible_refuses_another_camera(model_file):
     assert "pitch_deg" in str(err.value) and "mount_height_m" not in str(err.value)
 
 
+def test_check_compatible_takes_a_calibrated_camera_equal_to_the_one_trained_for(model_file):
+    model = load_model(model_file[0])
+    fx, fy, cx, cy = ODD_CAMERA.intrinsics
+    calibrated = replace(ODD_CAMERA, fx=round(fx, 6), fy=round(fy, 6), cx=cx, cy=cy)  # as a camera_info file gives it
+    assert calibrated != ODD_CAMERA and calibrated.same_geometry(ODD_CAMERA)
+    check_compatible(model, calibrated, ODD_FEATURES)
+    with pytest.raises(UserError, match="another camera"):
+        check_compatible(model, replace(calibrated, fx=fx * 1.001))
+
+
 def test_check_compatible_refuses_a_default_model_under_pitch_25(tmp_path: Path):
     config = ClassifierConfig()
     model = load_model(save_model(tmp_path / "m.safetensors", config, random_weights(config), model_meta()))

@@ -68,6 +68,18 @@ class CameraConfig:
         cy = self.cy if self.cy is not None else self.height_px / 2
         return fx, fy, cx, cy
 
+    def same_geometry(self, other: CameraConfig, rel_tol: float = 1e-6) -> bool:
+        """Whether ``other`` projects the ground as this camera does: the same image size, and
+        intrinsics, mount and range equal within ``rel_tol`` (a calibration file's fx = 320.0
+        and one derived from a 90 deg field of view, 320.00000000000006, are the same camera)."""
+        if (self.width_px, self.height_px) != (other.width_px, other.height_px):
+            return False
+        mine, theirs = self._geometry(), other._geometry()
+        return all(math.isclose(a, b, rel_tol=rel_tol, abs_tol=1e-9) for a, b in zip(mine, theirs))
+
+    def _geometry(self) -> tuple[float, ...]:
+        return (*self.intrinsics, self.mount_height_m, self.mount_forward_m, self.pitch_deg, self.yaw_deg, self.max_range_m)
+
     def to_dict(self) -> dict:
         return asdict(self)
 

@@ -121,10 +121,10 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
     path = ReferencePath(np.asarray(recording.meta.get("path", scenario.waypoints), dtype=float))
     tracker = PathTracker(path)
     perceived = recording.perception
-    if camera != rec_camera and perceived != "clean":
+    if not camera.same_geometry(rec_camera) and perceived != "clean":
         raise UserError(str(recording.path / "meta.json"), f"its frames are what the robot received under perception {perceived!r}; "
                         "rendering them again under another camera would give the simulator's truth instead", field="perception")
-    renderer = None if camera == rec_camera else SegmentationRenderer(PinholeCamera(camera), rasterise(scenario))
+    renderer = None if camera.same_geometry(rec_camera) else SegmentationRenderer(PinholeCamera(camera), rasterise(scenario))
     lookahead = Lookahead(features.lookahead, featurizer, PinholeCamera(camera)) if features.lookahead is not None else None
     if len(recording) == 0:
         raise UserError(str(recording.path / "frames.jsonl"), "holds no frames to featurise", field="frames")

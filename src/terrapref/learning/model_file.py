@@ -180,7 +180,7 @@ def _differences(a: dict, b: dict, prefix: str = "") -> list[str]:
 
 def check_compatible(model: LoadedModel, camera: CameraConfig, features: FeatureConfig | None = None) -> None:
     """Refuse a model trained under another camera or preference set than the planner's."""
-    if model.camera != camera:
+    if not model.camera.same_geometry(camera):
         diff = _differences(model.camera.to_dict(), camera.to_dict())
         raise UserError(model.path, f"trained for another camera ({', '.join(diff)} differ); re-featurise the recordings with this camera and retrain", field="camera")
     if features is not None and model.features != features:

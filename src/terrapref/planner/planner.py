@@ -71,7 +71,7 @@ class Planner:
         camera = camera or policy.camera
         if isinstance(model, LoadedModel):
             check_compatible(model, camera)
-        elif policy.camera != camera:
+        elif not policy.camera.same_geometry(camera):
             raise ValueError(f"{policy.name}: built for another camera")
         self.policy = policy
         self.camera = PinholeCamera(camera)
