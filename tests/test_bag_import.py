@@ -387,6 +387,42 @@ def test_the_camera_mounting_from_tf_static(tmp_path: Path, logs, imported):
         load_robot(robot)
 
 
+def test_an_export_stamps_its_images_in_the_optical_frame_and_latches_its_static_transforms(tmp_path: Path, logs, imported):
+    """REP 103's optical frame (z forward, x right, y down) carries the images and calibration,
+    /tf_static reaches it from base_link, and the bag offers /tf_static transient-local (ROS 2)
+    or latched (ROS 1), as a player needs to hand it to late subscribers."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.interfaces import QosDurability
+
+    from terrapref.camera import CameraConfig, PinholeCamera
+    from terrapref.interop.bag_import import _rotation, camera_mount_from_tf
+
+    _, rec = imported["mcap"]
+    out = tmp_path / "run.mcap"
+    assert main(["export", str(rec.path), "--format", "mcap", "--out", str(out)]) == 0
+    with AnyReader([out]) as reader:
+        conns = {c.topic: c for c in reader.connections}
+        assert [q.durability for q in conns["/tf_static"].ext.offered_qos_profiles] == [QosDurability.TRANSIENT_LOCAL]
+        assert conns["/tf"].ext.offered_qos_profiles == []
+        frames = {topic: reader.deserialize(raw, conns[topic].msgtype).header.frame_id
+                  for topic in ("/terrapref/labels", "/terrapref/camera_info")
+                  for _, _, raw in [next(reader.messages(connections=[conns[topic]]))]}
+        static = next(reader.messages(connections=[conns["/tf_static"]]))
+        transforms = reader.deserialize(static[2], "tf2_msgs/msg/TFMessage").transforms
+    assert set(frames.values()) == {"camera_optical"}
+    # The optical axes, carried to base_link through the chain, are the camera model's.
+    static = {t.child_frame_id: (t.header.frame_id, np.array([t.transform.translation.x, t.transform.translation.y, t.transform.translation.z]),
+                                 _rotation(t.transform.rotation)) for t in transforms}
+    assert static["camera_link"][0] == "base_link" and static["camera_optical"][0] == "camera_link"
+    camera = PinholeCamera(CameraConfig.from_dict(rec.meta["camera"]))
+    np.testing.assert_allclose((static["camera_link"][2] @ static["camera_optical"][2]).T, camera.R, atol=1e-12)  # rows: right, down, forward
+    mount = camera_mount_from_tf(static, "base_link", "camera_optical", str(out), [])
+    assert mount["pitch_deg"] == pytest.approx(camera.config.pitch_deg) and mount["yaw_deg"] == pytest.approx(camera.config.yaw_deg, abs=1e-9)
+    assert mount["height_m"] == pytest.approx(camera.config.mount_height_m) and mount["forward_m"] == pytest.approx(camera.config.mount_forward_m)
+    with AnyReader([logs["bags"]["rosbag1"]]) as reader:
+        assert [c.ext.latching for c in reader.connections if c.topic == "/tf_static"] == [1]
+
+
 @pytest.mark.slow
 def test_a_model_taught_by_an_imported_log_drives_like_one_taught_by_the_simulator_recording(tmp_path: Path):
     """One drive of teach_course, as a quirky MCAP log and as the simulator recorded it: both

@@ -89,11 +89,52 @@ def test_an_evaluated_run_carries_its_costmap_as_an_occupancy_grid(tmp_path):
     out = tmp_path / "ev"
     assert main(["evaluate", str(model), "fig7_rock_vs_non_traversable_left", "--seeds", "1", "--no-driver", "--workers", "1",
                  "--out", str(out), "--mcap"]) == 0
-    with AnyReader([out / "runs" / "fig7_rock_vs_non_traversable_left_seed0.mcap"]) as reader:
-        counts = {c.topic: c.msgcount for c in reader.connections}
-        grids = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages() if c.topic == "/terrapref/costmap"]
-    assert counts["/terrapref/costmap"] == -(-counts["/terrapref/labels"] // 10)  # once a second
-    last = grids[-1]
-    cost = np.asarray(last.data, dtype=np.int8).reshape(last.info.height, last.info.width)
-    assert last.header.frame_id == "odom" and last.info.resolution > 0
+    counts, cost = _costmaps_in(out / "runs" / "fig7_rock_vs_non_traversable_left_seed0.mcap")
+    assert counts["/terrapref/costmap"] == counts["/terrapref/costmap_grid"] == -(-counts["/terrapref/labels"] // 10)  # once a second
     assert (cost == LETHAL_COST).any() and (cost == UNKNOWN_COST).any() and ((cost > 0) & (cost < LETHAL_COST)).any()  # trees, unseen, rock
+
+
+def _costmaps_in(mcap) -> tuple[dict[str, int], np.ndarray]:
+    """The message count of each topic of an MCAP run and its last costmap's cells, read from
+    the OccupancyGrid, after checking that the Foxglove Grid beside it holds the same costs, in
+    the same place, in the colours of cost_colours."""
+    from rosbags.highlevel import AnyReader
+
+    from terrapref.planner.costmap import cost_colours
+
+    with AnyReader([mcap]) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+        last = {c.topic: reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages() if c.topic.startswith("/terrapref/costmap")}
+    occupancy, grid = last["/terrapref/costmap"], last["/terrapref/costmap_grid"]
+    cost = np.asarray(occupancy.data, dtype=np.int8).reshape(occupancy.info.height, occupancy.info.width)
+    assert occupancy.header.frame_id == grid.frame_id == "odom" and occupancy.info.resolution > 0
+    assert (grid.timestamp.sec, grid.timestamp.nanosec) == (occupancy.header.stamp.sec, occupancy.header.stamp.nanosec)
+    assert grid.column_count == occupancy.info.width and grid.cell_size.x == grid.cell_size.y == pytest.approx(occupancy.info.resolution)
+    assert (grid.pose.position.x, grid.pose.position.y) == (occupancy.info.origin.position.x, occupancy.info.origin.position.y)
+    assert [(f.name, f.offset, f.type) for f in grid.fields] == [("cost", 0, 7), ("red", 4, 1), ("green", 5, 1), ("blue", 6, 1), ("alpha", 7, 1)]
+    cells = np.asarray(grid.data, dtype=np.uint8).reshape(-1, grid.column_count, grid.cell_stride)
+    assert grid.row_stride == grid.column_count * grid.cell_stride and cells.shape[0] == occupancy.info.height
+    as_float = cells[..., :4].copy().view("<f4")[..., 0]
+    np.testing.assert_array_equal(as_float, np.where(cost < 0, np.nan, cost).astype(np.float32))
+    np.testing.assert_array_equal(cells[..., 4:], cost_colours(cost))
+    return counts, cost
+
+
+def test_an_exported_recording_carries_the_costmap_a_model_sees_in_it(tmp_path, capsys):
+    from helpers import model_meta, one_line_error
+
+    from terrapref.cli import main
+
+    config = ClassifierConfig(hidden=8, skip=True)
+    model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
+    rec = tmp_path / "rec"
+    assert main(["record", "fig7_rock_vs_non_traversable_left", "--out", str(rec), "--quiet", "--disturb", "0"]) == 0
+    assert main(["export", str(rec), "--format", "mcap", "--model", str(model), "--out", str(tmp_path / "run.mcap")]) == 0
+    counts, cost = _costmaps_in(tmp_path / "run.mcap")
+    assert counts["/terrapref/costmap"] == -(-counts["/terrapref/labels"] // 10)
+    assert (cost == LETHAL_COST).any() and ((cost > 0) & (cost < LETHAL_COST)).any()
+    capsys.readouterr()
+    plain = save_model(tmp_path / "c.safetensors", config, skip_path_weights(config), model_meta())
+    assert main(["export", str(rec), "--format", "mcap", "--model", str(plain), "--out", str(tmp_path / "c.mcap")]) == 2
+    one_line_error(capsys, "c.safetensors", "no offset stage")
+    assert not (tmp_path / "c.mcap").exists()

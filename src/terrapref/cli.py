@@ -580,9 +580,12 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 def _cmd_export(args: argparse.Namespace) -> int:
     out = Path(args.out)
-    _check_output(out, "--out", [args.input])
+    inputs = [args.input] + ([args.model] if args.model else [])
+    _check_output(out, "--out", inputs)
     if args.format == "mcap":
-        _check_output(Path(f"{out}.robot.yaml"), "--out", [args.input])
+        _check_output(Path(f"{out}.robot.yaml"), "--out", inputs)
+        from dataclasses import replace
+
         from terrapref.demos.recording import read_recording
         from terrapref.interop.mcap_export import recording_frames, write_mcap
         from terrapref.progress import Progress
@@ -590,11 +593,16 @@ def _cmd_export(args: argparse.Namespace) -> int:
         rec = read_recording(args.input)
         if len(rec) == 0:
             raise UserError(args.input, "holds no frames", field="frames.jsonl")
+        frames = recording_frames(rec)
+        if args.model:
+            frames = replace(frames, costmap=_recording_costmaps(args.model, frames))
         bar = Progress("export", len(rec))
-        write_mcap(out, recording_frames(rec), progress=lambda done, total: bar.update(done))
+        write_mcap(out, frames, progress=lambda done, total: bar.update(done))
         bar.close(f"{len(rec)} frames")
         print(f"wrote {out} (ROS 2 MCAP; open it in Foxglove) and {out.name}.robot.yaml (terrapref import {out} --robot {out}.robot.yaml)")
         return 0
+    if args.model:
+        raise UserError(args.model, "--model goes with --format mcap (a recording's costmap); for onnx the model is the input", field="--model")
     from terrapref.interop.onnx_export import export_onnx
     from terrapref.learning.model_file import load_model
 
@@ -602,6 +610,22 @@ def _cmd_export(args: argparse.Namespace) -> int:
     export_onnx(model, out)
     print(f"wrote {out} (ONNX: input utilities float32 [N, {model.classifier.m}, {model.classifier.n_features}], output logits float32 [N, {model.classifier.m}])")
     return 0
+
+
+def _recording_costmaps(model_path: str, frames):
+    """The costmaps the model at ``model_path`` learns to see in a recording's ``frames`` (a
+    RunFrames): its offset stage's map fed each frame at the pose recorded."""
+    from terrapref.interop.mcap_export import costmaps_of
+    from terrapref.learning.model_file import load_model
+    from terrapref.planner import Planner
+
+    model = load_model(model_path)
+    if model.classes != frames.classes:
+        raise UserError(model_path, "was trained for another class table than the recording's", field="classes")
+    stage = Planner(model, frames.camera).offset_stage
+    if stage is None:
+        raise UserError(model_path, "has no offset stage, whose ground map the costmap prices (train it with recipe teach)", field="--model")
+    return costmaps_of(stage, frames.poses, model.features.feature_classes)
 
 
 def _cmd_perception(args: argparse.Namespace) -> int:
@@ -959,6 +983,8 @@ def _export_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("input", help="model file (--format onnx) or recording folder (--format mcap)")
     p.add_argument("--format", choices=["onnx", "mcap"], required=True, help="onnx: the classifier C; mcap: the recording's frames as ROS 2 messages")
     p.add_argument("--out", required=True, help="output file")
+    p.add_argument("--model", help="with --format mcap: also write the costmap this model (with an offset stage) prices the recording's ground with, "
+                                   "as nav_msgs/OccupancyGrid and foxglove_msgs/Grid, once a second")
     p.set_defaults(func=_cmd_export)
 
 

@@ -150,14 +150,11 @@ def _course_runs(results: list[RunResult], name: str, evidence: _Evidence | None
     return entry
 
 
-COSTMAP_EVERY = 10  # frames between two costmaps in a run's MCAP (1 Hz)
-
-
 def _write_runs(results: list[RunResult], folder: Path, model) -> None:
     """Each planner run as an MCAP file, its camera frames rendered again at the poses driven;
     with an offset stage, the costmap of the ground those frames show, once a second."""
     from terrapref.camera import SegmentationRenderer
-    from terrapref.interop.mcap_export import RunFrames, write_mcap
+    from terrapref.interop.mcap_export import RunFrames, costmaps_of, write_mcap
     from terrapref.planner import Planner
 
     camera = PinholeCamera(model.camera)
@@ -172,21 +169,8 @@ def _write_runs(results: list[RunResult], folder: Path, model) -> None:
         frames = RunFrames(times=0.1 * np.arange(len(poses)), poses=poses, commands=run.commands,
                            image=lambda i, poses=poses, renderer=renderer: renderer.render(Pose(*poses[i])), chosen=run.index,
                            path=scenario.waypoints, camera=model.camera, classes=model.classes, preference=model.features.preference, probs=run.probs,
-                           costmap=_costmaps(stage, poses, model.features.feature_classes) if stage is not None else None)
+                           costmap=costmaps_of(stage, poses, model.features.feature_classes) if stage is not None else None)
         write_mcap(folder / f"{file_stem(r.scenario)}_seed{r.seed}.mcap", frames, robot_file=False)
-
-
-def _costmaps(stage, poses: np.ndarray, names: tuple[str, ...]):
-    """The costmap writer of one run: ``stage``'s map, emptied, takes each frame in turn (the
-    frames written, seen from the poses driven), and every ``COSTMAP_EVERY``-th gives the costmap."""
-    from terrapref.camera import SegmentationView
-
-    stage.reset()
-
-    def costmap(i: int, ids: np.ndarray):
-        stage.map.update(SegmentationView.of(ids), Pose(*poses[i]))
-        return stage.costmap(names) if i % COSTMAP_EVERY == 0 else None
-    return costmap
 
 
 def file_stem(scenario: str) -> str:

@@ -10,8 +10,13 @@ Topics (all in the ``odom`` frame, the recording's world frame; stamps from an e
     /terrapref/path             nav_msgs/Path                 the reference path, once
     /terrapref/trajectories     visualization_msgs/MarkerArray the 21 trajectories, the chosen one green
     /terrapref/costmap          nav_msgs/OccupancyGrid        the learned preference over the ground seen
-                                                              (a planner's run with an offset stage; 1 Hz)
-    /tf, /tf_static             tf2_msgs/TFMessage            odom -> base_link, base_link -> camera
+                                                              (a run of a model with an offset stage; 1 Hz)
+    /terrapref/costmap_grid     foxglove_msgs/Grid            the same costmap as Foxglove's Grid: cost
+                                                              (float32, NaN unknown) and its colour per cell
+    /tf, /tf_static             tf2_msgs/TFMessage            odom -> base_link; base_link -> camera_link ->
+                                                              camera_optical (z forward, x right, y down), the
+                                                              frame of the images and calibration; /tf_static
+                                                              offered transient-local, so a player latches it
 
 Importing an exported recording with the robot file written beside it (``FILE.robot.yaml``)
 gives back the same frames, so it featurises to the same dataset.
@@ -19,7 +24,6 @@ gives back the same frames, so it featurises to the same dataset.
 
 from __future__ import annotations
 
-import math
 import shutil
 import tempfile
 from collections.abc import Callable
@@ -33,8 +37,9 @@ from terrapref.camera import CameraConfig
 from terrapref.features import PreferenceSetConfig
 from terrapref.features.preference_set import forward_simulate
 from terrapref.fileio import write_text_atomic
-from terrapref.interop.ros_messages import (EPOCH_S, Message, Topics, add_topics, camera_info, compressed_image, header, occupancy_grid, odometry,
-                                            path_message, png, point, pose, rpy_quaternion, tf_message, transform, twist, typestore, vector3, zeroed)
+from terrapref.interop.ros_messages import (EPOCH_S, OPTICAL_FRAME, Message, Topics, add_topics, camera_info, camera_mount, compressed_image,
+                                            foxglove_grid, header, occupancy_grid, odometry, path_message, png, point, pose, rpy_quaternion, tf_message, transform, twist,
+                                            typestore, vector3, zeroed)
 from terrapref.planner.costmap import Costmap
 from terrapref.terrain import ClassTable
 
@@ -61,7 +66,8 @@ class RunFrames:
     costmap: Callable[[int, np.ndarray], Costmap | None] | None = None  # frame, its class ids -> the costmap to publish then
 
 
-COSTMAP_TOPIC = (f"{PREFIX}/costmap", "nav_msgs/msg/OccupancyGrid")
+COSTMAP_TOPICS = {"costmap": (f"{PREFIX}/costmap", "nav_msgs/msg/OccupancyGrid"), "costmap_grid": (f"{PREFIX}/costmap_grid", "foxglove_msgs/msg/Grid")}
+COSTMAP_EVERY = 10  # frames between two costmaps (1 Hz at 10 frames a second)
 _TOPICS = {  # role: (topic, type), in the order the file lists them
     "labels": (f"{PREFIX}/labels", "sensor_msgs/msg/CompressedImage"),
     "labels_color": (f"{PREFIX}/labels_color", "sensor_msgs/msg/CompressedImage"),
@@ -133,7 +139,7 @@ def _write_bag(bag_dir: Path, run: RunFrames, progress: Callable[[int, int], Non
     ts = typestore()
     scene = _Scene.of(ts, run)
     with Writer(bag_dir, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-        topics = add_topics(writer, ts, _TOPICS if run.costmap is None else {**_TOPICS, "costmap": COSTMAP_TOPIC})
+        topics = add_topics(writer, ts, _TOPICS if run.costmap is None else {**_TOPICS, **COSTMAP_TOPICS})
         _write_fixed(topics, scene)
         for i in range(len(run.times)):
             _write_frame(topics, scene, i)
@@ -146,9 +152,7 @@ def _write_fixed(topics: Topics, scene: _Scene) -> None:
     ts, cam = scene.ts, scene.run.camera
     first = scene.bag_ns(scene.t0_s)
     topics.write("path", first, path_message(ts, scene.run.path))
-    mount = transform(ts, header(ts, 0.0, "base_link"), "camera", (cam.mount_forward_m, 0.0, cam.mount_height_m),
-                      rpy_quaternion(ts, 0.0, math.radians(cam.pitch_deg), math.radians(cam.yaw_deg)))
-    topics.write("tf_static", first, tf_message(ts, [mount]))
+    topics.write("tf_static", first, tf_message(ts, camera_mount(ts, cam)))
 
 
 def _write_frame(topics: Topics, scene: _Scene, i: int) -> None:
@@ -158,13 +162,15 @@ def _write_frame(topics: Topics, scene: _Scene, i: int) -> None:
     ns = scene.bag_ns(float(run.times[i]))
     x, y, yaw = (float(v) for v in run.poses[i])
     ids = run.image(i)
-    topics.write("camera_info", ns, camera_info(ts, header(ts, t, "camera"), run.camera))
-    topics.write("labels", ns, compressed_image(ts, header(ts, t, "camera"), "mono8; png compressed class ids", png(ids)))
-    topics.write("labels_color", ns, compressed_image(ts, header(ts, t, "camera"), "png", png(ids, scene.palette)))
+    optical = header(ts, t, OPTICAL_FRAME)
+    topics.write("camera_info", ns, camera_info(ts, optical, run.camera))
+    topics.write("labels", ns, compressed_image(ts, optical, "mono8; png compressed class ids", png(ids)))
+    topics.write("labels_color", ns, compressed_image(ts, optical, "png", png(ids, scene.palette)))
     topics.write("odom", ns, odometry(ts, header(ts, t, "odom"), pose(ts, x, y, rpy_quaternion(ts, 0, 0, yaw))))
     grid = run.costmap(i, ids) if run.costmap is not None else None
     if grid is not None:
         topics.write("costmap", ns, occupancy_grid(ts, header(ts, t, "odom"), grid.cost, grid.resolution_m, grid.origin))
+        topics.write("costmap_grid", ns, foxglove_grid(ts, t, "odom", grid))
     base = transform(ts, header(ts, t, "odom"), "base_link", (x, y, 0.0), rpy_quaternion(ts, 0, 0, yaw))
     topics.write("tf", ns, tf_message(ts, [base]))
     v, w = (float(u) for u in run.commands[i])
@@ -200,6 +206,22 @@ def _robot_yaml(cam: CameraConfig) -> str:
         f"  yaw_deg: {cam.yaw_deg!r}\n  max_range_m: {cam.max_range_m!r}\n"
         "labels: terrapref   # the ids are terrapref's own classes\n"
     )
+
+
+def costmaps_of(stage, poses: np.ndarray, names: tuple[str, ...]) -> Callable[[int, np.ndarray], Costmap | None]:
+    """The costmaps of one run for :attr:`RunFrames.costmap`: ``stage`` (an offset stage,
+    terrapref.planner.offset), its map emptied, takes each frame in turn as it was seen from
+    ``poses`` (F, 3), and every :data:`COSTMAP_EVERY`-th frame gives the costmap of ``names``, the
+    model's feature classes. Frames are to be asked for in order."""
+    from terrapref.camera import SegmentationView
+    from terrapref.vehicle import Pose
+
+    stage.reset()
+
+    def costmap(i: int, ids: np.ndarray) -> Costmap | None:
+        stage.map.update(SegmentationView.of(ids), Pose(*poses[i]))
+        return stage.costmap(names) if i % COSTMAP_EVERY == 0 else None
+    return costmap
 
 
 def recording_frames(rec) -> RunFrames:

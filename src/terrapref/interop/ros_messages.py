@@ -22,6 +22,7 @@ if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
     from terrapref.camera import CameraConfig
+    from terrapref.planner.costmap import Costmap
 
 Message = Any  # an instance of a message class that rosbags makes at run time from the typestore
 EPOCH_S = 1_700_000_000
@@ -36,7 +37,20 @@ def typestore(ros1: bool = False) -> Typestore:
     ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
     if "tf2_msgs/msg/TFMessage" not in ts.fielddefs:  # not in rosbags' ROS 1 store: registered from its definition
         ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
+    if not ros1:
+        for name, definition in _FOXGLOVE_MSGS.items():
+            ts.register(get_types_from_msg(definition, name))
     return ts
+
+
+# Foxglove's own message types (the foxglove_msgs package), as far as the files use them.
+_FOXGLOVE_MSGS = {
+    "foxglove_msgs/msg/Vector2": "float64 x\nfloat64 y\n",
+    "foxglove_msgs/msg/PackedElementField": "uint8 UINT8=1\nuint8 FLOAT32=7\nstring name\nuint32 offset\nuint8 type\n",
+    "foxglove_msgs/msg/Grid": ("builtin_interfaces/Time timestamp\nstring frame_id\ngeometry_msgs/Pose pose\nuint32 column_count\n"
+                               "foxglove_msgs/Vector2 cell_size\nuint32 row_stride\nuint32 cell_stride\n"
+                               "foxglove_msgs/PackedElementField[] fields\nuint8[] data\n"),
+}
 
 
 @dataclass(frozen=True)
@@ -55,10 +69,27 @@ class Topics:
         self.writer.write(conn, t_ns, data)
 
 
+LATCHED_TOPICS = frozenset({"/tf_static"})  # published once and kept for late subscribers
+
+
 def add_topics(writer: Any, ts: Typestore, topics: dict[str, tuple[str, str]], ros1: bool = False) -> Topics:
-    """Connections for ``{role: (topic, msgtype)}``, added to ``writer`` in that order."""
-    connections = {role: writer.add_connection(topic, msgtype, typestore=ts) for role, (topic, msgtype) in topics.items()}
+    """Connections for ``{role: (topic, msgtype)}``, added to ``writer`` in that order; the topics
+    of :data:`LATCHED_TOPICS` offered latched (ROS 1) or transient-local (ROS 2), so that a bag's
+    player hands them to subscribers that come late, as a robot's static transform publisher does."""
+    connections = {role: writer.add_connection(topic, msgtype, typestore=ts, **(_latched(ros1) if topic in LATCHED_TOPICS else {}))
+                   for role, (topic, msgtype) in topics.items()}
     return Topics(writer, ts, connections, ros1)
+
+
+def _latched(ros1: bool) -> dict[str, Any]:
+    """The keyword arguments of rosbags' ``add_connection`` that offer a topic latched."""
+    if ros1:
+        return {"latching": 1}
+    from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+
+    unset = QosTime(0, 0)
+    return {"offered_qos_profiles": [Qos(QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL, unset, unset,
+                                         QosLiveliness.AUTOMATIC, unset, False)]}
 
 
 def zeroed(ts: Typestore, msgtype: str, **fields: Any) -> Message:
@@ -150,6 +181,18 @@ def transform(ts: Typestore, parent: Message, child_frame_id: str, xyz: tuple[fl
     return ts.types["geometry_msgs/msg/TransformStamped"](header=parent, child_frame_id=child_frame_id, transform=moved)
 
 
+OPTICAL_FRAME = "camera_optical"  # the frame images and calibration are stamped in: z forward, x right, y down (REP 103)
+
+
+def camera_mount(ts: Typestore, camera: CameraConfig, ros1: bool = False) -> list[Message]:
+    """The camera's mounting as a robot publishes it on /tf_static: base_link -> camera_link (x
+    forward, pitched down by the mount's pitch and turned by its yaw) -> :data:`OPTICAL_FRAME`."""
+    mount = transform(ts, header(ts, 0.0, "base_link", ros1), "camera_link", (camera.mount_forward_m, 0.0, camera.mount_height_m),
+                      rpy_quaternion(ts, 0.0, math.radians(camera.pitch_deg), math.radians(camera.yaw_deg)))
+    optical = transform(ts, header(ts, 0.0, "camera_link", ros1), OPTICAL_FRAME, (0.0, 0.0, 0.0), quaternion(ts, (-0.5, 0.5, -0.5, 0.5)))
+    return [mount, optical]
+
+
 def tf_message(ts: Typestore, transforms: list[Message]) -> Message:
     """tf2_msgs/TFMessage holding ``transforms``."""
     return ts.types["tf2_msgs/msg/TFMessage"](transforms=transforms)
@@ -168,6 +211,26 @@ def occupancy_grid(ts: Typestore, stamped: Message, cost: np.ndarray, resolution
     info = T["nav_msgs/msg/MapMetaData"](map_load_time=stamped.stamp, resolution=float(resolution_m), width=w, height=h,
                                          origin=pose(ts, float(origin[0]), float(origin[1]), rpy_quaternion(ts, 0.0, 0.0, 0.0)))
     return T["nav_msgs/msg/OccupancyGrid"](header=stamped, info=info, data=np.ascontiguousarray(cost, dtype=np.int8).ravel())
+
+
+GRID_FIELDS = (("cost", 0, 7), ("red", 4, 1), ("green", 5, 1), ("blue", 6, 1), ("alpha", 7, 1))  # name, byte offset, PackedElementField type
+
+
+def foxglove_grid(ts: Typestore, t_s: float, frame_id: str, costmap: Costmap) -> Message:
+    """foxglove_msgs/Grid of ``costmap`` in ``frame_id``, stamped ``t_s`` [s]: per cell its cost as
+    float32 (NaN unknown) and its colour (:func:`terrapref.planner.costmap.cost_colours`)."""
+    from terrapref.planner.costmap import cost_colours
+
+    T = ts.types
+    h, w = costmap.cost.shape
+    cells = np.zeros((h, w), dtype=[("cost", "<f4"), ("rgba", "u1", 4)])
+    cells["cost"] = np.where(costmap.cost < 0, np.nan, costmap.cost.astype(np.float32))
+    cells["rgba"] = cost_colours(costmap.cost)
+    fields = [T["foxglove_msgs/msg/PackedElementField"](name=name, offset=offset, type=kind) for name, offset, kind in GRID_FIELDS]
+    corner = pose(ts, float(costmap.origin[0]), float(costmap.origin[1]), rpy_quaternion(ts, 0.0, 0.0, 0.0))
+    return T["foxglove_msgs/msg/Grid"](timestamp=stamp(ts, t_s), frame_id=frame_id, pose=corner, column_count=w,
+                                       cell_size=T["foxglove_msgs/msg/Vector2"](x=costmap.resolution_m, y=costmap.resolution_m),
+                                       row_stride=8 * w, cell_stride=8, fields=fields, data=cells.view(np.uint8).ravel())
 
 
 def odometry(ts: Typestore, stamped: Message, base_pose: Message) -> Message:

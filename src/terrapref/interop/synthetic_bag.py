@@ -20,8 +20,8 @@ import numpy as np
 from terrapref.camera import CameraConfig
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.demos.session import Disturber
-from terrapref.interop.ros_messages import (Message, Topics, add_topics, camera_info, compressed_image, epoch_ns, header, odometry, path_message,
-                                            png, pose, quaternion, tf_message, transform, twist, typestore, yaw_quaternion)
+from terrapref.interop.ros_messages import (OPTICAL_FRAME, Message, Topics, add_topics, camera_info, camera_mount, compressed_image, epoch_ns, header,
+                                            odometry, path_message, png, pose, tf_message, twist, typestore, yaw_quaternion)
 from terrapref.recipes import DEFAULT_RECIPE, RECIPES
 from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.sim import Frame, Simulation
@@ -130,11 +130,11 @@ class _Messages:
 
     def camera_info(self, t_s: float) -> Message:
         """The camera's calibration, stamped ``t_s`` [s] in the optical frame."""
-        return camera_info(self.ts, self.header(t_s, "camera_optical"), self.camera, self.ros1)
+        return camera_info(self.ts, self.header(t_s, OPTICAL_FRAME), self.camera, self.ros1)
 
     def image(self, t_s: float, ids: np.ndarray) -> Message:
         """The segmentation ``ids`` (H, W) in RELLIS-3D ids, in the log's encoding."""
-        stamped = self.header(t_s, "camera_optical")
+        stamped = self.header(t_s, OPTICAL_FRAME)
         if self.encoding == "png":
             return compressed_image(self.ts, stamped, "mono8; png compressed", png(ids.astype(np.uint8)))
         if self.encoding == "rgb8":  # a colour segmentation: the RELLIS ids through COLORS
@@ -214,13 +214,7 @@ def _put_fixed(log: _Log, path_xy: list[tuple[float, float]]) -> None:
     messages, cam = log.messages, log.messages.camera
     ts = messages.ts
     log.queue.put(0.0, "path", path_message(ts, path_xy, messages.ros1))
-    # The camera's mounting as a robot publishes it: base_link -> camera_link (x forward,
-    # pitched down) -> camera_optical (z forward), the frame the images are stamped in.
-    p2 = math.radians(cam.pitch_deg) / 2
-    mount = transform(ts, messages.header(0.0, "base_link"), "camera_link", (cam.mount_forward_m, 0.0, cam.mount_height_m),
-                      quaternion(ts, (0.0, math.sin(p2), 0.0, math.cos(p2))))
-    optical = transform(ts, messages.header(0.0, "camera_link"), "camera_optical", (0.0, 0.0, 0.0), quaternion(ts, (-0.5, 0.5, -0.5, 0.5)))
-    log.queue.put(0.0, "tf_static", tf_message(ts, [mount, optical]))
+    log.queue.put(0.0, "tf_static", tf_message(ts, camera_mount(ts, cam, messages.ros1)))
 
 
 def _drive(sim: Simulation, sc: Scenario, seed: int, profile: tuple[str, ...] | None, log: _Log) -> None:

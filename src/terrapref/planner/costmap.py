@@ -79,3 +79,19 @@ def costmap_of(cells: np.ndarray, origin: np.ndarray | None, resolution_m: float
     grid = costs[cells] if origin is not None else np.full(cells.shape, UNKNOWN_COST, dtype=np.int8)
     corner = (float(origin[0]), float(origin[1])) if origin is not None else (0.0, 0.0)
     return Costmap(grid, float(resolution_m), corner, {n: float(p) for n, p in zip(names, prices, strict=True)})
+
+
+_CHEAP, _DEAR, _LETHAL = np.array([40, 200, 60]), np.array([230, 40, 30]), np.array([20, 20, 20])
+
+
+def cost_colours(cost: np.ndarray) -> np.ndarray:
+    """RGBA (..., 4) uint8 of costs, for a viewer: green (0) to red (99), lethal near-black,
+    unknown transparent."""
+    cost = np.asarray(cost)
+    share = np.clip(cost, 0, MAX_COST)[..., None] / MAX_COST
+    rgba = np.empty(cost.shape + (4,), dtype=np.uint8)
+    rgba[..., :3] = np.round(_CHEAP + share * (_DEAR - _CHEAP)).astype(np.uint8)
+    rgba[..., 3] = 160
+    rgba[cost == LETHAL_COST] = (*_LETHAL, 230)
+    rgba[cost == UNKNOWN_COST] = 0
+    return rgba
