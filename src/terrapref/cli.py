@@ -567,6 +567,54 @@ def _cmd_ros1(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_route(args: argparse.Namespace) -> int:
+    import numpy as np
+    import yaml
+
+    from terrapref.fileio import write_text_atomic
+    from terrapref.learning.model_file import load_model
+    from terrapref.planner import Planner
+    from terrapref.planner.route import RouteConfig, RouteError, detour_price, plan_route, prior_costmap
+    from terrapref.plots import save_map
+    from terrapref.scenario import resolve_scenario
+    from terrapref.scenario.path import ReferencePath
+    from terrapref.world import rasterise
+
+    out, figure = Path(args.out), Path(args.out).with_suffix(".png")
+    for path in (out, figure):
+        _check_output(path, "--out", [args.scenario, args.model])
+    if out.suffix.lower() not in (".yaml", ".yml"):
+        raise UserError(str(out), "the route is written as a scenario file: give it the suffix .yaml", field="--out")
+    if not (math.isfinite(args.resolution) and 0.05 <= args.resolution <= 2.0):
+        raise UserError("--resolution", f"expected a cell size in [0.05, 2] m, got {args.resolution}")
+    scenario = resolve_scenario(args.scenario)
+    model = load_model(args.model)
+    if model.classes != scenario.classes:
+        raise UserError(args.model, f"was trained for another class table than {args.scenario}'s", field="classes")
+    stage = Planner(model).offset_stage
+    if stage is None:
+        raise UserError(args.model, "has no offset stage, whose learned prices the route is priced with (train it with recipe teach)", field="--model")
+    world = rasterise(scenario)
+    path = ReferencePath(scenario.waypoints)
+    try:
+        route = plan_route(prior_costmap(world, stage, model.features.feature_classes), path, detour_price(stage), RouteConfig(resolution_m=args.resolution))
+    except RouteError as exc:
+        raise UserError(args.scenario, str(exc), field="path") from None
+    data = scenario.to_dict()
+    data["name"] = f"{scenario.name}_route"
+    data["description"] = f"{scenario.name} with its path replaced by the route {Path(args.model).name} prices lowest"
+    data["path"] = {"waypoints": np.round(route.waypoints, 3).tolist()}
+    text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=120)
+    write_text_atomic(out, "# terrapref route: a scenario whose path is the route; every command that takes a scenario takes it,\n"
+                           "# and terrapref ros1 --path-file reads its waypoints.\n" + text)
+    save_map(figure, scenario, world, tracks=[("route", route.waypoints, "tab:blue")], title=f"{scenario.name}: route priced by {Path(args.model).name}")
+    along = "meets lethal terrain" if not math.isfinite(route.along_path_cost) else f"{route.along_path_cost:.1f}"
+    print(f"route: {route.length_m:.1f} m (path {path.length_m:.1f} m), up to {route.max_offset_m:.1f} m from the path; "
+          f"price {route.cost:.1f} (the path itself: {along})")
+    print(f"wrote {out} (the scenario with the route as its path: terrapref evaluate {args.model} {out}) and {figure}")
+    return 0
+
+
 def _cmd_info(args: argparse.Namespace) -> int:
     from terrapref.report.info import info_lines
 
@@ -999,6 +1047,15 @@ def _ros1_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_cmd_ros1)
 
 
+def _route_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("route", help="plan a global route over a scenario's map, priced with a model's learned preference, as waypoints the planner follows")
+    p.add_argument("scenario", help="the course (packaged name, file or gen:N): its terrain stands in for a prior map such as labelled aerial imagery")
+    p.add_argument("--model", required=True, help="a model with an offset stage (recipe teach): its class prices and price of leaving the path")
+    p.add_argument("--out", required=True, help="the scenario with the route as its path (.yaml); a figure is written beside it (.png)")
+    p.add_argument("--resolution", type=float, default=0.25, help="search cell size [m] (default 0.25)")
+    p.set_defaults(func=_cmd_route)
+
+
 def _info_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("info", help="what a recording, dataset, model or ONNX file holds (camera, profile, data, history, identifiability)")
     p.add_argument("files", nargs="+", metavar="FILE", help="recording folders, dataset or model files (.safetensors), ONNX files")
@@ -1056,6 +1113,7 @@ COMMANDS = (
     _replay_parser,
     _export_parser,
     _ros1_parser,
+    _route_parser,
     _info_parser,
     _select_parser,
     _perception_parser,

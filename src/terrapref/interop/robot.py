@@ -174,7 +174,8 @@ def _load_labels(ref: str, here: Path, classes: ClassTable, source: str) -> Labe
 
 
 def load_waypoints(path: Path, source: str) -> np.ndarray:
-    """Waypoints (N, 2) from a YAML file: a list of [x, y], or a mapping with ``waypoints``."""
+    """Waypoints (N, 2) from a YAML file: a list of [x, y], a mapping with ``waypoints``, or a
+    scenario file (its ``path: waypoints``, as ``terrapref route`` writes)."""
     data = None
     try:
         data = load_yaml_text(path.read_text())
@@ -183,7 +184,7 @@ def load_waypoints(path: Path, source: str) -> np.ndarray:
     except (OSError, UnicodeDecodeError, ValueError, yaml.YAMLError) as exc:
         raise UserError(source, f"{path}: unreadable ({exc})", field="path_file") from None
     if isinstance(data, dict):
-        data = data.get("waypoints")
+        data = data["path"].get("waypoints") if isinstance(data.get("path"), dict) and "waypoints" not in data else data.get("waypoints")
     try:
         points = np.asarray(data, dtype=float)
     except (TypeError, ValueError):

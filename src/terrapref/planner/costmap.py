@@ -32,12 +32,21 @@ class Costmap:
         origin: the corner of cell (0, 0) [m].
         prices: each class's learned price per metre (against the background), by name; the
             costs are these scaled to 0-99.
+        lethal: the classes among ``prices`` that are lethal (cost 100 whatever their price).
     """
 
     cost: np.ndarray
     resolution_m: float
     origin: tuple[float, float]
     prices: dict[str, float]
+    lethal: frozenset[str] = frozenset()
+
+    @property
+    def price_per_cost(self) -> float:
+        """The price per metre that one unit of cost stands for (the dearest non-lethal class's
+        price over 99; 0 when no class is dearer than the background)."""
+        top = max([p for name, p in self.prices.items() if name not in self.lethal and p > 0] or [0.0])
+        return top / MAX_COST
 
     def cell_of(self, x: float, y: float) -> tuple[int, int] | None:
         """(row, column) of the cell holding (x, y) [m], or None off the grid."""
@@ -78,7 +87,8 @@ def costmap_of(cells: np.ndarray, origin: np.ndarray | None, resolution_m: float
     costs, prices = class_costs(weights, lethal, k)
     grid = costs[cells] if origin is not None else np.full(cells.shape, UNKNOWN_COST, dtype=np.int8)
     corner = (float(origin[0]), float(origin[1])) if origin is not None else (0.0, 0.0)
-    return Costmap(grid, float(resolution_m), corner, {n: float(p) for n, p in zip(names, prices, strict=True)})
+    return Costmap(grid, float(resolution_m), corner, {n: float(p) for n, p in zip(names, prices, strict=True)},
+                   frozenset(n for n, is_lethal in zip(names, lethal[:k]) if is_lethal))
 
 
 _CHEAP, _DEAR, _LETHAL = np.array([40, 200, 60]), np.array([230, 40, 30]), np.array([20, 20, 20])

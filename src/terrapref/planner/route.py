@@ -1,0 +1,189 @@
+"""A global route over a prior map, priced as the model learned: higher-level planning.
+
+The local planner keeps within a few metres of its reference path; a wide patch the driver would
+go round, the way round lying farther out than the offsets it weighs, it can only cross. A
+route planned over a prior map of the course (the scenario's terrain here, standing in for
+labelled aerial imagery on a robot) moves the reference path itself.
+
+The route is the least-cost way from the path's start to its end through the costmap of that
+map (:mod:`terrapref.planner.costmap`: the learned per-class prices, lethal classes lethal) with
+the price the model learned for leaving the path: the corridor utility prices a metre on class
+k at ``-w_k`` and holding an offset of d metres at ``-w_detour * d^2`` per metre of path, so a
+metre of route at distance d from the reference path costs ``price(cell) - w_detour * d^2``.
+A cell's price is the mean over the vehicle's footprint across it; cells within half the
+vehicle's width plus a margin of lethal terrain, or off the map, are not entered. The search
+is Dijkstra's over the 8-connected grid (networkx).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from terrapref.planner.costmap import LETHAL_COST, MAX_COST, UNKNOWN_COST, Costmap, costmap_of
+from terrapref.scenario.path import ReferencePath
+
+if TYPE_CHECKING:
+    from terrapref.planner.offset import OffsetStage
+    from terrapref.world import WorldMap
+
+_LENGTH_PRICE = 0.01  # per metre of route on the cheapest ground: among equal routes, the shortest
+
+
+@dataclass(frozen=True)
+class RouteConfig:
+    """How the route is searched.
+
+    Attributes:
+        resolution_m: the side of a search cell [m].
+        half_width_m: half the vehicle's width; a cell's price is the mean across it [m].
+        lethal_margin_m: clearance kept from lethal terrain beyond the half width [m].
+        band_m: the search keeps within this distance of the reference path [m].
+        spacing_m: spacing of the waypoints written [m].
+    """
+
+    resolution_m: float = 0.25
+    half_width_m: float = 0.6
+    lethal_margin_m: float = 0.3
+    band_m: float = 12.0
+    spacing_m: float = 1.0
+
+    def __post_init__(self) -> None:
+        values = (self.resolution_m, self.half_width_m, self.lethal_margin_m, self.band_m, self.spacing_m)
+        if not all(math.isfinite(v) for v in values) or min(self.resolution_m, self.band_m, self.spacing_m) <= 0 \
+                or min(self.half_width_m, self.lethal_margin_m) < 0:
+            raise ValueError("a route needs resolution_m, band_m and spacing_m > 0, half_width_m and lethal_margin_m >= 0")
+
+
+@dataclass(frozen=True)
+class Route:
+    """A route and what it costs.
+
+    Attributes:
+        waypoints: (N, 2) [m], ``spacing_m`` apart, from the path's start to its end.
+        cost: its price in the learned utility's units (a metre on the background at the
+            path costs about ``_LENGTH_PRICE``).
+        along_path_cost: the price of driving the reference path itself (inf: it meets lethal
+            terrain or leaves the map).
+        max_offset_m: the farthest the route runs from the reference path [m].
+    """
+
+    waypoints: np.ndarray
+    cost: float
+    along_path_cost: float
+    max_offset_m: float
+
+    @property
+    def length_m(self) -> float:
+        return float(np.linalg.norm(np.diff(self.waypoints, axis=0), axis=1).sum())
+
+
+class RouteError(ValueError):
+    """No route: the path's start or end cannot be entered, or lethal terrain cuts them apart."""
+
+
+def prior_costmap(world: WorldMap, stage: OffsetStage, names: tuple[str, ...]) -> Costmap:
+    """The costmap of a prior map ``world`` (every cell known) as ``stage``, an offset stage,
+    prices what its ground map holds; ``names``, the classes of its K terrain columns."""
+    cells = stage.map.columns[world.raster]
+    return costmap_of(cells, np.zeros(2), world.resolution_m, stage.utility.weights, stage.lethal, names)
+
+
+def detour_price(stage: OffsetStage) -> float:
+    """The price, per metre and per square metre of offset, of holding off the path that
+    ``stage``'s corridor utility learned (``-w_detour``)."""
+    return float(-stage.utility.weights[stage.k + 1])
+
+
+def coarsened(costmap: Costmap, resolution_m: float) -> Costmap:
+    """``costmap`` in cells of ``resolution_m`` (a whole multiple of its own): each the mean of the
+    costs within, lethal (or unknown) when any cell within is."""
+    factor = max(1, round(resolution_m / costmap.resolution_m))
+    if factor == 1:
+        return costmap
+    h, w = (n // factor for n in costmap.cost.shape)
+    blocks = costmap.cost[: h * factor, : w * factor].reshape(h, factor, w, factor).astype(np.int16)
+    cost = np.round(blocks.clip(0, MAX_COST).mean(axis=(1, 3))).astype(np.int8)
+    cost[(blocks == UNKNOWN_COST).any(axis=(1, 3))] = UNKNOWN_COST
+    cost[(blocks == LETHAL_COST).any(axis=(1, 3))] = LETHAL_COST
+    return Costmap(cost, costmap.resolution_m * factor, costmap.origin, costmap.prices, costmap.lethal)
+
+
+def plan_route(costmap: Costmap, path: ReferencePath, detour_price: float, config: RouteConfig | None = None) -> Route:
+    """The least-cost route along ``path`` through ``costmap`` (module docstring); ``detour_price``
+    the price of a metre held d metres off the path, per d^2 (the model's ``-w_detour``)."""
+    import networkx as nx
+
+    config = config or RouteConfig()
+    grid = coarsened(costmap, config.resolution_m)
+    res = grid.resolution_m
+    h, w = grid.cost.shape
+    centres = np.stack(np.meshgrid(grid.origin[0] + (np.arange(w) + 0.5) * res, grid.origin[1] + (np.arange(h) + 0.5) * res), axis=-1)
+    d = path.distance_to(centres.reshape(-1, 2)).reshape(h, w)
+    price = _footprint_price(grid, config) + max(detour_price, 0.0) * d**2 + _LENGTH_PRICE
+    price[(d > config.band_m) | _blocked(grid, config)] = np.inf
+    start, goal = (grid.cell_of(*path.point_at(s)) for s in (0.0, path.length_m))
+    for name, cell in (("start", start), ("end", goal)):
+        if cell is None or not np.isfinite(price[cell]):
+            raise RouteError(f"the path's {name} is off the map or within {config.half_width_m + config.lethal_margin_m:.1f} m of lethal terrain")
+    graph = nx.Graph()
+    graph.add_weighted_edges_from(_edges(price, res))
+    try:
+        cells = nx.dijkstra_path(graph, start[0] * w + start[1], goal[0] * w + goal[1])
+    except (nx.NetworkXNoPath, nx.NodeNotFound):
+        raise RouteError("lethal terrain cuts the path's start from its end on this map") from None
+    rows, cols = np.divmod(np.asarray(cells), w)
+    points = centres[rows, cols]
+    points[0], points[-1] = path.point_at(0.0), path.point_at(path.length_m)
+    waypoints = ReferencePath(points).resampled(config.spacing_m)[0]
+    along = path.resampled(res)[0]
+    return Route(waypoints, _cost_of(points, price, grid), _cost_of(along, price, grid), float(d[rows, cols].max()))
+
+
+def _footprint_price(grid: Costmap, config: RouteConfig) -> np.ndarray:
+    """Each cell's price per metre: the costs' prices averaged over a disc of the half width."""
+    price = np.where((grid.cost >= 0) & (grid.cost <= MAX_COST), grid.cost, 0).astype(float) * grid.price_per_cost
+    return _disc_mean(price, config.half_width_m / grid.resolution_m)
+
+
+def _blocked(grid: Costmap, config: RouteConfig) -> np.ndarray:
+    """Cells the vehicle's centre may not enter: within the half width and margin of lethal
+    terrain, or of ground the map does not hold."""
+    bad = ((grid.cost == LETHAL_COST) | (grid.cost == UNKNOWN_COST)).astype(float)
+    return _disc_mean(bad, (config.half_width_m + config.lethal_margin_m) / grid.resolution_m) > 0
+
+
+def _disc_mean(a: np.ndarray, radius_cells: float) -> np.ndarray:
+    """The mean of ``a`` over a disc of ``radius_cells`` around each cell (edges padded with the
+    nearest cell)."""
+    r = int(math.floor(radius_cells))
+    if r == 0:
+        return a.copy()
+    offsets = [(i, j) for i in range(-r, r + 1) for j in range(-r, r + 1) if i * i + j * j <= radius_cells**2 + 1e-9]
+    padded = np.pad(a, r, mode="edge")
+    h, w = a.shape
+    return sum(padded[r + i: r + i + h, r + j: r + j + w] for i, j in offsets) / len(offsets)
+
+
+def _edges(price: np.ndarray, res: float):
+    """(node, node, weight) of every step between neighbouring enterable cells (8-connected):
+    the step's length times the mean price of its two cells."""
+    h, w = price.shape
+    ids = np.arange(h * w).reshape(h, w)
+    for di, dj in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        a = (slice(0, h - di), slice(max(0, -dj), w - max(0, dj)))
+        b = (slice(di, h), slice(max(0, dj), w + min(0, dj)))
+        weight = res * math.hypot(di, dj) * 0.5 * (price[a] + price[b])
+        ok = np.isfinite(weight)
+        yield from zip(ids[a][ok].tolist(), ids[b][ok].tolist(), weight[ok].tolist())
+
+
+def _cost_of(points: np.ndarray, price: np.ndarray, grid: Costmap) -> float:
+    """The price of driving through ``points`` (N, 2) [m]: each step's length times the price
+    of the cell it starts in (inf where that cell cannot be entered)."""
+    cells = [grid.cell_of(float(x), float(y)) for x, y in points[:-1]]
+    steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    return float(sum(step * (price[c] if c is not None else np.inf) for c, step in zip(cells, steps)))
