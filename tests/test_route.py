@@ -16,7 +16,7 @@ from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.planner.costmap import LETHAL_COST
 from terrapref.planner.offset import OffsetStage
-from terrapref.planner.route import RouteConfig, RouteError, detour_price, plan_route, prior_costmap
+from terrapref.planner.route import RouteConfig, RouteError, detour_prices, plan_route, prior_costmap
 from terrapref.scenario import load_scenario
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import default_classes
@@ -30,7 +30,7 @@ def _route(patches: list[dict], config: RouteConfig | None = None):
     """The route along PATH over ``patches``, priced as DRIVER_LIKE prices them, and its costmap."""
     stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), PinholeCamera(), _columns(), K, np.array([0]), 1.0)
     costmap = prior_costmap(rasterise(_scenario(patches)), stage, NAMES)
-    return plan_route(costmap, PATH, detour_price(stage), config), costmap
+    return plan_route(costmap, PATH, *detour_prices(stage), config=config), costmap
 
 
 def _band(cls: str, x: tuple[float, float], y: tuple[float, float]) -> dict:

@@ -574,7 +574,7 @@ def _cmd_route(args: argparse.Namespace) -> int:
     from terrapref.fileio import write_text_atomic
     from terrapref.learning.model_file import load_model
     from terrapref.planner import Planner
-    from terrapref.planner.route import RouteConfig, RouteError, detour_price, plan_route, prior_costmap
+    from terrapref.planner.route import RouteConfig, RouteError, detour_prices, plan_route, prior_costmap
     from terrapref.plots import save_map
     from terrapref.scenario import resolve_scenario
     from terrapref.scenario.path import ReferencePath
@@ -597,7 +597,7 @@ def _cmd_route(args: argparse.Namespace) -> int:
     world = rasterise(scenario)
     path = ReferencePath(scenario.waypoints)
     try:
-        route = plan_route(prior_costmap(world, stage, model.features.feature_classes), path, detour_price(stage), RouteConfig(resolution_m=args.resolution))
+        route = plan_route(prior_costmap(world, stage, model.features.feature_classes), path, *detour_prices(stage), config=RouteConfig(resolution_m=args.resolution))
     except RouteError as exc:
         raise UserError(args.scenario, str(exc), field="path") from None
     data = scenario.to_dict()

@@ -8,8 +8,10 @@ labelled aerial imagery on a robot) moves the reference path itself.
 The route is the least-cost way from the path's start to its end through the costmap of that
 map (:mod:`terrapref.planner.costmap`: the learned per-class prices, lethal classes lethal) with
 the price the model learned for leaving the path: the corridor utility prices a metre on class
-k at ``-w_k`` and holding an offset of d metres at ``-w_detour * d^2`` per metre of path, so a
-metre of route at distance d from the reference path costs ``price(cell) - w_detour * d^2``.
+k at ``-w_k`` and an offset of d metres held for L metres of path at ``-w_detour * d^2 * (L +
+span)``, the span standing for swerving out and back. So a metre of route at distance d from
+the reference path costs ``price(cell) - w_detour * d^2``, and a step from distance d1 to d2
+costs ``-w_detour * span / 2 * |d2^2 - d1^2|`` more (out to d and back: the span's share).
 A cell's price is the mean over the vehicle's footprint across it; cells within half the
 vehicle's width plus a margin of lethal terrain, or off the map, are not entered. The search
 is Dijkstra's over the 8-connected grid (networkx).
@@ -92,10 +94,10 @@ def prior_costmap(world: WorldMap, stage: OffsetStage, names: tuple[str, ...]) -
     return costmap_of(cells, np.zeros(2), world.resolution_m, stage.utility.weights, stage.lethal, names)
 
 
-def detour_price(stage: OffsetStage) -> float:
+def detour_prices(stage: OffsetStage) -> tuple[float, float]:
     """The price, per metre and per square metre of offset, of holding off the path that
-    ``stage``'s corridor utility learned (``-w_detour``)."""
-    return float(-stage.utility.weights[stage.k + 1])
+    ``stage``'s corridor utility learned (``-w_detour``), and the span [m] its detours add."""
+    return float(-stage.utility.weights[stage.k + 1]), float(stage.utility.config.span_m)
 
 
 def coarsened(costmap: Costmap, resolution_m: float) -> Costmap:
@@ -112,9 +114,10 @@ def coarsened(costmap: Costmap, resolution_m: float) -> Costmap:
     return Costmap(cost, costmap.resolution_m * factor, costmap.origin, costmap.prices, costmap.lethal)
 
 
-def plan_route(costmap: Costmap, path: ReferencePath, detour_price: float, config: RouteConfig | None = None) -> Route:
+def plan_route(costmap: Costmap, path: ReferencePath, detour_price: float, span_m: float = 0.0, config: RouteConfig | None = None) -> Route:
     """The least-cost route along ``path`` through ``costmap`` (module docstring); ``detour_price``
-    the price of a metre held d metres off the path, per d^2 (the model's ``-w_detour``)."""
+    the price of a metre held d metres off the path, per d^2 (the model's ``-w_detour``), and
+    ``span_m`` the metres of path a swerve out and back adds to a detour's length."""
     import networkx as nx
 
     config = config or RouteConfig()
@@ -123,14 +126,15 @@ def plan_route(costmap: Costmap, path: ReferencePath, detour_price: float, confi
     h, w = grid.cost.shape
     centres = np.stack(np.meshgrid(grid.origin[0] + (np.arange(w) + 0.5) * res, grid.origin[1] + (np.arange(h) + 0.5) * res), axis=-1)
     d = path.distance_to(centres.reshape(-1, 2)).reshape(h, w)
-    price = _footprint_price(grid, config) + max(detour_price, 0.0) * d**2 + _LENGTH_PRICE
+    alpha = max(detour_price, 0.0)
+    price = _footprint_price(grid, config) + alpha * d**2 + _LENGTH_PRICE
     price[(d > config.band_m) | _blocked(grid, config)] = np.inf
     start, goal = (grid.cell_of(*path.point_at(s)) for s in (0.0, path.length_m))
     for name, cell in (("start", start), ("end", goal)):
         if cell is None or not np.isfinite(price[cell]):
             raise RouteError(f"the path's {name} is off the map or within {config.half_width_m + config.lethal_margin_m:.1f} m of lethal terrain")
     graph = nx.Graph()
-    graph.add_weighted_edges_from(_edges(price, res))
+    graph.add_weighted_edges_from(_edges(price, alpha * span_m / 2 * d**2, res))
     try:
         cells = nx.dijkstra_path(graph, start[0] * w + start[1], goal[0] * w + goal[1])
     except (nx.NetworkXNoPath, nx.NodeNotFound):
@@ -168,15 +172,16 @@ def _disc_mean(a: np.ndarray, radius_cells: float) -> np.ndarray:
     return sum(padded[r + i: r + i + h, r + j: r + j + w] for i, j in offsets) / len(offsets)
 
 
-def _edges(price: np.ndarray, res: float):
+def _edges(price: np.ndarray, potential: np.ndarray, res: float):
     """(node, node, weight) of every step between neighbouring enterable cells (8-connected):
-    the step's length times the mean price of its two cells."""
+    the step's length times the mean price of its two cells, plus the change of ``potential``
+    between them (the swerve's price)."""
     h, w = price.shape
     ids = np.arange(h * w).reshape(h, w)
     for di, dj in ((0, 1), (1, 0), (1, 1), (1, -1)):
         a = (slice(0, h - di), slice(max(0, -dj), w - max(0, dj)))
         b = (slice(di, h), slice(max(0, dj), w + min(0, dj)))
-        weight = res * math.hypot(di, dj) * 0.5 * (price[a] + price[b])
+        weight = res * math.hypot(di, dj) * 0.5 * (price[a] + price[b]) + np.abs(potential[a] - potential[b])
         ok = np.isfinite(weight)
         yield from zip(ids[a][ok].tolist(), ids[b][ok].tolist(), weight[ok].tolist())
 
