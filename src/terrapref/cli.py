@@ -465,8 +465,14 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
     if args.style not in STYLES:
         raise UserError("--style", f"unknown driver style {args.style!r}; styles: {', '.join(STYLES)}")
-    metrics = evaluate_model(args.model, args.scenarios, args.seeds, args.out, profile, not args.no_driver, frames, engine,
-                             progress=lambda k, n: bar.update(k, f"{k}/{n} runs"), style=args.style, mcap=args.mcap, perception=perception)
+    view = _live_view(args)
+    try:
+        metrics = evaluate_model(args.model, args.scenarios, args.seeds, args.out, profile, not args.no_driver, frames, engine,
+                                 progress=lambda k, n: bar.update(k, f"{k}/{n} runs"), style=args.style, mcap=args.mcap, perception=perception,
+                                 watch=_watching(view))
+    finally:
+        if view is not None:
+            view.stop()
     bar.close()
     if perception is not None and perception.active:
         print(f"perception: {perception.name} ({perception.summary()}); the driver sees the truth")
@@ -565,6 +571,32 @@ def _cmd_ros1(args: argparse.Namespace) -> int:
         raise UserError("--rate", f"expected commands per second in (0, 200], got {args.rate}")
     run_node(args.model, args.robot, stamped=args.stamped, rate_hz=args.rate, path_file=args.path_file, cmd_topic=args.cmd_topic)
     return 0
+
+
+def _add_live_args(p: argparse.ArgumentParser, note: str) -> None:
+    p.add_argument("--live", action="store_true",
+                   help=f"serve the planner's channels live (those of the MCAP export) on Foxglove's WebSocket protocol; {note}")
+    p.add_argument("--live-host", default="127.0.0.1", help="address the live view listens on (default 127.0.0.1; 0.0.0.0: every interface)")
+    p.add_argument("--live-port", type=int, default=8765, help="port of the live view (default 8765, Foxglove's; 0: a free one)")
+
+
+def _live_view(args: argparse.Namespace):
+    """The live view that --live asks for (its address printed), or None."""
+    if not args.live:
+        return None
+    if not 0 <= args.live_port <= 65535:
+        raise UserError("--live-port", f"expected a port in [0, 65535], got {args.live_port}")
+    from terrapref.interop.live import LiveView
+
+    view = LiveView(args.live_host, args.live_port)
+    print(f"live view: {view.url} (Foxglove: Open connection, Foxglove WebSocket)", flush=True)
+    return view
+
+
+def _watching(view):
+    from terrapref.interop.live import watching
+
+    return watching(view)
 
 
 def _cmd_route(args: argparse.Namespace) -> int:
@@ -976,6 +1008,7 @@ def _evaluate_parser(sub: argparse._SubParsersAction) -> None:
     _add_engine_args(p)
     p.add_argument("--mcap", action="store_true", help="also write each planner run as ROS 2 MCAP in OUT/runs (Foxglove, RViz)")
     p.add_argument("--perception", metavar="PRESET|FILE", help=PERCEPTION_HELP + " (default: clean); the driver always sees the truth")
+    _add_live_args(p, "the runs go one after another in this process")
     p.set_defaults(func=_cmd_evaluate)
 
 

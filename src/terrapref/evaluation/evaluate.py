@@ -14,7 +14,7 @@ from terrapref.camera import PinholeCamera
 from terrapref.errors import UserError
 from terrapref.fileio import write_text_atomic
 from terrapref.grid import Engine
-from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, annotate_agreement, run_many, scenario_and_world, summarise
+from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, Watch, annotate_agreement, run_many, scenario_and_world, summarise
 from terrapref.evaluation.scoring import classes_in_zone
 from terrapref.learning.identify import GRASS, Identifiability
 from terrapref.perception import PerceptionModel
@@ -38,6 +38,7 @@ def evaluate_model(
     style: str = "default",
     mcap: bool = False,
     perception: PerceptionModel | None = None,
+    watch: Watch | None = None,
 ) -> dict:
     """Drive every scenario with the planner (and the synthetic driver) for seeds 0..N-1.
 
@@ -50,14 +51,15 @@ def evaluate_model(
     (``runs/SCENARIO_seedN.mcap``: the camera, the pose, the 21 trajectories and the one chosen);
     returns the metrics. ``engine``: where the runs go (default: local processes, one per core).
     With ``perception``, the planner receives what a robot would (terrapref.perception) while the
-    driver and the scoring see the truth; metrics.json names the model.
+    driver and the scoring see the truth; metrics.json names the model. With ``watch``, the runs
+    go one after another in this process, each planner driving as ``watch`` wraps it (a live view).
     """
     model = load_policy(model_path)  # C, or a learned baseline (linear, CNN)
     for name in scenarios:
         resolve_scenario(name)  # fail early, with the file and field, before any run
     profile = profile or PreferenceProfile.parse(list(model.profile), model.classes, source=f"{model_path}: profile")
     ev = _Evaluation(model_path, tuple(scenarios), seeds, profile, style, with_driver, perception or PerceptionModel())
-    results = annotate_agreement(run_many(ev.specs(frames, mcap), progress=progress, engine=engine))
+    results = annotate_agreement(run_many(ev.specs(frames, mcap), progress=progress, engine=engine, watch=watch))
     evidence = _evidence(model, scenarios)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -211,13 +211,18 @@ register_driver(PURE_PURSUIT, _baseline(PURE_PURSUIT))
 register_driver(HAND_COST, _baseline(HAND_COST))
 
 
-def run_one(spec: RunSpec) -> RunResult:
-    """Drive one run and return its scores, its path and any kept decisions."""
+Watch = Callable[[PlannerDriver], Driver]  # puts a planner driver where it can be watched (terrapref.interop.live)
+
+
+def run_one(spec: RunSpec, watch: Watch | None = None) -> RunResult:
+    """Drive one run and return its scores, its path and any kept decisions; with ``watch``, the
+    planner (of a planner run) drives as ``watch`` wraps it."""
     scenario, world = scenario_and_world(spec.scenario)
     profile = PreferenceProfile.parse(list(spec.profile), scenario.classes, source="--profile")
     sim, driver = _sim_and_driver(spec, scenario, world, profile)
     perceived = spec.perception is not None and spec.perception.active and spec.driver != EXPERT
-    runner = PerceivedDriver(driver, Perceiver(spec.perception, sim.renderer, scenario.classes, sim.config.camera_rate_hz)) if perceived else driver
+    watched = watch(driver) if watch is not None and isinstance(driver, PlannerDriver) else driver
+    runner = PerceivedDriver(watched, Perceiver(spec.perception, sim.renderer, scenario.classes, sim.config.camera_rate_hz)) if perceived else watched
     log = run_episode(sim, runner, np.random.default_rng(spec.seed), start_pose(scenario.start, spec.seed))
     metrics = score_run(log.trace[:, :2], scenario, sim.world, profile, completed=log.completed, collisions=log.collisions, duration_s=log.duration_s)
     planner = driver if isinstance(driver, PlannerDriver) else None
@@ -253,8 +258,16 @@ def _kept_run(spec: RunSpec, planner: PlannerDriver | None, log: EpisodeLog) -> 
 
 
 def run_many(specs: list[RunSpec], workers: int | None = None, progress: Callable[[int, int], None] | None = None,
-             engine: Engine | None = None) -> list[RunResult]:
-    """Run specs on ``engine`` (default: local processes, ``workers`` of them); results in the order given."""
+             engine: Engine | None = None, watch: Watch | None = None) -> list[RunResult]:
+    """Run specs on ``engine`` (default: local processes, ``workers`` of them); results in the order
+    given. With ``watch`` (:func:`run_one`), one after another in this process instead."""
+    if watch is not None:
+        results = []
+        for spec in specs:
+            results.append(run_one(spec, watch))
+            if progress is not None:
+                progress(len(results), len(specs))
+        return results
     engine = engine or Engine(workers=workers if workers is not None else min(len(specs), os.cpu_count() or 1) or 1)
     return run_grid(run_one, specs, engine, progress, describe=describe_spec)
 

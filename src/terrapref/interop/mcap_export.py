@@ -79,10 +79,11 @@ _TOPICS = {  # role: (topic, type), in the order the file lists them
     "tf": ("/tf", "tf2_msgs/msg/TFMessage"),
     "tf_static": ("/tf_static", "tf2_msgs/msg/TFMessage"),
 }
+TOPICS = {**_TOPICS, **COSTMAP_TOPICS}  # every channel of a file, by role
 
 
 @dataclass(frozen=True)
-class _Scene:
+class Scene:
     """What every frame of one file shares: the types, the clock's origin, the colours and the
     trajectory markers (fixed in base_link: restamped and recoloured per frame)."""
 
@@ -94,7 +95,7 @@ class _Scene:
     marker_array: Message
 
     @classmethod
-    def of(cls, ts: Typestore, run: RunFrames) -> _Scene:
+    def of(cls, ts: Typestore, run: RunFrames) -> Scene:
         """The shared part of ``run``'s file, in the types of ``ts``."""
         c = run.preference.control
         trajectories = forward_simulate(np.full(c.m, c.v_mps), np.asarray(c.w_rps), run.preference.n_steps, run.preference.dt_s)
@@ -137,17 +138,17 @@ def _write_bag(bag_dir: Path, run: RunFrames, progress: Callable[[int, int], Non
     from rosbags.rosbag2 import StoragePlugin, Writer
 
     ts = typestore()
-    scene = _Scene.of(ts, run)
+    scene = Scene.of(ts, run)
     with Writer(bag_dir, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-        topics = add_topics(writer, ts, _TOPICS if run.costmap is None else {**_TOPICS, **COSTMAP_TOPICS})
-        _write_fixed(topics, scene)
+        topics = add_topics(writer, ts, _TOPICS if run.costmap is None else TOPICS)
+        write_fixed(topics, scene)
         for i in range(len(run.times)):
             _write_frame(topics, scene, i)
             if progress is not None:
                 progress(i + 1, len(run.times))
 
 
-def _write_fixed(topics: Topics, scene: _Scene) -> None:
+def write_fixed(topics: Topics, scene: Scene) -> None:
     """The reference path and the camera's mounting (base_link -> camera), at the first frame."""
     ts, cam = scene.ts, scene.run.camera
     first = scene.bag_ns(scene.t0_s)
@@ -155,40 +156,59 @@ def _write_fixed(topics: Topics, scene: _Scene) -> None:
     topics.write("tf_static", first, tf_message(ts, camera_mount(ts, cam)))
 
 
-def _write_frame(topics: Topics, scene: _Scene, i: int) -> None:
-    """Frame ``i``: calibration, class ids and their colours, pose, command and trajectories."""
-    ts, run = scene.ts, scene.run
-    t = float(run.times[i]) - scene.t0_s
-    ns = scene.bag_ns(float(run.times[i]))
-    x, y, yaw = (float(v) for v in run.poses[i])
+@dataclass(frozen=True)
+class FrameData:
+    """One frame as the files and the live view carry it."""
+
+    t_s: float  # on the run's clock [s]
+    pose: tuple[float, float, float]  # x [m], y [m], yaw [rad]
+    command: tuple[float, float]  # v [m/s], w [rad/s]
+    ids: np.ndarray  # (H, W) uint8 class ids
+    chosen: int  # the trajectory chosen (or demonstrated)
+    probs: np.ndarray | None = None  # F_t (m,), when a planner drove
+    costmap: Costmap | None = None  # the costmap to publish with this frame
+
+
+def _write_frame(topics: Topics, scene: Scene, i: int) -> None:
+    """Frame ``i`` of the scene's run."""
+    run = scene.run
     ids = run.image(i)
+    x, y, yaw = (float(v) for v in run.poses[i])
+    v, w = (float(u) for u in run.commands[i])
+    write_frame(topics, scene, FrameData(float(run.times[i]), (x, y, yaw), (v, w), ids, int(run.chosen[i]),
+                                         run.probs[i] if run.probs is not None else None,
+                                         run.costmap(i, ids) if run.costmap is not None else None))
+
+
+def write_frame(topics: Topics, scene: Scene, frame: FrameData) -> None:
+    """One frame: calibration, class ids and their colours, pose, costmap, command and trajectories."""
+    ts = scene.ts
+    t = frame.t_s - scene.t0_s
+    ns = scene.bag_ns(frame.t_s)
+    x, y, yaw = frame.pose
     optical = header(ts, t, OPTICAL_FRAME)
-    topics.write("camera_info", ns, camera_info(ts, optical, run.camera))
-    topics.write("labels", ns, compressed_image(ts, optical, "mono8; png compressed class ids", png(ids)))
-    topics.write("labels_color", ns, compressed_image(ts, optical, "png", png(ids, scene.palette)))
+    topics.write("camera_info", ns, camera_info(ts, optical, scene.run.camera))
+    topics.write("labels", ns, compressed_image(ts, optical, "mono8; png compressed class ids", png(frame.ids)))
+    topics.write("labels_color", ns, compressed_image(ts, optical, "png", png(frame.ids, scene.palette)))
     topics.write("odom", ns, odometry(ts, header(ts, t, "odom"), pose(ts, x, y, rpy_quaternion(ts, 0, 0, yaw))))
-    grid = run.costmap(i, ids) if run.costmap is not None else None
-    if grid is not None:
-        topics.write("costmap", ns, occupancy_grid(ts, header(ts, t, "odom"), grid.cost, grid.resolution_m, grid.origin))
-        topics.write("costmap_grid", ns, foxglove_grid(ts, t, "odom", grid))
+    if frame.costmap is not None:
+        topics.write("costmap", ns, occupancy_grid(ts, header(ts, t, "odom"), frame.costmap.cost, frame.costmap.resolution_m, frame.costmap.origin))
+        topics.write("costmap_grid", ns, foxglove_grid(ts, t, "odom", frame.costmap))
     base = transform(ts, header(ts, t, "odom"), "base_link", (x, y, 0.0), rpy_quaternion(ts, 0, 0, yaw))
     topics.write("tf", ns, tf_message(ts, [base]))
-    v, w = (float(u) for u in run.commands[i])
-    topics.write("cmd_vel", ns, twist(ts, v, w))
-    _restyle_markers(scene, i, header(ts, t, "base_link"))
+    topics.write("cmd_vel", ns, twist(ts, *frame.command))
+    _restyle_markers(scene, frame.chosen, frame.probs, header(ts, t, "base_link"))
     topics.write("trajectories", ns, scene.marker_array)
 
 
-def _restyle_markers(scene: _Scene, i: int, stamped: Message) -> None:
-    """The markers for frame ``i``: the chosen trajectory thick and green, the others white to
+def _restyle_markers(scene: Scene, chosen: int, probs: np.ndarray | None, stamped: Message) -> None:
+    """The markers of one frame: the chosen trajectory thick and green, the others white to
     red, more opaque the likelier the planner found them (F_t, when a planner drove)."""
-    run = scene.run
     for j, marker in enumerate(scene.markers):
-        chosen = j == int(run.chosen[i])
-        p = float(run.probs[i, j]) if run.probs is not None else 0.0
+        p = float(probs[j]) if probs is not None else 0.0
         marker.header = stamped
-        marker.scale = vector3(scene.ts, x=0.08 if chosen else 0.03)
-        marker.color = _color(scene.ts, 0.1, 0.9, 0.2) if chosen else _color(scene.ts, 1.0, 1.0 - p, 1.0 - p, 0.4 + 0.6 * p)
+        marker.scale = vector3(scene.ts, x=0.08 if j == chosen else 0.03)
+        marker.color = _color(scene.ts, 0.1, 0.9, 0.2) if j == chosen else _color(scene.ts, 1.0, 1.0 - p, 1.0 - p, 0.4 + 0.6 * p)
 
 
 def _color(ts: Typestore, r: float, g: float, b: float, a: float = 1.0) -> Message:

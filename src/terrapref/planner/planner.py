@@ -158,13 +158,14 @@ class PlannerDriver:
         self.decisions: list[Decision] = []
         self.frames: list[int] = []
         self.image_of: dict[int, np.ndarray] = {}
+        self.last: Decision | None = None  # the latest decision
 
     def reset(self, scenario: Scenario, rng: np.random.Generator) -> None:
         self.planner.set_path(scenario.waypoints)
-        self.decisions, self.frames, self.image_of = [], [], {}
+        self.decisions, self.frames, self.image_of, self.last = [], [], {}, None
 
     def act(self, frame: Frame) -> Command:
-        d = self.planner.decide(frame.view, frame.pose)
+        d = self.last = self.planner.decide(frame.view, frame.pose)
         if self.keep:
             self.decisions.append(d)
             self.frames.append(frame.index)

@@ -1,0 +1,128 @@
+"""A live view: the channels of the MCAP export, served while the planner drives.
+
+A Foxglove WebSocket server (the Foxglove SDK, ``foxglove-sdk``) carries the same topics, types
+and messages as a run's MCAP file (terrapref.interop.mcap_export): ROS 2 messages, CDR-encoded,
+with their ros2msg schemas, so Foxglove shows them as it shows the file. The reference path and
+the camera's mounting are sent again once a second, so a viewer that connects late has them.
+
+    view = LiveView(port=8765)            # ws://127.0.0.1:8765: Foxglove, "Open connection"
+    driver = WatchedDriver(planner_driver, view, model)   # a terrapref.sim.Driver
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from terrapref.errors import UserError
+from terrapref.interop.mcap_export import COSTMAP_EVERY, TOPICS, FrameData, RunFrames, Scene, write_fixed, write_frame
+from terrapref.interop.ros_messages import Message, typestore
+
+if TYPE_CHECKING:
+    from terrapref.camera import CameraConfig
+    from terrapref.features import PreferenceSetConfig
+    from terrapref.planner.planner import PlannerDriver
+    from terrapref.terrain import ClassTable
+
+DEFAULT_HOST, DEFAULT_PORT = "127.0.0.1", 8765  # Foxglove's own default
+RESEND_EVERY = 10  # frames between two sendings of the path and the camera's mounting
+
+
+class LiveView:
+    """A Foxglove WebSocket server on ``host``:``port`` (0: a free port) with the export's channels."""
+
+    def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT) -> None:
+        import foxglove
+
+        self.ts = typestore()
+        self.context = foxglove.Context()
+        try:
+            self.server = foxglove.start_server(name="terrapref", host=host, port=port, context=self.context)
+        except Exception as exc:  # the SDK raises its own error type for a port in use or a bad host
+            raise UserError(f"{host}:{port}", f"cannot serve the live view ({exc})", field="--live-port") from None
+        self.host = host
+        self.channels = {role: foxglove.Channel(topic, message_encoding="cdr", context=self.context,
+                                                schema=foxglove.Schema(name=msgtype, encoding="ros2msg",
+                                                                       data=self.ts.generate_msgdef(msgtype, ros_version=2)[0].encode()))
+                         for role, (topic, msgtype) in TOPICS.items()}
+
+    @property
+    def port(self) -> int:
+        return int(self.server.port)
+
+    @property
+    def url(self) -> str:
+        return f"ws://{self.host}:{self.port}"
+
+    def write(self, role: str, t_ns: int, msg: Message) -> None:
+        """Send ``msg`` on the channel of ``role``, logged at ``t_ns`` [ns] (what a file's writer does)."""
+        self.channels[role].log(bytes(self.ts.serialize_cdr(msg, TOPICS[role][1])), log_time=t_ns)
+
+    def stop(self) -> None:
+        self.server.stop()
+
+
+@dataclass
+class LiveRun:
+    """One run on a :class:`LiveView`: its fixed messages, then a frame at a time."""
+
+    view: LiveView
+    scene: Scene
+    frames: int = field(default=0)
+
+    @classmethod
+    def start(cls, view: LiveView, path: np.ndarray, camera: CameraConfig, classes: ClassTable, preference: PreferenceSetConfig) -> LiveRun:
+        none = np.zeros((0, 3))
+        header = RunFrames(times=np.zeros(0), poses=none, commands=none[:, :2], image=_no_image, chosen=np.zeros(0, dtype=int),
+                           path=np.asarray(path, dtype=float), camera=camera, classes=classes, preference=preference)
+        run = cls(view, Scene.of(view.ts, header))
+        write_fixed(view, run.scene)
+        return run
+
+    def frame(self, frame: FrameData) -> None:
+        """Send one frame (and, every :data:`RESEND_EVERY` frames, the path and the mounting again)."""
+        write_frame(self.view, self.scene, frame)
+        self.frames += 1
+        if self.frames % RESEND_EVERY == 0:
+            write_fixed(self.view, self.scene)
+
+
+def _no_image(i: int) -> np.ndarray:
+    raise IndexError(i)
+
+
+class WatchedDriver:
+    """A planner driver (:class:`terrapref.planner.planner.PlannerDriver`) whose every decision is
+    sent to a :class:`LiveView` as it is made: the frame it decided on, the pose, the command, the
+    21 trajectories with F_t and the one chosen, and once a second the costmap, when the planner
+    has an offset stage. A :class:`terrapref.sim.Driver` itself."""
+
+    def __init__(self, inner: PlannerDriver, view: LiveView) -> None:
+        self.inner, self.view = inner, view
+        self.run: LiveRun | None = None
+        self._count = 0
+
+    def reset(self, scenario: Any, rng: np.random.Generator) -> None:
+        self.inner.reset(scenario, rng)
+        policy = self.inner.planner.policy
+        self.run = LiveRun.start(self.view, scenario.waypoints, policy.camera, policy.classes, policy.features.preference)
+        self._count = 0
+
+    def act(self, frame: Any) -> Any:
+        command = self.inner.act(frame)
+        planner, decision = self.inner.planner, self.inner.last
+        stage = planner.offset_stage
+        costmap = stage.costmap(planner.policy.features.feature_classes) if stage is not None and self._count % COSTMAP_EVERY == 0 else None
+        self._count += 1
+        x, y, yaw = (float(v) for v in frame.pose)
+        self.run.frame(FrameData(float(frame.time_s), (x, y, yaw), (float(command.v), float(command.w)), frame.view.image, decision.index,
+                                 decision.probs, costmap))
+        return command
+
+
+def watching(view: LiveView | None) -> Callable[[Any], Any] | None:
+    """The wrapper that puts a planner driver on ``view`` (None: none)."""
+    return None if view is None else (lambda driver: WatchedDriver(driver, view))
