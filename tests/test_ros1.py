@@ -14,6 +14,7 @@ import socket
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 from pathlib import Path
 
@@ -120,15 +121,19 @@ def test_the_node_commands_what_the_runtime_commands_on_the_same_frames(setup, t
     from terrapref.demos.recording import read_recording
     from terrapref.runtime import PlannerRuntime
 
+    from test_live import _watch
+
     root, model = setup
-    port = _free_port()
+    port, live_port, seen = _free_port(), _free_port(), {}
     env = {**os.environ, "ROS_MASTER_URI": f"http://127.0.0.1:{port}", "ROS_HOME": str(tmp_path / "ros"), "ROS_IP": "127.0.0.1"}
     master = subprocess.Popen(["roscore", "-p", str(port)], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     node = player = None
     try:
         node = subprocess.Popen([sys.executable, "-c", "import sys; from terrapref.cli import main; sys.exit(main())", "ros1",
-                                 "--model", str(model), "--robot", str(root / "robot.yaml"), "--stamped"],
+                                 "--model", str(model), "--robot", str(root / "robot.yaml"), "--stamped", "--live", "--live-port", str(live_port)],
                                 env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+        client = threading.Thread(target=_watch, args=(live_port, seen), daemon=True)
+        client.start()
         (tmp_path / "player.py").write_text(PLAYER)
         player = subprocess.run([sys.executable, str(tmp_path / "player.py"), str(root / "rec"), str(FIRST), str(FRAMES), str(tmp_path / "got.json")],
                                 env=env, capture_output=True, text=True, timeout=300)
@@ -146,3 +151,10 @@ def test_the_node_commands_what_the_runtime_commands_on_the_same_frames(setup, t
     assert got.shape == (FRAMES, 2)
     np.testing.assert_allclose(got, expected, atol=1e-6)
     assert len(np.unique(expected[:, 1])) > 1  # the frames make it steer, not only drive straight
+    # The live view carried the decisions as they were made, stamped with the frames' ROS times.
+    client.join(timeout=30)
+    labels = seen.get("/terrapref/labels", [])
+    assert "error" not in seen and len(labels) >= FRAMES // 2
+    stamps = sorted(log_ns for log_ns, _ in labels)
+    assert abs(stamps[-1] * 1e-9 - (100.0 + 0.1 * (FIRST + FRAMES - 1))) < 1e-6
+    assert seen.get("/terrapref/costmap") and seen.get("/terrapref/trajectories")

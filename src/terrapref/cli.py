@@ -569,7 +569,12 @@ def _cmd_ros1(args: argparse.Namespace) -> int:
 
     if not (math.isfinite(args.rate) and 0 < args.rate <= 200):
         raise UserError("--rate", f"expected commands per second in (0, 200], got {args.rate}")
-    run_node(args.model, args.robot, stamped=args.stamped, rate_hz=args.rate, path_file=args.path_file, cmd_topic=args.cmd_topic)
+    view = _live_view(args)
+    try:
+        run_node(args.model, args.robot, stamped=args.stamped, rate_hz=args.rate, path_file=args.path_file, cmd_topic=args.cmd_topic, live=view)
+    finally:
+        if view is not None:
+            view.stop()
     return 0
 
 
@@ -1077,6 +1082,7 @@ def _ros1_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rate", type=float, default=20.0, help="commands per second between decisions (default 20)")
     p.add_argument("--path-file", help="waypoints (YAML) of the reference path in the odometry frame, instead of the path topic")
     p.add_argument("--cmd-topic", help="where to publish the command (default: the robot file's command topic)")
+    _add_live_args(p, "stamped with the frames' ROS times")
     p.set_defaults(func=_cmd_ros1)
 
 

@@ -12,7 +12,7 @@ the camera's mounting are sent again once a second, so a viewer that connects la
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -74,11 +74,14 @@ class LiveRun:
     frames: int = field(default=0)
 
     @classmethod
-    def start(cls, view: LiveView, path: np.ndarray, camera: CameraConfig, classes: ClassTable, preference: PreferenceSetConfig) -> LiveRun:
+    def start(cls, view: LiveView, path: np.ndarray, camera: CameraConfig, classes: ClassTable, preference: PreferenceSetConfig,
+              clock_s: float = 0.0) -> LiveRun:
+        """A run on ``view`` whose frames' times are stamped as ``EPOCH_S + t - clock_s`` (a
+        simulated run's times from 0; ``EPOCH_S`` for stamps that are already ROS times)."""
         none = np.zeros((0, 3))
         header = RunFrames(times=np.zeros(0), poses=none, commands=none[:, :2], image=_no_image, chosen=np.zeros(0, dtype=int),
                            path=np.asarray(path, dtype=float), camera=camera, classes=classes, preference=preference)
-        run = cls(view, Scene.of(view.ts, header))
+        run = cls(view, replace(Scene.of(view.ts, header), t0_s=clock_s))
         write_fixed(view, run.scene)
         return run
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from types import SimpleNamespace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -23,6 +24,9 @@ from terrapref.interop.runtime import PlannerRuntime, RuntimeDecision
 from terrapref.learning.model_file import LoadedModel
 from terrapref.planner.costmap import Costmap
 from terrapref.vehicle import Command, Pose
+
+if TYPE_CHECKING:
+    from terrapref.interop.live import LiveRun, LiveView
 
 ODOMETRY_KEPT_S = 5.0  # how far back odometry is kept for interpolating to an image's stamp [s]
 
@@ -56,6 +60,14 @@ class PlannerNodeCore:
         self.path = None if path is None else np.asarray(path, dtype=float)
         self.odometry: deque[tuple[float, float, float, float]] = deque()  # (stamp [s], x, y, yaw)
         self.skipped = {"before the calibration or the path": 0, "without odometry at the stamp": 0, "out of order": 0}
+        self.view: LiveView | None = None
+        self._live: LiveRun | None = None
+        self._decided = 0
+
+    def watch(self, view: LiveView) -> None:
+        """Send every decision to the live view ``view`` (terrapref.interop.live), with the frame,
+        the pose and the command, and once a second the costmap."""
+        self.view, self._live, self._decided = view, None, 0
 
     @property
     def ready(self) -> bool:
@@ -120,7 +132,24 @@ class PlannerNodeCore:
         decision = self.runtime.decide(ids, t, pose)
         if decision is None:
             self.skipped["out of order"] += 1
+        elif self.view is not None:
+            self._send(decision, ids, pose)
         return decision
+
+    def _send(self, decision: RuntimeDecision, ids: np.ndarray, pose: Pose) -> None:
+        """One decision to the live view, stamped with its frame's ROS time."""
+        from terrapref.interop.live import LiveRun
+        from terrapref.interop.mcap_export import COSTMAP_EVERY, FrameData
+        from terrapref.interop.ros_messages import EPOCH_S
+
+        runtime, model = self.runtime, self.model
+        if self._live is None:
+            self._live = LiveRun.start(self.view, self.path, runtime.planner.camera.config, model.classes, model.features.preference, clock_s=EPOCH_S)
+        costmap = self.costmap() if self._decided % COSTMAP_EVERY == 0 else None
+        self._decided += 1
+        classes = runtime.lut[ids] if runtime.lut is not None else ids
+        self._live.frame(FrameData(decision.stamp_s, (pose.x, pose.y, pose.yaw), (float(decision.command.v), float(decision.command.w)),
+                                   classes, decision.index, decision.probs, costmap))
 
     def command_at(self, now_s: float) -> Command:
         """The command to send now: the last decision's while fresh, else a stop."""

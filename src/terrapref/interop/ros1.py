@@ -42,8 +42,9 @@ def import_rospy():
 
 
 def run_node(model_path: str, robot_path: str, stamped: bool = False, rate_hz: float = 20.0, path_file: str | None = None,
-             cmd_topic: str | None = None) -> None:
-    """Run the node until ROS shuts it down."""
+             cmd_topic: str | None = None, live=None) -> None:
+    """Run the node until ROS shuts it down; with ``live`` (a terrapref.interop.live.LiveView),
+    every decision is also sent there."""
     rospy = import_rospy()
     from geometry_msgs.msg import Twist, TwistStamped
     from nav_msgs.msg import OccupancyGrid, Odometry, Path as PathMsg
@@ -58,6 +59,8 @@ def run_node(model_path: str, robot_path: str, stamped: bool = False, rate_hz: f
     robot = load_robot(robot_path, model.classes)
     path = load_waypoints(Path(path_file), "--path-file") if path_file else (load_waypoints(robot.path_file, robot.source) if robot.path_file else None)
     core = PlannerNodeCore(model, robot, path)
+    if live is not None:
+        core.watch(live)
     rospy.init_node("terrapref", anonymous=False)
     cmd_pub = rospy.Publisher(cmd_topic or robot.topics["command"], TwistStamped if stamped else Twist, queue_size=10)
     traj_pub = rospy.Publisher("~trajectories", MarkerArray, queue_size=2)
