@@ -545,3 +545,40 @@ def test_the_route_is_drawn_on_the_ground_in_the_camera_view(tmp_path):
     view = shot[:480, :640].astype(int)
     on_route = (np.abs(view - np.array(PATH_COLOR)).sum(axis=2) < 30)
     assert on_route.sum() > 150 and on_route[:, 300:340].sum() > 0.8 * on_route.sum()  # straight ahead, down the middle
+
+
+class _Collecting:
+    """Stands in for a live view (terrapref.interop.live.LiveView): keeps each message by role,
+    serialised as it is sent (the trajectory markers are restyled in place frame after frame)."""
+
+    def __init__(self) -> None:
+        from terrapref.interop.ros_messages import typestore
+
+        self.ts, self.got = typestore(), {}
+
+    def write(self, role: str, t_ns: int, msg) -> None:
+        from terrapref.interop.mcap_export import TOPICS
+
+        msgtype = TOPICS[role][1]
+        self.got.setdefault(role, []).append((t_ns, self.ts.deserialize_cdr(self.ts.serialize_cdr(msg, msgtype), msgtype)))
+
+
+def test_drive_live_sends_every_driven_frame_and_riding_along_the_planners_costmap(tmp_path):
+    from test_corridor import DRIVER_LIKE, _corridor_meta
+
+    from helpers import skip_path_weights
+    from terrapref.learning.model_file import save_model
+    from terrapref.learning.network import ClassifierConfig
+
+    config = ClassifierConfig(hidden=8, skip=True)
+    model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
+    view = _Collecting()
+    result = run_teleop("demo_course", None, realtime=False, wait_for_start=False, max_frames=40, model=model, live=view,
+                        script=script_from({25: [key(pygame.KEYDOWN, pygame.K_LEFT)], 28: [key(pygame.KEYUP, pygame.K_LEFT)]}))
+    odom, markers = view.got["odom"], view.got["trajectories"]
+    assert len(odom) == len(markers) == result.frames + result.planner_frames == 40
+    assert [ns for ns, _ in odom] == sorted(ns for ns, _ in odom)
+    assert len(view.got["costmap"]) == 4 and view.got["path"] and view.got["tf_static"]  # once a second; the path and mounting resent
+    # F_t shades the trajectories while the planner drives; the driver's own frames show only its choice.
+    shaded = [len({round(m.color.a, 3) for m in msg.markers}) > 2 for _, msg in markers]
+    assert shaded[:25] == [True] * 25 and not any(shaded[26:29])

@@ -177,8 +177,13 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     if args.record is not None:
         _check_output(args.record, "--record", [args.scenario, *([args.model] if args.model else [])], folder=True)
     perception = _perception(args.perception, classes=scenario.classes)
-    result = run_session(scenario, TeleopOptions(record_dir=args.record, overwrite=args.force, v_mps=args.speed, disturbance=_disturbance(args.disturb),
-                                                 seed=args.seed, profile=profile, model=args.model, perception=perception))
+    view = _live_view(args)
+    try:
+        result = run_session(scenario, TeleopOptions(record_dir=args.record, overwrite=args.force, v_mps=args.speed, disturbance=_disturbance(args.disturb),
+                                                     seed=args.seed, profile=profile, model=args.model, perception=perception, live=view))
+    finally:
+        if view is not None:
+            view.stop()
     where = f", recorded to {result.record_dir}" if result.record_dir else ""
     state = "reached the goal" if result.completed else ("quit" if result.quit else "stopped")
     edge = f", {result.edge_frames} frames held at the map's edge (not recorded)" if result.edge_frames else ""
@@ -954,6 +959,7 @@ def _drive_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--perception", metavar="PRESET|FILE",
                    help="you see the truth; the recording (and a riding-along model) gets what the robot's camera and localisation "
                         "gave through this perception model")
+    _add_live_args(p, "every driven frame, riding along with the planner's F_t and costmap")
     p.set_defaults(func=_cmd_drive)
 
 

@@ -147,6 +147,7 @@ class TeleopOptions:
             the first frame, as scripted tests do).
         perception: the driver sees the truth; the recording, and a model riding along, get what
             the robot's camera and localisation gave through this model (terrapref.perception).
+        live: a live view (terrapref.interop.live.LiveView) every driven frame is sent to.
     """
 
     record_dir: str | Path | None = None
@@ -165,6 +166,7 @@ class TeleopOptions:
     model: str | Path | None = None
     perception: PerceptionModel | None = None
     wait_for_start: bool = True
+    live: Any = None
 
 
 @dataclass(frozen=True)
@@ -235,6 +237,11 @@ class _Session:
         self.decision: Any = _NOTHING_YET
         self.decision = self._decide()
         self.trace_px = [window.to_inset(self.frame.pose.x, self.frame.pose.y)]
+        self.live = None
+        if options.live is not None:
+            from terrapref.interop.live import LiveRun
+
+            self.live = LiveRun.start(options.live, sim.scenario.waypoints, sim.camera.config, sim.scenario.classes, prefs.config)
 
     def _decide(self) -> Any:
         """The planner's decision on the frame that reached the robot in this period (once per
@@ -320,9 +327,23 @@ class _Session:
             self.recorded += 1
         else:
             self.planner_frames += 1
+        if self.live is not None:
+            self._send(executed, label_w=w)
         self.frame = self.recorder.record_step(self.frame, command, executed, record=steered)
         self.decision = self._decide()
         self.trace_px.append(self.window.to_inset(self.frame.pose.x, self.frame.pose.y))
+
+    def _send(self, executed: Command, label_w: float) -> None:
+        """The frame just driven to the live view: what the camera shows, the pose, the command;
+        riding along, the planner's F_t and once a second its costmap."""
+        from terrapref.interop.mcap_export import COSTMAP_EVERY, FrameData
+
+        riding = self.planner is not None and self.decision is not _NOTHING_YET
+        stage = self.planner.offset_stage if riding else None
+        costmap = stage.costmap(self.planner.policy.features.feature_classes) if stage is not None and self.live.frames % COSTMAP_EVERY == 0 else None
+        pose = self.frame.pose
+        self.live.frame(FrameData(self.frame.time_s, (pose.x, pose.y, pose.yaw), (float(executed[0]), float(executed[1])), self.frame.view.image,
+                                  int(self.control.label_of(label_w)), self.decision.probs if riding and self.driver == "planner" else None, costmap))
 
     # --- drawing ----------------------------------------------------------------------------
 
