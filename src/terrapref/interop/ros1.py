@@ -81,15 +81,23 @@ def run_node(model_path: str, robot_path: str, stamped: bool = False, rate_hz: f
         else:
             cmd_pub.publish(twist)
 
-    def on_image(msgtype: str):
-        def handle(msg) -> None:
-            decision = core.on_image(msgtype, msg, robot.topics["segmentation"])
-            if decision is None:
-                return
-            last["stamp"] = decision.stamp_s
-            publish_command(decision.stamp_s, decision.stamp_s)
-            traj_pub.publish(markers.of(decision, msg.header.stamp))
-        return handle
+    image_types = {"sensor_msgs/Image": (Image, "sensor_msgs/msg/Image"), "sensor_msgs/CompressedImage": (CompressedImage, "sensor_msgs/msg/CompressedImage")}
+
+    def on_image(raw) -> None:
+        """A label image of either type (a robot publishes Image or CompressedImage on the topic,
+        and image_transport a CompressedImage on TOPIC/compressed): taken as it comes."""
+        kind = raw._connection_header.get("type", "")
+        if kind not in image_types:
+            rospy.logwarn_once(f"{robot.topics['segmentation']}: {kind} is not a label image (sensor_msgs/Image or CompressedImage); ignored")
+            return
+        cls, msgtype = image_types[kind]
+        msg = cls().deserialize(raw._buff)
+        decision = core.on_image(msgtype, msg, robot.topics["segmentation"])
+        if decision is None:
+            return
+        last["stamp"] = decision.stamp_s
+        publish_command(decision.stamp_s, decision.stamp_s)
+        traj_pub.publish(markers.of(decision, msg.header.stamp))
 
     image_sub = robot.topics["segmentation"]
     failure: list[UserError] = []
@@ -105,8 +113,8 @@ def run_node(model_path: str, robot_path: str, stamped: bool = False, rate_hz: f
     rospy.Subscriber(robot.topics["odometry"], Odometry, core.on_odometry, queue_size=50)
     if path is None and robot.path_topic:
         rospy.Subscriber(robot.path_topic, PathMsg, core.on_path, queue_size=1)
-    rospy.Subscriber(image_sub, Image, on_image("sensor_msgs/msg/Image"), queue_size=1)
-    rospy.Subscriber(image_sub + "/compressed", CompressedImage, on_image("sensor_msgs/msg/CompressedImage"), queue_size=1)
+    rospy.Subscriber(image_sub, rospy.AnyMsg, on_image, queue_size=1)
+    rospy.Subscriber(image_sub + "/compressed", rospy.AnyMsg, on_image, queue_size=1)
 
     def tick(event) -> None:
         now = rospy.get_time()
