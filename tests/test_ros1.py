@@ -129,8 +129,13 @@ def test_the_node_commands_what_the_runtime_commands_on_the_same_frames(setup, t
     master = subprocess.Popen(["roscore", "-p", str(port)], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     node = player = None
     try:
+        # TwistStamped through the node's private ROS parameter, as a launch file would set it.
+        for _ in range(100):
+            if subprocess.run(["rosparam", "set", "/terrapref/stamped", "true"], env=env, capture_output=True).returncode == 0:
+                break
+            time.sleep(0.1)
         node = subprocess.Popen([sys.executable, "-c", "import sys; from terrapref.cli import main; sys.exit(main())", "ros1",
-                                 "--model", str(model), "--robot", str(root / "robot.yaml"), "--stamped", "--live", "--live-port", str(live_port)],
+                                 "--model", str(model), "--robot", str(root / "robot.yaml"), "--live", "--live-port", str(live_port)],
                                 env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
         client = threading.Thread(target=_watch, args=(live_port, seen), daemon=True)
         client.start()
@@ -158,3 +163,17 @@ def test_the_node_commands_what_the_runtime_commands_on_the_same_frames(setup, t
     stamps = sorted(log_ns for log_ns, _ in labels)
     assert abs(stamps[-1] * 1e-9 - (100.0 + 0.1 * (FIRST + FRAMES - 1))) < 1e-6
     assert seen.get("/terrapref/costmap") and seen.get("/terrapref/trajectories")
+
+
+def test_node_options_come_from_the_command_line_then_ros_parameters_then_defaults():
+    from terrapref.errors import UserError
+    from terrapref.interop.ros1 import NodeOptions
+
+    params = {"~rate": 50, "~stamped": True, "~cmd_topic": "/robot/cmd"}
+    got = NodeOptions(rate=10.0).resolved(lambda name, default: params.get(name, default))
+    assert (got.rate, got.stamped, got.cmd_topic, got.path_file, got.hold_s) == (10.0, True, "/robot/cmd", None, 0.3)
+    for bad, field in (({"~rate": "fast"}, "~rate"), ({"~hold_s": -1}, "~hold_s"), ({"~stamped": "yes"}, "~stamped"), ({"~cmd_topic": ""}, "~cmd_topic")):
+        with pytest.raises(UserError, match=field):
+            NodeOptions().resolved(lambda name, default, bad=bad: bad.get(name, default))
+    with pytest.raises(UserError, match="--rate"):
+        NodeOptions(rate=float("nan")).resolved(lambda name, default: default)

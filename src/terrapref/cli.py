@@ -570,13 +570,13 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
 
 def _cmd_ros1(args: argparse.Namespace) -> int:
-    from terrapref.interop.ros1 import run_node
+    from terrapref.interop.ros1 import NodeOptions, run_node
 
-    if not (math.isfinite(args.rate) and 0 < args.rate <= 200):
-        raise UserError("--rate", f"expected commands per second in (0, 200], got {args.rate}")
+    options = NodeOptions(stamped=True if args.stamped else None, rate=args.rate, path_file=args.path_file, cmd_topic=args.cmd_topic)
+    options.resolved(lambda name, default: default)  # what the command line gives is checked before ROS starts
     view = _live_view(args)
     try:
-        run_node(args.model, args.robot, stamped=args.stamped, rate_hz=args.rate, path_file=args.path_file, cmd_topic=args.cmd_topic, live=view)
+        run_node(args.model, args.robot, options, live=view)
     finally:
         if view is not None:
             view.stop()
@@ -1084,10 +1084,12 @@ def _ros1_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("ros1", help="run the planner as a ROS 1 node (rospy; Debian's ros-core and python3-rospy)")
     p.add_argument("--model", required=True, help="a model file from train")
     p.add_argument("--robot", required=True, help="the robot file: topics, camera mounting, label map (terrapref-robot/1)")
-    p.add_argument("--stamped", action="store_true", help="publish geometry_msgs/TwistStamped (stamped with the frame decided on) instead of Twist")
-    p.add_argument("--rate", type=float, default=20.0, help="commands per second between decisions (default 20)")
-    p.add_argument("--path-file", help="waypoints (YAML) of the reference path in the odometry frame, instead of the path topic")
-    p.add_argument("--cmd-topic", help="where to publish the command (default: the robot file's command topic)")
+    p.add_argument("--stamped", action="store_true",
+                   help="publish geometry_msgs/TwistStamped (stamped with the frame decided on) instead of Twist (ROS parameter ~stamped)")
+    p.add_argument("--rate", type=float, help="commands per second between decisions (ROS parameter ~rate; default 20)")
+    p.add_argument("--path-file", help="waypoints (YAML: a list, a mapping with waypoints, or a scenario such as terrapref route writes) of "
+                                       "the reference path in the odometry frame, instead of the path topic (ROS parameter ~path_file)")
+    p.add_argument("--cmd-topic", help="where to publish the command (ROS parameter ~cmd_topic; default: the robot file's command topic)")
     _add_live_args(p, "stamped with the frames' ROS times")
     p.set_defaults(func=_cmd_ros1)
 

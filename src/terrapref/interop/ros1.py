@@ -5,7 +5,8 @@ file) path topics; publishes the command on the robot file's command topic (``Tw
 ``TwistStamped`` with ``--stamped``, stamped with the frame it was decided on) at the control
 rate and at once on each decision, the 21 trajectories with F_t and the chosen one
 (``~trajectories``, ``visualization_msgs/MarkerArray``) on each decision, and the learned costmap
-(``~costmap``, ``nav_msgs/OccupancyGrid``) once a second.
+(``~costmap``, ``nav_msgs/OccupancyGrid``) once a second. Its options come from the command
+line or its private ROS parameters (:class:`NodeOptions`).
 
 ROS 1's Python packages come from Debian (``ros-core``, ``python3-rospy`` and the message
 packages) and live in its Python 3.11 ``dist-packages``: where ``rospy`` is not importable from
@@ -15,8 +16,12 @@ terrapref's own environment, that folder is added to the import path.
 from __future__ import annotations
 
 import importlib
+import math
 import sys
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -41,8 +46,47 @@ def import_rospy():
     raise UserError("ros1", f"ROS 1's Python packages are not installed (Debian: apt install {ROS_PACKAGES})")
 
 
-def run_node(model_path: str, robot_path: str, stamped: bool = False, rate_hz: float = 20.0, path_file: str | None = None,
-             cmd_topic: str | None = None, live=None) -> None:
+@dataclass(frozen=True)
+class NodeOptions:
+    """How the node runs: each from the command line, else from the node's private ROS parameter
+    of the same name (``~stamped``, ``~rate``, ``~path_file``, ``~cmd_topic``, ``~hold_s``), else
+    the default.
+
+    Attributes:
+        stamped: publish TwistStamped instead of Twist (default False).
+        rate: commands per second between decisions (default 20).
+        path_file: waypoints of the reference path, instead of the path topic.
+        cmd_topic: where the command goes (default: the robot file's command topic).
+        hold_s: how long a decision's command holds after its frame's stamp [s] (default 0.3).
+    """
+
+    stamped: bool | None = None
+    rate: float | None = None
+    path_file: str | None = None
+    cmd_topic: str | None = None
+    hold_s: float | None = None
+
+    def resolved(self, get_param: Callable[[str, Any], Any]) -> NodeOptions:
+        """Every option set: the given ones, the rest from ``get_param("~name", default)`` (rospy's
+        ``get_param``), checked (a bad value is a UserError naming the option and where it came from)."""
+        defaults = {"stamped": False, "rate": 20.0, "path_file": None, "cmd_topic": None, "hold_s": 0.3}
+        values, origin = {}, {}
+        for name, default in defaults.items():
+            given = getattr(self, name)
+            values[name], origin[name] = (given, f"--{name.replace('_', '-')}") if given is not None else (get_param(f"~{name}", default), f"~{name}")
+        if not isinstance(values["stamped"], bool):
+            raise UserError(origin["stamped"], f"expected true or false, got {values['stamped']!r}")
+        for name, top in (("rate", 200.0), ("hold_s", 5.0)):
+            v = values[name]
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and 0 < v <= top):
+                raise UserError(origin[name], f"expected a number in (0, {top:g}], got {v!r}")
+        for name in ("path_file", "cmd_topic"):
+            if values[name] is not None and (not isinstance(values[name], str) or not values[name]):
+                raise UserError(origin[name], f"expected a non-empty string, got {values[name]!r}")
+        return NodeOptions(**values)
+
+
+def run_node(model_path: str, robot_path: str, options: NodeOptions | None = None, live=None) -> None:
     """Run the node until ROS shuts it down; with ``live`` (a terrapref.interop.live.LiveView),
     every decision is also sent there."""
     rospy = import_rospy()
@@ -57,12 +101,15 @@ def run_node(model_path: str, robot_path: str, stamped: bool = False, rate_hz: f
 
     model = load_model(model_path)
     robot = load_robot(robot_path, model.classes)
-    path = load_waypoints(Path(path_file), "--path-file") if path_file else (load_waypoints(robot.path_file, robot.source) if robot.path_file else None)
-    core = PlannerNodeCore(model, robot, path)
+    rospy.init_node("terrapref", anonymous=False)
+    opts = (options or NodeOptions()).resolved(rospy.get_param)
+    stamped, rate_hz = opts.stamped, float(opts.rate)
+    path = load_waypoints(Path(opts.path_file), "path_file") if opts.path_file else \
+        (load_waypoints(robot.path_file, robot.source) if robot.path_file else None)
+    core = PlannerNodeCore(model, robot, path, hold_s=float(opts.hold_s))
     if live is not None:
         core.watch(live)
-    rospy.init_node("terrapref", anonymous=False)
-    cmd_pub = rospy.Publisher(cmd_topic or robot.topics["command"], TwistStamped if stamped else Twist, queue_size=10)
+    cmd_pub = rospy.Publisher(opts.cmd_topic or robot.topics["command"], TwistStamped if stamped else Twist, queue_size=10)
     traj_pub = rospy.Publisher("~trajectories", MarkerArray, queue_size=2)
     cost_pub = rospy.Publisher("~costmap", OccupancyGrid, queue_size=1, latch=True)
     markers = _TrajectoryMarkers(model, rospy)
