@@ -42,8 +42,8 @@ PLAYER = textwrap.dedent('''
     from terrapref.interop.ros1 import import_rospy
     rospy = import_rospy()
     import numpy as np
-    from geometry_msgs.msg import PoseStamped, TwistStamped
-    from nav_msgs.msg import Odometry, Path
+    from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, TwistStamped
+    from nav_msgs.msg import Path
     from sensor_msgs.msg import CameraInfo, Image
     from terrapref.demos.recording import read_recording
 
@@ -52,7 +52,7 @@ PLAYER = textwrap.dedent('''
     rospy.init_node("player")
     info_pub = rospy.Publisher("/cam/info", CameraInfo, queue_size=1, latch=True)
     path_pub = rospy.Publisher("/plan", Path, queue_size=1, latch=True)
-    odom_pub = rospy.Publisher("/odom", Odometry, queue_size=10)
+    odom_pub = rospy.Publisher("/odom", PoseWithCovarianceStamped, queue_size=10)  # a localiser's pose, as the robot file allows
     seg_pub = rospy.Publisher("/seg", Image, queue_size=10)
     got = {}
     rospy.Subscriber("/cmd", TwistStamped, lambda m: got.__setitem__(round(m.header.stamp.to_sec(), 3), (m.twist.linear.x, m.twist.angular.z)))
@@ -75,7 +75,7 @@ PLAYER = textwrap.dedent('''
     for i in range(first, first + frames):
         t = 100.0 + 0.1 * i
         x, y, yaw = (float(v) for v in rec.poses[i])
-        odom = Odometry()
+        odom = PoseWithCovarianceStamped()
         odom.header.stamp = rospy.Time.from_sec(t)
         odom.header.frame_id = "odom"
         odom.pose.pose.position.x, odom.pose.pose.position.y = x, y

@@ -91,6 +91,7 @@ def run_node(model_path: str, robot_path: str, options: NodeOptions | None = Non
     every decision is also sent there."""
     rospy = import_rospy()
     from geometry_msgs.msg import Twist, TwistStamped
+    from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
     from nav_msgs.msg import OccupancyGrid, Odometry, Path as PathMsg
     from sensor_msgs.msg import CameraInfo, CompressedImage, Image
     from visualization_msgs.msg import MarkerArray
@@ -157,7 +158,17 @@ def run_node(model_path: str, robot_path: str, options: NodeOptions | None = Non
             rospy.signal_shutdown(exc.lines()[0])
 
     rospy.Subscriber(robot.topics["camera_info"], CameraInfo, on_camera_info, queue_size=1)
-    rospy.Subscriber(robot.topics["odometry"], Odometry, core.on_odometry, queue_size=50)
+    pose_types = {"nav_msgs/Odometry": Odometry, "geometry_msgs/PoseStamped": PoseStamped, "geometry_msgs/PoseWithCovarianceStamped": PoseWithCovarianceStamped}
+
+    def on_odometry(raw) -> None:
+        """Odometry, or a PoseStamped or PoseWithCovarianceStamped, as the robot file allows."""
+        kind = raw._connection_header.get("type", "")
+        if kind not in pose_types:
+            rospy.logwarn_once(f"{robot.topics['odometry']}: {kind} is not Odometry, PoseStamped or PoseWithCovarianceStamped; ignored")
+            return
+        core.on_odometry(pose_types[kind]().deserialize(raw._buff))
+
+    rospy.Subscriber(robot.topics["odometry"], rospy.AnyMsg, on_odometry, queue_size=50)
     if path is None and robot.path_topic:
         rospy.Subscriber(robot.path_topic, PathMsg, core.on_path, queue_size=1)
     rospy.Subscriber(image_sub, rospy.AnyMsg, on_image, queue_size=1)
