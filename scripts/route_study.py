@@ -73,12 +73,16 @@ def outcome(xy: np.ndarray, patch: list[float]) -> str:
 
 
 def _route(job: tuple[str, str, str]) -> str:
-    """Plan the route of one (model, layout file, route file); the route file's name."""
-    import subprocess
-    import sys
+    """Plan the route of one (model, layout file, route file) as `terrapref route` does; the route file's name."""
+    import contextlib
+    import io
+
+    from terrapref.cli import main as terrapref
 
     model, scenario, out = job
-    subprocess.run([sys.executable, "-m", "terrapref.cli", "route", scenario, "--model", model, "--out", out], check=True, capture_output=True)
+    with contextlib.redirect_stdout(io.StringIO()):
+        if terrapref(["route", scenario, "--model", model, "--out", out]) != 0:
+            raise RuntimeError(f"terrapref route {scenario} --model {model} failed")
     return out
 
 
