@@ -79,21 +79,6 @@ def test_a_planner_without_a_ground_map_says_so(tmp_path):
         runtime.costmap()
 
 
-def test_an_evaluated_run_carries_its_costmap_as_an_occupancy_grid(tmp_path):
-    from rosbags.highlevel import AnyReader
-
-    from terrapref.cli import main
-
-    config = ClassifierConfig(hidden=8, skip=True)
-    model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
-    out = tmp_path / "ev"
-    assert main(["evaluate", str(model), "fig7_rock_vs_non_traversable_left", "--seeds", "1", "--no-driver", "--workers", "1",
-                 "--out", str(out), "--mcap"]) == 0
-    counts, cost = _costmaps_in(out / "runs" / "fig7_rock_vs_non_traversable_left_seed0.mcap")
-    assert counts["/terrapref/costmap"] == counts["/terrapref/costmap_grid"] == -(-counts["/terrapref/labels"] // 10)  # once a second
-    assert (cost == LETHAL_COST).any() and (cost == UNKNOWN_COST).any() and ((cost > 0) & (cost < LETHAL_COST)).any()  # trees, unseen, rock
-
-
 def _costmaps_in(mcap) -> tuple[dict[str, int], np.ndarray]:
     """The message count of each topic of an MCAP run and its last costmap's cells, read from
     the OccupancyGrid, after checking that the Foxglove Grid beside it holds the same costs, in

@@ -66,14 +66,20 @@ def _watch(port: int, got: dict) -> None:
 
 
 def test_evaluate_live_serves_the_export_channels_to_a_websocket_client(tmp_path):
+    """The same run is also written as MCAP (--mcap): its costmaps, as OccupancyGrid and as
+    Foxglove Grid, once a second, are the ones the live view sent."""
+    from test_costmap import _costmaps_in
+
     config = ClassifierConfig(hidden=8, skip=True)
     model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
     port, got = _free_port(), {}
     client = threading.Thread(target=_watch, args=(port, got), daemon=True)
     client.start()
     assert main(["evaluate", str(model), "fig7_rock_vs_non_traversable_left", "--seeds", "1", "--no-driver", "--out", str(tmp_path / "ev"),
-                 "--live", "--live-port", str(port)]) == 0
+                 "--live", "--live-port", str(port), "--mcap"]) == 0
     client.join(timeout=30)
+    counts, file_cost = _costmaps_in(tmp_path / "ev" / "runs" / "fig7_rock_vs_non_traversable_left_seed0.mcap")
+    assert counts["/terrapref/costmap"] == counts["/terrapref/costmap_grid"] == -(-counts["/terrapref/labels"] // 10)  # once a second
     assert "error" not in got and got["ops"][:2] == ["serverInfo", "advertise"]
     advertised = {c["topic"]: c for c in got["channels"].values()}
     assert set(advertised) == {topic for topic, _ in TOPICS.values()}
@@ -88,8 +94,9 @@ def test_evaluate_live_serves_the_export_channels_to_a_websocket_client(tmp_path
     ids = np.asarray(Image.open(io.BytesIO(labels[-1].data.tobytes())))
     assert ids.shape == (480, 640) and set(np.unique(ids).tolist()) <= {0, 1, 2, 3, 4, 255}
     grid = decoded("/terrapref/costmap")[-1]
-    cost = np.asarray(grid.data, dtype=np.int8)
+    cost = np.asarray(grid.data, dtype=np.int8).reshape(grid.info.height, grid.info.width)
     assert (cost == LETHAL_COST).any() and ((cost > 0) & (cost < LETHAL_COST)).any() and grid.header.frame_id == "odom"
+    np.testing.assert_array_equal(cost, file_cost)  # the last one sent is the file's last
     markers = decoded("/terrapref/trajectories")[-1].markers
     assert len(markers) == 21 and sum(m.scale.x > 0.05 for m in markers) == 1  # the chosen one is drawn thick
     assert {t.child_frame_id for t in decoded("/tf_static")[-1].transforms} == {"camera_link", "camera_optical"}
