@@ -672,12 +672,12 @@ def _cmd_export(args: argparse.Namespace) -> int:
     out = Path(args.out)
     inputs = [args.input] + ([args.model] if args.model else [])
     _check_output(out, "--out", inputs)
-    if args.format == "mcap":
+    if args.format in ("mcap", "rosbag1"):
         _check_output(Path(f"{out}.robot.yaml"), "--out", inputs)
         from dataclasses import replace
 
         from terrapref.demos.recording import read_recording
-        from terrapref.interop.mcap_export import recording_frames, write_mcap
+        from terrapref.interop.mcap_export import recording_frames, write_bag
         from terrapref.progress import Progress
 
         rec = read_recording(args.input)
@@ -687,12 +687,13 @@ def _cmd_export(args: argparse.Namespace) -> int:
         if args.model:
             frames = replace(frames, costmap=_recording_costmaps(args.model, frames))
         bar = Progress("export", len(rec))
-        write_mcap(out, frames, progress=lambda done, total: bar.update(done))
+        write_bag(out, frames, ros1=args.format == "rosbag1", progress=lambda done, total: bar.update(done))
         bar.close(f"{len(rec)} frames")
-        print(f"wrote {out} (ROS 2 MCAP; open it in Foxglove) and {out.name}.robot.yaml (terrapref import {out} --robot {out}.robot.yaml)")
+        what = "ROS 1 bag; rosbag play it" if args.format == "rosbag1" else "ROS 2 MCAP; open it in Foxglove"
+        print(f"wrote {out} ({what}) and {out.name}.robot.yaml (terrapref import {out} --robot {out}.robot.yaml)")
         return 0
     if args.model:
-        raise UserError(args.model, "--model goes with --format mcap (a recording's costmap); for onnx the model is the input", field="--model")
+        raise UserError(args.model, "--model goes with --format mcap or rosbag1 (a recording's costmap); for onnx the model is the input", field="--model")
     from terrapref.interop.onnx_export import export_onnx
     from terrapref.learning.model_file import load_model
 
@@ -1071,11 +1072,12 @@ def _replay_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _export_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("export", help="export a model as ONNX, or a recording as ROS 2 MCAP (Foxglove, RViz)")
-    p.add_argument("input", help="model file (--format onnx) or recording folder (--format mcap)")
-    p.add_argument("--format", choices=["onnx", "mcap"], required=True, help="onnx: the classifier C; mcap: the recording's frames as ROS 2 messages")
+    p = sub.add_parser("export", help="export a model as ONNX, or a recording as ROS 2 MCAP (Foxglove, RViz) or a ROS 1 bag")
+    p.add_argument("input", help="model file (--format onnx) or recording folder (--format mcap or rosbag1)")
+    p.add_argument("--format", choices=["onnx", "mcap", "rosbag1"], required=True,
+                   help="onnx: the classifier C; mcap: the recording's frames as ROS 2 messages; rosbag1: the same as a ROS 1 bag (rosbag play)")
     p.add_argument("--out", required=True, help="output file")
-    p.add_argument("--model", help="with --format mcap: also write the costmap this model (with an offset stage) prices the recording's ground with, "
+    p.add_argument("--model", help="with --format mcap or rosbag1: also write the costmap this model (with an offset stage) prices the recording's ground with, "
                                    "as nav_msgs/OccupancyGrid and foxglove_msgs/Grid, once a second")
     p.set_defaults(func=_cmd_export)
 

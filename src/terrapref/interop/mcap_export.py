@@ -93,10 +93,11 @@ class Scene:
     palette: np.ndarray  # (256, 3) class colours
     markers: list[Message]  # one visualization_msgs/Marker per trajectory
     marker_array: Message
+    ros1: bool = False  # ROS 1 messages (headers with seq, CameraInfo's matrices in upper case)
 
     @classmethod
-    def of(cls, ts: Typestore, run: RunFrames) -> Scene:
-        """The shared part of ``run``'s file, in the types of ``ts``."""
+    def of(cls, ts: Typestore, run: RunFrames, ros1: bool = False) -> Scene:
+        """The shared part of ``run``'s file, in the types of ``ts`` (ROS 1's with ``ros1``)."""
         c = run.preference.control
         trajectories = forward_simulate(np.full(c.m, c.v_mps), np.asarray(c.w_rps), run.preference.n_steps, run.preference.dt_s)
         lifetime = ts.types["builtin_interfaces/msg/Duration"](sec=0, nanosec=200_000_000)
@@ -104,7 +105,11 @@ class Scene:
                           pose=zeroed(ts, "geometry_msgs/msg/Pose", orientation=rpy_quaternion(ts, 0, 0, 0)), lifetime=lifetime,
                           points=[point(ts, px, py, 0.02) for px, py in trajectories[j, :, :2]]) for j in range(c.m)]
         t0_s = float(run.times[0]) if len(run.times) else 0.0
-        return cls(ts, run, t0_s, run.classes.palette(), markers, ts.types["visualization_msgs/msg/MarkerArray"](markers=markers))
+        return cls(ts, run, t0_s, run.classes.palette(), markers, ts.types["visualization_msgs/msg/MarkerArray"](markers=markers), ros1)
+
+    def header(self, t_s: float, frame_id: str) -> Message:
+        """std_msgs/Header stamped ``t_s`` [s] after the first frame, in ``frame_id``."""
+        return header(self.ts, t_s, frame_id, self.ros1)
 
     def bag_ns(self, t_s: float) -> int:
         """Bag time [ns] of the run's time ``t_s`` [s]."""
@@ -114,46 +119,64 @@ class Scene:
 def write_mcap(out: str | Path, run: RunFrames, robot_file: bool = True, progress: Callable[[int, int], None] | None = None) -> Path:
     """Write ``run`` as a ROS 2 MCAP file at ``out`` (atomically); with ``robot_file``, also the
     terrapref-robot/1 file that imports it back (``out`` with ``.robot.yaml``)."""
+    return write_bag(out, run, ros1=False, robot_file=robot_file, progress=progress)
+
+
+def write_bag(out: str | Path, run: RunFrames, ros1: bool = False, robot_file: bool = True,
+              progress: Callable[[int, int], None] | None = None) -> Path:
+    """Write ``run`` at ``out`` (atomically) as a ROS 2 MCAP file, or with ``ros1`` as a ROS 1 bag
+    (the same topics, ROS 1's types; the costmap as OccupancyGrid alone, Foxglove's Grid being a
+    ROS 2 type); with ``robot_file``, also the terrapref-robot/1 file that imports it back."""
     out = Path(out)
-    _write_atomically(out, lambda bag_dir: _write_bag(bag_dir, run, progress))
+    tmpdir = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".writing", dir=out.parent if out.parent.exists() else None))
+    try:
+        written = _write_ros1(tmpdir / "run.bag", run, progress) if ros1 else _write_ros2(tmpdir / "bag", run, progress)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        written.replace(out)
+    finally:
+        shutil.rmtree(tmpdir, ignore_errors=True)
     if robot_file:
         write_text_atomic(out.with_name(out.name + ".robot.yaml"), _robot_yaml(run.camera))
     return out
 
 
-def _write_atomically(out: Path, write: Callable[[Path], None]) -> None:
-    """Have ``write`` make a ROS 2 MCAP bag in a temporary folder, then move its file to ``out``."""
-    tmpdir = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".writing", dir=out.parent if out.parent.exists() else None))
-    try:
-        write(tmpdir / "bag")
-        written = next((tmpdir / "bag").glob("*.mcap"))
-        out.parent.mkdir(parents=True, exist_ok=True)
-        written.replace(out)
-    finally:
-        shutil.rmtree(tmpdir, ignore_errors=True)
-
-
-def _write_bag(bag_dir: Path, run: RunFrames, progress: Callable[[int, int], None] | None) -> None:
-    """The bag of ``run`` at ``bag_dir``: the path and the camera's mounting once, then each frame."""
+def _write_ros2(bag_dir: Path, run: RunFrames, progress: Callable[[int, int], None] | None) -> Path:
+    """The ROS 2 MCAP bag of ``run`` in the folder ``bag_dir``; its file."""
     from rosbags.rosbag2 import StoragePlugin, Writer
 
     ts = typestore()
-    scene = Scene.of(ts, run)
     with Writer(bag_dir, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-        topics = add_topics(writer, ts, _TOPICS if run.costmap is None else TOPICS)
-        write_fixed(topics, scene)
-        for i in range(len(run.times)):
-            _write_frame(topics, scene, i)
-            if progress is not None:
-                progress(i + 1, len(run.times))
+        _write_frames(add_topics(writer, ts, _TOPICS if run.costmap is None else TOPICS), Scene.of(ts, run), progress)
+    return next(bag_dir.glob("*.mcap"))
+
+
+def _write_ros1(path: Path, run: RunFrames, progress: Callable[[int, int], None] | None) -> Path:
+    """The ROS 1 bag of ``run`` at ``path``."""
+    from rosbags.rosbag1 import Writer
+
+    ts = typestore(ros1=True)
+    topics = _TOPICS if run.costmap is None else {**_TOPICS, "costmap": COSTMAP_TOPICS["costmap"]}
+    with Writer(path) as writer:
+        _write_frames(add_topics(writer, ts, topics, ros1=True), Scene.of(ts, run, ros1=True), progress)
+    return path
+
+
+def _write_frames(topics: Topics, scene: Scene, progress: Callable[[int, int], None] | None) -> None:
+    """The path and the camera's mounting once, then each frame."""
+    write_fixed(topics, scene)
+    n = len(scene.run.times)
+    for i in range(n):
+        _write_frame(topics, scene, i)
+        if progress is not None:
+            progress(i + 1, n)
 
 
 def write_fixed(topics: Topics, scene: Scene) -> None:
     """The reference path and the camera's mounting (base_link -> camera), at the first frame."""
     ts, cam = scene.ts, scene.run.camera
     first = scene.bag_ns(scene.t0_s)
-    topics.write("path", first, path_message(ts, scene.run.path))
-    topics.write("tf_static", first, tf_message(ts, camera_mount(ts, cam)))
+    topics.write("path", first, path_message(ts, scene.run.path, scene.ros1))
+    topics.write("tf_static", first, tf_message(ts, camera_mount(ts, cam, scene.ros1)))
 
 
 @dataclass(frozen=True)
@@ -186,18 +209,21 @@ def write_frame(topics: Topics, scene: Scene, frame: FrameData) -> None:
     t = frame.t_s - scene.t0_s
     ns = scene.bag_ns(frame.t_s)
     x, y, yaw = frame.pose
-    optical = header(ts, t, OPTICAL_FRAME)
-    topics.write("camera_info", ns, camera_info(ts, optical, scene.run.camera))
+    # The pose first: a player sends messages of one stamp in the order written, and a node that
+    # interpolates odometry to an image's stamp needs the pose of that stamp when the image comes.
+    topics.write("odom", ns, odometry(ts, scene.header(t, "odom"), pose(ts, x, y, rpy_quaternion(ts, 0, 0, yaw))))
+    base = transform(ts, scene.header(t, "odom"), "base_link", (x, y, 0.0), rpy_quaternion(ts, 0, 0, yaw))
+    topics.write("tf", ns, tf_message(ts, [base]))
+    optical = scene.header(t, OPTICAL_FRAME)
+    topics.write("camera_info", ns, camera_info(ts, optical, scene.run.camera, scene.ros1))
     topics.write("labels", ns, compressed_image(ts, optical, "mono8; png compressed class ids", png(frame.ids)))
     topics.write("labels_color", ns, compressed_image(ts, optical, "png", png(frame.ids, scene.palette)))
-    topics.write("odom", ns, odometry(ts, header(ts, t, "odom"), pose(ts, x, y, rpy_quaternion(ts, 0, 0, yaw))))
     if frame.costmap is not None:
-        topics.write("costmap", ns, occupancy_grid(ts, header(ts, t, "odom"), frame.costmap.cost, frame.costmap.resolution_m, frame.costmap.origin))
-        topics.write("costmap_grid", ns, foxglove_grid(ts, t, "odom", frame.costmap))
-    base = transform(ts, header(ts, t, "odom"), "base_link", (x, y, 0.0), rpy_quaternion(ts, 0, 0, yaw))
-    topics.write("tf", ns, tf_message(ts, [base]))
+        topics.write("costmap", ns, occupancy_grid(ts, scene.header(t, "odom"), frame.costmap.cost, frame.costmap.resolution_m, frame.costmap.origin))
+        if not scene.ros1:
+            topics.write("costmap_grid", ns, foxglove_grid(ts, t, "odom", frame.costmap))
     topics.write("cmd_vel", ns, twist(ts, *frame.command))
-    _restyle_markers(scene, frame.chosen, frame.probs, header(ts, t, "base_link"))
+    _restyle_markers(scene, frame.chosen, frame.probs, scene.header(t, "base_link"))
     topics.write("trajectories", ns, scene.marker_array)
 
 

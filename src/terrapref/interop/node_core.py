@@ -12,7 +12,9 @@ ignores frames older than the last one and holds a command for ``hold_s`` after 
 from __future__ import annotations
 
 import math
+import threading
 from collections import deque
+from collections.abc import Callable
 from types import SimpleNamespace
 from typing import TYPE_CHECKING
 
@@ -23,12 +25,14 @@ from terrapref.interop.robot import RobotConfig
 from terrapref.interop.runtime import PlannerRuntime, RuntimeDecision
 from terrapref.learning.model_file import LoadedModel
 from terrapref.planner.costmap import Costmap
+from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Command, Pose
 
 if TYPE_CHECKING:
     from terrapref.interop.live import LiveRun, LiveView
 
 ODOMETRY_KEPT_S = 5.0  # how far back odometry is kept for interpolating to an image's stamp [s]
+ODOMETRY_WAIT_S = 0.5  # how long an image newer than the odometry waits for it [s]
 
 
 def stamp_s(header) -> float:
@@ -59,7 +63,14 @@ class PlannerNodeCore:
         self.runtime: PlannerRuntime | None = None
         self.path = None if path is None else np.asarray(path, dtype=float)
         self.odometry: deque[tuple[float, float, float, float]] = deque()  # (stamp [s], x, y, yaw)
-        self.skipped = {"before the calibration or the path": 0, "without odometry at the stamp": 0, "out of order": 0}
+        self.skipped = {"before the calibration or the path": 0, "without odometry at the stamp": 0, "out of order": 0,
+                        "superseded while waiting for odometry": 0}
+        self.decided = 0  # frames decided on
+        self.on_decision: Callable[[RuntimeDecision], None] | None = None  # told of every decision, whichever message brought it
+        self._pending: tuple[str, object, str, float] | None = None  # an image waiting for odometry at its stamp
+        self._lut: np.ndarray | None = None  # the robot's label ids -> class ids, once the calibration has come
+        self._undistort: np.ndarray | None = None  # a distorted lens's pinhole pixel -> its pixel (flat; -1 outside)
+        self._lock = threading.RLock()  # ROS calls back from a thread per topic
         self.view: LiveView | None = None
         self._live: LiveRun | None = None
         self._decided = 0
@@ -75,30 +86,43 @@ class PlannerNodeCore:
 
     def on_camera_info(self, info) -> None:
         """The first calibration makes the planner; a model for another camera is refused (UserError)."""
-        if self.runtime is not None:
-            return
-        camera, _ = camera_from_info(info, self.robot, self.robot.source)
-        self.runtime = PlannerRuntime(self.model, camera, labels=self.robot.labels, hold_s=self.hold_s)
-        if self.path is not None:
-            self.runtime.set_path(self.path)
+        with self._lock:
+            if self.runtime is not None:
+                return
+            camera, self._undistort = camera_from_info(info, self.robot, self.robot.source)
+            self._lut = self.robot.labels.lut(self.model.classes)
+            self.runtime = PlannerRuntime(self.model, camera, hold_s=self.hold_s)  # fed class ids, mapped and undistorted here
+            if self.path is not None:
+                self.runtime.set_path(self.path)
 
     def on_path(self, msg) -> None:
         """A nav_msgs/Path of two poses or more (re)sets the reference path."""
-        xy = np.array([(p.pose.position.x, p.pose.position.y) for p in msg.poses], dtype=float)
-        if len(xy) >= 2 and np.isfinite(xy).all():
-            self.path = xy
-            if self.runtime is not None:
-                self.runtime.set_path(xy)
+        with self._lock:
+            xy = np.array([(p.pose.position.x, p.pose.position.y) for p in msg.poses], dtype=float)
+            if len(xy) >= 2 and np.isfinite(xy).all():
+                self.path = xy
+                if self.runtime is not None:
+                    self.runtime.set_path(xy)
 
-    def on_odometry(self, msg) -> None:
-        """nav_msgs/Odometry, or a PoseStamped / PoseWithCovarianceStamped."""
-        p = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
-        t = stamp_s(msg.header)
-        if self.odometry and t < self.odometry[-1][0]:
-            return  # an older pose than one kept: odometry arrives in order or not at all
-        self.odometry.append((t, float(p.position.x), float(p.position.y), _yaw(p.orientation)))
-        while self.odometry and self.odometry[0][0] < t - ODOMETRY_KEPT_S:
-            self.odometry.popleft()
+    def on_odometry(self, msg) -> RuntimeDecision | None:
+        """nav_msgs/Odometry, or a PoseStamped / PoseWithCovarianceStamped; the decision on an
+        image that waited for it, if one did."""
+        with self._lock:
+            p = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
+            t = stamp_s(msg.header)
+            if self.odometry and t < self.odometry[-1][0]:
+                return None  # an older pose than one kept: odometry arrives in order or not at all
+            self.odometry.append((t, float(p.position.x), float(p.position.y), _yaw(p.orientation)))
+            while self.odometry and self.odometry[0][0] < t - ODOMETRY_KEPT_S:
+                self.odometry.popleft()
+            if self._pending is None or self._pending[3] > t:
+                return None
+            (msgtype, image, topic, stamp), self._pending = self._pending, None
+            pose = self.pose_at(stamp)
+            if pose is None:
+                self.skipped["without odometry at the stamp"] += 1
+                return None
+            return self._decide(msgtype, image, topic, stamp, pose)
 
     def pose_at(self, t: float) -> Pose | None:
         """The odometry interpolated to ``t`` [s]; None outside what is kept or across a gap."""
@@ -119,21 +143,42 @@ class PlannerNodeCore:
 
     def on_image(self, msgtype: str, msg, topic: str = "") -> RuntimeDecision | None:
         """A label image (``sensor_msgs/msg/Image`` or ``.../CompressedImage``): the decision on
-        it, or None when it is skipped (counted in :attr:`skipped`)."""
-        if not self.ready:
-            self.skipped["before the calibration or the path"] += 1
-            return None
-        t = stamp_s(msg.header)
-        pose = self.pose_at(t)
-        if pose is None:
-            self.skipped["without odometry at the stamp"] += 1
-            return None
-        ids = _decode(SimpleNamespace(topic=topic, msgtype=msgtype), msg, self.robot.source, self.robot.labels, t)
+        it, or None when it is skipped (counted in :attr:`skipped`) or waits for odometry.
+
+        An image newer than the last odometry (they travel on separate topics and either may
+        come first) waits, the newest one only, until odometry at or past its stamp arrives
+        (:meth:`on_odometry` then decides on it), for up to :data:`ODOMETRY_WAIT_S`.
+        """
+        with self._lock:
+            if not self.ready:
+                self.skipped["before the calibration or the path"] += 1
+                return None
+            t = stamp_s(msg.header)
+            pose = self.pose_at(t)
+            if pose is None:
+                if self.odometry and 0 < t - self.odometry[-1][0] <= ODOMETRY_WAIT_S:
+                    if self._pending is not None:
+                        self.skipped["superseded while waiting for odometry"] += 1
+                    self._pending = (msgtype, msg, topic, t)
+                else:
+                    self.skipped["without odometry at the stamp"] += 1
+                return None
+            return self._decide(msgtype, msg, topic, t, pose)
+
+    def _decide(self, msgtype: str, msg, topic: str, t: float, pose: Pose) -> RuntimeDecision | None:
+        raw = _decode(SimpleNamespace(topic=topic, msgtype=msgtype), msg, self.robot.source, self.robot.labels, t)
+        ids = self._lut[raw]
+        if self._undistort is not None:  # a lens with distortion: each pinhole pixel from where the lens put it
+            ids = np.where(self._undistort >= 0, ids.reshape(-1)[np.maximum(self._undistort, 0)], UNKNOWN).astype(np.uint8)
         decision = self.runtime.decide(ids, t, pose)
         if decision is None:
             self.skipped["out of order"] += 1
-        elif self.view is not None:
+            return None
+        self.decided += 1
+        if self.view is not None:
             self._send(decision, ids, pose)
+        if self.on_decision is not None:
+            self.on_decision(decision)
         return decision
 
     def _send(self, decision: RuntimeDecision, ids: np.ndarray, pose: Pose) -> None:
@@ -147,16 +192,17 @@ class PlannerNodeCore:
             self._live = LiveRun.start(self.view, self.path, runtime.planner.camera.config, model.classes, model.features.preference, clock_s=EPOCH_S)
         costmap = self.costmap() if self._decided % COSTMAP_EVERY == 0 else None
         self._decided += 1
-        classes = runtime.lut[ids] if runtime.lut is not None else ids
         self._live.frame(FrameData(decision.stamp_s, (pose.x, pose.y, pose.yaw), (float(decision.command.v), float(decision.command.w)),
-                                   classes, decision.index, decision.probs, costmap))
+                                   ids, decision.index, decision.probs, costmap))
 
     def command_at(self, now_s: float) -> Command:
         """The command to send now: the last decision's while fresh, else a stop."""
-        return self.runtime.command_at(now_s) if self.runtime is not None else Command(0.0, 0.0)
+        with self._lock:
+            return self.runtime.command_at(now_s) if self.runtime is not None else Command(0.0, 0.0)
 
     def costmap(self) -> Costmap | None:
         """The learned preference over the ground seen, when the planner keeps a ground map."""
-        if self.runtime is None or self.runtime.planner.offset_stage is None:
-            return None
-        return self.runtime.costmap()
+        with self._lock:
+            if self.runtime is None or self.runtime.planner.offset_stage is None:
+                return None
+            return self.runtime.costmap()

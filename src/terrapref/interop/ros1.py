@@ -139,13 +139,15 @@ def run_node(model_path: str, robot_path: str, options: NodeOptions | None = Non
             rospy.logwarn_once(f"{robot.topics['segmentation']}: {kind} is not a label image (sensor_msgs/Image or CompressedImage); ignored")
             return
         cls, msgtype = image_types[kind]
-        msg = cls().deserialize(raw._buff)
-        decision = core.on_image(msgtype, msg, robot.topics["segmentation"])
-        if decision is None:
-            return
+        core.on_image(msgtype, cls().deserialize(raw._buff), robot.topics["segmentation"])
+
+    def on_decision(decision) -> None:
+        """Each decision, whether its image or the odometry it waited for brought it."""
         last["stamp"] = decision.stamp_s
         publish_command(decision.stamp_s, decision.stamp_s)
-        traj_pub.publish(markers.of(decision, msg.header.stamp))
+        traj_pub.publish(markers.of(decision, rospy.Time.from_sec(decision.stamp_s)))
+
+    core.on_decision = on_decision
 
     image_sub = robot.topics["segmentation"]
     failure: list[UserError] = []
@@ -184,6 +186,11 @@ def run_node(model_path: str, robot_path: str, options: NodeOptions | None = Non
         if grid is not None:
             cost_pub.publish(_occupancy_grid(grid, OccupancyGrid, rospy))
 
+    def report() -> None:
+        skipped = ", ".join(f"{n} {why}" for why, n in core.skipped.items() if n) or "none"
+        print(f"terrapref ros1: {core.decided} frames decided on; skipped: {skipped}", flush=True)
+
+    rospy.on_shutdown(report)
     rospy.Timer(rospy.Duration(1.0 / rate_hz), tick)
     rospy.Timer(rospy.Duration(COSTMAP_PERIOD_S), publish_costmap)
     rospy.spin()

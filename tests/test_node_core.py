@@ -1,0 +1,95 @@
+"""What a ROS node of the planner does with its messages (terrapref.interop.node_core), without
+ROS: messages built with rosbags' ROS 2 types stand in for rospy's or rclpy's."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_corridor import DRIVER_LIKE, _corridor_meta
+
+from helpers import skip_path_weights
+from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer
+from terrapref.interop.node_core import PlannerNodeCore
+from terrapref.interop.robot import load_robot
+from terrapref.interop.ros_messages import camera_info, compressed_image, header, odometry, png, pose, typestore, yaw_quaternion
+from terrapref.interop.runtime import PlannerRuntime
+from terrapref.learning.model_file import load_model, save_model
+from terrapref.learning.network import ClassifierConfig
+from terrapref.scenario import resolve_scenario
+from terrapref.world import rasterise
+
+TS = typestore()
+POSES = [(20.0 + 0.1 * i, 15.0, 0.0) for i in range(6)]  # 0.1 m a frame along fig7's path, frames 0.1 s apart
+
+
+@pytest.fixture(scope="module")
+def setup(tmp_path_factory):
+    root = tmp_path_factory.mktemp("node")
+    config = ClassifierConfig(hidden=8, skip=True)
+    model = save_model(root / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
+    (root / "robot.yaml").write_text("format: terrapref-robot/1\ntopics: {segmentation: /seg, camera_info: /info, odometry: /odom, command: /cmd}\n"
+                                     "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n")
+    scenario = resolve_scenario("fig7_rock_vs_non_traversable_left")
+    renderer = SegmentationRenderer(PinholeCamera(CameraConfig()), rasterise(scenario))
+    images = [renderer.render(p) for p in POSES]
+    return load_model(model), load_robot(root / "robot.yaml"), scenario.waypoints, images
+
+
+def _core(setup) -> tuple[PlannerNodeCore, list]:
+    model, robot, path, _ = setup
+    core, told = PlannerNodeCore(model, robot, path), []
+    core.on_decision = told.append
+    core.on_camera_info(camera_info(TS, header(TS, 0.0, "camera_optical"), CameraConfig()))
+    return core, told
+
+
+def _odom(i: int):
+    x, y, yaw = POSES[i]
+    return odometry(TS, header(TS, 0.1 * i, "odom"), pose(TS, x, y, yaw_quaternion(TS, yaw)))
+
+
+def _image(setup, i: int):
+    return compressed_image(TS, header(TS, 0.1 * i, "camera_optical"), "png", png(setup[3][i]))
+
+
+def test_an_image_before_its_odometry_waits_for_it_and_is_decided_as_the_runtime_decides(setup):
+    model, _, path, images = setup
+    core, told = _core(setup)
+    runtime = PlannerRuntime(model)
+    runtime.set_path(path)
+    stamps = [1_700_000_000 + 0.1 * i for i in range(6)]  # header() stamps on the epoch-like clock
+    expected = [runtime.decide(images[i], stamps[i], POSES[i]) for i in range(6)]
+    core.on_odometry(_odom(0))
+    assert core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0)) is not None  # its pose is there: decided at once
+    for i in range(1, 6):  # each image comes before the odometry of its stamp, as on separate topics it may
+        assert core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, i)) is None
+        decision = core.on_odometry(_odom(i))
+        assert decision is not None and decision.stamp_s == pytest.approx(stamps[i])
+    assert [d.command for d in told] == [e.command for e in expected] and core.decided == 6
+    assert sum(core.skipped.values()) == 0
+
+
+def test_a_newer_image_supersedes_one_waiting_and_one_far_ahead_of_the_odometry_is_skipped(setup):
+    core, told = _core(setup)
+    core.on_odometry(_odom(0))
+    core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 2))
+    core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 3))  # the newer one waits instead
+    core.on_odometry(_odom(3))
+    assert [round(d.stamp_s - 1_700_000_000, 6) for d in told] == [0.3] and core.skipped["superseded while waiting for odometry"] == 1
+    far = compressed_image(TS, header(TS, 5.0, "camera_optical"), "png", png(setup[3][0]))
+    assert core.on_image("sensor_msgs/msg/CompressedImage", far) is None and core.skipped["without odometry at the stamp"] == 1
+
+
+def test_a_distorted_lens_is_undone_before_the_planner_sees_the_frame(setup):
+    model, robot, path, images = setup
+    core = PlannerNodeCore(model, robot, path)
+    info = camera_info(TS, header(TS, 0.0, "camera_optical"), CameraConfig())
+    info.d = np.array([-0.2, 0.05, 0.0, 0.0, 0.0])
+    core.on_camera_info(info)
+    core.on_odometry(_odom(0))
+    seen = []
+    core.runtime.decide = lambda ids, t, p: seen.append(ids)  # what the planner is handed
+    core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0))
+    assert seen[0].shape == images[0].shape and not np.array_equal(seen[0], images[0])
+    centre = (slice(200, 280), slice(280, 360))  # barrel distortion leaves the middle as it was
+    np.testing.assert_array_equal(seen[0][centre], images[0][centre])
