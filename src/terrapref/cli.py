@@ -610,16 +610,13 @@ def _watching(view):
 
 
 def _cmd_route(args: argparse.Namespace) -> int:
-    import numpy as np
     import yaml
 
     from terrapref.fileio import write_text_atomic
     from terrapref.learning.model_file import load_model
-    from terrapref.planner import Planner
-    from terrapref.planner.route import RouteConfig, RouteError, detour_prices, plan_route, prior_costmap
+    from terrapref.planner.route import RouteConfig, RouteError, route_over, routed_scenario
     from terrapref.plots import save_map
     from terrapref.scenario import resolve_scenario
-    from terrapref.scenario.path import ReferencePath
     from terrapref.world import rasterise
 
     out, figure = Path(args.out), Path(args.out).with_suffix(".png")
@@ -633,25 +630,19 @@ def _cmd_route(args: argparse.Namespace) -> int:
     model = load_model(args.model)
     if model.classes != scenario.classes:
         raise UserError(args.model, f"was trained for another class table than {args.scenario}'s", field="classes")
-    stage = Planner(model).offset_stage
-    if stage is None:
-        raise UserError(args.model, "has no offset stage, whose learned prices the route is priced with (train it with recipe teach)", field="--model")
-    world = rasterise(scenario)
-    path = ReferencePath(scenario.waypoints)
     try:
-        route = plan_route(prior_costmap(world, stage, model.features.feature_classes), path, *detour_prices(stage), config=RouteConfig(resolution_m=args.resolution))
+        route = route_over(scenario, model, RouteConfig(resolution_m=args.resolution))
     except RouteError as exc:
         raise UserError(args.scenario, str(exc), field="path") from None
-    data = scenario.to_dict()
-    data["name"] = f"{scenario.name}_route"
-    data["description"] = f"{scenario.name} with its path replaced by the route {Path(args.model).name} prices lowest"
-    data["path"] = {"waypoints": np.round(route.waypoints, 3).tolist()}
-    text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=120)
+    except ValueError as exc:
+        raise UserError(args.model, str(exc), field="--model") from None
+    text = yaml.safe_dump(routed_scenario(scenario, route, Path(args.model).name), sort_keys=False, default_flow_style=None, width=120)
     write_text_atomic(out, "# terrapref route: a scenario whose path is the route; every command that takes a scenario takes it,\n"
                            "# and terrapref ros1 --path-file reads its waypoints.\n" + text)
-    save_map(figure, scenario, world, tracks=[("route", route.waypoints, "tab:blue")], title=f"{scenario.name}: route priced by {Path(args.model).name}")
+    save_map(figure, scenario, rasterise(scenario), tracks=[("route", route.waypoints, "tab:blue")],
+             title=f"{scenario.name}: route priced by {Path(args.model).name}")
     along = "meets lethal terrain" if not math.isfinite(route.along_path_cost) else f"{route.along_path_cost:.1f}"
-    print(f"route: {route.length_m:.1f} m (path {path.length_m:.1f} m), up to {route.max_offset_m:.1f} m from the path; "
+    print(f"route: {route.length_m:.1f} m (path {scenario.path_length_m():.1f} m), up to {route.max_offset_m:.1f} m from the path; "
           f"price {route.cost:.1f} (the path itself: {along})")
     print(f"wrote {out} (the scenario with the route as its path: terrapref evaluate {args.model} {out}) and {figure}")
     return 0
@@ -685,7 +676,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
             raise UserError(args.input, "holds no frames", field="frames.jsonl")
         frames = recording_frames(rec)
         if args.model:
-            frames = replace(frames, costmap=_recording_costmaps(args.model, frames))
+            frames = replace(frames, costmap=_model_costmaps(args.model, frames))
         bar = Progress("export", len(rec))
         write_bag(out, frames, ros1=args.format == "rosbag1", progress=lambda done, total: bar.update(done))
         bar.close(f"{len(rec)} frames")
@@ -703,20 +694,14 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
-def _recording_costmaps(model_path: str, frames):
-    """The costmaps the model at ``model_path`` learns to see in a recording's ``frames`` (a
-    RunFrames): its offset stage's map fed each frame at the pose recorded."""
-    from terrapref.interop.mcap_export import costmaps_of
+def _model_costmaps(model_path: str, frames):
+    from terrapref.interop.mcap_export import model_costmaps
     from terrapref.learning.model_file import load_model
-    from terrapref.planner import Planner
 
-    model = load_model(model_path)
-    if model.classes != frames.classes:
-        raise UserError(model_path, "was trained for another class table than the recording's", field="classes")
-    stage = Planner(model, frames.camera).offset_stage
-    if stage is None:
-        raise UserError(model_path, "has no offset stage, whose ground map the costmap prices (train it with recipe teach)", field="--model")
-    return costmaps_of(stage, frames.poses, model.features.feature_classes)
+    try:
+        return model_costmaps(load_model(model_path), frames)
+    except ValueError as exc:
+        raise UserError(model_path, str(exc), field="--model") from None
 
 
 def _cmd_perception(args: argparse.Namespace) -> int:

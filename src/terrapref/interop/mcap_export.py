@@ -270,6 +270,23 @@ def costmaps_of(stage, poses: np.ndarray, names: tuple[str, ...]) -> Callable[[i
     return costmap
 
 
+def model_costmaps(model, frames: RunFrames) -> Callable[[int, np.ndarray], Costmap | None]:
+    """The costmaps ``model`` (a LoadedModel) sees in ``frames`` (a recording's): its offset
+    stage's ground map fed each frame at the pose recorded (:func:`costmaps_of`).
+
+    Raises:
+        ValueError: the model is for another class table, or has no offset stage.
+    """
+    from terrapref.planner import Planner
+
+    if model.classes != frames.classes:
+        raise ValueError("was trained for another class table than the recording's")
+    stage = Planner(model, frames.camera).offset_stage
+    if stage is None:
+        raise ValueError("has no offset stage, whose ground map the costmap prices (train it with recipe teach)")
+    return costmaps_of(stage, frames.poses, model.features.feature_classes)
+
+
 def recording_frames(rec) -> RunFrames:
     """A recording (terrapref.demos.recording.Recording) as the frames of one MCAP file."""
     from terrapref.features import PreferenceSetConfig

@@ -29,7 +29,9 @@ from terrapref.planner.costmap import LETHAL_COST, MAX_COST, UNKNOWN_COST, Costm
 from terrapref.scenario.path import ReferencePath
 
 if TYPE_CHECKING:
+    from terrapref.learning.model_file import LoadedModel
     from terrapref.planner.offset import OffsetStage
+    from terrapref.scenario import Scenario
     from terrapref.world import WorldMap
 
 _LENGTH_PRICE = 0.01  # per metre of route on the cheapest ground: among equal routes, the shortest
@@ -85,6 +87,34 @@ class Route:
 
 class RouteError(ValueError):
     """No route: the path's start or end cannot be entered, or lethal terrain cuts them apart."""
+
+
+def route_over(scenario: Scenario, model: LoadedModel, config: RouteConfig | None = None) -> Route:
+    """The route along ``scenario``'s path over its map (the prior), priced as ``model`` learned:
+    its offset stage's class prices and price of leaving the path.
+
+    Raises:
+        ValueError: the model has no offset stage (no corridor utility to price with).
+        RouteError: no route (module docstring).
+    """
+    from terrapref.planner.planner import Planner
+    from terrapref.world import rasterise
+
+    stage = Planner(model).offset_stage
+    if stage is None:
+        raise ValueError("has no offset stage, whose learned prices the route is priced with (train it with recipe teach)")
+    costmap = prior_costmap(rasterise(scenario), stage, model.features.feature_classes)
+    return plan_route(costmap, ReferencePath(scenario.waypoints), *detour_prices(stage), config=config)
+
+
+def routed_scenario(scenario: Scenario, route: Route, by: str) -> dict:
+    """``scenario`` as a terrapref-scenario/1 mapping whose path is ``route``, planned with the
+    model named ``by``."""
+    data = scenario.to_dict()
+    data["name"] = f"{scenario.name}_route"
+    data["description"] = f"{scenario.name} with its path replaced by the route {by} prices lowest"
+    data["path"] = {"waypoints": np.round(route.waypoints, 3).tolist()}
+    return data
 
 
 def prior_costmap(world: WorldMap, stage: OffsetStage, names: tuple[str, ...]) -> Costmap:
