@@ -7,7 +7,7 @@ that way round. The synthetic driver, whose offsets reach 8 m, drives each layou
 preference order: it crosses the patch or goes round it, on one side. Each model of a selection
 (`terrapref select --out SELECTION`, recipe teach) then drives the layout twice: along the
 path, and along the route `terrapref route` plans over the layout with that model. A run goes
-round when its reference point runs beside the patch along the middle third of its length.
+round when its footprint clears the patch along the middle third of the patch's length.
 
 Prints, for the planner with and without the route, how often it does as the driver did
 (through, round left, round right), with Wilson 95% intervals, the same split by the driver's
@@ -59,17 +59,23 @@ def layout(seed: int) -> dict:
             "patch": [x0, x0 + depth, edges[0], edges[1]]}
 
 
+HALF_WIDTH_M = 0.6  # the vehicle's footprint: a run goes round only when all of it clears the patch
+
+
 def outcome(xy: np.ndarray, patch: list[float]) -> str:
     """Through the patch, or round it on the left or the right of the path: where the reference
     point runs along the middle third of the patch's length (a driver that decides late clips
-    the near corner on its way round)."""
+    the near corner on its way round). Round only when the footprint clears the patch there;
+    a vehicle with a wheel in the patch crossed it."""
     x0, x1, y0, y1 = patch
     third = (x1 - x0) / 3
     middle = (xy[:, 0] >= x0 + third) & (xy[:, 0] <= x1 - third)
     if not middle.any():
         return "through"  # the run ended before the patch: counted as not going round
     y = float(np.median(xy[middle, 1]))
-    return "through" if y0 < y < y1 else ("round left" if y > Y_PATH else "round right")
+    if y0 - HALF_WIDTH_M < y < y1 + HALF_WIDTH_M:
+        return "through"
+    return "round left" if y > Y_PATH else "round right"
 
 
 def _route(job: tuple[str, str, str]) -> str:
@@ -108,10 +114,11 @@ def main() -> None:
     models = {(o, s): str(job_folder(args.selection, o, s) / "teach" / "model.safetensors") for o in orders for s in range(args.seeds)}
     jobs = [(models[o, s], str(args.out / "layouts" / f"detour_{n}.yaml"), str(args.out / "routes" / f"{'_'.join(c[:2] for c in o[:3])}_s{s}_{n}.yaml"))
             for (o, s) in models for n in patches]
+    todo = [j for j in jobs if not Path(j[2]).exists()]  # routes planned by an earlier run of the study are kept
     with ProcessPoolExecutor(args.workers) as pool:
-        for i, _ in enumerate(pool.map(_route, jobs), 1):
-            if i % 20 == 0 or i == len(jobs):
-                print(f"routes {i}/{len(jobs)}", flush=True)
+        for i, _ in enumerate(pool.map(_route, todo), 1):
+            if i % 20 == 0 or i == len(todo):
+                print(f"routes {i}/{len(todo)}", flush=True)
     specs, keys = [], []
     for o in orders:
         for n in patches:
@@ -154,8 +161,9 @@ def _figure(path: Path, summary: dict) -> None:
             ax.text(xi, 2, f"{sh:.0f}%\n{v['agree']}/{v['of']}", ha="center", va="bottom", fontsize=7, color="white")
     ax.set_xticks(np.arange(len(labels)), labels)
     ax.set_ylabel("does as the driver did (%)")
-    ax.set_ylim(0, 105)
-    ax.legend(fontsize=8, loc="upper right")
+    ax.set_ylim(0, 122)
+    ax.set_yticks(range(0, 101, 20))
+    ax.legend(fontsize=8, loc="upper center", ncol=2, frameon=False)
     ax.set_title("a wide patch across the path: through it, or round it on the driver's side")
     fig.tight_layout()
     fig.savefig(path)
