@@ -9,6 +9,7 @@ from test_corridor import DRIVER_LIKE, K, _columns, _corridor_meta, _scenario, _
 from helpers import skip_path_weights
 from terrapref.camera import PinholeCamera
 from terrapref.interop.runtime import PlannerRuntime
+from terrapref.features.corridor import CorridorConfig
 from terrapref.learning.corridor import CorridorUtility
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
@@ -82,7 +83,8 @@ def test_a_planner_without_a_ground_map_says_so(tmp_path):
 def _costmaps_in(mcap) -> tuple[dict[str, int], np.ndarray]:
     """The message count of each topic of an MCAP run and its last costmap's cells, read from
     the OccupancyGrid, after checking that the Foxglove Grid beside it holds the same costs, in
-    the same place, in the colours of cost_colours."""
+    the same place, in the colours of cost_colours, and that both cover the ground seen, not the
+    whole map the planner keeps."""
     from rosbags.highlevel import AnyReader
 
     from terrapref.planner.costmap import cost_colours
@@ -93,15 +95,16 @@ def _costmaps_in(mcap) -> tuple[dict[str, int], np.ndarray]:
     occupancy, grid = last["/terrapref/costmap"], last["/terrapref/costmap_grid"]
     cost = np.asarray(occupancy.data, dtype=np.int8).reshape(occupancy.info.height, occupancy.info.width)
     assert occupancy.header.frame_id == grid.frame_id == "odom" and occupancy.info.resolution > 0
+    full = round(2 * CorridorConfig().map_half_size_m / CorridorConfig().map_resolution_m)
+    assert occupancy.info.width * occupancy.info.height < full * full  # cropped to the ground seen
     assert (grid.timestamp.sec, grid.timestamp.nanosec) == (occupancy.header.stamp.sec, occupancy.header.stamp.nanosec)
     assert grid.column_count == occupancy.info.width and grid.cell_size.x == grid.cell_size.y == pytest.approx(occupancy.info.resolution)
     assert (grid.pose.position.x, grid.pose.position.y) == (occupancy.info.origin.position.x, occupancy.info.origin.position.y)
-    assert [(f.name, f.offset, f.type) for f in grid.fields] == [("cost", 0, 7), ("red", 4, 1), ("green", 5, 1), ("blue", 6, 1), ("alpha", 7, 1)]
+    assert [(f.name, f.offset, f.type) for f in grid.fields] == [("cost", 0, 2), ("red", 1, 1), ("green", 2, 1), ("blue", 3, 1), ("alpha", 4, 1)]
     cells = np.asarray(grid.data, dtype=np.uint8).reshape(-1, grid.column_count, grid.cell_stride)
     assert grid.row_stride == grid.column_count * grid.cell_stride and cells.shape[0] == occupancy.info.height
-    as_float = cells[..., :4].copy().view("<f4")[..., 0]
-    np.testing.assert_array_equal(as_float, np.where(cost < 0, np.nan, cost).astype(np.float32))
-    np.testing.assert_array_equal(cells[..., 4:], cost_colours(cost))
+    np.testing.assert_array_equal(cells[..., 0].view(np.int8), cost)
+    np.testing.assert_array_equal(cells[..., 1:], cost_colours(cost))
     return counts, cost
 
 

@@ -24,7 +24,7 @@ from terrapref.learning.network import ClassifierConfig
 from terrapref.planner.costmap import LETHAL_COST
 
 websockets = pytest.importorskip("websockets.sync.client", reason="the WebSocket client of the tests (websockets) is not installed")
-WATCHED = ("/terrapref/labels", "/terrapref/costmap", "/terrapref/trajectories", "/tf_static", "/terrapref/odom")
+WATCHED = ("/terrapref/labels", "/terrapref/costmap", "/terrapref/costmap_grid", "/terrapref/trajectories", "/tf_static", "/terrapref/odom")
 
 
 def _free_port() -> int:
@@ -38,7 +38,7 @@ def _watch(port: int, got: dict) -> None:
     by topic, until the server closes."""
     for _ in range(200):
         try:
-            ws = websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], open_timeout=1)
+            ws = websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], open_timeout=1, max_size=2**22)
             break
         except OSError:
             time.sleep(0.05)
@@ -97,6 +97,8 @@ def test_evaluate_live_serves_the_export_channels_to_a_websocket_client(tmp_path
     cost = np.asarray(grid.data, dtype=np.int8).reshape(grid.info.height, grid.info.width)
     assert (cost == LETHAL_COST).any() and ((cost > 0) & (cost < LETHAL_COST)).any() and grid.header.frame_id == "odom"
     np.testing.assert_array_equal(cost, file_cost)  # the last one sent is the file's last
+    foxglove_grid = decoded("/terrapref/costmap_grid")[-1]
+    assert foxglove_grid.column_count == grid.info.width and len(foxglove_grid.data) == cost.size * foxglove_grid.cell_stride
     markers = decoded("/terrapref/trajectories")[-1].markers
     assert len(markers) == 21 and sum(m.scale.x > 0.05 for m in markers) == 1  # the chosen one is drawn thick
     assert {t.child_frame_id for t in decoded("/tf_static")[-1].transforms} == {"camera_link", "camera_optical"}

@@ -12,7 +12,7 @@ Topics (all in the ``odom`` frame, the recording's world frame; stamps from an e
     /terrapref/costmap          nav_msgs/OccupancyGrid        the learned preference over the ground seen
                                                               (a run of a model with an offset stage; 1 Hz)
     /terrapref/costmap_grid     foxglove_msgs/Grid            the same costmap as Foxglove's Grid: cost
-                                                              (float32, NaN unknown) and its colour per cell
+                                                              (int8, -1 unknown) and its colour per cell
     /tf, /tf_static             tf2_msgs/TFMessage            odom -> base_link; base_link -> camera_link ->
                                                               camera_optical (z forward, x right, y down), the
                                                               frame of the images and calibration; /tf_static

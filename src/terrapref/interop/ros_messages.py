@@ -46,7 +46,7 @@ def typestore(ros1: bool = False) -> Typestore:
 # Foxglove's own message types (the foxglove_msgs package), as far as the files use them.
 _FOXGLOVE_MSGS = {
     "foxglove_msgs/msg/Vector2": "float64 x\nfloat64 y\n",
-    "foxglove_msgs/msg/PackedElementField": "uint8 UINT8=1\nuint8 FLOAT32=7\nstring name\nuint32 offset\nuint8 type\n",
+    "foxglove_msgs/msg/PackedElementField": "uint8 UINT8=1\nuint8 INT8=2\nstring name\nuint32 offset\nuint8 type\n",
     "foxglove_msgs/msg/Grid": ("builtin_interfaces/Time timestamp\nstring frame_id\ngeometry_msgs/Pose pose\nuint32 column_count\n"
                                "foxglove_msgs/Vector2 cell_size\nuint32 row_stride\nuint32 cell_stride\n"
                                "foxglove_msgs/PackedElementField[] fields\nuint8[] data\n"),
@@ -213,24 +213,25 @@ def occupancy_grid(ts: Typestore, stamped: Message, cost: np.ndarray, resolution
     return T["nav_msgs/msg/OccupancyGrid"](header=stamped, info=info, data=np.ascontiguousarray(cost, dtype=np.int8).ravel())
 
 
-GRID_FIELDS = (("cost", 0, 7), ("red", 4, 1), ("green", 5, 1), ("blue", 6, 1), ("alpha", 7, 1))  # name, byte offset, PackedElementField type
+GRID_FIELDS = (("cost", 0, 2), ("red", 1, 1), ("green", 2, 1), ("blue", 3, 1), ("alpha", 4, 1))  # name, byte offset, PackedElementField type (2 int8, 1 uint8)
 
 
 def foxglove_grid(ts: Typestore, t_s: float, frame_id: str, costmap: Costmap) -> Message:
     """foxglove_msgs/Grid of ``costmap`` in ``frame_id``, stamped ``t_s`` [s]: per cell its cost as
-    float32 (NaN unknown) and its colour (:func:`terrapref.planner.costmap.cost_colours`)."""
+    int8 (0-100, -1 unknown, as in OccupancyGrid) and its colour
+    (:func:`terrapref.planner.costmap.cost_colours`), 5 bytes a cell."""
     from terrapref.planner.costmap import cost_colours
 
     T = ts.types
     h, w = costmap.cost.shape
-    cells = np.zeros((h, w), dtype=[("cost", "<f4"), ("rgba", "u1", 4)])
-    cells["cost"] = np.where(costmap.cost < 0, np.nan, costmap.cost.astype(np.float32))
+    cells = np.zeros((h, w), dtype=[("cost", "i1"), ("rgba", "u1", 4)])
+    cells["cost"] = costmap.cost
     cells["rgba"] = cost_colours(costmap.cost)
     fields = [T["foxglove_msgs/msg/PackedElementField"](name=name, offset=offset, type=kind) for name, offset, kind in GRID_FIELDS]
     corner = pose(ts, float(costmap.origin[0]), float(costmap.origin[1]), rpy_quaternion(ts, 0.0, 0.0, 0.0))
     return T["foxglove_msgs/msg/Grid"](timestamp=stamp(ts, t_s), frame_id=frame_id, pose=corner, column_count=w,
                                        cell_size=T["foxglove_msgs/msg/Vector2"](x=costmap.resolution_m, y=costmap.resolution_m),
-                                       row_stride=8 * w, cell_stride=8, fields=fields, data=cells.view(np.uint8).ravel())
+                                       row_stride=5 * w, cell_stride=5, fields=fields, data=cells.view(np.uint8).ravel())
 
 
 def odometry(ts: Typestore, stamped: Message, base_pose: Message) -> Message:

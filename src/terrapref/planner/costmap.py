@@ -81,12 +81,17 @@ def class_costs(weights: np.ndarray, lethal: np.ndarray, k: int) -> tuple[np.nda
 def costmap_of(cells: np.ndarray, origin: np.ndarray | None, resolution_m: float, weights: np.ndarray, lethal: np.ndarray,
                names: tuple[str, ...]) -> Costmap:
     """The costmap of a ground map's ``cells`` (values 0..K + 1, rows along y) whose cell (0, 0)
-    has its corner at ``origin`` (None: nothing seen yet, every cell unknown); ``names``, the K
-    terrain columns' classes."""
+    has its corner at ``origin`` (None: nothing seen yet, every cell unknown), cropped to the
+    rectangle of cells seen; ``names``, the K terrain columns' classes."""
     k = len(names)
     costs, prices = class_costs(weights, lethal, k)
     grid = costs[cells] if origin is not None else np.full(cells.shape, UNKNOWN_COST, dtype=np.int8)
     corner = (float(origin[0]), float(origin[1])) if origin is not None else (0.0, 0.0)
+    seen_rows, seen_cols = np.flatnonzero((grid != UNKNOWN_COST).any(axis=1)), np.flatnonzero((grid != UNKNOWN_COST).any(axis=0))
+    if len(seen_rows):  # cropped to the ground seen: a map is mostly ground never seen, and a grid's size is what a message carries
+        r0, r1, c0, c1 = seen_rows[0], seen_rows[-1] + 1, seen_cols[0], seen_cols[-1] + 1
+        grid = grid[r0:r1, c0:c1]
+        corner = (corner[0] + c0 * resolution_m, corner[1] + r0 * resolution_m)
     return Costmap(grid, float(resolution_m), corner, {n: float(p) for n, p in zip(names, prices, strict=True)},
                    frozenset(n for n, is_lethal in zip(names, lethal[:k]) if is_lethal))
 
