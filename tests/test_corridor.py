@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import math
 import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -28,7 +26,7 @@ from terrapref.terrain import default_classes
 from terrapref.vehicle import Command, integrate_unicycle
 
 from helpers import model_meta, skip_path_weights
-from test_exact import _settings
+from test_exact import _settings, run_under
 
 K = len(default_classes().feature_names)  # columns: non_traversable, water, rock, mud
 # The synthetic driver's own costs relative to its detour price (per metre 1, 1.5, 2.25 by rank
@@ -441,9 +439,5 @@ def _fit_case() -> np.ndarray:
 
 def test_the_corridor_fit_gives_the_same_weights_under_every_cpu_setting():
     tests = os.path.dirname(__file__)
-    hashes = set()
-    for extra in _settings():
-        done = subprocess.run([sys.executable, "-c", _FIT.format(tests=tests)], env={**os.environ, **extra}, capture_output=True, text=True, timeout=300)
-        assert done.returncode == 0, done.stderr
-        hashes.add(done.stdout.strip())
+    hashes = {out.strip() for _, out in run_under(_settings(), _FIT.format(tests=tests))}
     assert len(hashes) == 1

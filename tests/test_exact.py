@@ -12,6 +12,7 @@ import os
 import platform
 import subprocess
 import sys
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
@@ -294,6 +295,19 @@ def _settings() -> list[dict[str, str]]:
     return settings
 
 
+def run_under(settings: list[dict[str, str]], code: str) -> list[tuple[dict[str, str], str]]:
+    """``code`` run by a fresh interpreter under each of ``settings`` (extra environment), as many
+    at once as there are cores (the answers do not depend on what else runs, which is the point);
+    (setting, its standard output) each, in order."""
+    def one(extra: dict[str, str]) -> tuple[dict[str, str], str]:
+        done = subprocess.run([sys.executable, "-c", code], env={**os.environ, **extra}, capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+        return extra, done.stdout
+
+    with ThreadPoolExecutor(max_workers=os.cpu_count() or 2) as pool:
+        return list(pool.map(one, settings))
+
+
 def _cpu_flags() -> str:
     try:
         with open("/proc/cpuinfo") as f:
@@ -304,12 +318,7 @@ def _cpu_flags() -> str:
 
 def test_training_gives_the_same_bits_under_every_cpu_setting():
     tests = os.path.dirname(__file__)
-    outputs = []
-    for extra in _settings():
-        env = {**os.environ, **extra}
-        done = subprocess.run([sys.executable, "-c", _TRAIN.format(tests=tests)], env=env, capture_output=True, text=True, timeout=300)
-        assert done.returncode == 0, done.stderr
-        outputs.append((extra, *done.stdout.split()))
+    outputs = [(extra, *out.split()) for extra, out in run_under(_settings(), _TRAIN.format(tests=tests))]
     trained = {h for _, h, _ in outputs}
     assert len(trained) == 1, outputs
     if platform.machine().lower() in ("x86_64", "amd64"):

@@ -9,9 +9,6 @@ replaced the NumPy form: tests/data/planner_decisions.json holds closed-loop dec
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -28,6 +25,8 @@ from terrapref.planner import Planner, PlannerDriver
 from terrapref.recipes import PAPER, TEACH, demonstrate
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation, run_episode
+
+from test_exact import run_under
 
 DATA = Path(__file__).parent / "data"
 
@@ -79,11 +78,7 @@ print(h.hexdigest())
 
 def test_compiled_forward_gives_the_same_bits_under_other_cpu_settings():
     settings = [{}, {"NPY_DISABLE_CPU_FEATURES": "X86_V4,AVX512_ICL,AVX512_SPR"}, {"OPENBLAS_CORETYPE": "Prescott"}, {"NUMBA_CPU_NAME": "generic"}]
-    hashes = set()
-    for extra in settings:
-        done = subprocess.run([sys.executable, "-c", _BITS], env={**os.environ, **extra}, capture_output=True, text=True, timeout=300)
-        assert done.returncode == 0, done.stderr
-        hashes.add(done.stdout.strip())
+    hashes = {out.strip() for _, out in run_under(settings, _BITS)}
     assert len(hashes) == 1
 
 
