@@ -93,3 +93,22 @@ def test_a_distorted_lens_is_undone_before_the_planner_sees_the_frame(setup):
     assert seen[0].shape == images[0].shape and not np.array_equal(seen[0], images[0])
     centre = (slice(200, 280), slice(280, 360))  # barrel distortion leaves the middle as it was
     np.testing.assert_array_equal(seen[0][centre], images[0][centre])
+
+
+def test_an_image_of_another_size_than_the_calibration_is_refused_by_name(setup):
+    from terrapref.errors import UserError
+
+    core, _ = _core(setup)
+    core.on_odometry(_odom(0))
+    small = compressed_image(TS, header(TS, 0.0, "camera_optical"), "png", png(setup[3][0][::2, ::2].copy()))
+    with pytest.raises(UserError, match="320 x 240 px; the calibration says 640 x 480"):
+        core.on_image("sensor_msgs/msg/CompressedImage", small)
+
+
+def test_an_older_image_does_not_displace_a_newer_one_waiting_for_odometry(setup):
+    core, told = _core(setup)
+    core.on_odometry(_odom(0))
+    core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 3))
+    core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 2))  # late: the newer one keeps waiting
+    core.on_odometry(_odom(3))
+    assert [round(d.stamp_s - 1_700_000_000, 6) for d in told] == [0.3]

@@ -44,6 +44,7 @@ PLAYER = textwrap.dedent('''
     import numpy as np
     from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, TwistStamped
     from nav_msgs.msg import Path
+    from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import CameraInfo, Image
     from terrapref.demos.recording import read_recording
 
@@ -54,9 +55,10 @@ PLAYER = textwrap.dedent('''
     path_pub = rospy.Publisher("/plan", Path, queue_size=1, latch=True)
     odom_pub = rospy.Publisher("/odom", PoseWithCovarianceStamped, queue_size=10)  # a localiser's pose, as the robot file allows
     seg_pub = rospy.Publisher("/seg", Image, queue_size=10)
+    clock_pub = rospy.Publisher("/clock", Clock, queue_size=10)  # the log's clock, as rosbag play --clock gives it
     got = {}
     rospy.Subscriber("/cmd", TwistStamped, lambda m: got.__setitem__(round(m.header.stamp.to_sec(), 3), (m.twist.linear.x, m.twist.angular.z)))
-    while seg_pub.get_num_connections() == 0 or odom_pub.get_num_connections() == 0:  # the node subscribes
+    while min(seg_pub.get_num_connections(), odom_pub.get_num_connections(), clock_pub.get_num_connections()) == 0:  # the node subscribes
         time.sleep(0.05)
     from terrapref.camera import CameraConfig
     fx, fy, cx, cy = CameraConfig().intrinsics  # the camera the model was trained for
@@ -82,6 +84,7 @@ PLAYER = textwrap.dedent('''
         odom.pose.pose.orientation.z, odom.pose.pose.orientation.w = np.sin(yaw / 2), np.cos(yaw / 2)
         image = Image(height=480, width=640, encoding="mono8", step=640, data=rec.image(i).tobytes())
         image.header.stamp = rospy.Time.from_sec(t)
+        clock_pub.publish(Clock(clock=rospy.Time.from_sec(t)))
         while round(t, 3) not in got:  # sent again until decided on (the node may not have the calibration yet)
             odom_pub.publish(odom)
             seg_pub.publish(image)
@@ -129,11 +132,13 @@ def test_the_node_commands_what_the_runtime_commands_on_the_same_frames(setup, t
     master = subprocess.Popen(["roscore", "-p", str(port)], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     node = player = None
     try:
-        # TwistStamped through the node's private ROS parameter, as a launch file would set it.
+        # TwistStamped through the node's private ROS parameter, as a launch file would set it, and
+        # the node's clock the player's (a command is in force until its frame is 0.3 s old by it).
         for _ in range(100):
             if subprocess.run(["rosparam", "set", "/terrapref/stamped", "true"], env=env, capture_output=True).returncode == 0:
                 break
             time.sleep(0.1)
+        subprocess.run(["rosparam", "set", "/use_sim_time", "true"], env=env, check=True, capture_output=True)
         node = subprocess.Popen([sys.executable, "-c", "import sys; from terrapref.cli import main; sys.exit(main())", "ros1",
                                  "--model", str(model), "--robot", str(root / "robot.yaml"), "--live", "--live-port", str(live_port)],
                                 env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)

@@ -82,3 +82,13 @@ def test_terrapref_route_writes_a_scenario_that_follows_the_route(tmp_path, caps
     assert main(["route", "fig7_rock_vs_non_traversable_left", "--model", str(plain), "--out", str(tmp_path / "c.yaml")]) == 2
     one_line_error(capsys, "c.safetensors", "no offset stage")
     assert not (tmp_path / "c.yaml").exists()
+
+
+def test_a_route_keeps_off_the_maps_edge_and_a_path_that_ends_where_it_starts_is_refused():
+    edge = ReferencePath(np.array([[2.0, 1.5], [38.0, 1.5]]))  # 1.5 m from the map's southern edge, beside a strip of water
+    stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), PinholeCamera(), _columns(), K, np.array([0]), 1.0)
+    costmap = prior_costmap(rasterise(_scenario([_band("water", (15.0, 25.0), (1.0, 4.0))])), stage, NAMES)
+    route = plan_route(costmap, edge, *detour_prices(stage))
+    assert ReferencePath(route.waypoints).resampled(0.05)[0][:, 1].min() > 0.8  # never within 0.9 m (less a cell) of the edge
+    with pytest.raises(RouteError, match="ends in the search cell it starts in"):
+        plan_route(costmap, ReferencePath(np.array([[10.0, 10.0], [10.1, 10.1]])), *detour_prices(stage))

@@ -624,8 +624,8 @@ def _cmd_route(args: argparse.Namespace) -> int:
         _check_output(path, "--out", [args.scenario, args.model])
     if out.suffix.lower() not in (".yaml", ".yml"):
         raise UserError(str(out), "the route is written as a scenario file: give it the suffix .yaml", field="--out")
-    if not (math.isfinite(args.resolution) and 0.05 <= args.resolution <= 2.0):
-        raise UserError("--resolution", f"expected a cell size in [0.05, 2] m, got {args.resolution}")
+    if not (math.isfinite(args.resolution) and 0.1 <= args.resolution <= 2.0):
+        raise UserError("--resolution", f"expected a cell size in [0.1, 2] m, got {args.resolution}")
     scenario = resolve_scenario(args.scenario)
     model = load_model(args.model)
     if model.classes != scenario.classes:
@@ -643,7 +643,7 @@ def _cmd_route(args: argparse.Namespace) -> int:
              title=f"{scenario.name}: route priced by {Path(args.model).name}")
     along = "meets lethal terrain" if not math.isfinite(route.along_path_cost) else f"{route.along_path_cost:.1f}"
     print(f"route: {route.length_m:.1f} m (path {scenario.path_length_m():.1f} m), up to {route.max_offset_m:.1f} m from the path; "
-          f"price {route.cost:.1f} (the path itself: {along})")
+          f"price {route.cost:.1f} (the path itself: {along}); searched in {route.cell_m:g} m cells")
     print(f"wrote {out} (the scenario with the route as its path: terrapref evaluate {args.model} {out}) and {figure}")
     return 0
 
@@ -1086,7 +1086,8 @@ def _route_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("scenario", help="the course (packaged name, file or gen:N): its terrain stands in for a prior map such as labelled aerial imagery")
     p.add_argument("--model", required=True, help="a model with an offset stage (recipe teach): its class prices and price of leaving the path")
     p.add_argument("--out", required=True, help="the scenario with the route as its path (.yaml); a figure is written beside it (.png)")
-    p.add_argument("--resolution", type=float, default=0.25, help="search cell size [m] (default 0.25)")
+    p.add_argument("--resolution", type=float, default=0.25,
+                   help="search cell size [m], 0.1-2, taken as the nearest whole multiple of the map's cells (default 0.25)")
     p.set_defaults(func=_cmd_route)
 
 

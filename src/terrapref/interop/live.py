@@ -81,16 +81,15 @@ class LiveRun:
         none = np.zeros((0, 3))
         header = RunFrames(times=np.zeros(0), poses=none, commands=none[:, :2], image=_no_image, chosen=np.zeros(0, dtype=int),
                            path=np.asarray(path, dtype=float), camera=camera, classes=classes, preference=preference)
-        run = cls(view, replace(Scene.of(view.ts, header), t0_s=clock_s))
-        write_fixed(view, run.scene)
-        return run
+        return cls(view, replace(Scene.of(view.ts, header), t0_s=clock_s))
 
     def frame(self, frame: FrameData) -> None:
-        """Send one frame (and, every :data:`RESEND_EVERY` frames, the path and the mounting again)."""
+        """Send one frame; with the first and every :data:`RESEND_EVERY`-th, the path and the
+        camera's mounting, stamped with that frame's time."""
+        if self.frames % RESEND_EVERY == 0:
+            write_fixed(self.view, self.scene, frame.t_s)
         write_frame(self.view, self.scene, frame)
         self.frames += 1
-        if self.frames % RESEND_EVERY == 0:
-            write_fixed(self.view, self.scene)
 
 
 def _no_image(i: int) -> np.ndarray:

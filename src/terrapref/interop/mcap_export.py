@@ -171,12 +171,14 @@ def _write_frames(topics: Topics, scene: Scene, progress: Callable[[int, int], N
             progress(i + 1, n)
 
 
-def write_fixed(topics: Topics, scene: Scene) -> None:
-    """The reference path and the camera's mounting (base_link -> camera), at the first frame."""
+def write_fixed(topics: Topics, scene: Scene, t_s: float | None = None) -> None:
+    """The reference path and the camera's mounting (base_link -> camera_optical), at the run's
+    time ``t_s`` [s] (default: its first frame's)."""
     ts, cam = scene.ts, scene.run.camera
-    first = scene.bag_ns(scene.t0_s)
-    topics.write("path", first, path_message(ts, scene.run.path, scene.ros1))
-    topics.write("tf_static", first, tf_message(ts, camera_mount(ts, cam, scene.ros1)))
+    t = scene.t0_s if t_s is None else t_s
+    at = scene.bag_ns(t)
+    topics.write("path", at, path_message(ts, scene.run.path, scene.ros1, t - scene.t0_s))
+    topics.write("tf_static", at, tf_message(ts, camera_mount(ts, cam, scene.ros1, t - scene.t0_s)))
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from terrapref.errors import UserError
 from terrapref.interop.bag_import import _decode, _yaw, camera_from_info
 from terrapref.interop.robot import RobotConfig
 from terrapref.interop.runtime import PlannerRuntime, RuntimeDecision
@@ -101,6 +102,7 @@ class PlannerNodeCore:
             xy = np.array([(p.pose.position.x, p.pose.position.y) for p in msg.poses], dtype=float)
             if len(xy) >= 2 and np.isfinite(xy).all():
                 self.path = xy
+                self._live = None  # the live view shows a new run along the new path
                 if self.runtime is not None:
                     self.runtime.set_path(xy)
 
@@ -159,7 +161,8 @@ class PlannerNodeCore:
                 if self.odometry and 0 < t - self.odometry[-1][0] <= ODOMETRY_WAIT_S:
                     if self._pending is not None:
                         self.skipped["superseded while waiting for odometry"] += 1
-                    self._pending = (msgtype, msg, topic, t)
+                    if self._pending is None or t > self._pending[3]:  # the newest image waits
+                        self._pending = (msgtype, msg, topic, t)
                 else:
                     self.skipped["without odometry at the stamp"] += 1
                 return None
@@ -167,6 +170,9 @@ class PlannerNodeCore:
 
     def _decide(self, msgtype: str, msg, topic: str, t: float, pose: Pose) -> RuntimeDecision | None:
         raw = _decode(SimpleNamespace(topic=topic, msgtype=msgtype), msg, self.robot.source, self.robot.labels, t)
+        if raw.shape != self.runtime.shape:
+            raise UserError(self.robot.source, f"a label image of {raw.shape[1]} x {raw.shape[0]} px; the calibration says "
+                            f"{self.runtime.shape[1]} x {self.runtime.shape[0]}", field="topics.segmentation")
         ids = self._lut[raw]
         if self._undistort is not None:  # a lens with distortion: each pinhole pixel from where the lens put it
             ids = np.where(self._undistort >= 0, ids.reshape(-1)[np.maximum(self._undistort, 0)], UNKNOWN).astype(np.uint8)

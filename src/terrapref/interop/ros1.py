@@ -2,8 +2,8 @@
 
 Subscribes to the robot file's label image, camera calibration, odometry and (without a path
 file) path topics; publishes the command on the robot file's command topic (``Twist``, or
-``TwistStamped`` with ``--stamped``, stamped with the frame it was decided on) at the control
-rate and at once on each decision, the 21 trajectories with F_t and the chosen one
+``TwistStamped`` with ``--stamped``, stamped with the frame it was decided on; a stop once that
+frame is ``hold_s`` old by the node's clock) at the control rate and at once on each decision, the 21 trajectories with F_t and the chosen one
 (``~trajectories``, ``visualization_msgs/MarkerArray``) on each decision, and the learned costmap
 (``~costmap``, ``nav_msgs/OccupancyGrid``) once a second. Its options come from the command
 line or its private ROS parameters (:class:`NodeOptions`).
@@ -48,9 +48,9 @@ def import_rospy():
 
 @dataclass(frozen=True)
 class NodeOptions:
-    """How the node runs: each from the command line, else from the node's private ROS parameter
-    of the same name (``~stamped``, ``~rate``, ``~path_file``, ``~cmd_topic``, ``~hold_s``), else
-    the default.
+    """How the node runs: each from the command line (``hold_s`` has no flag), else from the
+    node's private ROS parameter of the same name (``~stamped``, ``~rate``, ``~path_file``,
+    ``~cmd_topic``, ``~hold_s``), else the default.
 
     Attributes:
         stamped: publish TwistStamped instead of Twist (default False).
@@ -90,12 +90,6 @@ def run_node(model_path: str, robot_path: str, options: NodeOptions | None = Non
     """Run the node until ROS shuts it down; with ``live`` (a terrapref.interop.live.LiveView),
     every decision is also sent there."""
     rospy = import_rospy()
-    from geometry_msgs.msg import Twist, TwistStamped
-    from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
-    from nav_msgs.msg import OccupancyGrid, Odometry, Path as PathMsg
-    from sensor_msgs.msg import CameraInfo, CompressedImage, Image
-    from visualization_msgs.msg import MarkerArray
-
     from terrapref.interop.node_core import PlannerNodeCore
     from terrapref.interop.robot import load_robot, load_waypoints
     from terrapref.learning.model_file import load_model
@@ -104,98 +98,114 @@ def run_node(model_path: str, robot_path: str, options: NodeOptions | None = Non
     robot = load_robot(robot_path, model.classes)
     rospy.init_node("terrapref", anonymous=False)
     opts = (options or NodeOptions()).resolved(rospy.get_param)
-    stamped, rate_hz = opts.stamped, float(opts.rate)
     path = load_waypoints(Path(opts.path_file), "path_file") if opts.path_file else \
         (load_waypoints(robot.path_file, robot.source) if robot.path_file else None)
     core = PlannerNodeCore(model, robot, path, hold_s=float(opts.hold_s))
     if live is not None:
         core.watch(live)
-    cmd_pub = rospy.Publisher(opts.cmd_topic or robot.topics["command"], TwistStamped if stamped else Twist, queue_size=10)
-    traj_pub = rospy.Publisher("~trajectories", MarkerArray, queue_size=2)
-    cost_pub = rospy.Publisher("~costmap", OccupancyGrid, queue_size=1, latch=True)
-    markers = _TrajectoryMarkers(model, rospy)
-    last = {"stamp": None}
+    node = _Node(rospy, core, model, robot, opts)
+    rospy.on_shutdown(node.report)
+    rospy.spin()
+    if node.failure:
+        raise node.failure[0]
 
-    def publish_command(stamp_s: float, now_s: float) -> None:
-        v, w = core.command_at(now_s)
-        twist = Twist()
+
+class _Node:
+    """The node's publishers, subscribers and timers around a :class:`PlannerNodeCore`."""
+
+    def __init__(self, rospy, core, model, robot, opts: NodeOptions) -> None:
+        from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, Twist, TwistStamped
+        from nav_msgs.msg import OccupancyGrid, Odometry, Path as PathMsg
+        from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+        from visualization_msgs.msg import MarkerArray
+
+        self.rospy, self.core, self.robot, self.opts = rospy, core, robot, opts
+        self.failure: list[UserError] = []
+        self.said: set[str] = set()  # problems with incoming messages, each logged once
+        self.last_stamp: float | None = None  # the frame of the command in force
+        self.Twist, self.TwistStamped, self.OccupancyGrid = Twist, TwistStamped, OccupancyGrid
+        self.image_types = {"sensor_msgs/Image": (Image, "sensor_msgs/msg/Image"),
+                            "sensor_msgs/CompressedImage": (CompressedImage, "sensor_msgs/msg/CompressedImage")}
+        self.pose_types = {"nav_msgs/Odometry": Odometry, "geometry_msgs/PoseStamped": PoseStamped,
+                           "geometry_msgs/PoseWithCovarianceStamped": PoseWithCovarianceStamped}
+        self.cmd_pub = rospy.Publisher(opts.cmd_topic or robot.topics["command"], TwistStamped if opts.stamped else Twist, queue_size=10)
+        self.traj_pub = rospy.Publisher("~trajectories", MarkerArray, queue_size=2)
+        self.cost_pub = rospy.Publisher("~costmap", OccupancyGrid, queue_size=1, latch=True)
+        self.markers = _TrajectoryMarkers(model, rospy)
+        core.on_decision = self.on_decision
+        rospy.Subscriber(robot.topics["camera_info"], CameraInfo, self.on_camera_info, queue_size=1)
+        rospy.Subscriber(robot.topics["odometry"], rospy.AnyMsg, self.on_odometry, queue_size=50)
+        if core.path is None and robot.path_topic:
+            rospy.Subscriber(robot.path_topic, PathMsg, core.on_path, queue_size=1)
+        rospy.Subscriber(robot.topics["segmentation"], rospy.AnyMsg, self.on_image, queue_size=1)
+        rospy.Timer(rospy.Duration(1.0 / float(opts.rate)), self.tick)
+        rospy.Timer(rospy.Duration(COSTMAP_PERIOD_S), self.publish_costmap)
+
+    def publish_command(self, stamp_s: float) -> None:
+        """The command in force now (a stop once its frame is ``hold_s`` old), stamped with its frame."""
+        v, w = self.core.command_at(self.rospy.get_time())
+        twist = self.Twist()
         twist.linear.x, twist.angular.z = float(v), float(w)
-        if stamped:
-            msg = TwistStamped()
-            msg.header.stamp = rospy.Time.from_sec(stamp_s)
-            msg.header.frame_id = "base_link"
-            msg.twist = twist
-            cmd_pub.publish(msg)
-        else:
-            cmd_pub.publish(twist)
-
-    image_types = {"sensor_msgs/Image": (Image, "sensor_msgs/msg/Image"), "sensor_msgs/CompressedImage": (CompressedImage, "sensor_msgs/msg/CompressedImage")}
-
-    def on_image(raw) -> None:
-        """A label image of either type (a robot publishes Image or CompressedImage on the topic,
-        and image_transport a CompressedImage on TOPIC/compressed): taken as it comes."""
-        kind = raw._connection_header.get("type", "")
-        if kind not in image_types:
-            rospy.logwarn_once(f"{robot.topics['segmentation']}: {kind} is not a label image (sensor_msgs/Image or CompressedImage); ignored")
+        if not self.opts.stamped:
+            self.cmd_pub.publish(twist)
             return
-        cls, msgtype = image_types[kind]
-        core.on_image(msgtype, cls().deserialize(raw._buff), robot.topics["segmentation"])
+        msg = self.TwistStamped()
+        msg.header.stamp, msg.header.frame_id, msg.twist = self.rospy.Time.from_sec(stamp_s), "base_link", twist
+        self.cmd_pub.publish(msg)
 
-    def on_decision(decision) -> None:
+    def on_decision(self, decision) -> None:
         """Each decision, whether its image or the odometry it waited for brought it."""
-        last["stamp"] = decision.stamp_s
-        publish_command(decision.stamp_s, decision.stamp_s)
-        traj_pub.publish(markers.of(decision, rospy.Time.from_sec(decision.stamp_s)))
+        self.last_stamp = decision.stamp_s
+        self.publish_command(decision.stamp_s)
+        self.traj_pub.publish(self.markers.of(decision, self.rospy.Time.from_sec(decision.stamp_s)))
 
-    core.on_decision = on_decision
-
-    image_sub = robot.topics["segmentation"]
-    failure: list[UserError] = []
-
-    def on_camera_info(msg) -> None:
+    def on_camera_info(self, msg) -> None:
         try:
-            core.on_camera_info(msg)
+            self.core.on_camera_info(msg)
         except UserError as exc:  # a model for another camera: said once, and the node stops
-            failure.append(exc)
-            rospy.signal_shutdown(exc.lines()[0])
+            self.failure.append(exc)
+            self.rospy.signal_shutdown(exc.lines()[0])
 
-    rospy.Subscriber(robot.topics["camera_info"], CameraInfo, on_camera_info, queue_size=1)
-    pose_types = {"nav_msgs/Odometry": Odometry, "geometry_msgs/PoseStamped": PoseStamped, "geometry_msgs/PoseWithCovarianceStamped": PoseWithCovarianceStamped}
+    def on_image(self, raw) -> None:
+        """A label image, Image or CompressedImage, as the robot publishes it on the topic."""
+        kind = raw._connection_header.get("type", "")
+        if kind not in self.image_types:
+            return self._say(f"{self.robot.topics['segmentation']}: {kind} is not a label image (sensor_msgs/Image or CompressedImage); ignored")
+        cls, msgtype = self.image_types[kind]
+        self._guarded(lambda: self.core.on_image(msgtype, cls().deserialize(raw._buff), self.robot.topics["segmentation"]))
 
-    def on_odometry(raw) -> None:
+    def on_odometry(self, raw) -> None:
         """Odometry, or a PoseStamped or PoseWithCovarianceStamped, as the robot file allows."""
         kind = raw._connection_header.get("type", "")
-        if kind not in pose_types:
-            rospy.logwarn_once(f"{robot.topics['odometry']}: {kind} is not Odometry, PoseStamped or PoseWithCovarianceStamped; ignored")
-            return
-        core.on_odometry(pose_types[kind]().deserialize(raw._buff))
+        if kind not in self.pose_types:
+            return self._say(f"{self.robot.topics['odometry']}: {kind} is not Odometry, PoseStamped or PoseWithCovarianceStamped; ignored")
+        self._guarded(lambda: self.core.on_odometry(self.pose_types[kind]().deserialize(raw._buff)))
 
-    rospy.Subscriber(robot.topics["odometry"], rospy.AnyMsg, on_odometry, queue_size=50)
-    if path is None and robot.path_topic:
-        rospy.Subscriber(robot.path_topic, PathMsg, core.on_path, queue_size=1)
-    rospy.Subscriber(image_sub, rospy.AnyMsg, on_image, queue_size=1)
-    rospy.Subscriber(image_sub + "/compressed", rospy.AnyMsg, on_image, queue_size=1)
+    def _guarded(self, handle: Callable[[], Any]) -> None:
+        """Handle one message; a message the node cannot use (an image it cannot decode, of the
+        wrong size) is skipped and said once, not a traceback per frame."""
+        try:
+            handle()
+        except (UserError, ValueError) as exc:
+            self._say(exc.lines()[0] if isinstance(exc, UserError) else str(exc))
 
-    def tick(event) -> None:
-        now = rospy.get_time()
-        if last["stamp"] is not None:
-            publish_command(now, now)
+    def _say(self, problem: str) -> None:
+        if problem not in self.said:
+            self.said.add(problem)
+            self.rospy.logerr(f"terrapref: {problem} (said once; such messages are skipped)")
 
-    def publish_costmap(event) -> None:
-        grid = core.costmap()
+    def tick(self, event) -> None:
+        if self.last_stamp is not None:
+            self.publish_command(self.last_stamp)
+
+    def publish_costmap(self, event) -> None:
+        grid = self.core.costmap()
         if grid is not None:
-            cost_pub.publish(_occupancy_grid(grid, OccupancyGrid, rospy))
+            self.cost_pub.publish(_occupancy_grid(grid, self.OccupancyGrid, self.rospy))
 
-    def report() -> None:
-        skipped = ", ".join(f"{n} {why}" for why, n in core.skipped.items() if n) or "none"
-        print(f"terrapref ros1: {core.decided} frames decided on; skipped: {skipped}", flush=True)
-
-    rospy.on_shutdown(report)
-    rospy.Timer(rospy.Duration(1.0 / rate_hz), tick)
-    rospy.Timer(rospy.Duration(COSTMAP_PERIOD_S), publish_costmap)
-    rospy.spin()
-    if failure:
-        raise failure[0]
+    def report(self) -> None:
+        skipped = ", ".join(f"{n} {why}" for why, n in self.core.skipped.items() if n) or "none"
+        print(f"terrapref ros1: {self.core.decided} frames decided on; skipped: {skipped}", flush=True)
 
 
 class _TrajectoryMarkers:

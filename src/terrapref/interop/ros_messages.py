@@ -167,11 +167,11 @@ def pose(ts: Typestore, x: float, y: float, orientation: Message) -> Message:
     return ts.types["geometry_msgs/msg/Pose"](position=point(ts, x, y), orientation=orientation)
 
 
-def path_message(ts: Typestore, xy: Iterable[tuple[float, float]], ros1: bool = False) -> Message:
-    """nav_msgs/Path through the points ``xy`` [m] of the odom frame, stamped at time 0."""
+def path_message(ts: Typestore, xy: Iterable[tuple[float, float]], ros1: bool = False, t_s: float = 0.0) -> Message:
+    """nav_msgs/Path through the points ``xy`` [m] of the odom frame, stamped at ``t_s`` [s]."""
     PoseStamped = ts.types["geometry_msgs/msg/PoseStamped"]
-    poses = [PoseStamped(header=header(ts, 0.0, "odom", ros1), pose=pose(ts, x, y, yaw_quaternion(ts, 0.0))) for x, y in xy]
-    return ts.types["nav_msgs/msg/Path"](header=header(ts, 0.0, "odom", ros1), poses=poses)
+    poses = [PoseStamped(header=header(ts, t_s, "odom", ros1), pose=pose(ts, x, y, yaw_quaternion(ts, 0.0))) for x, y in xy]
+    return ts.types["nav_msgs/msg/Path"](header=header(ts, t_s, "odom", ros1), poses=poses)
 
 
 def transform(ts: Typestore, parent: Message, child_frame_id: str, xyz: tuple[float, float, float], rotation: Message) -> Message:
@@ -184,12 +184,13 @@ def transform(ts: Typestore, parent: Message, child_frame_id: str, xyz: tuple[fl
 OPTICAL_FRAME = "camera_optical"  # the frame images and calibration are stamped in: z forward, x right, y down (REP 103)
 
 
-def camera_mount(ts: Typestore, camera: CameraConfig, ros1: bool = False) -> list[Message]:
-    """The camera's mounting as a robot publishes it on /tf_static: base_link -> camera_link (x
-    forward, pitched down by the mount's pitch and turned by its yaw) -> :data:`OPTICAL_FRAME`."""
-    mount = transform(ts, header(ts, 0.0, "base_link", ros1), "camera_link", (camera.mount_forward_m, 0.0, camera.mount_height_m),
+def camera_mount(ts: Typestore, camera: CameraConfig, ros1: bool = False, t_s: float = 0.0) -> list[Message]:
+    """The camera's mounting as a robot publishes it on /tf_static, stamped ``t_s`` [s]:
+    base_link -> camera_link (x forward, pitched down by the mount's pitch and turned by its yaw)
+    -> :data:`OPTICAL_FRAME`."""
+    mount = transform(ts, header(ts, t_s, "base_link", ros1), "camera_link", (camera.mount_forward_m, 0.0, camera.mount_height_m),
                       rpy_quaternion(ts, 0.0, math.radians(camera.pitch_deg), math.radians(camera.yaw_deg)))
-    optical = transform(ts, header(ts, 0.0, "camera_link", ros1), OPTICAL_FRAME, (0.0, 0.0, 0.0), quaternion(ts, (-0.5, 0.5, -0.5, 0.5)))
+    optical = transform(ts, header(ts, t_s, "camera_link", ros1), OPTICAL_FRAME, (0.0, 0.0, 0.0), quaternion(ts, (-0.5, 0.5, -0.5, 0.5)))
     return [mount, optical]
 
 

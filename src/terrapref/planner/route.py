@@ -73,12 +73,15 @@ class Route:
         along_path_cost: the price of driving the reference path itself (inf: it meets lethal
             terrain or leaves the map).
         max_offset_m: the farthest the route runs from the reference path [m].
+        cell_m: the side of the search cells [m] (the resolution asked for, as a whole
+            multiple of the map's).
     """
 
     waypoints: np.ndarray
     cost: float
     along_path_cost: float
     max_offset_m: float
+    cell_m: float = 0.0
 
     @property
     def length_m(self) -> float:
@@ -131,8 +134,8 @@ def detour_prices(stage: OffsetStage) -> tuple[float, float]:
 
 
 def coarsened(costmap: Costmap, resolution_m: float) -> Costmap:
-    """``costmap`` in cells of ``resolution_m`` (a whole multiple of its own): each the mean of the
-    costs within, lethal (or unknown) when any cell within is."""
+    """``costmap`` in cells of the whole multiple of its own nearest ``resolution_m``: each the
+    mean of the costs within, lethal (or unknown) when any cell within is."""
     factor = max(1, round(resolution_m / costmap.resolution_m))
     if factor == 1:
         return costmap
@@ -162,7 +165,10 @@ def plan_route(costmap: Costmap, path: ReferencePath, detour_price: float, span_
     start, goal = (grid.cell_of(*path.point_at(s)) for s in (0.0, path.length_m))
     for name, cell in (("start", start), ("end", goal)):
         if cell is None or not np.isfinite(price[cell]):
-            raise RouteError(f"the path's {name} is off the map or within {config.half_width_m + config.lethal_margin_m:.1f} m of lethal terrain")
+            raise RouteError(f"the path's {name} is off the map or within {config.half_width_m + config.lethal_margin_m:.1f} m "
+                             "of lethal terrain or the map's edge")
+    if start == goal:
+        raise RouteError(f"the path ends in the search cell it starts in ({res:g} m): there is no way to plan between them")
     graph = nx.Graph()
     graph.add_weighted_edges_from(_edges(price, alpha * span_m / 2 * d**2, res))
     try:
@@ -174,7 +180,7 @@ def plan_route(costmap: Costmap, path: ReferencePath, detour_price: float, span_
     points[0], points[-1] = path.point_at(0.0), path.point_at(path.length_m)
     waypoints = ReferencePath(points).resampled(config.spacing_m)[0]
     along = path.resampled(res)[0]
-    return Route(waypoints, _cost_of(points, price, grid), _cost_of(along, price, grid), float(d[rows, cols].max()))
+    return Route(waypoints, _cost_of(points, price, grid), _cost_of(along, price, grid), float(d[rows, cols].max()), res)
 
 
 def _footprint_price(grid: Costmap, config: RouteConfig) -> np.ndarray:
@@ -185,19 +191,19 @@ def _footprint_price(grid: Costmap, config: RouteConfig) -> np.ndarray:
 
 def _blocked(grid: Costmap, config: RouteConfig) -> np.ndarray:
     """Cells the vehicle's centre may not enter: within the half width and margin of lethal
-    terrain, or of ground the map does not hold."""
+    terrain, of ground the map does not hold, or of the map's edge."""
     bad = ((grid.cost == LETHAL_COST) | (grid.cost == UNKNOWN_COST)).astype(float)
-    return _disc_mean(bad, (config.half_width_m + config.lethal_margin_m) / grid.resolution_m) > 0
+    return _disc_mean(bad, (config.half_width_m + config.lethal_margin_m) / grid.resolution_m, outside=1.0) > 0
 
 
-def _disc_mean(a: np.ndarray, radius_cells: float) -> np.ndarray:
-    """The mean of ``a`` over a disc of ``radius_cells`` around each cell (edges padded with the
-    nearest cell)."""
+def _disc_mean(a: np.ndarray, radius_cells: float, outside: float | None = None) -> np.ndarray:
+    """The mean of ``a`` over a disc of ``radius_cells`` around each cell; beyond the edges,
+    ``outside`` (None: the nearest cell's value)."""
     r = int(math.floor(radius_cells))
     if r == 0:
         return a.copy()
     offsets = [(i, j) for i in range(-r, r + 1) for j in range(-r, r + 1) if i * i + j * j <= radius_cells**2 + 1e-9]
-    padded = np.pad(a, r, mode="edge")
+    padded = np.pad(a, r, mode="edge") if outside is None else np.pad(a, r, mode="constant", constant_values=outside)
     h, w = a.shape
     return sum(padded[r + i: r + i + h, r + j: r + j + w] for i, j in offsets) / len(offsets)
 
