@@ -97,7 +97,7 @@ PLAYER = textwrap.dedent('''
 
 
 @pytest.fixture(scope="module")
-def setup(tmp_path_factory):
+def setup(tmp_path_factory, fig7_recording):
     from test_corridor import DRIVER_LIKE, _corridor_meta
 
     from helpers import skip_path_weights
@@ -105,7 +105,7 @@ def setup(tmp_path_factory):
     from terrapref.learning.network import ClassifierConfig
 
     root = tmp_path_factory.mktemp("ros1")
-    assert main(["record", "fig7_rock_vs_non_traversable_left", "--out", str(root / "rec"), "--quiet", "--disturb", "0"]) == 0
+    (root / "rec").symlink_to(fig7_recording, target_is_directory=True)
     config = ClassifierConfig(hidden=8, skip=True)
     model = save_model(root / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
     (root / "robot.yaml").write_text("format: terrapref-robot/1\n"
