@@ -82,22 +82,25 @@ def test_compiled_forward_gives_the_same_bits_under_other_cpu_settings():
     assert len(hashes) == 1
 
 
-def test_the_planner_makes_the_decisions_it_made_before_the_forward_pass_was_compiled(tmp_path):
+# (recipe, epochs, demonstration course, courses driven): as make_planner_decisions.py made them,
+# teach_course as it was then (its non_traversable situations were pairs until 2026-11-25).
+GOLDEN_RUNS = [pytest.param(TEACH, 40, str(DATA / "teach_course_pairs.yaml"), ("test_course", "fig8_water_mud_rock_mud_left"), id="teach"),
+               pytest.param(PAPER, 15, "train_course", ("test_course",), id="paper")]
+
+
+@pytest.mark.parametrize(("recipe", "epochs", "course", "driven"), GOLDEN_RUNS)
+def test_the_planner_makes_the_decisions_it_made_before_the_forward_pass_was_compiled(tmp_path, recipe, epochs, course, driven):
     golden = json.loads((DATA / "planner_decisions.json").read_text())
-    # (recipe, epochs, demonstration course, courses driven): as make_planner_decisions.py made them,
-    # teach_course as it was then (its non_traversable situations were pairs until 2026-11-25)
-    before = str(DATA / "teach_course_pairs.yaml")
-    for recipe, epochs, course, driven in [(TEACH, 40, before, ("test_course", "fig8_water_mud_rock_mud_left")), (PAPER, 15, "train_course", ("test_course",))]:
-        # the training schedule pinned as it was when the file was made (teach trained at lr 1e-3 then)
-        recipe = replace(recipe, train=replace(recipe.train, optimiser=replace(recipe.train.optimiser, epochs=epochs, lr=1e-3)))
-        features = recipe.features()
-        recordings = demonstrate(recipe, tmp_path / recipe.name, 7, course=course, features=features, write=False)
-        model = tmp_path / f"{recipe.name}.safetensors"
-        train_and_save(build_dataset(recordings, features), model, replace(recipe.train, seed=7), checkpoints=False)
-        for name in driven:
-            driver = PlannerDriver(Planner(load_model(model), offset=None), keep=True)  # C (and its second stage), as the file was made
-            run_episode(Simulation(resolve_scenario(name)), driver, np.random.default_rng(0))
-            made = [d.index for d in driver.decisions]
-            want = golden[f"{recipe.name}/{name}"]
-            first = next((i for i, (a, b) in enumerate(zip(made, want)) if a != b), None)
-            assert made == want, f"{recipe.name} on {name}: {len(made)} decisions against {len(want)}, first difference at {first}"
+    # the training schedule pinned as it was when the file was made (teach trained at lr 1e-3 then)
+    recipe = replace(recipe, train=replace(recipe.train, optimiser=replace(recipe.train.optimiser, epochs=epochs, lr=1e-3)))
+    features = recipe.features()
+    recordings = demonstrate(recipe, tmp_path / recipe.name, 7, course=course, features=features, write=False)
+    model = tmp_path / f"{recipe.name}.safetensors"
+    train_and_save(build_dataset(recordings, features), model, replace(recipe.train, seed=7), checkpoints=False)
+    for name in driven:
+        driver = PlannerDriver(Planner(load_model(model), offset=None), keep=True)  # C (and its second stage), as the file was made
+        run_episode(Simulation(resolve_scenario(name)), driver, np.random.default_rng(0))
+        made = [d.index for d in driver.decisions]
+        want = golden[f"{recipe.name}/{name}"]
+        first = next((i for i, (a, b) in enumerate(zip(made, want)) if a != b), None)
+        assert made == want, f"{recipe.name} on {name}: {len(made)} decisions against {len(want)}, first difference at {first}"
