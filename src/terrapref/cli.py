@@ -630,8 +630,9 @@ def _cmd_route(args: argparse.Namespace) -> int:
     model = load_model(args.model)
     if model.classes != scenario.classes:
         raise UserError(args.model, f"was trained for another class table than {args.scenario}'s", field="classes")
+    world = rasterise(scenario)
     try:
-        route = route_over(scenario, model, RouteConfig(resolution_m=args.resolution))
+        route = route_over(scenario, model, RouteConfig(resolution_m=args.resolution), world)
     except RouteError as exc:
         raise UserError(args.scenario, str(exc), field="path") from None
     except ValueError as exc:
@@ -639,7 +640,7 @@ def _cmd_route(args: argparse.Namespace) -> int:
     text = yaml.safe_dump(routed_scenario(scenario, route, Path(args.model).name), sort_keys=False, default_flow_style=None, width=120)
     write_text_atomic(out, "# terrapref route: a scenario whose path is the route; every command that takes a scenario takes it,\n"
                            "# and terrapref ros1 --path-file reads its waypoints.\n" + text)
-    save_map(figure, scenario, rasterise(scenario), tracks=[("route", route.waypoints, "tab:blue")],
+    save_map(figure, scenario, world, tracks=[("route", route.waypoints, "tab:blue")],
              title=f"{scenario.name}: route priced by {Path(args.model).name}")
     along = "meets lethal terrain" if not math.isfinite(route.along_path_cost) else f"{route.along_path_cost:.1f}"
     print(f"route: {route.length_m:.1f} m (path {scenario.path_length_m():.1f} m), up to {route.max_offset_m:.1f} m from the path; "

@@ -24,7 +24,8 @@ from terrapref.interop.ros_messages import Message, typestore
 if TYPE_CHECKING:
     from terrapref.camera import CameraConfig
     from terrapref.features import PreferenceSetConfig
-    from terrapref.planner.planner import PlannerDriver
+    from terrapref.planner.costmap import Costmap
+    from terrapref.planner.planner import Planner, PlannerDriver
     from terrapref.terrain import ClassTable
 
 DEFAULT_HOST, DEFAULT_PORT = "127.0.0.1", 8765  # Foxglove's own default
@@ -83,11 +84,14 @@ class LiveRun:
                            path=np.asarray(path, dtype=float), camera=camera, classes=classes, preference=preference)
         return cls(view, replace(Scene.of(view.ts, header), t0_s=clock_s))
 
-    def frame(self, frame: FrameData) -> None:
+    def frame(self, frame: FrameData, costmap: Callable[[], Costmap | None] | None = None) -> None:
         """Send one frame; with the first and every :data:`RESEND_EVERY`-th, the path and the
-        camera's mounting, stamped with that frame's time."""
+        camera's mounting, stamped with that frame's time; with the first and every
+        :data:`COSTMAP_EVERY`-th (once a second), the costmap ``costmap`` gives, if given."""
         if self.frames % RESEND_EVERY == 0:
             write_fixed(self.view, self.scene, frame.t_s)
+        if costmap is not None and self.frames % COSTMAP_EVERY == 0:
+            frame = replace(frame, costmap=costmap())
         write_frame(self.view, self.scene, frame)
         self.frames += 1
 
@@ -105,24 +109,25 @@ class WatchedDriver:
     def __init__(self, inner: PlannerDriver, view: LiveView) -> None:
         self.inner, self.view = inner, view
         self.run: LiveRun | None = None
-        self._count = 0
 
     def reset(self, scenario: Any, rng: np.random.Generator) -> None:
         self.inner.reset(scenario, rng)
         policy = self.inner.planner.policy
         self.run = LiveRun.start(self.view, scenario.waypoints, policy.camera, policy.classes, policy.features.preference)
-        self._count = 0
 
     def act(self, frame: Any) -> Any:
         command = self.inner.act(frame)
-        planner, decision = self.inner.planner, self.inner.last
-        stage = planner.offset_stage
-        costmap = stage.costmap(planner.policy.features.feature_classes) if stage is not None and self._count % COSTMAP_EVERY == 0 else None
-        self._count += 1
+        decision = self.inner.last
         x, y, yaw = (float(v) for v in frame.pose)
         self.run.frame(FrameData(float(frame.time_s), (x, y, yaw), (float(command.v), float(command.w)), frame.view.image, decision.index,
-                                 decision.probs, costmap))
+                                 decision.probs), planner_costmap(self.inner.planner))
         return command
+
+
+def planner_costmap(planner: Planner) -> Callable[[], Costmap] | None:
+    """What gives ``planner``'s costmap now, for :meth:`LiveRun.frame` (None: it keeps no ground map)."""
+    stage = planner.offset_stage
+    return None if stage is None else (lambda: stage.costmap(planner.policy.features.feature_classes))
 
 
 def watching(view: LiveView | None) -> Callable[[Any], Any] | None:

@@ -74,12 +74,11 @@ class PlannerNodeCore:
         self._lock = threading.RLock()  # ROS calls back from a thread per topic
         self.view: LiveView | None = None
         self._live: LiveRun | None = None
-        self._decided = 0
 
     def watch(self, view: LiveView) -> None:
         """Send every decision to the live view ``view`` (terrapref.interop.live), with the frame,
         the pose and the command, and once a second the costmap."""
-        self.view, self._live, self._decided = view, None, 0
+        self.view, self._live = view, None
 
     @property
     def ready(self) -> bool:
@@ -190,16 +189,14 @@ class PlannerNodeCore:
     def _send(self, decision: RuntimeDecision, ids: np.ndarray, pose: Pose) -> None:
         """One decision to the live view, stamped with its frame's ROS time."""
         from terrapref.interop.live import LiveRun
-        from terrapref.interop.mcap_export import COSTMAP_EVERY, FrameData
+        from terrapref.interop.mcap_export import FrameData
         from terrapref.interop.ros_messages import EPOCH_S
 
         runtime, model = self.runtime, self.model
         if self._live is None:
             self._live = LiveRun.start(self.view, self.path, runtime.planner.camera.config, model.classes, model.features.preference, clock_s=EPOCH_S)
-        costmap = self.costmap() if self._decided % COSTMAP_EVERY == 0 else None
-        self._decided += 1
         self._live.frame(FrameData(decision.stamp_s, (pose.x, pose.y, pose.yaw), (float(decision.command.v), float(decision.command.w)),
-                                   ids, decision.index, decision.probs, costmap))
+                                   ids, decision.index, decision.probs), self.costmap)
 
     def command_at(self, now_s: float) -> Command:
         """The command to send now: the last decision's while fresh, else a stop."""

@@ -92,9 +92,10 @@ class RouteError(ValueError):
     """No route: the path's start or end cannot be entered, or lethal terrain cuts them apart."""
 
 
-def route_over(scenario: Scenario, model: LoadedModel, config: RouteConfig | None = None) -> Route:
-    """The route along ``scenario``'s path over its map (the prior), priced as ``model`` learned:
-    its offset stage's class prices and price of leaving the path.
+def route_over(scenario: Scenario, model: LoadedModel, config: RouteConfig | None = None, world: WorldMap | None = None) -> Route:
+    """The route along ``scenario``'s path over its map (the prior; ``world``, its raster, when
+    the caller has it), priced as ``model`` learned: its offset stage's class prices and price of
+    leaving the path.
 
     Raises:
         ValueError: the model has no offset stage (no corridor utility to price with).
@@ -106,7 +107,7 @@ def route_over(scenario: Scenario, model: LoadedModel, config: RouteConfig | Non
     stage = Planner(model).offset_stage
     if stage is None:
         raise ValueError("has no offset stage, whose learned prices the route is priced with (train it with recipe teach)")
-    costmap = prior_costmap(rasterise(scenario), stage, model.features.feature_classes)
+    costmap = prior_costmap(world if world is not None else rasterise(scenario), stage, model.features.feature_classes)
     return plan_route(costmap, ReferencePath(scenario.waypoints), *detour_prices(stage), config=config)
 
 

@@ -336,14 +336,14 @@ class _Session:
     def _send(self, executed: Command, label_w: float) -> None:
         """The frame just driven to the live view: what the camera shows, the pose, the command;
         riding along, the planner's F_t and once a second its costmap."""
-        from terrapref.interop.mcap_export import COSTMAP_EVERY, FrameData
+        from terrapref.interop.live import planner_costmap
+        from terrapref.interop.mcap_export import FrameData
 
         riding = self.planner is not None and self.decision is not _NOTHING_YET
-        stage = self.planner.offset_stage if riding else None
-        costmap = stage.costmap(self.planner.policy.features.feature_classes) if stage is not None and self.live.frames % COSTMAP_EVERY == 0 else None
         pose = self.frame.pose
         self.live.frame(FrameData(self.frame.time_s, (pose.x, pose.y, pose.yaw), (float(executed[0]), float(executed[1])), self.frame.view.image,
-                                  int(self.control.label_of(label_w)), self.decision.probs if riding and self.driver == "planner" else None, costmap))
+                                  int(self.control.label_of(label_w)), self.decision.probs if riding and self.driver == "planner" else None),
+                        planner_costmap(self.planner) if riding else None)
 
     # --- drawing ----------------------------------------------------------------------------
 
