@@ -8,7 +8,7 @@ Run through ``scripts/bench.sh`` (one core); numbers go into ``docs/benchmarks.m
 (c) decision: ``Planner.decide`` (features + classifier C in NumPy + progress along the path)
     on the same frames, with a model trained on the recording (paper recipe). Target:
     <= 100 us median. Three more lines: a 2-member ensemble, the planner's second
-    stage (terrapref.planner.second_stage) as in recipe ``ours``, and the decision of recipe
+    stage (terrapref.planner.stages.second) as in recipe ``ours``, and the decision of recipe
     ``teach`` (an ensemble of three with the second stage, then with the offset stage too, which
     drives recipe ``teach`` since 2026-11-25; the stage weight does not change
     the cost).
@@ -35,6 +35,7 @@ from terrapref.demos.recording import RecordingWriter, read_recording
 from terrapref.demos.session import record_run, recording_meta
 from terrapref.features import FeatureConfig, PreferenceSetConfig, UtilityFeaturizer
 from terrapref.features.corridor import CorridorConfig
+from terrapref.planner.stages import OffsetConfig, SecondStageConfig
 from terrapref.camera import PinholeCamera
 from terrapref.scenario import resolve_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
@@ -85,19 +86,20 @@ def bench_closed_loop(model_path: Path) -> tuple[float, int]:
     return time.perf_counter() - t0, len(log.commands)
 
 
-def bench_decision(rec_dir: Path, repeats: int, features: FeatureConfig | None = None, members: int = 1, second_stage: bool = False) -> np.ndarray:
+def bench_decision(rec_dir: Path, repeats: int, features: FeatureConfig | None = None, members: int = 1, stages: tuple = ()) -> np.ndarray:
     from terrapref.demos.dataset import build_dataset
     from terrapref.learning.model_file import load_model
     from terrapref.learning.pipeline import train_and_save
     from terrapref.learning.network import ClassifierConfig
-    from terrapref.learning.train import SecondStageConfig, TrainConfig
+    from terrapref.learning.train import TrainConfig
     from terrapref.planner import Planner
 
     rec = read_recording(rec_dir)
     features = features or FeatureConfig()
-    plain = features == FeatureConfig() and members == 1 and not second_stage
+    plain = features == FeatureConfig() and members == 1 and not stages
     model_path = rec_dir.parent / ("model.safetensors" if plain else "variant.safetensors")
-    train_and_save(build_dataset([rec], features), model_path, TrainConfig(classifier=ClassifierConfig(members=members), second_stage=SecondStageConfig() if second_stage else None), checkpoints=False)
+    train_and_save(build_dataset([rec], features), model_path, TrainConfig(classifier=ClassifierConfig(members=members)), checkpoints=False,
+                   stages=stages)
     planner = Planner(load_model(model_path))
     idx = list(range(0, len(rec), max(1, len(rec) // 500)))
     images = [rec.image(i) for i in idx]
@@ -123,9 +125,9 @@ def main() -> int:
         t = bench_features(out, args.repeats)
         d = bench_decision(out, args.repeats)
         d2 = bench_decision(out, args.repeats, members=2)
-        d3 = bench_decision(out, args.repeats, second_stage=True)
-        d4 = bench_decision(out, args.repeats, members=3, second_stage=True)
-        d5 = bench_decision(out, args.repeats, FeatureConfig(corridor=CorridorConfig()), members=3, second_stage=True)
+        d3 = bench_decision(out, args.repeats, stages=(SecondStageConfig(),))
+        d4 = bench_decision(out, args.repeats, members=3, stages=(SecondStageConfig(),))
+        d5 = bench_decision(out, args.repeats, FeatureConfig(corridor=CorridorConfig()), members=3, stages=(SecondStageConfig(), OffsetConfig()))
         loop_s, loop_frames = bench_closed_loop(out.parent / "model.safetensors")
     ref_s = reference_ms() / 1e3
 

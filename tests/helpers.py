@@ -14,7 +14,7 @@ from terrapref.features import FeatureConfig
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.learning.torch_net import UtilityClassifier
-from terrapref.learning.train import SecondStageConfig, TrainConfig
+from terrapref.learning.train import TrainConfig
 from terrapref.terrain import default_classes
 
 
@@ -129,10 +129,9 @@ def random_weights(config: ClassifierConfig, seed: int = 0) -> dict[str, np.ndar
     return {k: v.detach().numpy().copy() for k, v in UtilityClassifier(config).state_dict().items()}
 
 
-def train_config(base: TrainConfig | None = None, *, utility: bool | None = None, **options) -> TrainConfig:
+def train_config(base: TrainConfig | None = None, **options) -> TrainConfig:
     """A training configuration written the short way: each option goes to the part that has it
-    (``epochs`` to the optimiser, ``hidden`` to the classifier, ``mirror`` to the data options);
-    ``utility`` turns the second stage on or off; ``stage_weight`` sets its weight."""
+    (``epochs`` to the optimiser, ``hidden`` to the classifier, ``mirror`` to the data options)."""
     from dataclasses import fields, replace
 
     config = base or TrainConfig()
@@ -141,12 +140,6 @@ def train_config(base: TrainConfig | None = None, *, utility: bool | None = None
         if name in ("seed",):
             config = replace(config, seed=value)
             continue
-        if name == "stage_weight":
-            config = replace(config, second_stage=SecondStageConfig(weight=value))
-            continue
         part = next(p for p in ("optimiser", "classifier", "data") if name in {f.name for f in fields(getattr(config, p))})
         parts.setdefault(part, {})[name] = value
-    config = config.updated(parts)
-    if utility is not None:
-        config = replace(config, second_stage=(config.second_stage or SecondStageConfig()) if utility else None)
-    return config
+    return config.updated(parts)

@@ -10,7 +10,8 @@ import pytest
 
 import terrapref.configargs
 from terrapref.configargs import add_arguments, apply_arguments, option
-from terrapref.learning.train import SecondStageConfig, TrainConfig
+from terrapref.errors import UserError
+from terrapref.learning.train import TrainConfig
 from terrapref.recipes import RECIPES
 
 
@@ -84,19 +85,34 @@ def test_the_train_flags_cover_every_documented_training_field():
     add_arguments(parser, TrainConfig)
     flags = {a.option_strings[0] for a in parser._actions if a.option_strings and a.option_strings[0] != "-h"}
     assert flags == {"--epochs", "--lr", "--batch-size", "--hidden", "--activation", "--skip", "--members", "--class-balance",
-                     "--mirror", "--steady-labels", "--second-stage", "--stage-weight", "--seed"}
-    args = parser.parse_args(["--no-second-stage", "--members", "1"])
+                     "--mirror", "--steady-labels", "--seed"}
+    args = parser.parse_args(["--members", "1"])
     config = apply_arguments(args, RECIPES["teach"].train)
-    assert config.second_stage is None and config.classifier.members == 1
+    assert config.classifier.members == 1
     assert config.optimiser == RECIPES["teach"].train.optimiser and config.data == RECIPES["teach"].train.data
-    on = apply_arguments(parser.parse_args(["--second-stage", "--stage-weight", "3"]), RECIPES["paper"].train)
-    assert on.second_stage == SecondStageConfig(weight=3.0)
+
+
+def test_the_stage_flags_change_the_recipes_stages():
+    from terrapref.cli import _stages, build_parser
+    from terrapref.planner.stages import OffsetConfig, SecondStageConfig
+
+    def stages(recipe: str, *flags: str) -> tuple:
+        return _stages(build_parser().parse_args(["train", "rec", "--out", "m.safetensors", *flags]), RECIPES[recipe])
+
+    assert stages("teach") == RECIPES["teach"].stages
+    assert stages("teach", "--no-second-stage") == (OffsetConfig(),)
+    assert stages("teach", "--stage-weight", "3") == (SecondStageConfig(weight=3.0, lookahead=True), OffsetConfig())
+    assert stages("paper", "--second-stage", "--stage-weight", "3") == (SecondStageConfig(weight=3.0),)
+    with pytest.raises(UserError, match="--stage-weight"):
+        stages("paper", "--stage-weight", "3")
+    with pytest.raises(UserError, match="--stage-weight"):
+        stages("ours", "--stage-weight", "-1")
 
 
 def test_a_configuration_changed_part_by_part():
     base = RECIPES["teach"].train
-    changed = base.updated({"classifier": {"hidden": 16}, "seed": 4, "second_stage": None})
+    changed = base.updated({"classifier": {"hidden": 16}, "seed": 4})
     assert changed.classifier.hidden == 16 and changed.classifier.members == base.classifier.members
-    assert changed.seed == 4 and changed.second_stage is None and changed.optimiser == base.optimiser
+    assert changed.seed == 4 and changed.optimiser == base.optimiser
     with pytest.raises(ValueError):
         base.updated({"optimiser": {"epochs": 0}})

@@ -17,15 +17,18 @@ from terrapref.features import FeatureConfig, UtilityFeaturizer
 from terrapref.features.corridor import CorridorConfig, CorridorFeatures, GroundMap, gated, intent_offsets, steer
 from terrapref.learning.corridor import CorridorUtility, fit_corridor, fit_softmax, soft_labels
 from terrapref.learning.model_file import load_model, save_model
+from terrapref.planner.registry import load_policy
 from terrapref.learning.network import ClassifierConfig
 from terrapref.planner import Planner
-from terrapref.planner.offset import OffsetConfig, OffsetStage
+from terrapref.planner.stages.offset import OffsetConfig, OffsetSteering
 from terrapref.scenario import parse_scenario
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import default_classes
 from terrapref.vehicle import Command, integrate_unicycle
 
 from helpers import model_meta, skip_path_weights
+
+CONTROL = FeatureConfig().preference.control  # the default control set: 1 m/s
 from test_exact import _settings, run_under
 
 K = len(default_classes().feature_names)  # columns: non_traversable, water, rock, mud
@@ -223,7 +226,7 @@ def test_the_corridor_fit_picks_the_near_distance_that_explains_the_labels():
         fit_corridor(features, near, np.full(n, np.nan), offsets)
 
 
-def _drive(stage: OffsetStage, scenario, camera: PinholeCamera, seconds: float) -> np.ndarray:
+def _drive(stage: OffsetSteering, scenario, camera: PinholeCamera, seconds: float) -> np.ndarray:
     from terrapref.scenario.path import PathTracker
     from terrapref.world import rasterise
     renderer = SegmentationRenderer(camera, rasterise(scenario))
@@ -233,7 +236,7 @@ def _drive(stage: OffsetStage, scenario, camera: PinholeCamera, seconds: float) 
     poses = []
     for _ in range(round(seconds * 10)):
         s = tracker.update(np.array(pose[:2]))
-        w = stage.decide(SegmentationView.of(renderer.render(pose)), pose, path, s)
+        w = stage.yaw_rate(SegmentationView.of(renderer.render(pose)), pose, path, s)
         pose = integrate_unicycle(pose, Command(1.0, w), 0.1)
         poses.append(pose)
     return np.array(poses)
@@ -242,7 +245,7 @@ def _drive(stage: OffsetStage, scenario, camera: PinholeCamera, seconds: float) 
 def test_the_offset_stage_goes_round_trees_on_the_path_and_comes_back(camera):
     scenario = _scenario([TREES])
     lethal = np.array([0])
-    stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, lethal, 1.0)
+    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, lethal, CONTROL)
     poses = _drive(stage, scenario, camera, 30.0)
     # Clear of the 2 x 2.2 m trees (x 13.1-15.1, y 9.1-11.3) by the half-width 0.6 m at least.
     beside = (poses[:, 0] > 13.1 - 0.6) & (poses[:, 0] < 15.1 + 0.6)
@@ -265,11 +268,11 @@ def test_trees_wider_than_every_fitted_offset_are_escaped_beyond_them(camera):
     # 7 m across: the fitted offsets reach 3 m, getting round needs 3.5 + 0.6 + 0.3 = 4.4 m or more.
     wide = {"class": "non_traversable", "rectangle": {"center": [16.0, 10.0], "size": [2.5, 7.0]}}
     scenario = _scenario([wide])
-    stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), 1.0)
+    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), CONTROL)
     poses = _drive(stage, scenario, camera, 34.0)
     assert _clearance(poses, (16.0, 10.0), (2.5, 7.0)) > 0.6 + 0.3
     assert abs(poses[-1, 1] - 10.0) < 0.3 and stage.held == 0.0  # back on the path
-    stuck = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), 1.0, OffsetConfig(escape_factor=1.0))
+    stuck = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), CONTROL, OffsetConfig(escape_factor=1.0))
     assert _clearance(_drive(stuck, scenario, camera, 34.0), (16.0, 10.0), (2.5, 7.0)) == 0.0  # without escape it drives in
 
 
@@ -280,15 +283,15 @@ def test_the_stage_goes_back_to_the_path_only_when_the_way_back_is_clear(camera)
     strip = {"class": "non_traversable", "rectangle": {"center": [11.0, 9.175], "size": [4.0, 0.35]}}
     scenario = _scenario([strip])
     path = ReferencePath(scenario.waypoints)
-    stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), 1.0)
+    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), CONTROL)
     pose = (9.0, 11.4, 0.0)
     stage.held = 1.4
-    stage.decide(_seen_from(scenario, camera, pose), pose, path, 7.0)
+    stage.yaw_rate(_seen_from(scenario, camera, pose), pose, path, 7.0)
     assert stage.held > 0.0
     free = _scenario([])
     stage.reset()
     stage.held = 1.4
-    stage.decide(_seen_from(free, camera, pose), pose, path, 7.0)
+    stage.yaw_rate(_seen_from(free, camera, pose), pose, path, 7.0)
     assert stage.held == 0.0  # with nothing there it goes back
 
 
@@ -300,7 +303,7 @@ def test_a_side_only_the_margin_rules_out_is_kept_rather_than_a_way_across_letha
     trees = {"class": "non_traversable", "rectangle": {"center": [16.0, 10.0], "size": [8.0, 2.5]}}
     scenario = _scenario([trees])
     path = ReferencePath(scenario.waypoints)
-    stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), 1.0)
+    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), CONTROL)
     pose = (10.5, 11.8, 0.0)
     stage.map.update(_seen_from(scenario, camera, pose), pose)
     assert (stage._swept(stage.offsets, pose, path, 8.5) < stage._steps).all()  # every way brushes the clearance
@@ -309,7 +312,7 @@ def test_a_side_only_the_margin_rules_out_is_kept_rather_than_a_way_across_letha
     poses = []
     while pose[0] < 20.0:  # until past the trees
         s = path.project(np.array(pose[:2]))[0]
-        w = stage.decide(_seen_from(scenario, camera, pose), pose, path, s)
+        w = stage.yaw_rate(_seen_from(scenario, camera, pose), pose, path, s)
         pose = integrate_unicycle(pose, Command(1.0, w), 0.1)
         poses.append(pose)
         assert stage.held > 0.0  # never the way across
@@ -325,7 +328,7 @@ def test_when_lethal_terrain_lies_across_every_way_the_side_held_is_kept(camera)
     strip = {"class": "non_traversable", "polygon": [[14.5, 18.0], [15.1, 18.0], [16.9, 2.0], [16.3, 2.0]]}
     scenario = _scenario([strip])
     path = ReferencePath(scenario.waypoints)
-    stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), 1.0)
+    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), CONTROL)
     pose = (10.5, 10.0, 0.0)
     stage.map.update(_seen_from(scenario, camera, pose), pose)
     reach = stage._swept(stage.offsets, pose, path, 8.5, stage._bare)
@@ -338,10 +341,10 @@ def test_when_lethal_terrain_lies_across_every_way_the_side_held_is_kept(camera)
 
 
 def test_ground_never_seen_is_priced_at_the_mean_of_the_non_lethal_classes(camera):
-    stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), 1.0)
+    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), CONTROL)
     assert stage.weights[K] == pytest.approx(DRIVER_LIKE[1:K].mean())
     with pytest.raises(ValueError):
-        OffsetStage(CorridorUtility(DRIVER_LIKE[:-1], 5.0), camera, _columns(), K, np.array([0]), 1.0)
+        OffsetSteering(CorridorUtility(DRIVER_LIKE[:-1], 5.0), camera, _columns(), K, np.array([0]), CONTROL)
 
 
 def _corridor_meta(weights, near_m=5.0) -> dict:
@@ -352,15 +355,16 @@ def _corridor_meta(weights, near_m=5.0) -> dict:
 def test_a_model_file_with_a_corridor_utility_drives_by_the_offset_stage(tmp_path):
     config = ClassifierConfig(hidden=8, skip=True)
     path = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
-    model = load_model(path)
-    assert model.corridor is not None and model.corridor.near_m == 5.0
-    assert Planner(model).offset_stage is not None
-    assert Planner(model, offset=None).offset_stage is None
-    for weights, near, field in ((DRIVER_LIKE[:-1], 5.0, "corridor.weights"), ([math.nan] * 7, 5.0, "corridor.weights"),
-                                 (DRIVER_LIKE, -1.0, "corridor.near_m")):
+    model = load_model(path)  # written before stages were listed: its corridor utility is the offset stage
+    planner = Planner(model)
+    assert planner.stage.type == "offset" and planner.stage.utility.near_m == 5.0 and planner.stage.config == OffsetConfig()
+    assert planner.runner.keeps_ground_map
+    assert not Planner(model, stage="argmax").runner.keeps_ground_map
+    for weights, near, field in ((DRIVER_LIKE[:-1], 5.0, "stages[0].weights"), ([math.nan] * 7, 5.0, "stages[0].weights"),
+                                 (DRIVER_LIKE, -1.0, "stages[0].near_m")):
         bad = save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), _corridor_meta(weights, near))
         with pytest.raises(UserError) as exc:
-            load_model(bad)
+            load_policy(bad)
         assert exc.value.problems[0].field == field
 
 
@@ -391,7 +395,7 @@ def test_corridor_data_survive_a_dataset_file_and_bad_values_are_refused(tmp_pat
 def test_the_compiled_swept_check_is_the_numpy_form(camera):
     """The way to each offset, stepped by pure pursuit in NumPy, meets the trees at the step the kernel says."""
     scenario = _scenario([TREES])
-    stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), 1.0)
+    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), CONTROL)
     path = ReferencePath(scenario.waypoints)
     for pose, s in (((8.0, 10.0, 0.0), 6.0), ((9.0, 10.5, 0.2), 7.0), ((10.0, 9.3, -0.3), 8.0)):
         stage.map.update(_seen_from(scenario, camera, pose), pose)
@@ -420,6 +424,7 @@ import sys, hashlib
 import numpy as np
 sys.path.insert(0, {tests!r})
 from test_corridor import _fit_case
+
 print(hashlib.sha256(_fit_case().tobytes()).hexdigest())
 """
 

@@ -9,13 +9,16 @@ from test_corridor import DRIVER_LIKE, K, _columns, _corridor_meta, _scenario, _
 from helpers import skip_path_weights
 from terrapref.camera import PinholeCamera
 from terrapref.interop.runtime import PlannerRuntime
+from terrapref.features import FeatureConfig
 from terrapref.features.corridor import CorridorConfig
 from terrapref.learning.corridor import CorridorUtility
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.planner.costmap import LETHAL_COST, UNKNOWN_COST, class_costs
-from terrapref.planner.offset import OffsetStage
+from terrapref.planner.stages.offset import OffsetSteering
 from terrapref.terrain import default_classes
+
+CONTROL = FeatureConfig().preference.control  # the default control set: 1 m/s
 
 PATCHES = [  # 4 m wide, 3 m deep, 6-9 m ahead of a vehicle at (10, 10) looking along +x
     {"class": "mud", "rectangle": {"center": [17.5, 14.0], "size": [3.0, 3.0]}},
@@ -29,11 +32,11 @@ PATCHES = [  # 4 m wide, 3 m deep, 6-9 m ahead of a vehicle at (10, 10) looking 
 def seen():
     camera = PinholeCamera()
     scenario = _scenario(PATCHES)
-    stage = OffsetStage(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), 1.0)
+    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), CONTROL, names=default_classes().feature_names)
     pose = (10.0, 10.0, 0.0)
     for _ in range(3):
         stage.map.update(_seen_from(scenario, camera, pose), pose)
-    return stage.costmap(default_classes().feature_names)
+    return stage.costmap()
 
 
 def test_the_cells_of_each_patch_are_priced_in_the_learned_order(seen):

@@ -120,6 +120,13 @@ def test_packages_import_only_from_the_layers_below_their_own():
     assert not upward, "imports against the layer order: " + ", ".join(upward)
 
 
+def test_the_package_docstring_lists_the_layers_in_order():
+    import re
+
+    lines = [line.split(". ", 1)[1].split(" (")[0] for line in (terrapref.__doc__ or "").splitlines() if re.match(r"\d+\. ", line)]
+    assert [set(line.split(", ")) for line in lines] == LAYERS
+
+
 # Registered entry points ("module:attribute", resolved on first use, as Gymnasium's are) are
 # imports too, made late. The one that points up the layers, and why:
 LATE_ENTRY_POINTS = {

@@ -17,6 +17,7 @@ from terrapref.demos.session import DisturbanceConfig
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, LookaheadConfig
 from terrapref.features.corridor import CorridorConfig
+from terrapref.planner.stages import OffsetConfig, SecondStageConfig
 from terrapref.recipes import DEFAULT_RECIPE, RECIPES, Recipe, recipe_named
 from terrapref.learning.train import TrainConfig
 from terrapref.scenario import parse_scenario
@@ -52,7 +53,7 @@ def test_the_paper_recipe_is_the_published_one():
     opt = paper.train.optimiser
     assert (opt.epochs, opt.lr, opt.batch_size, opt.val_fraction) == (15, 1e-3, 256, 0.2)
     assert not (paper.train.classifier.skip or paper.train.data.class_balance or paper.train.data.mirror)
-    assert paper.train.second_stage is None and paper.train.classifier.members == 1
+    assert paper.stages == () and paper.train.classifier.members == 1
     assert (paper.demonstrations, paper.corrections, paper.course) == (1, 0, "train_course")
     assert paper.disturbance is None
     assert paper.features() == FeatureConfig()  # the paper's U: no look-ahead
@@ -62,15 +63,16 @@ def test_ours_drives_train_course_twice_with_pushes():
     ours = RECIPES["ours"]
     assert (ours.demonstrations, ours.course, ours.disturbance) == (2, "train_course", DisturbanceConfig(rate_hz=0.3))
     assert (ours.train.optimiser.epochs, ours.train.optimiser.lr, ours.train.classifier.members) == (100, 3e-3, 1)
-    assert ours.train.classifier.skip and ours.train.data.class_balance and ours.train.data.mirror and ours.train.second_stage is not None
+    assert ours.train.classifier.skip and ours.train.data.class_balance and ours.train.data.mirror and ours.stages == (SecondStageConfig(),)
     assert ours.features().lookahead is None
 
 
 def test_teach_drives_teach_course_once_and_fits_through_the_lookahead():
     teach = RECIPES["teach"]
     assert (teach.demonstrations, teach.course, teach.disturbance) == (1, "teach_course", DisturbanceConfig(rate_hz=0.3))
-    assert (teach.train.optimiser.epochs, teach.train.optimiser.lr, teach.train.classifier.members, teach.train.second_stage.weight) == (100, 3e-3, 3, 5.0)
-    assert teach.train.classifier.skip and teach.train.data.class_balance and teach.train.data.mirror and teach.train.second_stage is not None
+    assert (teach.train.optimiser.epochs, teach.train.optimiser.lr, teach.train.classifier.members) == (100, 3e-3, 3)
+    assert teach.train.classifier.skip and teach.train.data.class_balance and teach.train.data.mirror
+    assert teach.stages == (SecondStageConfig(weight=5.0, lookahead=True), OffsetConfig())  # the offset stage, last, drives
     features = teach.features()
     assert features.lookahead == LookaheadConfig() and features.corridor == CorridorConfig()
     assert features == replace(FeatureConfig(), lookahead=LookaheadConfig(), corridor=CorridorConfig())

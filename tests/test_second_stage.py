@@ -1,10 +1,11 @@
-"""The planner's second stage (terrapref.planner.second_stage): trajectories laid out again from a
+"""The planner's second stage (terrapref.planner.stages.second): trajectories laid out again from a
 point along each candidate, read from the current frame, scored by a linear utility the model
 file carries; off for models without one."""
 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,10 +17,12 @@ from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
 from terrapref.learning.linear import LinearUtility
 from terrapref.learning.model_file import load_model, save_model
+from terrapref.planner.registry import load_policy
 from terrapref.learning.network import ClassifierConfig
 from terrapref.learning.pipeline import train_and_save
 from terrapref.planner import Planner
-from terrapref.planner.second_stage import SecondStage, SecondStageConfig
+from terrapref.planner.stages import SecondStage, SecondStageConfig
+from terrapref.planner.stages.second import SecondStageScores
 from terrapref.scenario import resolve_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim import Simulation
@@ -37,7 +40,7 @@ def setup():
     features = FeatureConfig()
     camera = PinholeCamera()
     featurizer = UtilityFeaturizer(features, camera)
-    return featurizer, camera, SecondStage(SecondStageConfig(), featurizer, camera, UTILITY)
+    return featurizer, camera, SecondStageScores(SecondStageConfig(), featurizer, camera, UTILITY)
 
 
 def _straight_path() -> ReferencePath:
@@ -59,7 +62,7 @@ def test_second_stage_utilities_are_those_of_the_pose_it_starts_from(setup, stri
     """U' equals U computed by hand at the start pose, with its points (every ``stride``-th,
     ending with the last) projected into this frame."""
     featurizer, camera, _ = setup
-    la = SecondStage(SecondStageConfig(stride=stride), featurizer, camera, UTILITY)
+    la = SecondStageScores(SecondStageConfig(stride=stride), featurizer, camera, UTILITY)
     course = resolve_scenario("demo_course")
     pose = Pose(16.0, 10.0, 0.1)
     image = SegmentationRenderer(camera, Simulation(course).world).render(pose)
@@ -115,7 +118,7 @@ def test_invalid_second_stage_configs(config):
 def test_a_second_stage_beyond_the_trajectories_is_refused(setup):
     featurizer, camera, _ = setup
     with pytest.raises(ValueError, match="within the trajectories"):
-        SecondStage(SecondStageConfig(after_s=10.0), featurizer, camera, UTILITY)
+        SecondStageScores(SecondStageConfig(after_s=10.0), featurizer, camera, UTILITY)
 
 
 def _model_with_utility(path: Path, utility: dict | None):
@@ -126,10 +129,12 @@ def _model_with_utility(path: Path, utility: dict | None):
 
 def test_the_planner_looks_ahead_only_with_a_utility(tmp_path: Path):
     plain = Planner(load_model(_model_with_utility(tmp_path / "plain.safetensors", None)))
-    assert plain.second_stage is None
+    assert plain.stage.type == "argmax"
     with_utility = load_model(_model_with_utility(tmp_path / "la.safetensors", {"w": UTILITY.w.tolist(), "b": UTILITY.b.tolist()}))
-    assert Planner(with_utility).second_stage is not None
-    assert Planner(with_utility, second_stage=None).second_stage is None
+    assert Planner(with_utility).stage.type == "second_stage"
+    assert Planner(with_utility, stage="argmax").stage.type == "argmax"
+    with pytest.raises(ValueError, match="no 'offset' stage"):
+        Planner(with_utility, stage="offset")
 
 
 def test_weight_zero_is_the_argmax_of_f(tmp_path: Path):
@@ -139,24 +144,26 @@ def test_weight_zero_is_the_argmax_of_f(tmp_path: Path):
     for x in (8.0, 12.0, 16.0):
         pose = Pose(x, 10.0, 0.0)
         image = renderer.render(pose)
-        planner = Planner(model, second_stage=SecondStageConfig(weight=0.0))
+        fitted = Planner(model).stage
+        planner = Planner(model, stage=SecondStage(replace(fitted.config, weight=0.0), fitted.utility))
         planner.set_path(np.vstack([[x, 10.0], course.waypoints[1:]]))
         d = planner.decide(image, pose)
         assert d.index == int(np.argmax(d.probs))
 
 
 @pytest.mark.parametrize("utility, field", [
-    ({"w": [1.0, 2.0], "b": [0.0] * 21}, "utility.w"),
-    ({"w": [0.0] * 5}, "utility.b"),
-    ({"w": [0.0] * 5, "b": [math.inf] * 21}, "utility.b"),
+    ({"w": [1.0, 2.0], "b": [0.0] * 21}, "stages[0].w"),
+    ({"w": [0.0] * 5}, "stages[0].b"),
+    ({"w": [0.0] * 5, "b": [math.inf] * 21}, "stages[0].b"),
     ("not a table", "utility"),
-    ({"w": [0.0] * 5, "b": [0.0] * 21, "weight": -1.0}, "utility.weight"),
-    ({"w": [0.0] * 5, "b": [0.0] * 21, "weight": "heavy"}, "utility.weight"),
+    ({"w": [0.0] * 5, "b": [0.0] * 21, "weight": -1.0}, "stages[0].weight"),
+    ({"w": [0.0] * 5, "b": [0.0] * 21, "weight": "heavy"}, "stages[0].weight"),
 ])
 def test_a_broken_utility_is_refused_with_its_field(tmp_path: Path, utility, field: str):
+    """A file written before stages were listed (its ``utility`` read as the second stage's block)."""
     path = _model_with_utility(tmp_path / "bad.safetensors", utility)
     with pytest.raises(UserError) as err:
-        load_model(path)
+        load_policy(path)
     assert err.value.problems[0].field == field and str(path) in str(err.value)
 
 
@@ -168,14 +175,16 @@ def test_training_keeps_the_fitted_utility_with_the_model(tmp_path: Path):
     dataset = Dataset(rng.uniform(0, 1, (n, m, 5)).astype(np.float32), rng.integers(0, m, n), np.zeros(n, np.float32),
                       np.zeros(n, np.int64), model_meta())
     out = tmp_path / "m.safetensors"
-    result = train_and_save(dataset, out, train_config(epochs=1, mirror=True, utility=True), checkpoints=False)
-    assert result.utility is not None
-    np.testing.assert_allclose(result.utility.b, result.utility.b[::-1], atol=0.02)  # random labels: asymmetric without mirror
+    result = train_and_save(dataset, out, train_config(epochs=1, mirror=True), checkpoints=False, stages=[SecondStageConfig()])
+    (stage,) = result.stages
+    np.testing.assert_allclose(stage.utility.b, stage.utility.b[::-1], atol=0.02)  # random labels: asymmetric without mirror
     model = load_model(out)
-    np.testing.assert_allclose(model.meta["utility"]["w"], result.utility.w)
-    assert Planner(model).second_stage is not None
+    (block,) = model.meta["stages"]
+    assert block["type"] == "second_stage" and block["fit"] == "frames" and block["weight"] == 1.5
+    np.testing.assert_allclose(block["w"], stage.utility.w)
+    assert Planner(model).stage.header() == stage.header()  # the file round-trips the fitted stage
     train_and_save(dataset, tmp_path / "p.safetensors", train_config(epochs=1), checkpoints=False)
-    assert "utility" not in load_model(tmp_path / "p.safetensors").meta
+    assert load_model(tmp_path / "p.safetensors").meta["stages"] == []
 
 
 def test_the_planner_drives_the_best_second_stage_score(tmp_path: Path):
@@ -183,7 +192,7 @@ def test_the_planner_drives_the_best_second_stage_score(tmp_path: Path):
     model = load_model(_model_with_utility(tmp_path / "la.safetensors", {"w": UTILITY.w.tolist(), "b": UTILITY.b.tolist()}))
     course = resolve_scenario("demo_course")
     renderer = SegmentationRenderer(PinholeCamera(), Simulation(course).world)
-    plain = Planner(model, second_stage=None)
+    plain = Planner(model, stage="argmax")
     for x in (8.0, 12.0, 16.0):
         pose = Pose(x, 10.0, 0.0)
         image = renderer.render(pose)
@@ -193,7 +202,7 @@ def test_the_planner_drives_the_best_second_stage_score(tmp_path: Path):
         plain.set_path(waypoints)
         d, d0 = planner.decide(image, pose), plain.decide(image, pose)
         np.testing.assert_array_equal(d.probs, d0.probs)
-        expected = planner.second_stage.scores(np.log(d.probs), SegmentationView.of(image), pose, planner.path, d.progress_s)
+        expected = planner.runner.scores(np.log(d.probs), SegmentationView.of(image), pose, planner.path, d.progress_s)
         assert d.index == int(np.argmax(expected))
 
 
@@ -216,7 +225,7 @@ def test_scores_are_the_linear_utility_of_the_second_stage_utilities(setup):
         assert np.isneginf(np.delete(got, rows)).all()
 
 
-def _numpy_scores(stage: SecondStage, log_probs: np.ndarray, image: np.ndarray, pose: Pose, path: ReferencePath, s: float) -> np.ndarray:
+def _numpy_scores(stage: SecondStageScores, log_probs: np.ndarray, image: np.ndarray, pose: Pose, path: ReferencePath, s: float) -> np.ndarray:
     """SecondStage.scores as NumPy computed it before its loop was compiled."""
     rows = np.argsort(-log_probs, kind="stable")[: stage.config.candidates]
     r, m = len(rows), stage.m
@@ -231,7 +240,7 @@ def _numpy_scores(stage: SecondStage, log_probs: np.ndarray, image: np.ndarray, 
     return out
 
 
-def _targets(stage: SecondStage, path: ReferencePath, s0: float, rows: np.ndarray) -> np.ndarray:
+def _targets(stage: SecondStageScores, path: ReferencePath, s0: float, rows: np.ndarray) -> np.ndarray:
     """Each candidate's target, (r, 2): the path point at s0 plus its start's forward offset."""
     line = path.straight_between(s0 + stage._x_lo, s0 + stage._x_hi)
     if line is None:
@@ -241,7 +250,7 @@ def _targets(stage: SecondStage, path: ReferencePath, s0: float, rows: np.ndarra
     return np.stack([x + t * ux, y + t * uy], axis=1)
 
 
-def _distances(stage: SecondStage, pose: Pose, path: ReferencePath, s: float, rows: np.ndarray) -> np.ndarray:
+def _distances(stage: SecondStageScores, pose: Pose, path: ReferencePath, s: float, rows: np.ndarray) -> np.ndarray:
     """The second pieces' end distances (r, m) as written out: the complex product by its
     formula, hypot from the C library (NumPy's, and the compiled loop's; not NumPy's SIMD complex
     ``abs``, which rounds differently per CPU)."""

@@ -17,6 +17,7 @@ from terrapref.learning.model_file import expected_shapes, load_model
 from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
 from terrapref.learning.pipeline import train_and_save
 from terrapref.learning.train import MEMBER_SEED_STEP, TrainConfig, split_indices, train
+from terrapref.planner.stages import SecondStageConfig
 
 from helpers import K, M, W_TRUE, assert_weights_equal, dataset_of, sparse_terrain_dataset, linear_dataset, model_meta, random_dataset, random_weights, train_config, weights_differ
 
@@ -27,7 +28,7 @@ from helpers import K, M, W_TRUE, assert_weights_equal, dataset_of, sparse_terra
 def test_defaults_are_the_papers_recipe():
     c = TrainConfig()
     assert (c.optimiser.epochs, c.optimiser.lr, c.optimiser.batch_size, c.optimiser.val_fraction) == (15, 1e-3, 256, 0.2)
-    assert not c.data.class_balance and not c.classifier.skip and c.classifier.depth == 3 and c.second_stage is None
+    assert not c.data.class_balance and not c.classifier.skip and c.classifier.depth == 3
 
 
 def test_paper_budget_is_an_80_20_split_and_135_adam_steps():
@@ -283,8 +284,8 @@ def test_training_without_the_identifiability_report_trains_the_same_weights():
     ds = random_dataset(120, seed=3)
     config = train_config(epochs=3)
     full, bare = train(ds, config), train(ds, config, identify=False)
-    assert full.identifiability is not None and bare.identifiability is None and bare.utility is None
+    assert full.identifiability is not None and bare.identifiability is None and not bare.stages
     assert_weights_equal(full.weights, bare.weights)
     # a second stage needs the fit: it is made whatever identify says
-    staged = train(ds, train_config(epochs=3, utility=True), identify=False)
-    assert staged.utility is not None
+    staged = train(ds, train_config(epochs=3), identify=False, stages=[SecondStageConfig()])
+    assert staged.stages[0].type == "second_stage" and staged.identifiability is not None

@@ -1,8 +1,26 @@
 """terrapref: learn how a person likes to drive off-road from a few minutes of demonstration.
 
-The package is laid out as the data flows: ``scenario`` (files) -> ``world`` (terrain raster)
--> ``vehicle`` and ``camera`` (dynamics and sensing) -> ``sim`` (closed loop, Gymnasium env)
--> demonstrations -> features -> learning -> planner -> evaluation -> report.
+The package is laid out as the data flows, in layers, bottom first; a layer imports only from
+the layers below it (tests/test_layout.py checks this list against the code):
+
+1. errors
+2. yamlio, fileio, progress, configargs, grid, registry
+3. tensorfile, terrain
+4. pngio, scenario (files)
+5. world (terrain raster)
+6. vehicle, plots (dynamics)
+7. camera (sensing)
+8. perception (what a robot's segmentation gets wrong)
+9. sim (closed loop, Gymnasium env)
+10. features (utility features U, look-ahead, corridor)
+11. demos (recordings, datasets)
+12. learning (C, linear and corridor fits, model files)
+13. planner (policies, decision stages, costmap, route)
+14. baselines, recipes
+15. interop (robot logs, ONNX, MCAP, ROS)
+16. evaluation, teleop
+17. report
+18. cli, runtime, warm_up
 """
 
 import os

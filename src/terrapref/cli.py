@@ -16,6 +16,7 @@ import sys
 import tempfile
 import threading
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
@@ -271,6 +272,29 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
     return 0
 
 
+def _stages(args: argparse.Namespace, recipe: Recipe) -> tuple:
+    """The recipe's stages with ``--second-stage`` / ``--no-second-stage`` and ``--stage-weight`` on top."""
+    from terrapref.planner.stages import SecondStageConfig
+
+    stages = list(recipe.stages)
+    second = next((i for i, s in enumerate(stages) if isinstance(s, SecondStageConfig)), None)
+    on, weight = getattr(args, "second_stage", None), getattr(args, "stage_weight", None)
+    if on is False and second is not None:
+        del stages[second]
+        second = None
+    elif on and second is None:
+        stages.insert(0, SecondStageConfig())
+        second = 0
+    if weight is not None:
+        if second is None:
+            raise UserError("--stage-weight", f"recipe {recipe.name} has no second stage here (add --second-stage)")
+        try:
+            stages[second] = replace(stages[second], weight=weight)
+        except ValueError as exc:
+            raise UserError("--stage-weight", str(exc)) from None
+    return tuple(stages)
+
+
 def _train_config(args: argparse.Namespace, recipe: Recipe) -> TrainConfig:
     """The recipe's training configuration with the flags given on the command line on top."""
     from terrapref.configargs import apply_arguments
@@ -397,13 +421,9 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
         chosen.append(f"{label}epoch {r.best_epoch}: val loss {best.val_loss:.4f}, val acc {best.val_acc:.3f}")
     if result.steadying is not None:
         print(result.steadying.line())
-    if result.corridor is not None:
-        fit, classes = result.corridor, data.feature_config.feature_classes
-        lethal = set(ClassTable.from_dict(data.meta["classes"], str(args.data[0])).lethal)
-        prices = ", ".join(f"{c} {w / fit.weights[len(classes) + 1]:.1f}{' (lethal: ruled out)' if c in lethal else ''}"
-                           for c, w in zip(classes, fit.weights))
-        print(f"offset stage: fitted to {fit.samples} frames, near distance {fit.near_m:g} m; each class's price per metre, "
-              f"relative to the detour's per m^2 of offset per metre: {prices}")
+    lethal = frozenset(ClassTable.from_dict(data.meta["classes"], str(args.data[0])).lethal)
+    for stage in result.stages:
+        print(stage.describe(data.feature_config.feature_classes, lethal))
     if result.identifiability is not None:
         print("what the demonstrations show (stored in the model):")
         for line in result.identifiability.lines(data.meta.get("profile")):
@@ -421,23 +441,25 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
     recipe = recipe_named(args.recipe or DEFAULT_RECIPE)
     config = _train_config(args, recipe)
+    recipe = replace(recipe, stages=_stages(args, recipe))
     _check_distinct(args.data, "recording or dataset")
     _check_output(args.out, "--out", args.data)
     data = _training_data(args, recipe)
-    if config.second_stage is not None and recipe.lookahead and data.U2 is None:
+    types = {stage.type for stage in recipe.stages}
+    if recipe.features().lookahead is not None and data.U2 is None:
         print(f"warning: {args.data[0]} carries no look-ahead utilities; the second stage is fitted frame by frame "
               f"(train from the recordings, or featurize them with --recipe {recipe.name})", file=sys.stderr)
-    if recipe.corridor and data.corridor is None:
-        print(f"warning: {args.data[0]} carries no corridor data; the planner will drive C's trajectories, not the offset stage "
+    if "offset" in types and data.corridor is None:
+        print(f"warning: {args.data[0]} carries no corridor data; the model gets no offset stage and drives C's trajectories "
               f"(train from the recordings, or featurize them with --recipe {recipe.name})", file=sys.stderr)
     opt, members = config.optimiser, config.classifier.members
     print(f"recipe {recipe.name}: training on {len(data)} samples ({len(args.data)} input(s)), {opt.epochs} epochs, "
           f"batch {opt.batch_size}, lr {opt.lr}{f', {members} members' if members > 1 else ''}")
     try:
-        result = train_and_save(data, args.out, config, progress=_epoch_printer(config, args.verbose), recipe=recipe.name)
+        result = train_and_save(data, args.out, config, progress=_epoch_printer(config, args.verbose), recipe=recipe.name, stages=recipe.stages)
     except KeyboardInterrupt:
         if interrupted_path(args.out).exists():
-            print(f"note: the best epochs so far are in {interrupted_path(args.out)} (marked interrupted: no second stage); "
+            print(f"note: the best epochs so far are in {interrupted_path(args.out)} (marked interrupted: no decision stages); "
                   f"{args.out} is untouched", file=sys.stderr)
         raise
     _report_training(args, config, data, result)
@@ -731,7 +753,9 @@ def _cmd_recipes(args: argparse.Namespace) -> int:
     for name, r in RECIPES.items():
         tag = " (default)" if name == DEFAULT_RECIPE else ""
         drives = f"{r.demonstrations} drive{'s' if r.demonstrations > 1 else ''} of {r.course}"
-        print(f"{name}{tag}: {drives}, {r.train.optimiser.epochs} epochs{f', {r.train.classifier.members} members' if r.train.classifier.members > 1 else ''}")
+        stages = ", then ".join(s.type for s in r.stages) or "none"
+        print(f"{name}{tag}: {drives}, {r.train.optimiser.epochs} epochs{f', {r.train.classifier.members} members' if r.train.classifier.members > 1 else ''}; "
+              f"stages: {stages} (the last drives; none: C's argmax)")
         print(f"    {r.summary}")
     return 0
 
@@ -990,6 +1014,11 @@ def _train_parser(sub: argparse._SubParsersAction, flags: bool = True) -> None:
 
         group = p.add_argument_group("training (defaults shown: recipe teach's; each flag overrides the chosen recipe's value)")
         add_arguments(group, TrainConfig, recipe_named(DEFAULT_RECIPE).train)
+        stages = p.add_argument_group("decision stages (terrapref recipes lists each recipe's; the last one fitted drives)")
+        stages.add_argument("--second-stage", action=argparse.BooleanOptionalAction, default=None,
+                            help="also fit the second stage's linear utility (or, with --no-, leave the recipe's out)")
+        stages.add_argument("--stage-weight", type=float, default=None,
+                            help="the second stage's weight against log F_t in the decision (recipe teach: 5.0)")
 
 
 def _evaluate_parser(sub: argparse._SubParsersAction) -> None:

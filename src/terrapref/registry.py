@@ -99,6 +99,10 @@ class Registry(Generic[T]):
     def __len__(self) -> int:
         return len(self._entries)
 
+    def values(self) -> Iterator[Any]:
+        """The values, loading each, in the order registered."""
+        return (entry.load() for entry in self._entries.values())
+
     def items(self) -> Iterator[tuple[str, Any]]:
         """(name, value) pairs, loading each value."""
         return ((name, entry.load()) for name, entry in self._entries.items())

@@ -38,9 +38,10 @@ def decisions(work: Path) -> dict:
         features = recipe.features()
         paths = record_demonstrations(recipe, work / recipe.name, 7, course=course, features=features)
         model = work / f"{recipe.name}.safetensors"
-        train_and_save(build_dataset([read_recording(p) for p in paths], features), model, replace(recipe.train, seed=7), checkpoints=False)
+        train_and_save(build_dataset([read_recording(p) for p in paths], features), model, replace(recipe.train, seed=7), checkpoints=False,
+                   stages=[s for s in recipe.stages if s.type != "offset"])
         for name in driven:
-            driver = PlannerDriver(Planner(load_model(model), offset=None), keep=True)
+            driver = PlannerDriver(Planner(load_model(model)), keep=True)
             run_episode(Simulation(resolve_scenario(name)), driver, np.random.default_rng(0))
             out[f"{recipe.name}/{name}"] = [d.index for d in driver.decisions]
     return out

@@ -160,7 +160,7 @@ def _write_runs(results: list[RunResult], folder: Path, model) -> None:
     from terrapref.planner import Planner
 
     camera = PinholeCamera(model.camera)
-    stage = Planner(model).offset_stage  # None for a planner without one (C alone, a baseline)
+    stage = Planner(model).runner  # its costmap only where it keeps a ground map (the offset stage)
     for r in results:
         run = r.run
         if r.driver != PLANNER or run is None:
@@ -171,7 +171,7 @@ def _write_runs(results: list[RunResult], folder: Path, model) -> None:
         frames = RunFrames(times=0.1 * np.arange(len(poses)), poses=poses, commands=run.commands,
                            image=lambda i, poses=poses, renderer=renderer: renderer.render(Pose(*poses[i])), chosen=run.index,
                            path=scenario.waypoints, camera=model.camera, classes=model.classes, preference=model.features.preference, probs=run.probs,
-                           costmap=costmaps_of(stage, poses, model.features.feature_classes) if stage is not None else None)
+                           costmap=costmaps_of(stage, poses) if stage.keeps_ground_map else None)
         write_mcap(folder / f"{file_stem(r.scenario)}_seed{r.seed}.mcap", frames, robot_file=False)
 
 

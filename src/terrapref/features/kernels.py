@@ -121,7 +121,7 @@ def stage_scores(log_probs: np.ndarray, weight: float, rows: np.ndarray, ids: np
     """The second stage's scores (m,): ``log_probs + weight * value`` for the candidates, where a
     candidate's value is the best of its second pieces' linear utilities; -inf elsewhere.
 
-    The NumPy form (terrapref.planner.second_stage)::
+    The NumPy form (terrapref.planner.stages.second)::
 
         terrain = point_weight[ids] * seen[rows].ravel()                            # (r * m * n',)
         value = (terrain.reshape(r, m, n').sum(axis=2) + w_distance * distance + b).max(axis=1)

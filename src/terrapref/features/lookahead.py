@@ -10,7 +10,7 @@ own utilities: terrain shares, and the distance utility of its end against the p
 horizon beyond its start, normalised over all the second pieces together, so that a first
 trajectory that has left the path scores its continuations lower than one that has not.
 
-The planner's second stage (terrapref.planner.second_stage) scores these with a learned linear
+The planner's second stage (terrapref.planner.stages.second) scores these with a learned linear
 utility; training fits that utility through the same look-ahead (terrapref.learning.linear).
 """
 

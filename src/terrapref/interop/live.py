@@ -126,8 +126,7 @@ class WatchedDriver:
 
 def planner_costmap(planner: Planner) -> Callable[[], Costmap] | None:
     """What gives ``planner``'s costmap now, for :meth:`LiveRun.frame` (None: it keeps no ground map)."""
-    stage = planner.offset_stage
-    return None if stage is None else (lambda: stage.costmap(planner.policy.features.feature_classes))
+    return planner.costmap if planner.runner.keeps_ground_map else None
 
 
 def watching(view: LiveView | None) -> Callable[[Any], Any] | None:

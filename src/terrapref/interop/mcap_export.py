@@ -256,19 +256,19 @@ def _robot_yaml(cam: CameraConfig) -> str:
     )
 
 
-def costmaps_of(stage, poses: np.ndarray, names: tuple[str, ...]) -> Callable[[int, np.ndarray], Costmap | None]:
-    """The costmaps of one run for :attr:`RunFrames.costmap`: ``stage`` (an offset stage,
-    terrapref.planner.offset), its map emptied, takes each frame in turn as it was seen from
-    ``poses`` (F, 3), and every :data:`COSTMAP_EVERY`-th frame gives the costmap of ``names``, the
-    model's feature classes. Frames are to be asked for in order."""
+def costmaps_of(stage, poses: np.ndarray) -> Callable[[int, np.ndarray], Costmap | None]:
+    """The costmaps of one run for :attr:`RunFrames.costmap`: ``stage`` (a planner's stage that
+    keeps a ground map, terrapref.planner.stages), its map emptied, takes each frame in turn as
+    it was seen from ``poses`` (F, 3), and every :data:`COSTMAP_EVERY`-th frame gives its
+    costmap. Frames are to be asked for in order."""
     from terrapref.camera import SegmentationView
     from terrapref.vehicle import Pose
 
     stage.reset()
 
     def costmap(i: int, ids: np.ndarray) -> Costmap | None:
-        stage.map.update(SegmentationView.of(ids), Pose(*poses[i]))
-        return stage.costmap(names) if i % COSTMAP_EVERY == 0 else None
+        stage.observe(SegmentationView.of(ids), Pose(*poses[i]))
+        return stage.costmap() if i % COSTMAP_EVERY == 0 else None
     return costmap
 
 
@@ -283,10 +283,10 @@ def model_costmaps(model, frames: RunFrames) -> Callable[[int, np.ndarray], Cost
 
     if model.classes != frames.classes:
         raise ValueError("was trained for another class table than the recording's")
-    stage = Planner(model, frames.camera).offset_stage
-    if stage is None:
+    stage = Planner(model, frames.camera).runner
+    if not stage.keeps_ground_map:
         raise ValueError("has no offset stage, whose ground map the costmap prices (train it with recipe teach)")
-    return costmaps_of(stage, frames.poses, model.features.feature_classes)
+    return costmaps_of(stage, frames.poses)
 
 
 def recording_frames(rec) -> RunFrames:

@@ -206,6 +206,6 @@ class PlannerNodeCore:
     def costmap(self) -> Costmap | None:
         """The learned preference over the ground seen, when the planner keeps a ground map."""
         with self._lock:
-            if self.runtime is None or self.runtime.planner.offset_stage is None:
+            if self.runtime is None or not self.runtime.planner.runner.keeps_ground_map:
                 return None
             return self.runtime.costmap()

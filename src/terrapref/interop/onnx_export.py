@@ -4,9 +4,9 @@ Input ``utilities``, float32 (N, m, k): each frame's utility features U (SPEC 7;
 terrain classes + distance). Output ``logits``, float32 (N, m): C's scores, whose softmax is
 F_t, computed in float64 inside the graph like the planner's own forward pass (an ensemble's logits are the log of its members' mean softmax, as in
 :func:`terrapref.learning.numpy_forward`). Everything the model was trained under (preference
-set, camera, classes, profile, feature configuration, the second stage's linear utility, the
-offset stage's corridor utility) is in the model's metadata as JSON strings under
-``terrapref.*`` keys. The offset stage itself (terrapref.planner.offset: a ground map, the
+set, camera, classes, profile, feature configuration, the decision stages: the second stage's
+linear utility, the offset stage's corridor utility) is in the model's metadata as JSON strings under
+``terrapref.*`` keys. The offset stage itself (terrapref.planner.stages.offset: a ground map, the
 corridor, pure pursuit) is not a network and is not in the graph; ``terrapref.runtime`` runs it.
 """
 
@@ -120,10 +120,7 @@ def export_onnx(model: LoadedModel, out: str | Path) -> Path:
         "profile": list(model.profile),
         "feature_classes": list(model.features.feature_classes),
     }
-    if model.utility is not None:
-        props["utility"] = {"w": model.utility.w.tolist(), "b": model.utility.b.tolist(), "weight": model.stage_weight}
-    if model.corridor is not None:  # the offset stage's utility; its geometry is features.corridor
-        props["corridor"] = {"weights": model.corridor.weights.tolist(), "near_m": model.corridor.near_m}
+    props["stages"] = list(model.stages)  # the decision stages' blocks (the offset stage's geometry is features.corridor)
     for key in ("recipe", "identifiability", "created", "sources", "fingerprint"):
         if key in meta:
             props[key] = meta[key]

@@ -114,10 +114,10 @@ class PlannerRuntime:
         Raises:
             ValueError: the model's planner keeps no ground map (it has no offset stage).
         """
-        stage = self.planner.offset_stage
-        if stage is None:
+        costmap = self.planner.costmap()
+        if costmap is None:
             raise ValueError("this model's planner keeps no ground map (no offset stage: recipe teach has one)")
-        return stage.costmap(self.model.features.feature_classes)
+        return costmap
 
     def command_at(self, now_s: float) -> Command:
         """The command to send at ``now_s``: the last decision's while it is fresh, else a stop."""

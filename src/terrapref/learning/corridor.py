@@ -1,4 +1,4 @@
-"""Fitting the corridor utility (terrapref.planner.offset) to the offsets a demonstrator steered for.
+"""Fitting the corridor utility (terrapref.planner.stages.offset) to the offsets a demonstrator steered for.
 
 Each frame's label is the offset the driver was steering for, read when the recording is
 featurised (:func:`terrapref.features.corridor.intent_offsets`). A softmax over the candidate

@@ -1,6 +1,11 @@
 """Model files: weights in safetensors, configuration and provenance in its JSON metadata.
 
 Loading reads tensors and a JSON header only; no code from the file is ever executed.
+
+The header's ``stages`` lists the decision stages fitted with C, one block each under its
+``type`` (terrapref.planner.stages reads them). Files written before stages were listed carry
+the second stage's linear utility as ``utility`` and the offset stage's as ``corridor``; they are
+read as the same stages (:func:`stage_blocks`).
 """
 
 from __future__ import annotations
@@ -14,8 +19,6 @@ import numpy as np
 from terrapref.camera import CameraConfig
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
-from terrapref.learning.corridor import CorridorUtility
-from terrapref.learning.linear import LinearUtility
 from terrapref.learning.network import MEMBERS, ClassifierConfig, member_prefix
 from terrapref.tensorfile import read_tensor_file, write_tensor_file
 from terrapref.terrain import ClassTable
@@ -36,9 +39,7 @@ class LoadedModel:
     classes: ClassTable
     profile: tuple[str, ...]
     meta: dict
-    utility: LinearUtility | None = None  # fitted with C for the planner's second stage (TrainConfig.second_stage)
-    stage_weight: float = 1.5  # the second stage's weight in the decision, as trained (SecondStageConfig.weight)
-    corridor: CorridorUtility | None = None  # the offset stage's utility, when trained on corridor data (terrapref.planner.offset)
+    stages: tuple[dict, ...] = ()  # the decision stages' blocks, in order (terrapref.planner.stages reads them)
 
 
 def save_model(path: str | Path, classifier: ClassifierConfig, weights: dict[str, np.ndarray], meta: dict) -> Path:
@@ -86,53 +87,33 @@ def classifier_from(weights: dict[str, np.ndarray], meta: dict, source: str) -> 
             raise UserError(source, f"expected finite floats, got {weights[name].dtype}" + (" with NaN or infinite values" if weights[name].dtype.kind == "f" else ""), field=f"weights.{name}")
     if classifier.m != features.preference.m or classifier.n_features != features.n_features:
         raise UserError(source, "classifier shape does not match its feature configuration", field="classifier")
-    utility, weight = _utility(meta, features, source)
-    return LoadedModel(source, classifier, weights, features, camera, classes, profile, meta, utility, weight, _corridor(meta, features, source))
+    return LoadedModel(source, classifier, weights, features, camera, classes, profile, meta, stage_blocks(meta, features, source))
 
 
-def _corridor(meta: dict, features: FeatureConfig, source: str) -> CorridorUtility | None:
-    """The corridor utility the metadata carries (``corridor``: ``weights``, ``near_m``), if any."""
-    data = meta.get("corridor")
-    if data is None:
-        return None
-    if not isinstance(data, dict):
-        raise UserError(source, "expected a mapping with weights and near_m", field="corridor")
-    if features.corridor is None:
-        raise UserError(source, "a corridor utility, but the feature configuration has no corridor", field="corridor")
-    size = features.n_terrain + 3
-    try:
-        weights = np.asarray(data["weights"], dtype=float)
-    except (KeyError, TypeError, ValueError):
-        weights = None
-    if weights is None or weights.shape != (size,) or not np.isfinite(weights).all():
-        raise UserError(source, f"expected {size} finite numbers", field="corridor.weights")
-    near = data.get("near_m")
-    if isinstance(near, bool) or not isinstance(near, (int, float)) or not (math.isfinite(near) and near > 0):
-        raise UserError(source, "expected a finite distance > 0", field="corridor.near_m")
-    return CorridorUtility(weights, float(near), features.corridor)
-
-
-def _utility(meta: dict, features: FeatureConfig, source: str) -> tuple[LinearUtility | None, float]:
-    """The linear utility the metadata carries (``utility``: ``w`` per column, ``b`` per trajectory,
-    ``weight`` in the decision, 1.5 in files made before it was stored), if any."""
-    data = meta.get("utility")
-    if data is None:
-        return None, 1.5
-    if not isinstance(data, dict):
-        raise UserError(source, "expected a mapping with w, b and weight", field="utility")
-    weight = data.get("weight", 1.5)
-    if isinstance(weight, bool) or not isinstance(weight, (int, float)) or not (math.isfinite(weight) and weight >= 0):
-        raise UserError(source, "expected a finite number >= 0", field="utility.weight")
-    arrays = {}
-    for name, size in (("w", features.n_terrain + 1), ("b", features.preference.m)):
-        try:
-            value = np.asarray(data[name], dtype=float)
-        except (KeyError, TypeError, ValueError, IndexError):
-            value = None
-        if value is None or value.shape != (size,) or not np.isfinite(value).all():
-            raise UserError(source, f"expected {size} finite numbers", field=f"utility.{name}")
-        arrays[name] = value
-    return LinearUtility(arrays["w"], arrays["b"]), float(weight)
+def stage_blocks(meta: dict, features: FeatureConfig, source: str) -> tuple[dict, ...]:
+    """The header's ``stages`` (a list of mappings, each with a ``type``), or, in a file written
+    before stages were listed, its ``utility`` (the second stage; fitted through the look-ahead's
+    ``after_s`` and ``stride`` when the features carry one) and ``corridor`` (the offset stage,
+    which drove), in that order."""
+    if "stages" in meta:
+        blocks = meta["stages"]
+        if not isinstance(blocks, list):
+            raise UserError(source, "expected a list of stages", field="stages")
+        for i, block in enumerate(blocks):
+            if not isinstance(block, dict) or not isinstance(block.get("type"), str):
+                raise UserError(source, "expected a mapping with a type", field=f"stages[{i}]")
+        return tuple(blocks)
+    blocks = []
+    for key, kind in (("utility", "second_stage"), ("corridor", "offset")):
+        data = meta.get(key)
+        if data is None:
+            continue
+        if not isinstance(data, dict):
+            raise UserError(source, "expected a mapping", field=key)
+        look = features.lookahead if key == "utility" and features.lookahead is not None else None
+        defaults = {"weight": 1.5, **({"after_s": look.after_s, "stride": look.stride} if look else {})} if key == "utility" else {}
+        blocks.append({"type": kind, **defaults, **data})
+    return tuple(blocks)
 
 
 def model_context(meta: dict, source: str) -> tuple[FeatureConfig, CameraConfig, ClassTable, tuple[str, ...]]:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import shutil
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, replace
 from pathlib import Path
 
@@ -12,7 +12,7 @@ from terrapref.demos.dataset import Dataset
 from terrapref.fileio import new_folder, replace_dir
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig, member_prefix
-from terrapref.learning.train import EpochMetrics, TrainConfig, TrainResult, train
+from terrapref.learning.train import EpochMetrics, StageFit, TrainConfig, TrainResult, train
 
 
 def _source_meta(dataset: Dataset, config: TrainConfig, recipe: str | None) -> dict:
@@ -37,10 +37,7 @@ def model_meta(dataset: Dataset, config: TrainConfig, result: TrainResult, sourc
         "steps": result.steps,
         **({"identifiability": result.identifiability.to_dict()} if result.identifiability is not None else {}),
         **({"steadying": result.steadying.to_dict()} if result.steadying is not None else {}),
-        **({"utility": {"w": result.utility.w.tolist(), "b": result.utility.b.tolist(), "weight": config.second_stage.weight,
-                        "fit": "lookahead" if dataset.U2 is not None else "frames"}} if result.utility is not None else {}),
-        **({"corridor": {"weights": result.corridor.weights.tolist(), "near_m": result.corridor.near_m, "loss": result.corridor.loss,
-                         "samples": result.corridor.samples}} if result.corridor is not None else {}),
+        "stages": [stage.header() for stage in result.stages],
         **({"members": [{"seed": seed, "best_epoch": r.best_epoch, "history": [asdict(h) for h in r.history]}
                         for seed, r in zip(config.member_seeds, result.members)]} if result.members else {}),
     }
@@ -98,15 +95,17 @@ class _Checkpoints:
             weights = {member_prefix(j) + k: v for j, (_, _, _, w) in enumerate(members) for k, v in w.items()}
         meta = {**self.meta, "status": "interrupted",
                 "interrupted": {"members_reached": len(members), "best_epochs": [e for _, e, _, _ in members],
-                                "note": "training was interrupted: the best epochs so far, without the second stage or the identifiability report"}}
+                                "note": "training was interrupted: the best epochs so far, without the decision stages or the identifiability report"}}
         meta.pop("members", None)
         return save_model(interrupted_path(out), classifier, weights, meta)
 
 
 def train_and_save(dataset: Dataset, out: str | Path, config: TrainConfig, checkpoints: bool = True,
-                   progress: Callable[[EpochMetrics], None] | None = None, recipe: str | None = None, identify: bool = True) -> TrainResult:
+                   progress: Callable[[EpochMetrics], None] | None = None, recipe: str | None = None, identify: bool = True,
+                   stages: Sequence[StageFit] = ()) -> TrainResult:
     """Train, write every epoch as a checkpoint as it is made and the chosen epoch as the model;
-    ``recipe`` (its name) is recorded in the model's metadata; ``identify`` as :func:`train`'s.
+    ``recipe`` (its name) is recorded in the model's metadata; ``identify`` and ``stages`` (the
+    decision stages to fit with C) as :func:`train`'s.
 
     Interrupted (Ctrl-C, or any error but a failed write) after at least one epoch, the best
     epochs so far are written as ``NAME.interrupted.safetensors`` beside ``out`` (metadata
@@ -119,7 +118,7 @@ def train_and_save(dataset: Dataset, out: str | Path, config: TrainConfig, check
     source = _source_meta(dataset, config, recipe)  # the data's fingerprint hashes every sample: once
     saver = _Checkpoints(out, {**source, "members": config.classifier.members}, checkpoints)
     try:
-        result = train(dataset, config, progress, on_epoch=saver, identify=identify)
+        result = train(dataset, config, progress, on_epoch=saver, identify=identify, stages=stages)
         meta = model_meta(dataset, config, result, source)
         save_model(out, result.classifier, result.weights, {**meta, "epoch": result.best_epoch})
     except OSError as exc:  # a file could not be written (a full disk): nothing of this run is left to fill it further

@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
-from typing import Any, get_args, get_type_hints
+from typing import Any, Protocol, get_args, get_type_hints
 
 import numpy as np
 
@@ -21,7 +21,6 @@ from terrapref.configargs import option
 from terrapref.demos.dataset import Dataset
 from terrapref.learning import exact, kernels
 from terrapref.learning.identify import Identifiability, identifiability
-from terrapref.learning.corridor import CorridorFit, fit_corridor
 from terrapref.learning.linear import LinearUtility, fit_linear_utility, fit_lookahead_utility
 from terrapref.learning.mlp import Adam, TrainableClassifier, cross_entropy, init_weights, round_inputs
 from terrapref.learning.steady import Steadying, steady_labels
@@ -79,23 +78,6 @@ class DataOptions:
 
 
 @dataclass(frozen=True)
-class SecondStageConfig:
-    """The linear utility model (terrapref.learning.linear), fitted to every sample (with the
-    mirrored copies when ``DataOptions.mirror`` is on) and kept with the model; the planner's
-    second stage scores with it (terrapref.planner.second_stage). When the dataset carries the
-    look-ahead utilities (``FeatureConfig.lookahead``), the fit goes through the look-ahead.
-
-    Attributes:
-        weight: the second stage's value against log F_t in the planner's decision.
-    """
-
-    weight: float = option(1.5, "the second stage's weight against log F_t in the decision", flag="stage-weight")
-
-    def __post_init__(self) -> None:
-        _check([(math.isfinite(self.weight) and self.weight >= 0, "stage weight must be finite and >= 0")])
-
-
-@dataclass(frozen=True)
 class TrainConfig:
     """How C is trained (defaults: the paper's recipe), in its parts.
 
@@ -104,7 +86,6 @@ class TrainConfig:
         classifier: C's shape (hidden width, activation, depth, residual path, ensemble
             members); its ``m``, ``n_features`` and ``ignore`` are set from the data.
         data: loss weighting and augmentation.
-        second_stage: also fit the linear utility for the planner's second stage (None: C alone).
         seed: seeds the split, the initialisation and the batch order; member j of an ensemble
             trains from ``seed + MEMBER_SEED_STEP * j`` (its own split, initialisation and order).
     """
@@ -112,15 +93,12 @@ class TrainConfig:
     optimiser: OptimiserConfig = field(default_factory=OptimiserConfig)
     classifier: ClassifierConfig = field(default_factory=ClassifierConfig)
     data: DataOptions = field(default_factory=DataOptions)
-    second_stage: SecondStageConfig | None = option(None, "also fit the linear utility and store it with the model; "
-                                                          "the planner then scores a second stage of trajectories with it")
     seed: int = option(0, "seeds the split, the initialisation and the batch order")
 
     def __post_init__(self) -> None:
         parts = [(self.optimiser, OptimiserConfig, "optimiser"), (self.classifier, ClassifierConfig, "classifier"), (self.data, DataOptions, "data")]
         _check([(isinstance(part, kind), f"{name}: expected {kind.__name__}") for part, kind, name in parts]
-               + [(self.second_stage is None or isinstance(self.second_stage, SecondStageConfig), "second_stage must be a SecondStageConfig or None"),
-                  (isinstance(self.seed, int) and not isinstance(self.seed, bool) and self.seed >= 0, "seed must be an integer >= 0")])
+               + [(isinstance(self.seed, int) and not isinstance(self.seed, bool) and self.seed >= 0, "seed must be an integer >= 0")])
         self.classifier.check_trainable()
 
     @property
@@ -135,7 +113,7 @@ class TrainConfig:
     def updated(self, changes: Mapping[str, Any]) -> TrainConfig:
         """This configuration with ``changes`` applied part by part, e.g. ``{"classifier":
         {"hidden": 16}, "seed": 3}`` (a variant named in data, such as a study's ablation); a
-        part that is off (``second_stage`` None) is built from its defaults first.
+        part that is off (None) is built from its defaults first.
 
         Raises:
             ValueError: an unknown name, or a value the configuration's checks refuse.
@@ -147,8 +125,7 @@ class TrainConfig:
         ignored columns come from the data and are in the model's ``classifier``."""
         shape = {k: v for k, v in self.classifier.to_dict().items() if k not in ("m", "n_features", "ignore")}
         return {"optimiser": asdict(self.optimiser), "classifier": shape,
-                "data": {**asdict(self.data), "ignore_features": list(self.data.ignore_features)},
-                "second_stage": None if self.second_stage is None else asdict(self.second_stage), "seed": self.seed}
+                "data": {**asdict(self.data), "ignore_features": list(self.data.ignore_features)}, "seed": self.seed}
 
 
 def _updated(config: Any, changes: Mapping[str, Any]) -> Any:
@@ -201,10 +178,9 @@ class TrainResult:
     checkpoints: list[dict[str, np.ndarray]]
     steps: int
     members: list[TrainResult] = field(default_factory=list)
-    utility: LinearUtility | None = None  # the linear utility model, when TrainConfig.second_stage asks for it
     identifiability: Identifiability | None = None  # what the data show of the preference (terrapref.learning.identify)
     steadying: Steadying | None = None  # the hand's tremor and what was done about it, with DataOptions.steady_labels
-    corridor: CorridorFit | None = None  # the offset stage's corridor utility, when the dataset carries corridor data
+    stages: list[Any] = field(default_factory=list)  # the decision stages fitted with C (terrapref.planner.stages), in order
 
 
 def _ensemble(results: list[TrainResult]) -> TrainResult:
@@ -236,16 +212,44 @@ def split_indices(n: int, val_fraction: float, rng: np.random.Generator) -> tupl
 EpochHook = Callable[[int, ClassifierConfig, dict[str, np.ndarray], EpochMetrics], None]  # (member, classifier, weights, metrics)
 
 
+class FitData:
+    """What the decision stages are fitted to: the samples C was trained on (labels steadied when
+    asked), whether mirrored copies join them, and the linear utility over them, fitted once
+    (the identifiability report and the second stage share it)."""
+
+    def __init__(self, dataset: Dataset, mirror: bool) -> None:
+        self.dataset, self.mirror = dataset, mirror
+        self._utility: tuple[LinearUtility, float] | None = None
+
+    def linear_utility(self) -> tuple[LinearUtility, float]:
+        """The linear utility over the terrain columns and the distance utility, and the
+        look-ahead's weight in its fit (:func:`_fit_utility`)."""
+        if self._utility is None:
+            self._utility = _fit_utility(self.dataset, self.mirror)
+        return self._utility
+
+    @property
+    def has_utility(self) -> bool:
+        return self._utility is not None
+
+
+class StageFit(Protocol):
+    """A decision stage before fitting, as a recipe names it (terrapref.planner.stages.StageConfig)."""
+
+    def fit(self, data: FitData) -> Any:
+        """The fitted stage, or None when the data lack what it needs."""
+
+
 def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callable[[EpochMetrics], None] | None = None,
-          on_epoch: EpochHook | None = None, identify: bool = True) -> TrainResult:
-    """Train C on ``dataset``; returns the lowest-validation-loss epoch's weights and the history.
+          on_epoch: EpochHook | None = None, identify: bool = True, stages: Sequence[StageFit] = ()) -> TrainResult:
+    """Train C on ``dataset``, then fit the decision ``stages`` to the same samples; returns the
+    lowest-validation-loss epoch's weights, the history and the fitted stages.
 
     ``on_epoch`` sees every epoch's weights as they are made (member by member), so that a
     caller can write checkpoints as training goes. The same dataset and configuration give the
     same weights, bit for bit, on any CPU and thread count (:mod:`terrapref.learning.exact`).
-    Without ``identify`` (and without a second stage) the linear utility is not fitted and the
-    result carries no identifiability report: for a caller that trains many models to compare C
-    alone (the study).
+    Without ``identify`` (and with no stage that fits the linear utility) the result carries no
+    identifiability report: for a caller that trains many models to compare C alone (the study).
     """
     config = config or TrainConfig()
     steadying = None
@@ -253,23 +257,12 @@ def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callabl
         dataset, steadying = steady_labels(dataset)
     result = _train_classifier(dataset, config, progress, on_epoch)
     result.steadying = steadying
-    if dataset.corridor is not None:
-        result.corridor = _fit_corridor(dataset)
-    if not identify and config.second_stage is None:
-        return result
-    # The linear utility: the second stage's (when asked for), and the identifiability report's.
-    utility, gamma = _fit_utility(dataset, config.data.mirror)
-    if config.second_stage is not None:
-        result.utility = utility
-    result.identifiability = _identifiability(dataset, utility, gamma)
+    data = FitData(dataset, config.data.mirror)
+    result.stages = [fitted for stage in stages if (fitted := stage.fit(data)) is not None]
+    if identify or data.has_utility:
+        utility, gamma = data.linear_utility()
+        result.identifiability = _identifiability(dataset, utility, gamma)
     return result
-
-
-def _fit_corridor(dataset: Dataset) -> CorridorFit:
-    """The offset stage's corridor utility, fitted to the offsets the driver steered for."""
-    corridor = dataset.corridor
-    offsets = dataset.feature_config.corridor.offsets
-    return fit_corridor(corridor.features, corridor.near_m, corridor.intent_m, offsets)
 
 
 def _train_classifier(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetrics], None] | None,

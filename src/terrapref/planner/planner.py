@@ -1,4 +1,5 @@
-"""The planner: at each camera frame, U from the image and the path, C, and the argmax command.
+"""The planner: at each camera frame, U from the image and the path, the policy's F_t, and the
+command its driving stage (terrapref.planner.stages) chooses.
 
 It sees only what a real robot has: the segmentation image, its own pose and the waypoints.
 It never reads the world map.
@@ -14,10 +15,9 @@ import numpy as np
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationView, as_view
 from terrapref.features import UtilityFeaturizer
 from terrapref.learning.model_file import LoadedModel, check_compatible
-from terrapref.learning import exact
-from terrapref.planner.offset import OffsetConfig, OffsetStage
-from terrapref.planner.second_stage import SecondStage, SecondStageConfig
+from terrapref.planner.costmap import Costmap
 from terrapref.planner.policy import ClassifierPolicy, Observation, Policy
+from terrapref.planner.stages import STAGES, Stage, StageContext, StageInput, driving_stage
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim.loop import Frame
@@ -30,7 +30,7 @@ class Decision:
     """One planning step.
 
     Attributes:
-        index: chosen trajectory (argmax of ``probs``, or of the second stage's scores).
+        index: chosen trajectory (steered continuously, the nearest one).
         command: its (v [m/s], w [rad/s]).
         probs: F_t, shape (m,).
         U: utility features, shape (m, K + 1).
@@ -44,29 +44,25 @@ class Decision:
     progress_s: float
 
 
-MODEL = "model"  # Planner(second_stage=MODEL): the second stage as the model was trained for it
 PATH_AHEAD_M = np.arange(1.0, 9.0)  # where Observation.path_ahead samples the path [m]
 
 
 class Planner:
     """A policy (the trained classifier C, or a baseline) driving by the preference set.
 
+    Each frame: U, the policy's F_t, and the command of the driving stage
+    (terrapref.planner.stages): by default the last of the stages the model file lists, or C's
+    argmax when it lists none.
+
     Args:
         model: a loaded model file (C) or any :class:`Policy`.
         camera: the robot's camera; a model trained for another camera is refused.
-        second_stage: the second stage beyond the trajectories (terrapref.planner.second_stage),
-            used when the model file carries the linear utility it scores with (``terrapref
-            train --second-stage``); ``MODEL`` (the default): the weight the model was trained
-            with and the look-ahead its data were featurised with; None never looks beyond the
-            trajectories.
-        offset: the offset stage (terrapref.planner.offset), used when the model file carries
-            the corridor utility it scores offsets with: the planner then steers toward the
-            offset it holds, and C's distribution is still computed for every frame. ``MODEL``
-            (the default): with the default :class:`OffsetConfig`; None: drive C's trajectories.
+        stage: the stage that drives instead of the file's: one of the file's by its type (or
+            ``"argmax"``, which every policy has), or a :class:`Stage` (e.g. with another
+            configuration).
     """
 
-    def __init__(self, model: LoadedModel | Policy, camera: CameraConfig | None = None,
-                 second_stage: SecondStageConfig | str | None = "model", offset: OffsetConfig | str | None = "model") -> None:
+    def __init__(self, model: LoadedModel | Policy, camera: CameraConfig | None = None, stage: Stage | str | None = None) -> None:
         policy = model if isinstance(model, Policy) else ClassifierPolicy(model)
         camera = camera or policy.camera
         if isinstance(model, LoadedModel):
@@ -76,27 +72,16 @@ class Planner:
         self.policy = policy
         self.camera = PinholeCamera(camera)
         self.featurizer = UtilityFeaturizer(policy.features, self.camera, policy.classes)
-        self.control = policy.features.preference.control
-        stage = policy.stage_utility()
-        if second_stage == MODEL and stage is not None:
-            look = policy.features.lookahead
-            second_stage = SecondStageConfig(weight=stage.weight, **({"after_s": look.after_s, "stride": look.stride} if look else {}))
-        self.second_stage = SecondStage(second_stage, self.featurizer, self.camera, stage.utility) if second_stage is not None and stage is not None else None
-        corridor = policy.corridor_utility()
-        self.offset_stage = None
-        if offset is not None and corridor is not None:
-            lethal = np.array(sorted({int(self.featurizer.class_columns[i]) for i in policy.classes.lethal_ids}), dtype=np.int64)
-            self.offset_stage = OffsetStage(corridor, self.camera, self.featurizer.class_columns, policy.features.n_terrain, lethal,
-                                            self.control.v_mps, None if offset == MODEL else offset)
+        self.stage = _chosen(policy, stage)
+        self.runner = self.stage.runner(StageContext(self.camera, self.featurizer, policy.features, policy.classes))
         self.path: ReferencePath | None = None
         self.tracker: PathTracker | None = None
 
     def set_path(self, waypoints: np.ndarray) -> None:
-        """Start following a new reference path (the offset stage forgets the ground it has seen)."""
+        """Start following a new reference path (the driving stage forgets what it kept, e.g. the ground seen)."""
         self.path = ReferencePath(np.asarray(waypoints, dtype=float))
         self.tracker = PathTracker(self.path)
-        if self.offset_stage is not None:
-            self.offset_stage.reset()
+        self.runner.reset()
 
     def warm_up(self) -> None:
         """Decide once on a blank frame along a straight path, then forget that path.
@@ -108,11 +93,10 @@ class Planner:
         self.set_path(np.array([[0.0, 0.0], [20.0, 0.0]]))
         self.decide(np.full(self.camera.shape, UNKNOWN, dtype=np.uint8), Pose(0.0, 0.0, 0.0))
         self.path, self.tracker = path, tracker
-        if self.offset_stage is not None:  # the blank frame is not ground seen
-            self.offset_stage.reset()
+        self.runner.reset()  # the blank frame is not ground seen
 
     def decide(self, image: np.ndarray | SegmentationView, pose: Pose) -> Decision:
-        """Choose a trajectory for one segmentation frame (H, W) uint8 at ``pose``.
+        """Choose a command for one segmentation frame (H, W) uint8 at ``pose``.
 
         ``image`` may be a :class:`SegmentationView`, of which only the pixels the policy reads
         are rendered (the preference set's, for C).
@@ -124,15 +108,28 @@ class Planner:
         U = self.featurizer(view, pose, self.path, s)
         ahead = path_ahead(self.path, pose, s) if self.policy.uses_path_ahead else _NO_POINTS
         probs = self.policy.probabilities(Observation(U, view, ahead))
-        if self.offset_stage is not None:
-            # Steered continuously within the stick's range; the index names the nearest trajectory.
-            w = float(np.clip(self.offset_stage.decide(view, pose, self.path, s), self.control.w_rps[0], self.control.w_rps[-1]))
-            return Decision(int(self.control.label_of(w)), Command(self.control.v_mps, w), probs, U, s)
-        if self.second_stage is None:
-            i = int(np.argmax(probs))
-        else:  # a probability of exactly 0 is -inf, never chosen
-            i = int(np.argmax(self.second_stage.scores(exact.log(probs), view, pose, self.path, s)))
-        return Decision(i, Command(*self.control.command(i)), probs, U, s)
+        choice = self.runner.decide(StageInput(probs, view, pose, self.path, s))
+        return Decision(choice.index, choice.command, probs, U, s)
+
+    def costmap(self) -> Costmap | None:
+        """The ground seen so far as the driving stage prices it (terrapref.planner.costmap);
+        None when that stage keeps no ground map (only the offset stage does)."""
+        return self.runner.costmap()
+
+
+def _chosen(policy: Policy, stage: Stage | str | None) -> Stage:
+    """The stage that drives (:class:`Planner`'s ``stage``)."""
+    if isinstance(stage, Stage):
+        return stage
+    if stage is None:
+        return driving_stage(policy.stages)
+    if stage == "argmax":
+        return driving_stage(())
+    found = [s for s in policy.stages if s.type == stage]
+    if not found:
+        have = ", ".join(["argmax", *(s.type for s in policy.stages)])
+        raise ValueError(f"{policy.path or policy.name}: no {stage!r} stage (STAGES: {', '.join(STAGES.names())}); it has {have}")
+    return found[-1]
 
 
 def path_ahead(path: ReferencePath, pose: Pose, progress_s: float) -> np.ndarray:

@@ -1,8 +1,9 @@
 """Policies: what scores the m trajectories at each frame, behind one planner interface.
 
 A policy sees what the planner sees (the utility features U, the segmentation image, and the
-reference path ahead in the vehicle frame) and returns one score per trajectory; the planner
-takes the argmax. The learned classifier C is one policy; the study's baselines are others:
+reference path ahead in the vehicle frame) and returns one score per trajectory; the planner's
+driving stage (terrapref.planner.stages: C's argmax for a policy without stages) turns them into
+a command. The learned classifier C is one policy; the study's baselines are others:
 
 - ``ClassifierPolicy``: C (SPEC 8), the paper's method.
 - ``PurePursuitPolicy``: follows the path and ignores terrain.
@@ -27,13 +28,13 @@ import numpy as np
 
 from terrapref.camera import CameraConfig, SegmentationView
 from terrapref.features import FeatureConfig
-from terrapref.learning.corridor import CorridorUtility
 from terrapref.learning.linear import LinearUtility
 from terrapref.learning.model_file import FORMAT, LoadedModel
 from terrapref.learning import exact
 from terrapref.learning.forward import PackedNetwork
 from terrapref.learning.forward import probabilities as forward_probabilities
 from terrapref.learning.network import softmax
+from terrapref.planner.stages import Stage, read_stages
 from terrapref.tensorfile import write_tensor_file
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.vehicle import pure_pursuit_yaw_rate
@@ -61,15 +62,6 @@ class Observation:
         return self.view.image
 
 
-@dataclass(frozen=True)
-class StageUtility:
-    """What a policy's second stage scores with (terrapref.planner.second_stage): the linear
-    utility fitted with it and its weight against log F_t in the decision."""
-
-    utility: LinearUtility
-    weight: float
-
-
 class Policy(abc.ABC):
     """Scores the m trajectories of a frame; the planner drives the best.
 
@@ -84,6 +76,10 @@ class Policy(abc.ABC):
         classes: the class table of the images it reads.
         profile: the preference order it was trained under, best first, if any.
         path: the model file it was loaded from ("" for none).
+
+    Attributes:
+        stages: the decision stages fitted with it, in order (the planner drives with the last;
+            none: the argmax of its scores).
     """
 
     name: ClassVar[str] = "policy"
@@ -95,6 +91,7 @@ class Policy(abc.ABC):
         self.camera = camera or CameraConfig()
         self.classes = classes or default_classes()
         self.profile, self.path = profile, path
+        self.stages: tuple[Stage, ...] = ()
 
     @abc.abstractmethod
     def logits(self, obs: Observation) -> np.ndarray:
@@ -103,16 +100,6 @@ class Policy(abc.ABC):
     def probabilities(self, obs: Observation) -> np.ndarray:
         """F_t, shape (m,): the softmax of :meth:`logits` (what the planner reads)."""
         return softmax(self.logits(obs))
-
-    def stage_utility(self) -> StageUtility | None:
-        """What a second stage beyond the trajectories scores with, for a policy trained with
-        one (None: the planner decides by ``logits`` alone)."""
-        return None
-
-    def corridor_utility(self) -> CorridorUtility | None:
-        """What the offset stage (terrapref.planner.offset) scores offsets with, for a policy
-        trained with one (None: the planner drives a trajectory)."""
-        return None
 
 
 class ClassifierPolicy(Policy):
@@ -124,6 +111,7 @@ class ClassifierPolicy(Policy):
         super().__init__(model.features, model.camera, model.classes, model.profile, model.path)
         self.model = model
         self._packed = PackedNetwork.of(model.classifier, model.weights)
+        self.stages = read_stages(model.stages, model.features, model.path)
 
     def logits(self, obs: Observation) -> np.ndarray:
         """log F_t (-inf where a probability is exactly 0)."""
@@ -133,12 +121,6 @@ class ClassifierPolicy(Policy):
         """F_t of C (the mean of an ensemble's members' softmaxes) in one compiled call, the same
         bits on every CPU (:mod:`terrapref.learning.forward`)."""
         return forward_probabilities(self._packed, obs.U)
-
-    def stage_utility(self) -> StageUtility | None:
-        return None if self.model.utility is None else StageUtility(self.model.utility, self.model.stage_weight)
-
-    def corridor_utility(self) -> CorridorUtility | None:
-        return self.model.corridor
 
 
 class LinearPolicy(Policy):

@@ -1,4 +1,5 @@
-"""Policies by name, as Gymnasium registers environments.
+"""Policies by name, as Gymnasium registers environments (one :class:`terrapref.registry.Registry`,
+as every named choice; the decision stages are in :data:`terrapref.planner.stages.STAGES`).
 
 ``register(kind, entry_point)`` names a way to build a :class:`~terrapref.planner.policy.Policy`;
 ``make(kind, **kwargs)`` builds one (the baselines that need no file: ``pure_pursuit``,
@@ -27,6 +28,7 @@ import numpy as np
 from terrapref.errors import UserError
 from terrapref.learning.linear import LinearUtility
 from terrapref.learning.model_file import CLASSIFIER, classifier_from, model_context, read_model_file
+from terrapref.registry import Registry
 from terrapref.planner.policy import CNN, LINEAR, ClassifierPolicy, CostPolicy, LinearPolicy, Policy, PurePursuitPolicy
 
 
@@ -53,26 +55,24 @@ class PolicySpec:
         return entry(*args, **kwargs)
 
 
-_REGISTRY: dict[str, PolicySpec] = {}
+POLICIES: Registry[PolicySpec] = Registry("policy kind")
 
 
 def register(kind: str, entry_point: Callable[..., Policy] | str, from_file: bool = False) -> None:
     """Name a way to build a policy; a kind is registered once."""
-    if kind in _REGISTRY:
-        raise ValueError(f"policy kind {kind!r} is already registered")
-    _REGISTRY[kind] = PolicySpec(kind, entry_point, from_file)
+    POLICIES.register(kind, PolicySpec(kind, entry_point, from_file))
 
 
 def kinds(from_file: bool | None = None) -> list[str]:
     """Registered kinds, in the order registered (only file kinds, or only the others, if asked)."""
-    return [k for k, spec in _REGISTRY.items() if from_file is None or spec.from_file == from_file]
+    return [k for k, spec in POLICIES.items() if from_file is None or spec.from_file == from_file]
 
 
 def make(kind: str, **kwargs) -> Policy:
     """A policy of a kind that needs no model file (``pure_pursuit``, ``hand_cost``)."""
-    if kind not in _REGISTRY or _REGISTRY[kind].from_file:
+    if kind not in POLICIES or POLICIES[kind].from_file:
         raise ValueError(f"unknown policy {kind!r}; policies without a file: {', '.join(kinds(from_file=False))}")
-    return _REGISTRY[kind].build(**kwargs)
+    return POLICIES[kind].build(**kwargs)
 
 
 def load_policy(path: str | Path) -> Policy:
@@ -80,9 +80,9 @@ def load_policy(path: str | Path) -> Policy:
     source = str(path)
     tensors, meta = read_model_file(path)
     kind = meta["kind"]
-    if kind not in _REGISTRY or not _REGISTRY[kind].from_file:
+    if kind not in POLICIES or not POLICIES[kind].from_file:
         raise UserError(source, f"unknown model kind {kind!r}; kinds: {', '.join(kinds(from_file=True))}", field="kind")
-    return _REGISTRY[kind].build(tensors, meta, source)
+    return POLICIES[kind].build(tensors, meta, source)
 
 
 def _classifier(tensors: dict[str, np.ndarray], meta: dict, source: str) -> Policy:

@@ -30,7 +30,7 @@ from terrapref.scenario.path import ReferencePath
 
 if TYPE_CHECKING:
     from terrapref.learning.model_file import LoadedModel
-    from terrapref.planner.offset import OffsetStage
+    from terrapref.planner.stages.offset import OffsetSteering
     from terrapref.scenario import Scenario
     from terrapref.world import WorldMap
 
@@ -102,10 +102,11 @@ def route_over(scenario: Scenario, model: LoadedModel, config: RouteConfig | Non
         RouteError: no route (module docstring).
     """
     from terrapref.planner.planner import Planner
+    from terrapref.planner.stages.offset import OffsetSteering
     from terrapref.world import rasterise
 
-    stage = Planner(model).offset_stage
-    if stage is None:
+    stage = Planner(model).runner
+    if not isinstance(stage, OffsetSteering):  # the route is priced with the offset stage's own prices
         raise ValueError("has no offset stage, whose learned prices the route is priced with (train it with recipe teach)")
     costmap = prior_costmap(world if world is not None else rasterise(scenario), stage, model.features.feature_classes)
     return plan_route(costmap, ReferencePath(scenario.waypoints), *detour_prices(stage), config=config)
@@ -121,14 +122,14 @@ def routed_scenario(scenario: Scenario, route: Route, by: str) -> dict:
     return data
 
 
-def prior_costmap(world: WorldMap, stage: OffsetStage, names: tuple[str, ...]) -> Costmap:
+def prior_costmap(world: WorldMap, stage: OffsetSteering, names: tuple[str, ...]) -> Costmap:
     """The costmap of a prior map ``world`` (every cell known) as ``stage``, an offset stage,
     prices what its ground map holds; ``names``, the classes of its K terrain columns."""
     cells = stage.map.columns[world.raster]
     return costmap_of(cells, np.zeros(2), world.resolution_m, stage.utility.weights, stage.lethal, names)
 
 
-def detour_prices(stage: OffsetStage) -> tuple[float, float]:
+def detour_prices(stage: OffsetSteering) -> tuple[float, float]:
     """The price, per metre and per square metre of offset, of holding off the path that
     ``stage``'s corridor utility learned (``-w_detour``), and the span [m] its detours add."""
     return float(-stage.utility.weights[stage.k + 1]), float(stage.utility.config.span_m)

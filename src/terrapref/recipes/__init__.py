@@ -4,18 +4,21 @@ Named recipes (:data:`RECIPES`, ``terrapref recipes``; ``--recipe NAME`` in ``tr
 ``reproduce`` and ``study``):
 
 - ``teach`` (the default, :data:`DEFAULT_RECIPE`): the product's. One drive of ``teach_course``
-  with disturbances; the offset stage's corridor utility, which drives (terrapref.planner.offset);
-  and C with a residual path, a class-balanced loss and mirrored samples, 100 epochs at learning
-  rate 3e-3, an ensemble of three; the second stage's utility fitted through the look-ahead;
-  labels from a moving average of w when the hand shakes (terrapref.learning.steady).
+  with disturbances; C with a residual path, a class-balanced loss and mirrored samples, 100
+  epochs at learning rate 3e-3, an ensemble of three; labels from a moving average of w when the
+  hand shakes (terrapref.learning.steady); stages: the second stage, fitted through the
+  look-ahead, then the offset stage, which drives (terrapref.planner.stages).
 - ``ours``: the paper's setting done well: two drives of ``train_course`` with disturbances,
-  the same C (one network), the second stage's utility fitted frame by frame. Used by
-  ``terrapref reproduce`` beside ``paper``.
-- ``paper``: the published recipe: one drive of ``train_course``, 15 epochs of the paper's C.
+  the same C (one network); stages: the second stage, fitted frame by frame, which drives. Used
+  by ``terrapref reproduce`` beside ``paper``.
+- ``paper``: the published recipe: one drive of ``train_course``, 15 epochs of the paper's C;
+  no stage: C's argmax drives.
 
-A recipe also holds the options a user may still choose on purpose (more drives, correction
-sessions); options that lost their experiment have left the code (docs/notebook.md names
-the commit where their rows still run).
+How each recipe scored is measured, not written here: docs/learning.md and the reports of
+``terrapref reproduce`` and ``terrapref select``.
+
+A recipe also holds the options a user may choose on purpose (more drives, correction
+sessions).
 """
 
 from __future__ import annotations
@@ -33,14 +36,15 @@ from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.demos.recording import MemoryRecordingWriter, Recording, RecordingWriter, read_recording
 from terrapref.demos.session import DisturbanceConfig, record_run, recording_meta
 from terrapref.errors import UserError
-from terrapref.features import FeatureConfig, LookaheadConfig
-from terrapref.features.corridor import CorridorConfig
+from terrapref.features import FeatureConfig
 from terrapref.learning.model_file import load_model
 from terrapref.learning.pipeline import train_and_save
 from terrapref.learning.network import ClassifierConfig
-from terrapref.learning.train import DataOptions, OptimiserConfig, SecondStageConfig, TrainConfig, TrainResult
+from terrapref.learning.train import DataOptions, OptimiserConfig, TrainConfig, TrainResult
 from terrapref.perception import PerceptionModel
+from terrapref.registry import Registry
 from terrapref.planner import Planner, PlannerDriver
+from terrapref.planner.stages import OffsetConfig, SecondStageConfig, StageConfig
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import SimConfig, Simulation
 from terrapref.terrain import PreferenceProfile
@@ -58,12 +62,10 @@ class Recipe:
         train: training hyperparameters.
         disturbance: pushes injected while demonstrating, so that recoveries are shown
             (None: the driver drives undisturbed).
-        lookahead: datasets carry the look-ahead utilities, and the second stage's utility is
-            fitted through them (``FeatureConfig.lookahead``).
-        corridor: datasets carry each frame's offset corridor, and training fits the planner's
-            offset stage to it (``FeatureConfig.corridor``).
+        stages: the decision stages fitted with C, in order; the last drives
+            (terrapref.planner.stages; none: C's argmax). Each says what its data must carry.
         course: the demonstration course.
-        summary: one line on what the recipe is for and how it scored (``terrapref recipes``).
+        summary: one line on what the recipe is for (``terrapref recipes``).
     """
 
     name: str
@@ -71,8 +73,7 @@ class Recipe:
     corrections: int = 0
     train: TrainConfig = field(default_factory=TrainConfig)
     disturbance: DisturbanceConfig | None = None
-    lookahead: bool = False
-    corridor: bool = False
+    stages: tuple[StageConfig, ...] = ()
     course: str = "train_course"
     summary: str = ""
 
@@ -81,42 +82,43 @@ class Recipe:
             raise ValueError("a recipe needs demonstrations >= 1 and corrections >= 0")
 
     def features(self, base: FeatureConfig | None = None) -> FeatureConfig:
-        """The feature configuration this recipe trains with: ``base`` with or without the look-ahead and the corridor."""
-        return replace(base or FeatureConfig(), lookahead=LookaheadConfig() if self.lookahead else None,
-                       corridor=CorridorConfig() if self.corridor else None)
+        """The feature configuration this recipe trains with: ``base`` with what its stages' fits
+        need (the look-ahead, the corridor) and nothing else."""
+        features = replace(base or FeatureConfig(), lookahead=None, corridor=None)
+        for stage in self.stages:
+            features = stage.features(features)
+        return features
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        return {**asdict(self), "stages": [{"type": s.type, **asdict(s)} for s in self.stages]}
 
 
-PAPER = Recipe("paper", summary="the published recipe: one drive of train_course, 15 epochs of the paper's C (reproduction only); "
-                       "scored 6.7% of test zones (5/75), 25 collisions in terrapref reproduce")
+PAPER = Recipe("paper", summary="the published recipe: one drive of train_course, 15 epochs of the paper's C, C's argmax drives "
+                       "(reproduction only)")
 # What recipes ours and teach train: 100 epochs of C at learning rate 3e-3 (chosen on generated
 # layouts against 300 epochs at 1e-3: the same agreement with the driver for a third of the
 # steps; docs/learning.md) with the residual path, a class-balanced loss and mirrored samples,
-# and the linear utility for the second stage.
-_RECOMMENDED = TrainConfig(OptimiserConfig(epochs=100, lr=3e-3), ClassifierConfig(skip=True), DataOptions(class_balance=True, mirror=True),
-                           SecondStageConfig())
-OURS = Recipe("ours", demonstrations=2, train=_RECOMMENDED,
+# (the second stage's linear utility is fitted to the same samples).
+_RECOMMENDED = TrainConfig(OptimiserConfig(epochs=100, lr=3e-3), ClassifierConfig(skip=True), DataOptions(class_balance=True, mirror=True))
+OURS = Recipe("ours", demonstrations=2, train=_RECOMMENDED, stages=(SecondStageConfig(),),
               disturbance=DisturbanceConfig(rate_hz=0.3),
               summary="two drives of train_course: the paper's setting done well (the reproduction's Tables 1 and 2); "
-                      "scored 94.7% of test zones (71/75), 0 collisions in terrapref reproduce")
-TEACH = Recipe("teach", course="teach_course", lookahead=True, corridor=True,
-               train=replace(_RECOMMENDED, classifier=ClassifierConfig(skip=True, members=3), second_stage=SecondStageConfig(weight=5.0),
-                             data=replace(_RECOMMENDED.data, steady_labels=True)),
+                      "the second stage drives")
+TEACH = Recipe("teach", course="teach_course",
+               train=replace(_RECOMMENDED, classifier=ClassifierConfig(skip=True, members=3), data=replace(_RECOMMENDED.data, steady_labels=True)),
+               stages=(SecondStageConfig(weight=5.0, lookahead=True), OffsetConfig()),
                disturbance=DisturbanceConfig(rate_hz=0.3),
                summary="one drive of teach_course: any preference order from five minutes (the default); the offset stage "
-                       "drives; the driver's choice in 96.6% of zones on 32 unseen layouts over 6 orders x 5 seeds, "
-                       "no collision (docs/learning.md)")
-RECIPES: dict[str, Recipe] = {r.name: r for r in (TEACH, OURS, PAPER)}
+                       "drives (docs/learning.md)")
+RECIPES: Registry[Recipe] = Registry("recipe")
+for _recipe in (TEACH, OURS, PAPER):
+    RECIPES.register(_recipe.name, _recipe, _recipe.summary)
 DEFAULT_RECIPE = TEACH.name
 
 
 def recipe_named(name: str, flag: str = "--recipe") -> Recipe:
     """A named recipe; an unknown name is a user error (naming ``flag``) listing the known ones."""
-    if name not in RECIPES:
-        raise UserError(flag, f"unknown recipe {name!r}; recipes: {', '.join(RECIPES)}")
-    return RECIPES[name]
+    return RECIPES.get(name, flag)
 
 
 @dataclass
@@ -249,7 +251,7 @@ def run_recipe(
     corr_s = 0.0
     train_cfg = replace(recipe.train, seed=seed)
     model = own / "model.safetensors"
-    result = train_and_save(build_dataset(recordings, features), model, train_cfg, checkpoints=False, recipe=recipe.name)
+    result = train_and_save(build_dataset(recordings, features), model, train_cfg, checkpoints=False, recipe=recipe.name, stages=recipe.stages)
     if recipe.corrections:  # the planner drives the course; only then is a simulation needed here
         camera, sim_cfg = CameraConfig(), SimConfig()
         expert_cfg = ExpertConfig.styled(style, profile.order)
@@ -263,7 +265,7 @@ def run_recipe(
         corr_s += run.duration_s
         recordings.append(read_recording(out))
         paths.append(out)
-        result = train_and_save(build_dataset(recordings, features), model, train_cfg, checkpoints=False, recipe=recipe.name)
+        result = train_and_save(build_dataset(recordings, features), model, train_cfg, checkpoints=False, recipe=recipe.name, stages=recipe.stages)
         if log:
             log(f"correction session {r + 1}/{recipe.corrections}: {len(recordings[-1])} frames, retrained")
     return RecipeOutput(model, paths, result, demo_s / 60.0, corr_s / 60.0)

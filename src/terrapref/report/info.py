@@ -108,15 +108,21 @@ def _onnx_lines(p: Path) -> list[str]:
     c = meta.get("classifier", {})
     return [f"{p}: C exported as ONNX ({meta.get('format', 'no terrapref metadata')})",
             f"network         {c.get('members', 1)} member(s), hidden {c.get('hidden')}, {c.get('activation')}, skip {c.get('skip')}",
-            f"second stage    {'weight ' + str(meta['utility']['weight']) if 'utility' in meta else 'none'}",
-            f"offset stage    {_offset_stage(meta.get('corridor'))}" + (" (in the metadata, not the graph)" if "corridor" in meta else "")] + _common(meta) + _identifiability(meta)
+            *_stage_lines(meta, " (in the metadata, not the graph)")] + _common(meta) + _identifiability(meta)
 
 
-def _offset_stage(corridor: object) -> str:
-    """The offset stage's line: it drives, with its near distance; or none."""
-    if not isinstance(corridor, dict):
-        return "none (C's trajectories drive)"
-    return f"drives (corridor utility, near distance {corridor.get('near_m', '?')} m)"
+def _stage_lines(meta: dict, offset_note: str = "") -> list[str]:
+    """The second stage's line (its weight, or none) and the offset stage's (it drives, with its
+    near distance; or none), from the header's ``stages`` (or, in older files, ``utility`` and ``corridor``)."""
+    if isinstance(meta.get("stages"), list):
+        blocks = [b for b in meta["stages"] if isinstance(b, dict)]
+    else:
+        blocks = [{"type": t, **meta[k]} for k, t in (("utility", "second_stage"), ("corridor", "offset")) if isinstance(meta.get(k), dict)]
+    second = next((b for b in blocks if b.get("type") == "second_stage"), None)
+    offset = next((b for b in blocks if b.get("type") == "offset"), None)
+    return [f"second stage    {'weight ' + str(second.get('weight', 1.5)) if second is not None else 'none'}",
+            f"offset stage    " + (f"drives (corridor utility, near distance {offset.get('near_m', '?')} m){offset_note}" if offset is not None
+                                   else "none (C's trajectories drive)")]
 
 
 def _tensor_file_header(p: Path) -> tuple[dict, dict[str, tuple[int, ...]]]:
@@ -154,12 +160,11 @@ def _model_lines(p: Path, meta: dict) -> list[str]:
     """A model: its state, recipe, network, second stage, training data and chosen epoch."""
     c = meta.get("classifier", {}) if isinstance(meta.get("classifier"), dict) else {}
     data = meta.get("data", {}) if isinstance(meta.get("data"), dict) else {}
-    lines = [f"{p}: terrapref model ({meta.get('kind', 'classifier')}" + (", INTERRUPTED: the best epochs so far, no second stage" if meta.get("status") == "interrupted" else "")
+    lines = [f"{p}: terrapref model ({meta.get('kind', 'classifier')}" + (", INTERRUPTED: the best epochs so far, no decision stages" if meta.get("status") == "interrupted" else "")
              + (f", checkpoint of epoch {meta.get('epoch')}" if meta.get("status") == "checkpoint" else "") + ")",
              f"recipe          {meta.get('recipe', '?')}",
              f"network         {c.get('members', 1)} member(s), hidden {c.get('hidden')}, {c.get('activation')}, skip {c.get('skip')}",
-             f"second stage    {'weight ' + str(meta['utility'].get('weight')) if isinstance(meta.get('utility'), dict) else 'none'}",
-             f"offset stage    {_offset_stage(meta.get('corridor'))}",
+             *_stage_lines(meta),
              f"data            {data.get('samples', '?')} samples, fingerprint {data.get('fingerprint', '?')}, {len(data.get('recordings', []) or [])} recording(s)"]
     return lines + _training(meta) + _common(meta) + _identifiability(meta)
 

@@ -282,7 +282,7 @@ def _recipe_lines(recipes: tuple[Recipe, ...]) -> list[str]:
                      f"mirrored samples {'on' if r.train.data.mirror else 'off'}"
                      + (f", {r.train.classifier.members} ensemble members" if r.train.classifier.members > 1 else "")
                      + (", the planner scoring a second stage of trajectories beyond the first with the linear utility fitted to the same samples"
-                        + (" through the look-ahead" if r.lookahead else "") if r.train.second_stage is not None else "")
+                        + (" through the look-ahead" if r.features().lookahead is not None else "") if any(s.type == "second_stage" for s in r.stages) else "")
                      + ("; labels from a moving average of w if the driver's hand shakes more than half the w grid's spacing"
                         if r.train.data.steady_labels else "") + ".")
     return lines

@@ -175,8 +175,8 @@ def _train_on_utilities(job: TrainJob) -> int:
 
 def _c_config(job: TrainJob) -> TrainConfig:
     """C's training settings for a job: recipe ours's, with the job's seed, epochs and changes."""
-    # The study compares C itself with the baselines: its models drive without the second stage.
-    return OURS.train.updated({"second_stage": None, "seed": job.seed, "optimiser": {"epochs": job.epochs}, **(job.train or {})})
+    # The study compares C itself with the baselines: its models are trained without stages (C's argmax drives).
+    return OURS.train.updated({"seed": job.seed, "optimiser": {"epochs": job.epochs}, **(job.train or {})})
 
 
 def _teach_job(job: TeachJob) -> TaughtModel:

@@ -1,4 +1,4 @@
-"""The offset stage: choose a lateral offset from the path with a learned corridor utility, hold it, steer to it.
+"""The ``offset`` stage: choose a lateral offset from the path with a learned corridor utility, hold it, steer to it.
 
 Each frame the ground map (terrapref.features.corridor) takes in the camera's view and the
 corridor utility ``weights . features(d)`` scores every candidate offset d. The stage then:
@@ -27,22 +27,30 @@ little unseen ground beside patches to price it, and an unknown cell is, on aver
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, fields, replace
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView
-from terrapref.features.corridor import CorridorFeatures, GroundMap, gated, steer
-from terrapref.learning.corridor import CorridorUtility
+from terrapref.features import FeatureConfig
+from terrapref.features.corridor import CorridorConfig, CorridorFeatures, GroundMap, gated, steer
+from terrapref.learning.corridor import CorridorFit, CorridorUtility, fit_corridor
 from terrapref.planner.costmap import Costmap, costmap_of
-from terrapref.planner.kernels import swept_reach
+from terrapref.planner.stages.base import Choice, Stage, StageConfig, StageContext, StageInput, StageRunner, Where, number, vector
+from terrapref.planner.stages.kernels import swept_reach
 from terrapref.scenario.path import ReferencePath
-from terrapref.vehicle import Pose
+from terrapref.vehicle import Command, ControlSet, Pose
+
+if TYPE_CHECKING:
+    from terrapref.learning.train import FitData
 
 
 @dataclass(frozen=True)
-class OffsetConfig:
-    """How the offset stage holds and reaches an offset.
+class OffsetConfig(StageConfig):
+    """How the offset stage holds and reaches an offset (its fit needs the corridor data:
+    :meth:`features`).
 
     Attributes:
         switch_margin: the held offset is kept while its cost is at most this much (relative)
@@ -55,6 +63,8 @@ class OffsetConfig:
             offset as far as the corridor reads, reach this many times as far as the fitted
             offsets do (1 = no escape).
     """
+
+    type: ClassVar[str] = "offset"
 
     switch_margin: float = 0.15
     pursuit_lookahead_m: float = 2.5
@@ -74,8 +84,61 @@ class OffsetConfig:
     def to_dict(self) -> dict:
         return asdict(self)
 
+    def features(self, base: FeatureConfig) -> FeatureConfig:
+        return replace(base, corridor=base.corridor or CorridorConfig())
 
-class OffsetStage:
+    def fit(self, data: FitData) -> OffsetStage | None:
+        """The corridor utility fitted to the offsets the driver steered for; None for data without corridor data."""
+        corridor = data.dataset.corridor
+        if corridor is None:
+            return None
+        fitted = fit_corridor(corridor.features, corridor.near_m, corridor.intent_m, data.dataset.feature_config.corridor.offsets)
+        return OffsetStage(self, CorridorUtility(fitted.weights, fitted.near_m, data.dataset.feature_config.corridor), fitted)
+
+
+@dataclass(frozen=True)
+class OffsetStage(Stage):
+    """A fitted offset stage: how it holds offsets, and the corridor utility that prices them
+    (``fit``: how the fit went, for a stage just fitted)."""
+
+    type: ClassVar[str] = "offset"
+
+    config: OffsetConfig
+    utility: CorridorUtility
+    fit: CorridorFit | None = None
+
+    def header(self) -> dict[str, Any]:
+        u = self.utility
+        return {"type": self.type, **self.config.to_dict(), "weights": u.weights.tolist(), "near_m": u.near_m,
+                **({"loss": self.fit.loss, "samples": self.fit.samples} if self.fit is not None else {})}
+
+    @classmethod
+    def from_header(cls, block: Mapping[str, Any], features: FeatureConfig, where: Where) -> OffsetStage:
+        if features.corridor is None:
+            raise where.error("", "an offset stage, but the feature configuration has no corridor")
+        weights = vector(block, "weights", features.n_terrain + 3, where)
+        near = number(block, "near_m", where, positive=True)
+        settings = {f.name: number(block, f.name, where, getattr(OffsetConfig, f.name)) for f in fields(OffsetConfig)}
+        try:
+            config = OffsetConfig(**settings)
+        except ValueError as exc:
+            raise where.error("", str(exc)) from None
+        return cls(config, CorridorUtility(weights, near, features.corridor))
+
+    def runner(self, context: StageContext) -> OffsetSteering:
+        return OffsetSteering(self.utility, context.camera, context.featurizer.class_columns, context.features.n_terrain,
+                              context.lethal_columns, context.features.preference.control, self.config, context.features.feature_classes)
+
+    def describe(self, names: tuple[str, ...], lethal: frozenset[str]) -> str:
+        """The learned price of each class per metre, relative to the detour's per m^2 of offset per metre."""
+        w = self.utility.weights
+        prices = ", ".join(f"{c} {p / w[len(names) + 1]:.1f}{' (lethal: ruled out)' if c in lethal else ''}" for c, p in zip(names, w))
+        fitted = f"fitted to {self.fit.samples} frames, " if self.fit is not None else ""
+        return (f"offset stage: {fitted}near distance {self.utility.near_m:g} m; each class's price per metre, "
+                f"relative to the detour's per m^2 of offset per metre: {prices}")
+
+
+class OffsetSteering(StageRunner):
     """The offset stage (module docstring) of one camera, class table and corridor utility.
 
     Args:
@@ -84,15 +147,17 @@ class OffsetStage:
         columns: terrain column of each class id (256,).
         k: the number of terrain classes K.
         lethal_columns: the terrain columns of lethal classes.
-        v_mps: the vehicle's forward speed [m/s].
+        control: the control set (the forward speed, and the trajectories a yaw rate is named by).
         config: how offsets are held and reached.
+        names: the classes of the K terrain columns (the costmap's).
     """
 
     def __init__(self, utility: CorridorUtility, camera: PinholeCamera, columns: np.ndarray, k: int, lethal_columns: np.ndarray,
-                 v_mps: float, config: OffsetConfig | None = None) -> None:
+                 control: ControlSet, config: OffsetConfig | None = None, names: tuple[str, ...] = ()) -> None:
         if utility.weights.shape != (k + 3,):
             raise ValueError(f"the corridor utility has {utility.weights.shape[0]} weights, expected {k + 3}")
-        self.utility, self.config, self.k, self.v_mps = utility, config or OffsetConfig(), k, v_mps
+        self.utility, self.config, self.k = utility, config or OffsetConfig(), k
+        self.control, self.v_mps, self.names = control, float(control.v_mps), names
         self.lethal = np.zeros(k + 2, dtype=bool)
         self.lethal[np.asarray(lethal_columns, dtype=np.int64)] = True
         weights = np.array(utility.weights, dtype=float)
@@ -108,7 +173,7 @@ class OffsetStage:
         self._bare = np.linspace(-utility.config.half_width_m, utility.config.half_width_m, 5)  # the footprint alone [m]
         self._line_stations = np.arange(-0.5, self.config.lethal_horizon_m + 1e-9, 0.25)
         self._far_stations = np.arange(-0.5, utility.config.stations_m[1] + 1e-9, 0.25)
-        self._steps = round(self.config.lethal_horizon_m / (v_mps * self.config.dt_s))
+        self._steps = round(self.config.lethal_horizon_m / (self.v_mps * self.config.dt_s))
         reach, step = utility.config.max_offset_m, utility.config.offset_step_m
         beyond = np.arange(reach + step, reach * self.config.escape_factor + 1e-9, step)
         self.escapes = np.concatenate([-beyond[::-1], beyond])  # (E,) offsets only for getting round lethal terrain [m]
@@ -116,14 +181,24 @@ class OffsetStage:
         self._centre = int(np.argmin(np.abs(self.offsets)))
         self.held = 0.0
 
+    keeps_ground_map = True
+
     def reset(self) -> None:
         """Start a new run: forget the map and the held offset."""
         self.map.reset()
         self.held = 0.0
 
-    def decide(self, view: SegmentationView, pose: Pose, path: ReferencePath, progress_s: float) -> float:
-        """The yaw rate [rad/s] toward the offset held after this frame."""
+    def observe(self, view: SegmentationView, pose: Pose) -> None:
         self.map.update(view, pose)
+
+    def decide(self, frame: StageInput) -> Choice:
+        """Steered continuously within the control set's range of yaw rates; the index names the nearest trajectory."""
+        w = float(np.clip(self.yaw_rate(frame.view, frame.pose, frame.path, frame.progress_s), self.control.w_rps[0], self.control.w_rps[-1]))
+        return Choice(int(self.control.label_of(w)), Command(self.control.v_mps, w))
+
+    def yaw_rate(self, view: SegmentationView, pose: Pose, path: ReferencePath, progress_s: float) -> float:
+        """The yaw rate [rad/s] toward the offset held after this frame."""
+        self.observe(view, pose)
         corridor = self.corridor(self.map, path, progress_s)
         value = _weighted(gated(corridor, self.offsets, self.utility.near_m), self.weights)
         escape = None
@@ -148,10 +223,9 @@ class OffsetStage:
             self.held = float(self.offsets[best])
         return float(steer(path, pose, progress_s, self.held, self.config.pursuit_lookahead_m, self.v_mps))
 
-    def costmap(self, names: tuple[str, ...]) -> Costmap:
-        """The ground map seen so far priced by the learned utility (terrapref.planner.costmap);
-        ``names``, the classes of the K terrain columns."""
-        return costmap_of(self.map.cells, self.map.origin, self.map.config.map_resolution_m, self.utility.weights, self.lethal, names)
+    def costmap(self) -> Costmap:
+        """The ground map seen so far priced by the learned utility (terrapref.planner.costmap)."""
+        return costmap_of(self.map.cells, self.map.origin, self.map.config.map_resolution_m, self.utility.weights, self.lethal, self.names)
 
     def _escape(self, value: np.ndarray, path: ReferencePath, progress_s: float) -> float | None:
         """The escape offset to hold when lethal terrain lies across every fitted offset, or None
