@@ -406,7 +406,7 @@ def test_a_simulated_keyboard_person_drives_the_course_through_the_window(tmp_pa
 
 @pytest.mark.slow
 def test_a_keyboard_demonstration_teaches_beside_a_stick(tmp_path, monkeypatch):
-    """The keyboard study on one seed and a few unseen layouts (scripts/keyboard_demo.py; README has the full run)."""
+    """The keyboard study on one seed and a few unseen layouts (scripts/keyboard_demo.py; docs/teleop.md has the full run)."""
     import importlib.util
     import json
     from pathlib import Path

@@ -1,4 +1,4 @@
-"""The planner for a robot's control loop: ``terrapref.runtime.PlannerRuntime`` (README, "On a robot").
+"""The planner for a robot's control loop: ``terrapref.runtime.PlannerRuntime`` (docs/robot.md).
 
 It lives in :mod:`terrapref.interop.runtime` beside the other robot-facing code; this module is
 its public name.

@@ -1,5 +1,5 @@
 """What a ROS node of the planner does with its messages, without ROS (the ROS 1 node and the
-README's rclpy node both wrap it).
+rclpy node of docs/robot.md both wrap it).
 
 Messages come in as they would from rospy or rclpy (attribute access: ``header.stamp``,
 ``pose.pose``, ``data``, ...). The calibration makes the planner (a model trained for another

@@ -1,6 +1,6 @@
 """The planner for a robot's control loop, without the simulator: label images in, commands out.
 
-A ROS 2 node (README, "On a robot") wraps :class:`PlannerRuntime`: it passes each label image
+A ROS 2 node (docs/robot.md, "A ROS 2 node") wraps :class:`PlannerRuntime`: it passes each label image
 with its stamp and the robot's pose at that stamp, sends ``command_at(now)`` at its own rate,
 and publishes the trajectory probabilities if it likes. Nothing here needs ROS.
 

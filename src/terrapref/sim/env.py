@@ -3,7 +3,7 @@
 Registered as ``terrapref/OffRoadNav-v1`` (discrete actions: an index into the control set)
 and ``terrapref/OffRoadNavContinuous-v1`` (actions in [-1, 1]^2 scaled to (v, w)). One step is
 one camera frame (0.1 s at the default 10 Hz). The spaces do not depend on the course, so one
-policy and one vector env serve every course (README, "Python and Gymnasium").
+policy and one vector env serve every course (docs/gymnasium.md).
 
 Example:
     >>> import gymnasium as gym
