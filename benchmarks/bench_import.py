@@ -39,7 +39,8 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--out", type=Path, default=None, help="work folder (default: a temporary one, removed after)")
     args = parser.parse_args()
-    from terrapref.interop.synthetic_bag import robot_yaml, write_synthetic_bag
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the tests' generator of robot logs
+    from synthetic_bag import robot_yaml, write_synthetic_bag
 
     work = args.out or Path(tempfile.mkdtemp(prefix="terrapref-bench-import-"))
     work.mkdir(parents=True, exist_ok=True)

@@ -7,12 +7,17 @@ from the robot's own origin, commands only on change, dropped and out-of-order i
 the odometry, an unrelated topic, /tf_static), and the robot file that reads them.
 
     .venv/bin/python examples/robot_logs.py --out logs [--scenario teach_course] [--heldout test_course]
+
+The logs are written by the tests' generator (tests/synthetic_bag.py), with rosbags: it needs a
+clone of the repository and terrapref's robot extra (scripts/setup.sh installs every extra).
 """
 
 import argparse
+import sys
 from pathlib import Path
 
-from terrapref.interop.synthetic_bag import robot_yaml, write_synthetic_bag
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the generator lives beside the tests that use it
+from synthetic_bag import robot_yaml, write_synthetic_bag  # noqa: E402
 
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 parser.add_argument("--out", type=Path, required=True, help="folder to write the logs into")

@@ -13,9 +13,10 @@ from terrapref.demos.dataset import Dataset, save_dataset
 from terrapref.features import FeatureConfig
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
-from terrapref.learning.torch_net import UtilityClassifier
 from terrapref.learning.train import TrainConfig
 from terrapref.terrain import default_classes
+
+from torch_net import UtilityClassifier
 
 
 def model_meta(features: FeatureConfig | None = None, camera: CameraConfig | None = None, profile: tuple[str, ...] | None = None) -> dict:

@@ -17,9 +17,10 @@ from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
 from terrapref.interop.bag_import import import_bag, smooth_path
 from terrapref.interop.robot import load_robot
-from terrapref.interop.synthetic_bag import TOPICS, robot_yaml, write_synthetic_bag
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation
+
+from synthetic_bag import TOPICS, robot_yaml, write_synthetic_bag
 
 SECONDS = 12.0
 FORMATS = [("mcap", "mono8", "drive.mcapbag"), ("rosbag1", "mono16", "drive.bag"), ("sqlite3", "png", "drive.db3bag")]
@@ -358,7 +359,7 @@ def test_replay_reports_agreement_with_the_operator(tmp_path: Path, logs, capsys
 
 
 def test_colour_segmentation_through_the_label_maps_colour_table(tmp_path: Path, imported):
-    from terrapref.interop.synthetic_bag import colour_label_map
+    from synthetic_bag import colour_label_map
 
     (tmp_path / "colours.yaml").write_text(colour_label_map())
     (tmp_path / "robot.yaml").write_text(robot_yaml(labels="colours.yaml"))

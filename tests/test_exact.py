@@ -21,7 +21,8 @@ import torch
 from terrapref.learning import exact
 from terrapref.learning.mlp import Adam, TrainableClassifier, cross_entropy, init_weights, round_inputs
 from terrapref.learning.network import ClassifierConfig, numpy_forward
-from terrapref.learning.torch_net import UtilityClassifier
+
+from torch_net import UtilityClassifier
 
 
 # --- elementary functions ------------------------------------------------------------------------

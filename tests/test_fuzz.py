@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 import yaml
 from helpers import model_meta
+from synthetic_bag import robot_yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -28,7 +29,6 @@ from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
 from terrapref.interop.labels import load_label_map
 from terrapref.interop.robot import load_robot
-from terrapref.interop.synthetic_bag import robot_yaml
 from terrapref.learning import ClassifierConfig, load_model, save_model
 from terrapref.learning.mlp import init_weights
 from terrapref.perception import load_perception

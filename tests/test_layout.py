@@ -91,6 +91,7 @@ def test_the_cycle_finder_finds_one():
 # the command line on top.
 LAYERS = [
     {"errors"},
+    {"extras"},
     {"yamlio", "fileio", "progress", "configargs", "grid", "registry"},
     {"tensorfile", "terrain"},
     {"pngio", "scenario"},

@@ -10,9 +10,9 @@ import pytest
 import torch
 
 from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
-from terrapref.learning.torch_net import UtilityClassifier
 
 from helpers import K, M, assert_weights_equal
+from torch_net import UtilityClassifier
 
 
 # --- the NumPy forward pass is the PyTorch network ------------------------------------------------

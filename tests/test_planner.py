@@ -26,7 +26,6 @@ from terrapref.features import FeatureConfig, UtilityFeaturizer
 from terrapref.learning.model_file import LoadedModel, load_model, save_model
 from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
 from terrapref.learning.pipeline import train_and_save
-from terrapref.learning.torch_net import UtilityClassifier
 from terrapref.planner import Decision, Planner, PlannerDriver
 from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
@@ -36,6 +35,7 @@ from terrapref.vehicle import Command, Pose
 from terrapref.world import WorldMap
 
 from helpers import LINEAR_W, linear_model, model_meta, train_config
+from torch_net import UtilityClassifier
 
 # Columns of U: non_traversable, water, rock, mud, distance. Avoid terrain, follow the path.
 def _linear_model(path: Path, camera: CameraConfig | None = None) -> LoadedModel:

@@ -17,7 +17,6 @@ from terrapref.features import FeatureConfig
 from terrapref.learning.linear import LinearUtility, fit_linear_utility
 from terrapref.learning.model_file import FORMAT, load_model, save_model
 from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
-from terrapref.learning.torch_net import UtilityClassifier
 from terrapref.planner.registry import load_policy
 from terrapref.planner import Planner
 from terrapref.planner.policy import (
@@ -38,6 +37,7 @@ from terrapref.terrain import default_classes
 from terrapref.vehicle import Pose
 
 from helpers import model_meta
+from torch_net import UtilityClassifier
 
 M, K = 21, 5  # trajectories; utility columns (non_traversable, water, rock, mud, distance)
 NO_IMAGE = SegmentationView.of(np.zeros((4, 4), np.uint8))

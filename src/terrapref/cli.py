@@ -477,6 +477,10 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     _check_distinct(args.scenarios, "scenario")
     _check_output(args.out, "--out", [args.model, *args.scenarios], folder=True)
     engine = _engine(args)
+    if args.mcap:
+        from terrapref.extras import check
+
+        check("robot", "--mcap", "rosbags")  # before the runs, not after them
     try:
         frames = sorted({int(f) for f in args.frames.split(",") if f.strip()}) if args.frames else []
     except ValueError:
@@ -691,8 +695,11 @@ def _cmd_export(args: argparse.Namespace) -> int:
         from dataclasses import replace
 
         from terrapref.demos.recording import read_recording
+        from terrapref.extras import check
         from terrapref.interop.mcap_export import recording_frames, write_bag
         from terrapref.progress import Progress
+
+        check("robot", f"terrapref export --format {args.format}", "rosbags")  # before the frames are read
 
         rec = read_recording(args.input)
         if len(rec) == 0:
@@ -793,9 +800,11 @@ def _cmd_study(args: argparse.Namespace) -> int:
     import time
     from dataclasses import replace
 
+    from terrapref.extras import check
     from terrapref.report.study import run_study
     from terrapref.report.study_plan import FULL, QUICK
 
+    check("cnn", "terrapref study (its end-to-end CNN baseline)")  # before the stages that come before the CNN's
     plan = QUICK if args.quick else FULL
     if args.seeds is not None:
         if args.seeds < 1:
@@ -877,10 +886,9 @@ def _engine(args: argparse.Namespace) -> Engine:
     if args.address is not None and args.engine != "ray":
         raise UserError("--address", "is the address of a Ray cluster; add --engine ray")
     if args.engine == "ray":
-        import importlib.util
+        from terrapref.extras import check
 
-        if importlib.util.find_spec("ray") is None:
-            raise UserError("--engine", "ray is not installed in this environment (bash scripts/setup.sh installs it)")
+        check("ray", "--engine ray")
         if args.address not in (None, "auto"):
             _check_ray_address(args.address)
     if args.engine == "ray":

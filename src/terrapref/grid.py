@@ -6,7 +6,7 @@ study's demonstrations and trainings) maps one function over a list of jobs thro
 
 - ``local`` (the default): forked worker processes on this machine, one per core unless
   ``workers`` says otherwise; one worker runs the jobs in this process.
-- ``ray``: Ray tasks. With no ``address`` a Ray instance is started on this machine with
+- ``ray``: Ray tasks (the ``ray`` extra). With no ``address`` a Ray instance is started on this machine with
   ``workers`` CPUs; with ``address`` (``ray start --head`` on one machine, ``ray start --address
   HEAD:6379`` on the others) the jobs go to that cluster. Jobs pass files by path, so on a
   cluster the output folder must be on storage every node sees, and terrapref must be installed
@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from typing import Any, TypeVar
 
 from terrapref.errors import UserError
+from terrapref.extras import needs
 
 J = TypeVar("J")
 R = TypeVar("R")
@@ -151,7 +152,8 @@ def _run_local(fn: Callable, jobs: list, workers: int, progress: Callable[[int, 
 def start_ray(engine: Engine) -> bool:
     """Connect to ``engine``'s Ray (start a local instance, or join the cluster at its address)
     unless this process already is; True when this call started the connection."""
-    import ray
+    with needs("ray", "--engine ray"):
+        import ray
 
     if ray.is_initialized():
         return False
@@ -170,9 +172,8 @@ def start_ray(engine: Engine) -> bool:
 
 
 def _run_ray(fn: Callable, jobs: list, engine: Engine, progress: Callable[[int, int], None] | None) -> list[tuple[bool, Any]]:
-    import ray
-
     started_here = start_ray(engine)
+    import ray  # start_ray has imported it, or said which extra brings it
     try:
         task = ray.remote(num_cpus=1)(_guarded)
         refs = [task.remote(fn, job) for job in jobs]

@@ -14,11 +14,10 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
-import torch
-from torch import nn
 
 from terrapref.camera import CameraConfig, SegmentationView
 from terrapref.demos.recording import Recording
+from terrapref.extras import needs
 from terrapref.features import FeatureConfig
 from terrapref.learning.model_file import FORMAT, model_context
 from terrapref.learning.train import class_weights, split_indices
@@ -27,6 +26,10 @@ from terrapref.planner.policy import CNN, Observation, Policy
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.tensorfile import write_tensor_file
 from terrapref.terrain import ClassTable
+
+with needs("cnn", "the CNN baseline"):  # this module is imported only for it
+    import torch
+    from torch import nn
 
 
 @dataclass(frozen=True)

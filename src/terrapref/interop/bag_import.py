@@ -33,6 +33,7 @@ from PIL import Image as PILImage
 from terrapref.camera import CameraConfig
 from terrapref.demos.recording import RecordingWriter, _is_recording
 from terrapref.errors import UserError
+from terrapref.extras import needs
 from terrapref.features import PreferenceSetConfig
 from terrapref.fileio import new_folder, replace_dir
 from terrapref.interop.robot import RobotConfig, load_waypoints
@@ -122,6 +123,8 @@ class _Bag:
             raise UserError(self.source, "no such bag")
         try:
             self.reader = _open_reader(path)
+        except UserError:  # the robot extra is missing
+            raise
         except Exception as exc:  # the reader's errors on a damaged or foreign file are many kinds
             raise UserError(self.source, f"not a readable ROS 1 bag, ROS 2 bag or MCAP file ({_one_line(exc)})") from None
         self.unreadable: dict[str, tuple[str, str]] = self.reader.unreadable  # topic -> (type, why)
@@ -248,9 +251,10 @@ def _open_reader(path: Path):
     cannot be parsed (or whose hash does not match it) is left out, in ``unreadable``, instead of
     failing the whole log. As AnyReader, the ROS 2 Humble types serve a log that carries no
     definitions at all."""
-    from rosbags.highlevel import AnyReader
-    from rosbags.interfaces import MessageDefinitionFormat
-    from rosbags.typesys import Stores, get_typestore
+    with needs("robot", "reading ROS bags"):
+        from rosbags.highlevel import AnyReader
+        from rosbags.interfaces import MessageDefinitionFormat
+        from rosbags.typesys import Stores, get_typestore
 
     class TolerantReader(AnyReader):
         def _open(self) -> None:

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from terrapref.errors import UserError
+from terrapref.extras import needs
 from terrapref.interop.mcap_export import COSTMAP_EVERY, TOPICS, FrameData, RunFrames, Scene, write_fixed, write_frame
 from terrapref.interop.ros_messages import Message, typestore
 
@@ -36,7 +37,9 @@ class LiveView:
     """A Foxglove WebSocket server on ``host``:``port`` (0: a free port) with the export's channels."""
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT) -> None:
-        import foxglove
+        with needs("robot", "the live view (--live)"):
+            import foxglove
+            import rosbags  # noqa: F401  (its typestore serialises the messages)
 
         self.ts = typestore()
         self.context = foxglove.Context()

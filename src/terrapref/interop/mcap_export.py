@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from terrapref.camera import CameraConfig
+from terrapref.extras import needs
 from terrapref.features import PreferenceSetConfig
 from terrapref.features.preference_set import forward_simulate
 from terrapref.fileio import write_text_atomic
@@ -142,7 +143,8 @@ def write_bag(out: str | Path, run: RunFrames, ros1: bool = False, robot_file: b
 
 def _write_ros2(bag_dir: Path, run: RunFrames, progress: Callable[[int, int], None] | None) -> Path:
     """The ROS 2 MCAP bag of ``run`` in the folder ``bag_dir``; its file."""
-    from rosbags.rosbag2 import StoragePlugin, Writer
+    with needs("robot", "writing MCAP"):
+        from rosbags.rosbag2 import StoragePlugin, Writer
 
     ts = typestore()
     with Writer(bag_dir, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
@@ -152,7 +154,8 @@ def _write_ros2(bag_dir: Path, run: RunFrames, progress: Callable[[int, int], No
 
 def _write_ros1(path: Path, run: RunFrames, progress: Callable[[int, int], None] | None) -> Path:
     """The ROS 1 bag of ``run`` at ``path``."""
-    from rosbags.rosbag1 import Writer
+    with needs("robot", "writing ROS 1 bags"):
+        from rosbags.rosbag1 import Writer
 
     ts = typestore(ros1=True)
     topics = _TOPICS if run.costmap is None else {**_TOPICS, "costmap": COSTMAP_TOPICS["costmap"]}

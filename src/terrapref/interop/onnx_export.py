@@ -16,12 +16,15 @@ import json
 from pathlib import Path
 
 import numpy as np
-import onnx
-from onnx import TensorProto, helper, numpy_helper
 
+from terrapref.extras import needs
 from terrapref.fileio import write_bytes_atomic
 from terrapref.learning.model_file import LoadedModel
 from terrapref.learning.network import ClassifierConfig, member_prefix
+
+with needs("robot", "ONNX files"):  # this module is imported only for them
+    import onnx
+    from onnx import TensorProto, helper, numpy_helper
 
 ONNX_FORMAT = "terrapref-onnx/1"
 OPSET = 17  # widely supported by runtimes; every operator used here exists since opset 13

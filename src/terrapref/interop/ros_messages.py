@@ -18,6 +18,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from PIL import Image as PILImage
 
+from terrapref.extras import needs
+
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
@@ -32,7 +34,8 @@ _NUMERIC = {"bool": bool, "byte": np.uint8, "char": np.uint8, "int8": np.int8, "
 
 def typestore(ros1: bool = False) -> Typestore:
     """ROS 1 Noetic's or ROS 2 Humble's message types, tf2_msgs/TFMessage among them."""
-    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+    with needs("robot", "ROS messages"):
+        from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
     if "tf2_msgs/msg/TFMessage" not in ts.fielddefs:  # not in rosbags' ROS 1 store: registered from its definition

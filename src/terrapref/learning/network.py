@@ -4,8 +4,8 @@ This is C's readable NumPy forward pass (the ONNX export's reference, and the te
 planner's control loop runs the same network as one compiled loop
 (:mod:`terrapref.learning.forward`, the same F_t on every CPU). Training runs its own forward and backward pass with
 CPU-independent arithmetic (:mod:`terrapref.learning.mlp`) over the same named weights; the
-PyTorch definition (:mod:`terrapref.learning.torch_net`) remains as an independent reference
-that the tests check both against.
+PyTorch definition (tests/torch_net.py) remains as an independent reference that the tests
+check both against.
 """
 
 from __future__ import annotations

@@ -1,8 +1,10 @@
 """The driving window in which a person records demonstrations and corrections (SPEC 10).
 
-This package is the only part of terrapref that imports pygame, and nothing imports it at
-package import time: the CLI loads it when ``terrapref drive`` runs, so the rest of the project
-works without pygame installed (``pip install terrapref[teleop]`` adds it).
+This package is the only part of terrapref that imports pygame, and nothing imports the package
+at terrapref's import time: the CLI loads it when ``terrapref drive`` runs, so the rest of the
+project works without pygame installed. pygame comes with the ``teleop`` extra
+(``pip install 'terrapref[teleop]'``); without it, importing this package is a one-line error
+naming the extra.
 
 The window shows what the learner will see, the camera's segmentation image, with the preference
 set S drawn on it and the trajectory of the current stick's label highlighted, so the driver
@@ -20,7 +22,11 @@ the terrain legend and the controls.
 
 import os
 
-os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")  # before any submodule imports pygame
+from terrapref.extras import needs
+
+os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")  # before pygame is first imported
+with needs("teleop", "terrapref drive"):  # here once, before the submodules import it
+    import pygame  # noqa: F401
 
 from terrapref.teleop.loop import COUNTDOWN_S, HANDBACK_S, TeleopOptions, TeleopResult, TeleopState, run_session, run_teleop  # noqa: E402
 from terrapref.teleop.stick import AXIS_DEADZONE, KEY_RATE_RPS2, Stick, axis_to_w, ramp_toward  # noqa: E402

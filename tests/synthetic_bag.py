@@ -5,7 +5,9 @@ The quirks (``quirks=True``): label images in RELLIS-3D ids (plus a few ids no m
 stamps from an epoch-like clock with jitter and a transport delay, odometry at 30 Hz in a frame
 that starts at the robot, commands published only when they change, the path published once,
 an unrelated topic, dropped images, pairs of images whose stamps arrive out of order, and a
-one-second gap in the odometry. Used by the tests and the import benchmark; not a user command.
+one-second gap in the odometry. Used by the tests, the import benchmark and
+examples/robot_logs.py (which import it from this folder); not part of the package. Writing the
+bags needs the robot extra (rosbags).
 """
 
 from __future__ import annotations
