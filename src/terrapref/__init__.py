@@ -4,23 +4,24 @@ The package is laid out as the data flows, in layers, bottom first; a layer impo
 the layers below it (tests/test_layout.py checks this list against the code):
 
 1. errors
-2. yamlio, fileio, progress, configargs, grid, registry
-3. tensorfile, terrain
-4. pngio, scenario (files)
-5. world (terrain raster)
-6. vehicle, plots (dynamics)
-7. camera (sensing)
-8. perception (what a robot's segmentation gets wrong)
-9. sim (closed loop, Gymnasium env)
-10. features (utility features U, look-ahead, corridor)
-11. demos (recordings, datasets)
-12. learning (C, linear and corridor fits, model files)
-13. planner (policies, decision stages, costmap, route)
-14. baselines, recipes
-15. interop (robot logs, ONNX, MCAP, ROS)
-16. evaluation, teleop
-17. report
-18. cli, runtime, warm_up
+2. extras (which optional extra a feature needs)
+3. yamlio, fileio, progress, configargs, grid, registry
+4. tensorfile, terrain
+5. pngio, scenario (files)
+6. world (terrain raster)
+7. vehicle, plots (dynamics)
+8. camera (sensing)
+9. perception (what a robot's segmentation gets wrong)
+10. sim (closed loop, Gymnasium env)
+11. features (utility features U, look-ahead, corridor)
+12. demos (recordings, datasets)
+13. learning (C, linear and corridor fits, model files)
+14. planner (policies, decision stages, costmap, route)
+15. baselines, recipes
+16. interop (robot logs, ONNX, MCAP, ROS)
+17. evaluation, teleop
+18. report
+19. cli, runtime, warm_up
 """
 
 import os
