@@ -91,8 +91,8 @@ def test_the_cycle_finder_finds_one():
 # the command line on top.
 LAYERS = [
     {"errors"},
-    {"yamlio", "fileio", "progress", "configargs", "grid", "registry"},
-    {"tensorfile", "terrain"},
+    {"yamlio", "fileio", "progress", "configargs", "registry"},
+    {"tensorfile", "terrain", "grid"},
     {"pngio", "scenario"},
     {"world"},
     {"vehicle", "plots"},

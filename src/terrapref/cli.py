@@ -468,8 +468,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     from terrapref.demos.expert import STYLES
     from terrapref.evaluation.stats import rate_text
 
-    if args.style not in STYLES:
-        raise UserError("--style", f"unknown driver style {args.style!r}; styles: {', '.join(STYLES)}")
+    STYLES.get(args.style, "--style")
     view = _live_view(args)
     try:
         metrics = evaluate_model(args.model, args.scenarios, args.seeds, args.out, profile, not args.no_driver, frames, engine,
@@ -807,8 +806,7 @@ def _cmd_select(args: argparse.Namespace) -> int:
         PreferenceProfile.parse(list(o), source="--orders")
     if len(set(orders)) != len(orders):
         raise UserError("--orders", f"names an order twice: {args.orders!r}")
-    if args.style not in STYLES:
-        raise UserError("--style", f"unknown driver style {args.style!r}; styles: {', '.join(STYLES)}")
+    STYLES.get(args.style, "--style")
     for flag, value, low in (("--seeds", args.seeds, 1), ("--courses", args.courses, 1), ("--first", args.first, 0)):
         if value < low:
             raise UserError(flag, f"must be an integer >= {low}, got {value}")
@@ -884,7 +882,7 @@ def _check_ray_address(address: str) -> None:
 
 def _add_engine_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, help="parallel jobs on this machine (default: one per core)")
-    p.add_argument("--engine", choices=ENGINES, default="local",
+    p.add_argument("--engine", choices=ENGINES.names(), default="local",
                    help="where the jobs run: local processes (default) or Ray (a local instance, or the cluster at --address)")
     p.add_argument("--address", metavar="HOST:PORT", help="a Ray cluster to run the jobs on (ray start --head on one machine); with --engine ray")
 

@@ -469,7 +469,7 @@ def _style_rows(plan: StudyPlan, taught: list[StudyRun]) -> tuple[list[str], lis
         other, d, own, theirs = _style_runs(plan, taught, style)
         ok, n = agreement(own, d)
         ok2, n2 = agreement(theirs, d)
-        rows.append(f"| {style} ({STYLES[style][0]}) | {rate_text(ok, n)} | {rate_text(ok2, n2) + f' ({other})' if other else '—'} | "
+        rows.append(f"| {style} ({STYLES[style].description}) | {rate_text(ok, n)} | {rate_text(ok2, n2) + f' ({other})' if other else '—'} | "
                     f"{_mean_clearance(d):.2f} m | {_clearance_gap(own, d):.2f} m | {_clearance_gap(theirs, d):.2f} m | "
                     f"{_mean_cross_track(d):.2f} m | {_mean_cross_track(own):.2f} m | "
                     f"{_mean_cross_track(theirs):.2f} m | {_collisions(own)} |")
