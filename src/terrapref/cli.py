@@ -119,7 +119,8 @@ def _cmd_record(args: argparse.Namespace) -> int:
     from terrapref.camera import CameraConfig
     from terrapref.demos.expert import ExpertConfig, ExpertDriver
     from terrapref.demos.recording import RecordingWriter
-    from terrapref.demos.session import record_run, recording_meta
+    from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
+    from terrapref.demos.session import record_run
     from terrapref.features import PreferenceSetConfig
     from terrapref.progress import Progress
     from terrapref.scenario import resolve_scenario
@@ -138,9 +139,8 @@ def _cmd_record(args: argparse.Namespace) -> int:
     disturbance = _disturbance(args.disturb)
     perception = _perception(args.perception, classes=scenario.classes)
     camera, preference, sim_config = CameraConfig(), PreferenceSetConfig(), SimConfig()
-    driver = {"kind": "expert", "seed": args.seed, "style": args.style, "config": expert.to_dict(),
-              "disturbance": disturbance.to_dict() if disturbance else None}
-    meta = recording_meta(scenario, camera, preference, sim_config, driver, profile, perception)
+    meta = RecordingMeta.driven(scenario, RecordingSetup(camera, preference, sim_config), ExpertInfo.of(args.seed, args.style, expert, disturbance),
+                                profile, perception)
     sim = Simulation(scenario, camera, sim_config)
     writer = RecordingWriter(args.out, meta, scenario.to_dict(), overwrite=args.force)
     bar = Progress(f"record {scenario.name}", sim.path.length_m, enabled=not args.quiet)

@@ -31,6 +31,7 @@ import numpy as np
 from PIL import Image as PILImage
 
 from terrapref.camera import CameraConfig
+from terrapref.demos.meta import ImportedInfo, RecordingMeta, SimMeta
 from terrapref.demos.recording import RecordingWriter, _is_recording
 from terrapref.errors import UserError
 from terrapref.features import PreferenceSetConfig
@@ -603,19 +604,13 @@ class _Placement:
         return x0 + self.shift[0], y0 + self.shift[1], yaw0
 
 
-def _meta(req: _Request, scenario: dict, camera: CameraConfig, preference: PreferenceSetConfig, placement: _Placement) -> dict:
+def _meta(req: _Request, scenario: dict, camera: CameraConfig, preference: PreferenceSetConfig, placement: _Placement) -> RecordingMeta:
     """The recording's meta.json entries of an import."""
-    return {
-        "scenario": scenario["name"],
-        "camera": camera.to_dict(),
-        "preference_set": preference.to_dict(),
-        "sim": {"camera_rate_hz": req.rate_hz},
-        "classes": req.classes.to_dict(),
-        "profile": list(req.robot.profile.order),
-        "driver": {"kind": "imported", "bag": req.bag.source, "robot": req.robot.source, "labels": req.robot.labels.name},
-        "path": placement.path.tolist(),
-        "origin_shift_m": [float(v) for v in placement.shift],
-    }
+    return RecordingMeta(
+        scenario=scenario["name"], camera=camera, preference_set=preference, sim=SimMeta(req.rate_hz), classes=req.classes,
+        profile=tuple(req.robot.profile.order), driver=ImportedInfo(req.bag.source, req.robot.source, req.robot.labels.name),
+        path=tuple((x, y) for x, y in placement.path.tolist()), origin_shift_m=(float(placement.shift[0]), float(placement.shift[1])),
+    )
 
 
 def _stream_images(req: _Request, seg_conns: list, shape: tuple[int, int], frames: _Frames, progress: Progress) -> None:

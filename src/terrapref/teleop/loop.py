@@ -38,7 +38,8 @@ import pygame
 
 from terrapref.camera import CameraConfig
 from terrapref.demos.recording import RecordingWriter
-from terrapref.demos.session import DisturbanceConfig, Disturber, RecordLoop, abort_recording, recording_meta, run_perceiver
+from terrapref.demos.meta import HumanInfo, RecordingMeta, RecordingSetup, RideAlongInfo
+from terrapref.demos.session import DisturbanceConfig, Disturber, RecordLoop, abort_recording, run_perceiver
 from terrapref.teleop.guide import CourseGuide, stays_on_map
 from terrapref.teleop.stick import Stick
 from terrapref.teleop.window import ALERT_COLOR, HIGHLIGHT_COLOR, PLANNER_COLOR, Banner, Window
@@ -53,6 +54,7 @@ from terrapref.vehicle import Command
 SOURCE = "terrapref drive"
 NO_DISPLAY = "no display available; set SDL_VIDEODRIVER=dummy for a headless run or run on a desktop"
 
+INPUT = "keyboard/mouse/gamepad"  # the devices a person drives with (recorded as the driver's input)
 COUNTDOWN_S = 3.0
 """From the start key to the first recorded frame, and again when resuming from a pause [s]."""
 HANDBACK_S = 1.5
@@ -510,14 +512,11 @@ def _open_recording(setup: _Setup, options: TeleopOptions) -> RecordingWriter | 
     """The recording the session writes, with who drove and how in its metadata; None when not recording."""
     if options.record_dir is None:
         return None
-    riding_along = setup.planner is not None
-    driver = {"kind": "corrections" if riding_along else "human", "input": "keyboard/mouse/gamepad",
-              "disturbance": options.disturbance.to_dict() if options.disturbance else None, "seed": options.seed}
-    if riding_along:
-        driver["model"] = str(options.model)
+    pushes = options.disturbance.to_dict() if options.disturbance else None
+    driver = HumanInfo(INPUT, pushes, options.seed) if setup.planner is None else RideAlongInfo(INPUT, pushes, options.seed, str(options.model))
     scenario = setup.scenario
     profile = options.profile or PreferenceProfile.default(scenario.classes)
-    meta = recording_meta(scenario, setup.camera, setup.preference, setup.sim, driver, profile, options.perception)
+    meta = RecordingMeta.driven(scenario, RecordingSetup(setup.camera, setup.preference, setup.sim), driver, profile, options.perception)
     return RecordingWriter(options.record_dir, meta, scenario.to_dict(), overwrite=options.overwrite)
 
 
