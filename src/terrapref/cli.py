@@ -445,7 +445,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from terrapref.evaluation.evaluate import evaluate_model
+    from terrapref.evaluation.evaluate import Evaluation, evaluate_model
     from terrapref.planner.registry import load_policy
     from terrapref.progress import Progress
     from terrapref.terrain import PreferenceProfile
@@ -471,9 +471,9 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     STYLES.get(args.style, "--style")
     view = _live_view(args)
     try:
-        metrics = evaluate_model(args.model, args.scenarios, args.seeds, args.out, profile, not args.no_driver, frames, engine,
-                                 progress=lambda k, n: bar.update(k, f"{k}/{n} runs"), style=args.style, mcap=args.mcap, perception=perception,
-                                 watch=_watching(view))
+        evaluation = Evaluation(args.model, tuple(args.scenarios), args.seeds, profile=profile, with_driver=not args.no_driver, style=args.style,
+                                frames=tuple(frames), mcap=args.mcap, perception=perception)
+        metrics = evaluate_model(evaluation, args.out, engine, progress=lambda k, n: bar.update(k, f"{k}/{n} runs"), watch=_watching(view))
     finally:
         if view is not None:
             view.stop()
