@@ -223,7 +223,7 @@ def run_one(spec: RunSpec, watch: Watch | None = None) -> RunResult:
     watched = watch(driver) if watch is not None and isinstance(driver, PlannerDriver) else driver
     runner = PerceivedDriver(watched, Perceiver(spec.perception, sim.renderer, scenario.classes, sim.config.camera_rate_hz)) if perceived else watched
     log = run_episode(sim, runner, np.random.default_rng(spec.seed), start_pose(scenario.start, spec.seed))
-    metrics = score_run(log.trace[:, :2], scenario, sim.world, profile, completed=log.completed, collisions=log.collisions, duration_s=log.duration_s)
+    metrics = score_run(log, scenario, sim.world, profile)
     planner = driver if isinstance(driver, PlannerDriver) else None
     return RunResult(spec.scenario, spec.seed, spec.driver, metrics, log.trace[::3, :2].astype(np.float32),
                      frames=_kept_frames(planner, log), run=_kept_run(spec, planner, log))
