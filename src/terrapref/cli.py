@@ -739,7 +739,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     import time
 
     from terrapref.recipes import recipe_named
-    from terrapref.report.reproduce import reproduce
+    from terrapref.report.reproduce import Reproduction, reproduce
     from terrapref.terrain import PreferenceProfile
 
     if args.seeds < 1:
@@ -758,8 +758,8 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     _check_output(args.out, "--out", folder=True)
     engine = _engine(args)
     t0 = time.perf_counter()
-    report = reproduce(args.out, args.seeds, args.eval_seeds, recipes, profile, engine, log=lambda m: print(m, flush=True),
-                       write_recordings=args.write_recordings, perceptions=perceptions)
+    setup = Reproduction(recipes, args.seeds, args.eval_seeds, profile or PreferenceProfile.default(), args.write_recordings, perceptions)
+    report = reproduce(args.out, setup, engine, log=lambda m: print(m, flush=True))
     print(f"wrote {report} ({time.perf_counter() - t0:.0f} s)")
     return 0
 
