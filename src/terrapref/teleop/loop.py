@@ -42,7 +42,7 @@ from terrapref.demos.meta import HumanInfo, RecordingMeta, RecordingSetup, RideA
 from terrapref.demos.session import DisturbanceConfig, Disturber, RecordLoop, abort_recording, run_perceiver
 from terrapref.teleop.guide import CourseGuide, stays_on_map
 from terrapref.teleop.stick import Stick
-from terrapref.teleop.window import ALERT_COLOR, HIGHLIGHT_COLOR, PLANNER_COLOR, Banner, Window
+from terrapref.teleop.window import ALERT_COLOR, HIGHLIGHT_COLOR, PLANNER_COLOR, Banner, Overlay, Window
 from terrapref.errors import Terminated, UserError
 from terrapref.features import PreferenceSet, PreferenceSetConfig
 from terrapref.perception import PerceptionModel
@@ -375,9 +375,22 @@ class _Session:
         mode = None
         if self.planner is not None:
             mode = ("PLANNER DRIVING", PLANNER_COLOR) if self.driver == "planner" else ("YOU DRIVE: recording corrections", HIGHLIGHT_COLOR)
-        status = _status(self.sim.time_s, self.v, w, label, self.control.m, self.recorded, self.sim.collisions,
-                         self.recorder.writer is not None, self.phase)
-        self.window.draw(self.frame.image, w, label, self.trace_px, status + note, readout.lines(), end_banner or self.banner(), mode)
+        overlay = Overlay(self.status(w, label) + note, readout.lines(), end_banner or self.banner(), mode)
+        self.window.draw(self.frame.image, w, label, self.trace_px, overlay)
+
+    def status(self, w: float, label: int) -> str:
+        """The line under the view: time, speed, the stick's w and label, frames, collisions, and the phase unless driving."""
+        parts = [
+            f"t {self.sim.time_s:6.1f} s",
+            f"v {self.v:.2f} m/s",
+            f"w {w:+.2f} rad/s",
+            f"label {label:2d}/{self.control.m - 1}",
+            f"{'rec' if self.recorder.writer is not None else 'frames'} {self.recorded}",
+            f"collisions {self.sim.collisions}",
+        ]
+        if self.phase != "driving":
+            parts.append(self.phase.upper())
+        return "   ".join(parts)
 
     def run(self, max_frames: int | None, script: Script | None, realtime: bool) -> None:
         """Loop over camera frames until the run ends, the driver quits or ``max_frames`` iterations have passed."""
@@ -524,17 +537,3 @@ def _disturber(options: TeleopOptions, frame_dt_s: float) -> Disturber | None:
     """The session's pushes, drawn from ``options.seed``; None when off."""
     disturbance = options.disturbance
     return Disturber(disturbance, np.random.default_rng(options.seed), frame_dt_s) if disturbance and disturbance.active else None
-
-
-def _status(time_s: float, v: float, w: float, label: int, m: int, frames: int, collisions: int, recording: bool, phase: str) -> str:
-    parts = [
-        f"t {time_s:6.1f} s",
-        f"v {v:.2f} m/s",
-        f"w {w:+.2f} rad/s",
-        f"label {label:2d}/{m - 1}",
-        f"{'rec' if recording else 'frames'} {frames}",
-        f"collisions {collisions}",
-    ]
-    if phase != "driving":
-        parts.append(phase.upper())
-    return "   ".join(parts)
