@@ -216,7 +216,7 @@ def rests_on(expect: str, present: Sequence[str], identified: Identifiability) -
 
 def _figures(results: list[RunResult], scenarios: Sequence[str], out: Path, model, profile: PreferenceProfile, perception: PerceptionModel) -> None:
     """Per course, the top-down evaluation figure; per kept frame, its decision picture (the frame the planner received)."""
-    from terrapref.plots import save_decision, save_evaluation
+    from terrapref.plots import CourseRuns, Decision, save_decision, save_evaluation
 
     pset = PreferenceSet(model.features.preference, PinholeCamera(model.camera))
     uv, visible = pset.camera.project_ground(pset.trajectories[..., :2])
@@ -227,15 +227,16 @@ def _figures(results: list[RunResult], scenarios: Sequence[str], out: Path, mode
         per_zone = _zone_successes(planner_runs)
         ok = sum(v[0] for v in per_zone.values())
         n = sum(v[1] for v in per_zone.values())
-        save_evaluation(out / f"{file_stem(name)}.png", scenario, world, [r.xy for r in driver_runs], [r.xy for r in planner_runs], per_zone,
+        course = CourseRuns(scenario, world, [r.xy for r in driver_runs], [r.xy for r in planner_runs], per_zone)
+        save_evaluation(out / f"{file_stem(name)}.png", course,
                         title=f"{name}: planner zone success {ok}/{n} over {len(planner_runs)} run(s), profile {profile}"
                               + (f", perception {perception.name}" if perception.active else ""))
         for r in planner_runs:
             for f in r.frames:
                 rgb = model.classes.palette()[f.image]
                 x, y, yaw = f.pose
-                save_decision(out / f"{file_stem(name)}_frame{f.number:05d}.png", rgb, uv, visible, f.probs, f.index,
-                              model.features.preference.control.w_rps, classes=model.classes,
+                decision = Decision(uv, visible, f.probs, f.index, model.features.preference.control.w_rps)
+                save_decision(out / f"{file_stem(name)}_frame{f.number:05d}.png", rgb, decision, classes=model.classes,
                               title=f"{name}, frame {f.number}, pose ({x:.1f} m, {y:.1f} m, yaw {np.degrees(yaw):.0f} deg)")
 
 
