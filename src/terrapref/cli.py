@@ -519,12 +519,12 @@ def _check_frames(frames: Sequence[int], scenarios: Sequence[str]) -> None:
 
 
 def _cmd_import(args: argparse.Namespace) -> int:
-    from terrapref.interop.bag_import import import_bag
+    from terrapref.interop.bag_import import ImportOptions, import_bag
     from terrapref.interop.robot import load_robot
 
     _check_output(args.out, "--out", [args.bag, args.robot], folder=True)
     robot = load_robot(args.robot)
-    report = import_bag(args.bag, robot, args.out, rate_hz=args.rate, force=args.force)
+    report = import_bag(args.bag, robot, args.out, ImportOptions(rate_hz=args.rate, force=args.force))
     for line in report.lines():
         print(line)
     print(f"wrote {args.out} (terrapref inspect / featurize / train accept it)")
@@ -533,7 +533,7 @@ def _cmd_import(args: argparse.Namespace) -> int:
 
 def _cmd_replay(args: argparse.Namespace) -> int:
     from terrapref.demos.recording import read_recording
-    from terrapref.interop.bag_import import import_bag
+    from terrapref.interop.bag_import import ImportOptions, import_bag
     from terrapref.interop.replay import replay, write_replay
     from terrapref.interop.robot import load_robot
     from terrapref.learning.model_file import check_compatible, load_model
@@ -546,7 +546,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     rec_dir = out / "recording"
     made = not out.exists()
     try:
-        report = import_bag(args.bag, robot, rec_dir, rate_hz=args.rate, force=True, check_camera=lambda camera: check_compatible(model, camera))
+        options = ImportOptions(rate_hz=args.rate, force=True, check_camera=lambda camera: check_compatible(model, camera))
+        report = import_bag(args.bag, robot, rec_dir, options)
     except BaseException:
         if made:  # refused (another camera) or stopped: no half-made OUT is left
             shutil.rmtree(out, ignore_errors=True)

@@ -507,13 +507,29 @@ class _Request:
     check_camera: Callable[[CameraConfig], None] | None = None
 
 
-def import_bag(bag_path: str | Path, robot: RobotConfig, out: str | Path, rate_hz: float = 10.0, force: bool = False,
-               show_progress: bool = True, classes: ClassTable | None = None,
-               check_camera: Callable[[CameraConfig], None] | None = None) -> ImportReport:
-    """Turn a bag into a recording at ``out`` that inspect, featurize and train accept;
-    ``check_camera`` may refuse the log's camera (raising) before any image is read."""
+@dataclass(frozen=True)
+class ImportOptions:
+    """How a bag is imported.
+
+    Attributes:
+        rate_hz: frames per second of the recording [Hz], in (0, 100].
+        force: replace a recording already at the destination.
+        classes: the recording's class table; None: the default one.
+        check_camera: may refuse the log's camera (raising) before any image is read.
+    """
+
+    rate_hz: float = 10.0
+    force: bool = False
+    classes: ClassTable | None = None
+    check_camera: Callable[[CameraConfig], None] | None = None
+
+
+def import_bag(bag_path: str | Path, robot: RobotConfig, out: str | Path, options: ImportOptions = ImportOptions(),
+               show_progress: bool = True) -> ImportReport:
+    """Turn a bag into a recording at ``out`` that inspect, featurize and train accept."""
     bag_path, out = Path(bag_path), Path(out)
-    classes = classes or default_classes()
+    rate_hz, force, check_camera = options.rate_hz, options.force, options.check_camera
+    classes = options.classes or default_classes()
     if not (math.isfinite(rate_hz) and 0 < rate_hz <= 100):
         raise UserError("--rate", "expected frames per second in (0, 100]")
     if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not (force and _is_recording(out)))):
