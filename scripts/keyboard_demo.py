@@ -42,7 +42,7 @@ from terrapref.evaluation.stats import rate_text, wilson  # noqa: E402
 from terrapref.grid import Engine, run_grid  # noqa: E402
 from terrapref.learning.pipeline import train_and_save  # noqa: E402
 from terrapref.recipes import DEFAULT_RECIPE, record_demonstrations, recipe_named  # noqa: E402
-from terrapref.plots import save_intervals  # noqa: E402
+from terrapref.plots import RateRow, save_intervals  # noqa: E402
 from terrapref.scenario import resolve_scenario  # noqa: E402
 from terrapref.terrain import PreferenceProfile  # noqa: E402
 
@@ -147,7 +147,7 @@ def write_report(out: Path, order, layouts, rows, collisions, drives, t_train: f
              f"drives {len(layouts)} generated layouts ({layouts[0]} to {layouts[-1]}). Rates with 95% Wilson intervals over all zones.", "",
              "| demonstration | zone success | agreement with the driver | collisions | drive: frames at w = 0 | drive: collisions | per seed (agreement) |",
              "|---|---|---|---|---|---|---|"]
-    labels, rates, intervals = [], [], []
+    points = []
     for kind in INPUTS:
         sel = [r for r in rows if r["input"] == kind]
         if not sel:
@@ -159,12 +159,10 @@ def write_report(out: Path, order, layouts, rows, collisions, drives, t_train: f
                      f"{sum(d['collisions'] or 0 for d in ds)} | {per_seed} |")
         for key, name in (("success", "zone success"), ("agrees", "agreement")):
             ok = sum(r[key] for r in sel)
-            labels.append(f"{kind}: {name}")
-            rates.append(ok / len(sel))
-            intervals.append(wilson(ok, len(sel)))
+            points.append(RateRow(f"{kind}: {name}", ok / len(sel), wilson(ok, len(sel))))
     lines += ["", f"Demonstrating and training {t_train:.0f} s, evaluation {t_eval:.0f} s (wall, {workers} workers).", "",
               "![keyboard](keyboard.png)", ""]
-    save_intervals(out / "keyboard.png", labels, rates, intervals, "share of zones", target=0.95,
+    save_intervals(out / "keyboard.png", points, "share of zones", target=0.95,
                    title=f"stick or keyboard, one drive each: {len(layouts)} layouts x {len(seeds)} seeds, 95% CI")
     (out / "KEYBOARD.md").write_text("\n".join(lines))
     print("\n".join(lines))

@@ -12,7 +12,8 @@ import pytest
 
 from terrapref.demos.expert import ExpertDriver
 from terrapref.demos.recording import FRAMES, RecordingWriter, read_recording
-from terrapref.demos.session import DisturbanceConfig, Disturber, record_run, recording_meta
+from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
+from terrapref.demos.session import DisturbanceConfig, Disturber, record_run
 from terrapref.features import PreferenceSetConfig
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation
@@ -136,7 +137,8 @@ def _record(out: Path, seed: int, disturbance: DisturbanceConfig | None, time_li
         sim.time_limit_s = time_limit_s
     driver = ExpertDriver()
     preference = PreferenceSetConfig()
-    meta = recording_meta(scenario, sim.camera.config, preference, sim.config, {"kind": "expert", "seed": seed}, PreferenceProfile.default())
+    meta = RecordingMeta.driven(scenario, RecordingSetup(sim.camera.config, preference, sim.config), ExpertInfo.of(seed, "default", driver.config, disturbance),
+                                PreferenceProfile.default())
     log = record_run(sim, driver, RecordingWriter(out, meta, scenario.to_dict()), preference, np.random.default_rng(seed),
                      disturbance=disturbance)
     lines = [json.loads(line) for line in (out / FRAMES).read_text().splitlines()]

@@ -11,7 +11,7 @@ from types import SimpleNamespace
 import pytest
 
 from terrapref.cli import main
-from terrapref.evaluation.evaluate import evaluate_model, file_stem
+from terrapref.evaluation.evaluate import Evaluation, evaluate_model, file_stem
 from terrapref.grid import Engine
 from terrapref.scenario import resolve_scenario
 from terrapref.terrain import PreferenceProfile, default_classes
@@ -32,7 +32,7 @@ def model_path(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def evaluated(model_path: Path, tmp_path_factory) -> SimpleNamespace:
     out = tmp_path_factory.mktemp("eval") / "ev"
-    metrics = evaluate_model(str(model_path), ["demo_course"], seeds=2, out_dir=out, engine=Engine(workers=1), frames=(5,))
+    metrics = evaluate_model(Evaluation(str(model_path), ("demo_course",), seeds=2, frames=(5,)), out, engine=Engine(workers=1))
     return SimpleNamespace(out=out, metrics=metrics)
 
 
@@ -106,7 +106,7 @@ def test_figures_are_written(evaluated):
 
 
 def test_evaluation_is_deterministic(model_path: Path, evaluated, tmp_path: Path):
-    again = evaluate_model(str(model_path), ["demo_course"], seeds=2, out_dir=tmp_path, with_driver=False, engine=Engine(workers=1))
+    again = evaluate_model(Evaluation(str(model_path), ("demo_course",), seeds=2, with_driver=False), tmp_path, engine=Engine(workers=1))
 
     def without_agreement(runs: dict) -> dict:  # the driver's run adds its choices to the planner's zones
         return {seed: {**run, "zones": [{k: v for k, v in z.items() if k not in ("driver_choice", "agrees")} for z in run["zones"]]}
@@ -118,7 +118,7 @@ def test_evaluation_is_deterministic(model_path: Path, evaluated, tmp_path: Path
 
 
 def test_without_the_driver(model_path: Path, tmp_path: Path):
-    metrics = evaluate_model(str(model_path), ["demo_course"], seeds=1, out_dir=tmp_path, with_driver=False, engine=Engine(workers=1))
+    metrics = evaluate_model(Evaluation(str(model_path), ("demo_course",), seeds=1, with_driver=False), tmp_path, engine=Engine(workers=1))
     assert list(metrics["scenarios"]["demo_course"]) == ["planner"]
     assert "driver_summary" not in metrics
     assert json.loads((tmp_path / "metrics.json").read_text()) == json.loads(json.dumps(metrics))
@@ -127,7 +127,7 @@ def test_without_the_driver(model_path: Path, tmp_path: Path):
 
 def test_profile_changes_how_best_resolves(model_path: Path, tmp_path: Path):
     profile = PreferenceProfile.parse(ROCK_FIRST)
-    metrics = evaluate_model(str(model_path), ["demo_course"], seeds=1, out_dir=tmp_path, profile=profile, with_driver=False, engine=Engine(workers=1))
+    metrics = evaluate_model(Evaluation(str(model_path), ("demo_course",), seeds=1, profile=profile, with_driver=False), tmp_path, engine=Engine(workers=1))
     assert metrics["profile"] == ROCK_FIRST.split(",")
     zones = {z["id"]: z for z in metrics["scenarios"]["demo_course"]["planner"]["0"]["zones"]}
     assert zones["2"]["expect"] == "rock"

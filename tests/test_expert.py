@@ -35,10 +35,7 @@ def _drive(name: str, seed: int, config: SimConfig | None = None) -> DrivenRun:
     scenario = resolve_scenario(name)
     sim = Simulation(scenario, config=config)
     log = run_episode(sim, ExpertDriver(), np.random.default_rng(seed))
-    metrics = score_run(
-        log.trace[:, :2], scenario, sim.world, PreferenceProfile.default(),
-        completed=log.completed, collisions=log.collisions, duration_s=log.duration_s,
-    )
+    metrics = score_run(log, scenario, sim.world, PreferenceProfile.default())
     return DrivenRun(scenario, sim, log, metrics)
 
 

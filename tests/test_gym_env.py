@@ -15,7 +15,7 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import terrapref.sim.env
 from terrapref.scenario import Scenario, parse_scenario
-from terrapref.sim.env import ENV_ID, ENV_ID_CONTINUOUS, MAX_EPISODE_STEPS, OffRoadNavEnv, RewardConfig
+from terrapref.sim.env import ENV_ID, ENV_ID_CONTINUOUS, MAX_EPISODE_STEPS, EnvConfig, OffRoadNavEnv, RewardConfig
 
 IDS = [ENV_ID, ENV_ID_CONTINUOUS]
 SMALL = (48, 64)  # the smallest comfortable size for SB3's default CNN (36 x 36 at least)
@@ -314,6 +314,15 @@ def test_render_modes():
     top = rgb[:, :480]
     assert (top[240, 232] == 0).all()  # the vehicle at the centre of the top-down view, facing east
     assert (top == 255).all(axis=-1).sum() > 100  # the path
+
+
+def test_the_options_are_one_config_and_each_is_also_a_keyword():
+    config = EnvConfig(image_size=SMALL, n_waypoints=3)
+    by_config, by_keywords = OffRoadNavEnv(_scenario(), config), OffRoadNavEnv(_scenario(), image_size=SMALL, n_waypoints=3)
+    assert by_config.config == by_keywords.config and by_config.observation_space == by_keywords.observation_space
+    assert OffRoadNavEnv(_scenario(), config, n_waypoints=5).config == EnvConfig(image_size=SMALL, n_waypoints=5)  # a keyword wins
+    with pytest.raises(TypeError):
+        OffRoadNavEnv(_scenario(), bogus=1)
 
 
 def test_bad_construction_arguments():

@@ -92,8 +92,8 @@ def test_the_cycle_finder_finds_one():
 LAYERS = [
     {"errors"},
     {"extras"},
-    {"yamlio", "fileio", "progress", "configargs", "grid", "registry"},
-    {"tensorfile", "terrain"},
+    {"yamlio", "fileio", "progress", "configargs", "registry"},
+    {"tensorfile", "terrain", "grid"},
     {"pngio", "scenario"},
     {"world"},
     {"vehicle", "plots"},

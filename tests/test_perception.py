@@ -520,12 +520,12 @@ def test_reproduce_reports_each_recipe_under_each_perception_model(tmp_path):
     """REPORT.md holds a row per recipe and a column per perception model, each cell from runs
     driven under that model (the field cell is not the clean one)."""
     from terrapref.recipes import TEACH
-    from terrapref.report.reproduce import reproduce
+    from terrapref.report.reproduce import Reproduction, reproduce
 
     import json
 
-    report_path = reproduce(tmp_path / "rep", seeds=1, recipes=(TEACH,), perceptions=(load_perception("clean"), load_perception("field")),
-                            log=lambda _: None)
+    setup = Reproduction(recipes=(TEACH,), seeds=1, perceptions=(load_perception("clean"), load_perception("field")))
+    report_path = reproduce(tmp_path / "rep", setup, log=lambda _: None)
     report = report_path.read_text()
     table = report.split("## Under what a robot sees")[1].split("\n## ")[0]
     header = next(line for line in table.splitlines() if line.startswith("| recipe |"))

@@ -20,7 +20,8 @@ from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer, 
 from terrapref.demos.dataset import build_dataset
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.demos.recording import RecordingWriter, read_recording
-from terrapref.demos.session import record_run, recording_meta
+from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
+from terrapref.demos.session import record_run
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
 from terrapref.learning.model_file import LoadedModel, load_model, save_model
@@ -270,9 +271,10 @@ def demo(tmp_path_factory, course) -> SimpleNamespace:
     """The synthetic driver's demonstration of demo_course, featurised, and a 3-epoch model."""
     d = tmp_path_factory.mktemp("demo")
     features, camera, profile = FeatureConfig(), CameraConfig(), PreferenceProfile.default(course.classes)
-    meta = recording_meta(course, camera, features.preference, SimConfig(), {"kind": "expert", "seed": 0}, profile)
+    expert = ExpertConfig(profile=profile.order)
+    meta = RecordingMeta.driven(course, RecordingSetup(camera, features.preference, SimConfig()), ExpertInfo.of(0, "default", expert), profile)
     writer = RecordingWriter(d / "rec", meta, course.to_dict())
-    record_run(Simulation(course, camera), ExpertDriver(ExpertConfig(profile=profile.order)), writer, features.preference, np.random.default_rng(0))
+    record_run(Simulation(course, camera), ExpertDriver(expert), writer, features.preference, np.random.default_rng(0))
     recording = read_recording(d / "rec")
     dataset = build_dataset([recording], features)
     result = train_and_save(dataset, d / "model.safetensors", train_config(epochs=3, skip=True), checkpoints=False)

@@ -111,7 +111,7 @@ MEANT = {
 
 def test_every_style_is_described_and_listed_here():
     assert set(STYLES) == set(MEANT)
-    assert all(description for description, _ in STYLES.values())
+    assert all(style.description for _, style in STYLES.items())
 
 
 @pytest.mark.parametrize("style", list(STYLES))
@@ -133,11 +133,11 @@ def test_the_style_without_a_profile_keeps_the_default_profile():
 
 def test_the_numbers_in_the_descriptions_are_the_configs():
     default, wide, late = ExpertConfig(), ExpertConfig.styled("wide"), ExpertConfig.styled("late")
-    assert f"reacts {default.reaction_distance_m:g} m ahead, {default.half_width_m:g} m half-width" in STYLES["default"][0]
-    assert f"terrain within {wide.margin_m:g} m beside it costs half" in STYLES["wide"][0]
-    assert f"{wide.lethal_margin_m:g} m extra from lethal terrain" in STYLES["wide"][0]
-    assert f"{late.reaction_distance_m:g} m ahead, not {default.reaction_distance_m:g} m" in STYLES["late"][0]
-    assert f"{ExpertConfig.styled('shaky').stick_noise_rps:g} rad/s of tremor" in STYLES["shaky"][0]
+    assert f"reacts {default.reaction_distance_m:g} m ahead, {default.half_width_m:g} m half-width" in STYLES["default"].description
+    assert f"terrain within {wide.margin_m:g} m beside it costs half" in STYLES["wide"].description
+    assert f"{wide.lethal_margin_m:g} m extra from lethal terrain" in STYLES["wide"].description
+    assert f"{late.reaction_distance_m:g} m ahead, not {default.reaction_distance_m:g} m" in STYLES["late"].description
+    assert f"{ExpertConfig.styled('shaky').stick_noise_rps:g} rad/s of tremor" in STYLES["shaky"].description
     assert ExpertConfig.styled("reluctant").deviation_cost == 2 * default.deviation_cost  # "twice the cost"
 
 

@@ -17,7 +17,17 @@ import pytest
 
 from terrapref.demos.expert import ExpertDriver
 from terrapref.demos.recording import FRAMES, META, Recording, RecordingWriter, read_recording
-from terrapref.demos.session import record_run, recording_meta
+from terrapref.demos.meta import (
+    CorrectionRoundInfo,
+    ExpertInfo,
+    HumanInfo,
+    ImportedInfo,
+    RecordingMeta,
+    RecordingSetup,
+    RideAlongInfo,
+    driver_from_dict,
+)
+from terrapref.demos.session import record_run
 from terrapref.errors import UserError
 from terrapref.features import PreferenceSetConfig
 from terrapref.scenario import Scenario, resolve_scenario
@@ -25,7 +35,7 @@ from terrapref.sim import EpisodeLog, Simulation
 from terrapref.terrain import PreferenceProfile
 
 H, W = 480, 640
-META_IN = {"scenario": "hand_made", "camera": {"width_px": W, "height_px": H}, "driver": {"kind": "test"}}
+META_IN = {"scenario": "hand_made", "camera": {"width_px": W, "height_px": H}, "driver": {"kind": "human", "input": "test", "disturbance": None, "seed": 0}}
 SCENARIO_IN = {"format": "terrapref-scenario/1", "name": "hand_made", "path": {"waypoints": [[0.0, 0.0], [5.0, 0.0]]}}
 
 
@@ -186,7 +196,8 @@ import sys
 import numpy as np
 from terrapref.demos.expert import ExpertDriver
 from terrapref.demos.recording import RecordingWriter
-from terrapref.demos.session import record_run, recording_meta
+from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
+from terrapref.demos.session import record_run
 from terrapref.features import PreferenceSetConfig
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation
@@ -196,7 +207,7 @@ scenario = resolve_scenario("demo_course")
 sim = Simulation(scenario)
 driver = ExpertDriver()
 preference = PreferenceSetConfig()
-meta = recording_meta(scenario, sim.camera.config, preference, sim.config, driver.config.to_dict(), PreferenceProfile.default())
+meta = RecordingMeta.driven(scenario, RecordingSetup(sim.camera.config, preference, sim.config), ExpertInfo.of(0, "default", driver.config), PreferenceProfile.default())
 writer = RecordingWriter(sys.argv[1], meta, scenario.to_dict())
 record_run(sim, driver, writer, preference, np.random.default_rng(0))
 """
@@ -246,7 +257,7 @@ def demo_recording(tmp_path_factory: pytest.TempPathFactory) -> FullRecording:
     sim = Simulation(scenario)
     driver = ExpertDriver()
     preference = PreferenceSetConfig()
-    meta = recording_meta(scenario, sim.camera.config, preference, sim.config, {"kind": "expert", "seed": 0}, PreferenceProfile.default())
+    meta = RecordingMeta.driven(scenario, RecordingSetup(sim.camera.config, preference, sim.config), ExpertInfo.of(0, "default", driver.config), PreferenceProfile.default())
     log = record_run(sim, driver, RecordingWriter(out, meta, scenario.to_dict()), preference, np.random.default_rng(0))
     return FullRecording(scenario, sim, log, read_recording(out))
 
@@ -330,7 +341,7 @@ def test_inspect_says_quit_and_not_reached(tmp_path: Path):
     from terrapref.terrain import PreferenceProfile
 
     scenario = resolve_scenario("demo_course")
-    meta = recording_meta(scenario, CameraConfig(), PreferenceSetConfig(), SimConfig(), {"kind": "human"}, PreferenceProfile.default())
+    meta = RecordingMeta.driven(scenario, RecordingSetup(CameraConfig(), PreferenceSetConfig(), SimConfig()), HumanInfo("keyboard"), PreferenceProfile.default())
     writer = RecordingWriter(tmp_path / "rec", meta, scenario.to_dict())
     sim = Simulation(scenario)
     frame = sim.reset()
@@ -377,3 +388,55 @@ def test_a_run_stopped_before_its_first_frame_leaves_no_recording(tmp_path):
     writer = RecordingWriter(out, {"camera": {}}, {"format": "terrapref-scenario/1"})
     writer.abort()
     assert not out.exists()
+
+
+# --- the typed meta.json (terrapref.demos.meta) ----------------------------------------------------------
+
+DRIVERS = [
+    ExpertInfo(3, "wide", {"reaction_distance_m": 5.0}, {"rate_hz": 0.15}),
+    HumanInfo("keyboard/mouse/gamepad", None, 0),
+    RideAlongInfo("keyboard/mouse/gamepad", {"rate_hz": 1.0}, 2, "model.safetensors"),
+    CorrectionRoundInfo(1, 7),
+    ImportedInfo("drive.mcap", "robot.yaml", "rellis"),
+]
+
+
+@pytest.mark.parametrize("driver", DRIVERS, ids=lambda d: type(d).__name__)
+def test_every_kind_of_driver_reads_back_as_written(driver):
+    data = json.loads(json.dumps(driver.to_dict()))
+    assert next(iter(data)) == "kind"
+    assert driver_from_dict(data, "meta.json") == driver
+
+
+def test_the_meta_reads_back_as_written_with_its_keys_in_the_files_order(demo_recording: FullRecording):
+    meta = demo_recording.rec.header
+    entries = {k: v for k, v in demo_recording.rec.meta.items() if k not in ("format", "status", "created", "frames", "summary", "finished")}
+    assert json.dumps(meta.to_dict()) == json.dumps(entries)
+    assert RecordingMeta.from_dict(meta.to_dict(), "meta.json") == meta
+    assert list(entries) == ["scenario", "camera", "preference_set", "sim", "classes", "profile", "driver", "path", "perception"]
+
+
+@pytest.mark.parametrize(("key", "value", "field", "message"), [
+    ("driver", {"kind": "robot"}, "driver.kind", "unknown driver kind 'robot'; driver kinds: expert, human, corrections, imported"),
+    ("driver", {"kind": "expert", "seed": "3"}, "driver.seed", "expected an integer, got str"),
+    ("driver", [1], "driver", "expected a mapping, got list"),
+    ("sim", {"camera_rate_hz": 0}, "sim.camera_rate_hz", "expected a frame rate > 0 [Hz]"),
+    ("sim", {"camera_rate_hz": 10.0, "vehicle": {"wheels": 4}}, "sim.vehicle", "invalid (TypeError"),
+    ("origin_shift_m", [1.0], "origin_shift_m", "expected two finite numbers [m]"),
+])
+def test_a_wrong_meta_entry_is_one_line_naming_the_file_and_field(tmp_path: Path, key, value, field, message):
+    rec = tmp_path / "rec"
+    with RecordingWriter(rec, {**META_IN, key: value}, {}) as w:
+        w.close()
+    with pytest.raises(UserError) as err:
+        read_recording(rec)
+    assert len(err.value.lines()) == 1 and err.value.problems[0].field == field and message in err.value.problems[0].message
+    assert err.value.source.endswith("meta.json")
+
+
+def test_the_meta_module_examples_run():
+    import doctest
+
+    import terrapref.demos.meta
+
+    assert doctest.testmod(terrapref.demos.meta, verbose=False).failed == 0

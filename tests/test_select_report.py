@@ -58,7 +58,7 @@ def test_the_figure_marks_each_row_with_its_own_target(tmp_path, monkeypatch):
                                      for p in ("clean", "field")],
              "engine": "local, 1 worker", "train_s": 1.0, "eval_s": 2.0}
     drawn = {}
-    monkeypatch.setattr(select_report, "save_intervals", lambda path, labels, *args, target=None, **kw: drawn.update(labels=labels, target=target))
+    monkeypatch.setattr(select_report, "save_intervals", lambda path, rows, *args, target=None, **kw: drawn.update(labels=[r.label for r in rows], target=target))
     write_selection_report(tmp_path, saved)
     assert drawn["labels"] == ["teach, all orders, clean", "teach, all orders, field"]
     assert drawn["target"] == [select_report.TARGET, select_report.PERCEIVED_TARGET]  # 95% on clean frames, 90% under errors

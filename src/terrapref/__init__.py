@@ -5,8 +5,8 @@ the layers below it (tests/test_layout.py checks this list against the code):
 
 1. errors
 2. extras (which optional extra a feature needs)
-3. yamlio, fileio, progress, configargs, grid, registry
-4. tensorfile, terrain
+3. yamlio, fileio, progress, configargs, registry
+4. tensorfile, terrain, grid
 5. pngio, scenario (files)
 6. world (terrain raster)
 7. vehicle, plots (dynamics)

@@ -120,7 +120,8 @@ def _cmd_record(args: argparse.Namespace) -> int:
     from terrapref.camera import CameraConfig
     from terrapref.demos.expert import ExpertConfig, ExpertDriver
     from terrapref.demos.recording import RecordingWriter
-    from terrapref.demos.session import record_run, recording_meta
+    from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
+    from terrapref.demos.session import record_run
     from terrapref.features import PreferenceSetConfig
     from terrapref.progress import Progress
     from terrapref.scenario import resolve_scenario
@@ -139,9 +140,8 @@ def _cmd_record(args: argparse.Namespace) -> int:
     disturbance = _disturbance(args.disturb)
     perception = _perception(args.perception, classes=scenario.classes)
     camera, preference, sim_config = CameraConfig(), PreferenceSetConfig(), SimConfig()
-    driver = {"kind": "expert", "seed": args.seed, "style": args.style, "config": expert.to_dict(),
-              "disturbance": disturbance.to_dict() if disturbance else None}
-    meta = recording_meta(scenario, camera, preference, sim_config, driver, profile, perception)
+    meta = RecordingMeta.driven(scenario, RecordingSetup(camera, preference, sim_config), ExpertInfo.of(args.seed, args.style, expert, disturbance),
+                                profile, perception)
     sim = Simulation(scenario, camera, sim_config)
     writer = RecordingWriter(args.out, meta, scenario.to_dict(), overwrite=args.force)
     bar = Progress(f"record {scenario.name}", sim.path.length_m, enabled=not args.quiet)
@@ -467,7 +467,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from terrapref.evaluation.evaluate import evaluate_model
+    from terrapref.evaluation.evaluate import Evaluation, evaluate_model
     from terrapref.planner.registry import load_policy
     from terrapref.progress import Progress
     from terrapref.terrain import PreferenceProfile
@@ -494,13 +494,12 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     from terrapref.demos.expert import STYLES
     from terrapref.evaluation.stats import rate_text
 
-    if args.style not in STYLES:
-        raise UserError("--style", f"unknown driver style {args.style!r}; styles: {', '.join(STYLES)}")
+    STYLES.get(args.style, "--style")
     view = _live_view(args)
     try:
-        metrics = evaluate_model(args.model, args.scenarios, args.seeds, args.out, profile, not args.no_driver, frames, engine,
-                                 progress=lambda k, n: bar.update(k, f"{k}/{n} runs"), style=args.style, mcap=args.mcap, perception=perception,
-                                 watch=_watching(view))
+        evaluation = Evaluation(args.model, tuple(args.scenarios), args.seeds, profile=profile, with_driver=not args.no_driver, style=args.style,
+                                frames=tuple(frames), mcap=args.mcap, perception=perception)
+        metrics = evaluate_model(evaluation, args.out, engine, progress=lambda k, n: bar.update(k, f"{k}/{n} runs"), watch=_watching(view))
     finally:
         if view is not None:
             view.stop()
@@ -546,12 +545,12 @@ def _check_frames(frames: Sequence[int], scenarios: Sequence[str]) -> None:
 
 
 def _cmd_import(args: argparse.Namespace) -> int:
-    from terrapref.interop.bag_import import import_bag
+    from terrapref.interop.bag_import import ImportOptions, import_bag
     from terrapref.interop.robot import load_robot
 
     _check_output(args.out, "--out", [args.bag, args.robot], folder=True)
     robot = load_robot(args.robot)
-    report = import_bag(args.bag, robot, args.out, rate_hz=args.rate, force=args.force)
+    report = import_bag(args.bag, robot, args.out, ImportOptions(rate_hz=args.rate, force=args.force))
     for line in report.lines():
         print(line)
     print(f"wrote {args.out} (terrapref inspect / featurize / train accept it)")
@@ -560,7 +559,7 @@ def _cmd_import(args: argparse.Namespace) -> int:
 
 def _cmd_replay(args: argparse.Namespace) -> int:
     from terrapref.demos.recording import read_recording
-    from terrapref.interop.bag_import import import_bag
+    from terrapref.interop.bag_import import ImportOptions, import_bag
     from terrapref.interop.replay import replay, write_replay
     from terrapref.interop.robot import load_robot
     from terrapref.learning.model_file import check_compatible, load_model
@@ -573,7 +572,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     rec_dir = out / "recording"
     made = not out.exists()
     try:
-        report = import_bag(args.bag, robot, rec_dir, rate_hz=args.rate, force=True, check_camera=lambda camera: check_compatible(model, camera))
+        options = ImportOptions(rate_hz=args.rate, force=True, check_camera=lambda camera: check_compatible(model, camera))
+        report = import_bag(args.bag, robot, rec_dir, options)
     except BaseException:
         if made:  # refused (another camera) or stopped: no half-made OUT is left
             shutil.rmtree(out, ignore_errors=True)
@@ -771,7 +771,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     import time
 
     from terrapref.recipes import recipe_named
-    from terrapref.report.reproduce import reproduce
+    from terrapref.report.reproduce import Reproduction, reproduce
     from terrapref.terrain import PreferenceProfile
 
     if args.seeds < 1:
@@ -790,8 +790,8 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     _check_output(args.out, "--out", folder=True)
     engine = _engine(args)
     t0 = time.perf_counter()
-    report = reproduce(args.out, args.seeds, args.eval_seeds, recipes, profile, engine, log=lambda m: print(m, flush=True),
-                       write_recordings=args.write_recordings, perceptions=perceptions)
+    setup = Reproduction(recipes, args.seeds, args.eval_seeds, profile or PreferenceProfile.default(), args.write_recordings, perceptions)
+    report = reproduce(args.out, setup, engine, log=lambda m: print(m, flush=True))
     print(f"wrote {report} ({time.perf_counter() - t0:.0f} s)")
     return 0
 
@@ -840,8 +840,7 @@ def _cmd_select(args: argparse.Namespace) -> int:
         PreferenceProfile.parse(list(o), source="--orders")
     if len(set(orders)) != len(orders):
         raise UserError("--orders", f"names an order twice: {args.orders!r}")
-    if args.style not in STYLES:
-        raise UserError("--style", f"unknown driver style {args.style!r}; styles: {', '.join(STYLES)}")
+    STYLES.get(args.style, "--style")
     for flag, value, low in (("--seeds", args.seeds, 1), ("--courses", args.courses, 1), ("--first", args.first, 0)):
         if value < low:
             raise UserError(flag, f"must be an integer >= {low}, got {value}")
@@ -916,7 +915,7 @@ def _check_ray_address(address: str) -> None:
 
 def _add_engine_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, help="parallel jobs on this machine (default: one per core)")
-    p.add_argument("--engine", choices=ENGINES, default="local",
+    p.add_argument("--engine", choices=ENGINES.names(), default="local",
                    help="where the jobs run: local processes (default) or Ray (a local instance, or the cluster at --address)")
     p.add_argument("--address", metavar="HOST:PORT", help="a Ray cluster to run the jobs on (ray start --head on one machine); with --engine ray")
 

@@ -30,11 +30,19 @@ from typing import Any, TypeVar
 
 from terrapref.errors import UserError
 from terrapref.extras import needs
+from terrapref.registry import Registry
 
 J = TypeVar("J")
 R = TypeVar("R")
 
-ENGINES = ("local", "ray")
+Outcome = tuple[bool, Any]  # (True, the job's result) or (False, what went wrong): see _guarded
+Runner = Callable[[Callable, list, "Engine", "Callable[[int, int], None] | None"], list[Outcome]]
+
+# Where a grid's jobs can run; each runner gives every job's outcome in the jobs' order. The
+# runners are named as "module:attribute" because they are defined below (and Ray is optional).
+ENGINES: Registry[Runner] = Registry("engine")
+ENGINES.register("local", "terrapref.grid:_run_here", doc="worker processes on this machine")
+ENGINES.register("ray", "terrapref.grid:_run_ray", doc="Ray tasks: a local instance, or a cluster")
 
 
 class GridError(RuntimeError):
@@ -63,8 +71,7 @@ class Engine:
     address: str | None = None
 
     def __post_init__(self) -> None:
-        if self.kind not in ENGINES:
-            raise ValueError(f"unknown engine {self.kind!r}; engines: {', '.join(ENGINES)}")
+        ENGINES.entry(self.kind)  # an unknown kind is a ValueError listing the engines
         if self.workers is not None and self.workers < 1:
             raise ValueError("workers must be >= 1")
         if self.address is not None and self.kind != "ray":
@@ -112,16 +119,7 @@ def run_grid(
     jobs = list(jobs)
     if not jobs:
         return []
-    if engine.kind == "ray":
-        outcomes = _run_ray(fn, jobs, engine, progress)
-    elif engine.n_workers <= 1 or len(jobs) == 1:
-        outcomes = []
-        for i, job in enumerate(jobs):
-            outcomes.append(_guarded(fn, job))
-            if progress:
-                progress(i + 1, len(jobs))
-    else:
-        outcomes = _run_local(fn, jobs, engine.n_workers, progress)
+    outcomes = ENGINES[engine.kind](fn, jobs, engine, progress)
     failed = [(job, value) for job, (ok, value) in zip(jobs, outcomes, strict=True) if not ok]
     for _, value in failed:
         if isinstance(value, UserError):
@@ -134,7 +132,19 @@ def run_grid(
     return [value for _, value in outcomes]
 
 
-def _run_local(fn: Callable, jobs: list, workers: int, progress: Callable[[int, int], None] | None) -> list[tuple[bool, Any]]:
+def _run_here(fn: Callable, jobs: list, engine: Engine, progress: Callable[[int, int], None] | None) -> list[Outcome]:
+    """The ``local`` engine: the jobs in this process with one worker (or one job), else in worker processes."""
+    if engine.n_workers > 1 and len(jobs) > 1:
+        return _run_local(fn, jobs, engine.n_workers, progress)
+    outcomes = []
+    for i, job in enumerate(jobs):
+        outcomes.append(_guarded(fn, job))
+        if progress:
+            progress(i + 1, len(jobs))
+    return outcomes
+
+
+def _run_local(fn: Callable, jobs: list, workers: int, progress: Callable[[int, int], None] | None) -> list[Outcome]:
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
     from functools import partial
@@ -171,7 +181,8 @@ def start_ray(engine: Engine) -> bool:
     return True
 
 
-def _run_ray(fn: Callable, jobs: list, engine: Engine, progress: Callable[[int, int], None] | None) -> list[tuple[bool, Any]]:
+def _run_ray(fn: Callable, jobs: list, engine: Engine, progress: Callable[[int, int], None] | None) -> list[Outcome]:
+    """The ``ray`` engine: one Ray task per job, on ``engine``'s instance or cluster."""
     started_here = start_ray(engine)
     import ray  # start_ray has imported it, or said which extra brings it
     try:

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import matplotlib
 
@@ -132,19 +134,31 @@ def save_loss_curve(path: str | Path, members: Sequence[tuple[Sequence[dict], in
     return _save(fig, path)
 
 
-def save_decision(path: str | Path, rgb: np.ndarray, uv: np.ndarray, visible: np.ndarray, probs: np.ndarray,
-                  chosen: int, w_rps: Sequence[float], title: str = "", classes=None) -> Path:
-    """The camera view with every trajectory coloured by its predicted probability on an absolute
-    0-1 scale, C's own best and the planner's choice marked apart (they differ when the second
-    stage overrules C), and a legend of the terrain classes.
+@dataclass(frozen=True, eq=False)  # arrays inside
+class Decision:
+    """A planner decision, as drawn over the camera view.
 
-    Args:
-        rgb: colour image (H, W, 3).
-        uv: pixel coordinates of the trajectory points, (m, n, 2); visible: (m, n) mask.
+    Attributes:
+        uv: pixel coordinates of the trajectory points, (m, n, 2).
+        visible: which of them the camera sees, (m, n).
         probs: F_t, (m,).
         chosen: the planner's choice (after the second stage, where there is one).
-        classes: the class table, for the terrain legend.
+        w_rps: each trajectory's yaw rate [rad/s], (m,).
     """
+
+    uv: np.ndarray
+    visible: np.ndarray
+    probs: np.ndarray
+    chosen: int
+    w_rps: Sequence[float]
+
+
+def save_decision(path: str | Path, rgb: np.ndarray, decision: Decision, title: str = "", classes=None) -> Path:
+    """The camera view ``rgb`` (H, W, 3) with every trajectory coloured by its predicted
+    probability on an absolute 0-1 scale, C's own best and the planner's choice marked apart (they
+    differ when the second stage overrules C), and a legend of the terrain classes (``classes``:
+    the class table)."""
+    uv, visible, probs, chosen, w_rps = decision.uv, decision.visible, decision.probs, decision.chosen, decision.w_rps
     h, w = rgb.shape[:2]
     fig, ax = plt.subplots(figsize=(8.6, 6.4), dpi=100)
     ax.imshow(rgb)
@@ -180,11 +194,30 @@ def save_decision(path: str | Path, rgb: np.ndarray, uv: np.ndarray, visible: np
     return _save(fig, path)
 
 
-def save_evaluation(path: str | Path, scenario: Scenario, world: WorldMap, driver: Sequence[np.ndarray], planner: Sequence[np.ndarray],
-                    zone_success: dict[str, tuple[int, int]], title: str) -> Path:
+@dataclass(frozen=True, eq=False)  # arrays inside
+class CourseRuns:
+    """The runs of one course, as an evaluation figure shows them.
+
+    Attributes:
+        scenario: the course.
+        world: its raster (the one the runs used).
+        driver: the synthetic driver's tracks, each (T, 2) [m].
+        planner: the planner's tracks, each (T, 2) [m].
+        zone_success: zone id -> (planner runs that met it, runs scored in it).
+    """
+
+    scenario: Scenario
+    world: WorldMap
+    driver: Sequence[np.ndarray]
+    planner: Sequence[np.ndarray]
+    zone_success: dict[str, tuple[int, int]]
+
+
+def save_evaluation(path: str | Path, runs: CourseRuns, title: str) -> Path:
     """An evaluation at a glance: the whole course with each zone numbered and outlined green
     (every planner run met it) or red (some run missed it), and below it one inset per zone at a
     legible scale with the driver's tracks (blue, dashed) and the planner's (red)."""
+    scenario, world, driver, planner, zone_success = runs.scenario, runs.world, runs.driver, runs.planner, runs.zone_success
     zones = list(scenario.zones)
     cols = 4
     rows = (len(zones) + cols - 1) // cols
@@ -210,16 +243,16 @@ def save_evaluation(path: str | Path, scenario: Scenario, world: WorldMap, drive
     ax.legend(handles=class_handles + tracks, loc="upper left", fontsize=7, framealpha=0.8, ncol=2)
     ax.set_title(title)
     for k, z in enumerate(zones):
-        _draw_zone_inset(fig.add_subplot(grid[1 + k // cols, k % cols]), scenario, world, z, driver, planner, zone_success.get(z.id, (0, 0)))
+        _draw_zone_inset(fig.add_subplot(grid[1 + k // cols, k % cols]), runs, z)
     fig.tight_layout()
     return _save(fig, path)
 
 
-def _draw_zone_inset(zax: plt.Axes, scenario: Scenario, world: WorldMap, z: Zone, driver: Sequence[np.ndarray], planner: Sequence[np.ndarray],
-                     success: tuple[int, int]) -> None:
-    """One zone at a legible scale (4 m around it): its outline green when every planner run met it
-    (``success``: runs that met it, runs scored), and the driver's and the planner's tracks."""
-    draw_map(zax, scenario, world, zones=False)
+def _draw_zone_inset(zax: plt.Axes, runs: CourseRuns, z: Zone) -> None:
+    """Zone ``z`` at a legible scale (4 m around it): its outline green when every planner run met
+    it, and the driver's and the planner's tracks."""
+    draw_map(zax, runs.scenario, runs.world, zones=False)
+    driver, planner, success = runs.driver, runs.planner, runs.zone_success.get(z.id, (0, 0))
     o = outline(z.shape)
     lo, hi = o.min(axis=0) - 4.0, o.max(axis=0) + 4.0
     half = max(hi - lo) / 2
@@ -256,8 +289,15 @@ def save_bars(path: str | Path, labels: Sequence[str], means: Sequence[float], s
     return _save(fig, path)
 
 
-def save_intervals(path: str | Path, labels: Sequence[str], rates: Sequence[float], intervals: Sequence[tuple[float, float]], ylabel: str,
-                   target: float | Sequence[float] | None = None, title: str = "") -> Path:
+class RateRow(NamedTuple):
+    """One row of :func:`save_intervals`: its label, its rate (0-1) and the rate's 95% interval (low, high)."""
+
+    label: str
+    rate: float
+    interval: tuple[float, float]
+
+
+def save_intervals(path: str | Path, rows: Sequence[RateRow], ylabel: str, target: float | Sequence[float] | None = None, title: str = "") -> Path:
     """One point per row with its 95% interval (asymmetric, e.g. Wilson) and the rate written beside it;
     ``target`` a line across, or one per row (a short line at each point, its value written where it
     changes; a line across when every row's is the same).
@@ -265,9 +305,10 @@ def save_intervals(path: str | Path, labels: Sequence[str], rates: Sequence[floa
     Points rather than bars: the axis can then start near the data without bars that begin
     nowhere, and differences of a few points stay visible.
     """
+    labels, intervals = [r.label for r in rows], [r.interval for r in rows]
     fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(labels) + 2), 3.8), dpi=120)
     x = np.arange(len(labels))
-    rates = np.asarray(rates, dtype=float)
+    rates = np.array([r.rate for r in rows], dtype=float)
     lo, hi = (np.array(v, dtype=float) for v in zip(*intervals)) if len(intervals) else (np.zeros(0), np.zeros(0))
     ax.errorbar(x, rates, yerr=np.stack([rates - lo, hi - rates]), fmt="o", color="tab:blue", capsize=5, lw=1.5)
     for xi, r, h in zip(x, rates, hi):

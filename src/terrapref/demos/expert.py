@@ -21,10 +21,12 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import asdict, dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
+from terrapref.registry import Registry
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim.loop import Frame
@@ -91,26 +93,39 @@ class ExpertConfig:
 
     @classmethod
     def styled(cls, style: str = "default", profile: tuple[str, ...] | None = None) -> ExpertConfig:
-        """The driver of a named style (:data:`STYLES`) with a preference ``profile``."""
-        if style not in STYLES:
-            raise ValueError(f"unknown driver style {style!r}; styles: {', '.join(STYLES)}")
+        """The driver of a named style (:data:`STYLES`) with a preference ``profile``; an unknown
+        style is a ValueError listing the styles."""
+        changes = STYLES[style].changes
         base = cls() if profile is None else cls(profile=tuple(profile))
-        return replace(base, **STYLES[style][1])
+        return replace(base, **changes)
 
 
-# Driver styles: different people, not only different orders. Each is the default driver with
-# a few parameters changed (description, changes); `terrapref record --style NAME`.
-STYLES: dict[str, tuple[str, dict]] = {
-    "default": ("reacts 5 m ahead, 0.6 m half-width, 0.4 m extra from lethal terrain", {}),
-    "wide": ("keeps wider margins: terrain within 0.5 m beside it costs half as if driven on, 0.8 m extra from lethal terrain",
-             {"margin_m": 0.5, "lethal_margin_m": 0.8}),
-    "late": ("reacts later: terrain on the path 3.5 m ahead, not 5 m; a slower hand (0.35 s)",
-             {"reaction_distance_m": 3.5, "reaction_delay_s": 0.35}),
-    "shaky": ("a shakier hand: 0.08 rad/s of tremor while the stick is deflected, a wider deadzone",
-              {"stick_noise_rps": 0.08, "deadzone_rps": 0.1}),
-    "reluctant": ("leaves the path reluctantly: twice the cost per metre of detour",
-                  {"deviation_cost": 0.16}),
-}
+class Style(NamedTuple):
+    """A driver style: the default driver with a few parameters changed.
+
+    Attributes:
+        description: what sets this driver apart, in words.
+        changes: the :class:`ExpertConfig` fields that differ from the default driver's.
+    """
+
+    description: str
+    changes: dict[str, float]
+
+
+def _style(name: str, description: str, **changes: float) -> None:
+    STYLES.register(name, Style(description, changes), doc=description)
+
+
+# Driver styles: different people, not only different orders; `terrapref record --style NAME`.
+STYLES: Registry[Style] = Registry("driver style", "styles")
+_style("default", "reacts 5 m ahead, 0.6 m half-width, 0.4 m extra from lethal terrain")
+_style("wide", "keeps wider margins: terrain within 0.5 m beside it costs half as if driven on, 0.8 m extra from lethal terrain",
+       margin_m=0.5, lethal_margin_m=0.8)
+_style("late", "reacts later: terrain on the path 3.5 m ahead, not 5 m; a slower hand (0.35 s)",
+       reaction_distance_m=3.5, reaction_delay_s=0.35)
+_style("shaky", "a shakier hand: 0.08 rad/s of tremor while the stick is deflected, a wider deadzone",
+       stick_noise_rps=0.08, deadzone_rps=0.1)
+_style("reluctant", "leaves the path reluctantly: twice the cost per metre of detour", deviation_cost=0.16)
 
 
 class ExpertDriver:

@@ -24,7 +24,8 @@ import shutil
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from functools import cached_property
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
@@ -34,6 +35,9 @@ from terrapref.errors import UserError
 from terrapref.fileio import new_folder, replace_dir, write_text_atomic
 from terrapref.pngio import read_label_png, write_png_atomic
 from terrapref.yamlio import load_yaml_text
+
+if TYPE_CHECKING:
+    from terrapref.demos.meta import RecordingMeta
 
 FORMAT = "terrapref-recording/1"
 META = "meta.json"
@@ -45,6 +49,11 @@ IMAGES = "images"
 def write_json_atomic(path: Path, data: Any) -> None:
     """Write JSON through a temporary file and a rename: readers see the old or the new file."""
     write_text_atomic(path, json.dumps(data, indent=2, sort_keys=False), fsync=True)
+
+
+def _entries(meta: RecordingMeta | dict[str, Any]) -> dict[str, Any]:
+    """A recording's configuration as meta.json holds it."""
+    return meta if isinstance(meta, dict) else meta.to_dict()
 
 
 def _is_recording(path: Path) -> bool:
@@ -60,11 +69,12 @@ class RecordingWriter:
             With ``overwrite`` the old recording stays untouched until the new one is
             complete: the new one is written beside it and swapped in by :meth:`close`; if the
             run ends early (:meth:`abort`) it is kept as ``OUT.partial`` and the old one stays.
-        meta: configuration to store (camera, control set, scenario name, driver...).
+        meta: configuration to store (camera, control set, scenario name, driver...): a
+            :class:`~terrapref.demos.meta.RecordingMeta`, or the entries its ``to_dict`` gives.
         scenario: the scenario mapping (``Scenario.to_dict()``) to store beside it.
     """
 
-    def __init__(self, out_dir: str | Path, meta: dict[str, Any], scenario: dict[str, Any], overwrite: bool = False) -> None:
+    def __init__(self, out_dir: str | Path, meta: RecordingMeta | dict[str, Any], scenario: dict[str, Any], overwrite: bool = False) -> None:
         self.target = Path(out_dir)
         self.dir = self.target
         self.partial_dir: Path | None = None  # where an aborted replacement was left
@@ -77,7 +87,7 @@ class RecordingWriter:
                 self.dir = new_folder(self.target, ".new")
             elif any(self.target.iterdir()):
                 raise UserError(str(self.target), "directory is not empty and holds no recording; refusing to write into it")
-        self.meta = {"format": FORMAT, "status": "partial", "created": datetime.now(timezone.utc).isoformat(timespec="seconds"), **meta}
+        self.meta = {"format": FORMAT, "status": "partial", "created": datetime.now(timezone.utc).isoformat(timespec="seconds"), **_entries(meta)}
         made = not self.dir.exists() or self.dir != self.target
         try:
             (self.dir / IMAGES).mkdir(parents=True, exist_ok=True)
@@ -164,10 +174,10 @@ class MemoryRecordingWriter:
         meta, scenario: as :class:`RecordingWriter`'s.
     """
 
-    def __init__(self, target: str | Path, meta: dict[str, Any], scenario: dict[str, Any]) -> None:
+    def __init__(self, target: str | Path, meta: RecordingMeta | dict[str, Any], scenario: dict[str, Any]) -> None:
         self.target = Path(target)
         self.partial_dir: Path | None = None
-        self.meta = {"format": FORMAT, "status": "partial", **meta}
+        self.meta = {"format": FORMAT, "status": "partial", **_entries(meta)}
         self.scenario = scenario
         self._rows: list[tuple[float, tuple[float, float, float], tuple[float, float], int]] = []
         self._views: list[SegmentationView] = []
@@ -247,6 +257,13 @@ class Recording:
         corrections, do not count)."""
         return len(self.times) * self.frame_period_s
 
+    @cached_property
+    def header(self) -> RecordingMeta:
+        """The configuration in :attr:`meta` as a typed record (read once, checked when the recording was read)."""
+        from terrapref.demos.meta import RecordingMeta
+
+        return RecordingMeta.from_dict(self.meta, str(self.path / META))
+
     @property
     def perception(self) -> str:
         """The name of the perception model the frames went through ('clean': the simulator's truth)."""
@@ -294,51 +311,9 @@ def _frame_problem(row: dict) -> tuple[str, str] | None:
 
 def _check_meta(meta: dict, path: Path) -> None:
     """The configuration a recording must carry, parsed once here so every later use is safe."""
-    from terrapref.camera import CameraConfig
-    from terrapref.features import PreferenceSetConfig
-    from terrapref.terrain import ClassTable
+    from terrapref.demos.meta import RecordingMeta
 
-    for key, parse in (("camera", CameraConfig.from_dict), ("preference_set", PreferenceSetConfig.from_dict), ("classes", lambda d: ClassTable.from_dict(d, str(path)))):
-        if key not in meta:
-            continue  # what needs it says so (featurising: require_meta)
-        value = meta[key]
-        if not isinstance(value, dict):
-            raise UserError(str(path), f"expected a mapping, got {type(value).__name__}", field=key)
-        try:
-            parse(value)
-        except UserError:
-            raise
-        except (TypeError, ValueError, KeyError, AttributeError) as exc:
-            raise UserError(str(path), f"invalid ({type(exc).__name__}: {exc})", field=key) from None
-    profile = meta.get("profile")
-    if profile is not None and not (isinstance(profile, list) and all(isinstance(p, str) for p in profile)):
-        raise UserError(str(path), "expected a list of class names", field="profile")
-    if "perception" in meta:
-        _check_perception(meta, path)
-    for key in ("path",):
-        if key in meta:
-            try:
-                points = np.asarray(meta[key], dtype=float)
-            except (TypeError, ValueError):
-                points = np.zeros(0)
-            if points.ndim != 2 or points.shape[1:] != (2,) or len(points) < 2 or not np.isfinite(points).all():
-                raise UserError(str(path), "expected at least two finite [x, y] points", field=key)
-
-
-def _check_perception(meta: dict, path: Path) -> None:
-    """The perception model a recording's frames went through (terrapref.perception), as it was written."""
-    from terrapref.errors import Problem
-    from terrapref.perception.model import from_dict
-    from terrapref.terrain import ClassTable, default_classes
-
-    value = meta["perception"]
-    if not isinstance(value, dict):
-        raise UserError(str(path), f"expected a mapping, got {type(value).__name__}", field="perception")
-    classes = ClassTable.from_dict(meta["classes"], str(path)) if isinstance(meta.get("classes"), dict) else default_classes()
-    try:
-        from_dict(value, str(path), classes)
-    except UserError as exc:
-        raise UserError(str(path), [Problem(f"perception.{p.field}" if p.field else "perception", p.message) for p in exc.problems]) from None
+    RecordingMeta.from_dict(meta, str(path))
 
 
 def require_meta(recording: Recording, *keys: str) -> None:

@@ -25,75 +25,88 @@ from terrapref.terrain import PreferenceProfile
 from terrapref.vehicle import Pose
 
 
-def evaluate_model(
-    model_path: str,
-    scenarios: Sequence[str],
-    seeds: int,
-    out_dir: str | Path,
-    profile: PreferenceProfile | None = None,
-    with_driver: bool = True,
-    frames: Sequence[int] = (),
-    engine: Engine | None = None,
-    progress: Callable[[int, int], None] | None = None,
-    style: str = "default",
-    mcap: bool = False,
-    perception: PerceptionModel | None = None,
-    watch: Watch | None = None,
-) -> dict:
-    """Drive every scenario with the planner (and the synthetic driver) for seeds 0..N-1.
-
-    ``best`` zones resolve under the model's profile unless ``profile`` overrides it. Each
-    planner zone gets the choice the driver (of ``style``) made in the same run and whether the
-    planner agreed (SPEC 12), and, when the model's demonstrations left a pair of classes
-    unidentified (terrapref.learning.identify), the pairs its expected choice rests on.
-    Writes ``metrics.json``, one top-down figure per scenario and the decision pictures of
-    ``frames`` (for seed 0) into ``out_dir``, and with ``mcap`` every planner run as ROS 2 MCAP
-    (``runs/SCENARIO_seedN.mcap``: the camera, the pose, the 21 trajectories and the one chosen);
-    returns the metrics. ``engine``: where the runs go (default: local processes, one per core).
-    With ``perception``, the planner receives what a robot would (terrapref.perception) while the
-    driver and the scoring see the truth; metrics.json names the model. With ``watch``, the runs
-    go one after another in this process, each planner driving as ``watch`` wraps it (a live view).
-    """
-    model = load_policy(model_path)  # C, or a learned baseline (linear, CNN)
-    for name in scenarios:
-        resolve_scenario(name)  # fail early, with the file and field, before any run
-    profile = profile or PreferenceProfile.parse(list(model.profile), model.classes, source=f"{model_path}: profile")
-    ev = _Evaluation(model_path, tuple(scenarios), seeds, profile, style, with_driver, perception or PerceptionModel())
-    results = annotate_agreement(run_many(ev.specs(frames, mcap), progress=progress, engine=engine, watch=watch))
-    evidence = _evidence(model, scenarios)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    metrics = _metrics(ev, results, evidence)
-    beyond = {r.scenario: sorted(set(frames) - {f.number for f in r.frames}) for r in results if r.driver == PLANNER and r.seed == 0}
-    if any(beyond.values()):
-        metrics["frames_beyond_the_run"] = {name: numbers for name, numbers in beyond.items() if numbers}
-    _figures(results, scenarios, out, model, profile, ev.perception)
-    if mcap:
-        _write_runs(results, out / "runs", model)
-    write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=2))
-    return metrics
-
-
 @dataclass(frozen=True)
-class _Evaluation:
-    """What an evaluation drives: a model over courses and seeds 0..N-1, its zones resolved under
-    ``profile``, and (``with_driver``) the synthetic driver of ``style`` on the same runs."""
+class Evaluation:
+    """What an evaluation drives: a model over courses and seeds 0..N-1, and (``with_driver``)
+    the synthetic driver on the same runs.
+
+    Attributes:
+        model_path: the model file (C, or a learned baseline: linear, CNN).
+        scenarios: the courses.
+        seeds: runs per course (seeds 0..N-1).
+        profile: the order ``best`` zones resolve under; None: the model's.
+        with_driver: also drive the synthetic driver, for the agreement with it.
+        style: the synthetic driver's style.
+        frames: decision numbers of seed 0 to draw.
+        mcap: write every planner run as ROS 2 MCAP.
+        perception: what the planner receives instead of the truth; None: the truth.
+    """
 
     model_path: str
     scenarios: tuple[str, ...]
     seeds: int
-    profile: PreferenceProfile
-    style: str
-    with_driver: bool
-    perception: PerceptionModel
+    profile: PreferenceProfile | None = None
+    with_driver: bool = True
+    style: str = "default"
+    frames: tuple[int, ...] = ()
+    mcap: bool = False
+    perception: PerceptionModel | None = None
 
-    def specs(self, frames: Sequence[int], mcap: bool) -> list[RunSpec]:
-        """The planner's runs (seed 0 keeping ``frames``; every run kept with ``mcap``), then the driver's."""
-        specs = [RunSpec(name, seed, PLANNER, self.model_path, self.profile.order, tuple(frames) if seed == 0 else (), keep_run=mcap,
-                         perception=self.perception) for name in self.scenarios for seed in range(self.seeds)]
+    @property
+    def perceived(self) -> PerceptionModel:
+        """The perception model the planner's runs go through (a clean one: the truth)."""
+        return self.perception or PerceptionModel()
+
+    def specs(self, profile: PreferenceProfile) -> list[RunSpec]:
+        """The planner's runs (seed 0 keeping ``frames``; every run kept with ``mcap``), then the
+        driver's; zones resolve under ``profile``."""
+        specs = [RunSpec(name, seed, PLANNER, self.model_path, profile.order, self.frames if seed == 0 else (), keep_run=self.mcap,
+                         perception=self.perceived) for name in self.scenarios for seed in range(self.seeds)]
         if self.with_driver:
-            specs += [RunSpec(name, seed, EXPERT, None, self.profile.order, style=self.style) for name in self.scenarios for seed in range(self.seeds)]
+            specs += [RunSpec(name, seed, EXPERT, None, profile.order, style=self.style) for name in self.scenarios for seed in range(self.seeds)]
         return specs
+
+
+def evaluate_model(
+    evaluation: Evaluation,
+    out_dir: str | Path,
+    engine: Engine | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    watch: Watch | None = None,
+) -> dict:
+    """Drive every scenario of ``evaluation`` with the planner (and the synthetic driver) for seeds 0..N-1.
+
+    ``best`` zones resolve under the model's profile unless the evaluation's ``profile``
+    overrides it. Each planner zone gets the choice the driver (of ``style``) made in the same
+    run and whether the planner agreed (SPEC 12), and, when the model's demonstrations left a
+    pair of classes unidentified (terrapref.learning.identify), the pairs its expected choice
+    rests on. Writes ``metrics.json``, one top-down figure per scenario and the decision
+    pictures of ``frames`` (for seed 0) into ``out_dir``, and with ``mcap`` every planner run as
+    ROS 2 MCAP (``runs/SCENARIO_seedN.mcap``: the camera, the pose, the 21 trajectories and the
+    one chosen); returns the metrics. ``engine``: where the runs go (default: local processes,
+    one per core). With ``perception``, the planner receives what a robot would
+    (terrapref.perception) while the driver and the scoring see the truth; metrics.json names the
+    model. With ``watch``, the runs go one after another in this process, each planner driving as
+    ``watch`` wraps it (a live view).
+    """
+    ev = evaluation
+    model = load_policy(ev.model_path)  # C, or a learned baseline (linear, CNN)
+    for name in ev.scenarios:
+        resolve_scenario(name)  # fail early, with the file and field, before any run
+    profile = ev.profile or PreferenceProfile.parse(list(model.profile), model.classes, source=f"{ev.model_path}: profile")
+    results = annotate_agreement(run_many(ev.specs(profile), progress=progress, engine=engine, watch=watch))
+    evidence = _evidence(model, ev.scenarios)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    metrics = _metrics(ev, profile, results, evidence)
+    beyond = {r.scenario: sorted(set(ev.frames) - {f.number for f in r.frames}) for r in results if r.driver == PLANNER and r.seed == 0}
+    if any(beyond.values()):
+        metrics["frames_beyond_the_run"] = {name: numbers for name, numbers in beyond.items() if numbers}
+    _figures(results, ev.scenarios, out, model, profile, ev.perceived)
+    if ev.mcap:
+        _write_runs(results, out / "runs", model)
+    write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=2))
+    return metrics
 
 
 @dataclass(frozen=True)
@@ -120,14 +133,14 @@ def _evidence(model, scenarios: Sequence[str]) -> _Evidence | None:
     return _Evidence(identified, present)
 
 
-def _metrics(ev: _Evaluation, results: list[RunResult], evidence: _Evidence | None) -> dict:
+def _metrics(ev: Evaluation, profile: PreferenceProfile, results: list[RunResult], evidence: _Evidence | None) -> dict:
     """metrics.json: what was evaluated, every run's metrics by course, driver and seed, and the summaries."""
     metrics: dict = {
         "model": str(ev.model_path),
-        "profile": list(ev.profile.order),
+        "profile": list(profile.order),
         "seeds": ev.seeds,
         "driver_style": ev.style,
-        "perception": ev.perception.to_dict(),
+        "perception": ev.perceived.to_dict(),
         "unidentified_pairs": [f"{p.first} vs {p.second}" for p in evidence.identified.unidentified()] if evidence is not None else None,
         "scenarios": {name: _course_runs(results, name, evidence) for name in ev.scenarios},
         "summary": summarise(results, PLANNER).to_dict(),
@@ -203,7 +216,7 @@ def rests_on(expect: str, present: Sequence[str], identified: Identifiability) -
 
 def _figures(results: list[RunResult], scenarios: Sequence[str], out: Path, model, profile: PreferenceProfile, perception: PerceptionModel) -> None:
     """Per course, the top-down evaluation figure; per kept frame, its decision picture (the frame the planner received)."""
-    from terrapref.plots import save_decision, save_evaluation
+    from terrapref.plots import CourseRuns, Decision, save_decision, save_evaluation
 
     pset = PreferenceSet(model.features.preference, PinholeCamera(model.camera))
     uv, visible = pset.camera.project_ground(pset.trajectories[..., :2])
@@ -214,15 +227,16 @@ def _figures(results: list[RunResult], scenarios: Sequence[str], out: Path, mode
         per_zone = _zone_successes(planner_runs)
         ok = sum(v[0] for v in per_zone.values())
         n = sum(v[1] for v in per_zone.values())
-        save_evaluation(out / f"{file_stem(name)}.png", scenario, world, [r.xy for r in driver_runs], [r.xy for r in planner_runs], per_zone,
+        course = CourseRuns(scenario, world, [r.xy for r in driver_runs], [r.xy for r in planner_runs], per_zone)
+        save_evaluation(out / f"{file_stem(name)}.png", course,
                         title=f"{name}: planner zone success {ok}/{n} over {len(planner_runs)} run(s), profile {profile}"
                               + (f", perception {perception.name}" if perception.active else ""))
         for r in planner_runs:
             for f in r.frames:
                 rgb = model.classes.palette()[f.image]
                 x, y, yaw = f.pose
-                save_decision(out / f"{file_stem(name)}_frame{f.number:05d}.png", rgb, uv, visible, f.probs, f.index,
-                              model.features.preference.control.w_rps, classes=model.classes,
+                decision = Decision(uv, visible, f.probs, f.index, model.features.preference.control.w_rps)
+                save_decision(out / f"{file_stem(name)}_frame{f.number:05d}.png", rgb, decision, classes=model.classes,
                               title=f"{name}, frame {f.number}, pose ({x:.1f} m, {y:.1f} m, yaw {np.degrees(yaw):.0f} deg)")
 
 

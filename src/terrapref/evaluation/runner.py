@@ -23,8 +23,9 @@ from terrapref.evaluation.stats import wilson
 from terrapref.grid import Engine, run_grid
 from terrapref.perception import PerceivedDriver, PerceptionModel, Perceiver
 from terrapref.planner import Planner, PlannerDriver
-from terrapref.planner.policy import Policy
+from terrapref.planner.policy import CostPolicy, Policy, PurePursuitPolicy
 from terrapref.planner.registry import load_policy, make as make_policy
+from terrapref.registry import Registry
 from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.sim import EpisodeLog, Simulation, run_episode
 from terrapref.terrain import PreferenceProfile
@@ -33,8 +34,8 @@ from terrapref.world import WorldMap, rasterise
 
 PLANNER = "planner"  # a model file: C, or a learned baseline (linear, CNN)
 EXPERT = "driver"  # the synthetic demonstrator, for comparison
-PURE_PURSUIT = "pure_pursuit"  # baselines that need no model file (policies registered in terrapref.planner.registry)
-HAND_COST = "hand_cost"
+PURE_PURSUIT = PurePursuitPolicy.name  # baselines that need no model file (policies registered in terrapref.planner.registry)
+HAND_COST = CostPolicy.name
 
 
 @dataclass(frozen=True)
@@ -163,20 +164,18 @@ def _policy_file(path: str) -> Policy:
 
 Driver = ExpertDriver | PlannerDriver
 DriverFactory = Callable[[RunSpec, Scenario, WorldMap, PreferenceProfile], tuple[Simulation, Driver]]
-_DRIVERS: dict[str, DriverFactory] = {}
+DRIVERS: Registry[DriverFactory] = Registry("driver")  # who can drive a run (RunSpec.driver)
 
 
-def register_driver(kind: str, factory: DriverFactory) -> None:
+def register_driver(kind: str, factory: DriverFactory, doc: str = "") -> None:
     """Name who can drive a run (``RunSpec.driver``): ``factory(spec, scenario, world, profile)``
     gives the run's simulation and its driver."""
-    if kind in _DRIVERS:
-        raise ValueError(f"driver {kind!r} is already registered")
-    _DRIVERS[kind] = factory
+    DRIVERS.register(kind, factory, doc)
 
 
 def drivers() -> list[str]:
     """The registered driver kinds, in the order registered."""
-    return list(_DRIVERS)
+    return DRIVERS.names()
 
 
 def _expert(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: PreferenceProfile) -> tuple[Simulation, Driver]:
@@ -205,10 +204,10 @@ def _baseline(kind: str) -> DriverFactory:
     return factory
 
 
-register_driver(EXPERT, _expert)
-register_driver(PLANNER, _model_file)
-register_driver(PURE_PURSUIT, _baseline(PURE_PURSUIT))
-register_driver(HAND_COST, _baseline(HAND_COST))
+register_driver(EXPERT, _expert, "the synthetic demonstrator of the run's profile and style")
+register_driver(PLANNER, _model_file, "the planner with a model file's policy")
+register_driver(PURE_PURSUIT, _baseline(PURE_PURSUIT), "the planner with the pure pursuit policy (no model file)")
+register_driver(HAND_COST, _baseline(HAND_COST), "the planner with the hand-tuned cost policy (no model file)")
 
 
 Watch = Callable[[PlannerDriver], Driver]  # puts a planner driver where it can be watched (terrapref.interop.live)
@@ -224,7 +223,7 @@ def run_one(spec: RunSpec, watch: Watch | None = None) -> RunResult:
     watched = watch(driver) if watch is not None and isinstance(driver, PlannerDriver) else driver
     runner = PerceivedDriver(watched, Perceiver(spec.perception, sim.renderer, scenario.classes, sim.config.camera_rate_hz)) if perceived else watched
     log = run_episode(sim, runner, np.random.default_rng(spec.seed), start_pose(scenario.start, spec.seed))
-    metrics = score_run(log.trace[:, :2], scenario, sim.world, profile, completed=log.completed, collisions=log.collisions, duration_s=log.duration_s)
+    metrics = score_run(log, scenario, sim.world, profile)
     planner = driver if isinstance(driver, PlannerDriver) else None
     return RunResult(spec.scenario, spec.seed, spec.driver, metrics, log.trace[::3, :2].astype(np.float32),
                      frames=_kept_frames(planner, log), run=_kept_run(spec, planner, log))
@@ -232,9 +231,7 @@ def run_one(spec: RunSpec, watch: Watch | None = None) -> RunResult:
 
 def _sim_and_driver(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: PreferenceProfile) -> tuple[Simulation, Driver]:
     """The simulation of a run and who drives it, by the run's registered driver kind."""
-    if spec.driver not in _DRIVERS:
-        raise ValueError(f"unknown driver {spec.driver!r}; drivers: {', '.join(_DRIVERS)}")
-    return _DRIVERS[spec.driver](spec, scenario, world, profile)
+    return DRIVERS[spec.driver](spec, scenario, world, profile)
 
 
 def _kept_frames(planner: PlannerDriver | None, log: EpisodeLog) -> tuple[KeptFrame, ...]:

@@ -16,6 +16,7 @@ import numpy as np
 
 from terrapref.scenario import AVOID, Scenario, Zone
 from terrapref.scenario.path import ReferencePath
+from terrapref.sim import EpisodeLog
 from terrapref.terrain import PreferenceProfile
 from terrapref.world import WorldMap
 
@@ -166,18 +167,10 @@ class RunMetrics:
         return cls(**scalars, zones=[ZoneResult.from_dict(z) for z in data["zones"]])
 
 
-def score_run(
-    xy: np.ndarray,
-    scenario: Scenario,
-    world: WorldMap,
-    profile: PreferenceProfile,
-    *,
-    completed: bool,
-    collisions: int,
-    duration_s: float,
-    tolerance_m: float = 0.3,
-) -> RunMetrics:
-    """All metrics of a run from its reference-point path ``xy`` (T, 2)."""
+def score_run(log: EpisodeLog, scenario: Scenario, world: WorldMap, profile: PreferenceProfile, tolerance_m: float = 0.3) -> RunMetrics:
+    """All metrics of the run ``log`` of ``scenario`` on ``world``: from its reference-point path
+    (every controller tick's x, y), whether it completed, its collisions and its duration."""
+    xy = log.trace[:, :2]
     path = ReferencePath(scenario.waypoints)
     mid, length = segments(xy)
     err = path.distance_to(mid) if len(mid) else np.zeros(0)
@@ -194,9 +187,9 @@ def score_run(
     classes = world.classes
     dist = {c.name: round(float(length[cls == c.id].sum()), 3) for c in classes.classes}
     return RunMetrics(
-        completed=completed,
-        collisions=collisions,
-        duration_s=round(duration_s, 3),
+        completed=log.completed,
+        collisions=log.collisions,
+        duration_s=round(log.duration_s, 3),
         rms_cross_track_m=round(rms(np.ones(len(mid), bool)), 4),
         max_cross_track_m=round(float(err.max()) if len(err) else 0.0, 4),
         rms_cross_track_outside_zones_m=round(rms(out), 4),

@@ -31,6 +31,7 @@ import numpy as np
 from PIL import Image as PILImage
 
 from terrapref.camera import CameraConfig
+from terrapref.demos.meta import ImportedInfo, RecordingMeta, SimMeta
 from terrapref.demos.recording import RecordingWriter, _is_recording
 from terrapref.errors import UserError
 from terrapref.extras import needs
@@ -510,13 +511,29 @@ class _Request:
     check_camera: Callable[[CameraConfig], None] | None = None
 
 
-def import_bag(bag_path: str | Path, robot: RobotConfig, out: str | Path, rate_hz: float = 10.0, force: bool = False,
-               show_progress: bool = True, classes: ClassTable | None = None,
-               check_camera: Callable[[CameraConfig], None] | None = None) -> ImportReport:
-    """Turn a bag into a recording at ``out`` that inspect, featurize and train accept;
-    ``check_camera`` may refuse the log's camera (raising) before any image is read."""
+@dataclass(frozen=True)
+class ImportOptions:
+    """How a bag is imported.
+
+    Attributes:
+        rate_hz: frames per second of the recording [Hz], in (0, 100].
+        force: replace a recording already at the destination.
+        classes: the recording's class table; None: the default one.
+        check_camera: may refuse the log's camera (raising) before any image is read.
+    """
+
+    rate_hz: float = 10.0
+    force: bool = False
+    classes: ClassTable | None = None
+    check_camera: Callable[[CameraConfig], None] | None = None
+
+
+def import_bag(bag_path: str | Path, robot: RobotConfig, out: str | Path, options: ImportOptions = ImportOptions(),
+               show_progress: bool = True) -> ImportReport:
+    """Turn a bag into a recording at ``out`` that inspect, featurize and train accept."""
     bag_path, out = Path(bag_path), Path(out)
-    classes = classes or default_classes()
+    rate_hz, force, check_camera = options.rate_hz, options.force, options.check_camera
+    classes = options.classes or default_classes()
     if not (math.isfinite(rate_hz) and 0 < rate_hz <= 100):
         raise UserError("--rate", "expected frames per second in (0, 100]")
     if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not (force and _is_recording(out)))):
@@ -607,19 +624,13 @@ class _Placement:
         return x0 + self.shift[0], y0 + self.shift[1], yaw0
 
 
-def _meta(req: _Request, scenario: dict, camera: CameraConfig, preference: PreferenceSetConfig, placement: _Placement) -> dict:
+def _meta(req: _Request, scenario: dict, camera: CameraConfig, preference: PreferenceSetConfig, placement: _Placement) -> RecordingMeta:
     """The recording's meta.json entries of an import."""
-    return {
-        "scenario": scenario["name"],
-        "camera": camera.to_dict(),
-        "preference_set": preference.to_dict(),
-        "sim": {"camera_rate_hz": req.rate_hz},
-        "classes": req.classes.to_dict(),
-        "profile": list(req.robot.profile.order),
-        "driver": {"kind": "imported", "bag": req.bag.source, "robot": req.robot.source, "labels": req.robot.labels.name},
-        "path": placement.path.tolist(),
-        "origin_shift_m": [float(v) for v in placement.shift],
-    }
+    return RecordingMeta(
+        scenario=scenario["name"], camera=camera, preference_set=preference, sim=SimMeta(req.rate_hz), classes=req.classes,
+        profile=tuple(req.robot.profile.order), driver=ImportedInfo(req.bag.source, req.robot.source, req.robot.labels.name),
+        path=tuple((x, y) for x, y in placement.path.tolist()), origin_shift_m=(float(placement.shift[0]), float(placement.shift[1])),
+    )
 
 
 def _stream_images(req: _Request, seg_conns: list, shape: tuple[int, int], frames: _Frames, progress: Progress) -> None:

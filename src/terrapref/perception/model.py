@@ -43,7 +43,7 @@ import math
 from dataclasses import asdict, dataclass, field, fields, replace
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from terrapref.errors import ConfigError, Problem, UserError
 from terrapref.terrain import ClassTable
@@ -262,7 +262,7 @@ def parse_perception(data: dict[str, Any], source: str, classes: ClassTable, nam
             if key not in schema:
                 problems.append(Problem(where, f"unknown key; expected {', '.join(schema)}"))
                 continue
-            checked = _check(value, *schema[key], where, classes, problems)
+            checked = _check(value, _Field(*schema[key]), where, classes, problems)
             if checked is not _BAD:
                 values[key] = checked
         sections[section] = values
@@ -278,8 +278,17 @@ def parse_perception(data: dict[str, Any], source: str, classes: ClassTable, nam
 _BAD = object()
 
 
-def _check(value: Any, kind: str, low: float, high: float, where: str, classes: ClassTable, problems: list[Problem]) -> Any:
-    """``value`` converted to the field's type, or _BAD (with the problem noted)."""
+class _Field(NamedTuple):
+    """What a field of the schema holds: its kind and the range of its numbers."""
+
+    kind: str
+    low: float
+    high: float
+
+
+def _check(value: Any, spec: _Field, where: str, classes: ClassTable, problems: list[Problem]) -> Any:
+    """``value`` converted to the type of the field ``spec`` describes, or _BAD (with the problem noted)."""
+    kind, low, high = spec
     def number(v: Any, at: str) -> float | None:
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             problems.append(Problem(at, f"expected a finite number, got {v!r}"))

@@ -73,11 +73,11 @@ def _recording_lines(p: Path) -> list[str]:
 
     rec = read_recording(p)
     m = rec.meta
-    driver = m.get("driver") if isinstance(m.get("driver"), dict) else {}
+    driver = rec.header.driver
     lines = [f"{p}: terrapref recording ({'complete' if rec.complete else 'partial'})",
              f"frames          {len(rec)} ({rec.duration_s:.1f} s)",
              f"scenario        {m.get('scenario')}",
-             f"driver          {_driver(driver)}",
+             f"driver          {driver.describe() if driver is not None else '?'}",
              f"perception      {_perception(rec.perception)}",
              f"created         {m.get('created', '?')}"]
     return lines + _common(m)
@@ -88,13 +88,6 @@ def _perception(name: str) -> str:
     if name == "clean":
         return "clean (the simulator's own labels and poses)"
     return f"{name} (what the robot's camera and localisation would have given; the driver saw the truth)"
-
-
-def _driver(driver: dict) -> str:
-    """Who drove: the kind, then whichever of style, seed, source bag and ridden-along model it names."""
-    return (f"{driver.get('kind', '?')}" + (f", style {driver['style']}" if driver.get("style") else "")
-            + (f", seed {driver['seed']}" if driver.get("seed") is not None else "") + (f", from {driver['bag']}" if driver.get("bag") else "")
-            + (f", riding along with {driver['model']}" if driver.get("model") else ""))
 
 
 def _onnx_lines(p: Path) -> list[str]:

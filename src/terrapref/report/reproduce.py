@@ -16,7 +16,7 @@ import functools
 import json
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -74,16 +74,31 @@ class RecipeRun:
 
 
 @dataclass(frozen=True)
-class _Setup:
-    """What a reproduction runs: the recipes, the training and evaluation seeds, the profile and the courses driven."""
+class Reproduction:
+    """What a reproduction runs.
 
-    recipes: tuple[Recipe, ...]
-    seeds: int
-    eval_seeds: int
-    profile: PreferenceProfile
-    scenarios: tuple[str, ...]
+    Attributes:
+        recipes: the recipes trained and compared.
+        seeds: training seeds per recipe (and the synthetic driver's runs per course).
+        eval_seeds: closed-loop runs per model and course.
+        profile: the driver's preference order.
+        write_recordings: also write the synthetic driver's demonstrations as recordings under
+            ``OUT/work`` (they are featurised as they are driven and kept in memory either way).
+        perceptions: each drives the test courses once more (the clean model among them adds
+            nothing: the runs above are clean).
+    """
+
+    recipes: tuple[Recipe, ...] = (PAPER, OURS, TEACH)
+    seeds: int = 5
+    eval_seeds: int = 1
+    profile: PreferenceProfile = field(default_factory=PreferenceProfile.default)
     write_recordings: bool = False
-    perceptions: tuple[PerceptionModel, ...] = ()  # the test courses again under each active one
+    perceptions: tuple[PerceptionModel, ...] = ()
+
+    @functools.cached_property
+    def scenarios(self) -> tuple[str, ...]:
+        """The courses driven: the training course, the test set and the figures' variations."""
+        return ("train_course", *TEST_SET, *variations())
 
 
 def _train_job(args: tuple[tuple[Recipe, ...], str, int, tuple[str, ...], bool]) -> list[RecipeModel]:
@@ -99,18 +114,13 @@ def _train_job(args: tuple[tuple[Recipe, ...], str, int, tuple[str, ...], bool])
     return rows
 
 
-def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes: tuple[Recipe, ...] = (PAPER, OURS, TEACH),
-              profile: PreferenceProfile | None = None, engine: Engine | None = None, log: Callable[[str], None] = print,
-              write_recordings: bool = False, perceptions: tuple[PerceptionModel, ...] = ()) -> Path:
-    """Run the whole reproduction into ``out_dir`` and return the path of REPORT.md; ``engine``
-    runs its jobs (default: local processes, one per core). The synthetic driver's
-    demonstrations are featurised as they are driven and kept in memory, or also written as
-    recordings under ``out_dir/work`` with ``write_recordings``. Each of ``perceptions`` (the clean
-    model among them adds nothing: the runs above are clean) drives the test courses once more."""
+def reproduce(out_dir: str | Path, setup: Reproduction | None = None, engine: Engine | None = None, log: Callable[[str], None] = print) -> Path:
+    """Run the whole reproduction ``setup`` (default: :class:`Reproduction`'s) into ``out_dir``
+    and return the path of REPORT.md; ``engine`` runs its jobs (default: local processes, one
+    per core)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    setup = _Setup(tuple(recipes), seeds, eval_seeds, profile or PreferenceProfile.default(), ("train_course", *TEST_SET, *variations()),
-                   write_recordings, tuple(perceptions))
+    setup = setup or Reproduction()
     engine = engine or Engine()
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -123,7 +133,7 @@ def reproduce(out_dir: str | Path, seeds: int = 5, eval_seeds: int = 1, recipes:
     return _write_report(out, setup, runs, trained, timings, engine)
 
 
-def _train_all(setup: _Setup, out: Path, engine: Engine, log: Callable[[str], None]) -> list[RecipeModel]:
+def _train_all(setup: Reproduction, out: Path, engine: Engine, log: Callable[[str], None]) -> list[RecipeModel]:
     """Stage 1: every recipe's model for every seed, by seed and then in the recipes' order."""
     # One job per seed and demonstration protocol (recipes recording the same demonstrations stay
     # together), the costliest first, so that both cores stay busy to the end.
@@ -142,7 +152,7 @@ def _train_all(setup: _Setup, out: Path, engine: Engine, log: Callable[[str], No
     return sorted((row for rows in done for row in rows), key=lambda t: (t.seed, order[t.recipe]))
 
 
-def _evaluate(setup: _Setup, trained: list[RecipeModel], engine: Engine, log: Callable[[str], None]) -> list[RecipeRun]:
+def _evaluate(setup: Reproduction, trained: list[RecipeModel], engine: Engine, log: Callable[[str], None]) -> list[RecipeRun]:
     """Stage 2: every model and the synthetic driver on every course, the planners' agreement with the driver."""
     specs = [RunSpec(sc, e, PLANNER, t.model, setup.profile.order)
              for t in trained for sc in setup.scenarios for e in range(setup.eval_seeds)]
@@ -202,7 +212,7 @@ def _mode(choices: list[tuple[str, bool, str]]) -> str:
     return top if names.count(top) == len(names) else f"{top} ({names.count(top)}/{len(names)})"
 
 
-def _write_report(out: Path, setup: _Setup, runs: list[RecipeRun], trained: list[RecipeModel], timings: dict[str, float],
+def _write_report(out: Path, setup: Reproduction, runs: list[RecipeRun], trained: list[RecipeModel], timings: dict[str, float],
                   engine: Engine) -> Path:
     """REPORT.md, its figures and results.json (every run's metrics and the time per stage)."""
     t_fig = time.perf_counter()
@@ -220,7 +230,7 @@ def _write_report(out: Path, setup: _Setup, runs: list[RecipeRun], trained: list
     return write_text_atomic(out / "REPORT.md", "\n".join(lines) + "\n")
 
 
-def _draw_figures(figs: Path, setup: _Setup, runs: list[RecipeRun], trained: list[RecipeModel], engine: Engine) -> None:
+def _draw_figures(figs: Path, setup: Reproduction, runs: list[RecipeRun], trained: list[RecipeModel], engine: Engine) -> None:
     """Each course with the driver's and the planners' seed-0 paths; each recipe's seed-0 training
     curve; drawn as a grid of jobs (a dozen figures of half a second each)."""
     jobs: list[tuple] = [("map", str(figs / f"{sc}.png"), sc, _tracks(runs, sc, setup.recipes)) for sc in setup.scenarios]
@@ -257,7 +267,7 @@ def _tracks(runs: list[RecipeRun], scenario: str, recipes: tuple[Recipe, ...]) -
     return tracks
 
 
-def _introduction(setup: _Setup) -> list[str]:
+def _introduction(setup: Reproduction) -> list[str]:
     """The title, the setting and one line per recipe."""
     lines = [
         "# terrapref: reproduction of the paper's Tables 1 and 2",
@@ -306,7 +316,7 @@ def _summary_table(recipes: tuple[Recipe, ...], runs: list[RecipeRun]) -> list[s
     return lines
 
 
-def _perception_table(setup: _Setup, runs: list[RecipeRun]) -> list[str]:
+def _perception_table(setup: Reproduction, runs: list[RecipeRun]) -> list[str]:
     """Each recipe on the test courses under each perception model: agreement with the driver (who sees
     the truth), zone success and collisions."""
     names = ["clean", *(p.name for p in setup.perceptions if p.active)]

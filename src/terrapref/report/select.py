@@ -26,7 +26,7 @@ from terrapref.grid import Engine, run_grid
 from terrapref.perception import PRESETS, PerceptionModel
 from terrapref.recipes import recipe_named, run_recipe
 from terrapref.progress import every_tenth
-from terrapref.plots import save_intervals
+from terrapref.plots import RateRow, save_intervals
 from terrapref.scenario.generate import zone_kind
 from terrapref.terrain import PreferenceProfile
 
@@ -209,7 +209,8 @@ def write_selection_report(out: Path, saved: dict) -> Path:
              "alike across seeds), the spread another set of layouts would show.", "",
              f"The demonstrations recorded: {_perception_line(sel.get('taught_under'))}. The models drive the layouts receiving "
              + ", then ".join(f"`{name}`" for name in seen) + " (terrapref.perception); the driver always sees the truth.", ""]
-    labels, rates, intervals, targets = [], [], [], []
+    points: list[RateRow] = []
+    targets: list[float] = []
     for name in seen:
         part = [r for r in rows if r.get("perception", "clean") == name]
         part_runs = [r for r in runs if r.get("perception", "clean") == name]
@@ -219,12 +220,10 @@ def write_selection_report(out: Path, saved: dict) -> Path:
         table, bars = _selection_table(sel, part, part_runs, order_bars=len(seen) == 1)
         lines += table + [""]
         for label, rate, interval in bars:
-            labels.append(f"{label}, {name}" if len(seen) > 1 else label)
-            rates.append(rate)
-            intervals.append(interval)
+            points.append(RateRow(f"{label}, {name}" if len(seen) > 1 else label, rate, interval))
             targets.append(TARGET if name == "clean" else PERCEIVED_TARGET)
     lines += [f"Training {saved['train_s']:.0f} s, runs {saved['eval_s']:.0f} s (wall; {saved['engine']}).", "", "![selection](select.png)", ""]
-    save_intervals(out / "select.png", labels, rates, intervals, "agreement with the driver",
+    save_intervals(out / "select.png", points, "agreement with the driver",
                    target=targets or TARGET,
                    title=f"one drive per model, {len(layouts)} layouts x {sel['seeds']} seeds; 95% intervals, layouts resampled")
     path = out / "SELECT.md"

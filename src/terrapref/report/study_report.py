@@ -416,7 +416,7 @@ def _taught(taught: list[StudyRun], method: str, order: Sequence[str], style: st
 
 def teaching_section(plan: StudyPlan, runs: list[StudyRun], figs: Path) -> list[str]:
     """Section 6: one drive of teach_course per order and per driver style; agreement with that driver on unseen layouts."""
-    from terrapref.plots import save_intervals
+    from terrapref.plots import RateRow, save_intervals
 
     taught = _select(runs, study="teach")
     if not taught:
@@ -439,8 +439,8 @@ def teaching_section(plan: StudyPlan, runs: list[StudyRun], figs: Path) -> list[
              "| driver style | agreement: own planner | agreement: planner of another style | clearance: driver | |Δ| own | |Δ| other | "
              "cross-track: driver | own | other | collisions (own) |", "|---|---|---|---|---|---|---|---|---|---|",
              *style_rows, "", *_imitation_table(plan, taught)]
-    save_intervals(figs / "teaching.png", [label for label, _, _ in points], [ok / n if n else float("nan") for _, ok, n in points],
-                   [wilson(ok, n) for _, ok, n in points], "agreement with its driver", target=0.95,
+    rows = [RateRow(label, ok / n if n else float("nan"), wilson(ok, n)) for label, ok, n in points]
+    save_intervals(figs / "teaching.png", rows, "agreement with its driver", target=0.95,
                    title="one drive of teach_course: agreement on unseen layouts, by order and driver style")
     return lines + ["", "![teaching](figures/teaching.png)", ""]
 
@@ -469,7 +469,7 @@ def _style_rows(plan: StudyPlan, taught: list[StudyRun]) -> tuple[list[str], lis
         other, d, own, theirs = _style_runs(plan, taught, style)
         ok, n = agreement(own, d)
         ok2, n2 = agreement(theirs, d)
-        rows.append(f"| {style} ({STYLES[style][0]}) | {rate_text(ok, n)} | {rate_text(ok2, n2) + f' ({other})' if other else '—'} | "
+        rows.append(f"| {style} ({STYLES[style].description}) | {rate_text(ok, n)} | {rate_text(ok2, n2) + f' ({other})' if other else '—'} | "
                     f"{_mean_clearance(d):.2f} m | {_clearance_gap(own, d):.2f} m | {_clearance_gap(theirs, d):.2f} m | "
                     f"{_mean_cross_track(d):.2f} m | {_mean_cross_track(own):.2f} m | "
                     f"{_mean_cross_track(theirs):.2f} m | {_collisions(own)} |")

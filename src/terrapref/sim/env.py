@@ -15,6 +15,8 @@ Example:
     >>> obs, reward, terminated, truncated, info = env.step(10)  # straight ahead
     >>> sorted(info["reward_terms"])
     ['collision', 'cross_track', 'goal', 'off_map', 'progress', 'terrain']
+    >>> OffRoadNavEnv("demo_course", EnvConfig(image_size=(60, 80)), n_waypoints=4).observation_space["waypoints"].shape
+    (8,)
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from __future__ import annotations
 import math
 from collections import OrderedDict
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import gymnasium as gym
@@ -88,6 +90,61 @@ class RewardConfig:
             raise ValueError("RewardConfig.corridor_m and terrain_growth must be positive")
 
 
+@dataclass(frozen=True)
+class EnvConfig:
+    """How an :class:`OffRoadNavEnv` observes, acts and is rewarded, whatever the course (each
+    field is also a keyword of the env and of ``gym.make``).
+
+    Attributes:
+        action_type: ``discrete`` (an index into the control set) or ``continuous`` ((a_v, a_w) in [-1, 1]^2).
+        image_size: the observed image's (h, w) [px], sampled from the camera's; None: the camera's own.
+        image_encoding: ``ids`` (one channel of class ids) or ``onehot`` (one channel per class).
+        n_waypoints: path points observed ahead.
+        waypoint_spacing_m: their spacing along the path [m].
+        reward: the reward's terms; None: :class:`RewardConfig`'s defaults.
+        profile: the preference order the terrain reward follows (names, text, or a profile); None: the table's default.
+        terminate_on_lethal: end the episode on entering lethal terrain.
+        terminate_off_map: end the episode on leaving the map.
+        start_jitter_m: the start is moved up to this far in x and y at each reset [m].
+        start_yaw_jitter_rad: and turned up to this much [rad].
+        control_set: the discrete actions; None: the default control set.
+        camera: the camera; None: the default camera.
+        sim: the simulation's settings; None: the defaults.
+        perception: what a robot's segmentation and localisation would give (a model, a preset's
+            name or a file); None: the truth.
+    """
+
+    action_type: Literal["discrete", "continuous"] = "discrete"
+    image_size: tuple[int, int] | None = (120, 160)
+    image_encoding: Literal["ids", "onehot"] = "ids"
+    n_waypoints: int = 10
+    waypoint_spacing_m: float = 2.0
+    reward: RewardConfig | None = None
+    profile: str | Sequence[str] | PreferenceProfile | None = None
+    terminate_on_lethal: bool = True
+    terminate_off_map: bool = True
+    start_jitter_m: float = 0.5
+    start_yaw_jitter_rad: float = 0.1
+    control_set: ControlSet | None = None
+    camera: CameraConfig | None = None
+    sim: SimConfig | None = None
+    perception: PerceptionModel | str | None = None
+
+    def __post_init__(self) -> None:
+        if self.action_type not in ("discrete", "continuous"):
+            raise ValueError(f"action_type must be 'discrete' or 'continuous', got {self.action_type!r}")
+        if self.image_encoding not in ("ids", "onehot"):
+            raise ValueError(f"image_encoding must be 'ids' or 'onehot', got {self.image_encoding!r}")
+        if self.n_waypoints < 1 or not self.waypoint_spacing_m > 0:
+            raise ValueError("n_waypoints must be >= 1 and waypoint_spacing_m > 0")
+        if not (self.start_jitter_m >= 0 and self.start_yaw_jitter_rad >= 0):
+            raise ValueError("start_jitter_m and start_yaw_jitter_rad must be >= 0")
+
+    def with_options(self, **options: Any) -> EnvConfig:
+        """This config with the fields named in ``options`` changed (as an env's keywords change it)."""
+        return replace(self, **options) if options else self
+
+
 class OffRoadNavEnv(gym.Env):
     """Follow a reference path across terrain, seeing only a segmentation camera.
 
@@ -115,6 +172,9 @@ class OffRoadNavEnv(gym.Env):
     generated course per reset); the start is jittered by up to ``start_jitter_m`` and
     ``start_yaw_jitter_rad``. ``reset(options={"scenario": ..., "start": (x, y, yaw)})``
     overrides both for one episode.
+    Construction: ``OffRoadNavEnv(scenario, config, render_mode, **options)``: every field of
+    :class:`EnvConfig` is also a keyword, which overrides ``config`` (as ``gym.make(ENV_ID,
+    scenario=..., image_size=...)`` passes them).
     Perception: ``perception`` (a terrapref.perception model, a preset's name or a file) makes
     the image and the pose-derived observations what a robot's segmentation and localisation
     would give; a step in which no frame arrives (late or lost) observes the last one again. The
@@ -126,37 +186,26 @@ class OffRoadNavEnv(gym.Env):
     def __init__(
         self,
         scenario: str | Scenario | Sequence[str | Scenario] = "demo_course",
-        action_type: Literal["discrete", "continuous"] = "discrete",
-        image_size: tuple[int, int] | None = (120, 160),
-        image_encoding: Literal["ids", "onehot"] = "ids",
-        n_waypoints: int = 10,
-        waypoint_spacing_m: float = 2.0,
-        reward: RewardConfig | None = None,
-        profile: str | Sequence[str] | PreferenceProfile | None = None,
-        terminate_on_lethal: bool = True,
-        terminate_off_map: bool = True,
-        start_jitter_m: float = 0.5,
-        start_yaw_jitter_rad: float = 0.1,
-        control_set: ControlSet | None = None,
-        camera: CameraConfig | None = None,
-        sim: SimConfig | None = None,
+        config: EnvConfig | None = None,
         render_mode: str | None = None,
-        perception: PerceptionModel | str | None = None,
+        **options: Any,
     ) -> None:
-        self._check_modes(render_mode, action_type, image_encoding)
-        _check_waypoints_and_jitter(n_waypoints, waypoint_spacing_m, start_jitter_m, start_yaw_jitter_rad)
+        config = config.with_options(**options) if config is not None else EnvConfig(**options)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.config = config
         self.courses = _courses(scenario)
-        self.action_type = action_type
-        self.control_set = control_set or ControlSet()
-        self.reward_config = reward or RewardConfig()
-        self.terminate_on_lethal, self.terminate_off_map = terminate_on_lethal, terminate_off_map
-        self.start_jitter_m, self.start_yaw_jitter_rad = start_jitter_m, start_yaw_jitter_rad
-        self.n_waypoints, self.waypoint_spacing_m = n_waypoints, waypoint_spacing_m
-        self.image_encoding = image_encoding
+        self.action_type = config.action_type
+        self.control_set = config.control_set or ControlSet()
+        self.reward_config = config.reward or RewardConfig()
+        self.terminate_on_lethal, self.terminate_off_map = config.terminate_on_lethal, config.terminate_off_map
+        self.start_jitter_m, self.start_yaw_jitter_rad = config.start_jitter_m, config.start_yaw_jitter_rad
+        self.n_waypoints, self.waypoint_spacing_m = config.n_waypoints, config.waypoint_spacing_m
+        self.image_encoding = config.image_encoding
         self.render_mode = render_mode
-        self._camera_config, self._sim_config = camera, sim
+        self._camera_config, self._sim_config = config.camera, config.sim
         self._sims: OrderedDict[Any, Simulation] = OrderedDict()
-        self.perception = load_perception(perception)
+        self.perception = load_perception(config.perception)
         self._perceiver: Perceiver | None = None
         self._last_obs: dict[str, np.ndarray] | None = None
 
@@ -164,10 +213,10 @@ class OffRoadNavEnv(gym.Env):
         first = self._simulation(self.courses[0] if self.courses[0] != RANDOM_COURSE else "gen:0")
         self.sim = first
         self.classes = first.scenario.classes
-        self.profile = _profile(profile, self.classes)
+        self.profile = _profile(config.profile, self.classes)
         self._terrain_cost = self._terrain_costs()
         self._class_ids = np.array([c.id for c in self.classes.classes], dtype=np.uint8)
-        self._image_hw, self._pixel_index = _image_sampling(first.camera.shape, image_size)
+        self._image_hw, self._pixel_index = _image_sampling(first.camera.shape, config.image_size)
         self._full_image = self._image_hw == first.camera.shape
         self.observation_space = self._observation_space()
         self.action_space: spaces.Space = self._action_space()
@@ -179,15 +228,6 @@ class OffRoadNavEnv(gym.Env):
         self._ended = False
 
     # --- construction -------------------------------------------------------------------------
-
-    def _check_modes(self, render_mode: str | None, action_type: str, image_encoding: str) -> None:
-        """Refuse a mode this env does not offer."""
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
-        if action_type not in ("discrete", "continuous"):
-            raise ValueError(f"action_type must be 'discrete' or 'continuous', got {action_type!r}")
-        if image_encoding not in ("ids", "onehot"):
-            raise ValueError(f"image_encoding must be 'ids' or 'onehot', got {image_encoding!r}")
 
     def _terrain_costs(self) -> np.ndarray:
         """Cost per metre driven on each class id, shape (256,): ``terrain_growth ** rank`` in the
@@ -419,14 +459,6 @@ class OffRoadNavEnv(gym.Env):
         reach = np.arange(0.0, 1.5, step / 2)
         view[to_pixels(np.stack([x + reach * math.cos(yaw), y + reach * math.sin(yaw)], axis=1))] = (220, 30, 30)
         return view
-
-
-def _check_waypoints_and_jitter(n_waypoints: int, waypoint_spacing_m: float, start_jitter_m: float, start_yaw_jitter_rad: float) -> None:
-    """Refuse an empty or backward waypoint observation and a negative start jitter."""
-    if n_waypoints < 1 or not waypoint_spacing_m > 0:
-        raise ValueError("n_waypoints must be >= 1 and waypoint_spacing_m > 0")
-    if not (start_jitter_m >= 0 and start_yaw_jitter_rad >= 0):
-        raise ValueError("start_jitter_m and start_yaw_jitter_rad must be >= 0")
 
 
 def _courses(scenario: str | Scenario | Sequence[str | Scenario]) -> tuple[str | Scenario, ...]:

@@ -38,10 +38,11 @@ import pygame
 
 from terrapref.camera import CameraConfig
 from terrapref.demos.recording import RecordingWriter
-from terrapref.demos.session import DisturbanceConfig, Disturber, RecordLoop, abort_recording, recording_meta, run_perceiver
+from terrapref.demos.meta import HumanInfo, RecordingMeta, RecordingSetup, RideAlongInfo
+from terrapref.demos.session import DisturbanceConfig, Disturber, RecordLoop, abort_recording, run_perceiver
 from terrapref.teleop.guide import CourseGuide, stays_on_map
 from terrapref.teleop.stick import Stick
-from terrapref.teleop.window import ALERT_COLOR, HIGHLIGHT_COLOR, PLANNER_COLOR, Banner, Window
+from terrapref.teleop.window import ALERT_COLOR, HIGHLIGHT_COLOR, PLANNER_COLOR, Banner, Overlay, Window
 from terrapref.errors import Terminated, UserError
 from terrapref.features import PreferenceSet, PreferenceSetConfig
 from terrapref.perception import PerceptionModel
@@ -53,6 +54,7 @@ from terrapref.vehicle import Command
 SOURCE = "terrapref drive"
 NO_DISPLAY = "no display available; set SDL_VIDEODRIVER=dummy for a headless run or run on a desktop"
 
+INPUT = "keyboard/mouse/gamepad"  # the devices a person drives with (recorded as the driver's input)
 COUNTDOWN_S = 3.0
 """From the start key to the first recorded frame, and again when resuming from a pause [s]."""
 HANDBACK_S = 1.5
@@ -373,9 +375,22 @@ class _Session:
         mode = None
         if self.planner is not None:
             mode = ("PLANNER DRIVING", PLANNER_COLOR) if self.driver == "planner" else ("YOU DRIVE: recording corrections", HIGHLIGHT_COLOR)
-        status = _status(self.sim.time_s, self.v, w, label, self.control.m, self.recorded, self.sim.collisions,
-                         self.recorder.writer is not None, self.phase)
-        self.window.draw(self.frame.image, w, label, self.trace_px, status + note, readout.lines(), end_banner or self.banner(), mode)
+        overlay = Overlay(self.status(w, label) + note, readout.lines(), end_banner or self.banner(), mode)
+        self.window.draw(self.frame.image, w, label, self.trace_px, overlay)
+
+    def status(self, w: float, label: int) -> str:
+        """The line under the view: time, speed, the stick's w and label, frames, collisions, and the phase unless driving."""
+        parts = [
+            f"t {self.sim.time_s:6.1f} s",
+            f"v {self.v:.2f} m/s",
+            f"w {w:+.2f} rad/s",
+            f"label {label:2d}/{self.control.m - 1}",
+            f"{'rec' if self.recorder.writer is not None else 'frames'} {self.recorded}",
+            f"collisions {self.sim.collisions}",
+        ]
+        if self.phase != "driving":
+            parts.append(self.phase.upper())
+        return "   ".join(parts)
 
     def run(self, max_frames: int | None, script: Script | None, realtime: bool) -> None:
         """Loop over camera frames until the run ends, the driver quits or ``max_frames`` iterations have passed."""
@@ -510,14 +525,11 @@ def _open_recording(setup: _Setup, options: TeleopOptions) -> RecordingWriter | 
     """The recording the session writes, with who drove and how in its metadata; None when not recording."""
     if options.record_dir is None:
         return None
-    riding_along = setup.planner is not None
-    driver = {"kind": "corrections" if riding_along else "human", "input": "keyboard/mouse/gamepad",
-              "disturbance": options.disturbance.to_dict() if options.disturbance else None, "seed": options.seed}
-    if riding_along:
-        driver["model"] = str(options.model)
+    pushes = options.disturbance.to_dict() if options.disturbance else None
+    driver = HumanInfo(INPUT, pushes, options.seed) if setup.planner is None else RideAlongInfo(INPUT, pushes, options.seed, str(options.model))
     scenario = setup.scenario
     profile = options.profile or PreferenceProfile.default(scenario.classes)
-    meta = recording_meta(scenario, setup.camera, setup.preference, setup.sim, driver, profile, options.perception)
+    meta = RecordingMeta.driven(scenario, RecordingSetup(setup.camera, setup.preference, setup.sim), driver, profile, options.perception)
     return RecordingWriter(options.record_dir, meta, scenario.to_dict(), overwrite=options.overwrite)
 
 
@@ -525,17 +537,3 @@ def _disturber(options: TeleopOptions, frame_dt_s: float) -> Disturber | None:
     """The session's pushes, drawn from ``options.seed``; None when off."""
     disturbance = options.disturbance
     return Disturber(disturbance, np.random.default_rng(options.seed), frame_dt_s) if disturbance and disturbance.active else None
-
-
-def _status(time_s: float, v: float, w: float, label: int, m: int, frames: int, collisions: int, recording: bool, phase: str) -> str:
-    parts = [
-        f"t {time_s:6.1f} s",
-        f"v {v:.2f} m/s",
-        f"w {w:+.2f} rad/s",
-        f"label {label:2d}/{m - 1}",
-        f"{'rec' if recording else 'frames'} {frames}",
-        f"collisions {collisions}",
-    ]
-    if phase != "driving":
-        parts.append(phase.upper())
-    return "   ".join(parts)

@@ -48,6 +48,23 @@ class Banner:
     lines: tuple[str, ...] = ()
 
 
+@dataclass(frozen=True)
+class Overlay:
+    """The text drawn around and over the camera view in one frame.
+
+    Attributes:
+        status: the line under the view (time, speed, label, frames, collisions).
+        hud: the guide's readout, top left of the view.
+        banner: large text over the view, or None.
+        mode: who drives (ride-along) and in what colour, top right of the view; None: nobody but you.
+    """
+
+    status: str
+    hud: Sequence[str] = ()
+    banner: Banner | None = None
+    mode: tuple[str, tuple[int, int, int]] | None = None
+
+
 class Window:
     """The driving window of one simulation."""
 
@@ -148,18 +165,9 @@ class Window:
 
     # --- per frame -----------------------------------------------------------------------------------
 
-    def draw(
-        self,
-        image: np.ndarray,
-        w: float,
-        label: int,
-        trace_px: Sequence[tuple[float, float]],
-        status: str,
-        hud: Sequence[str] = (),
-        banner: Banner | None = None,
-        mode: tuple[str, tuple[int, int, int]] | None = None,
-    ) -> None:
-        """Draw one frame and show it. ``mode``: who drives (ride-along), drawn top right of the view."""
+    def draw(self, image: np.ndarray, w: float, label: int, trace_px: Sequence[tuple[float, float]], overlay: Overlay) -> None:
+        """Draw one frame and show it: the camera ``image`` (class ids), the stick's ``w`` [rad/s]
+        and its ``label``, the driven trace in the inset, and the ``overlay``'s text."""
         canvas = self.canvas
         canvas.fill(PANEL_BG)
         view = pygame.image.frombuffer(np.ascontiguousarray(image, dtype=np.uint8), self.view_size, "P")  # class ids, 8-bit
@@ -167,15 +175,15 @@ class Window:
         canvas.blit(view, (0, 0))
         self._draw_route()
         self._draw_trajectories(label)
-        self._draw_hud(hud)
-        if mode is not None:
-            self._draw_box(self.hud_font.render(mode[0], True, mode[1]), anchor="topright")
+        self._draw_hud(overlay.hud)
+        if overlay.mode is not None:
+            self._draw_box(self.hud_font.render(overlay.mode[0], True, overlay.mode[1]), anchor="topright")
         self._draw_inset(trace_px)
         self._draw_gauge(w, label)
         self._draw_legend()
-        canvas.blit(self.font.render(status, True, TEXT_COLOR), (8, self.view_size[1] + 6))
-        if banner is not None:
-            self._draw_banner(banner)
+        canvas.blit(self.font.render(overlay.status, True, TEXT_COLOR), (8, self.view_size[1] + 6))
+        if overlay.banner is not None:
+            self._draw_banner(overlay.banner)
         self._present()
 
     def save(self, path: str) -> None:
