@@ -6,9 +6,9 @@ study's demonstrations and trainings) maps one function over a list of jobs thro
 
 - ``local`` (the default): forked worker processes on this machine, one per core unless
   ``workers`` says otherwise; one worker runs the jobs in this process.
-- ``ray``: Ray tasks (the ``ray`` extra). With no ``address`` a Ray instance is started on this machine with
-  ``workers`` CPUs; with ``address`` (``ray start --head`` on one machine, ``ray start --address
-  HEAD:6379`` on the others) the jobs go to that cluster. Jobs pass files by path, so on a
+- ``ray``: Ray tasks (the ``ray`` extra). With no ``address`` a Ray instance is started on this
+  machine with ``workers`` CPUs; with ``address`` (``ray start --head`` on one machine, ``ray
+  start --address HEAD:6379`` on the others) the jobs go to that cluster. Jobs pass files by path, so on a
   cluster the output folder must be on storage every node sees, and terrapref must be installed
   on every node.
 
