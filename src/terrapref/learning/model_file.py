@@ -10,7 +10,6 @@ read as the same stages (:func:`stage_blocks`).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 

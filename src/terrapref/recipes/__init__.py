@@ -35,7 +35,6 @@ from terrapref.demos.dataset import build_dataset
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.demos.recording import MemoryRecordingWriter, Recording, RecordingWriter, read_recording
 from terrapref.demos.session import DisturbanceConfig, record_run, recording_meta
-from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
 from terrapref.learning.model_file import load_model
 from terrapref.learning.pipeline import train_and_save
