@@ -17,11 +17,11 @@ than half the columns support (the map's edge, say, cutting the line short) give
 from __future__ import annotations
 
 import math
-from collections import deque
 
 import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView
+from terrapref.features import kernels
 from terrapref.terrain import UNKNOWN
 
 REFERENCE_EVERY = 4  # frames between updates of the reference line (it moves slowly; its median is the costly part)
@@ -54,73 +54,30 @@ class HorizonAttitude:
         self.memory = memory
         self.max_rad = math.radians(max_deg)
         self._u = self.cols + 0.5 - self.cx
-        self._history: deque[np.ndarray] = deque(maxlen=memory)
+        self._history = np.full((memory, len(self.cols)), np.nan)  # the last ``memory`` lines, a ring
         self._reference: np.ndarray | None = None
         self._frames = 0
 
     def reset(self) -> None:
         """Start a new run: forget the reference line."""
-        self._history.clear()
+        self._history.fill(np.nan)
         self._reference = None
         self._frames = 0
 
     def line(self, view: SegmentationView) -> np.ndarray:
-        """The first row of each column read below which the camera sees ground (the next rows
-        read mostly hold ground), (C,) float; NaN where the band holds none."""
-        ground = (view.pixels(self.index).reshape(len(self.rows), len(self.cols)) != UNKNOWN).astype(np.int8)
-        if len(self.rows) < 4:
-            return np.full(len(self.cols), np.nan)
-        run = ground[:-3] + ground[1:-2] + ground[2:-1] + ground[3:]  # ground among four rows read from here down
-        starts = run >= 3
-        found = starts.any(axis=0)
-        first = np.where(found, self.rows[np.argmax(starts, axis=0)].astype(float), np.nan)
-        return first
+        """The first row of each column read below which the camera sees ground (at least 3 of it and
+        the next 3 rows read are ground), (C,) float; NaN where the band holds none."""
+        return kernels.sky_line(view.pixels(self.index), self.rows, len(self.cols), UNKNOWN)
 
     def __call__(self, view: SegmentationView) -> tuple[float, float]:
         """(pitch [rad], more downward positive; roll [rad], as :meth:`PinholeCamera.tilted` takes it)
         of ``view``'s camera off its mount; (0, 0) until the reference holds five frames, and when
         the fit is not supported."""
         now = self.line(view)
-        self._history.append(now)
+        self._history[self._frames % self.memory] = now
         self._frames += 1
         if self._frames < 5:
             return 0.0, 0.0
         if self._reference is None or self._frames % REFERENCE_EVERY == 0 or self._frames < 2 * REFERENCE_EVERY:
-            with np.errstate(all="ignore"):
-                self._reference = np.nanmedian(np.stack(self._history), axis=0)
-        return self._fit(now - self._reference, self._reference)
-
-    def _fit(self, departure: np.ndarray, reference: np.ndarray) -> tuple[float, float]:
-        """Least squares of the columns' departures [rows] against a small pitch's and roll's image
-        motion at the reference line, twice: the second time without the columns that miss the
-        first fit by more than 3 rows."""
-        ok = np.isfinite(departure) & np.isfinite(reference)
-        if ok.sum() < len(self.cols) // 2:
-            return 0.0, 0.0
-        y = (reference + 0.5 - self.cy) / self.fy
-        slope = np.gradient(np.where(ok, reference, np.interp(self._u, self._u[ok], reference[ok])), self._u)
-        # A pitch moves the line by -fy (1 + y^2) rows; a roll by -(u - cx) rows and (v - cy) columns,
-        # which along a sloping line is a change of row of -(u - cx) - slope (v - cy).
-        design = np.stack([-self.fy * (1.0 + y**2), -self._u - slope * (reference + 0.5 - self.cy)], axis=1)
-        keep = ok.copy()
-        for _ in range(2):
-            if keep.sum() < len(self.cols) // 2:
-                return 0.0, 0.0
-            dp, dr = _least_squares(design[keep], departure[keep])
-            keep = ok & (np.abs(design[:, 0] * dp + design[:, 1] * dr - np.where(ok, departure, 0.0)) <= 3.0)
-        if not (abs(dp) <= self.max_rad and abs(dr) <= self.max_rad):
-            return 0.0, 0.0
-        return dp, dr
-
-
-def _least_squares(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
-    """The two coefficients x minimising |a x - b| for a (N, 2), by the normal equations with exactly
-    rounded sums (math.fsum): the same bits on every CPU, where a LAPACK solver's may differ."""
-    p, q = a[:, 0].tolist(), a[:, 1].tolist()
-    r = b.tolist()
-    pp, pq, qq = math.fsum(x * x for x in p), math.fsum(x * y for x, y in zip(p, q)), math.fsum(y * y for y in q)
-    pr, qr = math.fsum(x * z for x, z in zip(p, r)), math.fsum(y * z for y, z in zip(q, r))
-    det = pp * qq - pq * pq
-    if not det > 1e-12 * max(pp * qq, 1e-300):
-        return 0.0, 0.0
-    return (qq * pr - pq * qr) / det, (pp * qr - pq * pr) / det
+            self._reference = kernels.column_medians(self._history, min(self._frames, self.memory))
+        return kernels.attitude_fit(now - self._reference, self._reference, self._u, self.fx, self.fy, self.cy, self.max_rad)

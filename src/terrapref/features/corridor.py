@@ -224,28 +224,23 @@ class GroundMap:
         c = self.config
         self._recentre(x, y)
         self.frame += 1
-        cols = self.columns[view.pixels(self._pix)]
-        vx, vy = self._vx, self._vy
-        if self.attitude is not None:
-            dpitch, droll = self.attitude(view)
-            if dpitch or droll:
-                moved = _ground(self._ray, self.camera.tilted(dpitch, droll), self.camera.t) - self._ground0
-                vx, vy = vx + moved[:, 0], vy + moved[:, 1]
-                cols = np.where(np.isfinite(vx) & np.isfinite(vy), cols, self.k + 1)  # rays that no longer meet the ground
-                vx, vy = np.nan_to_num(vx), np.nan_to_num(vy)
+        ids = view.pixels(self._pix)
+        dpitch, droll = self.attitude(view) if self.attitude is not None else (0.0, 0.0)
+        tilted = bool(dpitch or droll)
+        axes = self.camera.tilted(dpitch, droll) if tilted else self.camera.R
         kernels.map_vote(self.evidence, self.stamp, self.cells, float(self.origin[0]), float(self.origin[1]), 1.0 / c.map_resolution_m,
-                         float(x), float(y), math.cos(yaw), math.sin(yaw), vx, vy, self._weight, cols, self.frame, self._fade,
-                         self.lethal, np.float32(c.map_lethal_share), np.float32(c.map_terrain_share), np.float32(c.map_min_evidence))
+                         float(x), float(y), math.cos(yaw), math.sin(yaw), self._vx, self._vy, self._weight, ids, self.columns, self.frame,
+                         self._fade, self.lethal, np.float32(c.map_lethal_share), np.float32(c.map_terrain_share),
+                         np.float32(c.map_min_evidence), tilted, self._ray, self._ground0, axes, self.camera.t)
 
     def beside(self, path: ReferencePath, s: np.ndarray, lat: np.ndarray) -> np.ndarray:
         """Terrain column (O, S, F) at the points ``lat`` (O, F) [m] left of the path at arc lengths ``s`` (S,)."""
-        u = path.direction_at(s)
-        normal = np.ascontiguousarray(np.stack([-u[:, 1], u[:, 0]], axis=-1))
-        centre = np.ascontiguousarray(path.point_at(s))
         if self.origin is None:
             return np.full((lat.shape[0], len(s), lat.shape[1]), self.k + 1, dtype=np.uint8)
+        a, d, length = path.segments
         return kernels.map_read_beside(self.cells, float(self.origin[0]), float(self.origin[1]), 1.0 / self.config.map_resolution_m,
-                                       centre, normal, np.ascontiguousarray(lat, dtype=np.float64), self.k + 1)
+                                       path.s, a, d, length, np.asarray(s, dtype=np.float64), np.ascontiguousarray(lat, dtype=np.float64),
+                                       self.k + 1)
 
     def lookup(self, points: np.ndarray) -> np.ndarray:
         """Terrain column at each world point (..., 2); K + 1 (never seen) outside the map."""
@@ -288,26 +283,10 @@ class CorridorFeatures:
         return gmap.beside(path, np.minimum(progress_s + self.stations, path.length_m), self._lat)
 
     def __call__(self, gmap: GroundMap, path: ReferencePath, progress_s: float) -> CorridorView:
-        k, step = self.k, self.config.station_step_m
-        col = self.columns(gmap, path, progress_s)
-        on = (col[self._centre] < k).any(axis=1)  # (S,): terrain on the path itself
-        upto, on_path_m, near_m = len(self.stations), 0.0, math.inf
-        if on.any():
-            idx = np.flatnonzero(on)
-            first = last = int(idx[0])
-            for i in idx[1:]:
-                if i - last > self._gap:
-                    break
-                last = int(i)
-            upto = min(len(self.stations), last + 1 + self._beyond)
-            on_path_m = (last - first + 1) * step
-            near_m = float(self.stations[first])
-        n_off = len(self.offsets)
-        flat = col[:, :upto].reshape(n_off, -1).astype(np.int64)
-        counts = np.bincount((np.arange(n_off)[:, None] * (k + 2) + flat).ravel(), minlength=n_off * (k + 2)).reshape(n_off, k + 2)
-        metres = counts * (step / col.shape[2])
-        detour = self.offsets**2 * (on_path_m + self.config.span_m)
-        return CorridorView(np.concatenate([metres[:, :k], metres[:, k + 1:], detour[:, None]], axis=1), near_m)
+        c = self.config
+        features, near_m = kernels.corridor_features(self.columns(gmap, path, progress_s), self._centre, self.k, self._gap, self._beyond,
+                                                     c.station_step_m, self.stations, self.offsets, c.span_m)
+        return CorridorView(features, float(near_m))
 
 
 def _ground(ray: np.ndarray, axes: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -342,11 +321,10 @@ def steer(path: ReferencePath, pose: Pose, progress_s: float, offset_m: np.ndarr
     of ``progress_s``; clipped to the stick's +-1 rad/s with ``clip``. One value per offset, ``offset_m``'s shape.
 
     Scalar ``math`` throughout (NumPy's vectorised trigonometry may pick CPU-specific code whose
-    last bits differ), so that the command, and the run it steers, is the same on every machine.
+    last bits differ, and ``math.hypot`` rounds more exactly than C's), so that the command, and
+    the run it steers, is the same on every machine.
     """
-    s = min(progress_s + lookahead_m, path.length_m)
-    cos_h, sin_h = (float(v) for v in path.direction_at(s))
-    tx0, ty0 = (float(v) for v in path.point_at(s))
+    tx0, ty0, cos_h, sin_h = path.frame_at(min(progress_s + lookahead_m, path.length_m))
     x, y, yaw = (float(v) for v in pose)
     offsets = np.asarray(offset_m, dtype=float)
     out = np.empty(offsets.shape)

@@ -186,25 +186,10 @@ def stage_distances(rows: np.ndarray, ends_x: np.ndarray, ends_y: np.ndarray, st
 
 
 @njit(cache=True, nogil=True)
-def map_write(cells: np.ndarray, ox: float, oy: float, inv_res: float, x: float, y: float, c: float, s: float,
-              vx: np.ndarray, vy: np.ndarray, cols: np.ndarray) -> None:
-    """Write each ground sample's column into the ground map's cells (rows y, columns x), in order.
-
-    The NumPy form: ``i = floor((x - ox + vx * c - vy * s) * inv_res)``, ``j = floor((y - oy +
-    vx * s + vy * c) * inv_res)``, ``cells[j[ok], i[ok]] = cols[ok]`` for the samples inside.
-    """
-    n_rows, n_cols = cells.shape
-    for p in range(vx.shape[0]):
-        i = math.floor((x - ox + vx[p] * c - vy[p] * s) * inv_res)
-        j = math.floor((y - oy + vx[p] * s + vy[p] * c) * inv_res)
-        if 0 <= i < n_cols and 0 <= j < n_rows:
-            cells[j, i] = cols[p]
-
-
-@njit(cache=True, nogil=True)
 def map_vote(evidence: np.ndarray, stamp: np.ndarray, cells: np.ndarray, ox: float, oy: float, inv_res: float, x: float, y: float,
-             c: float, s: float, vx: np.ndarray, vy: np.ndarray, weight: np.ndarray, cols: np.ndarray, frame: int, fade: np.ndarray,
-             lethal: np.ndarray, lethal_share: float, terrain_share: float, min_evidence: float) -> None:
+             c: float, s: float, vx: np.ndarray, vy: np.ndarray, weight: np.ndarray, ids: np.ndarray, columns: np.ndarray, frame: int,
+             fade: np.ndarray, lethal: np.ndarray, lethal_share: float, terrain_share: float, min_evidence: float,
+             tilted: bool, ray: np.ndarray, ground0: np.ndarray, axes: np.ndarray, t: np.ndarray) -> None:
     """Add each ground sample's vote to the evidence of its cell, and set the cell's column.
 
     A cell's evidence (``evidence[j, i]``, one float32 per column 0..K, K the background) fades by
@@ -214,19 +199,47 @@ def map_vote(evidence: np.ndarray, stamp: np.ndarray, cells: np.ndarray, ox: flo
     (``cells``): K + 1 (never seen) while its evidence totals less than ``min_evidence``; else the
     lethal column with the most evidence when the lethal columns hold at least ``lethal_share`` of
     it; else the other terrain column with the most when those columns hold at least
-    ``terrain_share``; else K. Ties go to the lowest column. Cells are found as in
-    :func:`map_write`; float32 sums in a fixed order, so every CPU agrees.
+    ``terrain_share``; else K. Ties go to the lowest column. A sample's cell:
+    ``i = floor((x - ox + vx * c - vy * s) * inv_res)``, ``j = floor((y - oy + vx * s + vy * c) *
+    inv_res)`` (rows y, columns x); float32 sums in a fixed order, so every CPU agrees.
+
+    A sample's column is ``columns[ids[p]]`` (its pixel's class id). With ``tilted``, the camera
+    is off its mount (``axes``, rows right, down, forward in the vehicle frame; optical centre
+    ``t``): a sample moves by where its pixel's ray ``ray[p]`` (camera frame, z = 1) now meets the
+    ground less where the mount's camera saw it meet it (``ground0[p]``), and a ray that no longer
+    meets it casts no vote; the NumPy form of that point is
+    ``terrapref.features.corridor._ground``.
     """
     n_rows, n_cols = cells.shape
     k = evidence.shape[2] - 1
-    for p in range(vx.shape[0]):
-        col = cols[p]
-        if col > k:
+    # First every sample's cell (-1: no vote), in a loop without stores to the map, then the votes.
+    n = vx.shape[0]
+    ci, cj = np.empty(n, np.int64), np.empty(n, np.int64)
+    for p in range(n):
+        ci[p] = -1
+        if columns[ids[p]] > k:
             continue
-        i = math.floor((x - ox + vx[p] * c - vy[p] * s) * inv_res)
-        j = math.floor((y - oy + vx[p] * s + vy[p] * c) * inv_res)
-        if not (0 <= i < n_cols and 0 <= j < n_rows):
+        px, py = vx[p], vy[p]
+        if tilted:
+            r0, r1 = ray[p, 0], ray[p, 1]
+            dz = r0 * axes[0, 2] + r1 * axes[1, 2] + axes[2, 2]
+            if not dz < -1e-12:
+                continue
+            scale = -t[2] / dz
+            gx = t[0] + scale * (r0 * axes[0, 0] + r1 * axes[1, 0] + axes[2, 0])
+            gy = t[1] + scale * (r0 * axes[0, 1] + r1 * axes[1, 1] + axes[2, 1])
+            px, py = px + (gx - ground0[p, 0]), py + (gy - ground0[p, 1])
+            if not (math.isfinite(px) and math.isfinite(py)):
+                continue
+        i = math.floor((x - ox + px * c - py * s) * inv_res)
+        j = math.floor((y - oy + px * s + py * c) * inv_res)
+        if 0 <= i < n_cols and 0 <= j < n_rows:
+            ci[p], cj[p] = i, j
+    for p in range(n):
+        i, j = ci[p], cj[p]
+        if i < 0:
             continue
+        col = columns[ids[p]]
         gap = frame - stamp[j, i]
         if gap != 0:
             f = fade[min(gap, fade.shape[0] - 1)]
@@ -275,19 +288,294 @@ def map_read(cells: np.ndarray, ox: float, oy: float, inv_res: float, px: np.nda
 
 
 @njit(cache=True, nogil=True)
-def map_read_beside(cells: np.ndarray, ox: float, oy: float, inv_res: float, centre: np.ndarray, normal: np.ndarray, lat: np.ndarray,
-                    never: int) -> np.ndarray:
-    """The ground map's column (O, S, F) at the points ``centre[s] + lat[o, f] * normal[s]``.
+def path_point(path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray, s: float) -> tuple[float, float, float, float]:
+    """(x, y, ux, uy): the point at arc length ``s`` (clamped to the path) and the unit direction
+    there, as ``ReferencePath.point_at`` and ``direction_at`` give them (segments: ``path.segments``)."""
+    n_seg = path_len.shape[0]
+    s = min(max(s, 0.0), path_s[-1])
+    i = min(max(np.searchsorted(path_s, s, side="right") - 1, 0), n_seg - 1)
+    f = (s - path_s[i]) / path_len[i]
+    return (path_a[i, 0] + f * path_d[i, 0], path_a[i, 1] + f * path_d[i, 1], path_d[i, 0] / path_len[i], path_d[i, 1] / path_len[i])
 
-    The NumPy form: :func:`map_read` of ``centre[None, :, None, :] + lat[:, None, :, None] * normal[None, :, None, :]``.
+
+@njit(cache=True, nogil=True)
+def map_read_beside(cells: np.ndarray, ox: float, oy: float, inv_res: float, path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray,
+                    path_len: np.ndarray, s: np.ndarray, lat: np.ndarray, never: int) -> np.ndarray:
+    """The ground map's column (O, S, F) at the points ``lat[o, f]`` [m] left of the path at arc
+    lengths ``s`` (S,), ``never`` outside the map.
+
+    The NumPy form: :func:`map_read` of ``centre[None, :, None, :] + lat[:, None, :, None] *
+    normal[None, :, None, :]``, ``centre = path.point_at(s)``, ``normal`` the path's direction
+    there turned left.
     """
     n_rows, n_cols = cells.shape
-    n_off, n_st, n_f = lat.shape[0], centre.shape[0], lat.shape[1]
+    n_off, n_st, n_f = lat.shape[0], s.shape[0], lat.shape[1]
     out = np.empty((n_off, n_st, n_f), np.uint8)
-    for o in range(n_off):
-        for s in range(n_st):
+    for q in range(n_st):
+        cx, cy, ux, uy = path_point(path_s, path_a, path_d, path_len, s[q])
+        nx, ny = -uy, ux
+        for o in range(n_off):
             for f in range(n_f):
-                i = math.floor((centre[s, 0] + lat[o, f] * normal[s, 0] - ox) * inv_res)
-                j = math.floor((centre[s, 1] + lat[o, f] * normal[s, 1] - oy) * inv_res)
-                out[o, s, f] = cells[j, i] if 0 <= i < n_cols and 0 <= j < n_rows else never
+                i = math.floor((cx + lat[o, f] * nx - ox) * inv_res)
+                j = math.floor((cy + lat[o, f] * ny - oy) * inv_res)
+                out[o, q, f] = cells[j, i] if 0 <= i < n_cols and 0 <= j < n_rows else never
     return out
+
+
+@njit(cache=True, nogil=True)
+def sky_line(ids: np.ndarray, rows: np.ndarray, n_cols: int, unknown: int) -> np.ndarray:
+    """The first band row of each column below which ground is seen, (n_cols,) float; NaN where none.
+
+    ``ids`` (len(rows) * n_cols,) are the class ids of the band, row by row. The NumPy form
+    (terrapref.features.attitude.HorizonAttitude.line): ``ground = ids != unknown``, the first
+    row r with at least 3 of rows r..r+3 ground; all NaN when the band holds fewer than 4 rows.
+    """
+    out = np.full(n_cols, np.nan)
+    if rows.shape[0] < 4:
+        return out
+    for c in range(n_cols):
+        for r in range(rows.shape[0] - 3):
+            seen = 0
+            for q in range(4):
+                if ids[(r + q) * n_cols + c] != unknown:
+                    seen += 1
+            if seen >= 3:
+                out[c] = rows[r]
+                break
+    return out
+
+
+@njit(cache=True, nogil=True)
+def column_medians(history: np.ndarray, count: int) -> np.ndarray:
+    """Median of each column of ``history[:count]`` (M, C) over its non-NaN entries, (C,); NaN
+    where a column has none. The NumPy form: ``np.nanmedian(history[:count], axis=0)`` (for an
+    even count, the mean of the two middle values)."""
+    n_cols = history.shape[1]
+    out = np.empty(n_cols)
+    values = np.empty(count)
+    for c in range(n_cols):
+        n = 0
+        for m in range(count):
+            v = history[m, c]
+            if not np.isnan(v):
+                values[n] = v
+                n += 1
+        if n == 0:
+            out[c] = np.nan
+            continue
+        s = np.sort(values[:n])
+        out[c] = s[n // 2] if n % 2 == 1 else (s[n // 2 - 1] + s[n // 2]) / 2.0
+    return out
+
+
+@njit(cache=True, nogil=True)
+def exact_sum(values: np.ndarray) -> float:
+    """The sum of finite ``values``, exactly rounded (to nearest, ties to even): ``math.fsum``'s
+    result, by the same method (Shewchuk's non-overlapping partials), so the same bits on every CPU."""
+    partials = np.empty(values.shape[0] + 1)
+    n = 0
+    for x in values:
+        i = 0
+        for j in range(n):
+            y = partials[j]
+            if abs(x) < abs(y):
+                x, y = y, x
+            hi = x + y
+            lo = y - (hi - x)
+            if lo != 0.0:
+                partials[i] = lo
+                i += 1
+            x = hi
+        n = i
+        if x != 0.0:
+            partials[n] = x
+            n += 1
+    if n == 0:
+        return 0.0
+    n -= 1
+    hi = partials[n]
+    lo = 0.0
+    while n > 0:
+        x = hi
+        n -= 1
+        y = partials[n]
+        hi = x + y
+        lo = y - (hi - x)
+        if lo != 0.0:
+            break
+    # Half-even rounding across several partials.
+    if n > 0 and ((lo < 0.0 and partials[n - 1] < 0.0) or (lo > 0.0 and partials[n - 1] > 0.0)):
+        y = lo * 2.0
+        x = hi + y
+        if y == x - hi:
+            hi = x
+    return hi
+
+
+@njit(cache=True, nogil=True)
+def _interp(x: float, xp: np.ndarray, fp: np.ndarray) -> float:
+    """``np.interp(x, xp, fp)`` for increasing ``xp`` (the ends held beyond it)."""
+    n = xp.shape[0]
+    if x <= xp[0]:
+        return fp[0]
+    if x >= xp[n - 1]:
+        return fp[n - 1]
+    j = np.searchsorted(xp, x, side="right") - 1
+    if x == xp[j]:
+        return fp[j]
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    out = slope * (x - xp[j]) + fp[j]
+    if np.isnan(out):
+        out = slope * (x - xp[j + 1]) + fp[j + 1]
+        if np.isnan(out) and fp[j] == fp[j + 1]:
+            out = fp[j]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _gradient(f: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``np.gradient(f, x)`` of 1-D ``f`` at coordinates ``x`` (at least 2): second-order central
+    differences inside (numpy's uniform form when every step of ``x`` is equal), first-order at the ends."""
+    n = f.shape[0]
+    out = np.empty(n)
+    dx = np.empty(n - 1)
+    uniform = True
+    for i in range(n - 1):
+        dx[i] = x[i + 1] - x[i]
+        if dx[i] != dx[0]:
+            uniform = False
+    if uniform:
+        for i in range(1, n - 1):
+            out[i] = (f[i + 1] - f[i - 1]) / (2.0 * dx[0])
+        out[0] = (f[1] - f[0]) / dx[0]
+        out[n - 1] = (f[n - 1] - f[n - 2]) / dx[0]
+        return out
+    for i in range(1, n - 1):
+        dx1, dx2 = dx[i - 1], dx[i]
+        a = -dx2 / (dx1 * (dx1 + dx2))
+        b = (dx2 - dx1) / (dx1 * dx2)
+        c = dx1 / (dx2 * (dx1 + dx2))
+        out[i] = a * f[i - 1] + b * f[i] + c * f[i + 1]
+    out[0] = (f[1] - f[0]) / dx[0]
+    out[n - 1] = (f[n - 1] - f[n - 2]) / dx[n - 2]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def attitude_fit(departure: np.ndarray, reference: np.ndarray, u: np.ndarray, fx: float, fy: float, cy: float,
+                 max_rad: float) -> tuple[float, float]:
+    """(pitch, roll) [rad] off the mount from the sky line's ``departure`` (C,) [rows] from its
+    ``reference`` (C,) at column offsets ``u`` (C,) [px]; (0, 0) when fewer than half the columns
+    support it. The NumPy form: ``HorizonAttitude._fit`` (tests/test_perception.py keeps it), with
+    :func:`exact_sum` for its ``math.fsum``."""
+    n = departure.shape[0]
+    ok = np.empty(n, np.bool_)
+    good = 0
+    for i in range(n):
+        ok[i] = np.isfinite(departure[i]) and np.isfinite(reference[i])
+        good += ok[i]
+    if good < n // 2:
+        return 0.0, 0.0
+    xp, fp = np.empty(good), np.empty(good)
+    g = 0
+    for i in range(n):
+        if ok[i]:
+            xp[g], fp[g] = u[i], reference[i]
+            g += 1
+    filled = np.empty(n)
+    for i in range(n):
+        filled[i] = reference[i] if ok[i] else _interp(u[i], xp, fp)
+    slope = _gradient(filled, u)
+    d0, d1 = np.empty(n), np.empty(n)
+    for i in range(n):
+        y = (reference[i] + 0.5 - cy) / fy
+        d0[i] = -fy * (1.0 + y * y)
+        d1[i] = -u[i] - slope[i] * (reference[i] + 0.5 - cy)
+    keep = ok.copy()
+    dp = dr = 0.0
+    pp, pq, qq, pr, qr = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    for _ in range(2):
+        m = 0
+        for i in range(n):
+            if keep[i]:
+                pp[m], pq[m], qq[m] = d0[i] * d0[i], d0[i] * d1[i], d1[i] * d1[i]
+                pr[m], qr[m] = d0[i] * departure[i], d1[i] * departure[i]
+                m += 1
+        if m < n // 2:
+            return 0.0, 0.0
+        spp, spq, sqq = exact_sum(pp[:m]), exact_sum(pq[:m]), exact_sum(qq[:m])
+        spr, sqr = exact_sum(pr[:m]), exact_sum(qr[:m])
+        det = spp * sqq - spq * spq
+        if not det > 1e-12 * max(spp * sqq, 1e-300):
+            dp, dr = 0.0, 0.0
+        else:
+            dp, dr = (sqq * spr - spq * sqr) / det, (spp * sqr - spq * spr) / det
+        for i in range(n):
+            keep[i] = ok[i] and abs(d0[i] * dp + d1[i] * dr - (departure[i] if ok[i] else 0.0)) <= 3.0
+    if not (abs(dp) <= max_rad and abs(dr) <= max_rad):
+        return 0.0, 0.0
+    return dp, dr
+
+
+@njit(cache=True, nogil=True)
+def corridor_features(col: np.ndarray, centre: int, k: int, gap: int, beyond: int, step: float, stations: np.ndarray,
+                      offsets: np.ndarray, span: float) -> tuple[np.ndarray, float]:
+    """The corridor's features (O, K + 2) and the distance to the first terrain on the path [m]
+    (inf: none), from the terrain column (O, S, F) under every footprint point.
+
+    The NumPy form is ``terrapref.features.corridor.CorridorFeatures`` (its module docstring):
+    the first patch on the path (row ``centre``; gaps of at most ``gap`` stations do not split
+    it) and ``beyond`` stations after it are counted, metres per column (count * step / F), the
+    never-seen column, and the detour's price ``offset^2 * (on-path metres + span)``.
+    """
+    n_off, n_st, n_f = col.shape
+    first, last = -1, -1
+    for q in range(n_st):
+        on = False
+        for f in range(n_f):
+            if col[centre, q, f] < k:
+                on = True
+                break
+        if not on:
+            continue
+        if first < 0:
+            first = last = q
+        elif q - last > gap:
+            break
+        else:
+            last = q
+    upto, on_path_m, near_m = n_st, 0.0, np.inf
+    if first >= 0:
+        upto = min(n_st, last + 1 + beyond)
+        on_path_m = (last - first + 1) * step
+        near_m = stations[first]
+    scale = step / n_f
+    out = np.empty((n_off, k + 2))
+    counts = np.zeros(k + 2, np.int64)
+    for o in range(n_off):
+        counts[:] = 0
+        for q in range(upto):
+            for f in range(n_f):
+                counts[col[o, q, f]] += 1
+        for v in range(k):
+            out[o, v] = counts[v] * scale
+        out[o, k] = counts[k + 1] * scale
+        out[o, k + 1] = offsets[o] * offsets[o] * (on_path_m + span)
+    return out, near_m
+
+
+@njit(cache=True, nogil=True)
+def gated_value(features: np.ndarray, offsets: np.ndarray, gate: bool, weights: np.ndarray) -> np.ndarray:
+    """Each offset's utility (O,): its features (O, K + 2), then the gate column (``offset^2`` while
+    ``gate``, else 0), times ``weights`` (K + 3,), summed column by column in order. The NumPy form:
+    ``terrapref.features.corridor.gated`` and ``terrapref.planner.stages.offset._weighted``."""
+    n_off, n_feat = features.shape
+    g = 1.0 if gate else 0.0
+    out = np.empty(n_off)
+    for o in range(n_off):
+        value = features[o, 0] * weights[0]
+        for j in range(1, n_feat):
+            value = value + features[o, j] * weights[j]
+        out[o] = value + offsets[o] * offsets[o] * g * weights[n_feat]
+    return out
+

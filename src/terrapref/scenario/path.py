@@ -51,6 +51,16 @@ class ReferencePath:
         f = (s - self.s[i]) / self._len[i]
         return self._a[i] + f[..., None] * self._d[i]
 
+    def frame_at(self, s: float) -> tuple[float, float, float, float]:
+        """(x, y, ux, uy): the point at arc length ``s`` (clamped to the path) and the unit direction
+        there, the values :meth:`point_at` and :meth:`direction_at` give, in plain floats."""
+        sf = min(max(float(s), 0.0), self.length_m)
+        i = min(max(bisect.bisect_right(self._s_list, sf) - 1, 0), len(self._len) - 1)
+        ln = self._len_list[i]
+        f = (sf - self._s_list[i]) / ln
+        (ax, ay), (dx, dy) = self._a_list[i], self._d_list[i]
+        return ax + f * dx, ay + f * dy, dx / ln, dy / ln
+
     def straight_between(self, s_lo: float, s_hi: float) -> tuple[float, float, float, float] | None:
         """(x, y, ux, uy): the point at ``s_lo`` and the unit direction there, when the path runs
         straight from ``s_lo`` to ``s_hi`` (one segment, both inside the path); else None."""

@@ -10,6 +10,8 @@ import math
 import numpy as np
 from numba import njit
 
+from terrapref.features.kernels import path_point
+
 
 @njit(cache=True, nogil=True)
 def _segment(path_s: np.ndarray, n_seg: int, s: float) -> tuple[int, float]:
@@ -61,4 +63,32 @@ def swept_reach(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progress
                         break
             if out[o] < steps:
                 break
+    return out
+
+
+@njit(cache=True, nogil=True)
+def lethal_hits(cells: np.ndarray, ox: float, oy: float, inv_res: float, path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray,
+                path_len: np.ndarray, progress_s: float, stations: np.ndarray, offsets: np.ndarray, across: np.ndarray,
+                lethal: np.ndarray, never: int) -> np.ndarray:
+    """(O, S): whether any point ``offsets[o] + across[a]`` [m] left of the path, at station
+    ``stations[s]`` from ``progress_s`` (capped at the path's end), lies on a lethal column of
+    the map (``lethal`` by column, ``never`` outside it).
+
+    The NumPy form: ``lethal[map_read_beside(..., minimum(progress_s + stations, length),
+    offsets[:, None] + across[None, :])].any(axis=2)``.
+    """
+    n_rows, n_cols = cells.shape
+    length = path_s[-1]
+    out = np.zeros((offsets.shape[0], stations.shape[0]), np.bool_)
+    for q in range(stations.shape[0]):
+        cx, cy, ux, uy = path_point(path_s, path_a, path_d, path_len, min(progress_s + stations[q], length))
+        nx, ny = -uy, ux
+        for o in range(offsets.shape[0]):
+            for a in range(across.shape[0]):
+                lat = offsets[o] + across[a]
+                i = math.floor((cx + lat * nx - ox) * inv_res)
+                j = math.floor((cy + lat * ny - oy) * inv_res)
+                if lethal[cells[j, i] if 0 <= i < n_cols and 0 <= j < n_rows else never]:
+                    out[o, q] = True
+                    break
     return out

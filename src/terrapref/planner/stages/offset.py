@@ -35,11 +35,12 @@ import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.features import FeatureConfig
-from terrapref.features.corridor import CorridorConfig, CorridorFeatures, GroundMap, gated, steer
+from terrapref.features.corridor import CorridorConfig, CorridorFeatures, GroundMap, steer
+from terrapref.features.kernels import gated_value
 from terrapref.learning.corridor import CorridorFit, CorridorUtility, fit_corridor
 from terrapref.planner.costmap import Costmap, costmap_of
 from terrapref.planner.stages.base import Choice, Stage, StageConfig, StageContext, StageInput, StageRunner, Where, number, vector
-from terrapref.planner.stages.kernels import swept_reach
+from terrapref.planner.stages.kernels import lethal_hits, swept_reach
 from terrapref.scenario.path import ReferencePath
 from terrapref.vehicle import Command, ControlSet, Pose
 
@@ -200,7 +201,7 @@ class OffsetSteering(StageRunner):
         """The yaw rate [rad/s] toward the offset held after this frame."""
         self.observe(view, pose)
         corridor = self.corridor(self.map, path, progress_s)
-        value = _weighted(gated(corridor, self.offsets, self.utility.near_m), self.weights)
+        value = gated_value(corridor.features, self.offsets, corridor.near_m > self.utility.near_m, self.weights)
         escape = None
         if self.lethal[: self.k].any():
             lines = None  # the offsets' lines to the horizon, when the far read below already holds them
@@ -288,8 +289,12 @@ class OffsetSteering(StageRunner):
         """:meth:`_lines` station by station, (O, S); ``across`` the points across each line (the
         footprint and its clearance by default)."""
         across = self._clear if across is None else across
-        s = np.minimum(progress_s + stations, path.length_m)
-        return self.lethal[self.map.beside(path, s, offsets[:, None] + across[None, :])].any(axis=2)
+        gmap = self.map
+        if gmap.origin is None:
+            return np.broadcast_to(self.lethal[self.k + 1], (len(offsets), len(stations))).copy()
+        a, d, length = path.segments
+        return lethal_hits(gmap.cells, float(gmap.origin[0]), float(gmap.origin[1]), 1.0 / gmap.config.map_resolution_m, path.s, a, d,
+                           length, float(progress_s), stations, np.asarray(offsets, dtype=np.float64), across, self.lethal, self.k + 1)
 
     def _swept(self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_s: float,
                across: np.ndarray | None = None) -> np.ndarray:
@@ -304,11 +309,3 @@ class OffsetSteering(StageRunner):
                            float(gmap.origin[0]), float(gmap.origin[1]), 1.0 / gmap.config.map_resolution_m,
                            self.lethal, self.k + 1)
 
-
-def _weighted(features: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """``features @ weights`` (O,), column by column in a fixed order: elementwise products and sums
-    round the same on every CPU, a BLAS product's order of additions may not."""
-    value = features[:, 0] * weights[0]
-    for j in range(1, len(weights)):
-        value = value + features[:, j] * weights[j]
-    return value
