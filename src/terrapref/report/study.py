@@ -79,7 +79,7 @@ def _demonstration_job(args: tuple[str, int, tuple[str, ...], tuple[tuple[str, s
 
 def _featurise_set(recordings: list, out: str, kind: str, n: int | None) -> str:
     """Featurise recordings into ``out``: a dataset (``kind`` "U", with horizon n) or CNN samples."""
-    from terrapref.demos.dataset import build_dataset, save_dataset
+    from terrapref.dataset import build_dataset, save_dataset
     from terrapref.tensorfile import write_tensor_file
 
     features = FeatureConfig()
@@ -155,7 +155,7 @@ def _train_cnn(job: TrainJob) -> int:
 
 def _train_on_utilities(job: TrainJob) -> int:
     """Fit the linear utility, or train C, on the job's utilities; returns how many samples it learned from."""
-    from terrapref.demos.dataset import Dataset, load_dataset
+    from terrapref.dataset import Dataset, load_dataset
     from terrapref.learning.linear import fit_linear_utility
     from terrapref.learning.pipeline import train_and_save
     from terrapref.planner.policy import save_linear
