@@ -87,7 +87,7 @@ def bench_closed_loop(model_path: Path) -> tuple[float, int]:
 
 
 def bench_decision(rec_dir: Path, repeats: int, features: FeatureConfig | None = None, members: int = 1, stages: tuple = ()) -> np.ndarray:
-    from terrapref.demos.dataset import build_dataset
+    from terrapref.dataset import build_dataset
     from terrapref.learning.model_file import load_model
     from terrapref.learning.pipeline import train_and_save
     from terrapref.learning.network import ClassifierConfig

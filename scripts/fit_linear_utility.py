@@ -14,7 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from terrapref.demos.dataset import build_dataset
+from terrapref.dataset import build_dataset
 from terrapref.demos.recording import read_recording
 from terrapref.features import FeatureConfig
 from terrapref.learning.linear import fit_linear_utility

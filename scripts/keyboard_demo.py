@@ -35,7 +35,7 @@ os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
 
 import numpy as np  # noqa: E402
 
-from terrapref.demos.dataset import build_dataset  # noqa: E402
+from terrapref.dataset import build_dataset  # noqa: E402
 from terrapref.demos.recording import read_recording  # noqa: E402
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, run_many, zone_agrees  # noqa: E402
 from terrapref.evaluation.stats import rate_text, wilson  # noqa: E402

@@ -14,7 +14,7 @@ import json
 import tempfile
 from pathlib import Path
 
-from terrapref.demos.dataset import build_dataset
+from terrapref.dataset import build_dataset
 from terrapref.demos.recording import read_recording
 from terrapref.evaluation.runner import PLANNER, RunSpec, run_many, summarise
 from terrapref.features import FeatureConfig

@@ -8,8 +8,8 @@ import numpy as np
 import torch
 
 from terrapref.camera import CameraConfig
-from terrapref.demos.dataset import FORMAT as DATASET_FORMAT
-from terrapref.demos.dataset import Dataset, save_dataset
+from terrapref.dataset import FORMAT as DATASET_FORMAT
+from terrapref.dataset import Dataset, save_dataset
 from terrapref.features import FeatureConfig
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig

@@ -99,7 +99,7 @@ def test_a_broken_recording_is_refused_by_featurize(tmp_path: Path, capsys, reco
 def _dataset_with(tmp_path: Path, **change) -> Path:
     from helpers import model_meta
 
-    from terrapref.demos.dataset import FORMAT
+    from terrapref.dataset import FORMAT
     from terrapref.tensorfile import write_tensor_file
 
     rng = np.random.default_rng(0)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from terrapref.cli import main
-from terrapref.demos.dataset import featurize_recording
+from terrapref.dataset import featurize_recording
 from terrapref.report.inspect import summarise
 from terrapref.demos.recording import read_recording
 from terrapref.errors import UserError
@@ -300,7 +300,7 @@ def _check_with_the_reference_mcap_reader(path: Path, frames: int) -> None:
 
 @pytest.mark.parametrize("fmt", ["mcap", "rosbag1"])
 def test_an_exported_recording_imports_to_the_same_dataset(tmp_path: Path, imported, capsys, fmt: str):
-    from terrapref.demos.dataset import build_dataset
+    from terrapref.dataset import build_dataset
     from terrapref.recipes import DEFAULT_RECIPE, recipe_named
 
     _, rec = imported["mcap"]

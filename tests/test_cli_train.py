@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from terrapref.cli import main
-from terrapref.demos.dataset import FORMAT as DATASET_FORMAT
-from terrapref.demos.dataset import Dataset, save_dataset
+from terrapref.dataset import FORMAT as DATASET_FORMAT
+from terrapref.dataset import Dataset, save_dataset
 from terrapref.learning.model_file import load_model
 
 from helpers import dataset_file, linear_model, model_meta, one_line_error

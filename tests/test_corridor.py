@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from terrapref.camera import PinholeCamera, SegmentationRenderer, SegmentationView
-from terrapref.demos.dataset import CorridorData, Dataset, load_dataset, save_dataset
-from terrapref.demos.dataset import FORMAT as DATASET_FORMAT
+from terrapref.dataset import CorridorData, Dataset, load_dataset, save_dataset
+from terrapref.dataset import FORMAT as DATASET_FORMAT
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
 from terrapref.features.corridor import CorridorConfig, CorridorFeatures, GroundMap, gated, intent_offsets, steer

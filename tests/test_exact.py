@@ -267,7 +267,7 @@ def test_init_uses_the_fan_in_bounds():
 
 _TRAIN = """
 import hashlib, numpy as np
-from terrapref.demos.dataset import Dataset
+from terrapref.dataset import Dataset
 from terrapref.learning.train import TrainConfig, train
 import sys; sys.path.insert(0, {tests!r})
 from helpers import model_meta, train_config

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from terrapref.demos.dataset import build_dataset
+from terrapref.dataset import build_dataset
 from terrapref.learning.forward import PackedNetwork, probabilities
 from terrapref.learning.mlp import init_weights
 from terrapref.learning.model_file import load_model

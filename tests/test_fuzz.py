@@ -22,8 +22,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from terrapref.camera.files import load_camera
-from terrapref.demos.dataset import FORMAT as DATASET_FORMAT
-from terrapref.demos.dataset import featurize_recording, load_dataset
+from terrapref.dataset import FORMAT as DATASET_FORMAT
+from terrapref.dataset import featurize_recording, load_dataset
 from terrapref.demos.recording import RecordingWriter, read_recording
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig

@@ -125,8 +125,8 @@ def test_progress_on_a_straight_path_is_the_distance_driven():
     assert info["progress_m"] == pytest.approx(0.1, abs=1e-9)
 
 
-def test_no_progress_off_the_corridor():
-    env = _env(reward=RewardConfig(corridor_m=3.0), scenario=_scenario(size=(40.0, 30.0), waypoints=[[2.0, 5.0], [35.0, 5.0]]))
+def test_no_progress_outside_the_path_band():
+    env = _env(reward=RewardConfig(path_band_m=3.0), scenario=_scenario(size=(40.0, 30.0), waypoints=[[2.0, 5.0], [35.0, 5.0]]))
     env.reset(options={"start": (2.0, 15.0, 0.0)})  # 10 m from the path, driving along it
     for _ in range(50):
         _, _, _, _, info = env.step(10)
@@ -147,7 +147,7 @@ def test_random_driving_earns_no_more_progress_than_it_drove():
             obs, _, terminated, truncated, info = env.step(env.action_space.sample())
             step = float(np.hypot(*(np.array(env.unwrapped.sim.vehicle.pose[:2]) - before)))
             assert info["reward_terms"]["progress"] <= 0.1 + 1e-9
-            if info["reward_terms"]["progress"] != 0.0:  # credited only within the 5 m corridor and on the map
+            if info["reward_terms"]["progress"] != 0.0:  # credited only within the 5 m path band and on the map
                 assert abs(obs["pose"][0]) <= 5.0 and not info["off_map"]
             earned += info["reward_terms"]["progress"]
             assert abs(info["progress_m"] - last) <= 0.1 + 1e-9  # the credited progress never jumps
@@ -363,7 +363,7 @@ def test_sb3_ppo_trains_on_two_courses_through_make_vec_env():
 # --- what a review found -------------------------------------------------------------------------
 
 
-def test_progress_resumes_after_a_detour_outside_the_corridor():
+def test_progress_resumes_after_a_detour_outside_the_path_band():
     env = gym.make(ENV_ID, scenario="demo_course", image_size=SMALL, start_jitter_m=0.0, start_yaw_jitter_rad=0.0).unwrapped
     env.reset(options={"start": (2.0, 16.0, 0.0)})  # 6 m left of the path, driving along it
     credited = 0.0
@@ -373,10 +373,10 @@ def test_progress_resumes_after_a_detour_outside_the_corridor():
         if terminated:
             break
     s_true, offset = env.sim.path.project(np.array(env.sim.vehicle.pose[:2]))
-    assert info["path_position_m"] == pytest.approx(s_true, abs=0.05)  # followed even outside the corridor
+    assert info["path_position_m"] == pytest.approx(s_true, abs=0.05)  # followed even outside the path band
     assert info["progress_m"] == pytest.approx(credited, abs=1e-9)  # what the reward credited
     assert abs(obs["pose"][0] - offset) < 0.05 and obs["waypoints"][0] > 0.0  # the path ahead, not behind
-    assert 0.0 < credited < s_true - 2.0  # the stretch driven outside the corridor earned nothing
+    assert 0.0 < credited < s_true - 2.0  # the stretch driven outside the path band earned nothing
 
 
 def test_a_start_anywhere_along_the_path():

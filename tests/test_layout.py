@@ -87,8 +87,8 @@ def test_the_cycle_finder_finds_one():
 
 # The package's layers, bottom first: a package may import only from layers below its own, so
 # that the folder list reads as the data flow (scenario -> world -> vehicle and camera ->
-# perception -> simulation -> features -> demonstrations -> learning -> planner -> evaluation -> report) with
-# the command line on top.
+# perception -> simulation -> features -> demonstrations -> datasets -> learning -> planner -> evaluation ->
+# report) with the command line on top.
 LAYERS = [
     {"errors"},
     {"extras"},
@@ -102,6 +102,7 @@ LAYERS = [
     {"sim"},
     {"features"},
     {"demos"},
+    {"dataset"},
     {"learning"},
     {"planner"},
     {"baselines", "recipes"},

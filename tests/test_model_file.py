@@ -16,7 +16,7 @@ import torch
 from safetensors.numpy import save_file
 
 from terrapref.camera import CameraConfig
-from terrapref.demos.dataset import Dataset, load_dataset, save_dataset
+from terrapref.dataset import Dataset, load_dataset, save_dataset
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, PreferenceSetConfig
 from terrapref.learning.model_file import FORMAT, check_compatible, load_model, read_model_file, save_model

@@ -17,7 +17,7 @@ import torch
 
 import terrapref.planner.planner as planner_module
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer, SegmentationView
-from terrapref.demos.dataset import build_dataset
+from terrapref.dataset import build_dataset
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.demos.recording import RecordingWriter, read_recording
 from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup

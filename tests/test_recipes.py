@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from terrapref.camera import CameraConfig
-from terrapref.demos.dataset import FORMAT as DATASET_FORMAT
-from terrapref.demos.dataset import Dataset, build_dataset, merge_datasets, save_dataset, training_data
+from terrapref.dataset import FORMAT as DATASET_FORMAT
+from terrapref.dataset import Dataset, build_dataset, merge_datasets, save_dataset, training_data
 from terrapref.demos.expert import STYLES, ExpertConfig, ExpertDriver
 from terrapref.demos.session import DisturbanceConfig
 from terrapref.errors import UserError

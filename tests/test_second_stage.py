@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from terrapref.camera import PinholeCamera, SegmentationRenderer, SegmentationView
-from terrapref.demos.dataset import Dataset
+from terrapref.dataset import Dataset
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
 from terrapref.learning.linear import LinearUtility

@@ -363,7 +363,7 @@ def test_frames_taken_off_the_map_are_not_training_data(tmp_path):
     """A recording made before the edge stopped the vehicle (or imported) keeps its off-map frames; featurising leaves them out."""
     import json
 
-    from terrapref.demos.dataset import build_dataset
+    from terrapref.dataset import build_dataset
     from terrapref.features import FeatureConfig
 
     out = tmp_path / "rec"
@@ -458,7 +458,7 @@ def test_frames_after_a_gap_get_the_features_of_a_recording_without_one(tmp_path
 
     import numpy as np
 
-    from terrapref.demos.dataset import featurize_recording
+    from terrapref.dataset import featurize_recording
     from terrapref.features import FeatureConfig
 
     from terrapref.cli import main

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import torch
 
-from terrapref.demos.dataset import FORMAT as DATASET_FORMAT
-from terrapref.demos.dataset import Dataset
+from terrapref.dataset import FORMAT as DATASET_FORMAT
+from terrapref.dataset import Dataset
 from terrapref.learning.model_file import expected_shapes, load_model
 from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
 from terrapref.learning.pipeline import train_and_save

@@ -14,14 +14,15 @@ the layers below it (tests/test_layout.py checks this list against the code):
 9. perception (what a robot's segmentation gets wrong)
 10. sim (closed loop, Gymnasium env)
 11. features (utility features U, look-ahead, corridor)
-12. demos (recordings, datasets)
-13. learning (C, linear and corridor fits, model files)
-14. planner (policies, decision stages, costmap, route)
-15. baselines, recipes
-16. interop (robot logs, ONNX, MCAP, ROS)
-17. evaluation, teleop
-18. report
-19. cli, runtime, warm_up
+12. demos (driving and recording demonstrations)
+13. dataset (featurising recordings into training sets)
+14. learning (C, linear and corridor fits, model files)
+15. planner (policies, decision stages, costmap, route)
+16. baselines, recipes
+17. interop (robot logs, ONNX, MCAP, ROS)
+18. evaluation, teleop
+19. report
+20. cli, runtime, warm_up
 """
 
 import os

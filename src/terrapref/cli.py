@@ -24,7 +24,7 @@ from terrapref.errors import Terminated, UserError
 from terrapref.grid import ENGINES, Engine, GridError
 
 if TYPE_CHECKING:  # for the hints only: the command line imports what a command needs when it runs
-    from terrapref.demos.dataset import Dataset
+    from terrapref.dataset import Dataset
     from terrapref.learning.train import EpochMetrics, TrainConfig, TrainResult
     from terrapref.recipes import Recipe
 
@@ -218,7 +218,7 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
 
 def _print_what_the_drive_shows(rec) -> None:
     """The identifiability report of a recording (featurised as the default recipe would), before any training."""
-    from terrapref.demos.dataset import build_dataset
+    from terrapref.dataset import build_dataset
     from terrapref.recipes import DEFAULT_RECIPE, recipe_named
     from terrapref.learning.train import identify
     from terrapref.progress import Progress
@@ -238,7 +238,7 @@ def _print_what_the_drive_shows(rec) -> None:
 def _cmd_featurize(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from terrapref.demos.dataset import build_dataset, save_dataset
+    from terrapref.dataset import build_dataset, save_dataset
     from terrapref.demos.recording import read_recording
     from terrapref.progress import Progress
 
@@ -372,7 +372,7 @@ def _training_data(args: argparse.Namespace, recipe: Recipe) -> Dataset:
     there is nothing to learn."""
     import numpy as np
 
-    from terrapref.demos.dataset import training_data
+    from terrapref.dataset import training_data
     from terrapref.progress import Progress
 
     recordings = [p for p in args.data if p.is_dir()]

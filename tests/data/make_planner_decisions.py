@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from terrapref.demos.dataset import build_dataset
+from terrapref.dataset import build_dataset
 from terrapref.demos.recording import read_recording
 from terrapref.learning.model_file import load_model
 from terrapref.learning.pipeline import train_and_save

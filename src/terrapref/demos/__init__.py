@@ -1,1 +1,2 @@
-"""Demonstrations: recordings, the synthetic driver standing in for a human, and featurisation."""
+"""Demonstrations: the synthetic driver standing in for a human, disturbances, driving sessions and
+recordings (featurising recordings into datasets is :mod:`terrapref.dataset`)."""

@@ -2,10 +2,10 @@
 drove it, as typed records: written by :meth:`RecordingMeta.to_dict` and read back by
 :meth:`RecordingMeta.from_dict`, here and nowhere else.
 
-The file keeps its keys in a fixed order, so a recording written today is the same file,
-byte for byte, as one written before these records existed. Older recordings lack some
-entries (an older driver had no style, an import has no perception model): what a file does
-not hold is None here, and the use that needs it says so (featurising: ``require_meta``).
+The file keeps its keys in the format's fixed order, so the same recording is the same file,
+byte for byte, whichever code wrote it. Some recordings lack some entries (a driver entry
+without a style, an import without a perception model): what a file does not hold is None
+here, and the use that needs it says so (featurising: ``require_meta``).
 
 A driver is one of four kinds, each with its own fields::
 
@@ -56,8 +56,8 @@ def _settings(config: ExpertConfig | DisturbanceConfig | None) -> Settings | Non
 class ExpertInfo:
     """The synthetic demonstrator (terrapref.demos.expert).
 
-    ``config`` and ``disturbance`` are kept as written: a recording made by an older version
-    may name parameters this one no longer has, and it must still load.
+    ``config`` and ``disturbance`` are kept as written: a recording may name parameters that
+    this code's :class:`ExpertConfig` does not have, and it must still load.
 
     Attributes:
         seed: the seed of its noise (and of the run's pushes).
@@ -304,7 +304,7 @@ Points = tuple[tuple[float, float], ...]
 @dataclass(frozen=True)
 class RecordingMeta:
     """Everything a recording carries to be featurised again later (SPEC 10), as its meta.json
-    holds it; None where the file does not say (an older recording, an import).
+    holds it; None where the file does not say (a recording without that entry, an import).
 
     Attributes:
         scenario: the course's name.

@@ -196,7 +196,7 @@ def file_stem(scenario: str) -> str:
 
 
 def _identifiability(model) -> Identifiability | None:
-    """What the model's demonstrations showed, if its file says (models trained before it was stored do not)."""
+    """What the model's demonstrations showed, if its file says (None for a file without the report)."""
     data = getattr(getattr(model, "model", None), "meta", {}).get("identifiability")
     try:
         return Identifiability.from_dict(data) if data else None

@@ -4,8 +4,8 @@ The trajectories end 5.8 m ahead, and a driver commits to a side of a patch abou
 it, weighing terrain further away (docs/learning.md). For each trajectory i, take the pose
 reached after ``after_s`` seconds along it and lay the whole preference set out again from
 there: 21 x 21 two-piece paths. Every point of a second piece lies on the flat ground at a fixed
-place in the vehicle frame, so its pixel in the current frame is precomputed like the first
-stage's (a point outside the image counts for no class, as in U). Each second piece gets its
+place in the vehicle frame, so its pixel in the current frame is precomputed like those of the
+trajectories themselves (a point outside the image counts for no class, as in U). Each second piece gets its
 own utilities: terrain shares, and the distance utility of its end against the path point one
 horizon beyond its start, normalised over all the second pieces together, so that a first
 trajectory that has left the path scores its continuations lower than one that has not.

@@ -138,8 +138,9 @@ class FeatureConfig:
     @classmethod
     def from_dict(cls, data: dict) -> FeatureConfig:
         if float(data.get("lane_m", 0.0)) != 0.0:
-            # Lanes beyond the trajectories' ends lost their experiment and left the code
-            # (docs/notebook.md names the commit that still reads such files).
+            # Lane columns beyond the trajectories' ends and a near distance column are not
+            # features this code computes: a file that asks for them is refused rather than
+            # read without them (docs/notebook.md names the commit that reads such files).
             raise ValueError(f"lane columns (lane_m {data['lane_m']}) are no longer supported; featurise the recordings again")
         if float(data.get("near_m", 0.0)) != 0.0:  # likewise the near distance column
             raise ValueError(f"the near distance column (near_m {data['near_m']}) is no longer supported; featurise the recordings again")

@@ -5,7 +5,7 @@ names, those of a PyTorch state dict), written out with its gradient by hand. Ev
 through :func:`terrapref.learning.exact.matmul` and every exponential through
 :func:`terrapref.learning.exact.exp`, so a training run gives the same weights, bit for bit,
 on any x86_64 or arm64 CPU, whatever BLAS kernel or thread count it has (docs/design.md).
-The network is a few thousand weights; NumPy trains it as fast as PyTorch did.
+The network is a few thousand weights, small enough that NumPy trains it as fast as PyTorch does.
 """
 
 from __future__ import annotations

@@ -89,8 +89,8 @@ class ClassifierConfig:
 
     @classmethod
     def from_dict(cls, data: dict) -> ClassifierConfig:
-        """The configuration a model file's header holds. Files written before the row-wise
-        compression lost its ``channels`` option say ``channels: 1``, which is what C is."""
+        """The configuration a model file's header holds. A header may name ``channels``, the
+        row-wise compression's outputs per trajectory: 1 is what C is; more are refused."""
         data = dict(data)
         if data.get("channels", 1) != 1:
             raise ValueError(f"channels {data['channels']!r}: more than one compression output per trajectory is no longer supported; train the model again")
@@ -183,7 +183,7 @@ def stacked_forward(config: ClassifierConfig, stacked: StackedWeights, U: np.nda
     else:
         p = softmax(logits)
         probs = p[0]
-        for j in range(1, members):  # added in member order, as the members' mean was before
+        for j in range(1, members):  # in member order, as learning/forward.py adds them (a sum over the axis may not)
             probs = probs + p[j]
         logits = np.log(probs * (1.0 / members) + 1e-30)
     return logits[0] if single else logits

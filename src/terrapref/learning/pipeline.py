@@ -8,7 +8,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict, replace
 from pathlib import Path
 
-from terrapref.demos.dataset import Dataset
+from terrapref.dataset import Dataset
 from terrapref.fileio import new_folder, replace_dir
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig, member_prefix

@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from terrapref.demos.dataset import Dataset
+from terrapref.dataset import Dataset
 
 _MAD_TO_STD = 1.4826  # a normal distribution's standard deviation per median absolute deviation
 WINDOW = 5  # frames averaged for a shaky hand (0.5 s at 10 Hz: shorter than a deliberate swerve)

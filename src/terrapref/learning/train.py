@@ -18,7 +18,7 @@ from typing import Any, Protocol, get_args, get_type_hints
 import numpy as np
 
 from terrapref.configargs import option
-from terrapref.demos.dataset import Dataset
+from terrapref.dataset import Dataset
 from terrapref.learning import exact, kernels
 from terrapref.learning.identify import Identifiability, identifiability
 from terrapref.learning.linear import LinearUtility, fit_linear_utility, fit_lookahead_utility

@@ -31,7 +31,7 @@ import numpy as np
 
 from terrapref.camera import CameraConfig
 from terrapref.recipes.corrections import record_corrections
-from terrapref.demos.dataset import build_dataset
+from terrapref.dataset import build_dataset
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.demos.recording import MemoryRecordingWriter, Recording, RecordingWriter, read_recording
 from terrapref.demos.session import DisturbanceConfig, record_run, recording_meta

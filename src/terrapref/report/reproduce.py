@@ -291,7 +291,7 @@ def _recipe_lines(recipes: tuple[Recipe, ...]) -> list[str]:
                      f"{r.train.optimiser.epochs} epochs, residual path {'on' if r.train.classifier.skip else 'off'}, class-balanced loss {'on' if r.train.data.class_balance else 'off'}, "
                      f"mirrored samples {'on' if r.train.data.mirror else 'off'}"
                      + (f", {r.train.classifier.members} ensemble members" if r.train.classifier.members > 1 else "")
-                     + (", the planner scoring a second stage of trajectories beyond the first with the linear utility fitted to the same samples"
+                     + (", the planner's second stage scoring second pieces of trajectory beyond the first with the linear utility fitted to the same samples"
                         + (" through the look-ahead" if r.features().lookahead is not None else "") if any(s.type == "second_stage" for s in r.stages) else "")
                      + ("; labels from a moving average of w if the driver's hand shakes more than half the w grid's spacing"
                         if r.train.data.steady_labels else "") + ".")

@@ -79,7 +79,7 @@ def _demonstration_job(args: tuple[str, int, tuple[str, ...], tuple[tuple[str, s
 
 def _featurise_set(recordings: list, out: str, kind: str, n: int | None) -> str:
     """Featurise recordings into ``out``: a dataset (``kind`` "U", with horizon n) or CNN samples."""
-    from terrapref.demos.dataset import build_dataset, save_dataset
+    from terrapref.dataset import build_dataset, save_dataset
     from terrapref.tensorfile import write_tensor_file
 
     features = FeatureConfig()
@@ -155,7 +155,7 @@ def _train_cnn(job: TrainJob) -> int:
 
 def _train_on_utilities(job: TrainJob) -> int:
     """Fit the linear utility, or train C, on the job's utilities; returns how many samples it learned from."""
-    from terrapref.demos.dataset import Dataset, load_dataset
+    from terrapref.dataset import Dataset, load_dataset
     from terrapref.learning.linear import fit_linear_utility
     from terrapref.learning.pipeline import train_and_save
     from terrapref.planner.policy import save_linear
@@ -341,7 +341,7 @@ def _course_runs(plan: StudyPlan, sc: str, trained: list[TrainedModel]) -> list[
     runs = [run for t in trained for run in _model_runs(plan, sc, t.job, default)]
     for s in range(plan.seeds):
         runs += [(RunSpec(sc, s, method, None, default), RunTag("baselines", method, s)) for method in (HAND_COST, PURE_PURSUIT, EXPERT)]
-        runs.append((RunSpec(sc, s, EXPERT, None, ALT_PROFILE), RunTag("profile", EXPERT, s, scored_under="model")))
+        runs.append((RunSpec(sc, s, EXPERT, None, ALT_PROFILE), RunTag("profile", EXPERT, s, scored_under="own")))
     return runs
 
 
@@ -350,7 +350,7 @@ def _model_runs(plan: StudyPlan, sc: str, job: TrainJob, default: tuple[str, ...
     under the default profile, and the default C under the other profile and under every perturbation."""
     own = ALT_PROFILE if job.study == "profile" else default
     runs = [(RunSpec(sc, 0, PLANNER, job.out, own),
-             RunTag(job.study, job.method, job.seed, ModelVariant(job.minutes, job.variant), scored_under="model"))]
+             RunTag(job.study, job.method, job.seed, ModelVariant(job.minutes, job.variant), scored_under="own"))]
     if job.study == "profile":  # the same run's choices, scored under the default profile
         runs.append((RunSpec(sc, 0, PLANNER, job.out, default), RunTag("profile_cross", "C", job.seed, scored_under="default")))
     if job.study == "baselines" and job.method == "C":

@@ -49,7 +49,7 @@ class RunTag:
     method: str  # C, linear, cnn, a driver without a model, or C_default (the default profile's C, scored under the other)
     seed: int  # the training seed; for drivers without a model, the evaluation seed
     model: ModelVariant | None = None  # a trained model's own run, scored under the profile it learned
-    scored_under: str | None = None  # "model", "default" or "alt": the profile its zones resolve under
+    scored_under: str | None = None  # the profile its zones resolve under: "own" (the one its model learned or its driver drove by), "default" or "alt"
     kind: str | None = None  # robustness: the perception preset, or the part swept and its level (x the preset's)
     level: float | None = None
     order: tuple[str, ...] | None = None  # teaching: the preference order and style of the driver

@@ -57,10 +57,10 @@ class RewardConfig:
     Attributes:
         progress_weight: per metre that the vehicle's projection on the path advanced this step.
             The advance is bounded by the distance the vehicle drove, counts backwards as well
-            as forwards, and is zero unless the vehicle was within ``corridor_m`` of the path and
+            as forwards, and is zero unless the vehicle was within ``path_band_m`` of the path and
             on the map before and after the step (the projection follows it everywhere, so a
             detour earns nothing for the stretch it skipped).
-        corridor_m: progress is credited only within this distance of the path [m].
+        path_band_m: half-width of the band around the path in which progress is credited [m].
         cross_track_weight: per metre of distance from the path, every step.
         collision_penalty: per entry onto lethal terrain.
         off_map_penalty: each time the vehicle leaves the map.
@@ -74,7 +74,7 @@ class RewardConfig:
     """
 
     progress_weight: float = 1.0
-    corridor_m: float = 5.0
+    path_band_m: float = 5.0
     cross_track_weight: float = 0.01
     collision_penalty: float = 10.0
     off_map_penalty: float = 10.0
@@ -86,8 +86,8 @@ class RewardConfig:
         for name, value in vars(self).items():
             if not math.isfinite(value):
                 raise ValueError(f"RewardConfig.{name} must be finite, got {value!r}")
-        if self.corridor_m <= 0 or self.terrain_growth <= 0:
-            raise ValueError("RewardConfig.corridor_m and terrain_growth must be positive")
+        if self.path_band_m <= 0 or self.terrain_growth <= 0:
+            raise ValueError("RewardConfig.path_band_m and terrain_growth must be positive")
 
 
 @dataclass(frozen=True)
@@ -162,8 +162,8 @@ class OffRoadNavEnv(gym.Env):
         v = (a_v + 1) / 2 x max speed, w = a_w x max yaw rate.
     Info: ``progress_m``, the progress the reward credits, summed from the start's place on the
         path (it grows by at most the distance driven in a step, and not at all outside the
-        corridor); ``path_position_m``, where the vehicle projects onto the path now (it follows
-        the vehicle off the corridor and may jump where the path passes near itself);
+        path band); ``path_position_m``, where the vehicle projects onto the path now (it follows
+        the vehicle out of the band and may jump where the path passes near itself);
         ``reward_terms``, ``is_success``, ``collisions``, ``off_map``, ``time_s``, ``scenario``.
     Reward: :class:`RewardConfig`. Terminated at the goal (``info["is_success"]``), on entering
     lethal terrain and on leaving the map (each configurable); truncated only by the
@@ -222,7 +222,7 @@ class OffRoadNavEnv(gym.Env):
         self.action_space: spaces.Space = self._action_space()
         self._progress_s = 0.0
         self._credited_m = 0.0  # progress the reward credited this episode, from the start's place on the path [m]
-        self._in_corridor = True
+        self._in_band = True  # within the reward's path band (RewardConfig.path_band_m)
         self._off_map = False
         self._started = False
         self._ended = False
@@ -318,7 +318,7 @@ class OffRoadNavEnv(gym.Env):
             self._perceiver.reset(np.random.default_rng(self.np_random.integers(2**63)))
             frame = self._perceiver.captured(frame)
         self._started, self._ended, self._off_map = True, False, False
-        self._in_corridor = abs(path.project(np.array(pose[:2]), self._progress_s - 2.0, self._progress_s + 2.0)[1]) <= self.reward_config.corridor_m
+        self._in_band = abs(path.project(np.array(pose[:2]), self._progress_s - 2.0, self._progress_s + 2.0)[1]) <= self.reward_config.path_band_m
         self._credited_m = self._progress_s
         terms = dict.fromkeys(("progress", "cross_track", "collision", "off_map", "goal", "terrain"), 0.0)
         self._last_obs = self._observation(frame.view, frame.pose)
@@ -340,13 +340,13 @@ class OffRoadNavEnv(gym.Env):
         xy = trace[1:, :2]
         off_map = bool(((xy < 0.0) | (xy > (sx, sy))).any())
 
-        # Where the vehicle is along the path, followed even off the corridor (so observations stay
-        # true); credit is the advance of that point, bounded by the distance driven, and only
-        # while the vehicle stays in the corridor and on the map.
-        s_before, in_before = self._progress_s, self._in_corridor
+        # Where the vehicle is along the path, followed even out of the path band (so observations
+        # stay true); credit is the advance of that point, bounded by the distance driven, and only
+        # while the vehicle stays in the band and on the map.
+        s_before, in_before = self._progress_s, self._in_band
         self._progress_s, offset = sim.path.project(trace[-1, :2], s_before - 2.0 - travelled, s_before + 10.0 + travelled)
-        self._in_corridor = abs(offset) <= cfg.corridor_m and not off_map
-        advance = min(max(self._progress_s - s_before, -travelled), travelled) if (in_before and self._in_corridor) else 0.0
+        self._in_band = abs(offset) <= cfg.path_band_m and not off_map
+        advance = min(max(self._progress_s - s_before, -travelled), travelled) if (in_before and self._in_band) else 0.0
         self._credited_m += advance
         left_map = off_map and not self._off_map
         self._off_map = off_map
