@@ -32,7 +32,8 @@ from reference import reference_ms  # benchmarks/reference.py (the script's fold
 from terrapref.camera import CameraConfig
 from terrapref.demos.expert import ExpertDriver
 from terrapref.demos.recording import RecordingWriter, read_recording
-from terrapref.demos.session import record_run, recording_meta
+from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
+from terrapref.demos.session import RunSettings, record_run
 from terrapref.features import FeatureConfig, PreferenceSetConfig, UtilityFeaturizer
 from terrapref.features.corridor import CorridorConfig
 from terrapref.planner.stages import OffsetConfig, SecondStageConfig
@@ -46,11 +47,11 @@ from terrapref.terrain import PreferenceProfile
 def bench_record(out: Path, seed: int) -> tuple[float, int, int]:
     scenario = resolve_scenario("train_course")
     camera, pref, sim_cfg = CameraConfig(), PreferenceSetConfig(), SimConfig()
-    meta = recording_meta(scenario, camera, pref, sim_cfg, {"kind": "expert", "seed": seed}, PreferenceProfile.default())
+    meta = RecordingMeta.driven(scenario, RecordingSetup(camera, pref, sim_cfg), ExpertInfo(seed), PreferenceProfile.default())
     t0 = time.perf_counter()
     sim = Simulation(scenario, camera, sim_cfg)
     writer = RecordingWriter(out, meta, scenario.to_dict())
-    record_run(sim, ExpertDriver(), writer, pref, np.random.default_rng(seed))
+    record_run(sim, ExpertDriver(), writer, RunSettings(pref), np.random.default_rng(seed))
     wall = time.perf_counter() - t0
     size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
     return wall, writer.count, size

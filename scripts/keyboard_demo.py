@@ -41,7 +41,7 @@ from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, run
 from terrapref.evaluation.stats import rate_text, wilson  # noqa: E402
 from terrapref.grid import Engine, run_grid  # noqa: E402
 from terrapref.learning.pipeline import train_and_save  # noqa: E402
-from terrapref.recipes import DEFAULT_RECIPE, record_demonstrations, recipe_named  # noqa: E402
+from terrapref.recipes import DEFAULT_RECIPE, RecipeSetup, record_demonstrations, recipe_named  # noqa: E402
 from terrapref.plots import RateRow, save_intervals  # noqa: E402
 from terrapref.scenario import resolve_scenario  # noqa: E402
 from terrapref.terrain import PreferenceProfile  # noqa: E402
@@ -57,7 +57,7 @@ def _demonstrate(job: tuple[str, str, int, tuple[str, ...]]) -> tuple[str, str, 
     profile = PreferenceProfile(order)
     work = Path(workdir)
     if kind == "stick":
-        rec = record_demonstrations(recipe, work, seed, profile)[0]
+        rec = record_demonstrations(recipe, work, RecipeSetup(seed, profile))[0]
     else:
         from terrapref.demos.expert import ExpertConfig, ExpertDriver
         from terrapref.teleop import run_teleop

@@ -13,7 +13,7 @@ import pytest
 from terrapref.demos.expert import ExpertDriver
 from terrapref.demos.recording import FRAMES, RecordingWriter, read_recording
 from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
-from terrapref.demos.session import DisturbanceConfig, Disturber, record_run
+from terrapref.demos.session import DisturbanceConfig, Disturber, RunSettings, record_run
 from terrapref.features import PreferenceSetConfig
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation
@@ -139,8 +139,7 @@ def _record(out: Path, seed: int, disturbance: DisturbanceConfig | None, time_li
     preference = PreferenceSetConfig()
     meta = RecordingMeta.driven(scenario, RecordingSetup(sim.camera.config, preference, sim.config), ExpertInfo.of(seed, "default", driver.config, disturbance),
                                 PreferenceProfile.default())
-    log = record_run(sim, driver, RecordingWriter(out, meta, scenario.to_dict()), preference, np.random.default_rng(seed),
-                     disturbance=disturbance)
+    log = record_run(sim, driver, RecordingWriter(out, meta, scenario.to_dict()), RunSettings(preference, disturbance), np.random.default_rng(seed))
     lines = [json.loads(line) for line in (out / FRAMES).read_text().splitlines()]
     return SimpleNamespace(log=log, rec=read_recording(out), lines=lines, sim=sim, preference=preference)
 

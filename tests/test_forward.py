@@ -22,7 +22,7 @@ from terrapref.learning.model_file import load_model
 from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
 from terrapref.learning.pipeline import train_and_save
 from terrapref.planner import Planner, PlannerDriver
-from terrapref.recipes import PAPER, TEACH, demonstrate
+from terrapref.recipes import PAPER, TEACH, RecipeSetup, demonstrate
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation, run_episode
 
@@ -94,7 +94,7 @@ def test_the_planner_makes_the_decisions_it_made_before_the_forward_pass_was_com
     # the training schedule pinned as it was when the file was made (teach trained at lr 1e-3 then)
     recipe = replace(recipe, train=replace(recipe.train, optimiser=replace(recipe.train.optimiser, epochs=epochs, lr=1e-3)))
     features = recipe.features()
-    recordings = demonstrate(recipe, tmp_path / recipe.name, 7, course=course, features=features, write=False)
+    recordings = demonstrate(recipe, tmp_path / recipe.name, RecipeSetup(7, course=course, features=features), write=False)
     model = tmp_path / f"{recipe.name}.safetensors"
     train_and_save(build_dataset(recordings, features), model, replace(recipe.train, seed=7), checkpoints=False,
                    stages=[s for s in recipe.stages if s.type != "offset"])

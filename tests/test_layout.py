@@ -148,3 +148,54 @@ def test_entry_points_that_point_up_the_layers_are_the_named_ones():
                 if m.group(1) != part and level[m.group(1)] >= level[part]:
                     found.add((part, m.group(1)))
     assert found == set(LATE_ENTRY_POINTS)
+
+
+# No function takes more than MAX_PARAMETERS (self and cls not counted): parameters that travel
+# together are one record (a frozen dataclass). Numba's @njit kernels are exempt: they take
+# arrays and scalars only.
+MAX_PARAMETERS = 6
+# Being reduced separately; each leaves this list when its signature is within the limit.
+LONG_SIGNATURES_BEING_REDUCED = {"train_and_save", "steer", "OffsetSteering.__init__"}
+
+
+def _long_signatures(tree: ast.AST) -> set[str]:
+    """``name`` (``Class.name`` for a method) of each function in ``tree`` that takes more than
+    MAX_PARAMETERS parameters and is not an @njit kernel."""
+    found = set()
+
+    def visit(node: ast.AST, owner: str) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                a = child.args
+                names = [x.arg for x in a.posonlyargs + a.args + a.kwonlyargs if x.arg not in ("self", "cls")]
+                names += [x.arg for x in (a.vararg, a.kwarg) if x is not None]
+                if len(names) > MAX_PARAMETERS and not any("njit" in ast.unparse(d) for d in child.decorator_list):
+                    found.add(f"{owner}{child.name}")
+                visit(child, f"{owner}{child.name}.")
+            elif isinstance(child, ast.ClassDef):
+                visit(child, f"{owner}{child.name}.")
+            else:
+                visit(child, owner)
+
+    visit(tree, "")
+    return found
+
+
+def test_no_function_takes_more_than_six_parameters():
+    found = {name for path in ROOT.rglob("*.py") for name in _long_signatures(ast.parse(path.read_text(), str(path)))}
+    assert found <= LONG_SIGNATURES_BEING_REDUCED, f"more than {MAX_PARAMETERS} parameters: {sorted(found - LONG_SIGNATURES_BEING_REDUCED)}"
+
+
+def test_the_signature_check_counts_parameters_as_written():
+    code = """
+def six(a, b, c, d, e, f): ...
+def seven(a, b, c, d, e, f, *, g=0): ...
+def rest(a, b, c, d, e, f, *args): ...
+@njit(cache=True)
+def kernel(a, b, c, d, e, f, g): ...
+class Thing:
+    def __init__(self, a, b, c, d, e, f): ...
+    @classmethod
+    def make(cls, a, b, c, d, e, f, g): ...
+"""
+    assert _long_signatures(ast.parse(code)) == {"seven", "rest", "Thing.make"}

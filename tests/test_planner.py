@@ -21,7 +21,7 @@ from terrapref.dataset import build_dataset
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.demos.recording import RecordingWriter, read_recording
 from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
-from terrapref.demos.session import record_run
+from terrapref.demos.session import RunSettings, record_run
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
 from terrapref.learning.model_file import LoadedModel, load_model, save_model
@@ -274,7 +274,7 @@ def demo(tmp_path_factory, course) -> SimpleNamespace:
     expert = ExpertConfig(profile=profile.order)
     meta = RecordingMeta.driven(course, RecordingSetup(camera, features.preference, SimConfig()), ExpertInfo.of(0, "default", expert), profile)
     writer = RecordingWriter(d / "rec", meta, course.to_dict())
-    record_run(Simulation(course, camera), ExpertDriver(expert), writer, features.preference, np.random.default_rng(0))
+    record_run(Simulation(course, camera), ExpertDriver(expert), writer, RunSettings(features.preference), np.random.default_rng(0))
     recording = read_recording(d / "rec")
     dataset = build_dataset([recording], features)
     result = train_and_save(dataset, d / "model.safetensors", train_config(epochs=3, skip=True), checkpoints=False)

@@ -280,15 +280,16 @@ def test_training_data_names_the_file_that_differs(tmp_path):
 
 
 def test_run_recipe_demonstrates_corrects_and_reuses_demonstrations(tmp_path):
-    from terrapref.recipes import Recipe, run_recipe
+    from terrapref.recipes import Recipe, RecipeSetup, run_recipe
 
     recipe = Recipe("tiny", demonstrations=1, corrections=1, train=train_config(epochs=2))
-    out = run_recipe(recipe, tmp_path, 0, course="demo_course", write_recordings=True)
+    setup = RecipeSetup(0, course="demo_course")
+    out = run_recipe(recipe, tmp_path, setup, write_recordings=True)
     assert out.model.exists()
     assert [p.name for p in out.recordings] == ["demo_course_0", "corrections_0"]
     assert out.demo_minutes > 0 and out.correction_minutes > 0
     stamp = (tmp_path / "demo_course_0" / "meta.json").stat().st_mtime_ns
-    again = run_recipe(Recipe("plain", demonstrations=1, train=train_config(epochs=2)), tmp_path, 0, course="demo_course")
+    again = run_recipe(Recipe("plain", demonstrations=1, train=train_config(epochs=2)), tmp_path, setup)
     assert again.recordings == [tmp_path / "demo_course_0"] and again.correction_minutes == 0
     assert (tmp_path / "demo_course_0" / "meta.json").stat().st_mtime_ns == stamp  # reused, not recorded again
 
@@ -296,32 +297,34 @@ def test_run_recipe_demonstrates_corrects_and_reuses_demonstrations(tmp_path):
 def test_demonstrations_kept_in_memory_train_what_their_recordings_train(tmp_path):
     """A demonstration kept in memory is featurised from the simulation's own views: the same
     samples, look-ahead and fingerprint as the same run written to disk and read back."""
-    from terrapref.recipes import TEACH, demonstrate, run_recipe
+    from terrapref.recipes import TEACH, RecipeSetup, demonstrate, run_recipe
 
     features = TEACH.features()
-    kept = demonstrate(TEACH, tmp_path / "mem", 3, course="demo_course", features=features, write=False)
-    written = demonstrate(TEACH, tmp_path / "disk", 3, course="demo_course", features=features, write=True)
+    setup = RecipeSetup(3, course="demo_course", features=features)
+    kept = demonstrate(TEACH, tmp_path / "mem", setup, write=False)
+    written = demonstrate(TEACH, tmp_path / "disk", setup, write=True)
     assert kept[0].in_memory and not written[0].in_memory and not (tmp_path / "mem").exists()
     a, b = build_dataset(kept, features), build_dataset(written, features)
     assert a.fingerprint == b.fingerprint and len(a) == len(written[0]) > 100
     np.testing.assert_array_equal(a.w, b.w)
     np.testing.assert_array_equal(kept[0].poses, written[0].poses)
     assert a.meta["recordings"][0]["written"] is False and "written" not in b.meta["recordings"][0]
-    out = run_recipe(replace(TEACH, train=train_config(epochs=1)), tmp_path / "job", 3, course="demo_course")
+    out = run_recipe(replace(TEACH, train=train_config(epochs=1)), tmp_path / "job", RecipeSetup(3, course="demo_course"))
     assert out.recordings == [] and out.model.exists() and not (tmp_path / "job" / "demo_course_0_disturbed").exists()
 
 
 def test_a_recorded_demonstration_of_another_course_is_recorded_again(tmp_path):
     from terrapref.demos.recording import read_recording
-    from terrapref.recipes import record_demonstrations
+    from terrapref.recipes import RecipeSetup, record_demonstrations
 
     recipe = Recipe("one", demonstrations=2)
     logged: list[str] = []
-    record_demonstrations(recipe, tmp_path, 0, course="demo_course", log=logged.append)
+    setup = RecipeSetup(0, course="demo_course")
+    record_demonstrations(recipe, tmp_path, setup, log=logged.append)
     assert len(logged) == 2
     meta_path = tmp_path / "demo_course_1" / "meta.json"
     meta_path.write_text(json.dumps({**json.loads(meta_path.read_text()), "scenario": "another_course"}))
     logged.clear()
-    record_demonstrations(recipe, tmp_path, 0, course="demo_course", log=logged.append)
+    record_demonstrations(recipe, tmp_path, setup, log=logged.append)
     assert read_recording(tmp_path / "demo_course_1").meta["scenario"] == "demo_course"
     assert len(logged) == 1 and logged[0].startswith("demonstration 2/2 (demo_course)"), "run 0 reused, run 1 recorded again"

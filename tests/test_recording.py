@@ -27,7 +27,7 @@ from terrapref.demos.meta import (
     RideAlongInfo,
     driver_from_dict,
 )
-from terrapref.demos.session import record_run
+from terrapref.demos.session import RunSettings, record_run
 from terrapref.errors import UserError
 from terrapref.features import PreferenceSetConfig
 from terrapref.scenario import Scenario, resolve_scenario
@@ -197,7 +197,7 @@ import numpy as np
 from terrapref.demos.expert import ExpertDriver
 from terrapref.demos.recording import RecordingWriter
 from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
-from terrapref.demos.session import record_run
+from terrapref.demos.session import RunSettings, record_run
 from terrapref.features import PreferenceSetConfig
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation
@@ -209,7 +209,7 @@ driver = ExpertDriver()
 preference = PreferenceSetConfig()
 meta = RecordingMeta.driven(scenario, RecordingSetup(sim.camera.config, preference, sim.config), ExpertInfo.of(0, "default", driver.config), PreferenceProfile.default())
 writer = RecordingWriter(sys.argv[1], meta, scenario.to_dict())
-record_run(sim, driver, writer, preference, np.random.default_rng(0))
+record_run(sim, driver, writer, RunSettings(preference), np.random.default_rng(0))
 """
 
 
@@ -258,7 +258,7 @@ def demo_recording(tmp_path_factory: pytest.TempPathFactory) -> FullRecording:
     driver = ExpertDriver()
     preference = PreferenceSetConfig()
     meta = RecordingMeta.driven(scenario, RecordingSetup(sim.camera.config, preference, sim.config), ExpertInfo.of(0, "default", driver.config), PreferenceProfile.default())
-    log = record_run(sim, driver, RecordingWriter(out, meta, scenario.to_dict()), preference, np.random.default_rng(0))
+    log = record_run(sim, driver, RecordingWriter(out, meta, scenario.to_dict()), RunSettings(preference), np.random.default_rng(0))
     return FullRecording(scenario, sim, log, read_recording(out))
 
 

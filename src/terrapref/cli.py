@@ -121,7 +121,7 @@ def _cmd_record(args: argparse.Namespace) -> int:
     from terrapref.demos.expert import ExpertConfig, ExpertDriver
     from terrapref.demos.recording import RecordingWriter
     from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
-    from terrapref.demos.session import record_run
+    from terrapref.demos.session import RunSettings, record_run
     from terrapref.features import PreferenceSetConfig
     from terrapref.progress import Progress
     from terrapref.scenario import resolve_scenario
@@ -146,9 +146,8 @@ def _cmd_record(args: argparse.Namespace) -> int:
     writer = RecordingWriter(args.out, meta, scenario.to_dict(), overwrite=args.force)
     bar = Progress(f"record {scenario.name}", sim.path.length_m, enabled=not args.quiet)
     try:
-        log = record_run(sim, ExpertDriver(expert, sim_config.camera_rate_hz), writer, preference, np.random.default_rng(args.seed),
-                         progress=lambda s: bar.update(s.progress_s, f"t={s.time_s:6.1f}s frames={writer.count}"), disturbance=disturbance,
-                         perception=perception)
+        log = record_run(sim, ExpertDriver(expert, sim_config.camera_rate_hz), writer, RunSettings(preference, disturbance, perception),
+                         np.random.default_rng(args.seed), progress=lambda s: bar.update(s.progress_s, f"t={s.time_s:6.1f}s frames={writer.count}"))
     except BaseException as exc:
         writer.abort()
         if writer.partial_dir is not None and isinstance(exc, OSError):  # a full disk: the unfinished replacement goes

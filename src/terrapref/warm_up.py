@@ -19,7 +19,7 @@ from pathlib import Path
 
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_one
 from terrapref.perception import load_perception
-from terrapref.recipes import RECIPES, run_recipe
+from terrapref.recipes import RECIPES, RecipeSetup, run_recipe
 from terrapref.terrain import PreferenceProfile
 
 COURSE = "fig7_rock_vs_non_traversable_left"  # short: a few hundred frames
@@ -33,7 +33,7 @@ def warm_up(log=print) -> float:
         for recipe in RECIPES.values():
             small = replace(recipe, demonstrations=1, corrections=0,
                             train=replace(recipe.train, optimiser=replace(recipe.train.optimiser, epochs=1)))
-            out = run_recipe(small, Path(tmp) / "work", 0, profile, course=COURSE)
+            out = run_recipe(small, Path(tmp) / "work", RecipeSetup(0, profile, course=COURSE))
             run_one(RunSpec(COURSE, 1, PLANNER, str(out.model), profile.order))
         run_one(RunSpec(COURSE, 1, PLANNER, str(out.model), profile.order, perception=load_perception("field")))
         run_one(RunSpec(COURSE, 1, EXPERT, None, profile.order))

@@ -21,7 +21,7 @@ from terrapref.demos.recording import read_recording
 from terrapref.learning.model_file import load_model
 from terrapref.learning.pipeline import train_and_save
 from terrapref.planner import Planner, PlannerDriver
-from terrapref.recipes import PAPER, TEACH, record_demonstrations
+from terrapref.recipes import PAPER, TEACH, RecipeSetup, record_demonstrations
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation, run_episode
 
@@ -36,7 +36,7 @@ def decisions(work: Path) -> dict:
         # the training schedule pinned as it was when the file was made (teach trained at lr 1e-3 then)
         recipe = replace(recipe, train=replace(recipe.train, optimiser=replace(recipe.train.optimiser, epochs=epochs, lr=1e-3)))
         features = recipe.features()
-        paths = record_demonstrations(recipe, work / recipe.name, 7, course=course, features=features)
+        paths = record_demonstrations(recipe, work / recipe.name, RecipeSetup(7, course=course, features=features))
         model = work / f"{recipe.name}.safetensors"
         train_and_save(build_dataset([read_recording(p) for p in paths], features), model, replace(recipe.train, seed=7), checkpoints=False,
                    stages=[s for s in recipe.stages if s.type != "offset"])

@@ -64,8 +64,11 @@ class CnnConfig:
 
 
 class CnnNet(nn.Module):
+    """The network ``config`` describes, for images downsampled to ``image_hw`` (h, w) and ``m`` trajectories."""
+
     def __init__(self, config: CnnConfig, image_hw: tuple[int, int], m: int) -> None:
         super().__init__()
+        self.config = config
         c1, c2, c3 = config.channels
         self.conv = nn.Sequential(
             nn.Conv2d(config.n_classes, c1, 3, stride=2, padding=1), nn.ReLU(),
@@ -195,25 +198,26 @@ class CnnPolicy(Policy):
     name = CNN
     uses_path_ahead = True
 
-    def __init__(self, net: CnnNet, config: CnnConfig, features: FeatureConfig, camera: CameraConfig, classes: ClassTable,
+    def __init__(self, net: CnnNet, features: FeatureConfig, camera: CameraConfig, classes: ClassTable,
                  profile: tuple[str, ...] | None = None, path: str = "") -> None:
         super().__init__(features, camera, classes, profile, path)
-        self.net, self.config = net.eval(), config
+        self.net, self.config = net.eval(), net.config
         # The pixels downsample() keeps (flat indices, and the downsampled shape): a frame is read only there.
-        self._grid = _grid((self.camera.height_px, self.camera.width_px), config.stride)
+        self._grid = _grid((self.camera.height_px, self.camera.width_px), self.config.stride)
 
     @classmethod
-    def from_tensors(cls, tensors: dict[str, np.ndarray], meta: dict, features: FeatureConfig, camera: CameraConfig,
-                     classes: ClassTable, profile: tuple[str, ...], source: str) -> CnnPolicy:
+    def from_tensors(cls, tensors: dict[str, np.ndarray], meta: dict, source: str) -> CnnPolicy:
+        """The CNN of a model file's ``tensors`` and ``meta`` (kind ``cnn``); ``source`` names the file in errors."""
         from terrapref.errors import UserError
 
+        features, camera, classes, profile = model_context(meta, source)
         try:
             config = CnnConfig.from_dict(meta["cnn"])
             net = CnnNet(config, tuple(meta["image_hw"]), features.preference.m)
             net.load_state_dict({k: torch.from_numpy(np.array(v)) for k, v in tensors.items()})
         except (KeyError, TypeError, ValueError, RuntimeError) as exc:
             raise UserError(source, f"not a valid CNN model ({str(exc).splitlines()[0]})", field="cnn") from None
-        return cls(net, config, features, camera, classes, profile, source)
+        return cls(net, features, camera, classes, profile, source)
 
     def logits(self, obs: Observation) -> np.ndarray:
         small = _read_grid(obs.view, self._grid)[None]  # downsample(obs.image, stride), not rendering the rest
@@ -225,5 +229,4 @@ class CnnPolicy(Policy):
 
 def cnn_from_file(tensors: dict[str, np.ndarray], meta: dict, source: str) -> CnnPolicy:
     """The CNN of a model file (kind ``cnn``; registered in terrapref.planner.registry)."""
-    features, camera, classes, profile = model_context(meta, source)
-    return CnnPolicy.from_tensors(tensors, meta, features, camera, classes, profile, source)
+    return CnnPolicy.from_tensors(tensors, meta, source)

@@ -9,35 +9,32 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from terrapref.camera import CameraConfig
 from terrapref.demos.disturbance import DisturbanceConfig, Disturber  # DisturbanceConfig: imported from here by callers too
-from terrapref.demos.meta import DriverInfo, RecordingMeta, RecordingSetup, driver_from_dict
 from terrapref.demos.recording import MemoryRecordingWriter, RecordingWriter
 from terrapref.features import PreferenceSetConfig
 from terrapref.perception import PerceptionModel, Perceiver, run_stream
-from terrapref.scenario import Scenario
-from terrapref.sim import Driver, EpisodeLog, Frame, SimConfig, Simulation
-from terrapref.terrain import PreferenceProfile
+from terrapref.sim import Driver, EpisodeLog, Frame, Simulation
 from terrapref.vehicle import Command, ControlSet
 
 
-def recording_meta(
-    scenario: Scenario,
-    camera: CameraConfig,
-    preference: PreferenceSetConfig,
-    sim: SimConfig,
-    driver: DriverInfo | dict[str, Any],
-    profile: PreferenceProfile,
-    perception: PerceptionModel | None = None,
-) -> dict[str, Any]:
-    """The entries of :meth:`RecordingMeta.driven`'s meta.json, for callers that still pass the
-    setup's parts one by one (and the driver as the mapping its ``to_dict`` gives)."""
-    info = driver if not isinstance(driver, dict) else driver_from_dict(driver, "driver")
-    return RecordingMeta.driven(scenario, RecordingSetup(camera, preference, sim), info, profile, perception).to_dict()
+@dataclass(frozen=True)
+class RunSettings:
+    """How a run is recorded, besides who drives it and where it is written.
+
+    Attributes:
+        preference: the control and preference set whose indices label the frames.
+        disturbance: pushes added to what the vehicle executes (None: none).
+        perception: what the robot receives instead of the truth (None: the truth).
+    """
+
+    preference: PreferenceSetConfig
+    disturbance: DisturbanceConfig | None = None
+    perception: PerceptionModel | None = None
 
 
 class RecordLoop:
@@ -108,24 +105,23 @@ def record_run(
     sim: Simulation,
     driver: Driver,
     writer: RecordingWriter | MemoryRecordingWriter,
-    preference: PreferenceSetConfig,
+    settings: RunSettings,
     rng: np.random.Generator,
     progress: Callable[[Simulation], None] | None = None,
-    disturbance: DisturbanceConfig | None = None,
-    perception: PerceptionModel | None = None,
 ) -> EpisodeLog:
-    """Drive ``sim`` with ``driver`` to the goal or the time limit, writing every frame.
+    """Drive ``sim`` with ``driver`` to the goal or the time limit, writing every frame labelled
+    in ``settings.preference``'s control set.
 
     The recording is marked complete only when the loop ends normally; an exception or a kill
-    leaves it partial with every frame written so far readable. With ``disturbance``, pushes
-    drawn from a stream seeded by ``rng`` are added to what the vehicle executes (the label
-    stays the driver's command). With ``perception``, the recording holds what the robot would
-    have logged (:class:`RecordLoop`), drawn from a stream spawned from ``rng``.
+    leaves it partial with every frame written so far readable. With ``settings.disturbance``,
+    pushes drawn from a stream seeded by ``rng`` are added to what the vehicle executes (the
+    label stays the driver's command). With ``settings.perception``, the recording holds what
+    the robot would have logged (:class:`RecordLoop`), drawn from a stream spawned from ``rng``.
     """
     frame = sim.reset()
     driver.reset(sim.scenario, rng)
-    disturber = _run_disturber(disturbance, rng, sim)
-    loop = RecordLoop(sim, writer, preference.control, disturber, run_perceiver(perception, sim, rng))
+    disturber = _run_disturber(settings.disturbance, rng, sim)
+    loop = RecordLoop(sim, writer, settings.preference.control, disturber, run_perceiver(settings.perception, sim, rng))
     while not sim.done:
         command = driver.act(frame)
         frame = loop.record_step(frame, command, loop.executed(command))

@@ -102,19 +102,36 @@ def fit_softmax(X: np.ndarray, Y: np.ndarray, l2: float = 1e-3, iterations: int 
     return theta, float(evaluate(theta)[0])
 
 
-def fit_corridor(features: np.ndarray, near_m: np.ndarray, intent: np.ndarray, offsets: np.ndarray, sigma_m: float = 0.3,
-                 l2: float = 1e-3, near_candidates: tuple[float, ...] = NEAR_CANDIDATES_M) -> CorridorFit:
+@dataclass(frozen=True)
+class CorridorFitConfig:
+    """How the corridor utility is fitted.
+
+    Attributes:
+        sigma_m: the width of the Gaussian soft labels around each intended offset [m].
+        l2: the ridge on the weights.
+        near_candidates: the near distances tried [m]; the one of the lowest loss is kept.
+    """
+
+    sigma_m: float = 0.3
+    l2: float = 1e-3
+    near_candidates: tuple[float, ...] = NEAR_CANDIDATES_M
+
+
+def fit_corridor(features: np.ndarray, near_m: np.ndarray, intent: np.ndarray, offsets: np.ndarray,
+                 config: CorridorFitConfig | None = None) -> CorridorFit:
     """Fit the corridor utility to frames' corridor features (N, O, K + 2), near distances (N,)
-    and intended offsets (N,); frames without an intended offset (NaN) are left out."""
+    and intended offsets (N,) over the candidate ``offsets`` (O,) [m]; frames without an intended
+    offset (NaN) are left out; ``config`` None: the default fit."""
+    config = config or CorridorFitConfig()
     keep = np.isfinite(intent)
     if not keep.any():
         raise ValueError("no frame has an intended offset to fit")
-    X, near, Y = features[keep].astype(np.float64), near_m[keep], soft_labels(intent[keep], offsets, sigma_m)
+    X, near, Y = features[keep].astype(np.float64), near_m[keep], soft_labels(intent[keep], offsets, config.sigma_m)
     best: tuple[np.ndarray, float, float] | None = None
     losses = {}
-    for candidate in near_candidates:
+    for candidate in config.near_candidates:
         gate = (offsets**2)[None, :, None] * (near > candidate)[:, None, None]
-        theta, loss = fit_softmax(np.concatenate([X, gate], axis=2), Y, l2)
+        theta, loss = fit_softmax(np.concatenate([X, gate], axis=2), Y, config.l2)
         losses[candidate] = loss
         if best is None or loss < best[1] - 1e-9:
             best = (theta, loss, candidate)

@@ -206,8 +206,21 @@ def fisher_covariance(U: np.ndarray, labels: np.ndarray, utility: LinearUtility,
     return np.linalg.pinv(info)
 
 
+@dataclass(frozen=True)
+class FittedLookahead:
+    """The look-ahead a linear utility was fitted through (terrapref.learning.linear.fit_lookahead_utility).
+
+    Attributes:
+        U2: (N, m, m, K + 1) look-ahead utilities of the frames.
+        gamma: the weight the best continuation's value got in the fit.
+    """
+
+    U2: np.ndarray
+    gamma: float
+
+
 def identifiability(U: np.ndarray, labels: np.ndarray, classes: tuple[str, ...], utility: LinearUtility,
-                    U2: np.ndarray | None = None, gamma: float = 1.0, lethal: tuple[str, ...] = ()) -> Identifiability:
+                    lookahead: FittedLookahead | None = None, lethal: tuple[str, ...] = ()) -> Identifiability:
     """The evidence and learned order for every pair of ``classes`` and grass.
 
     Args:
@@ -215,11 +228,12 @@ def identifiability(U: np.ndarray, labels: np.ndarray, classes: tuple[str, ...],
         labels: (N,) the demonstrated trajectories.
         classes: the K terrain classes, in U's column order.
         utility: the linear utility fitted to these frames (or to them and their mirror images).
-        U2, gamma: the look-ahead utilities and weight, when ``utility`` was fitted through them.
+        lookahead: the look-ahead ``utility`` was fitted through, if it was.
         lethal: the class table's lethal classes (their pairs are warned about differently).
     """
     counts = count_comparisons(U, labels, classes)
-    cov = fisher_covariance(U, labels, utility, U2, gamma)
+    cov = (fisher_covariance(U, labels, utility) if lookahead is None
+           else fisher_covariance(U, labels, utility, lookahead.U2, lookahead.gamma))
     weight = {name: float(utility.w[i]) for i, name in enumerate(classes)} | {GRASS: 0.0}
     order = tuple(sorted(weight, key=lambda c: -weight[c]))
     pairs = []

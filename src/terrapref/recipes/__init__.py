@@ -30,11 +30,12 @@ from pathlib import Path
 import numpy as np
 
 from terrapref.camera import CameraConfig
-from terrapref.recipes.corrections import record_corrections
+from terrapref.recipes.corrections import CorrectionDrivers, record_corrections
 from terrapref.dataset import build_dataset
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.demos.recording import MemoryRecordingWriter, Recording, RecordingWriter, read_recording
-from terrapref.demos.session import DisturbanceConfig, record_run, recording_meta
+from terrapref.demos.meta import CorrectionRoundInfo, ExpertInfo, RecordingMeta, RecordingSetup
+from terrapref.demos.session import DisturbanceConfig, RunSettings, record_run
 from terrapref.features import FeatureConfig
 from terrapref.learning.model_file import load_model
 from terrapref.learning.pipeline import train_and_save
@@ -120,6 +121,28 @@ def recipe_named(name: str, flag: str = "--recipe") -> Recipe:
     return RECIPES.get(name, flag)
 
 
+@dataclass(frozen=True)
+class RecipeSetup:
+    """What a recipe is run with, besides the recipe itself.
+
+    Attributes:
+        seed: seeds the demonstrations (run ``k``: ``seed * 100 + k``), training and the correction rounds.
+        profile: the synthetic driver's preference order (None: the course's class table's).
+        course: the course demonstrated (None: the recipe's own).
+        features: the feature configuration (None: the default; :func:`run_recipe` adds what the
+            recipe's stages need).
+        style: the synthetic driver's style (terrapref.demos.expert.STYLES).
+        perception: what the robot receives instead of the truth in the demonstrations (None: the truth).
+    """
+
+    seed: int
+    profile: PreferenceProfile | None = None
+    course: str | None = None
+    features: FeatureConfig | None = None
+    style: str = "default"
+    perception: PerceptionModel | None = None
+
+
 @dataclass
 class RecipeOutput:
     """What :func:`run_recipe` made: the model, the recordings it wrote (none when the
@@ -167,42 +190,31 @@ def _drive(drive: _Drive, features: FeatureConfig, write: bool) -> tuple[Recordi
                 and driver.get("seed") == drive.seed and driver.get("disturbance") == pushes and driver.get("config") == expert_cfg.to_dict()
                 and existing.meta.get("perception", PerceptionModel().to_dict()) == perception.to_dict()):
             return existing, False
-    meta = recording_meta(scenario, camera, features.preference, sim_cfg,
-                          {"kind": "expert", "seed": drive.seed, "style": drive.style, "config": expert_cfg.to_dict(), "disturbance": pushes}, profile,
-                          perception)
+    meta = RecordingMeta.driven(scenario, RecordingSetup(camera, features.preference, sim_cfg),
+                                ExpertInfo.of(drive.seed, drive.style, expert_cfg, drive.disturbance), profile, perception)
     writer = RecordingWriter(drive.out, meta, scenario.to_dict(), overwrite=True) if write else MemoryRecordingWriter(drive.out, meta, scenario.to_dict())
-    record_run(Simulation(scenario, camera, sim_cfg), ExpertDriver(expert_cfg), writer, features.preference,
-               np.random.default_rng(drive.seed), disturbance=drive.disturbance, perception=perception)
+    settings = RunSettings(features.preference, drive.disturbance, perception)
+    record_run(Simulation(scenario, camera, sim_cfg), ExpertDriver(expert_cfg), writer, settings, np.random.default_rng(drive.seed))
     return (read_recording(drive.out) if write else writer.recording()), True
 
 
-def demonstrate(
-    recipe: Recipe,
-    workdir: str | Path,
-    seed: int,
-    profile: PreferenceProfile | None = None,
-    course: str | None = None,
-    features: FeatureConfig | None = None,
-    log: Callable[[str], None] | None = None,
-    style: str = "default",
-    write: bool = True,
-    perception: PerceptionModel | None = None,
-) -> list[Recording]:
-    """The recipe's demonstration runs by the synthetic driver.
+def demonstrate(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Callable[[str], None] | None = None,
+                write: bool = True) -> list[Recording]:
+    """The recipe's demonstration runs by the synthetic driver, as ``setup`` says.
 
-    Run ``k`` of ``course`` (seed ``seed * 100 + k``) is recorded as ``workdir/COURSE_K`` (a name
-    that ends in ``_disturbed`` with disturbances, and then ``_perceived`` when its frames went through
-    an active ``perception`` model) with ``write``; without, it is kept in memory under that name. A
-    complete run already on disk under the same course, driver, profile, seed, disturbances and
-    perception is reused, so recipes sharing a seed share their demonstrations.
+    Run ``k`` of the course (seed ``setup.seed * 100 + k``) is recorded as ``workdir/COURSE_K`` (a
+    name that ends in ``_disturbed`` with disturbances, and then ``_perceived`` when its frames went
+    through an active perception model) with ``write``; without, it is kept in memory under that
+    name. A complete run already on disk under the same course, driver, profile, seed,
+    disturbances and perception is reused, so recipes sharing a seed share their demonstrations.
     """
     workdir = Path(workdir)
-    features = features or FeatureConfig()
-    course = course or recipe.course
+    features = setup.features or FeatureConfig()
+    course = setup.course or recipe.course
     tail = "" if recipe.disturbance is None else "_disturbed"
-    if perception is not None and perception.active:
+    if setup.perception is not None and setup.perception.active:
         tail += "_perceived"
-    drives = [_Drive(course, workdir / f"{course}_{k}{tail}", seed * 100 + k, recipe.disturbance, profile, style, perception)
+    drives = [_Drive(course, workdir / f"{course}_{k}{tail}", setup.seed * 100 + k, recipe.disturbance, setup.profile, setup.style, setup.perception)
               for k in range(recipe.demonstrations)]
     recordings = []
     for i, drive in enumerate(drives):
@@ -213,25 +225,14 @@ def demonstrate(
     return recordings
 
 
-def record_demonstrations(recipe: Recipe, workdir: str | Path, seed: int, profile: PreferenceProfile | None = None, course: str | None = None,
-                          features: FeatureConfig | None = None, log: Callable[[str], None] | None = None, style: str = "default") -> list[Path]:
+def record_demonstrations(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Callable[[str], None] | None = None) -> list[Path]:
     """The recipe's demonstration runs (:func:`demonstrate`), written as recordings in ``workdir``; their folders."""
-    return [r.path for r in demonstrate(recipe, workdir, seed, profile, course, features, log, style, write=True)]
+    return [r.path for r in demonstrate(recipe, workdir, setup, log, write=True)]
 
 
-def run_recipe(
-    recipe: Recipe,
-    workdir: str | Path,
-    seed: int,
-    profile: PreferenceProfile | None = None,
-    course: str | None = None,
-    features: FeatureConfig | None = None,
-    log: Callable[[str], None] | None = None,
-    style: str = "default",
-    write_recordings: bool = False,
-    perception: PerceptionModel | None = None,
-) -> RecipeOutput:
-    """Demonstrate, correct, train; write into ``workdir``.
+def run_recipe(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Callable[[str], None] | None = None,
+               write_recordings: bool = False) -> RecipeOutput:
+    """Demonstrate, correct, train, as ``setup`` says; write into ``workdir``.
 
     Demonstrations come from :func:`demonstrate` (shared by recipes with the same seed and
     protocol, through the recordings on disk), kept in memory unless ``write_recordings``;
@@ -240,11 +241,12 @@ def run_recipe(
     workdir = Path(workdir)
     own = workdir / recipe.name.replace(" ", "_")
     own.mkdir(parents=True, exist_ok=True)
-    course = course or recipe.course
+    course = setup.course or recipe.course
     scenario = resolve_scenario(course)
-    profile = profile or PreferenceProfile.default(scenario.classes)
-    features = recipe.features(features)
-    recordings = demonstrate(recipe, workdir, seed, profile, course, features, log, style, write=write_recordings, perception=perception)
+    profile = setup.profile or PreferenceProfile.default(scenario.classes)
+    features = recipe.features(setup.features)
+    seed = setup.seed
+    recordings = demonstrate(recipe, workdir, replace(setup, profile=profile, course=course, features=features), log, write=write_recordings)
     paths = [r.path for r in recordings if not r.in_memory]
     demo_s = sum(r.duration_s for r in recordings)
     corr_s = 0.0
@@ -253,14 +255,15 @@ def run_recipe(
     result = train_and_save(build_dataset(recordings, features), model, train_cfg, checkpoints=False, recipe=recipe.name, stages=recipe.stages)
     if recipe.corrections:  # the planner drives the course; only then is a simulation needed here
         camera, sim_cfg = CameraConfig(), SimConfig()
-        expert_cfg = ExpertConfig.styled(style, profile.order)
+        expert_cfg = ExpertConfig.styled(setup.style, profile.order)
         sim = Simulation(scenario, camera, sim_cfg)
     for r in range(recipe.corrections):
         out = own / f"corrections_{r}"
-        meta = recording_meta(scenario, camera, features.preference, sim_cfg, {"kind": "corrections", "round": r, "seed": seed}, profile)
+        meta = RecordingMeta.driven(scenario, RecordingSetup(camera, features.preference, sim_cfg), CorrectionRoundInfo(r, seed), profile)
         writer = RecordingWriter(out, meta, scenario.to_dict(), overwrite=True)
         planner = PlannerDriver(Planner(load_model(model)))
-        run = record_corrections(sim, planner, ExpertDriver(expert_cfg), writer, features.preference, np.random.default_rng(seed * 100 + 50 + r))
+        drivers = CorrectionDrivers(planner, ExpertDriver(expert_cfg))
+        run = record_corrections(sim, drivers, writer, features.preference, np.random.default_rng(seed * 100 + 50 + r))
         corr_s += run.duration_s
         recordings.append(read_recording(out))
         paths.append(out)

@@ -10,6 +10,8 @@ the operator holds the stick as if driving while the robot drives.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from terrapref.demos.expert import ExpertDriver
@@ -20,21 +22,32 @@ from terrapref.sim import EpisodeLog, Simulation
 from terrapref.vehicle import Command
 
 
-def record_corrections(
-    sim: Simulation,
-    planner: PlannerDriver,
-    expert: ExpertDriver,
-    writer: RecordingWriter,
-    preference: PreferenceSetConfig,
-    rng: np.random.Generator,
-    takeover: float = 0.0,
-) -> EpisodeLog:
-    """Drive with the planner, label every frame with the demonstrator's intent.
+@dataclass(frozen=True)
+class CorrectionDrivers:
+    """Who drives a correction session and who labels it.
 
-    Args:
+    Attributes:
+        planner: drives the vehicle.
+        expert: the demonstrator, whose intended command labels every frame.
         takeover: probability per frame that the demonstrator's command is executed instead
             of the planner's (0: pure DAgger).
     """
+
+    planner: PlannerDriver
+    expert: ExpertDriver
+    takeover: float = 0.0
+
+
+def record_corrections(
+    sim: Simulation,
+    drivers: CorrectionDrivers,
+    writer: RecordingWriter,
+    preference: PreferenceSetConfig,
+    rng: np.random.Generator,
+) -> EpisodeLog:
+    """Drive with ``drivers.planner``, label every frame with ``drivers.expert``'s intent in
+    ``preference``'s control set."""
+    planner, expert, takeover = drivers.planner, drivers.expert, drivers.takeover
     frame = sim.reset()
     planner.reset(sim.scenario, rng)
     expert.reset(sim.scenario, rng, world=sim.world)

@@ -27,7 +27,7 @@ from terrapref.grid import Engine, run_grid
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, annotate_agreement, run_many, summarise
 from terrapref.evaluation.stats import rate_text
 from terrapref.perception import PerceptionModel
-from terrapref.recipes import OURS, PAPER, TEACH, Recipe, run_recipe
+from terrapref.recipes import OURS, PAPER, TEACH, Recipe, RecipeSetup, run_recipe
 from terrapref.progress import every_tenth
 from terrapref.scenario import packaged_scenarios, resolve_scenario
 from terrapref.terrain import PreferenceProfile
@@ -107,7 +107,7 @@ def _train_job(args: tuple[tuple[Recipe, ...], str, int, tuple[str, ...], bool])
     rows = []
     for recipe in recipes:
         t0 = time.perf_counter()
-        out = run_recipe(recipe, workdir, seed, PreferenceProfile(profile), write_recordings=write)
+        out = run_recipe(recipe, workdir, RecipeSetup(seed, PreferenceProfile(profile)), write_recordings=write)
         members = tuple((tuple(m.history), m.best_epoch) for m in out.result.members or [out.result])
         rows.append(RecipeModel(recipe.name, seed, str(out.model), tuple(out.result.history), out.result.best_epoch,
                                 out.demo_minutes, out.correction_minutes, time.perf_counter() - t0, members))

@@ -24,7 +24,7 @@ from terrapref.evaluation.stats import cluster_bootstrap, rate_text
 from terrapref.fileio import write_text_atomic
 from terrapref.grid import Engine, run_grid
 from terrapref.perception import PRESETS, PerceptionModel
-from terrapref.recipes import recipe_named, run_recipe
+from terrapref.recipes import RecipeSetup, recipe_named, run_recipe
 from terrapref.progress import every_tenth
 from terrapref.plots import RateRow, save_intervals
 from terrapref.scenario.generate import zone_kind
@@ -92,9 +92,8 @@ class _Model:
 
 def _train(job: _OrderJob) -> list[str]:
     """Every recipe for one order and seed, one after another: they share the work folder's demonstrations."""
-    profile = PreferenceProfile(job.order)
-    return [str(run_recipe(recipe_named(r), job.workdir, job.seed, profile, style=job.style, perception=job.perception).model)
-            for r in job.recipes]
+    setup = RecipeSetup(job.seed, PreferenceProfile(job.order), style=job.style, perception=job.perception)
+    return [str(run_recipe(recipe_named(r), job.workdir, setup).model) for r in job.recipes]
 
 
 def job_folder(out: Path, order: Sequence[str], seed: int, taught_under: PerceptionModel | None = None) -> Path:

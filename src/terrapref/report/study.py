@@ -70,10 +70,10 @@ def swept(plan: StudyPlan, part: str, level: float) -> PerceptionModel:
 def _demonstration_job(args: tuple[str, int, tuple[str, ...], tuple[tuple[str, str, int | None], ...]]) -> list[str]:
     """One seed's demonstrations under one profile, kept in memory, featurised into ``sets``:
     (file, kind, horizon) each, a dataset (``kind`` "U", with horizon n) or the CNN's samples."""
-    from terrapref.recipes import demonstrate
+    from terrapref.recipes import RecipeSetup, demonstrate
 
     workdir, seed, profile, sets = args
-    recordings = demonstrate(DEMONSTRATIONS, workdir, seed, PreferenceProfile.parse(list(profile)), write=False)
+    recordings = demonstrate(DEMONSTRATIONS, workdir, RecipeSetup(seed, PreferenceProfile.parse(list(profile))), write=False)
     return [_featurise_set(recordings, out, kind, n) for out, kind, n in sets]
 
 
@@ -181,11 +181,11 @@ def _c_config(job: TrainJob) -> TrainConfig:
 
 def _teach_job(job: TeachJob) -> TaughtModel:
     """The recipe's drive(s) by the synthetic driver of ``order`` and ``style``, and its model."""
-    from terrapref.recipes import run_recipe
+    from terrapref.recipes import RecipeSetup, run_recipe
 
     t0 = time.perf_counter()
     recipe = _teach_recipe(job)
-    out = run_recipe(recipe, job.workdir, job.seed, PreferenceProfile(job.order), style=job.style)
+    out = run_recipe(recipe, job.workdir, RecipeSetup(job.seed, PreferenceProfile(job.order), style=job.style))
     return TaughtModel(job, str(out.model), out.demo_minutes, time.perf_counter() - t0)
 
 
