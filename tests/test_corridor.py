@@ -14,7 +14,7 @@ from terrapref.dataset import CorridorData, Dataset, load_dataset, save_dataset
 from terrapref.dataset import FORMAT as DATASET_FORMAT
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
-from terrapref.features.corridor import CorridorConfig, CorridorFeatures, GroundMap, gated, intent_offsets, steer
+from terrapref.features.corridor import TerrainColumns, CorridorConfig, CorridorFeatures, GroundMap, gated, intent_offsets, steer
 from terrapref.learning.corridor import CorridorUtility, fit_corridor, fit_softmax, soft_labels
 from terrapref.learning.model_file import load_model, save_model
 from terrapref.planner.registry import load_policy
@@ -60,6 +60,10 @@ def _columns() -> np.ndarray:
     return UtilityFeaturizer(FeatureConfig(), PinholeCamera()).class_columns
 
 
+def _terrain(lethal: tuple[int, ...] = (), names: tuple[str, ...] = ()) -> TerrainColumns:
+    return TerrainColumns(_columns(), K, lethal, names)
+
+
 def _seen_from(scenario, camera: PinholeCamera, pose) -> SegmentationView:
     from terrapref.world import rasterise
     return SegmentationView.of(SegmentationRenderer(camera, rasterise(scenario)).render(pose))
@@ -79,7 +83,7 @@ def test_offsets_and_stations_are_symmetric_grids():
 
 def test_a_patch_ahead_on_the_path_is_metres_on_its_class_and_sets_the_near_distance(camera):
     scenario = _scenario([MUD])
-    gmap = GroundMap(camera, _columns(), K)
+    gmap = GroundMap(camera, _terrain())
     gmap.update(_seen_from(scenario, camera, (2.0, 10.0, 0.0)), (2.0, 10.0, 0.0))
     corridor = CorridorFeatures(CorridorConfig(), K)
     view = corridor(gmap, ReferencePath(scenario.waypoints), 0.0)
@@ -103,7 +107,7 @@ def test_a_patch_ahead_on_the_path_is_metres_on_its_class_and_sets_the_near_dist
 
 def test_the_ground_map_keeps_the_world_fixed_when_it_recentres(camera):
     scenario = _scenario([MUD])
-    gmap = GroundMap(camera, _columns(), K)
+    gmap = GroundMap(camera, _terrain())
     gmap.update(_seen_from(scenario, camera, (2.0, 10.0, 0.0)), (2.0, 10.0, 0.0))
     points = np.stack(np.meshgrid(np.arange(0.0, 20.0, 0.07), np.arange(5.0, 15.0, 0.07)), axis=-1)
     before = gmap.lookup(points)
@@ -133,12 +137,12 @@ def test_the_ground_map_outvotes_labels_a_few_frames_get_wrong(camera):
     shows trees all over; the votes of thirty frames show the mud where it is and no tree at all."""
     scenario = _scenario([MUD])
     pose = (2.0, 10.0, 0.0)
-    truth = GroundMap(camera, _columns(), K, lethal_columns=[0])
+    truth = GroundMap(camera, _terrain((0,)))
     truth.update(_seen_from(scenario, camera, pose), pose)
-    voted = GroundMap(camera, _columns(), K, lethal_columns=[0])
+    voted = GroundMap(camera, _terrain((0,)))
     for view in _noisy_views(scenario, camera, pose, {"flip_rate": 0.2}, 30):
         voted.update(view, pose)
-    last = GroundMap(camera, _columns(), K, CorridorConfig(map_fade=0.0), lethal_columns=[0])
+    last = GroundMap(camera, _terrain((0,)), CorridorConfig(map_fade=0.0))
     last.update(view, pose)
     seen = truth.cells != K + 1
     assert (voted.cells[seen] == truth.cells[seen]).mean() > 0.999
@@ -156,7 +160,7 @@ def test_a_lethal_share_of_the_evidence_makes_a_cell_lethal(camera):
     centre = np.array([[12.1, 10.0]])
     for patch, share, expect in (("non_traversable", dict(map_lethal_share=0.35), 0), ("non_traversable", dict(map_lethal_share=0.5), K),
                                  ("mud", dict(map_terrain_share=0.35), 3), ("mud", dict(map_terrain_share=0.5), K)):
-        gmap = GroundMap(camera, _columns(), K, CorridorConfig(map_fade=1.0, **share), lethal_columns=[0])
+        gmap = GroundMap(camera, _terrain((0,)), CorridorConfig(map_fade=1.0, **share))
         for k in range(10):
             view = views[patch] if k % 5 in (1, 3) else plain
             gmap.update(view, pose)
@@ -167,7 +171,7 @@ def test_the_ground_map_waits_for_enough_evidence_before_a_cell_counts_as_seen(c
     scenario = _scenario([MUD])
     pose = (2.0, 10.0, 0.0)
     view = _seen_from(scenario, camera, pose)
-    gmap = GroundMap(camera, _columns(), K, CorridorConfig(map_min_evidence=0.5))
+    gmap = GroundMap(camera, _terrain(), CorridorConfig(map_min_evidence=0.5))
     gmap.update(view, pose)
     near, far = np.array([[4.0, 10.0]]), np.array([[14.5, 10.0]])  # 2 m ahead: a vote of 0.8; 12.5 m: 0.09
     assert gmap.lookup(near)[0] == K and gmap.lookup(far)[0] == K + 1
@@ -245,7 +249,7 @@ def _drive(stage: OffsetSteering, scenario, camera: PinholeCamera, seconds: floa
 def test_the_offset_stage_goes_round_trees_on_the_path_and_comes_back(camera):
     scenario = _scenario([TREES])
     lethal = np.array([0])
-    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, lethal, CONTROL)
+    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _terrain(tuple(int(c) for c in lethal)), CONTROL)
     poses = _drive(stage, scenario, camera, 30.0)
     # Clear of the 2 x 2.2 m trees (x 13.1-15.1, y 9.1-11.3) by the half-width 0.6 m at least.
     beside = (poses[:, 0] > 13.1 - 0.6) & (poses[:, 0] < 15.1 + 0.6)
@@ -268,11 +272,11 @@ def test_trees_wider_than_every_fitted_offset_are_escaped_beyond_them(camera):
     # 7 m across: the fitted offsets reach 3 m, getting round needs 3.5 + 0.6 + 0.3 = 4.4 m or more.
     wide = {"class": "non_traversable", "rectangle": {"center": [16.0, 10.0], "size": [2.5, 7.0]}}
     scenario = _scenario([wide])
-    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), CONTROL)
+    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
     poses = _drive(stage, scenario, camera, 34.0)
     assert _clearance(poses, (16.0, 10.0), (2.5, 7.0)) > 0.6 + 0.3
     assert abs(poses[-1, 1] - 10.0) < 0.3 and stage.held == 0.0  # back on the path
-    stuck = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), CONTROL, OffsetConfig(escape_factor=1.0))
+    stuck = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL, OffsetConfig(escape_factor=1.0))
     assert _clearance(_drive(stuck, scenario, camera, 34.0), (16.0, 10.0), (2.5, 7.0)) == 0.0  # without escape it drives in
 
 
@@ -283,7 +287,7 @@ def test_the_stage_goes_back_to_the_path_only_when_the_way_back_is_clear(camera)
     strip = {"class": "non_traversable", "rectangle": {"center": [11.0, 9.175], "size": [4.0, 0.35]}}
     scenario = _scenario([strip])
     path = ReferencePath(scenario.waypoints)
-    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), CONTROL)
+    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
     pose = (9.0, 11.4, 0.0)
     stage.held = 1.4
     stage.yaw_rate(_seen_from(scenario, camera, pose), pose, path, 7.0)
@@ -303,7 +307,7 @@ def test_a_side_only_the_margin_rules_out_is_kept_rather_than_a_way_across_letha
     trees = {"class": "non_traversable", "rectangle": {"center": [16.0, 10.0], "size": [8.0, 2.5]}}
     scenario = _scenario([trees])
     path = ReferencePath(scenario.waypoints)
-    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), CONTROL)
+    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
     pose = (10.5, 11.8, 0.0)
     stage.map.update(_seen_from(scenario, camera, pose), pose)
     assert (stage._swept(stage.offsets, pose, path, 8.5) < stage._steps).all()  # every way brushes the clearance
@@ -328,7 +332,7 @@ def test_when_lethal_terrain_lies_across_every_way_the_side_held_is_kept(camera)
     strip = {"class": "non_traversable", "polygon": [[14.5, 18.0], [15.1, 18.0], [16.9, 2.0], [16.3, 2.0]]}
     scenario = _scenario([strip])
     path = ReferencePath(scenario.waypoints)
-    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), CONTROL)
+    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
     pose = (10.5, 10.0, 0.0)
     stage.map.update(_seen_from(scenario, camera, pose), pose)
     reach = stage._swept(stage.offsets, pose, path, 8.5, stage._bare)
@@ -341,10 +345,10 @@ def test_when_lethal_terrain_lies_across_every_way_the_side_held_is_kept(camera)
 
 
 def test_ground_never_seen_is_priced_at_the_mean_of_the_non_lethal_classes(camera):
-    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), CONTROL)
+    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
     assert stage.weights[K] == pytest.approx(DRIVER_LIKE[1:K].mean())
     with pytest.raises(ValueError):
-        OffsetSteering(CorridorUtility(DRIVER_LIKE[:-1], 5.0), camera, _columns(), K, np.array([0]), CONTROL)
+        OffsetSteering(CorridorUtility(DRIVER_LIKE[:-1], 5.0), camera, _terrain((0,)), CONTROL)
 
 
 def _corridor_meta(weights, near_m=5.0) -> dict:
@@ -395,7 +399,7 @@ def test_corridor_data_survive_a_dataset_file_and_bad_values_are_refused(tmp_pat
 def test_the_compiled_swept_check_is_the_numpy_form(camera):
     """The way to each offset, stepped by pure pursuit in NumPy, meets the trees at the step the kernel says."""
     scenario = _scenario([TREES])
-    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), CONTROL)
+    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
     path = ReferencePath(scenario.waypoints)
     for pose, s in (((8.0, 10.0, 0.0), 6.0), ((9.0, 10.5, 0.2), 7.0), ((10.0, 9.3, -0.3), 8.0)):
         stage.map.update(_seen_from(scenario, camera, pose), pose)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_corridor import DRIVER_LIKE, K, _columns, _corridor_meta, _scenario, _seen_from
+from test_corridor import DRIVER_LIKE, K, _corridor_meta, _terrain, _scenario, _seen_from
 
 from helpers import skip_path_weights
 from terrapref.camera import PinholeCamera
@@ -32,7 +32,7 @@ PATCHES = [  # 4 m wide, 3 m deep, 6-9 m ahead of a vehicle at (10, 10) looking 
 def seen():
     camera = PinholeCamera()
     scenario = _scenario(PATCHES)
-    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _columns(), K, np.array([0]), CONTROL, names=default_classes().feature_names)
+    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,), default_classes().feature_names), CONTROL)
     pose = (10.0, 10.0, 0.0)
     for _ in range(3):
         stage.map.update(_seen_from(scenario, camera, pose), pose)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_corridor import DRIVER_LIKE, K, _columns, _corridor_meta, _scenario
+from test_corridor import DRIVER_LIKE, K, _corridor_meta, _terrain, _scenario
 
 from helpers import model_meta, one_line_error, skip_path_weights
 from terrapref.camera import PinholeCamera
@@ -31,7 +31,7 @@ PATH = ReferencePath(np.array([[2.0, 10.0], [38.0, 10.0]]))
 
 def _route(patches: list[dict], config: RouteConfig | None = None):
     """The route along PATH over ``patches``, priced as DRIVER_LIKE prices them, and its costmap."""
-    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), PinholeCamera(), _columns(), K, np.array([0]), CONTROL)
+    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), PinholeCamera(), _terrain((0,)), CONTROL)
     costmap = prior_costmap(rasterise(_scenario(patches)), stage, NAMES)
     return plan_route(costmap, PATH, *detour_prices(stage), config=config), costmap
 
@@ -89,7 +89,7 @@ def test_terrapref_route_writes_a_scenario_that_follows_the_route(tmp_path, caps
 
 def test_a_route_keeps_off_the_maps_edge_and_a_path_that_ends_where_it_starts_is_refused():
     edge = ReferencePath(np.array([[2.0, 1.5], [38.0, 1.5]]))  # 1.5 m from the map's southern edge, beside a strip of water
-    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), PinholeCamera(), _columns(), K, np.array([0]), CONTROL)
+    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), PinholeCamera(), _terrain((0,)), CONTROL)
     costmap = prior_costmap(rasterise(_scenario([_band("water", (15.0, 25.0), (1.0, 4.0))])), stage, NAMES)
     route = plan_route(costmap, edge, *detour_prices(stage))
     assert ReferencePath(route.waypoints).resampled(0.05)[0][:, 1].min() > 0.8  # never within 0.9 m (less a cell) of the edge

@@ -21,7 +21,7 @@ from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer, 
 from terrapref.demos.recording import Recording, read_recording, require_meta
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
-from terrapref.features.corridor import CorridorFeatures, GroundMap, intent_offsets
+from terrapref.features.corridor import CorridorFeatures, GroundMap, TerrainColumns, intent_offsets
 from terrapref.features.lookahead import Lookahead
 from terrapref.scenario import Scenario, parse_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
@@ -166,7 +166,7 @@ class _CorridorReader:
         config, k = features.corridor, features.n_terrain
         self.config = config
         lethal = sorted({int(featurizer.class_columns[i]) for i in classes.lethal_ids})
-        self.map = GroundMap(camera, featurizer.class_columns, k, config, lethal)
+        self.map = GroundMap(camera, TerrainColumns(featurizer.class_columns, k, tuple(lethal)), config)
         self.corridor = CorridorFeatures(config, k)
         self.features = np.empty((n, len(self.corridor.offsets), k + 2), dtype=np.float32)
         self.near = np.empty(n, dtype=np.float32)

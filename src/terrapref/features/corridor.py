@@ -134,6 +134,23 @@ class CorridorConfig:
         return cls(**data)
 
 
+@dataclass(frozen=True)
+class TerrainColumns:
+    """How a class table's classes fall into the terrain columns that the ground map holds.
+
+    Attributes:
+        of_class: terrain column of each class id (256,), as :attr:`UtilityFeaturizer.class_columns`.
+        k: the number of terrain classes K (column K: ground that is none of them).
+        lethal: the terrain columns of lethal classes.
+        names: the classes of the K columns, for a costmap's legend.
+    """
+
+    of_class: np.ndarray
+    k: int
+    lethal: tuple[int, ...] = ()
+    names: tuple[str, ...] = ()
+
+
 class GroundMap:
     """What the camera has shown of the ground around the vehicle, gathered over frames.
 
@@ -152,20 +169,17 @@ class GroundMap:
 
     Args:
         camera: the camera whose images update the map.
-        columns: terrain column of each class id (256,), as :attr:`UtilityFeaturizer.class_columns`.
-        k: the number of terrain classes K.
+        terrain: the class table's terrain columns.
         config: the corridor's configuration (map resolution, size and voting, image sampling).
-        lethal_columns: the terrain columns of lethal classes.
     """
 
-    def __init__(self, camera: PinholeCamera, columns: np.ndarray, k: int, config: CorridorConfig | None = None,
-                 lethal_columns: np.ndarray | tuple[int, ...] = ()) -> None:
+    def __init__(self, camera: PinholeCamera, terrain: TerrainColumns, config: CorridorConfig | None = None) -> None:
         self.config = c = config or CorridorConfig()
-        self.k = k
-        self.columns = np.asarray(columns, dtype=np.uint8).copy()
+        self.k = k = terrain.k
+        self.columns = np.asarray(terrain.of_class, dtype=np.uint8).copy()
         self.columns[UNKNOWN] = k + 1  # a pixel that sees no ground casts no vote
         self.lethal = np.zeros(k + 2, dtype=np.bool_)
-        self.lethal[np.asarray(lethal_columns, dtype=np.int64)] = True
+        self.lethal[np.asarray(terrain.lethal, dtype=np.int64)] = True
         # The ground points read from each image: a vehicle-frame grid, those the camera sees.
         xs = np.arange(0.2, c.sample_range_m, c.sample_step_m)
         ys = np.arange(-8.0, 8.0, c.sample_step_m)
@@ -315,10 +329,15 @@ def gated(view: CorridorView, offsets: np.ndarray, near_m: float) -> np.ndarray:
     return np.concatenate([view.features, gate[:, None]], axis=1)
 
 
-def steer(path: ReferencePath, pose: Pose, progress_s: float, offset_m: np.ndarray | float, lookahead_m: float, v_mps: float,
-          clip: bool = True) -> np.ndarray:
+def steer(path: ReferencePath, pose: Pose, progress_s: float, offset_m: np.ndarray | float, lookahead_m: float, v_mps: float) -> np.ndarray:
+    """:func:`pursuit_yaw_rates` clipped to the stick's +-1 rad/s."""
+    return np.clip(pursuit_yaw_rates(path, pose, progress_s, offset_m, lookahead_m, v_mps), -1.0, 1.0)
+
+
+def pursuit_yaw_rates(path: ReferencePath, pose: Pose, progress_s: float, offset_m: np.ndarray | float, lookahead_m: float,
+                      v_mps: float) -> np.ndarray:
     """Pure-pursuit yaw rate [rad/s] toward the path shifted by ``offset_m`` (left positive), ``lookahead_m`` ahead
-    of ``progress_s``; clipped to the stick's +-1 rad/s with ``clip``. One value per offset, ``offset_m``'s shape.
+    of ``progress_s``. One value per offset, ``offset_m``'s shape.
 
     Scalar ``math`` throughout (NumPy's vectorised trigonometry may pick CPU-specific code whose
     last bits differ, and ``math.hypot`` rounds more exactly than C's), so that the command, and
@@ -331,8 +350,7 @@ def steer(path: ReferencePath, pose: Pose, progress_s: float, offset_m: np.ndarr
     for k, d in enumerate(offsets.flat):
         tx, ty = tx0 - d * sin_h - x, ty0 + d * cos_h - y
         alpha = (math.atan2(ty, tx) - yaw + math.pi) % (2 * math.pi) - math.pi
-        w = pure_pursuit_yaw_rate(v_mps, math.sin(alpha), max(math.hypot(tx, ty), 1e-6))
-        out.flat[k] = min(max(w, -1.0), 1.0) if clip else w
+        out.flat[k] = pure_pursuit_yaw_rate(v_mps, math.sin(alpha), max(math.hypot(tx, ty), 1e-6))
     return out
 
 
@@ -358,6 +376,6 @@ def intent_offsets(poses: np.ndarray, later: np.ndarray, progress_s: np.ndarray,
     for i, (v, w) in enumerate(later):
         if not (math.isfinite(v) and math.isfinite(w)):
             continue
-        yaw_rate = steer(path, tuple(poses[i]), progress_s[i], offsets, lookahead_m, v, clip=False)
+        yaw_rate = pursuit_yaw_rates(path, tuple(poses[i]), progress_s[i], offsets, lookahead_m, v)
         out[i] = offsets[int(np.argmin(np.abs(yaw_rate - w)))]
     return out

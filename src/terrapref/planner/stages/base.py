@@ -12,6 +12,7 @@ import numpy as np
 from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
+from terrapref.features.corridor import TerrainColumns
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable
 from terrapref.vehicle import Command, Pose
@@ -35,6 +36,12 @@ class StageContext:
         """The terrain columns of the lethal classes, sorted."""
         columns = self.featurizer.class_columns
         return np.array(sorted({int(columns[i]) for i in self.classes.lethal_ids}), dtype=np.int64)
+
+    @property
+    def terrain(self) -> TerrainColumns:
+        """The terrain columns of the class table, named by the features' classes."""
+        return TerrainColumns(self.featurizer.class_columns, self.features.n_terrain, tuple(int(c) for c in self.lethal_columns),
+                              self.features.feature_classes)
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,7 @@ import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.features import FeatureConfig
-from terrapref.features.corridor import CorridorConfig, CorridorFeatures, GroundMap, steer
+from terrapref.features.corridor import CorridorConfig, CorridorFeatures, GroundMap, TerrainColumns, steer
 from terrapref.features.kernels import gated_value
 from terrapref.learning.corridor import CorridorFit, CorridorUtility, fit_corridor
 from terrapref.planner.costmap import Costmap, costmap_of
@@ -127,8 +127,7 @@ class OffsetStage(Stage):
         return cls(config, CorridorUtility(weights, near, features.corridor))
 
     def runner(self, context: StageContext) -> OffsetSteering:
-        return OffsetSteering(self.utility, context.camera, context.featurizer.class_columns, context.features.n_terrain,
-                              context.lethal_columns, context.features.preference.control, self.config, context.features.feature_classes)
+        return OffsetSteering(self.utility, context.camera, context.terrain, context.features.preference.control, self.config)
 
     def describe(self, names: tuple[str, ...], lethal: frozenset[str]) -> str:
         """The learned price of each class per metre, relative to the detour's per m^2 of offset per metre."""
@@ -145,28 +144,26 @@ class OffsetSteering(StageRunner):
     Args:
         utility: the fitted corridor utility.
         camera: the robot's camera.
-        columns: terrain column of each class id (256,).
-        k: the number of terrain classes K.
-        lethal_columns: the terrain columns of lethal classes.
+        terrain: the class table's terrain columns (which are lethal; the costmap's names).
         control: the control set (the forward speed, and the trajectories a yaw rate is named by).
         config: how offsets are held and reached.
-        names: the classes of the K terrain columns (the costmap's).
     """
 
-    def __init__(self, utility: CorridorUtility, camera: PinholeCamera, columns: np.ndarray, k: int, lethal_columns: np.ndarray,
-                 control: ControlSet, config: OffsetConfig | None = None, names: tuple[str, ...] = ()) -> None:
+    def __init__(self, utility: CorridorUtility, camera: PinholeCamera, terrain: TerrainColumns, control: ControlSet,
+                 config: OffsetConfig | None = None) -> None:
+        k = terrain.k
         if utility.weights.shape != (k + 3,):
             raise ValueError(f"the corridor utility has {utility.weights.shape[0]} weights, expected {k + 3}")
         self.utility, self.config, self.k = utility, config or OffsetConfig(), k
-        self.control, self.v_mps, self.names = control, float(control.v_mps), names
+        self.control, self.v_mps, self.names = control, float(control.v_mps), terrain.names
         self.lethal = np.zeros(k + 2, dtype=bool)
-        self.lethal[np.asarray(lethal_columns, dtype=np.int64)] = True
+        self.lethal[np.asarray(terrain.lethal, dtype=np.int64)] = True
         weights = np.array(utility.weights, dtype=float)
         safe = [j for j in range(k) if not self.lethal[j]]
         if safe:
             weights[k] = weights[safe].mean()
         self.weights = weights
-        self.map = GroundMap(camera, columns, k, utility.config, lethal_columns)
+        self.map = GroundMap(camera, terrain, utility.config)
         self.corridor = CorridorFeatures(utility.config, k)
         self.offsets = self.corridor.offsets
         m = utility.config.half_width_m + self.config.lethal_margin_m
