@@ -48,6 +48,7 @@ class HorizonAttitude:
         reach = self.fy * math.tan(math.radians(band_deg)) * 2.0
         top, bottom = max(0, int(horizon - reach)), min(c.height_px, int(horizon + reach) + 1)
         self.rows = np.arange(top, bottom, row_step_px)
+        self._row_values = self.rows.astype(np.float64)
         self.cols = np.arange(column_step_px // 2, c.width_px, column_step_px)
         self.index = (self.rows[:, None] * c.width_px + self.cols[None, :]).reshape(-1)
         self.index.flags.writeable = False
@@ -79,5 +80,5 @@ class HorizonAttitude:
         if self._frames < 5:
             return 0.0, 0.0
         if self._reference is None or self._frames % REFERENCE_EVERY == 0 or self._frames < 2 * REFERENCE_EVERY:
-            self._reference = kernels.column_medians(self._history, min(self._frames, self.memory))
+            self._reference = kernels.column_medians(self._history, min(self._frames, self.memory), self._row_values)
         return kernels.attitude_fit(now - self._reference, self._reference, self._u, self.fx, self.fy, self.cy, self.max_rad)

@@ -346,25 +346,36 @@ def sky_line(ids: np.ndarray, rows: np.ndarray, n_cols: int, unknown: int) -> np
 
 
 @njit(cache=True, nogil=True)
-def column_medians(history: np.ndarray, count: int) -> np.ndarray:
+def column_medians(history: np.ndarray, count: int, rows: np.ndarray) -> np.ndarray:
     """Median of each column of ``history[:count]`` (M, C) over its non-NaN entries, (C,); NaN
-    where a column has none. The NumPy form: ``np.nanmedian(history[:count], axis=0)`` (for an
-    even count, the mean of the two middle values)."""
-    n_cols = history.shape[1]
+    where a column has none. Every entry is NaN or one of ``rows`` (increasing), so each column is
+    counted into their bins. The NumPy form: ``np.nanmedian(history[:count], axis=0)`` (for an even
+    count, the mean of the two middle values)."""
+    n_cols, n_bins = history.shape[1], rows.shape[0]
     out = np.empty(n_cols)
-    values = np.empty(count)
+    counts = np.zeros(n_bins, np.int64)
     for c in range(n_cols):
+        counts[:] = 0
         n = 0
         for m in range(count):
             v = history[m, c]
             if not np.isnan(v):
-                values[n] = v
+                counts[np.searchsorted(rows, v)] += 1
                 n += 1
         if n == 0:
             out[c] = np.nan
             continue
-        s = np.sort(values[:n])
-        out[c] = s[n // 2] if n % 2 == 1 else (s[n // 2 - 1] + s[n // 2]) / 2.0
+        # The values of rank n // 2 (and n // 2 - 1, for an even n), counting from 0.
+        low, high = -1.0, -1.0
+        seen = 0
+        for b in range(n_bins):
+            seen += counts[b]
+            if low < 0 and seen > (n - 1) // 2:
+                low = rows[b]
+            if seen > n // 2:
+                high = rows[b]
+                break
+        out[c] = high if n % 2 == 1 else (low + high) / 2.0
     return out
 
 
