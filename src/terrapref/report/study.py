@@ -42,6 +42,7 @@ from terrapref.features import FeatureConfig
 from terrapref.perception import PerceptionModel, load_perception
 from terrapref.progress import every_tenth
 from terrapref.recipes import OURS
+from terrapref.records import to_plain
 from terrapref.report.reproduce import scenario_length
 from terrapref.report.study_plan import FULL, StudyPlan, TrainedModel, TrainJob
 from terrapref.report.study_report import ALT_PROFILE, ModelVariant, RunTag, StudyRun, agreement, write_study
@@ -114,8 +115,7 @@ class TeachJob:
 
     def to_dict(self) -> dict:
         """As study.json holds it, as the teaching part's C."""
-        return {"study": "teach", "method": "C", "seed": self.seed, "order": list(self.order), "style": self.style, "epochs": self.epochs,
-                "recipe": self.recipe, "workdir": self.workdir}
+        return {"study": "teach", "method": "C", **to_plain(self)}
 
 
 @dataclass(frozen=True)
