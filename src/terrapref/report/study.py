@@ -157,7 +157,7 @@ def _train_on_utilities(job: TrainJob) -> int:
     """Fit the linear utility, or train C, on the job's utilities; returns how many samples it learned from."""
     from terrapref.demos.dataset import Dataset, load_dataset
     from terrapref.learning.linear import fit_linear_utility
-    from terrapref.learning.pipeline import train_and_save
+    from terrapref.learning.pipeline import RunOptions, train_and_save
     from terrapref.planner.policy import save_linear
 
     n = _frames_for(job.minutes)
@@ -169,7 +169,7 @@ def _train_on_utilities(job: TrainJob) -> int:
         save_linear(job.out, fit_linear_utility(ds.U, ds.labels), meta)
     else:
         # C's models are compared by how they drive; what the data identify is the teaching section's question
-        train_and_save(ds, job.out, _c_config(job), checkpoints=False, identify=False)
+        train_and_save(ds, job.out, _c_config(job), options=RunOptions(checkpoints=False, identify=False))
     return len(ds)
 
 
