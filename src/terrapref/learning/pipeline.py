@@ -59,11 +59,12 @@ def interrupted_path(out: str | Path) -> Path:
 class _Checkpoints:
     """Every epoch written as it is made, into a fresh folder beside the model's; swapped in for
     the old one only when training completes, so a retrain never mixes two runs' checkpoints.
-    Also the best epoch so far of each member, for an interrupted run."""
+    Also the best epoch so far of each member, for an interrupted run. ``header``: what every
+    file of the run carries (:func:`source_header`, with the member count)."""
 
-    def __init__(self, out: Path, source: ModelHeader, write: bool) -> None:
+    def __init__(self, out: Path, header: ModelHeader, write: bool) -> None:
         self.final = out.with_name(out.stem + ".checkpoints")
-        self.header, self.write = replace(source, member_count=source.classifier.members), write
+        self.header, self.write = header, write
         self.folder = new_folder(self.final, "") if write else None
         self.best: dict[int, tuple[float, int, ClassifierConfig, dict]] = {}  # member -> (loss, epoch, classifier, weights)
 
@@ -120,7 +121,7 @@ def train_and_save(dataset: Dataset, out: str | Path, config: TrainConfig, stage
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     source = source_header(dataset, config, recipe)  # the data's fingerprint hashes every sample: once
-    saver = _Checkpoints(out, source, options.checkpoints)
+    saver = _Checkpoints(out, replace(source, member_count=config.classifier.members), options.checkpoints)
     try:
         result = train(dataset, config, options.progress, on_epoch=saver, identify=options.identify, stages=stages)
         write_model(out, model_header(config, result, source), result.weights)
