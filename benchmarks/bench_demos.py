@@ -90,7 +90,7 @@ def bench_closed_loop(model_path: Path) -> tuple[float, int]:
 def bench_decision(rec_dir: Path, repeats: int, features: FeatureConfig | None = None, members: int = 1, stages: tuple = ()) -> np.ndarray:
     from terrapref.dataset import build_dataset
     from terrapref.learning.model_file import load_model
-    from terrapref.learning.pipeline import train_and_save
+    from terrapref.learning.pipeline import RunOptions, train_and_save
     from terrapref.learning.network import ClassifierConfig
     from terrapref.learning.train import TrainConfig
     from terrapref.planner import Planner
@@ -99,8 +99,8 @@ def bench_decision(rec_dir: Path, repeats: int, features: FeatureConfig | None =
     features = features or FeatureConfig()
     plain = features == FeatureConfig() and members == 1 and not stages
     model_path = rec_dir.parent / ("model.safetensors" if plain else "variant.safetensors")
-    train_and_save(build_dataset([rec], features), model_path, TrainConfig(classifier=ClassifierConfig(members=members)), checkpoints=False,
-                   stages=stages)
+    train_and_save(build_dataset([rec], features), model_path, TrainConfig(classifier=ClassifierConfig(members=members)), stages=stages,
+                   options=RunOptions(checkpoints=False))
     planner = Planner(load_model(model_path))
     idx = list(range(0, len(rec), max(1, len(rec) // 500)))
     images = [rec.image(i) for i in idx]

@@ -20,7 +20,7 @@ from terrapref.learning.forward import PackedNetwork, probabilities
 from terrapref.learning.mlp import init_weights
 from terrapref.learning.model_file import load_model
 from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
-from terrapref.learning.pipeline import train_and_save
+from terrapref.learning.pipeline import RunOptions, train_and_save
 from terrapref.planner import Planner, PlannerDriver
 from terrapref.recipes import PAPER, TEACH, RecipeSetup, demonstrate
 from terrapref.scenario import resolve_scenario
@@ -96,8 +96,8 @@ def test_the_planner_makes_the_decisions_it_made_before_the_forward_pass_was_com
     features = recipe.features()
     recordings = demonstrate(recipe, tmp_path / recipe.name, RecipeSetup(7, course=course, features=features), write=False)
     model = tmp_path / f"{recipe.name}.safetensors"
-    train_and_save(build_dataset(recordings, features), model, replace(recipe.train, seed=7), checkpoints=False,
-                   stages=[s for s in recipe.stages if s.type != "offset"])
+    train_and_save(build_dataset(recordings, features), model, replace(recipe.train, seed=7),
+                   stages=[s for s in recipe.stages if s.type != "offset"], options=RunOptions(checkpoints=False))
     for name in driven:
         driver = PlannerDriver(Planner(load_model(model)), keep=True)  # C and its second stage (if any) drive, as when the file was made
         run_episode(Simulation(resolve_scenario(name)), driver, np.random.default_rng(0))

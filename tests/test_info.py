@@ -7,9 +7,12 @@ from pathlib import Path
 import pytest
 from helpers import linear_model
 from helpers import dataset_file
+from helpers import model_meta, skip_path_weights
 
 from terrapref import __version__
 from terrapref.cli import main
+from terrapref.learning.model_file import save_model
+from terrapref.learning.network import ClassifierConfig
 
 
 def test_version(capsys):
@@ -49,3 +52,13 @@ def test_info_gives_every_ensemble_members_chosen_epoch(tmp_path: Path, capsys):
     first = next(i for i, line in enumerate(lines) if line.startswith("training "))
     assert lines[first].startswith("training        member 1: 2 epochs, chose epoch ")
     assert lines[first + 1].startswith("                member 2: 2 epochs, chose epoch ")
+
+
+def test_info_reads_older_stage_blocks_and_shows_what_it_can_of_a_damaged_list(tmp_path: Path, capsys):
+    config = ClassifierConfig(hidden=8, skip=True)
+    old = save_model(tmp_path / "old.safetensors", config, skip_path_weights(config), {**model_meta(), "utility": {"w": [0.0] * 5, "b": [0.0] * 21}})
+    bad = save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), {**model_meta(), "stages": "offset"})
+    assert main(["info", str(old), str(bad)]) == 0
+    out = capsys.readouterr().out
+    assert "second stage    weight 1.5" in out and "offset stage    none" in out  # a utility block written before stages were listed
+    assert "stages          unreadable (stages: expected a list of stages)" in out and "profile         mud > rock" in out

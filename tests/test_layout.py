@@ -92,7 +92,7 @@ def test_the_cycle_finder_finds_one():
 LAYERS = [
     {"errors"},
     {"extras"},
-    {"yamlio", "fileio", "progress", "configargs", "registry"},
+    {"yamlio", "fileio", "progress", "configargs", "registry", "records"},
     {"tensorfile", "terrain", "grid"},
     {"pngio", "scenario"},
     {"world"},

@@ -18,9 +18,11 @@ from safetensors.numpy import save_file
 from terrapref.camera import CameraConfig
 from terrapref.dataset import Dataset, load_dataset, save_dataset
 from terrapref.errors import UserError
-from terrapref.features import FeatureConfig, PreferenceSetConfig
-from terrapref.learning.model_file import FORMAT, check_compatible, load_model, read_model_file, save_model
+from terrapref.features import FeatureConfig, LookaheadConfig, PreferenceSetConfig
+from terrapref.learning.header import DataSource, Interruption, MemberRun, ModelHeader, stage_blocks
+from terrapref.learning.model_file import FORMAT, check_compatible, load_model, read_model_file, save_model, write_model
 from terrapref.learning.network import ClassifierConfig
+from terrapref.learning.train import EpochMetrics, TrainConfig
 from terrapref.tensorfile import write_tensor_file
 from terrapref.terrain import PreferenceProfile, default_classes
 
@@ -248,6 +250,66 @@ def test_check_compatible_names_the_differing_preference_field(tmp_path: Path):
     with pytest.raises(UserError) as err:
         check_compatible(model, CameraConfig(), FeatureConfig(PreferenceSetConfig(n_steps=20)))
     assert "n_steps" in str(err.value)
+
+
+# --- the header as one record ----------------------------------------------------------------------
+
+
+def _header(**changes) -> ModelHeader:
+    """A finished ensemble's header with every entry training writes."""
+    epochs = tuple(EpochMetrics(e, 2.0 / e, 2.5 / e, 0.3, 0.25, 0.6) for e in (1, 2))
+    classes = default_classes()
+    values = dict(classifier=ClassifierConfig(hidden=8, members=2), recipe="teach", features=ODD_FEATURES, camera=ODD_CAMERA, classes=classes,
+                  profile=ODD_PROFILE, training=TrainConfig().to_dict(), data=DataSource("0123456789abcdef", 40, ({"path": "rec", "frames": 40},)),
+                  history=epochs, best_epoch=2, steps=8, identifiability={"order": ["mud"], "pairs": [], "min_frames": 20, "lethal": []},
+                  steadying={"tremor_rps": None, "spacing_rps": 0.1, "window": 1, "changed": 0.0},
+                  stages=({"type": "second_stage", "weight": 5.0},), members=(MemberRun(0, 2, epochs), MemberRun(1000, 1, epochs)), epoch=2)
+    return ModelHeader(**{**values, **changes})
+
+
+def test_a_header_is_written_in_the_files_order_and_read_back_equal(tmp_path: Path):
+    header = _header()
+    assert list(header.to_dict()) == ["format", "kind", "classifier", "recipe", "features", "camera", "classes", "profile", "training", "data",
+                                      "history", "best_epoch", "steps", "identifiability", "steadying", "stages", "members", "epoch"]
+    config = header.classifier
+    weights = {f"members.{j}.{k}": v for j in range(2) for k, v in random_weights(replace(config, members=1), j).items()}
+    model = load_model(write_model(tmp_path / "m.safetensors", header, weights))
+    assert model.header == header and model.meta == json.loads(json.dumps(header.to_dict()))
+    assert model.classifier == config and model.features == ODD_FEATURES and model.stages == header.stages
+
+
+def test_a_checkpoints_member_count_and_an_interrupted_runs_progress_are_its_own_entries():
+    checkpoint = _header(history=None, best_epoch=None, steps=None, identifiability=None, steadying=None, stages=None, members=None,
+                         member_count=2, member=1, epoch=3, status="checkpoint")
+    written = checkpoint.to_dict()
+    assert list(written)[-4:] == ["members", "member", "epoch", "status"] and written["members"] == 2
+    assert ModelHeader.from_dict(written, "c.safetensors") == checkpoint
+    interrupted = replace(checkpoint, member_count=None, member=None, epoch=None, status="interrupted", interrupted=Interruption(2, (3, 1)))
+    written = interrupted.to_dict()
+    assert list(written)[-3:] == ["data", "status", "interrupted"] and written["interrupted"]["best_epochs"] == [3, 1]
+    assert ModelHeader.from_dict(written, "i.safetensors") == interrupted
+
+
+@pytest.mark.parametrize("key, value", [("history", [{"epoch": 1}]), ("data", ["rec"]), ("members", "two"), ("best_epoch", 1.5),
+                                        ("recipe", 3), ("training", [])])
+def test_a_damaged_training_record_is_refused_naming_its_entry(tmp_path: Path, key: str, value):
+    header = _header()
+    config = header.classifier
+    weights = {f"members.{j}.{k}": v for j in range(2) for k, v in random_weights(replace(config, members=1), j).items()}
+    path = write_tensor_file(tmp_path / "m.safetensors", weights, {**header.to_dict(), key: value})
+    assert _expect_user_error(path).problems[0].field == key
+
+
+def test_stages_are_read_without_a_feature_configuration():
+    legacy = {"utility": {"w": [0.0], "b": [0.0]}, "corridor": {"weights": [1.0], "near_m": 2.0}}
+    assert stage_blocks(legacy, "old.safetensors") == ({"type": "second_stage", "weight": 1.5, "w": [0.0], "b": [0.0]},
+                                                      {"type": "offset", "weights": [1.0], "near_m": 2.0})
+    with_lookahead = stage_blocks(legacy, "old.safetensors", FeatureConfig(lookahead=LookaheadConfig(1.8, 3)).lookahead)
+    assert with_lookahead[0] == {"type": "second_stage", "weight": 1.5, "after_s": 1.8, "stride": 3, "w": [0.0], "b": [0.0]}
+    assert stage_blocks({"stages": []}, "new.safetensors") == () and stage_blocks({}, "checkpoint.safetensors") is None
+    with pytest.raises(UserError) as err:
+        stage_blocks({"stages": [{"weight": 1.0}]}, "bad.safetensors")
+    assert err.value.lines() == ["bad.safetensors: stages[0]: expected a mapping with a type"]
 
 
 # --- ensembles and sizes in a model file -----------------------------------------------------------

@@ -26,7 +26,7 @@ from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
 from terrapref.learning.model_file import LoadedModel, load_model, save_model
 from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
-from terrapref.learning.pipeline import train_and_save
+from terrapref.learning.pipeline import RunOptions, train_and_save
 from terrapref.planner import Decision, Planner, PlannerDriver
 from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
@@ -277,7 +277,7 @@ def demo(tmp_path_factory, course) -> SimpleNamespace:
     record_run(Simulation(course, camera), ExpertDriver(expert), writer, RunSettings(features.preference), np.random.default_rng(0))
     recording = read_recording(d / "rec")
     dataset = build_dataset([recording], features)
-    result = train_and_save(dataset, d / "model.safetensors", train_config(epochs=3, skip=True), checkpoints=False)
+    result = train_and_save(dataset, d / "model.safetensors", train_config(epochs=3, skip=True), options=RunOptions(checkpoints=False))
     return SimpleNamespace(recording=recording, dataset=dataset, result=result, model=load_model(d / "model.safetensors"))
 
 

@@ -19,7 +19,7 @@ from terrapref.learning.linear import LinearUtility
 from terrapref.learning.model_file import load_model, save_model
 from terrapref.planner.registry import load_policy
 from terrapref.learning.network import ClassifierConfig
-from terrapref.learning.pipeline import train_and_save
+from terrapref.learning.pipeline import RunOptions, train_and_save
 from terrapref.planner import Planner
 from terrapref.planner.stages import SecondStage, SecondStageConfig
 from terrapref.planner.stages.second import SecondStageScores
@@ -175,7 +175,7 @@ def test_training_keeps_the_fitted_utility_with_the_model(tmp_path: Path):
     dataset = Dataset(rng.uniform(0, 1, (n, m, 5)).astype(np.float32), rng.integers(0, m, n), np.zeros(n, np.float32),
                       np.zeros(n, np.int64), model_meta())
     out = tmp_path / "m.safetensors"
-    result = train_and_save(dataset, out, train_config(epochs=1, mirror=True), checkpoints=False, stages=[SecondStageConfig()])
+    result = train_and_save(dataset, out, train_config(epochs=1, mirror=True), stages=[SecondStageConfig()], options=RunOptions(checkpoints=False))
     (stage,) = result.stages
     np.testing.assert_allclose(stage.utility.b, stage.utility.b[::-1], atol=0.02)  # random labels: asymmetric without mirror
     model = load_model(out)
@@ -183,7 +183,7 @@ def test_training_keeps_the_fitted_utility_with_the_model(tmp_path: Path):
     assert block["type"] == "second_stage" and block["fit"] == "frames" and block["weight"] == 1.5
     np.testing.assert_allclose(block["w"], stage.utility.w)
     assert Planner(model).stage.header() == stage.header()  # the file round-trips the fitted stage
-    train_and_save(dataset, tmp_path / "p.safetensors", train_config(epochs=1), checkpoints=False)
+    train_and_save(dataset, tmp_path / "p.safetensors", train_config(epochs=1), options=RunOptions(checkpoints=False))
     assert load_model(tmp_path / "p.safetensors").meta["stages"] == []
 
 

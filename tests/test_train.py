@@ -15,7 +15,7 @@ from terrapref.dataset import FORMAT as DATASET_FORMAT
 from terrapref.dataset import Dataset
 from terrapref.learning.model_file import expected_shapes, load_model
 from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
-from terrapref.learning.pipeline import train_and_save
+from terrapref.learning.pipeline import RunOptions, train_and_save
 from terrapref.learning.train import MEMBER_SEED_STEP, TrainConfig, split_indices, train
 from terrapref.planner.stages import SecondStageConfig
 
@@ -123,7 +123,7 @@ def test_an_ensemble_model_file_loads_and_records_its_members(tmp_path: Path):
     data = random_dataset(300)
     config = train_config(epochs=2, batch_size=64, hidden=8, seed=3, members=2)
     path = tmp_path / "ens.safetensors"
-    result = train_and_save(data, path, config, checkpoints=False)
+    result = train_and_save(data, path, config, options=RunOptions(checkpoints=False))
     model = load_model(path)
     assert model.classifier.members == 2 and model.meta["training"]["classifier"]["members"] == 2
     assert [m["seed"] for m in model.meta["members"]] == [3, 3 + MEMBER_SEED_STEP]
@@ -204,7 +204,7 @@ def test_train_and_save_writes_the_model_and_every_checkpoint(tmp_path: Path):
 
 def test_train_and_save_without_checkpoints(tmp_path: Path):
     out = tmp_path / "pref.safetensors"
-    train_and_save(random_dataset(100), out, train_config(epochs=1), checkpoints=False)
+    train_and_save(random_dataset(100), out, train_config(epochs=1), options=RunOptions(checkpoints=False))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["pref.safetensors"]
 
 
@@ -259,7 +259,7 @@ def test_an_interrupted_training_leaves_its_best_so_far_and_touches_nothing_else
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        train_and_save(data, out, config, progress=stop)
+        train_and_save(data, out, config, options=RunOptions(progress=stop))
     assert out.read_bytes() == before  # the earlier model is untouched
     assert sorted(p.name for p in (tmp_path / "model.checkpoints").iterdir()) == old_checkpoints
     partial = load_model(interrupted_path(out))

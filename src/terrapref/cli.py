@@ -435,7 +435,7 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
-    from terrapref.learning.pipeline import interrupted_path, train_and_save
+    from terrapref.learning.pipeline import RunOptions, interrupted_path, train_and_save
     from terrapref.recipes import DEFAULT_RECIPE, recipe_named
 
     recipe = recipe_named(args.recipe or DEFAULT_RECIPE)
@@ -455,7 +455,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     print(f"recipe {recipe.name}: training on {len(data)} samples ({len(args.data)} input(s)), {opt.epochs} epochs, "
           f"batch {opt.batch_size}, lr {opt.lr}{f', {members} members' if members > 1 else ''}")
     try:
-        result = train_and_save(data, args.out, config, progress=_epoch_printer(config, args.verbose), recipe=recipe.name, stages=recipe.stages)
+        result = train_and_save(data, args.out, config, stages=recipe.stages, recipe=recipe.name,
+                                options=RunOptions(progress=_epoch_printer(config, args.verbose)))
     except KeyboardInterrupt:
         if interrupted_path(args.out).exists():
             print(f"note: the best epochs so far are in {interrupted_path(args.out)} (marked interrupted: no decision stages); "

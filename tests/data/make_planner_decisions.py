@@ -19,7 +19,7 @@ import numpy as np
 from terrapref.dataset import build_dataset
 from terrapref.demos.recording import read_recording
 from terrapref.learning.model_file import load_model
-from terrapref.learning.pipeline import train_and_save
+from terrapref.learning.pipeline import RunOptions, train_and_save
 from terrapref.planner import Planner, PlannerDriver
 from terrapref.recipes import PAPER, TEACH, RecipeSetup, record_demonstrations
 from terrapref.scenario import resolve_scenario
@@ -38,8 +38,8 @@ def decisions(work: Path) -> dict:
         features = recipe.features()
         paths = record_demonstrations(recipe, work / recipe.name, RecipeSetup(7, course=course, features=features))
         model = work / f"{recipe.name}.safetensors"
-        train_and_save(build_dataset([read_recording(p) for p in paths], features), model, replace(recipe.train, seed=7), checkpoints=False,
-                   stages=[s for s in recipe.stages if s.type != "offset"])
+        train_and_save(build_dataset([read_recording(p) for p in paths], features), model, replace(recipe.train, seed=7),
+                   stages=[s for s in recipe.stages if s.type != "offset"], options=RunOptions(checkpoints=False))
         for name in driven:
             driver = PlannerDriver(Planner(load_model(model)), keep=True)
             run_episode(Simulation(resolve_scenario(name)), driver, np.random.default_rng(0))

@@ -10,7 +10,7 @@ on the same recordings and scored by the same evaluation as C.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +23,7 @@ from terrapref.learning.model_file import FORMAT, model_context
 from terrapref.learning.train import class_weights, split_indices
 from terrapref.planner.planner import PATH_AHEAD_M, path_ahead
 from terrapref.planner.policy import CNN, Observation, Policy
+from terrapref.records import to_plain
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.tensorfile import write_tensor_file
 from terrapref.terrain import ClassTable
@@ -56,7 +57,7 @@ class CnnConfig:
     seed: int = 0
 
     def to_dict(self) -> dict:
-        return {**asdict(self), "channels": list(self.channels)}
+        return to_plain(self)
 
     @classmethod
     def from_dict(cls, data: dict) -> CnnConfig:

@@ -7,9 +7,11 @@ Pixel (col, row) covers [col, col + 1) x [row, row + 1); its centre is at +0.5.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
+
+from terrapref.records import from_plain, to_plain
 
 
 @dataclass(frozen=True)
@@ -81,11 +83,11 @@ class CameraConfig:
         return (*self.intrinsics, self.mount_height_m, self.mount_forward_m, self.pitch_deg, self.yaw_deg, self.max_range_m)
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        return to_plain(self)
 
     @classmethod
     def from_dict(cls, data: dict) -> CameraConfig:
-        return cls(**data)
+        return from_plain(cls, data)
 
 
 class PinholeCamera:

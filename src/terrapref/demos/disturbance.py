@@ -8,10 +8,11 @@ and a planner is never exactly on that line.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
+from terrapref.records import to_plain
 from terrapref.vehicle import Command
 
 
@@ -44,7 +45,7 @@ class DisturbanceConfig:
             raise ValueError("disturbance: rate >= 0, 0 <= min <= max yaw rate, 0 < min <= max duration")
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        return to_plain(self)
 
 
 class Disturber:

@@ -20,12 +20,13 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
+from terrapref.records import to_plain
 from terrapref.registry import Registry
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
@@ -89,7 +90,7 @@ class ExpertConfig:
     stick_noise_rps: float = 0.02
 
     def to_dict(self) -> dict:
-        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
+        return to_plain(self)
 
     @classmethod
     def styled(cls, style: str = "default", profile: tuple[str, ...] | None = None) -> ExpertConfig:

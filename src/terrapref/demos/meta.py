@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -35,6 +35,7 @@ from terrapref.camera import CameraConfig
 from terrapref.errors import Problem, UserError
 from terrapref.features import PreferenceSetConfig
 from terrapref.perception import PerceptionModel
+from terrapref.records import to_plain
 from terrapref.registry import Registry
 from terrapref.sim import SimConfig
 from terrapref.terrain import ClassTable, PreferenceProfile, default_classes
@@ -78,7 +79,7 @@ class ExpertInfo:
         return cls(seed, style, _settings(config), _settings(disturbance))
 
     def to_dict(self) -> dict[str, Any]:
-        return {"kind": self.kind, "seed": self.seed, "style": self.style, "config": self.config, "disturbance": self.disturbance}
+        return {"kind": self.kind, **to_plain(self)}
 
     def describe(self) -> str:
         return _describe(self.kind, style=self.style, seed=self.seed)
@@ -100,7 +101,7 @@ class HumanInfo:
     kind = "human"
 
     def to_dict(self) -> dict[str, Any]:
-        return {"kind": self.kind, "input": self.input, "disturbance": self.disturbance, "seed": self.seed}
+        return {"kind": self.kind, **to_plain(self)}
 
     def describe(self) -> str:
         return _describe(self.kind, seed=self.seed)
@@ -122,7 +123,7 @@ class RideAlongInfo:
     kind = "corrections"
 
     def to_dict(self) -> dict[str, Any]:
-        return {"kind": self.kind, "input": self.input, "disturbance": self.disturbance, "seed": self.seed, "model": self.model}
+        return {"kind": self.kind, **to_plain(self)}
 
     def describe(self) -> str:
         return _describe(self.kind, seed=self.seed, model=self.model)
@@ -142,7 +143,7 @@ class CorrectionRoundInfo:
     kind = "corrections"
 
     def to_dict(self) -> dict[str, Any]:
-        return {"kind": self.kind, "round": self.round, "seed": self.seed}
+        return {"kind": self.kind, **to_plain(self)}
 
     def describe(self) -> str:
         return _describe(self.kind, seed=self.seed)
@@ -164,7 +165,7 @@ class ImportedInfo:
     kind = "imported"
 
     def to_dict(self) -> dict[str, Any]:
-        return {"kind": self.kind, "bag": self.bag, "robot": self.robot, "labels": self.labels}
+        return {"kind": self.kind, **to_plain(self)}
 
     def describe(self) -> str:
         return _describe(self.kind, bag=self.bag)
@@ -265,12 +266,8 @@ class SimMeta:
         return cls(sim.camera_rate_hz, sim.goal_radius_m, sim.vehicle)
 
     def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"camera_rate_hz": self.camera_rate_hz}
-        if self.goal_radius_m is not None:
-            out["goal_radius_m"] = self.goal_radius_m
-        if self.vehicle is not None:
-            out["vehicle"] = asdict(self.vehicle)
-        return out
+        """What is recorded; None is left out."""
+        return to_plain(self, omit_none=True)
 
     @classmethod
     def from_dict(cls, data: Any, source: str) -> SimMeta:
@@ -339,20 +336,8 @@ class RecordingMeta:
                    driver, _points(scenario.waypoints), perception or PerceptionModel())
 
     def to_dict(self) -> dict[str, Any]:
-        """The entries of meta.json, in the file's order; what is None is left out."""
-        values = {
-            "scenario": self.scenario,
-            "camera": _to_dict(self.camera),
-            "preference_set": _to_dict(self.preference_set),
-            "sim": _to_dict(self.sim),
-            "classes": _to_dict(self.classes),
-            "profile": list(self.profile) if self.profile is not None else None,
-            "driver": _to_dict(self.driver),
-            "path": [list(p) for p in self.path] if self.path is not None else None,
-            "perception": _to_dict(self.perception),
-            "origin_shift_m": list(self.origin_shift_m) if self.origin_shift_m is not None else None,
-        }
-        return {k: v for k, v in values.items() if v is not None}
+        """The entries of meta.json, in the file's order (the fields'); what is None is left out."""
+        return to_plain(self, omit_none=True)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str) -> RecordingMeta:
@@ -375,10 +360,6 @@ class RecordingMeta:
         return cls(f.get("scenario", str, "a scenario name"), camera, preference, SimMeta.from_dict(data["sim"], source) if "sim" in data else None,
                    classes, tuple(profile) if profile is not None else None,
                    driver_from_dict(data["driver"], source) if "driver" in data else None, path, perception, shift)
-
-
-def _to_dict(record: Any) -> dict[str, Any] | None:
-    return record.to_dict() if record is not None else None
 
 
 def _points(points: np.ndarray) -> Points:

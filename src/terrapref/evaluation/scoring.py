@@ -10,10 +10,11 @@ terrain it did not choose (every patch, when it avoided them): the margin a driv
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from terrapref.records import from_plain, to_plain
 from terrapref.scenario import AVOID, Scenario, Zone
 from terrapref.scenario.path import ReferencePath
 from terrapref.sim import EpisodeLog
@@ -67,7 +68,7 @@ class ZoneResult:
 
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        return to_plain(self)
 
     @classmethod
     def from_dict(cls, data: dict) -> ZoneResult:
@@ -156,15 +157,12 @@ class RunMetrics:
         return sum(z.success for z in self.zones)
 
     def to_dict(self) -> dict:
-        d = asdict(self)
-        d["zones"] = [z.to_dict() for z in self.zones]
-        return d
+        return to_plain(self)
 
     @classmethod
     def from_dict(cls, data: dict) -> RunMetrics:
         """Metrics as :meth:`to_dict` wrote them."""
-        scalars = {f.name: data[f.name] for f in fields(cls) if f.name != "zones"}
-        return cls(**scalars, zones=[ZoneResult.from_dict(z) for z in data["zones"]])
+        return from_plain(cls, data)
 
 
 def score_run(log: EpisodeLog, scenario: Scenario, world: WorldMap, profile: PreferenceProfile, tolerance_m: float = 0.3) -> RunMetrics:

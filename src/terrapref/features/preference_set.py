@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from terrapref.camera import PinholeCamera
+from terrapref.records import to_plain
 from terrapref.vehicle import ControlSet
 
 
@@ -48,7 +49,7 @@ class PreferenceSetConfig:
         return self.control.v_mps * self.dt_s * (self.n_steps - 1)
 
     def to_dict(self) -> dict:
-        return {"control": self.control.to_dict(), "n_steps": self.n_steps, "dt_s": self.dt_s}
+        return to_plain(self)
 
     @classmethod
     def from_dict(cls, data: dict) -> PreferenceSetConfig:

@@ -19,7 +19,7 @@ The path is resampled every ``path_spacing_m`` so that sparse waypoints still gi
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from enum import Enum
 
 import numpy as np
@@ -28,6 +28,7 @@ from terrapref.camera import PinholeCamera, SegmentationView, as_view
 from terrapref.features import kernels
 from terrapref.features.corridor import CorridorConfig
 from terrapref.features.preference_set import PreferenceSet, PreferenceSetConfig
+from terrapref.records import to_plain
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.vehicle import Pose
@@ -63,7 +64,7 @@ class LookaheadConfig:
             raise ValueError("the look-ahead needs after_s > 0 and an integer stride >= 1")
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        return to_plain(self)
 
     @classmethod
     def from_dict(cls, data: dict) -> LookaheadConfig:
@@ -125,15 +126,7 @@ class FeatureConfig:
         return (*self.feature_classes, "distance")
 
     def to_dict(self) -> dict:
-        return {
-            "preference": self.preference.to_dict(),
-            "distance_mode": self.distance_mode.value,
-            "window_m": self.window_m,
-            "path_spacing_m": self.path_spacing_m,
-            "feature_classes": list(self.feature_classes),
-            **({"lookahead": self.lookahead.to_dict()} if self.lookahead is not None else {}),
-            **({"corridor": self.corridor.to_dict()} if self.corridor is not None else {}),
-        }
+        return to_plain(self, omit_none=("lookahead", "corridor"))
 
     @classmethod
     def from_dict(cls, data: dict) -> FeatureConfig:

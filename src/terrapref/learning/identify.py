@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from terrapref.learning.linear import LinearUtility
+from terrapref.records import to_plain
 
 GRASS = "grass"  # the background, compared like a class
 SHARE = 0.2  # a trajectory "runs over" a class when at least this share of its points do
@@ -72,9 +73,7 @@ class PairEvidence:
         return f"{self.first} > {self.second}: margin {self.margin:.2f}{interval}, {seen}"
 
     def to_dict(self) -> dict:
-        return {"first": self.first, "second": self.second, "frames": self.frames, "for_first": self.for_first,
-                "for_second": self.for_second, "sides": list(self.sides), "margin": self.margin,
-                "stderr": self.stderr, "identified": self.identified}
+        return {**to_plain(self), "identified": self.identified}
 
 
 @dataclass(frozen=True)

@@ -1,49 +1,85 @@
-"""Model files: weights in safetensors, configuration and provenance in its JSON metadata.
+"""Model files: weights in safetensors, configuration and provenance in its JSON metadata (the
+header, :class:`~terrapref.learning.header.ModelHeader`).
 
 Loading reads tensors and a JSON header only; no code from the file is ever executed.
-
-The header's ``stages`` lists the decision stages fitted with C, one block each under its
-``type`` (terrapref.planner.stages reads them). Files written before stages were listed carry
-the second stage's linear utility as ``utility`` and the offset stage's as ``corridor``; they are
-read as the same stages (:func:`stage_blocks`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from terrapref.camera import CameraConfig
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
+from terrapref.learning.header import CLASSIFIER, FORMAT, Block, ModelHeader, model_context, stage_blocks
 from terrapref.learning.network import MEMBERS, ClassifierConfig, member_prefix
 from terrapref.tensorfile import read_tensor_file, write_tensor_file
 from terrapref.terrain import ClassTable
 
-FORMAT = "terrapref-model/1"
-CLASSIFIER = "classifier"  # the metadata's "kind" of C; baselines write their own kinds
+__all__ = ["CLASSIFIER", "FORMAT", "LoadedModel", "check_compatible", "classifier_from", "expected_shapes", "load_model", "model_context",
+           "read_model_file", "save_model", "stage_blocks", "write_model"]
 
 
 @dataclass(frozen=True)
 class LoadedModel:
-    """A trained classifier and everything it was trained under."""
+    """A trained classifier and everything it was trained under.
+
+    Attributes:
+        path: the file it was read from.
+        header: its header, checked.
+        weights: C's weights, by PyTorch state-dict name.
+        meta: the header as the file holds it (entries this version does not read included).
+    """
 
     path: str
-    classifier: ClassifierConfig
+    header: ModelHeader
     weights: dict[str, np.ndarray]
-    features: FeatureConfig
-    camera: CameraConfig
-    classes: ClassTable
-    profile: tuple[str, ...]
     meta: dict
-    stages: tuple[dict, ...] = ()  # the decision stages' blocks, in order (terrapref.planner.stages reads them)
+
+    @property
+    def classifier(self) -> ClassifierConfig:
+        return self.header.classifier
+
+    @property
+    def features(self) -> FeatureConfig:
+        return self.header.features
+
+    @property
+    def camera(self) -> CameraConfig:
+        return self.header.camera
+
+    @property
+    def classes(self) -> ClassTable:
+        return self.header.classes
+
+    @property
+    def profile(self) -> tuple[str, ...]:
+        return self.header.profile or ()
+
+    @property
+    def stages(self) -> tuple[Block, ...]:
+        """The decision stages' blocks, in order (terrapref.planner.stages reads them)."""
+        return self.header.stages or ()
 
 
-def save_model(path: str | Path, classifier: ClassifierConfig, weights: dict[str, np.ndarray], meta: dict) -> Path:
-    """Write weights and metadata atomically. ``meta`` must hold features, camera, classes, profile."""
-    header = {"format": FORMAT, "kind": CLASSIFIER, "classifier": classifier.to_dict(), **meta}
+def write_model(path: str | Path, header: ModelHeader, weights: dict[str, np.ndarray]) -> Path:
+    """Write C's weights under ``header``, atomically."""
+    return _write(path, weights, header.to_dict())
+
+
+def save_model(path: str | Path, classifier: ClassifierConfig, weights: dict[str, np.ndarray], meta: Mapping[str, Any]) -> Path:
+    """Write C's weights under a header given as a mapping (made by hand: tests, tools), atomically;
+    ``meta`` holds the entries after ``format``, ``kind`` and ``classifier``, at least features,
+    camera, classes and profile. Training writes a :class:`ModelHeader` (:func:`write_model`)."""
+    return _write(path, weights, {"format": FORMAT, "kind": CLASSIFIER, "classifier": classifier.to_dict(), **meta})
+
+
+def _write(path: str | Path, weights: dict[str, np.ndarray], header: dict[str, Any]) -> Path:
     return write_tensor_file(path, {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in weights.items()}, header)
 
 
@@ -62,16 +98,8 @@ def load_model(path: str | Path) -> LoadedModel:
 
 def classifier_from(weights: dict[str, np.ndarray], meta: dict, source: str) -> LoadedModel:
     """Check and assemble C from a model file's tensors and metadata (see :func:`read_model_file`)."""
-    if meta["kind"] != CLASSIFIER:
-        raise UserError(source, f"holds a {meta['kind']!r} model, not the classifier C", field="kind")
-    features, camera, classes, profile = model_context(meta, source)
-    try:
-        classifier = ClassifierConfig.from_dict(meta["classifier"])
-    except KeyError as exc:
-        raise UserError(source, "missing", field=str(exc.args[0])) from None
-    except (TypeError, ValueError) as exc:
-        field = "classifier.channels" if "channels" in str(exc) else "classifier"
-        raise UserError(source, f"invalid configuration: {exc}", field=field) from None
+    header = ModelHeader.from_dict(meta, source)
+    classifier, features = header.classifier, header.features
     # The header's member count is checked against the weights before shapes are built from it.
     members = {name.split(".")[1] for name in weights if name.startswith(f"{MEMBERS}.")}
     if members != ({str(j) for j in range(classifier.members)} if classifier.members > 1 else set()):
@@ -86,50 +114,7 @@ def classifier_from(weights: dict[str, np.ndarray], meta: dict, source: str) -> 
             raise UserError(source, f"expected finite floats, got {weights[name].dtype}" + (" with NaN or infinite values" if weights[name].dtype.kind == "f" else ""), field=f"weights.{name}")
     if classifier.m != features.preference.m or classifier.n_features != features.n_features:
         raise UserError(source, "classifier shape does not match its feature configuration", field="classifier")
-    return LoadedModel(source, classifier, weights, features, camera, classes, profile, meta, stage_blocks(meta, features, source))
-
-
-def stage_blocks(meta: dict, features: FeatureConfig, source: str) -> tuple[dict, ...]:
-    """The header's ``stages`` (a list of mappings, each with a ``type``), or, in a file written
-    before stages were listed, its ``utility`` (the second stage; fitted through the look-ahead's
-    ``after_s`` and ``stride`` when the features carry one) and ``corridor`` (the offset stage,
-    which drove), in that order."""
-    if "stages" in meta:
-        blocks = meta["stages"]
-        if not isinstance(blocks, list):
-            raise UserError(source, "expected a list of stages", field="stages")
-        for i, block in enumerate(blocks):
-            if not isinstance(block, dict) or not isinstance(block.get("type"), str):
-                raise UserError(source, "expected a mapping with a type", field=f"stages[{i}]")
-        return tuple(blocks)
-    blocks = []
-    for key, kind in (("utility", "second_stage"), ("corridor", "offset")):
-        data = meta.get(key)
-        if data is None:
-            continue
-        if not isinstance(data, dict):
-            raise UserError(source, "expected a mapping", field=key)
-        look = features.lookahead if key == "utility" and features.lookahead is not None else None
-        defaults = {"weight": 1.5, **({"after_s": look.after_s, "stride": look.stride} if look else {})} if key == "utility" else {}
-        blocks.append({"type": kind, **defaults, **data})
-    return tuple(blocks)
-
-
-def model_context(meta: dict, source: str) -> tuple[FeatureConfig, CameraConfig, ClassTable, tuple[str, ...]]:
-    """The configuration every model file carries: features, camera, classes, profile."""
-    for key in ("features", "camera", "classes"):
-        if key in meta and not isinstance(meta[key], dict):
-            raise UserError(source, "expected a mapping", field=key)
-    try:
-        features = FeatureConfig.from_dict(meta["features"])
-        camera = CameraConfig.from_dict(meta["camera"])
-        classes = ClassTable.from_dict(meta["classes"], source)
-        profile = tuple(meta["profile"])
-    except KeyError as exc:
-        raise UserError(source, "missing", field=str(exc.args[0])) from None
-    except (TypeError, ValueError) as exc:
-        raise UserError(source, f"invalid configuration: {exc}", field="metadata") from None
-    return features, camera, classes, profile
+    return LoadedModel(source, header, weights, meta)
 
 
 def expected_shapes(c: ClassifierConfig) -> dict[str, tuple[int, ...]]:

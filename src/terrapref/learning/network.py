@@ -11,11 +11,12 @@ check both against.
 from __future__ import annotations
 
 import numbers
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
 from terrapref.configargs import option
+from terrapref.records import from_plain, to_plain
 
 ACTIVATIONS = ("relu", "tanh", "elu")
 MAX_WEIGHTS = 50_000_000  # 200 MB of float32 per model; C has about 10,000
@@ -80,7 +81,7 @@ class ClassifierConfig:
         return self.members * per_member
 
     def to_dict(self) -> dict:
-        return {**asdict(self), "ignore": list(self.ignore)}
+        return to_plain(self)
 
     @property
     def width_in(self) -> int:
@@ -95,7 +96,7 @@ class ClassifierConfig:
         if data.get("channels", 1) != 1:
             raise ValueError(f"channels {data['channels']!r}: more than one compression output per trajectory is no longer supported; train the model again")
         data.pop("channels", None)
-        return cls(**data)
+        return from_plain(cls, data)
 
 
 def _act(name: str, x: np.ndarray) -> np.ndarray:

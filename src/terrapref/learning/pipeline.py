@@ -5,42 +5,49 @@ from __future__ import annotations
 import math
 import shutil
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from terrapref.dataset import Dataset
 from terrapref.fileio import new_folder, replace_dir
-from terrapref.learning.model_file import save_model
+from terrapref.learning.header import CHECKPOINT, INTERRUPTED, DataSource, Interruption, MemberRun, ModelHeader
+from terrapref.learning.model_file import write_model
 from terrapref.learning.network import ClassifierConfig, member_prefix
 from terrapref.learning.train import EpochMetrics, StageFit, TrainConfig, TrainResult, train
+from terrapref.terrain import ClassTable
 
 
-def _source_meta(dataset: Dataset, config: TrainConfig, recipe: str | None) -> dict:
-    """What every file of one training carries, known before it starts: recipe, configuration, data."""
-    return {
-        **({"recipe": recipe} if recipe else {}),
-        "features": dataset.meta["features"],
-        "camera": dataset.meta["camera"],
-        "classes": dataset.meta["classes"],
-        "profile": dataset.meta["profile"],
-        "training": config.to_dict(),
-        "data": {"fingerprint": dataset.fingerprint, "samples": len(dataset), "recordings": dataset.meta.get("recordings", [])},
-    }
+@dataclass(frozen=True)
+class RunOptions:
+    """How :func:`train_and_save` runs, besides what it trains; none of it changes the model.
+
+    Attributes:
+        checkpoints: write every epoch as a checkpoint beside the model.
+        progress: called with every epoch's scores as it ends.
+        identify: also report what the demonstrations identify, as :func:`train`'s ``identify``.
+    """
+
+    checkpoints: bool = True
+    progress: Callable[[EpochMetrics], None] | None = None
+    identify: bool = True
 
 
-def model_meta(dataset: Dataset, config: TrainConfig, result: TrainResult, source: dict) -> dict:
-    """A model's metadata: ``source`` (:func:`_source_meta`) and what the training produced."""
-    return {
-        **source,
-        "history": [asdict(h) for h in result.history],
-        "best_epoch": result.best_epoch,
-        "steps": result.steps,
-        **({"identifiability": result.identifiability.to_dict()} if result.identifiability is not None else {}),
-        **({"steadying": result.steadying.to_dict()} if result.steadying is not None else {}),
-        "stages": [stage.header() for stage in result.stages],
-        **({"members": [{"seed": seed, "best_epoch": r.best_epoch, "history": [asdict(h) for h in r.history]}
-                        for seed, r in zip(config.member_seeds, result.members)]} if result.members else {}),
-    }
+def source_header(dataset: Dataset, config: TrainConfig, recipe: str | None = None) -> ModelHeader:
+    """What every file of one training carries, known before it starts: the recipe, the
+    configuration and the data (its classifier, the configured one, is each file's own)."""
+    profile = dataset.meta["profile"]
+    return ModelHeader(classifier=config.classifier, recipe=recipe or None, features=dataset.feature_config, camera=dataset.camera_config,
+                       classes=ClassTable.from_dict(dataset.meta["classes"], "dataset"), profile=tuple(profile) if profile is not None else None,
+                       training=config.to_dict(), data=DataSource(dataset.fingerprint, len(dataset), tuple(dataset.meta.get("recordings") or ())))
+
+
+def model_header(config: TrainConfig, result: TrainResult, source: ModelHeader) -> ModelHeader:
+    """A model's header: ``source`` (:func:`source_header`) and what the training produced."""
+    members = tuple(MemberRun(seed, r.best_epoch, tuple(r.history)) for seed, r in zip(config.member_seeds, result.members))
+    return replace(source, classifier=result.classifier, history=tuple(result.history), best_epoch=result.best_epoch, steps=result.steps,
+                   identifiability=result.identifiability.to_dict() if result.identifiability is not None else None,
+                   steadying=result.steadying.to_dict() if result.steadying is not None else None,
+                   stages=tuple(stage.header() for stage in result.stages), members=members or None, epoch=result.best_epoch)
 
 
 def interrupted_path(out: str | Path) -> Path:
@@ -52,11 +59,12 @@ def interrupted_path(out: str | Path) -> Path:
 class _Checkpoints:
     """Every epoch written as it is made, into a fresh folder beside the model's; swapped in for
     the old one only when training completes, so a retrain never mixes two runs' checkpoints.
-    Also the best epoch so far of each member, for an interrupted run."""
+    Also the best epoch so far of each member, for an interrupted run. ``header``: what every
+    file of the run carries (:func:`source_header`, with the member count)."""
 
-    def __init__(self, out: Path, meta: dict, write: bool) -> None:
+    def __init__(self, out: Path, header: ModelHeader, write: bool) -> None:
         self.final = out.with_name(out.stem + ".checkpoints")
-        self.meta, self.write = meta, write
+        self.header, self.write = header, write
         self.folder = new_folder(self.final, "") if write else None
         self.best: dict[int, tuple[float, int, ClassifierConfig, dict]] = {}  # member -> (loss, epoch, classifier, weights)
 
@@ -65,8 +73,8 @@ class _Checkpoints:
         if member not in self.best or loss < self.best[member][0]:
             self.best[member] = (loss, m.epoch, classifier, weights)
         if self.write:
-            name = f"epoch_{m.epoch:03d}.safetensors" if self.meta["members"] == 1 else f"member_{member + 1}/epoch_{m.epoch:03d}.safetensors"
-            save_model(self.folder / name, classifier, weights, {**self.meta, "member": member + 1, "epoch": m.epoch, "status": "checkpoint"})
+            name = f"epoch_{m.epoch:03d}.safetensors" if self.header.member_count == 1 else f"member_{member + 1}/epoch_{m.epoch:03d}.safetensors"
+            write_model(self.folder / name, replace(self.header, classifier=classifier, member=member + 1, epoch=m.epoch, status=CHECKPOINT), weights)
 
     def finish(self) -> None:
         if self.folder is not None:
@@ -93,34 +101,30 @@ class _Checkpoints:
         else:
             classifier = replace(classifier, members=len(members))
             weights = {member_prefix(j) + k: v for j, (_, _, _, w) in enumerate(members) for k, v in w.items()}
-        meta = {**self.meta, "status": "interrupted",
-                "interrupted": {"members_reached": len(members), "best_epochs": [e for _, e, _, _ in members],
-                                "note": "training was interrupted: the best epochs so far, without the decision stages or the identifiability report"}}
-        meta.pop("members", None)
-        return save_model(interrupted_path(out), classifier, weights, meta)
+        header = replace(self.header, classifier=classifier, member_count=None, status=INTERRUPTED,
+                         interrupted=Interruption(len(members), tuple(e for _, e, _, _ in members)))
+        return write_model(interrupted_path(out), header, weights)
 
 
-def train_and_save(dataset: Dataset, out: str | Path, config: TrainConfig, checkpoints: bool = True,
-                   progress: Callable[[EpochMetrics], None] | None = None, recipe: str | None = None, identify: bool = True,
-                   stages: Sequence[StageFit] = ()) -> TrainResult:
-    """Train, write every epoch as a checkpoint as it is made and the chosen epoch as the model;
-    ``recipe`` (its name) is recorded in the model's metadata; ``identify`` and ``stages`` (the
-    decision stages to fit with C) as :func:`train`'s.
+def train_and_save(dataset: Dataset, out: str | Path, config: TrainConfig, stages: Sequence[StageFit] = (), recipe: str | None = None,
+                   options: RunOptions = RunOptions()) -> TrainResult:
+    """Train C and fit the decision ``stages`` with it (as :func:`train`), write every epoch as a
+    checkpoint as it is made and the chosen epoch as the model; ``recipe`` (its name) is recorded
+    in the model's header.
 
     Interrupted (Ctrl-C, or any error but a failed write) after at least one epoch, the best
-    epochs so far are written as ``NAME.interrupted.safetensors`` beside ``out`` (metadata
+    epochs so far are written as ``NAME.interrupted.safetensors`` beside ``out`` (header
     ``status: interrupted``), its checkpoints as ``NAME.checkpoints.interrupted``; ``out`` and
     its old checkpoints are left as they were. A write that fails (a full disk) leaves nothing of
     this run behind.
     """
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    source = _source_meta(dataset, config, recipe)  # the data's fingerprint hashes every sample: once
-    saver = _Checkpoints(out, {**source, "members": config.classifier.members}, checkpoints)
+    source = source_header(dataset, config, recipe)  # the data's fingerprint hashes every sample: once
+    saver = _Checkpoints(out, replace(source, member_count=config.classifier.members), options.checkpoints)
     try:
-        result = train(dataset, config, progress, on_epoch=saver, identify=identify, stages=stages)
-        meta = model_meta(dataset, config, result, source)
-        save_model(out, result.classifier, result.weights, {**meta, "epoch": result.best_epoch})
+        result = train(dataset, config, options.progress, on_epoch=saver, identify=options.identify, stages=stages)
+        write_model(out, model_header(config, result, source), result.weights)
     except OSError as exc:  # a file could not be written (a full disk): nothing of this run is left to fill it further
         saver.discard()
         written = Path(exc.filename) if exc.filename else out

@@ -12,7 +12,7 @@ from __future__ import annotations
 import copy
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
+from dataclasses import dataclass, field, fields, is_dataclass, replace
 from typing import Any, Protocol, get_args, get_type_hints
 
 import numpy as np
@@ -25,6 +25,7 @@ from terrapref.learning.linear import LinearUtility, fit_linear_utility, fit_loo
 from terrapref.learning.mlp import Adam, TrainableClassifier, cross_entropy, init_weights, round_inputs
 from terrapref.learning.steady import Steadying, steady_labels
 from terrapref.learning.network import ClassifierConfig, member_prefix
+from terrapref.records import to_plain
 from terrapref.terrain import ClassTable
 
 
@@ -124,8 +125,7 @@ class TrainConfig:
         """As a model's metadata holds it (``training``); the classifier's m, n_features and
         ignored columns come from the data and are in the model's ``classifier``."""
         shape = {k: v for k, v in self.classifier.to_dict().items() if k not in ("m", "n_features", "ignore")}
-        return {"optimiser": asdict(self.optimiser), "classifier": shape,
-                "data": {**asdict(self.data), "ignore_features": list(self.data.ignore_features)}, "seed": self.seed}
+        return {"optimiser": to_plain(self.optimiser), "classifier": shape, "data": to_plain(self.data), "seed": self.seed}
 
 
 def _updated(config: Any, changes: Mapping[str, Any]) -> Any:

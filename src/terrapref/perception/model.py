@@ -40,12 +40,13 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any, NamedTuple
 
 from terrapref.errors import ConfigError, Problem, UserError
+from terrapref.records import to_plain
 from terrapref.terrain import ClassTable
 from terrapref.yamlio import read_yaml_mapping
 
@@ -192,9 +193,8 @@ class PerceptionModel:
         """As terrapref-perception/1 holds it (every field), with the name."""
         out: dict[str, Any] = {"format": FORMAT, "name": self.name}
         for section in _SECTIONS:
-            values = asdict(getattr(self, section))
+            values = to_plain(getattr(self, section))
             if section == "labels":
-                values["blob_radius_px"] = list(self.labels.blob_radius_px)
                 values["confusion"] = self.labels.confusion_dict()
             out[section] = values
         return out

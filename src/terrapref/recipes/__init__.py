@@ -38,7 +38,7 @@ from terrapref.demos.meta import CorrectionRoundInfo, ExpertInfo, RecordingMeta,
 from terrapref.demos.session import DisturbanceConfig, RunSettings, record_run
 from terrapref.features import FeatureConfig
 from terrapref.learning.model_file import load_model
-from terrapref.learning.pipeline import train_and_save
+from terrapref.learning.pipeline import RunOptions, train_and_save
 from terrapref.learning.network import ClassifierConfig
 from terrapref.learning.train import DataOptions, OptimiserConfig, TrainConfig, TrainResult
 from terrapref.perception import PerceptionModel
@@ -252,7 +252,7 @@ def run_recipe(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Cal
     corr_s = 0.0
     train_cfg = replace(recipe.train, seed=seed)
     model = own / "model.safetensors"
-    result = train_and_save(build_dataset(recordings, features), model, train_cfg, checkpoints=False, recipe=recipe.name, stages=recipe.stages)
+    result = train_and_save(build_dataset(recordings, features), model, train_cfg, stages=recipe.stages, recipe=recipe.name, options=RunOptions(checkpoints=False))
     if recipe.corrections:  # the planner drives the course; only then is a simulation needed here
         camera, sim_cfg = CameraConfig(), SimConfig()
         expert_cfg = ExpertConfig.styled(setup.style, profile.order)
@@ -267,7 +267,7 @@ def run_recipe(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Cal
         corr_s += run.duration_s
         recordings.append(read_recording(out))
         paths.append(out)
-        result = train_and_save(build_dataset(recordings, features), model, train_cfg, checkpoints=False, recipe=recipe.name, stages=recipe.stages)
+        result = train_and_save(build_dataset(recordings, features), model, train_cfg, stages=recipe.stages, recipe=recipe.name, options=RunOptions(checkpoints=False))
         if log:
             log(f"correction session {r + 1}/{recipe.corrections}: {len(recordings[-1])} frames, retrained")
     return RecipeOutput(model, paths, result, demo_s / 60.0, corr_s / 60.0)

@@ -101,19 +101,22 @@ def _onnx_lines(p: Path) -> list[str]:
     c = meta.get("classifier", {})
     return [f"{p}: C exported as ONNX ({meta.get('format', 'no terrapref metadata')})",
             f"network         {c.get('members', 1)} member(s), hidden {c.get('hidden')}, {c.get('activation')}, skip {c.get('skip')}",
-            *_stage_lines(meta, " (in the metadata, not the graph)")] + _common(meta) + _identifiability(meta)
+            *_stage_lines(meta, str(p), " (in the metadata, not the graph)")] + _common(meta) + _identifiability(meta)
 
 
-def _stage_lines(meta: dict, offset_note: str = "") -> list[str]:
+def _stage_lines(meta: dict, source: str, offset_note: str = "") -> list[str]:
     """The second stage's line (its weight, or none) and the offset stage's (it drives, with its
-    near distance; or none), from the header's ``stages`` (or, in older files, ``utility`` and ``corridor``)."""
-    if isinstance(meta.get("stages"), list):
-        blocks = [b for b in meta["stages"] if isinstance(b, dict)]
-    else:
-        blocks = [{"type": t, **meta[k]} for k, t in (("utility", "second_stage"), ("corridor", "offset")) if isinstance(meta.get(k), dict)]
-    second = next((b for b in blocks if b.get("type") == "second_stage"), None)
-    offset = next((b for b in blocks if b.get("type") == "offset"), None)
-    return [f"second stage    {'weight ' + str(second.get('weight', 1.5)) if second is not None else 'none'}",
+    near distance; or none), from the stages the header lists (older files' ``utility`` and
+    ``corridor`` read as the same stages); a damaged list is said to be one."""
+    from terrapref.learning.header import stage_blocks
+
+    try:
+        blocks = stage_blocks(meta, source) or ()
+    except UserError as exc:
+        return [f"stages          unreadable ({exc.problems[0].format('')})"]
+    second = next((b for b in blocks if b["type"] == "second_stage"), None)
+    offset = next((b for b in blocks if b["type"] == "offset"), None)
+    return [f"second stage    {'weight ' + str(second.get('weight', '?')) if second is not None else 'none'}",
             f"offset stage    " + (f"drives (corridor utility, near distance {offset.get('near_m', '?')} m){offset_note}" if offset is not None
                                    else "none (C's trajectories drive)")]
 
@@ -151,13 +154,15 @@ def _dataset_lines(p: Path, meta: dict, shapes: dict[str, tuple[int, ...]]) -> l
 
 def _model_lines(p: Path, meta: dict) -> list[str]:
     """A model: its state, recipe, network, second stage, training data and chosen epoch."""
+    from terrapref.learning.header import CHECKPOINT, CLASSIFIER, INTERRUPTED
+
     c = meta.get("classifier", {}) if isinstance(meta.get("classifier"), dict) else {}
     data = meta.get("data", {}) if isinstance(meta.get("data"), dict) else {}
-    lines = [f"{p}: terrapref model ({meta.get('kind', 'classifier')}" + (", INTERRUPTED: the best epochs so far, no decision stages" if meta.get("status") == "interrupted" else "")
-             + (f", checkpoint of epoch {meta.get('epoch')}" if meta.get("status") == "checkpoint" else "") + ")",
+    lines = [f"{p}: terrapref model ({meta.get('kind', CLASSIFIER)}" + (", INTERRUPTED: the best epochs so far, no decision stages" if meta.get("status") == INTERRUPTED else "")
+             + (f", checkpoint of epoch {meta.get('epoch')}" if meta.get("status") == CHECKPOINT else "") + ")",
              f"recipe          {meta.get('recipe', '?')}",
              f"network         {c.get('members', 1)} member(s), hidden {c.get('hidden')}, {c.get('activation')}, skip {c.get('skip')}",
-             *_stage_lines(meta),
+             *_stage_lines(meta, str(p)),
              f"data            {data.get('samples', '?')} samples, fingerprint {data.get('fingerprint', '?')}, {len(data.get('recordings', []) or [])} recording(s)"]
     return lines + _training(meta) + _common(meta) + _identifiability(meta)
 

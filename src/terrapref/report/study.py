@@ -42,6 +42,7 @@ from terrapref.features import FeatureConfig
 from terrapref.perception import PerceptionModel, load_perception
 from terrapref.progress import every_tenth
 from terrapref.recipes import OURS
+from terrapref.records import to_plain
 from terrapref.report.reproduce import scenario_length
 from terrapref.report.study_plan import FULL, StudyPlan, TrainedModel, TrainJob
 from terrapref.report.study_report import ALT_PROFILE, ModelVariant, RunTag, StudyRun, agreement, write_study
@@ -114,8 +115,7 @@ class TeachJob:
 
     def to_dict(self) -> dict:
         """As study.json holds it, as the teaching part's C."""
-        return {"study": "teach", "method": "C", "seed": self.seed, "order": list(self.order), "style": self.style, "epochs": self.epochs,
-                "recipe": self.recipe, "workdir": self.workdir}
+        return {"study": "teach", "method": "C", **to_plain(self)}
 
 
 @dataclass(frozen=True)
@@ -157,7 +157,7 @@ def _train_on_utilities(job: TrainJob) -> int:
     """Fit the linear utility, or train C, on the job's utilities; returns how many samples it learned from."""
     from terrapref.dataset import Dataset, load_dataset
     from terrapref.learning.linear import fit_linear_utility
-    from terrapref.learning.pipeline import train_and_save
+    from terrapref.learning.pipeline import RunOptions, train_and_save
     from terrapref.planner.policy import save_linear
 
     n = _frames_for(job.minutes)
@@ -169,7 +169,7 @@ def _train_on_utilities(job: TrainJob) -> int:
         save_linear(job.out, fit_linear_utility(ds.U, ds.labels), meta)
     else:
         # C's models are compared by how they drive; what the data identify is the teaching section's question
-        train_and_save(ds, job.out, _c_config(job), checkpoints=False, identify=False)
+        train_and_save(ds, job.out, _c_config(job), options=RunOptions(checkpoints=False, identify=False))
     return len(ds)
 
 

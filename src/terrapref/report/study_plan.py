@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from terrapref.recipes import TEACH
+from terrapref.records import to_plain
 from terrapref.report.reproduce import TEST_SET, variations
 
 # The orders the teaching study trains on: the paper's, then the others that put each of rock
@@ -88,10 +89,7 @@ class TrainJob:
 
     def to_dict(self) -> dict:
         """As study.json holds it: the optional fields only where set."""
-        job = {"study": self.study, "method": self.method, "seed": self.seed, "data": self.data, "out": self.out,
-               "epochs": self.epochs, "cnn_epochs": self.cnn_epochs, "tag": self.tag}
-        extra = {"minutes": self.minutes, "train": self.train, "variant": self.variant}
-        return job | {k: v for k, v in extra.items() if v is not None}
+        return to_plain(self, omit_none=("minutes", "train", "variant"))
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from terrapref.errors import ConfigError, Problem
+from terrapref.records import to_plain
 from terrapref.yamlio import read_yaml_mapping
 
 UNKNOWN = 255
@@ -99,7 +100,7 @@ class ClassTable:
             "background": self.background,
             "lethal": list(self.lethal),
             "profile": list(self.profile),
-            "classes": [{"id": c.id, "name": c.name, "color": list(c.color)} for c in self.classes],
+            "classes": [to_plain(c) for c in self.classes],
         }
 
     @classmethod

@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from terrapref.records import to_plain
+
 
 @dataclass(frozen=True)
 class ControlSet:
@@ -56,7 +58,7 @@ class ControlSet:
         return int(idx) if np.ndim(w) == 0 else idx
 
     def to_dict(self) -> dict:
-        return {"v_mps": self.v_mps, "w_rps": list(self.w_rps)}
+        return to_plain(self)
 
     @classmethod
     def from_dict(cls, data: dict) -> ControlSet:
