@@ -71,6 +71,10 @@ def _damage(rec: Path, how: str) -> None:
         meta = json.loads((rec / "meta.json").read_text())
         meta["camera"] = "x"
         (rec / "meta.json").write_text(json.dumps(meta))
+    elif how == "no profile":
+        meta = json.loads((rec / "meta.json").read_text())
+        meta.pop("profile")
+        (rec / "meta.json").write_text(json.dumps(meta))
     elif how == "class 200":
         path = rec / "images" / "000003.png"
         image = np.asarray(Image.open(path)).copy()
@@ -84,7 +88,7 @@ def _damage(rec: Path, how: str) -> None:
 
 @pytest.mark.parametrize("how,needle", [
     ("truncated", "frames.jsonl"), ("reversed", "frames.jsonl"), ("nan pose", "line 6.pose"), ("empty", "frames.jsonl"),
-    ("scenario list", "scenario.yaml"), ("camera str", "camera"), ("class 200", "000003.png"), ("rgb frame", "000003.png"),
+    ("scenario list", "scenario.yaml"), ("camera str", "camera"), ("no profile", "profile"), ("class 200", "000003.png"), ("rgb frame", "000003.png"),
     ("small frame", "000003.png"),
 ])
 def test_a_broken_recording_is_refused_by_featurize(tmp_path: Path, capsys, recording, how, needle):
