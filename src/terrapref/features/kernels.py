@@ -1,10 +1,14 @@
-"""The utility features' per-frame arithmetic, compiled (Numba) for the planner's control loop.
+"""The features' per-frame arithmetic, compiled (Numba) for the planner's control loop: the
+utility features U, the ground map's votes and reads, the corridor's features, and the camera's
+attitude from the sky line.
 
-On one frame the features are a few hundred pixels and a few dozen distances: NumPy's call
-overhead, not its arithmetic, set their cost. Each loop here does, element by element, exactly
+On one frame the utility features are a few hundred pixels and a few dozen distances, the
+corridor a few thousand map cells: NumPy's call overhead, not its arithmetic, set their cost,
+and a frame's ground samples (about 16,000) are a loop, not a vector. Each loop here does, element by element, exactly
 the IEEE 754 operations of the NumPy form its docstring gives, in the same order (compiled
 without fast-math: nothing is reassociated or fused into a multiply-add), so the features, and
-every decision made from them, are the same bits as before (tests/test_features.py compares).
+every decision made from them, are the same bits as the NumPy forms give (tests/test_features.py
+and tests/test_offset_kernels.py compare).
 """
 
 from __future__ import annotations

@@ -2,8 +2,8 @@
 written by :meth:`ModelHeader.to_dict` and read back by :meth:`ModelHeader.from_dict`, here and
 nowhere else (training writes it, loading and ``terrapref info`` read it).
 
-The header is the file's JSON metadata. Its entries keep a fixed order, so that a model written
-today is the same file, byte for byte, as one written before this record existed::
+The header is the file's JSON metadata. Its entries keep a fixed order, so that the same
+training writes the same file, byte for byte::
 
     format, kind, classifier         what the file is, and C's shape
     recipe                           the recipe that made it (absent: none named)
@@ -19,9 +19,9 @@ today is the same file, byte for byte, as one written before this record existed
     status, interrupted              ``checkpoint`` or ``interrupted`` (absent: a finished model),
                                      and what an interrupted training reached
 
-A header made by hand (tests, tools) may hold only the configuration. Files written before
-stages were listed carry the second stage's linear utility as ``utility`` and the offset
-stage's as ``corridor``; they are read as the same stages (:func:`stage_blocks`).
+A header made by hand (tests, tools) may hold only the configuration. A file without
+``stages`` may carry the second stage's linear utility as ``utility`` and the offset stage's as
+``corridor``; they are read as the same stages (:func:`stage_blocks`).
 """
 
 from __future__ import annotations
@@ -187,8 +187,8 @@ def model_context(meta: Mapping[str, Any], source: str) -> tuple[FeatureConfig, 
 def stage_blocks(meta: Mapping[str, Any], source: str, lookahead: LookaheadConfig | None = None) -> tuple[Block, ...] | None:
     """The decision stages a header lists, in order; None when it lists none.
 
-    They are its ``stages`` (a list of mappings, each with a ``type``) or, in a file written
-    before stages were listed, its ``utility`` (the second stage, of weight
+    They are its ``stages`` (a list of mappings, each with a ``type``) or, in a file without
+    them, its ``utility`` (the second stage, of weight
     :data:`LEGACY_SECOND_STAGE_WEIGHT` unless it names one; fitted through ``lookahead``, the
     features' look-ahead, at its ``after_s`` and ``stride`` when there is one) and its
     ``corridor`` (the offset stage, which drove). Only the blocks' shape is checked here; each

@@ -106,8 +106,8 @@ def _onnx_lines(p: Path) -> list[str]:
 
 def _stage_lines(meta: dict, source: str, offset_note: str = "") -> list[str]:
     """The second stage's line (its weight, or none) and the offset stage's (it drives, with its
-    near distance; or none), from the stages the header lists (older files' ``utility`` and
-    ``corridor`` read as the same stages); a damaged list is said to be one."""
+    near distance; or none), from the stages the header lists (a file without them: its ``utility`` and
+    ``corridor`` blocks, read as the same stages); a damaged list is said to be one."""
     from terrapref.learning.header import stage_blocks
 
     try:
