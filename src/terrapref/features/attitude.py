@@ -81,4 +81,4 @@ class HorizonAttitude:
             return 0.0, 0.0
         if self._reference is None or self._frames % REFERENCE_EVERY == 0 or self._frames < 2 * REFERENCE_EVERY:
             self._reference = kernels.column_medians(self._history, min(self._frames, self.memory), self._row_values)
-        return kernels.attitude_fit(now - self._reference, self._reference, self._u, self.fx, self.fy, self.cy, self.max_rad)
+        return kernels.attitude_fit(now - self._reference, self._reference, self._u, self.fy, self.cy, self.max_rad)

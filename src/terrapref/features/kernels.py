@@ -370,11 +370,11 @@ def column_medians(history: np.ndarray, count: int, rows: np.ndarray) -> np.ndar
             out[c] = np.nan
             continue
         # The values of rank n // 2 (and n // 2 - 1, for an even n), counting from 0.
-        low, high = -1.0, -1.0
+        low, high = np.nan, np.nan
         seen = 0
         for b in range(n_bins):
             seen += counts[b]
-            if low < 0 and seen > (n - 1) // 2:
+            if np.isnan(low) and seen > (n - 1) // 2:
                 low = rows[b]
             if seen > n // 2:
                 high = rows[b]
@@ -477,12 +477,13 @@ def _gradient(f: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
-def attitude_fit(departure: np.ndarray, reference: np.ndarray, u: np.ndarray, fx: float, fy: float, cy: float,
-                 max_rad: float) -> tuple[float, float]:
+def attitude_fit(departure: np.ndarray, reference: np.ndarray, u: np.ndarray, fy: float, cy: float, max_rad: float) -> tuple[float, float]:
     """(pitch, roll) [rad] off the mount from the sky line's ``departure`` (C,) [rows] from its
     ``reference`` (C,) at column offsets ``u`` (C,) [px]; (0, 0) when fewer than half the columns
-    support it. The NumPy form: ``HorizonAttitude._fit`` (tests/test_perception.py keeps it), with
-    :func:`exact_sum` for its ``math.fsum``."""
+    support it, or the estimate exceeds ``max_rad``. The least squares of
+    terrapref.features.attitude's module docstring, twice (the second time without the columns
+    that miss the first fit by more than 3 rows), with exactly rounded sums (:func:`exact_sum`);
+    tests/test_offset_kernels.py keeps its NumPy form and compares."""
     n = departure.shape[0]
     ok = np.empty(n, np.bool_)
     good = 0
