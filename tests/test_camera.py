@@ -336,7 +336,18 @@ def test_render_does_not_reuse_a_returned_frame():
 def _numpy_render(renderer: SegmentationRenderer, pose: Pose) -> np.ndarray:
     """The renderer's formula as a dozen vectorised NumPy passes (how it rendered before its loops
     were compiled): the compiled kernels must give these class ids, pixel for pixel."""
-    A, B = renderer._cells(pose)
+    # Each visible row's padded-raster cell of column offset 0 and its change per column: the
+    # ground points rotated by the yaw into the world frame, then to cells (+1 for the border).
+    x, y, yaw = pose
+    res = renderer.world.resolution_m
+    c, s = math.cos(yaw), math.sin(yaw)
+    P, Q = renderer._P, renderer._Q
+    A = np.empty(P.shape, np.float32)
+    B = np.empty(Q.shape, np.float32)
+    A[:, 0] = (x + (P[:, 0] * c - P[:, 1] * s)) / res + 1.0
+    A[:, 1] = (y + (P[:, 0] * s + P[:, 1] * c)) / res + 1.0
+    B[:, 0] = (Q[:, 0] * c - Q[:, 1] * s) / res
+    B[:, 1] = (Q[:, 0] * s + Q[:, 1] * c) / res
     ny, nx = renderer.world.raster.shape
     u = renderer._u
     gx = np.clip(np.multiply.outer(B[:, 0], u) + A[:, 0:1], 0.0, nx + 2 - 1e-2)

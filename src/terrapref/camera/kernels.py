@@ -21,46 +21,50 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
-def render_rows(A: np.ndarray, B: np.ndarray, u: np.ndarray, first: np.ndarray, last: np.ndarray,
-                raster: np.ndarray, nx: int, x_max: np.float32, y_max: np.float32, unknown: int, out: np.ndarray) -> None:
-    """Fill ``out`` (n, W) uint8, the visible rows of a frame.
+def render_frame(P: np.ndarray, Q: np.ndarray, u: np.ndarray, first: np.ndarray, last: np.ndarray,
+                 x: float, y: float, c: float, s: float, res: float,
+                 raster: np.ndarray, nx: int, x_max: np.float32, y_max: np.float32, unknown: int, out: np.ndarray) -> None:
+    """Fill ``out`` (H, W) uint8, a whole frame, of which the last n rows see the ground.
 
     Args:
-        A, B: (n, 2) float32, each row's padded-raster cell at column offset 0 and its change
-            per column.
+        P, Q: (n, 2) float64, each visible row's ground point at column offset 0 and its change
+            per column in the vehicle frame [m].
         u: (W,) float32 column offsets from the principal point.
-        first, last: (n,) the columns that see the ground within range, ``first[r]:last[r]``;
-            the others are ``unknown``.
+        first, last: (n,) int64, the columns that see the ground within range,
+            ``first[r]:last[r]``; the others are ``unknown``, as are the rows above the n.
+        x, y, c, s: the pose's position [m] and the cosine and sine of its yaw.
+        res: the raster's cell size [m].
         raster: the padded class raster, flat (ny * nx,) uint8, fewer than 2 ** 31 cells.
         nx: its row length.
         x_max, y_max: the largest cell coordinates clipped to (just inside the border).
     """
-    n, width = out.shape
+    height, width = out.shape
+    n = P.shape[0]
     zero = np.float32(0.0)
-    cells = np.empty(width, np.int32)
+    nx32 = np.int32(nx)
+    out[: height - n] = unknown
+    # Unsigned cell indices and loops over slices from 0, so that no index can be negative:
+    # the cells are then computed in a loop the compiler vectorises, and read without the
+    # wrap-around test a signed index costs.
+    cells = np.empty(width, np.uint32)
     for r in range(n):
-        a0, a1, b0, b1 = A[r, 0], A[r, 1], B[r, 0], B[r, 1]
+        # The padded-raster cell of column offset 0 and the change per column (+1 for the border).
+        a0 = np.float32((x + (P[r, 0] * c - P[r, 1] * s)) / res + 1.0)
+        a1 = np.float32((y + (P[r, 0] * s + P[r, 1] * c)) / res + 1.0)
+        b0 = np.float32((Q[r, 0] * c - Q[r, 1] * s) / res)
+        b1 = np.float32((Q[r, 0] * s + Q[r, 1] * c) / res)
         lo, hi = first[r], last[r]
-        for j in range(lo):
-            out[r, j] = unknown
-        for j in range(hi, width):
-            out[r, j] = unknown
-        if hi <= lo:
-            continue
-        # A cell coordinate is monotonic along the row (float32 rounding is monotonic), so when
-        # both ends of the run lie inside the padded raster, every column does and the clip is
-        # the identity: the cells are computed in a loop the compiler vectorises, then read.
-        x0, x1, y0, y1 = b0 * u[lo] + a0, b0 * u[hi - 1] + a0, b1 * u[lo] + a1, b1 * u[hi - 1] + a1
-        if min(x0, x1) >= zero and max(x0, x1) <= x_max and min(y0, y1) >= zero and max(y0, y1) <= y_max:
-            for j in range(lo, hi):
-                cells[j] = np.int32(b1 * u[j] + a1) * np.int32(nx) + np.int32(b0 * u[j] + a0)
-            for j in range(lo, hi):
-                out[r, j] = raster[cells[j]]
-            continue
-        for j in range(lo, hi):
-            gx = min(max(b0 * u[j] + a0, zero), x_max)
-            gy = min(max(b1 * u[j] + a1, zero), y_max)
-            out[r, j] = raster[np.int64(gy) * nx + np.int64(gx)]
+        row = out[height - n + r]
+        row[:lo] = unknown
+        row[hi:] = unknown
+        run = u[lo:hi]
+        for j in range(run.shape[0]):
+            gx = min(max(b0 * run[j] + a0, zero), x_max)
+            gy = min(max(b1 * run[j] + a1, zero), y_max)
+            cells[j] = np.int32(gy) * nx32 + np.int32(gx)
+        seen = row[lo:hi]
+        for j in range(seen.shape[0]):
+            seen[j] = raster[cells[j]]
 
 
 @njit(cache=True, nogil=True)
@@ -89,7 +93,7 @@ def pixels_at(flat_index: np.ndarray, width: int, row0: int, valid: np.ndarray, 
             continue
         r = k // width - row0
         if not done[r]:
-            # The cell of the row's column offset 0 and its change per column, as render.py's _cells.
+            # The cell of the row's column offset 0 and its change per column, as render_frame's.
             cells[r, 0] = np.float32((x + (P[r, 0] * c - P[r, 1] * s)) / res + 1.0)
             cells[r, 1] = np.float32((y + (P[r, 0] * s + P[r, 1] * c)) / res + 1.0)
             cells[r, 2] = np.float32((Q[r, 0] * c - Q[r, 1] * s) / res)

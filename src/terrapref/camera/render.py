@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from terrapref.camera.kernels import pixels_at, ray_pixels, render_rows, take
+from terrapref.camera.kernels import pixels_at, ray_pixels, render_frame, take
 from terrapref.camera.pinhole import PinholeCamera
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose
@@ -75,28 +75,12 @@ class SegmentationRenderer:
     def shape(self) -> tuple[int, int]:
         return self.camera.shape
 
-    def _cells(self, pose: Pose) -> tuple[np.ndarray, np.ndarray]:
-        """For each visible row, the padded-raster cell of column offset 0 and the change per
-        column, (n, 2) float32 each (``kernels.pixels_at`` computes the same per pixel)."""
-        x, y, yaw = pose
-        res = self.world.resolution_m
-        c, s = math.cos(yaw), math.sin(yaw)
-        P, Q = self._P, self._Q
-        A = np.empty(P.shape, np.float32)
-        B = np.empty(Q.shape, np.float32)
-        # Rotate by the yaw into the world frame, then to cells (+1 for the border).
-        A[:, 0] = (x + (P[:, 0] * c - P[:, 1] * s)) / res + 1.0
-        A[:, 1] = (y + (P[:, 0] * s + P[:, 1] * c)) / res + 1.0
-        B[:, 0] = (Q[:, 0] * c - Q[:, 1] * s) / res
-        B[:, 1] = (Q[:, 0] * s + Q[:, 1] * c) / res
-        return A, B
-
     def render(self, pose: Pose) -> np.ndarray:
         """Segmentation image at ``pose``: class ids, shape (height, width) uint8."""
-        A, B = self._cells(_finite(pose))
+        x, y, yaw = _finite(pose)
         out = np.empty(self.camera.shape, dtype=np.uint8)
-        out[: self._row0] = UNKNOWN
-        render_rows(A, B, self._u, self._first, self._last, self._flat, self._nx_pad, self._x_max, self._y_max, UNKNOWN, out[self._row0 :])
+        render_frame(self._P, self._Q, self._u, self._first, self._last, float(x), float(y), math.cos(yaw), math.sin(yaw),
+                     self.world.resolution_m, self._flat, self._nx_pad, self._x_max, self._y_max, UNKNOWN, out)
         return out
 
     def pixels(self, pose: Pose, flat_index: np.ndarray) -> np.ndarray:
