@@ -67,6 +67,18 @@ def render_frame(P: np.ndarray, Q: np.ndarray, u: np.ndarray, first: np.ndarray,
             seen[j] = raster[cells[j]]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def row_col(k: int, width: int, per_row: float) -> tuple[int, int]:
+    """(k // width, k % width) of a pixel index k >= 0, ``per_row`` = 1 / width: by a product
+    instead of an integer division (exact while (k + 0.5) / width lies far from an integer in
+    float64, as for any image under 2 ** 40 pixels; checked, with the division as the fallback)."""
+    row = np.int64((k + 0.5) * per_row)
+    col = k - row * width
+    if col < 0 or col >= width:
+        return k // width, k % width
+    return row, col
+
+
 @njit(cache=True, nogil=True)
 def pixels_at(flat_index: np.ndarray, width: int, row0: int, valid: np.ndarray, P: np.ndarray, Q: np.ndarray, u: np.ndarray,
               x: float, y: float, c: float, s: float, res: float,
@@ -84,14 +96,17 @@ def pixels_at(flat_index: np.ndarray, width: int, row0: int, valid: np.ndarray, 
     rows = P.shape[0]
     cells = np.empty((rows, 4), np.float32)
     done = np.zeros(rows, np.bool_)
+    n_pixels = valid.shape[0]
+    per_row = 1.0 / width
     for i in range(flat_index.shape[0]):
         k = flat_index[i]
-        if k < 0 or k >= valid.shape[0]:
+        if k < 0 or k >= n_pixels:
             raise IndexError("a pixel index is outside the image")
-        if not valid[k]:
+        if not valid[np.uint64(k)]:
             out[i] = unknown
             continue
-        r = k // width - row0
+        row, col = row_col(k, width, per_row)
+        r = np.uint64(row - row0)  # unsigned indices: no wrap-around test on each read
         if not done[r]:
             # The cell of the row's column offset 0 and its change per column, as render_frame's.
             cells[r, 0] = np.float32((x + (P[r, 0] * c - P[r, 1] * s)) / res + 1.0)
@@ -99,10 +114,10 @@ def pixels_at(flat_index: np.ndarray, width: int, row0: int, valid: np.ndarray, 
             cells[r, 2] = np.float32((Q[r, 0] * c - Q[r, 1] * s) / res)
             cells[r, 3] = np.float32((Q[r, 0] * s + Q[r, 1] * c) / res)
             done[r] = True
-        uj = u[k % width]
+        uj = u[np.uint64(col)]
         gx = min(max(cells[r, 2] * uj + cells[r, 0], zero), x_max)
         gy = min(max(cells[r, 3] * uj + cells[r, 1], zero), y_max)
-        out[i] = raster[np.int64(gy) * nx + np.int64(gx)]
+        out[i] = raster[np.uint64(gy) * np.uint64(nx) + np.uint64(gx)]
     return out
 
 
@@ -134,10 +149,12 @@ def ray_pixels(flat_index: np.ndarray, width: int, fx: float, fy: float, cx: flo
     is off its mount (roll breaks the row-affine form); float64 throughout.
     """
     out = np.empty(flat_index.shape[0], np.uint8)
+    per_row = 1.0 / width
     for i in range(flat_index.shape[0]):
         k = flat_index[i]
-        a = (k % width + 0.5 - cx) / fx
-        b = (k // width + 0.5 - cy) / fy
+        row, col = row_col(k, width, per_row)
+        a = (col + 0.5 - cx) / fx
+        b = (row + 0.5 - cy) / fy
         dx = a * axes[0, 0] + b * axes[1, 0] + axes[2, 0]
         dy = a * axes[0, 1] + b * axes[1, 1] + axes[2, 1]
         dz = a * axes[0, 2] + b * axes[1, 2] + axes[2, 2]

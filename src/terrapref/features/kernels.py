@@ -356,6 +356,7 @@ def column_medians(history: np.ndarray, count: int, rows: np.ndarray) -> np.ndar
     counted into their bins. The NumPy form: ``np.nanmedian(history[:count], axis=0)`` (for an even
     count, the mean of the two middle values)."""
     n_cols, n_bins = history.shape[1], rows.shape[0]
+    step = rows[1] - rows[0] if n_bins > 1 else 0.0
     out = np.empty(n_cols)
     counts = np.zeros(n_bins, np.int64)
     for c in range(n_cols):
@@ -364,7 +365,11 @@ def column_medians(history: np.ndarray, count: int, rows: np.ndarray) -> np.ndar
         for m in range(count):
             v = history[m, c]
             if not np.isnan(v):
-                counts[np.searchsorted(rows, v)] += 1
+                # Evenly spaced rows (the band's) give the bin at once; a search otherwise.
+                b = int((v - rows[0]) / step + 0.5) if step > 0.0 else -1
+                if not (0 <= b < n_bins and rows[b] == v):
+                    b = np.searchsorted(rows, v)
+                counts[b] += 1
                 n += 1
         if n == 0:
             out[c] = np.nan

@@ -26,6 +26,7 @@ import numpy as np
 from numba import njit
 
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationView
+from terrapref.camera.kernels import row_col
 from terrapref.perception.model import LabelErrors
 from terrapref.terrain import UNKNOWN, ClassTable
 
@@ -177,12 +178,14 @@ def _displaced(flat: np.ndarray, width: int, height: int, seed: np.uint64, radiu
     out = flat.copy()
     golden = np.uint64(0x9E3779B97F4A7C15)
     span = 2 * radius + 1
+    per_row = 1.0 / width
     for i in range(flat.shape[0]):
         k = flat[i]
         z = _mix(seed + np.uint64(k + 1) * golden)
         dx = _below(z, span) - radius
         dy = _below(_mix(z), span) - radius
-        x, y = k % width + dx, k // width + dy
+        row, col = row_col(k, width, per_row)
+        x, y = col + dx, row + dy
         if 0 <= x < width and 0 <= y < height:
             out[i] = y * width + x
     return out
@@ -197,12 +200,13 @@ def _errors(ids: np.ndarray, flat: np.ndarray, width: int, far: np.ndarray, conf
     out = ids.copy()
     golden = np.uint64(0x9E3779B97F4A7C15)
     tiles_x = (width + region - 1) // region
+    per_row = 1.0 / width
     for i in range(flat.shape[0]):
         k = flat[i]
         c = out[i]
         if far.shape[0] and far[k]:
             c = np.uint8(255)
-        y, x = k // width, k % width
+        y, x = row_col(k, width, per_row)
         if c != 255 and conf_n[c] > 0:
             tile = (y // region) * tiles_x + x // region
             u = _uniform(_mix(conf_seed + np.uint64(tile * 256 + c + 1) * golden))
