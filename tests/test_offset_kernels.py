@@ -368,7 +368,9 @@ def test_map_vote_gives_the_numpy_forms_map(tilted: bool):
         grid = np.round(rng.uniform([0.2, -4.0], [9.0, 4.0], (600, 2)) / 0.1) * 0.1
         vx, vy = np.where(np.isfinite(ground0), ground0, grid).T.copy()
         weight = (1.0 / (1.0 + (vx**2 + vy**2) / 16.0)).astype(np.float32)
-        ids = np.where(rng.random(600) < 0.1, UNKNOWN, rng.integers(0, 12, 600)).astype(np.uint8)
+        distinct = np.where(rng.random(400) < 0.1, UNKNOWN, rng.integers(0, 12, 400)).astype(np.uint8)  # the pixels read
+        pixel_of = rng.integers(0, 400, 600)  # each sample's pixel: some share one
+        ids = distinct[pixel_of]
         origin = np.round(rng.uniform(-5.0, 5.0, 2) / res) * res
         maps = [(np.zeros((n, n, k + 1), np.float32), np.zeros((n, n), np.int64), np.full((n, n), k + 1, np.uint8)) for _ in range(2)]
         frame = 0
@@ -377,10 +379,10 @@ def test_map_vote_gives_the_numpy_forms_map(tilted: bool):
             x, y = origin + n * res / 2 + rng.uniform(-3.0, 3.0, 2)
             yaw = rng.uniform(-math.pi, math.pi)
             axes = camera.tilted(rng.uniform(-0.06, 0.06), rng.uniform(-0.06, 0.06)) if tilted else camera.R
-            args = (float(origin[0]), float(origin[1]), 1.0 / res, float(x), float(y), math.cos(yaw), math.sin(yaw), vx, vy, weight, ids,
-                    columns, frame, fade, lethal)
-            kernels.map_vote(*maps[0], *args, *shares, tilted, ray, ground0, axes, camera.t)
-            _update_numpy(*maps[1], *args, shares, axes if tilted else None, ray, ground0, camera.t)
+            pose = (float(origin[0]), float(origin[1]), 1.0 / res, float(x), float(y), math.cos(yaw), math.sin(yaw), vx, vy, weight)
+            rest = (columns, frame, fade, lethal)
+            kernels.map_vote(*maps[0], *pose, distinct, pixel_of, *rest, *shares, tilted, ray, ground0, axes, camera.t)
+            _update_numpy(*maps[1], *pose, ids, *rest, shares, axes if tilted else None, ray, ground0, camera.t)
             for got, want in zip(maps[0], maps[1]):
                 assert _same(got, want), (seed, frame)
         evidence, _, cells = maps[0]

@@ -187,6 +187,8 @@ class GroundMap:
         pix = camera.pixel_indices(grid)
         seen = pix >= 0
         self._pix = pix[seen]
+        # Far samples share pixels: each distinct pixel is read once, and each sample reads its own.
+        self._pixels, self._pixel_of = np.unique(self._pix, return_inverse=True)
         self._vx, self._vy = grid[seen, 0].copy(), grid[seen, 1].copy()
         self.camera = camera
         self.attitude = HorizonAttitude(camera) if c.map_sky_attitude else None
@@ -238,12 +240,12 @@ class GroundMap:
         c = self.config
         self._recentre(x, y)
         self.frame += 1
-        ids = view.pixels(self._pix)
+        ids = view.pixels(self._pixels)
         dpitch, droll = self.attitude(view) if self.attitude is not None else (0.0, 0.0)
         tilted = bool(dpitch or droll)
         axes = self.camera.tilted(dpitch, droll) if tilted else self.camera.R
         kernels.map_vote(self.evidence, self.stamp, self.cells, float(self.origin[0]), float(self.origin[1]), 1.0 / c.map_resolution_m,
-                         float(x), float(y), math.cos(yaw), math.sin(yaw), self._vx, self._vy, self._weight, ids, self.columns, self.frame,
+                         float(x), float(y), math.cos(yaw), math.sin(yaw), self._vx, self._vy, self._weight, ids, self._pixel_of, self.columns, self.frame,
                          self._fade, self.lethal, np.float32(c.map_lethal_share), np.float32(c.map_terrain_share),
                          np.float32(c.map_min_evidence), tilted, self._ray, self._ground0, axes, self.camera.t)
 

@@ -191,7 +191,8 @@ def stage_distances(rows: np.ndarray, ends_x: np.ndarray, ends_y: np.ndarray, st
 
 @njit(cache=True, nogil=True)
 def map_vote(evidence: np.ndarray, stamp: np.ndarray, cells: np.ndarray, ox: float, oy: float, inv_res: float, x: float, y: float,
-             c: float, s: float, vx: np.ndarray, vy: np.ndarray, weight: np.ndarray, ids: np.ndarray, columns: np.ndarray, frame: int,
+             c: float, s: float, vx: np.ndarray, vy: np.ndarray, weight: np.ndarray, ids: np.ndarray, pixel_of: np.ndarray,
+             columns: np.ndarray, frame: int,
              fade: np.ndarray, lethal: np.ndarray, lethal_share: float, terrain_share: float, min_evidence: float,
              tilted: bool, ray: np.ndarray, ground0: np.ndarray, axes: np.ndarray, t: np.ndarray) -> None:
     """Add each ground sample's vote to the evidence of its cell, and set the cell's column.
@@ -207,7 +208,8 @@ def map_vote(evidence: np.ndarray, stamp: np.ndarray, cells: np.ndarray, ox: flo
     ``i = floor((x - ox + vx * c - vy * s) * inv_res)``, ``j = floor((y - oy + vx * s + vy * c) *
     inv_res)`` (rows y, columns x); float32 sums in a fixed order, so every CPU agrees.
 
-    A sample's column is ``columns[ids[p]]`` (its pixel's class id). With ``tilted``, the camera
+    A sample's column is ``columns[ids[pixel_of[p]]]`` (the class id of its pixel, ``ids`` holding
+    each distinct pixel's). With ``tilted``, the camera
     is off its mount (``axes``, rows right, down, forward in the vehicle frame; optical centre
     ``t``): a sample moves by where its pixel's ray ``ray[p]`` (camera frame, z = 1) now meets the
     ground less where the mount's camera saw it meet it (``ground0[p]``), and a ray that no longer
@@ -221,7 +223,7 @@ def map_vote(evidence: np.ndarray, stamp: np.ndarray, cells: np.ndarray, ox: flo
     ci, cj = np.empty(n, np.int64), np.empty(n, np.int64)
     for p in range(n):
         ci[p] = -1
-        if columns[ids[p]] > k:
+        if columns[ids[pixel_of[p]]] > k:
             continue
         px, py = vx[p], vy[p]
         if tilted:
@@ -243,7 +245,7 @@ def map_vote(evidence: np.ndarray, stamp: np.ndarray, cells: np.ndarray, ox: flo
         i, j = ci[p], cj[p]
         if i < 0:
             continue
-        col = columns[ids[p]]
+        col = columns[ids[pixel_of[p]]]
         gap = frame - stamp[j, i]
         if gap != 0:
             f = fade[min(gap, fade.shape[0] - 1)]
