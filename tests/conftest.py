@@ -16,3 +16,14 @@ def fig7_recording(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("fig7") / "rec"
     assert main(["record", "fig7_rock_vs_non_traversable_left", "--out", str(out), "--quiet", "--disturb", "0"]) == 0
     return out
+
+
+@pytest.fixture(scope="session")
+def cpu_outputs(request) -> dict:
+    """What each module's bit-for-bit check (its ``CPU_CHECK``, tests/cpu_settings.py) printed
+    under each of its CPU settings, by check name: one fresh interpreter per setting runs the
+    checks of every collected test that takes this fixture."""
+    from cpu_settings import run_checks
+
+    checks = {item.module.CPU_CHECK for item in request.session.items if "cpu_outputs" in getattr(item, "fixturenames", ())}
+    return run_checks(sorted(checks, key=lambda c: c.name))
