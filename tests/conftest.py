@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
@@ -16,6 +17,44 @@ def fig7_recording(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("fig7") / "rec"
     assert main(["record", "fig7_rock_vs_non_traversable_left", "--out", str(out), "--quiet", "--disturb", "0"]) == 0
     return out
+
+
+@pytest.fixture(scope="session")
+def demo_course_recording(tmp_path_factory) -> Path:
+    """``terrapref record demo_course`` as a user runs it: the synthetic driver, seed 0, pushed at
+    the default rate (about 575 frames). Shared: read it, never write into it (copy it first)."""
+    from terrapref.cli import main
+
+    out = tmp_path_factory.mktemp("demo_course") / "rec"
+    assert main(["record", "demo_course", "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+@pytest.fixture(scope="session")
+def demo_course_drive(tmp_path_factory) -> SimpleNamespace:
+    """The synthetic driver's undisturbed drive of demo_course (default style and profile, seed 0)
+    through the session loop: its ``scenario``, the ``sim`` it ended in, the episode ``log`` and
+    the recording's ``path``. It is run k = 0 of seed 0 of a recipe's demonstrations. Shared:
+    read it, never write into it or step its simulation."""
+    import numpy as np
+
+    from terrapref.demos.expert import ExpertDriver
+    from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
+    from terrapref.demos.recording import RecordingWriter
+    from terrapref.demos.session import record_run
+    from terrapref.features import PreferenceSetConfig
+    from terrapref.scenario import resolve_scenario
+    from terrapref.sim import Simulation
+    from terrapref.terrain import PreferenceProfile
+
+    out = tmp_path_factory.mktemp("demo_course_drive") / "rec"
+    scenario = resolve_scenario("demo_course")
+    sim = Simulation(scenario)
+    driver = ExpertDriver()
+    preference = PreferenceSetConfig()
+    meta = RecordingMeta.driven(scenario, RecordingSetup(sim.camera.config, preference, sim.config), ExpertInfo.of(0, "default", driver.config), PreferenceProfile.default())
+    log = record_run(sim, driver, RecordingWriter(out, meta, scenario.to_dict()), preference, np.random.default_rng(0))
+    return SimpleNamespace(scenario=scenario, sim=sim, log=log, path=out)
 
 
 @pytest.fixture(scope="session")
