@@ -1,11 +1,23 @@
-"""Fixtures shared across test modules, built once per test run."""
+"""Fixtures shared across test modules, built once per test run, and the run's BLAS threads."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
+
+MACHINE_ENVIRON = dict(os.environ)
+"""The environment the test run started with: the CPU-setting checks' setting ``{}`` runs in it."""
+
+# OpenBLAS's threads wait for each other spinning. Where every core is busy (a small machine
+# running several test runs at once) each of the small matrix products that training C makes
+# then waits out a scheduler time slice, and a test that trains takes ten times as long or
+# more. The tests, and the processes they start, use one BLAS thread unless the run was started
+# with a count; the bits do not depend on it (test_exact trains in fresh interpreters under
+# other thread counts, the machine's default among them).
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before NumPy is first imported, which reads it
 
 
 @pytest.fixture(scope="session")
@@ -65,4 +77,4 @@ def cpu_outputs(request) -> dict:
     from cpu_settings import run_checks
 
     checks = {item.module.CPU_CHECK for item in request.session.items if "cpu_outputs" in getattr(item, "fixturenames", ())}
-    return run_checks(sorted(checks, key=lambda c: c.name))
+    return run_checks(sorted(checks, key=lambda c: c.name), MACHINE_ENVIRON)

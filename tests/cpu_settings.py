@@ -15,6 +15,7 @@ import os
 import platform
 import subprocess
 import sys
+from collections.abc import Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -76,18 +77,18 @@ print(json.dumps(_run_all({code!r})))
 """
 
 
-def run_checks(checks: list[CpuCheck]) -> dict[str, list[tuple[Setting, str]]]:
+def run_checks(checks: list[CpuCheck], environ: Mapping[str, str]) -> dict[str, list[tuple[Setting, str]]]:
     """Each check run under each of its settings, by check: (setting, what it printed), in the
-    check's order of settings. One fresh interpreter per setting runs every check that has the
-    setting, as many at once as there are cores (the answers do not depend on what else runs,
-    which is the point)."""
+    check's order of settings. One fresh interpreter per setting, in ``environ`` with the
+    setting's variables added, runs every check that has the setting, as many at once as there
+    are cores (the answers do not depend on what else runs, which is the point)."""
     settings = list(dict.fromkeys(s for check in checks for s in check.settings))
     tests = os.path.dirname(os.path.abspath(__file__))
 
     def one(setting: tuple[tuple[str, str], ...]) -> dict[str, str]:
         code = [(c.name, c.code) for c in checks if setting in c.settings]
         program = _PROGRAM.format(tests=tests, code=code)
-        done = subprocess.run([sys.executable, "-c", program], env={**os.environ, **dict(setting)}, capture_output=True, text=True, timeout=300)
+        done = subprocess.run([sys.executable, "-c", program], env={**environ, **dict(setting)}, capture_output=True, text=True, timeout=300)
         assert done.returncode == 0, done.stderr
         return json.loads(done.stdout.strip().splitlines()[-1])
 
