@@ -46,8 +46,8 @@ def demo_course_recording(tmp_path_factory) -> Path:
 def demo_course_drive(tmp_path_factory) -> SimpleNamespace:
     """The synthetic driver's undisturbed drive of demo_course (default style and profile, seed 0)
     through the session loop: its ``scenario``, the ``sim`` it ended in, the episode ``log`` and
-    the recording's ``path``. It is run k = 0 of seed 0 of a recipe's demonstrations. Shared:
-    read it, never write into it or step its simulation."""
+    the recording's ``path``: the drive a recipe without pushes demonstrates first under seed 0.
+    Shared: read it, never write into it or step its simulation."""
     import numpy as np
 
     from terrapref.demos.expert import ExpertDriver
