@@ -1,10 +1,23 @@
-"""Fixtures shared across test modules, built once per test run."""
+"""Fixtures shared across test modules, built once per test run, and the run's BLAS threads."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
+
+MACHINE_ENVIRON = dict(os.environ)
+"""The environment the test run started with: the CPU-setting checks' setting ``{}`` runs in it."""
+
+# OpenBLAS's threads wait for each other spinning. Where every core is busy (a small machine
+# running several test runs at once) each of the small matrix products that training C makes
+# then waits out a scheduler time slice, and a test that trains takes ten times as long or
+# more. The tests, and the processes they start, use one BLAS thread unless the run was started
+# with a count; the bits do not depend on it (test_exact trains in fresh interpreters under
+# other thread counts, the machine's default among them).
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before NumPy is first imported, which reads it
 
 
 @pytest.fixture(scope="session")
@@ -16,3 +29,52 @@ def fig7_recording(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("fig7") / "rec"
     assert main(["record", "fig7_rock_vs_non_traversable_left", "--out", str(out), "--quiet", "--disturb", "0"]) == 0
     return out
+
+
+@pytest.fixture(scope="session")
+def demo_course_recording(tmp_path_factory) -> Path:
+    """``terrapref record demo_course`` as a user runs it: the synthetic driver, seed 0, pushed at
+    the default rate (about 575 frames). Shared: read it, never write into it (copy it first)."""
+    from terrapref.cli import main
+
+    out = tmp_path_factory.mktemp("demo_course") / "rec"
+    assert main(["record", "demo_course", "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+@pytest.fixture(scope="session")
+def demo_course_drive(tmp_path_factory) -> SimpleNamespace:
+    """The synthetic driver's undisturbed drive of demo_course (default style and profile, seed 0)
+    through the session loop: its ``scenario``, the ``sim`` it ended in, the episode ``log`` and
+    the recording's ``path``: the drive a recipe without pushes demonstrates first under seed 0.
+    Shared: read it, never write into it or step its simulation."""
+    import numpy as np
+
+    from terrapref.demos.expert import ExpertDriver
+    from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
+    from terrapref.demos.recording import RecordingWriter
+    from terrapref.demos.session import RunSettings, record_run
+    from terrapref.features import PreferenceSetConfig
+    from terrapref.scenario import resolve_scenario
+    from terrapref.sim import Simulation
+    from terrapref.terrain import PreferenceProfile
+
+    out = tmp_path_factory.mktemp("demo_course_drive") / "rec"
+    scenario = resolve_scenario("demo_course")
+    sim = Simulation(scenario)
+    driver = ExpertDriver()
+    preference = PreferenceSetConfig()
+    meta = RecordingMeta.driven(scenario, RecordingSetup(sim.camera.config, preference, sim.config), ExpertInfo.of(0, "default", driver.config), PreferenceProfile.default())
+    log = record_run(sim, driver, RecordingWriter(out, meta, scenario.to_dict()), RunSettings(preference), np.random.default_rng(0))
+    return SimpleNamespace(scenario=scenario, sim=sim, log=log, path=out)
+
+
+@pytest.fixture(scope="session")
+def cpu_outputs(request) -> dict:
+    """What each module's bit-for-bit check (its ``CPU_CHECK``, tests/cpu_settings.py) printed
+    under each of its CPU settings, by check name: one fresh interpreter per setting runs the
+    checks of every collected test that takes this fixture."""
+    from cpu_settings import run_checks
+
+    checks = {item.module.CPU_CHECK for item in request.session.items if "cpu_outputs" in getattr(item, "fixturenames", ())}
+    return run_checks(sorted(checks, key=lambda c: c.name), MACHINE_ENVIRON)

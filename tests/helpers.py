@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from terrapref.camera import CameraConfig
 from terrapref.dataset import FORMAT as DATASET_FORMAT
@@ -15,8 +14,6 @@ from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.learning.train import TrainConfig
 from terrapref.terrain import default_classes
-
-from torch_net import UtilityClassifier
 
 
 def model_meta(features: FeatureConfig | None = None, camera: CameraConfig | None = None, profile: tuple[str, ...] | None = None) -> dict:
@@ -126,6 +123,10 @@ def weights_differ(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> bool:
 
 def random_weights(config: ClassifierConfig, seed: int = 0) -> dict[str, np.ndarray]:
     """PyTorch's initial weights for ``config`` under ``seed``, as NumPy arrays."""
+    import torch  # here, so that the programs the tests start in fresh interpreters do not pay for it
+
+    from torch_net import UtilityClassifier
+
     torch.manual_seed(seed)
     return {k: v.detach().numpy().copy() for k, v in UtilityClassifier(config).state_dict().items()}
 

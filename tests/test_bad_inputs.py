@@ -15,10 +15,9 @@ from terrapref.cli import main
 
 
 @pytest.fixture(scope="module")
-def recording(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("rec") / "r0"
-    assert main(["record", "fig7_rock_vs_non_traversable_left", "--out", str(out), "--quiet", "--disturb", "0"]) == 0
-    return out
+def recording(fig7_recording) -> Path:
+    """An undisturbed recording of fig7 (tests/conftest.py): copy it before changing it."""
+    return fig7_recording
 
 
 def _one_error(capsys, *needles: str) -> str:

@@ -259,10 +259,11 @@ def test_validate_as_a_subprocess_exit_code_and_no_traceback(tmp_path: Path) -> 
     assert lines[4].startswith("error: huge.yaml: world: raster would have about 10^402 cells")
 
 
-def test_validate_as_a_subprocess_good_files_exit_0(tmp_path: Path) -> None:
+def test_validate_good_files_exit_0(tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    # In-process: the exit code and the streams of a real process are checked by the test above.
     write(tmp_path, "good.yaml", GOOD_YAML)
-    result = run_subprocess(tmp_path, "validate", "good.yaml", "demo_course")
-    assert (result.returncode, result.stdout, result.stderr) == (0, "good.yaml: ok\ndemo_course: ok\n", "")
+    monkeypatch.chdir(tmp_path)
+    assert run_cli(capsys, "validate", "good.yaml", "demo_course") == (0, ["good.yaml: ok", "demo_course: ok"], [])
 
 
 # --- render and show ----------------------------------------------------------------------------

@@ -46,13 +46,16 @@ def test_onehot_leaves_unknown_ids_all_zero():
 
 def test_samples_of_a_drive_kept_in_memory_are_those_of_the_same_drive_on_disk(tmp_path):
     """A recording kept in memory reads only the pixels the downsampling keeps: the same samples."""
+    from dataclasses import replace
+
     from terrapref.baselines.cnn import cnn_samples
     from terrapref.features import FeatureConfig
     from terrapref.recipes import OURS, RecipeSetup, demonstrate
 
+    first = replace(OURS, demonstrations=1)  # its first demonstration, the one compared
     setup = RecipeSetup(2, course="demo_course")
-    kept = demonstrate(OURS, tmp_path / "mem", setup, write=False)[:1]
-    written = demonstrate(OURS, tmp_path / "disk", setup, write=True)[:1]
+    kept = demonstrate(first, tmp_path / "mem", setup, write=False)
+    written = demonstrate(first, tmp_path / "disk", setup, write=True)
     a, b = cnn_samples(kept, FeatureConfig(), 16), cnn_samples(written, FeatureConfig(), 16)
     assert a[0].shape == (len(kept[0]), 30, 40)
     for x, y in zip(a, b, strict=True):

@@ -29,7 +29,7 @@ from terrapref.vehicle import Command, integrate_unicycle
 from helpers import model_meta, skip_path_weights
 
 CONTROL = FeatureConfig().preference.control  # the default control set: 1 m/s
-from test_exact import _settings, run_under
+from cpu_settings import SETTINGS, CpuCheck
 
 K = len(default_classes().feature_names)  # columns: non_traversable, water, rock, mud
 # The synthetic driver's own costs relative to its detour price (per metre 1, 1.5, 2.25 by rank
@@ -446,7 +446,9 @@ def _fit_case() -> np.ndarray:
     return fit_corridor(features, near, intent, offsets).weights
 
 
-def test_the_corridor_fit_gives_the_same_weights_under_every_cpu_setting():
-    tests = os.path.dirname(__file__)
-    hashes = {out.strip() for _, out in run_under(_settings(), _FIT.format(tests=tests))}
+CPU_CHECK = CpuCheck.of("corridor fit", _FIT.format(tests=os.path.dirname(__file__)), SETTINGS)
+
+
+def test_the_corridor_fit_gives_the_same_weights_under_every_cpu_setting(cpu_outputs):
+    hashes = {out.strip() for _, out in cpu_outputs["corridor fit"]}
     assert len(hashes) == 1

@@ -10,9 +10,6 @@ from __future__ import annotations
 import math
 import os
 import platform
-import subprocess
-import sys
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
@@ -22,6 +19,7 @@ from terrapref.learning import exact
 from terrapref.learning.mlp import Adam, TrainableClassifier, cross_entropy, init_weights, round_inputs
 from terrapref.learning.network import ClassifierConfig, numpy_forward
 
+from cpu_settings import SETTINGS, CpuCheck
 from torch_net import UtilityClassifier
 
 
@@ -287,40 +285,11 @@ print(h.hexdigest(), plain)
 """
 
 
-def _settings() -> list[dict[str, str]]:
-    settings = [{}, {"OPENBLAS_NUM_THREADS": "1"}, {"OPENBLAS_NUM_THREADS": "2"}]
-    if platform.machine().lower() in ("x86_64", "amd64"):
-        # Kernels every x86_64 CPU can run (SSE3, AVX2), and NumPy without its AVX-512 code paths.
-        settings += [{"OPENBLAS_CORETYPE": "Prescott"}, {"NPY_DISABLE_CPU_FEATURES": "X86_V4,AVX512_ICL,AVX512_SPR"}]
-        if "avx2" in _cpu_flags():
-            settings.append({"OPENBLAS_CORETYPE": "Haswell"})
-    return settings
+CPU_CHECK = CpuCheck.of("training", _TRAIN.format(tests=os.path.dirname(__file__)), SETTINGS)
 
 
-def run_under(settings: list[dict[str, str]], code: str) -> list[tuple[dict[str, str], str]]:
-    """``code`` run by a fresh interpreter under each of ``settings`` (extra environment), as many
-    at once as there are cores (the answers do not depend on what else runs, which is the point);
-    (setting, its standard output) each, in order."""
-    def one(extra: dict[str, str]) -> tuple[dict[str, str], str]:
-        done = subprocess.run([sys.executable, "-c", code], env={**os.environ, **extra}, capture_output=True, text=True, timeout=300)
-        assert done.returncode == 0, done.stderr
-        return extra, done.stdout
-
-    with ThreadPoolExecutor(max_workers=os.cpu_count() or 2) as pool:
-        return list(pool.map(one, settings))
-
-
-def _cpu_flags() -> str:
-    try:
-        with open("/proc/cpuinfo") as f:
-            return f.read()
-    except OSError:
-        return ""
-
-
-def test_training_gives_the_same_bits_under_every_cpu_setting():
-    tests = os.path.dirname(__file__)
-    outputs = [(extra, *out.split()) for extra, out in run_under(_settings(), _TRAIN.format(tests=tests))]
+def test_training_gives_the_same_bits_under_every_cpu_setting(cpu_outputs):
+    outputs = [(extra, *out.split()) for extra, out in cpu_outputs["training"]]
     trained = {h for _, h, _ in outputs}
     assert len(trained) == 1, outputs
     if platform.machine().lower() in ("x86_64", "amd64"):

@@ -26,7 +26,7 @@ from terrapref.recipes import PAPER, TEACH, RecipeSetup, demonstrate
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation, run_episode
 
-from test_exact import run_under
+from cpu_settings import CpuCheck
 
 DATA = Path(__file__).parent / "data"
 
@@ -76,9 +76,12 @@ print(h.hexdigest())
 """
 
 
-def test_compiled_forward_gives_the_same_bits_under_other_cpu_settings():
-    settings = [{}, {"NPY_DISABLE_CPU_FEATURES": "X86_V4,AVX512_ICL,AVX512_SPR"}, {"OPENBLAS_CORETYPE": "Prescott"}, {"NUMBA_CPU_NAME": "generic"}]
-    hashes = {out.strip() for _, out in run_under(settings, _BITS)}
+CPU_CHECK = CpuCheck.of("compiled forward", _BITS, [{}, {"NPY_DISABLE_CPU_FEATURES": "X86_V4,AVX512_ICL,AVX512_SPR"}, {"OPENBLAS_CORETYPE": "Prescott"},
+                                                  {"NUMBA_CPU_NAME": "generic"}])
+
+
+def test_compiled_forward_gives_the_same_bits_under_other_cpu_settings(cpu_outputs):
+    hashes = {out.strip() for _, out in cpu_outputs["compiled forward"]}
     assert len(hashes) == 1
 
 

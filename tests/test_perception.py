@@ -396,7 +396,7 @@ def test_a_sky_line_the_map_cuts_short_gives_no_estimate(renderer):
 # --- perceived recordings, evaluations and environments -------------------------------------------------
 
 
-def test_a_recording_under_perception_holds_what_the_robot_received(tmp_path, capsys):
+def test_a_recording_under_perception_holds_what_the_robot_received(tmp_path, capsys, demo_course_recording):
     """The driver sees the truth (the same drive as without perception); the recording holds the
     frames that reached the robot (fewer, late, their labels and poses off the truth) and names
     the model; it is featurised and trained from as any recording."""
@@ -406,8 +406,7 @@ def test_a_recording_under_perception_holds_what_the_robot_received(tmp_path, ca
     from terrapref.demos.recording import read_recording
     from terrapref.perception.model import from_dict
 
-    clean, seen = tmp_path / "clean", tmp_path / "seen"
-    assert main(["record", "demo_course", "--out", str(clean), "--quiet"]) == 0
+    clean, seen = demo_course_recording, tmp_path / "seen"
     assert main(["record", "demo_course", "--out", str(seen), "--quiet", "--perception", "field"]) == 0
     assert "under perception field" in capsys.readouterr().out
     a, b = read_recording(clean), read_recording(seen)
@@ -462,15 +461,17 @@ def test_the_gymnasium_env_observes_what_the_robot_would(tmp_path):
         OffRoadNavEnv("demo_course", perception="nowhere")
 
 
-def test_a_recordings_perception_is_checked_when_it_is_read(tmp_path):
+def test_a_recordings_perception_is_checked_when_it_is_read(tmp_path, demo_course_recording):
     import json
+    import shutil
 
-    from terrapref.cli import main
     from terrapref.demos.recording import read_recording
 
-    out = tmp_path / "rec"
-    assert main(["record", "demo_course", "--out", str(out), "--quiet", "--perception", "rellis"]) == 0
+    out = shutil.copytree(demo_course_recording, tmp_path / "rec")
     meta = json.loads((out / "meta.json").read_text())
+    meta["perception"] = load_perception("rellis").to_dict()  # the section a recording made under rellis carries
+    (out / "meta.json").write_text(json.dumps(meta))
+    assert read_recording(out).meta["perception"]["name"] == "rellis"
     meta["perception"]["labels"]["flip_rate"] = 7
     (out / "meta.json").write_text(json.dumps(meta))
     with pytest.raises(UserError) as err:

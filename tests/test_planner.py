@@ -18,10 +18,7 @@ import torch
 import terrapref.planner.planner as planner_module
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer, SegmentationView
 from terrapref.dataset import build_dataset
-from terrapref.demos.expert import ExpertConfig, ExpertDriver
-from terrapref.demos.recording import RecordingWriter, read_recording
-from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
-from terrapref.demos.session import RunSettings, record_run
+from terrapref.demos.recording import read_recording
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
 from terrapref.learning.model_file import LoadedModel, load_model, save_model
@@ -30,8 +27,7 @@ from terrapref.learning.pipeline import RunOptions, train_and_save
 from terrapref.planner import Decision, Planner, PlannerDriver
 from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
-from terrapref.sim import Frame, SimConfig, Simulation, run_episode
-from terrapref.terrain import PreferenceProfile
+from terrapref.sim import Frame, Simulation, run_episode
 from terrapref.vehicle import Command, Pose
 from terrapref.world import WorldMap
 
@@ -267,15 +263,11 @@ def test_model_for_another_camera_is_refused(tmp_path: Path, models):
 
 
 @pytest.fixture(scope="module")
-def demo(tmp_path_factory, course) -> SimpleNamespace:
-    """The synthetic driver's demonstration of demo_course, featurised, and a 3-epoch model."""
+def demo(tmp_path_factory, demo_course_drive) -> SimpleNamespace:
+    """The synthetic driver's demonstration of demo_course (tests/conftest.py), featurised, and a 3-epoch model."""
     d = tmp_path_factory.mktemp("demo")
-    features, camera, profile = FeatureConfig(), CameraConfig(), PreferenceProfile.default(course.classes)
-    expert = ExpertConfig(profile=profile.order)
-    meta = RecordingMeta.driven(course, RecordingSetup(camera, features.preference, SimConfig()), ExpertInfo.of(0, "default", expert), profile)
-    writer = RecordingWriter(d / "rec", meta, course.to_dict())
-    record_run(Simulation(course, camera), ExpertDriver(expert), writer, RunSettings(features.preference), np.random.default_rng(0))
-    recording = read_recording(d / "rec")
+    features = FeatureConfig()
+    recording = read_recording(demo_course_drive.path)
     dataset = build_dataset([recording], features)
     result = train_and_save(dataset, d / "model.safetensors", train_config(epochs=3, skip=True), options=RunOptions(checkpoints=False))
     return SimpleNamespace(recording=recording, dataset=dataset, result=result, model=load_model(d / "model.safetensors"))

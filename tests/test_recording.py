@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -15,7 +16,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from terrapref.demos.expert import ExpertDriver
 from terrapref.demos.recording import FRAMES, META, Recording, RecordingWriter, read_recording
 from terrapref.demos.meta import (
     CorrectionRoundInfo,
@@ -27,7 +27,6 @@ from terrapref.demos.meta import (
     RideAlongInfo,
     driver_from_dict,
 )
-from terrapref.demos.session import RunSettings, record_run
 from terrapref.errors import UserError
 from terrapref.features import PreferenceSetConfig
 from terrapref.scenario import Scenario, resolve_scenario
@@ -251,15 +250,10 @@ class FullRecording:
 
 
 @pytest.fixture(scope="module")
-def demo_recording(tmp_path_factory: pytest.TempPathFactory) -> FullRecording:
-    out = tmp_path_factory.mktemp("demo") / "rec"
-    scenario = resolve_scenario("demo_course")
-    sim = Simulation(scenario)
-    driver = ExpertDriver()
-    preference = PreferenceSetConfig()
-    meta = RecordingMeta.driven(scenario, RecordingSetup(sim.camera.config, preference, sim.config), ExpertInfo.of(0, "default", driver.config), PreferenceProfile.default())
-    log = record_run(sim, driver, RecordingWriter(out, meta, scenario.to_dict()), RunSettings(preference), np.random.default_rng(0))
-    return FullRecording(scenario, sim, log, read_recording(out))
+def demo_recording(demo_course_drive) -> FullRecording:
+    """The synthetic driver's drive of demo_course through the session loop (tests/conftest.py)."""
+    drive = demo_course_drive
+    return FullRecording(drive.scenario, drive.sim, drive.log, read_recording(drive.path))
 
 
 def test_recorded_run_matches_the_episode(demo_recording: FullRecording):
@@ -355,13 +349,12 @@ def test_inspect_says_quit_and_not_reached(tmp_path: Path):
     assert zone_lines and all(" -> -" in line for line in zone_lines)
 
 
-def test_sigterm_during_record_force_says_so_and_keeps_the_old_recording(tmp_path):
+def test_sigterm_during_record_force_says_so_and_keeps_the_old_recording(tmp_path, fig7_recording):
     # As after Ctrl-C: the old recording stays as it was, the unfinished one is OUT.partial (not
     # a hidden folder beside it), and the command says it was terminated.
     from terrapref.cli import main
 
-    out = tmp_path / "rec"
-    assert main(["record", "fig7_rock_vs_non_traversable_left", "--out", str(out), "--quiet", "--disturb", "0"]) == 0
+    out = shutil.copytree(fig7_recording, tmp_path / "rec")
     before = (out / "frames.jsonl").read_bytes()
     command = [sys.executable, "-c", "import sys; from terrapref.cli import main; sys.exit(main())",
                "record", "demo_course", "--out", str(out), "--force", "--quiet"]

@@ -34,7 +34,8 @@ def _ros1_missing() -> str | None:
     return None if probe.returncode == 0 else f"rospy or ROS 1 message packages are missing ({probe.stderr.strip().splitlines()[-1:]})"
 
 
-pytestmark = pytest.mark.skipif(_ros1_missing() is not None, reason=str(_ros1_missing()))
+_MISSING = _ros1_missing()
+pytestmark = pytest.mark.skipif(_MISSING is not None, reason=str(_MISSING))
 
 PLAYER = textwrap.dedent('''
     """Publish a recording's first frames to the node, one at a time, and keep the command each gets."""

@@ -450,7 +450,7 @@ def test_the_gamepad_stick_springs_back_and_takes_over_from_the_keys():
     assert stick.update(0.1) == pytest.approx(0.1) and stick.source == "keys", "the input used last drives"
 
 
-def test_frames_after_a_gap_get_the_features_of_a_recording_without_one(tmp_path):
+def test_frames_after_a_gap_get_the_features_of_a_recording_without_one(tmp_path, demo_course_recording):
     """A ride-along records only the takeovers: the path progress must jump the gap, so that
     the frames after it are featurised as they would be in one continuous recording."""
     import json
@@ -461,10 +461,7 @@ def test_frames_after_a_gap_get_the_features_of_a_recording_without_one(tmp_path
     from terrapref.dataset import featurize_recording
     from terrapref.features import FeatureConfig
 
-    from terrapref.cli import main
-
-    full = tmp_path / "full"
-    assert main(["record", "demo_course", "--out", str(full), "--quiet"]) == 0  # the synthetic driver, along the path
+    full = demo_course_recording  # the synthetic driver, along the path
     gappy = tmp_path / "gappy"
     shutil.copytree(full, gappy)
     lines = (gappy / "frames.jsonl").read_text().splitlines()
