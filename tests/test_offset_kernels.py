@@ -173,7 +173,7 @@ def _least_squares_python(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
 
 def _attitude_fit_numpy(departure: np.ndarray, reference: np.ndarray, u: np.ndarray, fy: float, cy: float,
                         max_rad: float) -> tuple[float, float]:
-    """The NumPy form of kernels.attitude_fit (HorizonAttitude._fit): least squares of the columns'
+    """The NumPy form of kernels.attitude_fit: least squares of the columns'
     departures against a small pitch's and roll's image motion at the reference line, twice, the
     second time without the columns that miss the first fit by more than 3 rows."""
     n = len(u)

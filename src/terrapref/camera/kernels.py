@@ -71,7 +71,11 @@ def render_frame(P: np.ndarray, Q: np.ndarray, u: np.ndarray, first: np.ndarray,
 def row_col(k: int, width: int, per_row: float) -> tuple[int, int]:
     """(k // width, k % width) of a pixel index k >= 0, ``per_row`` = 1 / width: by a product
     instead of an integer division (exact while (k + 0.5) / width lies far from an integer in
-    float64, as for any image under 2 ** 40 pixels; checked, with the division as the fallback)."""
+    float64, as for any image under 2 ** 40 pixels; checked, with the division as the fallback).
+
+    Inlined into its callers, here and in terrapref.perception.labels, whose cached copies Numba
+    does not recompile when only this file changes: after editing it, delete the ``__pycache__``
+    folders' ``*.nbi``/``*.nbc`` files (``python -m terrapref.warm_up`` rebuilds them)."""
     row = np.int64((k + 0.5) * per_row)
     col = k - row * width
     if col < 0 or col >= width:

@@ -24,7 +24,7 @@ from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.features import kernels
 from terrapref.terrain import UNKNOWN
 
-REFERENCE_EVERY = 4  # frames between updates of the reference line (it moves slowly; its median is the costly part)
+REFERENCE_EVERY = 4  # frames between updates of the reference line (it moves slowly)
 
 
 class HorizonAttitude:

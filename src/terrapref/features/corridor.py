@@ -134,7 +134,7 @@ class CorridorConfig:
         return cls(**data)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class TerrainColumns:
     """How a class table's classes fall into the terrain columns that the ground map holds.
 
@@ -149,6 +149,10 @@ class TerrainColumns:
     k: int
     lethal: tuple[int, ...] = ()
     names: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if np.shape(self.of_class) != (256,) or self.k < 0 or not all(0 <= c <= self.k + 1 for c in self.lethal):
+            raise ValueError("terrain columns need a column for each of the 256 class ids, K >= 0 and lethal columns up to K + 1")
 
 
 class GroundMap:
@@ -188,7 +192,7 @@ class GroundMap:
         seen = pix >= 0
         self._pix = pix[seen]
         # Far samples share pixels: each distinct pixel is read once, and each sample reads its own.
-        self._pixels, self._pixel_of = np.unique(self._pix, return_inverse=True)
+        self._distinct_pix, self._sample_pix = np.unique(self._pix, return_inverse=True)
         self._vx, self._vy = grid[seen, 0].copy(), grid[seen, 1].copy()
         self.camera = camera
         self.attitude = HorizonAttitude(camera) if c.map_sky_attitude else None
@@ -240,14 +244,17 @@ class GroundMap:
         c = self.config
         self._recentre(x, y)
         self.frame += 1
-        ids = view.pixels(self._pixels)
+        ids = view.pixels(self._distinct_pix)
         dpitch, droll = self.attitude(view) if self.attitude is not None else (0.0, 0.0)
         tilted = bool(dpitch or droll)
         axes = self.camera.tilted(dpitch, droll) if tilted else self.camera.R
-        kernels.map_vote(self.evidence, self.stamp, self.cells, float(self.origin[0]), float(self.origin[1]), 1.0 / c.map_resolution_m,
-                         float(x), float(y), math.cos(yaw), math.sin(yaw), self._vx, self._vy, self._weight, ids, self._pixel_of, self.columns, self.frame,
-                         self._fade, self.lethal, np.float32(c.map_lethal_share), np.float32(c.map_terrain_share),
-                         np.float32(c.map_min_evidence), tilted, self._ray, self._ground0, axes, self.camera.t)
+        kernels.map_vote(self.evidence, self.stamp, self.cells,  # the map
+                         float(self.origin[0]), float(self.origin[1]), 1.0 / c.map_resolution_m,  # its corner and cells per metre
+                         float(x), float(y), math.cos(yaw), math.sin(yaw),  # the pose
+                         self._vx, self._vy, self._weight, ids, self._sample_pix, self.columns,  # the samples and what they saw
+                         self.frame, self._fade, self.lethal,  # the votes' fading and the lethal columns
+                         np.float32(c.map_lethal_share), np.float32(c.map_terrain_share), np.float32(c.map_min_evidence),
+                         tilted, self._ray, self._ground0, axes, self.camera.t)  # the camera off its mount
 
     def beside(self, path: ReferencePath, s: np.ndarray, lat: np.ndarray) -> np.ndarray:
         """Terrain column (O, S, F) at the points ``lat`` (O, F) [m] left of the path at arc lengths ``s`` (S,)."""
@@ -333,7 +340,7 @@ def gated(view: CorridorView, offsets: np.ndarray, near_m: float) -> np.ndarray:
 
 def steer(path: ReferencePath, pose: Pose, progress_s: float, offset_m: np.ndarray | float, lookahead_m: float, v_mps: float) -> np.ndarray:
     """:func:`pursuit_yaw_rates` clipped to the stick's +-1 rad/s."""
-    return np.clip(pursuit_yaw_rates(path, pose, progress_s, offset_m, lookahead_m, v_mps), -1.0, 1.0)
+    return np.asarray(np.clip(pursuit_yaw_rates(path, pose, progress_s, offset_m, lookahead_m, v_mps), -1.0, 1.0))
 
 
 def pursuit_yaw_rates(path: ReferencePath, pose: Pose, progress_s: float, offset_m: np.ndarray | float, lookahead_m: float,

@@ -4,7 +4,7 @@ attitude from the sky line.
 
 On one frame the utility features are a few hundred pixels and a few dozen distances, the
 corridor a few thousand map cells: NumPy's call overhead, not its arithmetic, set their cost,
-and a frame's ground samples (about 16,000) are a loop, not a vector. Each loop here does, element by element, exactly
+and the ground map's samples are a loop, not a vector. Each loop here does, element by element, exactly
 the IEEE 754 operations of the NumPy form its docstring gives, in the same order (compiled
 without fast-math: nothing is reassociated or fused into a multiply-add), so the features, and
 every decision made from them, are the same bits as the NumPy forms give (tests/test_features.py
@@ -209,8 +209,7 @@ def map_vote(evidence: np.ndarray, stamp: np.ndarray, cells: np.ndarray, ox: flo
     inv_res)`` (rows y, columns x); float32 sums in a fixed order, so every CPU agrees.
 
     A sample's column is ``columns[ids[pixel_of[p]]]`` (the class id of its pixel, ``ids`` holding
-    each distinct pixel's). With ``tilted``, the camera
-    is off its mount (``axes``, rows right, down, forward in the vehicle frame; optical centre
+    each distinct pixel's). With ``tilted``, the camera is off its mount (``axes``, rows right, down, forward in the vehicle frame; optical centre
     ``t``): a sample moves by where its pixel's ray ``ray[p]`` (camera frame, z = 1) now meets the
     ground less where the mount's camera saw it meet it (``ground0[p]``), and a ray that no longer
     meets it casts no vote; the NumPy form of that point is
@@ -294,9 +293,13 @@ def map_read(cells: np.ndarray, ox: float, oy: float, inv_res: float, px: np.nda
 
 
 @njit(cache=True, nogil=True)
-def path_point(path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray, s: float) -> tuple[float, float, float, float]:
+def path_frame(path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray, s: float) -> tuple[float, float, float, float]:
     """(x, y, ux, uy): the point at arc length ``s`` (clamped to the path) and the unit direction
-    there, as ``ReferencePath.point_at`` and ``direction_at`` give them (segments: ``path.segments``)."""
+    there, as ``ReferencePath.frame_at`` gives them (segments: ``path.segments``).
+
+    Compiled into its callers, here and in terrapref.planner.stages.kernels, whose cached copies
+    Numba does not recompile when only this file changes: after editing it, delete the
+    ``__pycache__`` folders' ``*.nbi``/``*.nbc`` files (``python -m terrapref.warm_up`` rebuilds them)."""
     n_seg = path_len.shape[0]
     s = min(max(s, 0.0), path_s[-1])
     i = min(max(np.searchsorted(path_s, s, side="right") - 1, 0), n_seg - 1)
@@ -318,7 +321,7 @@ def map_read_beside(cells: np.ndarray, ox: float, oy: float, inv_res: float, pat
     n_off, n_st, n_f = lat.shape[0], s.shape[0], lat.shape[1]
     out = np.empty((n_off, n_st, n_f), np.uint8)
     for q in range(n_st):
-        cx, cy, ux, uy = path_point(path_s, path_a, path_d, path_len, s[q])
+        cx, cy, ux, uy = path_frame(path_s, path_a, path_d, path_len, s[q])
         nx, ny = -uy, ux
         for o in range(n_off):
             for f in range(n_f):
@@ -333,8 +336,8 @@ def sky_line(ids: np.ndarray, rows: np.ndarray, n_cols: int, unknown: int) -> np
     """The first band row of each column below which ground is seen, (n_cols,) float; NaN where none.
 
     ``ids`` (len(rows) * n_cols,) are the class ids of the band, row by row. The NumPy form
-    (terrapref.features.attitude.HorizonAttitude.line): ``ground = ids != unknown``, the first
-    row r with at least 3 of rows r..r+3 ground; all NaN when the band holds fewer than 4 rows.
+    (tests/test_offset_kernels.py keeps it): ``ground = ids != unknown``, the first row r with at
+    least 3 of rows r..r+3 ground; all NaN when the band holds fewer than 4 rows.
     """
     out = np.full(n_cols, np.nan)
     if rows.shape[0] < 4:
@@ -371,6 +374,8 @@ def column_medians(history: np.ndarray, count: int, rows: np.ndarray) -> np.ndar
                 b = int((v - rows[0]) / step + 0.5) if step > 0.0 else -1
                 if not (0 <= b < n_bins and rows[b] == v):
                     b = np.searchsorted(rows, v)
+                    if b >= n_bins or rows[b] != v:
+                        raise ValueError("a history entry is not one of the rows")
                 counts[b] += 1
                 n += 1
         if n == 0:
@@ -492,6 +497,8 @@ def attitude_fit(departure: np.ndarray, reference: np.ndarray, u: np.ndarray, fy
     that miss the first fit by more than 3 rows), with exactly rounded sums (:func:`exact_sum`);
     tests/test_offset_kernels.py keeps its NumPy form and compares."""
     n = departure.shape[0]
+    if n < 2:  # no slope to read along a single column
+        return 0.0, 0.0
     ok = np.empty(n, np.bool_)
     good = 0
     for i in range(n):
@@ -546,8 +553,8 @@ def corridor_features(col: np.ndarray, centre: int, k: int, gap: int, beyond: in
     """The corridor's features (O, K + 2) and the distance to the first terrain on the path [m]
     (inf: none), from the terrain column (O, S, F) under every footprint point.
 
-    The NumPy form is ``terrapref.features.corridor.CorridorFeatures`` (its module docstring):
-    the first patch on the path (row ``centre``; gaps of at most ``gap`` stations do not split
+    As terrapref.features.corridor's module docstring says, and as the NumPy form that
+    tests/test_offset_kernels.py keeps computes it: the first patch on the path (row ``centre``; gaps of at most ``gap`` stations do not split
     it) and ``beyond`` stations after it are counted, metres per column (count * step / F), the
     never-seen column, and the detour's price ``offset^2 * (on-path metres + span)``.
     """
@@ -591,7 +598,8 @@ def corridor_features(col: np.ndarray, centre: int, k: int, gap: int, beyond: in
 def gated_value(features: np.ndarray, offsets: np.ndarray, gate: bool, weights: np.ndarray) -> np.ndarray:
     """Each offset's utility (O,): its features (O, K + 2), then the gate column (``offset^2`` while
     ``gate``, else 0), times ``weights`` (K + 3,), summed column by column in order. The NumPy form:
-    ``terrapref.features.corridor.gated`` and ``terrapref.planner.stages.offset._weighted``."""
+    ``terrapref.features.corridor.gated``, then the weighted sum column by column
+    (tests/test_offset_kernels.py keeps it)."""
     n_off, n_feat = features.shape
     g = 1.0 if gate else 0.0
     out = np.empty(n_off)

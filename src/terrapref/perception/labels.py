@@ -28,7 +28,7 @@ from numba import njit
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationView
 from terrapref.camera.kernels import row_col
 from terrapref.perception.model import LabelErrors
-from terrapref.terrain import UNKNOWN, ClassTable
+from terrapref.terrain import ClassTable
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 

@@ -10,15 +10,7 @@ import math
 import numpy as np
 from numba import njit
 
-from terrapref.features.kernels import path_point
-
-
-@njit(cache=True, nogil=True)
-def _segment(path_s: np.ndarray, n_seg: int, s: float) -> tuple[int, float]:
-    """The path's segment at arc length ``s`` (clamped to the path), as ``ReferencePath.point_at``."""
-    s = min(max(s, 0.0), path_s[-1])
-    i = np.searchsorted(path_s, s, side="right") - 1
-    return min(max(i, 0), n_seg - 1), s
+from terrapref.features.kernels import path_frame
 
 
 @njit(cache=True, nogil=True)
@@ -30,21 +22,20 @@ def swept_reach(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progress
     every other step) onto a lethal column of the map (``lethal`` by column, ``never`` for cells
     outside the map); ``steps`` where it never does.
 
-    The NumPy form: :func:`terrapref.features.corridor.steer` (clipped to +-1 rad/s) toward
-    every offset at progress ``progress_s + step * dt * v``, then ``yaw += w dt``, ``x += v
+    The NumPy form: pure pursuit as :func:`terrapref.features.corridor.steer` gives it (clipped
+    to +-1 rad/s, but with the C library's ``hypot``, as ``np.hypot``, where steer has Python's)
+    toward every offset at progress ``progress_s + step * dt * v``, then ``yaw += w dt``, ``x += v
     cos(yaw) dt``, ``y += v sin(yaw) dt``.
     """
-    n_seg = path_len.shape[0]
     n_rows, n_cols = cells.shape
     out = np.full(offsets.shape[0], steps, np.int64)
     for o in range(offsets.shape[0]):
         x, y, yaw = x0, y0, yaw0
         for k in range(steps):
-            i, s = _segment(path_s, n_seg, min(progress_s + k * dt * v + lookahead_m, path_s[-1]))
-            f = (s - path_s[i]) / path_len[i]
-            cos_h, sin_h = path_d[i, 0] / path_len[i], path_d[i, 1] / path_len[i]
-            tx = path_a[i, 0] + f * path_d[i, 0] - offsets[o] * sin_h - x
-            ty = path_a[i, 1] + f * path_d[i, 1] + offsets[o] * cos_h - y
+            target_s = min(progress_s + k * dt * v + lookahead_m, path_s[-1])
+            px0, py0, cos_h, sin_h = path_frame(path_s, path_a, path_d, path_len, target_s)
+            tx = px0 - offsets[o] * sin_h - x
+            ty = py0 + offsets[o] * cos_h - y
             alpha = (math.atan2(ty, tx) - yaw + math.pi) % (2 * math.pi) - math.pi
             w = 2.0 * v * math.sin(alpha) / max(math.hypot(tx, ty), 1e-6)
             w = min(max(w, -1.0), 1.0)
@@ -81,7 +72,7 @@ def lethal_hits(cells: np.ndarray, ox: float, oy: float, inv_res: float, path_s:
     length = path_s[-1]
     out = np.zeros((offsets.shape[0], stations.shape[0]), np.bool_)
     for q in range(stations.shape[0]):
-        cx, cy, ux, uy = path_point(path_s, path_a, path_d, path_len, min(progress_s + stations[q], length))
+        cx, cy, ux, uy = path_frame(path_s, path_a, path_d, path_len, min(progress_s + stations[q], length))
         nx, ny = -uy, ux
         for o in range(offsets.shape[0]):
             for a in range(across.shape[0]):
