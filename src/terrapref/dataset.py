@@ -165,8 +165,7 @@ class _CorridorReader:
     def __init__(self, features: FeatureConfig, featurizer: UtilityFeaturizer, camera: PinholeCamera, classes: ClassTable, n: int) -> None:
         config, k = features.corridor, features.n_terrain
         self.config = config
-        lethal = sorted({int(featurizer.class_columns[i]) for i in classes.lethal_ids})
-        self.map = GroundMap(camera, TerrainColumns(featurizer.class_columns, k, tuple(lethal)), config)
+        self.map = GroundMap(camera, TerrainColumns.of(featurizer.class_columns, k, classes), config)
         self.corridor = CorridorFeatures(config, k)
         self.features = np.empty((n, len(self.corridor.offsets), k + 2), dtype=np.float32)
         self.near = np.empty(n, dtype=np.float32)

@@ -31,7 +31,7 @@ from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.features import kernels
 from terrapref.features.attitude import HorizonAttitude
 from terrapref.scenario.path import ReferencePath
-from terrapref.terrain import UNKNOWN
+from terrapref.terrain import UNKNOWN, ClassTable
 from terrapref.vehicle import Pose, pure_pursuit_yaw_rate
 
 
@@ -153,6 +153,11 @@ class TerrainColumns:
     def __post_init__(self) -> None:
         if np.shape(self.of_class) != (256,) or self.k < 0 or not all(0 <= c <= self.k + 1 for c in self.lethal):
             raise ValueError("terrain columns need a column for each of the 256 class ids, K >= 0 and lethal columns up to K + 1")
+
+    @classmethod
+    def of(cls, of_class: np.ndarray, k: int, classes: ClassTable, names: tuple[str, ...] = ()) -> TerrainColumns:
+        """The columns ``of_class`` gives the class ids, with the columns of ``classes``' lethal classes."""
+        return cls(of_class, k, tuple(sorted({int(of_class[i]) for i in classes.lethal_ids})), names)
 
 
 class GroundMap:

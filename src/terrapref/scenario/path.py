@@ -40,12 +40,8 @@ class ReferencePath:
     def point_at(self, s: float | np.ndarray) -> np.ndarray:
         """Points (..., 2) at arc lengths ``s`` (clamped to the path)."""
         if isinstance(s, (float, int)):  # scalar fast path: used once per frame in the control loop
-            sf = min(max(float(s), 0.0), self.length_m)
-            i = min(max(bisect.bisect_right(self._s_list, sf) - 1, 0), len(self._len) - 1)
-            f = (sf - self._s_list[i]) / self._len_list[i]
-            ax, ay = self._a_list[i]
-            dx, dy = self._d_list[i]
-            return np.array([ax + f * dx, ay + f * dy])
+            x, y, _, _ = self.frame_at(s)
+            return np.array([x, y])
         s = np.clip(np.asarray(s, dtype=float), 0.0, self.length_m)
         i = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, len(self._len) - 1)
         f = (s - self.s[i]) / self._len[i]

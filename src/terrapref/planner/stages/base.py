@@ -32,16 +32,9 @@ class StageContext:
     classes: ClassTable
 
     @property
-    def lethal_columns(self) -> np.ndarray:
-        """The terrain columns of the lethal classes, sorted."""
-        columns = self.featurizer.class_columns
-        return np.array(sorted({int(columns[i]) for i in self.classes.lethal_ids}), dtype=np.int64)
-
-    @property
     def terrain(self) -> TerrainColumns:
         """The terrain columns of the class table, named by the features' classes."""
-        return TerrainColumns(self.featurizer.class_columns, self.features.n_terrain, tuple(int(c) for c in self.lethal_columns),
-                              self.features.feature_classes)
+        return TerrainColumns.of(self.featurizer.class_columns, self.features.n_terrain, self.classes, self.features.feature_classes)
 
 
 @dataclass(frozen=True)
