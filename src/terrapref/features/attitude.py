@@ -43,7 +43,7 @@ class HorizonAttitude:
     def __init__(self, camera: PinholeCamera, column_step_px: int = 16, row_step_px: int = 2, band_deg: float = 10.0, memory: int = 200,
                  max_deg: float = 6.0) -> None:
         c = camera.config
-        self.fx, self.fy, self.cx, self.cy = camera.fx, camera.fy, camera.cx, camera.cy
+        self.fy, self.cx, self.cy = camera.fy, camera.cx, camera.cy
         horizon = camera.horizon_row()
         reach = self.fy * math.tan(math.radians(band_deg)) * 2.0
         top, bottom = max(0, int(horizon - reach)), min(c.height_px, int(horizon + reach) + 1)
