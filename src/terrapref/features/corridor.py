@@ -23,13 +23,14 @@ are weighed; later patches wait for their own turn.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.features import kernels
 from terrapref.features.attitude import HorizonAttitude
+from terrapref.records import to_plain
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import UNKNOWN, ClassTable
 from terrapref.vehicle import Pose, pure_pursuit_yaw_rate
@@ -124,7 +125,7 @@ class CorridorConfig:
         return np.linspace(-self.half_width_m, self.half_width_m, 5)
 
     def to_dict(self) -> dict:
-        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
+        return to_plain(self)
 
     @classmethod
     def from_dict(cls, data: dict) -> CorridorConfig:

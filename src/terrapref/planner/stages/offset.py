@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import dataclass, fields, replace
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
@@ -41,6 +41,7 @@ from terrapref.learning.corridor import CorridorFit, CorridorUtility, fit_corrid
 from terrapref.planner.costmap import Costmap, costmap_of
 from terrapref.planner.stages.base import Choice, Stage, StageConfig, StageContext, StageInput, StageRunner, Where, number, vector
 from terrapref.planner.stages.kernels import lethal_hits, swept_reach
+from terrapref.records import to_plain
 from terrapref.scenario.path import ReferencePath
 from terrapref.vehicle import Command, ControlSet, Pose
 
@@ -83,7 +84,7 @@ class OffsetConfig(StageConfig):
                              "and positive distances and step")
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        return to_plain(self)
 
     def features(self, base: FeatureConfig) -> FeatureConfig:
         return replace(base, corridor=base.corridor or CorridorConfig())
