@@ -277,26 +277,18 @@ def map_vote(evidence: np.ndarray, stamp: np.ndarray, cells: np.ndarray, ox: flo
             cells[j, i] = k
 
 
-@njit(cache=True, nogil=True, inline="always")
-def map_cell(cells: np.ndarray, ox: float, oy: float, inv_res: float, px: float, py: float, never: int) -> int:
-    """The ground map's column at the world point (px, py); ``never`` outside the map.
-
-    Compiled into its callers, here and in terrapref.planner.stages.kernels (see
-    :func:`path_frame` on their cached copies)."""
-    i = math.floor((px - ox) * inv_res)
-    j = math.floor((py - oy) * inv_res)
-    return cells[j, i] if 0 <= i < cells.shape[1] and 0 <= j < cells.shape[0] else never
-
-
 @njit(cache=True, nogil=True)
 def map_read(cells: np.ndarray, ox: float, oy: float, inv_res: float, px: np.ndarray, py: np.ndarray, never: int) -> np.ndarray:
     """The ground map's column at each point (flat arrays ``px``, ``py``); ``never`` outside it.
 
     The NumPy form: ``cells[floor((py - oy) * inv_res), floor((px - ox) * inv_res)]`` where inside.
     """
+    n_rows, n_cols = cells.shape
     out = np.empty(px.shape[0], np.uint8)
     for p in range(px.shape[0]):
-        out[p] = map_cell(cells, ox, oy, inv_res, px[p], py[p], never)
+        i = math.floor((px[p] - ox) * inv_res)
+        j = math.floor((py[p] - oy) * inv_res)
+        out[p] = cells[j, i] if 0 <= i < n_cols and 0 <= j < n_rows else never
     return out
 
 
@@ -325,6 +317,7 @@ def map_read_beside(cells: np.ndarray, ox: float, oy: float, inv_res: float, pat
     normal[None, :, None, :]``, ``centre = path.point_at(s)``, ``normal`` the path's direction
     there turned left.
     """
+    n_rows, n_cols = cells.shape
     n_off, n_st, n_f = lat.shape[0], s.shape[0], lat.shape[1]
     out = np.empty((n_off, n_st, n_f), np.uint8)
     for q in range(n_st):
@@ -332,7 +325,9 @@ def map_read_beside(cells: np.ndarray, ox: float, oy: float, inv_res: float, pat
         nx, ny = -uy, ux
         for o in range(n_off):
             for f in range(n_f):
-                out[o, q, f] = map_cell(cells, ox, oy, inv_res, cx + lat[o, f] * nx, cy + lat[o, f] * ny, never)
+                i = math.floor((cx + lat[o, f] * nx - ox) * inv_res)
+                j = math.floor((cy + lat[o, f] * ny - oy) * inv_res)
+                out[o, q, f] = cells[j, i] if 0 <= i < n_cols and 0 <= j < n_rows else never
     return out
 
 

@@ -10,7 +10,7 @@ import math
 import numpy as np
 from numba import njit
 
-from terrapref.features.kernels import map_cell, path_frame
+from terrapref.features.kernels import path_frame
 
 
 @njit(cache=True, nogil=True)
@@ -27,6 +27,7 @@ def swept_reach(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progress
     toward every offset at progress ``progress_s + step * dt * v``, then ``yaw += w dt``, ``x += v
     cos(yaw) dt``, ``y += v sin(yaw) dt``.
     """
+    n_rows, n_cols = cells.shape
     out = np.full(offsets.shape[0], steps, np.int64)
     for o in range(offsets.shape[0]):
         x, y, yaw = x0, y0, yaw0
@@ -43,7 +44,12 @@ def swept_reach(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progress
             y = y + v * math.sin(yaw) * dt
             if k % 2 == 0:
                 for c in range(clear.shape[0]):
-                    if lethal[map_cell(cells, ox, oy, inv_res, x - clear[c] * math.sin(yaw), y + clear[c] * math.cos(yaw), never)]:
+                    px = x - clear[c] * math.sin(yaw)
+                    py = y + clear[c] * math.cos(yaw)
+                    ci = math.floor((px - ox) * inv_res)
+                    cj = math.floor((py - oy) * inv_res)
+                    col = cells[cj, ci] if 0 <= ci < n_cols and 0 <= cj < n_rows else never
+                    if lethal[col]:
                         out[o] = k
                         break
             if out[o] < steps:
@@ -62,6 +68,7 @@ def lethal_hits(cells: np.ndarray, ox: float, oy: float, inv_res: float, path_s:
     The NumPy form: ``lethal[map_read_beside(..., minimum(progress_s + stations, length),
     offsets[:, None] + across[None, :])].any(axis=2)``.
     """
+    n_rows, n_cols = cells.shape
     length = path_s[-1]
     out = np.zeros((offsets.shape[0], stations.shape[0]), np.bool_)
     for q in range(stations.shape[0]):
@@ -70,7 +77,9 @@ def lethal_hits(cells: np.ndarray, ox: float, oy: float, inv_res: float, path_s:
         for o in range(offsets.shape[0]):
             for a in range(across.shape[0]):
                 lat = offsets[o] + across[a]
-                if lethal[map_cell(cells, ox, oy, inv_res, cx + lat * nx, cy + lat * ny, never)]:
+                i = math.floor((cx + lat * nx - ox) * inv_res)
+                j = math.floor((cy + lat * ny - oy) * inv_res)
+                if lethal[cells[j, i] if 0 <= i < n_cols and 0 <= j < n_rows else never]:
                     out[o, q] = True
                     break
     return out
