@@ -36,7 +36,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     status = 0
     for name in args.files:
         try:
-            load_scenario(scenario_path(name))
+            load_scenario(scenario_path(name), _class_table(args))
         except UserError as exc:
             for line in exc.lines():
                 print(f"error: {line}")  # in the report's order, beside the files that are ok
@@ -58,7 +58,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
     _check_output(args.out, "--out", [args.scenario])
     if args.preview:
         _check_output(args.preview, "--preview", [args.scenario, args.out])
-    scenario = resolve_scenario(args.scenario)
+    scenario = resolve_scenario(args.scenario, _class_table(args))
     x, y, yaw_deg = args.pose if args.pose is not None else (scenario.start[0], scenario.start[1], math.degrees(scenario.start[2]))
     camera = PinholeCamera()
     (w, h), reach = scenario.size_m, camera.config.max_range_m
@@ -82,7 +82,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
     _check_figure(args.out, "--out")
     _check_output(args.out, "--out", [args.scenario])
-    scenario = resolve_scenario(args.scenario)
+    scenario = resolve_scenario(args.scenario, _class_table(args))
     save_map(args.out, scenario, rasterise(scenario))
     print(f"wrote {args.out} ({scenario.name}: {len(scenario.terrain)} patches, {len(scenario.zones)} zones, path {scenario.path_length_m():.0f} m)")
     return 0
@@ -131,7 +131,7 @@ def _cmd_record(args: argparse.Namespace) -> int:
     if args.seed < 0:
         raise UserError("--seed", f"must be an integer >= 0, got {args.seed}")
     _check_output(args.out, "--out", [args.scenario], folder=True)
-    scenario = resolve_scenario(args.scenario)
+    scenario = resolve_scenario(args.scenario, _class_table(args))
     profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile is not None else PreferenceProfile.default(scenario.classes)
     try:
         expert = ExpertConfig.styled(args.style, profile.order)
@@ -172,10 +172,14 @@ def _cmd_drive(args: argparse.Namespace) -> int:
 
     if args.seed < 0:
         raise UserError("--seed", f"must be an integer >= 0, got {args.seed}")
-    scenario = resolve_scenario(args.scenario)
+    scenario = resolve_scenario(args.scenario, _class_table(args))
     profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile is not None else None
     if args.record is not None:
         _check_output(args.record, "--record", [args.scenario, *([args.model] if args.model else [])], folder=True)
+    if args.model is not None:
+        from terrapref.learning.model_file import load_model
+
+        _check_table(args, load_model(args.model).classes, args.model)
     perception = _perception(args.perception, classes=scenario.classes)
     view = _live_view(args)
     try:
@@ -203,6 +207,8 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
         _check_figure(args.out, "--out")
         _check_output(args.out, "--out", [args.recording])
     rec = read_recording(args.recording)
+    if getattr(args, "classes", None) is not None:
+        _check_table(args, _recording_table(rec), args.recording)
     summary = summarise(rec)
     for line in summary.lines():
         print(line)
@@ -245,6 +251,8 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
     _check_output(args.out, "--out", [*args.recordings, *([args.camera] if args.camera else [])])
     recordings = [read_recording(p) for p in args.recordings]
     for r in recordings:
+        if args.classes is not None:
+            _check_table(args, _recording_table(r), r.path)
         if not r.complete:
             print(f"warning: {r.path} is partial; using its {len(r)} frames", file=sys.stderr)
     from terrapref.recipes import DEFAULT_RECIPE, recipe_named
@@ -355,6 +363,33 @@ def _check_distinct(inputs: Sequence[str | Path], what: str) -> None:
         seen[key] = given
 
 
+def _class_table(args: argparse.Namespace):
+    """The class table ``--classes FILE`` gives, or None (the packaged default)."""
+    if getattr(args, "classes", None) is None:
+        return None
+    from terrapref.terrain import load_classes
+
+    return load_classes(args.classes)
+
+
+def _check_table(args: argparse.Namespace, found, source: str | Path) -> None:
+    """Refuse a file made for another class table than ``--classes`` gives (the default table
+    when the flag is not given), naming both."""
+    from terrapref.terrain import default_classes
+
+    table = _class_table(args) or default_classes()
+    if found != table:
+        given = f"{args.classes}'s" if getattr(args, "classes", None) is not None else "the default table's (give --classes FILE for another)"
+        raise UserError(str(source), f"was made for the class table of {', '.join(found.names)}, not {given} ({', '.join(table.names)})",
+                        field="classes")
+
+
+def _recording_table(rec):
+    from terrapref.terrain import ClassTable
+
+    return ClassTable.from_dict(rec.meta["classes"], str(rec.path / "meta.json"))
+
+
 def _special_file(path: Path) -> str | None:
     """What ``path`` is when it exists and is neither a regular file nor a folder (links followed):
     writing over it would replace a device node or block on a pipe."""
@@ -444,6 +479,10 @@ def _cmd_train(args: argparse.Namespace) -> int:
     _check_distinct(args.data, "recording or dataset")
     _check_output(args.out, "--out", args.data)
     data = _training_data(args, recipe)
+    if args.classes is not None:
+        from terrapref.terrain import ClassTable
+
+        _check_table(args, ClassTable.from_dict(data.meta["classes"], str(args.data[0])), args.data[0])
     types = {stage.type for stage in recipe.stages}
     if recipe.features().lookahead is not None and data.U2 is None:
         print(f"warning: {args.data[0]} carries no look-ahead utilities; the second stage is fitted frame by frame "
@@ -485,8 +524,9 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         frames = sorted({int(f) for f in args.frames.split(",") if f.strip()}) if args.frames else []
     except ValueError:
         raise UserError("--frames", f"expected comma-separated frame numbers, got {args.frames!r}") from None
-    _check_frames(frames, args.scenarios)
+    _check_frames(frames, args.scenarios, _class_table(args))
     model = load_policy(args.model)  # C, or a learned baseline's file (linear, CNN)
+    _check_table(args, model.classes, args.model)  # the scenarios are read with --classes' table
     profile = PreferenceProfile.parse(args.profile, model.classes) if args.profile is not None else None
     perception = _perception(args.perception, classes=model.classes)
     n_runs = len(args.scenarios) * args.seeds * (1 if args.no_driver else 2)
@@ -526,7 +566,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _check_frames(frames: Sequence[int], scenarios: Sequence[str]) -> None:
+def _check_frames(frames: Sequence[int], scenarios: Sequence[str], classes) -> None:
     """Refuse a frame number no run of these scenarios can reach: the shortest's time limit caps its frames."""
     from terrapref.scenario import resolve_scenario
     from terrapref.scenario.path import ReferencePath
@@ -538,7 +578,7 @@ def _check_frames(frames: Sequence[int], scenarios: Sequence[str]) -> None:
         raise UserError("--frames", f"frame numbers start at 0, got {frames[0]}")
     config = SimConfig()
     for name in scenarios:
-        scenario = resolve_scenario(name)
+        scenario = resolve_scenario(name, classes)
         last = int(config.time_limit(ReferencePath(scenario.waypoints).length_m) * config.camera_rate_hz)
         if frames[-1] > last:
             raise UserError("--frames", f"frame {frames[-1]} lies beyond any run of {scenario.name} (its time limit ends at frame {last})")
@@ -549,7 +589,7 @@ def _cmd_import(args: argparse.Namespace) -> int:
     from terrapref.interop.robot import load_robot
 
     _check_output(args.out, "--out", [args.bag, args.robot], folder=True)
-    robot = load_robot(args.robot)
+    robot = load_robot(args.robot, _class_table(args))
     report = import_bag(args.bag, robot, args.out, ImportOptions(rate_hz=args.rate, force=args.force))
     for line in report.lines():
         print(line)
@@ -652,7 +692,7 @@ def _cmd_route(args: argparse.Namespace) -> int:
         raise UserError(str(out), "the route is written as a scenario file: give it the suffix .yaml", field="--out")
     if not (math.isfinite(args.resolution) and 0.1 <= args.resolution <= 2.0):
         raise UserError("--resolution", f"expected a cell size in [0.1, 2] m, got {args.resolution}")
-    scenario = resolve_scenario(args.scenario)
+    scenario = resolve_scenario(args.scenario, _class_table(args))
     model = load_model(args.model)
     if model.classes != scenario.classes:
         raise UserError(args.model, f"was trained for another class table than {args.scenario}'s", field="classes")
@@ -702,6 +742,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
         check("robot", f"terrapref export --format {args.format}", "rosbags")  # before the frames are read
 
         rec = read_recording(args.input)
+        if args.classes is not None:
+            _check_table(args, _recording_table(rec), args.input)
         if len(rec) == 0:
             raise UserError(args.input, "holds no frames", field="frames.jsonl")
         frames = recording_frames(rec)
@@ -719,6 +761,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
     from terrapref.learning.model_file import load_model
 
     model = load_model(args.input)
+    if args.classes is not None:
+        _check_table(args, model.classes, args.input)
     export_onnx(model, out)
     print(f"wrote {out} (ONNX: input utilities float32 [N, {model.classifier.m}, {model.classifier.n_features}], output logits float32 [N, {model.classifier.m}])")
     return 0
@@ -920,9 +964,20 @@ def _add_engine_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--address", metavar="HOST:PORT", help="a Ray cluster to run the jobs on (ray start --head on one machine); with --engine ray")
 
 
+CLASSES_HELP = ("your own class table (a terrapref-classes/1 file, e.g. examples/classes/rellis3d.yaml): the classes scenarios, "
+                "generated layouts (gen:N) and label maps are read with; default: the packaged grass, mud, rock, water, non_traversable")
+CLASSES_CHECK_HELP = ("the class table the files must have been made for (a terrapref-classes/1 file); a file made for another is refused. "
+                      "Files carry their own table, so this is a check, not a setting")
+
+
+def _add_classes_arg(p: argparse.ArgumentParser, check: bool = False) -> None:
+    p.add_argument("--classes", metavar="FILE", help=CLASSES_CHECK_HELP if check else CLASSES_HELP)
+
+
 def _validate_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("validate", help="check scenario files against terrapref-scenario/1")
     p.add_argument("files", nargs="+", metavar="FILE", help="scenario files (YAML) to check")
+    _add_classes_arg(p)
     p.set_defaults(func=_cmd_validate)
 
 
@@ -932,6 +987,7 @@ def _render_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--pose", nargs=3, type=float, metavar=("X", "Y", "YAW_DEG"), help="vehicle pose [m, m, deg]; default: the start")
     p.add_argument("--out", required=True, type=Path, help="single-channel PNG of class ids")
     p.add_argument("--preview", type=Path, help="also write a colour preview PNG")
+    _add_classes_arg(p)
     p.set_defaults(func=_cmd_render)
 
 
@@ -939,6 +995,7 @@ def _show_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("show", help="draw the map top-down with the path, the start and the zones")
     p.add_argument("scenario", metavar="SCENARIO", help=SCENARIO_HELP)
     p.add_argument("--out", required=True, type=Path, help="figure file (.png, .pdf or .svg)")
+    _add_classes_arg(p)
     p.set_defaults(func=_cmd_show)
 
 
@@ -958,6 +1015,7 @@ def _record_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--perception", metavar="PRESET|FILE",
                    help="the driver sees the truth; the recording holds what the robot's camera and localisation gave through this "
                         "perception model (a preset: clean, rellis, field; or a terrapref-perception/1 file)")
+    _add_classes_arg(p)
     p.set_defaults(func=_cmd_record)
 
 
@@ -978,6 +1036,7 @@ def _drive_parser(sub: argparse._SubParsersAction) -> None:
                    help="you see the truth; the recording (and a riding-along model) gets what the robot's camera and localisation "
                         "gave through this perception model")
     _add_live_args(p, "every driven frame, riding along with the planner's F_t and costmap")
+    _add_classes_arg(p)
     p.set_defaults(func=_cmd_drive)
 
 
@@ -987,6 +1046,7 @@ def _inspect_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, help="top-down PNG (default: DIR/driven_path.png)")
     p.add_argument("--no-preference", action="store_true",
                    help="skip what the drive shows of the driver's preference (it featurises every frame: seconds)")
+    _add_classes_arg(p, check=True)
     p.set_defaults(func=_cmd_inspect)
 
 
@@ -1001,6 +1061,7 @@ def _featurize_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--dt", type=float, help="trajectory time step [s] (default 0.2)")
     p.add_argument("--camera", help="camera file to re-render the frames with: CameraConfig's fields, or a ROS camera_info YAML (with mount_height_m, pitch_deg)")
     p.add_argument("--recipe", metavar="NAME", help="featurise as this recipe trains (default: teach, with the look-ahead utilities)")
+    _add_classes_arg(p, check=True)
     p.set_defaults(func=_cmd_featurize)
 
 
@@ -1013,6 +1074,7 @@ def _train_parser(sub: argparse._SubParsersAction, flags: bool = True) -> None:
     p.add_argument("--out", required=True, type=Path, help="model file (.safetensors)")
     p.add_argument("--recipe", default=None, metavar="NAME", help="a named recipe (`terrapref recipes`; default: teach)")
     p.add_argument("--verbose", action="store_true", help="print every epoch (default: every tenth)")
+    _add_classes_arg(p, check=True)
     p.set_defaults(func=_cmd_train)
     if flags:
         from terrapref.configargs import add_arguments
@@ -1043,6 +1105,7 @@ def _evaluate_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mcap", action="store_true", help="also write each planner run as ROS 2 MCAP in OUT/runs (Foxglove, RViz)")
     p.add_argument("--perception", metavar="PRESET|FILE", help=PERCEPTION_HELP + " (default: clean); the driver always sees the truth")
     _add_live_args(p, "the runs go one after another in this process")
+    _add_classes_arg(p)
     p.set_defaults(func=_cmd_evaluate)
 
 
@@ -1080,6 +1143,7 @@ def _import_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, help="recording folder to create")
     p.add_argument("--rate", type=float, default=10.0, help="frames per second to keep (default 10, the planner's rate)")
     p.add_argument("--force", action="store_true", help="replace an existing recording at --out (only once the import succeeds)")
+    _add_classes_arg(p)
     p.set_defaults(func=_cmd_import)
 
 
@@ -1101,6 +1165,7 @@ def _export_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, help="output file")
     p.add_argument("--model", help="with --format mcap or rosbag1: also write the costmap this model (with an offset stage) prices the recording's ground with, "
                                    "as nav_msgs/OccupancyGrid and foxglove_msgs/Grid, once a second")
+    _add_classes_arg(p, check=True)
     p.set_defaults(func=_cmd_export)
 
 
@@ -1125,6 +1190,7 @@ def _route_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, help="the scenario with the route as its path (.yaml); a figure is written beside it (.png)")
     p.add_argument("--resolution", type=float, default=0.25,
                    help="search cell size [m], 0.1-2, taken as the nearest whole multiple of the map's cells (default 0.25)")
+    _add_classes_arg(p)
     p.set_defaults(func=_cmd_route)
 
 

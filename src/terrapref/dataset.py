@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -234,6 +234,8 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
         for key in ("classes", "profile"):
             if rec.meta.get(key) != first.meta.get(key):
                 raise UserError(str(rec.path / "meta.json"), f"differs from {first.path} in {key}; featurise them separately", field=key)
+    # The terrain columns are the recordings' class table's.
+    features = replace(features, feature_classes=ClassTable.from_dict(first.meta["classes"], str(first.path / "meta.json")).feature_names)
     parts = []
     for k, rec in enumerate(recordings):
         parts.append(featurize_recording(rec, features, camera))

@@ -166,7 +166,7 @@ class ExpertDriver:
         cost = np.zeros(256)
         cost[255] = c.lethal_cost  # off the map: never go there
         for rank, name in enumerate(profile.order):
-            cost[classes.id_of(name)] = c.rank_cost * c.rank_growth**rank
+            cost[list(classes.ids_of(name))] = c.rank_cost * c.rank_growth**rank
         lethal = np.zeros(256, dtype=bool)
         lethal[list(classes.lethal_ids)] = True
         lethal[255] = True

@@ -16,12 +16,12 @@ from terrapref.fileio import write_text_atomic
 from terrapref.grid import Engine
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, Watch, annotate_agreement, run_many, scenario_and_world, summarise
 from terrapref.evaluation.scoring import classes_in_zone
-from terrapref.learning.identify import GRASS, Identifiability
+from terrapref.learning.identify import Identifiability
 from terrapref.perception import PerceptionModel
 from terrapref.features import PreferenceSet
 from terrapref.planner.registry import load_policy
 from terrapref.scenario import AVOID, resolve_scenario
-from terrapref.terrain import PreferenceProfile
+from terrapref.terrain import ClassTable, PreferenceProfile
 from terrapref.vehicle import Pose
 
 
@@ -57,13 +57,14 @@ class Evaluation:
         """The perception model the planner's runs go through (a clean one: the truth)."""
         return self.perception or PerceptionModel()
 
-    def specs(self, profile: PreferenceProfile) -> list[RunSpec]:
+    def specs(self, profile: PreferenceProfile, classes: ClassTable | None = None) -> list[RunSpec]:
         """The planner's runs (seed 0 keeping ``frames``; every run kept with ``mcap``), then the
-        driver's; zones resolve under ``profile``."""
+        driver's; zones resolve under ``profile``, scenarios are read with ``classes``."""
         specs = [RunSpec(name, seed, PLANNER, self.model_path, profile.order, self.frames if seed == 0 else (), keep_run=self.mcap,
-                         perception=self.perceived) for name in self.scenarios for seed in range(self.seeds)]
+                         perception=self.perceived, classes=classes) for name in self.scenarios for seed in range(self.seeds)]
         if self.with_driver:
-            specs += [RunSpec(name, seed, EXPERT, None, profile.order, style=self.style) for name in self.scenarios for seed in range(self.seeds)]
+            specs += [RunSpec(name, seed, EXPERT, None, profile.order, style=self.style, classes=classes)
+                      for name in self.scenarios for seed in range(self.seeds)]
         return specs
 
 
@@ -92,9 +93,9 @@ def evaluate_model(
     ev = evaluation
     model = load_policy(ev.model_path)  # C, or a learned baseline (linear, CNN)
     for name in ev.scenarios:
-        resolve_scenario(name)  # fail early, with the file and field, before any run
+        resolve_scenario(name, model.classes)  # fail early, with the file and field, before any run
     profile = ev.profile or PreferenceProfile.parse(list(model.profile), model.classes, source=f"{ev.model_path}: profile")
-    results = annotate_agreement(run_many(ev.specs(profile), progress=progress, engine=engine, watch=watch))
+    results = annotate_agreement(run_many(ev.specs(profile, model.classes), progress=progress, engine=engine, watch=watch))
     evidence = _evidence(model, ev.scenarios)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -114,11 +115,13 @@ class _Evidence:
     """What the model's demonstrations showed, and the classes present in every zone of the courses driven."""
 
     identified: Identifiability
-    present: dict[str, dict[str, list[str]]]  # scenario -> zone id -> classes
+    present: dict[str, dict[str, list[str]]]  # scenario -> zone id -> terrain columns of the classes in it
+    classes: ClassTable
 
     def rests_on(self, scenario: str, zone: dict) -> list[str]:
         """The unidentified pairs a zone's expected choice rests on (:func:`rests_on`)."""
-        return rests_on(zone["expect"], self.present[scenario][zone["id"]], self.identified)
+        expect = zone["expect"] if zone["expect"] == AVOID else self.classes.column_of(zone["expect"])
+        return rests_on(expect, self.present[scenario][zone["id"]], self.identified)
 
 
 def _evidence(model, scenarios: Sequence[str]) -> _Evidence | None:
@@ -128,9 +131,10 @@ def _evidence(model, scenarios: Sequence[str]) -> _Evidence | None:
         return None
     present: dict[str, dict[str, list[str]]] = {}
     for name in scenarios:
-        scenario, world = scenario_and_world(name)
-        present[name] = {z.id: classes_in_zone(z, world) for z in scenario.zones}
-    return _Evidence(identified, present)
+        scenario, world = scenario_and_world(name, model.classes)
+        columns = model.classes.column_of  # the report names the lethal classes' shared column
+        present[name] = {z.id: list(dict.fromkeys(map(columns, classes_in_zone(z, world)))) for z in scenario.zones}
+    return _Evidence(identified, present, model.classes)
 
 
 def _metrics(ev: Evaluation, profile: PreferenceProfile, results: list[RunResult], evidence: _Evidence | None) -> dict:
@@ -178,7 +182,7 @@ def _write_runs(results: list[RunResult], folder: Path, model) -> None:
         run = r.run
         if r.driver != PLANNER or run is None:
             continue
-        scenario, world = scenario_and_world(r.scenario)  # cached: the runs of one course share a raster
+        scenario, world = scenario_and_world(r.scenario, model.classes)  # cached: the runs of one course share a raster
         renderer = SegmentationRenderer(camera, world)
         poses = run.poses
         frames = RunFrames(times=0.1 * np.arange(len(poses)), poses=poses, commands=run.commands,
@@ -207,10 +211,10 @@ def _identifiability(model) -> Identifiability | None:
 def rests_on(expect: str, present: Sequence[str], identified: Identifiability) -> list[str]:
     """The unidentified pairs a zone's expected choice depends on: the expected class against
     every other class present (or grass against them all, for ``avoid``)."""
-    best = GRASS if expect == AVOID else expect
+    best = identified.background if expect == AVOID else expect
     pairs = [identified.pair(best, other) for other in present if other != best]
     if expect != AVOID:
-        pairs.append(identified.pair(best, GRASS))
+        pairs.append(identified.pair(best, identified.background))
     return sorted({f"{p.first} vs {p.second}" for p in pairs if p is not None and not p.identified})
 
 
@@ -221,7 +225,7 @@ def _figures(results: list[RunResult], scenarios: Sequence[str], out: Path, mode
     pset = PreferenceSet(model.features.preference, PinholeCamera(model.camera))
     uv, visible = pset.camera.project_ground(pset.trajectories[..., :2])
     for name in scenarios:
-        scenario, world = scenario_and_world(name)  # the raster the runs used, not a new one
+        scenario, world = scenario_and_world(name, model.classes)  # the raster the runs used, not a new one
         planner_runs = [r for r in results if r.scenario == name and r.driver == PLANNER]
         driver_runs = [r for r in results if r.scenario == name and r.driver == EXPERT]
         per_zone = _zone_successes(planner_runs)

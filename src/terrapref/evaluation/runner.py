@@ -28,7 +28,7 @@ from terrapref.planner.registry import load_policy, make as make_policy
 from terrapref.registry import Registry
 from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.sim import EpisodeLog, Simulation, run_episode
-from terrapref.terrain import PreferenceProfile
+from terrapref.terrain import ClassTable, PreferenceProfile
 from terrapref.vehicle import Pose
 from terrapref.world import WorldMap, rasterise
 
@@ -49,6 +49,7 @@ class RunSpec:
     perception: PerceptionModel | None = None  # what the planner receives instead of the truth (the driver sees the truth)
     style: str = "default"  # the synthetic driver's style (terrapref.demos.expert.STYLES), for EXPERT runs
     keep_run: bool = False  # keep every decision (pose, choice, F_t) of a planner run, for an MCAP of it
+    classes: ClassTable | None = None  # the class table the scenario is read with (None: the default)
 
     @property
     def perceived_as(self) -> str:
@@ -151,9 +152,9 @@ def start_pose(start: tuple[float, float, float], seed: int) -> Pose:
 
 
 @functools.lru_cache(maxsize=16)
-def scenario_and_world(name: str) -> tuple:
+def scenario_and_world(name: str, classes: ClassTable | None = None) -> tuple:
     """Scenarios and rasters, cached per worker process: many runs share a handful of maps."""
-    scenario = resolve_scenario(name)
+    scenario = resolve_scenario(name, classes)
     return scenario, rasterise(scenario)
 
 
@@ -216,7 +217,7 @@ Watch = Callable[[PlannerDriver], Driver]  # puts a planner driver where it can 
 def run_one(spec: RunSpec, watch: Watch | None = None) -> RunResult:
     """Drive one run and return its scores, its path and any kept decisions; with ``watch``, the
     planner (of a planner run) drives as ``watch`` wraps it."""
-    scenario, world = scenario_and_world(spec.scenario)
+    scenario, world = scenario_and_world(spec.scenario, spec.classes)
     profile = PreferenceProfile.parse(list(spec.profile), scenario.classes, source="--profile")
     sim, driver = _sim_and_driver(spec, scenario, world, profile)
     perceived = spec.perception is not None and spec.perception.active and spec.driver != EXPERT

@@ -164,7 +164,7 @@ class UtilityFeaturizer:
         pix = pix.ravel()
         self._column = np.full(256, k, dtype=np.intp)  # class id -> terrain column (k: none)
         for j, name in enumerate(config.feature_classes):
-            self._column[classes.id_of(name)] = j
+            self._column[list(classes.ids_of(name))] = j
         self._point_row = np.where(pix >= 0, row, self._rows)  # m: a point outside the image
         self._pix_flat = np.where(pix >= 0, pix, 0)
         self._pix_flat.flags.writeable = False  # read-only: a renderer may prepare it once

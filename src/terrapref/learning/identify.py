@@ -33,7 +33,7 @@ import numpy as np
 from terrapref.learning.linear import LinearUtility
 from terrapref.records import to_plain
 
-GRASS = "grass"  # the background, compared like a class
+GRASS = "grass"  # the default table's background, compared like a class
 SHARE = 0.2  # a trajectory "runs over" a class when at least this share of its points do
 NEAR = 0.5  # trajectories whose distance utility is below this have left the path: not an option
 MIN_FRAMES = 10  # fewer comparing frames than this leave a pair unidentified
@@ -82,7 +82,8 @@ class Identifiability:
 
     order: tuple[str, ...]  # best first
     pairs: tuple[PairEvidence, ...]
-    lethal: tuple[str, ...] = ()  # the class table's lethal classes, which the offset stage never drives onto
+    lethal: tuple[str, ...] = ()  # the class table's lethal column, which the offset stage never drives onto
+    background: str = GRASS  # the class table's background (the class of clean trajectories)
 
     def pair(self, a: str, b: str) -> PairEvidence | None:
         return next((p for p in self.pairs if {p.first, p.second} == {a, b}), None)
@@ -134,24 +135,25 @@ class Identifiability:
                   f"{'identified' if p.identified else 'not identified'})" for p in reversed_)]
 
     def to_dict(self) -> dict:
-        return {"order": list(self.order), "pairs": [p.to_dict() for p in self.pairs], "min_frames": MIN_FRAMES, "lethal": list(self.lethal)}
+        out = {"order": list(self.order), "pairs": [p.to_dict() for p in self.pairs], "min_frames": MIN_FRAMES, "lethal": list(self.lethal)}
+        return out | ({"background": self.background} if self.background != GRASS else {})
 
     @classmethod
     def from_dict(cls, data: dict) -> Identifiability:
         pairs = tuple(PairEvidence(p["first"], p["second"], int(p["frames"]), int(p["for_first"]), int(p["for_second"]),
                                    (int(p["sides"][0]), int(p["sides"][1])), float(p["margin"]),
                                    None if p["stderr"] is None else float(p["stderr"])) for p in data["pairs"])
-        return cls(tuple(data["order"]), pairs, tuple(data.get("lethal", ())))
+        return cls(tuple(data["order"]), pairs, tuple(data.get("lethal", ())), str(data.get("background", GRASS)))
 
 
-def count_comparisons(U: np.ndarray, labels: np.ndarray, classes: tuple[str, ...]) -> dict[tuple[str, str], np.ndarray]:
+def count_comparisons(U: np.ndarray, labels: np.ndarray, classes: tuple[str, ...], background: str = GRASS) -> dict[tuple[str, str], np.ndarray]:
     """Per ordered pair (a, b): counts [a chosen with a on the left, a chosen on the right,
     b chosen with b on the left, b chosen on the right] over the frames comparing them.
 
     Args:
         U: (N, m, K + 1) utilities: K terrain shares in ``classes`` order, the distance utility last.
         labels: (N,) chosen trajectory per frame.
-        classes: the K terrain classes; ``grass`` is added as the class of clean trajectories.
+        classes: the K terrain classes; ``background`` is added as the class of clean trajectories.
     """
     n, m, _ = U.shape
     k = len(classes)
@@ -159,7 +161,7 @@ def count_comparisons(U: np.ndarray, labels: np.ndarray, classes: tuple[str, ...
     clean = terrain.sum(axis=2) < 0.05  # (N, m): (almost) no terrain on the trajectory
     near = U[:, :, -1] >= NEAR
     shares = np.concatenate([terrain, clean[..., None].astype(float)], axis=2)  # grass as column k
-    names = (*classes, GRASS)
+    names = (*classes, background)
     left = np.arange(m) > (m - 1) / 2  # trajectories turning left (w > 0)
     chosen = shares[np.arange(n), labels]  # (N, K + 1)
     out: dict[tuple[str, str], np.ndarray] = {}
@@ -206,6 +208,19 @@ def fisher_covariance(U: np.ndarray, labels: np.ndarray, utility: LinearUtility,
 
 
 @dataclass(frozen=True)
+class TableNames:
+    """What the report needs of the class table besides the terrain columns.
+
+    Attributes:
+        background: the background class (the class of clean trajectories, weight 0).
+        lethal: the lethal column (its pairs are warned about differently).
+    """
+
+    background: str = GRASS
+    lethal: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
 class FittedLookahead:
     """The look-ahead a linear utility was fitted through (terrapref.learning.linear.fit_lookahead_utility).
 
@@ -219,8 +234,8 @@ class FittedLookahead:
 
 
 def identifiability(U: np.ndarray, labels: np.ndarray, classes: tuple[str, ...], utility: LinearUtility,
-                    lookahead: FittedLookahead | None = None, lethal: tuple[str, ...] = ()) -> Identifiability:
-    """The evidence and learned order for every pair of ``classes`` and grass.
+                    lookahead: FittedLookahead | None = None, names: TableNames = TableNames()) -> Identifiability:
+    """The evidence and learned order for every pair of ``classes`` and the background.
 
     Args:
         U: (N, m, K + 1) utilities of the demonstrated frames (not mirrored): terrain shares, distance.
@@ -228,12 +243,13 @@ def identifiability(U: np.ndarray, labels: np.ndarray, classes: tuple[str, ...],
         classes: the K terrain classes, in U's column order.
         utility: the linear utility fitted to these frames (or to them and their mirror images).
         lookahead: the look-ahead ``utility`` was fitted through, if it was.
-        lethal: the class table's lethal classes (their pairs are warned about differently).
+        names: the background's name and the lethal column's.
     """
-    counts = count_comparisons(U, labels, classes)
+    background = names.background
+    counts = count_comparisons(U, labels, classes, background)
     cov = (fisher_covariance(U, labels, utility) if lookahead is None
            else fisher_covariance(U, labels, utility, lookahead.U2, lookahead.gamma))
-    weight = {name: float(utility.w[i]) for i, name in enumerate(classes)} | {GRASS: 0.0}
+    weight = {name: float(utility.w[i]) for i, name in enumerate(classes)} | {background: 0.0}
     order = tuple(sorted(weight, key=lambda c: -weight[c]))
     pairs = []
     for a, b in itertools.combinations(order, 2):  # a before b in the learned order
@@ -242,12 +258,12 @@ def identifiability(U: np.ndarray, labels: np.ndarray, classes: tuple[str, ...],
         for_a, for_b = (c[2] + c[3], c[0] + c[1]) if flip else (c[0] + c[1], c[2] + c[3])
         a_left, a_right = (c[2] + c[1], c[3] + c[0]) if flip else (c[0] + c[3], c[1] + c[2])
         grad = np.zeros(len(cov))
-        if a != GRASS:
+        if a != background:
             grad[classes.index(a)] += 1.0
-        if b != GRASS:
+        if b != background:
             grad[classes.index(b)] -= 1.0
         var = float(grad @ cov @ grad)
         stderr = math.sqrt(var) if var > 0 and math.isfinite(var) else None
         pairs.append(PairEvidence(a, b, int(for_a + for_b), int(for_a), int(for_b), (int(a_left), int(a_right)),
                                   weight[a] - weight[b], stderr))
-    return Identifiability(order, tuple(pairs), tuple(lethal))
+    return Identifiability(order, tuple(pairs), names.lethal, background)

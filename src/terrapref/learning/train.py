@@ -20,7 +20,7 @@ import numpy as np
 from terrapref.configargs import option
 from terrapref.dataset import Dataset
 from terrapref.learning import exact, kernels
-from terrapref.learning.identify import FittedLookahead, Identifiability, identifiability
+from terrapref.learning.identify import FittedLookahead, Identifiability, TableNames, identifiability
 from terrapref.learning.linear import LinearUtility, fit_linear_utility, fit_lookahead_utility
 from terrapref.learning.mlp import Adam, TrainableClassifier, cross_entropy, init_weights, round_inputs
 from terrapref.learning.steady import Steadying, steady_labels
@@ -289,9 +289,10 @@ def identify(dataset: Dataset, mirror: bool = True, steady: bool = False) -> Ide
 def _identifiability(dataset: Dataset, utility: LinearUtility, gamma: float) -> Identifiability:
     features = dataset.feature_config
     U = dataset.U[..., [*range(features.n_terrain), features.n_features - 1]]
-    lethal = tuple(ClassTable.from_dict(dataset.meta["classes"], "dataset").lethal)
+    table = ClassTable.from_dict(dataset.meta["classes"], "dataset")
+    names = TableNames(table.background, (table.lethal_column,) if table.lethal else ())
     lookahead = FittedLookahead(dataset.U2, gamma) if dataset.U2 is not None else None
-    return identifiability(U, dataset.labels, tuple(features.feature_classes), utility, lookahead, lethal)
+    return identifiability(U, dataset.labels, tuple(features.feature_classes), utility, lookahead, names)
 
 
 def _fit_utility(dataset: Dataset, mirror: bool) -> tuple[LinearUtility, float]:

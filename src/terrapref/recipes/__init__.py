@@ -47,7 +47,7 @@ from terrapref.planner import Planner, PlannerDriver
 from terrapref.planner.stages import OffsetConfig, SecondStageConfig, StageConfig
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import SimConfig, Simulation
-from terrapref.terrain import PreferenceProfile
+from terrapref.terrain import ClassTable, PreferenceProfile
 
 
 @dataclass(frozen=True)
@@ -133,6 +133,7 @@ class RecipeSetup:
             recipe's stages need).
         style: the synthetic driver's style (terrapref.demos.expert.STYLES).
         perception: what the robot receives instead of the truth in the demonstrations (None: the truth).
+        classes: the class table the course is read with (None: the default).
     """
 
     seed: int
@@ -141,6 +142,7 @@ class RecipeSetup:
     features: FeatureConfig | None = None
     style: str = "default"
     perception: PerceptionModel | None = None
+    classes: ClassTable | None = None
 
 
 @dataclass
@@ -167,6 +169,7 @@ class _Drive:
     profile: PreferenceProfile | None
     style: str
     perception: PerceptionModel | None = None
+    classes: ClassTable | None = None
 
 
 def _drive(drive: _Drive, features: FeatureConfig, write: bool) -> tuple[Recording, bool]:
@@ -177,7 +180,7 @@ def _drive(drive: _Drive, features: FeatureConfig, write: bool) -> tuple[Recordi
     course under the same driver, profile, seed, disturbances and perception is reused either
     way, so recipes sharing a seed share their demonstrations.
     """
-    scenario = resolve_scenario(drive.course)
+    scenario = resolve_scenario(drive.course, drive.classes)
     profile = drive.profile or PreferenceProfile.default(scenario.classes)
     camera, sim_cfg = CameraConfig(), SimConfig()
     expert_cfg = ExpertConfig.styled(drive.style, profile.order)
@@ -214,8 +217,9 @@ def demonstrate(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Ca
     tail = "" if recipe.disturbance is None else "_disturbed"
     if setup.perception is not None and setup.perception.active:
         tail += "_perceived"
-    drives = [_Drive(course, workdir / f"{course}_{k}{tail}", setup.seed * 100 + k, recipe.disturbance, setup.profile, setup.style, setup.perception)
-              for k in range(recipe.demonstrations)]
+    name = Path(course).stem if course.endswith((".yaml", ".yml")) else course
+    drives = [_Drive(course, workdir / f"{name}_{k}{tail}", setup.seed * 100 + k, recipe.disturbance, setup.profile, setup.style, setup.perception,
+                     setup.classes) for k in range(recipe.demonstrations)]
     recordings = []
     for i, drive in enumerate(drives):
         recording, driven = _drive(drive, features, write)
@@ -242,7 +246,7 @@ def run_recipe(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Cal
     own = workdir / recipe.name.replace(" ", "_")
     own.mkdir(parents=True, exist_ok=True)
     course = setup.course or recipe.course
-    scenario = resolve_scenario(course)
+    scenario = resolve_scenario(course, setup.classes)
     profile = setup.profile or PreferenceProfile.default(scenario.classes)
     features = recipe.features(setup.features)
     seed = setup.seed

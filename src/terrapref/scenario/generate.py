@@ -21,6 +21,7 @@ from terrapref.scenario.model import Scenario
 from terrapref.terrain import ClassTable, default_classes
 
 ZONE_KINDS = ("lone", "pair", "triple")
+ZONE_CLASSES = {"lone": 1, "pair": 2, "triple": 3}  # the classes each kind needs
 
 
 def _frame(wp: np.ndarray, s: float) -> tuple[np.ndarray, float]:
@@ -82,16 +83,23 @@ def generate_course(seed: int, zones: int = 8, kinds: tuple[str, ...] = ZONE_KIN
     wp = wp - lo + 20.0
     size = (float(hi[0] - lo[0] + 40.0), float(hi[1] - lo[1] + 40.0))
     names = list(classes.feature_names)
+    # A small table may have too few classes for pairs or triples.
+    kinds = tuple(k for k in kinds if ZONE_CLASSES[k] <= len(names)) or ("lone",)
+
+    def concrete(name: str) -> str:
+        """A class of a terrain column: lethal classes sharing one column take turns at random."""
+        return name if name in classes.names else str(rng.choice(classes.lethal))
+
     terrain, zone_list = [], []
     for z in range(zones):
         s = spacing * (z + 1)
         kind = kinds[int(rng.integers(len(kinds)))]
         if kind == "lone":
-            cls = names[int(rng.integers(len(names)))]
+            cls = concrete(names[int(rng.integers(len(names)))])
             terrain.append(_patch(rng, wp, s, cls, (0.0, rng.uniform(-0.4, 0.4)), (rng.uniform(2.2, 3.4), rng.uniform(2.2, 3.0))))
             expect, label, half = "avoid", f"lone {cls}", (6.0, 5.0)
         elif kind == "pair":
-            a, b = rng.choice(names, 2, replace=False)
+            a, b = (concrete(str(n)) for n in rng.choice(names, 2, replace=False))
             length_m, edge = rng.uniform(7.0, 10.0), rng.uniform(-0.3, 0.3)
             for cls, side in ((a, 1.0), (b, -1.0)):
                 width = rng.uniform(5.0, 6.5)
@@ -99,7 +107,7 @@ def generate_course(seed: int, zones: int = 8, kinds: tuple[str, ...] = ZONE_KIN
                     [[-length_m / 2, edge], [length_m / 2, edge], [length_m / 2, edge + side * width], [-length_m / 2, edge + side * width]]))})
             expect, label, half = "best", f"{a} | {b}", (length_m / 2 + 2.0, 8.5)
         else:
-            a, b, c = rng.choice(names, 3, replace=False)
+            a, b, c = (concrete(str(n)) for n in rng.choice(names, 3, replace=False))
             length_m, mid = rng.uniform(6.0, 8.0), rng.uniform(2.4, 3.2)
             for cls, l0, l1 in ((a, mid / 2, mid / 2 + 4.5), (b, -mid / 2, mid / 2), (c, -mid / 2 - 4.5, -mid / 2)):
                 terrain.append({"class": str(cls), "polygon": _to_world(wp, s, np.array([[-length_m / 2, l0], [length_m / 2, l0], [length_m / 2, l1], [-length_m / 2, l1]]))})

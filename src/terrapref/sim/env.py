@@ -234,8 +234,8 @@ class OffRoadNavEnv(gym.Env):
         profile; 0 for the background, lethal classes and ids of no class."""
         cost = np.zeros(256)
         for rank, name in enumerate(self.profile.order):
-            if name not in self.classes.lethal:
-                cost[self.classes.id_of(name)] = self.reward_config.terrain_growth**rank
+            if name != self.classes.lethal_column:
+                cost[list(self.classes.ids_of(name))] = self.reward_config.terrain_growth**rank
         return cost
 
     def _observation_space(self) -> spaces.Dict:

@@ -16,6 +16,13 @@ from terrapref.yamlio import read_yaml_mapping
 UNKNOWN = 255
 """Class id for pixels that see no ground: sky, beyond range, outside the map."""
 
+MAX_TERRAIN_CLASSES = 10
+"""Feature classes (neither background nor lethal) a table may have: a drive that shows every
+pair of them grows as K(K-1)/2."""
+
+LETHAL_COLUMN = "lethal"
+"""The terrain column that several lethal classes share (one lethal class keeps its own name)."""
+
 
 @dataclass(frozen=True)
 class TerrainClass:
@@ -45,9 +52,17 @@ class ClassTable:
         ids = [c.id for c in self.classes]
         if len(set(names)) != len(names) or len(set(ids)) != len(ids):
             raise ValueError("class names and ids must be unique")
-        for name in (self.background, *self.lethal, *self.profile):
+        for name in (self.background, *self.lethal):
             if name not in names:
                 raise ValueError(f"unknown class {name!r}")
+        if self.background in self.lethal:
+            raise ValueError(f"the background class {self.background!r} cannot be lethal")
+        if len(self.lethal) > 1 and LETHAL_COLUMN in names:
+            raise ValueError(f"a class named {LETHAL_COLUMN!r} would clash with the column the {len(self.lethal)} lethal classes share")
+        if len(self.terrain_names) > MAX_TERRAIN_CLASSES:
+            raise ValueError(f"{len(self.terrain_names)} feature classes (neither background nor lethal); at most {MAX_TERRAIN_CLASSES}")
+        if sorted(self.profile) != sorted(self.feature_names):
+            raise ValueError(f"profile must list each of {', '.join(self.feature_names)} exactly once")
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -74,17 +89,31 @@ class ClassTable:
         return tuple(self.id_of(n) for n in self.lethal)
 
     @property
-    def feature_classes(self) -> tuple[TerrainClass, ...]:
-        """The non-background classes in id order: one terrain utility feature each (SPEC 3, 7)."""
-        return tuple(c for c in self.classes if c.name != self.background)
+    def terrain_names(self) -> tuple[str, ...]:
+        """The feature classes a driver chooses between: neither background nor lethal, in id order."""
+        return tuple(c.name for c in self.classes if c.name != self.background and c.name not in self.lethal)
 
     @property
-    def feature_ids(self) -> tuple[int, ...]:
-        return tuple(c.id for c in self.feature_classes)
+    def lethal_column(self) -> str | None:
+        """The name of the one terrain column all lethal classes share: the class's own name when
+        the table has one lethal class, ``lethal`` when it has several, None when it has none."""
+        return _lethal_column(self.lethal)
 
     @property
     def feature_names(self) -> tuple[str, ...]:
-        return tuple(c.name for c in self.feature_classes)
+        """The terrain columns of the utility features (SPEC 3, 7): the non-background classes in
+        id order, the lethal ones pooled into one column at the place of the first of them."""
+        return _columns(self.classes, self.background, self.lethal)
+
+    def ids_of(self, column: str) -> tuple[int, ...]:
+        """The class ids a terrain column (a name of :attr:`feature_names`) or a class counts."""
+        if column == self.lethal_column:
+            return self.lethal_ids
+        return (self.id_of(column),)
+
+    def column_of(self, name: str) -> str:
+        """The terrain column a class falls into (lethal classes share one)."""
+        return self.lethal_column if name in self.lethal else name
 
     def palette(self) -> np.ndarray:
         """RGB lookup table, shape (256, 3) uint8; unknown (255) and unused ids are near-black/sky."""
@@ -139,16 +168,37 @@ class ClassTable:
         if not isinstance(background, str) or background not in names:
             problems.append(Problem("background", f"unknown class {background!r}"))
         lethal = data.get("lethal", [])
-        profile = data.get("profile", [])
-        for key, value in (("lethal", lethal), ("profile", profile)):
-            if not isinstance(value, list) or any(not isinstance(v, str) or v not in names for v in value):
-                problems.append(Problem(key, "must be a list of known class names"))
+        if not isinstance(lethal, list) or any(not isinstance(v, str) or v not in names for v in lethal) or len(set(lethal)) != len(lethal):
+            problems.append(Problem("lethal", "must be a list of distinct known class names"))
         if problems:
             raise ConfigError(source, problems)
+        ordered = tuple(sorted(classes, key=lambda c: c.id))
+        columns = _columns(ordered, background, tuple(lethal))
+        # Without a profile: the classes in id order, the lethal column last.
+        profile = data.get("profile", sorted(columns, key=lambda n: n == _lethal_column(tuple(lethal))))
+        if not isinstance(profile, list) or sorted(map(str, profile)) != sorted(columns):
+            raise ConfigError(source, f"must list each of {', '.join(columns)} exactly once, most preferred first", field="profile")
         try:
-            return cls(tuple(sorted(classes, key=lambda c: c.id)), background, tuple(lethal), tuple(profile))
+            return cls(ordered, background, tuple(lethal), tuple(profile))
         except ValueError as exc:
             raise ConfigError(source, str(exc), field="classes") from None
+
+
+def _lethal_column(lethal: tuple[str, ...]) -> str | None:
+    if not lethal:
+        return None
+    return lethal[0] if len(lethal) == 1 else LETHAL_COLUMN
+
+
+def _columns(classes: tuple[TerrainClass, ...], background: str, lethal: tuple[str, ...]) -> tuple[str, ...]:
+    """The terrain columns of ``classes`` (in id order): :attr:`ClassTable.feature_names`."""
+    first_lethal = next((c.name for c in classes if c.name in lethal), None)
+    names = []
+    for c in classes:
+        if c.name == background or (c.name in lethal and c.name != first_lethal):
+            continue
+        names.append(_lethal_column(lethal) if c.name == first_lethal else c.name)
+    return tuple(names)
 
 
 def load_classes(path: str | Path) -> ClassTable:

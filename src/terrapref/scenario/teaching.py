@@ -1,0 +1,219 @@
+"""The teaching course of any class table: one drive that shows every choice a driver makes.
+
+A driver's preference is an order of the table's feature classes. One drive identifies it
+when the course shows
+
+- every **pair** of feature classes side by side, meeting on the path (the driver takes the
+  better side);
+- every feature class as a **strip** on the path between lethal terrain and another class (the
+  driver keeps to the strip or moves over: how much worse one class is than another against a
+  2 m detour, and every class beside lethal terrain);
+- every class **alone** on the path (driven through or passed on the background).
+
+Pairs grow as K(K-1)/2. The course shows each pair once on each side, each strip with the
+lethal terrain once on each side and each class alone twice (once a little left of the path,
+once a little right) while that drive stays within :data:`BUDGET_M` (10 minutes at the driver's
+1 m/s: up to 4 feature classes). Beyond it the course is *compact*: each pair once, with every
+class on the left as often as on the right (to within one), each strip and each lone patch
+once, the sides alternating. Six feature classes then drive about 8 minutes; ten about 17.
+
+Situations sit on straight legs; the trail bends a little between them (keeping to the path is
+part of the lesson) and turns round every :data:`LANE` situations, so that a long course folds
+into a compact map.
+
+:func:`follow_up` makes a short course of only the pairs a drive left open (``terrapref course
+--after REC``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from terrapref.scenario.builder import CourseBuilder, trail
+from terrapref.terrain import ClassTable
+
+BUDGET_M = 600.0  # the longest full design [m]: 10 minutes at 1 m/s
+LANE = 8  # situations between two turns round
+HALF_M = {"lone": 6.0, "pair": 8.5, "strip": 8.5}  # half a situation's leg [m]
+START_M, END_M = 8.0, 5.0  # trail before the first situation and after the last [m]
+PAIR_SIZES = ((8.0, 5.0), (7.0, 5.5), (7.5, 5.0), (8.0, 5.5))  # (length, width) of a pair's patches [m]
+STRIP_M = 2.8  # width of a strip on the path [m]
+LONE_OFFSET_M = 0.3  # a lone patch lies this far left or right of the path [m]
+BEND_DEG, TURN_DEG = 12.0, 36.0  # the bend between two situations; each of a turn round's five
+
+
+@dataclass(frozen=True)
+class Situation:
+    """One scored situation of a teaching course.
+
+    Attributes:
+        kind: ``pair`` (classes[0] left, classes[1] right), ``strip`` (left, middle, right) or
+            ``lone`` (one class).
+        classes: the classes, left to right.
+        offset_m: a lone patch's lateral offset, left positive [m].
+    """
+
+    kind: str
+    classes: tuple[str, ...]
+    offset_m: float = 0.0
+
+    @property
+    def length_m(self) -> float:
+        return 2 * HALF_M[self.kind]
+
+    @property
+    def label(self) -> str:
+        return {"pair": " vs ", "strip": " | ", "lone": ""}[self.kind].join(self.classes)
+
+
+def balanced_pairs(names: Sequence[str]) -> list[tuple[str, str]]:
+    """Every pair of ``names`` once, as (left, right), each name on the left as often as on the
+    right to within one; in rounds in which no name comes twice (the circle method)."""
+    n = len(names)
+    odd = n if n % 2 else n - 1  # names[:odd] form a regular tournament; an even n's last name alternates
+    left_of = {}
+    for i in range(odd):
+        for j in range(odd):
+            if i != j and 1 <= (j - i) % odd <= (odd - 1) // 2:
+                left_of[frozenset((i, j))] = i
+    for i in range(odd, n):
+        for j in range(odd):
+            left_of[frozenset((i, j))] = j if j % 2 == 0 else i
+    # Rounds: fix the last slot, rotate the others (a bye stands in for a missing name).
+    slots = list(range(n)) + ([-1] if n % 2 else [])
+    pairs = []
+    for _ in range(len(slots) - 1):
+        for a, b in zip(slots[: len(slots) // 2], reversed(slots[len(slots) // 2:])):
+            if a >= 0 and b >= 0:
+                first = left_of[frozenset((a, b))]
+                pairs.append((names[first], names[b if first == a else a]))
+        slots = [slots[0], slots[-1], *slots[1:-1]]
+    return pairs
+
+
+def situations(classes: ClassTable, full: bool | None = None) -> list[Situation]:
+    """The situations of ``classes``' teaching course, in driving order.
+
+    ``full``: each pair on both sides (True), once (False), or whichever fits
+    :data:`BUDGET_M` (None)."""
+    terrain, lethal = list(classes.terrain_names), list(classes.lethal)
+    if not terrain:
+        raise ValueError("the class table has no feature class (neither background nor lethal) to teach")
+    if full is None:
+        full = course_length(situations(classes, True)) <= BUDGET_M
+    pairs = balanced_pairs(terrain)
+    if full:
+        pairs += [(b, a) for a, b in pairs]
+    strips = []
+    for k, middle in enumerate(terrain):
+        others = [t for t in terrain if t != middle] or [classes.background]
+        for side in ((1, -1) if full else ((1, -1)[k % 2],)):
+            neighbour = others[(k + (side < 0)) % len(others)]
+            if lethal:
+                wall = lethal[len(strips) % len(lethal)]
+                strips.append(Situation("strip", (wall, middle, neighbour) if side > 0 else (neighbour, middle, wall)))
+            else:
+                strips.append(Situation("strip", (neighbour, middle, others[(k + 1 + (side < 0)) % len(others)])))
+    lone = []
+    for k, name in enumerate([*terrain, *lethal]):
+        sides = (1, -1) if full else ((1, -1)[k % 2],)
+        lone += [Situation("lone", (name,), side * LONE_OFFSET_M) for side in sides]
+    return _interleave([[Situation("pair", p) for p in pairs], strips, lone])
+
+
+def follow_up(classes: ClassTable, open_pairs: Sequence[tuple[str, str]]) -> list[Situation]:
+    """A short course of only ``open_pairs`` (class names; the background means "alone on the
+    path"): each pair on both sides, each class against the background alone twice."""
+    out = []
+    for a, b in open_pairs:
+        if classes.background in (a, b):
+            name = b if a == classes.background else a
+            out += [Situation("lone", (classes.lethal[0] if name == classes.lethal_column else name,), side * LONE_OFFSET_M) for side in (1, -1)]
+        else:
+            a, b = (_concrete(classes, n) for n in (a, b))
+            out += [Situation("pair", (a, b)), Situation("pair", (b, a))]
+    return out
+
+
+def _concrete(classes: ClassTable, name: str) -> str:
+    """A class for a terrain column (the lethal column: the first lethal class)."""
+    return classes.lethal[0] if name == classes.lethal_column and name not in classes.names else name
+
+
+def _interleave(lists: Sequence[Sequence[Situation]]) -> list[Situation]:
+    """The situations of every list, each list spread evenly over the course."""
+    keyed = [((i + 0.5) / len(items), k, s) for k, items in enumerate(lists) for i, s in enumerate(items)]
+    return [s for _, _, s in sorted(keyed, key=lambda t: (t[0], t[1]))]
+
+
+def course_length(items: Sequence[Situation]) -> float:
+    """The trail's length [m]: every situation's leg, and the trail before and after them."""
+    return START_M + sum(s.length_m for s in items) + END_M
+
+
+def _turns(count: int) -> list[float]:
+    """Heading changes [deg] after each of ``count`` situations: gentle bends either way, and
+    every :data:`LANE` situations a turn round (five 36 degree bends), left and right in turn."""
+    turns, lane, k = [], 0, 0
+    while len(turns) < count - 1:
+        if k == LANE:
+            sign = 1.0 if lane % 2 == 0 else -1.0
+            turns += [sign * TURN_DEG] * 5
+            lane, k = lane + 1, 0
+        else:
+            turns.append(BEND_DEG if len(turns) % 2 == 0 else -BEND_DEG)
+            k += 1
+    return turns[: count - 1]
+
+
+def build_course(classes: ClassTable, items: Sequence[Situation], name: str, description: str) -> CourseBuilder:
+    """The course of ``items`` in driving order, on a trail folded into a compact map."""
+    lengths = [s.length_m for s in items]
+    legs = [START_M + lengths[0], *lengths[1:]]
+    legs[-1] += END_M
+    wp, size = trail(legs, _turns(len(items)))
+    c = CourseBuilder(name, description, size, [tuple(p) for p in wp], classes.background)
+    order = {n: k for k, n in enumerate(classes.names)}
+    s, pairs = START_M, 0
+    for k, item in enumerate(items):
+        s += HALF_M[item.kind]
+        zid = str(k + 1)
+        if item.kind == "lone":
+            name_ = item.classes[0]
+            _lone(c, name_, order[name_], s, item.offset_m)
+            c.zone(zid, item.label, s, (9.0, 9.0), "avoid")
+        elif item.kind == "pair":
+            c.pair(zid, item.classes[0], item.classes[1], s, PAIR_SIZES[pairs % len(PAIR_SIZES)])
+            pairs += 1
+        else:
+            left, middle, right = item.classes
+            c.rect(left, s, STRIP_M / 2 + 2.25, 7.0, 4.5)
+            c.rect(middle, s, 0.0, 7.0, STRIP_M)
+            c.rect(right, s, -STRIP_M / 2 - 2.25, 7.0, 4.5)
+            c.zone(zid, item.label, s, (11.0, 17.0), "best")
+        s += HALF_M[item.kind]
+    return c
+
+
+def _lone(c: CourseBuilder, name: str, index: int, s: float, lat: float) -> None:
+    """A patch under 3 m across on the path (a driver passes it on the background): a rectangle,
+    an irregular quadrilateral or a disc, by the class's place in the table."""
+    shape = index % 3
+    if shape == 0:
+        c.rect(name, s, lat, 3.0, 2.6)
+    elif shape == 1:
+        c.polygon(name, s, [(-1.6, lat - 1.2), (1.4, lat - 1.4), (1.6, lat + 1.1), (-1.2, lat + 1.4)])
+    else:
+        c.circle(name, s, lat, 1.4)
+
+
+def teaching_course(classes: ClassTable, name: str = "teaching_course", full: bool | None = None) -> CourseBuilder:
+    """The teaching course of ``classes`` (see the module docstring)."""
+    if full is None:
+        full = course_length(situations(classes, True)) <= BUDGET_M
+    items = situations(classes, full)
+    design = "every pair once on each side" if full else "every pair once, each class left as often as right"
+    description = (f"Teaching course for {len(classes.terrain_names)} feature classes ({', '.join(classes.terrain_names)}): {design}; "
+                   f"every class as a strip on the path between lethal terrain and another class; every class alone on the path.")
+    return build_course(classes, items, name, description)
