@@ -88,6 +88,84 @@ def _cmd_show(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_course(args: argparse.Namespace) -> int:
+    import yaml
+
+    from terrapref.fileio import write_text_atomic
+    from terrapref.plots import save_map
+    from terrapref.scenario import parse_scenario
+    from terrapref.scenario.teaching import DRIVER_SPEED_MPS, build_course, course_length, follow_up, teaching_course
+    from terrapref.world import rasterise
+
+    out = Path(args.out)
+    if out.suffix.lower() not in (".yaml", ".yml"):
+        raise UserError(str(out), "a course is a scenario file: give it the suffix .yaml", field="--out")
+    figure = out.with_suffix(".png")
+    inputs = [p for p in (args.classes, args.after) if p is not None]
+    for path in (out, figure):
+        _check_output(path, "--out", inputs)
+    table = _class_table(args)
+    if args.after is not None:
+        from terrapref.demos.recording import read_recording
+
+        rec = read_recording(args.after)
+        found = _recording_table(rec)
+        if table is not None:
+            _check_table(args, found, args.after)
+        table = found
+        open_pairs = _open_pairs(rec)
+        if not open_pairs:
+            print(f"{args.after}: the drive identified every pair of classes; no follow-up course is needed (nothing written)")
+            return 0
+        items = follow_up(table, open_pairs)
+        name = args.name or f"{Path(rec.meta.get('scenario') or 'course').name}_more"
+        course = build_course(table, items, name, f"Follow-up course: the pairs the drive of {rec.meta.get('scenario')} left open "
+                                                    f"({'; '.join(f'{a} vs {b}' for a, b in open_pairs)}), each both ways round.")
+        print(f"the drive left {len(open_pairs)} pairs open: {', '.join(f'{a} vs {b}' for a, b in open_pairs)}")
+    else:
+        from terrapref.terrain import default_classes
+
+        table = table or default_classes()
+        try:
+            course = teaching_course(table, args.name or "teaching_course", {"auto": None, "full": True, "compact": False}[args.design])
+        except ValueError as exc:
+            raise UserError(str(args.classes or "classes"), str(exc), field="classes") from None
+        items = None
+    data = course.data()
+    scenario = parse_scenario(data, str(out), table)  # checked as every command will read it
+    text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=120)
+    source = f"--classes {args.classes}" if args.classes else ("--after " + str(args.after) if args.after else "the default class table")
+    write_text_atomic(out, f"# terrapref course ({source}); the class table's scenario: give the same --classes to every command.\n" + text)
+    save_map(figure, scenario, rasterise(scenario))
+    length = scenario.path_length_m()
+    kinds = {}
+    for zone in scenario.zones:
+        kind = "lone" if zone.expect == "avoid" else ("strip" if zone.label.count(" | ") == 2 else "pair")
+        kinds[kind] = kinds.get(kind, 0) + 1
+    print(f"{scenario.name}: {scenario.description}")
+    print(f"  {len(scenario.zones)} situations ({', '.join(f'{n} {k}' for k, n in kinds.items())}); path {length:.0f} m; "
+          f"expected drive about {length / DRIVER_SPEED_MPS / 60:.1f} minutes at {DRIVER_SPEED_MPS:g} m/s")
+    print(f"wrote {out} and {figure} (record it: terrapref record {out}{f' --classes {args.classes}' if args.classes else ''} --out DIR)")
+    return 0
+
+
+def _open_pairs(rec) -> list[tuple[str, str]]:
+    """The pairs of classes a recording's drive leaves unidentified (the report ``inspect`` prints)."""
+    from terrapref.dataset import build_dataset
+    from terrapref.learning.train import identify
+    from terrapref.progress import Progress
+    from terrapref.recipes import DEFAULT_RECIPE, recipe_named
+
+    if len(rec) == 0:
+        raise UserError(str(rec.path), "holds no frames: drive the teaching course first", field="frames")
+    recipe = recipe_named(DEFAULT_RECIPE)
+    bar = Progress("featurize", 1)
+    dataset = build_dataset([rec], recipe.features(), progress=lambda k, n: bar.update(k, f"{len(rec)} frames"))
+    bar.close()
+    report = identify(dataset, steady=recipe.train.data.steady_labels)
+    return [(p.first, p.second) for p in report.unidentified()]
+
+
 def _cmd_list(args: argparse.Namespace) -> int:
     from terrapref.scenario import packaged_scenarios, resolve_scenario
 
@@ -879,9 +957,13 @@ def _cmd_select(args: argparse.Namespace) -> int:
         raise UserError("--recipes", f"expected distinct recipe names separated by commas, got {args.recipes!r}")
     for n in names:
         recipe_named(n, "--recipes")
-    orders = parse_orders(args.orders)
+    table = _class_table(args)
+    try:
+        orders = parse_orders(args.orders, table)
+    except ValueError as exc:
+        raise UserError("--orders", str(exc)) from None
     for o in orders:
-        PreferenceProfile.parse(list(o), source="--orders")
+        PreferenceProfile.parse(list(o), table, source="--orders")
     if len(set(orders)) != len(orders):
         raise UserError("--orders", f"names an order twice: {args.orders!r}")
     STYLES.get(args.style, "--style")
@@ -889,18 +971,40 @@ def _cmd_select(args: argparse.Namespace) -> int:
         if value < low:
             raise UserError(flag, f"must be an integer >= {low}, got {value}")
     _check_output(args.out, "--out", folder=True)
-    perceptions = tuple(_perception(n) for n in (x.strip() for x in (args.perception or "clean").split(",")) if n)
+    perceptions = tuple(_perception(n, classes=table) for n in (x.strip() for x in (args.perception or "clean").split(",")) if n)
     if len({p.name for p in perceptions}) != len(perceptions):
         raise UserError("--perception", f"names a perception model twice: {args.perception!r}")
     if args.taught_under == "same" and len(perceptions) != 1:
         raise UserError("--taught-under", "'same' needs exactly one --perception model")
-    taught_under = perceptions[0] if args.taught_under == "same" else _perception(args.taught_under, "--taught-under")
+    taught_under = perceptions[0] if args.taught_under == "same" else _perception(args.taught_under, "--taught-under", table)
     engine = _engine(args)
+    course = _selection_course(args, table)
     t0 = time.perf_counter()
-    path = run_selection(args.out, Selection(tuple(names), orders, args.seeds, args.first, args.courses, args.style, perceptions, taught_under),
-                         engine, log=lambda m: print(m, flush=True))
+    selection = Selection(tuple(names), orders, args.seeds, args.first, args.courses, args.style, perceptions, taught_under, table, course)
+    path = run_selection(args.out, selection, engine, log=lambda m: print(m, flush=True))
     print(f"done ({time.perf_counter() - t0:.0f} s): {path}")
     return 0
+
+
+def _selection_course(args: argparse.Namespace, table) -> str | None:
+    """The course every recipe demonstrates in ``select``: ``--course``, or with ``--classes`` the
+    table's teaching course (written into OUT); None: each recipe's own."""
+    if args.course is not None:
+        from terrapref.scenario import resolve_scenario
+
+        resolve_scenario(args.course, table)  # checked before any work
+        return str(Path(args.course).resolve()) if Path(args.course).exists() else args.course
+    if table is None:
+        return None
+    import yaml
+
+    from terrapref.fileio import write_text_atomic
+    from terrapref.scenario.teaching import teaching_course
+
+    Path(args.out).mkdir(parents=True, exist_ok=True)
+    path = Path(args.out).resolve() / "teaching_course.yaml"
+    write_text_atomic(path, yaml.safe_dump(teaching_course(table).data(), sort_keys=False, default_flow_style=None, width=120))
+    return str(path)
 
 
 def _perception(spec: str | None, flag: str = "--perception", classes=None):
@@ -972,6 +1076,20 @@ CLASSES_CHECK_HELP = ("the class table the files must have been made for (a terr
 
 def _add_classes_arg(p: argparse.ArgumentParser, check: bool = False) -> None:
     p.add_argument("--classes", metavar="FILE", help=CLASSES_CHECK_HELP if check else CLASSES_HELP)
+
+
+def _course_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("course", help="write the teaching course of a class table (or, with --after, a follow-up of what a drive left open)")
+    p.add_argument("--out", required=True, type=Path, help="scenario file to write (.yaml); a top-down figure goes beside it (.png)")
+    p.add_argument("--after", type=Path, metavar="REC",
+                   help="a recording of the teaching course: write a short course of only the pairs its drive left unidentified "
+                        "(train on both recordings after)")
+    p.add_argument("--design", choices=("auto", "full", "compact"), default="auto",
+                   help="full: every pair once on each side; compact: every pair once, sides balanced; auto (default): full while "
+                        "the drive stays within 10 minutes at 1 m/s")
+    p.add_argument("--name", help="the scenario's name (default: teaching_course, or the course driven + _more)")
+    _add_classes_arg(p)
+    p.set_defaults(func=_cmd_course)
 
 
 def _validate_parser(sub: argparse._SubParsersAction) -> None:
@@ -1205,7 +1323,8 @@ def _select_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, type=Path, help="folder for SELECT.md, select.json, select.png and the work")
     p.add_argument("--recipes", default="teach", help="recipe names separated by commas (terrapref recipes)")
     p.add_argument("--orders", default="all",
-                   help="'all' (the six orders with non_traversable last) or orders separated by ';', e.g. 'rock,mud,water;water,mud,rock'")
+                   help="'all' (every order of the feature classes, the lethal ones last: six for the default table), 'random:N' (N of them "
+                        "drawn at random, the same N every time) or orders separated by ';', e.g. 'rock,mud,water;water,mud,rock'")
     p.add_argument("--style", default="default", help="the synthetic driver's style")
     p.add_argument("--seeds", type=int, default=5, help="training seeds per recipe and order")
     p.add_argument("--first", type=int, default=1000, help="first generated layout (1000-1999: for choosing; 2000 on: for confirming)")
@@ -1215,6 +1334,9 @@ def _select_parser(sub: argparse._SubParsersAction) -> None:
                         "in turn, for a table each (default: clean): " + PERCEPTION_HELP)
     p.add_argument("--taught-under", metavar="PRESET|FILE|same", default=None,
                    help="record the demonstrations through this perception model instead of the truth ('same': --perception's)")
+    p.add_argument("--course", metavar="SCENARIO", help="the course every recipe demonstrates (default: each recipe's own; with --classes, "
+                                                        "the table's teaching course, as terrapref course writes it)")
+    _add_classes_arg(p)
     _add_engine_args(p)
     p.set_defaults(func=_cmd_select)
 
@@ -1236,6 +1358,7 @@ def _scenarios_parser(sub: argparse._SubParsersAction) -> None:
 
 
 COMMANDS = (
+    _course_parser,
     _validate_parser,
     _render_parser,
     _show_parser,

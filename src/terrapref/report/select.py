@@ -14,10 +14,13 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, run_many, zone_agrees
 from terrapref.evaluation.stats import cluster_bootstrap, rate_text
@@ -28,10 +31,11 @@ from terrapref.recipes import RecipeSetup, recipe_named, run_recipe
 from terrapref.progress import every_tenth
 from terrapref.plots import RateRow, save_intervals
 from terrapref.scenario.generate import zone_kind
-from terrapref.terrain import PreferenceProfile
+from terrapref.terrain import ClassTable, PreferenceProfile, default_classes
 
 LETHAL_LAST = "non_traversable"
 ALL_ORDERS = tuple((*p, LETHAL_LAST) for p in itertools.permutations(("mud", "rock", "water")))
+RANDOM_ORDERS_SEED = 4343  # `--orders random:N` draws its orders with this seed (stated in the report)
 TARGET = 0.95  # agreement the default recipe must keep on clean frames
 PERCEIVED_TARGET = 0.90  # and under a perception model's errors (docs/perception.md)
 
@@ -48,6 +52,8 @@ class Selection:
     style: str = "default"
     perceptions: tuple[PerceptionModel, ...] = ()  # what the planner receives driving the layouts, each in turn (none: the truth)
     taught_under: PerceptionModel | None = None  # what the demonstrations recorded (None: the truth)
+    classes: ClassTable | None = None  # the class table of the layouts and demonstrations (None: the default)
+    course: str | None = None  # the course every recipe demonstrates (None: each recipe's own)
 
     @property
     def driven_under(self) -> tuple[PerceptionModel, ...]:
@@ -59,14 +65,33 @@ class Selection:
         return [f"gen:{self.first + i}" for i in range(self.courses)]
 
 
-def parse_orders(text: str) -> tuple[tuple[str, ...], ...]:
-    """``all`` (the six orders with non_traversable last) or ``a,b,c;d,e,f`` (non_traversable appended if missing)."""
+def parse_orders(text: str, classes: ClassTable | None = None) -> tuple[tuple[str, ...], ...]:
+    """``all`` (every order of the feature classes, the lethal column last), ``random:N`` (N of
+    them drawn at random, with :data:`RANDOM_ORDERS_SEED`) or ``a,b,c;d,e,f`` (the lethal column
+    appended if missing)."""
+    classes = classes or default_classes()
+    last = (classes.lethal_column,) if classes.lethal else ()
     if text == "all":
-        return ALL_ORDERS
+        return tuple((*p, *last) for p in itertools.permutations(classes.terrain_names))
+    if text.startswith("random:"):
+        try:
+            n = int(text[len("random:"):])
+        except ValueError:
+            raise ValueError(f"random:N needs an integer N, got {text!r}") from None
+        total = math.factorial(len(classes.terrain_names))
+        if not 1 <= n <= total:
+            raise ValueError(f"random:N needs 1 <= N <= {total} (the orders of {len(classes.terrain_names)} classes), got {n}")
+        rng = np.random.default_rng(RANDOM_ORDERS_SEED)
+        orders: list[tuple[str, ...]] = []
+        while len(orders) < n:
+            order = (*(str(c) for c in rng.permutation(list(classes.terrain_names))), *last)
+            if order not in orders:
+                orders.append(order)
+        return tuple(orders)
     orders = []
     for item in text.split(";"):
         names = tuple(n.strip() for n in item.split(",") if n.strip())
-        orders.append(names if LETHAL_LAST in names else (*names, LETHAL_LAST))
+        orders.append(names if not last or last[0] in names else (*names, *last))
     return tuple(orders)
 
 
@@ -80,6 +105,8 @@ class _OrderJob:
     style: str
     workdir: str
     perception: PerceptionModel | None = None  # what the demonstrations recorded
+    classes: ClassTable | None = None  # the class table of the course
+    course: str | None = None  # the course demonstrated (None: each recipe's own)
 
 
 @dataclass(frozen=True)
@@ -92,7 +119,7 @@ class _Model:
 
 def _train(job: _OrderJob) -> list[str]:
     """Every recipe for one order and seed, one after another: they share the work folder's demonstrations."""
-    setup = RecipeSetup(job.seed, PreferenceProfile(job.order), style=job.style, perception=job.perception)
+    setup = RecipeSetup(job.seed, PreferenceProfile(job.order), job.course, style=job.style, perception=job.perception, classes=job.classes)
     return [str(run_recipe(recipe_named(r), job.workdir, setup).model) for r in job.recipes]
 
 
@@ -101,7 +128,15 @@ def job_folder(out: Path, order: Sequence[str], seed: int, taught_under: Percept
     each recipe's model in ``<recipe>/model.safetensors`` (drives recorded under a perception
     model in a folder of their own)."""
     tail = f"_{perception_tag(taught_under)}" if taught_under is not None and taught_under.active else ""
-    return out / "work" / f"{'_'.join(c[:2] for c in order[:3])}_s{seed}{tail}"
+    chosen = _chosen(order)
+    short = [c[:2] for c in chosen]
+    return out / "work" / f"{'_'.join(short if len(set(short)) == len(short) else chosen)}_s{seed}{tail}"
+
+
+def _chosen(order: Sequence[str]) -> Sequence[str]:
+    """An order's classes a driver chooses between: the last (the lethal column, worst for every
+    driver) left out."""
+    return order[:-1] if len(order) > 1 else order
 
 
 def perception_tag(model: PerceptionModel) -> str:
@@ -111,7 +146,7 @@ def perception_tag(model: PerceptionModel) -> str:
 
 
 def _describe(job: _OrderJob) -> str:
-    return f"recipes {', '.join(job.recipes)}, order {'>'.join(job.order[:3])}, seed {job.seed}"
+    return f"recipes {', '.join(job.recipes)}, order {'>'.join(_chosen(job.order))}, seed {job.seed}"
 
 
 def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None, log: Callable[[str], None] = print) -> Path:
@@ -124,8 +159,9 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
     t_train = time.perf_counter() - t0
 
     layouts = sel.layouts
-    specs = [RunSpec(c, 0, PLANNER, path, m.job.order, perception=p) for p in sel.driven_under for path, m in models.items() for c in layouts]
-    specs += [RunSpec(c, 0, EXPERT, None, o, style=sel.style) for o in sel.orders for c in layouts]
+    specs = [RunSpec(c, 0, PLANNER, path, m.job.order, perception=p, classes=sel.classes) for p in sel.driven_under for path, m in models.items()
+             for c in layouts]
+    specs += [RunSpec(c, 0, EXPERT, None, o, style=sel.style, classes=sel.classes) for o in sel.orders for c in layouts]
     log(f"[2/2] closed-loop runs: {len(specs)} on {len(layouts)} layouts ...")
     results = run_many(specs, progress=every_tenth(log), engine=engine)
     t_eval = time.perf_counter() - t0 - t_train
@@ -133,7 +169,8 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
     rows, runs = _zones_and_runs(specs, results, models)
     saved = {"selection": {"recipes": list(sel.recipes), "orders": [list(o) for o in sel.orders], "seeds": sel.seeds, "layouts": layouts,
                            "style": sel.style, "perceptions": [p.to_dict() for p in sel.driven_under],
-                           "taught_under": (sel.taught_under or PerceptionModel()).to_dict()},
+                           "taught_under": (sel.taught_under or PerceptionModel()).to_dict(),
+                           **({"classes": sel.classes.to_dict(), "course": sel.course} if sel.classes is not None else {})},
              "engine": engine.describe(), "zones": rows, "runs": runs, "train_s": round(t_train, 1), "eval_s": round(t_eval, 1)}
     write_text_atomic(out / "select.json", json.dumps(saved, indent=0))
     path = write_selection_report(out, saved)
@@ -144,8 +181,8 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
 def _train_all(out: Path, sel: Selection, engine: Engine, log: Callable[[str], None]) -> dict[str, _Model]:
     """Every recipe for every order and seed; model file -> the model, in the order trained."""
     # One job per order and seed: its recipes share the demonstrations recorded in its work folder.
-    jobs = [_OrderJob(tuple(sel.recipes), tuple(o), s, sel.style, str(job_folder(out, o, s, sel.taught_under)), sel.taught_under)
-            for o in sel.orders for s in range(sel.seeds)]
+    jobs = [_OrderJob(tuple(sel.recipes), tuple(o), s, sel.style, str(job_folder(out, o, s, sel.taught_under)), sel.taught_under, sel.classes,
+                      sel.course) for o in sel.orders for s in range(sel.seeds)]
     log(f"[1/2] demonstrations and training: {len(jobs) * len(sel.recipes)} models ({len(sel.recipes)} recipes x {len(sel.orders)} orders "
         f"x {sel.seeds} seeds) on {engine.describe()} ...")
     trained = run_grid(_train, jobs, engine, lambda k, n: log(f"      trained {k}/{n} order-and-seed jobs"), describe=_describe)
@@ -208,6 +245,12 @@ def write_selection_report(out: Path, saved: dict) -> Path:
              "alike across seeds), the spread another set of layouts would show.", "",
              f"The demonstrations recorded: {_perception_line(sel.get('taught_under'))}. The models drive the layouts receiving "
              + ", then ".join(f"`{name}`" for name in seen) + " (terrapref.perception); the driver always sees the truth.", ""]
+    if "classes" in sel:
+        table = sel["classes"]
+        lines += [f"Class table: background {table['background']}; feature classes "
+                  f"{', '.join(c['name'] for c in table['classes'] if c['name'] != table['background'] and c['name'] not in table['lethal'])}; "
+                  f"lethal {', '.join(table['lethal']) or 'none'}. Every recipe demonstrated `{sel['course']}`. Orders: "
+                  + "; ".join(" > ".join(_chosen(o)) for o in sel["orders"]) + ".", ""]
     points: list[RateRow] = []
     targets: list[float] = []
     for name in seen:
@@ -255,7 +298,7 @@ def _selection_table(sel: dict, rows: list[dict], runs: list[dict],
             lines.append(f"| {recipe} | {name} | {_rate(sub, 'agrees')} | {rate:.1%} (95% CI {lo:.1%}-{hi:.1%}) | " + " | ".join(_rate([r for r in sub if r["kind"] == k], "agrees") for k in kinds)
                          + f" | {_rate(sub, 'success')} | {_rate(sub, 'driver_success')} | {coll} | {seeds} |")
             if order is None or (order_bars and len(sel["recipes"]) == 1):
-                bars.append((f"{recipe}, all orders" if order is None else " > ".join(order[:3]), rate, (lo, hi)))
+                bars.append((f"{recipe}, all orders" if order is None else " > ".join(_chosen(order)), rate, (lo, hi)))
     misses: dict[tuple, int] = {}
     for r in rows:
         if not r["agrees"]:

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from terrapref.scenario.builder import CourseBuilder, trail
 from terrapref.terrain import ClassTable
 
+DRIVER_SPEED_MPS = 1.0  # the speed a teaching drive is timed at (the synthetic driver's)
 BUDGET_M = 600.0  # the longest full design [m]: 10 minutes at 1 m/s
 LANE = 8  # situations between two turns round
 HALF_M = {"lone": 6.0, "pair": 8.5, "strip": 8.5}  # half a situation's leg [m]
