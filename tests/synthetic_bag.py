@@ -27,7 +27,7 @@ from terrapref.interop.ros_messages import (OPTICAL_FRAME, Message, Topics, add_
 from terrapref.recipes import DEFAULT_RECIPE, RECIPES
 from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.sim import Frame, Simulation
-from terrapref.terrain import default_classes
+from terrapref.terrain import ClassTable, default_classes
 from terrapref.vehicle import Command, Pose
 
 if TYPE_CHECKING:
@@ -38,6 +38,11 @@ Encoding = Literal["mono8", "mono16", "png", "rgb8"]
 TOPICS = {"segmentation": "/robot/seg/labels", "camera_info": "/robot/camera/camera_info", "odometry": "/robot/odom",
           "command": "/robot/cmd_vel", "path": "/route/plan"}
 RELLIS = {"grass": 3, "mud": 33, "rock": 34, "water": 6, "non_traversable": 19}  # and unknown (sky) -> 7
+# The classes of examples/classes/rellis3d.yaml as a RELLIS-3D network labels them: grass as
+# "downhill" (30) and water as "deep water" (32), which RELLIS-3D's own conversion maps to grass
+# and water, so that a log of this table needs its label map's every kind of entry.
+RELLIS_OF_EXAMPLE = {"grass": 30, "dirt": 1, "gravel": 34, "mud": 33, "puddle": 31, "water": 32, "bush": 19, "tree": 4, "log": 15,
+                     "fence": 18, "building": 12, "vehicle": 8, "person": 17}
 UNLISTED_ID = 50  # an id the rellis3d map does not list
 COLORS = {3: (0, 102, 0), 33: (255, 128, 0), 34: (170, 170, 170), 6: (0, 128, 255), 19: (204, 153, 255), 7: (135, 206, 235)}  # for rgb8 logs
 ODOMETRY_RATE_HZ = 30.0
@@ -68,20 +73,22 @@ class _LogOptions:
     quirks: bool
     max_seconds: float | None
     repeat_images: int
+    classes: ClassTable | None = None
 
 
 def write_synthetic_bag(out: str | Path, storage: Storage = "mcap", scenario: str = "demo_course", seed: int = 0,
                         profile: tuple[str, ...] | None = None, encoding: Encoding = "mono8",
-                        quirks: bool = True, max_seconds: float | None = None, repeat_images: int = 1) -> Path:
+                        quirks: bool = True, max_seconds: float | None = None, repeat_images: int = 1, classes: ClassTable | None = None) -> Path:
     """Drive ``scenario`` with the synthetic driver and write the log; returns the bag's path.
 
     ``repeat_images`` > 1 publishes each frame that many times per 0.1 s (a faster camera), to
-    make large logs for benchmarks.
+    make large logs for benchmarks. ``classes``: the scenario's class table (None: the
+    default; examples/classes/rellis3d.yaml's classes are labelled by :data:`RELLIS_OF_EXAMPLE`).
     """
     out = Path(out)
-    options = _LogOptions(quirks, max_seconds, repeat_images)
+    options = _LogOptions(quirks, max_seconds, repeat_images, classes)
     ros1 = storage == "rosbag1"
-    sc = resolve_scenario(scenario)
+    sc = resolve_scenario(scenario, classes)
     sim = Simulation(sc)
     messages = _Messages(typestore(ros1), ros1, encoding, sim.camera.config)
     odom = _OdomFrame(*(sc.start if quirks else (0.0, 0.0, 0.0)))
@@ -228,7 +235,7 @@ def _drive(sim: Simulation, sc: Scenario, seed: int, profile: tuple[str, ...] | 
     driver.reset(sc, rng)  # then the pushes' stream, in the order `terrapref record` draws them: the same drive
     disturb = Disturber(protocol, np.random.default_rng(rng.integers(2**63)), 0.1) if protocol is not None else None
     jitter = np.random.default_rng(seed + 1)
-    to_ids = _rellis_ids()
+    to_ids = _rellis_ids(log.options.classes)
     state = _DriveState()
     max_seconds = log.options.max_seconds
     while not sim.done and (max_seconds is None or frame.time_s < max_seconds):
@@ -240,11 +247,13 @@ def _drive(sim: Simulation, sc: Scenario, seed: int, profile: tuple[str, ...] | 
         log.queue.flush(frame.time_s - 0.2)
 
 
-def _rellis_ids() -> np.ndarray:
-    """(256,) uint16: terrapref class id -> RELLIS-3D id (7, unknown, for any id not in RELLIS)."""
-    classes = default_classes()
+def _rellis_ids(classes: ClassTable | None) -> np.ndarray:
+    """(256,) uint16: class id of ``classes`` (None: the default table) -> RELLIS-3D id (7,
+    unknown, for any id not in RELLIS)."""
+    rellis = RELLIS if classes is None else RELLIS_OF_EXAMPLE
+    classes = classes or default_classes()
     to_ids = np.full(256, 7, np.uint16)
-    for name, rid in RELLIS.items():
+    for name, rid in rellis.items():
         to_ids[classes.id_of(name)] = rid
     return to_ids
 

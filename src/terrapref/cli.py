@@ -151,19 +151,12 @@ def _cmd_course(args: argparse.Namespace) -> int:
 
 def _open_pairs(rec) -> list[tuple[str, str]]:
     """The pairs of classes a recording's drive leaves unidentified (the report ``inspect`` prints)."""
-    from terrapref.dataset import build_dataset
-    from terrapref.learning.train import identify
-    from terrapref.progress import Progress
-    from terrapref.recipes import DEFAULT_RECIPE, recipe_named
+    from terrapref.recipes import DEFAULT_RECIPE, open_pairs, recipe_named
 
     if len(rec) == 0:
         raise UserError(str(rec.path), "holds no frames: drive the teaching course first", field="frames")
-    recipe = recipe_named(DEFAULT_RECIPE)
-    bar = Progress("featurize", 1)
-    dataset = build_dataset([rec], recipe.features(), progress=lambda k, n: bar.update(k, f"{len(rec)} frames"))
-    bar.close()
-    report = identify(dataset, steady=recipe.train.data.steady_labels)
-    return [(p.first, p.second) for p in report.unidentified()]
+    print("featurising the drive to find the pairs it left open ...", flush=True)
+    return open_pairs([rec], recipe_named(DEFAULT_RECIPE))
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
@@ -667,8 +660,9 @@ def _cmd_import(args: argparse.Namespace) -> int:
     from terrapref.interop.robot import load_robot
 
     _check_output(args.out, "--out", [args.bag, args.robot], folder=True)
-    robot = load_robot(args.robot, _class_table(args))
-    report = import_bag(args.bag, robot, args.out, ImportOptions(rate_hz=args.rate, force=args.force))
+    table = _class_table(args)
+    robot = load_robot(args.robot, table)
+    report = import_bag(args.bag, robot, args.out, ImportOptions(rate_hz=args.rate, force=args.force, classes=table))
     for line in report.lines():
         print(line)
     print(f"wrote {args.out} (terrapref inspect / featurize / train accept it)")
@@ -690,7 +684,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     rec_dir = out / "recording"
     made = not out.exists()
     try:
-        options = ImportOptions(rate_hz=args.rate, force=True, check_camera=lambda camera: check_compatible(model, camera))
+        options = ImportOptions(rate_hz=args.rate, force=True, classes=model.classes, check_camera=lambda camera: check_compatible(model, camera))
         report = import_bag(args.bag, robot, rec_dir, options)
     except BaseException:
         if made:  # refused (another camera) or stopped: no half-made OUT is left
@@ -869,7 +863,7 @@ def _cmd_perception(args: argparse.Namespace) -> int:
               "for one part alone: labels, pose, camera or frames)")
         return 0
     for i, spec in enumerate(args.models):
-        model = load_perception(spec)
+        model = load_perception(spec, _class_table(args))
         if i:
             print("---")
         print(yaml.safe_dump(model.to_dict(), sort_keys=False, default_flow_style=None).rstrip())
@@ -980,7 +974,8 @@ def _cmd_select(args: argparse.Namespace) -> int:
     engine = _engine(args)
     course = _selection_course(args, table)
     t0 = time.perf_counter()
-    selection = Selection(tuple(names), orders, args.seeds, args.first, args.courses, args.style, perceptions, taught_under, table, course)
+    selection = Selection(tuple(names), orders, args.seeds, args.first, args.courses, args.style, perceptions, taught_under, table, course,
+                          args.follow_up)
     path = run_selection(args.out, selection, engine, log=lambda m: print(m, flush=True))
     print(f"done ({time.perf_counter() - t0:.0f} s): {path}")
     return 0
@@ -1336,6 +1331,9 @@ def _select_parser(sub: argparse._SubParsersAction) -> None:
                    help="record the demonstrations through this perception model instead of the truth ('same': --perception's)")
     p.add_argument("--course", metavar="SCENARIO", help="the course every recipe demonstrates (default: each recipe's own; with --classes, "
                                                         "the table's teaching course, as terrapref course writes it)")
+    p.add_argument("--follow-up", action="store_true",
+                   help="after each demonstration, the driver also drives a follow-up course of the pairs it left unidentified "
+                        "(terrapref course --after), and the model trains on both")
     _add_classes_arg(p)
     _add_engine_args(p)
     p.set_defaults(func=_cmd_select)
@@ -1344,6 +1342,7 @@ def _select_parser(sub: argparse._SubParsersAction) -> None:
 def _perception_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("perception", help="list the perception presets (what a robot's planner gets instead of the truth), or print one in full")
     p.add_argument("models", nargs="*", metavar="PRESET|FILE", help="print these in full (checked as --perception checks them)")
+    _add_classes_arg(p)
     p.set_defaults(func=_cmd_perception)
 
 

@@ -134,6 +134,8 @@ class RecipeSetup:
         style: the synthetic driver's style (terrapref.demos.expert.STYLES).
         perception: what the robot receives instead of the truth in the demonstrations (None: the truth).
         classes: the class table the course is read with (None: the default).
+        follow_up: after the demonstrations, drive a follow-up course of the pairs of classes they
+            left unidentified (terrapref.scenario.teaching.follow_up), and train on both.
     """
 
     seed: int
@@ -143,6 +145,7 @@ class RecipeSetup:
     style: str = "default"
     perception: PerceptionModel | None = None
     classes: ClassTable | None = None
+    follow_up: bool = False
 
 
 @dataclass
@@ -229,6 +232,37 @@ def demonstrate(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Ca
     return recordings
 
 
+def open_pairs(recordings: list[Recording], recipe: Recipe) -> list[tuple[str, str]]:
+    """The pairs of classes (terrain columns, the background among them) that ``recordings``
+    leave unidentified, featurised and steadied as ``recipe`` trains (the report ``inspect`` prints)."""
+    from terrapref.learning.train import identify
+
+    dataset = build_dataset(recordings, recipe.features())
+    return [(p.first, p.second) for p in identify(dataset, steady=recipe.train.data.steady_labels).unidentified()]
+
+
+def _follow_up(recipe: Recipe, recordings: list[Recording], workdir: Path, setup: RecipeSetup, log: Callable[[str], None] | None) -> list[Recording]:
+    """The synthetic driver's drive of the follow-up course of what ``recordings`` left open
+    (written as ``workdir/<course>_more.yaml``); none when they identify every pair."""
+    import yaml
+
+    from terrapref.fileio import write_text_atomic
+    from terrapref.scenario.teaching import build_course, follow_up
+
+    pairs = open_pairs(recordings, recipe)
+    if not pairs:
+        return []
+    scenario = resolve_scenario(str(setup.course), setup.classes)
+    name = f"{scenario.name}_more"
+    course = build_course(scenario.classes, follow_up(scenario.classes, pairs), name, "Follow-up course: " + "; ".join(f"{a} vs {b}" for a, b in pairs))
+    path = workdir / f"{name}_s{setup.seed}_{'_'.join(c[:2] for c in (setup.profile.order if setup.profile else ()))}.yaml"
+    workdir.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(path, yaml.safe_dump(course.data(), sort_keys=False, default_flow_style=None, width=120))
+    if log:
+        log(f"follow-up course: {len(pairs)} pairs open ({', '.join(f'{a} vs {b}' for a, b in pairs)})")
+    return demonstrate(replace(recipe, demonstrations=1), workdir, replace(setup, course=str(path)), log, write=False)
+
+
 def record_demonstrations(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Callable[[str], None] | None = None) -> list[Path]:
     """The recipe's demonstration runs (:func:`demonstrate`), written as recordings in ``workdir``; their folders."""
     return [r.path for r in demonstrate(recipe, workdir, setup, log, write=True)]
@@ -251,6 +285,8 @@ def run_recipe(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Cal
     features = recipe.features(setup.features)
     seed = setup.seed
     recordings = demonstrate(recipe, workdir, replace(setup, profile=profile, course=course, features=features), log, write=write_recordings)
+    if setup.follow_up:
+        recordings += _follow_up(recipe, recordings, workdir, replace(setup, profile=profile, course=course, features=features), log)
     paths = [r.path for r in recordings if not r.in_memory]
     demo_s = sum(r.duration_s for r in recordings)
     corr_s = 0.0

@@ -54,6 +54,7 @@ class Selection:
     taught_under: PerceptionModel | None = None  # what the demonstrations recorded (None: the truth)
     classes: ClassTable | None = None  # the class table of the layouts and demonstrations (None: the default)
     course: str | None = None  # the course every recipe demonstrates (None: each recipe's own)
+    follow_up: bool = False  # also drive a follow-up course of the pairs the demonstrations left open
 
     @property
     def driven_under(self) -> tuple[PerceptionModel, ...]:
@@ -107,6 +108,7 @@ class _OrderJob:
     perception: PerceptionModel | None = None  # what the demonstrations recorded
     classes: ClassTable | None = None  # the class table of the course
     course: str | None = None  # the course demonstrated (None: each recipe's own)
+    follow_up: bool = False  # and a follow-up course of what it left open
 
 
 @dataclass(frozen=True)
@@ -119,7 +121,8 @@ class _Model:
 
 def _train(job: _OrderJob) -> list[str]:
     """Every recipe for one order and seed, one after another: they share the work folder's demonstrations."""
-    setup = RecipeSetup(job.seed, PreferenceProfile(job.order), job.course, style=job.style, perception=job.perception, classes=job.classes)
+    setup = RecipeSetup(job.seed, PreferenceProfile(job.order), job.course, style=job.style, perception=job.perception, classes=job.classes,
+                        follow_up=job.follow_up)
     return [str(run_recipe(recipe_named(r), job.workdir, setup).model) for r in job.recipes]
 
 
@@ -170,7 +173,8 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
     saved = {"selection": {"recipes": list(sel.recipes), "orders": [list(o) for o in sel.orders], "seeds": sel.seeds, "layouts": layouts,
                            "style": sel.style, "perceptions": [p.to_dict() for p in sel.driven_under],
                            "taught_under": (sel.taught_under or PerceptionModel()).to_dict(),
-                           **({"classes": sel.classes.to_dict(), "course": sel.course} if sel.classes is not None else {})},
+                           **({"classes": sel.classes.to_dict(), "course": sel.course} if sel.classes is not None else {}),
+                           **({"follow_up": True} if sel.follow_up else {})},
              "engine": engine.describe(), "zones": rows, "runs": runs, "train_s": round(t_train, 1), "eval_s": round(t_eval, 1)}
     write_text_atomic(out / "select.json", json.dumps(saved, indent=0))
     path = write_selection_report(out, saved)
@@ -182,7 +186,7 @@ def _train_all(out: Path, sel: Selection, engine: Engine, log: Callable[[str], N
     """Every recipe for every order and seed; model file -> the model, in the order trained."""
     # One job per order and seed: its recipes share the demonstrations recorded in its work folder.
     jobs = [_OrderJob(tuple(sel.recipes), tuple(o), s, sel.style, str(job_folder(out, o, s, sel.taught_under)), sel.taught_under, sel.classes,
-                      sel.course) for o in sel.orders for s in range(sel.seeds)]
+                      sel.course, sel.follow_up) for o in sel.orders for s in range(sel.seeds)]
     log(f"[1/2] demonstrations and training: {len(jobs) * len(sel.recipes)} models ({len(sel.recipes)} recipes x {len(sel.orders)} orders "
         f"x {sel.seeds} seeds) on {engine.describe()} ...")
     trained = run_grid(_train, jobs, engine, lambda k, n: log(f"      trained {k}/{n} order-and-seed jobs"), describe=_describe)
@@ -249,7 +253,8 @@ def write_selection_report(out: Path, saved: dict) -> Path:
         table = sel["classes"]
         lines += [f"Class table: background {table['background']}; feature classes "
                   f"{', '.join(c['name'] for c in table['classes'] if c['name'] != table['background'] and c['name'] not in table['lethal'])}; "
-                  f"lethal {', '.join(table['lethal']) or 'none'}. Every recipe demonstrated `{sel['course']}`. Orders: "
+                  f"lethal {', '.join(table['lethal']) or 'none'}. Every recipe demonstrated `{Path(sel['course']).name}`"
+                  f"{', then a follow-up course of the pairs its drive left open' if sel.get('follow_up') else ''}. Orders: "
                   + "; ".join(" > ".join(_chosen(o)) for o in sel["orders"]) + ".", ""]
     points: list[RateRow] = []
     targets: list[float] = []

@@ -31,6 +31,15 @@ class _Checker:
 
     def __init__(self) -> None:
         self.problems: list[Problem] = []
+        self.unknown: dict[str, list[str]] = {}  # unknown class name -> the fields naming it
+
+    def unknown_classes(self, classes: ClassTable) -> None:
+        """One problem per unknown class name, at the first field naming it: a scenario made for
+        another class table names its classes in many fields."""
+        for name, fields in self.unknown.items():
+            more = f" (and {len(fields) - 1} more fields)" if len(fields) > 1 else ""
+            self.fail(fields[0], f"unknown class {name!r}{more}; known: {', '.join(classes.names)} "
+                                 "(a scenario of another class table? give its --classes FILE)")
 
     def fail(self, field: str, message: str) -> None:
         self.problems.append(Problem(field, message))
@@ -88,7 +97,7 @@ class _Checker:
     def class_name(self, value: Any, field: str, classes: ClassTable) -> str | None:
         name = self.text(value, field)
         if name is not None and name not in classes.names:
-            self.fail(field, f"unknown class {name!r}; known: {', '.join(classes.names)}")
+            self.unknown.setdefault(name, []).append(field)
             return None
         return name
 
@@ -194,6 +203,7 @@ def parse_scenario(data: dict[str, Any], source: str = "", classes: ClassTable |
     waypoints = _waypoints(c, data, world.size_m)
     start = _start(c, data, waypoints, world.size_m)
     zones = _zones(c, data.get("zones", []), world.size_m, classes)
+    c.unknown_classes(classes)
     if c.problems:
         raise ScenarioError(source, c.problems)
     assert name is not None and world.size_m is not None and world.resolution_m is not None and world.background is not None
