@@ -23,7 +23,7 @@ from terrapref.errors import ConfigError
 from terrapref.interop.labels import load_label_map
 from terrapref.learning.identify import GRASS, Identifiability, PairEvidence, TableNames, identifiability
 from terrapref.learning.linear import LinearUtility
-from terrapref.report.select import ALL_ORDERS, parse_orders
+from terrapref.report.select import parse_orders
 from terrapref.scenario import parse_scenario, resolve_scenario
 from terrapref.scenario.generate import generate_course, zone_kind
 from terrapref.scenario.teaching import (
@@ -135,8 +135,9 @@ ELEVEN = ["grass", *(f"c{i}" for i in range(MAX_TERRAIN_CLASSES + 1)), "tree"]
 
 @pytest.mark.parametrize("table,field,words", [
     (("grass", ["tree"], ELEVEN), "classes", ["11 feature classes", f"at most {MAX_TERRAIN_CLASSES}"]),
-    (("grass", ["grass", "tree"], ["grass", "mud", "tree"]), "classes", ["background class 'grass' cannot be lethal"]),
-    (("grass", ["grass"], ["grass", "mud"]), "classes", ["background class 'grass' cannot be lethal"]),
+    (("grass", ["grass", "tree"], ["grass", "mud", "tree"]), "lethal", ["background class 'grass'", "cannot be lethal"]),
+    (("grass", ["grass"], ["grass", "mud"]), "lethal", ["background class 'grass'", "cannot be lethal"]),
+    (("grass", ["grass", "tree"], ["grass", "mud", "tree"], ["mud", "lethal"]), "lethal", ["background class 'grass'", "cannot be lethal"]),
     (("grass", ["tree", "log"], ["grass", "lethal", "tree", "log"]), "classes", ["'lethal'", "clash", "2 lethal classes"]),
     (("grass", ["lethal", "log"], ["grass", "mud", "lethal", "log"]), "classes", ["'lethal'", "clash"]),
     (("grass", ["tree", "log"], ["grass", "mud", "rock", "tree", "log"], ["mud", "lethal"]), "profile", ["mud, rock, lethal", "exactly once"]),
@@ -145,7 +146,7 @@ ELEVEN = ["grass", *(f"c{i}" for i in range(MAX_TERRAIN_CLASSES + 1)), "tree"]
     (("grass", ["tree", "log"], ["grass", "mud", "tree", "log"], ["mud", "mud", "lethal"]), "profile", ["mud, lethal"]),
     (("sand", ["tree"], ["grass", "tree"]), "background", ["'sand'"]),
     (("grass", ["stone"], ["grass", "tree"]), "lethal", ["known class names"]),
-], ids=["11 feature classes", "background lethal", "background the only lethal", "class lethal, 2 lethal",
+], ids=["11 feature classes", "background lethal", "background the only lethal", "background lethal, with a profile", "class lethal, 2 lethal",
         "class lethal is lethal, 2 lethal", "profile misses a column", "profile names an unknown class",
         "profile names a lethal class", "profile names a column twice", "unknown background", "unknown lethal"])
 def test_a_bad_table_is_refused_naming_the_file_and_field(tmp_path, table, field, words):
@@ -345,7 +346,7 @@ def test_a_small_table_gets_only_the_zones_it_can_fill():
 
 def test_all_orders_of_the_default_table_are_the_six(example):
     orders = parse_orders("all")
-    assert len(orders) == 6 and set(orders) == set(ALL_ORDERS)
+    assert orders == tuple((*p, "non_traversable") for p in itertools.permutations(("mud", "rock", "water")))
     assert len(parse_orders("all", example)) == math.factorial(6)
 
 
@@ -498,3 +499,12 @@ def test_identifiability_names_the_tables_background():
     assert report.order == ("sand", "mud", "lethal") and report.background == "sand"
     assert {frozenset((p.first, p.second)) for p in report.pairs} == {frozenset(p) for p in itertools.combinations(("sand", "mud", "lethal"), 2)}
     assert GRASS not in " ".join(report.lines())
+
+
+def test_a_bad_colour_of_a_lethal_class_is_one_problem(tmp_path):
+    path = _write_table(tmp_path, "grass", ["tree"], ["grass", "mud", "tree"])
+    path.write_text(path.read_text().replace("name: tree, color: [2, 4, 6]", "name: tree, color: [2, 4]"))
+    with pytest.raises(ConfigError) as caught:
+        load_classes(path)
+    lines = caught.value.lines()
+    assert len(lines) == 1 and lines[0].startswith(f"{path}: classes[2].color: "), lines

@@ -34,9 +34,10 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     from terrapref.scenario.catalog import scenario_path
 
     status = 0
+    table = _class_table(args)
     for name in args.files:
         try:
-            load_scenario(scenario_path(name), _class_table(args))
+            load_scenario(scenario_path(name), table)
         except UserError as exc:
             for line in exc.lines():
                 print(f"error: {line}")  # in the report's order, beside the files that are ok

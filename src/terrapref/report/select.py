@@ -33,8 +33,6 @@ from terrapref.plots import RateRow, save_intervals
 from terrapref.scenario.generate import zone_kind
 from terrapref.terrain import ClassTable, PreferenceProfile, default_classes
 
-LETHAL_LAST = "non_traversable"
-ALL_ORDERS = tuple((*p, LETHAL_LAST) for p in itertools.permutations(("mud", "rock", "water")))
 RANDOM_ORDERS_SEED = 4343  # `--orders random:N` draws its orders with this seed (stated in the report)
 TARGET = 0.95  # agreement the default recipe must keep on clean frames
 PERCEIVED_TARGET = 0.90  # and under a perception model's errors (docs/perception.md)
@@ -72,8 +70,8 @@ def parse_orders(text: str, classes: ClassTable | None = None) -> tuple[tuple[st
     appended if missing)."""
     classes = classes or default_classes()
     last = (classes.lethal_column,) if classes.lethal else ()
-    if text == "all":
-        return tuple((*p, *last) for p in itertools.permutations(classes.terrain_names))
+    if text == "all":  # in the order of the table's profile
+        return tuple((*p, *last) for p in itertools.permutations(c for c in classes.profile if c in classes.terrain_names))
     if text.startswith("random:"):
         try:
             n = int(text[len("random:"):])

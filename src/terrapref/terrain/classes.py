@@ -163,25 +163,30 @@ class ClassTable:
                 problems.append(Problem(f"{f}.color", "must be [r, g, b] with integers 0..255"))
                 continue
             classes.append(TerrainClass(cid, name, (color[0], color[1], color[2])))
-        names = {c.name for c in classes}
+        # Names are checked against every row that names a class, so that a bad colour is not
+        # also reported as an unknown background or lethal class.
+        names = {row["name"] for row in rows if isinstance(row, dict) and isinstance(row.get("name"), str)}
         background = data.get("background")
         if not isinstance(background, str) or background not in names:
             problems.append(Problem("background", f"unknown class {background!r}"))
         lethal = data.get("lethal", [])
         if not isinstance(lethal, list) or any(not isinstance(v, str) or v not in names for v in lethal) or len(set(lethal)) != len(lethal):
             problems.append(Problem("lethal", "must be a list of distinct known class names"))
+        elif background in lethal:
+            problems.append(Problem("lethal", f"names the background class {background!r}, which cannot be lethal"))
         if problems:
             raise ConfigError(source, problems)
         ordered = tuple(sorted(classes, key=lambda c: c.id))
         columns = _columns(ordered, background, tuple(lethal))
+        try:  # the table's own checks first, with its columns as a stand-in profile
+            cls(ordered, background, tuple(lethal), columns)
+        except ValueError as exc:
+            raise ConfigError(source, str(exc), field="classes") from None
         # Without a profile: the classes in id order, the lethal column last.
         profile = data.get("profile", sorted(columns, key=lambda n: n == _lethal_column(tuple(lethal))))
         if not isinstance(profile, list) or sorted(map(str, profile)) != sorted(columns):
             raise ConfigError(source, f"must list each of {', '.join(columns)} exactly once, most preferred first", field="profile")
-        try:
-            return cls(ordered, background, tuple(lethal), tuple(profile))
-        except ValueError as exc:
-            raise ConfigError(source, str(exc), field="classes") from None
+        return cls(ordered, background, tuple(lethal), tuple(profile))
 
 
 def _lethal_column(lethal: tuple[str, ...]) -> str | None:
