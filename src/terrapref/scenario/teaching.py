@@ -214,7 +214,9 @@ def teaching_course(classes: ClassTable, name: str = "teaching_course", full: bo
     if full is None:
         full = course_length(situations(classes, True)) <= BUDGET_M
     items = situations(classes, full)
-    design = "every pair once on each side" if full else "every pair once, each class left as often as right"
-    description = (f"Teaching course for {len(classes.terrain_names)} feature classes ({', '.join(classes.terrain_names)}): {design}; "
+    n = len(classes.terrain_names)
+    design = ("no pairs (one feature class)" if n < 2 else "every pair once on each side" if full
+              else "every pair once, each class left as often as right")
+    description = (f"Teaching course for {n} feature class{'es' if n != 1 else ''} ({', '.join(classes.terrain_names)}): {design}; "
                    f"every class as a strip on the path between lethal terrain and another class; every class alone on the path.")
     return build_course(classes, items, name, description)
