@@ -146,7 +146,10 @@ def _cmd_course(args: argparse.Namespace) -> int:
     print(f"{scenario.name}: {scenario.description}")
     print(f"  {len(scenario.zones)} situations ({', '.join(f'{n} {k}' for k, n in kinds.items())}); path {length:.0f} m; "
           f"expected drive about {length / DRIVER_SPEED_MPS / 60:.1f} minutes at {DRIVER_SPEED_MPS:g} m/s")
-    print(f"wrote {out} and {figure} (record it: terrapref record {out}{f' --classes {args.classes}' if args.classes else ''} --out DIR)")
+    from terrapref.terrain import default_classes
+
+    flag = f" --classes {args.classes}" if args.classes else (" --classes FILE (the class table of the drive)" if table != default_classes() else "")
+    print(f"wrote {out} and {figure} (record it: terrapref record {out}{flag} --out DIR)")
     return 0
 
 
