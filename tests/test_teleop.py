@@ -579,3 +579,24 @@ def test_drive_live_sends_every_driven_frame_and_riding_along_the_planners_costm
     # F_t shades the trajectories while the planner drives; the driver's own frames show only its choice.
     shaded = [len({round(m.color.a, 3) for m in msg.markers}) > 2 for _, msg in markers]
     assert shaded[:25] == [True] * 25 and not any(shaded[26:29])
+
+
+def test_a_course_of_ones_own_class_table_drives_in_the_window(tmp_path):
+    from pathlib import Path
+
+    from terrapref.scenario import parse_scenario
+    from terrapref.scenario.teaching import teaching_course
+    from terrapref.terrain import ClassTable, load_classes
+
+    table = load_classes(Path(__file__).resolve().parent.parent / "examples" / "classes" / "rellis3d.yaml")
+    scenario = parse_scenario(teaching_course(table).data(), "course.yaml", table)
+    out = tmp_path / "rec"
+    events = {3: [key(pygame.KEYDOWN, pygame.K_LEFT)], 6: [key(pygame.KEYUP, pygame.K_LEFT)], 12: [pygame.event.Event(pygame.QUIT)]}
+    result = run_teleop(scenario, out, realtime=False, wait_for_start=False, script=script_from(events), max_frames=40,
+                        screenshot=tmp_path / "shot.png")
+    assert result.frames == 12
+    rec = read_recording(out)
+    assert ClassTable.from_dict(rec.meta["classes"]) == table and rec.meta["profile"] == list(table.profile)
+    shot = pygame.image.load(str(tmp_path / "shot.png"))
+    # The camera view is drawn in the table's colours: grass just ahead, at the view's bottom left.
+    assert tuple(shot.get_at((20, 470)))[:3] == table.classes[0].color
