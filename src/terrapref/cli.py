@@ -808,6 +808,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
     _check_output(out, "--out", inputs)
     if args.format in ("mcap", "rosbag1"):
         _check_output(Path(f"{out}.robot.yaml"), "--out", inputs)
+        _check_output(Path(f"{out}.labels.yaml"), "--out", inputs)
         from dataclasses import replace
 
         from terrapref.demos.recording import read_recording
@@ -829,7 +830,13 @@ def _cmd_export(args: argparse.Namespace) -> int:
         write_bag(out, frames, ros1=args.format == "rosbag1", progress=lambda done, total: bar.update(done))
         bar.close(f"{len(rec)} frames")
         what = "ROS 1 bag; rosbag play it" if args.format == "rosbag1" else "ROS 2 MCAP; open it in Foxglove"
-        print(f"wrote {out} ({what}) and {out.name}.robot.yaml (terrapref import {out} --robot {out}.robot.yaml)")
+        from terrapref.terrain import default_classes
+
+        if frames.classes != default_classes():
+            print(f"wrote {out} ({what}), {out.name}.robot.yaml and its label map {out.name}.labels.yaml "
+                  f"(terrapref import {out} --robot {out}.robot.yaml --classes FILE, the recording's class table)")
+        else:
+            print(f"wrote {out} ({what}) and {out.name}.robot.yaml (terrapref import {out} --robot {out}.robot.yaml)")
         return 0
     if args.model:
         raise UserError(args.model, "--model goes with --format mcap or rosbag1 (a recording's costmap); for onnx the model is the input", field="--model")

@@ -42,7 +42,8 @@ from terrapref.interop.ros_messages import (EPOCH_S, OPTICAL_FRAME, Message, Top
                                             foxglove_grid, header, occupancy_grid, odometry, path_message, png, point, pose, rpy_quaternion, tf_message, transform, twist,
                                             typestore, vector3, zeroed)
 from terrapref.planner.costmap import Costmap
-from terrapref.terrain import ClassTable
+from terrapref.terrain import ClassTable, default_classes
+from terrapref.terrain.classes import UNKNOWN
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
@@ -137,7 +138,12 @@ def write_bag(out: str | Path, run: RunFrames, ros1: bool = False, robot_file: b
     finally:
         shutil.rmtree(tmpdir, ignore_errors=True)
     if robot_file:
-        write_text_atomic(out.with_name(out.name + ".robot.yaml"), _robot_yaml(run.camera))
+        labels = "terrapref   # the ids are terrapref's own classes"
+        if run.classes != default_classes():  # the ids are another table's: a map of them by name, beside the robot file
+            labels_file = out.with_name(out.name + ".labels.yaml")
+            write_text_atomic(labels_file, _label_map_yaml(run.classes))
+            labels = f"{labels_file.name}   # the ids of the class table the run was made with (terrapref import --classes FILE)"
+        write_text_atomic(out.with_name(out.name + ".robot.yaml"), _robot_yaml(run.camera, labels))
     return out
 
 
@@ -247,15 +253,23 @@ def _color(ts: Typestore, r: float, g: float, b: float, a: float = 1.0) -> Messa
     return ts.types["std_msgs/msg/ColorRGBA"](r=float(r), g=float(g), b=float(b), a=float(a))
 
 
-def _robot_yaml(cam: CameraConfig) -> str:
-    """The terrapref-robot/1 file that imports the exported topics back with ``cam``'s mounting."""
+def _label_map_yaml(classes: ClassTable) -> str:
+    """A terrapref-labels/1 file naming the class of each of ``classes``' ids."""
+    ids = "".join(f"  {c.id}: {c.name}\n" for c in classes.classes)
+    return (f"format: terrapref-labels/1\nname: exported\ndescription: the class ids of the table {', '.join(classes.names)}\n"
+            f"ids:\n{ids}  {UNKNOWN}: unknown\n")
+
+
+def _robot_yaml(cam: CameraConfig, labels: str) -> str:
+    """The terrapref-robot/1 file that imports the exported topics back with ``cam``'s mounting
+    and ``labels`` (the robot file's ``labels`` entry)."""
     return (
         "format: terrapref-robot/1\n"
         f"topics:\n  segmentation: {PREFIX}/labels\n  camera_info: {PREFIX}/camera_info\n  odometry: {PREFIX}/odom\n"
         f"  command: {PREFIX}/cmd_vel\n  path: {PREFIX}/path\n"
         f"camera:\n  height_m: {cam.mount_height_m!r}\n  pitch_deg: {cam.pitch_deg!r}\n  forward_m: {cam.mount_forward_m!r}\n"
         f"  yaw_deg: {cam.yaw_deg!r}\n  max_range_m: {cam.max_range_m!r}\n"
-        "labels: terrapref   # the ids are terrapref's own classes\n"
+        f"labels: {labels}\n"
     )
 
 
