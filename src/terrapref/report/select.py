@@ -228,6 +228,11 @@ def layout_interval(rows: Sequence[dict]) -> tuple[float, float, float]:
     return cluster_bootstrap(list(by_layout.values()))
 
 
+def _drives(sel: dict) -> str:
+    """What each model was taught from, in a few words."""
+    return "one drive and its follow-up" if sel.get("follow_up") else "one drive"
+
+
 def _perception_line(model: dict | None) -> str:
     """A perception model as select.json holds it, in a few words."""
     if not model or model.get("name", "clean") == "clean":
@@ -241,7 +246,7 @@ def write_selection_report(out: Path, saved: dict) -> Path:
     layouts = sel["layouts"]
     seen = [p["name"] for p in sel.get("perceptions", [{"name": "clean"}])]
     lines = ["# Recipe selection: agreement with the driver on generated layouts", "",
-             f"{len(sel['recipes'])} recipe(s) x {len(sel['orders'])} order(s) x {sel['seeds']} training seed(s), one drive each; every model and "
+             f"{len(sel['recipes'])} recipe(s) x {len(sel['orders'])} order(s) x {sel['seeds']} training seed(s), {_drives(sel)} each; every model and "
              f"its driver (style {sel['style']}) drive {len(layouts)} generated layouts ({layouts[0]} to {layouts[-1]}). Rates with 95% Wilson "
              "intervals over all zones; the layouts column resamples whole layouts instead (a cluster bootstrap: a layout's zones are "
              "alike across seeds), the spread another set of layouts would show.", "",
@@ -270,7 +275,7 @@ def write_selection_report(out: Path, saved: dict) -> Path:
     lines += [f"Training {saved['train_s']:.0f} s, runs {saved['eval_s']:.0f} s (wall; {saved['engine']}).", "", "![selection](select.png)", ""]
     save_intervals(out / "select.png", points, "agreement with the driver",
                    target=targets or TARGET,
-                   title=f"one drive per model, {len(layouts)} layouts x {sel['seeds']} seeds; 95% intervals, layouts resampled")
+                   title=f"{_drives(sel)} per model, {len(layouts)} layouts x {sel['seeds']} seeds; 95% intervals, layouts resampled")
     path = out / "SELECT.md"
     write_text_atomic(path, "\n".join(lines))
     return path
