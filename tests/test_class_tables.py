@@ -267,8 +267,9 @@ def test_a_teaching_course_reads_back_and_lies_on_its_map(table):
     scenario = parse_scenario(course.data(), "teaching_course", table)
     assert scenario.name == "teaching_course" and scenario.background == table.background
     assert [z.label for z in scenario.zones] == [s.label for s in items]
-    assert Counter(z.expect for z in scenario.zones) == {"avoid": sum(s.kind == "lone" for s in items),
-                                                         "best": sum(s.kind != "lone" for s in items)}
+    # A strip beside the background expects every driver to leave it for the background.
+    beside_background = [s.kind == "lone" or table.background in s.classes for s in items]
+    assert [z.expect for z in scenario.zones] == ["avoid" if b else "best" for b in beside_background]
     painted = {p.class_name for p in scenario.terrain}  # real classes, never a column
     assert {*table.terrain_names, *table.lethal} <= painted <= set(table.names)
     assert scenario.path_length_m() == pytest.approx(course_length(items), abs=0.01)
@@ -508,3 +509,35 @@ def test_a_bad_colour_of_a_lethal_class_is_one_problem(tmp_path):
         load_classes(path)
     lines = caught.value.lines()
     assert len(lines) == 1 and lines[0].startswith(f"{path}: classes[2].color: "), lines
+
+
+def test_a_table_that_differs_only_in_colours_or_profile_is_the_same_table(fig7_recording, tmp_path, capsys):
+    default_file = Path(__file__).resolve().parent.parent / "src" / "terrapref" / "data" / "classes.yaml"
+    text = default_file.read_text().replace("[92, 158, 70]", "[90, 160, 70]").replace("profile: [mud, rock, water, non_traversable]",
+                                                                                      "profile: [rock, mud, water, non_traversable]")
+    recoloured = tmp_path / "recoloured.yaml"
+    recoloured.write_text(text)
+    table = load_classes(recoloured)
+    assert table != default_classes() and table.same_classes(default_classes())
+    assert main(["inspect", str(fig7_recording), "--classes", str(recoloured), "--no-preference", "--out", str(tmp_path / "p.png")]) == 0
+    renamed = tmp_path / "renamed.yaml"
+    renamed.write_text(default_file.read_text().replace("name: rock", "name: stone").replace("rock, water", "stone, water"))
+    assert not load_classes(renamed).same_classes(default_classes())
+
+
+def test_a_table_of_the_background_alone_is_refused(tmp_path):
+    with pytest.raises(ConfigError) as caught:
+        load_classes(_write_table(tmp_path, "grass", [], ["grass"]))
+    assert "besides the background" in caught.value.lines()[0]
+
+
+def test_a_presets_pose_camera_and_frames_suit_any_table(example):
+    from terrapref.errors import UserError
+    from terrapref.perception import load_perception
+
+    for part in ("pose", "camera", "frames"):
+        assert load_perception(f"field:{part}", example).active
+    with pytest.raises(UserError):
+        load_perception("field", example)  # its label errors name the default table's classes
+    with pytest.raises(UserError):
+        load_perception("field:labels", example)

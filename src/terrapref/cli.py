@@ -90,12 +90,13 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
 
 def _cmd_course(args: argparse.Namespace) -> int:
-    import yaml
+    from collections import Counter
 
     from terrapref.fileio import write_text_atomic
     from terrapref.plots import save_map
     from terrapref.scenario import parse_scenario
-    from terrapref.scenario.teaching import DRIVER_SPEED_MPS, build_course, course_length, follow_up, teaching_course
+    from terrapref.scenario.teaching import DRIVER_SPEED_MPS, build_course, description, fits, follow_up, follow_up_course, situations
+    from terrapref.terrain import default_classes
     from terrapref.world import rasterise
 
     out = Path(args.out)
@@ -119,36 +120,26 @@ def _cmd_course(args: argparse.Namespace) -> int:
             print(f"{args.after}: the drive identified every pair of classes; no follow-up course is needed (nothing written)")
             return 0
         items = follow_up(table, open_pairs)
-        name = args.name or f"{Path(rec.meta.get('scenario') or 'course').name}_more"
-        course = build_course(table, items, name, f"Follow-up course: the pairs the drive of {rec.meta.get('scenario')} left open "
-                                                    f"({'; '.join(f'{a} vs {b}' for a, b in open_pairs)}), each both ways round.")
+        course = follow_up_course(table, open_pairs, args.name or f"{Path(rec.meta.get('scenario') or 'course').name}_more", str(rec.meta.get("scenario")))
         print(f"the drive left {len(open_pairs)} pairs open: {', '.join(f'{a} vs {b}' for a, b in open_pairs)}")
     else:
-        from terrapref.terrain import default_classes
-
         table = table or default_classes()
         try:
-            course = teaching_course(table, args.name or "teaching_course", {"auto": None, "full": True, "compact": False}[args.design])
+            full = fits(table) if args.design == "auto" else args.design == "full"
+            items = situations(table, full)
         except ValueError as exc:
             raise UserError(str(args.classes or "classes"), str(exc), field="classes") from None
-        items = None
-    data = course.data()
-    scenario = parse_scenario(data, str(out), table)  # checked as every command will read it
-    text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=120)
+        course = build_course(table, items, args.name or "teaching_course", description(table, full))
+    scenario = parse_scenario(course.data(), str(out), table)  # checked as every command will read it
     source = f"--classes {args.classes}" if args.classes else ("--after " + str(args.after) if args.after else "the default class table")
-    write_text_atomic(out, f"# terrapref course ({source}); the class table's scenario: give the same --classes to every command.\n" + text)
+    write_text_atomic(out, f"# terrapref course ({source}); the class table's scenario: give the same --classes to every command.\n" + course.to_yaml())
     save_map(figure, scenario, rasterise(scenario))
     length = scenario.path_length_m()
-    kinds = {}
-    for zone in scenario.zones:
-        kind = "lone" if zone.expect == "avoid" else ("strip" if zone.label.count(" | ") == 2 else "pair")
-        kinds[kind] = kinds.get(kind, 0) + 1
+    kinds = Counter(item.kind for item in items)
     print(f"{scenario.name}: {scenario.description}")
-    print(f"  {len(scenario.zones)} situations ({', '.join(f'{n} {k}' for k, n in kinds.items())}); path {length:.0f} m; "
+    print(f"  {len(items)} situations ({', '.join(f'{n} {k}' for k, n in kinds.items())}); path {length:.0f} m; "
           f"expected drive about {length / DRIVER_SPEED_MPS / 60:.1f} minutes at {DRIVER_SPEED_MPS:g} m/s")
-    from terrapref.terrain import default_classes
-
-    flag = f" --classes {args.classes}" if args.classes else (" --classes FILE (the class table of the drive)" if table != default_classes() else "")
+    flag = f" --classes {args.classes}" if args.classes else (" --classes FILE (the class table of the drive)" if not table.same_classes(default_classes()) else "")
     print(f"wrote {out} and {figure} (record it: terrapref record {out}{flag} --out DIR)")
     return 0
 
@@ -453,7 +444,7 @@ def _check_table(args: argparse.Namespace, found, source: str | Path) -> None:
     from terrapref.terrain import default_classes
 
     table = _class_table(args) or default_classes()
-    if found != table:
+    if not found.same_classes(table):
         given = f"{args.classes}'s" if getattr(args, "classes", None) is not None else "the default table's (give --classes FILE for another)"
         raise UserError(str(source), f"was made for the class table of {', '.join(found.names)}, not {given} ({', '.join(table.names)})",
                         field="classes")
@@ -530,7 +521,8 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
         chosen.append(f"{label}epoch {r.best_epoch}: val loss {best.val_loss:.4f}, val acc {best.val_acc:.3f}")
     if result.steadying is not None:
         print(result.steadying.line())
-    lethal = frozenset(ClassTable.from_dict(data.meta["classes"], str(args.data[0])).lethal)
+    table = ClassTable.from_dict(data.meta["classes"], str(args.data[0]))
+    lethal = frozenset({table.lethal_column} if table.lethal else ())  # the terrain column the lethal classes share
     for stage in result.stages:
         print(stage.describe(data.feature_config.feature_classes, lethal))
     if result.identifiability is not None:
@@ -553,6 +545,11 @@ def _cmd_train(args: argparse.Namespace) -> int:
     recipe = replace(recipe, stages=_stages(args, recipe))
     _check_distinct(args.data, "recording or dataset")
     _check_output(args.out, "--out", args.data)
+    if args.classes is not None:  # recordings before they are featurised
+        from terrapref.demos.recording import read_recording
+
+        for path in (p for p in args.data if p.is_dir()):
+            _check_table(args, _recording_table(read_recording(path)), path)
     data = _training_data(args, recipe)
     if args.classes is not None:
         from terrapref.terrain import ClassTable
@@ -770,7 +767,7 @@ def _cmd_route(args: argparse.Namespace) -> int:
         raise UserError("--resolution", f"expected a cell size in [0.1, 2] m, got {args.resolution}")
     scenario = resolve_scenario(args.scenario, _class_table(args))
     model = load_model(args.model)
-    if model.classes != scenario.classes:
+    if not model.classes.same_classes(scenario.classes):
         raise UserError(args.model, f"was trained for another class table than {args.scenario}'s", field="classes")
     world = rasterise(scenario)
     try:
@@ -787,7 +784,8 @@ def _cmd_route(args: argparse.Namespace) -> int:
     along = "meets lethal terrain" if not math.isfinite(route.along_path_cost) else f"{route.along_path_cost:.1f}"
     print(f"route: {route.length_m:.1f} m (path {scenario.path_length_m():.1f} m), up to {route.max_offset_m:.1f} m from the path; "
           f"price {route.cost:.1f} (the path itself: {along}); searched in {route.cell_m:g} m cells")
-    print(f"wrote {out} (the scenario with the route as its path: terrapref evaluate {args.model} {out}) and {figure}")
+    flag = f" --classes {args.classes}" if args.classes else ""
+    print(f"wrote {out} (the scenario with the route as its path: terrapref evaluate {args.model} {out}{flag}) and {figure}")
     return 0
 
 
@@ -832,7 +830,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
         what = "ROS 1 bag; rosbag play it" if args.format == "rosbag1" else "ROS 2 MCAP; open it in Foxglove"
         from terrapref.terrain import default_classes
 
-        if frames.classes != default_classes():
+        if not frames.classes.same_classes(default_classes()):
             print(f"wrote {out} ({what}), {out.name}.robot.yaml and its label map {out.name}.labels.yaml "
                   f"(terrapref import {out} --robot {out}.robot.yaml --classes FILE, the recording's class table)")
         else:
@@ -1002,14 +1000,12 @@ def _selection_course(args: argparse.Namespace, table) -> str | None:
         return str(Path(args.course).resolve()) if Path(args.course).exists() else args.course
     if table is None:
         return None
-    import yaml
-
     from terrapref.fileio import write_text_atomic
     from terrapref.scenario.teaching import teaching_course
 
     Path(args.out).mkdir(parents=True, exist_ok=True)
     path = Path(args.out).resolve() / "teaching_course.yaml"
-    write_text_atomic(path, yaml.safe_dump(teaching_course(table).data(), sort_keys=False, default_flow_style=None, width=120))
+    write_text_atomic(path, teaching_course(table).to_yaml())
     return str(path)
 
 

@@ -210,7 +210,7 @@ def _identifiability(model) -> Identifiability | None:
 
 def rests_on(expect: str, present: Sequence[str], identified: Identifiability) -> list[str]:
     """The unidentified pairs a zone's expected choice depends on: the expected class against
-    every other class present (or grass against them all, for ``avoid``)."""
+    every other class present (or the background against them all, for ``avoid``)."""
     best = identified.background if expect == AVOID else expect
     pairs = [identified.pair(best, other) for other in present if other != best]
     if expect != AVOID:

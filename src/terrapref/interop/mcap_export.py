@@ -139,7 +139,7 @@ def write_bag(out: str | Path, run: RunFrames, ros1: bool = False, robot_file: b
         shutil.rmtree(tmpdir, ignore_errors=True)
     if robot_file:
         labels = "terrapref   # the ids are terrapref's own classes"
-        if run.classes != default_classes():  # the ids are another table's: a map of them by name, beside the robot file
+        if not run.classes.same_classes(default_classes()):  # the ids are another table's: a map of them by name, beside the robot file
             labels_file = out.with_name(out.name + ".labels.yaml")
             write_text_atomic(labels_file, _label_map_yaml(run.classes))
             labels = f"{labels_file.name}   # the ids of the class table the run was made with (terrapref import --classes FILE)"

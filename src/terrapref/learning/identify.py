@@ -32,6 +32,7 @@ import numpy as np
 
 from terrapref.learning.linear import LinearUtility
 from terrapref.records import to_plain
+from terrapref.terrain.classes import LETHAL_COLUMN
 
 GRASS = "grass"  # the default table's background, compared like a class
 SHARE = 0.2  # a trajectory "runs over" a class when at least this share of its points do
@@ -98,7 +99,9 @@ class Identifiability:
                                                           else "compared, but the margin is within its uncertainty")
             lethal = next((c for c in (p.first, p.second) if c in self.lethal), None)
             if lethal is not None:  # the class table, not the drive, keeps the offset stage off it
-                out.append(f"{p.first} vs {p.second}: {why}; {lethal} is lethal, so the offset stage never drives onto it "
+                pooled = lethal == LETHAL_COLUMN  # several lethal classes, one column
+                what, verb, it = ("the lethal classes", "are", "them") if pooled else (lethal, "is", "it")
+                out.append(f"{p.first} vs {p.second}: {why}; {what} {verb} lethal, so the offset stage never drives onto {it} "
                            f"whatever the drive shows, but C's ranking of the two is a guess")
             else:
                 out.append(f"{p.first} vs {p.second}: {why}; the planner's choice between them is a guess")

@@ -393,7 +393,11 @@ def load_perception(spec: str | Path | PerceptionModel | None, classes: ClassTab
         return PerceptionModel()
     head, _, section = str(spec).rpartition(":")
     if head and section in _SECTIONS and not isinstance(spec, PerceptionModel):
-        return load_perception(head, classes).part(section)
+        # A preset's part is checked alone: its pose, camera or frames suit any class table.
+        model = load_perception(head, None if head in PRESETS else classes).part(section)
+        if classes is not None:
+            check_classes(model, classes, model.name)
+        return model
     if isinstance(spec, PerceptionModel):
         model = spec
     elif str(spec) in PRESETS:

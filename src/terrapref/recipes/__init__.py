@@ -244,20 +244,18 @@ def open_pairs(recordings: list[Recording], recipe: Recipe) -> list[tuple[str, s
 def _follow_up(recipe: Recipe, recordings: list[Recording], workdir: Path, setup: RecipeSetup, log: Callable[[str], None] | None) -> list[Recording]:
     """The synthetic driver's drive of the follow-up course of what ``recordings`` left open
     (written as ``workdir/<course>_more.yaml``); none when they identify every pair."""
-    import yaml
-
     from terrapref.fileio import write_text_atomic
-    from terrapref.scenario.teaching import build_course, follow_up
+    from terrapref.scenario.teaching import follow_up_course
 
     pairs = open_pairs(recordings, recipe)
     if not pairs:
         return []
     scenario = resolve_scenario(str(setup.course), setup.classes)
     name = f"{scenario.name}_more"
-    course = build_course(scenario.classes, follow_up(scenario.classes, pairs), name, "Follow-up course: " + "; ".join(f"{a} vs {b}" for a, b in pairs))
+    course = follow_up_course(scenario.classes, pairs, name, scenario.name)
     path = workdir / f"{name}_s{setup.seed}_{'_'.join(c[:2] for c in (setup.profile.order if setup.profile else ()))}.yaml"
     workdir.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(path, yaml.safe_dump(course.data(), sort_keys=False, default_flow_style=None, width=120))
+    write_text_atomic(path, course.to_yaml())
     if log:
         log(f"follow-up course: {len(pairs)} pairs open ({', '.join(f'{a} vs {b}' for a, b in pairs)})")
     return demonstrate(replace(recipe, demonstrations=1), workdir, replace(setup, course=str(path)), log, write=False)

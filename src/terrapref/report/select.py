@@ -32,6 +32,7 @@ from terrapref.progress import every_tenth
 from terrapref.plots import RateRow, save_intervals
 from terrapref.scenario.generate import zone_kind
 from terrapref.terrain import ClassTable, PreferenceProfile, default_classes
+from terrapref.terrain.classes import LETHAL_COLUMN
 
 RANDOM_ORDERS_SEED = 4343  # `--orders random:N` draws its orders with this seed (stated in the report)
 TARGET = 0.95  # agreement the default recipe must keep on clean frames
@@ -124,20 +125,28 @@ def _train(job: _OrderJob) -> list[str]:
     return [str(run_recipe(recipe_named(r), job.workdir, setup).model) for r in job.recipes]
 
 
-def job_folder(out: Path, order: Sequence[str], seed: int, taught_under: PerceptionModel | None = None) -> Path:
+def job_folder(out: Path, order: Sequence[str], seed: int, taught_under: PerceptionModel | None = None, lethal: str | None = "non_traversable") -> Path:
     """The work folder of one order and seed in a selection's ``out``: its demonstrations, and
     each recipe's model in ``<recipe>/model.safetensors`` (drives recorded under a perception
-    model in a folder of their own)."""
+    model in a folder of their own). ``lethal``: the order's lethal column, left out of the name."""
     tail = f"_{perception_tag(taught_under)}" if taught_under is not None and taught_under.active else ""
-    chosen = _chosen(order)
+    chosen = _chosen(order, lethal)
     short = [c[:2] for c in chosen]
     return out / "work" / f"{'_'.join(short if len(set(short)) == len(short) else chosen)}_s{seed}{tail}"
 
 
-def _chosen(order: Sequence[str]) -> Sequence[str]:
-    """An order's classes a driver chooses between: the last (the lethal column, worst for every
-    driver) left out."""
-    return order[:-1] if len(order) > 1 else order
+def _chosen(order: Sequence[str], lethal: str | None = "non_traversable") -> Sequence[str]:
+    """An order's classes a driver chooses between: the lethal column (last, worst for every
+    driver) left out; the default table's ``non_traversable`` unless ``lethal`` names another."""
+    return order[:-1] if order and order[-1] in (lethal, LETHAL_COLUMN) else order
+
+
+def _lethal_of(sel: dict) -> str | None:
+    """The lethal column of the class table select.json's selection names (the default table's when none)."""
+    table = sel.get("classes")
+    if table is None:
+        return "non_traversable"
+    return None if not table["lethal"] else table["lethal"][0] if len(table["lethal"]) == 1 else LETHAL_COLUMN
 
 
 def perception_tag(model: PerceptionModel) -> str:
@@ -147,7 +156,7 @@ def perception_tag(model: PerceptionModel) -> str:
 
 
 def _describe(job: _OrderJob) -> str:
-    return f"recipes {', '.join(job.recipes)}, order {'>'.join(_chosen(job.order))}, seed {job.seed}"
+    return f"recipes {', '.join(job.recipes)}, order {'>'.join(job.order)}, seed {job.seed}"
 
 
 def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None, log: Callable[[str], None] = print) -> Path:
@@ -171,8 +180,8 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
     saved = {"selection": {"recipes": list(sel.recipes), "orders": [list(o) for o in sel.orders], "seeds": sel.seeds, "layouts": layouts,
                            "style": sel.style, "perceptions": [p.to_dict() for p in sel.driven_under],
                            "taught_under": (sel.taught_under or PerceptionModel()).to_dict(),
-                           **({"classes": sel.classes.to_dict(), "course": sel.course} if sel.classes is not None else {}),
-                           **({"follow_up": True} if sel.follow_up else {})},
+                           **({"classes": sel.classes.to_dict()} if sel.classes is not None else {}),
+                           **({"course": sel.course} if sel.course is not None else {}), **({"follow_up": True} if sel.follow_up else {})},
              "engine": engine.describe(), "zones": rows, "runs": runs, "train_s": round(t_train, 1), "eval_s": round(t_eval, 1)}
     write_text_atomic(out / "select.json", json.dumps(saved, indent=0))
     path = write_selection_report(out, saved)
@@ -183,7 +192,7 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
 def _train_all(out: Path, sel: Selection, engine: Engine, log: Callable[[str], None]) -> dict[str, _Model]:
     """Every recipe for every order and seed; model file -> the model, in the order trained."""
     # One job per order and seed: its recipes share the demonstrations recorded in its work folder.
-    jobs = [_OrderJob(tuple(sel.recipes), tuple(o), s, sel.style, str(job_folder(out, o, s, sel.taught_under)), sel.taught_under, sel.classes,
+    jobs = [_OrderJob(tuple(sel.recipes), tuple(o), s, sel.style, str(job_folder(out, o, s, sel.taught_under, (sel.classes or default_classes()).lethal_column)), sel.taught_under, sel.classes,
                       sel.course, sel.follow_up) for o in sel.orders for s in range(sel.seeds)]
     log(f"[1/2] demonstrations and training: {len(jobs) * len(sel.recipes)} models ({len(sel.recipes)} recipes x {len(sel.orders)} orders "
         f"x {sel.seeds} seeds) on {engine.describe()} ...")
@@ -252,13 +261,15 @@ def write_selection_report(out: Path, saved: dict) -> Path:
              "alike across seeds), the spread another set of layouts would show.", "",
              f"The demonstrations recorded: {_perception_line(sel.get('taught_under'))}. The models drive the layouts receiving "
              + ", then ".join(f"`{name}`" for name in seen) + " (terrapref.perception); the driver always sees the truth.", ""]
+    lethal = _lethal_of(sel)
     if "classes" in sel:
         table = sel["classes"]
         lines += [f"Class table: background {table['background']}; feature classes "
                   f"{', '.join(c['name'] for c in table['classes'] if c['name'] != table['background'] and c['name'] not in table['lethal'])}; "
-                  f"lethal {', '.join(table['lethal']) or 'none'}. Every recipe demonstrated `{Path(sel['course']).name}`"
-                  f"{', then a follow-up course of the pairs its drive left open' if sel.get('follow_up') else ''}. Orders: "
-                  + "; ".join(" > ".join(_chosen(o)) for o in sel["orders"]) + ".", ""]
+                  f"lethal {', '.join(table['lethal']) or 'none'}. Orders: " + "; ".join(" > ".join(_chosen(o, lethal)) for o in sel["orders"]) + ".", ""]
+    if "course" in sel or sel.get("follow_up"):
+        course = f"`{Path(sel['course']).name}`" if "course" in sel else "its own course"
+        lines += [f"Every recipe demonstrated {course}{', then a follow-up course of the pairs its drive left open' if sel.get('follow_up') else ''}.", ""]
     points: list[RateRow] = []
     targets: list[float] = []
     for name in seen:
@@ -306,7 +317,7 @@ def _selection_table(sel: dict, rows: list[dict], runs: list[dict],
             lines.append(f"| {recipe} | {name} | {_rate(sub, 'agrees')} | {rate:.1%} (95% CI {lo:.1%}-{hi:.1%}) | " + " | ".join(_rate([r for r in sub if r["kind"] == k], "agrees") for k in kinds)
                          + f" | {_rate(sub, 'success')} | {_rate(sub, 'driver_success')} | {coll} | {seeds} |")
             if order is None or (order_bars and len(sel["recipes"]) == 1):
-                bars.append((f"{recipe}, all orders" if order is None else " > ".join(_chosen(order)), rate, (lo, hi)))
+                bars.append((f"{recipe}, all orders" if order is None else " > ".join(_chosen(order, _lethal_of(sel))), rate, (lo, hi)))
     misses: dict[tuple, int] = {}
     for r in rows:
         if not r["agrees"]:

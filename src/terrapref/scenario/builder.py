@@ -11,6 +11,7 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+import yaml
 
 from terrapref.scenario.loader import FORMAT
 
@@ -39,15 +40,19 @@ class CourseBuilder:
         return [[round(float(p[0] + a * c - l * sn), 3), round(float(p[1] + a * sn + l * c), 3)] for a, l in pts]
 
     def rect(self, cls: str, s: float, lat: float, length: float, width: float, yaw_deg: float = 0.0) -> None:
+        """A rectangle of class ``cls``, ``length`` x ``width`` [m], centred at arc length ``s`` and
+        ``lat`` [m] left of the path, turned ``yaw_deg`` [deg] from the path's heading there."""
         (cx, cy), = self.to_world(s, [(0.0, lat)])
         h = math.degrees(self.frame(s)[1])
         self.terrain.append({"class": cls, "rectangle": {"center": [cx, cy], "size": [length, width], "yaw_deg": round(h + yaw_deg, 3)}})
 
     def circle(self, cls: str, s: float, lat: float, radius: float) -> None:
+        """A disc of class ``cls`` and ``radius`` [m] centred at arc length ``s``, ``lat`` [m] left of the path."""
         (cx, cy), = self.to_world(s, [(0.0, lat)])
         self.terrain.append({"class": cls, "circle": {"center": [cx, cy], "radius": radius}})
 
     def polygon(self, cls: str, s: float, pts: Sequence[tuple[float, float]]) -> None:
+        """A polygon of class ``cls`` through the (along, left) points ``pts`` [m] round arc length ``s``."""
         self.terrain.append({"class": cls, "polygon": self.to_world(s, pts)})
 
     def zone(self, zid: str, label: str, s: float, size: tuple[float, float], expect: str) -> None:
@@ -74,6 +79,10 @@ class CourseBuilder:
             "path": {"waypoints": [[round(float(x), 3), round(float(y), 3)] for x, y in self.wp]},
             "zones": self.zones,
         }
+
+    def to_yaml(self) -> str:
+        """The course as the text of a ``terrapref-scenario/1`` file."""
+        return yaml.safe_dump(self.data(), sort_keys=False, default_flow_style=None, width=120)
 
 
 def trail(legs: Sequence[float], turns_deg: Sequence[float], margin_m: float = 12.0) -> tuple[np.ndarray, tuple[float, float]]:

@@ -101,8 +101,7 @@ def situations(classes: ClassTable, full: bool | None = None) -> list[Situation]
     terrain, lethal = list(classes.terrain_names), list(classes.lethal)
     if not terrain:
         raise ValueError("the class table has no feature class (neither background nor lethal) to teach")
-    if full is None:
-        full = course_length(situations(classes, True)) <= BUDGET_M
+    full = fits(classes) if full is None else full
     pairs = balanced_pairs(terrain)
     if full:
         pairs += [(b, a) for a, b in pairs]
@@ -121,6 +120,18 @@ def situations(classes: ClassTable, full: bool | None = None) -> list[Situation]
         sides = (1, -1) if full else ((1, -1)[k % 2],)
         lone += [Situation("lone", (name,), side * LONE_OFFSET_M) for side in sides]
     return _interleave([[Situation("pair", p) for p in pairs], strips, lone])
+
+
+def fits(classes: ClassTable) -> bool:
+    """Whether the full design of ``classes``' course stays within :data:`BUDGET_M`."""
+    return course_length(situations(classes, True)) <= BUDGET_M
+
+
+def follow_up_course(classes: ClassTable, open_pairs: Sequence[tuple[str, str]], name: str, driven: str) -> CourseBuilder:
+    """The follow-up course of ``open_pairs``, which a drive of the course ``driven`` left open."""
+    listed = "; ".join(f"{a} vs {b}" for a, b in open_pairs)
+    return build_course(classes, follow_up(classes, open_pairs), name,
+                        f"Follow-up course: the pairs the drive of {driven} left open ({listed}), each both ways round.")
 
 
 def follow_up(classes: ClassTable, open_pairs: Sequence[tuple[str, str]]) -> list[Situation]:
@@ -192,7 +203,8 @@ def build_course(classes: ClassTable, items: Sequence[Situation], name: str, des
             c.rect(left, s, STRIP_M / 2 + 2.25, 7.0, 4.5)
             c.rect(middle, s, 0.0, 7.0, STRIP_M)
             c.rect(right, s, -STRIP_M / 2 - 2.25, 7.0, 4.5)
-            c.zone(zid, item.label, s, (11.0, 17.0), "best")
+            # Beside the background, leaving the strip for it is every driver's choice.
+            c.zone(zid, item.label, s, (11.0, 17.0), "avoid" if classes.background in item.classes else "best")
         s += HALF_M[item.kind]
     return c
 
@@ -211,12 +223,14 @@ def _lone(c: CourseBuilder, name: str, index: int, s: float, lat: float) -> None
 
 def teaching_course(classes: ClassTable, name: str = "teaching_course", full: bool | None = None) -> CourseBuilder:
     """The teaching course of ``classes`` (see the module docstring)."""
-    if full is None:
-        full = course_length(situations(classes, True)) <= BUDGET_M
-    items = situations(classes, full)
+    full = fits(classes) if full is None else full
+    return build_course(classes, situations(classes, full), name, description(classes, full))
+
+
+def description(classes: ClassTable, full: bool) -> str:
+    """What the teaching course of ``classes`` shows, in the full or the compact design."""
     n = len(classes.terrain_names)
     design = ("no pairs (one feature class)" if n < 2 else "every pair once on each side" if full
               else "every pair once, each class left as often as right")
-    description = (f"Teaching course for {n} feature class{'es' if n != 1 else ''} ({', '.join(classes.terrain_names)}): {design}; "
-                   f"every class as a strip on the path between lethal terrain and another class; every class alone on the path.")
-    return build_course(classes, items, name, description)
+    return (f"Teaching course for {n} feature class{'es' if n != 1 else ''} ({', '.join(classes.terrain_names)}): {design}; "
+            f"every class as a strip on the path between lethal terrain and another class; every class alone on the path.")

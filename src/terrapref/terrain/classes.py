@@ -55,6 +55,8 @@ class ClassTable:
         for name in (self.background, *self.lethal):
             if name not in names:
                 raise ValueError(f"unknown class {name!r}")
+        if len(names) < 2:
+            raise ValueError("a table needs a class besides the background")
         if self.background in self.lethal:
             raise ValueError(f"the background class {self.background!r} cannot be lethal")
         if len(self.lethal) > 1 and LETHAL_COLUMN in names:
@@ -113,7 +115,13 @@ class ClassTable:
 
     def column_of(self, name: str) -> str:
         """The terrain column a class falls into (lethal classes share one)."""
-        return self.lethal_column if name in self.lethal else name
+        return LETHAL_COLUMN if len(self.lethal) > 1 and name in self.lethal else name
+
+    def same_classes(self, other: ClassTable) -> bool:
+        """Whether ``other`` means the same by every id: the same classes (ids and names), background
+        and lethal classes; colours and the default profile may differ."""
+        return ((tuple((c.id, c.name) for c in self.classes), self.background, frozenset(self.lethal))
+                == (tuple((c.id, c.name) for c in other.classes), other.background, frozenset(other.lethal)))
 
     def palette(self) -> np.ndarray:
         """RGB lookup table, shape (256, 3) uint8; unknown (255) and unused ids are near-black/sky."""
