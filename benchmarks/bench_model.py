@@ -1,0 +1,60 @@
+"""Decision time of a model file in closed loop: the planner drives a course, and each decision is timed.
+
+For models of any class table (``--classes FILE`` reads the course with that table), beside the
+reference the other benchmarks use, measured in the same run:
+
+    OMP_NUM_THREADS=1 taskset -c 0 .venv/bin/python benchmarks/bench_model.py me.safetensors gen:2000 \\
+        --classes examples/classes/rellis3d.yaml
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from reference import reference_ms  # benchmarks/reference.py (the script's folder is on sys.path)
+from terrapref.learning.model_file import load_model
+from terrapref.planner import Planner, PlannerDriver
+from terrapref.scenario import resolve_scenario
+from terrapref.sim import Simulation, run_episode
+from terrapref.terrain import load_classes
+
+
+def decision_times(model_path: str, scenario: str, classes_file: str | None) -> np.ndarray:
+    """Every decision's wall time [s] of one closed-loop run (seed 0) of the model on the course."""
+    model = load_model(model_path)
+    sim = Simulation(resolve_scenario(scenario, load_classes(classes_file) if classes_file else None))
+    driver = PlannerDriver(Planner(model))
+    times: list[float] = []
+    act = driver.act
+
+    def timed(frame):
+        t0 = time.perf_counter()
+        command = act(frame)
+        times.append(time.perf_counter() - t0)
+        return command
+
+    driver.act = timed
+    run_episode(sim, driver, np.random.default_rng(0))
+    return np.array(times)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("model")
+    parser.add_argument("scenario")
+    parser.add_argument("--classes", help="the class table the course is read with (a terrapref-classes/1 file)")
+    args = parser.parse_args()
+    decision_times(args.model, args.scenario, args.classes)  # compiled loops and caches warmed
+    t = decision_times(args.model, args.scenario, args.classes)
+    ref = reference_ms()
+    columns = len(load_model(args.model).features.feature_classes)
+    print(f"reference: naive NumPy render (reference.py)  {ref:.2f} ms")
+    print(f"decision of {args.model} ({columns} terrain columns) on {args.scenario}: median {np.median(t) * 1e6:.1f} us, "
+          f"p90 {np.percentile(t, 90) * 1e6:.1f} us over {len(t)} decisions; median / reference {np.median(t) * 1e3 / ref:.4f}")
+
+
+if __name__ == "__main__":
+    main()
