@@ -15,7 +15,7 @@ lethal terrain once on each side and each class alone twice (once a little left 
 once a little right) while that drive stays within :data:`BUDGET_M` (10 minutes at the driver's
 1 m/s: up to 4 feature classes). Beyond it the course is *compact*: each pair once, with every
 class on the left as often as on the right (to within one), each strip and each lone patch
-once, the sides alternating. Six feature classes then drive about 8 minutes; ten about 17.
+once, the sides alternating. Six feature classes then drive about 8 minutes; ten about 18.
 
 Situations sit on straight legs; the trail bends a little between them (keeping to the path is
 part of the lesson) and turns round every :data:`LANE` situations, so that a long course folds
@@ -141,7 +141,7 @@ def follow_up(classes: ClassTable, open_pairs: Sequence[tuple[str, str]]) -> lis
     for a, b in open_pairs:
         if classes.background in (a, b):
             name = b if a == classes.background else a
-            out += [Situation("lone", (classes.lethal[0] if name == classes.lethal_column else name,), side * LONE_OFFSET_M) for side in (1, -1)]
+            out += [Situation("lone", (_concrete(classes, name),), side * LONE_OFFSET_M) for side in (1, -1)]
         else:
             a, b = (_concrete(classes, n) for n in (a, b))
             out += [Situation("pair", (a, b)), Situation("pair", (b, a))]
