@@ -541,3 +541,19 @@ def test_a_presets_pose_camera_and_frames_suit_any_table(example):
         load_perception("field", example)  # its label errors name the default table's classes
     with pytest.raises(UserError):
         load_perception("field:labels", example)
+
+
+def test_a_recording_whose_meta_names_no_class_table_is_one_line(fig7_recording, tmp_path, capsys):
+    import json
+    import shutil
+
+    rec = tmp_path / "rec"
+    shutil.copytree(fig7_recording, rec)
+    meta = json.loads((rec / "meta.json").read_text())
+    del meta["classes"]
+    (rec / "meta.json").write_text(json.dumps(meta))
+    for argv in (["inspect", str(rec), "--no-preference", "--out", str(tmp_path / "p.png")],
+                 ["inspect", str(rec), "--classes", str(EXAMPLE), "--no-preference", "--out", str(tmp_path / "p.png")],
+                 ["export", str(rec), "--format", "mcap", "--out", str(tmp_path / "r.mcap")]):
+        assert main(argv) == 2
+        _one_error(capsys, f"{rec / 'meta.json'}: classes: missing")

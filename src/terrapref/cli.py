@@ -111,7 +111,7 @@ def _cmd_course(args: argparse.Namespace) -> int:
         from terrapref.demos.recording import read_recording
 
         rec = read_recording(args.after)
-        found = _recording_table(rec)
+        found = rec.classes
         if table is not None:
             _check_table(args, found, args.after)
         table = found
@@ -274,7 +274,7 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
         _check_output(args.out, "--out", [args.recording])
     rec = read_recording(args.recording)
     if getattr(args, "classes", None) is not None:
-        _check_table(args, _recording_table(rec), args.recording)
+        _check_table(args, rec.classes, args.recording)
     summary = summarise(rec)
     for line in summary.lines():
         print(line)
@@ -318,7 +318,7 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
     recordings = [read_recording(p) for p in args.recordings]
     for r in recordings:
         if args.classes is not None:
-            _check_table(args, _recording_table(r), r.path)
+            _check_table(args, r.classes, r.path)
         if not r.complete:
             print(f"warning: {r.path} is partial; using its {len(r)} frames", file=sys.stderr)
     from terrapref.recipes import DEFAULT_RECIPE, recipe_named
@@ -450,12 +450,6 @@ def _check_table(args: argparse.Namespace, found, source: str | Path) -> None:
                         field="classes")
 
 
-def _recording_table(rec):
-    from terrapref.terrain import ClassTable
-
-    return ClassTable.from_dict(rec.meta["classes"], str(rec.path / "meta.json"))
-
-
 def _special_file(path: Path) -> str | None:
     """What ``path`` is when it exists and is neither a regular file nor a folder (links followed):
     writing over it would replace a device node or block on a pipe."""
@@ -549,7 +543,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         from terrapref.demos.recording import read_recording
 
         for path in (p for p in args.data if p.is_dir()):
-            _check_table(args, _recording_table(read_recording(path)), path)
+            _check_table(args, read_recording(path).classes, path)
     data = _training_data(args, recipe)
     if args.classes is not None:
         from terrapref.terrain import ClassTable
@@ -818,7 +812,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
         rec = read_recording(args.input)
         if args.classes is not None:
-            _check_table(args, _recording_table(rec), args.input)
+            _check_table(args, rec.classes, args.input)
         if len(rec) == 0:
             raise UserError(args.input, "holds no frames", field="frames.jsonl")
         frames = recording_frames(rec)

@@ -113,7 +113,7 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
             the recording's scenario at its recorded pose.
     """
     require_meta(recording, "classes", "camera")
-    classes = ClassTable.from_dict(recording.meta["classes"], str(recording.path / "meta.json"))
+    classes = recording.classes
     rec_camera = CameraConfig.from_dict(recording.meta["camera"])
     camera = camera or rec_camera
     scenario = parse_scenario(recording.scenario, str(recording.path / "scenario.yaml"), classes)
@@ -235,7 +235,8 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
             if rec.meta.get(key) != first.meta.get(key):
                 raise UserError(str(rec.path / "meta.json"), f"differs from {first.path} in {key}; featurise them separately", field=key)
     # The terrain columns are the recordings' class table's.
-    features = replace(features, feature_classes=ClassTable.from_dict(first.meta["classes"], str(first.path / "meta.json")).feature_names)
+    require_meta(first, "classes")
+    features = replace(features, feature_classes=first.classes.feature_names)
     parts = []
     for k, rec in enumerate(recordings):
         parts.append(featurize_recording(rec, features, camera))

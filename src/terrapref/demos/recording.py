@@ -37,6 +37,7 @@ from terrapref.pngio import read_label_png, write_png_atomic
 from terrapref.yamlio import load_yaml_text
 
 if TYPE_CHECKING:
+    from terrapref.terrain import ClassTable
     from terrapref.demos.meta import RecordingMeta
 
 FORMAT = "terrapref-recording/1"
@@ -263,6 +264,15 @@ class Recording:
         from terrapref.demos.meta import RecordingMeta
 
         return RecordingMeta.from_dict(self.meta, str(self.path / META))
+
+    @property
+    def classes(self) -> ClassTable:
+        """The class table of the frames' ids (checked when the recording was read); a recording
+        whose meta.json names none is refused, naming the field."""
+        table = self.header.classes
+        if table is None:
+            raise UserError(str(self.path / META), "missing; the class table of the frames' ids is needed here", field="classes")
+        return table
 
     @property
     def perception(self) -> str:

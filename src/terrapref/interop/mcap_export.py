@@ -310,7 +310,7 @@ def recording_frames(rec) -> RunFrames:
     """A recording (terrapref.demos.recording.Recording) as the frames of one MCAP file."""
     from terrapref.features import PreferenceSetConfig
 
-    classes = ClassTable.from_dict(rec.meta["classes"], str(rec.path / "meta.json"))
+    classes = rec.classes
     path = np.asarray(rec.meta.get("path") or rec.scenario["path"]["waypoints"], dtype=float)
     return RunFrames(times=rec.times, poses=rec.poses, commands=rec.commands, image=rec.image, chosen=rec.labels, path=path,
                      camera=CameraConfig.from_dict(rec.meta["camera"]), classes=classes,

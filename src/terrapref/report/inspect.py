@@ -10,7 +10,7 @@ import numpy as np
 from terrapref.demos.recording import Recording
 from terrapref.evaluation.scoring import ZoneResult, score_zones
 from terrapref.scenario import Scenario, parse_scenario
-from terrapref.terrain import ClassTable, PreferenceProfile
+from terrapref.terrain import PreferenceProfile
 from terrapref.vehicle import ControlSet
 from terrapref.world import WorldMap, rasterise
 
@@ -57,7 +57,7 @@ class RecordingSummary:
 def summarise(recording: Recording) -> RecordingSummary:
     """Label histogram and zone choices (SPEC 12) of a recording, under its own profile."""
     meta = recording.meta
-    classes = ClassTable.from_dict(meta["classes"], str(recording.path / "meta.json"))
+    classes = recording.classes
     scenario = parse_scenario(recording.scenario, str(recording.path / "scenario.yaml"), classes)
     world = rasterise(scenario)
     profile = PreferenceProfile.parse(meta.get("profile") or list(classes.profile), classes, source=str(recording.path / "meta.json"))
