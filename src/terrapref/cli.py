@@ -430,12 +430,14 @@ def _check_distinct(inputs: Sequence[str | Path], what: str) -> None:
 
 
 def _class_table(args: argparse.Namespace):
-    """The class table ``--classes FILE`` gives, or None (the packaged default)."""
+    """The class table ``--classes FILE`` gives (read once per command), or None (the packaged default)."""
     if getattr(args, "classes", None) is None:
         return None
-    from terrapref.terrain import load_classes
+    if not hasattr(args, "class_table"):
+        from terrapref.terrain import load_classes
 
-    return load_classes(args.classes)
+        args.class_table = load_classes(args.classes)
+    return args.class_table
 
 
 def _check_table(args: argparse.Namespace, found, source: str | Path) -> None:
@@ -761,8 +763,7 @@ def _cmd_route(args: argparse.Namespace) -> int:
         raise UserError("--resolution", f"expected a cell size in [0.1, 2] m, got {args.resolution}")
     scenario = resolve_scenario(args.scenario, _class_table(args))
     model = load_model(args.model)
-    if not model.classes.same_classes(scenario.classes):
-        raise UserError(args.model, f"was trained for another class table than {args.scenario}'s", field="classes")
+    _check_table(args, model.classes, args.model)  # the table the scenario was read with
     world = rasterise(scenario)
     try:
         route = route_over(scenario, model, RouteConfig(resolution_m=args.resolution), world)

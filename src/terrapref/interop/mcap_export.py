@@ -298,7 +298,7 @@ def model_costmaps(model, frames: RunFrames) -> Callable[[int, np.ndarray], Cost
     """
     from terrapref.planner import Planner
 
-    if model.classes != frames.classes:
+    if not model.classes.same_classes(frames.classes):
         raise ValueError("was trained for another class table than the recording's")
     stage = Planner(model, frames.camera).runner
     if not stage.keeps_ground_map:

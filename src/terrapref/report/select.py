@@ -143,10 +143,7 @@ def _chosen(order: Sequence[str], lethal: str | None = "non_traversable") -> Seq
 
 def _lethal_of(sel: dict) -> str | None:
     """The lethal column of the class table select.json's selection names (the default table's when none)."""
-    table = sel.get("classes")
-    if table is None:
-        return "non_traversable"
-    return None if not table["lethal"] else table["lethal"][0] if len(table["lethal"]) == 1 else LETHAL_COLUMN
+    return (ClassTable.from_dict(sel["classes"], "select.json") if "classes" in sel else default_classes()).lethal_column
 
 
 def perception_tag(model: PerceptionModel) -> str:
