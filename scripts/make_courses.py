@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from terrapref.scenario.builder import CourseBuilder
+from terrapref.scenario.builder import CourseBuilder, trail
 
 OUT = Path(__file__).resolve().parent.parent / "src" / "terrapref" / "data" / "scenarios"
 
@@ -132,20 +132,7 @@ def teach_course(zones: list[tuple] | None = None, turns: list[float] | None = N
     half = half or {"lone": 6.0, "pair": 8.5, "triple": 8.5}  # half a leg [m]
     s_end = 5.0
     lengths = [2 * half[_kind(z)] for z in zones]
-    heading, point = 0.0, np.array([0.0, 0.0])
-    bends = [s_start + lengths[0]]  # the middle of each gap between situations
-    for length in lengths[1:]:
-        bends.append(bends[-1] + length)
-    points, s_prev = [point], 0.0
-    for k, s_bend in enumerate(bends[:-1]):
-        point = point + (s_bend - s_prev) * np.array([math.cos(heading), math.sin(heading)])
-        points.append(point)
-        heading += math.radians(turns[k])
-        s_prev = s_bend
-    points.append(point + (bends[-1] + s_end - s_prev) * np.array([math.cos(heading), math.sin(heading)]))
-    wp = np.array(points)
-    wp = wp - wp.min(axis=0) + 12.0
-    size = tuple(float(math.ceil(v + 12.0)) for v in wp.max(axis=0))
+    wp, size = trail([s_start + lengths[0], *lengths[1:-1], lengths[-1] + s_end], turns)
     c = Course(name, "The demonstration course: every pair of terrain classes side by side, each class once on each "
                "side, every class as a strip on the path between trees and another class, and every class alone on "
                "the path twice; one drive identifies any preference order.",
