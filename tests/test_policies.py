@@ -20,7 +20,6 @@ from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
 from terrapref.planner.registry import load_policy
 from terrapref.planner import Planner
 from terrapref.planner.policy import (
-    HAND_COSTS,
     HAND_DISTANCE_WEIGHT,
     ClassifierPolicy,
     CostPolicy,
@@ -28,6 +27,7 @@ from terrapref.planner.policy import (
     Observation,
     Policy,
     PurePursuitPolicy,
+    hand_costs,
     save_linear,
 )
 from terrapref.scenario import resolve_scenario
@@ -113,7 +113,9 @@ def test_linear_policy_refuses_wrong_shapes():
 def test_cost_policy_weights_follow_the_feature_columns():
     features = FeatureConfig()
     policy = CostPolicy()
-    expected = [-HAND_COSTS[name] for name in features.feature_classes] + [HAND_DISTANCE_WEIGHT]
+    costs = {"mud": 2.0, "rock": 4.0, "water": 8.0, "non_traversable": 50.0}  # the default profile's, by rank
+    assert hand_costs() == costs
+    expected = [-costs[name] for name in features.feature_classes] + [HAND_DISTANCE_WEIGHT]
     np.testing.assert_array_equal(policy.utility.w, expected)
     np.testing.assert_array_equal(policy.utility.b, np.zeros(M))
     # Custom costs: missing classes cost nothing, the distance weight comes last.
@@ -129,6 +131,17 @@ def test_cost_policy_weights_follow_the_feature_columns():
     logits = policy.logits(_obs(U))
     assert logits[4] > logits[3]
     assert logits[0] > logits[4]
+
+
+def test_hand_costs_of_another_table_follow_its_profile():
+    from terrapref.terrain import load_classes
+
+    table = load_classes("examples/classes/rellis3d.yaml")  # profile dirt > gravel > puddle > mud > bush > water > lethal
+    assert hand_costs(table) == {"dirt": 2.0, "gravel": 4.0, "puddle": 8.0, "mud": 16.0, "bush": 32.0, "water": 64.0, "lethal": 128.0}
+    policy = CostPolicy(classes=table)
+    assert policy.features.feature_classes == table.feature_names
+    w = dict(zip(policy.features.column_names, policy.utility.w))
+    assert w["water"] == -64.0 and w["lethal"] == -128.0 and w["distance"] == HAND_DISTANCE_WEIGHT
 
 
 def test_cost_policy_rejects_an_unknown_class():

@@ -18,7 +18,7 @@ from terrapref.evaluation.scoring import RunMetrics, ZoneResult
 from terrapref.grid import Engine
 from terrapref.report.study import LEARNED, PARTS, run_study, swept
 from terrapref.report.study_plan import FULL, QUICK, TEACH_ORDERS, StudyPlan, TrainedModel, TrainJob
-from terrapref.report.study_report import (ALL, ALT_PROFILE, METHOD_NAMES, ModelVariant, RunTag, StudyRun, _cell, _per_seed, _rate, _select,
+from terrapref.report.study_report import (ALL, METHOD_NAMES, ModelVariant, RunTag, StudyRun, _cell, _per_seed, _rate, _select,
                                            _zone_success, disagreement_zones, write_study)
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -274,7 +274,7 @@ def test_write_study_data_efficiency_rows(fabricated_study):
 
 def test_write_study_profile_disagreement(fabricated_study):
     text = fabricated_study[0].read_text()
-    assert " > ".join(ALT_PROFILE) in text
+    assert " > ".join(FULL.alt) in text
     assert "The zones where the two profiles expect different choices (1: sc 2)" in text
     assert "| C trained on the other profile, scored under the other profile | 100.0% (2/2, 95% CI 34.2%-100.0%) |" in text
     assert "| C trained on the default profile, scored under the other profile | 0.0% (0/2, 95% CI 0.0%-65.8%) |" in text
@@ -429,16 +429,17 @@ def test_study_runs_agree_with_each_other(tiny_study):
 
 
 @pytest.mark.slow
-def test_study_logs_four_stages_in_order(tiny_study):
+def test_study_logs_five_stages_in_order(tiny_study):
     _, lines = tiny_study
-    stages = [next(i for i, line in enumerate(lines) if line.startswith(f"[{k}/4]")) for k in range(1, 5)]
+    stages = [next(i for i, line in enumerate(lines) if line.startswith(f"[{k}/5]")) for k in range(1, 6)]
     assert stages == sorted(stages)
-    assert sum(line.startswith("[") for line in lines) == 4
-    assert lines[stages[0]].startswith("[1/4] demonstrations and featurisation: 1 seed(s) x 2 profiles")
+    assert sum(line.startswith("[") for line in lines) == 5  # the sweep's one level
+    assert lines[stages[0]].startswith("[1/5] demonstrations and featurisation: 1 seed(s) x 2 profile(s) x 2 runs of train_course")
     # 3 learned + 3 at 0.5 min + profile + 3 ablations, and the one drive of the teaching recipe
-    assert lines[stages[1]].startswith("[2/4] training and teaching: 10 models, and 1 drives of teach_course")
+    assert lines[stages[1]].startswith("[2/5] training and teaching: 10 models, and 1 drives of teach_course")
     # 17 as before, and the taught model and its driver on the one layout
-    assert lines[stages[2]] == "[3/4] closed-loop evaluation: 19 runs over 2 scenarios ..."
+    assert lines[stages[2]] == "[3/5] closed-loop evaluation: 19 runs over 2 scenarios ..."
+    assert lines[stages[3]].startswith("[4/5] robustness sweep at 1 x field's")
 
 
 # --- the command --------------------------------------------------------------------------------------

@@ -922,7 +922,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
 
     from terrapref.extras import check
     from terrapref.report.study import run_study
-    from terrapref.report.study_plan import FULL, QUICK
+    from terrapref.report.study_plan import FULL, QUICK, for_table
 
     check("cnn", "terrapref study (its end-to-end CNN baseline)")  # before the stages that come before the CNN's
     plan = QUICK if args.quick else FULL
@@ -936,6 +936,19 @@ def _cmd_study(args: argparse.Namespace) -> int:
         from terrapref.recipes import recipe_named
 
         plan = replace(plan, recipe=recipe_named(args.recipe).name)
+    table = _class_table(args)
+    perceptions = None
+    if args.perception is not None:
+        perceptions = tuple(_perception(n, classes=table) for n in (x.strip() for x in args.perception.split(",")) if n)
+        if len({p.name for p in perceptions}) != len(perceptions):
+            raise UserError("--perception", f"names a perception model twice: {args.perception!r}")
+    if table is not None:
+        plan = for_table(plan, table, perceptions=perceptions or (), follow_up=args.follow_up)
+    else:
+        plan = replace(plan, follow_up=args.follow_up)
+        if perceptions is not None:
+            active = [p for p in perceptions if p.active]
+            plan = replace(plan, presets=("clean", *active), sweep_base=active[-1] if active else None)
     t0 = time.perf_counter()
     path = run_study(args.out, plan, engine, log=lambda m: print(m, flush=True))
     print(f"wrote {path} ({time.perf_counter() - t0:.0f} s)")
@@ -1247,6 +1260,12 @@ def _study_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quick", action="store_true", help="one seed and fewer levels (about a minute on 2 cores)")
     p.add_argument("--seeds", type=int, help="training seeds (default: 3, or 1 with --quick)")
     p.add_argument("--recipe", metavar="NAME", help="the recipe section 6 teaches every order and style with (default: teach)")
+    _add_classes_arg(p)
+    p.add_argument("--perception", metavar="LIST",
+                   help="comma-separated perception presets or files the taught models also drive under; the last is swept part by part "
+                        "(default: clean,rellis,field, or clean,field with --quick; with --classes: clean, unless files for the table are given)")
+    p.add_argument("--follow-up", action="store_true",
+                   help="each teaching drive is followed by a drive of the course of what it left open, and the model learns from both")
     _add_engine_args(p)
     p.set_defaults(func=_cmd_study)
 

@@ -198,9 +198,10 @@ def _model_file(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: Pre
 
 
 def _baseline(kind: str) -> DriverFactory:
-    """The planner with a registered policy that needs no file (terrapref.planner.registry)."""
+    """The planner with a registered policy that needs no file (terrapref.planner.registry), for
+    the scenario's class table."""
     def factory(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: PreferenceProfile) -> tuple[Simulation, Driver]:
-        return _through_planner(make_policy(kind), spec, scenario, world)
+        return _through_planner(make_policy(kind, classes=scenario.classes), spec, scenario, world)
 
     return factory
 

@@ -87,9 +87,9 @@ class Policy(abc.ABC):
 
     def __init__(self, features: FeatureConfig | None = None, camera: CameraConfig | None = None, classes: ClassTable | None = None,
                  profile: tuple[str, ...] | None = None, path: str = "") -> None:
-        self.features = features or FeatureConfig()
-        self.camera = camera or CameraConfig()
         self.classes = classes or default_classes()
+        self.features = features or FeatureConfig(feature_classes=self.classes.feature_names)
+        self.camera = camera or CameraConfig()
         self.profile, self.path = profile, path
         self.stages: tuple[Stage, ...] = ()
 
@@ -139,22 +139,36 @@ class LinearPolicy(Policy):
         return obs.U @ self.utility.w + self.utility.b
 
 
-# Hand-set costs of the classic approach: a cost per metre-share on each class, tuned by
-# hand for the default profile (mud < rock < water << non_traversable) against a pull back to
-# the path. The numbers are the result of a few minutes of trial on train_course only.
-HAND_COSTS = {"mud": 2.0, "rock": 4.0, "water": 8.0, "non_traversable": 50.0}
+# Hand-set costs of the classic approach: a cost per metre-share on each class against a pull
+# back to the path. For the default profile (mud < rock < water << non_traversable) they are
+# mud 2, rock 4, water 8, non_traversable 50, the result of a few minutes of trial on
+# train_course only; another table's classes cost the same by rank in its default profile.
+HAND_BASE_COST = 2.0  # the most preferred class's; each next class in the profile costs twice the one before
+HAND_LETHAL_COST = 50.0  # the lethal column's, or twice the costliest class's where that is more
 HAND_DISTANCE_WEIGHT = 2.0
 
 
+def hand_costs(classes: ClassTable | None = None) -> dict[str, float]:
+    """The hand-tuned cost of each terrain column of ``classes`` (default: the packaged table):
+    by rank in the table's default profile, doubling from HAND_BASE_COST; the lethal column
+    HAND_LETHAL_COST, or twice the costliest class's where that is more."""
+    classes = classes or default_classes()
+    ranked = [name for name in classes.profile if name != classes.lethal_column]
+    costs = {name: HAND_BASE_COST * 2.0**rank for rank, name in enumerate(ranked)}
+    lethal = max(HAND_LETHAL_COST, 2.0 * max(costs.values(), default=0.0))
+    return costs | ({classes.lethal_column: lethal} if classes.lethal_column else {})
+
+
 class CostPolicy(LinearPolicy):
-    """The hand-tuned cost planner: -sum_k cost_k u^k + weight * u^5 (HAND_COSTS by default)."""
+    """The hand-tuned cost planner: -sum_k cost_k u^k + weight * u^(K+1) (:func:`hand_costs` of the table by default)."""
 
     name = "hand_cost"
 
     def __init__(self, costs: dict[str, float] | None = None, distance_weight: float = HAND_DISTANCE_WEIGHT,
                  features: FeatureConfig | None = None, camera: CameraConfig | None = None, classes: ClassTable | None = None) -> None:
-        features = features or FeatureConfig()
-        costs = dict(HAND_COSTS if costs is None else costs)
+        classes = classes or default_classes()
+        features = features or FeatureConfig(feature_classes=classes.feature_names)
+        costs = dict(hand_costs(classes) if costs is None else costs)
         unknown = set(costs) - set(features.feature_classes)
         if unknown:
             raise ValueError(f"no feature column for {sorted(unknown)}")

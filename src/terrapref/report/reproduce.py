@@ -30,7 +30,7 @@ from terrapref.perception import PerceptionModel
 from terrapref.recipes import OURS, PAPER, TEACH, Recipe, RecipeSetup, run_recipe
 from terrapref.progress import every_tenth
 from terrapref.scenario import packaged_scenarios, resolve_scenario
-from terrapref.terrain import PreferenceProfile
+from terrapref.terrain import ClassTable, PreferenceProfile
 
 if TYPE_CHECKING:
     from terrapref.learning.train import EpochMetrics
@@ -172,9 +172,9 @@ def _recipe_run(result: RunResult, spec: RunSpec, trained: list[RecipeModel]) ->
 
 
 @functools.lru_cache(maxsize=64)
-def scenario_length(scenario: str) -> float:
-    """Length of a scenario's reference path [m] (to start the longest runs first)."""
-    return resolve_scenario(scenario).path_length_m()
+def scenario_length(scenario: str, classes: ClassTable | None = None) -> float:
+    """Length of a scenario's reference path [m] (to start the longest runs first), read with ``classes``."""
+    return resolve_scenario(scenario, classes).path_length_m()
 
 
 def _zone_rows(runs: list[RecipeRun], scenario: str, recipes: tuple[Recipe, ...]) -> list[str]:

@@ -1,19 +1,21 @@
 """`terrapref study`: the paper's claims as measured figures, over seeds, with one evaluation.
 
 Stages (each parallel across processes):
-1. Demonstrations: per training seed, the synthetic driver demonstrates on ``train_course``
-   with the protocol of the recipe ``ours`` (two runs with disturbances), once under the
-   default profile and once under another profile.
+1. Demonstrations: per training seed, the synthetic driver demonstrates on ``train_course`` (with
+   a class table of one's own: the table's teaching course) with the protocol of the recipe
+   ``ours`` (two runs with disturbances), once under the default profile and once under another
+   profile.
 2. Featurisation: utility features (and, for the ablation, other horizons) and the CNN's
    downsampled images, each read from the recordings once.
 3. Training: C (recipe ``ours``, without the planner's second stage: the study measures C
    itself), the linear utility model and the CNN on the same
    recordings; the same three on the first 0.5 ... 10 minutes of them; C under the other
    profile; C's ablations.
-4. Teaching: per training seed, one drive of ``teach_course`` and a model by the default recipe
-   (``teach``), for each of several preference orders (default driver style) and for each
-   driver style (default order).
-5. Closed-loop evaluation on ``test_course`` and the figure variations: every model, pure
+4. Teaching: per training seed, one drive of ``teach_course`` (or the table's teaching course)
+   and a model by the default recipe (``teach``), for each of several preference orders (default
+   driver style) and for each driver style (default order).
+5. Closed-loop evaluation on ``test_course`` and the figure variations (with a table of one's
+   own: its generated layouts): every model, pure
    pursuit, the hand-tuned cost planner and the synthetic driver. The taught models, and the
    driver of each order and style, on generated layouts none of them has seen; the default
    style's taught models again under each perception preset (terrapref.perception).
@@ -44,9 +46,9 @@ from terrapref.progress import every_tenth
 from terrapref.recipes import OURS
 from terrapref.records import to_plain
 from terrapref.report.reproduce import scenario_length
-from terrapref.report.study_plan import FULL, StudyPlan, TrainedModel, TrainJob
-from terrapref.report.study_report import ALT_PROFILE, ModelVariant, RunTag, StudyRun, agreement, write_study
-from terrapref.terrain import PreferenceProfile
+from terrapref.report.study_plan import FULL, StudyPlan, TrainedModel, TrainJob, course_name
+from terrapref.report.study_report import ModelVariant, RunTag, StudyRun, agreement, write_study
+from terrapref.terrain import ClassTable, PreferenceProfile
 
 if TYPE_CHECKING:
     from terrapref.learning.train import TrainConfig
@@ -62,20 +64,36 @@ SWEEP_FLOOR = 0.9  # a part's sweep stops at the first level where agreement fal
 
 def swept(plan: StudyPlan, part: str, level: float) -> PerceptionModel:
     """The robustness sweep's perception model: one part of the plan's base preset alone, ``level`` times as large."""
-    return load_perception(plan.sweep_base).part(part).scaled(level)
+    return load_perception(plan.sweep_base, plan.classes).part(part).scaled(level)
 
 
 # -- jobs (module level: they run in worker processes) ---------------------------------------
 
 
-def _demonstration_job(args: tuple[str, int, tuple[str, ...], tuple[tuple[str, str, int | None], ...]]) -> list[str]:
-    """One seed's demonstrations under one profile, kept in memory, featurised into ``sets``:
-    (file, kind, horizon) each, a dataset (``kind`` "U", with horizon n) or the CNN's samples."""
+@dataclass(frozen=True)
+class DemonstrationJob:
+    """One seed's demonstrations of ``course`` under one profile (stage 1), kept in memory and
+    featurised into ``sets``: (file, kind, horizon) each, a dataset (``kind`` "U", with horizon n)
+    or the CNN's samples."""
+
+    workdir: str
+    seed: int
+    profile: tuple[str, ...]
+    sets: tuple[tuple[str, str, int | None], ...]
+    course: str
+    classes: ClassTable | None = None
+
+    def to_dict(self) -> dict:
+        return {"workdir": self.workdir, "seed": self.seed, "profile": list(self.profile), "course": self.course}
+
+
+def _demonstration_job(job: DemonstrationJob) -> list[str]:
+    """Drive and featurise one :class:`DemonstrationJob`; returns the files written."""
     from terrapref.recipes import RecipeSetup, demonstrate
 
-    workdir, seed, profile, sets = args
-    recordings = demonstrate(DEMONSTRATIONS, workdir, RecipeSetup(seed, PreferenceProfile.parse(list(profile))), write=False)
-    return [_featurise_set(recordings, out, kind, n) for out, kind, n in sets]
+    setup = RecipeSetup(job.seed, PreferenceProfile.parse(list(job.profile), job.classes), course=job.course, classes=job.classes)
+    recordings = demonstrate(DEMONSTRATIONS, job.workdir, setup, write=False)
+    return [_featurise_set(recordings, out, kind, n) for out, kind, n in job.sets]
 
 
 def _featurise_set(recordings: list, out: str, kind: str, n: int | None) -> str:
@@ -112,10 +130,13 @@ class TeachJob:
     epochs: int
     recipe: str
     workdir: str
+    course: str | None = None  # None: the recipe's own
+    follow_up: bool = False
+    classes: ClassTable | None = None  # study.json holds the plan's, once
 
     def to_dict(self) -> dict:
         """As study.json holds it, as the teaching part's C."""
-        return {"study": "teach", "method": "C", **to_plain(self)}
+        return {"study": "teach", "method": "C", **to_plain(replace(self, classes=None), omit_none=("course", "classes"))}
 
 
 @dataclass(frozen=True)
@@ -143,12 +164,16 @@ def _train_cnn(job: TrainJob) -> int:
     from terrapref.baselines.cnn import CnnConfig, save_cnn, train_cnn
     from terrapref.tensorfile import read_tensor_file
 
+    from terrapref.terrain import ClassTable
+
     n = _frames_for(job.minutes)
     tensors, meta = read_tensor_file(job.data, "terrapref-cnn-samples/1", "no such file", "not CNN samples")
     images, paths, labels = (tensors[k][:n] for k in ("images", "paths", "labels"))
-    config = CnnConfig(epochs=job.cnn_epochs, seed=job.seed)
-    result = train_cnn(images, paths, labels.astype(np.int64), FeatureConfig().preference.m, config)
-    meta = {k: meta[k] for k in ("camera", "classes", "profile")} | {"features": FeatureConfig().to_dict()}
+    table = ClassTable.from_dict(meta["classes"], job.data)
+    features = FeatureConfig(feature_classes=table.feature_names)
+    config = CnnConfig(n_classes=max(c.id for c in table.classes) + 1, epochs=job.cnn_epochs, seed=job.seed)  # a one-hot channel per id
+    result = train_cnn(images, paths, labels.astype(np.int64), features.preference.m, config)
+    meta = {k: meta[k] for k in ("camera", "classes", "profile")} | {"features": features.to_dict()}
     save_cnn(job.out, result, config, images.shape[1:], meta)
     return len(labels)
 
@@ -185,7 +210,8 @@ def _teach_job(job: TeachJob) -> TaughtModel:
 
     t0 = time.perf_counter()
     recipe = _teach_recipe(job)
-    out = run_recipe(recipe, job.workdir, RecipeSetup(job.seed, PreferenceProfile(job.order), style=job.style))
+    setup = RecipeSetup(job.seed, PreferenceProfile(job.order), course=job.course, style=job.style, classes=job.classes, follow_up=job.follow_up)
+    out = run_recipe(recipe, job.workdir, setup)
     return TaughtModel(job, str(out.model), out.demo_minutes, time.perf_counter() - t0)
 
 
@@ -201,7 +227,8 @@ def teach_jobs(plan: StudyPlan, work: Path) -> list[TeachJob]:
     """The teaching study's models: every order under the default style, every style under the default order."""
     default = plan.orders[0]
     combos = [(o, "default") for o in plan.orders] + [(default, st) for st in plan.styles if st != "default"]
-    return [TeachJob(s, tuple(o), st, plan.epochs, plan.recipe, str(work / "teach" / f"{'_'.join(c[:2] for c in o[:3])}_{st}_s{s}"))
+    return [TeachJob(s, tuple(o), st, plan.epochs, plan.recipe, str(work / "teach" / f"{'_'.join(c[:2] for c in o[:3])}_{st}_s{s}"),
+                     plan.course, plan.follow_up, plan.classes)
             for s in range(plan.seeds) for o, st in combos]
 
 
@@ -220,7 +247,7 @@ class _Workspace:
     def map(self, fn: Callable, jobs: list, what: str) -> list:
         """Map ``fn`` over ``jobs`` on the engine (results in order), logging progress; a failed job is named by its inputs."""
         def describe(job: object) -> str:
-            return f"{what} {job.to_dict() if isinstance(job, (TrainJob, TeachJob)) else job!r}"
+            return f"{what} {job.to_dict() if isinstance(job, (TrainJob, TeachJob, DemonstrationJob)) else job!r}"
 
         return run_grid(fn, jobs, self.engine, lambda k, n: self.log(f"      {what} {k}/{n}"), describe=describe)
 
@@ -239,6 +266,8 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, engine: Engine | None
     out = Path(out_dir)
     work = out / "work"
     work.mkdir(parents=True, exist_ok=True)
+    if plan.classes is not None and plan.course is None:
+        plan = replace(plan, course=str(_write_teaching_course(out, plan.classes)))
     ws = _Workspace(plan, work, engine or Engine(), log)
     timings: dict[str, float] = {}
     with _timed(timings, "demonstrations and featurisation"):
@@ -256,19 +285,31 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, engine: Engine | None
     return write_study(out, plan, trained, runs, timings, report_started=report_started)
 
 
+def _write_teaching_course(out: Path, table: ClassTable) -> Path:
+    """The table's teaching course, written into ``out`` (the course the study demonstrates)."""
+    from terrapref.scenario.teaching import teaching_course
+
+    path = out.resolve() / "teaching_course.yaml"
+    write_text_atomic(path, teaching_course(table).to_yaml())
+    return path
+
+
 def _demonstrate(ws: _Workspace) -> None:
     """Stage 1: per seed, the demonstrations under the default profile and under the other (kept in
     memory, as the reproduction's are), and from them the utilities and the CNN's samples of the
     default ones, the utilities of the other profile's, and the utilities at every ablated horizon."""
-    default = PreferenceProfile.default().order
+    plan = ws.plan
+    profiles = [("default", plan.default_order())] + ([("alt", plan.alt)] if plan.alt else [])
     jobs = []
-    for s in range(ws.plan.seeds):
-        base = ws.work / f"default_s{s}"
-        sets = ((str(base / "U.safetensors"), "U", None), (str(base / "cnn.safetensors"), "cnn", None),
-                *((str(base / f"U_n{n}.safetensors"), "U", n) for n in ws.plan.horizons))
-        jobs += [(str(base), s, default, sets), (str(ws.work / f"alt_s{s}"), s, ALT_PROFILE, ((str(ws.work / f"alt_s{s}" / "U.safetensors"), "U", None),))]
-    ws.log(f"[1/4] demonstrations and featurisation: {ws.plan.seeds} seed(s) x 2 profiles x {DEMONSTRATIONS.demonstrations} runs, "
-           f"{sum(len(j[3]) for j in jobs)} sets ...")
+    for s in range(plan.seeds):
+        for name, order in profiles:
+            base = ws.work / f"{name}_s{s}"
+            sets = [(str(base / "U.safetensors"), "U", None)]
+            if name == "default":
+                sets += [(str(base / "cnn.safetensors"), "cnn", None), *((str(base / f"U_n{n}.safetensors"), "U", n) for n in plan.horizons)]
+            jobs.append(DemonstrationJob(str(base), s, order, tuple(sets), plan.demo_course(), plan.classes))
+    ws.log(f"[1/5] demonstrations and featurisation: {plan.seeds} seed(s) x {len(profiles)} profile(s) x {DEMONSTRATIONS.demonstrations} runs "
+           f"of {course_name(plan.demo_course())}, {sum(len(j.sets) for j in jobs)} sets ...")
     ws.map(_demonstration_job, jobs, "demonstration set")
 
 
@@ -280,7 +321,7 @@ def _train_and_teach(ws: _Workspace) -> tuple[list[TrainedModel], list[TaughtMod
 
     plan = ws.plan
     train, teach = _train_jobs(plan, ws.work), teach_jobs(plan, ws.work)
-    ws.log(f"[2/4] training and teaching: {len(train)} models, and {len(teach)} drives of {recipe_named(plan.recipe).course} and "
+    ws.log(f"[2/5] training and teaching: {len(train)} models, and {len(teach)} drives of {course_name(plan.course or recipe_named(plan.recipe).course)} and "
            f"their models (recipe {plan.recipe}; {len(plan.orders)} orders, {len(plan.styles)} driver styles, {plan.seeds} seed(s)) ...")
     done = ws.map(_model_job, [*teach, *train], "model")  # the drives and their recipe's training first: the longest jobs
     return done[len(teach) :], done[: len(teach)]
@@ -307,7 +348,8 @@ def _train_jobs(plan: StudyPlan, work: Path) -> list[TrainJob]:
             add("baselines", method, s, base / ("cnn.safetensors" if method == "cnn" else "U.safetensors"), method)
             for minutes in plan.minutes:
                 add("efficiency", method, s, base / ("cnn.safetensors" if method == "cnn" else "U.safetensors"), f"{method}_{minutes:g}min", minutes=minutes)
-        add("profile", "C", s, work / f"alt_s{s}" / "U.safetensors", "C_alt")
+        if plan.alt is not None:
+            add("profile", "C", s, work / f"alt_s{s}" / "U.safetensors", "C_alt")
         add("ablation", "C", s, base / "U.safetensors", "C_no_distance", train={"data": {"ignore_features": ["distance"]}}, variant="without the distance utility")
         add("ablation", "C", s, base / "U.safetensors", "C_flat", train={"classifier": {"compress": False, "skip": False}}, variant="without the row-wise compression (flat MLP)")
         for n in plan.horizons:
@@ -321,7 +363,7 @@ def _train_jobs(plan: StudyPlan, work: Path) -> list[TrainJob]:
 def _evaluate(ws: _Workspace, trained: list[TrainedModel], taught: list[TaughtModel]) -> list[StudyRun]:
     """Stage 3: every closed-loop run, tagged with its place in the study."""
     planned = _evaluation_runs(ws.plan, trained, taught)
-    ws.log(f"[3/4] closed-loop evaluation: {len(planned)} runs over {len(ws.plan.scenarios()) + len(ws.plan.layouts)} scenarios ...")
+    ws.log(f"[3/5] closed-loop evaluation: {len(planned)} runs over {len(ws.plan.scenarios()) + len(ws.plan.layouts)} scenarios ...")
     results = run_many([spec for spec, _ in planned], progress=every_tenth(ws.log), engine=ws.engine)
     return [StudyRun(tag, r.scenario, r.metrics) for (_, tag), r in zip(planned, results, strict=True)]
 
@@ -331,45 +373,47 @@ def _evaluation_runs(plan: StudyPlan, trained: list[TrainedModel], taught: list[
     first, so that no worker is left with a long run at the end."""
     runs = [run for sc in plan.scenarios() for run in _course_runs(plan, sc, trained)]
     runs += [run for layout in plan.layouts for run in _layout_runs(plan, layout, taught)]
-    return sorted(runs, key=lambda run: -scenario_length(run[0].scenario))
+    return sorted(runs, key=lambda run: -scenario_length(run[0].scenario, plan.classes))
 
 
 def _course_runs(plan: StudyPlan, sc: str, trained: list[TrainedModel]) -> list[tuple[RunSpec, RunTag]]:
     """One evaluation course: every trained model's runs, then per seed the drivers without a model,
     and the synthetic driver under the other profile."""
-    default = PreferenceProfile.default().order
+    default, alt, classes = plan.default_order(), plan.alt, plan.classes
     runs = [run for t in trained for run in _model_runs(plan, sc, t.job, default)]
     for s in range(plan.seeds):
-        runs += [(RunSpec(sc, s, method, None, default), RunTag("baselines", method, s)) for method in (HAND_COST, PURE_PURSUIT, EXPERT)]
-        runs.append((RunSpec(sc, s, EXPERT, None, ALT_PROFILE), RunTag("profile", EXPERT, s, scored_under="own")))
+        runs += [(RunSpec(sc, s, method, None, default, classes=classes), RunTag("baselines", method, s)) for method in (HAND_COST, PURE_PURSUIT, EXPERT)]
+        if alt is not None:
+            runs.append((RunSpec(sc, s, EXPERT, None, alt, classes=classes), RunTag("profile", EXPERT, s, scored_under="own")))
     return runs
 
 
 def _model_runs(plan: StudyPlan, sc: str, job: TrainJob, default: tuple[str, ...]) -> list[tuple[RunSpec, RunTag]]:
     """A trained model's run on a course under the profile it learned; the other profile's C again
     under the default profile, and the default C under the other profile and under every perturbation."""
-    own = ALT_PROFILE if job.study == "profile" else default
-    runs = [(RunSpec(sc, 0, PLANNER, job.out, own),
+    alt, classes = plan.alt, plan.classes
+    own = alt if job.study == "profile" else default
+    runs = [(RunSpec(sc, 0, PLANNER, job.out, own, classes=classes),
              RunTag(job.study, job.method, job.seed, ModelVariant(job.minutes, job.variant), scored_under="own"))]
     if job.study == "profile":  # the same run's choices, scored under the default profile
-        runs.append((RunSpec(sc, 0, PLANNER, job.out, default), RunTag("profile_cross", "C", job.seed, scored_under="default")))
-    if job.study == "baselines" and job.method == "C":
-        runs.append((RunSpec(sc, 0, PLANNER, job.out, ALT_PROFILE), RunTag("profile_cross", "C_default", job.seed, scored_under="alt")))
+        runs.append((RunSpec(sc, 0, PLANNER, job.out, default, classes=classes), RunTag("profile_cross", "C", job.seed, scored_under="default")))
+    if job.study == "baselines" and job.method == "C" and alt is not None:
+        runs.append((RunSpec(sc, 0, PLANNER, job.out, alt, classes=classes), RunTag("profile_cross", "C_default", job.seed, scored_under="alt")))
     return runs
 
 
 def _layout_runs(plan: StudyPlan, layout: str, taught: list[TaughtModel]) -> list[tuple[RunSpec, RunTag]]:
     """One teaching layout: every taught model, and the driver of every order and style taught; the
     default style's models again under every perception preset but clean."""
-    runs = [(RunSpec(layout, 0, PLANNER, t.out, t.job.order), RunTag("teach", "C", t.job.seed, order=t.job.order, style=t.job.style))
+    classes = plan.classes
+    runs = [(RunSpec(layout, 0, PLANNER, t.out, t.job.order, classes=classes), RunTag("teach", "C", t.job.seed, order=t.job.order, style=t.job.style))
             for t in taught]
-    runs += [(RunSpec(layout, 0, EXPERT, None, order, style=style), RunTag("teach", EXPERT, 0, order=order, style=style))
+    runs += [(RunSpec(layout, 0, EXPERT, None, order, style=style, classes=classes), RunTag("teach", EXPERT, 0, order=order, style=style))
              for order, style in sorted({(t.job.order, t.job.style) for t in taught})]
-    for name in plan.presets:
-        model = load_perception(name)
+    for model in plan.perceptions():
         if model.active:
-            runs += [(RunSpec(layout, 0, PLANNER, t.out, t.job.order, perception=model),
-                      RunTag("robustness", "C", t.job.seed, kind=name, order=t.job.order, style=t.job.style))
+            runs += [(RunSpec(layout, 0, PLANNER, t.out, t.job.order, perception=model, classes=classes),
+                      RunTag("robustness", "C", t.job.seed, kind=model.name, order=t.job.order, style=t.job.style))
                      for t in taught if t.job.style == "default"]
     return runs
 
@@ -381,14 +425,15 @@ def _sweep(ws: _Workspace, taught: list[TaughtModel], runs: list[StudyRun]) -> l
     plan = ws.plan
     models = [t for t in taught if t.job.style == "default"]
     driver = [r for r in runs if r.tag.study == "teach" and r.tag.method == EXPERT and r.tag.style == "default"]
-    left, swept_runs = list(PARTS), []
+    base = load_perception(plan.sweep_base, plan.classes) if plan.sweep_base is not None else None
+    left, swept_runs = [part for part in PARTS if base is not None and base.part(part).active], []
     for level in plan.sweep:
         if not left or not models:
             break
-        planned = [(RunSpec(layout, 0, PLANNER, t.out, t.job.order, perception=swept(plan, part, level)),
+        planned = [(RunSpec(layout, 0, PLANNER, t.out, t.job.order, perception=swept(plan, part, level), classes=plan.classes),
                     RunTag("robustness", "C", t.job.seed, kind=part, level=level, order=t.job.order, style="default"))
                    for part in left for layout in plan.layouts for t in models]
-        ws.log(f"[4/5] robustness sweep at {level:g} x {plan.sweep_base}'s: {', '.join(left)} ({len(planned)} runs) ...")
+        ws.log(f"[4/5] robustness sweep at {level:g} x {plan.sweep_name()}'s: {', '.join(left)} ({len(planned)} runs) ...")
         results = run_many([spec for spec, _ in planned], progress=every_tenth(ws.log), engine=ws.engine)
         done = [StudyRun(tag, r.scenario, r.metrics) for (_, tag), r in zip(planned, results, strict=True)]
         swept_runs += done
@@ -401,7 +446,8 @@ def _sweep(ws: _Workspace, taught: list[TaughtModel], runs: list[StudyRun]) -> l
 
 def _plan_dict(plan: StudyPlan) -> dict:
     return {"seeds": plan.seeds, "minutes": list(plan.minutes), "epochs": plan.epochs, "cnn_epochs": plan.cnn_epochs,
-            "presets": list(plan.presets), "sweep_base": plan.sweep_base, "sweep": list(plan.sweep),
+            "presets": [p.name for p in plan.perceptions()], "sweep_base": plan.sweep_name(), "sweep": list(plan.sweep),
             "horizons": list(plan.horizons), "widths": list(plan.widths),
             "scenarios": plan.scenarios(), "orders": [list(o) for o in plan.orders], "styles": list(plan.styles), "layouts": list(plan.layouts),
-            "recipe": plan.recipe}
+            "recipe": plan.recipe, "classes": plan.classes.to_dict() if plan.classes is not None else None,
+            "course": plan.demo_course(), "follow_up": plan.follow_up, "alt": list(plan.alt) if plan.alt else None}

@@ -15,10 +15,9 @@ from terrapref.fileio import write_text_atomic
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PURE_PURSUIT, zone_agrees
 from terrapref.evaluation.scoring import RunMetrics
 from terrapref.evaluation.stats import cluster_bootstrap, rate_text, wilson
-from terrapref.report.study_plan import StudyPlan, TrainedModel
+from terrapref.report.study_plan import StudyPlan, TrainedModel, course_name
 
 TARGET = 0.9  # the success level the data-efficiency question asks about
-ALT_PROFILE = ("rock", "mud", "water", "non_traversable")  # the study's other preference profile
 ALL = "all"  # the data-efficiency point that uses every demonstrated minute: the baselines' runs
 METHOD_NAMES = {
     "C": "C (ours)",
@@ -199,9 +198,9 @@ def write_study(out: Path, plan: StudyPlan, trained: Sequence[TrainedModel], run
     efficiency = _Efficiency.of(plan, trained, runs, base)
     lines = _introduction(plan, runs)
     lines += _answers(plan, runs, base, efficiency)
-    lines += _baselines_section(base, figs)
+    lines += _baselines_section(plan, base, figs)
     lines += _efficiency_section(trained, runs, base, efficiency, figs)
-    lines += _profile_section(runs)
+    lines += _profile_section(plan, runs)
     lines += _robustness_section(plan, runs, figs)
     lines += _ablation_section(runs, base)
     lines += teaching_section(plan, runs, figs)
@@ -214,12 +213,16 @@ def write_study(out: Path, plan: StudyPlan, trained: Sequence[TrainedModel], run
 
 def _introduction(plan: StudyPlan, runs: list[StudyRun]) -> list[str]:
     """The title and what every number rests on."""
+    from terrapref.report.study import DEMONSTRATIONS
+
     zones_per_pass = sum(len(r.metrics.zones) for r in _select(runs, study="baselines", method=EXPERT, seed=0))
+    table = (f"The class table: background {plan.table.background}; terrain columns {', '.join(plan.table.terrain_names)}"
+             + (f"; lethal {', '.join(plan.table.lethal)}" if plan.table.lethal else "") + ". ") if plan.classes is not None else ""
     return ["# terrapref study: baselines, data efficiency, preference profiles, robustness, ablations", "",
-            f"Every number comes from closed-loop runs in the simulator on {', '.join(plan.scenarios())} "
+            f"{table}Every number comes from closed-loop runs in the simulator on {', '.join(plan.scenarios())} "
             f"({zones_per_pass} zones per pass), "
-            f"{plan.seeds} training seed(s): each seed has its own demonstrations (2 runs of train_course with disturbances, "
-            "about 11 minutes) and its own initialisation. Zone success is given as the mean over seeds ± its standard deviation; "
+            f"{plan.seeds} training seed(s): each seed has its own demonstrations ({DEMONSTRATIONS.demonstrations} runs of "
+            f"{course_name(plan.demo_course())} with disturbances) and its own initialisation. Zone success is given as the mean over seeds ± its standard deviation; "
             "collisions are summed over all runs; brackets give the 95% Wilson interval of the rate pooled over all zones. One zone is "
             f"{1 / max(zones_per_pass, 1):.1%} of a seed's score, so differences of a few points are within the spread between seeds.", ""]
 
@@ -234,39 +237,41 @@ def _answers(plan: StudyPlan, runs: list[StudyRun], base: _Baselines, efficiency
                  f"({(cells['C'][1] - cells[HAND_COST][1]) * 100:+.1f} points), learned linear utility {cells['linear'][0]} "
                  f"({(cells['C'][1] - cells['linear'][1]) * 100:+.1f} points); the end-to-end CNN {cells['cnn'][0]} "
                  f"({(cells['C'][1] - cells['cnn'][1]) * 100:+.1f} points).")
-    lines.append(_profile_answer(runs))
+    lines.append(_profile_answer(plan, runs))
     lines.append(_Robustness.of(plan, runs).answer())
     lines.append("")
     return lines
 
 
-def _profile_answer(runs: list[StudyRun]) -> str:
+def _profile_answer(plan: StudyPlan, runs: list[StudyRun]) -> str:
     """Whether the other profile is learned: overall, and in the zones where the profiles disagree."""
+    if plan.alt is None:
+        return f"- **Another profile:** none; the table has one class besides {plan.table.lethal_column or 'the background'}."
     profiles = _Profiles.of(runs)
     keep = disagreement_zones(runs)
     a_ok, a_n = _zone_success(profiles.alt, keep)
     d_ok, d_n = _zone_success(profiles.default_as_alt, keep)
-    return (f"- **Another profile ({' > '.join(ALT_PROFILE)}) is learned:** C trained on demonstrations driven under it reaches "
+    return (f"- **Another profile ({' > '.join(plan.alt)}) is learned:** C trained on demonstrations driven under it reaches "
             f"{_cell(profiles.alt)[0]} scored under that profile (the driver: {_cell(profiles.alt_driver)[0]}). In the {len(keep)} test zones where the two "
             f"profiles expect different choices, it makes the other profile's choice in {a_ok}/{a_n} runs; the model trained "
             f"on the default profile does so in {d_ok}/{d_n}. (All zones: the other-profile model scored under the default "
             f"profile {_cell(profiles.alt_as_default)[0]}, the default model under the other profile {_cell(profiles.default_as_alt)[0]}.)")
 
 
-def _baselines_section(base: _Baselines, figs: Path) -> list[str]:
+def _baselines_section(plan: StudyPlan, base: _Baselines, figs: Path) -> list[str]:
     """Section 1: every method under the same planner interface, and its bar chart."""
-    from terrapref.planner.policy import HAND_COSTS, HAND_DISTANCE_WEIGHT
+    from terrapref.planner.policy import HAND_DISTANCE_WEIGHT, hand_costs
     from terrapref.plots import save_bars
 
     lines = ["## 1. Baselines", "", "Each is a driver under the same planner interface, scored by the same code.", "",
              "| method | zone success | collisions | completed |", "|---|---|---|---|"]
     for m in BASELINES:
         lines.append(f"| {METHOD_NAMES[m]} | {base.cells[m][0]} | {_collisions(base.runs[m])} | {_completed(base.runs[m]):.0%} |")
-    lines += ["", f"Hand-tuned costs per unit share: {', '.join(f'{k} {v:g}' for k, v in HAND_COSTS.items())}; distance utility weight "
+    lines += ["", f"Hand-tuned costs per unit share: {', '.join(f'{k} {v:g}' for k, v in hand_costs(plan.table).items())}; distance utility weight "
               f"{HAND_DISTANCE_WEIGHT:g}. Pure pursuit: 2.5 m look-ahead, nearest trajectory. For the deterministic baselines, "
               "'seeds' are the evaluation seeds (start offset and heading).", "", "![baselines](figures/baselines.png)", ""]
     save_bars(figs / "baselines.png", [METHOD_NAMES[m] for m in BASELINES], [base.cells[m][1] for m in BASELINES],
-              [base.cells[m][2] for m in BASELINES], "zone success, test_course and variations", target=TARGET)
+              [base.cells[m][2] for m in BASELINES], "zone success, " + ("test_course and variations" if not plan.courses else ", ".join(plan.scenarios())), target=TARGET)
     return lines
 
 
@@ -289,18 +294,20 @@ def _efficiency_section(trained: Sequence[TrainedModel], runs: list[StudyRun], b
     return lines
 
 
-def _profile_section(runs: list[StudyRun]) -> list[str]:
+def _profile_section(plan: StudyPlan, runs: list[StudyRun]) -> list[str]:
     """Section 3: the other profile, learned and scored both ways; the choices; the zones where the profiles disagree."""
+    if plan.alt is None:
+        return ["## 3. Another preference profile", "", _profile_answer(plan, runs)[2:], ""]
     p = _Profiles.of(runs)
     lines = ["## 3. Another preference profile", "",
-             f"Demonstrations driven under {' > '.join(ALT_PROFILE)} (the default is mud > rock > water > non_traversable); "
+             f"Demonstrations driven under {' > '.join(plan.alt)} (the default is {' > '.join(plan.default_order())}); "
              "`best` zones resolve under the profile the model carries.", "",
              "| model | scored under | zone success | collisions |", "|---|---|---|---|",
              f"| C trained on the other profile | its own | {_cell(p.alt)[0]} | {_collisions(p.alt)} |",
              f"| synthetic driver, other profile | its own | {_cell(p.alt_driver)[0]} | {_collisions(p.alt_driver)} |",
              f"| C trained on the other profile | default | {_cell(p.alt_as_default)[0]} | — |",
              f"| C trained on the default profile | other | {_cell(p.default_as_alt)[0]} | — |", ""]
-    return lines + _choice_table(runs) + _disagreement_table(runs)
+    return lines + _choice_table(plan, runs) + _disagreement_table(runs)
 
 
 def _robustness_section(plan: StudyPlan, runs: list[StudyRun], figs: Path) -> list[str]:
@@ -312,13 +319,17 @@ def _robustness_section(plan: StudyPlan, runs: list[StudyRun], figs: Path) -> li
     lines = ["## 4. Robustness: what a real robot sees", "",
              f"The models of section 6 taught by the default-style driver of every order ({rob.models} models), driving the same "
              f"{len(plan.layouts)} layouts while they receive what a robot would instead of the truth (terrapref.perception; presets in "
-             f"docs/perception.md). The driver always sees the truth. Then each part of `{plan.sweep_base}` alone, at rising "
-             "multiples of it, until agreement with the driver falls below 90%. Rates with 95% Wilson intervals over zones.", "",
+             "docs/perception.md). The driver always sees the truth. "
+             + (f"Then each part of `{plan.sweep_name()}` alone, at rising multiples of it, until agreement with the driver falls below 90%. "
+                if plan.sweep_base is not None else "No perception model of this table was given (`--perception`): no sweep. ")
+             + "Rates with 95% Wilson intervals over zones.", "",
              "| perception | agreement with the driver | zone success | collisions |", "|---|---|---|---|"]
     for name, rr in rob.presets.items():
         ok, n = agreement(rr, rob.driver)
         lines.append(f"| {name} | {rate_text(ok, n)} | {_cell(rr)[0]} | {_collisions(rr)} |")
-    lines += ["", f"| part of `{plan.sweep_base}` alone | x level | agreement with the driver | collisions |", "|---|---|---|---|"]
+    if plan.sweep_base is None:
+        return lines + [""]
+    lines += ["", f"| part of `{plan.sweep_name()}` alone | x level | agreement with the driver | collisions |", "|---|---|---|---|"]
     curves = {}
     for part, levels in rob.sweep.items():
         pts = []
@@ -328,7 +339,7 @@ def _robustness_section(plan: StudyPlan, runs: list[StudyRun], figs: Path) -> li
             lines.append(f"| {part} | {level:g} | {rate_text(ok, n)} | {_collisions(rr)} |")
         curves[part] = pts
     lines += ["", "![robustness](figures/robustness.png)", ""]
-    save_curves(figs / "robustness.png", curves, f"level (multiples of {plan.sweep_base}'s)", "agreement with the driver", target=0.9, logx=True)
+    save_curves(figs / "robustness.png", curves, f"level (multiples of {plan.sweep_name()}'s)", "agreement with the driver", target=0.9, logx=True)
     return lines
 
 
@@ -345,7 +356,7 @@ class _Robustness:
     @classmethod
     def of(cls, plan: StudyPlan, runs: list[StudyRun]) -> _Robustness:
         clean = _select(runs, study="teach", method="C", style="default")
-        presets = {name: clean if name == "clean" else _select(runs, study="robustness", kind=name, level=None) for name in plan.presets}
+        presets = {m.name: clean if not m.active else _select(runs, study="robustness", kind=m.name, level=None) for m in plan.perceptions()}
         sweep: dict[str, dict[float, list[StudyRun]]] = {}
         for r in runs:
             if r.tag.study == "robustness" and r.tag.level is not None:
@@ -363,7 +374,8 @@ class _Robustness:
             below = [lv for lv in levels if lv not in kept]
             holds.append(f"{part} {'to x' + format(max(kept), 'g') if kept else 'not at x' + format(min(levels), 'g')}"
                          + (f", below at x{min(below):g}" if below else ""))
-        return f"- **Under what a robot sees** (agreement with the driver): {presets}. 90% holds for " + "; ".join(holds) + "."
+        held = (" 90% holds for " + "; ".join(holds) + ".") if holds else " No part was swept."
+        return f"- **Under what a robot sees** (agreement with the driver): {presets}.{held}"
 
 
 def _ratio(counts: tuple[int, int]) -> float:
@@ -379,7 +391,7 @@ def _ablation_section(runs: list[StudyRun], base: _Baselines) -> list[str]:
     for v in variants:
         rr = _select(runs, study="ablation", variant=v)
         lines.append(f"| {v} | {_cell(rr)[0]} | {_collisions(rr)} |")
-    return lines
+    return lines + [""]
 
 
 def agreement(planner: list[StudyRun], driver: list[StudyRun]) -> tuple[int, int]:
@@ -415,7 +427,9 @@ def _taught(taught: list[StudyRun], method: str, order: Sequence[str], style: st
 
 
 def teaching_section(plan: StudyPlan, runs: list[StudyRun], figs: Path) -> list[str]:
-    """Section 6: one drive of teach_course per order and per driver style; agreement with that driver on unseen layouts."""
+    """Section 6: one drive of the teaching course per order and per driver style; agreement with that driver on unseen layouts."""
+    from terrapref.recipes import recipe_named
+
     from terrapref.plots import RateRow, save_intervals
 
     taught = _select(runs, study="teach")
@@ -424,11 +438,13 @@ def teaching_section(plan: StudyPlan, runs: list[StudyRun], figs: Path) -> list[
     order_rows, order_points = _order_rows(plan, taught)
     style_rows, style_points = _style_rows(plan, taught)
     points = order_points + style_points
+    course = course_name(plan.course or recipe_named(plan.recipe).course)
+    follow = " and the follow-up course of what it left open" if plan.follow_up else ""
     lines = [f"## 6. Any order, any driver: one drive by recipe {plan.recipe}", "",
-             f"Per training seed, the synthetic driver demonstrates (recipe {plan.recipe}, {plan.epochs} epochs) for each order "
+             f"Per training seed, the synthetic driver demonstrates on {course}{follow} (recipe {plan.recipe}, {plan.epochs} epochs) for each order "
              f"(default style) and each driver style (default order); every model then drives {len(plan.layouts)} generated layouts it "
              f"has never seen ({', '.join(plan.layouts)}), and so does the driver it learned from. **Agreement**: the planner's zone "
-             "choice equals that driver's in the same zone of the same layout (touching non_traversable where the driver did not "
+             f"choice equals that driver's in the same zone of the same layout (touching {plan.table.lethal_column or 'lethal terrain'} where the driver did not "
              "counts against). Brackets: 95% Wilson interval over all zones and seeds.", "",
              "| order | agreement with its driver | zone success | the driver's zone success | collisions |", "|---|---|---|---|---|",
              *order_rows,
@@ -441,7 +457,7 @@ def teaching_section(plan: StudyPlan, runs: list[StudyRun], figs: Path) -> list[
              *style_rows, "", *_imitation_table(plan, taught)]
     rows = [RateRow(label, ok / n if n else float("nan"), wilson(ok, n)) for label, ok, n in points]
     save_intervals(figs / "teaching.png", rows, "agreement with its driver", target=0.95,
-                   title="one drive of teach_course: agreement on unseen layouts, by order and driver style")
+                   title=f"one drive of {course}: agreement on unseen layouts, by order and driver style")
     return lines + ["", "![teaching](figures/teaching.png)", ""]
 
 
@@ -577,11 +593,12 @@ def _disagreement_table(runs: list[StudyRun]) -> list[str]:
     return out + [""]
 
 
-def _choice_table(runs: list[StudyRun]) -> list[str]:
+def _choice_table(plan: StudyPlan, runs: list[StudyRun]) -> list[str]:
     """How often each class was chosen in `best` zones, by which profile the model learned."""
-    rows = ["| model | " + " | ".join(("mud", "rock", "water", "non_traversable", "avoid")) + " |", "|---|---|---|---|---|---|"]
+    columns = (*plan.default_order(), "avoid")
+    rows = ["| model | " + " | ".join(columns) + " |", "|---|" + "---|" * len(columns)]
     for label, rr in (("default profile", _select(runs, study="baselines", method="C")), ("other profile", _select(runs, study="profile", method="C"))):
         choices = [z.choice for r in rr for z in r.metrics.zones if z.expect != "avoid"]
         n = max(len(choices), 1)
-        rows.append(f"| C, {label} | " + " | ".join(f"{choices.count(c) / n:.0%}" for c in ("mud", "rock", "water", "non_traversable", "avoid")) + " |")
+        rows.append(f"| C, {label} | " + " | ".join(f"{choices.count(c) / n:.0%}" for c in columns) + " |")
     return ["Choices in the zones where a patch is expected (share of zones):", "", *rows, ""]
