@@ -292,6 +292,22 @@ def test_a_list_of_courses_and_generated_courses():
     assert all(1_000_000 <= int(n[4:]) < 2_000_000 for n in names)
 
 
+def test_a_class_table_of_ones_own_reads_course_names_and_perception():
+    from pathlib import Path
+
+    examples = Path(__file__).resolve().parent.parent / "examples" / "classes"
+    env = gym.make(ENV_ID, scenario=["gen:7", "gen:8"], image_size=SMALL, image_encoding="onehot",
+                   classes=str(examples / "rellis3d.yaml"), perception=str(examples / "rellis3d_field.yaml")).unwrapped
+    assert "bush" in env.classes.names and env.observation_space["image"].shape[-1] == len(env.classes.classes) == 13
+    obs, _ = env.reset(seed=0)
+    assert env.observation_space.contains(obs)
+    names = {env.classes.name_of(int(i)) for i in np.unique(env.sim.world.raster)}
+    assert names & {"dirt", "gravel", "mud", "puddle", "water", "bush"} and not names & {"rock", "non_traversable"}
+    env.step(env.action_space.sample())
+    with pytest.raises(ValueError, match="differs from the first course's"):
+        env.reset(options={"scenario": _scenario()})  # a scenario of the default table
+
+
 def test_reset_options():
     env = gym.make(ENV_ID, scenario="demo_course", image_size=SMALL)
     assert env.reset(seed=0, options={"scenario": "test_course"})[1]["scenario"] == "test_course"

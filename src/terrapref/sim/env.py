@@ -25,6 +25,7 @@ import math
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any, Literal
 
 import gymnasium as gym
@@ -36,7 +37,7 @@ from terrapref.camera import CameraConfig
 from terrapref.perception import PerceptionModel, Perceiver, load_perception
 from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.sim.loop import SimConfig, Simulation
-from terrapref.terrain import ClassTable
+from terrapref.terrain import ClassTable, load_classes
 from terrapref.terrain.profile import PreferenceProfile
 from terrapref.vehicle import Command, ControlSet, Pose
 
@@ -112,6 +113,9 @@ class EnvConfig:
         sim: the simulation's settings; None: the defaults.
         perception: what a robot's segmentation and localisation would give (a model, a preset's
             name or a file); None: the truth.
+        classes: the class table course names (packaged, ``gen:N`` or files) and the perception
+            file are read with (a table or a ``terrapref-classes/1`` file); None: the default.
+            A :class:`Scenario` given as it is carries its own table.
     """
 
     action_type: Literal["discrete", "continuous"] = "discrete"
@@ -129,6 +133,7 @@ class EnvConfig:
     camera: CameraConfig | None = None
     sim: SimConfig | None = None
     perception: PerceptionModel | str | None = None
+    classes: ClassTable | str | Path | None = None
 
     def __post_init__(self) -> None:
         if self.action_type not in ("discrete", "continuous"):
@@ -205,7 +210,8 @@ class OffRoadNavEnv(gym.Env):
         self.render_mode = render_mode
         self._camera_config, self._sim_config = config.camera, config.sim
         self._sims: OrderedDict[Any, Simulation] = OrderedDict()
-        self.perception = load_perception(config.perception)
+        self._table = load_classes(config.classes) if isinstance(config.classes, (str, Path)) else config.classes
+        self.perception = load_perception(config.perception, self._table)
         self._perceiver: Perceiver | None = None
         self._last_obs: dict[str, np.ndarray] | None = None
 
@@ -265,9 +271,9 @@ class OffRoadNavEnv(gym.Env):
         if key in self._sims:
             self._sims.move_to_end(key)
             return self._sims[key]
-        scenario = resolve_scenario(course) if isinstance(course, str) else course
+        scenario = resolve_scenario(course, self._table) if isinstance(course, str) else course
         sim = Simulation(scenario, self._camera_config, self._sim_config)
-        if hasattr(self, "classes") and scenario.classes != self.classes:
+        if hasattr(self, "classes") and not scenario.classes.same_classes(self.classes):
             raise ValueError(f"scenario {scenario.name!r}: its class table differs from the first course's; one env needs one table")
         self._sims[key] = sim
         while len(self._sims) > _SIM_CACHE:
