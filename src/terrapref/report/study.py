@@ -46,7 +46,7 @@ from terrapref.progress import every_tenth
 from terrapref.recipes import OURS
 from terrapref.records import to_plain
 from terrapref.report.reproduce import scenario_length
-from terrapref.report.study_plan import FULL, StudyPlan, TrainedModel, TrainJob, course_name
+from terrapref.report.study_plan import DEMONSTRATIONS, FULL, StudyPlan, TrainedModel, TrainJob, course_name
 from terrapref.report.study_report import ModelVariant, RunTag, StudyRun, agreement, write_study
 from terrapref.terrain import ClassTable, PreferenceProfile
 
@@ -55,7 +55,6 @@ if TYPE_CHECKING:
     from terrapref.recipes import Recipe
 
 LEARNED = ("C", "linear", "cnn")  # methods trained from demonstrations
-DEMONSTRATIONS = OURS  # the study's data: ours' runs of train_course
 
 
 PARTS = ("labels", "pose", "camera", "frames")  # the parts of a perception model the robustness sweep varies one at a time

@@ -13,6 +13,8 @@ from terrapref.records import to_plain
 from terrapref.report.reproduce import TEST_SET, variations
 from terrapref.terrain import ClassTable, PreferenceProfile, default_classes
 
+DEMONSTRATIONS = OURS  # the study's data: ours' runs of train_course (or of a table's teaching course)
+
 # The orders the teaching study trains on: the paper's, then the others that put each of rock
 # and water first (non_traversable last: it is lethal to every driver).
 TEACH_ORDERS = (
@@ -86,7 +88,7 @@ class StudyPlan:
 
     def demo_course(self) -> str:
         """The course the demonstrations of sections 1-3 and 5 go over."""
-        return self.course or OURS.course
+        return self.course or DEMONSTRATIONS.course
 
     def perceptions(self) -> list[PerceptionModel]:
         """The robustness section's perception models, in the plan's order."""

@@ -15,7 +15,7 @@ from terrapref.fileio import write_text_atomic
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PURE_PURSUIT, zone_agrees
 from terrapref.evaluation.scoring import RunMetrics
 from terrapref.evaluation.stats import cluster_bootstrap, rate_text, wilson
-from terrapref.report.study_plan import StudyPlan, TrainedModel, course_name
+from terrapref.report.study_plan import DEMONSTRATIONS, StudyPlan, TrainedModel, course_name
 
 TARGET = 0.9  # the success level the data-efficiency question asks about
 ALL = "all"  # the data-efficiency point that uses every demonstrated minute: the baselines' runs
@@ -213,8 +213,6 @@ def write_study(out: Path, plan: StudyPlan, trained: Sequence[TrainedModel], run
 
 def _introduction(plan: StudyPlan, runs: list[StudyRun]) -> list[str]:
     """The title and what every number rests on."""
-    from terrapref.report.study import DEMONSTRATIONS
-
     zones_per_pass = sum(len(r.metrics.zones) for r in _select(runs, study="baselines", method=EXPERT, seed=0))
     table = (f"The class table: background {plan.table.background}; terrain columns {', '.join(plan.table.terrain_names)}"
              + (f"; lethal {', '.join(plan.table.lethal)}" if plan.table.lethal else "") + ". ") if plan.classes is not None else ""
