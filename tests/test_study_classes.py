@@ -16,7 +16,7 @@ from terrapref.grid import Engine
 from terrapref.perception import load_perception
 from terrapref.planner.policy import hand_costs
 from terrapref.report.study import run_study
-from terrapref.report.study_plan import FULL, QUICK, StudyPlan, for_table, reversed_order
+from terrapref.report.study_plan import FULL, QUICK, StudyPlan, for_table, reversed_order, with_perception
 from terrapref.report.study_report import StudyRun, _select, write_study
 from terrapref.terrain import PreferenceProfile, load_classes
 
@@ -61,6 +61,14 @@ def test_a_tables_plan_sweeps_the_last_perception_given(example):
     plan = for_table(QUICK, example, perceptions=(load_perception("clean"), field), follow_up=True)
     assert [p.name for p in plan.perceptions()] == ["clean", field.name]
     assert plan.sweep_base is field and plan.sweep_name() == field.name and plan.follow_up
+
+
+def test_perception_given_for_the_default_table_replaces_the_presets():
+    field = load_perception("field")
+    plan = with_perception(FULL, (load_perception("clean"), load_perception("rellis"), field))
+    assert [p.name for p in plan.perceptions()] == ["clean", "rellis", "field"] and plan.sweep_name() == "field"
+    clean_only = with_perception(QUICK, (load_perception("clean"),))
+    assert clean_only.presets == ("clean",) and clean_only.sweep_base is None and clean_only.classes is None
 
 
 def test_a_table_of_one_class_has_one_order_and_no_other_profile(small):

@@ -922,7 +922,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
 
     from terrapref.extras import check
     from terrapref.report.study import run_study
-    from terrapref.report.study_plan import FULL, QUICK, for_table
+    from terrapref.report.study_plan import FULL, QUICK, for_table, with_perception
 
     check("cnn", "terrapref study (its end-to-end CNN baseline)")  # before the stages that come before the CNN's
     plan = QUICK if args.quick else FULL
@@ -947,8 +947,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
     else:
         plan = replace(plan, follow_up=args.follow_up)
         if perceptions is not None:
-            active = [p for p in perceptions if p.active]
-            plan = replace(plan, presets=("clean", *active), sweep_base=active[-1] if active else None)
+            plan = with_perception(plan, perceptions)
     t0 = time.perf_counter()
     path = run_study(args.out, plan, engine, log=lambda m: print(m, flush=True))
     print(f"wrote {path} ({time.perf_counter() - t0:.0f} s)")

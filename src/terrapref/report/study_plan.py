@@ -130,10 +130,16 @@ def for_table(plan: StudyPlan, table: ClassTable, course: str | Path | None = No
     default = PreferenceProfile.default(table).order
     n = min(len(plan.orders), math.factorial(len(table.terrain_names)))
     drawn = [o for o in parse_orders(f"random:{n}", table) if o != default]
+    plan = replace(plan, classes=table, course=None if course is None else str(course), follow_up=follow_up, alt=reversed_order(table),
+                   orders=(default, *drawn[: n - 1]), courses=tuple(f"gen:{6000 + i}" for i in range(len(plan.layouts))))
+    return with_perception(plan, perceptions)
+
+
+def with_perception(plan: StudyPlan, perceptions: tuple[PerceptionModel, ...]) -> StudyPlan:
+    """The plan with clean and the active ones of ``perceptions`` as its presets, the last of them
+    swept part by part (none: no sweep)."""
     active = [p for p in perceptions if p.active]
-    return replace(plan, classes=table, course=None if course is None else str(course), follow_up=follow_up, alt=reversed_order(table), orders=(default, *drawn[: n - 1]),
-                   courses=tuple(f"gen:{6000 + i}" for i in range(len(plan.layouts))),
-                   presets=("clean", *active), sweep_base=active[-1] if active else None)
+    return replace(plan, presets=("clean", *active), sweep_base=active[-1] if active else None)
 
 
 FULL = StudyPlan()
