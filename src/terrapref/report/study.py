@@ -163,8 +163,6 @@ def _train_cnn(job: TrainJob) -> int:
     from terrapref.baselines.cnn import CnnConfig, save_cnn, train_cnn
     from terrapref.tensorfile import read_tensor_file
 
-    from terrapref.terrain import ClassTable
-
     n = _frames_for(job.minutes)
     tensors, meta = read_tensor_file(job.data, "terrapref-cnn-samples/1", "no such file", "not CNN samples")
     images, paths, labels = (tensors[k][:n] for k in ("images", "paths", "labels"))
