@@ -306,6 +306,8 @@ def test_a_class_table_of_ones_own_reads_course_names_and_perception():
     env.step(env.action_space.sample())
     with pytest.raises(ValueError, match="differs from the first course's"):
         env.reset(options={"scenario": _scenario()})  # a scenario of the default table
+    with pytest.raises(ValueError, match="differs from classes="):
+        OffRoadNavEnv(_scenario(), classes=str(examples / "small.yaml"))
 
 
 def test_reset_options():

@@ -132,9 +132,102 @@ def test_cli_study_refuses_a_missing_table(tmp_path, capsys):
     assert not out.exists()
 
 
-def test_cli_study_refuses_a_perception_named_twice(tmp_path, capsys):
-    assert main(["study", "--quick", "--out", str(tmp_path / "s"), "--perception", "field,field"]) == 2
-    assert "--perception" in capsys.readouterr().err
+@pytest.mark.parametrize("value", ["field,field", ","])
+def test_cli_study_refuses_a_perception_named_twice_or_none(tmp_path, capsys, value):
+    out = tmp_path / "s"
+    assert main(["study", "--quick", "--out", str(out), "--perception", value]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --perception")
+    assert not out.exists()
+
+
+def test_cli_study_refuses_a_table_with_nothing_to_choose_between(tmp_path, capsys):
+    table = tmp_path / "trees.yaml"
+    table.write_text("format: terrapref-classes/1\nbackground: grass\nlethal: [tree]\nclasses:\n"
+                     "  - {id: 0, name: grass, color: [0, 100, 0]}\n  - {id: 1, name: tree, color: [0, 50, 0]}\n")
+    out = tmp_path / "s"
+    for command in (["study", "--quick"], ["select"]):
+        assert main([*command, "--out", str(out), "--classes", str(table)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [f"error: {table}: classes: the class table has no feature class (neither background nor lethal) to teach"]
+        assert not out.exists()
+
+
+@pytest.fixture
+def planned(monkeypatch):
+    """The plan ``terrapref study`` would run (run_study replaced by a recorder)."""
+    import terrapref.report.study as study
+
+    seen: list[StudyPlan] = []
+
+    def record(out, plan, engine=None, log=print):
+        seen.append(plan)
+        return Path(out) / "STUDY.md"
+
+    monkeypatch.setattr(study, "run_study", record)
+    return seen
+
+
+def test_cli_study_builds_the_tables_plan_from_its_flags(planned, tmp_path, example):
+    field = EXAMPLES / "rellis3d_field.yaml"
+    assert main(["study", "--quick", "--out", str(tmp_path / "s"), "--classes", str(EXAMPLES / "rellis3d.yaml"),
+                 "--perception", f"clean,{field}", "--follow-up", "--seeds", "2"]) == 0
+    plan = planned[0]
+    assert plan.classes.same_classes(example) and plan.follow_up and plan.seeds == 2
+    assert plan.orders == for_table(QUICK, example).orders and plan.alt == reversed_order(example)
+    assert [p.name for p in plan.perceptions()] == ["clean", str(field)] and plan.sweep_name() == str(field)
+
+
+def test_cli_study_of_the_packaged_table_file_is_the_default_study(planned, tmp_path):
+    from terrapref.terrain.classes import default_classes
+
+    packaged = Path(__file__).resolve().parent.parent / "src" / "terrapref" / "data" / "classes.yaml"
+    assert load_classes(packaged) == default_classes()
+    assert main(["study", "--quick", "--out", str(tmp_path / "a"), "--classes", str(packaged)]) == 0
+    assert main(["study", "--quick", "--out", str(tmp_path / "b"), "--perception", "clean"]) == 0
+    assert planned[0] == QUICK
+    assert planned[1] == replace(QUICK, presets=("clean",), sweep_base=None)
+
+
+def test_a_plan_of_another_tables_orders_is_refused(example):
+    with pytest.raises(ValueError, match="for_table"):
+        StudyPlan(classes=example)  # the default table's orders
+
+
+def test_a_table_without_lethal_classes_has_a_plan(tmp_path):
+    table_file = tmp_path / "soft.yaml"
+    table_file.write_text("format: terrapref-classes/1\nbackground: grass\nlethal: []\nclasses:\n"
+                          "  - {id: 0, name: grass, color: [0, 100, 0]}\n  - {id: 1, name: mud, color: [90, 60, 30]}\n"
+                          "  - {id: 2, name: sand, color: [200, 190, 120]}\n")
+    table = load_classes(table_file)
+    plan = for_table(QUICK, table)
+    assert plan.alt == tuple(reversed(PreferenceProfile.default(table).order)) and len(plan.orders) == 2
+    assert hand_costs(table) == dict(zip(PreferenceProfile.default(table).order, (2.0, 4.0)))
+
+
+def test_the_choice_table_counts_a_lethal_class_in_the_lethal_column(example, tmp_path):
+    from test_study import _run, _zone
+
+    plan = _table_plan(example)
+    best = plan.orders[0][0]
+    runs, trained = _fabricated(replace(plan, orders=plan.orders[:2]))
+    runs = [r for r in runs if r.tag.study in ("baselines", "efficiency") and not (r.tag.study == "baselines" and r.tag.method == "C")]
+    runs.append(_run("baselines", "C", 0, [_zone("1", best, "tree"), _zone("2", best, best), _zone("3", "avoid", "avoid")]))
+    text = write_study(tmp_path, plan, trained, runs, {"all": 1.0}).read_text()
+    row = next(line for line in text.splitlines() if line.startswith("| C, default profile |"))
+    cells = dict(zip((*plan.orders[0], "avoid"), row.strip("|").split("|")[1:]))
+    assert cells["lethal"].strip() == "50%" and cells[best].strip() == "50%"
+
+
+def test_data_budgets_beyond_the_demonstrations_are_not_reported(example, tmp_path):
+    from test_study import _trained
+
+    plan = replace(_table_plan(example), minutes=(0.5, 2.0, 5.0))
+    runs, trained = _fabricated(replace(plan, orders=plan.orders[:2]))
+    trained = [replace(t, samples=1800) if t.job.study == "baselines" else t for t in trained]  # 3 minutes of demonstrations
+    text = write_study(tmp_path, plan, trained, [r for r in runs if r.tag.study in ("baselines", "efficiency")], {"all": 1.0}).read_text()
+    assert "| 2 (1200 frames) |" in text and "| all, 3.0 (1800 frames) |" in text
+    assert "| 5 (" not in text
 
 
 # --- one tiny study of a 3-class table, end to end -------------------------------------------------
@@ -162,7 +255,7 @@ def test_a_tables_study_drives_its_own_course_and_layouts(tiny_table_study):
     assert not _select(runs, study="profile") and not _select(runs, study="profile_cross")
     # every baseline drove the table's layout, and its zones name the table's classes
     assert {r.tag.method for r in _select(runs, study="baselines")} == {"C", "linear", "cnn", HAND_COST, PURE_PURSUIT, EXPERT}
-    names = set(small.names) | {"avoid", "lethal", "none", "mixed"}
+    names = set(small.names) | {"avoid"}
     assert all(z.expect in names for r in runs for z in r.metrics.zones)
     # the sweep varies only what field:pose has: the pose
     assert {r.tag.kind for r in _select(runs, study="robustness", level=1.0)} == {"pose"}

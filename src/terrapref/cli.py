@@ -440,6 +440,15 @@ def _class_table(args: argparse.Namespace):
     return args.class_table
 
 
+def _teachable_table(args: argparse.Namespace):
+    """``--classes``' table for a command that teaches it (None: the default), refused when it has
+    no feature class to choose between."""
+    table = _class_table(args)
+    if table is not None and not table.terrain_names:
+        raise UserError(str(args.classes), "the class table has no feature class (neither background nor lethal) to teach", field="classes")
+    return table
+
+
 def _check_table(args: argparse.Namespace, found, source: str | Path) -> None:
     """Refuse a file made for another class table than ``--classes`` gives (the default table
     when the flag is not given), naming both."""
@@ -923,6 +932,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
     from terrapref.extras import check
     from terrapref.report.study import run_study
     from terrapref.report.study_plan import FULL, QUICK, for_table, with_perception
+    from terrapref.terrain import default_classes
 
     check("cnn", "terrapref study (its end-to-end CNN baseline)")  # before the stages that come before the CNN's
     plan = QUICK if args.quick else FULL
@@ -930,16 +940,18 @@ def _cmd_study(args: argparse.Namespace) -> int:
         if args.seeds < 1:
             raise UserError("--seeds", "must be >= 1")
         plan = replace(plan, seeds=args.seeds)
-    _check_output(args.out, "--out", folder=True)
-    engine = _engine(args)
     if args.recipe is not None:
         from terrapref.recipes import recipe_named
 
         plan = replace(plan, recipe=recipe_named(args.recipe).name)
-    table = _class_table(args)
+    table = _teachable_table(args)
+    if table is not None and table.same_classes(default_classes()) and table.profile == default_classes().profile:
+        table = None  # the packaged table, given by its file: the default plan
     perceptions = None
     if args.perception is not None:
         perceptions = tuple(_perception(n, classes=table) for n in (x.strip() for x in args.perception.split(",")) if n)
+        if not perceptions:
+            raise UserError("--perception", f"names no perception model: {args.perception!r}")
         if len({p.name for p in perceptions}) != len(perceptions):
             raise UserError("--perception", f"names a perception model twice: {args.perception!r}")
     if table is not None:
@@ -948,6 +960,8 @@ def _cmd_study(args: argparse.Namespace) -> int:
         plan = replace(plan, follow_up=args.follow_up)
         if perceptions is not None:
             plan = with_perception(plan, perceptions)
+    _check_output(args.out, "--out", folder=True)
+    engine = _engine(args)
     t0 = time.perf_counter()
     path = run_study(args.out, plan, engine, log=lambda m: print(m, flush=True))
     print(f"wrote {path} ({time.perf_counter() - t0:.0f} s)")
@@ -967,7 +981,7 @@ def _cmd_select(args: argparse.Namespace) -> int:
         raise UserError("--recipes", f"expected distinct recipe names separated by commas, got {args.recipes!r}")
     for n in names:
         recipe_named(n, "--recipes")
-    table = _class_table(args)
+    table = _teachable_table(args)
     try:
         orders = parse_orders(args.orders, table)
     except ValueError as exc:
@@ -1261,7 +1275,7 @@ def _study_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--recipe", metavar="NAME", help="the recipe section 6 teaches every order and style with (default: teach)")
     _add_classes_arg(p)
     p.add_argument("--perception", metavar="LIST",
-                   help="comma-separated perception presets or files the taught models also drive under; the last is swept part by part "
+                   help="comma-separated perception presets or files the taught models also drive under; the last that perturbs anything is swept part by part "
                         "(default: clean,rellis,field, or clean,field with --quick; with --classes: clean, unless files for the table are given)")
     p.add_argument("--follow-up", action="store_true",
                    help="each teaching drive is followed by a drive of the course of what it left open, and the model learns from both")

@@ -447,4 +447,4 @@ def _plan_dict(plan: StudyPlan) -> dict:
             "horizons": list(plan.horizons), "widths": list(plan.widths),
             "scenarios": plan.scenarios(), "orders": [list(o) for o in plan.orders], "styles": list(plan.styles), "layouts": list(plan.layouts),
             "recipe": plan.recipe, "classes": plan.classes.to_dict() if plan.classes is not None else None,
-            "course": plan.demo_course(), "follow_up": plan.follow_up, "alt": list(plan.alt) if plan.alt else None}
+            "course": plan.course, "follow_up": plan.follow_up, "alt": list(plan.alt) if plan.alt else None}

@@ -79,6 +79,13 @@ class StudyPlan:
     follow_up: bool = False
     alt: tuple[str, ...] | None = ("rock", "mud", "water", "non_traversable")
 
+    def __post_init__(self) -> None:
+        columns = sorted(self.table.feature_names)
+        for order in (*self.orders, *((self.alt,) if self.alt else ())):
+            if sorted(order) != columns:
+                raise ValueError(f"order {' > '.join(order)} is not an order of the class table's columns ({', '.join(columns)}); "
+                                 "a table of one's own takes its plan from for_table")
+
     @property
     def table(self) -> ClassTable:
         return self.classes or default_classes()

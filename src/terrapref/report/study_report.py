@@ -151,7 +151,8 @@ class _Baselines:
 
 @dataclass(frozen=True)
 class _Efficiency:
-    """Section 2's curves: per learned method, (minutes, mean, std) at each budget, the last all of it."""
+    """Section 2's curves: per learned method, (minutes, mean, std) at each budget shorter than the
+    demonstrations (a longer one is all of them), the last all of it."""
 
     full_minutes: float  # all of a seed's demonstrations [min]
     points: tuple[float | str, ...]  # the budgets [min], then ALL
@@ -160,7 +161,7 @@ class _Efficiency:
     @classmethod
     def of(cls, plan: StudyPlan, trained: Sequence[TrainedModel], runs: list[StudyRun], base: _Baselines) -> _Efficiency:
         full_minutes = _demo_minutes(trained)
-        points = (*plan.minutes, ALL)
+        points = (*(m for m in plan.minutes if not m >= full_minutes), ALL)
         curves = {m: [(full_minutes, *base.cells[m][1:]) if mins == ALL else (mins, *_cell(_select(runs, study="efficiency", method=m, minutes=mins))[1:])
                       for mins in points] for m in CURVES}
         return cls(full_minutes, points, curves)
@@ -593,10 +594,10 @@ def _disagreement_table(runs: list[StudyRun]) -> list[str]:
 
 def _choice_table(plan: StudyPlan, runs: list[StudyRun]) -> list[str]:
     """How often each class was chosen in `best` zones, by which profile the model learned."""
-    columns = (*plan.default_order(), "avoid")
+    columns = (*plan.default_order(), "avoid")  # a lethal class's choice counts in the lethal column
     rows = ["| model | " + " | ".join(columns) + " |", "|---|" + "---|" * len(columns)]
     for label, rr in (("default profile", _select(runs, study="baselines", method="C")), ("other profile", _select(runs, study="profile", method="C"))):
-        choices = [z.choice for r in rr for z in r.metrics.zones if z.expect != "avoid"]
+        choices = [plan.table.column_of(z.choice) for r in rr for z in r.metrics.zones if z.expect != "avoid"]
         n = max(len(choices), 1)
         rows.append(f"| C, {label} | " + " | ".join(f"{choices.count(c) / n:.0%}" for c in columns) + " |")
     return ["Choices in the zones where a patch is expected (share of zones):", "", *rows, ""]

@@ -219,6 +219,8 @@ class OffRoadNavEnv(gym.Env):
         first = self._simulation(self.courses[0] if self.courses[0] != RANDOM_COURSE else "gen:0")
         self.sim = first
         self.classes = first.scenario.classes
+        if self._table is not None and not self.classes.same_classes(self._table):
+            raise ValueError(f"scenario {first.scenario.name!r}: its class table differs from classes=; one env needs one table")
         self.profile = _profile(config.profile, self.classes)
         self._terrain_cost = self._terrain_costs()
         self._class_ids = np.array([c.id for c in self.classes.classes], dtype=np.uint8)
