@@ -315,6 +315,30 @@ def test_demonstrations_kept_in_memory_train_what_their_recordings_train(tmp_pat
     assert out.recordings == [] and out.model.exists() and not (tmp_path / "job" / "demo_course_0_disturbed").exists()
 
 
+def test_a_cache_featurises_each_recording_once_into_the_same_dataset(tmp_path, monkeypatch):
+    """build_dataset's cache (the follow-up's question and then training): each recording is
+    featurised once per features, and the dataset is the one built without it."""
+    import terrapref.dataset as dataset_module
+    from terrapref.recipes import TEACH, RecipeSetup, demonstrate
+
+    features = TEACH.features()
+    recordings = demonstrate(Recipe("two", demonstrations=2), tmp_path, RecipeSetup(3, course="demo_course"), write=False)
+    plain, one = build_dataset(recordings, features), build_dataset(recordings[:1], features)
+    calls: list[int] = []
+    featurise = dataset_module.featurize_recording
+    monkeypatch.setattr(dataset_module, "featurize_recording", lambda rec, *a: calls.append(id(rec)) or featurise(rec, *a))
+    cache: dict = {}
+    first = build_dataset(recordings[:1], features, cache=cache)
+    both = build_dataset(recordings, features, cache=cache)
+    assert calls == [id(recordings[0]), id(recordings[1])]  # the first recording was not featurised again
+    assert both.fingerprint == plain.fingerprint and first.fingerprint == one.fingerprint
+    for a, b in ((both.U, plain.U), (both.labels, plain.labels), (both.w, plain.w), (both.source, plain.source), (both.U2, plain.U2)):
+        np.testing.assert_array_equal(a, b)
+    assert both.meta == plain.meta
+    build_dataset(recordings, replace(features, lookahead=None), cache=cache)  # other features: featurised anew
+    assert len(calls) == 4
+
+
 def test_a_recorded_demonstration_of_another_course_is_recorded_again(tmp_path):
     from terrapref.demos.recording import read_recording
     from terrapref.recipes import RecipeSetup, record_demonstrations

@@ -223,8 +223,14 @@ def on_map(poses: np.ndarray, scenario: Scenario) -> np.ndarray:
     return (x >= 0) & (x <= w_m) & (y >= 0) & (y <= h_m)
 
 
-def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: CameraConfig | None = None, progress=None) -> Dataset:
-    """Featurise several recordings into one dataset (they must share classes and profile)."""
+def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: CameraConfig | None = None, progress=None,
+                  cache: dict | None = None) -> Dataset:
+    """Featurise several recordings into one dataset (they must share classes and profile).
+
+    ``cache`` keeps each recording's features (keyed by the recording object, the features and
+    the camera), so that a later dataset of some of the same recordings, while they are alive,
+    featurises only the others: the same arrays, computed once.
+    """
     if not recordings:
         raise UserError("featurize", "no recordings given")
     first = recordings[0]
@@ -239,7 +245,12 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
     features = replace(features, feature_classes=first.classes.feature_names)
     parts = []
     for k, rec in enumerate(recordings):
-        parts.append(featurize_recording(rec, features, camera))
+        key = (id(rec), features, camera)
+        if cache is None or key not in cache:
+            part = featurize_recording(rec, features, camera)
+            if cache is not None:
+                cache[key] = part
+        parts.append(part if cache is None else cache[key])
         if progress is not None:
             progress(k + 1, len(recordings))
     U = np.concatenate([p[0] for p in parts])

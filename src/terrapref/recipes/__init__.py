@@ -232,22 +232,25 @@ def demonstrate(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Ca
     return recordings
 
 
-def open_pairs(recordings: list[Recording], recipe: Recipe) -> list[tuple[str, str]]:
+def open_pairs(recordings: list[Recording], recipe: Recipe, features: FeatureConfig | None = None, cache: dict | None = None) -> list[tuple[str, str]]:
     """The pairs of classes (terrain columns, the background among them) that ``recordings``
-    leave unidentified, featurised and steadied as ``recipe`` trains (the report ``inspect`` prints)."""
+    leave unidentified, featurised (with ``recipe.features(features)``; ``cache`` as
+    build_dataset keeps it) and steadied as ``recipe`` trains (the report ``inspect`` prints)."""
     from terrapref.learning.train import identify
 
-    dataset = build_dataset(recordings, recipe.features())
+    dataset = build_dataset(recordings, recipe.features(features), cache=cache)
     return [(p.first, p.second) for p in identify(dataset, steady=recipe.train.data.steady_labels).unidentified()]
 
 
-def _follow_up(recipe: Recipe, recordings: list[Recording], workdir: Path, setup: RecipeSetup, log: Callable[[str], None] | None) -> list[Recording]:
+def _follow_up(recipe: Recipe, recordings: list[Recording], workdir: Path, setup: RecipeSetup, log: Callable[[str], None] | None,
+               cache: dict | None = None) -> list[Recording]:
     """The synthetic driver's drive of the follow-up course of what ``recordings`` left open
-    (written as ``workdir/<course>_more.yaml``); none when they identify every pair."""
+    (written as ``workdir/<course>_more.yaml``); none when they identify every pair. ``cache``
+    keeps the recordings' features for training (build_dataset)."""
     from terrapref.fileio import write_text_atomic
     from terrapref.scenario.teaching import follow_up_course
 
-    pairs = open_pairs(recordings, recipe)
+    pairs = open_pairs(recordings, recipe, setup.features, cache)
     if not pairs:
         return []
     scenario = resolve_scenario(str(setup.course), setup.classes)
@@ -283,14 +286,15 @@ def run_recipe(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Cal
     features = recipe.features(setup.features)
     seed = setup.seed
     recordings = demonstrate(recipe, workdir, replace(setup, profile=profile, course=course, features=features), log, write=write_recordings)
+    cache: dict = {}  # the recordings' features, computed once for the follow-up's question, training and retraining
     if setup.follow_up:
-        recordings += _follow_up(recipe, recordings, workdir, replace(setup, profile=profile, course=course, features=features), log)
+        recordings += _follow_up(recipe, recordings, workdir, replace(setup, profile=profile, course=course, features=features), log, cache)
     paths = [r.path for r in recordings if not r.in_memory]
     demo_s = sum(r.duration_s for r in recordings)
     corr_s = 0.0
     train_cfg = replace(recipe.train, seed=seed)
     model = own / "model.safetensors"
-    result = train_and_save(build_dataset(recordings, features), model, train_cfg, stages=recipe.stages, recipe=recipe.name, options=RunOptions(checkpoints=False))
+    result = train_and_save(build_dataset(recordings, features, cache=cache), model, train_cfg, stages=recipe.stages, recipe=recipe.name, options=RunOptions(checkpoints=False))
     if recipe.corrections:  # the planner drives the course; only then is a simulation needed here
         camera, sim_cfg = CameraConfig(), SimConfig()
         expert_cfg = ExpertConfig.styled(setup.style, profile.order)
@@ -305,7 +309,7 @@ def run_recipe(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Cal
         corr_s += run.duration_s
         recordings.append(read_recording(out))
         paths.append(out)
-        result = train_and_save(build_dataset(recordings, features), model, train_cfg, stages=recipe.stages, recipe=recipe.name, options=RunOptions(checkpoints=False))
+        result = train_and_save(build_dataset(recordings, features, cache=cache), model, train_cfg, stages=recipe.stages, recipe=recipe.name, options=RunOptions(checkpoints=False))
         if log:
             log(f"correction session {r + 1}/{recipe.corrections}: {len(recordings[-1])} frames, retrained")
     return RecipeOutput(model, paths, result, demo_s / 60.0, corr_s / 60.0)
