@@ -228,8 +228,8 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
     """Featurise several recordings into one dataset (they must share classes and profile).
 
     ``cache`` keeps each recording's features (keyed by the recording object, the features and
-    the camera), so that a later dataset of some of the same recordings, while they are alive,
-    featurises only the others: the same arrays, computed once.
+    the camera), so that a later dataset of some of the same recordings featurises only the
+    others: the same arrays, computed once.
     """
     if not recordings:
         raise UserError("featurize", "no recordings given")
@@ -249,8 +249,8 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
         if cache is None or key not in cache:
             part = featurize_recording(rec, features, camera)
             if cache is not None:
-                cache[key] = part
-        parts.append(part if cache is None else cache[key])
+                cache[key] = (rec, part)  # the recording held with its features: its id is not reused while the cache lives
+        parts.append(part if cache is None else cache[key][1])
         if progress is not None:
             progress(k + 1, len(recordings))
     U = np.concatenate([p[0] for p in parts])
