@@ -189,6 +189,17 @@ def test_cli_study_of_the_packaged_table_file_is_the_default_study(planned, tmp_
     assert planned[1] == replace(QUICK, presets=("clean",), sweep_base=None)
 
 
+def test_each_taught_order_has_a_work_folder_of_its_own(example, tmp_path):
+    from terrapref.report.study import teach_jobs
+
+    plan = for_table(QUICK, example)
+    first = plan.orders[0]
+    same_start = (*first[:3], *reversed(first[3:-1]), first[-1])  # the same three classes first
+    jobs = teach_jobs(replace(plan, orders=(first, same_start)), tmp_path)
+    assert len({j.workdir for j in jobs}) == len(jobs) == 3  # two orders, and the other style of the first
+    assert {Path(j.workdir).name for j in teach_jobs(QUICK, tmp_path)} == {"mu_ro_wa_default_s0", "mu_ro_wa_wide_s0", "ro_mu_wa_default_s0"}
+
+
 def test_a_plan_of_another_tables_orders_is_refused(example):
     with pytest.raises(ValueError, match="for_table"):
         StudyPlan(classes=example)  # the default table's orders

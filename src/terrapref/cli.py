@@ -912,10 +912,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     if not names or len(set(names)) != len(names):
         raise UserError("--recipes", f"expected distinct recipe names separated by commas, got {args.recipes!r}")
     recipes = tuple(recipe_named(n, "--recipes") for n in names)
-    specs = [n.strip() for n in args.perception.split(",") if n.strip()]
-    perceptions = tuple(_perception(n) for n in specs)
-    if len({p.name for p in perceptions}) != len(perceptions):
-        raise UserError("--perception", f"names a perception model twice: {args.perception!r}")
+    perceptions = _perception_list(args.perception)
     _check_output(args.out, "--out", folder=True)
     engine = _engine(args)
     t0 = time.perf_counter()
@@ -949,11 +946,9 @@ def _cmd_study(args: argparse.Namespace) -> int:
         table = None  # the packaged table, given by its file: the default plan
     perceptions = None
     if args.perception is not None:
-        perceptions = tuple(_perception(n, classes=table) for n in (x.strip() for x in args.perception.split(",")) if n)
+        perceptions = _perception_list(args.perception, table)
         if not perceptions:
             raise UserError("--perception", f"names no perception model: {args.perception!r}")
-        if len({p.name for p in perceptions}) != len(perceptions):
-            raise UserError("--perception", f"names a perception model twice: {args.perception!r}")
     if table is not None:
         plan = for_table(plan, table, perceptions=perceptions or (), follow_up=args.follow_up)
     else:
@@ -995,9 +990,7 @@ def _cmd_select(args: argparse.Namespace) -> int:
         if value < low:
             raise UserError(flag, f"must be an integer >= {low}, got {value}")
     _check_output(args.out, "--out", folder=True)
-    perceptions = tuple(_perception(n, classes=table) for n in (x.strip() for x in (args.perception or "clean").split(",")) if n)
-    if len({p.name for p in perceptions}) != len(perceptions):
-        raise UserError("--perception", f"names a perception model twice: {args.perception!r}")
+    perceptions = _perception_list(args.perception or "clean", table)
     if args.taught_under == "same" and len(perceptions) != 1:
         raise UserError("--taught-under", "'same' needs exactly one --perception model")
     taught_under = perceptions[0] if args.taught_under == "same" else _perception(args.taught_under, "--taught-under", table)
@@ -1021,13 +1014,9 @@ def _selection_course(args: argparse.Namespace, table) -> str | None:
         return str(Path(args.course).resolve()) if Path(args.course).exists() else args.course
     if table is None:
         return None
-    from terrapref.fileio import write_text_atomic
-    from terrapref.scenario.teaching import teaching_course
+    from terrapref.scenario.teaching import write_teaching_course
 
-    Path(args.out).mkdir(parents=True, exist_ok=True)
-    path = Path(args.out).resolve() / "teaching_course.yaml"
-    write_text_atomic(path, teaching_course(table).to_yaml())
-    return str(path)
+    return str(write_teaching_course(args.out, table))
 
 
 def _perception(spec: str | None, flag: str = "--perception", classes=None):
@@ -1042,6 +1031,15 @@ def _perception(spec: str | None, flag: str = "--perception", classes=None):
         if exc.source == "--perception" and flag != "--perception":
             raise UserError(flag, exc.problems) from None
         raise
+
+
+def _perception_list(text: str, classes=None) -> tuple:
+    """The perception models of a comma-separated ``--perception`` list (blank items skipped),
+    each checked before any work; one named twice is refused."""
+    models = tuple(_perception(n, classes=classes) for n in (x.strip() for x in text.split(",")) if n)
+    if len({p.name for p in models}) != len(models):
+        raise UserError("--perception", f"names a perception model twice: {text!r}")
+    return models
 
 
 SCENARIO_HELP = "a packaged scenario's name (terrapref scenarios lists them), gen:N for generated layout N, or a scenario file"

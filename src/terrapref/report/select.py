@@ -130,9 +130,15 @@ def job_folder(out: Path, order: Sequence[str], seed: int, taught_under: Percept
     each recipe's model in ``<recipe>/model.safetensors`` (drives recorded under a perception
     model in a folder of their own). ``lethal``: the order's lethal column, left out of the name."""
     tail = f"_{perception_tag(taught_under)}" if taught_under is not None and taught_under.active else ""
+    return out / "work" / f"{order_tag(order, lethal)}_s{seed}{tail}"
+
+
+def order_tag(order: Sequence[str], lethal: str | None = "non_traversable") -> str:
+    """An order in a folder name: the first two letters of each class a driver chooses between
+    (``mu_ro_wa``), or the whole names where two would share them; the lethal column left out."""
     chosen = _chosen(order, lethal)
     short = [c[:2] for c in chosen]
-    return out / "work" / f"{'_'.join(short if len(set(short)) == len(short) else chosen)}_s{seed}{tail}"
+    return "_".join(short if len(set(short)) == len(short) else chosen)
 
 
 def _chosen(order: Sequence[str], lethal: str | None = "non_traversable") -> Sequence[str]:

@@ -222,9 +222,11 @@ def _teach_recipe(job: TeachJob) -> Recipe:
 
 def teach_jobs(plan: StudyPlan, work: Path) -> list[TeachJob]:
     """The teaching study's models: every order under the default style, every style under the default order."""
-    default = plan.orders[0]
+    from terrapref.report.select import order_tag
+
+    default, lethal = plan.orders[0], plan.table.lethal_column
     combos = [(o, "default") for o in plan.orders] + [(default, st) for st in plan.styles if st != "default"]
-    return [TeachJob(s, tuple(o), st, plan.epochs, plan.recipe, str(work / "teach" / f"{'_'.join(c[:2] for c in o[:3])}_{st}_s{s}"),
+    return [TeachJob(s, tuple(o), st, plan.epochs, plan.recipe, str(work / "teach" / f"{order_tag(o, lethal)}_{st}_s{s}"),
                      plan.course, plan.follow_up, plan.classes)
             for s in range(plan.seeds) for o, st in combos]
 
@@ -264,7 +266,9 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, engine: Engine | None
     work = out / "work"
     work.mkdir(parents=True, exist_ok=True)
     if plan.classes is not None and plan.course is None:
-        plan = replace(plan, course=str(_write_teaching_course(out, plan.classes)))
+        from terrapref.scenario.teaching import write_teaching_course
+
+        plan = replace(plan, course=str(write_teaching_course(out, plan.classes)))
     ws = _Workspace(plan, work, engine or Engine(), log)
     timings: dict[str, float] = {}
     with _timed(timings, "demonstrations and featurisation"):
@@ -280,15 +284,6 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, engine: Engine | None
     study = {"plan": _plan_dict(plan), "trained": [t.to_dict() for t in [*trained, *taught]], "runs": [r.to_dict() for r in runs]}
     write_text_atomic(out / "study.json", json.dumps(study, indent=1, default=float))
     return write_study(out, plan, trained, runs, timings, report_started=report_started)
-
-
-def _write_teaching_course(out: Path, table: ClassTable) -> Path:
-    """The table's teaching course, written into ``out`` (the course the study demonstrates)."""
-    from terrapref.scenario.teaching import teaching_course
-
-    path = out.resolve() / "teaching_course.yaml"
-    write_text_atomic(path, teaching_course(table).to_yaml())
-    return path
 
 
 def _demonstrate(ws: _Workspace) -> None:

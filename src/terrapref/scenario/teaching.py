@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 from terrapref.scenario.builder import CourseBuilder, trail
 from terrapref.terrain import ClassTable
@@ -225,6 +226,17 @@ def teaching_course(classes: ClassTable, name: str = "teaching_course", full: bo
     """The teaching course of ``classes`` (see the module docstring)."""
     full = fits(classes) if full is None else full
     return build_course(classes, situations(classes, full), name, description(classes, full))
+
+
+def write_teaching_course(folder: str | Path, classes: ClassTable) -> Path:
+    """The teaching course of ``classes`` written as ``folder/teaching_course.yaml`` (the folder
+    made if need be), for the commands that demonstrate it; its absolute path."""
+    from terrapref.fileio import write_text_atomic
+
+    path = Path(folder).resolve() / "teaching_course.yaml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(path, teaching_course(classes).to_yaml())
+    return path
 
 
 def description(classes: ClassTable, full: bool) -> str:
