@@ -372,6 +372,40 @@ def test_a_model_file_with_a_corridor_utility_drives_by_the_offset_stage(tmp_pat
         assert exc.value.problems[0].field == field
 
 
+class _CountingFeaturizer:
+    """A featurizer that counts its calls."""
+
+    def __init__(self, inner: UtilityFeaturizer) -> None:
+        self.inner, self.calls = inner, 0
+
+    def __call__(self, *args, **kwargs):
+        self.calls += 1
+        return self.inner(*args, **kwargs)
+
+
+def test_the_offset_stage_leaves_u_and_c_until_a_decision_reports_them(tmp_path, camera):
+    config = ClassifierConfig(hidden=8, skip=True)
+    model = load_model(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE)))
+    scenario = _scenario([MUD])
+    image = _seen_from(scenario, camera, (5.0, 10.0, 0.0)).image
+    planners = {how: Planner(model) for how in ("view", "array")} | {"argmax": Planner(model, stage="argmax")}
+    for planner in planners.values():
+        planner.set_path(scenario.waypoints)
+        planner.featurizer = _CountingFeaturizer(planner.featurizer)
+    lazy = planners["view"].decide(SegmentationView.of(image), (5.0, 10.0, 0.0))
+    assert planners["view"].featurizer.calls == 0  # the offset stage steered without them
+    now = planners["array"].decide(image, (5.0, 10.0, 0.0))  # an array the caller may reuse: read at once
+    assert planners["array"].featurizer.calls == 1
+    argmax = planners["argmax"].decide(SegmentationView.of(image), (5.0, 10.0, 0.0))  # a stage that steers by F_t
+    assert planners["argmax"].featurizer.calls == 1
+    assert lazy.command == now.command and lazy.index == now.index and lazy.progress_s == now.progress_s
+    for a, b in ((lazy, now), (lazy, argmax)):
+        np.testing.assert_array_equal(a.probs, b.probs)
+        np.testing.assert_array_equal(a.U, b.U)
+    assert lazy.U[:, :K].sum() > 0  # the mud is in view
+    assert planners["view"].featurizer.calls == 1  # computed once, when first read
+
+
 def _corridor_dataset(n: int = 40) -> Dataset:
     rng = np.random.default_rng(2)
     features = FeatureConfig(corridor=CorridorConfig())

@@ -218,6 +218,7 @@ def test_planner_decides_without_the_world_map(models, course, monkeypatch):
         raise AssertionError("the planner read the world map")
 
     monkeypatch.setattr(WorldMap, "class_at", no_map)
+    monkeypatch.setattr(WorldMap, "class_at_point", no_map)
     monkeypatch.setattr(WorldMap, "cells_of", no_map)
     monkeypatch.setattr(SegmentationRenderer, "render", no_map)
     monkeypatch.setattr(SegmentationRenderer, "pixels", no_map)

@@ -7,8 +7,9 @@ It never reads the world map.
 
 from __future__ import annotations
 
+import functools
 import math
-from dataclasses import dataclass
+from collections.abc import Callable
 
 import numpy as np
 
@@ -25,23 +26,42 @@ from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Command, Pose
 
 
-@dataclass(frozen=True)
 class Decision:
     """One planning step.
 
     Attributes:
         index: chosen trajectory (steered continuously, the nearest one).
         command: its (v [m/s], w [rad/s]).
+        progress_s: the vehicle's progress along the path [m].
         probs: F_t, shape (m,).
         U: utility features, shape (m, K + 1).
-        progress_s: the vehicle's progress along the path [m].
+
+    When the driving stage steers without F_t (the offset stage), U and F_t are computed when
+    first read, from the frame's view, pose and path: the same values, and a control loop that
+    does not report them does not wait for C.
     """
 
-    index: int
-    command: Command
-    probs: np.ndarray
-    U: np.ndarray
-    progress_s: float
+    __slots__ = ("index", "command", "progress_s", "_outputs", "_pending")
+
+    def __init__(self, index: int, command: Command, progress_s: float, outputs: tuple[np.ndarray, np.ndarray] | None = None,
+                 pending: Callable[[], tuple[np.ndarray, np.ndarray]] | None = None) -> None:
+        if (outputs is None) == (pending is None):
+            raise ValueError("a decision needs either its (probs, U) or the function that computes them")
+        self.index, self.command, self.progress_s = index, command, progress_s
+        self._outputs, self._pending = outputs, pending
+
+    def _computed(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._outputs is None:
+            self._outputs, self._pending = self._pending(), None  # the frame is let go once read
+        return self._outputs
+
+    @property
+    def probs(self) -> np.ndarray:
+        return self._computed()[0]
+
+    @property
+    def U(self) -> np.ndarray:  # noqa: N802 (the paper's name)
+        return self._computed()[1]
 
 
 PATH_AHEAD_M = np.arange(1.0, 9.0)  # where Observation.path_ahead samples the path [m]
@@ -99,17 +119,26 @@ class Planner:
         """Choose a command for one segmentation frame (H, W) uint8 at ``pose``.
 
         ``image`` may be a :class:`SegmentationView`, of which only the pixels the policy reads
-        are rendered (the preference set's, for C).
+        are rendered (the preference set's, for C). Given a view, a stage that steers without
+        F_t leaves U and F_t to be computed when the decision's ``probs`` or ``U`` is first read
+        (a view's pixels do not change); given an array, they are computed now.
         """
         if self.path is None or self.tracker is None:
             raise RuntimeError("call set_path() first")
         view = as_view(image)
         s = self.tracker.update(np.array(pose[:2]))
-        U = self.featurizer(view, pose, self.path, s)
-        ahead = path_ahead(self.path, pose, s) if self.policy.uses_path_ahead else _NO_POINTS
-        probs = self.policy.probabilities(Observation(U, view, ahead))
+        if not self.runner.reads_probs and view is image:  # an array the caller may reuse is read now
+            choice = self.runner.decide(StageInput(None, view, pose, self.path, s))
+            return Decision(choice.index, choice.command, s, pending=functools.partial(self._outputs, view, pose, self.path, s))
+        probs, U = self._outputs(view, pose, self.path, s)
         choice = self.runner.decide(StageInput(probs, view, pose, self.path, s))
-        return Decision(choice.index, choice.command, probs, U, s)
+        return Decision(choice.index, choice.command, s, (probs, U))
+
+    def _outputs(self, view: SegmentationView, pose: Pose, path: ReferencePath, progress_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """(F_t, U) of one frame: the features, then the policy's probabilities."""
+        U = self.featurizer(view, pose, path, progress_s)
+        ahead = path_ahead(path, pose, progress_s) if self.policy.uses_path_ahead else _NO_POINTS
+        return self.policy.probabilities(Observation(U, view, ahead)), U
 
     def costmap(self) -> Costmap | None:
         """The ground seen so far as the driving stage prices it (terrapref.planner.costmap);
@@ -164,6 +193,7 @@ class PlannerDriver:
     def act(self, frame: Frame) -> Command:
         d = self.last = self.planner.decide(frame.view, frame.pose)
         if self.keep:
+            d.probs  # noqa: B018 (computed now, so that the kept decisions do not hold their frames)
             self.decisions.append(d)
             self.frames.append(frame.index)
             if frame.index in self.images:

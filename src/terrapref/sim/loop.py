@@ -125,7 +125,7 @@ class Simulation:
         return Frame(self.frame_index, self.time_s, SegmentationView(self.renderer, pose), pose, self.scenario.waypoints)
 
     def _is_lethal(self, pose: Pose) -> bool:
-        return bool(self._lethal[self.world.class_at(np.array(pose[:2]))])
+        return bool(self._lethal[self.world.class_at_point(pose[0], pose[1])])
 
     def step(self, command: Command) -> Frame:
         """Hold ``command`` for one camera period (several controller ticks) and render the next frame."""

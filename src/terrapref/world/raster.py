@@ -40,6 +40,14 @@ class WorldMap:
         inside = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
         return row, col, inside
 
+    def class_at_point(self, x: float, y: float) -> int:
+        """:meth:`class_at` of one point, in plain floats (the simulator asks it at every tick)."""
+        if not (math.isfinite(x) and math.isfinite(y)):
+            return UNKNOWN
+        col, row = math.floor(x / self.resolution_m), math.floor(y / self.resolution_m)
+        ny, nx = self.raster.shape
+        return int(self.raster[row, col]) if 0 <= col < nx and 0 <= row < ny else UNKNOWN
+
     def class_at(self, xy: np.ndarray) -> np.ndarray:
         """Class id at world points (..., 2) [m]; 255 (unknown) off the map."""
         row, col, inside = self.cells_of(np.asarray(xy, dtype=float))

@@ -42,14 +42,15 @@ class StageInput:
     """One frame as a stage sees it.
 
     Attributes:
-        probs: F_t, C's distribution over the m trajectories (m,).
+        probs: F_t, C's distribution over the m trajectories (m,); None for a stage that does
+            not read it (``StageRunner.reads_probs``).
         view: the segmentation image.
         pose: the vehicle's pose.
         path: the reference path.
         progress_s: the vehicle's progress along it [m].
     """
 
-    probs: np.ndarray
+    probs: np.ndarray | None
     view: SegmentationView
     pose: Pose
     path: ReferencePath
@@ -68,10 +69,12 @@ class StageRunner(abc.ABC):
     """A stage bound to one planner: decides each frame, and forgets what it kept when a run starts.
 
     A stage that keeps a ground map (``keeps_ground_map``) also takes in frames without deciding
-    (:meth:`observe`) and prices what it has seen (:meth:`costmap`).
+    (:meth:`observe`) and prices what it has seen (:meth:`costmap`). A stage that steers without
+    C's F_t (``reads_probs`` False) is given none, and the planner computes it only when asked.
     """
 
     keeps_ground_map: ClassVar[bool] = False
+    reads_probs: ClassVar[bool] = True
 
     @abc.abstractmethod
     def decide(self, frame: StageInput) -> Choice:

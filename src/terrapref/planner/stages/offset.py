@@ -181,6 +181,7 @@ class OffsetSteering(StageRunner):
         self.held = 0.0
 
     keeps_ground_map = True
+    reads_probs = False
 
     def reset(self) -> None:
         """Start a new run: forget the map and the held offset."""
