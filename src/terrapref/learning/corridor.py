@@ -6,10 +6,10 @@ offsets, ``p(d) ~ exp(weights . gated(features)(d))``, is fitted to Gaussian sof
 (``sigma_m``) around that offset by Newton's method with a small ridge, once for each candidate
 near distance; the near distance of the lowest loss is kept.
 
-Float64 NumPy throughout, and the problem is convex: NumPy's exp and sums may differ in their
-last bits between CPUs, the Newton steps do not amplify that, and the weights are kept to 12
-decimals, so the same data give the same weights on any machine (tests/test_corridor.py runs
-the fit under NumPy's and OpenBLAS's CPU settings).
+Float64 NumPy throughout, and the problem is convex: NumPy's exp, its sums and BLAS's matrix
+products may differ in their last bits between CPUs and thread counts, the Newton steps do not
+amplify that, and the weights are kept to 12 decimals, so the same data give the same weights
+on any machine (tests/test_corridor.py runs the fit under NumPy's and OpenBLAS's CPU settings).
 """
 
 from __future__ import annotations
@@ -48,7 +48,8 @@ class CorridorFit:
     Attributes:
         weights: (K + 3,), the columns of :func:`terrapref.features.corridor.gated`.
         near_m: the chosen near distance [m].
-        loss: mean cross-entropy of the soft labels at that near distance.
+        loss: mean cross-entropy of the soft labels at that near distance (to 12 decimals, as
+            the weights).
         losses: the loss at every candidate near distance.
         samples: frames fitted.
     """
@@ -72,7 +73,8 @@ def fit_softmax(X: np.ndarray, Y: np.ndarray, l2: float = 1e-3, iterations: int 
     ``X`` (N, O, P) features, ``Y`` (N, O) soft labels. Newton steps with a backtracking line
     search; the problem is convex, so the result does not depend on where it starts.
     """
-    n, _, p = X.shape
+    n, o, p = X.shape
+    rows = X.reshape(n * o, p)  # every (frame, offset) row: the sums over both as matrix products
 
     def evaluate(theta: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
         z = X @ theta
@@ -80,9 +82,9 @@ def fit_softmax(X: np.ndarray, Y: np.ndarray, l2: float = 1e-3, iterations: int 
         logp = z - np.log(np.exp(z).sum(axis=1, keepdims=True))
         prob = np.exp(logp)
         loss = -(Y * logp).sum() / n + l2 * theta @ theta
-        grad = np.einsum("nop,no->p", X, prob - Y) / n + 2 * l2 * theta
-        mean = np.einsum("nop,no->np", X, prob)
-        hess = (np.einsum("nop,noq,no->pq", X, X, prob) - mean.T @ mean) / n + 2 * l2 * np.eye(p)
+        grad = (prob - Y).reshape(-1) @ rows / n + 2 * l2 * theta
+        mean = np.matmul(prob[:, None, :], X)[:, 0, :]  # (N, P): each frame's expected features
+        hess = ((rows * prob.reshape(-1, 1)).T @ rows - mean.T @ mean) / n + 2 * l2 * np.eye(p)
         return loss, grad, hess
 
     theta = np.zeros(p)
@@ -136,6 +138,8 @@ def fit_corridor(features: np.ndarray, near_m: np.ndarray, intent: np.ndarray, o
         if best is None or loss < best[1] - 1e-9:
             best = (theta, loss, candidate)
     theta, loss, chosen = best
-    # NumPy's exp and sums may differ in the last bits between CPUs; the convex fit does not
-    # amplify them, and rounding leaves the same weights everywhere but at a rounding boundary.
-    return CorridorFit(np.round(theta, WEIGHT_DECIMALS), chosen, loss, losses, int(keep.sum()))
+    # NumPy's exp, sums and matrix products may differ in the last bits between CPUs; the convex
+    # fit does not amplify them, and rounding leaves the same weights (and losses) everywhere but
+    # at a rounding boundary.
+    losses = {near: round(value, WEIGHT_DECIMALS) for near, value in losses.items()}
+    return CorridorFit(np.round(theta, WEIGHT_DECIMALS), chosen, round(loss, WEIGHT_DECIMALS), losses, int(keep.sum()))
