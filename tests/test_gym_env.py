@@ -364,10 +364,11 @@ def test_a_gymnasium_vector_env_mixes_courses():
     envs.close()
 
 
-def test_sb3_ppo_trains_on_two_courses_through_make_vec_env():
+def test_sb3_ppo_trains_on_two_courses_through_make_vec_env(tmp_path, monkeypatch):
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
 
+    monkeypatch.setenv("SB3_LOGDIR", str(tmp_path))  # its logger's folder: not a new one in the system's temporary folder
     courses = iter(["demo_course", "fig8_water_mud_rock_mud_left"])
     venv = make_vec_env(lambda: gym.make(ENV_ID, scenario=next(courses), image_size=SMALL, image_encoding="onehot"), n_envs=2, seed=0)
     assert [e.unwrapped.sim.scenario.name for e in venv.envs] == ["demo_course", "fig8_water_mud_rock_mud_left"]
