@@ -40,7 +40,7 @@ from terrapref.demos.recording import read_recording  # noqa: E402
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, run_many, zone_agrees  # noqa: E402
 from terrapref.evaluation.stats import rate_text, wilson  # noqa: E402
 from terrapref.grid import Engine, run_grid  # noqa: E402
-from terrapref.learning.pipeline import train_and_save  # noqa: E402
+from terrapref.learning.pipeline import RunOptions, train_and_save  # noqa: E402
 from terrapref.recipes import DEFAULT_RECIPE, RecipeSetup, record_demonstrations, recipe_named  # noqa: E402
 from terrapref.plots import RateRow, save_intervals  # noqa: E402
 from terrapref.scenario import resolve_scenario  # noqa: E402
@@ -72,7 +72,7 @@ def _demonstrate(job: tuple[str, str, int, tuple[str, ...]]) -> tuple[str, str, 
                    profile=profile)
     model = work / f"model_{kind}.safetensors"
     train_and_save(build_dataset([read_recording(rec)], recipe.features()), model, replace(recipe.train, seed=seed),
-                   checkpoints=False, recipe=recipe.name)
+                   stages=recipe.stages, recipe=recipe.name, options=RunOptions(checkpoints=False))
     return kind, str(model), seed, time.perf_counter() - t0, str(rec)
 
 

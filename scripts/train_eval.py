@@ -18,7 +18,7 @@ from terrapref.dataset import build_dataset
 from terrapref.demos.recording import read_recording
 from terrapref.evaluation.runner import PLANNER, RunSpec, run_many, summarise
 from terrapref.features import FeatureConfig
-from terrapref.learning.pipeline import train_and_save
+from terrapref.learning.pipeline import RunOptions, train_and_save
 from terrapref.learning.train import TrainConfig
 from terrapref.scenario import packaged_scenarios
 
@@ -34,7 +34,7 @@ def main() -> int:
     print(f"{len(ds)} samples")
     with tempfile.TemporaryDirectory() as tmp:
         model = str(Path(tmp) / "model.safetensors")
-        r = train_and_save(ds, model, TrainConfig().updated(json.loads(args.config)), checkpoints=False)
+        r = train_and_save(ds, model, TrainConfig().updated(json.loads(args.config)), options=RunOptions(checkpoints=False))
         best = r.history[r.best_epoch - 1]
         print(f"epoch {r.best_epoch}: val loss {best.val_loss:.3f}, val acc {best.val_acc:.3f}, top-3 {best.val_top3:.3f}, {r.steps} steps")
         names = [n for n in packaged_scenarios() if n != "demo_course"]
