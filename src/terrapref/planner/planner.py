@@ -127,18 +127,13 @@ class Planner:
             raise RuntimeError("call set_path() first")
         view = as_view(image)
         s = self.tracker.update(np.array(pose[:2]))
+        outputs = functools.partial(_outputs, self.featurizer, self.policy, view, pose, self.path, s)
         if not self.runner.reads_probs and view is image:  # an array the caller may reuse is read now
             choice = self.runner.decide(StageInput(None, view, pose, self.path, s))
-            return Decision(choice.index, choice.command, s, pending=functools.partial(self._outputs, view, pose, self.path, s))
-        probs, U = self._outputs(view, pose, self.path, s)
+            return Decision(choice.index, choice.command, s, pending=outputs)
+        probs, U = outputs()
         choice = self.runner.decide(StageInput(probs, view, pose, self.path, s))
         return Decision(choice.index, choice.command, s, (probs, U))
-
-    def _outputs(self, view: SegmentationView, pose: Pose, path: ReferencePath, progress_s: float) -> tuple[np.ndarray, np.ndarray]:
-        """(F_t, U) of one frame: the features, then the policy's probabilities."""
-        U = self.featurizer(view, pose, path, progress_s)
-        ahead = path_ahead(path, pose, progress_s) if self.policy.uses_path_ahead else _NO_POINTS
-        return self.policy.probabilities(Observation(U, view, ahead)), U
 
     def costmap(self) -> Costmap | None:
         """The ground seen so far as the driving stage prices it (terrapref.planner.costmap);
@@ -159,6 +154,14 @@ def _chosen(policy: Policy, stage: Stage | str | None) -> Stage:
         have = ", ".join(["argmax", *(s.type for s in policy.stages)])
         raise ValueError(f"{policy.path or policy.name}: no {stage!r} stage (STAGES: {', '.join(STAGES.names())}); it has {have}")
     return found[-1]
+
+
+def _outputs(featurizer: UtilityFeaturizer, policy: Policy, view: SegmentationView, pose: Pose, path: ReferencePath,
+             progress_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """(F_t, U) of one frame: the features, then the policy's probabilities."""
+    U = featurizer(view, pose, path, progress_s)
+    ahead = path_ahead(path, pose, progress_s) if policy.uses_path_ahead else _NO_POINTS
+    return policy.probabilities(Observation(U, view, ahead)), U
 
 
 def path_ahead(path: ReferencePath, pose: Pose, progress_s: float) -> np.ndarray:

@@ -33,15 +33,17 @@ class WorldMap:
         return nx * self.resolution_m, ny * self.resolution_m
 
     def cells_of(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Cell indices (row, col) of world points (..., 2) and a mask of those on the map."""
-        col = np.floor(xy[..., 0] / self.resolution_m).astype(np.int64)
-        row = np.floor(xy[..., 1] / self.resolution_m).astype(np.int64)
+        """Cell indices (row, col) of world points (..., 2) and a mask of those on the map (a
+        non-finite point is off it; its indices are 0)."""
+        col = np.floor(xy[..., 0] / self.resolution_m)
+        row = np.floor(xy[..., 1] / self.resolution_m)
         ny, nx = self.raster.shape
-        inside = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
-        return row, col, inside
+        inside = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)  # in floats: NaN and huge values are outside on every CPU
+        return np.where(inside, row, 0).astype(np.int64), np.where(inside, col, 0).astype(np.int64), inside
 
     def class_at_point(self, x: float, y: float) -> int:
         """:meth:`class_at` of one point, in plain floats (the simulator asks it at every tick)."""
+        x, y = float(x), float(y)  # float64, as class_at divides (a float32 would divide in float32)
         if not (math.isfinite(x) and math.isfinite(y)):
             return UNKNOWN
         col, row = math.floor(x / self.resolution_m), math.floor(y / self.resolution_m)
