@@ -219,8 +219,6 @@ class OffRoadNavEnv(gym.Env):
         first = self._simulation(self.courses[0] if self.courses[0] != RANDOM_COURSE else "gen:0")
         self.sim = first
         self.classes = first.scenario.classes
-        if self._table is not None and not self.classes.same_classes(self._table):
-            raise ValueError(f"scenario {first.scenario.name!r}: its class table differs from classes=; one env needs one table")
         self.profile = _profile(config.profile, self.classes)
         self._terrain_cost = self._terrain_costs()
         self._class_ids = np.array([c.id for c in self.classes.classes], dtype=np.uint8)
@@ -274,9 +272,10 @@ class OffRoadNavEnv(gym.Env):
             self._sims.move_to_end(key)
             return self._sims[key]
         scenario = resolve_scenario(course, self._table) if isinstance(course, str) else course
+        table, which = (self.classes, "the first course's") if hasattr(self, "classes") else (self._table, "classes=")
+        if table is not None and not scenario.classes.same_classes(table):
+            raise ValueError(f"scenario {scenario.name!r}: its class table differs from {which}; one env needs one table")
         sim = Simulation(scenario, self._camera_config, self._sim_config)
-        if hasattr(self, "classes") and not scenario.classes.same_classes(self.classes):
-            raise ValueError(f"scenario {scenario.name!r}: its class table differs from the first course's; one env needs one table")
         self._sims[key] = sim
         while len(self._sims) > _SIM_CACHE:
             self._sims.popitem(last=False)
