@@ -309,11 +309,9 @@ def _train_and_teach(ws: _Workspace) -> tuple[list[TrainedModel], list[TaughtMod
     """Stage 2: every model trained from the demonstrations, and (section 6) every drive of the
     teaching recipe's course and its model: one grid, so that neither kind waits for the other's
     last job."""
-    from terrapref.recipes import recipe_named
-
     plan = ws.plan
     train, teach = _train_jobs(plan, ws.work), teach_jobs(plan, ws.work)
-    ws.log(f"[2/5] training and teaching: {len(train)} models, and {len(teach)} drives of {course_name(plan.course or recipe_named(plan.recipe).course)} and "
+    ws.log(f"[2/5] training and teaching: {len(train)} models, and {len(teach)} drives of {course_name(plan.teach_course())} and "
            f"their models (recipe {plan.recipe}; {len(plan.orders)} orders, {len(plan.styles)} driver styles, {plan.seeds} seed(s)) ...")
     done = ws.map(_model_job, [*teach, *train], "model")  # the drives and their recipe's training first: the longest jobs
     return done[len(teach) :], done[: len(teach)]

@@ -8,7 +8,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from terrapref.perception import PerceptionModel, load_perception
-from terrapref.recipes import OURS, TEACH
+from terrapref.recipes import OURS, TEACH, recipe_named
 from terrapref.records import to_plain
 from terrapref.report.reproduce import TEST_SET, variations
 from terrapref.terrain import ClassTable, PreferenceProfile, default_classes
@@ -96,6 +96,10 @@ class StudyPlan:
     def demo_course(self) -> str:
         """The course the demonstrations of sections 1-3 and 5 go over."""
         return self.course or DEMONSTRATIONS.course
+
+    def teach_course(self) -> str:
+        """The course the teaching drives of section 6 go over."""
+        return self.course or recipe_named(self.recipe).course
 
     def perceptions(self) -> list[PerceptionModel]:
         """The robustness section's perception models, in the plan's order."""

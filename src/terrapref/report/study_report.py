@@ -427,8 +427,6 @@ def _taught(taught: list[StudyRun], method: str, order: Sequence[str], style: st
 
 def teaching_section(plan: StudyPlan, runs: list[StudyRun], figs: Path) -> list[str]:
     """Section 6: one drive of the teaching course per order and per driver style; agreement with that driver on unseen layouts."""
-    from terrapref.recipes import recipe_named
-
     from terrapref.plots import RateRow, save_intervals
 
     taught = _select(runs, study="teach")
@@ -437,7 +435,7 @@ def teaching_section(plan: StudyPlan, runs: list[StudyRun], figs: Path) -> list[
     order_rows, order_points = _order_rows(plan, taught)
     style_rows, style_points = _style_rows(plan, taught)
     points = order_points + style_points
-    course = course_name(plan.course or recipe_named(plan.recipe).course)
+    course = course_name(plan.teach_course())
     follow = " and the follow-up course of what it left open" if plan.follow_up else ""
     lines = [f"## 6. Any order, any driver: one drive by recipe {plan.recipe}", "",
              f"Per training seed, the synthetic driver demonstrates on {course}{follow} (recipe {plan.recipe}, {plan.epochs} epochs) for each order "
