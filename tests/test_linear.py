@@ -131,3 +131,30 @@ def test_exact_helpers_give_matmuls_bits_past_a_chunk():
             out = np.empty(p)
             exact.vec_mat(a, np.ascontiguousarray(b[:, :p]).ravel(), p, out)
             assert _same_bits(out, exact.matmul(a[None], b[:, :p])[0])
+
+
+def test_distinct_columns_index_every_column():
+    from terrapref.learning.linear import _distinct_columns
+    rng = np.random.default_rng(9)
+    x = rng.integers(-3, 3, size=(5, 4000), dtype=np.int32)  # 6 ** 5 possible columns: many repeats
+    x[:, 17] = [2**26, -(2**26), 0, 1, -1]  # values at the grid's extremes
+    distinct, which = _distinct_columns(x)
+    assert np.array_equal(distinct[:, which], x)
+    assert np.unique(distinct.T, axis=0).shape[0] == distinct.shape[1]  # each once
+    firsts = np.unique(which, return_index=True)[1]
+    assert np.all(np.diff(firsts) > 0)  # in the order they first appear
+    empty, none = _distinct_columns(np.zeros((5, 0), dtype=np.int32))
+    assert empty.shape == (5, 0) and none.shape == (0,)
+
+
+def test_lookahead_fit_takes_numpys_argmax_with_a_nan_bias():
+    rng = np.random.default_rng(5)
+    U, labels = _utilities(rng, 20)
+    U2 = np.stack([_utilities(rng, 20)[0] for _ in range(21)], axis=2).astype(np.float16)
+    start = fit_linear_utility(U, labels, steps=20)
+    b = start.b.copy()
+    b[4] = np.nan  # the compiled argmax's slow path: the first NaN wins, as NumPy's
+    nan_start = LinearUtility(start.w, b)
+    got = fit_lookahead_utility(U, U2, labels, steps=2, start=nan_start)
+    want, gamma = _numpy_fit_through(U, U2, labels, 2, nan_start)
+    assert _same_bits(got.utility.w, want.w) and _same_bits(got.utility.b, want.b) and _same_bits(got.gamma, gamma)

@@ -212,8 +212,10 @@ def fit_lookahead_utility(U: np.ndarray, U2: np.ndarray, labels: np.ndarray, ste
     # U2 rounded as exact.rounded(U2, 18) would, held as int32 columns (k, N m m): what each step reads.
     second = np.asarray(U2, dtype=np.float32).reshape(n * m * m, k)
     second_unit, second_ints = _round_columns(second, 18)
+    distinct, which = _distinct_columns(second_ints)
+    del second, second_ints
     params = np.concatenate([start.w, start.b, [1.0]])
-    params = _fit_through(np.ascontiguousarray(first.ints.T), first.unit, second_ints, second_unit, 18, np.asarray(labels, dtype=np.int64),
+    params = _fit_through(np.ascontiguousarray(first.ints.T), first.unit, distinct, which, second_unit, 18, np.asarray(labels, dtype=np.int64),
                           params, m, steps, lr)
     return LookaheadFit(LinearUtility(params[:k].copy(), params[k : k + m].copy()), float(params[-1]))
 
@@ -236,13 +238,62 @@ def _scaled_rint_columns(x: np.ndarray, scale: float) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
-def _fit_through(first: np.ndarray, first_unit: float, second: np.ndarray, second_unit: float, bits: int, labels: np.ndarray,
-                 params: np.ndarray, m: int, steps: int, lr: float) -> np.ndarray:
+def _distinct_columns(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct columns of ``x`` (k, R) int32, in the order they first appear, and the index
+    of each column among them: ``x == distinct[:, which]``.
+
+    The look-ahead's utilities repeat a lot (most second pieces see the same few shares), so the
+    fit scores each distinct column once a step and reads the scores by index.
+    """
+    k, n = x.shape
+    size = 1
+    while size < 2 * n:
+        size *= 2
+    slots = np.full(size, -1, np.int32)  # open addressing: the distinct index held by each slot
+    which = np.empty(n, np.int32)
+    firsts = np.empty(n, np.int64)  # the column where each distinct one first appears
+    count = 0
+    for r in range(n):
+        h = np.uint64(0)
+        for c in range(k):  # the column's values, mixed as splitmix64 mixes its state
+            h = (h + np.uint64(np.uint32(x[c, r])) + np.uint64(0x9E3779B97F4A7C15)) * np.uint64(0xBF58476D1CE4E5B9)
+            h ^= h >> np.uint64(31)
+        slot = np.int64(h & np.uint64(size - 1))
+        while True:
+            u = slots[slot]
+            if u < 0:
+                slots[slot] = count
+                firsts[count] = r
+                which[r] = count
+                count += 1
+                break
+            f = firsts[u]
+            same = True
+            for c in range(k):
+                if x[c, f] != x[c, r]:
+                    same = False
+                    break
+            if same:
+                which[r] = u
+                break
+            slot = (slot + 1) & (size - 1)
+    distinct = np.empty((k, count), np.int32)
+    for u in range(count):
+        for c in range(k):
+            distinct[c, u] = x[c, firsts[u]]
+    return distinct, which
+
+
+@njit(cache=True, nogil=True)
+def _fit_through(first: np.ndarray, first_unit: float, distinct: np.ndarray, which: np.ndarray, second_unit: float, bits: int,
+                 labels: np.ndarray, params: np.ndarray, m: int, steps: int, lr: float) -> np.ndarray:
     """The fit through the look-ahead, compiled: ``params`` (K + 1 + m + 1,) = w, b, gamma.
 
-    ``first`` and ``second`` hold the rounded utilities (N m) and look-ahead utilities (N m m)
-    by columns, (K + 1, .). Per step, the NumPy form (the exact products as
-    :func:`exact.matmul` rounds and sums them)::
+    ``first`` holds the rounded utilities (N m) by columns, (K + 1, N m); the rounded look-ahead
+    utilities (N m m) are ``second = distinct[:, which]`` (:func:`_distinct_columns`). Each
+    product of integers is exact, so a distinct column's score is the score of each column equal
+    to it. Per step, the NumPy form (the exact products as :func:`exact.matmul` rounds and sums
+    them)::
 
         f2 = matmul(second.T, w[:, None]).reshape(n m, m) + b
         best = argmax(f2, axis=1); value = f2[arange(n m), best].reshape(n, m)
@@ -263,10 +314,13 @@ def _fit_through(first: np.ndarray, first_unit: float, second: np.ndarray, secon
     w_ints, grad, ones = np.empty(k), np.empty(params.shape[0]), np.ones(n)
     best, value, z = np.empty(nm, np.int64), np.empty(nm), np.empty(nm)
     chosen, spare, counts = np.empty((k, nm)), np.empty(k), np.empty(m)
+    scores = np.empty(distinct.shape[1])
+    by_rows = np.ascontiguousarray(distinct.T)  # a chosen column's k values in one cache line
     for _ in range(steps):
         gamma = params[-1]
         w_unit = exact.round_into(params[:k], w_bits, w_ints)
-        _best_continuations(second, w_ints, second_unit * w_unit, params[k : k + m], best, value)
+        _exact_scores(distinct, w_ints, scores)
+        _best_continuations(scores, which, second_unit * w_unit, params[k : k + m], best, value)
         _exact_scores(first, w_ints, z)
         u1 = first_unit * w_unit
         for i in range(n):
@@ -278,9 +332,10 @@ def _fit_through(first: np.ndarray, first_unit: float, second: np.ndarray, secon
         for r in range(nm):
             d[r] = d[r] / n
             counts[best[r]] += d[r]
-        for c in range(k):
-            for r in range(nm):
-                chosen[c, r] = second[c, r * m + best[r]]
+        for r in range(nm):
+            u = which[r * m + best[r]]
+            for c in range(k):
+                chosen[c, r] = by_rows[u, c]
         exact.vec_mat_rounded(d, first, first_unit, bits, grad[:k])
         exact.vec_mat_rounded(d, chosen, second_unit, bits, spare)
         exact.vec_mat(ones, d, m, grad[k : k + m])
@@ -295,23 +350,32 @@ def _fit_through(first: np.ndarray, first_unit: float, second: np.ndarray, secon
 
 
 @njit(cache=True, nogil=True)
-def _best_continuations(second: np.ndarray, w_ints: np.ndarray, unit: float, b: np.ndarray, best: np.ndarray, value: np.ndarray) -> None:
-    """For each row r of (N m) first pieces: the first argmax over j of ``f2 = (second[:, r m + j] .
-    w_ints) unit + b[j]`` into ``best[r]`` and its score into ``value[r]`` (NumPy's argmax: the
-    first of equal maxima, the first NaN if any)."""
-    k = second.shape[0]
+def _best_continuations(scores: np.ndarray, which: np.ndarray, unit: float, b: np.ndarray, best: np.ndarray, value: np.ndarray) -> None:
+    """For each row r of (N m) first pieces: the first argmax over j of ``f2 = scores[which[r m +
+    j]] unit + b[j]`` into ``best[r]`` and its score into ``value[r]`` (NumPy's argmax: the first
+    of equal maxima, the first NaN if any)."""
     m = b.shape[0]
+    finite = math.isfinite(unit)
+    for j in range(m):
+        finite = finite and math.isfinite(b[j])
+    for u in range(scores.shape[0]):
+        finite = finite and math.isfinite(scores[u])
+    if finite:  # no NaN can arise: a plain running maximum
+        for r in range(best.shape[0]):
+            base = r * m
+            top, top_f = 0, scores[which[base]] * unit + b[0]
+            for j in range(1, m):
+                f = scores[which[base + j]] * unit + b[j]
+                if f > top_f:
+                    top, top_f = j, f
+            best[r], value[r] = top, top_f
+        return
     f2 = np.empty(m)
     for r in range(best.shape[0]):
         base = r * m
-        f2[:] = 0.0
-        for c in range(k):
-            wc = w_ints[c]
-            for j in range(m):
-                f2[j] += second[c, base + j] * wc
         top = 0
         for j in range(m):
-            f2[j] = f2[j] * unit + b[j]
+            f2[j] = scores[which[base + j]] * unit + b[j]
             if j > 0 and (f2[j] > f2[top] or (f2[j] != f2[j] and f2[top] == f2[top])):
                 top = j
         best[r], value[r] = top, f2[top]
