@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 from terrapref.camera import PinholeCamera
 from terrapref.features import kernels
 from terrapref.features.corridor import CorridorConfig, pursuit_yaw_rates, steer
-from terrapref.planner.stages.kernels import lethal_hits
+from terrapref.planner.stages.kernels import lethal_hits, swept_reach
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import pure_pursuit_yaw_rate
@@ -306,29 +306,34 @@ def _map_vote_python(evidence, stamp, cells, ox, oy, inv_res, x, y, c, s, vx, vy
                 evidence[j, i, q] *= f
             stamp[j, i] = frame
         evidence[j, i, col] += weight[p]
-        total = evidence[j, i, k]
-        deadly = np.float32(0.0)
-        terrain = np.float32(0.0)
-        best_lethal, best_terrain = -1, -1
-        for q in range(k):
-            e = evidence[j, i, q]
-            total += e
-            if lethal[q]:
-                deadly += e
-                if best_lethal < 0 or e > evidence[j, i, best_lethal]:
-                    best_lethal = q
-            else:
-                terrain += e
-                if best_terrain < 0 or e > evidence[j, i, best_terrain]:
-                    best_terrain = q
-        if total < min_evidence:
-            cells[j, i] = k + 1
-        elif best_lethal >= 0 and deadly >= lethal_share * total:
-            cells[j, i] = best_lethal
-        elif best_terrain >= 0 and terrain >= terrain_share * total:
-            cells[j, i] = best_terrain
+        cells[j, i] = _column_python(evidence[j, i], lethal, lethal_share, terrain_share, min_evidence)
+
+
+def _column_python(e: np.ndarray, lethal: np.ndarray, lethal_share, terrain_share, min_evidence) -> int:
+    """A cell's column from its evidence ``e`` (K + 1,) float32: K + 1 below ``min_evidence`` in all;
+    else the lethal column with the most (the first of equals) if the lethal ones hold
+    ``lethal_share``; else the terrain one if those hold ``terrain_share``; else K. Sums in float32,
+    column by column."""
+    k = e.shape[0] - 1
+    total, deadly, terrain = e[k], np.float32(0.0), np.float32(0.0)
+    best_lethal, best_terrain = -1, -1
+    for q in range(k):
+        total += e[q]
+        if lethal[q]:
+            deadly += e[q]
+            if best_lethal < 0 or e[q] > e[best_lethal]:
+                best_lethal = q
         else:
-            cells[j, i] = k
+            terrain += e[q]
+            if best_terrain < 0 or e[q] > e[best_terrain]:
+                best_terrain = q
+    if total < min_evidence:
+        return k + 1
+    if best_lethal >= 0 and deadly >= lethal_share * total:
+        return best_lethal
+    if best_terrain >= 0 and terrain >= terrain_share * total:
+        return best_terrain
+    return k
 
 
 def _update_numpy(evidence, stamp, cells, ox, oy, inv_res, x, y, c, s, vx, vy, weight, ids, columns, frame, fade, lethal, shares, tilt,
@@ -380,12 +385,22 @@ def test_map_vote_gives_the_numpy_forms_map(tilted: bool):
             yaw = rng.uniform(-math.pi, math.pi)
             axes = camera.tilted(rng.uniform(-0.06, 0.06), rng.uniform(-0.06, 0.06)) if tilted else camera.R
             pose = (float(origin[0]), float(origin[1]), 1.0 / res, float(x), float(y), math.cos(yaw), math.sin(yaw), vx, vy, weight)
-            rest = (columns, frame, fade, lethal)
-            kernels.map_vote(*maps[0], *pose, distinct, pixel_of, *rest, *shares, tilted, ray, ground0, axes, camera.t)
-            _update_numpy(*maps[1], *pose, ids, *rest, shares, axes if tilted else None, ray, ground0, camera.t)
-            for got, want in zip(maps[0], maps[1]):
-                assert _same(got, want), (seed, frame)
-        evidence, _, cells = maps[0]
+            kernels.map_vote(*maps[0], *pose, distinct, pixel_of, columns, frame, fade, tilted, ray, ground0, axes, camera.t)
+            _update_numpy(*maps[1], *pose, ids, columns, frame, fade, lethal, shares, axes if tilted else None, ray, ground0, camera.t)
+            (evidence, stamp, cells), (want_evidence, want_stamp, want_cells) = maps
+            assert _same(evidence, want_evidence) and _same(stamp, want_stamp), (seed, frame)
+            # The votes leave their cells undecided; a read decides each as deciding after every vote did.
+            voted = cells == kernels.UNSETTLED
+            assert voted.any() and np.array_equal(cells[~voted], want_cells[~voted]), (seed, frame)
+            centres = (np.arange(n) + 0.5) * res
+            px, py = np.meshgrid(origin[0] + centres, origin[1] + centres)
+            read = kernels.map_read(cells.copy(), evidence, lethal, np.array(shares), float(origin[0]), float(origin[1]), 1.0 / res,
+                                    px.ravel(), py.ravel(), k + 1)
+            assert np.array_equal(read.reshape(n, n), want_cells), (seed, frame)
+            if rng.random() < 0.5:  # some frames' cells decided before the next votes, some not
+                kernels.map_settle(cells, evidence, lethal, np.array(shares))
+                assert _same(cells, want_cells), (seed, frame)
+        evidence, _, cells = maps[1]
         assert (cells < k + 1).sum() > 50 and (evidence > 0).sum(axis=2).max() > 1  # cells voted on, some by several columns
 
 
@@ -421,6 +436,20 @@ def _random_map(rng: np.random.Generator, path: ReferencePath, k: int) -> tuple[
     return rng.integers(0, k + 2, (64, 64)).astype(np.uint8), float(ox), float(oy), 1.0 / res
 
 
+def _undecided(rng: np.random.Generator, cells: np.ndarray, k: int) -> tuple[np.ndarray, tuple, np.ndarray]:
+    """``cells`` with about a third of them voted on since decided (kernels.UNSETTLED), the map's
+    layers a compiled read takes (cells, evidence, lethal columns, shares), and every cell as a
+    read decides it (_column_python where undecided)."""
+    evidence = (rng.random((*cells.shape, k + 1)) * (rng.random((*cells.shape, k + 1)) < 0.5)).astype(np.float32)
+    lethal = rng.random(k + 2) < 0.4
+    shares = np.array([0.35, 0.5, rng.choice([0.0, 0.3])], dtype=np.float32)
+    undecided = rng.random(cells.shape) < 0.3
+    decided = cells.copy()
+    for j, i in zip(*np.nonzero(undecided)):
+        decided[j, i] = _column_python(evidence[j, i], lethal, *shares)
+    return np.where(undecided, kernels.UNSETTLED, cells).astype(np.uint8), (evidence, lethal, shares), decided
+
+
 @FAST
 @given(seed=st.integers(0, 2**32 - 1), n_st=st.integers(1, 20), n_off=st.integers(1, 8), n_f=st.integers(1, 6))
 def test_map_read_beside_gives_the_numpy_forms_columns(seed: int, n_st: int, n_off: int, n_f: int):
@@ -431,8 +460,11 @@ def test_map_read_beside_gives_the_numpy_forms_columns(seed: int, n_st: int, n_o
     s = _arc_lengths(rng, path, n_st)
     lat = rng.uniform(-4.0, 4.0, (n_off, n_f))
     a, d, length = path.segments
-    got = kernels.map_read_beside(cells, ox, oy, inv_res, path.s, a, d, length, s, lat, k + 1)
+    lazy, layers, cells = _undecided(rng, cells, k)
+    got = kernels.map_read_beside(lazy, *layers, ox, oy, inv_res, path.s, a, d, length, s, lat, k + 1)
     assert _same(got, _map_read_beside_numpy(cells, ox, oy, inv_res, path, s, lat, k + 1))
+    read = lazy != kernels.UNSETTLED
+    assert np.array_equal(lazy[read], cells[read])  # the cells it decided are kept as decided
 
 
 def _lethal_hits_numpy(cells: np.ndarray, ox: float, oy: float, inv_res: float, path: ReferencePath, progress_s: float,
@@ -457,8 +489,34 @@ def test_lethal_hits_gives_the_numpy_forms_lines(seed: int, n_off: int, n_across
     across = np.sort(rng.uniform(-0.9, 0.9, n_across))
     progress_s = float(rng.uniform(-1.0, path.length_m + 1.0))
     a, d, length = path.segments
-    got = lethal_hits(cells, ox, oy, inv_res, path.s, a, d, length, progress_s, stations, offsets, across, lethal, k + 1)
+    lazy, layers, cells = _undecided(rng, cells, k)
+    got = lethal_hits(lazy, *layers, ox, oy, inv_res, path.s, a, d, length, progress_s, stations, offsets, across, lethal, k + 1)
     assert _same(got, _lethal_hits_numpy(cells, ox, oy, inv_res, path, progress_s, stations, offsets, across, lethal, k + 1))
+    read = lazy != kernels.UNSETTLED
+    assert np.array_equal(lazy[read], cells[read])
+
+
+@FAST
+@given(seed=st.integers(0, 2**32 - 1), n_off=st.integers(1, 10))
+def test_swept_reach_reads_undecided_cells_as_decided(seed: int, n_off: int):
+    rng = np.random.default_rng(seed)
+    path = _path(rng)
+    k = int(rng.integers(1, 6))
+    cells, ox, oy, inv_res = _random_map(rng, path, k)
+    cells = np.where(rng.random(cells.shape) < 0.97, k, cells).astype(np.uint8)
+    lazy, layers, cells = _undecided(rng, cells, k)
+    lethal = rng.random(k + 2) < 0.5
+    offsets = np.sort(rng.uniform(-3.5, 3.5, n_off))
+    clear = np.sort(rng.uniform(-0.9, 0.9, 5))
+    progress_s = float(rng.uniform(0.0, path.length_m))
+    x, y = path.point_at(progress_s)
+    a, d, length = path.segments
+    args = (float(x), float(y), float(path.heading_at(progress_s)), offsets, progress_s, 2.0, 0.1, 30, 2.5, path.s, a, d, length, clear)
+    got = swept_reach(*args, lazy, *layers, ox, oy, inv_res, lethal, k + 1)
+    want = swept_reach(*args, cells, *layers, ox, oy, inv_res, lethal, k + 1)  # no cell left to decide
+    assert _same(got, want)
+    read = lazy != kernels.UNSETTLED
+    assert np.array_equal(lazy[read], cells[read])
 
 
 # --- the corridor's features and value -----------------------------------------------------------

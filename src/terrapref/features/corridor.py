@@ -188,8 +188,12 @@ class GroundMap:
         self.k = k = terrain.k
         self.columns = np.asarray(terrain.of_class, dtype=np.uint8).copy()
         self.columns[UNKNOWN] = k + 1  # a pixel that sees no ground casts no vote
+        if k + 1 >= kernels.UNSETTLED:
+            raise ValueError(f"a ground map holds at most {kernels.UNSETTLED - 2} terrain columns, got {k}")
         self.lethal = np.zeros(k + 2, dtype=np.bool_)
         self.lethal[np.asarray(terrain.lethal, dtype=np.int64)] = True
+        # How a cell's evidence decides its column (kernels.map_decide): lethal share, terrain share, least evidence.
+        self._shares = np.array([c.map_lethal_share, c.map_terrain_share, c.map_min_evidence], dtype=np.float32)
         # The ground points read from each image: a vehicle-frame grid, those the camera sees.
         xs = np.arange(0.2, c.sample_range_m, c.sample_step_m)
         ys = np.arange(-8.0, 8.0, c.sample_step_m)
@@ -213,7 +217,8 @@ class GroundMap:
             fade[g] = fade[g - 1] * np.float32(c.map_fade)
         self._fade = fade
         self._n = int(round(2 * c.map_half_size_m / c.map_resolution_m))
-        self.cells = np.full((self._n, self._n), k + 1, dtype=np.uint8)  # (row: y, col: x)
+        # Each cell's column (row: y, col: x), kernels.UNSETTLED where voted on since last decided.
+        self._cells = np.full((self._n, self._n), k + 1, dtype=np.uint8)
         self.evidence = np.zeros((self._n, self._n, k + 1), dtype=np.float32)
         self.stamp = np.zeros((self._n, self._n), dtype=np.int64)
         self.frame = 0
@@ -221,7 +226,7 @@ class GroundMap:
 
     def reset(self) -> None:
         """Forget everything seen."""
-        self.cells.fill(self.k + 1)
+        self._cells.fill(self.k + 1)
         self.evidence.fill(0.0)
         self.stamp.fill(0)
         self.frame = 0
@@ -239,7 +244,7 @@ class GroundMap:
         if self.origin is not None:  # keep what the old square and the new one share
             old = np.round(self.origin / c.map_resolution_m).astype(np.int64)
             dx, dy = int(new[0] - old[0]), int(new[1] - old[1])
-            self.cells = _shifted(self.cells, dx, dy, self.k + 1)
+            self._cells = _shifted(self._cells, dx, dy, self.k + 1)
             self.evidence = _shifted(self.evidence, dx, dy, 0.0)
             self.stamp = _shifted(self.stamp, dx, dy, 0)
         self.origin = new * c.map_resolution_m
@@ -254,20 +259,30 @@ class GroundMap:
         dpitch, droll = self.attitude(view) if self.attitude is not None else (0.0, 0.0)
         tilted = bool(dpitch or droll)
         axes = self.camera.tilted(dpitch, droll) if tilted else self.camera.R
-        kernels.map_vote(self.evidence, self.stamp, self.cells,  # the map
+        kernels.map_vote(self.evidence, self.stamp, self._cells,  # the map
                          float(self.origin[0]), float(self.origin[1]), 1.0 / c.map_resolution_m,  # its corner and cells per metre
                          float(x), float(y), math.cos(yaw), math.sin(yaw),  # the pose
                          self._vx, self._vy, self._weight, ids, self._sample_pix, self.columns,  # the samples and what they saw
-                         self.frame, self._fade, self.lethal,  # the votes' fading and the lethal columns
-                         np.float32(c.map_lethal_share), np.float32(c.map_terrain_share), np.float32(c.map_min_evidence),
+                         self.frame, self._fade,  # the votes' fading
                          tilted, self._ray, self._ground0, axes, self.camera.t)  # the camera off its mount
+
+    @property
+    def cells(self) -> np.ndarray:
+        """Terrain column of every cell (rows y, columns x), each decided from its evidence."""
+        kernels.map_settle(self._cells, self.evidence, self.lethal, self._shares)
+        return self._cells
+
+    def layers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """What a compiled read of the map takes (kernels.map_decide): the cells' columns, some
+        still undecided, their evidence, the lethal columns and the shares that decide a column."""
+        return self._cells, self.evidence, self.lethal, self._shares
 
     def beside(self, path: ReferencePath, s: np.ndarray, lat: np.ndarray) -> np.ndarray:
         """Terrain column (O, S, F) at the points ``lat`` (O, F) [m] left of the path at arc lengths ``s`` (S,)."""
         if self.origin is None:
             return np.full((lat.shape[0], len(s), lat.shape[1]), self.k + 1, dtype=np.uint8)
         a, d, length = path.segments
-        return kernels.map_read_beside(self.cells, float(self.origin[0]), float(self.origin[1]), 1.0 / self.config.map_resolution_m,
+        return kernels.map_read_beside(*self.layers(), float(self.origin[0]), float(self.origin[1]), 1.0 / self.config.map_resolution_m,
                                        path.s, a, d, length, np.asarray(s, dtype=np.float64), np.ascontiguousarray(lat, dtype=np.float64),
                                        self.k + 1)
 
@@ -277,7 +292,8 @@ class GroundMap:
             return np.full(points.shape[:-1], self.k + 1, dtype=np.uint8)
         px = np.ascontiguousarray(points[..., 0], dtype=np.float64).reshape(-1)
         py = np.ascontiguousarray(points[..., 1], dtype=np.float64).reshape(-1)
-        out = kernels.map_read(self.cells, float(self.origin[0]), float(self.origin[1]), 1.0 / self.config.map_resolution_m, px, py, self.k + 1)
+        out = kernels.map_read(*self.layers(), float(self.origin[0]), float(self.origin[1]), 1.0 / self.config.map_resolution_m, px, py,
+                               self.k + 1)
         return out.reshape(points.shape[:-1])
 
 

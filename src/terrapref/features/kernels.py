@@ -18,6 +18,8 @@ import math
 import numpy as np
 from numba import njit
 
+UNSETTLED = 255  # a ground-map cell voted on since its column was last decided (columns run 0..K + 1)
+
 
 @njit(cache=True, nogil=True)
 def terrain_shares(ids: np.ndarray, column: np.ndarray, row: np.ndarray, m: int, k: int, scale: float) -> np.ndarray:
@@ -192,19 +194,15 @@ def stage_distances(rows: np.ndarray, ends_x: np.ndarray, ends_y: np.ndarray, st
 @njit(cache=True, nogil=True)
 def map_vote(evidence: np.ndarray, stamp: np.ndarray, cells: np.ndarray, ox: float, oy: float, inv_res: float, x: float, y: float,
              c: float, s: float, vx: np.ndarray, vy: np.ndarray, weight: np.ndarray, ids: np.ndarray, pixel_of: np.ndarray,
-             columns: np.ndarray, frame: int,
-             fade: np.ndarray, lethal: np.ndarray, lethal_share: float, terrain_share: float, min_evidence: float,
+             columns: np.ndarray, frame: int, fade: np.ndarray,
              tilted: bool, ray: np.ndarray, ground0: np.ndarray, axes: np.ndarray, t: np.ndarray) -> None:
-    """Add each ground sample's vote to the evidence of its cell, and set the cell's column.
+    """Add each ground sample's vote to the evidence of its cell, and mark the cell's column
+    :data:`UNSETTLED` (:func:`map_decide` decides it when it is read).
 
     A cell's evidence (``evidence[j, i]``, one float32 per column 0..K, K the background) fades by
     ``fade[g]`` when it is next voted on ``g`` frames later (``stamp`` holds the frame of its last
     vote; gaps beyond the table fade by its last entry), then gains the sample's ``weight`` in the
-    sample's column. Samples of column K + 1 (nothing seen) cast no vote. The cell's column
-    (``cells``): K + 1 (never seen) while its evidence totals less than ``min_evidence``; else the
-    lethal column with the most evidence when the lethal columns hold at least ``lethal_share`` of
-    it; else the other terrain column with the most when those columns hold at least
-    ``terrain_share``; else K. Ties go to the lowest column. A sample's cell:
+    sample's column. Samples of column K + 1 (nothing seen) cast no vote. A sample's cell:
     ``i = floor((x - ox + vx * c - vy * s) * inv_res)``, ``j = floor((y - oy + vx * s + vy * c) *
     inv_res)`` (rows y, columns x); float32 sums in a fixed order, so every CPU agrees.
 
@@ -252,43 +250,85 @@ def map_vote(evidence: np.ndarray, stamp: np.ndarray, cells: np.ndarray, ox: flo
                 evidence[j, i, q] *= f
             stamp[j, i] = frame
         evidence[j, i, col] += weight[p]
-        total = evidence[j, i, k]
-        deadly = np.float32(0.0)
-        terrain = np.float32(0.0)
-        best_lethal, best_terrain = -1, -1
-        for q in range(k):
-            e = evidence[j, i, q]
-            total += e
-            if lethal[q]:
-                deadly += e
-                if best_lethal < 0 or e > evidence[j, i, best_lethal]:
-                    best_lethal = q
-            else:
-                terrain += e
-                if best_terrain < 0 or e > evidence[j, i, best_terrain]:
-                    best_terrain = q
-        if total < min_evidence:
-            cells[j, i] = k + 1
-        elif best_lethal >= 0 and deadly >= lethal_share * total:
-            cells[j, i] = best_lethal
-        elif best_terrain >= 0 and terrain >= terrain_share * total:
-            cells[j, i] = best_terrain
+        cells[j, i] = UNSETTLED
+
+
+@njit(cache=True, nogil=True, inline="always")
+def map_decide(evidence: np.ndarray, lethal: np.ndarray, lethal_share: np.float32, terrain_share: np.float32,
+               min_evidence: np.float32, j: int, i: int) -> int:
+    """The column of ground-map cell ``(j, i)``, decided from its evidence.
+
+    The map's readers read a cell as ``col = cells[j, i]``, and if ``col == UNSETTLED`` (voted on
+    since it was last decided) as ``col = cells[j, i] = map_decide(...)``. A cell's column depends
+    only on its evidence, which changes only when it is voted on, so deciding it when it is read
+    gives the column that deciding it after every vote would; a frame reads a few thousand of the
+    fifteen thousand cells it votes on. (The test stays in each reader's loop, and the shares come
+    as numbers: each array a compiled helper takes costs every call more than the decision.)
+
+    The column: K + 1 (never seen) while the evidence totals less than ``min_evidence``; else the
+    lethal column (``lethal``, by column) with the most evidence when the lethal columns hold at
+    least ``lethal_share`` of it; else the other terrain column with the most when those columns
+    hold at least ``terrain_share``; else K. Ties go to the lowest column; float32 sums in column
+    order, so every CPU agrees.
+
+    Compiled into its callers, here and in terrapref.planner.stages.kernels (see
+    :func:`path_frame` on their cached copies).
+    """
+    k = evidence.shape[2] - 1
+    total = evidence[j, i, k]
+    deadly = np.float32(0.0)
+    terrain = np.float32(0.0)
+    best_lethal, best_terrain = -1, -1
+    for q in range(k):
+        e = evidence[j, i, q]
+        total += e
+        if lethal[q]:
+            deadly += e
+            if best_lethal < 0 or e > evidence[j, i, best_lethal]:
+                best_lethal = q
         else:
-            cells[j, i] = k
+            terrain += e
+            if best_terrain < 0 or e > evidence[j, i, best_terrain]:
+                best_terrain = q
+    if total < min_evidence:
+        return k + 1
+    if best_lethal >= 0 and deadly >= lethal_share * total:
+        return best_lethal
+    if best_terrain >= 0 and terrain >= terrain_share * total:
+        return best_terrain
+    return k
 
 
 @njit(cache=True, nogil=True)
-def map_read(cells: np.ndarray, ox: float, oy: float, inv_res: float, px: np.ndarray, py: np.ndarray, never: int) -> np.ndarray:
+def map_settle(cells: np.ndarray, evidence: np.ndarray, lethal: np.ndarray, shares: np.ndarray) -> None:
+    """Decide every cell of the map still :data:`UNSETTLED` (:func:`map_decide`; ``shares``:
+    its three shares, float32)."""
+    for j in range(cells.shape[0]):
+        for i in range(cells.shape[1]):
+            if cells[j, i] == UNSETTLED:
+                cells[j, i] = map_decide(evidence, lethal, shares[0], shares[1], shares[2], j, i)
+
+
+@njit(cache=True, nogil=True)
+def map_read(cells: np.ndarray, evidence: np.ndarray, lethal: np.ndarray, shares: np.ndarray, ox: float, oy: float, inv_res: float,
+             px: np.ndarray, py: np.ndarray, never: int) -> np.ndarray:
     """The ground map's column at each point (flat arrays ``px``, ``py``); ``never`` outside it.
 
-    The NumPy form: ``cells[floor((py - oy) * inv_res), floor((px - ox) * inv_res)]`` where inside.
+    The NumPy form: ``cells[floor((py - oy) * inv_res), floor((px - ox) * inv_res)]`` where
+    inside, each cell decided first if it is :data:`UNSETTLED` (:func:`map_decide`, with
+    ``evidence``, ``lethal`` and the three ``shares``).
     """
     n_rows, n_cols = cells.shape
     out = np.empty(px.shape[0], np.uint8)
     for p in range(px.shape[0]):
         i = math.floor((px[p] - ox) * inv_res)
         j = math.floor((py[p] - oy) * inv_res)
-        out[p] = cells[j, i] if 0 <= i < n_cols and 0 <= j < n_rows else never
+        col = never
+        if 0 <= i < n_cols and 0 <= j < n_rows:
+            col = cells[j, i]
+            if col == UNSETTLED:
+                col = cells[j, i] = map_decide(evidence, lethal, shares[0], shares[1], shares[2], j, i)
+        out[p] = col
     return out
 
 
@@ -308,8 +348,9 @@ def path_frame(path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_
 
 
 @njit(cache=True, nogil=True)
-def map_read_beside(cells: np.ndarray, ox: float, oy: float, inv_res: float, path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray,
-                    path_len: np.ndarray, s: np.ndarray, lat: np.ndarray, never: int) -> np.ndarray:
+def map_read_beside(cells: np.ndarray, evidence: np.ndarray, lethal: np.ndarray, shares: np.ndarray, ox: float, oy: float, inv_res: float,
+                    path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray, s: np.ndarray, lat: np.ndarray,
+                    never: int) -> np.ndarray:
     """The ground map's column (O, S, F) at the points ``lat[o, f]`` [m] left of the path at arc
     lengths ``s`` (S,), ``never`` outside the map.
 
@@ -327,7 +368,12 @@ def map_read_beside(cells: np.ndarray, ox: float, oy: float, inv_res: float, pat
             for f in range(n_f):
                 i = math.floor((cx + lat[o, f] * nx - ox) * inv_res)
                 j = math.floor((cy + lat[o, f] * ny - oy) * inv_res)
-                out[o, q, f] = cells[j, i] if 0 <= i < n_cols and 0 <= j < n_rows else never
+                col = never
+                if 0 <= i < n_cols and 0 <= j < n_rows:
+                    col = cells[j, i]
+                    if col == UNSETTLED:
+                        col = cells[j, i] = map_decide(evidence, lethal, shares[0], shares[1], shares[2], j, i)
+                out[o, q, f] = col
     return out
 
 

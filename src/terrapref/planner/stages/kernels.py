@@ -10,17 +10,19 @@ import math
 import numpy as np
 from numba import njit
 
-from terrapref.features.kernels import path_frame
+from terrapref.features.kernels import UNSETTLED, map_decide, path_frame
 
 
 @njit(cache=True, nogil=True)
 def swept_reach(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progress_s: float, v: float, dt: float, steps: int,
                 lookahead_m: float, path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray,
-                clear: np.ndarray, cells: np.ndarray, ox: float, oy: float, inv_res: float, lethal: np.ndarray, never: int) -> np.ndarray:
+                clear: np.ndarray, cells: np.ndarray, evidence: np.ndarray, map_lethal: np.ndarray, shares: np.ndarray, ox: float, oy: float,
+                inv_res: float, lethal: np.ndarray, never: int) -> np.ndarray:
     """Per offset (O,): the step at which pure pursuit toward the path shifted by it, driven for
     ``steps`` steps of ``dt`` from the pose, first brings a point across the footprint (``clear``,
     every other step) onto a lethal column of the map (``lethal`` by column, ``never`` for cells
-    outside the map); ``steps`` where it never does.
+    outside the map); ``steps`` where it never does. The map's cells are read as
+    :func:`terrapref.features.kernels.map_decide` says (``cells`` to ``shares``).
 
     The NumPy form: pure pursuit as :func:`terrapref.features.corridor.steer` gives it (clipped
     to +-1 rad/s, but with the C library's ``hypot``, as ``np.hypot``, where steer has Python's)
@@ -48,7 +50,11 @@ def swept_reach(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progress
                     py = y + clear[c] * math.cos(yaw)
                     ci = math.floor((px - ox) * inv_res)
                     cj = math.floor((py - oy) * inv_res)
-                    col = cells[cj, ci] if 0 <= ci < n_cols and 0 <= cj < n_rows else never
+                    col = never
+                    if 0 <= ci < n_cols and 0 <= cj < n_rows:
+                        col = cells[cj, ci]
+                        if col == UNSETTLED:
+                            col = cells[cj, ci] = map_decide(evidence, map_lethal, shares[0], shares[1], shares[2], cj, ci)
                     if lethal[col]:
                         out[o] = k
                         break
@@ -58,14 +64,14 @@ def swept_reach(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progress
 
 
 @njit(cache=True, nogil=True)
-def lethal_hits(cells: np.ndarray, ox: float, oy: float, inv_res: float, path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray,
-                path_len: np.ndarray, progress_s: float, stations: np.ndarray, offsets: np.ndarray, across: np.ndarray,
-                lethal: np.ndarray, never: int) -> np.ndarray:
+def lethal_hits(cells: np.ndarray, evidence: np.ndarray, map_lethal: np.ndarray, shares: np.ndarray, ox: float, oy: float, inv_res: float,
+                path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray, progress_s: float, stations: np.ndarray,
+                offsets: np.ndarray, across: np.ndarray, lethal: np.ndarray, never: int) -> np.ndarray:
     """(O, S): whether any point ``offsets[o] + across[a]`` [m] left of the path, at station
     ``stations[s]`` from ``progress_s`` (capped at the path's end), lies on a lethal column of
     the map (``lethal`` by column, ``never`` outside it).
 
-    The NumPy form: ``lethal[map_read_beside(..., minimum(progress_s + stations, length),
+    The NumPy form: ``lethal[map_read_beside(cells, ..., minimum(progress_s + stations, length),
     offsets[:, None] + across[None, :])].any(axis=2)``.
     """
     n_rows, n_cols = cells.shape
@@ -79,7 +85,12 @@ def lethal_hits(cells: np.ndarray, ox: float, oy: float, inv_res: float, path_s:
                 lat = offsets[o] + across[a]
                 i = math.floor((cx + lat * nx - ox) * inv_res)
                 j = math.floor((cy + lat * ny - oy) * inv_res)
-                if lethal[cells[j, i] if 0 <= i < n_cols and 0 <= j < n_rows else never]:
+                col = never
+                if 0 <= i < n_cols and 0 <= j < n_rows:
+                    col = cells[j, i]
+                    if col == UNSETTLED:
+                        col = cells[j, i] = map_decide(evidence, map_lethal, shares[0], shares[1], shares[2], j, i)
+                if lethal[col]:
                     out[o, q] = True
                     break
     return out
