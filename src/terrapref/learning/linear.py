@@ -94,11 +94,13 @@ def _frame_gradients(rows: np.ndarray, w_ints: np.ndarray, u: float, b: np.ndarr
     for f0 in range(0, n, _BLOCK_FRAMES):
         f1 = min(n, f0 + _BLOCK_FRAMES)
         r0, length = f0 * m, (f1 - f0) * m
-        z[:length] = 0.0
+        block = z[:length]
+        block[:] = 0.0
         for c in range(k):
             wc = w_ints[c]
+            column = rows[c, r0 : r0 + length]  # a 1-D view: the loop vectorises (2-D indexing kept it scalar)
             for t in range(length):
-                z[t] += np.float64(rows[c, r0 + t]) * wc
+                block[t] += np.float64(column[t]) * wc
         for f in range(f1 - f0):
             base = f * m
             for j in range(m):
@@ -139,8 +141,9 @@ def _exact_scores(columns: np.ndarray, w_ints: np.ndarray, out: np.ndarray) -> N
     out[:] = 0.0
     for c in range(columns.shape[0]):
         wc = w_ints[c]
-        for r in range(columns.shape[1]):
-            out[r] += columns[c, r] * wc
+        column = columns[c]  # a 1-D view: the loop vectorises
+        for r in range(column.shape[0]):
+            out[r] += column[r] * wc
 
 
 @njit(cache=True, nogil=True)
