@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer, SegmentationView
+from terrapref.camera import CameraConfig, PinholeCamera, PixelSet, SegmentationRenderer, SegmentationView
 from terrapref.terrain import UNKNOWN, default_classes
 from terrapref.vehicle import Pose
 from terrapref.world import WorldMap
@@ -423,6 +423,30 @@ def test_view_renders_the_whole_frame_only_when_asked():
     np.testing.assert_array_equal(SegmentationView.of(full).pixels(idx), full.reshape(-1)[idx])
     with pytest.raises(ValueError):
         SegmentationView(renderer)
+
+
+def test_a_pixel_set_reads_as_its_indices_on_every_camera_and_view():
+    """A PixelSet keeps its pixels' rows and columns for the camera it was first read with; read
+    with another camera, it works them out again. Every view reads it as its index array."""
+    rng = np.random.default_rng(8)
+    world = _blocks_world(rng)
+    small = CameraConfig(pitch_deg=45.0, hfov_deg=60.0, mount_height_m=0.8, width_px=320, height_px=200)
+    index = rng.integers(0, 320 * 200, 900)  # pixels of both cameras, some above the horizon
+    pixels = PixelSet(index)
+    index[:] = 0  # the set keeps its own copy
+    for config in (CameraConfig(), small, CameraConfig()):
+        renderer = SegmentationRenderer(PinholeCamera(config), world)
+        for _ in range(5):
+            pose = Pose(rng.uniform(-8.0, 48.0), rng.uniform(-8.0, 33.0), rng.uniform(-math.pi, math.pi))
+            full = renderer.render(pose).reshape(-1)
+            want = full[pixels.flat]
+            np.testing.assert_array_equal(renderer.pixels(pose, pixels), want)
+            np.testing.assert_array_equal(SegmentationView(renderer, pose).pixels(pixels), want)
+            np.testing.assert_array_equal(SegmentationView.of(full.reshape(renderer.shape)).pixels(pixels), want)
+    assert pixels.shape == (900,) and not pixels.flat.flags.writeable
+    renderer = SegmentationRenderer(PinholeCamera(small), world)
+    with pytest.raises(IndexError):
+        renderer.pixels(Pose(10.0, 15.0, 0.0), PixelSet(np.array([5, 320 * 200])))
 
 
 def test_pixels_reads_a_changed_index_array_afresh():

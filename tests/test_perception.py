@@ -138,6 +138,17 @@ def _labelled(renderer: SegmentationRenderer, errors: LabelErrors, seed: int, po
     return LabelledView(SegmentationView(renderer, pose), noise.draw(rng, 0))
 
 
+def test_perceived_views_read_a_pixel_set_as_its_indices(renderer):
+    from terrapref.camera import PixelSet
+    index = np.random.default_rng(4).integers(0, 640 * 480, 2000)
+    pixels = PixelSet(index)
+    errors = LabelErrors(flip_rate=0.05, blobs_per_frame=2.0, boundary_px=2)
+    for view in (_labelled(renderer, errors, 3), TiltedView(renderer, Pose(8.0, 10.0, 0.2), 0.01, math.radians(3.0)),
+                 LabelledView(TiltedView(renderer, Pose(8.0, 10.0, 0.2), 0.01, 0.0), _labelled(renderer, errors, 5)._errors)):
+        np.testing.assert_array_equal(view.pixels(pixels), view.pixels(index))
+        np.testing.assert_array_equal(view.pixels(pixels), view.image.reshape(-1)[index])
+
+
 ALL_ERRORS = LabelErrors(flip_rate=0.1, blobs_per_frame=3.0, boundary_px=3, confusion=(("grass", (("mud", 0.3),)),), max_range_m=12.0)
 
 

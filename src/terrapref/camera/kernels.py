@@ -93,24 +93,44 @@ def pixels_at(flat_index: np.ndarray, width: int, row0: int, valid: np.ndarray, 
     float64 are the visible rows' ground point at column offset 0 and its change per column in
     the vehicle frame [m] (row ``row0`` first); ``(x, y)``, ``c``, ``s`` the pose's position and
     the cosine and sine of its yaw; ``res`` the raster's cell size [m]. A row's cell and change
-    per column are computed once, when its first pixel is read.
+    per column are computed once, when its first pixel is read (:func:`pixels_of_rows`).
     """
-    out = np.empty(flat_index.shape[0], np.uint8)
-    zero = np.float32(0.0)
-    rows = P.shape[0]
-    cells = np.empty((rows, 4), np.float32)
-    done = np.zeros(rows, np.bool_)
-    n_pixels = valid.shape[0]
+    rows, cols = rows_and_columns(flat_index, width, row0, valid)
+    return pixels_of_rows(rows, cols, P, Q, u, x, y, c, s, res, raster, nx, x_max, y_max, unknown)
+
+
+@njit(cache=True, nogil=True)
+def rows_and_columns(flat_index: np.ndarray, width: int, row0: int, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each pixel's row less ``row0`` (-1 where ``valid`` (H * W,) says it sees no ground in
+    range) and its column, for :func:`pixels_of_rows`; IndexError for a pixel outside the image."""
+    rows = np.empty(flat_index.shape[0], np.int64)
+    cols = np.empty(flat_index.shape[0], np.int64)
     per_row = 1.0 / width
     for i in range(flat_index.shape[0]):
         k = flat_index[i]
-        if k < 0 or k >= n_pixels:
+        if k < 0 or k >= valid.shape[0]:
             raise IndexError("a pixel index is outside the image")
-        if not valid[np.uint64(k)]:
+        row, col = row_col(k, width, per_row)
+        rows[i] = row - row0 if valid[k] else -1
+        cols[i] = col
+    return rows, cols
+
+
+@njit(cache=True, nogil=True)
+def pixels_of_rows(rows: np.ndarray, cols: np.ndarray, P: np.ndarray, Q: np.ndarray, u: np.ndarray,
+                   x: float, y: float, c: float, s: float, res: float,
+                   raster: np.ndarray, nx: int, x_max: np.float32, y_max: np.float32, unknown: int) -> np.ndarray:
+    """:func:`pixels_at` of pixels given by their row among the visible rows (-1: ``unknown``)
+    and column (:func:`rows_and_columns`): the same float32 operations, the same class ids."""
+    out = np.empty(rows.shape[0], np.uint8)
+    zero = np.float32(0.0)
+    cells = np.empty((P.shape[0], 4), np.float32)
+    done = np.zeros(P.shape[0], np.bool_)
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        if r < 0:
             out[i] = unknown
             continue
-        row, col = row_col(k, width, per_row)
-        r = np.uint64(row - row0)  # unsigned indices: no wrap-around test on each read
         if not done[r]:
             # The cell of the row's column offset 0 and its change per column, as render_frame's.
             cells[r, 0] = np.float32((x + (P[r, 0] * c - P[r, 1] * s)) / res + 1.0)
@@ -118,7 +138,7 @@ def pixels_at(flat_index: np.ndarray, width: int, row0: int, valid: np.ndarray, 
             cells[r, 2] = np.float32((Q[r, 0] * c - Q[r, 1] * s) / res)
             cells[r, 3] = np.float32((Q[r, 0] * s + Q[r, 1] * c) / res)
             done[r] = True
-        uj = u[np.uint64(col)]
+        uj = u[cols[i]]
         gx = min(max(cells[r, 2] * uj + cells[r, 0], zero), x_max)
         gy = min(max(cells[r, 3] * uj + cells[r, 1], zero), y_max)
         out[i] = raster[np.uint64(gy) * np.uint64(nx) + np.uint64(gx)]

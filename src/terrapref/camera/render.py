@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from terrapref.camera.kernels import pixels_at, ray_pixels, render_frame, take
+from terrapref.camera.kernels import pixels_at, pixels_of_rows, ray_pixels, render_frame, rows_and_columns, take
 from terrapref.camera.pinhole import PinholeCamera
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose
@@ -83,13 +83,18 @@ class SegmentationRenderer:
                      self.world.resolution_m, self._flat, self._nx_pad, self._x_max, self._y_max, UNKNOWN, out)
         return out
 
-    def pixels(self, pose: Pose, flat_index: np.ndarray) -> np.ndarray:
+    def pixels(self, pose: Pose, flat_index: np.ndarray | PixelSet) -> np.ndarray:
         """Class ids of the pixels ``flat_index`` (row * width + col) of the image at ``pose``.
 
         Equal to ``render(pose).reshape(-1)[flat_index]``: the same float32 operations, on
-        those pixels only.
+        those pixels only. A :class:`PixelSet` keeps each pixel's visible row and column from
+        its first frame, so later frames skip working them out.
         """
         x, y, yaw = _finite(pose)
+        if isinstance(flat_index, PixelSet):
+            rows, cols = flat_index.rows_and_columns(self)
+            return pixels_of_rows(rows, cols, self._P, self._Q, self._u, float(x), float(y), math.cos(yaw), math.sin(yaw),
+                                  self.world.resolution_m, self._flat, self._nx_pad, self._x_max, self._y_max, UNKNOWN)
         flat = np.asarray(flat_index, dtype=np.int64).reshape(-1)
         ids = pixels_at(flat, self.camera.config.width_px, self._row0, self._valid_flat, self._P, self._Q, self._u,
                         float(x), float(y), math.cos(yaw), math.sin(yaw), self.world.resolution_m,
@@ -97,7 +102,7 @@ class SegmentationRenderer:
         return ids.reshape(np.shape(flat_index))
 
 
-    def pixels_tilted(self, pose: Pose, flat_index: np.ndarray, dpitch_rad: float, droll_rad: float,
+    def pixels_tilted(self, pose: Pose, flat_index: np.ndarray | PixelSet, dpitch_rad: float, droll_rad: float,
                       max_range_m: float | None = None) -> np.ndarray:
         """Class ids of the pixels ``flat_index`` that the camera sees when its attitude is off the
         mount by ``dpitch_rad`` and ``droll_rad`` (:meth:`PinholeCamera.tilted`); each pixel's ray is
@@ -105,7 +110,7 @@ class SegmentationRenderer:
         if that is nearer."""
         x, y, yaw = _finite(pose)
         cam, c = self.camera, self.camera.config
-        flat = np.asarray(flat_index, dtype=np.int64).reshape(-1)
+        flat = np.asarray(flat_of(flat_index), dtype=np.int64).reshape(-1)
         if flat.size and (flat.min() < 0 or flat.max() >= c.width_px * c.height_px):
             raise IndexError("a pixel index is outside the image")
         reach = c.max_range_m if max_range_m is None else min(c.max_range_m, max_range_m)
@@ -113,6 +118,40 @@ class SegmentationRenderer:
                          float(x), float(y), math.cos(yaw), math.sin(yaw), self.world.resolution_m,
                          self._flat, self._nx_pad, self._x_max, self._y_max, UNKNOWN)
         return ids.reshape(np.shape(flat_index))
+
+
+class PixelSet:
+    """A fixed set of pixels (row * width + col) that a reader takes from every frame, such as
+    the ground map's samples or the sky line's band: what a renderer works out of each pixel
+    alone (its row among the rows that see the ground, -1 for none, and its column) is kept from
+    the first frame, for the renderer's camera. Every view reads it as it reads ``flat``."""
+
+    __slots__ = ("flat", "_camera", "_rows", "_cols")
+
+    def __init__(self, flat_index: np.ndarray) -> None:
+        self.flat = np.array(flat_index, dtype=np.int64).reshape(-1)  # its own copy, read-only
+        self.flat.flags.writeable = False
+        self._camera = None
+        self._rows = self._cols = self.flat
+
+    @property
+    def shape(self) -> tuple[int]:
+        """(number of pixels,): the shape of what a view's ``pixels`` returns for it."""
+        return self.flat.shape
+
+    def rows_and_columns(self, renderer: SegmentationRenderer) -> tuple[np.ndarray, np.ndarray]:
+        """Each pixel's row among ``renderer``'s rows that see the ground (-1 where the pixel sees
+        none in range) and its column; worked out again only for another camera."""
+        config = renderer.camera.config
+        if self._camera is not config and self._camera != config:
+            self._rows, self._cols = rows_and_columns(self.flat, config.width_px, renderer._row0, renderer._valid_flat)
+            self._camera = config
+        return self._rows, self._cols
+
+
+def flat_of(flat_index: np.ndarray | PixelSet) -> np.ndarray:
+    """The pixel indices of ``flat_index``: an array as given, a :class:`PixelSet`'s ``flat``."""
+    return flat_index.flat if isinstance(flat_index, PixelSet) else flat_index
 
 
 def _finite(pose: Pose) -> Pose:
@@ -158,10 +197,11 @@ class SegmentationView:
         """(height, width) of the frame, without rendering it."""
         return self._image.shape if self._image is not None else self._renderer.shape
 
-    def pixels(self, flat_index: np.ndarray) -> np.ndarray:
-        """Class ids at ``flat_index`` (row * width + col)."""
+    def pixels(self, flat_index: np.ndarray | PixelSet) -> np.ndarray:
+        """Class ids at ``flat_index`` (row * width + col; or a :class:`PixelSet`)."""
         if self._image is not None:
             image = self._image
+            flat_index = flat_of(flat_index)
             if image.dtype == np.uint8 and image.ndim == 2 and image.flags.c_contiguous and flat_index.dtype.kind == "i":
                 return take(image, flat_index).reshape(np.shape(flat_index))  # NumPy's fancy indexing, without its overhead
             return image.reshape(-1)[flat_index]

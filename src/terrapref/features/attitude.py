@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from terrapref.camera import PinholeCamera, SegmentationView
+from terrapref.camera import PinholeCamera, PixelSet, SegmentationView
 from terrapref.features import kernels
 from terrapref.terrain import UNKNOWN
 
@@ -52,6 +52,7 @@ class HorizonAttitude:
         self.cols = np.arange(column_step_px // 2, c.width_px, column_step_px)
         self.index = (self.rows[:, None] * c.width_px + self.cols[None, :]).reshape(-1)
         self.index.flags.writeable = False
+        self._band = PixelSet(self.index)  # read every frame: its rows and columns worked out once
         self.memory = memory
         self.max_rad = math.radians(max_deg)
         self._u = self.cols + 0.5 - self.cx
@@ -68,7 +69,7 @@ class HorizonAttitude:
     def line(self, view: SegmentationView) -> np.ndarray:
         """The first row of each column read below which the camera sees ground (at least 3 of it and
         the next 3 rows read are ground), (C,) float; NaN where the band holds none."""
-        return kernels.sky_line(view.pixels(self.index), self.rows, len(self.cols), UNKNOWN)
+        return kernels.sky_line(view.pixels(self._band), self.rows, len(self.cols), UNKNOWN)
 
     def __call__(self, view: SegmentationView) -> tuple[float, float]:
         """(pitch [rad], more downward positive; roll [rad], as :meth:`PinholeCamera.tilted` takes it)

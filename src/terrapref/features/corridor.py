@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from terrapref.camera import PinholeCamera, SegmentationView
+from terrapref.camera import PinholeCamera, PixelSet, SegmentationView
 from terrapref.features import kernels
 from terrapref.features.attitude import HorizonAttitude
 from terrapref.records import to_plain
@@ -203,6 +203,7 @@ class GroundMap:
         self._pix = pix[seen]
         # Far samples share pixels: each distinct pixel is read once, and each sample reads its own.
         self._distinct_pix, self._sample_pix = np.unique(self._pix, return_inverse=True)
+        self._pixels = PixelSet(self._distinct_pix)  # read every frame: their rows and columns worked out once
         self._vx, self._vy = grid[seen, 0].copy(), grid[seen, 1].copy()
         self.camera = camera
         self.attitude = HorizonAttitude(camera) if c.map_sky_attitude else None
@@ -255,7 +256,7 @@ class GroundMap:
         c = self.config
         self._recentre(x, y)
         self.frame += 1
-        ids = view.pixels(self._distinct_pix)
+        ids = view.pixels(self._pixels)
         dpitch, droll = self.attitude(view) if self.attitude is not None else (0.0, 0.0)
         tilted = bool(dpitch or droll)
         axes = self.camera.tilted(dpitch, droll) if tilted else self.camera.R

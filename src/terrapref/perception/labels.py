@@ -25,7 +25,7 @@ import functools
 import numpy as np
 from numba import njit
 
-from terrapref.camera import CameraConfig, PinholeCamera, SegmentationView
+from terrapref.camera import CameraConfig, PinholeCamera, SegmentationView, flat_of
 from terrapref.camera.kernels import row_col
 from terrapref.perception.model import LabelErrors
 from terrapref.terrain import ClassTable
@@ -103,7 +103,7 @@ class FrameLabelErrors:
     def apply(self, base: SegmentationView, flat_index: np.ndarray) -> np.ndarray:
         """The class ids the robot's segmentation gives at pixels ``flat_index`` (row * width + col) of ``base``."""
         n, e = self.noise, self.noise.errors
-        flat = np.ascontiguousarray(flat_index, dtype=np.int64).reshape(-1)
+        flat = np.ascontiguousarray(flat_of(flat_index), dtype=np.int64).reshape(-1)
         source = _displaced(flat, n.width, n.height, np.uint64(self.boundary_seed), e.boundary_px) if e.boundary_px else flat
         ids = np.ascontiguousarray(base.pixels(source), dtype=np.uint8).reshape(-1)
         out = _errors(ids, flat, n.width, n.far, np.uint64(self.conf_seed), e.region_px, n.conf_n, n.conf_cum, n.conf_to,
