@@ -215,11 +215,12 @@ def map_vote(evidence: np.ndarray, stamp: np.ndarray, cells: np.ndarray, ox: flo
     """
     n_rows, n_cols = cells.shape
     k = evidence.shape[2] - 1
-    # First every sample's cell (-1: no vote), in a loop without stores to the map, then the votes.
+    # First every sample's cell (j * n_cols + i; -1: no vote), in a loop without stores to the
+    # map, then the votes, reading the map through flat views (2-D indexing cost the loop a fifth).
     n = vx.shape[0]
-    ci, cj = np.empty(n, np.int64), np.empty(n, np.int64)
+    cell = np.empty(n, np.int64)
     for p in range(n):
-        ci[p] = -1
+        cell[p] = -1
         if columns[ids[pixel_of[p]]] > k:
             continue
         px, py = vx[p], vy[p]
@@ -237,20 +238,22 @@ def map_vote(evidence: np.ndarray, stamp: np.ndarray, cells: np.ndarray, ox: flo
         i = math.floor((x - ox + px * c - py * s) * inv_res)
         j = math.floor((y - oy + px * s + py * c) * inv_res)
         if 0 <= i < n_cols and 0 <= j < n_rows:
-            ci[p], cj[p] = i, j
+            cell[p] = j * n_cols + i
+    votes, stamps, columns_of = evidence.reshape(-1), stamp.reshape(-1), cells.reshape(-1)
     for p in range(n):
-        i, j = ci[p], cj[p]
-        if i < 0:
+        c = cell[p]
+        if c < 0:
             continue
         col = columns[ids[pixel_of[p]]]
-        gap = frame - stamp[j, i]
+        gap = frame - stamps[c]
+        at = c * (k + 1)
         if gap != 0:
             f = fade[min(gap, fade.shape[0] - 1)]
             for q in range(k + 1):
-                evidence[j, i, q] *= f
-            stamp[j, i] = frame
-        evidence[j, i, col] += weight[p]
-        cells[j, i] = UNSETTLED
+                votes[at + q] *= f
+            stamps[c] = frame
+        votes[at + col] += weight[p]
+        columns_of[c] = UNSETTLED
 
 
 @njit(cache=True, nogil=True, inline="always")
