@@ -150,3 +150,27 @@ def test_expert_config_to_dict_is_plain_data():
     assert data["profile"] == ["mud", "rock", "water", "non_traversable"]
     assert data["speed_mps"] == 1.0
     assert all(isinstance(v, (int, float, str, list)) for v in data.values())
+
+
+@pytest.mark.parametrize("n_f", [4, 5, 7, 9])
+def test_offset_costs_and_hits_give_the_numpy_forms(n_f: int):
+    """The driver's per-offset costs and lethal hits, compiled, against the NumPy expressions they
+    replace over _offset_classes: the same bits (NumPy's summation order), the same hits."""
+    rng = np.random.default_rng(n_f)
+    raster = rng.integers(0, 5, (300, 400)).astype(np.uint8)
+    raster[rng.random(raster.shape) < 0.001] = 5  # lethal here and there
+    cost = rng.random(256) * 10.0 ** rng.integers(-3, 3, 256)  # magnitudes apart: a different order would show
+    lethal = np.zeros(256, dtype=bool)
+    lethal[5] = True
+    for upto in (1, 7, 8, 49, 128):
+        centre = np.stack([rng.uniform(-2.0, 22.0, upto), rng.uniform(-2.0, 17.0, upto)], axis=1)  # some points off the map
+        heading = rng.uniform(-np.pi, np.pi, upto)
+        normal = np.stack([-np.sin(heading), np.cos(heading)], axis=1)
+        lat = np.round(rng.uniform(-3.0, 3.0, 30), 6)[:, None] + np.linspace(-0.9, 0.9, n_f)[None, :]
+        classes = expert_module._offset_classes(centre, normal, lat, upto, raster, 0.05)
+        got = expert_module._offset_costs(centre, normal, lat, upto, raster, 0.05, cost)
+        want = cost[classes].mean(axis=2).sum(axis=1)
+        assert np.array_equal(got.view(np.int64), want.view(np.int64)), upto
+        hits = expert_module._offset_hits(centre, normal, lat, upto, raster, 0.05, lethal)
+        assert np.array_equal(hits, lethal[classes].any(axis=(1, 2))), upto
+        assert upto < 49 or (hits.any() and not hits.all())  # the long reaches hit on some offsets only

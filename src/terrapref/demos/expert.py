@@ -31,6 +31,7 @@ from terrapref.registry import Registry
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim.loop import Frame
+from terrapref.sums import numpy_sum
 from terrapref.terrain import UNKNOWN, PreferenceProfile
 from terrapref.vehicle import Command, pure_pursuit_yaw_rate
 from terrapref.world import WorldMap, rasterise
@@ -200,11 +201,10 @@ class ExpertDriver:
                 break
             last = int(i)
         upto = min(len(s), last + 1 + round(c.pursuit_lookahead_m / self.sample_step_m))
-        cls = self._classes(centre, normal, self._lat, upto)
-        terrain = self._cost[cls].mean(axis=2).sum(axis=1) * self.sample_step_m  # (O,)
+        terrain = self._costs(centre, normal, self._lat, upto) * self.sample_step_m  # (O,)
         if self._margin_lat is not None:  # the berth beside the footprint: half the cost of driving on it
-            terrain = terrain + 0.5 * self._cost[self._classes(centre, normal, self._margin_lat, upto)].mean(axis=2).sum(axis=1) * self.sample_step_m
-        hits_lethal = self._lethal[self._classes(centre, normal, self._lethal_lat, upto)].any(axis=(1, 2))
+            terrain = terrain + 0.5 * self._costs(centre, normal, self._margin_lat, upto) * self.sample_step_m
+        hits_lethal = _offset_hits(centre, normal, self._lethal_lat, upto, self.world.raster, self.world.resolution_m, self._lethal)
         terrain = terrain + hits_lethal * c.lethal_cost
         span = (last - first + 1) * self.sample_step_m + 2.0 * c.pursuit_lookahead_m
         total = terrain + c.deviation_cost * self.offsets**2 * span
@@ -221,6 +221,13 @@ class ExpertDriver:
         if self.offset != 0.0 and len(same_side):
             ties = same_side  # keep to the side already taken
         return float(self.offsets[ties[self.rng.integers(len(ties))]] if len(ties) > 1 else self.offsets[ties[0]])
+
+    def _costs(self, centre: np.ndarray, normal: np.ndarray, lat: np.ndarray, upto: int) -> np.ndarray:
+        """``cost[_classes(centre, normal, lat, upto)].mean(axis=2).sum(axis=1)`` (O,): each offset's
+        cost per point summed along the path, with NumPy's sums (compiled, up to 128 stations)."""
+        if upto > 128:
+            return self._cost[self._classes(centre, normal, lat, upto)].mean(axis=2).sum(axis=1)
+        return _offset_costs(centre, normal, lat, upto, self.world.raster, self.world.resolution_m, self._cost)
 
     def _classes(self, centre: np.ndarray, normal: np.ndarray, lat: np.ndarray, upto: int) -> np.ndarray:
         """Class ids (O, upto, F) of the points ``centre + lat * normal`` for the first ``upto`` samples along the path.
@@ -270,16 +277,62 @@ class ExpertDriver:
         return Command(c.speed_mps, out)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _cell_beside(x: float, y: float, lat: float, nx: float, ny: float, res: float) -> tuple[int, int]:
+    """(row, col) of the raster cell under ``(x, y) + lat * (nx, ny)``, floor to a cell as
+    :meth:`WorldMap.class_at` (numbers only: an inlined helper that takes an array costs each
+    point more than the point)."""
+    return np.int64(math.floor((y + lat * ny) / res)), np.int64(math.floor((x + lat * nx) / res))
+
+
+@njit(cache=True, nogil=True)
+def _offset_costs(centre: np.ndarray, normal: np.ndarray, lat: np.ndarray, upto: int, raster: np.ndarray, res: float,
+                  cost: np.ndarray) -> np.ndarray:
+    """(O,): ``cost[_offset_classes(...)].mean(axis=2).sum(axis=1)``, each mean and sum as NumPy
+    adds it (terrapref.sums.numpy_sum; ``upto`` <= 128)."""
+    n_rows, n_cols = raster.shape
+    n_f = lat.shape[1]
+    points, stations = np.empty(n_f), np.empty(upto)
+    out = np.empty(lat.shape[0])
+    for o in range(lat.shape[0]):
+        for k in range(upto):
+            total = 0.0  # numpy_sum's order for fewer than 8 terms, written out: a call per station cost more than its sum
+            for f in range(n_f):
+                row, col = _cell_beside(centre[k, 0], centre[k, 1], lat[o, f], normal[k, 0], normal[k, 1], res)
+                points[f] = cost[raster[row, col] if 0 <= col < n_cols and 0 <= row < n_rows else UNKNOWN]
+                total += points[f]
+            stations[k] = (0.0 + total if n_f < 8 else numpy_sum(points)) / n_f
+        out[o] = numpy_sum(stations)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _offset_hits(centre: np.ndarray, normal: np.ndarray, lat: np.ndarray, upto: int, raster: np.ndarray, res: float,
+                 lethal: np.ndarray) -> np.ndarray:
+    """(O,): ``lethal[_offset_classes(...)].any(axis=(1, 2))``, each offset's search stopped at its first hit."""
+    n_rows, n_cols = raster.shape
+    out = np.zeros(lat.shape[0], np.bool_)
+    for o in range(lat.shape[0]):
+        for k in range(upto):
+            for f in range(lat.shape[1]):
+                row, col = _cell_beside(centre[k, 0], centre[k, 1], lat[o, f], normal[k, 0], normal[k, 1], res)
+                if lethal[raster[row, col] if 0 <= col < n_cols and 0 <= row < n_rows else UNKNOWN]:
+                    out[o] = True
+                    break
+            if out[o]:
+                break
+    return out
+
+
 @njit(cache=True, nogil=True)
 def _offset_classes(centre: np.ndarray, normal: np.ndarray, lat: np.ndarray, upto: int, raster: np.ndarray, res: float) -> np.ndarray:
     """Class id (O, upto, F) uint8 of every point ``centre[s] + lat[o, f] * normal[s]`` (255 off the
     map): per point the NumPy form of :meth:`WorldMap.class_at`, ``floor(x / res)`` to a cell."""
-    ny, nx = raster.shape
+    n_rows, n_cols = raster.shape
     out = np.empty((lat.shape[0], upto, lat.shape[1]), np.uint8)
     for o in range(lat.shape[0]):
         for k in range(upto):
             for f in range(lat.shape[1]):
-                col = np.int64(math.floor((centre[k, 0] + lat[o, f] * normal[k, 0]) / res))
-                row = np.int64(math.floor((centre[k, 1] + lat[o, f] * normal[k, 1]) / res))
-                out[o, k, f] = raster[row, col] if 0 <= col < nx and 0 <= row < ny else UNKNOWN
+                row, col = _cell_beside(centre[k, 0], centre[k, 1], lat[o, f], normal[k, 0], normal[k, 1], res)
+                out[o, k, f] = raster[row, col] if 0 <= col < n_cols and 0 <= row < n_rows else UNKNOWN
     return out

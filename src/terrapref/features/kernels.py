@@ -18,6 +18,8 @@ import math
 import numpy as np
 from numba import njit
 
+from terrapref.sums import numpy_sum  # noqa: F401 - compiled into stage_scores; also used by the synthetic driver
+
 UNSETTLED = 255  # a ground-map cell voted on since its column was last decided (columns run 0..K + 1)
 
 
@@ -87,38 +89,6 @@ def utilities(ids: np.ndarray, column: np.ndarray, row: np.ndarray, k: int, scal
             out[i, j] = np.float32(shares[i, j])
         out[i, k] = np.float32(u[i])
     return out
-
-
-@njit(cache=True, nogil=True)
-def numpy_sum(a: np.ndarray) -> float:
-    """``a.sum()`` of a 1-D float64 array as NumPy adds it: from 0, in eight interleaved partial
-    sums added pairwise, then the last ``n % 8`` terms in order (its pairwise summation for
-    n <= 128; longer arrays are not summed here)."""
-    n = a.shape[0]
-    if n > 128:
-        raise ValueError("numpy_sum follows NumPy's summation order for at most 128 terms")
-    if n < 8:
-        res = 0.0
-        for i in range(n):
-            res += a[i]
-        return 0.0 + res
-    r0, r1, r2, r3, r4, r5, r6, r7 = a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]
-    i = 8
-    while i < n - n % 8:
-        r0 += a[i]
-        r1 += a[i + 1]
-        r2 += a[i + 2]
-        r3 += a[i + 3]
-        r4 += a[i + 4]
-        r5 += a[i + 5]
-        r6 += a[i + 6]
-        r7 += a[i + 7]
-        i += 8
-    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-    while i < n:
-        res += a[i]
-        i += 1
-    return 0.0 + res
 
 
 @njit(cache=True, nogil=True)
