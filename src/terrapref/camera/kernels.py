@@ -160,13 +160,14 @@ def take(image: np.ndarray, flat_index: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
-def ray_pixels(flat_index: np.ndarray, width: int, fx: float, fy: float, cx: float, cy: float, axes: np.ndarray, t: np.ndarray,
+def ray_pixels(flat_index: np.ndarray, width: int, ray_a: np.ndarray, ray_b: np.ndarray, axes: np.ndarray, t: np.ndarray,
                max_range_m: float, x: float, y: float, c: float, s: float, res: float,
                raster: np.ndarray, nx: int, x_max: np.float32, y_max: np.float32, unknown: int) -> np.ndarray:
     """Class ids (len(flat_index),) uint8 of the pixels ``flat_index`` of a camera at any attitude.
 
     Each pixel's ray through its centre, ``axes`` (3, 3) rows (right, down, forward in the
-    vehicle frame) weighted by the pixel's offsets, meets the ground z = 0 from the optical
+    vehicle frame) weighted by the pixel's offsets (``ray_a[col] = (col + 0.5 - cx) / fx``,
+    ``ray_b[row] = (row + 0.5 - cy) / fy``, worked out once per camera), meets the ground z = 0 from the optical
     centre ``t`` (3,); ``unknown`` where it does not, or farther than ``max_range_m``. The point
     goes to the world at the pose ((x, y), cosine ``c`` and sine ``s`` of the yaw) and to a cell
     of the padded raster as the row-affine renderer clips it. Used for a camera whose attitude
@@ -174,22 +175,27 @@ def ray_pixels(flat_index: np.ndarray, width: int, fx: float, fy: float, cx: flo
     """
     out = np.empty(flat_index.shape[0], np.uint8)
     per_row = 1.0 / width
+    # The axes and the centre in locals: read once, not again after every store to ``out``.
+    a0, a1, a2 = axes[0, 0], axes[0, 1], axes[0, 2]
+    b0, b1, b2 = axes[1, 0], axes[1, 1], axes[1, 2]
+    f0, f1, f2 = axes[2, 0], axes[2, 1], axes[2, 2]
+    t0, t1, t2 = t[0], t[1], t[2]
     for i in range(flat_index.shape[0]):
         k = flat_index[i]
         row, col = row_col(k, width, per_row)
-        a = (col + 0.5 - cx) / fx
-        b = (row + 0.5 - cy) / fy
-        dx = a * axes[0, 0] + b * axes[1, 0] + axes[2, 0]
-        dy = a * axes[0, 1] + b * axes[1, 1] + axes[2, 1]
-        dz = a * axes[0, 2] + b * axes[1, 2] + axes[2, 2]
+        a = ray_a[col]
+        b = ray_b[row]
+        dx = a * a0 + b * b0 + f0
+        dy = a * a1 + b * b1 + f1
+        dz = a * a2 + b * b2 + f2
         if dz >= -1e-12:
             out[i] = unknown
             continue
-        scale = -t[2] / dz
+        scale = -t2 / dz
         if scale * math.sqrt(dx * dx + dy * dy + dz * dz) > max_range_m:
             out[i] = unknown
             continue
-        gx, gy = t[0] + scale * dx, t[1] + scale * dy
+        gx, gy = t0 + scale * dx, t1 + scale * dy
         wx = min(max((x + gx * c - gy * s) / res + 1.0, 0.0), np.float64(x_max))
         wy = min(max((y + gx * s + gy * c) / res + 1.0, 0.0), np.float64(y_max))
         out[i] = raster[np.int64(wy) * nx + np.int64(wx)]

@@ -58,6 +58,9 @@ class SegmentationRenderer:
         self._P = (camera.t[:2] + s[:, None] * b[:, :2])[self._row0 :]  # (rows, 2) [m]
         self._Q = (s[:, None] * a[:2])[self._row0 :]  # (rows, 2) [m per px]
         self._u = u.astype(np.float32)
+        # Each column's and row's ray offsets through the pixel centres, for a camera off its mount (kernels.ray_pixels).
+        self._ray_a = (np.arange(width) + 0.5 - camera.cx) / camera.fx
+        self._ray_b = (np.arange(height) + 0.5 - camera.cy) / camera.fy
 
         # A one-cell border of 255 round the raster: clipped indices off the map read "unknown".
         ny, nx = world.raster.shape
@@ -114,7 +117,7 @@ class SegmentationRenderer:
         if flat.size and (flat.min() < 0 or flat.max() >= c.width_px * c.height_px):
             raise IndexError("a pixel index is outside the image")
         reach = c.max_range_m if max_range_m is None else min(c.max_range_m, max_range_m)
-        ids = ray_pixels(flat, c.width_px, cam.fx, cam.fy, cam.cx, cam.cy, cam.tilted(dpitch_rad, droll_rad), cam.t, reach,
+        ids = ray_pixels(flat, c.width_px, self._ray_a, self._ray_b, cam.tilted(dpitch_rad, droll_rad), cam.t, reach,
                          float(x), float(y), math.cos(yaw), math.sin(yaw), self.world.resolution_m,
                          self._flat, self._nx_pad, self._x_max, self._y_max, UNKNOWN)
         return ids.reshape(np.shape(flat_index))

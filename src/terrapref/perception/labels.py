@@ -61,6 +61,11 @@ class LabelNoise:
             self.conf_to[t, : len(row)] = [classes.id_of(seen) for seen, _ in row]
         cut = errors.max_range_m is not None and not range_in_view
         self.far = far_pixels(camera.config, errors.max_range_m) if cut else np.zeros(0, dtype=np.bool_)
+        # The confusion tile of each pixel: row // region * tiles across + col // region, from two
+        # tables (an integer division per pixel cost more than the rest of its errors).
+        region = errors.region_px
+        self.tile_of_col = np.arange(self.width, dtype=np.int64) // region
+        self.tile_of_row = np.arange(self.height, dtype=np.int64) // region * ((self.width + region - 1) // region)
         self._conf_base = 0
 
     def reset(self, rng: np.random.Generator) -> None:
@@ -106,7 +111,7 @@ class FrameLabelErrors:
         flat = np.ascontiguousarray(flat_of(flat_index), dtype=np.int64).reshape(-1)
         source = _displaced(flat, n.width, n.height, np.uint64(self.boundary_seed), e.boundary_px) if e.boundary_px else flat
         ids = np.ascontiguousarray(base.pixels(source), dtype=np.uint8).reshape(-1)
-        out = _errors(ids, flat, n.width, n.far, np.uint64(self.conf_seed), e.region_px, n.conf_n, n.conf_cum, n.conf_to,
+        out = _errors(ids, flat, n.width, n.far, np.uint64(self.conf_seed), n.tile_of_row, n.tile_of_col, n.conf_n, n.conf_cum, n.conf_to,
                       self.blobs, np.uint64(self.flip_seed), e.flip_rate, n.ids)
         return out.reshape(np.shape(flat_index))
 
@@ -192,15 +197,16 @@ def _displaced(flat: np.ndarray, width: int, height: int, seed: np.uint64, radiu
 
 
 @njit(cache=True, nogil=True)
-def _errors(ids: np.ndarray, flat: np.ndarray, width: int, far: np.ndarray, conf_seed: np.uint64, region: int, conf_n: np.ndarray,
-            conf_cum: np.ndarray, conf_to: np.ndarray, blobs: np.ndarray, flip_seed: np.uint64, flip_rate: float,
-            table_ids: np.ndarray) -> np.ndarray:
+def _errors(ids: np.ndarray, flat: np.ndarray, width: int, far: np.ndarray, conf_seed: np.uint64, tile_of_row: np.ndarray,
+            tile_of_col: np.ndarray, conf_n: np.ndarray, conf_cum: np.ndarray, conf_to: np.ndarray, blobs: np.ndarray, flip_seed: np.uint64,
+            flip_rate: float, table_ids: np.ndarray) -> np.ndarray:
     """Range, confusion, blobs and flips (the module docstring's steps 2-5) on the classes ``ids``
-    read for the pixels ``flat``."""
+    read for the pixels ``flat``; a pixel's confusion tile is ``tile_of_row[row] + tile_of_col[col]``
+    (``row // region * tiles across + col // region``)."""
     out = ids.copy()
     golden = np.uint64(0x9E3779B97F4A7C15)
-    tiles_x = (width + region - 1) // region
     per_row = 1.0 / width
+    last_key, last_u = -1, 0.0  # the confusion draw of the last (tile, class): neighbouring pixels share it
     for i in range(flat.shape[0]):
         k = flat[i]
         c = out[i]
@@ -208,8 +214,10 @@ def _errors(ids: np.ndarray, flat: np.ndarray, width: int, far: np.ndarray, conf
             c = np.uint8(255)
         y, x = row_col(k, width, per_row)
         if c != 255 and conf_n[c] > 0:
-            tile = (y // region) * tiles_x + x // region
-            u = _uniform(_mix(conf_seed + np.uint64(tile * 256 + c + 1) * golden))
+            key = (tile_of_row[y] + tile_of_col[x]) * 256 + c
+            if key != last_key:
+                last_key, last_u = key, _uniform(_mix(conf_seed + np.uint64(key + 1) * golden))
+            u = last_u
             for j in range(conf_n[c]):
                 if u < conf_cum[c, j]:
                     c = conf_to[c, j]
