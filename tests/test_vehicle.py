@@ -180,3 +180,17 @@ def test_control_set_validation_and_round_trip():
         ControlSet(0.0)
     cs = ControlSet.uniform(m=11, v_mps=0.8, w_max_rps=0.5)
     assert ControlSet.from_dict(cs.to_dict()) == cs
+
+
+def test_label_of_one_command_is_the_vectorised_label():
+    """One yaw rate takes a compiled path; it must give the label the NumPy form gives, on random
+    rates, rates at and halfway between grid values (ties), and non-finite ones."""
+    rng = np.random.default_rng(2)
+    for control in (ControlSet(), ControlSet.uniform(7, w_max_rps=0.6), ControlSet(1.0, (-0.5, -0.2, 0.2, 0.5))):
+        grid = np.asarray(control.w_rps)
+        w = np.concatenate([rng.uniform(-1.5, 1.5, 2000), grid, (grid[1:] + grid[:-1]) / 2, grid + 1e-12, grid - 1e-12,
+                            [0.0, -0.0, math.inf, -math.inf, math.nan]])
+        want = control.label_of(w)
+        got = np.array([control.label_of(float(x)) for x in w])
+        np.testing.assert_array_equal(got, want)
+        assert isinstance(control.label_of(0.3), int) and control.label_of(1) == control.label_of(np.array([1.0]))[0]

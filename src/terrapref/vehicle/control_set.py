@@ -4,7 +4,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import math
+
 import numpy as np
+from numba import njit
 
 from terrapref.records import to_plain
 
@@ -27,6 +30,7 @@ class ControlSet:
             raise ValueError("w_rps must have at least 2 strictly ascending values")
         if not self.v_mps > 0:
             raise ValueError("v_mps must be > 0")
+        object.__setattr__(self, "_grid", np.asarray(self.w_rps, dtype=float))  # label_of's, made once
 
     @classmethod
     def uniform(cls, m: int = 21, v_mps: float = 1.0, w_max_rps: float = 1.0) -> ControlSet:
@@ -49,6 +53,8 @@ class ControlSet:
 
     def label_of(self, w: float | np.ndarray) -> int | np.ndarray:
         """Index of the nearest yaw rate to a continuous ``w``; ties go toward w = 0."""
+        if isinstance(w, (float, int)):  # one command, as the control loop labels it: the same arithmetic, compiled
+            return int(_nearest_label(float(w), self._grid))
         grid = np.asarray(self.w_rps)
         w_arr = np.asarray(w, dtype=float)
         d = np.abs(w_arr[..., None] - grid)
@@ -63,3 +69,16 @@ class ControlSet:
     @classmethod
     def from_dict(cls, data: dict) -> ControlSet:
         return cls(float(data["v_mps"]), tuple(float(w) for w in data["w_rps"]))
+
+
+@njit(cache=True, nogil=True)
+def _nearest_label(w: float, grid: np.ndarray) -> int:
+    """:meth:`ControlSet.label_of` of one yaw rate: per grid value the NumPy form's ``key = round(|w
+    - grid|, 9) * 1e3 + |grid| * 1e-3`` (NumPy rounds to 9 decimals as ``rint(d * 1e9) / 1e9``),
+    and the first smallest key, as ``argmin`` takes it (the first NaN if any)."""
+    best, best_key = 0, math.inf
+    for j in range(grid.shape[0]):
+        key = np.rint(abs(w - grid[j]) * 1e9) / 1e9 * 1e3 + abs(grid[j]) * 1e-3
+        if j == 0 or key < best_key or (key != key and best_key == best_key):
+            best, best_key = j, key
+    return best
