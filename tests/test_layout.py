@@ -92,7 +92,7 @@ def test_the_cycle_finder_finds_one():
 LAYERS = [
     {"errors"},
     {"extras"},
-    {"yamlio", "fileio", "progress", "configargs", "registry", "records"},
+    {"yamlio", "fileio", "progress", "configargs", "registry", "records", "sums"},
     {"tensorfile", "terrain", "grid"},
     {"pngio", "scenario"},
     {"world"},
