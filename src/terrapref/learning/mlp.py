@@ -195,15 +195,25 @@ class TrainableClassifier:
         batch = len(g)
         for i in range(c.depth, -1, -1):
             out_i = cache.weights[i][1].ints.shape[0]
-            # The weight and bias gradients in one exact product, [inputs, 1]^T g, into the buffer.
-            self._weight_grads(g, cache.inputs[i], i, grads)
-            # d loss / d the layer's input, through the activation below it.
-            if out_i > exact.MAX_EXACT:  # a sum longer than one exact chunk: exact.matmul cuts it
-                product, unit = exact.matmul(g, self.weights[f"layers.{i}.weight"]), 1.0
-            else:
-                a = _rounded(g, _bits(out_i)[0])
+            if batch <= exact.MAX_EXACT and out_i <= exact.MAX_EXACT:
+                # g on the grids of both its products at once (one pass for its largest magnitude):
+                # the weight and bias gradients, [inputs, 1]^T g, and d loss / d the layer's input.
+                a_bits, b_bits = _bits(batch)
+                g_w, g_w_unit, g_in, g_in_unit = kernels.round_twice(np.ascontiguousarray(g, dtype=np.float64), a_bits, _bits(out_i)[0])
+                ones_ints, ones_unit = kernels.round_with_ones(np.ascontiguousarray(cache.inputs[i], dtype=np.float64), b_bits)
+                kernels.scale_into(g_w.T @ ones_ints, g_w_unit * ones_unit, grads, self._at[f"layers.{i}.weight"], self._at[f"layers.{i}.bias"])
                 weight = cache.weights[i][1]
-                product, unit = a.ints @ weight.ints, a.unit * weight.unit
+                product, unit = g_in @ weight.ints, g_in_unit * weight.unit
+            else:
+                # The weight and bias gradients in one exact product, [inputs, 1]^T g, into the buffer.
+                self._weight_grads(g, cache.inputs[i], i, grads)
+                # d loss / d the layer's input, through the activation below it.
+                if out_i > exact.MAX_EXACT:  # a sum longer than one exact chunk: exact.matmul cuts it
+                    product, unit = exact.matmul(g, self.weights[f"layers.{i}.weight"]), 1.0
+                else:
+                    a = _rounded(g, _bits(out_i)[0])
+                    weight = cache.weights[i][1]
+                    product, unit = a.ints @ weight.ints, a.unit * weight.unit
             if i == 0:
                 g = product * unit
             else:
