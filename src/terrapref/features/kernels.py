@@ -189,6 +189,9 @@ def map_vote(evidence: np.ndarray, stamp: np.ndarray, cells: np.ndarray, ox: flo
     # map, then the votes, reading the map through flat views (2-D indexing cost the loop a fifth).
     n = vx.shape[0]
     cell = np.empty(n, np.int64)
+    # The tilted camera's axes and centre in locals: read once, not again after every store.
+    a00, a01, a02, a10, a11, a12 = axes[0, 0], axes[0, 1], axes[0, 2], axes[1, 0], axes[1, 1], axes[1, 2]
+    a20, a21, a22, t0, t1, t2 = axes[2, 0], axes[2, 1], axes[2, 2], t[0], t[1], t[2]
     for p in range(n):
         cell[p] = -1
         if columns[ids[pixel_of[p]]] > k:
@@ -196,12 +199,12 @@ def map_vote(evidence: np.ndarray, stamp: np.ndarray, cells: np.ndarray, ox: flo
         px, py = vx[p], vy[p]
         if tilted:
             r0, r1 = ray[p, 0], ray[p, 1]
-            dz = r0 * axes[0, 2] + r1 * axes[1, 2] + axes[2, 2]
+            dz = r0 * a02 + r1 * a12 + a22
             if not dz < -1e-12:
                 continue
-            scale = -t[2] / dz
-            gx = t[0] + scale * (r0 * axes[0, 0] + r1 * axes[1, 0] + axes[2, 0])
-            gy = t[1] + scale * (r0 * axes[0, 1] + r1 * axes[1, 1] + axes[2, 1])
+            scale = -t2 / dz
+            gx = t0 + scale * (r0 * a00 + r1 * a10 + a20)
+            gy = t1 + scale * (r0 * a01 + r1 * a11 + a21)
             px, py = px + (gx - ground0[p, 0]), py + (gy - ground0[p, 1])
             if not (math.isfinite(px) and math.isfinite(py)):
                 continue
