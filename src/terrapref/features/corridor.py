@@ -224,6 +224,7 @@ class GroundMap:
         self.stamp = np.zeros((self._n, self._n), dtype=np.int64)
         self.frame = 0
         self.origin: np.ndarray | None = None  # world position of cell (0, 0)'s corner [m]
+        self._origin_xy: tuple[float, float] | None = None  # the same, in plain floats
 
     def reset(self) -> None:
         """Forget everything seen."""
@@ -231,16 +232,18 @@ class GroundMap:
         self.evidence.fill(0.0)
         self.stamp.fill(0)
         self.frame = 0
-        self.origin = None
+        self.origin = self._origin_xy = None
         if self.attitude is not None:
             self.attitude.reset()
 
     def _recentre(self, x: float, y: float) -> None:
         c = self.config
-        centre = np.array([x, y]) - c.map_half_size_m
-        # Re-centred while all the camera writes and the corridor reads stays inside.
-        if self.origin is not None and np.abs(self.origin - centre).max() < c.map_half_size_m - c.sample_range_m - 1.0:
+        # Re-centred while all the camera writes and the corridor reads stays inside (checked in
+        # plain floats: the same arithmetic as NumPy's on the two coordinates).
+        if self._origin_xy is not None and max(abs(self._origin_xy[0] - (x - c.map_half_size_m)),
+                                               abs(self._origin_xy[1] - (y - c.map_half_size_m))) < c.map_half_size_m - c.sample_range_m - 1.0:
             return
+        centre = np.array([x, y]) - c.map_half_size_m
         new = np.floor(centre / c.map_resolution_m).astype(np.int64)
         if self.origin is not None:  # keep what the old square and the new one share
             old = np.round(self.origin / c.map_resolution_m).astype(np.int64)
@@ -249,6 +252,7 @@ class GroundMap:
             self.evidence = _shifted(self.evidence, dx, dy, 0.0)
             self.stamp = _shifted(self.stamp, dx, dy, 0)
         self.origin = new * c.map_resolution_m
+        self._origin_xy = (float(self.origin[0]), float(self.origin[1]))
 
     def update(self, view: SegmentationView, pose: Pose) -> None:
         """Add what ``view``, taken at ``pose``, shows of the ground."""
