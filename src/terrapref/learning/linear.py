@@ -319,11 +319,12 @@ def _fit_through(first: np.ndarray, first_unit: float, distinct: np.ndarray, whi
     chosen, spare, counts = np.empty((k, nm)), np.empty(k), np.empty(m)
     scores = np.empty(distinct.shape[1])
     by_rows = np.ascontiguousarray(distinct.T)  # a chosen column's k values in one cache line
+    best_row = np.empty(nm, np.int32)  # the distinct row of each first piece's best continuation
     for _ in range(steps):
         gamma = params[-1]
         w_unit = exact.round_into(params[:k], w_bits, w_ints)
         _exact_scores(distinct, w_ints, scores)
-        _best_continuations(scores, which, second_unit * w_unit, params[k : k + m], best, value)
+        _best_continuations(scores, which, second_unit * w_unit, params[k : k + m], best, value, best_row)
         _exact_scores(first, w_ints, z)
         u1 = first_unit * w_unit
         for i in range(n):
@@ -336,7 +337,7 @@ def _fit_through(first: np.ndarray, first_unit: float, distinct: np.ndarray, whi
             d[r] = d[r] / n
             counts[best[r]] += d[r]
         for r in range(nm):
-            u = which[r * m + best[r]]
+            u = best_row[r]
             for c in range(k):
                 chosen[c, r] = by_rows[u, c]
         exact.vec_mat_rounded(d, first, first_unit, bits, grad[:k])
@@ -353,10 +354,12 @@ def _fit_through(first: np.ndarray, first_unit: float, distinct: np.ndarray, whi
 
 
 @njit(cache=True, nogil=True)
-def _best_continuations(scores: np.ndarray, which: np.ndarray, unit: float, b: np.ndarray, best: np.ndarray, value: np.ndarray) -> None:
+def _best_continuations(scores: np.ndarray, which: np.ndarray, unit: float, b: np.ndarray, best: np.ndarray, value: np.ndarray,
+                        best_row: np.ndarray) -> None:
     """For each row r of (N m) first pieces: the first argmax over j of ``f2 = scores[which[r m +
-    j]] unit + b[j]`` into ``best[r]`` and its score into ``value[r]`` (NumPy's argmax: the first
-    of equal maxima, the first NaN if any)."""
+    j]] unit + b[j]`` into ``best[r]``, its score into ``value[r]`` and its distinct row
+    ``which[r m + best[r]]`` into ``best_row[r]`` (NumPy's argmax: the first of equal maxima, the
+    first NaN if any)."""
     m = b.shape[0]
     finite = math.isfinite(unit)
     for j in range(m):
@@ -371,7 +374,7 @@ def _best_continuations(scores: np.ndarray, which: np.ndarray, unit: float, b: n
                 f = scores[which[base + j]] * unit + b[j]
                 if f > top_f:
                     top, top_f = j, f
-            best[r], value[r] = top, top_f
+            best[r], value[r], best_row[r] = top, top_f, which[base + top]
         return
     f2 = np.empty(m)
     for r in range(best.shape[0]):
@@ -381,4 +384,4 @@ def _best_continuations(scores: np.ndarray, which: np.ndarray, unit: float, b: n
             f2[j] = scores[which[base + j]] * unit + b[j]
             if j > 0 and (f2[j] > f2[top] or (f2[j] != f2[j] and f2[top] == f2[top])):
                 top = j
-        best[r], value[r] = top, f2[top]
+        best[r], value[r], best_row[r] = top, f2[top], which[base + top]
