@@ -93,10 +93,10 @@ def pixels_at(flat_index: np.ndarray, width: int, row0: int, valid: np.ndarray, 
     float64 are the visible rows' ground point at column offset 0 and its change per column in
     the vehicle frame [m] (row ``row0`` first); ``(x, y)``, ``c``, ``s`` the pose's position and
     the cosine and sine of its yaw; ``res`` the raster's cell size [m]. A row's cell and change
-    per column are computed once, when its first pixel is read (:func:`pixels_of_rows`).
+    per column are computed once, when its first pixel is read.
     """
-    rows, cols = rows_and_columns(flat_index, width, row0, valid)
-    return pixels_of_rows(rows, cols, P, Q, u, x, y, c, s, res, raster, nx, x_max, y_max, unknown)
+    none = np.empty(0, np.int64)
+    return _pixels(flat_index, none, none, False, width, row0, valid, P, Q, u, x, y, c, s, res, raster, nx, x_max, y_max, unknown)
 
 
 @njit(cache=True, nogil=True)
@@ -122,15 +122,39 @@ def pixels_of_rows(rows: np.ndarray, cols: np.ndarray, P: np.ndarray, Q: np.ndar
                    raster: np.ndarray, nx: int, x_max: np.float32, y_max: np.float32, unknown: int) -> np.ndarray:
     """:func:`pixels_at` of pixels given by their row among the visible rows (-1: ``unknown``)
     and column (:func:`rows_and_columns`): the same float32 operations, the same class ids."""
-    out = np.empty(rows.shape[0], np.uint8)
+    none = np.empty(0, np.int64)
+    return _pixels(none, rows, cols, True, 1, 0, np.empty(0, np.bool_), P, Q, u, x, y, c, s, res, raster, nx, x_max, y_max, unknown)
+
+
+@njit(cache=True, nogil=True)
+def _pixels(flat_index: np.ndarray, rows: np.ndarray, cols: np.ndarray, prepared: bool, width: int, row0: int, valid: np.ndarray,
+            P: np.ndarray, Q: np.ndarray, u: np.ndarray, x: float, y: float, c: float, s: float, res: float,
+            raster: np.ndarray, nx: int, x_max: np.float32, y_max: np.float32, unknown: int) -> np.ndarray:
+    """:func:`pixels_at` (``prepared`` False: from ``flat_index``) and :func:`pixels_of_rows`
+    (True: from ``rows`` and ``cols``) in one loop, so that both keep one pass over the pixels."""
+    n = rows.shape[0] if prepared else flat_index.shape[0]
+    out = np.empty(n, np.uint8)
     zero = np.float32(0.0)
     cells = np.empty((P.shape[0], 4), np.float32)
     done = np.zeros(P.shape[0], np.bool_)
-    for i in range(rows.shape[0]):
-        r = rows[i]
-        if r < 0:
-            out[i] = unknown
-            continue
+    n_pixels = valid.shape[0]
+    per_row = 1.0 / width
+    for i in range(n):
+        if prepared:
+            visible, col = rows[i], cols[i]
+            if visible < 0:
+                out[i] = unknown
+                continue
+        else:
+            k = flat_index[i]
+            if k < 0 or k >= n_pixels:
+                raise IndexError("a pixel index is outside the image")
+            if not valid[np.uint64(k)]:
+                out[i] = unknown
+                continue
+            row, col = row_col(k, width, per_row)
+            visible = row - row0
+        r = np.uint64(visible)  # unsigned indices: no wrap-around test on each read
         if not done[r]:
             # The cell of the row's column offset 0 and its change per column, as render_frame's.
             cells[r, 0] = np.float32((x + (P[r, 0] * c - P[r, 1] * s)) / res + 1.0)
@@ -138,7 +162,7 @@ def pixels_of_rows(rows: np.ndarray, cols: np.ndarray, P: np.ndarray, Q: np.ndar
             cells[r, 2] = np.float32((Q[r, 0] * c - Q[r, 1] * s) / res)
             cells[r, 3] = np.float32((Q[r, 0] * s + Q[r, 1] * c) / res)
             done[r] = True
-        uj = u[cols[i]]
+        uj = u[np.uint64(col)]
         gx = min(max(cells[r, 2] * uj + cells[r, 0], zero), x_max)
         gy = min(max(cells[r, 3] * uj + cells[r, 1], zero), y_max)
         out[i] = raster[np.uint64(gy) * np.uint64(nx) + np.uint64(gx)]
