@@ -134,8 +134,8 @@ class PixelSet:
     def __init__(self, flat_index: np.ndarray) -> None:
         self.flat = np.array(flat_index, dtype=np.int64).reshape(-1)  # its own copy, read-only
         self.flat.flags.writeable = False
-        self._camera = None
-        self._rows = self._cols = self.flat
+        self._camera = None  # the camera the rows and columns below were worked out for
+        self._rows = self._cols = np.empty(0, dtype=np.int64)
 
     @property
     def shape(self) -> tuple[int]:

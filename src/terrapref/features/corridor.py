@@ -239,10 +239,11 @@ class GroundMap:
     def _recentre(self, x: float, y: float) -> None:
         c = self.config
         # Re-centred while all the camera writes and the corridor reads stays inside (checked in
-        # plain floats: the same arithmetic as NumPy's on the two coordinates).
-        if self._origin_xy is not None and max(abs(self._origin_xy[0] - (x - c.map_half_size_m)),
-                                               abs(self._origin_xy[1] - (y - c.map_half_size_m))) < c.map_half_size_m - c.sample_range_m - 1.0:
-            return
+        # plain floats: the same arithmetic as NumPy's on the two coordinates; a NaN re-centres).
+        if self._origin_xy is not None:
+            reach = c.map_half_size_m - c.sample_range_m - 1.0
+            if abs(self._origin_xy[0] - (x - c.map_half_size_m)) < reach and abs(self._origin_xy[1] - (y - c.map_half_size_m)) < reach:
+                return
         centre = np.array([x, y]) - c.map_half_size_m
         new = np.floor(centre / c.map_resolution_m).astype(np.int64)
         if self.origin is not None:  # keep what the old square and the new one share
