@@ -450,8 +450,8 @@ def test_a_pixel_set_reads_as_its_indices_on_every_camera_and_view():
 
 
 def test_pixels_reads_a_changed_index_array_afresh():
-    """Only an index array that owns its data and is read-only is prepared once; any other is
-    read anew on every call, so changing it between calls changes the answer."""
+    """An index array is read anew on every call (only a PixelSet keeps what it works out), so
+    changing it between calls changes the answer, read-only or not."""
     rng = np.random.default_rng(5)
     renderer = SegmentationRenderer(PinholeCamera(), _blocks_world(rng))
     pose = Pose(20.0, 12.0, 0.4)

@@ -486,3 +486,20 @@ CPU_CHECK = CpuCheck.of("corridor fit", _FIT.format(tests=os.path.dirname(__file
 def test_the_corridor_fit_gives_the_same_weights_under_every_cpu_setting(cpu_outputs):
     hashes = {out.strip() for _, out in cpu_outputs["corridor fit"]}
     assert len(hashes) == 1
+
+
+def test_the_map_reads_every_voted_cell_as_decided_and_refuses_too_many_columns():
+    """After votes, ``cells`` holds no undecided marker (it decides them) and is read-only; a
+    class table with 254 terrain columns would need the marker as a column and is refused."""
+    from terrapref.features import kernels as feature_kernels
+    scenario = _scenario([MUD])
+    camera = PinholeCamera()
+    gmap = GroundMap(camera, _terrain())
+    for pose in ((2.0, 10.0, 0.0), (4.0, 10.2, 0.05)):
+        gmap.update(_seen_from(scenario, camera, pose), pose)
+    assert (gmap._cells == feature_kernels.UNSETTLED).any()  # the votes left cells to decide
+    cells = gmap.cells
+    assert not (cells == feature_kernels.UNSETTLED).any() and (cells < gmap.k + 1).any()
+    assert not cells.flags.writeable
+    with pytest.raises(ValueError, match="terrain columns"):
+        GroundMap(camera, TerrainColumns(np.zeros(256, np.uint8), 254))

@@ -380,7 +380,7 @@ def test_compiled_features_give_the_numpy_forms_bits(featurizer: UtilityFeaturiz
 
 @pytest.mark.parametrize("n", [1, 5, 7, 8, 9, 15, 16, 30, 128])
 def test_numpy_sum_adds_in_numpys_order(n: int):
-    from terrapref.features.kernels import numpy_sum
+    from terrapref.sums import numpy_sum
 
     rng = np.random.default_rng(n)
     # Terms over many magnitudes, so that another order would round differently somewhere.
@@ -390,7 +390,7 @@ def test_numpy_sum_adds_in_numpys_order(n: int):
 
 
 def test_numpy_sum_refuses_more_terms_than_it_can_follow():
-    from terrapref.features.kernels import numpy_sum
+    from terrapref.sums import numpy_sum
 
     with pytest.raises(ValueError):
         numpy_sum(np.ones(129))

@@ -551,3 +551,14 @@ def test_reproduce_reports_each_recipe_under_each_perception_model(tmp_path):
     # The same test courses driven under each: the field runs are runs of their own, not the clean ones relabelled.
     tracks = {r["perception"]: [z["distance_m"] for z in r["metrics"]["zones"]] for r in runs if r["scenario"] == "test_course"}
     assert tracks["clean"] != tracks["field"]
+
+
+def test_confusion_tiles_from_the_tables_are_the_divisions():
+    """Each pixel's confusion tile from LabelNoise's row and column tables equals row // region *
+    tiles across + col // region, for regions that divide the image and that do not."""
+    for region, shape in ((32, (480, 640)), (7, (211, 333)), (1, (20, 30))):
+        camera = PinholeCamera(CameraConfig(width_px=shape[1], height_px=shape[0]))
+        noise = LabelNoise(LabelErrors(region_px=region), camera, default_classes())
+        rows, cols = np.mgrid[0 : shape[0], 0 : shape[1]]
+        want = rows // region * ((shape[1] + region - 1) // region) + cols // region
+        np.testing.assert_array_equal(noise.tile_of_row[rows] + noise.tile_of_col[cols], want)

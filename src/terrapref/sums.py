@@ -2,6 +2,10 @@
 
 Shared by the features (terrapref.features.kernels) and the synthetic driver
 (terrapref.demos.expert), which keeps apart from the feature pipeline (SPEC 10).
+
+Compiled into its callers, whose cached copies Numba does not recompile when only this file
+changes: after editing it, delete the ``__pycache__`` folders' ``*.nbi``/``*.nbc`` files
+(``python -m terrapref.warm_up`` rebuilds them).
 """
 
 from __future__ import annotations

@@ -225,7 +225,7 @@ class ExpertDriver:
     def _costs(self, centre: np.ndarray, normal: np.ndarray, lat: np.ndarray, upto: int) -> np.ndarray:
         """``cost[_classes(centre, normal, lat, upto)].mean(axis=2).sum(axis=1)`` (O,): each offset's
         cost per point summed along the path, with NumPy's sums (compiled, up to 128 stations)."""
-        if upto > 128:
+        if upto > 128 or lat.shape[1] > 128:  # past the sums terrapref.sums follows
             return self._cost[self._classes(centre, normal, lat, upto)].mean(axis=2).sum(axis=1)
         return _offset_costs(centre, normal, lat, upto, self.world.raster, self.world.resolution_m, self._cost)
 
@@ -289,7 +289,7 @@ def _cell_beside(x: float, y: float, lat: float, nx: float, ny: float, res: floa
 def _offset_costs(centre: np.ndarray, normal: np.ndarray, lat: np.ndarray, upto: int, raster: np.ndarray, res: float,
                   cost: np.ndarray) -> np.ndarray:
     """(O,): ``cost[_offset_classes(...)].mean(axis=2).sum(axis=1)``, each mean and sum as NumPy
-    adds it (terrapref.sums.numpy_sum; ``upto`` <= 128)."""
+    adds it (terrapref.sums.numpy_sum; ``upto`` and the points across, ``lat.shape[1]``, <= 128)."""
     n_rows, n_cols = raster.shape
     n_f = lat.shape[1]
     points, stations = np.empty(n_f), np.empty(upto)

@@ -259,7 +259,7 @@ class GroundMap:
         """Add what ``view``, taken at ``pose``, shows of the ground."""
         x, y, yaw = pose
         c = self.config
-        self._recentre(x, y)
+        self._recentre(float(x), float(y))
         self.frame += 1
         ids = view.pixels(self._pixels)
         dpitch, droll = self.attitude(view) if self.attitude is not None else (0.0, 0.0)
@@ -274,9 +274,13 @@ class GroundMap:
 
     @property
     def cells(self) -> np.ndarray:
-        """Terrain column of every cell (rows y, columns x), each decided from its evidence."""
+        """Terrain column of every cell (rows y, columns x), each decided from its evidence: a
+        read-only view, valid until the next :meth:`update` (which leaves the cells it votes on
+        to be decided again)."""
         kernels.map_settle(self._cells, self.evidence, self.lethal, self._shares)
-        return self._cells
+        view = self._cells.view()
+        view.flags.writeable = False
+        return view
 
     def layers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """What a compiled read of the map takes (kernels.map_decide): the cells' columns, some

@@ -18,7 +18,7 @@ import math
 import numpy as np
 from numba import njit
 
-from terrapref.sums import numpy_sum  # noqa: F401 - compiled into stage_scores; also used by the synthetic driver
+from terrapref.sums import numpy_sum
 
 UNSETTLED = 255  # a ground-map cell voted on since its column was last decided (columns run 0..K + 1)
 
@@ -214,19 +214,19 @@ def map_vote(evidence: np.ndarray, stamp: np.ndarray, cells: np.ndarray, ox: flo
             cell[p] = j * n_cols + i
     votes, stamps, columns_of = evidence.reshape(-1), stamp.reshape(-1), cells.reshape(-1)
     for p in range(n):
-        c = cell[p]
-        if c < 0:
+        here = cell[p]
+        if here < 0:
             continue
         col = columns[ids[pixel_of[p]]]
-        gap = frame - stamps[c]
-        at = c * (k + 1)
+        gap = frame - stamps[here]
+        at = here * (k + 1)
         if gap != 0:
             f = fade[min(gap, fade.shape[0] - 1)]
             for q in range(k + 1):
                 votes[at + q] *= f
-            stamps[c] = frame
+            stamps[here] = frame
         votes[at + col] += weight[p]
-        columns_of[c] = UNSETTLED
+        columns_of[here] = UNSETTLED
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -249,6 +249,8 @@ def _distinct_columns(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     fit scores each distinct column once a step and reads the scores by index.
     """
     k, n = x.shape
+    if n >= 2**30:
+        raise ValueError("_distinct_columns indexes columns with 32-bit integers: at most 2 ** 30 columns")
     size = 1
     while size < 2 * n:
         size *= 2
@@ -258,7 +260,7 @@ def _distinct_columns(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     count = 0
     for r in range(n):
         h = np.uint64(0)
-        for c in range(k):  # the column's values, mixed as splitmix64 mixes its state
+        for c in range(k):  # the column's values, each added and mixed by a multiply and a shift
             h = (h + np.uint64(np.uint32(x[c, r])) + np.uint64(0x9E3779B97F4A7C15)) * np.uint64(0xBF58476D1CE4E5B9)
             h ^= h >> np.uint64(31)
         slot = np.int64(h & np.uint64(size - 1))

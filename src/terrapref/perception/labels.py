@@ -25,7 +25,7 @@ import functools
 import numpy as np
 from numba import njit
 
-from terrapref.camera import CameraConfig, PinholeCamera, SegmentationView, flat_of
+from terrapref.camera import CameraConfig, PinholeCamera, PixelSet, SegmentationView, flat_of
 from terrapref.camera.kernels import row_col
 from terrapref.perception.model import LabelErrors
 from terrapref.terrain import ClassTable
@@ -105,7 +105,7 @@ class FrameLabelErrors:
     def __init__(self, noise: LabelNoise, boundary_seed: int, conf_seed: int, flip_seed: int, blobs: np.ndarray) -> None:
         self.noise, self.boundary_seed, self.conf_seed, self.flip_seed, self.blobs = noise, boundary_seed, conf_seed, flip_seed, blobs
 
-    def apply(self, base: SegmentationView, flat_index: np.ndarray) -> np.ndarray:
+    def apply(self, base: SegmentationView, flat_index: np.ndarray | PixelSet) -> np.ndarray:
         """The class ids the robot's segmentation gives at pixels ``flat_index`` (row * width + col) of ``base``."""
         n, e = self.noise, self.noise.errors
         flat = np.ascontiguousarray(flat_of(flat_index), dtype=np.int64).reshape(-1)
@@ -137,7 +137,7 @@ class LabelledView(SegmentationView):
             self._image = self._errors.apply(self._base, np.arange(h * w, dtype=np.int64)).reshape(h, w)
         return self._image
 
-    def pixels(self, flat_index: np.ndarray) -> np.ndarray:
+    def pixels(self, flat_index: np.ndarray | PixelSet) -> np.ndarray:
         if self._image is not None:
             return super().pixels(flat_index)
         return self._errors.apply(self._base, flat_index)

@@ -26,7 +26,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from terrapref.camera import SegmentationRenderer, SegmentationView
+from terrapref.camera import PixelSet, SegmentationRenderer, SegmentationView
 from terrapref.perception.labels import LabelledView, LabelNoise
 from terrapref.perception.model import PerceptionModel
 from terrapref.terrain import ClassTable
@@ -72,7 +72,7 @@ class TiltedView(SegmentationView):
             self._image = self._renderer.pixels_tilted(self._pose, np.arange(h * w, dtype=np.int64), *self._tilt).reshape(h, w)
         return self._image
 
-    def pixels(self, flat_index: np.ndarray) -> np.ndarray:
+    def pixels(self, flat_index: np.ndarray | PixelSet) -> np.ndarray:
         if self._image is not None:
             return super().pixels(flat_index)
         return self._renderer.pixels_tilted(self._pose, flat_index, *self._tilt)
