@@ -50,9 +50,8 @@ class HorizonAttitude:
         self.rows = np.arange(top, bottom, row_step_px)
         self._row_values = self.rows.astype(np.float64)
         self.cols = np.arange(column_step_px // 2, c.width_px, column_step_px)
-        self.index = (self.rows[:, None] * c.width_px + self.cols[None, :]).reshape(-1)
-        self.index.flags.writeable = False
-        self._band = PixelSet(self.index)  # read every frame: its rows and columns worked out once
+        # The band's pixels, row by row, read every frame: their rows and columns worked out once.
+        self._band = PixelSet((self.rows[:, None] * c.width_px + self.cols[None, :]).reshape(-1))
         self.memory = memory
         self.max_rad = math.radians(max_deg)
         self._u = self.cols + 0.5 - self.cx

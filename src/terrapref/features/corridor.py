@@ -202,8 +202,8 @@ class GroundMap:
         seen = pix >= 0
         self._pix = pix[seen]
         # Far samples share pixels: each distinct pixel is read once, and each sample reads its own.
-        self._distinct_pix, self._sample_pix = np.unique(self._pix, return_inverse=True)
-        self._pixels = PixelSet(self._distinct_pix)  # read every frame: their rows and columns worked out once
+        distinct, self._sample_pix = np.unique(self._pix, return_inverse=True)
+        self._pixels = PixelSet(distinct)  # read every frame: their rows and columns worked out once
         self._vx, self._vy = grid[seen, 0].copy(), grid[seen, 1].copy()
         self.camera = camera
         self.attitude = HorizonAttitude(camera) if c.map_sky_attitude else None

@@ -193,12 +193,12 @@ class TrainableClassifier:
         grads = np.empty_like(self.params) if out is None else out
         g = np.ascontiguousarray(grad_logits, dtype=np.float64)
         batch = len(g)
+        a_bits, b_bits = _bits(batch)  # g's and [inputs, 1]'s grids for the weight gradients, the same for every layer
         for i in range(c.depth, -1, -1):
             out_i = cache.weights[i][1].ints.shape[0]
             if batch <= exact.MAX_EXACT and out_i <= exact.MAX_EXACT:
                 # g on the grids of both its products at once (one pass for its largest magnitude):
                 # the weight and bias gradients, [inputs, 1]^T g, and d loss / d the layer's input.
-                a_bits, b_bits = _bits(batch)
                 g_w, g_w_unit, g_in, g_in_unit = kernels.round_twice(np.ascontiguousarray(g, dtype=np.float64), a_bits, _bits(out_i)[0])
                 ones_ints, ones_unit = kernels.round_with_ones(np.ascontiguousarray(cache.inputs[i], dtype=np.float64), b_bits)
                 kernels.scale_into(g_w.T @ ones_ints, g_w_unit * ones_unit, grads, self._at[f"layers.{i}.weight"], self._at[f"layers.{i}.bias"])
