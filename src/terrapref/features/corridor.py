@@ -266,7 +266,7 @@ class GroundMap:
         tilted = bool(dpitch or droll)
         axes = self.camera.tilted(dpitch, droll) if tilted else self.camera.R
         kernels.map_vote(self.evidence, self.stamp, self._cells,  # the map
-                         float(self.origin[0]), float(self.origin[1]), 1.0 / c.map_resolution_m,  # its corner and cells per metre
+                         *self._origin_xy, 1.0 / c.map_resolution_m,  # its corner and cells per metre
                          float(x), float(y), math.cos(yaw), math.sin(yaw),  # the pose
                          self._vx, self._vy, self._weight, ids, self._sample_pix, self.columns,  # the samples and what they saw
                          self.frame, self._fade,  # the votes' fading
@@ -282,19 +282,21 @@ class GroundMap:
         view.flags.writeable = False
         return view
 
-    def layers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def layers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, float, float]:
         """What a compiled read of the map takes (kernels.map_decide): the cells' columns, some
-        still undecided, their evidence, the lethal columns and the shares that decide a column."""
-        return self._cells, self.evidence, self.lethal, self._shares
+        still undecided, their evidence, the lethal columns and the shares that decide a column;
+        then where the map lies, its corner's x and y [m] and its cells per metre. Read once the map
+        has been placed (its first update: ``origin`` is not None)."""
+        ox, oy = self._origin_xy
+        return self._cells, self.evidence, self.lethal, self._shares, ox, oy, 1.0 / self.config.map_resolution_m
 
     def beside(self, path: ReferencePath, s: np.ndarray, lat: np.ndarray) -> np.ndarray:
         """Terrain column (O, S, F) at the points ``lat`` (O, F) [m] left of the path at arc lengths ``s`` (S,)."""
         if self.origin is None:
             return np.full((lat.shape[0], len(s), lat.shape[1]), self.k + 1, dtype=np.uint8)
         a, d, length = path.segments
-        return kernels.map_read_beside(*self.layers(), float(self.origin[0]), float(self.origin[1]), 1.0 / self.config.map_resolution_m,
-                                       path.s, a, d, length, np.asarray(s, dtype=np.float64), np.ascontiguousarray(lat, dtype=np.float64),
-                                       self.k + 1)
+        return kernels.map_read_beside(*self.layers(), path.s, a, d, length, np.asarray(s, dtype=np.float64),
+                                       np.ascontiguousarray(lat, dtype=np.float64), self.k + 1)
 
     def lookup(self, points: np.ndarray) -> np.ndarray:
         """Terrain column at each world point (..., 2); K + 1 (never seen) outside the map."""
@@ -302,8 +304,7 @@ class GroundMap:
             return np.full(points.shape[:-1], self.k + 1, dtype=np.uint8)
         px = np.ascontiguousarray(points[..., 0], dtype=np.float64).reshape(-1)
         py = np.ascontiguousarray(points[..., 1], dtype=np.float64).reshape(-1)
-        out = kernels.map_read(*self.layers(), float(self.origin[0]), float(self.origin[1]), 1.0 / self.config.map_resolution_m, px, py,
-                               self.k + 1)
+        out = kernels.map_read(*self.layers(), px, py, self.k + 1)
         return out.reshape(points.shape[:-1])
 
 

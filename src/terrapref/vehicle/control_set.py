@@ -54,7 +54,7 @@ class ControlSet:
         """Index of the nearest yaw rate to a continuous ``w``; ties go toward w = 0."""
         if isinstance(w, (float, int)):  # one command, as the control loop labels it: the same arithmetic, compiled
             return int(_nearest_label(float(w), self._grid))
-        grid = np.asarray(self.w_rps)
+        grid = self._grid
         w_arr = np.asarray(w, dtype=float)
         d = np.abs(w_arr[..., None] - grid)
         # Among equally near grid values prefer the one with the smaller |w| (SPEC 6).

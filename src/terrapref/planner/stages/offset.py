@@ -292,8 +292,8 @@ class OffsetSteering(StageRunner):
         if gmap.origin is None:
             return np.broadcast_to(self.lethal[self.k + 1], (len(offsets), len(stations))).copy()
         a, d, length = path.segments
-        return lethal_hits(*gmap.layers(), float(gmap.origin[0]), float(gmap.origin[1]), 1.0 / gmap.config.map_resolution_m, path.s, a, d,
-                           length, float(progress_s), stations, np.asarray(offsets, dtype=np.float64), across, self.lethal, self.k + 1)
+        return lethal_hits(*gmap.layers(), path.s, a, d, length, float(progress_s), stations, np.asarray(offsets, dtype=np.float64),
+                           across, self.lethal, self.k + 1)
 
     def _swept(self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_s: float,
                across: np.ndarray | None = None) -> np.ndarray:
@@ -305,6 +305,5 @@ class OffsetSteering(StageRunner):
         a, d, length = path.segments
         return swept_reach(float(pose[0]), float(pose[1]), float(pose[2]), offsets, float(progress_s), self.v_mps, c.dt_s,
                            self._steps, c.pursuit_lookahead_m, path.s, a, d, length, across, *gmap.layers(),
-                           float(gmap.origin[0]), float(gmap.origin[1]), 1.0 / gmap.config.map_resolution_m,
                            self.lethal, self.k + 1)
 
