@@ -53,15 +53,34 @@ IMAGE_DELAY_S, ODOMETRY_DELAY_S, STAMP_JITTER_S = 0.03, 0.004, 0.003
 
 
 def colour_label_map() -> str:
-    """A terrapref-labels/1 file with rellis3d's ids and :data:`COLORS` as its colour table."""
+    """A terrapref-labels/1 file with rellis3d's ids and :data:`COLORS` as its colour table (a
+    colour it lacks, as the quirks' unlisted id's, is unknown)."""
     names = {0: "unknown", 3: "grass", 33: "mud", 34: "rock", 6: "water", 19: "non_traversable", 7: "unknown"}
     ids = "\n".join(f"  {k}: {v}" for k, v in names.items())
     colors = "\n".join(f"  {k}: [{r}, {g}, {b}]" for k, (r, g, b) in COLORS.items())
-    return f"format: terrapref-labels/1\nname: colour_rellis\nids:\n{ids}\ncolors:\n{colors}\n"
+    return f"format: terrapref-labels/1\nname: colour_rellis\nunlisted: unknown\nids:\n{ids}\ncolors:\n{colors}\n"
 
 
-def robot_yaml(labels: str = "rellis3d", path_topic: bool = True) -> str:
-    """The robot file that matches :func:`write_synthetic_bag`'s topics."""
+LENIENT_LABELS = "rellis3d_unlisted_unknown.yaml"  # rellis3d's map, its unlisted ids (UNLISTED_ID) unknown
+
+
+def lenient_label_map() -> str:
+    """The packaged rellis3d label map with ``unlisted: unknown``: the quirky logs' unlisted ids import as unknown."""
+    from importlib import resources
+
+    return resources.files("terrapref.data").joinpath("labels/rellis3d.yaml").read_text() + "unlisted: unknown\n"
+
+
+def write_robot(path: Path, text: str | None = None) -> Path:
+    """Write a robot file (``text``, default :func:`robot_yaml`'s) and :data:`LENIENT_LABELS` beside it."""
+    path.write_text(robot_yaml() if text is None else text)
+    (path.parent / LENIENT_LABELS).write_text(lenient_label_map())
+    return path
+
+
+def robot_yaml(labels: str = LENIENT_LABELS, path_topic: bool = True) -> str:
+    """The robot file that matches :func:`write_synthetic_bag`'s topics (by default with the
+    label map :func:`write_robot` writes beside it, which makes the quirks' unlisted ids unknown)."""
     topics = "\n".join(f"  {k}: {v}" for k, v in TOPICS.items() if path_topic or k != "path")
     return f"format: terrapref-robot/1\ntopics:\n{topics}\ncamera:\n  height_m: 1.0\n  pitch_deg: 30.0\nlabels: {labels}\n"
 

@@ -20,7 +20,7 @@ from terrapref.interop.robot import load_robot
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation
 
-from synthetic_bag import TOPICS, robot_yaml, write_synthetic_bag
+from synthetic_bag import LENIENT_LABELS, TOPICS, UNLISTED_ID, robot_yaml, write_robot, write_synthetic_bag
 
 SECONDS = 12.0
 FORMATS = [("mcap", "mono8", "drive.mcapbag"), ("rosbag1", "mono16", "drive.bag"), ("sqlite3", "png", "drive.db3bag")]
@@ -29,7 +29,7 @@ FORMATS = [("mcap", "mono8", "drive.mcapbag"), ("rosbag1", "mono16", "drive.bag"
 @pytest.fixture(scope="module")
 def logs(tmp_path_factory) -> dict:
     root = tmp_path_factory.mktemp("bags")
-    (root / "robot.yaml").write_text(robot_yaml())
+    write_robot(root / "robot.yaml", robot_yaml())
     bags = {storage: write_synthetic_bag(root / name, storage, encoding=encoding, max_seconds=SECONDS) for storage, encoding, name in FORMATS}
     return {"root": root, "robot": root / "robot.yaml", "bags": bags}
 
@@ -52,6 +52,20 @@ def test_every_format_imports_to_the_same_recording(imported):
         np.testing.assert_allclose(other.poses, rec.poses, atol=1e-9)
         np.testing.assert_array_equal(other.labels, rec.labels)
         np.testing.assert_array_equal(other.image(len(rec) // 2), rec.image(len(rec) // 2))
+
+
+def test_an_id_the_label_map_does_not_list_is_refused_unless_the_map_makes_it_unknown(tmp_path: Path, logs):
+    robot = write_robot(tmp_path / "robot.yaml", robot_yaml(labels="rellis3d"))  # the packaged map: unlisted ids are errors
+    dest = tmp_path / "rec"
+    with pytest.raises(UserError) as info:
+        import_bag(logs["bags"]["mcap"], load_robot(robot), dest, show_progress=False)
+    (line,) = info.value.lines()
+    assert "rellis3d.yaml" in line and "ids:" in line and f"label id {UNLISTED_ID} " in line and "unlisted: unknown" in line, line
+    assert not dest.exists() and not dest.with_name("rec.partial").exists()  # nothing half-written
+    (tmp_path / "lenient").mkdir()
+    lenient = write_robot(tmp_path / "lenient" / "robot.yaml")  # the same map with unlisted: unknown
+    report = import_bag(logs["bags"]["mcap"], load_robot(lenient), dest, show_progress=False)
+    assert report.frames > 0 and 0.0 < report.unmapped_share < 0.01
 
 
 def test_the_quirks_are_handled_and_reported(imported):
@@ -94,7 +108,7 @@ def test_inspect_and_featurize_accept_an_imported_recording(imported, capsys):
 
 def test_without_a_path_the_driven_odometry_is_smoothed(tmp_path: Path, logs):
     robot = tmp_path / "robot.yaml"
-    robot.write_text(robot_yaml(path_topic=False))
+    write_robot(robot, robot_yaml(path_topic=False))
     report = import_bag(logs["bags"]["mcap"], load_robot(robot), tmp_path / "rec", show_progress=False)
     assert report.path_source.startswith("the driven odometry")
     straight = smooth_path(np.stack([np.linspace(0, 30, 301), 0.2 * np.sin(np.linspace(0, 30, 301) * 5)], axis=1))
@@ -128,10 +142,10 @@ def _one_line(capsys, *names: str) -> str:
 def test_a_missing_topic_or_a_wrong_type_names_the_bag_and_the_field(tmp_path: Path, logs, capsys):
     bag = str(logs["bags"]["mcap"])
     robot = tmp_path / "robot.yaml"
-    robot.write_text(robot_yaml().replace(TOPICS["odometry"], "/warthog/odom"))
+    write_robot(robot, robot_yaml().replace(TOPICS["odometry"], "/warthog/odom"))
     assert main(["import", bag, "--robot", str(robot), "--out", str(tmp_path / "a")]) == 2
     _one_line(capsys, bag, "topics.odometry", "/warthog/odom", "is not in the bag")
-    robot.write_text(robot_yaml().replace(f"odometry: {TOPICS['odometry']}", f"odometry: {TOPICS['command']}"))
+    write_robot(robot, robot_yaml().replace(f"odometry: {TOPICS['odometry']}", f"odometry: {TOPICS['command']}"))
     assert main(["import", bag, "--robot", str(robot), "--out", str(tmp_path / "b")]) == 2
     _one_line(capsys, bag, "topics.odometry", "geometry_msgs/msg/Twist")
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
@@ -140,7 +154,7 @@ def test_a_missing_topic_or_a_wrong_type_names_the_bag_and_the_field(tmp_path: P
 def test_every_missing_or_mistyped_topic_is_named_in_one_message(tmp_path: Path, logs, capsys):
     bag = str(logs["bags"]["mcap"])
     robot = tmp_path / "robot.yaml"
-    robot.write_text(robot_yaml().replace(TOPICS["odometry"], "/warthog/odom").replace(f"command: {TOPICS['command']}", f"command: {TOPICS['path']}"))
+    write_robot(robot, robot_yaml().replace(TOPICS["odometry"], "/warthog/odom").replace(f"command: {TOPICS['command']}", f"command: {TOPICS['path']}"))
     assert main(["import", bag, "--robot", str(robot), "--out", str(tmp_path / "a")]) == 2
     _one_line(capsys, bag, "topics.odometry /warthog/odom is not in the bag", f"topics.command {TOPICS['path']} has type nav_msgs/msg/Path")
 
@@ -178,7 +192,7 @@ def test_a_log_with_service_events_imports_and_says_what_it_left_out(tmp_path: P
     assert len(read_recording(tmp_path / "rec")) == len(imported["mcap"][1])
     # Asked for as a topic the planner needs, it is one line naming the topic and its type.
     robot = tmp_path / "robot.yaml"
-    robot.write_text(robot_yaml().replace(TOPICS["command"], "/add_two_ints/_service_event"))
+    write_robot(robot, robot_yaml().replace(TOPICS["command"], "/add_two_ints/_service_event"))
     assert main(["import", str(bag), "--robot", str(robot), "--out", str(tmp_path / "b")]) == 2
     _one_line(capsys, "/add_two_ints/_service_event", "AddTwoInts_Event", "cannot be read")
 
@@ -241,7 +255,7 @@ def test_a_failed_force_import_keeps_the_old_recording(tmp_path: Path, logs, cap
     (lambda t: t.replace("height_m: 1.0", "height_m: -1"), "camera.height_m"),
     (lambda t: t.replace(f"  command: {TOPICS['command']}\n", ""), "topics.command"),
     (lambda t: t.replace(TOPICS["segmentation"], "seg"), "topics.segmentation"),
-    (lambda t: t.replace("labels: rellis3d", "labels: cityscapes"), "labels"),
+    (lambda t: t.replace(f"labels: {LENIENT_LABELS}", "labels: cityscapes"), "labels"),
     (lambda t: t.replace("terrapref-robot/1", "terrapref-robot/9"), "format"),
 ])
 def test_a_bad_robot_file_is_one_line_naming_file_and_field(tmp_path: Path, edit, field: str):
@@ -362,7 +376,7 @@ def test_colour_segmentation_through_the_label_maps_colour_table(tmp_path: Path,
     from synthetic_bag import colour_label_map
 
     (tmp_path / "colours.yaml").write_text(colour_label_map())
-    (tmp_path / "robot.yaml").write_text(robot_yaml(labels="colours.yaml"))
+    write_robot(tmp_path / "robot.yaml", robot_yaml(labels="colours.yaml"))
     bag = write_synthetic_bag(tmp_path / "rgb.mcap", "mcap", encoding="rgb8", max_seconds=SECONDS)
     report = import_bag(bag, load_robot(tmp_path / "robot.yaml"), tmp_path / "rec", show_progress=False)
     rec = read_recording(tmp_path / "rec")
@@ -370,22 +384,22 @@ def test_colour_segmentation_through_the_label_maps_colour_table(tmp_path: Path,
     assert len(rec) == len(ids_rec)
     np.testing.assert_array_equal(rec.image(len(rec) // 2), ids_rec.image(len(rec) // 2))  # the same classes as from ids
     assert 0.0 < report.unmapped_share < 0.01  # the unlisted id has no colour: unknown, and counted
-    (tmp_path / "robot.yaml").write_text(robot_yaml())  # rellis3d has no colour table
+    write_robot(tmp_path / "robot.yaml", robot_yaml())  # rellis3d has no colour table
     with pytest.raises(UserError, match="colour table"):
         import_bag(bag, load_robot(tmp_path / "robot.yaml"), tmp_path / "rec2", show_progress=False)
 
 
 def test_the_camera_mounting_from_tf_static(tmp_path: Path, logs, imported):
     robot = tmp_path / "robot.yaml"
-    robot.write_text(robot_yaml().replace("  height_m: 1.0\n  pitch_deg: 30.0\n", "  tf: base_link\n"))
+    write_robot(robot, robot_yaml().replace("  height_m: 1.0\n  pitch_deg: 30.0\n", "  tf: base_link\n"))
     import_bag(logs["bags"]["rosbag1"], load_robot(robot), tmp_path / "rec", show_progress=False)
     rec, given = read_recording(tmp_path / "rec"), imported["rosbag1"][1]
     for key in ("mount_height_m", "mount_forward_m", "pitch_deg", "yaw_deg", "hfov_deg"):
         assert rec.meta["camera"][key] == pytest.approx(given.meta["camera"][key], abs=1e-9), key
-    robot.write_text(robot_yaml().replace("  height_m: 1.0\n  pitch_deg: 30.0\n", "  tf: chassis\n"))
+    write_robot(robot, robot_yaml().replace("  height_m: 1.0\n  pitch_deg: 30.0\n", "  tf: chassis\n"))
     with pytest.raises(UserError, match="no static transform chain from chassis"):
         import_bag(logs["bags"]["rosbag1"], load_robot(robot), tmp_path / "rec2", show_progress=False)
-    robot.write_text(robot_yaml().replace("  pitch_deg: 30.0\n", "  tf: base_link\n"))
+    write_robot(robot, robot_yaml().replace("  pitch_deg: 30.0\n", "  tf: base_link\n"))
     with pytest.raises(UserError, match="either tf or height_m"):
         load_robot(robot)
 
@@ -432,7 +446,7 @@ def test_a_model_taught_by_an_imported_log_drives_like_one_taught_by_the_simulat
     taught with the default recipe, both scored on generated layouts against the same driver."""
     import json
 
-    (tmp_path / "robot.yaml").write_text(robot_yaml())
+    write_robot(tmp_path / "robot.yaml", robot_yaml())
     bag = write_synthetic_bag(tmp_path / "teach.mcap", "mcap", scenario="teach_course", seed=0, encoding="png")
     assert main(["import", str(bag), "--robot", str(tmp_path / "robot.yaml"), "--out", str(tmp_path / "rec_bag")]) == 0
     assert main(["record", "teach_course", "--seed", "0", "--out", str(tmp_path / "rec_sim")]) == 0

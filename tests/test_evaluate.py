@@ -69,8 +69,9 @@ def test_every_run_is_scored(evaluated, driver: str):
         for z in run["zones"]:
             assert ZONE_KEYS <= set(z)
             assert z["expect"] in ("avoid", *default_classes().feature_names)
-            assert z["choice"] in ("avoid", *default_classes().feature_names)
+            assert z["choice"] in ("avoid", "not reached", *default_classes().feature_names)
             assert isinstance(z["success"], bool)
+            assert (z["choice"] == "not reached") is (not z["reached"]) and z["success"] <= z["reached"]
             if z["choice"] != z["expect"]:
                 assert not z["success"]
 

@@ -21,7 +21,7 @@ from terrapref.extras import EXTRAS, MissingExtra, check, needs
 from terrapref.learning.model_file import FORMAT
 from terrapref.tensorfile import write_tensor_file
 
-from synthetic_bag import robot_yaml
+from synthetic_bag import robot_yaml, write_robot
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -76,7 +76,7 @@ def core_only(tmp_path_factory) -> dict:
     """What a fresh interpreter without any extra's package reports: failed imports, and each
     command's exit code and standard error."""
     work = tmp_path_factory.mktemp("core_only")
-    (work / "robot.yaml").write_text(robot_yaml())
+    write_robot(work / "robot.yaml", robot_yaml())
     (work / "drive.mcap").write_bytes(b"")
     # A CNN model file: loading it reaches the CNN baseline's code, which is all this needs.
     write_tensor_file(work / "cnn.safetensors", {"w": np.zeros(1, np.float32)}, {"format": FORMAT, "kind": "cnn"})

@@ -106,5 +106,11 @@ def test_the_planner_makes_the_decisions_it_made_before_the_forward_pass_was_com
         run_episode(Simulation(resolve_scenario(name)), driver, np.random.default_rng(0))
         made = [d.index for d in driver.decisions]
         want = golden[f"{recipe.name}/{name}"]
+        # The stop rule came after the file: up to the first stop, the same decisions; from there
+        # on the run differs (the paper's planner stops at the map's edge, where it drove on then).
+        stopped = next((i for i, d in enumerate(driver.decisions) if d.stop is not None), None)
+        if stopped is not None:
+            made, want = made[:stopped + 1], want[:stopped + 1]
+            assert stopped > 1000, f"{recipe.name} on {name}: stopped at decision {stopped} ({driver.decisions[stopped].stop})"
         first = next((i for i, (a, b) in enumerate(zip(made, want)) if a != b), None)
         assert made == want, f"{recipe.name} on {name}: {len(made)} decisions against {len(want)}, first difference at {first}"

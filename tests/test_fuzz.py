@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import yaml
 from helpers import model_meta
-from synthetic_bag import robot_yaml
+from synthetic_bag import robot_yaml, write_robot
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -99,7 +99,7 @@ def base(tmp_path_factory) -> dict:
                                                   "w": np.zeros(n, np.float32), "source": np.zeros(n, np.int64)}, {"format": DATASET_FORMAT, **model_meta()})
     save_model(root / "model.safetensors", ClassifierConfig(hidden=4), init_weights(ClassifierConfig(hidden=4), rng), model_meta())
     (root / "scenario.yaml").write_text(yaml.safe_dump(resolve_scenario("fig7_rock_vs_non_traversable_left").to_dict(), sort_keys=False))
-    (root / "robot.yaml").write_text(robot_yaml())
+    write_robot(root / "robot.yaml", robot_yaml())
     (root / "camera.yaml").write_text("image_width: 640\nimage_height: 480\ncamera_matrix: {rows: 3, cols: 3, data: [320.0, 0.0, 320.0, 0.0, 320.0, 240.0, 0.0, 0.0, 1.0]}\n"
                                       "distortion_model: plumb_bob\ndistortion_coefficients: {rows: 1, cols: 5, data: [0.0, 0.0, 0.0, 0.0, 0.0]}\n"
                                       "mount_height_m: 1.0\npitch_deg: 30.0\n")

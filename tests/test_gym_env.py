@@ -169,7 +169,9 @@ def test_collision_ends_the_episode_with_one_penalty():
             break
     assert terminated and info["collisions"] == 1 and not info["is_success"]
     assert info["reward_terms"]["collision"] == -10.0
-    assert total == pytest.approx(info["progress_m"] - 10.0, abs=1e-9)
+    contact = info["reward_terms"]["contact"]  # 10 per second with the footprint on the strip: at most the step's 0.1 s
+    assert -1.0 - 1e-9 <= contact < 0.0
+    assert total == pytest.approx(info["progress_m"] - 10.0 + contact, abs=1e-9)
     with pytest.raises(ResetNeeded):
         env.step(10)
     env.reset(seed=0)  # usable again

@@ -92,7 +92,7 @@ def test_the_cycle_finder_finds_one():
 LAYERS = [
     {"errors"},
     {"extras"},
-    {"yamlio", "fileio", "progress", "configargs", "registry", "records", "sums"},
+    {"yamlio", "fileio", "progress", "configargs", "registry", "records", "sums", "stops"},
     {"tensorfile", "terrain", "grid"},
     {"pngio", "scenario"},
     {"world"},

@@ -171,7 +171,7 @@ def test_planner_holds_no_world_map_after_driving(models, course):
     sim = Simulation(course)
     driver = PlannerDriver(Planner(models.linear), keep=True)
     log = run_episode(sim, driver, np.random.default_rng(0))
-    assert log.completed and len(driver.decisions) == len(log.commands) > 100
+    assert len(driver.decisions) == len(log.commands) > 100
     np.testing.assert_array_equal(log.commands, [tuple(d.command) for d in driver.decisions])
     held = _reachable(driver)
     assert not [o for o in held if isinstance(o, (WorldMap, SegmentationRenderer, Simulation, Scenario))]

@@ -145,7 +145,8 @@ def test_annotate_agreement_leaves_runs_without_a_driver_run_and_the_driver_alon
 
 def test_annotated_zones_are_written_with_the_drivers_choice(results: list[RunResult]):
     zones = annotate_agreement(results)[1].to_dict()["metrics"]["zones"]
-    assert list(zones[1]) == ["id", "label", "expect", "choice", "success", "touched_lethal", "distance_m", "clearance_m", "driver_choice", "agrees"]
+    assert list(zones[1]) == ["id", "label", "expect", "choice", "success", "touched_lethal", "distance_m", "clearance_m", "reached",
+                              "driver_choice", "agrees"]
     assert (zones[1]["driver_choice"], zones[1]["agrees"]) == ("mud", False)
 
 
@@ -161,6 +162,14 @@ def test_summarise_the_planner(results: list[RunResult]):
         "agreement_zones": 3,
         "collision_count": 1,
         "completed_rate": round(2 / 3, 4),
+        "completed_ci95": [round(v, 4) for v in _wilson_by_hand(2, 3)],
+        "ended": {"goal": 2, "time limit": 1},
+        "not_reached": 0,
+        "contact_s": 0.0,
+        "driven_m": 0.0,
+        "stop_count": 0,
+        "stops_per_100m": None,
+        "stops_s": {},
         "mean_rms_cross_track_m": 0.5,
     }
 
@@ -179,7 +188,8 @@ def test_summarise_without_annotation_has_no_agreement(results: list[RunResult])
 def test_summarise_a_driver_with_no_runs():
     s = summarise([_run("course", 0, EXPERT, [_zone("a", "mud")])], PLANNER).to_dict()
     assert s == {"runs": 0, "zones": 0, "zone_success_rate": None, "zone_success_ci95": [0.0, 1.0], "collision_count": 0,
-                 "completed_rate": None, "mean_rms_cross_track_m": None}
+                 "completed_rate": None, "completed_ci95": [0.0, 1.0], "ended": {}, "not_reached": 0, "contact_s": 0, "driven_m": 0,
+                 "stop_count": 0, "stops_per_100m": None, "stops_s": {}, "mean_rms_cross_track_m": None}
 
 
 # --- the cluster bootstrap of a mean -------------------------------------------------------------

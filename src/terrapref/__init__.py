@@ -5,7 +5,7 @@ the layers below it (tests/test_layout.py checks this list against the code):
 
 1. errors
 2. extras (which optional extra a feature needs)
-3. yamlio, fileio, progress, configargs, registry, records, sums
+3. yamlio, fileio, progress, configargs, registry, records, sums, stops
 4. tensorfile, terrain, grid
 5. pngio, scenario (files)
 6. world (terrain raster)

@@ -227,7 +227,8 @@ def _cmd_record(args: argparse.Namespace) -> int:
     bar.close("done")
     state = "reached the goal" if log.completed else "timed out"
     seen = f"; the frames are what the robot received under perception {perception.name}" if perception is not None and perception.active else ""
-    print(f"wrote {args.out}: {writer.count} frames, {log.duration_s:.1f} s, {state}, {log.collisions} collisions (complete){seen}")
+    contact = f" ({log.contact_s:.1f} s, {log.contact_m:.1f} m with lethal terrain under the vehicle)" if log.contact_s else ""
+    print(f"wrote {args.out}: {writer.count} frames, {log.duration_s:.1f} s, {state}, {log.collisions} collisions{contact} (complete){seen}")
     return 0
 
 
@@ -481,6 +482,7 @@ def _training_data(args: argparse.Namespace, recipe: Recipe) -> Dataset:
     from terrapref.progress import Progress
 
     recordings = [p for p in args.data if p.is_dir()]
+    _warn_lethal_contact(recordings)
     bar = Progress("featurize", len(recordings), enabled=bool(recordings))
     data = training_data(args.data, recipe.features(), progress=lambda k, n: bar.update(k, f"{k}/{n} recordings"))
     bar.close()
@@ -489,6 +491,17 @@ def _training_data(args: argparse.Namespace, recipe: Recipe) -> Dataset:
     if len(np.unique(data.labels)) < 2:
         raise UserError(str(args.data[0]), f"every sample has the same label ({int(data.labels[0])}): the drive never steered, there is no choice to learn", field="labels")
     return data
+
+
+def _warn_lethal_contact(recordings: list[Path]) -> None:
+    """A warning for each recording whose drive had lethal terrain under the footprint."""
+    from terrapref.demos.recording import read_recording
+
+    for path in recordings:
+        contact = read_recording(path).lethal_contact()
+        if contact is not None:
+            print(f"warning: {path}: the drive had lethal terrain under the vehicle ({contact}); the model learns from it as driven",
+                  file=sys.stderr)
 
 
 def _epoch_printer(config: TrainConfig, verbose: bool) -> Callable[[EpochMetrics], None]:

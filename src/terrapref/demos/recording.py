@@ -247,6 +247,17 @@ class Recording:
     def __len__(self) -> int:
         return len(self.times)
 
+    def lethal_contact(self) -> str | None:
+        """What the drive's summary says of lethal terrain under the footprint ("2 entries, 3.4 s,
+        2.9 m"), None when it touched none (or, recorded before contact was counted, entered none)."""
+        run = self.meta.get("summary") if isinstance(self.meta.get("summary"), dict) else {}
+        entries, seconds, metres = run.get("collisions") or 0, run.get("contact_s") or 0.0, run.get("contact_m")
+        if not entries and not seconds:
+            return None
+        parts = [f"{entries} entr{'y' if entries == 1 else 'ies'}"] + ([f"{seconds:.1f} s"] if seconds else []) \
+            + ([f"{metres:.1f} m"] if metres else [])
+        return ", ".join(parts)
+
     @property
     def frame_period_s(self) -> float:
         """The usual time between frames [s]: the median step (0.1, the camera's 10 Hz, with fewer than two frames)."""

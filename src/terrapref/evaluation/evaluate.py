@@ -188,7 +188,7 @@ def _write_runs(results: list[RunResult], folder: Path, model) -> None:
         frames = RunFrames(times=0.1 * np.arange(len(poses)), poses=poses, commands=run.commands,
                            image=lambda i, poses=poses, renderer=renderer: renderer.render(Pose(*poses[i])), chosen=run.index,
                            path=scenario.waypoints, camera=model.camera, classes=model.classes, preference=model.features.preference, probs=run.probs,
-                           costmap=costmaps_of(stage, poses) if stage.keeps_ground_map else None)
+                           costmap=costmaps_of(stage, poses) if stage.keeps_ground_map else None, stops=run.stops or None)
         write_mcap(folder / f"{file_stem(r.scenario)}_seed{r.seed}.mcap", frames, robot_file=False)
 
 

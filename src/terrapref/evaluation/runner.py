@@ -12,13 +12,14 @@ from __future__ import annotations
 import functools
 import math
 import os
+from collections import Counter
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
-from terrapref.evaluation.scoring import RunMetrics, ZoneResult, score_run
+from terrapref.evaluation.scoring import RunMetrics, ZoneResult, ZoneRules, score_run
 from terrapref.evaluation.stats import wilson
 from terrapref.grid import Engine, run_grid
 from terrapref.perception import PerceivedDriver, PerceptionModel, Perceiver
@@ -76,6 +77,7 @@ class KeptRun:
     index: np.ndarray  # (n,): the trajectories chosen
     probs: np.ndarray  # (n, m) float32: F_t
     commands: np.ndarray  # (n, 2): v [m/s], w [rad/s] sent
+    stops: tuple[str | None, ...] = ()  # (n,): why the planner stopped at each (None: it drove)
 
 
 @dataclass(frozen=True)
@@ -132,14 +134,29 @@ class Summary:
     agreement_zones: int = 0  # zones compared with the driver's; the agreement fields are None without any
     agreement_rate: float | None = None
     agreement_ci95: tuple[float, float] | None = None
+    completed_ci95: tuple[float, float] = (0.0, 1.0)
+    not_reached: int = 0  # zones the vehicle did not get past (each a failure)
+    ended: dict[str, int] = field(default_factory=dict)  # runs by how they ended (goal, stopped, time limit)
+    contact_s: float = 0.0  # time with lethal terrain under the footprint, all runs [s]
+    driven_m: float = 0.0  # distance driven, all runs [m]
+    stop_count: int = 0  # stops, all runs
+    stops_s: dict[str, float] = field(default_factory=dict)  # seconds stood still by reason, all runs
+
+    @property
+    def stops_per_100m(self) -> float | None:
+        """Stops per 100 m driven; None where nothing was driven."""
+        return round(100.0 * self.stop_count / self.driven_m, 3) if self.driven_m > 0 else None
 
     def to_dict(self) -> dict:
         """As JSON; the agreement only where zones were compared."""
         agreement = {"agreement_rate": self.agreement_rate, "agreement_ci95": list(self.agreement_ci95 or ()),
                      "agreement_zones": self.agreement_zones} if self.agreement_zones else {}
         return {"runs": self.runs, "zones": self.zones, "zone_success_rate": self.zone_success_rate,
-                "zone_success_ci95": list(self.zone_success_ci95), **agreement, "collision_count": self.collision_count,
-                "completed_rate": self.completed_rate, "mean_rms_cross_track_m": self.mean_rms_cross_track_m}
+                "zone_success_ci95": list(self.zone_success_ci95), **agreement, "not_reached": self.not_reached,
+                "collision_count": self.collision_count, "contact_s": self.contact_s,
+                "completed_rate": self.completed_rate, "completed_ci95": list(self.completed_ci95), "ended": self.ended,
+                "mean_rms_cross_track_m": self.mean_rms_cross_track_m, "driven_m": self.driven_m, "stop_count": self.stop_count,
+                "stops_per_100m": self.stops_per_100m, "stops_s": self.stops_s}
 
 
 def start_pose(start: tuple[float, float, float], seed: int) -> Pose:
@@ -225,7 +242,7 @@ def run_one(spec: RunSpec, watch: Watch | None = None) -> RunResult:
     watched = watch(driver) if watch is not None and isinstance(driver, PlannerDriver) else driver
     runner = PerceivedDriver(watched, Perceiver(spec.perception, sim.renderer, scenario.classes, sim.config.camera_rate_hz)) if perceived else watched
     log = run_episode(sim, runner, np.random.default_rng(spec.seed), start_pose(scenario.start, spec.seed))
-    metrics = score_run(log, scenario, sim.world, profile)
+    metrics = score_run(log, scenario, sim.world, profile, ZoneRules(footprint_m=sim.config.vehicle.footprint_m))
     planner = driver if isinstance(driver, PlannerDriver) else None
     return RunResult(spec.scenario, spec.seed, spec.driver, metrics, log.trace[::3, :2].astype(np.float32),
                      frames=_kept_frames(planner, log), run=_kept_run(spec, planner, log))
@@ -253,7 +270,8 @@ def _kept_run(spec: RunSpec, planner: PlannerDriver | None, log: EpisodeLog) -> 
         return None
     numbers = np.array(planner.frames, dtype=np.int64)
     return KeptRun(log.trace[3 * numbers].copy(), np.array([d.index for d in planner.decisions]),
-                   np.stack([d.probs for d in planner.decisions]).astype(np.float32), log.commands[numbers].copy())
+                   np.stack([d.probs for d in planner.decisions]).astype(np.float32), log.commands[numbers].copy(),
+                   tuple(d.stop for d in planner.decisions))
 
 
 def run_many(specs: list[RunSpec], workers: int | None = None, progress: Callable[[int, int], None] | None = None,
@@ -308,17 +326,29 @@ def summarise(results: list[RunResult], driver: str) -> Summary:
     ok = sum(z.success for z in zones)
     compared = [a for r in runs if r.agreement is not None for a in r.agreement]
     agree = sum(a.agrees for a in compared)
+    completed = sum(r.metrics.completed for r in runs)
+    stops: dict[str, float] = {}
+    for r in runs:
+        for reason, seconds in r.metrics.stops_s.items():
+            stops[reason] = round(stops.get(reason, 0.0) + seconds, 3)
     return Summary(
         runs=len(runs),
         zones=n,
         zone_success_rate=round(ok / n, 4) if n else None,
         zone_success_ci95=_rounded(wilson(ok, n)),
         collision_count=int(sum(r.metrics.collisions for r in runs)),
-        completed_rate=round(sum(r.metrics.completed for r in runs) / len(runs), 4) if runs else None,
+        completed_rate=round(completed / len(runs), 4) if runs else None,
         mean_rms_cross_track_m=round(float(np.mean([r.metrics.rms_cross_track_m for r in runs])), 4) if runs else None,
         agreement_zones=len(compared),
         agreement_rate=round(agree / len(compared), 4) if compared else None,
         agreement_ci95=_rounded(wilson(agree, len(compared))) if compared else None,
+        completed_ci95=_rounded(wilson(completed, len(runs))),
+        not_reached=sum(not z.reached for z in zones),
+        ended=dict(sorted(Counter(r.metrics.ending for r in runs).items())),
+        contact_s=round(sum(r.metrics.contact_s for r in runs), 3),
+        driven_m=round(sum(r.metrics.driven_m for r in runs), 3),
+        stop_count=sum(r.metrics.stop_count for r in runs),
+        stops_s=dict(sorted(stops.items())),
     )
 
 

@@ -6,6 +6,11 @@ otherwise ``avoid``. The zone succeeds when the choice equals the expectation (`
 resolved under the profile being tested) and no lethal cell was driven on inside it (unless a
 lethal class was expected). A zone's clearance is how close the reference point came to the
 terrain it did not choose (every patch, when it avoided them): the margin a driver keeps.
+
+Only what was driven counts: a zone the vehicle did not get past (it never entered it, or its
+progress along the path stopped short of where the path leaves the zone) is
+:data:`NOT_REACHED`, a failure, whatever it would have expected. Lethal terrain counts
+under the whole footprint (the line across the vehicle), not only under its reference point.
 """
 
 from __future__ import annotations
@@ -20,6 +25,23 @@ from terrapref.scenario.path import ReferencePath
 from terrapref.sim import EpisodeLog
 from terrapref.terrain import PreferenceProfile
 from terrapref.world import WorldMap
+
+NOT_REACHED = "not reached"  # a zone's choice when the vehicle did not get past it
+REACHED_TOLERANCE_M = 0.5  # progress this short of the zone's end along the path still counts as past it
+
+
+@dataclass(frozen=True)
+class ZoneRules:
+    """How zones are scored.
+
+    Attributes:
+        tolerance_m: a class is the zone's choice when more than this much was driven on it [m].
+        footprint_m: the vehicle's footprint across (VehicleConfig.footprint_m): lethal
+            terrain under any of its points touches it [m].
+    """
+
+    tolerance_m: float = 0.3
+    footprint_m: tuple[float, ...] = (-0.6, -0.3, 0.0, 0.3, 0.6)
 
 
 def segments(xy: np.ndarray, max_step_m: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
@@ -65,7 +87,7 @@ class ZoneResult:
     touched_lethal: bool
     distance_m: dict[str, float]
     clearance_m: float | None = None  # closest approach to terrain not chosen; None: none in reach
-
+    reached: bool = True  # the vehicle got past the zone (else its choice is NOT_REACHED)
 
     def to_dict(self) -> dict:
         return to_plain(self)
@@ -76,12 +98,28 @@ class ZoneResult:
         return cls(**{f.name: data[f.name] for f in fields(cls) if f.name in data})
 
 
-def score_zones(xy: np.ndarray, scenario: Scenario, world: WorldMap, profile: PreferenceProfile, tolerance_m: float = 0.3) -> list[ZoneResult]:
-    """Score every zone of ``scenario`` for the driven reference-point path ``xy`` (T, 2)."""
+def score_zones(trace: np.ndarray, scenario: Scenario, world: WorldMap, profile: PreferenceProfile, progress_m: float | None = None,
+                rules: ZoneRules = ZoneRules()) -> list[ZoneResult]:
+    """Score every zone of ``scenario`` for the driven path ``trace``.
+
+    Args:
+        trace: the reference point's path, (T, 2) [m]; or its poses, (T, 3) [m, m, rad], and then
+            lethal terrain under any point of the footprint inside a zone is touching it.
+        progress_m: how far along the path the run got [m]; a zone whose end along the path
+            lies beyond it is not reached. None: the run is taken to have passed every zone
+            it entered.
+        rules: the zone rules (the choice's tolerance, the footprint).
+    """
+    trace = np.asarray(trace, dtype=float)
+    xy, yaw = trace[:, :2], (trace[:, 2] if trace.ndim == 2 and trace.shape[1] == 3 else None)
+    tolerance_m, footprint_m = rules.tolerance_m, rules.footprint_m
     mid, length = segments(xy)
     cls = world.class_at(mid)
     classes = world.classes
-    lethal = set(classes.lethal_ids)
+    lethal = np.zeros(256, dtype=bool)
+    lethal[list(classes.lethal_ids)] = True
+    under = _footprint_lethal(xy, yaw, world, lethal, footprint_m) if yaw is not None else None
+    path = ReferencePath(scenario.waypoints)
     results = []
     for zone in scenario.zones:
         inside = zone.shape.contains(mid) if len(mid) else np.zeros(0, bool)
@@ -91,14 +129,44 @@ def score_zones(xy: np.ndarray, scenario: Scenario, world: WorldMap, profile: Pr
                 continue
             dist[classes.name_of(int(cid))] = round(float(length[inside & (cls == cid)].sum()), 3)
         top = max(dist.items(), key=lambda kv: kv[1], default=(AVOID, 0.0))
-        choice = top[0] if top[1] > tolerance_m else AVOID
         expect = zone.resolve_expect(classes_in_zone(zone, world), profile, classes)
-        touched = bool(np.isin(cls[inside], list(lethal)).any())
+        touched = bool(lethal[cls[inside]].any())
+        if under is not None and len(xy):
+            touched |= bool(under[zone.shape.contains(np.asarray(xy, dtype=float))].any())
+        reached = _passed(zone, path, progress_m, bool(inside.any()))
+        choice = (top[0] if top[1] > tolerance_m else AVOID) if reached else NOT_REACHED
         expected_lethal = expect in classes.lethal
-        success = choice == expect and (not touched or expected_lethal)
-        clearance = _clearance(mid[inside], world, exclude=classes.id_of(choice) if choice != AVOID else None)
-        results.append(ZoneResult(zone.id, zone.label, expect, choice, success, touched, dist, clearance))
+        success = reached and choice == expect and (not touched or expected_lethal)
+        clearance = _clearance(mid[inside], world, exclude=classes.id_of(choice) if choice in classes.names else None)
+        results.append(ZoneResult(zone.id, zone.label, expect, choice, success, touched, dist, clearance, reached))
     return results
+
+
+def zone_end_m(zone: Zone, path: ReferencePath, step_m: float = 0.1) -> float | None:
+    """Where the path leaves ``zone`` for the last time, as arc length [m]; None when it never enters it."""
+    s = np.arange(0.0, path.length_m + step_m / 2, step_m)
+    inside = zone.shape.contains(path.point_at(s))
+    return float(s[inside].max()) if inside.any() else None
+
+
+def _passed(zone: Zone, path: ReferencePath, progress_m: float | None, entered: bool) -> bool:
+    """Whether the run got past ``zone``: it entered the zone and, for a zone the path crosses,
+    its progress along the path reached the zone's end (a vehicle that stands still inside a
+    zone has not got past it; progress alone is not enough, as a vehicle driving beside the
+    path far off it still makes progress along it)."""
+    if not entered:
+        return False
+    end = zone_end_m(zone, path) if progress_m is not None else None
+    return end is None or progress_m >= min(end, path.length_m) - REACHED_TOLERANCE_M
+
+
+def _footprint_lethal(xy: np.ndarray, yaw: np.ndarray, world: WorldMap, lethal: np.ndarray, footprint_m: tuple[float, ...]) -> np.ndarray:
+    """Whether lethal terrain lies under any footprint point at each pose (T,)."""
+    xy = np.asarray(xy, dtype=float)
+    across = np.asarray(footprint_m, dtype=float)
+    yaw = np.asarray(yaw, dtype=float)[:, None]
+    points = np.stack([xy[:, 0:1] - across * np.sin(yaw), xy[:, 1:2] + across * np.cos(yaw)], axis=-1)
+    return lethal[world.class_at(points)].any(axis=1)
 
 
 CLEARANCE_REACH_M = 3.0  # terrain farther than this from the path in a zone does not count
@@ -151,10 +219,26 @@ class RunMetrics:
     rms_cross_track_outside_zones_m: float
     distance_m: dict[str, float]
     zones: list[ZoneResult] = field(default_factory=list)
+    ended: str | None = None  # how the run ended: goal, stopped (stood still for good) or time limit (None: not recorded)
+    progress_m: float | None = None  # how far along the path it got [m]
+    contact_s: float = 0.0  # time with lethal terrain under the footprint [s]
+    contact_m: float = 0.0  # distance driven so [m]
+    stop_count: int = 0  # times the vehicle came to a stop
+    stops_s: dict[str, float] = field(default_factory=dict)  # seconds stood still, by reason
 
     @property
     def zone_successes(self) -> int:
         return sum(z.success for z in self.zones)
+
+    @property
+    def ending(self) -> str:
+        """How the run ended; for metrics that did not record it, the goal or the time limit by ``completed``."""
+        return self.ended or ("goal" if self.completed else "time limit")
+
+    @property
+    def driven_m(self) -> float:
+        """The distance the reference point travelled [m]."""
+        return float(sum(self.distance_m.values()))
 
     def to_dict(self) -> dict:
         return to_plain(self)
@@ -165,9 +249,10 @@ class RunMetrics:
         return from_plain(cls, data)
 
 
-def score_run(log: EpisodeLog, scenario: Scenario, world: WorldMap, profile: PreferenceProfile, tolerance_m: float = 0.3) -> RunMetrics:
-    """All metrics of the run ``log`` of ``scenario`` on ``world``: from its reference-point path
-    (every controller tick's x, y), whether it completed, its collisions and its duration."""
+def score_run(log: EpisodeLog, scenario: Scenario, world: WorldMap, profile: PreferenceProfile, rules: ZoneRules = ZoneRules()) -> RunMetrics:
+    """All metrics of the run ``log`` of ``scenario`` on ``world``: from its path (every controller
+    tick's pose), whether it completed and how it ended, its collisions and contact, its stops
+    and its duration; ``rules`` how its zones are scored."""
     xy = log.trace[:, :2]
     path = ReferencePath(scenario.waypoints)
     mid, length = segments(xy)
@@ -192,5 +277,11 @@ def score_run(log: EpisodeLog, scenario: Scenario, world: WorldMap, profile: Pre
         max_cross_track_m=round(float(err.max()) if len(err) else 0.0, 4),
         rms_cross_track_outside_zones_m=round(rms(out), 4),
         distance_m=dist,
-        zones=score_zones(xy, scenario, world, profile, tolerance_m),
+        zones=score_zones(log.trace, scenario, world, profile, log.progress_m, rules),
+        ended=log.ended,
+        progress_m=round(log.progress_m, 3),
+        contact_s=round(log.contact_s, 3),
+        contact_m=round(log.contact_m, 3),
+        stop_count=log.stop_count,
+        stops_s={k: round(v, 3) for k, v in sorted(log.stops.items())},
     )

@@ -37,6 +37,7 @@ from terrapref.errors import UserError
 from terrapref.extras import needs
 from terrapref.features import PreferenceSetConfig
 from terrapref.fileio import new_folder, replace_dir
+from terrapref.interop.labels import LabelMap
 from terrapref.interop.robot import RobotConfig, load_waypoints
 from terrapref.progress import Progress
 from terrapref.terrain import ClassTable, default_classes
@@ -572,12 +573,16 @@ def _import(req: _Request, out: Path, show_progress: bool, report: ImportReport)
     placement = _Placement.of(streams.odom[:, :2], _reference_path(req, streams, report))
     preference = PreferenceSetConfig()
     conversion = _Conversion(req.rate_hz, robot.max_gap_s, preference.control, robot.labels.lut(req.classes), robot.labels.listed(),
-                             undistort, placement.shift)
+                             undistort, placement.shift, robot.labels)
     scenario = _scenario(bag_path_name(bag.source), placement.path, placement.start(streams.odom[0]), tuple(placement.size), req.classes)
     meta = _meta(req, scenario, camera, preference, placement)
     progress = Progress("import", sum(c.msgcount for c in seg_conns), enabled=show_progress)
     frames = _Frames(streams, conversion, RecordingWriter(out, meta, scenario), report)
-    _stream_images(req, seg_conns, (camera.height_px, camera.width_px), frames, progress)
+    try:
+        _stream_images(req, seg_conns, (camera.height_px, camera.width_px), frames, progress)
+    except UserError:
+        frames.writer.abort()  # nothing half-written: a replaced recording stays as it was
+        raise
     frames.close(bag.source, progress)
 
 
@@ -672,6 +677,7 @@ class _Conversion:
     listed: np.ndarray  # (65536,) bool: the ids the label map lists
     undistort: np.ndarray | None  # (H, W) flat index of each pinhole pixel in the lens's image (-1: outside); None: no distortion
     shift: np.ndarray  # (2,) [m] odometry frame -> map
+    labels: LabelMap  # the label map (whether ids it does not list are an error)
 
 
 @dataclass
@@ -701,7 +707,7 @@ class _Frames:
         v, w = self.streams.cmd[self._command_index(t)]
         w_set = float(np.clip(w * c.control.v_mps / v, min(c.control.w_rps), max(c.control.w_rps)))  # same curvature at the set's speed
         pose = self._pose_at(t)
-        image = self._classes(ids)
+        image = self._classes(ids, t)
         if self.t_first is None:
             self.t_first = t
         self.writer.append(t - self.t_first, pose, image, (c.control.v_mps, w_set), int(c.control.label_of(w_set)))
@@ -752,14 +758,18 @@ class _Frames:
             yaw = (yaw + math.pi) % (2 * math.pi) - math.pi
         return x + shift[0], y + shift[1], yaw
 
-    def _classes(self, ids: np.ndarray) -> np.ndarray:
-        """Class ids (H, W) uint8 of the label ids ``ids``, undistorted; the pixels counted."""
+    def _classes(self, ids: np.ndarray, t: float) -> np.ndarray:
+        """Class ids (H, W) uint8 of the label ids ``ids`` (the image stamped ``t`` [s]), undistorted;
+        the pixels counted. An id the label map does not list is an error unless the map makes it unknown."""
         c = self.conversion
+        unmapped = int(np.count_nonzero(~c.listed[ids]))
+        if unmapped:
+            c.labels.refuse_unlisted(ids, f"the image stamped {t:.3f} s")
         image = c.lut[ids]
         if c.undistort is not None:
             image = np.where(c.undistort >= 0, image.reshape(-1)[np.maximum(c.undistort, 0)], UNKNOWN).astype(np.uint8)
         self.pixels += ids.size
-        self.unmapped += int(np.count_nonzero(~c.listed[ids]))
+        self.unmapped += unmapped
         self.unknown += int(np.count_nonzero(image == UNKNOWN))
         return image
 

@@ -9,8 +9,14 @@ A map is keyed by id, never by colour (SPEC 14)::
       3: grass
       33: mud
 
-Ids the map does not list are unknown (255), and importing reports their share. A network
-that publishes colour images (rgb8) instead of ids adds its colour table, again keyed by id::
+An id the map does not list is an error where images come in (the runtime, the ROS node, the
+importer), naming the id: a network that emits a class nobody mapped must not be driven on as
+if it were ground. A map that means such ids to be unknown says so::
+
+    unlisted: unknown    # default: error
+
+A network that publishes colour images (rgb8) instead of ids adds its colour table, again
+keyed by id::
 
     colors:
       3: [0, 102, 0]
@@ -35,7 +41,8 @@ from terrapref.yamlio import read_yaml_mapping
 LABELS_FORMAT = "terrapref-labels/1"
 UNKNOWN_NAME = "unknown"
 MAX_ID = 65535  # mono16 label images
-_KEYS = {"format", "name", "description", "ids", "colors"}
+_KEYS = {"format", "name", "description", "ids", "colors", "unlisted"}
+UNLISTED = ("error", "unknown")  # what an id the map does not list is (LabelMap.unlisted)
 NO_ID = MAX_ID  # what a colour missing from the table decodes to (never listed)
 
 
@@ -47,6 +54,7 @@ class LabelMap:
     ids: dict[int, str]
     source: str = ""
     colors: dict[int, tuple[int, int, int]] | None = None  # id -> (r, g, b), for rgb8 images
+    unlisted: str = "error"  # an id the map does not list: an error, or unknown (UNLISTED)
 
     def decode_rgb(self, rgb: np.ndarray) -> np.ndarray:
         """Label ids (H, W) uint16 of an (H, W, 3) uint8 colour image, by the colour table."""
@@ -60,16 +68,29 @@ class LabelMap:
         at = np.clip(np.searchsorted(keys, packed), 0, len(keys) - 1)
         return np.where(keys[at] == packed, ids[at], NO_ID).astype(np.uint16)
 
-    def lut(self, classes: ClassTable) -> np.ndarray:
-        """Lookup table (65536,) uint8: source id -> class id of ``classes`` (255 unknown)."""
+    def lut(self, classes: ClassTable, unlisted: int = UNKNOWN) -> np.ndarray:
+        """Lookup table (65536,) uint8: source id -> class id of ``classes`` (255 unknown), and
+        ``unlisted`` for the ids the map does not list."""
         missing = sorted({n for n in self.ids.values() if n != UNKNOWN_NAME} - set(classes.names))
         if missing:
             raise ConfigError(self.source or self.name, f"class {missing[0]!r} is not in the class table ({', '.join(classes.names)})", field="ids")
-        lut = np.full(MAX_ID + 1, UNKNOWN, dtype=np.uint8)
+        lut = np.full(MAX_ID + 1, unlisted, dtype=np.uint8)
         for source_id, name in self.ids.items():
-            if name != UNKNOWN_NAME:
-                lut[source_id] = classes.id_of(name)
+            lut[source_id] = UNKNOWN if name == UNKNOWN_NAME else classes.id_of(name)
         return lut
+
+    def unlisted_in(self, ids: np.ndarray) -> list[int]:
+        """The ids in ``ids`` (label images) that the map does not list, sorted."""
+        listed = self.listed()
+        return sorted(int(i) for i in np.unique(ids[~listed[ids]]))
+
+    def refuse_unlisted(self, ids: np.ndarray, where: str) -> None:
+        """Raise a :class:`ConfigError` naming the ids in ``ids`` the map does not list, unless it maps them to unknown."""
+        if self.unlisted == "unknown":
+            return
+        bad = self.unlisted_in(ids)
+        if bad:
+            raise ConfigError(self.source or self.name, unlisted_message(bad, where), field="ids")
 
     def listed(self) -> np.ndarray:
         """Mask (65536,) of the ids the map lists (``unknown`` included)."""
@@ -112,9 +133,19 @@ def parse_label_map(data: dict, source: str) -> LabelMap:
                 problems.append(Problem(f"colors.{key}", f"colour {value} is already another id's"))
             else:
                 out_colors[key] = (value[0], value[1], value[2])
+    unlisted = data.get("unlisted", "error")
+    if unlisted not in UNLISTED:
+        problems.append(Problem("unlisted", f"expected one of {', '.join(UNLISTED)}"))
     if problems:
         raise ConfigError(source, problems)
-    return LabelMap(name, out, source, out_colors)
+    return LabelMap(name, out, source, out_colors, unlisted)
+
+
+def unlisted_message(ids: list[int], where: str) -> str:
+    """The error for label ids a map does not list, seen ``where``."""
+    shown = ", ".join(str(i) for i in ids[:8]) + (" ..." if len(ids) > 8 else "")
+    return (f"label id{'s' if len(ids) > 1 else ''} {shown} in {where} not listed: add {'them' if len(ids) > 1 else 'it'} "
+            "(as a class or as unknown), or set unlisted: unknown")
 
 
 def packaged_label_maps() -> list[str]:

@@ -118,12 +118,16 @@ class WatchedDriver:
         policy = self.inner.planner.policy
         self.run = LiveRun.start(self.view, scenario.waypoints, policy.camera, policy.classes, policy.features.preference)
 
+    @property
+    def stop_reason(self) -> str | None:
+        return self.inner.stop_reason
+
     def act(self, frame: Any) -> Any:
         command = self.inner.act(frame)
         decision = self.inner.last
         x, y, yaw = (float(v) for v in frame.pose)
         self.run.frame(FrameData(float(frame.time_s), (x, y, yaw), (float(command.v), float(command.w)), frame.view.image, decision.index,
-                                 decision.probs), planner_costmap(self.inner.planner))
+                                 decision.probs, stop=decision.stop), planner_costmap(self.inner.planner))
         return command
 
 

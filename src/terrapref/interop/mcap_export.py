@@ -42,6 +42,7 @@ from terrapref.interop.ros_messages import (EPOCH_S, OPTICAL_FRAME, Message, Top
                                             foxglove_grid, header, occupancy_grid, odometry, path_message, png, point, pose, rpy_quaternion, tf_message, transform, twist,
                                             typestore, vector3, zeroed)
 from terrapref.planner.costmap import Costmap
+from terrapref.stops import REASONS
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.terrain.classes import UNKNOWN
 
@@ -66,6 +67,7 @@ class RunFrames:
     preference: PreferenceSetConfig
     probs: np.ndarray | None = None  # (F, m) F_t, when a planner drove
     costmap: Callable[[int, np.ndarray], Costmap | None] | None = None  # frame, its class ids -> the costmap to publish then
+    stops: tuple[str | None, ...] | None = None  # (F,) why the planner stopped at each frame (None: it drove), when a planner drove
 
 
 COSTMAP_TOPICS = {"costmap": (f"{PREFIX}/costmap", "nav_msgs/msg/OccupancyGrid"), "costmap_grid": (f"{PREFIX}/costmap_grid", "foxglove_msgs/msg/Grid")}
@@ -78,6 +80,7 @@ _TOPICS = {  # role: (topic, type), in the order the file lists them
     "cmd_vel": (f"{PREFIX}/cmd_vel", "geometry_msgs/msg/Twist"),
     "path": (f"{PREFIX}/path", "nav_msgs/msg/Path"),
     "trajectories": (f"{PREFIX}/trajectories", "visualization_msgs/msg/MarkerArray"),
+    "status": (f"{PREFIX}/status", "std_msgs/msg/String"),  # the planner's: "driving", or "stopped: REASON (what it means)"
     "tf": ("/tf", "tf2_msgs/msg/TFMessage"),
     "tf_static": ("/tf_static", "tf2_msgs/msg/TFMessage"),
 }
@@ -201,6 +204,7 @@ class FrameData:
     chosen: int  # the trajectory chosen (or demonstrated)
     probs: np.ndarray | None = None  # F_t (m,), when a planner drove
     costmap: Costmap | None = None  # the costmap to publish with this frame
+    stop: str | None = None  # why the planner stopped (None: it drove), when a planner drove
 
 
 def _write_frame(topics: Topics, scene: Scene, i: int) -> None:
@@ -211,7 +215,8 @@ def _write_frame(topics: Topics, scene: Scene, i: int) -> None:
     v, w = (float(u) for u in run.commands[i])
     write_frame(topics, scene, FrameData(float(run.times[i]), (x, y, yaw), (v, w), ids, int(run.chosen[i]),
                                          run.probs[i] if run.probs is not None else None,
-                                         run.costmap(i, ids) if run.costmap is not None else None))
+                                         run.costmap(i, ids) if run.costmap is not None else None,
+                                         run.stops[i] if run.stops is not None else None))
 
 
 def write_frame(topics: Topics, scene: Scene, frame: FrameData) -> None:
@@ -236,6 +241,13 @@ def write_frame(topics: Topics, scene: Scene, frame: FrameData) -> None:
     topics.write("cmd_vel", ns, twist(ts, *frame.command))
     _restyle_markers(scene, frame.chosen, frame.probs, scene.header(t, "base_link"))
     topics.write("trajectories", ns, scene.marker_array)
+    if frame.probs is not None:  # a planner drove: whether it drives or stops, and why
+        topics.write("status", ns, ts.types["std_msgs/msg/String"](data=status_text(frame.stop)))
+
+
+def status_text(stop: str | None) -> str:
+    """The planner's status as the status topic and the logs say it: ``driving``, or ``stopped: REASON (what it means)``."""
+    return "driving" if stop is None else f"stopped: {stop} ({REASONS.get(stop, stop)})"
 
 
 def _restyle_markers(scene: Scene, chosen: int, probs: np.ndarray | None, stamped: Message) -> None:

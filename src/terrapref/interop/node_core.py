@@ -23,9 +23,11 @@ import numpy as np
 from terrapref.errors import UserError
 from terrapref.interop.bag_import import _decode, _yaw, camera_from_info
 from terrapref.interop.robot import RobotConfig
+from terrapref.interop.labels import unlisted_message
 from terrapref.interop.runtime import PlannerRuntime, RuntimeDecision
 from terrapref.learning.model_file import LoadedModel
 from terrapref.planner.costmap import Costmap
+from terrapref.stops import STALE
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Command, Pose
 
@@ -60,7 +62,7 @@ class PlannerNodeCore:
     """
 
     def __init__(self, model: LoadedModel, robot: RobotConfig, path: np.ndarray | None = None, hold_s: float = 0.3) -> None:
-        self.model, self.robot, self.hold_s = model, robot, hold_s
+        self.model, self.robot, self.hold_s, self.stop = model, robot, hold_s, robot.stop
         self.runtime: PlannerRuntime | None = None
         self.path = None if path is None else np.asarray(path, dtype=float)
         self.odometry: deque[tuple[float, float, float, float]] = deque()  # (stamp [s], x, y, yaw)
@@ -90,8 +92,11 @@ class PlannerNodeCore:
             if self.runtime is not None:
                 return
             camera, self._undistort = camera_from_info(info, self.robot, self.robot.source)
-            self._lut = self.robot.labels.lut(self.model.classes)
-            self.runtime = PlannerRuntime(self.model, camera, hold_s=self.hold_s)  # fed class ids, mapped and undistorted here
+            runtime = PlannerRuntime(self.model, camera, hold_s=self.hold_s, stop=self.stop)  # fed class ids, mapped and undistorted here
+            labels = self.robot.labels
+            # An id the label map does not list becomes one the class table does not name, and is refused with it.
+            self._lut = labels.lut(self.model.classes, UNKNOWN if labels.unlisted == "unknown" else runtime.foreign.unnamed)
+            self.runtime = runtime
             if self.path is not None:
                 self.runtime.set_path(self.path)
 
@@ -173,6 +178,9 @@ class PlannerNodeCore:
             raise UserError(self.robot.source, f"a label image of {raw.shape[1]} x {raw.shape[0]} px; the calibration says "
                             f"{self.runtime.shape[1]} x {self.runtime.shape[0]}", field="topics.segmentation")
         ids = self._lut[raw]
+        if self.runtime.foreign(ids):
+            raise UserError(self.robot.labels.source or self.robot.source, unlisted_message(self.robot.labels.unlisted_in(raw), "a label image"),
+                            field="ids")
         if self._undistort is not None:  # a lens with distortion: each pinhole pixel from where the lens put it
             ids = np.where(self._undistort >= 0, ids.reshape(-1)[np.maximum(self._undistort, 0)], UNKNOWN).astype(np.uint8)
         decision = self.runtime.decide(ids, t, pose)
@@ -196,12 +204,16 @@ class PlannerNodeCore:
         if self._live is None:
             self._live = LiveRun.start(self.view, self.path, runtime.planner.camera.config, model.classes, model.features.preference, clock_s=EPOCH_S)
         self._live.frame(FrameData(decision.stamp_s, (pose.x, pose.y, pose.yaw), (float(decision.command.v), float(decision.command.w)),
-                                   ids, decision.index, decision.probs), self.costmap)
+                                   ids, decision.index, decision.probs, stop=decision.stop), self.costmap)
 
     def command_at(self, now_s: float) -> Command:
         """The command to send now: the last decision's while fresh, else a stop."""
+        return self.status_at(now_s)[0]
+
+    def status_at(self, now_s: float) -> tuple[Command, str | None]:
+        """The command to send now and why it stops (None while it drives; ``stale`` before any frame)."""
         with self._lock:
-            return self.runtime.command_at(now_s) if self.runtime is not None else Command(0.0, 0.0)
+            return self.runtime.status_at(now_s) if self.runtime is not None else (Command(0.0, 0.0), STALE)
 
     def costmap(self) -> Costmap | None:
         """The learned preference over the ground seen, when the planner keeps a ground map."""

@@ -22,6 +22,11 @@
     path_file: route.yaml                      # optional: waypoints [[x, y], ...] in the odometry frame
     profile: [mud, rock, water, non_traversable]  # optional: the operator's declared order
     max_gap_s: 0.5                             # optional: longer gaps in odometry or images are skipped
+    stop:                                      # optional: when the planner stops (terrapref.planner.stop)
+      decel_mps2: 1.0                          # the robot's braking [m/s^2]
+      reaction_s: 0.2                          # frame to brakes [s]
+      margin_m: 0.3                            # kept from lethal or unseen ground when stopped [m]
+      blind_after_s: 0.5                       # blind frames tolerated before a stop [s]
 
 Without ``topics.path`` or ``path_file`` the reference path is the driven odometry, smoothed.
 Relative file names are relative to the robot file.
@@ -30,7 +35,7 @@ Relative file names are relative to the robot file.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -38,12 +43,13 @@ import yaml
 
 from terrapref.errors import ConfigError, Problem, UserError
 from terrapref.interop.labels import LabelMap, load_label_map
+from terrapref.planner.stop import StopConfig
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.terrain.profile import PreferenceProfile
 from terrapref.yamlio import load_yaml_text, read_yaml_mapping
 
 ROBOT_FORMAT = "terrapref-robot/1"
-_TOP = {"format", "topics", "camera", "labels", "path_file", "profile", "max_gap_s", "description"}
+_TOP = {"format", "topics", "camera", "labels", "path_file", "profile", "max_gap_s", "description", "stop"}
 _TOPICS_REQUIRED = ("segmentation", "camera_info", "odometry", "command")
 _TOPICS = set(_TOPICS_REQUIRED) | {"path"}
 _CAMERA = {"height_m": (0.05, 10.0), "pitch_deg": (-89.0, 89.0), "forward_m": (-10.0, 10.0), "yaw_deg": (-180.0, 180.0), "max_range_m": (1.0, 500.0)}
@@ -60,6 +66,7 @@ class RobotConfig:
     profile: PreferenceProfile
     path_file: Path | None
     max_gap_s: float
+    stop: StopConfig = field(default_factory=StopConfig)
 
     @property
     def path_topic(self) -> str | None:
@@ -91,7 +98,26 @@ def load_robot(path: str | Path, classes: ClassTable | None = None) -> RobotConf
     resolved = None
     if path_file is not None:
         resolved = Path(path_file) if Path(path_file).is_absolute() else here / path_file
-    return RobotConfig(source, topics, camera, labels, profile, resolved, float(data.get("max_gap_s", 0.5)))
+    return RobotConfig(source, topics, camera, labels, profile, resolved, float(data.get("max_gap_s", 0.5)), _stop(data.get("stop"), source))
+
+
+def _stop(block: object, source: str) -> StopConfig:
+    """The stop rule's settings from the file's ``stop`` block (absent: the defaults)."""
+    if block is None:
+        return StopConfig()
+    names = [f.name for f in fields(StopConfig)]
+    if not isinstance(block, dict):
+        raise ConfigError(source, f"expected a mapping of {', '.join(names)}", field="stop")
+    for key, value in block.items():
+        if key not in names:
+            raise ConfigError(source, f"unknown key; expected {', '.join(names)}", field=f"stop.{key}")
+        wanted = int if key == "arcs" else (int, float)
+        if isinstance(value, bool) or not isinstance(value, wanted):
+            raise ConfigError(source, f"expected {'a whole number' if key == 'arcs' else 'a number'}", field=f"stop.{key}")
+    try:
+        return StopConfig(**block)
+    except ValueError as exc:
+        raise ConfigError(source, str(exc), field="stop") from None
 
 
 def _check_topics(topics: object, problems: list[Problem]) -> dict[str, str]:

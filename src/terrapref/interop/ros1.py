@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from terrapref.errors import UserError
+from terrapref.stops import REASONS
 
 DEBIAN_DIST_PACKAGES = Path("/usr/lib/python3/dist-packages")
 ROS_PACKAGES = "ros-core python3-rospy python3-geometry-msgs python3-sensor-msgs python3-nav-msgs python3-visualization-msgs python3-std-msgs"
@@ -123,6 +124,7 @@ class _Node:
         self.failure: list[UserError] = []
         self.said: set[str] = set()  # problems with incoming messages, each logged once
         self.last_stamp: float | None = None  # the frame of the command in force
+        self.stop_reason: str | None = None  # why the command in force stops (None: it drives)
         self.Twist, self.TwistStamped, self.OccupancyGrid = Twist, TwistStamped, OccupancyGrid
         self.image_types = {"sensor_msgs/Image": (Image, "sensor_msgs/msg/Image"),
                             "sensor_msgs/CompressedImage": (CompressedImage, "sensor_msgs/msg/CompressedImage")}
@@ -142,8 +144,15 @@ class _Node:
         rospy.Timer(rospy.Duration(COSTMAP_PERIOD_S), self.publish_costmap)
 
     def publish_command(self, stamp_s: float) -> None:
-        """The command in force now (a stop once its frame is ``hold_s`` old), stamped with its frame."""
-        v, w = self.core.command_at(self.rospy.get_time())
+        """The command in force now (a stop once its frame is ``hold_s`` old), stamped with its frame;
+        each time the planner stops, or moves on, the log says so and why."""
+        (v, w), reason = self.core.status_at(self.rospy.get_time())
+        if reason != self.stop_reason:
+            self.stop_reason = reason
+            if reason is None:
+                self.rospy.loginfo("terrapref: moving on")
+            else:
+                self.rospy.logwarn(f"terrapref: stopping: {reason} ({REASONS.get(reason, reason)})")
         twist = self.Twist()
         twist.linear.x, twist.angular.z = float(v), float(w)
         if not self.opts.stamped:

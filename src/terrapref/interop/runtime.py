@@ -4,10 +4,14 @@ A ROS 2 node (docs/robot.md, "A ROS 2 node") wraps :class:`PlannerRuntime`: it p
 with its stamp and the robot's pose at that stamp, sends ``command_at(now)`` at its own rate,
 and publishes the trajectory probabilities if it likes. Nothing here needs ROS.
 
-Safety: the last decision's command is held for ``hold_s`` after its frame's stamp; past that
-(the camera stopped, frames are late) the runtime commands a stop until a fresh frame arrives.
-An image of the wrong size, a camera other than the model's, or labels outside the map are
-refused with a ``ValueError`` rather than driven on.
+Safety: the planner stops, and says why, when no way ahead is free of lethal or unseen ground
+within its stopping distance, or when its frames have seen too little ground for too long
+(terrapref.planner.stop); the last decision's command is held for ``hold_s`` after its frame's
+stamp, and past that (the camera stopped, frames are late) the runtime commands a stop, reason
+``stale``, until a fresh frame arrives. An image of the wrong size, a camera other than the
+model's, or ids that neither the class table (nor the label map) names are refused with a
+``ValueError`` rather than driven on, unless ``unknown_ids="unknown"`` says such ids are unknown
+ground (255), which is then never free for the stop rule.
 """
 
 from __future__ import annotations
@@ -19,13 +23,17 @@ from pathlib import Path
 import numpy as np
 
 from terrapref.camera import CameraConfig
-from terrapref.interop.labels import LabelMap
+from terrapref.interop.labels import LabelMap, unlisted_message
 from terrapref.learning.model_file import LoadedModel, load_model
 from terrapref.planner.costmap import Costmap
 from terrapref.planner.planner import Planner
+from terrapref.planner.stop import StopConfig
+from terrapref.stops import STALE
+from terrapref.terrain.classes import UNKNOWN, ForeignIds
 from terrapref.vehicle import Command, Pose
 
 STOP = Command(0.0, 0.0)
+UNKNOWN_IDS = ("error", "unknown")  # what the runtime makes of an id no table or map names (PlannerRuntime's unknown_ids)
 
 
 @dataclass(frozen=True)
@@ -34,11 +42,12 @@ class RuntimeDecision:
 
     Attributes:
         stamp_s: the frame's stamp [s].
-        command: (v [m/s], w [rad/s]) of the chosen trajectory.
+        command: (v [m/s], w [rad/s]) of the chosen trajectory; (0, 0) when the planner stops.
         index: the chosen trajectory (0..m-1, the control set's order).
         probs: C's F_t over the m trajectories.
         progress_m: progress along the path [m].
         U: the frame's utility features (m, K + 1), as C saw them.
+        stop: why the planner stops (terrapref.stops.REASONS), None while it drives.
     """
 
     stamp_s: float
@@ -47,6 +56,7 @@ class RuntimeDecision:
     probs: np.ndarray
     progress_m: float
     U: np.ndarray
+    stop: str | None = None
 
 
 class PlannerRuntime:
@@ -60,16 +70,30 @@ class PlannerRuntime:
             uint16) and are mapped onto the model's classes. None: images hold terrapref class
             ids (uint8, 255 unknown).
         hold_s: how long a decision's command stays in force after its frame's stamp [s].
+        stop: when the planner stops (terrapref.planner.stop; default: its defaults).
+        unknown_ids: what an id that neither the class table nor the label map names is:
+            ``"error"`` (a ValueError naming it) or ``"unknown"`` (unknown ground, 255). A label
+            map whose file says ``unlisted: unknown`` makes its unlisted ids unknown either way.
     """
 
-    def __init__(self, model: str | Path | LoadedModel, camera: CameraConfig | None = None, labels: LabelMap | None = None, hold_s: float = 0.3) -> None:
+    def __init__(self, model: str | Path | LoadedModel, camera: CameraConfig | None = None, labels: LabelMap | None = None, hold_s: float = 0.3,
+                 stop: StopConfig | None = None, unknown_ids: str = "error") -> None:
         if not (math.isfinite(hold_s) and hold_s >= 0):
             raise ValueError("hold_s must be a finite number >= 0")
+        if unknown_ids not in UNKNOWN_IDS:
+            raise ValueError(f"unknown_ids must be one of {', '.join(UNKNOWN_IDS)}, got {unknown_ids!r}")
         self.model = model if isinstance(model, LoadedModel) else load_model(model)
-        self.planner = Planner(self.model, camera)  # refuses a camera the model was not trained for
+        self.planner = Planner(self.model, camera, stop=stop)  # refuses a camera the model was not trained for
         self.planner.warm_up()  # the compiled loops ready before the first frame
         self.shape = self.planner.camera.shape
-        self.lut = labels.lut(self.model.classes) if labels is not None else None
+        self.labels = labels
+        self.unknown_ids = unknown_ids
+        self.foreign = ForeignIds(self.model.classes)
+        if labels is not None:  # ids the map does not list become an id the table does not name, found with the rest
+            lenient = unknown_ids == "unknown" or labels.unlisted == "unknown"
+            self.lut = labels.lut(self.model.classes, UNKNOWN if lenient else self.foreign.unnamed)
+        else:
+            self.lut = None
         self.hold_s = hold_s
         self.last: RuntimeDecision | None = None
 
@@ -95,17 +119,34 @@ class PlannerRuntime:
         if self.lut is not None:
             if image.dtype not in (np.uint8, np.uint16):
                 raise ValueError(f"label image of dtype {image.dtype}; expected uint8 or uint16 label ids")
-            image = self.lut[image]
+            raw, image = image, self.lut[image]
+            if self.foreign(image):
+                raise ValueError(unlisted_message(self.labels.unlisted_in(raw), "a label image")
+                                 + f" (label map {self.labels.source or self.labels.name})")
         elif image.dtype != np.uint8:
             raise ValueError(f"label image of dtype {image.dtype}; expected uint8 class ids (or give a label map)")
+        else:
+            image = self._named(image)
         pose = Pose(*(float(v) for v in pose))
         if not (math.isfinite(stamp_s) and all(math.isfinite(v) for v in pose)):
             raise ValueError("stamp and pose must be finite")
         if self.last is not None and stamp_s <= self.last.stamp_s:
             return None
-        d = self.planner.decide(image, pose)
-        self.last = RuntimeDecision(float(stamp_s), d.command, d.index, d.probs, d.progress_s, d.U)
+        d = self.planner.decide(image, pose, float(stamp_s))
+        self.last = RuntimeDecision(float(stamp_s), d.command, d.index, d.probs, d.progress_s, d.U, d.stop)
         return self.last
+
+    def _named(self, image: np.ndarray) -> np.ndarray:
+        """``image`` with class ids the table does not name refused (ValueError), or made unknown."""
+        foreign = self.foreign(image)
+        if not foreign:
+            return image
+        if self.unknown_ids == "error":
+            shown = ", ".join(str(i) for i in foreign[:8]) + (" ..." if len(foreign) > 8 else "")
+            raise ValueError(f"class id{'s' if len(foreign) > 1 else ''} {shown} in a label image "
+                             f"{'are' if len(foreign) > 1 else 'is'} not in the model's class table ({', '.join(self.model.classes.names)}); "
+                             "give a label map, or unknown_ids='unknown' to take them as unknown ground")
+        return np.where(self.foreign.allowed[image], image, np.uint8(UNKNOWN)).astype(np.uint8)
 
     def costmap(self) -> Costmap:
         """The learned preference over the ground seen so far, in the frame of the poses given
@@ -121,6 +162,12 @@ class PlannerRuntime:
 
     def command_at(self, now_s: float) -> Command:
         """The command to send at ``now_s``: the last decision's while it is fresh, else a stop."""
+        return self.status_at(now_s)[0]
+
+    def status_at(self, now_s: float) -> tuple[Command, str | None]:
+        """The command to send at ``now_s`` and why it stops (None while it drives): the last
+        decision's while it is fresh, else a stop for ``stale`` frames."""
         if self.last is None or not now_s - self.last.stamp_s <= self.hold_s:
-            return STOP
-        return self.last.command
+            return STOP, STALE
+        return self.last.command, self.last.stop
+

@@ -29,6 +29,7 @@ import numpy as np
 from terrapref.camera import PixelSet, SegmentationRenderer, SegmentationView
 from terrapref.perception.labels import LabelledView, LabelNoise
 from terrapref.perception.model import PerceptionModel
+from terrapref.stops import STALE, stop_reason_of
 from terrapref.terrain import ClassTable
 from terrapref.vehicle import Command, Pose
 
@@ -172,19 +173,24 @@ class PerceivedDriver:
     def __init__(self, inner: Driver, perceiver: Perceiver, hold_s: float = COMMAND_HOLD_S) -> None:
         self.inner, self.perceiver, self.hold_s = inner, perceiver, hold_s
         self.stops = 0  # periods the vehicle was stopped for want of a fresh frame
+        self.stop_reason: str | None = None  # why the last command stops (the inner driver's, or stale)
         self._last: Command | None = None
+        self._last_reason: str | None = None
         self._stamp_s = -math.inf
 
     def reset(self, scenario: Any, rng: np.random.Generator) -> None:
         self.inner.reset(scenario, rng)
         self.perceiver.reset(run_stream(rng, getattr(scenario, "name", "")))
-        self._last, self._stamp_s, self.stops = None, -math.inf, 0
+        self._last, self._last_reason, self._stamp_s, self.stops, self.stop_reason = None, None, -math.inf, 0, None
 
     def act(self, frame: Frame) -> Command:
         got = self.perceiver(frame)
         if got is not None:
             self._last, self._stamp_s = self.inner.act(got), got.time_s
+            self._last_reason = stop_reason_of(self.inner)
         if self._last is not None and frame.time_s - self._stamp_s <= self.hold_s + 1e-9:
+            self.stop_reason = self._last_reason
             return self._last
         self.stops += 1
+        self.stop_reason = STALE
         return STOP

@@ -19,6 +19,7 @@ from terrapref.learning.model_file import LoadedModel, check_compatible
 from terrapref.planner.costmap import Costmap
 from terrapref.planner.policy import ClassifierPolicy, Observation, Policy
 from terrapref.planner.stages import STAGES, Stage, StageContext, StageInput, driving_stage
+from terrapref.planner.stop import StopConfig, StopRule
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim.loop import Frame
@@ -31,23 +32,24 @@ class Decision:
 
     Attributes:
         index: chosen trajectory (steered continuously, the nearest one).
-        command: its (v [m/s], w [rad/s]).
+        command: its (v [m/s], w [rad/s]); (0, 0) when the planner stops.
         progress_s: the vehicle's progress along the path [m].
         probs: F_t, shape (m,).
         U: utility features, shape (m, K + 1).
+        stop: why the planner stops (terrapref.planner.stop.REASONS), None while it drives.
 
     When the driving stage steers without F_t (the offset stage), U and F_t are computed when
     first read, from the frame's view, pose and path: the same values, and a control loop that
     does not report them does not wait for C.
     """
 
-    __slots__ = ("index", "command", "progress_s", "_outputs", "_pending")
+    __slots__ = ("index", "command", "progress_s", "stop", "_outputs", "_pending")
 
     def __init__(self, index: int, command: Command, progress_s: float, outputs: tuple[np.ndarray, np.ndarray] | None = None,
-                 pending: Callable[[], tuple[np.ndarray, np.ndarray]] | None = None) -> None:
+                 pending: Callable[[], tuple[np.ndarray, np.ndarray]] | None = None, stop: str | None = None) -> None:
         if (outputs is None) == (pending is None):
             raise ValueError("a decision needs either its (probs, U) or the function that computes them")
-        self.index, self.command, self.progress_s = index, command, progress_s
+        self.index, self.command, self.progress_s, self.stop = index, command, progress_s, stop
         self._outputs, self._pending = outputs, pending
 
     def _computed(self) -> tuple[np.ndarray, np.ndarray]:
@@ -64,6 +66,8 @@ class Decision:
         return self._computed()[1]
 
 
+STOP_COMMAND = Command(0.0, 0.0)
+DEFAULT_HALF_WIDTH_M = 0.6  # the vehicle's half width where the model's features do not say it [m]
 PATH_AHEAD_M = np.arange(1.0, 9.0)  # where Observation.path_ahead samples the path [m]
 
 
@@ -72,7 +76,8 @@ class Planner:
 
     Each frame: U, the policy's F_t, and the command of the driving stage
     (terrapref.planner.stages): by default the last of the stages the model file lists, or C's
-    argmax when it lists none.
+    argmax when it lists none; then the stop rule (terrapref.planner.stop), which commands a
+    stop, with its reason, when no way ahead is free or the frames have been blind too long.
 
     Args:
         model: a loaded model file (C) or any :class:`Policy`.
@@ -80,9 +85,11 @@ class Planner:
         stage: the stage that drives instead of the file's: one of the file's by its type (or
             ``"argmax"``, which every policy has), or a :class:`Stage` (e.g. with another
             configuration).
+        stop: when to stop (default: :class:`StopConfig`'s defaults).
     """
 
-    def __init__(self, model: LoadedModel | Policy, camera: CameraConfig | None = None, stage: Stage | str | None = None) -> None:
+    def __init__(self, model: LoadedModel | Policy, camera: CameraConfig | None = None, stage: Stage | str | None = None,
+                 stop: StopConfig | None = None) -> None:
         policy = model if isinstance(model, Policy) else ClassifierPolicy(model)
         camera = camera or policy.camera
         if isinstance(model, LoadedModel):
@@ -93,15 +100,21 @@ class Planner:
         self.camera = PinholeCamera(camera)
         self.featurizer = UtilityFeaturizer(policy.features, self.camera, policy.classes)
         self.stage = _chosen(policy, stage)
-        self.runner = self.stage.runner(StageContext(self.camera, self.featurizer, policy.features, policy.classes))
+        context = StageContext(self.camera, self.featurizer, policy.features, policy.classes)
+        self.runner = self.stage.runner(context)
+        control = policy.features.preference.control
+        corridor = policy.features.corridor
+        self.stop_rule = StopRule(self.camera, context.terrain, float(np.max(np.abs(control.w_rps))),
+                                  corridor.half_width_m if corridor is not None else DEFAULT_HALF_WIDTH_M, stop, self.runner.ground_map)
         self.path: ReferencePath | None = None
         self.tracker: PathTracker | None = None
 
     def set_path(self, waypoints: np.ndarray) -> None:
-        """Start following a new reference path (the driving stage forgets what it kept, e.g. the ground seen)."""
+        """Start following a new reference path (the driving stage and the stop rule forget what they kept, e.g. the ground seen)."""
         self.path = ReferencePath(np.asarray(waypoints, dtype=float))
         self.tracker = PathTracker(self.path)
         self.runner.reset()
+        self.stop_rule.reset()
 
     def warm_up(self) -> None:
         """Decide once on a blank frame along a straight path, then forget that path.
@@ -114,9 +127,11 @@ class Planner:
         self.decide(np.full(self.camera.shape, UNKNOWN, dtype=np.uint8), Pose(0.0, 0.0, 0.0))
         self.path, self.tracker = path, tracker
         self.runner.reset()  # the blank frame is not ground seen
+        self.stop_rule.reset()
 
-    def decide(self, image: np.ndarray | SegmentationView, pose: Pose) -> Decision:
-        """Choose a command for one segmentation frame (H, W) uint8 at ``pose``.
+    def decide(self, image: np.ndarray | SegmentationView, pose: Pose, time_s: float | None = None) -> Decision:
+        """Choose a command for one segmentation frame (H, W) uint8 at ``pose``, taken at ``time_s``
+        [s] (None: frames 0.1 s apart; the stop rule times blind frames by it).
 
         ``image`` may be a :class:`SegmentationView`, of which only the pixels the policy reads
         are rendered (the preference set's, for C). Given a view, a stage that steers without
@@ -130,10 +145,12 @@ class Planner:
         outputs = functools.partial(_outputs, self.featurizer, self.policy, view, pose, self.path, s)
         if not self.runner.reads_probs and view is image:  # an array the caller may reuse is read now
             choice = self.runner.decide(StageInput(None, view, pose, self.path, s))
-            return Decision(choice.index, choice.command, s, pending=outputs)
+            stop = self.stop_rule.check(view, pose, choice.command.v, choice.command.w, time_s)
+            return Decision(choice.index, STOP_COMMAND if stop else choice.command, s, pending=outputs, stop=stop)
         probs, U = outputs()
         choice = self.runner.decide(StageInput(probs, view, pose, self.path, s))
-        return Decision(choice.index, choice.command, s, (probs, U))
+        stop = self.stop_rule.check(view, pose, choice.command.v, choice.command.w, time_s)
+        return Decision(choice.index, STOP_COMMAND if stop else choice.command, s, (probs, U), stop=stop)
 
     def costmap(self) -> Costmap | None:
         """The ground seen so far as the driving stage prices it (terrapref.planner.costmap);
@@ -189,12 +206,17 @@ class PlannerDriver:
         self.image_of: dict[int, np.ndarray] = {}
         self.last: Decision | None = None  # the latest decision
 
+    @property
+    def stop_reason(self) -> str | None:
+        """Why the latest decision stops (terrapref.planner.stop), None while it drives."""
+        return self.last.stop if self.last is not None else None
+
     def reset(self, scenario: Scenario, rng: np.random.Generator) -> None:
         self.planner.set_path(scenario.waypoints)
         self.decisions, self.frames, self.image_of, self.last = [], [], {}, None
 
     def act(self, frame: Frame) -> Command:
-        d = self.last = self.planner.decide(frame.view, frame.pose)
+        d = self.last = self.planner.decide(frame.view, frame.pose, frame.time_s)
         if self.keep:
             d.probs  # noqa: B018 (computed now, so that the kept decisions do not hold their frames)
             self.decisions.append(d)

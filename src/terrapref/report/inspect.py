@@ -26,6 +26,7 @@ class RecordingSummary:
     scenario: Scenario
     world: WorldMap
     quit: bool = False  # the person ended the drive (Esc) before the goal
+    lethal_contact: str | None = None  # what the drive's summary says of lethal terrain under the vehicle
 
     @property
     def status(self) -> str:
@@ -41,6 +42,8 @@ class RecordingSummary:
             f"scenario   {self.scenario.name}",
             "labels     (index: w [rad/s]  count)",
         ]
+        if self.lethal_contact is not None:
+            out.insert(4, f"lethal     the drive had lethal terrain under the vehicle: {self.lethal_contact}")
         peak = max(int(self.label_counts.max()), 1)
         for i, n in enumerate(self.label_counts):
             out.append(f"  {i:3d}: {self.control.w_rps[i]:+5.2f}  {int(n):6d}  {'#' * round(40 * int(n) / peak)}")
@@ -64,13 +67,10 @@ def summarise(recording: Recording) -> RecordingSummary:
     control = ControlSet.from_dict(meta["preference_set"]["control"])
     counts = np.bincount(recording.labels, minlength=control.m)[: control.m]
     xy = recording.poses[:, :2]
-    zones = []
-    for z in score_zones(xy, scenario, world, profile):
-        zone = next(zz for zz in scenario.zones if zz.id == z.id)
-        reached = bool(len(xy) and zone.shape.contains(xy).any())
-        zones.append((z, reached))
+    zones = [(z, z.reached) for z in score_zones(recording.poses, scenario, world, profile)]
     run = meta.get("summary") if isinstance(meta.get("summary"), dict) else {}
-    return RecordingSummary(len(recording), recording.duration_s, recording.complete, counts, control, zones, scenario, world, quit=bool(run.get("quit")))
+    return RecordingSummary(len(recording), recording.duration_s, recording.complete, counts, control, zones, scenario, world,
+                            quit=bool(run.get("quit")), lethal_contact=recording.lethal_contact())
 
 
 def save_driven_path(summary: RecordingSummary, recording: Recording, out: str | Path) -> Path:

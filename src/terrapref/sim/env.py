@@ -14,7 +14,7 @@ Example:
     ((120, 160, 1), 'uint8')
     >>> obs, reward, terminated, truncated, info = env.step(10)  # straight ahead
     >>> sorted(info["reward_terms"])
-    ['collision', 'cross_track', 'goal', 'off_map', 'progress', 'terrain']
+    ['collision', 'contact', 'cross_track', 'goal', 'off_map', 'progress', 'terrain']
     >>> OffRoadNavEnv("demo_course", EnvConfig(image_size=(60, 80)), n_waypoints=4).observation_space["waypoints"].shape
     (8,)
 """
@@ -63,7 +63,9 @@ class RewardConfig:
             detour earns nothing for the stretch it skipped).
         path_band_m: half-width of the band around the path in which progress is credited [m].
         cross_track_weight: per metre of distance from the path, every step.
-        collision_penalty: per entry onto lethal terrain.
+        collision_penalty: per entry of the footprint onto lethal terrain.
+        contact_penalty: per second with lethal terrain under the footprint (when the episode
+            goes on after an entry: ``terminate_on_lethal`` False).
         off_map_penalty: each time the vehicle leaves the map.
         goal_reward: once, on reaching the goal.
         terrain_weight: per unit of terrain cost: each metre driven on the class ranked ``r``
@@ -78,6 +80,7 @@ class RewardConfig:
     path_band_m: float = 5.0
     cross_track_weight: float = 0.01
     collision_penalty: float = 10.0
+    contact_penalty: float = 10.0
     off_map_penalty: float = 10.0
     goal_reward: float = 10.0
     terrain_weight: float = 0.0
@@ -318,6 +321,11 @@ class OffRoadNavEnv(gym.Env):
             pose = Pose(x + dx, y + dy, yaw + dyaw)
             self._progress_s = path.project(np.array(pose[:2]), 0.0, 5.0)[0]
         frame = self.sim.reset(pose)
+        if self.sim.started_in_contact:
+            where = "'start'" if options.get("start") is not None else f"the start of {self.sim.scenario.name!r}"
+            self._started = False
+            raise ValueError(f"reset: {where} ({pose[0]:.2f}, {pose[1]:.2f}) puts the vehicle's footprint on lethal terrain; "
+                             "start it clear of lethal terrain")
         if self.perception.active:
             # The first observation is the first frame as the robot's camera and localisation give
             # it; its timing applies from the first step on.
@@ -338,7 +346,7 @@ class OffRoadNavEnv(gym.Env):
             raise ResetNeeded("the episode has ended (goal, lethal terrain or off the map); call reset() before step()")
         command = self._command(action)  # checked before anything changes, so a bad action leaves the env as it was
         sim, cfg = self.sim, self.reward_config
-        tick0, collisions0 = len(sim.trace) - 1, sim.collisions
+        tick0, collisions0, contact0 = len(sim.trace) - 1, sim.collisions, sim.contact_s
         frame = sim.step(command)
         trace = np.array(sim.trace[tick0:], dtype=float)
         hops = np.hypot(*np.diff(trace[:, :2], axis=0).T)
@@ -365,6 +373,7 @@ class OffRoadNavEnv(gym.Env):
             "progress": cfg.progress_weight * advance,
             "cross_track": -cfg.cross_track_weight * abs(offset),
             "collision": -cfg.collision_penalty * collided,
+            "contact": -cfg.contact_penalty * (sim.contact_s - contact0),
             "off_map": -cfg.off_map_penalty * left_map,
             "goal": cfg.goal_reward * success,
             "terrain": -cfg.terrain_weight * terrain_cost,

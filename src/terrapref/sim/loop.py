@@ -15,6 +15,7 @@ import numpy as np
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer, SegmentationView
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import ReferencePath
+from terrapref.stops import UNSAID, stop_reason_of
 from terrapref.vehicle import Command, Pose, Vehicle, VehicleConfig
 from terrapref.world import WorldMap, rasterise
 
@@ -28,12 +29,16 @@ class SimConfig:
             vehicle's control rate.
         goal_radius_m: the run is complete within this distance of the last waypoint [m].
         time_limit_s: episode time limit [s]; None gives 2 x path length / max speed + 60 s.
+        stopped_limit_s: the run ends once the vehicle has stood still this long without a
+            break (a stop whose reason does not clear in a world that does not change);
+            None: only the goal or the time limit ends it [s].
         vehicle: the vehicle's controller rate and limits.
     """
 
     camera_rate_hz: float = 10.0
     goal_radius_m: float = 2.0
     time_limit_s: float | None = None
+    stopped_limit_s: float | None = 20.0
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
 
     def time_limit(self, path_length_m: float) -> float:
@@ -44,6 +49,8 @@ class SimConfig:
         ratio = self.vehicle.control_rate_hz / self.camera_rate_hz
         if self.camera_rate_hz <= 0 or abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
             raise ValueError("camera_rate_hz must divide the vehicle's control rate")
+        if self.stopped_limit_s is not None and not (math.isfinite(self.stopped_limit_s) and self.stopped_limit_s > 0):
+            raise ValueError("stopped_limit_s must be None or a finite number > 0")
 
     @property
     def ticks_per_frame(self) -> int:
@@ -76,11 +83,16 @@ class Frame:
 
 
 class Driver(Protocol):
-    """Anything that turns frames into commands: the synthetic demonstrator, a human, a planner."""
+    """Anything that turns frames into commands: the synthetic demonstrator, a human, a planner.
+
+    A driver that stops for a reason (terrapref.planner.stop) says which in ``stop_reason``
+    after :meth:`act` (None while it drives); the loop counts stops by it.
+    """
 
     def reset(self, scenario: Scenario, rng: np.random.Generator) -> None: ...
 
     def act(self, frame: Frame) -> Command: ...
+
 
 
 class Simulation:
@@ -109,9 +121,15 @@ class Simulation:
         self.vehicle = Vehicle(Pose(*(self.scenario.start if pose is None else pose)), self.config.vehicle)
         self.tick = 0
         self.frame_index = 0
-        self.collisions = 0
         self.progress_s = self.path.project(self.vehicle.pose[:2], 0.0, 5.0)[0]
-        self._on_lethal = self._is_lethal(self.vehicle.pose)
+        self._on_lethal = bool(self._in_contact(np.array([self.vehicle.pose]))[0])
+        self.started_in_contact = self._on_lethal
+        self.collisions = int(self._on_lethal)  # a start in contact with lethal terrain is one
+        self.contact_s = 0.0
+        self.contact_m = 0.0
+        self.stops: dict[str, float] = {}  # seconds stood still, by the reason given
+        self.stop_count = 0  # times the vehicle came to a stop
+        self.stopped_s = 0.0  # how long it has stood still without a break
         self.trace: list[Pose] = [self.vehicle.pose]
         self.commands: list[Command] = []
         return self.frame()
@@ -124,21 +142,45 @@ class Simulation:
         pose = self.vehicle.pose
         return Frame(self.frame_index, self.time_s, SegmentationView(self.renderer, pose), pose, self.scenario.waypoints)
 
-    def _is_lethal(self, pose: Pose) -> bool:
-        return bool(self._lethal[self.world.class_at_point(pose[0], pose[1])])
+    def _in_contact(self, poses: np.ndarray) -> np.ndarray:
+        """Whether lethal terrain lies under any point of the footprint at each pose (P, 3), (P,)."""
+        across = np.asarray(self.config.vehicle.footprint_m)
+        yaw = poses[:, 2:3]
+        points = np.stack([poses[:, 0:1] - across * np.sin(yaw), poses[:, 1:2] + across * np.cos(yaw)], axis=-1)
+        return self._lethal[self.world.class_at(points)].any(axis=1)
 
-    def step(self, command: Command) -> Frame:
-        """Hold ``command`` for one camera period (several controller ticks) and render the next frame."""
+    def step(self, command: Command, stop_reason: str | None = None) -> Frame:
+        """Hold ``command`` for one camera period (several controller ticks) and render the next frame.
+
+        A command of v = 0 is a stop, counted under ``stop_reason`` (the driver's, :data:`UNSAID`
+        when it gives none). Contact with lethal terrain is counted at every tick wherever the
+        footprint is: each entry a collision, and the time and distance in contact.
+        """
         self.vehicle.set_command(Command(*command))
         self.commands.append(self.vehicle.command)
-        for _ in range(self.config.ticks_per_frame):
+        c = self.config
+        period_s = c.ticks_per_frame * c.vehicle.dt_s
+        if self.vehicle.command.v == 0.0:
+            if self.stopped_s == 0.0:
+                self.stop_count += 1
+            reason = stop_reason or UNSAID
+            self.stops[reason] = self.stops.get(reason, 0.0) + period_s
+            self.stopped_s += period_s
+        else:
+            self.stopped_s = 0.0
+        poses = []
+        for _ in range(c.ticks_per_frame):
             pose = self.vehicle.tick()
             self.tick += 1
             self.trace.append(pose)
-            lethal = self._is_lethal(pose)
-            if lethal and not self._on_lethal:
-                self.collisions += 1
-            self._on_lethal = lethal
+            poses.append(pose)
+        step_m = self.vehicle.command.v * c.vehicle.dt_s
+        for contact in self._in_contact(np.array(poses)):
+            if contact:
+                self.collisions += not self._on_lethal
+                self.contact_s += c.vehicle.dt_s
+                self.contact_m += step_m
+            self._on_lethal = bool(contact)
         # Progress along the path, searched in a window so a path passing near itself cannot capture it.
         self.progress_s = max(self.progress_s, self.path.project(self.vehicle.pose[:2], self.progress_s - 2.0, self.progress_s + 10.0)[0])
         self.frame_index += 1
@@ -156,8 +198,23 @@ class Simulation:
         return self.time_s >= self.time_limit_s
 
     @property
+    def gave_up(self) -> bool:
+        """The vehicle has stood still for ``stopped_limit_s`` without a break."""
+        limit = self.config.stopped_limit_s
+        return limit is not None and self.stopped_s >= limit - 1e-9
+
+    @property
     def done(self) -> bool:
-        return self.reached_goal or self.timed_out
+        return self.reached_goal or self.timed_out or self.gave_up
+
+    @property
+    def ended(self) -> str:
+        """How the run ended (:data:`ENDINGS`): at the goal, stopped for good, or at the time limit; ``running`` before."""
+        return GOAL if self.reached_goal else STOPPED if self.gave_up else TIME_LIMIT if self.timed_out else "running"
+
+
+GOAL, STOPPED, TIME_LIMIT = "goal", "stopped", "time limit"
+ENDINGS = (GOAL, STOPPED, TIME_LIMIT)  # how a run ends (EpisodeLog.ended)
 
 
 @dataclass
@@ -168,8 +225,14 @@ class EpisodeLog:
         trace: poses at every controller tick, shape (T, 3) [m, m, rad].
         commands: command held after each frame, shape (F, 2) [m/s, rad/s].
         completed: reached the last waypoint before the time limit.
-        collisions: entries onto lethal terrain.
+        collisions: entries of the footprint onto lethal terrain (a start in contact is one).
         duration_s: simulated time [s].
+        ended: how the run ended (:data:`ENDINGS`).
+        contact_s: time with lethal terrain under the footprint [s].
+        contact_m: distance driven with lethal terrain under the footprint [m].
+        stops: seconds stood still, by the reason the driver gave.
+        stop_count: times the vehicle came to a stop.
+        progress_m: how far along the path the vehicle got [m].
     """
 
     scenario: str
@@ -178,6 +241,12 @@ class EpisodeLog:
     completed: bool
     collisions: int
     duration_s: float
+    ended: str = GOAL
+    contact_s: float = 0.0
+    contact_m: float = 0.0
+    stops: dict[str, float] = field(default_factory=dict)
+    stop_count: int = 0
+    progress_m: float = 0.0
 
     @classmethod
     def of(cls, sim: Simulation) -> EpisodeLog:
@@ -189,11 +258,18 @@ class EpisodeLog:
             completed=sim.reached_goal,
             collisions=sim.collisions,
             duration_s=sim.time_s,
+            ended=sim.ended,
+            contact_s=sim.contact_s,
+            contact_m=sim.contact_m,
+            stops=dict(sim.stops),
+            stop_count=sim.stop_count,
+            progress_m=float(sim.progress_s),
         )
 
     def summary(self) -> dict:
         """What a recording's metadata keeps of the run."""
-        return {"completed": self.completed, "collisions": self.collisions, "duration_s": round(self.duration_s, 3)}
+        return {"completed": self.completed, "collisions": self.collisions, "duration_s": round(self.duration_s, 3),
+                "contact_s": round(self.contact_s, 3), "contact_m": round(self.contact_m, 3)}
 
 
 def run_episode(sim: Simulation, driver: Driver, rng: np.random.Generator, start: Pose | None = None) -> EpisodeLog:
@@ -201,5 +277,6 @@ def run_episode(sim: Simulation, driver: Driver, rng: np.random.Generator, start
     frame = sim.reset(start)
     driver.reset(sim.scenario, rng)
     while not sim.done:
-        frame = sim.step(driver.act(frame))
+        command = driver.act(frame)
+        frame = sim.step(command, stop_reason_of(driver))
     return EpisodeLog.of(sim)

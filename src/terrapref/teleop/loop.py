@@ -81,12 +81,14 @@ class TeleopResult:
         frames: frames recorded (when recording) or driven by the person: paused, waiting,
             edge and (riding along) planner frames excluded.
         completed: the vehicle reached the goal.
-        collisions: entries onto lethal terrain.
+        collisions: entries of the footprint onto lethal terrain.
         quit: the driver quit (Esc, Q or the window's close button) before the run ended.
         record_dir: the recording's directory, or None when not recording.
         duration_s: simulated time driven [s].
         edge_frames: frames the vehicle was held at the map's edge.
         planner_frames: frames the planner drove (riding along).
+        contact_s: time with lethal terrain under the footprint [s].
+        contact_m: distance driven so [m].
     """
 
     frames: int
@@ -97,6 +99,8 @@ class TeleopResult:
     duration_s: float = 0.0
     edge_frames: int = 0
     planner_frames: int = 0
+    contact_s: float = 0.0
+    contact_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -426,12 +430,15 @@ class _Session:
             duration_s=self.sim.time_s,
             edge_frames=self.edge_frames,
             planner_frames=self.planner_frames,
+            contact_s=self.sim.contact_s,
+            contact_m=self.sim.contact_m,
         )
 
 
 def _summary(result: TeleopResult) -> dict[str, Any]:
     """What the recording's metadata keeps of the session."""
     return {"completed": result.completed, "collisions": result.collisions, "duration_s": round(result.duration_s, 3),
+            "contact_s": round(result.contact_s, 3), "contact_m": round(result.contact_m, 3),
             "quit": result.quit, "edge_frames": result.edge_frames, "planner_frames": result.planner_frames}
 
 
@@ -486,7 +493,7 @@ def run_session(scenario: Scenario | str, options: TeleopOptions) -> TeleopResul
 def _resolve(scenario: Scenario | str, options: TeleopOptions) -> _Setup:
     """The scenario and configurations the session drives with, checked, and the planner riding along."""
     scenario = resolve_scenario(scenario) if isinstance(scenario, str) else scenario
-    sim_cfg = options.sim_config or SimConfig()
+    sim_cfg = options.sim_config or SimConfig(stopped_limit_s=None)  # a person may stand still as long as they like
     if not 0.0 < options.v_mps <= sim_cfg.vehicle.max_speed_mps:
         raise UserError(SOURCE, f"speed must be in (0, {sim_cfg.vehicle.max_speed_mps:g}] m/s, got {options.v_mps:g}", field="v_mps")
     if options.max_frames is not None and options.max_frames < 0:

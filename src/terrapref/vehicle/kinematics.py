@@ -56,15 +56,24 @@ class VehicleConfig:
         control_rate_hz: rate of the internal controller that applies the held command [Hz].
         max_speed_mps: commands are clipped to v in [0, max_speed_mps] [m/s].
         max_yaw_rate_rps: commands are clipped to |w| <= max_yaw_rate_rps [rad/s].
+        half_width_m: half the vehicle's width: its footprint is the line across it at the
+            reference point, and lethal terrain under any part of that line is contact [m].
     """
 
     control_rate_hz: float = 30.0
     max_speed_mps: float = 1.0
     max_yaw_rate_rps: float = 1.0
+    half_width_m: float = 0.6
 
     def __post_init__(self) -> None:
-        if self.control_rate_hz <= 0 or self.max_speed_mps <= 0 or self.max_yaw_rate_rps <= 0:
-            raise ValueError("vehicle rates and limits must be > 0")
+        values = (self.control_rate_hz, self.max_speed_mps, self.max_yaw_rate_rps, self.half_width_m)
+        if not all(math.isfinite(v) and v > 0 for v in values):
+            raise ValueError("vehicle rates, limits and half width must be finite and > 0")
+
+    @property
+    def footprint_m(self) -> tuple[float, ...]:
+        """Lateral positions of the footprint's 5 points, left positive [m]."""
+        return tuple(self.half_width_m * k / 2 for k in (-2, -1, 0, 1, 2))
 
     @property
     def dt_s(self) -> float:

@@ -12,7 +12,7 @@ import numpy as np
 from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
-from terrapref.features.corridor import TerrainColumns
+from terrapref.features.corridor import GroundMap, TerrainColumns
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable
 from terrapref.vehicle import Command, Pose
@@ -89,6 +89,11 @@ class StageRunner(abc.ABC):
     def costmap(self) -> Costmap | None:
         """The ground seen so far priced by what the stage learned (terrapref.planner.costmap),
         for a stage that keeps a ground map; None otherwise."""
+        return None
+
+    @property
+    def ground_map(self) -> GroundMap | None:
+        """The ground map the stage keeps, updated as it decides (the stop rule reads it); None for a stage that keeps none."""
         return None
 
 

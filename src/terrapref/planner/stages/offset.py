@@ -223,6 +223,10 @@ class OffsetSteering(StageRunner):
             self.held = float(self.offsets[best])
         return float(steer(path, pose, progress_s, self.held, self.config.pursuit_lookahead_m, self.v_mps))
 
+    @property
+    def ground_map(self) -> GroundMap:
+        return self.map
+
     def costmap(self) -> Costmap:
         """The ground map seen so far priced by the learned utility (terrapref.planner.costmap)."""
         return costmap_of(self.map.cells, self.map.origin, self.map.config.map_resolution_m, self.utility.weights, self.lethal, self.names)

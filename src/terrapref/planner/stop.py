@@ -1,0 +1,270 @@
+"""When the planner stops: the one rule every decision passes through (SPEC 18).
+
+A stop is a decision with a reason, not a failure to hide. After the driving stage has chosen
+its command, the planner commands v = 0 instead when:
+
+- ``no_free_way``: no way ahead keeps the footprint on ground that is seen and not lethal over
+  the stopping distance. The ways are arcs of constant yaw rate across the stick's range, at
+  the commanded speed; the stopping distance is what the vehicle covers before it stands
+  (``reaction_s`` at that speed, then braking at ``decel_mps2``) plus ``margin_m``. Ground is
+  read from the ground map the planner keeps (the offset stage's, or a small one of the rule's
+  own). Unknown ground (never seen, 255, beyond the camera's range) is never free where the
+  camera looks from the pose it stands at; under and right beside the vehicle, where it cannot
+  look, the rule goes by what the map remembers from earlier frames, and a vehicle that starts
+  on ground it has never seen takes that ground as the ground it stands on.
+- ``blind``: for ``blind_after_s`` or longer, each frame showed less than ``seen_share`` of the
+  ground ahead (the footprint's width, from the camera's near edge to ``look_m``): a lens
+  covered, a segmentation that failed, a range cut short.
+- ``stale``: no fresh frame for longer than the command is held (the runtime's and the
+  simulated robot's ``hold_s``); the command holder says so, not this rule (no frame arrives to
+  check).
+
+The planner moves on by itself at the first frame whose reason has cleared. The reasons'
+names are terrapref.stops'.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from terrapref.camera import PinholeCamera, PixelSet, SegmentationView
+from terrapref.features.corridor import CorridorConfig, GroundMap, TerrainColumns
+from terrapref.features.kernels import UNSETTLED, map_decide
+from terrapref.records import to_plain
+from terrapref.stops import BLIND, NO_FREE_WAY
+from terrapref.terrain import UNKNOWN
+from terrapref.vehicle import Pose
+
+
+
+@dataclass(frozen=True)
+class StopConfig:
+    """When the planner stops (module docstring).
+
+    Attributes:
+        reaction_s: from a frame to the brakes acting: a camera period and a controller tick,
+            rounded up [s].
+        decel_mps2: the braking the rule counts on [m/s^2].
+        margin_m: kept between the stopped footprint and lethal or unseen ground [m].
+        blind_after_s: how long frames may see too little of the ground ahead before a stop [s].
+        seen_share: a frame sees enough when at least this share of the ground ahead shows ground.
+        look_m: the ground ahead a frame must show runs from the camera's near edge to this far [m].
+        arcs: how many ways (arcs of constant yaw rate across the stick's range) are checked.
+        step_m: spacing of the points checked along each way [m].
+    """
+
+    reaction_s: float = 0.2
+    decel_mps2: float = 1.0
+    margin_m: float = 0.3
+    blind_after_s: float = 0.5
+    seen_share: float = 0.5
+    look_m: float = 3.0
+    arcs: int = 21
+    step_m: float = 0.1
+
+    def __post_init__(self) -> None:
+        finite = (self.reaction_s, self.decel_mps2, self.margin_m, self.blind_after_s, self.seen_share, self.look_m, self.step_m)
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in finite):
+            raise ValueError("the stop rule's settings must be finite numbers")
+        if self.reaction_s < 0 or self.decel_mps2 <= 0 or self.margin_m < 0 or self.blind_after_s < 0 or not 0 < self.seen_share <= 1 \
+                or self.look_m <= 0 or self.step_m <= 0 or isinstance(self.arcs, bool) or not isinstance(self.arcs, int) or self.arcs < 1:
+            raise ValueError("the stop rule needs reaction_s, margin_m and blind_after_s >= 0, decel_mps2, look_m and step_m > 0, "
+                             "seen_share in (0, 1] and at least one arc")
+
+    def stopping_distance_m(self, v_mps: float) -> float:
+        """Distance [m] from a frame to standing still, at ``v_mps``, plus the margin."""
+        v = abs(float(v_mps))
+        return v * self.reaction_s + v * v / (2.0 * self.decel_mps2) + self.margin_m
+
+    def to_dict(self) -> dict:
+        return to_plain(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> StopConfig:
+        return cls(**data)
+
+
+# The small ground map a rule keeps for a stage that keeps none: ground read to 5 m ahead,
+# the last few frames counting (fade 0.8 a frame), as the offset stage's map otherwise.
+_OWN_MAP = CorridorConfig(stations_m=(-1.0, 4.0), map_half_size_m=7.0, sample_range_m=5.0, map_fade=0.8)
+
+
+class StopRule:
+    """The stop rule (module docstring) for one planner's camera and class table.
+
+    Args:
+        camera: the robot's camera.
+        terrain: the class table's terrain columns (which are lethal).
+        max_yaw_rate_rps: the stick's range of yaw rates; the ways checked span it [rad/s].
+        half_width_m: half the vehicle's width; the footprint is 5 points across it [m].
+        config: the rule's settings.
+        ground_map: the driving stage's ground map, updated by the stage before the rule reads
+            it; None: the rule keeps a small one of its own.
+    """
+
+    def __init__(self, camera: PinholeCamera, terrain: TerrainColumns, max_yaw_rate_rps: float = 1.0, half_width_m: float = 0.6,
+                 config: StopConfig | None = None, ground_map: GroundMap | None = None) -> None:
+        self.config = c = config or StopConfig()
+        self.own_map = ground_map is None
+        self.map = GroundMap(camera, terrain, _OWN_MAP) if ground_map is None else ground_map
+        self.k = terrain.k
+        self.lethal = np.zeros(self.k + 2, dtype=np.bool_)
+        self.lethal[np.asarray(terrain.lethal, dtype=np.int64)] = True
+        self.across = np.linspace(-half_width_m, half_width_m, 5)
+        self.yaw_rates = np.linspace(-max_yaw_rate_rps, max_yaw_rate_rps, c.arcs) if c.arcs > 1 else np.zeros(1)
+        # Where the camera on its mount looks, in the vehicle frame: a grid of 0.05 m cells.
+        self._vis_origin = (-2.0, -6.0)
+        self._vis_inv_res = 20.0
+        xs = self._vis_origin[0] + (np.arange(int(12.0 * self._vis_inv_res)) + 0.5) / self._vis_inv_res
+        ys = self._vis_origin[1] + (np.arange(int(12.0 * self._vis_inv_res)) + 0.5) / self._vis_inv_res
+        grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1)
+        self.visible = camera.pixel_indices(grid) >= 0  # (X, Y)
+        self.near_m = _near_edge(camera, half_width_m)
+        # The ground ahead a frame must show: the footprint's width from the near edge to look_m.
+        ahead = np.arange(self.near_m, max(c.look_m, self.near_m + c.step_m), c.step_m)
+        across = np.arange(-half_width_m, half_width_m + 1e-9, c.step_m)
+        points = np.stack(np.meshgrid(ahead, across, indexing="ij"), axis=-1).reshape(-1, 2)
+        pix = camera.pixel_indices(points)
+        self._ahead = PixelSet(pix[pix >= 0])
+        self._blind_since: float | None = None
+        self._frames = 0
+
+    def reset(self) -> None:
+        """Start a new run: forget the ground seen (the rule's own map) and how long frames were blind."""
+        if self.own_map:
+            self.map.reset()
+        self._blind_since = None
+        self._frames = 0
+
+    def observe(self, view: SegmentationView, pose: Pose) -> None:
+        """Take in a frame's view (the rule's own map only; a stage's map is the stage's to update)."""
+        if self.own_map:
+            self.map.update(view, pose)
+
+    def seen_share(self, view: SegmentationView) -> float:
+        """The share of the ground ahead (the footprint's width, near edge to ``look_m``) that ``view`` shows as ground."""
+        if self._ahead.shape[0] == 0:
+            return 0.0
+        ids = view.pixels(self._ahead)
+        return float(np.count_nonzero(ids != UNKNOWN)) / ids.shape[0]
+
+    def check(self, view: SegmentationView, pose: Pose, v_mps: float, w_rps: float, time_s: float | None = None) -> str | None:
+        """The reason to stop at this frame, or None to drive the stage's command (``v_mps``, ``w_rps``).
+
+        Args:
+            view: the frame's segmentation image.
+            pose: the pose it was taken at.
+            v_mps: the speed the stage commands: the stopping distance is worked out at it.
+            w_rps: the yaw rate it commands: its arc is checked first.
+            time_s: the frame's time [s]; None: frames are taken 0.1 s apart.
+        """
+        self.observe(view, pose)
+        self._frames += 1
+        now = time_s if time_s is not None else 0.1 * (self._frames - 1)
+        if self.seen_share(view) < self.config.seen_share:
+            if self._blind_since is None:
+                self._blind_since = now
+            if now - self._blind_since >= self.config.blind_after_s - 1e-9:
+                return BLIND
+        else:
+            self._blind_since = None
+        return None if self.free_way(pose, v_mps, w_rps) else NO_FREE_WAY
+
+    def free_way(self, pose: Pose, v_mps: float, w_rps: float = 0.0) -> bool:
+        """Whether some way ahead keeps the footprint on seen, non-lethal ground over the
+        stopping distance at ``v_mps``; the arc nearest ``w_rps`` is tried first."""
+        if self.map.origin is None:
+            return False
+        c = self.config
+        distance = c.stopping_distance_m(v_mps)
+        steps = max(1, math.ceil(distance / c.step_m - 1e-9))
+        order = self.yaw_rates[np.argsort(np.abs(self.yaw_rates - w_rps), kind="stable")]
+        v = max(abs(float(v_mps)), 1e-3)
+        return first_free_arc(float(pose[0]), float(pose[1]), float(pose[2]), order / v, c.step_m, steps, self.across, *self.map.layers(),
+                              self.lethal, self.k + 1, self.visible, self._vis_origin[0], self._vis_origin[1], self._vis_inv_res) >= 0
+
+
+def _near_edge(camera: PinholeCamera, half_width_m: float) -> float:
+    """The nearest distance ahead [m] at which the camera on its mount sees the footprint's whole width."""
+    xs = np.arange(0.0, 5.0, 0.01)
+    ys = np.array([-half_width_m, 0.0, half_width_m])
+    points = np.stack(np.broadcast_arrays(xs[:, None], ys[None, :]), axis=-1)
+    seen = (camera.pixel_indices(points) >= 0).all(axis=1)
+    return float(xs[np.argmax(seen)]) if seen.any() else 5.0
+
+
+@njit(cache=True, nogil=True)
+def first_free_arc(x0: float, y0: float, yaw0: float, curvatures: np.ndarray, step_m: float, steps: int, across: np.ndarray,
+                   cells: np.ndarray, evidence: np.ndarray, map_lethal: np.ndarray, shares: np.ndarray, ox: float, oy: float,
+                   inv_res: float, lethal: np.ndarray, never: int, visible: np.ndarray, vx0: float, vy0: float, vis_inv_res: float) -> int:
+    """The first of the arcs (``curvatures`` (A,) [1/m], in the order to try them) along which
+    the footprint (``across`` (F,) [m], left positive) stays on seen, non-lethal ground of the
+    map for ``steps`` steps of ``step_m`` from the pose; -1 when none does.
+
+    A point is blocked when its cell's column is lethal (``lethal`` by column), or never seen
+    (``never``) where the camera looks from the pose (``visible``, a vehicle-frame grid from
+    (``vx0``, ``vy0``) at ``vis_inv_res`` cells per metre). A cell never seen whose 4-neighbours
+    were seen reads as them (lethal if any is): the map's samples leave single cells unvoted
+    between them, which are not unseen ground. The map's cells are read as
+    :func:`terrapref.features.kernels.map_decide` says (``cells`` to ``shares``).
+    """
+    n_rows, n_cols = cells.shape
+    vis_x, vis_y = visible.shape
+    c0, s0 = math.cos(yaw0), math.sin(yaw0)
+    for a in range(curvatures.shape[0]):
+        kappa = curvatures[a]
+        free = True
+        for q in range(1, steps + 1):
+            d = q * step_m
+            heading = kappa * d
+            if abs(kappa) < 1e-9:
+                bx, by = d, 0.0
+            else:
+                bx, by = math.sin(heading) / kappa, (1.0 - math.cos(heading)) / kappa
+            sh, ch = math.sin(heading), math.cos(heading)
+            for f in range(across.shape[0]):
+                px = bx - across[f] * sh  # vehicle frame
+                py = by + across[f] * ch
+                wx = x0 + px * c0 - py * s0
+                wy = y0 + px * s0 + py * c0
+                i = math.floor((wx - ox) * inv_res)
+                j = math.floor((wy - oy) * inv_res)
+                col = never
+                if 0 <= i < n_cols and 0 <= j < n_rows:
+                    col = cells[j, i]
+                    if col == UNSETTLED:
+                        col = cells[j, i] = map_decide(evidence, map_lethal, shares[0], shares[1], shares[2], j, i)
+                    if col == never:  # a cell between samples: read its neighbours
+                        seen, deadly = False, False
+                        for dj, di in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+                            jj, ii = j + dj, i + di
+                            if 0 <= ii < n_cols and 0 <= jj < n_rows:
+                                cn = cells[jj, ii]
+                                if cn == UNSETTLED:
+                                    cn = cells[jj, ii] = map_decide(evidence, map_lethal, shares[0], shares[1], shares[2], jj, ii)
+                                if cn != never:
+                                    seen = True
+                                    deadly = deadly or lethal[cn]
+                        if seen:
+                            if deadly:
+                                free = False
+                                break
+                            continue
+                if lethal[col]:
+                    free = False
+                    break
+                if col == never:
+                    gi = math.floor((px - vx0) * vis_inv_res)
+                    gj = math.floor((py - vy0) * vis_inv_res)
+                    if 0 <= gi < vis_x and 0 <= gj < vis_y and visible[gi, gj]:
+                        free = False
+                        break
+            if not free:
+                break
+        if free:
+            return a
+    return -1

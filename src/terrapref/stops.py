@@ -1,0 +1,18 @@
+"""Why a vehicle stands still: the reasons a stop is given with (SPEC 18), shared by the
+planner's stop rule (terrapref.planner.stop), the command holders that stop on stale frames
+(the simulated robot's perception, the runtime) and the scores that count stops."""
+
+NO_FREE_WAY, BLIND, STALE = "no_free_way", "blind", "stale"
+UNSAID = "unsaid"  # a stop whose driver gave no reason (a person letting go of the throttle)
+
+REASONS = {
+    NO_FREE_WAY: "no way ahead is free of lethal or unseen ground within the stopping distance",
+    BLIND: "too little of the ground ahead seen for too long",
+    STALE: "no fresh frame within the time a command is held",
+    UNSAID: "the driver stopped without giving a reason",
+}
+
+
+def stop_reason_of(driver: object) -> str | None:
+    """The reason ``driver`` gave for its last command (its ``stop_reason``), None if it drives or gives none."""
+    return getattr(driver, "stop_reason", None)
