@@ -597,6 +597,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from terrapref.evaluation.evaluate import Evaluation, evaluate_model
+    from terrapref.evaluation.runner import Summary
     from terrapref.planner.registry import load_policy
     from terrapref.progress import Progress
     from terrapref.terrain import PreferenceProfile
@@ -638,8 +639,9 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         print(f"perception: {perception.name} ({perception.summary()}); the driver sees the truth")
     zones = [z for sc in metrics["scenarios"].values() for run in sc.get("planner", {}).values() for z in run["zones"]]
     s = metrics["summary"]
-    print(f"planner: zone success {rate_text(sum(z['success'] for z in zones), len(zones))}, {s['collision_count']} collisions, "
-          f"completed {s['completed_rate']:.0%}")
+    print(f"planner: zone success {rate_text(sum(z['success'] for z in zones), len(zones))}, {s['collision_count']} collisions")
+    for line in Summary.from_dict(s).driving_lines():
+        print(f"planner: {line}")
     compared = [z for z in zones if "agrees" in z]
     if compared:
         print(f"planner: agreement with the driver ({args.style}) {rate_text(sum(z['agrees'] for z in compared), len(compared))}")

@@ -14,7 +14,7 @@ import math
 import os
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 
 import numpy as np
 
@@ -146,6 +146,33 @@ class Summary:
     def stops_per_100m(self) -> float | None:
         """Stops per 100 m driven; None where nothing was driven."""
         return round(100.0 * self.stop_count / self.driven_m, 3) if self.driven_m > 0 else None
+
+    @classmethod
+    def from_dict(cls, data: dict) -> Summary:
+        """A summary as :meth:`to_dict` wrote it."""
+        known = {f.name for f in fields(cls)}
+        values = {k: (tuple(v) if k.endswith("_ci95") and v is not None else v) for k, v in data.items() if k in known}
+        return cls(**values)
+
+    def driving_lines(self) -> list[str]:
+        """What a summary says of how the runs were driven, beside their scores: completion,
+        how runs ended, zones not reached, contact with lethal terrain and stops by reason."""
+        if not self.runs:
+            return []
+        lo, hi = self.completed_ci95
+        ended = ", ".join(f"{why} {n}" for why, n in self.ended.items())
+        lines = [f"completed {self.completed_rate:.0%} of {self.runs} runs (95% CI {lo:.0%}-{hi:.0%}); ended: {ended}"]
+        if self.not_reached:
+            lines.append(f"{self.not_reached} of {self.zones} zones not reached (each a failure)")
+        if self.contact_s:
+            lines.append(f"lethal terrain under the vehicle for {self.contact_s:.1f} s")
+        if self.stop_count:
+            reasons = ", ".join(f"{why} {seconds:.1f} s" for why, seconds in self.stops_s.items())
+            per = f", {self.stops_per_100m:.2f} per 100 m driven" if self.stops_per_100m is not None else ", nothing driven"
+            lines.append(f"{self.stop_count} stops{per}; stood still: {reasons}")
+        else:
+            lines.append("no stop")
+        return lines
 
     def to_dict(self) -> dict:
         """As JSON; the agreement only where zones were compared."""

@@ -55,6 +55,12 @@ class StopConfig:
         look_m: the ground ahead a frame must show runs from the camera's near edge to this far [m].
         arcs: how many ways (arcs of constant yaw rate across the stick's range) are checked.
         step_m: spacing of the points checked along each way [m].
+        lethal_evidence: a lethal cell where the camera cannot look from the pose (under the
+            vehicle's nose) blocks a way once the map holds at least this much lethal evidence
+            for it (a vote from 0 m weighs 1; a patch approached from afar gathers tens); with
+            less it does not: a region mislabelled for a few frames while the vehicle stood
+            would otherwise hold it for ever, as no later frame can see that ground again. Where
+            the camera looks, every lethal cell blocks (the next frames confirm or clear it).
     """
 
     reaction_s: float = 0.2
@@ -65,15 +71,18 @@ class StopConfig:
     look_m: float = 3.0
     arcs: int = 21
     step_m: float = 0.1
+    lethal_evidence: float = 5.0
 
     def __post_init__(self) -> None:
-        finite = (self.reaction_s, self.decel_mps2, self.margin_m, self.blind_after_s, self.seen_share, self.look_m, self.step_m)
+        finite = (self.reaction_s, self.decel_mps2, self.margin_m, self.blind_after_s, self.seen_share, self.look_m, self.step_m,
+                  self.lethal_evidence)
         if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in finite):
             raise ValueError("the stop rule's settings must be finite numbers")
         if self.reaction_s < 0 or self.decel_mps2 <= 0 or self.margin_m < 0 or self.blind_after_s < 0 or not 0 < self.seen_share <= 1 \
-                or self.look_m <= 0 or self.step_m <= 0 or isinstance(self.arcs, bool) or not isinstance(self.arcs, int) or self.arcs < 1:
-            raise ValueError("the stop rule needs reaction_s, margin_m and blind_after_s >= 0, decel_mps2, look_m and step_m > 0, "
-                             "seen_share in (0, 1] and at least one arc")
+                or self.look_m <= 0 or self.step_m <= 0 or isinstance(self.arcs, bool) or not isinstance(self.arcs, int) or self.arcs < 1 \
+                or self.lethal_evidence < 0:
+            raise ValueError("the stop rule needs reaction_s, margin_m, blind_after_s and lethal_evidence >= 0, decel_mps2, look_m and "
+                             "step_m > 0, seen_share in (0, 1] and at least one arc")
 
     def stopping_distance_m(self, v_mps: float) -> float:
         """Distance [m] from a frame to standing still, at ``v_mps``, plus the margin."""
@@ -185,7 +194,7 @@ class StopRule:
         order = self.yaw_rates[np.argsort(np.abs(self.yaw_rates - w_rps), kind="stable")]
         v = max(abs(float(v_mps)), 1e-3)
         return first_free_arc(float(pose[0]), float(pose[1]), float(pose[2]), order / v, c.step_m, steps, self.across, *self.map.layers(),
-                              self.lethal, self.k + 1, self.visible, self._vis_origin[0], self._vis_origin[1], self._vis_inv_res) >= 0
+                              self.lethal, self.k + 1, np.float32(c.lethal_evidence), self.visible, *self._vis_origin, self._vis_inv_res) >= 0
 
 
 def _near_edge(camera: PinholeCamera, half_width_m: float) -> float:
@@ -200,16 +209,20 @@ def _near_edge(camera: PinholeCamera, half_width_m: float) -> float:
 @njit(cache=True, nogil=True)
 def first_free_arc(x0: float, y0: float, yaw0: float, curvatures: np.ndarray, step_m: float, steps: int, across: np.ndarray,
                    cells: np.ndarray, evidence: np.ndarray, map_lethal: np.ndarray, shares: np.ndarray, ox: float, oy: float,
-                   inv_res: float, lethal: np.ndarray, never: int, visible: np.ndarray, vx0: float, vy0: float, vis_inv_res: float) -> int:
+                   inv_res: float, lethal: np.ndarray, never: int, confirmed: np.float32, visible: np.ndarray, vx0: float, vy0: float,
+                   vis_inv_res: float) -> int:
     """The first of the arcs (``curvatures`` (A,) [1/m], in the order to try them) along which
     the footprint (``across`` (F,) [m], left positive) stays on seen, non-lethal ground of the
     map for ``steps`` steps of ``step_m`` from the pose; -1 when none does.
 
-    A point is blocked when its cell's column is lethal (``lethal`` by column), or never seen
-    (``never``) where the camera looks from the pose (``visible``, a vehicle-frame grid from
-    (``vx0``, ``vy0``) at ``vis_inv_res`` cells per metre). A cell never seen whose 4-neighbours
-    were seen reads as them (lethal if any is): the map's samples leave single cells unvoted
-    between them, which are not unseen ground. The map's cells are read as
+    A point is blocked where the camera looks from the pose (``visible``, a vehicle-frame grid
+    from (``vx0``, ``vy0``) at ``vis_inv_res`` cells per metre) when its cell's column is lethal
+    (``lethal`` by column) or never seen (``never``); where it does not look, when its cell is
+    lethal on at least ``confirmed`` lethal evidence (``map_lethal``'s columns). A cell never seen
+    whose 4-neighbours were seen reads as them (lethal if any is): the map's samples leave single
+    cells unvoted between them, which are not unseen ground. A lethal cell none of whose
+    4-neighbours is lethal does not block (a speckle: labels flipped in a few frames; the
+    footprint's points, 0.3 m apart, do not resolve a 0.1 m obstacle either). The map's cells are read as
     :func:`terrapref.features.kernels.map_decide` says (``cells`` to ``shares``).
     """
     n_rows, n_cols = cells.shape
@@ -231,6 +244,9 @@ def first_free_arc(x0: float, y0: float, yaw0: float, curvatures: np.ndarray, st
                 py = by + across[f] * ch
                 wx = x0 + px * c0 - py * s0
                 wy = y0 + px * s0 + py * c0
+                gi = math.floor((px - vx0) * vis_inv_res)
+                gj = math.floor((py - vy0) * vis_inv_res)
+                looks = 0 <= gi < vis_x and 0 <= gj < vis_y and visible[gi, gj]
                 i = math.floor((wx - ox) * inv_res)
                 j = math.floor((wy - oy) * inv_res)
                 col = never
@@ -248,23 +264,48 @@ def first_free_arc(x0: float, y0: float, yaw0: float, curvatures: np.ndarray, st
                                     cn = cells[jj, ii] = map_decide(evidence, map_lethal, shares[0], shares[1], shares[2], jj, ii)
                                 if cn != never:
                                     seen = True
-                                    deadly = deadly or lethal[cn]
+                                    deadly = deadly or (lethal[cn] and (looks or _lethal_evidence(evidence, map_lethal, jj, ii) >= confirmed))
                         if seen:
                             if deadly:
                                 free = False
                                 break
                             continue
-                if lethal[col]:
+                if lethal[col] and (looks or col == never or _lethal_evidence(evidence, map_lethal, j, i) >= confirmed) \
+                        and (col == never or _lethal_neighbour(cells, evidence, map_lethal, shares, lethal, j, i)):
                     free = False
                     break
-                if col == never:
-                    gi = math.floor((px - vx0) * vis_inv_res)
-                    gj = math.floor((py - vy0) * vis_inv_res)
-                    if 0 <= gi < vis_x and 0 <= gj < vis_y and visible[gi, gj]:
-                        free = False
-                        break
+                if col == never and looks:
+                    free = False
+                    break
             if not free:
                 break
         if free:
             return a
     return -1
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _lethal_evidence(evidence: np.ndarray, map_lethal: np.ndarray, j: int, i: int) -> np.float32:
+    """The evidence for lethal columns (``map_lethal``) map cell ``(j, i)`` holds, as of its last vote."""
+    total = np.float32(0.0)
+    for q in range(evidence.shape[2]):
+        if map_lethal[q]:
+            total += evidence[j, i, q]
+    return total
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _lethal_neighbour(cells: np.ndarray, evidence: np.ndarray, map_lethal: np.ndarray, shares: np.ndarray, lethal: np.ndarray,
+                      j: int, i: int) -> bool:
+    """Whether a 4-neighbour of map cell ``(j, i)`` is lethal (``lethal`` by column; cells decided as
+    :func:`terrapref.features.kernels.map_decide` says)."""
+    n_rows, n_cols = cells.shape
+    for dj, di in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        jj, ii = j + dj, i + di
+        if 0 <= ii < n_cols and 0 <= jj < n_rows:
+            cn = cells[jj, ii]
+            if cn == UNSETTLED:
+                cn = cells[jj, ii] = map_decide(evidence, map_lethal, shares[0], shares[1], shares[2], jj, ii)
+            if lethal[cn]:
+                return True
+    return False

@@ -24,7 +24,7 @@ import numpy as np
 
 from terrapref.fileio import write_text_atomic
 from terrapref.grid import Engine, run_grid
-from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, annotate_agreement, run_many, summarise
+from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, Summary, annotate_agreement, run_many, summarise
 from terrapref.evaluation.stats import rate_text
 from terrapref.perception import PerceptionModel
 from terrapref.recipes import OURS, PAPER, TEACH, Recipe, RecipeSetup, run_recipe
@@ -303,8 +303,10 @@ def _summary_table(recipes: tuple[Recipe, ...], runs: list[RecipeRun]) -> list[s
     test_names = [*TEST_SET, *variations()]
     lines = ["", "## Summary (test_course and the figure variations)", "",
              "Zone success against the zones' expectations; agreement: the planner's choice equals the synthetic driver's in the same "
-             "zone of the same run (evaluation seed). 95% Wilson intervals over all zones of all training seeds.", "",
-             "| who | zone success | agreement with the driver | collisions | completed | runs |", "|---|---|---|---|---|---|"]
+             "zone of the same run (evaluation seed). 95% Wilson intervals over all zones of all training seeds. Only what was "
+             "driven counts: a zone the vehicle did not get past is a failure (not reached); stops are the planner's (terrapref.planner.stop).", "",
+             "| who | zone success | agreement with the driver | collisions | completed | not reached | stops (per 100 m) | runs |",
+             "|---|---|---|---|---|---|---|---|"]
     for name in [*(r.name for r in recipes), "driver"]:
         chosen = [r.result for r in runs if r.recipe == name and r.result.scenario in test_names]
         zones = [z for r in chosen for z in r.metrics.zones]
@@ -312,7 +314,7 @@ def _summary_table(recipes: tuple[Recipe, ...], runs: list[RecipeRun]) -> list[s
         s = summarise(chosen, PLANNER if name != "driver" else EXPERT)
         agreement = rate_text(sum(a.agrees for a in compared), len(compared)) if compared else "—"
         lines.append(f"| {name} | {rate_text(sum(z.success for z in zones), len(zones))} | {agreement} | {s.collision_count} | "
-                     f"{s.completed_rate:.0%} | {s.runs} |")
+                     f"{s.completed_rate:.0%} | {s.not_reached} | {_stops_text(s)} | {s.runs} |")
     return lines
 
 
@@ -326,7 +328,8 @@ def _perception_table(setup: Reproduction, runs: list[RecipeRun]) -> list[str]:
     lines = ["", "## Under what a robot sees (test_course and the figure variations)", "",
              "The same models, each planner receiving what a robot's segmentation, localisation and camera would give instead of "
              "the truth (terrapref.perception; `terrapref perception` lists the presets, docs/perception.md derives them); the "
-             "driver sees the truth. Each cell: agreement with the driver, zone success, collisions; 95% Wilson intervals.", "",
+             "driver sees the truth. Each cell: agreement with the driver, zone success, collisions, runs completed and stops; "
+             "95% Wilson intervals.", "",
              "| recipe | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
     for recipe in setup.recipes:
         cells = []
@@ -334,10 +337,20 @@ def _perception_table(setup: Reproduction, runs: list[RecipeRun]) -> list[str]:
             chosen = [r.result for r in runs if r.recipe == recipe.name and r.perception == name and r.result.scenario in test_names]
             compared = [a for r in chosen if r.agreement is not None for a in r.agreement]
             zones = [z for r in chosen for z in r.metrics.zones]
+            s = summarise(chosen, PLANNER)
             cells.append(f"{rate_text(sum(a.agrees for a in compared), len(compared))}; success {rate_text(sum(z.success for z in zones), len(zones))}; "
-                         f"{sum(r.metrics.collisions for r in chosen)} collisions")
+                         f"{s.collision_count} collisions; completed {s.completed_rate:.0%}; stops {_stops_text(s)}")
         lines.append(f"| {recipe.name} | " + " | ".join(cells) + " |")
     return lines
+
+
+def _stops_text(s: Summary) -> str:
+    """A summary's stops: how many, per 100 m driven, and the seconds stood still by reason."""
+    if not s.stop_count:
+        return "0"
+    reasons = ", ".join(f"{why} {seconds:.1f} s" for why, seconds in s.stops_s.items())
+    per = f" ({s.stops_per_100m:.2f})" if s.stops_per_100m is not None else ""
+    return f"{s.stop_count}{per}: {reasons}"
 
 
 def _zone_tables(recipes: tuple[Recipe, ...], runs: list[RecipeRun]) -> list[str]:

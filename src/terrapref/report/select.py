@@ -214,7 +214,9 @@ def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict
         model = models[spec.model_path]
         who = {"recipe": model.recipe, "order": list(model.job.order), "seed": model.job.seed, "scenario": r.scenario,
                "perception": spec.perceived_as}
-        runs.append({**who, "collisions": r.metrics.collisions})
+        m = r.metrics
+        runs.append({**who, "collisions": m.collisions, "completed": m.completed, "ended": m.ending, "contact_s": m.contact_s,
+                     "driven_m": round(m.driven_m, 3), "stops": m.stop_count, "stops_s": m.stops_s})
         for z in r.metrics.zones:
             d = driver[(tuple(spec.profile), r.scenario, z.id)]
             rows.append({**who, "zone": z.id, "kind": zone_kind(z.label), "choice": z.choice, "driver_choice": d.choice,
@@ -224,6 +226,15 @@ def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict
 
 def _rate(rows: Sequence[dict], key: str) -> str:
     return rate_text(sum(r[key] for r in rows), len(rows))
+
+
+def _completion(runs: Sequence[dict]) -> str:
+    """Runs completed and stops per 100 m driven, two cells (``-`` for a select.json written before they were kept)."""
+    if not runs or "completed" not in runs[0]:
+        return "- | -"
+    driven = sum(r["driven_m"] for r in runs)
+    per = f"{100 * sum(r['stops'] for r in runs) / driven:.2f}" if driven > 0 else "-"
+    return f"{rate_text(sum(r['completed'] for r in runs), len(runs))} | {per}"
 
 
 def layout_interval(rows: Sequence[dict]) -> tuple[float, float, float]:
@@ -302,15 +313,17 @@ def _selection_table(sel: dict, rows: list[dict], runs: list[dict],
     orders, and with ``order_bars`` each order's too when there is one recipe."""
     kinds = sorted({r["kind"] for r in rows})
     lines = ["| recipe | order | agreement with the driver | agreement, layouts resampled | " + " | ".join(f"agreement, {k} zones" for k in kinds)
-             + " | zone success | the driver's zone success | collisions | per seed |",
-             "|---|---|---|---|" + "---|" * len(kinds) + "---|---|---|---|"]
+             + " | zone success | the driver's zone success | collisions | runs completed | stops per 100 m | per seed |",
+             "|---|---|---|---|" + "---|" * len(kinds) + "---|---|---|---|---|---|"]
     bars = []
     for recipe in sel["recipes"]:
         for order in [*sel["orders"], None]:
             sub = [r for r in rows if r["recipe"] == recipe and (order is None or r["order"] == order)]
             if not sub:
                 continue
-            coll = sum(r["collisions"] for r in runs if r["recipe"] == recipe and (order is None or r["order"] == order))
+            its = [r for r in runs if r["recipe"] == recipe and (order is None or r["order"] == order)]
+            coll = sum(r["collisions"] for r in its)
+            completed = _completion(its)
             per_seed = {}
             for r in sub:
                 per_seed.setdefault(r["seed"], []).append(r["agrees"])
@@ -318,7 +331,7 @@ def _selection_table(sel: dict, rows: list[dict], runs: list[dict],
             name = "**all**" if order is None else " > ".join(order)
             rate, lo, hi = layout_interval(sub)
             lines.append(f"| {recipe} | {name} | {_rate(sub, 'agrees')} | {rate:.1%} (95% CI {lo:.1%}-{hi:.1%}) | " + " | ".join(_rate([r for r in sub if r["kind"] == k], "agrees") for k in kinds)
-                         + f" | {_rate(sub, 'success')} | {_rate(sub, 'driver_success')} | {coll} | {seeds} |")
+                         + f" | {_rate(sub, 'success')} | {_rate(sub, 'driver_success')} | {coll} | {completed} | {seeds} |")
             if order is None or (order_bars and len(sel["recipes"]) == 1):
                 bars.append((f"{recipe}, all orders" if order is None else " > ".join(_chosen(order, _lethal_of(sel))), rate, (lo, hi)))
     misses: dict[tuple, int] = {}

@@ -255,7 +255,7 @@ class _Session:
         if self.planner is None:
             return None
         got = self.recorder.perceive(self.frame)
-        return self.planner.decide(got.view, got.pose) if got is not None else self.decision
+        return self.planner.decide(got.view, got.pose, got.time_s) if got is not None else self.decision
 
 
     # --- input --------------------------------------------------------------------------------
@@ -379,6 +379,8 @@ class _Session:
         mode = None
         if self.planner is not None:
             mode = ("PLANNER DRIVING", PLANNER_COLOR) if self.driver == "planner" else ("YOU DRIVE: recording corrections", HIGHLIGHT_COLOR)
+            if self.driver == "planner" and self.decision is not None and self.decision.stop is not None:
+                mode = (f"PLANNER STOPPED: {self.decision.stop}", ALERT_COLOR)
         overlay = Overlay(self.status(w, label) + note, readout.lines(), end_banner or self.banner(), mode)
         self.window.draw(self.frame.image, w, label, self.trace_px, overlay)
 
