@@ -151,10 +151,11 @@ def test_every_pixel_unknown_stops_the_runtime_and_a_clear_frame_moves_it_on(mod
     assert reasons[0] == NO_FREE_WAY  # nothing seen yet: no way is known to be free
     assert reasons[5:] == [BLIND] * 3  # 0.5 s of covered frames: blind
     grass = _ground(runtime, default_classes().id_of("grass"))
-    d = runtime.decide(grass, 0.8, (0.0, 0.0, 0.0))
-    assert d.stop is None and d.command[0] > 0  # the reason cleared: it moves on
-    assert runtime.status_at(0.85) == (d.command, None)
-    assert runtime.status_at(2.0) == (Command(0.0, 0.0), STALE)  # no fresh frame: stale
+    reasons = [runtime.decide(grass, 0.8 + 0.1 * i, (0.0, 0.0, 0.0)).stop for i in range(5)]
+    assert reasons == [NO_FREE_WAY] * 3 + [None] * 2  # a free way for resume_after_s (0.3 s): it moves on
+    d = runtime.last
+    assert d.command[0] > 0 and runtime.status_at(d.stamp_s + 0.05) == (d.command, None)
+    assert runtime.status_at(d.stamp_s + 2.0) == (Command(0.0, 0.0), STALE)  # no fresh frame: stale
 
 
 def test_every_ground_pixel_lethal_stops_the_runtime(model: Path):

@@ -4,7 +4,9 @@ A stop is a decision with a reason, not a failure to hide. After the driving sta
 its command, the planner commands v = 0 instead when:
 
 - ``no_free_way``: no way ahead keeps the footprint on ground that is seen and not lethal over
-  the stopping distance. The ways are arcs of constant yaw rate across the stick's range, at
+  the stopping distance. A vehicle whose footprint is on lethal terrain already stands there
+  too: under pose noise, "on it" and "just short of it" cannot be told apart, and driving on
+  from just short of it is what the rule exists to prevent. The ways are arcs of constant yaw rate across the stick's range, at
   the commanded speed; the stopping distance is what the vehicle covers before it stands
   (``reaction_s`` at that speed, then braking at ``decel_mps2``) plus ``margin_m``. Ground is
   read from the ground map the planner keeps (the offset stage's, or a small one of the rule's
@@ -19,7 +21,7 @@ its command, the planner commands v = 0 instead when:
   simulated robot's ``hold_s``); the command holder says so, not this rule (no frame arrives to
   check).
 
-The planner moves on by itself at the first frame whose reason has cleared. The reasons'
+The planner moves on by itself once the reason has cleared (a free way, for ``resume_after_s``). The reasons'
 names are terrapref.stops'.
 """
 
@@ -51,6 +53,10 @@ class StopConfig:
         decel_mps2: the braking the rule counts on [m/s^2].
         margin_m: kept between the stopped footprint and lethal or unseen ground [m].
         blind_after_s: how long frames may see too little of the ground ahead before a stop [s].
+        resume_after_s: once stopped for want of a free way, how long a way must stay free
+            before the planner moves on [s]: a way that flickers free for a frame (label noise)
+            would otherwise let the vehicle creep, a frame's travel at a time, toward what
+            stopped it.
         seen_share: a frame sees enough when at least this share of the ground ahead shows ground.
         look_m: the ground ahead a frame must show runs from the camera's near edge to this far [m].
         arcs: how many ways (arcs of constant yaw rate across the stick's range) are checked.
@@ -67,6 +73,7 @@ class StopConfig:
     decel_mps2: float = 1.0
     margin_m: float = 0.3
     blind_after_s: float = 0.5
+    resume_after_s: float = 0.3
     seen_share: float = 0.5
     look_m: float = 3.0
     arcs: int = 21
@@ -74,14 +81,15 @@ class StopConfig:
     lethal_evidence: float = 5.0
 
     def __post_init__(self) -> None:
-        finite = (self.reaction_s, self.decel_mps2, self.margin_m, self.blind_after_s, self.seen_share, self.look_m, self.step_m,
-                  self.lethal_evidence)
+        finite = (self.reaction_s, self.decel_mps2, self.margin_m, self.blind_after_s, self.resume_after_s, self.seen_share, self.look_m,
+                  self.step_m, self.lethal_evidence)
         if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in finite):
             raise ValueError("the stop rule's settings must be finite numbers")
-        if self.reaction_s < 0 or self.decel_mps2 <= 0 or self.margin_m < 0 or self.blind_after_s < 0 or not 0 < self.seen_share <= 1 \
+        if self.reaction_s < 0 or self.decel_mps2 <= 0 or self.margin_m < 0 or self.blind_after_s < 0 or self.resume_after_s < 0 \
+                or not 0 < self.seen_share <= 1 \
                 or self.look_m <= 0 or self.step_m <= 0 or isinstance(self.arcs, bool) or not isinstance(self.arcs, int) or self.arcs < 1 \
                 or self.lethal_evidence < 0:
-            raise ValueError("the stop rule needs reaction_s, margin_m, blind_after_s and lethal_evidence >= 0, decel_mps2, look_m and "
+            raise ValueError("the stop rule needs reaction_s, margin_m, blind_after_s, resume_after_s and lethal_evidence >= 0, decel_mps2, look_m and "
                              "step_m > 0, seen_share in (0, 1] and at least one arc")
 
     def stopping_distance_m(self, v_mps: float) -> float:
@@ -140,13 +148,16 @@ class StopRule:
         pix = camera.pixel_indices(points)
         self._ahead = PixelSet(pix[pix >= 0])
         self._blind_since: float | None = None
+        self._stopped = False  # the last frame stopped for want of a free way
+        self._free_since: float | None = None  # since when a way has been free again, while so stopped
         self._frames = 0
 
     def reset(self) -> None:
-        """Start a new run: forget the ground seen (the rule's own map) and how long frames were blind."""
+        """Start a new run: forget the ground seen (the rule's own map), how long frames were blind and any stop."""
         if self.own_map:
             self.map.reset()
         self._blind_since = None
+        self._stopped, self._free_since = False, None
         self._frames = 0
 
     def observe(self, view: SegmentationView, pose: Pose) -> None:
@@ -181,7 +192,15 @@ class StopRule:
                 return BLIND
         else:
             self._blind_since = None
-        return None if self.free_way(pose, v_mps, w_rps) else NO_FREE_WAY
+        if not self.free_way(pose, v_mps, w_rps):
+            self._stopped, self._free_since = True, None
+            return NO_FREE_WAY
+        if self._stopped:  # free again: moves on once it has stayed free resume_after_s
+            self._free_since = now if self._free_since is None else self._free_since
+            if now - self._free_since < self.config.resume_after_s - 1e-9:
+                return NO_FREE_WAY
+            self._stopped, self._free_since = False, None
+        return None
 
     def free_way(self, pose: Pose, v_mps: float, w_rps: float = 0.0) -> bool:
         """Whether some way ahead keeps the footprint on seen, non-lethal ground over the
