@@ -183,9 +183,11 @@ class GroundMap:
         camera: the camera whose images update the map.
         terrain: the class table's terrain columns.
         config: the corridor's configuration (map resolution, size and voting, image sampling).
+        sample_half_width_m: ground is read this far each side of the vehicle [m].
     """
 
-    def __init__(self, camera: PinholeCamera, terrain: TerrainColumns, config: CorridorConfig | None = None) -> None:
+    def __init__(self, camera: PinholeCamera, terrain: TerrainColumns, config: CorridorConfig | None = None,
+                 sample_half_width_m: float = 8.0) -> None:
         self.config = c = config or CorridorConfig()
         self.k = k = terrain.k
         self.columns = np.asarray(terrain.of_class, dtype=np.uint8).copy()
@@ -198,7 +200,7 @@ class GroundMap:
         self._shares = np.array([c.map_lethal_share, c.map_terrain_share, c.map_min_evidence], dtype=np.float32)
         # The ground points read from each image: a vehicle-frame grid, those the camera sees.
         xs = np.arange(0.2, c.sample_range_m, c.sample_step_m)
-        ys = np.arange(-8.0, 8.0, c.sample_step_m)
+        ys = np.arange(-sample_half_width_m, sample_half_width_m, c.sample_step_m)
         grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1).reshape(-1, 2)
         pix = camera.pixel_indices(grid)
         seen = pix >= 0

@@ -36,7 +36,7 @@ class Decision:
         progress_s: the vehicle's progress along the path [m].
         probs: F_t, shape (m,).
         U: utility features, shape (m, K + 1).
-        stop: why the planner stops (terrapref.planner.stop.REASONS), None while it drives.
+        stop: why the planner stops (terrapref.stops.REASONS), None while it drives.
 
     When the driving stage steers without F_t (the offset stage), U and F_t are computed when
     first read, from the frame's view, pose and path: the same values, and a control loop that
