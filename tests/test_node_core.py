@@ -112,3 +112,25 @@ def test_an_older_image_does_not_displace_a_newer_one_waiting_for_odometry(setup
     core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 2))  # late: the newer one keeps waiting
     core.on_odometry(_odom(3))
     assert [round(d.stamp_s - 1_700_000_000, 6) for d in told] == [0.3]
+
+
+def test_an_id_the_label_map_does_not_list_is_refused_by_name_and_nothing_is_decided(setup):
+    from terrapref.errors import UserError
+
+    core, told = _core(setup)  # labels: terrapref (ids 0-4 and 255)
+    core.on_odometry(_odom(0))
+    ids = setup[3][0].copy()
+    ids[470:, :8] = 9  # a class nobody mapped
+    with pytest.raises(UserError, match=r"terrapref\.yaml: ids: label id 9 in a label image not listed"):
+        core.on_image("sensor_msgs/msg/CompressedImage", compressed_image(TS, header(TS, 0.0, "camera_optical"), "png", png(ids)))
+    assert told == [] and core.decided == 0
+
+
+def test_the_node_says_why_it_stops(setup):
+    core, told = _core(setup)
+    assert core.status_at(0.0)[1] == "stale"  # nothing decided yet
+    core.on_odometry(_odom(0))
+    decision = core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0))
+    command, reason = core.status_at(decision.stamp_s + 0.05)
+    assert (command, reason) == (decision.command, decision.stop)
+    assert core.status_at(decision.stamp_s + 1.0) == ((0.0, 0.0), "stale")

@@ -316,3 +316,18 @@ def test_the_offset_stage_stops_at_the_wall_reading_its_own_ground_map(tmp_path:
     assert not planner.stop_rule.own_map and planner.stop_rule.map is planner.runner.ground_map  # one map, the stage's
     m = run_one(RunSpec(wall, 0, "planner", str(path), PROFILE)).metrics
     assert m.collisions == 0 and m.ended == "stopped" and set(m.stops_s) == {NO_FREE_WAY}
+
+
+def test_a_runs_mcap_says_when_and_why_the_planner_stopped(tmp_path: Path, wall: str, model: Path):
+    from rosbags.highlevel import AnyReader
+
+    from terrapref.evaluation.evaluate import Evaluation, evaluate_model
+    from terrapref.grid import Engine
+
+    evaluate_model(Evaluation(str(model), (wall,), seeds=1, with_driver=False, mcap=True), tmp_path / "ev", engine=Engine(workers=1))
+    (path,) = (tmp_path / "ev" / "runs").glob("*.mcap")
+    with AnyReader([path]) as reader:
+        connections = [c for c in reader.connections if c.topic == "/terrapref/status"]
+        said = [reader.deserialize(raw, c.msgtype).data for c, _, raw in reader.messages(connections=connections)]
+    assert said[0] == "driving" and said[-1].startswith("stopped: no_free_way (")
+    assert said.index(said[-1]) == said.count("driving")  # it drove, then stood, and never drove again
