@@ -331,3 +331,19 @@ def test_a_runs_mcap_says_when_and_why_the_planner_stopped(tmp_path: Path, wall:
         said = [reader.deserialize(raw, c.msgtype).data for c, _, raw in reader.messages(connections=connections)]
     assert said[0] == "driving" and said[-1].startswith("stopped: no_free_way (")
     assert said.index(said[-1]) == said.count("driving")  # it drove, then stood, and never drove again
+
+
+def test_a_drive_through_lethal_terrain_says_so_and_training_on_it_warns(tmp_path: Path, wall: str, capsys):
+    from terrapref.cli import _warn_lethal_contact, main
+    from terrapref.demos.recording import read_recording
+
+    rec = tmp_path / "rec"
+    assert main(["record", wall, "--out", str(rec), "--quiet"]) == 0  # the synthetic driver cannot go round a wall: it crosses
+    out = capsys.readouterr().out
+    assert "1 collisions (" in out and "with lethal terrain under the vehicle" in out
+    contact = read_recording(rec).lethal_contact()
+    assert contact is not None and contact.startswith("1 entry, ")
+    assert main(["inspect", str(rec)]) == 0
+    assert "the drive had lethal terrain under the vehicle: 1 entry" in capsys.readouterr().out
+    _warn_lethal_contact([rec])
+    assert f"warning: {rec}: the drive had lethal terrain under the vehicle" in capsys.readouterr().err

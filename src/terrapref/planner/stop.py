@@ -275,29 +275,21 @@ def first_free_arc(x0: float, y0: float, yaw0: float, curvatures: np.ndarray, fi
                 looks = 0 <= gi < vis_x and 0 <= gj < vis_y and visible[gi, gj]
                 i = math.floor((wx - ox) * inv_res)
                 j = math.floor((wy - oy) * inv_res)
-                col = never
-                if 0 <= i < n_cols and 0 <= j < n_rows:
-                    col = cells[j, i]
-                    if col == UNSETTLED:
-                        col = cells[j, i] = map_decide(evidence, map_lethal, shares[0], shares[1], shares[2], j, i)
-                    if col == never:  # a cell between samples: read its neighbours
-                        seen, deadly = False, False
-                        for dj, di in ((0, 1), (0, -1), (1, 0), (-1, 0)):
-                            jj, ii = j + dj, i + di
-                            if 0 <= ii < n_cols and 0 <= jj < n_rows:
-                                cn = cells[jj, ii]
-                                if cn == UNSETTLED:
-                                    cn = cells[jj, ii] = map_decide(evidence, map_lethal, shares[0], shares[1], shares[2], jj, ii)
-                                if cn != never:
-                                    seen = True
-                                    deadly = deadly or (lethal[cn] and (looks or _lethal_evidence(evidence, map_lethal, jj, ii) >= confirmed))
-                        if seen:
-                            if deadly:
-                                free = False
-                                break
-                            continue
-                if lethal[col] and (looks or col == never or _lethal_evidence(evidence, map_lethal, j, i) >= confirmed) \
-                        and (col == never or _lethal_neighbour(cells, evidence, map_lethal, shares, lethal, j, i)):
+                col = _column(cells, evidence, map_lethal, shares, j, i, never)
+                if col == never and 0 <= i < n_cols and 0 <= j < n_rows:  # a cell between samples: read its neighbours
+                    seen, deadly = False, False
+                    for dj, di in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+                        cn = _column(cells, evidence, map_lethal, shares, j + dj, i + di, never)
+                        if cn != never:
+                            seen = True
+                            deadly = deadly or (lethal[cn] and (looks or _lethal_evidence(evidence, map_lethal, j + dj, i + di) >= confirmed))
+                    if seen:
+                        if deadly:
+                            free = False
+                            break
+                        continue
+                if lethal[col] and (looks or _lethal_evidence(evidence, map_lethal, j, i) >= confirmed) \
+                        and _lethal_neighbour(cells, evidence, map_lethal, shares, lethal, j, i, never):
                     free = False
                     break
                 if col == never and looks:
@@ -321,17 +313,22 @@ def _lethal_evidence(evidence: np.ndarray, map_lethal: np.ndarray, j: int, i: in
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _column(cells: np.ndarray, evidence: np.ndarray, map_lethal: np.ndarray, shares: np.ndarray, j: int, i: int, never: int) -> int:
+    """The column of map cell ``(j, i)``, decided first if it is UNSETTLED (as
+    :func:`terrapref.features.kernels.map_decide` says); ``never`` outside the map."""
+    if not (0 <= i < cells.shape[1] and 0 <= j < cells.shape[0]):
+        return never
+    col = cells[j, i]
+    if col == UNSETTLED:
+        col = cells[j, i] = map_decide(evidence, map_lethal, shares[0], shares[1], shares[2], j, i)
+    return col
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _lethal_neighbour(cells: np.ndarray, evidence: np.ndarray, map_lethal: np.ndarray, shares: np.ndarray, lethal: np.ndarray,
-                      j: int, i: int) -> bool:
-    """Whether a 4-neighbour of map cell ``(j, i)`` is lethal (``lethal`` by column; cells decided as
-    :func:`terrapref.features.kernels.map_decide` says)."""
-    n_rows, n_cols = cells.shape
+                      j: int, i: int, never: int) -> bool:
+    """Whether a 4-neighbour of map cell ``(j, i)`` is lethal (``lethal`` by column)."""
     for dj, di in ((0, 1), (0, -1), (1, 0), (-1, 0)):
-        jj, ii = j + dj, i + di
-        if 0 <= ii < n_cols and 0 <= jj < n_rows:
-            cn = cells[jj, ii]
-            if cn == UNSETTLED:
-                cn = cells[jj, ii] = map_decide(evidence, map_lethal, shares[0], shares[1], shares[2], jj, ii)
-            if lethal[cn]:
-                return True
+        if lethal[_column(cells, evidence, map_lethal, shares, j + dj, i + di, never)]:
+            return True
     return False
