@@ -34,7 +34,7 @@ LINEAR_W = np.array([-8.0, -4.0, -2.0, -1.0, 6.0], dtype=np.float32)
 def skip_path_weights(config: ClassifierConfig, w: np.ndarray = LINEAR_W) -> dict[str, np.ndarray]:
     """C reduced to its skip path: logits = U @ w exactly (the hidden layers output zero)."""
     dims = [config.m] + [config.hidden] * config.depth + [config.m]
-    weights = {"compress.weight": np.asarray(w, np.float32)[None], "compress.bias": np.zeros(1, np.float32)}
+    weights = {"compress.weight": np.array(w, np.float32)[None], "compress.bias": np.zeros(1, np.float32)}  # a copy: callers may change it
     for i, (a, b) in enumerate(zip(dims[:-1], dims[1:])):
         weights[f"layers.{i}.weight"] = np.zeros((b, a), np.float32)
         weights[f"layers.{i}.bias"] = np.zeros(b, np.float32)

@@ -78,11 +78,13 @@ def write_robot(path: Path, text: str | None = None) -> Path:
     return path
 
 
-def robot_yaml(labels: str = LENIENT_LABELS, path_topic: bool = True) -> str:
+def robot_yaml(labels: str = LENIENT_LABELS, path_topic: bool = True, profile: bool = True) -> str:
     """The robot file that matches :func:`write_synthetic_bag`'s topics (by default with the
-    label map :func:`write_robot` writes beside it, which makes the quirks' unlisted ids unknown)."""
+    label map :func:`write_robot` writes beside it, which makes the quirks' unlisted ids unknown,
+    and with the order the synthetic operator drives by, the default's; ``profile=False``: none declared)."""
     topics = "\n".join(f"  {k}: {v}" for k, v in TOPICS.items() if path_topic or k != "path")
-    return f"format: terrapref-robot/1\ntopics:\n{topics}\ncamera:\n  height_m: 1.0\n  pitch_deg: 30.0\nlabels: {labels}\n"
+    order = f"profile: [{', '.join(default_classes().profile)}]\n" if profile else ""
+    return f"format: terrapref-robot/1\ntopics:\n{topics}\ncamera:\n  height_m: 1.0\n  pitch_deg: 30.0\nlabels: {labels}\n{order}"
 
 
 @dataclass(frozen=True)

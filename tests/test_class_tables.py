@@ -146,9 +146,14 @@ ELEVEN = ["grass", *(f"c{i}" for i in range(MAX_TERRAIN_CLASSES + 1)), "tree"]
     (("grass", ["tree", "log"], ["grass", "mud", "tree", "log"], ["mud", "mud", "lethal"]), "profile", ["mud, lethal"]),
     (("sand", ["tree"], ["grass", "tree"]), "background", ["'sand'"]),
     (("grass", ["stone"], ["grass", "tree"]), "lethal", ["known class names"]),
+    (("grass", ["tree"], ["grass", "unknown", "tree"]), "classes[1].name", ["'unknown'", "reserved"]),
+    (("grass", ["tree"], ["grass", "avoid", "tree"]), "classes[1].name", ["'avoid'", "reserved", "zone"]),
+    (("grass", ["tree"], ["grass", "best", "tree"]), "classes[1].name", ["'best'", "reserved", "zone"]),
+    (("grass", ["tree"], ["grass", "'True'", "tree"], ["True", "tree"]), "profile", ["True, tree", "exactly once"]),
 ], ids=["11 feature classes", "background lethal", "background the only lethal", "background lethal, with a profile", "class lethal, 2 lethal",
         "class lethal is lethal, 2 lethal", "profile misses a column", "profile names an unknown class",
-        "profile names a lethal class", "profile names a column twice", "unknown background", "unknown lethal"])
+        "profile names a lethal class", "profile names a column twice", "unknown background", "unknown lethal",
+        "a class named unknown", "a class named avoid", "a class named best", "a boolean in the profile"])
 def test_a_bad_table_is_refused_naming_the_file_and_field(tmp_path, table, field, words):
     path = _write_table(tmp_path, *table)
     with pytest.raises(ConfigError) as caught:
@@ -359,6 +364,17 @@ def test_random_orders_are_distinct_drawn_the_same_each_time(example):
     assert set(parse_orders("random:720", example)) == set(parse_orders("all", example))
 
 
+@pytest.mark.parametrize("n", [20_000, 40_320 // 2 + 1, 40_320])
+def test_many_random_orders_are_drawn_at_once(n):
+    """Of the 40,320 orders of 8 classes, thousands: each drawn once (a draw that checked each new
+    order against a list of those drawn took minutes)."""
+    table = _synthetic(8)
+    orders = parse_orders(f"random:{n}", table)
+    assert len(orders) == len(set(orders)) == n
+    assert all(sorted(o[:-1]) == sorted(table.terrain_names) and o[-1] == table.lethal_column for o in orders)
+    assert parse_orders(f"random:{n}", table) == orders
+
+
 @pytest.mark.parametrize("text", ["random:0", "random:-1", "random:721", "random:x", "random:"])
 def test_a_bad_random_count_is_refused(example, text):
     with pytest.raises(ValueError, match="random:N"):
@@ -390,11 +406,16 @@ def test_course_writes_the_example_tables_teaching_course(tmp_path, capsys, exam
     assert float(minutes.group(1)) == round(course_length(situations(example)) / 60, 1)
     assert f"{len(situations(example))} situations" in printed
     assert yaml.safe_load(out.read_text()) == yaml.safe_load(yaml.safe_dump(teaching_course(example).data()))
-    # Read with the default table its classes are unknown; with the example table it is a course.
-    assert main(["validate", str(out)]) == 2
-    assert "unknown class 'dirt'" in capsys.readouterr().out
+    # The course carries its table: it reads without --classes, with the example table, and not with another.
+    assert "(record it: terrapref record " + str(out) + " --out DIR)" in printed
+    assert main(["validate", str(out)]) == 0
     assert main(["validate", str(out), "--classes", str(EXAMPLE)]) == 0
-    assert main(["show", str(out), "--classes", str(EXAMPLE), "--out", str(tmp_path / "map.png")]) == 0
+    assert main(["show", str(out), "--out", str(tmp_path / "map.png")]) == 0
+    capsys.readouterr()
+    default_file = Path(__file__).resolve().parent.parent / "src" / "terrapref" / "data" / "classes.yaml"
+    assert main(["show", str(out), "--classes", str(default_file), "--out", str(tmp_path / "map2.png")]) == 2
+    line = _one_error(capsys, str(out), "classes: the scenario carries the class table of grass, dirt", "not the one given (grass, non_traversable")
+    assert not (tmp_path / "map2.png").exists(), line
 
 
 def test_course_design_and_name(tmp_path, capsys):
@@ -557,3 +578,51 @@ def test_a_recording_whose_meta_names_no_class_table_is_one_line(fig7_recording,
                  ["export", str(rec), "--format", "mcap", "--out", str(tmp_path / "r.mcap")]):
         assert main(argv) == 2
         _one_error(capsys, f"{rec / 'meta.json'}: classes: missing")
+
+
+def test_the_follow_up_loop_runs_without_classes_and_asks_what_drives_leave_open_together(tmp_path, capsys, fig7_recording):
+    """A course carries its table: record, course --after (of several drives), train and evaluate
+    never need --classes again."""
+    from terrapref.demos.recording import read_recording
+
+    small = EXAMPLES / "small.yaml"
+    course, me, more, me_more = tmp_path / "c.yaml", tmp_path / "me", tmp_path / "more.yaml", tmp_path / "me_more"
+    assert main(["course", "--classes", str(small), "--out", str(course)]) == 0
+    assert main(["record", str(course), "--out", str(me), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["course", "--after", str(me), "--out", str(more)]) == 0
+    printed = capsys.readouterr().out
+    assert "the drive left 1 pairs open: mud vs tree" in printed
+    assert f"(record it: terrapref record {more} --out DIR)" in printed, "the command that works, not a --classes FILE placeholder"
+    assert main(["record", str(more), "--out", str(me_more), "--quiet"]) == 0
+    assert read_recording(me_more).classes == load_classes(small)
+    # Both drives together leave nothing open; nothing is written.
+    assert main(["course", "--after", str(me), str(me_more), "--out", str(tmp_path / "more2.yaml")]) == 0
+    assert "the drives together identified every pair of classes" in capsys.readouterr().out
+    assert not (tmp_path / "more2.yaml").exists()
+    # Drives of two tables, or one drive twice, are refused in one line naming the file.
+    assert main(["course", "--after", str(me), str(fig7_recording), "--out", str(tmp_path / "x.yaml")]) == 2
+    _one_error(capsys, str(fig7_recording), "classes", "give drives of one table")
+    assert main(["course", "--after", str(me), str(me), "--out", str(tmp_path / "x.yaml")]) == 2
+    _one_error(capsys, str(me), "given twice")
+    assert not (tmp_path / "x.yaml").exists()
+    # The model carries the table: evaluate reads the course with it, and a --classes of another table is refused.
+    model = tmp_path / "m.safetensors"
+    assert main(["train", str(me), str(me_more), "--recipe", "paper", "--epochs", "2", "--out", str(model)]) == 0
+    assert main(["evaluate", str(model), str(more), "--seeds", "1", "--no-driver", "--out", str(tmp_path / "ev")]) == 0
+    assert (tmp_path / "ev" / "metrics.json").is_file()
+    capsys.readouterr()
+    assert main(["evaluate", str(model), str(more), "--classes", str(EXAMPLE), "--seeds", "1", "--no-driver", "--out", str(tmp_path / "ev2")]) == 2
+    _one_error(capsys, str(model), "classes", str(EXAMPLE))
+    assert not (tmp_path / "ev2").exists()
+
+
+def test_a_scenario_carrying_a_bad_table_is_refused_naming_the_field(tmp_path, capsys):
+    table = load_classes(EXAMPLES / "small.yaml")
+    data = teaching_course(table).data()
+    data["classes"]["background"] = "sand"
+    bad = tmp_path / "c.yaml"
+    bad.write_text(yaml.safe_dump(data, sort_keys=False))
+    assert main(["record", str(bad), "--out", str(tmp_path / "rec")]) == 2
+    _one_error(capsys, f"{bad}: classes.background: unknown class 'sand'")
+    assert not (tmp_path / "rec").exists()

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from terrapref.fileio import atomic_path, new_folder, write_bytes_atomic, write_text_atomic
+from terrapref.errors import UserError
+from terrapref.fileio import atomic_path, new_folder, output_folder, write_bytes_atomic, write_text_atomic
 from terrapref.pngio import write_png_atomic
 from terrapref.tensorfile import write_tensor_file
 
@@ -89,3 +90,59 @@ def test_folders_written_to_replace_others_follow_the_umask(tmp_path):
         assert stat.S_IMODE((tmp_path / "m.checkpoints").stat().st_mode) == 0o755
     finally:
         os.umask(old)
+
+
+# --- a command's output folder: one rule for every command -----------------------------------------
+
+
+def _files(folder: Path) -> dict[str, str]:
+    return {str(p.relative_to(folder)): p.read_text() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_an_output_folder_is_made_and_written(tmp_path: Path):
+    with output_folder(tmp_path / "a" / "out", force=False) as out:
+        (out / "metrics.json").write_text("{}")
+    assert _files(tmp_path / "a" / "out") == {"metrics.json": "{}"}
+    (tmp_path / "empty").mkdir()
+    with output_folder(tmp_path / "empty", force=False) as out:  # an empty folder holds nothing to lose
+        (out / "x").write_text("1")
+
+
+def test_an_existing_output_folder_is_refused_without_force_and_kept(tmp_path: Path):
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "old.png").write_text("old")
+    with pytest.raises(UserError, match="exists; choose another --out, or pass --force"):
+        with output_folder(tmp_path / "out", force=False):
+            pytest.fail("the block ran")
+    assert _files(tmp_path / "out") == {"old.png": "old"}
+
+
+def test_force_replaces_the_whole_folder_so_no_two_runs_mix(tmp_path: Path):
+    for run in ("first", "second"):
+        with output_folder(tmp_path / "out", force=True) as out:
+            (out / f"{run}.png").write_text(run)
+            (out / "metrics.json").write_text(run)
+    assert _files(tmp_path / "out") == {"second.png": "second", "metrics.json": "second"}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]  # nothing left aside
+
+
+def test_a_replacement_that_fails_puts_the_old_folder_back_and_keeps_the_new_one_apart(tmp_path: Path):
+    with output_folder(tmp_path / "out", force=False) as out:
+        (out / "metrics.json").write_text("old")
+    with pytest.raises(KeyboardInterrupt):
+        with output_folder(tmp_path / "out", force=True) as out:
+            (out / "half.png").write_text("new")
+            raise KeyboardInterrupt
+    assert _files(tmp_path / "out") == {"metrics.json": "old"}
+    assert _files(tmp_path / "out.partial") == {"half.png": "new"}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "out.partial"]
+
+
+def test_a_folder_another_command_is_writing_is_refused_even_with_force(tmp_path: Path):
+    with output_folder(tmp_path / "out", force=False) as out:
+        (out / "metrics.json").write_text("running")
+        for force in (False, True):
+            with pytest.raises(UserError, match="is being written by another terrapref command"):
+                with output_folder(tmp_path / "out", force=force):
+                    pytest.fail("the block ran")
+        assert _files(out) == {"metrics.json": "running"}

@@ -320,6 +320,12 @@ def test_reset_options():
         env.reset(options={"course": "test_course"})
     with pytest.raises(ValueError, match="start"):
         env.reset(options={"start": (1.0, float("nan"), 0.0)})
+    for bad in ("east", (1.0, "x", 0.0), {"x": 1.0}):
+        with pytest.raises(ValueError, match="'start' must be three finite numbers"):
+            env.reset(options={"start": bad})
+    for bad in ([1, 2], "test_course", 3):
+        with pytest.raises(ValueError, match="reset options: expected a dict"):
+            env.reset(options=bad)
 
 
 def test_render_modes():

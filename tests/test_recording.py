@@ -420,6 +420,7 @@ def test_the_meta_reads_back_as_written_with_its_keys_in_the_files_order(demo_re
 def test_a_wrong_meta_entry_is_one_line_naming_the_file_and_field(tmp_path: Path, key, value, field, message):
     rec = tmp_path / "rec"
     with RecordingWriter(rec, {**META_IN, key: value}, {}) as w:
+        w.append(0.0, (1.0, 2.0, 0.0), np.zeros((4, 4), np.uint8), (1.0, 0.0), 10)
         w.close()
     with pytest.raises(UserError) as err:
         read_recording(rec)

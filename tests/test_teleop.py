@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import subprocess
 import sys
 
@@ -600,3 +601,117 @@ def test_a_course_of_ones_own_class_table_drives_in_the_window(tmp_path):
     shot = pygame.image.load(str(tmp_path / "shot.png"))
     # The camera view is drawn in the table's colours: grass just ahead, at the view's bottom left.
     assert tuple(shot.get_at((20, 470)))[:3] == table.classes[0].color
+
+
+def _overlays(monkeypatch) -> list:
+    """Every overlay the window draws, in order (the window still draws them)."""
+    from terrapref.teleop.window import Window
+
+    drawn = []
+    draw = Window.draw
+
+    def keep(self, image, w, label, trace_px, overlay):
+        drawn.append(overlay)
+        draw(self, image, w, label, trace_px, overlay)
+
+    monkeypatch.setattr(Window, "draw", keep)
+    return drawn
+
+
+def test_each_push_is_shown_as_it_happens_and_marked_on_the_map(tmp_path, monkeypatch):
+    import json
+
+    from terrapref.demos.session import DisturbanceConfig
+
+    drawn = _overlays(monkeypatch)
+    out = tmp_path / "rec"
+    events = {3: [key(pygame.KEYDOWN, pygame.K_SPACE)], 3 + 30 + 120: [pygame.event.Event(pygame.QUIT)]}
+    result = run_teleop("demo_course", out, realtime=False, script=script_from(events), max_frames=400,
+                        disturbance=DisturbanceConfig(rate_hz=1.0), seed=3, screenshot=tmp_path / "shot.png")
+    start = drawn[0].banner
+    assert start is not None and any("a push turns the vehicle" in line for line in start.lines)
+    assert any("--disturb 0" in line for line in start.lines), "the start screen says how to turn them off"
+    frames = [json.loads(x) for x in (out / "frames.jsonl").read_text().splitlines()]
+    pushed = [("executed" in f) for f in frames]
+    starts = sum(1 for i, p in enumerate(pushed) if p and (i == 0 or not pushed[i - 1]))
+    assert result.pushes >= starts > 0
+    # The frame after each pushed frame is drawn with the alert, naming the push's direction.
+    driving = [o for o in drawn if o.banner is None][: len(frames)]
+    for i, f in enumerate(frames[:-1]):
+        if "executed" in f:
+            side = "LEFT" if f["executed"][1] > f["cmd"][1] else "RIGHT"
+            assert any(a.startswith(f"PUSHED {side}") for a in driving[i + 1].alerts)
+    assert len(drawn[-1].pushes_px) == result.pushes and f"pushes {result.pushes}" in drawn[-1].status
+
+
+def test_without_pushes_the_start_screen_says_so_and_nothing_is_pushed(tmp_path, monkeypatch):
+    drawn = _overlays(monkeypatch)
+    events = {2: [key(pygame.KEYDOWN, pygame.K_SPACE)], 80: [pygame.event.Event(pygame.QUIT)]}
+    result = run_teleop("demo_course", None, realtime=False, script=script_from(events), max_frames=100, disturbance=None)
+    assert "No pushes: the vehicle goes where you steer." in drawn[0].banner.lines
+    assert result.pushes == 0 and not any(o.alerts for o in drawn) and "pushes" not in drawn[-1].status
+
+
+def test_drive_disturb_0_turns_the_pushes_off(tmp_path, monkeypatch, capsys):
+    from terrapref.cli import main
+
+    drawn = _overlays(monkeypatch)
+    import terrapref.teleop as teleop
+
+    run = teleop.run_session
+
+    def scripted(scenario, options):
+        from dataclasses import replace
+
+        return run(scenario, replace(options, realtime=False, wait_for_start=False, max_frames=60))
+
+    monkeypatch.setattr(teleop, "run_session", scripted)
+    assert main(["drive", "demo_course", "--disturb", "0", "--record", str(tmp_path / "rec")]) == 0
+    assert read_recording(tmp_path / "rec").meta["driver"]["disturbance"] is None
+    assert drawn and not any(o.alerts for o in drawn) and "push" not in capsys.readouterr().out
+    assert main(["drive", "demo_course", "--disturb", "2", "--seed", "3"]) == 0
+    assert re.search(r"drove 60 frames, stopped, 0 collisions, [1-9][0-9]* push(es)? \(--disturb 0: none\)$", capsys.readouterr().out.strip())
+
+
+def test_off_the_route_the_display_points_back_and_stops_counting_patches_along_it():
+    from terrapref.features import PreferenceSet, PreferenceSetConfig
+    from terrapref.sim import Simulation
+    from terrapref.teleop.guide import CourseGuide
+    from terrapref.vehicle import Pose
+
+    scenario = _tiny([{"class": "mud", "rectangle": {"center": [20.0, 6.0], "size": [3.0, 2.0]}}])
+    sim = Simulation(scenario)
+    guide = CourseGuide(sim.world, sim.path, PreferenceSet(PreferenceSetConfig(), sim.camera))
+    near = guide.readout(Pose(8.0, 7.0, 0.0), 6.0, label=10)
+    assert not near.off_route and near.warning() is None
+    assert near.lines()[1] == "next patch: mud in 10 m" and near.lines()[4] == "route: 1.0 m to your right"
+    # 5 m north of the route, heading away from it (north-east): the route is behind, to the right.
+    away = guide.readout(Pose(12.0, 11.0, math.radians(60.0)), 10.0, label=10)
+    assert away.off_route and away.offset_m == pytest.approx(5.0)
+    assert away.lines()[1] == "next patch: back on the route first", "no distance counted along a route the vehicle is not on"
+    assert away.warning() == "OFF ROUTE: 5 m away, turn right (it is behind you)"
+    # The way back: the route 3 m ahead of its nearest point, (15, 6) from (12, 11): 59 deg right of east, 119 deg right of the heading.
+    assert math.degrees(away.rejoin_rad) == pytest.approx(-60.0 - math.degrees(math.atan2(5.0, 3.0)), abs=0.1)
+    facing = guide.readout(Pose(12.0, 11.0, math.radians(-70.0)), 10.0, label=10)  # the way back 11 deg to the left
+    assert facing.warning() == "OFF ROUTE: 5 m away, ahead"
+
+
+def test_driving_away_from_the_route_raises_the_alert_and_draws_the_arrow(tmp_path, monkeypatch):
+    import numpy as np
+
+    from terrapref.scenario import parse_scenario
+    from terrapref.teleop.window import ALERT_COLOR
+
+    drawn = _overlays(monkeypatch)
+    data = {"format": "terrapref-scenario/1", "name": "wide", "world": {"size_m": [40.0, 30.0], "resolution_m": 0.05, "background": "grass"},
+            "terrain": [{"class": "mud", "rectangle": {"center": [30.0, 6.0], "size": [3.0, 2.0]}}],
+            "path": {"waypoints": [[2.0, 6.0], [38.0, 6.0]]}, "start": [4.0, 6.0, 60.0]}
+    run_teleop(parse_scenario(data), None, realtime=False, wait_for_start=False, max_frames=80, disturbance=None,
+               screenshot=tmp_path / "shot.png")
+    first, last = drawn[0], drawn[-1]
+    assert not first.off_route and not first.alerts and first.hud[1].startswith("next patch: mud in")
+    assert last.off_route and last.alerts[0].startswith("OFF ROUTE: 7 m away, turn right")
+    assert last.hud[1] == "next patch: back on the route first" and last.route_rad < 0
+    shot = pygame.surfarray.array3d(pygame.image.load(str(tmp_path / "shot.png"))).transpose(1, 0, 2)[:480, :640].astype(int)
+    red = np.abs(shot - np.array(ALERT_COLOR)).sum(axis=2) < 30
+    assert red[140:230, 280:360].sum() > 200, "the arrow under the alert"

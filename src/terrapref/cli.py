@@ -20,6 +20,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
+from terrapref.configargs import finite_float
 from terrapref.errors import Terminated, UserError
 from terrapref.grid import ENGINES, Engine, GridError
 
@@ -103,25 +104,22 @@ def _cmd_course(args: argparse.Namespace) -> int:
     if out.suffix.lower() not in (".yaml", ".yml"):
         raise UserError(str(out), "a course is a scenario file: give it the suffix .yaml", field="--out")
     figure = out.with_suffix(".png")
-    inputs = [p for p in (args.classes, args.after) if p is not None]
+    inputs = [p for p in (args.classes, *(args.after or ())) if p is not None]
     for path in (out, figure):
         _check_output(path, "--out", inputs)
     table = _class_table(args)
     if args.after is not None:
-        from terrapref.demos.recording import read_recording
-
-        rec = read_recording(args.after)
-        found = rec.classes
-        if table is not None:
-            _check_table(args, found, args.after)
-        table = found
-        open_pairs = _open_pairs(rec)
+        recs = _drives_of_one_table(args, args.after)
+        table = recs[0].classes
+        open_pairs = _open_pairs(recs)
+        drives = "drives together" if len(recs) > 1 else "drive"
         if not open_pairs:
-            print(f"{args.after}: the drive identified every pair of classes; no follow-up course is needed (nothing written)")
+            print(f"{', '.join(map(str, args.after))}: the {drives} identified every pair of classes; no follow-up course is needed (nothing written)")
             return 0
         items = follow_up(table, open_pairs)
-        course = follow_up_course(table, open_pairs, args.name or f"{Path(rec.meta.get('scenario') or 'course').name}_more", str(rec.meta.get("scenario")))
-        print(f"the drive left {len(open_pairs)} pairs open: {', '.join(f'{a} vs {b}' for a, b in open_pairs)}")
+        driven = list(dict.fromkeys(str(r.meta.get("scenario")) for r in recs))
+        course = follow_up_course(table, open_pairs, args.name or f"{Path(driven[0]).name}_more", " and ".join(driven), drives=len(recs))
+        print(f"the {drives} left {len(open_pairs)} pairs open: {', '.join(f'{a} vs {b}' for a, b in open_pairs)}")
     else:
         table = table or default_classes()
         try:
@@ -131,27 +129,44 @@ def _cmd_course(args: argparse.Namespace) -> int:
             raise UserError(str(args.classes or "classes"), str(exc), field="classes") from None
         course = build_course(table, items, args.name or "teaching_course", description(table, full))
     scenario = parse_scenario(course.data(), str(out), table)  # checked as every command will read it
-    source = f"--classes {args.classes}" if args.classes else ("--after " + str(args.after) if args.after else "the default class table")
-    write_text_atomic(out, f"# terrapref course ({source}); the class table's scenario: give the same --classes to every command.\n" + course.to_yaml())
+    source = f"--classes {args.classes}" if args.classes else ("--after " + " ".join(map(str, args.after)) if args.after else "the default class table")
+    write_text_atomic(out, f"# terrapref course ({source}); it carries its class table (classes:), so no command needs --classes for it.\n"
+                      + course.to_yaml())
     save_map(figure, scenario, rasterise(scenario))
     length = scenario.path_length_m()
     kinds = Counter(item.kind for item in items)
     print(f"{scenario.name}: {scenario.description}")
     print(f"  {len(items)} situations ({', '.join(f'{n} {k}' for k, n in kinds.items())}); path {length:.0f} m; "
           f"expected drive about {length / DRIVER_SPEED_MPS / 60:.1f} minutes at {DRIVER_SPEED_MPS:g} m/s")
-    flag = f" --classes {args.classes}" if args.classes else (" --classes FILE (the class table of the drive)" if not table.same_classes(default_classes()) else "")
-    print(f"wrote {out} and {figure} (record it: terrapref record {out}{flag} --out DIR)")
+    print(f"wrote {out} and {figure} (record it: terrapref record {out} --out DIR)")
     return 0
 
 
-def _open_pairs(rec) -> list[tuple[str, str]]:
-    """The pairs of classes a recording's drive leaves unidentified (the report ``inspect`` prints)."""
+def _drives_of_one_table(args: argparse.Namespace, paths: Sequence[Path]) -> list:
+    """The recordings ``course --after`` reads, each given once and all of one class table
+    (``--classes``' when given, else the first's)."""
+    from terrapref.demos.recording import read_recording
+
+    _check_distinct(paths, "recording")
+    recs = [read_recording(p) for p in paths]
+    for path, rec in zip(paths, recs, strict=True):
+        if _class_table(args) is not None:
+            _check_table(args, rec.classes, path)
+        elif not rec.classes.same_classes(recs[0].classes):
+            raise UserError(str(path), f"was made for the class table of {', '.join(rec.classes.names)}, not {paths[0]}'s "
+                                       f"({', '.join(recs[0].classes.names)}): give drives of one table", field="classes")
+    return recs
+
+
+def _open_pairs(recs: Sequence) -> list[tuple[str, str]]:
+    """The pairs of classes that recordings' drives together leave unidentified (the report ``inspect`` prints)."""
     from terrapref.recipes import DEFAULT_RECIPE, open_pairs, recipe_named
 
-    if len(rec) == 0:
-        raise UserError(str(rec.path), "holds no frames: drive the teaching course first", field="frames")
-    print("featurising the drive to find the pairs it left open ...", flush=True)
-    return open_pairs([rec], recipe_named(DEFAULT_RECIPE))
+    for rec in recs:
+        if len(rec) == 0:
+            raise UserError(str(rec.path), "holds no frames: drive the teaching course first", field="frames")
+    print(f"featurising the drive{'s' if len(recs) > 1 else ''} to find the pairs left open ...", flush=True)
+    return open_pairs(list(recs), recipe_named(DEFAULT_RECIPE))
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
@@ -239,14 +254,17 @@ def _cmd_drive(args: argparse.Namespace) -> int:
 
     if args.seed < 0:
         raise UserError("--seed", f"must be an integer >= 0, got {args.seed}")
-    scenario = resolve_scenario(args.scenario, _class_table(args))
-    profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile is not None else None
-    if args.record is not None:
-        _check_output(args.record, "--record", [args.scenario, *([args.model] if args.model else [])], folder=True)
+    riding = None  # the table of the model riding along: the scenario is read with it
     if args.model is not None:
         from terrapref.learning.model_file import load_model
 
-        _check_table(args, load_model(args.model).classes, args.model)
+        riding = load_model(args.model).classes
+        if args.classes is not None:
+            _check_table(args, riding, args.model)
+    scenario = resolve_scenario(args.scenario, _class_table(args) or riding)
+    profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile is not None else None
+    if args.record is not None:
+        _check_output(args.record, "--record", [args.scenario, *([args.model] if args.model else [])], folder=True)
     perception = _perception(args.perception, classes=scenario.classes)
     view = _live_view(args)
     try:
@@ -258,6 +276,7 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     where = f", recorded to {result.record_dir}" if result.record_dir else ""
     state = "reached the goal" if result.completed else ("quit" if result.quit else "stopped")
     edge = f", {result.edge_frames} frames held at the map's edge (not recorded)" if result.edge_frames else ""
+    edge += f", {result.pushes} push{'es' if result.pushes != 1 else ''} (--disturb 0: none)" if result.pushes else ""
     if args.model is not None:
         print(f"rode along: the planner drove {result.planner_frames} frames, you {result.frames} (corrections){where}; "
               f"{state}, {result.collisions} collisions{edge}")
@@ -615,9 +634,10 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         frames = sorted({int(f) for f in args.frames.split(",") if f.strip()}) if args.frames else []
     except ValueError:
         raise UserError("--frames", f"expected comma-separated frame numbers, got {args.frames!r}") from None
-    _check_frames(frames, args.scenarios, _class_table(args))
+    _check_frames(frames, args.scenarios, _class_table(args))  # before the model is read
     model = load_policy(args.model)  # C, or a learned baseline's file (linear, CNN)
-    _check_table(args, model.classes, args.model)  # the scenarios are read with --classes' table
+    if args.classes is not None:  # the model carries its table (the scenarios are read with it); --classes must be it
+        _check_table(args, model.classes, args.model)
     profile = PreferenceProfile.parse(args.profile, model.classes) if args.profile is not None else None
     perception = _perception(args.perception, classes=model.classes)
     n_runs = len(args.scenarios) * args.seeds * (1 if args.no_driver else 2)
@@ -647,7 +667,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         print(f"planner: agreement with the driver ({args.style}) {rate_text(sum(z['agrees'] for z in compared), len(compared))}")
     if "driver_summary" in metrics:
         d = metrics["driver_summary"]
-        print(f"driver:  zone success {d['zone_success_rate']:.1%} over {d['zones']} zones, {d['collision_count']} collisions")
+        success = f"{d['zone_success_rate']:.1%}" if d["zones"] else "-"
+        print(f"driver:  zone success {success} over {d['zones']} zones, {d['collision_count']} collisions")
     for name, numbers in metrics.get("frames_beyond_the_run", {}).items():
         print(f"note: --frames {','.join(map(str, numbers))}: {name}'s run (seed 0) ended before them; no picture", file=sys.stderr)
     guesses = [z for z in zones if z.get("rests_on_unidentified")]
@@ -660,6 +681,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
 def _check_frames(frames: Sequence[int], scenarios: Sequence[str], classes) -> None:
     """Refuse a frame number no run of these scenarios can reach: the shortest's time limit caps its frames."""
+    from terrapref.errors import ScenarioError
     from terrapref.scenario import resolve_scenario
     from terrapref.scenario.path import ReferencePath
     from terrapref.sim import SimConfig
@@ -670,7 +692,12 @@ def _check_frames(frames: Sequence[int], scenarios: Sequence[str], classes) -> N
         raise UserError("--frames", f"frame numbers start at 0, got {frames[0]}")
     config = SimConfig()
     for name in scenarios:
-        scenario = resolve_scenario(name, classes)
+        try:  # only the path counts here, which gen:N draws alike for every table
+            scenario = resolve_scenario(name, classes)
+        except ScenarioError:
+            if classes is not None:
+                raise
+            continue  # a file of the model's table that does not carry it: read with the model's, and its end noted after the run
         last = int(config.time_limit(ReferencePath(scenario.waypoints).length_m) * config.camera_rate_hz)
         if frames[-1] > last:
             raise UserError("--frames", f"frame {frames[-1]} lies beyond any run of {scenario.name} (its time limit ends at frame {last})")
@@ -679,11 +706,13 @@ def _check_frames(frames: Sequence[int], scenarios: Sequence[str], classes) -> N
 def _cmd_import(args: argparse.Namespace) -> int:
     from terrapref.interop.bag_import import ImportOptions, import_bag
     from terrapref.interop.robot import load_robot
+    from terrapref.terrain import PreferenceProfile, default_classes
 
     _check_output(args.out, "--out", [args.bag, args.robot], folder=True)
     table = _class_table(args)
     robot = load_robot(args.robot, table)
-    report = import_bag(args.bag, robot, args.out, ImportOptions(rate_hz=args.rate, force=args.force, classes=table))
+    profile = PreferenceProfile.parse(args.profile, table or default_classes()) if args.profile is not None else None
+    report = import_bag(args.bag, robot, args.out, ImportOptions(rate_hz=args.rate, force=args.force, classes=table, profile=profile))
     for line in report.lines():
         print(line)
     print(f"wrote {args.out} (terrapref inspect / featurize / train accept it)")
@@ -785,9 +814,10 @@ def _cmd_route(args: argparse.Namespace) -> int:
         raise UserError(str(out), "the route is written as a scenario file: give it the suffix .yaml", field="--out")
     if not (math.isfinite(args.resolution) and 0.1 <= args.resolution <= 2.0):
         raise UserError("--resolution", f"expected a cell size in [0.1, 2] m, got {args.resolution}")
-    scenario = resolve_scenario(args.scenario, _class_table(args))
     model = load_model(args.model)
-    _check_table(args, model.classes, args.model)  # the table the scenario was read with
+    if args.classes is not None:  # the model carries its table; --classes, when given, must be it
+        _check_table(args, model.classes, args.model)
+    scenario = resolve_scenario(args.scenario, model.classes)
     world = rasterise(scenario)
     try:
         route = route_over(scenario, model, RouteConfig(resolution_m=args.resolution), world)
@@ -1115,11 +1145,11 @@ def _add_classes_arg(p: argparse.ArgumentParser, check: bool = False) -> None:
 
 
 def _course_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("course", help="write the teaching course of a class table (or, with --after, a follow-up of what a drive left open)")
+    p = sub.add_parser("course", help="write the teaching course of a class table (or, with --after, a follow-up of what drives left open)")
     p.add_argument("--out", required=True, type=Path, help="scenario file to write (.yaml); a top-down figure goes beside it (.png)")
-    p.add_argument("--after", type=Path, metavar="REC",
-                   help="a recording of the teaching course: write a short course of only the pairs its drive left unidentified "
-                        "(train on both recordings after)")
+    p.add_argument("--after", type=Path, nargs="+", metavar="REC",
+                   help="recordings of the teaching course (and of earlier follow-ups): write a short course of only the pairs "
+                        "their drives together left unidentified (train on all the recordings after)")
     p.add_argument("--design", choices=("auto", "full", "compact"), default="auto",
                    help="full: every pair once on each side; compact: every pair once, sides balanced; auto (default): full while "
                         "the drive stays within 10 minutes at 1 m/s")
@@ -1138,7 +1168,7 @@ def _validate_parser(sub: argparse._SubParsersAction) -> None:
 def _render_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("render", help="render the segmentation camera image at a pose")
     p.add_argument("scenario", metavar="SCENARIO", help="packaged scenario name or file")
-    p.add_argument("--pose", nargs=3, type=float, metavar=("X", "Y", "YAW_DEG"), help="vehicle pose [m, m, deg]; default: the start")
+    p.add_argument("--pose", nargs=3, type=finite_float, metavar=("X", "Y", "YAW_DEG"), help="vehicle pose [m, m, deg]; default: the start")
     p.add_argument("--out", required=True, type=Path, help="single-channel PNG of class ids")
     p.add_argument("--preview", type=Path, help="also write a colour preview PNG")
     _add_classes_arg(p)
@@ -1163,7 +1193,7 @@ def _record_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, type=Path, help="recording directory to create")
     p.add_argument("--force", action="store_true", help="replace an existing recording at --out")
     p.add_argument("--quiet", action="store_true", help="no progress output")
-    p.add_argument("--disturb", type=float, default=None, metavar="RATE",
+    p.add_argument("--disturb", type=finite_float, default=None, metavar="RATE",
                    help="push the executed yaw rate off the driver's command RATE times per second, so recoveries are shown "
                         "(default: the recommended protocol's 0.3; 0: none)")
     p.add_argument("--perception", metavar="PRESET|FILE",
@@ -1178,9 +1208,10 @@ def _drive_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("scenario", metavar="SCENARIO", help=SCENARIO_HELP)
     p.add_argument("--record", type=Path, metavar="DIR", help="record the drive into DIR")
     p.add_argument("--force", action="store_true", help="replace an existing recording at DIR")
-    p.add_argument("--speed", type=float, default=1.0, help="forward speed [m/s] (default 1)")
-    p.add_argument("--disturb", type=float, default=None, metavar="RATE",
-                   help="pushes per second on the executed yaw rate (default: the recommended protocol's 0.3; 0: none)")
+    p.add_argument("--speed", type=finite_float, default=1.0, help="forward speed [m/s] (default 1)")
+    p.add_argument("--disturb", type=finite_float, default=None, metavar="RATE",
+                   help="pushes per second on the executed yaw rate, each shown in the window as it happens "
+                        "(default: the recommended protocol's 0.3; 0: none)")
     p.add_argument("--seed", type=int, default=0, help="seeds the pushes")
     p.add_argument("--profile", help="your preference order, best first, stored with the recording (default: the class table's)")
     p.add_argument("--model", type=Path, metavar="MODEL",
@@ -1212,7 +1243,7 @@ def _featurize_parser(sub: argparse._SubParsersAction) -> None:
                    help="how each trajectory's distance to the path is measured: lookahead (default) to the path ahead of the vehicle, "
                         "window to the nearest path point within a window, paper as the paper writes it")
     p.add_argument("--n-steps", type=int, help="trajectory points n (default 30)")
-    p.add_argument("--dt", type=float, help="trajectory time step [s] (default 0.2)")
+    p.add_argument("--dt", type=finite_float, help="trajectory time step [s] (default 0.2)")
     p.add_argument("--camera", help="camera file to re-render the frames with: CameraConfig's fields, or a ROS camera_info YAML (with mount_height_m, pitch_deg)")
     p.add_argument("--recipe", metavar="NAME", help="featurise as this recipe trains (default: teach, with the look-ahead utilities)")
     _add_classes_arg(p, check=True)
@@ -1240,7 +1271,7 @@ def _train_parser(sub: argparse._SubParsersAction, flags: bool = True) -> None:
         stages = p.add_argument_group("decision stages (terrapref recipes lists each recipe's; the last one fitted drives)")
         stages.add_argument("--second-stage", action=argparse.BooleanOptionalAction, default=None,
                             help="also fit the second stage's linear utility (or, with --no-, leave the recipe's out)")
-        stages.add_argument("--stage-weight", type=float, default=None,
+        stages.add_argument("--stage-weight", type=finite_float, default=None,
                             help="the second stage's weight against log F_t in the decision (recipe teach: 5.0)")
 
 
@@ -1259,7 +1290,7 @@ def _evaluate_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mcap", action="store_true", help="also write each planner run as ROS 2 MCAP in OUT/runs (Foxglove, RViz)")
     p.add_argument("--perception", metavar="PRESET|FILE", help=PERCEPTION_HELP + " (default: clean); the driver always sees the truth")
     _add_live_args(p, "the runs go one after another in this process")
-    _add_classes_arg(p)
+    _add_classes_arg(p, check=True)  # the scenarios and gen:N are read with the model's table
     p.set_defaults(func=_cmd_evaluate)
 
 
@@ -1301,8 +1332,10 @@ def _import_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("bag", help="a .bag file, a ROS 2 bag folder, or a .mcap / .db3 file")
     p.add_argument("--robot", required=True, help="terrapref-robot/1 file: topics, camera mounting, label map")
     p.add_argument("--out", required=True, help="recording folder to create")
-    p.add_argument("--rate", type=float, default=10.0, help="frames per second to keep (default 10, the planner's rate)")
+    p.add_argument("--rate", type=finite_float, default=10.0, help="frames per second to keep (default 10, the planner's rate)")
     p.add_argument("--force", action="store_true", help="replace an existing recording at --out (only once the import succeeds)")
+    p.add_argument("--profile", help="the driver's preference order, best first, stored with the recording (default: the robot file's "
+                                     "profile; with neither, the recording declares none and training refuses it)")
     _add_classes_arg(p)
     p.set_defaults(func=_cmd_import)
 
@@ -1313,7 +1346,7 @@ def _replay_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--robot", required=True, help="terrapref-robot/1 file")
     p.add_argument("--model", required=True, help="model file (terrapref train)")
     p.add_argument("--out", required=True, help="folder for replay.json, replay.png and the imported recording")
-    p.add_argument("--rate", type=float, default=10.0, help="frames per second to replay (default 10)")
+    p.add_argument("--rate", type=finite_float, default=10.0, help="frames per second to replay (default 10)")
     p.set_defaults(func=_cmd_replay)
 
 
@@ -1335,7 +1368,7 @@ def _ros1_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--robot", required=True, help="the robot file: topics, camera mounting, label map (terrapref-robot/1)")
     p.add_argument("--stamped", action="store_true",
                    help="publish geometry_msgs/TwistStamped (stamped with the frame decided on) instead of Twist (ROS parameter ~stamped)")
-    p.add_argument("--rate", type=float, help="commands per second between decisions (ROS parameter ~rate; default 20)")
+    p.add_argument("--rate", type=finite_float, help="commands per second between decisions (ROS parameter ~rate; default 20)")
     p.add_argument("--path-file", help="waypoints (YAML: a list, a mapping with waypoints, or a scenario such as terrapref route writes) of "
                                        "the reference path in the odometry frame, instead of the path topic (ROS parameter ~path_file)")
     p.add_argument("--cmd-topic", help="where to publish the command (ROS parameter ~cmd_topic; default: the robot file's command topic)")
@@ -1348,9 +1381,9 @@ def _route_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("scenario", help="the course (packaged name, file or gen:N): its terrain stands in for a prior map such as labelled aerial imagery")
     p.add_argument("--model", required=True, help="a model with an offset stage (recipe teach): its class prices and price of leaving the path")
     p.add_argument("--out", required=True, help="the scenario with the route as its path (.yaml); a figure is written beside it (.png)")
-    p.add_argument("--resolution", type=float, default=0.25,
+    p.add_argument("--resolution", type=finite_float, default=0.25,
                    help="search cell size [m], 0.1-2, taken as the nearest whole multiple of the map's cells (default 0.25)")
-    _add_classes_arg(p)
+    _add_classes_arg(p, check=True)  # the scenario is read with the model's table
     p.set_defaults(func=_cmd_route)
 
 

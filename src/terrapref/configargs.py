@@ -28,8 +28,9 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import typing
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 HELP, FLAG, CHOICES = "help", "flag", "choices"
@@ -58,13 +59,24 @@ def _nested(cls: type, f: dataclasses.Field) -> type | None:
     return None
 
 
-def _scalar(cls: type, f: dataclasses.Field) -> type:
-    """The type a flag's value is parsed as: the field's (``X | None`` gives X)."""
+def _scalar(cls: type, f: dataclasses.Field) -> Callable[[str], Any]:
+    """How a flag's value is parsed: as the field's type (``X | None`` gives X); a float must be finite."""
     hint = typing.get_type_hints(cls)[f.name]
     kinds = [a for a in (hint, *typing.get_args(hint)) if a in (int, float, str)]
     if not kinds:
         raise TypeError(f"{cls.__name__}.{f.name}: a flag needs an int, float or str field")
-    return kinds[0]
+    return finite_float if kinds[0] is float else kinds[0]
+
+
+def finite_float(text: str) -> float:
+    """A flag's number, refused (by argparse, naming the flag) when it is not finite: inf or nan."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
 
 
 def _fields(cls: type) -> Iterator[tuple[dataclasses.Field, type | None]]:

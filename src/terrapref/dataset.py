@@ -235,7 +235,8 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
         raise UserError("featurize", "no recordings given")
     first = recordings[0]
     if first.meta.get("profile") is None:
-        raise UserError(str(first.path / "meta.json"), "names no preference order; a model needs the order its driver had", field="profile")
+        raise UserError(str(first.path / "meta.json"), "names no preference order; a model needs the order its driver had "
+                        "(an imported drive: import it again with --profile, or add profile: to its robot file)", field="profile")
     for rec in recordings[1:]:
         for key in ("classes", "profile"):
             if rec.meta.get(key) != first.meta.get(key):

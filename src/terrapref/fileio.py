@@ -87,3 +87,62 @@ def write_bytes_atomic(path: str | Path, data: bytes, fsync: bool = False) -> Pa
 def write_text_atomic(path: str | Path, text: str, fsync: bool = False) -> Path:
     """Write UTF-8 ``text`` to ``path`` atomically."""
     return write_bytes_atomic(path, text.encode("utf-8"), fsync)
+
+
+@contextlib.contextmanager
+def output_folder(out: str | Path, force: bool, flag: str = "--out") -> Iterator[Path]:
+    """``out``, made fresh for one command to write all its outputs into, and held against every
+    other command while it does: the one rule for a folder output.
+
+    A folder that exists and holds anything is refused unless ``force``; with ``force`` it is moved
+    aside, and removed only once the block ends without an exception. Otherwise the new, unfinished
+    folder is kept as ``OUT.partial`` and the old one put back: a run never leaves two runs' files
+    mixed in one folder, and a replacement that fails loses nothing. Another command writing the
+    same folder (a lock on it) is refused, with or without ``force``.
+
+    Raises:
+        UserError: ``out`` exists and is not empty (without ``force``), or is being written.
+    """
+    from terrapref.errors import UserError
+
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    aside: Path | None = None
+    if out.is_dir() and any(out.iterdir()):
+        with _locked(out, flag):  # held while it is moved: refused if another command is writing it
+            if not force:
+                raise UserError(str(out), f"exists; choose another {flag}, or pass --force to replace it (the old folder stays "
+                                          "until the new one is complete)", field=flag)
+            aside = new_folder(out, ".old")
+            os.replace(out, aside / "old")
+    out.mkdir(exist_ok=True)
+    with _locked(out, flag):  # (another command that made the folder first in the meantime: the old one stays aside, hidden)
+        try:
+            yield out
+        except BaseException:
+            if aside is not None:
+                replace_dir(out, out.with_name(out.name + ".partial"))
+                os.replace(aside / "old", out)
+                shutil.rmtree(aside, ignore_errors=True)
+            raise
+    if aside is not None:
+        shutil.rmtree(aside, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _locked(folder: Path, flag: str) -> Iterator[None]:
+    """An exclusive lock on ``folder`` for the block; refused (UserError) if another process holds it."""
+    import fcntl
+
+    from terrapref.errors import UserError
+
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise UserError(str(folder), f"is being written by another terrapref command; choose another {flag} or wait for it to end",
+                            field=flag) from None
+        yield
+    finally:
+        os.close(fd)  # releases the lock

@@ -14,6 +14,11 @@ import numpy as np
 from terrapref.records import from_plain, to_plain
 
 
+MAX_IMAGE_PX = 4096
+"""The largest image side a camera may have [px]: a 4K segmentation; the planner's per-pixel tables
+of a larger one would not fit a robot's memory, and a size read from a file is bounded by it."""
+
+
 @dataclass(frozen=True)
 class CameraConfig:
     """Camera intrinsics and mounting.
@@ -44,8 +49,8 @@ class CameraConfig:
     max_range_m: float = 30.0
 
     def __post_init__(self) -> None:
-        if self.width_px <= 0 or self.height_px <= 0:
-            raise ValueError("image size must be > 0")
+        if not (0 < self.width_px <= MAX_IMAGE_PX and 0 < self.height_px <= MAX_IMAGE_PX):
+            raise ValueError(f"image size must be 1..{MAX_IMAGE_PX} px a side, got {self.width_px} x {self.height_px}")
         if not 0 < self.hfov_deg < 180:
             raise ValueError("hfov_deg must be in (0, 180)")
         if self.mount_height_m <= 0 or self.max_range_m <= 0:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -136,7 +137,12 @@ class RecordingWriter:
         self.count += 1
 
     def close(self, summary: dict[str, Any] | None = None) -> None:
-        """Mark the recording complete (atomically) with an optional summary."""
+        """Mark the recording complete (atomically) with an optional summary. A run that kept no
+        frame is no recording: it is removed (an old one it was to replace stays) and refused."""
+        if self.count == 0:
+            self.abort()
+            raise UserError(str(self.target), "not written: no frame reached the recording (a perception file that drops every frame, "
+                                              "or a drive ended before its first frame)")
         self._frames.close()
         self.meta.update(status="complete", frames=self.count, finished=datetime.now(timezone.utc).isoformat(timespec="seconds"))
         if summary:
@@ -231,6 +237,9 @@ class Recording:
         complete: False if the run did not finish (crash, kill, interruption).
         views: for a recording kept in memory (:class:`MemoryRecordingWriter`), each frame's
             segmentation as the simulation rendered it; None for one read from disk.
+        folder: the identity (device, inode) of the folder it was read from: a recording
+            replaced while it is read (``record --force`` into it) is another folder, and each
+            image read checks it, so a reader sees one whole recording or fails clearly.
     """
 
     path: Path
@@ -243,6 +252,7 @@ class Recording:
     image_files: tuple[str, ...]
     complete: bool
     views: tuple[SegmentationView, ...] | None = None
+    folder: tuple[int, int] | None = None
 
     def __len__(self) -> int:
         return len(self.times)
@@ -302,9 +312,16 @@ class Recording:
             return self.views[i].image
         path = self.path / self.image_files[i]
         try:
-            return read_label_png(path)
+            image = read_label_png(path)
         except (OSError, ValueError, SyntaxError) as exc:  # Pillow's errors on damaged or foreign files
+            self._check_same_folder()  # a missing image of a replaced recording is said as such
             raise UserError(str(path), f"not a single-channel 8-bit class-id PNG ({exc})") from None
+        self._check_same_folder()  # after the read: an image of a recording swapped in meanwhile is never used
+        return image
+
+    def _check_same_folder(self) -> None:
+        if self.folder is not None and _folder_identity(self.path) != self.folder:
+            raise UserError(str(self.path), "was replaced or removed while it was being read (another command wrote it); run this again")
 
     def images(self) -> np.ndarray:
         """All frames, shape (F, H, W) uint8."""
@@ -351,11 +368,14 @@ def read_recording(path: str | Path) -> Recording:
         UserError: not a recording, unknown format, or a malformed line/field (named).
     """
     root = Path(path)
+    folder = _folder_identity(root)
     meta = _read_meta(root)
     scenario = _read_scenario(root)
     _check_meta(meta, root / META)
     frames = _read_frames(root)
     complete = _is_complete(meta, frames, root / FRAMES)
+    if _folder_identity(root) != folder:  # what was read may be of two recordings
+        raise UserError(str(root), "was replaced or removed while it was being read (another command wrote it); run this again")
     rows, f = frames.rows, len(frames.rows)
     return Recording(
         path=root,
@@ -367,7 +387,17 @@ def read_recording(path: str | Path) -> Recording:
         labels=np.array([r["label"] for r in rows], dtype=np.int64),
         image_files=tuple(r["image"] for r in rows),
         complete=complete,
+        folder=folder,
     )
+
+
+def _folder_identity(root: Path) -> tuple[int, int] | None:
+    """The folder's (device, inode), None if it is gone."""
+    try:
+        st = os.stat(root)
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino
 
 
 @dataclass(frozen=True)

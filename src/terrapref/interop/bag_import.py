@@ -42,6 +42,7 @@ from terrapref.interop.robot import RobotConfig, load_waypoints
 from terrapref.progress import Progress
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.terrain.classes import UNKNOWN
+from terrapref.terrain.profile import PreferenceProfile
 from terrapref.vehicle import ControlSet
 
 TYPES = {
@@ -70,6 +71,7 @@ class ImportReport:
     image_gaps: int = 0
     longest_gap_s: float = 0.0
     path_source: str = ""
+    order: str = ""  # the preference order the recording carries, and where it came from
     duration_s: float = 0.0
     notes: list[str] = field(default_factory=list)
 
@@ -80,6 +82,7 @@ class ImportReport:
         if self.image_gaps:
             out.append(f"image gaps       {self.image_gaps} longer than max_gap_s (longest {self.longest_gap_s:.2f} s); frames on either side kept")
         out.append(f"path             {self.path_source}")
+        out.append(f"order            {self.order}")
         out += [f"note             {n}" for n in self.notes]
         return out
 
@@ -510,6 +513,7 @@ class _Request:
     classes: ClassTable
     rate_hz: float
     check_camera: Callable[[CameraConfig], None] | None = None
+    profile: PreferenceProfile | None = None  # the driver's declared order (None: none declared)
 
 
 @dataclass(frozen=True)
@@ -521,12 +525,15 @@ class ImportOptions:
         force: replace a recording already at the destination.
         classes: the recording's class table; None: the default one.
         check_camera: may refuse the log's camera (raising) before any image is read.
+        profile: the driver's preference order, over the robot file's; with neither, the
+            recording declares none (and says so), for training needs the order its driver had.
     """
 
     rate_hz: float = 10.0
     force: bool = False
     classes: ClassTable | None = None
     check_camera: Callable[[CameraConfig], None] | None = None
+    profile: PreferenceProfile | None = None
 
 
 def import_bag(bag_path: str | Path, robot: RobotConfig, out: str | Path, options: ImportOptions = ImportOptions(),
@@ -542,9 +549,17 @@ def import_bag(bag_path: str | Path, robot: RobotConfig, out: str | Path, option
     out.parent.mkdir(parents=True, exist_ok=True)
     bag = _Bag(bag_path)
     report = ImportReport(str(bag_path))
+    profile = options.profile or robot.profile
+    if options.profile is not None:
+        report.order = f"{' > '.join(profile.order)} (--profile)"
+    elif profile is not None:
+        report.order = f"{' > '.join(profile.order)} (the robot file's profile)"
+    else:
+        report.order = ("none declared (the robot file has no profile:); featurize and train need the order the driver had: "
+                        "import again with --profile or add profile: to the robot file")
     tmp = new_folder(out, ".importing")
     try:
-        _import(_Request(bag, robot, classes, rate_hz, check_camera), tmp / "rec", show_progress, report)
+        _import(_Request(bag, robot, classes, rate_hz, check_camera, profile), tmp / "rec", show_progress, report)
         replace_dir(tmp / "rec", out)
     finally:
         bag.close()
@@ -633,7 +648,7 @@ def _meta(req: _Request, scenario: dict, camera: CameraConfig, preference: Prefe
     """The recording's meta.json entries of an import."""
     return RecordingMeta(
         scenario=scenario["name"], camera=camera, preference_set=preference, sim=SimMeta(req.rate_hz), classes=req.classes,
-        profile=tuple(req.robot.profile.order), driver=ImportedInfo(req.bag.source, req.robot.source, req.robot.labels.name),
+        profile=tuple(req.profile.order) if req.profile is not None else None, driver=ImportedInfo(req.bag.source, req.robot.source, req.robot.labels.name),
         path=tuple((x, y) for x, y in placement.path.tolist()), origin_shift_m=(float(placement.shift[0]), float(placement.shift[1])),
     )
 

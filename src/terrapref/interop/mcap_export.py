@@ -68,6 +68,7 @@ class RunFrames:
     probs: np.ndarray | None = None  # (F, m) F_t, when a planner drove
     costmap: Callable[[int, np.ndarray], Costmap | None] | None = None  # frame, its class ids -> the costmap to publish then
     stops: tuple[str | None, ...] | None = None  # (F,) why the planner stopped at each frame (None: it drove), when a planner drove
+    profile: tuple[str, ...] | None = None  # the driver's declared preference order (a recording's), for the robot file
 
 
 COSTMAP_TOPICS = {"costmap": (f"{PREFIX}/costmap", "nav_msgs/msg/OccupancyGrid"), "costmap_grid": (f"{PREFIX}/costmap_grid", "foxglove_msgs/msg/Grid")}
@@ -146,7 +147,7 @@ def write_bag(out: str | Path, run: RunFrames, ros1: bool = False, robot_file: b
             labels_file = out.with_name(out.name + ".labels.yaml")
             write_text_atomic(labels_file, _label_map_yaml(run.classes))
             labels = f"{labels_file.name}   # the ids of the class table the run was made with (terrapref import --classes FILE)"
-        write_text_atomic(out.with_name(out.name + ".robot.yaml"), _robot_yaml(run.camera, labels))
+        write_text_atomic(out.with_name(out.name + ".robot.yaml"), _robot_yaml(run.camera, labels, run.profile))
     return out
 
 
@@ -272,16 +273,17 @@ def _label_map_yaml(classes: ClassTable) -> str:
             f"ids:\n{ids}  {UNKNOWN}: unknown\n")
 
 
-def _robot_yaml(cam: CameraConfig, labels: str) -> str:
-    """The terrapref-robot/1 file that imports the exported topics back with ``cam``'s mounting
-    and ``labels`` (the robot file's ``labels`` entry)."""
+def _robot_yaml(cam: CameraConfig, labels: str, profile: tuple[str, ...] | None = None) -> str:
+    """The terrapref-robot/1 file that imports the exported topics back with ``cam``'s mounting,
+    ``labels`` (the robot file's ``labels`` entry) and the driver's declared ``profile``, if any."""
+    order = f"profile: [{', '.join(profile)}]   # the driver's declared order, from the recording\n" if profile else ""
     return (
         "format: terrapref-robot/1\n"
         f"topics:\n  segmentation: {PREFIX}/labels\n  camera_info: {PREFIX}/camera_info\n  odometry: {PREFIX}/odom\n"
         f"  command: {PREFIX}/cmd_vel\n  path: {PREFIX}/path\n"
         f"camera:\n  height_m: {cam.mount_height_m!r}\n  pitch_deg: {cam.pitch_deg!r}\n  forward_m: {cam.mount_forward_m!r}\n"
         f"  yaw_deg: {cam.yaw_deg!r}\n  max_range_m: {cam.max_range_m!r}\n"
-        f"labels: {labels}\n"
+        f"labels: {labels}\n" + order
     )
 
 
@@ -326,4 +328,9 @@ def recording_frames(rec) -> RunFrames:
     path = np.asarray(rec.meta.get("path") or rec.scenario["path"]["waypoints"], dtype=float)
     return RunFrames(times=rec.times, poses=rec.poses, commands=rec.commands, image=rec.image, chosen=rec.labels, path=path,
                      camera=CameraConfig.from_dict(rec.meta["camera"]), classes=classes,
-                     preference=PreferenceSetConfig.from_dict(rec.meta["preference_set"]))
+                     preference=PreferenceSetConfig.from_dict(rec.meta["preference_set"]), profile=_declared_order(rec.meta.get("profile")))
+
+
+def _declared_order(profile: object) -> tuple[str, ...] | None:
+    """A recording's ``profile`` entry as an order, or None when it declares none."""
+    return tuple(str(name) for name in profile) if isinstance(profile, list) and profile else None

@@ -27,6 +27,7 @@ from terrapref.interop.labels import unlisted_message
 from terrapref.interop.runtime import PlannerRuntime, RuntimeDecision
 from terrapref.learning.model_file import LoadedModel
 from terrapref.planner.costmap import Costmap
+from terrapref.scenario.path import ReferencePath
 from terrapref.stops import STALE
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Command, Pose
@@ -67,7 +68,7 @@ class PlannerNodeCore:
         self.path = None if path is None else np.asarray(path, dtype=float)
         self.odometry: deque[tuple[float, float, float, float]] = deque()  # (stamp [s], x, y, yaw)
         self.skipped = {"before the calibration or the path": 0, "without odometry at the stamp": 0, "out of order": 0,
-                        "superseded while waiting for odometry": 0}
+                        "superseded while waiting for odometry": 0, "paths of fewer than two distinct points": 0}
         self.decided = 0  # frames decided on
         self.on_decision: Callable[[RuntimeDecision], None] | None = None  # told of every decision, whichever message brought it
         self._pending: tuple[str, object, str, float] | None = None  # an image waiting for odometry at its stamp
@@ -101,14 +102,18 @@ class PlannerNodeCore:
                 self.runtime.set_path(self.path)
 
     def on_path(self, msg) -> None:
-        """A nav_msgs/Path of two poses or more (re)sets the reference path."""
+        """A nav_msgs/Path of two distinct points or more (re)sets the reference path; another is skipped (counted)."""
         with self._lock:
-            xy = np.array([(p.pose.position.x, p.pose.position.y) for p in msg.poses], dtype=float)
-            if len(xy) >= 2 and np.isfinite(xy).all():
-                self.path = xy
-                self._live = None  # the live view shows a new run along the new path
-                if self.runtime is not None:
-                    self.runtime.set_path(xy)
+            xy = np.array([(p.pose.position.x, p.pose.position.y) for p in msg.poses], dtype=float).reshape(-1, 2)
+            try:
+                ReferencePath(xy)
+            except ValueError:  # fewer than two distinct finite points: the path in force stays
+                self.skipped["paths of fewer than two distinct points"] += 1
+                return
+            self.path = xy
+            self._live = None  # the live view shows a new run along the new path
+            if self.runtime is not None:
+                self.runtime.set_path(xy)
 
     def on_odometry(self, msg) -> RuntimeDecision | None:
         """nav_msgs/Odometry, or a PoseStamped / PoseWithCovarianceStamped; the decision on an

@@ -44,6 +44,7 @@ import yaml
 from terrapref.errors import ConfigError, Problem, UserError
 from terrapref.interop.labels import LabelMap, load_label_map
 from terrapref.planner.stop import StopConfig
+from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.terrain.profile import PreferenceProfile
 from terrapref.yamlio import load_yaml_text, read_yaml_mapping
@@ -63,7 +64,7 @@ class RobotConfig:
     topics: dict[str, str]
     camera: dict[str, float | str]  # height_m, pitch_deg, forward_m, yaw_deg, max_range_m; or tf (a base frame) and max_range_m
     labels: LabelMap
-    profile: PreferenceProfile
+    profile: PreferenceProfile | None  # the operator's declared order; None when the file declares none
     path_file: Path | None
     max_gap_s: float
     stop: StopConfig = field(default_factory=StopConfig)
@@ -93,7 +94,7 @@ def load_robot(path: str | Path, classes: ClassTable | None = None) -> RobotConf
     here = Path(path).parent
     labels = _load_labels(data["labels"], here, classes, source)
     profile_data = data.get("profile")
-    profile = PreferenceProfile.parse(profile_data, classes, f"{source}: profile") if profile_data is not None else PreferenceProfile.default(classes)
+    profile = PreferenceProfile.parse(profile_data, classes, f"{source}: profile") if profile_data is not None else None
     path_file = data.get("path_file")
     resolved = None
     if path_file is not None:
@@ -215,6 +216,8 @@ def load_waypoints(path: Path, source: str) -> np.ndarray:
         points = np.asarray(data, dtype=float)
     except (TypeError, ValueError):
         points = np.zeros((0,))
-    if points.ndim != 2 or points.shape[1] != 2 or len(points) < 2 or not np.isfinite(points).all():
-        raise UserError(source, f"{path}: expected at least two finite [x, y] waypoints", field="path_file")
+    try:
+        ReferencePath(points)
+    except ValueError:
+        raise UserError(source, f"{path}: expected at least two distinct finite [x, y] waypoints", field="path_file") from None
     return points

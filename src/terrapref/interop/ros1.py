@@ -17,7 +17,10 @@ from __future__ import annotations
 
 import importlib
 import math
+import os
+import socket
 import sys
+import urllib.parse
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -97,6 +100,7 @@ def run_node(model_path: str, robot_path: str, options: NodeOptions | None = Non
 
     model = load_model(model_path)
     robot = load_robot(robot_path, model.classes)
+    check_master(os.environ.get("ROS_MASTER_URI", DEFAULT_MASTER_URI))  # rospy would wait for one for ever
     rospy.init_node("terrapref", anonymous=False)
     opts = (options or NodeOptions()).resolved(rospy.get_param)
     path = load_waypoints(Path(opts.path_file), "path_file") if opts.path_file else \
@@ -109,6 +113,27 @@ def run_node(model_path: str, robot_path: str, options: NodeOptions | None = Non
     rospy.spin()
     if node.failure:
         raise node.failure[0]
+
+
+DEFAULT_MASTER_URI = "http://localhost:11311"
+MASTER_TIMEOUT_S = 3.0
+
+
+def check_master(uri: str, timeout_s: float = MASTER_TIMEOUT_S) -> None:
+    """Refuse, within ``timeout_s``, a ROS_MASTER_URI that is not http://HOST:PORT or where nothing
+    answers (rospy.init_node would wait for a master for ever)."""
+    try:
+        parsed = urllib.parse.urlsplit(uri)
+        scheme, host, port = parsed.scheme, parsed.hostname, parsed.port
+    except ValueError:  # a port that is not a number or out of range, a bracket left open
+        scheme = host = port = None
+    if scheme not in ("http", "https") or not host or port is None:
+        raise UserError("ROS_MASTER_URI", f"{uri!r} is not a ROS master's URI; expected http://HOST:PORT (e.g. {DEFAULT_MASTER_URI})")
+    try:
+        socket.create_connection((host, port), timeout=timeout_s).close()
+    except OSError as exc:
+        raise UserError("ROS_MASTER_URI", f"no ROS master at {uri} ({exc.strerror or exc}); start roscore there or point ROS_MASTER_URI "
+                                          "at the robot's master") from None
 
 
 class _Node:

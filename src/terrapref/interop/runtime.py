@@ -28,6 +28,7 @@ from terrapref.learning.model_file import LoadedModel, load_model
 from terrapref.planner.costmap import Costmap
 from terrapref.planner.planner import Planner
 from terrapref.planner.stop import StopConfig
+from terrapref.scenario.path import ReferencePath
 from terrapref.stops import STALE
 from terrapref.terrain.classes import UNKNOWN, ForeignIds
 from terrapref.vehicle import Command, Pose
@@ -100,8 +101,7 @@ class PlannerRuntime:
     def set_path(self, waypoints: np.ndarray) -> None:
         """Follow a new reference path, (N, 2) [m] in the frame the poses are given in."""
         waypoints = np.asarray(waypoints, dtype=float)
-        if waypoints.ndim != 2 or waypoints.shape[1] != 2 or len(waypoints) < 2 or not np.isfinite(waypoints).all():
-            raise ValueError(f"a path is at least two finite (x, y) points, got shape {waypoints.shape}")
+        ReferencePath(waypoints)  # refuses (ValueError) fewer than two distinct finite points, before anything changes
         self.planner.set_path(waypoints)
         self.last = None
 

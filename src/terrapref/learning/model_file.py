@@ -80,6 +80,11 @@ def save_model(path: str | Path, classifier: ClassifierConfig, weights: dict[str
 
 
 def _write(path: str | Path, weights: dict[str, np.ndarray], header: dict[str, Any]) -> Path:
+    """Write a model file; weights that are not finite (a diverged fit) are refused, nothing written."""
+    for name, value in weights.items():
+        if not np.isfinite(value).all():
+            raise UserError(str(path), f"not written: {int(np.size(value) - np.isfinite(value).sum())} of its weights are not finite "
+                                       "(NaN or inf: the fit diverged; a smaller --lr may help)", field=name)
     return write_tensor_file(path, {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in weights.items()}, header)
 
 

@@ -27,6 +27,7 @@ class RecordingSummary:
     world: WorldMap
     quit: bool = False  # the person ended the drive (Esc) before the goal
     lethal_contact: str | None = None  # what the drive's summary says of lethal terrain under the vehicle
+    order: tuple[str, ...] | None = None  # the driver's declared preference order; None: the recording declares none
 
     @property
     def status(self) -> str:
@@ -40,10 +41,12 @@ class RecordingSummary:
             f"frames     {self.frames}",
             f"duration   {self.duration_s:.1f} s",
             f"scenario   {self.scenario.name}",
+            f"order      {' > '.join(self.order)}" if self.order else
+            "order      none declared (zones are scored under the class table's order; training needs the driver's)",
             "labels     (index: w [rad/s]  count)",
         ]
         if self.lethal_contact is not None:
-            out.insert(4, f"lethal     the drive had lethal terrain under the vehicle: {self.lethal_contact}")
+            out.insert(5, f"lethal     the drive had lethal terrain under the vehicle: {self.lethal_contact}")
         peak = max(int(self.label_counts.max()), 1)
         for i, n in enumerate(self.label_counts):
             out.append(f"  {i:3d}: {self.control.w_rps[i]:+5.2f}  {int(n):6d}  {'#' * round(40 * int(n) / peak)}")
@@ -70,7 +73,8 @@ def summarise(recording: Recording) -> RecordingSummary:
     zones = [(z, z.reached) for z in score_zones(recording.poses, scenario, world, profile)]
     run = meta.get("summary") if isinstance(meta.get("summary"), dict) else {}
     return RecordingSummary(len(recording), recording.duration_s, recording.complete, counts, control, zones, scenario, world,
-                            quit=bool(run.get("quit")), lethal_contact=recording.lethal_contact())
+                            quit=bool(run.get("quit")), lethal_contact=recording.lethal_contact(),
+                            order=tuple(meta["profile"]) if meta.get("profile") else None)
 
 
 def save_driven_path(summary: RecordingSummary, recording: Recording, out: str | Path) -> Path:

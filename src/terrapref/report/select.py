@@ -81,18 +81,34 @@ def parse_orders(text: str, classes: ClassTable | None = None) -> tuple[tuple[st
         total = math.factorial(len(classes.terrain_names))
         if not 1 <= n <= total:
             raise ValueError(f"random:N needs 1 <= N <= {total} (the orders of {len(classes.terrain_names)} classes), got {n}")
-        rng = np.random.default_rng(RANDOM_ORDERS_SEED)
-        orders: list[tuple[str, ...]] = []
-        while len(orders) < n:
-            order = (*(str(c) for c in rng.permutation(list(classes.terrain_names))), *last)
-            if order not in orders:
-                orders.append(order)
-        return tuple(orders)
+        return tuple((*order, *last) for order in _draw_orders(classes.terrain_names, n, np.random.default_rng(RANDOM_ORDERS_SEED)))
     orders = []
     for item in text.split(";"):
         names = tuple(n.strip() for n in item.split(",") if n.strip())
         orders.append(names if not last or last[0] in names else (*names, *last))
     return tuple(orders)
+
+
+def _draw_orders(names: tuple[str, ...], n: int, rng: np.random.Generator) -> list[tuple[str, ...]]:
+    """``n`` distinct orders of ``names`` drawn at random: permutations drawn until ``n`` differ while
+    that takes few draws (at most half of all orders wanted), else ``n`` ranks of all orders drawn
+    without replacement and unranked, so that no ``n`` takes more than one draw per order."""
+    total = math.factorial(len(names))
+    if n <= total // 2:
+        orders: dict[tuple[str, ...], None] = {}  # insertion-ordered, with constant-time membership
+        while len(orders) < n:
+            orders.setdefault(tuple(str(c) for c in rng.permutation(list(names))), None)
+        return list(orders)
+    return [_unrank(names, int(rank)) for rank in rng.choice(total, size=n, replace=False)]
+
+
+def _unrank(names: tuple[str, ...], rank: int) -> tuple[str, ...]:
+    """The ``rank``-th order of ``names`` (lexicographic by position, factorial number system)."""
+    left, order = list(names), []
+    for k in range(len(names) - 1, -1, -1):
+        digit, rank = divmod(rank, math.factorial(k))
+        order.append(left.pop(digit))
+    return tuple(order)
 
 
 @dataclass(frozen=True)

@@ -14,13 +14,19 @@ import numpy as np
 import yaml
 
 from terrapref.scenario.loader import FORMAT
+from terrapref.terrain import ClassTable
 
 
 class CourseBuilder:
-    """A course under construction: its trail, and the patches and zones placed along it."""
+    """A course under construction: its trail, and the patches and zones placed along it.
 
-    def __init__(self, name: str, description: str, size_m: tuple[float, float], waypoints: Sequence[Sequence[float]], background: str = "grass"):
-        self.name, self.description, self.size_m, self.background = name, description, size_m, background
+    With ``classes`` the course carries that class table (the file's ``classes:``), so that every
+    command reads it with its own table; without, it is read with the default table or ``--classes``.
+    """
+
+    def __init__(self, name: str, description: str, size_m: tuple[float, float], waypoints: Sequence[Sequence[float]], background: str = "grass",
+                 classes: ClassTable | None = None):
+        self.name, self.description, self.size_m, self.background, self.classes = name, description, size_m, background, classes
         self.wp = np.array(waypoints, dtype=float)
         self.seg_len = np.linalg.norm(np.diff(self.wp, axis=0), axis=1)
         self.s = np.concatenate([[0], np.cumsum(self.seg_len)])
@@ -78,6 +84,7 @@ class CourseBuilder:
             "terrain": self.terrain,
             "path": {"waypoints": [[round(float(x), 3), round(float(y), 3)] for x, y in self.wp]},
             "zones": self.zones,
+            **({"classes": self.classes.to_dict()} if self.classes is not None else {}),
         }
 
     def to_yaml(self) -> str:

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from terrapref.errors import Problem, ScenarioError, UserError
+from terrapref.errors import ConfigError, Problem, ScenarioError, UserError
 from terrapref.scenario.model import AVOID, BEST, Scenario, TerrainPatch, Zone, grid_shape
 from terrapref.scenario.shapes import Circle, Polygon, Rectangle, Shape
 from terrapref.terrain import ClassTable, default_classes
@@ -21,7 +21,7 @@ from terrapref.yamlio import read_yaml_mapping
 FORMAT = "terrapref-scenario/1"
 MAX_CELLS = 100_000_000
 _NAME = re.compile(r"[A-Za-z0-9_-]+")
-_TOP_KEYS = frozenset({"format", "name", "description", "world", "terrain", "path", "start", "zones"})
+_TOP_KEYS = frozenset({"format", "name", "description", "world", "terrain", "path", "start", "zones", "classes"})
 _REQUIRED_KEYS = frozenset({"format", "name", "world", "path"})
 _SHAPE_KEYS = ("polygon", "circle", "rectangle")
 
@@ -188,14 +188,16 @@ def _on_map(p: np.ndarray, size_m: tuple[float, float]) -> np.ndarray:
 
 
 def parse_scenario(data: dict[str, Any], source: str = "", classes: ClassTable | None = None) -> Scenario:
-    """Validate a parsed mapping and build a :class:`Scenario`.
+    """Validate a parsed mapping and build a :class:`Scenario`, its class names read with
+    ``classes`` or the table the scenario carries (``classes:``; neither: the default table).
 
     Raises:
-        ScenarioError: listing every problem found, each with its field path.
+        ScenarioError: listing every problem found, each with its field path; a carried table
+            that is not ``classes`` (by :meth:`ClassTable.same_classes`) alone.
     """
-    classes = classes or default_classes()
     c = _Checker()
     data = _header(c, data, source)
+    classes = _carried_table(c, data, source, classes)
     name = _name(c, data)
     description = _description(c, data)
     world = _world(c, data, classes)
@@ -249,6 +251,27 @@ def _header(c: _Checker, data: dict[str, Any], source: str) -> dict[str, Any]:
         raise ScenarioError(source, c.problems)
     top = c.mapping(data, "", _REQUIRED_KEYS, _TOP_KEYS - _REQUIRED_KEYS)
     return data if top is None else top
+
+
+def _carried_table(c: _Checker, data: dict[str, Any], source: str, given: ClassTable | None) -> ClassTable:
+    """The table the scenario is read with: ``given``, else the one it carries, else the default.
+
+    A course made for a class table of one's own carries it (``classes:``, the fields of a
+    ``terrapref-classes/1`` file), so that it reads without ``--classes``; a table given as well
+    must be the same table, or every class name would mean another class.
+    """
+    if "classes" not in data:
+        return given or default_classes()
+    try:
+        carried = ClassTable.from_dict(data["classes"], source)
+    except ConfigError as exc:
+        for problem in exc.problems:
+            c.fail(f"classes.{problem.field}" if problem.field else "classes", problem.message)
+        raise ScenarioError(source, c.problems) from None
+    if given is not None and not carried.same_classes(given):
+        c.fail("classes", f"the scenario carries the class table of {', '.join(carried.names)}, not the one given ({', '.join(given.names)})")
+        raise ScenarioError(source, c.problems)
+    return given or carried
 
 
 def _name(c: _Checker, data: dict[str, Any]) -> str | None:

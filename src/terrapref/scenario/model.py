@@ -75,7 +75,8 @@ class Scenario:
         return float(np.linalg.norm(np.diff(self.waypoints, axis=0), axis=1).sum())
 
     def to_dict(self) -> dict:
-        """The scenario as a ``terrapref-scenario/1`` mapping (round-trips through the loader)."""
+        """The scenario as a ``terrapref-scenario/1`` mapping (round-trips through the loader); a
+        scenario of a class table other than the default carries it (``classes:``)."""
         out: dict = {
             "format": "terrapref-scenario/1",
             "name": self.name,
@@ -90,6 +91,8 @@ class Scenario:
         }
         if self.description:
             out["description"] = self.description
+        if self.classes != default_classes():
+            out["classes"] = self.classes.to_dict()
         return out
 
 

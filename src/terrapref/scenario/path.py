@@ -16,9 +16,13 @@ class ReferencePath:
 
     def __init__(self, waypoints: np.ndarray) -> None:
         wp = np.asarray(waypoints, dtype=float)
+        if wp.ndim != 2 or wp.shape[1:] != (2,) or not np.isfinite(wp).all():
+            raise ValueError(f"a path is a list of finite (x, y) points, got shape {wp.shape}")
         keep = np.ones(len(wp), dtype=bool)
         keep[1:] = np.any(np.diff(wp, axis=0) != 0, axis=1)  # drop repeated points
         self.waypoints = wp[keep]
+        if len(self.waypoints) < 2:
+            raise ValueError(f"a path needs at least two distinct points; its {len(wp)} point(s) are all {wp[0].tolist() if len(wp) else 'missing'}")
         self._a = self.waypoints[:-1]
         self._d = np.diff(self.waypoints, axis=0)
         self._len = np.linalg.norm(self._d, axis=1)

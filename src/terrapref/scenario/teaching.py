@@ -128,11 +128,11 @@ def fits(classes: ClassTable) -> bool:
     return course_length(situations(classes, True)) <= BUDGET_M
 
 
-def follow_up_course(classes: ClassTable, open_pairs: Sequence[tuple[str, str]], name: str, driven: str) -> CourseBuilder:
-    """The follow-up course of ``open_pairs``, which a drive of the course ``driven`` left open."""
+def follow_up_course(classes: ClassTable, open_pairs: Sequence[tuple[str, str]], name: str, driven: str, drives: int = 1) -> CourseBuilder:
+    """The follow-up course of ``open_pairs``, which ``drives`` drives of the course(s) ``driven`` left open together."""
     listed = "; ".join(f"{a} vs {b}" for a, b in open_pairs)
-    return build_course(classes, follow_up(classes, open_pairs), name,
-                        f"Follow-up course: the pairs the drive of {driven} left open ({listed}), each both ways round.")
+    what = f"the drive of {driven}" if drives == 1 else f"{drives} drives of {driven} together"
+    return build_course(classes, follow_up(classes, open_pairs), name, f"Follow-up course: the pairs {what} left open ({listed}), each both ways round.")
 
 
 def follow_up(classes: ClassTable, open_pairs: Sequence[tuple[str, str]]) -> list[Situation]:
@@ -186,7 +186,7 @@ def build_course(classes: ClassTable, items: Sequence[Situation], name: str, des
     legs = [START_M + lengths[0], *lengths[1:]]
     legs[-1] += END_M
     wp, size = trail(legs, _turns(len(items)))
-    c = CourseBuilder(name, description, size, [tuple(p) for p in wp], classes.background)
+    c = CourseBuilder(name, description, size, [tuple(p) for p in wp], classes.background, classes)
     order = {n: k for k, n in enumerate(classes.names)}
     s, pairs = START_M, 0
     for k, item in enumerate(items):

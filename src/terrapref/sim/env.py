@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
@@ -294,6 +294,8 @@ class OffRoadNavEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
         super().reset(seed=seed)
+        if options is not None and not isinstance(options, Mapping):
+            raise ValueError(f"reset options: expected a dict with 'scenario' and/or 'start', got {type(options).__name__}")
         options = dict(options or {})
         unknown = set(options) - {"scenario", "start"}
         if unknown:
@@ -306,7 +308,10 @@ class OffRoadNavEnv(gym.Env):
         self.sim = self._simulation(course if course is not None else self._draw_course())
         path = self.sim.path
         if options.get("start") is not None:
-            start = np.asarray(options["start"], dtype=float)
+            try:
+                start = np.asarray(options["start"], dtype=float)
+            except (TypeError, ValueError):
+                start = np.zeros(0)
             if start.shape != (3,) or not np.isfinite(start).all():
                 raise ValueError(f"reset options: 'start' must be three finite numbers (x [m], y [m], yaw [rad]), got {options['start']!r}")
             sx, sy = self.sim.scenario.size_m

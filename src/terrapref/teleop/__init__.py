@@ -9,9 +9,10 @@ naming the extra.
 The window shows what the learner will see, the camera's segmentation image, with the preference
 set S drawn on it and the trajectory of the current stick's label highlighted, so the driver
 sees which discrete command each stick position is recorded as; a heads-up display with the
-progress along the path, the next patch, the terrain under the vehicle and the label as a turn;
-a top-down inset of the map with the reference path, the vehicle and its trace; a stick gauge,
-the terrain legend and the controls.
+progress along the path, the next patch, the terrain under the vehicle, the label as a turn and
+the distance to the route; alerts when a push turns the vehicle or it is off the route, with an
+arrow back to the route; a top-down inset of the map with the reference path, the vehicle, its
+trace and where the pushes began; a stick gauge, the terrain legend and the controls.
 
 - ``stick``: keyboard, mouse and gamepad input.
 - ``guide``: what the display says about the course, and where the map ends.

@@ -1,5 +1,6 @@
 """What the driving window tells the driver about the course: progress, the next patch, the
-terrain underneath, the label as a turn, and where the map ends. No drawing here."""
+terrain underneath, the label as a turn, where the route is, and where the map ends. No drawing
+here."""
 
 from __future__ import annotations
 
@@ -20,6 +21,14 @@ PATCH_REACH_M = 3.0
 the preference set reaches about 3 m to each side over its first metres)."""
 EDGE_MARGIN_M = 1.0
 """The vehicle stops when its next frame would bring its centre nearer the map's edge than this [m]."""
+OFF_ROUTE_M = PATCH_REACH_M
+"""Farther than this from the route the vehicle is off it [m]: the patches the display names
+(those within :data:`PATCH_REACH_M` of the route) are no longer on its way."""
+REJOIN_AHEAD_M = 3.0
+"""The way back points at the route this far ahead of its nearest point [m], so that the driver
+rejoins it heading along it rather than square to it."""
+ON_LINE_M = 0.25
+"""Nearer the route than this, the display says the vehicle is on it [m]."""
 
 
 @dataclass(frozen=True)
@@ -35,6 +44,11 @@ class Readout:
         turn_deg_s: the label's turn rate [deg/s], positive to the left.
         radius_m: the label's turn radius at the control set's speed [m] (inf: straight).
         at_edge: the vehicle is held at the map's edge.
+        offset_m: the vehicle's distance from the route [m] (the cross-track error, >= 0).
+        foot_rad: the bearing of the route's nearest point from the vehicle's heading [rad],
+            positive to the left (which side the route lies).
+        rejoin_rad: the bearing of the way back onto the route (:data:`REJOIN_AHEAD_M` ahead
+            of its nearest point) from the vehicle's heading [rad], positive to the left.
     """
 
     progress_m: float
@@ -46,10 +60,28 @@ class Readout:
     turn_deg_s: float
     radius_m: float
     at_edge: bool = False
+    offset_m: float = 0.0
+    foot_rad: float = 0.0
+    rejoin_rad: float = 0.0
+
+    @property
+    def off_route(self) -> bool:
+        """The vehicle is farther from the route than :data:`OFF_ROUTE_M`."""
+        return self.offset_m > OFF_ROUTE_M
+
+    def warning(self) -> str | None:
+        """What to do when off the route ("OFF ROUTE: 7 m away, turn left"); None on it."""
+        if not self.off_route:
+            return None
+        degrees = math.degrees(self.rejoin_rad)
+        way = "ahead" if abs(degrees) < 20.0 else f"turn {'left' if degrees > 0 else 'right'}"
+        return f"OFF ROUTE: {self.offset_m:.0f} m away, {way}" + (" (it is behind you)" if abs(degrees) > 90.0 else "")
 
     def lines(self) -> list[str]:
         share = self.progress_m / self.length_m if self.length_m > 0 else 0.0
-        if self.next_patch is None:
+        if self.off_route:  # the patches are counted along the route, which the vehicle is not on
+            patch = "next patch: back on the route first"
+        elif self.next_patch is None:
             patch = "next patch: none ahead"
         elif self.next_patch_m <= SAMPLE_STEP_M:
             patch = f"patch here: {self.next_patch}"
@@ -57,7 +89,11 @@ class Readout:
             patch = f"next patch: {self.next_patch} in {self.next_patch_m:.0f} m"
         side = "left" if self.turn_deg_s > 0.05 else "right" if self.turn_deg_s < -0.05 else ""
         turn = f"label {self.label}: {f'{side} {abs(self.turn_deg_s):.0f} deg/s, a {self.radius_m:.1f} m radius' if side else 'straight'}"
-        return [f"path {self.progress_m:5.1f} / {self.length_m:.0f} m ({share:.0%})", patch, f"under the vehicle: {self.under}", turn]
+        if self.offset_m < ON_LINE_M:
+            route = "route: on it"
+        else:
+            route = f"route: {self.offset_m:.1f} m to your {'left' if self.foot_rad > 0 else 'right'}"
+        return [f"path {self.progress_m:5.1f} / {self.length_m:.0f} m ({share:.0%})", patch, f"under the vehicle: {self.under}", turn, route]
 
 
 class CourseGuide:
@@ -93,6 +129,8 @@ class CourseGuide:
             self.radius_m = np.where(w != 0.0, control.v_mps / np.abs(w), np.inf)
 
     def readout(self, pose: Pose, progress_m: float, label: int, at_edge: bool = False) -> Readout:
+        """The display for the vehicle at ``pose`` having come ``progress_m`` [m] along the path
+        (the simulation's progress), its stick on ``label``."""
         i = min(int(math.ceil(progress_m / SAMPLE_STEP_M - 1e-9)), len(self.s) - 1)
         # Beside a patch now, if the sample just passed has one.
         j = i - 1 if i > 0 and self.cls[i - 1] >= 0 else int(self.next_index[i])
@@ -102,7 +140,27 @@ class CourseGuide:
             name, dist = self.names.get(int(self.cls[j]), "?"), max(0.0, float(self.s[j]) - progress_m)
         under_id = int(self.world.class_at(np.array(pose[:2])))
         under = "off the map" if under_id == 255 else self.names.get(under_id, "?")
-        return Readout(progress_m, self.path.length_m, under, name, dist, label, float(self.turn_deg_s[label]), float(self.radius_m[label]), at_edge)
+        offset_m, foot_rad, rejoin_rad = self.where_the_route_is(pose, progress_m)
+        return Readout(progress_m, self.path.length_m, under, name, dist, label, float(self.turn_deg_s[label]), float(self.radius_m[label]), at_edge,
+                       offset_m, foot_rad, rejoin_rad)
+
+    def where_the_route_is(self, pose: Pose, progress_m: float) -> tuple[float, float, float]:
+        """(distance [m], bearing of its nearest point [rad], bearing of the way back [rad]): the
+        route seen from ``pose``, bearings from the heading and positive to the left.
+
+        The nearest point is searched near ``progress_m`` (as the simulation tracks progress),
+        so that a path passing near itself cannot pull the way back to a later stretch.
+        """
+        x, y, yaw = pose
+        s, offset = self.path.project(np.array([x, y]), progress_m - 2.0, progress_m + 10.0)
+        fx, fy = self.path.point_at(float(s))
+        tx, ty = self.path.point_at(float(min(s + REJOIN_AHEAD_M, self.path.length_m)))
+        return abs(float(offset)), _bearing(fx - x, fy - y, yaw), _bearing(tx - x, ty - y, yaw)
+
+
+def _bearing(dx: float, dy: float, yaw: float) -> float:
+    """The direction of (dx, dy) [m] from heading ``yaw`` [rad], in [-pi, pi), positive to the left."""
+    return (math.atan2(dy, dx) - yaw + math.pi) % (2 * math.pi) - math.pi
 
 
 def stays_on_map(world: WorldMap, pose: Pose, command: Command, period_s: float, margin_m: float = EDGE_MARGIN_M) -> bool:

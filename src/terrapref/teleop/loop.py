@@ -16,6 +16,9 @@ The map's edge is a boundary: when the next frame would bring the vehicle within
 on the spot, v = 0) and the frame is not recorded, so a recording never holds frames taken off or
 at the edge of the map.
 
+Pushes (the session's disturbances, on unless turned off): while one turns the vehicle, an alert
+says which way, and the map marks where it began; the start screen says they will come.
+
 Riding along with a model: the planner drives; any stick input (an arrow, Down/C, the mouse
 button over the view, the pad off centre) takes over from the planner's current command, and the
 frames the driver steers are recorded as corrections (label: the driver's command); after
@@ -59,6 +62,8 @@ COUNTDOWN_S = 3.0
 """From the start key to the first recorded frame, and again when resuming from a pause [s]."""
 HANDBACK_S = 1.5
 """Riding along, the planner drives again after this long without stick input [s]."""
+PUSH_SHOWN_S = 1.0
+"""A push's alert stays this long after the push ends, so that a short one is seen too [s]."""
 
 START_KEYS = (pygame.K_SPACE, pygame.K_RETURN, pygame.K_KP_ENTER, pygame.K_p)
 QUIT_KEYS = (pygame.K_ESCAPE, pygame.K_q)
@@ -89,6 +94,7 @@ class TeleopResult:
         planner_frames: frames the planner drove (riding along).
         contact_s: time with lethal terrain under the footprint [s].
         contact_m: distance driven so [m].
+        pushes: pushes that turned the vehicle.
     """
 
     frames: int
@@ -101,6 +107,7 @@ class TeleopResult:
     planner_frames: int = 0
     contact_s: float = 0.0
     contact_m: float = 0.0
+    pushes: int = 0
 
 
 @dataclass(frozen=True)
@@ -237,6 +244,12 @@ class _Session:
         self.quit = False
         self.at_edge = False
         self.recorded = self.edge_frames = self.planner_frames = 0
+        self.disturbance = options.disturbance if options.disturbance is not None and options.disturbance.active else None
+        self.pushing = False  # the last driven frame was pushed
+        self.push_rps = 0.0  # the last push [rad/s]
+        self.push_shown_s = 0.0  # how much longer the last push's alert stays [s]
+        self.pushes = 0
+        self.pushes_px: list[tuple[float, float]] = []
         self.frame = sim.reset()
         if planner is not None:
             planner.set_path(sim.scenario.waypoints)
@@ -324,6 +337,7 @@ class _Session:
         held at the map's edge where it must be, recorded only where the person steered."""
         command = Command(self.v, w) if self.driver == "you" else Command(*self.decision.command)
         executed = self.recorder.executed(command)
+        self._note_push(float(executed[1]) - float(command[1]))
         self.at_edge = not stays_on_map(self.sim.world, self.frame.pose, executed, self.frame_dt)
         steered = self.driver == "you" and not self.at_edge
         if self.at_edge:
@@ -338,6 +352,24 @@ class _Session:
         self.frame = self.recorder.record_step(self.frame, command, executed, record=steered)
         self.decision = self._decide()
         self.trace_px.append(self.window.to_inset(self.frame.pose.x, self.frame.pose.y))
+
+    def _note_push(self, push_rps: float) -> None:
+        """Keep what the display shows of the pushes: the one turning the vehicle now (``push_rps``
+        [rad/s], 0 for none), how many there were, and where each began."""
+        if push_rps != 0.0:
+            if not self.pushing or (push_rps > 0) != (self.push_rps > 0):
+                self.pushes += 1
+                self.pushes_px.append(self.window.to_inset(self.frame.pose.x, self.frame.pose.y))
+            self.push_rps, self.push_shown_s = push_rps, PUSH_SHOWN_S
+        else:
+            self.push_shown_s -= self.frame_dt
+        self.pushing = push_rps != 0.0
+
+    def push_alert(self) -> str | None:
+        """The alert of the push turning the vehicle now or a moment ago ("PUSHED LEFT ..."); None without one."""
+        if self.push_shown_s <= 0.0 or self.push_rps == 0.0:
+            return None
+        return f"PUSHED {'LEFT' if self.push_rps > 0 else 'RIGHT'} ({abs(self.push_rps):.2f} rad/s): steer back"
 
     def _send(self, executed: Command, label_w: float) -> None:
         """The frame just driven to the live view: what the camera shows, the pose, the command;
@@ -357,6 +389,13 @@ class _Session:
         if self.phase == "waiting":
             what = ("The planner drives; steer to correct it." if self.planner is not None
                     else "Drive along the magenta path the way you like to drive.")
+            if self.disturbance is not None:
+                every_s = 1.0 / self.disturbance.rate_hz
+                pushes = (f"Now and then (about every {every_s:.0f} s) a push turns the vehicle off",
+                          "its line, as a rut would: steer back. A red alert shows it.",
+                          "(terrapref drive --disturb 0: no pushes)")
+            else:
+                pushes = ("No pushes: the vehicle goes where you steer.",)
             return Banner("Press Space to start", HIGHLIGHT_COLOR, (
                 what,
                 "The white arcs are the turns you can take; yours is yellow.",
@@ -365,6 +404,7 @@ class _Session:
                 "Down or C centres it. Or hold the left mouse button over",
                 "this view (the pointer's position steers), or use a gamepad.",
                 "Recording starts after a 3 s countdown. Space pauses.",
+                *pushes,
             ))
         if self.phase == "countdown":
             return Banner(str(max(1, math.ceil(self.countdown_left * self.frame_dt))), HIGHLIGHT_COLOR)
@@ -381,7 +421,9 @@ class _Session:
             mode = ("PLANNER DRIVING", PLANNER_COLOR) if self.driver == "planner" else ("YOU DRIVE: recording corrections", HIGHLIGHT_COLOR)
             if self.driver == "planner" and self.decision is not None and self.decision.stop is not None:
                 mode = (f"PLANNER STOPPED: {self.decision.stop}", ALERT_COLOR)
-        overlay = Overlay(self.status(w, label) + note, readout.lines(), end_banner or self.banner(), mode)
+        alerts = tuple(a for a in (self.push_alert(), readout.warning()) if a is not None)
+        overlay = Overlay(self.status(w, label) + note, readout.lines(), end_banner or self.banner(), mode, alerts=alerts,
+                          route_rad=readout.rejoin_rad, off_route=readout.off_route, pushes_px=self.pushes_px)
         self.window.draw(self.frame.image, w, label, self.trace_px, overlay)
 
     def status(self, w: float, label: int) -> str:
@@ -394,6 +436,8 @@ class _Session:
             f"{'rec' if self.recorder.writer is not None else 'frames'} {self.recorded}",
             f"collisions {self.sim.collisions}",
         ]
+        if self.disturbance is not None:
+            parts.append(f"pushes {self.pushes}")
         if self.phase != "driving":
             parts.append(self.phase.upper())
         return "   ".join(parts)
@@ -434,6 +478,7 @@ class _Session:
             planner_frames=self.planner_frames,
             contact_s=self.sim.contact_s,
             contact_m=self.sim.contact_m,
+            pushes=self.pushes,
         )
 
 

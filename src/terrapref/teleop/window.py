@@ -1,5 +1,6 @@
-"""Drawing the driving window: the camera view with S, the heads-up display, the map inset, the
-stick gauge, the legend and the instructions, on a fixed-size canvas scaled to the window.
+"""Drawing the driving window: the camera view with S, the heads-up display, the alerts (a push,
+off the route) and the arrow back to the route, the map inset with the pushes marked, the stick
+gauge, the legend and the instructions, on a fixed-size canvas scaled to the window.
 
 The window is resizable: everything is drawn at the canvas's own size and scaled to fit the
 window, keeping its aspect ratio (the margins are left dark); pointer positions are mapped back
@@ -57,12 +58,23 @@ class Overlay:
         hud: the guide's readout, top left of the view.
         banner: large text over the view, or None.
         mode: who drives (ride-along) and in what colour, top right of the view; None: nobody but you.
+        alerts: what just happened to the vehicle or where it is (a push, off the route), in
+            the alert colour at the top centre of the view.
+        route_rad: the bearing of the way back onto the route from the heading [rad], positive
+            to the left; an arrow points it out when ``off_route`` or when the route is out of
+            the camera's sight. None: no arrow.
+        off_route: the vehicle is off the route.
+        pushes_px: where the pushes began, in inset pixels (:meth:`Window.to_inset`).
     """
 
     status: str
     hud: Sequence[str] = ()
     banner: Banner | None = None
     mode: tuple[str, tuple[int, int, int]] | None = None
+    alerts: Sequence[str] = ()
+    route_rad: float | None = None
+    off_route: bool = False
+    pushes_px: Sequence[tuple[float, float]] = ()
 
 
 class Window:
@@ -173,12 +185,15 @@ class Window:
         view = pygame.image.frombuffer(np.ascontiguousarray(image, dtype=np.uint8), self.view_size, "P")  # class ids, 8-bit
         view.set_palette(self.palette_list)  # SDL colours it while blitting: no (H, W, 3) array per frame
         canvas.blit(view, (0, 0))
-        self._draw_route()
+        in_sight = self._draw_route()
         self._draw_trajectories(label)
-        self._draw_hud(overlay.hud)
+        below_hud = self._draw_hud(overlay.hud)
         if overlay.mode is not None:
             self._draw_box(self.hud_font.render(overlay.mode[0], True, overlay.mode[1]), anchor="topright")
-        self._draw_inset(trace_px)
+        bottom = self._draw_alerts(overlay.alerts, below_hud)
+        if overlay.route_rad is not None and (overlay.off_route or not in_sight):
+            self._draw_arrow(overlay.route_rad, bottom)
+        self._draw_inset(trace_px, overlay.pushes_px)
         self._draw_gauge(w, label)
         self._draw_legend()
         canvas.blit(self.font.render(overlay.status, True, TEXT_COLOR), (8, self.view_size[1] + 6))
@@ -201,9 +216,10 @@ class Window:
         self._shade(box.inflate(12, 8))
         self.canvas.blit(text, box)
 
-    def _draw_hud(self, hud: Sequence[str]) -> None:
+    def _draw_hud(self, hud: Sequence[str]) -> int:
+        """The guide's lines, top left of the view; returns the canvas row below them."""
         if not hud:
-            return
+            return 4
         lines = [self.hud_font.render(line, True, TEXT_COLOR) for line in hud]
         width = max(s.get_width() for s in lines) + 16
         height = sum(s.get_height() + 3 for s in lines) + 10
@@ -212,6 +228,33 @@ class Window:
         for s in lines:
             self.canvas.blit(s, (12, y))
             y += s.get_height() + 3
+        return 4 + height
+
+    def _draw_alerts(self, alerts: Sequence[str], top: int) -> int:
+        """The alerts, one under another at the centre of the view below ``top`` [px] (the HUD);
+        returns the canvas row below them."""
+        y = top + 10
+        for line in alerts:
+            text = self.hud_font.render(line, True, ALERT_COLOR)
+            box = text.get_rect(midtop=(self.view_size[0] // 2, y))
+            self._shade(box.inflate(14, 8), (10, 10, 10, 215))
+            self.canvas.blit(text, box)
+            y = box.bottom + 10
+        return y
+
+    def _draw_arrow(self, bearing_rad: float, top: int) -> None:
+        """An arrow below ``top`` [px], at the view's centre, pointing the way back onto the
+        route: straight up is straight ahead, left is to the vehicle's left."""
+        cx, cy, r = self.view_size[0] / 2, top + 34.0, 26.0
+        ux, uy = -math.sin(bearing_rad), -math.cos(bearing_rad)  # the arrow's direction on the canvas (y grows downward)
+        nx, ny = -uy, ux
+        tip = (cx + r * ux, cy + r * uy)
+        wings = [(cx - 0.2 * r * ux + s * 0.75 * r * nx, cy - 0.2 * r * uy + s * 0.75 * r * ny) for s in (1, -1)]
+        stem = [(cx - 0.2 * r * ux + s * 0.3 * r * nx, cy - 0.2 * r * uy + s * 0.3 * r * ny) for s in (1, -1)]
+        tail = [(cx - r * ux + s * 0.3 * r * nx, cy - r * uy + s * 0.3 * r * ny) for s in (1, -1)]
+        outline = [tip, wings[0], stem[0], tail[0], tail[1], stem[1], wings[1]]
+        pygame.draw.polygon(self.canvas, ALERT_COLOR, outline)
+        pygame.draw.polygon(self.canvas, OUTLINE_COLOR, outline, 2)
 
     def _draw_banner(self, banner: Banner) -> None:
         text = self.big_font.render(banner.text, True, banner.color)
@@ -227,8 +270,8 @@ class Window:
             self.canvas.blit(s, (box.left + 16, y))
             y += s.get_height() + 4
 
-    def _draw_route(self) -> None:
-        """The reference path on the ground in the camera view, where it is in sight."""
+    def _draw_route(self) -> bool:
+        """The reference path on the ground in the camera view, where it is in sight; whether any of it is."""
         sim = self.sim
         x, y, yaw = sim.vehicle.pose
         s0, _ = sim.path.project(np.array([x, y]))
@@ -237,11 +280,14 @@ class Window:
         c, sn = math.cos(yaw), math.sin(yaw)
         local = np.stack([c * d[:, 0] + sn * d[:, 1], -sn * d[:, 0] + c * d[:, 1]], axis=1)
         uv, visible = sim.camera.project_ground(local)
+        in_sight = False
         for run in np.split(np.arange(len(s)), np.flatnonzero(np.diff(visible.astype(int))) + 1):
             if visible[run[0]] and len(run) > 1:
                 points = [(float(u), float(v)) for u, v in uv[run]]
                 pygame.draw.lines(self.canvas, OUTLINE_COLOR, False, points, 6)
                 pygame.draw.lines(self.canvas, PATH_COLOR, False, points, 3)
+                in_sight = True
+        return in_sight
 
     def _draw_trajectories(self, label: int) -> None:
         for i, runs in enumerate(self.segments):
@@ -258,10 +304,10 @@ class Window:
                 pygame.draw.circle(self.canvas, OUTLINE_COLOR, (u, v), 5)
                 pygame.draw.circle(self.canvas, HIGHLIGHT_COLOR, (u, v), 3)
 
-    def _draw_inset(self, trace_px: Sequence[tuple[float, float]]) -> None:
+    def _draw_inset(self, trace_px: Sequence[tuple[float, float]], pushes_px: Sequence[tuple[float, float]] = ()) -> None:
         canvas = self.canvas
         ox, oy = self.inset_origin
-        canvas.blit(self.font.render("map (north up)", True, DIM_TEXT), (ox, PANEL_MARGIN_PX))
+        canvas.blit(self.font.render("map (north up; red dots: pushes)" if pushes_px else "map (north up)", True, DIM_TEXT), (ox, PANEL_MARGIN_PX))
         canvas.blit(self.inset, (ox, oy))
         pygame.draw.rect(canvas, DIM_TEXT, pygame.Rect(ox - 1, oy - 1, self.inset_size[0] + 2, self.inset_size[1] + 2), 1)
         clip = canvas.get_clip()
@@ -272,6 +318,8 @@ class Window:
         pygame.draw.circle(canvas, PATH_COLOR, self.path_px[-1], 4, 1)
         if len(trace_px) > 1:
             pygame.draw.lines(canvas, TRACE_COLOR, False, trace_px, 2)
+        for point in pushes_px:
+            pygame.draw.circle(canvas, ALERT_COLOR, point, 3)
         x, y, yaw = self.sim.vehicle.pose
         cx, cy = self.to_inset(x, y)
         c, s = math.cos(yaw), math.sin(yaw)

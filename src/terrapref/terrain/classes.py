@@ -22,6 +22,12 @@ pair of them grows as K(K-1)/2."""
 
 LETHAL_COLUMN = "lethal"
 """The terrain column that several lethal classes share (one lethal class keeps its own name)."""
+RESERVED_NAMES = {
+    "unknown": "label maps and exports name id 255 so",
+    "avoid": "a zone expects avoid when the driver keeps off it",
+    "best": "a zone expects best when the driver takes the class it likes best",
+}
+"""Words the product's files give their own meaning; no class may be named so."""
 
 
 @dataclass(frozen=True)
@@ -163,6 +169,9 @@ class ClassTable:
             if not isinstance(name, str) or not name.isidentifier():
                 problems.append(Problem(f"{f}.name", "must be an identifier-like string"))
                 continue
+            if name in RESERVED_NAMES:
+                problems.append(Problem(f"{f}.name", f"{name!r} is a reserved word ({RESERVED_NAMES[name]}); choose another name"))
+                continue
             if (
                 not isinstance(color, list)
                 or len(color) != 3
@@ -192,7 +201,7 @@ class ClassTable:
             raise ConfigError(source, str(exc), field="classes") from None
         # Without a profile: the classes in id order, the lethal column last.
         profile = data.get("profile", sorted(columns, key=lambda n: n == _lethal_column(tuple(lethal))))
-        if not isinstance(profile, list) or sorted(map(str, profile)) != sorted(columns):
+        if not isinstance(profile, list) or not all(isinstance(p, str) for p in profile) or sorted(profile) != sorted(columns):
             raise ConfigError(source, f"must list each of {', '.join(columns)} exactly once, most preferred first", field="profile")
         return cls(ordered, background, tuple(lethal), tuple(profile))
 

@@ -1,0 +1,125 @@
+"""Nothing lost or mixed between the product's own files: what one command writes, the next reads
+back whole (the driver's order through a bag, a recording replaced while it is read, reserved
+class names), and every command treats an existing output the same way."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from helpers import one_line_error
+
+from terrapref.cli import main
+from terrapref.demos.recording import read_recording
+
+ORDER = ["water", "rock", "mud", "non_traversable"]  # not the default order
+
+
+@pytest.fixture(scope="module")
+def ordered_recording(tmp_path_factory) -> Path:
+    """A short undisturbed drive by a driver with a non-default order."""
+    out = tmp_path_factory.mktemp("ordered") / "rec"
+    assert main(["record", "fig7a_non_traversable_longer", "--out", str(out), "--quiet", "--disturb", "0", "--profile", ",".join(ORDER)]) == 0
+    return out
+
+
+@pytest.mark.parametrize("fmt", ["mcap", "rosbag1"])
+def test_the_drivers_order_survives_an_export_and_an_import(tmp_path: Path, ordered_recording: Path, capsys, fmt: str):
+    bag = tmp_path / ("run.mcap" if fmt == "mcap" else "run.bag")
+    assert main(["export", str(ordered_recording), "--format", fmt, "--out", str(bag)]) == 0
+    assert main(["import", str(bag), "--robot", f"{bag}.robot.yaml", "--out", str(tmp_path / "back")]) == 0
+    assert "water > rock > mud > non_traversable (the robot file's profile)" in capsys.readouterr().out
+    assert read_recording(tmp_path / "back").meta["profile"] == ORDER
+
+
+def test_an_import_with_no_declared_order_says_so_and_training_refuses_it(tmp_path: Path, ordered_recording: Path, capsys):
+    bag = tmp_path / "run.mcap"
+    assert main(["export", str(ordered_recording), "--format", "mcap", "--out", str(bag)]) == 0
+    robot = Path(f"{bag}.robot.yaml")
+    robot.write_text("".join(line for line in robot.read_text().splitlines(keepends=True) if not line.startswith("profile:")))
+    assert main(["import", str(bag), "--robot", str(robot), "--out", str(tmp_path / "none")]) == 0
+    out = capsys.readouterr().out
+    assert "none declared" in out and "default" not in out.split("order", 1)[1].splitlines()[0]
+    assert read_recording(tmp_path / "none").meta.get("profile") is None
+    assert main(["inspect", str(tmp_path / "none"), "--no-preference"]) == 0
+    assert "order      none declared" in capsys.readouterr().out
+    assert main(["featurize", str(tmp_path / "none"), "--out", str(tmp_path / "ds.safetensors")]) == 2
+    one_line_error(capsys, "meta.json", "profile", "--profile")
+    assert not (tmp_path / "ds.safetensors").exists()
+    # --profile declares it at the import
+    assert main(["import", str(bag), "--robot", str(robot), "--out", str(tmp_path / "given"), "--profile", "rock,mud,water,non_traversable"]) == 0
+    assert "(--profile)" in capsys.readouterr().out
+    assert read_recording(tmp_path / "given").meta["profile"] == ["rock", "mud", "water", "non_traversable"]
+
+
+def test_a_recording_replaced_while_it_is_featurised_fails_clearly(tmp_path: Path, fig7_recording: Path, ordered_recording: Path,
+                                                                    monkeypatch, capsys):
+    """`record --force --out REC` swapping a new drive in while `featurize REC` reads it: the
+    reader would take one recording's frame list and the other's images; it must fail instead."""
+    import shutil
+
+    import terrapref.demos.recording as recording_module
+    from terrapref.fileio import replace_dir
+
+    rec, other = tmp_path / "rec", tmp_path / "other"
+    shutil.copytree(fig7_recording, rec)
+    shutil.copytree(ordered_recording, other)
+    reads = []
+    real = recording_module.read_label_png
+
+    def read_then_replace(path):
+        reads.append(path)
+        if len(reads) == 5:  # as record --force does once its new drive is complete
+            replace_dir(other, rec)
+        return real(path)
+
+    monkeypatch.setattr(recording_module, "read_label_png", read_then_replace)
+    assert main(["featurize", str(rec), "--out", str(tmp_path / "ds.safetensors")]) == 2
+    one_line_error(capsys, str(rec), "replaced")
+    assert not (tmp_path / "ds.safetensors").exists()
+    assert len(read_recording(rec)) == len(read_recording(ordered_recording))  # the new one, whole, for the next reader
+
+
+@pytest.mark.parametrize("value", ["inf", "nan", "-inf"])
+def test_a_learning_rate_that_is_not_finite_is_refused(tmp_path: Path, capsys, value: str):
+    from helpers import dataset_file
+
+    data = dataset_file(tmp_path / "ds.safetensors")
+    with pytest.raises(SystemExit) as refused:
+        main(["train", str(data), "--out", str(tmp_path / "m.safetensors"), f"--lr={value}"])
+    assert refused.value.code == 2
+    one_line_error(capsys, "--lr", "not a finite number")
+    assert list(tmp_path.iterdir()) == [data]
+
+
+def test_weights_that_are_not_finite_are_never_written(tmp_path: Path):
+    import numpy as np
+    from helpers import model_meta, skip_path_weights
+
+    from terrapref.errors import UserError
+    from terrapref.learning.model_file import save_model
+    from terrapref.learning.network import ClassifierConfig
+
+    config = ClassifierConfig(hidden=8, skip=True)
+    weights = {name: value.copy() for name, value in skip_path_weights(config).items()}  # (views of a shared array)
+    weights["compress.weight"][0, 2] = np.nan
+    with pytest.raises(UserError, match="compress.weight.*1 of its weights are not finite"):
+        save_model(tmp_path / "m.safetensors", config, weights, model_meta())
+    assert not (tmp_path / "m.safetensors").exists()
+
+
+def test_a_drive_whose_every_frame_is_dropped_writes_no_recording(tmp_path: Path, fig7_recording: Path, capsys):
+    import shutil
+
+    drop_all = tmp_path / "drop.yaml"
+    drop_all.write_text("format: terrapref-perception/1\nframes: {drop_rate: 1.0}\n")
+    args = ["record", "fig7a_non_traversable_longer", "--quiet", "--disturb", "0", "--perception", str(drop_all)]
+    assert main([*args, "--out", str(tmp_path / "new")]) == 2
+    one_line_error(capsys, "new", "no frame")
+    assert not (tmp_path / "new").exists()
+    old = tmp_path / "old"
+    shutil.copytree(fig7_recording, old)
+    assert main([*args, "--out", str(old), "--force"]) == 2
+    one_line_error(capsys, "old", "no frame")
+    assert len(read_recording(old)) == len(read_recording(fig7_recording)) and read_recording(old).complete
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["drop.yaml", "old"]
