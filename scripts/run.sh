@@ -8,4 +8,4 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 OUT=${1:-out}
-.venv/bin/terrapref reproduce --out "$OUT"
+.venv/bin/terrapref reproduce --out "$OUT" --force   # a run before it is replaced whole, once this one is complete

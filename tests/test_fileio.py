@@ -146,3 +146,16 @@ def test_a_folder_another_command_is_writing_is_refused_even_with_force(tmp_path
                 with output_folder(tmp_path / "out", force=force):
                     pytest.fail("the block ran")
         assert _files(out) == {"metrics.json": "running"}
+
+
+def test_a_command_refused_before_it_wrote_anything_leaves_nothing(tmp_path: Path):
+    with pytest.raises(UserError):
+        with output_folder(tmp_path / "new", force=False):
+            raise UserError("--frames", "bad")
+    assert not (tmp_path / "new").exists()
+    with output_folder(tmp_path / "out", force=False) as out:
+        (out / "metrics.json").write_text("old")
+    with pytest.raises(UserError):
+        with output_folder(tmp_path / "out", force=True):
+            raise UserError("--frames", "bad")
+    assert _files(tmp_path / "out") == {"metrics.json": "old"} and sorted(p.name for p in tmp_path.iterdir()) == ["out"]

@@ -123,3 +123,69 @@ def test_a_drive_whose_every_frame_is_dropped_writes_no_recording(tmp_path: Path
     one_line_error(capsys, "old", "no frame")
     assert len(read_recording(old)) == len(read_recording(fig7_recording)) and read_recording(old).complete
     assert sorted(p.name for p in tmp_path.iterdir()) == ["drop.yaml", "old"]
+
+
+# --- one rule for every command's output ----------------------------------------------------------
+
+
+def _writers(tmp: Path, rec: Path) -> dict[str, tuple[list[str], Path]]:
+    """Each command that writes, as a user runs it: its arguments and the output it makes."""
+    from helpers import dataset_file, linear_model
+
+    model, data = linear_model(tmp / "m.safetensors"), dataset_file(tmp / "ds.safetensors", n=64)
+    return {
+        "render": (["render", "demo_course", "--out", str(tmp / "seg.png")], tmp / "seg.png"),
+        "show": (["show", "demo_course", "--out", str(tmp / "map.png")], tmp / "map.png"),
+        "course": (["course", "--classes", "examples/classes/small.yaml", "--out", str(tmp / "c.yaml")], tmp / "c.yaml"),
+        "inspect": (["inspect", str(rec), "--no-preference", "--out", str(tmp / "driven.png")], tmp / "driven.png"),
+        "featurize": (["featurize", str(rec), "--out", str(tmp / "d.safetensors")], tmp / "d.safetensors"),
+        "train": (["train", str(data), "--recipe", "paper", "--epochs", "1", "--out", str(tmp / "t.safetensors")], tmp / "t.safetensors"),
+        "export onnx": (["export", str(model), "--format", "onnx", "--out", str(tmp / "m.onnx")], tmp / "m.onnx"),
+        "export mcap": (["export", str(rec), "--format", "mcap", "--out", str(tmp / "r.mcap")], tmp / "r.mcap"),
+        "evaluate": (["evaluate", str(model), "fig7a_non_traversable_longer", "--seeds", "1", "--no-driver", "--workers", "1",
+                      "--out", str(tmp / "ev")], tmp / "ev"),
+    }
+
+
+def _state(path: Path) -> dict[str, bytes]:
+    files = sorted(path.rglob("*")) if path.is_dir() else [path]
+    return {str(p): p.read_bytes() for p in files if p.is_file()}
+
+
+@pytest.mark.parametrize("command", ["render", "show", "course", "inspect", "featurize", "train", "export onnx", "export mcap", "evaluate"])
+def test_every_command_refuses_an_existing_output_without_force_and_replaces_it_with_force(tmp_path: Path, fig7_recording: Path,
+                                                                                            monkeypatch, capsys, command: str):
+    monkeypatch.chdir(Path(__file__).resolve().parent.parent)  # examples/ as a user's clone has it
+    argv, out = _writers(tmp_path, fig7_recording)[command]
+    assert main(argv) == 0
+    before = _state(out)
+    capsys.readouterr()
+    assert main(argv) == 2
+    one_line_error(capsys, str(out), "exists", "--force")
+    assert _state(out) == before  # untouched
+    assert main([*argv, "--force"]) == 0
+
+
+def test_two_evaluations_into_one_folder_leave_one_run_whole(tmp_path: Path, fig7_recording: Path, capsys):
+    """A second evaluate while the first writes is refused, even with --force; one after another,
+    the second (with --force) replaces the first whole: no figure of the first is left beside it."""
+    from terrapref.fileio import output_folder
+
+    argv, out = _writers(tmp_path, fig7_recording)["evaluate"]
+    with output_folder(out, force=False):  # as a first evaluate holds it while it runs
+        (out / "fig7a_non_traversable_longer_seed0.png").write_bytes(b"first")
+        assert main([*argv, "--force"]) == 2
+        one_line_error(capsys, str(out), "being written by another terrapref command")
+    (out / "from_the_first_run.png").write_bytes(b"first")
+    assert main([*argv, "--force"]) == 0
+    assert not (out / "from_the_first_run.png").exists() and (out / "metrics.json").is_file()
+
+
+@pytest.mark.parametrize("argv", [["reproduce", "--seeds", "1"], ["select", "--seeds", "1", "--courses", "1"], ["study", "--quick"]],
+                         ids=["reproduce", "select", "study"])
+def test_the_long_jobs_refuse_an_existing_folder_before_any_work(tmp_path: Path, capsys, argv):
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "REPORT.md").write_text("an earlier run")
+    assert main([*argv, "--out", str(tmp_path / "out")]) == 2
+    one_line_error(capsys, "out", "exists", "--force")
+    assert (tmp_path / "out" / "REPORT.md").read_text() == "an earlier run"

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, NoReturn
 
 from terrapref.configargs import finite_float
 from terrapref.errors import Terminated, UserError
+from terrapref.fileio import output_folder
 from terrapref.grid import ENGINES, Engine, GridError
 
 if TYPE_CHECKING:  # for the hints only: the command line imports what a command needs when it runs
@@ -57,9 +58,9 @@ def _cmd_render(args: argparse.Namespace) -> int:
 
     if args.pose is not None and not all(math.isfinite(v) for v in args.pose):
         raise UserError("--pose", "X, Y and YAW_DEG must be finite numbers")
-    _check_output(args.out, "--out", [args.scenario])
+    _check_output(args.out, "--out", [args.scenario], force=args.force)
     if args.preview:
-        _check_output(args.preview, "--preview", [args.scenario, args.out])
+        _check_output(args.preview, "--preview", [args.scenario, args.out], force=args.force)
     scenario = resolve_scenario(args.scenario, _class_table(args))
     x, y, yaw_deg = args.pose if args.pose is not None else (scenario.start[0], scenario.start[1], math.degrees(scenario.start[2]))
     camera = PinholeCamera()
@@ -83,7 +84,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
     from terrapref.world import rasterise
 
     _check_figure(args.out, "--out")
-    _check_output(args.out, "--out", [args.scenario])
+    _check_output(args.out, "--out", [args.scenario], force=args.force)
     scenario = resolve_scenario(args.scenario, _class_table(args))
     save_map(args.out, scenario, rasterise(scenario))
     print(f"wrote {args.out} ({scenario.name}: {len(scenario.terrain)} patches, {len(scenario.zones)} zones, path {scenario.path_length_m():.0f} m)")
@@ -106,7 +107,7 @@ def _cmd_course(args: argparse.Namespace) -> int:
     figure = out.with_suffix(".png")
     inputs = [p for p in (args.classes, *(args.after or ())) if p is not None]
     for path in (out, figure):
-        _check_output(path, "--out", inputs)
+        _check_output(path, "--out", inputs, force=args.force)
     table = _class_table(args)
     if args.after is not None:
         recs = _drives_of_one_table(args, args.after)
@@ -291,7 +292,7 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
 
     if args.out is not None:
         _check_figure(args.out, "--out")
-        _check_output(args.out, "--out", [args.recording])
+        _check_output(args.out, "--out", [args.recording], force=args.force)
     rec = read_recording(args.recording)
     if getattr(args, "classes", None) is not None:
         _check_table(args, rec.classes, args.recording)
@@ -334,7 +335,7 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
     from terrapref.progress import Progress
 
     _check_distinct(args.recordings, "recording")
-    _check_output(args.out, "--out", [*args.recordings, *([args.camera] if args.camera else [])])
+    _check_output(args.out, "--out", [*args.recordings, *([args.camera] if args.camera else [])], force=args.force)
     recordings = [read_recording(p) for p in args.recordings]
     for r in recordings:
         if args.classes is not None:
@@ -410,9 +411,11 @@ def _check_figure(out: str | Path, flag: str) -> None:
         raise UserError(str(out), f"a figure needs one of the suffixes {', '.join(FIGURE_FORMATS)}", field=flag)
 
 
-def _check_output(out: str | Path, flag: str, inputs: Sequence[str | Path] = (), folder: bool = False) -> None:
+def _check_output(out: str | Path, flag: str, inputs: Sequence[str | Path] = (), folder: bool = False, force: bool | None = None) -> None:
     """Refuse an output before any work: one that is an input or lies inside one, a device, FIFO
-    or socket, a file where a folder goes (or the reverse), or a place that cannot be written."""
+    or socket, a file where a folder goes (or the reverse), a place that cannot be written, and,
+    given ``force`` (the command's --force), a file that exists unless it is True: the one rule
+    of every command (a folder output's is :func:`terrapref.fileio.output_folder`)."""
     out = Path(out)
     target = out.resolve()
     for given in map(Path, inputs):
@@ -427,6 +430,8 @@ def _check_output(out: str | Path, flag: str, inputs: Sequence[str | Path] = (),
         raise UserError(str(out), f"is a {special}; {flag} must name a {'folder' if folder else 'regular file'}", field=flag)
     if out.exists() and out.is_dir() != folder:
         raise UserError(str(out), "exists and is a " + ("file; expected a folder" if folder else "folder; expected a file name"), field=flag)
+    if force is False and not folder and out.exists():
+        raise UserError(str(out), f"exists; choose another {flag}, or pass --force to replace it (only once the new one is complete)", field=flag)
     parent = out if folder and out.exists() else out.parent
     while not parent.exists() and parent != parent.parent:
         parent = parent.parent
@@ -435,6 +440,12 @@ def _check_output(out: str | Path, flag: str, inputs: Sequence[str | Path] = (),
             pass
     except OSError as exc:
         raise UserError(str(out), f"cannot be written (no file can be made in {parent}: {exc.strerror or exc})", field=flag) from None
+
+
+def _add_force_arg(p: argparse.ArgumentParser) -> None:
+    """--force, the same for every command that writes: an output that exists is refused without it."""
+    p.add_argument("--force", action="store_true",
+                   help="replace an output that exists (only once the new one is complete; a folder is replaced whole)")
 
 
 def _check_distinct(inputs: Sequence[str | Path], what: str) -> None:
@@ -581,7 +592,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     config = _train_config(args, recipe)
     recipe = replace(recipe, stages=_stages(args, recipe))
     _check_distinct(args.data, "recording or dataset")
-    _check_output(args.out, "--out", args.data)
+    _check_output(args.out, "--out", args.data, force=args.force)
     if args.classes is not None:  # recordings before they are featurised
         from terrapref.demos.recording import read_recording
 
@@ -640,43 +651,43 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         _check_table(args, model.classes, args.model)
     profile = PreferenceProfile.parse(args.profile, model.classes) if args.profile is not None else None
     perception = _perception(args.perception, classes=model.classes)
-    n_runs = len(args.scenarios) * args.seeds * (1 if args.no_driver else 2)
-    bar = Progress("evaluate", n_runs)
     from terrapref.demos.expert import STYLES
     from terrapref.evaluation.stats import rate_text
 
     STYLES.get(args.style, "--style")
-    view = _live_view(args)
-    try:
-        evaluation = Evaluation(args.model, tuple(args.scenarios), args.seeds, profile=profile, with_driver=not args.no_driver, style=args.style,
-                                frames=tuple(frames), mcap=args.mcap, perception=perception)
-        metrics = evaluate_model(evaluation, args.out, engine, progress=lambda k, n: bar.update(k, f"{k}/{n} runs"), watch=_watching(view))
-    finally:
-        if view is not None:
-            view.stop()
-    bar.close()
-    if perception is not None and perception.active:
-        print(f"perception: {perception.name} ({perception.summary()}); the driver sees the truth")
-    zones = [z for sc in metrics["scenarios"].values() for run in sc.get("planner", {}).values() for z in run["zones"]]
-    s = metrics["summary"]
-    print(f"planner: zone success {rate_text(sum(z['success'] for z in zones), len(zones))}, {s['collision_count']} collisions")
-    for line in Summary.from_dict(s).driving_lines():
-        print(f"planner: {line}")
-    compared = [z for z in zones if "agrees" in z]
-    if compared:
-        print(f"planner: agreement with the driver ({args.style}) {rate_text(sum(z['agrees'] for z in compared), len(compared))}")
-    if "driver_summary" in metrics:
-        d = metrics["driver_summary"]
-        success = f"{d['zone_success_rate']:.1%}" if d["zones"] else "-"
-        print(f"driver:  zone success {success} over {d['zones']} zones, {d['collision_count']} collisions")
-    for name, numbers in metrics.get("frames_beyond_the_run", {}).items():
-        print(f"note: --frames {','.join(map(str, numbers))}: {name}'s run (seed 0) ended before them; no picture", file=sys.stderr)
-    guesses = [z for z in zones if z.get("rests_on_unidentified")]
-    if metrics.get("unidentified_pairs"):
-        print(f"note: the model's demonstrations did not identify {', '.join(metrics['unidentified_pairs'])}; "
-              f"{len(guesses)} of {len(zones)} zone runs rest on them (marked in metrics.json)")
-    print(f"wrote {Path(args.out) / 'metrics.json'} and figures in {args.out}" + (f"; runs as MCAP in {Path(args.out) / 'runs'}" if args.mcap else ""))
-    return 0
+    with output_folder(args.out, args.force):
+        bar = Progress("evaluate", len(args.scenarios) * args.seeds * (1 if args.no_driver else 2))
+        view = _live_view(args)
+        try:
+            evaluation = Evaluation(args.model, tuple(args.scenarios), args.seeds, profile=profile, with_driver=not args.no_driver, style=args.style,
+                                    frames=tuple(frames), mcap=args.mcap, perception=perception)
+            metrics = evaluate_model(evaluation, args.out, engine, progress=lambda k, n: bar.update(k, f"{k}/{n} runs"), watch=_watching(view))
+        finally:
+            if view is not None:
+                view.stop()
+        bar.close()
+        if perception is not None and perception.active:
+            print(f"perception: {perception.name} ({perception.summary()}); the driver sees the truth")
+        zones = [z for sc in metrics["scenarios"].values() for run in sc.get("planner", {}).values() for z in run["zones"]]
+        s = metrics["summary"]
+        print(f"planner: zone success {rate_text(sum(z['success'] for z in zones), len(zones))}, {s['collision_count']} collisions")
+        for line in Summary.from_dict(s).driving_lines():
+            print(f"planner: {line}")
+        compared = [z for z in zones if "agrees" in z]
+        if compared:
+            print(f"planner: agreement with the driver ({args.style}) {rate_text(sum(z['agrees'] for z in compared), len(compared))}")
+        if "driver_summary" in metrics:
+            d = metrics["driver_summary"]
+            success = f"{d['zone_success_rate']:.1%}" if d["zones"] else "-"
+            print(f"driver:  zone success {success} over {d['zones']} zones, {d['collision_count']} collisions")
+        for name, numbers in metrics.get("frames_beyond_the_run", {}).items():
+            print(f"note: --frames {','.join(map(str, numbers))}: {name}'s run (seed 0) ended before them; no picture", file=sys.stderr)
+        guesses = [z for z in zones if z.get("rests_on_unidentified")]
+        if metrics.get("unidentified_pairs"):
+            print(f"note: the model's demonstrations did not identify {', '.join(metrics['unidentified_pairs'])}; "
+                  f"{len(guesses)} of {len(zones)} zone runs rest on them (marked in metrics.json)")
+        print(f"wrote {Path(args.out) / 'metrics.json'} and figures in {args.out}" + (f"; runs as MCAP in {Path(args.out) / 'runs'}" if args.mcap else ""))
+        return 0
 
 
 def _check_frames(frames: Sequence[int], scenarios: Sequence[str], classes) -> None:
@@ -720,26 +731,27 @@ def _cmd_import(args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from terrapref.demos.recording import read_recording
-    from terrapref.interop.bag_import import ImportOptions, import_bag
-    from terrapref.interop.replay import replay, write_replay
     from terrapref.interop.robot import load_robot
-    from terrapref.learning.model_file import check_compatible, load_model
-    from terrapref.progress import Progress
+    from terrapref.learning.model_file import load_model
 
     model = load_model(args.model)
     robot = load_robot(args.robot, model.classes)
     out = Path(args.out)
     _check_output(out, "--out", [args.bag, args.model, args.robot], folder=True)
+    with output_folder(out, args.force):  # refused (another camera) or stopped: nothing of a new OUT is left
+        return _replay_into(args, model, robot, out)
+
+
+def _replay_into(args: argparse.Namespace, model, robot, out: Path) -> int:
+    from terrapref.demos.recording import read_recording
+    from terrapref.interop.bag_import import ImportOptions, import_bag
+    from terrapref.interop.replay import replay, write_replay
+    from terrapref.learning.model_file import check_compatible
+    from terrapref.progress import Progress
+
     rec_dir = out / "recording"
-    made = not out.exists()
-    try:
-        options = ImportOptions(rate_hz=args.rate, force=True, classes=model.classes, check_camera=lambda camera: check_compatible(model, camera))
-        report = import_bag(args.bag, robot, rec_dir, options)
-    except BaseException:
-        if made:  # refused (another camera) or stopped: no half-made OUT is left
-            shutil.rmtree(out, ignore_errors=True)
-        raise
+    options = ImportOptions(rate_hz=args.rate, force=True, classes=model.classes, check_camera=lambda camera: check_compatible(model, camera))
+    report = import_bag(args.bag, robot, rec_dir, options)
     print(f"imported {report.frames} frames ({report.duration_s:.0f} s) into {rec_dir}")
     rec = read_recording(rec_dir)
     bar = Progress("replay", len(rec))
@@ -809,7 +821,7 @@ def _cmd_route(args: argparse.Namespace) -> int:
 
     out, figure = Path(args.out), Path(args.out).with_suffix(".png")
     for path in (out, figure):
-        _check_output(path, "--out", [args.scenario, args.model])
+        _check_output(path, "--out", [args.scenario, args.model], force=args.force)
     if out.suffix.lower() not in (".yaml", ".yml"):
         raise UserError(str(out), "the route is written as a scenario file: give it the suffix .yaml", field="--out")
     if not (math.isfinite(args.resolution) and 0.1 <= args.resolution <= 2.0):
@@ -852,10 +864,10 @@ def _cmd_info(args: argparse.Namespace) -> int:
 def _cmd_export(args: argparse.Namespace) -> int:
     out = Path(args.out)
     inputs = [args.input] + ([args.model] if args.model else [])
-    _check_output(out, "--out", inputs)
+    _check_output(out, "--out", inputs, force=args.force)
     if args.format in ("mcap", "rosbag1"):
-        _check_output(Path(f"{out}.robot.yaml"), "--out", inputs)
-        _check_output(Path(f"{out}.labels.yaml"), "--out", inputs)
+        _check_output(Path(f"{out}.robot.yaml"), "--out", inputs, force=args.force)
+        _check_output(Path(f"{out}.labels.yaml"), "--out", inputs, force=args.force)
         from dataclasses import replace
 
         from terrapref.demos.recording import read_recording
@@ -959,12 +971,13 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     recipes = tuple(recipe_named(n, "--recipes") for n in names)
     perceptions = _perception_list(args.perception)
     _check_output(args.out, "--out", folder=True)
-    engine = _engine(args)
-    t0 = time.perf_counter()
-    setup = Reproduction(recipes, args.seeds, args.eval_seeds, profile or PreferenceProfile.default(), args.write_recordings, perceptions)
-    report = reproduce(args.out, setup, engine, log=lambda m: print(m, flush=True))
-    print(f"wrote {report} ({time.perf_counter() - t0:.0f} s)")
-    return 0
+    with output_folder(args.out, args.force):
+        engine = _engine(args)
+        t0 = time.perf_counter()
+        setup = Reproduction(recipes, args.seeds, args.eval_seeds, profile or PreferenceProfile.default(), args.write_recordings, perceptions)
+        report = reproduce(args.out, setup, engine, log=lambda m: print(m, flush=True))
+        print(f"wrote {report} ({time.perf_counter() - t0:.0f} s)")
+        return 0
 
 
 def _cmd_study(args: argparse.Namespace) -> int:
@@ -1001,11 +1014,12 @@ def _cmd_study(args: argparse.Namespace) -> int:
         if perceptions is not None:
             plan = with_perception(plan, perceptions)
     _check_output(args.out, "--out", folder=True)
-    engine = _engine(args)
-    t0 = time.perf_counter()
-    path = run_study(args.out, plan, engine, log=lambda m: print(m, flush=True))
-    print(f"wrote {path} ({time.perf_counter() - t0:.0f} s)")
-    return 0
+    with output_folder(args.out, args.force):
+        engine = _engine(args)
+        t0 = time.perf_counter()
+        path = run_study(args.out, plan, engine, log=lambda m: print(m, flush=True))
+        print(f"wrote {path} ({time.perf_counter() - t0:.0f} s)")
+        return 0
 
 
 def _cmd_select(args: argparse.Namespace) -> int:
@@ -1039,14 +1053,15 @@ def _cmd_select(args: argparse.Namespace) -> int:
     if args.taught_under == "same" and len(perceptions) != 1:
         raise UserError("--taught-under", "'same' needs exactly one --perception model")
     taught_under = perceptions[0] if args.taught_under == "same" else _perception(args.taught_under, "--taught-under", table)
-    engine = _engine(args)
-    course = _selection_course(args, table)
-    t0 = time.perf_counter()
-    selection = Selection(tuple(names), orders, args.seeds, args.first, args.courses, args.style, perceptions, taught_under, table, course,
-                          args.follow_up)
-    path = run_selection(args.out, selection, engine, log=lambda m: print(m, flush=True))
-    print(f"done ({time.perf_counter() - t0:.0f} s): {path}")
-    return 0
+    with output_folder(args.out, args.force):
+        engine = _engine(args)
+        course = _selection_course(args, table)
+        t0 = time.perf_counter()
+        selection = Selection(tuple(names), orders, args.seeds, args.first, args.courses, args.style, perceptions, taught_under, table, course,
+                              args.follow_up)
+        path = run_selection(args.out, selection, engine, log=lambda m: print(m, flush=True))
+        print(f"done ({time.perf_counter() - t0:.0f} s): {path}")
+        return 0
 
 
 def _selection_course(args: argparse.Namespace, table) -> str | None:
@@ -1155,6 +1170,7 @@ def _course_parser(sub: argparse._SubParsersAction) -> None:
                         "the drive stays within 10 minutes at 1 m/s")
     p.add_argument("--name", help="the scenario's name (default: teaching_course, or the course driven + _more)")
     _add_classes_arg(p)
+    _add_force_arg(p)
     p.set_defaults(func=_cmd_course)
 
 
@@ -1172,6 +1188,7 @@ def _render_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, type=Path, help="single-channel PNG of class ids")
     p.add_argument("--preview", type=Path, help="also write a colour preview PNG")
     _add_classes_arg(p)
+    _add_force_arg(p)
     p.set_defaults(func=_cmd_render)
 
 
@@ -1180,6 +1197,7 @@ def _show_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("scenario", metavar="SCENARIO", help=SCENARIO_HELP)
     p.add_argument("--out", required=True, type=Path, help="figure file (.png, .pdf or .svg)")
     _add_classes_arg(p)
+    _add_force_arg(p)
     p.set_defaults(func=_cmd_show)
 
 
@@ -1232,6 +1250,7 @@ def _inspect_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-preference", action="store_true",
                    help="skip what the drive shows of the driver's preference (it featurises every frame: seconds)")
     _add_classes_arg(p, check=True)
+    _add_force_arg(p)
     p.set_defaults(func=_cmd_inspect)
 
 
@@ -1247,6 +1266,7 @@ def _featurize_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--camera", help="camera file to re-render the frames with: CameraConfig's fields, or a ROS camera_info YAML (with mount_height_m, pitch_deg)")
     p.add_argument("--recipe", metavar="NAME", help="featurise as this recipe trains (default: teach, with the look-ahead utilities)")
     _add_classes_arg(p, check=True)
+    _add_force_arg(p)
     p.set_defaults(func=_cmd_featurize)
 
 
@@ -1260,6 +1280,7 @@ def _train_parser(sub: argparse._SubParsersAction, flags: bool = True) -> None:
     p.add_argument("--recipe", default=None, metavar="NAME", help="a named recipe (`terrapref recipes`; default: teach)")
     p.add_argument("--verbose", action="store_true", help="print every epoch (default: every tenth)")
     _add_classes_arg(p, check=True)
+    _add_force_arg(p)
     p.set_defaults(func=_cmd_train)
     if flags:
         from terrapref.configargs import add_arguments
@@ -1291,6 +1312,7 @@ def _evaluate_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--perception", metavar="PRESET|FILE", help=PERCEPTION_HELP + " (default: clean); the driver always sees the truth")
     _add_live_args(p, "the runs go one after another in this process")
     _add_classes_arg(p, check=True)  # the scenarios and gen:N are read with the model's table
+    _add_force_arg(p)
     p.set_defaults(func=_cmd_evaluate)
 
 
@@ -1308,6 +1330,7 @@ def _reproduce_parser(sub: argparse._SubParsersAction) -> None:
                    help="perception models (presets or files, separated by commas) every recipe's models drive the test courses under, "
                         "for the report's table of what a robot sees (default: clean,rellis,field)")
     _add_engine_args(p)
+    _add_force_arg(p)
     p.set_defaults(func=_cmd_reproduce)
 
 
@@ -1324,6 +1347,7 @@ def _study_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--follow-up", action="store_true",
                    help="each teaching drive is followed by a drive of the course of what it left open, and the model learns from both")
     _add_engine_args(p)
+    _add_force_arg(p)
     p.set_defaults(func=_cmd_study)
 
 
@@ -1347,6 +1371,7 @@ def _replay_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--model", required=True, help="model file (terrapref train)")
     p.add_argument("--out", required=True, help="folder for replay.json, replay.png and the imported recording")
     p.add_argument("--rate", type=finite_float, default=10.0, help="frames per second to replay (default 10)")
+    _add_force_arg(p)
     p.set_defaults(func=_cmd_replay)
 
 
@@ -1359,6 +1384,7 @@ def _export_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--model", help="with --format mcap or rosbag1: also write the costmap this model (with an offset stage) prices the recording's ground with, "
                                    "as nav_msgs/OccupancyGrid and foxglove_msgs/Grid, once a second")
     _add_classes_arg(p, check=True)
+    _add_force_arg(p)
     p.set_defaults(func=_cmd_export)
 
 
@@ -1384,6 +1410,7 @@ def _route_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--resolution", type=finite_float, default=0.25,
                    help="search cell size [m], 0.1-2, taken as the nearest whole multiple of the map's cells (default 0.25)")
     _add_classes_arg(p, check=True)  # the scenario is read with the model's table
+    _add_force_arg(p)
     p.set_defaults(func=_cmd_route)
 
 
@@ -1416,6 +1443,7 @@ def _select_parser(sub: argparse._SubParsersAction) -> None:
                         "(terrapref course --after), and the model trains on both")
     _add_classes_arg(p)
     _add_engine_args(p)
+    _add_force_arg(p)
     p.set_defaults(func=_cmd_select)
 
 

@@ -96,7 +96,8 @@ def output_folder(out: str | Path, force: bool, flag: str = "--out") -> Iterator
 
     A folder that exists and holds anything is refused unless ``force``; with ``force`` it is moved
     aside, and removed only once the block ends without an exception. Otherwise the new, unfinished
-    folder is kept as ``OUT.partial`` and the old one put back: a run never leaves two runs' files
+    folder is kept as ``OUT.partial`` (unless it is empty) and the old one put back; a new folder
+    that fails empty is removed. A run never leaves two runs' files
     mixed in one folder, and a replacement that fails loses nothing. Another command writing the
     same folder (a lock on it) is refused, with or without ``force``.
 
@@ -120,8 +121,12 @@ def output_folder(out: str | Path, force: bool, flag: str = "--out") -> Iterator
         try:
             yield out
         except BaseException:
+            empty = not out.is_dir() or not any(out.iterdir())
+            if empty:  # refused before it wrote anything: nothing of it is kept
+                shutil.rmtree(out, ignore_errors=True)
             if aside is not None:
-                replace_dir(out, out.with_name(out.name + ".partial"))
+                if not empty:
+                    replace_dir(out, out.with_name(out.name + ".partial"))
                 os.replace(aside / "old", out)
                 shutil.rmtree(aside, ignore_errors=True)
             raise
