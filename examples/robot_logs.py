@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the generator lives beside the tests that use it
-from synthetic_bag import robot_yaml, write_synthetic_bag  # noqa: E402
+from synthetic_bag import write_robot, write_synthetic_bag  # noqa: E402
 
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 parser.add_argument("--out", type=Path, required=True, help="folder to write the logs into")
@@ -27,7 +27,7 @@ parser.add_argument("--seed", type=int, default=0)
 args = parser.parse_args()
 
 args.out.mkdir(parents=True, exist_ok=True)
-(args.out / "robot.yaml").write_text(robot_yaml())
+write_robot(args.out / "robot.yaml")  # with the label map it names beside it
 for storage, name, scenario, seed in (("mcap", "drive_mcap", args.scenario, args.seed), ("rosbag1", "drive.bag", args.scenario, args.seed),
                                       ("sqlite3", "heldout_sqlite3", args.heldout, args.seed + 1)):
     path = args.out / name
@@ -36,4 +36,4 @@ for storage, name, scenario, seed in (("mcap", "drive_mcap", args.scenario, args
         continue
     write_synthetic_bag(path, storage, scenario=scenario, seed=seed, encoding="png")
     print(f"wrote {path} ({storage}, {scenario})")
-print(f"wrote {args.out / 'robot.yaml'}")
+print(f"wrote {args.out / 'robot.yaml'} and the label map it names")

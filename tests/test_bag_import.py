@@ -106,6 +106,21 @@ def test_inspect_and_featurize_accept_an_imported_recording(imported, capsys):
     assert main(["featurize", str(rec.path), "--out", str(out)]) == 0 and out.is_file()
 
 
+def test_inspect_of_an_imported_log_says_it_has_no_map_and_draws_none(imported, tmp_path: Path, capsys):
+    import matplotlib.pyplot as plt
+
+    from terrapref.plots import draw_map
+
+    _, rec = imported["mcap"]
+    assert main(["inspect", str(rec.path), "--no-preference", "--out", str(tmp_path / "path.png")]) == 0
+    out = capsys.readouterr().out
+    assert "map        none: the log holds the path and the driven poses, not the ground" in out
+    summary = summarise(rec)
+    fig, ax = plt.subplots()
+    assert draw_map(ax, summary.scenario, summary.world) == [] and len(ax.images) == 0  # no legend of classes, no painted ground
+    plt.close(fig)
+
+
 def test_without_a_path_the_driven_odometry_is_smoothed(tmp_path: Path, logs):
     robot = tmp_path / "robot.yaml"
     write_robot(robot, robot_yaml(path_topic=False))
@@ -326,10 +341,26 @@ def test_an_exported_recording_imports_to_the_same_dataset(tmp_path: Path, impor
     assert {"/tf", "/tf_static", "/terrapref/odom", "/terrapref/cmd_vel", "/terrapref/path", "/terrapref/camera_info", "/terrapref/labels_color"} <= set(topics)
     if fmt == "mcap":
         _check_with_the_reference_mcap_reader(out, len(rec))
+    assert _chunk_compression(out) == {"mcap": {"zstd"}, "rosbag1": {"lz4"}}[fmt]  # each format's own, which its players read
+    progress = [line for line in capsys.readouterr().err.splitlines() if line.startswith("export:") and "%" in line]
+    assert progress and all(f"/{len(rec)} frames (" in line for line in progress)  # what is done and the time, not a bare percentage
     assert main(["import", str(out), "--robot", f"{out}.robot.yaml", "--out", str(tmp_path / "back")]) == 0
     back = read_recording(tmp_path / "back")
     features = recipe_named(DEFAULT_RECIPE).features()
     assert build_dataset([back], features).fingerprint == build_dataset([rec], features).fingerprint
+
+
+def _chunk_compression(path: Path) -> set[str]:
+    """The compressions of a bag's chunks ('' for none): an MCAP file's by the reference reader, a ROS 1 bag's by rosbags'."""
+    if path.suffix == ".mcap":
+        from mcap.reader import make_reader
+
+        with path.open("rb") as f:
+            return {c.compression for c in make_reader(f).get_summary().chunk_indexes}
+    from rosbags.rosbag1 import Reader
+
+    with Reader(path) as reader:  # each chunk keeps the function that decompresses it: lz4's, bz2's, or none
+        return {(c.decompressor.__module__ or "").split(".")[0] if c.decompressor else "" for c in reader.chunks.values()}
 
 
 def test_evaluate_writes_each_run_as_mcap(tmp_path: Path, capsys):
@@ -357,7 +388,11 @@ def test_replay_reports_agreement_with_the_operator(tmp_path: Path, logs, capsys
 
     result = json.loads((out / "replay.json").read_text())
     o = result["overall"]
-    assert o["frames"] == len(read_recording(out / "recording")) and 0.0 <= o["top1"] <= o["top3"] <= 1.0
+    assert o["frames"] == len(read_recording(out / "recording")) and 0.0 <= o["top1"] <= 1.0
+    c = result["classifier_overall"]
+    assert 0.0 <= c["top1"] <= c["top3"] <= 1.0 and o["top3"] is None  # the planner ranks nothing: only C has a top-3
+    assert "planner, all frames" in text and "top-3" not in text.split("planner, all frames")[1].splitlines()[0]
+    assert "the planner's stages choose one trajectory and rank none, so only C has a top-3" in text
     assert result["terrain_in_view"]["frames"] < o["frames"] and (out / "replay.png").stat().st_size > 10_000
     # A model for another camera is refused in one line.
     from helpers import model_meta
@@ -497,3 +532,17 @@ def test_compressed_depth_png_of_label_ids_is_read_and_of_depth_refused_by_name(
     conn, msg = _compressed("32FC1; compressedDepth png", header + png.getvalue())
     with pytest.raises(UserError, match="compressedDepth of '32FC1' holds depth"):
         _decode(conn, msg, "drive.bag", t_s=1.0)
+
+
+def test_the_sample_logs_robot_file_reads_with_the_label_map_written_beside_it(tmp_path: Path, monkeypatch, capsys):
+    """docs/robot-logs.md's flow starts with examples/robot_logs.py: its robot file must import (the bags themselves are the tests')."""
+    import runpy
+    import sys
+
+    import synthetic_bag
+
+    monkeypatch.setattr(synthetic_bag, "write_synthetic_bag", lambda path, *a, **k: Path(path).mkdir())
+    monkeypatch.setattr(sys, "argv", ["robot_logs.py", "--out", str(tmp_path / "logs")])
+    runpy.run_path(str(Path(__file__).parents[1] / "examples" / "robot_logs.py"), run_name="__main__")
+    assert main(["validate", str(tmp_path / "logs" / "robot.yaml")]) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == f"{tmp_path / 'logs' / 'robot.yaml'}: ok (robot file)"

@@ -74,3 +74,48 @@ def test_every_argument_of_every_command_says_what_it_is():
     silent = [f"{name} {a.dest}" for name, sub in commands.items() for a in sub._actions
               if not isinstance(a, argparse._HelpAction) and not a.help]
     assert not silent, silent
+
+
+@pytest.mark.parametrize("flag", ["--out", "--preview"])
+def test_render_refuses_a_lossy_image_name_before_writing(tmp_path: Path, capsys, flag: str):
+    outputs = {"--out": tmp_path / "seg.png", "--preview": tmp_path / "view.png"} | {flag: tmp_path / "seg.jpg"}
+    assert main(["render", "demo_course", "--out", str(outputs["--out"]), "--preview", str(outputs["--preview"])]) == 2
+    assert _error(capsys) == f"error: {tmp_path / 'seg.jpg'}: {flag}: render writes PNG (class ids need a lossless format): give it the suffix .png"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_export_onnx_of_a_recording_says_which_format_a_recording_takes(tmp_path: Path, capsys):
+    (tmp_path / "rec").mkdir()
+    assert main(["export", str(tmp_path / "rec"), "--format", "onnx", "--out", str(tmp_path / "m.onnx")]) == 2
+    error = _error(capsys)
+    assert error.startswith(f"error: {tmp_path / 'rec'}: --format: is a recording folder") and "--format mcap or rosbag1" in error
+
+
+def test_every_flag_with_a_default_names_it_in_its_help():
+    import argparse
+
+    from terrapref.cli import build_parser
+
+    parser = build_parser(train_flags=True)
+    commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
+    unnamed = [f"{name} {a.option_strings[0]}={a.default!r}" for name, sub in commands.items() for a in sub._actions
+               if a.option_strings and a.default not in (None, False, argparse.SUPPRESS) and "default" not in (a.help or "")]
+    assert not unnamed, unnamed  # select --help once gave none of its five
+
+
+def test_time_left_is_estimated_from_the_pace_so_far():
+    from terrapref.progress import duration_text, time_left
+
+    assert time_left(10.0, 0.25) == "10 s, about 30 s left"
+    assert time_left(90.0, 0.5) == "1 min 30 s, about 1 min 30 s left"
+    assert time_left(0.5, 0.5) == "0 s" and time_left(30.0, 0.01) == "30 s"  # too early to tell
+    assert time_left(12.0, 1.0) == "12 s" and duration_text(4000) == "1 h 6 min"
+
+
+def test_long_jobs_report_what_they_have_done_and_the_time_left(fig7_recording: Path, tmp_path: Path, capsys):
+    assert main(["course", "--after", str(fig7_recording), "--out", str(tmp_path / "more.yaml")]) == 0
+    lines = capsys.readouterr().err.splitlines()
+    frames = len((fig7_recording / "frames.jsonl").read_text().splitlines())
+    ticks = [line for line in lines if line.startswith("featurising the drive to find the pairs left open:") and "% " in line]
+    assert len(ticks) >= 10 and f"{frames}/{frames} frames" in ticks[-1]  # a line per tenth of the frames, not one at the end
+    assert all(line.rstrip().endswith(")") for line in ticks)  # each with the time so far (and what is left, once it can be told)

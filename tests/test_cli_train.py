@@ -43,7 +43,7 @@ def test_cli_train_writes_model_curve_and_checkpoints(tmp_path: Path, capsys):
     assert curve.read_bytes().startswith(PNG)
     folder = tmp_path / "models" / "pref.checkpoints"
     assert sorted(p.name for p in folder.iterdir()) == [f"epoch_{i:03d}.safetensors" for i in (1, 2, 3)]
-    epoch_lines = [line for line in captured.out.splitlines() if re.fullmatch(r"\s*\d+(\s+\d+\.\d+){5}", line)]
+    epoch_lines = [line for line in captured.out.splitlines() if re.fullmatch(r"\s*\d+(\s+\d+\.\d+){5}\s+\d.* s( left)?", line)]  # with the time so far (and left)
     assert [int(line.split()[0]) for line in epoch_lines] == [1, 2, 3]
     # Each line is the history the model file records.
     for line, h in zip(epoch_lines, model.meta["history"], strict=True):
@@ -121,3 +121,21 @@ def test_cli_train_bad_hyperparameter_is_a_user_error(tmp_path: Path, capsys, fl
 
 
 # --- errors raised in worker processes ------------------------------------------------------------
+
+
+def test_train_prints_the_time_left_with_its_epochs(monkeypatch, capsys):
+    import time
+    from types import SimpleNamespace
+
+    from terrapref.cli import _epoch_printer
+
+    clock = iter(float(t) for t in range(0, 1000, 10))  # each reading of the clock 10 s after the last
+    monkeypatch.setattr(time, "perf_counter", lambda: next(clock))
+    config = SimpleNamespace(classifier=SimpleNamespace(members=2), optimiser=SimpleNamespace(epochs=10))
+    show = _epoch_printer(config, verbose=False)
+    for _member in range(2):
+        for epoch in range(1, 11):
+            show(SimpleNamespace(epoch=epoch, train_loss=1.0, val_loss=1.0, train_acc=0.5, val_acc=0.5, val_top3=0.8))
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.lstrip()[:1].isdigit()]
+    assert rows[0].endswith("10 s, about 3 min 10 s left")  # 1 of 20 epochs in 10 s: 19 more at that pace
+    assert rows[-1].endswith("3 min 20 s")  # done: no estimate

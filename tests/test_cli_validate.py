@@ -67,25 +67,25 @@ def run_subprocess(cwd: Path, *argv: str) -> subprocess.CompletedProcess[str]:
 
 def test_validate_good_file_prints_ok(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = write(tmp_path, "good.yaml", GOOD_YAML)
-    assert run_cli(capsys, "validate", str(path)) == (0, [f"{path}: ok"], [])
+    assert run_cli(capsys, "validate", str(path)) == (0, [f"{path}: ok (scenario)"], [])
 
 
 def test_validate_several_good_files_and_a_packaged_name(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     a = write(tmp_path, "a.yaml", GOOD_YAML)
     b = write(tmp_path, "b.yml", edit("name: tiny_course", "name: other"))
     code, out, err = run_cli(capsys, "validate", str(a), str(b), "demo_course")
-    assert (code, out, err) == (0, [f"{a}: ok", f"{b}: ok", "demo_course: ok"], [])
+    assert (code, out, err) == (0, [f"{a}: ok (scenario)", f"{b}: ok (scenario)", "demo_course: ok (scenario)"], [])
 
 
 def test_validate_every_packaged_scenario(capsys: pytest.CaptureFixture[str]) -> None:
     names = packaged_scenarios()
-    assert run_cli(capsys, "validate", *names) == (0, [f"{n}: ok" for n in names], [])
+    assert run_cli(capsys, "validate", *names) == (0, [f"{n}: ok (scenario)" for n in names], [])
 
 
 def test_validate_a_relative_path(tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
     write(tmp_path, "x.yaml", GOOD_YAML)
     monkeypatch.chdir(tmp_path)
-    assert run_cli(capsys, "validate", "x.yaml") == (0, ["x.yaml: ok"], [])
+    assert run_cli(capsys, "validate", "x.yaml") == (0, ["x.yaml: ok (scenario)"], [])
 
 
 # --- validate: bad files, one problem each ------------------------------------------------------
@@ -183,7 +183,7 @@ def test_validate_name_too_long_for_the_os(tmp_path: Path, capsys: pytest.Captur
     assert code == 2 and err == []
     assert len(out) == 2
     assert out[0].startswith(f"error: {name}: ")
-    assert out[1].endswith(": ok")
+    assert out[1].endswith(": ok (scenario)")
 
 
 def test_validate_reports_every_problem_in_a_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -217,18 +217,65 @@ def test_validate_mixed_good_and_bad_files(tmp_path: Path, capsys: pytest.Captur
     assert code == 2
     assert err == []
     assert out == [
-        f"{good}: ok",
+        f"{good}: ok (scenario)",
         f"error: {bad}: terrain[0].circle.radius: must be > 0",
         f"error: {empty}: empty file",
-        f"{good2}: ok",
+        f"{good2}: ok (scenario)",
     ]
 
 
 def test_validate_needs_a_file(capsys: pytest.CaptureFixture[str]) -> None:
-    with pytest.raises(SystemExit) as info:
-        main(["validate"])
-    assert info.value.code == 2
-    assert "Traceback" not in capsys.readouterr().err
+    code, out, err = run_cli(capsys, "validate")
+    assert (code, out) == (2, []) and len(err) == 1 and "--template KIND" in err[0]
+
+
+# --- validate: every kind of file, and templates to start from ----------------------------------
+
+KINDS = {"scenario": "scenario", "classes": "class table", "perception": "perception model", "robot": "robot file", "labels": "label map"}
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_each_template_is_a_file_of_its_kind_that_validate_accepts(tmp_path: Path, capsys: pytest.CaptureFixture[str], kind: str) -> None:
+    code, out, err = run_cli(capsys, "validate", "--template", kind)
+    assert code == 0 and err == [] and out[0].startswith("# ")  # commented
+    path = write(tmp_path, f"{kind}.yaml", "\n".join(out) + "\n")  # terrapref validate --template KIND > FILE
+    assert run_cli(capsys, "validate", str(path)) == (0, [f"{path}: ok ({KINDS[kind]})"], [])
+
+
+@pytest.mark.parametrize("kind,old,new,line", [
+    ("classes", "id: 2, name: gravel", "id: 300, name: gravel", "classes[2].id: must be an integer in 0..254"),
+    ("perception", "drop_rate: 0.05", "drop_rate: 2", "frames.drop_rate: must be in [0, 1], got 2"),
+    ("robot", "height_m: 1.0", "height_m: -1.0", "camera.height_m: ..."),
+    ("labels", "2: mud", "2: lava", "ids: class 'lava' is not in the class table ..."),
+    ("robot", "format: terrapref-robot/1\n", "", "format: missing; expected 'terrapref-robot/1'"),
+])
+def test_validate_names_the_file_and_field_of_each_kind(tmp_path: Path, capsys: pytest.CaptureFixture[str], kind: str, old: str, new: str,
+                                                        line: str) -> None:
+    main(["validate", "--template", kind])
+    text = capsys.readouterr().out
+    assert old in text
+    path = write(tmp_path, f"{kind}.yaml", text.replace(old, new, 1))
+    code, out, err = run_cli(capsys, "validate", str(path))
+    assert (code, err, len(out)) == (2, [], 1), out
+    expected = f"error: {path}: {line}"
+    assert out[0].startswith(expected[:-3]) if line.endswith("...") else out[0] == expected
+
+
+def test_validate_reads_a_label_map_and_a_perception_file_with_the_given_table(capsys: pytest.CaptureFixture[str]) -> None:
+    examples = Path(__file__).parents[1] / "examples" / "classes"
+    table, labels, field = (str(examples / n) for n in ("rellis3d.yaml", "rellis3d_labels.yaml", "rellis3d_field.yaml"))
+    assert run_cli(capsys, "validate", table, labels, field, "--classes", table) == (
+        0, [f"{table}: ok (class table)", f"{labels}: ok (label map)", f"{field}: ok (perception model)"], [])
+    code, out, _ = run_cli(capsys, "validate", labels)  # the default table has no 'building'
+    assert code == 2 and out[0].startswith(f"error: {labels}: ids: class ")
+
+
+def test_validate_refuses_a_file_of_no_known_kind(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = write(tmp_path, "x.yaml", "format: terrapref-model/1\n")
+    code, out, _ = run_cli(capsys, "validate", str(path))
+    assert code == 2 and out == [f"error: {path}: format: 'terrapref-model/1' is not a file terrapref reads here; expected one of "
+                                 "terrapref-scenario/1, terrapref-classes/1, terrapref-perception/1, terrapref-robot/1, terrapref-labels/1"]
+    assert run_cli(capsys, "validate", "--template", "robot", str(path))[0] == 2
 
 
 def test_validate_as_a_subprocess_exit_code_and_no_traceback(tmp_path: Path) -> None:
@@ -246,14 +293,14 @@ def test_validate_as_a_subprocess_exit_code_and_no_traceback(tmp_path: Path) -> 
     assert result.stderr == ""
     lines = result.stdout.splitlines()
     assert lines == [
-        f"{good}: ok",
+        f"{good}: ok (scenario)",
         "error: bad.yaml: terrain[0].circle.radius: must be finite (got NaN or infinity)",
         "error: garbage.yaml: binary data, expected a YAML text file",
         lines[3],
         lines[4],
         "error: dir.yaml: is a directory, expected a file",
         "error: missing.yaml: no such file",
-        "demo_course: ok",
+        "demo_course: ok (scenario)",
     ]
     assert lines[3].startswith("error: date.yaml: malformed YAML")
     assert lines[4].startswith("error: huge.yaml: world: raster would have about 10^402 cells")
@@ -263,7 +310,7 @@ def test_validate_good_files_exit_0(tmp_path: Path, capsys: pytest.CaptureFixtur
     # In-process: the exit code and the streams of a real process are checked by the test above.
     write(tmp_path, "good.yaml", GOOD_YAML)
     monkeypatch.chdir(tmp_path)
-    assert run_cli(capsys, "validate", "good.yaml", "demo_course") == (0, ["good.yaml: ok", "demo_course: ok"], [])
+    assert run_cli(capsys, "validate", "good.yaml", "demo_course") == (0, ["good.yaml: ok (scenario)", "demo_course: ok (scenario)"], [])
 
 
 # --- render and show ----------------------------------------------------------------------------

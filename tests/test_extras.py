@@ -68,6 +68,8 @@ COMMANDS = {
     ("evaluate", "c.safetensors", "gen:7", "--engine", "ray", "--out", "ev_ray"): "ray",
     ("evaluate", "cnn.safetensors", "gen:7", "--out", "ev_cnn"): "cnn",
     ("study", "--quick", "--out", "study"): "cnn",
+    ("ros2", "--model", "c.safetensors", "--robot", "robot.yaml"): "ros2",
+    ("play", "drive.mcap"): "ros2",
 }
 
 

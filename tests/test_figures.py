@@ -41,7 +41,7 @@ def test_a_missed_zone_is_marked_with_what_was_expected_and_chosen():
     fig, ax = plt.subplots()
     zone = scenario.zones[0]
     draw_map(ax, scenario, rasterise(scenario), marks={zone.id: "missed: expected avoid, drove water"})
-    marked = [t for t in ax.texts if "missed: expected avoid, drove water" in t.get_text()]
+    marked = [t for t in ax.texts if "missed: expected avoid, drove water" in t.get_text().replace("\n", " ")]  # wrapped beside its zone
     assert len(marked) == 1 and marked[0].get_text().startswith(zone.id) and marked[0].get_color() == "red"
     plt.close(fig)
 
@@ -63,3 +63,110 @@ def test_the_loss_plot_draws_every_member(tmp_path):
     assert len(loss_ax.lines) == 3 * 3  # train, validation and the chosen epoch of each member
     assert [t.get_text() for t in loss_ax.get_legend().get_texts()][:3] == [f"member {j}: epoch {e} chosen" for j, e in ((1, 3), (2, 2), (3, 1))]
     assert (tmp_path / "loss.png").stat().st_size > 10_000
+
+
+def _kept_figure(monkeypatch) -> dict:
+    """The next figure a save_* function draws, kept for the test when the function closes it."""
+    captured: dict = {}
+    real_close = plt.close
+
+    def keep(fig):
+        captured["fig"] = fig
+        return real_close(fig)
+
+    monkeypatch.setattr(plt, "close", keep)
+    return captured
+
+
+def test_a_zone_label_stays_beside_its_zone_however_long():
+    from terrapref.scenario.shapes import outline
+
+    scenario = resolve_scenario("teach_course")  # labels such as "rock | mud | water" beside small zones
+    fig, ax = plt.subplots(figsize=(11.5, 6), dpi=120)
+    draw_map(ax, scenario, rasterise(scenario))
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    for text, zone in zip([t for t in ax.texts if t.get_text()], scenario.zones, strict=True):
+        box = text.get_window_extent(renderer)
+        (x0, y0), (x1, y1) = ax.transData.transform(outline(zone.shape)).min(axis=0), ax.transData.transform(outline(zone.shape)).max(axis=0)
+        farthest = max(max(abs(x - min(max(x, x0), x1)) for x in (box.x0, box.x1)), max(abs(y - min(max(y, y0), y1)) for y in (box.y0, box.y1)))
+        assert farthest < 120, (zone.id, text.get_text(), farthest)  # pixels: a wrapped label's width, not a line across the map
+    plt.close(fig)
+
+
+def test_the_legend_lists_only_the_classes_on_the_map():
+    scenario = resolve_scenario("fig7_rock_vs_non_traversable_left")  # rock and trees on grass: no water, no mud
+    fig, ax = plt.subplots()
+    names = [h.get_label() for h in draw_map(ax, scenario, rasterise(scenario))]
+    assert names == ["grass", "non_traversable", "rock"]
+    plt.close(fig)
+
+
+def test_non_latin_and_very_long_class_names_draw_without_warnings_or_boxes(tmp_path, recwarn):
+    import warnings
+
+    from terrapref.plots import LONGEST_NAME, save_map
+    from terrapref.scenario import parse_scenario
+    from terrapref.terrain import ClassTable
+
+    long_name = "a_very_long_class_name_that_goes_on_and_on"
+    table = ClassTable.from_dict({"format": "terrapref-classes/1", "background": "grass", "lethal": ["tree"], "profile": ["泥地", long_name, "tree"],
+                                  "classes": [{"id": 0, "name": "grass", "color": [92, 158, 70]}, {"id": 1, "name": "泥地", "color": [112, 72, 36]},
+                                              {"id": 2, "name": long_name, "color": [150, 150, 150]}, {"id": 3, "name": "tree", "color": [20, 70, 20]}]},
+                                 "table.yaml")
+    scenario = parse_scenario({"format": "terrapref-scenario/1", "name": "t", "world": {"size_m": [20, 10], "resolution_m": 0.1, "background": "grass"},
+                               "terrain": [{"class": "泥地", "circle": {"center": [6, 5], "radius": 1}},
+                                           {"class": long_name, "circle": {"center": [12, 5], "radius": 1}}],
+                               "path": {"waypoints": [[1, 5], [19, 5]]},
+                               "zones": [{"id": "1", "label": f"泥地 vs {long_name}", "circle": {"center": [9, 5], "radius": 4}, "expect": "best"}]},
+                              "t.yaml", table)
+    warnings.simplefilter("always")
+    kept = {}
+    real_close = plt.close
+    plt.close = lambda fig: (kept.setdefault("fig", fig), real_close(fig))
+    try:
+        save_map(tmp_path / "map.png", scenario, rasterise(scenario))
+    finally:
+        plt.close = real_close
+    assert [str(w.message) for w in recwarn] == []  # matplotlib's "Glyph ... missing from font(s)" names its source files
+    ax = kept["fig"].axes[0]
+    legend = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert "class 1" in legend and long_name[: LONGEST_NAME - 1] + "\u2026" in legend
+    assert all(len(line) <= 30 for t in ax.texts for line in t.get_text().splitlines())
+    assert "class 1" in " ".join(t.get_text() for t in ax.texts)
+
+
+def test_the_route_is_drawn_wide_beneath_the_dashed_path(tmp_path, monkeypatch):
+    import numpy as np
+
+    from terrapref.plots import save_map
+
+    scenario = resolve_scenario("demo_course")
+    kept = _kept_figure(monkeypatch)
+    save_map(tmp_path / "route.png", scenario, rasterise(scenario), tracks=[("route", scenario.waypoints + np.array([0.0, 0.1]), "tab:blue")])
+    lines = {line.get_label(): line for line in kept["fig"].axes[0].lines}
+    path, route = lines["reference path"], lines["route"]
+    assert route.get_linewidth() >= 2 * path.get_linewidth() and route.get_zorder() < path.get_zorder()
+
+
+def test_the_evaluation_figure_gives_each_seed_its_colour_and_keeps_its_legend_off_the_map(tmp_path, monkeypatch):
+    import numpy as np
+
+    from terrapref.plots import CourseRuns, save_evaluation
+
+    scenario = resolve_scenario("demo_course")
+    tracks = [scenario.waypoints + np.array([0.0, dy]) for dy in (0.0, 0.5)]
+    kept = _kept_figure(monkeypatch)
+    save_evaluation(tmp_path / "ev.png", CourseRuns(scenario, rasterise(scenario), tracks, tracks, {"1": (1, 2)}), "t")
+    fig = kept["fig"]
+    overview = fig.axes[0]
+    planner = [line for line in overview.lines if line.get_linestyle() == "-" and len(line.get_xdata()) == len(scenario.waypoints)]
+    assert len({matplotlib.colors.to_hex(line.get_color()) for line in planner}) == 2  # seed 0 and seed 1 apart
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)  # the closed figure, drawn again as it was saved
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    legend = overview.get_legend()
+    assert _overlap(legend.get_window_extent(renderer), overview.get_window_extent(renderer)) == 0.0
+    assert {"seed 0", "seed 1"} <= {t.get_text() for t in legend.get_texts()}

@@ -108,7 +108,7 @@ LAYERS = [
     {"baselines", "recipes"},
     {"interop"},
     {"evaluation", "teleop"},
-    {"report"},
+    {"report", "filekinds"},
     {"cli", "runtime", "warm_up"},
 ]
 

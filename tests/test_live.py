@@ -117,3 +117,96 @@ def test_a_port_in_use_is_one_line(tmp_path, capsys):
         assert main(["evaluate", str(model), "fig7_rock_vs_non_traversable_left", "--seeds", "1", "--no-driver", "--out", str(tmp_path / "ev"),
                      "--live", "--live-port", str(port)]) == 2
     one_line_error(capsys, f"127.0.0.1:{port}", "cannot serve the live view")
+
+
+@pytest.mark.parametrize("host", ["192.0.2.1", "no-such-host.invalid"])  # an address of no interface here (TEST-NET-1); a name of none
+def test_a_host_this_machine_cannot_listen_on_blames_the_host(tmp_path, capsys, host):
+    from helpers import linear_model, one_line_error
+
+    model = linear_model(tmp_path / "linear.safetensors")
+    assert main(["evaluate", str(model), "fig7_rock_vs_non_traversable_left", "--seeds", "1", "--no-driver", "--out", str(tmp_path / "ev"),
+                 "--live", "--live-host", host]) == 2
+    assert "--live-port" not in one_line_error(capsys, f"{host}: --live-host: cannot listen on this address")
+
+
+@pytest.mark.parametrize("offered,named", [(["foxglove.websocket.v1"], "foxglove.websocket.v1"), (["foxglove.sdk.v1"], "foxglove.sdk.v1"),
+                                           (["foxglove.websocket.v1", "foxglove.sdk.v1"], "foxglove.sdk.v1")])
+def test_a_viewer_connects_by_either_name_of_the_protocol(offered, named):
+    from terrapref.interop.live import LiveView
+
+    view = LiveView(port=0)
+    try:
+        with websockets.connect(view.url, subprotocols=offered, open_timeout=5) as ws:
+            assert ws.subprotocol == named and json.loads(ws.recv(timeout=5))["op"] == "serverInfo"
+    finally:
+        view.stop()
+
+
+def test_a_client_offering_neither_name_is_told_which_the_view_speaks():
+    from websockets.exceptions import InvalidStatus
+
+    from terrapref.interop.live import LiveView
+
+    view = LiveView(port=0)
+    try:
+        for offered in (None, ["some.other.v1"]):
+            with pytest.raises(InvalidStatus) as refused:
+                websockets.connect(view.url, subprotocols=offered, open_timeout=5)
+            response = refused.value.response
+            assert response.status_code == 400 and response.headers["Sec-WebSocket-Protocol"] == "foxglove.sdk.v1, foxglove.websocket.v1"
+            assert b"speaks the subprotocol foxglove.sdk.v1 (also by its earlier name foxglove.websocket.v1)" in response.body
+    finally:
+        view.stop()
+
+
+def test_a_paced_run_sends_each_frame_when_its_time_comes(monkeypatch):
+    from types import SimpleNamespace
+
+    from terrapref.interop import live
+
+    clock, slept = [100.0], []
+    monkeypatch.setattr(live.time, "monotonic", lambda: clock[0])
+    monkeypatch.setattr(live.time, "sleep", lambda s: slept.append(round(s, 6)))
+    run = live.LiveRun(SimpleNamespace(pace=2.0), scene=None)
+    for t_s, wall in ((5.0, 100.0), (6.0, 100.1), (8.0, 101.6)):  # run time [s], then the wall clock when the frame is ready
+        clock[0] = wall
+        run._keep_pace(t_s)
+    assert slept == [0.4]  # 1 s of run at twice real time is due 0.5 s after the first; the third frame was late already
+    unpaced = live.LiveRun(SimpleNamespace(pace=0.0), scene=None)
+    unpaced._keep_pace(0.0)
+    unpaced._keep_pace(10.0)
+    assert slept == [0.4]
+
+
+def test_wait_holds_the_first_run_until_a_viewer_subscribes():
+    from terrapref.camera import CameraConfig
+    from terrapref.features import PreferenceSetConfig
+    from terrapref.interop.live import LiveRun, LiveView
+    from terrapref.terrain import default_classes
+
+    view = LiveView(port=0, wait=True)
+    started = threading.Event()
+    runner = threading.Thread(target=lambda: (LiveRun.start(view, np.array([[0.0, 0.0], [5.0, 0.0]]), CameraConfig(), default_classes(),
+                                                            PreferenceSetConfig()), started.set()), daemon=True)
+    try:
+        runner.start()
+        assert not started.wait(0.3)  # no viewer yet
+        with websockets.connect(view.url, subprotocols=["foxglove.websocket.v1"], open_timeout=5) as ws:
+            advertised = next(m for m in (json.loads(ws.recv(timeout=5)) for _ in range(5)) if m["op"] == "advertise")
+            channel = advertised["channels"][0]["id"]
+            ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 1, "channelId": channel}]}))
+            assert started.wait(10)
+    finally:
+        view.stop()
+
+
+def test_live_pace_and_wait_go_with_live(tmp_path, capsys):
+    from helpers import linear_model, one_line_error
+
+    model = linear_model(tmp_path / "linear.safetensors")
+    base = ["evaluate", str(model), "demo_course", "--seeds", "1", "--no-driver", "--out", str(tmp_path / "ev")]
+    assert main([*base, "--live-pace", "1"]) == 2
+    one_line_error(capsys, "--live-pace: goes with --live")
+    assert main([*base, "--live", "--live-port", "0", "--live-pace", "0"]) == 2
+    one_line_error(capsys, "--live-pace: expected a factor of real time > 0")
+    assert not (tmp_path / "ev").exists()

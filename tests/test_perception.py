@@ -4,6 +4,7 @@ frame timing, the driver behind a perceiver, and perceived runs and recordings."
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from types import SimpleNamespace
 from pathlib import Path
 
@@ -79,6 +80,18 @@ def test_a_file_round_trips_through_to_dict(tmp_path: Path):
     from terrapref.perception.model import from_dict
 
     assert from_dict(model.to_dict(), "meta.json", default_classes()) == model
+
+
+@pytest.mark.parametrize("name", PRESETS)
+def test_the_printed_preset_is_a_file_perception_reads_back(tmp_path: Path, capsys, name: str):
+    from terrapref.cli import main
+
+    assert main(["perception", name]) == 0
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(capsys.readouterr().out)  # terrapref perception NAME > NAME.yaml
+    model = load_perception(path)
+    assert model == replace(load_perception(name), name=str(path))
+    assert main(["perception", str(path)]) == 0
 
 
 @pytest.mark.parametrize("text,field", [

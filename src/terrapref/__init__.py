@@ -21,7 +21,7 @@ the layers below it (tests/test_layout.py checks this list against the code):
 16. baselines, recipes
 17. interop (robot logs, ONNX, MCAP, ROS)
 18. evaluation, teleop
-19. report
+19. report, filekinds (which reader checks a file, templates)
 20. cli, runtime, warm_up
 """
 

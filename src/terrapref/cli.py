@@ -32,21 +32,40 @@ if TYPE_CHECKING:  # for the hints only: the command line imports what a command
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
+    from terrapref.filekinds import KINDS, check_file, template
     from terrapref.scenario import load_scenario
     from terrapref.scenario.catalog import scenario_path
 
+    if args.template is not None:
+        if args.files:
+            raise UserError("--template", "prints a template to start from; give it alone, or FILEs to check without it")
+        print(template(args.template), end="")
+        return 0
+    if not args.files:
+        raise UserError("validate", f"give the files to check, or --template KIND ({', '.join(KINDS)}) for one to start from")
     status = 0
     table = _class_table(args)
     for name in args.files:
         try:
-            load_scenario(scenario_path(name), table)
+            if _is_file(name):
+                kind = check_file(name, table).title
+            else:  # a packaged scenario's name
+                load_scenario(scenario_path(name), table)
+                kind = KINDS["scenario"].title
         except UserError as exc:
             for line in exc.lines():
                 print(f"error: {line}")  # in the report's order, beside the files that are ok
             status = 2
         else:
-            print(f"{name}: ok")
+            print(f"{name}: ok ({kind})")
     return status
+
+
+def _is_file(name: str) -> bool:
+    try:
+        return Path(name).is_file()
+    except OSError:  # a name the OS refuses (too long): the scenario reader says so
+        return False
 
 
 def _cmd_render(args: argparse.Namespace) -> int:
@@ -61,6 +80,9 @@ def _cmd_render(args: argparse.Namespace) -> int:
     _check_output(args.out, "--out", [args.scenario], force=args.force)
     if args.preview:
         _check_output(args.preview, "--preview", [args.scenario, args.out], force=args.force)
+    for flag, path in (("--out", args.out), ("--preview", args.preview)):
+        if path is not None and Path(path).suffix.lower() != ".png":  # a lossy format would change the class ids
+            raise UserError(str(path), "render writes PNG (class ids need a lossless format): give it the suffix .png", field=flag)
     scenario = resolve_scenario(args.scenario, _class_table(args))
     x, y, yaw_deg = args.pose if args.pose is not None else (scenario.start[0], scenario.start[1], math.degrees(scenario.start[2]))
     camera = PinholeCamera()
@@ -166,8 +188,13 @@ def _open_pairs(recs: Sequence) -> list[tuple[str, str]]:
     for rec in recs:
         if len(rec) == 0:
             raise UserError(str(rec.path), "holds no frames: drive the teaching course first", field="frames")
-    print(f"featurising the drive{'s' if len(recs) > 1 else ''} to find the pairs left open ...", flush=True)
-    return open_pairs(list(recs), recipe_named(DEFAULT_RECIPE))
+    from terrapref.progress import Progress
+
+    total = sum(len(r) for r in recs)
+    bar = Progress(f"featurising the drive{'s' if len(recs) > 1 else ''} to find the pairs left open", total, unit="frames")
+    pairs = open_pairs(list(recs), recipe_named(DEFAULT_RECIPE), frames=lambda done, n: bar.update(done, f"{done}/{n} frames"))
+    bar.close(f"{total} frames")
+    return pairs
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
@@ -319,8 +346,8 @@ def _print_what_the_drive_shows(rec) -> None:
         print("what the drive shows: nothing (no frames)")
         return
     recipe = recipe_named(DEFAULT_RECIPE)
-    bar = Progress("featurize", 1)
-    dataset = build_dataset([rec], recipe.features(), progress=lambda k, n: bar.update(k, f"{len(rec)} frames"))
+    bar = Progress("featurize", len(rec), unit="frames")
+    dataset = build_dataset([rec], recipe.features(), frames=lambda done, n: bar.update(done, f"{done}/{n} frames"))
     bar.close()
     print(f"what the drive shows (recipe {DEFAULT_RECIPE}'s features, {len(dataset)} frames):")
     for line in identify(dataset, steady=recipe.train.data.steady_labels).lines(rec.meta.get("profile")):
@@ -535,10 +562,16 @@ def _warn_lethal_contact(recordings: list[Path]) -> None:
 
 
 def _epoch_printer(config: TrainConfig, verbose: bool) -> Callable[[EpochMetrics], None]:
-    """Prints a table of epochs (every tenth, the last, or all when ``verbose``), one per ensemble member."""
-    header = f"{'epoch':>5s} {'train loss':>10s} {'val loss':>9s} {'train acc':>9s} {'val acc':>8s} {'val top3':>8s}"
+    """Prints a table of epochs (every tenth, the last, or all when ``verbose``), one per ensemble
+    member, each row with the time so far and the time the remaining epochs will take at the pace so far."""
+    import time
+
+    from terrapref.progress import time_left
+
+    header = f"{'epoch':>5s} {'train loss':>10s} {'val loss':>9s} {'train acc':>9s} {'val acc':>8s} {'val top3':>8s}  time"
     members, epochs = config.classifier.members, config.optimiser.epochs
     member = 0
+    start = time.perf_counter()
 
     def show(m) -> None:
         nonlocal member
@@ -546,7 +579,9 @@ def _epoch_printer(config: TrainConfig, verbose: bool) -> Callable[[EpochMetrics
             member += 1
             print(f"member {member}/{members}\n{header}" if members > 1 else header)
         if verbose or m.epoch == epochs or m.epoch % max(1, epochs // 10) == 0:
-            print(f"{m.epoch:5d} {m.train_loss:10.4f} {m.val_loss:9.4f} {m.train_acc:9.3f} {m.val_acc:8.3f} {m.val_top3:8.3f}", flush=True)
+            done = ((member - 1) * epochs + m.epoch) / (members * epochs)
+            print(f"{m.epoch:5d} {m.train_loss:10.4f} {m.val_loss:9.4f} {m.train_acc:9.3f} {m.val_acc:8.3f} {m.val_top3:8.3f}  "
+                  f"{time_left(time.perf_counter() - start, done)}", flush=True)
 
     return show
 
@@ -762,9 +797,12 @@ def _replay_into(args: argparse.Namespace, model, robot, out: Path) -> int:
                       ("C alone, terrain", "classifier_terrain_in_view")):
         r = result[key]
         if r["frames"]:
-            print(f"{name:20s} top-1 {r['top1']:.1%}, top-3 {r['top3']:.1%}, mean |w| error {r['mean_abs_w_error_rps']:.3f} rad/s over {r['frames']} frames")
+            top3 = f", top-3 {r['top3']:.1%}" if r["top3"] is not None else ""
+            print(f"{name:20s} top-1 {r['top1']:.1%}{top3}, mean |w| error {r['mean_abs_w_error_rps']:.3f} rad/s over {r['frames']} frames")
         else:
             print(f"{name:20s} no frames")
+    print("top-3: how often the operator's trajectory is among the three C ranks most probable (F_t); the planner's stages "
+          "choose one trajectory and rank none, so only C has a top-3")
     print(f"wrote {out / 'replay.json'} and {out / 'replay.png'}")
     return 0
 
@@ -783,23 +821,94 @@ def _cmd_ros1(args: argparse.Namespace) -> int:
     return 0
 
 
-def _add_live_args(p: argparse.ArgumentParser, note: str) -> None:
+def _cmd_ros2(args: argparse.Namespace) -> int:
+    from terrapref.extras import check
+
+    check("ros2", "terrapref ros2")  # before the model is read
+    from terrapref.interop.node_core import NodeOptions
+    from terrapref.interop.ros2 import run_node
+
+    options = NodeOptions(stamped=True if args.stamped else None, rate=args.rate, path_file=args.path_file, cmd_topic=args.cmd_topic)
+    options.resolved(lambda name, default: default)  # what the command line gives is checked before DDS starts
+    view = _live_view(args)
+    try:
+        run_node(args.model, args.robot, options, ros_args=args.ros_args or (), live=view)
+    except KeyboardInterrupt as exc:  # Ctrl-C ends a node as ROS 2's do (its summary printed); SIGTERM as every command
+        if isinstance(exc, Terminated):
+            raise
+    finally:
+        if view is not None:
+            view.stop()
+    return 0
+
+
+def _cmd_play(args: argparse.Namespace) -> int:
+    from terrapref.extras import check
+
+    check("ros2", "terrapref play")
+    from terrapref.interop.dds import domain_id
+    from terrapref.interop.play import BagPlayer
+    from terrapref.interop.robot import load_robot_topics
+    from terrapref.progress import Progress
+
+    if not 0.01 <= args.rate <= 100:
+        raise UserError("--rate", f"expected a factor in [0.01, 100], got {args.rate:g}")
+    if not 1 <= args.clock <= 1000:
+        raise UserError("--clock", f"expected a rate in [1, 1000] Hz, got {args.clock:g}")
+    if not 0 <= args.delay <= 60:
+        raise UserError("--delay", f"expected [0, 60] s, got {args.delay:g}")
+    domain = domain_id()
+    topics = set(args.topics) if args.topics else None
+    if args.robot:  # what the node reads, and the transforms that place it; the log's commands and markers stay out
+        roles = load_robot_topics(args.robot)
+        topics = (topics or set()) | {t for role, t in roles.items() if role != "command"}
+    player = BagPlayer(args.bag, domain, topics, optional={"/tf", "/tf_static"} if args.robot else ())
+    first, last = player.span_ns
+    span_s = (last - first) * 1e-9
+    print(f"playing {args.bag} in ROS_DOMAIN_ID {domain}: {', '.join(sorted({t for t, _ in player.writers}))} and /clock, "
+          f"{span_s:.1f} s of log at {args.rate:g}x", flush=True)
+    bar = Progress("play", span_s, "s")
+    count = 0
+    try:
+        count = player.play(rate=args.rate, clock_hz=args.clock, delay_s=args.delay, progress=lambda ns: bar.update(ns * 1e-9))
+    finally:
+        bar.close(f"{count} messages")
+        player.close()
+    print(f"played {count} messages on {len(player.writers)} topics and /clock: {span_s:.1f} s of {args.bag}")
+    return 0
+
+
+def _add_live_args(p: argparse.ArgumentParser, note: str, paced: bool = False) -> None:
+    """--live and its address; with ``paced`` (simulated runs), --live-pace and --live-wait too."""
     p.add_argument("--live", action="store_true",
-                   help=f"serve the planner's channels live (those of the MCAP export) on Foxglove's WebSocket protocol; {note}")
+                   help=f"serve the planner's channels live (those of the MCAP export) on Foxglove's WebSocket protocol "
+                        f"(subprotocol foxglove.sdk.v1, or foxglove.websocket.v1 for older viewers); {note}")
     p.add_argument("--live-host", default="127.0.0.1", help="address the live view listens on (default 127.0.0.1; 0.0.0.0: every interface)")
     p.add_argument("--live-port", type=int, default=8765, help="port of the live view (default 8765, Foxglove's; 0: a free one)")
+    if paced:
+        p.add_argument("--live-pace", type=finite_float, default=None, metavar="FACTOR",
+                       help="send each run's frames at FACTOR times real time (1: as driven; 2: twice as fast); default: as fast as "
+                            "they are computed")
+        p.add_argument("--live-wait", action="store_true", help="wait for a viewer to connect before the first run starts")
 
 
 def _live_view(args: argparse.Namespace):
     """The live view that --live asks for (its address printed), or None."""
+    pace, wait = getattr(args, "live_pace", None), getattr(args, "live_wait", False)
     if not args.live:
+        if pace is not None or wait:
+            raise UserError("--live-pace" if pace is not None else "--live-wait", "goes with --live")
         return None
     if not 0 <= args.live_port <= 65535:
         raise UserError("--live-port", f"expected a port in [0, 65535], got {args.live_port}")
+    if pace is not None and not pace > 0:
+        raise UserError("--live-pace", f"expected a factor of real time > 0 (1: as driven), got {pace:g}")
     from terrapref.interop.live import LiveView
 
-    view = LiveView(args.live_host, args.live_port)
-    print(f"live view: {view.url} (Foxglove: Open connection, Foxglove WebSocket)", flush=True)
+    view = LiveView(args.live_host, args.live_port, pace=pace or 0.0, wait=wait)
+    paced = f"; frames at {pace:g}x real time" if pace else ""
+    waiting = "; waiting for a viewer before the first run" if wait else ""
+    print(f"live view: {view.url} (Foxglove: Open connection, Foxglove WebSocket{paced}){waiting}", flush=True)
     return view
 
 
@@ -886,7 +995,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
         if args.model:
             frames = replace(frames, costmap=_model_costmaps(args.model, frames))
         bar = Progress("export", len(rec))
-        write_bag(out, frames, ros1=args.format == "rosbag1", progress=lambda done, total: bar.update(done))
+        write_bag(out, frames, ros1=args.format == "rosbag1", progress=lambda done, total: bar.update(done, f"{done}/{total} frames"))
         bar.close(f"{len(rec)} frames")
         what = "ROS 1 bag; rosbag play it" if args.format == "rosbag1" else "ROS 2 MCAP; open it in Foxglove"
         from terrapref.terrain import default_classes
@@ -902,6 +1011,9 @@ def _cmd_export(args: argparse.Namespace) -> int:
     from terrapref.interop.onnx_export import export_onnx
     from terrapref.learning.model_file import load_model
 
+    if Path(args.input).is_dir():
+        raise UserError(args.input, "is a recording folder; --format onnx exports a model file (.safetensors), a recording exports "
+                                    "as --format mcap or rosbag1", field="--format")
     model = load_model(args.input)
     if args.classes is not None:
         _check_table(args, model.classes, args.input)
@@ -936,7 +1048,8 @@ def _cmd_perception(args: argparse.Namespace) -> int:
         model = load_perception(spec, _class_table(args))
         if i:
             print("---")
-        print(yaml.safe_dump(model.to_dict(), sort_keys=False, default_flow_style=None).rstrip())
+        print(f"# {model.name} as a terrapref-perception/1 file: save it, edit any field, give it to --perception FILE")
+        print(yaml.safe_dump(model.file_dict(), sort_keys=False, default_flow_style=None).rstrip())
     return 0
 
 
@@ -1175,8 +1288,13 @@ def _course_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _validate_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("validate", help="check scenario files against terrapref-scenario/1")
-    p.add_argument("files", nargs="+", metavar="FILE", help="scenario files (YAML) to check")
+    p = sub.add_parser("validate", help="check scenarios, class tables, perception models, robot files and label maps (each by its format)")
+    p.add_argument("files", nargs="*", metavar="FILE",
+                   help="files to check, each read as its format: field says (terrapref-scenario/1, -classes/1, -perception/1, -robot/1, "
+                        "-labels/1), or packaged scenarios' names")
+    p.add_argument("--template", metavar="KIND", choices=("scenario", "classes", "perception", "robot", "labels"),
+                   help="print a commented file of this kind to start from (scenario, classes, perception, robot, labels): "
+                        "terrapref validate --template robot > robot.yaml")
     _add_classes_arg(p)
     p.set_defaults(func=_cmd_validate)
 
@@ -1306,11 +1424,11 @@ def _evaluate_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--profile", help="resolve `best` zones under this profile instead of the model's")
     p.add_argument("--frames", help="comma-separated frame numbers of seed 0 to draw as decision pictures")
     p.add_argument("--no-driver", action="store_true", help="skip the synthetic driver's comparison runs")
-    p.add_argument("--style", default="default", help="the synthetic driver's style for the comparison runs (agreement)")
+    p.add_argument("--style", default="default", help="the synthetic driver's style for the comparison runs (agreement; default: default)")
     _add_engine_args(p)
     p.add_argument("--mcap", action="store_true", help="also write each planner run as ROS 2 MCAP in OUT/runs (Foxglove, RViz)")
     p.add_argument("--perception", metavar="PRESET|FILE", help=PERCEPTION_HELP + " (default: clean); the driver always sees the truth")
-    _add_live_args(p, "the runs go one after another in this process")
+    _add_live_args(p, "the runs go one after another in this process", paced=True)
     _add_classes_arg(p, check=True)  # the scenarios and gen:N are read with the model's table
     _add_force_arg(p)
     p.set_defaults(func=_cmd_evaluate)
@@ -1320,7 +1438,7 @@ def _reproduce_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("reproduce", help="demonstrate, train and evaluate end to end; write REPORT.md with Tables 1 and 2")
     p.add_argument("--out", required=True, type=Path, help="folder for REPORT.md, its figures and the work")
     p.add_argument("--seeds", type=int, default=5, help="training seeds per recipe (default 5)")
-    p.add_argument("--eval-seeds", type=int, default=1, help="evaluation runs per model and scenario")
+    p.add_argument("--eval-seeds", type=int, default=1, help="evaluation runs per model and scenario (default 1)")
     p.add_argument("--recipes", default="paper,ours,teach",
                    help="recipes to compare, by name, separated by commas (default: paper,ours,teach; see `terrapref recipes`)")
     p.add_argument("--profile", help="preference order for the demonstrations, best first")
@@ -1402,6 +1520,37 @@ def _ros1_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_cmd_ros1)
 
 
+def _ros2_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("ros2", help="run the planner as a ROS 2 node over DDS (no rclpy; the ros2 extra: cyclonedds)")
+    p.add_argument("--model", required=True, help="a model file from train")
+    p.add_argument("--robot", required=True, help="the robot file: topics, camera mounting, label map (terrapref-robot/1)")
+    p.add_argument("--stamped", action="store_true",
+                   help="publish geometry_msgs/TwistStamped (stamped with the frame decided on; Jazzy's Nav2 default) instead of Twist "
+                        "(ROS parameter stamped)")
+    p.add_argument("--rate", type=finite_float, help="commands per second between decisions (ROS parameter rate; default 20)")
+    p.add_argument("--path-file", help="waypoints (YAML: a list, a mapping with waypoints, or a scenario such as terrapref route writes) of "
+                                       "the reference path in the odometry frame, instead of the path topic (ROS parameter path_file)")
+    p.add_argument("--cmd-topic", help="where to publish the command (ROS parameter cmd_topic; default: the robot file's command topic)")
+    _add_live_args(p, "stamped with the frames' ROS times")
+    p.add_argument("--ros-args", nargs=argparse.REMAINDER, metavar="ARG",
+                   help="ROS 2's arguments, last: -p NAME:=VALUE (stamped, rate, path_file, cmd_topic, hold_s, use_sim_time) and "
+                        "-r FROM:=TO (topics; __node, __ns); ROS_DOMAIN_ID picks the domain")
+    p.set_defaults(func=_cmd_ros2)
+
+
+def _play_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("play", help="publish a ROS 2 bag or MCAP on ROS 2 topics with /clock, as ros2 bag play --clock (the ros2 extra)")
+    p.add_argument("bag", help="a ROS 2 bag folder or .mcap file (terrapref export --format mcap writes one)")
+    p.add_argument("--robot", help="play only what this robot file's node reads (image, camera_info, odometry, path) and /tf, /tf_static, "
+                                   "so that the log's own commands and markers stay off the node's topics")
+    p.add_argument("--topics", nargs="+", metavar="TOPIC", help="play only these topics (with --robot: these as well)")
+    p.add_argument("--rate", type=finite_float, default=1.0, help="speed factor over the log's own pace (default 1)")
+    p.add_argument("--clock", type=finite_float, default=40.0, help="/clock messages per second (default 40, as ros2 bag play --clock)")
+    p.add_argument("--delay", type=finite_float, default=1.0,
+                   help="seconds between joining the domain and the first message, for subscribers to discover the topics (default 1)")
+    p.set_defaults(func=_cmd_play)
+
+
 def _route_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("route", help="plan a global route over a scenario's map, priced with a model's learned preference, as waypoints the planner follows")
     p.add_argument("scenario", help="the course (packaged name, file or gen:N): its terrain stands in for a prior map such as labelled aerial imagery")
@@ -1423,14 +1572,14 @@ def _info_parser(sub: argparse._SubParsersAction) -> None:
 def _select_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("select", help="compare recipes: train each for every order and seed, drive generated layouts, report agreement with the driver")
     p.add_argument("--out", required=True, type=Path, help="folder for SELECT.md, select.json, select.png and the work")
-    p.add_argument("--recipes", default="teach", help="recipe names separated by commas (terrapref recipes)")
+    p.add_argument("--recipes", default="teach", help="recipe names separated by commas (terrapref recipes; default: teach)")
     p.add_argument("--orders", default="all",
                    help="'all' (every order of the feature classes, the lethal ones last: six for the default table), 'random:N' (N of them "
-                        "drawn at random, the same N every time) or orders separated by ';', e.g. 'rock,mud,water;water,mud,rock'")
-    p.add_argument("--style", default="default", help="the synthetic driver's style")
-    p.add_argument("--seeds", type=int, default=5, help="training seeds per recipe and order")
-    p.add_argument("--first", type=int, default=1000, help="first generated layout (1000-1999: for choosing; 2000 on: for confirming)")
-    p.add_argument("--courses", type=int, default=32, help="generated layouts")
+                        "drawn at random, the same N every time) or orders separated by ';', e.g. 'rock,mud,water;water,mud,rock' (default: all)")
+    p.add_argument("--style", default="default", help="the synthetic driver's style (default: default; terrapref record --help lists them)")
+    p.add_argument("--seeds", type=int, default=5, help="training seeds per recipe and order (default: 5)")
+    p.add_argument("--first", type=int, default=1000, help="first generated layout (1000-1999: for choosing; 2000 on: for confirming; default: 1000)")
+    p.add_argument("--courses", type=int, default=32, help="generated layouts (default: 32)")
     p.add_argument("--perception", metavar="P1,P2,...",
                    help="perception models (presets, files or NAME:PART, separated by commas) the models drive the layouts under, each "
                         "in turn, for a table each (default: clean): " + PERCEPTION_HELP)
@@ -1481,6 +1630,8 @@ COMMANDS = (
     _replay_parser,
     _export_parser,
     _ros1_parser,
+    _ros2_parser,
+    _play_parser,
     _route_parser,
     _info_parser,
     _select_parser,

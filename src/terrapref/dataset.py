@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import NamedTuple
@@ -103,7 +104,8 @@ class Featurised(NamedTuple):
     corridor: CorridorData | None
 
 
-def featurize_recording(recording: Recording, features: FeatureConfig, camera: CameraConfig | None = None) -> Featurised:
+def featurize_recording(recording: Recording, features: FeatureConfig, camera: CameraConfig | None = None,
+                        on_frame: Callable[[int], None] | None = None) -> Featurised:
     """U (F, m, K + 1), labels (F,), w (F,) and, when ``features.lookahead`` asks, U2 (F, m, m, K + 1)
     float16, and when ``features.corridor`` asks, the corridor data, for every frame of a
     recording taken on the map (frames off it are left out).
@@ -111,6 +113,7 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
     Args:
         camera: None uses the recorded frames; another configuration re-renders each frame from
             the recording's scenario at its recorded pose.
+        on_frame: called after each frame with the frames done so far (a long recording takes a minute).
     """
     require_meta(recording, "classes", "camera")
     classes = recording.classes
@@ -154,6 +157,8 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
             U2[j] = lookahead.utilities(view, pose, path, s)
         if corridor is not None:
             corridor.read(j, view, pose, path, s)
+        if on_frame is not None:
+            on_frame(j + 1)
     w = recording.commands[keep, 1].astype(np.float32)
     labels = np.asarray(features.preference.control.label_of(w), dtype=np.int64).reshape(n)
     return Featurised(U, labels, w, U2, corridor.data(recording, keep, path) if corridor is not None else None)
@@ -224,8 +229,11 @@ def on_map(poses: np.ndarray, scenario: Scenario) -> np.ndarray:
 
 
 def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: CameraConfig | None = None, progress=None,
-                  cache: dict | None = None) -> Dataset:
+                  cache: dict | None = None, frames: Callable[[int, int], None] | None = None) -> Dataset:
     """Featurise several recordings into one dataset (they must share classes and profile).
+
+    ``progress(k, n)`` is called after each of the ``n`` recordings, ``frames(done, total)`` after
+    each frame of them all.
 
     ``cache`` keeps each recording's features (keyed by the recording object, the features and
     the camera), so that a later dataset of some of the same recordings featurises only the
@@ -245,13 +253,15 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
     require_meta(first, "classes")
     features = replace(features, feature_classes=first.classes.feature_names)
     parts = []
+    total, before = sum(len(r) for r in recordings), 0
     for k, rec in enumerate(recordings):
         key = (id(rec), features, camera)
         if cache is None or key not in cache:
-            part = featurize_recording(rec, features, camera)
+            part = featurize_recording(rec, features, camera, None if frames is None else (lambda j, b=before: frames(b + j, total)))
             if cache is not None:
                 cache[key] = (rec, part)  # the recording held with its features: its id is not reused while the cache lives
         parts.append(part if cache is None else cache[key][1])
+        before += len(rec)
         if progress is not None:
             progress(k + 1, len(recordings))
     U = np.concatenate([p[0] for p in parts])

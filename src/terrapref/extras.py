@@ -8,6 +8,8 @@ evaluation, reports and routes. The heavy parts are extras, installed by name:
   ``export``, ``evaluate --mcap``, ``--live``; rosbags, onnx, onnxruntime, foxglove-sdk).
 - ``ray``: the Ray grid engine (``--engine ray``).
 - ``cnn``: the end-to-end CNN baseline (``study``, a CNN model file; PyTorch).
+- ``ros2``: the planner as a ROS 2 node over DDS, and playing ROS 2 logs onto a ROS 2 graph
+  (``ros2``, ``play``; cyclonedds, rosbags).
 
 Code that needs one imports its packages where the feature runs, inside :func:`needs`, so that
 a missing extra is one line naming it instead of a traceback::
@@ -31,6 +33,7 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "robot": ("rosbags", "onnx", "onnxruntime", "foxglove"),
     "ray": ("ray",),
     "cnn": ("torch",),
+    "ros2": ("cyclonedds", "rosbags"),
 }
 """Each extra's importable packages (pyproject.toml's ``optional-dependencies`` name their distributions)."""
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,45 +21,96 @@ from matplotlib.patches import Patch  # noqa: E402
 from terrapref.fileio import atomic_path  # noqa: E402
 from terrapref.scenario import Scenario, Zone  # noqa: E402
 from terrapref.scenario.shapes import outline  # noqa: E402
+from terrapref.terrain import ClassTable, TerrainClass  # noqa: E402
 from terrapref.world import WorldMap  # noqa: E402
 
 
-def _save(fig: plt.Figure, path: str | Path) -> Path:
-    """Write a figure (creating its folder) and release it."""
+def _save(fig: plt.Figure, path: str | Path, whole: bool = False) -> Path:
+    """Write a figure (creating its folder) and release it; ``whole``: grown to hold everything
+    drawn, a legend beside the axes included."""
     path = Path(path)
     try:
         with atomic_path(path) as tmp:
-            fig.savefig(tmp)
+            fig.savefig(tmp, **({"bbox_inches": "tight", "pad_inches": 0.1} if whole else {}))
     finally:
         plt.close(fig)
     return path
 
 
+PATH_ZORDER = 3.0  # the reference path's layer: tracks go beneath it, the start above
+TRACK_LW = 3.5  # a track's width [pt], twice and more the dashed path's, so both are seen where they coincide
+SEED_COLOURS = ("magenta", "yellow", "cyan", "white", "black", "darkviolet")  # one per run seed, clear of the terrain palette and the zones' lime and red
+LONGEST_NAME = 24  # characters of a class name a figure shows; a longer one is cut with an ellipsis
+
+
+@functools.cache
+def _font() -> object:
+    """The font figures are drawn in (matplotlib's default family's file)."""
+    from matplotlib import font_manager
+
+    return font_manager.get_font(font_manager.findfont(font_manager.FontProperties()))
+
+
+def drawable(text: str) -> bool:
+    """Whether the figures' font has a glyph for every character of ``text`` (else matplotlib
+    draws boxes and warns)."""
+    font = _font()
+    return all(ch in "\n " or font.get_char_index(ord(ch)) != 0 for ch in text)
+
+
+def class_label(c: TerrainClass) -> str:
+    """A class's name as figures show it: ``class ID`` when the font cannot draw it, cut to
+    :data:`LONGEST_NAME` characters when longer."""
+    if not drawable(c.name):
+        return f"class {c.id}"
+    return c.name if len(c.name) <= LONGEST_NAME else c.name[: LONGEST_NAME - 1] + "\u2026"
+
+
+def figure_text(text: str, classes: ClassTable) -> str:
+    """``text`` (a zone's label, a title) with every class name in it as :func:`class_label`
+    shows it, and any other character the font lacks as ``?``."""
+    for c in sorted(classes.classes, key=lambda c: -len(c.name)):  # longest first: no name inside another is replaced early
+        if c.name in text and class_label(c) != c.name:
+            text = text.replace(c.name, class_label(c))
+    return text if drawable(text) else "".join(ch if drawable(ch) else "?" for ch in text)
+
+
+def class_handles(classes: ClassTable, present: Sequence[int] | None = None) -> list:
+    """Legend entries of ``classes``, only those whose ids are in ``present`` when given."""
+    keep = set(present) if present is not None else None
+    return [Patch(color=np.array(c.color) / 255, label=class_label(c)) for c in classes.classes if keep is None or c.id in keep]
+
+
 def draw_map(ax: plt.Axes, scenario: Scenario, world: WorldMap, zones: bool = True, marks: dict[str, str] | None = None) -> list:
     """Top-down map with the reference path, the start and the labelled zones, each label placed
     clear of the others; ``marks`` (zone id -> text, a missed zone's expected and chosen) are
-    added to their zones' labels in red. Returns the legend handles."""
+    added to their zones' labels in red. Returns the legend handles: the classes the map shows
+    (none where it has no terrain, :attr:`Scenario.has_terrain`: the ground is left blank)."""
     classes = scenario.classes
-    rgb = classes.palette()[world.raster]
     sx, sy = world.size_m
-    ax.imshow(rgb, origin="lower", extent=(0, sx, 0, sy), interpolation="nearest")
+    handles: list = []
+    if scenario.has_terrain:
+        ax.imshow(classes.palette()[world.raster], origin="lower", extent=(0, sx, 0, sy), interpolation="nearest")
+        handles = class_handles(classes, np.unique(world.raster).tolist())
+    else:
+        ax.set_facecolor("whitesmoke")
     wp = scenario.waypoints
-    ax.plot(wp[:, 0], wp[:, 1], color="white", lw=1.5, ls="--", label="reference path",
+    ax.plot(wp[:, 0], wp[:, 1], color="white", lw=1.5, ls="--", label="reference path", zorder=PATH_ZORDER,
             path_effects=[patheffects.withStroke(linewidth=3, foreground="black")])  # seen on any ground, and in the legend
     x, y, yaw = scenario.start
     ax.annotate("", xy=(x + 2.5 * np.cos(yaw), y + 2.5 * np.sin(yaw)), xytext=(x, y), arrowprops={"arrowstyle": "-|>", "color": "black", "lw": 1.5})
-    ax.plot([x], [y], "o", color="black", ms=5, label="start")
+    ax.plot([x], [y], "o", color="black", ms=5, label="start", zorder=PATH_ZORDER + 0.5)
     ax.set_xlim(0, sx)
     ax.set_ylim(0, sy)
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     if zones:
-        _label_zones(ax, scenario.zones, marks or {})
-    return [Patch(color=np.array(c.color) / 255, label=c.name) for c in classes.classes]
+        _label_zones(ax, scenario.zones, marks or {}, classes)
+    return handles
 
 
-def _label_zones(ax: plt.Axes, zones: Sequence[Zone], marks: dict[str, str]) -> None:
+def _label_zones(ax: plt.Axes, zones: Sequence[Zone], marks: dict[str, str], classes: ClassTable) -> None:
     """Each zone's outline and label; a label goes above its zone, else below, right or left,
     whichever first overlaps no label placed before it (else the least overlapping)."""
     renderer = ax.figure.canvas.get_renderer()
@@ -67,7 +120,8 @@ def _label_zones(ax: plt.Axes, zones: Sequence[Zone], marks: dict[str, str]) -> 
         o = outline(z.shape)
         ax.plot(o[:, 0], o[:, 1], color="yellow", lw=1.0)
         (x0, y0), (x1, y1) = o.min(axis=0), o.max(axis=0)
-        text = z.id + (f": {z.label}" if z.label else "") + (f"\n{marks[z.id]}" if z.id in marks else "")
+        text = _wrapped(figure_text(z.id + (f": {z.label}" if z.label else ""), classes))
+        text += f"\n{_wrapped(figure_text(marks[z.id], classes))}" if z.id in marks else ""
         style = {"color": "red" if z.id in marks else "yellow", "fontsize": 7, "bbox": {"facecolor": "black", "alpha": 0.6, "pad": 1, "lw": 0}}
         best = None
         for x, y, ha, va in (((x0 + x1) / 2, y1 + 0.5, "center", "bottom"), ((x0 + x1) / 2, y0 - 0.5, "center", "top"),
@@ -88,6 +142,13 @@ def _label_zones(ax: plt.Axes, zones: Sequence[Zone], marks: dict[str, str]) -> 
         placed.append(best[2])
 
 
+LABEL_WIDTH = 26  # characters per line of a zone's label: a long one is wrapped, so that it stays beside its zone
+
+
+def _wrapped(text: str) -> str:
+    return "\n".join(textwrap.wrap(text, LABEL_WIDTH, break_long_words=False, break_on_hyphens=False)) or text
+
+
 def save_map(path: str | Path, scenario: Scenario, world: WorldMap,
              tracks: Sequence[tuple[str, np.ndarray, str]] = (), title: str | None = None, marks: dict[str, str] | None = None) -> Path:
     """Write a top-down PNG of the map; ``tracks`` are (label, xy (N, 2), colour) drawn on top,
@@ -95,12 +156,12 @@ def save_map(path: str | Path, scenario: Scenario, world: WorldMap,
     sx, sy = world.size_m
     width = 11.5
     fig, ax = plt.subplots(figsize=(width, max(3.0, (width - 1.5) * sy / sx * 0.95)), dpi=120)
-    class_handles = draw_map(ax, scenario, world, marks=marks)
-    for label, xy, color in tracks:
-        ax.plot(xy[:, 0], xy[:, 1], color=color, lw=1.6, label=label)
-    ax.legend(handles=class_handles + ax.get_legend_handles_labels()[0], loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7,
+    classes_shown = draw_map(ax, scenario, world, marks=marks)
+    for label, xy, color in tracks:  # wide and beneath the path: the dashed path stays seen along a track that follows it
+        ax.plot(xy[:, 0], xy[:, 1], color=color, lw=TRACK_LW, alpha=0.85, label=label, zorder=PATH_ZORDER - 0.5, solid_capstyle="round")
+    ax.legend(handles=classes_shown + ax.get_legend_handles_labels()[0], loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7,
               framealpha=0.8, borderaxespad=0.0)  # beside the map: never over the start or a zone
-    ax.set_title(title or scenario.name)
+    ax.set_title(figure_text(title or scenario.name, scenario.classes))
     fig.tight_layout()
     return _save(fig, path)
 
@@ -183,8 +244,8 @@ def save_decision(path: str | Path, rgb: np.ndarray, decision: Decision, title: 
     handles = [Line2D([], [], color="white", lw=3, ls="--", label="planner's choice")]
     if best != chosen:
         handles.append(Line2D([], [], color="cyan", lw=2, ls=":", label="C's best (second stage overruled it)"))
-    if classes is not None:
-        handles += [Patch(color=np.array(c.color) / 255, label=c.name) for c in classes.classes]
+    if classes is not None:  # the classes in view
+        handles += class_handles(classes, [c.id for c in classes.classes if (rgb.reshape(-1, 3) == c.color).all(axis=1).any()])
     ax.legend(handles=handles, loc="lower left", fontsize=7, framealpha=0.8)
     ax.set_xlim(0, w)
     ax.set_ylim(h, 0)
@@ -201,8 +262,8 @@ class CourseRuns:
     Attributes:
         scenario: the course.
         world: its raster (the one the runs used).
-        driver: the synthetic driver's tracks, each (T, 2) [m].
-        planner: the planner's tracks, each (T, 2) [m].
+        driver: the synthetic driver's tracks, each (T, 2) [m], by seed (the k-th is seed k's).
+        planner: the planner's tracks, each (T, 2) [m], by seed.
         zone_success: zone id -> (planner runs that met it, runs scored in it).
     """
 
@@ -216,7 +277,8 @@ class CourseRuns:
 def save_evaluation(path: str | Path, runs: CourseRuns, title: str) -> Path:
     """An evaluation at a glance: the whole course with each zone numbered and outlined green
     (every planner run met it) or red (some run missed it), and below it one inset per zone at a
-    legible scale with the driver's tracks (blue, dashed) and the planner's (red)."""
+    legible scale; each seed's runs in a colour of their own (:data:`SEED_COLOURS`), the driver's
+    dashed and the planner's solid. The legend stands beside the course, off the map."""
     scenario, world, driver, planner, zone_success = runs.scenario, runs.world, runs.driver, runs.planner, runs.zone_success
     zones = list(scenario.zones)
     cols = 4
@@ -226,26 +288,27 @@ def save_evaluation(path: str | Path, runs: CourseRuns, title: str) -> Path:
     fig = plt.figure(figsize=(13, overview_h + 3.3 * rows + 0.6), dpi=110)
     grid = fig.add_gridspec(1 + rows, cols, height_ratios=[overview_h] + [3.3] * rows)
     ax = fig.add_subplot(grid[0, :])
-    class_handles = draw_map(ax, scenario, world, zones=False)
-    for xy in driver:
-        ax.plot(xy[:, 0], xy[:, 1], color="deepskyblue", lw=1.0, ls="--")
-    for xy in planner:
-        ax.plot(xy[:, 0], xy[:, 1], color="red", lw=0.9, alpha=0.8)
+    classes_shown = draw_map(ax, scenario, world, zones=False)
+    _draw_runs(ax, runs, scale=1.0)
     for z in zones:
         ok, n = zone_success.get(z.id, (0, 0))
         o = outline(z.shape)
         colour = "lime" if n and ok == n else "red"
         ax.plot(o[:, 0], o[:, 1], color=colour, lw=1.4)
         c = o.mean(axis=0)
-        ax.text(c[0], c[1], z.id, color="black", fontsize=7, ha="center", va="center", bbox={"facecolor": colour, "alpha": 0.85, "pad": 1, "lw": 0})
-    tracks = [Line2D([], [], color="deepskyblue", ls="--", label="driver"), Line2D([], [], color="red", label="planner"),
-              Patch(facecolor="none", edgecolor="lime", label="zone met in every run"), Patch(facecolor="none", edgecolor="red", label="zone missed in some run")]
-    ax.legend(handles=class_handles + tracks, loc="upper left", fontsize=7, framealpha=0.8, ncol=2)
-    ax.set_title(title)
+        ax.text(c[0], c[1], z.id, color="black", fontsize=7, ha="center", va="center", zorder=PATH_ZORDER + 1,
+                bbox={"facecolor": colour, "alpha": 0.85, "pad": 1, "lw": 0})
+    seeds = max(len(driver), len(planner))
+    tracks = [Line2D([], [], color="grey", ls="--", label="driver"), Line2D([], [], color="grey", label="planner")]
+    tracks += [Line2D([], [], color=_seed_colour(k), lw=3, label=f"seed {k}") for k in range(seeds)] if seeds > 1 else []
+    tracks += [Patch(facecolor="none", edgecolor="lime", label="zone met in every run"), Patch(facecolor="none", edgecolor="red", label="zone missed in some run")]
+    ax.legend(handles=classes_shown + ax.get_legend_handles_labels()[0] + tracks, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7,
+              framealpha=0.8, borderaxespad=0.0)  # beside the course: never over the start or a zone
+    ax.set_title(figure_text(title, scenario.classes))
     for k, z in enumerate(zones):
         _draw_zone_inset(fig.add_subplot(grid[1 + k // cols, k % cols]), runs, z)
     fig.tight_layout()
-    return _save(fig, path)
+    return _save(fig, path, whole=True)
 
 
 def _draw_zone_inset(zax: plt.Axes, runs: CourseRuns, z: Zone) -> None:
@@ -260,17 +323,28 @@ def _draw_zone_inset(zax: plt.Axes, runs: CourseRuns, z: Zone) -> None:
     ok, n = success
     colour = "lime" if n and ok == n else "red"
     zax.plot(o[:, 0], o[:, 1], color=colour, lw=1.2)
-    for xy in driver:
-        zax.plot(xy[:, 0], xy[:, 1], color="deepskyblue", lw=1.4, ls="--")
-    for xy in planner:
-        zax.plot(xy[:, 0], xy[:, 1], color="red", lw=1.1, alpha=0.8)
+    _draw_runs(zax, runs, scale=1.3)
     zax.set_xlim(mid[0] - half, mid[0] + half)
     zax.set_ylim(mid[1] - half, mid[1] + half)
     zax.set_xlabel("")
     zax.set_ylabel("")
     zax.tick_params(labelsize=6)
     verdict = f"{ok}/{n} met" if n else "not scored"
-    zax.set_title(f"{z.id}: {z.label or z.expect} ({verdict})", fontsize=8, color="darkred" if colour == "red" else "black")
+    zax.set_title(figure_text(f"{z.id}: {z.label or z.expect} ({verdict})", runs.scenario.classes), fontsize=8,
+                  color="darkred" if colour == "red" else "black")
+
+
+def _seed_colour(seed: int) -> str:
+    return SEED_COLOURS[seed % len(SEED_COLOURS)]
+
+
+def _draw_runs(ax: plt.Axes, runs: CourseRuns, scale: float) -> None:
+    """Every run's track, seed k's (the k-th of each list) in its colour: the driver's dashed, the
+    planner's solid; widths times ``scale``."""
+    for k, xy in enumerate(runs.driver):
+        ax.plot(xy[:, 0], xy[:, 1], color=_seed_colour(k), lw=1.0 * scale, ls="--", zorder=PATH_ZORDER + 0.2)
+    for k, xy in enumerate(runs.planner):
+        ax.plot(xy[:, 0], xy[:, 1], color=_seed_colour(k), lw=1.0 * scale, alpha=0.9, zorder=PATH_ZORDER + 0.1)
 
 
 def save_bars(path: str | Path, labels: Sequence[str], means: Sequence[float], stds: Sequence[float], ylabel: str,
@@ -332,7 +406,8 @@ def save_intervals(path: str | Path, rows: Sequence[RateRow], ylabel: str, targe
     ax.set_ylim(max(0.0, bottom - 0.05), 1.0)
     ax.yaxis.set_major_formatter(matplotlib.ticker.PercentFormatter(1.0))
     ax.set_ylabel(ylabel)
-    ax.set_title(title, fontsize=9)
+    width_chars = int(fig.get_figwidth() * 12)  # what a 9-point title holds across the figure
+    ax.set_title("\n".join(textwrap.wrap(title, width_chars)) if title else "", fontsize=9)
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
     return _save(fig, path)

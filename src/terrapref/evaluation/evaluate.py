@@ -226,8 +226,8 @@ def _figures(results: list[RunResult], scenarios: Sequence[str], out: Path, mode
     uv, visible = pset.camera.project_ground(pset.trajectories[..., :2])
     for name in scenarios:
         scenario, world = scenario_and_world(name, model.classes)  # the raster the runs used, not a new one
-        planner_runs = [r for r in results if r.scenario == name and r.driver == PLANNER]
-        driver_runs = [r for r in results if r.scenario == name and r.driver == EXPERT]
+        planner_runs = sorted((r for r in results if r.scenario == name and r.driver == PLANNER), key=lambda r: r.seed)
+        driver_runs = sorted((r for r in results if r.scenario == name and r.driver == EXPERT), key=lambda r: r.seed)
         per_zone = _zone_successes(planner_runs)
         ok = sum(v[0] for v in per_zone.values())
         n = sum(v[1] for v in per_zone.values())

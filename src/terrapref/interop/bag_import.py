@@ -21,6 +21,7 @@ from __future__ import annotations
 import heapq
 import io
 import math
+import re
 import shutil
 from collections import Counter
 from collections.abc import Callable, Sequence
@@ -110,8 +111,10 @@ def _field(msg, *names):
 
 
 def _one_line(exc: BaseException, limit: int = 160) -> str:
-    """An exception's text on one line (a reader's errors quote whole message definitions)."""
-    text = " ".join(str(exc).split())
+    """An exception's text on one line (a reader's errors quote whole message definitions), without
+    the memory addresses some quote (PIL's ``<_io.BytesIO object at 0x...>``), so that the same
+    problem reads the same each time."""
+    text = re.sub(r" at 0x[0-9a-fA-F]+", "", " ".join(str(exc).split()))
     return f"{type(exc).__name__}: {text[:limit]}{'...' if len(text) > limit else ''}"
 
 

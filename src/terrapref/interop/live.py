@@ -5,12 +5,15 @@ and messages as a run's MCAP file (terrapref.interop.mcap_export): ROS 2 message
 with their ros2msg schemas, so Foxglove shows them as it shows the file. The reference path and
 the camera's mounting are sent again once a second, so a viewer that connects late has them.
 
-    view = LiveView(port=8765)            # ws://127.0.0.1:8765: Foxglove, "Open connection"
+    view = LiveView(port=8765)            # ws://127.0.0.1:8765: Foxglove, "Open connection" (foxglove.sdk.v1 or foxglove.websocket.v1)
     driver = WatchedDriver(planner_driver, view, model)   # a terrapref.sim.Driver
 """
 
 from __future__ import annotations
 
+import math
+import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
@@ -34,19 +37,36 @@ RESEND_EVERY = 10  # frames between two sendings of the path and the camera's mo
 
 
 class LiveView:
-    """A Foxglove WebSocket server on ``host``:``port`` (0: a free port) with the export's channels."""
+    """A Foxglove WebSocket server on ``host``:``port`` (0: a free port) with the export's channels.
 
-    def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT) -> None:
+    Viewers connect by either name of the protocol, ``foxglove.sdk.v1`` or ``foxglove.websocket.v1``
+    (terrapref.interop.ws_front relays them to the SDK's server). ``pace``: a simulated run's
+    frames are sent at this many times real time (0: as fast as they come); ``wait``: a run's
+    first frame waits until a viewer has subscribed.
+    """
+
+    def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, pace: float = 0.0, wait: bool = False) -> None:
         with needs("robot", "the live view (--live)"):
             import foxglove
             import rosbags  # noqa: F401  (its typestore serialises the messages)
+        from terrapref.interop.ws_front import Front
 
+        if not (math.isfinite(pace) and pace >= 0):
+            raise UserError("--live-pace", f"expected a factor of real time >= 0 (0: unpaced), got {pace}")
         self.ts = typestore()
         self.context = foxglove.Context()
-        try:
-            self.server = foxglove.start_server(name="terrapref", host=host, port=port, context=self.context)
-        except Exception as exc:  # the SDK raises its own error type for a port in use or a bad host
-            raise UserError(f"{host}:{port}", f"cannot serve the live view ({exc})", field="--live-port") from None
+        self.pace, self.wait = pace, wait
+        self.viewers = threading.Event()  # set once a viewer subscribes to a channel
+        _check_host(host)
+        try:  # the SDK's server, on a free local port, behind the front door where the user asked
+            self.server = foxglove.start_server(name="terrapref", host="127.0.0.1", port=0, context=self.context,
+                                                server_listener=_subscriptions(self.viewers))
+            self.front = Front(host, port, int(self.server.port))
+        except Exception as exc:  # the host is known to be one to listen on, so the port is at fault
+            if hasattr(self, "server"):
+                self.server.stop()
+            reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+            raise UserError(f"{host}:{port}", f"cannot serve the live view ({reason})", field="--live-port") from None
         self.host = host
         self.channels = {role: foxglove.Channel(topic, message_encoding="cdr", context=self.context,
                                                 schema=foxglove.Schema(name=msgtype, encoding="ros2msg",
@@ -55,7 +75,7 @@ class LiveView:
 
     @property
     def port(self) -> int:
-        return int(self.server.port)
+        return self.front.port
 
     @property
     def url(self) -> str:
@@ -65,17 +85,51 @@ class LiveView:
         """Send ``msg`` on the channel of ``role``, logged at ``t_ns`` [ns] (what a file's writer does)."""
         self.channels[role].log(bytes(self.ts.serialize_cdr(msg, TOPICS[role][1])), log_time=t_ns)
 
+    def wait_for_viewer(self) -> None:
+        """Block until a viewer has subscribed to a channel (at once when one has)."""
+        while not self.viewers.wait(0.2):  # in steps: Ctrl-C is heard
+            pass
+
     def stop(self) -> None:
-        self.server.stop()
+        self.server.stop()  # its closing frames go out through the front, which then closes
+        self.front.stop()
+
+
+def _subscriptions(event: threading.Event) -> object:
+    """A listener of the SDK's server (foxglove.websocket.ServerListener) that sets ``event``
+    when a viewer subscribes to a channel."""
+    from foxglove.websocket import ServerListener
+
+    class Subscriptions(ServerListener):
+        def on_subscribe(self, client: object, channel: object) -> None:
+            event.set()
+
+    return Subscriptions()
+
+
+def _check_host(host: str) -> None:
+    """Refuse a host this machine cannot listen on (no such name, an address of another machine),
+    naming --live-host; a port's own trouble is left to the server's start."""
+    import socket
+
+    try:
+        family, kind, proto, _, address = socket.getaddrinfo(host, 0, type=socket.SOCK_STREAM)[0]
+        with socket.socket(family, kind, proto) as probe:
+            probe.bind(address)
+    except (OSError, UnicodeError) as exc:
+        problem = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        raise UserError(host, f"cannot listen on this address ({problem})", field="--live-host") from None
 
 
 @dataclass
 class LiveRun:
-    """One run on a :class:`LiveView`: its fixed messages, then a frame at a time."""
+    """One run on a :class:`LiveView`: its fixed messages, then a frame at a time, each sent no
+    sooner than the view's pace allows (frame time over pace after the first)."""
 
     view: LiveView
     scene: Scene
     frames: int = field(default=0)
+    _clock: tuple[float, float] | None = None  # the first frame's (run time [s], wall time [s])
 
     @classmethod
     def start(cls, view: LiveView, path: np.ndarray, camera: CameraConfig, classes: ClassTable, preference: PreferenceSetConfig,
@@ -85,18 +139,35 @@ class LiveRun:
         none = np.zeros((0, 3))
         header = RunFrames(times=np.zeros(0), poses=none, commands=none[:, :2], image=_no_image, chosen=np.zeros(0, dtype=int),
                            path=np.asarray(path, dtype=float), camera=camera, classes=classes, preference=preference)
+        if getattr(view, "wait", False):
+            view.wait_for_viewer()
         return cls(view, replace(Scene.of(view.ts, header), t0_s=clock_s))
 
     def frame(self, frame: FrameData, costmap: Callable[[], Costmap | None] | None = None) -> None:
         """Send one frame; with the first and every :data:`RESEND_EVERY`-th, the path and the
         camera's mounting, stamped with that frame's time; with the first and every
         :data:`COSTMAP_EVERY`-th (once a second), the costmap ``costmap`` gives, if given."""
+        self._keep_pace(frame.t_s)
         if self.frames % RESEND_EVERY == 0:
             write_fixed(self.view, self.scene, frame.t_s)
         if costmap is not None and self.frames % COSTMAP_EVERY == 0:
             frame = replace(frame, costmap=costmap())
         write_frame(self.view, self.scene, frame)
         self.frames += 1
+
+
+    def _keep_pace(self, t_s: float) -> None:
+        """Sleep until frame time ``t_s`` [s] is due at the view's pace (none: at once)."""
+        pace = getattr(self.view, "pace", 0.0)
+        if not pace:
+            return
+        now = time.monotonic()
+        if self._clock is None:
+            self._clock = (t_s, now)
+            return
+        due = self._clock[1] + (t_s - self._clock[0]) / pace
+        if due > now:
+            time.sleep(due - now)
 
 
 def _no_image(i: int) -> np.ndarray:

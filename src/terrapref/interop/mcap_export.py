@@ -18,8 +18,10 @@ Topics (all in the ``odom`` frame, the recording's world frame; stamps from an e
                                                               frame of the images and calibration; /tf_static
                                                               offered transient-local, so a player latches it
 
-Importing an exported recording with the robot file written beside it (``FILE.robot.yaml``)
-gives back the same frames, so it featurises to the same dataset.
+An MCAP file's chunks are compressed with zstd, a ROS 1 bag's with lz4 (each format's own
+compression, which Foxglove, ``ros2 bag`` and ``rosbag play`` read as they are). Importing an
+exported recording with the robot file written beside it (``FILE.robot.yaml``) gives back the
+same frames, so it featurises to the same dataset.
 """
 
 from __future__ import annotations
@@ -72,7 +74,11 @@ class RunFrames:
 
 
 COSTMAP_TOPICS = {"costmap": (f"{PREFIX}/costmap", "nav_msgs/msg/OccupancyGrid"), "costmap_grid": (f"{PREFIX}/costmap_grid", "foxglove_msgs/msg/Grid")}
-COSTMAP_EVERY = 10  # frames between two costmaps (1 Hz at 10 frames a second)
+# Frames between two costmaps: 1 Hz at 10 frames a second. The ground map the costmap shows
+# grows by about a metre of driving per second while the camera sees 20-30 m ahead, so a
+# costmap a second shows every change a viewer can see; compressed (zstd), the costmaps are
+# about a tenth of a file, the camera's images most of the rest (docs/robot-logs.md).
+COSTMAP_EVERY = 10
 _TOPICS = {  # role: (topic, type), in the order the file lists them
     "labels": (f"{PREFIX}/labels", "sensor_msgs/msg/CompressedImage"),
     "labels_color": (f"{PREFIX}/labels_color", "sensor_msgs/msg/CompressedImage"),
@@ -155,9 +161,12 @@ def _write_ros2(bag_dir: Path, run: RunFrames, progress: Callable[[int, int], No
     """The ROS 2 MCAP bag of ``run`` in the folder ``bag_dir``; its file."""
     with needs("robot", "writing MCAP"):
         from rosbags.rosbag2 import StoragePlugin, Writer
+        from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 
     ts = typestore()
-    with Writer(bag_dir, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+    writer = Writer(bag_dir, version=9, storage_plugin=StoragePlugin.MCAP)
+    writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)  # MCAP's own zstd chunks: Foxglove and ros2 bag read them as they are
+    with writer:
         _write_frames(add_topics(writer, ts, _TOPICS if run.costmap is None else TOPICS), Scene.of(ts, run), progress)
     return next(bag_dir.glob("*.mcap"))
 
@@ -169,7 +178,9 @@ def _write_ros1(path: Path, run: RunFrames, progress: Callable[[int, int], None]
 
     ts = typestore(ros1=True)
     topics = _TOPICS if run.costmap is None else {**_TOPICS, "costmap": COSTMAP_TOPICS["costmap"]}
-    with Writer(path) as writer:
+    writer = Writer(path)
+    writer.set_compression(Writer.CompressionFormat.LZ4)  # a ROS 1 bag's own chunk compression (zstd is not one): rosbag play reads it
+    with writer:
         _write_frames(add_topics(writer, ts, topics, ros1=True), Scene.of(ts, run, ros1=True), progress)
     return path
 

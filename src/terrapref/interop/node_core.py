@@ -1,5 +1,5 @@
 """What a ROS node of the planner does with its messages, without ROS (the ROS 1 node and the
-rclpy node of docs/robot.md both wrap it).
+ROS 2 node both wrap it, each around its own transport).
 
 Messages come in as they would from rospy or rclpy (attribute access: ``header.stamp``,
 ``pose.pose``, ``data``, ...). The calibration makes the planner (a model trained for another
@@ -15,8 +15,9 @@ import math
 import threading
 from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass
 from types import SimpleNamespace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -28,7 +29,7 @@ from terrapref.interop.runtime import PlannerRuntime, RuntimeDecision
 from terrapref.learning.model_file import LoadedModel
 from terrapref.planner.costmap import Costmap
 from terrapref.scenario.path import ReferencePath
-from terrapref.stops import STALE
+from terrapref.stops import REASONS, STALE
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Command, Pose
 
@@ -37,6 +38,7 @@ if TYPE_CHECKING:
 
 ODOMETRY_KEPT_S = 5.0  # how far back odometry is kept for interpolating to an image's stamp [s]
 ODOMETRY_WAIT_S = 0.5  # how long an image newer than the odometry waits for it [s]
+ODOMETRY_AHEAD_S = 1.0  # odometry stamped further ahead of the node's clock is refused [s]
 
 
 def stamp_s(header) -> float:
@@ -68,7 +70,8 @@ class PlannerNodeCore:
         self.path = None if path is None else np.asarray(path, dtype=float)
         self.odometry: deque[tuple[float, float, float, float]] = deque()  # (stamp [s], x, y, yaw)
         self.skipped = {"before the calibration or the path": 0, "without odometry at the stamp": 0, "out of order": 0,
-                        "superseded while waiting for odometry": 0, "paths of fewer than two distinct points": 0}
+                        "superseded while waiting for odometry": 0, "paths of fewer than two distinct points": 0,
+                        "odometry ahead of the clock": 0, "calibrations of another size": 0}
         self.decided = 0  # frames decided on
         self.on_decision: Callable[[RuntimeDecision], None] | None = None  # told of every decision, whichever message brought it
         self._pending: tuple[str, object, str, float] | None = None  # an image waiting for odometry at its stamp
@@ -84,13 +87,25 @@ class PlannerNodeCore:
         self.view, self._live = view, None
 
     @property
+    def lock(self) -> threading.RLock:
+        """The lock every message handler holds (re-entrant): a node that sends commands from a
+        timer as well as from decisions holds it too, so that the two never cross."""
+        return self._lock
+
+    @property
     def ready(self) -> bool:
         return self.runtime is not None and self.path is not None
 
     def on_camera_info(self, info) -> None:
-        """The first calibration makes the planner; a model for another camera is refused (UserError)."""
+        """The first calibration makes the planner; a model for another camera is refused
+        (UserError). A later one of another image size than the planner's is refused
+        (ValueError, counted): the planner keeps the calibration it was made with."""
         with self._lock:
             if self.runtime is not None:
+                h, w = self.runtime.shape
+                if (int(info.width), int(info.height)) != (w, h):
+                    self.skipped["calibrations of another size"] += 1
+                    raise ValueError(f"a camera_info of another image size than the {w} x {h} px the planner was made with; ignored")
                 return
             camera, self._undistort = camera_from_info(info, self.robot, self.robot.source)
             runtime = PlannerRuntime(self.model, camera, hold_s=self.hold_s, stop=self.stop)  # fed class ids, mapped and undistorted here
@@ -110,17 +125,28 @@ class PlannerNodeCore:
             except ValueError:  # fewer than two distinct finite points: the path in force stays
                 self.skipped["paths of fewer than two distinct points"] += 1
                 return
+            if self.path is not None and np.array_equal(xy, self.path):
+                return  # the path in force, sent again (a planner's periodic plan, a latched topic heard twice): the progress along it stays
             self.path = xy
             self._live = None  # the live view shows a new run along the new path
             if self.runtime is not None:
                 self.runtime.set_path(xy)
 
-    def on_odometry(self, msg) -> RuntimeDecision | None:
+    def on_odometry(self, msg, now_s: float | None = None) -> RuntimeDecision | None:
         """nav_msgs/Odometry, or a PoseStamped / PoseWithCovarianceStamped; the decision on an
-        image that waited for it, if one did."""
+        image that waited for it, if one did.
+
+        With ``now_s``, the node's clock [s] (None before it runs), a pose stamped more than
+        :data:`ODOMETRY_AHEAD_S` ahead of it is refused (ValueError, counted): kept, it would
+        make every later pose look older than the newest and be dropped.
+        """
         with self._lock:
             p = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
             t = stamp_s(msg.header)
+            if now_s is not None and now_s > 0 and t > now_s + ODOMETRY_AHEAD_S:
+                self.skipped["odometry ahead of the clock"] += 1
+                raise ValueError(f"odometry stamped more than {ODOMETRY_AHEAD_S:g} s ahead of the node's clock (another clock, or "
+                                 "use_sim_time unset while a log plays?)")
             if self.odometry and t < self.odometry[-1][0]:
                 return None  # an older pose than one kept: odometry arrives in order or not at all
             self.odometry.append((t, float(p.position.x), float(p.position.y), _yaw(p.orientation)))
@@ -178,7 +204,8 @@ class PlannerNodeCore:
             return self._decide(msgtype, msg, topic, t, pose)
 
     def _decide(self, msgtype: str, msg, topic: str, t: float, pose: Pose) -> RuntimeDecision | None:
-        raw = _decode(SimpleNamespace(topic=topic, msgtype=msgtype), msg, self.robot.source, self.robot.labels, t)
+        # No time in the error: a node says each problem once, and a stream of bad frames is one problem.
+        raw = _decode(SimpleNamespace(topic=topic, msgtype=msgtype), msg, self.robot.source, self.robot.labels)
         if raw.shape != self.runtime.shape:
             raise UserError(self.robot.source, f"a label image of {raw.shape[1]} x {raw.shape[0]} px; the calibration says "
                             f"{self.runtime.shape[1]} x {self.runtime.shape[0]}", field="topics.segmentation")
@@ -226,3 +253,113 @@ class PlannerNodeCore:
             if self.runtime is None or not self.runtime.planner.runner.keeps_ground_map:
                 return None
             return self.runtime.costmap()
+
+
+@dataclass(frozen=True)
+class NodeOptions:
+    """How a node runs: each from the command line (``hold_s`` has no flag), else from the
+    node's ROS parameter of the same name (ROS 1: the private ``~stamped``, ``~rate``,
+    ``~path_file``, ``~cmd_topic``, ``~hold_s``; ROS 2: ``-p stamped:=true`` and so on), else
+    the default.
+
+    Attributes:
+        stamped: publish TwistStamped instead of Twist (default False).
+        rate: commands per second between decisions [Hz] (default 20).
+        path_file: waypoints of the reference path, instead of the path topic.
+        cmd_topic: where the command goes (default: the robot file's command topic).
+        hold_s: how long a decision's command holds after its frame's stamp [s] (default 0.3).
+    """
+
+    stamped: bool | None = None
+    rate: float | None = None
+    path_file: str | None = None
+    cmd_topic: str | None = None
+    hold_s: float | None = None
+
+    def resolved(self, get_param: Callable[[str, Any], Any], param: Callable[[str], str] = lambda name: f"~{name}") -> NodeOptions:
+        """Every option set: the given ones, the rest from ``get_param(param(name), default)``
+        (rospy's ``get_param`` with ``~name`` by default), checked (a bad value is a UserError
+        naming the option and where it came from)."""
+        defaults = {"stamped": False, "rate": 20.0, "path_file": None, "cmd_topic": None, "hold_s": 0.3}
+        values, origin = {}, {}
+        for name, default in defaults.items():
+            given = getattr(self, name)
+            values[name], origin[name] = (given, f"--{name.replace('_', '-')}") if given is not None else (get_param(param(name), default), param(name))
+        if not isinstance(values["stamped"], bool):
+            raise UserError(origin["stamped"], f"expected true or false, got {values['stamped']!r}")
+        for name, top in (("rate", 200.0), ("hold_s", 5.0)):
+            v = values[name]
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and 0 < v <= top):
+                raise UserError(origin[name], f"expected a number in (0, {top:g}], got {v!r}")
+        for name in ("path_file", "cmd_topic"):
+            if values[name] is not None and (not isinstance(values[name], str) or not values[name]):
+                raise UserError(origin[name], f"expected a non-empty string, got {values[name]!r}")
+        return NodeOptions(**values)
+
+
+class NodeLog:
+    """What a node says about its work, whatever its transport: each problem with an incoming
+    message once (such messages are skipped, not a traceback per frame), and each time the
+    planner stops or moves on, with the reason.
+
+    Args:
+        info, warn, error: the transport's logging calls, each taking one line.
+        prefix: what each line starts with (ROS 2's log lines name the node already).
+    """
+
+    def __init__(self, info: Callable[[str], None], warn: Callable[[str], None], error: Callable[[str], None], prefix: str = "terrapref: ") -> None:
+        self.info, self.warn, self.error, self.prefix = info, warn, error, prefix
+        self.said: set[str] = set()
+        self.stop_reason: str | None = None  # why the command in force stops (None: it drives)
+
+    def say(self, problem: str) -> None:
+        """``problem`` with an incoming message, logged the first time only."""
+        if problem not in self.said:
+            self.said.add(problem)
+            self.error(f"{self.prefix}{problem} (said once; such messages are skipped)")
+
+    def guarded(self, handle: Callable[[], Any]) -> Any:
+        """Handle one message; one the node cannot use (an image it cannot decode, of the wrong
+        size, a pose from the future) is skipped and said once."""
+        try:
+            return handle()
+        except (UserError, ValueError) as exc:
+            self.say(exc.lines()[0] if isinstance(exc, UserError) else str(exc))
+            return None
+
+    def status(self, reason: str | None) -> None:
+        """The reason the command in force stops (None: it drives); a change is logged."""
+        if reason != self.stop_reason:
+            self.stop_reason = reason
+            if reason is None:
+                self.info(f"{self.prefix}moving on")
+            else:
+                self.warn(f"{self.prefix}stopping: {reason} ({REASONS.get(reason, reason)})")
+
+
+def report_line(core: PlannerNodeCore, command: str) -> str:
+    """The line a node prints when it ends: frames decided on, and those skipped and why."""
+    skipped = ", ".join(f"{n} {why}" for why, n in core.skipped.items() if n) or "none"
+    return f"terrapref {command}: {core.decided} frames decided on; skipped: {skipped}"
+
+
+class TrajectoryShapes:
+    """The trajectories of a model's preference set as a node draws them: line strips in
+    base_link, shaded by F_t, the chosen one thick and green.
+
+    Attributes:
+        paths: (m, n, 2) the trajectories' points in base_link [m].
+    """
+
+    def __init__(self, model: LoadedModel) -> None:
+        from terrapref.features.preference_set import forward_simulate
+
+        pref = model.features.preference
+        c = pref.control
+        self.paths = forward_simulate(np.full(c.m, c.v_mps), np.asarray(c.w_rps), pref.n_steps, pref.dt_s)[..., :2]
+
+    def styles(self, decision: RuntimeDecision) -> list[tuple[float, tuple[float, float, float, float]]]:
+        """Per trajectory, its line width [m] and colour (r, g, b, a) for ``decision``."""
+        top = float(np.max(decision.probs)) or 1.0
+        return [(0.06, (0.1, 0.9, 0.2, 1.0)) if j == decision.index else (0.03, (1.0, 1.0, 1.0, 0.2 + 0.8 * float(decision.probs[j]) / top))
+                for j in range(len(self.paths))]

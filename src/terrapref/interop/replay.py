@@ -1,9 +1,10 @@
 """Open-loop replay: the runtime over a held-out log, against what the operator did.
 
 For every frame of the log the model decides from the same label image, stamp and pose as the
-operator had, and the replay counts how often its trajectory is the operator's (top-1), among
-its three most probable (top-3), and how far its yaw rate is from the operator's (mean |w|
-error), over all frames and over the frames where terrain lies on some trajectory (where the
+operator had, and the replay counts how often its trajectory is the operator's (top-1), how
+often the operator's is among the three C finds most probable (top-3: C's alone, since the
+planner's stages choose one trajectory and rank none), and how far its yaw rate is from the
+operator's (mean |w| error), over all frames and over the frames where terrain lies on some trajectory (where the
 preference matters). The check a team makes before putting a model on the robot.
 """
 
@@ -21,9 +22,10 @@ from terrapref.learning.model_file import LoadedModel
 from terrapref.interop.runtime import PlannerRuntime
 
 
-def _rates(hit1: np.ndarray, hit3: np.ndarray, werr: np.ndarray) -> dict:
+def _rates(hit1: np.ndarray, hit3: np.ndarray | None, werr: np.ndarray) -> dict:
+    """Top-1, top-3 (None where there is no ranking) and mean |w| error over the frames given."""
     n = int(len(hit1))
-    return {"frames": n, "top1": float(hit1.mean()) if n else None, "top3": float(hit3.mean()) if n else None,
+    return {"frames": n, "top1": float(hit1.mean()) if n else None, "top3": float(hit3.mean()) if n and hit3 is not None else None,
             "mean_abs_w_error_rps": float(werr.mean()) if n else None}
 
 
@@ -55,10 +57,11 @@ def replay(model: LoadedModel, rec: Recording, progress=None) -> dict:
     c_hit1 = c_best == rec.labels
     c_werr = np.abs(w_grid[c_best] - rec.commands[:, 1])
     return {
-        "overall": _rates(hit1, top3, werr),
-        "terrain_in_view": _rates(hit1[terrain], top3[terrain], werr[terrain]),
-        # C's own argmax, as training's accuracy measures it (top-3 is F_t's either way); the
-        # planner's second stage looks further ahead and departs from the operator's next command more often.
+        # The planner's decision stages choose one trajectory and rank none, so only C, whose F_t
+        # ranks all m, has a top-3 (null for the planner: it would be C's own again).
+        "overall": _rates(hit1, None, werr),
+        "terrain_in_view": _rates(hit1[terrain], None, werr[terrain]),
+        # C's own argmax, as training's accuracy measures it; the planner's stages choose by more than F_t.
         "classifier_overall": _rates(c_hit1, top3, c_werr),
         "classifier_terrain_in_view": _rates(c_hit1[terrain], top3[terrain], c_werr[terrain]),
         "series": {"t": rec.times.tolist(), "w_operator": rec.commands[:, 1].tolist(), "w_model": w_grid[chosen].tolist(),
@@ -94,7 +97,8 @@ def write_replay(result: dict, out: Path, title: str) -> tuple[Path, Path]:
     ax2.set_xlabel("time [s]")
     ax2.set_ylabel(f"top-1 agreement ({window / 10:g} s window)")
     o, v = result["overall"], result["terrain_in_view"]
-    fmt = lambda r: "n/a" if r["top1"] is None else f"top-1 {r['top1']:.0%}, top-3 {r['top3']:.0%}, |w| error {r['mean_abs_w_error_rps']:.3f} rad/s ({r['frames']} frames)"  # noqa: E731
+    fmt = lambda r: "n/a" if r["top1"] is None else (f"top-1 {r['top1']:.0%}" + (f", top-3 {r['top3']:.0%}" if r["top3"] is not None else "")  # noqa: E731
+                                                     + f", |w| error {r['mean_abs_w_error_rps']:.3f} rad/s ({r['frames']} frames)")
     c = result["classifier_overall"]
     ax2.set_title(f"planner, all frames: {fmt(o)}\nplanner, terrain in view: {fmt(v)}\nC alone (argmax F_t), all frames: {fmt(c)}", fontsize=9)
     ax3 = fig.add_subplot(grid[2, 0])

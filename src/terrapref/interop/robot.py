@@ -102,6 +102,16 @@ def load_robot(path: str | Path, classes: ClassTable | None = None) -> RobotConf
     return RobotConfig(source, topics, camera, labels, profile, resolved, float(data.get("max_gap_s", 0.5)), _stop(data.get("stop"), source))
 
 
+def load_robot_topics(path: str | Path) -> dict[str, str]:
+    """The topics of a robot file by role, checked (the rest of the file is not read)."""
+    data = read_yaml_mapping(path, ROBOT_FORMAT)
+    problems: list[Problem] = []
+    topics = _check_topics(data.get("topics"), problems)
+    if problems:
+        raise ConfigError(str(path), problems)
+    return topics
+
+
 def _stop(block: object, source: str) -> StopConfig:
     """The stop rule's settings from the file's ``stop`` block (absent: the defaults)."""
     if block is None:

@@ -6,7 +6,8 @@ file) path topics; publishes the command on the robot file's command topic (``Tw
 frame is ``hold_s`` old by the node's clock) at the control rate and at once on each decision, the 21 trajectories with F_t and the chosen one
 (``~trajectories``, ``visualization_msgs/MarkerArray``) on each decision, and the learned costmap
 (``~costmap``, ``nav_msgs/OccupancyGrid``) once a second. Its options come from the command
-line or its private ROS parameters (:class:`NodeOptions`).
+line or its private ROS parameters (:class:`NodeOptions`). What is not ROS 1 transport lives in
+:mod:`terrapref.interop.node_core`, which the ROS 2 node shares.
 
 ROS 1's Python packages come from Debian (``ros-core``, ``python3-rospy`` and the message
 packages) and live in its Python 3.11 ``dist-packages``: where ``rospy`` is not importable from
@@ -16,20 +17,16 @@ terrapref's own environment, that folder is added to the import path.
 from __future__ import annotations
 
 import importlib
-import math
 import os
 import socket
 import sys
 import urllib.parse
-from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
-
-import numpy as np
 
 from terrapref.errors import UserError
-from terrapref.stops import REASONS
+from terrapref.interop.node_core import NodeOptions
+
+__all__ = ["NodeOptions", "check_master", "import_rospy", "run_node"]
 
 DEBIAN_DIST_PACKAGES = Path("/usr/lib/python3/dist-packages")
 ROS_PACKAGES = "ros-core python3-rospy python3-geometry-msgs python3-sensor-msgs python3-nav-msgs python3-visualization-msgs python3-std-msgs"
@@ -48,46 +45,6 @@ def import_rospy():
             except ImportError:
                 pass
     raise UserError("ros1", f"ROS 1's Python packages are not installed (Debian: apt install {ROS_PACKAGES})")
-
-
-@dataclass(frozen=True)
-class NodeOptions:
-    """How the node runs: each from the command line (``hold_s`` has no flag), else from the
-    node's private ROS parameter of the same name (``~stamped``, ``~rate``, ``~path_file``,
-    ``~cmd_topic``, ``~hold_s``), else the default.
-
-    Attributes:
-        stamped: publish TwistStamped instead of Twist (default False).
-        rate: commands per second between decisions (default 20).
-        path_file: waypoints of the reference path, instead of the path topic.
-        cmd_topic: where the command goes (default: the robot file's command topic).
-        hold_s: how long a decision's command holds after its frame's stamp [s] (default 0.3).
-    """
-
-    stamped: bool | None = None
-    rate: float | None = None
-    path_file: str | None = None
-    cmd_topic: str | None = None
-    hold_s: float | None = None
-
-    def resolved(self, get_param: Callable[[str, Any], Any]) -> NodeOptions:
-        """Every option set: the given ones, the rest from ``get_param("~name", default)`` (rospy's
-        ``get_param``), checked (a bad value is a UserError naming the option and where it came from)."""
-        defaults = {"stamped": False, "rate": 20.0, "path_file": None, "cmd_topic": None, "hold_s": 0.3}
-        values, origin = {}, {}
-        for name, default in defaults.items():
-            given = getattr(self, name)
-            values[name], origin[name] = (given, f"--{name.replace('_', '-')}") if given is not None else (get_param(f"~{name}", default), f"~{name}")
-        if not isinstance(values["stamped"], bool):
-            raise UserError(origin["stamped"], f"expected true or false, got {values['stamped']!r}")
-        for name, top in (("rate", 200.0), ("hold_s", 5.0)):
-            v = values[name]
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and 0 < v <= top):
-                raise UserError(origin[name], f"expected a number in (0, {top:g}], got {v!r}")
-        for name in ("path_file", "cmd_topic"):
-            if values[name] is not None and (not isinstance(values[name], str) or not values[name]):
-                raise UserError(origin[name], f"expected a non-empty string, got {values[name]!r}")
-        return NodeOptions(**values)
 
 
 def run_node(model_path: str, robot_path: str, options: NodeOptions | None = None, live=None) -> None:
@@ -145,11 +102,12 @@ class _Node:
         from sensor_msgs.msg import CameraInfo, CompressedImage, Image
         from visualization_msgs.msg import MarkerArray
 
+        from terrapref.interop.node_core import NodeLog
+
         self.rospy, self.core, self.robot, self.opts = rospy, core, robot, opts
         self.failure: list[UserError] = []
-        self.said: set[str] = set()  # problems with incoming messages, each logged once
+        self.log = NodeLog(rospy.loginfo, rospy.logwarn, rospy.logerr)
         self.last_stamp: float | None = None  # the frame of the command in force
-        self.stop_reason: str | None = None  # why the command in force stops (None: it drives)
         self.Twist, self.TwistStamped, self.OccupancyGrid = Twist, TwistStamped, OccupancyGrid
         self.image_types = {"sensor_msgs/Image": (Image, "sensor_msgs/msg/Image"),
                             "sensor_msgs/CompressedImage": (CompressedImage, "sensor_msgs/msg/CompressedImage")}
@@ -172,12 +130,7 @@ class _Node:
         """The command in force now (a stop once its frame is ``hold_s`` old), stamped with its frame;
         each time the planner stops, or moves on, the log says so and why."""
         (v, w), reason = self.core.status_at(self.rospy.get_time())
-        if reason != self.stop_reason:
-            self.stop_reason = reason
-            if reason is None:
-                self.rospy.loginfo("terrapref: moving on")
-            else:
-                self.rospy.logwarn(f"terrapref: stopping: {reason} ({REASONS.get(reason, reason)})")
+        self.log.status(reason)
         twist = self.Twist()
         twist.linear.x, twist.angular.z = float(v), float(w)
         if not self.opts.stamped:
@@ -199,34 +152,23 @@ class _Node:
         except UserError as exc:  # a model for another camera: said once, and the node stops
             self.failure.append(exc)
             self.rospy.signal_shutdown(exc.lines()[0])
+        except ValueError as exc:  # a later calibration of another size: said once, ignored
+            self.log.say(str(exc))
 
     def on_image(self, raw) -> None:
         """A label image, Image or CompressedImage, as the robot publishes it on the topic."""
         kind = raw._connection_header.get("type", "")
         if kind not in self.image_types:
-            return self._say(f"{self.robot.topics['segmentation']}: {kind} is not a label image (sensor_msgs/Image or CompressedImage); ignored")
+            return self.log.say(f"{self.robot.topics['segmentation']}: {kind} is not a label image (sensor_msgs/Image or CompressedImage); ignored")
         cls, msgtype = self.image_types[kind]
-        self._guarded(lambda: self.core.on_image(msgtype, cls().deserialize(raw._buff), self.robot.topics["segmentation"]))
+        self.log.guarded(lambda: self.core.on_image(msgtype, cls().deserialize(raw._buff), self.robot.topics["segmentation"]))
 
     def on_odometry(self, raw) -> None:
         """Odometry, or a PoseStamped or PoseWithCovarianceStamped, as the robot file allows."""
         kind = raw._connection_header.get("type", "")
         if kind not in self.pose_types:
-            return self._say(f"{self.robot.topics['odometry']}: {kind} is not Odometry, PoseStamped or PoseWithCovarianceStamped; ignored")
-        self._guarded(lambda: self.core.on_odometry(self.pose_types[kind]().deserialize(raw._buff)))
-
-    def _guarded(self, handle: Callable[[], Any]) -> None:
-        """Handle one message; a message the node cannot use (an image it cannot decode, of the
-        wrong size) is skipped and said once, not a traceback per frame."""
-        try:
-            handle()
-        except (UserError, ValueError) as exc:
-            self._say(exc.lines()[0] if isinstance(exc, UserError) else str(exc))
-
-    def _say(self, problem: str) -> None:
-        if problem not in self.said:
-            self.said.add(problem)
-            self.rospy.logerr(f"terrapref: {problem} (said once; such messages are skipped)")
+            return self.log.say(f"{self.robot.topics['odometry']}: {kind} is not Odometry, PoseStamped or PoseWithCovarianceStamped; ignored")
+        self.log.guarded(lambda: self.core.on_odometry(self.pose_types[kind]().deserialize(raw._buff), self.rospy.get_time()))
 
     def tick(self, event) -> None:
         if self.last_stamp is not None:
@@ -238,19 +180,19 @@ class _Node:
             self.cost_pub.publish(_occupancy_grid(grid, self.OccupancyGrid, self.rospy))
 
     def report(self) -> None:
-        skipped = ", ".join(f"{n} {why}" for why, n in self.core.skipped.items() if n) or "none"
-        print(f"terrapref ros1: {self.core.decided} frames decided on; skipped: {skipped}", flush=True)
+        from terrapref.interop.node_core import report_line
+
+        print(report_line(self.core, "ros1"), flush=True)
 
 
 class _TrajectoryMarkers:
-    """The 21 trajectories as line strips in base_link, shaded by F_t, the chosen one green."""
+    """The trajectories as line strips in base_link, shaded by F_t, the chosen one green
+    (:class:`terrapref.interop.node_core.TrajectoryShapes`), as rospy messages."""
 
     def __init__(self, model, rospy) -> None:
-        from terrapref.features.preference_set import forward_simulate
+        from terrapref.interop.node_core import TrajectoryShapes
 
-        pref = model.features.preference
-        c = pref.control
-        self.paths = forward_simulate(np.full(c.m, c.v_mps), np.asarray(c.w_rps), pref.n_steps, pref.dt_s)[..., :2]
+        self.shapes = TrajectoryShapes(model)
         self.rospy = rospy
 
     def of(self, decision, stamp):
@@ -259,15 +201,13 @@ class _TrajectoryMarkers:
         from visualization_msgs.msg import Marker, MarkerArray
 
         out = MarkerArray()
-        top = float(np.max(decision.probs)) or 1.0
-        for j, pts in enumerate(self.paths):
+        for j, (pts, (width_m, rgba)) in enumerate(zip(self.shapes.paths, self.shapes.styles(decision))):
             m = Marker()
             m.header.stamp, m.header.frame_id = stamp, "base_link"
             m.ns, m.id, m.type, m.action = "trajectories", j, Marker.LINE_STRIP, Marker.ADD
             m.pose.orientation.w = 1.0
-            m.scale.x = 0.06 if j == decision.index else 0.03
-            shade = float(decision.probs[j]) / top
-            m.color = ColorRGBA(0.1, 0.9, 0.2, 1.0) if j == decision.index else ColorRGBA(1.0, 1.0, 1.0, 0.2 + 0.8 * shade)
+            m.scale.x = width_m
+            m.color = ColorRGBA(*rgba)
             m.points = [Point(float(x), float(y), 0.02) for x, y in pts]
             m.lifetime = self.rospy.Duration(0.5)
             out.markers.append(m)

@@ -187,13 +187,15 @@ def transform(ts: Typestore, parent: Message, child_frame_id: str, xyz: tuple[fl
 OPTICAL_FRAME = "camera_optical"  # the frame images and calibration are stamped in: z forward, x right, y down (REP 103)
 
 
-def camera_mount(ts: Typestore, camera: CameraConfig, ros1: bool = False, t_s: float = 0.0) -> list[Message]:
+def camera_mount(ts: Typestore, camera: CameraConfig, ros1: bool = False, t_s: float = 0.0,
+                 frames: tuple[str, str] = ("camera_link", OPTICAL_FRAME)) -> list[Message]:
     """The camera's mounting as a robot publishes it on /tf_static, stamped ``t_s`` [s]:
     base_link -> camera_link (x forward, pitched down by the mount's pitch and turned by its yaw)
-    -> :data:`OPTICAL_FRAME`."""
-    mount = transform(ts, header(ts, t_s, "base_link", ros1), "camera_link", (camera.mount_forward_m, 0.0, camera.mount_height_m),
+    -> :data:`OPTICAL_FRAME` (or the two ``frames`` named)."""
+    link, optical_frame = frames
+    mount = transform(ts, header(ts, t_s, "base_link", ros1), link, (camera.mount_forward_m, 0.0, camera.mount_height_m),
                       rpy_quaternion(ts, 0.0, math.radians(camera.pitch_deg), math.radians(camera.yaw_deg)))
-    optical = transform(ts, header(ts, t_s, "camera_link", ros1), OPTICAL_FRAME, (0.0, 0.0, 0.0), quaternion(ts, (-0.5, 0.5, -0.5, 0.5)))
+    optical = transform(ts, header(ts, t_s, link, ros1), optical_frame, (0.0, 0.0, 0.0), quaternion(ts, (-0.5, 0.5, -0.5, 0.5)))
     return [mount, optical]
 
 

@@ -199,6 +199,11 @@ class PerceptionModel:
             out[section] = values
         return out
 
+    def file_dict(self) -> dict[str, Any]:
+        """As a ``terrapref-perception/1`` file holds it (every field), which ``--perception FILE`` reads
+        back: :meth:`to_dict` less the name, which a file takes from its path."""
+        return {k: v for k, v in self.to_dict().items() if k != "name"}
+
     def summary(self) -> str:
         """The fields that are on, one line (``clean`` when none is)."""
         parts = []

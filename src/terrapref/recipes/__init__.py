@@ -232,13 +232,15 @@ def demonstrate(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Ca
     return recordings
 
 
-def open_pairs(recordings: list[Recording], recipe: Recipe, features: FeatureConfig | None = None, cache: dict | None = None) -> list[tuple[str, str]]:
+def open_pairs(recordings: list[Recording], recipe: Recipe, features: FeatureConfig | None = None, cache: dict | None = None,
+               frames: Callable[[int, int], None] | None = None) -> list[tuple[str, str]]:
     """The pairs of classes (terrain columns, the background among them) that ``recordings``
-    leave unidentified, featurised (with ``recipe.features(features)``; ``cache`` as
-    build_dataset keeps it) and steadied as ``recipe`` trains (the report ``inspect`` prints)."""
+    leave unidentified, featurised (with ``recipe.features(features)``; ``cache`` and ``frames``,
+    the progress by frame, as build_dataset takes them) and steadied as ``recipe`` trains (the
+    report ``inspect`` prints)."""
     from terrapref.learning.train import identify
 
-    dataset = build_dataset(recordings, recipe.features(features), cache=cache)
+    dataset = build_dataset(recordings, recipe.features(features), cache=cache, frames=frames)
     return [(p.first, p.second) for p in identify(dataset, steady=recipe.train.data.steady_labels).unidentified()]
 
 

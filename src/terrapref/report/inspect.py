@@ -45,6 +45,8 @@ class RecordingSummary:
             "order      none declared (zones are scored under the class table's order; training needs the driver's)",
             "labels     (index: w [rad/s]  count)",
         ]
+        if not self.scenario.has_terrain:
+            out.insert(4, "map        none: the log holds the path and the driven poses, not the ground (the figure draws those alone)")
         if self.lethal_contact is not None:
             out.insert(5, f"lethal     the drive had lethal terrain under the vehicle: {self.lethal_contact}")
         peak = max(int(self.label_counts.max()), 1)

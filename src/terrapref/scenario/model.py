@@ -74,6 +74,12 @@ class Scenario:
     def path_length_m(self) -> float:
         return float(np.linalg.norm(np.diff(self.waypoints, axis=0), axis=1).sum())
 
+    @property
+    def has_terrain(self) -> bool:
+        """Whether there is a map of the ground: an imported robot log's scenario has only its path
+        (no patch, no zone), and its ground is not known."""
+        return bool(self.terrain or self.zones)
+
     def to_dict(self) -> dict:
         """The scenario as a ``terrapref-scenario/1`` mapping (round-trips through the loader); a
         scenario of a class table other than the default carries it (``classes:``)."""

@@ -1,0 +1,139 @@
+"""``terrapref play``: a ROS 2 log (a bag folder or an MCAP file) published on ROS 2 topics with
+``/clock``, as ``ros2 bag play --clock`` would, over DDS (:mod:`terrapref.interop.dds`), so that a
+node can be watched driving a recorded log without ROS 2 installed.
+
+Each topic keeps the type of the log (its DDS type and RIHS01 hash made from the definitions
+the log carries) and the QoS the log's publisher offered where the log says (``/tf_static``
+transient local, say), else ROS 2's default (reliable, keep last 10). A topic the log holds
+only one message of (a reference path sent once) is offered transient local, as a latched
+publisher would, so that a node that joins later still gets it. ``/clock`` carries the log's
+time: at a steady rate, and before each message, at that message's time.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Collection, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from terrapref.errors import UserError
+from terrapref.interop.dds import CLOCK, DEFAULT, LATCHED, MessageTypes, Participant, QosProfile, Writer
+from terrapref.interop.ros_messages import typestore
+
+CLOCK_HZ = 40.0  # ros2 bag play --clock's default rate [Hz]
+
+
+@dataclass(frozen=True)
+class Message:
+    """One message of the log: its log time [ns], topic, type and rosbags message."""
+
+    t_ns: int
+    topic: str
+    msgtype: str
+    msg: Any
+
+
+class BagPlayer:
+    """A ROS 2 log's topics as ROS 2 publishers on one participant.
+
+    Args:
+        path: a ROS 2 bag folder or MCAP file.
+        domain: the DDS domain (ROS_DOMAIN_ID).
+        topics: the topics to play (default: all of them); a name the log does not hold is a
+            UserError, unless it is one of ``optional``.
+    """
+
+    def __init__(self, path: str | Path, domain: int, topics: Collection[str] | None = None, optional: Collection[str] = ()) -> None:
+        from terrapref.interop.bag_import import _open_reader
+
+        self.path = Path(path)
+        if not self.path.exists():
+            raise UserError(str(path), "no such file or folder")
+        if self.path.suffix == ".bag":
+            raise UserError(str(path), "a ROS 1 bag: terrapref play publishes ROS 2 logs (a bag folder or .mcap); play ROS 1 bags with rosbag play")
+        try:
+            self.reader = _open_reader(self.path)
+        except UserError:
+            raise
+        except Exception as exc:  # rosbags' errors on what is not a readable log vary with the flaw
+            raise UserError(str(path), f"not a readable ROS 2 bag or MCAP ({' '.join(str(exc).split())[:160]})") from None
+        held = {c.topic for c in self.reader.connections}
+        if topics is not None:
+            missing = sorted(set(topics) - held - set(optional))
+            if missing:
+                raise UserError(str(path), f"holds no topic {', '.join(missing)} (asked for); it holds {', '.join(sorted(held))}")
+        # A /clock the log recorded is left out: the player's own /clock keeps the log's time.
+        self.connections = [c for c in self.reader.connections if (topics is None or c.topic in topics) and c.topic != "/clock"]
+        if not self.connections:
+            raise UserError(str(path), "holds no messages to play", field="--topics")
+        self.types = MessageTypes(self.reader.typestore)
+        self.dds = Participant(domain, self.types)
+        self.clock = self.dds.writer("/clock", "rosgraph_msgs/msg/Clock", CLOCK, MessageTypes(typestore()))  # a log need not hold /clock's type
+        self.writers: dict[tuple[str, str], Writer] = {}
+        for c in self.connections:
+            if (c.topic, c.msgtype) not in self.writers:
+                self.writers[c.topic, c.msgtype] = self.dds.writer(c.topic, c.msgtype, self._profile(c))
+
+    def _profile(self, connection) -> QosProfile:
+        """The QoS a topic is played with: the one offered in the log, else ROS 2's default;
+        transient local for a topic of one message."""
+        from rosbags.interfaces import QosDurability, QosReliability
+
+        offered = getattr(getattr(connection, "ext", None), "offered_qos_profiles", None) or []
+        if offered:
+            q = offered[0]
+            return QosProfile("as recorded", reliable=q.reliability != QosReliability.BEST_EFFORT, depth=max(1, int(q.depth or 10)),
+                              transient_local=q.durability == QosDurability.TRANSIENT_LOCAL)
+        return LATCHED if connection.msgcount == 1 else DEFAULT
+
+    @property
+    def span_ns(self) -> tuple[int, int]:
+        """The log's first and last message times [ns]."""
+        return self.reader.start_time, self.reader.end_time
+
+    def messages(self) -> Iterator[Message]:
+        """The messages played, in the log's order."""
+        for conn, t_ns, raw in self.reader.messages(connections=self.connections):
+            yield Message(t_ns, conn.topic, conn.msgtype, self.reader.deserialize(raw, conn.msgtype))
+
+    def publish(self, message: Message) -> None:
+        """Send one message of the log on its topic."""
+        self.writers[message.topic, message.msgtype].publish(message.msg)
+
+    def publish_clock(self, t_ns: int) -> None:
+        """``/clock`` at the log's time ``t_ns`` [ns]."""
+        T = self.clock.types.ts.types
+        self.clock.publish(T["rosgraph_msgs/msg/Clock"](clock=T["builtin_interfaces/msg/Time"](sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000)))
+
+    def play(self, rate: float = 1.0, clock_hz: float = CLOCK_HZ, delay_s: float = 0.0, progress=None) -> int:
+        """Publish every message at its time in the log, ``rate`` times as fast, with ``/clock``
+        at ``clock_hz``; the number of messages published."""
+        time.sleep(delay_s)  # discovery: subscribers that are already up match the new publishers meanwhile
+        first_ns = self.span_ns[0]
+        start = time.monotonic()
+        next_clock, clock_ns, count = start, None, 0
+        for message in self.messages():
+            due = start + (message.t_ns - first_ns) * 1e-9 / rate
+            while True:  # the clock ticks on while the next message is not due
+                now = time.monotonic()
+                if now >= due:
+                    break
+                if now >= next_clock:
+                    self.publish_clock(first_ns + int((now - start) * rate * 1e9))
+                    next_clock = now + 1.0 / clock_hz
+                time.sleep(max(0.0, min(due, next_clock) - now))
+            if message.t_ns != clock_ns:  # the clock at the message's time, before it
+                clock_ns = message.t_ns
+                self.publish_clock(clock_ns)
+            self.publish(message)
+            count += 1
+            if progress is not None:
+                progress(message.t_ns - first_ns)
+        return count
+
+    def close(self) -> None:
+        """Leave the domain and close the log."""
+        self.dds.close()
+        self.reader.close()

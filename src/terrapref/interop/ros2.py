@@ -1,0 +1,371 @@
+"""``terrapref ros2``: the planner as a ROS 2 node, speaking DDS itself (no rclpy), around
+:class:`PlannerNodeCore`.
+
+The same node as ``terrapref ros1`` (:mod:`terrapref.interop.ros1`), on ROS 2's wire
+(:mod:`terrapref.interop.dds`): it subscribes to the robot file's label image
+(``sensor_msgs/Image`` or ``CompressedImage``, whichever the robot publishes), camera
+calibration, odometry (``nav_msgs/Odometry``, ``PoseStamped`` or ``PoseWithCovarianceStamped``)
+and, without a path file, path (``nav_msgs/Path``); it publishes the command (``Twist``, or
+``TwistStamped`` with ``stamped``) at the control rate and at once on each decision, the
+trajectories with F_t (``~/trajectories``) on each decision, the learned costmap (``~/costmap``,
+transient local) once a second, and the camera mounting it assumes on ``/tf_static``.
+
+Its options come from the command line or ROS 2 parameters (``--ros-args -p rate:=10``), its
+topic names can be remapped (``-r /cmd_vel:=/robot/cmd_vel``, ``-r __node:=NAME``,
+``-r __ns:=/NS``), ``ROS_DOMAIN_ID`` picks the domain, and ``-p use_sim_time:=true`` takes the
+node's clock from ``/clock``.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from terrapref.errors import UserError
+from terrapref.interop.dds import CLOCK, DEFAULT, LATCHED, SENSOR_DATA, MessageTypes, Participant, QosProfile, domain_id
+from terrapref.interop.node_core import NodeLog, NodeOptions, PlannerNodeCore, TrajectoryShapes, report_line
+
+NODE_NAME = "terrapref"
+COSTMAP_PERIOD_S = 1.0  # between two costmaps [s]
+SILENT_AFTER_S = 5.0  # an input topic without a publisher this long after the start is said [s]
+MARKER_LIFETIME_S = 0.5
+MOUNT_FRAMES = ("terrapref_camera_link", "terrapref_camera_optical")  # the node's own names: never a second parent in the robot's tree
+IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+POSE_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
+PARAMETERS = ("stamped", "rate", "path_file", "cmd_topic", "hold_s", "use_sim_time")
+
+
+@dataclass(frozen=True)
+class Endpoint:
+    """One topic of the node: its role, name (resolved and remapped), types and QoS profile."""
+
+    role: str
+    topic: str
+    msgtypes: tuple[str, ...]
+    profile: QosProfile
+    publishes: bool
+
+
+@dataclass(frozen=True)
+class RosArgs:
+    """What ``--ros-args`` gives: parameters (``-p NAME:=VALUE``, the value read as YAML, as ROS 2
+    reads it) and remappings (``-r FROM:=TO``; ``__node`` and ``__ns`` rename the node)."""
+
+    params: dict[str, Any] = field(default_factory=dict)
+    remaps: dict[str, str] = field(default_factory=dict)
+
+    @classmethod
+    def parse(cls, tokens: Sequence[str]) -> RosArgs:
+        """Parse the words after ``--ros-args``; anything else is a UserError naming it."""
+        params, remaps = {}, {}
+        words = list(tokens)
+        while words:
+            flag = words.pop(0)
+            if flag == "--ros-args":
+                continue
+            if flag not in ("-p", "--param", "-r", "--remap"):
+                raise UserError("--ros-args", f"{flag!r}: expected -p NAME:=VALUE or -r FROM:=TO")
+            if not words or ":=" not in words[0]:
+                raise UserError("--ros-args", f"{flag} needs NAME:=VALUE, got {words[0] if words else 'nothing'}")
+            name, _, value = words.pop(0).partition(":=")
+            if flag in ("-p", "--param"):
+                if name not in PARAMETERS:
+                    raise UserError("--ros-args", f"-p {name}: no such parameter; the node's are {', '.join(PARAMETERS)}")
+                try:
+                    params[name] = yaml.safe_load(value) if value else ""
+                except yaml.YAMLError:
+                    params[name] = value
+            else:
+                if not name or not value:
+                    raise UserError("--ros-args", f"-r {name}:={value}: expected FROM:=TO, both names")
+                remaps[name] = value
+        return cls(params, remaps)
+
+    def get_param(self, key: str, default: Any) -> Any:
+        """A parameter's value (``key`` as :meth:`NodeOptions.resolved` asks: ``-p NAME``), else ``default``."""
+        return self.params.get(key.removeprefix("-p "), default)
+
+    @property
+    def use_sim_time(self) -> bool:
+        value = self.params.get("use_sim_time", False)
+        if not isinstance(value, bool):
+            raise UserError("-p use_sim_time", f"expected true or false, got {value!r}")
+        return value
+
+
+class Names:
+    """ROS 2 name resolution for one node: ``~/x`` under the node, relative names under its
+    namespace, then the remappings.
+
+    Args:
+        remaps: ``-r`` rules; ``__node`` and ``__ns`` set the node's name and namespace.
+    """
+
+    def __init__(self, remaps: Mapping[str, str]) -> None:
+        self.node = remaps.get("__node", NODE_NAME)
+        self.namespace = "/" + remaps.get("__ns", "/").strip("/")
+        if not self.node.replace("_", "").isalnum() or not all(p.replace("_", "").isalnum() for p in self.namespace.strip("/").split("/") if p):
+            raise UserError("--ros-args", f"-r __node:={self.node} / __ns:={self.namespace}: names are letters, digits and _")
+        self.fqn = self.namespace.rstrip("/") + "/" + self.node
+        self.remaps = {self._expand(a): self._expand(b) for a, b in remaps.items() if a not in ("__node", "__ns")}
+
+    def _expand(self, name: str) -> str:
+        if name.startswith("~"):
+            return self.fqn + "/" + name[1:].lstrip("/")
+        return name if name.startswith("/") else self.namespace.rstrip("/") + "/" + name
+
+    def resolve(self, name: str) -> str:
+        """The topic ``name`` names for this node, remapped."""
+        full = self._expand(name)
+        return self.remaps.get(full, full)
+
+
+class NodeClock:
+    """The node's clock [s]: the system's, or with ``use_sim_time`` the newest ``/clock`` (0
+    until one comes, as ROS 2's)."""
+
+    def __init__(self, sim: bool) -> None:
+        self.sim = sim
+        self._sim_s: float | None = None
+
+    def on_clock(self, msg) -> None:
+        """A rosgraph_msgs/Clock from /clock."""
+        self._sim_s = int(msg.clock.sec) + int(msg.clock.nanosec) * 1e-9
+
+    def now(self) -> float:
+        """The node's time now [s]."""
+        return (self._sim_s or 0.0) if self.sim else time.time()
+
+    def running(self) -> bool:
+        """Whether the clock has started (a simulated one, once /clock has spoken)."""
+        return not self.sim or self._sim_s is not None
+
+
+def _stderr(level: str, node: str) -> Callable[[str], None]:
+    """A logging call that writes one line as ROS 2's console does: ``[LEVEL] [time] [node]: line``."""
+    def log(line: str) -> None:
+        print(f"[{level}] [{time.time():.6f}] [{node}]: {line}", file=sys.stderr, flush=True)
+    return log
+
+
+def run_node(model_path: str, robot_path: str, options: NodeOptions | None = None, ros_args: Sequence[str] = (), live: Any = None,
+             stop: threading.Event | None = None) -> None:
+    """Run the node until Ctrl-C or SIGTERM (or ``stop`` is set); with ``live`` (a
+    terrapref.interop.live.LiveView), every decision is also sent there. Ends with a line of
+    what it decided and skipped; a calibration the model refuses ends it with that UserError."""
+    from terrapref.interop.robot import load_robot, load_waypoints
+    from terrapref.interop.ros_messages import typestore
+    from terrapref.learning.model_file import load_model
+
+    args = RosArgs.parse(ros_args)
+    names = Names(args.remaps)
+    opts = (options or NodeOptions()).resolved(args.get_param, param=lambda name: f"-p {name}")
+    clock = NodeClock(args.use_sim_time)
+    domain = domain_id()
+    model = load_model(model_path)
+    robot = load_robot(robot_path, model.classes)
+    path = load_waypoints(Path(opts.path_file), "path_file") if opts.path_file else \
+        (load_waypoints(robot.path_file, robot.source) if robot.path_file else None)
+    core = PlannerNodeCore(model, robot, path, hold_s=float(opts.hold_s))
+    if live is not None:
+        core.watch(live)
+    node = _Node(core, opts, names, clock, Participant(domain, MessageTypes(typestore())))
+    try:
+        node.spin(stop or threading.Event())
+    finally:
+        node.close()
+        print(report_line(core, "ros2"), flush=True)
+    if node.failure:
+        raise node.failure[0]
+
+
+def endpoints(robot, opts: NodeOptions, names: Names, sim: bool, path_topic: bool) -> list[Endpoint]:
+    """Every topic of the node, with its types and QoS profile.
+
+    Subscriptions to streams (images, calibration, odometry) are best effort, which hears
+    reliable and best-effort publishers alike (a reliable subscription would not match a
+    best-effort publisher); the path is heard both reliable and transient local, so that a
+    path published once before the node started still arrives.
+    """
+    t = robot.topics
+    out = [Endpoint("segmentation", names.resolve(t["segmentation"]), IMAGE_TYPES, SENSOR_DATA, False),
+           Endpoint("camera_info", names.resolve(t["camera_info"]), ("sensor_msgs/msg/CameraInfo",), SENSOR_DATA, False),
+           Endpoint("odometry", names.resolve(t["odometry"]), POSE_TYPES, SENSOR_DATA, False)]
+    if path_topic:
+        out += [Endpoint("path", names.resolve(robot.path_topic), ("nav_msgs/msg/Path",), DEFAULT, False),
+                Endpoint("path", names.resolve(robot.path_topic), ("nav_msgs/msg/Path",), LATCHED, False)]
+    if sim:
+        out.append(Endpoint("clock", "/clock", ("rosgraph_msgs/msg/Clock",), CLOCK, False))
+    twist = "geometry_msgs/msg/TwistStamped" if opts.stamped else "geometry_msgs/msg/Twist"
+    out += [Endpoint("command", names.resolve(opts.cmd_topic or t["command"]), (twist,), DEFAULT, True),
+            Endpoint("trajectories", names.resolve("~/trajectories"), ("visualization_msgs/msg/MarkerArray",), DEFAULT, True),
+            Endpoint("costmap", names.resolve("~/costmap"), ("nav_msgs/msg/OccupancyGrid",), LATCHED, True)]
+    if "tf" not in robot.camera:  # the mounting comes from the robot file; with camera.tf the robot's own tree has it
+        out.append(Endpoint("tf_static", "/tf_static", ("tf2_msgs/msg/TFMessage",), LATCHED, True))
+    return out
+
+
+class _Node:
+    """The node's DDS endpoints and timers around a :class:`PlannerNodeCore`."""
+
+    def __init__(self, core: PlannerNodeCore, opts: NodeOptions, names: Names, clock: NodeClock, dds: Participant) -> None:
+        robot = core.robot
+        self.core, self.robot, self.opts, self.names, self.clock, self.dds = core, robot, opts, names, clock, dds
+        self.ts, self.domain = dds.types.ts, dds.domain
+        self.failure: list[UserError] = []
+        self.log = NodeLog(_stderr("INFO", names.node), _stderr("WARN", names.node), _stderr("ERROR", names.node), prefix="")
+        self.last_stamp: float | None = None  # the frame of the command in force
+        self.odom_frame = "odom"  # the odometry's frame, which the costmap is in
+        self.shapes = TrajectoryShapes(core.model)
+        self.failed = threading.Event()
+        dds.on_error = self._on_error
+        self.endpoints = endpoints(robot, opts, names, clock.sim, core.path is None and bool(robot.path_topic))
+        self.writers: dict[str, Any] = {}
+        self.readers: dict[str, list[Any]] = {}
+        handlers = {"segmentation": self.on_image, "camera_info": self.on_camera_info, "odometry": self.on_odometry,
+                    "path": core.on_path, "clock": clock.on_clock}
+        core.on_decision = self.on_decision
+        for e in self.endpoints:
+            if e.publishes:
+                self.writers[e.role] = self.dds.writer(e.topic, e.msgtypes[0], e.profile)
+            else:
+                for msgtype in e.msgtypes:
+                    handle = handlers[e.role]
+                    callback = (lambda msg, handle=handle, msgtype=msgtype: handle(msg, msgtype)) if e.role in ("segmentation", "odometry") else handle
+                    self.readers.setdefault(e.role, []).append(self.dds.subscribe(e.topic, msgtype, e.profile, callback,
+                                                                                  newest_only=e.role == "segmentation"))
+        self.publish_mount()
+        self.log.info(f"in ROS_DOMAIN_ID {self.domain} as {names.fqn}: " + "; ".join(
+            f"{'publishes' if e.publishes else 'hears'} {e.topic} ({' or '.join(m.split('/')[-1] for m in e.msgtypes)}, {e.profile.describe()})"
+            for e in self.endpoints))
+
+    def _on_error(self, exc: BaseException) -> None:
+        """A callback's exception that is not about the message (a bug): said once, the node goes on."""
+        if isinstance(exc, UserError):
+            self.log.say(exc.lines()[0])
+        else:
+            self.log.say(f"internal error handling a message ({type(exc).__name__}: {exc})")
+
+    def header(self, t_s: float, frame_id: str) -> Any:
+        """std_msgs/Header stamped ``t_s`` [s] (the node's clock) in ``frame_id``."""
+        ns = int(round(t_s * 1e9))
+        return self.ts.types["std_msgs/msg/Header"](stamp=self.ts.types["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000),
+                                                   frame_id=frame_id)
+
+    def publish_mount(self) -> None:
+        """The camera's mounting the planner assumes (base_link -> terrapref_camera_link ->
+        terrapref_camera_optical), once, transient local as tf2's static broadcaster."""
+        from terrapref.camera import CameraConfig
+        from terrapref.interop.ros_messages import EPOCH_S, camera_mount, tf_message
+
+        if "tf_static" not in self.writers:
+            return
+        cam = self.robot.camera
+        mount = CameraConfig(mount_height_m=cam["height_m"], pitch_deg=cam["pitch_deg"], mount_forward_m=cam["forward_m"], yaw_deg=cam["yaw_deg"])
+        self.writers["tf_static"].publish(tf_message(self.ts, camera_mount(self.ts, mount, t_s=self.clock.now() - EPOCH_S, frames=MOUNT_FRAMES)))
+
+    def publish_command(self, stamp: float) -> None:
+        """The command in force now (a stop once its frame is ``hold_s`` old by the node's clock),
+        stamped with its frame; each time the planner stops, or moves on, the log says so and why."""
+        from terrapref.interop.ros_messages import twist
+
+        with self.core.lock:  # a decision's command and the timer's never cross (the lock a decision is made under)
+            (v, w), reason = self.core.status_at(self.clock.now())
+            self.log.status(reason)
+            msg = twist(self.ts, float(v), float(w))
+            if self.opts.stamped:
+                msg = self.ts.types["geometry_msgs/msg/TwistStamped"](header=self.header(stamp, "base_link"), twist=msg)
+            self.writers["command"].publish(msg)
+
+    def on_decision(self, decision) -> None:
+        """Each decision, whether its image or the odometry it waited for brought it."""
+        self.last_stamp = decision.stamp_s
+        self.publish_command(decision.stamp_s)
+        self.writers["trajectories"].publish(self.markers(decision))
+
+    def markers(self, decision) -> Any:
+        """The trajectories of ``decision`` as visualization_msgs/MarkerArray (line strips in base_link)."""
+        from terrapref.interop.ros_messages import point, vector3, zeroed
+
+        T = self.ts.types
+        stamped = self.header(decision.stamp_s, "base_link")
+        lifetime = T["builtin_interfaces/msg/Duration"](sec=0, nanosec=int(MARKER_LIFETIME_S * 1e9))
+        out = []
+        for j, (pts, (width_m, rgba)) in enumerate(zip(self.shapes.paths, self.shapes.styles(decision))):
+            out.append(zeroed(self.ts, "visualization_msgs/msg/Marker", header=stamped, ns="trajectories", id=j, type=4, action=0,
+                              pose=zeroed(self.ts, "geometry_msgs/msg/Pose", orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)),
+                              scale=vector3(self.ts, x=width_m), color=T["std_msgs/msg/ColorRGBA"](r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3]),
+                              lifetime=lifetime, points=[point(self.ts, x, y, 0.02) for x, y in pts]))
+        return T["visualization_msgs/msg/MarkerArray"](markers=out)
+
+    def on_camera_info(self, msg) -> None:
+        try:
+            self.core.on_camera_info(msg)
+        except UserError as exc:  # a model for another camera: said once, and the node stops
+            self.failure.append(exc)
+            self.log.error(exc.lines()[0])
+            self.failed.set()
+        except ValueError as exc:  # a later calibration of another size: said once, ignored
+            self.log.say(f"{self.names.resolve(self.robot.topics['camera_info'])}: {exc}")
+
+    def on_image(self, msg, msgtype: str) -> None:
+        """A label image, Image or CompressedImage, as the robot publishes it on the topic."""
+        topic = self.names.resolve(self.robot.topics["segmentation"])
+        self.log.guarded(lambda: self.core.on_image(msgtype, msg, topic))
+
+    def on_odometry(self, msg, msgtype: str) -> None:
+        """Odometry, or a PoseStamped or PoseWithCovarianceStamped, as the robot file allows."""
+        topic = self.names.resolve(self.robot.topics["odometry"])
+        self.odom_frame = str(msg.header.frame_id).lstrip("/") or self.odom_frame
+
+        def handle() -> None:
+            try:
+                self.core.on_odometry(msg, self.clock.now() if self.clock.running() else None)
+            except ValueError as exc:
+                raise ValueError(f"{topic}: {exc}") from None
+        self.log.guarded(handle)
+
+    def publish_costmap(self) -> None:
+        """The learned costmap, when the model keeps a ground map, in the odometry's frame."""
+        from terrapref.interop.ros_messages import occupancy_grid
+
+        grid = self.core.costmap()
+        if grid is not None:
+            self.writers["costmap"].publish(occupancy_grid(self.ts, self.header(self.clock.now(), self.odom_frame), grid.cost, grid.resolution_m, grid.origin))
+
+    def check_publishers(self) -> None:
+        """Each input topic that no publisher in the domain offers, said once: a robot in
+        another ROS_DOMAIN_ID, or not on this network, looks just like a silent one."""
+        for role, readers in self.readers.items():
+            if not any(r.get_matched_publications() for r in readers):
+                topic = next(e for e in self.endpoints if e.role == role)
+                self.log.warn(f"{topic.topic}: no publisher of {' or '.join(topic.msgtypes)} in ROS_DOMAIN_ID {self.domain} after "
+                              f"{SILENT_AFTER_S:g} s (is the robot in this domain, and its DDS on this network?); waiting")
+
+    def spin(self, stop: threading.Event) -> None:
+        """Commands at the control rate, the costmap once a second, until ``stop`` or a failure."""
+        period = 1.0 / float(self.opts.rate)
+        start = time.monotonic()
+        next_costmap, checked = start + COSTMAP_PERIOD_S, False
+        while not (stop.is_set() or self.failed.is_set()):
+            time.sleep(period)
+            now = time.monotonic()
+            if self.last_stamp is not None:
+                self.publish_command(self.last_stamp)
+            if now >= next_costmap:
+                next_costmap = now + COSTMAP_PERIOD_S
+                self.publish_costmap()
+            if not checked and now - start >= SILENT_AFTER_S:
+                checked = True
+                self.check_publishers()
+
+    def close(self) -> None:
+        """Leave the domain: subscribers see the node's publishers go."""
+        self.dds.close()
