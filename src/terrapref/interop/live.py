@@ -12,7 +12,6 @@ the camera's mounting are sent again once a second, so a viewer that connects la
 from __future__ import annotations
 
 import math
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -56,11 +55,11 @@ class LiveView:
         self.ts = typestore()
         self.context = foxglove.Context()
         self.pace, self.wait = pace, wait
-        self.viewers = threading.Event()  # set once a viewer subscribes to a channel
         _check_host(host)
         try:  # the SDK's server, on a free local port, behind the front door where the user asked
-            self.server = foxglove.start_server(name="terrapref", host="127.0.0.1", port=0, context=self.context,
-                                                server_listener=_subscriptions(self.viewers))
+            # No server listener: the SDK would call it from its own threads, which can then wait on the
+            # GIL while a thread of ours logging a message waits on them (a node that never ends).
+            self.server = foxglove.start_server(name="terrapref", host="127.0.0.1", port=0, context=self.context)
             self.front = Front(host, port, int(self.server.port))
         except Exception as exc:  # the host is known to be one to listen on, so the port is at fault
             if hasattr(self, "server"):
@@ -87,24 +86,12 @@ class LiveView:
 
     def wait_for_viewer(self) -> None:
         """Block until a viewer has subscribed to a channel (at once when one has)."""
-        while not self.viewers.wait(0.2):  # in steps: Ctrl-C is heard
-            pass
+        while not any(channel.has_sinks() for channel in self.channels.values()):
+            time.sleep(0.1)  # in steps: Ctrl-C is heard
 
     def stop(self) -> None:
         self.server.stop()  # its closing frames go out through the front, which then closes
         self.front.stop()
-
-
-def _subscriptions(event: threading.Event) -> object:
-    """A listener of the SDK's server (foxglove.websocket.ServerListener) that sets ``event``
-    when a viewer subscribes to a channel."""
-    from foxglove.websocket import ServerListener
-
-    class Subscriptions(ServerListener):
-        def on_subscribe(self, client: object, channel: object) -> None:
-            event.set()
-
-    return Subscriptions()
 
 
 def _check_host(host: str) -> None:
