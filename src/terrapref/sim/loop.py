@@ -111,8 +111,8 @@ class Simulation:
         self.camera = PinholeCamera(camera)
         self.renderer = SegmentationRenderer(self.camera, self.world)
         self.path = ReferencePath(scenario.waypoints)
-        self._lethal = np.zeros(256, dtype=bool)
-        self._lethal[list(scenario.classes.lethal_ids)] = True
+        self._lethal = frozenset(int(i) for i in scenario.classes.lethal_ids)
+        self._across = tuple(float(a) for a in self.config.vehicle.footprint_m)
         self.time_limit_s = self.config.time_limit(self.path.length_m)
         self.reset()
 
@@ -122,7 +122,7 @@ class Simulation:
         self.tick = 0
         self.frame_index = 0
         self.progress_s = self.path.project(self.vehicle.pose[:2], 0.0, 5.0)[0]
-        self._on_lethal = bool(self._in_contact(np.array([self.vehicle.pose]))[0])
+        self._on_lethal = self._in_contact(self.vehicle.pose)
         self.started_in_contact = self._on_lethal
         self.collisions = int(self._on_lethal)  # a start in contact with lethal terrain is one
         self.contact_s = 0.0
@@ -142,12 +142,12 @@ class Simulation:
         pose = self.vehicle.pose
         return Frame(self.frame_index, self.time_s, SegmentationView(self.renderer, pose), pose, self.scenario.waypoints)
 
-    def _in_contact(self, poses: np.ndarray) -> np.ndarray:
-        """Whether lethal terrain lies under any point of the footprint at each pose (P, 3), (P,)."""
-        across = np.asarray(self.config.vehicle.footprint_m)
-        yaw = poses[:, 2:3]
-        points = np.stack([poses[:, 0:1] - across * np.sin(yaw), poses[:, 1:2] + across * np.cos(yaw)], axis=-1)
-        return self._lethal[self.world.class_at(points)].any(axis=1)
+    def _in_contact(self, pose: Pose) -> bool:
+        """Whether lethal terrain lies under any point of the footprint at ``pose``, in plain floats
+        (asked at every tick: a few array calls would cost more than the vehicle's own tick)."""
+        x, y, yaw = pose
+        sin, cos, class_at = math.sin(yaw), math.cos(yaw), self.world.class_at_point
+        return any(class_at(x - a * sin, y + a * cos) in self._lethal for a in self._across)
 
     def step(self, command: Command, stop_reason: str | None = None) -> Frame:
         """Hold ``command`` for one camera period (several controller ticks) and render the next frame.
@@ -175,7 +175,7 @@ class Simulation:
             self.trace.append(pose)
             poses.append(pose)
         step_m = self.vehicle.command.v * c.vehicle.dt_s
-        for contact in self._in_contact(np.array(poses)):
+        for contact in map(self._in_contact, poses):
             if contact:
                 self.collisions += not self._on_lethal
                 self.contact_s += c.vehicle.dt_s
