@@ -113,3 +113,29 @@ def test_no_ros_master_is_said_within_seconds_not_waited_for():
         listening.bind(("127.0.0.1", 0))
         listening.listen()
         check_master(f"http://127.0.0.1:{listening.getsockname()[1]}")
+
+
+@pytest.mark.parametrize("block,key,value,words", [
+    ("preference", "n_steps", 10**9, ["n_steps", "1..1000"]),
+    ("corridor", "map_resolution_m", 1e-6, ["ground-map cells a side", "at most 4096"]),
+    ("corridor", "offset_step_m", 1e-9, ["offsets", "at most 10000"]),
+    ("corridor", "station_step_m", 1e-9, ["stations", "at most 10000"]),
+    ("corridor", "sample_step_m", 1e-9, ["camera samples", "at most 10000"]),
+], ids=["trajectory points", "map cells", "offsets", "stations", "samples"])
+def test_every_size_a_model_file_gives_is_bounded(tmp_path: Path, capsys, block, key, value, words):
+    """Sizes in a model's header once allocated gigabytes (or failed in a worker) before any check."""
+    from helpers import skip_path_weights
+    from test_corridor import DRIVER_LIKE, _corridor_meta
+
+    from terrapref.learning.model_file import _write, read_model_file, save_model
+    from terrapref.learning.network import ClassifierConfig
+
+    config = ClassifierConfig(hidden=8, skip=True)
+    good = save_model(tmp_path / "good.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
+    weights, meta = read_model_file(good)
+    meta["features"][block][key] = value
+    model = tmp_path / "big.safetensors"
+    _write(model, weights, meta)
+    assert main(["evaluate", str(model), "fig7a_non_traversable_longer", "--seeds", "1", "--no-driver", "--out", str(tmp_path / "ev")]) == 2
+    one_line_error(capsys, "big.safetensors", *words)
+    assert not (tmp_path / "ev").exists()

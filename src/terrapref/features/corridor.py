@@ -36,6 +36,12 @@ from terrapref.terrain import UNKNOWN, ClassTable
 from terrapref.vehicle import Pose, pure_pursuit_yaw_rate
 
 
+MAX_COUNT = 10_000
+"""The most offsets, stations or camera samples a corridor may have."""
+MAX_MAP_CELLS = 4096
+"""The most ground-map cells a side (640 by default: 64 m at 0.1 m)."""
+
+
 @dataclass(frozen=True)
 class CorridorConfig:
     """Geometry of the offset corridor and of the ground map behind it.
@@ -104,6 +110,13 @@ class CorridorConfig:
             raise ValueError("the ground map must reach past the camera's sample range by more than 1 m, and that past the corridor")
         if not self.stations_m[0] < self.stations_m[1]:
             raise ValueError("the corridor's stations_m must run forward")
+        counts = {"offsets": (self.max_offset_m / self.offset_step_m, MAX_COUNT),
+                  "stations": ((self.stations_m[1] - self.stations_m[0]) / self.station_step_m, MAX_COUNT),
+                  "camera samples": (self.sample_range_m / self.sample_step_m, MAX_COUNT),
+                  "ground-map cells a side": (2 * self.map_half_size_m / self.map_resolution_m, MAX_MAP_CELLS)}
+        for what, (count, most) in counts.items():  # a size read from a file is bounded before anything is allocated by it
+            if count > most:
+                raise ValueError(f"the corridor's steps give {count:.3g} {what}; at most {most}")
         if not (math.isfinite(self.map_range_m) and self.map_range_m > 0 and 0 <= self.map_fade <= 1 and 0 < self.map_lethal_share <= 1
                 and 0 < self.map_terrain_share <= 1 and 0 <= self.map_min_evidence < 1e3):
             raise ValueError("the ground map needs map_range_m > 0, map_fade in [0, 1], map_lethal_share and map_terrain_share in (0, 1] "

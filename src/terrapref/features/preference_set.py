@@ -12,6 +12,7 @@ blur neighbouring situations together.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -19,6 +20,9 @@ import numpy as np
 from terrapref.camera import PinholeCamera
 from terrapref.records import to_plain
 from terrapref.vehicle import ControlSet
+
+MAX_STEPS = 1000
+"""The most points a trajectory may have (a horizon of n_steps x dt_s; 30 x 0.2 s by default)."""
 
 
 @dataclass(frozen=True)
@@ -36,8 +40,8 @@ class PreferenceSetConfig:
     dt_s: float = 0.2
 
     def __post_init__(self) -> None:
-        if self.n_steps < 1 or not self.dt_s > 0:
-            raise ValueError("n_steps must be >= 1 and dt_s > 0")
+        if not 1 <= self.n_steps <= MAX_STEPS or not (math.isfinite(self.dt_s) and self.dt_s > 0):
+            raise ValueError(f"n_steps must be in 1..{MAX_STEPS} and dt_s a number > 0")
 
     @property
     def m(self) -> int:

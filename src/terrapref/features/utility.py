@@ -101,8 +101,8 @@ class FeatureConfig:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "distance_mode", DistanceMode(self.distance_mode))
-        if not self.path_spacing_m > 0 or (self.window_m is not None and not self.window_m > 0):
-            raise ValueError("path_spacing_m and window_m must be > 0")
+        if not self.path_spacing_m >= 0.01 or (self.window_m is not None and not self.window_m > 0):
+            raise ValueError("path_spacing_m must be >= 0.01 m (a path is resampled at it) and window_m > 0")
         if self.lookahead is not None and not isinstance(self.lookahead, LookaheadConfig):
             raise ValueError("lookahead must be a LookaheadConfig")
         if self.corridor is not None and not isinstance(self.corridor, CorridorConfig):
