@@ -255,26 +255,26 @@ class Participant:
         from cyclonedds.internal import InvalidSample
         from cyclonedds.sub import DataReader
 
-        slot: list[Any] = []  # newest_only: the sample waiting to be handled
+        pending = [False]  # a wake-up for this reader is in the inbox, not yet handled
 
-        def handle_newest(_) -> None:
+        def arrived(_) -> None:
+            # On DDS's own thread: only a wake-up. Taking the samples here would call into the
+            # reader from its listener, which deadlocks with a close that deletes the reader
+            # while messages still come (the delete waits for the listener, the listener for the reader).
             with self._slots:
-                sample = slot.pop() if slot else None
-            if sample is not None:
-                callback(sample)
+                if pending[0]:
+                    return
+                pending[0] = True
+            self._inbox.put((handle, None))
 
-        def arrived(reader) -> None:
-            for sample in reader.take(N=64):
-                if isinstance(sample, InvalidSample):  # a publisher gone (its instance unregistered): no message
-                    continue
-                if not newest_only:
-                    self._inbox.put((callback, sample))
-                    continue
-                with self._slots:
-                    waiting = bool(slot)
-                    slot[:] = [sample]
-                if not waiting:
-                    self._inbox.put((handle_newest, None))
+        def handle(_) -> None:
+            with self._slots:
+                pending[0] = False  # samples that come from here on wake this again
+            samples: list[Any] = []
+            while batch := reader.take(N=64):  # all that waits: the listener is told of new data only
+                samples += [s for s in batch if not isinstance(s, InvalidSample)]  # (a publisher gone: no message)
+            for sample in samples[-1:] if newest_only else samples:
+                callback(sample)
 
         reader = DataReader(self.dp, self._topic(topic, msgtype), qos=profile.qos(self.types.user_data(msgtype)),
                             listener=Listener(on_data_available=arrived))
@@ -298,6 +298,8 @@ class Participant:
         """Stop handing messages to callbacks and leave the domain (remote participants see it go)."""
         self._inbox.put(None)
         self._thread.join(timeout=5)
+        if self._thread.is_alive():  # a callback still runs, maybe inside a reader: deleting the readers now could wait on it
+            return
         self._readers.clear()
         self._topics.clear()
         self.dp = None  # cyclonedds deletes the participant, and with it its endpoints
