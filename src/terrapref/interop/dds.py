@@ -23,7 +23,6 @@ way out; cyclonedds serialises them, an implementation independent of rosbags' s
 from __future__ import annotations
 
 import os
-import queue
 import threading
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -100,6 +99,7 @@ DEFAULT = QosProfile("default", reliable=True, depth=10)  # rclcpp's default: co
 LATCHED = QosProfile("transient local", reliable=True, depth=1, transient_local=True)  # /tf_static, maps: kept for late subscribers
 CLOCK = QosProfile("clock", reliable=False, depth=1)  # rclcpp's ClockQoS: /clock, newest only
 
+WAIT_NS = 20_000_000  # the longest the participant's thread waits for data before it looks whether it is to stop [ns]
 _BASE = {"bool": "bool", "byte": "uint8", "char": "uint8", "octet": "uint8"}  # ROS 2's byte and char are IDL octet and uint8
 
 
@@ -201,8 +201,12 @@ class Writer:
 
 class Participant:
     """One ROS 2 participant on a DDS domain: publishers, and subscriptions whose messages are
-    handed to their callbacks, in the order they came, on one thread of the participant's own
-    (so that a slow callback never holds up DDS's receive thread).
+    handed to their callbacks, in the order they came, on one thread of the participant's own.
+
+    No DDS listener is used: cyclonedds would call it from its own threads, which then need the
+    GIL, while its Python bindings hold the GIL through a take or a write that can wait on those
+    very threads (a process that froze now and then, Ctrl-C unheard). The thread of its own waits
+    on a DDS wait set instead (without the GIL) and takes what came.
 
     Args:
         domain: the DDS domain (ROS_DOMAIN_ID; :func:`domain_id`).
@@ -213,14 +217,16 @@ class Participant:
 
     def __init__(self, domain: int, types: MessageTypes, on_error: Callable[[BaseException], None] | None = None) -> None:
         with needs("ros2", "ROS 2 over DDS"):
-            from cyclonedds.core import Policy, Qos
+            from cyclonedds.core import Policy, Qos, WaitSet
             from cyclonedds.domain import DomainParticipant
         self.types, self.domain = types, domain
         self.dp = DomainParticipant(domain, qos=Qos(Policy.Userdata(ENCLAVE)))
         self._topics: dict[tuple[str, str], Any] = {}
         self._readers: list[Any] = []  # kept alive: cyclonedds deletes an entity its Python object no longer holds
-        self._inbox: queue.Queue = queue.Queue()
-        self._slots = threading.Lock()
+        self._waitset = WaitSet(self.dp)
+        self._handlers: list[tuple[Any, Callable[[], None]]] = []  # (read condition, what takes and hands on its reader's samples)
+        self._lock = threading.Lock()  # guards _handlers: subscriptions may come while the thread runs
+        self._closing = False
         self.on_error = on_error
         self._thread = threading.Thread(target=self._dispatch, name="terrapref-dds", daemon=True)
         self._thread.start()
@@ -251,55 +257,49 @@ class Participant:
         newest one not handled yet (as a ROS 1 subscriber of queue size 1: a camera stream the
         callback cannot keep up with). A topic may be subscribed with several types: each
         reader hears the publishers of its own."""
-        from cyclonedds.core import Listener
+        from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState
         from cyclonedds.internal import InvalidSample
         from cyclonedds.sub import DataReader
 
-        pending = [False]  # a wake-up for this reader is in the inbox, not yet handled
+        reader = DataReader(self.dp, self._topic(topic, msgtype), qos=profile.qos(self.types.user_data(msgtype)))
 
-        def arrived(_) -> None:
-            # On DDS's own thread: only a wake-up. Taking the samples here would call into the
-            # reader from its listener, which deadlocks with a close that deletes the reader
-            # while messages still come (the delete waits for the listener, the listener for the reader).
-            with self._slots:
-                if pending[0]:
-                    return
-                pending[0] = True
-            self._inbox.put((handle, None))
-
-        def handle(_) -> None:
-            with self._slots:
-                pending[0] = False  # samples that come from here on wake this again
+        def handle() -> None:
             samples: list[Any] = []
-            while batch := reader.take(N=64):  # all that waits: the listener is told of new data only
+            while batch := reader.take(N=64):  # all that waits
                 samples += [s for s in batch if not isinstance(s, InvalidSample)]  # (a publisher gone: no message)
             for sample in samples[-1:] if newest_only else samples:
                 callback(sample)
 
-        reader = DataReader(self.dp, self._topic(topic, msgtype), qos=profile.qos(self.types.user_data(msgtype)),
-                            listener=Listener(on_data_available=arrived))
-        self._readers.append(reader)
+        condition = ReadCondition(reader, ViewState.Any | InstanceState.Any | SampleState.NotRead)
+        with self._lock:
+            self._waitset.attach(condition)
+            self._handlers.append((condition, handle))
+            self._readers.append(reader)
         return reader
 
     def _dispatch(self) -> None:
-        while True:
-            item = self._inbox.get()
-            if item is None:
-                return
-            callback, sample = item
-            try:
-                callback(sample)
-            except BaseException as exc:  # noqa: BLE001  (handed to on_error: the node says it once and carries on)
-                if self.on_error is None:
-                    raise
-                self.on_error(exc)
+        while not self._closing:
+            self._waitset.wait(WAIT_NS)  # without the GIL; at most this long, so that a close is heard
+            with self._lock:
+                handlers = [handle for _, handle in self._handlers]
+            for handle in handlers:
+                if self._closing:
+                    return
+                try:
+                    handle()
+                except BaseException as exc:  # noqa: BLE001  (handed to on_error: the node says it once and carries on)
+                    if self.on_error is None:
+                        raise
+                    self.on_error(exc)
 
     def close(self) -> None:
         """Stop handing messages to callbacks and leave the domain (remote participants see it go)."""
-        self._inbox.put(None)
+        self._closing = True
         self._thread.join(timeout=5)
-        if self._thread.is_alive():  # a callback still runs, maybe inside a reader: deleting the readers now could wait on it
+        if self._thread.is_alive():  # a callback still runs: its entities are left to the process's end
             return
+        self._handlers.clear()
         self._readers.clear()
         self._topics.clear()
+        self._waitset = None
         self.dp = None  # cyclonedds deletes the participant, and with it its endpoints
