@@ -150,6 +150,11 @@ def system(tmp_path_factory, fig7_recording):
     live_port, live = _free_port(), {}
     node = _node(model, robot, {**env, "ROS_DOMAIN_ID": str(driven)}, "-p", "use_sim_time:=true", "-p", "stamped:=true", "-p", "rate:=50",
                  flags=("--live", "--live-port", str(live_port)))
+    node_output: dict[str, list[str]] = {"stdout": [], "stderr": []}  # read as it comes: a pipe nobody reads fills and stops the node
+    node_readers = [threading.Thread(target=lambda name=name: node_output[name].extend(getattr(node, name)), daemon=True)
+                    for name in ("stdout", "stderr")]
+    for reader in node_readers:
+        reader.start()
     live_client = threading.Thread(target=_watch, args=(live_port, live), daemon=True)
     live_client.start()
     out = {"model": model, "bag": bag, "rec": rec}
@@ -198,8 +203,10 @@ def system(tmp_path_factory, fig7_recording):
     finally:
         for proc in (node, idle_node):
             proc.send_signal(signal.SIGINT)
-        stdout, stderr = node.communicate(timeout=30)
-        out["node"] = (node.returncode, stdout, stderr)
+        node.wait(timeout=30)
+        for reader in node_readers:
+            reader.join(timeout=10)
+        out["node"] = (node.returncode, "".join(node_output["stdout"]), "".join(node_output["stderr"]))
         live_client.join(timeout=30)
         out["live"] = live
         idle_node.wait(timeout=30)
