@@ -60,6 +60,22 @@ def _node(model: Path, robot: Path, env: dict, *ros_args: str, flags: tuple[str,
                              "--robot", str(robot), *flags, "--ros-args", *ros_args], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
+def _publish_until_commanded(player, heard, t_ns: int, group: list, stamp: float, tries: int = 20) -> None:
+    """Publish the clock at ``t_ns`` and the messages of one stamp, again until a command of the
+    image's ``stamp`` is heard (best effort: a message may be lost), at most ``tries`` times."""
+    from terrapref.interop.node_core import stamp_s
+
+    for _ in range(tries):
+        player.publish_clock(t_ns)
+        for m in group:
+            player.publish(m)
+        try:
+            _wait(lambda: any(round(stamp_s(c.header), 6) == stamp for c in heard.get("cmd")), timeout_s=1.0, what="a command")
+            return
+        except AssertionError:
+            continue
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -178,15 +194,7 @@ def system(tmp_path_factory, fig7_recording):
             image = next(m for m in group if m.topic == "/terrapref/labels")
             stamp = round(stamp_s(image.msg.header), 6)
             images[stamp] = k
-            for attempt in range(20):  # sent again until decided on (best effort: a message may be lost)
-                player.publish_clock(t_ns)
-                for m in group:
-                    player.publish(m)
-                try:
-                    _wait(lambda: any(round(stamp_s(c.header), 6) == stamp for c in heard.get("cmd")), timeout_s=1.0, what="a command")
-                    break
-                except AssertionError:
-                    continue
+            _publish_until_commanded(player, heard, t_ns, group, stamp)
             got[stamp] = next((c.twist.linear.x, c.twist.angular.z) for c in heard.get("cmd") if round(stamp_s(c.header), 6) == stamp)
         out["commands"] = [got[s] for s in sorted(got)]
         out["stamps"] = sorted(got)
@@ -245,15 +253,7 @@ def _bad_input(player, messages, times, heard, out) -> None:
         time.sleep(0.1)
     last = [m for m in messages if m.t_ns == times[FRAMES]]
     stamp = round(stamp_s(next(m for m in last if m.topic == "/terrapref/labels").msg.header), 6)
-    for _ in range(20):
-        player.publish_clock(times[FRAMES])
-        for m in last:
-            player.publish(m)
-        try:
-            _wait(lambda: any(round(stamp_s(c.header), 6) == stamp for c in heard.get("cmd")), timeout_s=1.0, what="the frame after bad input")
-            break
-        except AssertionError:
-            continue
+    _publish_until_commanded(player, heard, times[FRAMES], last, stamp)
     out["after_bad"] = any(round(stamp_s(c.header), 6) == stamp for c in heard.get("cmd"))
 
 
