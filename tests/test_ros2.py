@@ -17,6 +17,7 @@ import threading
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import pytest
@@ -55,8 +56,31 @@ def _domains() -> tuple[int, int]:
     raise AssertionError("no quiet DDS domain")
 
 
+# The node as `terrapref ros2` runs, with every thread's stack written to stderr on SIGUSR1: what a node that
+# does not end on Ctrl-C was doing is then in the test's failure.
+NODE_MAIN = ("import faulthandler, signal, sys; faulthandler.register(signal.SIGUSR1, all_threads=True); "
+             "from terrapref.cli import main; sys.exit(main())")
+
+
+def _end(proc: subprocess.Popen, readers: list[threading.Thread], output: Callable[[], str], what: str) -> str | None:
+    """Ctrl-C has been sent to ``proc``: wait for it to end. If it does not within 30 s, write
+    its threads' stacks (SIGUSR1), kill it, and return what it was doing, for the failure."""
+    stuck = None
+    try:
+        proc.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGUSR1)
+        time.sleep(2.0)
+        proc.kill()
+        proc.wait()
+        stuck = f"{what} did not end within 30 s of Ctrl-C; its threads then:\n"
+    for reader in readers:
+        reader.join(timeout=10)
+    return None if stuck is None else stuck + output()[-12000:]
+
+
 def _node(model: Path, robot: Path, env: dict, *ros_args: str, flags: tuple[str, ...] = ()) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-c", "import sys; from terrapref.cli import main; sys.exit(main())", "ros2", "--model", str(model),
+    return subprocess.Popen([sys.executable, "-c", NODE_MAIN, "ros2", "--model", str(model),
                              "--robot", str(robot), *flags, "--ros-args", *ros_args], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
@@ -215,14 +239,11 @@ def system(tmp_path_factory, fig7_recording):
     finally:
         for proc in (node, idle_node):
             proc.send_signal(signal.SIGINT)
-        node.wait(timeout=30)
-        for reader in node_readers:
-            reader.join(timeout=10)
+        stuck = [_end(node, node_readers, lambda: "".join(node_output["stderr"]), "the node")]
         out["node"] = (node.returncode, "".join(node_output["stdout"]), "".join(node_output["stderr"]))
         live_client.join(timeout=30)
         out["live"] = live
-        idle_node.wait(timeout=30)
-        idle_reader.join(timeout=10)
+        stuck.append(_end(idle_node, [idle_reader], lambda: "".join(idle_log), "the idle node"))
         out["idle"] = (idle_node.returncode, idle_node.stdout.read(), "".join(idle_log))
         for dds in (player, listener):
             if dds is not None:
@@ -231,6 +252,7 @@ def system(tmp_path_factory, fig7_recording):
             os.environ.pop("CYCLONEDDS_URI", None)
         else:
             os.environ["CYCLONEDDS_URI"] = previous_uri
+    assert not any(stuck), "\n".join(s for s in stuck if s)
     return out
 
 
