@@ -503,3 +503,26 @@ def test_the_map_reads_every_voted_cell_as_decided_and_refuses_too_many_columns(
     assert not cells.flags.writeable
     with pytest.raises(ValueError, match="terrain columns"):
         GroundMap(camera, TerrainColumns(np.zeros(256, np.uint8), 254))
+
+
+@pytest.mark.parametrize("best", [-4.0, 4.0])
+def test_the_held_offset_is_kept_within_the_margin_whatever_the_sign_of_the_best_utility(best):
+    from terrapref.planner.stages.offset import keeps
+
+    short = 0.1 * abs(best)  # within a margin of 0.15 of the best's magnitude
+    assert keeps(best - short, best, 0.15) and not keeps(best - 2 * short, best, 0.15)
+    assert keeps(best, best, 0.0) and not keeps(best - 1e-9, best, 0.0)
+
+
+def test_a_driver_who_likes_a_patch_is_not_switched_off_a_held_offset_by_a_sliver(camera):
+    # A utility that prices mud above the grass around it: every offset's utility on the patch is
+    # positive, and one a step off the best is short of it by the detour's price alone.
+    likes_mud = DRIVER_LIKE.copy()
+    likes_mud[3] = 2.0
+    scenario = _scenario([MUD])
+    path = ReferencePath(scenario.waypoints)
+    stage = OffsetSteering(CorridorUtility(likes_mud, 5.0), camera, _terrain((0,)), CONTROL)
+    pose = (6.0, 10.2, 0.0)
+    stage.held = 0.2
+    stage.yaw_rate(_seen_from(scenario, camera, pose), pose, path, 4.0)
+    assert stage.held == pytest.approx(0.2)  # kept: a margin of the best's magnitude, not of its signed value

@@ -11,8 +11,8 @@ corridor utility ``weights . features(d)`` scores every candidate offset d. The 
    before lethal terrain;
 2. goes back to the path while nothing lies on it within the utility's near distance, unless
    the way back is ruled out (then it takes the best offset that is not);
-3. otherwise keeps the offset it holds while that offset's cost is within ``switch_margin`` of
-   the best one's, and takes the best one when not, so that it does not dither between sides;
+3. otherwise keeps the offset it holds while that offset's utility falls short of the best one's
+   by at most ``switch_margin`` of the best's magnitude (:func:`keeps`), and takes the best one when not, so that it does not dither between sides;
 4. but first, when lethal terrain lies across every offset the utility was fitted on, as far
    ahead as the corridor reads (a lethal patch wider than they reach), takes the nearest offset
    beyond them, up to ``escape_factor`` times as far, that is clear of it, and holds it while it
@@ -55,8 +55,8 @@ class OffsetConfig(StageConfig):
     :meth:`features`).
 
     Attributes:
-        switch_margin: the held offset is kept while its cost is at most this much (relative)
-            above the best offset's.
+        switch_margin: the held offset is kept while its utility falls short of the best
+            offset's by at most this share of the best's magnitude.
         pursuit_lookahead_m: pure-pursuit look-ahead along the path [m].
         lethal_margin_m: clearance kept from lethal terrain beside the footprint [m].
         lethal_horizon_m: how far ahead the way to each offset is checked for lethal terrain [m].
@@ -139,6 +139,14 @@ class OffsetStage(Stage):
                 f"relative to the detour's per m^2 of offset per metre: {prices}")
 
 
+def keeps(held: float, best: float, margin: float) -> bool:
+    """Whether an offset whose utility is ``held`` is kept against the best one's, ``best``: it is
+    while it falls short of the best by at most ``margin`` of the best's magnitude (a learned
+    utility may be positive or negative; a margin of the best value itself would be none at all
+    where the best is positive)."""
+    return held >= best - margin * abs(best)
+
+
 class OffsetSteering(StageRunner):
     """The offset stage (module docstring) of one camera, class table and corridor utility.
 
@@ -219,7 +227,7 @@ class OffsetSteering(StageRunner):
             self.held = escape
         elif corridor.near_m > self.utility.near_m and np.isfinite(value[self._centre]):
             self.held = 0.0  # nothing near and the way back clear of lethal terrain
-        elif self.held == 0.0 or abs(self.held) > self.offsets[-1] or not value[held] >= value[best] * (1 + self.config.switch_margin):
+        elif self.held == 0.0 or abs(self.held) > self.offsets[-1] or not keeps(value[held], value[best], self.config.switch_margin):
             self.held = float(self.offsets[best])
         return float(steer(path, pose, progress_s, self.held, self.config.pursuit_lookahead_m, self.v_mps))
 
