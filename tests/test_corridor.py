@@ -398,7 +398,7 @@ def test_the_offset_stage_leaves_u_and_c_until_a_decision_reports_them(tmp_path,
     assert planners["array"].featurizer.calls == 1
     argmax = planners["argmax"].decide(SegmentationView.of(image), (5.0, 10.0, 0.0))  # a stage that steers by F_t
     assert planners["argmax"].featurizer.calls == 1
-    assert lazy.command == now.command and lazy.index == now.index and lazy.progress_s == now.progress_s
+    assert lazy.command == now.command and lazy.index == now.index and lazy.progress_m == now.progress_m
     for a, b in ((lazy, now), (lazy, argmax)):
         np.testing.assert_array_equal(a.probs, b.probs)
         np.testing.assert_array_equal(a.U, b.U)

@@ -467,11 +467,11 @@ def test_map_read_beside_gives_the_numpy_forms_columns(seed: int, n_st: int, n_o
     assert np.array_equal(lazy[read], cells[read])  # the cells it decided are kept as decided
 
 
-def _lethal_hits_numpy(cells: np.ndarray, ox: float, oy: float, inv_res: float, path: ReferencePath, progress_s: float,
+def _lethal_hits_numpy(cells: np.ndarray, ox: float, oy: float, inv_res: float, path: ReferencePath, progress_m: float,
                        stations: np.ndarray, offsets: np.ndarray, across: np.ndarray, lethal: np.ndarray, never: int) -> np.ndarray:
     """The NumPy form of terrapref.planner.stages.kernels.lethal_hits (OffsetSteering's lethal
     lines): whether any point across each offset's line at each station lies on a lethal column."""
-    s = np.minimum(progress_s + stations, path.length_m)
+    s = np.minimum(progress_m + stations, path.length_m)
     return lethal[_map_read_beside_numpy(cells, ox, oy, inv_res, path, s, offsets[:, None] + across[None, :], never)].any(axis=2)
 
 
@@ -487,11 +487,11 @@ def test_lethal_hits_gives_the_numpy_forms_lines(seed: int, n_off: int, n_across
     stations = -1.0 + np.arange(int(rng.integers(1, 40))) * 0.25
     offsets = np.sort(rng.uniform(-3.5, 3.5, n_off))
     across = np.sort(rng.uniform(-0.9, 0.9, n_across))
-    progress_s = float(rng.uniform(-1.0, path.length_m + 1.0))
+    progress_m = float(rng.uniform(-1.0, path.length_m + 1.0))
     a, d, length = path.segments
     lazy, layers, cells = _undecided(rng, cells, k)
-    got = lethal_hits(lazy, *layers, ox, oy, inv_res, path.s, a, d, length, progress_s, stations, offsets, across, lethal, k + 1)
-    assert _same(got, _lethal_hits_numpy(cells, ox, oy, inv_res, path, progress_s, stations, offsets, across, lethal, k + 1))
+    got = lethal_hits(lazy, *layers, ox, oy, inv_res, path.s, a, d, length, progress_m, stations, offsets, across, lethal, k + 1)
+    assert _same(got, _lethal_hits_numpy(cells, ox, oy, inv_res, path, progress_m, stations, offsets, across, lethal, k + 1))
     read = lazy != kernels.UNSETTLED
     assert np.array_equal(lazy[read], cells[read])
 
@@ -508,10 +508,10 @@ def test_swept_reach_reads_undecided_cells_as_decided(seed: int, n_off: int):
     lethal = rng.random(k + 2) < 0.5
     offsets = np.sort(rng.uniform(-3.5, 3.5, n_off))
     clear = np.sort(rng.uniform(-0.9, 0.9, 5))
-    progress_s = float(rng.uniform(0.0, path.length_m))
-    x, y = path.point_at(progress_s)
+    progress_m = float(rng.uniform(0.0, path.length_m))
+    x, y = path.point_at(progress_m)
     a, d, length = path.segments
-    args = (float(x), float(y), float(path.heading_at(progress_s)), offsets, progress_s, 2.0, 0.1, 30, 2.5, path.s, a, d, length, clear)
+    args = (float(x), float(y), float(path.heading_at(progress_m)), offsets, progress_m, 2.0, 0.1, 30, 2.5, path.s, a, d, length, clear)
     got = swept_reach(*args, lazy, *layers, ox, oy, inv_res, lethal, k + 1)
     want = swept_reach(*args, cells, *layers, ox, oy, inv_res, lethal, k + 1)  # no cell left to decide
     assert _same(got, want)
@@ -608,11 +608,11 @@ def test_frame_at_gives_point_at_and_direction_at(seed: int):
         assert _same(np.array([x, y]), path.point_at(np.array([s]))[0]), s  # the vectorised form too
 
 
-def _steer_python(path: ReferencePath, pose, progress_s: float, offset_m, lookahead_m: float, v_mps: float,
+def _steer_python(path: ReferencePath, pose, progress_m: float, offset_m, lookahead_m: float, v_mps: float,
                   clip: bool = True) -> np.ndarray:
     """The Python form of pursuit_yaw_rates (``clip=False``) and steer: the pure-pursuit yaw rate
     toward the path shifted by ``offset_m``, the target read by ``point_at`` and ``direction_at``."""
-    s = min(progress_s + lookahead_m, path.length_m)
+    s = min(progress_m + lookahead_m, path.length_m)
     cos_h, sin_h = (float(v) for v in path.direction_at(s))
     tx0, ty0 = (float(v) for v in path.point_at(s))
     x, y, yaw = (float(v) for v in pose)
@@ -632,12 +632,12 @@ def test_pursuit_yaw_rates_and_steer_give_the_python_forms_rates(seed: int, scal
     rng = np.random.default_rng(seed)
     path = _path(rng)
     for _ in range(4):
-        progress_s = float(rng.choice([rng.uniform(-0.5, path.length_m + 0.5), *path.s]))
-        x, y = path.point_at(min(max(progress_s, 0.0), path.length_m)) + rng.normal(0.0, 1.0, 2)
+        progress_m = float(rng.choice([rng.uniform(-0.5, path.length_m + 0.5), *path.s]))
+        x, y = path.point_at(min(max(progress_m, 0.0), path.length_m)) + rng.normal(0.0, 1.0, 2)
         pose = (float(x), float(y), float(rng.uniform(-math.pi, math.pi)))
         offsets = float(rng.uniform(-3.0, 3.0)) if scalar else np.arange(-15, 16) * 0.2
         lookahead_m, v_mps = float(rng.uniform(0.5, 4.0)), float(rng.uniform(0.5, 3.0))
-        rates = pursuit_yaw_rates(path, pose, progress_s, offsets, lookahead_m, v_mps)
-        assert _same(rates, _steer_python(path, pose, progress_s, offsets, lookahead_m, v_mps, clip=False))
-        assert _same(steer(path, pose, progress_s, offsets, lookahead_m, v_mps),
-                     _steer_python(path, pose, progress_s, offsets, lookahead_m, v_mps, clip=True))
+        rates = pursuit_yaw_rates(path, pose, progress_m, offsets, lookahead_m, v_mps)
+        assert _same(rates, _steer_python(path, pose, progress_m, offsets, lookahead_m, v_mps, clip=False))
+        assert _same(steer(path, pose, progress_m, offsets, lookahead_m, v_mps),
+                     _steer_python(path, pose, progress_m, offsets, lookahead_m, v_mps, clip=True))

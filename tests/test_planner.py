@@ -95,7 +95,7 @@ def test_decision_contract(models, course, views, which: str):
     # U is the feature of this image, pose and path, as training computed it.
     path = ReferencePath(_rest_of_course(course))
     s = PathTracker(path).update(np.array(views.near[:2]))
-    assert d.progress_s == pytest.approx(s) and d.progress_s == pytest.approx(0.0, abs=0.01)
+    assert d.progress_m == pytest.approx(s) and d.progress_m == pytest.approx(0.0, abs=0.01)
     featurizer = UtilityFeaturizer(model.features, PinholeCamera(model.camera), model.classes)
     np.testing.assert_array_equal(d.U, featurizer(views.near_image, views.near, path, s))
     assert d.U.shape == (m, model.features.n_features)

@@ -202,7 +202,7 @@ def test_the_planner_drives_the_best_second_stage_score(tmp_path: Path):
         plain.set_path(waypoints)
         d, d0 = planner.decide(image, pose), plain.decide(image, pose)
         np.testing.assert_array_equal(d.probs, d0.probs)
-        expected = planner.runner.scores(np.log(d.probs), SegmentationView.of(image), pose, planner.path, d.progress_s)
+        expected = planner.runner.scores(np.log(d.probs), SegmentationView.of(image), pose, planner.path, d.progress_m)
         assert d.index == int(np.argmax(expected))
 
 

@@ -351,13 +351,13 @@ class CorridorFeatures:
         self._gap = round(config.gap_m / config.station_step_m)
         self._beyond = round(config.span_m / 2 / config.station_step_m)
 
-    def columns(self, gmap: GroundMap, path: ReferencePath, progress_s: float) -> np.ndarray:
+    def columns(self, gmap: GroundMap, path: ReferencePath, progress_m: float) -> np.ndarray:
         """Terrain column under every footprint point, shape (O, S, F)."""
-        return gmap.beside(path, np.minimum(progress_s + self.stations, path.length_m), self._lat)
+        return gmap.beside(path, np.minimum(progress_m + self.stations, path.length_m), self._lat)
 
-    def __call__(self, gmap: GroundMap, path: ReferencePath, progress_s: float) -> CorridorView:
+    def __call__(self, gmap: GroundMap, path: ReferencePath, progress_m: float) -> CorridorView:
         c = self.config
-        features, near_m = kernels.corridor_features(self.columns(gmap, path, progress_s), self._centre, self.k, self._gap, self._beyond,
+        features, near_m = kernels.corridor_features(self.columns(gmap, path, progress_m), self._centre, self.k, self._gap, self._beyond,
                                                      c.station_step_m, self.stations, self.offsets, c.span_m)
         return CorridorView(features, float(near_m))
 
@@ -388,21 +388,21 @@ def gated(view: CorridorView, offsets: np.ndarray, near_m: float) -> np.ndarray:
     return np.concatenate([view.features, gate[:, None]], axis=1)
 
 
-def steer(path: ReferencePath, pose: Pose, progress_s: float, offset_m: np.ndarray | float, lookahead_m: float, v_mps: float) -> np.ndarray:
+def steer(path: ReferencePath, pose: Pose, progress_m: float, offset_m: np.ndarray | float, lookahead_m: float, v_mps: float) -> np.ndarray:
     """:func:`pursuit_yaw_rates` clipped to the stick's +-1 rad/s."""
-    return np.asarray(np.clip(pursuit_yaw_rates(path, pose, progress_s, offset_m, lookahead_m, v_mps), -1.0, 1.0))
+    return np.asarray(np.clip(pursuit_yaw_rates(path, pose, progress_m, offset_m, lookahead_m, v_mps), -1.0, 1.0))
 
 
-def pursuit_yaw_rates(path: ReferencePath, pose: Pose, progress_s: float, offset_m: np.ndarray | float, lookahead_m: float,
+def pursuit_yaw_rates(path: ReferencePath, pose: Pose, progress_m: float, offset_m: np.ndarray | float, lookahead_m: float,
                       v_mps: float) -> np.ndarray:
     """Pure-pursuit yaw rate [rad/s] toward the path shifted by ``offset_m`` (left positive), ``lookahead_m`` ahead
-    of ``progress_s``. One value per offset, ``offset_m``'s shape.
+    of ``progress_m``. One value per offset, ``offset_m``'s shape.
 
     Scalar ``math`` throughout (NumPy's vectorised trigonometry may pick CPU-specific code whose
     last bits differ, and ``math.hypot`` rounds more exactly than C's), so that the command, and
     the run it steers, is the same on every machine.
     """
-    tx0, ty0, cos_h, sin_h = path.frame_at(min(progress_s + lookahead_m, path.length_m))
+    tx0, ty0, cos_h, sin_h = path.frame_at(min(progress_m + lookahead_m, path.length_m))
     x, y, yaw = (float(v) for v in pose)
     offsets = np.asarray(offset_m, dtype=float)
     out = np.empty(offsets.shape)
@@ -413,7 +413,7 @@ def pursuit_yaw_rates(path: ReferencePath, pose: Pose, progress_s: float, offset
     return out
 
 
-def intent_offsets(poses: np.ndarray, later: np.ndarray, progress_s: np.ndarray, path: ReferencePath, offsets: np.ndarray,
+def intent_offsets(poses: np.ndarray, later: np.ndarray, progress_m: np.ndarray, path: ReferencePath, offsets: np.ndarray,
                    lookahead_m: float) -> np.ndarray:
     """The offset [m] each frame's driver was steering for, (F,); NaN where ``later`` is NaN.
 
@@ -426,7 +426,7 @@ def intent_offsets(poses: np.ndarray, later: np.ndarray, progress_s: np.ndarray,
     Args:
         poses: (F, 3) the vehicle's poses.
         later: (F, 2) the command (v [m/s], w [rad/s]) recorded one reaction time after each frame.
-        progress_s: (F,) the vehicle's progress along the path [m].
+        progress_m: (F,) the vehicle's progress along the path [m].
         path: the reference path.
         offsets: the candidate offsets (O,) [m].
         lookahead_m: the driver's pure-pursuit look-ahead [m].
@@ -435,6 +435,6 @@ def intent_offsets(poses: np.ndarray, later: np.ndarray, progress_s: np.ndarray,
     for i, (v, w) in enumerate(later):
         if not (math.isfinite(v) and math.isfinite(w)):
             continue
-        yaw_rate = pursuit_yaw_rates(path, tuple(poses[i]), progress_s[i], offsets, lookahead_m, v)
+        yaw_rate = pursuit_yaw_rates(path, tuple(poses[i]), progress_m[i], offsets, lookahead_m, v)
         out[i] = offsets[int(np.argmin(np.abs(yaw_rate - w)))]
     return out

@@ -69,7 +69,7 @@ class Lookahead:
         """Flat pixel indices (row * width + col) that trajectory ``i``'s second pieces read."""
         return self.pix[i][self.seen[i] > 0]
 
-    def utilities(self, view: SegmentationView, pose: Pose, path: ReferencePath, progress_s: float, rows: np.ndarray | None = None) -> np.ndarray:
+    def utilities(self, view: SegmentationView, pose: Pose, path: ReferencePath, progress_m: float, rows: np.ndarray | None = None) -> np.ndarray:
         """U' of the second pieces after each trajectory in ``rows`` (all: None): shape (len(rows), m, K + 1)."""
         rows = np.arange(self.m) if rows is None else rows
         r, m, k = len(rows), self.m, self.k
@@ -77,10 +77,10 @@ class Lookahead:
         shares *= self.seen[rows].reshape(-1, 1)
         U = np.empty((r, m, k + 1))
         U[..., :k] = shares.reshape(r, m, self.points, k).sum(axis=2)
-        U[..., k] = self.distance_utility(pose, path, progress_s, rows)
+        U[..., k] = self.distance_utility(pose, path, progress_m, rows)
         return U
 
-    def distance_utility(self, pose: Pose, path: ReferencePath, progress_s: float, rows: np.ndarray) -> np.ndarray:
+    def distance_utility(self, pose: Pose, path: ReferencePath, progress_m: float, rows: np.ndarray) -> np.ndarray:
         """u^5 of the second pieces after ``rows``, (r, m): each end against the path point one
         horizon beyond its start's progress (the start's forward offset added to the vehicle's).
 
@@ -90,7 +90,7 @@ class Lookahead:
         x, y, yaw = pose
         # Each start's target: the path point at s0 plus the start's forward offset. Usually the
         # path runs straight there and the kernel places the targets along that line itself.
-        s0 = progress_s + self._horizon_m
+        s0 = progress_m + self._horizon_m
         line = path.straight_between(s0 + self._x_lo, s0 + self._x_hi)
         targets = path.point_at(s0 + self.starts[rows, 0]) if line is None else _NO_TARGETS
         return kernels.stage_distances(rows, self._ends_x, self._ends_y, self._start_x, self._x_lo, line or _NO_LINE, targets,

@@ -186,25 +186,25 @@ class UtilityFeaturizer:
         ids = as_view(image).pixels(self._pix_flat)
         return kernels.terrain_shares(ids, self._column, self._point_row, self._rows, len(self.config.feature_classes), self._scale)
 
-    def distances(self, pose: Pose, path: ReferencePath, progress_s: float | None = None) -> np.ndarray:
+    def distances(self, pose: Pose, path: ReferencePath, progress_m: float | None = None) -> np.ndarray:
         """d(T^i, P) [m] for each trajectory, shape (m,)."""
         x, y, yaw = pose
         c, s = math.cos(yaw), math.sin(yaw)
         ex, ey = self._ends[:, 0], self._ends[:, 1]
         mode = self.config.distance_mode
         if mode is DistanceMode.LOOKAHEAD:
-            if progress_s is None:
+            if progress_m is None:
                 raise ValueError("lookahead distance needs the vehicle's progress along the path")
-            tx, ty = path.point_at(progress_s + self.config.preference.horizon_m)
+            tx, ty = path.point_at(progress_m + self.config.preference.horizon_m)
             # Endpoint minus target, in the world frame, without building the (m, 2) array.
             return kernels.end_distances(ex, ey, c, s, x - tx, y - ty)
         ends = self._ends @ np.array([[c, s], [-s, c]]) + (x, y)  # endpoints in the world frame
         pts, arc = path.resampled(self.config.path_spacing_m)
         if mode is DistanceMode.WINDOW:
-            if progress_s is None:
+            if progress_m is None:
                 raise ValueError("windowed distance needs the vehicle's progress along the path")
-            lo = np.searchsorted(arc, progress_s, side="left")
-            hi = np.searchsorted(arc, progress_s + self.config.effective_window_m, side="right")
+            lo = np.searchsorted(arc, progress_m, side="left")
+            hi = np.searchsorted(arc, progress_m + self.config.effective_window_m, side="right")
             pts = pts[max(0, min(lo, len(pts) - 1)) : max(hi, lo + 1)]
         diff = ends[:, None, :] - pts[None, :, :]
         return np.sqrt(np.min(np.einsum("mpj,mpj->mp", diff, diff), axis=1))
@@ -214,15 +214,15 @@ class UtilityFeaturizer:
         """u^5 = 1 - (d - d_min) / (d_max - d_min); all ones when the range is below ``eps``."""
         return kernels.normalise(np.asarray(d, dtype=np.float64), eps)
 
-    def __call__(self, image: np.ndarray | SegmentationView, pose: Pose, path: ReferencePath, progress_s: float | None = None) -> np.ndarray:
+    def __call__(self, image: np.ndarray | SegmentationView, pose: Pose, path: ReferencePath, progress_m: float | None = None) -> np.ndarray:
         """U, shape (m, n_features) float32: terrain shares, then the distance utility."""
-        if self.config.distance_mode is DistanceMode.LOOKAHEAD and progress_s is not None:  # the usual case, in one compiled call
+        if self.config.distance_mode is DistanceMode.LOOKAHEAD and progress_m is not None:  # the usual case, in one compiled call
             x, y, yaw = pose
-            tx, ty = path.point_at(progress_s + self.config.preference.horizon_m)
+            tx, ty = path.point_at(progress_m + self.config.preference.horizon_m)
             ids = as_view(image).pixels(self._pix_flat)
             return kernels.utilities(ids, self._column, self._point_row, len(self.config.feature_classes), self._scale, self._ex, self._ey,
                                      math.cos(yaw), math.sin(yaw), x - tx, y - ty, NORMALISE_EPS)
         u = np.empty((self.m, self.config.n_features), dtype=np.float32)
         u[:, :-1] = self.terrain(image)
-        u[:, -1] = self.normalise(self.distances(pose, path, progress_s))
+        u[:, -1] = self.normalise(self.distances(pose, path, progress_m))
         return u

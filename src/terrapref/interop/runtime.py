@@ -133,7 +133,7 @@ class PlannerRuntime:
         if self.last is not None and stamp_s <= self.last.stamp_s:
             return None
         d = self.planner.decide(image, pose, float(stamp_s))
-        self.last = RuntimeDecision(float(stamp_s), d.command, d.index, d.probs, d.progress_s, d.U, d.stop)
+        self.last = RuntimeDecision(float(stamp_s), d.command, d.index, d.probs, d.progress_m, d.U, d.stop)
         return self.last
 
     def _named(self, image: np.ndarray) -> np.ndarray:

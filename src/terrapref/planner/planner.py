@@ -33,7 +33,7 @@ class Decision:
     Attributes:
         index: chosen trajectory (steered continuously, the nearest one).
         command: its (v [m/s], w [rad/s]); (0, 0) when the planner stops.
-        progress_s: the vehicle's progress along the path [m].
+        progress_m: the vehicle's progress along the path [m].
         probs: F_t, shape (m,).
         U: utility features, shape (m, K + 1).
         stop: why the planner stops (terrapref.stops.REASONS), None while it drives.
@@ -43,13 +43,13 @@ class Decision:
     does not report them does not wait for C.
     """
 
-    __slots__ = ("index", "command", "progress_s", "stop", "_outputs", "_pending")
+    __slots__ = ("index", "command", "progress_m", "stop", "_outputs", "_pending")
 
-    def __init__(self, index: int, command: Command, progress_s: float, outputs: tuple[np.ndarray, np.ndarray] | None = None,
+    def __init__(self, index: int, command: Command, progress_m: float, outputs: tuple[np.ndarray, np.ndarray] | None = None,
                  pending: Callable[[], tuple[np.ndarray, np.ndarray]] | None = None, stop: str | None = None) -> None:
         if (outputs is None) == (pending is None):
             raise ValueError("a decision needs either its (probs, U) or the function that computes them")
-        self.index, self.command, self.progress_s, self.stop = index, command, progress_s, stop
+        self.index, self.command, self.progress_m, self.stop = index, command, progress_m, stop
         self._outputs, self._pending = outputs, pending
 
     def _computed(self) -> tuple[np.ndarray, np.ndarray]:
@@ -174,18 +174,18 @@ def _chosen(policy: Policy, stage: Stage | str | None) -> Stage:
 
 
 def _outputs(featurizer: UtilityFeaturizer, policy: Policy, view: SegmentationView, pose: Pose, path: ReferencePath,
-             progress_s: float) -> tuple[np.ndarray, np.ndarray]:
+             progress_m: float) -> tuple[np.ndarray, np.ndarray]:
     """(F_t, U) of one frame: the features, then the policy's probabilities."""
-    U = featurizer(view, pose, path, progress_s)
-    ahead = path_ahead(path, pose, progress_s) if policy.uses_path_ahead else _NO_POINTS
+    U = featurizer(view, pose, path, progress_m)
+    ahead = path_ahead(path, pose, progress_m) if policy.uses_path_ahead else _NO_POINTS
     return policy.probabilities(Observation(U, view, ahead)), U
 
 
-def path_ahead(path: ReferencePath, pose: Pose, progress_s: float) -> np.ndarray:
-    """The path 1, 2, ... m (PATH_AHEAD_M) ahead of ``progress_s`` in the vehicle frame (P, 2) [m]."""
+def path_ahead(path: ReferencePath, pose: Pose, progress_m: float) -> np.ndarray:
+    """The path 1, 2, ... m (PATH_AHEAD_M) ahead of ``progress_m`` in the vehicle frame (P, 2) [m]."""
     x, y, yaw = pose
     c, s = math.cos(yaw), math.sin(yaw)
-    d = path.point_at(progress_s + PATH_AHEAD_M) - (x, y)
+    d = path.point_at(progress_m + PATH_AHEAD_M) - (x, y)
     return np.stack([d[:, 0] * c + d[:, 1] * s, -d[:, 0] * s + d[:, 1] * c], axis=1)
 
 

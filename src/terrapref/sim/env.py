@@ -229,7 +229,7 @@ class OffRoadNavEnv(gym.Env):
         self._full_image = self._image_hw == first.camera.shape
         self.observation_space = self._observation_space()
         self.action_space: spaces.Space = self._action_space()
-        self._progress_s = 0.0
+        self._progress_m = 0.0
         self._credited_m = 0.0  # progress the reward credited this episode, from the start's place on the path [m]
         self._in_band = True  # within the reward's path band (RewardConfig.path_band_m)
         self._off_map = False
@@ -318,13 +318,13 @@ class OffRoadNavEnv(gym.Env):
             if not (0.0 <= start[0] <= sx and 0.0 <= start[1] <= sy):
                 raise ValueError(f"reset options: 'start' ({start[0]:g}, {start[1]:g}) is off the {sx:g} x {sy:g} m map")
             pose = Pose(*map(float, start))
-            self._progress_s = path.project(start[:2])[0]  # anywhere along the path
+            self._progress_m = path.project(start[:2])[0]  # anywhere along the path
         else:
             x, y, yaw = self.sim.scenario.start
             dx, dy = self.np_random.uniform(-1.0, 1.0, 2) * self.start_jitter_m
             dyaw = self.np_random.uniform(-1.0, 1.0) * self.start_yaw_jitter_rad
             pose = Pose(x + dx, y + dy, yaw + dyaw)
-            self._progress_s = path.project(np.array(pose[:2]), 0.0, 5.0)[0]
+            self._progress_m = path.project(np.array(pose[:2]), 0.0, 5.0)[0]
         frame = self.sim.reset(pose)
         if self.sim.started_in_contact:
             where = "'start'" if options.get("start") is not None else f"the start of {self.sim.scenario.name!r}"
@@ -338,8 +338,8 @@ class OffRoadNavEnv(gym.Env):
             self._perceiver.reset(np.random.default_rng(self.np_random.integers(2**63)))
             frame = self._perceiver.captured(frame)
         self._started, self._ended, self._off_map = True, False, False
-        self._in_band = abs(path.project(np.array(pose[:2]), self._progress_s - 2.0, self._progress_s + 2.0)[1]) <= self.reward_config.path_band_m
-        self._credited_m = self._progress_s
+        self._in_band = abs(path.project(np.array(pose[:2]), self._progress_m - 2.0, self._progress_m + 2.0)[1]) <= self.reward_config.path_band_m
+        self._credited_m = self._progress_m
         terms = dict.fromkeys(("progress", "cross_track", "collision", "off_map", "goal", "terrain"), 0.0)
         self._last_obs = self._observation(frame.view, frame.pose)
         return self._last_obs, self._info(terms, success=False, off_map=False)
@@ -363,16 +363,16 @@ class OffRoadNavEnv(gym.Env):
         # Where the vehicle is along the path, followed even out of the path band (so observations
         # stay true); credit is the advance of that point, bounded by the distance driven, and only
         # while the vehicle stays in the band and on the map.
-        s_before, in_before = self._progress_s, self._in_band
-        self._progress_s, offset = sim.path.project(trace[-1, :2], s_before - 2.0 - travelled, s_before + 10.0 + travelled)
+        s_before, in_before = self._progress_m, self._in_band
+        self._progress_m, offset = sim.path.project(trace[-1, :2], s_before - 2.0 - travelled, s_before + 10.0 + travelled)
         self._in_band = abs(offset) <= cfg.path_band_m and not off_map
-        advance = min(max(self._progress_s - s_before, -travelled), travelled) if (in_before and self._in_band) else 0.0
+        advance = min(max(self._progress_m - s_before, -travelled), travelled) if (in_before and self._in_band) else 0.0
         self._credited_m += advance
         left_map = off_map and not self._off_map
         self._off_map = off_map
         collided = sim.collisions - collisions0
         end = sim.path.waypoints[-1]
-        success = math.hypot(trace[-1, 0] - end[0], trace[-1, 1] - end[1]) <= sim.config.goal_radius_m and self._progress_s >= 0.5 * sim.path.length_m
+        success = math.hypot(trace[-1, 0] - end[0], trace[-1, 1] - end[1]) <= sim.config.goal_radius_m and self._progress_m >= 0.5 * sim.path.length_m
         terrain_cost = float((self._terrain_cost[sim.world.class_at(xy)] * hops).sum())
         terms = {
             "progress": cfg.progress_weight * advance,
@@ -434,15 +434,15 @@ class OffRoadNavEnv(gym.Env):
             image = (ids[:, :, None] == self._class_ids).astype(np.uint8) * np.uint8(255)
         x, y, yaw = pose
         path, r = self.sim.path, WAYPOINT_RANGE_M
-        _, offset = path.project(np.array([x, y]), self._progress_s - 2.0, self._progress_s + 10.0)
-        heading = (yaw - float(path.heading_at(self._progress_s)) + math.pi) % (2 * math.pi) - math.pi
-        s = self._progress_s + self.waypoint_spacing_m * np.arange(1, self.n_waypoints + 1)
+        _, offset = path.project(np.array([x, y]), self._progress_m - 2.0, self._progress_m + 10.0)
+        heading = (yaw - float(path.heading_at(self._progress_m)) + math.pi) % (2 * math.pi) - math.pi
+        s = self._progress_m + self.waypoint_spacing_m * np.arange(1, self.n_waypoints + 1)
         d = path.point_at(s) - (x, y)
         c, sn = math.cos(yaw), math.sin(yaw)
         local = np.stack([c * d[:, 0] + sn * d[:, 1], -sn * d[:, 0] + c * d[:, 1]], axis=1)
         return {
             "image": image,
-            "pose": np.array([np.clip(offset, -r, r), np.clip(heading, -math.pi, math.pi), min(max(self._progress_s / path.length_m, 0.0), 1.0)], np.float32),
+            "pose": np.array([np.clip(offset, -r, r), np.clip(heading, -math.pi, math.pi), min(max(self._progress_m / path.length_m, 0.0), 1.0)], np.float32),
             "waypoints": np.clip(local, -r, r).reshape(-1).astype(np.float32),
         }
 
@@ -453,7 +453,7 @@ class OffRoadNavEnv(gym.Env):
             "collisions": self.sim.collisions,
             "off_map": off_map,
             "progress_m": self._credited_m,
-            "path_position_m": self._progress_s,
+            "path_position_m": self._progress_m,
             "time_s": self.sim.time_s,
             "reward_terms": terms,
         }

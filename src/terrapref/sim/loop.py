@@ -121,7 +121,7 @@ class Simulation:
         self.vehicle = Vehicle(Pose(*(self.scenario.start if pose is None else pose)), self.config.vehicle)
         self.tick = 0
         self.frame_index = 0
-        self.progress_s = self.path.project(self.vehicle.pose[:2], 0.0, 5.0)[0]
+        self.progress_m = self.path.project(self.vehicle.pose[:2], 0.0, 5.0)[0]
         self._on_lethal = self._in_contact(self.vehicle.pose)
         self.started_in_contact = self._on_lethal
         self.collisions = int(self._on_lethal)  # a start in contact with lethal terrain is one
@@ -182,7 +182,7 @@ class Simulation:
                 self.contact_m += step_m
             self._on_lethal = bool(contact)
         # Progress along the path, searched in a window so a path passing near itself cannot capture it.
-        self.progress_s = max(self.progress_s, self.path.project(self.vehicle.pose[:2], self.progress_s - 2.0, self.progress_s + 10.0)[0])
+        self.progress_m = max(self.progress_m, self.path.project(self.vehicle.pose[:2], self.progress_m - 2.0, self.progress_m + 10.0)[0])
         self.frame_index += 1
         return self.frame()
 
@@ -191,7 +191,7 @@ class Simulation:
         end = self.path.waypoints[-1]
         x, y, _ = self.vehicle.pose
         near = math.hypot(x - end[0], y - end[1]) <= self.config.goal_radius_m
-        return near and self.progress_s >= 0.5 * self.path.length_m
+        return near and self.progress_m >= 0.5 * self.path.length_m
 
     @property
     def timed_out(self) -> bool:
@@ -263,7 +263,7 @@ class EpisodeLog:
             contact_m=sim.contact_m,
             stops=dict(sim.stops),
             stop_count=sim.stop_count,
-            progress_m=float(sim.progress_s),
+            progress_m=float(sim.progress_m),
         )
 
     def summary(self) -> dict:

@@ -415,7 +415,7 @@ class _Session:
         return None
 
     def draw(self, w: float, label: int, end_banner: Banner | None = None, note: str = "") -> None:
-        readout = self.guide.readout(self.frame.pose, self.sim.progress_s, label, self.at_edge)
+        readout = self.guide.readout(self.frame.pose, self.sim.progress_m, label, self.at_edge)
         mode = None
         if self.planner is not None:
             mode = ("PLANNER DRIVING", PLANNER_COLOR) if self.driver == "planner" else ("YOU DRIVE: recording corrections", HIGHLIGHT_COLOR)

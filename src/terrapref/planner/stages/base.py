@@ -47,14 +47,14 @@ class StageInput:
         view: the segmentation image.
         pose: the vehicle's pose.
         path: the reference path.
-        progress_s: the vehicle's progress along it [m].
+        progress_m: the vehicle's progress along it [m].
     """
 
     probs: np.ndarray | None
     view: SegmentationView
     pose: Pose
     path: ReferencePath
-    progress_s: float
+    progress_m: float
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,7 @@ from terrapref.features.kernels import UNSETTLED, map_decide, path_frame
 
 
 @njit(cache=True, nogil=True)
-def swept_reach(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progress_s: float, v: float, dt: float, steps: int,
+def swept_reach(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progress_m: float, v: float, dt: float, steps: int,
                 lookahead_m: float, path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray,
                 clear: np.ndarray, cells: np.ndarray, evidence: np.ndarray, map_lethal: np.ndarray, shares: np.ndarray, ox: float, oy: float,
                 inv_res: float, lethal: np.ndarray, never: int) -> np.ndarray:
@@ -26,7 +26,7 @@ def swept_reach(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progress
 
     The NumPy form: pure pursuit as :func:`terrapref.features.corridor.steer` gives it (clipped
     to +-1 rad/s, but with the C library's ``hypot``, as ``np.hypot``, where steer has Python's)
-    toward every offset at progress ``progress_s + step * dt * v``, then ``yaw += w dt``, ``x += v
+    toward every offset at progress ``progress_m + step * dt * v``, then ``yaw += w dt``, ``x += v
     cos(yaw) dt``, ``y += v sin(yaw) dt``.
     """
     n_rows, n_cols = cells.shape
@@ -34,7 +34,7 @@ def swept_reach(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progress
     for o in range(offsets.shape[0]):
         x, y, yaw = x0, y0, yaw0
         for k in range(steps):
-            target_s = min(progress_s + k * dt * v + lookahead_m, path_s[-1])
+            target_s = min(progress_m + k * dt * v + lookahead_m, path_s[-1])
             px0, py0, cos_h, sin_h = path_frame(path_s, path_a, path_d, path_len, target_s)
             tx = px0 - offsets[o] * sin_h - x
             ty = py0 + offsets[o] * cos_h - y
@@ -65,20 +65,20 @@ def swept_reach(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progress
 
 @njit(cache=True, nogil=True)
 def lethal_hits(cells: np.ndarray, evidence: np.ndarray, map_lethal: np.ndarray, shares: np.ndarray, ox: float, oy: float, inv_res: float,
-                path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray, progress_s: float, stations: np.ndarray,
+                path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray, progress_m: float, stations: np.ndarray,
                 offsets: np.ndarray, across: np.ndarray, lethal: np.ndarray, never: int) -> np.ndarray:
     """(O, S): whether any point ``offsets[o] + across[a]`` [m] left of the path, at station
-    ``stations[s]`` from ``progress_s`` (capped at the path's end), lies on a lethal column of
+    ``stations[s]`` from ``progress_m`` (capped at the path's end), lies on a lethal column of
     the map (``lethal`` by column, ``never`` outside it).
 
-    The NumPy form: ``lethal[map_read_beside(cells, ..., minimum(progress_s + stations, length),
+    The NumPy form: ``lethal[map_read_beside(cells, ..., minimum(progress_m + stations, length),
     offsets[:, None] + across[None, :])].any(axis=2)``.
     """
     n_rows, n_cols = cells.shape
     length = path_s[-1]
     out = np.zeros((offsets.shape[0], stations.shape[0]), np.bool_)
     for q in range(stations.shape[0]):
-        cx, cy, ux, uy = path_frame(path_s, path_a, path_d, path_len, min(progress_s + stations[q], length))
+        cx, cy, ux, uy = path_frame(path_s, path_a, path_d, path_len, min(progress_m + stations[q], length))
         nx, ny = -uy, ux
         for o in range(offsets.shape[0]):
             for a in range(across.shape[0]):

@@ -201,24 +201,24 @@ class OffsetSteering(StageRunner):
 
     def decide(self, frame: StageInput) -> Choice:
         """Steered continuously within the control set's range of yaw rates; the index names the nearest trajectory."""
-        w = float(np.clip(self.yaw_rate(frame.view, frame.pose, frame.path, frame.progress_s), self.control.w_rps[0], self.control.w_rps[-1]))
+        w = float(np.clip(self.yaw_rate(frame.view, frame.pose, frame.path, frame.progress_m), self.control.w_rps[0], self.control.w_rps[-1]))
         return Choice(int(self.control.label_of(w)), Command(self.control.v_mps, w))
 
-    def yaw_rate(self, view: SegmentationView, pose: Pose, path: ReferencePath, progress_s: float) -> float:
+    def yaw_rate(self, view: SegmentationView, pose: Pose, path: ReferencePath, progress_m: float) -> float:
         """The yaw rate [rad/s] toward the offset held after this frame."""
         self.observe(view, pose)
-        corridor = self.corridor(self.map, path, progress_s)
+        corridor = self.corridor(self.map, path, progress_m)
         value = gated_value(corridor.features, self.offsets, corridor.near_m > self.utility.near_m, self.weights)
         escape = None
         if self.lethal[: self.k].any():
             lines = None  # the offsets' lines to the horizon, when the far read below already holds them
-            if self._lines(self._outermost, path, progress_s, self._far_stations).all():  # the outermost two first: cheaper
-                far = self._hits(self.offsets, path, progress_s, self._far_stations)
+            if self._lines(self._outermost, path, progress_m, self._far_stations).all():  # the outermost two first: cheaper
+                far = self._hits(self.offsets, path, progress_m, self._far_stations)
                 if far.any(axis=1).all():
-                    escape = self._escape(value, path, progress_s)
+                    escape = self._escape(value, path, progress_m)
                 if len(self._line_stations) <= far.shape[1]:
                     lines = far[:, :len(self._line_stations)].any(axis=1)  # the same stations, from the same start and step
-            blocked = self._blocked(self.offsets, pose, path, progress_s, lines)
+            blocked = self._blocked(self.offsets, pose, path, progress_m, lines)
             if not blocked.all():
                 value = np.where(blocked, -np.inf, value)
         best = int(np.argmax(value))
@@ -229,7 +229,7 @@ class OffsetSteering(StageRunner):
             self.held = 0.0  # nothing near and the way back clear of lethal terrain
         elif self.held == 0.0 or abs(self.held) > self.offsets[-1] or not keeps(value[held], value[best], self.config.switch_margin):
             self.held = float(self.offsets[best])
-        return float(steer(path, pose, progress_s, self.held, self.config.pursuit_lookahead_m, self.v_mps))
+        return float(steer(path, pose, progress_m, self.held, self.config.pursuit_lookahead_m, self.v_mps))
 
     @property
     def ground_map(self) -> GroundMap:
@@ -239,14 +239,14 @@ class OffsetSteering(StageRunner):
         """The ground map seen so far priced by the learned utility (terrapref.planner.costmap)."""
         return costmap_of(self.map.cells, self.map.origin, self.map.config.map_resolution_m, self.utility.weights, self.lethal, self.names)
 
-    def _escape(self, value: np.ndarray, path: ReferencePath, progress_s: float) -> float | None:
+    def _escape(self, value: np.ndarray, path: ReferencePath, progress_m: float) -> float | None:
         """The escape offset to hold when lethal terrain lies across every fitted offset, or None
         if none is clear as far as the corridor reads. The one held is kept while clear; otherwise
         the nearest clear one, and of two as near, the one on the side whose outermost fitted
         offset the utility prefers."""
         if self.escapes.size == 0:
             return None
-        clear = ~self._lines(self.escapes, path, progress_s, self._far_stations)
+        clear = ~self._lines(self.escapes, path, progress_m, self._far_stations)
         if not clear.any():
             return None
         if abs(self.held) > self.offsets[-1] and clear[np.argmin(np.abs(self.escapes - self.held))]:
@@ -255,7 +255,7 @@ class OffsetSteering(StageRunner):
         order = np.lexsort((-side, np.abs(self.escapes)))  # nearest first, then the preferred side
         return float(self.escapes[order[np.argmax(clear[order])]])
 
-    def _blocked(self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_s: float,
+    def _blocked(self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_m: float,
                  lines: np.ndarray | None = None) -> np.ndarray:
         """Which of ``offsets`` (O,) lethal terrain rules out.
 
@@ -273,29 +273,29 @@ class OffsetSteering(StageRunner):
         Of those that stay, the ones whose line is clear with the margin, if any is.
         """
         if lines is None:
-            lines = self._lines(offsets, path, progress_s, self._line_stations)
+            lines = self._lines(offsets, path, progress_m, self._line_stations)
         if not lines.any():
             return lines
-        reach = self._swept(offsets, pose, path, progress_s)
+        reach = self._swept(offsets, pose, path, progress_m)
         both = lines | (reach < self._steps)
         if not both.all():
             return both
-        reach = self._swept(offsets, pose, path, progress_s, self._bare)
-        keep = ~self._lines(offsets, path, progress_s, self._line_stations, self._bare) & (reach == self._steps)
+        reach = self._swept(offsets, pose, path, progress_m, self._bare)
+        keep = ~self._lines(offsets, path, progress_m, self._line_stations, self._bare) & (reach == self._steps)
         if not keep.any():
             side = np.sign(offsets) == np.sign(self.held) if self.held != 0.0 else np.ones(len(offsets), bool)
             side = side if side.any() else np.ones(len(offsets), bool)
             keep = side & (reach == reach[side].max())
         return ~(keep & ~lines if (keep & ~lines).any() else keep)
 
-    def _lines(self, offsets: np.ndarray, path: ReferencePath, progress_s: float, stations: np.ndarray,
+    def _lines(self, offsets: np.ndarray, path: ReferencePath, progress_m: float, stations: np.ndarray,
                across: np.ndarray | None = None) -> np.ndarray:
         """Which of ``offsets`` (O,) have lethal terrain on their line parallel to the path, at
         ``stations`` (S,) from the vehicle's progress, across the footprint and its clearance
         (``across``, by default)."""
-        return self._hits(offsets, path, progress_s, stations, across).any(axis=1)
+        return self._hits(offsets, path, progress_m, stations, across).any(axis=1)
 
-    def _hits(self, offsets: np.ndarray, path: ReferencePath, progress_s: float, stations: np.ndarray,
+    def _hits(self, offsets: np.ndarray, path: ReferencePath, progress_m: float, stations: np.ndarray,
               across: np.ndarray | None = None) -> np.ndarray:
         """:meth:`_lines` station by station, (O, S); ``across`` the points across each line (the
         footprint and its clearance by default)."""
@@ -304,10 +304,10 @@ class OffsetSteering(StageRunner):
         if gmap.origin is None:
             return np.broadcast_to(self.lethal[self.k + 1], (len(offsets), len(stations))).copy()
         a, d, length = path.segments
-        return lethal_hits(*gmap.layers(), path.s, a, d, length, float(progress_s), stations, np.asarray(offsets, dtype=np.float64),
+        return lethal_hits(*gmap.layers(), path.s, a, d, length, float(progress_m), stations, np.asarray(offsets, dtype=np.float64),
                            across, self.lethal, self.k + 1)
 
-    def _swept(self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_s: float,
+    def _swept(self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_m: float,
                across: np.ndarray | None = None) -> np.ndarray:
         """For each of ``offsets`` (O,), the step of ``dt_s`` at which pure pursuit toward it first drives
         the footprint (``across``, with its clearance by default) onto lethal terrain, ``self._steps``
@@ -315,7 +315,7 @@ class OffsetSteering(StageRunner):
         across = self._clear if across is None else across
         c, gmap = self.config, self.map
         a, d, length = path.segments
-        return swept_reach(float(pose[0]), float(pose[1]), float(pose[2]), offsets, float(progress_s), self.v_mps, c.dt_s,
+        return swept_reach(float(pose[0]), float(pose[1]), float(pose[2]), offsets, float(progress_m), self.v_mps, c.dt_s,
                            self._steps, c.pursuit_lookahead_m, path.s, a, d, length, across, *gmap.layers(),
                            self.lethal, self.k + 1)
 

@@ -142,14 +142,14 @@ class SecondStageScores(Lookahead, StageRunner):
 
     def decide(self, frame: StageInput) -> Choice:
         # a probability of exactly 0 is -inf, never chosen
-        i = int(np.argmax(self.scores(exact.log(frame.probs), frame.view, frame.pose, frame.path, frame.progress_s)))
+        i = int(np.argmax(self.scores(exact.log(frame.probs), frame.view, frame.pose, frame.path, frame.progress_m)))
         return Choice(i, Command(*self.control.command(i)))
 
-    def scores(self, log_probs: np.ndarray, view: SegmentationView, pose: Pose, path: ReferencePath, progress_s: float) -> np.ndarray:
+    def scores(self, log_probs: np.ndarray, view: SegmentationView, pose: Pose, path: ReferencePath, progress_m: float) -> np.ndarray:
         """log F_t + weight * value of the second stage for the candidates; -inf elsewhere, shape (m,)."""
         rows = np.argsort(-log_probs, kind="stable")[: self.config.candidates]
         # w . U'_ij + b_j without building U' (the same sums as utilities() @ w + b, the terrain
         # weights summed point by point in one compiled pass), then the best continuation.
         ids = view.pixels(self.pix[rows].ravel())
-        distance = self.distance_utility(pose, path, progress_s, rows)
+        distance = self.distance_utility(pose, path, progress_m, rows)
         return kernels.stage_scores(log_probs, self.config.weight, rows, ids, self._point_weight, self.seen, distance, float(self.w[self.k]), self.b)
