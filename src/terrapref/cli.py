@@ -256,7 +256,7 @@ def _cmd_record(args: argparse.Namespace) -> int:
     bar = Progress(f"record {scenario.name}", sim.path.length_m, enabled=not args.quiet)
     try:
         log = record_run(sim, ExpertDriver(expert, sim_config.camera_rate_hz), writer, RunSettings(preference, disturbance, perception),
-                         np.random.default_rng(args.seed), progress=lambda s: bar.update(s.progress_s, f"t={s.time_s:6.1f}s frames={writer.count}"))
+                         np.random.default_rng(args.seed), progress=lambda s: bar.update(s.progress_m, f"t={s.time_s:6.1f}s frames={writer.count}"))
     except BaseException as exc:
         writer.abort()
         if writer.partial_dir is not None and isinstance(exc, OSError):  # a full disk: the unfinished replacement goes
