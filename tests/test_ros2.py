@@ -79,9 +79,12 @@ def _end(proc: subprocess.Popen, readers: list[threading.Thread], output: Callab
     return None if stuck is None else stuck + output()[-12000:]
 
 
-def _node(model: Path, robot: Path, env: dict, *ros_args: str, flags: tuple[str, ...] = ()) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-c", NODE_MAIN, "ros2", "--model", str(model),
-                             "--robot", str(robot), *flags, "--ros-args", *ros_args], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+def _node(model: Path, robot: Path, env: dict, *ros_args: str, flags: tuple[str, ...] = (), sigint_ignored: bool = False) -> subprocess.Popen:
+    """The node in a process of its own; ``sigint_ignored``: started as a script's background job
+    is (SIGINT ignored, which a child inherits), and Ctrl-C must end it all the same."""
+    return subprocess.Popen([sys.executable, "-c", NODE_MAIN, "ros2", "--model", str(model), "--robot", str(robot), *flags, "--ros-args", *ros_args],
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=(lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if sigint_ignored else None)
 
 
 def _publish_until_commanded(player, heard, t_ns: int, group: list, stamp: float, tries: int = 20) -> None:
@@ -151,10 +154,6 @@ def _endpoints(dp, own) -> list:
     return out
 
 
-SYSTEM = pytest.mark.slow  # the node and a publisher in two processes over DDS: in fresh clones' first test runs the node
-# with --live has now and then not ended on Ctrl-C (not understood yet), so these run with -m slow, not in the default run
-
-
 @pytest.fixture(scope="module")
 def system(tmp_path_factory, fig7_recording):
     """Two nodes: one driven frame by frame from this process (with bad input after the drive),
@@ -187,7 +186,7 @@ def system(tmp_path_factory, fig7_recording):
     os.environ["CYCLONEDDS_URI"] = LOOPBACK  # this process's participants, before its first one
     driven, idle = _domains()
     env = {**os.environ, "CYCLONEDDS_URI": LOOPBACK, "TERRAPREF_DEBUG": ""}
-    idle_node = _node(model, robot, {**env, "ROS_DOMAIN_ID": str(idle)}, "-p", "use_sim_time:=true", "-p", "stamped:=true")
+    idle_node = _node(model, robot, {**env, "ROS_DOMAIN_ID": str(idle)}, "-p", "use_sim_time:=true", "-p", "stamped:=true", sigint_ignored=True)
     idle_log: list[str] = []  # read as it comes: the node says it waits, then play starts
     idle_reader = threading.Thread(target=lambda: idle_log.extend(idle_node.stderr), daemon=True)
     idle_reader.start()
@@ -286,7 +285,6 @@ def replace_fields(ts, msg, msgtype: str, **fields):
     return ts.types[msgtype](**{f.name: fields.get(f.name, getattr(msg, f.name)) for f in dc_fields(msg)})
 
 
-@SYSTEM
 def test_the_node_commands_what_the_runtime_commands_frame_by_frame(system):
     """Each image's command, matched by its stamp (TwistStamped), is the runtime's on the same frame."""
     from terrapref.interop.runtime import PlannerRuntime
@@ -316,7 +314,6 @@ def test_the_node_commands_what_the_runtime_commands_frame_by_frame(system):
     assert transforms[0].transform.translation.z == pytest.approx(1.0)
 
 
-@SYSTEM
 def test_every_endpoint_is_named_typed_and_offered_as_ros2_expects(system):
     """Read back from DDS discovery: rt/ topic names, pkg::msg::dds_::T_ types, QoS and the type hash."""
     from cyclonedds.core import Policy
@@ -351,7 +348,6 @@ def test_every_endpoint_is_named_typed_and_offered_as_ros2_expects(system):
     }
 
 
-@SYSTEM
 def test_bad_input_is_said_once_and_skipped(system):
     """An undecodable image, a calibration of another size and odometry from the future, each sent
     twice: each said once, counted, and the next good frame is decided on as ever."""
@@ -367,10 +363,10 @@ def test_bad_input_is_said_once_and_skipped(system):
         assert found and 1 <= int(found.group(1)) <= 2, stdout
 
 
-@SYSTEM
 def test_play_drives_a_node_that_waited_in_an_empty_domain(system):
     """A node alone in its domain says once that nobody publishes its inputs, then `terrapref play`
-    publishes a log there and a DDS subscriber sees the node's commands, markers and costmap."""
+    publishes a log there and a DDS subscriber sees the node's commands, markers and costmap; started
+    with SIGINT ignored (as a script's background job is), it ends on Ctrl-C all the same."""
     play = system["play"]
     assert play.returncode == 0, play.stderr[-2000:]
     assert "played" in play.stdout and "/clock" in play.stdout

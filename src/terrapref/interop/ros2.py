@@ -18,10 +18,12 @@ node's clock from ``/clock``.
 
 from __future__ import annotations
 
+import contextlib
+import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -178,12 +180,29 @@ def run_node(model_path: str, robot_path: str, options: NodeOptions | None = Non
         core.watch(live)
     node = _Node(core, opts, names, clock, Participant(domain, MessageTypes(typestore())))
     try:
-        node.spin(stop or threading.Event())
+        with _interruptible():
+            node.spin(stop or threading.Event())
     finally:
         node.close()
         print(report_line(core, "ros2"), flush=True)
     if node.failure:
         raise node.failure[0]
+
+
+@contextlib.contextmanager
+def _interruptible() -> Iterator[None]:
+    """SIGINT raises KeyboardInterrupt while the node runs, as rclpy's nodes (and rospy's) install
+    for themselves: a node started by a script in the background inherits SIGINT ignored, and
+    ``ros2 launch`` or a supervisor's SIGINT would then never end it. Off the main thread (a node
+    run in-process, ended by ``stop``) nothing is installed."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def endpoints(robot, opts: NodeOptions, names: Names, sim: bool, path_topic: bool) -> list[Endpoint]:
