@@ -36,9 +36,10 @@ def test_cli_train_writes_model_curve_and_checkpoints(tmp_path: Path, capsys):
     training = model.meta["training"]
     assert training["optimiser"]["epochs"] == 3 and training["data"]["class_balance"] and training["seed"] == 2
     # Flags override the recipe's value field by field; the rest is the recipe's (teach: mirrored samples, the second stage;
-    # its offset stage needs corridor data, which this dataset lacks, and is left out with a warning).
-    assert not training["data"]["mirror"] and [s["type"] for s in model.stages] == ["second_stage"] and model.stages[0]["weight"] == 2.5
-    assert "carries no corridor data" in captured.err
+    # its offset rule reads what this dataset lacks, and is left out with a warning).
+    blocks = model.meta["rules"]
+    assert not training["data"]["mirror"] and [s["type"] for s in blocks] == ["second_stage"] and blocks[0]["weight"] == 2.5
+    assert model.meta["drives"] == "second_stage" and "carries no data for the offset rule" in captured.err
     curve = tmp_path / "models" / "pref.loss.png"
     assert curve.read_bytes().startswith(PNG)
     folder = tmp_path / "models" / "pref.checkpoints"
@@ -81,7 +82,7 @@ def test_cli_train_second_stage_stores_the_fitted_utility(tmp_path: Path, capsys
     out = tmp_path / "m.safetensors"
     assert main(["train", str(data), "--out", str(out), "--epochs", "1", "--mirror", "--second-stage"]) == 0
     model = load_model(out)
-    (stage,) = [s for s in model.stages if s["type"] == "second_stage"]
+    (stage,) = [s for s in model.meta["rules"] if s["type"] == "second_stage"]
     assert stage["weight"] == 5.0 and len(stage["w"]) == 5 and len(stage["b"]) == 21
 
 

@@ -94,12 +94,12 @@ def test_the_train_flags_cover_every_documented_training_field():
 
 def test_the_stage_flags_change_the_recipes_stages():
     from terrapref.cli import _stages, build_parser
-    from terrapref.planner.stages import OffsetConfig, SecondStageConfig
+    from terrapref.rules import OffsetConfig, SecondStageConfig
 
     def stages(recipe: str, *flags: str) -> tuple:
         return _stages(build_parser().parse_args(["train", "rec", "--out", "m.safetensors", *flags]), RECIPES[recipe])
 
-    assert stages("teach") == RECIPES["teach"].stages
+    assert stages("teach") == RECIPES["teach"].rules
     assert stages("teach", "--no-second-stage") == (OffsetConfig(),)
     assert stages("teach", "--stage-weight", "3") == (SecondStageConfig(weight=3.0, lookahead=True), OffsetConfig())
     assert stages("paper", "--second-stage", "--stage-weight", "3") == (SecondStageConfig(weight=3.0),)

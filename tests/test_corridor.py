@@ -1,4 +1,4 @@
-"""The offset corridor (terrapref.features.corridor), its fit (terrapref.learning.corridor) and the
+"""The offset corridor (terrapref.rules.offset), its fit (terrapref.rules.offset.fit) and the
 planner's offset stage (terrapref.planner.offset): closed-form geometry on tiny scenarios."""
 
 from __future__ import annotations
@@ -10,17 +10,21 @@ import numpy as np
 import pytest
 
 from terrapref.camera import PinholeCamera, SegmentationRenderer, SegmentationView
-from terrapref.dataset import CorridorData, Dataset, load_dataset, save_dataset
+from terrapref.dataset import Dataset, load_dataset, save_dataset
 from terrapref.dataset import FORMAT as DATASET_FORMAT
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
-from terrapref.features.corridor import TerrainColumns, CorridorConfig, CorridorFeatures, GroundMap, gated, intent_offsets, steer
-from terrapref.learning.corridor import CorridorUtility, fit_corridor, fit_softmax, soft_labels
+from terrapref.rules.columns import TerrainColumns
+from terrapref.rules.offset.ground_map import GroundMap
+from terrapref.rules.offset.geometry import OffsetGeometry
+from terrapref.rules.offset.features import OffsetFeatures, gated
+from terrapref.rules.offset.steering import intent_offsets, steer
+from terrapref.rules.offset.fit import OffsetUtility, fit_offset_utility, fit_softmax, soft_labels
 from terrapref.learning.model_file import load_model, save_model
 from terrapref.planner.registry import load_policy
 from terrapref.learning.network import ClassifierConfig
 from terrapref.planner import Planner
-from terrapref.planner.stages.offset import OffsetConfig, OffsetSteering
+from terrapref.rules.offset.rule import OffsetConfig, OffsetSteering
 from terrapref.scenario import parse_scenario
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import default_classes
@@ -70,22 +74,22 @@ def _seen_from(scenario, camera: PinholeCamera, pose) -> SegmentationView:
 
 
 def test_offsets_and_stations_are_symmetric_grids():
-    c = CorridorConfig()
+    c = OffsetGeometry()
     assert len(c.offsets) == 31 and c.offsets[15] == 0.0
     np.testing.assert_allclose(c.offsets, -c.offsets[::-1])
     assert c.stations[0] == -1.0 and c.stations[-1] == 11.0 and len(c.stations) == 49
-    assert CorridorConfig.from_dict(c.to_dict()) == c
+    assert OffsetGeometry.from_dict(c.to_dict()) == c
     with pytest.raises(ValueError):
-        CorridorConfig(offset_step_m=0.0)
+        OffsetGeometry(offset_step_m=0.0)
     with pytest.raises(ValueError):
-        CorridorConfig(stations_m=(5.0, 1.0))
+        OffsetGeometry(stations_m=(5.0, 1.0))
 
 
 def test_a_patch_ahead_on_the_path_is_metres_on_its_class_and_sets_the_near_distance(camera):
     scenario = _scenario([MUD])
     gmap = GroundMap(camera, _terrain())
     gmap.update(_seen_from(scenario, camera, (2.0, 10.0, 0.0)), (2.0, 10.0, 0.0))
-    corridor = CorridorFeatures(CorridorConfig(), K)
+    corridor = OffsetFeatures(OffsetGeometry(), K)
     view = corridor(gmap, ReferencePath(scenario.waypoints), 0.0)
     offsets = corridor.offsets
     mud = view.features[:, 3]
@@ -142,7 +146,7 @@ def test_the_ground_map_outvotes_labels_a_few_frames_get_wrong(camera):
     voted = GroundMap(camera, _terrain((0,)))
     for view in _noisy_views(scenario, camera, pose, {"flip_rate": 0.2}, 30):
         voted.update(view, pose)
-    last = GroundMap(camera, _terrain((0,)), CorridorConfig(map_fade=0.0))
+    last = GroundMap(camera, _terrain((0,)), OffsetGeometry(map_fade=0.0))
     last.update(view, pose)
     seen = truth.cells != K + 1
     assert (voted.cells[seen] == truth.cells[seen]).mean() > 0.999
@@ -160,7 +164,7 @@ def test_a_lethal_share_of_the_evidence_makes_a_cell_lethal(camera):
     centre = np.array([[12.1, 10.0]])
     for patch, share, expect in (("non_traversable", dict(map_lethal_share=0.35), 0), ("non_traversable", dict(map_lethal_share=0.5), K),
                                  ("mud", dict(map_terrain_share=0.35), 3), ("mud", dict(map_terrain_share=0.5), K)):
-        gmap = GroundMap(camera, _terrain((0,)), CorridorConfig(map_fade=1.0, **share))
+        gmap = GroundMap(camera, _terrain((0,)), OffsetGeometry(map_fade=1.0, **share))
         for k in range(10):
             view = views[patch] if k % 5 in (1, 3) else plain
             gmap.update(view, pose)
@@ -171,7 +175,7 @@ def test_the_ground_map_waits_for_enough_evidence_before_a_cell_counts_as_seen(c
     scenario = _scenario([MUD])
     pose = (2.0, 10.0, 0.0)
     view = _seen_from(scenario, camera, pose)
-    gmap = GroundMap(camera, _terrain(), CorridorConfig(map_min_evidence=0.5))
+    gmap = GroundMap(camera, _terrain(), OffsetGeometry(map_min_evidence=0.5))
     gmap.update(view, pose)
     near, far = np.array([[4.0, 10.0]]), np.array([[14.5, 10.0]])  # 2 m ahead: a vote of 0.8; 12.5 m: 0.09
     assert gmap.lookup(near)[0] == K and gmap.lookup(far)[0] == K + 1
@@ -189,7 +193,7 @@ def test_steering_toward_an_offset_is_pure_pursuit():
 
 def test_the_intended_offset_inverts_pure_pursuit():
     path = ReferencePath(np.array([[0.0, 0.0], [30.0, 0.0]]))
-    offsets = CorridorConfig().offsets
+    offsets = OffsetGeometry().offsets
     # Heading 0.2 rad to the left at 0.3 m: straight ahead, 2.5 m on, is 0.3 + 2.5 tan(0.2) = 0.807 m.
     poses = np.array([[5.0, 0.0, 0.0], [6.0, 0.3, 0.2], [7.0, 0.0, 0.0]])
     w = steer(path, tuple(poses[0]), 5.0, 1.2, 2.5, 1.0)
@@ -214,7 +218,7 @@ def test_the_softmax_fit_recovers_the_weights_that_made_the_labels():
 def test_the_corridor_fit_picks_the_near_distance_that_explains_the_labels():
     """Frames where the driver keeps to the path while a patch is far and swerves once it is near."""
     rng = np.random.default_rng(1)
-    c = CorridorConfig()
+    c = OffsetGeometry()
     offsets = c.offsets
     n = 600
     near = rng.uniform(1.0, 10.0, n)
@@ -222,12 +226,12 @@ def test_the_corridor_fit_picks_the_near_distance_that_explains_the_labels():
     features[:, :, 3] = np.where(np.abs(offsets) < 1.0, 2.0, 0.0)  # 2 m of mud near the path, on every frame
     features[:, :, 5] = offsets**2 * 7.0
     intent = np.where(near > 4.0, 0.0, 1.4 * rng.choice([-1.0, 1.0], n))
-    fit = fit_corridor(features, near, intent, offsets)
+    fit = fit_offset_utility(features, near, intent, offsets)
     assert fit.near_m == 4.0 and fit.samples == n
     assert fit.weights[3] < 0 and fit.weights[-1] < 0  # mud costs; far from a patch, so does leaving the path
     assert soft_labels(np.array([0.0]), offsets, 0.3).sum() == pytest.approx(1.0)
     with pytest.raises(ValueError):
-        fit_corridor(features, near, np.full(n, np.nan), offsets)
+        fit_offset_utility(features, near, np.full(n, np.nan), offsets)
 
 
 def _drive(stage: OffsetSteering, scenario, camera: PinholeCamera, seconds: float) -> np.ndarray:
@@ -249,7 +253,7 @@ def _drive(stage: OffsetSteering, scenario, camera: PinholeCamera, seconds: floa
 def test_the_offset_stage_goes_round_trees_on_the_path_and_comes_back(camera):
     scenario = _scenario([TREES])
     lethal = np.array([0])
-    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _terrain(tuple(int(c) for c in lethal)), CONTROL)
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain(tuple(int(c) for c in lethal)), CONTROL)
     poses = _drive(stage, scenario, camera, 30.0)
     # Clear of the 2 x 2.2 m trees (x 13.1-15.1, y 9.1-11.3) by the half-width 0.6 m at least.
     beside = (poses[:, 0] > 13.1 - 0.6) & (poses[:, 0] < 15.1 + 0.6)
@@ -272,11 +276,11 @@ def test_trees_wider_than_every_fitted_offset_are_escaped_beyond_them(camera):
     # 7 m across: the fitted offsets reach 3 m, getting round needs 3.5 + 0.6 + 0.3 = 4.4 m or more.
     wide = {"class": "non_traversable", "rectangle": {"center": [16.0, 10.0], "size": [2.5, 7.0]}}
     scenario = _scenario([wide])
-    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
     poses = _drive(stage, scenario, camera, 34.0)
     assert _clearance(poses, (16.0, 10.0), (2.5, 7.0)) > 0.6 + 0.3
     assert abs(poses[-1, 1] - 10.0) < 0.3 and stage.held == 0.0  # back on the path
-    stuck = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL, OffsetConfig(escape_factor=1.0))
+    stuck = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL, OffsetConfig(escape_factor=1.0))
     assert _clearance(_drive(stuck, scenario, camera, 34.0), (16.0, 10.0), (2.5, 7.0)) == 0.0  # without escape it drives in
 
 
@@ -287,7 +291,7 @@ def test_the_stage_goes_back_to_the_path_only_when_the_way_back_is_clear(camera)
     strip = {"class": "non_traversable", "rectangle": {"center": [11.0, 9.175], "size": [4.0, 0.35]}}
     scenario = _scenario([strip])
     path = ReferencePath(scenario.waypoints)
-    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
     pose = (9.0, 11.4, 0.0)
     stage.held = 1.4
     stage.yaw_rate(_seen_from(scenario, camera, pose), pose, path, 7.0)
@@ -307,7 +311,7 @@ def test_a_side_only_the_margin_rules_out_is_kept_rather_than_a_way_across_letha
     trees = {"class": "non_traversable", "rectangle": {"center": [16.0, 10.0], "size": [8.0, 2.5]}}
     scenario = _scenario([trees])
     path = ReferencePath(scenario.waypoints)
-    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
     pose = (10.5, 11.8, 0.0)
     stage.map.update(_seen_from(scenario, camera, pose), pose)
     assert (stage._swept(stage.offsets, pose, path, 8.5) < stage._steps).all()  # every way brushes the clearance
@@ -332,7 +336,7 @@ def test_when_lethal_terrain_lies_across_every_way_the_side_held_is_kept(camera)
     strip = {"class": "non_traversable", "polygon": [[14.5, 18.0], [15.1, 18.0], [16.9, 2.0], [16.3, 2.0]]}
     scenario = _scenario([strip])
     path = ReferencePath(scenario.waypoints)
-    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
     pose = (10.5, 10.0, 0.0)
     stage.map.update(_seen_from(scenario, camera, pose), pose)
     reach = stage._swept(stage.offsets, pose, path, 8.5, stage._bare)
@@ -345,31 +349,49 @@ def test_when_lethal_terrain_lies_across_every_way_the_side_held_is_kept(camera)
 
 
 def test_ground_never_seen_is_priced_at_the_mean_of_the_non_lethal_classes(camera):
-    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
     assert stage.weights[K] == pytest.approx(DRIVER_LIKE[1:K].mean())
     with pytest.raises(ValueError):
-        OffsetSteering(CorridorUtility(DRIVER_LIKE[:-1], 5.0), camera, _terrain((0,)), CONTROL)
+        OffsetSteering(OffsetUtility(DRIVER_LIKE[:-1], 5.0), camera, _terrain((0,)), CONTROL)
 
 
 def _corridor_meta(weights, near_m=5.0) -> dict:
-    features = FeatureConfig(corridor=CorridorConfig())
-    return {**model_meta(features=features), "corridor": {"weights": list(weights), "near_m": near_m}}
+    """A model file's header as files before the ``stages`` list wrote it: the offset rule's
+    utility as ``corridor``, its geometry in the features' ``corridor``."""
+    meta = model_meta()
+    meta["features"]["corridor"] = OffsetGeometry().to_dict()
+    return {**meta, "corridor": {"weights": list(weights), "near_m": near_m}}
 
 
-def test_a_model_file_with_a_corridor_utility_drives_by_the_offset_stage(tmp_path):
+def _offset_meta(weights, near_m=5.0) -> dict:
+    """A model file's header as this version writes it: the offset rule in ``rules``, driving."""
+    block = {"type": "offset", **OffsetConfig().to_dict(), "weights": list(weights), "near_m": near_m}
+    return {**model_meta(), "rules": [block], "drives": "offset"}
+
+
+@pytest.mark.parametrize("make, key", [(_corridor_meta, "rules"), (_offset_meta, "rules")])
+def test_a_model_file_with_an_offset_utility_drives_by_the_offset_rule_old_or_new(tmp_path, make, key):
     config = ClassifierConfig(hidden=8, skip=True)
-    path = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
-    model = load_model(path)  # written before stages were listed: its corridor utility is the offset stage
+    path = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), make(DRIVER_LIKE))
+    model = load_model(path)
     planner = Planner(model)
-    assert planner.stage.type == "offset" and planner.stage.utility.near_m == 5.0 and planner.stage.config == OffsetConfig()
+    assert planner.rule.type == "offset" and planner.rule.utility.near_m == 5.0 and planner.rule.config == OffsetConfig()
     assert planner.runner.keeps_ground_map
-    assert not Planner(model, stage="argmax").runner.keeps_ground_map
-    for weights, near, field in ((DRIVER_LIKE[:-1], 5.0, "stages[0].weights"), ([math.nan] * 7, 5.0, "stages[0].weights"),
-                                 (DRIVER_LIKE, -1.0, "stages[0].near_m")):
-        bad = save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), _corridor_meta(weights, near))
+    assert not Planner(model, rule="argmax").runner.keeps_ground_map
+    for weights, near, field in ((DRIVER_LIKE[:-1], 5.0, f"{key}[0].weights"), ([math.nan] * 7, 5.0, f"{key}[0].weights"),
+                                 (DRIVER_LIKE, -1.0, f"{key}[0].near_m")):
+        bad = save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), make(weights, near))
         with pytest.raises(UserError) as exc:
             load_policy(bad)
         assert exc.value.problems[0].field == field
+
+
+def test_a_file_that_names_a_rule_it_does_not_list_to_drive_is_refused(tmp_path):
+    config = ClassifierConfig(hidden=8, skip=True)
+    bad = save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), {**_offset_meta(DRIVER_LIKE), "drives": "second_stage"})
+    with pytest.raises(UserError) as exc:
+        Planner(load_model(bad))
+    assert exc.value.problems[0].field == "drives" and "second_stage" in str(exc.value)
 
 
 class _CountingFeaturizer:
@@ -388,7 +410,7 @@ def test_the_offset_stage_leaves_u_and_c_until_a_decision_reports_them(tmp_path,
     model = load_model(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE)))
     scenario = _scenario([MUD])
     image = _seen_from(scenario, camera, (5.0, 10.0, 0.0)).image
-    planners = {how: Planner(model) for how in ("view", "array")} | {"argmax": Planner(model, stage="argmax")}
+    planners = {how: Planner(model) for how in ("view", "array")} | {"argmax": Planner(model, rule="argmax")}
     for planner in planners.values():
         planner.set_path(scenario.waypoints)
         planner.featurizer = _CountingFeaturizer(planner.featurizer)
@@ -406,34 +428,35 @@ def test_the_offset_stage_leaves_u_and_c_until_a_decision_reports_them(tmp_path,
     assert planners["view"].featurizer.calls == 1  # computed once, when first read
 
 
-def _corridor_dataset(n: int = 40) -> Dataset:
+def _offset_dataset(n: int = 40) -> Dataset:
     rng = np.random.default_rng(2)
-    features = FeatureConfig(corridor=CorridorConfig())
-    o = len(CorridorConfig().offsets)
-    corridor = CorridorData(rng.uniform(0, 3, (n, o, K + 2)).astype(np.float32), np.full(n, np.inf, np.float32),
-                            np.append(rng.uniform(-1, 1, n - 2), [np.nan, np.nan]).astype(np.float32))
+    rule = OffsetConfig()
+    o = len(rule.geometry.offsets)
+    arrays = {"features": rng.uniform(0, 3, (n, o, K + 2)).astype(np.float32), "near_m": np.full(n, np.inf, np.float32),
+              "intent_m": np.append(rng.uniform(-1, 1, n - 2), [np.nan, np.nan]).astype(np.float32)}
+    meta = {"format": DATASET_FORMAT, **model_meta(), "rules": {"offset": {"config": rule.data(), "arrays": dict(OffsetConfig.arrays)}}}
     return Dataset(rng.uniform(0, 1, (n, 21, 5)).astype(np.float32), rng.integers(0, 21, n), np.zeros(n, np.float32),
-                   np.zeros(n, np.int64), {"format": DATASET_FORMAT, **model_meta(features=features)}, None, corridor)
+                   np.zeros(n, np.int64), meta, {"offset": arrays})
 
 
-def test_corridor_data_survive_a_dataset_file_and_bad_values_are_refused(tmp_path):
-    data = _corridor_dataset()
+def test_the_offset_rules_arrays_survive_a_dataset_file_and_bad_values_are_refused(tmp_path):
+    data = _offset_dataset()
     back = load_dataset(save_dataset(data, tmp_path / "d.safetensors"))
-    for a, b in zip(data.corridor, back.corridor):
-        np.testing.assert_array_equal(a, b)
-    assert back.fingerprint == data.fingerprint
-    broken = data.corridor.features.copy()
+    for name, a in data.rules["offset"].items():
+        np.testing.assert_array_equal(a, back.rules["offset"][name])
+    assert back.fingerprint == data.fingerprint and back.rule_data("offset")[0] == OffsetConfig().data()
+    broken = data.rules["offset"]["features"].copy()
     broken[3, 4, 1] = np.nan
-    bad = Dataset(data.U, data.labels, data.w, data.source, data.meta, None, data.corridor._replace(features=broken))
+    bad = Dataset(data.U, data.labels, data.w, data.source, data.meta, {"offset": {**data.rules["offset"], "features": broken}})
     with pytest.raises(UserError) as exc:
         load_dataset(save_dataset(bad, tmp_path / "bad.safetensors"))
-    assert exc.value.problems[0].field == "corridor.features"
+    assert exc.value.problems[0].field == "rules.offset.features"
 
 
 def test_the_compiled_swept_check_is_the_numpy_form(camera):
     """The way to each offset, stepped by pure pursuit in NumPy, meets the trees at the step the kernel says."""
     scenario = _scenario([TREES])
-    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
     path = ReferencePath(scenario.waypoints)
     for pose, s in (((8.0, 10.0, 0.0), 6.0), ((9.0, 10.5, 0.2), 7.0), ((10.0, 9.3, -0.3), 8.0)):
         stage.map.update(_seen_from(scenario, camera, pose), pose)
@@ -470,14 +493,14 @@ print(hashlib.sha256(_fit_case().tobytes()).hexdigest())
 def _fit_case() -> np.ndarray:
     """Weights of a corridor fit to random frames, with labels from a known utility."""
     rng = np.random.default_rng(3)
-    offsets = CorridorConfig().offsets
+    offsets = OffsetGeometry().offsets
     n = 800
     features = rng.uniform(0.0, 3.0, (n, len(offsets), K + 2)) * (rng.uniform(size=(n, 1, K + 2)) < 0.5)
     features[:, :, K + 1] = offsets**2 * rng.uniform(5.0, 12.0, (n, 1))
     near = rng.uniform(1.0, 12.0, n)
     value = np.concatenate([features, (offsets**2)[None, :, None] * (near > 5.0)[:, None, None]], axis=2) @ DRIVER_LIKE
     intent = offsets[np.argmax(value + rng.gumbel(size=value.shape), axis=1)]
-    return fit_corridor(features, near, intent, offsets).weights
+    return fit_offset_utility(features, near, intent, offsets).weights
 
 
 CPU_CHECK = CpuCheck.of("corridor fit", _FIT.format(tests=os.path.dirname(__file__)), SETTINGS)
@@ -491,15 +514,15 @@ def test_the_corridor_fit_gives_the_same_weights_under_every_cpu_setting(cpu_out
 def test_the_map_reads_every_voted_cell_as_decided_and_refuses_too_many_columns():
     """After votes, ``cells`` holds no undecided marker (it decides them) and is read-only; a
     class table with 254 terrain columns would need the marker as a column and is refused."""
-    from terrapref.features import kernels as feature_kernels
+    from terrapref.rules.offset import ground_map_compiled
     scenario = _scenario([MUD])
     camera = PinholeCamera()
     gmap = GroundMap(camera, _terrain())
     for pose in ((2.0, 10.0, 0.0), (4.0, 10.2, 0.05)):
         gmap.update(_seen_from(scenario, camera, pose), pose)
-    assert (gmap._cells == feature_kernels.UNSETTLED).any()  # the votes left cells to decide
+    assert (gmap._cells == ground_map_compiled.UNSETTLED).any()  # the votes left cells to decide
     cells = gmap.cells
-    assert not (cells == feature_kernels.UNSETTLED).any() and (cells < gmap.k + 1).any()
+    assert not (cells == ground_map_compiled.UNSETTLED).any() and (cells < gmap.k + 1).any()
     assert not cells.flags.writeable
     with pytest.raises(ValueError, match="terrain columns"):
         GroundMap(camera, TerrainColumns(np.zeros(256, np.uint8), 254))
@@ -507,7 +530,7 @@ def test_the_map_reads_every_voted_cell_as_decided_and_refuses_too_many_columns(
 
 @pytest.mark.parametrize("best", [-4.0, 4.0])
 def test_the_held_offset_is_kept_within_the_margin_whatever_the_sign_of_the_best_utility(best):
-    from terrapref.planner.stages.offset import keeps
+    from terrapref.rules.offset.rule import keeps
 
     short = 0.1 * abs(best)  # within a margin of 0.15 of the best's magnitude
     assert keeps(best - short, best, 0.15) and not keeps(best - 2 * short, best, 0.15)
@@ -521,7 +544,7 @@ def test_a_driver_who_likes_a_patch_is_not_switched_off_a_held_offset_by_a_slive
     likes_mud[3] = 2.0
     scenario = _scenario([MUD])
     path = ReferencePath(scenario.waypoints)
-    stage = OffsetSteering(CorridorUtility(likes_mud, 5.0), camera, _terrain((0,)), CONTROL)
+    stage = OffsetSteering(OffsetUtility(likes_mud, 5.0), camera, _terrain((0,)), CONTROL)
     pose = (6.0, 10.2, 0.0)
     stage.held = 0.2
     stage.yaw_rate(_seen_from(scenario, camera, pose), pose, path, 4.0)

@@ -1,4 +1,4 @@
-"""The learned preference as a costmap (terrapref.planner.costmap)."""
+"""The learned preference as a costmap (terrapref.rules.costmap)."""
 
 from __future__ import annotations
 
@@ -10,12 +10,12 @@ from helpers import skip_path_weights
 from terrapref.camera import PinholeCamera
 from terrapref.interop.runtime import PlannerRuntime
 from terrapref.features import FeatureConfig
-from terrapref.features.corridor import CorridorConfig
-from terrapref.learning.corridor import CorridorUtility
+from terrapref.rules.offset.geometry import OffsetGeometry
+from terrapref.rules.offset.fit import OffsetUtility
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
-from terrapref.planner.costmap import LETHAL_COST, UNKNOWN_COST, class_costs
-from terrapref.planner.stages.offset import OffsetSteering
+from terrapref.rules.costmap import LETHAL_COST, UNKNOWN_COST, class_costs
+from terrapref.rules.offset.rule import OffsetSteering
 from terrapref.terrain import default_classes
 
 CONTROL = FeatureConfig().preference.control  # the default control set: 1 m/s
@@ -32,7 +32,7 @@ PATCHES = [  # 4 m wide, 3 m deep, 6-9 m ahead of a vehicle at (10, 10) looking 
 def seen():
     camera = PinholeCamera()
     scenario = _scenario(PATCHES)
-    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,), default_classes().feature_names), CONTROL)
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,), default_classes().feature_names), CONTROL)
     pose = (10.0, 10.0, 0.0)
     for _ in range(3):
         stage.map.update(_seen_from(scenario, camera, pose), pose)
@@ -90,7 +90,7 @@ def _costmaps_in(mcap) -> tuple[dict[str, int], np.ndarray]:
     whole map the planner keeps."""
     from rosbags.highlevel import AnyReader
 
-    from terrapref.planner.costmap import cost_colours
+    from terrapref.rules.costmap import cost_colours
 
     with AnyReader([mcap]) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
@@ -98,7 +98,7 @@ def _costmaps_in(mcap) -> tuple[dict[str, int], np.ndarray]:
     occupancy, grid = last["/terrapref/costmap"], last["/terrapref/costmap_grid"]
     cost = np.asarray(occupancy.data, dtype=np.int8).reshape(occupancy.info.height, occupancy.info.width)
     assert occupancy.header.frame_id == grid.frame_id == "odom" and occupancy.info.resolution > 0
-    full = round(2 * CorridorConfig().map_half_size_m / CorridorConfig().map_resolution_m)
+    full = round(2 * OffsetGeometry().map_half_size_m / OffsetGeometry().map_resolution_m)
     assert occupancy.info.width * occupancy.info.height < full * full  # cropped to the ground seen
     assert (grid.timestamp.sec, grid.timestamp.nanosec) == (occupancy.header.stamp.sec, occupancy.header.stamp.nanosec)
     assert grid.column_count == occupancy.info.width and grid.cell_size.x == grid.cell_size.y == pytest.approx(occupancy.info.resolution)

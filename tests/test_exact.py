@@ -273,12 +273,12 @@ rng = np.random.default_rng(0)
 U = rng.uniform(0, 1, (500, 21, 5)).astype(np.float32)
 labels = np.argmax(U @ np.array([-3.0, -1.5, -0.5, 0.5, 2.0], np.float32), axis=1)
 data = Dataset(U, labels, np.zeros(500, np.float32), np.zeros(500, np.int64), {{"format": "terrapref-dataset/1", **model_meta()}})
-from terrapref.planner.stages import SecondStageConfig
-r = train(data, train_config(epochs=4, batch_size=64, hidden=16, skip=True, class_balance=True, mirror=True), stages=[SecondStageConfig()])
+from terrapref.rules import SecondStageConfig
+r = train(data, train_config(epochs=4, batch_size=64, hidden=16, skip=True, class_balance=True, mirror=True), rules=[SecondStageConfig()])
 h = hashlib.sha256()
 for name in sorted(r.weights):
     h.update(r.weights[name].tobytes())
-h.update(r.stages[0].utility.w.tobytes() + r.stages[0].utility.b.tobytes())
+h.update(r.rules[0].utility.w.tobytes() + r.rules[0].utility.b.tobytes())
 a, b = rng.normal(size=(256, 300)), rng.normal(size=(300, 64))
 plain = hashlib.sha256((a @ b).tobytes() + np.exp(rng.normal(size=10000)).tobytes()).hexdigest()
 print(h.hexdigest(), plain)

@@ -348,7 +348,7 @@ def test_a_file_with_lane_columns_is_refused_and_one_without_loads():
 
 
 def test_compiled_features_give_the_numpy_forms_bits(featurizer: UtilityFeaturizer):
-    """terrapref.features.kernels: the same bits as the NumPy forms the featurizer used before."""
+    """terrapref.features.utility_compiled: the same bits as the NumPy forms the featurizer used before."""
     rng = np.random.default_rng(4)
     pix = featurizer.pset.pixel_index
     m, n = pix.shape

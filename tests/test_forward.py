@@ -97,10 +97,11 @@ def test_the_planner_makes_the_decisions_it_made_before_the_forward_pass_was_com
     # the training schedule pinned as it was when the file was made (teach trained at lr 1e-3 then)
     recipe = replace(recipe, train=replace(recipe.train, optimiser=replace(recipe.train.optimiser, epochs=epochs, lr=1e-3)))
     features = recipe.features()
+    rules = tuple(r for r in recipe.rules if r.type != "offset")  # C and its second stage drive, as when the file was made
     recordings = demonstrate(recipe, tmp_path / recipe.name, RecipeSetup(7, course=course, features=features), write=False)
     model = tmp_path / f"{recipe.name}.safetensors"
-    train_and_save(build_dataset(recordings, features), model, replace(recipe.train, seed=7),
-                   stages=[s for s in recipe.stages if s.type != "offset"], options=RunOptions(checkpoints=False))
+    train_and_save(build_dataset(recordings, features, rules=rules), model, replace(recipe.train, seed=7),
+                   rules=rules, options=RunOptions(checkpoints=False))
     for name in driven:
         driver = PlannerDriver(Planner(load_model(model)), keep=True)  # C and its second stage (if any) drive, as when the file was made
         run_episode(Simulation(resolve_scenario(name)), driver, np.random.default_rng(0))

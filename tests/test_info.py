@@ -31,6 +31,8 @@ def test_info_on_a_model_a_dataset_an_onnx_file_and_a_recording(tmp_path: Path, 
     assert "terrapref model" in out and "terrapref dataset" in out and "exported as ONNX" in out and "terrapref recording (complete)" in out
     assert out.count("camera          640x480") == 4 and "profile         mud > rock > water > non_traversable" in out
     assert "samples         300" in out and "driver          expert" in out
+    # the linear model lists no rule: C's argmax drives, and the graph is that decision
+    assert out.count("drives          argmax\n") == 2 and "the graph holds C alone" not in out
 
 
 @pytest.mark.parametrize("content", [b"", b"not safetensors at all", b"\x00" * 64])
@@ -60,5 +62,6 @@ def test_info_reads_older_stage_blocks_and_shows_what_it_can_of_a_damaged_list(t
     bad = save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), {**model_meta(), "stages": "offset"})
     assert main(["info", str(old), str(bad)]) == 0
     out = capsys.readouterr().out
-    assert "second stage    weight 1.5" in out and "offset stage    none" in out  # a utility block written before stages were listed
-    assert "stages          unreadable (stages: expected a list of stages)" in out and "profile         mud > rock" in out
+    # a utility block written before rules were listed: the second stage, which drives
+    assert "drives          second_stage\n  second stage: weight 1.5, linear utility fitted frame by frame\n" in out
+    assert "rules           unreadable (stages: expected a list of rules)" in out and "profile         mud > rock" in out

@@ -40,7 +40,8 @@ def _model(path: Path, config: ClassifierConfig, seed: int = 0, utility: bool = 
         weights = {member_prefix(j) + k: v for j in range(config.members) for k, v in init_weights(config, rng).items()}
     meta = model_meta()
     if utility:
-        meta["stages"] = [{"type": "second_stage", "weight": 5.0, "w": [-1.0, -2.0, -3.0, -9.0, 4.0], "b": [0.0] * 21, "fit": "frames"}]
+        meta["rules"] = [{"type": "second_stage", "weight": 5.0, "w": [-1.0, -2.0, -3.0, -9.0, 4.0], "b": [0.0] * 21, "fit": "frames"}]
+        meta["drives"] = "second_stage"
     return save_model(path, config, weights, meta)
 
 
@@ -86,8 +87,9 @@ def test_onnx_metadata_carries_the_configuration(tmp_path: Path):
     assert meta["classes"] == model.classes.to_dict() and meta["profile"] == list(model.profile)
     assert meta["classifier"] == model.classifier.to_dict()
     assert meta["preference_set"]["w_rps"] == list(model.features.preference.control.w_rps) and len(meta["preference_set"]["w_rps"]) == 21
-    (stage,) = meta["stages"]
+    (stage,) = meta["rules"]
     assert stage["type"] == "second_stage" and stage["weight"] == 5.0 and stage["w"] == [-1.0, -2.0, -3.0, -9.0, 4.0]
+    assert meta["drives"] == "second_stage"
 
 
 def test_cli_export_onnx(tmp_path: Path, capsys):

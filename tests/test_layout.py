@@ -104,6 +104,7 @@ LAYERS = [
     {"demos"},
     {"dataset"},
     {"learning"},
+    {"rules"},
     {"planner"},
     {"baselines", "recipes"},
     {"interop"},

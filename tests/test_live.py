@@ -21,7 +21,7 @@ from terrapref.interop.mcap_export import TOPICS
 from terrapref.interop.ros_messages import typestore
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
-from terrapref.planner.costmap import LETHAL_COST
+from terrapref.rules.costmap import LETHAL_COST
 
 websockets = pytest.importorskip("websockets.sync.client", reason="the WebSocket client of the tests (websockets) is not installed")
 WATCHED = ("/terrapref/labels", "/terrapref/costmap", "/terrapref/costmap_grid", "/terrapref/trajectories", "/tf_static", "/terrapref/odom")

@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from terrapref.learning import exact, kernels
+from terrapref.learning import exact
+from terrapref.learning import layers_compiled as kernels
 from terrapref.learning.mlp import Adam, TrainableClassifier, _activate, _activation_slope, cross_entropy, init_weights, round_inputs
 from terrapref.learning.network import ClassifierConfig
 

@@ -18,8 +18,8 @@ from safetensors.numpy import save_file
 from terrapref.camera import CameraConfig
 from terrapref.dataset import Dataset, load_dataset, save_dataset
 from terrapref.errors import UserError
-from terrapref.features import FeatureConfig, LookaheadConfig, PreferenceSetConfig
-from terrapref.learning.header import DataSource, Interruption, MemberRun, ModelHeader, stage_blocks
+from terrapref.features import FeatureConfig, PreferenceSetConfig
+from terrapref.learning.header import DataSource, Interruption, MemberRun, ModelHeader, rule_blocks
 from terrapref.learning.model_file import FORMAT, check_compatible, load_model, read_model_file, save_model, write_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.learning.train import EpochMetrics, TrainConfig
@@ -263,23 +263,24 @@ def _header(**changes) -> ModelHeader:
                   profile=ODD_PROFILE, training=TrainConfig().to_dict(), data=DataSource("0123456789abcdef", 40, ({"path": "rec", "frames": 40},)),
                   history=epochs, best_epoch=2, steps=8, identifiability={"order": ["mud"], "pairs": [], "min_frames": 20, "lethal": []},
                   steadying={"tremor_rps": None, "spacing_rps": 0.1, "window": 1, "changed": 0.0},
-                  stages=({"type": "second_stage", "weight": 5.0},), members=(MemberRun(0, 2, epochs), MemberRun(1000, 1, epochs)), epoch=2)
+                  rules=({"type": "second_stage", "weight": 5.0},), drives="second_stage", members=(MemberRun(0, 2, epochs), MemberRun(1000, 1, epochs)),
+                  epoch=2)
     return ModelHeader(**{**values, **changes})
 
 
 def test_a_header_is_written_in_the_files_order_and_read_back_equal(tmp_path: Path):
     header = _header()
     assert list(header.to_dict()) == ["format", "kind", "classifier", "recipe", "features", "camera", "classes", "profile", "training", "data",
-                                      "history", "best_epoch", "steps", "identifiability", "steadying", "stages", "members", "epoch"]
+                                      "history", "best_epoch", "steps", "identifiability", "steadying", "rules", "drives", "members", "epoch"]
     config = header.classifier
     weights = {f"members.{j}.{k}": v for j in range(2) for k, v in random_weights(replace(config, members=1), j).items()}
     model = load_model(write_model(tmp_path / "m.safetensors", header, weights))
     assert model.header == header and model.meta == json.loads(json.dumps(header.to_dict()))
-    assert model.classifier == config and model.features == ODD_FEATURES and model.stages == header.stages
+    assert model.classifier == config and model.features == ODD_FEATURES and model.rule_blocks == (header.rules, "rules")
 
 
 def test_a_checkpoints_member_count_and_an_interrupted_runs_progress_are_its_own_entries():
-    checkpoint = _header(history=None, best_epoch=None, steps=None, identifiability=None, steadying=None, stages=None, members=None,
+    checkpoint = _header(history=None, best_epoch=None, steps=None, identifiability=None, steadying=None, rules=None, drives=None, members=None,
                          member_count=2, member=1, epoch=3, status="checkpoint")
     written = checkpoint.to_dict()
     assert list(written)[-4:] == ["members", "member", "epoch", "status"] and written["members"] == 2
@@ -300,16 +301,22 @@ def test_a_damaged_training_record_is_refused_naming_its_entry(tmp_path: Path, k
     assert _expect_user_error(path).problems[0].field == key
 
 
-def test_stages_are_read_without_a_feature_configuration():
+def test_rules_are_read_without_a_feature_configuration_and_older_files_keys_by_each_rule():
+    from terrapref.rules import legacy_blocks
+
     legacy = {"utility": {"w": [0.0], "b": [0.0]}, "corridor": {"weights": [1.0], "near_m": 2.0}}
-    assert stage_blocks(legacy, "old.safetensors") == ({"type": "second_stage", "weight": 1.5, "w": [0.0], "b": [0.0]},
-                                                      {"type": "offset", "weights": [1.0], "near_m": 2.0})
-    with_lookahead = stage_blocks(legacy, "old.safetensors", FeatureConfig(lookahead=LookaheadConfig(1.8, 3)).lookahead)
+    assert legacy_blocks(legacy, "old.safetensors") == ({"type": "second_stage", "weight": 1.5, "w": [0.0], "b": [0.0]},
+                                                         {"type": "offset", "weights": [1.0], "near_m": 2.0})
+    with_lookahead = legacy_blocks({**legacy, "features": {"lookahead": {"after_s": 1.8, "stride": 3}}}, "old.safetensors")
     assert with_lookahead[0] == {"type": "second_stage", "weight": 1.5, "after_s": 1.8, "stride": 3, "w": [0.0], "b": [0.0]}
-    assert stage_blocks({"stages": []}, "new.safetensors") == () and stage_blocks({}, "checkpoint.safetensors") is None
+    assert rule_blocks({"rules": []}, "rules", "new.safetensors") == () and rule_blocks({}, "rules", "checkpoint.safetensors") is None
+    assert rule_blocks({"stages": [{"type": "offset"}]}, "stages", "older.safetensors") == ({"type": "offset"},)
     with pytest.raises(UserError) as err:
-        stage_blocks({"stages": [{"weight": 1.0}]}, "bad.safetensors")
+        rule_blocks({"stages": [{"weight": 1.0}]}, "stages", "bad.safetensors")
     assert err.value.lines() == ["bad.safetensors: stages[0]: expected a mapping with a type"]
+    with pytest.raises(UserError) as err:
+        legacy_blocks({"corridor": [1.0]}, "bad.safetensors")
+    assert err.value.lines() == ["bad.safetensors: corridor: expected a mapping"]
 
 
 # --- ensembles and sizes in a model file -----------------------------------------------------------

@@ -20,9 +20,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from terrapref.camera import PinholeCamera
-from terrapref.features import kernels
-from terrapref.features.corridor import CorridorConfig, pursuit_yaw_rates, steer
-from terrapref.planner.stages.kernels import lethal_hits, swept_reach
+from terrapref.features import attitude_compiled
+from terrapref.rules.offset import ground_map_compiled, offsets_compiled
+from terrapref.rules.offset.geometry import OffsetGeometry
+from terrapref.rules.offset.steering import pursuit_yaw_rates, steer
+from terrapref.rules.offset.reach_compiled import lethal_hits, swept_reach
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import pure_pursuit_yaw_rate
@@ -62,7 +64,7 @@ def _arc_lengths(rng: np.random.Generator, path: ReferencePath, n: int) -> np.nd
 
 
 def _sky_line_numpy(ids: np.ndarray, rows: np.ndarray, n_cols: int, unknown: int) -> np.ndarray:
-    """The NumPy form of kernels.sky_line (HorizonAttitude.line): the first row of each column with
+    """The NumPy form of attitude_compiled.sky_line (HorizonAttitude.line): the first row of each column with
     ground in at least 3 of it and the next 3 rows read, (C,) float; NaN where none."""
     ground = (ids.reshape(len(rows), n_cols) != unknown).astype(np.int8)
     if len(rows) < 4:
@@ -80,11 +82,11 @@ def test_sky_line_gives_the_numpy_forms_rows(seed: int, n_rows: int, n_cols: int
     step = int(rng.integers(1, 4))
     rows = np.arange(0, n_rows * step, step) + int(rng.integers(0, 200))
     ids = np.where(rng.random(n_rows * n_cols) < ground, rng.integers(0, UNKNOWN, n_rows * n_cols), UNKNOWN).astype(np.uint8)
-    assert _same(kernels.sky_line(ids, rows, n_cols, UNKNOWN), _sky_line_numpy(ids, rows, n_cols, UNKNOWN))
+    assert _same(attitude_compiled.sky_line(ids, rows, n_cols, UNKNOWN), _sky_line_numpy(ids, rows, n_cols, UNKNOWN))
 
 
 def _column_medians_numpy(history: np.ndarray, count: int) -> np.ndarray:
-    """The NumPy form of kernels.column_medians: ``np.nanmedian`` of the first ``count`` lines."""
+    """The NumPy form of attitude_compiled.column_medians: ``np.nanmedian`` of the first ``count`` lines."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # an all-NaN column's median is NaN
         return np.nanmedian(history[:count], axis=0)
@@ -101,7 +103,7 @@ def test_column_medians_are_numpys_nanmedians(seed: int, memory: int, n_cols: in
         rows = np.unique(rng.uniform(-480.0, 480.0, int(rng.integers(1, 30))))  # negative ones too
     history = np.where(rng.random((memory, n_cols)) < missing, np.nan, rng.choice(rows, (memory, n_cols)))
     for count in range(1, memory + 1):  # the lines past ``count`` are not read
-        assert _same(kernels.column_medians(history, count, rows), _column_medians_numpy(history, count))
+        assert _same(attitude_compiled.column_medians(history, count, rows), _column_medians_numpy(history, count))
 
 
 # --- exactly rounded sums ------------------------------------------------------------------------
@@ -136,13 +138,13 @@ FSUM_CASES = [
 
 @pytest.mark.parametrize("values", FSUM_CASES, ids=range(len(FSUM_CASES)))
 def test_exact_sum_is_fsum_on_the_hard_cases(values: list[float]):
-    assert _same(kernels.exact_sum(np.array(values, dtype=np.float64)), math.fsum(values))
+    assert _same(attitude_compiled.exact_sum(np.array(values, dtype=np.float64)), math.fsum(values))
 
 
 @FAST
 @given(st.lists(st.floats(-1e300, 1e300, allow_subnormal=True), max_size=24))
 def test_exact_sum_is_fsum(values: list[float]):
-    assert _same(kernels.exact_sum(np.array(values, dtype=np.float64)), math.fsum(values))
+    assert _same(attitude_compiled.exact_sum(np.array(values, dtype=np.float64)), math.fsum(values))
 
 
 def test_exact_sum_is_fsum_on_sums_that_cancel():
@@ -152,14 +154,14 @@ def test_exact_sum_is_fsum_on_sums_that_cancel():
         v = rng.standard_normal(n) * 10.0 ** rng.integers(-300, 300, n).astype(float)
         v = np.concatenate([v, -v[: int(rng.integers(0, n + 1))] * rng.choice([1.0, 1.0 + 2.0**-52, 1.0 - 2.0**-53])])
         v = rng.permutation(v)
-        assert _same(kernels.exact_sum(v), math.fsum(v.tolist()))
+        assert _same(attitude_compiled.exact_sum(v), math.fsum(v.tolist()))
 
 
 # --- the attitude's fit --------------------------------------------------------------------------
 
 
 def _least_squares_python(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
-    """The Python form of kernels.attitude_fit's least squares: the two coefficients x minimising
+    """The Python form of attitude_compiled.attitude_fit's least squares: the two coefficients x minimising
     |a x - b| for a (N, 2), by the normal equations with exactly rounded sums (math.fsum)."""
     p, q = a[:, 0].tolist(), a[:, 1].tolist()
     r = b.tolist()
@@ -173,7 +175,7 @@ def _least_squares_python(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
 
 def _attitude_fit_numpy(departure: np.ndarray, reference: np.ndarray, u: np.ndarray, fy: float, cy: float,
                         max_rad: float) -> tuple[float, float]:
-    """The NumPy form of kernels.attitude_fit: least squares of the columns'
+    """The NumPy form of attitude_compiled.attitude_fit: least squares of the columns'
     departures against a small pitch's and roll's image motion at the reference line, twice, the
     second time without the columns that miss the first fit by more than 3 rows."""
     n = len(u)
@@ -231,7 +233,7 @@ def test_attitude_fit_gives_the_python_forms_pitch_and_roll(spacing: str):
     for trial in range(150):
         n = int(rng.integers(2, 41))
         departure, reference, u, fy, cy = _attitude_case(rng, n, spacing, missing=rng.choice([0.0, 0.2, 0.6]))
-        got = kernels.attitude_fit(departure, reference, u, fy, cy, max_rad)
+        got = attitude_compiled.attitude_fit(departure, reference, u, fy, cy, max_rad)
         want = _attitude_fit_numpy(departure, reference, u, fy, cy, max_rad)
         assert _same(got[0], want[0]) and _same(got[1], want[1]), (trial, departure, reference, u)
         fitted += want != (0.0, 0.0)
@@ -249,7 +251,7 @@ def test_attitude_fit_gives_the_python_forms_pitch_and_roll(spacing: str):
 def test_attitude_fit_gives_the_python_forms_pitch_and_roll_on_drawn_lines(seed: int, n: int, spacing: str, missing: float):
     departure, reference, u, fy, cy = _attitude_case(np.random.default_rng(seed), n, spacing, missing)
     max_rad = math.radians(6.0)
-    got = kernels.attitude_fit(departure, reference, u, fy, cy, max_rad)
+    got = attitude_compiled.attitude_fit(departure, reference, u, fy, cy, max_rad)
     want = _attitude_fit_numpy(departure, reference, u, fy, cy, max_rad)
     assert _same(got[0], want[0]) and _same(got[1], want[1])
 
@@ -268,7 +270,7 @@ def test_attitude_fit_rejects_what_the_python_form_rejects():
     for name, (departure, ref) in cases.items():
         uu = u[: len(departure)]
         want = _attitude_fit_numpy(departure, ref, uu, fy, cy, max_rad)
-        got = kernels.attitude_fit(departure, ref, uu, fy, cy, max_rad)
+        got = attitude_compiled.attitude_fit(departure, ref, uu, fy, cy, max_rad)
         assert _same(got[0], want[0]) and _same(got[1], want[1]), name
 
 
@@ -277,7 +279,7 @@ def test_attitude_fit_rejects_what_the_python_form_rejects():
 
 def _ground_numpy(ray: np.ndarray, axes: np.ndarray, t: np.ndarray) -> np.ndarray:
     """The NumPy form of where rays (N, 2) of a camera at ``t`` with ``axes`` meet the ground,
-    (N, 2) in the vehicle frame [m]; NaN for rays that do not (terrapref.features.corridor._ground)."""
+    (N, 2) in the vehicle frame [m]; NaN for rays that do not (terrapref.rules.offset.ground_map._ground)."""
     d = [ray[:, 0] * axes[0, i] + ray[:, 1] * axes[1, i] + axes[2, i] for i in range(3)]
     with np.errstate(divide="ignore", invalid="ignore"):
         scale = np.where(d[2] < -1e-12, -t[2] / d[2], np.nan)
@@ -286,7 +288,7 @@ def _ground_numpy(ray: np.ndarray, axes: np.ndarray, t: np.ndarray) -> np.ndarra
 
 def _map_vote_python(evidence, stamp, cells, ox, oy, inv_res, x, y, c, s, vx, vy, weight, cols, frame, fade, lethal, lethal_share,
                      terrain_share, min_evidence) -> None:
-    """The Python form of kernels.map_vote's votes, sample by sample, with each sample's column
+    """The Python form of ground_map_compiled.map_vote's votes, sample by sample, with each sample's column
     ``cols`` given and placed at (vx, vy): float32 evidence, faded by the frames since a cell's
     last vote; a cell's column the lethal one, else the terrain one, else K (K + 1: too little)."""
     n_rows, n_cols = cells.shape
@@ -385,20 +387,20 @@ def test_map_vote_gives_the_numpy_forms_map(tilted: bool):
             yaw = rng.uniform(-math.pi, math.pi)
             axes = camera.tilted(rng.uniform(-0.06, 0.06), rng.uniform(-0.06, 0.06)) if tilted else camera.R
             pose = (float(origin[0]), float(origin[1]), 1.0 / res, float(x), float(y), math.cos(yaw), math.sin(yaw), vx, vy, weight)
-            kernels.map_vote(*maps[0], *pose, distinct, pixel_of, columns, frame, fade, tilted, ray, ground0, axes, camera.t)
+            ground_map_compiled.map_vote(*maps[0], *pose, distinct, pixel_of, columns, frame, fade, tilted, ray, ground0, axes, camera.t)
             _update_numpy(*maps[1], *pose, ids, columns, frame, fade, lethal, shares, axes if tilted else None, ray, ground0, camera.t)
             (evidence, stamp, cells), (want_evidence, want_stamp, want_cells) = maps
             assert _same(evidence, want_evidence) and _same(stamp, want_stamp), (seed, frame)
             # The votes leave their cells undecided; a read decides each as deciding after every vote did.
-            voted = cells == kernels.UNSETTLED
+            voted = cells == ground_map_compiled.UNSETTLED
             assert voted.any() and np.array_equal(cells[~voted], want_cells[~voted]), (seed, frame)
             centres = (np.arange(n) + 0.5) * res
             px, py = np.meshgrid(origin[0] + centres, origin[1] + centres)
-            read = kernels.map_read(cells.copy(), evidence, lethal, np.array(shares), float(origin[0]), float(origin[1]), 1.0 / res,
+            read = ground_map_compiled.map_read(cells.copy(), evidence, lethal, np.array(shares), float(origin[0]), float(origin[1]), 1.0 / res,
                                     px.ravel(), py.ravel(), k + 1)
             assert np.array_equal(read.reshape(n, n), want_cells), (seed, frame)
             if rng.random() < 0.5:  # some frames' cells decided before the next votes, some not
-                kernels.map_settle(cells, evidence, lethal, np.array(shares))
+                ground_map_compiled.map_settle(cells, evidence, lethal, np.array(shares))
                 assert _same(cells, want_cells), (seed, frame)
         evidence, _, cells = maps[1]
         assert (cells < k + 1).sum() > 50 and (evidence > 0).sum(axis=2).max() > 1  # cells voted on, some by several columns
@@ -408,7 +410,7 @@ def test_map_vote_gives_the_numpy_forms_map(tilted: bool):
 
 
 def _map_read_numpy(cells: np.ndarray, ox: float, oy: float, inv_res: float, px: np.ndarray, py: np.ndarray, never: int) -> np.ndarray:
-    """The NumPy form of kernels.map_read: ``cells[floor((py - oy) * inv_res), floor((px - ox) *
+    """The NumPy form of ground_map_compiled.map_read: ``cells[floor((py - oy) * inv_res), floor((px - ox) *
     inv_res)]`` where inside, ``never`` elsewhere."""
     n_rows, n_cols = cells.shape
     i, j = np.floor((px - ox) * inv_res), np.floor((py - oy) * inv_res)
@@ -420,7 +422,7 @@ def _map_read_numpy(cells: np.ndarray, ox: float, oy: float, inv_res: float, px:
 
 def _map_read_beside_numpy(cells: np.ndarray, ox: float, oy: float, inv_res: float, path: ReferencePath, s: np.ndarray, lat: np.ndarray,
                            never: int) -> np.ndarray:
-    """The NumPy form of kernels.map_read_beside: the map's column (O, S, F) at ``centre + lat *
+    """The NumPy form of ground_map_compiled.map_read_beside: the map's column (O, S, F) at ``centre + lat *
     normal``, ``centre = path.point_at(s)``, ``normal`` the path's direction there turned left."""
     u = path.direction_at(s)
     normal = np.stack([-u[:, 1], u[:, 0]], axis=-1)
@@ -437,7 +439,7 @@ def _random_map(rng: np.random.Generator, path: ReferencePath, k: int) -> tuple[
 
 
 def _undecided(rng: np.random.Generator, cells: np.ndarray, k: int) -> tuple[np.ndarray, tuple, np.ndarray]:
-    """``cells`` with about a third of them voted on since decided (kernels.UNSETTLED), the map's
+    """``cells`` with about a third of them voted on since decided (ground_map_compiled.UNSETTLED), the map's
     layers a compiled read takes (cells, evidence, lethal columns, shares), and every cell as a
     read decides it (_column_python where undecided)."""
     evidence = (rng.random((*cells.shape, k + 1)) * (rng.random((*cells.shape, k + 1)) < 0.5)).astype(np.float32)
@@ -447,7 +449,7 @@ def _undecided(rng: np.random.Generator, cells: np.ndarray, k: int) -> tuple[np.
     decided = cells.copy()
     for j, i in zip(*np.nonzero(undecided)):
         decided[j, i] = _column_python(evidence[j, i], lethal, *shares)
-    return np.where(undecided, kernels.UNSETTLED, cells).astype(np.uint8), (evidence, lethal, shares), decided
+    return np.where(undecided, ground_map_compiled.UNSETTLED, cells).astype(np.uint8), (evidence, lethal, shares), decided
 
 
 @FAST
@@ -461,15 +463,15 @@ def test_map_read_beside_gives_the_numpy_forms_columns(seed: int, n_st: int, n_o
     lat = rng.uniform(-4.0, 4.0, (n_off, n_f))
     a, d, length = path.segments
     lazy, layers, cells = _undecided(rng, cells, k)
-    got = kernels.map_read_beside(lazy, *layers, ox, oy, inv_res, path.s, a, d, length, s, lat, k + 1)
+    got = ground_map_compiled.map_read_beside(lazy, *layers, ox, oy, inv_res, path.s, a, d, length, s, lat, k + 1)
     assert _same(got, _map_read_beside_numpy(cells, ox, oy, inv_res, path, s, lat, k + 1))
-    read = lazy != kernels.UNSETTLED
+    read = lazy != ground_map_compiled.UNSETTLED
     assert np.array_equal(lazy[read], cells[read])  # the cells it decided are kept as decided
 
 
 def _lethal_hits_numpy(cells: np.ndarray, ox: float, oy: float, inv_res: float, path: ReferencePath, progress_m: float,
                        stations: np.ndarray, offsets: np.ndarray, across: np.ndarray, lethal: np.ndarray, never: int) -> np.ndarray:
-    """The NumPy form of terrapref.planner.stages.kernels.lethal_hits (OffsetSteering's lethal
+    """The NumPy form of terrapref.rules.offset.reach_compiled.lethal_hits (OffsetSteering's lethal
     lines): whether any point across each offset's line at each station lies on a lethal column."""
     s = np.minimum(progress_m + stations, path.length_m)
     return lethal[_map_read_beside_numpy(cells, ox, oy, inv_res, path, s, offsets[:, None] + across[None, :], never)].any(axis=2)
@@ -492,7 +494,7 @@ def test_lethal_hits_gives_the_numpy_forms_lines(seed: int, n_off: int, n_across
     lazy, layers, cells = _undecided(rng, cells, k)
     got = lethal_hits(lazy, *layers, ox, oy, inv_res, path.s, a, d, length, progress_m, stations, offsets, across, lethal, k + 1)
     assert _same(got, _lethal_hits_numpy(cells, ox, oy, inv_res, path, progress_m, stations, offsets, across, lethal, k + 1))
-    read = lazy != kernels.UNSETTLED
+    read = lazy != ground_map_compiled.UNSETTLED
     assert np.array_equal(lazy[read], cells[read])
 
 
@@ -515,7 +517,7 @@ def test_swept_reach_reads_undecided_cells_as_decided(seed: int, n_off: int):
     got = swept_reach(*args, lazy, *layers, ox, oy, inv_res, lethal, k + 1)
     want = swept_reach(*args, cells, *layers, ox, oy, inv_res, lethal, k + 1)  # no cell left to decide
     assert _same(got, want)
-    read = lazy != kernels.UNSETTLED
+    read = lazy != ground_map_compiled.UNSETTLED
     assert np.array_equal(lazy[read], cells[read])
 
 
@@ -524,7 +526,7 @@ def test_swept_reach_reads_undecided_cells_as_decided(seed: int, n_off: int):
 
 def _corridor_features_numpy(col: np.ndarray, centre: int, k: int, gap: int, beyond: int, step: float, stations: np.ndarray,
                              offsets: np.ndarray, span: float) -> tuple[np.ndarray, float]:
-    """The NumPy form of kernels.corridor_features (CorridorFeatures.__call__): metres on each
+    """The NumPy form of offsets_compiled.offset_features (OffsetFeatures.__call__): metres on each
     column up to ``beyond`` stations past the first patch on the path, and the detour's price."""
     on = (col[centre] < k).any(axis=1)  # (S,): terrain on the path itself
     upto, on_path_m, near_m = len(stations), 0.0, math.inf
@@ -551,7 +553,7 @@ def _corridor_features_numpy(col: np.ndarray, centre: int, k: int, gap: int, bey
        on_path=st.sampled_from([0.0, 0.05, 0.3, 1.0]))
 def test_corridor_features_give_the_numpy_forms_features(seed: int, k: int, gap: int, beyond: int, on_path: float):
     rng = np.random.default_rng(seed)
-    config = CorridorConfig(station_step_m=float(rng.choice([0.25, 0.1, 0.3])), span_m=float(rng.uniform(0.0, 8.0)))
+    config = OffsetGeometry(station_step_m=float(rng.choice([0.25, 0.1, 0.3])), span_m=float(rng.uniform(0.0, 8.0)))
     stations, offsets = config.stations, config.offsets
     n_off, n_st, n_f = len(offsets), len(stations), int(rng.integers(1, 6))
     centre = int(np.argmin(np.abs(offsets)))
@@ -560,20 +562,20 @@ def test_corridor_features_give_the_numpy_forms_features(seed: int, k: int, gap:
     terrain = rng.random(n_st) < on_path
     col[centre] = np.where(terrain[:, None] & (rng.random((n_st, n_f)) < 0.5), rng.integers(0, k, (n_st, n_f)),
                            rng.integers(k, k + 2, (n_st, n_f)))
-    got, near_m = kernels.corridor_features(col, centre, k, gap, beyond, config.station_step_m, stations, offsets, config.span_m)
+    got, near_m = offsets_compiled.offset_features(col, centre, k, gap, beyond, config.station_step_m, stations, offsets, config.span_m)
     want, want_near_m = _corridor_features_numpy(col, centre, k, gap, beyond, config.station_step_m, stations, offsets, config.span_m)
     assert _same(got, want) and _same(near_m, want_near_m)
 
 
 def _gated_numpy(features: np.ndarray, view_near_m: float, offsets: np.ndarray, near_m: float) -> np.ndarray:
-    """The NumPy form of terrapref.features.corridor.gated: the gate column d^2 while nothing is
+    """The NumPy form of terrapref.rules.offset.features.gated: the gate column d^2 while nothing is
     on the path within ``near_m``, after the corridor's features, (O, K + 3)."""
     gate = offsets**2 * float(view_near_m > near_m)
     return np.concatenate([features, gate[:, None]], axis=1)
 
 
 def _weighted_numpy(features: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """The NumPy form of ``features @ weights`` (O,) in kernels.gated_value: column by column in order."""
+    """The NumPy form of ``features @ weights`` (O,) in offsets_compiled.gated_value: column by column in order."""
     value = features[:, 0] * weights[0]
     for j in range(1, len(weights)):
         value = value + features[:, j] * weights[j]
@@ -589,7 +591,7 @@ def test_gated_value_gives_the_numpy_forms_value(seed: int, n_off: int, k: int, 
     features[rng.random(features.shape) < 0.3] = 0.0
     offsets = rng.uniform(-3.0, 3.0, n_off)
     weights = rng.normal(0.0, 1.0, k + 3) * 10.0 ** rng.integers(-2, 3, k + 3)
-    got = kernels.gated_value(features, offsets, view_near_m > near_m, weights)
+    got = offsets_compiled.gated_value(features, offsets, view_near_m > near_m, weights)
     assert _same(got, _weighted_numpy(_gated_numpy(features, view_near_m, offsets, near_m), weights))
 
 

@@ -397,12 +397,12 @@ def test_policies_are_registered_by_name_and_built_or_loaded_by_it(tmp_path: Pat
 def test_only_a_policy_trained_with_a_second_stage_brings_one(classifier_file):
     from terrapref.planner.policy import ClassifierPolicy, CostPolicy
 
-    assert CostPolicy().stages == ()
-    assert ClassifierPolicy(classifier_file.model).stages == ()  # trained without one
+    assert CostPolicy().rules == ()
+    assert ClassifierPolicy(classifier_file.model).rules == ()  # trained without one
     block = {"type": "second_stage", "weight": 5.0, "w": [0.0, 1.0, 2.0, 3.0, 4.0], "b": [0.0] * 21, "fit": "frames"}
     model = classifier_file.model
-    with_stage = replace(model, header=replace(model.header, stages=(block,)))
-    (stage,) = ClassifierPolicy(with_stage).stages
+    with_stage = replace(model, header=replace(model.header, rules=(block,)))
+    (stage,) = ClassifierPolicy(with_stage).rules
     assert stage.type == "second_stage" and stage.config.weight == 5.0 and list(stage.utility.w) == block["w"]
     assert stage.header() == {**block, "after_s": 2.4, "stride": 2, "candidates": 7}
 

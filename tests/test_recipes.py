@@ -15,9 +15,10 @@ from terrapref.dataset import Dataset, build_dataset, merge_datasets, save_datas
 from terrapref.demos.expert import STYLES, ExpertConfig, ExpertDriver
 from terrapref.demos.session import DisturbanceConfig
 from terrapref.errors import UserError
-from terrapref.features import FeatureConfig, LookaheadConfig
-from terrapref.features.corridor import CorridorConfig
-from terrapref.planner.stages import OffsetConfig, SecondStageConfig
+from terrapref.features import FeatureConfig
+from terrapref.rules.second.lookahead import LookaheadConfig
+from terrapref.rules.offset.geometry import OffsetGeometry
+from terrapref.rules import OffsetConfig, SecondStageConfig
 from terrapref.recipes import DEFAULT_RECIPE, RECIPES, Recipe, recipe_named
 from terrapref.learning.train import TrainConfig
 from terrapref.scenario import parse_scenario
@@ -53,18 +54,18 @@ def test_the_paper_recipe_is_the_published_one():
     opt = paper.train.optimiser
     assert (opt.epochs, opt.lr, opt.batch_size, opt.val_fraction) == (15, 1e-3, 256, 0.2)
     assert not (paper.train.classifier.skip or paper.train.data.class_balance or paper.train.data.mirror)
-    assert paper.stages == () and paper.train.classifier.members == 1
+    assert paper.rules == () and paper.train.classifier.members == 1
     assert (paper.demonstrations, paper.corrections, paper.course) == (1, 0, "train_course")
     assert paper.disturbance is None
-    assert paper.features() == FeatureConfig()  # the paper's U: no look-ahead
+    assert paper.features() == FeatureConfig()  # the paper's U
 
 
 def test_ours_drives_train_course_twice_with_pushes():
     ours = RECIPES["ours"]
     assert (ours.demonstrations, ours.course, ours.disturbance) == (2, "train_course", DisturbanceConfig(rate_hz=0.3))
     assert (ours.train.optimiser.epochs, ours.train.optimiser.lr, ours.train.classifier.members) == (100, 3e-3, 1)
-    assert ours.train.classifier.skip and ours.train.data.class_balance and ours.train.data.mirror and ours.stages == (SecondStageConfig(),)
-    assert ours.features().lookahead is None
+    assert ours.train.classifier.skip and ours.train.data.class_balance and ours.train.data.mirror and ours.rules == (SecondStageConfig(),)
+    assert ours.rules[0].data() is None  # fitted frame by frame: it reads nothing of the frames
 
 
 def test_teach_drives_teach_course_once_and_fits_through_the_lookahead():
@@ -72,16 +73,14 @@ def test_teach_drives_teach_course_once_and_fits_through_the_lookahead():
     assert (teach.demonstrations, teach.course, teach.disturbance) == (1, "teach_course", DisturbanceConfig(rate_hz=0.3))
     assert (teach.train.optimiser.epochs, teach.train.optimiser.lr, teach.train.classifier.members) == (100, 3e-3, 3)
     assert teach.train.classifier.skip and teach.train.data.class_balance and teach.train.data.mirror
-    assert teach.stages == (SecondStageConfig(weight=5.0, lookahead=True), OffsetConfig())  # the offset stage, last, drives
-    features = teach.features()
-    assert features.lookahead == LookaheadConfig() and features.corridor == CorridorConfig()
-    assert features == replace(FeatureConfig(), lookahead=LookaheadConfig(), corridor=CorridorConfig())
+    assert teach.rules == (SecondStageConfig(weight=5.0, lookahead=True), OffsetConfig())  # the offset rule, last, drives
+    assert teach.features() == FeatureConfig()
+    assert [r.data() for r in teach.rules] == [{"lookahead": LookaheadConfig().to_dict()}, {"geometry": OffsetGeometry().to_dict()}]
 
 
-def test_features_keep_the_base_and_set_the_recipes_own():
-    base = FeatureConfig(path_spacing_m=0.5, lookahead=LookaheadConfig(), corridor=CorridorConfig())
-    assert RECIPES["teach"].features(base) == base
-    assert RECIPES["paper"].features(base) == replace(base, lookahead=None, corridor=None)
+def test_features_are_the_base_given():
+    base = FeatureConfig(path_spacing_m=0.5)
+    assert RECIPES["teach"].features(base) == base == RECIPES["paper"].features(base)
 
 
 @pytest.mark.parametrize("bad", [dict(demonstrations=0), dict(corrections=-1)])
@@ -194,9 +193,11 @@ def _dataset(n: int, recordings: int, seed: int, lookahead: bool = False, **meta
     m, k = 21, 5
     source = np.sort(np.arange(n) % recordings).astype(np.int64)
     meta = {"format": DATASET_FORMAT, **model_meta(), "recordings": [{"path": f"rec{seed}_{i}"} for i in range(recordings)], **meta}
-    U2 = rng.uniform(0, 1, (n, m, m, k)).astype(np.float16) if lookahead else None
+    rules = {"second_stage": {"U2": rng.uniform(0, 1, (n, m, m, k)).astype(np.float16)}} if lookahead else {}
+    if lookahead:
+        meta["rules"] = {"second_stage": {"config": SecondStageConfig(lookahead=True).data(), "arrays": {"U2": "finite"}}}
     return Dataset(rng.uniform(0, 1, (n, m, k)).astype(np.float32), rng.integers(0, m, n), rng.uniform(-1, 1, n).astype(np.float32),
-                   source, meta, U2)
+                   source, meta, rules)
 
 
 def test_merging_concatenates_and_numbers_the_recordings_across_all():
@@ -257,7 +258,7 @@ def test_datasets_with_and_without_lookahead_are_refused(first: bool, second: bo
     a, b = _dataset(3, 1, 0, lookahead=first), _dataset(3, 1, 1, lookahead=second)
     with pytest.raises(UserError) as caught:
         merge_datasets([("first.safetensors", a), ("second.safetensors", b)])
-    assert caught.value.source == "second.safetensors" and [p.field for p in caught.value.problems] == ["U2"]
+    assert caught.value.source == "second.safetensors" and [p.field for p in caught.value.problems] == ["rules"]
     assert "first.safetensors" in str(caught.value)
 
 
@@ -321,21 +322,21 @@ def test_a_cache_featurises_each_recording_once_into_the_same_dataset(tmp_path, 
     import terrapref.dataset as dataset_module
     from terrapref.recipes import TEACH, RecipeSetup, demonstrate
 
-    features = TEACH.features()
+    features, rules = TEACH.features(), TEACH.rules
     recordings = demonstrate(Recipe("two", demonstrations=2), tmp_path, RecipeSetup(3, course="demo_course"), write=False)
-    plain, one = build_dataset(recordings, features), build_dataset(recordings[:1], features)
+    plain, one = build_dataset(recordings, features, rules=rules), build_dataset(recordings[:1], features, rules=rules)
     calls: list[int] = []
     featurise = dataset_module.featurize_recording
     monkeypatch.setattr(dataset_module, "featurize_recording", lambda rec, *a: calls.append(id(rec)) or featurise(rec, *a))
     cache: dict = {}
-    first = build_dataset(recordings[:1], features, cache=cache)
-    both = build_dataset(recordings, features, cache=cache)
+    first = build_dataset(recordings[:1], features, rules=rules, cache=cache)
+    both = build_dataset(recordings, features, rules=rules, cache=cache)
     assert calls == [id(recordings[0]), id(recordings[1])]  # the first recording was not featurised again
     assert both.fingerprint == plain.fingerprint and first.fingerprint == one.fingerprint
     for a, b in ((both.U, plain.U), (both.labels, plain.labels), (both.w, plain.w), (both.source, plain.source), (both.U2, plain.U2)):
         np.testing.assert_array_equal(a, b)
     assert both.meta == plain.meta
-    build_dataset(recordings, replace(features, lookahead=None), cache=cache)  # other features: featurised anew
+    build_dataset(recordings, features, rules=rules[1:], cache=cache)  # other rules' data: featurised anew
     assert len(calls) == 4
 
 

@@ -12,12 +12,12 @@ from terrapref.camera import PinholeCamera
 from terrapref.cli import main
 from terrapref.interop.robot import load_waypoints
 from terrapref.features import FeatureConfig
-from terrapref.learning.corridor import CorridorUtility
+from terrapref.rules.offset.fit import OffsetUtility
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
-from terrapref.planner.costmap import LETHAL_COST
-from terrapref.planner.stages.offset import OffsetSteering
-from terrapref.planner.route import RouteConfig, RouteError, detour_prices, plan_route, prior_costmap
+from terrapref.rules.costmap import LETHAL_COST
+from terrapref.rules.offset.rule import OffsetSteering
+from terrapref.planner.route import RouteConfig, RouteError, plan_route
 from terrapref.scenario import load_scenario
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import default_classes
@@ -31,9 +31,10 @@ PATH = ReferencePath(np.array([[2.0, 10.0], [38.0, 10.0]]))
 
 def _route(patches: list[dict], config: RouteConfig | None = None):
     """The route along PATH over ``patches``, priced as DRIVER_LIKE prices them, and its costmap."""
-    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), PinholeCamera(), _terrain((0,)), CONTROL)
-    costmap = prior_costmap(rasterise(_scenario(patches)), stage, NAMES)
-    return plan_route(costmap, PATH, *detour_prices(stage), config=config), costmap
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), PinholeCamera(), _terrain((0,), NAMES), CONTROL)
+    prices = stage.route_prices()
+    costmap = prices.prior(rasterise(_scenario(patches)))
+    return plan_route(costmap, PATH, prices.detour_price, prices.span_m, config=config), costmap
 
 
 def _band(cls: str, x: tuple[float, float], y: tuple[float, float]) -> dict:
@@ -83,15 +84,16 @@ def test_terrapref_route_writes_a_scenario_that_follows_the_route(tmp_path, caps
     assert (tmp_path / "route.png").stat().st_size > 10_000
     plain = save_model(tmp_path / "c.safetensors", config, skip_path_weights(config), model_meta())
     assert main(["route", "fig7_rock_vs_non_traversable_left", "--model", str(plain), "--out", str(tmp_path / "c.yaml")]) == 2
-    one_line_error(capsys, "c.safetensors", "no offset stage")
+    one_line_error(capsys, "c.safetensors", "learned no prices")
     assert not (tmp_path / "c.yaml").exists()
 
 
 def test_a_route_keeps_off_the_maps_edge_and_a_path_that_ends_where_it_starts_is_refused():
     edge = ReferencePath(np.array([[2.0, 1.5], [38.0, 1.5]]))  # 1.5 m from the map's southern edge, beside a strip of water
-    stage = OffsetSteering(CorridorUtility(DRIVER_LIKE, 5.0), PinholeCamera(), _terrain((0,)), CONTROL)
-    costmap = prior_costmap(rasterise(_scenario([_band("water", (15.0, 25.0), (1.0, 4.0))])), stage, NAMES)
-    route = plan_route(costmap, edge, *detour_prices(stage))
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), PinholeCamera(), _terrain((0,), NAMES), CONTROL)
+    prices = stage.route_prices()
+    costmap = prices.prior(rasterise(_scenario([_band("water", (15.0, 25.0), (1.0, 4.0))])))
+    route = plan_route(costmap, edge, prices.detour_price, prices.span_m)
     assert ReferencePath(route.waypoints).resampled(0.05)[0][:, 1].min() > 0.8  # never within 0.9 m (less a cell) of the edge
     with pytest.raises(RouteError, match="ends in the search cell it starts in"):
-        plan_route(costmap, ReferencePath(np.array([[10.0, 10.0], [10.1, 10.1]])), *detour_prices(stage))
+        plan_route(costmap, ReferencePath(np.array([[10.0, 10.0], [10.1, 10.1]])), prices.detour_price, prices.span_m)

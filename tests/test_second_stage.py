@@ -1,4 +1,4 @@
-"""The planner's second stage (terrapref.planner.stages.second): trajectories laid out again from a
+"""The planner's second stage (terrapref.rules.second.rule): trajectories laid out again from a
 point along each candidate, read from the current frame, scored by a linear utility the model
 file carries; off for models without one."""
 
@@ -21,8 +21,8 @@ from terrapref.planner.registry import load_policy
 from terrapref.learning.network import ClassifierConfig
 from terrapref.learning.pipeline import RunOptions, train_and_save
 from terrapref.planner import Planner
-from terrapref.planner.stages import SecondStage, SecondStageConfig
-from terrapref.planner.stages.second import SecondStageScores
+from terrapref.rules import SecondStageRule, SecondStageConfig
+from terrapref.rules.second.rule import SecondStageScores
 from terrapref.scenario import resolve_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim import Simulation
@@ -129,12 +129,12 @@ def _model_with_utility(path: Path, utility: dict | None):
 
 def test_the_planner_looks_ahead_only_with_a_utility(tmp_path: Path):
     plain = Planner(load_model(_model_with_utility(tmp_path / "plain.safetensors", None)))
-    assert plain.stage.type == "argmax"
+    assert plain.rule.type == "argmax"
     with_utility = load_model(_model_with_utility(tmp_path / "la.safetensors", {"w": UTILITY.w.tolist(), "b": UTILITY.b.tolist()}))
-    assert Planner(with_utility).stage.type == "second_stage"
-    assert Planner(with_utility, stage="argmax").stage.type == "argmax"
-    with pytest.raises(ValueError, match="no 'offset' stage"):
-        Planner(with_utility, stage="offset")
+    assert Planner(with_utility).rule.type == "second_stage"
+    assert Planner(with_utility, rule="argmax").rule.type == "argmax"
+    with pytest.raises(ValueError, match="no 'offset' rule"):
+        Planner(with_utility, rule="offset")
 
 
 def test_weight_zero_is_the_argmax_of_f(tmp_path: Path):
@@ -144,20 +144,20 @@ def test_weight_zero_is_the_argmax_of_f(tmp_path: Path):
     for x in (8.0, 12.0, 16.0):
         pose = Pose(x, 10.0, 0.0)
         image = renderer.render(pose)
-        fitted = Planner(model).stage
-        planner = Planner(model, stage=SecondStage(replace(fitted.config, weight=0.0), fitted.utility))
+        fitted = Planner(model).rule
+        planner = Planner(model, rule=SecondStageRule(replace(fitted.config, weight=0.0), fitted.utility))
         planner.set_path(np.vstack([[x, 10.0], course.waypoints[1:]]))
         d = planner.decide(image, pose)
         assert d.index == int(np.argmax(d.probs))
 
 
 @pytest.mark.parametrize("utility, field", [
-    ({"w": [1.0, 2.0], "b": [0.0] * 21}, "stages[0].w"),
-    ({"w": [0.0] * 5}, "stages[0].b"),
-    ({"w": [0.0] * 5, "b": [math.inf] * 21}, "stages[0].b"),
+    ({"w": [1.0, 2.0], "b": [0.0] * 21}, "rules[0].w"),
+    ({"w": [0.0] * 5}, "rules[0].b"),
+    ({"w": [0.0] * 5, "b": [math.inf] * 21}, "rules[0].b"),
     ("not a table", "utility"),
-    ({"w": [0.0] * 5, "b": [0.0] * 21, "weight": -1.0}, "stages[0].weight"),
-    ({"w": [0.0] * 5, "b": [0.0] * 21, "weight": "heavy"}, "stages[0].weight"),
+    ({"w": [0.0] * 5, "b": [0.0] * 21, "weight": -1.0}, "rules[0].weight"),
+    ({"w": [0.0] * 5, "b": [0.0] * 21, "weight": "heavy"}, "rules[0].weight"),
 ])
 def test_a_broken_utility_is_refused_with_its_field(tmp_path: Path, utility, field: str):
     """A file written before stages were listed (its ``utility`` read as the second stage's block)."""
@@ -175,16 +175,16 @@ def test_training_keeps_the_fitted_utility_with_the_model(tmp_path: Path):
     dataset = Dataset(rng.uniform(0, 1, (n, m, 5)).astype(np.float32), rng.integers(0, m, n), np.zeros(n, np.float32),
                       np.zeros(n, np.int64), model_meta())
     out = tmp_path / "m.safetensors"
-    result = train_and_save(dataset, out, train_config(epochs=1, mirror=True), stages=[SecondStageConfig()], options=RunOptions(checkpoints=False))
-    (stage,) = result.stages
+    result = train_and_save(dataset, out, train_config(epochs=1, mirror=True), rules=[SecondStageConfig()], options=RunOptions(checkpoints=False))
+    (stage,) = result.rules
     np.testing.assert_allclose(stage.utility.b, stage.utility.b[::-1], atol=0.02)  # random labels: asymmetric without mirror
     model = load_model(out)
-    (block,) = model.meta["stages"]
+    (block,) = model.meta["rules"]
     assert block["type"] == "second_stage" and block["fit"] == "frames" and block["weight"] == 1.5
     np.testing.assert_allclose(block["w"], stage.utility.w)
-    assert Planner(model).stage.header() == stage.header()  # the file round-trips the fitted stage
+    assert Planner(model).rule.header() == stage.header()  # the file round-trips the fitted stage
     train_and_save(dataset, tmp_path / "p.safetensors", train_config(epochs=1), options=RunOptions(checkpoints=False))
-    assert load_model(tmp_path / "p.safetensors").meta["stages"] == []
+    assert load_model(tmp_path / "p.safetensors").meta["rules"] == []
 
 
 def test_the_planner_drives_the_best_second_stage_score(tmp_path: Path):
@@ -192,7 +192,7 @@ def test_the_planner_drives_the_best_second_stage_score(tmp_path: Path):
     model = load_model(_model_with_utility(tmp_path / "la.safetensors", {"w": UTILITY.w.tolist(), "b": UTILITY.b.tolist()}))
     course = resolve_scenario("demo_course")
     renderer = SegmentationRenderer(PinholeCamera(), Simulation(course).world)
-    plain = Planner(model, stage="argmax")
+    plain = Planner(model, rule="argmax")
     for x in (8.0, 12.0, 16.0):
         pose = Pose(x, 10.0, 0.0)
         image = renderer.render(pose)
@@ -226,7 +226,7 @@ def test_scores_are_the_linear_utility_of_the_second_stage_utilities(setup):
 
 
 def _numpy_scores(stage: SecondStageScores, log_probs: np.ndarray, image: np.ndarray, pose: Pose, path: ReferencePath, s: float) -> np.ndarray:
-    """SecondStage.scores as NumPy computed it before its loop was compiled."""
+    """SecondStageRule.scores as NumPy computed it before its loop was compiled."""
     rows = np.argsort(-log_probs, kind="stable")[: stage.config.candidates]
     r, m = len(rows), stage.m
     terrain = np.take(stage._point_weight, image.reshape(-1)[stage.pix[rows].ravel()])

@@ -17,7 +17,7 @@ from terrapref.learning.model_file import expected_shapes, load_model
 from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
 from terrapref.learning.pipeline import RunOptions, train_and_save
 from terrapref.learning.train import MEMBER_SEED_STEP, TrainConfig, split_indices, train
-from terrapref.planner.stages import SecondStageConfig
+from terrapref.rules import SecondStageConfig
 
 from helpers import K, M, W_TRUE, assert_weights_equal, dataset_of, sparse_terrain_dataset, linear_dataset, model_meta, random_dataset, random_weights, train_config, weights_differ
 
@@ -284,8 +284,8 @@ def test_training_without_the_identifiability_report_trains_the_same_weights():
     ds = random_dataset(120, seed=3)
     config = train_config(epochs=3)
     full, bare = train(ds, config), train(ds, config, identify=False)
-    assert full.identifiability is not None and bare.identifiability is None and not bare.stages
+    assert full.identifiability is not None and bare.identifiability is None and not bare.rules
     assert_weights_equal(full.weights, bare.weights)
     # a second stage needs the fit: it is made whatever identify says
-    staged = train(ds, train_config(epochs=3), identify=False, stages=[SecondStageConfig()])
-    assert staged.stages[0].type == "second_stage" and staged.identifiability is not None
+    staged = train(ds, train_config(epochs=3), identify=False, rules=[SecondStageConfig()])
+    assert staged.rules[0].type == "second_stage" and staged.identifiability is not None

@@ -13,16 +13,17 @@ the layers below it (tests/test_layout.py checks this list against the code):
 8. camera (sensing)
 9. perception (what a robot's segmentation gets wrong)
 10. sim (closed loop, Gymnasium env)
-11. features (utility features U, look-ahead, corridor)
+11. features (utility features U, the sky line's attitude)
 12. demos (driving and recording demonstrations)
-13. dataset (featurising recordings into training sets)
-14. learning (C, linear and corridor fits, model files)
-15. planner (policies, decision stages, costmap, route)
-16. baselines, recipes
-17. interop (robot logs, ONNX, MCAP, ROS)
-18. evaluation, teleop
-19. report, filekinds (which reader checks a file, templates)
-20. cli, runtime, warm_up
+13. dataset (featurising recordings into training sets, with what the rules read)
+14. learning (C, the linear utility, model files)
+15. rules (decision rules, one package each: argmax, second stage, offset with its ground map)
+16. planner (policies, the stop rule, route)
+17. baselines, recipes
+18. interop (robot logs, ONNX, MCAP, ROS)
+19. evaluation, teleop
+20. report, filekinds (which reader checks a file, templates)
+21. cli, runtime, warm_up
 """
 
 import os

@@ -347,7 +347,7 @@ def _print_what_the_drive_shows(rec) -> None:
         return
     recipe = recipe_named(DEFAULT_RECIPE)
     bar = Progress("featurize", len(rec), unit="frames")
-    dataset = build_dataset([rec], recipe.features(), frames=lambda done, n: bar.update(done, f"{done}/{n} frames"))
+    dataset = build_dataset([rec], recipe.features(), rules=recipe.rules, progress=lambda p: bar.update(p.frames_done, f"{p.frames_done}/{p.frames} frames"))
     bar.close()
     print(f"what the drive shows (recipe {DEFAULT_RECIPE}'s features, {len(dataset)} frames):")
     for line in identify(dataset, steady=recipe.train.data.steady_labels).lines(rec.meta.get("profile")):
@@ -371,7 +371,8 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
             print(f"warning: {r.path} is partial; using its {len(r)} frames", file=sys.stderr)
     from terrapref.recipes import DEFAULT_RECIPE, recipe_named
 
-    features = replace(recipe_named(args.recipe or DEFAULT_RECIPE).features(), distance_mode=args.distance_mode)
+    recipe = recipe_named(args.recipe or DEFAULT_RECIPE)
+    features = replace(recipe.features(), distance_mode=args.distance_mode)
     pref = features.preference
     if args.n_steps is not None or args.dt is not None:
         if args.n_steps is not None and args.n_steps < 1:
@@ -386,18 +387,23 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
 
         camera = load_camera(args.camera)
     bar = Progress("featurize", len(recordings))
-    dataset = build_dataset(recordings, features, camera, progress=lambda k, n: bar.update(k, f"{k}/{n} recordings"))
+    dataset = build_dataset(recordings, features, camera, recipe.rules, progress=_by_recording(bar))
     bar.close()
     save_dataset(dataset, args.out)
     print(f"wrote {args.out}: {len(dataset)} samples from {len(recordings)} recordings (fingerprint {dataset.fingerprint})")
     return 0
 
 
-def _stages(args: argparse.Namespace, recipe: Recipe) -> tuple:
-    """The recipe's stages with ``--second-stage`` / ``--no-second-stage`` and ``--stage-weight`` on top."""
-    from terrapref.planner.stages import SecondStageConfig
+def _by_recording(bar):
+    """A featurising progress (terrapref.dataset.Featuring) that moves ``bar`` a whole recording at a time."""
+    return lambda p: bar.update(p.recordings_done, f"{p.recordings_done}/{p.recordings} recordings") if p.recordings_done else None
 
-    stages = list(recipe.stages)
+
+def _stages(args: argparse.Namespace, recipe: Recipe) -> tuple:
+    """The recipe's rules with ``--second-stage`` / ``--no-second-stage`` and ``--stage-weight`` on top."""
+    from terrapref.rules import SecondStageConfig
+
+    stages = list(recipe.rules)
     second = next((i for i, s in enumerate(stages) if isinstance(s, SecondStageConfig)), None)
     on, weight = getattr(args, "second_stage", None), getattr(args, "stage_weight", None)
     if on is False and second is not None:
@@ -541,7 +547,7 @@ def _training_data(args: argparse.Namespace, recipe: Recipe) -> Dataset:
     recordings = [p for p in args.data if p.is_dir()]
     _warn_lethal_contact(recordings)
     bar = Progress("featurize", len(recordings), enabled=bool(recordings))
-    data = training_data(args.data, recipe.features(), progress=lambda k, n: bar.update(k, f"{k}/{n} recordings"))
+    data = training_data(args.data, recipe.features(), recipe.rules, progress=_by_recording(bar))
     bar.close()
     if len(data) == 0:
         raise UserError(str(args.data[0]), "holds no samples to train on", field="frames")
@@ -606,8 +612,8 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
         print(result.steadying.line())
     table = ClassTable.from_dict(data.meta["classes"], str(args.data[0]))
     lethal = frozenset({table.lethal_column} if table.lethal else ())  # the terrain column the lethal classes share
-    for stage in result.stages:
-        print(stage.describe(data.feature_config.feature_classes, lethal))
+    for rule in result.rules:
+        print(rule.describe(data.feature_config.feature_classes, lethal))
     if result.identifiability is not None:
         print("what the demonstrations show (stored in the model):")
         for line in result.identifiability.lines(data.meta.get("profile")):
@@ -625,7 +631,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
     recipe = recipe_named(args.recipe or DEFAULT_RECIPE)
     config = _train_config(args, recipe)
-    recipe = replace(recipe, stages=_stages(args, recipe))
+    recipe = replace(recipe, rules=_stages(args, recipe))
     _check_distinct(args.data, "recording or dataset")
     _check_output(args.out, "--out", args.data, force=args.force)
     if args.classes is not None:  # recordings before they are featurised
@@ -638,22 +644,19 @@ def _cmd_train(args: argparse.Namespace) -> int:
         from terrapref.terrain import ClassTable
 
         _check_table(args, ClassTable.from_dict(data.meta["classes"], str(args.data[0])), args.data[0])
-    types = {stage.type for stage in recipe.stages}
-    if recipe.features().lookahead is not None and data.U2 is None:
-        print(f"warning: {args.data[0]} carries no look-ahead utilities; the second stage is fitted frame by frame "
-              f"(train from the recordings, or featurize them with --recipe {recipe.name})", file=sys.stderr)
-    if "offset" in types and data.corridor is None:
-        print(f"warning: {args.data[0]} carries no corridor data; the model gets no offset stage and drives C's trajectories "
-              f"(train from the recordings, or featurize them with --recipe {recipe.name})", file=sys.stderr)
+    for rule in recipe.rules:
+        if rule.data() is not None and data.rule_data(rule.type) is None:
+            print(f"warning: {args.data[0]} carries no data for the {rule.type} rule; {rule.without_data} "
+                  f"(train from the recordings, or featurize them with --recipe {recipe.name})", file=sys.stderr)
     opt, members = config.optimiser, config.classifier.members
     print(f"recipe {recipe.name}: training on {len(data)} samples ({len(args.data)} input(s)), {opt.epochs} epochs, "
           f"batch {opt.batch_size}, lr {opt.lr}{f', {members} members' if members > 1 else ''}")
     try:
-        result = train_and_save(data, args.out, config, stages=recipe.stages, recipe=recipe.name,
+        result = train_and_save(data, args.out, config, rules=recipe.rules, recipe=recipe.name,
                                 options=RunOptions(progress=_epoch_printer(config, args.verbose)))
     except KeyboardInterrupt:
         if interrupted_path(args.out).exists():
-            print(f"note: the best epochs so far are in {interrupted_path(args.out)} (marked interrupted: no decision stages); "
+            print(f"note: the best epochs so far are in {interrupted_path(args.out)} (marked interrupted: no decision rules); "
                   f"{args.out} is untouched", file=sys.stderr)
         raise
     _report_training(args, config, data, result)
@@ -1059,9 +1062,9 @@ def _cmd_recipes(args: argparse.Namespace) -> int:
     for name, r in RECIPES.items():
         tag = " (default)" if name == DEFAULT_RECIPE else ""
         drives = f"{r.demonstrations} drive{'s' if r.demonstrations > 1 else ''} of {r.course}"
-        stages = ", then ".join(s.type for s in r.stages) or "none"
+        stages = ", then ".join(s.type for s in r.rules) or "none"
         print(f"{name}{tag}: {drives}, {r.train.optimiser.epochs} epochs{f', {r.train.classifier.members} members' if r.train.classifier.members > 1 else ''}; "
-              f"stages: {stages} (the last drives; none: C's argmax)")
+              f"rules: {stages} (the last drives; none: C's argmax)")
         print(f"    {r.summary}")
     return 0
 

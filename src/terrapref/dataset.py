@@ -12,9 +12,9 @@ from __future__ import annotations
 import hashlib
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
@@ -22,32 +22,39 @@ from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer, 
 from terrapref.demos.recording import Recording, read_recording, require_meta
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
-from terrapref.features.corridor import CorridorFeatures, GroundMap, TerrainColumns, intent_offsets
-from terrapref.features.lookahead import Lookahead
 from terrapref.scenario import Scenario, parse_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.tensorfile import read_tensor_file, write_tensor_file
 from terrapref.terrain import ClassTable
 from terrapref.world import rasterise
 
-FORMAT = "terrapref-dataset/1"
+FORMAT = "terrapref-dataset/2"
+OLD_FORMATS = ("terrapref-dataset/1",)  # before the decision rules kept their own arrays: featurised again, not read
+
+# What a rule's array may hold besides finite numbers, as a dataset declares it for each array (checked on load).
+ARRAY_KINDS = {"finite": "finite numbers", "finite >= 0": "finite numbers >= 0", "no NaN": "numbers (inf allowed, NaN not)",
+               "no inf": "numbers (NaN allowed, inf not)"}
 
 
-class CorridorData(NamedTuple):
-    """Each frame's offset corridor (terrapref.features.corridor) and what the driver steered for.
+class FrameReader(Protocol):
+    """What a decision rule reads of each frame while a recording is featurised (terrapref.rules.base.FrameReader)."""
 
-    Attributes:
-        features: metres per terrain class, never seen, and the detour's price, per candidate
-            offset, shape (N, O, K + 2) float32.
-        near_m: distance along the path to the first terrain on it, shape (N,) float32 [m]
-            (inf: none within the corridor).
-        intent_m: the offset the driver was steering for, shape (N,) float32 [m] (NaN: the
-            recording ends before its reaction time has passed).
-    """
+    def read(self, j: int, view: SegmentationView, pose: tuple, path: ReferencePath, progress_m: float) -> None: ...
 
-    features: np.ndarray
-    near_m: np.ndarray
-    intent_m: np.ndarray
+    def arrays(self, recording: Recording, keep: np.ndarray, path: ReferencePath) -> dict[str, np.ndarray]: ...
+
+
+class RuleData(Protocol):
+    """A decision rule's configuration as featurisation sees it (terrapref.rules.base.RuleConfig):
+    its name, the configuration of the arrays it reads (None: none), how each array is checked,
+    and a reader of them."""
+
+    type: str
+    arrays: dict[str, str]
+
+    def data(self) -> dict[str, Any] | None: ...
+
+    def reader(self, featurizer: UtilityFeaturizer, camera: PinholeCamera, classes: ClassTable, n: int) -> FrameReader: ...
 
 
 @dataclass(frozen=True)
@@ -60,10 +67,9 @@ class Dataset:
         w: demonstrated continuous yaw rate [rad/s], shape (N,) float32.
         source: index of the recording each sample came from, shape (N,) int64.
         meta: features, camera, classes, profile, recordings (JSON-serialisable).
-        U2: the look-ahead utilities of every frame, shape (N, m, m, K + 1) float16, when the
-            feature configuration asks for them (``FeatureConfig.lookahead``); else None.
-        corridor: every frame's offset corridor and intended offset, when the feature
-            configuration asks for them (``FeatureConfig.corridor``); else None.
+        rules: what the decision rules' fits read of each frame, by rule (its ``type``) and
+            array name, one row per sample; ``meta["rules"]`` holds, by rule, the configuration
+            they were read with and how each array is checked.
     """
 
     U: np.ndarray
@@ -71,8 +77,7 @@ class Dataset:
     w: np.ndarray
     source: np.ndarray
     meta: dict
-    U2: np.ndarray | None = None
-    corridor: CorridorData | None = None
+    rules: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return len(self.labels)
@@ -86,9 +91,21 @@ class Dataset:
         return CameraConfig.from_dict(self.meta["camera"])
 
     @property
+    def U2(self) -> np.ndarray | None:
+        """The look-ahead utilities of every frame, (N, m, m, K + 1) float16, when a rule's arrays
+        hold them (the second stage's, ``U2``); else None."""
+        return next((arrays["U2"] for arrays in self.rules.values() if "U2" in arrays), None)
+
+    def rule_data(self, rule: str) -> tuple[dict[str, Any], dict[str, np.ndarray]] | None:
+        """The configuration ``rule``'s arrays were read with, and the arrays; None when the dataset holds none for it."""
+        if rule not in self.rules:
+            return None
+        return self.meta["rules"][rule]["config"], self.rules[rule]
+
+    @property
     def fingerprint(self) -> str:
         h = hashlib.sha256()
-        extra = (() if self.U2 is None else (self.U2,)) + (() if self.corridor is None else tuple(self.corridor))
+        extra = [a for arrays in self.rules.values() for a in arrays.values()]
         for a in (self.U, self.labels, *extra):
             h.update(np.ascontiguousarray(a).tobytes())
         return h.hexdigest()[:16]
@@ -100,15 +117,13 @@ class Featurised(NamedTuple):
     U: np.ndarray
     labels: np.ndarray
     w: np.ndarray
-    U2: np.ndarray | None
-    corridor: CorridorData | None
+    rules: dict[str, dict[str, np.ndarray]]
 
 
 def featurize_recording(recording: Recording, features: FeatureConfig, camera: CameraConfig | None = None,
-                        on_frame: Callable[[int], None] | None = None) -> Featurised:
-    """U (F, m, K + 1), labels (F,), w (F,) and, when ``features.lookahead`` asks, U2 (F, m, m, K + 1)
-    float16, and when ``features.corridor`` asks, the corridor data, for every frame of a
-    recording taken on the map (frames off it are left out).
+                        on_frame: Callable[[int], None] | None = None, rules: tuple[RuleData, ...] = ()) -> Featurised:
+    """U (F, m, K + 1), labels (F,), w (F,) and what each of ``rules`` reads for its fit, for every
+    frame of a recording taken on the map (frames off it are left out).
 
     Args:
         camera: None uses the recorded frames; another configuration re-renders each frame from
@@ -128,7 +143,6 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
         raise UserError(str(recording.path / "meta.json"), f"its frames are what the robot received under perception {perceived!r}; "
                         "rendering them again under another camera would give the simulator's truth instead", field="perception")
     renderer = None if camera.same_geometry(rec_camera) else SegmentationRenderer(PinholeCamera(camera), rasterise(scenario))
-    lookahead = Lookahead(features.lookahead, featurizer, PinholeCamera(camera)) if features.lookahead is not None else None
     if len(recording) == 0:
         raise UserError(str(recording.path / "frames.jsonl"), "holds no frames to featurise", field="frames")
     keep = np.flatnonzero(on_map(recording.poses, scenario))  # frames taken off the map are not training data
@@ -140,60 +154,25 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
     known[255] = True
     shape = (rec_camera.height_px, rec_camera.width_px)
     U = np.empty((n, m, features.n_features), dtype=np.float32)
-    U2 = np.empty((n, m, m, features.n_terrain + 1), dtype=np.float16) if lookahead is not None else None
     # Between frames that are not consecutive (a ride-along's corrections, frames left out off
     # the map) the vehicle may have gone further than the tracker's window: widen it by what
     # the vehicle could have driven in the gap.
     period = recording.frame_period_s
     v_max = _max_speed(recording.meta)
-    corridor = _CorridorReader(features, featurizer, PinholeCamera(camera), classes, n) if features.corridor is not None else None
+    readers = {rule.type: rule.reader(featurizer, PinholeCamera(camera), classes, n) for rule in rules if rule.data() is not None}
     for j, i in enumerate(keep):
         pose = tuple(recording.poses[i])
         view = _frame_view(recording, i, renderer, pose, shape, known)
         gap_s = recording.times[i] - recording.times[keep[j - 1]] if j > 0 else 0.0
         s = tracker.update(recording.poses[i, :2], ahead_m=v_max * gap_s + 2.0 if gap_s > 1.5 * period else None)
         U[j] = featurizer(view, pose, path, s)
-        if lookahead is not None:
-            U2[j] = lookahead.utilities(view, pose, path, s)
-        if corridor is not None:
-            corridor.read(j, view, pose, path, s)
+        for reader in readers.values():
+            reader.read(j, view, pose, path, s)
         if on_frame is not None:
             on_frame(j + 1)
     w = recording.commands[keep, 1].astype(np.float32)
     labels = np.asarray(features.preference.control.label_of(w), dtype=np.int64).reshape(n)
-    return Featurised(U, labels, w, U2, corridor.data(recording, keep, path) if corridor is not None else None)
-
-
-class _CorridorReader:
-    """The corridor of each frame of one recording, read in order (the ground map gathers them)."""
-
-    def __init__(self, features: FeatureConfig, featurizer: UtilityFeaturizer, camera: PinholeCamera, classes: ClassTable, n: int) -> None:
-        config, k = features.corridor, features.n_terrain
-        self.config = config
-        self.map = GroundMap(camera, TerrainColumns.of(featurizer.class_columns, k, classes), config)
-        self.corridor = CorridorFeatures(config, k)
-        self.features = np.empty((n, len(self.corridor.offsets), k + 2), dtype=np.float32)
-        self.near = np.empty(n, dtype=np.float32)
-        self.progress = np.empty(n)
-
-    def read(self, j: int, view: SegmentationView, pose: tuple, path: ReferencePath, s: float) -> None:
-        self.map.update(view, pose)
-        frame = self.corridor(self.map, path, s)
-        self.features[j], self.near[j] = frame.features, frame.near_m
-        self.progress[j] = s
-
-    def data(self, recording: Recording, keep: np.ndarray, path: ReferencePath) -> CorridorData:
-        """The corridor data, with each frame's intended offset read from the command one reaction time later."""
-        delay = round(self.config.intent_delay_s / recording.frame_period_s)
-        later = np.full((len(keep), 2), np.nan)
-        ahead = keep + delay
-        ok = ahead < len(recording)
-        # Only where the frame that much later is the next ones' in time (not across a gap).
-        ok[ok] &= np.abs(recording.times[ahead[ok]] - recording.times[keep[ok]] - delay * recording.frame_period_s) < 0.5 * recording.frame_period_s
-        later[ok] = recording.commands[ahead[ok]]
-        intent = intent_offsets(recording.poses[keep], later, self.progress, path, self.corridor.offsets,
-                                self.config.intent_lookahead_m)
-        return CorridorData(self.features, self.near, intent.astype(np.float32))
+    return Featurised(U, labels, w, {name: reader.arrays(recording, keep, path) for name, reader in readers.items()})
 
 
 def _frame_view(recording: Recording, i: int, renderer: SegmentationRenderer | None, pose: tuple, shape: tuple[int, int],
@@ -228,15 +207,24 @@ def on_map(poses: np.ndarray, scenario: Scenario) -> np.ndarray:
     return (x >= 0) & (x <= w_m) & (y >= 0) & (y <= h_m)
 
 
-def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: CameraConfig | None = None, progress=None,
-                  cache: dict | None = None, frames: Callable[[int, int], None] | None = None) -> Dataset:
-    """Featurise several recordings into one dataset (they must share classes and profile).
+class Featuring(NamedTuple):
+    """How far featurising several recordings has come (:func:`build_dataset`'s progress)."""
 
-    ``progress(k, n)`` is called after each of the ``n`` recordings, ``frames(done, total)`` after
-    each frame of them all.
+    recordings_done: int
+    recordings: int
+    frames_done: int
+    frames: int
 
-    ``cache`` keeps each recording's features (keyed by the recording object, the features and
-    the camera), so that a later dataset of some of the same recordings featurises only the
+
+def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: CameraConfig | None = None, rules: tuple[RuleData, ...] = (),
+                  cache: dict | None = None, progress: Callable[[Featuring], None] | None = None) -> Dataset:
+    """Featurise several recordings into one dataset (they must share classes and profile), with
+    the arrays each of the decision ``rules`` (a recipe's) reads for its fit.
+
+    ``progress`` is called after each frame and after each recording.
+
+    ``cache`` keeps each recording's features (keyed by the recording object, the features, the
+    camera and the rules' data), so that a later dataset of some of the same recordings featurises only the
     others: the same arrays, computed once.
     """
     if not recordings:
@@ -252,23 +240,25 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
     # The terrain columns are the recordings' class table's.
     require_meta(first, "classes")
     features = replace(features, feature_classes=first.classes.feature_names)
+    rules = tuple(rule for rule in rules if rule.data() is not None)
+    reads = tuple((rule.type, repr(rule.data())) for rule in rules)
     parts = []
-    total, before = sum(len(r) for r in recordings), 0
+    total, before, n = sum(len(r) for r in recordings), 0, len(recordings)
     for k, rec in enumerate(recordings):
-        key = (id(rec), features, camera)
+        key = (id(rec), features, camera, reads)
         if cache is None or key not in cache:
-            part = featurize_recording(rec, features, camera, None if frames is None else (lambda j, b=before: frames(b + j, total)))
+            on_frame = None if progress is None else (lambda j, b=before, k=k: progress(Featuring(k, n, b + j, total)))
+            part = featurize_recording(rec, features, camera, on_frame, rules)
             if cache is not None:
                 cache[key] = (rec, part)  # the recording held with its features: its id is not reused while the cache lives
         parts.append(part if cache is None else cache[key][1])
         before += len(rec)
         if progress is not None:
-            progress(k + 1, len(recordings))
+            progress(Featuring(k + 1, n, before, total))
     U = np.concatenate([p[0] for p in parts])
     labels = np.concatenate([p[1] for p in parts])
     w = np.concatenate([p[2] for p in parts])
-    U2 = np.concatenate([p.U2 for p in parts]) if features.lookahead is not None else None
-    corridor = CorridorData(*(np.concatenate(a) for a in zip(*(p.corridor for p in parts)))) if features.corridor is not None else None
+    arrays = {rule.type: {name: np.concatenate([p.rules[rule.type][name] for p in parts]) for name in parts[0].rules[rule.type]} for rule in rules}
     source = np.concatenate([np.full(len(p[1]), k, dtype=np.int64) for k, p in enumerate(parts)])
     meta = {
         "format": FORMAT,
@@ -276,6 +266,7 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
         "camera": (camera or CameraConfig.from_dict(first.meta["camera"])).to_dict(),
         "classes": first.meta["classes"],
         "profile": first.meta.get("profile"),
+        "rules": {rule.type: {"config": rule.data(), "arrays": {name: rule.arrays[name] for name in arrays[rule.type]}} for rule in rules},
         "recordings": [
             {"path": str(r.path), "scenario": r.meta.get("scenario"), "frames": len(r), "frames_used": len(p[1]), "complete": r.complete,
              "driver": r.meta.get("driver"), "perception": r.perception,
@@ -283,23 +274,26 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
             for r, p in zip(recordings, parts, strict=True)
         ],
     }
-    return Dataset(U, labels, w.astype(np.float32), source, meta, U2, corridor)
+    return Dataset(U, labels, w.astype(np.float32), source, meta, arrays)
 
 
 def save_dataset(dataset: Dataset, path: str | Path) -> Path:
     """Write a dataset as safetensors (tensors plus JSON metadata), atomically."""
     meta = {**dataset.meta, "format": FORMAT, "fingerprint": dataset.fingerprint, "samples": len(dataset)}
     tensors = {"U": dataset.U, "labels": dataset.labels, "w": dataset.w, "source": dataset.source}
-    if dataset.U2 is not None:
-        tensors["U2"] = dataset.U2
-    if dataset.corridor is not None:
-        tensors |= {f"corridor.{name}": a for name, a in zip(CorridorData._fields, dataset.corridor)}
+    tensors |= {f"rules.{rule}.{name}": a for rule, arrays in dataset.rules.items() for name, a in arrays.items()}
     return write_tensor_file(path, tensors, meta)
 
 
 def load_dataset(path: str | Path) -> Dataset:
     """Read a dataset written by :func:`save_dataset` (no code is executed on load)."""
-    tensors, meta = read_tensor_file(path, FORMAT, "no such file", "not a terrapref dataset")
+    try:
+        tensors, meta = read_tensor_file(path, FORMAT, "no such file", "not a terrapref dataset")
+    except UserError as exc:
+        old = next((f for f in OLD_FORMATS if f in exc.problems[0].message), None)
+        if old is None:
+            raise
+        raise UserError(str(path), f"a dataset of an earlier version ({old}); featurize its recordings again", field="format") from None
     for key in ("U", "labels", "w", "source"):
         if key not in tensors:
             raise UserError(str(path), "missing tensor", field=key)
@@ -314,8 +308,36 @@ def load_dataset(path: str | Path) -> Dataset:
         raise UserError(str(path), f"invalid configuration ({type(exc).__name__}: {exc})", field="metadata") from None
     if not isinstance(meta.get("profile"), list):
         raise UserError(str(path), "expected a list of class names", field="profile")
-    corridor = CorridorData(*(tensors[f"corridor.{name}"] for name in CorridorData._fields)) if "corridor.features" in tensors else None
-    return Dataset(tensors["U"], tensors["labels"], tensors["w"], tensors["source"], meta, tensors.get("U2"), corridor)
+    rules = _rule_arrays(tensors, meta, str(path))
+    return Dataset(tensors["U"], tensors["labels"], tensors["w"], tensors["source"], meta, rules)
+
+
+def _rule_arrays(tensors: dict[str, np.ndarray], meta: dict, source: str) -> dict[str, dict[str, np.ndarray]]:
+    """The rules' arrays of a dataset file, each as ``meta["rules"]`` declares it: one row per
+    sample, floats, and only the values its kind allows (:data:`ARRAY_KINDS`)."""
+    declared = meta.get("rules", {})
+    if not isinstance(declared, dict) or not all(isinstance(d, dict) and isinstance(d.get("arrays"), dict) for d in declared.values()):
+        raise UserError(source, "expected a mapping of rules, each with its config and arrays", field="rules")
+    n = len(tensors["labels"])
+    out: dict[str, dict[str, np.ndarray]] = {}
+    for rule, d in declared.items():
+        out[rule] = {}
+        for name, kind in d["arrays"].items():
+            key = f"rules.{rule}.{name}"
+            a = tensors.get(key)
+            if a is None:
+                raise UserError(source, "missing tensor", field=key)
+            if kind not in ARRAY_KINDS:
+                raise UserError(source, f"unknown kind {kind!r}; expected one of {', '.join(ARRAY_KINDS)}", field=f"rules.{rule}.arrays.{name}")
+            bad = {"finite": ~np.isfinite(a), "finite >= 0": ~(np.isfinite(a) & (a >= 0)), "no NaN": np.isnan(a), "no inf": np.isinf(a)}[kind] \
+                if a.dtype.kind == "f" else None
+            if len(a) != n or a.dtype.kind != "f" or bad.any():
+                raise UserError(source, f"expected {ARRAY_KINDS[kind]}, a row for each of the {n} samples; got {a.dtype} {a.shape}", field=key)
+            out[rule][name] = a
+    stray = sorted(k for k in tensors if k.startswith("rules.") and k.split(".")[1] not in out)
+    if stray:
+        raise UserError(source, "a rule's array that meta.rules does not declare", field=stray[0])
+    return out
 
 
 def _check_tensors(t: dict[str, np.ndarray], source: str) -> None:
@@ -335,21 +357,6 @@ def _check_tensors(t: dict[str, np.ndarray], source: str) -> None:
         raise UserError(source, "holds NaN or infinite yaw rates", field="w")
     if n and t["source"].min() < 0:
         raise UserError(source, "recording numbers must be >= 0", field="source")
-    U2 = t.get("U2")
-    if U2 is not None and (U2.ndim != 4 or U2.shape[:3] != (n, m, m) or U2.dtype.kind != "f" or not np.isfinite(U2).all()):
-        raise UserError(source, f"expected finite floats of shape ({n}, {m}, {m}, k), got {U2.dtype} {U2.shape}", field="U2")
-    names = [f"corridor.{name}" for name in CorridorData._fields]
-    present = [name in t for name in names]
-    if any(present) and not all(present):
-        raise UserError(source, "missing tensor", field=names[present.index(False)])
-    if all(present):
-        features, near, intent = (t[name] for name in names)
-        if features.ndim != 3 or len(features) != n or features.dtype.kind != "f" or not np.isfinite(features).all() or (features < 0).any():
-            raise UserError(source, f"expected finite metres >= 0 of shape ({n}, offsets, k + 2), got {features.dtype} {features.shape}", field=names[0])
-        if near.shape != (n,) or near.dtype.kind != "f" or np.isnan(near).any():
-            raise UserError(source, f"expected {n} distances (inf allowed, NaN not), got {near.dtype} {near.shape}", field=names[1])
-        if intent.shape != (n,) or intent.dtype.kind != "f" or np.isinf(intent).any():
-            raise UserError(source, f"expected {n} offsets (NaN allowed, inf not), got {intent.dtype} {intent.shape}", field=names[2])
 
 
 def merge_datasets(sets: list[tuple[str, Dataset]]) -> Dataset:
@@ -359,13 +366,9 @@ def merge_datasets(sets: list[tuple[str, Dataset]]) -> Dataset:
         raise UserError("train", "no training data given")
     first_name, first = sets[0]
     for name, d in sets[1:]:
-        for key in ("features", "camera", "classes", "profile"):
+        for key in ("features", "camera", "classes", "profile", "rules"):
             if d.meta.get(key) != first.meta.get(key):
                 raise UserError(name, f"differs from {first_name} in {key}; featurise all recordings the same way", field=key)
-        if (d.U2 is None) != (first.U2 is None):
-            raise UserError(name, f"carries look-ahead utilities and {first_name} does not, or the other way round", field="U2")
-        if (d.corridor is None) != (first.corridor is None):
-            raise UserError(name, f"carries corridor data and {first_name} does not, or the other way round", field="corridor")
     if len(sets) == 1:
         return first
     # Each dataset's recordings are numbered after those of the datasets before it: by the
@@ -376,17 +379,18 @@ def merge_datasets(sets: list[tuple[str, Dataset]]) -> Dataset:
         np.concatenate([d.U for _, d in sets]), np.concatenate([d.labels for _, d in sets]), np.concatenate([d.w for _, d in sets]),
         np.concatenate([d.source + off for off, (_, d) in zip(offsets, sets)]),
         {**first.meta, "recordings": [r for _, d in sets for r in d.meta.get("recordings", [])]},
-        None if first.U2 is None else np.concatenate([d.U2 for _, d in sets]),
-        None if first.corridor is None else CorridorData(*(np.concatenate(a) for a in zip(*(d.corridor for _, d in sets)))),
+        {rule: {name: np.concatenate([d.rules[rule][name] for _, d in sets]) for name in arrays} for rule, arrays in first.rules.items()},
     )
 
 
-def training_data(paths: list[Path], features: FeatureConfig, progress=None) -> Dataset:
-    """The samples of ``paths``: recording directories, featurised under ``features``, and dataset
-    files (from ``terrapref featurize``), loaded as they are; merged into one dataset."""
+def training_data(paths: list[Path], features: FeatureConfig, rules: tuple[RuleData, ...] = (),
+                  progress: Callable[[Featuring], None] | None = None) -> Dataset:
+    """The samples of ``paths``: recording directories, featurised under ``features`` with the
+    arrays ``rules`` read, and dataset files (from ``terrapref featurize``), loaded as they are;
+    merged into one dataset."""
     recordings = [read_recording(p) for p in paths if Path(p).is_dir()]
     sets: list[tuple[str, Dataset]] = []
     if recordings:
-        sets.append((str(recordings[0].path), build_dataset(recordings, features, progress=progress)))
+        sets.append((str(recordings[0].path), build_dataset(recordings, features, rules=rules, progress=progress)))
     sets += [(str(p), load_dataset(p)) for p in paths if not Path(p).is_dir()]
     return merge_datasets(sets)

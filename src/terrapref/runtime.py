@@ -5,6 +5,6 @@ its public name.
 """
 
 from terrapref.interop.runtime import STOP, PlannerRuntime, RuntimeDecision
-from terrapref.planner.costmap import Costmap
+from terrapref.rules.costmap import Costmap
 
 __all__ = ["STOP", "Costmap", "PlannerRuntime", "RuntimeDecision"]

@@ -1,6 +1,6 @@
 """NumPy's summation order, compiled: for loops that must give the bits of a NumPy ``sum``.
 
-Shared by the features (terrapref.features.kernels) and the synthetic driver
+Shared by the features (terrapref.features.utility_compiled, terrapref.rules.second.scores_compiled) and the synthetic driver
 (terrapref.demos.expert), which keeps apart from the feature pipeline (SPEC 10).
 
 Compiled into its callers, whose cached copies Numba does not recompile when only this file

@@ -36,10 +36,11 @@ def decisions(work: Path) -> dict:
         # the training schedule pinned as it was when the file was made (teach trained at lr 1e-3 then)
         recipe = replace(recipe, train=replace(recipe.train, optimiser=replace(recipe.train.optimiser, epochs=epochs, lr=1e-3)))
         features = recipe.features()
+        rules = tuple(r for r in recipe.rules if r.type != "offset")
         paths = record_demonstrations(recipe, work / recipe.name, RecipeSetup(7, course=course, features=features))
         model = work / f"{recipe.name}.safetensors"
-        train_and_save(build_dataset([read_recording(p) for p in paths], features), model, replace(recipe.train, seed=7),
-                   stages=[s for s in recipe.stages if s.type != "offset"], options=RunOptions(checkpoints=False))
+        train_and_save(build_dataset([read_recording(p) for p in paths], features, rules=rules), model, replace(recipe.train, seed=7),
+                   rules=rules, options=RunOptions(checkpoints=False))
         for name in driven:
             driver = PlannerDriver(Planner(load_model(model)), keep=True)
             run_episode(Simulation(resolve_scenario(name)), driver, np.random.default_rng(0))

@@ -4,7 +4,7 @@ The camera has no roll, so every image row sees a straight line on the ground, a
 point of pixel (col, row) is affine in col: ``g = P[row] + Q[row] * (col + 0.5 - cx)`` in the
 vehicle frame. P and Q are precomputed once per camera; per frame they are rotated into map
 cells, and each pixel's cell is one float32 multiply-add away, with no trigonometry per pixel.
-The per-pixel loops are compiled (:mod:`terrapref.camera.kernels`); a frame is one pass.
+The per-pixel loops are compiled (:mod:`terrapref.camera.render_compiled`); a frame is one pass.
 
 A planner reads only the few hundred pixels its trajectories project to, so
 ``SegmentationRenderer.pixels`` computes any set of pixels alone, with the same float32
@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from terrapref.camera.kernels import pixels_at, pixels_of_rows, ray_pixels, render_frame, rows_and_columns, take
+from terrapref.camera.render_compiled import pixels_at, pixels_of_rows, ray_pixels, render_frame, rows_and_columns, take
 from terrapref.camera.pinhole import PinholeCamera
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose

@@ -25,15 +25,12 @@ from enum import Enum
 import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView, as_view
-from terrapref.features import kernels
-from terrapref.features.corridor import CorridorConfig
+from terrapref.features import utility_compiled as kernels
 from terrapref.features.preference_set import PreferenceSet, PreferenceSetConfig
 from terrapref.records import to_plain
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.vehicle import Pose
-
-
 
 
 NORMALISE_EPS = 1e-9  # a distance range below this normalises to all ones
@@ -43,32 +40,6 @@ class DistanceMode(str, Enum):
     PAPER = "paper"
     WINDOW = "window"
     LOOKAHEAD = "lookahead"
-
-
-@dataclass(frozen=True)
-class LookaheadConfig:
-    """Where the second pieces start and which of their points are read.
-
-    Attributes:
-        after_s: where along each first trajectory the second piece starts [s]; rounded to a
-            trajectory point (point j is j dt along; the last, (n - 1) dt).
-        stride: terrain shares read on every ``stride``-th point of each second piece, ending
-            with its last.
-    """
-
-    after_s: float = 2.4
-    stride: int = 2
-
-    def __post_init__(self) -> None:
-        if not (math.isfinite(self.after_s) and self.after_s > 0 and isinstance(self.stride, int) and self.stride >= 1):
-            raise ValueError("the look-ahead needs after_s > 0 and an integer stride >= 1")
-
-    def to_dict(self) -> dict:
-        return to_plain(self)
-
-    @classmethod
-    def from_dict(cls, data: dict) -> LookaheadConfig:
-        return cls(float(data["after_s"]), int(data["stride"]))
 
 
 @dataclass(frozen=True)
@@ -83,12 +54,6 @@ class FeatureConfig:
         path_spacing_m: resampling step of the reference path [m].
         feature_classes: class names of the terrain columns, in order (the table's
             non-background classes in id order).
-        lookahead: with a configuration, datasets also carry the look-ahead utilities U' of
-            every frame (terrapref.features.lookahead), through which training fits the
-            planner's second stage; None (the paper's data): U only.
-        corridor: with a configuration, datasets also carry each frame's offset corridor and
-            the offset the driver steered for (terrapref.features.corridor), to which training
-            fits the planner's offset stage; None: not.
     """
 
     preference: PreferenceSetConfig = field(default_factory=PreferenceSetConfig)
@@ -96,17 +61,11 @@ class FeatureConfig:
     window_m: float | None = None
     path_spacing_m: float = 0.25
     feature_classes: tuple[str, ...] = field(default_factory=lambda: default_classes().feature_names)
-    lookahead: LookaheadConfig | None = None
-    corridor: CorridorConfig | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "distance_mode", DistanceMode(self.distance_mode))
         if not self.path_spacing_m >= 0.01 or (self.window_m is not None and not self.window_m > 0):
             raise ValueError("path_spacing_m must be >= 0.01 m (a path is resampled at it) and window_m > 0")
-        if self.lookahead is not None and not isinstance(self.lookahead, LookaheadConfig):
-            raise ValueError("lookahead must be a LookaheadConfig")
-        if self.corridor is not None and not isinstance(self.corridor, CorridorConfig):
-            raise ValueError("corridor must be a CorridorConfig")
 
     @property
     def effective_window_m(self) -> float:
@@ -126,7 +85,7 @@ class FeatureConfig:
         return (*self.feature_classes, "distance")
 
     def to_dict(self) -> dict:
-        return to_plain(self, omit_none=("lookahead", "corridor"))
+        return to_plain(self)
 
     @classmethod
     def from_dict(cls, data: dict) -> FeatureConfig:
@@ -143,9 +102,7 @@ class FeatureConfig:
             data.get("window_m"),
             float(data["path_spacing_m"]),
             tuple(data["feature_classes"]),
-            LookaheadConfig.from_dict(data["lookahead"]) if data.get("lookahead") is not None else None,
-            CorridorConfig.from_dict(data["corridor"]) if data.get("corridor") is not None else None,
-        )
+        )  # a file written before the rules owned their data may also hold ``lookahead`` and ``corridor``: the rules read those
 
 
 class UtilityFeaturizer:

@@ -27,7 +27,7 @@ from terrapref.interop.ros_messages import Message, typestore
 if TYPE_CHECKING:
     from terrapref.camera import CameraConfig
     from terrapref.features import PreferenceSetConfig
-    from terrapref.planner.costmap import Costmap
+    from terrapref.rules.costmap import Costmap
     from terrapref.planner.planner import Planner, PlannerDriver
     from terrapref.terrain import ClassTable
 

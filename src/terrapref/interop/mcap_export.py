@@ -43,7 +43,7 @@ from terrapref.fileio import write_text_atomic
 from terrapref.interop.ros_messages import (EPOCH_S, OPTICAL_FRAME, Message, Topics, add_topics, camera_info, camera_mount, compressed_image,
                                             foxglove_grid, header, occupancy_grid, odometry, path_message, png, point, pose, rpy_quaternion, tf_message, transform, twist,
                                             typestore, vector3, zeroed)
-from terrapref.planner.costmap import Costmap
+from terrapref.rules.costmap import Costmap
 from terrapref.stops import REASONS
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.terrain.classes import UNKNOWN
@@ -300,7 +300,7 @@ def _robot_yaml(cam: CameraConfig, labels: str, profile: tuple[str, ...] | None 
 
 def costmaps_of(stage, poses: np.ndarray) -> Callable[[int, np.ndarray], Costmap | None]:
     """The costmaps of one run for :attr:`RunFrames.costmap`: ``stage`` (a planner's stage that
-    keeps a ground map, terrapref.planner.stages), its map emptied, takes each frame in turn as
+    keeps a ground map, terrapref.rules), its map emptied, takes each frame in turn as
     it was seen from ``poses`` (F, 3), and every :data:`COSTMAP_EVERY`-th frame gives its
     costmap. Frames are to be asked for in order."""
     from terrapref.camera import SegmentationView

@@ -27,7 +27,7 @@ from terrapref.interop.robot import RobotConfig
 from terrapref.interop.labels import unlisted_message
 from terrapref.interop.runtime import PlannerRuntime, RuntimeDecision
 from terrapref.learning.model_file import LoadedModel
-from terrapref.planner.costmap import Costmap
+from terrapref.rules.costmap import Costmap
 from terrapref.scenario.path import ReferencePath
 from terrapref.stops import REASONS, STALE
 from terrapref.terrain import UNKNOWN

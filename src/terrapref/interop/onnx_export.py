@@ -6,7 +6,7 @@ F_t, computed in float64 inside the graph like the planner's own forward pass (a
 :func:`terrapref.learning.numpy_forward`). Everything the model was trained under (preference
 set, camera, classes, profile, feature configuration, the decision stages: the second stage's
 linear utility, the offset stage's corridor utility) is in the model's metadata as JSON strings under
-``terrapref.*`` keys. The offset stage itself (terrapref.planner.stages.offset: a ground map, the
+``terrapref.*`` keys. The offset stage itself (terrapref.rules.offset.rule: a ground map, the
 corridor, pure pursuit) is not a network and is not in the graph; ``terrapref.runtime`` runs it.
 """
 
@@ -123,7 +123,12 @@ def export_onnx(model: LoadedModel, out: str | Path) -> Path:
         "profile": list(model.profile),
         "feature_classes": list(model.features.feature_classes),
     }
-    props["stages"] = list(model.stages)  # the decision stages' blocks (the offset stage's geometry is features.corridor)
+    from terrapref.rules import rules_of
+
+    rules, drives = rules_of(model)  # the decision rules' blocks, read (older files' too) and written as this version writes them
+    props["rules"] = [rule.header() for rule in rules]
+    if drives is not None or rules:
+        props["drives"] = drives or rules[-1].type
     for key in ("recipe", "identifiability", "created", "sources", "fingerprint"):
         if key in meta:
             props[key] = meta[key]

@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
     from terrapref.camera import CameraConfig
-    from terrapref.planner.costmap import Costmap
+    from terrapref.rules.costmap import Costmap
 
 Message = Any  # an instance of a message class that rosbags makes at run time from the typestore
 EPOCH_S = 1_700_000_000
@@ -225,8 +225,8 @@ GRID_FIELDS = (("cost", 0, 2), ("red", 1, 1), ("green", 2, 1), ("blue", 3, 1), (
 def foxglove_grid(ts: Typestore, t_s: float, frame_id: str, costmap: Costmap) -> Message:
     """foxglove_msgs/Grid of ``costmap`` in ``frame_id``, stamped ``t_s`` [s]: per cell its cost as
     int8 (0-100, -1 unknown, as in OccupancyGrid) and its colour
-    (:func:`terrapref.planner.costmap.cost_colours`), 5 bytes a cell."""
-    from terrapref.planner.costmap import cost_colours
+    (:func:`terrapref.rules.costmap.cost_colours`), 5 bytes a cell."""
+    from terrapref.rules.costmap import cost_colours
 
     T = ts.types
     h, w = costmap.cost.shape

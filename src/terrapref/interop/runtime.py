@@ -25,7 +25,7 @@ import numpy as np
 from terrapref.camera import CameraConfig
 from terrapref.interop.labels import LabelMap, unlisted_message
 from terrapref.learning.model_file import LoadedModel, load_model
-from terrapref.planner.costmap import Costmap
+from terrapref.rules.costmap import Costmap
 from terrapref.planner.planner import Planner
 from terrapref.planner.stop import StopConfig
 from terrapref.scenario.path import ReferencePath
@@ -150,14 +150,14 @@ class PlannerRuntime:
 
     def costmap(self) -> Costmap:
         """The learned preference over the ground seen so far, in the frame of the poses given
-        (terrapref.planner.costmap): 0-99 by learned price, 100 lethal, -1 never seen.
+        (terrapref.rules.costmap): 0-99 by learned price, 100 lethal, -1 never seen.
 
         Raises:
-            ValueError: the model's planner keeps no ground map (it has no offset stage).
+            ValueError: the rule that drives keeps no ground map (recipe teach's offset rule does).
         """
         costmap = self.planner.costmap()
         if costmap is None:
-            raise ValueError("this model's planner keeps no ground map (no offset stage: recipe teach has one)")
+            raise ValueError(f"this model drives by rule {self.planner.rule.type}, which keeps no ground map (recipe teach's offset rule does)")
         return costmap
 
     def command_at(self, now_s: float) -> Command:

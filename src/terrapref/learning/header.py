@@ -13,15 +13,16 @@ training writes the same file, byte for byte::
     history, best_epoch, steps,      what a completed training produced
     identifiability, steadying
     stages                           the decision stages fitted with C, one block each under its
-                                     ``type`` (terrapref.planner.stages reads them)
+                                     ``type`` (terrapref.rules reads them)
     members                          an ensemble's members; in a checkpoint, how many there are
     member, epoch                    a checkpoint's member and epoch; a model's chosen epoch
     status, interrupted              ``checkpoint`` or ``interrupted`` (absent: a finished model),
                                      and what an interrupted training reached
 
-A header made by hand (tests, tools) may hold only the configuration. A file without
-``stages`` may carry the second stage's linear utility as ``utility`` and the offset stage's as
-``corridor``; they are read as the same stages (:func:`stage_blocks`).
+A header made by hand (tests, tools) may hold only the configuration. Files written before the
+rules named the one that drives list them as ``stages`` (the last one drives), and older files
+still carry the second stage's linear utility as ``utility`` and the offset rule's as
+``corridor`` (each rule reads its own: terrapref.rules.legacy_blocks).
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ from typing import Any
 
 from terrapref.camera import CameraConfig
 from terrapref.errors import UserError
-from terrapref.features import FeatureConfig, LookaheadConfig
+from terrapref.features import FeatureConfig
 from terrapref.learning.network import ClassifierConfig
 from terrapref.learning.train import EpochMetrics
 from terrapref.records import from_plain, to_plain
@@ -42,9 +43,7 @@ FORMAT = "terrapref-model/1"
 CLASSIFIER = "classifier"  # the header's "kind" of C; baselines write their own kinds
 CHECKPOINT = "checkpoint"  # the status of an epoch written as it was made
 INTERRUPTED = "interrupted"  # the status of the best epochs so far of a training that was stopped
-LEGACY_SECOND_STAGE_WEIGHT = 1.5  # the second stage's weight in files whose ``utility`` names none
-
-Block = dict[str, Any]  # a decision stage's block, under its "type"
+Block = dict[str, Any]  # a decision rule's block, under its "type"
 Section = dict[str, Any]  # a section kept as the version that wrote it wrote it
 
 
@@ -98,7 +97,9 @@ class ModelHeader:
             (for an ensemble, member 0's).
         identifiability, steadying: what the demonstrations identify and what steadying the labels
             did, as written (terrapref.learning.identify, .steady).
-        stages: the decision stages' blocks, in order; None: the file lists none (a checkpoint).
+        rules: the decision rules' blocks, in order; None: the file lists none (a checkpoint).
+        drives: the type of the rule that drives (one of ``rules``, or ``argmax``).
+        stages: an older file's list of rules (the last one drove); never written.
         members: an ensemble's members.
         member_count: a checkpoint's number of members (the file's ``members``).
         member: the member a checkpoint holds, from 1.
@@ -120,6 +121,8 @@ class ModelHeader:
     steps: int | None = None
     identifiability: Section | None = None
     steadying: Section | None = None
+    rules: tuple[Block, ...] | None = None
+    drives: str | None = None
     stages: tuple[Block, ...] | None = None
     members: tuple[MemberRun, ...] | None = None
     member_count: int | None = None
@@ -160,7 +163,8 @@ class ModelHeader:
                    profile=profile, training=_entry(meta, "training", _section, source), data=_entry(meta, "data", _record(DataSource), source),
                    history=_entry(meta, "history", _history, source), best_epoch=_entry(meta, "best_epoch", _integer, source),
                    steps=_entry(meta, "steps", _integer, source), identifiability=_entry(meta, "identifiability", _section, source),
-                   steadying=_entry(meta, "steadying", _section, source), stages=stage_blocks(meta, source, features.lookahead),
+                   steadying=_entry(meta, "steadying", _section, source), rules=rule_blocks(meta, "rules", source),
+                   drives=_entry(meta, "drives", _text, source), stages=rule_blocks(meta, "stages", source),
                    members=members if isinstance(members, tuple) else None, member_count=members if isinstance(members, int) else None,
                    member=_entry(meta, "member", _integer, source), epoch=_entry(meta, "epoch", _integer, source),
                    status=_entry(meta, "status", _text, source), interrupted=_entry(meta, "interrupted", _record(Interruption), source))
@@ -184,40 +188,23 @@ def model_context(meta: Mapping[str, Any], source: str) -> tuple[FeatureConfig, 
     return features, camera, classes, profile
 
 
-def stage_blocks(meta: Mapping[str, Any], source: str, lookahead: LookaheadConfig | None = None) -> tuple[Block, ...] | None:
-    """The decision stages a header lists, in order; None when it lists none.
-
-    They are its ``stages`` (a list of mappings, each with a ``type``) or, in a file without
-    them, its ``utility`` (the second stage, of weight
-    :data:`LEGACY_SECOND_STAGE_WEIGHT` unless it names one; fitted through ``lookahead``, the
-    features' look-ahead, at its ``after_s`` and ``stride`` when there is one) and its
-    ``corridor`` (the offset stage, which drove). Only the blocks' shape is checked here; each
-    stage checks its own fields when the planner reads it.
+def rule_blocks(meta: Mapping[str, Any], key: str, source: str) -> tuple[Block, ...] | None:
+    """The decision rules a header lists under ``key`` (``rules``; ``stages`` in older files), in
+    order; None when it lists none. Only the blocks' shape is checked here; each rule checks its
+    own fields when it is read (terrapref.rules.read_rules).
 
     Raises:
-        UserError: ``stages`` is not a list of mappings with a type, or ``utility`` or
-            ``corridor`` is not a mapping, naming the file and the field.
+        UserError: the list is not a list of mappings with a type, naming the file and the field.
     """
-    if "stages" in meta:
-        blocks = meta["stages"]
-        if not isinstance(blocks, list):
-            raise UserError(source, "expected a list of stages", field="stages")
-        for i, block in enumerate(blocks):
-            if not isinstance(block, dict) or not isinstance(block.get("type"), str):
-                raise UserError(source, "expected a mapping with a type", field=f"stages[{i}]")
-        return tuple(blocks)
-    legacy = [(key, kind) for key, kind in (("utility", "second_stage"), ("corridor", "offset")) if meta.get(key) is not None]
-    if not legacy:
+    if key not in meta:
         return None
-    out = []
-    for key, kind in legacy:
-        data = meta[key]
-        if not isinstance(data, dict):
-            raise UserError(source, "expected a mapping", field=key)
-        look = {"after_s": lookahead.after_s, "stride": lookahead.stride} if lookahead is not None else {}
-        defaults = {"weight": LEGACY_SECOND_STAGE_WEIGHT, **look} if key == "utility" else {}
-        out.append({"type": kind, **defaults, **data})
-    return tuple(out)
+    blocks = meta[key]
+    if not isinstance(blocks, list):
+        raise UserError(source, "expected a list of rules", field=key)
+    for i, block in enumerate(blocks):
+        if not isinstance(block, dict) or not isinstance(block.get("type"), str):
+            raise UserError(source, "expected a mapping with a type", field=f"{key}[{i}]")
+    return tuple(blocks)
 
 
 # --- the provenance entries, each read once: a wrong one is a UserError naming it ---------------------

@@ -192,7 +192,7 @@ def fit_lookahead_utility(U: np.ndarray, U2: np.ndarray, labels: np.ndarray, ste
     """Fit the linear utility through the planner's look-ahead (SPEC 8's loss over a planning rule).
 
     Trajectory i scores ``f(U_i) + gamma * max_j f(U2_ij)`` with ``f(u) = w . u + b``: its own
-    utility plus the best of the second pieces that continue it (terrapref.features.lookahead);
+    utility plus the best of the second pieces that continue it (terrapref.rules.second.lookahead);
     a softmax over i is fitted to the demonstrated labels by full-batch Adam, ``w``, ``b`` and
     ``gamma`` together, from ``start`` (default: the frame-wise fit) and gamma = 1.
 

@@ -16,7 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from terrapref.learning import exact, kernels
+from terrapref.learning import exact
+from terrapref.learning import layers_compiled as kernels
 from terrapref.learning.network import ClassifierConfig
 
 
@@ -92,7 +93,7 @@ class TrainableClassifier:
 
     Each product is :func:`exact.matmul`'s (operands rounded to their grids, integers multiplied
     in BLAS, exact in any order); the rounding and the elementwise work around the products run
-    as compiled loops (:mod:`terrapref.learning.kernels`), with the bits of the NumPy forms.
+    as compiled loops (:mod:`terrapref.learning.layers_compiled`), with the bits of the NumPy forms.
     The weights live in one flat buffer, ``params``; ``weights`` holds a view of each under its
     state-dict name, and :meth:`gradient` fills a buffer laid out the same way, so that Adam
     updates all of them in one pass.

@@ -16,13 +16,13 @@ import numpy as np
 from terrapref.camera import CameraConfig
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
-from terrapref.learning.header import CLASSIFIER, FORMAT, Block, ModelHeader, model_context, stage_blocks
+from terrapref.learning.header import CLASSIFIER, FORMAT, Block, ModelHeader, model_context, rule_blocks
 from terrapref.learning.network import MEMBERS, ClassifierConfig, member_prefix
 from terrapref.tensorfile import read_tensor_file, write_tensor_file
 from terrapref.terrain import ClassTable
 
 __all__ = ["CLASSIFIER", "FORMAT", "LoadedModel", "check_compatible", "classifier_from", "expected_shapes", "load_model", "model_context",
-           "read_model_file", "save_model", "stage_blocks", "write_model"]
+           "read_model_file", "rule_blocks", "save_model", "write_model"]
 
 
 @dataclass(frozen=True)
@@ -62,9 +62,15 @@ class LoadedModel:
         return self.header.profile or ()
 
     @property
-    def stages(self) -> tuple[Block, ...]:
-        """The decision stages' blocks, in order (terrapref.planner.stages reads them)."""
-        return self.header.stages or ()
+    def rule_blocks(self) -> tuple[tuple[Block, ...], str] | None:
+        """The decision rules' blocks, in order, and the name of their list in the file (``rules``,
+        or an older file's ``stages``); None for a file that lists them in neither (terrapref.rules
+        reads them, and the oldest files' own keys)."""
+        if self.header.rules is not None:
+            return self.header.rules, "rules"
+        if self.header.stages is not None:
+            return self.header.stages, "stages"
+        return None
 
 
 def write_model(path: str | Path, header: ModelHeader, weights: dict[str, np.ndarray]) -> Path:

@@ -13,7 +13,7 @@ from terrapref.fileio import new_folder, replace_dir
 from terrapref.learning.header import CHECKPOINT, INTERRUPTED, DataSource, Interruption, MemberRun, ModelHeader
 from terrapref.learning.model_file import write_model
 from terrapref.learning.network import ClassifierConfig, member_prefix
-from terrapref.learning.train import EpochMetrics, StageFit, TrainConfig, TrainResult, train
+from terrapref.learning.train import EpochMetrics, RuleFit, TrainConfig, TrainResult, train
 from terrapref.terrain import ClassTable
 
 
@@ -47,7 +47,8 @@ def model_header(config: TrainConfig, result: TrainResult, source: ModelHeader) 
     return replace(source, classifier=result.classifier, history=tuple(result.history), best_epoch=result.best_epoch, steps=result.steps,
                    identifiability=result.identifiability.to_dict() if result.identifiability is not None else None,
                    steadying=result.steadying.to_dict() if result.steadying is not None else None,
-                   stages=tuple(stage.header() for stage in result.stages), members=members or None, epoch=result.best_epoch)
+                   rules=tuple(rule.header() for rule in result.rules), drives=result.rules[-1].type if result.rules else None,
+                   members=members or None, epoch=result.best_epoch)
 
 
 def interrupted_path(out: str | Path) -> Path:
@@ -106,9 +107,9 @@ class _Checkpoints:
         return write_model(interrupted_path(out), header, weights)
 
 
-def train_and_save(dataset: Dataset, out: str | Path, config: TrainConfig, stages: Sequence[StageFit] = (), recipe: str | None = None,
+def train_and_save(dataset: Dataset, out: str | Path, config: TrainConfig, rules: Sequence[RuleFit] = (), recipe: str | None = None,
                    options: RunOptions = RunOptions()) -> TrainResult:
-    """Train C and fit the decision ``stages`` with it (as :func:`train`), write every epoch as a
+    """Train C and fit the decision ``rules`` with it (as :func:`train`), write every epoch as a
     checkpoint as it is made and the chosen epoch as the model; ``recipe`` (its name) is recorded
     in the model's header.
 
@@ -123,7 +124,7 @@ def train_and_save(dataset: Dataset, out: str | Path, config: TrainConfig, stage
     source = source_header(dataset, config, recipe)  # the data's fingerprint hashes every sample: once
     saver = _Checkpoints(out, replace(source, member_count=config.classifier.members), options.checkpoints)
     try:
-        result = train(dataset, config, options.progress, on_epoch=saver, identify=options.identify, stages=stages)
+        result = train(dataset, config, options.progress, on_epoch=saver, identify=options.identify, rules=rules)
         write_model(out, model_header(config, result, source), result.weights)
     except OSError as exc:  # a file could not be written (a full disk): nothing of this run is left to fill it further
         saver.discard()

@@ -19,7 +19,8 @@ import numpy as np
 
 from terrapref.configargs import option
 from terrapref.dataset import Dataset
-from terrapref.learning import exact, kernels
+from terrapref.learning import exact
+from terrapref.learning import layers_compiled as kernels
 from terrapref.learning.identify import FittedLookahead, Identifiability, TableNames, identifiability
 from terrapref.learning.linear import LinearUtility, fit_linear_utility, fit_lookahead_utility
 from terrapref.learning.mlp import Adam, TrainableClassifier, cross_entropy, init_weights, round_inputs
@@ -180,7 +181,7 @@ class TrainResult:
     members: list[TrainResult] = field(default_factory=list)
     identifiability: Identifiability | None = None  # what the data show of the preference (terrapref.learning.identify)
     steadying: Steadying | None = None  # the hand's tremor and what was done about it, with DataOptions.steady_labels
-    stages: list[Any] = field(default_factory=list)  # the decision stages fitted with C (terrapref.planner.stages), in order
+    rules: list[Any] = field(default_factory=list)  # the decision rules fitted with C (terrapref.rules), in order
 
 
 def _ensemble(results: list[TrainResult]) -> TrainResult:
@@ -213,7 +214,7 @@ EpochHook = Callable[[int, ClassifierConfig, dict[str, np.ndarray], EpochMetrics
 
 
 class FitData:
-    """What the decision stages are fitted to: the samples C was trained on (labels steadied when
+    """What the decision rules are fitted to: the samples C was trained on (labels steadied when
     asked), whether mirrored copies join them, and the linear utility over them, fitted once
     (the identifiability report and the second stage share it)."""
 
@@ -228,27 +229,31 @@ class FitData:
             self._utility = _fit_utility(self.dataset, self.mirror)
         return self._utility
 
+    def rule_data(self, rule: str) -> tuple[dict[str, Any], dict[str, np.ndarray]] | None:
+        """The configuration ``rule``'s arrays were read with, and the arrays (:meth:`Dataset.rule_data`)."""
+        return self.dataset.rule_data(rule)
+
     @property
     def has_utility(self) -> bool:
         return self._utility is not None
 
 
-class StageFit(Protocol):
-    """A decision stage before fitting, as a recipe names it (terrapref.planner.stages.StageConfig)."""
+class RuleFit(Protocol):
+    """A decision rule before fitting, as a recipe names it (terrapref.rules.RuleConfig)."""
 
     def fit(self, data: FitData) -> Any:
-        """The fitted stage, or None when the data lack what it needs."""
+        """The fitted rule, or None when the data lack what it needs."""
 
 
 def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callable[[EpochMetrics], None] | None = None,
-          on_epoch: EpochHook | None = None, identify: bool = True, stages: Sequence[StageFit] = ()) -> TrainResult:
-    """Train C on ``dataset``, then fit the decision ``stages`` to the same samples; returns the
-    lowest-validation-loss epoch's weights, the history and the fitted stages.
+          on_epoch: EpochHook | None = None, identify: bool = True, rules: Sequence[RuleFit] = ()) -> TrainResult:
+    """Train C on ``dataset``, then fit the decision ``rules`` to the same samples; returns the
+    lowest-validation-loss epoch's weights, the history and the fitted rules.
 
     ``on_epoch`` sees every epoch's weights as they are made (member by member), so that a
     caller can write checkpoints as training goes. The same dataset and configuration give the
     same weights, bit for bit, on any CPU and thread count (:mod:`terrapref.learning.exact`).
-    Without ``identify`` (and with no stage that fits the linear utility) the result carries no
+    Without ``identify`` (and with no rule that fits the linear utility) the result carries no
     identifiability report: for a caller that trains many models to compare C alone (the study).
     """
     config = config or TrainConfig()
@@ -258,7 +263,7 @@ def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callabl
     result = _train_classifier(dataset, config, progress, on_epoch)
     result.steadying = steadying
     data = FitData(dataset, config.data.mirror)
-    result.stages = [fitted for stage in stages if (fitted := stage.fit(data)) is not None]
+    result.rules = [fitted for rule in rules if (fitted := rule.fit(data)) is not None]
     if identify or data.has_utility:
         utility, gamma = data.linear_utility()
         result.identifiability = _identifiability(dataset, utility, gamma)

@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit
 
 from terrapref.camera import CameraConfig, PinholeCamera, PixelSet, SegmentationView, flat_of
-from terrapref.camera.kernels import row_col
+from terrapref.camera.render_compiled import row_col
 from terrapref.perception.model import LabelErrors
 from terrapref.terrain import ClassTable
 

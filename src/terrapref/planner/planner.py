@@ -1,5 +1,5 @@
 """The planner: at each camera frame, U from the image and the path, the policy's F_t, and the
-command its driving stage (terrapref.planner.stages) chooses.
+command its driving rule (terrapref.rules) chooses.
 
 It sees only what a real robot has: the segmentation image, its own pose and the waypoints.
 It never reads the world map.
@@ -16,9 +16,9 @@ import numpy as np
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationView, as_view
 from terrapref.features import UtilityFeaturizer
 from terrapref.learning.model_file import LoadedModel, check_compatible
-from terrapref.planner.costmap import Costmap
+from terrapref.rules.costmap import Costmap
 from terrapref.planner.policy import ClassifierPolicy, Observation, Policy
-from terrapref.planner.stages import STAGES, Stage, StageContext, StageInput, driving_stage
+from terrapref.rules import RULES, ArgmaxRule, Rule, RuleContext, RuleInput, driving_rule
 from terrapref.planner.stop import StopConfig, StopRule
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
@@ -38,7 +38,7 @@ class Decision:
         U: utility features, shape (m, K + 1).
         stop: why the planner stops (terrapref.stops.REASONS), None while it drives.
 
-    When the driving stage steers without F_t (the offset stage), U and F_t are computed when
+    When the driving rule steers without F_t (the offset rule), U and F_t are computed when
     first read, from the frame's view, pose and path: the same values, and a control loop that
     does not report them does not wait for C.
     """
@@ -74,21 +74,21 @@ PATH_AHEAD_M = np.arange(1.0, 9.0)  # where Observation.path_ahead samples the p
 class Planner:
     """A policy (the trained classifier C, or a baseline) driving by the preference set.
 
-    Each frame: U, the policy's F_t, and the command of the driving stage
-    (terrapref.planner.stages): by default the last of the stages the model file lists, or C's
+    Each frame: U, the policy's F_t, and the command of the driving rule
+    (terrapref.rules): by default the one the model file names to drive, or C's
     argmax when it lists none; then the stop rule (terrapref.planner.stop), which commands a
     stop, with its reason, when no way ahead is free or the frames have been blind too long.
 
     Args:
         model: a loaded model file (C) or any :class:`Policy`.
         camera: the robot's camera; a model trained for another camera is refused.
-        stage: the stage that drives instead of the file's: one of the file's by its type (or
-            ``"argmax"``, which every policy has), or a :class:`Stage` (e.g. with another
+        rule: the rule that drives instead of the one the file names: one of the file's by its
+            type (or ``"argmax"``, which every policy has), or a :class:`Rule` (e.g. with another
             configuration).
         stop: when to stop (default: :class:`StopConfig`'s defaults).
     """
 
-    def __init__(self, model: LoadedModel | Policy, camera: CameraConfig | None = None, stage: Stage | str | None = None,
+    def __init__(self, model: LoadedModel | Policy, camera: CameraConfig | None = None, rule: Rule | str | None = None,
                  stop: StopConfig | None = None) -> None:
         policy = model if isinstance(model, Policy) else ClassifierPolicy(model)
         camera = camera or policy.camera
@@ -99,18 +99,18 @@ class Planner:
         self.policy = policy
         self.camera = PinholeCamera(camera)
         self.featurizer = UtilityFeaturizer(policy.features, self.camera, policy.classes)
-        self.stage = _chosen(policy, stage)
-        context = StageContext(self.camera, self.featurizer, policy.features, policy.classes)
-        self.runner = self.stage.runner(context)
+        self.rule = _chosen(policy, rule)
+        context = RuleContext(self.camera, self.featurizer, policy.features, policy.classes)
+        self.runner = self.rule.runner(context)
         control = policy.features.preference.control
-        corridor = policy.features.corridor
+        half_width = self.runner.half_width_m
         self.stop_rule = StopRule(self.camera, context.terrain, float(np.max(np.abs(control.w_rps))),
-                                  corridor.half_width_m if corridor is not None else DEFAULT_HALF_WIDTH_M, stop, self.runner.ground_map)
+                                  half_width if half_width is not None else DEFAULT_HALF_WIDTH_M, stop, self.runner.ground_map)
         self.path: ReferencePath | None = None
         self.tracker: PathTracker | None = None
 
     def set_path(self, waypoints: np.ndarray) -> None:
-        """Start following a new reference path (the driving stage and the stop rule forget what they kept, e.g. the ground seen)."""
+        """Start following a new reference path (the driving rule and the stop rule forget what they kept, e.g. the ground seen)."""
         self.path = ReferencePath(np.asarray(waypoints, dtype=float))
         self.tracker = PathTracker(self.path)
         self.runner.reset()
@@ -134,7 +134,7 @@ class Planner:
         [s] (None: frames 0.1 s apart; the stop rule times blind frames by it).
 
         ``image`` may be a :class:`SegmentationView`, of which only the pixels the policy reads
-        are rendered (the preference set's, for C). Given a view, a stage that steers without
+        are rendered (the preference set's, for C). Given a view, a rule that steers without
         F_t leaves U and F_t to be computed when the decision's ``probs`` or ``U`` is first read
         (a view's pixels do not change); given an array, they are computed now.
         """
@@ -144,32 +144,32 @@ class Planner:
         s = self.tracker.update(np.array(pose[:2]))
         outputs = functools.partial(_outputs, self.featurizer, self.policy, view, pose, self.path, s)
         if not self.runner.reads_probs and view is image:  # an array the caller may reuse is read now
-            choice = self.runner.decide(StageInput(None, view, pose, self.path, s))
+            choice = self.runner.decide(RuleInput(None, view, pose, self.path, s))
             stop = self.stop_rule.check(view, pose, choice.command.v, choice.command.w, time_s)
             return Decision(choice.index, STOP_COMMAND if stop else choice.command, s, pending=outputs, stop=stop)
         probs, U = outputs()
-        choice = self.runner.decide(StageInput(probs, view, pose, self.path, s))
+        choice = self.runner.decide(RuleInput(probs, view, pose, self.path, s))
         stop = self.stop_rule.check(view, pose, choice.command.v, choice.command.w, time_s)
         return Decision(choice.index, STOP_COMMAND if stop else choice.command, s, (probs, U), stop=stop)
 
     def costmap(self) -> Costmap | None:
-        """The ground seen so far as the driving stage prices it (terrapref.planner.costmap);
-        None when that stage keeps no ground map (only the offset stage does)."""
+        """The ground seen so far as the driving rule prices it (terrapref.rules.costmap);
+        None when that rule keeps no ground map (only the offset rule does)."""
         return self.runner.costmap()
 
 
-def _chosen(policy: Policy, stage: Stage | str | None) -> Stage:
-    """The stage that drives (:class:`Planner`'s ``stage``)."""
-    if isinstance(stage, Stage):
-        return stage
-    if stage is None:
-        return driving_stage(policy.stages)
-    if stage == "argmax":
-        return driving_stage(())
-    found = [s for s in policy.stages if s.type == stage]
+def _chosen(policy: Policy, rule: Rule | str | None) -> Rule:
+    """The rule that drives (:class:`Planner`'s ``rule``)."""
+    if isinstance(rule, Rule):
+        return rule
+    if rule is None:
+        return driving_rule(policy.rules, policy.drives, policy.path or policy.name)
+    if rule == ArgmaxRule.type:
+        return ArgmaxRule()
+    found = [r for r in policy.rules if r.type == rule]
     if not found:
-        have = ", ".join(["argmax", *(s.type for s in policy.stages)])
-        raise ValueError(f"{policy.path or policy.name}: no {stage!r} stage (STAGES: {', '.join(STAGES.names())}); it has {have}")
+        have = ", ".join([ArgmaxRule.type, *(r.type for r in policy.rules)])
+        raise ValueError(f"{policy.path or policy.name}: no {rule!r} rule (rules: {', '.join(RULES.names())}); it has {have}")
     return found[-1]
 
 

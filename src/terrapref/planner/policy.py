@@ -2,7 +2,7 @@
 
 A policy sees what the planner sees (the utility features U, the segmentation image, and the
 reference path ahead in the vehicle frame) and returns one score per trajectory; the planner's
-driving stage (terrapref.planner.stages: C's argmax for a policy without stages) turns them into
+driving stage (terrapref.rules: C's argmax for a policy without stages) turns them into
 a command. The learned classifier C is one policy; the study's baselines are others:
 
 - ``ClassifierPolicy``: C (SPEC 8), the paper's method.
@@ -34,7 +34,7 @@ from terrapref.learning import exact
 from terrapref.learning.forward import PackedNetwork
 from terrapref.learning.forward import probabilities as forward_probabilities
 from terrapref.learning.network import softmax
-from terrapref.planner.stages import Stage, read_stages
+from terrapref.rules import Rule, rules_of
 from terrapref.tensorfile import write_tensor_file
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.vehicle import pure_pursuit_yaw_rate
@@ -91,7 +91,8 @@ class Policy(abc.ABC):
         self.features = features or FeatureConfig(feature_classes=self.classes.feature_names)
         self.camera = camera or CameraConfig()
         self.profile, self.path = profile, path
-        self.stages: tuple[Stage, ...] = ()
+        self.rules: tuple[Rule, ...] = ()  # the decision rules the model file lists
+        self.drives: str | None = None  # the one it names to drive
 
     @abc.abstractmethod
     def logits(self, obs: Observation) -> np.ndarray:
@@ -111,7 +112,7 @@ class ClassifierPolicy(Policy):
         super().__init__(model.features, model.camera, model.classes, model.profile, model.path)
         self.model = model
         self._packed = PackedNetwork.of(model.classifier, model.weights)
-        self.stages = read_stages(model.stages, model.features, model.path)
+        self.rules, self.drives = rules_of(model)
 
     def logits(self, obs: Observation) -> np.ndarray:
         """log F_t (-inf where a probability is exactly 0)."""

@@ -6,7 +6,7 @@ route planned over a prior map of the course (the scenario's terrain here, stand
 labelled aerial imagery on a robot) moves the reference path itself.
 
 The route is the least-cost way from the path's start to its end through the costmap of that
-map (:mod:`terrapref.planner.costmap`: the learned per-class prices, lethal classes lethal) with
+map (:mod:`terrapref.rules.costmap`: the learned per-class prices, lethal classes lethal) with
 the price the model learned for leaving the path: the corridor utility prices a metre on class
 k at ``-w_k`` and an offset of d metres held for L metres of path at ``-w_detour * d^2 * (L +
 span)``, the span standing for swerving out and back. So a metre of route at distance d from
@@ -25,12 +25,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from terrapref.planner.costmap import LETHAL_COST, MAX_COST, UNKNOWN_COST, Costmap, costmap_of
+from terrapref.rules.costmap import LETHAL_COST, MAX_COST, UNKNOWN_COST, Costmap
 from terrapref.scenario.path import ReferencePath
 
 if TYPE_CHECKING:
     from terrapref.learning.model_file import LoadedModel
-    from terrapref.planner.stages.offset import OffsetSteering
     from terrapref.scenario import Scenario
     from terrapref.world import WorldMap
 
@@ -94,22 +93,22 @@ class RouteError(ValueError):
 
 def route_over(scenario: Scenario, model: LoadedModel, config: RouteConfig | None = None, world: WorldMap | None = None) -> Route:
     """The route along ``scenario``'s path over its map (the prior; ``world``, its raster, when
-    the caller has it), priced as ``model`` learned: its offset stage's class prices and price of
-    leaving the path.
+    the caller has it), priced as ``model``'s driving rule learned: its class prices and price of
+    leaving the path (:meth:`terrapref.rules.RuleRunner.route_prices`).
 
     Raises:
-        ValueError: the model has no offset stage (no corridor utility to price with).
+        ValueError: the model's driving rule learned no prices to route with.
         RouteError: no route (module docstring).
     """
     from terrapref.planner.planner import Planner
-    from terrapref.planner.stages.offset import OffsetSteering
     from terrapref.world import rasterise
 
-    stage = Planner(model).runner
-    if not isinstance(stage, OffsetSteering):  # the route is priced with the offset stage's own prices
-        raise ValueError("has no offset stage, whose learned prices the route is priced with (train it with recipe teach)")
-    costmap = prior_costmap(world if world is not None else rasterise(scenario), stage, model.features.feature_classes)
-    return plan_route(costmap, ReferencePath(scenario.waypoints), *detour_prices(stage), config=config)
+    planner = Planner(model)
+    prices = planner.runner.route_prices()
+    if prices is None:
+        raise ValueError(f"drives by rule {planner.rule.type}, which learned no prices of the ground to route with (train with recipe teach)")
+    costmap = prices.prior(world if world is not None else rasterise(scenario))
+    return plan_route(costmap, ReferencePath(scenario.waypoints), prices.detour_price, prices.span_m, config=config)
 
 
 def routed_scenario(scenario: Scenario, route: Route, by: str) -> dict:
@@ -120,19 +119,6 @@ def routed_scenario(scenario: Scenario, route: Route, by: str) -> dict:
     data["description"] = f"{scenario.name} with its path replaced by the route {by} prices lowest"
     data["path"] = {"waypoints": np.round(route.waypoints, 3).tolist()}
     return data
-
-
-def prior_costmap(world: WorldMap, stage: OffsetSteering, names: tuple[str, ...]) -> Costmap:
-    """The costmap of a prior map ``world`` (every cell known) as ``stage``, an offset stage,
-    prices what its ground map holds; ``names``, the classes of its K terrain columns."""
-    cells = stage.map.columns[world.raster]
-    return costmap_of(cells, np.zeros(2), world.resolution_m, stage.utility.weights, stage.lethal, names)
-
-
-def detour_prices(stage: OffsetSteering) -> tuple[float, float]:
-    """The price, per metre and per square metre of offset, of holding off the path that
-    ``stage``'s corridor utility learned (``-w_detour``), and the span [m] its detours add."""
-    return float(-stage.utility.weights[stage.k + 1]), float(stage.utility.config.span_m)
 
 
 def coarsened(costmap: Costmap, resolution_m: float) -> Costmap:

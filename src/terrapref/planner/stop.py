@@ -34,8 +34,10 @@ import numpy as np
 from numba import njit
 
 from terrapref.camera import PinholeCamera, PixelSet, SegmentationView
-from terrapref.features.corridor import CorridorConfig, GroundMap, TerrainColumns
-from terrapref.features.kernels import UNSETTLED, map_decide
+from terrapref.rules.offset.geometry import OffsetGeometry
+from terrapref.rules.columns import TerrainColumns
+from terrapref.rules.offset.ground_map import GroundMap
+from terrapref.rules.offset.ground_map_compiled import UNSETTLED, map_decide
 from terrapref.records import to_plain
 from terrapref.stops import BLIND, NO_FREE_WAY
 from terrapref.terrain import UNKNOWN
@@ -110,7 +112,7 @@ class StopConfig:
 # counting (fade 0.8 a frame), placed with the mount's attitude, otherwise as the offset stage's
 # map. It is much coarser than the offset stage's (a fortieth of the samples): it decides only
 # whether to go, and the decision it guards (C's) costs 20 us.
-_OWN_MAP = CorridorConfig(stations_m=(-1.0, 3.0), map_resolution_m=0.2, sample_step_m=0.2, map_half_size_m=5.0, sample_range_m=3.5,
+_OWN_MAP = OffsetGeometry(stations_m=(-1.0, 3.0), map_resolution_m=0.2, sample_step_m=0.2, map_half_size_m=5.0, sample_range_m=3.5,
                           map_fade=0.8, map_sky_attitude=False)
 _OWN_MAP_HALF_WIDTH_M = 3.0
 
@@ -248,7 +250,7 @@ def first_free_arc(x0: float, y0: float, yaw0: float, curvatures: np.ndarray, fi
     cells unvoted between them, which are not unseen ground. A lethal cell none of whose
     4-neighbours is lethal does not block (a speckle: labels flipped in a few frames; the
     footprint's points, 0.3 m apart, do not resolve a 0.1 m obstacle either). The map's cells are read as
-    :func:`terrapref.features.kernels.map_decide` says (``cells`` to ``shares``).
+    :func:`terrapref.rules.offset.ground_map_compiled.map_decide` says (``cells`` to ``shares``).
     """
     n_rows, n_cols = cells.shape
     vis_x, vis_y = visible.shape
@@ -315,7 +317,7 @@ def _lethal_evidence(evidence: np.ndarray, map_lethal: np.ndarray, j: int, i: in
 @njit(cache=True, nogil=True, inline="always")
 def _column(cells: np.ndarray, evidence: np.ndarray, map_lethal: np.ndarray, shares: np.ndarray, j: int, i: int, never: int) -> int:
     """The column of map cell ``(j, i)``, decided first if it is UNSETTLED (as
-    :func:`terrapref.features.kernels.map_decide` says); ``never`` outside the map."""
+    :func:`terrapref.rules.offset.ground_map_compiled.map_decide` says); ``never`` outside the map."""
     if not (0 <= i < cells.shape[1] and 0 <= j < cells.shape[0]):
         return never
     col = cells[j, i]

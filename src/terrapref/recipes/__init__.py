@@ -6,13 +6,13 @@ Named recipes (:data:`RECIPES`, ``terrapref recipes``; ``--recipe NAME`` in ``tr
 - ``teach`` (the default, :data:`DEFAULT_RECIPE`): the product's. One drive of ``teach_course``
   with disturbances; C with a residual path, a class-balanced loss and mirrored samples, 100
   epochs at learning rate 3e-3, an ensemble of three; labels from a moving average of w when the
-  hand shakes (terrapref.learning.steady); stages: the second stage, fitted through the
-  look-ahead, then the offset stage, which drives (terrapref.planner.stages).
+  hand shakes (terrapref.learning.steady); rules: the second stage, fitted through the
+  look-ahead, then the offset rule, which drives (terrapref.rules).
 - ``ours``: the paper's setting done well: two drives of ``train_course`` with disturbances,
-  the same C (one network); stages: the second stage, fitted frame by frame, which drives. Used
+  the same C (one network); rules: the second stage, fitted frame by frame, which drives. Used
   by ``terrapref reproduce`` beside ``paper``.
 - ``paper``: the published recipe: one drive of ``train_course``, 15 epochs of the paper's C;
-  no stage: C's argmax drives.
+  no rule: C's argmax drives.
 
 How each recipe scored is measured, not written here: docs/learning.md and the reports of
 ``terrapref reproduce`` and ``terrapref select``.
@@ -44,7 +44,7 @@ from terrapref.learning.train import DataOptions, OptimiserConfig, TrainConfig, 
 from terrapref.perception import PerceptionModel
 from terrapref.registry import Registry
 from terrapref.planner import Planner, PlannerDriver
-from terrapref.planner.stages import OffsetConfig, SecondStageConfig, StageConfig
+from terrapref.rules import OffsetConfig, SecondStageConfig, RuleConfig
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import SimConfig, Simulation
 from terrapref.terrain import ClassTable, PreferenceProfile
@@ -62,8 +62,8 @@ class Recipe:
         train: training hyperparameters.
         disturbance: pushes injected while demonstrating, so that recoveries are shown
             (None: the driver drives undisturbed).
-        stages: the decision stages fitted with C, in order; the last drives
-            (terrapref.planner.stages; none: C's argmax). Each says what its data must carry.
+        rules: the decision rules fitted with C, in order; the last drives (terrapref.rules;
+            none: C's argmax). Each says what its fit reads of the frames.
         course: the demonstration course.
         summary: one line on what the recipe is for (``terrapref recipes``).
     """
@@ -73,7 +73,7 @@ class Recipe:
     corrections: int = 0
     train: TrainConfig = field(default_factory=TrainConfig)
     disturbance: DisturbanceConfig | None = None
-    stages: tuple[StageConfig, ...] = ()
+    rules: tuple[RuleConfig, ...] = ()
     course: str = "train_course"
     summary: str = ""
 
@@ -82,15 +82,12 @@ class Recipe:
             raise ValueError("a recipe needs demonstrations >= 1 and corrections >= 0")
 
     def features(self, base: FeatureConfig | None = None) -> FeatureConfig:
-        """The feature configuration this recipe trains with: ``base`` with what its stages' fits
-        need (the look-ahead, the corridor) and nothing else."""
-        features = replace(base or FeatureConfig(), lookahead=None, corridor=None)
-        for stage in self.stages:
-            features = stage.features(features)
-        return features
+        """The feature configuration C trains with (``base``, else the default); what the rules'
+        fits read besides is theirs (:attr:`rules`)."""
+        return base or FeatureConfig()
 
     def to_dict(self) -> dict:
-        return {**asdict(self), "stages": [{"type": s.type, **asdict(s)} for s in self.stages]}
+        return {**asdict(self), "rules": [{"type": r.type, **asdict(r)} for r in self.rules]}
 
 
 PAPER = Recipe("paper", summary="the published recipe: one drive of train_course, 15 epochs of the paper's C, C's argmax drives "
@@ -100,15 +97,15 @@ PAPER = Recipe("paper", summary="the published recipe: one drive of train_course
 # steps; docs/learning.md) with the residual path, a class-balanced loss and mirrored samples,
 # (the second stage's linear utility is fitted to the same samples).
 _RECOMMENDED = TrainConfig(OptimiserConfig(epochs=100, lr=3e-3), ClassifierConfig(skip=True), DataOptions(class_balance=True, mirror=True))
-OURS = Recipe("ours", demonstrations=2, train=_RECOMMENDED, stages=(SecondStageConfig(),),
+OURS = Recipe("ours", demonstrations=2, train=_RECOMMENDED, rules=(SecondStageConfig(),),
               disturbance=DisturbanceConfig(rate_hz=0.3),
               summary="two drives of train_course: the paper's setting done well (the reproduction's Tables 1 and 2); "
                       "the second stage drives")
 TEACH = Recipe("teach", course="teach_course",
                train=replace(_RECOMMENDED, classifier=ClassifierConfig(skip=True, members=3), data=replace(_RECOMMENDED.data, steady_labels=True)),
-               stages=(SecondStageConfig(weight=5.0, lookahead=True), OffsetConfig()),
+               rules=(SecondStageConfig(weight=5.0, lookahead=True), OffsetConfig()),
                disturbance=DisturbanceConfig(rate_hz=0.3),
-               summary="one drive of teach_course: any preference order from five minutes (the default); the offset stage "
+               summary="one drive of teach_course: any preference order from five minutes (the default); the offset rule "
                        "drives (docs/learning.md)")
 RECIPES: Registry[Recipe] = Registry("recipe")
 for _recipe in (TEACH, OURS, PAPER):
@@ -129,8 +126,7 @@ class RecipeSetup:
         seed: seeds the demonstrations (run ``k``: ``seed * 100 + k``), training and the correction rounds.
         profile: the synthetic driver's preference order (None: the course's class table's).
         course: the course demonstrated (None: the recipe's own).
-        features: the feature configuration (None: the default; :func:`run_recipe` adds what the
-            recipe's stages need).
+        features: C's feature configuration (None: the default).
         style: the synthetic driver's style (terrapref.demos.expert.STYLES).
         perception: what the robot receives instead of the truth in the demonstrations (None: the truth).
         classes: the class table the course is read with (None: the default).
@@ -240,7 +236,8 @@ def open_pairs(recordings: list[Recording], recipe: Recipe, features: FeatureCon
     report ``inspect`` prints)."""
     from terrapref.learning.train import identify
 
-    dataset = build_dataset(recordings, recipe.features(features), cache=cache, frames=frames)
+    dataset = build_dataset(recordings, recipe.features(features), rules=recipe.rules, cache=cache,
+                            progress=None if frames is None else lambda p: frames(p.frames_done, p.frames))
     return [(p.first, p.second) for p in identify(dataset, steady=recipe.train.data.steady_labels).unidentified()]
 
 
@@ -296,7 +293,7 @@ def run_recipe(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Cal
     corr_s = 0.0
     train_cfg = replace(recipe.train, seed=seed)
     model = own / "model.safetensors"
-    result = train_and_save(build_dataset(recordings, features, cache=cache), model, train_cfg, stages=recipe.stages, recipe=recipe.name, options=RunOptions(checkpoints=False))
+    result = train_and_save(build_dataset(recordings, features, cache=cache, rules=recipe.rules), model, train_cfg, rules=recipe.rules, recipe=recipe.name, options=RunOptions(checkpoints=False))
     if recipe.corrections:  # the planner drives the course; only then is a simulation needed here
         camera, sim_cfg = CameraConfig(), SimConfig()
         expert_cfg = ExpertConfig.styled(setup.style, profile.order)
@@ -311,7 +308,7 @@ def run_recipe(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Cal
         corr_s += run.duration_s
         recordings.append(read_recording(out))
         paths.append(out)
-        result = train_and_save(build_dataset(recordings, features, cache=cache), model, train_cfg, stages=recipe.stages, recipe=recipe.name, options=RunOptions(checkpoints=False))
+        result = train_and_save(build_dataset(recordings, features, cache=cache, rules=recipe.rules), model, train_cfg, rules=recipe.rules, recipe=recipe.name, options=RunOptions(checkpoints=False))
         if log:
             log(f"correction session {r + 1}/{recipe.corrections}: {len(recordings[-1])} frames, retrained")
     return RecipeOutput(model, paths, result, demo_s / 60.0, corr_s / 60.0)

@@ -60,9 +60,14 @@ def info_lines(path: str | Path) -> list[str]:
         return _onnx_lines(p)
     meta, shapes = _tensor_file_header(p)
     fmt = meta.get("format")
-    if fmt == "terrapref-dataset/1":
+    from terrapref.dataset import FORMAT as DATASET, OLD_FORMATS
+    from terrapref.learning.header import FORMAT as MODEL
+
+    if fmt == DATASET:
         return _dataset_lines(p, meta, shapes)
-    if fmt == "terrapref-model/1":
+    if fmt in OLD_FORMATS:
+        raise UserError(str(p), f"a dataset of an earlier version ({fmt}); featurize its recordings again", field="format")
+    if fmt == MODEL:
         return _model_lines(p, meta)
     raise UserError(str(p), f"format {fmt!r} is not a terrapref recording, dataset or model", field="format")
 
@@ -101,24 +106,27 @@ def _onnx_lines(p: Path) -> list[str]:
     c = meta.get("classifier", {})
     return [f"{p}: C exported as ONNX ({meta.get('format', 'no terrapref metadata')})",
             f"network         {c.get('members', 1)} member(s), hidden {c.get('hidden')}, {c.get('activation')}, skip {c.get('skip')}",
-            *_stage_lines(meta, str(p), " (in the metadata, not the graph)")] + _common(meta) + _identifiability(meta)
+            *_rule_lines(meta, str(p), graph_note=True)] + _common(meta) + _identifiability(meta)
 
 
-def _stage_lines(meta: dict, source: str, offset_note: str = "") -> list[str]:
-    """The second stage's line (its weight, or none) and the offset stage's (it drives, with its
-    near distance; or none), from the stages the header lists (a file without them: its ``utility`` and
-    ``corridor`` blocks, read as the same stages); a damaged list is said to be one."""
-    from terrapref.learning.header import stage_blocks
+def _rule_lines(meta: dict, source: str, graph_note: bool = False) -> list[str]:
+    """The rule that drives and the rules fitted only to be reported, each as it describes
+    itself (terrapref.rules); a damaged list is said to be one. ``graph_note``: an exported
+    graph, which holds C alone: a rule that is not C's argmax runs in the planner, not in it."""
+    from terrapref.rules import rules_in
+    from terrapref.terrain import ClassTable
 
     try:
-        blocks = stage_blocks(meta, source) or ()
-    except UserError as exc:
-        return [f"stages          unreadable ({exc.problems[0].format('')})"]
-    second = next((b for b in blocks if b["type"] == "second_stage"), None)
-    offset = next((b for b in blocks if b["type"] == "offset"), None)
-    return [f"second stage    {'weight ' + str(second.get('weight', '?')) if second is not None else 'none'}",
-            f"offset stage    " + (f"drives (corridor utility, near distance {offset.get('near_m', '?')} m){offset_note}" if offset is not None
-                                   else "none (C's trajectories drive)")]
+        rules, driving = rules_in(meta, source)
+        classes = ClassTable.from_dict(meta["classes"], source)
+    except (UserError, KeyError, TypeError, ValueError) as exc:
+        return [f"rules           unreadable ({exc.problems[0].format('') if isinstance(exc, UserError) else exc})"]
+    names = tuple(meta["features"].get("feature_classes", ()))
+    lethal = frozenset({classes.lethal_column} if classes.lethal else ())  # the terrain column the lethal classes share
+    note = " (in the metadata; the graph holds C alone)" if graph_note and not driving.graph else ""
+    lines = [f"drives          {driving.type}{note}"]
+    lines += [f"  {rule.describe(names, lethal)}" + ("" if rule is driving else " (fitted to be reported; it does not drive)") for rule in rules]
+    return lines
 
 
 def _tensor_file_header(p: Path) -> tuple[dict, dict[str, tuple[int, ...]]]:
@@ -142,12 +150,12 @@ def _tensor_file_header(p: Path) -> tuple[dict, dict[str, tuple[int, ...]]]:
 
 
 def _dataset_lines(p: Path, meta: dict, shapes: dict[str, tuple[int, ...]]) -> list[str]:
-    """A dataset: samples, whether it holds look-ahead utilities, and the recordings it came from."""
+    """A dataset: samples, the decision rules whose data it holds, and the recordings it came from."""
     n = shapes.get("U", (0,))[0]
     recs = meta.get("recordings", [])
+    rules = meta.get("rules") if isinstance(meta.get("rules"), dict) else {}
     return ([f"{p}: terrapref dataset", f"samples         {n} from {len(recs)} recording(s)",
-             f"look-ahead      {'yes' if 'U2' in shapes else 'no'}",
-             f"corridor        {'yes' if 'corridor.features' in shapes else 'no'}"]
+             f"rules' data     {', '.join(rules) or 'none (C alone)'}"]
             + [f"  {r.get('path')}: {r.get('frames')} frames, {r.get('scenario')}" + (f", perception {r['perception']}" if r.get("perception", "clean") != "clean" else "")
                for r in recs if isinstance(r, dict)] + _common(meta))
 
@@ -158,11 +166,11 @@ def _model_lines(p: Path, meta: dict) -> list[str]:
 
     c = meta.get("classifier", {}) if isinstance(meta.get("classifier"), dict) else {}
     data = meta.get("data", {}) if isinstance(meta.get("data"), dict) else {}
-    lines = [f"{p}: terrapref model ({meta.get('kind', CLASSIFIER)}" + (", INTERRUPTED: the best epochs so far, no decision stages" if meta.get("status") == INTERRUPTED else "")
+    lines = [f"{p}: terrapref model ({meta.get('kind', CLASSIFIER)}" + (", INTERRUPTED: the best epochs so far, no decision rules" if meta.get("status") == INTERRUPTED else "")
              + (f", checkpoint of epoch {meta.get('epoch')}" if meta.get("status") == CHECKPOINT else "") + ")",
              f"recipe          {meta.get('recipe', '?')}",
              f"network         {c.get('members', 1)} member(s), hidden {c.get('hidden')}, {c.get('activation')}, skip {c.get('skip')}",
-             *_stage_lines(meta, str(p)),
+             *_rule_lines(meta, str(p)),
              f"data            {data.get('samples', '?')} samples, fingerprint {data.get('fingerprint', '?')}, {len(data.get('recordings', []) or [])} recording(s)"]
     return lines + _training(meta) + _common(meta) + _identifiability(meta)
 

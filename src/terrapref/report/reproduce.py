@@ -134,7 +134,7 @@ def reproduce(out_dir: str | Path, setup: Reproduction | None = None, engine: En
 
 
 def _train_all(setup: Reproduction, out: Path, engine: Engine, log: Callable[[str], None]) -> list[RecipeModel]:
-    """Stage 1: every recipe's model for every seed, by seed and then in the recipes' order."""
+    """Rule 1: every recipe's model for every seed, by seed and then in the recipes' order."""
     # One job per seed and demonstration protocol (recipes recording the same demonstrations stay
     # together), the costliest first, so that both cores stay busy to the end.
     groups: dict = {}
@@ -153,7 +153,7 @@ def _train_all(setup: Reproduction, out: Path, engine: Engine, log: Callable[[st
 
 
 def _evaluate(setup: Reproduction, trained: list[RecipeModel], engine: Engine, log: Callable[[str], None]) -> list[RecipeRun]:
-    """Stage 2: every model and the synthetic driver on every course, the planners' agreement with the driver."""
+    """Rule 2: every model and the synthetic driver on every course, the planners' agreement with the driver."""
     specs = [RunSpec(sc, e, PLANNER, t.model, setup.profile.order)
              for t in trained for sc in setup.scenarios for e in range(setup.eval_seeds)]
     specs += [RunSpec(sc, e, PLANNER, t.model, setup.profile.order, perception=p)
@@ -291,8 +291,7 @@ def _recipe_lines(recipes: tuple[Recipe, ...]) -> list[str]:
                      f"{r.train.optimiser.epochs} epochs, residual path {'on' if r.train.classifier.skip else 'off'}, class-balanced loss {'on' if r.train.data.class_balance else 'off'}, "
                      f"mirrored samples {'on' if r.train.data.mirror else 'off'}"
                      + (f", {r.train.classifier.members} ensemble members" if r.train.classifier.members > 1 else "")
-                     + (", the planner's second stage scoring second pieces of trajectory beyond the first with the linear utility fitted to the same samples"
-                        + (" through the look-ahead" if r.features().lookahead is not None else "") if any(s.type == "second_stage" for s in r.stages) else "")
+                     + "".join(f", {summary}" for rule in r.rules if (summary := rule.summary()))
                      + ("; labels from a moving average of w if the driver's hand shakes more than half the w grid's spacing"
                         if r.train.data.steady_labels else "") + ".")
     return lines

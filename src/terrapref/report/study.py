@@ -287,7 +287,7 @@ def run_study(out_dir: str | Path, plan: StudyPlan = FULL, engine: Engine | None
 
 
 def _demonstrate(ws: _Workspace) -> None:
-    """Stage 1: per seed, the demonstrations under the default profile and under the other (kept in
+    """Rule 1: per seed, the demonstrations under the default profile and under the other (kept in
     memory, as the reproduction's are), and from them the utilities and the CNN's samples of the
     default ones, the utilities of the other profile's, and the utilities at every ablated horizon."""
     plan = ws.plan
@@ -306,7 +306,7 @@ def _demonstrate(ws: _Workspace) -> None:
 
 
 def _train_and_teach(ws: _Workspace) -> tuple[list[TrainedModel], list[TaughtModel]]:
-    """Stage 2: every model trained from the demonstrations, and (section 6) every drive of the
+    """Rule 2: every model trained from the demonstrations, and (section 6) every drive of the
     teaching recipe's course and its model: one grid, so that neither kind waits for the other's
     last job."""
     plan = ws.plan
@@ -351,7 +351,7 @@ def _train_jobs(plan: StudyPlan, work: Path) -> list[TrainJob]:
 
 
 def _evaluate(ws: _Workspace, trained: list[TrainedModel], taught: list[TaughtModel]) -> list[StudyRun]:
-    """Stage 3: every closed-loop run, tagged with its place in the study."""
+    """Rule 3: every closed-loop run, tagged with its place in the study."""
     planned = _evaluation_runs(ws.plan, trained, taught)
     ws.log(f"[3/5] closed-loop evaluation: {len(planned)} runs over {len(ws.plan.scenarios()) + len(ws.plan.layouts)} scenarios ...")
     results = run_many([spec for spec, _ in planned], progress=every_tenth(ws.log), engine=ws.engine)
@@ -409,7 +409,7 @@ def _layout_runs(plan: StudyPlan, layout: str, taught: list[TaughtModel]) -> lis
 
 
 def _sweep(ws: _Workspace, taught: list[TaughtModel], runs: list[StudyRun]) -> list[StudyRun]:
-    """Stage 4: each part of the plan's base preset alone, at each level of the sweep in turn, on the
+    """Rule 4: each part of the plan's base preset alone, at each level of the sweep in turn, on the
     default style's taught models; a part drops out after the first level where agreement with
     the driver (the teaching section's driver runs) falls below SWEEP_FLOOR."""
     plan = ws.plan

@@ -10,24 +10,54 @@ own utilities: terrain shares, and the distance utility of its end against the p
 horizon beyond its start, normalised over all the second pieces together, so that a first
 trajectory that has left the path scores its continuations lower than one that has not.
 
-The planner's second stage (terrapref.planner.stages.second) scores these with a learned linear
+The planner's second stage (terrapref.rules.second.rule) scores these with a learned linear
 utility; training fits that utility through the same look-ahead (terrapref.learning.linear).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+
 import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView
-from terrapref.features import kernels
-from terrapref.features.utility import NORMALISE_EPS, LookaheadConfig, UtilityFeaturizer
+from terrapref.rules.second import scores_compiled as kernels
+from terrapref.features.utility import NORMALISE_EPS, UtilityFeaturizer
+from terrapref.records import to_plain
 from terrapref.scenario.path import ReferencePath
 from terrapref.vehicle import Pose
 
 
 _NO_TARGETS = np.zeros((0, 2))
 _NO_LINE = (0.0, 0.0, 0.0, 0.0)
+
+
+
+@dataclass(frozen=True)
+class LookaheadConfig:
+    """Where the second pieces start and which of their points are read.
+
+    Attributes:
+        after_s: where along each first trajectory the second piece starts [s]; rounded to a
+            trajectory point (point j is j dt along; the last, (n - 1) dt).
+        stride: terrain shares read on every ``stride``-th point of each second piece, ending
+            with its last.
+    """
+
+    after_s: float = 2.4
+    stride: int = 2
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.after_s) and self.after_s > 0 and isinstance(self.stride, int) and self.stride >= 1):
+            raise ValueError("the look-ahead needs after_s > 0 and an integer stride >= 1")
+
+    def to_dict(self) -> dict:
+        return to_plain(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> LookaheadConfig:
+        return cls(float(data["after_s"]), int(data["stride"]))
 
 
 class Lookahead:

@@ -1,7 +1,7 @@
-"""Fitting the corridor utility (terrapref.planner.stages.offset) to the offsets a demonstrator steered for.
+"""Fitting the corridor utility (terrapref.rules.offset.rule) to the offsets a demonstrator steered for.
 
 Each frame's label is the offset the driver was steering for, read when the recording is
-featurised (:func:`terrapref.features.corridor.intent_offsets`). A softmax over the candidate
+featurised (:func:`terrapref.rules.offset.steering.intent_offsets`). A softmax over the candidate
 offsets, ``p(d) ~ exp(weights . gated(features)(d))``, is fitted to Gaussian soft labels
 (``sigma_m``) around that offset by Newton's method with a small ridge, once for each candidate
 near distance; the near distance of the lowest loss is kept.
@@ -19,18 +19,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from terrapref.features.corridor import CorridorConfig
+from terrapref.rules.offset.geometry import OffsetGeometry
 
 WEIGHT_DECIMALS = 12  # fitted weights are kept to this many decimals
 NEAR_CANDIDATES_M = (2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 6.0, 7.0, 8.0)
 
 
 @dataclass(frozen=True)
-class CorridorUtility:
+class OffsetUtility:
     """A fitted corridor utility: ``weights . gated(features)`` per offset.
 
     Attributes:
-        weights: one per column of :func:`terrapref.features.corridor.gated`, shape (K + 3,):
+        weights: one per column of :func:`terrapref.rules.offset.features.gated`, shape (K + 3,):
             K terrain classes, never seen, the detour's price, the gate.
         near_m: the gate's near distance [m].
         config: the corridor's geometry.
@@ -38,15 +38,15 @@ class CorridorUtility:
 
     weights: np.ndarray
     near_m: float
-    config: CorridorConfig = field(default_factory=CorridorConfig)
+    config: OffsetGeometry = field(default_factory=OffsetGeometry)
 
 
 @dataclass(frozen=True)
-class CorridorFit:
+class OffsetFit:
     """A fitted corridor utility and how well it fitted.
 
     Attributes:
-        weights: (K + 3,), the columns of :func:`terrapref.features.corridor.gated`.
+        weights: (K + 3,), the columns of :func:`terrapref.rules.offset.features.gated`.
         near_m: the chosen near distance [m].
         loss: mean cross-entropy of the soft labels at that near distance (to 12 decimals, as
             the weights).
@@ -119,8 +119,8 @@ class CorridorFitConfig:
     near_candidates: tuple[float, ...] = NEAR_CANDIDATES_M
 
 
-def fit_corridor(features: np.ndarray, near_m: np.ndarray, intent: np.ndarray, offsets: np.ndarray,
-                 config: CorridorFitConfig | None = None) -> CorridorFit:
+def fit_offset_utility(features: np.ndarray, near_m: np.ndarray, intent: np.ndarray, offsets: np.ndarray,
+                 config: CorridorFitConfig | None = None) -> OffsetFit:
     """Fit the corridor utility to frames' corridor features (N, O, K + 2), near distances (N,)
     and intended offsets (N,) over the candidate ``offsets`` (O,) [m]; frames without an intended
     offset (NaN) are left out; ``config`` None: the default fit."""
@@ -142,4 +142,4 @@ def fit_corridor(features: np.ndarray, near_m: np.ndarray, intent: np.ndarray, o
     # fit does not amplify them, and rounding leaves the same weights (and losses) everywhere but
     # at a rounding boundary.
     losses = {near: round(value, WEIGHT_DECIMALS) for near, value in losses.items()}
-    return CorridorFit(np.round(theta, WEIGHT_DECIMALS), chosen, round(loss, WEIGHT_DECIMALS), losses, int(keep.sum()))
+    return OffsetFit(np.round(theta, WEIGHT_DECIMALS), chosen, round(loss, WEIGHT_DECIMALS), losses, int(keep.sum()))

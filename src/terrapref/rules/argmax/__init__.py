@@ -1,4 +1,4 @@
-"""The ``argmax`` stage: drive the trajectory C ranks first (the paper's planner, SPEC 9)."""
+"""The ``argmax`` rule: drive the trajectory C ranks first (the paper's planner, SPEC 9)."""
 
 from __future__ import annotations
 
@@ -8,38 +8,38 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from terrapref.features import FeatureConfig
-from terrapref.planner.stages.base import Choice, Stage, StageConfig, StageContext, StageInput, StageRunner, Where
+from terrapref.rules.base import Choice, HeaderContext, Rule, RuleConfig, RuleContext, RuleInput, RuleRunner, Where
 from terrapref.vehicle import Command, ControlSet
 
 
 @dataclass(frozen=True)
-class ArgmaxStage(Stage, StageConfig):
+class ArgmaxRule(Rule, RuleConfig):
     """Nothing to fit: the argmax of F_t."""
 
     type: ClassVar[str] = "argmax"
+    graph: ClassVar[bool] = True  # its decision is C's graph, and the argmax of its output
 
-    def fit(self, data: object) -> ArgmaxStage:
+    def fit(self, data: object) -> ArgmaxRule:
         return self
 
     def header(self) -> dict[str, Any]:
         return {"type": self.type}
 
     @classmethod
-    def from_header(cls, block: Mapping[str, Any], features: FeatureConfig, where: Where) -> ArgmaxStage:
+    def from_header(cls, block: Mapping[str, Any], context: HeaderContext, where: Where) -> ArgmaxRule:
         return cls()
 
-    def runner(self, context: StageContext) -> StageRunner:
+    def runner(self, context: RuleContext) -> RuleRunner:
         return _Argmax(context.features.preference.control)
 
     def describe(self, names: tuple[str, ...], lethal: frozenset[str]) -> str:
         return "argmax: the trajectory C ranks first"
 
 
-class _Argmax(StageRunner):
+class _Argmax(RuleRunner):
     def __init__(self, control: ControlSet) -> None:
         self.control = control
 
-    def decide(self, frame: StageInput) -> Choice:
+    def decide(self, frame: RuleInput) -> Choice:
         i = int(np.argmax(frame.probs))
         return Choice(i, Command(*self.control.command(i)))

@@ -1,7 +1,8 @@
-"""The ``offset`` stage: choose a lateral offset from the path with a learned corridor utility, hold it, steer to it.
+"""The ``offset`` rule: choose a lateral offset from the path with a learned utility, hold it, steer to it.
 
-Each frame the ground map (terrapref.features.corridor) takes in the camera's view and the
-corridor utility ``weights . features(d)`` scores every candidate offset d. The stage then:
+Each frame the ground map (:mod:`.ground_map`) takes in the camera's view and the offset
+utility ``weights . features(d)`` (:mod:`.features`, fitted by :mod:`.fit`) scores every
+candidate offset d. The rule then:
 
 1. rules out offsets whose way there, pure pursuit toward them for ``lethal_horizon_m``, brings
    the footprint (plus ``lethal_margin_m``) onto lethal terrain, whenever any lethal terrain lies
@@ -28,31 +29,39 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView
-from terrapref.features import FeatureConfig
-from terrapref.features.corridor import CorridorConfig, CorridorFeatures, GroundMap, TerrainColumns, steer
-from terrapref.features.kernels import gated_value
-from terrapref.learning.corridor import CorridorFit, CorridorUtility, fit_corridor
-from terrapref.planner.costmap import Costmap, costmap_of
-from terrapref.planner.stages.base import Choice, Stage, StageConfig, StageContext, StageInput, StageRunner, Where, number, vector
-from terrapref.planner.stages.kernels import lethal_hits, swept_reach
+from terrapref.errors import UserError
+from terrapref.features import UtilityFeaturizer
 from terrapref.records import to_plain
+from terrapref.rules.base import (Choice, FrameReader, HeaderContext, Rule, RuleConfig, RuleContext, RuleInput, RoutePrices, RuleRunner,
+                                  TerrainColumns, Where, number, vector)
+from terrapref.rules.costmap import Costmap, costmap_of
+from terrapref.rules.offset.features import OffsetFeatures
+from terrapref.rules.offset.fit import OffsetFit, OffsetUtility, fit_offset_utility
+from terrapref.rules.offset.geometry import OffsetGeometry
+from terrapref.rules.offset.ground_map import GroundMap
+from terrapref.rules.offset.offsets_compiled import gated_value
+from terrapref.rules.offset.reach_compiled import lethal_hits, swept_reach
+from terrapref.rules.offset.steering import intent_offsets, steer
 from terrapref.scenario.path import ReferencePath
+from terrapref.terrain import ClassTable
 from terrapref.vehicle import Command, ControlSet, Pose
 
 if TYPE_CHECKING:
+    from terrapref.demos.recording import Recording
     from terrapref.learning.train import FitData
+    from terrapref.world import WorldMap
 
 
 @dataclass(frozen=True)
-class OffsetConfig(StageConfig):
-    """How the offset stage holds and reaches an offset (its fit needs the corridor data:
-    :meth:`features`).
+class OffsetConfig(RuleConfig):
+    """How the offset rule holds and reaches an offset, and the geometry of its offsets and
+    ground map (its fit reads each frame's offset features: :meth:`reader`).
 
     Attributes:
         switch_margin: the held offset is kept while its utility falls short of the best
@@ -62,11 +71,14 @@ class OffsetConfig(StageConfig):
         lethal_horizon_m: how far ahead the way to each offset is checked for lethal terrain [m].
         dt_s: time step of that check [s].
         escape_factor: escape offsets, used only when lethal terrain lies across every fitted
-            offset as far as the corridor reads, reach this many times as far as the fitted
+            offset as far as the features read, reach this many times as far as the fitted
             offsets do (1 = no escape).
+        geometry: the candidate offsets, the stations read along the path and the ground map.
     """
 
     type: ClassVar[str] = "offset"
+    arrays: ClassVar[dict[str, str]] = {"features": "finite >= 0", "near_m": "no NaN", "intent_m": "no inf"}
+    without_data: ClassVar[str] = "the model gets no offset rule and drives C's trajectories"
 
     switch_margin: float = 0.15
     pursuit_lookahead_m: float = 2.5
@@ -74,40 +86,89 @@ class OffsetConfig(StageConfig):
     lethal_horizon_m: float = 6.0
     dt_s: float = 0.1
     escape_factor: float = 2.0
+    geometry: OffsetGeometry = field(default_factory=OffsetGeometry)
 
     def __post_init__(self) -> None:
         values = (self.switch_margin, self.pursuit_lookahead_m, self.lethal_margin_m, self.lethal_horizon_m, self.dt_s,
                   self.escape_factor)
         if not all(math.isfinite(v) for v in values) or self.switch_margin < 0 or self.lethal_margin_m < 0 \
                 or self.pursuit_lookahead_m <= 0 or self.lethal_horizon_m <= 0 or self.dt_s <= 0 or self.escape_factor < 1:
-            raise ValueError("the offset stage needs switch_margin >= 0, lethal_margin_m >= 0, escape_factor >= 1 "
+            raise ValueError("the offset rule needs switch_margin >= 0, lethal_margin_m >= 0, escape_factor >= 1 "
                              "and positive distances and step")
+        if not isinstance(self.geometry, OffsetGeometry):
+            raise ValueError("the offset rule's geometry must be an OffsetGeometry")
 
     def to_dict(self) -> dict:
         return to_plain(self)
 
-    def features(self, base: FeatureConfig) -> FeatureConfig:
-        return replace(base, corridor=base.corridor or CorridorConfig())
+    def summary(self) -> str:
+        return "the offset rule, holding the lateral offset a utility fitted to the offsets the driver held prices best, driving"
 
-    def fit(self, data: FitData) -> OffsetStage | None:
-        """The corridor utility fitted to the offsets the driver steered for; None for data without corridor data."""
-        corridor = data.dataset.corridor
-        if corridor is None:
+    def data(self) -> dict[str, Any]:
+        return {"geometry": self.geometry.to_dict()}
+
+    def reader(self, featurizer: UtilityFeaturizer, camera: PinholeCamera, classes: ClassTable, n: int) -> OffsetReader:
+        return OffsetReader(self.geometry, featurizer, camera, classes, n)
+
+    def fit(self, data: FitData) -> OffsetRule | None:
+        """The offset utility fitted to the offsets the driver steered for; None for data without the rule's arrays."""
+        found = data.rule_data(self.type)
+        if found is None:
             return None
-        fitted = fit_corridor(corridor.features, corridor.near_m, corridor.intent_m, data.dataset.feature_config.corridor.offsets)
-        return OffsetStage(self, CorridorUtility(fitted.weights, fitted.near_m, data.dataset.feature_config.corridor), fitted)
+        recorded, arrays = found
+        geometry = OffsetGeometry.from_dict(recorded["geometry"])  # the geometry the frames were read with
+        fitted = fit_offset_utility(arrays["features"], arrays["near_m"], arrays["intent_m"], geometry.offsets)
+        return OffsetRule(replace(self, geometry=geometry), OffsetUtility(fitted.weights, fitted.near_m, geometry), fitted)
+
+
+class OffsetReader(FrameReader):
+    """The offset features of each frame of one recording, read in order (the ground map gathers
+    them), and each frame's intended offset: the rule's training arrays.
+
+    Arrays: ``features`` (N, O, K + 2) float32, metres per terrain class, never seen, and the
+    detour's price per candidate offset; ``near_m`` (N,) float32, the distance along the path to
+    the first terrain on it (inf: none within reach); ``intent_m`` (N,) float32, the offset the
+    driver was steering for (NaN: the recording ends before its reaction time has passed)."""
+
+    def __init__(self, geometry: OffsetGeometry, featurizer: UtilityFeaturizer, camera: PinholeCamera, classes: ClassTable, n: int) -> None:
+        k = featurizer.config.n_terrain
+        self.geometry = geometry
+        self.map = GroundMap(camera, TerrainColumns.of(featurizer.class_columns, k, classes), geometry)
+        self.offsets = OffsetFeatures(geometry, k)
+        self.features = np.empty((n, len(self.offsets.offsets), k + 2), dtype=np.float32)
+        self.near = np.empty(n, dtype=np.float32)
+        self.progress = np.empty(n)
+
+    def read(self, j: int, view: SegmentationView, pose: Pose, path: ReferencePath, progress_m: float) -> None:
+        self.map.update(view, pose)
+        frame = self.offsets(self.map, path, progress_m)
+        self.features[j], self.near[j] = frame.features, frame.near_m
+        self.progress[j] = progress_m
+
+    def arrays(self, recording: Recording, keep: np.ndarray, path: ReferencePath) -> dict[str, np.ndarray]:
+        """The arrays, with each frame's intended offset read from the command one reaction time later."""
+        period = recording.frame_period_s
+        delay = round(self.geometry.intent_delay_s / period)
+        later = np.full((len(keep), 2), np.nan)
+        ahead = keep + delay
+        ok = ahead < len(recording)
+        # Only where the frame that much later is the next ones' in time (not across a gap).
+        ok[ok] &= np.abs(recording.times[ahead[ok]] - recording.times[keep[ok]] - delay * period) < 0.5 * period
+        later[ok] = recording.commands[ahead[ok]]
+        intent = intent_offsets(recording.poses[keep], later, self.progress, path, self.offsets.offsets, self.geometry.intent_lookahead_m)
+        return {"features": self.features, "near_m": self.near, "intent_m": intent.astype(np.float32)}
 
 
 @dataclass(frozen=True)
-class OffsetStage(Stage):
-    """A fitted offset stage: how it holds offsets, and the corridor utility that prices them
-    (``fit``: how the fit went, for a stage just fitted)."""
+class OffsetRule(Rule):
+    """A fitted offset rule: how it holds offsets, and the offset utility that prices them
+    (``fit``: how the fit went, for a rule just fitted)."""
 
     type: ClassVar[str] = "offset"
 
     config: OffsetConfig
-    utility: CorridorUtility
-    fit: CorridorFit | None = None
+    utility: OffsetUtility
+    fit: OffsetFit | None = None
 
     def header(self) -> dict[str, Any]:
         u = self.utility
@@ -115,19 +176,33 @@ class OffsetStage(Stage):
                 **({"loss": self.fit.loss, "samples": self.fit.samples} if self.fit is not None else {})}
 
     @classmethod
-    def from_header(cls, block: Mapping[str, Any], features: FeatureConfig, where: Where) -> OffsetStage:
-        if features.corridor is None:
-            raise where.error("", "an offset stage, but the feature configuration has no corridor")
-        weights = vector(block, "weights", features.n_terrain + 3, where)
-        near = number(block, "near_m", where, positive=True)
-        settings = {f.name: number(block, f.name, where, getattr(OffsetConfig, f.name)) for f in fields(OffsetConfig)}
+    def from_header(cls, block: Mapping[str, Any], context: HeaderContext, where: Where) -> OffsetRule:
+        raw = block.get("geometry", context.raw_features.get("corridor"))  # older files: the features' ``corridor``
+        if not isinstance(raw, Mapping):
+            raise where.error("geometry", "missing: an offset rule needs its geometry")
         try:
-            config = OffsetConfig(**settings)
+            geometry = OffsetGeometry.from_dict(dict(raw))
+        except (TypeError, ValueError, KeyError) as exc:
+            raise where.error("geometry", f"invalid ({exc})") from None
+        weights = vector(block, "weights", context.features.n_terrain + 3, where)
+        near = number(block, "near_m", where, positive=True)
+        settings = {f.name: number(block, f.name, where, getattr(OffsetConfig, f.name)) for f in fields(OffsetConfig) if f.name != "geometry"}
+        try:
+            config = OffsetConfig(**settings, geometry=geometry)
         except ValueError as exc:
             raise where.error("", str(exc)) from None
-        return cls(config, CorridorUtility(weights, near, features.corridor))
+        return cls(config, OffsetUtility(weights, near, geometry))
 
-    def runner(self, context: StageContext) -> OffsetSteering:
+    @classmethod
+    def legacy_block(cls, meta: Mapping[str, Any], source: str) -> dict[str, Any] | None:
+        data = meta.get("corridor")  # files before the ``stages`` list: the utility, which drove
+        if data is None:
+            return None
+        if not isinstance(data, dict):
+            raise UserError(source, "expected a mapping", field="corridor")
+        return {"type": cls.type, **data}
+
+    def runner(self, context: RuleContext) -> OffsetSteering:
         return OffsetSteering(self.utility, context.camera, context.terrain, context.features.preference.control, self.config)
 
     def describe(self, names: tuple[str, ...], lethal: frozenset[str]) -> str:
@@ -135,7 +210,7 @@ class OffsetStage(Stage):
         w = self.utility.weights
         prices = ", ".join(f"{c} {p / w[len(names) + 1]:.1f}{' (lethal: ruled out)' if c in lethal else ''}" for c, p in zip(names, w))
         fitted = f"fitted to {self.fit.samples} frames, " if self.fit is not None else ""
-        return (f"offset stage: {fitted}near distance {self.utility.near_m:g} m; each class's price per metre, "
+        return (f"offset rule: {fitted}near distance {self.utility.near_m:g} m; each class's price per metre, "
                 f"relative to the detour's per m^2 of offset per metre: {prices}")
 
 
@@ -147,7 +222,7 @@ def keeps(held: float, best: float, margin: float) -> bool:
     return held >= best - margin * abs(best)
 
 
-class OffsetSteering(StageRunner):
+class OffsetSteering(RuleRunner):
     """The offset stage (module docstring) of one camera, class table and corridor utility.
 
     Args:
@@ -158,12 +233,13 @@ class OffsetSteering(StageRunner):
         config: how offsets are held and reached.
     """
 
-    def __init__(self, utility: CorridorUtility, camera: PinholeCamera, terrain: TerrainColumns, control: ControlSet,
+    def __init__(self, utility: OffsetUtility, camera: PinholeCamera, terrain: TerrainColumns, control: ControlSet,
                  config: OffsetConfig | None = None) -> None:
         k = terrain.k
         if utility.weights.shape != (k + 3,):
             raise ValueError(f"the corridor utility has {utility.weights.shape[0]} weights, expected {k + 3}")
         self.utility, self.config, self.k = utility, config or OffsetConfig(), k
+        self.half_width_m = float(utility.config.half_width_m)
         self.control, self.v_mps, self.names = control, float(control.v_mps), terrain.names
         self.lethal = np.zeros(k + 2, dtype=bool)
         self.lethal[np.asarray(terrain.lethal, dtype=np.int64)] = True
@@ -173,7 +249,7 @@ class OffsetSteering(StageRunner):
             weights[k] = weights[safe].mean()
         self.weights = weights
         self.map = GroundMap(camera, terrain, utility.config)
-        self.corridor = CorridorFeatures(utility.config, k)
+        self.corridor = OffsetFeatures(utility.config, k)
         self.offsets = self.corridor.offsets
         m = utility.config.half_width_m + self.config.lethal_margin_m
         self._clear = np.linspace(-m, m, 7)  # the footprint and its clearance, across [m]
@@ -199,7 +275,7 @@ class OffsetSteering(StageRunner):
     def observe(self, view: SegmentationView, pose: Pose) -> None:
         self.map.update(view, pose)
 
-    def decide(self, frame: StageInput) -> Choice:
+    def decide(self, frame: RuleInput) -> Choice:
         """Steered continuously within the control set's range of yaw rates; the index names the nearest trajectory."""
         w = float(np.clip(self.yaw_rate(frame.view, frame.pose, frame.path, frame.progress_m), self.control.w_rps[0], self.control.w_rps[-1]))
         return Choice(int(self.control.label_of(w)), Command(self.control.v_mps, w))
@@ -235,8 +311,17 @@ class OffsetSteering(StageRunner):
     def ground_map(self) -> GroundMap:
         return self.map
 
+    def route_prices(self) -> RoutePrices:
+        """The class prices and the price of holding off the path this rule learned (``-w_detour``), for a route search."""
+        return RoutePrices(self._prior, float(-self.utility.weights[self.k + 1]), float(self.utility.config.span_m))
+
+    def _prior(self, world: WorldMap) -> Costmap:
+        """The costmap of a prior map ``world`` (every cell known), priced as the ground map's cells are."""
+        cells = self.map.columns[world.raster]
+        return costmap_of(cells, np.zeros(2), world.resolution_m, self.utility.weights, self.lethal, self.names)
+
     def costmap(self) -> Costmap:
-        """The ground map seen so far priced by the learned utility (terrapref.planner.costmap)."""
+        """The ground map seen so far priced by the learned utility (terrapref.rules.costmap)."""
         return costmap_of(self.map.cells, self.map.origin, self.map.config.map_resolution_m, self.utility.weights, self.lethal, self.names)
 
     def _escape(self, value: np.ndarray, path: ReferencePath, progress_m: float) -> float | None:

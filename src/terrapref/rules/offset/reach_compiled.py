@@ -10,7 +10,7 @@ import math
 import numpy as np
 from numba import njit
 
-from terrapref.features.kernels import UNSETTLED, map_decide, path_frame
+from terrapref.rules.offset.ground_map_compiled import UNSETTLED, map_decide, path_frame
 
 
 @njit(cache=True, nogil=True)
@@ -22,9 +22,9 @@ def swept_reach(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progress
     ``steps`` steps of ``dt`` from the pose, first brings a point across the footprint (``clear``,
     every other step) onto a lethal column of the map (``lethal`` by column, ``never`` for cells
     outside the map); ``steps`` where it never does. The map's cells are read as
-    :func:`terrapref.features.kernels.map_decide` says (``cells`` to ``shares``).
+    :func:`terrapref.rules.offset.ground_map_compiled.map_decide` says (``cells`` to ``shares``).
 
-    The NumPy form: pure pursuit as :func:`terrapref.features.corridor.steer` gives it (clipped
+    The NumPy form: pure pursuit as :func:`terrapref.rules.offset.steering.steer` gives it (clipped
     to +-1 rad/s, but with the C library's ``hypot``, as ``np.hypot``, where steer has Python's)
     toward every offset at progress ``progress_m + step * dt * v``, then ``yaw += w dt``, ``x += v
     cos(yaw) dt``, ``y += v sin(yaw) dt``.

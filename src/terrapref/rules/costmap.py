@@ -1,6 +1,6 @@
 """The learned preference as a costmap: what other planners (Nav2, MPPI, move_base) read.
 
-The offset stage keeps a ground map of what the camera has shown (terrapref.features.corridor,
+The offset stage keeps a ground map of what the camera has shown (terrapref.rules.offset,
 ``GroundMap``): each cell holds a terrain class, ground that is none of them, or ground never
 seen. The costmap prices every cell with the corridor utility the model learned from the drive:
 a class's price is what driving a metre on it costs against driving a metre on the background

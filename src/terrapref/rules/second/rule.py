@@ -1,7 +1,7 @@
-"""The ``second_stage`` stage: trajectories beyond the first, scored by a learned linear utility.
+"""The ``second_stage`` rule: trajectories beyond the first, scored by a learned linear utility.
 
 For each of the ``candidates`` trajectories C ranks highest, the look-ahead
-(terrapref.features.lookahead) lays the preference set out again from a point along it, and
+(terrapref.rules.second.lookahead) lays the preference set out again from a point along it, and
 each of those second pieces is scored with the linear utility model ``w . U'_j + b_j`` fitted
 to the same demonstrations as C (terrapref.learning.linear; through the look-ahead when the
 data carry it, :attr:`SecondStageConfig.lookahead`). The planner then drives the argmax of
@@ -23,23 +23,27 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView
-from terrapref.features import FeatureConfig, UtilityFeaturizer, kernels
-from terrapref.features.lookahead import Lookahead
-from terrapref.features.utility import LookaheadConfig
+from terrapref.errors import UserError
+from terrapref.features import UtilityFeaturizer
 from terrapref.learning import exact
 from terrapref.learning.linear import LinearUtility
-from terrapref.planner.stages.base import Choice, Stage, StageConfig, StageContext, StageInput, StageRunner, Where, number, vector
+from terrapref.rules.base import Choice, FrameReader, HeaderContext, Rule, RuleConfig, RuleContext, RuleInput, RuleRunner, Where, number, vector
+from terrapref.rules.second import scores_compiled as kernels
+from terrapref.rules.second.lookahead import Lookahead, LookaheadConfig
 from terrapref.scenario.path import ReferencePath
+from terrapref.terrain import ClassTable
 from terrapref.vehicle import Command, ControlSet, Pose
 
 if TYPE_CHECKING:
+    from terrapref.demos.recording import Recording
     from terrapref.learning.train import FitData
 
 FITS = ("lookahead", "frames")  # how the utility was fitted: through the look-ahead, or frame by frame
+LEGACY_WEIGHT = 1.5  # the second stage's weight in files whose ``utility`` names none
 
 
 @dataclass(frozen=True)
-class SecondStageConfig(StageConfig):
+class SecondStageConfig(RuleConfig):
     """The second stage's decision rule (defaults chosen on generated courses, docs/notebook.md).
 
     Attributes:
@@ -49,11 +53,13 @@ class SecondStageConfig(StageConfig):
         candidates: how many of C's highest-ranked trajectories are looked beyond.
         stride: the second stage's terrain shares read every ``stride``-th point
             (LookaheadConfig.stride).
-        lookahead: the training data carry the look-ahead utilities U' (``FeatureConfig.lookahead``)
-            and the utility is fitted through them; otherwise frame by frame, on U.
+        lookahead: the training data carry the look-ahead utilities U' (:meth:`reader`) and the
+            utility is fitted through them; otherwise frame by frame, on U.
     """
 
     type: ClassVar[str] = "second_stage"
+    arrays: ClassVar[dict[str, str]] = {"U2": "finite"}
+    without_data: ClassVar[str] = "the second stage is fitted frame by frame"
 
     after_s: float = 2.4
     weight: float = 1.5
@@ -70,19 +76,41 @@ class SecondStageConfig(StageConfig):
     def lookahead_config(self) -> LookaheadConfig:
         return LookaheadConfig(self.after_s, self.stride)
 
-    def features(self, base: FeatureConfig) -> FeatureConfig:
-        return replace(base, lookahead=self.lookahead_config) if self.lookahead else base
+    def summary(self) -> str:
+        return ("the planner's second stage scoring second pieces of trajectory beyond the first with the linear utility fitted to the same "
+                "samples" + (" through the look-ahead" if self.lookahead else ""))
 
-    def fit(self, data: FitData) -> SecondStage:
+    def data(self) -> dict[str, Any] | None:
+        return {"lookahead": self.lookahead_config.to_dict()} if self.lookahead else None
+
+    def reader(self, featurizer: UtilityFeaturizer, camera: PinholeCamera, classes: ClassTable, n: int) -> LookaheadReader:
+        return LookaheadReader(Lookahead(self.lookahead_config, featurizer, camera), n)
+
+    def fit(self, data: FitData) -> SecondStageRule:
         """The linear utility over the samples C was trained on (through the look-ahead when they carry it)."""
         utility, _ = data.linear_utility()
-        look = data.dataset.feature_config.lookahead if data.dataset.U2 is not None else None
+        found = data.dataset.rule_data(self.type)
+        look = LookaheadConfig.from_dict(found[0]["lookahead"]) if found is not None else None
         config = replace(self, after_s=look.after_s, stride=look.stride) if look is not None else self
-        return SecondStage(config, utility, "lookahead" if look is not None else "frames")
+        return SecondStageRule(config, utility, "lookahead" if look is not None else "frames")
+
+
+class LookaheadReader(FrameReader):
+    """The look-ahead utilities U' of each frame of one recording: array ``U2`` (N, m, m, K + 1) float16."""
+
+    def __init__(self, lookahead: Lookahead, n: int) -> None:
+        self.lookahead = lookahead
+        self.U2 = np.empty((n, lookahead.m, lookahead.m, lookahead.k + 1), dtype=np.float16)
+
+    def read(self, j: int, view: SegmentationView, pose: Pose, path: ReferencePath, progress_m: float) -> None:
+        self.U2[j] = self.lookahead.utilities(view, pose, path, progress_m)
+
+    def arrays(self, recording: Recording, keep: np.ndarray, path: ReferencePath) -> dict[str, np.ndarray]:
+        return {"U2": self.U2}
 
 
 @dataclass(frozen=True)
-class SecondStage(Stage):
+class SecondStageRule(Rule):
     """A fitted second stage: its rule and the linear utility (w over the K terrain columns and the
     distance utility, b per trajectory) it scores the second pieces with."""
 
@@ -98,7 +126,8 @@ class SecondStage(Stage):
                 "w": self.utility.w.tolist(), "b": self.utility.b.tolist(), "fit": self.fit}
 
     @classmethod
-    def from_header(cls, block: Mapping[str, Any], features: FeatureConfig, where: Where) -> SecondStage:
+    def from_header(cls, block: Mapping[str, Any], context: HeaderContext, where: Where) -> SecondStageRule:
+        features = context.features
         d = SecondStageConfig()
         weight = number(block, "weight", where, d.weight, low=0.0)
         after_s = number(block, "after_s", where, d.after_s, positive=True)
@@ -119,14 +148,29 @@ class SecondStage(Stage):
             raise where.error("", str(exc)) from None
         return cls(config, LinearUtility(w, b), fit)
 
-    def runner(self, context: StageContext) -> StageRunner:
+    @classmethod
+    def legacy_block(cls, meta: Mapping[str, Any], source: str) -> dict[str, Any] | None:
+        """A file before the ``stages`` list carried the linear utility as ``utility``: the second
+        stage, of weight :data:`LEGACY_WEIGHT` unless it names one, fitted through the features'
+        look-ahead (at its ``after_s`` and ``stride``) when they had one."""
+        data = meta.get("utility")
+        if data is None:
+            return None
+        if not isinstance(data, dict):
+            raise UserError(source, "expected a mapping", field="utility")
+        features = meta.get("features")
+        look = features.get("lookahead") if isinstance(features, dict) else None
+        look = {"after_s": look.get("after_s"), "stride": look.get("stride")} if isinstance(look, dict) else {}
+        return {"type": cls.type, "weight": LEGACY_WEIGHT, **look, **data}
+
+    def runner(self, context: RuleContext) -> RuleRunner:
         return SecondStageScores(self.config, context.featurizer, context.camera, self.utility)
 
     def describe(self, names: tuple[str, ...], lethal: frozenset[str]) -> str:
         return f"second stage: weight {self.config.weight:g}, linear utility fitted {'through the look-ahead' if self.fit == 'lookahead' else 'frame by frame'}"
 
 
-class SecondStageScores(Lookahead, StageRunner):
+class SecondStageScores(Lookahead, RuleRunner):
     """The look-ahead of one featurizer (preference set and camera), scored by a linear utility."""
 
     def __init__(self, config: SecondStageConfig, featurizer: UtilityFeaturizer, camera: PinholeCamera, utility: LinearUtility) -> None:
@@ -140,7 +184,7 @@ class SecondStageScores(Lookahead, StageRunner):
         # By class id: each point's terrain weight w_k / n'; 0 for classes U does not count.
         self._point_weight = np.append(self.w[:k] / self.points, 0.0)[featurizer.class_columns]
 
-    def decide(self, frame: StageInput) -> Choice:
+    def decide(self, frame: RuleInput) -> Choice:
         # a probability of exactly 0 is -inf, never chosen
         i = int(np.argmax(self.scores(exact.log(frame.probs), frame.view, frame.pose, frame.path, frame.progress_m)))
         return Choice(i, Command(*self.control.command(i)))

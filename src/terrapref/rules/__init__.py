@@ -1,0 +1,113 @@
+"""Decision rules: what turns a frame into the command the planner drives.
+
+A policy (:mod:`terrapref.planner.policy`) scores the m trajectories; a rule decides what to
+drive. Every rule is one registered package (:data:`RULES`) that owns its configuration, what
+its fit reads of each frame (the dataset keeps it under the rule's name), its fit, its block in
+the model file (older files' too), its decision and what it offers (a costmap, a route's prices);
+the interface is :mod:`.base`.
+
+The rules:
+
+- ``argmax`` (:mod:`.argmax`): the trajectory C ranks first (the paper's planner);
+- ``second_stage`` (:mod:`.second`): C's best trajectories scored again with the second pieces
+  beyond them, by a linear utility fitted with C;
+- ``offset`` (:mod:`.offset`): a lateral offset from the path, priced by a utility learned from
+  the offsets the driver held, kept and steered to (the default planner's).
+
+A model file lists the rules fitted with it (``rules``) and names the one that drives
+(``drives``); the others were fitted to be reported, and a planner may be asked to drive by one
+of them instead. A file that lists none drives C's argmax.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
+from terrapref.errors import UserError
+from terrapref.features import FeatureConfig
+from terrapref.registry import Registry
+from terrapref.rules.argmax import ArgmaxRule
+from terrapref.rules.base import Choice, HeaderContext, Rule, RuleConfig, RuleContext, RuleInput, RuleRunner, Where
+from terrapref.rules.offset.rule import OffsetConfig, OffsetRule
+from terrapref.rules.second.rule import SecondStageConfig, SecondStageRule
+
+if TYPE_CHECKING:
+    from terrapref.learning.model_file import LoadedModel
+
+__all__ = ["RULES", "ArgmaxRule", "Choice", "HeaderContext", "OffsetConfig", "OffsetRule", "Rule", "RuleConfig", "RuleContext", "RuleInput",
+           "RuleRunner", "SecondStageConfig", "SecondStageRule", "driving_rule", "legacy_blocks", "read_rules", "rules_in", "rules_of"]
+
+RULES: Registry[type[Rule]] = Registry("rule")
+
+
+def register_rule(cls: type[Rule], doc: str) -> type[Rule]:
+    """Register a rule class under its ``type``."""
+    RULES.register(cls.type, cls, doc)
+    return cls
+
+
+def legacy_blocks(meta: Mapping[str, Any], source: str) -> tuple[dict[str, Any], ...]:
+    """The rules of a file written before the ``stages`` list, each from its own key of the header
+    (:meth:`Rule.legacy_block`), in the order they were listed then (the second stage first)."""
+    return tuple(block for cls in RULES.values() if (block := cls.legacy_block(meta, source)) is not None)
+
+
+def read_rules(blocks: Sequence[Mapping[str, Any]], features: FeatureConfig, raw_features: Mapping[str, Any], source: str,
+               key: str = "rules") -> tuple[Rule, ...]:
+    """The rules a model file lists, each checked by its own type (``raw_features``: the file's
+    ``features`` section, where older files kept a rule's geometry; ``key``: the list's name in
+    the file, for errors)."""
+    context = HeaderContext(features, raw_features)
+    rules = []
+    for i, block in enumerate(blocks):
+        where = Where(source, i, key)
+        rules.append(RULES.get(str(block["type"]), where.field("type"), source).from_header(block, context, where))
+    return tuple(rules)
+
+
+def rules_of(model: LoadedModel) -> tuple[tuple[Rule, ...], str | None]:
+    """The rules a model file lists (its ``rules``, an older file's ``stages``, or the oldest
+    files' own keys), read, and the type of the one it names to drive (None: not named)."""
+    listed = model.rule_blocks
+    blocks, key = listed if listed is not None else (legacy_blocks(model.meta, model.path), "rules")
+    raw = model.meta.get("features")
+    return read_rules(blocks, model.features, raw if isinstance(raw, Mapping) else {}, model.path, key), model.header.drives
+
+
+def rules_in(meta: Mapping[str, Any], source: str) -> tuple[tuple[Rule, ...], Rule]:
+    """The rules a file's metadata lists (a model file's header, or an exported graph's
+    metadata), read against its features, and the one that drives; a problem is a
+    :class:`UserError` naming ``source`` and the field."""
+    from terrapref.learning.header import rule_blocks
+
+    raw = meta.get("features")
+    try:
+        features = FeatureConfig.from_dict(dict(raw))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise UserError(source, f"invalid configuration ({exc})", field="features") from None
+    rules = next(((blocks, key) for key in ("rules", "stages") if (blocks := rule_blocks(meta, key, source)) is not None), None)
+    blocks, key = rules if rules is not None else (legacy_blocks(meta, source), "rules")
+    read = read_rules(blocks, features, raw, source, key)
+    drives = meta.get("drives")
+    if drives is not None and not isinstance(drives, str):
+        raise UserError(source, "expected a rule's type", field="drives")
+    return read, driving_rule(read, drives, source)
+
+
+def driving_rule(rules: Sequence[Rule], drives: str | None, source: str = "model") -> Rule:
+    """The rule that drives: the one ``drives`` names (a file's ``drives``), else the last one
+    listed (older files); C's argmax when none is listed."""
+    if drives is None:
+        return rules[-1] if rules else ArgmaxRule()
+    if drives == ArgmaxRule.type:
+        return next((r for r in rules if r.type == drives), ArgmaxRule())
+    found = next((r for r in rules if r.type == drives), None)
+    if found is None:
+        raise UserError(source, f"names rule {drives!r} to drive, but lists {', '.join(r.type for r in rules) or 'none'}", field="drives")
+    return found
+
+
+register_rule(ArgmaxRule, "the trajectory C ranks first (the paper's planner)")
+register_rule(SecondStageRule, "C's best trajectories scored again with the second pieces beyond them (a linear utility)")
+register_rule(OffsetRule, "a lateral offset from the path priced by a learned utility, held and steered to")

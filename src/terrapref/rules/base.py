@@ -1,0 +1,253 @@
+"""The interface every decision rule implements (terrapref.rules), and the checks its file blocks share.
+
+A rule is three objects: its configuration before fitting (:class:`RuleConfig`, what a recipe
+names), the fitted rule (:class:`Rule`, one block of a model file's ``rules`` list), and the
+fitted rule bound to one planner (:class:`RuleRunner`, which decides each frame). A rule whose
+fit needs more than C's samples reads it from each frame while recordings are featurised
+(:meth:`RuleConfig.reader`), and the dataset keeps those arrays under the rule's name.
+"""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import numpy as np
+
+from terrapref.camera import PinholeCamera, SegmentationView
+from terrapref.errors import UserError
+from terrapref.features import FeatureConfig, UtilityFeaturizer
+from terrapref.scenario.path import ReferencePath
+from terrapref.terrain import ClassTable
+from terrapref.rules.columns import TerrainColumns
+from terrapref.vehicle import Command, Pose
+
+if TYPE_CHECKING:
+    from terrapref.demos.recording import Recording
+    from terrapref.learning.train import FitData
+    from terrapref.rules.costmap import Costmap
+    from terrapref.rules.offset.ground_map import GroundMap
+    from terrapref.world import WorldMap
+
+
+@dataclass(frozen=True)
+class RuleContext:
+    """What a rule is bound to: one planner's camera, featurizer, features and class table."""
+
+    camera: PinholeCamera
+    featurizer: UtilityFeaturizer
+    features: FeatureConfig
+    classes: ClassTable
+
+    @property
+    def terrain(self) -> TerrainColumns:
+        """The terrain columns of the class table, named by the features' classes."""
+        return TerrainColumns.of(self.featurizer.class_columns, self.features.n_terrain, self.classes, self.features.feature_classes)
+
+
+@dataclass(frozen=True)
+class RuleInput:
+    """One frame as a rule sees it.
+
+    Attributes:
+        probs: F_t, C's distribution over the m trajectories (m,); None for a rule that does
+            not read it (``RuleRunner.reads_probs``).
+        view: the segmentation image.
+        pose: the vehicle's pose.
+        path: the reference path.
+        progress_m: the vehicle's progress along it [m].
+    """
+
+    probs: np.ndarray | None
+    view: SegmentationView
+    pose: Pose
+    path: ReferencePath
+    progress_m: float
+
+
+@dataclass(frozen=True)
+class Choice:
+    """What a rule drives: the command, and the trajectory it is (or, steered continuously, the nearest one)."""
+
+    index: int
+    command: Command
+
+
+@dataclass(frozen=True)
+class RoutePrices:
+    """What a rule offers a route search (terrapref.planner.route): a prior map priced as it
+    learned, and its price of holding off the path.
+
+    Attributes:
+        prior: the costmap of a prior map (every cell known).
+        detour_price: per metre along and per square metre of offset held off the path.
+        span_m: the metres a detour adds, swerving in and out [m].
+    """
+
+    prior: Callable[[WorldMap], Costmap]
+    detour_price: float
+    span_m: float
+
+
+class RuleRunner(abc.ABC):
+    """A rule bound to one planner: decides each frame, and forgets what it kept when a run starts.
+
+    A rule that keeps a ground map (``keeps_ground_map``) also takes in frames without deciding
+    (:meth:`observe`) and prices what it has seen (:meth:`costmap`). A rule that steers without
+    C's F_t (``reads_probs`` False) is given none, and the planner computes it only when asked.
+    """
+
+    keeps_ground_map: ClassVar[bool] = False
+    reads_probs: ClassVar[bool] = True
+    half_width_m: float | None = None  # the footprint's half width the rule keeps clear [m] (None: the planner's default)
+
+    @abc.abstractmethod
+    def decide(self, frame: RuleInput) -> Choice:
+        """The command for this frame."""
+
+    def reset(self) -> None:
+        """Start a new run (a new path)."""
+
+    def observe(self, view: SegmentationView, pose: Pose) -> None:
+        """Take in a frame's view without deciding (a rule that keeps no ground map ignores it)."""
+
+    def costmap(self) -> Costmap | None:
+        """The ground seen so far priced by what the rule learned (terrapref.rules.costmap),
+        for a rule that keeps a ground map; None otherwise."""
+        return None
+
+    def route_prices(self) -> RoutePrices | None:
+        """What a route search prices ground with (terrapref.planner.route); None for a rule that learned no prices."""
+        return None
+
+    @property
+    def ground_map(self) -> GroundMap | None:
+        """The ground map the rule keeps, updated as it decides (the stop rule reads it); None for a rule that keeps none."""
+        return None
+
+
+@dataclass(frozen=True)
+class HeaderContext:
+    """What a rule's block is read against: the model's features, and the raw ``features``
+    section of the file (older files kept a rule's geometry there, as ``corridor`` or ``lookahead``)."""
+
+    features: FeatureConfig
+    raw_features: Mapping[str, Any]
+
+
+class Rule(abc.ABC):
+    """A fitted decision rule: its configuration and what was fitted, as one block of a model
+    file's ``rules`` list (``type`` names it in :data:`terrapref.rules.RULES`).
+
+    ``graph``: the rule's decision is C's graph (what ``terrapref export --format onnx`` writes);
+    otherwise the graph holds C alone and the rule runs in the planner.
+    """
+
+    type: ClassVar[str]
+    graph: ClassVar[bool] = False
+
+    @abc.abstractmethod
+    def header(self) -> dict[str, Any]:
+        """The block in the model file: ``{"type": ..., ...}`` (JSON values only)."""
+
+    @classmethod
+    @abc.abstractmethod
+    def from_header(cls, block: Mapping[str, Any], context: HeaderContext, where: Where) -> Rule:
+        """The rule a block describes, checked against the model's features; a problem is a
+        :class:`UserError` naming the file and the block's field (``where.field(name)``)."""
+
+    @classmethod
+    def legacy_block(cls, meta: Mapping[str, Any], source: str) -> dict[str, Any] | None:
+        """This rule's block in a file written before the ``stages`` list (its own key of the
+        header), or None; read as a block of ``rules`` is. A key that is not a mapping is a
+        :class:`UserError` naming ``source`` and the key."""
+        return None
+
+    @abc.abstractmethod
+    def runner(self, context: RuleContext) -> RuleRunner:
+        """This rule bound to one planner."""
+
+    def describe(self, names: tuple[str, ...], lethal: frozenset[str]) -> str:
+        """One line on what was fitted (``terrapref train``, ``terrapref info``); ``names`` the terrain columns' classes."""
+        return self.type
+
+
+class FrameReader(abc.ABC):
+    """What one rule reads of each frame of one recording while it is featurised, for its fit."""
+
+    @abc.abstractmethod
+    def read(self, j: int, view: SegmentationView, pose: Pose, path: ReferencePath, progress_m: float) -> None:
+        """Take in frame ``j`` (frames come in order)."""
+
+    @abc.abstractmethod
+    def arrays(self, recording: Recording, keep: np.ndarray, path: ReferencePath) -> dict[str, np.ndarray]:
+        """The arrays of the frames read, by name, each with one row per frame (``keep``: the
+        recording's frames they were)."""
+
+
+class RuleConfig(abc.ABC):
+    """What a recipe names: a rule before fitting.
+
+    ``arrays``: the arrays its reader gives, each with what it may hold besides finite numbers
+    (terrapref.dataset.ARRAY_KINDS), checked when a dataset is read. ``without_data``: what
+    becomes of the rule when the training data lack them (said as a warning by ``terrapref train``).
+    """
+
+    type: ClassVar[str]
+    arrays: ClassVar[dict[str, str]] = {}
+    without_data: ClassVar[str] = ""
+
+    def summary(self) -> str:
+        """What the rule adds to a recipe, in a few words for a report (``terrapref reproduce``); empty: nothing to say."""
+        return ""
+
+    def data(self) -> dict[str, Any] | None:
+        """The configuration of what the rule's fit reads of each frame, as the dataset records
+        it under the rule's name; None: it needs nothing beyond C's samples."""
+        return None
+
+    def reader(self, featurizer: UtilityFeaturizer, camera: PinholeCamera, classes: ClassTable, n: int) -> FrameReader:
+        """Reads :meth:`data`'s arrays from ``n`` frames of one recording."""
+        raise NotImplementedError(f"the {self.type} rule reads nothing of the frames")
+
+    @abc.abstractmethod
+    def fit(self, data: FitData) -> Rule | None:
+        """The rule fitted to the samples C was trained on; None when the data lack what the fit needs."""
+
+
+@dataclass(frozen=True)
+class Where:
+    """Where a rule's block sits: the file, the list (``rules``; ``stages`` in older files) and the block's position in it."""
+
+    source: str
+    index: int
+    key: str = "rules"
+
+    def field(self, name: str = "") -> str:
+        return f"{self.key}[{self.index}]" + (f".{name}" if name else "")
+
+    def error(self, name: str, message: str) -> UserError:
+        return UserError(self.source, message, field=self.field(name))
+
+
+def number(block: Mapping[str, Any], name: str, where: Where, default: float | None = None, low: float = -np.inf,
+           positive: bool = False) -> float:
+    """A finite number field of a block (``default`` when absent, if given), >= ``low`` (> 0 with ``positive``)."""
+    value = block.get(name, default)
+    ok = not isinstance(value, bool) and isinstance(value, (int, float)) and np.isfinite(value) and value >= low
+    if not ok or (positive and value <= 0):
+        raise where.error(name, "missing" if value is None else f"expected a finite number {'> 0' if positive else f'>= {low:g}' if np.isfinite(low) else ''}".rstrip())
+    return float(value)
+
+
+def vector(block: Mapping[str, Any], name: str, size: int, where: Where) -> np.ndarray:
+    """A field of ``size`` finite numbers."""
+    try:
+        value = np.asarray(block[name], dtype=float)
+    except (KeyError, TypeError, ValueError):
+        value = None
+    if value is None or value.shape != (size,) or not np.isfinite(value).all():
+        raise where.error(name, f"expected {size} finite numbers")
+    return value

@@ -1,0 +1,124 @@
+"""The offset rule's geometry: the candidate offsets, the stations read along the path, the
+footprint, and the ground map's size, resolution and voting (:class:`OffsetGeometry`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from terrapref.records import to_plain
+
+MAX_COUNT = 10_000
+"""The most offsets, stations or camera samples a corridor may have."""
+MAX_MAP_CELLS = 4096
+"""The most ground-map cells a side (640 by default: 64 m at 0.1 m)."""
+
+
+@dataclass(frozen=True)
+class OffsetGeometry:
+    """Geometry of the offset corridor and of the ground map behind it.
+
+    Attributes:
+        max_offset_m: candidate offsets run from -max to +max [m].
+        offset_step_m: spacing of the candidate offsets [m].
+        stations_m: first and last station read along the path, from the vehicle's progress [m].
+        station_step_m: spacing of the stations [m].
+        half_width_m: half the footprint's width; 5 points across it [m].
+        span_m: metres added to the on-path length in the detour's price (swerving in and out) [m].
+        gap_m: gaps along the path shorter than this do not split a patch [m].
+        map_resolution_m: cell size of the ground map [m].
+        map_half_size_m: the ground map covers this much around its centre, each way [m].
+        sample_step_m: spacing of the ground points read from each image [m].
+        sample_range_m: ground read up to this far ahead of the camera [m].
+        intent_delay_s: a demonstrator's command is read as what it meant this long before (its
+            reaction time) [s] ...
+        intent_lookahead_m: ... and inverted through pure pursuit this far ahead along the path
+            into the offset it was steering for [m] (terrapref.rules.offset.fit).
+        map_range_m: a ground sample's vote in the map weighs 1 / (1 + (r / map_range_m)^2) at r
+            metres from the vehicle: near ground is seen sharper and placed better [m].
+        map_fade: each frame a cell is not voted on, its evidence fades by this factor, so that
+            recent views count more than old ones (0: the last view alone).
+        map_lethal_share: a cell is lethal when lethal classes hold at least this share of its
+            evidence ...
+        map_terrain_share: ... else terrain (its class with the most evidence) when the K
+            terrain classes hold at least this share, else background: a segmentation network
+            misses a patch into the ground around it far more often than it sees a patch in plain
+            ground, and a patch blurred over frames must not vanish into the ground around it
+            (0.4 rather than a majority: a patch's edge cells stay the patch under the `field`
+            preset's misses, so a detour keeps its width; docs/perception.md).
+        map_min_evidence: a cell counts as seen once its evidence totals this much (a vote at
+            0 m weighs 1).
+        map_sky_attitude: place the ground samples with the camera's pitch and roll off its mount
+            as the sky line of each frame shows them (terrapref.features.attitude), not with the
+            mount's.
+    """
+
+    max_offset_m: float = 3.0
+    offset_step_m: float = 0.2
+    stations_m: tuple[float, float] = (-1.0, 11.0)
+    station_step_m: float = 0.25
+    half_width_m: float = 0.6
+    span_m: float = 5.0
+    gap_m: float = 1.0
+    map_resolution_m: float = 0.1
+    map_half_size_m: float = 32.0
+    sample_step_m: float = 0.1
+    sample_range_m: float = 14.0
+    intent_delay_s: float = 0.2
+    intent_lookahead_m: float = 2.5
+    map_range_m: float = 4.0
+    map_fade: float = 0.97
+    map_lethal_share: float = 0.35
+    map_terrain_share: float = 0.4
+    map_min_evidence: float = 0.0
+    map_sky_attitude: bool = True
+
+    def __post_init__(self) -> None:
+        positive = (self.max_offset_m, self.offset_step_m, self.station_step_m, self.half_width_m, self.map_resolution_m,
+                    self.map_half_size_m, self.sample_step_m, self.sample_range_m, self.intent_lookahead_m)
+        if not all(math.isfinite(v) and v > 0 for v in positive) or not (self.span_m >= 0 and self.gap_m >= 0 and self.intent_delay_s >= 0):
+            raise ValueError("the corridor needs positive sizes and steps, and span_m, gap_m and intent_delay_s >= 0")
+        if not self.map_half_size_m > self.sample_range_m + 1.0 or not self.stations_m[1] < self.sample_range_m:
+            raise ValueError("the ground map must reach past the camera's sample range by more than 1 m, and that past the corridor")
+        if not self.stations_m[0] < self.stations_m[1]:
+            raise ValueError("the corridor's stations_m must run forward")
+        counts = {"offsets": (self.max_offset_m / self.offset_step_m, MAX_COUNT),
+                  "stations": ((self.stations_m[1] - self.stations_m[0]) / self.station_step_m, MAX_COUNT),
+                  "camera samples": (self.sample_range_m / self.sample_step_m, MAX_COUNT),
+                  "ground-map cells a side": (2 * self.map_half_size_m / self.map_resolution_m, MAX_MAP_CELLS)}
+        for what, (count, most) in counts.items():  # a size read from a file is bounded before anything is allocated by it
+            if count > most:
+                raise ValueError(f"the corridor's steps give {count:.3g} {what}; at most {most}")
+        if not (math.isfinite(self.map_range_m) and self.map_range_m > 0 and 0 <= self.map_fade <= 1 and 0 < self.map_lethal_share <= 1
+                and 0 < self.map_terrain_share <= 1 and 0 <= self.map_min_evidence < 1e3):
+            raise ValueError("the ground map needs map_range_m > 0, map_fade in [0, 1], map_lethal_share and map_terrain_share in (0, 1] "
+                             "and map_min_evidence >= 0")
+
+    @property
+    def offsets(self) -> np.ndarray:
+        """Candidate lateral offsets (O,) [m], left positive, symmetric about 0."""
+        n = round(self.max_offset_m / self.offset_step_m)
+        return np.arange(-n, n + 1) * self.offset_step_m
+
+    @property
+    def stations(self) -> np.ndarray:
+        """Stations (S,) [m] along the path from the vehicle's progress."""
+        n = round((self.stations_m[1] - self.stations_m[0]) / self.station_step_m)
+        return self.stations_m[0] + np.arange(n + 1) * self.station_step_m
+
+    @property
+    def footprint(self) -> np.ndarray:
+        """Lateral positions (5,) [m] of the footprint's points about its centre line."""
+        return np.linspace(-self.half_width_m, self.half_width_m, 5)
+
+    def to_dict(self) -> dict:
+        return to_plain(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> OffsetGeometry:
+        data = dict(data)
+        if "stations_m" in data:
+            data["stations_m"] = tuple(data["stations_m"])
+        return cls(**data)

@@ -1,0 +1,185 @@
+"""The ground map: what the camera has shown of the ground around the vehicle, gathered over
+frames (:class:`GroundMap`), in the terrain columns of a class table (:class:`TerrainColumns`)."""
+
+from __future__ import annotations
+
+import math
+import numpy as np
+
+from terrapref.camera import PinholeCamera, PixelSet, SegmentationView
+from terrapref.features.attitude import HorizonAttitude
+from terrapref.rules.offset import ground_map_compiled as kernels
+from terrapref.rules.columns import TerrainColumns
+from terrapref.rules.offset.geometry import OffsetGeometry
+from terrapref.scenario.path import ReferencePath
+from terrapref.terrain import UNKNOWN
+from terrapref.vehicle import Pose
+
+
+class GroundMap:
+    """What the camera has shown of the ground around the vehicle, gathered over frames.
+
+    A square of ``2 * map_half_size_m`` in the world frame, re-centred on the vehicle before
+    the ground the camera sees (``sample_range_m`` ahead) could leave it; cells that leave it
+    are forgotten. Every frame, each ground sample the camera sees votes for its terrain column
+    in its cell, weighted by how near it is (``map_range_m``), and a cell's older votes fade
+    (``map_fade``); the cell holds the column with the most evidence, or a lethal one where
+    lethal classes hold ``map_lethal_share`` of it. So a label that a few frames get wrong (a
+    segmentation network's flips, a blob, a region mislabelled for a moment, a pose or a camera
+    attitude a little off) is outvoted by the frames that got it right, and lethal terrain is
+    neither entered nor seen where it is not because of a few frames.
+
+    Cells hold a terrain column (0..K-1), K for ground that is none of the K classes, K + 1 for
+    ground never seen.
+
+    Args:
+        camera: the camera whose images update the map.
+        terrain: the class table's terrain columns.
+        config: the offset rule's geometry (map resolution, size and voting, image sampling).
+        sample_half_width_m: ground is read this far each side of the vehicle [m].
+    """
+
+    def __init__(self, camera: PinholeCamera, terrain: TerrainColumns, config: OffsetGeometry | None = None,
+                 sample_half_width_m: float = 8.0) -> None:
+        self.config = c = config or OffsetGeometry()
+        self.k = k = terrain.k
+        self.columns = np.asarray(terrain.of_class, dtype=np.uint8).copy()
+        self.columns[UNKNOWN] = k + 1  # a pixel that sees no ground casts no vote
+        if k + 1 >= kernels.UNSETTLED:
+            raise ValueError(f"a ground map holds at most {kernels.UNSETTLED - 2} terrain columns, got {k}")
+        self.lethal = np.zeros(k + 2, dtype=np.bool_)
+        self.lethal[np.asarray(terrain.lethal, dtype=np.int64)] = True
+        # How a cell's evidence decides its column (kernels.map_decide): lethal share, terrain share, least evidence.
+        self._shares = np.array([c.map_lethal_share, c.map_terrain_share, c.map_min_evidence], dtype=np.float32)
+        # The ground points read from each image: a vehicle-frame grid, those the camera sees.
+        xs = np.arange(0.2, c.sample_range_m, c.sample_step_m)
+        ys = np.arange(-sample_half_width_m, sample_half_width_m, c.sample_step_m)
+        grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1).reshape(-1, 2)
+        pix = camera.pixel_indices(grid)
+        seen = pix >= 0
+        self._pix = pix[seen]
+        # Far samples share pixels: each distinct pixel is read once, and each sample reads its own.
+        distinct, self._sample_pix = np.unique(self._pix, return_inverse=True)
+        self._pixels = PixelSet(distinct)  # read every frame: their rows and columns worked out once
+        self._vx, self._vy = grid[seen, 0].copy(), grid[seen, 1].copy()
+        self.camera = camera
+        self.attitude = HorizonAttitude(camera) if c.map_sky_attitude else None
+        # The ray through each sample's pixel centre (camera frame, z = 1), and where the mount's
+        # camera sees it meet the ground: a tilted camera moves each sample by where its ray lands.
+        cols, rows = self._pix % camera.config.width_px, self._pix // camera.config.width_px
+        self._ray = np.stack([(cols + 0.5 - camera.cx) / camera.fx, (rows + 0.5 - camera.cy) / camera.fy], axis=1)
+        self._ground0 = _ground(self._ray, camera.R, camera.t)
+        self._weight = (1.0 / (1.0 + (self._vx**2 + self._vy**2) / c.map_range_m**2)).astype(np.float32)
+        fade = np.ones(64, dtype=np.float32)
+        for g in range(1, len(fade)):  # by repeated products: the same bits on every CPU
+            fade[g] = fade[g - 1] * np.float32(c.map_fade)
+        self._fade = fade
+        self._n = int(round(2 * c.map_half_size_m / c.map_resolution_m))
+        # Each cell's column (row: y, col: x), kernels.UNSETTLED where voted on since last decided.
+        self._cells = np.full((self._n, self._n), k + 1, dtype=np.uint8)
+        self.evidence = np.zeros((self._n, self._n, k + 1), dtype=np.float32)
+        self.stamp = np.zeros((self._n, self._n), dtype=np.int64)
+        self.frame = 0
+        self.origin: np.ndarray | None = None  # world position of cell (0, 0)'s corner [m]
+        self._origin_xy: tuple[float, float] | None = None  # the same, in plain floats
+
+    def reset(self) -> None:
+        """Forget everything seen."""
+        self._cells.fill(self.k + 1)
+        self.evidence.fill(0.0)
+        self.stamp.fill(0)
+        self.frame = 0
+        self.origin = self._origin_xy = None
+        if self.attitude is not None:
+            self.attitude.reset()
+
+    def _recentre(self, x: float, y: float) -> None:
+        c = self.config
+        # Re-centred while all the camera writes and the corridor reads stays inside (checked in
+        # plain floats: the same arithmetic as NumPy's on the two coordinates; a NaN re-centres).
+        if self._origin_xy is not None:
+            reach = c.map_half_size_m - c.sample_range_m - 1.0
+            if abs(self._origin_xy[0] - (x - c.map_half_size_m)) < reach and abs(self._origin_xy[1] - (y - c.map_half_size_m)) < reach:
+                return
+        centre = np.array([x, y]) - c.map_half_size_m
+        new = np.floor(centre / c.map_resolution_m).astype(np.int64)
+        if self.origin is not None:  # keep what the old square and the new one share
+            old = np.round(self.origin / c.map_resolution_m).astype(np.int64)
+            dx, dy = int(new[0] - old[0]), int(new[1] - old[1])
+            self._cells = _shifted(self._cells, dx, dy, self.k + 1)
+            self.evidence = _shifted(self.evidence, dx, dy, 0.0)
+            self.stamp = _shifted(self.stamp, dx, dy, 0)
+        self.origin = new * c.map_resolution_m
+        self._origin_xy = (float(self.origin[0]), float(self.origin[1]))
+
+    def update(self, view: SegmentationView, pose: Pose) -> None:
+        """Add what ``view``, taken at ``pose``, shows of the ground."""
+        x, y, yaw = pose
+        c = self.config
+        self._recentre(float(x), float(y))
+        self.frame += 1
+        ids = view.pixels(self._pixels)
+        dpitch, droll = self.attitude(view) if self.attitude is not None else (0.0, 0.0)
+        tilted = bool(dpitch or droll)
+        axes = self.camera.tilted(dpitch, droll) if tilted else self.camera.R
+        kernels.map_vote(self.evidence, self.stamp, self._cells,  # the map
+                         *self._origin_xy, 1.0 / c.map_resolution_m,  # its corner and cells per metre
+                         float(x), float(y), math.cos(yaw), math.sin(yaw),  # the pose
+                         self._vx, self._vy, self._weight, ids, self._sample_pix, self.columns,  # the samples and what they saw
+                         self.frame, self._fade,  # the votes' fading
+                         tilted, self._ray, self._ground0, axes, self.camera.t)  # the camera off its mount
+
+    @property
+    def cells(self) -> np.ndarray:
+        """Terrain column of every cell (rows y, columns x), each decided from its evidence: a
+        read-only view, valid until the next :meth:`update` (which leaves the cells it votes on
+        to be decided again)."""
+        kernels.map_settle(self._cells, self.evidence, self.lethal, self._shares)
+        view = self._cells.view()
+        view.flags.writeable = False
+        return view
+
+    def layers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, float, float]:
+        """What a compiled read of the map takes (kernels.map_decide): the cells' columns, some
+        still undecided, their evidence, the lethal columns and the shares that decide a column;
+        then where the map lies, its corner's x and y [m] and its cells per metre. Read once the map
+        has been placed (its first update: ``origin`` is not None)."""
+        ox, oy = self._origin_xy
+        return self._cells, self.evidence, self.lethal, self._shares, ox, oy, 1.0 / self.config.map_resolution_m
+
+    def beside(self, path: ReferencePath, s: np.ndarray, lat: np.ndarray) -> np.ndarray:
+        """Terrain column (O, S, F) at the points ``lat`` (O, F) [m] left of the path at arc lengths ``s`` (S,)."""
+        if self.origin is None:
+            return np.full((lat.shape[0], len(s), lat.shape[1]), self.k + 1, dtype=np.uint8)
+        a, d, length = path.segments
+        return kernels.map_read_beside(*self.layers(), path.s, a, d, length, np.asarray(s, dtype=np.float64),
+                                       np.ascontiguousarray(lat, dtype=np.float64), self.k + 1)
+
+    def lookup(self, points: np.ndarray) -> np.ndarray:
+        """Terrain column at each world point (..., 2); K + 1 (never seen) outside the map."""
+        if self.origin is None:
+            return np.full(points.shape[:-1], self.k + 1, dtype=np.uint8)
+        px = np.ascontiguousarray(points[..., 0], dtype=np.float64).reshape(-1)
+        py = np.ascontiguousarray(points[..., 1], dtype=np.float64).reshape(-1)
+        out = kernels.map_read(*self.layers(), px, py, self.k + 1)
+        return out.reshape(points.shape[:-1])
+
+
+def _ground(ray: np.ndarray, axes: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Where rays (N, 2) of a camera at ``t`` with ``axes`` (rows right, down, forward in the vehicle
+    frame) meet the ground, (N, 2) in the vehicle frame [m]; NaN for rays that do not.
+
+    Elementwise products and sums in a fixed order (no matrix product): the same bits on every CPU."""
+    d = [ray[:, 0] * axes[0, i] + ray[:, 1] * axes[1, i] + axes[2, i] for i in range(3)]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = np.where(d[2] < -1e-12, -t[2] / d[2], np.nan)
+    return np.stack([t[0] + scale * d[0], t[1] + scale * d[1]], axis=1)
+
+
+def _shifted(a: np.ndarray, dx: int, dy: int, fill: float) -> np.ndarray:
+    """``a`` (rows y, columns x, ...) moved so that what was at cell (i + dx, j + dy) is at (i, j); ``fill`` where nothing was."""
+    out = np.full_like(a, fill)
+    n = a.shape[0]
+    if abs(dx) < n and abs(dy) < n:
+        out[max(0, -dy):n - max(0, dy), max(0, -dx):n - max(0, dx)] = a[max(0, dy):n - max(0, -dy), max(0, dx):n - max(0, -dx)]
+    return out
