@@ -32,6 +32,7 @@ import numpy as np
 from terrapref.camera import CameraConfig
 from terrapref.recipes.corrections import CorrectionDrivers, record_corrections
 from terrapref.dataset import build_dataset
+from terrapref.errors import UserError
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.demos.recording import MemoryRecordingWriter, Recording, RecordingWriter, read_recording
 from terrapref.demos.meta import CorrectionRoundInfo, ExpertInfo, RecordingMeta, RecordingSetup
@@ -119,6 +120,32 @@ DEFAULT_RECIPE = TEACH.name
 def recipe_named(name: str, flag: str = "--recipe") -> Recipe:
     """A named recipe; an unknown name is a user error (naming ``flag``) listing the known ones."""
     return RECIPES.get(name, flag)
+
+
+def stages_with(recipe: Recipe, second_stage: bool | None = None, stage_weight: float | None = None) -> tuple[StageConfig, ...]:
+    """The recipe's stages with the second stage added first (``second_stage`` True; kept where the
+    recipe has one) or left out (False), and its weight against log F_t set (``stage_weight``);
+    None leaves the recipe's as they are (``train --second-stage/--no-second-stage/--stage-weight``).
+
+    Raises:
+        UserError: a weight with no second stage to take it, or a weight the stage refuses (naming ``--stage-weight``).
+    """
+    stages = list(recipe.stages)
+    second = next((i for i, s in enumerate(stages) if isinstance(s, SecondStageConfig)), None)
+    if second_stage is False and second is not None:
+        del stages[second]
+        second = None
+    elif second_stage and second is None:
+        stages.insert(0, SecondStageConfig())
+        second = 0
+    if stage_weight is not None:
+        if second is None:
+            raise UserError("--stage-weight", f"recipe {recipe.name} has no second stage here (add --second-stage)")
+        try:
+            stages[second] = replace(stages[second], weight=stage_weight)
+        except ValueError as exc:
+            raise UserError("--stage-weight", str(exc)) from None
+    return tuple(stages)
 
 
 @dataclass(frozen=True)
