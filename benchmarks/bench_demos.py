@@ -8,7 +8,7 @@ Run through ``scripts/bench.sh`` (one core); numbers go into ``docs/benchmarks.m
 (c) decision: ``Planner.decide`` (features + classifier C in NumPy + progress along the path)
     on the same frames, with a model trained on the recording (paper recipe). Target:
     <= 100 us median. Three more lines: a 2-member ensemble, the planner's second
-    stage (terrapref.planner.stages.second) as in recipe ``ours``, and the decision of recipe
+    stage (terrapref.rules.second.rule) as in recipe ``ours``, and the decision of recipe
     ``teach`` (an ensemble of three with the second stage, then with the offset stage too, which
     drives recipe ``teach``, the default: target <= 150 us; the stage weight does not change
     the cost).
@@ -35,8 +35,7 @@ from terrapref.demos.recording import RecordingWriter, read_recording
 from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
 from terrapref.demos.session import RunSettings, record_run
 from terrapref.features import FeatureConfig, PreferenceSetConfig, UtilityFeaturizer
-from terrapref.features.corridor import CorridorConfig
-from terrapref.planner.stages import OffsetConfig, SecondStageConfig
+from terrapref.rules import OffsetConfig, SecondStageConfig
 from terrapref.camera import PinholeCamera
 from terrapref.scenario import resolve_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
@@ -87,7 +86,7 @@ def bench_closed_loop(model_path: Path) -> tuple[float, int]:
     return time.perf_counter() - t0, len(log.commands)
 
 
-def bench_decision(rec_dir: Path, repeats: int, features: FeatureConfig | None = None, members: int = 1, stages: tuple = ()) -> np.ndarray:
+def bench_decision(rec_dir: Path, repeats: int, features: FeatureConfig | None = None, members: int = 1, rules: tuple = ()) -> np.ndarray:
     from terrapref.dataset import build_dataset
     from terrapref.learning.model_file import load_model
     from terrapref.learning.pipeline import RunOptions, train_and_save
@@ -97,9 +96,9 @@ def bench_decision(rec_dir: Path, repeats: int, features: FeatureConfig | None =
 
     rec = read_recording(rec_dir)
     features = features or FeatureConfig()
-    plain = features == FeatureConfig() and members == 1 and not stages
+    plain = features == FeatureConfig() and members == 1 and not rules
     model_path = rec_dir.parent / ("model.safetensors" if plain else "variant.safetensors")
-    train_and_save(build_dataset([rec], features), model_path, TrainConfig(classifier=ClassifierConfig(members=members)), stages=stages,
+    train_and_save(build_dataset([rec], features, rules=rules), model_path, TrainConfig(classifier=ClassifierConfig(members=members)), rules=rules,
                    options=RunOptions(checkpoints=False))
     planner = Planner(load_model(model_path))
     idx = list(range(0, len(rec), max(1, len(rec) // 500)))
@@ -126,9 +125,9 @@ def main() -> int:
         t = bench_features(out, args.repeats)
         d = bench_decision(out, args.repeats)
         d2 = bench_decision(out, args.repeats, members=2)
-        d3 = bench_decision(out, args.repeats, stages=(SecondStageConfig(),))
-        d4 = bench_decision(out, args.repeats, members=3, stages=(SecondStageConfig(),))
-        d5 = bench_decision(out, args.repeats, FeatureConfig(corridor=CorridorConfig()), members=3, stages=(SecondStageConfig(), OffsetConfig()))
+        d3 = bench_decision(out, args.repeats, rules=(SecondStageConfig(),))
+        d4 = bench_decision(out, args.repeats, members=3, rules=(SecondStageConfig(),))
+        d5 = bench_decision(out, args.repeats, members=3, rules=(SecondStageConfig(), OffsetConfig()))
         loop_s, loop_frames = bench_closed_loop(out.parent / "model.safetensors")
     ref_s = reference_ms() / 1e3
 

@@ -71,8 +71,8 @@ def _demonstrate(job: tuple[str, str, int, tuple[str, ...]]) -> tuple[str, str, 
         run_teleop(scenario, rec, overwrite=True, realtime=False, script=person, disturbance=recipe.disturbance, seed=seed * 100,
                    profile=profile)
     model = work / f"model_{kind}.safetensors"
-    train_and_save(build_dataset([read_recording(rec)], recipe.features()), model, replace(recipe.train, seed=seed),
-                   stages=recipe.stages, recipe=recipe.name, options=RunOptions(checkpoints=False))
+    train_and_save(build_dataset([read_recording(rec)], recipe.features(), rules=recipe.rules), model, replace(recipe.train, seed=seed),
+                   rules=recipe.rules, recipe=recipe.name, options=RunOptions(checkpoints=False))
     return kind, str(model), seed, time.perf_counter() - t0, str(rec)
 
 

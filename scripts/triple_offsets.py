@@ -4,8 +4,8 @@ Reads a `terrapref select` output folder (select.json and the models under work/
 model and the driver it learned from again on the same layouts, and for each triple zone takes
 the largest distance of the reference point from the path within ``--window`` metres (along
 the path) of the zone's centre. Prints the distribution separately for the zones where the
-planner and the driver agree and where they do not (docs/learning.md, "A closer look at the
-triples").
+planner and the driver agree and where they do not (the lab book,
+docs/lab/2026-11-25-offset-stage.md, "A closer look at the triples").
 
     python scripts/triple_offsets.py RUNS/selection [--recipe teach] [--window 3] [--workers 2]
 """

@@ -33,7 +33,9 @@ from terrapref.scenario.teaching import (
     balanced_pairs,
     build_course,
     course_length,
+    designed_course,
     follow_up,
+    follow_up_after,
     situations,
     teaching_course,
 )
@@ -283,6 +285,23 @@ def test_a_teaching_course_reads_back_and_lies_on_its_map(table):
         x0, y0, x1, y1 = shape.bounds()
         assert 0.0 <= x0 and 0.0 <= y0 and x1 <= w and y1 <= h, (shape, scenario.size_m)
     assert np.all((scenario.waypoints >= 0) & (scenario.waypoints <= (w, h)))
+
+
+def test_the_course_design_is_chosen_by_name(example):
+    for design, full in (("auto", False), ("full", True), ("compact", False)):
+        course, items = designed_course(example, design, "mine")
+        assert items == situations(example, full) and course.name == "mine"
+        assert course.data() == build_course(example, items, "mine", course.description).data()
+    assert designed_course(example)[0].data() == teaching_course(example).data()
+
+
+def test_a_follow_up_is_named_after_the_courses_driven(example):
+    pairs = [("grass", "mud")]
+    course, items = follow_up_after(example, pairs, ["courses/a.yaml", "b", "courses/a.yaml"])
+    assert course.name == "a.yaml_more" and items == follow_up(example, pairs)
+    assert "3 drives of courses/a.yaml and b together left open (grass vs mud)" in course.description
+    assert follow_up_after(example, pairs, ["a"], "more")[0].name == "more"
+    assert "the drive of a left open" in follow_up_after(example, pairs, ["a"])[0].description
 
 
 def test_a_table_without_feature_classes_has_no_teaching_course(tmp_path, capsys):

@@ -128,7 +128,7 @@ def test_train_prints_the_time_left_with_its_epochs(monkeypatch, capsys):
     import time
     from types import SimpleNamespace
 
-    from terrapref.cli import _epoch_printer
+    from terrapref.cli.train import _epoch_printer
 
     clock = iter(float(t) for t in range(0, 1000, 10))  # each reading of the clock 10 s after the last
     monkeypatch.setattr(time, "perf_counter", lambda: next(clock))

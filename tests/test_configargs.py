@@ -93,11 +93,13 @@ def test_the_train_flags_cover_every_documented_training_field():
 
 
 def test_the_stage_flags_change_the_recipes_stages():
-    from terrapref.cli import _stages, build_parser
+    from terrapref.cli import build_parser
+    from terrapref.recipes import rules_with
     from terrapref.rules import OffsetConfig, SecondStageConfig
 
     def stages(recipe: str, *flags: str) -> tuple:
-        return _stages(build_parser().parse_args(["train", "rec", "--out", "m.safetensors", *flags]), RECIPES[recipe])
+        args = build_parser().parse_args(["train", "rec", "--out", "m.safetensors", *flags])
+        return rules_with(RECIPES[recipe], args.second_stage, args.stage_weight)
 
     assert stages("teach") == RECIPES["teach"].rules
     assert stages("teach", "--no-second-stage") == (OffsetConfig(),)

@@ -10,7 +10,17 @@ import numpy as np
 import pytest
 
 from terrapref.errors import UserError
-from terrapref.fileio import atomic_path, new_folder, output_folder, write_bytes_atomic, write_text_atomic
+from terrapref.fileio import (
+    FIGURE_FORMATS,
+    atomic_path,
+    check_distinct,
+    check_figure,
+    check_output,
+    new_folder,
+    output_folder,
+    write_bytes_atomic,
+    write_text_atomic,
+)
 from terrapref.pngio import write_png_atomic
 from terrapref.tensorfile import write_tensor_file
 
@@ -159,3 +169,59 @@ def test_a_command_refused_before_it_wrote_anything_leaves_nothing(tmp_path: Pat
         with output_folder(tmp_path / "out", force=True):
             raise UserError("--frames", "bad")
     assert _files(tmp_path / "out") == {"metrics.json": "old"} and sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+# --- the outputs a command names, checked before any work ----------------------------------------
+
+
+def _refusal(call, *args, **kwargs) -> str:
+    with pytest.raises(UserError) as caught:
+        call(*args, **kwargs)
+    (line,) = caught.value.lines()
+    return line
+
+
+def test_an_output_that_is_an_input_or_lies_inside_one_is_refused(tmp_path: Path):
+    rec = tmp_path / "rec"
+    rec.mkdir()
+    assert _refusal(check_output, rec, "--out", [rec], folder=True) == f"{rec}: --out: is also an input; --out must name a new folder"
+    inside = rec / "model.safetensors"
+    assert _refusal(check_output, inside, "--out", [rec]) == f"{inside}: --out: lies inside the input {rec}; --out must name a place outside it"
+    check_output(tmp_path / "model.safetensors", "--out", [rec, tmp_path / "not_there"])  # beside it, and an input that does not exist
+
+
+def test_an_output_of_the_wrong_kind_or_one_that_exists_without_force_is_refused(tmp_path: Path):
+    file, folder = tmp_path / "a.png", tmp_path / "dir"
+    file.write_bytes(b"x")
+    folder.mkdir()
+    assert "exists and is a file; expected a folder" in _refusal(check_output, file, "--out", folder=True)
+    assert "exists and is a folder; expected a file name" in _refusal(check_output, folder, "--out")
+    assert "exists; choose another --preview, or pass --force" in _refusal(check_output, file, "--preview", force=False)
+    check_output(file, "--out", force=True)
+    check_output(file, "--out")  # force not given: the command replaces the file by its own rule
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    assert _refusal(check_output, fifo, "--out") == f"{fifo}: --out: is a FIFO; --out must name a regular file"
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux's /proc")
+def test_an_output_where_no_file_can_be_made_is_refused():
+    # /proc takes no new file, not even root's: permissions alone would not say so.
+    out = Path("/proc/terrapref-not-a-process/a.png")
+    assert _refusal(check_output, out, "--out").startswith(f"{out}: --out: cannot be written (no file can be made in /proc: ")
+
+
+def test_a_figure_needs_a_suffix_the_plotting_library_writes():
+    for suffix in FIGURE_FORMATS:
+        check_figure(f"map{suffix.upper()}", "--out")
+    assert _refusal(check_figure, "map.txt", "--out") == f"map.txt: --out: a figure needs one of the suffixes {', '.join(FIGURE_FORMATS)}"
+
+
+def test_an_input_given_twice_is_refused_by_either_name(tmp_path: Path):
+    rec = tmp_path / "rec"
+    rec.mkdir()
+    check_distinct([rec, tmp_path / "other", "gen:1"], "recording")
+    assert _refusal(check_distinct, [rec, rec], "recording") == f"{rec}: is given twice; give each recording once"
+    alias = tmp_path / "link"
+    alias.symlink_to(rec)
+    assert _refusal(check_distinct, [rec, alias], "recording") == f"{alias}: is given twice (the same as {rec}); give each recording once"

@@ -130,6 +130,18 @@ def test_the_package_docstring_lists_the_layers_in_order():
     assert [set(line.split(", ")) for line in lines] == LAYERS
 
 
+# The command line is one module per group of commands, each a few lines over library calls; a
+# module past this many lines is a sign that logic has settled in the command line (docs/layout.md).
+MAX_CLI_MODULE_LINES = 400
+
+
+def test_no_command_line_module_is_longer_than_400_lines():
+    modules = sorted((ROOT / "cli").glob("*.py"))
+    assert len(modules) > 5, "the scan sees the cli package"
+    long = {path.name: n for path in modules if (n := len(path.read_text().splitlines())) > MAX_CLI_MODULE_LINES}
+    assert not long, f"cli modules over {MAX_CLI_MODULE_LINES} lines: {long}"
+
+
 # Registered entry points ("module:attribute", resolved on first use, as Gymnasium's are) are
 # imports too, made late. The one that points up the layers, and why:
 LATE_ENTRY_POINTS = {

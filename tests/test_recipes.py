@@ -11,15 +11,15 @@ import pytest
 
 from terrapref.camera import CameraConfig
 from terrapref.dataset import FORMAT as DATASET_FORMAT
-from terrapref.dataset import Dataset, build_dataset, merge_datasets, save_dataset, training_data
+from terrapref.dataset import Dataset, build_dataset, check_learnable, merge_datasets, save_dataset, training_data
 from terrapref.demos.expert import STYLES, ExpertConfig, ExpertDriver
 from terrapref.demos.session import DisturbanceConfig
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
-from terrapref.rules.second.lookahead import LookaheadConfig
-from terrapref.rules.offset.geometry import OffsetGeometry
+from terrapref.recipes import DEFAULT_RECIPE, RECIPES, Recipe, recipe_named, rules_with
 from terrapref.rules import OffsetConfig, SecondStageConfig
-from terrapref.recipes import DEFAULT_RECIPE, RECIPES, Recipe, recipe_named
+from terrapref.rules.offset.geometry import OffsetGeometry
+from terrapref.rules.second.lookahead import LookaheadConfig
 from terrapref.learning.train import TrainConfig
 from terrapref.scenario import parse_scenario
 from terrapref.terrain import default_classes
@@ -278,6 +278,26 @@ def test_training_data_names_the_file_that_differs(tmp_path):
         training_data(paths, FeatureConfig())
     assert caught.value.source == str(paths[1]) and caught.value.problems[0].field == "profile"
     assert str(paths[0]) in caught.value.problems[0].message
+
+
+def test_samples_with_nothing_to_learn_are_refused():
+    data = _dataset(6, 2, 0)
+    check_learnable(data, "a.safetensors")
+    for empty, field in ((replace(data, U=data.U[:0], labels=data.labels[:0]), "frames"), (replace(data, labels=np.full_like(data.labels, 7)), "labels")):
+        with pytest.raises(UserError) as caught:
+            check_learnable(empty, "a.safetensors")
+        assert caught.value.source == "a.safetensors" and caught.value.problems[0].field == field
+
+
+def test_the_second_stage_is_added_left_out_or_weighted():
+    teach, paper = RECIPES["teach"], RECIPES["paper"]
+    assert rules_with(teach) == teach.rules and rules_with(teach, True) == teach.rules
+    assert rules_with(teach, False) == (OffsetConfig(),)
+    assert rules_with(paper, True, 2.0) == (SecondStageConfig(weight=2.0),)
+    with pytest.raises(UserError, match="recipe paper has no second stage here"):
+        rules_with(paper, stage_weight=2.0)
+    with pytest.raises(UserError, match="recipe teach has no second stage here"):
+        rules_with(teach, False, 2.0)
 
 
 def test_run_recipe_demonstrates_corrects_and_reuses_demonstrations(tmp_path):

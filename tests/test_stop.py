@@ -334,7 +334,8 @@ def test_a_runs_mcap_says_when_and_why_the_planner_stopped(tmp_path: Path, wall:
 
 
 def test_a_drive_through_lethal_terrain_says_so_and_training_on_it_warns(tmp_path: Path, wall: str, capsys):
-    from terrapref.cli import _warn_lethal_contact, main
+    from terrapref.cli import main
+    from terrapref.cli.train import _warn_lethal_contact
     from terrapref.demos.recording import read_recording
 
     rec = tmp_path / "rec"

@@ -394,3 +394,16 @@ def training_data(paths: list[Path], features: FeatureConfig, rules: tuple[RuleD
         sets.append((str(recordings[0].path), build_dataset(recordings, features, rules=rules, progress=progress)))
     sets += [(str(p), load_dataset(p)) for p in paths if not Path(p).is_dir()]
     return merge_datasets(sets)
+
+
+def check_learnable(data: Dataset, source: str | Path) -> None:
+    """Refuse samples with nothing to learn from: none at all, or every one with the same label
+    (the drive never steered, so there is no choice between trajectories).
+
+    Raises:
+        UserError: naming ``source`` (the first input the samples came from).
+    """
+    if len(data) == 0:
+        raise UserError(str(source), "holds no samples to train on", field="frames")
+    if len(np.unique(data.labels)) < 2:
+        raise UserError(str(source), f"every sample has the same label ({int(data.labels[0])}): the drive never steered, there is no choice to learn", field="labels")

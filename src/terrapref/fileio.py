@@ -1,5 +1,6 @@
 """Writing files so that a reader never sees half of one: a unique temporary name in the same
-folder, then a rename. Every file terrapref writes goes through here.
+folder, then a rename. Every file terrapref writes goes through here, and every output a command
+names is checked here before any work (:func:`check_output`, :func:`output_folder`).
 
 The temporary name is unique (two writers of the same target cannot collide), keeps the
 target's suffix (writers such as matplotlib choose the format by it), and the finished file's
@@ -11,8 +12,9 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+import stat
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 
@@ -87,6 +89,87 @@ def write_bytes_atomic(path: str | Path, data: bytes, fsync: bool = False) -> Pa
 def write_text_atomic(path: str | Path, text: str, fsync: bool = False) -> Path:
     """Write UTF-8 ``text`` to ``path`` atomically."""
     return write_bytes_atomic(path, text.encode("utf-8"), fsync)
+
+
+FIGURE_FORMATS = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".tif", ".tiff", ".webp", ".eps", ".ps")
+
+
+def check_figure(out: str | Path, flag: str) -> None:
+    """A figure's file name must say a format the plotting library writes.
+
+    Raises:
+        UserError: ``out``'s suffix is none of :data:`FIGURE_FORMATS` (naming ``flag``).
+    """
+    from terrapref.errors import UserError
+
+    if Path(out).suffix.lower() not in FIGURE_FORMATS:
+        raise UserError(str(out), f"a figure needs one of the suffixes {', '.join(FIGURE_FORMATS)}", field=flag)
+
+
+def check_output(out: str | Path, flag: str, inputs: Sequence[str | Path] = (), folder: bool = False, force: bool | None = None) -> None:
+    """Refuse an output before any work: one that is an input or lies inside one, a device, FIFO
+    or socket, a file where a folder goes (or the reverse), a place that cannot be written, and,
+    given ``force`` (the command's --force), a file that exists unless it is True: the one rule
+    of every command (a folder output's is :func:`output_folder`).
+
+    Raises:
+        UserError: ``out`` is refused (naming ``flag``).
+    """
+    from terrapref.errors import UserError
+
+    out = Path(out)
+    target = out.resolve()
+    for given in map(Path, inputs):
+        if not given.exists():
+            continue
+        if target == given.resolve():
+            raise UserError(str(out), f"is also an input; {flag} must name a new {'folder' if folder else 'file'}", field=flag)
+        if given.is_dir() and target.is_relative_to(given.resolve()):
+            raise UserError(str(out), f"lies inside the input {given}; {flag} must name a place outside it", field=flag)
+    special = _special_file(out)
+    if special:
+        raise UserError(str(out), f"is a {special}; {flag} must name a {'folder' if folder else 'regular file'}", field=flag)
+    if out.exists() and out.is_dir() != folder:
+        raise UserError(str(out), "exists and is a " + ("file; expected a folder" if folder else "folder; expected a file name"), field=flag)
+    if force is False and not folder and out.exists():
+        raise UserError(str(out), f"exists; choose another {flag}, or pass --force to replace it (only once the new one is complete)", field=flag)
+    parent = out if folder and out.exists() else out.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    try:  # a file made and removed at once: permissions alone miss read-only and virtual file systems
+        with tempfile.TemporaryFile(dir=parent):
+            pass
+    except OSError as exc:
+        raise UserError(str(out), f"cannot be written (no file can be made in {parent}: {exc.strerror or exc})", field=flag) from None
+
+
+def check_distinct(inputs: Sequence[str | Path], what: str) -> None:
+    """Refuse an input given twice (by the same name, or two names of one file): its frames would
+    count twice, or land in training and validation both.
+
+    Raises:
+        UserError: an input is given twice (``what``: the kind of input, in the message).
+    """
+    from terrapref.errors import UserError
+
+    seen: dict[object, str] = {}
+    for given in map(str, inputs):
+        key = Path(given).resolve() if Path(given).exists() else given
+        if key in seen:
+            same = "" if seen[key] == given else f" (the same as {seen[key]})"
+            raise UserError(given, f"is given twice{same}; give each {what} once")
+        seen[key] = given
+
+
+def _special_file(path: Path) -> str | None:
+    """What ``path`` is when it exists and is neither a regular file nor a folder (links followed):
+    writing over it would replace a device node or block on a pipe."""
+    try:
+        mode = path.stat().st_mode
+    except OSError:
+        return None
+    kinds = ((stat.S_ISCHR, "character device"), (stat.S_ISBLK, "block device"), (stat.S_ISFIFO, "FIFO"), (stat.S_ISSOCK, "socket"))
+    return next((name for test, name in kinds if test(mode)), None)
 
 
 @contextlib.contextmanager

@@ -44,7 +44,8 @@ from terrapref.learning.train import DataOptions, OptimiserConfig, TrainConfig, 
 from terrapref.perception import PerceptionModel
 from terrapref.registry import Registry
 from terrapref.planner import Planner, PlannerDriver
-from terrapref.rules import OffsetConfig, SecondStageConfig, RuleConfig
+from terrapref.rules import OffsetConfig, RuleConfig, SecondStageConfig
+from terrapref.rules.second.rule import with_second_stage
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import SimConfig, Simulation
 from terrapref.terrain import ClassTable, PreferenceProfile
@@ -116,6 +117,12 @@ DEFAULT_RECIPE = TEACH.name
 def recipe_named(name: str, flag: str = "--recipe") -> Recipe:
     """A named recipe; an unknown name is a user error (naming ``flag``) listing the known ones."""
     return RECIPES.get(name, flag)
+
+
+def rules_with(recipe: Recipe, second_stage: bool | None = None, stage_weight: float | None = None) -> tuple[RuleConfig, ...]:
+    """The recipe's rules with the second stage added, left out or reweighed
+    (terrapref.rules.second.rule.with_second_stage; ``train --second-stage/--no-second-stage/--stage-weight``)."""
+    return with_second_stage(recipe.rules, second_stage, stage_weight, f"recipe {recipe.name}")
 
 
 @dataclass(frozen=True)

@@ -228,6 +228,29 @@ def teaching_course(classes: ClassTable, name: str = "teaching_course", full: bo
     return build_course(classes, situations(classes, full), name, description(classes, full))
 
 
+def designed_course(classes: ClassTable, design: str = "auto", name: str = "teaching_course") -> tuple[CourseBuilder, list[Situation]]:
+    """The teaching course of ``classes`` in ``design`` (``terrapref course --design``): ``full``
+    (every pair once on each side), ``compact`` (every pair once, sides balanced) or ``auto`` (full
+    while it stays within :data:`BUDGET_M`); with its situations in driving order.
+
+    Raises:
+        ValueError: the table has no feature class to teach.
+    """
+    full = fits(classes) if design == "auto" else design == "full"
+    items = situations(classes, full)
+    return build_course(classes, items, name, description(classes, full)), items
+
+
+def follow_up_after(classes: ClassTable, open_pairs: Sequence[tuple[str, str]], courses: Sequence[str],
+                    name: str | None = None) -> tuple[CourseBuilder, list[Situation]]:
+    """The follow-up course of ``open_pairs``, which drives of ``courses`` (each drive's course, by
+    name) left open together (``terrapref course --after``), with its situations in driving order;
+    named ``name``, by default the first course's name followed by ``_more``."""
+    driven = list(dict.fromkeys(courses))
+    course = follow_up_course(classes, open_pairs, name or f"{Path(driven[0]).name}_more", " and ".join(driven), drives=len(courses))
+    return course, follow_up(classes, open_pairs)
+
+
 def write_teaching_course(folder: str | Path, classes: ClassTable) -> Path:
     """The teaching course of ``classes`` written as ``folder/teaching_course.yaml`` (the folder
     made if need be), for the commands that demonstrate it; its absolute path."""

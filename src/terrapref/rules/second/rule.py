@@ -16,7 +16,7 @@ is the paper's argmax of F_t.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -93,6 +93,33 @@ class SecondStageConfig(RuleConfig):
         look = LookaheadConfig.from_dict(found[0]["lookahead"]) if found is not None else None
         config = replace(self, after_s=look.after_s, stride=look.stride) if look is not None else self
         return SecondStageRule(config, utility, "lookahead" if look is not None else "frames")
+
+
+def with_second_stage(rules: Sequence[RuleConfig], on: bool | None = None, weight: float | None = None,
+                      recipe: str = "the recipe") -> tuple[RuleConfig, ...]:
+    """``rules`` (a recipe's) with the second stage added first (``on`` True; kept where they have
+    one) or left out (False), and its weight against log F_t set (``weight``); None leaves them
+    as they are (``train --second-stage/--no-second-stage/--stage-weight``).
+
+    Raises:
+        UserError: a weight with no second stage to take it, or a weight the stage refuses (naming ``--stage-weight``).
+    """
+    out = list(rules)
+    second = next((i for i, r in enumerate(out) if isinstance(r, SecondStageConfig)), None)
+    if on is False and second is not None:
+        del out[second]
+        second = None
+    elif on and second is None:
+        out.insert(0, SecondStageConfig())
+        second = 0
+    if weight is not None:
+        if second is None:
+            raise UserError("--stage-weight", f"{recipe} has no second stage here (add --second-stage)")
+        try:
+            out[second] = replace(out[second], weight=weight)
+        except ValueError as exc:
+            raise UserError("--stage-weight", str(exc)) from None
+    return tuple(out)
 
 
 class LookaheadReader(FrameReader):

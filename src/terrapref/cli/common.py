@@ -1,0 +1,175 @@
+"""What several commands share: the flags for class tables, perception, the grid engine, the live
+view and --force, their help texts, and the checks of their values (each before any work)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from terrapref.configargs import finite_float
+from terrapref.errors import UserError
+from terrapref.grid import ENGINES, Engine
+
+SCENARIO_HELP = "a packaged scenario's name (terrapref scenarios lists them), gen:N for generated layout N, or a scenario file"
+PERCEPTION_HELP = ("what the planner receives instead of the truth: a preset (clean, rellis, field; terrapref perception lists them) "
+                   "or a terrapref-perception/1 file")
+
+CLASSES_HELP = ("your own class table (a terrapref-classes/1 file, e.g. examples/classes/rellis3d.yaml): the classes scenarios, "
+                "generated layouts (gen:N) and label maps are read with; default: the packaged grass, mud, rock, water, non_traversable")
+CLASSES_CHECK_HELP = ("the class table the files must have been made for (a terrapref-classes/1 file); a file made for another is refused. "
+                      "Files carry their own table, so this is a check, not a setting")
+
+
+def add_classes_arg(p: argparse.ArgumentParser, check: bool = False) -> None:
+    """--classes FILE: the table files are read with, or (``check``) the one they must have been made for."""
+    p.add_argument("--classes", metavar="FILE", help=CLASSES_CHECK_HELP if check else CLASSES_HELP)
+
+
+def add_force_arg(p: argparse.ArgumentParser) -> None:
+    """--force, the same for every command that writes: an output that exists is refused without it."""
+    p.add_argument("--force", action="store_true",
+                   help="replace an output that exists (only once the new one is complete; a folder is replaced whole)")
+
+
+def add_engine_args(p: argparse.ArgumentParser) -> None:
+    """--workers, --engine and --address: where a command's grid of jobs runs (:func:`grid_engine` checks them)."""
+    p.add_argument("--workers", type=int, help="parallel jobs on this machine (default: one per core)")
+    p.add_argument("--engine", choices=ENGINES.names(), default="local",
+                   help="where the jobs run: local processes (default) or Ray (a local instance, or the cluster at --address)")
+    p.add_argument("--address", metavar="HOST:PORT", help="a Ray cluster to run the jobs on (ray start --head on one machine); with --engine ray")
+
+
+def add_live_args(p: argparse.ArgumentParser, note: str, paced: bool = False) -> None:
+    """--live and its address; with ``paced`` (simulated runs), --live-pace and --live-wait too."""
+    p.add_argument("--live", action="store_true",
+                   help=f"serve the planner's channels live (those of the MCAP export) on Foxglove's WebSocket protocol "
+                        f"(subprotocol foxglove.sdk.v1, or foxglove.websocket.v1 for older viewers); {note}")
+    p.add_argument("--live-host", default="127.0.0.1", help="address the live view listens on (default 127.0.0.1; 0.0.0.0: every interface)")
+    p.add_argument("--live-port", type=int, default=8765, help="port of the live view (default 8765, Foxglove's; 0: a free one)")
+    if paced:
+        p.add_argument("--live-pace", type=finite_float, default=None, metavar="FACTOR",
+                       help="send each run's frames at FACTOR times real time (1: as driven; 2: twice as fast); default: as fast as "
+                            "they are computed")
+        p.add_argument("--live-wait", action="store_true", help="wait for a viewer to connect before the first run starts")
+
+
+def class_table(args: argparse.Namespace):
+    """The class table ``--classes FILE`` gives (read once per command), or None (the packaged default)."""
+    if getattr(args, "classes", None) is None:
+        return None
+    if not hasattr(args, "class_table"):
+        from terrapref.terrain import load_classes
+
+        args.class_table = load_classes(args.classes)
+    return args.class_table
+
+
+def teachable_table(args: argparse.Namespace):
+    """``--classes``' table for a command that teaches it (None: the default), refused when it has
+    no feature class to choose between."""
+    table = class_table(args)
+    if table is not None and not table.terrain_names:
+        raise UserError(str(args.classes), "the class table has no feature class (neither background nor lethal) to teach", field="classes")
+    return table
+
+
+def check_table(args: argparse.Namespace, found, source: str | Path) -> None:
+    """Refuse a file made for another class table than ``--classes`` gives (the default table
+    when the flag is not given), naming both."""
+    from terrapref.terrain import default_classes
+
+    table = class_table(args) or default_classes()
+    if not found.same_classes(table):
+        given = f"{args.classes}'s" if getattr(args, "classes", None) is not None else "the default table's (give --classes FILE for another)"
+        raise UserError(str(source), f"was made for the class table of {', '.join(found.names)}, not {given} ({', '.join(table.names)})",
+                        field="classes")
+
+
+def perception_model(spec: str | None, flag: str = "--perception", classes=None):
+    """The perception model of ``--perception PRESET|FILE`` (None when not given), checked before any work."""
+    if spec is None:
+        return None
+    from terrapref.perception import load_perception
+
+    try:
+        return load_perception(spec, classes)
+    except UserError as exc:
+        if exc.source == "--perception" and flag != "--perception":
+            raise UserError(flag, exc.problems) from None
+        raise
+
+
+def perception_list(text: str, classes=None) -> tuple:
+    """The perception models of a comma-separated ``--perception`` list (blank items skipped),
+    each checked before any work; one named twice is refused."""
+    models = tuple(perception_model(n, classes=classes) for n in (x.strip() for x in text.split(",")) if n)
+    if len({p.name for p in models}) != len(models):
+        raise UserError("--perception", f"names a perception model twice: {text!r}")
+    return models
+
+
+def grid_engine(args: argparse.Namespace) -> Engine:
+    """The grid engine of ``--engine``, ``--workers`` and ``--address``, checked before any work."""
+    if args.workers is not None and args.workers < 1:
+        raise UserError("--workers", f"must be an integer >= 1, got {args.workers}")
+    if args.address is not None and args.engine != "ray":
+        raise UserError("--address", "is the address of a Ray cluster; add --engine ray")
+    if args.engine == "ray":
+        from terrapref.extras import check
+
+        check("ray", "--engine ray")
+        if args.address not in (None, "auto"):
+            _check_ray_address(args.address)
+    if args.engine == "ray":
+        # Jobs pass files by path; a cluster's workers do not start in this folder.
+        for name in ("out", "model"):
+            value = getattr(args, name, None)
+            if isinstance(value, (str, Path)) and str(value):
+                setattr(args, name, type(value)(Path(value).resolve()))
+    return Engine(args.engine, args.workers, args.address)
+
+
+def _check_ray_address(address: str) -> None:
+    """Refuse, in a few seconds, an address where no Ray head answers (Ray itself retries for minutes)."""
+    import socket
+
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    if not host or not port.isdigit():
+        raise UserError("--address", f"expected HOST:PORT of a Ray head (ray start --head), got {address!r}")
+    try:
+        with socket.create_connection((host, int(port)), timeout=5.0):
+            pass
+    except OSError as exc:
+        raise UserError("--address", f"no Ray head answers at {address} ({exc.strerror or exc}); start one with ray start --head") from None
+
+
+def live_view(args: argparse.Namespace):
+    """The live view that --live asks for (its address printed), or None."""
+    pace, wait = getattr(args, "live_pace", None), getattr(args, "live_wait", False)
+    if not args.live:
+        if pace is not None or wait:
+            raise UserError("--live-pace" if pace is not None else "--live-wait", "goes with --live")
+        return None
+    if not 0 <= args.live_port <= 65535:
+        raise UserError("--live-port", f"expected a port in [0, 65535], got {args.live_port}")
+    if pace is not None and not pace > 0:
+        raise UserError("--live-pace", f"expected a factor of real time > 0 (1: as driven), got {pace:g}")
+    from terrapref.interop.live import LiveView
+
+    view = LiveView(args.live_host, args.live_port, pace=pace or 0.0, wait=wait)
+    paced = f"; frames at {pace:g}x real time" if pace else ""
+    waiting = "; waiting for a viewer before the first run" if wait else ""
+    print(f"live view: {view.url} (Foxglove: Open connection, Foxglove WebSocket{paced}){waiting}", flush=True)
+    return view
+
+
+def watching(view):
+    """What a run shows the live view ``view`` (None: nothing), as terrapref.interop.live.watching gives it."""
+    from terrapref.interop.live import watching
+
+    return watching(view)
+
+
+def by_recording(bar):
+    """A featurising progress (terrapref.dataset.Featuring) that moves ``bar`` a whole recording at a time."""
+    return lambda p: bar.update(p.recordings_done, f"{p.recordings_done}/{p.recordings} recordings") if p.recordings_done else None

@@ -1,0 +1,237 @@
+"""Commands on scenarios and courses: validate, render, show, course, scenarios."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+from terrapref.cli.common import SCENARIO_HELP, add_classes_arg, add_force_arg, check_table, class_table
+from terrapref.configargs import finite_float
+from terrapref.errors import UserError
+from terrapref.fileio import check_distinct, check_figure, check_output, write_text_atomic
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    from terrapref.filekinds import KINDS, check_file, template
+    from terrapref.scenario import load_scenario
+    from terrapref.scenario.catalog import scenario_path
+
+    if args.template is not None:
+        if args.files:
+            raise UserError("--template", "prints a template to start from; give it alone, or FILEs to check without it")
+        print(template(args.template), end="")
+        return 0
+    if not args.files:
+        raise UserError("validate", f"give the files to check, or --template KIND ({', '.join(KINDS)}) for one to start from")
+    status = 0
+    table = class_table(args)
+    for name in args.files:
+        try:
+            if _is_file(name):
+                kind = check_file(name, table).title
+            else:  # a packaged scenario's name
+                load_scenario(scenario_path(name), table)
+                kind = KINDS["scenario"].title
+        except UserError as exc:
+            for line in exc.lines():
+                print(f"error: {line}")  # in the report's order, beside the files that are ok
+            status = 2
+        else:
+            print(f"{name}: ok ({kind})")
+    return status
+
+
+def _is_file(name: str) -> bool:
+    try:
+        return Path(name).is_file()
+    except OSError:  # a name the OS refuses (too long): the scenario reader says so
+        return False
+
+
+def validate_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("validate", help="check scenarios, class tables, perception models, robot files and label maps (each by its format)")
+    p.add_argument("files", nargs="*", metavar="FILE",
+                   help="files to check, each read as its format: field says (terrapref-scenario/1, -classes/1, -perception/1, -robot/1, "
+                        "-labels/1), or packaged scenarios' names")
+    p.add_argument("--template", metavar="KIND", choices=("scenario", "classes", "perception", "robot", "labels"),
+                   help="print a commented file of this kind to start from (scenario, classes, perception, robot, labels): "
+                        "terrapref validate --template robot > robot.yaml")
+    add_classes_arg(p)
+    p.set_defaults(func=_cmd_validate)
+
+
+def _cmd_render(args: argparse.Namespace) -> int:
+    from terrapref.camera import PinholeCamera, SegmentationRenderer
+    from terrapref.pngio import preview_with_legend, write_png_atomic
+    from terrapref.scenario import resolve_scenario
+    from terrapref.vehicle import Pose
+    from terrapref.world import rasterise
+
+    if args.pose is not None and not all(math.isfinite(v) for v in args.pose):
+        raise UserError("--pose", "X, Y and YAW_DEG must be finite numbers")
+    check_output(args.out, "--out", [args.scenario], force=args.force)
+    if args.preview:
+        check_output(args.preview, "--preview", [args.scenario, args.out], force=args.force)
+    for flag, path in (("--out", args.out), ("--preview", args.preview)):
+        if path is not None and Path(path).suffix.lower() != ".png":  # a lossy format would change the class ids
+            raise UserError(str(path), "render writes PNG (class ids need a lossless format): give it the suffix .png", field=flag)
+    scenario = resolve_scenario(args.scenario, class_table(args))
+    x, y, yaw_deg = args.pose if args.pose is not None else (scenario.start[0], scenario.start[1], math.degrees(scenario.start[2]))
+    camera = PinholeCamera()
+    (w, h), reach = scenario.size_m, camera.config.max_range_m
+    if not (-reach <= x <= w + reach and -reach <= y <= h + reach and abs(yaw_deg) <= 1e6):
+        raise UserError("--pose", f"({x:g}, {y:g}, {yaw_deg:g} deg) is not a pose the camera sees {scenario.name}'s {w:g} x {h:g} m world from "
+                        f"(x and y within {reach:g} m of it, |yaw| <= 1e6 deg)")
+    renderer = SegmentationRenderer(camera, rasterise(scenario))
+    image = renderer.render(Pose(x, y, math.radians(yaw_deg)))
+    write_png_atomic(args.out, image)
+    print(f"wrote {args.out} ({image.shape[1]}x{image.shape[0]} class ids)")
+    if args.preview:
+        write_png_atomic(args.preview, preview_with_legend(image, scenario.classes))
+        print(f"wrote {args.preview} (colour preview, the image and a legend beside it)")
+    return 0
+
+
+def render_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("render", help="render the segmentation camera image at a pose")
+    p.add_argument("scenario", metavar="SCENARIO", help="packaged scenario name or file")
+    p.add_argument("--pose", nargs=3, type=finite_float, metavar=("X", "Y", "YAW_DEG"), help="vehicle pose [m, m, deg]; default: the start")
+    p.add_argument("--out", required=True, type=Path, help="single-channel PNG of class ids")
+    p.add_argument("--preview", type=Path, help="also write a colour preview PNG")
+    add_classes_arg(p)
+    add_force_arg(p)
+    p.set_defaults(func=_cmd_render)
+
+
+def _cmd_show(args: argparse.Namespace) -> int:
+    from terrapref.plots import save_map
+    from terrapref.scenario import resolve_scenario
+    from terrapref.world import rasterise
+
+    check_figure(args.out, "--out")
+    check_output(args.out, "--out", [args.scenario], force=args.force)
+    scenario = resolve_scenario(args.scenario, class_table(args))
+    save_map(args.out, scenario, rasterise(scenario))
+    print(f"wrote {args.out} ({scenario.name}: {len(scenario.terrain)} patches, {len(scenario.zones)} zones, path {scenario.path_length_m():.0f} m)")
+    return 0
+
+
+def show_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("show", help="draw the map top-down with the path, the start and the zones")
+    p.add_argument("scenario", metavar="SCENARIO", help=SCENARIO_HELP)
+    p.add_argument("--out", required=True, type=Path, help="figure file (.png, .pdf or .svg)")
+    add_classes_arg(p)
+    add_force_arg(p)
+    p.set_defaults(func=_cmd_show)
+
+
+def _cmd_course(args: argparse.Namespace) -> int:
+    from collections import Counter
+
+    from terrapref.plots import save_map
+    from terrapref.scenario import parse_scenario
+    from terrapref.scenario.teaching import DRIVER_SPEED_MPS, designed_course, follow_up_after
+    from terrapref.terrain import default_classes
+    from terrapref.world import rasterise
+
+    out = Path(args.out)
+    if out.suffix.lower() not in (".yaml", ".yml"):
+        raise UserError(str(out), "a course is a scenario file: give it the suffix .yaml", field="--out")
+    figure = out.with_suffix(".png")
+    inputs = [p for p in (args.classes, *(args.after or ())) if p is not None]
+    for path in (out, figure):
+        check_output(path, "--out", inputs, force=args.force)
+    table = class_table(args)
+    if args.after is not None:
+        recs = _drives_of_one_table(args, args.after)
+        table = recs[0].classes
+        open_pairs = _open_pairs(recs)
+        drives = "drives together" if len(recs) > 1 else "drive"
+        if not open_pairs:
+            print(f"{', '.join(map(str, args.after))}: the {drives} identified every pair of classes; no follow-up course is needed (nothing written)")
+            return 0
+        course, items = follow_up_after(table, open_pairs, [str(r.meta.get("scenario")) for r in recs], args.name)
+        print(f"the {drives} left {len(open_pairs)} pairs open: {', '.join(f'{a} vs {b}' for a, b in open_pairs)}")
+    else:
+        table = table or default_classes()
+        try:
+            course, items = designed_course(table, args.design, args.name or "teaching_course")
+        except ValueError as exc:
+            raise UserError(str(args.classes or "classes"), str(exc), field="classes") from None
+    scenario = parse_scenario(course.data(), str(out), table)  # checked as every command will read it
+    source = f"--classes {args.classes}" if args.classes else ("--after " + " ".join(map(str, args.after)) if args.after else "the default class table")
+    write_text_atomic(out, f"# terrapref course ({source}); it carries its class table (classes:), so no command needs --classes for it.\n"
+                      + course.to_yaml())
+    save_map(figure, scenario, rasterise(scenario))
+    length = scenario.path_length_m()
+    kinds = Counter(item.kind for item in items)
+    print(f"{scenario.name}: {scenario.description}")
+    print(f"  {len(items)} situations ({', '.join(f'{n} {k}' for k, n in kinds.items())}); path {length:.0f} m; "
+          f"expected drive about {length / DRIVER_SPEED_MPS / 60:.1f} minutes at {DRIVER_SPEED_MPS:g} m/s")
+    print(f"wrote {out} and {figure} (record it: terrapref record {out} --out DIR)")
+    return 0
+
+
+def _drives_of_one_table(args: argparse.Namespace, paths: Sequence[Path]) -> list:
+    """The recordings ``course --after`` reads, each given once and all of one class table
+    (``--classes``' when given, else the first's)."""
+    from terrapref.demos.recording import read_recording
+
+    check_distinct(paths, "recording")
+    recs = [read_recording(p) for p in paths]
+    for path, rec in zip(paths, recs, strict=True):
+        if class_table(args) is not None:
+            check_table(args, rec.classes, path)
+        elif not rec.classes.same_classes(recs[0].classes):
+            raise UserError(str(path), f"was made for the class table of {', '.join(rec.classes.names)}, not {paths[0]}'s "
+                                       f"({', '.join(recs[0].classes.names)}): give drives of one table", field="classes")
+    return recs
+
+
+def _open_pairs(recs: Sequence) -> list[tuple[str, str]]:
+    """The pairs of classes that recordings' drives together leave unidentified (the report ``inspect`` prints)."""
+    from terrapref.recipes import DEFAULT_RECIPE, open_pairs, recipe_named
+
+    for rec in recs:
+        if len(rec) == 0:
+            raise UserError(str(rec.path), "holds no frames: drive the teaching course first", field="frames")
+    from terrapref.progress import Progress
+
+    total = sum(len(r) for r in recs)
+    bar = Progress(f"featurising the drive{'s' if len(recs) > 1 else ''} to find the pairs left open", total, unit="frames")
+    pairs = open_pairs(list(recs), recipe_named(DEFAULT_RECIPE), frames=lambda done, n: bar.update(done, f"{done}/{n} frames"))
+    bar.close(f"{total} frames")
+    return pairs
+
+
+def course_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("course", help="write the teaching course of a class table (or, with --after, a follow-up of what drives left open)")
+    p.add_argument("--out", required=True, type=Path, help="scenario file to write (.yaml); a top-down figure goes beside it (.png)")
+    p.add_argument("--after", type=Path, nargs="+", metavar="REC",
+                   help="recordings of the teaching course (and of earlier follow-ups): write a short course of only the pairs "
+                        "their drives together left unidentified (train on all the recordings after)")
+    p.add_argument("--design", choices=("auto", "full", "compact"), default="auto",
+                   help="full: every pair once on each side; compact: every pair once, sides balanced; auto (default): full while "
+                        "the drive stays within 10 minutes at 1 m/s")
+    p.add_argument("--name", help="the scenario's name (default: teaching_course, or the course driven + _more)")
+    add_classes_arg(p)
+    add_force_arg(p)
+    p.set_defaults(func=_cmd_course)
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
+    from terrapref.scenario import packaged_scenarios, resolve_scenario
+
+    names = packaged_scenarios()
+    width = max(map(len, names), default=0)
+    for name in names:
+        s = resolve_scenario(name)
+        print(f"{name:{width}s} {s.size_m[0]:5.0f} x {s.size_m[1]:<4.0f} m  path {s.path_length_m():5.0f} m  {len(s.zones):2d} zones  {s.description}")
+    return 0
+
+
+def scenarios_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("scenarios", help="list the packaged scenarios")
+    p.set_defaults(func=_cmd_list)

@@ -1,0 +1,15 @@
+"""The ``offset`` rule (the default planner's): hold a lateral offset from the path that a
+utility learned from the driver prices best, and steer to it.
+
+- :mod:`.geometry`: the candidate offsets, the stations read along the path, the footprint and
+  the ground map's size and voting (:class:`~.geometry.OffsetGeometry`);
+- :mod:`.ground_map`: what the camera has shown of the ground, gathered over frames
+  (its compiled votes and reads: :mod:`.ground_map_compiled`);
+- :mod:`.features`: what driving at each offset would cross (:mod:`.offsets_compiled`);
+- :mod:`.steering`: pure pursuit toward an offset, and its inverse, the offset a driver's
+  command was steering for (the training labels);
+- :mod:`.fit`: the utility fitted to those labels;
+- :mod:`.rule`: the rule itself: its configuration, what it reads of each frame for its fit,
+  its file block, and its decision (with the ways to offsets checked against lethal terrain:
+  :mod:`.reach_compiled`).
+"""

@@ -1,0 +1,130 @@
+"""The documentation: no dated measurement outside the lab book, and no link to a file or heading
+that is not there.
+
+The how-to, reference and design pages state the current state; dated measurements and history
+live in the lab book, ``docs/lab/`` (STYLE 15). A lab-book entry is named by its date, so a link
+*target* may hold a date (``[lab book](lab/2026-11-28-stopping.md)``); the text a reader sees may
+not.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from urllib.parse import unquote
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+LAB = DOCS / "lab"
+
+DATE = re.compile(r"20\d\d-\d\d-\d\d")
+LINK = re.compile(r"!?\[(?P<text>[^\]]*)\]\((?P<target>[^)\s]+)(?:\s+\"[^\"]*\")?\)")
+TARGET = re.compile(r"\]\([^)\s]*(?:\s+\"[^\"]*\")?\)")
+FENCE = re.compile(r"^\s*(```|~~~)")
+HEADING = re.compile(r"^(#{1,6})\s+(?P<title>.+?)\s*#*\s*$")
+
+
+def _pages() -> list[Path]:
+    """README.md and every page under docs/, the lab book included."""
+    return [ROOT / "README.md", *sorted(DOCS.rglob("*.md"))]
+
+
+def _user_pages() -> list[Path]:
+    """The pages outside the lab book."""
+    return [p for p in _pages() if LAB not in p.parents]
+
+
+def _name(page: Path) -> str:
+    return str(page.relative_to(ROOT))
+
+
+def _prose(page: Path) -> str:
+    """The page with its fenced code blocks blanked (line numbers kept)."""
+    lines, fenced = [], False
+    for line in page.read_text(encoding="utf-8").splitlines():
+        if FENCE.match(line):
+            fenced = not fenced
+            lines.append("")
+            continue
+        lines.append("" if fenced else line)
+    return "\n".join(lines)
+
+
+def _links(page: Path) -> list[tuple[int, str]]:
+    """(line number, target) of every relative link or image in the page's prose (a link's text
+    may run over several lines)."""
+    text = _prose(page)
+    found = []
+    for match in LINK.finditer(text):
+        target = match["target"]
+        if re.match(r"[A-Za-z][A-Za-z0-9+.-]*:", target):  # http:, https:, mailto:
+            continue
+        found.append((text.count("\n", 0, match.start("target")) + 1, target))
+    return found
+
+
+def _slug(title: str) -> str:
+    """A heading's anchor as GitHub makes it: lower case, punctuation dropped, spaces to hyphens."""
+    text = re.sub(r"\[([^\]]*)\]\([^)]*\)", r"\1", title)  # a link in a heading anchors by its text
+    text = re.sub(r"[^\w\- ]", "", text.lower())
+    return text.replace(" ", "-")
+
+
+def _anchors(page: Path) -> set[str]:
+    """Every heading anchor of a page (a repeated heading gets -1, -2, ... as on GitHub)."""
+    seen: dict[str, int] = {}
+    anchors = set()
+    for line in _prose(page).splitlines():
+        match = HEADING.match(line)
+        if not match:
+            continue
+        slug = _slug(match["title"])
+        count = seen.get(slug, 0)
+        seen[slug] = count + 1
+        anchors.add(slug if count == 0 else f"{slug}-{count}")
+    return anchors
+
+
+@pytest.mark.parametrize("page", _user_pages(), ids=_name)
+def test_no_date_outside_the_lab_book(page: Path) -> None:
+    """A date in a how-to, reference or design page (or the README) is a dated measurement that
+    belongs in the lab book; link targets are left out, since lab-book entries are named by date."""
+    text = page.read_text(encoding="utf-8")
+    seen = TARGET.sub(lambda m: "]" + " " * (len(m.group(0)) - 1), text)  # targets blanked, offsets kept
+    dated = [f"{_name(page)}:{seen.count(chr(10), 0, m.start()) + 1}: {m.group(0)}" for m in DATE.finditer(seen)]
+    assert not dated, "dated text outside docs/lab/ (move it to the lab book):\n" + "\n".join(dated)
+
+
+@pytest.mark.parametrize("page", _pages(), ids=_name)
+def test_relative_links_point_at_files_that_exist(page: Path) -> None:
+    broken = []
+    for number, target in _links(page):
+        path = unquote(target.split("#", 1)[0])
+        if path and not (page.parent / path).exists():
+            broken.append(f"{_name(page)}:{number}: {target}")
+    assert not broken, "links to files that do not exist:\n" + "\n".join(broken)
+
+
+@pytest.mark.parametrize("page", _pages(), ids=_name)
+def test_links_to_headings_point_at_headings_that_exist(page: Path) -> None:
+    broken = []
+    for number, target in _links(page):
+        path, _, anchor = target.partition("#")
+        if not anchor:
+            continue
+        linked = page if not path else (page.parent / unquote(path)).resolve()
+        if linked.suffix != ".md" or not linked.exists():
+            continue  # a missing file is the test above's to report
+        if anchor not in _anchors(linked):
+            broken.append(f"{_name(page)}:{number}: {target}")
+    assert not broken, "links to headings that do not exist:\n" + "\n".join(broken)
+
+
+def test_the_index_lists_every_page() -> None:
+    """docs/index.md names every page outside the lab book, so that none is left unfound."""
+    index = DOCS / "index.md"
+    listed = {(index.parent / unquote(t.split("#", 1)[0])).resolve() for _, t in _links(index) if t.split("#", 1)[0]}
+    missing = [_name(p) for p in sorted(DOCS.glob("*.md")) if p != index and p.resolve() not in listed]
+    assert not missing, "pages docs/index.md does not list: " + ", ".join(missing)
