@@ -18,7 +18,7 @@ from terrapref.features import UtilityFeaturizer
 from terrapref.learning.model_file import LoadedModel, check_compatible
 from terrapref.rules.costmap import Costmap
 from terrapref.planner.policy import ClassifierPolicy, Observation, Policy
-from terrapref.rules import RULES, ArgmaxRule, Rule, RuleContext, RuleInput, driving_rule
+from terrapref.rules import Rule, RuleContext, RuleInput, chosen_rule
 from terrapref.planner.stop import StopConfig, StopRule
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
@@ -162,15 +162,7 @@ def _chosen(policy: Policy, rule: Rule | str | None) -> Rule:
     """The rule that drives (:class:`Planner`'s ``rule``)."""
     if isinstance(rule, Rule):
         return rule
-    if rule is None:
-        return driving_rule(policy.rules, policy.drives, policy.path or policy.name)
-    if rule == ArgmaxRule.type:
-        return ArgmaxRule()
-    found = [r for r in policy.rules if r.type == rule]
-    if not found:
-        have = ", ".join([ArgmaxRule.type, *(r.type for r in policy.rules)])
-        raise ValueError(f"{policy.path or policy.name}: no {rule!r} rule (rules: {', '.join(RULES.names())}); it has {have}")
-    return found[-1]
+    return chosen_rule(policy.rules, policy.drives, rule, policy.path or policy.name)
 
 
 def _outputs(featurizer: UtilityFeaturizer, policy: Policy, view: SegmentationView, pose: Pose, path: ReferencePath,

@@ -36,7 +36,7 @@ if TYPE_CHECKING:
     from terrapref.learning.model_file import LoadedModel
 
 __all__ = ["RULES", "ArgmaxRule", "Choice", "HeaderContext", "OffsetConfig", "OffsetRule", "Rule", "RuleConfig", "RuleContext", "RuleInput",
-           "RuleRunner", "SecondStageConfig", "SecondStageRule", "driving_rule", "legacy_blocks", "read_rules", "rules_in", "rules_of"]
+           "RuleRunner", "SecondStageConfig", "SecondStageRule", "chosen_rule", "driving_rule", "legacy_blocks", "read_rules", "rules_in", "rules_of"]
 
 RULES: Registry[type[Rule]] = Registry("rule")
 
@@ -106,6 +106,24 @@ def driving_rule(rules: Sequence[Rule], drives: str | None, source: str = "model
     if found is None:
         raise UserError(source, f"names rule {drives!r} to drive, but lists {', '.join(r.type for r in rules) or 'none'}", field="drives")
     return found
+
+
+def chosen_rule(rules: Sequence[Rule], drives: str | None, wanted: str | None, source: str) -> Rule:
+    """The rule that drives a planner: the one the file names (``wanted`` None), or the one of the
+    file's of type ``wanted`` (``argmax``, C's, every model has).
+
+    Raises:
+        ValueError: the file lists no rule of type ``wanted``.
+    """
+    if wanted is None:
+        return driving_rule(rules, drives, source)
+    if wanted == ArgmaxRule.type:
+        return ArgmaxRule()
+    found = [r for r in rules if r.type == wanted]
+    if not found:
+        have = ", ".join([ArgmaxRule.type, *(r.type for r in rules)])
+        raise ValueError(f"{source}: no {wanted!r} rule (rules: {', '.join(RULES.names())}); it has {have}")
+    return found[-1]
 
 
 register_rule(ArgmaxRule, "the trajectory C ranks first (the paper's planner)")
