@@ -29,8 +29,8 @@ the layers below it (tests/test_layout.py checks this list against the code):
 import os
 
 # terrapref's numeric work is many small matrix products (a 21 x 64 network, 21 trajectories),
-# for which BLAS threads cost far more than they save (training took 2.6 times as long with two
-# threads as with one on a 2-core machine); results do not depend on it (learning/exact.py).
+# for which BLAS threads cost far more than they save (docs/lab/2026-11-28-figures-from-code.md); results do not
+# depend on it (learning/exact.py).
 # The environment still decides where it says otherwise, and only before NumPy is loaded.
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")

@@ -212,7 +212,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
 def study_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("study", help="baselines, data efficiency, profiles, robustness and ablations; write STUDY.md")
     p.add_argument("--out", required=True, type=Path, help="folder for STUDY.md, its figures and the work")
-    p.add_argument("--quick", action="store_true", help="one seed and fewer levels (about a minute on 2 cores)")
+    p.add_argument("--quick", action="store_true", help="one seed and fewer levels (its time: docs/benchmarks.md)")
     p.add_argument("--seeds", type=int, help="training seeds (default: 3, or 1 with --quick)")
     p.add_argument("--recipe", metavar="NAME", help="the recipe section 6 teaches every order and style with (default: teach)")
     add_classes_arg(p)

@@ -151,7 +151,7 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
     m = len(data.feature_config.preference.control.w_rps)
     print(f"val acc: the share of held-out frames ({config.optimiser.val_fraction:.0%}) whose driven trajectory C ranks first of {m} "
           f"(chance {1 / m:.3f}); neighbours differ by one step of steering, so val top3 and, for the planner, the agreement "
-          "`terrapref evaluate` measures say more (one synthetic drive of teach_course: val acc about 0.45, val top3 about 0.84)")
+          "`terrapref evaluate` measures say more")
     print(f"wrote {args.out} ({'; '.join(chosen)}), {curve}, checkpoints in {Path(args.out).with_name(Path(args.out).stem + '.checkpoints')}")
 
 
