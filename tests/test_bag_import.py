@@ -392,7 +392,7 @@ def test_replay_reports_agreement_with_the_operator(tmp_path: Path, logs, capsys
     c = result["classifier_overall"]
     assert 0.0 <= c["top1"] <= c["top3"] <= 1.0 and o["top3"] is None  # the planner ranks nothing: only C has a top-3
     assert "planner, all frames" in text and "top-3" not in text.split("planner, all frames")[1].splitlines()[0]
-    assert "the planner's stages choose one trajectory and rank none, so only C has a top-3" in text
+    assert "the planner's rules choose one trajectory and rank none, so only C has a top-3" in text
     assert result["terrain_in_view"]["frames"] < o["frames"] and (out / "replay.png").stat().st_size > 10_000
     # A model for another camera is refused in one line.
     from helpers import model_meta

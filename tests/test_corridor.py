@@ -1,5 +1,5 @@
 """The offset corridor (terrapref.rules.offset), its fit (terrapref.rules.offset.fit) and the
-planner's offset stage (terrapref.planner.offset): closed-form geometry on tiny scenarios."""
+closed-form geometry on tiny scenarios."""
 
 from __future__ import annotations
 
@@ -415,7 +415,7 @@ def test_the_offset_stage_leaves_u_and_c_until_a_decision_reports_them(tmp_path,
         planner.set_path(scenario.waypoints)
         planner.featurizer = _CountingFeaturizer(planner.featurizer)
     lazy = planners["view"].decide(SegmentationView.of(image), (5.0, 10.0, 0.0))
-    assert planners["view"].featurizer.calls == 0  # the offset stage steered without them
+    assert planners["view"].featurizer.calls == 0  # the offset rule steered without them
     now = planners["array"].decide(image, (5.0, 10.0, 0.0))  # an array the caller may reuse: read at once
     assert planners["array"].featurizer.calls == 1
     argmax = planners["argmax"].decide(SegmentationView.of(image), (5.0, 10.0, 0.0))  # a stage that steers by F_t

@@ -126,5 +126,5 @@ def test_an_exported_recording_carries_the_costmap_a_model_sees_in_it(tmp_path, 
     capsys.readouterr()
     plain = save_model(tmp_path / "c.safetensors", config, skip_path_weights(config), model_meta())
     assert main(["export", str(rec), "--format", "mcap", "--model", str(plain), "--out", str(tmp_path / "c.mcap")]) == 2
-    one_line_error(capsys, "c.safetensors", "no offset stage")
+    one_line_error(capsys, "c.safetensors", "no offset rule")
     assert not (tmp_path / "c.mcap").exists()

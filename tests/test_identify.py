@@ -333,6 +333,6 @@ def test_an_unordered_pair_with_a_lethal_class_is_left_to_the_class_table():
     pairs = (PairEvidence("water", "non_traversable", 7, 2, 5, (7, 0), 3.4, 2.4), PairEvidence("mud", "water", 0, 0, 0, (0, 0), 0.1, None))
     report = Identifiability(("mud", "water", "non_traversable"), pairs, ("non_traversable",))
     lethal, plain = report.warnings()
-    assert "non_traversable is lethal" in lethal and "offset stage never drives onto it" in lethal
+    assert "non_traversable is lethal" in lethal and "offset rule never drives onto it" in lethal
     assert plain == "mud vs water: never compared; the planner's choice between them is a guess"
     assert Identifiability.from_dict(report.to_dict()) == report

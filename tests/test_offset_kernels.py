@@ -1,4 +1,4 @@
-"""The offset stage's compiled loops give the bits of the NumPy and Python forms they stand for.
+"""The offset rule's compiled loops give the bits of the NumPy and Python forms they stand for.
 
 Each ``_*_numpy`` or ``_*_python`` function below is such a form, kept here as the reference:
 the sky line, the reference line's median, the attitude's least squares (``math.fsum``), the

@@ -1,4 +1,4 @@
-"""One way to name things that can be chosen by name: policies, decision stages, drivers, recipes,
+"""One way to name things that can be chosen by name: policies, decision rules, drivers, recipes,
 driving styles and grid engines all live in a :class:`Registry`, as Gymnasium keeps its
 environments' specs.
 
@@ -52,7 +52,7 @@ class Entry(Generic[T]):
 
 
 class Registry(Generic[T]):
-    """Named entries of one kind (``what``: "policy", "stage", "recipe", ...), in the order registered.
+    """Named entries of one kind (``what``: "policy", "rule", "recipe", ...), in the order registered.
 
     Args:
         what: the kind's name, singular, for messages.

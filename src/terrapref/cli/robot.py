@@ -78,7 +78,7 @@ def _replay_into(args: argparse.Namespace, model, robot, out: Path) -> int:
             print(f"{name:20s} top-1 {r['top1']:.1%}{top3}, mean |w| error {r['mean_abs_w_error_rps']:.3f} rad/s over {r['frames']} frames")
         else:
             print(f"{name:20s} no frames")
-    print("top-3: how often the operator's trajectory is among the three C ranks most probable (F_t); the planner's stages "
+    print("top-3: how often the operator's trajectory is among the three C ranks most probable (F_t); the planner's rules "
           "choose one trajectory and rank none, so only C has a top-3")
     print(f"wrote {out / 'replay.json'} and {out / 'replay.png'}")
     return 0
@@ -171,7 +171,7 @@ def export_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--format", choices=["onnx", "mcap", "rosbag1"], required=True,
                    help="onnx: the classifier C; mcap: the recording's frames as ROS 2 messages; rosbag1: the same as a ROS 1 bag (rosbag play)")
     p.add_argument("--out", required=True, help="output file")
-    p.add_argument("--model", help="with --format mcap or rosbag1: also write the costmap this model (with an offset stage) prices the recording's ground with, "
+    p.add_argument("--model", help="with --format mcap or rosbag1: also write the costmap this model (with an offset rule) prices the recording's ground with, "
                                    "as nav_msgs/OccupancyGrid and foxglove_msgs/Grid, once a second")
     add_classes_arg(p, check=True)
     add_force_arg(p)
@@ -337,7 +337,7 @@ def _cmd_route(args: argparse.Namespace) -> int:
 def route_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("route", help="plan a global route over a scenario's map, priced with a model's learned preference, as waypoints the planner follows")
     p.add_argument("scenario", help="the course (packaged name, file or gen:N): its terrain stands in for a prior map such as labelled aerial imagery")
-    p.add_argument("--model", required=True, help="a model with an offset stage (recipe teach): its class prices and price of leaving the path")
+    p.add_argument("--model", required=True, help="a model with an offset rule (recipe teach): its class prices and price of leaving the path")
     p.add_argument("--out", required=True, help="the scenario with the route as its path (.yaml); a figure is written beside it (.png)")
     p.add_argument("--resolution", type=finite_float, default=0.25,
                    help="search cell size [m], 0.1-2, taken as the nearest whole multiple of the map's cells (default 0.25)")

@@ -174,10 +174,10 @@ def train_parser(sub: argparse._SubParsersAction, flags: bool = True) -> None:
 
         group = p.add_argument_group("training (defaults shown: recipe teach's; each flag overrides the chosen recipe's value)")
         add_arguments(group, TrainConfig, recipe_named(DEFAULT_RECIPE).train)
-        stages = p.add_argument_group("decision stages (terrapref recipes lists each recipe's; the last one fitted drives)")
-        stages.add_argument("--second-stage", action=argparse.BooleanOptionalAction, default=None,
+        rules = p.add_argument_group("decision rules (terrapref recipes lists each recipe's; the last one fitted drives)")
+        rules.add_argument("--second-stage", action=argparse.BooleanOptionalAction, default=None,
                             help="also fit the second stage's linear utility (or, with --no-, leave the recipe's out)")
-        stages.add_argument("--stage-weight", type=finite_float, default=None,
+        rules.add_argument("--stage-weight", type=finite_float, default=None,
                             help="the second stage's weight against log F_t in the decision (recipe teach: 5.0)")
 
 

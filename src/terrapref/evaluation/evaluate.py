@@ -171,13 +171,13 @@ def _course_runs(results: list[RunResult], name: str, evidence: _Evidence | None
 
 def _write_runs(results: list[RunResult], folder: Path, model) -> None:
     """Each planner run as an MCAP file, its camera frames rendered again at the poses driven;
-    with an offset stage, the costmap of the ground those frames show, once a second."""
+    with an offset rule, the costmap of the ground those frames show, once a second."""
     from terrapref.camera import SegmentationRenderer
     from terrapref.interop.mcap_export import RunFrames, costmaps_of, write_mcap
     from terrapref.planner import Planner
 
     camera = PinholeCamera(model.camera)
-    stage = Planner(model).runner  # its costmap only where it keeps a ground map (the offset stage)
+    runner = Planner(model).runner  # its costmap only where it keeps a ground map (the offset rule)
     for r in results:
         run = r.run
         if r.driver != PLANNER or run is None:
@@ -188,7 +188,7 @@ def _write_runs(results: list[RunResult], folder: Path, model) -> None:
         frames = RunFrames(times=0.1 * np.arange(len(poses)), poses=poses, commands=run.commands,
                            image=lambda i, poses=poses, renderer=renderer: renderer.render(Pose(*poses[i])), chosen=run.index,
                            path=scenario.waypoints, camera=model.camera, classes=model.classes, preference=model.features.preference, probs=run.probs,
-                           costmap=costmaps_of(stage, poses) if stage.keeps_ground_map else None, stops=run.stops or None)
+                           costmap=costmaps_of(runner, poses) if runner.keeps_ground_map else None, stops=run.stops or None)
         write_mcap(folder / f"{file_stem(r.scenario)}_seed{r.seed}.mcap", frames, robot_file=False)
 
 

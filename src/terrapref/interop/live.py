@@ -165,7 +165,7 @@ class WatchedDriver:
     """A planner driver (:class:`terrapref.planner.planner.PlannerDriver`) whose every decision is
     sent to a :class:`LiveView` as it is made: the frame it decided on, the pose, the command, the
     21 trajectories with F_t and the one chosen, and once a second the costmap, when the planner
-    has an offset stage. A :class:`terrapref.sim.Driver` itself."""
+    has an offset rule. A :class:`terrapref.sim.Driver` itself."""
 
     def __init__(self, inner: PlannerDriver, view: LiveView) -> None:
         self.inner, self.view = inner, view

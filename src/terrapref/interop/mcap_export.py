@@ -10,7 +10,7 @@ Topics (all in the ``odom`` frame, the recording's world frame; stamps from an e
     /terrapref/path             nav_msgs/Path                 the reference path, once
     /terrapref/trajectories     visualization_msgs/MarkerArray the 21 trajectories, the chosen one green
     /terrapref/costmap          nav_msgs/OccupancyGrid        the learned preference over the ground seen
-                                                              (a run of a model with an offset stage; 1 Hz)
+                                                              (a run of a model with an offset rule; 1 Hz)
     /terrapref/costmap_grid     foxglove_msgs/Grid            the same costmap as Foxglove's Grid: cost
                                                               (int8, -1 unknown) and its colour per cell
     /tf, /tf_static             tf2_msgs/TFMessage            odom -> base_link; base_link -> camera_link ->
@@ -298,37 +298,37 @@ def _robot_yaml(cam: CameraConfig, labels: str, profile: tuple[str, ...] | None 
     )
 
 
-def costmaps_of(stage, poses: np.ndarray) -> Callable[[int, np.ndarray], Costmap | None]:
-    """The costmaps of one run for :attr:`RunFrames.costmap`: ``stage`` (a planner's stage that
+def costmaps_of(runner, poses: np.ndarray) -> Callable[[int, np.ndarray], Costmap | None]:
+    """The costmaps of one run for :attr:`RunFrames.costmap`: ``runner`` (a planner's rule that
     keeps a ground map, terrapref.rules), its map emptied, takes each frame in turn as
     it was seen from ``poses`` (F, 3), and every :data:`COSTMAP_EVERY`-th frame gives its
     costmap. Frames are to be asked for in order."""
     from terrapref.camera import SegmentationView
     from terrapref.vehicle import Pose
 
-    stage.reset()
+    runner.reset()
 
     def costmap(i: int, ids: np.ndarray) -> Costmap | None:
-        stage.observe(SegmentationView.of(ids), Pose(*poses[i]))
-        return stage.costmap() if i % COSTMAP_EVERY == 0 else None
+        runner.observe(SegmentationView.of(ids), Pose(*poses[i]))
+        return runner.costmap() if i % COSTMAP_EVERY == 0 else None
     return costmap
 
 
 def model_costmaps(model, frames: RunFrames) -> Callable[[int, np.ndarray], Costmap | None]:
     """The costmaps ``model`` (a LoadedModel) sees in ``frames`` (a recording's): its offset
-    stage's ground map fed each frame at the pose recorded (:func:`costmaps_of`).
+    rule's ground map fed each frame at the pose recorded (:func:`costmaps_of`).
 
     Raises:
-        ValueError: the model is for another class table, or has no offset stage.
+        ValueError: the model is for another class table, or has no offset rule.
     """
     from terrapref.planner import Planner
 
     if not model.classes.same_classes(frames.classes):
         raise ValueError("was trained for another class table than the recording's")
-    stage = Planner(model, frames.camera).runner
-    if not stage.keeps_ground_map:
-        raise ValueError("has no offset stage, whose ground map the costmap prices (train it with recipe teach)")
-    return costmaps_of(stage, frames.poses)
+    runner = Planner(model, frames.camera).runner
+    if not runner.keeps_ground_map:
+        raise ValueError("has no offset rule, whose ground map the costmap prices (train it with recipe teach)")
+    return costmaps_of(runner, frames.poses)
 
 
 def recording_frames(rec) -> RunFrames:

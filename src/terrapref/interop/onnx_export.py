@@ -4,10 +4,10 @@ Input ``utilities``, float32 (N, m, k): each frame's utility features U (SPEC 7;
 terrain classes + distance). Output ``logits``, float32 (N, m): C's scores, whose softmax is
 F_t, computed in float64 inside the graph like the planner's own forward pass (an ensemble's logits are the log of its members' mean softmax, as in
 :func:`terrapref.learning.numpy_forward`). Everything the model was trained under (preference
-set, camera, classes, profile, feature configuration, the decision stages: the second stage's
-linear utility, the offset stage's corridor utility) is in the model's metadata as JSON strings under
-``terrapref.*`` keys. The offset stage itself (terrapref.rules.offset.rule: a ground map, the
-corridor, pure pursuit) is not a network and is not in the graph; ``terrapref.runtime`` runs it.
+set, camera, classes, profile, feature configuration, the decision rules: the second stage's
+linear utility, the offset rule's utility) is in the model's metadata as JSON strings under
+``terrapref.*`` keys. The offset rule itself (terrapref.rules.offset.rule: a ground map, the
+offsets' features, pure pursuit) is not a network and is not in the graph; ``terrapref.runtime`` runs it.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 For every frame of the log the model decides from the same label image, stamp and pose as the
 operator had, and the replay counts how often its trajectory is the operator's (top-1), how
 often the operator's is among the three C finds most probable (top-3: C's alone, since the
-planner's stages choose one trajectory and rank none), and how far its yaw rate is from the
+planner's rules choose one trajectory and rank none), and how far its yaw rate is from the
 operator's (mean |w| error), over all frames and over the frames where terrain lies on some trajectory (where the
 preference matters). The check a team makes before putting a model on the robot.
 """
@@ -57,11 +57,11 @@ def replay(model: LoadedModel, rec: Recording, progress=None) -> dict:
     c_hit1 = c_best == rec.labels
     c_werr = np.abs(w_grid[c_best] - rec.commands[:, 1])
     return {
-        # The planner's decision stages choose one trajectory and rank none, so only C, whose F_t
+        # The planner's decision rules choose one trajectory and rank none, so only C, whose F_t
         # ranks all m, has a top-3 (null for the planner: it would be C's own again).
         "overall": _rates(hit1, None, werr),
         "terrain_in_view": _rates(hit1[terrain], None, werr[terrain]),
-        # C's own argmax, as training's accuracy measures it; the planner's stages choose by more than F_t.
+        # C's own argmax, as training's accuracy measures it; the planner's rules choose by more than F_t.
         "classifier_overall": _rates(c_hit1, top3, c_werr),
         "classifier_terrain_in_view": _rates(c_hit1[terrain], top3[terrain], c_werr[terrain]),
         "series": {"t": rec.times.tolist(), "w_operator": rec.commands[:, 1].tolist(), "w_model": w_grid[chosen].tolist(),

@@ -12,8 +12,8 @@ training writes the same file, byte for byte::
     training, data                   how it was trained, and on which data
     history, best_epoch, steps,      what a completed training produced
     identifiability, steadying
-    stages                           the decision stages fitted with C, one block each under its
-                                     ``type`` (terrapref.rules reads them)
+    rules, drives                    the decision rules fitted with C, one block each under its
+                                     ``type`` (terrapref.rules reads them), and the one that drives
     members                          an ensemble's members; in a checkpoint, how many there are
     member, epoch                    a checkpoint's member and epoch; a model's chosen epoch
     status, interrupted              ``checkpoint`` or ``interrupted`` (absent: a finished model),
@@ -77,7 +77,7 @@ class Interruption:
 
     members_reached: int
     best_epochs: tuple[int, ...]
-    note: str = "training was interrupted: the best epochs so far, without the decision stages or the identifiability report"
+    note: str = "training was interrupted: the best epochs so far, without the decision rules or the identifiability report"
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -83,7 +83,7 @@ class Identifiability:
 
     order: tuple[str, ...]  # best first
     pairs: tuple[PairEvidence, ...]
-    lethal: tuple[str, ...] = ()  # the class table's lethal column, which the offset stage never drives onto
+    lethal: tuple[str, ...] = ()  # the class table's lethal column, which the offset rule never drives onto
     background: str = GRASS  # the class table's background (the class of clean trajectories)
 
     def pair(self, a: str, b: str) -> PairEvidence | None:
@@ -98,10 +98,10 @@ class Identifiability:
             why = "never compared" if p.frames == 0 else (f"compared in only {p.frames} frames" if p.frames < MIN_FRAMES
                                                           else "compared, but the margin is within its uncertainty")
             lethal = next((c for c in (p.first, p.second) if c in self.lethal), None)
-            if lethal is not None:  # the class table, not the drive, keeps the offset stage off it
+            if lethal is not None:  # the class table, not the drive, keeps the offset rule off it
                 pooled = lethal == LETHAL_COLUMN  # several lethal classes, one column
                 what, verb, it = ("the lethal classes", "are", "them") if pooled else (lethal, "is", "it")
-                out.append(f"{p.first} vs {p.second}: {why}; {what} {verb} lethal, so the offset stage never drives onto {it} "
+                out.append(f"{p.first} vs {p.second}: {why}; {what} {verb} lethal, so the offset rule never drives onto {it} "
                            f"whatever the drive shows, but C's ranking of the two is a guess")
             else:
                 out.append(f"{p.first} vs {p.second}: {why}; the planner's choice between them is a guess")

@@ -2,7 +2,7 @@
 
 A policy sees what the planner sees (the utility features U, the segmentation image, and the
 reference path ahead in the vehicle frame) and returns one score per trajectory; the planner's
-driving stage (terrapref.rules: C's argmax for a policy without stages) turns them into
+driving rule (terrapref.rules: C's argmax for a policy without rules) turns them into
 a command. The learned classifier C is one policy; the study's baselines are others:
 
 - ``ClassifierPolicy``: C (SPEC 8), the paper's method.
@@ -78,7 +78,7 @@ class Policy(abc.ABC):
         path: the model file it was loaded from ("" for none).
 
     Attributes:
-        stages: the decision stages fitted with it, in order (the planner drives with the last;
+        rules: the decision rules fitted with it, in order (the planner drives with the one the file names;
             none: the argmax of its scores).
     """
 

@@ -1,5 +1,5 @@
 """Policies by name, as Gymnasium registers environments (one :class:`terrapref.registry.Registry`,
-as every named choice; the decision stages are in :data:`terrapref.rules.RULES`).
+as every named choice; the decision rules are in :data:`terrapref.rules.RULES`).
 
 ``register(kind, entry_point)`` names a way to build a :class:`~terrapref.planner.policy.Policy`;
 ``make(kind, **kwargs)`` builds one (the baselines that need no file: ``pure_pursuit``,

@@ -7,7 +7,7 @@ labelled aerial imagery on a robot) moves the reference path itself.
 
 The route is the least-cost way from the path's start to its end through the costmap of that
 map (:mod:`terrapref.rules.costmap`: the learned per-class prices, lethal classes lethal) with
-the price the model learned for leaving the path: the corridor utility prices a metre on class
+the price the model learned for leaving the path: the offset utility prices a metre on class
 k at ``-w_k`` and an offset of d metres held for L metres of path at ``-w_detour * d^2 * (L +
 span)``, the span standing for swerving out and back. So a metre of route at distance d from
 the reference path costs ``price(cell) - w_detour * d^2``, and a step from distance d1 to d2

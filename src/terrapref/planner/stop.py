@@ -1,6 +1,6 @@
 """When the planner stops: the one rule every decision passes through (SPEC 18).
 
-A stop is a decision with a reason, not a failure to hide. After the driving stage has chosen
+A stop is a decision with a reason, not a failure to hide. After the driving rule has chosen
 its command, the planner commands v = 0 instead when:
 
 - ``no_free_way``: no way ahead keeps the footprint on ground that is seen and not lethal over
@@ -9,7 +9,7 @@ its command, the planner commands v = 0 instead when:
   from just short of it is what the rule exists to prevent. The ways are arcs of constant yaw rate across the stick's range, at
   the commanded speed; the stopping distance is what the vehicle covers before it stands
   (``reaction_s`` at that speed, then braking at ``decel_mps2``) plus ``margin_m``. Ground is
-  read from the ground map the planner keeps (the offset stage's, or a small one of the rule's
+  read from the ground map the planner keeps (the offset rule's, or a small one of the rule's
   own). Unknown ground (never seen, 255, beyond the camera's range) is never free where the
   camera looks from the pose it stands at; under and right beside the vehicle, where it cannot
   look, the rule goes by what the map remembers from earlier frames, and a vehicle that starts
@@ -107,10 +107,10 @@ class StopConfig:
         return cls(**data)
 
 
-# The small ground map a rule keeps for a stage that keeps none: 0.2 m cells, ground read every
+# The small ground map the stop rule keeps for a decision rule that keeps none: 0.2 m cells, ground read every
 # 0.2 m to 3.5 m ahead and 3 m each side (the ways' reach at 2 m/s), the last few frames
-# counting (fade 0.8 a frame), placed with the mount's attitude, otherwise as the offset stage's
-# map. It is much coarser than the offset stage's (a fortieth of the samples): it decides only
+# counting (fade 0.8 a frame), placed with the mount's attitude, otherwise as the offset rule's
+# map. It is much coarser than the offset rule's (a fortieth of the samples): it decides only
 # whether to go, and the decision it guards (C's) costs 20 us.
 _OWN_MAP = OffsetGeometry(stations_m=(-1.0, 3.0), map_resolution_m=0.2, sample_step_m=0.2, map_half_size_m=5.0, sample_range_m=3.5,
                           map_fade=0.8, map_sky_attitude=False)
@@ -126,7 +126,7 @@ class StopRule:
         max_yaw_rate_rps: the stick's range of yaw rates; the ways checked span it [rad/s].
         half_width_m: half the vehicle's width; the footprint is 5 points across it [m].
         config: the rule's settings.
-        ground_map: the driving stage's ground map, updated by the stage before the rule reads
+        ground_map: the driving rule's ground map, updated by that rule before the stop rule reads
             it; None: the rule keeps a small one of its own.
     """
 
@@ -168,7 +168,7 @@ class StopRule:
         self._frames = 0
 
     def observe(self, view: SegmentationView, pose: Pose) -> None:
-        """Take in a frame's view (the rule's own map only; a stage's map is the stage's to update)."""
+        """Take in a frame's view (the stop rule's own map only; a decision rule's map is that rule's to update)."""
         if self.own_map:
             self.map.update(view, pose)
 
@@ -180,12 +180,12 @@ class StopRule:
         return float(np.count_nonzero(ids != UNKNOWN)) / ids.shape[0]
 
     def check(self, view: SegmentationView, pose: Pose, v_mps: float, w_rps: float, time_s: float | None = None) -> str | None:
-        """The reason to stop at this frame, or None to drive the stage's command (``v_mps``, ``w_rps``).
+        """The reason to stop at this frame, or None to drive the driving rule's command (``v_mps``, ``w_rps``).
 
         Args:
             view: the frame's segmentation image.
             pose: the pose it was taken at.
-            v_mps: the speed the stage commands: the stopping distance is worked out at it.
+            v_mps: the speed the driving rule commands: the stopping distance is worked out at it.
             w_rps: the yaw rate it commands: its arc is checked first.
             time_s: the frame's time [s]; None: frames are taken 0.1 s apart.
         """

@@ -1,8 +1,8 @@
 """The learned preference as a costmap: what other planners (Nav2, MPPI, move_base) read.
 
-The offset stage keeps a ground map of what the camera has shown (terrapref.rules.offset,
+The offset rule keeps a ground map of what the camera has shown (terrapref.rules.offset,
 ``GroundMap``): each cell holds a terrain class, ground that is none of them, or ground never
-seen. The costmap prices every cell with the corridor utility the model learned from the drive:
+seen. The costmap prices every cell with the offset utility the model learned from the drive:
 a class's price is what driving a metre on it costs against driving a metre on the background
 (the weight the utility gives it, negated), so the cells keep the driver's order. Lethal classes
 are lethal, ground never seen is unknown. Costs follow ``nav_msgs/OccupancyGrid``: 0 (the
@@ -63,7 +63,7 @@ class Costmap:
 
 def class_costs(weights: np.ndarray, lethal: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """The cost (K + 2,) int8 of each map cell value (K terrain columns, K: the background,
-    K + 1: never seen) and the price per metre (K,) of each terrain column, from the corridor
+    K + 1: never seen) and the price per metre (K,) of each terrain column, from the offset
     utility's ``weights`` (K + 3,; the first K price a metre on each class, as utilities) and the
     ``lethal`` columns (K + 2,)."""
     prices = -np.asarray(weights[:k], dtype=float)

@@ -1,7 +1,7 @@
-"""The offset corridor: what driving beside the path at a lateral offset would cross.
+"""The offsets' features: what driving beside the path at a lateral offset would cross.
 
 A person facing a patch on the trail does not pick a 6 m arc; they pick a side and how far out
-to hold it until the patch is behind them. The corridor features describe exactly that choice.
+to hold it until the patch is behind them. The offset features describe exactly that choice.
 For each candidate offset d (left positive) from the reference path, the footprint is laid
 along the path shifted by d, over stations from just behind the vehicle to ``stations_m[1]``
 ahead, and the ground under it is read from a :class:`GroundMap`: the camera's views, gathered
@@ -35,7 +35,7 @@ from terrapref.scenario.path import ReferencePath
 
 @dataclass(frozen=True)
 class OffsetView:
-    """The corridor at one frame.
+    """The offset features at one frame.
 
     Attributes:
         features: per offset, metres on each terrain class, metres never seen and the detour's
@@ -48,7 +48,7 @@ class OffsetView:
 
 
 class OffsetFeatures:
-    """Corridor features (module docstring) read from a ground map along a path."""
+    """Offset features (module docstring) read from a ground map along a path."""
 
     def __init__(self, config: OffsetGeometry, k: int) -> None:
         self.config, self.k = config, k
@@ -71,6 +71,6 @@ class OffsetFeatures:
 
 
 def gated(view: OffsetView, offsets: np.ndarray, near_m: float) -> np.ndarray:
-    """The corridor's features with the gate column: d^2 while nothing is on the path within ``near_m``, (O, K + 3)."""
+    """The offsets' features with the gate column: d^2 while nothing is on the path within ``near_m``, (O, K + 3)."""
     gate = offsets**2 * float(view.near_m > near_m)
     return np.concatenate([view.features, gate[:, None]], axis=1)

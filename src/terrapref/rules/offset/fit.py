@@ -1,4 +1,4 @@
-"""Fitting the corridor utility (terrapref.rules.offset.rule) to the offsets a demonstrator steered for.
+"""Fitting the offset utility (terrapref.rules.offset.rule) to the offsets a demonstrator steered for.
 
 Each frame's label is the offset the driver was steering for, read when the recording is
 featurised (:func:`terrapref.rules.offset.steering.intent_offsets`). A softmax over the candidate
@@ -27,13 +27,13 @@ NEAR_CANDIDATES_M = (2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 6.0, 7.0, 8.0)
 
 @dataclass(frozen=True)
 class OffsetUtility:
-    """A fitted corridor utility: ``weights . gated(features)`` per offset.
+    """A fitted offset utility: ``weights . gated(features)`` per offset.
 
     Attributes:
         weights: one per column of :func:`terrapref.rules.offset.features.gated`, shape (K + 3,):
             K terrain classes, never seen, the detour's price, the gate.
         near_m: the gate's near distance [m].
-        config: the corridor's geometry.
+        config: the offset rule's geometry.
     """
 
     weights: np.ndarray
@@ -43,7 +43,7 @@ class OffsetUtility:
 
 @dataclass(frozen=True)
 class OffsetFit:
-    """A fitted corridor utility and how well it fitted.
+    """A fitted offset utility and how well it fitted.
 
     Attributes:
         weights: (K + 3,), the columns of :func:`terrapref.rules.offset.features.gated`.
@@ -105,8 +105,8 @@ def fit_softmax(X: np.ndarray, Y: np.ndarray, l2: float = 1e-3, iterations: int 
 
 
 @dataclass(frozen=True)
-class CorridorFitConfig:
-    """How the corridor utility is fitted.
+class OffsetFitConfig:
+    """How the offset utility is fitted.
 
     Attributes:
         sigma_m: the width of the Gaussian soft labels around each intended offset [m].
@@ -120,11 +120,11 @@ class CorridorFitConfig:
 
 
 def fit_offset_utility(features: np.ndarray, near_m: np.ndarray, intent: np.ndarray, offsets: np.ndarray,
-                 config: CorridorFitConfig | None = None) -> OffsetFit:
-    """Fit the corridor utility to frames' corridor features (N, O, K + 2), near distances (N,)
+                 config: OffsetFitConfig | None = None) -> OffsetFit:
+    """Fit the offset utility to frames' offset features (N, O, K + 2), near distances (N,)
     and intended offsets (N,) over the candidate ``offsets`` (O,) [m]; frames without an intended
     offset (NaN) are left out; ``config`` None: the default fit."""
-    config = config or CorridorFitConfig()
+    config = config or OffsetFitConfig()
     keep = np.isfinite(intent)
     if not keep.any():
         raise ValueError("no frame has an intended offset to fit")

@@ -11,14 +11,14 @@ import numpy as np
 from terrapref.records import to_plain
 
 MAX_COUNT = 10_000
-"""The most offsets, stations or camera samples a corridor may have."""
+"""The most offsets, stations or camera samples an offset geometry may have."""
 MAX_MAP_CELLS = 4096
 """The most ground-map cells a side (640 by default: 64 m at 0.1 m)."""
 
 
 @dataclass(frozen=True)
 class OffsetGeometry:
-    """Geometry of the offset corridor and of the ground map behind it.
+    """Geometry of the candidate offsets, what is read along them, and of the ground map behind them.
 
     Attributes:
         max_offset_m: candidate offsets run from -max to +max [m].
@@ -79,18 +79,18 @@ class OffsetGeometry:
         positive = (self.max_offset_m, self.offset_step_m, self.station_step_m, self.half_width_m, self.map_resolution_m,
                     self.map_half_size_m, self.sample_step_m, self.sample_range_m, self.intent_lookahead_m)
         if not all(math.isfinite(v) and v > 0 for v in positive) or not (self.span_m >= 0 and self.gap_m >= 0 and self.intent_delay_s >= 0):
-            raise ValueError("the corridor needs positive sizes and steps, and span_m, gap_m and intent_delay_s >= 0")
+            raise ValueError("the offset geometry needs positive sizes and steps, and span_m, gap_m and intent_delay_s >= 0")
         if not self.map_half_size_m > self.sample_range_m + 1.0 or not self.stations_m[1] < self.sample_range_m:
-            raise ValueError("the ground map must reach past the camera's sample range by more than 1 m, and that past the corridor")
+            raise ValueError("the ground map must reach past the camera's sample range by more than 1 m, and that past the stations read")
         if not self.stations_m[0] < self.stations_m[1]:
-            raise ValueError("the corridor's stations_m must run forward")
+            raise ValueError("the offset geometry's stations_m must run forward")
         counts = {"offsets": (self.max_offset_m / self.offset_step_m, MAX_COUNT),
                   "stations": ((self.stations_m[1] - self.stations_m[0]) / self.station_step_m, MAX_COUNT),
                   "camera samples": (self.sample_range_m / self.sample_step_m, MAX_COUNT),
                   "ground-map cells a side": (2 * self.map_half_size_m / self.map_resolution_m, MAX_MAP_CELLS)}
         for what, (count, most) in counts.items():  # a size read from a file is bounded before anything is allocated by it
             if count > most:
-                raise ValueError(f"the corridor's steps give {count:.3g} {what}; at most {most}")
+                raise ValueError(f"the offset geometry's steps give {count:.3g} {what}; at most {most}")
         if not (math.isfinite(self.map_range_m) and self.map_range_m > 0 and 0 <= self.map_fade <= 1 and 0 < self.map_lethal_share <= 1
                 and 0 < self.map_terrain_share <= 1 and 0 <= self.map_min_evidence < 1e3):
             raise ValueError("the ground map needs map_range_m > 0, map_fade in [0, 1], map_lethal_share and map_terrain_share in (0, 1] "

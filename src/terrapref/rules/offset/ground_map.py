@@ -95,7 +95,7 @@ class GroundMap:
 
     def _recentre(self, x: float, y: float) -> None:
         c = self.config
-        # Re-centred while all the camera writes and the corridor reads stays inside (checked in
+        # Re-centred while all the camera writes and the offset features read stays inside (checked in
         # plain floats: the same arithmetic as NumPy's on the two coordinates; a NaN re-centres).
         if self._origin_xy is not None:
             reach = c.map_half_size_m - c.sample_range_m - 1.0

@@ -17,7 +17,7 @@ from numba import njit
 @njit(cache=True, nogil=True)
 def offset_features(col: np.ndarray, centre: int, k: int, gap: int, beyond: int, step: float, stations: np.ndarray,
                       offsets: np.ndarray, span: float) -> tuple[np.ndarray, float]:
-    """The corridor's features (O, K + 2) and the distance to the first terrain on the path [m]
+    """The offsets' features (O, K + 2) and the distance to the first terrain on the path [m]
     (inf: none), from the terrain column (O, S, F) under every footprint point.
 
     As terrapref.rules.offset.features' module docstring says, and as the NumPy form that

@@ -1,4 +1,4 @@
-"""The offset stage's per-frame loops, compiled (Numba) for the planner's control loop.
+"""The offset rule's per-frame loops, compiled (Numba) for the planner's control loop.
 
 Each follows the NumPy form its docstring gives, element by element, without fast-math.
 """

@@ -6,7 +6,7 @@ candidate offset d. The rule then:
 
 1. rules out offsets whose way there, pure pursuit toward them for ``lethal_horizon_m``, brings
    the footprint (plus ``lethal_margin_m``) onto lethal terrain, whenever any lethal terrain lies
-   near the corridor (the class table says which classes are lethal; that is not learned); when
+   near the offsets' ways (the class table says which classes are lethal; that is not learned); when
    that rules out every offset, checks again with the footprint alone, without the margin, and
    keeps the offsets whose way is clear of it; when none is, those whose way runs farthest
    before lethal terrain;
@@ -15,7 +15,7 @@ candidate offset d. The rule then:
 3. otherwise keeps the offset it holds while that offset's utility falls short of the best one's
    by at most ``switch_margin`` of the best's magnitude (:func:`keeps`), and takes the best one when not, so that it does not dither between sides;
 4. but first, when lethal terrain lies across every offset the utility was fitted on, as far
-   ahead as the corridor reads (a lethal patch wider than they reach), takes the nearest offset
+   ahead as the offset features read (a lethal patch wider than they reach), takes the nearest offset
    beyond them, up to ``escape_factor`` times as far, that is clear of it, and holds it while it
    stays clear; the utility cannot price those offsets, so they serve only to get round lethal
    terrain;
@@ -223,10 +223,10 @@ def keeps(held: float, best: float, margin: float) -> bool:
 
 
 class OffsetSteering(RuleRunner):
-    """The offset stage (module docstring) of one camera, class table and corridor utility.
+    """The offset rule (module docstring) of one camera, class table and offset utility.
 
     Args:
-        utility: the fitted corridor utility.
+        utility: the fitted offset utility.
         camera: the robot's camera.
         terrain: the class table's terrain columns (which are lethal; the costmap's names).
         control: the control set (the forward speed, and the trajectories a yaw rate is named by).
@@ -237,7 +237,7 @@ class OffsetSteering(RuleRunner):
                  config: OffsetConfig | None = None) -> None:
         k = terrain.k
         if utility.weights.shape != (k + 3,):
-            raise ValueError(f"the corridor utility has {utility.weights.shape[0]} weights, expected {k + 3}")
+            raise ValueError(f"the offset utility has {utility.weights.shape[0]} weights, expected {k + 3}")
         self.utility, self.config, self.k = utility, config or OffsetConfig(), k
         self.half_width_m = float(utility.config.half_width_m)
         self.control, self.v_mps, self.names = control, float(control.v_mps), terrain.names
@@ -249,8 +249,8 @@ class OffsetSteering(RuleRunner):
             weights[k] = weights[safe].mean()
         self.weights = weights
         self.map = GroundMap(camera, terrain, utility.config)
-        self.corridor = OffsetFeatures(utility.config, k)
-        self.offsets = self.corridor.offsets
+        self.features = OffsetFeatures(utility.config, k)
+        self.offsets = self.features.offsets
         m = utility.config.half_width_m + self.config.lethal_margin_m
         self._clear = np.linspace(-m, m, 7)  # the footprint and its clearance, across [m]
         self._bare = np.linspace(-utility.config.half_width_m, utility.config.half_width_m, 5)  # the footprint alone [m]
@@ -283,8 +283,8 @@ class OffsetSteering(RuleRunner):
     def yaw_rate(self, view: SegmentationView, pose: Pose, path: ReferencePath, progress_m: float) -> float:
         """The yaw rate [rad/s] toward the offset held after this frame."""
         self.observe(view, pose)
-        corridor = self.corridor(self.map, path, progress_m)
-        value = gated_value(corridor.features, self.offsets, corridor.near_m > self.utility.near_m, self.weights)
+        seen = self.features(self.map, path, progress_m)
+        value = gated_value(seen.features, self.offsets, seen.near_m > self.utility.near_m, self.weights)
         escape = None
         if self.lethal[: self.k].any():
             lines = None  # the offsets' lines to the horizon, when the far read below already holds them
@@ -301,7 +301,7 @@ class OffsetSteering(RuleRunner):
         held = int(np.argmin(np.abs(self.offsets - self.held)))
         if escape is not None:
             self.held = escape
-        elif corridor.near_m > self.utility.near_m and np.isfinite(value[self._centre]):
+        elif seen.near_m > self.utility.near_m and np.isfinite(value[self._centre]):
             self.held = 0.0  # nothing near and the way back clear of lethal terrain
         elif self.held == 0.0 or abs(self.held) > self.offsets[-1] or not keeps(value[held], value[best], self.config.switch_margin):
             self.held = float(self.offsets[best])
@@ -326,7 +326,7 @@ class OffsetSteering(RuleRunner):
 
     def _escape(self, value: np.ndarray, path: ReferencePath, progress_m: float) -> float | None:
         """The escape offset to hold when lethal terrain lies across every fitted offset, or None
-        if none is clear as far as the corridor reads. The one held is kept while clear; otherwise
+        if none is clear as far as the offset features read. The one held is kept while clear; otherwise
         the nearest clear one, and of two as near, the one on the side whose outermost fitted
         offset the utility prefers."""
         if self.escapes.size == 0:
