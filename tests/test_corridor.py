@@ -1,5 +1,5 @@
-"""The offset corridor (terrapref.rules.offset), its fit (terrapref.rules.offset.fit) and the
-closed-form geometry on tiny scenarios."""
+"""The offset rule (terrapref.rules.offset): its offsets' features, ground map, fit and decision, on
+tiny scenarios with closed-form answers."""
 
 from __future__ import annotations
 

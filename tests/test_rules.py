@@ -63,23 +63,7 @@ class WrittenButNotRead(AssertionError):
     known bug below is expected to raise (any other failure of its checks still fails)."""
 
 
-NOT_READ_BACK = pytest.mark.xfail(
-    strict=True, raises=WrittenButNotRead,
-    reason="OffsetRule.header() writes the fit's 'loss' and 'samples' into its block, and OffsetRule.from_header() never reads "
-           "them (the rule read back has fit=None): a model file read and written again loses them, `describe` of a loaded "
-           "rule no longer says 'fitted to N frames', and a damaged 'loss' or 'samples' (a string) is accepted silently")
-STATIONS_CRASH = pytest.mark.xfail(
-    strict=True, raises=IndexError,
-    reason="an offset block whose geometry.stations_m is a one-character string (or a list of one number) escapes as an "
-           "IndexError from OffsetGeometry.__post_init__ (stations_m[1]) instead of a UserError naming rules[0].geometry: "
-           "OffsetGeometry.from_dict does not check that stations_m is a pair of numbers, and OffsetRule.from_header "
-           "catches only TypeError, ValueError and KeyError")
-
-KNOWN_BUGS: dict[tuple[str, str], pytest.MarkDecorator] = {
-    ("round_trip", "offset"): NOT_READ_BACK,
-    ("damaged_number", "offset"): NOT_READ_BACK,
-    ("damaged_nested_number", "offset"): STATIONS_CRASH,
-}
+KNOWN_BUGS: dict[tuple[str, str], pytest.MarkDecorator] = {}
 """Known bugs, by (check, rule type): the one case each is expected to fail (strictly: fixed, it must be unmarked)."""
 
 

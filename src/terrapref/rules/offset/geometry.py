@@ -76,6 +76,9 @@ class OffsetGeometry:
     map_sky_attitude: bool = True
 
     def __post_init__(self) -> None:
+        stations = self.stations_m
+        if not (isinstance(stations, tuple) and len(stations) == 2 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in stations)):
+            raise ValueError("the offset geometry's stations_m must be two numbers [m], the first and last station read")
         positive = (self.max_offset_m, self.offset_step_m, self.station_step_m, self.half_width_m, self.map_resolution_m,
                     self.map_half_size_m, self.sample_step_m, self.sample_range_m, self.intent_lookahead_m)
         if not all(math.isfinite(v) and v > 0 for v in positive) or not (self.span_m >= 0 and self.gap_m >= 0 and self.intent_delay_s >= 0):

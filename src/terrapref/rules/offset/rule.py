@@ -182,7 +182,7 @@ class OffsetRule(Rule):
             raise where.error("geometry", "missing: an offset rule needs its geometry")
         try:
             geometry = OffsetGeometry.from_dict(dict(raw))
-        except (TypeError, ValueError, KeyError) as exc:
+        except (TypeError, ValueError, KeyError, IndexError) as exc:
             raise where.error("geometry", f"invalid ({exc})") from None
         weights = vector(block, "weights", context.features.n_terrain + 3, where)
         near = number(block, "near_m", where, positive=True)
@@ -191,7 +191,13 @@ class OffsetRule(Rule):
             config = OffsetConfig(**settings, geometry=geometry)
         except ValueError as exc:
             raise where.error("", str(exc)) from None
-        return cls(config, OffsetUtility(weights, near, geometry))
+        fit = None
+        if "loss" in block or "samples" in block:  # how the fit went, as training wrote it
+            samples = block.get("samples")
+            if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
+                raise where.error("samples", "expected the number of frames fitted, an integer >= 1")
+            fit = OffsetFit(weights, near, number(block, "loss", where, low=0.0), {}, samples)
+        return cls(config, OffsetUtility(weights, near, geometry), fit)
 
     @classmethod
     def legacy_block(cls, meta: Mapping[str, Any], source: str) -> dict[str, Any] | None:
