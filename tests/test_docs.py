@@ -128,3 +128,71 @@ def test_the_index_lists_every_page() -> None:
     listed = {(index.parent / unquote(t.split("#", 1)[0])).resolve() for _, t in _links(index) if t.split("#", 1)[0]}
     missing = [_name(p) for p in sorted(DOCS.glob("*.md")) if p != index and p.resolve() not in listed]
     assert not missing, "pages docs/index.md does not list: " + ", ".join(missing)
+
+
+# docs/layout.md's tree of src/terrapref/: an entry is a line indented less than the description
+# column, naming one or more packages (``name/``) or modules (``name.py``), comma-separated, and
+# then, after a space, what they are; a line indented to the description column or beyond goes on
+# describing the entry above it. Two spaces of indent per level: ``  rules/`` is a part of
+# terrapref, ``    offset/`` a part of rules/.
+PACKAGE = ROOT / "src" / "terrapref"
+LAYOUT = DOCS / "layout.md"
+DESCRIPTION_COLUMN = 14
+ENTRY = re.compile(r"(?P<names>[A-Za-z_]\w*(?:/|\.py)(?:, [A-Za-z_]\w*(?:/|\.py))*)(?:\s|$)")
+
+
+def _layout_tree() -> list[tuple[int, str, int]]:
+    """(line number, path under src/terrapref/, depth) of every part docs/layout.md's tree names,
+    from the fenced block that opens with ``src/terrapref/``."""
+    lines = LAYOUT.read_text(encoding="utf-8").splitlines()
+    start = next(i for i, line in enumerate(lines) if line.strip() == "src/terrapref/" and i and FENCE.match(lines[i - 1]))
+    parents: list[str] = []
+    found = []
+    for number, line in enumerate(lines[start + 1:], start + 2):
+        if FENCE.match(line):
+            break
+        indent = len(line) - len(line.lstrip(" "))
+        if not line.strip() or indent >= DESCRIPTION_COLUMN:
+            continue
+        assert indent % 2 == 0 and indent >= 2, f"docs/layout.md:{number}: an entry is indented by a multiple of two spaces"
+        depth = indent // 2
+        match = ENTRY.match(line, indent)
+        assert match, f"docs/layout.md:{number}: expected names ending in / or .py: {line.strip()!r}"
+        assert depth - 1 <= len(parents), f"docs/layout.md:{number}: indented below no package"
+        del parents[depth - 1:]
+        names = match["names"].split(", ")
+        for name in names:
+            found.append((number, "".join(parents) + name, depth))
+        if len(names) == 1 and names[0].endswith("/"):
+            parents.append(names[0])
+    return found
+
+
+def _parts(folder: Path) -> set[str]:
+    """The packages (``name/``: folders with an ``__init__.py``) and modules (``name.py``) directly in
+    ``folder``, without ``__init__.py`` and ``__main__.py``."""
+    packages = {f"{p.name}/" for p in folder.iterdir() if p.is_dir() and (p / "__init__.py").is_file()}
+    modules = {p.name for p in folder.glob("*.py") if p.name not in ("__init__.py", "__main__.py")}
+    return packages | modules
+
+
+def test_the_layout_tree_names_every_top_level_package_and_module() -> None:
+    named = {path for _, path, depth in _layout_tree() if depth == 1}
+    missing = sorted(_parts(PACKAGE) - named)
+    assert not missing, "parts of src/terrapref/ that docs/layout.md's tree does not name: " + ", ".join(missing)
+
+
+def test_the_layout_tree_names_every_decision_rule_package() -> None:
+    named = {path for _, path, _ in _layout_tree()}
+    rules = {f"rules/{p.name}/" for p in (PACKAGE / "rules").iterdir() if p.is_dir() and (p / "__init__.py").is_file()}
+    assert rules, "the scan sees the rule packages"
+    missing = sorted(rules - named)
+    assert not missing, "rule packages that docs/layout.md's tree does not name: " + ", ".join(missing)
+
+
+def test_every_part_the_layout_tree_names_exists() -> None:
+    tree = _layout_tree()
+    assert len(tree) > 30, "the scan reads the tree"
+    gone = [f"docs/layout.md:{number}: {path}" for number, path, _ in tree
+            if not ((PACKAGE / path).is_dir() if path.endswith("/") else (PACKAGE / path).is_file())]
+    assert not gone, "docs/layout.md's tree names what src/terrapref/ does not hold:\n" + "\n".join(gone)
