@@ -22,6 +22,7 @@ from hypothesis import strategies as st
 from terrapref.camera import PinholeCamera
 from terrapref.features import attitude_compiled
 from terrapref.rules.offset import ground_map_compiled, offsets_compiled
+from terrapref.rules.offset.ground_map_compiled import MapLayers
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.offset.steering import pursuit_yaw_rates, steer
 from terrapref.rules.offset.reach_compiled import lethal_hits, swept_reach
@@ -396,8 +397,8 @@ def test_map_vote_gives_the_numpy_forms_map(tilted: bool):
             assert voted.any() and np.array_equal(cells[~voted], want_cells[~voted]), (seed, frame)
             centres = (np.arange(n) + 0.5) * res
             px, py = np.meshgrid(origin[0] + centres, origin[1] + centres)
-            read = ground_map_compiled.map_read(cells.copy(), evidence, lethal, np.array(shares), float(origin[0]), float(origin[1]), 1.0 / res,
-                                    px.ravel(), py.ravel(), k + 1)
+            layers = ground_map_compiled.MapLayers(cells.copy(), evidence, lethal, np.array(shares), float(origin[0]), float(origin[1]), 1.0 / res)
+            read = ground_map_compiled.map_read(layers, px.ravel(), py.ravel(), k + 1)
             assert np.array_equal(read.reshape(n, n), want_cells), (seed, frame)
             if rng.random() < 0.5:  # some frames' cells decided before the next votes, some not
                 ground_map_compiled.map_settle(cells, evidence, lethal, np.array(shares))
@@ -463,7 +464,7 @@ def test_map_read_beside_gives_the_numpy_forms_columns(seed: int, n_st: int, n_o
     lat = rng.uniform(-4.0, 4.0, (n_off, n_f))
     a, d, length = path.segments
     lazy, layers, cells = _undecided(rng, cells, k)
-    got = ground_map_compiled.map_read_beside(lazy, *layers, ox, oy, inv_res, path.s, a, d, length, s, lat, k + 1)
+    got = ground_map_compiled.map_read_beside(MapLayers(lazy, *layers, ox, oy, inv_res), path.s, a, d, length, s, lat, k + 1)
     assert _same(got, _map_read_beside_numpy(cells, ox, oy, inv_res, path, s, lat, k + 1))
     read = lazy != ground_map_compiled.UNSETTLED
     assert np.array_equal(lazy[read], cells[read])  # the cells it decided are kept as decided
@@ -492,7 +493,7 @@ def test_lethal_hits_gives_the_numpy_forms_lines(seed: int, n_off: int, n_across
     progress_m = float(rng.uniform(-1.0, path.length_m + 1.0))
     a, d, length = path.segments
     lazy, layers, cells = _undecided(rng, cells, k)
-    got = lethal_hits(lazy, *layers, ox, oy, inv_res, path.s, a, d, length, progress_m, stations, offsets, across, lethal, k + 1)
+    got = lethal_hits(MapLayers(lazy, *layers, ox, oy, inv_res), path.s, a, d, length, progress_m, stations, offsets, across, lethal, k + 1)
     assert _same(got, _lethal_hits_numpy(cells, ox, oy, inv_res, path, progress_m, stations, offsets, across, lethal, k + 1))
     read = lazy != ground_map_compiled.UNSETTLED
     assert np.array_equal(lazy[read], cells[read])
@@ -514,8 +515,8 @@ def test_swept_reach_reads_undecided_cells_as_decided(seed: int, n_off: int):
     x, y = path.point_at(progress_m)
     a, d, length = path.segments
     args = (float(x), float(y), float(path.heading_at(progress_m)), offsets, progress_m, 2.0, 0.1, 30, 2.5, path.s, a, d, length, clear)
-    got = swept_reach(*args, lazy, *layers, ox, oy, inv_res, lethal, k + 1)
-    want = swept_reach(*args, cells, *layers, ox, oy, inv_res, lethal, k + 1)  # no cell left to decide
+    got = swept_reach(*args, MapLayers(lazy, *layers, ox, oy, inv_res), lethal, k + 1)
+    want = swept_reach(*args, MapLayers(cells, *layers, ox, oy, inv_res), lethal, k + 1)  # no cell left to decide
     assert _same(got, want)
     read = lazy != ground_map_compiled.UNSETTLED
     assert np.array_equal(lazy[read], cells[read])

@@ -37,7 +37,7 @@ from terrapref.camera import PinholeCamera, PixelSet, SegmentationView
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.columns import TerrainColumns
 from terrapref.rules.offset.ground_map import GroundMap
-from terrapref.rules.offset.ground_map_compiled import UNSETTLED, map_decide
+from terrapref.rules.offset.ground_map_compiled import UNSETTLED, MapLayers, map_decide
 from terrapref.records import to_plain
 from terrapref.stops import BLIND, NO_FREE_WAY
 from terrapref.terrain import UNKNOWN
@@ -220,7 +220,7 @@ class StopRule:
         v = max(abs(float(v_mps)), 1e-3)
         first = int(np.argmin(np.abs(self.yaw_rates - w_rps)))
         return first_free_arc(float(pose[0]), float(pose[1]), float(pose[2]), self.yaw_rates / v, first, c.step_m, steps, self.across,
-                              *self.map.layers(), self.lethal, self.k + 1, np.float32(c.lethal_evidence), self.visible, *self._vis_origin,
+                              self.map.layers(), self.lethal, self.k + 1, np.float32(c.lethal_evidence), self.visible, *self._vis_origin,
                               self._vis_inv_res) >= 0
 
 
@@ -235,8 +235,7 @@ def _near_edge(camera: PinholeCamera, half_width_m: float) -> float:
 
 @njit(cache=True, nogil=True)
 def first_free_arc(x0: float, y0: float, yaw0: float, curvatures: np.ndarray, first: int, step_m: float, steps: int, across: np.ndarray,
-                   cells: np.ndarray, evidence: np.ndarray, map_lethal: np.ndarray, shares: np.ndarray, ox: float, oy: float,
-                   inv_res: float, lethal: np.ndarray, never: int, confirmed: np.float32, visible: np.ndarray, vx0: float, vy0: float,
+                   layers: MapLayers, lethal: np.ndarray, never: int, confirmed: np.float32, visible: np.ndarray, vx0: float, vy0: float,
                    vis_inv_res: float) -> int:
     """An arc (``curvatures`` (A,) [1/m], ``first`` tried first, then the others in order) along
     which the footprint (``across`` (F,) [m], left positive) stays on seen, non-lethal ground of
@@ -249,9 +248,10 @@ def first_free_arc(x0: float, y0: float, yaw0: float, curvatures: np.ndarray, fi
     whose 4-neighbours were seen reads as them (lethal if any is): the map's samples leave single
     cells unvoted between them, which are not unseen ground. A lethal cell none of whose
     4-neighbours is lethal does not block (a speckle: labels flipped in a few frames; the
-    footprint's points, 0.3 m apart, do not resolve a 0.1 m obstacle either). The map's cells are read as
-    :func:`terrapref.rules.offset.ground_map_compiled.map_decide` says (``cells`` to ``shares``).
+    footprint's points, 0.3 m apart, do not resolve a 0.1 m obstacle either). The map's cells
+    (``layers``) are read as :func:`terrapref.rules.offset.ground_map_compiled.map_decide` says.
     """
+    cells, evidence, map_lethal, shares, ox, oy, inv_res = layers
     n_rows, n_cols = cells.shape
     vis_x, vis_y = visible.shape
     c0, s0 = math.cos(yaw0), math.sin(yaw0)

@@ -139,20 +139,19 @@ class GroundMap:
         view.flags.writeable = False
         return view
 
-    def layers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, float, float]:
-        """What a compiled read of the map takes (kernels.map_decide): the cells' columns, some
-        still undecided, their evidence, the lethal columns and the shares that decide a column;
-        then where the map lies, its corner's x and y [m] and its cells per metre. Read once the map
-        has been placed (its first update: ``origin`` is not None)."""
+    def layers(self) -> kernels.MapLayers:
+        """The map as a compiled read takes it (its cells, some still undecided, their evidence,
+        the lethal columns, the shares that decide a column, its corner and cells per metre).
+        Read once the map has been placed (its first update: ``origin`` is not None)."""
         ox, oy = self._origin_xy
-        return self._cells, self.evidence, self.lethal, self._shares, ox, oy, 1.0 / self.config.map_resolution_m
+        return kernels.MapLayers(self._cells, self.evidence, self.lethal, self._shares, ox, oy, 1.0 / self.config.map_resolution_m)
 
     def beside(self, path: ReferencePath, s: np.ndarray, lat: np.ndarray) -> np.ndarray:
         """Terrain column (O, S, F) at the points ``lat`` (O, F) [m] left of the path at arc lengths ``s`` (S,)."""
         if self.origin is None:
             return np.full((lat.shape[0], len(s), lat.shape[1]), self.k + 1, dtype=np.uint8)
         a, d, length = path.segments
-        return kernels.map_read_beside(*self.layers(), path.s, a, d, length, np.asarray(s, dtype=np.float64),
+        return kernels.map_read_beside(self.layers(), path.s, a, d, length, np.asarray(s, dtype=np.float64),
                                        np.ascontiguousarray(lat, dtype=np.float64), self.k + 1)
 
     def lookup(self, points: np.ndarray) -> np.ndarray:
@@ -161,7 +160,7 @@ class GroundMap:
             return np.full(points.shape[:-1], self.k + 1, dtype=np.uint8)
         px = np.ascontiguousarray(points[..., 0], dtype=np.float64).reshape(-1)
         py = np.ascontiguousarray(points[..., 1], dtype=np.float64).reshape(-1)
-        out = kernels.map_read(*self.layers(), px, py, self.k + 1)
+        out = kernels.map_read(self.layers(), px, py, self.k + 1)
         return out.reshape(points.shape[:-1])
 
 

@@ -13,11 +13,35 @@ from __future__ import annotations
 
 import math
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
 
 UNSETTLED = 255  # a ground-map cell voted on since its column was last decided (columns run 0..K + 1)
+
+
+class MapLayers(NamedTuple):
+    """The ground map as a compiled read takes it (terrapref.rules.offset.ground_map.GroundMap.layers).
+
+    Attributes:
+        cells: each cell's column (rows y, columns x) (n, n) uint8, :data:`UNSETTLED` where voted
+            on since it was last decided (:func:`map_decide` decides it when it is read).
+        evidence: each cell's evidence per column (n, n, K + 1) float32.
+        lethal: which columns are lethal (K + 2,) bool.
+        shares: the lethal share, the terrain share and the least evidence that decide a column (3,) float32.
+        ox, oy: the map's corner in the world [m].
+        inv_res: cells per metre.
+    """
+
+    cells: np.ndarray
+    evidence: np.ndarray
+    lethal: np.ndarray
+    shares: np.ndarray
+    ox: float
+    oy: float
+    inv_res: float
 
 
 @njit(cache=True, nogil=True)
@@ -142,14 +166,14 @@ def map_settle(cells: np.ndarray, evidence: np.ndarray, lethal: np.ndarray, shar
                 cells[j, i] = map_decide(evidence, lethal, shares[0], shares[1], shares[2], j, i)
 
 @njit(cache=True, nogil=True)
-def map_read(cells: np.ndarray, evidence: np.ndarray, lethal: np.ndarray, shares: np.ndarray, ox: float, oy: float, inv_res: float,
-             px: np.ndarray, py: np.ndarray, never: int) -> np.ndarray:
+def map_read(layers: MapLayers, px: np.ndarray, py: np.ndarray, never: int) -> np.ndarray:
     """The ground map's column at each point (flat arrays ``px``, ``py``); ``never`` outside it.
 
     The NumPy form: ``cells[floor((py - oy) * inv_res), floor((px - ox) * inv_res)]`` where
     inside, each cell decided first if it is :data:`UNSETTLED` (:func:`map_decide`, with
     ``evidence``, ``lethal`` and the three ``shares``).
     """
+    cells, evidence, lethal, shares, ox, oy, inv_res = layers
     n_rows, n_cols = cells.shape
     out = np.empty(px.shape[0], np.uint8)
     for p in range(px.shape[0]):
@@ -178,8 +202,7 @@ def path_frame(path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_
     return (path_a[i, 0] + f * path_d[i, 0], path_a[i, 1] + f * path_d[i, 1], path_d[i, 0] / path_len[i], path_d[i, 1] / path_len[i])
 
 @njit(cache=True, nogil=True)
-def map_read_beside(cells: np.ndarray, evidence: np.ndarray, lethal: np.ndarray, shares: np.ndarray, ox: float, oy: float, inv_res: float,
-                    path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray, s: np.ndarray, lat: np.ndarray,
+def map_read_beside(layers: MapLayers, path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray, s: np.ndarray, lat: np.ndarray,
                     never: int) -> np.ndarray:
     """The ground map's column (O, S, F) at the points ``lat[o, f]`` [m] left of the path at arc
     lengths ``s`` (S,), ``never`` outside the map.
@@ -188,6 +211,7 @@ def map_read_beside(cells: np.ndarray, evidence: np.ndarray, lethal: np.ndarray,
     normal[None, :, None, :]``, ``centre = path.point_at(s)``, ``normal`` the path's direction
     there turned left.
     """
+    cells, evidence, lethal, shares, ox, oy, inv_res = layers
     n_rows, n_cols = cells.shape
     n_off, n_st, n_f = lat.shape[0], s.shape[0], lat.shape[1]
     out = np.empty((n_off, n_st, n_f), np.uint8)

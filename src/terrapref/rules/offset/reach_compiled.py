@@ -10,25 +10,25 @@ import math
 import numpy as np
 from numba import njit
 
-from terrapref.rules.offset.ground_map_compiled import UNSETTLED, map_decide, path_frame
+from terrapref.rules.offset.ground_map_compiled import UNSETTLED, MapLayers, map_decide, path_frame
 
 
 @njit(cache=True, nogil=True)
 def swept_reach(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progress_m: float, v: float, dt: float, steps: int,
                 lookahead_m: float, path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray,
-                clear: np.ndarray, cells: np.ndarray, evidence: np.ndarray, map_lethal: np.ndarray, shares: np.ndarray, ox: float, oy: float,
-                inv_res: float, lethal: np.ndarray, never: int) -> np.ndarray:
+                clear: np.ndarray, layers: MapLayers, lethal: np.ndarray, never: int) -> np.ndarray:
     """Per offset (O,): the step at which pure pursuit toward the path shifted by it, driven for
     ``steps`` steps of ``dt`` from the pose, first brings a point across the footprint (``clear``,
     every other step) onto a lethal column of the map (``lethal`` by column, ``never`` for cells
-    outside the map); ``steps`` where it never does. The map's cells are read as
-    :func:`terrapref.rules.offset.ground_map_compiled.map_decide` says (``cells`` to ``shares``).
+    outside the map); ``steps`` where it never does. The map's cells (``layers``) are read as
+    :func:`terrapref.rules.offset.ground_map_compiled.map_decide` says.
 
     The NumPy form: pure pursuit as :func:`terrapref.rules.offset.steering.steer` gives it (clipped
     to +-1 rad/s, but with the C library's ``hypot``, as ``np.hypot``, where steer has Python's)
     toward every offset at progress ``progress_m + step * dt * v``, then ``yaw += w dt``, ``x += v
     cos(yaw) dt``, ``y += v sin(yaw) dt``.
     """
+    cells, evidence, map_lethal, shares, ox, oy, inv_res = layers
     n_rows, n_cols = cells.shape
     out = np.full(offsets.shape[0], steps, np.int64)
     for o in range(offsets.shape[0]):
@@ -64,16 +64,16 @@ def swept_reach(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progress
 
 
 @njit(cache=True, nogil=True)
-def lethal_hits(cells: np.ndarray, evidence: np.ndarray, map_lethal: np.ndarray, shares: np.ndarray, ox: float, oy: float, inv_res: float,
-                path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray, progress_m: float, stations: np.ndarray,
+def lethal_hits(layers: MapLayers, path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray, progress_m: float, stations: np.ndarray,
                 offsets: np.ndarray, across: np.ndarray, lethal: np.ndarray, never: int) -> np.ndarray:
     """(O, S): whether any point ``offsets[o] + across[a]`` [m] left of the path, at station
     ``stations[s]`` from ``progress_m`` (capped at the path's end), lies on a lethal column of
     the map (``lethal`` by column, ``never`` outside it).
 
-    The NumPy form: ``lethal[map_read_beside(cells, ..., minimum(progress_m + stations, length),
+    The NumPy form: ``lethal[map_read_beside(layers, ..., minimum(progress_m + stations, length),
     offsets[:, None] + across[None, :])].any(axis=2)``.
     """
+    cells, evidence, map_lethal, shares, ox, oy, inv_res = layers
     n_rows, n_cols = cells.shape
     length = path_s[-1]
     out = np.zeros((offsets.shape[0], stations.shape[0]), np.bool_)

@@ -395,7 +395,7 @@ class OffsetSteering(RuleRunner):
         if gmap.origin is None:
             return np.broadcast_to(self.lethal[self.k + 1], (len(offsets), len(stations))).copy()
         a, d, length = path.segments
-        return lethal_hits(*gmap.layers(), path.s, a, d, length, float(progress_m), stations, np.asarray(offsets, dtype=np.float64),
+        return lethal_hits(gmap.layers(), path.s, a, d, length, float(progress_m), stations, np.asarray(offsets, dtype=np.float64),
                            across, self.lethal, self.k + 1)
 
     def _swept(self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_m: float,
@@ -407,6 +407,6 @@ class OffsetSteering(RuleRunner):
         c, gmap = self.config, self.map
         a, d, length = path.segments
         return swept_reach(float(pose[0]), float(pose[1]), float(pose[2]), offsets, float(progress_m), self.v_mps, c.dt_s,
-                           self._steps, c.pursuit_lookahead_m, path.s, a, d, length, across, *gmap.layers(),
+                           self._steps, c.pursuit_lookahead_m, path.s, a, d, length, across, gmap.layers(),
                            self.lethal, self.k + 1)
 
