@@ -29,14 +29,13 @@ from pathlib import Path
 import numpy as np
 from reference import reference_ms  # benchmarks/reference.py (the script's folder is on sys.path)
 
-from terrapref.camera import CameraConfig
+from terrapref.camera import CameraConfig, PinholeCamera
 from terrapref.demos.expert import ExpertDriver
-from terrapref.demos.recording import RecordingWriter, read_recording
 from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
+from terrapref.demos.recording import RecordingWriter, read_recording
 from terrapref.demos.session import RunSettings, record_run
 from terrapref.features import FeatureConfig, PreferenceSetConfig, UtilityFeaturizer
 from terrapref.rules import OffsetConfig, SecondStageConfig
-from terrapref.camera import PinholeCamera
 from terrapref.scenario import resolve_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim import SimConfig, Simulation
@@ -89,8 +88,8 @@ def bench_closed_loop(model_path: Path) -> tuple[float, int]:
 def bench_decision(rec_dir: Path, repeats: int, features: FeatureConfig | None = None, members: int = 1, rules: tuple = ()) -> np.ndarray:
     from terrapref.dataset import build_dataset
     from terrapref.learning.model_file import load_model
-    from terrapref.learning.pipeline import RunOptions, train_and_save
     from terrapref.learning.network import ClassifierConfig
+    from terrapref.learning.pipeline import RunOptions, train_and_save
     from terrapref.learning.train import TrainConfig
     from terrapref.planner import Planner
 

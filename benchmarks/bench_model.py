@@ -13,8 +13,8 @@ import argparse
 import time
 
 import numpy as np
-
 from reference import reference_ms  # benchmarks/reference.py (the script's folder is on sys.path)
+
 from terrapref.learning.model_file import load_model
 from terrapref.planner import Planner, PlannerDriver
 from terrapref.scenario import resolve_scenario

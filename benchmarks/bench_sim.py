@@ -24,7 +24,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-
 from reference import reference_ms  # benchmarks/reference.py (the script's folder is on sys.path)
 
 from terrapref.camera import PinholeCamera, SegmentationRenderer

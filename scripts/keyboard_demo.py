@@ -41,8 +41,8 @@ from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, run
 from terrapref.evaluation.stats import rate_text, wilson  # noqa: E402
 from terrapref.grid import Engine, run_grid  # noqa: E402
 from terrapref.learning.pipeline import RunOptions, train_and_save  # noqa: E402
-from terrapref.recipes import DEFAULT_RECIPE, RecipeSetup, record_demonstrations, recipe_named  # noqa: E402
 from terrapref.plots import RateRow, save_intervals  # noqa: E402
+from terrapref.recipes import DEFAULT_RECIPE, RecipeSetup, recipe_named, record_demonstrations  # noqa: E402
 from terrapref.scenario import resolve_scenario  # noqa: E402
 from terrapref.terrain import PreferenceProfile  # noqa: E402
 

@@ -17,7 +17,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from terrapref.scenario.builder import CourseBuilder, trail
 
@@ -87,7 +86,7 @@ def test_course() -> Course:
     c.zone("6", "mud, water inside", 168, (13.0, 14.0), "best")
     # 7: rock (right, an ellipse-like polygon) against non_traversable (left).
     ell = [(4.0 * math.cos(t), -2.6 - 2.6 * math.sin(t)) for t in np.linspace(0, 2 * math.pi, 14, endpoint=False)]
-    c.polygon("rock", 212, [(round(a, 3), round(min(l, 0.0), 3)) for a, l in ell])
+    c.polygon("rock", 212, [(round(a, 3), round(min(lat, 0.0), 3)) for a, lat in ell])
     c.rect("non_traversable", 212, 2.6, 8.0, 5.2, 0.0)
     c.zone("7", "rock + non_traversable", 212, (12.0, 14.0), "best")
     return c

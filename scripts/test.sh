@@ -1,7 +1,11 @@
 #!/usr/bin/env bash
-# Set up the environment if needed, then run the default (fast) test suite, one worker per core
-# (pytest-xdist; pass -n 0 to run in one process, e.g. under a debugger).
+# Set up the environment if needed, check the code with the linter and the formatter (ruff,
+# pinned), then run the default (fast) test suite, one worker per core (pytest-xdist; pass -n 0
+# to run in one process, e.g. under a debugger). `ruff format src tests scripts benchmarks
+# examples` formats what the check refuses.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
+.venv/bin/ruff check --quiet src tests scripts benchmarks examples
+.venv/bin/ruff format --check --quiet src tests scripts benchmarks examples
 exec .venv/bin/python -m pytest -q -n auto --dist worksteal "$@"

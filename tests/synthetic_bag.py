@@ -22,8 +22,25 @@ import numpy as np
 from terrapref.camera import CameraConfig
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.demos.session import Disturber
-from terrapref.interop.ros_messages import (OPTICAL_FRAME, Message, Topics, add_topics, camera_info, camera_mount, compressed_image, epoch_ns, header,
-                                            odometry, path_message, png, pose, tf_message, twist, typestore, yaw_quaternion)
+from terrapref.interop.ros_messages import (
+    OPTICAL_FRAME,
+    Message,
+    Topics,
+    add_topics,
+    camera_info,
+    camera_mount,
+    compressed_image,
+    epoch_ns,
+    header,
+    odometry,
+    path_message,
+    png,
+    pose,
+    tf_message,
+    twist,
+    typestore,
+    yaw_quaternion,
+)
 from terrapref.recipes import DEFAULT_RECIPE, RECIPES
 from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.sim import Frame, Simulation
@@ -124,7 +141,8 @@ def write_synthetic_bag(out: str | Path, storage: Storage = "mcap", scenario: st
 def _open_writer(out: Path, storage: Storage) -> Any:
     """A rosbags writer (not yet open) of a ROS 1 bag, or a ROS 2 bag in MCAP or sqlite3."""
     from rosbags.rosbag1 import Writer as Writer1
-    from rosbags.rosbag2 import StoragePlugin, Writer as Writer2
+    from rosbags.rosbag2 import StoragePlugin
+    from rosbags.rosbag2 import Writer as Writer2
 
     if storage == "rosbag1":
         return Writer1(out)

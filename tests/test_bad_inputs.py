@@ -105,7 +105,6 @@ def test_a_broken_recording_is_refused_by_featurize(tmp_path: Path, capsys, reco
 
 def _dataset_with(tmp_path: Path, **change) -> Path:
     from helpers import model_meta
-
     from terrapref.dataset import FORMAT
     from terrapref.tensorfile import write_tensor_file
 
@@ -134,10 +133,9 @@ def test_a_broken_or_degenerate_dataset_is_refused_before_training(tmp_path: Pat
 
 def test_a_model_with_nan_weights_is_refused(tmp_path: Path, capsys):
     from helpers import model_meta
-
     from terrapref.learning import ClassifierConfig
-    from terrapref.learning.model_file import CLASSIFIER, FORMAT
     from terrapref.learning.mlp import init_weights
+    from terrapref.learning.model_file import CLASSIFIER, FORMAT
     from terrapref.tensorfile import write_tensor_file as _write
 
     weights = init_weights(ClassifierConfig(), np.random.default_rng(0))

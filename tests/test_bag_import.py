@@ -9,18 +9,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from synthetic_bag import LENIENT_LABELS, TOPICS, UNLISTED_ID, robot_yaml, write_robot, write_synthetic_bag
 from terrapref.cli import main
 from terrapref.dataset import featurize_recording
-from terrapref.report.inspect import summarise
 from terrapref.demos.recording import read_recording
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
 from terrapref.interop.bag_import import import_bag, smooth_path
 from terrapref.interop.robot import load_robot
+from terrapref.report.inspect import summarise
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation
-
-from synthetic_bag import LENIENT_LABELS, TOPICS, UNLISTED_ID, robot_yaml, write_robot, write_synthetic_bag
 
 SECONDS = 12.0
 FORMATS = [("mcap", "mono8", "drive.mcapbag"), ("rosbag1", "mono16", "drive.bag"), ("sqlite3", "png", "drive.db3bag")]

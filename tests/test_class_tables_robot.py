@@ -9,13 +9,12 @@ import numpy as np
 import pytest
 import yaml
 
+from synthetic_bag import RELLIS_OF_EXAMPLE, TOPICS, write_synthetic_bag
 from terrapref.cli import main
 from terrapref.demos.recording import read_recording
 from terrapref.learning.model_file import load_model
 from terrapref.scenario.teaching import Situation, build_course
 from terrapref.terrain import ClassTable, load_classes
-
-from synthetic_bag import RELLIS_OF_EXAMPLE, TOPICS, write_synthetic_bag
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples" / "classes"
 TABLE = EXAMPLES / "rellis3d.yaml"

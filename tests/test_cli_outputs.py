@@ -6,9 +6,8 @@ import os
 from pathlib import Path
 
 import pytest
-from helpers import linear_model
-from helpers import dataset_file
 
+from helpers import dataset_file, linear_model
 from terrapref.cli import main
 
 

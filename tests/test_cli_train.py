@@ -9,12 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers import dataset_file, linear_model, model_meta, one_line_error
 from terrapref.cli import main
 from terrapref.dataset import FORMAT as DATASET_FORMAT
 from terrapref.dataset import Dataset, save_dataset
 from terrapref.learning.model_file import load_model
-
-from helpers import dataset_file, linear_model, model_meta, one_line_error
 
 PNG = b"\x89PNG\r\n\x1a\n"
 

@@ -9,31 +9,30 @@ import os
 import numpy as np
 import pytest
 
+from cpu_settings import SETTINGS, CpuCheck
+from helpers import model_meta, skip_path_weights
 from terrapref.camera import PinholeCamera, SegmentationRenderer, SegmentationView
-from terrapref.dataset import Dataset, load_dataset, save_dataset
 from terrapref.dataset import FORMAT as DATASET_FORMAT
+from terrapref.dataset import Dataset, load_dataset, save_dataset
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
-from terrapref.rules.columns import TerrainColumns
-from terrapref.rules.offset.ground_map import GroundMap
-from terrapref.rules.offset.geometry import OffsetGeometry
-from terrapref.rules.offset.features import OffsetFeatures, gated
-from terrapref.rules.offset.steering import intent_offsets, steer
-from terrapref.rules.offset.fit import OffsetUtility, fit_offset_utility, fit_softmax, soft_labels
 from terrapref.learning.model_file import load_model, save_model
-from terrapref.planner.registry import load_policy
 from terrapref.learning.network import ClassifierConfig
 from terrapref.planner import Planner
+from terrapref.planner.registry import load_policy
+from terrapref.rules.columns import TerrainColumns
+from terrapref.rules.offset.features import OffsetFeatures, gated
+from terrapref.rules.offset.fit import OffsetUtility, fit_offset_utility, fit_softmax, soft_labels
+from terrapref.rules.offset.geometry import OffsetGeometry
+from terrapref.rules.offset.ground_map import GroundMap
 from terrapref.rules.offset.rule import OffsetConfig, OffsetSteering
+from terrapref.rules.offset.steering import intent_offsets, steer
 from terrapref.scenario import parse_scenario
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import default_classes
 from terrapref.vehicle import Command, integrate_unicycle
 
-from helpers import model_meta, skip_path_weights
-
 CONTROL = FeatureConfig().preference.control  # the default control set: 1 m/s
-from cpu_settings import SETTINGS, CpuCheck
 
 K = len(default_classes().feature_names)  # columns: non_traversable, water, rock, mud
 # The synthetic driver's own costs relative to its detour price (per metre 1, 1.5, 2.25 by rank

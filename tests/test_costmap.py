@@ -4,19 +4,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_corridor import DRIVER_LIKE, K, _corridor_meta, _terrain, _scenario, _seen_from
 
 from helpers import skip_path_weights
 from terrapref.camera import PinholeCamera
-from terrapref.interop.runtime import PlannerRuntime
 from terrapref.features import FeatureConfig
-from terrapref.rules.offset.geometry import OffsetGeometry
-from terrapref.rules.offset.fit import OffsetUtility
+from terrapref.interop.runtime import PlannerRuntime
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.rules.costmap import LETHAL_COST, UNKNOWN_COST, class_costs
+from terrapref.rules.offset.fit import OffsetUtility
+from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.offset.rule import OffsetSteering
 from terrapref.terrain import default_classes
+from test_corridor import DRIVER_LIKE, _corridor_meta, _scenario, _seen_from, _terrain
 
 CONTROL = FeatureConfig().preference.control  # the default control set: 1 m/s
 
@@ -113,7 +113,6 @@ def _costmaps_in(mcap) -> tuple[dict[str, int], np.ndarray]:
 
 def test_an_exported_recording_carries_the_costmap_a_model_sees_in_it(tmp_path, capsys, fig7_recording):
     from helpers import model_meta, one_line_error
-
     from terrapref.cli import main
 
     config = ClassifierConfig(hidden=8, skip=True)

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from terrapref.demos.expert import ExpertDriver
-from terrapref.demos.recording import FRAMES, RecordingWriter, read_recording
 from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
+from terrapref.demos.recording import FRAMES, RecordingWriter, read_recording
 from terrapref.demos.session import DisturbanceConfig, Disturber, RunSettings, record_run
 from terrapref.features import PreferenceSetConfig
 from terrapref.scenario import resolve_scenario

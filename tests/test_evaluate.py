@@ -10,13 +10,12 @@ from types import SimpleNamespace
 
 import pytest
 
+from helpers import linear_model, one_line_error
 from terrapref.cli import main
 from terrapref.evaluation.evaluate import Evaluation, evaluate_model, file_stem
 from terrapref.grid import Engine
 from terrapref.scenario import resolve_scenario
 from terrapref.terrain import PreferenceProfile, default_classes
-
-from helpers import linear_model, one_line_error
 
 PNG = b"\x89PNG\r\n\x1a\n"
 RUN_KEYS = {"completed", "collisions", "duration_s", "rms_cross_track_m", "max_cross_track_m", "distance_m", "zones"}

@@ -15,13 +15,11 @@ import numpy as np
 import pytest
 import torch
 
+from cpu_settings import SETTINGS, CpuCheck
 from terrapref.learning import exact
 from terrapref.learning.mlp import Adam, TrainableClassifier, cross_entropy, init_weights, round_inputs
 from terrapref.learning.network import ClassifierConfig, numpy_forward
-
-from cpu_settings import SETTINGS, CpuCheck
 from torch_net import UtilityClassifier
-
 
 # --- elementary functions ------------------------------------------------------------------------
 

@@ -17,11 +17,10 @@ import numpy as np
 import pytest
 
 import terrapref
+from synthetic_bag import robot_yaml, write_robot
 from terrapref.extras import EXTRAS, MissingExtra, check, needs
 from terrapref.learning.model_file import FORMAT
 from terrapref.tensorfile import write_tensor_file
-
-from synthetic_bag import robot_yaml, write_robot
 
 ROOT = Path(__file__).resolve().parents[1]
 

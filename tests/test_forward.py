@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cpu_settings import CpuCheck
 from terrapref.dataset import build_dataset
 from terrapref.learning.forward import PackedNetwork, probabilities
 from terrapref.learning.mlp import init_weights
@@ -25,8 +26,6 @@ from terrapref.planner import Planner, PlannerDriver
 from terrapref.recipes import PAPER, TEACH, RecipeSetup, demonstrate
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation, run_episode
-
-from cpu_settings import CpuCheck
 
 DATA = Path(__file__).parent / "data"
 

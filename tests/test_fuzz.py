@@ -16,11 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from helpers import model_meta
-from synthetic_bag import robot_yaml, write_robot
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from helpers import model_meta
+from synthetic_bag import robot_yaml, write_robot
 from terrapref.camera.files import load_camera
 from terrapref.dataset import FORMAT as DATASET_FORMAT
 from terrapref.dataset import featurize_recording, load_dataset

@@ -7,11 +7,12 @@ import json
 from pathlib import Path
 
 import pytest
-from helpers import linear_model
 
+from helpers import linear_model
 from terrapref.cli import main
 from terrapref.errors import UserError
 from terrapref.grid import Engine, GridError, run_grid
+
 
 def square(x: int) -> int:
     return x * x

@@ -5,10 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from helpers import linear_model
-from helpers import dataset_file
-from helpers import model_meta, skip_path_weights
 
+from helpers import dataset_file, linear_model, model_meta, skip_path_weights
 from terrapref import __version__
 from terrapref.cli import main
 from terrapref.learning.model_file import save_model

@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import onnxruntime as ort
 import pytest
-from helpers import linear_model, model_meta
 
+from helpers import linear_model, model_meta
 from terrapref.camera import CameraConfig
 from terrapref.cli import main
 from terrapref.errors import UserError

@@ -13,7 +13,6 @@ import time
 import numpy as np
 import pytest
 from PIL import Image
-from test_corridor import DRIVER_LIKE, _corridor_meta
 
 from helpers import skip_path_weights
 from terrapref.cli import main
@@ -22,6 +21,7 @@ from terrapref.interop.ros_messages import typestore
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.rules.costmap import LETHAL_COST
+from test_corridor import DRIVER_LIKE, _corridor_meta
 
 websockets = pytest.importorskip("websockets.sync.client", reason="the WebSocket client of the tests (websockets) is not installed")
 WATCHED = ("/terrapref/labels", "/terrapref/costmap", "/terrapref/costmap_grid", "/terrapref/trajectories", "/tf_static", "/terrapref/odom")

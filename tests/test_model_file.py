@@ -15,6 +15,7 @@ import pytest
 import torch
 from safetensors.numpy import save_file
 
+from helpers import assert_weights_equal, model_meta, random_dataset, random_weights, sparse_terrain_dataset
 from terrapref.camera import CameraConfig
 from terrapref.dataset import Dataset, load_dataset, save_dataset
 from terrapref.errors import UserError
@@ -25,9 +26,6 @@ from terrapref.learning.network import ClassifierConfig
 from terrapref.learning.train import EpochMetrics, TrainConfig
 from terrapref.tensorfile import write_tensor_file
 from terrapref.terrain import PreferenceProfile, default_classes
-
-from helpers import assert_weights_equal, sparse_terrain_dataset, model_meta, random_dataset, random_weights
-
 
 # --- model files -------------------------------------------------------------------------------------
 

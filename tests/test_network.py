@@ -9,11 +9,9 @@ import numpy as np
 import pytest
 import torch
 
-from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
-
 from helpers import K, M, assert_weights_equal
+from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
 from torch_net import UtilityClassifier
-
 
 # --- the NumPy forward pass is the PyTorch network ------------------------------------------------
 

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from helpers import linear_model, one_line_error
 
+from helpers import linear_model, one_line_error
 from terrapref.cli import main
 
 
@@ -125,10 +125,9 @@ def test_no_ros_master_is_said_within_seconds_not_waited_for():
 def test_every_size_a_model_file_gives_is_bounded(tmp_path: Path, capsys, block, key, value, words):
     """Sizes in a model's header once allocated gigabytes (or failed in a worker) before any check."""
     from helpers import skip_path_weights
-    from test_corridor import DRIVER_LIKE, _corridor_meta
-
     from terrapref.learning.model_file import _write, read_model_file, save_model
     from terrapref.learning.network import ClassifierConfig
+    from test_corridor import DRIVER_LIKE, _corridor_meta
 
     config = ClassifierConfig(hidden=8, skip=True)
     good = save_model(tmp_path / "good.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))

@@ -7,8 +7,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from helpers import one_line_error
 
+from helpers import one_line_error
 from terrapref.cli import main
 from terrapref.demos.recording import read_recording
 
@@ -94,8 +94,8 @@ def test_a_learning_rate_that_is_not_finite_is_refused(tmp_path: Path, capsys, v
 
 def test_weights_that_are_not_finite_are_never_written(tmp_path: Path):
     import numpy as np
-    from helpers import model_meta, skip_path_weights
 
+    from helpers import model_meta, skip_path_weights
     from terrapref.errors import UserError
     from terrapref.learning.model_file import save_model
     from terrapref.learning.network import ClassifierConfig

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_corridor import DRIVER_LIKE, _corridor_meta
 
 from helpers import skip_path_weights
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer
@@ -17,6 +16,7 @@ from terrapref.learning.model_file import load_model, save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.scenario import resolve_scenario
 from terrapref.world import rasterise
+from test_corridor import DRIVER_LIKE, _corridor_meta
 
 TS = typestore()
 POSES = [(20.0 + 0.1 * i, 15.0, 0.0) for i in range(6)]  # 0.1 m a frame along fig7's path, frames 0.1 s apart

@@ -22,10 +22,10 @@ from hypothesis import strategies as st
 from terrapref.camera import PinholeCamera
 from terrapref.features import attitude_compiled
 from terrapref.rules.offset import ground_map_compiled, offsets_compiled
-from terrapref.rules.offset.ground_map_compiled import MapLayers
 from terrapref.rules.offset.geometry import OffsetGeometry
-from terrapref.rules.offset.steering import pursuit_yaw_rates, steer
+from terrapref.rules.offset.ground_map_compiled import MapLayers
 from terrapref.rules.offset.reach_compiled import lethal_hits, swept_reach
+from terrapref.rules.offset.steering import pursuit_yaw_rates, steer
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import pure_pursuit_yaw_rate

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from types import SimpleNamespace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -19,8 +19,8 @@ from terrapref.perception import (
     FrameTiming,
     LabelErrors,
     PerceivedDriver,
-    PerceptionModel,
     Perceiver,
+    PerceptionModel,
     PoseErrors,
     load_perception,
 )
@@ -545,10 +545,10 @@ def test_select_and_reproduce_refuse_a_bad_perception_before_any_work(tmp_path, 
 def test_reproduce_reports_each_recipe_under_each_perception_model(tmp_path):
     """REPORT.md holds a row per recipe and a column per perception model, each cell from runs
     driven under that model (the field cell is not the clean one)."""
+    import json
+
     from terrapref.recipes import TEACH
     from terrapref.report.reproduce import Reproduction, reproduce
-
-    import json
 
     setup = Reproduction(recipes=(TEACH,), seeds=1, perceptions=(load_perception("clean"), load_perception("field")))
     report_path = reproduce(tmp_path / "rep", setup, log=lambda _: None)

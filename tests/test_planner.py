@@ -16,6 +16,7 @@ import pytest
 import torch
 
 import terrapref.planner.planner as planner_module
+from helpers import LINEAR_W, linear_model, model_meta, train_config
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer, SegmentationView
 from terrapref.dataset import build_dataset
 from terrapref.demos.recording import read_recording
@@ -30,9 +31,8 @@ from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim import Frame, Simulation, run_episode
 from terrapref.vehicle import Command, Pose
 from terrapref.world import WorldMap
-
-from helpers import LINEAR_W, linear_model, model_meta, train_config
 from torch_net import UtilityClassifier
+
 
 # Columns of U: non_traversable, water, rock, mud, distance. Avoid terrain, follow the path.
 def _linear_model(path: Path, camera: CameraConfig | None = None) -> LoadedModel:

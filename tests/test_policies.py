@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 import torch
 
+from helpers import model_meta
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer, SegmentationView
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
 from terrapref.learning.linear import LinearUtility, fit_linear_utility
 from terrapref.learning.model_file import FORMAT, load_model, save_model
 from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
-from terrapref.planner.registry import load_policy
 from terrapref.planner import Planner
 from terrapref.planner.policy import (
     HAND_DISTANCE_WEIGHT,
@@ -30,13 +30,12 @@ from terrapref.planner.policy import (
     hand_costs,
     save_linear,
 )
+from terrapref.planner.registry import load_policy
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation
 from terrapref.tensorfile import write_tensor_file
 from terrapref.terrain import default_classes
 from terrapref.vehicle import Pose
-
-from helpers import model_meta
 from torch_net import UtilityClassifier
 
 M, K = 21, 5  # trajectories; utility columns (non_traversable, water, rock, mud, distance)

@@ -9,6 +9,7 @@ from dataclasses import fields, replace
 import numpy as np
 import pytest
 
+from helpers import model_meta, train_config
 from terrapref.camera import CameraConfig
 from terrapref.dataset import FORMAT as DATASET_FORMAT
 from terrapref.dataset import Dataset, build_dataset, check_learnable, merge_datasets, save_dataset, training_data
@@ -16,15 +17,13 @@ from terrapref.demos.expert import STYLES, ExpertConfig, ExpertDriver
 from terrapref.demos.session import DisturbanceConfig
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
+from terrapref.learning.train import TrainConfig
 from terrapref.recipes import DEFAULT_RECIPE, RECIPES, Recipe, recipe_named, rules_with
 from terrapref.rules import OffsetConfig, SecondStageConfig
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.second.lookahead import LookaheadConfig
-from terrapref.learning.train import TrainConfig
 from terrapref.scenario import parse_scenario
 from terrapref.terrain import default_classes
-
-from helpers import model_meta, train_config
 
 # --- the named recipes -------------------------------------------------------------------------------
 

@@ -16,7 +16,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from terrapref.demos.recording import FRAMES, META, Recording, RecordingWriter, read_recording
 from terrapref.demos.meta import (
     CorrectionRoundInfo,
     ExpertInfo,
@@ -27,6 +26,7 @@ from terrapref.demos.meta import (
     RideAlongInfo,
     driver_from_dict,
 )
+from terrapref.demos.recording import FRAMES, META, Recording, RecordingWriter, read_recording
 from terrapref.errors import UserError
 from terrapref.features import PreferenceSetConfig
 from terrapref.scenario import Scenario, resolve_scenario
@@ -328,9 +328,8 @@ def test_force_keeps_the_old_recording_until_the_new_one_is_complete(tmp_path: P
 
 def test_inspect_says_quit_and_not_reached(tmp_path: Path):
     from terrapref.camera import CameraConfig
-    from terrapref.report.inspect import summarise
     from terrapref.features import PreferenceSetConfig
-    from terrapref.scenario import resolve_scenario
+    from terrapref.report.inspect import summarise
     from terrapref.sim import SimConfig, Simulation
     from terrapref.terrain import PreferenceProfile
 
@@ -352,7 +351,6 @@ def test_inspect_says_quit_and_not_reached(tmp_path: Path):
 def test_sigterm_during_record_force_says_so_and_keeps_the_old_recording(tmp_path, fig7_recording):
     # As after Ctrl-C: the old recording stays as it was, the unfinished one is OUT.partial (not
     # a hidden folder beside it), and the command says it was terminated.
-    from terrapref.cli import main
 
     out = shutil.copytree(fig7_recording, tmp_path / "rec")
     before = (out / "frames.jsonl").read_bytes()

@@ -11,8 +11,8 @@ import pytest
 import terrapref.records
 from terrapref.features import FeatureConfig
 from terrapref.features.utility import DistanceMode
-from terrapref.rules.second.lookahead import LookaheadConfig
 from terrapref.records import from_plain, to_plain
+from terrapref.rules.second.lookahead import LookaheadConfig
 
 
 def test_the_module_examples_run():

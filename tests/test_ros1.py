@@ -16,12 +16,9 @@ import sys
 import textwrap
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
-
-from terrapref.cli import main
 
 FIRST, FRAMES = 190, 40  # the recording's frames published: the drive comes up to the rock and the trees
 
@@ -99,11 +96,10 @@ PLAYER = textwrap.dedent('''
 
 @pytest.fixture(scope="module")
 def setup(tmp_path_factory, fig7_recording):
-    from test_corridor import DRIVER_LIKE, _corridor_meta
-
     from helpers import skip_path_weights
     from terrapref.learning.model_file import save_model
     from terrapref.learning.network import ClassifierConfig
+    from test_corridor import DRIVER_LIKE, _corridor_meta
 
     root = tmp_path_factory.mktemp("ros1")
     (root / "rec").symlink_to(fig7_recording, target_is_directory=True)
@@ -124,7 +120,6 @@ def _free_port() -> int:
 def test_the_node_commands_what_the_runtime_commands_on_the_same_frames(setup, tmp_path):
     from terrapref.demos.recording import read_recording
     from terrapref.runtime import PlannerRuntime
-
     from test_live import _watch
 
     root, model = setup

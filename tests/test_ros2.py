@@ -158,8 +158,6 @@ def _endpoints(dp, own) -> list:
 def system(tmp_path_factory, fig7_recording):
     """Two nodes: one driven frame by frame from this process (with bad input after the drive),
     one that starts in a domain where nobody publishes and is then driven by `terrapref play`."""
-    from test_corridor import DRIVER_LIKE, _corridor_meta
-
     from helpers import skip_path_weights
     from terrapref.demos.recording import read_recording
     from terrapref.interop.dds import MessageTypes, Participant
@@ -169,6 +167,7 @@ def system(tmp_path_factory, fig7_recording):
     from terrapref.interop.ros_messages import typestore
     from terrapref.learning.model_file import save_model
     from terrapref.learning.network import ClassifierConfig
+    from test_corridor import DRIVER_LIKE, _corridor_meta
     from test_live import _watch
 
     root = tmp_path_factory.mktemp("ros2")

@@ -5,23 +5,23 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_corridor import DRIVER_LIKE, K, _corridor_meta, _terrain, _scenario
 
 from helpers import model_meta, one_line_error, skip_path_weights
 from terrapref.camera import PinholeCamera
 from terrapref.cli import main
-from terrapref.interop.robot import load_waypoints
 from terrapref.features import FeatureConfig
-from terrapref.rules.offset.fit import OffsetUtility
+from terrapref.interop.robot import load_waypoints
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
-from terrapref.rules.costmap import LETHAL_COST
-from terrapref.rules.offset.rule import OffsetSteering
 from terrapref.planner.route import RouteConfig, RouteError, plan_route
+from terrapref.rules.costmap import LETHAL_COST
+from terrapref.rules.offset.fit import OffsetUtility
+from terrapref.rules.offset.rule import OffsetSteering
 from terrapref.scenario import load_scenario
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import default_classes
 from terrapref.world import rasterise
+from test_corridor import DRIVER_LIKE, _corridor_meta, _scenario, _terrain
 
 CONTROL = FeatureConfig().preference.control  # the default control set: 1 m/s
 

@@ -33,6 +33,7 @@ import numpy as np
 import pytest
 
 import terrapref.rules
+from helpers import model_meta, skip_path_weights
 from terrapref.camera import CameraConfig
 from terrapref.dataset import build_dataset
 from terrapref.demos.recording import read_recording
@@ -48,8 +49,6 @@ from terrapref.rules import RULES, HeaderContext, Rule, RuleConfig, read_rules
 from terrapref.rules.base import Where
 from terrapref.terrain import UNKNOWN, ClassTable
 from terrapref.vehicle import Pose
-
-from helpers import model_meta, skip_path_weights
 
 SOURCE = "rules-under-test"
 """The file name a block read on its own is said to come from."""

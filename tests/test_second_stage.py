@@ -11,25 +11,24 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers import model_meta, skip_path_weights, train_config
 from terrapref.camera import PinholeCamera, SegmentationRenderer, SegmentationView
 from terrapref.dataset import Dataset
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
 from terrapref.learning.linear import LinearUtility
 from terrapref.learning.model_file import load_model, save_model
-from terrapref.planner.registry import load_policy
 from terrapref.learning.network import ClassifierConfig
 from terrapref.learning.pipeline import RunOptions, train_and_save
 from terrapref.planner import Planner
-from terrapref.rules import SecondStageRule, SecondStageConfig
+from terrapref.planner.registry import load_policy
+from terrapref.rules import SecondStageConfig, SecondStageRule
 from terrapref.rules.second.rule import SecondStageScores
 from terrapref.scenario import resolve_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim import Simulation
 from terrapref.terrain import default_classes
 from terrapref.vehicle import Pose
-
-from helpers import model_meta, skip_path_weights, train_config
 
 # Columns of U: non_traversable, water, rock, mud, distance.
 UTILITY = LinearUtility(np.array([-12.0, -5.0, -3.0, -1.0, 5.0]), np.linspace(-1.0, 1.0, 21) ** 2 * -4.0 + 2.0)

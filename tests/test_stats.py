@@ -5,9 +5,8 @@ from __future__ import annotations
 
 import math
 
-import pytest
-
 import numpy as np
+import pytest
 
 from terrapref.evaluation.runner import EXPERT, PLANNER, PURE_PURSUIT, RunResult, annotate_agreement, summarise, zone_agrees
 from terrapref.evaluation.scoring import RunMetrics, ZoneResult

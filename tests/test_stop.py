@@ -9,12 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers import linear_model
+from terrapref.errors import UserError
 from terrapref.evaluation.runner import PURE_PURSUIT, RunSpec, run_one, summarise
 from terrapref.evaluation.scoring import NOT_REACHED, score_run, score_zones
 from terrapref.features import FeatureConfig
 from terrapref.interop.labels import parse_label_map
 from terrapref.interop.robot import load_robot
-from terrapref.errors import UserError
 from terrapref.learning.linear import LinearUtility
 from terrapref.perception.model import load_perception
 from terrapref.planner import Planner, PlannerDriver
@@ -28,8 +29,6 @@ from terrapref.terrain import PreferenceProfile, default_classes
 from terrapref.terrain.classes import UNKNOWN, ForeignIds, load_classes
 from terrapref.vehicle import Command, Pose
 from terrapref.world import rasterise
-
-from helpers import linear_model
 
 PROFILE = ("mud", "rock", "water", "non_traversable")
 WALL = """format: terrapref-scenario/1
@@ -304,11 +303,10 @@ def test_the_rule_reads_the_offset_stages_map_and_keeps_its_own_otherwise(model:
 
 
 def test_the_offset_stage_stops_at_the_wall_reading_its_own_ground_map(tmp_path: Path, wall: str):
-    from test_corridor import DRIVER_LIKE, _corridor_meta
-
     from helpers import skip_path_weights
     from terrapref.learning.model_file import load_model, save_model
     from terrapref.learning.network import ClassifierConfig
+    from test_corridor import DRIVER_LIKE, _corridor_meta
 
     config = ClassifierConfig(hidden=8, skip=True)
     path = save_model(tmp_path / "offset.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))

@@ -12,14 +12,26 @@ from pathlib import Path
 import pytest
 
 from terrapref.cli import main
-from terrapref.perception import load_perception
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PURE_PURSUIT
 from terrapref.evaluation.scoring import RunMetrics, ZoneResult
 from terrapref.grid import Engine
+from terrapref.perception import load_perception
 from terrapref.report.study import LEARNED, PARTS, run_study, swept
 from terrapref.report.study_plan import FULL, QUICK, TEACH_ORDERS, StudyPlan, TrainedModel, TrainJob
-from terrapref.report.study_report import (ALL, METHOD_NAMES, ModelVariant, RunTag, StudyRun, _cell, _per_seed, _rate, _select,
-                                           _zone_success, disagreement_zones, write_study)
+from terrapref.report.study_report import (
+    ALL,
+    METHOD_NAMES,
+    ModelVariant,
+    RunTag,
+    StudyRun,
+    _cell,
+    _per_seed,
+    _rate,
+    _select,
+    _zone_success,
+    disagreement_zones,
+    write_study,
+)
 
 PNG = b"\x89PNG\r\n\x1a\n"
 METHODS = ("C", "linear", "cnn", HAND_COST, PURE_PURSUIT, EXPERT)

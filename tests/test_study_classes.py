@@ -19,7 +19,6 @@ from terrapref.report.study import run_study
 from terrapref.report.study_plan import FULL, QUICK, StudyPlan, for_table, reversed_order, with_perception
 from terrapref.report.study_report import StudyRun, _select, write_study
 from terrapref.terrain import PreferenceProfile, load_classes
-
 from test_study import _fabricated
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples" / "classes"
@@ -231,7 +230,6 @@ def test_the_choice_table_counts_a_lethal_class_in_the_lethal_column(example, tm
 
 
 def test_data_budgets_beyond_the_demonstrations_are_not_reported(example, tmp_path):
-    from test_study import _trained
 
     plan = replace(_table_plan(example), minutes=(0.5, 2.0, 5.0))
     runs, trained = _fabricated(replace(plan, orders=plan.orders[:2]))

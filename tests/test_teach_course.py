@@ -41,7 +41,7 @@ def test_every_pair_meets_on_both_sides(labels):
     beside = Counter((right if left == LETHAL else left, "right" if left == LETHAL else "left") for left, middle, right in triples)
     assert beside == {(c, side): 1 for c in safe for side in ("left", "right")}
     # Each strip has each other class beside it once: every ordered (strip, other) pair.
-    assert sorted((m, r if l == LETHAL else l) for l, m, r in triples) == sorted(itertools.permutations(safe, 2))
+    assert sorted((m, r if left == LETHAL else left) for left, m, r in triples) == sorted(itertools.permutations(safe, 2))
 
 
 def test_every_class_lies_alone_twice():

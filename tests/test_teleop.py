@@ -16,8 +16,8 @@ import pytest
 pygame = pytest.importorskip("pygame")
 
 from terrapref.demos.recording import read_recording  # noqa: E402
-from terrapref.teleop import COUNTDOWN_S, run_teleop  # noqa: E402
 from terrapref.errors import UserError  # noqa: E402
+from terrapref.teleop import COUNTDOWN_S, run_teleop  # noqa: E402
 from terrapref.vehicle import ControlSet  # noqa: E402
 
 CENTRE = 10  # index of w = 0 in the default control set
@@ -277,9 +277,9 @@ def test_a_resized_window_scales_the_view_and_the_mouse_follows(tmp_path):
 
 
 def test_the_guide_reads_progress_the_next_patch_and_the_terrain_underneath():
-    from terrapref.teleop.guide import CourseGuide
     from terrapref.features import PreferenceSet, PreferenceSetConfig
     from terrapref.sim import Simulation
+    from terrapref.teleop.guide import CourseGuide
     from terrapref.vehicle import Pose
 
     scenario = _tiny([{"class": "mud", "rectangle": {"center": [13.5, 6.0], "size": [3.0, 2.0]}},
@@ -307,7 +307,6 @@ def test_the_guide_reads_progress_the_next_patch_and_the_terrain_underneath():
 def test_riding_along_records_only_the_takeover_and_train_accepts_it(tmp_path):
     """The planner drives; Left takes over from the planner's command; 1.5 s untouched hands back."""
     from helpers import linear_model
-
     from terrapref.cli import main
     from terrapref.teleop import HANDBACK_S
 
@@ -387,8 +386,8 @@ def test_a_simulated_keyboard_person_drives_the_course_through_the_window(tmp_pa
     import numpy as np
 
     from terrapref.demos.expert import ExpertConfig, ExpertDriver
-    from terrapref.teleop.keyboard import KeyboardPerson, START_AFTER_FRAMES
     from terrapref.scenario import resolve_scenario
+    from terrapref.teleop.keyboard import START_AFTER_FRAMES, KeyboardPerson
 
     scenario = resolve_scenario("demo_course")
     person = KeyboardPerson(ExpertDriver(ExpertConfig()), scenario, np.random.default_rng(0))
@@ -562,11 +561,10 @@ class _Collecting:
 
 
 def test_drive_live_sends_every_driven_frame_and_riding_along_the_planners_costmap(tmp_path):
-    from test_corridor import DRIVER_LIKE, _corridor_meta
-
     from helpers import skip_path_weights
     from terrapref.learning.model_file import save_model
     from terrapref.learning.network import ClassifierConfig
+    from test_corridor import DRIVER_LIKE, _corridor_meta
 
     config = ClassifierConfig(hidden=8, skip=True)
     model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))

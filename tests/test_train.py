@@ -11,6 +11,20 @@ import numpy as np
 import pytest
 import torch
 
+from helpers import (
+    W_TRUE,
+    K,
+    M,
+    assert_weights_equal,
+    dataset_of,
+    linear_dataset,
+    model_meta,
+    random_dataset,
+    random_weights,
+    sparse_terrain_dataset,
+    train_config,
+    weights_differ,
+)
 from terrapref.dataset import FORMAT as DATASET_FORMAT
 from terrapref.dataset import Dataset
 from terrapref.learning.model_file import expected_shapes, load_model
@@ -18,9 +32,6 @@ from terrapref.learning.network import ClassifierConfig, numpy_forward, softmax
 from terrapref.learning.pipeline import RunOptions, train_and_save
 from terrapref.learning.train import MEMBER_SEED_STEP, TrainConfig, split_indices, train
 from terrapref.rules import SecondStageConfig
-
-from helpers import K, M, W_TRUE, assert_weights_equal, dataset_of, sparse_terrain_dataset, linear_dataset, model_meta, random_dataset, random_weights, train_config, weights_differ
-
 
 # --- the paper's recipe ----------------------------------------------------------------------------
 

@@ -315,7 +315,7 @@ def _draw_zone_inset(zax: plt.Axes, runs: CourseRuns, z: Zone) -> None:
     """Zone ``z`` at a legible scale (4 m around it): its outline green when every planner run met
     it, and the driver's and the planner's tracks."""
     draw_map(zax, runs.scenario, runs.world, zones=False)
-    driver, planner, success = runs.driver, runs.planner, runs.zone_success.get(z.id, (0, 0))
+    success = runs.zone_success.get(z.id, (0, 0))
     o = outline(z.shape)
     lo, hi = o.min(axis=0) - 4.0, o.max(axis=0) + 4.0
     half = max(hi - lo) / 2

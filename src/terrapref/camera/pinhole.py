@@ -13,7 +13,6 @@ import numpy as np
 
 from terrapref.records import from_plain, to_plain
 
-
 MAX_IMAGE_PX = 4096
 """The largest image side a camera may have [px]: a 4K segmentation; the planner's per-pixel tables
 of a larger one would not fit a robot's memory, and a size read from a file is bounded by it."""

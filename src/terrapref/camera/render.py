@@ -18,8 +18,8 @@ import math
 
 import numpy as np
 
-from terrapref.camera.render_compiled import pixels_at, pixels_of_rows, ray_pixels, render_frame, rows_and_columns, take
 from terrapref.camera.pinhole import PinholeCamera
+from terrapref.camera.render_compiled import pixels_at, pixels_of_rows, ray_pixels, render_frame, rows_and_columns, take
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose
 from terrapref.world import WorldMap

@@ -24,11 +24,19 @@ from typing import NoReturn
 from terrapref.cli.courses import course_parser, render_parser, scenarios_parser, show_parser, validate_parser
 from terrapref.cli.demos import drive_parser, featurize_parser, inspect_parser, record_parser
 from terrapref.cli.evaluate import evaluate_parser, perception_parser, reproduce_parser, select_parser, study_parser
-from terrapref.cli.robot import export_parser, import_parser, info_parser, play_parser, replay_parser, ros1_parser, ros2_parser, route_parser
+from terrapref.cli.robot import (
+    export_parser,
+    import_parser,
+    info_parser,
+    play_parser,
+    replay_parser,
+    ros1_parser,
+    ros2_parser,
+    route_parser,
+)
 from terrapref.cli.train import recipes_parser, train_parser
 from terrapref.errors import Terminated, UserError
 from terrapref.grid import GridError
-
 
 COMMANDS = (
     course_parser,

@@ -8,8 +8,17 @@ import shutil
 import sys
 from pathlib import Path
 
-from terrapref.cli.common import (SCENARIO_HELP, add_classes_arg, add_force_arg, add_live_args, by_recording, check_table, class_table, live_view,
-                                    perception_model)
+from terrapref.cli.common import (
+    SCENARIO_HELP,
+    add_classes_arg,
+    add_force_arg,
+    add_live_args,
+    by_recording,
+    check_table,
+    class_table,
+    live_view,
+    perception_model,
+)
 from terrapref.configargs import finite_float
 from terrapref.errors import UserError
 from terrapref.fileio import check_distinct, check_figure, check_output
@@ -20,8 +29,8 @@ def _cmd_record(args: argparse.Namespace) -> int:
 
     from terrapref.camera import CameraConfig
     from terrapref.demos.expert import ExpertConfig, ExpertDriver
-    from terrapref.demos.recording import RecordingWriter
     from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
+    from terrapref.demos.recording import RecordingWriter
     from terrapref.demos.session import RunSettings, record_run
     from terrapref.features import PreferenceSetConfig
     from terrapref.progress import Progress
@@ -163,8 +172,8 @@ def drive_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_inspect(args: argparse.Namespace) -> int:
-    from terrapref.report.inspect import save_driven_path, summarise
     from terrapref.demos.recording import read_recording
+    from terrapref.report.inspect import save_driven_path, summarise
 
     if args.out is not None:
         check_figure(args.out, "--out")
@@ -187,9 +196,9 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
 def _print_what_the_drive_shows(rec) -> None:
     """The identifiability report of a recording (featurised as the default recipe would), before any training."""
     from terrapref.dataset import build_dataset
-    from terrapref.recipes import DEFAULT_RECIPE, recipe_named
     from terrapref.learning.train import identify
     from terrapref.progress import Progress
+    from terrapref.recipes import DEFAULT_RECIPE, recipe_named
 
     if len(rec) == 0:
         print("what the drive shows: nothing (no frames)")

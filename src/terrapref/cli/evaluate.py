@@ -7,8 +7,22 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from terrapref.cli.common import (PERCEPTION_HELP, SCENARIO_HELP, add_classes_arg, add_engine_args, add_force_arg, add_live_args, check_table, class_table,
-                                  grid_engine, live_view, perception_list, perception_model, teachable_table, watching)
+from terrapref.cli.common import (
+    PERCEPTION_HELP,
+    SCENARIO_HELP,
+    add_classes_arg,
+    add_engine_args,
+    add_force_arg,
+    add_live_args,
+    check_table,
+    class_table,
+    grid_engine,
+    live_view,
+    perception_list,
+    perception_model,
+    teachable_table,
+    watching,
+)
 from terrapref.errors import UserError
 from terrapref.fileio import check_distinct, check_output, output_folder
 

@@ -37,8 +37,6 @@ from terrapref.vehicle import Command, pure_pursuit_yaw_rate
 from terrapref.world import WorldMap, rasterise
 
 
-
-
 @dataclass(frozen=True)
 class ExpertConfig:
     """Parameters of the synthetic driver.

@@ -42,8 +42,8 @@ from terrapref.terrain import ClassTable, PreferenceProfile, default_classes
 from terrapref.vehicle import VehicleConfig
 
 if TYPE_CHECKING:
-    from terrapref.demos.expert import ExpertConfig
     from terrapref.demos.disturbance import DisturbanceConfig
+    from terrapref.demos.expert import ExpertConfig
     from terrapref.scenario import Scenario
 
 Settings = dict[str, Any]  # a configuration as the version that wrote it wrote it (see ExpertInfo)

@@ -24,8 +24,8 @@ import os
 import shutil
 from dataclasses import dataclass
 from datetime import datetime, timezone
-from pathlib import Path
 from functools import cached_property
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -38,8 +38,8 @@ from terrapref.pngio import read_label_png, write_png_atomic
 from terrapref.yamlio import load_yaml_text
 
 if TYPE_CHECKING:
-    from terrapref.terrain import ClassTable
     from terrapref.demos.meta import RecordingMeta
+    from terrapref.terrain import ClassTable
 
 FORMAT = "terrapref-recording/1"
 META = "meta.json"

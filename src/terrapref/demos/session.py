@@ -17,7 +17,7 @@ import numpy as np
 from terrapref.demos.disturbance import DisturbanceConfig, Disturber  # DisturbanceConfig: imported from here by callers too
 from terrapref.demos.recording import MemoryRecordingWriter, RecordingWriter
 from terrapref.features import PreferenceSetConfig
-from terrapref.perception import PerceptionModel, Perceiver, run_stream
+from terrapref.perception import Perceiver, PerceptionModel, run_stream
 from terrapref.sim import Driver, EpisodeLog, Frame, Simulation
 from terrapref.vehicle import Command, ControlSet
 

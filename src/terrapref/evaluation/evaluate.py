@@ -12,13 +12,23 @@ import numpy as np
 
 from terrapref.camera import PinholeCamera
 from terrapref.errors import UserError
+from terrapref.evaluation.runner import (
+    EXPERT,
+    PLANNER,
+    RunResult,
+    RunSpec,
+    Watch,
+    annotate_agreement,
+    run_many,
+    scenario_and_world,
+    summarise,
+)
+from terrapref.evaluation.scoring import classes_in_zone
+from terrapref.features import PreferenceSet
 from terrapref.fileio import write_text_atomic
 from terrapref.grid import Engine
-from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, Watch, annotate_agreement, run_many, scenario_and_world, summarise
-from terrapref.evaluation.scoring import classes_in_zone
 from terrapref.learning.identify import Identifiability
 from terrapref.perception import PerceptionModel
-from terrapref.features import PreferenceSet
 from terrapref.planner.registry import load_policy
 from terrapref.scenario import AVOID, resolve_scenario
 from terrapref.terrain import ClassTable, PreferenceProfile

@@ -22,10 +22,11 @@ from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.evaluation.scoring import RunMetrics, ZoneResult, ZoneRules, score_run
 from terrapref.evaluation.stats import wilson
 from terrapref.grid import Engine, run_grid
-from terrapref.perception import PerceivedDriver, PerceptionModel, Perceiver
+from terrapref.perception import PerceivedDriver, Perceiver, PerceptionModel
 from terrapref.planner import Planner, PlannerDriver
 from terrapref.planner.policy import CostPolicy, Policy, PurePursuitPolicy
-from terrapref.planner.registry import load_policy, make as make_policy
+from terrapref.planner.registry import load_policy
+from terrapref.planner.registry import make as make_policy
 from terrapref.registry import Registry
 from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.sim import EpisodeLog, Simulation, run_episode

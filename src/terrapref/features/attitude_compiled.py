@@ -9,7 +9,6 @@ bits as the NumPy forms give.
 
 from __future__ import annotations
 
-
 import numpy as np
 from numba import njit
 

@@ -32,7 +32,6 @@ from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.vehicle import Pose
 
-
 NORMALISE_EPS = 1e-9  # a distance range below this normalises to all ones
 
 

@@ -40,9 +40,31 @@ from terrapref.extras import needs
 from terrapref.features import PreferenceSetConfig
 from terrapref.features.preference_set import forward_simulate
 from terrapref.fileio import write_text_atomic
-from terrapref.interop.ros_messages import (EPOCH_S, OPTICAL_FRAME, Message, Topics, add_topics, camera_info, camera_mount, compressed_image,
-                                            foxglove_grid, header, occupancy_grid, odometry, path_message, png, point, pose, rpy_quaternion, tf_message, transform, twist,
-                                            typestore, vector3, zeroed)
+from terrapref.interop.ros_messages import (
+    EPOCH_S,
+    OPTICAL_FRAME,
+    Message,
+    Topics,
+    add_topics,
+    camera_info,
+    camera_mount,
+    compressed_image,
+    foxglove_grid,
+    header,
+    occupancy_grid,
+    odometry,
+    path_message,
+    png,
+    point,
+    pose,
+    rpy_quaternion,
+    tf_message,
+    transform,
+    twist,
+    typestore,
+    vector3,
+    zeroed,
+)
 from terrapref.rules.costmap import Costmap
 from terrapref.stops import REASONS
 from terrapref.terrain import ClassTable, default_classes

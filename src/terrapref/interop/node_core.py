@@ -23,8 +23,8 @@ import numpy as np
 
 from terrapref.errors import UserError
 from terrapref.interop.bag_import import _decode, _yaw, camera_from_info
-from terrapref.interop.robot import RobotConfig
 from terrapref.interop.labels import unlisted_message
+from terrapref.interop.robot import RobotConfig
 from terrapref.interop.runtime import PlannerRuntime, RuntimeDecision
 from terrapref.learning.model_file import LoadedModel
 from terrapref.rules.costmap import Costmap

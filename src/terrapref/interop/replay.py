@@ -18,8 +18,8 @@ import numpy as np
 from terrapref.camera import CameraConfig
 from terrapref.demos.recording import Recording
 from terrapref.fileio import atomic_path, write_bytes_atomic
-from terrapref.learning.model_file import LoadedModel
 from terrapref.interop.runtime import PlannerRuntime
+from terrapref.learning.model_file import LoadedModel
 
 
 def _rates(hit1: np.ndarray, hit3: np.ndarray | None, werr: np.ndarray) -> dict:

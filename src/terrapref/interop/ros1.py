@@ -98,7 +98,8 @@ class _Node:
 
     def __init__(self, rospy, core, model, robot, opts: NodeOptions) -> None:
         from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, Twist, TwistStamped
-        from nav_msgs.msg import OccupancyGrid, Odometry, Path as PathMsg
+        from nav_msgs.msg import OccupancyGrid, Odometry
+        from nav_msgs.msg import Path as PathMsg
         from sensor_msgs.msg import CameraInfo, CompressedImage, Image
         from visualization_msgs.msg import MarkerArray
 

@@ -25,9 +25,9 @@ import numpy as np
 from terrapref.camera import CameraConfig
 from terrapref.interop.labels import LabelMap, unlisted_message
 from terrapref.learning.model_file import LoadedModel, load_model
-from terrapref.rules.costmap import Costmap
 from terrapref.planner.planner import Planner
 from terrapref.planner.stop import StopConfig
+from terrapref.rules.costmap import Costmap
 from terrapref.scenario.path import ReferencePath
 from terrapref.stops import STALE
 from terrapref.terrain.classes import UNKNOWN, ForeignIds

@@ -66,7 +66,6 @@ def _fit_frames(rows: np.ndarray, unit: float, bits: int, labels: np.ndarray, sw
     are vectorised), then rounded and summed into both products in one more pass.
     """
     k, nm = rows.shape
-    n = nm // m
     params, mom, vel = np.zeros(k + m), np.zeros(k + m), np.zeros(k + m)
     power1 = power2 = 1.0
     w_bits = min(26, exact._chunk_bits(k) - bits)

@@ -24,11 +24,10 @@ from terrapref.learning import layers_compiled as kernels
 from terrapref.learning.identify import FittedLookahead, Identifiability, TableNames, identifiability
 from terrapref.learning.linear import LinearUtility, fit_linear_utility, fit_lookahead_utility
 from terrapref.learning.mlp import Adam, TrainableClassifier, cross_entropy, init_weights, round_inputs
-from terrapref.learning.steady import Steadying, steady_labels
 from terrapref.learning.network import ClassifierConfig, member_prefix
+from terrapref.learning.steady import Steadying, steady_labels
 from terrapref.records import to_plain
 from terrapref.terrain import ClassTable
-
 
 MEMBER_SEED_STEP = 1000  # member j of an ensemble trains from seed + MEMBER_SEED_STEP * j
 INIT_STREAM = 17  # the initial weights come from the stream (seed, INIT_STREAM), apart from the split's and batches'

@@ -16,10 +16,10 @@ import numpy as np
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationView, as_view
 from terrapref.features import UtilityFeaturizer
 from terrapref.learning.model_file import LoadedModel, check_compatible
-from terrapref.rules.costmap import Costmap
 from terrapref.planner.policy import ClassifierPolicy, Observation, Policy
-from terrapref.rules import Rule, RuleContext, RuleInput, chosen_rule
 from terrapref.planner.stop import StopConfig, StopRule
+from terrapref.rules import Rule, RuleContext, RuleInput, chosen_rule
+from terrapref.rules.costmap import Costmap
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim.loop import Frame

@@ -21,18 +21,18 @@ from __future__ import annotations
 import abc
 import math
 from dataclasses import dataclass
-from typing import ClassVar
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
 from terrapref.camera import CameraConfig, SegmentationView
 from terrapref.features import FeatureConfig
-from terrapref.learning.linear import LinearUtility
-from terrapref.learning.model_file import FORMAT, LoadedModel
 from terrapref.learning import exact
 from terrapref.learning.forward import PackedNetwork
 from terrapref.learning.forward import probabilities as forward_probabilities
+from terrapref.learning.linear import LinearUtility
+from terrapref.learning.model_file import FORMAT, LoadedModel
 from terrapref.learning.network import softmax
 from terrapref.rules import Rule, rules_of
 from terrapref.tensorfile import write_tensor_file

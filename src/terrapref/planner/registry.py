@@ -28,8 +28,8 @@ import numpy as np
 from terrapref.errors import UserError
 from terrapref.learning.linear import LinearUtility
 from terrapref.learning.model_file import CLASSIFIER, classifier_from, model_context, read_model_file
-from terrapref.registry import Registry
 from terrapref.planner.policy import CNN, LINEAR, ClassifierPolicy, CostPolicy, LinearPolicy, Policy, PurePursuitPolicy
+from terrapref.registry import Registry
 
 
 @dataclass(frozen=True)

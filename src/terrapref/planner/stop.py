@@ -34,15 +34,14 @@ import numpy as np
 from numba import njit
 
 from terrapref.camera import PinholeCamera, PixelSet, SegmentationView
-from terrapref.rules.offset.geometry import OffsetGeometry
+from terrapref.records import to_plain
 from terrapref.rules.columns import TerrainColumns
+from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.offset.ground_map import GroundMap
 from terrapref.rules.offset.ground_map_compiled import UNSETTLED, MapLayers, map_decide
-from terrapref.records import to_plain
 from terrapref.stops import BLIND, NO_FREE_WAY
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose
-
 
 
 @dataclass(frozen=True)

@@ -30,20 +30,20 @@ from pathlib import Path
 import numpy as np
 
 from terrapref.camera import CameraConfig
-from terrapref.recipes.corrections import CorrectionDrivers, record_corrections
 from terrapref.dataset import build_dataset
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
-from terrapref.demos.recording import MemoryRecordingWriter, Recording, RecordingWriter, read_recording
 from terrapref.demos.meta import CorrectionRoundInfo, ExpertInfo, RecordingMeta, RecordingSetup
+from terrapref.demos.recording import MemoryRecordingWriter, Recording, RecordingWriter, read_recording
 from terrapref.demos.session import DisturbanceConfig, RunSettings, record_run
 from terrapref.features import FeatureConfig
 from terrapref.learning.model_file import load_model
-from terrapref.learning.pipeline import RunOptions, train_and_save
 from terrapref.learning.network import ClassifierConfig
+from terrapref.learning.pipeline import RunOptions, train_and_save
 from terrapref.learning.train import DataOptions, OptimiserConfig, TrainConfig, TrainResult
 from terrapref.perception import PerceptionModel
-from terrapref.registry import Registry
 from terrapref.planner import Planner, PlannerDriver
+from terrapref.recipes.corrections import CorrectionDrivers, record_corrections
+from terrapref.registry import Registry
 from terrapref.rules import OffsetConfig, RuleConfig, SecondStageConfig
 from terrapref.rules.second.rule import with_second_stage
 from terrapref.scenario import resolve_scenario

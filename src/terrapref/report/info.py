@@ -60,7 +60,8 @@ def info_lines(path: str | Path) -> list[str]:
         return _onnx_lines(p)
     meta, shapes = _tensor_file_header(p)
     fmt = meta.get("format")
-    from terrapref.dataset import FORMAT as DATASET, OLD_FORMATS
+    from terrapref.dataset import FORMAT as DATASET
+    from terrapref.dataset import OLD_FORMATS
     from terrapref.learning.header import FORMAT as MODEL
 
     if fmt == DATASET:

@@ -71,7 +71,6 @@ def summarise(recording: Recording) -> RecordingSummary:
     profile = PreferenceProfile.parse(meta.get("profile") or list(classes.profile), classes, source=str(recording.path / "meta.json"))
     control = ControlSet.from_dict(meta["preference_set"]["control"])
     counts = np.bincount(recording.labels, minlength=control.m)[: control.m]
-    xy = recording.poses[:, :2]
     zones = [(z, z.reached) for z in score_zones(recording.poses, scenario, world, profile)]
     run = meta.get("summary") if isinstance(meta.get("summary"), dict) else {}
     return RecordingSummary(len(recording), recording.duration_s, recording.complete, counts, control, zones, scenario, world,

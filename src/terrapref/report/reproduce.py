@@ -22,13 +22,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from terrapref.fileio import write_text_atomic
-from terrapref.grid import Engine, run_grid
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, Summary, annotate_agreement, run_many, summarise
 from terrapref.evaluation.stats import rate_text
+from terrapref.fileio import write_text_atomic
+from terrapref.grid import Engine, run_grid
 from terrapref.perception import PerceptionModel
-from terrapref.recipes import OURS, PAPER, TEACH, Recipe, RecipeSetup, run_recipe
 from terrapref.progress import every_tenth
+from terrapref.recipes import OURS, PAPER, TEACH, Recipe, RecipeSetup, run_recipe
 from terrapref.scenario import packaged_scenarios, resolve_scenario
 from terrapref.terrain import ClassTable, PreferenceProfile
 

@@ -27,9 +27,9 @@ from terrapref.evaluation.stats import cluster_bootstrap, rate_text
 from terrapref.fileio import write_text_atomic
 from terrapref.grid import Engine, run_grid
 from terrapref.perception import PRESETS, PerceptionModel
-from terrapref.recipes import RecipeSetup, recipe_named, run_recipe
-from terrapref.progress import every_tenth
 from terrapref.plots import RateRow, save_intervals
+from terrapref.progress import every_tenth
+from terrapref.recipes import RecipeSetup, recipe_named, run_recipe
 from terrapref.scenario.generate import zone_kind
 from terrapref.terrain import ClassTable, PreferenceProfile, default_classes
 from terrapref.terrain.classes import LETHAL_COLUMN

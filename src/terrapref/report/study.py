@@ -37,10 +37,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from terrapref.fileio import write_text_atomic
-from terrapref.grid import Engine, run_grid
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PLANNER, PURE_PURSUIT, RunSpec, run_many
 from terrapref.features import FeatureConfig
+from terrapref.fileio import write_text_atomic
+from terrapref.grid import Engine, run_grid
 from terrapref.perception import PerceptionModel, load_perception
 from terrapref.progress import every_tenth
 from terrapref.recipes import OURS

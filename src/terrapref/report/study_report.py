@@ -11,10 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
-from terrapref.fileio import write_text_atomic
 from terrapref.evaluation.runner import EXPERT, HAND_COST, PURE_PURSUIT, zone_agrees
 from terrapref.evaluation.scoring import RunMetrics
 from terrapref.evaluation.stats import cluster_bootstrap, rate_text, wilson
+from terrapref.fileio import write_text_atomic
 from terrapref.report.study_plan import DEMONSTRATIONS, StudyPlan, TrainedModel, course_name
 
 TARGET = 0.9  # the success level the data-efficiency question asks about

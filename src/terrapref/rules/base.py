@@ -19,9 +19,9 @@ import numpy as np
 from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
+from terrapref.rules.columns import TerrainColumns
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable
-from terrapref.rules.columns import TerrainColumns
 from terrapref.vehicle import Command, Pose
 
 if TYPE_CHECKING:

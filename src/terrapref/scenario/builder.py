@@ -43,7 +43,7 @@ class CourseBuilder:
         """Local (along, left) points round arc length ``s``, in world coordinates (mm rounded)."""
         p, h = self.frame(s)
         c, sn = math.cos(h), math.sin(h)
-        return [[round(float(p[0] + a * c - l * sn), 3), round(float(p[1] + a * sn + l * c), 3)] for a, l in pts]
+        return [[round(float(p[0] + a * c - lat * sn), 3), round(float(p[1] + a * sn + lat * c), 3)] for a, lat in pts]
 
     def rect(self, cls: str, s: float, lat: float, length: float, width: float, yaw_deg: float = 0.0) -> None:
         """A rectangle of class ``cls``, ``length`` x ``width`` [m], centred at arc length ``s`` and

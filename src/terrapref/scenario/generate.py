@@ -35,7 +35,7 @@ def _frame(wp: np.ndarray, s: float) -> tuple[np.ndarray, float]:
 def _to_world(wp: np.ndarray, s: float, pts: np.ndarray) -> list[list[float]]:
     p, h = _frame(wp, s)
     c, sn = math.cos(h), math.sin(h)
-    return [[round(float(p[0] + a * c - l * sn), 3), round(float(p[1] + a * sn + l * c), 3)] for a, l in pts]
+    return [[round(float(p[0] + a * c - lat * sn), 3), round(float(p[1] + a * sn + lat * c), 3)] for a, lat in pts]
 
 
 def _blob(rng: np.random.Generator, radius: float, k: int) -> np.ndarray:

@@ -7,7 +7,6 @@ import math
 
 import numpy as np
 
-
 _SCALAR_SEGMENTS = 24  # project() windows up to this many segments in plain floats
 
 

@@ -34,7 +34,7 @@ from gymnasium import spaces
 from gymnasium.error import InvalidAction, ResetNeeded
 
 from terrapref.camera import CameraConfig
-from terrapref.perception import PerceptionModel, Perceiver, load_perception
+from terrapref.perception import Perceiver, PerceptionModel, load_perception
 from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.sim.loop import SimConfig, Simulation
 from terrapref.terrain import ClassTable, load_classes

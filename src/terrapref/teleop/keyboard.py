@@ -16,9 +16,9 @@ import numpy as np
 import pygame
 
 from terrapref.demos.expert import ExpertDriver
+from terrapref.scenario import Scenario
 from terrapref.teleop.loop import TeleopState
 from terrapref.teleop.stick import KEY_STEP_RPS
-from terrapref.scenario import Scenario
 from terrapref.world import WorldMap
 
 REACTION_S = 0.3

@@ -40,17 +40,17 @@ import numpy as np
 import pygame
 
 from terrapref.camera import CameraConfig
-from terrapref.demos.recording import RecordingWriter
 from terrapref.demos.meta import HumanInfo, RecordingMeta, RecordingSetup, RideAlongInfo
+from terrapref.demos.recording import RecordingWriter
 from terrapref.demos.session import DisturbanceConfig, Disturber, RecordLoop, abort_recording, run_perceiver
-from terrapref.teleop.guide import CourseGuide, stays_on_map
-from terrapref.teleop.stick import Stick
-from terrapref.teleop.window import ALERT_COLOR, HIGHLIGHT_COLOR, PLANNER_COLOR, Banner, Overlay, Window
 from terrapref.errors import Terminated, UserError
 from terrapref.features import PreferenceSet, PreferenceSetConfig
 from terrapref.perception import PerceptionModel
 from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.sim import Frame, SimConfig, Simulation
+from terrapref.teleop.guide import CourseGuide, stays_on_map
+from terrapref.teleop.stick import Stick
+from terrapref.teleop.window import ALERT_COLOR, HIGHLIGHT_COLOR, PLANNER_COLOR, Banner, Overlay, Window
 from terrapref.terrain import PreferenceProfile
 from terrapref.vehicle import Command
 

@@ -4,12 +4,13 @@ frames (:class:`GroundMap`), in the terrain columns of a class table (:class:`Te
 from __future__ import annotations
 
 import math
+
 import numpy as np
 
 from terrapref.camera import PinholeCamera, PixelSet, SegmentationView
 from terrapref.features.attitude import HorizonAttitude
-from terrapref.rules.offset import ground_map_compiled as kernels
 from terrapref.rules.columns import TerrainColumns
+from terrapref.rules.offset import ground_map_compiled as kernels
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import UNKNOWN

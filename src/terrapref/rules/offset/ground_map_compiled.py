@@ -12,12 +12,10 @@ bits as the NumPy forms give.
 from __future__ import annotations
 
 import math
-
 from typing import NamedTuple
 
 import numpy as np
 from numba import njit
-
 
 UNSETTLED = 255  # a ground-map cell voted on since its column was last decided (columns run 0..K + 1)
 

@@ -38,8 +38,21 @@ from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.errors import UserError
 from terrapref.features import UtilityFeaturizer
 from terrapref.records import to_plain
-from terrapref.rules.base import (Choice, FrameReader, HeaderContext, Rule, RuleConfig, RuleContext, RuleInput, RoutePrices, RuleRunner,
-                                  TerrainColumns, Where, number, vector)
+from terrapref.rules.base import (
+    Choice,
+    FrameReader,
+    HeaderContext,
+    RoutePrices,
+    Rule,
+    RuleConfig,
+    RuleContext,
+    RuleInput,
+    RuleRunner,
+    TerrainColumns,
+    Where,
+    number,
+    vector,
+)
 from terrapref.rules.costmap import Costmap, costmap_of
 from terrapref.rules.offset.features import OffsetFeatures
 from terrapref.rules.offset.fit import OffsetFit, OffsetUtility, fit_offset_utility

@@ -22,12 +22,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView
-from terrapref.rules.second import scores_compiled as kernels
 from terrapref.features.utility import NORMALISE_EPS, UtilityFeaturizer
 from terrapref.records import to_plain
+from terrapref.rules.second import scores_compiled as kernels
 from terrapref.scenario.path import ReferencePath
 from terrapref.vehicle import Pose
-
 
 _NO_TARGETS = np.zeros((0, 2))
 _NO_LINE = (0.0, 0.0, 0.0, 0.0)

@@ -27,7 +27,19 @@ from terrapref.errors import UserError
 from terrapref.features import UtilityFeaturizer
 from terrapref.learning import exact
 from terrapref.learning.linear import LinearUtility
-from terrapref.rules.base import Choice, FrameReader, HeaderContext, Rule, RuleConfig, RuleContext, RuleInput, RuleRunner, Where, number, vector
+from terrapref.rules.base import (
+    Choice,
+    FrameReader,
+    HeaderContext,
+    Rule,
+    RuleConfig,
+    RuleContext,
+    RuleInput,
+    RuleRunner,
+    Where,
+    number,
+    vector,
+)
 from terrapref.rules.second import scores_compiled as kernels
 from terrapref.rules.second.lookahead import Lookahead, LookaheadConfig
 from terrapref.scenario.path import ReferencePath
