@@ -97,8 +97,13 @@ def bench_decision(rec_dir: Path, repeats: int, features: FeatureConfig | None =
     features = features or FeatureConfig()
     plain = features == FeatureConfig() and members == 1 and not rules
     model_path = rec_dir.parent / ("model.safetensors" if plain else "variant.safetensors")
-    train_and_save(build_dataset([rec], features, rules=rules), model_path, TrainConfig(classifier=ClassifierConfig(members=members)), rules=rules,
-                   options=RunOptions(checkpoints=False))
+    train_and_save(
+        build_dataset([rec], features, rules=rules),
+        model_path,
+        TrainConfig(classifier=ClassifierConfig(members=members)),
+        rules=rules,
+        options=RunOptions(checkpoints=False),
+    )
     planner = Planner(load_model(model_path))
     idx = list(range(0, len(rec), max(1, len(rec) // 500)))
     images = [rec.image(i) for i in idx]
@@ -132,7 +137,9 @@ def main() -> int:
 
     def line(name: str, samples: np.ndarray, target: str) -> None:
         med = float(np.median(samples))
-        print(f"{name:48s} {med * 1e6:8.1f}us {np.percentile(samples, 90) * 1e6:8.1f}us {med / ref_s:10.5f} {target:>10s}   ({len(samples)} calls)")
+        print(
+            f"{name:48s} {med * 1e6:8.1f}us {np.percentile(samples, 90) * 1e6:8.1f}us {med / ref_s:10.5f} {target:>10s}   ({len(samples)} calls)"
+        )
 
     print(f"{'benchmark':48s} {'median':>10s} {'p90':>10s} {'/reference':>10s} {'target':>10s}")
     print(f"{'reference: naive NumPy render (reference.py)':48s} {ref_s * 1e3:8.2f}ms {'':>10s} {1:10d} {'-':>10s}")
@@ -142,10 +149,14 @@ def main() -> int:
     line("decision with the second stage, per frame", d3, "-")
     line("decision of recipe teach, C + second stage", d4, "<= 60us")
     line("the default decision: teach, offset stage drives", d5, "<= 150us")
-    print(f"{'planner driving train_course, closed loop':48s} {loop_s:9.2f}s {'':>10s} {loop_s / ref_s:10.1f} {'-':>10s}   "
-          f"({loop_frames} frames, {loop_frames / loop_s:.0f} frames/s)")
-    print(f"{'record train_course (synthetic driver)':48s} {wall:9.2f}s {'':>10s} {wall / ref_s:10.1f} {'<= 20s':>10s}   "
-          f"({frames} frames, {size / 1e6:.1f} MB, {size / frames / 1e3:.1f} kB/frame)")
+    print(
+        f"{'planner driving train_course, closed loop':48s} {loop_s:9.2f}s {'':>10s} {loop_s / ref_s:10.1f} {'-':>10s}   "
+        f"({loop_frames} frames, {loop_frames / loop_s:.0f} frames/s)"
+    )
+    print(
+        f"{'record train_course (synthetic driver)':48s} {wall:9.2f}s {'':>10s} {wall / ref_s:10.1f} {'<= 20s':>10s}   "
+        f"({frames} frames, {size / 1e6:.1f} MB, {size / frames / 1e3:.1f} kB/frame)"
+    )
     return 0
 
 

@@ -27,8 +27,12 @@ def _import_once(bag: Path, robot: Path, out: Path) -> tuple[float, float]:
     shutil.rmtree(out, ignore_errors=True)
     before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     start = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "terrapref.cli", "import", str(bag), "--robot", str(robot), "--out", str(out)],
-                   check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    subprocess.run(
+        [sys.executable, "-m", "terrapref.cli", "import", str(bag), "--robot", str(robot), "--out", str(out)],
+        check=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     wall = time.perf_counter() - start
     peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     return wall, max(peak, before) / 1024.0
@@ -57,7 +61,9 @@ def main() -> None:
             runs = [_import_once(bag, robot, work / f"rec_{storage}") for _ in range(args.repeat)]
             wall = statistics.median(r[0] for r in runs)
             peak = max(r[1] for r in runs)
-            print(f"| {storage}, 1,689 images of 640x480 mono8 | {mb:.0f} MB | {wall:.2f} s (range {min(r[0] for r in runs):.2f}-{max(r[0] for r in runs):.2f}) | {mb / wall:.0f} MB/s | {peak:.0f} MB |")
+            print(
+                f"| {storage}, 1,689 images of 640x480 mono8 | {mb:.0f} MB | {wall:.2f} s (range {min(r[0] for r in runs):.2f}-{max(r[0] for r in runs):.2f}) | {mb / wall:.0f} MB/s | {peak:.0f} MB |"
+            )
         import gymnasium as gym
 
         import terrapref.sim.env  # noqa: F401

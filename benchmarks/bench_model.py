@@ -52,8 +52,10 @@ def main() -> None:
     ref = reference_ms()
     columns = len(load_model(args.model).features.feature_classes)
     print(f"reference: naive NumPy render (reference.py)  {ref:.2f} ms")
-    print(f"decision of {args.model} ({columns} terrain columns) on {args.scenario}: median {np.median(t) * 1e6:.1f} us, "
-          f"p90 {np.percentile(t, 90) * 1e6:.1f} us over {len(t)} decisions; median / reference {np.median(t) * 1e3 / ref:.4f}")
+    print(
+        f"decision of {args.model} ({columns} terrain columns) on {args.scenario}: median {np.median(t) * 1e6:.1f} us, "
+        f"p90 {np.percentile(t, 90) * 1e6:.1f} us over {len(t)} decisions; median / reference {np.median(t) * 1e3 / ref:.4f}"
+    )
 
 
 if __name__ == "__main__":

@@ -62,7 +62,10 @@ def bench_render(n_poses: int, rng: np.random.Generator, size_m: float = 100.0, 
     ids = np.array([c.id for c in classes.classes], dtype=np.uint8)
     world = WorldMap(rng.choice(ids, size=(n, n)), resolution_m, classes)
     renderer = SegmentationRenderer(PinholeCamera(), world)
-    poses = [Pose(float(x), float(y), float(a)) for x, y, a in zip(rng.uniform(0, size_m, n_poses), rng.uniform(0, size_m, n_poses), rng.uniform(-math.pi, math.pi, n_poses))]
+    poses = [
+        Pose(float(x), float(y), float(a))
+        for x, y, a in zip(rng.uniform(0, size_m, n_poses), rng.uniform(0, size_m, n_poses), rng.uniform(-math.pi, math.pi, n_poses))
+    ]
     for pose in poses[:warmup]:
         renderer.render(pose)
     samples = np.empty(n_poses)
@@ -74,7 +77,11 @@ def bench_render(n_poses: int, rng: np.random.Generator, size_m: float = 100.0, 
 
 
 def bench_loop(
-    n_frames: int, command: Command = Command(1.0, 0.0), scenario: str = "demo_course", episode_frames: int = 550, warmup: int = 10,
+    n_frames: int,
+    command: Command = Command(1.0, 0.0),
+    scenario: str = "demo_course",
+    episode_frames: int = 550,
+    warmup: int = 10,
     whole_frame: bool = True,
 ) -> Timing:
     """Time ``Simulation.step`` with a constant command, restarting after ``episode_frames`` or when done.
@@ -115,26 +122,39 @@ def main(argv: list[str] | None = None) -> int:
 
     threads = os.environ.get("OMP_NUM_THREADS", "unset")
     affinity = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else "?"
-    print(f"python {platform.python_version()}, numpy {np.__version__}, {platform.machine()}, "
-          f"{os.cpu_count()} CPUs, pinned to {affinity}, OMP_NUM_THREADS={threads}")
+    print(
+        f"python {platform.python_version()}, numpy {np.__version__}, {platform.machine()}, "
+        f"{os.cpu_count()} CPUs, pinned to {affinity}, OMP_NUM_THREADS={threads}"
+    )
     rows = [
         ("benchmark", "median", "p90", "mean", "rate", "median / reference", "target"),
         ("reference: naive NumPy render, one ray per pixel (benchmarks/reference.py)", f"{ref:.3f} ms", "-", "-", "-", "1", "-"),
         (
             f"render 640x480, 100 m map @ 0.05 m ({args.poses} poses)",
-            f"{render.median_ms:.3f} ms", f"{render.p90_ms:.3f} ms", f"{render.mean_ms:.3f} ms",
-            f"{1e3 / render.median_ms:.0f} fps", f"{render.median_ms / ref:.4f}",
+            f"{render.median_ms:.3f} ms",
+            f"{render.p90_ms:.3f} ms",
+            f"{render.mean_ms:.3f} ms",
+            f"{1e3 / render.median_ms:.0f} fps",
+            f"{render.median_ms / ref:.4f}",
             f"<= {RENDER_TARGET_MS:g} ms: {'met' if render.median_ms <= RENDER_TARGET_MS else 'MISSED'}",
         ),
         (
             f"Simulation.step + whole frame, demo_course ({args.frames} frames)",
-            f"{loop.median_ms:.3f} ms", f"{loop.p90_ms:.3f} ms", f"{loop.mean_ms:.3f} ms",
-            f"{len(loop.samples) / loop.samples.sum():.0f} fps", f"{loop.median_ms / ref:.4f}", "-",
+            f"{loop.median_ms:.3f} ms",
+            f"{loop.p90_ms:.3f} ms",
+            f"{loop.mean_ms:.3f} ms",
+            f"{len(loop.samples) / loop.samples.sum():.0f} fps",
+            f"{loop.median_ms / ref:.4f}",
+            "-",
         ),
         (
             f"Simulation.step, frame not read, demo_course ({args.frames} frames)",
-            f"{bare.median_ms:.3f} ms", f"{bare.p90_ms:.3f} ms", f"{bare.mean_ms:.3f} ms",
-            f"{len(bare.samples) / bare.samples.sum():.0f} fps", f"{bare.median_ms / ref:.4f}", "-",
+            f"{bare.median_ms:.3f} ms",
+            f"{bare.p90_ms:.3f} ms",
+            f"{bare.mean_ms:.3f} ms",
+            f"{len(bare.samples) / bare.samples.sum():.0f} fps",
+            f"{bare.median_ms / ref:.4f}",
+            "-",
         ),
     ]
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]

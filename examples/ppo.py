@@ -1,6 +1,6 @@
 """Train Stable-Baselines3's PPO on a mix of courses for a few thousand steps and report steps/s.
 
-    .venv/bin/python examples/ppo.py [--steps 4096]
+.venv/bin/python examples/ppo.py [--steps 4096]
 """
 
 import argparse

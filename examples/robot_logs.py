@@ -28,8 +28,11 @@ args = parser.parse_args()
 
 args.out.mkdir(parents=True, exist_ok=True)
 write_robot(args.out / "robot.yaml")  # with the label map it names beside it
-for storage, name, scenario, seed in (("mcap", "drive_mcap", args.scenario, args.seed), ("rosbag1", "drive.bag", args.scenario, args.seed),
-                                      ("sqlite3", "heldout_sqlite3", args.heldout, args.seed + 1)):
+for storage, name, scenario, seed in (
+    ("mcap", "drive_mcap", args.scenario, args.seed),
+    ("rosbag1", "drive.bag", args.scenario, args.seed),
+    ("sqlite3", "heldout_sqlite3", args.heldout, args.seed + 1),
+):
     path = args.out / name
     if path.exists():
         print(f"{path} exists; skipped")

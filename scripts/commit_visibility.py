@@ -91,13 +91,22 @@ def main() -> int:
                 row, other = "triple, best on a side", parts[2] if parts[0] == best else parts[0]
             seen_best, seen_other = points[best] >= args.min_points, points[other] >= args.min_points
             table[(row, "zones")] += 1
-            table[(row, {(True, True): "both", (True, False): "best only", (False, True): "other only", (False, False): "neither"}[(seen_best, seen_other)])] += 1
+            table[
+                (
+                    row,
+                    {(True, True): "both", (True, False): "best only", (False, True): "other only", (False, False): "neither"}[
+                        (seen_best, seen_other)
+                    ],
+                )
+            ] += 1
         print(f"{course}: done", flush=True)
     print(f"\nclasses on some trajectory (>= {args.min_points} of {features.preference.n_steps} points) when the driver commits")
     print(f"{'zone kind':30s} {'zones':>6s} {'both':>6s} {'best only':>10s} {'other only':>11s} {'neither':>8s}")
     for row in ("pair", "triple, best on a side", "triple, best in the middle"):
         if table[(row, "zones")]:
-            print(f"{row:30s} {table[(row, 'zones')]:6d} {table[(row, 'both')]:6d} {table[(row, 'best only')]:10d} {table[(row, 'other only')]:11d} {table[(row, 'neither')]:8d}")
+            print(
+                f"{row:30s} {table[(row, 'zones')]:6d} {table[(row, 'both')]:6d} {table[(row, 'best only')]:10d} {table[(row, 'other only')]:11d} {table[(row, 'neither')]:8d}"
+            )
     return 0
 
 

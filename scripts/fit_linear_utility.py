@@ -33,7 +33,9 @@ def main() -> int:
     in_view = (ds.U[:, :, :-1].sum(axis=2) > 0).any(axis=1)
     lin = fit_linear_utility(ds.U, ds.labels)
     w, acc = lin.w, float((lin.logits(ds.U.astype(np.float64)).argmax(axis=1) == ds.labels).mean())
-    print(f"n={args.n_steps} dt={args.dt} distance={args.distance_mode}: {len(ds)} frames, terrain on some trajectory in {in_view.mean():.0%}")
+    print(
+        f"n={args.n_steps} dt={args.dt} distance={args.distance_mode}: {len(ds)} frames, terrain on some trajectory in {in_view.mean():.0%}"
+    )
     print("weights  " + "  ".join(f"{name} {v:+.2f}" for name, v in zip(fc.column_names, w)) + f"   accuracy {acc:.2f}")
     return 0
 

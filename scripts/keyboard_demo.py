@@ -68,11 +68,18 @@ def _demonstrate(job: tuple[str, str, int, tuple[str, ...]]) -> tuple[str, str, 
         person = KeyboardPerson(ExpertDriver(ExpertConfig.styled("default", order)), scenario, np.random.default_rng(seed * 100))
         # Pushes with the default recipe's protocol (recipe.disturbance), drawn from their own
         # stream: the same kind of pushes as the stick's drive, not at the same moments.
-        run_teleop(scenario, rec, overwrite=True, realtime=False, script=person, disturbance=recipe.disturbance, seed=seed * 100,
-                   profile=profile)
+        run_teleop(
+            scenario, rec, overwrite=True, realtime=False, script=person, disturbance=recipe.disturbance, seed=seed * 100, profile=profile
+        )
     model = work / f"model_{kind}.safetensors"
-    train_and_save(build_dataset([read_recording(rec)], recipe.features(), rules=recipe.rules), model, replace(recipe.train, seed=seed),
-                   rules=recipe.rules, recipe=recipe.name, options=RunOptions(checkpoints=False))
+    train_and_save(
+        build_dataset([read_recording(rec)], recipe.features(), rules=recipe.rules),
+        model,
+        replace(recipe.train, seed=seed),
+        rules=recipe.rules,
+        recipe=recipe.name,
+        options=RunOptions(checkpoints=False),
+    )
     return kind, str(model), seed, time.perf_counter() - t0, str(rec)
 
 
@@ -90,9 +97,13 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     jobs = [(kind, str(args.out / "work" / f"{kind}_s{s}"), s, order) for s in range(args.seeds) for kind in INPUTS]
-    done = run_grid(_demonstrate, jobs, Engine(workers=args.workers),
-                    lambda k, n: print(f"demonstrated and trained {k}/{n}", file=sys.stderr, flush=True),
-                    describe=lambda j: f"{j[0]} drive, seed {j[2]}")
+    done = run_grid(
+        _demonstrate,
+        jobs,
+        Engine(workers=args.workers),
+        lambda k, n: print(f"demonstrated and trained {k}/{n}", file=sys.stderr, flush=True),
+        describe=lambda j: f"{j[0]} drive, seed {j[2]}",
+    )
     models = {(kind, seed): model for kind, model, seed, _, _ in done}
     recordings = {(kind, seed): rec for kind, _, seed, _, rec in done}
     t_train = time.perf_counter() - t0
@@ -100,13 +111,27 @@ def main(argv: list[str] | None = None) -> int:
     keys = sorted(models)
     specs = [RunSpec(c, 0, PLANNER, models[key], order) for key in keys for c in layouts]
     specs += [RunSpec(c, 0, EXPERT, None, order) for c in layouts]
-    results = run_many(specs, args.workers, lambda k, n: print(f"run {k}/{n}", file=sys.stderr, flush=True) if k % 20 == 0 or k == n else None)
+    results = run_many(
+        specs, args.workers, lambda k, n: print(f"run {k}/{n}", file=sys.stderr, flush=True) if k % 20 == 0 or k == n else None
+    )
     t_eval = time.perf_counter() - t0 - t_train
 
     rows, collisions = _zone_rows(specs, results, {models[key]: key for key in keys})
     drives = _drives(recordings)
-    (args.out / "keyboard.json").write_text(json.dumps({"profile": order, "layouts": layouts, "zones": rows, "collisions": collisions, "drives": drives,
-                                                        "train_s": t_train, "eval_s": t_eval}, indent=0))
+    (args.out / "keyboard.json").write_text(
+        json.dumps(
+            {
+                "profile": order,
+                "layouts": layouts,
+                "zones": rows,
+                "collisions": collisions,
+                "drives": drives,
+                "train_s": t_train,
+                "eval_s": t_eval,
+            },
+            indent=0,
+        )
+    )
     write_report(args.out, order, layouts, rows, collisions, drives, t_train, t_eval, args.workers)
     return 0
 
@@ -123,8 +148,18 @@ def _zone_rows(specs: list[RunSpec], results: list[RunResult], kind_of: dict[str
         collisions[kind] += r.metrics.collisions
         for z in r.metrics.zones:
             d = driver[(r.scenario, z.id)]
-            rows.append({"input": kind, "seed": seed, "scenario": r.scenario, "zone": z.id, "choice": z.choice,
-                         "driver_choice": d.choice, "agrees": zone_agrees(z, d), "success": z.success})
+            rows.append(
+                {
+                    "input": kind,
+                    "seed": seed,
+                    "scenario": r.scenario,
+                    "zone": z.id,
+                    "choice": z.choice,
+                    "driver_choice": d.choice,
+                    "agrees": zone_agrees(z, d),
+                    "success": z.success,
+                }
+            )
     return rows, collisions
 
 
@@ -135,18 +170,26 @@ def _drives(recordings: dict[tuple[str, int], str]) -> dict[str, dict]:
         kind, seed = key
         rec = read_recording(recordings[key])
         w = rec.commands[:, 1]
-        drives[f"{kind}_s{seed}"] = {"frames": len(rec), "minutes": rec.duration_s / 60, "straight_share": float(np.mean(w == 0.0)),
-                                     "collisions": rec.meta.get("summary", {}).get("collisions")}
+        drives[f"{kind}_s{seed}"] = {
+            "frames": len(rec),
+            "minutes": rec.duration_s / 60,
+            "straight_share": float(np.mean(w == 0.0)),
+            "collisions": rec.meta.get("summary", {}).get("collisions"),
+        }
     return drives
 
 
 def write_report(out: Path, order, layouts, rows, collisions, drives, t_train: float, t_eval: float, workers: int) -> None:
     seeds = sorted({r["seed"] for r in rows})
-    lines = ["# A keyboard demonstration against a stick: one drive of teach_course each", "",
-             f"Driver: the synthetic driver, default style, order {' > '.join(order)}; {len(seeds)} training seed(s); every model "
-             f"drives {len(layouts)} generated layouts ({layouts[0]} to {layouts[-1]}). Rates with 95% Wilson intervals over all zones.", "",
-             "| demonstration | zone success | agreement with the driver | collisions | drive: frames at w = 0 | drive: collisions | per seed (agreement) |",
-             "|---|---|---|---|---|---|---|"]
+    lines = [
+        "# A keyboard demonstration against a stick: one drive of teach_course each",
+        "",
+        f"Driver: the synthetic driver, default style, order {' > '.join(order)}; {len(seeds)} training seed(s); every model "
+        f"drives {len(layouts)} generated layouts ({layouts[0]} to {layouts[-1]}). Rates with 95% Wilson intervals over all zones.",
+        "",
+        "| demonstration | zone success | agreement with the driver | collisions | drive: frames at w = 0 | drive: collisions | per seed (agreement) |",
+        "|---|---|---|---|---|---|---|",
+    ]
     points = []
     for kind in INPUTS:
         sel = [r for r in rows if r["input"] == kind]
@@ -154,16 +197,28 @@ def write_report(out: Path, order, layouts, rows, collisions, drives, t_train: f
             continue
         ds = [d for k, d in drives.items() if k.startswith(kind + "_")]
         per_seed = ", ".join(f"{np.mean([r['agrees'] for r in sel if r['seed'] == s]):.0%}" for s in seeds)
-        lines.append(f"| {kind} | {rate_text(sum(r['success'] for r in sel), len(sel))} | {rate_text(sum(r['agrees'] for r in sel), len(sel))} | "
-                     f"{collisions[kind]} | {np.mean([d['straight_share'] for d in ds]):.0%} | "
-                     f"{sum(d['collisions'] or 0 for d in ds)} | {per_seed} |")
+        lines.append(
+            f"| {kind} | {rate_text(sum(r['success'] for r in sel), len(sel))} | {rate_text(sum(r['agrees'] for r in sel), len(sel))} | "
+            f"{collisions[kind]} | {np.mean([d['straight_share'] for d in ds]):.0%} | "
+            f"{sum(d['collisions'] or 0 for d in ds)} | {per_seed} |"
+        )
         for key, name in (("success", "zone success"), ("agrees", "agreement")):
             ok = sum(r[key] for r in sel)
             points.append(RateRow(f"{kind}: {name}", ok / len(sel), wilson(ok, len(sel))))
-    lines += ["", f"Demonstrating and training {t_train:.0f} s, evaluation {t_eval:.0f} s (wall, {workers} workers).", "",
-              "![keyboard](keyboard.png)", ""]
-    save_intervals(out / "keyboard.png", points, "share of zones", target=0.95,
-                   title=f"stick or keyboard, one drive each: {len(layouts)} layouts x {len(seeds)} seeds, 95% CI")
+    lines += [
+        "",
+        f"Demonstrating and training {t_train:.0f} s, evaluation {t_eval:.0f} s (wall, {workers} workers).",
+        "",
+        "![keyboard](keyboard.png)",
+        "",
+    ]
+    save_intervals(
+        out / "keyboard.png",
+        points,
+        "share of zones",
+        target=0.95,
+        title=f"stick or keyboard, one drive each: {len(layouts)} layouts x {len(seeds)} seeds, 95% CI",
+    )
     (out / "KEYBOARD.md").write_text("\n".join(lines))
     print("\n".join(lines))
 

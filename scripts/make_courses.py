@@ -33,9 +33,13 @@ class Course(CourseBuilder):
 
 def train_course() -> Course:
     """Table 1: four lone patches (avoid), then six neighbouring pairs (best), on a 328 m U-trail."""
-    c = Course("train_course", "Training trail of the paper's Table 1: lone water, rock, mud, non_traversable; "
-               "then mud|rock, rock|water, water|non_traversable, non_traversable|water, water|rock, rock|mud.",
-               (165.0, 60.0), [(5, 10), (145, 10), (155, 20), (155, 40), (145, 50), (5, 50)])
+    c = Course(
+        "train_course",
+        "Training trail of the paper's Table 1: lone water, rock, mud, non_traversable; "
+        "then mud|rock, rock|water, water|non_traversable, non_traversable|water, water|rock, rock|mud.",
+        (165.0, 60.0),
+        [(5, 10), (145, 10), (155, 20), (155, 40), (145, 50), (5, 50)],
+    )
     c.rect("water", 20, 0.0, 3.0, 2.6)
     c.zone("1", "water", 20, (9.0, 9.0), "avoid")
     c.circle("rock", 45, 0.2, 1.4)
@@ -57,9 +61,13 @@ def train_course() -> Course:
 
 def test_course() -> Course:
     """Table 2: seven situations with shapes unlike training, on an S-shaped trail."""
-    c = Course("test_course", "Test trail of the paper's Table 2: water, rock, mud+non_traversable, "
-               "water+non_traversable+mud, mud+rock+water, mud with water inside, rock+non_traversable.",
-               (240.0, 70.0), [(5, 15), (60, 15), (90, 30), (145, 30), (175, 50), (235, 50)])
+    c = Course(
+        "test_course",
+        "Test trail of the paper's Table 2: water, rock, mud+non_traversable, "
+        "water+non_traversable+mud, mud+rock+water, mud with water inside, rock+non_traversable.",
+        (240.0, 70.0),
+        [(5, 15), (60, 15), (90, 30), (145, 30), (175, 50), (235, 50)],
+    )
     # 1: an irregular water pond on the path.
     c.polygon("water", 15, [(-1.8, -0.6), (-0.6, -1.5), (1.2, -1.2), (1.9, 0.3), (0.8, 1.4), (-1.2, 1.1)])
     c.zone("1", "water", 15, (9.0, 9.0), "avoid")
@@ -100,11 +108,26 @@ def test_course() -> Course:
 # non_traversable beside every class. Every class lies alone on the path twice, once a little
 # left of it and once a little right. (lateral offset [m] of a lone patch)
 TEACH_ZONES = [
-    ("mud", "rock"), ("water", 0.3), ("non_traversable", "mud", "water"), ("rock", -0.3), ("water", "rock"), ("mud", 0.3),
-    ("rock", "mud", "non_traversable"), ("non_traversable", -0.3),
-    ("mud", "water"), ("water", "rock", "non_traversable"), ("rock", "mud"), ("non_traversable", "rock", "mud"), ("water", "mud"),
-    ("rock", "water"), ("mud", -0.3), ("mud", "water", "non_traversable"), ("water", -0.3), ("non_traversable", "water", "rock"),
-    ("non_traversable", 0.3), ("rock", 0.3),
+    ("mud", "rock"),
+    ("water", 0.3),
+    ("non_traversable", "mud", "water"),
+    ("rock", -0.3),
+    ("water", "rock"),
+    ("mud", 0.3),
+    ("rock", "mud", "non_traversable"),
+    ("non_traversable", -0.3),
+    ("mud", "water"),
+    ("water", "rock", "non_traversable"),
+    ("rock", "mud"),
+    ("non_traversable", "rock", "mud"),
+    ("water", "mud"),
+    ("rock", "water"),
+    ("mud", -0.3),
+    ("mud", "water", "non_traversable"),
+    ("water", -0.3),
+    ("non_traversable", "water", "rock"),
+    ("non_traversable", 0.3),
+    ("rock", 0.3),
 ]
 # Heading change [deg] at the bend after each situation: a horseshoe, so that the trail bends
 # between situations (keeping to the path is part of the lesson) and fits a compact map. The
@@ -117,8 +140,14 @@ def _kind(zone: tuple) -> str:
     return "lone" if not isinstance(zone[1], str) else ("triple" if len(zone) == 3 else "pair")
 
 
-def teach_course(zones: list[tuple] | None = None, turns: list[float] | None = None, half: dict[str, float] | None = None,
-                 s_start: float = 8.0, name: str = "teach_course", middle_m: float = 2.8) -> Course:
+def teach_course(
+    zones: list[tuple] | None = None,
+    turns: list[float] | None = None,
+    half: dict[str, float] | None = None,
+    s_start: float = 8.0,
+    name: str = "teach_course",
+    middle_m: float = 2.8,
+) -> Course:
     """The product's demonstration course (SPEC 13): one drive shows every pair, both ways round, and every class alone.
 
     Situations sit on straight legs (``2 * half[kind]`` m); the trail bends between them. Lone
@@ -132,10 +161,14 @@ def teach_course(zones: list[tuple] | None = None, turns: list[float] | None = N
     s_end = 5.0
     lengths = [2 * half[_kind(z)] for z in zones]
     wp, size = trail([s_start + lengths[0], *lengths[1:-1], lengths[-1] + s_end], turns)
-    c = Course(name, "The demonstration course: every pair of terrain classes side by side, each class once on each "
-               "side, every class as a strip on the path between trees and another class, and every class alone on "
-               "the path twice; one drive identifies any preference order.",
-               size, [tuple(p) for p in wp])
+    c = Course(
+        name,
+        "The demonstration course: every pair of terrain classes side by side, each class once on each "
+        "side, every class as a strip on the path between trees and another class, and every class alone on "
+        "the path twice; one drive identifies any preference order.",
+        size,
+        [tuple(p) for p in wp],
+    )
     lone_shapes = {
         "water": lambda s, lat: c.rect("water", s, lat, 3.0, 2.6),
         "mud": lambda s, lat: c.polygon("mud", s, [(-1.6, lat - 1.2), (1.4, lat - 1.4), (1.6, lat + 1.1), (-1.2, lat + 1.4)]),
@@ -173,23 +206,54 @@ def variation(name: str, description: str, build) -> Course:
 def variations() -> list[Course]:
     s = 30.0
     out = [
-        variation("fig7a_non_traversable_longer", "Figure 7(a): a longer non_traversable patch on the path (avoid).",
-                  lambda c: (c.rect("non_traversable", s, 0.0, 8.0, 2.6), c.zone("1", "non_traversable, longer", s, (14.0, 10.0), "avoid"))),
-        variation("fig7b_non_traversable_wider", "Figure 7(b): a wider non_traversable patch on the path (avoid).",
-                  lambda c: (c.rect("non_traversable", s, 0.3, 2.8, 5.5), c.zone("1", "non_traversable, wider", s, (10.0, 14.0), "avoid"))),
+        variation(
+            "fig7a_non_traversable_longer",
+            "Figure 7(a): a longer non_traversable patch on the path (avoid).",
+            lambda c: (c.rect("non_traversable", s, 0.0, 8.0, 2.6), c.zone("1", "non_traversable, longer", s, (14.0, 10.0), "avoid")),
+        ),
+        variation(
+            "fig7b_non_traversable_wider",
+            "Figure 7(b): a wider non_traversable patch on the path (avoid).",
+            lambda c: (c.rect("non_traversable", s, 0.3, 2.8, 5.5), c.zone("1", "non_traversable, wider", s, (10.0, 14.0), "avoid")),
+        ),
     ]
     for side, sign in (("left", 1.0), ("right", -1.0)):
-        out.append(variation(f"fig7_rock_vs_non_traversable_{side}", f"Figure 7(c/d): rock on the {side} against non_traversable, meeting on the path.",
-                             lambda c, sign=sign: (c.rect("rock", s, sign * 2.0, 6.0, 4.0), c.rect("non_traversable", s, -sign * 2.0, 6.0, 4.0),
-                                                   c.zone("1", "rock vs non_traversable", s, (10.0, 12.0), "best"))))
+        out.append(
+            variation(
+                f"fig7_rock_vs_non_traversable_{side}",
+                f"Figure 7(c/d): rock on the {side} against non_traversable, meeting on the path.",
+                lambda c, sign=sign: (
+                    c.rect("rock", s, sign * 2.0, 6.0, 4.0),
+                    c.rect("non_traversable", s, -sign * 2.0, 6.0, 4.0),
+                    c.zone("1", "rock vs non_traversable", s, (10.0, 12.0), "best"),
+                ),
+            )
+        )
     for side, sign in (("left", 1.0), ("right", -1.0)):
-        out.append(variation(f"fig8_rock_vs_non_traversable_large_{side}", f"Figure 8(a/b): rock on the {side} against non_traversable, both wider and longer.",
-                             lambda c, sign=sign: (c.rect("rock", s, sign * 3.0, 10.0, 6.0), c.rect("non_traversable", s, -sign * 3.0, 10.0, 6.0),
-                                                   c.zone("1", "rock vs non_traversable, large", s, (14.0, 16.0), "best"))))
+        out.append(
+            variation(
+                f"fig8_rock_vs_non_traversable_large_{side}",
+                f"Figure 8(a/b): rock on the {side} against non_traversable, both wider and longer.",
+                lambda c, sign=sign: (
+                    c.rect("rock", s, sign * 3.0, 10.0, 6.0),
+                    c.rect("non_traversable", s, -sign * 3.0, 10.0, 6.0),
+                    c.zone("1", "rock vs non_traversable, large", s, (14.0, 16.0), "best"),
+                ),
+            )
+        )
     for side, sign in (("left", 1.0), ("right", -1.0)):
-        out.append(variation(f"fig8_water_mud_rock_mud_{side}", f"Figure 8(c/d): water on the path, mud on the {side}, rock on the other side.",
-                             lambda c, sign=sign: (c.rect("water", s, 0.0, 6.0, 3.0), c.rect("mud", s, sign * 3.5, 6.0, 4.0),
-                                                   c.rect("rock", s, -sign * 3.5, 6.0, 4.0), c.zone("1", "water vs mud vs rock", s, (10.0, 15.0), "best"))))
+        out.append(
+            variation(
+                f"fig8_water_mud_rock_mud_{side}",
+                f"Figure 8(c/d): water on the path, mud on the {side}, rock on the other side.",
+                lambda c, sign=sign: (
+                    c.rect("water", s, 0.0, 6.0, 3.0),
+                    c.rect("mud", s, sign * 3.5, 6.0, 4.0),
+                    c.rect("rock", s, -sign * 3.5, 6.0, 4.0),
+                    c.zone("1", "water vs mud vs rock", s, (10.0, 15.0), "best"),
+                ),
+            )
+        )
     return out
 
 

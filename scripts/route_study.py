@@ -52,11 +52,15 @@ def layout(seed: int) -> dict:
     if rng.random() < 0.3:  # trees beyond the near edge: that way round is closed
         y = Y_PATH + side * (near + 1.0 + 1.5)
         terrain.append({"class": "non_traversable", "rectangle": {"center": [x0 + depth / 2, y], "size": [depth + 4.0, 3.0]}})
-    return {"format": "terrapref-scenario/1", "name": f"detour_{seed}",
-            "description": f"{cls} {depth:.1f} m long across the path, {near:.1f} m to one side and {far:.1f} m to the other",
-            "world": {"size_m": [LENGTH, 2 * Y_PATH], "resolution_m": 0.05, "background": "grass"},
-            "terrain": terrain, "path": {"waypoints": [[5.0, Y_PATH], [LENGTH - 5.0, Y_PATH]]},
-            "patch": [x0, x0 + depth, edges[0], edges[1]]}
+    return {
+        "format": "terrapref-scenario/1",
+        "name": f"detour_{seed}",
+        "description": f"{cls} {depth:.1f} m long across the path, {near:.1f} m to one side and {far:.1f} m to the other",
+        "world": {"size_m": [LENGTH, 2 * Y_PATH], "resolution_m": 0.05, "background": "grass"},
+        "terrain": terrain,
+        "path": {"waypoints": [[5.0, Y_PATH], [LENGTH - 5.0, Y_PATH]]},
+        "patch": [x0, x0 + depth, edges[0], edges[1]],
+    }
 
 
 HALF_WIDTH_M = 0.6  # the vehicle's footprint: a run goes round only when all of it clears the patch
@@ -112,8 +116,15 @@ def main() -> None:
         patches[seed] = data.pop("patch")
         (args.out / "layouts" / f"detour_{seed}.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
     models = {(o, s): str(job_folder(args.selection, o, s) / "teach" / "model.safetensors") for o in orders for s in range(args.seeds)}
-    jobs = [(models[o, s], str(args.out / "layouts" / f"detour_{n}.yaml"), str(args.out / "routes" / f"{'_'.join(c[:2] for c in o[:3])}_s{s}_{n}.yaml"))
-            for (o, s) in models for n in patches]
+    jobs = [
+        (
+            models[o, s],
+            str(args.out / "layouts" / f"detour_{n}.yaml"),
+            str(args.out / "routes" / f"{'_'.join(c[:2] for c in o[:3])}_s{s}_{n}.yaml"),
+        )
+        for (o, s) in models
+        for n in patches
+    ]
     todo = [j for j in jobs if not Path(j[2]).exists()]  # routes planned by an earlier run of the study are kept
     with ProcessPoolExecutor(args.workers) as pool:
         for i, _ in enumerate(pool.map(_route, todo), 1):
@@ -129,19 +140,38 @@ def main() -> None:
             job = next(j for j in jobs if j[0] == model and j[1].endswith(f"detour_{n}.yaml"))
             specs += [RunSpec(job[1], 0, PLANNER, model, o), RunSpec(job[2], 0, PLANNER, model, o)]
             keys += [("path", o, s, n), ("route", o, s, n)]
-    results = run_many(specs, engine=Engine(workers=args.workers), progress=lambda d, t: print(f"runs {d}/{t}", flush=True) if d % 50 == 0 or d == t else None)
+    results = run_many(
+        specs,
+        engine=Engine(workers=args.workers),
+        progress=lambda d, t: print(f"runs {d}/{t}", flush=True) if d % 50 == 0 or d == t else None,
+    )
     got = {k: outcome(r.xy, patches[k[3]]) for k, r in zip(keys, results, strict=True)}
-    rows = [{"order": list(o), "seed": s, "layout": n, "driver": got["driver", o, None, n], "path": got["path", o, s, n], "route": got["route", o, s, n]}
-            for (o, s) in models for n in patches]
+    rows = [
+        {
+            "order": list(o),
+            "seed": s,
+            "layout": n,
+            "driver": got["driver", o, None, n],
+            "path": got["path", o, s, n],
+            "route": got["route", o, s, n],
+        }
+        for (o, s) in models
+        for n in patches
+    ]
     summary = {}
     for way in ("path", "route"):
-        for label, subset in (("all", rows), ("driver went round", [r for r in rows if r["driver"] != "through"]),
-                              ("driver went through", [r for r in rows if r["driver"] == "through"])):
+        for label, subset in (
+            ("all", rows),
+            ("driver went round", [r for r in rows if r["driver"] != "through"]),
+            ("driver went through", [r for r in rows if r["driver"] == "through"]),
+        ):
             agree = sum(r[way] == r["driver"] for r in subset)
             lo, hi = wilson(agree, len(subset)) if subset else (float("nan"), float("nan"))
             summary[f"{way}: {label}"] = {"agree": agree, "of": len(subset), "ci": [lo, hi]}
-            print(f"planner along the {way:5s} | {label:20s} | {agree}/{len(subset)} = {100 * agree / max(len(subset), 1):.1f}% "
-                  f"(95% CI {100 * lo:.1f}-{100 * hi:.1f}%)")
+            print(
+                f"planner along the {way:5s} | {label:20s} | {agree}/{len(subset)} = {100 * agree / max(len(subset), 1):.1f}% "
+                f"(95% CI {100 * lo:.1f}-{100 * hi:.1f}%)"
+            )
     (args.out / "route_study.json").write_text(json.dumps({"summary": summary, "runs": rows}, indent=1))
     _figure(args.out / "route_study.png", summary)
     print(f"wrote {args.out / 'route_study.json'} and {args.out / 'route_study.png'}")

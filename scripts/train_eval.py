@@ -26,7 +26,9 @@ from terrapref.scenario import packaged_scenarios
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("recordings")
-    parser.add_argument("config", help='TrainConfig changes as JSON, part by part, e.g. {"optimiser": {"epochs": 300}, "classifier": {"skip": true}}')
+    parser.add_argument(
+        "config", help='TrainConfig changes as JSON, part by part, e.g. {"optimiser": {"epochs": 300}, "classifier": {"skip": true}}'
+    )
     parser.add_argument("--seeds", type=int, default=1)
     parser.add_argument("--profile", default="mud,rock,water,non_traversable")
     args = parser.parse_args()
@@ -42,8 +44,8 @@ def main() -> int:
         res = run_many([RunSpec(n, s, PLANNER, model, profile) for n in names for s in range(args.seeds)])
     for x in res:
         m = x.metrics
-        zones = " ".join(f'{z.id}:{z.expect}->{z.choice}{"" if z.success else "(X)"}' for z in m.zones)
-        print(f'{x.scenario:42s} seed {x.seed} collisions {m.collisions}  {zones}')
+        zones = " ".join(f"{z.id}:{z.expect}->{z.choice}{'' if z.success else '(X)'}" for z in m.zones)
+        print(f"{x.scenario:42s} seed {x.seed} collisions {m.collisions}  {zones}")
     print("test set:", summarise([x for x in res if x.scenario != "train_course"], PLANNER).to_dict())
     print("train_course:", summarise([x for x in res if x.scenario == "train_course"], PLANNER).to_dict())
     return 0

@@ -73,14 +73,19 @@ def main() -> None:
     specs += [RunSpec(c, 0, EXPERT, None, tuple(o), style=style) for o in sel["orders"] for c in layouts]
     results = run_many(specs, engine=Engine(workers=args.workers))
     courses = {c: Layout(c) for c in layouts}
-    driver = {(s.profile, s.scenario): courses[s.scenario].largest_offsets(r.xy, args.window)
-              for s, r in zip(specs, results, strict=True) if s.driver == EXPERT}
+    driver = {
+        (s.profile, s.scenario): courses[s.scenario].largest_offsets(r.xy, args.window)
+        for s, r in zip(specs, results, strict=True)
+        if s.driver == EXPERT
+    }
     groups: dict[bool, list[tuple[float, float]]] = {True: [], False: []}
     for spec, r in zip(specs, results, strict=True):
         if spec.driver != PLANNER:
             continue
         for zone, offset in courses[spec.scenario].largest_offsets(r.xy, args.window).items():
-            groups[agrees[(spec.profile, seed_of[spec.model_path], spec.scenario, zone)]].append((driver[(spec.profile, spec.scenario)][zone], offset))
+            groups[agrees[(spec.profile, seed_of[spec.model_path], spec.scenario, zone)]].append(
+                (driver[(spec.profile, spec.scenario)][zone], offset)
+            )
     lo, hi = STRADDLE_M
     print(f"| triple zones | driver: median (quartiles) | driver between {lo} and {hi} m | planner: median (quartiles) |")
     print("|---|---|---|---|")
@@ -90,8 +95,10 @@ def main() -> None:
             continue
         d, p = np.percentile(a[:, 0], [50, 25, 75]), np.percentile(a[:, 1], [50, 25, 75])
         straddle = int(((a[:, 0] >= lo) & (a[:, 0] <= hi)).sum())
-        print(f"| the {len(a)} where they {label} | {d[0]:.2f} m ({d[1]:.2f}-{d[2]:.2f}) | {straddle} of {len(a)} "
-              f"| {p[0]:.2f} m ({p[1]:.2f}-{p[2]:.2f}) |")
+        print(
+            f"| the {len(a)} where they {label} | {d[0]:.2f} m ({d[1]:.2f}-{d[2]:.2f}) | {straddle} of {len(a)} "
+            f"| {p[0]:.2f} m ({p[1]:.2f}-{p[2]:.2f}) |"
+        )
 
 
 if __name__ == "__main__":

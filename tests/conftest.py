@@ -64,7 +64,12 @@ def demo_course_drive(tmp_path_factory) -> SimpleNamespace:
     sim = Simulation(scenario)
     driver = ExpertDriver()
     preference = PreferenceSetConfig()
-    meta = RecordingMeta.driven(scenario, RecordingSetup(sim.camera.config, preference, sim.config), ExpertInfo.of(0, "default", driver.config), PreferenceProfile.default())
+    meta = RecordingMeta.driven(
+        scenario,
+        RecordingSetup(sim.camera.config, preference, sim.config),
+        ExpertInfo.of(0, "default", driver.config),
+        PreferenceProfile.default(),
+    )
     log = record_run(sim, driver, RecordingWriter(out, meta, scenario.to_dict()), RunSettings(preference), np.random.default_rng(0))
     return SimpleNamespace(scenario=scenario, sim=sim, log=log, path=out)
 

@@ -88,7 +88,9 @@ def run_checks(checks: list[CpuCheck], environ: Mapping[str, str]) -> dict[str, 
     def one(setting: tuple[tuple[str, str], ...]) -> dict[str, str]:
         code = [(c.name, c.code) for c in checks if setting in c.settings]
         program = _PROGRAM.format(tests=tests, code=code)
-        done = subprocess.run([sys.executable, "-c", program], env={**environ, **dict(setting)}, capture_output=True, text=True, timeout=300)
+        done = subprocess.run(
+            [sys.executable, "-c", program], env={**environ, **dict(setting)}, capture_output=True, text=True, timeout=300
+        )
         assert done.returncode == 0, done.stderr
         return json.loads(done.stdout.strip().splitlines()[-1])
 

@@ -52,7 +52,9 @@ def dataset_file(path: Path, n: int = 300, seed: int = 0) -> Path:
     """A random dataset of ``n`` samples with the default configuration, saved at ``path``."""
     rng = np.random.default_rng(seed)
     meta = {"format": DATASET_FORMAT, **model_meta()}
-    data = Dataset(rng.uniform(0, 1, (n, 21, 5)).astype(np.float32), rng.integers(0, 21, n), np.zeros(n, np.float32), np.zeros(n, np.int64), meta)
+    data = Dataset(
+        rng.uniform(0, 1, (n, 21, 5)).astype(np.float32), rng.integers(0, 21, n), np.zeros(n, np.float32), np.zeros(n, np.int64), meta
+    )
     return save_dataset(data, path)
 
 

@@ -52,16 +52,41 @@ if TYPE_CHECKING:
 
 Storage = Literal["rosbag1", "sqlite3", "mcap"]
 Encoding = Literal["mono8", "mono16", "png", "rgb8"]
-TOPICS = {"segmentation": "/robot/seg/labels", "camera_info": "/robot/camera/camera_info", "odometry": "/robot/odom",
-          "command": "/robot/cmd_vel", "path": "/route/plan"}
+TOPICS = {
+    "segmentation": "/robot/seg/labels",
+    "camera_info": "/robot/camera/camera_info",
+    "odometry": "/robot/odom",
+    "command": "/robot/cmd_vel",
+    "path": "/route/plan",
+}
 RELLIS = {"grass": 3, "mud": 33, "rock": 34, "water": 6, "non_traversable": 19}  # and unknown (sky) -> 7
 # The classes of examples/classes/rellis3d.yaml as a RELLIS-3D network labels them: grass as
 # "downhill" (30) and water as "deep water" (32), which RELLIS-3D's own conversion maps to grass
 # and water, so that a log of this table needs its label map's every kind of entry.
-RELLIS_OF_EXAMPLE = {"grass": 30, "dirt": 1, "gravel": 34, "mud": 33, "puddle": 31, "water": 32, "bush": 19, "tree": 4, "log": 15,
-                     "fence": 18, "building": 12, "vehicle": 8, "person": 17}
+RELLIS_OF_EXAMPLE = {
+    "grass": 30,
+    "dirt": 1,
+    "gravel": 34,
+    "mud": 33,
+    "puddle": 31,
+    "water": 32,
+    "bush": 19,
+    "tree": 4,
+    "log": 15,
+    "fence": 18,
+    "building": 12,
+    "vehicle": 8,
+    "person": 17,
+}
 UNLISTED_ID = 50  # an id the rellis3d map does not list
-COLORS = {3: (0, 102, 0), 33: (255, 128, 0), 34: (170, 170, 170), 6: (0, 128, 255), 19: (204, 153, 255), 7: (135, 206, 235)}  # for rgb8 logs
+COLORS = {
+    3: (0, 102, 0),
+    33: (255, 128, 0),
+    34: (170, 170, 170),
+    6: (0, 128, 255),
+    19: (204, 153, 255),
+    7: (135, 206, 235),
+}  # for rgb8 logs
 ODOMETRY_RATE_HZ = 30.0
 ODOMETRY_GAP_S = (8.0, 9.0)  # with quirks, no odometry in this span of the drive
 # With quirks, what a robot's clocks and transport add: image and odometry stamps arrive this much
@@ -114,9 +139,18 @@ class _LogOptions:
     classes: ClassTable | None = None
 
 
-def write_synthetic_bag(out: str | Path, storage: Storage = "mcap", scenario: str = "demo_course", seed: int = 0,
-                        profile: tuple[str, ...] | None = None, encoding: Encoding = "mono8",
-                        quirks: bool = True, max_seconds: float | None = None, repeat_images: int = 1, classes: ClassTable | None = None) -> Path:
+def write_synthetic_bag(
+    out: str | Path,
+    storage: Storage = "mcap",
+    scenario: str = "demo_course",
+    seed: int = 0,
+    profile: tuple[str, ...] | None = None,
+    encoding: Encoding = "mono8",
+    quirks: bool = True,
+    max_seconds: float | None = None,
+    repeat_images: int = 1,
+    classes: ClassTable | None = None,
+) -> Path:
     """Drive ``scenario`` with the synthetic driver and write the log; returns the bag's path.
 
     ``repeat_images`` > 1 publishes each frame that many times per 0.1 s (a faster camera), to
@@ -195,8 +229,15 @@ class _Messages:
 
     def _raw_image(self, stamped: Message, step: int, data: np.ndarray) -> Message:
         """sensor_msgs/Image of rows of ``step`` bytes, little-endian."""
-        return self.ts.types["sensor_msgs/msg/Image"](header=stamped, height=self.camera.height_px, width=self.camera.width_px,
-                                                      encoding=self.encoding, is_bigendian=0, step=step, data=data)
+        return self.ts.types["sensor_msgs/msg/Image"](
+            header=stamped,
+            height=self.camera.height_px,
+            width=self.camera.width_px,
+            encoding=self.encoding,
+            is_bigendian=0,
+            step=step,
+            data=data,
+        )
 
     def odometry(self, t_s: float, x: float, y: float, yaw: float) -> Message:
         """Odometry of base_link at (x, y [m], yaw [rad]) in the odom frame, stamped ``t_s``."""
@@ -341,7 +382,7 @@ def _put_odometry(log: _Log, trace: list[Pose], state: _DriveState) -> None:
     quirks, delayed, and none in ODOMETRY_GAP_S)."""
     quirks = log.options.quirks
     gap = ODOMETRY_GAP_S if quirks else (math.inf, math.inf)
-    for x, y, yaw in trace[state.tick + 1:]:
+    for x, y, yaw in trace[state.tick + 1 :]:
         state.tick += 1
         t_odom = state.tick / ODOMETRY_RATE_HZ
         if gap[0] <= t_odom < gap[1]:

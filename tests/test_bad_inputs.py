@@ -29,11 +29,14 @@ def _one_error(capsys, *needles: str) -> str:
     return errors[0]
 
 
-@pytest.mark.parametrize("argv,needle", [
-    (["show", "gen:-1", "--out", "m.png"], "gen:-1"),
-    (["record", "demo_course", "--seed", "-1", "--out", "r1"], "--seed"),
-    (["show", "demo_course", "--out", "map.xyz"], "--out"),
-])
+@pytest.mark.parametrize(
+    "argv,needle",
+    [
+        (["show", "gen:-1", "--out", "m.png"], "gen:-1"),
+        (["record", "demo_course", "--seed", "-1", "--out", "r1"], "--seed"),
+        (["show", "demo_course", "--out", "map.xyz"], "--out"),
+    ],
+)
 def test_bad_flags(tmp_path: Path, capsys, monkeypatch, argv, needle):
     monkeypatch.chdir(tmp_path)
     assert main(argv) == 2
@@ -89,11 +92,21 @@ def _damage(rec: Path, how: str) -> None:
         Image.fromarray(np.zeros((48, 64), np.uint8)).save(rec / "images" / "000003.png")
 
 
-@pytest.mark.parametrize("how,needle", [
-    ("truncated", "frames.jsonl"), ("reversed", "frames.jsonl"), ("nan pose", "line 6.pose"), ("empty", "frames.jsonl"),
-    ("scenario list", "scenario.yaml"), ("camera str", "camera"), ("no profile", "profile"), ("class 200", "000003.png"), ("rgb frame", "000003.png"),
-    ("small frame", "000003.png"),
-])
+@pytest.mark.parametrize(
+    "how,needle",
+    [
+        ("truncated", "frames.jsonl"),
+        ("reversed", "frames.jsonl"),
+        ("nan pose", "line 6.pose"),
+        ("empty", "frames.jsonl"),
+        ("scenario list", "scenario.yaml"),
+        ("camera str", "camera"),
+        ("no profile", "profile"),
+        ("class 200", "000003.png"),
+        ("rgb frame", "000003.png"),
+        ("small frame", "000003.png"),
+    ],
+)
 def test_a_broken_recording_is_refused_by_featurize(tmp_path: Path, capsys, recording, how, needle):
     rec = tmp_path / "rec"
     shutil.copytree(recording, rec)
@@ -110,20 +123,27 @@ def _dataset_with(tmp_path: Path, **change) -> Path:
 
     rng = np.random.default_rng(0)
     n = 50
-    tensors = {"U": rng.uniform(0, 1, (n, 21, 5)).astype(np.float32), "labels": rng.integers(0, 21, n), "w": np.zeros(n, np.float32),
-               "source": np.zeros(n, np.int64)}
+    tensors = {
+        "U": rng.uniform(0, 1, (n, 21, 5)).astype(np.float32),
+        "labels": rng.integers(0, 21, n),
+        "w": np.zeros(n, np.float32),
+        "source": np.zeros(n, np.int64),
+    }
     tensors.update(change)
     return write_tensor_file(tmp_path / "d.safetensors", tensors, {"format": FORMAT, **model_meta()})
 
 
-@pytest.mark.parametrize("change,needle", [
-    ({"U": np.full((50, 21, 5), np.nan, np.float32)}, "U:"),
-    ({"U": np.zeros((50, 105), np.float32)}, "U:"),
-    ({"labels": np.full(50, 30)}, "labels:"),
-    ({"labels": np.zeros(49, np.int64)}, "labels:"),
-    ({"w": np.full(50, np.inf, np.float32)}, "w:"),
-    ({"labels": np.full(50, 10)}, "same label"),
-])
+@pytest.mark.parametrize(
+    "change,needle",
+    [
+        ({"U": np.full((50, 21, 5), np.nan, np.float32)}, "U:"),
+        ({"U": np.zeros((50, 105), np.float32)}, "U:"),
+        ({"labels": np.full(50, 30)}, "labels:"),
+        ({"labels": np.zeros(49, np.int64)}, "labels:"),
+        ({"w": np.full(50, np.inf, np.float32)}, "w:"),
+        ({"labels": np.full(50, 10)}, "same label"),
+    ],
+)
 def test_a_broken_or_degenerate_dataset_is_refused_before_training(tmp_path: Path, capsys, change, needle):
     data = _dataset_with(tmp_path, **change)
     assert main(["train", str(data), "--out", str(tmp_path / "m.safetensors"), "--epochs", "1"]) == 2
@@ -142,8 +162,11 @@ def test_a_model_with_nan_weights_is_refused(tmp_path: Path, capsys):
     weights["layers.1.weight"][0, 0] = np.nan
     path = tmp_path / "m.safetensors"
     # save_model refuses such weights (a fit that diverged is never written); a file made elsewhere is refused where it is read
-    _write(path, {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in weights.items()},
-           {"format": FORMAT, "kind": CLASSIFIER, "classifier": ClassifierConfig().to_dict(), **model_meta()})
+    _write(
+        path,
+        {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in weights.items()},
+        {"format": FORMAT, "kind": CLASSIFIER, "classifier": ClassifierConfig().to_dict(), **model_meta()},
+    )
     assert main(["evaluate", str(path), "demo_course", "--seeds", "1", "--out", str(tmp_path / "e")]) == 2
     _one_error(capsys, str(path), "weights.layers.1.weight")
 
@@ -152,14 +175,17 @@ def _contents(folder: Path) -> dict[str, bytes]:
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
-@pytest.mark.parametrize("argv", [
-    ["featurize", "REC", "--out", "REC/frames.jsonl"],
-    ["featurize", "REC", "--out", "REC/new.safetensors"],
-    ["train", "REC", "--out", "REC/meta.json"],
-    ["export", "REC", "--format", "mcap", "--out", "REC/frames.jsonl"],
-    ["inspect", "REC", "--out", "REC/images/000000.png"],
-    ["import", "REC", "--robot", "robot.yaml", "--out", "REC/imported"],
-])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["featurize", "REC", "--out", "REC/frames.jsonl"],
+        ["featurize", "REC", "--out", "REC/new.safetensors"],
+        ["train", "REC", "--out", "REC/meta.json"],
+        ["export", "REC", "--format", "mcap", "--out", "REC/frames.jsonl"],
+        ["inspect", "REC", "--out", "REC/images/000000.png"],
+        ["import", "REC", "--robot", "robot.yaml", "--out", "REC/imported"],
+    ],
+)
 def test_an_output_inside_an_input_is_refused_before_any_work(tmp_path: Path, capsys, recording, argv):
     rec = shutil.copytree(recording, tmp_path / "rec")
     before = _contents(rec)
@@ -175,18 +201,22 @@ def test_an_output_that_is_a_device_or_a_fifo_is_refused_and_left_as_it_was(tmp_
 
     os.mkfifo(tmp_path / "fifo.png")
     (tmp_path / "dev.safetensors").symlink_to("/dev/null")
-    for argv, kind in ((["show", "demo_course", "--out", str(tmp_path / "fifo.png")], "FIFO"),
-                       (["train", str(recording), "--out", str(tmp_path / "dev.safetensors")], "character device"),
-                       (["export", str(recording), "--format", "mcap", "--out", str(tmp_path / "fifo.png")], "FIFO"),
-                       (["render", "demo_course", "--out", str(tmp_path / "dev.safetensors")], "character device")):
+    for argv, kind in (
+        (["show", "demo_course", "--out", str(tmp_path / "fifo.png")], "FIFO"),
+        (["train", str(recording), "--out", str(tmp_path / "dev.safetensors")], "character device"),
+        (["export", str(recording), "--format", "mcap", "--out", str(tmp_path / "fifo.png")], "FIFO"),
+        (["render", "demo_course", "--out", str(tmp_path / "dev.safetensors")], "character device"),
+    ):
         assert main(argv) == 2
         _one_error(capsys, "--out", kind)
     assert stat.S_ISFIFO((tmp_path / "fifo.png").stat().st_mode)
     assert stat.S_ISCHR(os.stat("/dev/null").st_mode) and (tmp_path / "dev.safetensors").is_symlink()
 
 
-_ROBOT = ("format: terrapref-robot/1\ntopics: {segmentation: /seg, camera_info: /info, odometry: /odom, command: /cmd}\n"
-          "camera: {height_m: 1.0, pitch_deg: 30.0}\n")
+_ROBOT = (
+    "format: terrapref-robot/1\ntopics: {segmentation: /seg, camera_info: /info, odometry: /odom, command: /cmd}\n"
+    "camera: {height_m: 1.0, pitch_deg: 30.0}\n"
+)
 
 
 @pytest.mark.parametrize("kind", ["scenario", "perception", "robot", "label map", "class table"])
@@ -196,7 +226,11 @@ def test_a_yaml_file_with_a_key_given_twice_is_refused_naming_the_key_and_its_li
         "scenario": ("s.yaml", "format: terrapref-scenario/1\nname: a\nname: b\n", ["validate", "s.yaml"]),
         "perception": ("p.yaml", "format: terrapref-perception/1\nlabels:\n  flip_rate: 0.1\n  flip_rate: 0.0\n", ["perception", "p.yaml"]),
         "robot": ("r.yaml", _ROBOT + "labels: rellis3d\nlabels: terrapref\n", ["import", "x.bag", "--robot", "r.yaml", "--out", "o"]),
-        "label map": ("l.yaml", "format: terrapref-labels/1\nids:\n  3: grass\n  0x3: mud\n", ["import", "x.bag", "--robot", "r.yaml", "--out", "o"]),
+        "label map": (
+            "l.yaml",
+            "format: terrapref-labels/1\nids:\n  3: grass\n  0x3: mud\n",
+            ["import", "x.bag", "--robot", "r.yaml", "--out", "o"],
+        ),
         "class table": ("c.yaml", "format: terrapref-classes/1\nclasses: []\nclasses: []\n", None),
     }
     name, text, argv = files[kind]
@@ -216,11 +250,14 @@ def test_a_yaml_file_with_a_key_given_twice_is_refused_naming_the_key_and_its_li
     assert "given twice (first at line" in err.err + err.out and "Traceback" not in err.err
 
 
-@pytest.mark.parametrize("text", [
-    "fx: 0.0\n",
-    "fx: -300.0\nfy: 300.0\n",
-    "image_width: 640\nimage_height: 480\ncamera_matrix: {rows: 3, cols: 3, data: [-300, 0, 320, 0, 300, 240, 0, 0, 1]}\n",
-])
+@pytest.mark.parametrize(
+    "text",
+    [
+        "fx: 0.0\n",
+        "fx: -300.0\nfy: 300.0\n",
+        "image_width: 640\nimage_height: 480\ncamera_matrix: {rows: 3, cols: 3, data: [-300, 0, 320, 0, 300, 240, 0, 0, 1]}\n",
+    ],
+)
 def test_a_camera_file_with_a_focal_length_that_is_not_positive_is_refused(tmp_path: Path, capsys, recording, text):
     (tmp_path / "cam.yaml").write_text(text)
     assert main(["featurize", str(recording), "--camera", str(tmp_path / "cam.yaml"), "--out", str(tmp_path / "d.safetensors")]) == 2
@@ -237,15 +274,18 @@ def test_a_recording_whose_camera_has_no_focal_length_is_refused(tmp_path: Path,
     _one_error(capsys, "meta.json", "camera", "fy must be a focal length > 0")
 
 
-@pytest.mark.parametrize("argv, needles", [
-    (["record", "demo_course", "--profile", "", "--out", "OUT/r"], ("--profile", "exactly once")),
-    (["train", "REC", "--hidden", "100000000", "--out", "OUT/m.safetensors"], ("--hidden", "weights", "at most")),
-    (["render", "demo_course", "--pose", "1e308", "0", "0", "--out", "OUT/s.png"], ("--pose", "within 30 m")),
-    (["evaluate", "M", "demo_course", "--frames", "5,99999", "--out", "OUT/e"], ("--frames", "99999", "time limit")),
-    (["train", "REC", "REC", "--out", "OUT/m.safetensors"], ("REC", "given twice")),
-    (["featurize", "REC", "REC/", "--out", "OUT/d.safetensors"], ("REC", "given twice")),
-    (["evaluate", "M", "demo_course", "demo_course", "--out", "OUT/e"], ("demo_course", "given twice")),
-])
+@pytest.mark.parametrize(
+    "argv, needles",
+    [
+        (["record", "demo_course", "--profile", "", "--out", "OUT/r"], ("--profile", "exactly once")),
+        (["train", "REC", "--hidden", "100000000", "--out", "OUT/m.safetensors"], ("--hidden", "weights", "at most")),
+        (["render", "demo_course", "--pose", "1e308", "0", "0", "--out", "OUT/s.png"], ("--pose", "within 30 m")),
+        (["evaluate", "M", "demo_course", "--frames", "5,99999", "--out", "OUT/e"], ("--frames", "99999", "time limit")),
+        (["train", "REC", "REC", "--out", "OUT/m.safetensors"], ("REC", "given twice")),
+        (["featurize", "REC", "REC/", "--out", "OUT/d.safetensors"], ("REC", "given twice")),
+        (["evaluate", "M", "demo_course", "demo_course", "--out", "OUT/e"], ("demo_course", "given twice")),
+    ],
+)
 def test_values_that_cannot_be_right_and_inputs_given_twice_are_refused_before_any_work(tmp_path: Path, capsys, recording, argv, needles):
     out = tmp_path / "out"
     out.mkdir()
@@ -271,16 +311,21 @@ def _full_disk_after(writes: int):
         if len(calls) > writes:
             raise SafetensorError("Error while serializing: I/O error: No space left on device (os error 28)")
         save_file(tensors, filename, metadata=metadata)
+
     return write
 
 
 @pytest.mark.parametrize("command, writes", [("train", 0), ("train", 2), ("featurize", 0)])
-def test_a_full_disk_is_one_error_naming_the_output_and_leaves_nothing_behind(tmp_path: Path, capsys, monkeypatch, recording, command, writes):
+def test_a_full_disk_is_one_error_naming_the_output_and_leaves_nothing_behind(
+    tmp_path: Path, capsys, monkeypatch, recording, command, writes
+):
     monkeypatch.setattr("terrapref.tensorfile.save_file", _full_disk_after(writes))
     out = tmp_path / "out"
     out.mkdir()
     name = "m.safetensors" if command == "train" else "d.safetensors"
-    assert main([command, str(recording), "--out", str(out / name), *(["--epochs", "3", "--members", "1"] if command == "train" else [])]) == 2
+    assert (
+        main([command, str(recording), "--out", str(out / name), *(["--epochs", "3", "--members", "1"] if command == "train" else [])]) == 2
+    )
     _one_error(capsys, str(out / name), "No space left on device")
     assert not any(out.iterdir()), list(out.iterdir())  # no model, checkpoints or .interrupted
 
@@ -299,18 +344,22 @@ def test_record_onto_a_full_disk_keeps_the_recording_it_replaces_and_no_hidden_f
         if len(calls) > 10:
             raise OSError(errno.ENOSPC, "No space left on device", str(path))
         return real(path, image, **kwargs)
+
     monkeypatch.setattr(recording_module, "write_png_atomic", write)
     assert main(["record", "demo_course", "--out", str(rec), "--force", "--quiet"]) == 2
     _one_error(capsys, "No space left on device")
     assert _contents(rec) == before and sorted(p.name for p in tmp_path.iterdir()) == ["rec"]
 
 
-@pytest.mark.parametrize("argv, needles", [
-    (["evaluate", "m.safetensors", "demo_course", "--seeds", "abc", "--out", "e"], ("terrapref evaluate", "--seeds", "'abc'")),
-    (["render", "demo_course", "--pose", "8", "10", "--out", "s.png"], ("terrapref render", "--pose", "expected 3 arguments")),
-    (["record", "teach_course"], ("terrapref record", "--out")),
-    (["drive-it"], ("terrapref", "invalid choice", "'drive-it'")),
-])
+@pytest.mark.parametrize(
+    "argv, needles",
+    [
+        (["evaluate", "m.safetensors", "demo_course", "--seeds", "abc", "--out", "e"], ("terrapref evaluate", "--seeds", "'abc'")),
+        (["render", "demo_course", "--pose", "8", "10", "--out", "s.png"], ("terrapref render", "--pose", "expected 3 arguments")),
+        (["record", "teach_course"], ("terrapref record", "--out")),
+        (["drive-it"], ("terrapref", "invalid choice", "'drive-it'")),
+    ],
+)
 def test_the_command_lines_own_refusals_are_one_line(capsys, argv: list[str], needles: tuple[str, ...]):
     with pytest.raises(SystemExit) as info:
         main(argv)

@@ -29,7 +29,9 @@ FORMATS = [("mcap", "mono8", "drive.mcapbag"), ("rosbag1", "mono16", "drive.bag"
 def logs(tmp_path_factory) -> dict:
     root = tmp_path_factory.mktemp("bags")
     write_robot(root / "robot.yaml", robot_yaml())
-    bags = {storage: write_synthetic_bag(root / name, storage, encoding=encoding, max_seconds=SECONDS) for storage, encoding, name in FORMATS}
+    bags = {
+        storage: write_synthetic_bag(root / name, storage, encoding=encoding, max_seconds=SECONDS) for storage, encoding, name in FORMATS
+    }
     return {"root": root, "robot": root / "robot.yaml", "bags": bags}
 
 
@@ -168,7 +170,10 @@ def test_a_missing_topic_or_a_wrong_type_names_the_bag_and_the_field(tmp_path: P
 def test_every_missing_or_mistyped_topic_is_named_in_one_message(tmp_path: Path, logs, capsys):
     bag = str(logs["bags"]["mcap"])
     robot = tmp_path / "robot.yaml"
-    write_robot(robot, robot_yaml().replace(TOPICS["odometry"], "/warthog/odom").replace(f"command: {TOPICS['command']}", f"command: {TOPICS['path']}"))
+    write_robot(
+        robot,
+        robot_yaml().replace(TOPICS["odometry"], "/warthog/odom").replace(f"command: {TOPICS['command']}", f"command: {TOPICS['path']}"),
+    )
     assert main(["import", bag, "--robot", str(robot), "--out", str(tmp_path / "a")]) == 2
     _one_line(capsys, bag, "topics.odometry /warthog/odom is not in the bag", f"topics.command {TOPICS['path']} has type nav_msgs/msg/Path")
 
@@ -187,9 +192,13 @@ def _rewritten(mcap: Path, out: Path, service_events: bool = False, receive_shif
         writer.start(profile="ros2", library="terrapref tests")
         summary = reader.get_summary()
         schemas = {i: writer.register_schema(s.name, s.encoding, s.data) for i, s in summary.schemas.items()}
-        channels = {i: writer.register_channel(c.topic, c.message_encoding, schemas[c.schema_id], c.metadata) for i, c in summary.channels.items()}
+        channels = {
+            i: writer.register_channel(c.topic, c.message_encoding, schemas[c.schema_id], c.metadata) for i, c in summary.channels.items()
+        }
         raw = b"=" * 80 + b"\nSRV: example_interfaces/srv/AddTwoInts\nint64 a\nint64 b\n---\nint64 sum\n"
-        event = writer.register_channel("/add_two_ints/_service_event", "cdr", writer.register_schema("example_interfaces/srv/AddTwoInts_Event", "ros2msg", raw), {})
+        event = writer.register_channel(
+            "/add_two_ints/_service_event", "cdr", writer.register_schema("example_interfaces/srv/AddTwoInts_Event", "ros2msg", raw), {}
+        )
         for i, (_, channel, message) in enumerate(reader.iter_messages()):
             writer.add_message(channels[channel.id], message.log_time + shift_ns, message.data, message.publish_time + shift_ns)
             if service_events and i % 50 == 0:
@@ -263,15 +272,18 @@ def test_a_failed_force_import_keeps_the_old_recording(tmp_path: Path, logs, cap
     assert (out / "frames.jsonl").read_bytes() == before and read_recording(out).complete
 
 
-@pytest.mark.parametrize("edit,field", [
-    (lambda t: t + "speed: 3\n", "speed"),
-    (lambda t: t.replace("  pitch_deg: 30.0\n", ""), "camera.pitch_deg"),
-    (lambda t: t.replace("height_m: 1.0", "height_m: -1"), "camera.height_m"),
-    (lambda t: t.replace(f"  command: {TOPICS['command']}\n", ""), "topics.command"),
-    (lambda t: t.replace(TOPICS["segmentation"], "seg"), "topics.segmentation"),
-    (lambda t: t.replace(f"labels: {LENIENT_LABELS}", "labels: cityscapes"), "labels"),
-    (lambda t: t.replace("terrapref-robot/1", "terrapref-robot/9"), "format"),
-])
+@pytest.mark.parametrize(
+    "edit,field",
+    [
+        (lambda t: t + "speed: 3\n", "speed"),
+        (lambda t: t.replace("  pitch_deg: 30.0\n", ""), "camera.pitch_deg"),
+        (lambda t: t.replace("height_m: 1.0", "height_m: -1"), "camera.height_m"),
+        (lambda t: t.replace(f"  command: {TOPICS['command']}\n", ""), "topics.command"),
+        (lambda t: t.replace(TOPICS["segmentation"], "seg"), "topics.segmentation"),
+        (lambda t: t.replace(f"labels: {LENIENT_LABELS}", "labels: cityscapes"), "labels"),
+        (lambda t: t.replace("terrapref-robot/1", "terrapref-robot/9"), "format"),
+    ],
+)
 def test_a_bad_robot_file_is_one_line_naming_file_and_field(tmp_path: Path, edit, field: str):
     robot = tmp_path / "robot.yaml"
     robot.write_text(edit(robot_yaml()))
@@ -337,7 +349,15 @@ def test_an_exported_recording_imports_to_the_same_dataset(tmp_path: Path, impor
     topics = _topics(out)
     assert topics["/terrapref/labels"] == ("sensor_msgs/msg/CompressedImage", len(rec))
     assert topics["/terrapref/trajectories"] == ("visualization_msgs/msg/MarkerArray", len(rec))
-    assert {"/tf", "/tf_static", "/terrapref/odom", "/terrapref/cmd_vel", "/terrapref/path", "/terrapref/camera_info", "/terrapref/labels_color"} <= set(topics)
+    assert {
+        "/tf",
+        "/tf_static",
+        "/terrapref/odom",
+        "/terrapref/cmd_vel",
+        "/terrapref/path",
+        "/terrapref/camera_info",
+        "/terrapref/labels_color",
+    } <= set(topics)
     if fmt == "mcap":
         _check_with_the_reference_mcap_reader(out, len(rec))
     assert _chunk_compression(out) == {"mcap": {"zstd"}, "rosbag1": {"lz4"}}[fmt]  # each format's own, which its players read
@@ -367,7 +387,24 @@ def test_evaluate_writes_each_run_as_mcap(tmp_path: Path, capsys):
 
     model = linear_model(tmp_path / "linear.safetensors")
     out = tmp_path / "ev"
-    assert main(["evaluate", str(model), "fig7_rock_vs_non_traversable_left", "--seeds", "1", "--no-driver", "--workers", "1", "--out", str(out), "--mcap"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                str(model),
+                "fig7_rock_vs_non_traversable_left",
+                "--seeds",
+                "1",
+                "--no-driver",
+                "--workers",
+                "1",
+                "--out",
+                str(out),
+                "--mcap",
+            ]
+        )
+        == 0
+    )
     run = out / "runs" / "fig7_rock_vs_non_traversable_left_seed0.mcap"
     topics = _topics(run)
     frames = topics["/terrapref/labels"][1]
@@ -401,7 +438,21 @@ def test_replay_reports_agreement_with_the_operator(tmp_path: Path, logs, capsys
     other = load_model(model)
     meta = model_meta(camera=CameraConfig(pitch_deg=20.0))
     save_model(tmp_path / "other.safetensors", other.classifier, other.weights, meta)
-    assert main(["replay", str(logs["bags"]["sqlite3"]), "--robot", str(logs["robot"]), "--model", str(tmp_path / "other.safetensors"), "--out", str(tmp_path / "r2")]) == 2
+    assert (
+        main(
+            [
+                "replay",
+                str(logs["bags"]["sqlite3"]),
+                "--robot",
+                str(logs["robot"]),
+                "--model",
+                str(tmp_path / "other.safetensors"),
+                "--out",
+                str(tmp_path / "r2"),
+            ]
+        )
+        == 2
+    )
     _one_line(capsys, "other.safetensors", "another camera")
     assert not (tmp_path / "r2").exists()  # refused as soon as the log's camera is known, nothing left half-made
 
@@ -455,21 +506,35 @@ def test_an_export_stamps_its_images_in_the_optical_frame_and_latches_its_static
         conns = {c.topic: c for c in reader.connections}
         assert [q.durability for q in conns["/tf_static"].ext.offered_qos_profiles] == [QosDurability.TRANSIENT_LOCAL]
         assert conns["/tf"].ext.offered_qos_profiles == []
-        frames = {topic: reader.deserialize(raw, conns[topic].msgtype).header.frame_id
-                  for topic in ("/terrapref/labels", "/terrapref/camera_info")
-                  for _, _, raw in [next(reader.messages(connections=[conns[topic]]))]}
+        frames = {
+            topic: reader.deserialize(raw, conns[topic].msgtype).header.frame_id
+            for topic in ("/terrapref/labels", "/terrapref/camera_info")
+            for _, _, raw in [next(reader.messages(connections=[conns[topic]]))]
+        }
         static = next(reader.messages(connections=[conns["/tf_static"]]))
         transforms = reader.deserialize(static[2], "tf2_msgs/msg/TFMessage").transforms
     assert set(frames.values()) == {"camera_optical"}
     # The optical axes, carried to base_link through the chain, are the camera model's.
-    static = {t.child_frame_id: (t.header.frame_id, np.array([t.transform.translation.x, t.transform.translation.y, t.transform.translation.z]),
-                                 _rotation(t.transform.rotation)) for t in transforms}
+    static = {
+        t.child_frame_id: (
+            t.header.frame_id,
+            np.array([t.transform.translation.x, t.transform.translation.y, t.transform.translation.z]),
+            _rotation(t.transform.rotation),
+        )
+        for t in transforms
+    }
     assert static["camera_link"][0] == "base_link" and static["camera_optical"][0] == "camera_link"
     camera = PinholeCamera(CameraConfig.from_dict(rec.meta["camera"]))
-    np.testing.assert_allclose((static["camera_link"][2] @ static["camera_optical"][2]).T, camera.R, atol=1e-12)  # rows: right, down, forward
+    np.testing.assert_allclose(
+        (static["camera_link"][2] @ static["camera_optical"][2]).T, camera.R, atol=1e-12
+    )  # rows: right, down, forward
     mount = camera_mount_from_tf(static, "base_link", "camera_optical", str(out), [])
-    assert mount["pitch_deg"] == pytest.approx(camera.config.pitch_deg) and mount["yaw_deg"] == pytest.approx(camera.config.yaw_deg, abs=1e-9)
-    assert mount["height_m"] == pytest.approx(camera.config.mount_height_m) and mount["forward_m"] == pytest.approx(camera.config.mount_forward_m)
+    assert mount["pitch_deg"] == pytest.approx(camera.config.pitch_deg) and mount["yaw_deg"] == pytest.approx(
+        camera.config.yaw_deg, abs=1e-9
+    )
+    assert mount["height_m"] == pytest.approx(camera.config.mount_height_m) and mount["forward_m"] == pytest.approx(
+        camera.config.mount_forward_m
+    )
     with AnyReader([logs["bags"]["rosbag1"]]) as reader:
         assert [c.ext.latching for c in reader.connections if c.topic == "/tf_static"] == [1]
 

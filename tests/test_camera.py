@@ -30,7 +30,9 @@ def _grass_with_mud_square(center: tuple[float, float], half_m: float, size_m: f
     return _world(raster, res)
 
 
-def _blocks_world(rng: np.random.Generator, size_m: tuple[float, float] = (40.0, 25.0), res: float = 0.05, block_m: float = 0.5) -> WorldMap:
+def _blocks_world(
+    rng: np.random.Generator, size_m: tuple[float, float] = (40.0, 25.0), res: float = 0.05, block_m: float = 0.5
+) -> WorldMap:
     """Random classes in square blocks; a non-square map, so rows and columns cannot be swapped."""
     k = round(block_m / res)
     blocks = rng.integers(0, 5, (round(size_m[1] / block_m), round(size_m[0] / block_m))).astype(np.uint8)
@@ -251,7 +253,16 @@ def test_render_matches_ray_casting_on_a_large_map():
     "config",
     [
         CameraConfig(pitch_deg=20.0, hfov_deg=70.0, mount_height_m=1.5),
-        CameraConfig(pitch_deg=35.0, hfov_deg=100.0, mount_height_m=0.7, yaw_deg=15.0, mount_forward_m=0.3, max_range_m=12.0, width_px=160, height_px=90),
+        CameraConfig(
+            pitch_deg=35.0,
+            hfov_deg=100.0,
+            mount_height_m=0.7,
+            yaw_deg=15.0,
+            mount_forward_m=0.3,
+            max_range_m=12.0,
+            width_px=160,
+            height_px=90,
+        ),
     ],
     ids=["p20-h70-1.5m", "yawed-forward-small"],
 )
@@ -360,8 +371,11 @@ def _numpy_render(renderer: SegmentationRenderer, pose: Pose) -> np.ndarray:
     return out
 
 
-@pytest.mark.parametrize("config", [CameraConfig(), CameraConfig(pitch_deg=45.0, hfov_deg=60.0, mount_height_m=0.8, width_px=320, height_px=200)],
-                         ids=["default", "p45-small"])
+@pytest.mark.parametrize(
+    "config",
+    [CameraConfig(), CameraConfig(pitch_deg=45.0, hfov_deg=60.0, mount_height_m=0.8, width_px=320, height_px=200)],
+    ids=["default", "p45-small"],
+)
 def test_compiled_render_equals_the_numpy_form_pixel_for_pixel(config):
     rng = np.random.default_rng(23)
     # Every cell its own random class, so a pixel read from a neighbouring cell would show.
@@ -393,8 +407,11 @@ def test_render_and_pixels_refuse_a_pose_that_is_not_finite_or_a_pixel_off_the_i
 # --- rendering only the pixels a driver reads ------------------------------------------------
 
 
-@pytest.mark.parametrize("config", [CameraConfig(), CameraConfig(pitch_deg=45.0, hfov_deg=60.0, mount_height_m=0.8, width_px=320, height_px=200)],
-                         ids=["default", "p45-small"])
+@pytest.mark.parametrize(
+    "config",
+    [CameraConfig(), CameraConfig(pitch_deg=45.0, hfov_deg=60.0, mount_height_m=0.8, width_px=320, height_px=200)],
+    ids=["default", "p45-small"],
+)
 def test_pixels_equal_the_full_frame_at_random_poses(config):
     rng = np.random.default_rng(11)
     world = _blocks_world(rng)
@@ -489,9 +506,13 @@ pitch_deg: 20.0
     (tmp_path / "ros.yaml").write_text(ros)
     cam = load_camera(tmp_path / "ros.yaml")
     assert cam.intrinsics == (320.0, 320.0, 320.0, 240.0) and cam.mount_height_m == 1.2 and cam.pitch_deg == 20.0
-    for text, field in ((ros.replace("data: [0.0, 0.0, 0.0, 0.0, 0.0]", "data: [0.1, 0.0, 0.0, 0.0, 0.0]"), "distortion_coefficients"),
-                        (ros.replace("image_width: 640", "image_width: -4"), "image_width"),
-                        (ros + "lens: wide\n", "lens"), ("width_px: 320\nzoom: 2\n", "zoom"), ("pitch_deg: .nan\n", "pitch_deg")):
+    for text, field in (
+        (ros.replace("data: [0.0, 0.0, 0.0, 0.0, 0.0]", "data: [0.1, 0.0, 0.0, 0.0, 0.0]"), "distortion_coefficients"),
+        (ros.replace("image_width: 640", "image_width: -4"), "image_width"),
+        (ros + "lens: wide\n", "lens"),
+        ("width_px: 320\nzoom: 2\n", "zoom"),
+        ("pitch_deg: .nan\n", "pitch_deg"),
+    ):
         (tmp_path / "bad.yaml").write_text(text)
         with pytest.raises(UserError) as info:
             load_camera(tmp_path / "bad.yaml")

@@ -125,7 +125,11 @@ def test_a_profile_of_the_example_table_names_its_columns(example):
     text = "bush,water,dirt,gravel,puddle,mud,lethal"
     assert PreferenceProfile.parse(text, example).order == tuple(text.split(","))
     assert PreferenceProfile.default(example).order == example.profile
-    for bad in ("bush,water,dirt,gravel,puddle,mud,tree", "bush,water,dirt,gravel,puddle,mud", "bush,water,dirt,gravel,puddle,mud,lethal,grass"):
+    for bad in (
+        "bush,water,dirt,gravel,puddle,mud,tree",
+        "bush,water,dirt,gravel,puddle,mud",
+        "bush,water,dirt,gravel,puddle,mud,lethal,grass",
+    ):
         with pytest.raises(ConfigError):
             PreferenceProfile.parse(bad, example)
 
@@ -135,27 +139,53 @@ def test_a_profile_of_the_example_table_names_its_columns(example):
 ELEVEN = ["grass", *(f"c{i}" for i in range(MAX_TERRAIN_CLASSES + 1)), "tree"]
 
 
-@pytest.mark.parametrize("table,field,words", [
-    (("grass", ["tree"], ELEVEN), "classes", ["11 feature classes", f"at most {MAX_TERRAIN_CLASSES}"]),
-    (("grass", ["grass", "tree"], ["grass", "mud", "tree"]), "lethal", ["background class 'grass'", "cannot be lethal"]),
-    (("grass", ["grass"], ["grass", "mud"]), "lethal", ["background class 'grass'", "cannot be lethal"]),
-    (("grass", ["grass", "tree"], ["grass", "mud", "tree"], ["mud", "lethal"]), "lethal", ["background class 'grass'", "cannot be lethal"]),
-    (("grass", ["tree", "log"], ["grass", "lethal", "tree", "log"]), "classes", ["'lethal'", "clash", "2 lethal classes"]),
-    (("grass", ["lethal", "log"], ["grass", "mud", "lethal", "log"]), "classes", ["'lethal'", "clash"]),
-    (("grass", ["tree", "log"], ["grass", "mud", "rock", "tree", "log"], ["mud", "lethal"]), "profile", ["mud, rock, lethal", "exactly once"]),
-    (("grass", ["tree", "log"], ["grass", "mud", "tree", "log"], ["mud", "lethal", "rock"]), "profile", ["mud, lethal"]),
-    (("grass", ["tree", "log"], ["grass", "mud", "tree", "log"], ["mud", "tree"]), "profile", ["mud, lethal"]),
-    (("grass", ["tree", "log"], ["grass", "mud", "tree", "log"], ["mud", "mud", "lethal"]), "profile", ["mud, lethal"]),
-    (("sand", ["tree"], ["grass", "tree"]), "background", ["'sand'"]),
-    (("grass", ["stone"], ["grass", "tree"]), "lethal", ["known class names"]),
-    (("grass", ["tree"], ["grass", "unknown", "tree"]), "classes[1].name", ["'unknown'", "reserved"]),
-    (("grass", ["tree"], ["grass", "avoid", "tree"]), "classes[1].name", ["'avoid'", "reserved", "zone"]),
-    (("grass", ["tree"], ["grass", "best", "tree"]), "classes[1].name", ["'best'", "reserved", "zone"]),
-    (("grass", ["tree"], ["grass", "'True'", "tree"], ["True", "tree"]), "profile", ["True, tree", "exactly once"]),
-], ids=["11 feature classes", "background lethal", "background the only lethal", "background lethal, with a profile", "class lethal, 2 lethal",
-        "class lethal is lethal, 2 lethal", "profile misses a column", "profile names an unknown class",
-        "profile names a lethal class", "profile names a column twice", "unknown background", "unknown lethal",
-        "a class named unknown", "a class named avoid", "a class named best", "a boolean in the profile"])
+@pytest.mark.parametrize(
+    "table,field,words",
+    [
+        (("grass", ["tree"], ELEVEN), "classes", ["11 feature classes", f"at most {MAX_TERRAIN_CLASSES}"]),
+        (("grass", ["grass", "tree"], ["grass", "mud", "tree"]), "lethal", ["background class 'grass'", "cannot be lethal"]),
+        (("grass", ["grass"], ["grass", "mud"]), "lethal", ["background class 'grass'", "cannot be lethal"]),
+        (
+            ("grass", ["grass", "tree"], ["grass", "mud", "tree"], ["mud", "lethal"]),
+            "lethal",
+            ["background class 'grass'", "cannot be lethal"],
+        ),
+        (("grass", ["tree", "log"], ["grass", "lethal", "tree", "log"]), "classes", ["'lethal'", "clash", "2 lethal classes"]),
+        (("grass", ["lethal", "log"], ["grass", "mud", "lethal", "log"]), "classes", ["'lethal'", "clash"]),
+        (
+            ("grass", ["tree", "log"], ["grass", "mud", "rock", "tree", "log"], ["mud", "lethal"]),
+            "profile",
+            ["mud, rock, lethal", "exactly once"],
+        ),
+        (("grass", ["tree", "log"], ["grass", "mud", "tree", "log"], ["mud", "lethal", "rock"]), "profile", ["mud, lethal"]),
+        (("grass", ["tree", "log"], ["grass", "mud", "tree", "log"], ["mud", "tree"]), "profile", ["mud, lethal"]),
+        (("grass", ["tree", "log"], ["grass", "mud", "tree", "log"], ["mud", "mud", "lethal"]), "profile", ["mud, lethal"]),
+        (("sand", ["tree"], ["grass", "tree"]), "background", ["'sand'"]),
+        (("grass", ["stone"], ["grass", "tree"]), "lethal", ["known class names"]),
+        (("grass", ["tree"], ["grass", "unknown", "tree"]), "classes[1].name", ["'unknown'", "reserved"]),
+        (("grass", ["tree"], ["grass", "avoid", "tree"]), "classes[1].name", ["'avoid'", "reserved", "zone"]),
+        (("grass", ["tree"], ["grass", "best", "tree"]), "classes[1].name", ["'best'", "reserved", "zone"]),
+        (("grass", ["tree"], ["grass", "'True'", "tree"], ["True", "tree"]), "profile", ["True, tree", "exactly once"]),
+    ],
+    ids=[
+        "11 feature classes",
+        "background lethal",
+        "background the only lethal",
+        "background lethal, with a profile",
+        "class lethal, 2 lethal",
+        "class lethal is lethal, 2 lethal",
+        "profile misses a column",
+        "profile names an unknown class",
+        "profile names a lethal class",
+        "profile names a column twice",
+        "unknown background",
+        "unknown lethal",
+        "a class named unknown",
+        "a class named avoid",
+        "a class named best",
+        "a boolean in the profile",
+    ],
+)
 def test_a_bad_table_is_refused_naming_the_file_and_field(tmp_path, table, field, words):
     path = _write_table(tmp_path, *table)
     with pytest.raises(ConfigError) as caught:
@@ -169,7 +199,11 @@ def test_a_bad_table_is_refused_naming_the_file_and_field(tmp_path, table, field
 def test_the_constructor_checks_what_from_dict_checks():
     classes = (TerrainClass(0, "grass", (0, 0, 0)), TerrainClass(1, "mud", (1, 1, 1)), TerrainClass(2, "tree", (2, 2, 2)))
     assert ClassTable(classes, "grass", ("tree",), ("mud", "tree")).feature_names == ("mud", "tree")
-    for background, lethal, profile in (("grass", ("grass",), ("mud", "tree")), ("grass", ("tree",), ("mud",)), ("grass", ("tree",), ("mud", "lethal"))):
+    for background, lethal, profile in (
+        ("grass", ("grass",), ("mud", "tree")),
+        ("grass", ("tree",), ("mud",)),
+        ("grass", ("tree",), ("mud", "lethal")),
+    ):
         with pytest.raises(ValueError):
             ClassTable(classes, background, lethal, profile)
 
@@ -213,8 +247,11 @@ def test_balanced_pairs_show_every_pair_once_each_name_left_as_often_as_right(n)
 
 
 def _kinds(items: list[Situation]) -> tuple[list[tuple[str, ...]], list[tuple[str, ...]], list[Situation]]:
-    return ([s.classes for s in items if s.kind == "pair"], [s.classes for s in items if s.kind == "strip"],
-            [s for s in items if s.kind == "lone"])
+    return (
+        [s.classes for s in items if s.kind == "pair"],
+        [s.classes for s in items if s.kind == "strip"],
+        [s for s in items if s.kind == "lone"],
+    )
 
 
 @pytest.mark.parametrize("table", [default_classes(), _synthetic(2, lethal=2), _synthetic(4, lethal=3)], ids=["default", "2+2", "4+3"])
@@ -226,8 +263,12 @@ def test_the_full_design_shows_everything_on_both_sides(table):
     assert all((left in lethal) != (right in lethal) for left, _, right in strips)
     sides = Counter((middle, "left" if left in lethal else "right") for left, middle, _ in strips)
     assert sides == {(c, side): 1 for c in terrain for side in ("left", "right")}
-    assert all(middle in terrain and (left in terrain or right in terrain) and middle not in (left, right) for left, middle, right in strips)
-    assert Counter((s.classes[0], s.offset_m) for s in lone) == {(c, o): 1 for c in (*terrain, *lethal) for o in (LONE_OFFSET_M, -LONE_OFFSET_M)}
+    assert all(
+        middle in terrain and (left in terrain or right in terrain) and middle not in (left, right) for left, middle, right in strips
+    )
+    assert Counter((s.classes[0], s.offset_m) for s in lone) == {
+        (c, o): 1 for c in (*terrain, *lethal) for o in (LONE_OFFSET_M, -LONE_OFFSET_M)
+    }
 
 
 def test_the_compact_design_shows_each_pair_once_balanced(example):
@@ -245,7 +286,7 @@ def test_the_compact_design_shows_each_pair_once_balanced(example):
     assert abs(positive - (len(lone) - positive)) <= 1
     # Each kind spread over the whole drive: every third of it has pairs, strips and lone patches.
     items = situations(example, full=False)
-    thirds = [items[i * len(items) // 3:(i + 1) * len(items) // 3] for i in range(3)]
+    thirds = [items[i * len(items) // 3 : (i + 1) * len(items) // 3] for i in range(3)]
     assert all({s.kind for s in third} == {"pair", "strip", "lone"} for third in thirds)
 
 
@@ -266,8 +307,11 @@ def test_the_design_is_full_while_it_fits_the_budget(example):
     assert [course_length(situations(_synthetic(k), full=True)) <= BUDGET_M for k in range(1, 11)] == [k <= 4 for k in range(1, 11)]
 
 
-@pytest.mark.parametrize("table", [default_classes(), load_classes(EXAMPLE), _synthetic(1, lethal=0), _synthetic(1), _synthetic(10, lethal=3)],
-                         ids=["default", "example", "1+0", "1+1", "10+3"])
+@pytest.mark.parametrize(
+    "table",
+    [default_classes(), load_classes(EXAMPLE), _synthetic(1, lethal=0), _synthetic(1), _synthetic(10, lethal=3)],
+    ids=["default", "example", "1+0", "1+1", "10+3"],
+)
 def test_a_teaching_course_reads_back_and_lies_on_its_map(table):
     items = situations(table)
     course = teaching_course(table)
@@ -324,7 +368,12 @@ def test_a_follow_up_shows_each_open_pair_both_ways_and_the_background_as_lone_p
     # The default table's lethal column is its own class.
     d = default_classes()
     items = follow_up(d, [("grass", "non_traversable"), ("water", "non_traversable")])
-    assert [s.classes for s in items] == [("non_traversable",), ("non_traversable",), ("water", "non_traversable"), ("non_traversable", "water")]
+    assert [s.classes for s in items] == [
+        ("non_traversable",),
+        ("non_traversable",),
+        ("water", "non_traversable"),
+        ("non_traversable", "water"),
+    ]
 
 
 # --- Generated layouts ---------------------------------------------------------------------------
@@ -409,7 +458,9 @@ def test_random_count_is_capped_by_the_tables_orders():
 def test_an_explicit_order_gets_the_lethal_column_appended(example):
     assert parse_orders("mud,rock,water") == (("mud", "rock", "water", "non_traversable"),)
     assert parse_orders("bush,water,dirt,gravel,puddle,mud;dirt,gravel,mud,puddle,water,bush,lethal", example) == (
-        ("bush", "water", "dirt", "gravel", "puddle", "mud", "lethal"), ("dirt", "gravel", "mud", "puddle", "water", "bush", "lethal"))
+        ("bush", "water", "dirt", "gravel", "puddle", "mud", "lethal"),
+        ("dirt", "gravel", "mud", "puddle", "water", "bush", "lethal"),
+    )
 
 
 # --- The command line ----------------------------------------------------------------------------
@@ -433,7 +484,9 @@ def test_course_writes_the_example_tables_teaching_course(tmp_path, capsys, exam
     capsys.readouterr()
     default_file = Path(__file__).resolve().parent.parent / "src" / "terrapref" / "data" / "classes.yaml"
     assert main(["show", str(out), "--classes", str(default_file), "--out", str(tmp_path / "map2.png")]) == 2
-    line = _one_error(capsys, str(out), "classes: the scenario carries the class table of grass, dirt", "not the one given (grass, non_traversable")
+    line = _one_error(
+        capsys, str(out), "classes: the scenario carries the class table of grass, dirt", "not the one given (grass, non_traversable"
+    )
     assert not (tmp_path / "map2.png").exists(), line
 
 
@@ -488,7 +541,10 @@ def test_evaluate_refuses_a_model_of_another_table(tmp_path, capsys):
     assert main(["course", "--classes", str(EXAMPLE), "--out", str(course)]) == 0
     model = linear_model(tmp_path / "m.safetensors")  # made for the default table
     capsys.readouterr()
-    assert main(["evaluate", str(model), str(course), "--classes", str(EXAMPLE), "--out", str(tmp_path / "ev"), "--seeds", "1", "--no-driver"]) == 2
+    assert (
+        main(["evaluate", str(model), str(course), "--classes", str(EXAMPLE), "--out", str(tmp_path / "ev"), "--seeds", "1", "--no-driver"])
+        == 2
+    )
     _one_error(capsys, str(model), "non_traversable", str(EXAMPLE), "person")
     assert not (tmp_path / "ev" / "metrics.json").exists()
 
@@ -535,10 +591,17 @@ def test_identifiability_names_the_tables_background():
     rng = np.random.default_rng(0)
     n, m = 40, 5
     U = rng.uniform(0, 1, (n, m, 3))
-    report = identifiability(U, rng.integers(0, m, n), ("mud", "lethal"), LinearUtility(np.array([-1.0, -3.0, 1.0]), np.zeros(m)),
-                             names=TableNames("sand", ("lethal",)))
+    report = identifiability(
+        U,
+        rng.integers(0, m, n),
+        ("mud", "lethal"),
+        LinearUtility(np.array([-1.0, -3.0, 1.0]), np.zeros(m)),
+        names=TableNames("sand", ("lethal",)),
+    )
     assert report.order == ("sand", "mud", "lethal") and report.background == "sand"
-    assert {frozenset((p.first, p.second)) for p in report.pairs} == {frozenset(p) for p in itertools.combinations(("sand", "mud", "lethal"), 2)}
+    assert {frozenset((p.first, p.second)) for p in report.pairs} == {
+        frozenset(p) for p in itertools.combinations(("sand", "mud", "lethal"), 2)
+    }
     assert GRASS not in " ".join(report.lines())
 
 
@@ -553,8 +616,11 @@ def test_a_bad_colour_of_a_lethal_class_is_one_problem(tmp_path):
 
 def test_a_table_that_differs_only_in_colours_or_profile_is_the_same_table(fig7_recording, tmp_path, capsys):
     default_file = Path(__file__).resolve().parent.parent / "src" / "terrapref" / "data" / "classes.yaml"
-    text = default_file.read_text().replace("[92, 158, 70]", "[90, 160, 70]").replace("profile: [mud, rock, water, non_traversable]",
-                                                                                      "profile: [rock, mud, water, non_traversable]")
+    text = (
+        default_file.read_text()
+        .replace("[92, 158, 70]", "[90, 160, 70]")
+        .replace("profile: [mud, rock, water, non_traversable]", "profile: [rock, mud, water, non_traversable]")
+    )
     recoloured = tmp_path / "recoloured.yaml"
     recoloured.write_text(text)
     table = load_classes(recoloured)
@@ -592,9 +658,11 @@ def test_a_recording_whose_meta_names_no_class_table_is_one_line(fig7_recording,
     meta = json.loads((rec / "meta.json").read_text())
     del meta["classes"]
     (rec / "meta.json").write_text(json.dumps(meta))
-    for argv in (["inspect", str(rec), "--no-preference", "--out", str(tmp_path / "p.png")],
-                 ["inspect", str(rec), "--classes", str(EXAMPLE), "--no-preference", "--out", str(tmp_path / "p.png")],
-                 ["export", str(rec), "--format", "mcap", "--out", str(tmp_path / "r.mcap")]):
+    for argv in (
+        ["inspect", str(rec), "--no-preference", "--out", str(tmp_path / "p.png")],
+        ["inspect", str(rec), "--classes", str(EXAMPLE), "--no-preference", "--out", str(tmp_path / "p.png")],
+        ["export", str(rec), "--format", "mcap", "--out", str(tmp_path / "r.mcap")],
+    ):
         assert main(argv) == 2
         _one_error(capsys, f"{rec / 'meta.json'}: classes: missing")
 
@@ -631,7 +699,10 @@ def test_the_follow_up_loop_runs_without_classes_and_asks_what_drives_leave_open
     assert main(["evaluate", str(model), str(more), "--seeds", "1", "--no-driver", "--out", str(tmp_path / "ev")]) == 0
     assert (tmp_path / "ev" / "metrics.json").is_file()
     capsys.readouterr()
-    assert main(["evaluate", str(model), str(more), "--classes", str(EXAMPLE), "--seeds", "1", "--no-driver", "--out", str(tmp_path / "ev2")]) == 2
+    assert (
+        main(["evaluate", str(model), str(more), "--classes", str(EXAMPLE), "--seeds", "1", "--no-driver", "--out", str(tmp_path / "ev2")])
+        == 2
+    )
     _one_error(capsys, str(model), "classes", str(EXAMPLE))
     assert not (tmp_path / "ev2").exists()
 

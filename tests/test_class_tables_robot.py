@@ -37,8 +37,10 @@ def log(tmp_path_factory, table) -> dict:
     bag = write_synthetic_bag(root / "drive.mcapbag", "mcap", scenario=str(course), profile=table.profile, quirks=False, classes=table)
     topics = "\n".join(f"  {k}: {v}" for k, v in TOPICS.items())
     robot = root / "robot.yaml"
-    robot.write_text(f"format: terrapref-robot/1\ntopics:\n{topics}\ncamera:\n  height_m: 1.0\n  pitch_deg: 30.0\nlabels: {LABELS}\n"
-                     f"profile: [{', '.join(table.profile)}]\n")
+    robot.write_text(
+        f"format: terrapref-robot/1\ntopics:\n{topics}\ncamera:\n  height_m: 1.0\n  pitch_deg: 30.0\nlabels: {LABELS}\n"
+        f"profile: [{', '.join(table.profile)}]\n"
+    )
     return {"root": root, "bag": bag, "robot": robot, "course": course}
 
 

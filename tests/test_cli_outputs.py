@@ -70,8 +70,9 @@ def test_every_argument_of_every_command_says_what_it_is():
 
     parser = build_parser(train_flags=True)
     commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
-    silent = [f"{name} {a.dest}" for name, sub in commands.items() for a in sub._actions
-              if not isinstance(a, argparse._HelpAction) and not a.help]
+    silent = [
+        f"{name} {a.dest}" for name, sub in commands.items() for a in sub._actions if not isinstance(a, argparse._HelpAction) and not a.help
+    ]
     assert not silent, silent
 
 
@@ -79,7 +80,10 @@ def test_every_argument_of_every_command_says_what_it_is():
 def test_render_refuses_a_lossy_image_name_before_writing(tmp_path: Path, capsys, flag: str):
     outputs = {"--out": tmp_path / "seg.png", "--preview": tmp_path / "view.png"} | {flag: tmp_path / "seg.jpg"}
     assert main(["render", "demo_course", "--out", str(outputs["--out"]), "--preview", str(outputs["--preview"])]) == 2
-    assert _error(capsys) == f"error: {tmp_path / 'seg.jpg'}: {flag}: render writes PNG (class ids need a lossless format): give it the suffix .png"
+    assert (
+        _error(capsys)
+        == f"error: {tmp_path / 'seg.jpg'}: {flag}: render writes PNG (class ids need a lossless format): give it the suffix .png"
+    )
     assert list(tmp_path.iterdir()) == []
 
 
@@ -97,8 +101,12 @@ def test_every_flag_with_a_default_names_it_in_its_help():
 
     parser = build_parser(train_flags=True)
     commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
-    unnamed = [f"{name} {a.option_strings[0]}={a.default!r}" for name, sub in commands.items() for a in sub._actions
-               if a.option_strings and a.default not in (None, False, argparse.SUPPRESS) and "default" not in (a.help or "")]
+    unnamed = [
+        f"{name} {a.option_strings[0]}={a.default!r}"
+        for name, sub in commands.items()
+        for a in sub._actions
+        if a.option_strings and a.default not in (None, False, argparse.SUPPRESS) and "default" not in (a.help or "")
+    ]
     assert not unnamed, unnamed  # select --help once gave none of its five
 
 

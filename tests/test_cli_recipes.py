@@ -18,11 +18,14 @@ def test_recipes_lists_every_recipe_with_what_it_is_for(capsys):
         assert recipe.summary and f"    {recipe.summary}" in out, name
 
 
-@pytest.mark.parametrize("value, message", [
-    ("bogus", "unknown recipe 'bogus'"),
-    ("paper,paper", "expected distinct recipe names"),
-    (",", "expected distinct recipe names"),
-])
+@pytest.mark.parametrize(
+    "value, message",
+    [
+        ("bogus", "unknown recipe 'bogus'"),
+        ("paper,paper", "expected distinct recipe names"),
+        (",", "expected distinct recipe names"),
+    ],
+)
 def test_reproduce_refuses_bad_recipe_lists_before_any_work(tmp_path, capsys, value: str, message: str):
     out = tmp_path / "rep"
     assert main(["reproduce", "--out", str(out), "--recipes", value]) == 2

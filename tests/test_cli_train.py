@@ -26,8 +26,27 @@ def model_path(tmp_path_factory) -> Path:
 def test_cli_train_writes_model_curve_and_checkpoints(tmp_path: Path, capsys):
     data = dataset_file(tmp_path / "data.safetensors")
     out = tmp_path / "models" / "pref.safetensors"
-    rc = main(["train", str(data), "--out", str(out), "--epochs", "3", "--skip", "--class-balance", "--hidden", "16", "--seed", "2",
-               "--members", "1", "--no-mirror", "--stage-weight", "2.5"])
+    rc = main(
+        [
+            "train",
+            str(data),
+            "--out",
+            str(out),
+            "--epochs",
+            "3",
+            "--skip",
+            "--class-balance",
+            "--hidden",
+            "16",
+            "--seed",
+            "2",
+            "--members",
+            "1",
+            "--no-mirror",
+            "--stage-weight",
+            "2.5",
+        ]
+    )
     captured = capsys.readouterr()
     assert rc == 0, captured.err
     model = load_model(out)
@@ -43,7 +62,9 @@ def test_cli_train_writes_model_curve_and_checkpoints(tmp_path: Path, capsys):
     assert curve.read_bytes().startswith(PNG)
     folder = tmp_path / "models" / "pref.checkpoints"
     assert sorted(p.name for p in folder.iterdir()) == [f"epoch_{i:03d}.safetensors" for i in (1, 2, 3)]
-    epoch_lines = [line for line in captured.out.splitlines() if re.fullmatch(r"\s*\d+(\s+\d+\.\d+){5}\s+\d.* s( left)?", line)]  # with the time so far (and left)
+    epoch_lines = [
+        line for line in captured.out.splitlines() if re.fullmatch(r"\s*\d+(\s+\d+\.\d+){5}\s+\d.* s( left)?", line)
+    ]  # with the time so far (and left)
     assert [int(line.split()[0]) for line in epoch_lines] == [1, 2, 3]
     # Each line is the history the model file records.
     for line, h in zip(epoch_lines, model.meta["history"], strict=True):
@@ -92,8 +113,12 @@ def test_cli_train_refuses_a_dataset_with_columns_that_left_in_one_line(tmp_path
     meta = {"format": DATASET_FORMAT, **model_meta()}
     meta["features"] = {**meta["features"], **features}
     n = 50
-    data = save_dataset(Dataset(rng.uniform(0, 1, (n, 21, 6)).astype(np.float32), rng.integers(0, 21, n),
-                                np.zeros(n, np.float32), np.zeros(n, np.int64), meta), tmp_path / "old.safetensors")
+    data = save_dataset(
+        Dataset(
+            rng.uniform(0, 1, (n, 21, 6)).astype(np.float32), rng.integers(0, 21, n), np.zeros(n, np.float32), np.zeros(n, np.int64), meta
+        ),
+        tmp_path / "old.safetensors",
+    )
     out = tmp_path / "m.safetensors"
     assert main(["train", str(data), "--out", str(out), "--epochs", "1"]) == 2
     assert "no longer supported" in one_line_error(capsys, str(data))
@@ -112,7 +137,9 @@ def test_cli_train_refuses_a_model_file_as_data(model_path: Path, tmp_path: Path
     one_line_error(capsys, str(model_path))
 
 
-@pytest.mark.parametrize("flag", [["--epochs", "0"], ["--batch-size", "0"], ["--hidden", "0"], ["--lr", "-1"], ["--members", "0"]], ids=lambda f: f[0])
+@pytest.mark.parametrize(
+    "flag", [["--epochs", "0"], ["--batch-size", "0"], ["--hidden", "0"], ["--lr", "-1"], ["--members", "0"]], ids=lambda f: f[0]
+)
 def test_cli_train_bad_hyperparameter_is_a_user_error(tmp_path: Path, capsys, flag: list[str]):
     data = dataset_file(tmp_path / "data.safetensors", 50)
     assert main(["train", str(data), "--out", str(tmp_path / "m.safetensors"), *flag]) == 2

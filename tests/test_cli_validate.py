@@ -93,12 +93,20 @@ def test_validate_a_relative_path(tmp_path: Path, capsys: pytest.CaptureFixture[
 # (test id, file content, the expected line after "FILE: ").  An entry ending in "..." is a prefix.
 BAD_FILES: list[tuple[str, str | bytes, str]] = [
     ("empty", b"", "empty file"),
-    ("binary-nul", bytes(np.random.default_rng(1).integers(0, 256, 2048, dtype=np.uint8)) + b"\x00", "binary data, expected a YAML text file"),
+    (
+        "binary-nul",
+        bytes(np.random.default_rng(1).integers(0, 256, 2048, dtype=np.uint8)) + b"\x00",
+        "binary data, expected a YAML text file",
+    ),
     ("non-utf8", b"format: terrapref-scenario/1\nname: \xe9\xff\xfe\n", "not UTF-8 text, expected a YAML file"),
     ("malformed", "format: terrapref-scenario/1\nworld: {size_m: [1, 2}\n", "malformed YAML at line 2..."),
     ("bad-date", "format: terrapref-scenario/1\nname: 2020-13-45\n", "malformed YAML..."),
     ("top-level-list", "- format\n- name\n", "expected a mapping at the top level, got a list"),
-    ("wrong-format", edit("terrapref-scenario/1", "terrapref-scenario/2"), "format: 'terrapref-scenario/2' is not supported; expected 'terrapref-scenario/1'"),
+    (
+        "wrong-format",
+        edit("terrapref-scenario/1", "terrapref-scenario/2"),
+        "format: 'terrapref-scenario/2' is not supported; expected 'terrapref-scenario/1'",
+    ),
     ("missing-format", edit("format: terrapref-scenario/1\n", ""), "format: missing; expected 'terrapref-scenario/1'"),
     ("missing-name", edit("name: tiny_course\n", ""), "name: missing"),
     ("missing-resolution", edit("  resolution_m: 0.1\n", ""), "world.resolution_m: missing"),
@@ -111,26 +119,54 @@ BAD_FILES: list[tuple[str, str | bytes, str]] = [
     ("unknown-zone", edit('{id: "1",', '{id: "1", weight: 2,'), "zones[0].weight: unknown key"),
     ("string-number", edit("resolution_m: 0.1", "resolution_m: fine"), "world.resolution_m: expected a number, got string 'fine'"),
     ("bool-number", edit("radius: 1.0", "radius: yes"), "terrain[0].circle.radius: expected a number, got boolean True"),
-    ("mapping-for-list", edit("size_m: [20.0, 10.0]", "size_m: {x: 20.0, y: 10.0}"), "world.size_m: expected a list of 2 numbers, got a mapping"),
+    (
+        "mapping-for-list",
+        edit("size_m: [20.0, 10.0]", "size_m: {x: 20.0, y: 10.0}"),
+        "world.size_m: expected a list of 2 numbers, got a mapping",
+    ),
     ("nan", edit("radius: 1.0", "radius: .nan"), "terrain[0].circle.radius: must be finite (got NaN or infinity)"),
     ("inf", edit("resolution_m: 0.1", "resolution_m: .inf"), "world.resolution_m: must be finite (got NaN or infinity)"),
     ("minus-inf", edit("[19.0, 5.0]]", "[-.inf, 5.0]]"), "path.waypoints[1][0]: must be finite (got NaN or infinity)"),
     ("huge-int", edit("radius: 1.0", "radius: 1" + "0" * 400), "terrain[0].circle.radius: is too large"),
     ("unknown-class", edit("class: rock", "class: lava"), "terrain[1].class: unknown class 'lava'..."),
     ("unknown-background", edit("background: grass", "background: snow"), "world.background: unknown class 'snow'..."),
-    ("polygon-2-distinct", edit("[[14.0, 1.0], [16.0, 1.0], [15.0, 3.0]]", "[[14.0, 1.0], [16.0, 1.0], [14.0, 1.0]]"), "terrain[3].polygon: needs at least 3 distinct vertices, got 2"),
-    ("polygon-2-vertices", edit("[[14.0, 1.0], [16.0, 1.0], [15.0, 3.0]]", "[[14.0, 1.0], [16.0, 1.0]]"), "terrain[3].polygon: expected a list of at least 3 [x, y] points, got a list of 2"),
-    ("polygon-collinear", edit("[[14.0, 1.0], [16.0, 1.0], [15.0, 3.0]]", "[[14.0, 1.0], [15.0, 2.0], [16.0, 3.0]]"), "terrain[3].polygon: has zero area (vertices are collinear)"),
-    ("shape-off-map", edit("center: [15.0, 5.0], radius: 1.5", "center: [35.0, 5.0], radius: 1.5"), "terrain[2].circle: lies wholly off the map..."),
+    (
+        "polygon-2-distinct",
+        edit("[[14.0, 1.0], [16.0, 1.0], [15.0, 3.0]]", "[[14.0, 1.0], [16.0, 1.0], [14.0, 1.0]]"),
+        "terrain[3].polygon: needs at least 3 distinct vertices, got 2",
+    ),
+    (
+        "polygon-2-vertices",
+        edit("[[14.0, 1.0], [16.0, 1.0], [15.0, 3.0]]", "[[14.0, 1.0], [16.0, 1.0]]"),
+        "terrain[3].polygon: expected a list of at least 3 [x, y] points, got a list of 2",
+    ),
+    (
+        "polygon-collinear",
+        edit("[[14.0, 1.0], [16.0, 1.0], [15.0, 3.0]]", "[[14.0, 1.0], [15.0, 2.0], [16.0, 3.0]]"),
+        "terrain[3].polygon: has zero area (vertices are collinear)",
+    ),
+    (
+        "shape-off-map",
+        edit("center: [15.0, 5.0], radius: 1.5", "center: [35.0, 5.0], radius: 1.5"),
+        "terrain[2].circle: lies wholly off the map...",
+    ),
     ("waypoint-off-map", edit("[19.0, 5.0]]", "[19.0, 5.0], [25.0, 5.0]]"), "path.waypoints[2]: (25, 5) is off the map..."),
     ("path-same-points", edit("[[1.0, 5.0], [19.0, 5.0]]", "[[1.0, 1.0], [1.0, 1.0]]"), "path.waypoints: needs at least 2 distinct points"),
-    ("path-one-point", edit("[[1.0, 5.0], [19.0, 5.0]]", "[[1.0, 1.0]]"), "path.waypoints: expected a list of at least 2 [x, y] points, got a list of 1"),
+    (
+        "path-one-point",
+        edit("[[1.0, 5.0], [19.0, 5.0]]", "[[1.0, 1.0]]"),
+        "path.waypoints: expected a list of at least 2 [x, y] points, got a list of 1",
+    ),
     ("resolution-zero", edit("resolution_m: 0.1", "resolution_m: 0"), "world.resolution_m: must be > 0"),
     ("resolution-negative", edit("resolution_m: 0.1", "resolution_m: -0.1"), "world.resolution_m: must be > 0"),
     ("radius-zero", edit("radius: 1.0", "radius: 0"), "terrain[0].circle.radius: must be > 0"),
-    ("too-many-cells", edit("size_m: [20.0, 10.0]", "size_m: [2000.0, 1000.0]").replace("resolution_m: 0.1", "resolution_m: 0.05"), "world: raster would have 40000 x 20000 = 800,000,000 cells..."),
+    (
+        "too-many-cells",
+        edit("size_m: [20.0, 10.0]", "size_m: [2000.0, 1000.0]").replace("resolution_m: 0.1", "resolution_m: 0.05"),
+        "world: raster would have 40000 x 20000 = 800,000,000 cells...",
+    ),
     ("astronomical-cells", edit("size_m: [20.0, 10.0]", "size_m: [1.0e+300, 1.0e+300]"), "world: raster would have about 10^602 cells..."),
-    ("duplicate-zone", edit('{id: "2",', '{id: 1,'), "zones[1].id: duplicate zone id '1' (also zones[0])"),
+    ("duplicate-zone", edit('{id: "2",', "{id: 1,"), "zones[1].id: duplicate zone id '1' (also zones[0])"),
     ("bad-expect", edit("expect: avoid", "expect: maybe"), "zones[1].expect: 'maybe' is neither 'avoid', 'best' nor a known class..."),
     ("bad-name", edit("name: tiny_course", "name: tiny course!"), "name: must match [A-Za-z0-9_-]+"),
 ]
@@ -242,15 +278,19 @@ def test_each_template_is_a_file_of_its_kind_that_validate_accepts(tmp_path: Pat
     assert run_cli(capsys, "validate", str(path)) == (0, [f"{path}: ok ({KINDS[kind]})"], [])
 
 
-@pytest.mark.parametrize("kind,old,new,line", [
-    ("classes", "id: 2, name: gravel", "id: 300, name: gravel", "classes[2].id: must be an integer in 0..254"),
-    ("perception", "drop_rate: 0.05", "drop_rate: 2", "frames.drop_rate: must be in [0, 1], got 2"),
-    ("robot", "height_m: 1.0", "height_m: -1.0", "camera.height_m: ..."),
-    ("labels", "2: mud", "2: lava", "ids: class 'lava' is not in the class table ..."),
-    ("robot", "format: terrapref-robot/1\n", "", "format: missing; expected 'terrapref-robot/1'"),
-])
-def test_validate_names_the_file_and_field_of_each_kind(tmp_path: Path, capsys: pytest.CaptureFixture[str], kind: str, old: str, new: str,
-                                                        line: str) -> None:
+@pytest.mark.parametrize(
+    "kind,old,new,line",
+    [
+        ("classes", "id: 2, name: gravel", "id: 300, name: gravel", "classes[2].id: must be an integer in 0..254"),
+        ("perception", "drop_rate: 0.05", "drop_rate: 2", "frames.drop_rate: must be in [0, 1], got 2"),
+        ("robot", "height_m: 1.0", "height_m: -1.0", "camera.height_m: ..."),
+        ("labels", "2: mud", "2: lava", "ids: class 'lava' is not in the class table ..."),
+        ("robot", "format: terrapref-robot/1\n", "", "format: missing; expected 'terrapref-robot/1'"),
+    ],
+)
+def test_validate_names_the_file_and_field_of_each_kind(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], kind: str, old: str, new: str, line: str
+) -> None:
     main(["validate", "--template", kind])
     text = capsys.readouterr().out
     assert old in text
@@ -265,7 +305,10 @@ def test_validate_reads_a_label_map_and_a_perception_file_with_the_given_table(c
     examples = Path(__file__).parents[1] / "examples" / "classes"
     table, labels, field = (str(examples / n) for n in ("rellis3d.yaml", "rellis3d_labels.yaml", "rellis3d_field.yaml"))
     assert run_cli(capsys, "validate", table, labels, field, "--classes", table) == (
-        0, [f"{table}: ok (class table)", f"{labels}: ok (label map)", f"{field}: ok (perception model)"], [])
+        0,
+        [f"{table}: ok (class table)", f"{labels}: ok (label map)", f"{field}: ok (perception model)"],
+        [],
+    )
     code, out, _ = run_cli(capsys, "validate", labels)  # the default table has no 'building'
     assert code == 2 and out[0].startswith(f"error: {labels}: ids: class ")
 
@@ -273,8 +316,10 @@ def test_validate_reads_a_label_map_and_a_perception_file_with_the_given_table(c
 def test_validate_refuses_a_file_of_no_known_kind(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = write(tmp_path, "x.yaml", "format: terrapref-model/1\n")
     code, out, _ = run_cli(capsys, "validate", str(path))
-    assert code == 2 and out == [f"error: {path}: format: 'terrapref-model/1' is not a file terrapref reads here; expected one of "
-                                 "terrapref-scenario/1, terrapref-classes/1, terrapref-perception/1, terrapref-robot/1, terrapref-labels/1"]
+    assert code == 2 and out == [
+        f"error: {path}: format: 'terrapref-model/1' is not a file terrapref reads here; expected one of "
+        "terrapref-scenario/1, terrapref-classes/1, terrapref-perception/1, terrapref-robot/1, terrapref-labels/1"
+    ]
     assert run_cli(capsys, "validate", "--template", "robot", str(path))[0] == 2
 
 

@@ -84,8 +84,19 @@ def test_the_train_flags_cover_every_documented_training_field():
     parser = argparse.ArgumentParser()
     add_arguments(parser, TrainConfig)
     flags = {a.option_strings[0] for a in parser._actions if a.option_strings and a.option_strings[0] != "-h"}
-    assert flags == {"--epochs", "--lr", "--batch-size", "--hidden", "--activation", "--skip", "--members", "--class-balance",
-                     "--mirror", "--steady-labels", "--seed"}
+    assert flags == {
+        "--epochs",
+        "--lr",
+        "--batch-size",
+        "--hidden",
+        "--activation",
+        "--skip",
+        "--members",
+        "--class-balance",
+        "--mirror",
+        "--steady-labels",
+        "--seed",
+    }
     args = parser.parse_args(["--members", "1"])
     config = apply_arguments(args, RECIPES["teach"].train)
     assert config.classifier.members == 1

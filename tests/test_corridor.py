@@ -41,13 +41,15 @@ DRIVER_LIKE = np.array([-25.5, -1.9125, -1.275, -0.85, 0.0, -0.068, -1.3])
 
 
 def _scenario(terrain: list[dict]):
-    return parse_scenario({
-        "format": "terrapref-scenario/1",
-        "name": "corridor_test",
-        "world": {"size_m": [40.0, 20.0], "resolution_m": 0.05, "background": "grass"},
-        "terrain": terrain,
-        "path": {"waypoints": [[2.0, 10.0], [38.0, 10.0]]},
-    })
+    return parse_scenario(
+        {
+            "format": "terrapref-scenario/1",
+            "name": "corridor_test",
+            "world": {"size_m": [40.0, 20.0], "resolution_m": 0.05, "background": "grass"},
+            "terrain": terrain,
+            "path": {"waypoints": [[2.0, 10.0], [38.0, 10.0]]},
+        }
+    )
 
 
 MUD = {"class": "mud", "rectangle": {"center": [12.1, 10.0], "size": [3.0, 2.0]}}  # 8.6-11.6 m along the path, 1 m each side
@@ -69,6 +71,7 @@ def _terrain(lethal: tuple[int, ...] = (), names: tuple[str, ...] = ()) -> Terra
 
 def _seen_from(scenario, camera: PinholeCamera, pose) -> SegmentationView:
     from terrapref.world import rasterise
+
     return SegmentationView.of(SegmentationRenderer(camera, rasterise(scenario)).render(pose))
 
 
@@ -157,12 +160,18 @@ def test_a_lethal_share_of_the_evidence_makes_a_cell_lethal(camera):
     """Trees seen in 40% of the frames are lethal at a lethal share of 0.35, not at 0.5; mud seen as
     often (and grass the rest) is terrain at a terrain share of 0.35, and grass at 0.5."""
     pose = (2.0, 10.0, 0.0)
-    views = {c: _seen_from(_scenario([{"class": c, "rectangle": {"center": [12.1, 10.0], "size": [3.0, 2.0]}}]), camera, pose)
-             for c in ("non_traversable", "mud")}
+    views = {
+        c: _seen_from(_scenario([{"class": c, "rectangle": {"center": [12.1, 10.0], "size": [3.0, 2.0]}}]), camera, pose)
+        for c in ("non_traversable", "mud")
+    }
     plain = _seen_from(_scenario([]), camera, pose)
     centre = np.array([[12.1, 10.0]])
-    for patch, share, expect in (("non_traversable", dict(map_lethal_share=0.35), 0), ("non_traversable", dict(map_lethal_share=0.5), K),
-                                 ("mud", dict(map_terrain_share=0.35), 3), ("mud", dict(map_terrain_share=0.5), K)):
+    for patch, share, expect in (
+        ("non_traversable", dict(map_lethal_share=0.35), 0),
+        ("non_traversable", dict(map_lethal_share=0.5), K),
+        ("mud", dict(map_terrain_share=0.35), 3),
+        ("mud", dict(map_terrain_share=0.5), K),
+    ):
         gmap = GroundMap(camera, _terrain((0,)), OffsetGeometry(map_fade=1.0, **share))
         for k in range(10):
             view = views[patch] if k % 5 in (1, 3) else plain
@@ -236,6 +245,7 @@ def test_the_corridor_fit_picks_the_near_distance_that_explains_the_labels():
 def _drive(stage: OffsetSteering, scenario, camera: PinholeCamera, seconds: float) -> np.ndarray:
     from terrapref.scenario.path import PathTracker
     from terrapref.world import rasterise
+
     renderer = SegmentationRenderer(camera, rasterise(scenario))
     path = ReferencePath(scenario.waypoints)
     tracker = PathTracker(path)
@@ -377,8 +387,11 @@ def test_a_model_file_with_an_offset_utility_drives_by_the_offset_rule_old_or_ne
     assert planner.rule.type == "offset" and planner.rule.utility.near_m == 5.0 and planner.rule.config == OffsetConfig()
     assert planner.runner.keeps_ground_map
     assert not Planner(model, rule="argmax").runner.keeps_ground_map
-    for weights, near, field in ((DRIVER_LIKE[:-1], 5.0, f"{key}[0].weights"), ([math.nan] * 7, 5.0, f"{key}[0].weights"),
-                                 (DRIVER_LIKE, -1.0, f"{key}[0].near_m")):
+    for weights, near, field in (
+        (DRIVER_LIKE[:-1], 5.0, f"{key}[0].weights"),
+        ([math.nan] * 7, 5.0, f"{key}[0].weights"),
+        (DRIVER_LIKE, -1.0, f"{key}[0].near_m"),
+    ):
         bad = save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), make(weights, near))
         with pytest.raises(UserError) as exc:
             load_policy(bad)
@@ -387,7 +400,9 @@ def test_a_model_file_with_an_offset_utility_drives_by_the_offset_rule_old_or_ne
 
 def test_a_file_that_names_a_rule_it_does_not_list_to_drive_is_refused(tmp_path):
     config = ClassifierConfig(hidden=8, skip=True)
-    bad = save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), {**_offset_meta(DRIVER_LIKE), "drives": "second_stage"})
+    bad = save_model(
+        tmp_path / "bad.safetensors", config, skip_path_weights(config), {**_offset_meta(DRIVER_LIKE), "drives": "second_stage"}
+    )
     with pytest.raises(UserError) as exc:
         Planner(load_model(bad))
     assert exc.value.problems[0].field == "drives" and "second_stage" in str(exc.value)
@@ -431,11 +446,20 @@ def _offset_dataset(n: int = 40) -> Dataset:
     rng = np.random.default_rng(2)
     rule = OffsetConfig()
     o = len(rule.geometry.offsets)
-    arrays = {"features": rng.uniform(0, 3, (n, o, K + 2)).astype(np.float32), "near_m": np.full(n, np.inf, np.float32),
-              "intent_m": np.append(rng.uniform(-1, 1, n - 2), [np.nan, np.nan]).astype(np.float32)}
+    arrays = {
+        "features": rng.uniform(0, 3, (n, o, K + 2)).astype(np.float32),
+        "near_m": np.full(n, np.inf, np.float32),
+        "intent_m": np.append(rng.uniform(-1, 1, n - 2), [np.nan, np.nan]).astype(np.float32),
+    }
     meta = {"format": DATASET_FORMAT, **model_meta(), "rules": {"offset": {"config": rule.data(), "arrays": dict(OffsetConfig.arrays)}}}
-    return Dataset(rng.uniform(0, 1, (n, 21, 5)).astype(np.float32), rng.integers(0, 21, n), np.zeros(n, np.float32),
-                   np.zeros(n, np.int64), meta, {"offset": arrays})
+    return Dataset(
+        rng.uniform(0, 1, (n, 21, 5)).astype(np.float32),
+        rng.integers(0, 21, n),
+        np.zeros(n, np.float32),
+        np.zeros(n, np.int64),
+        meta,
+        {"offset": arrays},
+    )
 
 
 def test_the_offset_rules_arrays_survive_a_dataset_file_and_bad_values_are_refused(tmp_path):
@@ -514,6 +538,7 @@ def test_the_map_reads_every_voted_cell_as_decided_and_refuses_too_many_columns(
     """After votes, ``cells`` holds no undecided marker (it decides them) and is read-only; a
     class table with 254 terrain columns would need the marker as a column and is refused."""
     from terrapref.rules.offset import ground_map_compiled
+
     scenario = _scenario([MUD])
     camera = PinholeCamera()
     gmap = GroundMap(camera, _terrain())

@@ -103,7 +103,13 @@ def _costmaps_in(mcap) -> tuple[dict[str, int], np.ndarray]:
     assert (grid.timestamp.sec, grid.timestamp.nanosec) == (occupancy.header.stamp.sec, occupancy.header.stamp.nanosec)
     assert grid.column_count == occupancy.info.width and grid.cell_size.x == grid.cell_size.y == pytest.approx(occupancy.info.resolution)
     assert (grid.pose.position.x, grid.pose.position.y) == (occupancy.info.origin.position.x, occupancy.info.origin.position.y)
-    assert [(f.name, f.offset, f.type) for f in grid.fields] == [("cost", 0, 2), ("red", 1, 1), ("green", 2, 1), ("blue", 3, 1), ("alpha", 4, 1)]
+    assert [(f.name, f.offset, f.type) for f in grid.fields] == [
+        ("cost", 0, 2),
+        ("red", 1, 1),
+        ("green", 2, 1),
+        ("blue", 3, 1),
+        ("alpha", 4, 1),
+    ]
     cells = np.asarray(grid.data, dtype=np.uint8).reshape(-1, grid.column_count, grid.cell_stride)
     assert grid.row_stride == grid.column_count * grid.cell_stride and cells.shape[0] == occupancy.info.height
     np.testing.assert_array_equal(cells[..., 0].view(np.int8), cost)

@@ -34,14 +34,17 @@ def test_default_config_is_valid():
     DisturbanceConfig(min_yaw_rate_rps=0.4, max_yaw_rate_rps=0.4, min_duration_s=1.0, max_duration_s=1.0)  # fixed pushes
 
 
-@pytest.mark.parametrize("kw", [
-    {"rate_hz": -0.1},
-    {"min_yaw_rate_rps": -0.1},
-    {"min_yaw_rate_rps": 0.7, "max_yaw_rate_rps": 0.5},
-    {"min_duration_s": 2.0, "max_duration_s": 1.0},
-    {"min_duration_s": 0.0},
-    {"max_command_rps": 0.0},
-])
+@pytest.mark.parametrize(
+    "kw",
+    [
+        {"rate_hz": -0.1},
+        {"min_yaw_rate_rps": -0.1},
+        {"min_yaw_rate_rps": 0.7, "max_yaw_rate_rps": 0.5},
+        {"min_duration_s": 2.0, "max_duration_s": 1.0},
+        {"min_duration_s": 0.0},
+        {"max_command_rps": 0.0},
+    ],
+)
 def test_invalid_config_is_refused(kw: dict):
     with pytest.raises(ValueError):
         DisturbanceConfig(**kw)
@@ -137,9 +140,15 @@ def _record(out: Path, seed: int, disturbance: DisturbanceConfig | None, time_li
         sim.time_limit_s = time_limit_s
     driver = ExpertDriver()
     preference = PreferenceSetConfig()
-    meta = RecordingMeta.driven(scenario, RecordingSetup(sim.camera.config, preference, sim.config), ExpertInfo.of(seed, "default", driver.config, disturbance),
-                                PreferenceProfile.default())
-    log = record_run(sim, driver, RecordingWriter(out, meta, scenario.to_dict()), RunSettings(preference, disturbance), np.random.default_rng(seed))
+    meta = RecordingMeta.driven(
+        scenario,
+        RecordingSetup(sim.camera.config, preference, sim.config),
+        ExpertInfo.of(seed, "default", driver.config, disturbance),
+        PreferenceProfile.default(),
+    )
+    log = record_run(
+        sim, driver, RecordingWriter(out, meta, scenario.to_dict()), RunSettings(preference, disturbance), np.random.default_rng(seed)
+    )
     lines = [json.loads(line) for line in (out / FRAMES).read_text().splitlines()]
     return SimpleNamespace(log=log, rec=read_recording(out), lines=lines, sim=sim, preference=preference)
 

@@ -148,7 +148,7 @@ def _layout_tree() -> list[tuple[int, str, int]]:
     start = next(i for i, line in enumerate(lines) if line.strip() == "src/terrapref/" and i and FENCE.match(lines[i - 1]))
     parents: list[str] = []
     found = []
-    for number, line in enumerate(lines[start + 1:], start + 2):
+    for number, line in enumerate(lines[start + 1 :], start + 2):
         if FENCE.match(line):
             break
         indent = len(line) - len(line.lstrip(" "))
@@ -159,7 +159,7 @@ def _layout_tree() -> list[tuple[int, str, int]]:
         match = ENTRY.match(line, indent)
         assert match, f"docs/layout.md:{number}: expected names ending in / or .py: {line.strip()!r}"
         assert depth - 1 <= len(parents), f"docs/layout.md:{number}: indented below no package"
-        del parents[depth - 1:]
+        del parents[depth - 1 :]
         names = match["names"].split(", ")
         for name in names:
             found.append((number, "".join(parents) + name, depth))
@@ -193,6 +193,9 @@ def test_the_layout_tree_names_every_decision_rule_package() -> None:
 def test_every_part_the_layout_tree_names_exists() -> None:
     tree = _layout_tree()
     assert len(tree) > 30, "the scan reads the tree"
-    gone = [f"docs/layout.md:{number}: {path}" for number, path, _ in tree
-            if not ((PACKAGE / path).is_dir() if path.endswith("/") else (PACKAGE / path).is_file())]
+    gone = [
+        f"docs/layout.md:{number}: {path}"
+        for number, path, _ in tree
+        if not ((PACKAGE / path).is_dir() if path.endswith("/") else (PACKAGE / path).is_file())
+    ]
     assert not gone, "docs/layout.md's tree names what src/terrapref/ does not hold:\n" + "\n".join(gone)

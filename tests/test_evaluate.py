@@ -109,8 +109,10 @@ def test_evaluation_is_deterministic(model_path: Path, evaluated, tmp_path: Path
     again = evaluate_model(Evaluation(str(model_path), ("demo_course",), seeds=2, with_driver=False), tmp_path, engine=Engine(workers=1))
 
     def without_agreement(runs: dict) -> dict:  # the driver's run adds its choices to the planner's zones
-        return {seed: {**run, "zones": [{k: v for k, v in z.items() if k not in ("driver_choice", "agrees")} for z in run["zones"]]}
-                for seed, run in runs.items()}
+        return {
+            seed: {**run, "zones": [{k: v for k, v in z.items() if k not in ("driver_choice", "agrees")} for z in run["zones"]]}
+            for seed, run in runs.items()
+        }
 
     assert again["scenarios"]["demo_course"]["planner"] == without_agreement(evaluated.metrics["scenarios"]["demo_course"]["planner"])
     summary = {k: v for k, v in evaluated.metrics["summary"].items() if not k.startswith("agreement")}
@@ -127,7 +129,9 @@ def test_without_the_driver(model_path: Path, tmp_path: Path):
 
 def test_profile_changes_how_best_resolves(model_path: Path, tmp_path: Path):
     profile = PreferenceProfile.parse(ROCK_FIRST)
-    metrics = evaluate_model(Evaluation(str(model_path), ("demo_course",), seeds=1, profile=profile, with_driver=False), tmp_path, engine=Engine(workers=1))
+    metrics = evaluate_model(
+        Evaluation(str(model_path), ("demo_course",), seeds=1, profile=profile, with_driver=False), tmp_path, engine=Engine(workers=1)
+    )
     assert metrics["profile"] == ROCK_FIRST.split(",")
     zones = {z["id"]: z for z in metrics["scenarios"]["demo_course"]["planner"]["0"]["zones"]}
     assert zones["2"]["expect"] == "rock"
@@ -139,11 +143,30 @@ def test_profile_changes_how_best_resolves(model_path: Path, tmp_path: Path):
 
 def test_cli_evaluate_with_a_profile(model_path: Path, tmp_path: Path, capsys):
     out = tmp_path / "ev"
-    rc = main(["evaluate", str(model_path), "demo_course", "--seeds", "1", "--out", str(out), "--no-driver", "--workers", "1", "--profile", ROCK_FIRST])
+    rc = main(
+        [
+            "evaluate",
+            str(model_path),
+            "demo_course",
+            "--seeds",
+            "1",
+            "--out",
+            str(out),
+            "--no-driver",
+            "--workers",
+            "1",
+            "--profile",
+            ROCK_FIRST,
+        ]
+    )
     captured = capsys.readouterr()
     assert rc == 0, captured.err
     metrics = json.loads((out / "metrics.json").read_text())
-    assert {z["id"]: z["expect"] for z in metrics["scenarios"]["demo_course"]["planner"]["0"]["zones"]} == {"1": "avoid", "2": "rock", "3": "avoid"}
+    assert {z["id"]: z["expect"] for z in metrics["scenarios"]["demo_course"]["planner"]["0"]["zones"]} == {
+        "1": "avoid",
+        "2": "rock",
+        "3": "avoid",
+    }
     assert "driver" not in metrics["scenarios"]["demo_course"]
     assert "planner: zone success" in captured.out and str(out / "metrics.json") in captured.out
 
@@ -176,7 +199,9 @@ def test_cli_evaluate_zero_seeds_is_a_user_error(model_path: Path, tmp_path: Pat
 
 
 def test_cli_evaluate_bad_frames_is_a_user_error(model_path: Path, tmp_path: Path, capsys):
-    rc = main(["evaluate", str(model_path), "demo_course", "--seeds", "1", "--out", str(tmp_path / "ev"), "--frames", "5,x", "--workers", "1"])
+    rc = main(
+        ["evaluate", str(model_path), "demo_course", "--seeds", "1", "--out", str(tmp_path / "ev"), "--frames", "5,x", "--workers", "1"]
+    )
     assert rc == 2
     one_line_error(capsys, "--frames")
 
@@ -189,8 +214,10 @@ def test_user_error_survives_the_trip_between_processes():
 
     from terrapref.errors import Problem, ScenarioError, UserError
 
-    for err in (UserError("model.safetensors", "not a model", field="format"),
-                ScenarioError("s.yaml", [Problem("terrain[0].circle.radius", "must be > 0"), Problem("path", "too short")])):
+    for err in (
+        UserError("model.safetensors", "not a model", field="format"),
+        ScenarioError("s.yaml", [Problem("terrain[0].circle.radius", "must be > 0"), Problem("path", "too short")]),
+    ):
         back = pickle.loads(pickle.dumps(err))
         assert type(back) is type(err) and back.lines() == err.lines() and str(back) == str(err)
 
@@ -207,7 +234,15 @@ def test_a_bad_model_in_a_worker_is_a_user_error_not_a_broken_pool(tmp_path: Pat
     assert str(bad) in str(info.value)
 
 
-@pytest.mark.parametrize("scenario, stem", [("demo_course", "demo_course"), ("gen:7", "gen_7"), ("courses/my.yaml", "courses_my"),
-                                            ("/abs/path/x.yml", "abs_path_x"), ("C:\\runs\\a b.yaml", "C_runs_a_b")])
+@pytest.mark.parametrize(
+    "scenario, stem",
+    [
+        ("demo_course", "demo_course"),
+        ("gen:7", "gen_7"),
+        ("courses/my.yaml", "courses_my"),
+        ("/abs/path/x.yml", "abs_path_x"),
+        ("C:\\runs\\a b.yaml", "C_runs_a_b"),
+    ],
+)
 def test_figures_are_named_for_any_file_system(scenario: str, stem: str):
     assert file_stem(scenario) == stem

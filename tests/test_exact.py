@@ -82,14 +82,18 @@ def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
 
 def test_compiled_loops_give_the_numpy_forms_bits():
     rng = np.random.default_rng(7)
-    x = np.concatenate([rng.standard_normal(30000) * scale for scale in (1.0, 30.0, 400.0)]
-                       + [[0.0, -0.0, 709.0, 709.5, -740.0, -745.0, 1e-310, -1e-310, np.inf, -np.inf]])
+    x = np.concatenate(
+        [rng.standard_normal(30000) * scale for scale in (1.0, 30.0, 400.0)]
+        + [[0.0, -0.0, 709.0, 709.5, -740.0, -745.0, 1e-310, -1e-310, np.inf, -np.inf]]
+    )
     with np.errstate(invalid="ignore"):
         assert _same_bits(exact.exp(x), _numpy_exp(x))
         assert _same_bits(exact.exp(x.reshape(-1, 10)[:, ::2]), _numpy_exp(x.reshape(-1, 10)[:, ::2]))  # any shape and strides
         assert np.isnan(exact.exp(np.array([np.nan]))[0])
         # Every scaling the range reduction can ask for, results subnormal ones included.
-        sweep = np.concatenate([np.linspace(-745.0, -700.0, 200001), np.linspace(700.0, 710.0, 20001), np.arange(-1068, 1024) * math.log(2)])
+        sweep = np.concatenate(
+            [np.linspace(-745.0, -700.0, 200001), np.linspace(700.0, 710.0, 20001), np.arange(-1068, 1024) * math.log(2)]
+        )
         assert _same_bits(exact.exp(sweep), _numpy_exp(sweep))
         y = np.concatenate([np.abs(x), rng.random(1000) * 1e-300, [5e-324, 1e308, -1.0, np.nan]])
         np.testing.assert_array_equal(exact.log(y), _numpy_log(y))  # NaN where NaN
@@ -139,7 +143,7 @@ def test_matmul_is_the_exact_product_of_the_rounded_operands(k: int):
             assert out[i, j] == math.fsum(terms) * (ra.unit * rb.unit)
     # ... and close to the plain product: about 2 ** -(bits - 1) of the largest terms
     scale = np.abs(a).max() * np.abs(b).max() * k
-    np.testing.assert_allclose(out, a @ b, rtol=0, atol=scale * 2.0 ** -16)
+    np.testing.assert_allclose(out, a @ b, rtol=0, atol=scale * 2.0**-16)
 
 
 def test_matmul_does_not_depend_on_the_order_of_the_terms():

@@ -134,6 +134,11 @@ def test_needs_names_the_extra_and_what_is_missing(monkeypatch):
 @pytest.mark.slow
 def test_the_core_installs_and_works_without_its_extras():
     """A real core-only install in a fresh environment (a few minutes; needs the package index)."""
-    done = subprocess.run(["bash", str(ROOT / "scripts" / "check_core.sh")], capture_output=True, text=True, timeout=1800,
-                          env={**os.environ, "PYTHON": sys.executable})
+    done = subprocess.run(
+        ["bash", str(ROOT / "scripts" / "check_core.sh")],
+        capture_output=True,
+        text=True,
+        timeout=1800,
+        env={**os.environ, "PYTHON": sys.executable},
+    )
     assert done.returncode == 0, done.stdout[-4000:] + done.stderr[-4000:]

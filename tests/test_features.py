@@ -359,7 +359,9 @@ def test_compiled_features_give_the_numpy_forms_bits(featurizer: UtilityFeaturiz
         image = rng.integers(0, 6, (480, 640)).astype(np.uint8)
         image[rng.random((480, 640)) < 0.1] = UNKNOWN
         ids = image.reshape(-1)[featurizer._pix_flat]
-        expected = np.bincount(featurizer.class_columns[ids] + offset, minlength=(m + 1) * (k + 1)).reshape(m + 1, k + 1)[:-1, :k] * (1.0 / n)
+        expected = np.bincount(featurizer.class_columns[ids] + offset, minlength=(m + 1) * (k + 1)).reshape(m + 1, k + 1)[:-1, :k] * (
+            1.0 / n
+        )
         np.testing.assert_array_equal(featurizer.terrain(image), expected)
         pose = Pose(rng.uniform(0, 60), rng.uniform(-5, 5), rng.uniform(-math.pi, math.pi))
         s = float(rng.uniform(0, 60))

@@ -28,8 +28,12 @@ def test_zone_labels_do_not_overlap_and_the_legend_stays_off_the_map(name):
     renderer = fig.canvas.get_renderer()
     boxes = [t.get_window_extent(renderer) for t in ax.texts if t.get_text()]  # the start arrow is an empty annotation
     assert len(boxes) == len(scenario.zones)
-    crowded = [(i, j) for i in range(len(boxes)) for j in range(i) if _overlap(boxes[i], boxes[j]) > 0.1 * min(boxes[i].width * boxes[i].height,
-                                                                                                                 boxes[j].width * boxes[j].height)]
+    crowded = [
+        (i, j)
+        for i in range(len(boxes))
+        for j in range(i)
+        if _overlap(boxes[i], boxes[j]) > 0.1 * min(boxes[i].width * boxes[i].height, boxes[j].width * boxes[j].height)
+    ]
     assert not crowded, crowded
     assert _overlap(legend.get_window_extent(renderer), ax.get_window_extent(renderer)) == 0.0
     assert "reference path" in [t.get_text() for t in legend.get_texts()]
@@ -47,13 +51,17 @@ def test_a_missed_zone_is_marked_with_what_was_expected_and_chosen():
 
 
 def test_the_loss_plot_draws_every_member(tmp_path):
-    history = [{"epoch": e, "train_loss": 2.0 / e, "val_loss": 2.1 / e, "train_acc": 0.1 * e, "val_acc": 0.09 * e, "val_top3": 0.2 * e} for e in (1, 2, 3)]
+    history = [
+        {"epoch": e, "train_loss": 2.0 / e, "val_loss": 2.1 / e, "train_acc": 0.1 * e, "val_acc": 0.09 * e, "val_top3": 0.2 * e}
+        for e in (1, 2, 3)
+    ]
     captured = {}
     real_close = plt.close
 
     def keep(fig):
         captured["fig"] = fig
         return real_close(fig)
+
     plt.close = keep
     try:
         save_loss_curve(tmp_path / "loss.png", [(history, 3), (history, 2), (history, 1)], title="t")
@@ -61,7 +69,9 @@ def test_the_loss_plot_draws_every_member(tmp_path):
         plt.close = real_close
     loss_ax = captured["fig"].axes[0]
     assert len(loss_ax.lines) == 3 * 3  # train, validation and the chosen epoch of each member
-    assert [t.get_text() for t in loss_ax.get_legend().get_texts()][:3] == [f"member {j}: epoch {e} chosen" for j, e in ((1, 3), (2, 2), (3, 1))]
+    assert [t.get_text() for t in loss_ax.get_legend().get_texts()][:3] == [
+        f"member {j}: epoch {e} chosen" for j, e in ((1, 3), (2, 2), (3, 1))
+    ]
     assert (tmp_path / "loss.png").stat().st_size > 10_000
 
 
@@ -88,8 +98,13 @@ def test_a_zone_label_stays_beside_its_zone_however_long():
     renderer = fig.canvas.get_renderer()
     for text, zone in zip([t for t in ax.texts if t.get_text()], scenario.zones, strict=True):
         box = text.get_window_extent(renderer)
-        (x0, y0), (x1, y1) = ax.transData.transform(outline(zone.shape)).min(axis=0), ax.transData.transform(outline(zone.shape)).max(axis=0)
-        farthest = max(max(abs(x - min(max(x, x0), x1)) for x in (box.x0, box.x1)), max(abs(y - min(max(y, y0), y1)) for y in (box.y0, box.y1)))
+        (x0, y0), (x1, y1) = (
+            ax.transData.transform(outline(zone.shape)).min(axis=0),
+            ax.transData.transform(outline(zone.shape)).max(axis=0),
+        )
+        farthest = max(
+            max(abs(x - min(max(x, x0), x1)) for x in (box.x0, box.x1)), max(abs(y - min(max(y, y0), y1)) for y in (box.y0, box.y1))
+        )
         assert farthest < 120, (zone.id, text.get_text(), farthest)  # pixels: a wrapped label's width, not a line across the map
     plt.close(fig)
 
@@ -110,16 +125,36 @@ def test_non_latin_and_very_long_class_names_draw_without_warnings_or_boxes(tmp_
     from terrapref.terrain import ClassTable
 
     long_name = "a_very_long_class_name_that_goes_on_and_on"
-    table = ClassTable.from_dict({"format": "terrapref-classes/1", "background": "grass", "lethal": ["tree"], "profile": ["泥地", long_name, "tree"],
-                                  "classes": [{"id": 0, "name": "grass", "color": [92, 158, 70]}, {"id": 1, "name": "泥地", "color": [112, 72, 36]},
-                                              {"id": 2, "name": long_name, "color": [150, 150, 150]}, {"id": 3, "name": "tree", "color": [20, 70, 20]}]},
-                                 "table.yaml")
-    scenario = parse_scenario({"format": "terrapref-scenario/1", "name": "t", "world": {"size_m": [20, 10], "resolution_m": 0.1, "background": "grass"},
-                               "terrain": [{"class": "泥地", "circle": {"center": [6, 5], "radius": 1}},
-                                           {"class": long_name, "circle": {"center": [12, 5], "radius": 1}}],
-                               "path": {"waypoints": [[1, 5], [19, 5]]},
-                               "zones": [{"id": "1", "label": f"泥地 vs {long_name}", "circle": {"center": [9, 5], "radius": 4}, "expect": "best"}]},
-                              "t.yaml", table)
+    table = ClassTable.from_dict(
+        {
+            "format": "terrapref-classes/1",
+            "background": "grass",
+            "lethal": ["tree"],
+            "profile": ["泥地", long_name, "tree"],
+            "classes": [
+                {"id": 0, "name": "grass", "color": [92, 158, 70]},
+                {"id": 1, "name": "泥地", "color": [112, 72, 36]},
+                {"id": 2, "name": long_name, "color": [150, 150, 150]},
+                {"id": 3, "name": "tree", "color": [20, 70, 20]},
+            ],
+        },
+        "table.yaml",
+    )
+    scenario = parse_scenario(
+        {
+            "format": "terrapref-scenario/1",
+            "name": "t",
+            "world": {"size_m": [20, 10], "resolution_m": 0.1, "background": "grass"},
+            "terrain": [
+                {"class": "泥地", "circle": {"center": [6, 5], "radius": 1}},
+                {"class": long_name, "circle": {"center": [12, 5], "radius": 1}},
+            ],
+            "path": {"waypoints": [[1, 5], [19, 5]]},
+            "zones": [{"id": "1", "label": f"泥地 vs {long_name}", "circle": {"center": [9, 5], "radius": 4}, "expect": "best"}],
+        },
+        "t.yaml",
+        table,
+    )
     warnings.simplefilter("always")
     kept = {}
     real_close = plt.close
@@ -143,7 +178,9 @@ def test_the_route_is_drawn_wide_beneath_the_dashed_path(tmp_path, monkeypatch):
 
     scenario = resolve_scenario("demo_course")
     kept = _kept_figure(monkeypatch)
-    save_map(tmp_path / "route.png", scenario, rasterise(scenario), tracks=[("route", scenario.waypoints + np.array([0.0, 0.1]), "tab:blue")])
+    save_map(
+        tmp_path / "route.png", scenario, rasterise(scenario), tracks=[("route", scenario.waypoints + np.array([0.0, 0.1]), "tab:blue")]
+    )
     lines = {line.get_label(): line for line in kept["fig"].axes[0].lines}
     path, route = lines["reference path"], lines["route"]
     assert route.get_linewidth() >= 2 * path.get_linewidth() and route.get_zorder() < path.get_zorder()

@@ -186,7 +186,10 @@ def test_an_output_that_is_an_input_or_lies_inside_one_is_refused(tmp_path: Path
     rec.mkdir()
     assert _refusal(check_output, rec, "--out", [rec], folder=True) == f"{rec}: --out: is also an input; --out must name a new folder"
     inside = rec / "model.safetensors"
-    assert _refusal(check_output, inside, "--out", [rec]) == f"{inside}: --out: lies inside the input {rec}; --out must name a place outside it"
+    assert (
+        _refusal(check_output, inside, "--out", [rec])
+        == f"{inside}: --out: lies inside the input {rec}; --out must name a place outside it"
+    )
     check_output(tmp_path / "model.safetensors", "--out", [rec, tmp_path / "not_there"])  # beside it, and an input that does not exist
 
 

@@ -75,8 +75,11 @@ print(h.hexdigest())
 """
 
 
-CPU_CHECK = CpuCheck.of("compiled forward", _BITS, [{}, {"NPY_DISABLE_CPU_FEATURES": "X86_V4,AVX512_ICL,AVX512_SPR"}, {"OPENBLAS_CORETYPE": "Prescott"},
-                                                  {"NUMBA_CPU_NAME": "generic"}])
+CPU_CHECK = CpuCheck.of(
+    "compiled forward",
+    _BITS,
+    [{}, {"NPY_DISABLE_CPU_FEATURES": "X86_V4,AVX512_ICL,AVX512_SPR"}, {"OPENBLAS_CORETYPE": "Prescott"}, {"NUMBA_CPU_NAME": "generic"}],
+)
 
 
 def test_compiled_forward_gives_the_same_bits_under_other_cpu_settings(cpu_outputs):
@@ -86,8 +89,10 @@ def test_compiled_forward_gives_the_same_bits_under_other_cpu_settings(cpu_outpu
 
 # (recipe, epochs, demonstration course, courses driven): as make_planner_decisions.py made them,
 # teach_course as it was then (its non_traversable situations were pairs until 2026-11-25).
-GOLDEN_RUNS = [pytest.param(TEACH, 40, str(DATA / "teach_course_pairs.yaml"), ("test_course", "fig8_water_mud_rock_mud_left"), id="teach"),
-               pytest.param(PAPER, 15, "train_course", ("test_course",), id="paper")]
+GOLDEN_RUNS = [
+    pytest.param(TEACH, 40, str(DATA / "teach_course_pairs.yaml"), ("test_course", "fig8_water_mud_rock_mud_left"), id="teach"),
+    pytest.param(PAPER, 15, "train_course", ("test_course",), id="paper"),
+]
 
 
 @pytest.mark.parametrize(("recipe", "epochs", "course", "driven"), GOLDEN_RUNS)
@@ -99,8 +104,13 @@ def test_the_planner_makes_the_decisions_it_made_before_the_forward_pass_was_com
     rules = tuple(r for r in recipe.rules if r.type != "offset")  # C and its second stage drive, as when the file was made
     recordings = demonstrate(recipe, tmp_path / recipe.name, RecipeSetup(7, course=course, features=features), write=False)
     model = tmp_path / f"{recipe.name}.safetensors"
-    train_and_save(build_dataset(recordings, features, rules=rules), model, replace(recipe.train, seed=7),
-                   rules=rules, options=RunOptions(checkpoints=False))
+    train_and_save(
+        build_dataset(recordings, features, rules=rules),
+        model,
+        replace(recipe.train, seed=7),
+        rules=rules,
+        options=RunOptions(checkpoints=False),
+    )
     for name in driven:
         driver = PlannerDriver(Planner(load_model(model)), keep=True)  # C and its second stage (if any) drive, as when the file was made
         run_episode(Simulation(resolve_scenario(name)), driver, np.random.default_rng(0))
@@ -110,7 +120,7 @@ def test_the_planner_makes_the_decisions_it_made_before_the_forward_pass_was_com
         # on the run differs (the paper's planner stops at the map's edge, where it drove on then).
         stopped = next((i for i, d in enumerate(driver.decisions) if d.stop is not None), None)
         if stopped is not None:
-            made, want = made[:stopped + 1], want[:stopped + 1]
+            made, want = made[: stopped + 1], want[: stopped + 1]
             assert stopped > 1000, f"{recipe.name} on {name}: stopped at decision {stopped} ({driver.decisions[stopped].stop})"
         first = next((i for i, (a, b) in enumerate(zip(made, want)) if a != b), None)
         assert made == want, f"{recipe.name} on {name}: {len(made)} decisions against {len(want)}, first difference at {first}"

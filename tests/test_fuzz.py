@@ -85,8 +85,14 @@ def base(tmp_path_factory) -> dict:
     from terrapref.features import PreferenceSetConfig
     from terrapref.terrain import default_classes
 
-    meta = {"scenario": scenario.name, "camera": CameraConfig().to_dict(), "preference_set": PreferenceSetConfig().to_dict(),
-            "classes": default_classes().to_dict(), "profile": list(default_classes().profile), "path": scenario.waypoints.tolist()}
+    meta = {
+        "scenario": scenario.name,
+        "camera": CameraConfig().to_dict(),
+        "preference_set": PreferenceSetConfig().to_dict(),
+        "classes": default_classes().to_dict(),
+        "profile": list(default_classes().profile),
+        "path": scenario.waypoints.tolist(),
+    }
     writer = RecordingWriter(root / "rec", meta, scenario.to_dict())
     frame = sim.reset()
     for _ in range(3):
@@ -95,15 +101,27 @@ def base(tmp_path_factory) -> dict:
     writer.close({"completed": False})
     rng = np.random.default_rng(0)
     n = 20
-    write_tensor_file(root / "data.safetensors", {"U": rng.uniform(0, 1, (n, 21, 5)).astype(np.float32), "labels": rng.integers(0, 21, n),
-                                                  "w": np.zeros(n, np.float32), "source": np.zeros(n, np.int64)}, {"format": DATASET_FORMAT, **model_meta()})
+    write_tensor_file(
+        root / "data.safetensors",
+        {
+            "U": rng.uniform(0, 1, (n, 21, 5)).astype(np.float32),
+            "labels": rng.integers(0, 21, n),
+            "w": np.zeros(n, np.float32),
+            "source": np.zeros(n, np.int64),
+        },
+        {"format": DATASET_FORMAT, **model_meta()},
+    )
     save_model(root / "model.safetensors", ClassifierConfig(hidden=4), init_weights(ClassifierConfig(hidden=4), rng), model_meta())
     (root / "scenario.yaml").write_text(yaml.safe_dump(resolve_scenario("fig7_rock_vs_non_traversable_left").to_dict(), sort_keys=False))
     write_robot(root / "robot.yaml", robot_yaml())
-    (root / "camera.yaml").write_text("image_width: 640\nimage_height: 480\ncamera_matrix: {rows: 3, cols: 3, data: [320.0, 0.0, 320.0, 0.0, 320.0, 240.0, 0.0, 0.0, 1.0]}\n"
-                                      "distortion_model: plumb_bob\ndistortion_coefficients: {rows: 1, cols: 5, data: [0.0, 0.0, 0.0, 0.0, 0.0]}\n"
-                                      "mount_height_m: 1.0\npitch_deg: 30.0\n")
-    (root / "labels.yaml").write_text("format: terrapref-labels/1\nname: mine\nids:\n  0: unknown\n  3: grass\n  33: mud\ncolors:\n  3: [0, 102, 0]\n")
+    (root / "camera.yaml").write_text(
+        "image_width: 640\nimage_height: 480\ncamera_matrix: {rows: 3, cols: 3, data: [320.0, 0.0, 320.0, 0.0, 320.0, 240.0, 0.0, 0.0, 1.0]}\n"
+        "distortion_model: plumb_bob\ndistortion_coefficients: {rows: 1, cols: 5, data: [0.0, 0.0, 0.0, 0.0, 0.0]}\n"
+        "mount_height_m: 1.0\npitch_deg: 30.0\n"
+    )
+    (root / "labels.yaml").write_text(
+        "format: terrapref-labels/1\nname: mine\nids:\n  0: unknown\n  3: grass\n  33: mud\ncolors:\n  3: [0, 102, 0]\n"
+    )
     data = resources.files("terrapref.data")
     (root / "perception.yaml").write_text(data.joinpath("perception").joinpath("field.yaml").read_text())
     (root / "classes.yaml").write_text(data.joinpath("classes.yaml").read_text())
@@ -146,13 +164,20 @@ def recording_fields(base, tmp_path_factory):
     lines = (base["root"] / "rec" / "frames.jsonl").read_text().splitlines()
     meta = json.loads((base["root"] / "rec" / "meta.json").read_text())
 
-    @given(st.sampled_from(["frame", "meta"]), st.integers(0, 2), st.sampled_from(["t", "pose", "cmd", "label", "image", "i", "camera", "classes", "preference_set", "profile", "path", "frames", "status"]), json_values)
+    @given(
+        st.sampled_from(["frame", "meta"]),
+        st.integers(0, 2),
+        st.sampled_from(
+            ["t", "pose", "cmd", "label", "image", "i", "camera", "classes", "preference_set", "profile", "path", "frames", "status"]
+        ),
+        json_values,
+    )
     def run(where, k, key, value):
         rec = _fresh(base, tmp, "rec")
         if where == "frame":
             row = json.loads(lines[k])
             row[key] = value
-            (rec / "frames.jsonl").write_text("\n".join([*lines[:k], json.dumps(row), *lines[k + 1:]]) + "\n")
+            (rec / "frames.jsonl").write_text("\n".join([*lines[:k], json.dumps(row), *lines[k + 1 :]]) + "\n")
         else:
             (rec / "meta.json").write_text(json.dumps({**meta, key: value}))
         _reads_or_refuses(lambda: _featurize(rec), rec)
@@ -200,7 +225,7 @@ def tensor_fields(base, tmp_path_factory, kind: str):
             meta[key] = data.draw(json_values)
         path = tmp / f"{kind}.safetensors"
         write_tensor_file(path, tensors, meta)
-        _reads_or_refuses(lambda: (load_dataset(path) if kind == "dataset" else load_model(path)), path)
+        _reads_or_refuses(lambda: load_dataset(path) if kind == "dataset" else load_model(path), path)
 
     return run
 

@@ -85,16 +85,24 @@ def test_cli_evaluate_on_ray_gives_the_local_engines_results(tmp_path, capsys):
     """The planner and the driver on a local Ray instance with 2 CPUs: the same runs, the same numbers."""
     model = str(linear_model(tmp_path / "m.safetensors"))
     assert main(["evaluate", model, "demo_course", "--seeds", "2", "--out", str(tmp_path / "local"), "--workers", "2"]) == 0
-    assert main(["evaluate", model, "demo_course", "--seeds", "2", "--out", str(tmp_path / "ray"), "--engine", "ray", "--workers", "2"]) == 0
+    assert (
+        main(["evaluate", model, "demo_course", "--seeds", "2", "--out", str(tmp_path / "ray"), "--engine", "ray", "--workers", "2"]) == 0
+    )
     a, b = (json.loads(Path(tmp_path / d / "metrics.json").read_text()) for d in ("local", "ray"))
     assert a["summary"]["zones"] > 0 and a == b
 
 
 def test_select_refuses_bad_flags_before_any_work(tmp_path, capsys):
     out = tmp_path / "sel"
-    for argv, flag in ((["--recipes", "teach,nope"], "--recipes"), (["--orders", "mud,lava"], "--orders"), (["--seeds", "0"], "--seeds"),
-                       (["--orders", "mud,rock,water;mud,rock,water,non_traversable"], "--orders"),
-                       (["--style", "sleepy"], "--style"), (["--first", "-1"], "--first"), (["--address", "h:1"], "--address")):
+    for argv, flag in (
+        (["--recipes", "teach,nope"], "--recipes"),
+        (["--orders", "mud,lava"], "--orders"),
+        (["--seeds", "0"], "--seeds"),
+        (["--orders", "mud,rock,water;mud,rock,water,non_traversable"], "--orders"),
+        (["--style", "sleepy"], "--style"),
+        (["--first", "-1"], "--first"),
+        (["--address", "h:1"], "--address"),
+    ):
         assert main(["select", "--out", str(out), *argv]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and flag in err[0]

@@ -21,7 +21,9 @@ IDS = [ENV_ID, ENV_ID_CONTINUOUS]
 SMALL = (48, 64)  # the smallest comfortable size for SB3's default CNN (36 x 36 at least)
 
 
-def _scenario(terrain: list[dict] | None = None, waypoints: list[list[float]] | None = None, size: tuple[float, float] = (20.0, 10.0)) -> Scenario:
+def _scenario(
+    terrain: list[dict] | None = None, waypoints: list[list[float]] | None = None, size: tuple[float, float] = (20.0, 10.0)
+) -> Scenario:
     return parse_scenario(
         {
             "format": "terrapref-scenario/1",
@@ -47,7 +49,9 @@ MUD_STRIP = {"class": "mud", "rectangle": {"center": [6.0, 5.0], "size": [1.0, 4
 
 
 @pytest.mark.parametrize("env_id", IDS)
-@pytest.mark.parametrize("kwargs", [{}, {"image_encoding": "onehot", "image_size": SMALL}, {"scenario": ["demo_course", "gen:*"], "render_mode": "rgb_array"}])
+@pytest.mark.parametrize(
+    "kwargs", [{}, {"image_encoding": "onehot", "image_size": SMALL}, {"scenario": ["demo_course", "gen:*"], "render_mode": "rgb_array"}]
+)
 def test_gymnasium_and_sb3_checkers_pass_without_warnings(env_id, kwargs):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -298,8 +302,14 @@ def test_a_class_table_of_ones_own_reads_course_names_and_perception():
     from pathlib import Path
 
     examples = Path(__file__).resolve().parent.parent / "examples" / "classes"
-    env = gym.make(ENV_ID, scenario=["gen:7", "gen:8"], image_size=SMALL, image_encoding="onehot",
-                   classes=str(examples / "rellis3d.yaml"), perception=str(examples / "rellis3d_field.yaml")).unwrapped
+    env = gym.make(
+        ENV_ID,
+        scenario=["gen:7", "gen:8"],
+        image_size=SMALL,
+        image_encoding="onehot",
+        classes=str(examples / "rellis3d.yaml"),
+        perception=str(examples / "rellis3d_field.yaml"),
+    ).unwrapped
     assert "bush" in env.classes.names and env.observation_space["image"].shape[-1] == len(env.classes.classes) == 13
     obs, _ = env.reset(seed=0)
     assert env.observation_space.contains(obs)
@@ -352,7 +362,13 @@ def test_the_options_are_one_config_and_each_is_also_a_keyword():
 
 
 def test_bad_construction_arguments():
-    for kwargs in ({"action_type": "joystick"}, {"image_encoding": "rgb"}, {"image_size": (481, 640)}, {"scenario": []}, {"n_waypoints": 0}):
+    for kwargs in (
+        {"action_type": "joystick"},
+        {"image_encoding": "rgb"},
+        {"image_size": (481, 640)},
+        {"scenario": []},
+        {"n_waypoints": 0},
+    ):
         with pytest.raises(ValueError):
             OffRoadNavEnv(**{"scenario": _scenario(), **kwargs})
     with pytest.raises(ValueError, match="finite"):
@@ -363,7 +379,9 @@ def test_bad_construction_arguments():
 
 
 def test_a_gymnasium_vector_env_mixes_courses():
-    envs = gym.vector.SyncVectorEnv([lambda name=name: gym.make(ENV_ID, scenario=name, image_size=SMALL) for name in ("demo_course", "test_course")])
+    envs = gym.vector.SyncVectorEnv(
+        [lambda name=name: gym.make(ENV_ID, scenario=name, image_size=SMALL) for name in ("demo_course", "test_course")]
+    )
     obs, info = envs.reset(seed=0)
     assert obs["image"].shape == (2, *SMALL, 1) and list(info["scenario"]) == ["demo_course", "test_course"]
     for _ in range(3):

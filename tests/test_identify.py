@@ -89,8 +89,7 @@ def test_a_frame_compares_the_two_classes_and_counts_the_choice_on_its_side():
     np.testing.assert_array_equal(counts[("water", GRASS)], [1, 0, 0, 0])  # water taken over the clean centre
     np.testing.assert_array_equal(counts[("mud", GRASS)], [0, 0, 0, 0])  # took neither mud nor a clean one
     np.testing.assert_array_equal(counts[("mud", "rock")], [0, 0, 0, 0])  # no rock: not offered
-    assert set(counts) == {("mud", "rock"), ("mud", "water"), ("rock", "water"),
-                           ("mud", GRASS), ("rock", GRASS), ("water", GRASS)}
+    assert set(counts) == {("mud", "rock"), ("mud", "water"), ("rock", "water"), ("mud", GRASS), ("rock", GRASS), ("water", GRASS)}
 
 
 def test_the_mirrored_frame_counts_on_the_other_side():
@@ -249,17 +248,23 @@ def test_a_profile_the_drive_contradicts_names_each_reversed_pair(report: Identi
     # Declared water first: the drive put water last, identified against rock and a guess against mud.
     lines = report.against(["water", "mud", "rock", "non_traversable"])  # a class the report lacks is left out
     mw, rw = report.pair("mud", "water"), report.pair("rock", "water")
-    assert lines == ["the profile stored with the drive: water > mud > rock: the drive orders 2 of 3 pairs the other way round",
-                     f"  water > mud in the profile, mud > water in the drive (margin {mw.margin:.2f}, not identified)",
-                     f"  water > rock in the profile, rock > water in the drive (margin {rw.margin:.2f}, identified)"]
+    assert lines == [
+        "the profile stored with the drive: water > mud > rock: the drive orders 2 of 3 pairs the other way round",
+        f"  water > mud in the profile, mud > water in the drive (margin {mw.margin:.2f}, not identified)",
+        f"  water > rock in the profile, rock > water in the drive (margin {rw.margin:.2f}, identified)",
+    ]
 
 
 def test_a_drive_that_orders_nothing_states_no_order():
     # One frame, no choice between two classes: every weight 0, no learned order, no pair "the other way round".
     order = ("non_traversable", "water", "rock", "mud", "grass")
-    empty = Identifiability(order, tuple(PairEvidence(a, b, 0, 0, 0, (0, 0), 0.0, None) for i, a in enumerate(order) for b in order[i + 1:]))
+    empty = Identifiability(
+        order, tuple(PairEvidence(a, b, 0, 0, 0, (0, 0), 0.0, None) for i, a in enumerate(order) for b in order[i + 1 :])
+    )
     assert empty.lines()[0] == "learned order: none (the drive sets no class above another)"
-    assert empty.against(["rock", "mud", "water"]) == ["the profile stored with the drive: rock > mud > water: the drive orders none of its 3 pairs"]
+    assert empty.against(["rock", "mud", "water"]) == [
+        "the profile stored with the drive: rock > mud > water: the drive orders none of its 3 pairs"
+    ]
 
 
 def test_the_report_counts_each_choice_for_its_class_and_each_frame_on_its_side():
@@ -267,8 +272,9 @@ def test_the_report_counts_each_choice_for_its_class_and_each_frame_on_its_side(
     read the other way round from the counts (mud, grass)."""
     mud_right, mud_left = _frame({"mud": [0]}), _frame({"mud": [6]})
     mud_left_rock_right = _frame({"mud": [5, 6], "rock": [0, 1]})
-    frames = [(mud_right, 3)] * 12 + [(mud_right, 0)] * 3 + [(mud_left, 3)] * 5 \
-        + [(mud_left_rock_right, 6)] * 4 + [(mud_left_rock_right, 1)] * 2
+    frames = (
+        [(mud_right, 3)] * 12 + [(mud_right, 0)] * 3 + [(mud_left, 3)] * 5 + [(mud_left_rock_right, 6)] * 4 + [(mud_left_rock_right, 1)] * 2
+    )
     U, labels = np.stack([f for f, _ in frames]), np.array([label for _, label in frames])
     report = identifiability(U, labels, CLASSES, LinearUtility(W_TRUE, np.zeros(M)))
     grass_mud = report.pair("mud", GRASS)
@@ -298,8 +304,9 @@ def test_a_margin_within_its_uncertainty_leaves_a_pair_unidentified(drive):
     p = report.pair("mud", "rock")
     assert p.frames >= MIN_FRAMES and p.margin == 0.0 and p.stderr > 0
     assert not p.identified
-    assert "mud vs rock: compared, but the margin is within its uncertainty; the planner's choice between them is a guess" \
-        in report.warnings()
+    assert (
+        "mud vs rock: compared, but the margin is within its uncertainty; the planner's choice between them is a guess" in report.warnings()
+    )
 
 
 def test_an_unknown_stderr_is_never_identified():
@@ -312,11 +319,14 @@ def test_an_unknown_stderr_is_never_identified():
 
 
 def test_to_dict_and_back_is_the_same_report():
-    report = Identifiability((GRASS, "mud", "water"), (
-        PairEvidence(GRASS, "mud", 40, 35, 5, (22, 18), 1.25, 0.3125),
-        PairEvidence(GRASS, "water", 12, 12, 0, (6, 6), 4.5, None),
-        PairEvidence("mud", "water", 0, 0, 0, (0, 0), 3.25, 0.5),
-    ))
+    report = Identifiability(
+        (GRASS, "mud", "water"),
+        (
+            PairEvidence(GRASS, "mud", 40, 35, 5, (22, 18), 1.25, 0.3125),
+            PairEvidence(GRASS, "water", 12, 12, 0, (6, 6), 4.5, None),
+            PairEvidence("mud", "water", 0, 0, 0, (0, 0), 3.25, 0.5),
+        ),
+    )
     data = json.loads(json.dumps(report.to_dict()))  # as stored in a model file's JSON
     assert data["min_frames"] == MIN_FRAMES
     assert [p["identified"] for p in data["pairs"]] == [True, False, False]

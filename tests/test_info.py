@@ -56,7 +56,9 @@ def test_info_gives_every_ensemble_members_chosen_epoch(tmp_path: Path, capsys):
 
 def test_info_reads_older_stage_blocks_and_shows_what_it_can_of_a_damaged_list(tmp_path: Path, capsys):
     config = ClassifierConfig(hidden=8, skip=True)
-    old = save_model(tmp_path / "old.safetensors", config, skip_path_weights(config), {**model_meta(), "utility": {"w": [0.0] * 5, "b": [0.0] * 21}})
+    old = save_model(
+        tmp_path / "old.safetensors", config, skip_path_weights(config), {**model_meta(), "utility": {"w": [0.0] * 5, "b": [0.0] * 21}}
+    )
     bad = save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), {**model_meta(), "stages": "offset"})
     assert main(["info", str(old), str(bad)]) == 0
     out = capsys.readouterr().out

@@ -45,7 +45,6 @@ def _model(path: Path, config: ClassifierConfig, seed: int = 0, utility: bool = 
     return save_model(path, config, weights, meta)
 
 
-
 # --- ONNX ------------------------------------------------------------------------------------
 
 
@@ -113,7 +112,9 @@ def test_rellis3d_maps_as_the_spec_says():
     assert "rellis3d" in packaged_label_maps()
     lut = load_label_map("rellis3d", classes).lut(classes)
     spec = {
-        "water": [6, 31], "rock": [34], "mud": [33],
+        "water": [6, 31],
+        "rock": [34],
+        "mud": [33],
         "non_traversable": [4, 5, 8, 9, 12, 15, 17, 18, 19, 27],
         "grass": [1, 3, 10, 23],
     }
@@ -123,17 +124,20 @@ def test_rellis3d_maps_as_the_spec_says():
     assert lut[2] == 255 and lut[1000] == 255  # ids the map does not list
 
 
-@pytest.mark.parametrize("text,field", [
-    ("format: terrapref-labels/1\nids: {3: grass}\ncolours: {}\n", "colours"),
-    ("format: terrapref-labels/1\nids: {3: gravel}\n", "ids"),
-    ("format: terrapref-labels/1\nids: {-1: grass}\n", "ids.-1"),
-    ("format: terrapref-labels/1\nids: {70000: grass}\n", "ids.70000"),
-    ("format: terrapref-labels/1\nids: []\n", "ids"),
-    ("format: terrapref-labels/2\nids: {3: grass}\n", "format"),
-    ("ids: {3: grass}\n", "format"),
-    ("format: terrapref-labels/1\nids: {3: grass}\ncolors: {3: [0, 300, 0]}\n", "colors.3"),
-    ("format: terrapref-labels/1\nids: {3: grass, 4: mud}\ncolors: {3: [1, 2, 3], 4: [1, 2, 3]}\n", "colors.4"),
-])
+@pytest.mark.parametrize(
+    "text,field",
+    [
+        ("format: terrapref-labels/1\nids: {3: grass}\ncolours: {}\n", "colours"),
+        ("format: terrapref-labels/1\nids: {3: gravel}\n", "ids"),
+        ("format: terrapref-labels/1\nids: {-1: grass}\n", "ids.-1"),
+        ("format: terrapref-labels/1\nids: {70000: grass}\n", "ids.70000"),
+        ("format: terrapref-labels/1\nids: []\n", "ids"),
+        ("format: terrapref-labels/2\nids: {3: grass}\n", "format"),
+        ("ids: {3: grass}\n", "format"),
+        ("format: terrapref-labels/1\nids: {3: grass}\ncolors: {3: [0, 300, 0]}\n", "colors.3"),
+        ("format: terrapref-labels/1\nids: {3: grass, 4: mud}\ncolors: {3: [1, 2, 3], 4: [1, 2, 3]}\n", "colors.4"),
+    ],
+)
 def test_a_bad_label_map_is_one_line_naming_file_and_field(tmp_path: Path, text: str, field: str):
     path = tmp_path / "labels.yaml"
     path.write_text(text)

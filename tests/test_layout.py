@@ -17,7 +17,13 @@ def _package_imports() -> dict[str, set[str]]:
     for path in ROOT.rglob("*.py"):
         part = path.relative_to(ROOT).parts[0].removesuffix(".py")
         for node in ast.walk(ast.parse(path.read_text(), str(path))):
-            names = [a.name for a in node.names] if isinstance(node, ast.Import) else [node.module or ""] if isinstance(node, ast.ImportFrom) and node.level == 0 else []
+            names = (
+                [a.name for a in node.names]
+                if isinstance(node, ast.Import)
+                else [node.module or ""]
+                if isinstance(node, ast.ImportFrom) and node.level == 0
+                else []
+            )
             for name in names:
                 bits = name.split(".")
                 if bits[0] == "terrapref" and len(bits) > 1 and bits[1] != part:
@@ -53,7 +59,7 @@ def _cycle(edges: dict[str, set[str]]) -> list[str] | None:
         stack.append(node)
         for nxt in sorted(edges.get(node, ())):
             if state.get(nxt) == 1:
-                return stack[stack.index(nxt):] + [nxt]
+                return stack[stack.index(nxt) :] + [nxt]
             if nxt not in state and (found := visit(nxt)):
                 return found
         stack.pop()
@@ -157,7 +163,11 @@ def test_entry_points_that_point_up_the_layers_are_the_named_ones():
     for path in ROOT.rglob("*.py"):
         part = path.relative_to(ROOT).parts[0].removesuffix(".py")
         for node in ast.walk(ast.parse(path.read_text(), str(path))):
-            if isinstance(node, ast.Constant) and isinstance(node.value, str) and (m := re.fullmatch(r"terrapref\.(\w+)[\w.]*:\w+", node.value)):
+            if (
+                isinstance(node, ast.Constant)
+                and isinstance(node.value, str)
+                and (m := re.fullmatch(r"terrapref\.(\w+)[\w.]*:\w+", node.value))
+            ):
                 if m.group(1) != part and level[m.group(1)] >= level[part]:
                     found.add((part, m.group(1)))
     assert found == set(LATE_ENTRY_POINTS)

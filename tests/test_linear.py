@@ -15,7 +15,9 @@ from terrapref.learning import exact
 from terrapref.learning.linear import LinearUtility, fit_linear_utility, fit_lookahead_utility
 
 
-def _numpy_fit_frames(U: np.ndarray, labels: np.ndarray, steps: int, lr: float = 0.05, sample_weight: np.ndarray | None = None) -> LinearUtility:
+def _numpy_fit_frames(
+    U: np.ndarray, labels: np.ndarray, steps: int, lr: float = 0.05, sample_weight: np.ndarray | None = None
+) -> LinearUtility:
     U = np.asarray(U, dtype=np.float64)
     n, m, k = U.shape
     rows = exact.rounded(U.reshape(n * m, k), 18)
@@ -40,8 +42,9 @@ def _numpy_fit_frames(U: np.ndarray, labels: np.ndarray, steps: int, lr: float =
     return LinearUtility(params[:k].copy(), params[k:].copy())
 
 
-def _numpy_fit_through(U: np.ndarray, U2: np.ndarray, labels: np.ndarray, steps: int, start: LinearUtility, lr: float = 0.05
-                       ) -> tuple[LinearUtility, float]:
+def _numpy_fit_through(
+    U: np.ndarray, U2: np.ndarray, labels: np.ndarray, steps: int, start: LinearUtility, lr: float = 0.05
+) -> tuple[LinearUtility, float]:
     U = np.asarray(U, dtype=np.float64)
     n, m, k = U.shape
     first = exact.rounded(U.reshape(n * m, k), 18)
@@ -135,6 +138,7 @@ def test_exact_helpers_give_matmuls_bits_past_a_chunk():
 
 def test_distinct_columns_index_every_column():
     from terrapref.learning.linear import _distinct_columns
+
     rng = np.random.default_rng(9)
     x = rng.integers(-3, 3, size=(5, 4000), dtype=np.int32)  # 6 ** 5 possible columns: many repeats
     x[:, 17] = [2**26, -(2**26), 0, 1, -1]  # values at the grid's extremes

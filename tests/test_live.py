@@ -75,8 +75,25 @@ def test_evaluate_live_serves_the_export_channels_to_a_websocket_client(tmp_path
     port, got = _free_port(), {}
     client = threading.Thread(target=_watch, args=(port, got), daemon=True)
     client.start()
-    assert main(["evaluate", str(model), "fig7_rock_vs_non_traversable_left", "--seeds", "1", "--no-driver", "--out", str(tmp_path / "ev"),
-                 "--live", "--live-port", str(port), "--mcap"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                str(model),
+                "fig7_rock_vs_non_traversable_left",
+                "--seeds",
+                "1",
+                "--no-driver",
+                "--out",
+                str(tmp_path / "ev"),
+                "--live",
+                "--live-port",
+                str(port),
+                "--mcap",
+            ]
+        )
+        == 0
+    )
     client.join(timeout=30)
     counts, file_cost = _costmaps_in(tmp_path / "ev" / "runs" / "fig7_rock_vs_non_traversable_left_seed0.mcap")
     assert counts["/terrapref/costmap"] == counts["/terrapref/costmap_grid"] == -(-counts["/terrapref/labels"] // 10)  # once a second
@@ -114,8 +131,24 @@ def test_a_port_in_use_is_one_line(tmp_path, capsys):
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         port = busy.getsockname()[1]
-        assert main(["evaluate", str(model), "fig7_rock_vs_non_traversable_left", "--seeds", "1", "--no-driver", "--out", str(tmp_path / "ev"),
-                     "--live", "--live-port", str(port)]) == 2
+        assert (
+            main(
+                [
+                    "evaluate",
+                    str(model),
+                    "fig7_rock_vs_non_traversable_left",
+                    "--seeds",
+                    "1",
+                    "--no-driver",
+                    "--out",
+                    str(tmp_path / "ev"),
+                    "--live",
+                    "--live-port",
+                    str(port),
+                ]
+            )
+            == 2
+        )
     one_line_error(capsys, f"127.0.0.1:{port}", "cannot serve the live view")
 
 
@@ -124,13 +157,35 @@ def test_a_host_this_machine_cannot_listen_on_blames_the_host(tmp_path, capsys, 
     from helpers import linear_model, one_line_error
 
     model = linear_model(tmp_path / "linear.safetensors")
-    assert main(["evaluate", str(model), "fig7_rock_vs_non_traversable_left", "--seeds", "1", "--no-driver", "--out", str(tmp_path / "ev"),
-                 "--live", "--live-host", host]) == 2
+    assert (
+        main(
+            [
+                "evaluate",
+                str(model),
+                "fig7_rock_vs_non_traversable_left",
+                "--seeds",
+                "1",
+                "--no-driver",
+                "--out",
+                str(tmp_path / "ev"),
+                "--live",
+                "--live-host",
+                host,
+            ]
+        )
+        == 2
+    )
     assert "--live-port" not in one_line_error(capsys, f"{host}: --live-host: cannot listen on this address")
 
 
-@pytest.mark.parametrize("offered,named", [(["foxglove.websocket.v1"], "foxglove.websocket.v1"), (["foxglove.sdk.v1"], "foxglove.sdk.v1"),
-                                           (["foxglove.websocket.v1", "foxglove.sdk.v1"], "foxglove.sdk.v1")])
+@pytest.mark.parametrize(
+    "offered,named",
+    [
+        (["foxglove.websocket.v1"], "foxglove.websocket.v1"),
+        (["foxglove.sdk.v1"], "foxglove.sdk.v1"),
+        (["foxglove.websocket.v1", "foxglove.sdk.v1"], "foxglove.sdk.v1"),
+    ],
+)
 def test_a_viewer_connects_by_either_name_of_the_protocol(offered, named):
     from terrapref.interop.live import LiveView
 
@@ -186,8 +241,13 @@ def test_wait_holds_the_first_run_until_a_viewer_subscribes():
 
     view = LiveView(port=0, wait=True)
     started = threading.Event()
-    runner = threading.Thread(target=lambda: (LiveRun.start(view, np.array([[0.0, 0.0], [5.0, 0.0]]), CameraConfig(), default_classes(),
-                                                            PreferenceSetConfig()), started.set()), daemon=True)
+    runner = threading.Thread(
+        target=lambda: (
+            LiveRun.start(view, np.array([[0.0, 0.0], [5.0, 0.0]]), CameraConfig(), default_classes(), PreferenceSetConfig()),
+            started.set(),
+        ),
+        daemon=True,
+    )
     try:
         runner.start()
         assert not started.wait(0.3)  # no viewer yet

@@ -148,7 +148,10 @@ def test_flat_gradient_and_adam_give_the_named_forms_bits():
                 opt.step(net.backward(cache, grad))
             else:
                 buffer = net.gradient(cache, grad)
-                assert all(_same_bits(buffer[net._at[k] : net._at[k] + v.size], net.backward(cache, grad)[k].ravel()) for k, v in net.weights.items())
+                assert all(
+                    _same_bits(buffer[net._at[k] : net._at[k] + v.size], net.backward(cache, grad)[k].ravel())
+                    for k, v in net.weights.items()
+                )
                 opt.step(buffer)
     assert all(_same_bits(by_name.weights[k], flat.weights[k]) for k in weights)
     with pytest.raises(ValueError, match="values for"):

@@ -39,7 +39,9 @@ ODD_PROFILE = ("mud", "rock", "water", "non_traversable")
 def model_file(tmp_path: Path) -> tuple[Path, ClassifierConfig, dict[str, np.ndarray]]:
     config = ClassifierConfig(hidden=16, activation="tanh", depth=2, skip=True)
     weights = random_weights(config)
-    path = save_model(tmp_path / "sub" / "model.safetensors", config, weights, {**model_meta(ODD_FEATURES, ODD_CAMERA, ODD_PROFILE), "note": "kept"})
+    path = save_model(
+        tmp_path / "sub" / "model.safetensors", config, weights, {**model_meta(ODD_FEATURES, ODD_CAMERA, ODD_PROFILE), "note": "kept"}
+    )
     return path, config, weights
 
 
@@ -257,19 +259,51 @@ def _header(**changes) -> ModelHeader:
     """A finished ensemble's header with every entry training writes."""
     epochs = tuple(EpochMetrics(e, 2.0 / e, 2.5 / e, 0.3, 0.25, 0.6) for e in (1, 2))
     classes = default_classes()
-    values = dict(classifier=ClassifierConfig(hidden=8, members=2), recipe="teach", features=ODD_FEATURES, camera=ODD_CAMERA, classes=classes,
-                  profile=ODD_PROFILE, training=TrainConfig().to_dict(), data=DataSource("0123456789abcdef", 40, ({"path": "rec", "frames": 40},)),
-                  history=epochs, best_epoch=2, steps=8, identifiability={"order": ["mud"], "pairs": [], "min_frames": 20, "lethal": []},
-                  steadying={"tremor_rps": None, "spacing_rps": 0.1, "window": 1, "changed": 0.0},
-                  rules=({"type": "second_stage", "weight": 5.0},), drives="second_stage", members=(MemberRun(0, 2, epochs), MemberRun(1000, 1, epochs)),
-                  epoch=2)
+    values = dict(
+        classifier=ClassifierConfig(hidden=8, members=2),
+        recipe="teach",
+        features=ODD_FEATURES,
+        camera=ODD_CAMERA,
+        classes=classes,
+        profile=ODD_PROFILE,
+        training=TrainConfig().to_dict(),
+        data=DataSource("0123456789abcdef", 40, ({"path": "rec", "frames": 40},)),
+        history=epochs,
+        best_epoch=2,
+        steps=8,
+        identifiability={"order": ["mud"], "pairs": [], "min_frames": 20, "lethal": []},
+        steadying={"tremor_rps": None, "spacing_rps": 0.1, "window": 1, "changed": 0.0},
+        rules=({"type": "second_stage", "weight": 5.0},),
+        drives="second_stage",
+        members=(MemberRun(0, 2, epochs), MemberRun(1000, 1, epochs)),
+        epoch=2,
+    )
     return ModelHeader(**{**values, **changes})
 
 
 def test_a_header_is_written_in_the_files_order_and_read_back_equal(tmp_path: Path):
     header = _header()
-    assert list(header.to_dict()) == ["format", "kind", "classifier", "recipe", "features", "camera", "classes", "profile", "training", "data",
-                                      "history", "best_epoch", "steps", "identifiability", "steadying", "rules", "drives", "members", "epoch"]
+    assert list(header.to_dict()) == [
+        "format",
+        "kind",
+        "classifier",
+        "recipe",
+        "features",
+        "camera",
+        "classes",
+        "profile",
+        "training",
+        "data",
+        "history",
+        "best_epoch",
+        "steps",
+        "identifiability",
+        "steadying",
+        "rules",
+        "drives",
+        "members",
+        "epoch",
+    ]
     config = header.classifier
     weights = {f"members.{j}.{k}": v for j in range(2) for k, v in random_weights(replace(config, members=1), j).items()}
     model = load_model(write_model(tmp_path / "m.safetensors", header, weights))
@@ -278,8 +312,20 @@ def test_a_header_is_written_in_the_files_order_and_read_back_equal(tmp_path: Pa
 
 
 def test_a_checkpoints_member_count_and_an_interrupted_runs_progress_are_its_own_entries():
-    checkpoint = _header(history=None, best_epoch=None, steps=None, identifiability=None, steadying=None, rules=None, drives=None, members=None,
-                         member_count=2, member=1, epoch=3, status="checkpoint")
+    checkpoint = _header(
+        history=None,
+        best_epoch=None,
+        steps=None,
+        identifiability=None,
+        steadying=None,
+        rules=None,
+        drives=None,
+        members=None,
+        member_count=2,
+        member=1,
+        epoch=3,
+        status="checkpoint",
+    )
     written = checkpoint.to_dict()
     assert list(written)[-4:] == ["members", "member", "epoch", "status"] and written["members"] == 2
     assert ModelHeader.from_dict(written, "c.safetensors") == checkpoint
@@ -289,8 +335,9 @@ def test_a_checkpoints_member_count_and_an_interrupted_runs_progress_are_its_own
     assert ModelHeader.from_dict(written, "i.safetensors") == interrupted
 
 
-@pytest.mark.parametrize("key, value", [("history", [{"epoch": 1}]), ("data", ["rec"]), ("members", "two"), ("best_epoch", 1.5),
-                                        ("recipe", 3), ("training", [])])
+@pytest.mark.parametrize(
+    "key, value", [("history", [{"epoch": 1}]), ("data", ["rec"]), ("members", "two"), ("best_epoch", 1.5), ("recipe", 3), ("training", [])]
+)
 def test_a_damaged_training_record_is_refused_naming_its_entry(tmp_path: Path, key: str, value):
     header = _header()
     config = header.classifier
@@ -303,8 +350,10 @@ def test_rules_are_read_without_a_feature_configuration_and_older_files_keys_by_
     from terrapref.rules import legacy_blocks
 
     legacy = {"utility": {"w": [0.0], "b": [0.0]}, "corridor": {"weights": [1.0], "near_m": 2.0}}
-    assert legacy_blocks(legacy, "old.safetensors") == ({"type": "second_stage", "weight": 1.5, "w": [0.0], "b": [0.0]},
-                                                         {"type": "offset", "weights": [1.0], "near_m": 2.0})
+    assert legacy_blocks(legacy, "old.safetensors") == (
+        {"type": "second_stage", "weight": 1.5, "w": [0.0], "b": [0.0]},
+        {"type": "offset", "weights": [1.0], "near_m": 2.0},
+    )
     with_lookahead = legacy_blocks({**legacy, "features": {"lookahead": {"after_s": 1.8, "stride": 3}}}, "old.safetensors")
     assert with_lookahead[0] == {"type": "second_stage", "weight": 1.5, "after_s": 1.8, "stride": 3, "w": [0.0], "b": [0.0]}
     assert rule_blocks({"rules": []}, "rules", "new.safetensors") == () and rule_blocks({}, "rules", "checkpoint.safetensors") is None
@@ -353,8 +402,6 @@ def test_a_model_header_with_a_fractional_size_is_refused(tmp_path: Path):
 def test_profile_of_the_model_parses(model_file):
     model = load_model(model_file[0])
     assert PreferenceProfile.parse(list(model.profile), model.classes).order == ODD_PROFILE
-
-
 
 
 # --- mirror augmentation ---------------------------------------------------------------------------------

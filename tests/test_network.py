@@ -29,7 +29,11 @@ CONFIGS = [
 ]
 
 
-@pytest.mark.parametrize("config", CONFIGS, ids=lambda c: f"{c.activation}-d{c.depth}-h{c.hidden}-m{c.m}k{c.n_features}{'-skip' if c.skip else ''}{'' if c.compress else '-flat'}")
+@pytest.mark.parametrize(
+    "config",
+    CONFIGS,
+    ids=lambda c: f"{c.activation}-d{c.depth}-h{c.hidden}-m{c.m}k{c.n_features}{'-skip' if c.skip else ''}{'' if c.compress else '-flat'}",
+)
 def test_numpy_forward_equals_torch(config: ClassifierConfig):
     torch.manual_seed(3)
     net = UtilityClassifier(config).eval()
@@ -117,9 +121,19 @@ def _per_member_forward(config: ClassifierConfig, weights: dict[str, np.ndarray]
     return logits[0] if single else logits
 
 
-@pytest.mark.parametrize("config", [*CONFIGS[:7], ClassifierConfig(members=3, skip=True), ClassifierConfig(members=2, activation="tanh", ignore=(1, 3)),
-                                    ClassifierConfig(members=3, compress=False, activation="elu"), ClassifierConfig(members=1, ignore=(0,))],
-                         ids=lambda c: f"{c.activation}-d{c.depth}-M{c.members}{'-skip' if c.skip else ''}{'' if c.compress else '-flat'}{'-ignore' if c.ignore else ''}")
+@pytest.mark.parametrize(
+    "config",
+    [
+        *CONFIGS[:7],
+        ClassifierConfig(members=3, skip=True),
+        ClassifierConfig(members=2, activation="tanh", ignore=(1, 3)),
+        ClassifierConfig(members=3, compress=False, activation="elu"),
+        ClassifierConfig(members=1, ignore=(0,)),
+    ],
+    ids=lambda c: (
+        f"{c.activation}-d{c.depth}-M{c.members}{'-skip' if c.skip else ''}{'' if c.compress else '-flat'}{'-ignore' if c.ignore else ''}"
+    ),
+)
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_stacked_members_give_the_per_member_bits(config: ClassifierConfig, dtype):
     rng = np.random.default_rng(8)

@@ -31,8 +31,11 @@ def test_a_course_with_no_zones_is_evaluated(tmp_path: Path, capsys):
     assert (tmp_path / "ev" / "metrics.json").is_file()
 
 
-@pytest.mark.parametrize("waypoints", [[[5.0, 15.0], [5.0, 15.0]], [[5.0, 15.0]], [[5.0, float("nan")], [30.0, 15.0]]],
-                         ids=["two identical points", "one point", "not finite"])
+@pytest.mark.parametrize(
+    "waypoints",
+    [[[5.0, 15.0], [5.0, 15.0]], [[5.0, 15.0]], [[5.0, float("nan")], [30.0, 15.0]]],
+    ids=["two identical points", "one point", "not finite"],
+)
 def test_a_path_of_no_length_is_refused_by_the_runtime_before_anything_changes(tmp_path: Path, waypoints):
     from terrapref.interop.runtime import PlannerRuntime
     from terrapref.scenario import resolve_scenario
@@ -53,8 +56,10 @@ def test_the_node_skips_a_path_of_no_length_and_keeps_the_one_in_force(tmp_path:
     from terrapref.learning.model_file import load_model
 
     robot = tmp_path / "robot.yaml"
-    robot.write_text("format: terrapref-robot/1\ntopics: {segmentation: /seg, camera_info: /info, odometry: /odom, command: /cmd, path: /path}\n"
-                     "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n")
+    robot.write_text(
+        "format: terrapref-robot/1\ntopics: {segmentation: /seg, camera_info: /info, odometry: /odom, command: /cmd, path: /path}\n"
+        "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n"
+    )
     core = PlannerNodeCore(load_model(linear_model(tmp_path / "m.safetensors")), load_robot(robot))
     ts = typestore()
     core.on_path(path_message(ts, [(5.0, 15.0), (5.0, 15.0)]))
@@ -74,8 +79,14 @@ def test_a_path_file_of_no_length_is_refused_naming_it(tmp_path: Path):
         load_waypoints(path, "robot.yaml")
 
 
-@pytest.mark.parametrize("command", [["evaluate", "{model}", "fig7a_non_traversable_longer", "--seeds", "1", "--out", "{tmp}/ev"],
-                                     ["export", "{model}", "--format", "onnx", "--out", "{tmp}/m.onnx"]], ids=["evaluate", "export"])
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["evaluate", "{model}", "fig7a_non_traversable_longer", "--seeds", "1", "--out", "{tmp}/ev"],
+        ["export", "{model}", "--format", "onnx", "--out", "{tmp}/m.onnx"],
+    ],
+    ids=["evaluate", "export"],
+)
 def test_an_image_size_in_a_file_is_bounded_before_anything_is_allocated(tmp_path: Path, capsys, command):
     """A model header asking for a camera 10^9 pixels wide once exhausted the machine's memory."""
     from terrapref.learning.model_file import _write, read_model_file
@@ -115,13 +126,17 @@ def test_no_ros_master_is_said_within_seconds_not_waited_for():
         check_master(f"http://127.0.0.1:{listening.getsockname()[1]}")
 
 
-@pytest.mark.parametrize("block,key,value,words", [
-    ("preference", "n_steps", 10**9, ["n_steps", "1..1000"]),
-    ("corridor", "map_resolution_m", 1e-6, ["ground-map cells a side", "at most 4096"]),
-    ("corridor", "offset_step_m", 1e-9, ["offsets", "at most 10000"]),
-    ("corridor", "station_step_m", 1e-9, ["stations", "at most 10000"]),
-    ("corridor", "sample_step_m", 1e-9, ["camera samples", "at most 10000"]),
-], ids=["trajectory points", "map cells", "offsets", "stations", "samples"])
+@pytest.mark.parametrize(
+    "block,key,value,words",
+    [
+        ("preference", "n_steps", 10**9, ["n_steps", "1..1000"]),
+        ("corridor", "map_resolution_m", 1e-6, ["ground-map cells a side", "at most 4096"]),
+        ("corridor", "offset_step_m", 1e-9, ["offsets", "at most 10000"]),
+        ("corridor", "station_step_m", 1e-9, ["stations", "at most 10000"]),
+        ("corridor", "sample_step_m", 1e-9, ["camera samples", "at most 10000"]),
+    ],
+    ids=["trajectory points", "map cells", "offsets", "stations", "samples"],
+)
 def test_every_size_a_model_file_gives_is_bounded(tmp_path: Path, capsys, block, key, value, words):
     """Sizes in a model's header once allocated gigabytes (or failed in a worker) before any check."""
     from helpers import skip_path_weights

@@ -19,7 +19,9 @@ ORDER = ["water", "rock", "mud", "non_traversable"]  # not the default order
 def ordered_recording(tmp_path_factory) -> Path:
     """A short undisturbed drive by a driver with a non-default order."""
     out = tmp_path_factory.mktemp("ordered") / "rec"
-    assert main(["record", "fig7a_non_traversable_longer", "--out", str(out), "--quiet", "--disturb", "0", "--profile", ",".join(ORDER)]) == 0
+    assert (
+        main(["record", "fig7a_non_traversable_longer", "--out", str(out), "--quiet", "--disturb", "0", "--profile", ",".join(ORDER)]) == 0
+    )
     return out
 
 
@@ -47,13 +49,17 @@ def test_an_import_with_no_declared_order_says_so_and_training_refuses_it(tmp_pa
     one_line_error(capsys, "meta.json", "profile", "--profile")
     assert not (tmp_path / "ds.safetensors").exists()
     # --profile declares it at the import
-    assert main(["import", str(bag), "--robot", str(robot), "--out", str(tmp_path / "given"), "--profile", "rock,mud,water,non_traversable"]) == 0
+    assert (
+        main(["import", str(bag), "--robot", str(robot), "--out", str(tmp_path / "given"), "--profile", "rock,mud,water,non_traversable"])
+        == 0
+    )
     assert "(--profile)" in capsys.readouterr().out
     assert read_recording(tmp_path / "given").meta["profile"] == ["rock", "mud", "water", "non_traversable"]
 
 
-def test_a_recording_replaced_while_it_is_featurised_fails_clearly(tmp_path: Path, fig7_recording: Path, ordered_recording: Path,
-                                                                    monkeypatch, capsys):
+def test_a_recording_replaced_while_it_is_featurised_fails_clearly(
+    tmp_path: Path, fig7_recording: Path, ordered_recording: Path, monkeypatch, capsys
+):
     """`record --force --out REC` swapping a new drive in while `featurize REC` reads it: the
     reader would take one recording's frame list and the other's images; it must fail instead."""
     import shutil
@@ -142,8 +148,21 @@ def _writers(tmp: Path, rec: Path) -> dict[str, tuple[list[str], Path]]:
         "train": (["train", str(data), "--recipe", "paper", "--epochs", "1", "--out", str(tmp / "t.safetensors")], tmp / "t.safetensors"),
         "export onnx": (["export", str(model), "--format", "onnx", "--out", str(tmp / "m.onnx")], tmp / "m.onnx"),
         "export mcap": (["export", str(rec), "--format", "mcap", "--out", str(tmp / "r.mcap")], tmp / "r.mcap"),
-        "evaluate": (["evaluate", str(model), "fig7a_non_traversable_longer", "--seeds", "1", "--no-driver", "--workers", "1",
-                      "--out", str(tmp / "ev")], tmp / "ev"),
+        "evaluate": (
+            [
+                "evaluate",
+                str(model),
+                "fig7a_non_traversable_longer",
+                "--seeds",
+                "1",
+                "--no-driver",
+                "--workers",
+                "1",
+                "--out",
+                str(tmp / "ev"),
+            ],
+            tmp / "ev",
+        ),
     }
 
 
@@ -153,8 +172,9 @@ def _state(path: Path) -> dict[str, bytes]:
 
 
 @pytest.mark.parametrize("command", ["render", "show", "course", "inspect", "featurize", "train", "export onnx", "export mcap", "evaluate"])
-def test_every_command_refuses_an_existing_output_without_force_and_replaces_it_with_force(tmp_path: Path, fig7_recording: Path,
-                                                                                            monkeypatch, capsys, command: str):
+def test_every_command_refuses_an_existing_output_without_force_and_replaces_it_with_force(
+    tmp_path: Path, fig7_recording: Path, monkeypatch, capsys, command: str
+):
     monkeypatch.chdir(Path(__file__).resolve().parent.parent)  # examples/ as a user's clone has it
     argv, out = _writers(tmp_path, fig7_recording)[command]
     assert main(argv) == 0
@@ -181,8 +201,11 @@ def test_two_evaluations_into_one_folder_leave_one_run_whole(tmp_path: Path, fig
     assert not (out / "from_the_first_run.png").exists() and (out / "metrics.json").is_file()
 
 
-@pytest.mark.parametrize("argv", [["reproduce", "--seeds", "1"], ["select", "--seeds", "1", "--courses", "1"], ["study", "--quick"]],
-                         ids=["reproduce", "select", "study"])
+@pytest.mark.parametrize(
+    "argv",
+    [["reproduce", "--seeds", "1"], ["select", "--seeds", "1", "--courses", "1"], ["study", "--quick"]],
+    ids=["reproduce", "select", "study"],
+)
 def test_the_long_jobs_refuse_an_existing_folder_before_any_work(tmp_path: Path, capsys, argv):
     (tmp_path / "out").mkdir()
     (tmp_path / "out" / "REPORT.md").write_text("an earlier run")

@@ -27,8 +27,10 @@ def setup(tmp_path_factory):
     root = tmp_path_factory.mktemp("node")
     config = ClassifierConfig(hidden=8, skip=True)
     model = save_model(root / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
-    (root / "robot.yaml").write_text("format: terrapref-robot/1\ntopics: {segmentation: /seg, camera_info: /info, odometry: /odom, command: /cmd}\n"
-                                     "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n")
+    (root / "robot.yaml").write_text(
+        "format: terrapref-robot/1\ntopics: {segmentation: /seg, camera_info: /info, odometry: /odom, command: /cmd}\n"
+        "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n"
+    )
     scenario = resolve_scenario("fig7_rock_vs_non_traversable_left")
     renderer = SegmentationRenderer(PinholeCamera(CameraConfig()), rasterise(scenario))
     images = [renderer.render(p) for p in POSES]

@@ -42,8 +42,9 @@ def _same(a, b) -> bool:
     if a.dtype.kind != "f":
         return bool(np.array_equal(a, b))
     nan = np.isnan(a)
-    return bool(np.array_equal(nan, np.isnan(b)) and np.array_equal(a[~nan], b[~nan])
-                and np.array_equal(np.signbit(a[~nan]), np.signbit(b[~nan])))
+    return bool(
+        np.array_equal(nan, np.isnan(b)) and np.array_equal(a[~nan], b[~nan]) and np.array_equal(np.signbit(a[~nan]), np.signbit(b[~nan]))
+    )
 
 
 def _path(rng: np.random.Generator, n: int | None = None) -> ReferencePath:
@@ -94,8 +95,13 @@ def _column_medians_numpy(history: np.ndarray, count: int) -> np.ndarray:
 
 
 @FAST
-@given(seed=st.integers(0, 2**32 - 1), memory=st.integers(1, 12), n_cols=st.integers(1, 8), missing=st.floats(0.0, 1.0),
-       integer_rows=st.booleans())
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    memory=st.integers(1, 12),
+    n_cols=st.integers(1, 8),
+    missing=st.floats(0.0, 1.0),
+    integer_rows=st.booleans(),
+)
 def test_column_medians_are_numpys_nanmedians(seed: int, memory: int, n_cols: int, missing: float, integer_rows: bool):
     rng = np.random.default_rng(seed)
     if integer_rows:  # the band's rows, as HorizonAttitude reads them
@@ -174,8 +180,9 @@ def _least_squares_python(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     return (qq * pr - pq * qr) / det, (pp * qr - pq * pr) / det
 
 
-def _attitude_fit_numpy(departure: np.ndarray, reference: np.ndarray, u: np.ndarray, fy: float, cy: float,
-                        max_rad: float) -> tuple[float, float]:
+def _attitude_fit_numpy(
+    departure: np.ndarray, reference: np.ndarray, u: np.ndarray, fy: float, cy: float, max_rad: float
+) -> tuple[float, float]:
     """The NumPy form of attitude_compiled.attitude_fit: least squares of the columns'
     departures against a small pitch's and roll's image motion at the reference line, twice, the
     second time without the columns that miss the first fit by more than 3 rows."""
@@ -247,8 +254,7 @@ def test_attitude_fit_gives_the_python_forms_pitch_and_roll(spacing: str):
 
 
 @FAST
-@given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 40), spacing=st.sampled_from(SPACINGS),
-       missing=st.floats(0.0, 0.8))
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 40), spacing=st.sampled_from(SPACINGS), missing=st.floats(0.0, 0.8))
 def test_attitude_fit_gives_the_python_forms_pitch_and_roll_on_drawn_lines(seed: int, n: int, spacing: str, missing: float):
     departure, reference, u, fy, cy = _attitude_case(np.random.default_rng(seed), n, spacing, missing)
     max_rad = math.radians(6.0)
@@ -287,8 +293,28 @@ def _ground_numpy(ray: np.ndarray, axes: np.ndarray, t: np.ndarray) -> np.ndarra
     return np.stack([t[0] + scale * d[0], t[1] + scale * d[1]], axis=1)
 
 
-def _map_vote_python(evidence, stamp, cells, ox, oy, inv_res, x, y, c, s, vx, vy, weight, cols, frame, fade, lethal, lethal_share,
-                     terrain_share, min_evidence) -> None:
+def _map_vote_python(
+    evidence,
+    stamp,
+    cells,
+    ox,
+    oy,
+    inv_res,
+    x,
+    y,
+    c,
+    s,
+    vx,
+    vy,
+    weight,
+    cols,
+    frame,
+    fade,
+    lethal,
+    lethal_share,
+    terrain_share,
+    min_evidence,
+) -> None:
     """The Python form of ground_map_compiled.map_vote's votes, sample by sample, with each sample's column
     ``cols`` given and placed at (vx, vy): float32 evidence, faded by the frames since a cell's
     last vote; a cell's column the lethal one, else the terrain one, else K (K + 1: too little)."""
@@ -339,8 +365,9 @@ def _column_python(e: np.ndarray, lethal: np.ndarray, lethal_share, terrain_shar
     return k
 
 
-def _update_numpy(evidence, stamp, cells, ox, oy, inv_res, x, y, c, s, vx, vy, weight, ids, columns, frame, fade, lethal, shares, tilt,
-                  ray, ground0, t) -> None:
+def _update_numpy(
+    evidence, stamp, cells, ox, oy, inv_res, x, y, c, s, vx, vy, weight, ids, columns, frame, fade, lethal, shares, tilt, ray, ground0, t
+) -> None:
     """The NumPy form of GroundMap.update's samples ahead of the vote: each pixel's column; with a
     tilt (the camera's axes off its mount), each sample moved by where its ray now meets the
     ground less where the mount's camera saw it meet it, no vote from a ray that misses it."""
@@ -397,7 +424,9 @@ def test_map_vote_gives_the_numpy_forms_map(tilted: bool):
             assert voted.any() and np.array_equal(cells[~voted], want_cells[~voted]), (seed, frame)
             centres = (np.arange(n) + 0.5) * res
             px, py = np.meshgrid(origin[0] + centres, origin[1] + centres)
-            layers = ground_map_compiled.MapLayers(cells.copy(), evidence, lethal, np.array(shares), float(origin[0]), float(origin[1]), 1.0 / res)
+            layers = ground_map_compiled.MapLayers(
+                cells.copy(), evidence, lethal, np.array(shares), float(origin[0]), float(origin[1]), 1.0 / res
+            )
             read = ground_map_compiled.map_read(layers, px.ravel(), py.ravel(), k + 1)
             assert np.array_equal(read.reshape(n, n), want_cells), (seed, frame)
             if rng.random() < 0.5:  # some frames' cells decided before the next votes, some not
@@ -421,8 +450,9 @@ def _map_read_numpy(cells: np.ndarray, ox: float, oy: float, inv_res: float, px:
     return out
 
 
-def _map_read_beside_numpy(cells: np.ndarray, ox: float, oy: float, inv_res: float, path: ReferencePath, s: np.ndarray, lat: np.ndarray,
-                           never: int) -> np.ndarray:
+def _map_read_beside_numpy(
+    cells: np.ndarray, ox: float, oy: float, inv_res: float, path: ReferencePath, s: np.ndarray, lat: np.ndarray, never: int
+) -> np.ndarray:
     """The NumPy form of ground_map_compiled.map_read_beside: the map's column (O, S, F) at ``centre + lat *
     normal``, ``centre = path.point_at(s)``, ``normal`` the path's direction there turned left."""
     u = path.direction_at(s)
@@ -470,8 +500,19 @@ def test_map_read_beside_gives_the_numpy_forms_columns(seed: int, n_st: int, n_o
     assert np.array_equal(lazy[read], cells[read])  # the cells it decided are kept as decided
 
 
-def _lethal_hits_numpy(cells: np.ndarray, ox: float, oy: float, inv_res: float, path: ReferencePath, progress_m: float,
-                       stations: np.ndarray, offsets: np.ndarray, across: np.ndarray, lethal: np.ndarray, never: int) -> np.ndarray:
+def _lethal_hits_numpy(
+    cells: np.ndarray,
+    ox: float,
+    oy: float,
+    inv_res: float,
+    path: ReferencePath,
+    progress_m: float,
+    stations: np.ndarray,
+    offsets: np.ndarray,
+    across: np.ndarray,
+    lethal: np.ndarray,
+    never: int,
+) -> np.ndarray:
     """The NumPy form of terrapref.rules.offset.reach_compiled.lethal_hits (OffsetSteering's lethal
     lines): whether any point across each offset's line at each station lies on a lethal column."""
     s = np.minimum(progress_m + stations, path.length_m)
@@ -525,8 +566,9 @@ def test_swept_reach_reads_undecided_cells_as_decided(seed: int, n_off: int):
 # --- the corridor's features and value -----------------------------------------------------------
 
 
-def _corridor_features_numpy(col: np.ndarray, centre: int, k: int, gap: int, beyond: int, step: float, stations: np.ndarray,
-                             offsets: np.ndarray, span: float) -> tuple[np.ndarray, float]:
+def _corridor_features_numpy(
+    col: np.ndarray, centre: int, k: int, gap: int, beyond: int, step: float, stations: np.ndarray, offsets: np.ndarray, span: float
+) -> tuple[np.ndarray, float]:
     """The NumPy form of offsets_compiled.offset_features (OffsetFeatures.__call__): metres on each
     column up to ``beyond`` stations past the first patch on the path, and the detour's price."""
     on = (col[centre] < k).any(axis=1)  # (S,): terrain on the path itself
@@ -546,12 +588,17 @@ def _corridor_features_numpy(col: np.ndarray, centre: int, k: int, gap: int, bey
     counts = np.bincount((np.arange(n_off)[:, None] * (k + 2) + flat).ravel(), minlength=n_off * (k + 2)).reshape(n_off, k + 2)
     metres = counts * (step / col.shape[2])
     detour = offsets**2 * (on_path_m + span)
-    return np.concatenate([metres[:, :k], metres[:, k + 1:], detour[:, None]], axis=1), near_m
+    return np.concatenate([metres[:, :k], metres[:, k + 1 :], detour[:, None]], axis=1), near_m
 
 
 @FAST
-@given(seed=st.integers(0, 2**32 - 1), k=st.integers(1, 6), gap=st.integers(0, 5), beyond=st.integers(0, 12),
-       on_path=st.sampled_from([0.0, 0.05, 0.3, 1.0]))
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    k=st.integers(1, 6),
+    gap=st.integers(0, 5),
+    beyond=st.integers(0, 12),
+    on_path=st.sampled_from([0.0, 0.05, 0.3, 1.0]),
+)
 def test_corridor_features_give_the_numpy_forms_features(seed: int, k: int, gap: int, beyond: int, on_path: float):
     rng = np.random.default_rng(seed)
     config = OffsetGeometry(station_step_m=float(rng.choice([0.25, 0.1, 0.3])), span_m=float(rng.uniform(0.0, 8.0)))
@@ -561,8 +608,9 @@ def test_corridor_features_give_the_numpy_forms_features(seed: int, k: int, gap:
     col = rng.integers(0, k + 2, (n_off, n_st, n_f)).astype(np.uint8)
     # On the path: terrain at a share ``on_path`` of the stations (none, scattered with gaps, all).
     terrain = rng.random(n_st) < on_path
-    col[centre] = np.where(terrain[:, None] & (rng.random((n_st, n_f)) < 0.5), rng.integers(0, k, (n_st, n_f)),
-                           rng.integers(k, k + 2, (n_st, n_f)))
+    col[centre] = np.where(
+        terrain[:, None] & (rng.random((n_st, n_f)) < 0.5), rng.integers(0, k, (n_st, n_f)), rng.integers(k, k + 2, (n_st, n_f))
+    )
     got, near_m = offsets_compiled.offset_features(col, centre, k, gap, beyond, config.station_step_m, stations, offsets, config.span_m)
     want, want_near_m = _corridor_features_numpy(col, centre, k, gap, beyond, config.station_step_m, stations, offsets, config.span_m)
     assert _same(got, want) and _same(near_m, want_near_m)
@@ -584,8 +632,13 @@ def _weighted_numpy(features: np.ndarray, weights: np.ndarray) -> np.ndarray:
 
 
 @FAST
-@given(seed=st.integers(0, 2**32 - 1), n_off=st.integers(1, 31), k=st.integers(1, 6),
-       view_near_m=st.sampled_from([0.0, 1.5, 4.0, math.inf]), near_m=st.sampled_from([0.0, 2.0, 4.0, 100.0]))
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n_off=st.integers(1, 31),
+    k=st.integers(1, 6),
+    view_near_m=st.sampled_from([0.0, 1.5, 4.0, math.inf]),
+    near_m=st.sampled_from([0.0, 2.0, 4.0, 100.0]),
+)
 def test_gated_value_gives_the_numpy_forms_value(seed: int, n_off: int, k: int, view_near_m: float, near_m: float):
     rng = np.random.default_rng(seed)
     features = rng.uniform(0.0, 12.0, (n_off, k + 2)) * 10.0 ** rng.integers(-3, 4, (n_off, k + 2))
@@ -611,8 +664,9 @@ def test_frame_at_gives_point_at_and_direction_at(seed: int):
         assert _same(np.array([x, y]), path.point_at(np.array([s]))[0]), s  # the vectorised form too
 
 
-def _steer_python(path: ReferencePath, pose, progress_m: float, offset_m, lookahead_m: float, v_mps: float,
-                  clip: bool = True) -> np.ndarray:
+def _steer_python(
+    path: ReferencePath, pose, progress_m: float, offset_m, lookahead_m: float, v_mps: float, clip: bool = True
+) -> np.ndarray:
     """The Python form of pursuit_yaw_rates (``clip=False``) and steer: the pure-pursuit yaw rate
     toward the path shifted by ``offset_m``, the target read by ``point_at`` and ``direction_at``."""
     s = min(progress_m + lookahead_m, path.length_m)
@@ -642,5 +696,7 @@ def test_pursuit_yaw_rates_and_steer_give_the_python_forms_rates(seed: int, scal
         lookahead_m, v_mps = float(rng.uniform(0.5, 4.0)), float(rng.uniform(0.5, 3.0))
         rates = pursuit_yaw_rates(path, pose, progress_m, offsets, lookahead_m, v_mps)
         assert _same(rates, _steer_python(path, pose, progress_m, offsets, lookahead_m, v_mps, clip=False))
-        assert _same(steer(path, pose, progress_m, offsets, lookahead_m, v_mps),
-                     _steer_python(path, pose, progress_m, offsets, lookahead_m, v_mps, clip=True))
+        assert _same(
+            steer(path, pose, progress_m, offsets, lookahead_m, v_mps),
+            _steer_python(path, pose, progress_m, offsets, lookahead_m, v_mps, clip=True),
+        )

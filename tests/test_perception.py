@@ -70,8 +70,11 @@ def test_a_part_keeps_one_section_and_is_named_for_it():
 
 
 def test_a_file_round_trips_through_to_dict(tmp_path: Path):
-    path = _write(tmp_path, "labels: {flip_rate: 0.05, confusion: {water: {grass: 0.4, mud: 0.1}}, max_range_m: 20}\n"
-                            "pose: {noise_m: 0.3, drift_deg_per_m: 0.5}\ncamera: {pitch_jitter_deg: 2}\nframes: {delay: 1, drop_rate: 0.1}\n")
+    path = _write(
+        tmp_path,
+        "labels: {flip_rate: 0.05, confusion: {water: {grass: 0.4, mud: 0.1}}, max_range_m: 20}\n"
+        "pose: {noise_m: 0.3, drift_deg_per_m: 0.5}\ncamera: {pitch_jitter_deg: 2}\nframes: {delay: 1, drop_rate: 0.1}\n",
+    )
     model = load_perception(path)
     assert model.labels.flip_rate == 0.05 and model.labels.confusion_dict() == {"water": {"grass": 0.4, "mud": 0.1}}
     assert model.pose == PoseErrors(noise_m=0.3, drift_deg_per_m=0.5)
@@ -94,23 +97,26 @@ def test_the_printed_preset_is_a_file_perception_reads_back(tmp_path: Path, caps
     assert main(["perception", str(path)]) == 0
 
 
-@pytest.mark.parametrize("text,field", [
-    ("labels: {flip_rate: 1.5}\n", "labels.flip_rate"),
-    ("labels: {flip_rate: x}\n", "labels.flip_rate"),
-    ("labels: {boundary_px: 2.5}\n", "labels.boundary_px"),
-    ("labels: {blob_radius_px: [10]}\n", "labels.blob_radius_px"),
-    ("labels: {blob_radius_px: [30, 10]}\n", "labels.blob_radius_px"),
-    ("labels: {confusion: {lava: {grass: 0.1}}}\n", "labels.confusion.lava"),
-    ("labels: {confusion: {mud: {mud: 0.1}}}\n", "labels.confusion.mud.mud"),
-    ("labels: {confusion: {mud: {grass: 0.7, rock: 0.6}}}\n", "labels.confusion.mud"),
-    ("labels: {colour: 3}\n", "labels.colour"),
-    ("pose: {noise_m: -1}\n", "pose.noise_m"),
-    ("pose: 3\n", "pose"),
-    ("camera: {pitch_jitter_deg: .nan}\n", "camera.pitch_jitter_deg"),
-    ("frames: {delay: -1}\n", "frames.delay"),
-    ("frames: {drop_rate: true}\n", "frames.drop_rate"),
-    ("wind: 3\n", "wind"),
-])
+@pytest.mark.parametrize(
+    "text,field",
+    [
+        ("labels: {flip_rate: 1.5}\n", "labels.flip_rate"),
+        ("labels: {flip_rate: x}\n", "labels.flip_rate"),
+        ("labels: {boundary_px: 2.5}\n", "labels.boundary_px"),
+        ("labels: {blob_radius_px: [10]}\n", "labels.blob_radius_px"),
+        ("labels: {blob_radius_px: [30, 10]}\n", "labels.blob_radius_px"),
+        ("labels: {confusion: {lava: {grass: 0.1}}}\n", "labels.confusion.lava"),
+        ("labels: {confusion: {mud: {mud: 0.1}}}\n", "labels.confusion.mud.mud"),
+        ("labels: {confusion: {mud: {grass: 0.7, rock: 0.6}}}\n", "labels.confusion.mud"),
+        ("labels: {colour: 3}\n", "labels.colour"),
+        ("pose: {noise_m: -1}\n", "pose.noise_m"),
+        ("pose: 3\n", "pose"),
+        ("camera: {pitch_jitter_deg: .nan}\n", "camera.pitch_jitter_deg"),
+        ("frames: {delay: -1}\n", "frames.delay"),
+        ("frames: {drop_rate: true}\n", "frames.drop_rate"),
+        ("wind: 3\n", "wind"),
+    ],
+)
 def test_a_bad_file_is_refused_naming_the_file_and_field(tmp_path: Path, text: str, field: str):
     path = _write(tmp_path, text)
     with pytest.raises(UserError) as err:
@@ -153,11 +159,15 @@ def _labelled(renderer: SegmentationRenderer, errors: LabelErrors, seed: int, po
 
 def test_perceived_views_read_a_pixel_set_as_its_indices(renderer):
     from terrapref.camera import PixelSet
+
     index = np.random.default_rng(4).integers(0, 640 * 480, 2000)
     pixels = PixelSet(index)
     errors = LabelErrors(flip_rate=0.05, blobs_per_frame=2.0, boundary_px=2)
-    for view in (_labelled(renderer, errors, 3), TiltedView(renderer, Pose(8.0, 10.0, 0.2), 0.01, math.radians(3.0)),
-                 LabelledView(TiltedView(renderer, Pose(8.0, 10.0, 0.2), 0.01, 0.0), _labelled(renderer, errors, 5)._errors)):
+    for view in (
+        _labelled(renderer, errors, 3),
+        TiltedView(renderer, Pose(8.0, 10.0, 0.2), 0.01, math.radians(3.0)),
+        LabelledView(TiltedView(renderer, Pose(8.0, 10.0, 0.2), 0.01, 0.0), _labelled(renderer, errors, 5)._errors),
+    ):
         np.testing.assert_array_equal(view.pixels(pixels), view.pixels(index))
         np.testing.assert_array_equal(view.pixels(pixels), view.image.reshape(-1)[index])
 
@@ -219,7 +229,7 @@ def test_boundary_errors_change_pixels_near_a_border_only(renderer):
     changed = np.argwhere(out != clean)
     assert len(changed) > 0
     for r, c in changed[::7]:
-        window = clean[max(0, r - 2):r + 3, max(0, c - 2):c + 3]
+        window = clean[max(0, r - 2) : r + 3, max(0, c - 2) : c + 3]
         assert out[r, c] in window  # a neighbour's class, from within the reach
         assert len(np.unique(window)) > 1  # and only beside a border
 
@@ -435,7 +445,9 @@ def test_a_recording_under_perception_holds_what_the_robot_received(tmp_path, ca
     assert main(["record", "demo_course", "--out", str(seen), "--quiet", "--perception", "field"]) == 0
     assert "under perception field" in capsys.readouterr().out
     a, b = read_recording(clean), read_recording(seen)
-    assert a.meta["perception"]["name"] == "clean" and from_dict(b.meta["perception"], "meta", default_classes()) == load_perception("field")
+    assert a.meta["perception"]["name"] == "clean" and from_dict(b.meta["perception"], "meta", default_classes()) == load_perception(
+        "field"
+    )
     assert a.meta["summary"] == b.meta["summary"]  # the same drive
     assert 0.8 * len(a) < len(b) < len(a)  # lost and stale frames are not written
     times = b.times
@@ -516,14 +528,35 @@ def test_select_drives_the_same_models_under_several_perception_models(tmp_path)
     from terrapref.cli import main
 
     out = tmp_path / "sel"
-    argv = ["select", "--recipes", "paper", "--orders", "rock,mud,water", "--seeds", "1", "--courses", "1", "--workers", "2",
-            "--perception", "clean,rellis", "--taught-under", "field", "--out", str(out)]
+    argv = [
+        "select",
+        "--recipes",
+        "paper",
+        "--orders",
+        "rock,mud,water",
+        "--seeds",
+        "1",
+        "--courses",
+        "1",
+        "--workers",
+        "2",
+        "--perception",
+        "clean,rellis",
+        "--taught-under",
+        "field",
+        "--out",
+        str(out),
+    ]
     assert main(argv) == 0
     saved = json.loads((out / "select.json").read_text())
     assert [p["name"] for p in saved["selection"]["perceptions"]] == ["clean", "rellis"]
     assert saved["selection"]["taught_under"]["name"] == "field"
     assert {r["perception"] for r in saved["zones"]} == {"clean", "rellis"}
-    assert len([r for r in saved["zones"] if r["perception"] == "clean"]) == len([r for r in saved["zones"] if r["perception"] == "rellis"]) > 0
+    assert (
+        len([r for r in saved["zones"] if r["perception"] == "clean"])
+        == len([r for r in saved["zones"] if r["perception"] == "rellis"])
+        > 0
+    )
     text = (out / "SELECT.md").read_text()
     assert "## Perception `clean`" in text and "## Perception `rellis`" in text and "The demonstrations recorded: field" in text
     assert list((out / "work").iterdir())[0].name.endswith("_field")
@@ -532,9 +565,13 @@ def test_select_drives_the_same_models_under_several_perception_models(tmp_path)
 def test_select_and_reproduce_refuse_a_bad_perception_before_any_work(tmp_path, capsys):
     from terrapref.cli import main
 
-    for argv, flag in ((["select", "--perception", "fog"], "--perception"), (["select", "--perception", "clean,clean"], "--perception"),
-                       (["select", "--taught-under", "fog"], "--taught-under"), (["select", "--perception", "clean,field", "--taught-under", "same"], "--taught-under"),
-                       (["reproduce", "--perception", "rellis,fog"], "--perception")):
+    for argv, flag in (
+        (["select", "--perception", "fog"], "--perception"),
+        (["select", "--perception", "clean,clean"], "--perception"),
+        (["select", "--taught-under", "fog"], "--taught-under"),
+        (["select", "--perception", "clean,field", "--taught-under", "same"], "--taught-under"),
+        (["reproduce", "--perception", "rellis,fog"], "--perception"),
+    ):
         assert main([*argv, "--out", str(tmp_path / "o")]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and flag in err[0], err

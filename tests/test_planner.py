@@ -121,7 +121,11 @@ def test_warm_up_decides_once_and_forgets_it(models, course, views):
     planner, fresh = _planner(models.random, course), _planner(models.random, course)
     first = planner.decide(views.near_image, views.near)
     planner.warm_up()  # mid-drive: the path and the progress along it are kept
-    assert planner.decide(views.near_image, views.near).probs.tolist() == fresh.decide(views.near_image, views.near).probs.tolist() == first.probs.tolist()
+    assert (
+        planner.decide(views.near_image, views.near).probs.tolist()
+        == fresh.decide(views.near_image, views.near).probs.tolist()
+        == first.probs.tolist()
+    )
     assert planner.tracker is not None and planner.path is not None
 
 
@@ -189,7 +193,9 @@ def test_planner_module_does_not_import_the_world():
             elif isinstance(node, ast.ImportFrom):
                 imported += [node.module or ""] + [f"{node.module}.{a.name}" for a in node.names]
         assert not [n for n in imported if n.startswith("terrapref.world")], module.__name__
-        assert not [n for n in imported if n.endswith(("rasterise", "WorldMap", "SegmentationRenderer")) or "camera.render" in n], module.__name__
+        assert not [n for n in imported if n.endswith(("rasterise", "WorldMap", "SegmentationRenderer")) or "camera.render" in n], (
+            module.__name__
+        )
 
 
 def test_planner_decides_without_the_world_map(models, course, monkeypatch):

@@ -83,8 +83,9 @@ def test_fit_linear_utility_sample_weight_zero_ignores_samples():
     labels = np.argmax(U @ w_true, axis=1)
     base = fit_linear_utility(U, labels, steps=300)
     bad = np.argmin(U @ w_true, axis=1)  # the worst trajectory each time
-    both = fit_linear_utility(np.concatenate([U, U]), np.concatenate([labels, bad]), steps=300,
-                              sample_weight=np.concatenate([np.ones(300), np.zeros(300)]))
+    both = fit_linear_utility(
+        np.concatenate([U, U]), np.concatenate([labels, bad]), steps=300, sample_weight=np.concatenate([np.ones(300), np.zeros(300)])
+    )
     # Equal up to the fixed-point rounding of the exact products (twice the terms: one bit fewer).
     np.testing.assert_allclose(both.w, base.w, rtol=1e-4, atol=1e-6)
     np.testing.assert_allclose(both.b, base.b, rtol=1e-4, atol=1e-6)
@@ -245,8 +246,11 @@ def test_load_policy_refuses_an_unknown_kind(tmp_path: Path, classifier_file):
 
 
 def test_load_policy_refuses_a_linear_file_with_wrong_shapes(tmp_path: Path):
-    path = write_tensor_file(tmp_path / "lin.safetensors", {"w": np.zeros(K + 1, np.float32), "b": np.zeros(M, np.float32)},
-                             {"format": FORMAT, "kind": "linear", **model_meta()})
+    path = write_tensor_file(
+        tmp_path / "lin.safetensors",
+        {"w": np.zeros(K + 1, np.float32), "b": np.zeros(M, np.float32)},
+        {"format": FORMAT, "kind": "linear", **model_meta()},
+    )
     with pytest.raises(UserError) as err:
         load_policy(path)
     assert err.value.problems[0].field == "weights.w"

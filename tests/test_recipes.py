@@ -116,8 +116,11 @@ def test_every_style_is_described_and_listed_here():
 def test_a_style_is_the_default_driver_with_its_own_changes(style: str):
     default, styled = ExpertConfig(profile=PROFILE), ExpertConfig.styled(style, PROFILE)
     assert styled.profile == PROFILE
-    changed = {f.name: (getattr(default, f.name), getattr(styled, f.name)) for f in fields(ExpertConfig)
-               if getattr(default, f.name) != getattr(styled, f.name)}
+    changed = {
+        f.name: (getattr(default, f.name), getattr(styled, f.name))
+        for f in fields(ExpertConfig)
+        if getattr(default, f.name) != getattr(styled, f.name)
+    }
     assert set(changed) == set(MEANT[style])
     for name, (before, after) in changed.items():
         assert (after - before) * MEANT[style][name] > 0, (name, before, after)
@@ -146,13 +149,15 @@ def test_an_unknown_style_is_refused_naming_the_styles():
 
 def _patch(cls: str, radius_m: float = 1.6):
     """A straight trail along y = 10 from x = 2 with one circular patch at x = 15."""
-    return parse_scenario({
-        "format": "terrapref-scenario/1",
-        "name": "one_patch",
-        "world": {"size_m": [30.0, 20.0], "resolution_m": 0.05, "background": "grass"},
-        "terrain": [{"class": cls, "circle": {"center": [15.0, 10.0], "radius": radius_m}}],
-        "path": {"waypoints": [[2.0, 10.0], [28.0, 10.0]]},
-    })
+    return parse_scenario(
+        {
+            "format": "terrapref-scenario/1",
+            "name": "one_patch",
+            "world": {"size_m": [30.0, 20.0], "resolution_m": 0.05, "background": "grass"},
+            "terrain": [{"class": cls, "circle": {"center": [15.0, 10.0], "radius": radius_m}}],
+            "path": {"waypoints": [[2.0, 10.0], [28.0, 10.0]]},
+        }
+    )
 
 
 def _offset(style: str, scenario, s_m: float) -> float:
@@ -195,8 +200,14 @@ def _dataset(n: int, recordings: int, seed: int, lookahead: bool = False, **meta
     rules = {"second_stage": {"U2": rng.uniform(0, 1, (n, m, m, k)).astype(np.float16)}} if lookahead else {}
     if lookahead:
         meta["rules"] = {"second_stage": {"config": SecondStageConfig(lookahead=True).data(), "arrays": {"U2": "finite"}}}
-    return Dataset(rng.uniform(0, 1, (n, m, k)).astype(np.float32), rng.integers(0, m, n), rng.uniform(-1, 1, n).astype(np.float32),
-                   source, meta, rules)
+    return Dataset(
+        rng.uniform(0, 1, (n, m, k)).astype(np.float32),
+        rng.integers(0, m, n),
+        rng.uniform(-1, 1, n).astype(np.float32),
+        source,
+        meta,
+        rules,
+    )
 
 
 def test_merging_concatenates_and_numbers_the_recordings_across_all():
@@ -237,19 +248,24 @@ def test_no_datasets_is_a_user_error():
         merge_datasets([])
 
 
-@pytest.mark.parametrize("field, value", [
-    ("profile", ["water", "rock", "mud", "non_traversable"]),
-    ("features", FeatureConfig(path_spacing_m=0.5).to_dict()),
-    ("camera", CameraConfig(hfov_deg=60.0).to_dict()),
-    ("classes", {**default_classes().to_dict(), "background": "mud"}),
-])
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("profile", ["water", "rock", "mud", "non_traversable"]),
+        ("features", FeatureConfig(path_spacing_m=0.5).to_dict()),
+        ("camera", CameraConfig(hfov_deg=60.0).to_dict()),
+        ("classes", {**default_classes().to_dict(), "background": "mud"}),
+    ],
+)
 def test_datasets_made_differently_are_refused_naming_the_file_and_field(field: str, value):
     a, b = _dataset(3, 1, 0), _dataset(3, 1, 1, **{field: value})
     with pytest.raises(UserError) as caught:
         merge_datasets([("first.safetensors", a), ("second.safetensors", b)])
     error = caught.value
     assert error.source == "second.safetensors" and [p.field for p in error.problems] == [field]
-    assert error.lines() == [f"second.safetensors: {field}: differs from first.safetensors in {field}; featurise all recordings the same way"]
+    assert error.lines() == [
+        f"second.safetensors: {field}: differs from first.safetensors in {field}; featurise all recordings the same way"
+    ]
 
 
 @pytest.mark.parametrize("first, second", [(False, True), (True, False)])
@@ -282,7 +298,10 @@ def test_training_data_names_the_file_that_differs(tmp_path):
 def test_samples_with_nothing_to_learn_are_refused():
     data = _dataset(6, 2, 0)
     check_learnable(data, "a.safetensors")
-    for empty, field in ((replace(data, U=data.U[:0], labels=data.labels[:0]), "frames"), (replace(data, labels=np.full_like(data.labels, 7)), "labels")):
+    for empty, field in (
+        (replace(data, U=data.U[:0], labels=data.labels[:0]), "frames"),
+        (replace(data, labels=np.full_like(data.labels, 7)), "labels"),
+    ):
         with pytest.raises(UserError) as caught:
             check_learnable(empty, "a.safetensors")
         assert caught.value.source == "a.safetensors" and caught.value.problems[0].field == field

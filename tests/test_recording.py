@@ -34,7 +34,11 @@ from terrapref.sim import EpisodeLog, Simulation
 from terrapref.terrain import PreferenceProfile
 
 H, W = 480, 640
-META_IN = {"scenario": "hand_made", "camera": {"width_px": W, "height_px": H}, "driver": {"kind": "human", "input": "test", "disturbance": None, "seed": 0}}
+META_IN = {
+    "scenario": "hand_made",
+    "camera": {"width_px": W, "height_px": H},
+    "driver": {"kind": "human", "input": "test", "disturbance": None, "seed": 0},
+}
 SCENARIO_IN = {"format": "terrapref-scenario/1", "name": "hand_made", "path": {"waypoints": [[0.0, 0.0], [5.0, 0.0]]}}
 
 
@@ -334,7 +338,9 @@ def test_inspect_says_quit_and_not_reached(tmp_path: Path):
     from terrapref.terrain import PreferenceProfile
 
     scenario = resolve_scenario("demo_course")
-    meta = RecordingMeta.driven(scenario, RecordingSetup(CameraConfig(), PreferenceSetConfig(), SimConfig()), HumanInfo("keyboard"), PreferenceProfile.default())
+    meta = RecordingMeta.driven(
+        scenario, RecordingSetup(CameraConfig(), PreferenceSetConfig(), SimConfig()), HumanInfo("keyboard"), PreferenceProfile.default()
+    )
     writer = RecordingWriter(tmp_path / "rec", meta, scenario.to_dict())
     sim = Simulation(scenario)
     frame = sim.reset()
@@ -354,8 +360,17 @@ def test_sigterm_during_record_force_says_so_and_keeps_the_old_recording(tmp_pat
 
     out = shutil.copytree(fig7_recording, tmp_path / "rec")
     before = (out / "frames.jsonl").read_bytes()
-    command = [sys.executable, "-c", "import sys; from terrapref.cli import main; sys.exit(main())",
-               "record", "demo_course", "--out", str(out), "--force", "--quiet"]
+    command = [
+        sys.executable,
+        "-c",
+        "import sys; from terrapref.cli import main; sys.exit(main())",
+        "record",
+        "demo_course",
+        "--out",
+        str(out),
+        "--force",
+        "--quiet",
+    ]
     child = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         # Wait (no time limit: the child either writes 20 frames or exits) for the replacement's frames.
@@ -401,20 +416,25 @@ def test_every_kind_of_driver_reads_back_as_written(driver):
 
 def test_the_meta_reads_back_as_written_with_its_keys_in_the_files_order(demo_recording: FullRecording):
     meta = demo_recording.rec.header
-    entries = {k: v for k, v in demo_recording.rec.meta.items() if k not in ("format", "status", "created", "frames", "summary", "finished")}
+    entries = {
+        k: v for k, v in demo_recording.rec.meta.items() if k not in ("format", "status", "created", "frames", "summary", "finished")
+    }
     assert json.dumps(meta.to_dict()) == json.dumps(entries)
     assert RecordingMeta.from_dict(meta.to_dict(), "meta.json") == meta
     assert list(entries) == ["scenario", "camera", "preference_set", "sim", "classes", "profile", "driver", "path", "perception"]
 
 
-@pytest.mark.parametrize(("key", "value", "field", "message"), [
-    ("driver", {"kind": "robot"}, "driver.kind", "unknown driver kind 'robot'; driver kinds: expert, human, corrections, imported"),
-    ("driver", {"kind": "expert", "seed": "3"}, "driver.seed", "expected an integer, got str"),
-    ("driver", [1], "driver", "expected a mapping, got list"),
-    ("sim", {"camera_rate_hz": 0}, "sim.camera_rate_hz", "expected a frame rate > 0 [Hz]"),
-    ("sim", {"camera_rate_hz": 10.0, "vehicle": {"wheels": 4}}, "sim.vehicle", "invalid (TypeError"),
-    ("origin_shift_m", [1.0], "origin_shift_m", "expected two finite numbers [m]"),
-])
+@pytest.mark.parametrize(
+    ("key", "value", "field", "message"),
+    [
+        ("driver", {"kind": "robot"}, "driver.kind", "unknown driver kind 'robot'; driver kinds: expert, human, corrections, imported"),
+        ("driver", {"kind": "expert", "seed": "3"}, "driver.seed", "expected an integer, got str"),
+        ("driver", [1], "driver", "expected a mapping, got list"),
+        ("sim", {"camera_rate_hz": 0}, "sim.camera_rate_hz", "expected a frame rate > 0 [Hz]"),
+        ("sim", {"camera_rate_hz": 10.0, "vehicle": {"wheels": 4}}, "sim.vehicle", "invalid (TypeError"),
+        ("origin_shift_m", [1.0], "origin_shift_m", "expected two finite numbers [m]"),
+    ],
+)
 def test_a_wrong_meta_entry_is_one_line_naming_the_file_and_field(tmp_path: Path, key, value, field, message):
     rec = tmp_path / "rec"
     with RecordingWriter(rec, {**META_IN, key: value}, {}) as w:

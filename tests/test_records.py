@@ -37,8 +37,13 @@ class Outer:
 def test_a_record_becomes_json_and_comes_back_equal():
     record = Outer(Inner((1, 2), ("a", "b")), (Inner((3, 4)),), LookaheadConfig(1.8, 3))
     plain = to_plain(record)
-    assert plain == {"inner": {"sides": [1, 2], "names": ["a", "b"]}, "inners": [{"sides": [3, 4], "names": []}],
-                     "look": {"after_s": 1.8, "stride": 3}, "mode": "paper", "note": None}
+    assert plain == {
+        "inner": {"sides": [1, 2], "names": ["a", "b"]},
+        "inners": [{"sides": [3, 4], "names": []}],
+        "look": {"after_s": 1.8, "stride": 3},
+        "mode": "paper",
+        "note": None,
+    }
     assert from_plain(Outer, json.loads(json.dumps(plain))) == record
 
 

@@ -26,8 +26,16 @@ FIRST, FRAMES = 190, 40  # the recording's frames published: the drive comes up 
 def _ros1_missing() -> str | None:
     if shutil.which("roscore") is None:
         return "roscore is not installed (Debian: apt install ros-core)"
-    probe = subprocess.run([sys.executable, "-c", "from terrapref.interop.ros1 import import_rospy; import_rospy(); "
-                            "import sensor_msgs.msg, nav_msgs.msg, geometry_msgs.msg, visualization_msgs.msg"], capture_output=True, text=True)
+    probe = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "from terrapref.interop.ros1 import import_rospy; import_rospy(); "
+            "import sensor_msgs.msg, nav_msgs.msg, geometry_msgs.msg, visualization_msgs.msg",
+        ],
+        capture_output=True,
+        text=True,
+    )
     return None if probe.returncode == 0 else f"rospy or ROS 1 message packages are missing ({probe.stderr.strip().splitlines()[-1:]})"
 
 
@@ -105,9 +113,11 @@ def setup(tmp_path_factory, fig7_recording):
     (root / "rec").symlink_to(fig7_recording, target_is_directory=True)
     config = ClassifierConfig(hidden=8, skip=True)
     model = save_model(root / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
-    (root / "robot.yaml").write_text("format: terrapref-robot/1\n"
-                                     "topics: {segmentation: /seg, camera_info: /cam/info, odometry: /odom, command: /cmd, path: /plan}\n"
-                                     "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n")
+    (root / "robot.yaml").write_text(
+        "format: terrapref-robot/1\n"
+        "topics: {segmentation: /seg, camera_info: /cam/info, odometry: /odom, command: /cmd, path: /plan}\n"
+        "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n"
+    )
     return root, model
 
 
@@ -125,7 +135,9 @@ def test_the_node_commands_what_the_runtime_commands_on_the_same_frames(setup, t
     root, model = setup
     port, live_port, seen = _free_port(), _free_port(), {}
     env = {**os.environ, "ROS_MASTER_URI": f"http://127.0.0.1:{port}", "ROS_HOME": str(tmp_path / "ros"), "ROS_IP": "127.0.0.1"}
-    master = subprocess.Popen(["roscore", "-p", str(port)], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    master = subprocess.Popen(
+        ["roscore", "-p", str(port)], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
+    )
     node = player = None
     try:
         # TwistStamped through the node's private ROS parameter, as a launch file would set it, and
@@ -135,14 +147,36 @@ def test_the_node_commands_what_the_runtime_commands_on_the_same_frames(setup, t
                 break
             time.sleep(0.1)
         subprocess.run(["rosparam", "set", "/use_sim_time", "true"], env=env, check=True, capture_output=True)
-        node = subprocess.Popen([sys.executable, "-c", "import sys; from terrapref.cli import main; sys.exit(main())", "ros1",
-                                 "--model", str(model), "--robot", str(root / "robot.yaml"), "--live", "--live-port", str(live_port)],
-                                env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+        node = subprocess.Popen(
+            [
+                sys.executable,
+                "-c",
+                "import sys; from terrapref.cli import main; sys.exit(main())",
+                "ros1",
+                "--model",
+                str(model),
+                "--robot",
+                str(root / "robot.yaml"),
+                "--live",
+                "--live-port",
+                str(live_port),
+            ],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            start_new_session=True,
+        )
         client = threading.Thread(target=_watch, args=(live_port, seen), daemon=True)
         client.start()
         (tmp_path / "player.py").write_text(PLAYER)
-        player = subprocess.run([sys.executable, str(tmp_path / "player.py"), str(root / "rec"), str(FIRST), str(FRAMES), str(tmp_path / "got.json")],
-                                env=env, capture_output=True, text=True, timeout=300)
+        player = subprocess.run(
+            [sys.executable, str(tmp_path / "player.py"), str(root / "rec"), str(FIRST), str(FRAMES), str(tmp_path / "got.json")],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
         assert player.returncode == 0, player.stderr[-2000:]
     finally:
         for proc in (node, master):
@@ -173,7 +207,12 @@ def test_node_options_come_from_the_command_line_then_ros_parameters_then_defaul
     params = {"~rate": 50, "~stamped": True, "~cmd_topic": "/robot/cmd"}
     got = NodeOptions(rate=10.0).resolved(lambda name, default: params.get(name, default))
     assert (got.rate, got.stamped, got.cmd_topic, got.path_file, got.hold_s) == (10.0, True, "/robot/cmd", None, 0.3)
-    for bad, field in (({"~rate": "fast"}, "~rate"), ({"~hold_s": -1}, "~hold_s"), ({"~stamped": "yes"}, "~stamped"), ({"~cmd_topic": ""}, "~cmd_topic")):
+    for bad, field in (
+        ({"~rate": "fast"}, "~rate"),
+        ({"~hold_s": -1}, "~hold_s"),
+        ({"~stamped": "yes"}, "~stamped"),
+        ({"~cmd_topic": ""}, "~cmd_topic"),
+    ):
         with pytest.raises(UserError, match=field):
             NodeOptions().resolved(lambda name, default, bad=bad: bad.get(name, default))
     with pytest.raises(UserError, match="--rate"):

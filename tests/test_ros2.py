@@ -23,16 +23,31 @@ import numpy as np
 import pytest
 
 FIRST, FRAMES = 190, 40  # the recording's frames published: the drive comes up to the rock and the trees
-LOOPBACK = ('<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>'
-            "<AllowMulticast>false</AllowMulticast></General><Discovery><ParticipantIndex>auto</ParticipantIndex>"
-            '<MaxAutoParticipantIndex>60</MaxAutoParticipantIndex><Peers><Peer address="127.0.0.1"/></Peers></Discovery></Domain></CycloneDDS>')
-NODE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage", "sensor_msgs/msg/CameraInfo", "nav_msgs/msg/Odometry",
-              "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped", "nav_msgs/msg/Path", "rosgraph_msgs/msg/Clock",
-              "geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped", "visualization_msgs/msg/MarkerArray", "nav_msgs/msg/OccupancyGrid",
-              "tf2_msgs/msg/TFMessage")
+LOOPBACK = (
+    '<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>'
+    "<AllowMulticast>false</AllowMulticast></General><Discovery><ParticipantIndex>auto</ParticipantIndex>"
+    '<MaxAutoParticipantIndex>60</MaxAutoParticipantIndex><Peers><Peer address="127.0.0.1"/></Peers></Discovery></Domain></CycloneDDS>'
+)
+NODE_TYPES = (
+    "sensor_msgs/msg/Image",
+    "sensor_msgs/msg/CompressedImage",
+    "sensor_msgs/msg/CameraInfo",
+    "nav_msgs/msg/Odometry",
+    "geometry_msgs/msg/PoseStamped",
+    "geometry_msgs/msg/PoseWithCovarianceStamped",
+    "nav_msgs/msg/Path",
+    "rosgraph_msgs/msg/Clock",
+    "geometry_msgs/msg/Twist",
+    "geometry_msgs/msg/TwistStamped",
+    "visualization_msgs/msg/MarkerArray",
+    "nav_msgs/msg/OccupancyGrid",
+    "tf2_msgs/msg/TFMessage",
+)
 # As `ros2 topic info --verbose` prints them on ROS 2 Jazzy: hashes of the real message packages.
-JAZZY_HASHES = {"geometry_msgs/msg/Twist": "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a",
-                "geometry_msgs/msg/PoseStamped": "RIHS01_10f3786d7d40fd2b54367835614bff85d4ad3b5dab62bf8bca0cc232d73b4cd8"}
+JAZZY_HASHES = {
+    "geometry_msgs/msg/Twist": "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a",
+    "geometry_msgs/msg/PoseStamped": "RIHS01_10f3786d7d40fd2b54367835614bff85d4ad3b5dab62bf8bca0cc232d73b4cd8",
+}
 
 
 def _domains() -> tuple[int, int]:
@@ -58,8 +73,10 @@ def _domains() -> tuple[int, int]:
 
 # The node as `terrapref ros2` runs, with every thread's stack written to stderr on SIGUSR1: what a node that
 # does not end on Ctrl-C was doing is then in the test's failure.
-NODE_MAIN = ("import faulthandler, signal, sys; faulthandler.register(signal.SIGUSR1, all_threads=True); "
-             "from terrapref.cli import main; sys.exit(main())")
+NODE_MAIN = (
+    "import faulthandler, signal, sys; faulthandler.register(signal.SIGUSR1, all_threads=True); "
+    "from terrapref.cli import main; sys.exit(main())"
+)
 
 
 def _end(proc: subprocess.Popen, readers: list[threading.Thread], output: Callable[[], str], what: str) -> str | None:
@@ -79,12 +96,19 @@ def _end(proc: subprocess.Popen, readers: list[threading.Thread], output: Callab
     return None if stuck is None else stuck + output()[-12000:]
 
 
-def _node(model: Path, robot: Path, env: dict, *ros_args: str, flags: tuple[str, ...] = (), sigint_ignored: bool = False) -> subprocess.Popen:
+def _node(
+    model: Path, robot: Path, env: dict, *ros_args: str, flags: tuple[str, ...] = (), sigint_ignored: bool = False
+) -> subprocess.Popen:
     """The node in a process of its own; ``sigint_ignored``: started as a script's background job
     is (SIGINT ignored, which a child inherits), and Ctrl-C must end it all the same."""
-    return subprocess.Popen([sys.executable, "-c", NODE_MAIN, "ros2", "--model", str(model), "--robot", str(robot), *flags, "--ros-args", *ros_args],
-                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=(lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if sigint_ignored else None)
+    return subprocess.Popen(
+        [sys.executable, "-c", NODE_MAIN, "ros2", "--model", str(model), "--robot", str(robot), *flags, "--ros-args", *ros_args],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=(lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if sigint_ignored else None,
+    )
 
 
 def _publish_until_commanded(player, heard, t_ns: int, group: list, stamp: float, tries: int = 20) -> None:
@@ -127,6 +151,7 @@ class _Heard:
         def keep(msg) -> None:
             with self.lock:
                 self.by_topic.setdefault(topic, []).append(msg)
+
         return keep
 
     def get(self, topic: str) -> list:
@@ -176,8 +201,14 @@ def system(tmp_path_factory, fig7_recording):
     rec = read_recording(fig7_recording)
     frames = recording_frames(rec)
     part = slice(FIRST, FIRST + FRAMES + 1)  # one frame more, for after the bad input
-    frames = replace(frames, times=frames.times[part], poses=frames.poses[part], commands=frames.commands[part], chosen=frames.chosen[part],
-                     image=lambda i: rec.image(FIRST + i))
+    frames = replace(
+        frames,
+        times=frames.times[part],
+        poses=frames.poses[part],
+        commands=frames.commands[part],
+        chosen=frames.chosen[part],
+        image=lambda i: rec.image(FIRST + i),
+    )
     bag = write_bag(root / "drive.mcap", frames)
     robot = root / "drive.mcap.robot.yaml"
 
@@ -185,16 +216,30 @@ def system(tmp_path_factory, fig7_recording):
     os.environ["CYCLONEDDS_URI"] = LOOPBACK  # this process's participants, before its first one
     driven, idle = _domains()
     env = {**os.environ, "CYCLONEDDS_URI": LOOPBACK, "TERRAPREF_DEBUG": ""}
-    idle_node = _node(model, robot, {**env, "ROS_DOMAIN_ID": str(idle)}, "-p", "use_sim_time:=true", "-p", "stamped:=true", sigint_ignored=True)
+    idle_node = _node(
+        model, robot, {**env, "ROS_DOMAIN_ID": str(idle)}, "-p", "use_sim_time:=true", "-p", "stamped:=true", sigint_ignored=True
+    )
     idle_log: list[str] = []  # read as it comes: the node says it waits, then play starts
     idle_reader = threading.Thread(target=lambda: idle_log.extend(idle_node.stderr), daemon=True)
     idle_reader.start()
     live_port, live = _free_port(), {}
-    node = _node(model, robot, {**env, "ROS_DOMAIN_ID": str(driven)}, "-p", "use_sim_time:=true", "-p", "stamped:=true", "-p", "rate:=50",
-                 flags=("--live", "--live-port", str(live_port)))
+    node = _node(
+        model,
+        robot,
+        {**env, "ROS_DOMAIN_ID": str(driven)},
+        "-p",
+        "use_sim_time:=true",
+        "-p",
+        "stamped:=true",
+        "-p",
+        "rate:=50",
+        flags=("--live", "--live-port", str(live_port)),
+    )
     node_output: dict[str, list[str]] = {"stdout": [], "stderr": []}  # read as it comes: a pipe nobody reads fills and stops the node
-    node_readers = [threading.Thread(target=lambda name=name: node_output[name].extend(getattr(node, name)), daemon=True)
-                    for name in ("stdout", "stderr")]
+    node_readers = [
+        threading.Thread(target=lambda name=name: node_output[name].extend(getattr(node, name)), daemon=True)
+        for name in ("stdout", "stderr")
+    ]
     for reader in node_readers:
         reader.start()
     live_client = threading.Thread(target=_watch, args=(live_port, live), daemon=True)
@@ -229,8 +274,25 @@ def system(tmp_path_factory, fig7_recording):
         idle_heard, idle_listener = _Heard(), Participant(idle, MessageTypes(typestore()))
         _listen(idle_listener, idle_heard)
         _wait(lambda: any("/clock: no publisher" in line for line in idle_log), what="the idle node to say nobody publishes")
-        play = subprocess.run([sys.executable, "-c", "import sys; from terrapref.cli import main; sys.exit(main())", "play", str(bag), "--robot", str(robot),
-                               "--rate", "2", "--delay", "0.5"], env={**env, "ROS_DOMAIN_ID": str(idle)}, capture_output=True, text=True, timeout=120)
+        play = subprocess.run(
+            [
+                sys.executable,
+                "-c",
+                "import sys; from terrapref.cli import main; sys.exit(main())",
+                "play",
+                str(bag),
+                "--robot",
+                str(robot),
+                "--rate",
+                "2",
+                "--delay",
+                "0.5",
+            ],
+            env={**env, "ROS_DOMAIN_ID": str(idle)},
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         _wait(lambda: idle_heard.get("costmap"), timeout_s=5.0, what="the idle node's costmap")
         out["play"], out["idle_heard"] = play, idle_heard
         idle_listener.close()
@@ -262,8 +324,14 @@ def _bad_input(player, messages, times, heard, out) -> None:
     t_ns = times[FRAMES - 1]
     group = {m.topic: m for m in messages if m.t_ns == t_ns}
     image, info, odom = group["/terrapref/labels"].msg, group["/terrapref/camera_info"].msg, group["/terrapref/odom"].msg
-    future = ts.types["nav_msgs/msg/Odometry"](header=ts.types["std_msgs/msg/Header"](stamp=ts.types["builtin_interfaces/msg/Time"](
-        sec=odom.header.stamp.sec + 3600, nanosec=0), frame_id="odom"), child_frame_id="base_link", pose=odom.pose, twist=odom.twist)
+    future = ts.types["nav_msgs/msg/Odometry"](
+        header=ts.types["std_msgs/msg/Header"](
+            stamp=ts.types["builtin_interfaces/msg/Time"](sec=odom.header.stamp.sec + 3600, nanosec=0), frame_id="odom"
+        ),
+        child_frame_id="base_link",
+        pose=odom.pose,
+        twist=odom.twist,
+    )
     smaller = replace_fields(ts, info, "sensor_msgs/msg/CameraInfo", width=320, height=240)
     garbled = replace_fields(ts, image, "sensor_msgs/msg/CompressedImage", data=np.frombuffer(b"not a png at all", dtype=np.uint8))
     for _ in range(2):
@@ -292,7 +360,9 @@ def test_the_node_commands_what_the_runtime_commands_frame_by_frame(system):
     rec = system["rec"]
     runtime = PlannerRuntime(load_model(system["model"]))
     runtime.set_path(np.asarray(rec.meta.get("path") or rec.scenario["path"]["waypoints"], dtype=float))
-    expected = np.array([runtime.decide(rec.image(FIRST + k), s, tuple(rec.poses[FIRST + k])).command for k, s in enumerate(system["stamps"])])
+    expected = np.array(
+        [runtime.decide(rec.image(FIRST + k), s, tuple(rec.poses[FIRST + k])).command for k, s in enumerate(system["stamps"])]
+    )
     got = np.array(system["commands"])
     assert got.shape == (FRAMES, 2)
     np.testing.assert_allclose(got, expected, atol=1e-6)
@@ -308,8 +378,10 @@ def test_the_node_commands_what_the_runtime_commands_frame_by_frame(system):
     assert "error" not in live and len(live.get("/terrapref/labels", [])) >= FRAMES // 2 and live.get("/terrapref/trajectories")
     assert abs(max(ns for ns, _ in live["/terrapref/labels"]) * 1e-9 - system["stamps"][-1]) < 0.2
     transforms = [t for m in system["heard"].get("tf_static") for t in m.transforms]
-    assert [(t.header.frame_id, t.child_frame_id) for t in transforms] == [("base_link", "terrapref_camera_link"),
-                                                                          ("terrapref_camera_link", "terrapref_camera_optical")]
+    assert [(t.header.frame_id, t.child_frame_id) for t in transforms] == [
+        ("base_link", "terrapref_camera_link"),
+        ("terrapref_camera_link", "terrapref_camera_optical"),
+    ]
     assert transforms[0].transform.translation.z == pytest.approx(1.0)
 
 
@@ -336,8 +408,10 @@ def test_every_endpoint_is_named_typed_and_offered_as_ros2_expects(system):
     assert seen == {
         ("hears", "/terrapref/labels"): {("sensor_msgs/msg/Image", False, False, 5), ("sensor_msgs/msg/CompressedImage", False, False, 5)},
         ("hears", "/terrapref/camera_info"): {("sensor_msgs/msg/CameraInfo", False, False, 5)},
-        ("hears", "/terrapref/odom"): {(t, False, False, 5) for t in ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped",
-                                                                      "geometry_msgs/msg/PoseWithCovarianceStamped")},
+        ("hears", "/terrapref/odom"): {
+            (t, False, False, 5)
+            for t in ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
+        },
         ("hears", "/terrapref/path"): {("nav_msgs/msg/Path", True, False, 10), ("nav_msgs/msg/Path", True, True, 1)},
         ("hears", "/clock"): {("rosgraph_msgs/msg/Clock", False, False, 1)},
         ("publishes", "/terrapref/cmd_vel"): {("geometry_msgs/msg/TwistStamped", True, False, 10)},
@@ -353,8 +427,11 @@ def test_bad_input_is_said_once_and_skipped(system):
     import re
 
     code, stdout, stderr = system["node"]
-    for said in ("topic /terrapref/labels: not a decodable png", "/terrapref/camera_info: a camera_info of another image size than the 640 x 480 px",
-                 "/terrapref/odom: odometry stamped more than 1 s ahead of the node's clock"):
+    for said in (
+        "topic /terrapref/labels: not a decodable png",
+        "/terrapref/camera_info: a camera_info of another image size than the 640 x 480 px",
+        "/terrapref/odom: odometry stamped more than 1 s ahead of the node's clock",
+    ):
         assert sum(said in line for line in stderr.splitlines()) == 1, (said, stderr)
     assert "Traceback" not in stderr and "internal error" not in stderr and system["after_bad"]
     for counted in ("odometry ahead of the clock", "calibrations of another size"):
@@ -396,11 +473,22 @@ def test_each_message_type_is_cdr_identical_to_rosbags_and_announces_its_rihs01(
     info = rm.camera_info(ts, h, CameraConfig())
     info.d = np.array([-0.2, 0.05, 0.001, 0.0, 0.0])
     ids = np.arange(48, dtype=np.uint8).reshape(6, 8)
-    marker = rm.zeroed(ts, "visualization_msgs/msg/Marker", header=h, ns="trajectories", id=3, type=4, action=0,
-                       scale=rm.vector3(ts, x=0.06), color=T["std_msgs/msg/ColorRGBA"](r=0.1, g=0.9, b=0.2, a=1.0),
-                       points=[rm.point(ts, 0.1 * k, 0.01 * k * k, 0.02) for k in range(30)])
+    marker = rm.zeroed(
+        ts,
+        "visualization_msgs/msg/Marker",
+        header=h,
+        ns="trajectories",
+        id=3,
+        type=4,
+        action=0,
+        scale=rm.vector3(ts, x=0.06),
+        color=T["std_msgs/msg/ColorRGBA"](r=0.1, g=0.9, b=0.2, a=1.0),
+        points=[rm.point(ts, 0.1 * k, 0.01 * k * k, 0.02) for k in range(30)],
+    )
     messages = {
-        "sensor_msgs/msg/Image": T["sensor_msgs/msg/Image"](header=h, height=6, width=8, encoding="mono8", is_bigendian=0, step=8, data=ids.ravel()),
+        "sensor_msgs/msg/Image": T["sensor_msgs/msg/Image"](
+            header=h, height=6, width=8, encoding="mono8", is_bigendian=0, step=8, data=ids.ravel()
+        ),
         "sensor_msgs/msg/CompressedImage": rm.compressed_image(ts, h, "png", rm.png(ids)),
         "sensor_msgs/msg/CameraInfo": info,
         "nav_msgs/msg/Odometry": odom,
@@ -437,27 +525,48 @@ def test_ros_args_set_parameters_and_remap_names():
     from terrapref.interop.node_core import NodeOptions
     from terrapref.interop.ros2 import Names, RosArgs
 
-    args = RosArgs.parse(["-p", "rate:=10", "-p", "stamped:=true", "-p", "use_sim_time:=true", "-r", "__ns:=/robot", "-r", "/seg:=/cam/labels",
-                          "-r", "cmd_vel:=/mux/planner"])
+    args = RosArgs.parse(
+        [
+            "-p",
+            "rate:=10",
+            "-p",
+            "stamped:=true",
+            "-p",
+            "use_sim_time:=true",
+            "-r",
+            "__ns:=/robot",
+            "-r",
+            "/seg:=/cam/labels",
+            "-r",
+            "cmd_vel:=/mux/planner",
+        ]
+    )
     opts = NodeOptions().resolved(args.get_param, param=lambda name: f"-p {name}")
     assert (opts.rate, opts.stamped, args.use_sim_time) == (10, True, True)
     names = Names(args.remaps)
     assert names.fqn == "/robot/terrapref"
     assert names.resolve("~/trajectories") == "/robot/terrapref/trajectories"
     assert names.resolve("/seg") == "/cam/labels" and names.resolve("cmd_vel") == "/mux/planner" and names.resolve("/odom") == "/odom"
-    for bad, match in ((["-p", "rate:=fast"], "-p rate"), (["-p", "speed:=1"], "no such parameter"), (["--log-level", "debug"], "--log-level"),
-                       (["-r", "a"], "-r needs")):
+    for bad, match in (
+        (["-p", "rate:=fast"], "-p rate"),
+        (["-p", "speed:=1"], "no such parameter"),
+        (["--log-level", "debug"], "--log-level"),
+        (["-r", "a"], "-r needs"),
+    ):
         with pytest.raises(UserError, match=match):
             NodeOptions().resolved(RosArgs.parse(bad).get_param, param=lambda name: f"-p {name}")
 
 
-@pytest.mark.parametrize("argv, env, words", [
-    (["ros2", "--model", "M", "--robot", "R", "--ros-args", "-p", "rate:=0"], {}, ["-p rate", "(0, 200]"]),
-    (["ros2", "--model", "M", "--robot", "R"], {"ROS_DOMAIN_ID": "999"}, ["ROS_DOMAIN_ID", "[0, 232]"]),
-    (["play", "nowhere.mcap"], {}, ["nowhere.mcap", "no such file"]),
-    (["play", "drive.bag"], {}, ["ROS 1 bag", "rosbag play"]),
-    (["play", "nowhere.mcap", "--rate", "0"], {}, ["--rate"]),
-])
+@pytest.mark.parametrize(
+    "argv, env, words",
+    [
+        (["ros2", "--model", "M", "--robot", "R", "--ros-args", "-p", "rate:=0"], {}, ["-p rate", "(0, 200]"]),
+        (["ros2", "--model", "M", "--robot", "R"], {"ROS_DOMAIN_ID": "999"}, ["ROS_DOMAIN_ID", "[0, 232]"]),
+        (["play", "nowhere.mcap"], {}, ["nowhere.mcap", "no such file"]),
+        (["play", "drive.bag"], {}, ["ROS 1 bag", "rosbag play"]),
+        (["play", "nowhere.mcap", "--rate", "0"], {}, ["--rate"]),
+    ],
+)
 def test_a_bad_argument_is_one_line_naming_it(argv, env, words, capsys, monkeypatch, tmp_path):
     from helpers import linear_model, one_line_error
     from terrapref.cli import main
@@ -465,8 +574,10 @@ def test_a_bad_argument_is_one_line_naming_it(argv, env, words, capsys, monkeypa
     monkeypatch.chdir(tmp_path)
     (tmp_path / "drive.bag").write_bytes(b"")
     linear_model(tmp_path / "M")
-    (tmp_path / "R").write_text("format: terrapref-robot/1\ntopics: {segmentation: /s, camera_info: /i, odometry: /o, command: /c}\n"
-                                "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n")
+    (tmp_path / "R").write_text(
+        "format: terrapref-robot/1\ntopics: {segmentation: /s, camera_info: /i, odometry: /o, command: /c}\n"
+        "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n"
+    )
     for key, value in env.items():
         monkeypatch.setenv(key, value)
     assert main(argv) == 2

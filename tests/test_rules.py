@@ -83,8 +83,9 @@ def _config_of(rule_type: str, rule_class: type[Rule]) -> RuleConfig:
                 return config
     if issubclass(rule_class, RuleConfig):
         return rule_class()
-    pytest.fail(f"rule {rule_type!r}: no recipe names it and it is not its own config; name it in a recipe "
-                "or teach tests/test_rules.py to make one")
+    pytest.fail(
+        f"rule {rule_type!r}: no recipe names it and it is not its own config; name it in a recipe or teach tests/test_rules.py to make one"
+    )
 
 
 @pytest.fixture(scope="module")
@@ -109,13 +110,25 @@ def fitted(fig7_recording, tmp_path_factory) -> SimpleNamespace:
     folder = tmp_path_factory.mktemp("rules")
     classifier = ClassifierConfig(hidden=8, skip=True)
     assert classifier.n_features == features.n_features, "the skip path's weights fit the recording's features"
-    meta = {**model_meta(features=features, camera=CameraConfig.from_dict(recording.meta["camera"])),
-            "classes": recording.meta["classes"], "profile": recording.meta["profile"]}
-    files = {name: save_model(folder / f"{name}.safetensors", classifier, skip_path_weights(classifier),
-                              {**meta, "rules": [rule.header()], "drives": name})
-             for name, rule in rules.items()}
-    return SimpleNamespace(recording=recording, features=features, raw_features=dataset.meta["features"], rules=rules,
-                           files=files, classes=ClassTable.from_dict(recording.meta["classes"], SOURCE))
+    meta = {
+        **model_meta(features=features, camera=CameraConfig.from_dict(recording.meta["camera"])),
+        "classes": recording.meta["classes"],
+        "profile": recording.meta["profile"],
+    }
+    files = {
+        name: save_model(
+            folder / f"{name}.safetensors", classifier, skip_path_weights(classifier), {**meta, "rules": [rule.header()], "drives": name}
+        )
+        for name, rule in rules.items()
+    }
+    return SimpleNamespace(
+        recording=recording,
+        features=features,
+        raw_features=dataset.meta["features"],
+        rules=rules,
+        files=files,
+        classes=ClassTable.from_dict(recording.meta["classes"], SOURCE),
+    )
 
 
 def _planner(fitted: SimpleNamespace, rule_type: str) -> Planner:
@@ -214,6 +227,7 @@ def test_a_blank_or_lethal_frame_gives_a_finite_command(fitted, rule_type):
 
 def _numeric_fields(block: Mapping[str, Any], prefix: tuple[str, ...] = ()) -> Iterator[tuple[str, ...]]:
     """The path of every number or list of numbers in ``block``, mappings within it included."""
+
     def is_number(v: object) -> bool:
         return isinstance(v, (int, float)) and not isinstance(v, bool)
 

@@ -566,24 +566,48 @@ def test_two_shapes_in_one_item() -> None:
         (lambda d: d["world"].update(resolution_m=None), "world.resolution_m", "expected a number, got nothing"),
         (lambda d: d["terrain"][0]["circle"].update(radius="1.5"), "terrain[0].circle.radius", "expected a number, got string '1.5'"),
         (lambda d: d["terrain"][0]["circle"].update(radius=False), "terrain[0].circle.radius", "expected a number, got boolean False"),
-        (lambda d: d["terrain"][1]["rectangle"].update(yaw_deg="north"), "terrain[1].rectangle.yaw_deg", "expected a number, got string 'north'"),
+        (
+            lambda d: d["terrain"][1]["rectangle"].update(yaw_deg="north"),
+            "terrain[1].rectangle.yaw_deg",
+            "expected a number, got string 'north'",
+        ),
         (lambda d: d["world"].update(size_m=20.0), "world.size_m", "expected a list of 2 numbers, got number 20.0"),
         (lambda d: d["world"].update(size_m=[20.0, 10.0, 5.0]), "world.size_m", "expected a list of 2 numbers, got a list of 3"),
         (lambda d: d["world"].update(size_m={"x": 20, "y": 10}), "world.size_m", "expected a list of 2 numbers, got a mapping"),
         (lambda d: d["world"].update(size_m=[20.0, "ten"]), "world.size_m[1]", "expected a number, got string 'ten'"),
-        (lambda d: d["terrain"][0]["circle"].update(center=[5.0, True]), "terrain[0].circle.center[1]", "expected a number, got boolean True"),
+        (
+            lambda d: d["terrain"][0]["circle"].update(center=[5.0, True]),
+            "terrain[0].circle.center[1]",
+            "expected a number, got boolean True",
+        ),
         (lambda d: d.update(terrain={"class": "mud"}), "terrain", "expected a list, got a mapping"),
         (lambda d: d.update(terrain=None), "terrain", "expected a list, got nothing"),
         (lambda d: d.update(zones={"id": "1"}), "zones", "expected a list, got a mapping"),
-        (lambda d: d["path"].update(waypoints={"a": [1, 2]}), "path.waypoints", "expected a list of at least 2 [x, y] points, got a mapping"),
+        (
+            lambda d: d["path"].update(waypoints={"a": [1, 2]}),
+            "path.waypoints",
+            "expected a list of at least 2 [x, y] points, got a mapping",
+        ),
         (lambda d: d["path"].update(waypoints=[[1.0, 5.0], "end"]), "path.waypoints[1]", "expected a list of 2 numbers, got string 'end'"),
-        (lambda d: d["path"].update(waypoints=[[1.0, 5.0], [19.0, 5.0, 0.0]]), "path.waypoints[1]", "expected a list of 2 numbers, got a list of 3"),
+        (
+            lambda d: d["path"].update(waypoints=[[1.0, 5.0], [19.0, 5.0, 0.0]]),
+            "path.waypoints[1]",
+            "expected a list of 2 numbers, got a list of 3",
+        ),
         (lambda d: d.update(world=[20.0, 10.0]), "world", "expected a mapping, got a list of 2"),
         (lambda d: d.update(path=[[1.0, 5.0], [19.0, 5.0]]), "path", "expected a mapping, got a list of 2"),
         (lambda d: d["terrain"].__setitem__(0, "mud"), "terrain[0]", "expected a mapping, got string 'mud'"),
         (lambda d: d["terrain"][0].update(circle=[5.0, 5.0, 1.0]), "terrain[0].circle", "expected a mapping, got a list of 3"),
-        (lambda d: d["terrain"][2].update(polygon={"a": 1}), "terrain[2].polygon", "expected a list of at least 3 [x, y] points, got a mapping"),
-        (lambda d: d["terrain"][2]["polygon"].__setitem__(1, [16.0]), "terrain[2].polygon[1]", "expected a list of 2 numbers, got a list of 1"),
+        (
+            lambda d: d["terrain"][2].update(polygon={"a": 1}),
+            "terrain[2].polygon",
+            "expected a list of at least 3 [x, y] points, got a mapping",
+        ),
+        (
+            lambda d: d["terrain"][2]["polygon"].__setitem__(1, [16.0]),
+            "terrain[2].polygon[1]",
+            "expected a list of 2 numbers, got a list of 1",
+        ),
         (lambda d: d.update(name=5), "name", "expected a string, got number 5"),
         (lambda d: d.update(description=["a"]), "description", "expected a string, got a list of 1"),
         (lambda d: d.update(start=[1.0, 5.0]), "start", "expected a list of 3 numbers, got a list of 2"),
@@ -707,6 +731,7 @@ def test_huge_polygon_covering_the_map_is_accepted() -> None:
     data = edited(lambda d: d["terrain"][2].update(polygon=[[-1e200, -1e200], [1e200, -1e200], [0.0, 1e200]]))
     assert isinstance(parse_scenario(data).terrain[2].shape, Polygon)
 
+
 @pytest.mark.parametrize(
     ("edit", "field"),
     [
@@ -768,13 +793,16 @@ def test_resolution_must_be_positive(value: float) -> None:
     assert only_problem(data) == Problem("world.resolution_m", "must be > 0")
 
 
-@pytest.mark.parametrize(("edit", "field"), [
-    (lambda d: d["world"].update(size_m=[0.0, 10.0]), "world.size_m[0]"),
-    (lambda d: d["world"].update(size_m=[20.0, -10.0]), "world.size_m[1]"),
-    (lambda d: d["terrain"][0]["circle"].update(radius=0.0), "terrain[0].circle.radius"),
-    (lambda d: d["terrain"][0]["circle"].update(radius=-1.5), "terrain[0].circle.radius"),
-    (lambda d: d["terrain"][1]["rectangle"].update(size=[2.0, 0]), "terrain[1].rectangle.size[1]"),
-])
+@pytest.mark.parametrize(
+    ("edit", "field"),
+    [
+        (lambda d: d["world"].update(size_m=[0.0, 10.0]), "world.size_m[0]"),
+        (lambda d: d["world"].update(size_m=[20.0, -10.0]), "world.size_m[1]"),
+        (lambda d: d["terrain"][0]["circle"].update(radius=0.0), "terrain[0].circle.radius"),
+        (lambda d: d["terrain"][0]["circle"].update(radius=-1.5), "terrain[0].circle.radius"),
+        (lambda d: d["terrain"][1]["rectangle"].update(size=[2.0, 0]), "terrain[1].rectangle.size[1]"),
+    ],
+)
 def test_sizes_must_be_positive(edit: Callable, field: str) -> None:
     assert only_problem(edited(edit)) == Problem(field, "must be > 0")
 
@@ -860,9 +888,7 @@ def test_every_problem_in_a_file_is_reported(tmp_path: Path) -> None:
 
 
 def test_problems_in_many_items_are_all_reported() -> None:
-    data = scenario(
-        terrain=[{"class": "mud", "circle": {"center": [5.0, 5.0], "radius": -float(i)}} for i in range(1, 4)]
-    )
+    data = scenario(terrain=[{"class": "mud", "circle": {"center": [5.0, 5.0], "radius": -float(i)}} for i in range(1, 4)])
     assert problems_of(data) == [Problem(f"terrain[{i}].circle.radius", "must be > 0") for i in range(3)]
 
 
@@ -892,7 +918,6 @@ def test_parse_error_without_source_has_no_file_prefix() -> None:
     with pytest.raises(ScenarioError) as info:
         parse_scenario(scenario(name="bad name"))
     assert info.value.lines() == ["name: must match [A-Za-z0-9_-]+"]
-
 
 
 def test_generated_courses_are_deterministic_valid_and_labelled_by_kind() -> None:

@@ -53,7 +53,9 @@ def test_the_second_stage_starts_after_s_along_each_trajectory(setup):
     straight = featurizer.m // 2
     np.testing.assert_allclose(la.starts[straight], [SecondStageConfig().after_s, 0.0, 0.0], atol=1e-12)
     # The straight continuation of the straight trajectory runs on along the x axis.
-    np.testing.assert_allclose(la.ends[straight, straight], [SecondStageConfig().after_s + featurizer.config.preference.horizon_m, 0.0], atol=1e-9)
+    np.testing.assert_allclose(
+        la.ends[straight, straight], [SecondStageConfig().after_s + featurizer.config.preference.horizon_m, 0.0], atol=1e-9
+    )
 
 
 @pytest.mark.parametrize("stride", [1, 2, 3])
@@ -75,8 +77,10 @@ def test_second_stage_utilities_are_those_of_the_pose_it_starts_from(setup, stri
     for r, i in enumerate(rows):
         x0, y0, th = la.starts[i]
         pts = featurizer.pset.trajectories[:, ::-1][:, ::stride][:, ::-1, :2]  # every stride-th, ending with the last
-        here = np.stack([x0 + pts[..., 0] * math.cos(th) - pts[..., 1] * math.sin(th),
-                         y0 + pts[..., 0] * math.sin(th) + pts[..., 1] * math.cos(th)], axis=-1)
+        here = np.stack(
+            [x0 + pts[..., 0] * math.cos(th) - pts[..., 1] * math.sin(th), y0 + pts[..., 0] * math.sin(th) + pts[..., 1] * math.cos(th)],
+            axis=-1,
+        )
         pix = camera.pixel_indices(here)
         labels = np.where(pix >= 0, image.reshape(-1)[np.maximum(pix, 0)], 255)
         for j, name in enumerate(featurizer.config.feature_classes):
@@ -150,14 +154,17 @@ def test_weight_zero_is_the_argmax_of_f(tmp_path: Path):
         assert d.index == int(np.argmax(d.probs))
 
 
-@pytest.mark.parametrize("utility, field", [
-    ({"w": [1.0, 2.0], "b": [0.0] * 21}, "rules[0].w"),
-    ({"w": [0.0] * 5}, "rules[0].b"),
-    ({"w": [0.0] * 5, "b": [math.inf] * 21}, "rules[0].b"),
-    ("not a table", "utility"),
-    ({"w": [0.0] * 5, "b": [0.0] * 21, "weight": -1.0}, "rules[0].weight"),
-    ({"w": [0.0] * 5, "b": [0.0] * 21, "weight": "heavy"}, "rules[0].weight"),
-])
+@pytest.mark.parametrize(
+    "utility, field",
+    [
+        ({"w": [1.0, 2.0], "b": [0.0] * 21}, "rules[0].w"),
+        ({"w": [0.0] * 5}, "rules[0].b"),
+        ({"w": [0.0] * 5, "b": [math.inf] * 21}, "rules[0].b"),
+        ("not a table", "utility"),
+        ({"w": [0.0] * 5, "b": [0.0] * 21, "weight": -1.0}, "rules[0].weight"),
+        ({"w": [0.0] * 5, "b": [0.0] * 21, "weight": "heavy"}, "rules[0].weight"),
+    ],
+)
 def test_a_broken_utility_is_refused_with_its_field(tmp_path: Path, utility, field: str):
     """A file written before stages were listed (its ``utility`` read as the second stage's block)."""
     path = _model_with_utility(tmp_path / "bad.safetensors", utility)
@@ -171,10 +178,13 @@ def test_training_keeps_the_fitted_utility_with_the_model(tmp_path: Path):
     mirrored trajectory biases; without ``utility`` the file carries none."""
     rng = np.random.default_rng(0)
     n, m = 200, 21
-    dataset = Dataset(rng.uniform(0, 1, (n, m, 5)).astype(np.float32), rng.integers(0, m, n), np.zeros(n, np.float32),
-                      np.zeros(n, np.int64), model_meta())
+    dataset = Dataset(
+        rng.uniform(0, 1, (n, m, 5)).astype(np.float32), rng.integers(0, m, n), np.zeros(n, np.float32), np.zeros(n, np.int64), model_meta()
+    )
     out = tmp_path / "m.safetensors"
-    result = train_and_save(dataset, out, train_config(epochs=1, mirror=True), rules=[SecondStageConfig()], options=RunOptions(checkpoints=False))
+    result = train_and_save(
+        dataset, out, train_config(epochs=1, mirror=True), rules=[SecondStageConfig()], options=RunOptions(checkpoints=False)
+    )
     (stage,) = result.rules
     np.testing.assert_allclose(stage.utility.b, stage.utility.b[::-1], atol=0.02)  # random labels: asymmetric without mirror
     model = load_model(out)
@@ -224,7 +234,9 @@ def test_scores_are_the_linear_utility_of_the_second_stage_utilities(setup):
         assert np.isneginf(np.delete(got, rows)).all()
 
 
-def _numpy_scores(stage: SecondStageScores, log_probs: np.ndarray, image: np.ndarray, pose: Pose, path: ReferencePath, s: float) -> np.ndarray:
+def _numpy_scores(
+    stage: SecondStageScores, log_probs: np.ndarray, image: np.ndarray, pose: Pose, path: ReferencePath, s: float
+) -> np.ndarray:
     """SecondStageRule.scores as NumPy computed it before its loop was compiled."""
     rows = np.argsort(-log_probs, kind="stable")[: stage.config.candidates]
     r, m = len(rows), stage.m
@@ -273,8 +285,10 @@ def test_the_distances_are_numpys_complex_ones_to_the_last_bits(setup):
         s = float(rng.uniform(0, 12))
         rows = rng.permutation(21)[:7]
         targets = _targets(stage, path, s + stage._horizon_m, rows)
-        numpy_form = np.abs((stage.ends[rows] @ (1.0, 1j)) * complex(math.cos(pose.yaw), math.sin(pose.yaw))
-                            + (complex(pose.x, pose.y) - (targets @ (1.0, 1j))[:, None]))
+        numpy_form = np.abs(
+            (stage.ends[rows] @ (1.0, 1j)) * complex(math.cos(pose.yaw), math.sin(pose.yaw))
+            + (complex(pose.x, pose.y) - (targets @ (1.0, 1j))[:, None])
+        )
         np.testing.assert_allclose(_distances(stage, pose, path, s, rows), numpy_form, rtol=4e-16 * 8, atol=1e-14)
 
 

@@ -10,9 +10,21 @@ def _zones(misses_by_layout: dict[str, int], zones_per_layout: int = 40) -> list
     rows = []
     for layout, misses in misses_by_layout.items():
         for i in range(zones_per_layout):
-            rows.append({"recipe": "teach", "order": ORDER, "seed": i % 5, "scenario": layout, "zone": str(i), "kind": "lone",
-                         "choice": "mud", "driver_choice": "mud" if i >= misses else "avoid", "agrees": i >= misses,
-                         "success": True, "driver_success": True})
+            rows.append(
+                {
+                    "recipe": "teach",
+                    "order": ORDER,
+                    "seed": i % 5,
+                    "scenario": layout,
+                    "zone": str(i),
+                    "kind": "lone",
+                    "choice": "mud",
+                    "driver_choice": "mud" if i >= misses else "avoid",
+                    "agrees": i >= misses,
+                    "success": True,
+                    "driver_success": True,
+                }
+            )
     return rows
 
 
@@ -38,9 +50,14 @@ def test_the_layout_interval_resamples_layouts_not_zones():
 
 def test_select_md_gives_both_intervals_per_order(tmp_path):
     rows = _zones({f"gen:{i}": (6 if i == 0 else 0) for i in range(4)})
-    saved = {"selection": {"recipes": ["teach"], "orders": [ORDER], "seeds": 5, "layouts": [f"gen:{i}" for i in range(4)], "style": "default"},
-             "zones": rows, "runs": [{"recipe": "teach", "order": ORDER, "seed": 0, "scenario": "gen:0", "collisions": 0}],
-             "engine": "local, 1 worker", "train_s": 1.0, "eval_s": 2.0}
+    saved = {
+        "selection": {"recipes": ["teach"], "orders": [ORDER], "seeds": 5, "layouts": [f"gen:{i}" for i in range(4)], "style": "default"},
+        "zones": rows,
+        "runs": [{"recipe": "teach", "order": ORDER, "seed": 0, "scenario": "gen:0", "collisions": 0}],
+        "engine": "local, 1 worker",
+        "train_s": 1.0,
+        "eval_s": 2.0,
+    }
     text = write_selection_report(tmp_path, saved).read_text()
     rate, lo, hi = layout_interval(rows)
     row = next(line for line in text.splitlines() if line.startswith("| teach | mud > rock > water"))
@@ -51,14 +68,32 @@ def test_select_md_gives_both_intervals_per_order(tmp_path):
 
 def test_the_figure_marks_each_row_with_its_own_target(tmp_path, monkeypatch):
     import terrapref.report.select as select_report
+
     rows = [dict(r, perception=name) for name in ("clean", "field") for r in _zones({"gen:0": 1, "gen:1": 0})]
-    saved = {"selection": {"recipes": ["teach"], "orders": [ORDER], "seeds": 5, "layouts": ["gen:0", "gen:1"], "style": "default",
-                           "perceptions": [{"name": "clean"}, {"name": "field"}]},
-             "zones": rows, "runs": [{"recipe": "teach", "order": ORDER, "seed": 0, "scenario": "gen:0", "collisions": 0, "perception": p}
-                                     for p in ("clean", "field")],
-             "engine": "local, 1 worker", "train_s": 1.0, "eval_s": 2.0}
+    saved = {
+        "selection": {
+            "recipes": ["teach"],
+            "orders": [ORDER],
+            "seeds": 5,
+            "layouts": ["gen:0", "gen:1"],
+            "style": "default",
+            "perceptions": [{"name": "clean"}, {"name": "field"}],
+        },
+        "zones": rows,
+        "runs": [
+            {"recipe": "teach", "order": ORDER, "seed": 0, "scenario": "gen:0", "collisions": 0, "perception": p}
+            for p in ("clean", "field")
+        ],
+        "engine": "local, 1 worker",
+        "train_s": 1.0,
+        "eval_s": 2.0,
+    }
     drawn = {}
-    monkeypatch.setattr(select_report, "save_intervals", lambda path, rows, *args, target=None, **kw: drawn.update(labels=[r.label for r in rows], target=target))
+    monkeypatch.setattr(
+        select_report,
+        "save_intervals",
+        lambda path, rows, *args, target=None, **kw: drawn.update(labels=[r.label for r in rows], target=target),
+    )
     write_selection_report(tmp_path, saved)
     assert drawn["labels"] == ["teach, all orders, clean", "teach, all orders, field"]
     assert drawn["target"] == [select_report.TARGET, select_report.PERCEIVED_TARGET]  # 95% on clean frames, 90% under errors

@@ -84,22 +84,26 @@ def _zone(id: str, choice: str, success: bool = True, touched_lethal: bool = Fal
     return ZoneResult(id, id, choice if success else "avoid", choice, success, touched_lethal, {})
 
 
-def _run(scenario: str, seed: int, driver: str, zones: list[ZoneResult], collisions: int = 0, completed: bool = True,
-         rms: float = 0.1) -> RunResult:
+def _run(
+    scenario: str, seed: int, driver: str, zones: list[ZoneResult], collisions: int = 0, completed: bool = True, rms: float = 0.1
+) -> RunResult:
     """A result as ``run_one`` returns it, with an empty path."""
     metrics = RunMetrics(completed, collisions, 60.0, rms, 2 * rms, rms, {}, zones)
     return RunResult(scenario, seed, driver, metrics, np.zeros((0, 2), np.float32))
 
 
-@pytest.mark.parametrize("planner, driver, agrees", [
-    (("mud", False), ("mud", False), True),
-    (("mud", False), ("rock", False), False),
-    (("avoid", False), ("avoid", False), True),
-    (("avoid", False), ("mud", False), False),
-    (("mud", True), ("mud", False), False),  # the same choice, but the planner touched lethal terrain
-    (("mud", True), ("mud", True), True),  # so did the driver
-    (("mud", False), ("mud", True), True),  # only the driver did
-])
+@pytest.mark.parametrize(
+    "planner, driver, agrees",
+    [
+        (("mud", False), ("mud", False), True),
+        (("mud", False), ("rock", False), False),
+        (("avoid", False), ("avoid", False), True),
+        (("avoid", False), ("mud", False), False),
+        (("mud", True), ("mud", False), False),  # the same choice, but the planner touched lethal terrain
+        (("mud", True), ("mud", True), True),  # so did the driver
+        (("mud", False), ("mud", True), True),  # only the driver did
+    ],
+)
 def test_zone_agrees(planner: tuple[str, bool], driver: tuple[str, bool], agrees: bool):
     assert zone_agrees(_zone("z", *planner[:1], touched_lethal=planner[1]), _zone("z", *driver[:1], touched_lethal=driver[1])) is agrees
 
@@ -109,8 +113,14 @@ def results() -> list[RunResult]:
     return [
         _run("course", 0, EXPERT, [_zone("a", "mud"), _zone("b", "rock"), _zone("c", "avoid")]),
         # The driver's zones in another order: matched by id.
-        _run("course", 0, PLANNER, [_zone("c", "avoid"), _zone("a", "mud", success=False, touched_lethal=True), _zone("b", "water", success=False)],
-             collisions=1, rms=0.3),
+        _run(
+            "course",
+            0,
+            PLANNER,
+            [_zone("c", "avoid"), _zone("a", "mud", success=False, touched_lethal=True), _zone("b", "water", success=False)],
+            collisions=1,
+            rms=0.3,
+        ),
         _run("course", 1, PLANNER, [_zone("a", "mud"), _zone("b", "rock"), _zone("c", "avoid")], rms=0.5),  # no driver run
         _run("other", 0, PLANNER, [_zone("x", "mud", success=False)], completed=False, rms=0.7),  # no driver run
         _run("course", 0, PURE_PURSUIT, [_zone("a", "avoid", success=False), _zone("b", "rock"), _zone("c", "avoid")]),
@@ -144,8 +154,19 @@ def test_annotate_agreement_leaves_runs_without_a_driver_run_and_the_driver_alon
 
 def test_annotated_zones_are_written_with_the_drivers_choice(results: list[RunResult]):
     zones = annotate_agreement(results)[1].to_dict()["metrics"]["zones"]
-    assert list(zones[1]) == ["id", "label", "expect", "choice", "success", "touched_lethal", "distance_m", "clearance_m", "reached",
-                              "driver_choice", "agrees"]
+    assert list(zones[1]) == [
+        "id",
+        "label",
+        "expect",
+        "choice",
+        "success",
+        "touched_lethal",
+        "distance_m",
+        "clearance_m",
+        "reached",
+        "driver_choice",
+        "agrees",
+    ]
     assert (zones[1]["driver_choice"], zones[1]["agrees"]) == ("mud", False)
 
 
@@ -186,9 +207,23 @@ def test_summarise_without_annotation_has_no_agreement(results: list[RunResult])
 
 def test_summarise_a_driver_with_no_runs():
     s = summarise([_run("course", 0, EXPERT, [_zone("a", "mud")])], PLANNER).to_dict()
-    assert s == {"runs": 0, "zones": 0, "zone_success_rate": None, "zone_success_ci95": [0.0, 1.0], "collision_count": 0,
-                 "completed_rate": None, "completed_ci95": [0.0, 1.0], "ended": {}, "not_reached": 0, "contact_s": 0, "driven_m": 0,
-                 "stop_count": 0, "stops_per_100m": None, "stops_s": {}, "mean_rms_cross_track_m": None}
+    assert s == {
+        "runs": 0,
+        "zones": 0,
+        "zone_success_rate": None,
+        "zone_success_ci95": [0.0, 1.0],
+        "collision_count": 0,
+        "completed_rate": None,
+        "completed_ci95": [0.0, 1.0],
+        "ended": {},
+        "not_reached": 0,
+        "contact_s": 0,
+        "driven_m": 0,
+        "stop_count": 0,
+        "stops_per_100m": None,
+        "stops_s": {},
+        "mean_rms_cross_track_m": None,
+    }
 
 
 # --- the cluster bootstrap of a mean -------------------------------------------------------------

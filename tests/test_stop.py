@@ -41,7 +41,8 @@ zones:
   - {id: "1", label: beyond the wall, rectangle: {center: [30.0, 10.0], size: [6.0, 6.0], yaw_deg: 0.0}, expect: avoid}
 """
 OPEN = WALL.replace("  - {class: non_traversable, rectangle: {center: [20.0, 10.0], size: [2.0, 20.0], yaw_deg: 0.0}}\n", "").replace(
-    "terrain:\n", "terrain: []\n")
+    "terrain:\n", "terrain: []\n"
+)
 
 
 @pytest.fixture(scope="module")
@@ -66,8 +67,19 @@ def test_the_stopping_distance_is_reaction_braking_and_margin():
     assert c.stopping_distance_m(0.0) == pytest.approx(0.3)
 
 
-@pytest.mark.parametrize("bad", [{"decel_mps2": 0.0}, {"margin_m": -0.1}, {"seen_share": 0.0}, {"seen_share": 1.5}, {"arcs": 0},
-                                 {"reaction_s": math.nan}, {"look_m": math.inf}, {"arcs": True}])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"decel_mps2": 0.0},
+        {"margin_m": -0.1},
+        {"seen_share": 0.0},
+        {"seen_share": 1.5},
+        {"arcs": 0},
+        {"reaction_s": math.nan},
+        {"look_m": math.inf},
+        {"arcs": True},
+    ],
+)
 def test_bad_settings_are_refused(bad: dict):
     with pytest.raises(ValueError):
         StopConfig(**bad)
@@ -184,7 +196,9 @@ def test_ids_a_label_map_does_not_list_are_refused_unless_it_says_unknown(model:
     frame[470:, :4] = 12
     with pytest.raises(ValueError, match=r"label id 12 in a label image not listed.*unlisted: unknown.*net\.yaml"):
         _runtime(model, labels=strict).decide(frame, 0.0, (0.0, 0.0, 0.0))
-    lenient = parse_label_map({"format": "terrapref-labels/1", "name": "net", "ids": {10: "grass", 11: "mud"}, "unlisted": "unknown"}, "net.yaml")
+    lenient = parse_label_map(
+        {"format": "terrapref-labels/1", "name": "net", "ids": {10: "grass", 11: "mud"}, "unlisted": "unknown"}, "net.yaml"
+    )
     assert _runtime(model, labels=lenient).decide(frame, 0.0, (0.0, 0.0, 0.0)) is not None
     with pytest.raises(UserError, match="unlisted"):
         parse_label_map({"format": "terrapref-labels/1", "ids": {1: "grass"}, "unlisted": "ignore"}, "bad.yaml")
@@ -286,8 +300,12 @@ def test_the_robot_file_sets_the_stop_rule(tmp_path: Path):
     robot = write_robot(tmp_path / "robot.yaml", robot_yaml() + "stop:\n  decel_mps2: 0.5\n  margin_m: 0.5\n")
     assert load_robot(robot).stop == StopConfig(decel_mps2=0.5, margin_m=0.5)
     assert load_robot(write_robot(tmp_path / "plain.yaml")).stop == StopConfig()
-    for tail, field in [("stop:\n  brake: 1.0\n", "stop.brake"), ("stop:\n  decel_mps2: fast\n", "stop.decel_mps2"),
-                        ("stop:\n  decel_mps2: -1\n", "stop"), ("stop: 3\n", "stop")]:
+    for tail, field in [
+        ("stop:\n  brake: 1.0\n", "stop.brake"),
+        ("stop:\n  decel_mps2: fast\n", "stop.decel_mps2"),
+        ("stop:\n  decel_mps2: -1\n", "stop"),
+        ("stop: 3\n", "stop"),
+    ]:
         with pytest.raises(UserError) as info:
             load_robot(write_robot(tmp_path / "bad.yaml", robot_yaml() + tail))
         (line,) = info.value.lines()

@@ -35,16 +35,35 @@ from terrapref.report.study_report import (
 
 PNG = b"\x89PNG\r\n\x1a\n"
 METHODS = ("C", "linear", "cnn", HAND_COST, PURE_PURSUIT, EXPERT)
-SECTIONS = ("## Answers", "## 1. Baselines", "## 2. Data efficiency", "## 3. Another preference profile", "## 4. Robustness", "## 5. Ablations",
-            "## 6. Any order, any driver")
+SECTIONS = (
+    "## Answers",
+    "## 1. Baselines",
+    "## 2. Data efficiency",
+    "## 3. Another preference profile",
+    "## 4. Robustness",
+    "## 5. Ablations",
+    "## 6. Any order, any driver",
+)
 
 
 def _zone(zid: str, expect: str, choice: str, success: bool | None = None) -> ZoneResult:
     return ZoneResult(zid, f"zone {zid}", expect, choice, expect == choice if success is None else success, False, {})
 
 
-def _run(study: str, method: str, seed: int, zones: list[ZoneResult], scenario: str = "sc", collisions: int = 0, completed: bool = True,
-         rms: float = 0.0, minutes=None, variant: str | None = None, order=None, **tag) -> StudyRun:
+def _run(
+    study: str,
+    method: str,
+    seed: int,
+    zones: list[ZoneResult],
+    scenario: str = "sc",
+    collisions: int = 0,
+    completed: bool = True,
+    rms: float = 0.0,
+    minutes=None,
+    variant: str | None = None,
+    order=None,
+    **tag,
+) -> StudyRun:
     """A run as run_study tags it; ``minutes`` or ``variant`` make it a trained model's own run."""
     model = ModelVariant(minutes, variant) if minutes is not None or variant is not None else None
     run_tag = RunTag(study, method, seed, model, order=tuple(order) if order is not None else None, **tag)
@@ -53,7 +72,9 @@ def _run(study: str, method: str, seed: int, zones: list[ZoneResult], scenario: 
 
 def _trained(study: str, method: str, seed: int, samples: int, minutes: float | None = None) -> TrainedModel:
     """A trained model's record as run_study keeps it; only the fields the report reads matter."""
-    return TrainedModel(TrainJob(study, method, seed, "U.safetensors", f"{method}_s{seed}.safetensors", 1, 1, method, minutes=minutes), samples, 1.0)
+    return TrainedModel(
+        TrainJob(study, method, seed, "U.safetensors", f"{method}_s{seed}.safetensors", 1, 1, method, minutes=minutes), samples, 1.0
+    )
 
 
 def _successes(seed: int, flags: list[bool], study: str = "baselines", method: str = "C", **tag) -> StudyRun:
@@ -106,8 +127,12 @@ def test_cell_of_nothing():
 
 
 def test_select_matches_every_key():
-    runs = [_successes(0, [True], study="efficiency", minutes=0.5), _successes(0, [True], study="efficiency", minutes=ALL),
-            _successes(1, [True], study="efficiency", minutes=0.5), _successes(0, [True], study="efficiency", method="cnn", minutes=0.5)]
+    runs = [
+        _successes(0, [True], study="efficiency", minutes=0.5),
+        _successes(0, [True], study="efficiency", minutes=ALL),
+        _successes(1, [True], study="efficiency", minutes=0.5),
+        _successes(0, [True], study="efficiency", method="cnn", minutes=0.5),
+    ]
     assert _select(runs, study="efficiency", method="C", minutes=0.5) == [runs[0], runs[2]]
     assert _select(runs, study="efficiency", minutes=ALL) == [runs[1]]
     assert _select(runs, study="baselines") == []
@@ -193,6 +218,7 @@ def _fabricated(plan: StudyPlan) -> tuple[list[StudyRun], list[TrainedModel]]:
 
     Per seed (0, 1): C 3/3 and 1/3, linear 1/3 and 1/3, the CNN 0/3, the driver 3/3, the others 2/3.
     Zone 2 is the one where the profiles disagree (mud under the default, rock under the other)."""
+
     def zones(ok: int, expect2: str = "mud") -> list[ZoneResult]:
         exp = ["avoid", expect2, "avoid"]
         return [_zone(str(i + 1), e, e if i < ok else "water") for i, e in enumerate(exp)]
@@ -224,12 +250,17 @@ def _taught(plan: StudyPlan, seed: int) -> list[StudyRun]:
     The paper's order: the driver and its planner both take mud, then pass the patch (clearance
     1.0 and 0.8 m). Rock first: the driver takes rock, its planner mud (half the zones agree).
     The wide driver passes at 1.5 m, its planner at 1.4 m (the default style's planner at 0.8 m)."""
+
     def run(method: str, order, style: str, first: str, clearance: float, xtrack: float) -> StudyRun:
         zs = [replace(_zone("1", first, first), clearance_m=0.5), replace(_zone("2", "avoid", "avoid"), clearance_m=clearance)]
         return _run("teach", method, seed if method == "C" else 0, zs, scenario="L", rms=xtrack, order=order, style=style)
 
     paper, rock_first = plan.orders
-    runs = [run("C", paper, "default", "mud", 0.8, 0.4), run("C", rock_first, "default", "mud", 0.8, 0.4), run("C", paper, "wide", "mud", 1.4, 0.6)]
+    runs = [
+        run("C", paper, "default", "mud", 0.8, 0.4),
+        run("C", rock_first, "default", "mud", 0.8, 0.4),
+        run("C", paper, "wide", "mud", 1.4, 0.6),
+    ]
     # Section 4: under field the paper's order's planner takes water in the pair zone (half its zones
     # agree; rock first: none); the pose sweep agrees in every zone at x1 and in half at x2.
     for order, first in ((paper, "water"), (rock_first, "water")):
@@ -239,15 +270,28 @@ def _taught(plan: StudyPlan, seed: int) -> list[StudyRun]:
             zs = [_zone("1", first2, first2), _zone("2", "avoid", "avoid")]
             runs.append(_run("robustness", "C", seed, zs, scenario="L", order=order, style="default", kind="pose", level=level))
     if seed == 0:
-        runs += [run(EXPERT, paper, "default", "mud", 1.0, 0.5), run(EXPERT, rock_first, "default", "rock", 1.0, 0.5),
-                 run(EXPERT, paper, "wide", "mud", 1.5, 0.7)]
+        runs += [
+            run(EXPERT, paper, "default", "mud", 1.0, 0.5),
+            run(EXPERT, rock_first, "default", "rock", 1.0, 0.5),
+            run(EXPERT, paper, "wide", "mud", 1.5, 0.7),
+        ]
     return runs
 
 
 @pytest.fixture(scope="module")
 def fabricated_study(tmp_path_factory) -> tuple[Path, list[StudyRun]]:
-    plan = StudyPlan(seeds=2, minutes=(0.5, 2.0), presets=("clean", "field"), sweep=(1.0, 2.0), horizons=(), widths=(16,), courses=("sc",),
-                     orders=TEACH_ORDERS[:2], styles=("default", "wide"), layouts=("L",))
+    plan = StudyPlan(
+        seeds=2,
+        minutes=(0.5, 2.0),
+        presets=("clean", "field"),
+        sweep=(1.0, 2.0),
+        horizons=(),
+        widths=(16,),
+        courses=("sc",),
+        orders=TEACH_ORDERS[:2],
+        styles=("default", "wide"),
+        layouts=("L",),
+    )
     runs, trained = _fabricated(plan)
     out = tmp_path_factory.mktemp("fabricated")
     path = write_study(out, plan, trained, runs, {"demonstrations": 1.0, "training": 2.5})
@@ -280,7 +324,9 @@ def test_write_study_data_efficiency_rows(fabricated_study):
     text = fabricated_study[0].read_text()
     assert "| 0.5 (300 frames) | 33.3% ± 0.0% [10%-70%] | 33.3% ± 0.0% [10%-70%] | 33.3% ± 0.0% [10%-70%] |" in text
     assert "| 2 (1200 frames) |" in text
-    assert "| all, 11.0 (6600 frames) | 66.7% ± 33.3% [30%-90%] | 33.3% ± 0.0% [10%-70%] | 0.0% ± 0.0% [0%-39%] |" in text  # 6600 frames at 10 Hz
+    assert (
+        "| all, 11.0 (6600 frames) | 66.7% ± 33.3% [30%-90%] | 33.3% ± 0.0% [10%-70%] | 0.0% ± 0.0% [0%-39%] |" in text
+    )  # 6600 frames at 10 Hz
     assert "C not reached with all 11.0 min (best 67%)" in text
 
 
@@ -322,20 +368,36 @@ def test_write_study_teaching_imitation_is_paired_per_layout_and_seed(fabricated
     wide = next(line for line in text.splitlines() if line.startswith("| wide | default |"))
     # both seeds alike: agreement 0 (both planners take mud, as the wide driver does); cross-track
     # |0.4 - 0.7| - |0.6 - 0.7| = 0.2 m; clearance (0 in the pair zone, 0.7 - 0.1 in the lone one) 0.3 m
-    assert wide == ("| wide | default | 2 | +0.0 pts (+0.0 to +0.0), not shown | +0.20 m (+0.20 to +0.20), **own** | "
-                    "+0.30 m (+0.30 to +0.30), **own** |")
+    assert wide == (
+        "| wide | default | 2 | +0.0 pts (+0.0 to +0.0), not shown | +0.20 m (+0.20 to +0.20), **own** | "
+        "+0.30 m (+0.30 to +0.30), **own** |"
+    )
     default = next(line for line in text.splitlines() if line.startswith("| default | wide |"))
     # against the default driver (cross-track 0.5 m, lone-patch clearance 1.0 m): its own planner
     # 0.4 m and 0.8 m, the wide style's 0.6 m and 1.4 m: as close in cross-track, 0.2 m closer in clearance
-    assert default == ("| default | wide | 2 | +0.0 pts (+0.0 to +0.0), not shown | +0.00 m (+0.00 to +0.00), not shown | "
-                       "+0.10 m (+0.10 to +0.10), **own** |")
+    assert default == (
+        "| default | wide | 2 | +0.0 pts (+0.0 to +0.0), not shown | +0.00 m (+0.00 to +0.00), not shown | "
+        "+0.10 m (+0.10 to +0.10), **own** |"
+    )
 
 
 # --- one tiny study, end to end -------------------------------------------------------------------
 
 
-TINY = StudyPlan(seeds=1, minutes=(0.5,), epochs=2, cnn_epochs=1, presets=("clean", "field"), sweep=(1.0,), horizons=(), widths=(16,), courses=("demo_course",),
-                 orders=TEACH_ORDERS[:1], styles=("default",), layouts=("demo_course",))
+TINY = StudyPlan(
+    seeds=1,
+    minutes=(0.5,),
+    epochs=2,
+    cnn_epochs=1,
+    presets=("clean", "field"),
+    sweep=(1.0,),
+    horizons=(),
+    widths=(16,),
+    courses=("demo_course",),
+    orders=TEACH_ORDERS[:1],
+    styles=("default",),
+    layouts=("demo_course",),
+)
 
 
 @pytest.fixture(scope="module")

@@ -84,8 +84,18 @@ def test_reversed_order_of_the_default_table():
 
 def _table_plan(table, **extra) -> StudyPlan:
     """The fabricated study's plan, its names those of ``table``."""
-    plan = StudyPlan(seeds=2, minutes=(0.5, 2.0), presets=("clean",), sweep_base=None, sweep=(1.0,), horizons=(), widths=(16,),
-                     courses=("sc",), styles=("default", "wide"), layouts=("L",))
+    plan = StudyPlan(
+        seeds=2,
+        minutes=(0.5, 2.0),
+        presets=("clean",),
+        sweep_base=None,
+        sweep=(1.0,),
+        horizons=(),
+        widths=(16,),
+        courses=("sc",),
+        styles=("default", "wide"),
+        layouts=("L",),
+    )
     return for_table(plan, table, **extra)
 
 
@@ -93,8 +103,9 @@ def test_the_report_of_a_table_speaks_its_names(example, tmp_path):
     plan = _table_plan(example, course="teaching_course.yaml")
     runs, trained = _fabricated(replace(plan, orders=plan.orders[:2]))
     # the fabricated runs name the default table's classes: the report's columns come from the plan
-    text = write_study(tmp_path, plan, trained, [r for r in runs if r.tag.study != "teach" and r.tag.study != "robustness"],
-                       {"all": 1.0}).read_text()
+    text = write_study(
+        tmp_path, plan, trained, [r for r in runs if r.tag.study != "teach" and r.tag.study != "robustness"], {"all": 1.0}
+    ).read_text()
     assert "The class table: background grass; terrain columns dirt, gravel, mud, puddle, water, bush; lethal tree, log" in text
     assert "2 runs of teaching_course.yaml with disturbances" in text
     costs = ", ".join(f"{k} {v:g}" for k, v in hand_costs(example).items())
@@ -142,8 +153,10 @@ def test_cli_study_refuses_a_perception_named_twice_or_none(tmp_path, capsys, va
 
 def test_cli_study_refuses_a_table_with_nothing_to_choose_between(tmp_path, capsys):
     table = tmp_path / "trees.yaml"
-    table.write_text("format: terrapref-classes/1\nbackground: grass\nlethal: [tree]\nclasses:\n"
-                     "  - {id: 0, name: grass, color: [0, 100, 0]}\n  - {id: 1, name: tree, color: [0, 50, 0]}\n")
+    table.write_text(
+        "format: terrapref-classes/1\nbackground: grass\nlethal: [tree]\nclasses:\n"
+        "  - {id: 0, name: grass, color: [0, 100, 0]}\n  - {id: 1, name: tree, color: [0, 50, 0]}\n"
+    )
     out = tmp_path / "s"
     for command in (["study", "--quick"], ["select"]):
         assert main([*command, "--out", str(out), "--classes", str(table)]) == 2
@@ -169,8 +182,24 @@ def planned(monkeypatch):
 
 def test_cli_study_builds_the_tables_plan_from_its_flags(planned, tmp_path, example):
     field = EXAMPLES / "rellis3d_field.yaml"
-    assert main(["study", "--quick", "--out", str(tmp_path / "s"), "--classes", str(EXAMPLES / "rellis3d.yaml"),
-                 "--perception", f"clean,{field}", "--follow-up", "--seeds", "2"]) == 0
+    assert (
+        main(
+            [
+                "study",
+                "--quick",
+                "--out",
+                str(tmp_path / "s"),
+                "--classes",
+                str(EXAMPLES / "rellis3d.yaml"),
+                "--perception",
+                f"clean,{field}",
+                "--follow-up",
+                "--seeds",
+                "2",
+            ]
+        )
+        == 0
+    )
     plan = planned[0]
     assert plan.classes.same_classes(example) and plan.follow_up and plan.seeds == 2
     assert plan.orders == for_table(QUICK, example).orders and plan.alt == reversed_order(example)
@@ -206,9 +235,11 @@ def test_a_plan_of_another_tables_orders_is_refused(example):
 
 def test_a_table_without_lethal_classes_has_a_plan(tmp_path):
     table_file = tmp_path / "soft.yaml"
-    table_file.write_text("format: terrapref-classes/1\nbackground: grass\nlethal: []\nclasses:\n"
-                          "  - {id: 0, name: grass, color: [0, 100, 0]}\n  - {id: 1, name: mud, color: [90, 60, 30]}\n"
-                          "  - {id: 2, name: sand, color: [200, 190, 120]}\n")
+    table_file.write_text(
+        "format: terrapref-classes/1\nbackground: grass\nlethal: []\nclasses:\n"
+        "  - {id: 0, name: grass, color: [0, 100, 0]}\n  - {id: 1, name: mud, color: [90, 60, 30]}\n"
+        "  - {id: 2, name: sand, color: [200, 190, 120]}\n"
+    )
     table = load_classes(table_file)
     plan = for_table(QUICK, table)
     assert plan.alt == tuple(reversed(PreferenceProfile.default(table).order)) and len(plan.orders) == 2
@@ -244,8 +275,21 @@ def test_data_budgets_beyond_the_demonstrations_are_not_reported(example, tmp_pa
 
 @pytest.fixture(scope="module")
 def tiny_table_study(tmp_path_factory, small):
-    plan = for_table(StudyPlan(seeds=1, minutes=(0.5,), epochs=2, cnn_epochs=1, sweep=(1.0,), horizons=(), widths=(16,), styles=("default",),
-                               layouts=("gen:5000",)), small, perceptions=(load_perception("field:pose", small),))
+    plan = for_table(
+        StudyPlan(
+            seeds=1,
+            minutes=(0.5,),
+            epochs=2,
+            cnn_epochs=1,
+            sweep=(1.0,),
+            horizons=(),
+            widths=(16,),
+            styles=("default",),
+            layouts=("gen:5000",),
+        ),
+        small,
+        perceptions=(load_perception("field:pose", small),),
+    )
     out = tmp_path_factory.mktemp("table_study")
     lines: list[str] = []
     path = run_study(out, plan, Engine(workers=2), log=lines.append)

@@ -41,8 +41,15 @@ def test_left_then_release_then_right_is_recorded_and_labelled(tmp_path):
         32: [key(pygame.KEYUP, pygame.K_RIGHT)],
         40: [pygame.event.Event(pygame.QUIT)],
     }
-    result = run_teleop("demo_course", out, realtime=False, wait_for_start=False, script=script_from(events), max_frames=200,
-                        screenshot=tmp_path / "shot.png")
+    result = run_teleop(
+        "demo_course",
+        out,
+        realtime=False,
+        wait_for_start=False,
+        script=script_from(events),
+        max_frames=200,
+        screenshot=tmp_path / "shot.png",
+    )
     assert result.quit and not result.completed
     rec = read_recording(out)
     assert rec.complete, "a session the driver quit cleanly is a complete recording"
@@ -114,7 +121,15 @@ def test_ramp_and_axis_closed_forms():
 def test_keyboard_ramp_labels_and_screenshot(tmp_path):
     out = tmp_path / "rec"
     events = {2: [key(pygame.KEYDOWN, pygame.K_LEFT)], 8: [key(pygame.KEYUP, pygame.K_LEFT)], 10: [pygame.event.Event(pygame.QUIT)]}
-    result = run_teleop("demo_course", out, realtime=False, wait_for_start=False, script=script_from(events), max_frames=40, screenshot=tmp_path / "shot.png")
+    result = run_teleop(
+        "demo_course",
+        out,
+        realtime=False,
+        wait_for_start=False,
+        script=script_from(events),
+        max_frames=40,
+        screenshot=tmp_path / "shot.png",
+    )
     assert result.frames == 10 and result.duration_s == pytest.approx(1.0)
     rec = read_recording(out)
     assert rec.meta["driver"] == {"kind": "human", "input": "keyboard/mouse/gamepad", "disturbance": None, "seed": 0}
@@ -233,7 +248,7 @@ def test_the_window_opens_waiting_and_records_only_after_the_countdown(tmp_path)
     rec = read_recording(out)
     countdown = round(COUNTDOWN_S * 10)
     # The key's frame is the countdown's first; the vehicle moves on frame 10 + countdown.
-    assert phases[:11] == ["waiting"] * 11 and phases[11:10 + countdown] == ["countdown"] * (countdown - 1)
+    assert phases[:11] == ["waiting"] * 11 and phases[11 : 10 + countdown] == ["countdown"] * (countdown - 1)
     assert phases[10 + countdown] == "driving"
     assert result.frames == len(rec) == 50 - 10 - countdown
     assert rec.times[0] == 0.0, "nothing moved before the countdown ended"
@@ -246,8 +261,9 @@ def test_the_map_edge_stops_the_vehicle_and_is_not_recorded(tmp_path):
     out = tmp_path / "rec"
     # Start 3 m from the west edge, heading west (at it; the start yaw is in degrees).
     events = {45: [key(pygame.KEYDOWN, pygame.K_LEFT)], 120: [pygame.event.Event(pygame.QUIT)]}
-    result = run_teleop(_tiny(start=[3.0, 6.0, 180.0]), out, realtime=False, wait_for_start=False,
-                        script=script_from(events), max_frames=200)
+    result = run_teleop(
+        _tiny(start=[3.0, 6.0, 180.0]), out, realtime=False, wait_for_start=False, script=script_from(events), max_frames=200
+    )
     rec = read_recording(out)
     assert result.edge_frames > 0
     assert len(rec) == result.frames == 120 - result.edge_frames
@@ -268,8 +284,15 @@ def test_a_resized_window_scales_the_view_and_the_mouse_follows(tmp_path):
         4: [pygame.event.Event(pygame.MOUSEBUTTONDOWN, pos=(320, 480), button=1)],
         8: [pygame.event.Event(pygame.QUIT)],
     }
-    run_teleop("demo_course", out, realtime=False, wait_for_start=False, script=script_from(events), max_frames=20,
-               screenshot=tmp_path / "shot.png")
+    run_teleop(
+        "demo_course",
+        out,
+        realtime=False,
+        wait_for_start=False,
+        script=script_from(events),
+        max_frames=20,
+        screenshot=tmp_path / "shot.png",
+    )
     rec = read_recording(out)
     assert rec.commands[5, 1] == pytest.approx(0.5)
     shot = pygame.image.load(str(tmp_path / "shot.png"))
@@ -282,8 +305,12 @@ def test_the_guide_reads_progress_the_next_patch_and_the_terrain_underneath():
     from terrapref.teleop.guide import CourseGuide
     from terrapref.vehicle import Pose
 
-    scenario = _tiny([{"class": "mud", "rectangle": {"center": [13.5, 6.0], "size": [3.0, 2.0]}},
-                      {"class": "water", "rectangle": {"center": [21.0, 8.75], "size": [2.0, 1.5]}}])
+    scenario = _tiny(
+        [
+            {"class": "mud", "rectangle": {"center": [13.5, 6.0], "size": [3.0, 2.0]}},
+            {"class": "water", "rectangle": {"center": [21.0, 8.75], "size": [2.0, 1.5]}},
+        ]
+    )
     sim = Simulation(scenario)
     prefs = PreferenceSet(PreferenceSetConfig(), sim.camera)
     guide = CourseGuide(sim.world, sim.path, prefs)
@@ -324,7 +351,7 @@ def test_riding_along_records_only_the_takeover_and_train_accepts_it(tmp_path):
     result = run_teleop("demo_course", out, realtime=False, wait_for_start=False, script=script, max_frames=200, model=model)
     handback = round(HANDBACK_S * 10)
     # State is seen before each frame: the driver steers frames 20-22 (Left held) and 15 more untouched.
-    assert drivers[:21] == ["planner"] * 21 and drivers[21:24 + handback] == ["you"] * (3 + handback)
+    assert drivers[:21] == ["planner"] * 21 and drivers[21 : 24 + handback] == ["you"] * (3 + handback)
     assert drivers[24 + handback] == "planner"
     rec = read_recording(out)
     assert result.frames == len(rec) == 3 + handback and result.planner_frames == 80 - len(rec)
@@ -336,8 +363,14 @@ def test_riding_along_records_only_the_takeover_and_train_accepts_it(tmp_path):
     assert rec.times[0] == pytest.approx(2.0) and (rec.times[1:] - rec.times[:-1]).max() == pytest.approx(0.1)
     # A demonstration and the corrections train together.
     demo = tmp_path / "demo"
-    run_teleop("demo_course", demo, realtime=False, wait_for_start=False, max_frames=60,
-               script=script_from({10: [key(pygame.KEYDOWN, pygame.K_RIGHT)], 14: [key(pygame.KEYUP, pygame.K_RIGHT)]}))
+    run_teleop(
+        "demo_course",
+        demo,
+        realtime=False,
+        wait_for_start=False,
+        max_frames=60,
+        script=script_from({10: [key(pygame.KEYDOWN, pygame.K_RIGHT)], 14: [key(pygame.KEYUP, pygame.K_RIGHT)]}),
+    )
     assert main(["train", str(demo), str(out), "--out", str(tmp_path / "m2.safetensors"), "--epochs", "1"]) == 0
 
 
@@ -399,7 +432,9 @@ def test_a_simulated_keyboard_person_drives_the_course_through_the_window(tmp_pa
     assert result.frames + START_AFTER_FRAMES + round(COUNTDOWN_S * 10) <= 2000
     w = rec.commands[:, 1]
     steps = np.round(np.abs(np.diff(w)), 6)
-    assert ((steps == 0.0) | (steps == 0.05) | (steps == 0.1) | (w[1:] == 0.0)).all(), "a press moves a step, a hold less at first, or Down centres it"
+    assert ((steps == 0.0) | (steps == 0.05) | (steps == 0.1) | (w[1:] == 0.0)).all(), (
+        "a press moves a step, a hold less at first, or Down centres it"
+    )
     assert len(set(rec.labels.tolist())) >= 5 and 0.2 < np.mean(w == 0.0) < 0.9, "curves of several widths, and straight stretches"
     assert person.presses > 10
 
@@ -484,8 +519,15 @@ def test_a_window_resized_in_one_direction_is_letterboxed_and_the_mouse_follows(
         7: [pygame.event.Event(pygame.MOUSEBUTTONDOWN, pos=(52 + 600, 495), button=1)],  # the status bar: not the view
         9: [pygame.event.Event(pygame.QUIT)],
     }
-    run_teleop("demo_course", out, realtime=False, wait_for_start=False, script=script_from(events), max_frames=20,
-               screenshot=tmp_path / "shot.png")
+    run_teleop(
+        "demo_course",
+        out,
+        realtime=False,
+        wait_for_start=False,
+        script=script_from(events),
+        max_frames=20,
+        screenshot=tmp_path / "shot.png",
+    )
     w = read_recording(out).commands[:, 1]
     assert w[5] == pytest.approx(0.5), "a quarter from the left of the view as the driver sees it"
     assert w[8] == pytest.approx(0.5), "a click below the camera view does not steer"
@@ -514,7 +556,15 @@ def test_sigterm_before_the_first_frame_of_drive_leaves_no_recording(tmp_path):
     import time
 
     out = tmp_path / "rec"
-    command = [sys.executable, "-c", "import sys; from terrapref.cli import main; sys.exit(main())", "drive", "demo_course", "--record", str(out)]
+    command = [
+        sys.executable,
+        "-c",
+        "import sys; from terrapref.cli import main; sys.exit(main())",
+        "drive",
+        "demo_course",
+        "--record",
+        str(out),
+    ]
     child = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         while not (out / "meta.json").exists():  # no time limit: the window opens its recording or the child exits
@@ -537,10 +587,18 @@ def test_the_route_is_drawn_on_the_ground_in_the_camera_view(tmp_path):
     from terrapref.teleop.window import PATH_COLOR
 
     events = {5: [pygame.event.Event(pygame.QUIT)]}
-    run_teleop("demo_course", None, realtime=False, wait_for_start=False, script=script_from(events), max_frames=20, screenshot=tmp_path / "shot.png")
+    run_teleop(
+        "demo_course",
+        None,
+        realtime=False,
+        wait_for_start=False,
+        script=script_from(events),
+        max_frames=20,
+        screenshot=tmp_path / "shot.png",
+    )
     shot = pygame.surfarray.array3d(pygame.image.load(str(tmp_path / "shot.png"))).transpose(1, 0, 2)  # (H, W, 3)
     view = shot[:480, :640].astype(int)
-    on_route = (np.abs(view - np.array(PATH_COLOR)).sum(axis=2) < 30)
+    on_route = np.abs(view - np.array(PATH_COLOR)).sum(axis=2) < 30
     assert on_route.sum() > 150 and on_route[:, 300:340].sum() > 0.8 * on_route.sum()  # straight ahead, down the middle
 
 
@@ -569,8 +627,16 @@ def test_drive_live_sends_every_driven_frame_and_riding_along_the_planners_costm
     config = ClassifierConfig(hidden=8, skip=True)
     model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
     view = _Collecting()
-    result = run_teleop("demo_course", None, realtime=False, wait_for_start=False, max_frames=40, model=model, live=view,
-                        script=script_from({25: [key(pygame.KEYDOWN, pygame.K_LEFT)], 28: [key(pygame.KEYUP, pygame.K_LEFT)]}))
+    result = run_teleop(
+        "demo_course",
+        None,
+        realtime=False,
+        wait_for_start=False,
+        max_frames=40,
+        model=model,
+        live=view,
+        script=script_from({25: [key(pygame.KEYDOWN, pygame.K_LEFT)], 28: [key(pygame.KEYUP, pygame.K_LEFT)]}),
+    )
     odom, markers = view.got["odom"], view.got["trajectories"]
     assert len(odom) == len(markers) == result.frames + result.planner_frames == 40
     assert [ns for ns, _ in odom] == sorted(ns for ns, _ in odom)
@@ -591,8 +657,9 @@ def test_a_course_of_ones_own_class_table_drives_in_the_window(tmp_path):
     scenario = parse_scenario(teaching_course(table).data(), "course.yaml", table)
     out = tmp_path / "rec"
     events = {3: [key(pygame.KEYDOWN, pygame.K_LEFT)], 6: [key(pygame.KEYUP, pygame.K_LEFT)], 12: [pygame.event.Event(pygame.QUIT)]}
-    result = run_teleop(scenario, out, realtime=False, wait_for_start=False, script=script_from(events), max_frames=40,
-                        screenshot=tmp_path / "shot.png")
+    result = run_teleop(
+        scenario, out, realtime=False, wait_for_start=False, script=script_from(events), max_frames=40, screenshot=tmp_path / "shot.png"
+    )
     assert result.frames == 12
     rec = read_recording(out)
     assert ClassTable.from_dict(rec.meta["classes"]) == table and rec.meta["profile"] == list(table.profile)
@@ -624,8 +691,16 @@ def test_each_push_is_shown_as_it_happens_and_marked_on_the_map(tmp_path, monkey
     drawn = _overlays(monkeypatch)
     out = tmp_path / "rec"
     events = {3: [key(pygame.KEYDOWN, pygame.K_SPACE)], 3 + 30 + 120: [pygame.event.Event(pygame.QUIT)]}
-    result = run_teleop("demo_course", out, realtime=False, script=script_from(events), max_frames=400,
-                        disturbance=DisturbanceConfig(rate_hz=1.0), seed=3, screenshot=tmp_path / "shot.png")
+    result = run_teleop(
+        "demo_course",
+        out,
+        realtime=False,
+        script=script_from(events),
+        max_frames=400,
+        disturbance=DisturbanceConfig(rate_hz=1.0),
+        seed=3,
+        screenshot=tmp_path / "shot.png",
+    )
     start = drawn[0].banner
     assert start is not None and any("a push turns the vehicle" in line for line in start.lines)
     assert any("--disturb 0" in line for line in start.lines), "the start screen says how to turn them off"
@@ -668,7 +743,9 @@ def test_drive_disturb_0_turns_the_pushes_off(tmp_path, monkeypatch, capsys):
     assert read_recording(tmp_path / "rec").meta["driver"]["disturbance"] is None
     assert drawn and not any(o.alerts for o in drawn) and "push" not in capsys.readouterr().out
     assert main(["drive", "demo_course", "--disturb", "2", "--seed", "3"]) == 0
-    assert re.search(r"drove 60 frames, stopped, 0 collisions, [1-9][0-9]* push(es)? \(--disturb 0: none\)$", capsys.readouterr().out.strip())
+    assert re.search(
+        r"drove 60 frames, stopped, 0 collisions, [1-9][0-9]* push(es)? \(--disturb 0: none\)$", capsys.readouterr().out.strip()
+    )
 
 
 def test_off_the_route_the_display_points_back_and_stops_counting_patches_along_it():
@@ -701,11 +778,17 @@ def test_driving_away_from_the_route_raises_the_alert_and_draws_the_arrow(tmp_pa
     from terrapref.teleop.window import ALERT_COLOR
 
     drawn = _overlays(monkeypatch)
-    data = {"format": "terrapref-scenario/1", "name": "wide", "world": {"size_m": [40.0, 30.0], "resolution_m": 0.05, "background": "grass"},
-            "terrain": [{"class": "mud", "rectangle": {"center": [30.0, 6.0], "size": [3.0, 2.0]}}],
-            "path": {"waypoints": [[2.0, 6.0], [38.0, 6.0]]}, "start": [4.0, 6.0, 60.0]}
-    run_teleop(parse_scenario(data), None, realtime=False, wait_for_start=False, max_frames=80, disturbance=None,
-               screenshot=tmp_path / "shot.png")
+    data = {
+        "format": "terrapref-scenario/1",
+        "name": "wide",
+        "world": {"size_m": [40.0, 30.0], "resolution_m": 0.05, "background": "grass"},
+        "terrain": [{"class": "mud", "rectangle": {"center": [30.0, 6.0], "size": [3.0, 2.0]}}],
+        "path": {"waypoints": [[2.0, 6.0], [38.0, 6.0]]},
+        "start": [4.0, 6.0, 60.0],
+    }
+    run_teleop(
+        parse_scenario(data), None, realtime=False, wait_for_start=False, max_frames=80, disturbance=None, screenshot=tmp_path / "shot.png"
+    )
     first, last = drawn[0], drawn[-1]
     assert not first.off_route and not first.alerts and first.hud[1].startswith("next patch: mud in")
     assert last.off_route and last.alerts[0].startswith("OFF ROUTE: 7 m away, turn right")

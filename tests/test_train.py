@@ -124,7 +124,9 @@ def test_members_train_apart_from_their_own_seeds():
     for j, member in enumerate(result.members):
         alone = train(data, train_config(config, members=1, seed=5 + MEMBER_SEED_STEP * j))
         assert_weights_equal(member.weights, alone.weights)
-        assert_weights_equal({k[len(f"members.{j}."):]: v for k, v in result.weights.items() if k.startswith(f"members.{j}.")}, alone.weights)
+        assert_weights_equal(
+            {k[len(f"members.{j}.") :]: v for k, v in result.weights.items() if k.startswith(f"members.{j}.")}, alone.weights
+        )
     assert weights_differ(result.members[0].weights, result.members[1].weights)
     assert result.history == result.members[0].history and result.steps == sum(m.steps for m in result.members)
     assert len(result.checkpoints) == 2 and set(result.checkpoints[0]) == set(result.weights)
@@ -185,8 +187,6 @@ def test_a_linear_preference_is_learned():
     tr, va = split_indices(len(data), 0.2, np.random.default_rng(0))
     pred = np.argmax(numpy_forward(result.classifier, result.weights, data.U[va]), axis=1)
     assert abs(float((pred == data.labels[va]).mean()) - best.val_acc) < 1e-6
-
-
 
 
 # --- train and save ----------------------------------------------------------------------------------
@@ -251,8 +251,6 @@ def test_mirror_needs_a_symmetric_control_set():
         train(data, train_config(epochs=1, mirror=True))
 
 
-
-
 def test_an_interrupted_training_leaves_its_best_so_far_and_touches_nothing_else(tmp_path: Path):
     from terrapref.learning.pipeline import interrupted_path
 
@@ -287,8 +285,13 @@ def test_an_interrupted_training_leaves_its_best_so_far_and_touches_nothing_else
 def _interrupt_dataset() -> Dataset:
     rng = np.random.default_rng(0)
     n = 200
-    return Dataset(rng.uniform(0, 1, (n, 21, 5)).astype(np.float32), rng.integers(0, 21, n), np.zeros(n, np.float32), np.zeros(n, np.int64),
-                   {"format": DATASET_FORMAT, **model_meta()})
+    return Dataset(
+        rng.uniform(0, 1, (n, 21, 5)).astype(np.float32),
+        rng.integers(0, 21, n),
+        np.zeros(n, np.float32),
+        np.zeros(n, np.int64),
+        {"format": DATASET_FORMAT, **model_meta()},
+    )
 
 
 def test_training_without_the_identifiability_report_trains_the_same_weights():

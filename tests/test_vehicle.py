@@ -154,8 +154,22 @@ def test_default_control_set_is_the_papers():
 @pytest.mark.parametrize(
     "w,label",
     [
-        (0.0, 10), (0.05, 10), (-0.05, 10), (0.049, 10), (0.051, 11), (0.15, 11), (-0.15, 9), (0.25, 12), (-0.95, 1),
-        (0.95, 19), (0.12, 11), (-0.33, 7), (1.0, 20), (2.0, 20), (-1.0, 0), (-7.0, 0),
+        (0.0, 10),
+        (0.05, 10),
+        (-0.05, 10),
+        (0.049, 10),
+        (0.051, 11),
+        (0.15, 11),
+        (-0.15, 9),
+        (0.25, 12),
+        (-0.95, 1),
+        (0.95, 19),
+        (0.12, 11),
+        (-0.33, 7),
+        (1.0, 20),
+        (2.0, 20),
+        (-1.0, 0),
+        (-7.0, 0),
     ],
 )
 def test_label_of_maps_w_to_the_nearest_bin_ties_toward_zero(w, label):
@@ -188,8 +202,16 @@ def test_label_of_one_command_is_the_vectorised_label():
     rng = np.random.default_rng(2)
     for control in (ControlSet(), ControlSet.uniform(7, w_max_rps=0.6), ControlSet(1.0, (-0.5, -0.2, 0.2, 0.5))):
         grid = np.asarray(control.w_rps)
-        w = np.concatenate([rng.uniform(-1.5, 1.5, 2000), grid, (grid[1:] + grid[:-1]) / 2, grid + 1e-12, grid - 1e-12,
-                            [0.0, -0.0, math.inf, -math.inf, math.nan]])
+        w = np.concatenate(
+            [
+                rng.uniform(-1.5, 1.5, 2000),
+                grid,
+                (grid[1:] + grid[:-1]) / 2,
+                grid + 1e-12,
+                grid - 1e-12,
+                [0.0, -0.0, math.inf, -math.inf, math.nan],
+            ]
+        )
         want = control.label_of(w)
         got = np.array([control.label_of(float(x)) for x in w])
         np.testing.assert_array_equal(got, want)

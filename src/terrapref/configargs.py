@@ -99,8 +99,9 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type, defaults: Any = No
         if nested is not None or isinstance(f.default, bool):
             parser.add_argument(f"--{_flag(f)}", dest=_dest(f), action=argparse.BooleanOptionalAction, default=None, help=text)
         else:
-            parser.add_argument(f"--{_flag(f)}", dest=_dest(f), type=_scalar(cls, f), default=None,
-                                choices=f.metadata.get(CHOICES), help=text)
+            parser.add_argument(
+                f"--{_flag(f)}", dest=_dest(f), type=_scalar(cls, f), default=None, choices=f.metadata.get(CHOICES), help=text
+            )
         if nested is not None:
             add_arguments(parser, nested, current if dataclasses.is_dataclass(current) else None)
 

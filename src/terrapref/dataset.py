@@ -32,8 +32,12 @@ FORMAT = "terrapref-dataset/2"
 OLD_FORMATS = ("terrapref-dataset/1",)  # before the decision rules kept their own arrays: featurised again, not read
 
 # What a rule's array may hold besides finite numbers, as a dataset declares it for each array (checked on load).
-ARRAY_KINDS = {"finite": "finite numbers", "finite >= 0": "finite numbers >= 0", "no NaN": "numbers (inf allowed, NaN not)",
-               "no inf": "numbers (NaN allowed, inf not)"}
+ARRAY_KINDS = {
+    "finite": "finite numbers",
+    "finite >= 0": "finite numbers >= 0",
+    "no NaN": "numbers (inf allowed, NaN not)",
+    "no inf": "numbers (NaN allowed, inf not)",
+}
 
 
 class FrameReader(Protocol):
@@ -120,8 +124,13 @@ class Featurised(NamedTuple):
     rules: dict[str, dict[str, np.ndarray]]
 
 
-def featurize_recording(recording: Recording, features: FeatureConfig, camera: CameraConfig | None = None,
-                        on_frame: Callable[[int], None] | None = None, rules: tuple[RuleData, ...] = ()) -> Featurised:
+def featurize_recording(
+    recording: Recording,
+    features: FeatureConfig,
+    camera: CameraConfig | None = None,
+    on_frame: Callable[[int], None] | None = None,
+    rules: tuple[RuleData, ...] = (),
+) -> Featurised:
     """U (F, m, K + 1), labels (F,), w (F,) and what each of ``rules`` reads for its fit, for every
     frame of a recording taken on the map (frames off it are left out).
 
@@ -140,14 +149,22 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
     tracker = PathTracker(path)
     perceived = recording.perception
     if not camera.same_geometry(rec_camera) and perceived != "clean":
-        raise UserError(str(recording.path / "meta.json"), f"its frames are what the robot received under perception {perceived!r}; "
-                        "rendering them again under another camera would give the simulator's truth instead", field="perception")
+        raise UserError(
+            str(recording.path / "meta.json"),
+            f"its frames are what the robot received under perception {perceived!r}; "
+            "rendering them again under another camera would give the simulator's truth instead",
+            field="perception",
+        )
     renderer = None if camera.same_geometry(rec_camera) else SegmentationRenderer(PinholeCamera(camera), rasterise(scenario))
     if len(recording) == 0:
         raise UserError(str(recording.path / "frames.jsonl"), "holds no frames to featurise", field="frames")
     keep = np.flatnonzero(on_map(recording.poses, scenario))  # frames taken off the map are not training data
     if len(keep) == 0:
-        raise UserError(str(recording.path / "frames.jsonl"), f"every frame was taken off the {scenario.size_m[0]:g} x {scenario.size_m[1]:g} m map", field="pose")
+        raise UserError(
+            str(recording.path / "frames.jsonl"),
+            f"every frame was taken off the {scenario.size_m[0]:g} x {scenario.size_m[1]:g} m map",
+            field="pose",
+        )
     n, m = len(keep), featurizer.m
     known = np.zeros(256, dtype=bool)
     known[[c.id for c in classes.classes]] = True
@@ -175,8 +192,9 @@ def featurize_recording(recording: Recording, features: FeatureConfig, camera: C
     return Featurised(U, labels, w, {name: reader.arrays(recording, keep, path) for name, reader in readers.items()})
 
 
-def _frame_view(recording: Recording, i: int, renderer: SegmentationRenderer | None, pose: tuple, shape: tuple[int, int],
-                known: np.ndarray) -> SegmentationView:
+def _frame_view(
+    recording: Recording, i: int, renderer: SegmentationRenderer | None, pose: tuple, shape: tuple[int, int], known: np.ndarray
+) -> SegmentationView:
     """Frame ``i`` as the featurizer reads it: re-rendered under another camera, the simulation's
     own view for a recording kept in memory (only the pixels read are rendered), or the recorded
     image, refused when its size or class ids do not fit the recording's camera and classes."""
@@ -186,8 +204,11 @@ def _frame_view(recording: Recording, i: int, renderer: SegmentationRenderer | N
         return recording.views[i]
     image = recording.image(i)
     if image.shape != shape or not known[image].all():
-        what = f"is {image.shape[1]} x {image.shape[0]}, the camera's {shape[1]} x {shape[0]}" if image.shape != shape else \
-            f"holds class ids {sorted(set(np.unique(image).tolist()) - set(np.flatnonzero(known).tolist()))[:5]} that the class table does not have"
+        what = (
+            f"is {image.shape[1]} x {image.shape[0]}, the camera's {shape[1]} x {shape[0]}"
+            if image.shape != shape
+            else f"holds class ids {sorted(set(np.unique(image).tolist()) - set(np.flatnonzero(known).tolist()))[:5]} that the class table does not have"
+        )
         raise UserError(str(recording.path / recording.image_files[i]), what)
     return SegmentationView.of(image)
 
@@ -216,8 +237,14 @@ class Featuring(NamedTuple):
     frames: int
 
 
-def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: CameraConfig | None = None, rules: tuple[RuleData, ...] = (),
-                  cache: dict | None = None, progress: Callable[[Featuring], None] | None = None) -> Dataset:
+def build_dataset(
+    recordings: list[Recording],
+    features: FeatureConfig,
+    camera: CameraConfig | None = None,
+    rules: tuple[RuleData, ...] = (),
+    cache: dict | None = None,
+    progress: Callable[[Featuring], None] | None = None,
+) -> Dataset:
     """Featurise several recordings into one dataset (they must share classes and profile), with
     the arrays each of the decision ``rules`` (a recipe's) reads for its fit.
 
@@ -231,8 +258,12 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
         raise UserError("featurize", "no recordings given")
     first = recordings[0]
     if first.meta.get("profile") is None:
-        raise UserError(str(first.path / "meta.json"), "names no preference order; a model needs the order its driver had "
-                        "(an imported drive: import it again with --profile, or add profile: to its robot file)", field="profile")
+        raise UserError(
+            str(first.path / "meta.json"),
+            "names no preference order; a model needs the order its driver had "
+            "(an imported drive: import it again with --profile, or add profile: to its robot file)",
+            field="profile",
+        )
     for rec in recordings[1:]:
         for key in ("classes", "profile"):
             if rec.meta.get(key) != first.meta.get(key):
@@ -258,7 +289,9 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
     U = np.concatenate([p[0] for p in parts])
     labels = np.concatenate([p[1] for p in parts])
     w = np.concatenate([p[2] for p in parts])
-    arrays = {rule.type: {name: np.concatenate([p.rules[rule.type][name] for p in parts]) for name in parts[0].rules[rule.type]} for rule in rules}
+    arrays = {
+        rule.type: {name: np.concatenate([p.rules[rule.type][name] for p in parts]) for name in parts[0].rules[rule.type]} for rule in rules
+    }
     source = np.concatenate([np.full(len(p[1]), k, dtype=np.int64) for k, p in enumerate(parts)])
     meta = {
         "format": FORMAT,
@@ -268,9 +301,16 @@ def build_dataset(recordings: list[Recording], features: FeatureConfig, camera: 
         "profile": first.meta.get("profile"),
         "rules": {rule.type: {"config": rule.data(), "arrays": {name: rule.arrays[name] for name in arrays[rule.type]}} for rule in rules},
         "recordings": [
-            {"path": str(r.path), "scenario": r.meta.get("scenario"), "frames": len(r), "frames_used": len(p[1]), "complete": r.complete,
-             "driver": r.meta.get("driver"), "perception": r.perception,
-             **({"written": False} if r.in_memory else {})}
+            {
+                "path": str(r.path),
+                "scenario": r.meta.get("scenario"),
+                "frames": len(r),
+                "frames_used": len(p[1]),
+                "complete": r.complete,
+                "driver": r.meta.get("driver"),
+                "perception": r.perception,
+                **({"written": False} if r.in_memory else {}),
+            }
             for r, p in zip(recordings, parts, strict=True)
         ],
     }
@@ -328,11 +368,18 @@ def _rule_arrays(tensors: dict[str, np.ndarray], meta: dict, source: str) -> dic
             if a is None:
                 raise UserError(source, "missing tensor", field=key)
             if kind not in ARRAY_KINDS:
-                raise UserError(source, f"unknown kind {kind!r}; expected one of {', '.join(ARRAY_KINDS)}", field=f"rules.{rule}.arrays.{name}")
-            bad = {"finite": ~np.isfinite(a), "finite >= 0": ~(np.isfinite(a) & (a >= 0)), "no NaN": np.isnan(a), "no inf": np.isinf(a)}[kind] \
-                if a.dtype.kind == "f" else None
+                raise UserError(
+                    source, f"unknown kind {kind!r}; expected one of {', '.join(ARRAY_KINDS)}", field=f"rules.{rule}.arrays.{name}"
+                )
+            bad = (
+                {"finite": ~np.isfinite(a), "finite >= 0": ~(np.isfinite(a) & (a >= 0)), "no NaN": np.isnan(a), "no inf": np.isinf(a)}[kind]
+                if a.dtype.kind == "f"
+                else None
+            )
             if len(a) != n or a.dtype.kind != "f" or bad.any():
-                raise UserError(source, f"expected {ARRAY_KINDS[kind]}, a row for each of the {n} samples; got {a.dtype} {a.shape}", field=key)
+                raise UserError(
+                    source, f"expected {ARRAY_KINDS[kind]}, a row for each of the {n} samples; got {a.dtype} {a.shape}", field=key
+                )
             out[rule][name] = a
     stray = sorted(k for k in tensors if k.startswith("rules.") and k.split(".")[1] not in out)
     if stray:
@@ -350,7 +397,9 @@ def _check_tensors(t: dict[str, np.ndarray], source: str) -> None:
         raise UserError(source, "holds NaN or infinite utilities", field="U")
     for key, kinds in (("labels", "iu"), ("w", "f"), ("source", "iu")):
         if t[key].shape != (n,) or t[key].dtype.kind not in kinds:
-            raise UserError(source, f"expected {n} {'integers' if kinds == 'iu' else 'floats'}, got {t[key].dtype} {t[key].shape}", field=key)
+            raise UserError(
+                source, f"expected {n} {'integers' if kinds == 'iu' else 'floats'}, got {t[key].dtype} {t[key].shape}", field=key
+            )
     if n and (t["labels"].min() < 0 or t["labels"].max() >= m):
         raise UserError(source, f"labels must index the {m} trajectories", field="labels")
     if not np.isfinite(t["w"]).all():
@@ -376,15 +425,18 @@ def merge_datasets(sets: list[tuple[str, Dataset]]) -> Dataset:
     counts = [len(d.meta.get("recordings") or []) or (int(d.source.max()) + 1 if len(d) else 0) for _, d in sets[:-1]]
     offsets = np.cumsum([0] + counts)
     return Dataset(
-        np.concatenate([d.U for _, d in sets]), np.concatenate([d.labels for _, d in sets]), np.concatenate([d.w for _, d in sets]),
+        np.concatenate([d.U for _, d in sets]),
+        np.concatenate([d.labels for _, d in sets]),
+        np.concatenate([d.w for _, d in sets]),
         np.concatenate([d.source + off for off, (_, d) in zip(offsets, sets)]),
         {**first.meta, "recordings": [r for _, d in sets for r in d.meta.get("recordings", [])]},
         {rule: {name: np.concatenate([d.rules[rule][name] for _, d in sets]) for name in arrays} for rule, arrays in first.rules.items()},
     )
 
 
-def training_data(paths: list[Path], features: FeatureConfig, rules: tuple[RuleData, ...] = (),
-                  progress: Callable[[Featuring], None] | None = None) -> Dataset:
+def training_data(
+    paths: list[Path], features: FeatureConfig, rules: tuple[RuleData, ...] = (), progress: Callable[[Featuring], None] | None = None
+) -> Dataset:
     """The samples of ``paths``: recording directories, featurised under ``features`` with the
     arrays ``rules`` read, and dataset files (from ``terrapref featurize``), loaded as they are;
     merged into one dataset."""
@@ -406,4 +458,8 @@ def check_learnable(data: Dataset, source: str | Path) -> None:
     if len(data) == 0:
         raise UserError(str(source), "holds no samples to train on", field="frames")
     if len(np.unique(data.labels)) < 2:
-        raise UserError(str(source), f"every sample has the same label ({int(data.labels[0])}): the drive never steered, there is no choice to learn", field="labels")
+        raise UserError(
+            str(source),
+            f"every sample has the same label ({int(data.labels[0])}): the drive never steered, there is no choice to learn",
+            field="labels",
+        )

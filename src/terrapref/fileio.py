@@ -130,9 +130,13 @@ def check_output(out: str | Path, flag: str, inputs: Sequence[str | Path] = (), 
     if special:
         raise UserError(str(out), f"is a {special}; {flag} must name a {'folder' if folder else 'regular file'}", field=flag)
     if out.exists() and out.is_dir() != folder:
-        raise UserError(str(out), "exists and is a " + ("file; expected a folder" if folder else "folder; expected a file name"), field=flag)
+        raise UserError(
+            str(out), "exists and is a " + ("file; expected a folder" if folder else "folder; expected a file name"), field=flag
+        )
     if force is False and not folder and out.exists():
-        raise UserError(str(out), f"exists; choose another {flag}, or pass --force to replace it (only once the new one is complete)", field=flag)
+        raise UserError(
+            str(out), f"exists; choose another {flag}, or pass --force to replace it (only once the new one is complete)", field=flag
+        )
     parent = out if folder and out.exists() else out.parent
     while not parent.exists() and parent != parent.parent:
         parent = parent.parent
@@ -195,8 +199,11 @@ def output_folder(out: str | Path, force: bool, flag: str = "--out") -> Iterator
     if out.is_dir() and any(out.iterdir()):
         with _locked(out, flag):  # held while it is moved: refused if another command is writing it
             if not force:
-                raise UserError(str(out), f"exists; choose another {flag}, or pass --force to replace it (the old folder stays "
-                                          "until the new one is complete)", field=flag)
+                raise UserError(
+                    str(out),
+                    f"exists; choose another {flag}, or pass --force to replace it (the old folder stays until the new one is complete)",
+                    field=flag,
+                )
             aside = new_folder(out, ".old")
             os.replace(out, aside / "old")
     out.mkdir(exist_ok=True)
@@ -229,8 +236,9 @@ def _locked(folder: Path, flag: str) -> Iterator[None]:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise UserError(str(folder), f"is being written by another terrapref command; choose another {flag} or wait for it to end",
-                            field=flag) from None
+            raise UserError(
+                str(folder), f"is being written by another terrapref command; choose another {flag} or wait for it to end", field=flag
+            ) from None
         yield
     finally:
         os.close(fd)  # releases the lock

@@ -185,6 +185,7 @@ def _run_ray(fn: Callable, jobs: list, engine: Engine, progress: Callable[[int, 
     """The ``ray`` engine: one Ray task per job, on ``engine``'s instance or cluster."""
     started_here = start_ray(engine)
     import ray  # start_ray has imported it, or said which extra brings it
+
     try:
         task = ray.remote(num_cpus=1)(_guarded)
         refs = [task.remote(fn, job) for job in jobs]

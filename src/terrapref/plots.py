@@ -39,7 +39,14 @@ def _save(fig: plt.Figure, path: str | Path, whole: bool = False) -> Path:
 
 PATH_ZORDER = 3.0  # the reference path's layer: tracks go beneath it, the start above
 TRACK_LW = 3.5  # a track's width [pt], twice and more the dashed path's, so both are seen where they coincide
-SEED_COLOURS = ("magenta", "yellow", "cyan", "white", "black", "darkviolet")  # one per run seed, clear of the terrain palette and the zones' lime and red
+SEED_COLOURS = (
+    "magenta",
+    "yellow",
+    "cyan",
+    "white",
+    "black",
+    "darkviolet",
+)  # one per run seed, clear of the terrain palette and the zones' lime and red
 LONGEST_NAME = 24  # characters of a class name a figure shows; a longer one is cut with an ellipsis
 
 
@@ -95,10 +102,20 @@ def draw_map(ax: plt.Axes, scenario: Scenario, world: WorldMap, zones: bool = Tr
     else:
         ax.set_facecolor("whitesmoke")
     wp = scenario.waypoints
-    ax.plot(wp[:, 0], wp[:, 1], color="white", lw=1.5, ls="--", label="reference path", zorder=PATH_ZORDER,
-            path_effects=[patheffects.withStroke(linewidth=3, foreground="black")])  # seen on any ground, and in the legend
+    ax.plot(
+        wp[:, 0],
+        wp[:, 1],
+        color="white",
+        lw=1.5,
+        ls="--",
+        label="reference path",
+        zorder=PATH_ZORDER,
+        path_effects=[patheffects.withStroke(linewidth=3, foreground="black")],
+    )  # seen on any ground, and in the legend
     x, y, yaw = scenario.start
-    ax.annotate("", xy=(x + 2.5 * np.cos(yaw), y + 2.5 * np.sin(yaw)), xytext=(x, y), arrowprops={"arrowstyle": "-|>", "color": "black", "lw": 1.5})
+    ax.annotate(
+        "", xy=(x + 2.5 * np.cos(yaw), y + 2.5 * np.sin(yaw)), xytext=(x, y), arrowprops={"arrowstyle": "-|>", "color": "black", "lw": 1.5}
+    )
     ax.plot([x], [y], "o", color="black", ms=5, label="start", zorder=PATH_ZORDER + 0.5)
     ax.set_xlim(0, sx)
     ax.set_ylim(0, sy)
@@ -122,10 +139,18 @@ def _label_zones(ax: plt.Axes, zones: Sequence[Zone], marks: dict[str, str], cla
         (x0, y0), (x1, y1) = o.min(axis=0), o.max(axis=0)
         text = _wrapped(figure_text(z.id + (f": {z.label}" if z.label else ""), classes))
         text += f"\n{_wrapped(figure_text(marks[z.id], classes))}" if z.id in marks else ""
-        style = {"color": "red" if z.id in marks else "yellow", "fontsize": 7, "bbox": {"facecolor": "black", "alpha": 0.6, "pad": 1, "lw": 0}}
+        style = {
+            "color": "red" if z.id in marks else "yellow",
+            "fontsize": 7,
+            "bbox": {"facecolor": "black", "alpha": 0.6, "pad": 1, "lw": 0},
+        }
         best = None
-        for x, y, ha, va in (((x0 + x1) / 2, y1 + 0.5, "center", "bottom"), ((x0 + x1) / 2, y0 - 0.5, "center", "top"),
-                             (x1 + 0.5, (y0 + y1) / 2, "left", "center"), (x0 - 0.5, (y0 + y1) / 2, "right", "center")):
+        for x, y, ha, va in (
+            ((x0 + x1) / 2, y1 + 0.5, "center", "bottom"),
+            ((x0 + x1) / 2, y0 - 0.5, "center", "top"),
+            (x1 + 0.5, (y0 + y1) / 2, "left", "center"),
+            (x0 - 0.5, (y0 + y1) / 2, "right", "center"),
+        ):
             label = ax.text(x, y, text, ha=ha, va=va, **style)
             box = label.get_window_extent(renderer).expanded(1.05, 1.1)
             inside = max(0.0, min(box.x1, frame.x1) - max(box.x0, frame.x0)) * max(0.0, min(box.y1, frame.y1) - max(box.y0, frame.y0))
@@ -149,8 +174,14 @@ def _wrapped(text: str) -> str:
     return "\n".join(textwrap.wrap(text, LABEL_WIDTH, break_long_words=False, break_on_hyphens=False)) or text
 
 
-def save_map(path: str | Path, scenario: Scenario, world: WorldMap,
-             tracks: Sequence[tuple[str, np.ndarray, str]] = (), title: str | None = None, marks: dict[str, str] | None = None) -> Path:
+def save_map(
+    path: str | Path,
+    scenario: Scenario,
+    world: WorldMap,
+    tracks: Sequence[tuple[str, np.ndarray, str]] = (),
+    title: str | None = None,
+    marks: dict[str, str] | None = None,
+) -> Path:
     """Write a top-down PNG of the map; ``tracks`` are (label, xy (N, 2), colour) drawn on top,
     ``marks`` (zone id -> text) added to those zones' labels in red."""
     sx, sy = world.size_m
@@ -159,8 +190,14 @@ def save_map(path: str | Path, scenario: Scenario, world: WorldMap,
     classes_shown = draw_map(ax, scenario, world, marks=marks)
     for label, xy, color in tracks:  # wide and beneath the path: the dashed path stays seen along a track that follows it
         ax.plot(xy[:, 0], xy[:, 1], color=color, lw=TRACK_LW, alpha=0.85, label=label, zorder=PATH_ZORDER - 0.5, solid_capstyle="round")
-    ax.legend(handles=classes_shown + ax.get_legend_handles_labels()[0], loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7,
-              framealpha=0.8, borderaxespad=0.0)  # beside the map: never over the start or a zone
+    ax.legend(
+        handles=classes_shown + ax.get_legend_handles_labels()[0],
+        loc="upper left",
+        bbox_to_anchor=(1.01, 1.0),
+        fontsize=7,
+        framealpha=0.8,
+        borderaxespad=0.0,
+    )  # beside the map: never over the start or a zone
     ax.set_title(figure_text(title or scenario.name, scenario.classes))
     fig.tight_layout()
     return _save(fig, path)
@@ -179,14 +216,23 @@ def save_loss_curve(path: str | Path, members: Sequence[tuple[Sequence[dict], in
         ax2.plot(epochs, [h["train_acc"] for h in history], color=colour, lw=1.0, alpha=0.6)
         ax2.plot(epochs, [h["val_acc"] for h in history], color=colour, lw=1.6, ls="--")
         ax2.plot(epochs, [h["val_top3"] for h in history], color=colour, lw=1.6, ls=":")
-    who = [Line2D([], [], color=f"C{j}", lw=3, label=f"member {j + 1}: epoch {best} chosen" if len(members) > 1 else f"epoch {best} chosen")
-           for j, (_, best) in enumerate(members)]
+    who = [
+        Line2D([], [], color=f"C{j}", lw=3, label=f"member {j + 1}: epoch {best} chosen" if len(members) > 1 else f"epoch {best} chosen")
+        for j, (_, best) in enumerate(members)
+    ]
     key = [Line2D([], [], color="grey", lw=1.0, label="train"), Line2D([], [], color="grey", lw=1.6, ls="--", label="validation")]
     ax1.legend(handles=who + key + [Line2D([], [], color="grey", ls=":", label="chosen epoch")], fontsize=7, loc="upper right")
     ax1.set_xlabel("epoch")
     ax1.set_ylabel("cross-entropy loss")
-    ax2.legend(handles=[Line2D([], [], color="grey", lw=1.0, label="train top-1"), Line2D([], [], color="grey", lw=1.6, ls="--", label="validation top-1"),
-                        Line2D([], [], color="grey", lw=1.6, ls=":", label="validation top-3")], fontsize=7, loc="lower right")
+    ax2.legend(
+        handles=[
+            Line2D([], [], color="grey", lw=1.0, label="train top-1"),
+            Line2D([], [], color="grey", lw=1.6, ls="--", label="validation top-1"),
+            Line2D([], [], color="grey", lw=1.6, ls=":", label="validation top-3"),
+        ],
+        fontsize=7,
+        loc="lower right",
+    )
     ax2.set_xlabel("epoch")
     ax2.set_ylabel("accuracy (chance 1 in 21)")
     ax2.set_ylim(0, 1)
@@ -233,12 +279,26 @@ def save_decision(path: str | Path, rgb: np.ndarray, decision: Decision, title: 
         ax.plot(pts[:, 0], pts[:, 1], color=cmap(float(probs[i])), lw=lw, alpha=0.95)
         if i == chosen:
             ax.plot(pts[:, 0], pts[:, 1], color="white", lw=1.0, ls="--")
-            ax.text(pts[-1, 0], pts[-1, 1] - 8, f"chosen w={w_rps[i]:+.1f}\np={probs[i]:.2f}", color="white", fontsize=8, ha="center",
-                    bbox={"facecolor": "black", "alpha": 0.6, "pad": 1, "lw": 0})
+            ax.text(
+                pts[-1, 0],
+                pts[-1, 1] - 8,
+                f"chosen w={w_rps[i]:+.1f}\np={probs[i]:.2f}",
+                color="white",
+                fontsize=8,
+                ha="center",
+                bbox={"facecolor": "black", "alpha": 0.6, "pad": 1, "lw": 0},
+            )
         elif i == best:
             ax.plot(pts[:, 0], pts[:, 1], color="cyan", lw=1.0, ls=":")
-            ax.text(pts[-1, 0], pts[-1, 1] + 14, f"C's best w={w_rps[i]:+.1f}\np={probs[i]:.2f}", color="cyan", fontsize=8, ha="center",
-                    bbox={"facecolor": "black", "alpha": 0.6, "pad": 1, "lw": 0})
+            ax.text(
+                pts[-1, 0],
+                pts[-1, 1] + 14,
+                f"C's best w={w_rps[i]:+.1f}\np={probs[i]:.2f}",
+                color="cyan",
+                fontsize=8,
+                ha="center",
+                bbox={"facecolor": "black", "alpha": 0.6, "pad": 1, "lw": 0},
+            )
     sm = plt.cm.ScalarMappable(cmap=cmap, norm=matplotlib.colors.Normalize(0.0, 1.0))
     fig.colorbar(sm, ax=ax, fraction=0.035, label="predicted probability F_t (absolute scale)")
     handles = [Line2D([], [], color="white", lw=3, ls="--", label="planner's choice")]
@@ -296,14 +356,32 @@ def save_evaluation(path: str | Path, runs: CourseRuns, title: str) -> Path:
         colour = "lime" if n and ok == n else "red"
         ax.plot(o[:, 0], o[:, 1], color=colour, lw=1.4)
         c = o.mean(axis=0)
-        ax.text(c[0], c[1], z.id, color="black", fontsize=7, ha="center", va="center", zorder=PATH_ZORDER + 1,
-                bbox={"facecolor": colour, "alpha": 0.85, "pad": 1, "lw": 0})
+        ax.text(
+            c[0],
+            c[1],
+            z.id,
+            color="black",
+            fontsize=7,
+            ha="center",
+            va="center",
+            zorder=PATH_ZORDER + 1,
+            bbox={"facecolor": colour, "alpha": 0.85, "pad": 1, "lw": 0},
+        )
     seeds = max(len(driver), len(planner))
     tracks = [Line2D([], [], color="grey", ls="--", label="driver"), Line2D([], [], color="grey", label="planner")]
     tracks += [Line2D([], [], color=_seed_colour(k), lw=3, label=f"seed {k}") for k in range(seeds)] if seeds > 1 else []
-    tracks += [Patch(facecolor="none", edgecolor="lime", label="zone met in every run"), Patch(facecolor="none", edgecolor="red", label="zone missed in some run")]
-    ax.legend(handles=classes_shown + ax.get_legend_handles_labels()[0] + tracks, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7,
-              framealpha=0.8, borderaxespad=0.0)  # beside the course: never over the start or a zone
+    tracks += [
+        Patch(facecolor="none", edgecolor="lime", label="zone met in every run"),
+        Patch(facecolor="none", edgecolor="red", label="zone missed in some run"),
+    ]
+    ax.legend(
+        handles=classes_shown + ax.get_legend_handles_labels()[0] + tracks,
+        loc="upper left",
+        bbox_to_anchor=(1.01, 1.0),
+        fontsize=7,
+        framealpha=0.8,
+        borderaxespad=0.0,
+    )  # beside the course: never over the start or a zone
     ax.set_title(figure_text(title, scenario.classes))
     for k, z in enumerate(zones):
         _draw_zone_inset(fig.add_subplot(grid[1 + k // cols, k % cols]), runs, z)
@@ -330,8 +408,11 @@ def _draw_zone_inset(zax: plt.Axes, runs: CourseRuns, z: Zone) -> None:
     zax.set_ylabel("")
     zax.tick_params(labelsize=6)
     verdict = f"{ok}/{n} met" if n else "not scored"
-    zax.set_title(figure_text(f"{z.id}: {z.label or z.expect} ({verdict})", runs.scenario.classes), fontsize=8,
-                  color="darkred" if colour == "red" else "black")
+    zax.set_title(
+        figure_text(f"{z.id}: {z.label or z.expect} ({verdict})", runs.scenario.classes),
+        fontsize=8,
+        color="darkred" if colour == "red" else "black",
+    )
 
 
 def _seed_colour(seed: int) -> str:
@@ -347,8 +428,9 @@ def _draw_runs(ax: plt.Axes, runs: CourseRuns, scale: float) -> None:
         ax.plot(xy[:, 0], xy[:, 1], color=_seed_colour(k), lw=1.0 * scale, alpha=0.9, zorder=PATH_ZORDER + 0.1)
 
 
-def save_bars(path: str | Path, labels: Sequence[str], means: Sequence[float], stds: Sequence[float], ylabel: str,
-              target: float | None = None) -> Path:
+def save_bars(
+    path: str | Path, labels: Sequence[str], means: Sequence[float], stds: Sequence[float], ylabel: str, target: float | None = None
+) -> Path:
     """One bar per method with its spread over seeds."""
     fig, ax = plt.subplots(figsize=(8, 3.8), dpi=120)
     x = np.arange(len(labels))
@@ -371,7 +453,9 @@ class RateRow(NamedTuple):
     interval: tuple[float, float]
 
 
-def save_intervals(path: str | Path, rows: Sequence[RateRow], ylabel: str, target: float | Sequence[float] | None = None, title: str = "") -> Path:
+def save_intervals(
+    path: str | Path, rows: Sequence[RateRow], ylabel: str, target: float | Sequence[float] | None = None, title: str = ""
+) -> Path:
     """One point per row with its 95% interval (asymmetric, e.g. Wilson) and the rate written beside it;
     ``target`` a line across, or one per row (a short line at each point, its value written where it
     changes; a line across when every row's is the same).
@@ -413,8 +497,14 @@ def save_intervals(path: str | Path, rows: Sequence[RateRow], ylabel: str, targe
     return _save(fig, path)
 
 
-def save_curves(path: str | Path, series: dict[str, Sequence[tuple[float, float, float]]], xlabel: str, ylabel: str,
-                target: float | None = None, logx: bool = False) -> Path:
+def save_curves(
+    path: str | Path,
+    series: dict[str, Sequence[tuple[float, float, float]]],
+    xlabel: str,
+    ylabel: str,
+    target: float | None = None,
+    logx: bool = False,
+) -> Path:
     """Lines of (x, mean, std) per series, with the spread shaded."""
     fig, ax = plt.subplots(figsize=(6.5, 4), dpi=120)
     for name, pts in series.items():

@@ -86,8 +86,9 @@ class Registry(Generic[T]):
         """The value of ``name``, chosen by a user through ``flag`` (a command-line option, or a
         field of the file ``source``): an unknown name is a :class:`UserError` naming both."""
         if name not in self._entries:
-            raise UserError(source or flag, f"unknown {self.what} {name!r}; {self.plural}: {', '.join(self._entries)}",
-                            field=flag if source else "")
+            raise UserError(
+                source or flag, f"unknown {self.what} {name!r}; {self.plural}: {', '.join(self._entries)}", field=flag if source else ""
+            )
         return self[name]
 
     def __contains__(self, name: object) -> bool:

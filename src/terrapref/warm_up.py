@@ -31,8 +31,9 @@ def warm_up(log=print) -> float:
     profile = PreferenceProfile.default()
     with tempfile.TemporaryDirectory(prefix="terrapref-warm-up-") as tmp:
         for recipe in RECIPES.values():
-            small = replace(recipe, demonstrations=1, corrections=0,
-                            train=replace(recipe.train, optimiser=replace(recipe.train.optimiser, epochs=1)))
+            small = replace(
+                recipe, demonstrations=1, corrections=0, train=replace(recipe.train, optimiser=replace(recipe.train.optimiser, epochs=1))
+            )
             out = run_recipe(small, Path(tmp) / "work", RecipeSetup(0, profile, course=COURSE))
             run_one(RunSpec(COURSE, 1, PLANNER, str(out.model), profile.order))
         run_one(RunSpec(COURSE, 1, PLANNER, str(out.model), profile.order, perception=load_perception("field")))

@@ -82,4 +82,6 @@ def read_yaml_mapping(path: str | Path, expected_format: str | None = None) -> d
 
 
 def _type_name(value: object) -> str:
-    return {type(None): "nothing", list: "a list", str: "a string", int: "a number", float: "a number", bool: "a boolean"}.get(type(value), type(value).__name__)
+    return {type(None): "nothing", list: "a list", str: "a string", int: "a number", float: "a number", bool: "a boolean"}.get(
+        type(value), type(value).__name__
+    )

@@ -26,8 +26,10 @@ from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation, run_episode
 
 # (recipe, epochs, demonstration course, courses driven); teach_course as it was when the file was made
-CASES = [(TEACH, 40, str(Path(__file__).with_name("teach_course_pairs.yaml")), ("test_course", "fig8_water_mud_rock_mud_left")),
-         (PAPER, 15, "train_course", ("test_course",))]
+CASES = [
+    (TEACH, 40, str(Path(__file__).with_name("teach_course_pairs.yaml")), ("test_course", "fig8_water_mud_rock_mud_left")),
+    (PAPER, 15, "train_course", ("test_course",)),
+]
 
 
 def decisions(work: Path) -> dict:
@@ -39,8 +41,13 @@ def decisions(work: Path) -> dict:
         rules = tuple(r for r in recipe.rules if r.type != "offset")
         paths = record_demonstrations(recipe, work / recipe.name, RecipeSetup(7, course=course, features=features))
         model = work / f"{recipe.name}.safetensors"
-        train_and_save(build_dataset([read_recording(p) for p in paths], features, rules=rules), model, replace(recipe.train, seed=7),
-                   rules=rules, options=RunOptions(checkpoints=False))
+        train_and_save(
+            build_dataset([read_recording(p) for p in paths], features, rules=rules),
+            model,
+            replace(recipe.train, seed=7),
+            rules=rules,
+            options=RunOptions(checkpoints=False),
+        )
         for name in driven:
             driver = PlannerDriver(Planner(load_model(model)), keep=True)
             run_episode(Simulation(resolve_scenario(name)), driver, np.random.default_rng(0))

@@ -72,9 +72,12 @@ class CnnNet(nn.Module):
         self.config = config
         c1, c2, c3 = config.channels
         self.conv = nn.Sequential(
-            nn.Conv2d(config.n_classes, c1, 3, stride=2, padding=1), nn.ReLU(),
-            nn.Conv2d(c1, c2, 3, stride=2, padding=1), nn.ReLU(),
-            nn.Conv2d(c2, c3, 3, stride=2, padding=1), nn.ReLU(),
+            nn.Conv2d(config.n_classes, c1, 3, stride=2, padding=1),
+            nn.ReLU(),
+            nn.Conv2d(c1, c2, 3, stride=2, padding=1),
+            nn.ReLU(),
+            nn.Conv2d(c2, c3, 3, stride=2, padding=1),
+            nn.ReLU(),
         )
         with torch.no_grad():
             flat = self.conv(torch.zeros(1, config.n_classes, *image_hw)).numel()
@@ -141,8 +144,14 @@ class CnnTrainResult:
     n_samples: int
 
 
-def train_cnn(images: np.ndarray, paths: np.ndarray, labels: np.ndarray, m: int, config: CnnConfig,
-              progress: Callable[[int, float], None] | None = None) -> CnnTrainResult:
+def train_cnn(
+    images: np.ndarray,
+    paths: np.ndarray,
+    labels: np.ndarray,
+    m: int,
+    config: CnnConfig,
+    progress: Callable[[int, float], None] | None = None,
+) -> CnnTrainResult:
     """Train on (downsampled images, path points, labels); the lowest-validation-loss epoch wins."""
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
@@ -188,8 +197,16 @@ def _train(images, paths, labels, m, config, progress) -> CnnTrainResult:
 def save_cnn(path: str | Path, result: CnnTrainResult, config: CnnConfig, image_hw: tuple[int, int], meta: dict) -> Path:
     """Write the CNN's weights (safetensors) and configuration; ``meta`` as for C."""
     tensors = {k: v.detach().numpy().astype(np.float32) for k, v in result.net.state_dict().items()}
-    header = {"format": FORMAT, **meta, "kind": CNN, "cnn": config.to_dict(), "image_hw": list(image_hw),
-              "best_epoch": result.best_epoch, "val_acc": result.val_acc, "samples": result.n_samples}
+    header = {
+        "format": FORMAT,
+        **meta,
+        "kind": CNN,
+        "cnn": config.to_dict(),
+        "image_hw": list(image_hw),
+        "best_epoch": result.best_epoch,
+        "val_acc": result.val_acc,
+        "samples": result.n_samples,
+    }
     return write_tensor_file(path, tensors, header)
 
 
@@ -199,8 +216,15 @@ class CnnPolicy(Policy):
     name = CNN
     uses_path_ahead = True
 
-    def __init__(self, net: CnnNet, features: FeatureConfig, camera: CameraConfig, classes: ClassTable,
-                 profile: tuple[str, ...] | None = None, path: str = "") -> None:
+    def __init__(
+        self,
+        net: CnnNet,
+        features: FeatureConfig,
+        camera: CameraConfig,
+        classes: ClassTable,
+        profile: tuple[str, ...] | None = None,
+        path: str = "",
+    ) -> None:
         super().__init__(features, camera, classes, profile, path)
         self.net, self.config = net.eval(), net.config
         # The pixels downsample() keeps (flat indices, and the downsampled shape): a frame is read only there.
@@ -224,7 +248,9 @@ class CnnPolicy(Policy):
         small = _read_grid(obs.view, self._grid)[None]  # downsample(obs.image, stride), not rendering the rest
         torch.set_num_threads(1)
         with torch.no_grad():
-            out = self.net(_onehot(small, self.config.n_classes), torch.from_numpy((obs.path_ahead.ravel() / PATH_SCALE_M)[None].astype(np.float32)))
+            out = self.net(
+                _onehot(small, self.config.n_classes), torch.from_numpy((obs.path_ahead.ravel() / PATH_SCALE_M)[None].astype(np.float32))
+            )
         return out[0].numpy().astype(np.float64)
 
 

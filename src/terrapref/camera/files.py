@@ -21,8 +21,16 @@ from terrapref.yamlio import read_yaml_mapping
 
 _FIELDS = {f.name for f in fields(CameraConfig)}
 _MOUNT = ("mount_height_m", "mount_forward_m", "pitch_deg", "yaw_deg", "max_range_m")
-_ROS = {"image_width", "image_height", "camera_name", "camera_matrix", "distortion_model", "distortion_coefficients",
-        "rectification_matrix", "projection_matrix"}
+_ROS = {
+    "image_width",
+    "image_height",
+    "camera_name",
+    "camera_matrix",
+    "distortion_model",
+    "distortion_coefficients",
+    "rectification_matrix",
+    "projection_matrix",
+}
 
 
 def _number(value: object) -> bool:
@@ -51,9 +59,16 @@ def camera_from_mapping(data: dict, source: str) -> CameraConfig:
         k = _matrix(data, "camera_matrix", 9, problems)
         d = data.get("distortion_coefficients")
         if d is not None:
-            coeffs = _matrix(data, "distortion_coefficients", len(d.get("data", [])) if isinstance(d, dict) and isinstance(d.get("data"), list) else -1, problems)
+            coeffs = _matrix(
+                data,
+                "distortion_coefficients",
+                len(d.get("data", [])) if isinstance(d, dict) and isinstance(d.get("data"), list) else -1,
+                problems,
+            )
             if coeffs is not None and np.any(coeffs):
-                problems.append(Problem("distortion_coefficients", "the renderer is a pinhole camera; give a rectified (undistorted) calibration"))
+                problems.append(
+                    Problem("distortion_coefficients", "the renderer is a pinhole camera; give a rectified (undistorted) calibration")
+                )
         mount = {key: data[key] for key in _MOUNT if key in data}
         for key, v in mount.items():
             if not _number(v):
@@ -62,8 +77,16 @@ def camera_from_mapping(data: dict, source: str) -> CameraConfig:
             raise ConfigError(source, problems)
         fx, fy, cx, cy = k[0], k[4], k[2], k[5]
         try:
-            return CameraConfig(width_px=w, height_px=h, hfov_deg=math.degrees(2 * math.atan(w / (2 * fx))) if fx > 0 else 90.0,
-                                fx=fx, fy=fy, cx=cx, cy=cy, **mount)
+            return CameraConfig(
+                width_px=w,
+                height_px=h,
+                hfov_deg=math.degrees(2 * math.atan(w / (2 * fx))) if fx > 0 else 90.0,
+                fx=fx,
+                fy=fy,
+                cx=cx,
+                cy=cy,
+                **mount,
+            )
         except ValueError as exc:
             raise ConfigError(source, str(exc)) from None
     unknown = sorted(set(data) - _FIELDS)

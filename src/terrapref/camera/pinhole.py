@@ -117,8 +117,11 @@ class PinholeCamera:
         cp, sp, cy, sy = math.cos(p), math.sin(p), math.cos(y), math.sin(y)
         forward = (cp * cy, cp * sy, -sp)
         right = (sy, -cy, 0.0)
-        down = (forward[1] * right[2] - forward[2] * right[1], forward[2] * right[0] - forward[0] * right[2],
-                forward[0] * right[1] - forward[1] * right[0])  # forward x right, as the mount's axes are made
+        down = (
+            forward[1] * right[2] - forward[2] * right[1],
+            forward[2] * right[0] - forward[0] * right[2],
+            forward[0] * right[1] - forward[1] * right[0],
+        )  # forward x right, as the mount's axes are made
         cr, sr = math.cos(droll_rad), math.sin(droll_rad)
         return np.array([[cr * r + sr * d for r, d in zip(right, down)], [-sr * r + cr * d for r, d in zip(right, down)], forward])
 
@@ -148,11 +151,7 @@ class PinholeCamera:
         u = self.fx * cam[..., 0] / zs + self.cx
         v = self.fy * cam[..., 1] / zs + self.cy
         c = self.config
-        visible = (
-            in_front
-            & (u >= 0) & (u < c.width_px) & (v >= 0) & (v < c.height_px)
-            & (np.linalg.norm(p3, axis=-1) <= c.max_range_m)
-        )
+        visible = in_front & (u >= 0) & (u < c.width_px) & (v >= 0) & (v < c.height_px) & (np.linalg.norm(p3, axis=-1) <= c.max_range_m)
         return np.stack([u, v], axis=-1), visible
 
     def pixel_indices(self, points_v: np.ndarray) -> np.ndarray:

@@ -82,8 +82,24 @@ class SegmentationRenderer:
         """Segmentation image at ``pose``: class ids, shape (height, width) uint8."""
         x, y, yaw = _finite(pose)
         out = np.empty(self.camera.shape, dtype=np.uint8)
-        render_frame(self._P, self._Q, self._u, self._first, self._last, float(x), float(y), math.cos(yaw), math.sin(yaw),
-                     self.world.resolution_m, self._flat, self._nx_pad, self._x_max, self._y_max, UNKNOWN, out)
+        render_frame(
+            self._P,
+            self._Q,
+            self._u,
+            self._first,
+            self._last,
+            float(x),
+            float(y),
+            math.cos(yaw),
+            math.sin(yaw),
+            self.world.resolution_m,
+            self._flat,
+            self._nx_pad,
+            self._x_max,
+            self._y_max,
+            UNKNOWN,
+            out,
+        )
         return out
 
     def pixels(self, pose: Pose, flat_index: np.ndarray | PixelSet) -> np.ndarray:
@@ -96,17 +112,48 @@ class SegmentationRenderer:
         x, y, yaw = _finite(pose)
         if isinstance(flat_index, PixelSet):
             rows, cols = flat_index.rows_and_columns(self)
-            return pixels_of_rows(rows, cols, self._P, self._Q, self._u, float(x), float(y), math.cos(yaw), math.sin(yaw),
-                                  self.world.resolution_m, self._flat, self._nx_pad, self._x_max, self._y_max, UNKNOWN)
+            return pixels_of_rows(
+                rows,
+                cols,
+                self._P,
+                self._Q,
+                self._u,
+                float(x),
+                float(y),
+                math.cos(yaw),
+                math.sin(yaw),
+                self.world.resolution_m,
+                self._flat,
+                self._nx_pad,
+                self._x_max,
+                self._y_max,
+                UNKNOWN,
+            )
         flat = np.asarray(flat_index, dtype=np.int64).reshape(-1)
-        ids = pixels_at(flat, self.camera.config.width_px, self._row0, self._valid_flat, self._P, self._Q, self._u,
-                        float(x), float(y), math.cos(yaw), math.sin(yaw), self.world.resolution_m,
-                        self._flat, self._nx_pad, self._x_max, self._y_max, UNKNOWN)
+        ids = pixels_at(
+            flat,
+            self.camera.config.width_px,
+            self._row0,
+            self._valid_flat,
+            self._P,
+            self._Q,
+            self._u,
+            float(x),
+            float(y),
+            math.cos(yaw),
+            math.sin(yaw),
+            self.world.resolution_m,
+            self._flat,
+            self._nx_pad,
+            self._x_max,
+            self._y_max,
+            UNKNOWN,
+        )
         return ids.reshape(np.shape(flat_index))
 
-
-    def pixels_tilted(self, pose: Pose, flat_index: np.ndarray | PixelSet, dpitch_rad: float, droll_rad: float,
-                      max_range_m: float | None = None) -> np.ndarray:
+    def pixels_tilted(
+        self, pose: Pose, flat_index: np.ndarray | PixelSet, dpitch_rad: float, droll_rad: float, max_range_m: float | None = None
+    ) -> np.ndarray:
         """Class ids of the pixels ``flat_index`` that the camera sees when its attitude is off the
         mount by ``dpitch_rad`` and ``droll_rad`` (:meth:`PinholeCamera.tilted`); each pixel's ray is
         followed to the ground (kernels.ray_pixels), up to ``max_range_m`` or the camera's range
@@ -117,9 +164,25 @@ class SegmentationRenderer:
         if flat.size and (flat.min() < 0 or flat.max() >= c.width_px * c.height_px):
             raise IndexError("a pixel index is outside the image")
         reach = c.max_range_m if max_range_m is None else min(c.max_range_m, max_range_m)
-        ids = ray_pixels(flat, c.width_px, self._ray_a, self._ray_b, cam.tilted(dpitch_rad, droll_rad), cam.t, reach,
-                         float(x), float(y), math.cos(yaw), math.sin(yaw), self.world.resolution_m,
-                         self._flat, self._nx_pad, self._x_max, self._y_max, UNKNOWN)
+        ids = ray_pixels(
+            flat,
+            c.width_px,
+            self._ray_a,
+            self._ray_b,
+            cam.tilted(dpitch_rad, droll_rad),
+            cam.t,
+            reach,
+            float(x),
+            float(y),
+            math.cos(yaw),
+            math.sin(yaw),
+            self.world.resolution_m,
+            self._flat,
+            self._nx_pad,
+            self._x_max,
+            self._y_max,
+            UNKNOWN,
+        )
         return ids.reshape(np.shape(flat_index))
 
 

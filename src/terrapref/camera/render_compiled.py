@@ -21,9 +21,24 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
-def render_frame(P: np.ndarray, Q: np.ndarray, u: np.ndarray, first: np.ndarray, last: np.ndarray,
-                 x: float, y: float, c: float, s: float, res: float,
-                 raster: np.ndarray, nx: int, x_max: np.float32, y_max: np.float32, unknown: int, out: np.ndarray) -> None:
+def render_frame(
+    P: np.ndarray,
+    Q: np.ndarray,
+    u: np.ndarray,
+    first: np.ndarray,
+    last: np.ndarray,
+    x: float,
+    y: float,
+    c: float,
+    s: float,
+    res: float,
+    raster: np.ndarray,
+    nx: int,
+    x_max: np.float32,
+    y_max: np.float32,
+    unknown: int,
+    out: np.ndarray,
+) -> None:
     """Fill ``out`` (H, W) uint8, a whole frame, of which the last n rows see the ground.
 
     Args:
@@ -84,9 +99,25 @@ def row_col(k: int, width: int, per_row: float) -> tuple[int, int]:
 
 
 @njit(cache=True, nogil=True)
-def pixels_at(flat_index: np.ndarray, width: int, row0: int, valid: np.ndarray, P: np.ndarray, Q: np.ndarray, u: np.ndarray,
-              x: float, y: float, c: float, s: float, res: float,
-              raster: np.ndarray, nx: int, x_max: np.float32, y_max: np.float32, unknown: int) -> np.ndarray:
+def pixels_at(
+    flat_index: np.ndarray,
+    width: int,
+    row0: int,
+    valid: np.ndarray,
+    P: np.ndarray,
+    Q: np.ndarray,
+    u: np.ndarray,
+    x: float,
+    y: float,
+    c: float,
+    s: float,
+    res: float,
+    raster: np.ndarray,
+    nx: int,
+    x_max: np.float32,
+    y_max: np.float32,
+    unknown: int,
+) -> np.ndarray:
     """Class ids (len(flat_index),) uint8 of the pixels ``flat_index`` (row * width + col).
 
     ``valid`` (H * W,) says which pixels see the ground within range; ``P`` and ``Q`` (n, 2)
@@ -117,9 +148,23 @@ def rows_and_columns(flat_index: np.ndarray, width: int, row0: int, valid: np.nd
 
 
 @njit(cache=True, nogil=True)
-def pixels_of_rows(rows: np.ndarray, cols: np.ndarray, P: np.ndarray, Q: np.ndarray, u: np.ndarray,
-                   x: float, y: float, c: float, s: float, res: float,
-                   raster: np.ndarray, nx: int, x_max: np.float32, y_max: np.float32, unknown: int) -> np.ndarray:
+def pixels_of_rows(
+    rows: np.ndarray,
+    cols: np.ndarray,
+    P: np.ndarray,
+    Q: np.ndarray,
+    u: np.ndarray,
+    x: float,
+    y: float,
+    c: float,
+    s: float,
+    res: float,
+    raster: np.ndarray,
+    nx: int,
+    x_max: np.float32,
+    y_max: np.float32,
+    unknown: int,
+) -> np.ndarray:
     """:func:`pixels_at` of pixels given by their row among the visible rows (-1: ``unknown``)
     and column (:func:`rows_and_columns`): the same float32 operations, the same class ids."""
     none = np.empty(0, np.int64)
@@ -127,9 +172,28 @@ def pixels_of_rows(rows: np.ndarray, cols: np.ndarray, P: np.ndarray, Q: np.ndar
 
 
 @njit(cache=True, nogil=True)
-def _pixels(flat_index: np.ndarray, rows: np.ndarray, cols: np.ndarray, prepared: bool, width: int, row0: int, valid: np.ndarray,
-            P: np.ndarray, Q: np.ndarray, u: np.ndarray, x: float, y: float, c: float, s: float, res: float,
-            raster: np.ndarray, nx: int, x_max: np.float32, y_max: np.float32, unknown: int) -> np.ndarray:
+def _pixels(
+    flat_index: np.ndarray,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    prepared: bool,
+    width: int,
+    row0: int,
+    valid: np.ndarray,
+    P: np.ndarray,
+    Q: np.ndarray,
+    u: np.ndarray,
+    x: float,
+    y: float,
+    c: float,
+    s: float,
+    res: float,
+    raster: np.ndarray,
+    nx: int,
+    x_max: np.float32,
+    y_max: np.float32,
+    unknown: int,
+) -> np.ndarray:
     """:func:`pixels_at` (``prepared`` False: from ``flat_index``) and :func:`pixels_of_rows`
     (True: from ``rows`` and ``cols``) in one loop, so that both keep one pass over the pixels."""
     n = rows.shape[0] if prepared else flat_index.shape[0]
@@ -184,9 +248,25 @@ def take(image: np.ndarray, flat_index: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
-def ray_pixels(flat_index: np.ndarray, width: int, ray_a: np.ndarray, ray_b: np.ndarray, axes: np.ndarray, t: np.ndarray,
-               max_range_m: float, x: float, y: float, c: float, s: float, res: float,
-               raster: np.ndarray, nx: int, x_max: np.float32, y_max: np.float32, unknown: int) -> np.ndarray:
+def ray_pixels(
+    flat_index: np.ndarray,
+    width: int,
+    ray_a: np.ndarray,
+    ray_b: np.ndarray,
+    axes: np.ndarray,
+    t: np.ndarray,
+    max_range_m: float,
+    x: float,
+    y: float,
+    c: float,
+    s: float,
+    res: float,
+    raster: np.ndarray,
+    nx: int,
+    x_max: np.float32,
+    y_max: np.float32,
+    unknown: int,
+) -> np.ndarray:
     """Class ids (len(flat_index),) uint8 of the pixels ``flat_index`` of a camera at any attitude.
 
     Each pixel's ray through its centre, ``axes`` (3, 3) rows (right, down, forward in the

@@ -6,9 +6,10 @@ problem, naming the file and the field, and exits with code 2.
 One module per group of commands, each holding its commands and their parsers side by side:
 :mod:`~terrapref.cli.courses` (validate, render, show, course, scenarios),
 :mod:`~terrapref.cli.demos` (record, drive, inspect, featurize), :mod:`~terrapref.cli.train`
-(train, recipes), :mod:`~terrapref.cli.evaluate` (evaluate, reproduce, study, select,
-perception) and :mod:`~terrapref.cli.robot` (import, replay, export, ros1, ros2, play, route,
-info); the flags several share are in :mod:`~terrapref.cli.common`.
+(train, recipes), :mod:`~terrapref.cli.evaluate` (evaluate, perception),
+:mod:`~terrapref.cli.studies` (reproduce, study, select), :mod:`~terrapref.cli.files` (import,
+replay, export, info) and :mod:`~terrapref.cli.robot` (ros1, ros2, play, route); the flags
+several share are in :mod:`~terrapref.cli.common`.
 """
 
 from __future__ import annotations
@@ -23,17 +24,10 @@ from typing import NoReturn
 
 from terrapref.cli.courses import course_parser, render_parser, scenarios_parser, show_parser, validate_parser
 from terrapref.cli.demos import drive_parser, featurize_parser, inspect_parser, record_parser
-from terrapref.cli.evaluate import evaluate_parser, perception_parser, reproduce_parser, select_parser, study_parser
-from terrapref.cli.robot import (
-    export_parser,
-    import_parser,
-    info_parser,
-    play_parser,
-    replay_parser,
-    ros1_parser,
-    ros2_parser,
-    route_parser,
-)
+from terrapref.cli.evaluate import evaluate_parser, perception_parser
+from terrapref.cli.files import export_parser, import_parser, info_parser, replay_parser
+from terrapref.cli.robot import play_parser, ros1_parser, ros2_parser, route_parser
+from terrapref.cli.studies import reproduce_parser, select_parser, study_parser
 from terrapref.cli.train import recipes_parser, train_parser
 from terrapref.errors import Terminated, UserError
 from terrapref.grid import GridError
@@ -94,6 +88,7 @@ def _on_sigterm(pid: int) -> Callable[[int, object], None]:
             os.kill(os.getpid(), signum)
             return
         raise Terminated()
+
     return handler
 
 

@@ -11,13 +11,19 @@ from terrapref.errors import UserError
 from terrapref.grid import ENGINES, Engine
 
 SCENARIO_HELP = "a packaged scenario's name (terrapref scenarios lists them), gen:N for generated layout N, or a scenario file"
-PERCEPTION_HELP = ("what the planner receives instead of the truth: a preset (clean, rellis, field; terrapref perception lists them) "
-                   "or a terrapref-perception/1 file")
+PERCEPTION_HELP = (
+    "what the planner receives instead of the truth: a preset (clean, rellis, field; terrapref perception lists them) "
+    "or a terrapref-perception/1 file"
+)
 
-CLASSES_HELP = ("your own class table (a terrapref-classes/1 file, e.g. examples/classes/rellis3d.yaml): the classes scenarios, "
-                "generated layouts (gen:N) and label maps are read with; default: the packaged grass, mud, rock, water, non_traversable")
-CLASSES_CHECK_HELP = ("the class table the files must have been made for (a terrapref-classes/1 file); a file made for another is refused. "
-                      "Files carry their own table, so this is a check, not a setting")
+CLASSES_HELP = (
+    "your own class table (a terrapref-classes/1 file, e.g. examples/classes/rellis3d.yaml): the classes scenarios, "
+    "generated layouts (gen:N) and label maps are read with; default: the packaged grass, mud, rock, water, non_traversable"
+)
+CLASSES_CHECK_HELP = (
+    "the class table the files must have been made for (a terrapref-classes/1 file); a file made for another is refused. "
+    "Files carry their own table, so this is a check, not a setting"
+)
 
 
 def add_classes_arg(p: argparse.ArgumentParser, check: bool = False) -> None:
@@ -27,29 +33,45 @@ def add_classes_arg(p: argparse.ArgumentParser, check: bool = False) -> None:
 
 def add_force_arg(p: argparse.ArgumentParser) -> None:
     """--force, the same for every command that writes: an output that exists is refused without it."""
-    p.add_argument("--force", action="store_true",
-                   help="replace an output that exists (only once the new one is complete; a folder is replaced whole)")
+    p.add_argument(
+        "--force", action="store_true", help="replace an output that exists (only once the new one is complete; a folder is replaced whole)"
+    )
 
 
 def add_engine_args(p: argparse.ArgumentParser) -> None:
     """--workers, --engine and --address: where a command's grid of jobs runs (:func:`grid_engine` checks them)."""
     p.add_argument("--workers", type=int, help="parallel jobs on this machine (default: one per core)")
-    p.add_argument("--engine", choices=ENGINES.names(), default="local",
-                   help="where the jobs run: local processes (default) or Ray (a local instance, or the cluster at --address)")
-    p.add_argument("--address", metavar="HOST:PORT", help="a Ray cluster to run the jobs on (ray start --head on one machine); with --engine ray")
+    p.add_argument(
+        "--engine",
+        choices=ENGINES.names(),
+        default="local",
+        help="where the jobs run: local processes (default) or Ray (a local instance, or the cluster at --address)",
+    )
+    p.add_argument(
+        "--address", metavar="HOST:PORT", help="a Ray cluster to run the jobs on (ray start --head on one machine); with --engine ray"
+    )
 
 
 def add_live_args(p: argparse.ArgumentParser, note: str, paced: bool = False) -> None:
     """--live and its address; with ``paced`` (simulated runs), --live-pace and --live-wait too."""
-    p.add_argument("--live", action="store_true",
-                   help=f"serve the planner's channels live (those of the MCAP export) on Foxglove's WebSocket protocol "
-                        f"(subprotocol foxglove.sdk.v1, or foxglove.websocket.v1 for older viewers); {note}")
-    p.add_argument("--live-host", default="127.0.0.1", help="address the live view listens on (default 127.0.0.1; 0.0.0.0: every interface)")
+    p.add_argument(
+        "--live",
+        action="store_true",
+        help=f"serve the planner's channels live (those of the MCAP export) on Foxglove's WebSocket protocol "
+        f"(subprotocol foxglove.sdk.v1, or foxglove.websocket.v1 for older viewers); {note}",
+    )
+    p.add_argument(
+        "--live-host", default="127.0.0.1", help="address the live view listens on (default 127.0.0.1; 0.0.0.0: every interface)"
+    )
     p.add_argument("--live-port", type=int, default=8765, help="port of the live view (default 8765, Foxglove's; 0: a free one)")
     if paced:
-        p.add_argument("--live-pace", type=finite_float, default=None, metavar="FACTOR",
-                       help="send each run's frames at FACTOR times real time (1: as driven; 2: twice as fast); default: as fast as "
-                            "they are computed")
+        p.add_argument(
+            "--live-pace",
+            type=finite_float,
+            default=None,
+            metavar="FACTOR",
+            help="send each run's frames at FACTOR times real time (1: as driven; 2: twice as fast); default: as fast as they are computed",
+        )
         p.add_argument("--live-wait", action="store_true", help="wait for a viewer to connect before the first run starts")
 
 
@@ -80,9 +102,14 @@ def check_table(args: argparse.Namespace, found, source: str | Path) -> None:
 
     table = class_table(args) or default_classes()
     if not found.same_classes(table):
-        given = f"{args.classes}'s" if getattr(args, "classes", None) is not None else "the default table's (give --classes FILE for another)"
-        raise UserError(str(source), f"was made for the class table of {', '.join(found.names)}, not {given} ({', '.join(table.names)})",
-                        field="classes")
+        given = (
+            f"{args.classes}'s" if getattr(args, "classes", None) is not None else "the default table's (give --classes FILE for another)"
+        )
+        raise UserError(
+            str(source),
+            f"was made for the class table of {', '.join(found.names)}, not {given} ({', '.join(table.names)})",
+            field="classes",
+        )
 
 
 def perception_model(spec: str | None, flag: str = "--perception", classes=None):

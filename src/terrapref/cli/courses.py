@@ -52,12 +52,20 @@ def _is_file(name: str) -> bool:
 
 def validate_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("validate", help="check scenarios, class tables, perception models, robot files and label maps (each by its format)")
-    p.add_argument("files", nargs="*", metavar="FILE",
-                   help="files to check, each read as its format: field says (terrapref-scenario/1, -classes/1, -perception/1, -robot/1, "
-                        "-labels/1), or packaged scenarios' names")
-    p.add_argument("--template", metavar="KIND", choices=("scenario", "classes", "perception", "robot", "labels"),
-                   help="print a commented file of this kind to start from (scenario, classes, perception, robot, labels): "
-                        "terrapref validate --template robot > robot.yaml")
+    p.add_argument(
+        "files",
+        nargs="*",
+        metavar="FILE",
+        help="files to check, each read as its format: field says (terrapref-scenario/1, -classes/1, -perception/1, -robot/1, "
+        "-labels/1), or packaged scenarios' names",
+    )
+    p.add_argument(
+        "--template",
+        metavar="KIND",
+        choices=("scenario", "classes", "perception", "robot", "labels"),
+        help="print a commented file of this kind to start from (scenario, classes, perception, robot, labels): "
+        "terrapref validate --template robot > robot.yaml",
+    )
     add_classes_arg(p)
     p.set_defaults(func=_cmd_validate)
 
@@ -82,8 +90,11 @@ def _cmd_render(args: argparse.Namespace) -> int:
     camera = PinholeCamera()
     (w, h), reach = scenario.size_m, camera.config.max_range_m
     if not (-reach <= x <= w + reach and -reach <= y <= h + reach and abs(yaw_deg) <= 1e6):
-        raise UserError("--pose", f"({x:g}, {y:g}, {yaw_deg:g} deg) is not a pose the camera sees {scenario.name}'s {w:g} x {h:g} m world from "
-                        f"(x and y within {reach:g} m of it, |yaw| <= 1e6 deg)")
+        raise UserError(
+            "--pose",
+            f"({x:g}, {y:g}, {yaw_deg:g} deg) is not a pose the camera sees {scenario.name}'s {w:g} x {h:g} m world from "
+            f"(x and y within {reach:g} m of it, |yaw| <= 1e6 deg)",
+        )
     renderer = SegmentationRenderer(camera, rasterise(scenario))
     image = renderer.render(Pose(x, y, math.radians(yaw_deg)))
     write_png_atomic(args.out, image)
@@ -114,7 +125,9 @@ def _cmd_show(args: argparse.Namespace) -> int:
     check_output(args.out, "--out", [args.scenario], force=args.force)
     scenario = resolve_scenario(args.scenario, class_table(args))
     save_map(args.out, scenario, rasterise(scenario))
-    print(f"wrote {args.out} ({scenario.name}: {len(scenario.terrain)} patches, {len(scenario.zones)} zones, path {scenario.path_length_m():.0f} m)")
+    print(
+        f"wrote {args.out} ({scenario.name}: {len(scenario.terrain)} patches, {len(scenario.zones)} zones, path {scenario.path_length_m():.0f} m)"
+    )
     return 0
 
 
@@ -150,7 +163,9 @@ def _cmd_course(args: argparse.Namespace) -> int:
         open_pairs = _open_pairs(recs)
         drives = "drives together" if len(recs) > 1 else "drive"
         if not open_pairs:
-            print(f"{', '.join(map(str, args.after))}: the {drives} identified every pair of classes; no follow-up course is needed (nothing written)")
+            print(
+                f"{', '.join(map(str, args.after))}: the {drives} identified every pair of classes; no follow-up course is needed (nothing written)"
+            )
             return 0
         course, items = follow_up_after(table, open_pairs, [str(r.meta.get("scenario")) for r in recs], args.name)
         print(f"the {drives} left {len(open_pairs)} pairs open: {', '.join(f'{a} vs {b}' for a, b in open_pairs)}")
@@ -161,15 +176,23 @@ def _cmd_course(args: argparse.Namespace) -> int:
         except ValueError as exc:
             raise UserError(str(args.classes or "classes"), str(exc), field="classes") from None
     scenario = parse_scenario(course.data(), str(out), table)  # checked as every command will read it
-    source = f"--classes {args.classes}" if args.classes else ("--after " + " ".join(map(str, args.after)) if args.after else "the default class table")
-    write_text_atomic(out, f"# terrapref course ({source}); it carries its class table (classes:), so no command needs --classes for it.\n"
-                      + course.to_yaml())
+    source = (
+        f"--classes {args.classes}"
+        if args.classes
+        else ("--after " + " ".join(map(str, args.after)) if args.after else "the default class table")
+    )
+    write_text_atomic(
+        out,
+        f"# terrapref course ({source}); it carries its class table (classes:), so no command needs --classes for it.\n" + course.to_yaml(),
+    )
     save_map(figure, scenario, rasterise(scenario))
     length = scenario.path_length_m()
     kinds = Counter(item.kind for item in items)
     print(f"{scenario.name}: {scenario.description}")
-    print(f"  {len(items)} situations ({', '.join(f'{n} {k}' for k, n in kinds.items())}); path {length:.0f} m; "
-          f"expected drive about {length / DRIVER_SPEED_MPS / 60:.1f} minutes at {DRIVER_SPEED_MPS:g} m/s")
+    print(
+        f"  {len(items)} situations ({', '.join(f'{n} {k}' for k, n in kinds.items())}); path {length:.0f} m; "
+        f"expected drive about {length / DRIVER_SPEED_MPS / 60:.1f} minutes at {DRIVER_SPEED_MPS:g} m/s"
+    )
     print(f"wrote {out} and {figure} (record it: terrapref record {out} --out DIR)")
     return 0
 
@@ -185,8 +208,12 @@ def _drives_of_one_table(args: argparse.Namespace, paths: Sequence[Path]) -> lis
         if class_table(args) is not None:
             check_table(args, rec.classes, path)
         elif not rec.classes.same_classes(recs[0].classes):
-            raise UserError(str(path), f"was made for the class table of {', '.join(rec.classes.names)}, not {paths[0]}'s "
-                                       f"({', '.join(recs[0].classes.names)}): give drives of one table", field="classes")
+            raise UserError(
+                str(path),
+                f"was made for the class table of {', '.join(rec.classes.names)}, not {paths[0]}'s "
+                f"({', '.join(recs[0].classes.names)}): give drives of one table",
+                field="classes",
+            )
     return recs
 
 
@@ -209,12 +236,21 @@ def _open_pairs(recs: Sequence) -> list[tuple[str, str]]:
 def course_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("course", help="write the teaching course of a class table (or, with --after, a follow-up of what drives left open)")
     p.add_argument("--out", required=True, type=Path, help="scenario file to write (.yaml); a top-down figure goes beside it (.png)")
-    p.add_argument("--after", type=Path, nargs="+", metavar="REC",
-                   help="recordings of the teaching course (and of earlier follow-ups): write a short course of only the pairs "
-                        "their drives together left unidentified (train on all the recordings after)")
-    p.add_argument("--design", choices=("auto", "full", "compact"), default="auto",
-                   help="full: every pair once on each side; compact: every pair once, sides balanced; auto (default): full while "
-                        "the drive stays within 10 minutes at 1 m/s")
+    p.add_argument(
+        "--after",
+        type=Path,
+        nargs="+",
+        metavar="REC",
+        help="recordings of the teaching course (and of earlier follow-ups): write a short course of only the pairs "
+        "their drives together left unidentified (train on all the recordings after)",
+    )
+    p.add_argument(
+        "--design",
+        choices=("auto", "full", "compact"),
+        default="auto",
+        help="full: every pair once on each side; compact: every pair once, sides balanced; auto (default): full while "
+        "the drive stays within 10 minutes at 1 m/s",
+    )
     p.add_argument("--name", help="the scenario's name (default: teaching_course, or the course driven + _more)")
     add_classes_arg(p)
     add_force_arg(p)
@@ -228,7 +264,9 @@ def _cmd_list(args: argparse.Namespace) -> int:
     width = max(map(len, names), default=0)
     for name in names:
         s = resolve_scenario(name)
-        print(f"{name:{width}s} {s.size_m[0]:5.0f} x {s.size_m[1]:<4.0f} m  path {s.path_length_m():5.0f} m  {len(s.zones):2d} zones  {s.description}")
+        print(
+            f"{name:{width}s} {s.size_m[0]:5.0f} x {s.size_m[1]:<4.0f} m  path {s.path_length_m():5.0f} m  {len(s.zones):2d} zones  {s.description}"
+        )
     return 0
 
 

@@ -42,7 +42,9 @@ def _cmd_record(args: argparse.Namespace) -> int:
         raise UserError("--seed", f"must be an integer >= 0, got {args.seed}")
     check_output(args.out, "--out", [args.scenario], folder=True)
     scenario = resolve_scenario(args.scenario, class_table(args))
-    profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile is not None else PreferenceProfile.default(scenario.classes)
+    profile = (
+        PreferenceProfile.parse(args.profile, scenario.classes) if args.profile is not None else PreferenceProfile.default(scenario.classes)
+    )
     try:
         expert = ExpertConfig.styled(args.style, profile.order)
     except ValueError as exc:
@@ -50,14 +52,25 @@ def _cmd_record(args: argparse.Namespace) -> int:
     disturbance = _disturbance(args.disturb)
     perception = perception_model(args.perception, classes=scenario.classes)
     camera, preference, sim_config = CameraConfig(), PreferenceSetConfig(), SimConfig()
-    meta = RecordingMeta.driven(scenario, RecordingSetup(camera, preference, sim_config), ExpertInfo.of(args.seed, args.style, expert, disturbance),
-                                profile, perception)
+    meta = RecordingMeta.driven(
+        scenario,
+        RecordingSetup(camera, preference, sim_config),
+        ExpertInfo.of(args.seed, args.style, expert, disturbance),
+        profile,
+        perception,
+    )
     sim = Simulation(scenario, camera, sim_config)
     writer = RecordingWriter(args.out, meta, scenario.to_dict(), overwrite=args.force)
     bar = Progress(f"record {scenario.name}", sim.path.length_m, enabled=not args.quiet)
     try:
-        log = record_run(sim, ExpertDriver(expert, sim_config.camera_rate_hz), writer, RunSettings(preference, disturbance, perception),
-                         np.random.default_rng(args.seed), progress=lambda s: bar.update(s.progress_m, f"t={s.time_s:6.1f}s frames={writer.count}"))
+        log = record_run(
+            sim,
+            ExpertDriver(expert, sim_config.camera_rate_hz),
+            writer,
+            RunSettings(preference, disturbance, perception),
+            np.random.default_rng(args.seed),
+            progress=lambda s: bar.update(s.progress_m, f"t={s.time_s:6.1f}s frames={writer.count}"),
+        )
     except BaseException as exc:
         writer.abort()
         if writer.partial_dir is not None and isinstance(exc, OSError):  # a full disk: the unfinished replacement goes
@@ -70,9 +83,15 @@ def _cmd_record(args: argparse.Namespace) -> int:
         raise
     bar.close("done")
     state = "reached the goal" if log.completed else "timed out"
-    seen = f"; the frames are what the robot received under perception {perception.name}" if perception is not None and perception.active else ""
+    seen = (
+        f"; the frames are what the robot received under perception {perception.name}"
+        if perception is not None and perception.active
+        else ""
+    )
     contact = f" ({log.contact_s:.1f} s, {log.contact_m:.1f} m with lethal terrain under the vehicle)" if log.contact_s else ""
-    print(f"wrote {args.out}: {writer.count} frames, {log.duration_s:.1f} s, {state}, {log.collisions} collisions{contact} (complete){seen}")
+    print(
+        f"wrote {args.out}: {writer.count} frames, {log.duration_s:.1f} s, {state}, {log.collisions} collisions{contact} (complete){seen}"
+    )
     return 0
 
 
@@ -95,18 +114,30 @@ def record_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("record", help="record a demonstration with the synthetic driver")
     p.add_argument("scenario", metavar="SCENARIO", help=SCENARIO_HELP)
     p.add_argument("--profile", help="preference order, best first, e.g. rock,mud,water,non_traversable (default: the class table's)")
-    p.add_argument("--style", default="default", help="the driver's style: default, wide (wider margins), late (reacts later), shaky (a shakier hand), "
-                        "reluctant (leaves the path reluctantly)")
+    p.add_argument(
+        "--style",
+        default="default",
+        help="the driver's style: default, wide (wider margins), late (reacts later), shaky (a shakier hand), "
+        "reluctant (leaves the path reluctantly)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seeds the driver's hand and the pushes (default 0)")
     p.add_argument("--out", required=True, type=Path, help="recording directory to create")
     p.add_argument("--force", action="store_true", help="replace an existing recording at --out")
     p.add_argument("--quiet", action="store_true", help="no progress output")
-    p.add_argument("--disturb", type=finite_float, default=None, metavar="RATE",
-                   help="push the executed yaw rate off the driver's command RATE times per second, so recoveries are shown "
-                        "(default: the recommended protocol's 0.3; 0: none)")
-    p.add_argument("--perception", metavar="PRESET|FILE",
-                   help="the driver sees the truth; the recording holds what the robot's camera and localisation gave through this "
-                        "perception model (a preset: clean, rellis, field; or a terrapref-perception/1 file)")
+    p.add_argument(
+        "--disturb",
+        type=finite_float,
+        default=None,
+        metavar="RATE",
+        help="push the executed yaw rate off the driver's command RATE times per second, so recoveries are shown "
+        "(default: the recommended protocol's 0.3; 0: none)",
+    )
+    p.add_argument(
+        "--perception",
+        metavar="PRESET|FILE",
+        help="the driver sees the truth; the recording holds what the robot's camera and localisation gave through this "
+        "perception model (a preset: clean, rellis, field; or a terrapref-perception/1 file)",
+    )
     add_classes_arg(p)
     p.set_defaults(func=_cmd_record)
 
@@ -132,8 +163,20 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     perception = perception_model(args.perception, classes=scenario.classes)
     view = live_view(args)
     try:
-        result = run_session(scenario, TeleopOptions(record_dir=args.record, overwrite=args.force, v_mps=args.speed, disturbance=_disturbance(args.disturb),
-                                                     seed=args.seed, profile=profile, model=args.model, perception=perception, live=view))
+        result = run_session(
+            scenario,
+            TeleopOptions(
+                record_dir=args.record,
+                overwrite=args.force,
+                v_mps=args.speed,
+                disturbance=_disturbance(args.disturb),
+                seed=args.seed,
+                profile=profile,
+                model=args.model,
+                perception=perception,
+                live=view,
+            ),
+        )
     finally:
         if view is not None:
             view.stop()
@@ -142,30 +185,46 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     edge = f", {result.edge_frames} frames held at the map's edge (not recorded)" if result.edge_frames else ""
     edge += f", {result.pushes} push{'es' if result.pushes != 1 else ''} (--disturb 0: none)" if result.pushes else ""
     if args.model is not None:
-        print(f"rode along: the planner drove {result.planner_frames} frames, you {result.frames} (corrections){where}; "
-              f"{state}, {result.collisions} collisions{edge}")
+        print(
+            f"rode along: the planner drove {result.planner_frames} frames, you {result.frames} (corrections){where}; "
+            f"{state}, {result.collisions} collisions{edge}"
+        )
     else:
         print(f"drove {result.frames} frames, {state}, {result.collisions} collisions{where}{edge}")
     return 0
 
 
 def drive_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("drive", help="drive a scenario yourself (keyboard, mouse or gamepad), optionally recording, or ride along with a model (--model)")
+    p = sub.add_parser(
+        "drive", help="drive a scenario yourself (keyboard, mouse or gamepad), optionally recording, or ride along with a model (--model)"
+    )
     p.add_argument("scenario", metavar="SCENARIO", help=SCENARIO_HELP)
     p.add_argument("--record", type=Path, metavar="DIR", help="record the drive into DIR")
     p.add_argument("--force", action="store_true", help="replace an existing recording at DIR")
     p.add_argument("--speed", type=finite_float, default=1.0, help="forward speed [m/s] (default 1)")
-    p.add_argument("--disturb", type=finite_float, default=None, metavar="RATE",
-                   help="pushes per second on the executed yaw rate, each shown in the window as it happens "
-                        "(default: the recommended protocol's 0.3; 0: none)")
+    p.add_argument(
+        "--disturb",
+        type=finite_float,
+        default=None,
+        metavar="RATE",
+        help="pushes per second on the executed yaw rate, each shown in the window as it happens "
+        "(default: the recommended protocol's 0.3; 0: none)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seeds the pushes")
     p.add_argument("--profile", help="your preference order, best first, stored with the recording (default: the class table's)")
-    p.add_argument("--model", type=Path, metavar="MODEL",
-                   help="ride along: MODEL drives, any stick input takes over, and the frames you steer are recorded as "
-                        "corrections that train accepts beside demonstrations")
-    p.add_argument("--perception", metavar="PRESET|FILE",
-                   help="you see the truth; the recording (and a riding-along model) gets what the robot's camera and localisation "
-                        "gave through this perception model")
+    p.add_argument(
+        "--model",
+        type=Path,
+        metavar="MODEL",
+        help="ride along: MODEL drives, any stick input takes over, and the frames you steer are recorded as "
+        "corrections that train accepts beside demonstrations",
+    )
+    p.add_argument(
+        "--perception",
+        metavar="PRESET|FILE",
+        help="you see the truth; the recording (and a riding-along model) gets what the robot's camera and localisation "
+        "gave through this perception model",
+    )
     add_live_args(p, "every driven frame, riding along with the planner's F_t and costmap")
     add_classes_arg(p)
     p.set_defaults(func=_cmd_drive)
@@ -205,7 +264,9 @@ def _print_what_the_drive_shows(rec) -> None:
         return
     recipe = recipe_named(DEFAULT_RECIPE)
     bar = Progress("featurize", len(rec), unit="frames")
-    dataset = build_dataset([rec], recipe.features(), rules=recipe.rules, progress=lambda p: bar.update(p.frames_done, f"{p.frames_done}/{p.frames} frames"))
+    dataset = build_dataset(
+        [rec], recipe.features(), rules=recipe.rules, progress=lambda p: bar.update(p.frames_done, f"{p.frames_done}/{p.frames} frames")
+    )
     bar.close()
     print(f"what the drive shows (recipe {DEFAULT_RECIPE}'s features, {len(dataset)} frames):")
     for line in identify(dataset, steady=recipe.train.data.steady_labels).lines(rec.meta.get("profile")):
@@ -216,8 +277,11 @@ def inspect_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("inspect", help="summarise a recording and draw its driven path")
     p.add_argument("recording", metavar="DIR", type=Path, help="a recording folder (from record, drive or import)")
     p.add_argument("--out", type=Path, help="top-down PNG (default: DIR/driven_path.png)")
-    p.add_argument("--no-preference", action="store_true",
-                   help="skip what the drive shows of the driver's preference (it featurises every frame: seconds)")
+    p.add_argument(
+        "--no-preference",
+        action="store_true",
+        help="skip what the drive shows of the driver's preference (it featurises every frame: seconds)",
+    )
     add_classes_arg(p, check=True)
     add_force_arg(p)
     p.set_defaults(func=_cmd_inspect)
@@ -248,7 +312,9 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
             raise UserError("--n-steps", f"must be an integer >= 1, got {args.n_steps}")
         if args.dt is not None and not (math.isfinite(args.dt) and args.dt > 0):
             raise UserError("--dt", f"must be a finite number of seconds > 0, got {args.dt}")
-        pref = replace(pref, n_steps=args.n_steps if args.n_steps is not None else pref.n_steps, dt_s=args.dt if args.dt is not None else pref.dt_s)
+        pref = replace(
+            pref, n_steps=args.n_steps if args.n_steps is not None else pref.n_steps, dt_s=args.dt if args.dt is not None else pref.dt_s
+        )
         features = replace(features, preference=pref)
     camera = None
     if args.camera:
@@ -267,12 +333,19 @@ def featurize_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("featurize", help="turn recordings into a training set (U, label)")
     p.add_argument("recordings", nargs="+", metavar="DIR", type=Path, help="recording folders (from record, drive or import)")
     p.add_argument("--out", required=True, type=Path, help="dataset file (.safetensors)")
-    p.add_argument("--distance-mode", choices=["lookahead", "window", "paper"], default="lookahead",
-                   help="how each trajectory's distance to the path is measured: lookahead (default) to the path ahead of the vehicle, "
-                        "window to the nearest path point within a window, paper as the paper writes it")
+    p.add_argument(
+        "--distance-mode",
+        choices=["lookahead", "window", "paper"],
+        default="lookahead",
+        help="how each trajectory's distance to the path is measured: lookahead (default) to the path ahead of the vehicle, "
+        "window to the nearest path point within a window, paper as the paper writes it",
+    )
     p.add_argument("--n-steps", type=int, help="trajectory points n (default 30)")
     p.add_argument("--dt", type=finite_float, help="trajectory time step [s] (default 0.2)")
-    p.add_argument("--camera", help="camera file to re-render the frames with: CameraConfig's fields, or a ROS camera_info YAML (with mount_height_m, pitch_deg)")
+    p.add_argument(
+        "--camera",
+        help="camera file to re-render the frames with: CameraConfig's fields, or a ROS camera_info YAML (with mount_height_m, pitch_deg)",
+    )
     p.add_argument("--recipe", metavar="NAME", help="featurise as this recipe trains (default: teach, with the look-ahead utilities)")
     add_classes_arg(p, check=True)
     add_force_arg(p)

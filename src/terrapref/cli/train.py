@@ -41,18 +41,32 @@ def _cmd_train(args: argparse.Namespace) -> int:
         check_table(args, ClassTable.from_dict(data.meta["classes"], str(args.data[0])), args.data[0])
     for rule in recipe.rules:
         if rule.data() is not None and data.rule_data(rule.type) is None:
-            print(f"warning: {args.data[0]} carries no data for the {rule.type} rule; {rule.without_data} "
-                  f"(train from the recordings, or featurize them with --recipe {recipe.name})", file=sys.stderr)
+            print(
+                f"warning: {args.data[0]} carries no data for the {rule.type} rule; {rule.without_data} "
+                f"(train from the recordings, or featurize them with --recipe {recipe.name})",
+                file=sys.stderr,
+            )
     opt, members = config.optimiser, config.classifier.members
-    print(f"recipe {recipe.name}: training on {len(data)} samples ({len(args.data)} input(s)), {opt.epochs} epochs, "
-          f"batch {opt.batch_size}, lr {opt.lr}{f', {members} members' if members > 1 else ''}")
+    print(
+        f"recipe {recipe.name}: training on {len(data)} samples ({len(args.data)} input(s)), {opt.epochs} epochs, "
+        f"batch {opt.batch_size}, lr {opt.lr}{f', {members} members' if members > 1 else ''}"
+    )
     try:
-        result = train_and_save(data, args.out, config, rules=recipe.rules, recipe=recipe.name,
-                                options=RunOptions(progress=_epoch_printer(config, args.verbose)))
+        result = train_and_save(
+            data,
+            args.out,
+            config,
+            rules=recipe.rules,
+            recipe=recipe.name,
+            options=RunOptions(progress=_epoch_printer(config, args.verbose)),
+        )
     except KeyboardInterrupt:
         if interrupted_path(args.out).exists():
-            print(f"note: the best epochs so far are in {interrupted_path(args.out)} (marked interrupted: no decision rules); "
-                  f"{args.out} is untouched", file=sys.stderr)
+            print(
+                f"note: the best epochs so far are in {interrupted_path(args.out)} (marked interrupted: no decision rules); "
+                f"{args.out} is untouched",
+                file=sys.stderr,
+            )
         raise
     _report_training(args, config, data, result)
     return 0
@@ -93,8 +107,10 @@ def _warn_lethal_contact(recordings: list[Path]) -> None:
     for path in recordings:
         contact = read_recording(path).lethal_contact()
         if contact is not None:
-            print(f"warning: {path}: the drive had lethal terrain under the vehicle ({contact}); the model learns from it as driven",
-                  file=sys.stderr)
+            print(
+                f"warning: {path}: the drive had lethal terrain under the vehicle ({contact}); the model learns from it as driven",
+                file=sys.stderr,
+            )
 
 
 def _epoch_printer(config: TrainConfig, verbose: bool) -> Callable[[EpochMetrics], None]:
@@ -116,8 +132,11 @@ def _epoch_printer(config: TrainConfig, verbose: bool) -> Callable[[EpochMetrics
             print(f"member {member}/{members}\n{header}" if members > 1 else header)
         if verbose or m.epoch == epochs or m.epoch % max(1, epochs // 10) == 0:
             done = ((member - 1) * epochs + m.epoch) / (members * epochs)
-            print(f"{m.epoch:5d} {m.train_loss:10.4f} {m.val_loss:9.4f} {m.train_acc:9.3f} {m.val_acc:8.3f} {m.val_top3:8.3f}  "
-                  f"{time_left(time.perf_counter() - start, done)}", flush=True)
+            print(
+                f"{m.epoch:5d} {m.train_loss:10.4f} {m.val_loss:9.4f} {m.train_acc:9.3f} {m.val_acc:8.3f} {m.val_top3:8.3f}  "
+                f"{time_left(time.perf_counter() - start, done)}",
+                flush=True,
+            )
 
     return show
 
@@ -131,8 +150,11 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
 
     members = config.classifier.members
     curve = Path(args.out).with_suffix(".loss.png")
-    save_loss_curve(curve, [([asdict(h) for h in r.history], r.best_epoch) for r in result.members or [result]],
-                    title=f"{Path(args.out).name}: {len(data)} samples{f', {members} members' if members > 1 else ''}")
+    save_loss_curve(
+        curve,
+        [([asdict(h) for h in r.history], r.best_epoch) for r in result.members or [result]],
+        title=f"{Path(args.out).name}: {len(data)} samples{f', {members} members' if members > 1 else ''}",
+    )
     chosen = []
     for j, r in enumerate(result.members or [result]):
         best = r.history[r.best_epoch - 1]
@@ -149,18 +171,27 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
         for line in result.identifiability.lines(data.meta.get("profile")):
             print(f"  {line}")
     m = len(data.feature_config.preference.control.w_rps)
-    print(f"val acc: the share of held-out frames ({config.optimiser.val_fraction:.0%}) whose driven trajectory C ranks first of {m} "
-          f"(chance {1 / m:.3f}); neighbours differ by one step of steering, so val top3 and, for the planner, the agreement "
-          "`terrapref evaluate` measures say more")
-    print(f"wrote {args.out} ({'; '.join(chosen)}), {curve}, checkpoints in {Path(args.out).with_name(Path(args.out).stem + '.checkpoints')}")
+    print(
+        f"val acc: the share of held-out frames ({config.optimiser.val_fraction:.0%}) whose driven trajectory C ranks first of {m} "
+        f"(chance {1 / m:.3f}); neighbours differ by one step of steering, so val top3 and, for the planner, the agreement "
+        "`terrapref evaluate` measures say more"
+    )
+    print(
+        f"wrote {args.out} ({'; '.join(chosen)}), {curve}, checkpoints in {Path(args.out).with_name(Path(args.out).stem + '.checkpoints')}"
+    )
 
 
 def train_parser(sub: argparse._SubParsersAction, flags: bool = True) -> None:
     """``train``; its training flags come from TrainConfig's fields (``flags``: built only when
     the command line is a training, since they need the recipes and NumPy)."""
     p = sub.add_parser("train", help="train a planner from recordings or featurised datasets (recipe teach by default)")
-    p.add_argument("data", nargs="+", metavar="DATA", type=Path,
-                   help="recording directories (featurised as the recipe needs) or dataset files from `terrapref featurize`")
+    p.add_argument(
+        "data",
+        nargs="+",
+        metavar="DATA",
+        type=Path,
+        help="recording directories (featurised as the recipe needs) or dataset files from `terrapref featurize`",
+    )
     p.add_argument("--out", required=True, type=Path, help="model file (.safetensors)")
     p.add_argument("--recipe", default=None, metavar="NAME", help="a named recipe (`terrapref recipes`; default: teach)")
     p.add_argument("--verbose", action="store_true", help="print every epoch (default: every tenth)")
@@ -175,10 +206,18 @@ def train_parser(sub: argparse._SubParsersAction, flags: bool = True) -> None:
         group = p.add_argument_group("training (defaults shown: recipe teach's; each flag overrides the chosen recipe's value)")
         add_arguments(group, TrainConfig, recipe_named(DEFAULT_RECIPE).train)
         rules = p.add_argument_group("decision rules (terrapref recipes lists each recipe's; the last one fitted drives)")
-        rules.add_argument("--second-stage", action=argparse.BooleanOptionalAction, default=None,
-                            help="also fit the second stage's linear utility (or, with --no-, leave the recipe's out)")
-        rules.add_argument("--stage-weight", type=finite_float, default=None,
-                            help="the second stage's weight against log F_t in the decision (recipe teach: 5.0)")
+        rules.add_argument(
+            "--second-stage",
+            action=argparse.BooleanOptionalAction,
+            default=None,
+            help="also fit the second stage's linear utility (or, with --no-, leave the recipe's out)",
+        )
+        rules.add_argument(
+            "--stage-weight",
+            type=finite_float,
+            default=None,
+            help="the second stage's weight against log F_t in the decision (recipe teach: 5.0)",
+        )
 
 
 def _cmd_recipes(args: argparse.Namespace) -> int:
@@ -188,8 +227,10 @@ def _cmd_recipes(args: argparse.Namespace) -> int:
         tag = " (default)" if name == DEFAULT_RECIPE else ""
         drives = f"{r.demonstrations} drive{'s' if r.demonstrations > 1 else ''} of {r.course}"
         stages = ", then ".join(s.type for s in r.rules) or "none"
-        print(f"{name}{tag}: {drives}, {r.train.optimiser.epochs} epochs{f', {r.train.classifier.members} members' if r.train.classifier.members > 1 else ''}; "
-              f"rules: {stages} (the last drives; none: C's argmax)")
+        print(
+            f"{name}{tag}: {drives}, {r.train.optimiser.epochs} epochs{f', {r.train.classifier.members} members' if r.train.classifier.members > 1 else ''}; "
+            f"rules: {stages} (the last drives; none: C's argmax)"
+        )
         print(f"    {r.summary}")
     return 0
 

@@ -40,8 +40,12 @@ class DisturbanceConfig:
         return self.rate_hz > 0
 
     def __post_init__(self) -> None:
-        if not (self.rate_hz >= 0 and 0 <= self.min_yaw_rate_rps <= self.max_yaw_rate_rps
-                and 0 < self.min_duration_s <= self.max_duration_s and self.max_command_rps > 0):
+        if not (
+            self.rate_hz >= 0
+            and 0 <= self.min_yaw_rate_rps <= self.max_yaw_rate_rps
+            and 0 < self.min_duration_s <= self.max_duration_s
+            and self.max_command_rps > 0
+        ):
             raise ValueError("disturbance: rate >= 0, 0 <= min <= max yaw rate, 0 < min <= max duration")
 
     def to_dict(self) -> dict:

@@ -119,12 +119,18 @@ def _style(name: str, description: str, **changes: float) -> None:
 # Driver styles: different people, not only different orders; `terrapref record --style NAME`.
 STYLES: Registry[Style] = Registry("driver style", "styles")
 _style("default", "reacts 5 m ahead, 0.6 m half-width, 0.4 m extra from lethal terrain")
-_style("wide", "keeps wider margins: terrain within 0.5 m beside it costs half as if driven on, 0.8 m extra from lethal terrain",
-       margin_m=0.5, lethal_margin_m=0.8)
-_style("late", "reacts later: terrain on the path 3.5 m ahead, not 5 m; a slower hand (0.35 s)",
-       reaction_distance_m=3.5, reaction_delay_s=0.35)
-_style("shaky", "a shakier hand: 0.08 rad/s of tremor while the stick is deflected, a wider deadzone",
-       stick_noise_rps=0.08, deadzone_rps=0.1)
+_style(
+    "wide",
+    "keeps wider margins: terrain within 0.5 m beside it costs half as if driven on, 0.8 m extra from lethal terrain",
+    margin_m=0.5,
+    lethal_margin_m=0.8,
+)
+_style(
+    "late", "reacts later: terrain on the path 3.5 m ahead, not 5 m; a slower hand (0.35 s)", reaction_distance_m=3.5, reaction_delay_s=0.35
+)
+_style(
+    "shaky", "a shakier hand: 0.08 rad/s of tremor while the stick is deflected, a wider deadzone", stick_noise_rps=0.08, deadzone_rps=0.1
+)
 _style("reluctant", "leaves the path reluctantly: twice the cost per metre of detour", deviation_cost=0.16)
 
 
@@ -284,8 +290,9 @@ def _cell_beside(x: float, y: float, lat: float, nx: float, ny: float, res: floa
 
 
 @njit(cache=True, nogil=True)
-def _offset_costs(centre: np.ndarray, normal: np.ndarray, lat: np.ndarray, upto: int, raster: np.ndarray, res: float,
-                  cost: np.ndarray) -> np.ndarray:
+def _offset_costs(
+    centre: np.ndarray, normal: np.ndarray, lat: np.ndarray, upto: int, raster: np.ndarray, res: float, cost: np.ndarray
+) -> np.ndarray:
     """(O,): ``cost[_offset_classes(...)].mean(axis=2).sum(axis=1)``, each mean and sum as NumPy
     adds it (terrapref.sums.numpy_sum; ``upto`` and the points across, ``lat.shape[1]``, <= 128)."""
     n_rows, n_cols = raster.shape
@@ -305,8 +312,9 @@ def _offset_costs(centre: np.ndarray, normal: np.ndarray, lat: np.ndarray, upto:
 
 
 @njit(cache=True, nogil=True)
-def _offset_hits(centre: np.ndarray, normal: np.ndarray, lat: np.ndarray, upto: int, raster: np.ndarray, res: float,
-                 lethal: np.ndarray) -> np.ndarray:
+def _offset_hits(
+    centre: np.ndarray, normal: np.ndarray, lat: np.ndarray, upto: int, raster: np.ndarray, res: float, lethal: np.ndarray
+) -> np.ndarray:
     """(O,): ``lethal[_offset_classes(...)].any(axis=(1, 2))``, each offset's search stopped at its first hit."""
     n_rows, n_cols = raster.shape
     out = np.zeros(lat.shape[0], np.bool_)

@@ -176,8 +176,13 @@ DriverInfo = ExpertInfo | HumanInfo | RideAlongInfo | CorrectionRoundInfo | Impo
 
 def _describe(kind: str, style: str | None = None, seed: int | None = None, bag: str | None = None, model: str | None = None) -> str:
     """Who drove, in words: the kind, then whichever of style, seed, source bag and ridden-along model it names."""
-    return (kind + (f", style {style}" if style else "") + (f", seed {seed}" if seed is not None else "")
-            + (f", from {bag}" if bag else "") + (f", riding along with {model}" if model else ""))
+    return (
+        kind
+        + (f", style {style}" if style else "")
+        + (f", seed {seed}" if seed is not None else "")
+        + (f", from {bag}" if bag else "")
+        + (f", riding along with {model}" if model else "")
+    )
 
 
 class _Fields:
@@ -206,8 +211,12 @@ class _Fields:
 
 
 def _expert(f: _Fields) -> ExpertInfo:
-    return ExpertInfo(f.get("seed", int, "an integer"), f.get("style", str, "a style name", "default"),
-                      f.get("config", dict, "a mapping"), f.get("disturbance", dict, "a mapping"))
+    return ExpertInfo(
+        f.get("seed", int, "an integer"),
+        f.get("style", str, "a style name", "default"),
+        f.get("config", dict, "a mapping"),
+        f.get("disturbance", dict, "a mapping"),
+    )
 
 
 def _human(f: _Fields) -> HumanInfo:
@@ -217,8 +226,12 @@ def _human(f: _Fields) -> HumanInfo:
 def _corrections(f: _Fields) -> RideAlongInfo | CorrectionRoundInfo:
     if "round" in f.data:  # the synthetic driver's round in a recipe; a person's session has no rounds
         return CorrectionRoundInfo(f.get("round", int, "an integer", 0), f.get("seed", int, "an integer"))
-    return RideAlongInfo(f.get("input", str, "text"), f.get("disturbance", dict, "a mapping"), f.get("seed", int, "an integer"),
-                         f.get("model", str, "a file name"))
+    return RideAlongInfo(
+        f.get("input", str, "text"),
+        f.get("disturbance", dict, "a mapping"),
+        f.get("seed", int, "an integer"),
+        f.get("model", str, "a file name"),
+    )
 
 
 def _imported(f: _Fields) -> ImportedInfo:
@@ -328,12 +341,27 @@ class RecordingMeta:
     origin_shift_m: tuple[float, float] | None = None
 
     @classmethod
-    def driven(cls, scenario: Scenario, setup: RecordingSetup, driver: DriverInfo, profile: PreferenceProfile,
-               perception: PerceptionModel | None = None) -> RecordingMeta:
+    def driven(
+        cls,
+        scenario: Scenario,
+        setup: RecordingSetup,
+        driver: DriverInfo,
+        profile: PreferenceProfile,
+        perception: PerceptionModel | None = None,
+    ) -> RecordingMeta:
         """The meta of a run of ``scenario`` driven by ``driver`` under ``setup``, whose frames went
         through ``perception`` (None: the truth)."""
-        return cls(scenario.name, setup.camera, setup.preference, SimMeta.of(setup.sim), scenario.classes, tuple(profile.order),
-                   driver, _points(scenario.waypoints), perception or PerceptionModel())
+        return cls(
+            scenario.name,
+            setup.camera,
+            setup.preference,
+            SimMeta.of(setup.sim),
+            scenario.classes,
+            tuple(profile.order),
+            driver,
+            _points(scenario.waypoints),
+            perception or PerceptionModel(),
+        )
 
     def to_dict(self) -> dict[str, Any]:
         """The entries of meta.json, in the file's order (the fields'); what is None is left out."""
@@ -357,9 +385,18 @@ class RecordingMeta:
         path = _path(data["path"], source, "path", 2) if "path" in data else None
         f = _Fields(data, source, "")
         shift = _path([data["origin_shift_m"]], source, "origin_shift_m", 1)[0] if "origin_shift_m" in data else None
-        return cls(f.get("scenario", str, "a scenario name"), camera, preference, SimMeta.from_dict(data["sim"], source) if "sim" in data else None,
-                   classes, tuple(profile) if profile is not None else None,
-                   driver_from_dict(data["driver"], source) if "driver" in data else None, path, perception, shift)
+        return cls(
+            f.get("scenario", str, "a scenario name"),
+            camera,
+            preference,
+            SimMeta.from_dict(data["sim"], source) if "sim" in data else None,
+            classes,
+            tuple(profile) if profile is not None else None,
+            driver_from_dict(data["driver"], source) if "driver" in data else None,
+            path,
+            perception,
+            shift,
+        )
 
 
 def _points(points: np.ndarray) -> Points:
@@ -401,5 +438,7 @@ def _path(value: Any, source: str, field: str, least: int) -> Points:
     except (TypeError, ValueError):
         points = np.zeros(0)
     if points.ndim != 2 or points.shape[1:] != (2,) or len(points) < least or not np.isfinite(points).all():
-        raise UserError(source, "expected at least two finite [x, y] points" if least > 1 else "expected two finite numbers [m]", field=field)
+        raise UserError(
+            source, "expected at least two finite [x, y] points" if least > 1 else "expected two finite numbers [m]", field=field
+        )
     return _points(points)

@@ -76,7 +76,9 @@ class RecordingWriter:
         scenario: the scenario mapping (``Scenario.to_dict()``) to store beside it.
     """
 
-    def __init__(self, out_dir: str | Path, meta: RecordingMeta | dict[str, Any], scenario: dict[str, Any], overwrite: bool = False) -> None:
+    def __init__(
+        self, out_dir: str | Path, meta: RecordingMeta | dict[str, Any], scenario: dict[str, Any], overwrite: bool = False
+    ) -> None:
         self.target = Path(out_dir)
         self.dir = self.target
         self.partial_dir: Path | None = None  # where an aborted replacement was left
@@ -89,7 +91,12 @@ class RecordingWriter:
                 self.dir = new_folder(self.target, ".new")
             elif any(self.target.iterdir()):
                 raise UserError(str(self.target), "directory is not empty and holds no recording; refusing to write into it")
-        self.meta = {"format": FORMAT, "status": "partial", "created": datetime.now(timezone.utc).isoformat(timespec="seconds"), **_entries(meta)}
+        self.meta = {
+            "format": FORMAT,
+            "status": "partial",
+            "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            **_entries(meta),
+        }
         made = not self.dir.exists() or self.dir != self.target
         try:
             (self.dir / IMAGES).mkdir(parents=True, exist_ok=True)
@@ -141,8 +148,11 @@ class RecordingWriter:
         frame is no recording: it is removed (an old one it was to replace stays) and refused."""
         if self.count == 0:
             self.abort()
-            raise UserError(str(self.target), "not written: no frame reached the recording (a perception file that drops every frame, "
-                                              "or a drive ended before its first frame)")
+            raise UserError(
+                str(self.target),
+                "not written: no frame reached the recording (a perception file that drops every frame, "
+                "or a drive ended before its first frame)",
+            )
         self._frames.close()
         self.meta.update(status="complete", frames=self.count, finished=datetime.now(timezone.utc).isoformat(timespec="seconds"))
         if summary:
@@ -193,11 +203,20 @@ class MemoryRecordingWriter:
     def count(self) -> int:
         return len(self._rows)
 
-    def append(self, time_s: float, pose: tuple[float, float, float], image: np.ndarray | SegmentationView, command: tuple[float, float],
-               label: int, executed: tuple[float, float] | None = None) -> None:
+    def append(
+        self,
+        time_s: float,
+        pose: tuple[float, float, float],
+        image: np.ndarray | SegmentationView,
+        command: tuple[float, float],
+        label: int,
+        executed: tuple[float, float] | None = None,
+    ) -> None:
         """Keep one frame as :meth:`RecordingWriter.append` writes it (time rounded to the
         microsecond); ``executed``, which a recording read back does not hold either, is not kept."""
-        self._rows.append((round(float(time_s), 6), (float(pose[0]), float(pose[1]), float(pose[2])), (float(command[0]), float(command[1])), int(label)))
+        self._rows.append(
+            (round(float(time_s), 6), (float(pose[0]), float(pose[1]), float(pose[2])), (float(command[0]), float(command[1])), int(label))
+        )
         self._views.append(as_view(image))
 
     def close(self, summary: dict[str, Any] | None = None) -> None:
@@ -264,8 +283,11 @@ class Recording:
         entries, seconds, metres = run.get("collisions") or 0, run.get("contact_s") or 0.0, run.get("contact_m")
         if not entries and not seconds:
             return None
-        parts = [f"{entries} entr{'y' if entries == 1 else 'ies'}"] + ([f"{seconds:.1f} s"] if seconds else []) \
+        parts = (
+            [f"{entries} entr{'y' if entries == 1 else 'ies'}"]
+            + ([f"{seconds:.1f} s"] if seconds else [])
             + ([f"{metres:.1f} m"] if metres else [])
+        )
         return ", ".join(parts)
 
     @property
@@ -330,6 +352,7 @@ class Recording:
 
 def _frame_problem(row: dict) -> tuple[str, str] | None:
     """(field, message) of the first thing wrong with one frame record, or None."""
+
     def finite(v: object) -> bool:
         return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
@@ -490,7 +513,9 @@ def _check_frame(row: dict, previous: dict | None, frames_path: Path, line_no: i
     if problem:
         raise UserError(str(frames_path), problem[1], field=f"line {line_no}.{problem[0]}")
     if previous is not None and not row["t"] > previous["t"]:
-        raise UserError(str(frames_path), f"time {row['t']} does not follow {previous['t']}; frames must be in time order", field=f"line {line_no}.t")
+        raise UserError(
+            str(frames_path), f"time {row['t']} does not follow {previous['t']}; frames must be in time order", field=f"line {line_no}.t"
+        )
 
 
 def _is_complete(meta: dict, frames: _Frames, frames_path: Path) -> bool:
@@ -499,5 +524,7 @@ def _is_complete(meta: dict, frames: _Frames, frames_path: Path) -> bool:
     f = len(frames.rows)
     declared = meta.get("frames")
     if complete and isinstance(declared, int) and declared != f:
-        raise UserError(str(frames_path), f"holds {f} frames; meta.json says the complete run has {declared} (truncated or edited?)", field="frames")
+        raise UserError(
+            str(frames_path), f"holds {f} frames; meta.json says the complete run has {declared} (truncated or edited?)", field="frames"
+        )
     return complete

@@ -59,8 +59,14 @@ class RecordLoop:
         perceiver: what the robot receives instead of the truth, already reset; None: the truth.
     """
 
-    def __init__(self, sim: Simulation, writer: RecordingWriter | MemoryRecordingWriter | None, control: ControlSet, disturb: Disturber | None = None,
-                 perceiver: Perceiver | None = None) -> None:
+    def __init__(
+        self,
+        sim: Simulation,
+        writer: RecordingWriter | MemoryRecordingWriter | None,
+        control: ControlSet,
+        disturb: Disturber | None = None,
+        perceiver: Perceiver | None = None,
+    ) -> None:
         self.sim, self.writer, self.control, self.disturb, self.perceiver = sim, writer, control, disturb, perceiver
         self._perceived: tuple[int, Frame | None] | None = None  # (the period, what reached the robot in it)
 
@@ -83,8 +89,14 @@ class RecordLoop:
         """
         got = self.perceive(frame)
         if record and self.writer is not None and got is not None:
-            self.writer.append(frame.time_s, got.pose, got.view, command, self.control.label_of(command[1]),
-                               executed=executed if executed != command else None)
+            self.writer.append(
+                frame.time_s,
+                got.pose,
+                got.view,
+                command,
+                self.control.label_of(command[1]),
+                executed=executed if executed != command else None,
+            )
         return self.sim.step(executed)
 
     def close(self, summary: dict[str, Any]) -> None:

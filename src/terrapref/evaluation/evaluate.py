@@ -70,11 +70,27 @@ class Evaluation:
     def specs(self, profile: PreferenceProfile, classes: ClassTable | None = None) -> list[RunSpec]:
         """The planner's runs (seed 0 keeping ``frames``; every run kept with ``mcap``), then the
         driver's; zones resolve under ``profile``, scenarios are read with ``classes``."""
-        specs = [RunSpec(name, seed, PLANNER, self.model_path, profile.order, self.frames if seed == 0 else (), keep_run=self.mcap,
-                         perception=self.perceived, classes=classes) for name in self.scenarios for seed in range(self.seeds)]
+        specs = [
+            RunSpec(
+                name,
+                seed,
+                PLANNER,
+                self.model_path,
+                profile.order,
+                self.frames if seed == 0 else (),
+                keep_run=self.mcap,
+                perception=self.perceived,
+                classes=classes,
+            )
+            for name in self.scenarios
+            for seed in range(self.seeds)
+        ]
         if self.with_driver:
-            specs += [RunSpec(name, seed, EXPERT, None, profile.order, style=self.style, classes=classes)
-                      for name in self.scenarios for seed in range(self.seeds)]
+            specs += [
+                RunSpec(name, seed, EXPERT, None, profile.order, style=self.style, classes=classes)
+                for name in self.scenarios
+                for seed in range(self.seeds)
+            ]
         return specs
 
 
@@ -195,10 +211,20 @@ def _write_runs(results: list[RunResult], folder: Path, model) -> None:
         scenario, world = scenario_and_world(r.scenario, model.classes)  # cached: the runs of one course share a raster
         renderer = SegmentationRenderer(camera, world)
         poses = run.poses
-        frames = RunFrames(times=0.1 * np.arange(len(poses)), poses=poses, commands=run.commands,
-                           image=lambda i, poses=poses, renderer=renderer: renderer.render(Pose(*poses[i])), chosen=run.index,
-                           path=scenario.waypoints, camera=model.camera, classes=model.classes, preference=model.features.preference, probs=run.probs,
-                           costmap=costmaps_of(runner, poses) if runner.keeps_ground_map else None, stops=run.stops or None)
+        frames = RunFrames(
+            times=0.1 * np.arange(len(poses)),
+            poses=poses,
+            commands=run.commands,
+            image=lambda i, poses=poses, renderer=renderer: renderer.render(Pose(*poses[i])),
+            chosen=run.index,
+            path=scenario.waypoints,
+            camera=model.camera,
+            classes=model.classes,
+            preference=model.features.preference,
+            probs=run.probs,
+            costmap=costmaps_of(runner, poses) if runner.keeps_ground_map else None,
+            stops=run.stops or None,
+        )
         write_mcap(folder / f"{file_stem(r.scenario)}_seed{r.seed}.mcap", frames, robot_file=False)
 
 
@@ -228,7 +254,9 @@ def rests_on(expect: str, present: Sequence[str], identified: Identifiability) -
     return sorted({f"{p.first} vs {p.second}" for p in pairs if p is not None and not p.identified})
 
 
-def _figures(results: list[RunResult], scenarios: Sequence[str], out: Path, model, profile: PreferenceProfile, perception: PerceptionModel) -> None:
+def _figures(
+    results: list[RunResult], scenarios: Sequence[str], out: Path, model, profile: PreferenceProfile, perception: PerceptionModel
+) -> None:
     """Per course, the top-down evaluation figure; per kept frame, its decision picture (the frame the planner received)."""
     from terrapref.plots import CourseRuns, Decision, save_decision, save_evaluation
 
@@ -242,16 +270,24 @@ def _figures(results: list[RunResult], scenarios: Sequence[str], out: Path, mode
         ok = sum(v[0] for v in per_zone.values())
         n = sum(v[1] for v in per_zone.values())
         course = CourseRuns(scenario, world, [r.xy for r in driver_runs], [r.xy for r in planner_runs], per_zone)
-        save_evaluation(out / f"{file_stem(name)}.png", course,
-                        title=f"{name}: planner zone success {ok}/{n} over {len(planner_runs)} run(s), profile {profile}"
-                              + (f", perception {perception.name}" if perception.active else ""))
+        save_evaluation(
+            out / f"{file_stem(name)}.png",
+            course,
+            title=f"{name}: planner zone success {ok}/{n} over {len(planner_runs)} run(s), profile {profile}"
+            + (f", perception {perception.name}" if perception.active else ""),
+        )
         for r in planner_runs:
             for f in r.frames:
                 rgb = model.classes.palette()[f.image]
                 x, y, yaw = f.pose
                 decision = Decision(uv, visible, f.probs, f.index, model.features.preference.control.w_rps)
-                save_decision(out / f"{file_stem(name)}_frame{f.number:05d}.png", rgb, decision, classes=model.classes,
-                              title=f"{name}, frame {f.number}, pose ({x:.1f} m, {y:.1f} m, yaw {np.degrees(yaw):.0f} deg)")
+                save_decision(
+                    out / f"{file_stem(name)}_frame{f.number:05d}.png",
+                    rgb,
+                    decision,
+                    classes=model.classes,
+                    title=f"{name}, frame {f.number}, pose ({x:.1f} m, {y:.1f} m, yaw {np.degrees(yaw):.0f} deg)",
+                )
 
 
 def _zone_successes(runs: list[RunResult]) -> dict[str, tuple[int, int]]:

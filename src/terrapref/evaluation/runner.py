@@ -177,14 +177,33 @@ class Summary:
 
     def to_dict(self) -> dict:
         """As JSON; the agreement only where zones were compared."""
-        agreement = {"agreement_rate": self.agreement_rate, "agreement_ci95": list(self.agreement_ci95 or ()),
-                     "agreement_zones": self.agreement_zones} if self.agreement_zones else {}
-        return {"runs": self.runs, "zones": self.zones, "zone_success_rate": self.zone_success_rate,
-                "zone_success_ci95": list(self.zone_success_ci95), **agreement, "not_reached": self.not_reached,
-                "collision_count": self.collision_count, "contact_s": self.contact_s,
-                "completed_rate": self.completed_rate, "completed_ci95": list(self.completed_ci95), "ended": self.ended,
-                "mean_rms_cross_track_m": self.mean_rms_cross_track_m, "driven_m": self.driven_m, "stop_count": self.stop_count,
-                "stops_per_100m": self.stops_per_100m, "stops_s": self.stops_s}
+        agreement = (
+            {
+                "agreement_rate": self.agreement_rate,
+                "agreement_ci95": list(self.agreement_ci95 or ()),
+                "agreement_zones": self.agreement_zones,
+            }
+            if self.agreement_zones
+            else {}
+        )
+        return {
+            "runs": self.runs,
+            "zones": self.zones,
+            "zone_success_rate": self.zone_success_rate,
+            "zone_success_ci95": list(self.zone_success_ci95),
+            **agreement,
+            "not_reached": self.not_reached,
+            "collision_count": self.collision_count,
+            "contact_s": self.contact_s,
+            "completed_rate": self.completed_rate,
+            "completed_ci95": list(self.completed_ci95),
+            "ended": self.ended,
+            "mean_rms_cross_track_m": self.mean_rms_cross_track_m,
+            "driven_m": self.driven_m,
+            "stop_count": self.stop_count,
+            "stops_per_100m": self.stops_per_100m,
+            "stops_s": self.stops_s,
+        }
 
 
 def start_pose(start: tuple[float, float, float], seed: int) -> Pose:
@@ -245,6 +264,7 @@ def _model_file(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: Pre
 def _baseline(kind: str) -> DriverFactory:
     """The planner with a registered policy that needs no file (terrapref.planner.registry), for
     the scenario's class table."""
+
     def factory(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: PreferenceProfile) -> tuple[Simulation, Driver]:
         return _through_planner(make_policy(kind, classes=scenario.classes), spec, scenario, world)
 
@@ -268,12 +288,23 @@ def run_one(spec: RunSpec, watch: Watch | None = None) -> RunResult:
     sim, driver = _sim_and_driver(spec, scenario, world, profile)
     perceived = spec.perception is not None and spec.perception.active and spec.driver != EXPERT
     watched = watch(driver) if watch is not None and isinstance(driver, PlannerDriver) else driver
-    runner = PerceivedDriver(watched, Perceiver(spec.perception, sim.renderer, scenario.classes, sim.config.camera_rate_hz)) if perceived else watched
+    runner = (
+        PerceivedDriver(watched, Perceiver(spec.perception, sim.renderer, scenario.classes, sim.config.camera_rate_hz))
+        if perceived
+        else watched
+    )
     log = run_episode(sim, runner, np.random.default_rng(spec.seed), start_pose(scenario.start, spec.seed))
     metrics = score_run(log, scenario, sim.world, profile, ZoneRules(footprint_m=sim.config.vehicle.footprint_m))
     planner = driver if isinstance(driver, PlannerDriver) else None
-    return RunResult(spec.scenario, spec.seed, spec.driver, metrics, log.trace[::3, :2].astype(np.float32),
-                     frames=_kept_frames(planner, log), run=_kept_run(spec, planner, log))
+    return RunResult(
+        spec.scenario,
+        spec.seed,
+        spec.driver,
+        metrics,
+        log.trace[::3, :2].astype(np.float32),
+        frames=_kept_frames(planner, log),
+        run=_kept_run(spec, planner, log),
+    )
 
 
 def _sim_and_driver(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: PreferenceProfile) -> tuple[Simulation, Driver]:
@@ -286,8 +317,11 @@ def _kept_frames(planner: PlannerDriver | None, log: EpisodeLog) -> tuple[KeptFr
     the class image it was decided on (what the planner received, under a perception model)."""
     if planner is None:
         return ()
-    frames = [KeptFrame(number, tuple(log.trace[3 * number]), d.probs, d.index, planner.image_of[number])
-              for number, d in zip(planner.frames, planner.decisions, strict=True) if number in planner.image_of]
+    frames = [
+        KeptFrame(number, tuple(log.trace[3 * number]), d.probs, d.index, planner.image_of[number])
+        for number, d in zip(planner.frames, planner.decisions, strict=True)
+        if number in planner.image_of
+    ]
     return tuple(sorted(frames, key=lambda f: f.number))
 
 
@@ -297,13 +331,22 @@ def _kept_run(spec: RunSpec, planner: PlannerDriver | None, log: EpisodeLog) -> 
     if not spec.keep_run or planner is None or not planner.decisions:
         return None
     numbers = np.array(planner.frames, dtype=np.int64)
-    return KeptRun(log.trace[3 * numbers].copy(), np.array([d.index for d in planner.decisions]),
-                   np.stack([d.probs for d in planner.decisions]).astype(np.float32), log.commands[numbers].copy(),
-                   tuple(d.stop for d in planner.decisions))
+    return KeptRun(
+        log.trace[3 * numbers].copy(),
+        np.array([d.index for d in planner.decisions]),
+        np.stack([d.probs for d in planner.decisions]).astype(np.float32),
+        log.commands[numbers].copy(),
+        tuple(d.stop for d in planner.decisions),
+    )
 
 
-def run_many(specs: list[RunSpec], workers: int | None = None, progress: Callable[[int, int], None] | None = None,
-             engine: Engine | None = None, watch: Watch | None = None) -> list[RunResult]:
+def run_many(
+    specs: list[RunSpec],
+    workers: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    engine: Engine | None = None,
+    watch: Watch | None = None,
+) -> list[RunResult]:
     """Run specs on ``engine`` (default: local processes, ``workers`` of them); results in the order
     given. With ``watch`` (:func:`run_one`), one after another in this process instead."""
     if watch is not None:

@@ -98,8 +98,14 @@ class ZoneResult:
         return cls(**{f.name: data[f.name] for f in fields(cls) if f.name in data})
 
 
-def score_zones(trace: np.ndarray, scenario: Scenario, world: WorldMap, profile: PreferenceProfile, progress_m: float | None = None,
-                rules: ZoneRules = ZoneRules()) -> list[ZoneResult]:
+def score_zones(
+    trace: np.ndarray,
+    scenario: Scenario,
+    world: WorldMap,
+    profile: PreferenceProfile,
+    progress_m: float | None = None,
+    rules: ZoneRules = ZoneRules(),
+) -> list[ZoneResult]:
     """Score every zone of ``scenario`` for the driven path ``trace``.
 
     Args:
@@ -203,7 +209,9 @@ def _clearance(points: np.ndarray, world: WorldMap, exclude: int | None) -> floa
     d = np.sqrt(((points[:, None, :] - cells[None, :, :]) ** 2).sum(axis=2)).min()
     if d > CLEARANCE_REACH_M:
         return None
-    inside = other[np.clip((points[:, 1] / res).astype(int) - r0, 0, r1 - r0 - 1), np.clip((points[:, 0] / res).astype(int) - c0, 0, c1 - c0 - 1)]
+    inside = other[
+        np.clip((points[:, 1] / res).astype(int) - r0, 0, r1 - r0 - 1), np.clip((points[:, 0] / res).astype(int) - c0, 0, c1 - c0 - 1)
+    ]
     return 0.0 if inside.any() else round(float(d), 3)
 
 
@@ -249,7 +257,9 @@ class RunMetrics:
         return from_plain(cls, data)
 
 
-def score_run(log: EpisodeLog, scenario: Scenario, world: WorldMap, profile: PreferenceProfile, rules: ZoneRules = ZoneRules()) -> RunMetrics:
+def score_run(
+    log: EpisodeLog, scenario: Scenario, world: WorldMap, profile: PreferenceProfile, rules: ZoneRules = ZoneRules()
+) -> RunMetrics:
     """All metrics of the run ``log`` of ``scenario`` on ``world``: from its path (every controller
     tick's pose), whether it completed and how it ended, its collisions and contact, its stops
     and its duration; ``rules`` how its zones are scored."""

@@ -40,8 +40,15 @@ class HorizonAttitude:
         max_deg: estimates beyond this pitch or roll are not believed (0 instead) [deg].
     """
 
-    def __init__(self, camera: PinholeCamera, column_step_px: int = 16, row_step_px: int = 2, band_deg: float = 10.0, memory: int = 200,
-                 max_deg: float = 6.0) -> None:
+    def __init__(
+        self,
+        camera: PinholeCamera,
+        column_step_px: int = 16,
+        row_step_px: int = 2,
+        band_deg: float = 10.0,
+        memory: int = 200,
+        max_deg: float = 6.0,
+    ) -> None:
         c = camera.config
         self.fy, self.cx, self.cy = camera.fy, camera.cx, camera.cy
         horizon = camera.horizon_row()

@@ -35,6 +35,7 @@ def sky_line(ids: np.ndarray, rows: np.ndarray, n_cols: int, unknown: int) -> np
                 break
     return out
 
+
 @njit(cache=True, nogil=True)
 def column_medians(history: np.ndarray, count: int, rows: np.ndarray) -> np.ndarray:
     """Median of each column of ``history[:count]`` (M, C) over its non-NaN entries, (C,); NaN
@@ -74,6 +75,7 @@ def column_medians(history: np.ndarray, count: int, rows: np.ndarray) -> np.ndar
                 break
         out[c] = high if n % 2 == 1 else (low + high) / 2.0
     return out
+
 
 @njit(cache=True, nogil=True)
 def exact_sum(values: np.ndarray) -> float:
@@ -118,6 +120,7 @@ def exact_sum(values: np.ndarray) -> float:
             hi = x
     return hi
 
+
 @njit(cache=True, nogil=True)
 def _interp(x: float, xp: np.ndarray, fp: np.ndarray) -> float:
     """``np.interp(x, xp, fp)`` for increasing ``xp`` (the ends held beyond it)."""
@@ -136,6 +139,7 @@ def _interp(x: float, xp: np.ndarray, fp: np.ndarray) -> float:
         if np.isnan(out) and fp[j] == fp[j + 1]:
             out = fp[j]
     return out
+
 
 @njit(cache=True, nogil=True)
 def _gradient(f: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -164,6 +168,7 @@ def _gradient(f: np.ndarray, x: np.ndarray) -> np.ndarray:
     out[0] = (f[1] - f[0]) / dx[0]
     out[n - 1] = (f[n - 1] - f[n - 2]) / dx[n - 2]
     return out
+
 
 @njit(cache=True, nogil=True)
 def attitude_fit(departure: np.ndarray, reference: np.ndarray, u: np.ndarray, fy: float, cy: float, max_rad: float) -> tuple[float, float]:

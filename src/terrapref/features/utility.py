@@ -170,14 +170,28 @@ class UtilityFeaturizer:
         """u^5 = 1 - (d - d_min) / (d_max - d_min); all ones when the range is below ``eps``."""
         return kernels.normalise(np.asarray(d, dtype=np.float64), eps)
 
-    def __call__(self, image: np.ndarray | SegmentationView, pose: Pose, path: ReferencePath, progress_m: float | None = None) -> np.ndarray:
+    def __call__(
+        self, image: np.ndarray | SegmentationView, pose: Pose, path: ReferencePath, progress_m: float | None = None
+    ) -> np.ndarray:
         """U, shape (m, n_features) float32: terrain shares, then the distance utility."""
         if self.config.distance_mode is DistanceMode.LOOKAHEAD and progress_m is not None:  # the usual case, in one compiled call
             x, y, yaw = pose
             tx, ty = path.point_at(progress_m + self.config.preference.horizon_m)
             ids = as_view(image).pixels(self._pix_flat)
-            return kernels.utilities(ids, self._column, self._point_row, len(self.config.feature_classes), self._scale, self._ex, self._ey,
-                                     math.cos(yaw), math.sin(yaw), x - tx, y - ty, NORMALISE_EPS)
+            return kernels.utilities(
+                ids,
+                self._column,
+                self._point_row,
+                len(self.config.feature_classes),
+                self._scale,
+                self._ex,
+                self._ey,
+                math.cos(yaw),
+                math.sin(yaw),
+                x - tx,
+                y - ty,
+                NORMALISE_EPS,
+            )
         u = np.empty((self.m, self.config.n_features), dtype=np.float32)
         u[:, :-1] = self.terrain(image)
         u[:, -1] = self.normalise(self.distances(pose, path, progress_m))

@@ -38,6 +38,7 @@ def terrain_shares(ids: np.ndarray, column: np.ndarray, row: np.ndarray, m: int,
             out[i, j] = counts[i, j] * scale
     return out
 
+
 @njit(cache=True, nogil=True)
 def end_distances(ex: np.ndarray, ey: np.ndarray, c: float, s: float, dx: float, dy: float) -> np.ndarray:
     """Distances (m,) of endpoints (ex, ey) rotated by (c, s) and shifted by (dx, dy) from the origin.
@@ -48,6 +49,7 @@ def end_distances(ex: np.ndarray, ey: np.ndarray, c: float, s: float, dx: float,
     for i in range(ex.shape[0]):
         out[i] = math.hypot(ex[i] * c - ey[i] * s + dx, ex[i] * s + ey[i] * c + dy)
     return out
+
 
 @njit(cache=True, nogil=True)
 def normalise(d: np.ndarray, eps: float) -> np.ndarray:
@@ -65,9 +67,22 @@ def normalise(d: np.ndarray, eps: float) -> np.ndarray:
         out[i] = (hi - flat[i]) * inv
     return out.reshape(d.shape)
 
+
 @njit(cache=True, nogil=True)
-def utilities(ids: np.ndarray, column: np.ndarray, row: np.ndarray, k: int, scale: float, ex: np.ndarray, ey: np.ndarray,
-              c: float, s: float, dx: float, dy: float, eps: float) -> np.ndarray:
+def utilities(
+    ids: np.ndarray,
+    column: np.ndarray,
+    row: np.ndarray,
+    k: int,
+    scale: float,
+    ex: np.ndarray,
+    ey: np.ndarray,
+    c: float,
+    s: float,
+    dx: float,
+    dy: float,
+    eps: float,
+) -> np.ndarray:
     """U (m, k + 1) float32 of one frame with the look-ahead distance: :func:`terrain_shares`,
     then :func:`normalise` of :func:`end_distances`, each converted to float32 as NumPy assigns
     float64 into a float32 array (one call where the features made five)."""

@@ -79,9 +79,13 @@ class ImportReport:
     def lines(self) -> list[str]:
         out = [f"images read      {self.images}", f"frames kept      {self.frames} ({self.duration_s:.1f} s)"]
         out += [f"skipped          {n} {reason}" for reason, n in sorted(self.skipped.items())]
-        out.append(f"label ids        {100 * self.unmapped_share:.2f}% of pixels not in the label map; {100 * self.unknown_share:.1f}% unknown after mapping")
+        out.append(
+            f"label ids        {100 * self.unmapped_share:.2f}% of pixels not in the label map; {100 * self.unknown_share:.1f}% unknown after mapping"
+        )
         if self.image_gaps:
-            out.append(f"image gaps       {self.image_gaps} longer than max_gap_s (longest {self.longest_gap_s:.2f} s); frames on either side kept")
+            out.append(
+                f"image gaps       {self.image_gaps} longer than max_gap_s (longest {self.longest_gap_s:.2f} s); frames on either side kept"
+            )
         out.append(f"path             {self.path_source}")
         out.append(f"order            {self.order}")
         out += [f"note             {n}" for n in self.notes]
@@ -144,8 +148,9 @@ class _Bag:
         if problems:
             have = sorted({c.topic for c in self.reader.connections})
             shown = ", ".join(have[:12]) + (" ..." if len(have) > 12 else "")
-            raise UserError(self.source, f"{'; '.join(problems)} (topics in {robot.source}; the bag has {shown or 'no topics'})",
-                            field="topics")
+            raise UserError(
+                self.source, f"{'; '.join(problems)} (topics in {robot.source}; the bag has {shown or 'no topics'})", field="topics"
+            )
 
     def _topic_problem(self, topic: str, role: str) -> str | None:
         conns = [c for c in self.reader.connections if c.topic == topic]
@@ -205,9 +210,13 @@ def _rotation(q) -> np.ndarray:
     x, y, z, w = q.x, q.y, q.z, q.w
     n = math.sqrt(x * x + y * y + z * z + w * w) or 1.0
     x, y, z, w = x / n, y / n, z / n, w / n
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def camera_mount_from_tf(static: dict, base: str, camera_frame: str, source: str, notes: list[str]) -> dict[str, float]:
@@ -220,7 +229,11 @@ def camera_mount_from_tf(static: dict, base: str, camera_frame: str, source: str
     while frame != base:
         if frame not in static or len(chain) > 32:
             have = ", ".join(sorted(f"{p} -> {c}" for c, (p, _, _) in static.items())) or "none"
-            raise UserError(source, f"no static transform chain from {base} to the camera frame {camera_frame!r} in /tf_static (transforms: {have})", field="camera.tf")
+            raise UserError(
+                source,
+                f"no static transform chain from {base} to the camera frame {camera_frame!r} in /tf_static (transforms: {have})",
+                field="camera.tf",
+            )
         parent, t, r = static[frame]
         chain.append((t, r))
         frame = parent
@@ -232,8 +245,12 @@ def camera_mount_from_tf(static: dict, base: str, camera_frame: str, source: str
     axis = r_total @ (np.array([0.0, 0.0, 1.0]) if optical else np.array([1.0, 0.0, 0.0]))
     if abs(t_total[1]) > 0.05:
         notes.append(f"the camera sits {t_total[1]:+.2f} m to the side of {base}; terrapref's camera model ignores a lateral offset")
-    return {"height_m": float(t_total[2]), "forward_m": float(t_total[0]), "pitch_deg": math.degrees(math.asin(float(np.clip(-axis[2], -1, 1)))),
-            "yaw_deg": math.degrees(math.atan2(axis[1], axis[0]))}
+    return {
+        "height_m": float(t_total[2]),
+        "forward_m": float(t_total[0]),
+        "pitch_deg": math.degrees(math.asin(float(np.clip(-axis[2], -1, 1)))),
+        "yaw_deg": math.degrees(math.atan2(axis[1], axis[0])),
+    }
 
 
 def _definition_types(connection) -> dict:
@@ -246,7 +263,11 @@ def _definition_types(connection) -> dict:
         return get_types_from_msg(definition.data, connection.msgtype)
     if definition.format == MessageDefinitionFormat.IDL:
         sep = "=" * 80 + "\n"
-        parts = [p.split("\n", 1)[1] for p in definition.data.split(sep)[1:]] if definition.data.startswith(f"{sep}IDL: ") else [definition.data]
+        parts = (
+            [p.split("\n", 1)[1] for p in definition.data.split(sep)[1:]]
+            if definition.data.startswith(f"{sep}IDL: ")
+            else [definition.data]
+        )
         types: dict = {}
         for idl in parts:
             types.update(get_types_from_idl(idl))
@@ -313,7 +334,9 @@ def _read_small_topics(bag: _Bag, robot: RobotConfig) -> _Streams:
         try:
             read.take(role, conn, t_ns, msg)
         except (AttributeError, TypeError, ValueError) as exc:
-            raise UserError(bag.source, f"topic {conn.topic}: a {conn.msgtype} without the expected fields ({exc})", field=f"topics.{role}") from None
+            raise UserError(
+                bag.source, f"topic {conn.topic}: a {conn.msgtype} without the expected fields ({exc})", field=f"topics.{role}"
+            ) from None
     if read.info is None:
         raise UserError(bag.source, f"topic {topics['camera_info']} holds no camera calibration", field="topics.camera_info")
     if len(read.odom_t) < 2:
@@ -357,7 +380,11 @@ class _SmallTopics:
         elif role == "tf_static":
             for tr in msg.transforms:
                 v = tr.transform.translation
-                self.static[str(tr.child_frame_id).lstrip("/")] = (str(tr.header.frame_id).lstrip("/"), np.array([v.x, v.y, v.z]), _rotation(tr.transform.rotation))
+                self.static[str(tr.child_frame_id).lstrip("/")] = (
+                    str(tr.header.frame_id).lstrip("/"),
+                    np.array([v.x, v.y, v.z]),
+                    _rotation(tr.transform.rotation),
+                )
 
     def streams(self) -> _Streams:
         """The streams without non-finite samples, each sorted by time, yaw unwrapped."""
@@ -380,7 +407,9 @@ class _SmallTopics:
         return _Streams(o_t, o, c_t[order], c[order], self.path, self.info, self.static, shift)
 
 
-def camera_from_info(info, robot: RobotConfig, source: str, static: dict | None = None, notes: list[str] | None = None) -> tuple[CameraConfig, np.ndarray | None]:
+def camera_from_info(
+    info, robot: RobotConfig, source: str, static: dict | None = None, notes: list[str] | None = None
+) -> tuple[CameraConfig, np.ndarray | None]:
     """The camera (CameraConfig) and, for a distorted lens, the nearest-pixel undistortion map;
     the mounting from the robot file, or from ``static`` transforms when it says ``tf``."""
     try:
@@ -392,13 +421,29 @@ def camera_from_info(info, robot: RobotConfig, source: str, static: dict | None 
         raise UserError(source, f"camera_info unreadable ({exc})", field="topics.camera_info") from None
     fx, fy, cx, cy = k[0, 0], k[1, 1], k[0, 2], k[1, 2]
     if width <= 0 or height <= 0 or not (fx > 0 and fy > 0 and np.isfinite([fx, fy, cx, cy]).all()):
-        raise UserError(source, f"camera_info: image {width} x {height}, K {k.ravel().tolist()} is not a calibration", field="topics.camera_info")
+        raise UserError(
+            source, f"camera_info: image {width} x {height}, K {k.ravel().tolist()} is not a calibration", field="topics.camera_info"
+        )
     cam = dict(robot.camera)
     if "tf" in cam:
-        cam.update(camera_mount_from_tf(static or {}, str(cam["tf"]).lstrip("/"), str(info.header.frame_id).lstrip("/"), source, notes if notes is not None else []))
+        cam.update(
+            camera_mount_from_tf(
+                static or {}, str(cam["tf"]).lstrip("/"), str(info.header.frame_id).lstrip("/"), source, notes if notes is not None else []
+            )
+        )
         if not (0.05 <= cam["height_m"] <= 10.0 and -89.0 <= cam["pitch_deg"] <= 89.0):
-            raise UserError(source, f"/tf_static puts the camera {cam['height_m']:.2f} m high, pitched {cam['pitch_deg']:.1f} deg: not a ground-looking camera", field="camera.tf")
-    mount = dict(mount_height_m=cam["height_m"], mount_forward_m=cam["forward_m"], pitch_deg=cam["pitch_deg"], yaw_deg=cam["yaw_deg"], max_range_m=cam["max_range_m"])
+            raise UserError(
+                source,
+                f"/tf_static puts the camera {cam['height_m']:.2f} m high, pitched {cam['pitch_deg']:.1f} deg: not a ground-looking camera",
+                field="camera.tf",
+            )
+    mount = dict(
+        mount_height_m=cam["height_m"],
+        mount_forward_m=cam["forward_m"],
+        pitch_deg=cam["pitch_deg"],
+        yaw_deg=cam["yaw_deg"],
+        max_range_m=cam["max_range_m"],
+    )
     hfov = math.degrees(2 * math.atan(width / (2 * fx)))
     camera = CameraConfig(width_px=width, height_px=height, hfov_deg=hfov, fx=fx, fy=fy, cx=cx, cy=cy, **mount)
     # A centred pinhole with square pixels is written by its field of view, as terrapref's own
@@ -440,17 +485,27 @@ def _decode(conn, msg, source: str, labels=None, t_s: float | None = None) -> np
         dtype = np.dtype(">u2" if msg.is_bigendian else "<u2")
     elif encoding in ("rgb8", "bgr8"):
         if labels is None or not labels.colors:
-            raise UserError(source, f"topic {conn.topic}: {msg.encoding} colour images need a colour table (colors) in the label map", field="labels")
+            raise UserError(
+                source, f"topic {conn.topic}: {msg.encoding} colour images need a colour table (colors) in the label map", field="labels"
+            )
         data = np.frombuffer(bytes(msg.data), dtype=np.uint8)
         if step < 3 * w or len(data) < step * h:
-            raise UserError(source, f"topic {conn.topic}: image data of {len(data)} bytes does not hold {h} rows of {step}", field="topics.segmentation")
+            raise UserError(
+                source, f"topic {conn.topic}: image data of {len(data)} bytes does not hold {h} rows of {step}", field="topics.segmentation"
+            )
         rgb = data[: step * h].reshape(h, step)[:, : 3 * w].reshape(h, w, 3)
         return labels.decode_rgb(rgb[..., ::-1] if encoding == "bgr8" else rgb)
     else:
-        raise UserError(source, f"topic {conn.topic}: image encoding {msg.encoding!r}; label ids come as mono8 or mono16 (or rgb8 with a colour table)", field="topics.segmentation")
+        raise UserError(
+            source,
+            f"topic {conn.topic}: image encoding {msg.encoding!r}; label ids come as mono8 or mono16 (or rgb8 with a colour table)",
+            field="topics.segmentation",
+        )
     data = np.frombuffer(bytes(msg.data), dtype=np.uint8)
     if step < w * dtype.itemsize or len(data) < step * h:
-        raise UserError(source, f"topic {conn.topic}: image data of {len(data)} bytes does not hold {h} rows of {step}", field="topics.segmentation")
+        raise UserError(
+            source, f"topic {conn.topic}: image data of {len(data)} bytes does not hold {h} rows of {step}", field="topics.segmentation"
+        )
     rows = data[: step * h].reshape(h, step)[:, : w * dtype.itemsize]
     return np.ascontiguousarray(rows).view(dtype).reshape(h, w).astype(np.uint16 if dtype.itemsize == 2 else np.uint8)
 
@@ -465,8 +520,12 @@ def _decode_png(conn, msg, source: str, t_s: float | None) -> np.ndarray:
         raise UserError(source, f"{where}: CompressedImage format {msg.format!r}; label ids need lossless png", field="topics.segmentation")
     if "compresseddepth" in fmt:
         if not fmt.startswith(("16uc1", "mono16")):
-            raise UserError(source, f"{where}: compressedDepth of {msg.format.split(';')[0].strip()!r} holds depth, not label ids; "
-                                    "publish the ids as 16UC1 (or mono8/mono16 png)", field="topics.segmentation")
+            raise UserError(
+                source,
+                f"{where}: compressedDepth of {msg.format.split(';')[0].strip()!r} holds depth, not label ids; "
+                "publish the ids as 16UC1 (or mono8/mono16 png)",
+                field="topics.segmentation",
+            )
         data = data[COMPRESSED_DEPTH_HEADER:]
     try:
         with PILImage.open(io.BytesIO(data)) as im:
@@ -488,7 +547,7 @@ def smooth_path(xy: np.ndarray, spacing_m: float = 1.0) -> np.ndarray:
     pts = np.stack([np.interp(grid, s, xy[:, 0]), np.interp(grid, s, xy[:, 1])], axis=1)
     half = min(int(PATH_SMOOTHING_M / 0.25), len(pts) - 1)
     # Odd reflection at both ends: the path starts and ends where the drive did, and straight runs stay straight.
-    padded = np.concatenate([2 * pts[0] - pts[half:0:-1], pts, 2 * pts[-1] - pts[-2:-half - 2:-1]])
+    padded = np.concatenate([2 * pts[0] - pts[half:0:-1], pts, 2 * pts[-1] - pts[-2 : -half - 2 : -1]])
     kernel = np.ones(2 * half + 1) / (2 * half + 1)
     smooth = np.stack([np.convolve(padded[:, k], kernel, mode="valid") for k in range(2)], axis=1)
     take = np.arange(0, len(smooth), int(spacing_m / 0.25))
@@ -539,8 +598,9 @@ class ImportOptions:
     profile: PreferenceProfile | None = None
 
 
-def import_bag(bag_path: str | Path, robot: RobotConfig, out: str | Path, options: ImportOptions = ImportOptions(),
-               show_progress: bool = True) -> ImportReport:
+def import_bag(
+    bag_path: str | Path, robot: RobotConfig, out: str | Path, options: ImportOptions = ImportOptions(), show_progress: bool = True
+) -> ImportReport:
     """Turn a bag into a recording at ``out`` that inspect, featurize and train accept."""
     bag_path, out = Path(bag_path), Path(out)
     rate_hz, force, check_camera = options.rate_hz, options.force, options.check_camera
@@ -558,8 +618,10 @@ def import_bag(bag_path: str | Path, robot: RobotConfig, out: str | Path, option
     elif profile is not None:
         report.order = f"{' > '.join(profile.order)} (the robot file's profile)"
     else:
-        report.order = ("none declared (the robot file has no profile:); featurize and train need the order the driver had: "
-                        "import again with --profile or add profile: to the robot file")
+        report.order = (
+            "none declared (the robot file has no profile:); featurize and train need the order the driver had: "
+            "import again with --profile or add profile: to the robot file"
+        )
     tmp = new_folder(out, ".importing")
     try:
         _import(_Request(bag, robot, classes, rate_hz, check_camera, profile), tmp / "rec", show_progress, report)
@@ -576,22 +638,34 @@ def _import(req: _Request, out: Path, show_progress: bool, report: ImportReport)
     bag.check_topics(robot, ["segmentation", "odometry", "command", "camera_info"] + (["path"] if robot.path_topic else []))
     if bag.unreadable:
         shown = ", ".join(f"{topic} ({msgtype})" for topic, (msgtype, _) in sorted(bag.unreadable.items())[:4])
-        report.notes.append(f"left out {len(bag.unreadable)} topic(s) whose message definition in the log cannot be read: {shown}"
-                            + (" ..." if len(bag.unreadable) > 4 else ""))
+        report.notes.append(
+            f"left out {len(bag.unreadable)} topic(s) whose message definition in the log cannot be read: {shown}"
+            + (" ..." if len(bag.unreadable) > 4 else "")
+        )
     seg_conns = bag.connections(robot.topics["segmentation"], "segmentation", robot.source)
     streams = _read_small_topics(bag, robot)
     if len(streams.cmd_t) == 0:
         raise UserError(bag.source, f"topic {robot.topics['command']} holds no usable command", field="topics.command")
     if streams.receive_shift_s:
-        report.notes.append(f"header stamps run {streams.receive_shift_s:+.1f} s from when the log received the messages (simulated time?); "
-                            "unstamped messages (a Twist command) are moved onto the stamps' clock")
+        report.notes.append(
+            f"header stamps run {streams.receive_shift_s:+.1f} s from when the log received the messages (simulated time?); "
+            "unstamped messages (a Twist command) are moved onto the stamps' clock"
+        )
     camera, undistort = camera_from_info(streams.info, robot, bag.source, streams.static, report.notes)
     if req.check_camera is not None:
         req.check_camera(camera)
     placement = _Placement.of(streams.odom[:, :2], _reference_path(req, streams, report))
     preference = PreferenceSetConfig()
-    conversion = _Conversion(req.rate_hz, robot.max_gap_s, preference.control, robot.labels.lut(req.classes), robot.labels.listed(),
-                             undistort, placement.shift, robot.labels)
+    conversion = _Conversion(
+        req.rate_hz,
+        robot.max_gap_s,
+        preference.control,
+        robot.labels.lut(req.classes),
+        robot.labels.listed(),
+        undistort,
+        placement.shift,
+        robot.labels,
+    )
     scenario = _scenario(bag_path_name(bag.source), placement.path, placement.start(streams.odom[0]), tuple(placement.size), req.classes)
     meta = _meta(req, scenario, camera, preference, placement)
     progress = Progress("import", sum(c.msgcount for c in seg_conns), enabled=show_progress)
@@ -650,9 +724,15 @@ class _Placement:
 def _meta(req: _Request, scenario: dict, camera: CameraConfig, preference: PreferenceSetConfig, placement: _Placement) -> RecordingMeta:
     """The recording's meta.json entries of an import."""
     return RecordingMeta(
-        scenario=scenario["name"], camera=camera, preference_set=preference, sim=SimMeta(req.rate_hz), classes=req.classes,
-        profile=tuple(req.profile.order) if req.profile is not None else None, driver=ImportedInfo(req.bag.source, req.robot.source, req.robot.labels.name),
-        path=tuple((x, y) for x, y in placement.path.tolist()), origin_shift_m=(float(placement.shift[0]), float(placement.shift[1])),
+        scenario=scenario["name"],
+        camera=camera,
+        preference_set=preference,
+        sim=SimMeta(req.rate_hz),
+        classes=req.classes,
+        profile=tuple(req.profile.order) if req.profile is not None else None,
+        driver=ImportedInfo(req.bag.source, req.robot.source, req.robot.labels.name),
+        path=tuple((x, y) for x, y in placement.path.tolist()),
+        origin_shift_m=(float(placement.shift[0]), float(placement.shift[1])),
     )
 
 
@@ -670,8 +750,11 @@ def _stream_images(req: _Request, seg_conns: list, shape: tuple[int, int], frame
         ids = _decode(conn, msg, bag.source, req.robot.labels, (t_ns - bag.reader.start_time) * 1e-9)
         report.images += 1
         if ids.shape != shape:
-            raise UserError(bag.source, f"topic {conn.topic}: image {ids.shape[1]} x {ids.shape[0]}, camera_info says {shape[1]} x {shape[0]}",
-                            field="topics.segmentation")
+            raise UserError(
+                bag.source,
+                f"topic {conn.topic}: image {ids.shape[1]} x {ids.shape[0]}, camera_info says {shape[1]} x {shape[0]}",
+                field="topics.segmentation",
+            )
         if last_image_t is not None and t - last_image_t > req.robot.max_gap_s:
             report.image_gaps += 1
             report.longest_gap_s = max(report.longest_gap_s, t - last_image_t)
@@ -797,10 +880,18 @@ class _Frames:
         progress.close(f"{writer.count} frames from {report.images} images")
         if writer.count == 0:
             writer.abort()
-            spans = [(name, t) for name, t in (("images", self.image_span), ("odometry", self.streams.odom_t), ("commands", self.streams.cmd_t)) if len(t)]
+            spans = [
+                (name, t)
+                for name, t in (("images", self.image_span), ("odometry", self.streams.odom_t), ("commands", self.streams.cmd_t))
+                if len(t)
+            ]
             when = "; ".join(f"{name} {min(t):.1f}-{max(t):.1f} s" for name, t in spans if np.isfinite(min(t)))
-            raise UserError(source, f"no usable frame: {', '.join(f'{n} {r}' for r, n in report.skipped.items()) or 'no images'}"
-                                    + (f" (stamps: {when})" if when else ""), field="topics.segmentation")
+            raise UserError(
+                source,
+                f"no usable frame: {', '.join(f'{n} {r}' for r, n in report.skipped.items()) or 'no images'}"
+                + (f" (stamps: {when})" if when else ""),
+                field="topics.segmentation",
+            )
         report.frames = writer.count
         report.duration_s = float(self.last_t - self.t_first) + 1.0 / self.conversion.rate_hz
         report.unmapped_share = self.unmapped / max(self.pixels, 1)

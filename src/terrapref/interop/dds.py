@@ -83,15 +83,20 @@ class QosProfile:
         """The cyclonedds Qos of an endpoint of this profile, with ``user_data`` (XCDR1 only, as ROS 2's middlewares)."""
         from cyclonedds.core import Policy, Qos
 
-        return Qos(Policy.Reliability.Reliable(100_000_000) if self.reliable else Policy.Reliability.BestEffort,
-                   Policy.History.KeepLast(self.depth),
-                   Policy.Durability.TransientLocal if self.transient_local else Policy.Durability.Volatile,
-                   Policy.DataRepresentation(use_cdrv0_representation=True), Policy.Userdata(user_data))
+        return Qos(
+            Policy.Reliability.Reliable(100_000_000) if self.reliable else Policy.Reliability.BestEffort,
+            Policy.History.KeepLast(self.depth),
+            Policy.Durability.TransientLocal if self.transient_local else Policy.Durability.Volatile,
+            Policy.DataRepresentation(use_cdrv0_representation=True),
+            Policy.Userdata(user_data),
+        )
 
     def describe(self) -> str:
         """The profile in words, as the docs and the node's log give it."""
-        return (f"{'reliable' if self.reliable else 'best effort'}, keep last {self.depth}, "
-                f"{'transient local' if self.transient_local else 'volatile'}")
+        return (
+            f"{'reliable' if self.reliable else 'best effort'}, keep last {self.depth}, "
+            f"{'transient local' if self.transient_local else 'volatile'}"
+        )
 
 
 SENSOR_DATA = QosProfile("sensor data", reliable=False, depth=5)  # rclcpp's SensorDataQoS: camera streams
@@ -129,8 +134,9 @@ class MessageTypes:
         if msgtype not in self._idl:
             fields = {name: self._field(node) for name, node in self.ts.fielddefs[msgtype][1]}
             # An empty message is one uint8 in ROS 2's IDL (a struct needs a member).
-            self._idl[msgtype] = make_idl_struct(msgtype.rsplit("/", 1)[1] + "_", dds_type(msgtype),
-                                                 fields or {"structure_needs_at_least_one_member": T.uint8})
+            self._idl[msgtype] = make_idl_struct(
+                msgtype.rsplit("/", 1)[1] + "_", dds_type(msgtype), fields or {"structure_needs_at_least_one_member": T.uint8}
+            )
         return self._idl[msgtype]
 
     def _field(self, node: tuple) -> Any:

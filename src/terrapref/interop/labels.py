@@ -73,7 +73,9 @@ class LabelMap:
         ``unlisted`` for the ids the map does not list."""
         missing = sorted({n for n in self.ids.values() if n != UNKNOWN_NAME} - set(classes.names))
         if missing:
-            raise ConfigError(self.source or self.name, f"class {missing[0]!r} is not in the class table ({', '.join(classes.names)})", field="ids")
+            raise ConfigError(
+                self.source or self.name, f"class {missing[0]!r} is not in the class table ({', '.join(classes.names)})", field="ids"
+            )
         lut = np.full(MAX_ID + 1, unlisted, dtype=np.uint8)
         for source_id, name in self.ids.items():
             lut[source_id] = UNKNOWN if name == UNKNOWN_NAME else classes.id_of(name)
@@ -127,7 +129,11 @@ def parse_label_map(data: dict, source: str) -> LabelMap:
         for key, value in colors.items():
             if isinstance(key, bool) or not isinstance(key, int) or not 0 <= key < MAX_ID:
                 problems.append(Problem(f"colors.{key}", f"a label id must be an integer in 0..{MAX_ID - 1}"))
-            elif not (isinstance(value, list) and len(value) == 3 and all(isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 255 for v in value)):
+            elif not (
+                isinstance(value, list)
+                and len(value) == 3
+                and all(isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 255 for v in value)
+            ):
                 problems.append(Problem(f"colors.{key}", "expected [r, g, b] with integers 0..255"))
             elif tuple(value) in out_colors.values():
                 problems.append(Problem(f"colors.{key}", f"colour {value} is already another id's"))
@@ -144,13 +150,17 @@ def parse_label_map(data: dict, source: str) -> LabelMap:
 def unlisted_message(ids: list[int], where: str) -> str:
     """The error for label ids a map does not list, seen ``where``."""
     shown = ", ".join(str(i) for i in ids[:8]) + (" ..." if len(ids) > 8 else "")
-    return (f"label id{'s' if len(ids) > 1 else ''} {shown} in {where} not listed: add {'them' if len(ids) > 1 else 'it'} "
-            "(as a class or as unknown), or set unlisted: unknown")
+    return (
+        f"label id{'s' if len(ids) > 1 else ''} {shown} in {where} not listed: add {'them' if len(ids) > 1 else 'it'} "
+        "(as a class or as unknown), or set unlisted: unknown"
+    )
 
 
 def packaged_label_maps() -> list[str]:
     """Names of the label maps that ship with terrapref."""
-    return sorted(p.name.removesuffix(".yaml") for p in resources.files("terrapref.data").joinpath("labels").iterdir() if p.name.endswith(".yaml"))
+    return sorted(
+        p.name.removesuffix(".yaml") for p in resources.files("terrapref.data").joinpath("labels").iterdir() if p.name.endswith(".yaml")
+    )
 
 
 def load_label_map(name_or_path: str | Path, classes: ClassTable | None = None, source: str = "labels") -> LabelMap:

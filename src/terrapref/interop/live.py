@@ -67,10 +67,15 @@ class LiveView:
             reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
             raise UserError(f"{host}:{port}", f"cannot serve the live view ({reason})", field="--live-port") from None
         self.host = host
-        self.channels = {role: foxglove.Channel(topic, message_encoding="cdr", context=self.context,
-                                                schema=foxglove.Schema(name=msgtype, encoding="ros2msg",
-                                                                       data=self.ts.generate_msgdef(msgtype, ros_version=2)[0].encode()))
-                         for role, (topic, msgtype) in TOPICS.items()}
+        self.channels = {
+            role: foxglove.Channel(
+                topic,
+                message_encoding="cdr",
+                context=self.context,
+                schema=foxglove.Schema(name=msgtype, encoding="ros2msg", data=self.ts.generate_msgdef(msgtype, ros_version=2)[0].encode()),
+            )
+            for role, (topic, msgtype) in TOPICS.items()
+        }
 
     @property
     def port(self) -> int:
@@ -119,13 +124,29 @@ class LiveRun:
     _clock: tuple[float, float] | None = None  # the first frame's (run time [s], wall time [s])
 
     @classmethod
-    def start(cls, view: LiveView, path: np.ndarray, camera: CameraConfig, classes: ClassTable, preference: PreferenceSetConfig,
-              clock_s: float = 0.0) -> LiveRun:
+    def start(
+        cls,
+        view: LiveView,
+        path: np.ndarray,
+        camera: CameraConfig,
+        classes: ClassTable,
+        preference: PreferenceSetConfig,
+        clock_s: float = 0.0,
+    ) -> LiveRun:
         """A run on ``view`` whose frames' times are stamped as ``EPOCH_S + t - clock_s`` (a
         simulated run's times from 0; ``EPOCH_S`` for stamps that are already ROS times)."""
         none = np.zeros((0, 3))
-        header = RunFrames(times=np.zeros(0), poses=none, commands=none[:, :2], image=_no_image, chosen=np.zeros(0, dtype=int),
-                           path=np.asarray(path, dtype=float), camera=camera, classes=classes, preference=preference)
+        header = RunFrames(
+            times=np.zeros(0),
+            poses=none,
+            commands=none[:, :2],
+            image=_no_image,
+            chosen=np.zeros(0, dtype=int),
+            path=np.asarray(path, dtype=float),
+            camera=camera,
+            classes=classes,
+            preference=preference,
+        )
         if getattr(view, "wait", False):
             view.wait_for_viewer()
         return cls(view, replace(Scene.of(view.ts, header), t0_s=clock_s))
@@ -141,7 +162,6 @@ class LiveRun:
             frame = replace(frame, costmap=costmap())
         write_frame(self.view, self.scene, frame)
         self.frames += 1
-
 
     def _keep_pace(self, t_s: float) -> None:
         """Sleep until frame time ``t_s`` [s] is due at the view's pace (none: at once)."""
@@ -184,8 +204,18 @@ class WatchedDriver:
         command = self.inner.act(frame)
         decision = self.inner.last
         x, y, yaw = (float(v) for v in frame.pose)
-        self.run.frame(FrameData(float(frame.time_s), (x, y, yaw), (float(command.v), float(command.w)), frame.view.image, decision.index,
-                                 decision.probs, stop=decision.stop), planner_costmap(self.inner.planner))
+        self.run.frame(
+            FrameData(
+                float(frame.time_s),
+                (x, y, yaw),
+                (float(command.v), float(command.w)),
+                frame.view.image,
+                decision.index,
+                decision.probs,
+                stop=decision.stop,
+            ),
+            planner_costmap(self.inner.planner),
+        )
         return command
 
 

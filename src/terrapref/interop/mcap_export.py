@@ -95,7 +95,10 @@ class RunFrames:
     profile: tuple[str, ...] | None = None  # the driver's declared preference order (a recording's), for the robot file
 
 
-COSTMAP_TOPICS = {"costmap": (f"{PREFIX}/costmap", "nav_msgs/msg/OccupancyGrid"), "costmap_grid": (f"{PREFIX}/costmap_grid", "foxglove_msgs/msg/Grid")}
+COSTMAP_TOPICS = {
+    "costmap": (f"{PREFIX}/costmap", "nav_msgs/msg/OccupancyGrid"),
+    "costmap_grid": (f"{PREFIX}/costmap_grid", "foxglove_msgs/msg/Grid"),
+}
 # Frames between two costmaps: 1 Hz at 10 frames a second. The ground map the costmap shows
 # grows by about a metre of driving per second while the camera sees 20-30 m ahead, so a
 # costmap a second shows every change a viewer can see; compressed (zstd), the costmaps are
@@ -135,9 +138,20 @@ class Scene:
         c = run.preference.control
         trajectories = forward_simulate(np.full(c.m, c.v_mps), np.asarray(c.w_rps), run.preference.n_steps, run.preference.dt_s)
         lifetime = ts.types["builtin_interfaces/msg/Duration"](sec=0, nanosec=200_000_000)
-        markers = [zeroed(ts, "visualization_msgs/msg/Marker", ns="trajectories", id=j, type=4, action=0,
-                          pose=zeroed(ts, "geometry_msgs/msg/Pose", orientation=rpy_quaternion(ts, 0, 0, 0)), lifetime=lifetime,
-                          points=[point(ts, px, py, 0.02) for px, py in trajectories[j, :, :2]]) for j in range(c.m)]
+        markers = [
+            zeroed(
+                ts,
+                "visualization_msgs/msg/Marker",
+                ns="trajectories",
+                id=j,
+                type=4,
+                action=0,
+                pose=zeroed(ts, "geometry_msgs/msg/Pose", orientation=rpy_quaternion(ts, 0, 0, 0)),
+                lifetime=lifetime,
+                points=[point(ts, px, py, 0.02) for px, py in trajectories[j, :, :2]],
+            )
+            for j in range(c.m)
+        ]
         t0_s = float(run.times[0]) if len(run.times) else 0.0
         return cls(ts, run, t0_s, run.classes.palette(), markers, ts.types["visualization_msgs/msg/MarkerArray"](markers=markers), ros1)
 
@@ -156,8 +170,9 @@ def write_mcap(out: str | Path, run: RunFrames, robot_file: bool = True, progres
     return write_bag(out, run, ros1=False, robot_file=robot_file, progress=progress)
 
 
-def write_bag(out: str | Path, run: RunFrames, ros1: bool = False, robot_file: bool = True,
-              progress: Callable[[int, int], None] | None = None) -> Path:
+def write_bag(
+    out: str | Path, run: RunFrames, ros1: bool = False, robot_file: bool = True, progress: Callable[[int, int], None] | None = None
+) -> Path:
     """Write ``run`` at ``out`` (atomically) as a ROS 2 MCAP file, or with ``ros1`` as a ROS 1 bag
     (the same topics, ROS 1's types; the costmap as OccupancyGrid alone, Foxglove's Grid being a
     ROS 2 type); with ``robot_file``, also the terrapref-robot/1 file that imports it back."""
@@ -187,7 +202,9 @@ def _write_ros2(bag_dir: Path, run: RunFrames, progress: Callable[[int, int], No
 
     ts = typestore()
     writer = Writer(bag_dir, version=9, storage_plugin=StoragePlugin.MCAP)
-    writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)  # MCAP's own zstd chunks: Foxglove and ros2 bag read them as they are
+    writer.set_compression(
+        CompressionMode.STORAGE, CompressionFormat.ZSTD
+    )  # MCAP's own zstd chunks: Foxglove and ros2 bag read them as they are
     with writer:
         _write_frames(add_topics(writer, ts, _TOPICS if run.costmap is None else TOPICS), Scene.of(ts, run), progress)
     return next(bag_dir.glob("*.mcap"))
@@ -247,10 +264,20 @@ def _write_frame(topics: Topics, scene: Scene, i: int) -> None:
     ids = run.image(i)
     x, y, yaw = (float(v) for v in run.poses[i])
     v, w = (float(u) for u in run.commands[i])
-    write_frame(topics, scene, FrameData(float(run.times[i]), (x, y, yaw), (v, w), ids, int(run.chosen[i]),
-                                         run.probs[i] if run.probs is not None else None,
-                                         run.costmap(i, ids) if run.costmap is not None else None,
-                                         run.stops[i] if run.stops is not None else None))
+    write_frame(
+        topics,
+        scene,
+        FrameData(
+            float(run.times[i]),
+            (x, y, yaw),
+            (v, w),
+            ids,
+            int(run.chosen[i]),
+            run.probs[i] if run.probs is not None else None,
+            run.costmap(i, ids) if run.costmap is not None else None,
+            run.stops[i] if run.stops is not None else None,
+        ),
+    )
 
 
 def write_frame(topics: Topics, scene: Scene, frame: FrameData) -> None:
@@ -269,7 +296,9 @@ def write_frame(topics: Topics, scene: Scene, frame: FrameData) -> None:
     topics.write("labels", ns, compressed_image(ts, optical, "mono8; png compressed class ids", png(frame.ids)))
     topics.write("labels_color", ns, compressed_image(ts, optical, "png", png(frame.ids, scene.palette)))
     if frame.costmap is not None:
-        topics.write("costmap", ns, occupancy_grid(ts, scene.header(t, "odom"), frame.costmap.cost, frame.costmap.resolution_m, frame.costmap.origin))
+        topics.write(
+            "costmap", ns, occupancy_grid(ts, scene.header(t, "odom"), frame.costmap.cost, frame.costmap.resolution_m, frame.costmap.origin)
+        )
         if not scene.ros1:
             topics.write("costmap_grid", ns, foxglove_grid(ts, t, "odom", frame.costmap))
     topics.write("cmd_vel", ns, twist(ts, *frame.command))
@@ -302,8 +331,10 @@ def _color(ts: Typestore, r: float, g: float, b: float, a: float = 1.0) -> Messa
 def _label_map_yaml(classes: ClassTable) -> str:
     """A terrapref-labels/1 file naming the class of each of ``classes``' ids."""
     ids = "".join(f"  {c.id}: {c.name}\n" for c in classes.classes)
-    return (f"format: terrapref-labels/1\nname: exported\ndescription: the class ids of the table {', '.join(classes.names)}\n"
-            f"ids:\n{ids}  {UNKNOWN}: unknown\n")
+    return (
+        f"format: terrapref-labels/1\nname: exported\ndescription: the class ids of the table {', '.join(classes.names)}\n"
+        f"ids:\n{ids}  {UNKNOWN}: unknown\n"
+    )
 
 
 def _robot_yaml(cam: CameraConfig, labels: str, profile: tuple[str, ...] | None = None) -> str:
@@ -333,6 +364,7 @@ def costmaps_of(runner, poses: np.ndarray) -> Callable[[int, np.ndarray], Costma
     def costmap(i: int, ids: np.ndarray) -> Costmap | None:
         runner.observe(SegmentationView.of(ids), Pose(*poses[i]))
         return runner.costmap() if i % COSTMAP_EVERY == 0 else None
+
     return costmap
 
 
@@ -359,9 +391,18 @@ def recording_frames(rec) -> RunFrames:
 
     classes = rec.classes
     path = np.asarray(rec.meta.get("path") or rec.scenario["path"]["waypoints"], dtype=float)
-    return RunFrames(times=rec.times, poses=rec.poses, commands=rec.commands, image=rec.image, chosen=rec.labels, path=path,
-                     camera=CameraConfig.from_dict(rec.meta["camera"]), classes=classes,
-                     preference=PreferenceSetConfig.from_dict(rec.meta["preference_set"]), profile=_declared_order(rec.meta.get("profile")))
+    return RunFrames(
+        times=rec.times,
+        poses=rec.poses,
+        commands=rec.commands,
+        image=rec.image,
+        chosen=rec.labels,
+        path=path,
+        camera=CameraConfig.from_dict(rec.meta["camera"]),
+        classes=classes,
+        preference=PreferenceSetConfig.from_dict(rec.meta["preference_set"]),
+        profile=_declared_order(rec.meta.get("profile")),
+    )
 
 
 def _declared_order(profile: object) -> tuple[str, ...] | None:

@@ -69,9 +69,15 @@ class PlannerNodeCore:
         self.runtime: PlannerRuntime | None = None
         self.path = None if path is None else np.asarray(path, dtype=float)
         self.odometry: deque[tuple[float, float, float, float]] = deque()  # (stamp [s], x, y, yaw)
-        self.skipped = {"before the calibration or the path": 0, "without odometry at the stamp": 0, "out of order": 0,
-                        "superseded while waiting for odometry": 0, "paths of fewer than two distinct points": 0,
-                        "odometry ahead of the clock": 0, "calibrations of another size": 0}
+        self.skipped = {
+            "before the calibration or the path": 0,
+            "without odometry at the stamp": 0,
+            "out of order": 0,
+            "superseded while waiting for odometry": 0,
+            "paths of fewer than two distinct points": 0,
+            "odometry ahead of the clock": 0,
+            "calibrations of another size": 0,
+        }
         self.decided = 0  # frames decided on
         self.on_decision: Callable[[RuntimeDecision], None] | None = None  # told of every decision, whichever message brought it
         self._pending: tuple[str, object, str, float] | None = None  # an image waiting for odometry at its stamp
@@ -145,8 +151,10 @@ class PlannerNodeCore:
             t = stamp_s(msg.header)
             if now_s is not None and now_s > 0 and t > now_s + ODOMETRY_AHEAD_S:
                 self.skipped["odometry ahead of the clock"] += 1
-                raise ValueError(f"odometry stamped more than {ODOMETRY_AHEAD_S:g} s ahead of the node's clock (another clock, or "
-                                 "use_sim_time unset while a log plays?)")
+                raise ValueError(
+                    f"odometry stamped more than {ODOMETRY_AHEAD_S:g} s ahead of the node's clock (another clock, or "
+                    "use_sim_time unset while a log plays?)"
+                )
             if self.odometry and t < self.odometry[-1][0]:
                 return None  # an older pose than one kept: odometry arrives in order or not at all
             self.odometry.append((t, float(p.position.x), float(p.position.y), _yaw(p.orientation)))
@@ -207,12 +215,19 @@ class PlannerNodeCore:
         # No time in the error: a node says each problem once, and a stream of bad frames is one problem.
         raw = _decode(SimpleNamespace(topic=topic, msgtype=msgtype), msg, self.robot.source, self.robot.labels)
         if raw.shape != self.runtime.shape:
-            raise UserError(self.robot.source, f"a label image of {raw.shape[1]} x {raw.shape[0]} px; the calibration says "
-                            f"{self.runtime.shape[1]} x {self.runtime.shape[0]}", field="topics.segmentation")
+            raise UserError(
+                self.robot.source,
+                f"a label image of {raw.shape[1]} x {raw.shape[0]} px; the calibration says "
+                f"{self.runtime.shape[1]} x {self.runtime.shape[0]}",
+                field="topics.segmentation",
+            )
         ids = self._lut[raw]
         if self.runtime.foreign(ids):
-            raise UserError(self.robot.labels.source or self.robot.source, unlisted_message(self.robot.labels.unlisted_in(raw), "a label image"),
-                            field="ids")
+            raise UserError(
+                self.robot.labels.source or self.robot.source,
+                unlisted_message(self.robot.labels.unlisted_in(raw), "a label image"),
+                field="ids",
+            )
         if self._undistort is not None:  # a lens with distortion: each pinhole pixel from where the lens put it
             ids = np.where(self._undistort >= 0, ids.reshape(-1)[np.maximum(self._undistort, 0)], UNKNOWN).astype(np.uint8)
         decision = self.runtime.decide(ids, t, pose)
@@ -234,9 +249,21 @@ class PlannerNodeCore:
 
         runtime, model = self.runtime, self.model
         if self._live is None:
-            self._live = LiveRun.start(self.view, self.path, runtime.planner.camera.config, model.classes, model.features.preference, clock_s=EPOCH_S)
-        self._live.frame(FrameData(decision.stamp_s, (pose.x, pose.y, pose.yaw), (float(decision.command.v), float(decision.command.w)),
-                                   ids, decision.index, decision.probs, stop=decision.stop), self.costmap)
+            self._live = LiveRun.start(
+                self.view, self.path, runtime.planner.camera.config, model.classes, model.features.preference, clock_s=EPOCH_S
+            )
+        self._live.frame(
+            FrameData(
+                decision.stamp_s,
+                (pose.x, pose.y, pose.yaw),
+                (float(decision.command.v), float(decision.command.w)),
+                ids,
+                decision.index,
+                decision.probs,
+                stop=decision.stop,
+            ),
+            self.costmap,
+        )
 
     def command_at(self, now_s: float) -> Command:
         """The command to send now: the last decision's while fresh, else a stop."""
@@ -284,7 +311,9 @@ class NodeOptions:
         values, origin = {}, {}
         for name, default in defaults.items():
             given = getattr(self, name)
-            values[name], origin[name] = (given, f"--{name.replace('_', '-')}") if given is not None else (get_param(param(name), default), param(name))
+            values[name], origin[name] = (
+                (given, f"--{name.replace('_', '-')}") if given is not None else (get_param(param(name), default), param(name))
+            )
         if not isinstance(values["stamped"], bool):
             raise UserError(origin["stamped"], f"expected true or false, got {values['stamped']!r}")
         for name, top in (("rate", 200.0), ("hold_s", 5.0)):
@@ -307,7 +336,9 @@ class NodeLog:
         prefix: what each line starts with (ROS 2's log lines name the node already).
     """
 
-    def __init__(self, info: Callable[[str], None], warn: Callable[[str], None], error: Callable[[str], None], prefix: str = "terrapref: ") -> None:
+    def __init__(
+        self, info: Callable[[str], None], warn: Callable[[str], None], error: Callable[[str], None], prefix: str = "terrapref: "
+    ) -> None:
         self.info, self.warn, self.error, self.prefix = info, warn, error, prefix
         self.said: set[str] = set()
         self.stop_reason: str | None = None  # why the command in force stops (None: it drives)
@@ -361,5 +392,7 @@ class TrajectoryShapes:
     def styles(self, decision: RuntimeDecision) -> list[tuple[float, tuple[float, float, float, float]]]:
         """Per trajectory, its line width [m] and colour (r, g, b, a) for ``decision``."""
         top = float(np.max(decision.probs)) or 1.0
-        return [(0.06, (0.1, 0.9, 0.2, 1.0)) if j == decision.index else (0.03, (1.0, 1.0, 1.0, 0.2 + 0.8 * float(decision.probs[j]) / top))
-                for j in range(len(self.paths))]
+        return [
+            (0.06, (0.1, 0.9, 0.2, 1.0)) if j == decision.index else (0.03, (1.0, 1.0, 1.0, 0.2 + 0.8 * float(decision.probs[j]) / top))
+            for j in range(len(self.paths))
+        ]

@@ -58,7 +58,9 @@ def _member(g: _Graph, c: ClassifierConfig, weights: dict[str, np.ndarray], x: s
     """Logits (N, m) of one network for U (N, m, k) named ``x``; mirrors network.stacked_forward for one member."""
     w = lambda name: np.asarray(weights[f"{prefix}{name}"], dtype=np.float64)  # noqa: E731  (the file's float32 values, exactly)
     if c.compress:
-        per_row = g.op("Add", [g.op("MatMul", [x, g.const("compress_wT", w("compress.weight").T)]), g.const("compress_b", w("compress.bias"))])
+        per_row = g.op(
+            "Add", [g.op("MatMul", [x, g.const("compress_wT", w("compress.weight").T)]), g.const("compress_b", w("compress.bias"))]
+        )
         scores = g.op("Gather", [per_row, g.const("channel0", np.array(0, np.int64))], axis=2)  # (N, m)
         h = g.op("Reshape", [per_row, g.const("flat", np.array([0, c.m], np.int64))])
     else:
@@ -116,8 +118,12 @@ def export_onnx(model: LoadedModel, out: str | Path) -> Path:
         "format": ONNX_FORMAT,
         "classifier": model.classifier.to_dict(),
         "features": model.features.to_dict(),
-        "preference_set": {"v_mps": model.features.preference.control.v_mps, "w_rps": list(model.features.preference.control.w_rps),
-                           "n_steps": model.features.preference.n_steps, "dt_s": model.features.preference.dt_s},
+        "preference_set": {
+            "v_mps": model.features.preference.control.v_mps,
+            "w_rps": list(model.features.preference.control.w_rps),
+            "n_steps": model.features.preference.n_steps,
+            "dt_s": model.features.preference.dt_s,
+        },
         "camera": model.camera.to_dict(),
         "classes": model.classes.to_dict(),
         "profile": list(model.profile),

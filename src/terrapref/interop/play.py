@@ -52,7 +52,9 @@ class BagPlayer:
         if not self.path.exists():
             raise UserError(str(path), "no such file or folder")
         if self.path.suffix == ".bag":
-            raise UserError(str(path), "a ROS 1 bag: terrapref play publishes ROS 2 logs (a bag folder or .mcap); play ROS 1 bags with rosbag play")
+            raise UserError(
+                str(path), "a ROS 1 bag: terrapref play publishes ROS 2 logs (a bag folder or .mcap); play ROS 1 bags with rosbag play"
+            )
         try:
             self.reader = _open_reader(self.path)
         except UserError:
@@ -70,7 +72,9 @@ class BagPlayer:
             raise UserError(str(path), "holds no messages to play", field="--topics")
         self.types = MessageTypes(self.reader.typestore)
         self.dds = Participant(domain, self.types)
-        self.clock = self.dds.writer("/clock", "rosgraph_msgs/msg/Clock", CLOCK, MessageTypes(typestore()))  # a log need not hold /clock's type
+        self.clock = self.dds.writer(
+            "/clock", "rosgraph_msgs/msg/Clock", CLOCK, MessageTypes(typestore())
+        )  # a log need not hold /clock's type
         self.writers: dict[tuple[str, str], Writer] = {}
         for c in self.connections:
             if (c.topic, c.msgtype) not in self.writers:
@@ -84,8 +88,12 @@ class BagPlayer:
         offered = getattr(getattr(connection, "ext", None), "offered_qos_profiles", None) or []
         if offered:
             q = offered[0]
-            return QosProfile("as recorded", reliable=q.reliability != QosReliability.BEST_EFFORT, depth=max(1, int(q.depth or 10)),
-                              transient_local=q.durability == QosDurability.TRANSIENT_LOCAL)
+            return QosProfile(
+                "as recorded",
+                reliable=q.reliability != QosReliability.BEST_EFFORT,
+                depth=max(1, int(q.depth or 10)),
+                transient_local=q.durability == QosDurability.TRANSIENT_LOCAL,
+            )
         return LATCHED if connection.msgcount == 1 else DEFAULT
 
     @property
@@ -105,7 +113,9 @@ class BagPlayer:
     def publish_clock(self, t_ns: int) -> None:
         """``/clock`` at the log's time ``t_ns`` [ns]."""
         T = self.clock.types.ts.types
-        self.clock.publish(T["rosgraph_msgs/msg/Clock"](clock=T["builtin_interfaces/msg/Time"](sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000)))
+        self.clock.publish(
+            T["rosgraph_msgs/msg/Clock"](clock=T["builtin_interfaces/msg/Time"](sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000))
+        )
 
     def play(self, rate: float = 1.0, clock_hz: float = CLOCK_HZ, delay_s: float = 0.0, progress=None) -> int:
         """Publish every message at its time in the log, ``rate`` times as fast, with ``/clock``

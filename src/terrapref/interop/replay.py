@@ -25,8 +25,12 @@ from terrapref.learning.model_file import LoadedModel
 def _rates(hit1: np.ndarray, hit3: np.ndarray | None, werr: np.ndarray) -> dict:
     """Top-1, top-3 (None where there is no ranking) and mean |w| error over the frames given."""
     n = int(len(hit1))
-    return {"frames": n, "top1": float(hit1.mean()) if n else None, "top3": float(hit3.mean()) if n and hit3 is not None else None,
-            "mean_abs_w_error_rps": float(werr.mean()) if n else None}
+    return {
+        "frames": n,
+        "top1": float(hit1.mean()) if n else None,
+        "top3": float(hit3.mean()) if n and hit3 is not None else None,
+        "mean_abs_w_error_rps": float(werr.mean()) if n else None,
+    }
 
 
 def replay(model: LoadedModel, rec: Recording, progress=None) -> dict:
@@ -45,7 +49,9 @@ def replay(model: LoadedModel, rec: Recording, progress=None) -> dict:
     top3 = np.empty(len(rec), dtype=bool)
     terrain = np.empty(len(rec), dtype=bool)
     for i in range(len(rec)):
-        d = runtime.decide(rec.image(i), float(rec.times[i]), tuple(rec.poses[i]))  # never None: read_recording refuses times that do not grow
+        d = runtime.decide(
+            rec.image(i), float(rec.times[i]), tuple(rec.poses[i])
+        )  # never None: read_recording refuses times that do not grow
         chosen[i] = d.index
         c_best[i] = int(np.argmax(d.probs))
         top3[i] = rec.labels[i] in np.argsort(d.probs)[-3:]
@@ -64,8 +70,14 @@ def replay(model: LoadedModel, rec: Recording, progress=None) -> dict:
         # C's own argmax, as training's accuracy measures it; the planner's rules choose by more than F_t.
         "classifier_overall": _rates(c_hit1, top3, c_werr),
         "classifier_terrain_in_view": _rates(c_hit1[terrain], top3[terrain], c_werr[terrain]),
-        "series": {"t": rec.times.tolist(), "w_operator": rec.commands[:, 1].tolist(), "w_model": w_grid[chosen].tolist(),
-                   "terrain": terrain.tolist(), "top1": hit1.tolist(), "xy": rec.poses[:, :2].tolist()},
+        "series": {
+            "t": rec.times.tolist(),
+            "w_operator": rec.commands[:, 1].tolist(),
+            "w_model": w_grid[chosen].tolist(),
+            "terrain": terrain.tolist(),
+            "top1": hit1.tolist(),
+            "xy": rec.poses[:, :2].tolist(),
+        },
     }
 
 
@@ -97,10 +109,19 @@ def write_replay(result: dict, out: Path, title: str) -> tuple[Path, Path]:
     ax2.set_xlabel("time [s]")
     ax2.set_ylabel(f"top-1 agreement ({window / 10:g} s window)")
     o, v = result["overall"], result["terrain_in_view"]
-    fmt = lambda r: "n/a" if r["top1"] is None else (f"top-1 {r['top1']:.0%}" + (f", top-3 {r['top3']:.0%}" if r["top3"] is not None else "")  # noqa: E731
-                                                     + f", |w| error {r['mean_abs_w_error_rps']:.3f} rad/s ({r['frames']} frames)")
+    fmt = lambda r: (
+        "n/a"
+        if r["top1"] is None
+        else (
+            f"top-1 {r['top1']:.0%}"
+            + (f", top-3 {r['top3']:.0%}" if r["top3"] is not None else "")  # noqa: E731
+            + f", |w| error {r['mean_abs_w_error_rps']:.3f} rad/s ({r['frames']} frames)"
+        )
+    )
     c = result["classifier_overall"]
-    ax2.set_title(f"planner, all frames: {fmt(o)}\nplanner, terrain in view: {fmt(v)}\nC alone (argmax F_t), all frames: {fmt(c)}", fontsize=9)
+    ax2.set_title(
+        f"planner, all frames: {fmt(o)}\nplanner, terrain in view: {fmt(v)}\nC alone (argmax F_t), all frames: {fmt(c)}", fontsize=9
+    )
     ax3 = fig.add_subplot(grid[2, 0])
     xy = np.asarray(s["xy"])
     ax3.scatter(xy[:, 0], xy[:, 1], c=np.where(hit > 0, "tab:green", "tab:red"), s=4)

@@ -53,7 +53,13 @@ ROBOT_FORMAT = "terrapref-robot/1"
 _TOP = {"format", "topics", "camera", "labels", "path_file", "profile", "max_gap_s", "description", "stop"}
 _TOPICS_REQUIRED = ("segmentation", "camera_info", "odometry", "command")
 _TOPICS = set(_TOPICS_REQUIRED) | {"path"}
-_CAMERA = {"height_m": (0.05, 10.0), "pitch_deg": (-89.0, 89.0), "forward_m": (-10.0, 10.0), "yaw_deg": (-180.0, 180.0), "max_range_m": (1.0, 500.0)}
+_CAMERA = {
+    "height_m": (0.05, 10.0),
+    "pitch_deg": (-89.0, 89.0),
+    "forward_m": (-10.0, 10.0),
+    "yaw_deg": (-180.0, 180.0),
+    "max_range_m": (1.0, 500.0),
+}
 
 
 @dataclass(frozen=True)
@@ -99,7 +105,9 @@ def load_robot(path: str | Path, classes: ClassTable | None = None) -> RobotConf
     resolved = None
     if path_file is not None:
         resolved = Path(path_file) if Path(path_file).is_absolute() else here / path_file
-    return RobotConfig(source, topics, camera, labels, profile, resolved, float(data.get("max_gap_s", 0.5)), _stop(data.get("stop"), source))
+    return RobotConfig(
+        source, topics, camera, labels, profile, resolved, float(data.get("max_gap_s", 0.5)), _stop(data.get("stop"), source)
+    )
 
 
 def load_robot_topics(path: str | Path) -> dict[str, str]:

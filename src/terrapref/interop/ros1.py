@@ -29,7 +29,9 @@ from terrapref.interop.node_core import NodeOptions
 __all__ = ["NodeOptions", "check_master", "import_rospy", "run_node"]
 
 DEBIAN_DIST_PACKAGES = Path("/usr/lib/python3/dist-packages")
-ROS_PACKAGES = "ros-core python3-rospy python3-geometry-msgs python3-sensor-msgs python3-nav-msgs python3-visualization-msgs python3-std-msgs"
+ROS_PACKAGES = (
+    "ros-core python3-rospy python3-geometry-msgs python3-sensor-msgs python3-nav-msgs python3-visualization-msgs python3-std-msgs"
+)
 COSTMAP_PERIOD_S = 1.0
 
 
@@ -60,8 +62,11 @@ def run_node(model_path: str, robot_path: str, options: NodeOptions | None = Non
     check_master(os.environ.get("ROS_MASTER_URI", DEFAULT_MASTER_URI))  # rospy would wait for one for ever
     rospy.init_node("terrapref", anonymous=False)
     opts = (options or NodeOptions()).resolved(rospy.get_param)
-    path = load_waypoints(Path(opts.path_file), "path_file") if opts.path_file else \
-        (load_waypoints(robot.path_file, robot.source) if robot.path_file else None)
+    path = (
+        load_waypoints(Path(opts.path_file), "path_file")
+        if opts.path_file
+        else (load_waypoints(robot.path_file, robot.source) if robot.path_file else None)
+    )
     core = PlannerNodeCore(model, robot, path, hold_s=float(opts.hold_s))
     if live is not None:
         core.watch(live)
@@ -89,8 +94,10 @@ def check_master(uri: str, timeout_s: float = MASTER_TIMEOUT_S) -> None:
     try:
         socket.create_connection((host, port), timeout=timeout_s).close()
     except OSError as exc:
-        raise UserError("ROS_MASTER_URI", f"no ROS master at {uri} ({exc.strerror or exc}); start roscore there or point ROS_MASTER_URI "
-                                          "at the robot's master") from None
+        raise UserError(
+            "ROS_MASTER_URI",
+            f"no ROS master at {uri} ({exc.strerror or exc}); start roscore there or point ROS_MASTER_URI at the robot's master",
+        ) from None
 
 
 class _Node:
@@ -110,10 +117,15 @@ class _Node:
         self.log = NodeLog(rospy.loginfo, rospy.logwarn, rospy.logerr)
         self.last_stamp: float | None = None  # the frame of the command in force
         self.Twist, self.TwistStamped, self.OccupancyGrid = Twist, TwistStamped, OccupancyGrid
-        self.image_types = {"sensor_msgs/Image": (Image, "sensor_msgs/msg/Image"),
-                            "sensor_msgs/CompressedImage": (CompressedImage, "sensor_msgs/msg/CompressedImage")}
-        self.pose_types = {"nav_msgs/Odometry": Odometry, "geometry_msgs/PoseStamped": PoseStamped,
-                           "geometry_msgs/PoseWithCovarianceStamped": PoseWithCovarianceStamped}
+        self.image_types = {
+            "sensor_msgs/Image": (Image, "sensor_msgs/msg/Image"),
+            "sensor_msgs/CompressedImage": (CompressedImage, "sensor_msgs/msg/CompressedImage"),
+        }
+        self.pose_types = {
+            "nav_msgs/Odometry": Odometry,
+            "geometry_msgs/PoseStamped": PoseStamped,
+            "geometry_msgs/PoseWithCovarianceStamped": PoseWithCovarianceStamped,
+        }
         self.cmd_pub = rospy.Publisher(opts.cmd_topic or robot.topics["command"], TwistStamped if opts.stamped else Twist, queue_size=10)
         self.traj_pub = rospy.Publisher("~trajectories", MarkerArray, queue_size=2)
         self.cost_pub = rospy.Publisher("~costmap", OccupancyGrid, queue_size=1, latch=True)
@@ -160,7 +172,9 @@ class _Node:
         """A label image, Image or CompressedImage, as the robot publishes it on the topic."""
         kind = raw._connection_header.get("type", "")
         if kind not in self.image_types:
-            return self.log.say(f"{self.robot.topics['segmentation']}: {kind} is not a label image (sensor_msgs/Image or CompressedImage); ignored")
+            return self.log.say(
+                f"{self.robot.topics['segmentation']}: {kind} is not a label image (sensor_msgs/Image or CompressedImage); ignored"
+            )
         cls, msgtype = self.image_types[kind]
         self.log.guarded(lambda: self.core.on_image(msgtype, cls().deserialize(raw._buff), self.robot.topics["segmentation"]))
 
@@ -168,7 +182,9 @@ class _Node:
         """Odometry, or a PoseStamped or PoseWithCovarianceStamped, as the robot file allows."""
         kind = raw._connection_header.get("type", "")
         if kind not in self.pose_types:
-            return self.log.say(f"{self.robot.topics['odometry']}: {kind} is not Odometry, PoseStamped or PoseWithCovarianceStamped; ignored")
+            return self.log.say(
+                f"{self.robot.topics['odometry']}: {kind} is not Odometry, PoseStamped or PoseWithCovarianceStamped; ignored"
+            )
         self.log.guarded(lambda: self.core.on_odometry(self.pose_types[kind]().deserialize(raw._buff), self.rospy.get_time()))
 
     def tick(self, event) -> None:

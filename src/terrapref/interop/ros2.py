@@ -113,7 +113,9 @@ class Names:
     def __init__(self, remaps: Mapping[str, str]) -> None:
         self.node = remaps.get("__node", NODE_NAME)
         self.namespace = "/" + remaps.get("__ns", "/").strip("/")
-        if not self.node.replace("_", "").isalnum() or not all(p.replace("_", "").isalnum() for p in self.namespace.strip("/").split("/") if p):
+        if not self.node.replace("_", "").isalnum() or not all(
+            p.replace("_", "").isalnum() for p in self.namespace.strip("/").split("/") if p
+        ):
             raise UserError("--ros-args", f"-r __node:={self.node} / __ns:={self.namespace}: names are letters, digits and _")
         self.fqn = self.namespace.rstrip("/") + "/" + self.node
         self.remaps = {self._expand(a): self._expand(b) for a, b in remaps.items() if a not in ("__node", "__ns")}
@@ -152,13 +154,21 @@ class NodeClock:
 
 def _stderr(level: str, node: str) -> Callable[[str], None]:
     """A logging call that writes one line as ROS 2's console does: ``[LEVEL] [time] [node]: line``."""
+
     def log(line: str) -> None:
         print(f"[{level}] [{time.time():.6f}] [{node}]: {line}", file=sys.stderr, flush=True)
+
     return log
 
 
-def run_node(model_path: str, robot_path: str, options: NodeOptions | None = None, ros_args: Sequence[str] = (), live: Any = None,
-             stop: threading.Event | None = None) -> None:
+def run_node(
+    model_path: str,
+    robot_path: str,
+    options: NodeOptions | None = None,
+    ros_args: Sequence[str] = (),
+    live: Any = None,
+    stop: threading.Event | None = None,
+) -> None:
     """Run the node until Ctrl-C or SIGTERM (or ``stop`` is set); with ``live`` (a
     terrapref.interop.live.LiveView), every decision is also sent there. Ends with a line of
     what it decided and skipped; a calibration the model refuses ends it with that UserError."""
@@ -173,8 +183,11 @@ def run_node(model_path: str, robot_path: str, options: NodeOptions | None = Non
     domain = domain_id()
     model = load_model(model_path)
     robot = load_robot(robot_path, model.classes)
-    path = load_waypoints(Path(opts.path_file), "path_file") if opts.path_file else \
-        (load_waypoints(robot.path_file, robot.source) if robot.path_file else None)
+    path = (
+        load_waypoints(Path(opts.path_file), "path_file")
+        if opts.path_file
+        else (load_waypoints(robot.path_file, robot.source) if robot.path_file else None)
+    )
     core = PlannerNodeCore(model, robot, path, hold_s=float(opts.hold_s))
     if live is not None:
         core.watch(live)
@@ -214,18 +227,24 @@ def endpoints(robot, opts: NodeOptions, names: Names, sim: bool, path_topic: boo
     path published once before the node started still arrives.
     """
     t = robot.topics
-    out = [Endpoint("segmentation", names.resolve(t["segmentation"]), IMAGE_TYPES, SENSOR_DATA, False),
-           Endpoint("camera_info", names.resolve(t["camera_info"]), ("sensor_msgs/msg/CameraInfo",), SENSOR_DATA, False),
-           Endpoint("odometry", names.resolve(t["odometry"]), POSE_TYPES, SENSOR_DATA, False)]
+    out = [
+        Endpoint("segmentation", names.resolve(t["segmentation"]), IMAGE_TYPES, SENSOR_DATA, False),
+        Endpoint("camera_info", names.resolve(t["camera_info"]), ("sensor_msgs/msg/CameraInfo",), SENSOR_DATA, False),
+        Endpoint("odometry", names.resolve(t["odometry"]), POSE_TYPES, SENSOR_DATA, False),
+    ]
     if path_topic:
-        out += [Endpoint("path", names.resolve(robot.path_topic), ("nav_msgs/msg/Path",), DEFAULT, False),
-                Endpoint("path", names.resolve(robot.path_topic), ("nav_msgs/msg/Path",), LATCHED, False)]
+        out += [
+            Endpoint("path", names.resolve(robot.path_topic), ("nav_msgs/msg/Path",), DEFAULT, False),
+            Endpoint("path", names.resolve(robot.path_topic), ("nav_msgs/msg/Path",), LATCHED, False),
+        ]
     if sim:
         out.append(Endpoint("clock", "/clock", ("rosgraph_msgs/msg/Clock",), CLOCK, False))
     twist = "geometry_msgs/msg/TwistStamped" if opts.stamped else "geometry_msgs/msg/Twist"
-    out += [Endpoint("command", names.resolve(opts.cmd_topic or t["command"]), (twist,), DEFAULT, True),
-            Endpoint("trajectories", names.resolve("~/trajectories"), ("visualization_msgs/msg/MarkerArray",), DEFAULT, True),
-            Endpoint("costmap", names.resolve("~/costmap"), ("nav_msgs/msg/OccupancyGrid",), LATCHED, True)]
+    out += [
+        Endpoint("command", names.resolve(opts.cmd_topic or t["command"]), (twist,), DEFAULT, True),
+        Endpoint("trajectories", names.resolve("~/trajectories"), ("visualization_msgs/msg/MarkerArray",), DEFAULT, True),
+        Endpoint("costmap", names.resolve("~/costmap"), ("nav_msgs/msg/OccupancyGrid",), LATCHED, True),
+    ]
     if "tf" not in robot.camera:  # the mounting comes from the robot file; with camera.tf the robot's own tree has it
         out.append(Endpoint("tf_static", "/tf_static", ("tf2_msgs/msg/TFMessage",), LATCHED, True))
     return out
@@ -248,8 +267,13 @@ class _Node:
         self.endpoints = endpoints(robot, opts, names, clock.sim, core.path is None and bool(robot.path_topic))
         self.writers: dict[str, Any] = {}
         self.readers: dict[str, list[Any]] = {}
-        handlers = {"segmentation": self.on_image, "camera_info": self.on_camera_info, "odometry": self.on_odometry,
-                    "path": core.on_path, "clock": clock.on_clock}
+        handlers = {
+            "segmentation": self.on_image,
+            "camera_info": self.on_camera_info,
+            "odometry": self.on_odometry,
+            "path": core.on_path,
+            "clock": clock.on_clock,
+        }
         core.on_decision = self.on_decision
         for e in self.endpoints:
             if e.publishes:
@@ -257,13 +281,22 @@ class _Node:
             else:
                 for msgtype in e.msgtypes:
                     handle = handlers[e.role]
-                    callback = (lambda msg, handle=handle, msgtype=msgtype: handle(msg, msgtype)) if e.role in ("segmentation", "odometry") else handle
-                    self.readers.setdefault(e.role, []).append(self.dds.subscribe(e.topic, msgtype, e.profile, callback,
-                                                                                  newest_only=e.role == "segmentation"))
+                    callback = (
+                        (lambda msg, handle=handle, msgtype=msgtype: handle(msg, msgtype))
+                        if e.role in ("segmentation", "odometry")
+                        else handle
+                    )
+                    self.readers.setdefault(e.role, []).append(
+                        self.dds.subscribe(e.topic, msgtype, e.profile, callback, newest_only=e.role == "segmentation")
+                    )
         self.publish_mount()
-        self.log.info(f"in ROS_DOMAIN_ID {self.domain} as {names.fqn}: " + "; ".join(
-            f"{'publishes' if e.publishes else 'hears'} {e.topic} ({' or '.join(m.split('/')[-1] for m in e.msgtypes)}, {e.profile.describe()})"
-            for e in self.endpoints))
+        self.log.info(
+            f"in ROS_DOMAIN_ID {self.domain} as {names.fqn}: "
+            + "; ".join(
+                f"{'publishes' if e.publishes else 'hears'} {e.topic} ({' or '.join(m.split('/')[-1] for m in e.msgtypes)}, {e.profile.describe()})"
+                for e in self.endpoints
+            )
+        )
 
     def _on_error(self, exc: BaseException) -> None:
         """A callback's exception that is not about the message (a bug): said once, the node goes on."""
@@ -275,8 +308,9 @@ class _Node:
     def header(self, t_s: float, frame_id: str) -> Any:
         """std_msgs/Header stamped ``t_s`` [s] (the node's clock) in ``frame_id``."""
         ns = int(round(t_s * 1e9))
-        return self.ts.types["std_msgs/msg/Header"](stamp=self.ts.types["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000),
-                                                   frame_id=frame_id)
+        return self.ts.types["std_msgs/msg/Header"](
+            stamp=self.ts.types["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id=frame_id
+        )
 
     def publish_mount(self) -> None:
         """The camera's mounting the planner assumes (base_link -> terrapref_camera_link ->
@@ -287,8 +321,12 @@ class _Node:
         if "tf_static" not in self.writers:
             return
         cam = self.robot.camera
-        mount = CameraConfig(mount_height_m=cam["height_m"], pitch_deg=cam["pitch_deg"], mount_forward_m=cam["forward_m"], yaw_deg=cam["yaw_deg"])
-        self.writers["tf_static"].publish(tf_message(self.ts, camera_mount(self.ts, mount, t_s=self.clock.now() - EPOCH_S, frames=MOUNT_FRAMES)))
+        mount = CameraConfig(
+            mount_height_m=cam["height_m"], pitch_deg=cam["pitch_deg"], mount_forward_m=cam["forward_m"], yaw_deg=cam["yaw_deg"]
+        )
+        self.writers["tf_static"].publish(
+            tf_message(self.ts, camera_mount(self.ts, mount, t_s=self.clock.now() - EPOCH_S, frames=MOUNT_FRAMES))
+        )
 
     def publish_command(self, stamp: float) -> None:
         """The command in force now (a stop once its frame is ``hold_s`` old by the node's clock),
@@ -318,10 +356,24 @@ class _Node:
         lifetime = T["builtin_interfaces/msg/Duration"](sec=0, nanosec=int(MARKER_LIFETIME_S * 1e9))
         out = []
         for j, (pts, (width_m, rgba)) in enumerate(zip(self.shapes.paths, self.shapes.styles(decision))):
-            out.append(zeroed(self.ts, "visualization_msgs/msg/Marker", header=stamped, ns="trajectories", id=j, type=4, action=0,
-                              pose=zeroed(self.ts, "geometry_msgs/msg/Pose", orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)),
-                              scale=vector3(self.ts, x=width_m), color=T["std_msgs/msg/ColorRGBA"](r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3]),
-                              lifetime=lifetime, points=[point(self.ts, x, y, 0.02) for x, y in pts]))
+            out.append(
+                zeroed(
+                    self.ts,
+                    "visualization_msgs/msg/Marker",
+                    header=stamped,
+                    ns="trajectories",
+                    id=j,
+                    type=4,
+                    action=0,
+                    pose=zeroed(
+                        self.ts, "geometry_msgs/msg/Pose", orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)
+                    ),
+                    scale=vector3(self.ts, x=width_m),
+                    color=T["std_msgs/msg/ColorRGBA"](r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3]),
+                    lifetime=lifetime,
+                    points=[point(self.ts, x, y, 0.02) for x, y in pts],
+                )
+            )
         return T["visualization_msgs/msg/MarkerArray"](markers=out)
 
     def on_camera_info(self, msg) -> None:
@@ -349,6 +401,7 @@ class _Node:
                 self.core.on_odometry(msg, self.clock.now() if self.clock.running() else None)
             except ValueError as exc:
                 raise ValueError(f"{topic}: {exc}") from None
+
         self.log.guarded(handle)
 
     def publish_costmap(self) -> None:
@@ -357,7 +410,9 @@ class _Node:
 
         grid = self.core.costmap()
         if grid is not None:
-            self.writers["costmap"].publish(occupancy_grid(self.ts, self.header(self.clock.now(), self.odom_frame), grid.cost, grid.resolution_m, grid.origin))
+            self.writers["costmap"].publish(
+                occupancy_grid(self.ts, self.header(self.clock.now(), self.odom_frame), grid.cost, grid.resolution_m, grid.origin)
+            )
 
     def check_publishers(self) -> None:
         """Each input topic that no publisher in the domain offers, said once: a robot in
@@ -365,8 +420,10 @@ class _Node:
         for role, readers in self.readers.items():
             if not any(r.get_matched_publications() for r in readers):
                 topic = next(e for e in self.endpoints if e.role == role)
-                self.log.warn(f"{topic.topic}: no publisher of {' or '.join(topic.msgtypes)} in ROS_DOMAIN_ID {self.domain} after "
-                              f"{SILENT_AFTER_S:g} s (is the robot in this domain, and its DDS on this network?); waiting")
+                self.log.warn(
+                    f"{topic.topic}: no publisher of {' or '.join(topic.msgtypes)} in ROS_DOMAIN_ID {self.domain} after "
+                    f"{SILENT_AFTER_S:g} s (is the robot in this domain, and its DDS on this network?); waiting"
+                )
 
     def spin(self, stop: threading.Event) -> None:
         """Commands at the control rate, the costmap once a second, until ``stop`` or a failure."""

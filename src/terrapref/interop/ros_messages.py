@@ -28,8 +28,21 @@ if TYPE_CHECKING:
 
 Message = Any  # an instance of a message class that rosbags makes at run time from the typestore
 EPOCH_S = 1_700_000_000
-_NUMERIC = {"bool": bool, "byte": np.uint8, "char": np.uint8, "int8": np.int8, "uint8": np.uint8, "int16": np.int16, "uint16": np.uint16,
-            "int32": np.int32, "uint32": np.uint32, "int64": np.int64, "uint64": np.uint64, "float32": np.float32, "float64": np.float64}
+_NUMERIC = {
+    "bool": bool,
+    "byte": np.uint8,
+    "char": np.uint8,
+    "int8": np.int8,
+    "uint8": np.uint8,
+    "int16": np.int16,
+    "uint16": np.uint16,
+    "int32": np.int32,
+    "uint32": np.uint32,
+    "int64": np.int64,
+    "uint64": np.uint64,
+    "float32": np.float32,
+    "float64": np.float64,
+}
 
 
 def typestore(ros1: bool = False) -> Typestore:
@@ -50,9 +63,11 @@ def typestore(ros1: bool = False) -> Typestore:
 _FOXGLOVE_MSGS = {
     "foxglove_msgs/msg/Vector2": "float64 x\nfloat64 y\n",
     "foxglove_msgs/msg/PackedElementField": "uint8 UINT8=1\nuint8 INT8=2\nstring name\nuint32 offset\nuint8 type\n",
-    "foxglove_msgs/msg/Grid": ("builtin_interfaces/Time timestamp\nstring frame_id\ngeometry_msgs/Pose pose\nuint32 column_count\n"
-                               "foxglove_msgs/Vector2 cell_size\nuint32 row_stride\nuint32 cell_stride\n"
-                               "foxglove_msgs/PackedElementField[] fields\nuint8[] data\n"),
+    "foxglove_msgs/msg/Grid": (
+        "builtin_interfaces/Time timestamp\nstring frame_id\ngeometry_msgs/Pose pose\nuint32 column_count\n"
+        "foxglove_msgs/Vector2 cell_size\nuint32 row_stride\nuint32 cell_stride\n"
+        "foxglove_msgs/PackedElementField[] fields\nuint8[] data\n"
+    ),
 }
 
 
@@ -79,8 +94,10 @@ def add_topics(writer: Any, ts: Typestore, topics: dict[str, tuple[str, str]], r
     """Connections for ``{role: (topic, msgtype)}``, added to ``writer`` in that order; the topics
     of :data:`LATCHED_TOPICS` offered latched (ROS 1) or transient-local (ROS 2), so that a bag's
     player hands them to subscribers that come late, as a robot's static transform publisher does."""
-    connections = {role: writer.add_connection(topic, msgtype, typestore=ts, **(_latched(ros1) if topic in LATCHED_TOPICS else {}))
-                   for role, (topic, msgtype) in topics.items()}
+    connections = {
+        role: writer.add_connection(topic, msgtype, typestore=ts, **(_latched(ros1) if topic in LATCHED_TOPICS else {}))
+        for role, (topic, msgtype) in topics.items()
+    }
     return Topics(writer, ts, connections, ros1)
 
 
@@ -91,8 +108,21 @@ def _latched(ros1: bool) -> dict[str, Any]:
     from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 
     unset = QosTime(0, 0)
-    return {"offered_qos_profiles": [Qos(QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL, unset, unset,
-                                         QosLiveliness.AUTOMATIC, unset, False)]}
+    return {
+        "offered_qos_profiles": [
+            Qos(
+                QosHistory.KEEP_LAST,
+                1,
+                QosReliability.RELIABLE,
+                QosDurability.TRANSIENT_LOCAL,
+                unset,
+                unset,
+                QosLiveliness.AUTOMATIC,
+                unset,
+                False,
+            )
+        ]
+    }
 
 
 def zeroed(ts: Typestore, msgtype: str, **fields: Any) -> Message:
@@ -162,7 +192,9 @@ def rpy_quaternion(ts: Typestore, roll_rad: float, pitch_rad: float, yaw_rad: fl
     """geometry_msgs/Quaternion of roll about x, then pitch about y, then yaw about z (fixed axes)."""
     cr, sr, cp, sp = math.cos(roll_rad / 2), math.sin(roll_rad / 2), math.cos(pitch_rad / 2), math.sin(pitch_rad / 2)
     cy, sy = math.cos(yaw_rad / 2), math.sin(yaw_rad / 2)
-    return quaternion(ts, (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy))
+    return quaternion(
+        ts, (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
+    )
 
 
 def pose(ts: Typestore, x: float, y: float, orientation: Message) -> Message:
@@ -187,14 +219,20 @@ def transform(ts: Typestore, parent: Message, child_frame_id: str, xyz: tuple[fl
 OPTICAL_FRAME = "camera_optical"  # the frame images and calibration are stamped in: z forward, x right, y down (REP 103)
 
 
-def camera_mount(ts: Typestore, camera: CameraConfig, ros1: bool = False, t_s: float = 0.0,
-                 frames: tuple[str, str] = ("camera_link", OPTICAL_FRAME)) -> list[Message]:
+def camera_mount(
+    ts: Typestore, camera: CameraConfig, ros1: bool = False, t_s: float = 0.0, frames: tuple[str, str] = ("camera_link", OPTICAL_FRAME)
+) -> list[Message]:
     """The camera's mounting as a robot publishes it on /tf_static, stamped ``t_s`` [s]:
     base_link -> camera_link (x forward, pitched down by the mount's pitch and turned by its yaw)
     -> :data:`OPTICAL_FRAME` (or the two ``frames`` named)."""
     link, optical_frame = frames
-    mount = transform(ts, header(ts, t_s, "base_link", ros1), link, (camera.mount_forward_m, 0.0, camera.mount_height_m),
-                      rpy_quaternion(ts, 0.0, math.radians(camera.pitch_deg), math.radians(camera.yaw_deg)))
+    mount = transform(
+        ts,
+        header(ts, t_s, "base_link", ros1),
+        link,
+        (camera.mount_forward_m, 0.0, camera.mount_height_m),
+        rpy_quaternion(ts, 0.0, math.radians(camera.pitch_deg), math.radians(camera.yaw_deg)),
+    )
     optical = transform(ts, header(ts, t_s, link, ros1), optical_frame, (0.0, 0.0, 0.0), quaternion(ts, (-0.5, 0.5, -0.5, 0.5)))
     return [mount, optical]
 
@@ -214,12 +252,23 @@ def occupancy_grid(ts: Typestore, stamped: Message, cost: np.ndarray, resolution
     cell (0, 0)'s corner at ``origin`` [m] in the frame of the header ``stamped``."""
     T = ts.types
     h, w = cost.shape
-    info = T["nav_msgs/msg/MapMetaData"](map_load_time=stamped.stamp, resolution=float(resolution_m), width=w, height=h,
-                                         origin=pose(ts, float(origin[0]), float(origin[1]), rpy_quaternion(ts, 0.0, 0.0, 0.0)))
+    info = T["nav_msgs/msg/MapMetaData"](
+        map_load_time=stamped.stamp,
+        resolution=float(resolution_m),
+        width=w,
+        height=h,
+        origin=pose(ts, float(origin[0]), float(origin[1]), rpy_quaternion(ts, 0.0, 0.0, 0.0)),
+    )
     return T["nav_msgs/msg/OccupancyGrid"](header=stamped, info=info, data=np.ascontiguousarray(cost, dtype=np.int8).ravel())
 
 
-GRID_FIELDS = (("cost", 0, 2), ("red", 1, 1), ("green", 2, 1), ("blue", 3, 1), ("alpha", 4, 1))  # name, byte offset, PackedElementField type (2 int8, 1 uint8)
+GRID_FIELDS = (
+    ("cost", 0, 2),
+    ("red", 1, 1),
+    ("green", 2, 1),
+    ("blue", 3, 1),
+    ("alpha", 4, 1),
+)  # name, byte offset, PackedElementField type (2 int8, 1 uint8)
 
 
 def foxglove_grid(ts: Typestore, t_s: float, frame_id: str, costmap: Costmap) -> Message:
@@ -235,9 +284,17 @@ def foxglove_grid(ts: Typestore, t_s: float, frame_id: str, costmap: Costmap) ->
     cells["rgba"] = cost_colours(costmap.cost)
     fields = [T["foxglove_msgs/msg/PackedElementField"](name=name, offset=offset, type=kind) for name, offset, kind in GRID_FIELDS]
     corner = pose(ts, float(costmap.origin[0]), float(costmap.origin[1]), rpy_quaternion(ts, 0.0, 0.0, 0.0))
-    return T["foxglove_msgs/msg/Grid"](timestamp=stamp(ts, t_s), frame_id=frame_id, pose=corner, column_count=w,
-                                       cell_size=T["foxglove_msgs/msg/Vector2"](x=costmap.resolution_m, y=costmap.resolution_m),
-                                       row_stride=5 * w, cell_stride=5, fields=fields, data=cells.view(np.uint8).ravel())
+    return T["foxglove_msgs/msg/Grid"](
+        timestamp=stamp(ts, t_s),
+        frame_id=frame_id,
+        pose=corner,
+        column_count=w,
+        cell_size=T["foxglove_msgs/msg/Vector2"](x=costmap.resolution_m, y=costmap.resolution_m),
+        row_stride=5 * w,
+        cell_stride=5,
+        fields=fields,
+        data=cells.view(np.uint8).ravel(),
+    )
 
 
 def odometry(ts: Typestore, stamped: Message, base_pose: Message) -> Message:
@@ -245,7 +302,9 @@ def odometry(ts: Typestore, stamped: Message, base_pose: Message) -> Message:
     zero covariances and twist."""
     T = ts.types
     at = T["geometry_msgs/msg/PoseWithCovariance"](pose=base_pose, covariance=np.zeros(36))
-    still = T["geometry_msgs/msg/TwistWithCovariance"](twist=T["geometry_msgs/msg/Twist"](linear=vector3(ts), angular=vector3(ts)), covariance=np.zeros(36))
+    still = T["geometry_msgs/msg/TwistWithCovariance"](
+        twist=T["geometry_msgs/msg/Twist"](linear=vector3(ts), angular=vector3(ts)), covariance=np.zeros(36)
+    )
     return T["nav_msgs/msg/Odometry"](header=stamped, child_frame_id="base_link", pose=at, twist=still)
 
 
@@ -253,10 +312,22 @@ def camera_info(ts: Typestore, stamped: Message, camera: CameraConfig, ros1: boo
     """sensor_msgs/CameraInfo of ``camera``: its image size and K, no distortion."""
     fx, fy, cx, cy = camera.intrinsics
     roi = ts.types["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
-    matrices = {"d": np.zeros(5), "k": np.array([fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0]), "r": np.eye(3).ravel(),
-                "p": np.array([fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0])}
-    return ts.types["sensor_msgs/msg/CameraInfo"](header=stamped, height=camera.height_px, width=camera.width_px, distortion_model="plumb_bob",
-                                                  binning_x=0, binning_y=0, roi=roi, **{(k.upper() if ros1 else k): v for k, v in matrices.items()})
+    matrices = {
+        "d": np.zeros(5),
+        "k": np.array([fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0]),
+        "r": np.eye(3).ravel(),
+        "p": np.array([fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]),
+    }
+    return ts.types["sensor_msgs/msg/CameraInfo"](
+        header=stamped,
+        height=camera.height_px,
+        width=camera.width_px,
+        distortion_model="plumb_bob",
+        binning_x=0,
+        binning_y=0,
+        roi=roi,
+        **{(k.upper() if ros1 else k): v for k, v in matrices.items()},
+    )
 
 
 def png(ids: np.ndarray, palette: np.ndarray | None = None) -> np.ndarray:

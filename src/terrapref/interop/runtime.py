@@ -77,8 +77,15 @@ class PlannerRuntime:
             map whose file says ``unlisted: unknown`` makes its unlisted ids unknown either way.
     """
 
-    def __init__(self, model: str | Path | LoadedModel, camera: CameraConfig | None = None, labels: LabelMap | None = None, hold_s: float = 0.3,
-                 stop: StopConfig | None = None, unknown_ids: str = "error") -> None:
+    def __init__(
+        self,
+        model: str | Path | LoadedModel,
+        camera: CameraConfig | None = None,
+        labels: LabelMap | None = None,
+        hold_s: float = 0.3,
+        stop: StopConfig | None = None,
+        unknown_ids: str = "error",
+    ) -> None:
         if not (math.isfinite(hold_s) and hold_s >= 0):
             raise ValueError("hold_s must be a finite number >= 0")
         if unknown_ids not in UNKNOWN_IDS:
@@ -121,8 +128,10 @@ class PlannerRuntime:
                 raise ValueError(f"label image of dtype {image.dtype}; expected uint8 or uint16 label ids")
             raw, image = image, self.lut[image]
             if self.foreign(image):
-                raise ValueError(unlisted_message(self.labels.unlisted_in(raw), "a label image")
-                                 + f" (label map {self.labels.source or self.labels.name})")
+                raise ValueError(
+                    unlisted_message(self.labels.unlisted_in(raw), "a label image")
+                    + f" (label map {self.labels.source or self.labels.name})"
+                )
         elif image.dtype != np.uint8:
             raise ValueError(f"label image of dtype {image.dtype}; expected uint8 class ids (or give a label map)")
         else:
@@ -143,9 +152,11 @@ class PlannerRuntime:
             return image
         if self.unknown_ids == "error":
             shown = ", ".join(str(i) for i in foreign[:8]) + (" ..." if len(foreign) > 8 else "")
-            raise ValueError(f"class id{'s' if len(foreign) > 1 else ''} {shown} in a label image "
-                             f"{'are' if len(foreign) > 1 else 'is'} not in the model's class table ({', '.join(self.model.classes.names)}); "
-                             "give a label map, or unknown_ids='unknown' to take them as unknown ground")
+            raise ValueError(
+                f"class id{'s' if len(foreign) > 1 else ''} {shown} in a label image "
+                f"{'are' if len(foreign) > 1 else 'is'} not in the model's class table ({', '.join(self.model.classes.names)}); "
+                "give a label map, or unknown_ids='unknown' to take them as unknown ground"
+            )
         return np.where(self.foreign.allowed[image], image, np.uint8(UNKNOWN)).astype(np.uint8)
 
     def costmap(self) -> Costmap:
@@ -157,7 +168,9 @@ class PlannerRuntime:
         """
         costmap = self.planner.costmap()
         if costmap is None:
-            raise ValueError(f"this model drives by rule {self.planner.rule.type}, which keeps no ground map (recipe teach's offset rule does)")
+            raise ValueError(
+                f"this model drives by rule {self.planner.rule.type}, which keeps no ground map (recipe teach's offset rule does)"
+            )
         return costmap
 
     def command_at(self, now_s: float) -> Command:
@@ -170,4 +183,3 @@ class PlannerRuntime:
         if self.last is None or not now_s - self.last.stamp_s <= self.hold_s:
             return STOP, STALE
         return self.last.command, self.last.stop
-

@@ -141,12 +141,16 @@ def answering(head: bytes, rename: bool) -> bytes:
 def refusal(head: bytes) -> bytes:
     """The answer to a client that offers neither name: which protocol this server speaks."""
     websocket = re.search(rb"^upgrade:[ \t]*websocket", head, re.IGNORECASE | re.MULTILINE) is not None
-    text = (f"terrapref live view: a Foxglove WebSocket server. It speaks the subprotocol {SDK_PROTOCOL} "
-            f"(also by its earlier name {OLD_PROTOCOL}); {'offer one of them' if websocket else 'connect with a WebSocket client offering one'} "
-            "(Foxglove: Open connection, Foxglove WebSocket).\n").encode()
+    text = (
+        f"terrapref live view: a Foxglove WebSocket server. It speaks the subprotocol {SDK_PROTOCOL} "
+        f"(also by its earlier name {OLD_PROTOCOL}); {'offer one of them' if websocket else 'connect with a WebSocket client offering one'} "
+        "(Foxglove: Open connection, Foxglove WebSocket).\n"
+    ).encode()
     status = b"400 Bad Request" if websocket else b"426 Upgrade Required"
-    return (b"HTTP/1.1 " + status + b"\r\nContent-Type: text/plain; charset=utf-8\r\nConnection: close\r\n"
-            b"Sec-WebSocket-Protocol: " + ", ".join(PROTOCOLS).encode() + b"\r\nContent-Length: " + str(len(text)).encode() + b"\r\n\r\n" + text)
+    return (
+        b"HTTP/1.1 " + status + b"\r\nContent-Type: text/plain; charset=utf-8\r\nConnection: close\r\n"
+        b"Sec-WebSocket-Protocol: " + ", ".join(PROTOCOLS).encode() + b"\r\nContent-Length: " + str(len(text)).encode() + b"\r\n\r\n" + text
+    )
 
 
 def _read_head(s: socket.socket) -> tuple[bytes, bytes]:

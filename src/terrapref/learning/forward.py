@@ -57,8 +57,17 @@ class PackedNetwork:
                 flat += [np.ascontiguousarray(w.T).ravel(), b]
                 offset += w.size + b.size
         if config.compress:
-            compress = np.stack([np.concatenate([np.asarray(weights[f"{p}compress.weight"], np.float64).ravel(),
-                                                 np.asarray(weights[f"{p}compress.bias"], np.float64)]) for p in prefixes])
+            compress = np.stack(
+                [
+                    np.concatenate(
+                        [
+                            np.asarray(weights[f"{p}compress.weight"], np.float64).ravel(),
+                            np.asarray(weights[f"{p}compress.bias"], np.float64),
+                        ]
+                    )
+                    for p in prefixes
+                ]
+            )
         else:
             compress = np.zeros((len(prefixes), 0))
         ignore = np.ones(config.n_features)
@@ -73,8 +82,9 @@ def probabilities(net: PackedNetwork, U: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
-def _probabilities(U: np.ndarray, weights: np.ndarray, layout: np.ndarray, compress: np.ndarray, ignore: np.ndarray,
-                   activation: int, skip: bool) -> np.ndarray:
+def _probabilities(
+    U: np.ndarray, weights: np.ndarray, layout: np.ndarray, compress: np.ndarray, ignore: np.ndarray, activation: int, skip: bool
+) -> np.ndarray:
     m, k = U.shape
     x = np.empty((m, k))
     for i in range(m):

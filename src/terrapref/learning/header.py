@@ -159,15 +159,30 @@ class ModelHeader:
             field = "classifier.channels" if "channels" in str(exc) else "classifier"
             raise UserError(source, f"invalid configuration: {exc}", field=field) from None
         members = _entry(meta, "members", _members, source)
-        return cls(classifier=classifier, recipe=_entry(meta, "recipe", _text, source), features=features, camera=camera, classes=classes,
-                   profile=profile, training=_entry(meta, "training", _section, source), data=_entry(meta, "data", _record(DataSource), source),
-                   history=_entry(meta, "history", _history, source), best_epoch=_entry(meta, "best_epoch", _integer, source),
-                   steps=_entry(meta, "steps", _integer, source), identifiability=_entry(meta, "identifiability", _section, source),
-                   steadying=_entry(meta, "steadying", _section, source), rules=rule_blocks(meta, "rules", source),
-                   drives=_entry(meta, "drives", _text, source), stages=rule_blocks(meta, "stages", source),
-                   members=members if isinstance(members, tuple) else None, member_count=members if isinstance(members, int) else None,
-                   member=_entry(meta, "member", _integer, source), epoch=_entry(meta, "epoch", _integer, source),
-                   status=_entry(meta, "status", _text, source), interrupted=_entry(meta, "interrupted", _record(Interruption), source))
+        return cls(
+            classifier=classifier,
+            recipe=_entry(meta, "recipe", _text, source),
+            features=features,
+            camera=camera,
+            classes=classes,
+            profile=profile,
+            training=_entry(meta, "training", _section, source),
+            data=_entry(meta, "data", _record(DataSource), source),
+            history=_entry(meta, "history", _history, source),
+            best_epoch=_entry(meta, "best_epoch", _integer, source),
+            steps=_entry(meta, "steps", _integer, source),
+            identifiability=_entry(meta, "identifiability", _section, source),
+            steadying=_entry(meta, "steadying", _section, source),
+            rules=rule_blocks(meta, "rules", source),
+            drives=_entry(meta, "drives", _text, source),
+            stages=rule_blocks(meta, "stages", source),
+            members=members if isinstance(members, tuple) else None,
+            member_count=members if isinstance(members, int) else None,
+            member=_entry(meta, "member", _integer, source),
+            epoch=_entry(meta, "epoch", _integer, source),
+            status=_entry(meta, "status", _text, source),
+            interrupted=_entry(meta, "interrupted", _record(Interruption), source),
+        )
 
 
 def model_context(meta: Mapping[str, Any], source: str) -> tuple[FeatureConfig, CameraConfig, ClassTable, tuple[str, ...]]:

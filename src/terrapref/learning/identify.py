@@ -69,8 +69,12 @@ class PairEvidence:
 
     def describe(self) -> str:
         interval = f" +- {1.96 * self.stderr:.2f}" if self.stderr is not None else ""
-        seen = f"compared in {self.frames} frames ({self.for_first} for {self.first}, {self.for_second} for {self.second}; " \
-               f"{self.first} on the left {self.sides[0]}, on the right {self.sides[1]})" if self.frames else "never compared"
+        seen = (
+            f"compared in {self.frames} frames ({self.for_first} for {self.first}, {self.for_second} for {self.second}; "
+            f"{self.first} on the left {self.sides[0]}, on the right {self.sides[1]})"
+            if self.frames
+            else "never compared"
+        )
         return f"{self.first} > {self.second}: margin {self.margin:.2f}{interval}, {seen}"
 
     def to_dict(self) -> dict:
@@ -95,14 +99,21 @@ class Identifiability:
     def warnings(self) -> list[str]:
         out = []
         for p in self.unidentified():
-            why = "never compared" if p.frames == 0 else (f"compared in only {p.frames} frames" if p.frames < MIN_FRAMES
-                                                          else "compared, but the margin is within its uncertainty")
+            why = (
+                "never compared"
+                if p.frames == 0
+                else (
+                    f"compared in only {p.frames} frames" if p.frames < MIN_FRAMES else "compared, but the margin is within its uncertainty"
+                )
+            )
             lethal = next((c for c in (p.first, p.second) if c in self.lethal), None)
             if lethal is not None:  # the class table, not the drive, keeps the offset rule off it
                 pooled = lethal == LETHAL_COLUMN  # several lethal classes, one column
                 what, verb, it = ("the lethal classes", "are", "them") if pooled else (lethal, "is", "it")
-                out.append(f"{p.first} vs {p.second}: {why}; {what} {verb} lethal, so the offset rule never drives onto {it} "
-                           f"whatever the drive shows, but C's ranking of the two is a guess")
+                out.append(
+                    f"{p.first} vs {p.second}: {why}; {what} {verb} lethal, so the offset rule never drives onto {it} "
+                    f"whatever the drive shows, but C's ranking of the two is a guess"
+                )
             else:
                 out.append(f"{p.first} vs {p.second}: {why}; the planner's choice between them is a guess")
         return out
@@ -124,7 +135,7 @@ class Identifiability:
         it; or that every pair agrees, and how many of them the data identify."""
         named = [c for c in profile if c in self.order]
         head = f"the profile stored with the drive: {' > '.join(named)}"
-        pairs = [self.pair(a, b) for i, a in enumerate(named) for b in named[i + 1:]]  # a before b in the profile
+        pairs = [self.pair(a, b) for i, a in enumerate(named) for b in named[i + 1 :]]  # a before b in the profile
         evidence = [p for p in pairs if p.margin > 0]  # a tie (no weight learned between them) orders nothing
         unseen = f"; {len(pairs) - len(evidence)} tied" if len(evidence) < len(pairs) else ""
         reversed_ = [p for p in evidence if named.index(p.first) > named.index(p.second)]
@@ -133,9 +144,14 @@ class Identifiability:
         if not reversed_:
             identified = sum(p.identified for p in evidence)
             return [f"{head}: the drive agrees on all {len(evidence)} pairs it orders ({identified} identified){unseen}"]
-        return [f"{head}: the drive orders {len(reversed_)} of {len(evidence)} pairs the other way round{unseen}",
-                *(f"  {p.second} > {p.first} in the profile, {p.first} > {p.second} in the drive (margin {p.margin:.2f}, "
-                  f"{'identified' if p.identified else 'not identified'})" for p in reversed_)]
+        return [
+            f"{head}: the drive orders {len(reversed_)} of {len(evidence)} pairs the other way round{unseen}",
+            *(
+                f"  {p.second} > {p.first} in the profile, {p.first} > {p.second} in the drive (margin {p.margin:.2f}, "
+                f"{'identified' if p.identified else 'not identified'})"
+                for p in reversed_
+            ),
+        ]
 
     def to_dict(self) -> dict:
         out = {"order": list(self.order), "pairs": [p.to_dict() for p in self.pairs], "min_frames": MIN_FRAMES, "lethal": list(self.lethal)}
@@ -143,13 +159,25 @@ class Identifiability:
 
     @classmethod
     def from_dict(cls, data: dict) -> Identifiability:
-        pairs = tuple(PairEvidence(p["first"], p["second"], int(p["frames"]), int(p["for_first"]), int(p["for_second"]),
-                                   (int(p["sides"][0]), int(p["sides"][1])), float(p["margin"]),
-                                   None if p["stderr"] is None else float(p["stderr"])) for p in data["pairs"])
+        pairs = tuple(
+            PairEvidence(
+                p["first"],
+                p["second"],
+                int(p["frames"]),
+                int(p["for_first"]),
+                int(p["for_second"]),
+                (int(p["sides"][0]), int(p["sides"][1])),
+                float(p["margin"]),
+                None if p["stderr"] is None else float(p["stderr"]),
+            )
+            for p in data["pairs"]
+        )
         return cls(tuple(data["order"]), pairs, tuple(data.get("lethal", ())), str(data.get("background", GRASS)))
 
 
-def count_comparisons(U: np.ndarray, labels: np.ndarray, classes: tuple[str, ...], background: str = GRASS) -> dict[tuple[str, str], np.ndarray]:
+def count_comparisons(
+    U: np.ndarray, labels: np.ndarray, classes: tuple[str, ...], background: str = GRASS
+) -> dict[tuple[str, str], np.ndarray]:
     """Per ordered pair (a, b): counts [a chosen with a on the left, a chosen on the right,
     b chosen with b on the left, b chosen on the right] over the frames comparing them.
 
@@ -178,12 +206,15 @@ def count_comparisons(U: np.ndarray, labels: np.ndarray, classes: tuple[str, ...
         took_b = offered & (chosen[:, b] > chosen[:, a]) & (chosen[:, b] >= SHARE / 2)
         if b == k:  # against grass, a clean choice is grass (between two patches it favours neither)
             took_b = offered & clean[np.arange(n), labels]
-        out[(names[a], names[b])] = np.array([(took_a & a_left).sum(), (took_a & ~a_left).sum(),
-                                              (took_b & ~a_left).sum(), (took_b & a_left).sum()])
+        out[(names[a], names[b])] = np.array(
+            [(took_a & a_left).sum(), (took_a & ~a_left).sum(), (took_b & ~a_left).sum(), (took_b & a_left).sum()]
+        )
     return out
 
 
-def fisher_covariance(U: np.ndarray, labels: np.ndarray, utility: LinearUtility, U2: np.ndarray | None = None, gamma: float = 1.0) -> np.ndarray:
+def fisher_covariance(
+    U: np.ndarray, labels: np.ndarray, utility: LinearUtility, U2: np.ndarray | None = None, gamma: float = 1.0
+) -> np.ndarray:
     """Covariance of the linear utility's parameters (w, b[, gamma]) at the fit, from the Fisher
     information of the softmax over trajectories (the pseudo-inverse where it is singular).
 
@@ -236,8 +267,14 @@ class FittedLookahead:
     gamma: float
 
 
-def identifiability(U: np.ndarray, labels: np.ndarray, classes: tuple[str, ...], utility: LinearUtility,
-                    lookahead: FittedLookahead | None = None, names: TableNames = TableNames()) -> Identifiability:
+def identifiability(
+    U: np.ndarray,
+    labels: np.ndarray,
+    classes: tuple[str, ...],
+    utility: LinearUtility,
+    lookahead: FittedLookahead | None = None,
+    names: TableNames = TableNames(),
+) -> Identifiability:
     """The evidence and learned order for every pair of ``classes`` and the background.
 
     Args:
@@ -250,8 +287,9 @@ def identifiability(U: np.ndarray, labels: np.ndarray, classes: tuple[str, ...],
     """
     background = names.background
     counts = count_comparisons(U, labels, classes, background)
-    cov = (fisher_covariance(U, labels, utility) if lookahead is None
-           else fisher_covariance(U, labels, utility, lookahead.U2, lookahead.gamma))
+    cov = (
+        fisher_covariance(U, labels, utility) if lookahead is None else fisher_covariance(U, labels, utility, lookahead.U2, lookahead.gamma)
+    )
     weight = {name: float(utility.w[i]) for i, name in enumerate(classes)} | {background: 0.0}
     order = tuple(sorted(weight, key=lambda c: -weight[c]))
     pairs = []
@@ -267,6 +305,7 @@ def identifiability(U: np.ndarray, labels: np.ndarray, classes: tuple[str, ...],
             grad[classes.index(b)] -= 1.0
         var = float(grad @ cov @ grad)
         stderr = math.sqrt(var) if var > 0 and math.isfinite(var) else None
-        pairs.append(PairEvidence(a, b, int(for_a + for_b), int(for_a), int(for_b), (int(a_left), int(a_right)),
-                                  weight[a] - weight[b], stderr))
+        pairs.append(
+            PairEvidence(a, b, int(for_a + for_b), int(for_a), int(for_b), (int(a_left), int(a_right)), weight[a] - weight[b], stderr)
+        )
     return Identifiability(order, tuple(pairs), names.lethal, background)

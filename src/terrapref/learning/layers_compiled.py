@@ -39,8 +39,9 @@ def compress_forward(x: np.ndarray, x_unit: float, x_bits: int, weight: np.ndarr
 
 
 @njit(cache=True, nogil=True)
-def affine(product: np.ndarray, unit: float, bias: np.ndarray, relu: bool, skip: np.ndarray, next_bits: int
-           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+def affine(
+    product: np.ndarray, unit: float, bias: np.ndarray, relu: bool, skip: np.ndarray, next_bits: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """A layer's output from its exact integer product (B, out): ``z = product * unit + bias``
     (``+ skip`` when ``skip`` has rows, the residual path) and, with ``relu``,
     ``h = np.maximum(z, 0.0)`` (z where z > 0 or NaN, else +0.0; without, ``h`` is ``z``); with

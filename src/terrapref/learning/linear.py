@@ -30,8 +30,9 @@ class LinearUtility:
         return U @ self.w + self.b
 
 
-def fit_linear_utility(U: np.ndarray, labels: np.ndarray, steps: int = 1500, lr: float = 0.05,
-                       sample_weight: np.ndarray | None = None) -> LinearUtility:
+def fit_linear_utility(
+    U: np.ndarray, labels: np.ndarray, steps: int = 1500, lr: float = 0.05, sample_weight: np.ndarray | None = None
+) -> LinearUtility:
     """Maximum-likelihood fit of the linear utility model to (U (N, m, K + 1), labels (N,)).
 
     The arithmetic is :mod:`terrapref.learning.exact`'s, so the fit is the same on every CPU.
@@ -83,8 +84,9 @@ _BLOCK_FRAMES = 64  # frames whose arrays a step works on together (64 x 21 x 8 
 
 
 @njit(cache=True, nogil=True)
-def _frame_gradients(rows: np.ndarray, w_ints: np.ndarray, u: float, b: np.ndarray, labels: np.ndarray, sw: np.ndarray, m: int,
-                     g: np.ndarray) -> None:
+def _frame_gradients(
+    rows: np.ndarray, w_ints: np.ndarray, u: float, b: np.ndarray, labels: np.ndarray, sw: np.ndarray, m: int, g: np.ndarray
+) -> None:
     """g (N m,): ``softmax(rows.T @ w_ints * u + b by frames) - onehot(labels)``, times each frame's
     weight (see :func:`_fit_frames`); the products of integers are exact, so summed in any order."""
     k, n = rows.shape[0], rows.shape[1] // m
@@ -186,8 +188,9 @@ class LookaheadFit:
     gamma: float
 
 
-def fit_lookahead_utility(U: np.ndarray, U2: np.ndarray, labels: np.ndarray, steps: int = 300, lr: float = 0.05,
-                          start: LinearUtility | None = None) -> LookaheadFit:
+def fit_lookahead_utility(
+    U: np.ndarray, U2: np.ndarray, labels: np.ndarray, steps: int = 300, lr: float = 0.05, start: LinearUtility | None = None
+) -> LookaheadFit:
     """Fit the linear utility through the planner's look-ahead (SPEC 8's loss over a planning rule).
 
     Trajectory i scores ``f(U_i) + gamma * max_j f(U2_ij)`` with ``f(u) = w . u + b``: its own
@@ -217,8 +220,19 @@ def fit_lookahead_utility(U: np.ndarray, U2: np.ndarray, labels: np.ndarray, ste
     distinct, which = _distinct_columns(second_ints)
     del second, second_ints
     params = np.concatenate([start.w, start.b, [1.0]])
-    params = _fit_through(np.ascontiguousarray(first.ints.T), first.unit, distinct, which, second_unit, 18, np.asarray(labels, dtype=np.int64),
-                          params, m, steps, lr)
+    params = _fit_through(
+        np.ascontiguousarray(first.ints.T),
+        first.unit,
+        distinct,
+        which,
+        second_unit,
+        18,
+        np.asarray(labels, dtype=np.int64),
+        params,
+        m,
+        steps,
+        lr,
+    )
     return LookaheadFit(LinearUtility(params[:k].copy(), params[k : k + m].copy()), float(params[-1]))
 
 
@@ -289,8 +303,19 @@ def _distinct_columns(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @njit(cache=True, nogil=True)
-def _fit_through(first: np.ndarray, first_unit: float, distinct: np.ndarray, which: np.ndarray, second_unit: float, bits: int,
-                 labels: np.ndarray, params: np.ndarray, m: int, steps: int, lr: float) -> np.ndarray:
+def _fit_through(
+    first: np.ndarray,
+    first_unit: float,
+    distinct: np.ndarray,
+    which: np.ndarray,
+    second_unit: float,
+    bits: int,
+    labels: np.ndarray,
+    params: np.ndarray,
+    m: int,
+    steps: int,
+    lr: float,
+) -> np.ndarray:
     """The fit through the look-ahead, compiled: ``params`` (K + 1 + m + 1,) = w, b, gamma.
 
     ``first`` holds the rounded utilities (N m) by columns, (K + 1, N m); the rounded look-ahead
@@ -355,8 +380,9 @@ def _fit_through(first: np.ndarray, first_unit: float, distinct: np.ndarray, whi
 
 
 @njit(cache=True, nogil=True)
-def _best_continuations(scores: np.ndarray, which: np.ndarray, unit: float, b: np.ndarray, best: np.ndarray, value: np.ndarray,
-                        best_row: np.ndarray) -> None:
+def _best_continuations(
+    scores: np.ndarray, which: np.ndarray, unit: float, b: np.ndarray, best: np.ndarray, value: np.ndarray, best_row: np.ndarray
+) -> None:
     """For each row r of (N m) first pieces: the first argmax over j of ``f2 = scores[which[r m +
     j]] unit + b[j]`` into ``best[r]``, its score into ``value[r]`` and its distinct row
     ``which[r m + best[r]]`` into ``best_row[r]`` (NumPy's argmax: the first of equal maxima, the

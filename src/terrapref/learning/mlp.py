@@ -49,8 +49,11 @@ def round_inputs(U: np.ndarray) -> exact.Rounded:
     """U (B, m, k) on the fixed-point grid of C's inputs; round a dataset once and index it."""
     top = float(np.max(np.abs(U))) if np.size(U) else 0.0
     # One grid for every batch: relative to 1 (U's range), or to the largest entry if larger.
-    return exact.rounded(np.asarray(U, dtype=np.float64), INPUT_BITS) if top > 1.0 else exact.Rounded(
-        np.rint(np.asarray(U, dtype=np.float64) * 2.0**INPUT_BITS), 2.0**-INPUT_BITS, INPUT_BITS)
+    return (
+        exact.rounded(np.asarray(U, dtype=np.float64), INPUT_BITS)
+        if top > 1.0
+        else exact.Rounded(np.rint(np.asarray(U, dtype=np.float64) * 2.0**INPUT_BITS), 2.0**-INPUT_BITS, INPUT_BITS)
+    )
 
 
 def _activate(name: str, z: np.ndarray) -> np.ndarray:
@@ -160,14 +163,19 @@ class TrainableClassifier:
         for i in range(self.config.depth + 1):
             shape = self._shapes[f"layers.{i}.weight"]
             size = shape[0] * shape[1]
-            pair = tuple(exact.Rounded(ints[at + j * size : at + (j + 1) * size].reshape(shape), float(units[2 * i + j]), int(self._spans[2 * i + j, 2]))
-                         for j in range(2))
+            pair = tuple(
+                exact.Rounded(
+                    ints[at + j * size : at + (j + 1) * size].reshape(shape), float(units[2 * i + j]), int(self._spans[2 * i + j, 2])
+                )
+                for j in range(2)
+            )
             out.append(pair)
             at += 2 * size
         return out
 
-    def _layer(self, h: np.ndarray, rounded: exact.Rounded | None, weight: exact.Rounded, i: int, activation: str | None,
-               skip: np.ndarray) -> tuple[np.ndarray, np.ndarray, exact.Rounded | None]:
+    def _layer(
+        self, h: np.ndarray, rounded: exact.Rounded | None, weight: exact.Rounded, i: int, activation: str | None, skip: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, exact.Rounded | None]:
         """``z = matmul(h, W_i.T) + b_i (+ skip)``, the activation of z (z itself for the output
         layer) and that activation on the next layer's grid (``rounded`` is ``h`` on this one's)."""
         bias = self.weights[f"layers.{i}.bias"]
@@ -202,7 +210,9 @@ class TrainableClassifier:
                 # the weight and bias gradients, [inputs, 1]^T g, and d loss / d the layer's input.
                 g_w, g_w_unit, g_in, g_in_unit = kernels.round_twice(np.ascontiguousarray(g, dtype=np.float64), a_bits, _bits(out_i)[0])
                 ones_ints, ones_unit = kernels.round_with_ones(np.ascontiguousarray(cache.inputs[i], dtype=np.float64), b_bits)
-                kernels.scale_into(g_w.T @ ones_ints, g_w_unit * ones_unit, grads, self._at[f"layers.{i}.weight"], self._at[f"layers.{i}.bias"])
+                kernels.scale_into(
+                    g_w.T @ ones_ints, g_w_unit * ones_unit, grads, self._at[f"layers.{i}.weight"], self._at[f"layers.{i}.bias"]
+                )
                 weight = cache.weights[i][1]
                 product, unit = g_in @ weight.ints, g_in_unit * weight.unit
             else:
@@ -261,7 +271,9 @@ class Adam:
             updates in one pass from a flat gradient.
     """
 
-    def __init__(self, weights: dict[str, np.ndarray] | np.ndarray, lr: float, betas: tuple[float, float] = (0.9, 0.999), eps: float = 1e-8) -> None:
+    def __init__(
+        self, weights: dict[str, np.ndarray] | np.ndarray, lr: float, betas: tuple[float, float] = (0.9, 0.999), eps: float = 1e-8
+    ) -> None:
         self.weights, self.lr, self.betas, self.eps = weights, lr, betas, eps
         arrays = [weights] if isinstance(weights, np.ndarray) else list(weights.values())
         if not all(w.dtype == np.float64 and w.flags.c_contiguous and w.flags.writeable for w in arrays):
@@ -294,7 +306,9 @@ class Adam:
 
 
 @njit(cache=True, nogil=True)
-def _adam_update(p: np.ndarray, m: np.ndarray, v: np.ndarray, g: np.ndarray, b1: float, b2: float, step: float, root2: float, eps: float) -> None:
+def _adam_update(
+    p: np.ndarray, m: np.ndarray, v: np.ndarray, g: np.ndarray, b1: float, b2: float, step: float, root2: float, eps: float
+) -> None:
     """In place, per element, the NumPy form ``m = b1 m + (1 - b1) g; v = b2 v + (1 - b2) g g;
     p -= step m / (sqrt(v) / root2 + eps)``, in one pass (the same operations in the same order)."""
     for i in range(p.shape[0]):

@@ -21,8 +21,20 @@ from terrapref.learning.network import MEMBERS, ClassifierConfig, member_prefix
 from terrapref.tensorfile import read_tensor_file, write_tensor_file
 from terrapref.terrain import ClassTable
 
-__all__ = ["CLASSIFIER", "FORMAT", "LoadedModel", "check_compatible", "classifier_from", "expected_shapes", "load_model", "model_context",
-           "read_model_file", "rule_blocks", "save_model", "write_model"]
+__all__ = [
+    "CLASSIFIER",
+    "FORMAT",
+    "LoadedModel",
+    "check_compatible",
+    "classifier_from",
+    "expected_shapes",
+    "load_model",
+    "model_context",
+    "read_model_file",
+    "rule_blocks",
+    "save_model",
+    "write_model",
+]
 
 
 @dataclass(frozen=True)
@@ -89,8 +101,12 @@ def _write(path: str | Path, weights: dict[str, np.ndarray], header: dict[str, A
     """Write a model file; weights that are not finite (a diverged fit) are refused, nothing written."""
     for name, value in weights.items():
         if not np.isfinite(value).all():
-            raise UserError(str(path), f"not written: {int(np.size(value) - np.isfinite(value).sum())} of its weights are not finite "
-                                       "(NaN or inf: the fit diverged; a smaller --lr may help)", field=name)
+            raise UserError(
+                str(path),
+                f"not written: {int(np.size(value) - np.isfinite(value).sum())} of its weights are not finite "
+                "(NaN or inf: the fit diverged; a smaller --lr may help)",
+                field=name,
+            )
     return write_tensor_file(path, {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in weights.items()}, header)
 
 
@@ -114,15 +130,26 @@ def classifier_from(weights: dict[str, np.ndarray], meta: dict, source: str) -> 
     # The header's member count is checked against the weights before shapes are built from it.
     members = {name.split(".")[1] for name in weights if name.startswith(f"{MEMBERS}.")}
     if members != ({str(j) for j in range(classifier.members)} if classifier.members > 1 else set()):
-        raise UserError(source, f"header says {classifier.members} member(s), the weights hold {len(members) or 1}", field="classifier.members")
+        raise UserError(
+            source, f"header says {classifier.members} member(s), the weights hold {len(members) or 1}", field="classifier.members"
+        )
     expected = expected_shapes(classifier)
     if set(weights) != set(expected):
-        raise UserError(source, f"weights do not match the classifier (missing {sorted(set(expected) - set(weights))}, extra {sorted(set(weights) - set(expected))})", field="weights")
+        raise UserError(
+            source,
+            f"weights do not match the classifier (missing {sorted(set(expected) - set(weights))}, extra {sorted(set(weights) - set(expected))})",
+            field="weights",
+        )
     for name, shape in expected.items():
         if tuple(weights[name].shape) != shape:
             raise UserError(source, f"has shape {tuple(weights[name].shape)}, expected {shape}", field=f"weights.{name}")
         if weights[name].dtype.kind != "f" or not np.isfinite(weights[name]).all():
-            raise UserError(source, f"expected finite floats, got {weights[name].dtype}" + (" with NaN or infinite values" if weights[name].dtype.kind == "f" else ""), field=f"weights.{name}")
+            raise UserError(
+                source,
+                f"expected finite floats, got {weights[name].dtype}"
+                + (" with NaN or infinite values" if weights[name].dtype.kind == "f" else ""),
+                field=f"weights.{name}",
+            )
     if classifier.m != features.preference.m or classifier.n_features != features.n_features:
         raise UserError(source, "classifier shape does not match its feature configuration", field="classifier")
     return LoadedModel(source, header, weights, meta)
@@ -158,7 +185,13 @@ def check_compatible(model: LoadedModel, camera: CameraConfig, features: Feature
     """Refuse a model trained under another camera or preference set than the planner's."""
     if not model.camera.same_geometry(camera):
         diff = _differences(model.camera.to_dict(), camera.to_dict())
-        raise UserError(model.path, f"trained for another camera ({', '.join(diff)} differ); re-featurise the recordings with this camera and retrain", field="camera")
+        raise UserError(
+            model.path,
+            f"trained for another camera ({', '.join(diff)} differ); re-featurise the recordings with this camera and retrain",
+            field="camera",
+        )
     if features is not None and model.features != features:
         diff = _differences(model.features.to_dict(), features.to_dict())
-        raise UserError(model.path, f"trained with another preference set or feature configuration ({', '.join(diff)} differ)", field="features")
+        raise UserError(
+            model.path, f"trained with another preference set or feature configuration ({', '.join(diff)} differ)", field="features"
+        )

@@ -70,8 +70,10 @@ class ClassifierConfig:
         """Refuse, before anything is allocated, networks too large to train (a header read from
         a file is checked against the weights it holds instead)."""
         if self.weight_count > MAX_WEIGHTS:
-            raise ValueError(f"hidden {self.hidden} x depth {self.depth} x members {self.members} gives about {self.weight_count:,} weights "
-                             f"({self.weight_count * 4 / 2**30:,.1f} GiB); at most {MAX_WEIGHTS:,}")
+            raise ValueError(
+                f"hidden {self.hidden} x depth {self.depth} x members {self.members} gives about {self.weight_count:,} weights "
+                f"({self.weight_count * 4 / 2**30:,.1f} GiB); at most {MAX_WEIGHTS:,}"
+            )
 
     @property
     def weight_count(self) -> int:
@@ -94,7 +96,9 @@ class ClassifierConfig:
         row-wise compression's outputs per trajectory: 1 is what C is; more are refused."""
         data = dict(data)
         if data.get("channels", 1) != 1:
-            raise ValueError(f"channels {data['channels']!r}: more than one compression output per trajectory is no longer supported; train the model again")
+            raise ValueError(
+                f"channels {data['channels']!r}: more than one compression output per trajectory is no longer supported; train the model again"
+            )
         data.pop("channels", None)
         return from_plain(cls, data)
 

@@ -36,19 +36,34 @@ def source_header(dataset: Dataset, config: TrainConfig, recipe: str | None = No
     """What every file of one training carries, known before it starts: the recipe, the
     configuration and the data (its classifier, the configured one, is each file's own)."""
     profile = dataset.meta["profile"]
-    return ModelHeader(classifier=config.classifier, recipe=recipe or None, features=dataset.feature_config, camera=dataset.camera_config,
-                       classes=ClassTable.from_dict(dataset.meta["classes"], "dataset"), profile=tuple(profile) if profile is not None else None,
-                       training=config.to_dict(), data=DataSource(dataset.fingerprint, len(dataset), tuple(dataset.meta.get("recordings") or ())))
+    return ModelHeader(
+        classifier=config.classifier,
+        recipe=recipe or None,
+        features=dataset.feature_config,
+        camera=dataset.camera_config,
+        classes=ClassTable.from_dict(dataset.meta["classes"], "dataset"),
+        profile=tuple(profile) if profile is not None else None,
+        training=config.to_dict(),
+        data=DataSource(dataset.fingerprint, len(dataset), tuple(dataset.meta.get("recordings") or ())),
+    )
 
 
 def model_header(config: TrainConfig, result: TrainResult, source: ModelHeader) -> ModelHeader:
     """A model's header: ``source`` (:func:`source_header`) and what the training produced."""
     members = tuple(MemberRun(seed, r.best_epoch, tuple(r.history)) for seed, r in zip(config.member_seeds, result.members))
-    return replace(source, classifier=result.classifier, history=tuple(result.history), best_epoch=result.best_epoch, steps=result.steps,
-                   identifiability=result.identifiability.to_dict() if result.identifiability is not None else None,
-                   steadying=result.steadying.to_dict() if result.steadying is not None else None,
-                   rules=tuple(rule.header() for rule in result.rules), drives=result.rules[-1].type if result.rules else None,
-                   members=members or None, epoch=result.best_epoch)
+    return replace(
+        source,
+        classifier=result.classifier,
+        history=tuple(result.history),
+        best_epoch=result.best_epoch,
+        steps=result.steps,
+        identifiability=result.identifiability.to_dict() if result.identifiability is not None else None,
+        steadying=result.steadying.to_dict() if result.steadying is not None else None,
+        rules=tuple(rule.header() for rule in result.rules),
+        drives=result.rules[-1].type if result.rules else None,
+        members=members or None,
+        epoch=result.best_epoch,
+    )
 
 
 def interrupted_path(out: str | Path) -> Path:
@@ -74,8 +89,16 @@ class _Checkpoints:
         if member not in self.best or loss < self.best[member][0]:
             self.best[member] = (loss, m.epoch, classifier, weights)
         if self.write:
-            name = f"epoch_{m.epoch:03d}.safetensors" if self.header.member_count == 1 else f"member_{member + 1}/epoch_{m.epoch:03d}.safetensors"
-            write_model(self.folder / name, replace(self.header, classifier=classifier, member=member + 1, epoch=m.epoch, status=CHECKPOINT), weights)
+            name = (
+                f"epoch_{m.epoch:03d}.safetensors"
+                if self.header.member_count == 1
+                else f"member_{member + 1}/epoch_{m.epoch:03d}.safetensors"
+            )
+            write_model(
+                self.folder / name,
+                replace(self.header, classifier=classifier, member=member + 1, epoch=m.epoch, status=CHECKPOINT),
+                weights,
+            )
 
     def finish(self) -> None:
         if self.folder is not None:
@@ -102,13 +125,24 @@ class _Checkpoints:
         else:
             classifier = replace(classifier, members=len(members))
             weights = {member_prefix(j) + k: v for j, (_, _, _, w) in enumerate(members) for k, v in w.items()}
-        header = replace(self.header, classifier=classifier, member_count=None, status=INTERRUPTED,
-                         interrupted=Interruption(len(members), tuple(e for _, e, _, _ in members)))
+        header = replace(
+            self.header,
+            classifier=classifier,
+            member_count=None,
+            status=INTERRUPTED,
+            interrupted=Interruption(len(members), tuple(e for _, e, _, _ in members)),
+        )
         return write_model(interrupted_path(out), header, weights)
 
 
-def train_and_save(dataset: Dataset, out: str | Path, config: TrainConfig, rules: Sequence[RuleFit] = (), recipe: str | None = None,
-                   options: RunOptions = RunOptions()) -> TrainResult:
+def train_and_save(
+    dataset: Dataset,
+    out: str | Path,
+    config: TrainConfig,
+    rules: Sequence[RuleFit] = (),
+    recipe: str | None = None,
+    options: RunOptions = RunOptions(),
+) -> TrainResult:
     """Train C and fit the decision ``rules`` with it (as :func:`train`), write every epoch as a
     checkpoint as it is made and the chosen epoch as the model; ``recipe`` (its name) is recorded
     in the model's header.
@@ -129,8 +163,11 @@ def train_and_save(dataset: Dataset, out: str | Path, config: TrainConfig, rules
     except OSError as exc:  # a file could not be written (a full disk): nothing of this run is left to fill it further
         saver.discard()
         written = Path(exc.filename) if exc.filename else out
-        raise OSError(exc.errno, f"{exc.strerror or exc} (writing {'a checkpoint' if written != out else 'the model'}; nothing of this run is kept)",
-                      str(out)) from None
+        raise OSError(
+            exc.errno,
+            f"{exc.strerror or exc} (writing {'a checkpoint' if written != out else 'the model'}; nothing of this run is kept)",
+            str(out),
+        ) from None
     except BaseException:
         saver.keep_partial()
         saver.interrupted_model(out)

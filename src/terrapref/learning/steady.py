@@ -47,8 +47,12 @@ class Steadying:
     changed: float
 
     def to_dict(self) -> dict:
-        return {"tremor_rps": None if math.isnan(self.tremor_rps) else round(self.tremor_rps, 5), "spacing_rps": self.spacing_rps,
-                "window": self.window, "changed": round(self.changed, 4)}
+        return {
+            "tremor_rps": None if math.isnan(self.tremor_rps) else round(self.tremor_rps, 5),
+            "spacing_rps": self.spacing_rps,
+            "window": self.window,
+            "changed": round(self.changed, 4),
+        }
 
     def line(self) -> str:
         """One line for ``terrapref train``."""

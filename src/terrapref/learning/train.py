@@ -50,8 +50,14 @@ class OptimiserConfig:
     val_fraction: float = 0.2
 
     def __post_init__(self) -> None:
-        _check([(self.epochs >= 1, "epochs must be >= 1"), (self.batch_size >= 1, "batch_size must be >= 1"),
-                (self.lr > 0, "lr must be > 0"), (0.0 <= self.val_fraction < 1.0, "val_fraction must be in [0, 1)")])
+        _check(
+            [
+                (self.epochs >= 1, "epochs must be >= 1"),
+                (self.batch_size >= 1, "batch_size must be >= 1"),
+                (self.lr > 0, "lr must be > 0"),
+                (0.0 <= self.val_fraction < 1.0, "val_fraction must be in [0, 1)"),
+            ]
+        )
 
 
 @dataclass(frozen=True)
@@ -97,9 +103,15 @@ class TrainConfig:
     seed: int = option(0, "seeds the split, the initialisation and the batch order")
 
     def __post_init__(self) -> None:
-        parts = [(self.optimiser, OptimiserConfig, "optimiser"), (self.classifier, ClassifierConfig, "classifier"), (self.data, DataOptions, "data")]
-        _check([(isinstance(part, kind), f"{name}: expected {kind.__name__}") for part, kind, name in parts]
-               + [(isinstance(self.seed, int) and not isinstance(self.seed, bool) and self.seed >= 0, "seed must be an integer >= 0")])
+        parts = [
+            (self.optimiser, OptimiserConfig, "optimiser"),
+            (self.classifier, ClassifierConfig, "classifier"),
+            (self.data, DataOptions, "data"),
+        ]
+        _check(
+            [(isinstance(part, kind), f"{name}: expected {kind.__name__}") for part, kind, name in parts]
+            + [(isinstance(self.seed, int) and not isinstance(self.seed, bool) and self.seed >= 0, "seed must be an integer >= 0")]
+        )
         self.classifier.check_trainable()
 
     @property
@@ -185,13 +197,21 @@ class TrainResult:
 
 def _ensemble(results: list[TrainResult]) -> TrainResult:
     """One result whose weights hold every member's, under ``members.{j}.`` names."""
+
     def merged(per_member: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
         return {member_prefix(j) + name: v for j, w in enumerate(per_member) for name, v in w.items()}
 
     first = results[0]
     checkpoints = [merged(list(epoch)) for epoch in zip(*(r.checkpoints for r in results))]
-    return TrainResult(replace(first.classifier, members=len(results)), merged([r.weights for r in results]), first.history,
-                       first.best_epoch, checkpoints, sum(r.steps for r in results), results)
+    return TrainResult(
+        replace(first.classifier, members=len(results)),
+        merged([r.weights for r in results]),
+        first.history,
+        first.best_epoch,
+        checkpoints,
+        sum(r.steps for r in results),
+        results,
+    )
 
 
 def class_weights(labels: np.ndarray, m: int) -> np.ndarray:
@@ -244,8 +264,14 @@ class RuleFit(Protocol):
         """The fitted rule, or None when the data lack what it needs."""
 
 
-def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callable[[EpochMetrics], None] | None = None,
-          on_epoch: EpochHook | None = None, identify: bool = True, rules: Sequence[RuleFit] = ()) -> TrainResult:
+def train(
+    dataset: Dataset,
+    config: TrainConfig | None = None,
+    progress: Callable[[EpochMetrics], None] | None = None,
+    on_epoch: EpochHook | None = None,
+    identify: bool = True,
+    rules: Sequence[RuleFit] = (),
+) -> TrainResult:
     """Train C on ``dataset``, then fit the decision ``rules`` to the same samples; returns the
     lowest-validation-loss epoch's weights, the history and the fitted rules.
 
@@ -269,15 +295,20 @@ def train(dataset: Dataset, config: TrainConfig | None = None, progress: Callabl
     return result
 
 
-def _train_classifier(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetrics], None] | None,
-                      on_epoch: EpochHook | None) -> TrainResult:
+def _train_classifier(
+    dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetrics], None] | None, on_epoch: EpochHook | None
+) -> TrainResult:
     """C alone: one network, or an ensemble of members trained one after another."""
     if config.classifier.members == 1:
         result = _train(dataset, config, progress, on_epoch and (lambda *a: on_epoch(0, *a)))
     else:
         one = replace(config.classifier, members=1)
-        result = _ensemble([_train(dataset, replace(config, seed=seed, classifier=one), progress, on_epoch and (lambda *a, j=j: on_epoch(j, *a)))
-                            for j, seed in enumerate(config.member_seeds)])
+        result = _ensemble(
+            [
+                _train(dataset, replace(config, seed=seed, classifier=one), progress, on_epoch and (lambda *a, j=j: on_epoch(j, *a)))
+                for j, seed in enumerate(config.member_seeds)
+            ]
+        )
     return result
 
 
@@ -393,8 +424,12 @@ def _epoch(net: TrainableClassifier, opt: Adam, data: _Samples, order: np.ndarra
     return exact.fsum(np.concatenate(seen_loss)) / n, seen_hits / n, steps
 
 
-def _train(dataset: Dataset, config: TrainConfig, progress: Callable[[EpochMetrics], None] | None,
-           on_epoch: Callable[[ClassifierConfig, dict[str, np.ndarray], EpochMetrics], None] | None = None) -> TrainResult:
+def _train(
+    dataset: Dataset,
+    config: TrainConfig,
+    progress: Callable[[EpochMetrics], None] | None,
+    on_epoch: Callable[[ClassifierConfig, dict[str, np.ndarray], EpochMetrics], None] | None = None,
+) -> TrainResult:
     """One network: split, initialise, train every epoch, keep the lowest-validation-loss one."""
     rng = np.random.default_rng(config.seed)
     data = _samples(dataset, config, rng)

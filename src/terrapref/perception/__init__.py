@@ -18,5 +18,18 @@ from terrapref.perception.model import (
 )
 from terrapref.perception.perceiver import COMMAND_HOLD_S, PerceivedDriver, Perceiver, run_stream
 
-__all__ = ["COMMAND_HOLD_S", "FORMAT", "PRESETS", "CameraJitter", "FrameTiming", "LabelErrors", "PerceivedDriver", "PerceptionModel",
-           "Perceiver", "PoseErrors", "load_perception", "preset", "run_stream"]
+__all__ = [
+    "COMMAND_HOLD_S",
+    "FORMAT",
+    "PRESETS",
+    "CameraJitter",
+    "FrameTiming",
+    "LabelErrors",
+    "PerceivedDriver",
+    "PerceptionModel",
+    "Perceiver",
+    "PoseErrors",
+    "load_perception",
+    "preset",
+    "run_stream",
+]

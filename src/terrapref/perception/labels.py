@@ -111,8 +111,22 @@ class FrameLabelErrors:
         flat = np.ascontiguousarray(flat_of(flat_index), dtype=np.int64).reshape(-1)
         source = _displaced(flat, n.width, n.height, np.uint64(self.boundary_seed), e.boundary_px) if e.boundary_px else flat
         ids = np.ascontiguousarray(base.pixels(source), dtype=np.uint8).reshape(-1)
-        out = _errors(ids, flat, n.width, n.far, np.uint64(self.conf_seed), n.tile_of_row, n.tile_of_col, n.conf_n, n.conf_cum, n.conf_to,
-                      self.blobs, np.uint64(self.flip_seed), e.flip_rate, n.ids)
+        out = _errors(
+            ids,
+            flat,
+            n.width,
+            n.far,
+            np.uint64(self.conf_seed),
+            n.tile_of_row,
+            n.tile_of_col,
+            n.conf_n,
+            n.conf_cum,
+            n.conf_to,
+            self.blobs,
+            np.uint64(self.flip_seed),
+            e.flip_rate,
+            n.ids,
+        )
         return out.reshape(np.shape(flat_index))
 
 
@@ -197,9 +211,22 @@ def _displaced(flat: np.ndarray, width: int, height: int, seed: np.uint64, radiu
 
 
 @njit(cache=True, nogil=True)
-def _errors(ids: np.ndarray, flat: np.ndarray, width: int, far: np.ndarray, conf_seed: np.uint64, tile_of_row: np.ndarray,
-            tile_of_col: np.ndarray, conf_n: np.ndarray, conf_cum: np.ndarray, conf_to: np.ndarray, blobs: np.ndarray, flip_seed: np.uint64,
-            flip_rate: float, table_ids: np.ndarray) -> np.ndarray:
+def _errors(
+    ids: np.ndarray,
+    flat: np.ndarray,
+    width: int,
+    far: np.ndarray,
+    conf_seed: np.uint64,
+    tile_of_row: np.ndarray,
+    tile_of_col: np.ndarray,
+    conf_n: np.ndarray,
+    conf_cum: np.ndarray,
+    conf_to: np.ndarray,
+    blobs: np.ndarray,
+    flip_seed: np.uint64,
+    flip_rate: float,
+    table_ids: np.ndarray,
+) -> np.ndarray:
     """Range, confusion, blobs and flips (the module docstring's steps 2-5) on the classes ``ids``
     read for the pixels ``flat``; a pixel's confusion tile is ``tile_of_row[row] + tile_of_col[col]``
     (``row // region * tiles across + col // region``)."""

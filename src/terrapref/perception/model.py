@@ -182,12 +182,18 @@ class PerceptionModel:
         confusion = tuple((t, tuple((c, p * factor) for c, p in row)) for t, row in lab.confusion)
         confusion = tuple((t, tuple((c, p / max(1.0, sum(q for _, q in row))) for c, p in row)) for t, row in confusion)
         return PerceptionModel(
-            replace(lab, flip_rate=min(1.0, lab.flip_rate * factor), blobs_per_frame=lab.blobs_per_frame * factor,
-                    boundary_px=round(lab.boundary_px * factor), confusion=tuple((t, row) for t, row in confusion if any(p > 0 for _, p in row))),
+            replace(
+                lab,
+                flip_rate=min(1.0, lab.flip_rate * factor),
+                blobs_per_frame=lab.blobs_per_frame * factor,
+                boundary_px=round(lab.boundary_px * factor),
+                confusion=tuple((t, row) for t, row in confusion if any(p > 0 for _, p in row)),
+            ),
             PoseErrors(*(v * factor for v in (pose.noise_m, pose.noise_deg, pose.drift_m_per_m, pose.drift_deg_per_m))),
             replace(cam, pitch_jitter_deg=cam.pitch_jitter_deg * factor, roll_jitter_deg=cam.roll_jitter_deg * factor),
             FrameTiming(round(fr.delay * factor), min(1.0, fr.late_rate * factor), min(1.0, fr.drop_rate * factor)),
-            name=f"{self.name} x {factor:g}")
+            name=f"{self.name} x {factor:g}",
+        )
 
     def to_dict(self) -> dict[str, Any]:
         """As terrapref-perception/1 holds it (every field), with the name."""
@@ -233,11 +239,22 @@ def _short(value: Any) -> str:
 # Each field: (kind, low, high); a number must lie in [low, high].
 _NUMBER, _INT, _RANGE_PX, _CONFUSION, _OPTIONAL = "number", "integer", "radius range", "confusion", "number or null"
 _SCHEMA: dict[str, dict[str, tuple[str, float, float]]] = {
-    "labels": {"flip_rate": (_NUMBER, 0.0, 1.0), "blobs_per_frame": (_NUMBER, 0.0, 100.0), "blob_radius_px": (_RANGE_PX, 1, 10_000),
-               "boundary_px": (_INT, 0, 100), "confusion": (_CONFUSION, 0.0, 1.0), "region_px": (_INT, 1, 10_000),
-               "persist_frames": (_INT, 1, 10_000), "max_range_m": (_OPTIONAL, 0.1, 1e6)},
-    "pose": {"noise_m": (_NUMBER, 0.0, 100.0), "noise_deg": (_NUMBER, 0.0, 180.0), "drift_m_per_m": (_NUMBER, 0.0, 10.0),
-             "drift_deg_per_m": (_NUMBER, 0.0, 180.0)},
+    "labels": {
+        "flip_rate": (_NUMBER, 0.0, 1.0),
+        "blobs_per_frame": (_NUMBER, 0.0, 100.0),
+        "blob_radius_px": (_RANGE_PX, 1, 10_000),
+        "boundary_px": (_INT, 0, 100),
+        "confusion": (_CONFUSION, 0.0, 1.0),
+        "region_px": (_INT, 1, 10_000),
+        "persist_frames": (_INT, 1, 10_000),
+        "max_range_m": (_OPTIONAL, 0.1, 1e6),
+    },
+    "pose": {
+        "noise_m": (_NUMBER, 0.0, 100.0),
+        "noise_deg": (_NUMBER, 0.0, 180.0),
+        "drift_m_per_m": (_NUMBER, 0.0, 10.0),
+        "drift_deg_per_m": (_NUMBER, 0.0, 180.0),
+    },
     "camera": {"pitch_jitter_deg": (_NUMBER, 0.0, 30.0), "roll_jitter_deg": (_NUMBER, 0.0, 30.0), "jitter_time_s": (_NUMBER, 0.0, 1e4)},
     "frames": {"delay": (_INT, 0, 100), "late_rate": (_NUMBER, 0.0, 1.0), "drop_rate": (_NUMBER, 0.0, 1.0)},
 }
@@ -276,8 +293,9 @@ def parse_perception(data: dict[str, Any], source: str, classes: ClassTable, nam
     labels = LabelErrors(**sections["labels"])
     if labels.blob_radius_px[0] > labels.blob_radius_px[1]:
         raise ConfigError(source, "the smallest radius must not exceed the largest", field="labels.blob_radius_px")
-    return PerceptionModel(labels, PoseErrors(**sections["pose"]), CameraJitter(**sections["camera"]), FrameTiming(**sections["frames"]),
-                           name=name or source)
+    return PerceptionModel(
+        labels, PoseErrors(**sections["pose"]), CameraJitter(**sections["camera"]), FrameTiming(**sections["frames"]), name=name or source
+    )
 
 
 _BAD = object()
@@ -294,6 +312,7 @@ class _Field(NamedTuple):
 def _check(value: Any, spec: _Field, where: str, classes: ClassTable, problems: list[Problem]) -> Any:
     """``value`` converted to the type of the field ``spec`` describes, or _BAD (with the problem noted)."""
     kind, low, high = spec
+
     def number(v: Any, at: str) -> float | None:
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             problems.append(Problem(at, f"expected a finite number, got {v!r}"))
@@ -350,7 +369,9 @@ def _confusion(value: Any, where: str, classes: ClassTable, number, problems: li
         shares = []
         for seen, p in row.items():
             if seen not in classes.names or seen == true:
-                problems.append(Problem(f"{at}.{seen}", f"expected another class of the table ({', '.join(c for c in classes.names if c != true)})"))
+                problems.append(
+                    Problem(f"{at}.{seen}", f"expected another class of the table ({', '.join(c for c in classes.names if c != true)})")
+                )
                 continue
             x = number(p, f"{at}.{seen}")
             if x is not None and x > 0:
@@ -369,8 +390,11 @@ def check_classes(model: PerceptionModel, classes: ClassTable, source: str) -> N
     for true, row in model.labels.confusion:
         for name in (true, *(c for c, _ in row)):
             if name not in classes.names:
-                raise UserError(source, f"names class {name!r}, which this class table does not have ({', '.join(classes.names)})",
-                                field=f"labels.confusion.{true}")
+                raise UserError(
+                    source,
+                    f"names class {name!r}, which this class table does not have ({', '.join(classes.names)})",
+                    field=f"labels.confusion.{true}",
+                )
 
 
 @functools.cache

@@ -62,7 +62,9 @@ class TiltedView(SegmentationView):
 
     __slots__ = ("_tilt",)
 
-    def __init__(self, renderer: SegmentationRenderer, pose: Pose, dpitch_rad: float, droll_rad: float, max_range_m: float | None = None) -> None:
+    def __init__(
+        self, renderer: SegmentationRenderer, pose: Pose, dpitch_rad: float, droll_rad: float, max_range_m: float | None = None
+    ) -> None:
         super().__init__(renderer, pose)
         self._tilt = (dpitch_rad, droll_rad, max_range_m)
 
@@ -99,7 +101,9 @@ class Perceiver:
 
     def reset(self, rng: np.random.Generator) -> None:
         """Start a run: every part's random stream seeded from ``rng``, no drift, no frame pending."""
-        self._rng_labels, self._rng_pose, self._rng_camera, self._rng_frames = (np.random.default_rng(rng.integers(2**63)) for _ in range(4))
+        self._rng_labels, self._rng_pose, self._rng_camera, self._rng_frames = (
+            np.random.default_rng(rng.integers(2**63)) for _ in range(4)
+        )
         if self.labels is not None:
             self.labels.reset(self._rng_labels)
         self._drift = np.zeros(3)  # x [m], y [m], yaw [rad]

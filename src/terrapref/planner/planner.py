@@ -45,8 +45,15 @@ class Decision:
 
     __slots__ = ("index", "command", "progress_m", "stop", "_outputs", "_pending")
 
-    def __init__(self, index: int, command: Command, progress_m: float, outputs: tuple[np.ndarray, np.ndarray] | None = None,
-                 pending: Callable[[], tuple[np.ndarray, np.ndarray]] | None = None, stop: str | None = None) -> None:
+    def __init__(
+        self,
+        index: int,
+        command: Command,
+        progress_m: float,
+        outputs: tuple[np.ndarray, np.ndarray] | None = None,
+        pending: Callable[[], tuple[np.ndarray, np.ndarray]] | None = None,
+        stop: str | None = None,
+    ) -> None:
         if (outputs is None) == (pending is None):
             raise ValueError("a decision needs either its (probs, U) or the function that computes them")
         self.index, self.command, self.progress_m, self.stop = index, command, progress_m, stop
@@ -88,8 +95,13 @@ class Planner:
         stop: when to stop (default: :class:`StopConfig`'s defaults).
     """
 
-    def __init__(self, model: LoadedModel | Policy, camera: CameraConfig | None = None, rule: Rule | str | None = None,
-                 stop: StopConfig | None = None) -> None:
+    def __init__(
+        self,
+        model: LoadedModel | Policy,
+        camera: CameraConfig | None = None,
+        rule: Rule | str | None = None,
+        stop: StopConfig | None = None,
+    ) -> None:
         policy = model if isinstance(model, Policy) else ClassifierPolicy(model)
         camera = camera or policy.camera
         if isinstance(model, LoadedModel):
@@ -104,8 +116,14 @@ class Planner:
         self.runner = self.rule.runner(context)
         control = policy.features.preference.control
         half_width = self.runner.half_width_m
-        self.stop_rule = StopRule(self.camera, context.terrain, float(np.max(np.abs(control.w_rps))),
-                                  half_width if half_width is not None else DEFAULT_HALF_WIDTH_M, stop, self.runner.ground_map)
+        self.stop_rule = StopRule(
+            self.camera,
+            context.terrain,
+            float(np.max(np.abs(control.w_rps))),
+            half_width if half_width is not None else DEFAULT_HALF_WIDTH_M,
+            stop,
+            self.runner.ground_map,
+        )
         self.path: ReferencePath | None = None
         self.tracker: PathTracker | None = None
 
@@ -165,8 +183,9 @@ def _chosen(policy: Policy, rule: Rule | str | None) -> Rule:
     return chosen_rule(policy.rules, policy.drives, rule, policy.path or policy.name)
 
 
-def _outputs(featurizer: UtilityFeaturizer, policy: Policy, view: SegmentationView, pose: Pose, path: ReferencePath,
-             progress_m: float) -> tuple[np.ndarray, np.ndarray]:
+def _outputs(
+    featurizer: UtilityFeaturizer, policy: Policy, view: SegmentationView, pose: Pose, path: ReferencePath, progress_m: float
+) -> tuple[np.ndarray, np.ndarray]:
     """(F_t, U) of one frame: the features, then the policy's probabilities."""
     U = featurizer(view, pose, path, progress_m)
     ahead = path_ahead(path, pose, progress_m) if policy.uses_path_ahead else _NO_POINTS

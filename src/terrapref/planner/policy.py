@@ -85,8 +85,14 @@ class Policy(abc.ABC):
     name: ClassVar[str] = "policy"
     uses_path_ahead: ClassVar[bool] = False  # the planner computes Observation.path_ahead only when asked
 
-    def __init__(self, features: FeatureConfig | None = None, camera: CameraConfig | None = None, classes: ClassTable | None = None,
-                 profile: tuple[str, ...] | None = None, path: str = "") -> None:
+    def __init__(
+        self,
+        features: FeatureConfig | None = None,
+        camera: CameraConfig | None = None,
+        classes: ClassTable | None = None,
+        profile: tuple[str, ...] | None = None,
+        path: str = "",
+    ) -> None:
         self.classes = classes or default_classes()
         self.features = features or FeatureConfig(feature_classes=self.classes.feature_names)
         self.camera = camera or CameraConfig()
@@ -129,8 +135,15 @@ class LinearPolicy(Policy):
 
     name = "linear"
 
-    def __init__(self, utility: LinearUtility, features: FeatureConfig | None = None, camera: CameraConfig | None = None,
-                 classes: ClassTable | None = None, profile: tuple[str, ...] | None = None, path: str = "") -> None:
+    def __init__(
+        self,
+        utility: LinearUtility,
+        features: FeatureConfig | None = None,
+        camera: CameraConfig | None = None,
+        classes: ClassTable | None = None,
+        profile: tuple[str, ...] | None = None,
+        path: str = "",
+    ) -> None:
         super().__init__(features, camera, classes, profile, path)
         self.utility = utility
         if len(utility.w) != self.features.n_features or len(utility.b) != self.features.preference.m:
@@ -165,8 +178,14 @@ class CostPolicy(LinearPolicy):
 
     name = "hand_cost"
 
-    def __init__(self, costs: dict[str, float] | None = None, distance_weight: float = HAND_DISTANCE_WEIGHT,
-                 features: FeatureConfig | None = None, camera: CameraConfig | None = None, classes: ClassTable | None = None) -> None:
+    def __init__(
+        self,
+        costs: dict[str, float] | None = None,
+        distance_weight: float = HAND_DISTANCE_WEIGHT,
+        features: FeatureConfig | None = None,
+        camera: CameraConfig | None = None,
+        classes: ClassTable | None = None,
+    ) -> None:
         classes = classes or default_classes()
         features = features or FeatureConfig(feature_classes=classes.feature_names)
         costs = dict(hand_costs(classes) if costs is None else costs)
@@ -185,8 +204,13 @@ class PurePursuitPolicy(Policy):
     name = "pure_pursuit"
     uses_path_ahead = True
 
-    def __init__(self, lookahead_m: float = 2.5, features: FeatureConfig | None = None, camera: CameraConfig | None = None,
-                 classes: ClassTable | None = None) -> None:
+    def __init__(
+        self,
+        lookahead_m: float = 2.5,
+        features: FeatureConfig | None = None,
+        camera: CameraConfig | None = None,
+        classes: ClassTable | None = None,
+    ) -> None:
         super().__init__(features, camera, classes)
         self.lookahead_m = lookahead_m
         control = self.features.preference.control

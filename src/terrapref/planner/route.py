@@ -56,8 +56,11 @@ class RouteConfig:
 
     def __post_init__(self) -> None:
         values = (self.resolution_m, self.half_width_m, self.lethal_margin_m, self.band_m, self.spacing_m)
-        if not all(math.isfinite(v) for v in values) or min(self.resolution_m, self.band_m, self.spacing_m) <= 0 \
-                or min(self.half_width_m, self.lethal_margin_m) < 0:
+        if (
+            not all(math.isfinite(v) for v in values)
+            or min(self.resolution_m, self.band_m, self.spacing_m) <= 0
+            or min(self.half_width_m, self.lethal_margin_m) < 0
+        ):
             raise ValueError("a route needs resolution_m, band_m and spacing_m > 0, half_width_m and lethal_margin_m >= 0")
 
 
@@ -106,7 +109,9 @@ def route_over(scenario: Scenario, model: LoadedModel, config: RouteConfig | Non
     planner = Planner(model)
     prices = planner.runner.route_prices()
     if prices is None:
-        raise ValueError(f"drives by rule {planner.rule.type}, which learned no prices of the ground to route with (train with recipe teach)")
+        raise ValueError(
+            f"drives by rule {planner.rule.type}, which learned no prices of the ground to route with (train with recipe teach)"
+        )
     costmap = prices.prior(world if world is not None else rasterise(scenario))
     return plan_route(costmap, ReferencePath(scenario.waypoints), prices.detour_price, prices.span_m, config=config)
 
@@ -153,8 +158,10 @@ def plan_route(costmap: Costmap, path: ReferencePath, detour_price: float, span_
     start, goal = (grid.cell_of(*path.point_at(s)) for s in (0.0, path.length_m))
     for name, cell in (("start", start), ("end", goal)):
         if cell is None or not np.isfinite(price[cell]):
-            raise RouteError(f"the path's {name} is off the map or within {config.half_width_m + config.lethal_margin_m:.1f} m "
-                             "of lethal terrain or the map's edge")
+            raise RouteError(
+                f"the path's {name} is off the map or within {config.half_width_m + config.lethal_margin_m:.1f} m "
+                "of lethal terrain or the map's edge"
+            )
     if start == goal:
         raise RouteError(f"the path ends in the search cell it starts in ({res:g} m): there is no way to plan between them")
     graph = nx.Graph()
@@ -193,7 +200,7 @@ def _disc_mean(a: np.ndarray, radius_cells: float, outside: float | None = None)
     offsets = [(i, j) for i in range(-r, r + 1) for j in range(-r, r + 1) if i * i + j * j <= radius_cells**2 + 1e-9]
     padded = np.pad(a, r, mode="edge") if outside is None else np.pad(a, r, mode="constant", constant_values=outside)
     h, w = a.shape
-    return sum(padded[r + i: r + i + h, r + j: r + j + w] for i, j in offsets) / len(offsets)
+    return sum(padded[r + i : r + i + h, r + j : r + j + w] for i, j in offsets) / len(offsets)
 
 
 def _edges(price: np.ndarray, potential: np.ndarray, res: float):

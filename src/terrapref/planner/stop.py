@@ -82,16 +82,37 @@ class StopConfig:
     lethal_evidence: float = 5.0
 
     def __post_init__(self) -> None:
-        finite = (self.reaction_s, self.decel_mps2, self.margin_m, self.blind_after_s, self.resume_after_s, self.seen_share, self.look_m,
-                  self.step_m, self.lethal_evidence)
+        finite = (
+            self.reaction_s,
+            self.decel_mps2,
+            self.margin_m,
+            self.blind_after_s,
+            self.resume_after_s,
+            self.seen_share,
+            self.look_m,
+            self.step_m,
+            self.lethal_evidence,
+        )
         if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in finite):
             raise ValueError("the stop rule's settings must be finite numbers")
-        if self.reaction_s < 0 or self.decel_mps2 <= 0 or self.margin_m < 0 or self.blind_after_s < 0 or self.resume_after_s < 0 \
-                or not 0 < self.seen_share <= 1 \
-                or self.look_m <= 0 or self.step_m <= 0 or isinstance(self.arcs, bool) or not isinstance(self.arcs, int) or self.arcs < 1 \
-                or self.lethal_evidence < 0:
-            raise ValueError("the stop rule needs reaction_s, margin_m, blind_after_s, resume_after_s and lethal_evidence >= 0, decel_mps2, look_m and "
-                             "step_m > 0, seen_share in (0, 1] and at least one arc")
+        if (
+            self.reaction_s < 0
+            or self.decel_mps2 <= 0
+            or self.margin_m < 0
+            or self.blind_after_s < 0
+            or self.resume_after_s < 0
+            or not 0 < self.seen_share <= 1
+            or self.look_m <= 0
+            or self.step_m <= 0
+            or isinstance(self.arcs, bool)
+            or not isinstance(self.arcs, int)
+            or self.arcs < 1
+            or self.lethal_evidence < 0
+        ):
+            raise ValueError(
+                "the stop rule needs reaction_s, margin_m, blind_after_s, resume_after_s and lethal_evidence >= 0, decel_mps2, look_m and "
+                "step_m > 0, seen_share in (0, 1] and at least one arc"
+            )
 
     def stopping_distance_m(self, v_mps: float) -> float:
         """Distance [m] from a frame to standing still, at ``v_mps``, plus the margin."""
@@ -111,8 +132,15 @@ class StopConfig:
 # counting (fade 0.8 a frame), placed with the mount's attitude, otherwise as the offset rule's
 # map. It is much coarser than the offset rule's (a fortieth of the samples): it decides only
 # whether to go, and the decision it guards (C's) costs 20 us.
-_OWN_MAP = OffsetGeometry(stations_m=(-1.0, 3.0), map_resolution_m=0.2, sample_step_m=0.2, map_half_size_m=5.0, sample_range_m=3.5,
-                          map_fade=0.8, map_sky_attitude=False)
+_OWN_MAP = OffsetGeometry(
+    stations_m=(-1.0, 3.0),
+    map_resolution_m=0.2,
+    sample_step_m=0.2,
+    map_half_size_m=5.0,
+    sample_range_m=3.5,
+    map_fade=0.8,
+    map_sky_attitude=False,
+)
 _OWN_MAP_HALF_WIDTH_M = 3.0
 
 
@@ -129,8 +157,15 @@ class StopRule:
             it; None: the rule keeps a small one of its own.
     """
 
-    def __init__(self, camera: PinholeCamera, terrain: TerrainColumns, max_yaw_rate_rps: float = 1.0, half_width_m: float = 0.6,
-                 config: StopConfig | None = None, ground_map: GroundMap | None = None) -> None:
+    def __init__(
+        self,
+        camera: PinholeCamera,
+        terrain: TerrainColumns,
+        max_yaw_rate_rps: float = 1.0,
+        half_width_m: float = 0.6,
+        config: StopConfig | None = None,
+        ground_map: GroundMap | None = None,
+    ) -> None:
         self.config = c = config or StopConfig()
         self.own_map = ground_map is None
         self.map = GroundMap(camera, terrain, _OWN_MAP, _OWN_MAP_HALF_WIDTH_M) if ground_map is None else ground_map
@@ -218,9 +253,26 @@ class StopRule:
         steps = max(1, math.ceil(distance / c.step_m - 1e-9))
         v = max(abs(float(v_mps)), 1e-3)
         first = int(np.argmin(np.abs(self.yaw_rates - w_rps)))
-        return first_free_arc(float(pose[0]), float(pose[1]), float(pose[2]), self.yaw_rates / v, first, c.step_m, steps, self.across,
-                              self.map.layers(), self.lethal, self.k + 1, np.float32(c.lethal_evidence), self.visible, *self._vis_origin,
-                              self._vis_inv_res) >= 0
+        return (
+            first_free_arc(
+                float(pose[0]),
+                float(pose[1]),
+                float(pose[2]),
+                self.yaw_rates / v,
+                first,
+                c.step_m,
+                steps,
+                self.across,
+                self.map.layers(),
+                self.lethal,
+                self.k + 1,
+                np.float32(c.lethal_evidence),
+                self.visible,
+                *self._vis_origin,
+                self._vis_inv_res,
+            )
+            >= 0
+        )
 
 
 def _near_edge(camera: PinholeCamera, half_width_m: float) -> float:
@@ -233,9 +285,24 @@ def _near_edge(camera: PinholeCamera, half_width_m: float) -> float:
 
 
 @njit(cache=True, nogil=True)
-def first_free_arc(x0: float, y0: float, yaw0: float, curvatures: np.ndarray, first: int, step_m: float, steps: int, across: np.ndarray,
-                   layers: MapLayers, lethal: np.ndarray, never: int, confirmed: np.float32, visible: np.ndarray, vx0: float, vy0: float,
-                   vis_inv_res: float) -> int:
+def first_free_arc(
+    x0: float,
+    y0: float,
+    yaw0: float,
+    curvatures: np.ndarray,
+    first: int,
+    step_m: float,
+    steps: int,
+    across: np.ndarray,
+    layers: MapLayers,
+    lethal: np.ndarray,
+    never: int,
+    confirmed: np.float32,
+    visible: np.ndarray,
+    vx0: float,
+    vy0: float,
+    vis_inv_res: float,
+) -> int:
     """An arc (``curvatures`` (A,) [1/m], ``first`` tried first, then the others in order) along
     which the footprint (``across`` (F,) [m], left positive) stays on seen, non-lethal ground of
     the map for ``steps`` steps of ``step_m`` from the pose; -1 when none does.
@@ -283,14 +350,19 @@ def first_free_arc(x0: float, y0: float, yaw0: float, curvatures: np.ndarray, fi
                         cn = _column(cells, evidence, map_lethal, shares, j + dj, i + di, never)
                         if cn != never:
                             seen = True
-                            deadly = deadly or (lethal[cn] and (looks or _lethal_evidence(evidence, map_lethal, j + dj, i + di) >= confirmed))
+                            deadly = deadly or (
+                                lethal[cn] and (looks or _lethal_evidence(evidence, map_lethal, j + dj, i + di) >= confirmed)
+                            )
                     if seen:
                         if deadly:
                             free = False
                             break
                         continue
-                if lethal[col] and (looks or _lethal_evidence(evidence, map_lethal, j, i) >= confirmed) \
-                        and _lethal_neighbour(cells, evidence, map_lethal, shares, lethal, j, i, never):
+                if (
+                    lethal[col]
+                    and (looks or _lethal_evidence(evidence, map_lethal, j, i) >= confirmed)
+                    and _lethal_neighbour(cells, evidence, map_lethal, shares, lethal, j, i, never)
+                ):
                     free = False
                     break
                 if col == never and looks:
@@ -326,8 +398,9 @@ def _column(cells: np.ndarray, evidence: np.ndarray, map_lethal: np.ndarray, sha
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _lethal_neighbour(cells: np.ndarray, evidence: np.ndarray, map_lethal: np.ndarray, shares: np.ndarray, lethal: np.ndarray,
-                      j: int, i: int, never: int) -> bool:
+def _lethal_neighbour(
+    cells: np.ndarray, evidence: np.ndarray, map_lethal: np.ndarray, shares: np.ndarray, lethal: np.ndarray, j: int, i: int, never: int
+) -> bool:
     """Whether a 4-neighbour of map cell ``(j, i)`` is lethal (``lethal`` by column)."""
     for dj, di in ((0, 1), (0, -1), (1, 0), (-1, 0)):
         if lethal[_column(cells, evidence, map_lethal, shares, j + dj, i + di, never)]:

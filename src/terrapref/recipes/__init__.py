@@ -91,23 +91,30 @@ class Recipe:
         return {**asdict(self), "rules": [{"type": r.type, **asdict(r)} for r in self.rules]}
 
 
-PAPER = Recipe("paper", summary="the published recipe: one drive of train_course, 15 epochs of the paper's C, C's argmax drives "
-                       "(reproduction only)")
+PAPER = Recipe(
+    "paper", summary="the published recipe: one drive of train_course, 15 epochs of the paper's C, C's argmax drives (reproduction only)"
+)
 # What recipes ours and teach train: 100 epochs of C at learning rate 3e-3 (chosen on generated
 # layouts against 300 epochs at 1e-3: the same agreement with the driver for a third of the
 # steps; docs/learning.md) with the residual path, a class-balanced loss and mirrored samples,
 # (the second stage's linear utility is fitted to the same samples).
 _RECOMMENDED = TrainConfig(OptimiserConfig(epochs=100, lr=3e-3), ClassifierConfig(skip=True), DataOptions(class_balance=True, mirror=True))
-OURS = Recipe("ours", demonstrations=2, train=_RECOMMENDED, rules=(SecondStageConfig(),),
-              disturbance=DisturbanceConfig(rate_hz=0.3),
-              summary="two drives of train_course: the paper's setting done well (the reproduction's Tables 1 and 2); "
-                      "the second stage drives")
-TEACH = Recipe("teach", course="teach_course",
-               train=replace(_RECOMMENDED, classifier=ClassifierConfig(skip=True, members=3), data=replace(_RECOMMENDED.data, steady_labels=True)),
-               rules=(SecondStageConfig(weight=5.0, lookahead=True), OffsetConfig()),
-               disturbance=DisturbanceConfig(rate_hz=0.3),
-               summary="one drive of teach_course: any preference order from five minutes (the default); the offset rule "
-                       "drives (docs/learning.md)")
+OURS = Recipe(
+    "ours",
+    demonstrations=2,
+    train=_RECOMMENDED,
+    rules=(SecondStageConfig(),),
+    disturbance=DisturbanceConfig(rate_hz=0.3),
+    summary="two drives of train_course: the paper's setting done well (the reproduction's Tables 1 and 2); the second stage drives",
+)
+TEACH = Recipe(
+    "teach",
+    course="teach_course",
+    train=replace(_RECOMMENDED, classifier=ClassifierConfig(skip=True, members=3), data=replace(_RECOMMENDED.data, steady_labels=True)),
+    rules=(SecondStageConfig(weight=5.0, lookahead=True), OffsetConfig()),
+    disturbance=DisturbanceConfig(rate_hz=0.3),
+    summary="one drive of teach_course: any preference order from five minutes (the default); the offset rule drives (docs/learning.md)",
+)
 RECIPES: Registry[Recipe] = Registry("recipe")
 for _recipe in (TEACH, OURS, PAPER):
     RECIPES.register(_recipe.name, _recipe, _recipe.summary)
@@ -195,20 +202,36 @@ def _drive(drive: _Drive, features: FeatureConfig, write: bool) -> tuple[Recordi
     if (drive.out / "meta.json").exists():
         existing = read_recording(drive.out)
         driver = existing.meta["driver"]
-        if (existing.complete and existing.meta.get("scenario") == scenario.name and existing.meta.get("profile") == list(profile.order)
-                and driver.get("seed") == drive.seed and driver.get("disturbance") == pushes and driver.get("config") == expert_cfg.to_dict()
-                and existing.meta.get("perception", PerceptionModel().to_dict()) == perception.to_dict()):
+        if (
+            existing.complete
+            and existing.meta.get("scenario") == scenario.name
+            and existing.meta.get("profile") == list(profile.order)
+            and driver.get("seed") == drive.seed
+            and driver.get("disturbance") == pushes
+            and driver.get("config") == expert_cfg.to_dict()
+            and existing.meta.get("perception", PerceptionModel().to_dict()) == perception.to_dict()
+        ):
             return existing, False
-    meta = RecordingMeta.driven(scenario, RecordingSetup(camera, features.preference, sim_cfg),
-                                ExpertInfo.of(drive.seed, drive.style, expert_cfg, drive.disturbance), profile, perception)
-    writer = RecordingWriter(drive.out, meta, scenario.to_dict(), overwrite=True) if write else MemoryRecordingWriter(drive.out, meta, scenario.to_dict())
+    meta = RecordingMeta.driven(
+        scenario,
+        RecordingSetup(camera, features.preference, sim_cfg),
+        ExpertInfo.of(drive.seed, drive.style, expert_cfg, drive.disturbance),
+        profile,
+        perception,
+    )
+    writer = (
+        RecordingWriter(drive.out, meta, scenario.to_dict(), overwrite=True)
+        if write
+        else MemoryRecordingWriter(drive.out, meta, scenario.to_dict())
+    )
     settings = RunSettings(features.preference, drive.disturbance, perception)
     record_run(Simulation(scenario, camera, sim_cfg), ExpertDriver(expert_cfg), writer, settings, np.random.default_rng(drive.seed))
     return (read_recording(drive.out) if write else writer.recording()), True
 
 
-def demonstrate(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Callable[[str], None] | None = None,
-                write: bool = True) -> list[Recording]:
+def demonstrate(
+    recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Callable[[str], None] | None = None, write: bool = True
+) -> list[Recording]:
     """The recipe's demonstration runs by the synthetic driver, as ``setup`` says.
 
     Run ``k`` of the course (seed ``setup.seed * 100 + k``) is recorded as ``workdir/COURSE_K`` (a
@@ -224,8 +247,19 @@ def demonstrate(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Ca
     if setup.perception is not None and setup.perception.active:
         tail += "_perceived"
     name = Path(course).stem if course.endswith((".yaml", ".yml")) else course
-    drives = [_Drive(course, workdir / f"{name}_{k}{tail}", setup.seed * 100 + k, recipe.disturbance, setup.profile, setup.style, setup.perception,
-                     setup.classes) for k in range(recipe.demonstrations)]
+    drives = [
+        _Drive(
+            course,
+            workdir / f"{name}_{k}{tail}",
+            setup.seed * 100 + k,
+            recipe.disturbance,
+            setup.profile,
+            setup.style,
+            setup.perception,
+            setup.classes,
+        )
+        for k in range(recipe.demonstrations)
+    ]
     recordings = []
     for i, drive in enumerate(drives):
         recording, driven = _drive(drive, features, write)
@@ -235,21 +269,37 @@ def demonstrate(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Ca
     return recordings
 
 
-def open_pairs(recordings: list[Recording], recipe: Recipe, features: FeatureConfig | None = None, cache: dict | None = None,
-               frames: Callable[[int, int], None] | None = None) -> list[tuple[str, str]]:
+def open_pairs(
+    recordings: list[Recording],
+    recipe: Recipe,
+    features: FeatureConfig | None = None,
+    cache: dict | None = None,
+    frames: Callable[[int, int], None] | None = None,
+) -> list[tuple[str, str]]:
     """The pairs of classes (terrain columns, the background among them) that ``recordings``
     leave unidentified, featurised (with ``recipe.features(features)``; ``cache`` and ``frames``,
     the progress by frame, as build_dataset takes them) and steadied as ``recipe`` trains (the
     report ``inspect`` prints)."""
     from terrapref.learning.train import identify
 
-    dataset = build_dataset(recordings, recipe.features(features), rules=recipe.rules, cache=cache,
-                            progress=None if frames is None else lambda p: frames(p.frames_done, p.frames))
+    dataset = build_dataset(
+        recordings,
+        recipe.features(features),
+        rules=recipe.rules,
+        cache=cache,
+        progress=None if frames is None else lambda p: frames(p.frames_done, p.frames),
+    )
     return [(p.first, p.second) for p in identify(dataset, steady=recipe.train.data.steady_labels).unidentified()]
 
 
-def _follow_up(recipe: Recipe, recordings: list[Recording], workdir: Path, setup: RecipeSetup, log: Callable[[str], None] | None,
-               cache: dict | None = None) -> list[Recording]:
+def _follow_up(
+    recipe: Recipe,
+    recordings: list[Recording],
+    workdir: Path,
+    setup: RecipeSetup,
+    log: Callable[[str], None] | None,
+    cache: dict | None = None,
+) -> list[Recording]:
     """The synthetic driver's drive of the follow-up course of what ``recordings`` left open
     (written as ``workdir/<course>_more.yaml``); none when they identify every pair. ``cache``
     keeps the recordings' features for training (build_dataset)."""
@@ -275,8 +325,9 @@ def record_demonstrations(recipe: Recipe, workdir: str | Path, setup: RecipeSetu
     return [r.path for r in demonstrate(recipe, workdir, setup, log, write=True)]
 
 
-def run_recipe(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Callable[[str], None] | None = None,
-               write_recordings: bool = False) -> RecipeOutput:
+def run_recipe(
+    recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Callable[[str], None] | None = None, write_recordings: bool = False
+) -> RecipeOutput:
     """Demonstrate, correct, train, as ``setup`` says; write into ``workdir``.
 
     Demonstrations come from :func:`demonstrate` (shared by recipes with the same seed and
@@ -291,7 +342,9 @@ def run_recipe(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Cal
     profile = setup.profile or PreferenceProfile.default(scenario.classes)
     features = recipe.features(setup.features)
     seed = setup.seed
-    recordings = demonstrate(recipe, workdir, replace(setup, profile=profile, course=course, features=features), log, write=write_recordings)
+    recordings = demonstrate(
+        recipe, workdir, replace(setup, profile=profile, course=course, features=features), log, write=write_recordings
+    )
     cache: dict = {}  # the recordings' features, computed once for the follow-up's question, training and retraining
     if setup.follow_up:
         recordings += _follow_up(recipe, recordings, workdir, replace(setup, profile=profile, course=course, features=features), log, cache)
@@ -300,7 +353,14 @@ def run_recipe(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Cal
     corr_s = 0.0
     train_cfg = replace(recipe.train, seed=seed)
     model = own / "model.safetensors"
-    result = train_and_save(build_dataset(recordings, features, cache=cache, rules=recipe.rules), model, train_cfg, rules=recipe.rules, recipe=recipe.name, options=RunOptions(checkpoints=False))
+    result = train_and_save(
+        build_dataset(recordings, features, cache=cache, rules=recipe.rules),
+        model,
+        train_cfg,
+        rules=recipe.rules,
+        recipe=recipe.name,
+        options=RunOptions(checkpoints=False),
+    )
     if recipe.corrections:  # the planner drives the course; only then is a simulation needed here
         camera, sim_cfg = CameraConfig(), SimConfig()
         expert_cfg = ExpertConfig.styled(setup.style, profile.order)
@@ -315,7 +375,14 @@ def run_recipe(recipe: Recipe, workdir: str | Path, setup: RecipeSetup, log: Cal
         corr_s += run.duration_s
         recordings.append(read_recording(out))
         paths.append(out)
-        result = train_and_save(build_dataset(recordings, features, cache=cache, rules=recipe.rules), model, train_cfg, rules=recipe.rules, recipe=recipe.name, options=RunOptions(checkpoints=False))
+        result = train_and_save(
+            build_dataset(recordings, features, cache=cache, rules=recipe.rules),
+            model,
+            train_cfg,
+            rules=recipe.rules,
+            recipe=recipe.name,
+            options=RunOptions(checkpoints=False),
+        )
         if log:
             log(f"correction session {r + 1}/{recipe.corrections}: {len(recordings[-1])} frames, retrained")
     return RecipeOutput(model, paths, result, demo_s / 60.0, corr_s / 60.0)

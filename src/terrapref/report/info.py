@@ -11,8 +11,10 @@ from terrapref.errors import UserError
 
 def _camera(c: dict) -> str:
     intr = f"fx {c['fx']:.1f}" if c.get("fx") is not None else f"{c.get('hfov_deg')} deg field of view"
-    return (f"{c.get('width_px')}x{c.get('height_px')}, {intr}, {c.get('mount_height_m')} m high, "
-            f"pitched {c.get('pitch_deg')} deg, {c.get('max_range_m')} m range")
+    return (
+        f"{c.get('width_px')}x{c.get('height_px')}, {intr}, {c.get('mount_height_m')} m high, "
+        f"pitched {c.get('pitch_deg')} deg, {c.get('max_range_m')} m range"
+    )
 
 
 def _preference(p: dict) -> str:
@@ -80,12 +82,14 @@ def _recording_lines(p: Path) -> list[str]:
     rec = read_recording(p)
     m = rec.meta
     driver = rec.header.driver
-    lines = [f"{p}: terrapref recording ({'complete' if rec.complete else 'partial'})",
-             f"frames          {len(rec)} ({rec.duration_s:.1f} s)",
-             f"scenario        {m.get('scenario')}",
-             f"driver          {driver.describe() if driver is not None else '?'}",
-             f"perception      {_perception(rec.perception)}",
-             f"created         {m.get('created', '?')}"]
+    lines = [
+        f"{p}: terrapref recording ({'complete' if rec.complete else 'partial'})",
+        f"frames          {len(rec)} ({rec.duration_s:.1f} s)",
+        f"scenario        {m.get('scenario')}",
+        f"driver          {driver.describe() if driver is not None else '?'}",
+        f"perception      {_perception(rec.perception)}",
+        f"created         {m.get('created', '?')}",
+    ]
     return lines + _common(m)
 
 
@@ -105,9 +109,15 @@ def _onnx_lines(p: Path) -> list[str]:
     except Exception as exc:  # onnx's parser raises several kinds on a foreign or damaged file
         raise UserError(str(p), f"not an ONNX model terrapref can read ({type(exc).__name__})") from None
     c = meta.get("classifier", {})
-    return [f"{p}: C exported as ONNX ({meta.get('format', 'no terrapref metadata')})",
+    return (
+        [
+            f"{p}: C exported as ONNX ({meta.get('format', 'no terrapref metadata')})",
             f"network         {c.get('members', 1)} member(s), hidden {c.get('hidden')}, {c.get('activation')}, skip {c.get('skip')}",
-            *_rule_lines(meta, str(p), graph_note=True)] + _common(meta) + _identifiability(meta)
+            *_rule_lines(meta, str(p), graph_note=True),
+        ]
+        + _common(meta)
+        + _identifiability(meta)
+    )
 
 
 def _rule_lines(meta: dict, source: str, graph_note: bool = False) -> list[str]:
@@ -126,7 +136,9 @@ def _rule_lines(meta: dict, source: str, graph_note: bool = False) -> list[str]:
     lethal = frozenset({classes.lethal_column} if classes.lethal else ())  # the terrain column the lethal classes share
     note = " (in the metadata; the graph holds C alone)" if graph_note and not driving.graph else ""
     lines = [f"drives          {driving.type}{note}"]
-    lines += [f"  {rule.describe(names, lethal)}" + ("" if rule is driving else " (fitted to be reported; it does not drive)") for rule in rules]
+    lines += [
+        f"  {rule.describe(names, lethal)}" + ("" if rule is driving else " (fitted to be reported; it does not drive)") for rule in rules
+    ]
     return lines
 
 
@@ -155,10 +167,20 @@ def _dataset_lines(p: Path, meta: dict, shapes: dict[str, tuple[int, ...]]) -> l
     n = shapes.get("U", (0,))[0]
     recs = meta.get("recordings", [])
     rules = meta.get("rules") if isinstance(meta.get("rules"), dict) else {}
-    return ([f"{p}: terrapref dataset", f"samples         {n} from {len(recs)} recording(s)",
-             f"rules' data     {', '.join(rules) or 'none (C alone)'}"]
-            + [f"  {r.get('path')}: {r.get('frames')} frames, {r.get('scenario')}" + (f", perception {r['perception']}" if r.get("perception", "clean") != "clean" else "")
-               for r in recs if isinstance(r, dict)] + _common(meta))
+    return (
+        [
+            f"{p}: terrapref dataset",
+            f"samples         {n} from {len(recs)} recording(s)",
+            f"rules' data     {', '.join(rules) or 'none (C alone)'}",
+        ]
+        + [
+            f"  {r.get('path')}: {r.get('frames')} frames, {r.get('scenario')}"
+            + (f", perception {r['perception']}" if r.get("perception", "clean") != "clean" else "")
+            for r in recs
+            if isinstance(r, dict)
+        ]
+        + _common(meta)
+    )
 
 
 def _model_lines(p: Path, meta: dict) -> list[str]:
@@ -167,12 +189,16 @@ def _model_lines(p: Path, meta: dict) -> list[str]:
 
     c = meta.get("classifier", {}) if isinstance(meta.get("classifier"), dict) else {}
     data = meta.get("data", {}) if isinstance(meta.get("data"), dict) else {}
-    lines = [f"{p}: terrapref model ({meta.get('kind', CLASSIFIER)}" + (", INTERRUPTED: the best epochs so far, no decision rules" if meta.get("status") == INTERRUPTED else "")
-             + (f", checkpoint of epoch {meta.get('epoch')}" if meta.get("status") == CHECKPOINT else "") + ")",
-             f"recipe          {meta.get('recipe', '?')}",
-             f"network         {c.get('members', 1)} member(s), hidden {c.get('hidden')}, {c.get('activation')}, skip {c.get('skip')}",
-             *_rule_lines(meta, str(p)),
-             f"data            {data.get('samples', '?')} samples, fingerprint {data.get('fingerprint', '?')}, {len(data.get('recordings', []) or [])} recording(s)"]
+    lines = [
+        f"{p}: terrapref model ({meta.get('kind', CLASSIFIER)}"
+        + (", INTERRUPTED: the best epochs so far, no decision rules" if meta.get("status") == INTERRUPTED else "")
+        + (f", checkpoint of epoch {meta.get('epoch')}" if meta.get("status") == CHECKPOINT else "")
+        + ")",
+        f"recipe          {meta.get('recipe', '?')}",
+        f"network         {c.get('members', 1)} member(s), hidden {c.get('hidden')}, {c.get('activation')}, skip {c.get('skip')}",
+        *_rule_lines(meta, str(p)),
+        f"data            {data.get('samples', '?')} samples, fingerprint {data.get('fingerprint', '?')}, {len(data.get('recordings', []) or [])} recording(s)",
+    ]
     return lines + _training(meta) + _common(meta) + _identifiability(meta)
 
 

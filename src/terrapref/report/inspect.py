@@ -41,8 +41,9 @@ class RecordingSummary:
             f"frames     {self.frames}",
             f"duration   {self.duration_s:.1f} s",
             f"scenario   {self.scenario.name}",
-            f"order      {' > '.join(self.order)}" if self.order else
-            "order      none declared (zones are scored under the class table's order; training needs the driver's)",
+            f"order      {' > '.join(self.order)}"
+            if self.order
+            else "order      none declared (zones are scored under the class table's order; training needs the driver's)",
             "labels     (index: w [rad/s]  count)",
         ]
         if not self.scenario.has_terrain:
@@ -73,9 +74,19 @@ def summarise(recording: Recording) -> RecordingSummary:
     counts = np.bincount(recording.labels, minlength=control.m)[: control.m]
     zones = [(z, z.reached) for z in score_zones(recording.poses, scenario, world, profile)]
     run = meta.get("summary") if isinstance(meta.get("summary"), dict) else {}
-    return RecordingSummary(len(recording), recording.duration_s, recording.complete, counts, control, zones, scenario, world,
-                            quit=bool(run.get("quit")), lethal_contact=recording.lethal_contact(),
-                            order=tuple(meta["profile"]) if meta.get("profile") else None)
+    return RecordingSummary(
+        len(recording),
+        recording.duration_s,
+        recording.complete,
+        counts,
+        control,
+        zones,
+        scenario,
+        world,
+        quit=bool(run.get("quit")),
+        lethal_contact=recording.lethal_contact(),
+        order=tuple(meta["profile"]) if meta.get("profile") else None,
+    )
 
 
 def save_driven_path(summary: RecordingSummary, recording: Recording, out: str | Path) -> Path:
@@ -83,5 +94,11 @@ def save_driven_path(summary: RecordingSummary, recording: Recording, out: str |
 
     status = summary.status
     missed = {z.id: f"missed: expected {z.expect}, drove {z.choice}" for z, reached in summary.zones if reached and not z.success}
-    return save_map(out, summary.scenario, summary.world, [("driven", recording.poses[:, :2], "red")],
-                    title=f"{summary.scenario.name}: {recording.path.name} ({status}, {summary.frames} frames)", marks=missed)
+    return save_map(
+        out,
+        summary.scenario,
+        summary.world,
+        [("driven", recording.poses[:, :2], "red")],
+        title=f"{summary.scenario.name}: {recording.path.name} ({status}, {summary.frames} frames)",
+        marks=missed,
+    )

@@ -109,12 +109,25 @@ def _train_job(args: tuple[tuple[Recipe, ...], str, int, tuple[str, ...], bool])
         t0 = time.perf_counter()
         out = run_recipe(recipe, workdir, RecipeSetup(seed, PreferenceProfile(profile)), write_recordings=write)
         members = tuple((tuple(m.history), m.best_epoch) for m in out.result.members or [out.result])
-        rows.append(RecipeModel(recipe.name, seed, str(out.model), tuple(out.result.history), out.result.best_epoch,
-                                out.demo_minutes, out.correction_minutes, time.perf_counter() - t0, members))
+        rows.append(
+            RecipeModel(
+                recipe.name,
+                seed,
+                str(out.model),
+                tuple(out.result.history),
+                out.result.best_epoch,
+                out.demo_minutes,
+                out.correction_minutes,
+                time.perf_counter() - t0,
+                members,
+            )
+        )
     return rows
 
 
-def reproduce(out_dir: str | Path, setup: Reproduction | None = None, engine: Engine | None = None, log: Callable[[str], None] = print) -> Path:
+def reproduce(
+    out_dir: str | Path, setup: Reproduction | None = None, engine: Engine | None = None, log: Callable[[str], None] = print
+) -> Path:
     """Run the whole reproduction ``setup`` (default: :class:`Reproduction`'s) into ``out_dir``
     and return the path of REPORT.md; ``engine`` runs its jobs (default: local processes, one
     per core)."""
@@ -140,24 +153,46 @@ def _train_all(setup: Reproduction, out: Path, engine: Engine, log: Callable[[st
     groups: dict = {}
     for r in setup.recipes:
         groups.setdefault((r.course, r.disturbance), []).append(r)
-    cost = {key: max(r.demonstrations * (1 + r.train.classifier.members * r.train.optimiser.epochs * (2 if r.train.data.mirror else 1) / 100) for r in g)
-            for key, g in groups.items()}
-    jobs = [(tuple(g), str(out / "work" / f"seed{s}"), s, setup.profile.order, setup.write_recordings)
-            for key, g in sorted(groups.items(), key=lambda kv: -cost[kv[0]]) for s in range(setup.seeds)]
-    log(f"[1/3] demonstrations, corrections and training: {len(setup.recipes) * setup.seeds} models "
-        f"({', '.join(r.name for r in setup.recipes)} x {setup.seeds} seeds) ...")
-    done = run_grid(_train_job, jobs, engine, lambda k, n: log(f"      trained {k}/{n} job(s)"),
-                    describe=lambda j: f"recipes {', '.join(r.name for r in j[0])}, seed {j[2]}")
+    cost = {
+        key: max(
+            r.demonstrations * (1 + r.train.classifier.members * r.train.optimiser.epochs * (2 if r.train.data.mirror else 1) / 100)
+            for r in g
+        )
+        for key, g in groups.items()
+    }
+    jobs = [
+        (tuple(g), str(out / "work" / f"seed{s}"), s, setup.profile.order, setup.write_recordings)
+        for key, g in sorted(groups.items(), key=lambda kv: -cost[kv[0]])
+        for s in range(setup.seeds)
+    ]
+    log(
+        f"[1/3] demonstrations, corrections and training: {len(setup.recipes) * setup.seeds} models "
+        f"({', '.join(r.name for r in setup.recipes)} x {setup.seeds} seeds) ..."
+    )
+    done = run_grid(
+        _train_job,
+        jobs,
+        engine,
+        lambda k, n: log(f"      trained {k}/{n} job(s)"),
+        describe=lambda j: f"recipes {', '.join(r.name for r in j[0])}, seed {j[2]}",
+    )
     order = {r.name: i for i, r in enumerate(setup.recipes)}
     return sorted((row for rows in done for row in rows), key=lambda t: (t.seed, order[t.recipe]))
 
 
 def _evaluate(setup: Reproduction, trained: list[RecipeModel], engine: Engine, log: Callable[[str], None]) -> list[RecipeRun]:
     """Rule 2: every model and the synthetic driver on every course, the planners' agreement with the driver."""
-    specs = [RunSpec(sc, e, PLANNER, t.model, setup.profile.order)
-             for t in trained for sc in setup.scenarios for e in range(setup.eval_seeds)]
-    specs += [RunSpec(sc, e, PLANNER, t.model, setup.profile.order, perception=p)
-              for p in setup.perceptions if p.active for t in trained for sc in (*TEST_SET, *variations()) for e in range(setup.eval_seeds)]
+    specs = [
+        RunSpec(sc, e, PLANNER, t.model, setup.profile.order) for t in trained for sc in setup.scenarios for e in range(setup.eval_seeds)
+    ]
+    specs += [
+        RunSpec(sc, e, PLANNER, t.model, setup.profile.order, perception=p)
+        for p in setup.perceptions
+        if p.active
+        for t in trained
+        for sc in (*TEST_SET, *variations())
+        for e in range(setup.eval_seeds)
+    ]
     specs += [RunSpec(sc, s, EXPERT, None, setup.profile.order) for sc in setup.scenarios for s in range(setup.seeds)]
     specs.sort(key=lambda sp: -scenario_length(sp.scenario))  # longest first: no core idles at the end
     log(f"[2/3] closed-loop evaluation: {len(specs)} runs ...")
@@ -212,8 +247,9 @@ def _mode(choices: list[tuple[str, bool, str]]) -> str:
     return top if names.count(top) == len(names) else f"{top} ({names.count(top)}/{len(names)})"
 
 
-def _write_report(out: Path, setup: Reproduction, runs: list[RecipeRun], trained: list[RecipeModel], timings: dict[str, float],
-                  engine: Engine) -> Path:
+def _write_report(
+    out: Path, setup: Reproduction, runs: list[RecipeRun], trained: list[RecipeModel], timings: dict[str, float], engine: Engine
+) -> Path:
     """REPORT.md, its figures and results.json (every run's metrics and the time per stage)."""
     t_fig = time.perf_counter()
     figs = out / "figures"
@@ -234,8 +270,11 @@ def _draw_figures(figs: Path, setup: Reproduction, runs: list[RecipeRun], traine
     """Each course with the driver's and the planners' seed-0 paths; each recipe's seed-0 training
     curve; drawn as a grid of jobs (a dozen figures of half a second each)."""
     jobs: list[tuple] = [("map", str(figs / f"{sc}.png"), sc, _tracks(runs, sc, setup.recipes)) for sc in setup.scenarios]
-    jobs += [("curve", str(figs / f"training_{t.recipe}.png"), t.recipe, [([asdict(h) for h in history], best) for history, best in t.members])
-             for t in trained if t.seed == 0]
+    jobs += [
+        ("curve", str(figs / f"training_{t.recipe}.png"), t.recipe, [([asdict(h) for h in history], best) for history, best in t.members])
+        for t in trained
+        if t.seed == 0
+    ]
     run_grid(_figure_job, jobs, engine, describe=lambda j: f"figure {j[1]}")
 
 
@@ -285,35 +324,51 @@ def _recipe_lines(recipes: tuple[Recipe, ...]) -> list[str]:
     """One line per recipe: its demonstrations, pushes, corrections and training."""
     lines = []
     for r in recipes:
-        pushes = (f"with disturbances ({r.disturbance.rate_hz:g} pushes/s of {r.disturbance.min_yaw_rate_rps:g}-{r.disturbance.max_yaw_rate_rps:g} rad/s)"
-                  if r.disturbance is not None else "undisturbed")
-        lines.append(f"- **{r.name}**: {r.demonstrations} demonstration run(s) of {r.course}, {pushes}, {r.corrections} correction session(s), "
-                     f"{r.train.optimiser.epochs} epochs, residual path {'on' if r.train.classifier.skip else 'off'}, class-balanced loss {'on' if r.train.data.class_balance else 'off'}, "
-                     f"mirrored samples {'on' if r.train.data.mirror else 'off'}"
-                     + (f", {r.train.classifier.members} ensemble members" if r.train.classifier.members > 1 else "")
-                     + "".join(f", {summary}" for rule in r.rules if (summary := rule.summary()))
-                     + ("; labels from a moving average of w if the driver's hand shakes more than half the w grid's spacing"
-                        if r.train.data.steady_labels else "") + ".")
+        pushes = (
+            f"with disturbances ({r.disturbance.rate_hz:g} pushes/s of {r.disturbance.min_yaw_rate_rps:g}-{r.disturbance.max_yaw_rate_rps:g} rad/s)"
+            if r.disturbance is not None
+            else "undisturbed"
+        )
+        lines.append(
+            f"- **{r.name}**: {r.demonstrations} demonstration run(s) of {r.course}, {pushes}, {r.corrections} correction session(s), "
+            f"{r.train.optimiser.epochs} epochs, residual path {'on' if r.train.classifier.skip else 'off'}, class-balanced loss {'on' if r.train.data.class_balance else 'off'}, "
+            f"mirrored samples {'on' if r.train.data.mirror else 'off'}"
+            + (f", {r.train.classifier.members} ensemble members" if r.train.classifier.members > 1 else "")
+            + "".join(f", {summary}" for rule in r.rules if (summary := rule.summary()))
+            + (
+                "; labels from a moving average of w if the driver's hand shakes more than half the w grid's spacing"
+                if r.train.data.steady_labels
+                else ""
+            )
+            + "."
+        )
     return lines
 
 
 def _summary_table(recipes: tuple[Recipe, ...], runs: list[RecipeRun]) -> list[str]:
     """Each recipe's and the driver's zone success, agreement, collisions and completion over the test courses."""
     test_names = [*TEST_SET, *variations()]
-    lines = ["", "## Summary (test_course and the figure variations)", "",
-             "Zone success against the zones' expectations; agreement: the planner's choice equals the synthetic driver's in the same "
-             "zone of the same run (evaluation seed). 95% Wilson intervals over all zones of all training seeds. Only what was "
-             "driven counts: a zone the vehicle did not get past is a failure (not reached); stops are the planner's (terrapref.planner.stop).", "",
-             "| who | zone success | agreement with the driver | collisions | completed | not reached | stops (per 100 m) | runs |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "",
+        "## Summary (test_course and the figure variations)",
+        "",
+        "Zone success against the zones' expectations; agreement: the planner's choice equals the synthetic driver's in the same "
+        "zone of the same run (evaluation seed). 95% Wilson intervals over all zones of all training seeds. Only what was "
+        "driven counts: a zone the vehicle did not get past is a failure (not reached); stops are the planner's (terrapref.planner.stop).",
+        "",
+        "| who | zone success | agreement with the driver | collisions | completed | not reached | stops (per 100 m) | runs |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for name in [*(r.name for r in recipes), "driver"]:
         chosen = [r.result for r in runs if r.recipe == name and r.result.scenario in test_names]
         zones = [z for r in chosen for z in r.metrics.zones]
         compared = [a for r in chosen if r.agreement is not None for a in r.agreement]
         s = summarise(chosen, PLANNER if name != "driver" else EXPERT)
         agreement = rate_text(sum(a.agrees for a in compared), len(compared)) if compared else "—"
-        lines.append(f"| {name} | {rate_text(sum(z.success for z in zones), len(zones))} | {agreement} | {s.collision_count} | "
-                     f"{s.completed_rate:.0%} | {s.not_reached} | {_stops_text(s)} | {s.runs} |")
+        lines.append(
+            f"| {name} | {rate_text(sum(z.success for z in zones), len(zones))} | {agreement} | {s.collision_count} | "
+            f"{s.completed_rate:.0%} | {s.not_reached} | {_stops_text(s)} | {s.runs} |"
+        )
     return lines
 
 
@@ -324,12 +379,18 @@ def _perception_table(setup: Reproduction, runs: list[RecipeRun]) -> list[str]:
     if len(names) == 1:
         return []
     test_names = {*TEST_SET, *variations()}
-    lines = ["", "## Under what a robot sees (test_course and the figure variations)", "",
-             "The same models, each planner receiving what a robot's segmentation, localisation and camera would give instead of "
-             "the truth (terrapref.perception; `terrapref perception` lists the presets, docs/perception.md derives them); the "
-             "driver sees the truth. Each cell: agreement with the driver, zone success, collisions, runs completed and stops; "
-             "95% Wilson intervals.", "",
-             "| recipe | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    lines = [
+        "",
+        "## Under what a robot sees (test_course and the figure variations)",
+        "",
+        "The same models, each planner receiving what a robot's segmentation, localisation and camera would give instead of "
+        "the truth (terrapref.perception; `terrapref perception` lists the presets, docs/perception.md derives them); the "
+        "driver sees the truth. Each cell: agreement with the driver, zone success, collisions, runs completed and stops; "
+        "95% Wilson intervals.",
+        "",
+        "| recipe | " + " | ".join(names) + " |",
+        "|---|" + "---|" * len(names),
+    ]
     for recipe in setup.recipes:
         cells = []
         for name in names:
@@ -337,8 +398,10 @@ def _perception_table(setup: Reproduction, runs: list[RecipeRun]) -> list[str]:
             compared = [a for r in chosen if r.agreement is not None for a in r.agreement]
             zones = [z for r in chosen for z in r.metrics.zones]
             s = summarise(chosen, PLANNER)
-            cells.append(f"{rate_text(sum(a.agrees for a in compared), len(compared))}; success {rate_text(sum(z.success for z in zones), len(zones))}; "
-                         f"{s.collision_count} collisions; completed {s.completed_rate:.0%}; stops {_stops_text(s)}")
+            cells.append(
+                f"{rate_text(sum(a.agrees for a in compared), len(compared))}; success {rate_text(sum(z.success for z in zones), len(zones))}; "
+                f"{s.collision_count} collisions; completed {s.completed_rate:.0%}; stops {_stops_text(s)}"
+            )
         lines.append(f"| {recipe.name} | " + " | ".join(cells) + " |")
     return lines
 
@@ -357,7 +420,10 @@ def _zone_tables(recipes: tuple[Recipe, ...], runs: list[RecipeRun]) -> list[str
     header = "| zone | terrains | expected | driver | " + " | ".join(f"{r.name} planner | {r.name} success" for r in recipes) + " |"
     sep = "|" + "---|" * (4 + 2 * len(recipes))
     lines = []
-    for title, names in (("Table 1: training scenarios (train_course)", ["train_course"]), ("Table 2: test scenarios (test_course)", ["test_course"])):
+    for title, names in (
+        ("Table 1: training scenarios (train_course)", ["train_course"]),
+        ("Table 2: test scenarios (test_course)", ["test_course"]),
+    ):
         lines += ["", f"## {title}", "", header, sep]
         for sc in names:
             lines += _zone_rows(runs, sc, recipes)
@@ -373,7 +439,9 @@ def _training_lines(recipes: tuple[Recipe, ...], trained: list[RecipeModel]) -> 
     lines = ["", "## Training", ""]
     for r in recipes:
         ts = [t for t in trained if t.recipe == r.name]
-        lines.append(f"- {r.name}: chosen epochs {[t.best_epoch for t in ts]}; validation accuracy at the chosen epoch "
-                     f"{[round(t.history[t.best_epoch - 1].val_acc, 3) for t in ts]}; demonstration {np.mean([t.demo_minutes for t in ts]):.1f} min, "
-                     f"corrections {np.mean([t.correction_minutes for t in ts]):.1f} min per seed. Curve: `figures/training_{r.name}.png`.")
+        lines.append(
+            f"- {r.name}: chosen epochs {[t.best_epoch for t in ts]}; validation accuracy at the chosen epoch "
+            f"{[round(t.history[t.best_epoch - 1].val_acc, 3) for t in ts]}; demonstration {np.mean([t.demo_minutes for t in ts]):.1f} min, "
+            f"corrections {np.mean([t.correction_minutes for t in ts]):.1f} min per seed. Curve: `figures/training_{r.name}.png`."
+        )
     return lines

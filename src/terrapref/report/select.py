@@ -75,7 +75,7 @@ def parse_orders(text: str, classes: ClassTable | None = None) -> tuple[tuple[st
         return tuple((*p, *last) for p in itertools.permutations(c for c in classes.profile if c in classes.terrain_names))
     if text.startswith("random:"):
         try:
-            n = int(text[len("random:"):])
+            n = int(text[len("random:") :])
         except ValueError:
             raise ValueError(f"random:N needs an integer N, got {text!r}") from None
         total = math.factorial(len(classes.terrain_names))
@@ -136,12 +136,21 @@ class _Model:
 
 def _train(job: _OrderJob) -> list[str]:
     """Every recipe for one order and seed, one after another: they share the work folder's demonstrations."""
-    setup = RecipeSetup(job.seed, PreferenceProfile(job.order), job.course, style=job.style, perception=job.perception, classes=job.classes,
-                        follow_up=job.follow_up)
+    setup = RecipeSetup(
+        job.seed,
+        PreferenceProfile(job.order),
+        job.course,
+        style=job.style,
+        perception=job.perception,
+        classes=job.classes,
+        follow_up=job.follow_up,
+    )
     return [str(run_recipe(recipe_named(r), job.workdir, setup).model) for r in job.recipes]
 
 
-def job_folder(out: Path, order: Sequence[str], seed: int, taught_under: PerceptionModel | None = None, lethal: str | None = "non_traversable") -> Path:
+def job_folder(
+    out: Path, order: Sequence[str], seed: int, taught_under: PerceptionModel | None = None, lethal: str | None = "non_traversable"
+) -> Path:
     """The work folder of one order and seed in a selection's ``out``: its demonstrations, and
     each recipe's model in ``<recipe>/model.safetensors`` (drives recorded under a perception
     model in a folder of their own). ``lethal``: the order's lethal column, left out of the name."""
@@ -188,20 +197,37 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
     t_train = time.perf_counter() - t0
 
     layouts = sel.layouts
-    specs = [RunSpec(c, 0, PLANNER, path, m.job.order, perception=p, classes=sel.classes) for p in sel.driven_under for path, m in models.items()
-             for c in layouts]
+    specs = [
+        RunSpec(c, 0, PLANNER, path, m.job.order, perception=p, classes=sel.classes)
+        for p in sel.driven_under
+        for path, m in models.items()
+        for c in layouts
+    ]
     specs += [RunSpec(c, 0, EXPERT, None, o, style=sel.style, classes=sel.classes) for o in sel.orders for c in layouts]
     log(f"[2/2] closed-loop runs: {len(specs)} on {len(layouts)} layouts ...")
     results = run_many(specs, progress=every_tenth(log), engine=engine)
     t_eval = time.perf_counter() - t0 - t_train
 
     rows, runs = _zones_and_runs(specs, results, models)
-    saved = {"selection": {"recipes": list(sel.recipes), "orders": [list(o) for o in sel.orders], "seeds": sel.seeds, "layouts": layouts,
-                           "style": sel.style, "perceptions": [p.to_dict() for p in sel.driven_under],
-                           "taught_under": (sel.taught_under or PerceptionModel()).to_dict(),
-                           **({"classes": sel.classes.to_dict()} if sel.classes is not None else {}),
-                           **({"course": sel.course} if sel.course is not None else {}), **({"follow_up": True} if sel.follow_up else {})},
-             "engine": engine.describe(), "zones": rows, "runs": runs, "train_s": round(t_train, 1), "eval_s": round(t_eval, 1)}
+    saved = {
+        "selection": {
+            "recipes": list(sel.recipes),
+            "orders": [list(o) for o in sel.orders],
+            "seeds": sel.seeds,
+            "layouts": layouts,
+            "style": sel.style,
+            "perceptions": [p.to_dict() for p in sel.driven_under],
+            "taught_under": (sel.taught_under or PerceptionModel()).to_dict(),
+            **({"classes": sel.classes.to_dict()} if sel.classes is not None else {}),
+            **({"course": sel.course} if sel.course is not None else {}),
+            **({"follow_up": True} if sel.follow_up else {}),
+        },
+        "engine": engine.describe(),
+        "zones": rows,
+        "runs": runs,
+        "train_s": round(t_train, 1),
+        "eval_s": round(t_eval, 1),
+    }
     write_text_atomic(out / "select.json", json.dumps(saved, indent=0))
     path = write_selection_report(out, saved)
     log(f"wrote {path}")
@@ -211,32 +237,73 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
 def _train_all(out: Path, sel: Selection, engine: Engine, log: Callable[[str], None]) -> dict[str, _Model]:
     """Every recipe for every order and seed; model file -> the model, in the order trained."""
     # One job per order and seed: its recipes share the demonstrations recorded in its work folder.
-    jobs = [_OrderJob(tuple(sel.recipes), tuple(o), s, sel.style, str(job_folder(out, o, s, sel.taught_under, (sel.classes or default_classes()).lethal_column)), sel.taught_under, sel.classes,
-                      sel.course, sel.follow_up) for o in sel.orders for s in range(sel.seeds)]
-    log(f"[1/2] demonstrations and training: {len(jobs) * len(sel.recipes)} models ({len(sel.recipes)} recipes x {len(sel.orders)} orders "
-        f"x {sel.seeds} seeds) on {engine.describe()} ...")
+    jobs = [
+        _OrderJob(
+            tuple(sel.recipes),
+            tuple(o),
+            s,
+            sel.style,
+            str(job_folder(out, o, s, sel.taught_under, (sel.classes or default_classes()).lethal_column)),
+            sel.taught_under,
+            sel.classes,
+            sel.course,
+            sel.follow_up,
+        )
+        for o in sel.orders
+        for s in range(sel.seeds)
+    ]
+    log(
+        f"[1/2] demonstrations and training: {len(jobs) * len(sel.recipes)} models ({len(sel.recipes)} recipes x {len(sel.orders)} orders "
+        f"x {sel.seeds} seeds) on {engine.describe()} ..."
+    )
     trained = run_grid(_train, jobs, engine, lambda k, n: log(f"      trained {k}/{n} order-and-seed jobs"), describe=_describe)
     return {m: _Model(r, j) for j, ms in zip(jobs, trained, strict=True) for r, m in zip(j.recipes, ms, strict=True)}
 
 
 def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict[str, _Model]) -> tuple[list[dict], list[dict]]:
     """select.json's rows: every planner zone beside the same order's driver in the same zone, and every planner run's collisions."""
-    driver = {(tuple(s.profile), r.scenario, z.id): z for s, r in zip(specs, results, strict=True) if r.driver == EXPERT
-              for z in r.metrics.zones}
+    driver = {
+        (tuple(s.profile), r.scenario, z.id): z for s, r in zip(specs, results, strict=True) if r.driver == EXPERT for z in r.metrics.zones
+    }
     rows, runs = [], []
     for spec, r in zip(specs, results, strict=True):
         if r.driver != PLANNER:
             continue
         model = models[spec.model_path]
-        who = {"recipe": model.recipe, "order": list(model.job.order), "seed": model.job.seed, "scenario": r.scenario,
-               "perception": spec.perceived_as}
+        who = {
+            "recipe": model.recipe,
+            "order": list(model.job.order),
+            "seed": model.job.seed,
+            "scenario": r.scenario,
+            "perception": spec.perceived_as,
+        }
         m = r.metrics
-        runs.append({**who, "collisions": m.collisions, "completed": m.completed, "ended": m.ending, "contact_s": m.contact_s,
-                     "driven_m": round(m.driven_m, 3), "stops": m.stop_count, "stops_s": m.stops_s})
+        runs.append(
+            {
+                **who,
+                "collisions": m.collisions,
+                "completed": m.completed,
+                "ended": m.ending,
+                "contact_s": m.contact_s,
+                "driven_m": round(m.driven_m, 3),
+                "stops": m.stop_count,
+                "stops_s": m.stops_s,
+            }
+        )
         for z in r.metrics.zones:
             d = driver[(tuple(spec.profile), r.scenario, z.id)]
-            rows.append({**who, "zone": z.id, "kind": zone_kind(z.label), "choice": z.choice, "driver_choice": d.choice,
-                         "agrees": zone_agrees(z, d), "success": z.success, "driver_success": d.success})
+            rows.append(
+                {
+                    **who,
+                    "zone": z.id,
+                    "kind": zone_kind(z.label),
+                    "choice": z.choice,
+                    "driver_choice": d.choice,
+                    "agrees": zone_agrees(z, d),
+                    "success": z.success,
+                    "driver_success": d.success,
+                }
+            )
     return rows, runs
 
 
@@ -284,22 +351,36 @@ def write_selection_report(out: Path, saved: dict) -> Path:
     sel, rows, runs = saved["selection"], saved["zones"], saved["runs"]
     layouts = sel["layouts"]
     seen = [p["name"] for p in sel.get("perceptions", [{"name": "clean"}])]
-    lines = ["# Recipe selection: agreement with the driver on generated layouts", "",
-             f"{len(sel['recipes'])} recipe(s) x {len(sel['orders'])} order(s) x {sel['seeds']} training seed(s), {_drives(sel)} each; every model and "
-             f"its driver (style {sel['style']}) drive {len(layouts)} generated layouts ({layouts[0]} to {layouts[-1]}). Rates with 95% Wilson "
-             "intervals over all zones; the layouts column resamples whole layouts instead (a cluster bootstrap: a layout's zones are "
-             "alike across seeds), the spread another set of layouts would show.", "",
-             f"The demonstrations recorded: {_perception_line(sel.get('taught_under'))}. The models drive the layouts receiving "
-             + ", then ".join(f"`{name}`" for name in seen) + " (terrapref.perception); the driver always sees the truth.", ""]
+    lines = [
+        "# Recipe selection: agreement with the driver on generated layouts",
+        "",
+        f"{len(sel['recipes'])} recipe(s) x {len(sel['orders'])} order(s) x {sel['seeds']} training seed(s), {_drives(sel)} each; every model and "
+        f"its driver (style {sel['style']}) drive {len(layouts)} generated layouts ({layouts[0]} to {layouts[-1]}). Rates with 95% Wilson "
+        "intervals over all zones; the layouts column resamples whole layouts instead (a cluster bootstrap: a layout's zones are "
+        "alike across seeds), the spread another set of layouts would show.",
+        "",
+        f"The demonstrations recorded: {_perception_line(sel.get('taught_under'))}. The models drive the layouts receiving "
+        + ", then ".join(f"`{name}`" for name in seen)
+        + " (terrapref.perception); the driver always sees the truth.",
+        "",
+    ]
     lethal = _lethal_of(sel)
     if "classes" in sel:
         table = sel["classes"]
-        lines += [f"Class table: background {table['background']}; feature classes "
-                  f"{', '.join(c['name'] for c in table['classes'] if c['name'] != table['background'] and c['name'] not in table['lethal'])}; "
-                  f"lethal {', '.join(table['lethal']) or 'none'}. Orders: " + "; ".join(" > ".join(_chosen(o, lethal)) for o in sel["orders"]) + ".", ""]
+        lines += [
+            f"Class table: background {table['background']}; feature classes "
+            f"{', '.join(c['name'] for c in table['classes'] if c['name'] != table['background'] and c['name'] not in table['lethal'])}; "
+            f"lethal {', '.join(table['lethal']) or 'none'}. Orders: "
+            + "; ".join(" > ".join(_chosen(o, lethal)) for o in sel["orders"])
+            + ".",
+            "",
+        ]
     if "course" in sel or sel.get("follow_up"):
         course = f"`{Path(sel['course']).name}`" if "course" in sel else "its own course"
-        lines += [f"Every recipe demonstrated {course}{', then a follow-up course of the pairs its drive left open' if sel.get('follow_up') else ''}.", ""]
+        lines += [
+            f"Every recipe demonstrated {course}{', then a follow-up course of the pairs its drive left open' if sel.get('follow_up') else ''}.",
+            "",
+        ]
     points: list[RateRow] = []
     targets: list[float] = []
     for name in seen:
@@ -313,24 +394,37 @@ def write_selection_report(out: Path, saved: dict) -> Path:
         for label, rate, interval in bars:
             points.append(RateRow(f"{label}, {name}" if len(seen) > 1 else label, rate, interval))
             targets.append(TARGET if name == "clean" else PERCEIVED_TARGET)
-    lines += [f"Training {saved['train_s']:.0f} s, runs {saved['eval_s']:.0f} s (wall; {saved['engine']}).", "", "![selection](select.png)", ""]
-    save_intervals(out / "select.png", points, "agreement with the driver",
-                   target=targets or TARGET,
-                   title=f"{_drives(sel)} per model, {len(layouts)} layouts x {sel['seeds']} seeds; 95% intervals, layouts resampled")
+    lines += [
+        f"Training {saved['train_s']:.0f} s, runs {saved['eval_s']:.0f} s (wall; {saved['engine']}).",
+        "",
+        "![selection](select.png)",
+        "",
+    ]
+    save_intervals(
+        out / "select.png",
+        points,
+        "agreement with the driver",
+        target=targets or TARGET,
+        title=f"{_drives(sel)} per model, {len(layouts)} layouts x {sel['seeds']} seeds; 95% intervals, layouts resampled",
+    )
     path = out / "SELECT.md"
     write_text_atomic(path, "\n".join(lines))
     return path
 
 
-def _selection_table(sel: dict, rows: list[dict], runs: list[dict],
-                     order_bars: bool = True) -> tuple[list[str], list[tuple[str, float, tuple[float, float]]]]:
+def _selection_table(
+    sel: dict, rows: list[dict], runs: list[dict], order_bars: bool = True
+) -> tuple[list[str], list[tuple[str, float, tuple[float, float]]]]:
     """One perception's table (per recipe and order, then all orders) and its disagreements; and the
     bars of the figure: (label, agreement, its interval resampling layouts), each recipe's over all
     orders, and with ``order_bars`` each order's too when there is one recipe."""
     kinds = sorted({r["kind"] for r in rows})
-    lines = ["| recipe | order | agreement with the driver | agreement, layouts resampled | " + " | ".join(f"agreement, {k} zones" for k in kinds)
-             + " | zone success | the driver's zone success | collisions | runs completed | stops per 100 m | per seed |",
-             "|---|---|---|---|" + "---|" * len(kinds) + "---|---|---|---|---|---|"]
+    lines = [
+        "| recipe | order | agreement with the driver | agreement, layouts resampled | "
+        + " | ".join(f"agreement, {k} zones" for k in kinds)
+        + " | zone success | the driver's zone success | collisions | runs completed | stops per 100 m | per seed |",
+        "|---|---|---|---|" + "---|" * len(kinds) + "---|---|---|---|---|---|",
+    ]
     bars = []
     for recipe in sel["recipes"]:
         for order in [*sel["orders"], None]:
@@ -346,8 +440,11 @@ def _selection_table(sel: dict, rows: list[dict], runs: list[dict],
             seeds = ", ".join(f"{sum(v) / len(v):.0%}" for v in per_seed.values()) if order is not None else "-"
             name = "**all**" if order is None else " > ".join(order)
             rate, lo, hi = layout_interval(sub)
-            lines.append(f"| {recipe} | {name} | {_rate(sub, 'agrees')} | {rate:.1%} (95% CI {lo:.1%}-{hi:.1%}) | " + " | ".join(_rate([r for r in sub if r["kind"] == k], "agrees") for k in kinds)
-                         + f" | {_rate(sub, 'success')} | {_rate(sub, 'driver_success')} | {coll} | {completed} | {seeds} |")
+            lines.append(
+                f"| {recipe} | {name} | {_rate(sub, 'agrees')} | {rate:.1%} (95% CI {lo:.1%}-{hi:.1%}) | "
+                + " | ".join(_rate([r for r in sub if r["kind"] == k], "agrees") for k in kinds)
+                + f" | {_rate(sub, 'success')} | {_rate(sub, 'driver_success')} | {coll} | {completed} | {seeds} |"
+            )
             if order is None or (order_bars and len(sel["recipes"]) == 1):
                 bars.append((f"{recipe}, all orders" if order is None else " > ".join(_chosen(order, _lethal_of(sel))), rate, (lo, hi)))
     misses: dict[tuple, int] = {}
@@ -356,6 +453,9 @@ def _selection_table(sel: dict, rows: list[dict], runs: list[dict],
             key = (r["recipe"], r["kind"], r["choice"], r["driver_choice"])
             misses[key] = misses.get(key, 0) + 1
     if misses:
-        lines += ["", "Disagreements (recipe, zone kind: planner's choice / driver's choice, count): "
-                  + "; ".join(f"{rc}, {k}: {p} / {d}, {n}" for (rc, k, p, d), n in sorted(misses.items(), key=lambda kv: -kv[1]))]
+        lines += [
+            "",
+            "Disagreements (recipe, zone kind: planner's choice / driver's choice, count): "
+            + "; ".join(f"{rc}, {k}: {p} / {d}, {n}" for (rc, k, p, d), n in sorted(misses.items(), key=lambda kv: -kv[1])),
+        ]
     return lines, bars

@@ -207,7 +207,9 @@ def _teach_job(job: TeachJob) -> TaughtModel:
 
     t0 = time.perf_counter()
     recipe = _teach_recipe(job)
-    setup = RecipeSetup(job.seed, PreferenceProfile(job.order), course=job.course, style=job.style, classes=job.classes, follow_up=job.follow_up)
+    setup = RecipeSetup(
+        job.seed, PreferenceProfile(job.order), course=job.course, style=job.style, classes=job.classes, follow_up=job.follow_up
+    )
     out = run_recipe(recipe, job.workdir, setup)
     return TaughtModel(job, str(out.model), out.demo_minutes, time.perf_counter() - t0)
 
@@ -226,9 +228,21 @@ def teach_jobs(plan: StudyPlan, work: Path) -> list[TeachJob]:
 
     default, lethal = plan.orders[0], plan.table.lethal_column
     combos = [(o, "default") for o in plan.orders] + [(default, st) for st in plan.styles if st != "default"]
-    return [TeachJob(s, tuple(o), st, plan.epochs, plan.recipe, str(work / "teach" / f"{order_tag(o, lethal)}_{st}_s{s}"),
-                     plan.course, plan.follow_up, plan.classes)
-            for s in range(plan.seeds) for o, st in combos]
+    return [
+        TeachJob(
+            s,
+            tuple(o),
+            st,
+            plan.epochs,
+            plan.recipe,
+            str(work / "teach" / f"{order_tag(o, lethal)}_{st}_s{s}"),
+            plan.course,
+            plan.follow_up,
+            plan.classes,
+        )
+        for s in range(plan.seeds)
+        for o, st in combos
+    ]
 
 
 # -- the study -------------------------------------------------------------------------------
@@ -245,6 +259,7 @@ class _Workspace:
 
     def map(self, fn: Callable, jobs: list, what: str) -> list:
         """Map ``fn`` over ``jobs`` on the engine (results in order), logging progress; a failed job is named by its inputs."""
+
         def describe(job: object) -> str:
             return f"{what} {job.to_dict() if isinstance(job, (TrainJob, TeachJob, DemonstrationJob)) else job!r}"
 
@@ -298,10 +313,15 @@ def _demonstrate(ws: _Workspace) -> None:
             base = ws.work / f"{name}_s{s}"
             sets = [(str(base / "U.safetensors"), "U", None)]
             if name == "default":
-                sets += [(str(base / "cnn.safetensors"), "cnn", None), *((str(base / f"U_n{n}.safetensors"), "U", n) for n in plan.horizons)]
+                sets += [
+                    (str(base / "cnn.safetensors"), "cnn", None),
+                    *((str(base / f"U_n{n}.safetensors"), "U", n) for n in plan.horizons),
+                ]
             jobs.append(DemonstrationJob(str(base), s, order, tuple(sets), plan.demo_course(), plan.classes))
-    ws.log(f"[1/5] demonstrations and featurisation: {plan.seeds} seed(s) x {len(profiles)} profile(s) x {DEMONSTRATIONS.demonstrations} runs "
-           f"of {course_name(plan.demo_course())}, {sum(len(j.sets) for j in jobs)} sets ...")
+    ws.log(
+        f"[1/5] demonstrations and featurisation: {plan.seeds} seed(s) x {len(profiles)} profile(s) x {DEMONSTRATIONS.demonstrations} runs "
+        f"of {course_name(plan.demo_course())}, {sum(len(j.sets) for j in jobs)} sets ..."
+    )
     ws.map(_demonstration_job, jobs, "demonstration set")
 
 
@@ -311,8 +331,10 @@ def _train_and_teach(ws: _Workspace) -> tuple[list[TrainedModel], list[TaughtMod
     last job."""
     plan = ws.plan
     train, teach = _train_jobs(plan, ws.work), teach_jobs(plan, ws.work)
-    ws.log(f"[2/5] training and teaching: {len(train)} models, and {len(teach)} drives of {course_name(plan.teach_course())} and "
-           f"their models (recipe {plan.recipe}; {len(plan.orders)} orders, {len(plan.styles)} driver styles, {plan.seeds} seed(s)) ...")
+    ws.log(
+        f"[2/5] training and teaching: {len(train)} models, and {len(teach)} drives of {course_name(plan.teach_course())} and "
+        f"their models (recipe {plan.recipe}; {len(plan.orders)} orders, {len(plan.styles)} driver styles, {plan.seeds} seed(s)) ..."
+    )
     done = ws.map(_model_job, [*teach, *train], "model")  # the drives and their recipe's training first: the longest jobs
     return done[len(teach) :], done[: len(teach)]
 
@@ -330,18 +352,43 @@ def _train_jobs(plan: StudyPlan, work: Path) -> list[TrainJob]:
     models.mkdir(exist_ok=True)
 
     def add(study: str, method: str, s: int, data: Path, tag: str, **extra) -> None:
-        jobs.append(TrainJob(study, method, s, str(data), str(models / f"{tag}_s{s}.safetensors"), plan.epochs, plan.cnn_epochs, tag, **extra))
+        jobs.append(
+            TrainJob(study, method, s, str(data), str(models / f"{tag}_s{s}.safetensors"), plan.epochs, plan.cnn_epochs, tag, **extra)
+        )
 
     for s in range(plan.seeds):
         base = work / f"default_s{s}"
         for method in LEARNED:
             add("baselines", method, s, base / ("cnn.safetensors" if method == "cnn" else "U.safetensors"), method)
             for minutes in plan.minutes:
-                add("efficiency", method, s, base / ("cnn.safetensors" if method == "cnn" else "U.safetensors"), f"{method}_{minutes:g}min", minutes=minutes)
+                add(
+                    "efficiency",
+                    method,
+                    s,
+                    base / ("cnn.safetensors" if method == "cnn" else "U.safetensors"),
+                    f"{method}_{minutes:g}min",
+                    minutes=minutes,
+                )
         if plan.alt is not None:
             add("profile", "C", s, work / f"alt_s{s}" / "U.safetensors", "C_alt")
-        add("ablation", "C", s, base / "U.safetensors", "C_no_distance", train={"data": {"ignore_features": ["distance"]}}, variant="without the distance utility")
-        add("ablation", "C", s, base / "U.safetensors", "C_flat", train={"classifier": {"compress": False, "skip": False}}, variant="without the row-wise compression (flat MLP)")
+        add(
+            "ablation",
+            "C",
+            s,
+            base / "U.safetensors",
+            "C_no_distance",
+            train={"data": {"ignore_features": ["distance"]}},
+            variant="without the distance utility",
+        )
+        add(
+            "ablation",
+            "C",
+            s,
+            base / "U.safetensors",
+            "C_flat",
+            train={"classifier": {"compress": False, "skip": False}},
+            variant="without the row-wise compression (flat MLP)",
+        )
         for n in plan.horizons:
             add("ablation", "C", s, base / f"U_n{n}.safetensors", f"C_n{n}", variant=f"horizon n = {n}")
         for w in plan.widths:
@@ -372,7 +419,10 @@ def _course_runs(plan: StudyPlan, sc: str, trained: list[TrainedModel]) -> list[
     default, alt, classes = plan.default_order(), plan.alt, plan.classes
     runs = [run for t in trained for run in _model_runs(plan, sc, t.job, default)]
     for s in range(plan.seeds):
-        runs += [(RunSpec(sc, s, method, None, default, classes=classes), RunTag("baselines", method, s)) for method in (HAND_COST, PURE_PURSUIT, EXPERT)]
+        runs += [
+            (RunSpec(sc, s, method, None, default, classes=classes), RunTag("baselines", method, s))
+            for method in (HAND_COST, PURE_PURSUIT, EXPERT)
+        ]
         if alt is not None:
             runs.append((RunSpec(sc, s, EXPERT, None, alt, classes=classes), RunTag("profile", EXPERT, s, scored_under="own")))
     return runs
@@ -383,12 +433,20 @@ def _model_runs(plan: StudyPlan, sc: str, job: TrainJob, default: tuple[str, ...
     under the default profile, and the default C under the other profile and under every perturbation."""
     alt, classes = plan.alt, plan.classes
     own = alt if job.study == "profile" else default
-    runs = [(RunSpec(sc, 0, PLANNER, job.out, own, classes=classes),
-             RunTag(job.study, job.method, job.seed, ModelVariant(job.minutes, job.variant), scored_under="own"))]
+    runs = [
+        (
+            RunSpec(sc, 0, PLANNER, job.out, own, classes=classes),
+            RunTag(job.study, job.method, job.seed, ModelVariant(job.minutes, job.variant), scored_under="own"),
+        )
+    ]
     if job.study == "profile":  # the same run's choices, scored under the default profile
-        runs.append((RunSpec(sc, 0, PLANNER, job.out, default, classes=classes), RunTag("profile_cross", "C", job.seed, scored_under="default")))
+        runs.append(
+            (RunSpec(sc, 0, PLANNER, job.out, default, classes=classes), RunTag("profile_cross", "C", job.seed, scored_under="default"))
+        )
     if job.study == "baselines" and job.method == "C" and alt is not None:
-        runs.append((RunSpec(sc, 0, PLANNER, job.out, alt, classes=classes), RunTag("profile_cross", "C_default", job.seed, scored_under="alt")))
+        runs.append(
+            (RunSpec(sc, 0, PLANNER, job.out, alt, classes=classes), RunTag("profile_cross", "C_default", job.seed, scored_under="alt"))
+        )
     return runs
 
 
@@ -396,15 +454,27 @@ def _layout_runs(plan: StudyPlan, layout: str, taught: list[TaughtModel]) -> lis
     """One teaching layout: every taught model, and the driver of every order and style taught; the
     default style's models again under every perception preset but clean."""
     classes = plan.classes
-    runs = [(RunSpec(layout, 0, PLANNER, t.out, t.job.order, classes=classes), RunTag("teach", "C", t.job.seed, order=t.job.order, style=t.job.style))
-            for t in taught]
-    runs += [(RunSpec(layout, 0, EXPERT, None, order, style=style, classes=classes), RunTag("teach", EXPERT, 0, order=order, style=style))
-             for order, style in sorted({(t.job.order, t.job.style) for t in taught})]
+    runs = [
+        (
+            RunSpec(layout, 0, PLANNER, t.out, t.job.order, classes=classes),
+            RunTag("teach", "C", t.job.seed, order=t.job.order, style=t.job.style),
+        )
+        for t in taught
+    ]
+    runs += [
+        (RunSpec(layout, 0, EXPERT, None, order, style=style, classes=classes), RunTag("teach", EXPERT, 0, order=order, style=style))
+        for order, style in sorted({(t.job.order, t.job.style) for t in taught})
+    ]
     for model in plan.perceptions():
         if model.active:
-            runs += [(RunSpec(layout, 0, PLANNER, t.out, t.job.order, perception=model, classes=classes),
-                      RunTag("robustness", "C", t.job.seed, kind=model.name, order=t.job.order, style=t.job.style))
-                     for t in taught if t.job.style == "default"]
+            runs += [
+                (
+                    RunSpec(layout, 0, PLANNER, t.out, t.job.order, perception=model, classes=classes),
+                    RunTag("robustness", "C", t.job.seed, kind=model.name, order=t.job.order, style=t.job.style),
+                )
+                for t in taught
+                if t.job.style == "default"
+            ]
     return runs
 
 
@@ -420,9 +490,15 @@ def _sweep(ws: _Workspace, taught: list[TaughtModel], runs: list[StudyRun]) -> l
     for level in plan.sweep:
         if not left or not models:
             break
-        planned = [(RunSpec(layout, 0, PLANNER, t.out, t.job.order, perception=swept(plan, part, level), classes=plan.classes),
-                    RunTag("robustness", "C", t.job.seed, kind=part, level=level, order=t.job.order, style="default"))
-                   for part in left for layout in plan.layouts for t in models]
+        planned = [
+            (
+                RunSpec(layout, 0, PLANNER, t.out, t.job.order, perception=swept(plan, part, level), classes=plan.classes),
+                RunTag("robustness", "C", t.job.seed, kind=part, level=level, order=t.job.order, style="default"),
+            )
+            for part in left
+            for layout in plan.layouts
+            for t in models
+        ]
         ws.log(f"[4/5] robustness sweep at {level:g} x {plan.sweep_name()}'s: {', '.join(left)} ({len(planned)} runs) ...")
         results = run_many([spec for spec, _ in planned], progress=every_tenth(ws.log), engine=ws.engine)
         done = [StudyRun(tag, r.scenario, r.metrics) for (_, tag), r in zip(planned, results, strict=True)]
@@ -435,9 +511,23 @@ def _sweep(ws: _Workspace, taught: list[TaughtModel], runs: list[StudyRun]) -> l
 
 
 def _plan_dict(plan: StudyPlan) -> dict:
-    return {"seeds": plan.seeds, "minutes": list(plan.minutes), "epochs": plan.epochs, "cnn_epochs": plan.cnn_epochs,
-            "presets": [p.name for p in plan.perceptions()], "sweep_base": plan.sweep_name(), "sweep": list(plan.sweep),
-            "horizons": list(plan.horizons), "widths": list(plan.widths),
-            "scenarios": plan.scenarios(), "orders": [list(o) for o in plan.orders], "styles": list(plan.styles), "layouts": list(plan.layouts),
-            "recipe": plan.recipe, "classes": plan.classes.to_dict() if plan.classes is not None else None,
-            "course": plan.course, "follow_up": plan.follow_up, "alt": list(plan.alt) if plan.alt else None}
+    return {
+        "seeds": plan.seeds,
+        "minutes": list(plan.minutes),
+        "epochs": plan.epochs,
+        "cnn_epochs": plan.cnn_epochs,
+        "presets": [p.name for p in plan.perceptions()],
+        "sweep_base": plan.sweep_name(),
+        "sweep": list(plan.sweep),
+        "horizons": list(plan.horizons),
+        "widths": list(plan.widths),
+        "scenarios": plan.scenarios(),
+        "orders": [list(o) for o in plan.orders],
+        "styles": list(plan.styles),
+        "layouts": list(plan.layouts),
+        "recipe": plan.recipe,
+        "classes": plan.classes.to_dict() if plan.classes is not None else None,
+        "course": plan.course,
+        "follow_up": plan.follow_up,
+        "alt": list(plan.alt) if plan.alt else None,
+    }

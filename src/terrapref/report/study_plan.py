@@ -83,8 +83,10 @@ class StudyPlan:
         columns = sorted(self.table.feature_names)
         for order in (*self.orders, *((self.alt,) if self.alt else ())):
             if sorted(order) != columns:
-                raise ValueError(f"order {' > '.join(order)} is not an order of the class table's columns ({', '.join(columns)}); "
-                                 "a table of one's own takes its plan from for_table")
+                raise ValueError(
+                    f"order {' > '.join(order)} is not an order of the class table's columns ({', '.join(columns)}); "
+                    "a table of one's own takes its plan from for_table"
+                )
 
     @property
     def table(self) -> ClassTable:
@@ -128,8 +130,13 @@ def reversed_order(table: ClassTable) -> tuple[str, ...] | None:
     return (*reversed([c for c in order if c not in last]), *last)
 
 
-def for_table(plan: StudyPlan, table: ClassTable, course: str | Path | None = None, perceptions: tuple[PerceptionModel, ...] = (),
-              follow_up: bool = False) -> StudyPlan:
+def for_table(
+    plan: StudyPlan,
+    table: ClassTable,
+    course: str | Path | None = None,
+    perceptions: tuple[PerceptionModel, ...] = (),
+    follow_up: bool = False,
+) -> StudyPlan:
     """The plan for a class table of one's own: ``course`` for the demonstrations and the teaching
     drives (None: the table's teaching course, which run_study writes beside STUDY.md); as many of its orders as the plan has (its default
     first, then drawn at random as ``select --orders random:N`` draws them); its generated layouts
@@ -141,8 +148,15 @@ def for_table(plan: StudyPlan, table: ClassTable, course: str | Path | None = No
     default = PreferenceProfile.default(table).order
     n = min(len(plan.orders), math.factorial(len(table.terrain_names)))
     drawn = [o for o in parse_orders(f"random:{n}", table) if o != default]
-    plan = replace(plan, classes=table, course=None if course is None else str(course), follow_up=follow_up, alt=reversed_order(table),
-                   orders=(default, *drawn[: n - 1]), courses=tuple(f"gen:{6000 + i}" for i in range(len(plan.layouts))))
+    plan = replace(
+        plan,
+        classes=table,
+        course=None if course is None else str(course),
+        follow_up=follow_up,
+        alt=reversed_order(table),
+        orders=(default, *drawn[: n - 1]),
+        courses=tuple(f"gen:{6000 + i}" for i in range(len(plan.layouts))),
+    )
     return with_perception(plan, perceptions)
 
 
@@ -155,9 +169,17 @@ def with_perception(plan: StudyPlan, perceptions: tuple[PerceptionModel, ...]) -
 
 FULL = StudyPlan()
 QUICK = StudyPlan(
-    seeds=1, minutes=(2.0,), epochs=100, cnn_epochs=15,
-    presets=("clean", "field"), sweep=(1.0, 4.0),
-    horizons=(), widths=(16,), orders=TEACH_ORDERS[:2], styles=("default", "wide"), layouts=("gen:5000", "gen:5001"),
+    seeds=1,
+    minutes=(2.0,),
+    epochs=100,
+    cnn_epochs=15,
+    presets=("clean", "field"),
+    sweep=(1.0, 4.0),
+    horizons=(),
+    widths=(16,),
+    orders=TEACH_ORDERS[:2],
+    styles=("default", "wide"),
+    layouts=("gen:5000", "gen:5001"),
 )
 
 

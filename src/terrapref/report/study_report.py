@@ -48,7 +48,9 @@ class RunTag:
     method: str  # C, linear, cnn, a driver without a model, or C_default (the default profile's C, scored under the other)
     seed: int  # the training seed; for drivers without a model, the evaluation seed
     model: ModelVariant | None = None  # a trained model's own run, scored under the profile it learned
-    scored_under: str | None = None  # the profile its zones resolve under: "own" (the one its model learned or its driver drove by), "default" or "alt"
+    scored_under: str | None = (
+        None  # the profile its zones resolve under: "own" (the one its model learned or its driver drove by), "default" or "alt"
+    )
     kind: str | None = None  # robustness: the perception preset, or the part swept and its level (x the preset's)
     level: float | None = None
     order: tuple[str, ...] | None = None  # teaching: the preference order and style of the driver
@@ -67,8 +69,13 @@ class RunTag:
         tag: dict = {"study": self.study, "method": self.method, "seed": self.seed}
         if self.model is not None:
             tag |= {"minutes": self.model.minutes, "variant": self.model.variant}
-        rest = {"scored_under": self.scored_under, "kind": self.kind, "level": self.level,
-                "order": list(self.order) if self.order is not None else None, "style": self.style}
+        rest = {
+            "scored_under": self.scored_under,
+            "kind": self.kind,
+            "level": self.level,
+            "order": list(self.order) if self.order is not None else None,
+            "style": self.style,
+        }
         return tag | {k: v for k, v in rest.items() if v is not None}
 
     @classmethod
@@ -76,8 +83,17 @@ class RunTag:
         """A tag as :meth:`to_dict` wrote it."""
         model = ModelVariant(data["minutes"], data["variant"]) if "minutes" in data else None
         order = tuple(data["order"]) if data.get("order") is not None else None
-        return cls(data["study"], data["method"], data["seed"], model, data.get("scored_under"), data.get("kind"), data.get("level"),
-                   order, data.get("style"))
+        return cls(
+            data["study"],
+            data["method"],
+            data["seed"],
+            model,
+            data.get("scored_under"),
+            data.get("kind"),
+            data.get("level"),
+            order,
+            data.get("style"),
+        )
 
 
 @dataclass(frozen=True)
@@ -162,8 +178,15 @@ class _Efficiency:
     def of(cls, plan: StudyPlan, trained: Sequence[TrainedModel], runs: list[StudyRun], base: _Baselines) -> _Efficiency:
         full_minutes = _demo_minutes(trained)
         points = (*(m for m in plan.minutes if not m >= full_minutes), ALL)
-        curves = {m: [(full_minutes, *base.cells[m][1:]) if mins == ALL else (mins, *_cell(_select(runs, study="efficiency", method=m, minutes=mins))[1:])
-                      for mins in points] for m in CURVES}
+        curves = {
+            m: [
+                (full_minutes, *base.cells[m][1:])
+                if mins == ALL
+                else (mins, *_cell(_select(runs, study="efficiency", method=m, minutes=mins))[1:])
+                for mins in points
+            ]
+            for m in CURVES
+        }
         return cls(full_minutes, points, curves)
 
     def minutes_to_target(self, method: str) -> str:
@@ -186,12 +209,22 @@ class _Profiles:
 
     @classmethod
     def of(cls, runs: list[StudyRun]) -> _Profiles:
-        return cls(_select(runs, study="profile", method="C"), _select(runs, study="profile", method=EXPERT),
-                   _select(runs, study="profile_cross", method="C"), _select(runs, study="profile_cross", method="C_default"))
+        return cls(
+            _select(runs, study="profile", method="C"),
+            _select(runs, study="profile", method=EXPERT),
+            _select(runs, study="profile_cross", method="C"),
+            _select(runs, study="profile_cross", method="C_default"),
+        )
 
 
-def write_study(out: Path, plan: StudyPlan, trained: Sequence[TrainedModel], runs: list[StudyRun], timings: dict[str, float],
-                report_started: float | None = None) -> Path:
+def write_study(
+    out: Path,
+    plan: StudyPlan,
+    trained: Sequence[TrainedModel],
+    runs: list[StudyRun],
+    timings: dict[str, float],
+    report_started: float | None = None,
+) -> Path:
     """Write STUDY.md and the figures; ``report_started`` (perf_counter) times this stage in the table."""
     figs = out / "figures"
     figs.mkdir(exist_ok=True)
@@ -215,27 +248,42 @@ def write_study(out: Path, plan: StudyPlan, trained: Sequence[TrainedModel], run
 def _introduction(plan: StudyPlan, runs: list[StudyRun]) -> list[str]:
     """The title and what every number rests on."""
     zones_per_pass = sum(len(r.metrics.zones) for r in _select(runs, study="baselines", method=EXPERT, seed=0))
-    table = (f"The class table: background {plan.table.background}; terrain columns {', '.join(plan.table.terrain_names)}"
-             + (f"; lethal {', '.join(plan.table.lethal)}" if plan.table.lethal else "") + ". ") if plan.classes is not None else ""
-    return ["# terrapref study: baselines, data efficiency, preference profiles, robustness, ablations", "",
-            f"{table}Every number comes from closed-loop runs in the simulator on {', '.join(plan.scenarios())} "
-            f"({zones_per_pass} zones per pass), "
-            f"{plan.seeds} training seed(s): each seed has its own demonstrations ({DEMONSTRATIONS.demonstrations} runs of "
-            f"{course_name(plan.demo_course())} with disturbances) and its own initialisation. Zone success is given as the mean over seeds ± its standard deviation; "
-            "collisions are summed over all runs; brackets give the 95% Wilson interval of the rate pooled over all zones. One zone is "
-            f"{1 / max(zones_per_pass, 1):.1%} of a seed's score, so differences of a few points are within the spread between seeds.", ""]
+    table = (
+        (
+            f"The class table: background {plan.table.background}; terrain columns {', '.join(plan.table.terrain_names)}"
+            + (f"; lethal {', '.join(plan.table.lethal)}" if plan.table.lethal else "")
+            + ". "
+        )
+        if plan.classes is not None
+        else ""
+    )
+    return [
+        "# terrapref study: baselines, data efficiency, preference profiles, robustness, ablations",
+        "",
+        f"{table}Every number comes from closed-loop runs in the simulator on {', '.join(plan.scenarios())} "
+        f"({zones_per_pass} zones per pass), "
+        f"{plan.seeds} training seed(s): each seed has its own demonstrations ({DEMONSTRATIONS.demonstrations} runs of "
+        f"{course_name(plan.demo_course())} with disturbances) and its own initialisation. Zone success is given as the mean over seeds ± its standard deviation; "
+        "collisions are summed over all runs; brackets give the 95% Wilson interval of the rate pooled over all zones. One zone is "
+        f"{1 / max(zones_per_pass, 1):.1%} of a seed's score, so differences of a few points are within the spread between seeds.",
+        "",
+    ]
 
 
 def _answers(plan: StudyPlan, runs: list[StudyRun], base: _Baselines, efficiency: _Efficiency) -> list[str]:
     """The study's questions, each answered in one bullet."""
     cells = base.cells
     lines = ["## Answers", ""]
-    lines.append(f"- **Minutes of demonstration to reach {TARGET:.0%} zone success:** C {efficiency.minutes_to_target('C')}; "
-                 f"linear utility {efficiency.minutes_to_target('linear')}; end-to-end CNN {efficiency.minutes_to_target('cnn')}.")
-    lines.append(f"- **Learned planner against hand-tuned and linear:** C {cells['C'][0]}, hand-tuned cost {cells[HAND_COST][0]} "
-                 f"({(cells['C'][1] - cells[HAND_COST][1]) * 100:+.1f} points), learned linear utility {cells['linear'][0]} "
-                 f"({(cells['C'][1] - cells['linear'][1]) * 100:+.1f} points); the end-to-end CNN {cells['cnn'][0]} "
-                 f"({(cells['C'][1] - cells['cnn'][1]) * 100:+.1f} points).")
+    lines.append(
+        f"- **Minutes of demonstration to reach {TARGET:.0%} zone success:** C {efficiency.minutes_to_target('C')}; "
+        f"linear utility {efficiency.minutes_to_target('linear')}; end-to-end CNN {efficiency.minutes_to_target('cnn')}."
+    )
+    lines.append(
+        f"- **Learned planner against hand-tuned and linear:** C {cells['C'][0]}, hand-tuned cost {cells[HAND_COST][0]} "
+        f"({(cells['C'][1] - cells[HAND_COST][1]) * 100:+.1f} points), learned linear utility {cells['linear'][0]} "
+        f"({(cells['C'][1] - cells['linear'][1]) * 100:+.1f} points); the end-to-end CNN {cells['cnn'][0]} "
+        f"({(cells['C'][1] - cells['cnn'][1]) * 100:+.1f} points)."
+    )
     lines.append(_profile_answer(plan, runs))
     lines.append(_Robustness.of(plan, runs).answer())
     lines.append("")
@@ -250,11 +298,13 @@ def _profile_answer(plan: StudyPlan, runs: list[StudyRun]) -> str:
     keep = disagreement_zones(runs)
     a_ok, a_n = _zone_success(profiles.alt, keep)
     d_ok, d_n = _zone_success(profiles.default_as_alt, keep)
-    return (f"- **Another profile ({' > '.join(plan.alt)}) is learned:** C trained on demonstrations driven under it reaches "
-            f"{_cell(profiles.alt)[0]} scored under that profile (the driver: {_cell(profiles.alt_driver)[0]}). In the {len(keep)} test zones where the two "
-            f"profiles expect different choices, it makes the other profile's choice in {a_ok}/{a_n} runs; the model trained "
-            f"on the default profile does so in {d_ok}/{d_n}. (All zones: the other-profile model scored under the default "
-            f"profile {_cell(profiles.alt_as_default)[0]}, the default model under the other profile {_cell(profiles.default_as_alt)[0]}.)")
+    return (
+        f"- **Another profile ({' > '.join(plan.alt)}) is learned:** C trained on demonstrations driven under it reaches "
+        f"{_cell(profiles.alt)[0]} scored under that profile (the driver: {_cell(profiles.alt_driver)[0]}). In the {len(keep)} test zones where the two "
+        f"profiles expect different choices, it makes the other profile's choice in {a_ok}/{a_n} runs; the model trained "
+        f"on the default profile does so in {d_ok}/{d_n}. (All zones: the other-profile model scored under the default "
+        f"profile {_cell(profiles.alt_as_default)[0]}, the default model under the other profile {_cell(profiles.default_as_alt)[0]}.)"
+    )
 
 
 def _baselines_section(plan: StudyPlan, base: _Baselines, figs: Path) -> list[str]:
@@ -262,34 +312,72 @@ def _baselines_section(plan: StudyPlan, base: _Baselines, figs: Path) -> list[st
     from terrapref.planner.policy import HAND_DISTANCE_WEIGHT, hand_costs
     from terrapref.plots import save_bars
 
-    lines = ["## 1. Baselines", "", "Each is a driver under the same planner interface, scored by the same code.", "",
-             "| method | zone success | collisions | completed |", "|---|---|---|---|"]
+    lines = [
+        "## 1. Baselines",
+        "",
+        "Each is a driver under the same planner interface, scored by the same code.",
+        "",
+        "| method | zone success | collisions | completed |",
+        "|---|---|---|---|",
+    ]
     for m in BASELINES:
         lines.append(f"| {METHOD_NAMES[m]} | {base.cells[m][0]} | {_collisions(base.runs[m])} | {_completed(base.runs[m]):.0%} |")
-    lines += ["", f"Hand-tuned costs per unit share: {', '.join(f'{k} {v:g}' for k, v in hand_costs(plan.table).items())}; distance utility weight "
-              f"{HAND_DISTANCE_WEIGHT:g}. Pure pursuit: 2.5 m look-ahead, nearest trajectory. For the deterministic baselines, "
-              "'seeds' are the evaluation seeds (start offset and heading).", "", "![baselines](figures/baselines.png)", ""]
-    save_bars(figs / "baselines.png", [METHOD_NAMES[m] for m in BASELINES], [base.cells[m][1] for m in BASELINES],
-              [base.cells[m][2] for m in BASELINES], "zone success, " + ("test_course and variations" if not plan.courses else ", ".join(plan.scenarios())), target=TARGET)
+    lines += [
+        "",
+        f"Hand-tuned costs per unit share: {', '.join(f'{k} {v:g}' for k, v in hand_costs(plan.table).items())}; distance utility weight "
+        f"{HAND_DISTANCE_WEIGHT:g}. Pure pursuit: 2.5 m look-ahead, nearest trajectory. For the deterministic baselines, "
+        "'seeds' are the evaluation seeds (start offset and heading).",
+        "",
+        "![baselines](figures/baselines.png)",
+        "",
+    ]
+    save_bars(
+        figs / "baselines.png",
+        [METHOD_NAMES[m] for m in BASELINES],
+        [base.cells[m][1] for m in BASELINES],
+        [base.cells[m][2] for m in BASELINES],
+        "zone success, " + ("test_course and variations" if not plan.courses else ", ".join(plan.scenarios())),
+        target=TARGET,
+    )
     return lines
 
 
-def _efficiency_section(trained: Sequence[TrainedModel], runs: list[StudyRun], base: _Baselines, efficiency: _Efficiency,
-                        figs: Path) -> list[str]:
+def _efficiency_section(
+    trained: Sequence[TrainedModel], runs: list[StudyRun], base: _Baselines, efficiency: _Efficiency, figs: Path
+) -> list[str]:
     """Section 2: success against minutes of demonstration, as a table and curves."""
     from terrapref.plots import save_curves
 
-    lines = ["## 2. Data efficiency", "", "The first N minutes of the same demonstrations.", "",
-             "| minutes | " + " | ".join(METHOD_NAMES[m] for m in CURVES) + " |", "|---|" + "---|" * len(CURVES)]
+    lines = [
+        "## 2. Data efficiency",
+        "",
+        "The first N minutes of the same demonstrations.",
+        "",
+        "| minutes | " + " | ".join(METHOD_NAMES[m] for m in CURVES) + " |",
+        "|---|" + "---|" * len(CURVES),
+    ]
     for mins in efficiency.points:
         study = "baselines" if mins == ALL else "efficiency"
-        samples = next((t.samples for t in trained if t.job.study == study and t.job.minutes == (None if mins == ALL else mins) and t.job.method == "C"), 0)
+        samples = next(
+            (
+                t.samples
+                for t in trained
+                if t.job.study == study and t.job.minutes == (None if mins == ALL else mins) and t.job.method == "C"
+            ),
+            0,
+        )
         label = f"all, {efficiency.full_minutes:.1f}" if mins == ALL else f"{mins:g}"
         texts = [_cell(base.runs[m] if mins == ALL else _select(runs, study="efficiency", method=m, minutes=mins))[0] for m in CURVES]
         lines.append(f"| {label} ({samples} frames) | " + " | ".join(texts) + " |")
     lines += ["", "![data efficiency](figures/data_efficiency.png)", ""]
-    save_curves(figs / "data_efficiency.png", {METHOD_NAMES[m]: list(efficiency.curves[m]) for m in CURVES},
-                "minutes of demonstration", "zone success", target=TARGET, logx=True)
+    save_curves(
+        figs / "data_efficiency.png",
+        {METHOD_NAMES[m]: list(efficiency.curves[m]) for m in CURVES},
+        "minutes of demonstration",
+        "zone success",
+        target=TARGET,
+        logx=True,
+    )
     return lines
 
 
@@ -298,14 +386,20 @@ def _profile_section(plan: StudyPlan, runs: list[StudyRun]) -> list[str]:
     if plan.alt is None:
         return ["## 3. Another preference profile", "", _profile_answer(plan, runs)[2:], ""]
     p = _Profiles.of(runs)
-    lines = ["## 3. Another preference profile", "",
-             f"Demonstrations driven under {' > '.join(plan.alt)} (the default is {' > '.join(plan.default_order())}); "
-             "`best` zones resolve under the profile the model carries.", "",
-             "| model | scored under | zone success | collisions |", "|---|---|---|---|",
-             f"| C trained on the other profile | its own | {_cell(p.alt)[0]} | {_collisions(p.alt)} |",
-             f"| synthetic driver, other profile | its own | {_cell(p.alt_driver)[0]} | {_collisions(p.alt_driver)} |",
-             f"| C trained on the other profile | default | {_cell(p.alt_as_default)[0]} | — |",
-             f"| C trained on the default profile | other | {_cell(p.default_as_alt)[0]} | — |", ""]
+    lines = [
+        "## 3. Another preference profile",
+        "",
+        f"Demonstrations driven under {' > '.join(plan.alt)} (the default is {' > '.join(plan.default_order())}); "
+        "`best` zones resolve under the profile the model carries.",
+        "",
+        "| model | scored under | zone success | collisions |",
+        "|---|---|---|---|",
+        f"| C trained on the other profile | its own | {_cell(p.alt)[0]} | {_collisions(p.alt)} |",
+        f"| synthetic driver, other profile | its own | {_cell(p.alt_driver)[0]} | {_collisions(p.alt_driver)} |",
+        f"| C trained on the other profile | default | {_cell(p.alt_as_default)[0]} | — |",
+        f"| C trained on the default profile | other | {_cell(p.default_as_alt)[0]} | — |",
+        "",
+    ]
     return lines + _choice_table(plan, runs) + _disagreement_table(runs)
 
 
@@ -315,14 +409,22 @@ def _robustness_section(plan: StudyPlan, runs: list[StudyRun], figs: Path) -> li
     from terrapref.plots import save_curves
 
     rob = _Robustness.of(plan, runs)
-    lines = ["## 4. Robustness: what a real robot sees", "",
-             f"The models of section 6 taught by the default-style driver of every order ({rob.models} models), driving the same "
-             f"{len(plan.layouts)} layouts while they receive what a robot would instead of the truth (terrapref.perception; presets in "
-             "docs/perception.md). The driver always sees the truth. "
-             + (f"Then each part of `{plan.sweep_name()}` alone, at rising multiples of it, until agreement with the driver falls below 90%. "
-                if plan.sweep_base is not None else "No perception model of this table was given (`--perception`): no sweep. ")
-             + "Rates with 95% Wilson intervals over zones.", "",
-             "| perception | agreement with the driver | zone success | collisions |", "|---|---|---|---|"]
+    lines = [
+        "## 4. Robustness: what a real robot sees",
+        "",
+        f"The models of section 6 taught by the default-style driver of every order ({rob.models} models), driving the same "
+        f"{len(plan.layouts)} layouts while they receive what a robot would instead of the truth (terrapref.perception; presets in "
+        "docs/perception.md). The driver always sees the truth. "
+        + (
+            f"Then each part of `{plan.sweep_name()}` alone, at rising multiples of it, until agreement with the driver falls below 90%. "
+            if plan.sweep_base is not None
+            else "No perception model of this table was given (`--perception`): no sweep. "
+        )
+        + "Rates with 95% Wilson intervals over zones.",
+        "",
+        "| perception | agreement with the driver | zone success | collisions |",
+        "|---|---|---|---|",
+    ]
     for name, rr in rob.presets.items():
         ok, n = agreement(rr, rob.driver)
         lines.append(f"| {name} | {rate_text(ok, n)} | {_cell(rr)[0]} | {_collisions(rr)} |")
@@ -338,7 +440,9 @@ def _robustness_section(plan: StudyPlan, runs: list[StudyRun], figs: Path) -> li
             lines.append(f"| {part} | {level:g} | {rate_text(ok, n)} | {_collisions(rr)} |")
         curves[part] = pts
     lines += ["", "![robustness](figures/robustness.png)", ""]
-    save_curves(figs / "robustness.png", curves, f"level (multiples of {plan.sweep_name()}'s)", "agreement with the driver", target=0.9, logx=True)
+    save_curves(
+        figs / "robustness.png", curves, f"level (multiples of {plan.sweep_name()}'s)", "agreement with the driver", target=0.9, logx=True
+    )
     return lines
 
 
@@ -355,7 +459,9 @@ class _Robustness:
     @classmethod
     def of(cls, plan: StudyPlan, runs: list[StudyRun]) -> _Robustness:
         clean = _select(runs, study="teach", method="C", style="default")
-        presets = {m.name: clean if not m.active else _select(runs, study="robustness", kind=m.name, level=None) for m in plan.perceptions()}
+        presets = {
+            m.name: clean if not m.active else _select(runs, study="robustness", kind=m.name, level=None) for m in plan.perceptions()
+        }
         sweep: dict[str, dict[float, list[StudyRun]]] = {}
         for r in runs:
             if r.tag.study == "robustness" and r.tag.level is not None:
@@ -366,13 +472,17 @@ class _Robustness:
 
     def answer(self) -> str:
         """One bullet: agreement under each preset, and how far each part holds 90%."""
-        presets = ", ".join(f"{name} {rate_text(*agreement(rr, self.driver))} ({_collisions(rr)} collisions)" for name, rr in self.presets.items())
+        presets = ", ".join(
+            f"{name} {rate_text(*agreement(rr, self.driver))} ({_collisions(rr)} collisions)" for name, rr in self.presets.items()
+        )
         holds = []
         for part, levels in self.sweep.items():
             kept = [lv for lv, rr in levels.items() if _ratio(agreement(rr, self.driver)) >= 0.9]
             below = [lv for lv in levels if lv not in kept]
-            holds.append(f"{part} {'to x' + format(max(kept), 'g') if kept else 'not at x' + format(min(levels), 'g')}"
-                         + (f", below at x{min(below):g}" if below else ""))
+            holds.append(
+                f"{part} {'to x' + format(max(kept), 'g') if kept else 'not at x' + format(min(levels), 'g')}"
+                + (f", below at x{min(below):g}" if below else "")
+            )
         held = (" 90% holds for " + "; ".join(holds) + ".") if holds else " No part was swept."
         return f"- **Under what a robot sees** (agreement with the driver): {presets}.{held}"
 
@@ -384,8 +494,13 @@ def _ratio(counts: tuple[int, int]) -> float:
 
 def _ablation_section(runs: list[StudyRun], base: _Baselines) -> list[str]:
     """Section 5: C with one part taken away or changed at a time."""
-    lines = ["## 5. Ablations", "", "| variant | zone success | collisions |", "|---|---|---|",
-             f"| C (ours: compression, distance utility, n = 30, width 64) | {base.cells['C'][0]} | {_collisions(base.runs['C'])} |"]
+    lines = [
+        "## 5. Ablations",
+        "",
+        "| variant | zone success | collisions |",
+        "|---|---|---|",
+        f"| C (ours: compression, distance utility, n = 30, width 64) | {base.cells['C'][0]} | {_collisions(base.runs['C'])} |",
+    ]
     variants = sorted({r.tag.variant for r in runs if r.tag.study == "ablation"}, key=str)
     for v in variants:
         rr = _select(runs, study="ablation", variant=v)
@@ -404,8 +519,12 @@ def agreement(planner: list[StudyRun], driver: list[StudyRun]) -> tuple[int, int
 def _clearance_gap(planner: list[StudyRun], driver: list[StudyRun]) -> float:
     """Mean |planner's zone clearance - the driver's| over zones where both came near terrain they did not choose [m]."""
     by = {(r.scenario, z.id): z.clearance_m for r in driver for z in r.metrics.zones}
-    gaps = [abs(z.clearance_m - by[(r.scenario, z.id)]) for r in planner for z in r.metrics.zones
-            if z.clearance_m is not None and by.get((r.scenario, z.id)) is not None]
+    gaps = [
+        abs(z.clearance_m - by[(r.scenario, z.id)])
+        for r in planner
+        for z in r.metrics.zones
+        if z.clearance_m is not None and by.get((r.scenario, z.id)) is not None
+    ]
     return float(np.mean(gaps)) if gaps else float("nan")
 
 
@@ -437,24 +556,39 @@ def teaching_section(plan: StudyPlan, runs: list[StudyRun], figs: Path) -> list[
     points = order_points + style_points
     course = course_name(plan.teach_course())
     follow = " and the follow-up course of what it left open" if plan.follow_up else ""
-    lines = [f"## 6. Any order, any driver: one drive by recipe {plan.recipe}", "",
-             f"Per training seed, the synthetic driver demonstrates on {course}{follow} (recipe {plan.recipe}, {plan.epochs} epochs) for each order "
-             f"(default style) and each driver style (default order); every model then drives {len(plan.layouts)} generated layouts it "
-             f"has never seen ({', '.join(plan.layouts)}), and so does the driver it learned from. **Agreement**: the planner's zone "
-             f"choice equals that driver's in the same zone of the same layout (touching {plan.table.lethal_column or 'lethal terrain'} where the driver did not "
-             "counts against). Brackets: 95% Wilson interval over all zones and seeds.", "",
-             "| order | agreement with its driver | zone success | the driver's zone success | collisions |", "|---|---|---|---|---|",
-             *order_rows,
-             "", "Driver styles (order " + " > ".join(plan.orders[0]) + "): each style's planner against its own driver, and the "
-             "planner taught by another style against the same driver. Clearance: how close the reference point came to terrain "
-             "it did not choose, per zone; |Δ| is the mean gap to the driver's clearance in the same zone. Cross-track: RMS over "
-             "the run.", "",
-             "| driver style | agreement: own planner | agreement: planner of another style | clearance: driver | |Δ| own | |Δ| other | "
-             "cross-track: driver | own | other | collisions (own) |", "|---|---|---|---|---|---|---|---|---|---|",
-             *style_rows, "", *_imitation_table(plan, taught)]
+    lines = [
+        f"## 6. Any order, any driver: one drive by recipe {plan.recipe}",
+        "",
+        f"Per training seed, the synthetic driver demonstrates on {course}{follow} (recipe {plan.recipe}, {plan.epochs} epochs) for each order "
+        f"(default style) and each driver style (default order); every model then drives {len(plan.layouts)} generated layouts it "
+        f"has never seen ({', '.join(plan.layouts)}), and so does the driver it learned from. **Agreement**: the planner's zone "
+        f"choice equals that driver's in the same zone of the same layout (touching {plan.table.lethal_column or 'lethal terrain'} where the driver did not "
+        "counts against). Brackets: 95% Wilson interval over all zones and seeds.",
+        "",
+        "| order | agreement with its driver | zone success | the driver's zone success | collisions |",
+        "|---|---|---|---|---|",
+        *order_rows,
+        "",
+        "Driver styles (order " + " > ".join(plan.orders[0]) + "): each style's planner against its own driver, and the "
+        "planner taught by another style against the same driver. Clearance: how close the reference point came to terrain "
+        "it did not choose, per zone; |Δ| is the mean gap to the driver's clearance in the same zone. Cross-track: RMS over "
+        "the run.",
+        "",
+        "| driver style | agreement: own planner | agreement: planner of another style | clearance: driver | |Δ| own | |Δ| other | "
+        "cross-track: driver | own | other | collisions (own) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+        *style_rows,
+        "",
+        *_imitation_table(plan, taught),
+    ]
     rows = [RateRow(label, ok / n if n else float("nan"), wilson(ok, n)) for label, ok, n in points]
-    save_intervals(figs / "teaching.png", rows, "agreement with its driver", target=0.95,
-                   title=f"one drive of {course}: agreement on unseen layouts, by order and driver style")
+    save_intervals(
+        figs / "teaching.png",
+        rows,
+        "agreement with its driver",
+        target=0.95,
+        title=f"one drive of {course}: agreement on unseen layouts, by order and driver style",
+    )
     return lines + ["", "![teaching](figures/teaching.png)", ""]
 
 
@@ -466,8 +600,10 @@ def _order_rows(plan: StudyPlan, taught: list[StudyRun]) -> tuple[list[str], lis
         ok, n = agreement(p, d)
         succ = [z.success for r in p for z in r.metrics.zones]
         dsucc = [z.success for r in d for z in r.metrics.zones]
-        rows.append(f"| {' > '.join(order)} | {rate_text(ok, n)} | {rate_text(int(sum(succ)), len(succ))} | "
-                    f"{rate_text(int(sum(dsucc)), len(dsucc))} | {_collisions(p)} |")
+        rows.append(
+            f"| {' > '.join(order)} | {rate_text(ok, n)} | {rate_text(int(sum(succ)), len(succ))} | "
+            f"{rate_text(int(sum(dsucc)), len(dsucc))} | {_collisions(p)} |"
+        )
         points.append((" > ".join(order[:3]), ok, n))
     return rows, points
 
@@ -482,10 +618,12 @@ def _style_rows(plan: StudyPlan, taught: list[StudyRun]) -> tuple[list[str], lis
         other, d, own, theirs = _style_runs(plan, taught, style)
         ok, n = agreement(own, d)
         ok2, n2 = agreement(theirs, d)
-        rows.append(f"| {style} ({STYLES[style].description}) | {rate_text(ok, n)} | {rate_text(ok2, n2) + f' ({other})' if other else '—'} | "
-                    f"{_mean_clearance(d):.2f} m | {_clearance_gap(own, d):.2f} m | {_clearance_gap(theirs, d):.2f} m | "
-                    f"{_mean_cross_track(d):.2f} m | {_mean_cross_track(own):.2f} m | "
-                    f"{_mean_cross_track(theirs):.2f} m | {_collisions(own)} |")
+        rows.append(
+            f"| {style} ({STYLES[style].description}) | {rate_text(ok, n)} | {rate_text(ok2, n2) + f' ({other})' if other else '—'} | "
+            f"{_mean_clearance(d):.2f} m | {_clearance_gap(own, d):.2f} m | {_clearance_gap(theirs, d):.2f} m | "
+            f"{_mean_cross_track(d):.2f} m | {_mean_cross_track(own):.2f} m | "
+            f"{_mean_cross_track(theirs):.2f} m | {_collisions(own)} |"
+        )
         if style != "default":
             points.append((f"style {style}", ok, n))
     return rows, points
@@ -505,29 +643,48 @@ def _imitation_table(plan: StudyPlan, taught: list[StudyRun]) -> list[str]:
             continue
         driver = {r.scenario: r for r in driver_runs}
         theirs = {(r.scenario, r.tag.seed): r for r in other_runs}
-        pairs = [(r, theirs[(r.scenario, r.tag.seed)], driver[r.scenario]) for r in own_runs
-                 if (r.scenario, r.tag.seed) in theirs and r.scenario in driver]
+        pairs = [
+            (r, theirs[(r.scenario, r.tag.seed)], driver[r.scenario])
+            for r in own_runs
+            if (r.scenario, r.tag.seed) in theirs and r.scenario in driver
+        ]
         agree, track, clear = [], [], []
         for own, oth, drv in pairs:
             d = {z.id: z for z in drv.metrics.zones}
             o = {z.id: z for z in oth.metrics.zones}
             zs = [(z, o[z.id], d[z.id]) for z in own.metrics.zones if z.id in o and z.id in d]
             agree.append([100.0 * (float(zone_agrees(a, c)) - float(zone_agrees(b, c))) for a, b, c in zs])
-            track.append([abs(oth.metrics.rms_cross_track_m - drv.metrics.rms_cross_track_m)
-                          - abs(own.metrics.rms_cross_track_m - drv.metrics.rms_cross_track_m)])
-            clear.append([abs(b.clearance_m - c.clearance_m) - abs(a.clearance_m - c.clearance_m) for a, b, c in zs
-                          if None not in (a.clearance_m, b.clearance_m, c.clearance_m)])
-        cells = [_difference_text(cluster_bootstrap(g), unit, digits) for g, unit, digits in ((agree, " pts", 1), (track, " m", 2), (clear, " m", 2))]
+            track.append(
+                [
+                    abs(oth.metrics.rms_cross_track_m - drv.metrics.rms_cross_track_m)
+                    - abs(own.metrics.rms_cross_track_m - drv.metrics.rms_cross_track_m)
+                ]
+            )
+            clear.append(
+                [
+                    abs(b.clearance_m - c.clearance_m) - abs(a.clearance_m - c.clearance_m)
+                    for a, b, c in zs
+                    if None not in (a.clearance_m, b.clearance_m, c.clearance_m)
+                ]
+            )
+        cells = [
+            _difference_text(cluster_bootstrap(g), unit, digits)
+            for g, unit, digits in ((agree, " pts", 1), (track, " m", 2), (clear, " m", 2))
+        ]
         rows.append(f"| {style} | {other} | {len(pairs)} | " + " | ".join(cells) + " |")
     if not rows:
         return []
-    return ["Does each style's planner imitate its own driver better than the other style's planner? Paired on the same layout and "
-            "training seed: agreement with the driver (own minus other, percentage points), and how much closer the own planner "
-            "comes to the driver's cross-track RMS and zone clearances than the other does (|other - driver| - |own - driver|). "
-            "Positive favours the own planner; brackets: 95% interval resampling (layout, seed) runs (2,000 draws); **own** or "
-            "**other** where the interval as printed excludes 0, else not shown.", "",
-            "| driver style | other planner | runs | agreement: own - other | cross-track: own closer by | clearance: own closer by |",
-            "|---|---|---|---|---|---|", *rows]
+    return [
+        "Does each style's planner imitate its own driver better than the other style's planner? Paired on the same layout and "
+        "training seed: agreement with the driver (own minus other, percentage points), and how much closer the own planner "
+        "comes to the driver's cross-track RMS and zone clearances than the other does (|other - driver| - |own - driver|). "
+        "Positive favours the own planner; brackets: 95% interval resampling (layout, seed) runs (2,000 draws); **own** or "
+        "**other** where the interval as printed excludes 0, else not shown.",
+        "",
+        "| driver style | other planner | runs | agreement: own - other | cross-track: own closer by | clearance: own closer by |",
+        "|---|---|---|---|---|---|",
+        *rows,
+    ]
 
 
 def _style_runs(plan: StudyPlan, taught: list[StudyRun], style: str) -> tuple[str | None, list[StudyRun], list[StudyRun], list[StudyRun]]:
@@ -565,6 +722,7 @@ def _zone_success(runs: list[StudyRun], keep: set) -> tuple[int, int]:
 
 def disagreement_zones(runs: list[StudyRun]) -> set:
     """(scenario, zone id) whose expected choice differs between the default and the other profile."""
+
     def expects(rr: list[StudyRun]) -> dict:
         return {(r.scenario, z.id): z.expect for r in rr for z in r.metrics.zones}
 
@@ -577,15 +735,23 @@ def _disagreement_table(runs: list[StudyRun]) -> list[str]:
     keep = disagreement_zones(runs)
     if not keep:
         return []
-    rows = [(label, *_zone_success(rr, keep)) for label, rr in (
-        ("C trained on the other profile, scored under the other profile", _select(runs, study="profile", method="C")),
-        ("C trained on the default profile, scored under the other profile", _select(runs, study="profile_cross", method="C_default")),
-        ("C trained on the default profile, scored under the default profile", _select(runs, study="baselines", method="C")),
-        ("C trained on the other profile, scored under the default profile", _select(runs, study="profile_cross", method="C")),
-    )]
-    out = [f"The zones where the two profiles expect different choices ({len(keep)}: "
-           + ", ".join(f"{sc} {zid}" for sc, zid in sorted(keep)) + "):", "",
-           "| model and scoring | success in these zones |", "|---|---|"]
+    rows = [
+        (label, *_zone_success(rr, keep))
+        for label, rr in (
+            ("C trained on the other profile, scored under the other profile", _select(runs, study="profile", method="C")),
+            ("C trained on the default profile, scored under the other profile", _select(runs, study="profile_cross", method="C_default")),
+            ("C trained on the default profile, scored under the default profile", _select(runs, study="baselines", method="C")),
+            ("C trained on the other profile, scored under the default profile", _select(runs, study="profile_cross", method="C")),
+        )
+    ]
+    out = [
+        f"The zones where the two profiles expect different choices ({len(keep)}: "
+        + ", ".join(f"{sc} {zid}" for sc, zid in sorted(keep))
+        + "):",
+        "",
+        "| model and scoring | success in these zones |",
+        "|---|---|",
+    ]
     out += [f"| {label} | {rate_text(ok, n)} |" for label, ok, n in rows]
     return out + [""]
 
@@ -594,7 +760,10 @@ def _choice_table(plan: StudyPlan, runs: list[StudyRun]) -> list[str]:
     """How often each class was chosen in `best` zones, by which profile the model learned."""
     columns = (*plan.default_order(), "avoid")  # a lethal class's choice counts in the lethal column
     rows = ["| model | " + " | ".join(columns) + " |", "|---|" + "---|" * len(columns)]
-    for label, rr in (("default profile", _select(runs, study="baselines", method="C")), ("other profile", _select(runs, study="profile", method="C"))):
+    for label, rr in (
+        ("default profile", _select(runs, study="baselines", method="C")),
+        ("other profile", _select(runs, study="profile", method="C")),
+    ):
         choices = [plan.table.column_of(z.choice) for r in rr for z in r.metrics.zones if z.expect != "avoid"]
         n = max(len(choices), 1)
         rows.append(f"| C, {label} | " + " | ".join(f"{choices.count(c) / n:.0%}" for c in columns) + " |")

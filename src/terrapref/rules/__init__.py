@@ -35,8 +35,27 @@ from terrapref.rules.second.rule import SecondStageConfig, SecondStageRule
 if TYPE_CHECKING:
     from terrapref.learning.model_file import LoadedModel
 
-__all__ = ["RULES", "ArgmaxRule", "Choice", "HeaderContext", "OffsetConfig", "OffsetRule", "Rule", "RuleConfig", "RuleContext", "RuleInput",
-           "RuleRunner", "SecondStageConfig", "SecondStageRule", "chosen_rule", "driving_rule", "legacy_blocks", "read_rules", "rules_in", "rules_of"]
+__all__ = [
+    "RULES",
+    "ArgmaxRule",
+    "Choice",
+    "HeaderContext",
+    "OffsetConfig",
+    "OffsetRule",
+    "Rule",
+    "RuleConfig",
+    "RuleContext",
+    "RuleInput",
+    "RuleRunner",
+    "SecondStageConfig",
+    "SecondStageRule",
+    "chosen_rule",
+    "driving_rule",
+    "legacy_blocks",
+    "read_rules",
+    "rules_in",
+    "rules_of",
+]
 
 RULES: Registry[type[Rule]] = Registry("rule")
 
@@ -53,8 +72,9 @@ def legacy_blocks(meta: Mapping[str, Any], source: str) -> tuple[dict[str, Any],
     return tuple(block for cls in RULES.values() if (block := cls.legacy_block(meta, source)) is not None)
 
 
-def read_rules(blocks: Sequence[Mapping[str, Any]], features: FeatureConfig, raw_features: Mapping[str, Any], source: str,
-               key: str = "rules") -> tuple[Rule, ...]:
+def read_rules(
+    blocks: Sequence[Mapping[str, Any]], features: FeatureConfig, raw_features: Mapping[str, Any], source: str, key: str = "rules"
+) -> tuple[Rule, ...]:
     """The rules a model file lists, each checked by its own type (``raw_features``: the file's
     ``features`` section, where older files kept a rule's geometry; ``key``: the list's name in
     the file, for errors)."""

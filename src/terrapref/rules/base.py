@@ -232,13 +232,19 @@ class Where:
         return UserError(self.source, message, field=self.field(name))
 
 
-def number(block: Mapping[str, Any], name: str, where: Where, default: float | None = None, low: float = -np.inf,
-           positive: bool = False) -> float:
+def number(
+    block: Mapping[str, Any], name: str, where: Where, default: float | None = None, low: float = -np.inf, positive: bool = False
+) -> float:
     """A finite number field of a block (``default`` when absent, if given), >= ``low`` (> 0 with ``positive``)."""
     value = block.get(name, default)
     ok = not isinstance(value, bool) and isinstance(value, (int, float)) and np.isfinite(value) and value >= low
     if not ok or (positive and value <= 0):
-        raise where.error(name, "missing" if value is None else f"expected a finite number {'> 0' if positive else f'>= {low:g}' if np.isfinite(low) else ''}".rstrip())
+        raise where.error(
+            name,
+            "missing"
+            if value is None
+            else f"expected a finite number {'> 0' if positive else f'>= {low:g}' if np.isfinite(low) else ''}".rstrip(),
+        )
     return float(value)
 
 

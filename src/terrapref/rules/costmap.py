@@ -78,8 +78,9 @@ def class_costs(weights: np.ndarray, lethal: np.ndarray, k: int) -> tuple[np.nda
     return costs, prices
 
 
-def costmap_of(cells: np.ndarray, origin: np.ndarray | None, resolution_m: float, weights: np.ndarray, lethal: np.ndarray,
-               names: tuple[str, ...]) -> Costmap:
+def costmap_of(
+    cells: np.ndarray, origin: np.ndarray | None, resolution_m: float, weights: np.ndarray, lethal: np.ndarray, names: tuple[str, ...]
+) -> Costmap:
     """The costmap of a ground map's ``cells`` (values 0..K + 1, rows along y) whose cell (0, 0)
     has its corner at ``origin`` (None: nothing seen yet, every cell unknown), cropped to the
     rectangle of cells seen; ``names``, the K terrain columns' classes."""
@@ -92,8 +93,13 @@ def costmap_of(cells: np.ndarray, origin: np.ndarray | None, resolution_m: float
         r0, r1, c0, c1 = seen_rows[0], seen_rows[-1] + 1, seen_cols[0], seen_cols[-1] + 1
         grid = grid[r0:r1, c0:c1]
         corner = (corner[0] + c0 * resolution_m, corner[1] + r0 * resolution_m)
-    return Costmap(grid, float(resolution_m), corner, {n: float(p) for n, p in zip(names, prices, strict=True)},
-                   frozenset(n for n, is_lethal in zip(names, lethal[:k]) if is_lethal))
+    return Costmap(
+        grid,
+        float(resolution_m),
+        corner,
+        {n: float(p) for n, p in zip(names, prices, strict=True)},
+        frozenset(n for n, is_lethal in zip(names, lethal[:k]) if is_lethal),
+    )
 
 
 _CHEAP, _DEAR, _LETHAL = np.array([40, 200, 60]), np.array([230, 40, 30]), np.array([20, 20, 20])

@@ -6,6 +6,18 @@ from terrapref.scenario.model import AVOID, BEST, Scenario, TerrainPatch, Zone
 from terrapref.scenario.shapes import Circle, Polygon, Rectangle, Shape
 
 __all__ = [
-    "AVOID", "BEST", "FORMAT", "Circle", "Polygon", "Rectangle", "Scenario", "Shape", "TerrainPatch", "Zone",
-    "load_scenario", "packaged_scenarios", "parse_scenario", "resolve_scenario",
+    "AVOID",
+    "BEST",
+    "FORMAT",
+    "Circle",
+    "Polygon",
+    "Rectangle",
+    "Scenario",
+    "Shape",
+    "TerrainPatch",
+    "Zone",
+    "load_scenario",
+    "packaged_scenarios",
+    "parse_scenario",
+    "resolve_scenario",
 ]

@@ -24,8 +24,15 @@ class CourseBuilder:
     command reads it with its own table; without, it is read with the default table or ``--classes``.
     """
 
-    def __init__(self, name: str, description: str, size_m: tuple[float, float], waypoints: Sequence[Sequence[float]], background: str = "grass",
-                 classes: ClassTable | None = None):
+    def __init__(
+        self,
+        name: str,
+        description: str,
+        size_m: tuple[float, float],
+        waypoints: Sequence[Sequence[float]],
+        background: str = "grass",
+        classes: ClassTable | None = None,
+    ):
         self.name, self.description, self.size_m, self.background, self.classes = name, description, size_m, background, classes
         self.wp = np.array(waypoints, dtype=float)
         self.seg_len = np.linalg.norm(np.diff(self.wp, axis=0), axis=1)
@@ -48,13 +55,13 @@ class CourseBuilder:
     def rect(self, cls: str, s: float, lat: float, length: float, width: float, yaw_deg: float = 0.0) -> None:
         """A rectangle of class ``cls``, ``length`` x ``width`` [m], centred at arc length ``s`` and
         ``lat`` [m] left of the path, turned ``yaw_deg`` [deg] from the path's heading there."""
-        (cx, cy), = self.to_world(s, [(0.0, lat)])
+        ((cx, cy),) = self.to_world(s, [(0.0, lat)])
         h = math.degrees(self.frame(s)[1])
         self.terrain.append({"class": cls, "rectangle": {"center": [cx, cy], "size": [length, width], "yaw_deg": round(h + yaw_deg, 3)}})
 
     def circle(self, cls: str, s: float, lat: float, radius: float) -> None:
         """A disc of class ``cls`` and ``radius`` [m] centred at arc length ``s``, ``lat`` [m] left of the path."""
-        (cx, cy), = self.to_world(s, [(0.0, lat)])
+        ((cx, cy),) = self.to_world(s, [(0.0, lat)])
         self.terrain.append({"class": cls, "circle": {"center": [cx, cy], "radius": radius}})
 
     def polygon(self, cls: str, s: float, pts: Sequence[tuple[float, float]]) -> None:
@@ -63,9 +70,11 @@ class CourseBuilder:
 
     def zone(self, zid: str, label: str, s: float, size: tuple[float, float], expect: str) -> None:
         """A scored zone: a rectangle of ``size`` (along, across) centred on the path at ``s``."""
-        (cx, cy), = self.to_world(s, [(0.0, 0.0)])
+        ((cx, cy),) = self.to_world(s, [(0.0, 0.0)])
         h = math.degrees(self.frame(s)[1])
-        self.zones.append({"id": zid, "label": label, "rectangle": {"center": [cx, cy], "size": list(size), "yaw_deg": round(h, 3)}, "expect": expect})
+        self.zones.append(
+            {"id": zid, "label": label, "rectangle": {"center": [cx, cy], "size": list(size), "yaw_deg": round(h, 3)}, "expect": expect}
+        )
 
     def pair(self, zid: str, left: str, right: str, s: float, size: tuple[float, float] = (8.0, 5.0)) -> None:
         """Two patches of ``size`` (length, width) meeting on the path: ``left`` on its left, ``right`` on its right."""

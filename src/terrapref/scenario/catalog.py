@@ -25,7 +25,9 @@ def scenario_path(name_or_path: str) -> Path:
     if name_or_path in packaged_scenarios():
         ref = resources.files("terrapref") / "data" / "scenarios" / f"{name_or_path}.yaml"
         return Path(str(ref))
-    raise ScenarioError(name_or_path, f"no such file and no packaged scenario of that name; packaged: {', '.join(packaged_scenarios()) or 'none'}")
+    raise ScenarioError(
+        name_or_path, f"no such file and no packaged scenario of that name; packaged: {', '.join(packaged_scenarios()) or 'none'}"
+    )
 
 
 def resolve_scenario(name_or_path: str, classes: ClassTable | None = None) -> Scenario:

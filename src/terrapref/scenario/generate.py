@@ -50,11 +50,13 @@ def _patch(rng: np.random.Generator, wp: np.ndarray, s: float, cls: str, centre:
     a0, l0 = centre
     kind = rng.choice(["rect", "polygon", "circle"]) if max(size) < 3.6 else rng.choice(["rect", "polygon"])
     if kind == "circle":
-        (cx, cy), = _to_world(wp, s, np.array([[a0, l0]]))
+        ((cx, cy),) = _to_world(wp, s, np.array([[a0, l0]]))
         return {"class": cls, "circle": {"center": [cx, cy], "radius": round(float(min(size)) / 2, 3)}}
     if kind == "rect":
         yaw = rng.uniform(-12, 12)
-        local = np.array([[-size[0] / 2, -size[1] / 2], [size[0] / 2, -size[1] / 2], [size[0] / 2, size[1] / 2], [-size[0] / 2, size[1] / 2]])
+        local = np.array(
+            [[-size[0] / 2, -size[1] / 2], [size[0] / 2, -size[1] / 2], [size[0] / 2, size[1] / 2], [-size[0] / 2, size[1] / 2]]
+        )
         c, sn = math.cos(math.radians(yaw)), math.sin(math.radians(yaw))
         local = local @ np.array([[c, sn], [-sn, c]]) + (a0, l0)
         return {"class": cls, "polygon": _to_world(wp, s, local)}
@@ -103,14 +105,36 @@ def generate_course(seed: int, zones: int = 8, kinds: tuple[str, ...] = ZONE_KIN
             length_m, edge = rng.uniform(7.0, 10.0), rng.uniform(-0.3, 0.3)
             for cls, side in ((a, 1.0), (b, -1.0)):
                 width = rng.uniform(5.0, 6.5)
-                terrain.append({"class": str(cls), "polygon": _to_world(wp, s, np.array(
-                    [[-length_m / 2, edge], [length_m / 2, edge], [length_m / 2, edge + side * width], [-length_m / 2, edge + side * width]]))})
+                terrain.append(
+                    {
+                        "class": str(cls),
+                        "polygon": _to_world(
+                            wp,
+                            s,
+                            np.array(
+                                [
+                                    [-length_m / 2, edge],
+                                    [length_m / 2, edge],
+                                    [length_m / 2, edge + side * width],
+                                    [-length_m / 2, edge + side * width],
+                                ]
+                            ),
+                        ),
+                    }
+                )
             expect, label, half = "best", f"{a} | {b}", (length_m / 2 + 2.0, 8.5)
         else:
             a, b, c = (concrete(str(n)) for n in rng.choice(names, 3, replace=False))
             length_m, mid = rng.uniform(6.0, 8.0), rng.uniform(2.4, 3.2)
             for cls, l0, l1 in ((a, mid / 2, mid / 2 + 4.5), (b, -mid / 2, mid / 2), (c, -mid / 2 - 4.5, -mid / 2)):
-                terrain.append({"class": str(cls), "polygon": _to_world(wp, s, np.array([[-length_m / 2, l0], [length_m / 2, l0], [length_m / 2, l1], [-length_m / 2, l1]]))})
+                terrain.append(
+                    {
+                        "class": str(cls),
+                        "polygon": _to_world(
+                            wp, s, np.array([[-length_m / 2, l0], [length_m / 2, l0], [length_m / 2, l1], [-length_m / 2, l1]])
+                        ),
+                    }
+                )
             expect, label, half = "best", f"{a} | {b} | {c}", (length_m / 2 + 2.0, 8.5)
         box = np.array([[-half[0], -half[1]], [half[0], -half[1]], [half[0], half[1]], [-half[0], half[1]]])
         zone_list.append({"id": str(z + 1), "label": label, "polygon": _to_world(wp, s, box), "expect": expect})

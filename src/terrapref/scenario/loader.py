@@ -38,8 +38,11 @@ class _Checker:
         another class table names its classes in many fields."""
         for name, fields in self.unknown.items():
             more = f" (and {len(fields) - 1} more fields)" if len(fields) > 1 else ""
-            self.fail(fields[0], f"unknown class {name!r}{more}; known: {', '.join(classes.names)} "
-                                 "(a scenario of another class table? give its --classes FILE)")
+            self.fail(
+                fields[0],
+                f"unknown class {name!r}{more}; known: {', '.join(classes.names)} "
+                "(a scenario of another class table? give its --classes FILE)",
+            )
 
     def fail(self, field: str, message: str) -> None:
         self.problems.append(Problem(field, message))
@@ -143,7 +146,9 @@ class _Checker:
         if shape is not None and size_m is not None:
             x0, y0, x1, y1 = shape.bounds()
             if x1 <= 0 or y1 <= 0 or x0 >= size_m[0] or y0 >= size_m[1]:
-                self.fail(f, f"lies wholly off the map (bounds x {x0:g}..{x1:g}, y {y0:g}..{y1:g}; map 0..{size_m[0]:g} x 0..{size_m[1]:g})")
+                self.fail(
+                    f, f"lies wholly off the map (bounds x {x0:g}..{x1:g}, y {y0:g}..{y1:g}; map 0..{size_m[0]:g} x 0..{size_m[1]:g})"
+                )
                 return None
         return shape
 
@@ -269,7 +274,9 @@ def _carried_table(c: _Checker, data: dict[str, Any], source: str, given: ClassT
             c.fail(f"classes.{problem.field}" if problem.field else "classes", problem.message)
         raise ScenarioError(source, c.problems) from None
     if given is not None and not carried.same_classes(given):
-        c.fail("classes", f"the scenario carries the class table of {', '.join(carried.names)}, not the one given ({', '.join(given.names)})")
+        c.fail(
+            "classes", f"the scenario carries the class table of {', '.join(carried.names)}, not the one given ({', '.join(given.names)})"
+        )
         raise ScenarioError(source, c.problems)
     return given or carried
 
@@ -307,7 +314,10 @@ def _raster_size(c: _Checker, size: tuple[float, ...], resolution_m: float) -> t
     if size[0] / resolution_m * (size[1] / resolution_m) > 1e18:
         # Past 10^18 an exact count is unreadable (and past ~10^308 it overflows); give the magnitude.
         digits = math.log10(size[0]) + math.log10(size[1]) - 2 * math.log10(resolution_m)
-        c.fail("world", f"raster would have about 10^{digits:.0f} cells, more than the limit of {MAX_CELLS:,}; use a coarser resolution_m or a smaller size_m")
+        c.fail(
+            "world",
+            f"raster would have about 10^{digits:.0f} cells, more than the limit of {MAX_CELLS:,}; use a coarser resolution_m or a smaller size_m",
+        )
         return None
     ny, nx = grid_shape((size[0], size[1]), resolution_m)
     if nx * ny > MAX_CELLS:
@@ -352,7 +362,10 @@ def _waypoints(c: _Checker, data: dict[str, Any], size_m: tuple[float, float] | 
         off = np.flatnonzero(~_on_map(waypoints, size_m))
         if len(off):
             i = int(off[0])
-            c.fail(f"path.waypoints[{i}]", f"({waypoints[i, 0]:g}, {waypoints[i, 1]:g}) is off the map (0..{size_m[0]:g} x 0..{size_m[1]:g}); {len(off)} waypoint(s) off the map")
+            c.fail(
+                f"path.waypoints[{i}]",
+                f"({waypoints[i, 0]:g}, {waypoints[i, 1]:g}) is off the map (0..{size_m[0]:g} x 0..{size_m[1]:g}); {len(off)} waypoint(s) off the map",
+            )
             return None
     return waypoints
 

@@ -90,10 +90,7 @@ class Scenario:
             "terrain": [{"class": p.class_name, **p.shape.to_dict()} for p in self.terrain],
             "path": {"waypoints": self.waypoints.tolist()},
             "start": [self.start[0], self.start[1], math.degrees(self.start[2])],
-            "zones": [
-                {"id": z.id, **({"label": z.label} if z.label else {}), **z.shape.to_dict(), "expect": z.expect}
-                for z in self.zones
-            ],
+            "zones": [{"id": z.id, **({"label": z.label} if z.label else {}), **z.shape.to_dict(), "expect": z.expect} for z in self.zones],
         }
         if self.description:
             out["description"] = self.description

@@ -21,7 +21,9 @@ class ReferencePath:
         keep[1:] = np.any(np.diff(wp, axis=0) != 0, axis=1)  # drop repeated points
         self.waypoints = wp[keep]
         if len(self.waypoints) < 2:
-            raise ValueError(f"a path needs at least two distinct points; its {len(wp)} point(s) are all {wp[0].tolist() if len(wp) else 'missing'}")
+            raise ValueError(
+                f"a path needs at least two distinct points; its {len(wp)} point(s) are all {wp[0].tolist() if len(wp) else 'missing'}"
+            )
         self._a = self.waypoints[:-1]
         self._d = np.diff(self.waypoints, axis=0)
         self._len = np.linalg.norm(self._d, axis=1)

@@ -86,7 +86,7 @@ def balanced_pairs(names: Sequence[str]) -> list[tuple[str, str]]:
     slots = list(range(n)) + ([-1] if n % 2 else [])
     pairs = []
     for _ in range(len(slots) - 1):
-        for a, b in zip(slots[: len(slots) // 2], reversed(slots[len(slots) // 2:])):
+        for a, b in zip(slots[: len(slots) // 2], reversed(slots[len(slots) // 2 :])):
             if a >= 0 and b >= 0:
                 first = left_of[frozenset((a, b))]
                 pairs.append((names[first], names[b if first == a else a]))
@@ -109,7 +109,7 @@ def situations(classes: ClassTable, full: bool | None = None) -> list[Situation]
     strips = []
     for k, middle in enumerate(terrain):
         others = [t for t in terrain if t != middle] or [classes.background]
-        for side in ((1, -1) if full else ((1, -1)[k % 2],)):
+        for side in (1, -1) if full else ((1, -1)[k % 2],):
             neighbour = others[(k + (side < 0)) % len(others)]
             if lethal:
                 wall = lethal[len(strips) % len(lethal)]
@@ -132,7 +132,9 @@ def follow_up_course(classes: ClassTable, open_pairs: Sequence[tuple[str, str]],
     """The follow-up course of ``open_pairs``, which ``drives`` drives of the course(s) ``driven`` left open together."""
     listed = "; ".join(f"{a} vs {b}" for a, b in open_pairs)
     what = f"the drive of {driven}" if drives == 1 else f"{drives} drives of {driven} together"
-    return build_course(classes, follow_up(classes, open_pairs), name, f"Follow-up course: the pairs {what} left open ({listed}), each both ways round.")
+    return build_course(
+        classes, follow_up(classes, open_pairs), name, f"Follow-up course: the pairs {what} left open ({listed}), each both ways round."
+    )
 
 
 def follow_up(classes: ClassTable, open_pairs: Sequence[tuple[str, str]]) -> list[Situation]:
@@ -241,8 +243,9 @@ def designed_course(classes: ClassTable, design: str = "auto", name: str = "teac
     return build_course(classes, items, name, description(classes, full)), items
 
 
-def follow_up_after(classes: ClassTable, open_pairs: Sequence[tuple[str, str]], courses: Sequence[str],
-                    name: str | None = None) -> tuple[CourseBuilder, list[Situation]]:
+def follow_up_after(
+    classes: ClassTable, open_pairs: Sequence[tuple[str, str]], courses: Sequence[str], name: str | None = None
+) -> tuple[CourseBuilder, list[Situation]]:
     """The follow-up course of ``open_pairs``, which drives of ``courses`` (each drive's course, by
     name) left open together (``terrapref course --after``), with its situations in driving order;
     named ``name``, by default the first course's name followed by ``_more``."""
@@ -265,7 +268,14 @@ def write_teaching_course(folder: str | Path, classes: ClassTable) -> Path:
 def description(classes: ClassTable, full: bool) -> str:
     """What the teaching course of ``classes`` shows, in the full or the compact design."""
     n = len(classes.terrain_names)
-    design = ("no pairs (one feature class)" if n < 2 else "every pair once on each side" if full
-              else "every pair once, each class left as often as right")
-    return (f"Teaching course for {n} feature class{'es' if n != 1 else ''} ({', '.join(classes.terrain_names)}): {design}; "
-            f"every class as a strip on the path between lethal terrain and another class; every class alone on the path.")
+    design = (
+        "no pairs (one feature class)"
+        if n < 2
+        else "every pair once on each side"
+        if full
+        else "every pair once, each class left as often as right"
+    )
+    return (
+        f"Teaching course for {n} feature class{'es' if n != 1 else ''} ({', '.join(classes.terrain_names)}): {design}; "
+        f"every class as a strip on the path between lethal terrain and another class; every class alone on the path."
+    )

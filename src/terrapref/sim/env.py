@@ -329,8 +329,10 @@ class OffRoadNavEnv(gym.Env):
         if self.sim.started_in_contact:
             where = "'start'" if options.get("start") is not None else f"the start of {self.sim.scenario.name!r}"
             self._started = False
-            raise ValueError(f"reset: {where} ({pose[0]:.2f}, {pose[1]:.2f}) puts the vehicle's footprint on lethal terrain; "
-                             "start it clear of lethal terrain")
+            raise ValueError(
+                f"reset: {where} ({pose[0]:.2f}, {pose[1]:.2f}) puts the vehicle's footprint on lethal terrain; "
+                "start it clear of lethal terrain"
+            )
         if self.perception.active:
             # The first observation is the first frame as the robot's camera and localisation give
             # it; its timing applies from the first step on.
@@ -338,7 +340,9 @@ class OffRoadNavEnv(gym.Env):
             self._perceiver.reset(np.random.default_rng(self.np_random.integers(2**63)))
             frame = self._perceiver.captured(frame)
         self._started, self._ended, self._off_map = True, False, False
-        self._in_band = abs(path.project(np.array(pose[:2]), self._progress_m - 2.0, self._progress_m + 2.0)[1]) <= self.reward_config.path_band_m
+        self._in_band = (
+            abs(path.project(np.array(pose[:2]), self._progress_m - 2.0, self._progress_m + 2.0)[1]) <= self.reward_config.path_band_m
+        )
         self._credited_m = self._progress_m
         terms = dict.fromkeys(("progress", "cross_track", "collision", "off_map", "goal", "terrain"), 0.0)
         self._last_obs = self._observation(frame.view, frame.pose)
@@ -372,7 +376,10 @@ class OffRoadNavEnv(gym.Env):
         self._off_map = off_map
         collided = sim.collisions - collisions0
         end = sim.path.waypoints[-1]
-        success = math.hypot(trace[-1, 0] - end[0], trace[-1, 1] - end[1]) <= sim.config.goal_radius_m and self._progress_m >= 0.5 * sim.path.length_m
+        success = (
+            math.hypot(trace[-1, 0] - end[0], trace[-1, 1] - end[1]) <= sim.config.goal_radius_m
+            and self._progress_m >= 0.5 * sim.path.length_m
+        )
         terrain_cost = float((self._terrain_cost[sim.world.class_at(xy)] * hops).sum())
         terms = {
             "progress": cfg.progress_weight * advance,
@@ -442,7 +449,10 @@ class OffRoadNavEnv(gym.Env):
         local = np.stack([c * d[:, 0] + sn * d[:, 1], -sn * d[:, 0] + c * d[:, 1]], axis=1)
         return {
             "image": image,
-            "pose": np.array([np.clip(offset, -r, r), np.clip(heading, -math.pi, math.pi), min(max(self._progress_m / path.length_m, 0.0), 1.0)], np.float32),
+            "pose": np.array(
+                [np.clip(offset, -r, r), np.clip(heading, -math.pi, math.pi), min(max(self._progress_m / path.length_m, 0.0), 1.0)],
+                np.float32,
+            ),
             "waypoints": np.clip(local, -r, r).reshape(-1).astype(np.float32),
         }
 
@@ -513,7 +523,12 @@ def register_envs() -> None:
     """Register the environment ids with Gymnasium (idempotent)."""
     for env_id, action_type in ((ENV_ID, "discrete"), (ENV_ID_CONTINUOUS, "continuous")):
         if env_id not in gym.registry:
-            gym.register(id=env_id, entry_point="terrapref.sim.env:OffRoadNavEnv", kwargs={"action_type": action_type}, max_episode_steps=MAX_EPISODE_STEPS)
+            gym.register(
+                id=env_id,
+                entry_point="terrapref.sim.env:OffRoadNavEnv",
+                kwargs={"action_type": action_type},
+                max_episode_steps=MAX_EPISODE_STEPS,
+            )
 
 
 register_envs()

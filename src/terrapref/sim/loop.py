@@ -94,7 +94,6 @@ class Driver(Protocol):
     def act(self, frame: Frame) -> Command: ...
 
 
-
 class Simulation:
     """The world, the vehicle and the camera of one scenario, stepped one camera frame at a time."""
 
@@ -268,8 +267,13 @@ class EpisodeLog:
 
     def summary(self) -> dict:
         """What a recording's metadata keeps of the run."""
-        return {"completed": self.completed, "collisions": self.collisions, "duration_s": round(self.duration_s, 3),
-                "contact_s": round(self.contact_s, 3), "contact_m": round(self.contact_m, 3)}
+        return {
+            "completed": self.completed,
+            "collisions": self.collisions,
+            "duration_s": round(self.duration_s, 3),
+            "contact_s": round(self.contact_s, 3),
+            "contact_m": round(self.contact_m, 3),
+        }
 
 
 def run_episode(sim: Simulation, driver: Driver, rng: np.random.Generator, start: Pose | None = None) -> EpisodeLog:

@@ -32,5 +32,17 @@ with needs("teleop", "terrapref drive"):  # here once, before the submodules imp
 from terrapref.teleop.loop import COUNTDOWN_S, HANDBACK_S, TeleopOptions, TeleopResult, TeleopState, run_session, run_teleop  # noqa: E402
 from terrapref.teleop.stick import AXIS_DEADZONE, KEY_RATE_RPS2, Stick, axis_to_w, ramp_toward  # noqa: E402
 
-__all__ = ["AXIS_DEADZONE", "COUNTDOWN_S", "HANDBACK_S", "KEY_RATE_RPS2", "Stick", "TeleopOptions", "TeleopResult", "TeleopState",
-           "axis_to_w", "ramp_toward", "run_session", "run_teleop"]
+__all__ = [
+    "AXIS_DEADZONE",
+    "COUNTDOWN_S",
+    "HANDBACK_S",
+    "KEY_RATE_RPS2",
+    "Stick",
+    "TeleopOptions",
+    "TeleopResult",
+    "TeleopState",
+    "axis_to_w",
+    "ramp_toward",
+    "run_session",
+    "run_teleop",
+]

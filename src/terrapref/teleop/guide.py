@@ -93,7 +93,13 @@ class Readout:
             route = "route: on it"
         else:
             route = f"route: {self.offset_m:.1f} m to your {'left' if self.foot_rad > 0 else 'right'}"
-        return [f"path {self.progress_m:5.1f} / {self.length_m:.0f} m ({share:.0%})", patch, f"under the vehicle: {self.under}", turn, route]
+        return [
+            f"path {self.progress_m:5.1f} / {self.length_m:.0f} m ({share:.0%})",
+            patch,
+            f"under the vehicle: {self.under}",
+            turn,
+            route,
+        ]
 
 
 class CourseGuide:
@@ -141,8 +147,20 @@ class CourseGuide:
         under_id = int(self.world.class_at(np.array(pose[:2])))
         under = "off the map" if under_id == 255 else self.names.get(under_id, "?")
         offset_m, foot_rad, rejoin_rad = self.where_the_route_is(pose, progress_m)
-        return Readout(progress_m, self.path.length_m, under, name, dist, label, float(self.turn_deg_s[label]), float(self.radius_m[label]), at_edge,
-                       offset_m, foot_rad, rejoin_rad)
+        return Readout(
+            progress_m,
+            self.path.length_m,
+            under,
+            name,
+            dist,
+            label,
+            float(self.turn_deg_s[label]),
+            float(self.radius_m[label]),
+            at_edge,
+            offset_m,
+            foot_rad,
+            rejoin_rad,
+        )
 
     def where_the_route_is(self, pose: Pose, progress_m: float) -> tuple[float, float, float]:
         """(distance [m], bearing of its nearest point [rad], bearing of the way back [rad]): the

@@ -42,8 +42,15 @@ class KeyboardPerson:
         reaction_s: the delay from a frame to the key press it causes [s].
     """
 
-    def __init__(self, expert: ExpertDriver, scenario: Scenario, rng: np.random.Generator, camera_rate_hz: float = 10.0,
-                 reaction_s: float = REACTION_S, world: WorldMap | None = None) -> None:
+    def __init__(
+        self,
+        expert: ExpertDriver,
+        scenario: Scenario,
+        rng: np.random.Generator,
+        camera_rate_hz: float = 10.0,
+        reaction_s: float = REACTION_S,
+        world: WorldMap | None = None,
+    ) -> None:
         self.expert = expert
         self.expert.reset(scenario, rng, world=world)
         self.step = KEY_STEP_RPS  # how far a press moves the stick [rad/s]; holding it, less per frame at first

@@ -197,7 +197,9 @@ def _check_display() -> None:
     """Refuse to open a window nobody can see: SDL would silently fall back to an offscreen one."""
     if os.environ.get("SDL_VIDEODRIVER"):
         return
-    if sys.platform.startswith(("linux", "freebsd", "openbsd", "netbsd")) and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+    if sys.platform.startswith(("linux", "freebsd", "openbsd", "netbsd")) and not (
+        os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+    ):
         raise UserError(SOURCE, NO_DISPLAY)
 
 
@@ -235,7 +237,9 @@ class _Session:
         self.control = prefs.config.control
         self.frame_dt = 1.0 / sim.config.camera_rate_hz
         self.guide = CourseGuide(sim.world, sim.path, prefs)
-        self.stick = Stick(w_max_rps=float(np.abs(self.control.w_rps).max()), view_width_px=window.view_size[0], view_height_px=window.view_size[1])
+        self.stick = Stick(
+            w_max_rps=float(np.abs(self.control.w_rps).max()), view_width_px=window.view_size[0], view_height_px=window.view_size[1]
+        )
         self.planner = planner
         self.driver = "planner" if planner is not None else "you"
         self.idle_s = 0.0
@@ -269,7 +273,6 @@ class _Session:
             return None
         got = self.recorder.perceive(self.frame)
         return self.planner.decide(got.view, got.pose, got.time_s) if got is not None else self.decision
-
 
     # --- input --------------------------------------------------------------------------------
 
@@ -379,33 +382,50 @@ class _Session:
 
         riding = self.planner is not None and self.decision is not _NOTHING_YET
         pose = self.frame.pose
-        self.live.frame(FrameData(self.frame.time_s, (pose.x, pose.y, pose.yaw), (float(executed[0]), float(executed[1])), self.frame.view.image,
-                                  int(self.control.label_of(label_w)), self.decision.probs if riding and self.driver == "planner" else None),
-                        planner_costmap(self.planner) if riding else None)
+        self.live.frame(
+            FrameData(
+                self.frame.time_s,
+                (pose.x, pose.y, pose.yaw),
+                (float(executed[0]), float(executed[1])),
+                self.frame.view.image,
+                int(self.control.label_of(label_w)),
+                self.decision.probs if riding and self.driver == "planner" else None,
+            ),
+            planner_costmap(self.planner) if riding else None,
+        )
 
     # --- drawing ----------------------------------------------------------------------------
 
     def banner(self) -> Banner | None:
         if self.phase == "waiting":
-            what = ("The planner drives; steer to correct it." if self.planner is not None
-                    else "Drive along the magenta path the way you like to drive.")
+            what = (
+                "The planner drives; steer to correct it."
+                if self.planner is not None
+                else "Drive along the magenta path the way you like to drive."
+            )
             if self.disturbance is not None:
                 every_s = 1.0 / self.disturbance.rate_hz
-                pushes = (f"Now and then (about every {every_s:.0f} s) a push turns the vehicle off",
-                          "its line, as a rut would: steer back. A red alert shows it.",
-                          "(terrapref drive --disturb 0: no pushes)")
+                pushes = (
+                    f"Now and then (about every {every_s:.0f} s) a push turns the vehicle off",
+                    "its line, as a rut would: steer back. A red alert shows it.",
+                    "(terrapref drive --disturb 0: no pushes)",
+                )
             else:
                 pushes = ("No pushes: the vehicle goes where you steer.",)
-            return Banner("Press Space to start", HIGHLIGHT_COLOR, (
-                what,
-                "The white arcs are the turns you can take; yours is yellow.",
-                f"The vehicle moves at {self.v:g} m/s; you steer.",
-                "Left/Right move the stick, which stays where you leave it;",
-                "Down or C centres it. Or hold the left mouse button over",
-                "this view (the pointer's position steers), or use a gamepad.",
-                "Recording starts after a 3 s countdown. Space pauses.",
-                *pushes,
-            ))
+            return Banner(
+                "Press Space to start",
+                HIGHLIGHT_COLOR,
+                (
+                    what,
+                    "The white arcs are the turns you can take; yours is yellow.",
+                    f"The vehicle moves at {self.v:g} m/s; you steer.",
+                    "Left/Right move the stick, which stays where you leave it;",
+                    "Down or C centres it. Or hold the left mouse button over",
+                    "this view (the pointer's position steers), or use a gamepad.",
+                    "Recording starts after a 3 s countdown. Space pauses.",
+                    *pushes,
+                ),
+            )
         if self.phase == "countdown":
             return Banner(str(max(1, math.ceil(self.countdown_left * self.frame_dt))), HIGHLIGHT_COLOR)
         if self.phase == "paused":
@@ -422,8 +442,16 @@ class _Session:
             if self.driver == "planner" and self.decision is not None and self.decision.stop is not None:
                 mode = (f"PLANNER STOPPED: {self.decision.stop}", ALERT_COLOR)
         alerts = tuple(a for a in (self.push_alert(), readout.warning()) if a is not None)
-        overlay = Overlay(self.status(w, label) + note, readout.lines(), end_banner or self.banner(), mode, alerts=alerts,
-                          route_rad=readout.rejoin_rad, off_route=readout.off_route, pushes_px=self.pushes_px)
+        overlay = Overlay(
+            self.status(w, label) + note,
+            readout.lines(),
+            end_banner or self.banner(),
+            mode,
+            alerts=alerts,
+            route_rad=readout.rejoin_rad,
+            off_route=readout.off_route,
+            pushes_px=self.pushes_px,
+        )
         self.window.draw(self.frame.image, w, label, self.trace_px, overlay)
 
     def status(self, w: float, label: int) -> str:
@@ -484,9 +512,16 @@ class _Session:
 
 def _summary(result: TeleopResult) -> dict[str, Any]:
     """What the recording's metadata keeps of the session."""
-    return {"completed": result.completed, "collisions": result.collisions, "duration_s": round(result.duration_s, 3),
-            "contact_s": round(result.contact_s, 3), "contact_m": round(result.contact_m, 3),
-            "quit": result.quit, "edge_frames": result.edge_frames, "planner_frames": result.planner_frames}
+    return {
+        "completed": result.completed,
+        "collisions": result.collisions,
+        "duration_s": round(result.duration_s, 3),
+        "contact_s": round(result.contact_s, 3),
+        "contact_m": round(result.contact_m, 3),
+        "quit": result.quit,
+        "edge_frames": result.edge_frames,
+        "planner_frames": result.planner_frames,
+    }
 
 
 def run_teleop(scenario: Scenario | str, record_dir: str | Path | None = None, **options: Any) -> TeleopResult:
@@ -516,8 +551,13 @@ def run_session(scenario: Scenario | str, options: TeleopOptions) -> TeleopResul
     try:
         sim, prefs, window = _open_window(setup, options.record_dir)
         writer = _open_recording(setup, options)
-        recorder = RecordLoop(sim, writer, prefs.config.control, _disturber(options, 1.0 / setup.sim.camera_rate_hz),
-                              run_perceiver(options.perception, sim, np.random.default_rng([options.seed, 1])))
+        recorder = RecordLoop(
+            sim,
+            writer,
+            prefs.config.control,
+            _disturber(options, 1.0 / setup.sim.camera_rate_hz),
+            run_perceiver(options.perception, sim, np.random.default_rng([options.seed, 1])),
+        )
         session = _Session(recorder, prefs, window, setup.planner, options)
         session.run(options.max_frames, options.script, options.realtime)
         end = session.show_end(options.screenshot)
@@ -551,8 +591,9 @@ def _resolve(scenario: Scenario | str, options: TeleopOptions) -> _Setup:
     return _Setup(scenario, camera or CameraConfig(), preference or PreferenceSetConfig(), sim_cfg, planner)
 
 
-def _load_planner(model: str | Path, camera: CameraConfig | None,
-                  preference: PreferenceSetConfig | None) -> tuple[CameraConfig, PreferenceSetConfig, Any]:
+def _load_planner(
+    model: str | Path, camera: CameraConfig | None, preference: PreferenceSetConfig | None
+) -> tuple[CameraConfig, PreferenceSetConfig, Any]:
     """The planner of the model file ``model``, with the camera and preference set it needs where not given."""
     from terrapref.learning.model_file import load_model
     from terrapref.planner import Planner
@@ -580,7 +621,9 @@ def _open_recording(setup: _Setup, options: TeleopOptions) -> RecordingWriter | 
     if options.record_dir is None:
         return None
     pushes = options.disturbance.to_dict() if options.disturbance else None
-    driver = HumanInfo(INPUT, pushes, options.seed) if setup.planner is None else RideAlongInfo(INPUT, pushes, options.seed, str(options.model))
+    driver = (
+        HumanInfo(INPUT, pushes, options.seed) if setup.planner is None else RideAlongInfo(INPUT, pushes, options.seed, str(options.model))
+    )
     scenario = setup.scenario
     profile = options.profile or PreferenceProfile.default(scenario.classes)
     meta = RecordingMeta.driven(scenario, RecordingSetup(setup.camera, setup.preference, setup.sim), driver, profile, options.perception)

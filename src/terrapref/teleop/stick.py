@@ -92,7 +92,12 @@ class Stick:
                     self.held_s = None  # the next frame moves one step, then the hold ramps
             elif down and event.key in (pygame.K_DOWN, pygame.K_c):
                 self.w, self.source, self.touched = 0.0, "keys", True
-        elif event.type == pygame.MOUSEBUTTONDOWN and event.button == 1 and 0 <= event.pos[0] < self.view_width and 0 <= event.pos[1] < self.view_height:
+        elif (
+            event.type == pygame.MOUSEBUTTONDOWN
+            and event.button == 1
+            and 0 <= event.pos[0] < self.view_width
+            and 0 <= event.pos[1] < self.view_height
+        ):
             self.mouse_x, self.source, self.touched = float(event.pos[0]), "mouse", True
         elif event.type == pygame.MOUSEMOTION and self.mouse_x is not None:
             self.mouse_x = float(min(max(event.pos[0], 0), self.view_width))

@@ -307,7 +307,9 @@ class Window:
     def _draw_inset(self, trace_px: Sequence[tuple[float, float]], pushes_px: Sequence[tuple[float, float]] = ()) -> None:
         canvas = self.canvas
         ox, oy = self.inset_origin
-        canvas.blit(self.font.render("map (north up; red dots: pushes)" if pushes_px else "map (north up)", True, DIM_TEXT), (ox, PANEL_MARGIN_PX))
+        canvas.blit(
+            self.font.render("map (north up; red dots: pushes)" if pushes_px else "map (north up)", True, DIM_TEXT), (ox, PANEL_MARGIN_PX)
+        )
         canvas.blit(self.inset, (ox, oy))
         pygame.draw.rect(canvas, DIM_TEXT, pygame.Rect(ox - 1, oy - 1, self.inset_size[0] + 2, self.inset_size[1] + 2), 1)
         clip = canvas.get_clip()

@@ -126,8 +126,11 @@ class ClassTable:
     def same_classes(self, other: ClassTable) -> bool:
         """Whether ``other`` means the same by every id: the same classes (ids and names), background
         and lethal classes; colours and the default profile may differ."""
-        return ((tuple((c.id, c.name) for c in self.classes), self.background, frozenset(self.lethal))
-                == (tuple((c.id, c.name) for c in other.classes), other.background, frozenset(other.lethal)))
+        return (tuple((c.id, c.name) for c in self.classes), self.background, frozenset(self.lethal)) == (
+            tuple((c.id, c.name) for c in other.classes),
+            other.background,
+            frozenset(other.lethal),
+        )
 
     def palette(self) -> np.ndarray:
         """RGB lookup table, shape (256, 3) uint8; unknown (255) and unused ids are near-black/sky."""
@@ -172,11 +175,7 @@ class ClassTable:
             if name in RESERVED_NAMES:
                 problems.append(Problem(f"{f}.name", f"{name!r} is a reserved word ({RESERVED_NAMES[name]}); choose another name"))
                 continue
-            if (
-                not isinstance(color, list)
-                or len(color) != 3
-                or not all(isinstance(v, int) and 0 <= v <= 255 for v in color)
-            ):
+            if not isinstance(color, list) or len(color) != 3 or not all(isinstance(v, int) and 0 <= v <= 255 for v in color):
                 problems.append(Problem(f"{f}.color", "must be [r, g, b] with integers 0..255"))
                 continue
             classes.append(TerrainClass(cid, name, (color[0], color[1], color[2])))

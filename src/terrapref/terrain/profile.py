@@ -27,7 +27,9 @@ class PreferenceProfile:
         names = [n for n in names if n]
         unknown = [n for n in names if n not in classes.feature_names]
         if unknown:
-            raise ConfigError(source, f"unknown or background class {unknown[0]!r}; expected a permutation of {', '.join(classes.feature_names)}")
+            raise ConfigError(
+                source, f"unknown or background class {unknown[0]!r}; expected a permutation of {', '.join(classes.feature_names)}"
+            )
         if sorted(names) != sorted(classes.feature_names):
             raise ConfigError(source, f"must list each of {', '.join(classes.feature_names)} exactly once")
         return cls(tuple(names))

@@ -62,7 +62,9 @@ def paint(raster: np.ndarray, shape: Shape, class_id: int, resolution_m: float) 
     """Set every cell whose centre lies inside ``shape`` to ``class_id`` (in place)."""
     ny, nx = raster.shape
     # Clip the bounds to the map first: a huge shape must not overflow the cell arithmetic.
-    x0, y0, x1, y1 = (float(np.clip(v, -resolution_m, lim + resolution_m)) for v, lim in zip(shape.bounds(), (nx * resolution_m, ny * resolution_m) * 2))
+    x0, y0, x1, y1 = (
+        float(np.clip(v, -resolution_m, lim + resolution_m)) for v, lim in zip(shape.bounds(), (nx * resolution_m, ny * resolution_m) * 2)
+    )
     c0, c1 = max(0, math.floor(x0 / resolution_m)), min(nx, math.ceil(x1 / resolution_m) + 1)
     r0, r1 = max(0, math.floor(y0 / resolution_m)), min(ny, math.ceil(y1 / resolution_m) + 1)
     if c0 >= c1 or r0 >= r1:

@@ -20,7 +20,6 @@ first patch on the path (gaps under ``gap_m`` do not split it) and ``span_m / 2`
 are weighed; later patches wait for their own turn.
 """
 
-
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -65,8 +64,17 @@ class OffsetFeatures:
 
     def __call__(self, gmap: GroundMap, path: ReferencePath, progress_m: float) -> OffsetView:
         c = self.config
-        features, near_m = kernels.offset_features(self.columns(gmap, path, progress_m), self._centre, self.k, self._gap, self._beyond,
-                                                     c.station_step_m, self.stations, self.offsets, c.span_m)
+        features, near_m = kernels.offset_features(
+            self.columns(gmap, path, progress_m),
+            self._centre,
+            self.k,
+            self._gap,
+            self._beyond,
+            c.station_step_m,
+            self.stations,
+            self.offsets,
+            c.span_m,
+        )
         return OffsetView(features, float(near_m))
 
 

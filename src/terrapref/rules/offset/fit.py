@@ -119,8 +119,9 @@ class OffsetFitConfig:
     near_candidates: tuple[float, ...] = NEAR_CANDIDATES_M
 
 
-def fit_offset_utility(features: np.ndarray, near_m: np.ndarray, intent: np.ndarray, offsets: np.ndarray,
-                 config: OffsetFitConfig | None = None) -> OffsetFit:
+def fit_offset_utility(
+    features: np.ndarray, near_m: np.ndarray, intent: np.ndarray, offsets: np.ndarray, config: OffsetFitConfig | None = None
+) -> OffsetFit:
     """Fit the offset utility to frames' offset features (N, O, K + 2), near distances (N,)
     and intended offsets (N,) over the candidate ``offsets`` (O,) [m]; frames without an intended
     offset (NaN) are left out; ``config`` None: the default fit."""

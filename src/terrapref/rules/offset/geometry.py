@@ -77,27 +77,50 @@ class OffsetGeometry:
 
     def __post_init__(self) -> None:
         stations = self.stations_m
-        if not (isinstance(stations, tuple) and len(stations) == 2 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in stations)):
+        if not (
+            isinstance(stations, tuple)
+            and len(stations) == 2
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in stations)
+        ):
             raise ValueError("the offset geometry's stations_m must be two numbers [m], the first and last station read")
-        positive = (self.max_offset_m, self.offset_step_m, self.station_step_m, self.half_width_m, self.map_resolution_m,
-                    self.map_half_size_m, self.sample_step_m, self.sample_range_m, self.intent_lookahead_m)
+        positive = (
+            self.max_offset_m,
+            self.offset_step_m,
+            self.station_step_m,
+            self.half_width_m,
+            self.map_resolution_m,
+            self.map_half_size_m,
+            self.sample_step_m,
+            self.sample_range_m,
+            self.intent_lookahead_m,
+        )
         if not all(math.isfinite(v) and v > 0 for v in positive) or not (self.span_m >= 0 and self.gap_m >= 0 and self.intent_delay_s >= 0):
             raise ValueError("the offset geometry needs positive sizes and steps, and span_m, gap_m and intent_delay_s >= 0")
         if not self.map_half_size_m > self.sample_range_m + 1.0 or not self.stations_m[1] < self.sample_range_m:
             raise ValueError("the ground map must reach past the camera's sample range by more than 1 m, and that past the stations read")
         if not self.stations_m[0] < self.stations_m[1]:
             raise ValueError("the offset geometry's stations_m must run forward")
-        counts = {"offsets": (self.max_offset_m / self.offset_step_m, MAX_COUNT),
-                  "stations": ((self.stations_m[1] - self.stations_m[0]) / self.station_step_m, MAX_COUNT),
-                  "camera samples": (self.sample_range_m / self.sample_step_m, MAX_COUNT),
-                  "ground-map cells a side": (2 * self.map_half_size_m / self.map_resolution_m, MAX_MAP_CELLS)}
+        counts = {
+            "offsets": (self.max_offset_m / self.offset_step_m, MAX_COUNT),
+            "stations": ((self.stations_m[1] - self.stations_m[0]) / self.station_step_m, MAX_COUNT),
+            "camera samples": (self.sample_range_m / self.sample_step_m, MAX_COUNT),
+            "ground-map cells a side": (2 * self.map_half_size_m / self.map_resolution_m, MAX_MAP_CELLS),
+        }
         for what, (count, most) in counts.items():  # a size read from a file is bounded before anything is allocated by it
             if count > most:
                 raise ValueError(f"the offset geometry's steps give {count:.3g} {what}; at most {most}")
-        if not (math.isfinite(self.map_range_m) and self.map_range_m > 0 and 0 <= self.map_fade <= 1 and 0 < self.map_lethal_share <= 1
-                and 0 < self.map_terrain_share <= 1 and 0 <= self.map_min_evidence < 1e3):
-            raise ValueError("the ground map needs map_range_m > 0, map_fade in [0, 1], map_lethal_share and map_terrain_share in (0, 1] "
-                             "and map_min_evidence >= 0")
+        if not (
+            math.isfinite(self.map_range_m)
+            and self.map_range_m > 0
+            and 0 <= self.map_fade <= 1
+            and 0 < self.map_lethal_share <= 1
+            and 0 < self.map_terrain_share <= 1
+            and 0 <= self.map_min_evidence < 1e3
+        ):
+            raise ValueError(
+                "the ground map needs map_range_m > 0, map_fade in [0, 1], map_lethal_share and map_terrain_share in (0, 1] "
+                "and map_min_evidence >= 0"
+            )
 
     @property
     def offsets(self) -> np.ndarray:

@@ -40,8 +40,9 @@ class GroundMap:
         sample_half_width_m: ground is read this far each side of the vehicle [m].
     """
 
-    def __init__(self, camera: PinholeCamera, terrain: TerrainColumns, config: OffsetGeometry | None = None,
-                 sample_half_width_m: float = 8.0) -> None:
+    def __init__(
+        self, camera: PinholeCamera, terrain: TerrainColumns, config: OffsetGeometry | None = None, sample_half_width_m: float = 8.0
+    ) -> None:
         self.config = c = config or OffsetGeometry()
         self.k = k = terrain.k
         self.columns = np.asarray(terrain.of_class, dtype=np.uint8).copy()
@@ -123,12 +124,30 @@ class GroundMap:
         dpitch, droll = self.attitude(view) if self.attitude is not None else (0.0, 0.0)
         tilted = bool(dpitch or droll)
         axes = self.camera.tilted(dpitch, droll) if tilted else self.camera.R
-        kernels.map_vote(self.evidence, self.stamp, self._cells,  # the map
-                         *self._origin_xy, 1.0 / c.map_resolution_m,  # its corner and cells per metre
-                         float(x), float(y), math.cos(yaw), math.sin(yaw),  # the pose
-                         self._vx, self._vy, self._weight, ids, self._sample_pix, self.columns,  # the samples and what they saw
-                         self.frame, self._fade,  # the votes' fading
-                         tilted, self._ray, self._ground0, axes, self.camera.t)  # the camera off its mount
+        kernels.map_vote(
+            self.evidence,
+            self.stamp,
+            self._cells,  # the map
+            *self._origin_xy,
+            1.0 / c.map_resolution_m,  # its corner and cells per metre
+            float(x),
+            float(y),
+            math.cos(yaw),
+            math.sin(yaw),  # the pose
+            self._vx,
+            self._vy,
+            self._weight,
+            ids,
+            self._sample_pix,
+            self.columns,  # the samples and what they saw
+            self.frame,
+            self._fade,  # the votes' fading
+            tilted,
+            self._ray,
+            self._ground0,
+            axes,
+            self.camera.t,
+        )  # the camera off its mount
 
     @property
     def cells(self) -> np.ndarray:
@@ -152,8 +171,9 @@ class GroundMap:
         if self.origin is None:
             return np.full((lat.shape[0], len(s), lat.shape[1]), self.k + 1, dtype=np.uint8)
         a, d, length = path.segments
-        return kernels.map_read_beside(self.layers(), path.s, a, d, length, np.asarray(s, dtype=np.float64),
-                                       np.ascontiguousarray(lat, dtype=np.float64), self.k + 1)
+        return kernels.map_read_beside(
+            self.layers(), path.s, a, d, length, np.asarray(s, dtype=np.float64), np.ascontiguousarray(lat, dtype=np.float64), self.k + 1
+        )
 
     def lookup(self, points: np.ndarray) -> np.ndarray:
         """Terrain column at each world point (..., 2); K + 1 (never seen) outside the map."""
@@ -181,5 +201,5 @@ def _shifted(a: np.ndarray, dx: int, dy: int, fill: float) -> np.ndarray:
     out = np.full_like(a, fill)
     n = a.shape[0]
     if abs(dx) < n and abs(dy) < n:
-        out[max(0, -dy):n - max(0, dy), max(0, -dx):n - max(0, dx)] = a[max(0, dy):n - max(0, -dy), max(0, dx):n - max(0, -dx)]
+        out[max(0, -dy) : n - max(0, dy), max(0, -dx) : n - max(0, dx)] = a[max(0, dy) : n - max(0, -dy), max(0, dx) : n - max(0, -dx)]
     return out

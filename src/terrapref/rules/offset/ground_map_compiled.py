@@ -43,10 +43,31 @@ class MapLayers(NamedTuple):
 
 
 @njit(cache=True, nogil=True)
-def map_vote(evidence: np.ndarray, stamp: np.ndarray, cells: np.ndarray, ox: float, oy: float, inv_res: float, x: float, y: float,
-             c: float, s: float, vx: np.ndarray, vy: np.ndarray, weight: np.ndarray, ids: np.ndarray, pixel_of: np.ndarray,
-             columns: np.ndarray, frame: int, fade: np.ndarray,
-             tilted: bool, ray: np.ndarray, ground0: np.ndarray, axes: np.ndarray, t: np.ndarray) -> None:
+def map_vote(
+    evidence: np.ndarray,
+    stamp: np.ndarray,
+    cells: np.ndarray,
+    ox: float,
+    oy: float,
+    inv_res: float,
+    x: float,
+    y: float,
+    c: float,
+    s: float,
+    vx: np.ndarray,
+    vy: np.ndarray,
+    weight: np.ndarray,
+    ids: np.ndarray,
+    pixel_of: np.ndarray,
+    columns: np.ndarray,
+    frame: int,
+    fade: np.ndarray,
+    tilted: bool,
+    ray: np.ndarray,
+    ground0: np.ndarray,
+    axes: np.ndarray,
+    t: np.ndarray,
+) -> None:
     """Add each ground sample's vote to the evidence of its cell, and mark the cell's column
     :data:`UNSETTLED` (:func:`map_decide` decides it when it is read).
 
@@ -109,9 +130,11 @@ def map_vote(evidence: np.ndarray, stamp: np.ndarray, cells: np.ndarray, ox: flo
         votes[at + col] += weight[p]
         columns_of[here] = UNSETTLED
 
+
 @njit(cache=True, nogil=True, inline="always")
-def map_decide(evidence: np.ndarray, lethal: np.ndarray, lethal_share: np.float32, terrain_share: np.float32,
-               min_evidence: np.float32, j: int, i: int) -> int:
+def map_decide(
+    evidence: np.ndarray, lethal: np.ndarray, lethal_share: np.float32, terrain_share: np.float32, min_evidence: np.float32, j: int, i: int
+) -> int:
     """The column of ground-map cell ``(j, i)``, decided from its evidence.
 
     The map's readers read a cell as ``col = cells[j, i]``, and if ``col == UNSETTLED`` (voted on
@@ -154,6 +177,7 @@ def map_decide(evidence: np.ndarray, lethal: np.ndarray, lethal_share: np.float3
         return best_terrain
     return k
 
+
 @njit(cache=True, nogil=True)
 def map_settle(cells: np.ndarray, evidence: np.ndarray, lethal: np.ndarray, shares: np.ndarray) -> None:
     """Decide every cell of the map still :data:`UNSETTLED` (:func:`map_decide`; ``shares``:
@@ -162,6 +186,7 @@ def map_settle(cells: np.ndarray, evidence: np.ndarray, lethal: np.ndarray, shar
         for i in range(cells.shape[1]):
             if cells[j, i] == UNSETTLED:
                 cells[j, i] = map_decide(evidence, lethal, shares[0], shares[1], shares[2], j, i)
+
 
 @njit(cache=True, nogil=True)
 def map_read(layers: MapLayers, px: np.ndarray, py: np.ndarray, never: int) -> np.ndarray:
@@ -185,8 +210,11 @@ def map_read(layers: MapLayers, px: np.ndarray, py: np.ndarray, never: int) -> n
         out[p] = col
     return out
 
+
 @njit(cache=True, nogil=True)
-def path_frame(path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray, s: float) -> tuple[float, float, float, float]:
+def path_frame(
+    path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray, s: float
+) -> tuple[float, float, float, float]:
     """(x, y, ux, uy): the point at arc length ``s`` (clamped to the path) and the unit direction
     there, as ``ReferencePath.frame_at`` gives them (segments: ``path.segments``).
 
@@ -199,9 +227,18 @@ def path_frame(path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_
     f = (s - path_s[i]) / path_len[i]
     return (path_a[i, 0] + f * path_d[i, 0], path_a[i, 1] + f * path_d[i, 1], path_d[i, 0] / path_len[i], path_d[i, 1] / path_len[i])
 
+
 @njit(cache=True, nogil=True)
-def map_read_beside(layers: MapLayers, path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray, s: np.ndarray, lat: np.ndarray,
-                    never: int) -> np.ndarray:
+def map_read_beside(
+    layers: MapLayers,
+    path_s: np.ndarray,
+    path_a: np.ndarray,
+    path_d: np.ndarray,
+    path_len: np.ndarray,
+    s: np.ndarray,
+    lat: np.ndarray,
+    never: int,
+) -> np.ndarray:
     """The ground map's column (O, S, F) at the points ``lat[o, f]`` [m] left of the path at arc
     lengths ``s`` (S,), ``never`` outside the map.
 

@@ -14,8 +14,9 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
-def offset_features(col: np.ndarray, centre: int, k: int, gap: int, beyond: int, step: float, stations: np.ndarray,
-                      offsets: np.ndarray, span: float) -> tuple[np.ndarray, float]:
+def offset_features(
+    col: np.ndarray, centre: int, k: int, gap: int, beyond: int, step: float, stations: np.ndarray, offsets: np.ndarray, span: float
+) -> tuple[np.ndarray, float]:
     """The offsets' features (O, K + 2) and the distance to the first terrain on the path [m]
     (inf: none), from the terrain column (O, S, F) under every footprint point.
 
@@ -58,6 +59,7 @@ def offset_features(col: np.ndarray, centre: int, k: int, gap: int, beyond: int,
         out[o, k] = counts[k + 1] * scale
         out[o, k + 1] = offsets[o] * offsets[o] * (on_path_m + span)
     return out, near_m
+
 
 @njit(cache=True, nogil=True)
 def gated_value(features: np.ndarray, offsets: np.ndarray, gate: bool, weights: np.ndarray) -> np.ndarray:

@@ -14,9 +14,25 @@ from terrapref.rules.offset.ground_map_compiled import UNSETTLED, MapLayers, map
 
 
 @njit(cache=True, nogil=True)
-def swept_reach(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progress_m: float, v: float, dt: float, steps: int,
-                lookahead_m: float, path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray,
-                clear: np.ndarray, layers: MapLayers, lethal: np.ndarray, never: int) -> np.ndarray:
+def swept_reach(
+    x0: float,
+    y0: float,
+    yaw0: float,
+    offsets: np.ndarray,
+    progress_m: float,
+    v: float,
+    dt: float,
+    steps: int,
+    lookahead_m: float,
+    path_s: np.ndarray,
+    path_a: np.ndarray,
+    path_d: np.ndarray,
+    path_len: np.ndarray,
+    clear: np.ndarray,
+    layers: MapLayers,
+    lethal: np.ndarray,
+    never: int,
+) -> np.ndarray:
     """Per offset (O,): the step at which pure pursuit toward the path shifted by it, driven for
     ``steps`` steps of ``dt`` from the pose, first brings a point across the footprint (``clear``,
     every other step) onto a lethal column of the map (``lethal`` by column, ``never`` for cells
@@ -64,8 +80,19 @@ def swept_reach(x0: float, y0: float, yaw0: float, offsets: np.ndarray, progress
 
 
 @njit(cache=True, nogil=True)
-def lethal_hits(layers: MapLayers, path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray, progress_m: float, stations: np.ndarray,
-                offsets: np.ndarray, across: np.ndarray, lethal: np.ndarray, never: int) -> np.ndarray:
+def lethal_hits(
+    layers: MapLayers,
+    path_s: np.ndarray,
+    path_a: np.ndarray,
+    path_d: np.ndarray,
+    path_len: np.ndarray,
+    progress_m: float,
+    stations: np.ndarray,
+    offsets: np.ndarray,
+    across: np.ndarray,
+    lethal: np.ndarray,
+    never: int,
+) -> np.ndarray:
     """(O, S): whether any point ``offsets[o] + across[a]`` [m] left of the path, at station
     ``stations[s]`` from ``progress_m`` (capped at the path's end), lies on a lethal column of
     the map (``lethal`` by column, ``never`` outside it).

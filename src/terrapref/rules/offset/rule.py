@@ -102,12 +102,19 @@ class OffsetConfig(RuleConfig):
     geometry: OffsetGeometry = field(default_factory=OffsetGeometry)
 
     def __post_init__(self) -> None:
-        values = (self.switch_margin, self.pursuit_lookahead_m, self.lethal_margin_m, self.lethal_horizon_m, self.dt_s,
-                  self.escape_factor)
-        if not all(math.isfinite(v) for v in values) or self.switch_margin < 0 or self.lethal_margin_m < 0 \
-                or self.pursuit_lookahead_m <= 0 or self.lethal_horizon_m <= 0 or self.dt_s <= 0 or self.escape_factor < 1:
-            raise ValueError("the offset rule needs switch_margin >= 0, lethal_margin_m >= 0, escape_factor >= 1 "
-                             "and positive distances and step")
+        values = (self.switch_margin, self.pursuit_lookahead_m, self.lethal_margin_m, self.lethal_horizon_m, self.dt_s, self.escape_factor)
+        if (
+            not all(math.isfinite(v) for v in values)
+            or self.switch_margin < 0
+            or self.lethal_margin_m < 0
+            or self.pursuit_lookahead_m <= 0
+            or self.lethal_horizon_m <= 0
+            or self.dt_s <= 0
+            or self.escape_factor < 1
+        ):
+            raise ValueError(
+                "the offset rule needs switch_margin >= 0, lethal_margin_m >= 0, escape_factor >= 1 and positive distances and step"
+            )
         if not isinstance(self.geometry, OffsetGeometry):
             raise ValueError("the offset rule's geometry must be an OffsetGeometry")
 
@@ -185,8 +192,13 @@ class OffsetRule(Rule):
 
     def header(self) -> dict[str, Any]:
         u = self.utility
-        return {"type": self.type, **self.config.to_dict(), "weights": u.weights.tolist(), "near_m": u.near_m,
-                **({"loss": self.fit.loss, "samples": self.fit.samples} if self.fit is not None else {})}
+        return {
+            "type": self.type,
+            **self.config.to_dict(),
+            "weights": u.weights.tolist(),
+            "near_m": u.near_m,
+            **({"loss": self.fit.loss, "samples": self.fit.samples} if self.fit is not None else {}),
+        }
 
     @classmethod
     def from_header(cls, block: Mapping[str, Any], context: HeaderContext, where: Where) -> OffsetRule:
@@ -199,7 +211,9 @@ class OffsetRule(Rule):
             raise where.error("geometry", f"invalid ({exc})") from None
         weights = vector(block, "weights", context.features.n_terrain + 3, where)
         near = number(block, "near_m", where, positive=True)
-        settings = {f.name: number(block, f.name, where, getattr(OffsetConfig, f.name)) for f in fields(OffsetConfig) if f.name != "geometry"}
+        settings = {
+            f.name: number(block, f.name, where, getattr(OffsetConfig, f.name)) for f in fields(OffsetConfig) if f.name != "geometry"
+        }
         try:
             config = OffsetConfig(**settings, geometry=geometry)
         except ValueError as exc:
@@ -229,8 +243,10 @@ class OffsetRule(Rule):
         w = self.utility.weights
         prices = ", ".join(f"{c} {p / w[len(names) + 1]:.1f}{' (lethal: ruled out)' if c in lethal else ''}" for c, p in zip(names, w))
         fitted = f"fitted to {self.fit.samples} frames, " if self.fit is not None else ""
-        return (f"offset rule: {fitted}near distance {self.utility.near_m:g} m; each class's price per metre, "
-                f"relative to the detour's per m^2 of offset per metre: {prices}")
+        return (
+            f"offset rule: {fitted}near distance {self.utility.near_m:g} m; each class's price per metre, "
+            f"relative to the detour's per m^2 of offset per metre: {prices}"
+        )
 
 
 def keeps(held: float, best: float, margin: float) -> bool:
@@ -252,8 +268,14 @@ class OffsetSteering(RuleRunner):
         config: how offsets are held and reached.
     """
 
-    def __init__(self, utility: OffsetUtility, camera: PinholeCamera, terrain: TerrainColumns, control: ControlSet,
-                 config: OffsetConfig | None = None) -> None:
+    def __init__(
+        self,
+        utility: OffsetUtility,
+        camera: PinholeCamera,
+        terrain: TerrainColumns,
+        control: ControlSet,
+        config: OffsetConfig | None = None,
+    ) -> None:
         k = terrain.k
         if utility.weights.shape != (k + 3,):
             raise ValueError(f"the offset utility has {utility.weights.shape[0]} weights, expected {k + 3}")
@@ -296,7 +318,9 @@ class OffsetSteering(RuleRunner):
 
     def decide(self, frame: RuleInput) -> Choice:
         """Steered continuously within the control set's range of yaw rates; the index names the nearest trajectory."""
-        w = float(np.clip(self.yaw_rate(frame.view, frame.pose, frame.path, frame.progress_m), self.control.w_rps[0], self.control.w_rps[-1]))
+        w = float(
+            np.clip(self.yaw_rate(frame.view, frame.pose, frame.path, frame.progress_m), self.control.w_rps[0], self.control.w_rps[-1])
+        )
         return Choice(int(self.control.label_of(w)), Command(self.control.v_mps, w))
 
     def yaw_rate(self, view: SegmentationView, pose: Pose, path: ReferencePath, progress_m: float) -> float:
@@ -312,7 +336,7 @@ class OffsetSteering(RuleRunner):
                 if far.any(axis=1).all():
                     escape = self._escape(value, path, progress_m)
                 if len(self._line_stations) <= far.shape[1]:
-                    lines = far[:, :len(self._line_stations)].any(axis=1)  # the same stations, from the same start and step
+                    lines = far[:, : len(self._line_stations)].any(axis=1)  # the same stations, from the same start and step
             blocked = self._blocked(self.offsets, pose, path, progress_m, lines)
             if not blocked.all():
                 value = np.where(blocked, -np.inf, value)
@@ -359,8 +383,9 @@ class OffsetSteering(RuleRunner):
         order = np.lexsort((-side, np.abs(self.escapes)))  # nearest first, then the preferred side
         return float(self.escapes[order[np.argmax(clear[order])]])
 
-    def _blocked(self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_m: float,
-                 lines: np.ndarray | None = None) -> np.ndarray:
+    def _blocked(
+        self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_m: float, lines: np.ndarray | None = None
+    ) -> np.ndarray:
         """Which of ``offsets`` (O,) lethal terrain rules out.
 
         First each offset's line parallel to the path, from 0.5 m behind to the horizon, with the
@@ -392,15 +417,17 @@ class OffsetSteering(RuleRunner):
             keep = side & (reach == reach[side].max())
         return ~(keep & ~lines if (keep & ~lines).any() else keep)
 
-    def _lines(self, offsets: np.ndarray, path: ReferencePath, progress_m: float, stations: np.ndarray,
-               across: np.ndarray | None = None) -> np.ndarray:
+    def _lines(
+        self, offsets: np.ndarray, path: ReferencePath, progress_m: float, stations: np.ndarray, across: np.ndarray | None = None
+    ) -> np.ndarray:
         """Which of ``offsets`` (O,) have lethal terrain on their line parallel to the path, at
         ``stations`` (S,) from the vehicle's progress, across the footprint and its clearance
         (``across``, by default)."""
         return self._hits(offsets, path, progress_m, stations, across).any(axis=1)
 
-    def _hits(self, offsets: np.ndarray, path: ReferencePath, progress_m: float, stations: np.ndarray,
-              across: np.ndarray | None = None) -> np.ndarray:
+    def _hits(
+        self, offsets: np.ndarray, path: ReferencePath, progress_m: float, stations: np.ndarray, across: np.ndarray | None = None
+    ) -> np.ndarray:
         """:meth:`_lines` station by station, (O, S); ``across`` the points across each line (the
         footprint and its clearance by default)."""
         across = self._clear if across is None else across
@@ -408,18 +435,45 @@ class OffsetSteering(RuleRunner):
         if gmap.origin is None:
             return np.broadcast_to(self.lethal[self.k + 1], (len(offsets), len(stations))).copy()
         a, d, length = path.segments
-        return lethal_hits(gmap.layers(), path.s, a, d, length, float(progress_m), stations, np.asarray(offsets, dtype=np.float64),
-                           across, self.lethal, self.k + 1)
+        return lethal_hits(
+            gmap.layers(),
+            path.s,
+            a,
+            d,
+            length,
+            float(progress_m),
+            stations,
+            np.asarray(offsets, dtype=np.float64),
+            across,
+            self.lethal,
+            self.k + 1,
+        )
 
-    def _swept(self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_m: float,
-               across: np.ndarray | None = None) -> np.ndarray:
+    def _swept(
+        self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_m: float, across: np.ndarray | None = None
+    ) -> np.ndarray:
         """For each of ``offsets`` (O,), the step of ``dt_s`` at which pure pursuit toward it first drives
         the footprint (``across``, with its clearance by default) onto lethal terrain, ``self._steps``
         where it does not within the horizon."""
         across = self._clear if across is None else across
         c, gmap = self.config, self.map
         a, d, length = path.segments
-        return swept_reach(float(pose[0]), float(pose[1]), float(pose[2]), offsets, float(progress_m), self.v_mps, c.dt_s,
-                           self._steps, c.pursuit_lookahead_m, path.s, a, d, length, across, gmap.layers(),
-                           self.lethal, self.k + 1)
-
+        return swept_reach(
+            float(pose[0]),
+            float(pose[1]),
+            float(pose[2]),
+            offsets,
+            float(progress_m),
+            self.v_mps,
+            c.dt_s,
+            self._steps,
+            c.pursuit_lookahead_m,
+            path.s,
+            a,
+            d,
+            length,
+            across,
+            gmap.layers(),
+            self.lethal,
+            self.k + 1,
+        )

@@ -16,8 +16,9 @@ def steer(path: ReferencePath, pose: Pose, progress_m: float, offset_m: np.ndarr
     return np.asarray(np.clip(pursuit_yaw_rates(path, pose, progress_m, offset_m, lookahead_m, v_mps), -1.0, 1.0))
 
 
-def pursuit_yaw_rates(path: ReferencePath, pose: Pose, progress_m: float, offset_m: np.ndarray | float, lookahead_m: float,
-                      v_mps: float) -> np.ndarray:
+def pursuit_yaw_rates(
+    path: ReferencePath, pose: Pose, progress_m: float, offset_m: np.ndarray | float, lookahead_m: float, v_mps: float
+) -> np.ndarray:
     """Pure-pursuit yaw rate [rad/s] toward the path shifted by ``offset_m`` (left positive), ``lookahead_m`` ahead
     of ``progress_m``. One value per offset, ``offset_m``'s shape.
 
@@ -36,8 +37,9 @@ def pursuit_yaw_rates(path: ReferencePath, pose: Pose, progress_m: float, offset
     return out
 
 
-def intent_offsets(poses: np.ndarray, later: np.ndarray, progress_m: np.ndarray, path: ReferencePath, offsets: np.ndarray,
-                   lookahead_m: float) -> np.ndarray:
+def intent_offsets(
+    poses: np.ndarray, later: np.ndarray, progress_m: np.ndarray, path: ReferencePath, offsets: np.ndarray, lookahead_m: float
+) -> np.ndarray:
     """The offset [m] each frame's driver was steering for, (F,); NaN where ``later`` is NaN.
 
     The offset whose pure-pursuit yaw rate is nearest the command. A stick at rest (w = 0) is

@@ -32,7 +32,6 @@ _NO_TARGETS = np.zeros((0, 2))
 _NO_LINE = (0.0, 0.0, 0.0, 0.0)
 
 
-
 @dataclass(frozen=True)
 class LookaheadConfig:
     """Where the second pieces start and which of their points are read.
@@ -75,8 +74,9 @@ class Lookahead:
         pts = pset.trajectories[:, n - 1 - (n - 1) // config.stride * config.stride :: config.stride, :2]  # (m, n', 2), own frame
         x0, y0, yaw0 = (self.starts[:, j, None, None] for j in range(3))
         c, s = np.cos(yaw0), np.sin(yaw0)
-        second = np.stack([x0 + pts[None, ..., 0] * c - pts[None, ..., 1] * s,
-                           y0 + pts[None, ..., 0] * s + pts[None, ..., 1] * c], axis=-1)  # (m, m, n', 2) vehicle frame
+        second = np.stack(
+            [x0 + pts[None, ..., 0] * c - pts[None, ..., 1] * s, y0 + pts[None, ..., 0] * s + pts[None, ..., 1] * c], axis=-1
+        )  # (m, m, n', 2) vehicle frame
         pix = camera.pixel_indices(second)  # (m, m, n')
         self.pix = np.where(pix >= 0, pix, 0)
         self.seen = (pix >= 0).astype(float)  # 1 where a point is in the image, 0 where it is not
@@ -98,7 +98,9 @@ class Lookahead:
         """Flat pixel indices (row * width + col) that trajectory ``i``'s second pieces read."""
         return self.pix[i][self.seen[i] > 0]
 
-    def utilities(self, view: SegmentationView, pose: Pose, path: ReferencePath, progress_m: float, rows: np.ndarray | None = None) -> np.ndarray:
+    def utilities(
+        self, view: SegmentationView, pose: Pose, path: ReferencePath, progress_m: float, rows: np.ndarray | None = None
+    ) -> np.ndarray:
         """U' of the second pieces after each trajectory in ``rows`` (all: None): shape (len(rows), m, K + 1)."""
         rows = np.arange(self.m) if rows is None else rows
         r, m, k = len(rows), self.m, self.k
@@ -122,5 +124,17 @@ class Lookahead:
         s0 = progress_m + self._horizon_m
         line = path.straight_between(s0 + self._x_lo, s0 + self._x_hi)
         targets = path.point_at(s0 + self.starts[rows, 0]) if line is None else _NO_TARGETS
-        return kernels.stage_distances(rows, self._ends_x, self._ends_y, self._start_x, self._x_lo, line or _NO_LINE, targets,
-                                       math.cos(yaw), math.sin(yaw), x, y, NORMALISE_EPS)
+        return kernels.stage_distances(
+            rows,
+            self._ends_x,
+            self._ends_y,
+            self._start_x,
+            self._x_lo,
+            line or _NO_LINE,
+            targets,
+            math.cos(yaw),
+            math.sin(yaw),
+            x,
+            y,
+            NORMALISE_EPS,
+        )

@@ -80,8 +80,14 @@ class SecondStageConfig(RuleConfig):
     lookahead: bool = False
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.after_s) and self.after_s > 0 and math.isfinite(self.weight) and self.weight >= 0
-                and self.candidates >= 1 and self.stride >= 1):
+        if not (
+            math.isfinite(self.after_s)
+            and self.after_s > 0
+            and math.isfinite(self.weight)
+            and self.weight >= 0
+            and self.candidates >= 1
+            and self.stride >= 1
+        ):
             raise ValueError("the second stage needs after_s > 0, weight >= 0, candidates >= 1 and stride >= 1")
 
     @property
@@ -89,8 +95,10 @@ class SecondStageConfig(RuleConfig):
         return LookaheadConfig(self.after_s, self.stride)
 
     def summary(self) -> str:
-        return ("the planner's second stage scoring second pieces of trajectory beyond the first with the linear utility fitted to the same "
-                "samples" + (" through the look-ahead" if self.lookahead else ""))
+        return (
+            "the planner's second stage scoring second pieces of trajectory beyond the first with the linear utility fitted to the same "
+            "samples" + (" through the look-ahead" if self.lookahead else "")
+        )
 
     def data(self) -> dict[str, Any] | None:
         return {"lookahead": self.lookahead_config.to_dict()} if self.lookahead else None
@@ -107,8 +115,9 @@ class SecondStageConfig(RuleConfig):
         return SecondStageRule(config, utility, "lookahead" if look is not None else "frames")
 
 
-def with_second_stage(rules: Sequence[RuleConfig], on: bool | None = None, weight: float | None = None,
-                      recipe: str = "the recipe") -> tuple[RuleConfig, ...]:
+def with_second_stage(
+    rules: Sequence[RuleConfig], on: bool | None = None, weight: float | None = None, recipe: str = "the recipe"
+) -> tuple[RuleConfig, ...]:
     """``rules`` (a recipe's) with the second stage added first (``on`` True; kept where they have
     one) or left out (False), and its weight against log F_t set (``weight``); None leaves them
     as they are (``train --second-stage/--no-second-stage/--stage-weight``).
@@ -161,8 +170,16 @@ class SecondStageRule(Rule):
 
     def header(self) -> dict[str, Any]:
         c = self.config
-        return {"type": self.type, "weight": c.weight, "after_s": c.after_s, "stride": c.stride, "candidates": c.candidates,
-                "w": self.utility.w.tolist(), "b": self.utility.b.tolist(), "fit": self.fit}
+        return {
+            "type": self.type,
+            "weight": c.weight,
+            "after_s": c.after_s,
+            "stride": c.stride,
+            "candidates": c.candidates,
+            "w": self.utility.w.tolist(),
+            "b": self.utility.b.tolist(),
+            "fit": self.fit,
+        }
 
     @classmethod
     def from_header(cls, block: Mapping[str, Any], context: HeaderContext, where: Where) -> SecondStageRule:
@@ -235,4 +252,6 @@ class SecondStageScores(Lookahead, RuleRunner):
         # weights summed point by point in one compiled pass), then the best continuation.
         ids = view.pixels(self.pix[rows].ravel())
         distance = self.distance_utility(pose, path, progress_m, rows)
-        return kernels.stage_scores(log_probs, self.config.weight, rows, ids, self._point_weight, self.seen, distance, float(self.w[self.k]), self.b)
+        return kernels.stage_scores(
+            log_probs, self.config.weight, rows, ids, self._point_weight, self.seen, distance, float(self.w[self.k]), self.b
+        )

@@ -19,8 +19,17 @@ from terrapref.sums import numpy_sum
 
 
 @njit(cache=True, nogil=True)
-def stage_scores(log_probs: np.ndarray, weight: float, rows: np.ndarray, ids: np.ndarray, point_weight: np.ndarray,
-                 seen: np.ndarray, distance: np.ndarray, w_distance: float, b: np.ndarray) -> np.ndarray:
+def stage_scores(
+    log_probs: np.ndarray,
+    weight: float,
+    rows: np.ndarray,
+    ids: np.ndarray,
+    point_weight: np.ndarray,
+    seen: np.ndarray,
+    distance: np.ndarray,
+    w_distance: float,
+    b: np.ndarray,
+) -> np.ndarray:
     """The second stage's scores (m,): ``log_probs + weight * value`` for the candidates, where a
     candidate's value is the best of its second pieces' linear utilities; -inf elsewhere.
 
@@ -56,9 +65,22 @@ def stage_scores(log_probs: np.ndarray, weight: float, rows: np.ndarray, ids: np
         out[rows[a]] = log_probs[rows[a]] + weight * best
     return out
 
+
 @njit(cache=True, nogil=True)
-def stage_distances(rows: np.ndarray, ends_x: np.ndarray, ends_y: np.ndarray, start_x: np.ndarray, x_lo: float, line: tuple[float, float, float, float],
-                    targets: np.ndarray, c: float, s: float, x: float, y: float, eps: float) -> np.ndarray:
+def stage_distances(
+    rows: np.ndarray,
+    ends_x: np.ndarray,
+    ends_y: np.ndarray,
+    start_x: np.ndarray,
+    x_lo: float,
+    line: tuple[float, float, float, float],
+    targets: np.ndarray,
+    c: float,
+    s: float,
+    x: float,
+    y: float,
+    eps: float,
+) -> np.ndarray:
     """The second pieces' distance utility (r, m) after the trajectories ``rows``, normalised over
     all of them together (:func:`normalise`).
 

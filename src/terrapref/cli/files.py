@@ -1,0 +1,226 @@
+"""Commands on robot logs and the product's files: import, replay, export, info."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from terrapref.cli.common import add_classes_arg, add_force_arg, check_table, class_table
+from terrapref.configargs import finite_float
+from terrapref.errors import UserError
+from terrapref.fileio import check_output, output_folder
+
+
+def _cmd_import(args: argparse.Namespace) -> int:
+    from terrapref.interop.bag_import import ImportOptions, import_bag
+    from terrapref.interop.robot import load_robot
+    from terrapref.terrain import PreferenceProfile, default_classes
+
+    check_output(args.out, "--out", [args.bag, args.robot], folder=True)
+    table = class_table(args)
+    robot = load_robot(args.robot, table)
+    profile = PreferenceProfile.parse(args.profile, table or default_classes()) if args.profile is not None else None
+    report = import_bag(args.bag, robot, args.out, ImportOptions(rate_hz=args.rate, force=args.force, classes=table, profile=profile))
+    for line in report.lines():
+        print(line)
+    print(f"wrote {args.out} (terrapref inspect / featurize / train accept it)")
+    return 0
+
+
+def import_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("import", help="turn a ROS 1 bag, ROS 2 bag (sqlite3 or MCAP) of a drive into a recording")
+    p.add_argument("bag", help="a .bag file, a ROS 2 bag folder, or a .mcap / .db3 file")
+    p.add_argument("--robot", required=True, help="terrapref-robot/1 file: topics, camera mounting, label map")
+    p.add_argument("--out", required=True, help="recording folder to create")
+    p.add_argument("--rate", type=finite_float, default=10.0, help="frames per second to keep (default 10, the planner's rate)")
+    p.add_argument("--force", action="store_true", help="replace an existing recording at --out (only once the import succeeds)")
+    p.add_argument(
+        "--profile",
+        help="the driver's preference order, best first, stored with the recording (default: the robot file's "
+        "profile; with neither, the recording declares none and training refuses it)",
+    )
+    add_classes_arg(p)
+    p.set_defaults(func=_cmd_import)
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from terrapref.interop.robot import load_robot
+    from terrapref.learning.model_file import load_model
+
+    model = load_model(args.model)
+    robot = load_robot(args.robot, model.classes)
+    out = Path(args.out)
+    check_output(out, "--out", [args.bag, args.model, args.robot], folder=True)
+    with output_folder(out, args.force):  # refused (another camera) or stopped: nothing of a new OUT is left
+        return _replay_into(args, model, robot, out)
+
+
+def _replay_into(args: argparse.Namespace, model, robot, out: Path) -> int:
+    from terrapref.demos.recording import read_recording
+    from terrapref.interop.bag_import import ImportOptions, import_bag
+    from terrapref.interop.replay import replay, write_replay
+    from terrapref.learning.model_file import check_compatible
+    from terrapref.progress import Progress
+
+    rec_dir = out / "recording"
+    options = ImportOptions(
+        rate_hz=args.rate, force=True, classes=model.classes, check_camera=lambda camera: check_compatible(model, camera)
+    )
+    report = import_bag(args.bag, robot, rec_dir, options)
+    print(f"imported {report.frames} frames ({report.duration_s:.0f} s) into {rec_dir}")
+    rec = read_recording(rec_dir)
+    bar = Progress("replay", len(rec))
+    result = replay(model, rec, progress=lambda k, n: bar.update(k, f"{k}/{n} frames"))
+    bar.close()
+    write_replay(result, out, f"{Path(args.model).name} on {Path(args.bag).name}")
+    for name, key in (
+        ("planner, all frames", "overall"),
+        ("planner, terrain", "terrain_in_view"),
+        ("C alone, all", "classifier_overall"),
+        ("C alone, terrain", "classifier_terrain_in_view"),
+    ):
+        r = result[key]
+        if r["frames"]:
+            top3 = f", top-3 {r['top3']:.1%}" if r["top3"] is not None else ""
+            print(f"{name:20s} top-1 {r['top1']:.1%}{top3}, mean |w| error {r['mean_abs_w_error_rps']:.3f} rad/s over {r['frames']} frames")
+        else:
+            print(f"{name:20s} no frames")
+    print(
+        "top-3: how often the operator's trajectory is among the three C ranks most probable (F_t); the planner's rules "
+        "choose one trajectory and rank none, so only C has a top-3"
+    )
+    print(f"wrote {out / 'replay.json'} and {out / 'replay.png'}")
+    return 0
+
+
+def replay_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("replay", help="run a model open-loop over a held-out bag: how often it makes the operator's choice")
+    p.add_argument("bag", help="a .bag file, a ROS 2 bag folder, or a .mcap / .db3 file")
+    p.add_argument("--robot", required=True, help="terrapref-robot/1 file")
+    p.add_argument("--model", required=True, help="model file (terrapref train)")
+    p.add_argument("--out", required=True, help="folder for replay.json, replay.png and the imported recording")
+    p.add_argument("--rate", type=finite_float, default=10.0, help="frames per second to replay (default 10)")
+    add_force_arg(p)
+    p.set_defaults(func=_cmd_replay)
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    inputs = [args.input] + ([args.model] if args.model else [])
+    check_output(out, "--out", inputs, force=args.force)
+    if args.format in ("mcap", "rosbag1"):
+        check_output(Path(f"{out}.robot.yaml"), "--out", inputs, force=args.force)
+        check_output(Path(f"{out}.labels.yaml"), "--out", inputs, force=args.force)
+        from dataclasses import replace
+
+        from terrapref.demos.recording import read_recording
+        from terrapref.extras import check
+        from terrapref.interop.mcap_export import recording_frames, write_bag
+        from terrapref.progress import Progress
+
+        check("robot", f"terrapref export --format {args.format}", "rosbags")  # before the frames are read
+
+        rec = read_recording(args.input)
+        if args.classes is not None:
+            check_table(args, rec.classes, args.input)
+        if len(rec) == 0:
+            raise UserError(args.input, "holds no frames", field="frames.jsonl")
+        frames = recording_frames(rec)
+        if args.model:
+            frames = replace(frames, costmap=_model_costmaps(args.model, frames))
+        bar = Progress("export", len(rec))
+        write_bag(out, frames, ros1=args.format == "rosbag1", progress=lambda done, total: bar.update(done, f"{done}/{total} frames"))
+        bar.close(f"{len(rec)} frames")
+        what = "ROS 1 bag; rosbag play it" if args.format == "rosbag1" else "ROS 2 MCAP; open it in Foxglove"
+        from terrapref.terrain import default_classes
+
+        if not frames.classes.same_classes(default_classes()):
+            print(
+                f"wrote {out} ({what}), {out.name}.robot.yaml and its label map {out.name}.labels.yaml "
+                f"(terrapref import {out} --robot {out}.robot.yaml --classes FILE, the recording's class table)"
+            )
+        else:
+            print(f"wrote {out} ({what}) and {out.name}.robot.yaml (terrapref import {out} --robot {out}.robot.yaml)")
+        return 0
+    if args.model:
+        raise UserError(
+            args.model,
+            "--model goes with --format mcap or rosbag1 (a recording's costmap); for onnx the model is the input",
+            field="--model",
+        )
+    from terrapref.interop.onnx_export import export_onnx
+    from terrapref.learning.model_file import load_model
+
+    if Path(args.input).is_dir():
+        raise UserError(
+            args.input,
+            "is a recording folder; --format onnx exports a model file (.safetensors), a recording exports as --format mcap or rosbag1",
+            field="--format",
+        )
+    model = load_model(args.input)
+    if args.classes is not None:
+        check_table(args, model.classes, args.input)
+    from terrapref.rules import driving_rule, rules_of
+
+    rules, drives = rules_of(model)
+    driving = driving_rule(rules, drives, args.input)
+    export_onnx(model, out)
+    print(
+        f"wrote {out} (ONNX: input utilities float32 [N, {model.classifier.m}, {model.classifier.n_features}], output logits float32 [N, {model.classifier.m}])"
+    )
+    if not driving.graph:
+        print(
+            f"note: {args.input} drives by the {driving.type} rule, which is not a network: the graph holds C, the classifier the model "
+            "also carries, and the rule's block is in its metadata; the deployable planner is terrapref.runtime.PlannerRuntime "
+            "(or terrapref ros1 / ros2), docs/robot.md",
+            file=sys.stderr,
+        )
+    return 0
+
+
+def _model_costmaps(model_path: str, frames):
+    from terrapref.interop.mcap_export import model_costmaps
+    from terrapref.learning.model_file import load_model
+
+    try:
+        return model_costmaps(load_model(model_path), frames)
+    except ValueError as exc:
+        raise UserError(model_path, str(exc), field="--model") from None
+
+
+def export_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("export", help="export a model as ONNX, or a recording as ROS 2 MCAP (Foxglove, RViz) or a ROS 1 bag")
+    p.add_argument("input", help="model file (--format onnx) or recording folder (--format mcap or rosbag1)")
+    p.add_argument(
+        "--format",
+        choices=["onnx", "mcap", "rosbag1"],
+        required=True,
+        help="onnx: the classifier C; mcap: the recording's frames as ROS 2 messages; rosbag1: the same as a ROS 1 bag (rosbag play)",
+    )
+    p.add_argument("--out", required=True, help="output file")
+    p.add_argument(
+        "--model",
+        help="with --format mcap or rosbag1: also write the costmap this model (with an offset rule) prices the recording's ground with, "
+        "as nav_msgs/OccupancyGrid and foxglove_msgs/Grid, once a second",
+    )
+    add_classes_arg(p, check=True)
+    add_force_arg(p)
+    p.set_defaults(func=_cmd_export)
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    from terrapref.report.info import info_lines
+
+    for i, path in enumerate(args.files):
+        if i:
+            print()
+        for line in info_lines(path):
+            print(line)
+    return 0
+
+
+def info_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("info", help="what a recording, dataset, model or ONNX file holds (camera, profile, data, history, identifiability)")
+    p.add_argument("files", nargs="+", metavar="FILE", help="recording folders, dataset or model files (.safetensors), ONNX files")
+    p.set_defaults(func=_cmd_info)

@@ -1,0 +1,247 @@
+"""Commands that train and drive many models: reproduce, study, select."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from terrapref.cli.common import (
+    PERCEPTION_HELP,
+    add_classes_arg,
+    add_engine_args,
+    add_force_arg,
+    grid_engine,
+    perception_list,
+    perception_model,
+    teachable_table,
+)
+from terrapref.errors import UserError
+from terrapref.fileio import check_output, output_folder
+
+
+def _cmd_reproduce(args: argparse.Namespace) -> int:
+    import time
+
+    from terrapref.recipes import recipe_named
+    from terrapref.report.reproduce import Reproduction, reproduce
+    from terrapref.terrain import PreferenceProfile
+
+    if args.seeds < 1:
+        raise UserError("--seeds", "must be >= 1")
+    if args.eval_seeds < 1:
+        raise UserError("--eval-seeds", "must be >= 1")
+    profile = PreferenceProfile.parse(args.profile) if args.profile is not None else None
+    names = [n.strip() for n in args.recipes.split(",") if n.strip()]
+    if not names or len(set(names)) != len(names):
+        raise UserError("--recipes", f"expected distinct recipe names separated by commas, got {args.recipes!r}")
+    recipes = tuple(recipe_named(n, "--recipes") for n in names)
+    perceptions = perception_list(args.perception)
+    check_output(args.out, "--out", folder=True)
+    with output_folder(args.out, args.force):
+        engine = grid_engine(args)
+        t0 = time.perf_counter()
+        setup = Reproduction(
+            recipes, args.seeds, args.eval_seeds, profile or PreferenceProfile.default(), args.write_recordings, perceptions
+        )
+        report = reproduce(args.out, setup, engine, log=lambda m: print(m, flush=True))
+        print(f"wrote {report} ({time.perf_counter() - t0:.0f} s)")
+        return 0
+
+
+def reproduce_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("reproduce", help="demonstrate, train and evaluate end to end; write REPORT.md with Tables 1 and 2")
+    p.add_argument("--out", required=True, type=Path, help="folder for REPORT.md, its figures and the work")
+    p.add_argument("--seeds", type=int, default=5, help="training seeds per recipe (default 5)")
+    p.add_argument("--eval-seeds", type=int, default=1, help="evaluation runs per model and scenario (default 1)")
+    p.add_argument(
+        "--recipes",
+        default="paper,ours,teach",
+        help="recipes to compare, by name, separated by commas (default: paper,ours,teach; see `terrapref recipes`)",
+    )
+    p.add_argument("--profile", help="preference order for the demonstrations, best first")
+    p.add_argument(
+        "--write-recordings",
+        action="store_true",
+        help="also write the synthetic driver's demonstrations as recordings in OUT/work (they are featurised as they are driven)",
+    )
+    p.add_argument(
+        "--perception",
+        default="clean,rellis,field",
+        metavar="P1,P2,...",
+        help="perception models (presets or files, separated by commas) every recipe's models drive the test courses under, "
+        "for the report's table of what a robot sees (default: clean,rellis,field)",
+    )
+    add_engine_args(p)
+    add_force_arg(p)
+    p.set_defaults(func=_cmd_reproduce)
+
+
+def _cmd_study(args: argparse.Namespace) -> int:
+    import time
+    from dataclasses import replace
+
+    from terrapref.extras import check
+    from terrapref.report.study import run_study
+    from terrapref.report.study_plan import FULL, QUICK, for_table, with_perception
+    from terrapref.terrain import default_classes
+
+    check("cnn", "terrapref study (its end-to-end CNN baseline)")  # before the stages that come before the CNN's
+    plan = QUICK if args.quick else FULL
+    if args.seeds is not None:
+        if args.seeds < 1:
+            raise UserError("--seeds", "must be >= 1")
+        plan = replace(plan, seeds=args.seeds)
+    if args.recipe is not None:
+        from terrapref.recipes import recipe_named
+
+        plan = replace(plan, recipe=recipe_named(args.recipe).name)
+    table = teachable_table(args)
+    if table is not None and table.same_classes(default_classes()) and table.profile == default_classes().profile:
+        table = None  # the packaged table, given by its file: the default plan
+    perceptions = None
+    if args.perception is not None:
+        perceptions = perception_list(args.perception, table)
+        if not perceptions:
+            raise UserError("--perception", f"names no perception model: {args.perception!r}")
+    if table is not None:
+        plan = for_table(plan, table, perceptions=perceptions or (), follow_up=args.follow_up)
+    else:
+        plan = replace(plan, follow_up=args.follow_up)
+        if perceptions is not None:
+            plan = with_perception(plan, perceptions)
+    check_output(args.out, "--out", folder=True)
+    with output_folder(args.out, args.force):
+        engine = grid_engine(args)
+        t0 = time.perf_counter()
+        path = run_study(args.out, plan, engine, log=lambda m: print(m, flush=True))
+        print(f"wrote {path} ({time.perf_counter() - t0:.0f} s)")
+        return 0
+
+
+def study_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("study", help="baselines, data efficiency, profiles, robustness and ablations; write STUDY.md")
+    p.add_argument("--out", required=True, type=Path, help="folder for STUDY.md, its figures and the work")
+    p.add_argument("--quick", action="store_true", help="one seed and fewer levels (its time: docs/benchmarks.md)")
+    p.add_argument("--seeds", type=int, help="training seeds (default: 3, or 1 with --quick)")
+    p.add_argument("--recipe", metavar="NAME", help="the recipe section 6 teaches every order and style with (default: teach)")
+    add_classes_arg(p)
+    p.add_argument(
+        "--perception",
+        metavar="LIST",
+        help="comma-separated perception presets or files the taught models also drive under; the last that perturbs anything is swept part by part "
+        "(default: clean,rellis,field, or clean,field with --quick; with --classes: clean, unless files for the table are given)",
+    )
+    p.add_argument(
+        "--follow-up",
+        action="store_true",
+        help="each teaching drive is followed by a drive of the course of what it left open, and the model learns from both",
+    )
+    add_engine_args(p)
+    add_force_arg(p)
+    p.set_defaults(func=_cmd_study)
+
+
+def _cmd_select(args: argparse.Namespace) -> int:
+    import time
+
+    from terrapref.demos.expert import STYLES
+    from terrapref.recipes import recipe_named
+    from terrapref.report.select import Selection, parse_orders, run_selection
+    from terrapref.terrain import PreferenceProfile
+
+    names = [n.strip() for n in args.recipes.split(",") if n.strip()]
+    if not names or len(set(names)) != len(names):
+        raise UserError("--recipes", f"expected distinct recipe names separated by commas, got {args.recipes!r}")
+    for n in names:
+        recipe_named(n, "--recipes")
+    table = teachable_table(args)
+    try:
+        orders = parse_orders(args.orders, table)
+    except ValueError as exc:
+        raise UserError("--orders", str(exc)) from None
+    for o in orders:
+        PreferenceProfile.parse(list(o), table, source="--orders")
+    if len(set(orders)) != len(orders):
+        raise UserError("--orders", f"names an order twice: {args.orders!r}")
+    STYLES.get(args.style, "--style")
+    for flag, value, low in (("--seeds", args.seeds, 1), ("--courses", args.courses, 1), ("--first", args.first, 0)):
+        if value < low:
+            raise UserError(flag, f"must be an integer >= {low}, got {value}")
+    check_output(args.out, "--out", folder=True)
+    perceptions = perception_list(args.perception or "clean", table)
+    if args.taught_under == "same" and len(perceptions) != 1:
+        raise UserError("--taught-under", "'same' needs exactly one --perception model")
+    taught_under = perceptions[0] if args.taught_under == "same" else perception_model(args.taught_under, "--taught-under", table)
+    with output_folder(args.out, args.force):
+        engine = grid_engine(args)
+        course = _selection_course(args, table)
+        t0 = time.perf_counter()
+        selection = Selection(
+            tuple(names), orders, args.seeds, args.first, args.courses, args.style, perceptions, taught_under, table, course, args.follow_up
+        )
+        path = run_selection(args.out, selection, engine, log=lambda m: print(m, flush=True))
+        print(f"done ({time.perf_counter() - t0:.0f} s): {path}")
+        return 0
+
+
+def _selection_course(args: argparse.Namespace, table) -> str | None:
+    """The course every recipe demonstrates in ``select``: ``--course``, or with ``--classes`` the
+    table's teaching course (written into OUT); None: each recipe's own."""
+    if args.course is not None:
+        from terrapref.scenario import resolve_scenario
+
+        resolve_scenario(args.course, table)  # checked before any work
+        return str(Path(args.course).resolve()) if Path(args.course).exists() else args.course
+    if table is None:
+        return None
+    from terrapref.scenario.teaching import write_teaching_course
+
+    return str(write_teaching_course(args.out, table))
+
+
+def select_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "select", help="compare recipes: train each for every order and seed, drive generated layouts, report agreement with the driver"
+    )
+    p.add_argument("--out", required=True, type=Path, help="folder for SELECT.md, select.json, select.png and the work")
+    p.add_argument("--recipes", default="teach", help="recipe names separated by commas (terrapref recipes; default: teach)")
+    p.add_argument(
+        "--orders",
+        default="all",
+        help="'all' (every order of the feature classes, the lethal ones last: six for the default table), 'random:N' (N of them "
+        "drawn at random, the same N every time) or orders separated by ';', e.g. 'rock,mud,water;water,mud,rock' (default: all)",
+    )
+    p.add_argument("--style", default="default", help="the synthetic driver's style (default: default; terrapref record --help lists them)")
+    p.add_argument("--seeds", type=int, default=5, help="training seeds per recipe and order (default: 5)")
+    p.add_argument(
+        "--first", type=int, default=1000, help="first generated layout (1000-1999: for choosing; 2000 on: for confirming; default: 1000)"
+    )
+    p.add_argument("--courses", type=int, default=32, help="generated layouts (default: 32)")
+    p.add_argument(
+        "--perception",
+        metavar="P1,P2,...",
+        help="perception models (presets, files or NAME:PART, separated by commas) the models drive the layouts under, each "
+        "in turn, for a table each (default: clean): " + PERCEPTION_HELP,
+    )
+    p.add_argument(
+        "--taught-under",
+        metavar="PRESET|FILE|same",
+        default=None,
+        help="record the demonstrations through this perception model instead of the truth ('same': --perception's)",
+    )
+    p.add_argument(
+        "--course",
+        metavar="SCENARIO",
+        help="the course every recipe demonstrates (default: each recipe's own; with --classes, "
+        "the table's teaching course, as terrapref course writes it)",
+    )
+    p.add_argument(
+        "--follow-up",
+        action="store_true",
+        help="after each demonstration, the driver also drives a follow-up course of the pairs it left unidentified "
+        "(terrapref course --after), and the model trains on both",
+    )
+    add_classes_arg(p)
+    add_engine_args(p)
+    add_force_arg(p)
+    p.set_defaults(func=_cmd_select)
