@@ -418,3 +418,30 @@ def test_drivers_are_registered_by_name_like_policies():
         register_driver("driver", lambda *a: None)
     with pytest.raises(ValueError, match="unknown driver 'bogus'; drivers: driver, planner, pure_pursuit, hand_cost"):
         run_one(RunSpec("demo_course", 0, "bogus", None, ("mud", "rock", "water", "non_traversable")))
+
+
+def test_one_model_type_loads_saves_and_plans_with_every_kind_of_file(tmp_path: Path):
+    """Model: C's file (with its rules) and a baseline's, read, written back as read, and planned
+    with; only C's is exported as a graph."""
+    from helpers import linear_model
+    from terrapref.cli import main
+    from terrapref.planner.model import Model
+    from terrapref.tensorfile import read_tensor_file
+
+    rng = np.random.default_rng(6)
+    files = {
+        "classifier": linear_model(tmp_path / "c.safetensors"),
+        "linear": save_linear(tmp_path / "lin.safetensors", LinearUtility(rng.normal(size=K), rng.normal(size=M)), model_meta()),
+    }
+    for kind, path in files.items():
+        model = Model.load(path)
+        assert model.kind == kind and model.path == str(path) and model.classes == default_classes() and model.rules == ()
+        assert model.driving.type == "argmax" and (model.classifier is not None) == (kind == "classifier")
+        again = model.save(tmp_path / f"again_{kind}.safetensors")
+        (t1, m1), (t2, m2) = read_tensor_file(path, FORMAT, "", ""), read_tensor_file(again, FORMAT, "", "")
+        assert m1 == m2 and t1.keys() == t2.keys() and all(np.array_equal(t1[k], t2[k]) for k in t1)
+        planner = model.planner()
+        planner.set_path(np.array([[0.0, 0.0], [20.0, 0.0]]))
+        assert np.isfinite(planner.decide(np.full(planner.camera.shape, 0, np.uint8), (0.0, 0.0, 0.0)).command.w)
+    assert main(["export", str(files["linear"]), "--format", "onnx", "--out", str(tmp_path / "l.onnx")]) == 2
+    assert not (tmp_path / "l.onnx").exists()

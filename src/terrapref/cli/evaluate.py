@@ -28,7 +28,7 @@ from terrapref.fileio import check_distinct, check_output, output_folder
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from terrapref.evaluation.evaluate import Evaluation, evaluate_model
     from terrapref.evaluation.runner import Summary
-    from terrapref.planner.registry import load_policy
+    from terrapref.planner.model import Model
     from terrapref.progress import Progress
     from terrapref.terrain import PreferenceProfile
 
@@ -46,7 +46,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     except ValueError:
         raise UserError("--frames", f"expected comma-separated frame numbers, got {args.frames!r}") from None
     _check_frames(frames, args.scenarios, class_table(args))  # before the model is read
-    model = load_policy(args.model)  # C, or a learned baseline's file (linear, CNN)
+    model = Model.load(args.model).policy  # C, or a learned baseline's file (linear, CNN)
     if args.classes is not None:  # the model carries its table (the scenarios are read with it); --classes must be it
         check_table(args, model.classes, args.model)
     profile = PreferenceProfile.parse(args.profile, model.classes) if args.profile is not None else None

@@ -46,9 +46,9 @@ def import_parser(sub: argparse._SubParsersAction) -> None:
 
 def _cmd_replay(args: argparse.Namespace) -> int:
     from terrapref.interop.robot import load_robot
-    from terrapref.learning.model_file import load_model
+    from terrapref.planner.model import Model
 
-    model = load_model(args.model)
+    model = Model.load(args.model)
     robot = load_robot(args.robot, model.classes)
     out = Path(args.out)
     check_output(out, "--out", [args.bag, args.model, args.robot], folder=True)
@@ -150,7 +150,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
             field="--model",
         )
     from terrapref.interop.onnx_export import export_onnx
-    from terrapref.learning.model_file import load_model
+    from terrapref.planner.model import Model
 
     if Path(args.input).is_dir():
         raise UserError(
@@ -158,17 +158,15 @@ def _cmd_export(args: argparse.Namespace) -> int:
             "is a recording folder; --format onnx exports a model file (.safetensors), a recording exports as --format mcap or rosbag1",
             field="--format",
         )
-    model = load_model(args.input)
+    model = Model.load(args.input)
+    if model.classifier is None:
+        raise UserError(args.input, f"holds a {model.kind!r} model, not the classifier C: --format onnx exports C", field="kind")
     if args.classes is not None:
         check_table(args, model.classes, args.input)
-    from terrapref.rules import driving_rule, rules_of
-
-    rules, drives = rules_of(model)
-    driving = driving_rule(rules, drives, args.input)
-    export_onnx(model, out)
-    print(
-        f"wrote {out} (ONNX: input utilities float32 [N, {model.classifier.m}, {model.classifier.n_features}], output logits float32 [N, {model.classifier.m}])"
-    )
+    driving = model.driving
+    export_onnx(model.classifier, out)
+    c = model.classifier.classifier
+    print(f"wrote {out} (ONNX: input utilities float32 [N, {c.m}, {c.n_features}], output logits float32 [N, {c.m}])")
     if not driving.graph:
         print(
             f"note: {args.input} drives by the {driving.type} rule, which is not a network: the graph holds C, the classifier the model "
@@ -181,10 +179,10 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 def _model_costmaps(model_path: str, frames):
     from terrapref.interop.mcap_export import model_costmaps
-    from terrapref.learning.model_file import load_model
+    from terrapref.planner.model import Model
 
     try:
-        return model_costmaps(load_model(model_path), frames)
+        return model_costmaps(Model.load(model_path), frames)
     except ValueError as exc:
         raise UserError(model_path, str(exc), field="--model") from None
 

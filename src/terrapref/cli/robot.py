@@ -157,7 +157,7 @@ def play_parser(sub: argparse._SubParsersAction) -> None:
 def _cmd_route(args: argparse.Namespace) -> int:
     import yaml
 
-    from terrapref.learning.model_file import load_model
+    from terrapref.planner.model import Model
     from terrapref.planner.route import RouteConfig, RouteError, route_over, routed_scenario
     from terrapref.plots import save_map
     from terrapref.scenario import resolve_scenario
@@ -170,7 +170,7 @@ def _cmd_route(args: argparse.Namespace) -> int:
         raise UserError(str(out), "the route is written as a scenario file: give it the suffix .yaml", field="--out")
     if not (math.isfinite(args.resolution) and 0.1 <= args.resolution <= 2.0):
         raise UserError("--resolution", f"expected a cell size in [0.1, 2] m, got {args.resolution}")
-    model = load_model(args.model)
+    model = Model.load(args.model)
     if args.classes is not None:  # the model carries its table; --classes, when given, must be it
         check_table(args, model.classes, args.model)
     scenario = resolve_scenario(args.scenario, model.classes)

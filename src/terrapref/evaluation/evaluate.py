@@ -29,7 +29,7 @@ from terrapref.fileio import write_text_atomic
 from terrapref.grid import Engine
 from terrapref.learning.identify import Identifiability
 from terrapref.perception import PerceptionModel
-from terrapref.planner.registry import load_policy
+from terrapref.planner.model import Model
 from terrapref.scenario import AVOID, resolve_scenario
 from terrapref.terrain import ClassTable, PreferenceProfile
 from terrapref.vehicle import Pose
@@ -117,7 +117,7 @@ def evaluate_model(
     ``watch`` wraps it (a live view).
     """
     ev = evaluation
-    model = load_policy(ev.model_path)  # C, or a learned baseline (linear, CNN)
+    model = Model.load(ev.model_path).policy  # C, or a learned baseline (linear, CNN)
     for name in ev.scenarios:
         resolve_scenario(name, model.classes)  # fail early, with the file and field, before any run
     profile = ev.profile or PreferenceProfile.parse(list(model.profile), model.classes, source=f"{ev.model_path}: profile")

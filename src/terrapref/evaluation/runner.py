@@ -24,8 +24,8 @@ from terrapref.evaluation.stats import wilson
 from terrapref.grid import Engine, run_grid
 from terrapref.perception import PerceivedDriver, Perceiver, PerceptionModel
 from terrapref.planner import Planner, PlannerDriver
+from terrapref.planner.model import Model
 from terrapref.planner.policy import CostPolicy, Policy, PurePursuitPolicy
-from terrapref.planner.registry import load_policy
 from terrapref.planner.registry import make as make_policy
 from terrapref.registry import Registry
 from terrapref.scenario import Scenario, resolve_scenario
@@ -224,7 +224,7 @@ def scenario_and_world(name: str, classes: ClassTable | None = None) -> tuple:
 
 @functools.lru_cache(maxsize=8)
 def _policy_file(path: str) -> Policy:
-    return load_policy(path)
+    return Model.load(path).policy
 
 
 Driver = ExpertDriver | PlannerDriver

@@ -369,17 +369,15 @@ def costmaps_of(runner, poses: np.ndarray) -> Callable[[int, np.ndarray], Costma
 
 
 def model_costmaps(model, frames: RunFrames) -> Callable[[int, np.ndarray], Costmap | None]:
-    """The costmaps ``model`` (a LoadedModel) sees in ``frames`` (a recording's): its offset
-    rule's ground map fed each frame at the pose recorded (:func:`costmaps_of`).
+    """The costmaps ``model`` (a terrapref.planner.model.Model) sees in ``frames`` (a recording's):
+    its driving rule's ground map fed each frame at the pose recorded (:func:`costmaps_of`).
 
     Raises:
-        ValueError: the model is for another class table, or has no offset rule.
+        ValueError: the model is for another class table, or its driving rule keeps no ground map.
     """
-    from terrapref.planner import Planner
-
     if not model.classes.same_classes(frames.classes):
         raise ValueError("was trained for another class table than the recording's")
-    runner = Planner(model, frames.camera).runner
+    runner = model.planner(frames.camera).runner
     if not runner.keeps_ground_map:
         raise ValueError("has no offset rule, whose ground map the costmap prices (train it with recipe teach)")
     return costmaps_of(runner, frames.poses)

@@ -19,7 +19,7 @@ from terrapref.camera import CameraConfig
 from terrapref.demos.recording import Recording
 from terrapref.fileio import atomic_path, write_bytes_atomic
 from terrapref.interop.runtime import PlannerRuntime
-from terrapref.learning.model_file import LoadedModel
+from terrapref.planner.model import Model
 
 
 def _rates(hit1: np.ndarray, hit3: np.ndarray | None, werr: np.ndarray) -> dict:
@@ -33,7 +33,7 @@ def _rates(hit1: np.ndarray, hit3: np.ndarray | None, werr: np.ndarray) -> dict:
     }
 
 
-def replay(model: LoadedModel, rec: Recording, progress=None) -> dict:
+def replay(model: Model, rec: Recording, progress=None) -> dict:
     """Decide on every frame of ``rec`` with ``model``; the metrics and the per-frame series.
 
     A model trained for another camera than the log's is refused (UserError).

@@ -24,8 +24,8 @@ import numpy as np
 
 from terrapref.camera import CameraConfig
 from terrapref.interop.labels import LabelMap, unlisted_message
-from terrapref.learning.model_file import LoadedModel, load_model
-from terrapref.planner.planner import Planner
+from terrapref.learning.model_file import LoadedModel
+from terrapref.planner.model import Model
 from terrapref.planner.stop import StopConfig
 from terrapref.rules.costmap import Costmap
 from terrapref.scenario.path import ReferencePath
@@ -64,7 +64,8 @@ class PlannerRuntime:
     """A trained model driving from label images.
 
     Args:
-        model: a model file (``terrapref train``) or a loaded model.
+        model: a model file (``terrapref train``, or a learned baseline's), or one loaded
+            (terrapref.planner.model.Model; C's file as terrapref.learning.model_file.load_model reads it).
         camera: the robot's camera; a model trained for another one is refused (default: the
             model's own).
         labels: the segmentation network's label map; images then hold its ids (uint8 or
@@ -79,7 +80,7 @@ class PlannerRuntime:
 
     def __init__(
         self,
-        model: str | Path | LoadedModel,
+        model: str | Path | Model | LoadedModel,
         camera: CameraConfig | None = None,
         labels: LabelMap | None = None,
         hold_s: float = 0.3,
@@ -90,8 +91,8 @@ class PlannerRuntime:
             raise ValueError("hold_s must be a finite number >= 0")
         if unknown_ids not in UNKNOWN_IDS:
             raise ValueError(f"unknown_ids must be one of {', '.join(UNKNOWN_IDS)}, got {unknown_ids!r}")
-        self.model = model if isinstance(model, LoadedModel) else load_model(model)
-        self.planner = Planner(self.model, camera, stop=stop)  # refuses a camera the model was not trained for
+        self.model = model if isinstance(model, Model) else Model.of(model) if isinstance(model, LoadedModel) else Model.load(model)
+        self.planner = self.model.planner(camera, stop=stop)  # refuses a camera the model was not trained for
         self.planner.warm_up()  # the compiled loops ready before the first frame
         self.shape = self.planner.camera.shape
         self.labels = labels

@@ -97,6 +97,12 @@ def save_model(path: str | Path, classifier: ClassifierConfig, weights: dict[str
     return _write(path, weights, {"format": FORMAT, "kind": CLASSIFIER, "classifier": classifier.to_dict(), **meta})
 
 
+def write_model_file(path: str | Path, weights: dict[str, np.ndarray], header: Mapping[str, Any]) -> Path:
+    """Write a model file of any kind, its tensors and its header as given, atomically (weights
+    that are not finite are refused, nothing written)."""
+    return _write(path, weights, dict(header))
+
+
 def _write(path: str | Path, weights: dict[str, np.ndarray], header: dict[str, Any]) -> Path:
     """Write a model file; weights that are not finite (a diverged fit) are refused, nothing written."""
     for name, value in weights.items():

@@ -77,8 +77,12 @@ def make(kind: str, **kwargs) -> Policy:
 
 def load_policy(path: str | Path) -> Policy:
     """Any model file (C, linear, CNN) as its policy; loading never runs code from the file."""
-    source = str(path)
     tensors, meta = read_model_file(path)
+    return policy_from(tensors, meta, str(path))
+
+
+def policy_from(tensors: dict[str, np.ndarray], meta: dict, source: str) -> Policy:
+    """The policy of a model file's tensors and header (any kind: ``meta["kind"]``), checked."""
     kind = meta["kind"]
     if kind not in POLICIES or not POLICIES[kind].from_file:
         raise UserError(source, f"unknown model kind {kind!r}; kinds: {', '.join(kinds(from_file=True))}", field="kind")

@@ -29,7 +29,7 @@ from terrapref.rules.costmap import LETHAL_COST, MAX_COST, UNKNOWN_COST, Costmap
 from terrapref.scenario.path import ReferencePath
 
 if TYPE_CHECKING:
-    from terrapref.learning.model_file import LoadedModel
+    from terrapref.planner.model import Model
     from terrapref.scenario import Scenario
     from terrapref.world import WorldMap
 
@@ -94,7 +94,7 @@ class RouteError(ValueError):
     """No route: the path's start or end cannot be entered, or lethal terrain cuts them apart."""
 
 
-def route_over(scenario: Scenario, model: LoadedModel, config: RouteConfig | None = None, world: WorldMap | None = None) -> Route:
+def route_over(scenario: Scenario, model: Model, config: RouteConfig | None = None, world: WorldMap | None = None) -> Route:
     """The route along ``scenario``'s path over its map (the prior; ``world``, its raster, when
     the caller has it), priced as ``model``'s driving rule learned: its class prices and price of
     leaving the path (:meth:`terrapref.rules.RuleRunner.route_prices`).
@@ -103,10 +103,9 @@ def route_over(scenario: Scenario, model: LoadedModel, config: RouteConfig | Non
         ValueError: the model's driving rule learned no prices to route with.
         RouteError: no route (module docstring).
     """
-    from terrapref.planner.planner import Planner
     from terrapref.world import rasterise
 
-    planner = Planner(model)
+    planner = model.planner()
     prices = planner.runner.route_prices()
     if prices is None:
         raise ValueError(

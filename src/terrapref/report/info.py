@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 from terrapref.errors import UserError
+from terrapref.learning.header import CHECKPOINT, CLASSIFIER, INTERRUPTED
 
 
 def _camera(c: dict) -> str:
@@ -121,9 +122,9 @@ def _onnx_lines(p: Path) -> list[str]:
 
 
 def _rule_lines(meta: dict, source: str, graph_note: bool = False) -> list[str]:
-    """The rule that drives and the rules fitted only to be reported, each as it describes
-    itself (terrapref.rules); a damaged list is said to be one. ``graph_note``: an exported
-    graph, which holds C alone: a rule that is not C's argmax runs in the planner, not in it."""
+    """The rules a file's metadata lists (a model's header, an exported graph's metadata), read
+    by the rules themselves (terrapref.rules.rules_in); a damaged list is said to be one.
+    ``graph_note``: an exported graph, which holds C alone."""
     from terrapref.rules import rules_in
     from terrapref.terrain import ClassTable
 
@@ -132,7 +133,11 @@ def _rule_lines(meta: dict, source: str, graph_note: bool = False) -> list[str]:
         classes = ClassTable.from_dict(meta["classes"], source)
     except (UserError, KeyError, TypeError, ValueError) as exc:
         return [f"rules           unreadable ({exc.problems[0].format('') if isinstance(exc, UserError) else exc})"]
-    names = tuple(meta["features"].get("feature_classes", ()))
+    return _rules(rules, driving, tuple(meta["features"].get("feature_classes", ())), classes, graph_note)
+
+
+def _rules(rules, driving, names: tuple[str, ...], classes, graph_note: bool = False) -> list[str]:
+    """The rule that drives and the rules fitted only to be reported, each as it describes itself."""
     lethal = frozenset({classes.lethal_column} if classes.lethal else ())  # the terrain column the lethal classes share
     note = " (in the metadata; the graph holds C alone)" if graph_note and not driving.graph else ""
     lines = [f"drives          {driving.type}{note}"]
@@ -184,20 +189,61 @@ def _dataset_lines(p: Path, meta: dict, shapes: dict[str, tuple[int, ...]]) -> l
 
 
 def _model_lines(p: Path, meta: dict) -> list[str]:
-    """A model: its state, recipe, network, second stage, training data and chosen epoch."""
-    from terrapref.learning.header import CHECKPOINT, CLASSIFIER, INTERRUPTED
+    """A model: its state, recipe, network, decision rules, training data and chosen epoch, as
+    terrapref.planner.model.Model reads the file; a file it refuses is shown as far as its
+    header can be read, with the refusal."""
+    from terrapref.errors import UserError
+    from terrapref.planner.model import Model
 
+    try:
+        model = Model.load(p)
+    except UserError as exc:
+        return _damaged_model_lines(p, meta, exc)
+    loaded = model.classifier
+    if loaded is None:  # a learned baseline: its kind and configuration
+        return [f"{p}: terrapref model ({model.kind})"] + _common(meta)
+    h = loaded.header
+    c, data = h.classifier, h.data
+    state = {INTERRUPTED: ", INTERRUPTED: the best epochs so far, no decision rules", CHECKPOINT: f", checkpoint of epoch {h.epoch}"}
+    runs = (
+        [(f"member {j + 1}: ", m.history, m.best_epoch) for j, m in enumerate(h.members)] if h.members else [("", h.history, h.best_epoch)]
+    )
+    chosen = [f"{label}{line}" for label, history, best in runs if (line := _epoch_line(history, best))]
+    return (
+        [
+            f"{p}: terrapref model ({model.kind}{state.get(h.status, '')})",
+            f"recipe          {h.recipe or '?'}",
+            f"network         {c.members} member(s), hidden {c.hidden}, {c.activation}, skip {c.skip}",
+            *_rules(model.rules, model.driving, h.features.feature_classes, h.classes),
+            "data            "
+            + (
+                f"{data.samples} samples, fingerprint {data.fingerprint}, {len(data.recordings)} recording(s)"
+                if data
+                else "? (none recorded)"
+            ),
+        ]
+        + [("training        " if i == 0 else " " * 16) + line for i, line in enumerate(chosen)]
+        + _common(meta)
+        + _identifiability(meta)
+    )
+
+
+def _epoch_line(history, best: int | None) -> str | None:
+    """Epochs run, the epoch chosen and its validation scores (``history``: EpochMetrics)."""
+    if not history or best is None or not 0 < best <= len(history):
+        return None
+    e = history[best - 1]
+    return f"{len(history)} epochs, chose epoch {best}: val loss {e.val_loss:.4f}, val acc {e.val_acc:.3f}"
+
+
+def _damaged_model_lines(p: Path, meta: dict, exc) -> list[str]:
+    """A model file the reader refuses: what its header still says, and why it is refused."""
     c = meta.get("classifier", {}) if isinstance(meta.get("classifier"), dict) else {}
-    data = meta.get("data", {}) if isinstance(meta.get("data"), dict) else {}
     lines = [
-        f"{p}: terrapref model ({meta.get('kind', CLASSIFIER)}"
-        + (", INTERRUPTED: the best epochs so far, no decision rules" if meta.get("status") == INTERRUPTED else "")
-        + (f", checkpoint of epoch {meta.get('epoch')}" if meta.get("status") == CHECKPOINT else "")
-        + ")",
+        f"{p}: terrapref model ({meta.get('kind', CLASSIFIER)}), NOT READABLE: {exc.problems[0].format('')}",
         f"recipe          {meta.get('recipe', '?')}",
         f"network         {c.get('members', 1)} member(s), hidden {c.get('hidden')}, {c.get('activation')}, skip {c.get('skip')}",
         *_rule_lines(meta, str(p)),
-        f"data            {data.get('samples', '?')} samples, fingerprint {data.get('fingerprint', '?')}, {len(data.get('recordings', []) or [])} recording(s)",
     ]
     return lines + _training(meta) + _common(meta) + _identifiability(meta)
 
