@@ -573,3 +573,15 @@ def test_a_driver_who_likes_a_patch_is_not_switched_off_a_held_offset_by_a_slive
     stage.held = 0.2
     stage.yaw_rate(_seen_from(scenario, camera, pose), pose, path, 4.0)
     assert stage.held == pytest.approx(0.2)  # kept: a margin of the best's magnitude, not of its signed value
+
+
+def test_an_offset_block_written_before_the_pursuit_distances_were_renamed_reads_the_same(tmp_path):
+    config = ClassifierConfig(hidden=8, skip=True)
+    block = {"type": "offset", **OffsetConfig(pursuit_m=3.0).to_dict(), "weights": list(DRIVER_LIKE), "near_m": 5.0}
+    block["pursuit_lookahead_m"] = block.pop("pursuit_m")
+    block["geometry"]["intent_lookahead_m"] = block["geometry"].pop("intent_pursuit_m")
+    path = save_model(
+        tmp_path / "old.safetensors", config, skip_path_weights(config), {**model_meta(), "rules": [block], "drives": "offset"}
+    )
+    rule = Planner(load_model(path)).rule
+    assert rule.config == OffsetConfig(pursuit_m=3.0)

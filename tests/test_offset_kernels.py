@@ -664,12 +664,10 @@ def test_frame_at_gives_point_at_and_direction_at(seed: int):
         assert _same(np.array([x, y]), path.point_at(np.array([s]))[0]), s  # the vectorised form too
 
 
-def _steer_python(
-    path: ReferencePath, pose, progress_m: float, offset_m, lookahead_m: float, v_mps: float, clip: bool = True
-) -> np.ndarray:
+def _steer_python(path: ReferencePath, pose, progress_m: float, offset_m, pursuit_m: float, v_mps: float, clip: bool = True) -> np.ndarray:
     """The Python form of pursuit_yaw_rates (``clip=False``) and steer: the pure-pursuit yaw rate
     toward the path shifted by ``offset_m``, the target read by ``point_at`` and ``direction_at``."""
-    s = min(progress_m + lookahead_m, path.length_m)
+    s = min(progress_m + pursuit_m, path.length_m)
     cos_h, sin_h = (float(v) for v in path.direction_at(s))
     tx0, ty0 = (float(v) for v in path.point_at(s))
     x, y, yaw = (float(v) for v in pose)
@@ -693,10 +691,10 @@ def test_pursuit_yaw_rates_and_steer_give_the_python_forms_rates(seed: int, scal
         x, y = path.point_at(min(max(progress_m, 0.0), path.length_m)) + rng.normal(0.0, 1.0, 2)
         pose = (float(x), float(y), float(rng.uniform(-math.pi, math.pi)))
         offsets = float(rng.uniform(-3.0, 3.0)) if scalar else np.arange(-15, 16) * 0.2
-        lookahead_m, v_mps = float(rng.uniform(0.5, 4.0)), float(rng.uniform(0.5, 3.0))
-        rates = pursuit_yaw_rates(path, pose, progress_m, offsets, lookahead_m, v_mps)
-        assert _same(rates, _steer_python(path, pose, progress_m, offsets, lookahead_m, v_mps, clip=False))
+        pursuit_m, v_mps = float(rng.uniform(0.5, 4.0)), float(rng.uniform(0.5, 3.0))
+        rates = pursuit_yaw_rates(path, pose, progress_m, offsets, pursuit_m, v_mps)
+        assert _same(rates, _steer_python(path, pose, progress_m, offsets, pursuit_m, v_mps, clip=False))
         assert _same(
-            steer(path, pose, progress_m, offsets, lookahead_m, v_mps),
-            _steer_python(path, pose, progress_m, offsets, lookahead_m, v_mps, clip=True),
+            steer(path, pose, progress_m, offsets, pursuit_m, v_mps),
+            _steer_python(path, pose, progress_m, offsets, pursuit_m, v_mps, clip=True),
         )

@@ -58,7 +58,7 @@ class ExpertConfig:
         rank_cost: terrain cost per metre of the most preferred class; each later class in
             the profile costs ``rank_growth`` times more; lethal classes cost ``lethal_cost``.
         switch_margin: a new offset must be this much cheaper (relative) to replace the held one.
-        pursuit_lookahead_m: pure-pursuit look-ahead distance [m].
+        pursuit_m: pure pursuit's pursuit distance: how far along the path it aims [m].
         max_yaw_rate_rps: stick range [rad/s].
         stick_rate_rps2: how fast the stick can move [rad/s per s].
         deadzone_rps: corrections below this leave the stick at zero [rad/s].
@@ -81,7 +81,7 @@ class ExpertConfig:
     rank_growth: float = 1.5
     lethal_cost: float = 1000.0
     switch_margin: float = 0.15
-    pursuit_lookahead_m: float = 2.5
+    pursuit_m: float = 2.5
     max_yaw_rate_rps: float = 1.0
     stick_rate_rps2: float = 4.0
     deadzone_rps: float = 0.06
@@ -204,13 +204,13 @@ class ExpertDriver:
             if i - last > gap:
                 break
             last = int(i)
-        upto = min(len(s), last + 1 + round(c.pursuit_lookahead_m / self.sample_step_m))
+        upto = min(len(s), last + 1 + round(c.pursuit_m / self.sample_step_m))
         terrain = self._costs(centre, normal, self._lat, upto) * self.sample_step_m  # (O,)
         if self._margin_lat is not None:  # the berth beside the footprint: half the cost of driving on it
             terrain = terrain + 0.5 * self._costs(centre, normal, self._margin_lat, upto) * self.sample_step_m
         hits_lethal = _offset_hits(centre, normal, self._lethal_lat, upto, self.world.raster, self.world.resolution_m, self._lethal)
         terrain = terrain + hits_lethal * c.lethal_cost
-        span = (last - first + 1) * self.sample_step_m + 2.0 * c.pursuit_lookahead_m
+        span = (last - first + 1) * self.sample_step_m + 2.0 * c.pursuit_m
         total = terrain + c.deviation_cost * self.offsets**2 * span
         best = float(total.min())
         # Hold the current side unless another is clearly cheaper (no dithering); among equal
@@ -245,7 +245,7 @@ class ExpertDriver:
     def steer(self, pose: tuple[float, float, float], s_now: float, offset: float) -> float:
         """Pure-pursuit yaw rate [rad/s] toward the path shifted sideways by ``offset``."""
         c = self.config
-        s_t = s_now + c.pursuit_lookahead_m
+        s_t = s_now + c.pursuit_m
         heading = float(self.path.heading_at(s_t))
         target = self.path.point_at(s_t) + offset * np.array([-math.sin(heading), math.cos(heading)])
         x, y, yaw = pose

@@ -198,7 +198,7 @@ class CostPolicy(LinearPolicy):
 
 
 class PurePursuitPolicy(Policy):
-    """A path follower that ignores terrain: pure pursuit to a look-ahead point on the path,
+    """A path follower that ignores terrain: pure pursuit to the path point ``pursuit_m`` ahead,
     then the trajectory whose yaw rate is nearest the pursuit command."""
 
     name = "pure_pursuit"
@@ -206,21 +206,21 @@ class PurePursuitPolicy(Policy):
 
     def __init__(
         self,
-        lookahead_m: float = 2.5,
+        pursuit_m: float = 2.5,
         features: FeatureConfig | None = None,
         camera: CameraConfig | None = None,
         classes: ClassTable | None = None,
     ) -> None:
         super().__init__(features, camera, classes)
-        self.lookahead_m = lookahead_m
+        self.pursuit_m = pursuit_m
         control = self.features.preference.control
         self._w = np.asarray(control.w_rps, dtype=float)
         self._v = float(control.v_mps)
 
     def logits(self, obs: Observation) -> np.ndarray:
-        # The path point (1 m apart) nearest the look-ahead distance.
+        # The path point (1 m apart) nearest the pursuit distance.
         d = np.hypot(obs.path_ahead[:, 0], obs.path_ahead[:, 1])
-        j = int(np.clip(np.searchsorted(d, self.lookahead_m), 0, len(d) - 1))
+        j = int(np.clip(np.searchsorted(d, self.pursuit_m), 0, len(d) - 1))
         x, y = obs.path_ahead[j]
         dist = max(math.hypot(x, y), 1e-6)
         w = pure_pursuit_yaw_rate(self._v, y / dist, dist)

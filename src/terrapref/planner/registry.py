@@ -12,7 +12,7 @@ importing them:
 
 >>> sorted(kinds())
 ['classifier', 'cnn', 'hand_cost', 'linear', 'pure_pursuit']
->>> make("pure_pursuit", lookahead_m=3.0).lookahead_m
+>>> make("pure_pursuit", pursuit_m=3.0).pursuit_m
 3.0
 """
 

@@ -34,7 +34,7 @@ class OffsetGeometry:
         sample_range_m: ground read up to this far ahead of the camera [m].
         intent_delay_s: a demonstrator's command is read as what it meant this long before (its
             reaction time) [s] ...
-        intent_lookahead_m: ... and inverted through pure pursuit this far ahead along the path
+        intent_pursuit_m: ... and inverted through pure pursuit this far ahead along the path
             into the offset it was steering for [m] (terrapref.rules.offset.fit).
         map_range_m: a ground sample's vote in the map weighs 1 / (1 + (r / map_range_m)^2) at r
             metres from the vehicle: near ground is seen sharper and placed better [m].
@@ -67,7 +67,7 @@ class OffsetGeometry:
     sample_step_m: float = 0.1
     sample_range_m: float = 14.0
     intent_delay_s: float = 0.2
-    intent_lookahead_m: float = 2.5
+    intent_pursuit_m: float = 2.5
     map_range_m: float = 4.0
     map_fade: float = 0.97
     map_lethal_share: float = 0.35
@@ -92,7 +92,7 @@ class OffsetGeometry:
             self.map_half_size_m,
             self.sample_step_m,
             self.sample_range_m,
-            self.intent_lookahead_m,
+            self.intent_pursuit_m,
         )
         if not all(math.isfinite(v) and v > 0 for v in positive) or not (self.span_m >= 0 and self.gap_m >= 0 and self.intent_delay_s >= 0):
             raise ValueError("the offset geometry needs positive sizes and steps, and span_m, gap_m and intent_delay_s >= 0")
@@ -145,6 +145,8 @@ class OffsetGeometry:
     @classmethod
     def from_dict(cls, data: dict) -> OffsetGeometry:
         data = dict(data)
+        if "intent_lookahead_m" in data and "intent_pursuit_m" not in data:  # its name in files before it was intent_pursuit_m
+            data["intent_pursuit_m"] = data.pop("intent_lookahead_m")
         if "stations_m" in data:
             data["stations_m"] = tuple(data["stations_m"])
         return cls(**data)

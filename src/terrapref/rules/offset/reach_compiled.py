@@ -23,7 +23,7 @@ def swept_reach(
     v: float,
     dt: float,
     steps: int,
-    lookahead_m: float,
+    pursuit_m: float,
     path_s: np.ndarray,
     path_a: np.ndarray,
     path_d: np.ndarray,
@@ -50,7 +50,7 @@ def swept_reach(
     for o in range(offsets.shape[0]):
         x, y, yaw = x0, y0, yaw0
         for k in range(steps):
-            target_s = min(progress_m + k * dt * v + lookahead_m, path_s[-1])
+            target_s = min(progress_m + k * dt * v + pursuit_m, path_s[-1])
             px0, py0, cos_h, sin_h = path_frame(path_s, path_a, path_d, path_len, target_s)
             tx = px0 - offsets[o] * sin_h - x
             ty = py0 + offsets[o] * cos_h - y

@@ -19,7 +19,7 @@ candidate offset d. The rule then:
    beyond them, up to ``escape_factor`` times as far, that is clear of it, and holds it while it
    stays clear; the utility cannot price those offsets, so they serve only to get round lethal
    terrain;
-5. steers toward the path shifted by the held offset, ``pursuit_lookahead_m`` ahead.
+5. steers toward the path shifted by the held offset, ``pursuit_m`` ahead.
 
 Ground never seen is priced at the mean of the non-lethal classes' weights: a fit sees too
 little unseen ground beside patches to price it, and an unknown cell is, on average, one of them.
@@ -79,7 +79,7 @@ class OffsetConfig(RuleConfig):
     Attributes:
         switch_margin: the held offset is kept while its utility falls short of the best
             offset's by at most this share of the best's magnitude.
-        pursuit_lookahead_m: pure-pursuit look-ahead along the path [m].
+        pursuit_m: pure pursuit aims this far along the path ahead of the vehicle's progress [m].
         lethal_margin_m: clearance kept from lethal terrain beside the footprint [m].
         lethal_horizon_m: how far ahead the way to each offset is checked for lethal terrain [m].
         dt_s: time step of that check [s].
@@ -94,7 +94,7 @@ class OffsetConfig(RuleConfig):
     without_data: ClassVar[str] = "the model gets no offset rule and drives C's trajectories"
 
     switch_margin: float = 0.15
-    pursuit_lookahead_m: float = 2.5
+    pursuit_m: float = 2.5
     lethal_margin_m: float = 0.3
     lethal_horizon_m: float = 6.0
     dt_s: float = 0.1
@@ -102,12 +102,12 @@ class OffsetConfig(RuleConfig):
     geometry: OffsetGeometry = field(default_factory=OffsetGeometry)
 
     def __post_init__(self) -> None:
-        values = (self.switch_margin, self.pursuit_lookahead_m, self.lethal_margin_m, self.lethal_horizon_m, self.dt_s, self.escape_factor)
+        values = (self.switch_margin, self.pursuit_m, self.lethal_margin_m, self.lethal_horizon_m, self.dt_s, self.escape_factor)
         if (
             not all(math.isfinite(v) for v in values)
             or self.switch_margin < 0
             or self.lethal_margin_m < 0
-            or self.pursuit_lookahead_m <= 0
+            or self.pursuit_m <= 0
             or self.lethal_horizon_m <= 0
             or self.dt_s <= 0
             or self.escape_factor < 1
@@ -175,7 +175,7 @@ class OffsetReader(FrameReader):
         # Only where the frame that much later is the next ones' in time (not across a gap).
         ok[ok] &= np.abs(recording.times[ahead[ok]] - recording.times[keep[ok]] - delay * period) < 0.5 * period
         later[ok] = recording.commands[ahead[ok]]
-        intent = intent_offsets(recording.poses[keep], later, self.progress, path, self.offsets.offsets, self.geometry.intent_lookahead_m)
+        intent = intent_offsets(recording.poses[keep], later, self.progress, path, self.offsets.offsets, self.geometry.intent_pursuit_m)
         return {"features": self.features, "near_m": self.near, "intent_m": intent.astype(np.float32)}
 
 
@@ -211,6 +211,8 @@ class OffsetRule(Rule):
             raise where.error("geometry", f"invalid ({exc})") from None
         weights = vector(block, "weights", context.features.n_terrain + 3, where)
         near = number(block, "near_m", where, positive=True)
+        if "pursuit_lookahead_m" in block and "pursuit_m" not in block:  # its name in files before it was pursuit_m
+            block = {**block, "pursuit_m": block["pursuit_lookahead_m"]}
         settings = {
             f.name: number(block, f.name, where, getattr(OffsetConfig, f.name)) for f in fields(OffsetConfig) if f.name != "geometry"
         }
@@ -348,7 +350,7 @@ class OffsetSteering(RuleRunner):
             self.held = 0.0  # nothing near and the way back clear of lethal terrain
         elif self.held == 0.0 or abs(self.held) > self.offsets[-1] or not keeps(value[held], value[best], self.config.switch_margin):
             self.held = float(self.offsets[best])
-        return float(steer(path, pose, progress_m, self.held, self.config.pursuit_lookahead_m, self.v_mps))
+        return float(steer(path, pose, progress_m, self.held, self.config.pursuit_m, self.v_mps))
 
     @property
     def ground_map(self) -> GroundMap:
@@ -467,7 +469,7 @@ class OffsetSteering(RuleRunner):
             self.v_mps,
             c.dt_s,
             self._steps,
-            c.pursuit_lookahead_m,
+            c.pursuit_m,
             path.s,
             a,
             d,

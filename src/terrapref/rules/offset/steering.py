@@ -11,22 +11,22 @@ from terrapref.scenario.path import ReferencePath
 from terrapref.vehicle import Pose, pure_pursuit_yaw_rate
 
 
-def steer(path: ReferencePath, pose: Pose, progress_m: float, offset_m: np.ndarray | float, lookahead_m: float, v_mps: float) -> np.ndarray:
+def steer(path: ReferencePath, pose: Pose, progress_m: float, offset_m: np.ndarray | float, pursuit_m: float, v_mps: float) -> np.ndarray:
     """:func:`pursuit_yaw_rates` clipped to the stick's +-1 rad/s."""
-    return np.asarray(np.clip(pursuit_yaw_rates(path, pose, progress_m, offset_m, lookahead_m, v_mps), -1.0, 1.0))
+    return np.asarray(np.clip(pursuit_yaw_rates(path, pose, progress_m, offset_m, pursuit_m, v_mps), -1.0, 1.0))
 
 
 def pursuit_yaw_rates(
-    path: ReferencePath, pose: Pose, progress_m: float, offset_m: np.ndarray | float, lookahead_m: float, v_mps: float
+    path: ReferencePath, pose: Pose, progress_m: float, offset_m: np.ndarray | float, pursuit_m: float, v_mps: float
 ) -> np.ndarray:
-    """Pure-pursuit yaw rate [rad/s] toward the path shifted by ``offset_m`` (left positive), ``lookahead_m`` ahead
+    """Pure-pursuit yaw rate [rad/s] toward the path shifted by ``offset_m`` (left positive), ``pursuit_m`` ahead
     of ``progress_m``. One value per offset, ``offset_m``'s shape.
 
     Scalar ``math`` throughout (NumPy's vectorised trigonometry may pick CPU-specific code whose
     last bits differ, and ``math.hypot`` rounds more exactly than C's), so that the command, and
     the run it steers, is the same on every machine.
     """
-    tx0, ty0, cos_h, sin_h = path.frame_at(min(progress_m + lookahead_m, path.length_m))
+    tx0, ty0, cos_h, sin_h = path.frame_at(min(progress_m + pursuit_m, path.length_m))
     x, y, yaw = (float(v) for v in pose)
     offsets = np.asarray(offset_m, dtype=float)
     out = np.empty(offsets.shape)
@@ -38,7 +38,7 @@ def pursuit_yaw_rates(
 
 
 def intent_offsets(
-    poses: np.ndarray, later: np.ndarray, progress_m: np.ndarray, path: ReferencePath, offsets: np.ndarray, lookahead_m: float
+    poses: np.ndarray, later: np.ndarray, progress_m: np.ndarray, path: ReferencePath, offsets: np.ndarray, pursuit_m: float
 ) -> np.ndarray:
     """The offset [m] each frame's driver was steering for, (F,); NaN where ``later`` is NaN.
 
@@ -54,12 +54,12 @@ def intent_offsets(
         progress_m: (F,) the vehicle's progress along the path [m].
         path: the reference path.
         offsets: the candidate offsets (O,) [m].
-        lookahead_m: the driver's pure-pursuit look-ahead [m].
+        pursuit_m: the driver's pursuit distance: how far along the path it aimed [m].
     """
     out = np.full(len(poses), np.nan)
     for i, (v, w) in enumerate(later):
         if not (math.isfinite(v) and math.isfinite(w)):
             continue
-        yaw_rate = pursuit_yaw_rates(path, tuple(poses[i]), progress_m[i], offsets, lookahead_m, v)
+        yaw_rate = pursuit_yaw_rates(path, tuple(poses[i]), progress_m[i], offsets, pursuit_m, v)
         out[i] = offsets[int(np.argmin(np.abs(yaw_rate - w)))]
     return out
