@@ -9,7 +9,7 @@ Run through ``scripts/bench.sh`` (one core); numbers go into ``docs/benchmarks.m
     on the same frames, with a model trained on the recording (paper recipe). Target:
     <= 100 us median. Three more lines: a 2-member ensemble, the planner's second
     stage (terrapref.rules.second.rule) as in recipe ``ours``, and the decision of recipe
-    ``teach`` (an ensemble of three with the second stage, then with the offset stage too, which
+    ``teach`` (an ensemble of three with the second stage, then with the offset rule too, which
     drives recipe ``teach``, the default: target <= 150 us; the stage weight does not change
     the cost).
 (d) closed loop: the planner (same model) driving ``train_course`` in the simulation, frames
@@ -148,7 +148,7 @@ def main() -> int:
     line("decision, 2 members, per frame", d2, "-")
     line("decision with the second stage, per frame", d3, "-")
     line("decision of recipe teach, C + second stage", d4, "<= 60us")
-    line("the default decision: teach, offset stage drives", d5, "<= 150us")
+    line("the default decision: teach, offset rule drives", d5, "<= 150us")
     print(
         f"{'planner driving train_course, closed loop':48s} {loop_s:9.2f}s {'':>10s} {loop_s / ref_s:10.1f} {'-':>10s}   "
         f"({loop_frames} frames, {loop_frames / loop_s:.0f} frames/s)"
