@@ -25,7 +25,7 @@ def main() -> int:
     parser.add_argument("recordings", nargs="+")
     parser.add_argument("--n-steps", type=int, default=30)
     parser.add_argument("--dt", type=float, default=0.2)
-    parser.add_argument("--distance-mode", default="lookahead", choices=["lookahead", "window", "paper"])
+    parser.add_argument("--distance-mode", default="progress", choices=["progress", "window", "paper"])
     args = parser.parse_args()
     fc = FeatureConfig(distance_mode=args.distance_mode)
     fc = replace(fc, preference=replace(fc.preference, n_steps=args.n_steps, dt_s=args.dt))

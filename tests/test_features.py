@@ -268,7 +268,7 @@ def test_window_distance_ignores_the_returning_leg(camera: PinholeCamera):
 
 
 def test_lookahead_distance_ignores_the_returning_leg(camera: PinholeCamera):
-    feat = _loop_featurizer(camera, DistanceMode.LOOKAHEAD)
+    feat = _loop_featurizer(camera, DistanceMode.PROGRESS)
     path = ReferencePath(_to_world(LOOP_V, LOOP_POSE))
     s = _loop_progress(path)
     d = feat.distances(LOOP_POSE, path, s)
@@ -285,7 +285,7 @@ def test_lookahead_distance_ignores_the_returning_leg(camera: PinholeCamera):
 
 
 def test_window_and_lookahead_need_a_progress(camera: PinholeCamera):
-    for mode in (DistanceMode.WINDOW, DistanceMode.LOOKAHEAD):
+    for mode in (DistanceMode.WINDOW, DistanceMode.PROGRESS):
         feat = UtilityFeaturizer(FeatureConfig(distance_mode=mode), camera, CLASSES)
         with pytest.raises(ValueError):
             feat.distances(Pose(0.0, 0.0, 0.0), _straight_path(), None)
@@ -396,3 +396,9 @@ def test_numpy_sum_refuses_more_terms_than_it_can_follow():
 
     with pytest.raises(ValueError):
         numpy_sum(np.ones(129))
+
+
+def test_the_progress_distance_mode_reads_its_older_name():
+    """``lookahead``, the mode's name in files and flags before "look-ahead" was the second stage's alone."""
+    assert FeatureConfig(distance_mode="lookahead").distance_mode is DistanceMode.PROGRESS  # type: ignore[arg-type]
+    assert FeatureConfig.from_dict({**FeatureConfig().to_dict(), "distance_mode": "lookahead"}) == FeatureConfig()

@@ -335,9 +335,10 @@ def featurize_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, type=Path, help="dataset file (.safetensors)")
     p.add_argument(
         "--distance-mode",
-        choices=["lookahead", "window", "paper"],
-        default="lookahead",
-        help="how each trajectory's distance to the path is measured: lookahead (default) to the path ahead of the vehicle, "
+        choices=["progress", "window", "paper"],
+        type=lambda v: "progress" if v == "lookahead" else v,  # its name before "look-ahead" was the second stage's alone
+        default="progress",
+        help="how each trajectory's distance to the path is measured: progress (default) to the path point the vehicle's progress reaches, "
         "window to the nearest path point within a window, paper as the paper writes it",
     )
     p.add_argument("--n-steps", type=int, help="trajectory points n (default 30)")

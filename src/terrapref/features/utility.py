@@ -9,7 +9,7 @@ Three definitions of d, recorded with every dataset and model:
 - ``paper``: distance from the trajectory's end to the nearest path point, all of P.
 - ``window``: nearest path point among those ahead of the vehicle's progress, within
   ``window_m``, so that a path passing near itself or behind the vehicle cannot capture it.
-- ``lookahead`` (default): distance to the single path point at progress + the trajectory's
+- ``progress`` (default; ``lookahead`` in older files): distance to the single path point at progress + the trajectory's
   travel distance (where a perfect follower would be). With the window starting at the
   vehicle, the tightest arcs (w = +-1 over 6 m) curl back to end beside the vehicle, next to
   the path, and get the best ``window`` score; the look-ahead point ranks them last.
@@ -38,7 +38,12 @@ NORMALISE_EPS = 1e-9  # a distance range below this normalises to all ones
 class DistanceMode(str, Enum):
     PAPER = "paper"
     WINDOW = "window"
-    LOOKAHEAD = "lookahead"
+    PROGRESS = "progress"
+
+    @classmethod
+    def _missing_(cls, value: object) -> DistanceMode | None:
+        # ``lookahead``: this mode's name in files and flags before "look-ahead" was the second stage's alone
+        return cls.PROGRESS if value == "lookahead" else None
 
 
 @dataclass(frozen=True)
@@ -56,7 +61,7 @@ class FeatureConfig:
     """
 
     preference: PreferenceSetConfig = field(default_factory=PreferenceSetConfig)
-    distance_mode: DistanceMode = DistanceMode.LOOKAHEAD
+    distance_mode: DistanceMode = DistanceMode.PROGRESS
     window_m: float | None = None
     path_spacing_m: float = 0.25
     feature_classes: tuple[str, ...] = field(default_factory=lambda: default_classes().feature_names)
@@ -148,9 +153,9 @@ class UtilityFeaturizer:
         c, s = math.cos(yaw), math.sin(yaw)
         ex, ey = self._ends[:, 0], self._ends[:, 1]
         mode = self.config.distance_mode
-        if mode is DistanceMode.LOOKAHEAD:
+        if mode is DistanceMode.PROGRESS:
             if progress_m is None:
-                raise ValueError("lookahead distance needs the vehicle's progress along the path")
+                raise ValueError("the progress distance mode needs the vehicle's progress along the path")
             tx, ty = path.point_at(progress_m + self.config.preference.horizon_m)
             # Endpoint minus target, in the world frame, without building the (m, 2) array.
             return kernels.end_distances(ex, ey, c, s, x - tx, y - ty)
@@ -174,7 +179,7 @@ class UtilityFeaturizer:
         self, image: np.ndarray | SegmentationView, pose: Pose, path: ReferencePath, progress_m: float | None = None
     ) -> np.ndarray:
         """U, shape (m, n_features) float32: terrain shares, then the distance utility."""
-        if self.config.distance_mode is DistanceMode.LOOKAHEAD and progress_m is not None:  # the usual case, in one compiled call
+        if self.config.distance_mode is DistanceMode.PROGRESS and progress_m is not None:  # the usual case, in one compiled call
             x, y, yaw = pose
             tx, ty = path.point_at(progress_m + self.config.preference.horizon_m)
             ids = as_view(image).pixels(self._pix_flat)
