@@ -327,7 +327,9 @@ def test_a_checkpoints_member_count_and_an_interrupted_runs_progress_are_its_own
         status="checkpoint",
     )
     written = checkpoint.to_dict()
-    assert list(written)[-4:] == ["members", "member", "epoch", "status"] and written["members"] == 2
+    assert list(written)[-4:] == ["member_count", "member", "epoch", "status"] and written["member_count"] == 2
+    older = {**{k: v for k, v in written.items() if k != "member_count"}, "members": 2}  # a checkpoint before the count had its own name
+    assert ModelHeader.from_dict(older, "old.safetensors") == checkpoint
     assert ModelHeader.from_dict(written, "c.safetensors") == checkpoint
     interrupted = replace(checkpoint, member_count=None, member=None, epoch=None, status="interrupted", interrupted=Interruption(2, (3, 1)))
     written = interrupted.to_dict()

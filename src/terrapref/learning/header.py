@@ -14,7 +14,7 @@ training writes the same file, byte for byte::
     identifiability, steadying
     rules, drives                    the decision rules fitted with C, one block each under its
                                      ``type`` (terrapref.rules reads them), and the one that drives
-    members                          an ensemble's members; in a checkpoint, how many there are
+    members, member_count            an ensemble's members' runs; in a checkpoint, how many there are
     member, epoch                    a checkpoint's member and epoch; a model's chosen epoch
     status, interrupted              ``checkpoint`` or ``interrupted`` (absent: a finished model),
                                      and what an interrupted training reached
@@ -101,7 +101,8 @@ class ModelHeader:
         drives: the type of the rule that drives (one of ``rules``, or ``argmax``).
         stages: an older file's list of rules (the last one drove); never written.
         members: an ensemble's members.
-        member_count: a checkpoint's number of members (the file's ``members``).
+        member_count: a checkpoint's number of members (``members`` in older files, which held
+            either this count or the members' runs).
         member: the member a checkpoint holds, from 1.
         epoch: a checkpoint's epoch, or the epoch a model holds.
         status: :data:`CHECKPOINT` or :data:`INTERRUPTED`; None: a finished model.
@@ -136,7 +137,7 @@ class ModelHeader:
         what is None left out (the profile is always written); a checkpoint's member count is
         its ``members``."""
         entries = to_plain(self, omit_none=[f.name for f in fields(self) if f.name != "profile"])
-        return {"format": FORMAT, "kind": CLASSIFIER, **{("members" if k == "member_count" else k): v for k, v in entries.items()}}
+        return {"format": FORMAT, "kind": CLASSIFIER, **entries}
 
     @classmethod
     def from_dict(cls, meta: Mapping[str, Any], source: str) -> ModelHeader:
@@ -177,7 +178,7 @@ class ModelHeader:
             drives=_entry(meta, "drives", _text, source),
             stages=rule_blocks(meta, "stages", source),
             members=members if isinstance(members, tuple) else None,
-            member_count=members if isinstance(members, int) else None,
+            member_count=members if isinstance(members, int) else _entry(meta, "member_count", _integer, source),
             member=_entry(meta, "member", _integer, source),
             epoch=_entry(meta, "epoch", _integer, source),
             status=_entry(meta, "status", _text, source),
