@@ -16,7 +16,7 @@ from terrapref.rules.offset.fit import OffsetUtility
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.offset.rule import OffsetSteering
 from terrapref.terrain import default_classes
-from test_corridor import DRIVER_LIKE, _corridor_meta, _scenario, _seen_from, _terrain
+from test_offset_rule import DRIVER_LIKE, _offset_meta, _scenario, _seen_from, _terrain
 
 CONTROL = FeatureConfig().preference.control  # the default control set: 1 m/s
 
@@ -63,7 +63,7 @@ def test_a_class_liked_better_than_the_background_costs_nothing():
 
 def test_the_runtime_gives_the_costmap_of_the_ground_it_has_seen(tmp_path):
     config = ClassifierConfig(hidden=8, skip=True)
-    path = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
+    path = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
     runtime = PlannerRuntime(path)
     runtime.set_path(np.array([[2.0, 10.0], [38.0, 10.0]]))
     assert (runtime.costmap().cost == UNKNOWN_COST).all()  # nothing seen yet
@@ -122,7 +122,7 @@ def test_an_exported_recording_carries_the_costmap_a_model_sees_in_it(tmp_path, 
     from terrapref.cli import main
 
     config = ClassifierConfig(hidden=8, skip=True)
-    model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
+    model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
     rec = fig7_recording
     assert main(["export", str(rec), "--format", "mcap", "--model", str(model), "--out", str(tmp_path / "run.mcap")]) == 0
     counts, cost = _costmaps_in(tmp_path / "run.mcap")

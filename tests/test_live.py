@@ -21,7 +21,7 @@ from terrapref.interop.ros_messages import typestore
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.rules.costmap import LETHAL_COST
-from test_corridor import DRIVER_LIKE, _corridor_meta
+from test_offset_rule import DRIVER_LIKE, _offset_meta
 
 websockets = pytest.importorskip("websockets.sync.client", reason="the WebSocket client of the tests (websockets) is not installed")
 WATCHED = ("/terrapref/labels", "/terrapref/costmap", "/terrapref/costmap_grid", "/terrapref/trajectories", "/tf_static", "/terrapref/odom")
@@ -71,7 +71,7 @@ def test_evaluate_live_serves_the_export_channels_to_a_websocket_client(tmp_path
     from test_costmap import _costmaps_in
 
     config = ClassifierConfig(hidden=8, skip=True)
-    model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
+    model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
     port, got = _free_port(), {}
     client = threading.Thread(target=_watch, args=(port, got), daemon=True)
     client.start()

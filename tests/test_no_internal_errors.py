@@ -130,10 +130,10 @@ def test_no_ros_master_is_said_within_seconds_not_waited_for():
     "block,key,value,words",
     [
         ("preference", "n_steps", 10**9, ["n_steps", "1..1000"]),
-        ("corridor", "map_resolution_m", 1e-6, ["ground-map cells a side", "at most 4096"]),
-        ("corridor", "offset_step_m", 1e-9, ["offsets", "at most 10000"]),
-        ("corridor", "station_step_m", 1e-9, ["stations", "at most 10000"]),
-        ("corridor", "sample_step_m", 1e-9, ["camera samples", "at most 10000"]),
+        ("geometry", "map_resolution_m", 1e-6, ["ground-map cells a side", "at most 4096"]),
+        ("geometry", "offset_step_m", 1e-9, ["offsets", "at most 10000"]),
+        ("geometry", "station_step_m", 1e-9, ["stations", "at most 10000"]),
+        ("geometry", "sample_step_m", 1e-9, ["camera samples", "at most 10000"]),
     ],
     ids=["trajectory points", "map cells", "offsets", "stations", "samples"],
 )
@@ -142,12 +142,12 @@ def test_every_size_a_model_file_gives_is_bounded(tmp_path: Path, capsys, block,
     from helpers import skip_path_weights
     from terrapref.learning.model_file import _write, read_model_file, save_model
     from terrapref.learning.network import ClassifierConfig
-    from test_corridor import DRIVER_LIKE, _corridor_meta
+    from test_offset_rule import DRIVER_LIKE, _offset_meta
 
     config = ClassifierConfig(hidden=8, skip=True)
-    good = save_model(tmp_path / "good.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
+    good = save_model(tmp_path / "good.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
     weights, meta = read_model_file(good)
-    meta["features"][block][key] = value
+    (meta["rules"][0] if block == "geometry" else meta["features"])[block][key] = value  # the offset rule's geometry, or C's preference set
     model = tmp_path / "big.safetensors"
     _write(model, weights, meta)
     assert main(["evaluate", str(model), "fig7a_non_traversable_longer", "--seeds", "1", "--no-driver", "--out", str(tmp_path / "ev")]) == 2

@@ -16,7 +16,7 @@ from terrapref.learning.model_file import load_model, save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.scenario import resolve_scenario
 from terrapref.world import rasterise
-from test_corridor import DRIVER_LIKE, _corridor_meta
+from test_offset_rule import DRIVER_LIKE, _offset_meta
 
 TS = typestore()
 POSES = [(20.0 + 0.1 * i, 15.0, 0.0) for i in range(6)]  # 0.1 m a frame along fig7's path, frames 0.1 s apart
@@ -26,7 +26,7 @@ POSES = [(20.0 + 0.1 * i, 15.0, 0.0) for i in range(6)]  # 0.1 m a frame along f
 def setup(tmp_path_factory):
     root = tmp_path_factory.mktemp("node")
     config = ClassifierConfig(hidden=8, skip=True)
-    model = save_model(root / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
+    model = save_model(root / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
     (root / "robot.yaml").write_text(
         "format: terrapref-robot/1\ntopics: {segmentation: /seg, camera_info: /info, odometry: /odom, command: /cmd}\n"
         "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n"

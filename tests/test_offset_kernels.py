@@ -599,7 +599,7 @@ def _corridor_features_numpy(
     beyond=st.integers(0, 12),
     on_path=st.sampled_from([0.0, 0.05, 0.3, 1.0]),
 )
-def test_corridor_features_give_the_numpy_forms_features(seed: int, k: int, gap: int, beyond: int, on_path: float):
+def test_offset_rule_features_give_the_numpy_forms_features(seed: int, k: int, gap: int, beyond: int, on_path: float):
     rng = np.random.default_rng(seed)
     config = OffsetGeometry(station_step_m=float(rng.choice([0.25, 0.1, 0.3])), span_m=float(rng.uniform(0.0, 8.0)))
     stations, offsets = config.stations, config.offsets

@@ -107,12 +107,12 @@ def setup(tmp_path_factory, fig7_recording):
     from helpers import skip_path_weights
     from terrapref.learning.model_file import save_model
     from terrapref.learning.network import ClassifierConfig
-    from test_corridor import DRIVER_LIKE, _corridor_meta
+    from test_offset_rule import DRIVER_LIKE, _offset_meta
 
     root = tmp_path_factory.mktemp("ros1")
     (root / "rec").symlink_to(fig7_recording, target_is_directory=True)
     config = ClassifierConfig(hidden=8, skip=True)
-    model = save_model(root / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
+    model = save_model(root / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
     (root / "robot.yaml").write_text(
         "format: terrapref-robot/1\n"
         "topics: {segmentation: /seg, camera_info: /cam/info, odometry: /odom, command: /cmd, path: /plan}\n"

@@ -192,12 +192,12 @@ def system(tmp_path_factory, fig7_recording):
     from terrapref.interop.ros_messages import typestore
     from terrapref.learning.model_file import save_model
     from terrapref.learning.network import ClassifierConfig
-    from test_corridor import DRIVER_LIKE, _corridor_meta
     from test_live import _watch
+    from test_offset_rule import DRIVER_LIKE, _offset_meta
 
     root = tmp_path_factory.mktemp("ros2")
     config = ClassifierConfig(hidden=8, skip=True)
-    model = save_model(root / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
+    model = save_model(root / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
     rec = read_recording(fig7_recording)
     frames = recording_frames(rec)
     part = slice(FIRST, FIRST + FRAMES + 1)  # one frame more, for after the bad input

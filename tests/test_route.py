@@ -21,7 +21,7 @@ from terrapref.scenario import load_scenario
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import default_classes
 from terrapref.world import rasterise
-from test_corridor import DRIVER_LIKE, _corridor_meta, _scenario, _terrain
+from test_offset_rule import DRIVER_LIKE, _corridor_meta, _scenario, _terrain
 
 CONTROL = FeatureConfig().preference.control  # the default control set: 1 m/s
 

@@ -324,7 +324,7 @@ def test_the_offset_stage_stops_at_the_wall_reading_its_own_ground_map(tmp_path:
     from helpers import skip_path_weights
     from terrapref.learning.model_file import load_model, save_model
     from terrapref.learning.network import ClassifierConfig
-    from test_corridor import DRIVER_LIKE, _corridor_meta
+    from test_offset_rule import DRIVER_LIKE, _corridor_meta
 
     config = ClassifierConfig(hidden=8, skip=True)
     path = save_model(tmp_path / "offset.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))

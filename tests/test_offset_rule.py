@@ -223,7 +223,7 @@ def test_the_softmax_fit_recovers_the_weights_that_made_the_labels():
     np.testing.assert_allclose(theta, truth, atol=1e-6)
 
 
-def test_the_corridor_fit_picks_the_near_distance_that_explains_the_labels():
+def test_the_offset_fit_picks_the_near_distance_that_explains_the_labels():
     """Frames where the driver keeps to the path while a patch is far and swerves once it is near."""
     rng = np.random.default_rng(1)
     c = OffsetGeometry()
@@ -364,7 +364,7 @@ def test_ground_never_seen_is_priced_at_the_mean_of_the_non_lethal_classes(camer
         OffsetSteering(OffsetUtility(DRIVER_LIKE[:-1], 5.0), camera, _terrain((0,)), CONTROL)
 
 
-def _corridor_meta(weights, near_m=5.0) -> dict:
+def _oldest_offset_meta(weights, near_m=5.0) -> dict:
     """A model file's header as files before the ``stages`` list wrote it: the offset rule's
     utility as ``corridor``, its geometry in the features' ``corridor``."""
     meta = model_meta()
@@ -378,7 +378,7 @@ def _offset_meta(weights, near_m=5.0) -> dict:
     return {**model_meta(), "rules": [block], "drives": "offset"}
 
 
-@pytest.mark.parametrize("make, key", [(_corridor_meta, "rules"), (_offset_meta, "rules")])
+@pytest.mark.parametrize("make, key", [(_oldest_offset_meta, "rules"), (_offset_meta, "rules")])
 def test_a_model_file_with_an_offset_utility_drives_by_the_offset_rule_old_or_new(tmp_path, make, key):
     config = ClassifierConfig(hidden=8, skip=True)
     path = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), make(DRIVER_LIKE))
@@ -421,7 +421,7 @@ class _CountingFeaturizer:
 
 def test_the_offset_stage_leaves_u_and_c_until_a_decision_reports_them(tmp_path, camera):
     config = ClassifierConfig(hidden=8, skip=True)
-    model = load_model(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE)))
+    model = load_model(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _oldest_offset_meta(DRIVER_LIKE)))
     scenario = _scenario([MUD])
     image = _seen_from(scenario, camera, (5.0, 10.0, 0.0)).image
     planners = {how: Planner(model) for how in ("view", "array")} | {"argmax": Planner(model, rule="argmax")}
@@ -507,7 +507,7 @@ _FIT = """
 import sys, hashlib
 import numpy as np
 sys.path.insert(0, {tests!r})
-from test_corridor import _fit_case
+from test_offset_rule import _fit_case
 
 print(hashlib.sha256(_fit_case().tobytes()).hexdigest())
 """
@@ -529,7 +529,7 @@ def _fit_case() -> np.ndarray:
 CPU_CHECK = CpuCheck.of("corridor fit", _FIT.format(tests=os.path.dirname(__file__)), SETTINGS)
 
 
-def test_the_corridor_fit_gives_the_same_weights_under_every_cpu_setting(cpu_outputs):
+def test_the_offset_fit_gives_the_same_weights_under_every_cpu_setting(cpu_outputs):
     hashes = {out.strip() for _, out in cpu_outputs["corridor fit"]}
     assert len(hashes) == 1
 
