@@ -21,7 +21,7 @@ from terrapref.scenario import load_scenario
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import default_classes
 from terrapref.world import rasterise
-from test_offset_rule import DRIVER_LIKE, _corridor_meta, _scenario, _terrain
+from test_offset_rule import DRIVER_LIKE, _offset_meta, _scenario, _terrain
 
 CONTROL = FeatureConfig().preference.control  # the default control set: 1 m/s
 
@@ -72,7 +72,7 @@ def test_lethal_terrain_is_kept_clear_by_half_the_width_and_the_margin_or_refuse
 
 def test_terrapref_route_writes_a_scenario_that_follows_the_route(tmp_path, capsys):
     config = ClassifierConfig(hidden=8, skip=True)
-    model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
+    model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
     out = tmp_path / "route.yaml"
     assert main(["route", "fig7_rock_vs_non_traversable_left", "--model", str(model), "--out", str(out)]) == 0
     assert "meets lethal terrain" in capsys.readouterr().out  # the path itself clips the trees

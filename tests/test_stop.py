@@ -324,10 +324,10 @@ def test_the_offset_stage_stops_at_the_wall_reading_its_own_ground_map(tmp_path:
     from helpers import skip_path_weights
     from terrapref.learning.model_file import load_model, save_model
     from terrapref.learning.network import ClassifierConfig
-    from test_offset_rule import DRIVER_LIKE, _corridor_meta
+    from test_offset_rule import DRIVER_LIKE, _offset_meta
 
     config = ClassifierConfig(hidden=8, skip=True)
-    path = save_model(tmp_path / "offset.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
+    path = save_model(tmp_path / "offset.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
     planner = Planner(load_model(path))
     assert not planner.stop_rule.own_map and planner.stop_rule.map is planner.runner.ground_map  # one map, the stage's
     m = run_one(RunSpec(wall, 0, "planner", str(path), PROFILE)).metrics

@@ -622,10 +622,10 @@ def test_drive_live_sends_every_driven_frame_and_riding_along_the_planners_costm
     from helpers import skip_path_weights
     from terrapref.learning.model_file import save_model
     from terrapref.learning.network import ClassifierConfig
-    from test_offset_rule import DRIVER_LIKE, _corridor_meta
+    from test_offset_rule import DRIVER_LIKE, _offset_meta
 
     config = ClassifierConfig(hidden=8, skip=True)
-    model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _corridor_meta(DRIVER_LIKE))
+    model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
     view = _Collecting()
     result = run_teleop(
         "demo_course",
