@@ -8,6 +8,7 @@ import math
 from pathlib import Path
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 from helpers import linear_model, one_line_error
@@ -246,3 +247,41 @@ def test_a_bad_model_in_a_worker_is_a_user_error_not_a_broken_pool(tmp_path: Pat
 )
 def test_figures_are_named_for_any_file_system(scenario: str, stem: str):
     assert file_stem(scenario) == stem
+
+
+def test_speed_by_class_seconds_there_and_lateral_acceleration_are_closed_form():
+    """A hand-made log at 30 Hz: 10 m straight at 1.5 m/s across a mud strip (x 4-6 m), then a
+    quarter circle of radius 2 m at 1 m/s: mean speeds, seconds per class, a zone's speed and
+    v^2 / r = 0.5 m/s^2."""
+    from terrapref.evaluation.scoring import score_run
+    from terrapref.scenario import parse_scenario
+    from terrapref.sim.loop import EpisodeLog
+    from terrapref.world import rasterise
+
+    scenario = parse_scenario(
+        {
+            "format": "terrapref-scenario/1",
+            "name": "speeds",
+            "world": {"size_m": [20.0, 20.0], "resolution_m": 0.05, "background": "grass"},
+            "terrain": [{"class": "mud", "rectangle": {"center": [5.0, 5.0], "size": [2.0, 4.0]}}],
+            "path": {"waypoints": [[0.0, 5.0], [10.0, 5.0], [12.0, 7.0]]},
+            "zones": [{"id": "mud", "expect": "mud", "rectangle": {"center": [5.0, 5.0], "size": [2.0, 4.0]}}],
+        }
+    )
+    dt = 1.0 / 30.0
+    x = np.arange(0.0, 10.0 + 1e-9, 1.5 * dt)
+    straight = np.stack([x, np.full_like(x, 5.0), np.zeros_like(x)], axis=1)
+    a = np.arange(1, round((math.pi / 2) / (dt / 2.0)) + 1) * (dt / 2.0)  # 1 m/s on a 2 m circle: w = 0.5 rad/s
+    arc = np.stack([straight[-1, 0] + 2.0 * np.sin(a), 7.0 - 2.0 * np.cos(a), a], axis=1)
+    trace = np.vstack([straight, arc])
+    log = EpisodeLog("speeds", trace, np.zeros((0, 2)), True, 0, (len(trace) - 1) * dt)
+    m = score_run(log, scenario, rasterise(scenario), PreferenceProfile.default())
+    assert m.speed_by_class_mps["mud"]["mps"] == pytest.approx(1.5, abs=1e-3)
+    assert m.speed_by_class_mps["mud"]["s"] == pytest.approx(2.0 / 1.5, abs=dt)
+    grass = m.speed_by_class_mps["grass"]
+    assert grass["s"] == pytest.approx(8.0 / 1.5 + math.pi, abs=2 * dt)  # the rest of the straight, then the quarter circle
+    assert grass["mps"] == pytest.approx((8.0 + math.pi) / grass["s"], abs=2e-3)
+    assert m.max_lateral_accel_mps2 == pytest.approx(0.5, abs=1e-3)
+    (zone,) = m.zones
+    assert zone.speed_mps == pytest.approx(1.5, abs=1e-3) and "speed_mps" in zone.to_dict()
+    assert {"speed_by_class_mps", "max_lateral_accel_mps2"} <= set(m.to_dict()) and m.time_s == pytest.approx(log.duration_s)

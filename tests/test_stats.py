@@ -164,6 +164,7 @@ def test_annotated_zones_are_written_with_the_drivers_choice(results: list[RunRe
         "distance_m",
         "clearance_m",
         "reached",
+        "speed_mps",
         "driver_choice",
         "agrees",
     ]

@@ -15,7 +15,7 @@ under the whole footprint (the line across the vehicle), not only under its refe
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -61,6 +61,16 @@ def segments(xy: np.ndarray, max_step_m: float = 0.05) -> tuple[np.ndarray, np.n
     return mid, length[seg] / parts[seg]
 
 
+def piece_times(xy: np.ndarray, dt_s: float, max_step_m: float = 0.05) -> np.ndarray:
+    """The time [s] spent on each piece :func:`segments` cuts the polyline ``xy`` (T, 2) into, its
+    points ``dt_s`` apart: each step's time shared evenly between its pieces."""
+    xy = np.asarray(xy, dtype=float)
+    if len(xy) < 2:
+        return np.zeros(0)
+    parts = np.maximum(1, np.ceil(np.linalg.norm(np.diff(xy, axis=0), axis=1) / max_step_m).astype(int))
+    return np.repeat(dt_s / parts, parts)
+
+
 def classes_in_zone(zone: Zone, world: WorldMap) -> list[str]:
     """Non-background classes painted inside a zone (cells whose centres lie in it)."""
     res = world.resolution_m
@@ -88,6 +98,7 @@ class ZoneResult:
     distance_m: dict[str, float]
     clearance_m: float | None = None  # closest approach to terrain not chosen; None: none in reach
     reached: bool = True  # the vehicle got past the zone (else its choice is NOT_REACHED)
+    speed_mps: float | None = None  # the mean speed while the reference point was in the zone [m/s]; None: never in it, or not timed
 
     def to_dict(self) -> dict:
         return to_plain(self)
@@ -233,6 +244,10 @@ class RunMetrics:
     contact_m: float = 0.0  # distance driven so [m]
     stop_count: int = 0  # times the vehicle came to a stop
     stops_s: dict[str, float] = field(default_factory=dict)  # seconds stood still, by reason
+    # By class under the reference point: the mean speed there ("mps") and the seconds spent there ("s").
+    speed_by_class_mps: dict[str, dict[str, float]] = field(default_factory=dict)
+    time_s: float | None = None  # the time to the end of the path, or to the end of the run [s]
+    max_lateral_accel_mps2: float = 0.0  # the largest |v w| over the run's controller ticks [m/s^2]
 
     @property
     def zone_successes(self) -> int:
@@ -279,6 +294,18 @@ def score_run(
     cls = world.class_at(mid)
     classes = world.classes
     dist = {c.name: round(float(length[cls == c.id].sum()), 3) for c in classes.classes}
+    dt_s = log.duration_s / (len(xy) - 1) if len(xy) > 1 else 0.0  # the controller's tick
+    time = piece_times(xy, dt_s)
+    speeds = {
+        c.name: {"mps": round(float(length[on].sum() / time[on].sum()), 4), "s": round(float(time[on].sum()), 3)}
+        for c in classes.classes
+        if (on := cls == c.id).any() and time[on].sum() > 0
+    }
+    zones = [
+        replace(z, speed_mps=round(float(length[inside].sum() / time[inside].sum()), 4) if time[inside].sum() > 0 else None)
+        for z, zone in zip(score_zones(log.trace, scenario, world, profile, log.progress_m, rules), scenario.zones, strict=True)
+        for inside in [zone.shape.contains(mid) if len(mid) else np.zeros(0, bool)]
+    ]
     return RunMetrics(
         completed=log.completed,
         collisions=log.collisions,
@@ -287,11 +314,25 @@ def score_run(
         max_cross_track_m=round(float(err.max()) if len(err) else 0.0, 4),
         rms_cross_track_outside_zones_m=round(rms(out), 4),
         distance_m=dist,
-        zones=score_zones(log.trace, scenario, world, profile, log.progress_m, rules),
+        zones=zones,
         ended=log.ended,
         progress_m=round(log.progress_m, 3),
         contact_s=round(log.contact_s, 3),
         contact_m=round(log.contact_m, 3),
         stop_count=log.stop_count,
         stops_s={k: round(v, 3) for k, v in sorted(log.stops.items())},
+        speed_by_class_mps=speeds,
+        time_s=round(log.duration_s, 3),
+        max_lateral_accel_mps2=round(_max_lateral_accel(log.trace, dt_s), 4),
     )
+
+
+def _max_lateral_accel(trace: np.ndarray, dt_s: float) -> float:
+    """The largest |v w| [m/s^2] between consecutive controller ticks of ``trace`` (T, 3): v the
+    step's length over ``dt_s``, w its turn (wrapped to +-pi) over ``dt_s``."""
+    if len(trace) < 2 or dt_s <= 0:
+        return 0.0
+    step = np.diff(trace, axis=0)
+    v = np.hypot(step[:, 0], step[:, 1]) / dt_s
+    w = (step[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    return float(np.max(np.abs(v * w / dt_s)))
