@@ -60,7 +60,7 @@ def model_header(config: TrainConfig, result: TrainResult, source: ModelHeader) 
         identifiability=result.identifiability.to_dict() if result.identifiability is not None else None,
         steadying=result.steadying.to_dict() if result.steadying is not None else None,
         rules=tuple(rule.header() for rule in result.rules),
-        drives=result.rules[-1].type if result.rules else None,
+        drives=result.drives,
         members=members or None,
         epoch=result.best_epoch,
     )

@@ -194,6 +194,11 @@ class TrainResult:
     steadying: Steadying | None = None  # the hand's tremor and what was done about it, with DataOptions.steady_labels
     rules: list[Any] = field(default_factory=list)  # the decision rules fitted with C (terrapref.rules), in order
 
+    @property
+    def drives(self) -> str | None:
+        """The type of the rule that drives the model: the last one fitted (None: none was, C's argmax drives)."""
+        return self.rules[-1].type if self.rules else None
+
 
 def _ensemble(results: list[TrainResult]) -> TrainResult:
     """One result whose weights hold every member's, under ``members.{j}.`` names."""
