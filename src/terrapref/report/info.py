@@ -205,10 +205,11 @@ def _model_lines(p: Path, meta: dict) -> list[str]:
     h = loaded.header
     c, data = h.classifier, h.data
     state = {INTERRUPTED: ", INTERRUPTED: the best epochs so far, no decision rules", CHECKPOINT: f", checkpoint of epoch {h.epoch}"}
-    runs = (
-        [(f"member {j + 1}: ", m.history, m.best_epoch) for j, m in enumerate(h.members)] if h.members else [("", h.history, h.best_epoch)]
-    )
-    chosen = [f"{label}{line}" for label, history, best in runs if (line := _epoch_line(history, best))]
+    runs = [(m.history, m.best_epoch) for m in h.members] if h.members else [(h.history, h.best_epoch)]
+    chosen = [
+        _epoch_line(len(history), best, history[best - 1].val_loss, history[best - 1].val_acc) if _chosen(history, best) else None
+        for history, best in runs
+    ]
     return (
         [
             f"{p}: terrapref model ({model.kind}{state.get(h.status, '')})",
@@ -222,18 +223,27 @@ def _model_lines(p: Path, meta: dict) -> list[str]:
                 else "? (none recorded)"
             ),
         ]
-        + [("training        " if i == 0 else " " * 16) + line for i, line in enumerate(chosen)]
+        + _training_lines(chosen, bool(h.members))
         + _common(meta)
         + _identifiability(meta)
     )
 
 
-def _epoch_line(history, best: int | None) -> str | None:
-    """Epochs run, the epoch chosen and its validation scores (``history``: EpochMetrics)."""
-    if not history or best is None or not 0 < best <= len(history):
-        return None
-    e = history[best - 1]
-    return f"{len(history)} epochs, chose epoch {best}: val loss {e.val_loss:.4f}, val acc {e.val_acc:.3f}"
+def _chosen(history, best) -> bool:
+    """Whether ``best`` is an epoch of ``history`` (from 1)."""
+    return isinstance(history, (list, tuple)) and isinstance(best, int) and 0 < best <= len(history)
+
+
+def _epoch_line(epochs: int, best: int, val_loss: float, val_acc: float) -> str:
+    """Epochs run, the epoch chosen and its validation scores, as one line."""
+    return f"{epochs} epochs, chose epoch {best}: val loss {val_loss:.4f}, val acc {val_acc:.3f}"
+
+
+def _training_lines(chosen: list[str | None], members: bool) -> list[str]:
+    """The ``training`` lines: the run's chosen epoch, or each ensemble member's (``members``);
+    None where the history does not record it."""
+    lines = [f"member {j + 1}: {line}" if members else line for j, line in enumerate(chosen) if line]
+    return [("training        " if i == 0 else " " * 16) + line for i, line in enumerate(lines)]
 
 
 def _damaged_model_lines(p: Path, meta: dict, exc) -> list[str]:
@@ -250,20 +260,14 @@ def _damaged_model_lines(p: Path, meta: dict, exc) -> list[str]:
 
 def _training(meta: dict) -> list[str]:
     """The epoch training chose and its validation scores, if the history records it; for an
-    ensemble, each member's."""
+    ensemble, each member's (from a header as the file holds it)."""
     members = meta.get("members") if isinstance(meta.get("members"), list) else None
-    if not members:
-        chosen = _chosen_epoch(meta)
-        return [f"training        {chosen}"] if chosen else []
-    chosen = [f"member {j + 1}: {c}" for j, m in enumerate(members) if isinstance(m, dict) and (c := _chosen_epoch(m))]
-    return [("training        " if i == 0 else " " * 16) + line for i, line in enumerate(chosen)]
-
-
-def _chosen_epoch(record: dict) -> str | None:
-    """A history and its best epoch as one line: epochs run, the epoch chosen and its validation scores."""
-    history = record.get("history", []) if isinstance(record.get("history"), list) else []
-    best = record.get("best_epoch")
-    chosen = history[best - 1] if isinstance(best, int) and 0 < best <= len(history) else None
-    if not isinstance(chosen, dict):
-        return None
-    return f"{len(history)} epochs, chose epoch {best}: val loss {chosen.get('val_loss', float('nan')):.4f}, val acc {chosen.get('val_acc', float('nan')):.3f}"
+    chosen = []
+    for record in members or [meta]:
+        history, best = (record.get("history"), record.get("best_epoch")) if isinstance(record, dict) else (None, None)
+        epoch = history[best - 1] if _chosen(history, best) else None
+        nan = float("nan")
+        chosen.append(
+            _epoch_line(len(history), best, epoch.get("val_loss", nan), epoch.get("val_acc", nan)) if isinstance(epoch, dict) else None
+        )
+    return _training_lines(chosen, bool(members))
