@@ -308,7 +308,7 @@ def test_a_header_is_written_in_the_files_order_and_read_back_equal(tmp_path: Pa
     weights = {f"members.{j}.{k}": v for j in range(2) for k, v in random_weights(replace(config, members=1), j).items()}
     model = load_model(write_model(tmp_path / "m.safetensors", header, weights))
     assert model.header == header and model.meta == json.loads(json.dumps(header.to_dict()))
-    assert model.classifier == config and model.features == ODD_FEATURES and model.rule_blocks == (header.rules, "rules")
+    assert model.classifier == config and model.features == ODD_FEATURES and model.header.rules == header.rules
 
 
 def test_a_checkpoints_member_count_and_an_interrupted_runs_progress_are_its_own_entries():

@@ -16,7 +16,7 @@ import numpy as np
 from terrapref.camera import CameraConfig
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
-from terrapref.learning.header import CLASSIFIER, FORMAT, Block, ModelHeader, model_context, rule_blocks
+from terrapref.learning.header import CLASSIFIER, FORMAT, ModelHeader, model_context, rule_blocks
 from terrapref.learning.network import MEMBERS, ClassifierConfig, member_prefix
 from terrapref.tensorfile import read_tensor_file, write_tensor_file
 from terrapref.terrain import ClassTable
@@ -72,17 +72,6 @@ class LoadedModel:
     @property
     def profile(self) -> tuple[str, ...]:
         return self.header.profile or ()
-
-    @property
-    def rule_blocks(self) -> tuple[tuple[Block, ...], str] | None:
-        """The decision rules' blocks, in order, and the name of their list in the file (``rules``,
-        or an older file's ``stages``); None for a file that lists them in neither (terrapref.rules
-        reads them, and the oldest files' own keys)."""
-        if self.header.rules is not None:
-            return self.header.rules, "rules"
-        if self.header.stages is not None:
-            return self.header.stages, "stages"
-        return None
 
 
 def write_model(path: str | Path, header: ModelHeader, weights: dict[str, np.ndarray]) -> Path:

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
+from terrapref.learning.header import rule_blocks
 from terrapref.registry import Registry
 from terrapref.rules.argmax import ArgmaxRule
 from terrapref.rules.base import Choice, HeaderContext, Rule, RuleConfig, RuleContext, RuleInput, RuleRunner, Where
@@ -86,11 +87,18 @@ def read_rules(
     return tuple(rules)
 
 
+def _listed(meta: Mapping[str, Any], source: str) -> tuple[tuple[Mapping[str, Any], ...], str]:
+    """The rules' blocks a file's metadata lists, and the name of their list for errors: its
+    ``rules``, an older file's ``stages``, or the oldest files' own keys (:func:`legacy_blocks`)."""
+    for key in ("rules", "stages"):
+        if (blocks := rule_blocks(meta, key, source)) is not None:
+            return blocks, key
+    return legacy_blocks(meta, source), "rules"
+
+
 def rules_of(model: LoadedModel) -> tuple[tuple[Rule, ...], str | None]:
-    """The rules a model file lists (its ``rules``, an older file's ``stages``, or the oldest
-    files' own keys), read, and the type of the one it names to drive (None: not named)."""
-    listed = model.rule_blocks
-    blocks, key = listed if listed is not None else (legacy_blocks(model.meta, model.path), "rules")
+    """The rules a model file of C lists, read, and the type of the one it names to drive (None: not named)."""
+    blocks, key = _listed(model.meta, model.path)
     raw = model.meta.get("features")
     return read_rules(blocks, model.features, raw if isinstance(raw, Mapping) else {}, model.path, key), model.header.drives
 
@@ -99,15 +107,12 @@ def rules_in(meta: Mapping[str, Any], source: str) -> tuple[tuple[Rule, ...], Ru
     """The rules a file's metadata lists (a model file's header, or an exported graph's
     metadata), read against its features, and the one that drives; a problem is a
     :class:`UserError` naming ``source`` and the field."""
-    from terrapref.learning.header import rule_blocks
-
     raw = meta.get("features")
     try:
         features = FeatureConfig.from_dict(dict(raw))
     except (KeyError, TypeError, ValueError) as exc:
         raise UserError(source, f"invalid configuration ({exc})", field="features") from None
-    rules = next(((blocks, key) for key in ("rules", "stages") if (blocks := rule_blocks(meta, key, source)) is not None), None)
-    blocks, key = rules if rules is not None else (legacy_blocks(meta, source), "rules")
+    blocks, key = _listed(meta, source)
     read = read_rules(blocks, features, raw, source, key)
     drives = meta.get("drives")
     if drives is not None and not isinstance(drives, str):
