@@ -12,11 +12,20 @@ from terrapref.errors import Terminated, UserError
 from terrapref.fileio import check_output, write_text_atomic
 
 
-def _cmd_ros1(args: argparse.Namespace) -> int:
-    from terrapref.interop.ros1 import NodeOptions, run_node
+def _node_options(args: argparse.Namespace):
+    """The options a node's flags give (terrapref.interop.node_core.NodeOptions), checked before
+    the node joins ROS: a flag not given is left to the node's parameter or default."""
+    from terrapref.interop.node_core import NodeOptions
 
     options = NodeOptions(stamped=True if args.stamped else None, rate=args.rate, path_file=args.path_file, cmd_topic=args.cmd_topic)
-    options.resolved(lambda name, default: default)  # what the command line gives is checked before ROS starts
+    options.resolved(lambda name, default: default)
+    return options
+
+
+def _cmd_ros1(args: argparse.Namespace) -> int:
+    from terrapref.interop.ros1 import run_node
+
+    options = _node_options(args)
     view = live_view(args)
     try:
         run_node(args.model, args.robot, options, live=view)
@@ -50,11 +59,9 @@ def _cmd_ros2(args: argparse.Namespace) -> int:
     from terrapref.extras import check
 
     check("ros2", "terrapref ros2")  # before the model is read
-    from terrapref.interop.node_core import NodeOptions
     from terrapref.interop.ros2 import run_node
 
-    options = NodeOptions(stamped=True if args.stamped else None, rate=args.rate, path_file=args.path_file, cmd_topic=args.cmd_topic)
-    options.resolved(lambda name, default: default)  # what the command line gives is checked before DDS starts
+    options = _node_options(args)
     view = live_view(args)
     try:
         run_node(args.model, args.robot, options, ros_args=args.ros_args or (), live=view)
