@@ -92,10 +92,6 @@ class Model:
     def profile(self) -> tuple[str, ...]:
         return tuple(self.policy.profile or ())
 
-    @property
-    def is_classifier(self) -> bool:
-        return self.kind == CLASSIFIER
-
     def planner(self, camera: CameraConfig | None = None, rule: Rule | str | None = None, stop: StopConfig | None = None) -> Planner:
         """The planner this model drives (``rule``: another of its rules, or ``argmax``); a model
         trained for another camera than ``camera`` is refused."""

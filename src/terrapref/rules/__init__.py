@@ -87,18 +87,19 @@ def read_rules(
     return tuple(rules)
 
 
-def _listed(meta: Mapping[str, Any], source: str) -> tuple[tuple[Mapping[str, Any], ...], str]:
-    """The rules' blocks a file's metadata lists, and the name of their list for errors: its
-    ``rules``, an older file's ``stages``, or the oldest files' own keys (:func:`legacy_blocks`)."""
-    for key in ("rules", "stages"):
-        if (blocks := rule_blocks(meta, key, source)) is not None:
-            return blocks, key
+def _listed(rules: Sequence | None, stages: Sequence | None, meta: Mapping[str, Any], source: str) -> tuple[Sequence, str]:
+    """The rules' blocks a file lists, and the name of their list for errors: its ``rules``, an
+    older file's ``stages``, or else the oldest files' own keys of ``meta`` (:func:`legacy_blocks`)."""
+    if rules is not None:
+        return rules, "rules"
+    if stages is not None:
+        return stages, "stages"
     return legacy_blocks(meta, source), "rules"
 
 
 def rules_of(model: LoadedModel) -> tuple[tuple[Rule, ...], str | None]:
     """The rules a model file of C lists, read, and the type of the one it names to drive (None: not named)."""
-    blocks, key = _listed(model.meta, model.path)
+    blocks, key = _listed(model.header.rules, model.header.stages, model.meta, model.path)
     raw = model.meta.get("features")
     return read_rules(blocks, model.features, raw if isinstance(raw, Mapping) else {}, model.path, key), model.header.drives
 
@@ -112,7 +113,7 @@ def rules_in(meta: Mapping[str, Any], source: str) -> tuple[tuple[Rule, ...], Ru
         features = FeatureConfig.from_dict(dict(raw))
     except (KeyError, TypeError, ValueError) as exc:
         raise UserError(source, f"invalid configuration ({exc})", field="features") from None
-    blocks, key = _listed(meta, source)
+    blocks, key = _listed(rule_blocks(meta, "rules", source), rule_blocks(meta, "stages", source), meta, source)
     read = read_rules(blocks, features, raw, source, key)
     drives = meta.get("drives")
     if drives is not None and not isinstance(drives, str):
