@@ -25,7 +25,8 @@ from terrapref.learning.pipeline import RunOptions, train_and_save
 from terrapref.planner import Planner, PlannerDriver
 from terrapref.recipes import PAPER, TEACH, RecipeSetup, demonstrate
 from terrapref.scenario import resolve_scenario
-from terrapref.sim import Simulation, run_episode
+from terrapref.sim import SimConfig, Simulation, run_episode
+from terrapref.vehicle import VehicleConfig
 
 DATA = Path(__file__).parent / "data"
 
@@ -102,7 +103,9 @@ def test_the_planner_makes_the_decisions_it_made_before_the_forward_pass_was_com
     recipe = replace(recipe, train=replace(recipe.train, optimiser=replace(recipe.train.optimiser, epochs=epochs, lr=1e-3)))
     features = recipe.features()
     rules = tuple(r for r in recipe.rules if r.type != "offset")  # C and its second stage drive, as when the file was made
-    recordings = demonstrate(recipe, tmp_path / recipe.name, RecipeSetup(7, course=course, features=features), write=False)
+    recordings = demonstrate(
+        recipe, tmp_path / recipe.name, RecipeSetup(7, course=course, features=features, vehicle=VehicleConfig.paper()), write=False
+    )
     model = tmp_path / f"{recipe.name}.safetensors"
     train_and_save(
         build_dataset(recordings, features, rules=rules),
@@ -113,7 +116,7 @@ def test_the_planner_makes_the_decisions_it_made_before_the_forward_pass_was_com
     )
     for name in driven:
         driver = PlannerDriver(Planner(load_model(model)), keep=True)  # C and its second stage (if any) drive, as when the file was made
-        run_episode(Simulation(resolve_scenario(name)), driver, np.random.default_rng(0))
+        run_episode(Simulation(resolve_scenario(name), config=SimConfig.paper()), driver, np.random.default_rng(0))  # the vehicle of then
         made = [d.index for d in driver.decisions]
         want = golden[f"{recipe.name}/{name}"]
         # The stop rule came after the file: up to the first stop, the same decisions; from there

@@ -15,6 +15,7 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import terrapref.sim.env
 from terrapref.scenario import Scenario, parse_scenario
+from terrapref.sim import SimConfig
 from terrapref.sim.env import ENV_ID, ENV_ID_CONTINUOUS, MAX_EPISODE_STEPS, EnvConfig, OffRoadNavEnv, RewardConfig
 
 IDS = [ENV_ID, ENV_ID_CONTINUOUS]
@@ -36,6 +37,9 @@ def _scenario(
 
 
 def _env(scenario=None, **kwargs) -> OffRoadNavEnv:
+    """The env on a small course; commands are applied at once (the paper's vehicle) unless ``sim``
+    says otherwise, so that rewards are checked against closed-form distances."""
+    kwargs.setdefault("sim", SimConfig.paper())
     kwargs.setdefault("start_jitter_m", 0.0)
     kwargs.setdefault("start_yaw_jitter_rad", 0.0)
     return OffRoadNavEnv(scenario if scenario is not None else _scenario(), **kwargs)
@@ -250,11 +254,12 @@ def test_bad_continuous_actions_are_refused(action):
 
 
 def test_continuous_actions_are_scaled_and_clipped():
-    env = _env(action_type="continuous")
-    for action, command in (([1.0, 0.0], (1.0, 0.0)), ([-1.0, 0.5], (0.0, 0.5)), ([0.0, -1.0], (0.5, -1.0)), ([5.0, 2.0], (1.0, 1.0))):
+    env = _env(action_type="continuous", sim=SimConfig())  # the field UGV: 0..2 m/s
+    for action, command in (([1.0, 0.0], (2.0, 0.0)), ([-1.0, 0.5], (0.0, 0.5)), ([0.0, -1.0], (1.0, -1.0)), ([5.0, 2.0], (2.0, 1.0))):
         env.reset(seed=0)
         env.step(np.array(action, np.float32))
         assert tuple(env.sim.vehicle.command) == pytest.approx(command)
+        assert env.sim.vehicle.speed_mps == pytest.approx(min(command[0], 0.1))  # from rest at 1 m/s^2: 0.1 m/s after one frame
 
 
 # --- seeds, options, render --------------------------------------------------------------------
@@ -384,7 +389,7 @@ def test_a_gymnasium_vector_env_mixes_courses():
     )
     obs, info = envs.reset(seed=0)
     assert obs["image"].shape == (2, *SMALL, 1) and list(info["scenario"]) == ["demo_course", "test_course"]
-    for _ in range(3):
+    for _ in range(12):  # the field UGV reaches 1 m/s after 1 s at 1 m/s^2; then 0.1 m of progress a frame
         obs, reward, terminated, truncated, info = envs.step(np.array([10, 10]))
     np.testing.assert_allclose(reward, 0.1, atol=0.02)
     envs.close()

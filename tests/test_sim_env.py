@@ -11,6 +11,8 @@ from terrapref.scenario import Scenario, parse_scenario
 from terrapref.sim import Frame, SimConfig, Simulation, run_episode
 from terrapref.vehicle import Command, Pose, VehicleConfig
 
+AT_ONCE = SimConfig.paper()  # commands applied at once: the loop's timing and counting alone
+
 
 def _scenario(terrain: list[dict] | None = None, waypoints: list[list[float]] | None = None, start: list[float] | None = None) -> Scenario:
     data = {
@@ -49,7 +51,7 @@ class PursuitDriver:
 
 
 def test_frames_at_10hz_ticks_at_30hz():
-    sim = Simulation(_scenario())
+    sim = Simulation(_scenario(), config=AT_ONCE)
     frame = sim.reset()
     assert frame.index == 0 and frame.time_s == 0.0 and len(sim.trace) == 1
     for k in range(1, 6):
@@ -74,7 +76,7 @@ def test_camera_rate_must_divide_the_control_rate():
 
 
 def test_other_rates_keep_the_tick_count():
-    sim = Simulation(_scenario(), config=SimConfig(camera_rate_hz=5.0, vehicle=VehicleConfig(control_rate_hz=40.0)))
+    sim = Simulation(_scenario(), config=SimConfig(camera_rate_hz=5.0, vehicle=VehicleConfig(control_rate_hz=40.0, max_accel_mps2=None)))
     sim.step(Command(1.0, 0.0))
     assert len(sim.trace) == 1 + 8 and sim.time_s == pytest.approx(0.2)
     assert sim.vehicle.pose.x == pytest.approx(2.2, abs=1e-12)
@@ -101,7 +103,7 @@ def test_seeded_run_episode_is_identical():
 
 
 def test_simulation_reset_starts_over():
-    sim = Simulation(_scenario())
+    sim = Simulation(_scenario(), config=AT_ONCE)
     first = sim.reset()
     for _ in range(5):
         sim.step(Command(1.0, 0.3))
@@ -117,7 +119,7 @@ SECOND_STRIP = {"class": "non_traversable", "rectangle": {"center": [10.0, 5.0],
 
 
 def test_a_collision_counts_once_per_entry():
-    sim = Simulation(_scenario(terrain=[LETHAL_STRIP]))
+    sim = Simulation(_scenario(terrain=[LETHAL_STRIP]), config=AT_ONCE)
     for _ in range(40):  # 4 m: from x = 2 into the strip (5.5..6.5) and stopped inside it
         sim.step(Command(1.0, 0.0))
     assert 5.5 < sim.vehicle.pose.x < 6.5
@@ -131,7 +133,7 @@ def test_a_collision_counts_once_per_entry():
 
 
 def test_each_entry_is_a_new_collision():
-    sim = Simulation(_scenario(terrain=[LETHAL_STRIP, SECOND_STRIP]))
+    sim = Simulation(_scenario(terrain=[LETHAL_STRIP, SECOND_STRIP]), config=AT_ONCE)
     for _ in range(100):
         sim.step(Command(1.0, 0.0))
     assert sim.vehicle.pose.x == pytest.approx(12.0, abs=1e-9)
@@ -151,7 +153,7 @@ def test_non_lethal_terrain_is_no_collision():
 
 
 def test_run_episode_reaches_the_goal_and_stops():
-    sim = Simulation(_scenario())
+    sim = Simulation(_scenario(), config=AT_ONCE)
     log = run_episode(sim, PursuitDriver(noise_rps=0.0), np.random.default_rng(0))
     assert log.completed and log.collisions == 0
     assert log.duration_s == pytest.approx(len(log.commands) * 0.1)
@@ -186,3 +188,19 @@ def test_reset_accepts_a_numpy_pose():
     sim = Simulation(resolve_scenario("demo_course"))
     frame = sim.reset(np.array([5.0, 10.0, 0.25]))
     assert tuple(frame.pose) == (5.0, 10.0, 0.25)
+
+
+def test_the_default_vehicle_starts_from_rest_and_counts_the_distance_it_ramps_over():
+    sim = Simulation(_scenario(terrain=[LETHAL_STRIP]))  # the field UGV: 1 m/s^2 up, 2 m/s^2 down
+    for _ in range(10):
+        sim.step(Command(2.0, 0.0))
+    assert sim.vehicle.speed_mps == pytest.approx(1.0, abs=1e-12)  # 1 s of 1 m/s^2
+    assert sim.vehicle.pose.x == pytest.approx(2.0 + 0.5, abs=1e-9)
+    np.testing.assert_allclose(sim.speeds[:4], [0.0, 1 / 30, 2 / 30, 3 / 30], atol=1e-12)
+    while sim.vehicle.pose.x < 5.9:  # into the strip (5.5..6.5)
+        sim.step(Command(1.0, 0.0))
+    for _ in range(6):  # braking from 1 m/s at 2 m/s^2: 0.5 s and 0.25 m, all of it in contact
+        sim.step(Command(0.0, 0.0))
+    driven_in = sim.vehicle.pose.x - 5.5
+    assert sim.collisions == 1 and sim.vehicle.speed_mps == 0.0
+    assert sim.contact_m == pytest.approx(driven_in, abs=1 / 30 + 1e-9)  # counted per tick, at the ramped speed

@@ -23,7 +23,7 @@ from terrapref.planner.policy import LinearPolicy, PurePursuitPolicy
 from terrapref.planner.stop import StopConfig
 from terrapref.runtime import PlannerRuntime
 from terrapref.scenario import resolve_scenario
-from terrapref.sim import Simulation, run_episode
+from terrapref.sim import SimConfig, Simulation, run_episode
 from terrapref.stops import BLIND, NO_FREE_WAY, STALE
 from terrapref.terrain import PreferenceProfile, default_classes
 from terrapref.terrain.classes import UNKNOWN, ForeignIds, load_classes
@@ -239,7 +239,7 @@ def _strip_scenario(tmp_path: Path, y_min: float) -> str:
 
 def test_contact_counts_under_the_whole_footprint_not_only_its_centre(tmp_path: Path):
     scenario = resolve_scenario(_strip_scenario(tmp_path, 10.4))  # the strip starts 0.4 m left of the path: under the footprint
-    sim = Simulation(scenario)
+    sim = Simulation(scenario, config=SimConfig.paper())  # at 1 m/s from the first tick
     sim.reset(Pose(2.0, 10.0, 0.0))
     assert sim.collisions == 1 and sim.started_in_contact  # a start in contact is a collision
     for _ in range(10):

@@ -10,12 +10,15 @@ import pytest
 from terrapref.vehicle import Command, ControlSet, Pose, Vehicle, VehicleConfig, integrate_unicycle, wrap_angle
 
 
+AT_ONCE = VehicleConfig.paper()  # every command applied at once: the kinematics alone
+
+
 def _angle_diff(a: float, b: float) -> float:
     return abs(wrap_angle(a - b))
 
 
 def test_straight_drive_1mps_for_2s_is_2m():
-    vehicle = Vehicle(Pose(3.0, -1.0, 0.0))
+    vehicle = Vehicle(Pose(3.0, -1.0, 0.0), AT_ONCE)
     vehicle.set_command(Command(1.0, 0.0))
     for _ in range(60):  # 2 s at 30 Hz
         vehicle.tick()
@@ -26,7 +29,7 @@ def test_straight_drive_1mps_for_2s_is_2m():
 
 def test_straight_drive_follows_the_heading():
     yaw = math.radians(120.0)
-    vehicle = Vehicle(Pose(0.0, 0.0, yaw))
+    vehicle = Vehicle(Pose(0.0, 0.0, yaw), AT_ONCE)
     vehicle.set_command(Command(0.5, 0.0))
     for _ in range(90):  # 3 s
         vehicle.tick()
@@ -37,7 +40,7 @@ def test_full_circle_returns_to_the_start_pose():
     v, w = 1.0, 0.5
     period_s = 2 * math.pi / w
     n = 377  # ticks in one period: the rate is chosen so the period is a whole number of ticks
-    vehicle = Vehicle(Pose(2.0, 3.0, 0.7), VehicleConfig(control_rate_hz=n / period_s))
+    vehicle = Vehicle(Pose(2.0, 3.0, 0.7), VehicleConfig(control_rate_hz=n / period_s, max_accel_mps2=None))
     vehicle.set_command(Command(v, w))
     radius = v / w
     far = 0.0
@@ -86,7 +89,7 @@ def test_half_turn_at_unit_rate_ends_one_diameter_to_the_left():
 
 
 def test_controller_holds_the_last_command():
-    vehicle = Vehicle(Pose(0.0, 0.0, 0.0))
+    vehicle = Vehicle(Pose(0.0, 0.0, 0.0), AT_ONCE)
     assert vehicle.command == Command(0.0, 0.0)
     vehicle.tick()
     assert vehicle.pose == Pose(0.0, 0.0, 0.0)  # at rest until commanded
@@ -108,7 +111,7 @@ def test_commands_are_clipped_to_the_limits():
     assert vehicle.command == Command(0.0, 0.25)
     vehicle.set_command(Command(0.4, 2.0))
     assert vehicle.command == Command(0.4, 1.0)
-    fast = Vehicle(Pose(0.0, 0.0, 0.0), VehicleConfig(max_speed_mps=2.0))
+    fast = Vehicle(Pose(0.0, 0.0, 0.0), VehicleConfig(max_speed_mps=2.0, max_accel_mps2=None))
     fast.set_command(Command(5.0, 0.0))
     for _ in range(30):
         fast.tick()
@@ -216,3 +219,48 @@ def test_label_of_one_command_is_the_vectorised_label():
         got = np.array([control.label_of(float(x)) for x in w])
         np.testing.assert_array_equal(got, want)
         assert isinstance(control.label_of(0.3), int) and control.label_of(1) == control.label_of(np.array([1.0]))[0]
+
+
+def test_from_rest_the_speed_ramps_at_the_acceleration_limit_and_the_distance_is_its_integral():
+    vehicle = Vehicle(Pose(0.0, 0.0, 0.0), VehicleConfig(max_accel_mps2=1.0))  # 2 m/s top speed
+    vehicle.set_command(Command(2.0, 0.0))
+    speeds = []
+    for _ in range(90):  # 3 s at 30 Hz: 2 s of ramp, then 1 s at 2 m/s
+        vehicle.tick()
+        speeds.append(vehicle.speed_mps)
+    assert speeds[29] == pytest.approx(1.0, abs=1e-12)  # 1 m/s after 1 s
+    assert speeds[59] == pytest.approx(2.0, abs=1e-12) and speeds[-1] == 2.0
+    assert vehicle.pose.x == pytest.approx(0.5 * 1.0 * 2.0**2 + 2.0 * 1.0, abs=1e-9)  # a t^2 / 2, then v t
+
+
+def test_braking_from_full_speed_stops_within_the_braking_distance():
+    config = VehicleConfig(max_decel_mps2=2.0)
+    vehicle = Vehicle(Pose(0.0, 0.0, 0.0), config, speed_mps=2.0)
+    vehicle.set_command(Command(0.0, 0.0))
+    for _ in range(60):
+        vehicle.tick()
+    assert vehicle.speed_mps == 0.0
+    assert vehicle.pose.x == pytest.approx(config.braking_distance_m(2.0), abs=1e-9)
+    assert config.braking_distance_m(2.0) == pytest.approx(1.0)
+    assert VehicleConfig.paper().braking_distance_m(1.0) == 0.0
+
+
+def test_the_yaw_rate_follows_at_once_while_the_speed_ramps():
+    vehicle = Vehicle(Pose(0.0, 0.0, 0.0))
+    vehicle.set_command(Command(1.0, 0.5))
+    vehicle.tick()
+    assert vehicle.pose.yaw == pytest.approx(0.5 / 30, abs=1e-12)
+    assert vehicle.speed_mps == pytest.approx(1.0 / 30, abs=1e-12)
+
+
+@pytest.mark.parametrize("field", ["max_accel_mps2", "max_decel_mps2"])
+@pytest.mark.parametrize("value", [0.0, -1.0, math.inf, math.nan, True])
+def test_acceleration_limits_are_validated(field, value):
+    with pytest.raises(ValueError, match=field):
+        VehicleConfig(**{field: value})
+
+
+def test_a_vehicle_recorded_before_acceleration_limits_applied_commands_at_once():
+    old = {"control_rate_hz": 30.0, "max_speed_mps": 1.0, "max_yaw_rate_rps": 1.0, "half_width_m": 0.6}
+    assert VehicleConfig.from_dict(old) == VehicleConfig.paper()
+    assert VehicleConfig.from_dict(VehicleConfig().to_dict()) == VehicleConfig()

@@ -292,7 +292,7 @@ class SimMeta:
             raise f.fail("camera_rate_hz", "expected a frame rate > 0 [Hz]")
         vehicle = f.get("vehicle", dict, "a mapping")
         try:
-            parsed = VehicleConfig(**vehicle) if vehicle is not None else None
+            parsed = VehicleConfig.from_dict(vehicle) if vehicle is not None else None
         except (TypeError, ValueError) as exc:
             raise f.fail("vehicle", f"invalid ({type(exc).__name__}: {exc})") from None
         return cls(rate, f.number("goal_radius_m"), parsed)

@@ -29,9 +29,9 @@ from terrapref.planner.policy import CostPolicy, Policy, PurePursuitPolicy
 from terrapref.planner.registry import make as make_policy
 from terrapref.registry import Registry
 from terrapref.scenario import Scenario, resolve_scenario
-from terrapref.sim import EpisodeLog, Simulation, run_episode
+from terrapref.sim import EpisodeLog, SimConfig, Simulation, run_episode
 from terrapref.terrain import ClassTable, PreferenceProfile
-from terrapref.vehicle import Pose
+from terrapref.vehicle import Pose, VehicleConfig
 from terrapref.world import WorldMap, rasterise
 
 PLANNER = "planner"  # a model file: C, or a learned baseline (linear, CNN)
@@ -52,6 +52,7 @@ class RunSpec:
     style: str = "default"  # the synthetic driver's style (terrapref.demos.expert.STYLES), for EXPERT runs
     keep_run: bool = False  # keep every decision (pose, choice, F_t) of a planner run, for an MCAP of it
     classes: ClassTable | None = None  # the class table the scenario is read with (None: the default)
+    vehicle: VehicleConfig | None = None  # the vehicle driven (None: the default field UGV; VehicleConfig.paper(): the paper's)
 
     @property
     def perceived_as(self) -> str:
@@ -243,14 +244,21 @@ def drivers() -> list[str]:
     return DRIVERS.names()
 
 
+def _sim_config(spec: RunSpec) -> SimConfig:
+    """The simulation of a run: the default but for the vehicle it names."""
+    return SimConfig(vehicle=spec.vehicle or VehicleConfig())
+
+
 def _expert(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: PreferenceProfile) -> tuple[Simulation, Driver]:
     """The synthetic driver of the run's profile and style, on the cached raster (not a new one)."""
-    return Simulation(scenario, world=world), ExpertDriver(ExpertConfig.styled(spec.style, profile.order), world=world)
+    return Simulation(scenario, config=_sim_config(spec), world=world), ExpertDriver(
+        ExpertConfig.styled(spec.style, profile.order), world=world
+    )
 
 
 def _through_planner(policy: Policy, spec: RunSpec, scenario: Scenario, world: WorldMap) -> tuple[Simulation, Driver]:
     """The planner driving with ``policy``, seeing through the camera the policy was built for."""
-    sim = Simulation(scenario, policy.camera, world=world)
+    sim = Simulation(scenario, policy.camera, _sim_config(spec), world=world)
     return sim, PlannerDriver(Planner(policy), keep=bool(spec.keep_frames) or spec.keep_run, images=spec.keep_frames)
 
 

@@ -48,6 +48,7 @@ from terrapref.rules import OffsetConfig, RuleConfig, SecondStageConfig
 from terrapref.rules.second.rule import with_second_stage
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import SimConfig, Simulation
+from terrapref.vehicle import VehicleConfig
 from terrapref.terrain import ClassTable, PreferenceProfile
 
 
@@ -146,6 +147,8 @@ class RecipeSetup:
         classes: the class table the course is read with (None: the default).
         follow_up: after the demonstrations, drive a follow-up course of the pairs of classes they
             left unidentified (terrapref.scenario.teaching.follow_up), and train on both.
+        vehicle: the vehicle driven (None: the default, a field UGV; ``VehicleConfig.paper()`` for
+            the paper's setting).
     """
 
     seed: int
@@ -156,6 +159,7 @@ class RecipeSetup:
     perception: PerceptionModel | None = None
     classes: ClassTable | None = None
     follow_up: bool = False
+    vehicle: VehicleConfig | None = None
 
 
 @dataclass
@@ -183,6 +187,7 @@ class _Drive:
     style: str
     perception: PerceptionModel | None = None
     classes: ClassTable | None = None
+    vehicle: VehicleConfig | None = None
 
 
 def _drive(drive: _Drive, features: FeatureConfig, write: bool) -> tuple[Recording, bool]:
@@ -195,7 +200,7 @@ def _drive(drive: _Drive, features: FeatureConfig, write: bool) -> tuple[Recordi
     """
     scenario = resolve_scenario(drive.course, drive.classes)
     profile = drive.profile or PreferenceProfile.default(scenario.classes)
-    camera, sim_cfg = CameraConfig(), SimConfig()
+    camera, sim_cfg = CameraConfig(), SimConfig(vehicle=drive.vehicle or VehicleConfig())
     expert_cfg = ExpertConfig.styled(drive.style, profile.order)
     pushes = drive.disturbance.to_dict() if drive.disturbance is not None else None
     perception = drive.perception or PerceptionModel()
@@ -210,6 +215,7 @@ def _drive(drive: _Drive, features: FeatureConfig, write: bool) -> tuple[Recordi
             and driver.get("disturbance") == pushes
             and driver.get("config") == expert_cfg.to_dict()
             and existing.meta.get("perception", PerceptionModel().to_dict()) == perception.to_dict()
+            and existing.meta.get("sim", {}).get("vehicle") == sim_cfg.vehicle.to_dict()
         ):
             return existing, False
     meta = RecordingMeta.driven(
@@ -257,6 +263,7 @@ def demonstrate(
             setup.style,
             setup.perception,
             setup.classes,
+            setup.vehicle,
         )
         for k in range(recipe.demonstrations)
     ]
@@ -362,7 +369,7 @@ def run_recipe(
         options=RunOptions(checkpoints=False),
     )
     if recipe.corrections:  # the planner drives the course; only then is a simulation needed here
-        camera, sim_cfg = CameraConfig(), SimConfig()
+        camera, sim_cfg = CameraConfig(), SimConfig(vehicle=setup.vehicle or VehicleConfig())
         expert_cfg = ExpertConfig.styled(setup.style, profile.order)
         sim = Simulation(scenario, camera, sim_cfg)
     for r in range(recipe.corrections):

@@ -31,11 +31,13 @@ from terrapref.progress import every_tenth
 from terrapref.recipes import OURS, PAPER, TEACH, Recipe, RecipeSetup, run_recipe
 from terrapref.scenario import packaged_scenarios, resolve_scenario
 from terrapref.terrain import ClassTable, PreferenceProfile
+from terrapref.vehicle import VehicleConfig
 
 if TYPE_CHECKING:
     from terrapref.learning.train import EpochMetrics
 
 TEST_SET = ("test_course",)
+PAPER_VEHICLE = VehicleConfig.paper()  # the reproduction is driven in the paper's setting: 1 m/s, commands applied at once
 TRACK_COLOURS = ("orange", "red", "magenta", "limegreen")  # the planners' tracks, by recipe
 
 
@@ -107,7 +109,7 @@ def _train_job(args: tuple[tuple[Recipe, ...], str, int, tuple[str, ...], bool])
     rows = []
     for recipe in recipes:
         t0 = time.perf_counter()
-        out = run_recipe(recipe, workdir, RecipeSetup(seed, PreferenceProfile(profile)), write_recordings=write)
+        out = run_recipe(recipe, workdir, RecipeSetup(seed, PreferenceProfile(profile), vehicle=PAPER_VEHICLE), write_recordings=write)
         members = tuple((tuple(m.history), m.best_epoch) for m in out.result.members or [out.result])
         rows.append(
             RecipeModel(
@@ -183,17 +185,22 @@ def _train_all(setup: Reproduction, out: Path, engine: Engine, log: Callable[[st
 def _evaluate(setup: Reproduction, trained: list[RecipeModel], engine: Engine, log: Callable[[str], None]) -> list[RecipeRun]:
     """Rule 2: every model and the synthetic driver on every course, the planners' agreement with the driver."""
     specs = [
-        RunSpec(sc, e, PLANNER, t.model, setup.profile.order) for t in trained for sc in setup.scenarios for e in range(setup.eval_seeds)
+        RunSpec(sc, e, PLANNER, t.model, setup.profile.order, vehicle=PAPER_VEHICLE)
+        for t in trained
+        for sc in setup.scenarios
+        for e in range(setup.eval_seeds)
     ]
     specs += [
-        RunSpec(sc, e, PLANNER, t.model, setup.profile.order, perception=p)
+        RunSpec(sc, e, PLANNER, t.model, setup.profile.order, perception=p, vehicle=PAPER_VEHICLE)
         for p in setup.perceptions
         if p.active
         for t in trained
         for sc in (*TEST_SET, *variations())
         for e in range(setup.eval_seeds)
     ]
-    specs += [RunSpec(sc, s, EXPERT, None, setup.profile.order) for sc in setup.scenarios for s in range(setup.seeds)]
+    specs += [
+        RunSpec(sc, s, EXPERT, None, setup.profile.order, vehicle=PAPER_VEHICLE) for sc in setup.scenarios for s in range(setup.seeds)
+    ]
     specs.sort(key=lambda sp: -scenario_length(sp.scenario))  # longest first: no core idles at the end
     log(f"[2/3] closed-loop evaluation: {len(specs)} runs ...")
     results = annotate_agreement(run_many(specs, progress=every_tenth(log), engine=engine))

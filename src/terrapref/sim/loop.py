@@ -28,7 +28,8 @@ class SimConfig:
         camera_rate_hz: segmentation frames (and decisions) per second [Hz]; must divide the
             vehicle's control rate.
         goal_radius_m: the run is complete within this distance of the last waypoint [m].
-        time_limit_s: episode time limit [s]; None gives 2 x path length / max speed + 60 s.
+        time_limit_s: episode time limit [s]; None gives the time to drive the path twice at
+            1 m/s, plus 60 s.
         stopped_limit_s: the run ends once the vehicle has stood still this long without a
             break (a stop whose reason does not clear in a world that does not change);
             None: only the goal or the time limit ends it [s].
@@ -43,7 +44,12 @@ class SimConfig:
 
     def time_limit(self, path_length_m: float) -> float:
         """The episode time limit [s] on a path this long."""
-        return self.time_limit_s if self.time_limit_s is not None else 2.0 * path_length_m / self.vehicle.max_speed_mps + 60.0
+        return self.time_limit_s if self.time_limit_s is not None else 2.0 * path_length_m / 1.0 + 60.0
+
+    @classmethod
+    def paper(cls) -> SimConfig:
+        """The paper's setting: its vehicle (:meth:`VehicleConfig.paper`), the rest as default."""
+        return cls(vehicle=VehicleConfig.paper())
 
     def __post_init__(self) -> None:
         ratio = self.vehicle.control_rate_hz / self.camera_rate_hz
@@ -130,6 +136,7 @@ class Simulation:
         self.stop_count = 0  # times the vehicle came to a stop
         self.stopped_s = 0.0  # how long it has stood still without a break
         self.trace: list[Pose] = [self.vehicle.pose]
+        self.speeds: list[float] = [self.vehicle.speed_mps]  # the vehicle's speed at each tick [m/s]
         self.commands: list[Command] = []
         return self.frame()
 
@@ -167,14 +174,15 @@ class Simulation:
             self.stopped_s += period_s
         else:
             self.stopped_s = 0.0
-        poses = []
+        poses, steps_m = [], []
         for _ in range(c.ticks_per_frame):
             pose = self.vehicle.tick()
             self.tick += 1
             self.trace.append(pose)
+            self.speeds.append(self.vehicle.speed_mps)
             poses.append(pose)
-        step_m = self.vehicle.command.v * c.vehicle.dt_s
-        for contact in map(self._in_contact, poses):
+            steps_m.append(self.vehicle.step_m)
+        for contact, step_m in zip(map(self._in_contact, poses), steps_m, strict=True):
             if contact:
                 self.collisions += not self._on_lethal
                 self.contact_s += c.vehicle.dt_s
@@ -232,6 +240,7 @@ class EpisodeLog:
         stops: seconds stood still, by the reason the driver gave.
         stop_count: times the vehicle came to a stop.
         progress_m: how far along the path the vehicle got [m].
+        speeds: the vehicle's speed at every controller tick, shape (T,) [m/s]; None: not kept.
     """
 
     scenario: str
@@ -246,6 +255,7 @@ class EpisodeLog:
     stops: dict[str, float] = field(default_factory=dict)
     stop_count: int = 0
     progress_m: float = 0.0
+    speeds: np.ndarray | None = None
 
     @classmethod
     def of(cls, sim: Simulation) -> EpisodeLog:
@@ -263,6 +273,7 @@ class EpisodeLog:
             stops=dict(sim.stops),
             stop_count=sim.stop_count,
             progress_m=float(sim.progress_m),
+            speeds=np.array(sim.speeds, dtype=float),
         )
 
     def summary(self) -> dict:

@@ -181,15 +181,18 @@ def _bearing(dx: float, dy: float, yaw: float) -> float:
     return (math.atan2(dy, dx) - yaw + math.pi) % (2 * math.pi) - math.pi
 
 
-def stays_on_map(world: WorldMap, pose: Pose, command: Command, period_s: float, margin_m: float = EDGE_MARGIN_M) -> bool:
-    """Whether holding ``command`` for ``period_s`` keeps the vehicle's centre ``margin_m`` inside
-    the map, or at least takes it no nearer the edge (a vehicle already within the margin may
-    drive back in)."""
+def stays_on_map(
+    world: WorldMap, pose: Pose, command: Command, period_s: float, margin_m: float = EDGE_MARGIN_M, brake_m: float = 0.0
+) -> bool:
+    """Whether holding ``command`` for ``period_s``, then braking over ``brake_m`` along the heading
+    reached, keeps the vehicle's centre ``margin_m`` inside the map, or at least takes it no nearer
+    the edge (a vehicle already within the margin may drive back in)."""
     w_m, h_m = world.size_m
 
     def clearance(x: float, y: float) -> float:
         return min(x, w_m - x, y, h_m - y)
 
-    x, y, _ = integrate_unicycle(pose, command, period_s)
+    x, y, yaw = integrate_unicycle(pose, command, period_s)
+    x, y = x + brake_m * math.cos(yaw), y + brake_m * math.sin(yaw)
     after = clearance(x, y)
     return after >= margin_m or after >= clearance(pose[0], pose[1])

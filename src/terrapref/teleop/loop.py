@@ -341,7 +341,9 @@ class _Session:
         command = Command(self.v, w) if self.driver == "you" else Command(*self.decision.command)
         executed = self.recorder.executed(command)
         self._note_push(float(executed[1]) - float(command[1]))
-        self.at_edge = not stays_on_map(self.sim.world, self.frame.pose, executed, self.frame_dt)
+        vehicle = self.sim.vehicle
+        brake_m = vehicle.config.braking_distance_m(max(vehicle.speed_mps, float(executed[0])))
+        self.at_edge = not stays_on_map(self.sim.world, self.frame.pose, executed, self.frame_dt, brake_m=brake_m)
         steered = self.driver == "you" and not self.at_edge
         if self.at_edge:
             executed = Command(0.0, executed[1])  # held at the edge: it may turn on the spot

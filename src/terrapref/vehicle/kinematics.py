@@ -6,6 +6,8 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
+from terrapref.records import to_plain
+
 
 class Pose(NamedTuple):
     """Planar pose in the world frame: x [m] east, y [m] north, yaw [rad] CCW from +x."""
@@ -52,23 +54,51 @@ def integrate_unicycle(pose: Pose, cmd: Command, dt: float) -> Pose:
 class VehicleConfig:
     """Vehicle limits and controller rate.
 
+    The defaults are a field UGV's of about 1.2 m across (a Husky or Warthog class vehicle on
+    loose ground): 2 m/s top speed; 1 m/s^2 of acceleration, which its drive gives on grass and
+    mud without wheel spin (0 to 2 m/s in 2 s); 2 m/s^2 of braking, about 0.2 g, well inside the
+    grip of wet grass (friction about 0.5), so that it stops from 2 m/s within 1 m without
+    sliding. :meth:`paper` is the paper's vehicle: 1 m/s, every command applied at once.
+
     Attributes:
         control_rate_hz: rate of the internal controller that applies the held command [Hz].
         max_speed_mps: commands are clipped to v in [0, max_speed_mps] [m/s].
         max_yaw_rate_rps: commands are clipped to |w| <= max_yaw_rate_rps [rad/s].
         half_width_m: half the vehicle's width: its footprint is the line across it at the
             reference point, and lethal terrain under any part of that line is contact [m].
+        max_accel_mps2: how fast the speed may rise toward the command [m/s^2]; None: at once.
+        max_decel_mps2: how fast the speed may fall toward the command [m/s^2]; None: at once.
     """
 
     control_rate_hz: float = 30.0
-    max_speed_mps: float = 1.0
+    max_speed_mps: float = 2.0
     max_yaw_rate_rps: float = 1.0
     half_width_m: float = 0.6
+    max_accel_mps2: float | None = 1.0
+    max_decel_mps2: float | None = 2.0
 
     def __post_init__(self) -> None:
         values = (self.control_rate_hz, self.max_speed_mps, self.max_yaw_rate_rps, self.half_width_m)
-        if not all(math.isfinite(v) and v > 0 for v in values):
+        if not all(_positive(v) for v in values):
             raise ValueError("vehicle rates, limits and half width must be finite and > 0")
+        if not all(a is None or _positive(a) for a in (self.max_accel_mps2, self.max_decel_mps2)):
+            raise ValueError(
+                f"max_accel_mps2 and max_decel_mps2 must be None (at once) or finite and > 0, got {self.max_accel_mps2!r} and {self.max_decel_mps2!r}"
+            )
+
+    @classmethod
+    def paper(cls) -> VehicleConfig:
+        """The paper's vehicle: 1 m/s top speed and every command applied at once."""
+        return cls(max_speed_mps=1.0, max_accel_mps2=None, max_decel_mps2=None)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> VehicleConfig:
+        """The vehicle a recording's metadata names; one recorded before acceleration limits
+        existed applied its commands at once."""
+        return cls(**{"max_accel_mps2": None, "max_decel_mps2": None, **data})
+
+    def to_dict(self) -> dict:
+        return to_plain(self)
 
     @property
     def footprint_m(self) -> tuple[float, ...]:
@@ -79,14 +109,38 @@ class VehicleConfig:
     def dt_s(self) -> float:
         return 1.0 / self.control_rate_hz
 
+    def braking_distance_m(self, v_mps: float) -> float:
+        """Distance [m] this vehicle needs to stop from ``v_mps`` (0 when it stops at once)."""
+        return 0.0 if self.max_decel_mps2 is None else v_mps * v_mps / (2.0 * self.max_decel_mps2)
+
+    def next_speed(self, speed_mps: float, target_mps: float) -> float:
+        """The speed [m/s] one controller period after ``speed_mps``, moving toward ``target_mps``
+        within the acceleration limits."""
+        if target_mps > speed_mps:
+            step = math.inf if self.max_accel_mps2 is None else self.max_accel_mps2 * self.dt_s
+            return min(target_mps, speed_mps + step)
+        step = math.inf if self.max_decel_mps2 is None else self.max_decel_mps2 * self.dt_s
+        return max(target_mps, speed_mps - step)
+
+
+def _positive(x: float) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) and x > 0
+
 
 class Vehicle:
-    """A differential-drive vehicle whose controller holds the last command between ticks."""
+    """A differential-drive vehicle whose controller holds the last command between ticks.
 
-    def __init__(self, pose: Pose, config: VehicleConfig | None = None) -> None:
+    The yaw rate follows the command at once; the forward speed moves toward it within the
+    acceleration limits, so ``speed_mps`` (what the vehicle does) may differ from
+    ``command.v`` (what it was told).
+    """
+
+    def __init__(self, pose: Pose, config: VehicleConfig | None = None, speed_mps: float = 0.0) -> None:
         self.config = config or VehicleConfig()
         self.pose = Pose(*pose)
         self.command = Command(0.0, 0.0)
+        self.speed_mps = min(max(float(speed_mps), 0.0), self.config.max_speed_mps)
+        self.step_m = 0.0  # the distance driven in the last tick [m]
 
     def set_command(self, cmd: Command) -> None:
         """Latch a new command, clipped to the vehicle's limits; it is held until the next one."""
@@ -96,7 +150,15 @@ class Vehicle:
         self.command = Command(v, w)
 
     def tick(self) -> Pose:
-        """Advance one controller period (1 / control_rate_hz) with the held command."""
-        x, y, yaw = integrate_unicycle(self.pose, self.command, self.config.dt_s)
+        """Advance one controller period (1 / control_rate_hz) with the held command: the speed
+        ramps within the limits (the distance of the period is its mean speed's) and the yaw rate
+        is the command's."""
+        c, v0 = self.config, self.speed_mps
+        v1 = c.next_speed(v0, self.command.v)
+        at_once = (c.max_accel_mps2 if v1 > v0 else c.max_decel_mps2) is None
+        self.speed_mps = v1
+        v = v1 if at_once or v0 == v1 else 0.5 * (v0 + v1)
+        self.step_m = v * c.dt_s
+        x, y, yaw = integrate_unicycle(self.pose, Command(v, self.command.w), self.config.dt_s)
         self.pose = Pose(x, y, wrap_angle(yaw))
         return self.pose
