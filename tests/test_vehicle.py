@@ -9,7 +9,6 @@ import pytest
 
 from terrapref.vehicle import Command, ControlSet, Pose, Vehicle, VehicleConfig, integrate_unicycle, wrap_angle
 
-
 AT_ONCE = VehicleConfig.paper()  # every command applied at once: the kinematics alone
 
 

@@ -48,8 +48,8 @@ from terrapref.rules import OffsetConfig, RuleConfig, SecondStageConfig
 from terrapref.rules.second.rule import with_second_stage
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import SimConfig, Simulation
-from terrapref.vehicle import VehicleConfig
 from terrapref.terrain import ClassTable, PreferenceProfile
+from terrapref.vehicle import VehicleConfig
 
 
 @dataclass(frozen=True)
