@@ -149,7 +149,7 @@ def test_expert_config_to_dict_is_plain_data():
     data = ExpertConfig().to_dict()
     assert data["profile"] == ["mud", "rock", "water", "non_traversable"]
     assert data["speed_mps"] == 1.0
-    assert all(isinstance(v, (int, float, str, list)) for v in data.values())
+    assert all(v is None or isinstance(v, (int, float, str, list)) for v in data.values())
 
 
 @pytest.mark.parametrize("n_f", [4, 5, 7, 9])

@@ -97,13 +97,17 @@ def test_to_dict_is_plain_data():
 
 PROFILE = ("water", "rock", "mud", "non_traversable")
 
-# What each style is meant to change, and which way: +1 more than the default, -1 less.
+# What each style is meant to change, and which way: +1 more than the default, -1 less, SET where
+# the default has none (its speed style: the default driver keeps 1 m/s everywhere).
+SET = "set"
 MEANT = {
     "default": {},
-    "wide": {"margin_m": +1, "lethal_margin_m": +1},
-    "late": {"reaction_distance_m": -1, "reaction_delay_s": +1},
-    "shaky": {"stick_noise_rps": +1, "deadzone_rps": +1},
-    "reluctant": {"deviation_cost": +1},
+    "wide": {"margin_m": +1, "lethal_margin_m": +1, "speed_mps": +1, "ranked_speeds_mps": SET, "lateral_accel_mps2": SET}
+    | {"near_lethal_mps": SET, "preview_m": +1},
+    "late": {"reaction_distance_m": -1, "reaction_delay_s": +1, "speed_mps": +1, "ranked_speeds_mps": SET, "lateral_accel_mps2": SET}
+    | {"preview_m": -1},
+    "shaky": {"stick_noise_rps": +1, "deadzone_rps": +1, "speed_mps": +1, "ranked_speeds_mps": SET, "lateral_accel_mps2": SET},
+    "reluctant": {"deviation_cost": +1, "speed_mps": +1, "ranked_speeds_mps": SET, "lateral_accel_mps2": SET, "near_lethal_mps": SET},
 }
 
 
@@ -123,7 +127,13 @@ def test_a_style_is_the_default_driver_with_its_own_changes(style: str):
     }
     assert set(changed) == set(MEANT[style])
     for name, (before, after) in changed.items():
-        assert (after - before) * MEANT[style][name] > 0, (name, before, after)
+        if MEANT[style][name] == SET:
+            assert before is None and after is not None, (name, before, after)
+        else:
+            assert (after - before) * MEANT[style][name] > 0, (name, before, after)
+    if style != "default":  # a speed style: slower on the least preferred patch than on the most, both below open ground
+        fast, slow = styled.ranked_speeds_mps
+        assert styled.speed_mps > fast > slow > 0
     ExpertDriver(styled)  # builds its footprint and offsets from the config
 
 

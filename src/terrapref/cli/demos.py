@@ -28,10 +28,11 @@ def _cmd_record(args: argparse.Namespace) -> int:
     import numpy as np
 
     from terrapref.camera import CameraConfig
-    from terrapref.demos.expert import ExpertConfig, ExpertDriver
+    from terrapref.demos.expert import ExpertDriver
     from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
     from terrapref.demos.recording import RecordingWriter
     from terrapref.demos.session import RunSettings, record_run
+    from terrapref.demos.speed_style import driver_style
     from terrapref.features import PreferenceSetConfig
     from terrapref.progress import Progress
     from terrapref.scenario import resolve_scenario
@@ -45,13 +46,11 @@ def _cmd_record(args: argparse.Namespace) -> int:
     profile = (
         PreferenceProfile.parse(args.profile, scenario.classes) if args.profile is not None else PreferenceProfile.default(scenario.classes)
     )
-    try:
-        expert = ExpertConfig.styled(args.style, profile.order)
-    except ValueError as exc:
-        raise UserError("--style", str(exc)) from None
+    sim_config = SimConfig()
+    expert = driver_style(args.style, profile.order, scenario.classes, sim_config.vehicle.max_speed_mps, _style_flags(args))
     disturbance = _disturbance(args.disturb)
     perception = perception_model(args.perception, classes=scenario.classes)
-    camera, preference, sim_config = CameraConfig(), PreferenceSetConfig(), SimConfig()
+    camera, preference = CameraConfig(), PreferenceSetConfig()
     meta = RecordingMeta.driven(
         scenario,
         RecordingSetup(camera, preference, sim_config),
@@ -110,6 +109,20 @@ def _disturbance(rate_hz: float | None):
     return replace(protocol, rate_hz=rate_hz) if rate_hz > 0 else None
 
 
+def _style_flags(args: argparse.Namespace) -> dict:
+    """The driver's fields the speed flags set (none given: none)."""
+    from terrapref.demos.speed_style import parse_speeds
+
+    flags: dict = {}
+    if args.speeds is not None:
+        flags["speeds"] = parse_speeds(args.speeds)
+    if args.lateral_accel is not None:
+        flags["lateral_accel_mps2"] = args.lateral_accel
+    if args.preview is not None:
+        flags["preview_m"] = args.preview
+    return flags
+
+
 def record_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("record", help="record a demonstration with the synthetic driver")
     p.add_argument("scenario", metavar="SCENARIO", help=SCENARIO_HELP)
@@ -117,9 +130,17 @@ def record_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--style",
         default="default",
-        help="the driver's style: default, wide (wider margins), late (reacts later), shaky (a shakier hand), "
-        "reluctant (leaves the path reluctantly)",
+        metavar="NAME|FILE",
+        help="the driver's style: default (1 m/s everywhere), wide (wider margins, cautious), late (reacts later, brisk), "
+        "shaky (a shakier hand), reluctant (leaves the path reluctantly), or a terrapref-driver-style/1 file",
     )
+    p.add_argument(
+        "--speeds",
+        metavar="CLASS=MPS,...",
+        help="cruising speed per class [m/s], the background class included, e.g. grass=1.6,mud=0.5 (classes not named keep the style's)",
+    )
+    p.add_argument("--lateral-accel", type=finite_float, metavar="MPS2", help="lateral acceleration the driver keeps to in bends [m/s^2]")
+    p.add_argument("--preview", type=finite_float, metavar="M", help="how early the driver slows before a slower class [m]")
     p.add_argument("--seed", type=int, default=0, help="seeds the driver's hand and the pushes (default 0)")
     p.add_argument("--out", required=True, type=Path, help="recording directory to create")
     p.add_argument("--force", action="store_true", help="replace an existing recording at --out")
@@ -201,7 +222,12 @@ def drive_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("scenario", metavar="SCENARIO", help=SCENARIO_HELP)
     p.add_argument("--record", type=Path, metavar="DIR", help="record the drive into DIR")
     p.add_argument("--force", action="store_true", help="replace an existing recording at DIR")
-    p.add_argument("--speed", type=finite_float, default=1.0, help="forward speed [m/s] (default 1)")
+    p.add_argument(
+        "--speed",
+        type=finite_float,
+        default=1.0,
+        help="the set speed at the start [m/s], up to the vehicle's top speed; W/S, the mouse wheel or a gamepad change it (default 1)",
+    )
     p.add_argument(
         "--disturb",
         type=finite_float,
@@ -216,7 +242,7 @@ def drive_parser(sub: argparse._SubParsersAction) -> None:
         "--model",
         type=Path,
         metavar="MODEL",
-        help="ride along: MODEL drives, any stick input takes over, and the frames you steer are recorded as "
+        help="ride along: MODEL drives, any stick or throttle input takes over, and the frames you drive are recorded as "
         "corrections that train accepts beside demonstrations",
     )
     p.add_argument(

@@ -12,6 +12,11 @@ It drives the way a person with a gamepad does, not the way an optimal planner d
 - It steers toward the offset path by pure pursuit, through a stick that rests at exactly zero
   when no correction is needed, moves at a limited rate, lags by a reaction delay, and shakes a
   little only while it is deflected.
+- Its speed style (SPEC 18) sets the throttle: a cruising speed per class, the slowest of the
+  classes its footprint meets on its way over the next ``preview_m``; no faster in a bend than
+  its lateral-acceleration limit allows; slower still while lethal terrain lies near that way.
+  The throttle lags by the same reaction delay as the stick. The default driver keeps 1 m/s
+  everywhere (the paper's).
 
 It reads the map (privileged knowledge) and never uses the planner's feature pipeline.
 """
@@ -21,7 +26,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, replace
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
@@ -32,7 +37,7 @@ from terrapref.scenario import Scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim.loop import Frame
 from terrapref.sums import numpy_sum
-from terrapref.terrain import UNKNOWN, PreferenceProfile
+from terrapref.terrain import UNKNOWN, ClassTable, PreferenceProfile
 from terrapref.vehicle import Command, pure_pursuit_yaw_rate
 from terrapref.world import WorldMap, rasterise
 
@@ -43,7 +48,18 @@ class ExpertConfig:
 
     Attributes:
         profile: preferred feature classes, best first (the background class beats all).
-        speed_mps: forward speed [m/s] (the stick's v).
+        speed_mps: cruising speed on the background class and on every class given no speed of
+            its own [m/s].
+        speeds: cruising speed per class, by class name [m/s].
+        ranked_speeds_mps: the feature classes' cruising speeds from the most preferred class to
+            the least, evenly between (a style that names no classes, for any class table);
+            ``speeds`` wins for a class it names [m/s].
+        lateral_accel_mps2: the lateral acceleration it keeps to in bends, v^2 * curvature;
+            None: no limit [m/s^2].
+        preview_m: how far ahead on its way it slows for a slower class [m].
+        near_lethal_mps: its speed while lethal terrain lies within ``near_lethal_m`` of its
+            footprint on the way ahead; None: it does not slow for it [m/s].
+        near_lethal_m: see ``near_lethal_mps`` [m].
         reaction_distance_m: terrain on the path closer than this ahead triggers a detour [m].
         decision_extent_m: once triggered, the detour is planned over terrain this much
             further ahead too, so that the whole patch, not its near edge, is weighed [m].
@@ -68,6 +84,12 @@ class ExpertConfig:
 
     profile: tuple[str, ...] = ("mud", "rock", "water", "non_traversable")
     speed_mps: float = 1.0
+    speeds: tuple[tuple[str, float], ...] = ()
+    ranked_speeds_mps: tuple[float, float] | None = None
+    lateral_accel_mps2: float | None = None
+    preview_m: float = 3.0
+    near_lethal_mps: float | None = None
+    near_lethal_m: float = 1.0
     reaction_distance_m: float = 5.0
     decision_extent_m: float = 6.0
     lookbehind_m: float = 1.0
@@ -88,8 +110,22 @@ class ExpertConfig:
     reaction_delay_s: float = 0.2
     stick_noise_rps: float = 0.02
 
+    def __post_init__(self) -> None:
+        speeds = [self.speed_mps, *(v for _, v in self.speeds), *(self.ranked_speeds_mps or ()), self.near_lethal_mps or 1.0]
+        if not all(_positive(v) for v in speeds):
+            raise ValueError(f"cruising speeds must be finite and > 0 m/s, got {speeds}")
+        if self.lateral_accel_mps2 is not None and not _positive(self.lateral_accel_mps2):
+            raise ValueError(f"lateral_accel_mps2 must be None or finite and > 0, got {self.lateral_accel_mps2!r}")
+        if not (_positive(self.preview_m) and math.isfinite(self.near_lethal_m) and self.near_lethal_m >= 0):
+            raise ValueError(f"preview_m must be > 0 and near_lethal_m >= 0, got {self.preview_m!r} and {self.near_lethal_m!r}")
+
     def to_dict(self) -> dict:
         return to_plain(self)
+
+    @property
+    def steady(self) -> bool:
+        """Whether it keeps ``speed_mps`` everywhere (no speed style)."""
+        return not self.speeds and self.ranked_speeds_mps is None and self.lateral_accel_mps2 is None and self.near_lethal_mps is None
 
     @classmethod
     def styled(cls, style: str = "default", profile: tuple[str, ...] | None = None) -> ExpertConfig:
@@ -98,6 +134,30 @@ class ExpertConfig:
         changes = STYLES[style].changes
         base = cls() if profile is None else cls(profile=tuple(profile))
         return replace(base, **changes)
+
+    def speed_table(self, classes: ClassTable) -> np.ndarray:
+        """Cruising speed [m/s] per class id (256,): NaN for lethal classes and ids the table does
+        not name (the driver does not slow for what it never drives on); a ValueError for a
+        class in ``speeds`` the table does not have."""
+        table = np.full(256, np.nan)
+        for c in classes.classes:
+            table[c.id] = self.speed_mps
+        order = PreferenceProfile.parse(list(self.profile), classes, source="expert.profile").order
+        ranked = [name for name in order if name in classes.terrain_names]
+        if self.ranked_speeds_mps is not None and ranked:
+            fast, slow = self.ranked_speeds_mps
+            for rank, name in enumerate(ranked):
+                table[classes.id_of(name)] = fast + (slow - fast) * (rank / max(len(ranked) - 1, 1))
+        for name, v in self.speeds:
+            if name not in classes.names:
+                raise ValueError(f"speeds: class {name!r} is not in the class table ({', '.join(classes.names)})")
+            table[classes.id_of(name)] = v
+        table[list(classes.lethal_ids)] = np.nan
+        return table
+
+
+def _positive(x: object) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) and x > 0
 
 
 class Style(NamedTuple):
@@ -109,29 +169,59 @@ class Style(NamedTuple):
     """
 
     description: str
-    changes: dict[str, float]
+    changes: dict[str, Any]
 
 
-def _style(name: str, description: str, **changes: float) -> None:
+def _style(name: str, description: str, **changes: Any) -> None:
     STYLES.register(name, Style(description, changes), doc=description)
 
 
 # Driver styles: different people, not only different orders; `terrapref record --style NAME`.
 STYLES: Registry[Style] = Registry("driver style", "styles")
-_style("default", "reacts 5 m ahead, 0.6 m half-width, 0.4 m extra from lethal terrain")
+_style("default", "reacts 5 m ahead, 0.6 m half-width, 0.4 m extra from lethal terrain; 1 m/s everywhere (the paper's driver)")
 _style(
     "wide",
-    "keeps wider margins: terrain within 0.5 m beside it costs half as if driven on, 0.8 m extra from lethal terrain",
+    "keeps wider margins: terrain within 0.5 m beside it costs half as if driven on, 0.8 m extra from lethal terrain; "
+    "cautious: 1.2 m/s on open ground, 0.9 to 0.5 m/s on patches by preference, 0.6 m/s^2 in bends, 0.6 m/s near lethal terrain",
     margin_m=0.5,
     lethal_margin_m=0.8,
+    speed_mps=1.2,
+    ranked_speeds_mps=(0.9, 0.5),
+    lateral_accel_mps2=0.6,
+    near_lethal_mps=0.6,
+    preview_m=4.0,
 )
 _style(
-    "late", "reacts later: terrain on the path 3.5 m ahead, not 5 m; a slower hand (0.35 s)", reaction_distance_m=3.5, reaction_delay_s=0.35
+    "late",
+    "reacts later: terrain on the path 3.5 m ahead, not 5 m; a slower hand (0.35 s); "
+    "brisk: 1.8 m/s on open ground, 1.3 to 0.7 m/s on patches, 1.2 m/s^2 in bends, slows 2 m before a patch",
+    reaction_distance_m=3.5,
+    reaction_delay_s=0.35,
+    speed_mps=1.8,
+    ranked_speeds_mps=(1.3, 0.7),
+    lateral_accel_mps2=1.2,
+    preview_m=2.0,
 )
 _style(
-    "shaky", "a shakier hand: 0.08 rad/s of tremor while the stick is deflected, a wider deadzone", stick_noise_rps=0.08, deadzone_rps=0.1
+    "shaky",
+    "a shakier hand: 0.08 rad/s of tremor while the stick is deflected, a wider deadzone; "
+    "1.4 m/s on open ground, 1.0 to 0.5 m/s on patches, 0.8 m/s^2 in bends",
+    stick_noise_rps=0.08,
+    deadzone_rps=0.1,
+    speed_mps=1.4,
+    ranked_speeds_mps=(1.0, 0.5),
+    lateral_accel_mps2=0.8,
 )
-_style("reluctant", "leaves the path reluctantly: twice the cost per metre of detour", deviation_cost=0.16)
+_style(
+    "reluctant",
+    "leaves the path reluctantly: twice the cost per metre of detour; "
+    "1.6 m/s on open ground, 1.2 to 0.4 m/s on patches, 1.0 m/s^2 in bends, 0.8 m/s near lethal terrain",
+    deviation_cost=0.16,
+    speed_mps=1.6,
+    ranked_speeds_mps=(1.2, 0.4),
+    lateral_accel_mps2=1.0,
+    near_lethal_mps=0.8,
+)
 
 
 class ExpertDriver:
@@ -154,6 +244,8 @@ class ExpertDriver:
         self._lat = self.offsets[:, None] + foot[None, :]
         self._margin_lat = self.offsets[:, None] + margin_foot[None, :] if margin_foot is not None else None
         self._lethal_lat = self.offsets[:, None] + lethal_foot[None, :]
+        self._way_s = np.arange(0.0, c.preview_m + 1e-9, self.sample_step_m)  # the way ahead its speed looks over
+        self._near_lat = np.linspace(-c.half_width_m - c.near_lethal_m, c.half_width_m + c.near_lethal_m, 9)
         self._s_rel = np.arange(-c.lookbehind_m, c.reaction_distance_m + c.decision_extent_m + 1e-9, self.sample_step_m)
         self._in_reach = self._s_rel <= c.reaction_distance_m
 
@@ -180,6 +272,9 @@ class ExpertDriver:
         self.offset = 0.0
         self.stick = 0.0
         self._queue: deque[float] = deque([0.0] * max(0, round(c.reaction_delay_s / self.dt)))
+        self._throttle: deque[float] | None = None  # the speeds wanted, as the reaction delay holds them
+        self._speed = c.speed_table(classes)
+        self.wanted_mps = c.speed_mps
 
     # -- decision --------------------------------------------------------------------------
 
@@ -242,8 +337,9 @@ class ExpertDriver:
         """
         return _offset_classes(centre, normal, lat, upto, self.world.raster, self.world.resolution_m)
 
-    def steer(self, pose: tuple[float, float, float], s_now: float, offset: float) -> float:
-        """Pure-pursuit yaw rate [rad/s] toward the path shifted sideways by ``offset``."""
+    def pursuit(self, pose: tuple[float, float, float], s_now: float, offset: float) -> tuple[float, float]:
+        """Pure pursuit toward the path shifted sideways by ``offset``: the sine of the target's
+        bearing from the heading and its distance [m] (curvature 2 sin / distance)."""
         c = self.config
         s_t = s_now + c.pursuit_m
         heading = float(self.path.heading_at(s_t))
@@ -251,24 +347,64 @@ class ExpertDriver:
         x, y, yaw = pose
         alpha = math.atan2(target[1] - y, target[0] - x) - yaw
         alpha = (alpha + math.pi) % (2 * math.pi) - math.pi
-        dist = max(math.hypot(target[0] - x, target[1] - y), 1e-6)
-        return pure_pursuit_yaw_rate(c.speed_mps, math.sin(alpha), dist)
+        return math.sin(alpha), max(math.hypot(target[0] - x, target[1] - y), 1e-6)
+
+    def steer(self, pose: tuple[float, float, float], s_now: float, offset: float, v_mps: float | None = None) -> float:
+        """Pure-pursuit yaw rate [rad/s] toward the path shifted sideways by ``offset``, at
+        ``v_mps`` (None: the cruising speed)."""
+        return pure_pursuit_yaw_rate(self.config.speed_mps if v_mps is None else v_mps, *self.pursuit(pose, s_now, offset))
+
+    def wanted_speed(self, pose: tuple[float, float, float], s_now: float, curvature: float) -> float:
+        """The speed [m/s] the driver's style asks for now (before its hand's delay): the slowest
+        cruising speed of the classes its footprint meets now and on its way over the next
+        ``preview_m``, no more than its lateral-acceleration limit allows at ``curvature``
+        [1/m], nor than ``near_lethal_mps`` while lethal terrain lies near that way."""
+        c = self.config
+        if c.steady:
+            return c.speed_mps
+        s = s_now + self._way_s
+        s = s[s <= self.path.length_m]
+        x, y, yaw = pose
+        ids = [self.world.class_at_point(x - a * math.sin(yaw), y + a * math.cos(yaw)) for a in self._foot]
+        if len(s):
+            centre, heading = self.path.point_at(s), self.path.heading_at(s)
+            normal = np.stack([-np.sin(heading), np.cos(heading)], axis=1)
+            way = self.offset + self._foot[None, :]
+            ids += _offset_classes(centre, normal, way, len(s), self.world.raster, self.world.resolution_m).ravel().tolist()
+            if c.near_lethal_mps is not None:
+                near = _offset_hits(
+                    centre, normal, self.offset + self._near_lat[None, :], len(s), self.world.raster, self.world.resolution_m, self._lethal
+                )
+        speeds = self._speed[np.asarray(ids, dtype=np.intp)]
+        v = float(np.nanmin(speeds)) if np.isfinite(speeds).any() else c.speed_mps
+        if c.near_lethal_mps is not None and len(s) and near[0]:
+            v = min(v, c.near_lethal_mps)
+        if c.lateral_accel_mps2 is not None and curvature != 0.0:
+            v = min(v, math.sqrt(c.lateral_accel_mps2 / abs(curvature)))
+        return v
 
     def intent(self, frame: Frame) -> float:
-        """The yaw rate [rad/s] the driver wants now, before its hand's delay, rate limit and tremor.
+        """The yaw rate [rad/s] the driver wants now, before its hand's delay, rate limit and tremor,
+        at the faster of the vehicle's speed and the speed it wants (``wanted_mps`` after the call).
 
         Used alone when the driver corrects another driver (the planner) rather than driving.
         """
         c = self.config
         s_now = self.tracker.update(np.array(frame.pose[:2]))
         self.offset = self.choose_offset(s_now)
-        w = self.steer(frame.pose, s_now, self.offset)
+        sin_alpha, distance = self.pursuit(frame.pose, s_now, self.offset)
+        self.wanted_mps = self.wanted_speed(frame.pose, s_now, 2.0 * sin_alpha / distance)
+        w = pure_pursuit_yaw_rate(max(frame.speed_mps, self.wanted_mps), sin_alpha, distance)
         w = 0.0 if abs(w) < c.deadzone_rps else w
         return float(np.clip(w, -c.max_yaw_rate_rps, c.max_yaw_rate_rps))
 
     def act(self, frame: Frame) -> Command:
         c = self.config
         w = self.intent(frame)
+        if self._throttle is None:  # the hand holds the first speed it wants from the start
+            self._throttle = deque([self.wanted_mps] * len(self._queue))
+        self._throttle.append(self.wanted_mps)
+        v = self._throttle.popleft()
         self._queue.append(w)
         wanted = self._queue.popleft()
         step = c.stick_rate_rps2 * self.dt
@@ -278,7 +414,7 @@ class ExpertDriver:
         out = self.stick
         if out != 0.0 and c.stick_noise_rps > 0:
             out = float(np.clip(out + self.rng.normal(0.0, c.stick_noise_rps), -c.max_yaw_rate_rps, c.max_yaw_rate_rps))
-        return Command(c.speed_mps, out)
+        return Command(v, out)
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -74,6 +74,7 @@ class Frame:
             whole frame).
         pose: vehicle pose in the world frame.
         waypoints: the reference path, shape (N, 2) [m].
+        speed_mps: the vehicle's forward speed, as its odometry gives it [m/s].
     """
 
     index: int
@@ -81,6 +82,7 @@ class Frame:
     view: SegmentationView
     pose: Pose
     waypoints: np.ndarray
+    speed_mps: float = 0.0
 
     @property
     def image(self) -> np.ndarray:
@@ -146,7 +148,7 @@ class Simulation:
 
     def frame(self) -> Frame:
         pose = self.vehicle.pose
-        return Frame(self.frame_index, self.time_s, SegmentationView(self.renderer, pose), pose, self.scenario.waypoints)
+        return Frame(self.frame_index, self.time_s, SegmentationView(self.renderer, pose), pose, self.scenario.waypoints, self.vehicle.speed_mps)
 
     def _in_contact(self, pose: Pose) -> bool:
         """Whether lethal terrain lies under any point of the footprint at ``pose``, in plain floats

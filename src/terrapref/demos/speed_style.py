@@ -1,0 +1,126 @@
+"""A driver's speed style from the command line or a file (SPEC 18), checked against the class
+table and the vehicle before anything is driven.
+
+A style file (``terrapref-driver-style/1``, YAML) names a preset to start from and the fields it
+changes; a flag given beside it wins::
+
+    format: terrapref-driver-style/1
+    base: default            # a preset of `terrapref record --style` (default: default)
+    speeds: {grass: 1.6, rock: 1.0, mud: 0.5, water: 0.3}
+    lateral_accel_mps2: 0.8  # the lateral acceleration kept in bends
+    preview_m: 3.0           # how early it slows before a slower class
+    near_lethal_mps: 0.6     # its speed while lethal terrain lies near its way ...
+    near_lethal_m: 1.0       # ... within this distance of its footprint
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from terrapref.demos.expert import STYLES, ExpertConfig
+from terrapref.errors import UserError
+from terrapref.terrain import ClassTable
+from terrapref.yamlio import read_yaml_mapping
+
+STYLE_FORMAT = "terrapref-driver-style/1"
+_NUMBERS = ("speed_mps", "lateral_accel_mps2", "preview_m", "near_lethal_mps", "near_lethal_m")  # a file's plain numbers
+
+
+def parse_speeds(text: str, source: str = "--speeds") -> tuple[tuple[str, float], ...]:
+    """``CLASS=MPS,...`` as (class, speed) pairs; a malformed entry or a repeated class is a UserError."""
+    pairs: list[tuple[str, float]] = []
+    for item in (part.strip() for part in text.split(",")):
+        name, sep, value = item.partition("=")
+        name = name.strip()
+        try:
+            speed = float(value)
+        except ValueError:
+            speed = math.nan
+        if not sep or not name or not math.isfinite(speed):
+            raise UserError(source, f"expected CLASS=SPEED entries in m/s separated by commas, e.g. grass=1.6,mud=0.5; got {item!r}")
+        if name in dict(pairs):
+            raise UserError(source, f"class {name!r} is given twice")
+        pairs.append((name, speed))
+    return tuple(pairs)
+
+
+def read_style_file(path: str | Path) -> tuple[str, dict[str, Any]]:
+    """The preset a style file starts from and the :class:`ExpertConfig` fields it changes."""
+    source = str(path)
+    data = read_yaml_mapping(path, STYLE_FORMAT)
+    unknown = sorted(set(data) - {"format", "base", "speeds", "ranked_speeds_mps", *_NUMBERS})
+    if unknown:
+        raise UserError(source, f"unknown field; a style file has base, speeds, ranked_speeds_mps, {', '.join(_NUMBERS)}", field=unknown[0])
+    base = data.get("base", "default")
+    if base not in STYLES.names():
+        raise UserError(source, f"{base!r} is not a style ({', '.join(STYLES.names())})", field="base")
+    changes: dict[str, Any] = {}
+    for name in _NUMBERS:
+        if name in data:
+            value = data[name]
+            optional = name in ("lateral_accel_mps2", "near_lethal_mps")
+            if not (_number(value) or (optional and value is None)):
+                raise UserError(source, f"expected a number{' or null' if optional else ''}, got {value!r}", field=name)
+            changes[name] = None if value is None else float(value)
+    if "speeds" in data:
+        speeds = data["speeds"]
+        if not isinstance(speeds, dict) or not all(isinstance(k, str) and _number(v) for k, v in speeds.items()):
+            raise UserError(source, "expected a mapping of class names to speeds in m/s", field="speeds")
+        changes["speeds"] = tuple((k, float(v)) for k, v in speeds.items())
+    if "ranked_speeds_mps" in data:
+        ranked = data["ranked_speeds_mps"]
+        if not (isinstance(ranked, list) and len(ranked) == 2 and all(_number(v) for v in ranked)):
+            raise UserError(
+                source, "expected [fastest, slowest]: the most and the least preferred class's speeds", field="ranked_speeds_mps"
+            )
+        changes["ranked_speeds_mps"] = (float(ranked[0]), float(ranked[1]))
+    return base, changes
+
+
+def _number(value: object) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def driver_style(
+    style: str,
+    profile: tuple[str, ...],
+    classes: ClassTable,
+    max_speed_mps: float,
+    changes: dict[str, Any] | None = None,
+) -> ExpertConfig:
+    """The synthetic driver of ``style`` (a preset name or a style file) for ``profile``, with
+    ``changes`` (flags' fields) on top, checked against ``classes`` and the vehicle's top speed.
+
+    Raises:
+        UserError: an unknown preset, a bad file, a class the table lacks, a speed out of (0, max].
+    """
+    source, file_changes = ("--style", {}) if style in STYLES.names() else (style, None)
+    if file_changes is None:
+        if not style.endswith((".yaml", ".yml")) and not Path(style).exists():
+            raise UserError("--style", f"{style!r} is neither a style ({', '.join(STYLES.names())}) nor a style file")
+        style, file_changes = read_style_file(source)
+    flags = changes or {}
+    try:
+        config = replace(ExpertConfig.styled(style, profile), **file_changes)
+    except ValueError as exc:
+        raise UserError(source, str(exc)) from None
+    for field, value in flags.items():
+        try:
+            config = replace(config, **{field: value})
+        except ValueError as exc:
+            raise UserError(FLAGS.get(field, source), str(exc)) from None
+    blame = FLAGS["speeds"] if "speeds" in flags else source
+    try:
+        table = config.speed_table(classes)
+    except ValueError as exc:
+        raise UserError(blame, str(exc)) from None
+    fastest = max(config.speed_mps, float(max((v for v in table if v == v), default=0.0)))
+    if fastest > max_speed_mps + 1e-9:
+        raise UserError(blame, f"a cruising speed of {fastest:g} m/s is above the vehicle's {max_speed_mps:g} m/s")
+    return config
+
+
+FLAGS = {"speeds": "--speeds", "lateral_accel_mps2": "--lateral-accel", "preview_m": "--preview"}  # the fields flags set
