@@ -796,3 +796,143 @@ def test_driving_away_from_the_route_raises_the_alert_and_draws_the_arrow(tmp_pa
     shot = pygame.surfarray.array3d(pygame.image.load(str(tmp_path / "shot.png"))).transpose(1, 0, 2)[:480, :640].astype(int)
     red = np.abs(shot - np.array(ALERT_COLOR)).sum(axis=2) < 30
     assert red[140:230, 280:360].sum() > 200, "the arrow under the alert"
+
+
+# --- the throttle: the set speed from W/S, the mouse wheel and a gamepad axis ------------------
+
+
+def test_the_throttle_keys_step_at_a_press_then_ramp_gently_within_zero_and_top_speed():
+    from terrapref.teleop import Throttle
+
+    throttle = Throttle(1.0, v_max_mps=2.0)
+    throttle.handle(key(pygame.KEYDOWN, pygame.K_w))
+    v = [throttle.update(0.1) for _ in range(10)]
+    assert v[0] == pytest.approx(1.1) and v[1] == pytest.approx(1.15), "the press: one 0.1 m/s step; held: 0.5 m/s per s"
+    assert v[9] == pytest.approx(1.55)
+    assert max(throttle.update(0.1) for _ in range(20)) == 2.0 and throttle.v == 2.0, "held on: the top speed, no more"
+    throttle.handle(key(pygame.KEYUP, pygame.K_w))
+    assert throttle.update(0.1) == 2.0 and not throttle.active, "released, the set speed holds"
+    throttle.handle(key(pygame.KEYDOWN, pygame.K_s))
+    assert [throttle.update(0.1) for _ in range(3)] == pytest.approx([1.9, 1.85, 1.8])
+    assert min(throttle.update(0.1) for _ in range(50)) == 0.0 and throttle.v == 0.0, "held on: a stop, never below"
+    throttle.handle(key(pygame.KEYUP, pygame.K_s))
+    throttle.handle(key(pygame.KEYDOWN, pygame.K_w))  # a tap within one frame
+    throttle.handle(key(pygame.KEYUP, pygame.K_w))
+    assert throttle.update(0.1) == pytest.approx(0.1) and throttle.update(0.1) == pytest.approx(0.1)
+
+
+def test_the_mouse_wheel_and_the_pads_throttle_axis_move_the_set_speed():
+    from terrapref.teleop import Stick, Throttle
+    from terrapref.teleop.throttle import PAD_AXIS, PAD_DEADZONE
+
+    throttle = Throttle(1.0, v_max_mps=2.0)
+    throttle.handle(pygame.event.Event(pygame.MOUSEWHEEL, x=0, y=3, flipped=False))
+    assert throttle.update(0.1) == pytest.approx(1.3) and throttle.touched
+    throttle.handle(pygame.event.Event(pygame.MOUSEWHEEL, x=0, y=-1, flipped=False))
+    throttle.handle(pygame.event.Event(pygame.MOUSEWHEEL, x=0, y=1, flipped=True))  # reversed by the system: the wheel went down
+    assert throttle.update(0.1) == pytest.approx(1.1)
+
+    class Pad:
+        def __init__(self, axes: int) -> None:
+            self.axes, self.values = axes, [0.0] * axes
+
+        def get_numaxes(self) -> int:
+            return self.axes
+
+        def get_axis(self, i: int) -> float:
+            return self.values[i]
+
+    pygame.init()
+    stick = Stick(w_max_rps=1.0)
+    stick.joystick = pad = Pad(2)
+    pad.values[PAD_AXIS] = -1.0  # pushed fully up: 0.5 m/s per s
+    throttle = Throttle(1.0, v_max_mps=2.0)
+    assert [throttle.update(0.1, stick.axis(PAD_AXIS)) for _ in range(2)] == pytest.approx([1.05, 1.1])
+    assert throttle.touched and throttle.active
+    pad.values[PAD_AXIS] = PAD_DEADZONE / 2  # let go: the set speed holds
+    throttle.touched = False
+    assert throttle.update(0.1, stick.axis(PAD_AXIS)) == pytest.approx(1.1) and not throttle.touched and not throttle.active
+    pad.values[PAD_AXIS] = 0.5  # half down
+    assert throttle.update(0.1, stick.axis(PAD_AXIS)) == pytest.approx(1.075)
+    stick.joystick = Pad(1)  # a pad without the axis: the throttle is the keys' and the wheel's
+    assert stick.axis(PAD_AXIS) == 0.0 and throttle.update(0.1, stick.axis(PAD_AXIS)) == pytest.approx(1.075)
+    assert stick.update(0.1) == 0.0
+
+
+def test_a_recording_holds_the_set_speed_of_each_frame_and_leaves_out_standing_frames(tmp_path):
+    import numpy as np
+
+    out = tmp_path / "rec"
+    events = {
+        5: [key(pygame.KEYDOWN, pygame.K_w)],
+        9: [key(pygame.KEYUP, pygame.K_w)],
+        12: [pygame.event.Event(pygame.MOUSEWHEEL, x=0, y=-3, flipped=False)],
+        15: [key(pygame.KEYDOWN, pygame.K_s)],
+        40: [key(pygame.KEYUP, pygame.K_s)],
+        45: [key(pygame.KEYDOWN, pygame.K_w), key(pygame.KEYUP, pygame.K_w)],
+        50: [pygame.event.Event(pygame.QUIT)],
+    }
+    set_v: list[float] = []
+
+    def script(state):
+        set_v.append(state.v)
+        return events.get(state.index, [])
+
+    result = run_teleop("demo_course", out, realtime=False, wait_for_start=False, script=script, max_frames=100)
+    # W: a step at 5, then 0.05 m/s a frame until released at 9; the wheel 3 notches down at 12;
+    # S from 15: a step, then 0.05 m/s a frame, a stop at 32 held until W is tapped at 45.
+    expected = [1.0] * 5 + [1.1, 1.15, 1.2] + [1.25] * 4 + [0.95] * 3 + [0.85 - 0.05 * k for k in range(17)] + [0.0] * 13 + [0.1] * 5
+    assert set_v[1:51] == pytest.approx(expected), "scripts see the set speed after each frame"
+    rec = read_recording(out)
+    standing = [i for i, v in enumerate(expected) if v == 0.0]
+    assert result.standing_frames == len(standing) == 13 and rec.meta["summary"]["standing_frames"] == 13
+    assert len(rec) == result.frames == 50 - 13
+    np.testing.assert_allclose(rec.commands[:, 0], [v for v in expected if v > 0.0], atol=1e-9)
+    assert rec.times[32] - rec.times[31] == pytest.approx(0.1 * (1 + 13)), "the stop is a gap in the recording"
+    assert (rec.commands[:, 1] == 0.0).all() and (rec.labels == CENTRE).all()
+
+
+def test_the_status_line_shows_the_vehicles_speed_and_the_set_speed(monkeypatch):
+    drawn = _overlays(monkeypatch)
+    events = {3: [key(pygame.KEYDOWN, pygame.K_w), key(pygame.KEYUP, pygame.K_w)], 20: [pygame.event.Event(pygame.QUIT)]}
+    run_teleop("demo_course", None, realtime=False, wait_for_start=False, script=script_from(events), max_frames=40)
+    # From standstill at 1 m/s^2: 0.1 m/s more each 0.1 s frame, up to the set speed.
+    assert "v 0.00 m/s (set 1.00)" in drawn[0].status
+    assert "v 0.30 m/s (set 1.10)" in drawn[3].status, "the set speed at once, the vehicle's own a while later"
+    assert "v 1.10 m/s (set 1.10)" in drawn[15].status
+
+
+def test_the_throttle_takes_over_from_the_planner_and_is_recorded_as_a_correction(tmp_path):
+    """The planner drives; W takes over from the planner's command (its v one step faster, its w
+    kept on the stick); 1.5 s untouched hands back."""
+    from helpers import linear_model
+    from terrapref.teleop import HANDBACK_S
+
+    model = linear_model(tmp_path / "m.safetensors")
+    out = tmp_path / "corrections"
+    events = {20: [key(pygame.KEYDOWN, pygame.K_w), key(pygame.KEYUP, pygame.K_w)], 80: [pygame.event.Event(pygame.QUIT)]}
+    drivers: list[str] = []
+    stick: list[float] = []
+
+    def script(state):
+        drivers.append(state.driver)
+        stick.append(state.w)
+        return events.get(state.index, [])
+
+    result = run_teleop(
+        "demo_course", out, realtime=False, wait_for_start=False, script=script, max_frames=200, model=model, v_mps=0.5
+    )  # the driver's own starting speed is not the planner's
+    handback = round(HANDBACK_S * 10)
+    assert drivers[:21] == ["planner"] * 21 and drivers[21 : 21 + handback + 1] == ["you"] * (1 + handback)
+    assert drivers[21 + handback + 1] == "planner"
+    rec = read_recording(out)
+    assert result.frames == len(rec) == 1 + handback and result.planner_frames == 80 - len(rec)
+    assert rec.meta["driver"]["kind"] == "corrections"
+    assert rec.commands[:, 0] == pytest.approx([ControlSet().v_mps + 0.1] * len(rec)), "the planner's speed, one step faster"
+    assert (rec.commands[:, 1] == stick[21]).all(), "the stick holds the planner's w from the takeover on"
+    assert (rec.labels == ControlSet().label_of(rec.commands[:, 1])).all()
+
+
+def test_a_starting_speed_above_the_vehicles_top_speed_is_a_user_error():
+    with pytest.raises(UserError, match=r"speed must be in \(0, 2\] m/s, got 2.5"):
+        run_teleop("demo_course", realtime=False, wait_for_start=False, v_mps=2.5, max_frames=1)

@@ -12,9 +12,11 @@ sees which discrete command each stick position is recorded as; a heads-up displ
 progress along the path, the next patch, the terrain under the vehicle, the label as a turn and
 the distance to the route; alerts when a push turns the vehicle or it is off the route, with an
 arrow back to the route; a top-down inset of the map with the reference path, the vehicle, its
-trace and where the pushes began; a stick gauge, the terrain legend and the controls.
+trace and where the pushes began; a stick gauge, the terrain legend and the controls. The
+status line under the view gives the vehicle's speed beside the throttle's set speed.
 
-- ``stick``: keyboard, mouse and gamepad input.
+- ``stick``: keyboard, mouse and gamepad steering.
+- ``throttle``: the set speed, from W/S, the mouse wheel and a gamepad axis.
 - ``guide``: what the display says about the course, and where the map ends.
 - ``window``: drawing, on a canvas scaled to the (resizable) window.
 - ``loop``: the session (start, countdown, pause, riding along with a model, recording).
@@ -31,6 +33,7 @@ with needs("teleop", "terrapref drive"):  # here once, before the submodules imp
 
 from terrapref.teleop.loop import COUNTDOWN_S, HANDBACK_S, TeleopOptions, TeleopResult, TeleopState, run_session, run_teleop  # noqa: E402
 from terrapref.teleop.stick import AXIS_DEADZONE, KEY_RATE_RPS2, Stick, axis_to_w, ramp_toward  # noqa: E402
+from terrapref.teleop.throttle import Throttle  # noqa: E402
 
 __all__ = [
     "AXIS_DEADZONE",
@@ -41,6 +44,7 @@ __all__ = [
     "TeleopOptions",
     "TeleopResult",
     "TeleopState",
+    "Throttle",
     "axis_to_w",
     "ramp_toward",
     "run_session",

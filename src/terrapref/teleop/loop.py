@@ -7,9 +7,15 @@ camera period, through the record loop the synthetic driver uses too
 
 - ``waiting``: the window is open and nothing moves; the instructions are on screen. Space,
   Enter, P or a gamepad button starts the countdown.
-- ``countdown``: three seconds in which the driver can already set the stick; nothing moves.
+- ``countdown``: three seconds in which the driver can already set the stick and the throttle;
+  nothing moves.
 - ``driving``: the vehicle moves and frames are recorded. Space/P (or a gamepad button) pauses.
 - ``paused``: nothing moves; resuming counts down again.
+
+The command is (v, w): the throttle's set speed (terrapref.teleop.throttle) and the stick's yaw
+rate. A set speed of 0 stands the vehicle (it may still turn on the spot); those frames are not
+recorded, since a label names one of the control set's arcs, which a standing vehicle does not
+follow, and a long stop would fill the recording with one view.
 
 The map's edge is a boundary: when the next frame would bring the vehicle within
 :data:`~terrapref.teleop.guide.EDGE_MARGIN_M` of it, the vehicle stops (it may still turn
@@ -20,10 +26,11 @@ Pushes (the session's disturbances, on unless turned off): while one turns the v
 says which way, and the map marks where it began; the start screen says they will come.
 
 Riding along with a model: the planner drives; any stick input (an arrow, Down/C, the mouse
-button over the view, the pad off centre) takes over from the planner's current command, and the
-frames the driver steers are recorded as corrections (label: the driver's command); after
-:data:`HANDBACK_S` without stick input the planner drives again. Only the driver's frames are
-recorded: those are the situations in which the planner did what the driver would not.
+button over the view, the pad off centre) or throttle input (W/S, the mouse wheel, the pad's
+throttle axis) takes over from the planner's current command (v and w), and the driver's frames
+are recorded as corrections (label: the driver's command); after :data:`HANDBACK_S` without
+stick or throttle input the planner drives again. Only the driver's frames are recorded:
+those are the situations in which the planner did what the driver would not.
 """
 
 from __future__ import annotations
@@ -50,6 +57,7 @@ from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.sim import Frame, SimConfig, Simulation
 from terrapref.teleop.guide import CourseGuide, stays_on_map
 from terrapref.teleop.stick import Stick
+from terrapref.teleop.throttle import PAD_AXIS, Throttle
 from terrapref.teleop.window import ALERT_COLOR, HIGHLIGHT_COLOR, PLANNER_COLOR, Banner, Overlay, Window
 from terrapref.terrain import PreferenceProfile
 from terrapref.vehicle import Command
@@ -61,7 +69,7 @@ INPUT = "keyboard/mouse/gamepad"  # the devices a person drives with (recorded a
 COUNTDOWN_S = 3.0
 """From the start key to the first recorded frame, and again when resuming from a pause [s]."""
 HANDBACK_S = 1.5
-"""Riding along, the planner drives again after this long without stick input [s]."""
+"""Riding along, the planner drives again after this long without stick or throttle input [s]."""
 PUSH_SHOWN_S = 1.0
 """A push's alert stays this long after the push ends, so that a short one is seen too [s]."""
 
@@ -72,10 +80,11 @@ INSTRUCTIONS = (
     "Space/Enter  start, pause",
     "Left/Right   move the stick",
     "Down / C     centre it",
+    "W / S, wheel faster, slower",
     "mouse drag   steer",
     "Esc / Q      quit",
 )
-RIDE_ALONG_INSTRUCTIONS = ("stick input takes over", f"{HANDBACK_S:g} s untouched: hands back")
+RIDE_ALONG_INSTRUCTIONS = ("stick or throttle takes over", f"{HANDBACK_S:g} s untouched: hands back")
 
 
 @dataclass(frozen=True)
@@ -84,7 +93,7 @@ class TeleopResult:
 
     Attributes:
         frames: frames recorded (when recording) or driven by the person: paused, waiting,
-            edge and (riding along) planner frames excluded.
+            edge, standing and (riding along) planner frames excluded.
         completed: the vehicle reached the goal.
         collisions: entries of the footprint onto lethal terrain.
         quit: the driver quit (Esc, Q or the window's close button) before the run ended.
@@ -92,6 +101,7 @@ class TeleopResult:
         duration_s: simulated time driven [s].
         edge_frames: frames the vehicle was held at the map's edge.
         planner_frames: frames the planner drove (riding along).
+        standing_frames: frames the person drove at a set speed of 0.
         contact_s: time with lethal terrain under the footprint [s].
         contact_m: distance driven so [m].
         pushes: pushes that turned the vehicle.
@@ -105,6 +115,7 @@ class TeleopResult:
     duration_s: float = 0.0
     edge_frames: int = 0
     planner_frames: int = 0
+    standing_frames: int = 0
     contact_s: float = 0.0
     contact_m: float = 0.0
     pushes: int = 0
@@ -118,6 +129,7 @@ class TeleopState:
         index: loop iteration (0-based).
         frame: the camera frame on screen.
         w: the stick [rad/s] after the last frame.
+        v: the throttle's set speed [m/s] after the last frame.
         phase: ``waiting``, ``countdown``, ``driving`` or ``paused``.
         driver: ``you`` or (riding along) ``planner``.
     """
@@ -125,6 +137,7 @@ class TeleopState:
     index: int
     frame: Frame
     w: float
+    v: float
     phase: str
     driver: str
 
@@ -143,7 +156,8 @@ class TeleopOptions:
         preference: preference/control set configuration; its control set labels w (default:
             the model's when riding along).
         sim_config: loop timing and limits.
-        v_mps: forward speed held throughout [m/s], in (0, vehicle max speed].
+        v_mps: the throttle's set speed at the start [m/s], in (0, vehicle max speed]; the
+            driver moves it in [0, vehicle max speed] while driving.
         realtime: pace the loop at the camera rate for a person; False runs as fast as it can.
         script: ``TeleopState -> events`` posted before each iteration's events are handled
             (tests and the simulated keyboard driver inject key and mouse events this way).
@@ -228,18 +242,20 @@ _NOTHING_YET = _Held()
 
 class _Session:
     """One driving session's state: what a person adds to the record loop (phases, window
-    events, the stick, riding along, the map's edge). :func:`run_session` builds it and runs
-    :meth:`run`."""
+    events, the stick and the throttle, riding along, the map's edge). :func:`run_session`
+    builds it and runs :meth:`run`."""
 
     def __init__(self, recorder: RecordLoop, prefs: PreferenceSet, window: Window, planner: Any, options: TeleopOptions) -> None:
         sim = recorder.sim
-        self.recorder, self.sim, self.window, self.v = recorder, sim, window, options.v_mps
+        self.recorder, self.sim, self.window = recorder, sim, window
         self.control = prefs.config.control
         self.frame_dt = 1.0 / sim.config.camera_rate_hz
         self.guide = CourseGuide(sim.world, sim.path, prefs)
         self.stick = Stick(
             w_max_rps=float(np.abs(self.control.w_rps).max()), view_width_px=window.view_size[0], view_height_px=window.view_size[1]
         )
+        self.throttle = Throttle(options.v_mps, sim.config.vehicle.max_speed_mps)
+        self.command = Command(self.throttle.v, 0.0)  # the command of the last frame drawn
         self.planner = planner
         self.driver = "planner" if planner is not None else "you"
         self.idle_s = 0.0
@@ -247,7 +263,7 @@ class _Session:
         self.countdown_left = 0
         self.quit = False
         self.at_edge = False
-        self.recorded = self.edge_frames = self.planner_frames = 0
+        self.recorded = self.edge_frames = self.planner_frames = self.standing_frames = 0
         self.disturbance = options.disturbance if options.disturbance is not None and options.disturbance.active else None
         self.pushing = False  # the last driven frame was pushed
         self.push_rps = 0.0  # the last push [rad/s]
@@ -282,9 +298,15 @@ class _Session:
         elif self.phase == "driving":
             self.phase = "paused"
 
+    def _follow_planner(self) -> None:
+        """Rest the stick and the throttle at the planner's command, so that a takeover starts from it."""
+        v, w = self.decision.command
+        self.stick.follow(float(w))
+        self.throttle.follow(float(v))
+
     def handle_events(self) -> None:
         if self.driver == "planner":
-            self.stick.follow(float(self.decision.command[1]))
+            self._follow_planner()
         for event in pygame.event.get():
             if event.type == pygame.QUIT or (event.type == pygame.KEYDOWN and event.key in QUIT_KEYS):
                 self.quit = True
@@ -296,13 +318,14 @@ class _Session:
                 self.stick.handle(pygame.event.Event(event.type, {**event.dict, "pos": self.window.to_canvas(event.pos)}))
             else:
                 self.stick.handle(event)
+                self.throttle.handle(event)
 
     def _who_drives(self) -> None:
-        """Riding along: stick input takes the vehicle over; a stick left alone hands it back."""
+        """Riding along: stick or throttle input takes the vehicle over; both left alone hand it back."""
         if self.planner is None:
             return
-        used = self.stick.touched or self.stick.active
-        self.stick.touched = False
+        used = self.stick.touched or self.stick.active or self.throttle.touched or self.throttle.active
+        self.stick.touched = self.throttle.touched = False
         if self.phase != "driving":
             return
         if self.driver == "planner" and used:
@@ -312,7 +335,7 @@ class _Session:
                 self.idle_s = 0.0
             elif self.idle_s >= HANDBACK_S - 0.5 * self.frame_dt:  # the driver's last HANDBACK_S were untouched
                 self.driver = "planner"
-                self.stick.follow(float(self.decision.command[1]))
+                self._follow_planner()
             else:
                 self.idle_s += self.frame_dt
 
@@ -323,38 +346,40 @@ class _Session:
         if self.quit:
             return
         w = self.stick.update(self.frame_dt)
+        v = self.throttle.update(self.frame_dt, self.stick.axis(PAD_AXIS))
         self._who_drives()
-        if self.driver == "planner":
-            w = float(self.decision.command[1])
-        label = int(self.control.label_of(w))
-        self.draw(w, label)
+        self.command = Command(v, w) if self.driver == "you" else Command(*(float(c) for c in self.decision.command))
+        label = int(self.control.label_of(self.command.w))
+        self.draw(self.command, label)
         if self.phase == "countdown":
             self.countdown_left -= 1
             if self.countdown_left <= 0:
                 self.phase = "driving"
         elif self.phase == "driving":
-            self.drive(w)
+            self.drive(self.command)
 
-    def drive(self, w: float) -> None:
-        """One driven frame: the driver's command (the stick's ``w`` [rad/s] or the planner's),
-        held at the map's edge where it must be, recorded only where the person steered."""
-        command = Command(self.v, w) if self.driver == "you" else Command(*self.decision.command)
+    def drive(self, command: Command) -> None:
+        """One driven frame of ``command``, the driver's (the throttle's v [m/s] and the stick's w
+        [rad/s]) or the planner's: held at the map's edge where it must be, recorded only where
+        the person drove at a set speed above 0."""
         executed = self.recorder.executed(command)
         self._note_push(float(executed[1]) - float(command[1]))
         vehicle = self.sim.vehicle
         brake_m = vehicle.config.braking_distance_m(max(vehicle.speed_mps, float(executed[0])))
         self.at_edge = not stays_on_map(self.sim.world, self.frame.pose, executed, self.frame_dt, brake_m=brake_m)
-        steered = self.driver == "you" and not self.at_edge
+        kept = self.driver == "you" and not self.at_edge and command.v > 0.0
         if self.at_edge:
             executed = Command(0.0, executed[1])  # held at the edge: it may turn on the spot
             self.edge_frames += 1
-        elif steered:
+        elif kept:
             self.recorded += 1
+        elif self.driver == "you":
+            self.standing_frames += 1
         else:
             self.planner_frames += 1
         if self.live is not None:
-            self._send(executed, label_w=w)
-        self.frame = self.recorder.record_step(self.frame, command, executed, record=steered)
+            self._send(executed, label_w=command.w)
+        self.frame = self.recorder.record_step(self.frame, command, executed, record=kept)
         self.decision = self._decide()
         self.trace_px.append(self.window.to_inset(self.frame.pose.x, self.frame.pose.y))
 
@@ -420,10 +445,11 @@ class _Session:
                 (
                     what,
                     "The white arcs are the turns you can take; yours is yellow.",
-                    f"The vehicle moves at {self.v:g} m/s; you steer.",
                     "Left/Right move the stick, which stays where you leave it;",
                     "Down or C centres it. Or hold the left mouse button over",
                     "this view (the pointer's position steers), or use a gamepad.",
+                    f"W / S or the mouse wheel set the speed (at first {self.throttle.v:g} m/s),",
+                    "which holds until you change it; at 0 the vehicle stands.",
                     "Recording starts after a 3 s countdown. Space pauses.",
                     *pushes,
                 ),
@@ -436,7 +462,7 @@ class _Session:
             return Banner("MAP EDGE", ALERT_COLOR, ("The vehicle stopped: turn back onto the map.", "Frames here are not recorded."))
         return None
 
-    def draw(self, w: float, label: int, end_banner: Banner | None = None, note: str = "") -> None:
+    def draw(self, command: Command, label: int, end_banner: Banner | None = None, note: str = "") -> None:
         readout = self.guide.readout(self.frame.pose, self.sim.progress_m, label, self.at_edge)
         mode = None
         if self.planner is not None:
@@ -445,7 +471,7 @@ class _Session:
                 mode = (f"PLANNER STOPPED: {self.decision.stop}", ALERT_COLOR)
         alerts = tuple(a for a in (self.push_alert(), readout.warning()) if a is not None)
         overlay = Overlay(
-            self.status(w, label) + note,
+            self.status(command, label) + note,
             readout.lines(),
             end_banner or self.banner(),
             mode,
@@ -454,14 +480,15 @@ class _Session:
             off_route=readout.off_route,
             pushes_px=self.pushes_px,
         )
-        self.window.draw(self.frame.image, w, label, self.trace_px, overlay)
+        self.window.draw(self.frame.image, command.w, label, self.trace_px, overlay)
 
-    def status(self, w: float, label: int) -> str:
-        """The line under the view: time, speed, the stick's w and label, frames, collisions, and the phase unless driving."""
+    def status(self, command: Command, label: int) -> str:
+        """The line under the view: time, the vehicle's speed and the set one (``command``'s v
+        [m/s]), ``command``'s w [rad/s] and its label, frames, collisions, and the phase unless driving."""
         parts = [
             f"t {self.sim.time_s:6.1f} s",
-            f"v {self.v:.2f} m/s",
-            f"w {w:+.2f} rad/s",
+            f"v {self.sim.vehicle.speed_mps:.2f} m/s (set {command.v:.2f})",
+            f"w {command.w:+.2f} rad/s",
             f"label {label:2d}/{self.control.m - 1}",
             f"{'rec' if self.recorder.writer is not None else 'frames'} {self.recorded}",
             f"collisions {self.sim.collisions}",
@@ -478,7 +505,7 @@ class _Session:
         i = 0
         while not self.sim.done and (max_frames is None or i < max_frames):
             if script is not None:
-                for event in script(TeleopState(i, self.frame, self.stick.w, self.phase, self.driver)):
+                for event in script(TeleopState(i, self.frame, self.stick.w, self.throttle.v, self.phase, self.driver)):
                     pygame.event.post(event)
             self.tick()
             if self.quit:
@@ -490,7 +517,7 @@ class _Session:
     def show_end(self, screenshot: str | Path | None) -> Banner | None:
         """Draw how the run ended and save the window to ``screenshot``; returns the end banner (None: neither goal nor time up)."""
         end = Banner("GOAL") if self.sim.reached_goal else Banner("TIME UP", ALERT_COLOR) if self.sim.timed_out else None
-        self.draw(self.stick.w, int(self.control.label_of(self.stick.w)), end, "   quit" if self.quit else "   done")
+        self.draw(self.command, int(self.control.label_of(self.command.w)), end, "   quit" if self.quit else "   done")
         if screenshot is not None:
             self.window.save(str(screenshot))
         return end
@@ -506,6 +533,7 @@ class _Session:
             duration_s=self.sim.time_s,
             edge_frames=self.edge_frames,
             planner_frames=self.planner_frames,
+            standing_frames=self.standing_frames,
             contact_s=self.sim.contact_s,
             contact_m=self.sim.contact_m,
             pushes=self.pushes,
@@ -523,6 +551,7 @@ def _summary(result: TeleopResult) -> dict[str, Any]:
         "quit": result.quit,
         "edge_frames": result.edge_frames,
         "planner_frames": result.planner_frames,
+        "standing_frames": result.standing_frames,
     }
 
 

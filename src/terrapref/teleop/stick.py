@@ -73,6 +73,10 @@ class Stick:
     def active(self) -> bool:
         return self.left or self.right or self.mouse_x is not None or abs(self.pad) > AXIS_DEADZONE
 
+    def axis(self, index: int) -> float:
+        """The gamepad's axis ``index`` in [-1, 1]; 0 without a pad or on a pad without that axis."""
+        return float(self.joystick.get_axis(index)) if self.joystick is not None and self.joystick.get_numaxes() > index else 0.0
+
     def follow(self, w: float) -> None:
         """Rest the stick at ``w`` (the planner's command while it drives): arrows then move it from there."""
         self.w, self.source = float(w), "keys"
@@ -114,7 +118,7 @@ class Stick:
 
     def update(self, dt_s: float) -> float:
         """Sample the stick for one frame of ``dt_s`` [s]; returns w [rad/s]."""
-        self.pad = self.joystick.get_axis(0) if self.joystick is not None and self.joystick.get_numaxes() > 0 else 0.0
+        self.pad = self.axis(0)
         if abs(self.pad) > AXIS_DEADZONE:
             self.source, self.touched = "pad", True
         if self.left != self.right:

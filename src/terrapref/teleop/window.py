@@ -54,7 +54,7 @@ class Overlay:
     """The text drawn around and over the camera view in one frame.
 
     Attributes:
-        status: the line under the view (time, speed, label, frames, collisions).
+        status: the line under the view (time, the vehicle's speed and the set one, w, label, frames, collisions).
         hud: the guide's readout, top left of the view.
         banner: large text over the view, or None.
         mode: who drives (ride-along) and in what colour, top right of the view; None: nobody but you.
