@@ -35,7 +35,7 @@ from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
 from terrapref.demos.recording import RecordingWriter, read_recording
 from terrapref.demos.session import RunSettings, record_run
 from terrapref.features import FeatureConfig, PreferenceSetConfig, UtilityFeaturizer
-from terrapref.rules import OffsetConfig, SecondStageConfig
+from terrapref.rules import OffsetConfig, SecondStageConfig, SpeedConfig
 from terrapref.scenario import resolve_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim import SimConfig, Simulation
@@ -132,6 +132,7 @@ def main() -> int:
         d3 = bench_decision(out, args.repeats, rules=(SecondStageConfig(),))
         d4 = bench_decision(out, args.repeats, members=3, rules=(SecondStageConfig(),))
         d5 = bench_decision(out, args.repeats, members=3, rules=(SecondStageConfig(), OffsetConfig()))
+        d6 = bench_decision(out, args.repeats, members=3, rules=(SecondStageConfig(), OffsetConfig(), SpeedConfig()))
         loop_s, loop_frames = bench_closed_loop(out.parent / "model.safetensors")
     ref_s = reference_ms() / 1e3
 
@@ -148,7 +149,8 @@ def main() -> int:
     line("decision, 2 members, per frame", d2, "-")
     line("decision with the second stage, per frame", d3, "-")
     line("decision of recipe teach, C + second stage", d4, "<= 60us")
-    line("the default decision: teach, offset rule drives", d5, "<= 150us")
+    line("teach, offset rule drives, without the speed rule", d5, "-")
+    line("the default decision: teach, offset + speed rules", d6, "<= 150us")
     print(
         f"{'planner driving train_course, closed loop':48s} {loop_s:9.2f}s {'':>10s} {loop_s / ref_s:10.1f} {'-':>10s}   "
         f"({loop_frames} frames, {loop_frames / loop_s:.0f} frames/s)"

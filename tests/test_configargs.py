@@ -106,15 +106,15 @@ def test_the_train_flags_cover_every_documented_training_field():
 def test_the_stage_flags_change_the_recipes_stages():
     from terrapref.cli import build_parser
     from terrapref.recipes import rules_with
-    from terrapref.rules import OffsetConfig, SecondStageConfig
+    from terrapref.rules import OffsetConfig, SecondStageConfig, SpeedConfig
 
     def stages(recipe: str, *flags: str) -> tuple:
         args = build_parser().parse_args(["train", "rec", "--out", "m.safetensors", *flags])
         return rules_with(RECIPES[recipe], args.second_stage, args.stage_weight)
 
     assert stages("teach") == RECIPES["teach"].rules
-    assert stages("teach", "--no-second-stage") == (OffsetConfig(),)
-    assert stages("teach", "--stage-weight", "3") == (SecondStageConfig(weight=3.0, lookahead=True), OffsetConfig())
+    assert stages("teach", "--no-second-stage") == (OffsetConfig(), SpeedConfig())
+    assert stages("teach", "--stage-weight", "3") == (SecondStageConfig(weight=3.0, lookahead=True), OffsetConfig(), SpeedConfig())
     assert stages("paper", "--second-stage", "--stage-weight", "3") == (SecondStageConfig(weight=3.0),)
     with pytest.raises(UserError, match="--stage-weight"):
         stages("paper", "--stage-weight", "3")

@@ -19,7 +19,7 @@ from terrapref.errors import UserError
 from terrapref.features import FeatureConfig
 from terrapref.learning.train import TrainConfig
 from terrapref.recipes import DEFAULT_RECIPE, RECIPES, Recipe, recipe_named, rules_with
-from terrapref.rules import OffsetConfig, SecondStageConfig
+from terrapref.rules import OffsetConfig, SecondStageConfig, SpeedConfig
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.second.lookahead import LookaheadConfig
 from terrapref.scenario import parse_scenario
@@ -72,9 +72,14 @@ def test_teach_drives_teach_course_once_and_fits_through_the_lookahead():
     assert (teach.demonstrations, teach.course, teach.disturbance) == (1, "teach_course", DisturbanceConfig(rate_hz=0.3))
     assert (teach.train.optimiser.epochs, teach.train.optimiser.lr, teach.train.classifier.members) == (100, 3e-3, 3)
     assert teach.train.classifier.skip and teach.train.data.class_balance and teach.train.data.mirror
-    assert teach.rules == (SecondStageConfig(weight=5.0, lookahead=True), OffsetConfig())  # the offset rule, last, drives
+    # the offset rule, the last that steers, drives; the speed rule sets its speed
+    assert teach.rules == (SecondStageConfig(weight=5.0, lookahead=True), OffsetConfig(), SpeedConfig())
     assert teach.features() == FeatureConfig()
-    assert [r.data() for r in teach.rules] == [{"lookahead": LookaheadConfig().to_dict()}, {"geometry": OffsetGeometry().to_dict()}]
+    assert [r.data() for r in teach.rules] == [
+        {"lookahead": LookaheadConfig().to_dict()},
+        {"geometry": OffsetGeometry().to_dict()},
+        {"half_width_m": SpeedConfig().half_width_m},
+    ]
 
 
 def test_features_are_the_base_given():
@@ -320,7 +325,7 @@ def test_samples_with_nothing_to_learn_are_refused():
 def test_the_second_stage_is_added_left_out_or_weighted():
     teach, paper = RECIPES["teach"], RECIPES["paper"]
     assert rules_with(teach) == teach.rules and rules_with(teach, True) == teach.rules
-    assert rules_with(teach, False) == (OffsetConfig(),)
+    assert rules_with(teach, False) == (OffsetConfig(), SpeedConfig())
     assert rules_with(paper, True, 2.0) == (SecondStageConfig(weight=2.0),)
     with pytest.raises(UserError, match="recipe paper has no second stage here"):
         rules_with(paper, stage_weight=2.0)

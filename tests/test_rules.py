@@ -7,7 +7,8 @@ config) fitted, as training fits it, to the samples featurised from a recording 
 make (``fig7_recording``). Then, for each rule:
 
 1. its file block is JSON and reads back as the same rule, alone and through a model file that
-   lists it and names it to drive;
+   lists it and names it to drive (a rule that does not steer, the speed rule, sets the speed of
+   C's argmax there);
 2. it describes itself in one line that names it;
 3. two planners of the same file decide the same frames the same way, bit for bit, and so does a
    planner given the frames again after ``set_path``;
@@ -117,7 +118,10 @@ def fitted(fig7_recording, tmp_path_factory) -> SimpleNamespace:
     }
     files = {
         name: save_model(
-            folder / f"{name}.safetensors", classifier, skip_path_weights(classifier), {**meta, "rules": [rule.header()], "drives": name}
+            folder / f"{name}.safetensors",
+            classifier,
+            skip_path_weights(classifier),
+            {**meta, "rules": [rule.header()], "drives": name if rule.steers else "argmax"},  # a speed rule sets the speed of C's way
         )
         for name, rule in rules.items()
     }
@@ -163,9 +167,10 @@ def test_a_rule_reads_back_the_block_it_writes(fitted, rule_type):
     back = _read_back(json.loads(text), fitted, type(rule))
     assert type(back) is type(rule)
     _same_block(header, back.header())
-    planner = Planner(load_model(fitted.files[rule_type]))  # through a model file that names it to drive
-    assert planner.rule.type == rule_type
-    _same_block(header, planner.rule.header())
+    planner = Planner(load_model(fitted.files[rule_type]))  # through a model file that names it to drive (or sets the speed)
+    read = planner.rule if rule.steers else planner.speed.rule
+    assert read.type == rule_type
+    _same_block(header, read.header())
 
 
 # --- 2. the description ------------------------------------------------------------------------------

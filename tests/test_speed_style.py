@@ -168,11 +168,6 @@ def test_the_edges_of_the_valid_ranges_are_accepted():
     assert config.near_lethal_m == 0.0 and config.speed_mps == 2
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="ExpertConfig.__post_init__ checks `self.near_lethal_mps or 1.0`, so 0.0 passes as if None; "
-    "the driver then commands v = 0 whenever lethal terrain is near and the run gives up",
-)
 def test_a_zero_speed_near_lethal_terrain_is_refused():
     with pytest.raises(ValueError):
         ExpertConfig(near_lethal_mps=0.0)
@@ -443,11 +438,6 @@ def test_the_top_speed_itself_is_allowed_and_flags_win_over_the_file(tmp_path):
     assert err.value.source == "--lateral-accel"
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="driver_style replaces the file's whole `speeds` with the flag's, so a class the flag does not name loses the "
-    "file's speed, against `record --speeds`'s help: 'classes not named keep the style's'",
-)
 def test_a_speeds_flag_keeps_the_style_files_speeds_for_other_classes(tmp_path):
     path = _style_file(tmp_path, "speeds: {mud: 0.5}\n")
     config = driver_style(str(path), CLASSES.profile, CLASSES, TOP_SPEED_MPS, {"speeds": (("grass", 1.2),)})

@@ -166,7 +166,7 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
     lethal = frozenset({table.lethal_column} if table.lethal else ())  # the terrain column the lethal classes share
     print(f"drives: {result.drives or 'argmax'}" + ("" if result.rules else " (C's argmax: the recipe fits no decision rule)"))
     for rule in result.rules:
-        note = "" if rule.type == result.drives else " (fitted to be reported; it does not drive)"
+        note = "" if rule.type == result.drives or not rule.steers else " (fitted to be reported; it does not drive)"
         print(f"  {rule.describe(data.feature_config.feature_classes, lethal)}{note}")
     if result.identifiability is not None:
         print("what the demonstrations show (stored in the model):")

@@ -111,7 +111,8 @@ class ExpertConfig:
     stick_noise_rps: float = 0.02
 
     def __post_init__(self) -> None:
-        speeds = [self.speed_mps, *(v for _, v in self.speeds), *(self.ranked_speeds_mps or ()), self.near_lethal_mps or 1.0]
+        speeds = [self.speed_mps, *(v for _, v in self.speeds), *(self.ranked_speeds_mps or ())]
+        speeds += [self.near_lethal_mps] if self.near_lethal_mps is not None else []
         if not all(_positive(v) for v in speeds):
             raise ValueError(f"cruising speeds must be finite and > 0 m/s, got {speeds}")
         if self.lateral_accel_mps2 is not None and not _positive(self.lateral_accel_mps2):

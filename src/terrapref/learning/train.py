@@ -196,8 +196,9 @@ class TrainResult:
 
     @property
     def drives(self) -> str | None:
-        """The type of the rule that drives the model: the last one fitted (None: none was, C's argmax drives)."""
-        return self.rules[-1].type if self.rules else None
+        """The type of the rule that drives the model: the last one fitted that steers (None: none was, C's argmax drives)."""
+        steering = [r for r in self.rules if getattr(r, "steers", True)]
+        return steering[-1].type if steering else None
 
 
 def _ensemble(results: list[TrainResult]) -> TrainResult:

@@ -18,7 +18,7 @@ from terrapref.features import UtilityFeaturizer
 from terrapref.learning.model_file import LoadedModel, check_compatible
 from terrapref.planner.policy import ClassifierPolicy, Observation, Policy
 from terrapref.planner.stop import StopConfig, StopRule
-from terrapref.rules import Rule, RuleContext, RuleInput, chosen_rule
+from terrapref.rules import Choice, Rule, RuleContext, RuleInput, chosen_rule, speed_rule
 from terrapref.rules.costmap import Costmap
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
@@ -115,6 +115,9 @@ class Planner:
         context = RuleContext(self.camera, self.featurizer, policy.features, policy.classes)
         self.runner = self.rule.runner(context)
         control = policy.features.preference.control
+        speed = speed_rule(policy.rules)
+        self.speed = speed.runner(context) if speed is not None else None
+        self._set_v, self._max_w = float(control.v_mps), float(np.max(np.abs(control.w_rps)))
         half_width = self.runner.half_width_m
         self.stop_rule = StopRule(
             self.camera,
@@ -133,6 +136,8 @@ class Planner:
         self.tracker = PathTracker(self.path)
         self.runner.reset()
         self.stop_rule.reset()
+        if self.speed is not None:
+            self.speed.reset()
 
     def warm_up(self) -> None:
         """Decide once on a blank frame along a straight path, then forget that path.
@@ -146,6 +151,8 @@ class Planner:
         self.path, self.tracker = path, tracker
         self.runner.reset()  # the blank frame is not ground seen
         self.stop_rule.reset()
+        if self.speed is not None:
+            self.speed.reset()
 
     def decide(self, image: np.ndarray | SegmentationView, pose: Pose, time_s: float | None = None) -> Decision:
         """Choose a command for one segmentation frame (H, W) uint8 at ``pose``, taken at ``time_s``
@@ -162,13 +169,23 @@ class Planner:
         s = self.tracker.update(np.array(pose[:2]))
         outputs = functools.partial(_outputs, self.featurizer, self.policy, view, pose, self.path, s)
         if not self.runner.reads_probs and view is image:  # an array the caller may reuse is read now
-            choice = self.runner.decide(RuleInput(None, view, pose, self.path, s))
+            choice = self._at_speed(self.runner.decide(RuleInput(None, view, pose, self.path, s)), view, pose)
             stop = self.stop_rule.check(view, pose, choice.command.v, choice.command.w, time_s)
             return Decision(choice.index, STOP_COMMAND if stop else choice.command, s, pending=outputs, stop=stop)
         probs, U = outputs()
-        choice = self.runner.decide(RuleInput(probs, view, pose, self.path, s))
+        choice = self._at_speed(self.runner.decide(RuleInput(probs, view, pose, self.path, s)), view, pose)
         stop = self.stop_rule.check(view, pose, choice.command.v, choice.command.w, time_s)
         return Decision(choice.index, STOP_COMMAND if stop else choice.command, s, (probs, U), stop=stop)
+
+    def _at_speed(self, choice: Choice, view: SegmentationView, pose: Pose) -> Choice:
+        """The steering rule's choice at the speed rule's speed along its way (the same curvature);
+        as chosen without a speed rule."""
+        if self.speed is None:
+            return choice
+        self.speed.observe(view, pose)
+        curvature = choice.command.w / self._set_v
+        v = self.speed.speed(pose, curvature, self._max_w)
+        return Choice(choice.index, Command(v, curvature * v))
 
     def costmap(self) -> Costmap | None:
         """The ground seen so far as the driving rule prices it (terrapref.rules.costmap);

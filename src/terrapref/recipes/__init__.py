@@ -44,7 +44,7 @@ from terrapref.perception import PerceptionModel
 from terrapref.planner import Planner, PlannerDriver
 from terrapref.recipes.corrections import CorrectionDrivers, record_corrections
 from terrapref.registry import Registry
-from terrapref.rules import OffsetConfig, RuleConfig, SecondStageConfig
+from terrapref.rules import OffsetConfig, RuleConfig, SecondStageConfig, SpeedConfig
 from terrapref.rules.second.rule import with_second_stage
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import SimConfig, Simulation
@@ -112,7 +112,7 @@ TEACH = Recipe(
     "teach",
     course="teach_course",
     train=replace(_RECOMMENDED, classifier=ClassifierConfig(skip=True, members=3), data=replace(_RECOMMENDED.data, steady_labels=True)),
-    rules=(SecondStageConfig(weight=5.0, lookahead=True), OffsetConfig()),
+    rules=(SecondStageConfig(weight=5.0, lookahead=True), OffsetConfig(), SpeedConfig()),
     disturbance=DisturbanceConfig(rate_hz=0.3),
     summary="one drive of teach_course: any preference order from five minutes (the default); the offset rule drives (docs/learning.md)",
 )

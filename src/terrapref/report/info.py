@@ -142,7 +142,8 @@ def _rules(rules, driving, names: tuple[str, ...], classes, graph_note: bool = F
     note = " (in the metadata; the graph holds C alone)" if graph_note and not driving.graph else ""
     lines = [f"drives          {driving.type}{note}"]
     lines += [
-        f"  {rule.describe(names, lethal)}" + ("" if rule is driving else " (fitted to be reported; it does not drive)") for rule in rules
+        f"  {rule.describe(names, lethal)}" + ("" if rule is driving or not rule.steers else " (fitted to be reported; it does not drive)")
+        for rule in rules
     ]
     return lines
 

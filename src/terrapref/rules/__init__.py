@@ -12,11 +12,14 @@ The rules:
 - ``second_stage`` (:mod:`.second`): C's best trajectories scored again with the second pieces
   beyond them, by a linear utility fitted with C;
 - ``offset`` (:mod:`.offset`): a lateral offset from the path, priced by a utility learned from
-  the offsets the driver held, kept and steered to (the default planner's).
+  the offsets the driver held, kept and steered to (the default planner's);
+- ``speed`` (:mod:`.speed`): not a way but the speed along the way the steering rule chose, a
+  cruising speed per class, in bends and near lethal terrain, learned from the drive.
 
 A model file lists the rules fitted with it (``rules``) and names the one that drives
 (``drives``); the others were fitted to be reported, and a planner may be asked to drive by one
-of them instead. A file that lists none drives C's argmax.
+of them instead. A file that lists none drives C's argmax. A speed rule listed sets the speed
+whichever rule steers; without one the planner drives at the control set's speed.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ from terrapref.rules.argmax import ArgmaxRule
 from terrapref.rules.base import Choice, HeaderContext, Rule, RuleConfig, RuleContext, RuleInput, RuleRunner, Where
 from terrapref.rules.offset.rule import OffsetConfig, OffsetRule
 from terrapref.rules.second.rule import SecondStageConfig, SecondStageRule
+from terrapref.rules.speed.rule import SpeedConfig, SpeedRule
 
 if TYPE_CHECKING:
     from terrapref.learning.model_file import LoadedModel
@@ -50,12 +54,15 @@ __all__ = [
     "RuleRunner",
     "SecondStageConfig",
     "SecondStageRule",
+    "SpeedConfig",
+    "SpeedRule",
     "chosen_rule",
     "driving_rule",
     "legacy_blocks",
     "read_rules",
     "rules_in",
     "rules_of",
+    "speed_rule",
 ]
 
 RULES: Registry[type[Rule]] = Registry("rule")
@@ -121,9 +128,15 @@ def rules_in(meta: Mapping[str, Any], source: str) -> tuple[tuple[Rule, ...], Ru
     return read, driving_rule(read, drives, source)
 
 
+def speed_rule(rules: Sequence[Rule]) -> Rule | None:
+    """The rule that sets the speed (one that does not steer), or None: the control set's speed."""
+    return next((r for r in rules if not r.steers), None)
+
+
 def driving_rule(rules: Sequence[Rule], drives: str | None, source: str = "model") -> Rule:
     """The rule that drives: the one ``drives`` names (a file's ``drives``), else the last one
-    listed (older files); C's argmax when none is listed."""
+    listed that steers (older files); C's argmax when none is listed."""
+    rules = [r for r in rules if r.steers]
     if drives is None:
         return rules[-1] if rules else ArgmaxRule()
     if drives == ArgmaxRule.type:
@@ -145,7 +158,7 @@ def chosen_rule(rules: Sequence[Rule], drives: str | None, wanted: str | None, s
         return driving_rule(rules, drives, source)
     if wanted == ArgmaxRule.type:
         return ArgmaxRule()
-    found = [r for r in rules if r.type == wanted]
+    found = [r for r in rules if r.type == wanted and r.steers]
     if not found:
         have = ", ".join([ArgmaxRule.type, *(r.type for r in rules)])
         raise ValueError(f"{source}: no {wanted!r} rule (rules: {', '.join(RULES.names())}); it has {have}")
@@ -155,3 +168,4 @@ def chosen_rule(rules: Sequence[Rule], drives: str | None, wanted: str | None, s
 register_rule(ArgmaxRule, "the trajectory C ranks first (the paper's planner)")
 register_rule(SecondStageRule, "C's best trajectories scored again with the second pieces beyond them (a linear utility)")
 register_rule(OffsetRule, "a lateral offset from the path priced by a learned utility, held and steered to")
+register_rule(SpeedRule, "the speed along the way another rule steers: a cruising speed per class, in bends and near lethal terrain")

@@ -142,11 +142,13 @@ class Rule(abc.ABC):
     file's ``rules`` list (``type`` names it in :data:`terrapref.rules.RULES`).
 
     ``graph``: the rule's decision is C's graph (what ``terrapref export --format onnx`` writes);
-    otherwise the graph holds C alone and the rule runs in the planner.
+    otherwise the graph holds C alone and the rule runs in the planner. ``steers``: whether it
+    chooses the way; a rule that does not (the speed rule) sets the speed along the way chosen.
     """
 
     type: ClassVar[str]
     graph: ClassVar[bool] = False
+    steers: ClassVar[bool] = True  # False: it sets the speed along the way another rule steers (the speed rule)
 
     @abc.abstractmethod
     def header(self) -> dict[str, Any]:

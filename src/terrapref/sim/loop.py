@@ -148,7 +148,9 @@ class Simulation:
 
     def frame(self) -> Frame:
         pose = self.vehicle.pose
-        return Frame(self.frame_index, self.time_s, SegmentationView(self.renderer, pose), pose, self.scenario.waypoints, self.vehicle.speed_mps)
+        return Frame(
+            self.frame_index, self.time_s, SegmentationView(self.renderer, pose), pose, self.scenario.waypoints, self.vehicle.speed_mps
+        )
 
     def _in_contact(self, pose: Pose) -> bool:
         """Whether lethal terrain lies under any point of the footprint at ``pose``, in plain floats

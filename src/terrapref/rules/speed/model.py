@@ -1,0 +1,204 @@
+"""The speed model the speed rule learns, and its fit (SPEC 18).
+
+What a person's speed depends on, written as a few numbers that one drive can pin down: a
+cruising speed per terrain column (the background included), taken as the slowest of the columns
+the footprint meets on its way over the next ``preview_m``; no more than ``lateral_accel_mps2``
+allows in a bend of the way's curvature; and no more than ``near_lethal_mps`` while lethal terrain
+lies within ``near_lethal_m`` beside the footprint on that way.
+
+A frame's way is read as terrain columns at stations ``STATION_STEP_M`` apart (the first under
+the vehicle) and at the footprint's points across (:data:`ACROSS`: the footprint's 5, then the
+lethal rings' 4). The fit reads the way the driver drove; the planner reads the way it chose.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+STATION_STEP_M = 0.25
+STATIONS = 24  # the way is read to 6 m ahead
+PREVIEWS_M = tuple(0.25 * k for k in range(1, STATIONS + 1))  # the previews the fit tries [m]
+RINGS_M = (0.5, 1.0)  # lethal terrain this far beside the footprint is near, for the fit to choose [m]
+LAGS = (0, 1, 2, 3, 4)  # frames between what a frame shows and the speed commanded for it, for the fit to choose
+STRAIGHT = 0.05  # a way of less curvature is straight, for the cruising speeds [1/m]
+MIN_FRAMES = 10  # frames a cruising speed, a bend or a lethal neighbour needs to be fitted
+MIN_SPEED_MPS = 0.1  # the slowest the rule commands while it drives [m/s]
+
+
+def across(half_width_m: float) -> np.ndarray:
+    """The points across the way [m], left positive: the footprint's 5, then the rings' 4 (:data:`RINGS_M`)."""
+    foot = np.linspace(-half_width_m, half_width_m, 5)
+    rings = np.array([-(half_width_m + RINGS_M[1]), -(half_width_m + RINGS_M[0]), half_width_m + RINGS_M[0], half_width_m + RINGS_M[1]])
+    return np.concatenate([foot, rings])
+
+
+@dataclass(frozen=True)
+class SpeedModel:
+    """A fitted speed model (module docstring).
+
+    Attributes:
+        speeds_mps: cruising speed per terrain column, K + 1 of them (column K: the background) [m/s].
+        preview_m: how far ahead on its way the slowest column counts [m].
+        lateral_accel_mps2: the lateral acceleration kept in bends; None: no limit [m/s^2].
+        near_lethal_m: lethal terrain this far beside the footprint is near; None: it does not slow for it [m].
+        near_lethal_mps: the speed kept while lethal terrain is near [m/s].
+        lethal: the lethal terrain columns.
+    """
+
+    speeds_mps: tuple[float, ...]
+    preview_m: float
+    lateral_accel_mps2: float | None
+    near_lethal_m: float | None
+    near_lethal_mps: float | None
+    lethal: tuple[int, ...]
+
+    def predict(self, way: np.ndarray, curvature: np.ndarray) -> np.ndarray:
+        """The speed [m/s] (N,) for ways (N, STATIONS, 9) of terrain columns and their curvatures (N,) [1/m]."""
+        speeds = _speed_table(self.speeds_mps, self.lethal)
+        upto = _stations(self.preview_m)
+        v = np.nanmin(speeds[way[:, :upto, :5]].reshape(len(way), -1), axis=1, initial=np.inf)
+        v = np.where(np.isfinite(v), v, float(np.nanmin(self.speeds_mps)))  # nothing seen: the slowest cruising speed
+        if self.lateral_accel_mps2 is not None:
+            k = np.abs(curvature)
+            with np.errstate(divide="ignore"):
+                v = np.minimum(v, np.where(k > 0, np.sqrt(self.lateral_accel_mps2 / np.where(k > 0, k, 1.0)), np.inf))
+        if self.near_lethal_m is not None and self.near_lethal_mps is not None:
+            v = np.where(_near(way, upto, self.lethal, self.near_lethal_m), np.minimum(v, self.near_lethal_mps), v)
+        return np.maximum(v, MIN_SPEED_MPS)
+
+
+def _stations(preview_m: float) -> int:
+    """Stations of a way within ``preview_m`` (the one under the vehicle included)."""
+    return min(STATIONS, round(preview_m / STATION_STEP_M) + 1)
+
+
+def _speed_table(speeds_mps: tuple[float, ...], lethal: tuple[int, ...]) -> np.ndarray:
+    """Cruising speed per column value (K + 2 and up to 256): NaN for lethal and never-seen ground."""
+    table = np.full(256, np.nan)
+    table[: len(speeds_mps)] = speeds_mps
+    table[list(lethal)] = np.nan
+    return table
+
+
+def _near(way: np.ndarray, upto: int, lethal: tuple[int, ...], ring_m: float) -> np.ndarray:
+    """Whether lethal terrain lies on the footprint or within ``ring_m`` beside it on each way (N,)."""
+    is_lethal = np.zeros(256, dtype=bool)
+    is_lethal[list(lethal)] = True
+    points = [0, 1, 2, 3, 4, 6, 7] if ring_m <= RINGS_M[0] else list(range(9))
+    return is_lethal[way[:, :upto, points]].any(axis=(1, 2))
+
+
+@dataclass(frozen=True)
+class SpeedFit:
+    """How the fit went: the model, each column's cruising speed's 95% interval (None: never
+    shown at a steady speed), the lag chosen, frames fitted and the mean absolute error on them."""
+
+    model: SpeedModel
+    intervals: tuple[tuple[float, float] | None, ...]
+    lag_frames: int
+    samples: int
+    error_mps: float
+
+
+def fit_speed(
+    way: np.ndarray, curvature: np.ndarray, v_mps: np.ndarray, frame: np.ndarray, k: int, lethal: tuple[int, ...]
+) -> SpeedFit | None:
+    """The speed model that best explains the speeds commanded (``v_mps``, N) from the ways driven
+    (N, STATIONS, 9), their curvatures (N, NaN where the vehicle stood) and the frames' numbers
+    in their recordings (N; a lag pairs frames only within one recording); None without a frame
+    at a steady speed on any column.
+
+    For each preview and lag: a column's cruising speed is the median speed of the frames whose
+    way within the preview is that column alone and straight, with no lethal terrain near; the
+    bend's limit the median ``v^2 * curvature`` of the frames slower than their terrain allows in
+    bends; the lethal neighbour's speed the median of the frames slower than both near lethal
+    terrain (the ring that explains them best). The preview and lag that explain all frames best
+    (mean absolute error) are kept.
+    """
+    best: SpeedFit | None = None
+    for lag in LAGS:
+        later = _shifted(v_mps, frame, lag)
+        ok = np.isfinite(later) & (later > 0) & np.isfinite(curvature)
+        if np.count_nonzero(ok) < MIN_FRAMES:
+            continue
+        w, c, v = way[ok], curvature[ok], later[ok]
+        for preview in PREVIEWS_M:
+            fitted = _fit_at(w, c, v, k, lethal, preview)
+            if fitted is None:
+                continue
+            model, intervals = fitted
+            error = float(np.mean(np.abs(model.predict(w, c) - v)))
+            if best is None or error < best.error_mps - 1e-9:
+                best = SpeedFit(model, intervals, lag, int(len(v)), error)
+    return best
+
+
+def _shifted(v: np.ndarray, frame: np.ndarray, lag: int) -> np.ndarray:
+    """``v`` ``lag`` frames later within the same recording (NaN where there is no such frame)."""
+    out = np.full(len(v), np.nan)
+    if lag == 0:
+        return v.astype(float)
+    same = frame[lag:] == frame[:-lag] + lag
+    out[:-lag][same] = v[lag:][same]
+    return out
+
+
+def _fit_at(
+    way: np.ndarray, curvature: np.ndarray, v: np.ndarray, k: int, lethal: tuple[int, ...], preview_m: float
+) -> tuple[SpeedModel, tuple[tuple[float, float] | None, ...]] | None:
+    upto = _stations(preview_m)
+    foot = way[:, :upto, :5].reshape(len(way), -1)
+    seen = foot <= k  # K + 1: never seen
+    first = np.where(seen.any(axis=1), foot[np.arange(len(foot)), np.argmax(seen, axis=1)], k + 1)
+    alone = seen.any(axis=1) & np.all((foot == first[:, None]) | ~seen, axis=1)
+    near = _near(way, upto, lethal, RINGS_M[1])
+    steady = alone & (np.abs(curvature) < STRAIGHT) & ~near
+    speeds: list[float] = []
+    intervals: list[tuple[float, float] | None] = []
+    for col in range(k + 1):
+        rows = np.flatnonzero(steady & (first == col))
+        if col in lethal or len(rows) < MIN_FRAMES:
+            speeds.append(math.nan)
+            intervals.append(None)
+            continue
+        speeds.append(float(np.median(v[rows])))
+        intervals.append(_interval(v[rows], rows))
+    known = [s for s in speeds if not math.isnan(s)]
+    if not known:
+        return None
+    slowest = min(known)
+    speeds = [slowest if math.isnan(s) else s for s in speeds]  # never shown steady: the slowest known, to be safe
+    base = SpeedModel(tuple(speeds), preview_m, None, None, None, lethal)
+    terrain_v = base.predict(way, curvature)
+    bend = (terrain_v > 1.1 * v) & (np.abs(curvature) >= 2 * STRAIGHT) & ~near
+    best, best_error = base, float(np.mean(np.abs(terrain_v - v)))
+    if np.count_nonzero(bend) >= MIN_FRAMES:  # a limit in bends, kept only where it explains the frames better than none
+        for a_lat in np.percentile(v[bend] ** 2 * np.abs(curvature[bend]), (25, 50, 75)):
+            trial = SpeedModel(tuple(speeds), preview_m, float(a_lat), None, None, lethal)
+            error = float(np.mean(np.abs(trial.predict(way, curvature) - v)))
+            if error < best_error - 1e-9:
+                best, best_error = trial, error
+    a_lat = best.lateral_accel_mps2
+    allowed = best.predict(way, curvature)
+    for ring in RINGS_M:
+        slowed = _near(way, upto, lethal, ring) & (allowed > 1.1 * v)
+        if np.count_nonzero(slowed) < MIN_FRAMES:
+            continue
+        trial = SpeedModel(tuple(speeds), preview_m, a_lat, ring, float(np.median(v[slowed])), lethal)
+        error = float(np.mean(np.abs(trial.predict(way, curvature) - v)))
+        if error < best_error - 1e-9:
+            best, best_error = trial, error
+    return best, tuple(intervals)
+
+
+def _interval(v: np.ndarray, rows: np.ndarray, resamples: int = 200) -> tuple[float, float]:
+    """95% interval of the median of ``v`` by a bootstrap over blocks of 10 consecutive frames
+    (neighbouring frames are not independent), seeded: the same interval on every run."""
+    blocks = np.split(v, np.flatnonzero(np.diff(rows) > 1) + 1)
+    blocks = [b[i : i + 10] for b in blocks for i in range(0, len(b), 10)]
+    rng = np.random.default_rng(len(v))
+    medians = [float(np.median(np.concatenate([blocks[i] for i in rng.integers(len(blocks), size=len(blocks))]))) for _ in range(resamples)]
+    return float(np.percentile(medians, 2.5)), float(np.percentile(medians, 97.5))

@@ -1,0 +1,321 @@
+"""The ``speed`` rule: how fast to drive the way the steering chose, learned from the same drive.
+
+It does not steer: the rule that steers picks the way (a trajectory's or an offset's curvature),
+and this rule picks the speed along it (:class:`SpeedRunner`), from what its own ground map
+(terrapref.rules.offset.ground_map) has gathered of the ground the camera has shown, under and
+ahead of the vehicle. The model and its fit are :mod:`.model`. Its fit reads, for every frame of
+a drive, the ground map around the vehicle as the camera had shown it by then, along the way the
+driver then drove (:class:`SpeedReader`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import numpy as np
+
+from terrapref.camera import PinholeCamera, SegmentationView
+from terrapref.features import UtilityFeaturizer
+from terrapref.records import to_plain
+from terrapref.rules.base import FrameReader, HeaderContext, Rule, RuleConfig, RuleContext, Where, number
+from terrapref.rules.columns import TerrainColumns
+from terrapref.rules.offset.geometry import OffsetGeometry
+from terrapref.rules.offset.ground_map import GroundMap
+from terrapref.rules.speed.model import STATION_STEP_M, STATIONS, SpeedFit, SpeedModel, across, fit_speed
+from terrapref.scenario.path import ReferencePath
+from terrapref.terrain import ClassTable
+from terrapref.vehicle import Pose
+
+if TYPE_CHECKING:
+    from terrapref.demos.recording import Recording
+    from terrapref.learning.train import FitData
+
+# The speed rule's ground map: 0.2 m cells, ground read every 0.2 m to 6.5 m ahead (the way's
+# reach) and 3 m each side, the last few seconds counting (fade 0.9 a frame), so that the ground
+# under the vehicle, which the camera showed a moment ago, is still known.
+MAP = OffsetGeometry(
+    stations_m=(-1.0, 6.0),
+    map_resolution_m=0.2,
+    sample_step_m=0.2,
+    map_half_size_m=8.0,
+    sample_range_m=6.5,
+    map_fade=0.9,
+    map_sky_attitude=False,
+)
+MAP_HALF_WIDTH_M = 3.0
+# The ground around the vehicle each training frame keeps (the vehicle frame: x ahead, y left):
+# SNAPSHOT_X x SNAPSHOT_Y cells of SNAPSHOT_STEP_M from (SNAPSHOT_X0, -SNAPSHOT_Y0).
+SNAPSHOT_STEP_M = 0.2
+SNAPSHOT_X0, SNAPSHOT_Y0 = -1.0, 2.8
+SNAPSHOT_X, SNAPSHOT_Y = 40, 29
+
+
+@dataclass(frozen=True)
+class SpeedConfig(RuleConfig):
+    """The speed rule before fitting.
+
+    Attributes:
+        half_width_m: half the vehicle's width: the footprint whose ground sets the speed [m].
+        max_speed_mps: the fastest it commands [m/s].
+    """
+
+    type: ClassVar[str] = "speed"
+    arrays: ClassVar[dict[str, str]] = {"way": "finite >= 0", "curvature": "no inf", "v_mps": "finite >= 0", "frame": "finite >= 0"}
+    without_data: ClassVar[str] = "the model gets no speed rule and drives at the control set's speed"
+
+    half_width_m: float = 0.6
+    max_speed_mps: float = 2.0
+
+    def __post_init__(self) -> None:
+        if not (0 < self.half_width_m < 3 and math.isfinite(self.max_speed_mps) and self.max_speed_mps > 0):
+            raise ValueError("the speed rule needs a half width in (0, 3) m and a top speed > 0")
+
+    def to_dict(self) -> dict:
+        return to_plain(self)
+
+    def summary(self) -> str:
+        return "the speed rule, a cruising speed per class, in bends and near lethal terrain, learned from the drive"
+
+    def data(self) -> dict[str, Any]:
+        return {"half_width_m": self.half_width_m}
+
+    def reader(self, featurizer: UtilityFeaturizer, camera: PinholeCamera, classes: ClassTable, n: int) -> SpeedReader:
+        return SpeedReader(self.half_width_m, featurizer, camera, classes, n)
+
+    def fit(self, data: FitData) -> SpeedRule | None:
+        """The speed model fitted to the speeds the driver drove; None without the rule's arrays or a steady speed."""
+        found = data.rule_data(self.type)
+        if found is None:
+            return None
+        recorded, arrays = found
+        config = replace(self, half_width_m=float(recorded["half_width_m"]))
+        features = data.dataset.feature_config
+        column = ClassTable.from_dict(data.dataset.meta["classes"]).lethal_column
+        lethal = (features.feature_classes.index(column),) if column in features.feature_classes else ()
+        frame = arrays["frame"].astype(np.int64)
+        fitted = fit_speed(arrays["way"], arrays["curvature"], arrays["v_mps"], frame, features.n_terrain, lethal)
+        return None if fitted is None else SpeedRule(config, fitted.model, fitted)
+
+
+class SpeedReader(FrameReader):
+    """Each frame's ground around the vehicle as its ground map then held, and, once the drive is
+    read, the way the driver drove from each frame: the speed rule's training arrays.
+
+    Arrays: ``way`` (N, STATIONS, 9) uint8 terrain columns along the way driven (module
+    :mod:`.model`); ``curvature`` (N,) the command's curvature w / v (NaN where v = 0) [1/m];
+    ``v_mps`` (N,) the speed commanded [m/s]; ``frame`` (N,) the frame's number in its recording."""
+
+    def __init__(self, half_width_m: float, featurizer: UtilityFeaturizer, camera: PinholeCamera, classes: ClassTable, n: int) -> None:
+        terrain = TerrainColumns.of(featurizer.class_columns, featurizer.config.n_terrain, classes)
+        self.map = GroundMap(camera, terrain, MAP, MAP_HALF_WIDTH_M)
+        self.k = terrain.k
+        self.across = across(half_width_m)
+        xs = SNAPSHOT_X0 + SNAPSHOT_STEP_M * np.arange(SNAPSHOT_X)
+        ys = -SNAPSHOT_Y0 + SNAPSHOT_STEP_M * np.arange(SNAPSHOT_Y)
+        self._grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1)  # (X, Y, 2) vehicle frame
+        self.snapshots = np.empty((n, SNAPSHOT_X, SNAPSHOT_Y), dtype=np.uint8)
+
+    def read(self, j: int, view: SegmentationView, pose: Pose, path: ReferencePath, progress_m: float) -> None:
+        self.map.update(view, pose)
+        self.snapshots[j] = self.map.lookup(_to_world(self._grid, pose))
+
+    def arrays(self, recording: Recording, keep: np.ndarray, path: ReferencePath) -> dict[str, np.ndarray]:
+        poses = recording.poses[keep].astype(float)
+        v, w = recording.commands[keep, 0].astype(float), recording.commands[keep, 1].astype(float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            curvature = np.where(v > 0, w / v, np.nan)
+        way = np.full((len(keep), STATIONS, len(self.across)), self.k + 1, dtype=np.uint8)
+        step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
+        gap = np.diff(keep) != 1  # frames not next to each other (left out, or another session): the way ends there
+        step[gap] = np.inf
+        travelled = np.concatenate([[0.0], np.cumsum(step)])
+        d = STATION_STEP_M * np.arange(STATIONS)
+        for j in range(len(keep)):
+            end = np.searchsorted(travelled, travelled[j] + d[-1] + STATION_STEP_M, side="right")
+            ahead = travelled[j:end] - travelled[j]
+            reach = d <= ahead[-1]
+            if not reach.any() or not np.isfinite(ahead[-1]):
+                reach = d <= 0.0
+            x = np.interp(d[reach], ahead, poses[j:end, 0])
+            y = np.interp(d[reach], ahead, poses[j:end, 1])
+            yaw = np.interp(d[reach], ahead, np.unwrap(poses[j:end, 2]))
+            points = (
+                np.stack([x, y], axis=-1)[:, None, :]
+                + self.across[None, :, None] * np.stack([-np.sin(yaw), np.cos(yaw)], axis=-1)[:, None, :]
+            )
+            way[j, reach] = self._snapshot_at(j, points, tuple(poses[j]))
+        return {
+            "way": way,
+            "curvature": curvature.astype(np.float32),
+            "v_mps": v.astype(np.float32),
+            "frame": keep.astype(np.float32),
+        }
+
+    def _snapshot_at(self, j: int, points: np.ndarray, pose: tuple[float, float, float]) -> np.ndarray:
+        """Terrain column in frame ``j``'s snapshot at world ``points`` (..., 2); K + 1 outside it."""
+        x, y, yaw = pose
+        dx, dy = points[..., 0] - x, points[..., 1] - y
+        c, s = math.cos(yaw), math.sin(yaw)
+        i = np.floor((dx * c + dy * s - SNAPSHOT_X0) / SNAPSHOT_STEP_M + 0.5).astype(np.int64)
+        k = np.floor((-dx * s + dy * c + SNAPSHOT_Y0) / SNAPSHOT_STEP_M + 0.5).astype(np.int64)
+        inside = (i >= 0) & (i < SNAPSHOT_X) & (k >= 0) & (k < SNAPSHOT_Y)
+        out = np.full(points.shape[:-1], self.k + 1, dtype=np.uint8)
+        out[inside] = self.snapshots[j, i[inside], k[inside]]
+        return out
+
+
+def _to_world(points: np.ndarray, pose: Pose) -> np.ndarray:
+    """Vehicle-frame points (..., 2) in the world frame at ``pose``."""
+    x, y, yaw = pose
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.stack([x + points[..., 0] * c - points[..., 1] * s, y + points[..., 0] * s + points[..., 1] * c], axis=-1)
+
+
+@dataclass(frozen=True)
+class SpeedRule(Rule):
+    """A fitted speed rule (``fit``: how the fit went, for a rule just fitted)."""
+
+    type: ClassVar[str] = "speed"
+    steers: ClassVar[bool] = False
+
+    config: SpeedConfig
+    model: SpeedModel
+    fit: SpeedFit | None = None
+
+    def header(self) -> dict[str, Any]:
+        m = self.model
+        out = {
+            "type": self.type,
+            **self.config.to_dict(),
+            "speeds_mps": list(m.speeds_mps),
+            "preview_m": m.preview_m,
+            "lateral_accel_mps2": m.lateral_accel_mps2,
+            "near_lethal_m": m.near_lethal_m,
+            "near_lethal_mps": m.near_lethal_mps,
+            "lethal": list(m.lethal),
+        }
+        if self.fit is not None:
+            out |= {
+                "intervals_mps": [list(i) if i is not None else None for i in self.fit.intervals],
+                "lag_frames": self.fit.lag_frames,
+                "samples": self.fit.samples,
+                "error_mps": self.fit.error_mps,
+            }
+        return out
+
+    @classmethod
+    def from_header(cls, block: Mapping[str, Any], context: HeaderContext, where: Where) -> SpeedRule:
+        k = context.features.n_terrain
+        speeds = block.get("speeds_mps")
+        if not (isinstance(speeds, list) and len(speeds) == k + 1 and all(_number(v) and v > 0 for v in speeds)):
+            raise where.error("speeds_mps", f"expected {k + 1} cruising speeds > 0 [m/s], one per terrain column and the background")
+        lethal = block.get("lethal", [])
+        if not (isinstance(lethal, list) and all(isinstance(c, int) and not isinstance(c, bool) and 0 <= c <= k for c in lethal)):
+            raise where.error("lethal", f"expected terrain columns 0..{k}")
+        optional = {}
+        for name in ("lateral_accel_mps2", "near_lethal_m", "near_lethal_mps"):
+            optional[name] = None if block.get(name) is None else number(block, name, where, positive=True)
+        try:
+            config = SpeedConfig(number(block, "half_width_m", where, 0.6), number(block, "max_speed_mps", where, 2.0))
+        except ValueError as exc:
+            raise where.error("", str(exc)) from None
+        model = SpeedModel(
+            tuple(float(v) for v in speeds),
+            number(block, "preview_m", where, positive=True),
+            optional["lateral_accel_mps2"],
+            optional["near_lethal_m"],
+            optional["near_lethal_mps"],
+            tuple(lethal),
+        )
+        fit = None
+        intervals = block.get("intervals_mps")
+        if isinstance(intervals, list) and len(intervals) == k + 1:
+            fit = SpeedFit(
+                model,
+                tuple(
+                    tuple(float(x) for x in i) if isinstance(i, list) and len(i) == 2 and all(_number(x) for x in i) else None
+                    for i in intervals
+                ),
+                int(number(block, "lag_frames", where, 0.0, low=0.0)),
+                int(number(block, "samples", where, 0.0, low=0.0)),
+                number(block, "error_mps", where, 0.0, low=0.0),
+            )
+        return cls(config, model, fit)
+
+    def runner(self, context: RuleContext) -> SpeedRunner:
+        return SpeedRunner(self, context)
+
+    def describe(self, names: tuple[str, ...], lethal: frozenset[str]) -> str:
+        """The cruising speed per class with its interval, the classes never shown at a steady speed, and the limits."""
+        return "speed rule: " + "; ".join(self.lines(names, lethal))
+
+    def lines(self, names: tuple[str, ...], lethal: frozenset[str]) -> list[str]:
+        """What was learned, a line each: the speed per class (interval), then the limits."""
+        m, fit = self.model, self.fit
+        out = []
+        unseen = []
+        for col, name in enumerate((*names, "background")):
+            if name in lethal:
+                continue
+            interval = fit.intervals[col] if fit is not None else None
+            if fit is not None and interval is None:
+                unseen.append(name)
+                continue
+            around = f" (95% CI {interval[0]:.2f}-{interval[1]:.2f})" if interval is not None else ""
+            out.append(f"{name} {m.speeds_mps[col]:.2f} m/s{around}")
+        if unseen:
+            out.append(
+                f"never shown at a steady speed: {', '.join(unseen)} (driven at the slowest speed learned, {min(m.speeds_mps):.2f} m/s)"
+            )
+        out.append(f"slows {m.preview_m:g} m before a slower class")
+        out.append(
+            f"bends: at most {m.lateral_accel_mps2:.2f} m/s^2 sideways" if m.lateral_accel_mps2 is not None else "bends: no limit shown"
+        )
+        if m.near_lethal_m is not None and m.near_lethal_mps is not None:
+            out.append(f"near lethal terrain (within {m.near_lethal_m:g} m): {m.near_lethal_mps:.2f} m/s")
+        if fit is not None:
+            out.append(f"fitted to {fit.samples} frames, mean error {fit.error_mps:.3f} m/s")
+        return out
+
+
+def _number(value: object) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+class SpeedRunner:
+    """The speed rule bound to one planner: its own ground map, and the speed along a chosen way."""
+
+    def __init__(self, rule: SpeedRule, context: RuleContext) -> None:
+        self.rule = rule
+        self.map = GroundMap(context.camera, context.terrain, MAP, MAP_HALF_WIDTH_M)
+        self.across = across(rule.config.half_width_m)
+        self._d = STATION_STEP_M * np.arange(STATIONS)
+
+    def reset(self) -> None:
+        """Forget the ground seen (a new path)."""
+        self.map.reset()
+
+    def observe(self, view: SegmentationView, pose: Pose) -> None:
+        self.map.update(view, pose)
+
+    def speed(self, pose: Pose, curvature: float, max_yaw_rate_rps: float) -> float:
+        """The speed [m/s] along the arc of ``curvature`` [1/m] from ``pose``, within the rule's top
+        speed and the speed at which that arc needs no more than ``max_yaw_rate_rps``."""
+        x, y, yaw = pose
+        d, k = self._d, curvature
+        heading = yaw + k * d
+        if abs(k) < 1e-9:
+            px, py = x + d * math.cos(yaw), y + d * math.sin(yaw)
+        else:
+            px, py = x + (np.sin(heading) - math.sin(yaw)) / k, y - (np.cos(heading) - math.cos(yaw)) / k
+        normal = np.stack([-np.sin(heading), np.cos(heading)], axis=-1)
+        points = np.stack([px, py], axis=-1)[:, None, :] + self.across[None, :, None] * normal[:, None, :]
+        way = self.map.lookup(points)[None]
+        v = float(self.rule.model.predict(way, np.array([k]))[0])
+        top = self.rule.config.max_speed_mps
+        if abs(k) > 1e-9:
+            top = min(top, max_yaw_rate_rps / abs(k))
+        return min(v, top)
