@@ -106,7 +106,9 @@ def test_course() -> Course:
 # (once with the trees on the left, once on the right): the driver stays on the strip or moves
 # over, which shows how much worse one class is than another against a 2 m detour, and puts
 # non_traversable beside every class. Every class lies alone on the path twice, once a little
-# left of it and once a little right. (lateral offset [m] of a lone patch)
+# left of it and once a little right, but for the feature classes' second time: there each lies as a
+# lane between non_traversable walls too wide to pass round, which every driver drives along at its
+# own speed on it ("lane"). (lateral offset [m] of a lone patch)
 TEACH_ZONES = [
     ("mud", "rock"),
     ("water", 0.3),
@@ -122,12 +124,12 @@ TEACH_ZONES = [
     ("non_traversable", "rock", "mud"),
     ("water", "mud"),
     ("rock", "water"),
-    ("mud", -0.3),
+    ("mud", "lane"),
     ("mud", "water", "non_traversable"),
-    ("water", -0.3),
+    ("water", "lane"),
     ("non_traversable", "water", "rock"),
     ("non_traversable", 0.3),
-    ("rock", 0.3),
+    ("rock", "lane"),
 ]
 # Heading change [deg] at the bend after each situation: a horseshoe, so that the trail bends
 # between situations (keeping to the path is part of the lesson) and fits a compact map. The
@@ -135,9 +137,16 @@ TEACH_ZONES = [
 TEACH_TURNS = [10, -15, 10, -10, 15, -10, 10, 0, 36, 36, 36, 36, 36, -10, 10, -10, 5, -5, 5]
 
 
+LANE_M = 6.0  # a lane's length [m]: its speed is steady over the last part, after the driver's preview
+LANE_WIDTH_M = 4.0  # a lane's width [m]: the walls stay more than 1 m from a 1.2 m vehicle on its middle
+LANE_WALL_M = 9.0  # the walls' width each side: a driver cannot leave the path that far (8 m at most) [m]
+
+
 def _kind(zone: tuple) -> str:
-    """``lone`` (class, lateral offset), ``pair`` (left, right) or ``triple`` (left, middle, right)."""
-    return "lone" if not isinstance(zone[1], str) else ("triple" if len(zone) == 3 else "pair")
+    """``lone`` (class, lateral offset), ``lane`` (class, "lane"), ``pair`` (left, right) or ``triple`` (left, middle, right)."""
+    if not isinstance(zone[1], str):
+        return "lone"
+    return "lane" if zone[1] == "lane" else ("triple" if len(zone) == 3 else "pair")
 
 
 def teach_course(
@@ -148,24 +157,27 @@ def teach_course(
     name: str = "teach_course",
     middle_m: float = 2.8,
 ) -> Course:
-    """The product's demonstration course (SPEC 13): one drive shows every pair, both ways round, and every class alone.
+    """The product's demonstration course (SPEC 13): one drive shows every pair, both ways round,
+    every class alone, and every class in a lane it must be driven along (its speed on it).
 
     Situations sit on straight legs (``2 * half[kind]`` m); the trail bends between them. Lone
     patches are at most 3 m across (passed on grass); pair patches are 7-8 m long and 5-5.5 m
     wide and meet on the path, as on train_course; a triple puts a 2.8 m wide strip on the path
-    between two wide patches (7 m long), so that keeping to the path has a price in terrain.
+    between two wide patches (7 m long), so that keeping to the path has a price in terrain; a
+    lane puts a class :data:`LANE_WIDTH_M` wide and :data:`LANE_M` long on the path between walls no driver passes round.
     """
     zones = zones or TEACH_ZONES
     turns = turns or TEACH_TURNS
-    half = half or {"lone": 6.0, "pair": 8.5, "triple": 8.5}  # half a leg [m]
+    half = half or {"lone": 6.0, "lane": 6.0, "pair": 8.5, "triple": 8.5}  # half a leg [m]
     s_end = 5.0
     lengths = [2 * half[_kind(z)] for z in zones]
     wp, size = trail([s_start + lengths[0], *lengths[1:-1], lengths[-1] + s_end], turns)
     c = Course(
         name,
         "The demonstration course: every pair of terrain classes side by side, each class once on each "
-        "side, every class as a strip on the path between trees and another class, and every class alone on "
-        "the path twice; one drive identifies any preference order.",
+        "side, every class as a strip on the path between trees and another class, every class alone on "
+        "the path, and every class as a lane between trees, driven along; one drive identifies any preference order "
+        "and shows the speed on every class.",
         size,
         [tuple(p) for p in wp],
     )
@@ -183,6 +195,11 @@ def teach_course(
         if kind == "lone":
             lone_shapes[zone[0]](s, zone[1])
             c.zone(str(k + 1), zone[0], s, (9.0, 9.0), "avoid")
+        elif kind == "lane":
+            c.rect(zone[0], s, 0.0, LANE_M, LANE_WIDTH_M)
+            for side in (1.0, -1.0):
+                c.rect("non_traversable", s, side * (LANE_WIDTH_M + LANE_WALL_M) / 2, LANE_M, LANE_WALL_M)
+            c.zone(str(k + 1), f"non_traversable | {zone[0]} | non_traversable", s, (LANE_M + 4.0, LANE_WIDTH_M + 2.0), "best")
         elif kind == "pair":
             length, width = pair_sizes[pairs % len(pair_sizes)]
             pairs += 1

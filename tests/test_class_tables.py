@@ -266,9 +266,14 @@ def test_the_full_design_shows_everything_on_both_sides(table):
     assert all(
         middle in terrain and (left in terrain or right in terrain) and middle not in (left, right) for left, middle, right in strips
     )
-    assert Counter((s.classes[0], s.offset_m) for s in lone) == {
-        (c, o): 1 for c in (*terrain, *lethal) for o in (LONE_OFFSET_M, -LONE_OFFSET_M)
+    # Each lethal class alone on both sides; each feature class alone once and as a lane once, between walls of one lethal class.
+    assert Counter((s.classes[0], s.offset_m) for s in lone if s.classes[0] in lethal) == {
+        (c, o): 1 for c in lethal for o in (LONE_OFFSET_M, -LONE_OFFSET_M)
     }
+    assert Counter(s.classes[0] for s in lone if s.classes[0] in terrain) == {c: 1 for c in terrain}
+    lanes = [s.classes for s in situations(table, full=True) if s.kind == "lane"]
+    assert sorted(middle for _, middle, _ in lanes) == sorted(terrain)
+    assert all(left == right and left in lethal for left, _, right in lanes)
 
 
 def test_the_compact_design_shows_each_pair_once_balanced(example):
@@ -287,7 +292,8 @@ def test_the_compact_design_shows_each_pair_once_balanced(example):
     # Each kind spread over the whole drive: every third of it has pairs, strips and lone patches.
     items = situations(example, full=False)
     thirds = [items[i * len(items) // 3 : (i + 1) * len(items) // 3] for i in range(3)]
-    assert all({s.kind for s in third} == {"pair", "strip", "lone"} for third in thirds)
+    assert all({s.kind for s in third} == {"pair", "strip", "lone", "lane"} for third in thirds)
+    assert sorted(s.classes[1] for s in items if s.kind == "lane") == sorted(EXAMPLE_TERRAIN)
 
 
 def test_a_table_without_lethal_classes_puts_feature_classes_either_side_of_a_strip():
@@ -295,7 +301,9 @@ def test_a_table_without_lethal_classes_puts_feature_classes_either_side_of_a_st
     _, strips, lone = _kinds(situations(table, full=True))
     assert Counter(middle for _, middle, _ in strips) == {c: 2 for c in table.terrain_names}
     assert all(middle not in (left, right) and {left, right} <= set(table.terrain_names) for left, middle, right in strips)
-    assert Counter(s.classes[0] for s in lone) == {c: 2 for c in table.terrain_names}
+    assert Counter(s.classes[0] for s in lone) == {c: 1 for c in table.terrain_names}
+    lanes = [s for s in situations(table, full=True) if s.kind == "lane"]  # without walls: each class across the whole way
+    assert sorted(s.classes for s in lanes) == sorted((c,) for c in table.terrain_names)
 
 
 def test_the_design_is_full_while_it_fits_the_budget(example):
@@ -495,7 +503,7 @@ def test_course_design_and_name(tmp_path, capsys):
     assert main(["course", "--out", str(out), "--design", "compact", "--name", "short"]) == 0  # the default table's is full
     assert f"{len(situations(default_classes(), full=False))} situations" in capsys.readouterr().out
     data = yaml.safe_load(out.read_text())
-    assert data["name"] == "short" and len(data["zones"]) == 10
+    assert data["name"] == "short" and len(data["zones"]) == 13  # 3 pairs, 3 strips, 4 lone patches, 3 lanes
 
 
 def test_course_of_the_default_table_reads_without_classes(tmp_path, capsys):

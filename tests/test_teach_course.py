@@ -1,5 +1,6 @@
 """teach_course, the demonstration course: what one drive must show (SPEC 13, docs/design.md) and
-that the synthetic driver shows it within five and a half minutes."""
+that the synthetic driver shows it within five and a half minutes at 1 m/s, and every class at a
+steady speed within seven minutes at a person's speeds."""
 
 from __future__ import annotations
 
@@ -26,7 +27,13 @@ def _pairs(labels: list[str]) -> list[tuple[str, str]]:
 
 
 def _triples(labels: list[str]) -> list[tuple[str, str, str]]:
-    return [tuple(label.split(" | ")) for label in labels if label.count(" | ") == 2]
+    """The strips: a class on the path between the trees and another class (lanes, between trees on both sides, apart)."""
+    return [t for t in (tuple(label.split(" | ")) for label in labels if label.count(" | ") == 2) if not (t[0] == t[2] == LETHAL)]
+
+
+def _lanes(labels: list[str]) -> list[str]:
+    """The classes lying as a lane: between the trees on both sides, too wide to pass round."""
+    return [t[1] for t in (label.split(" | ") for label in labels if label.count(" | ") == 2) if t[0] == t[2] == LETHAL]
 
 
 def test_every_pair_meets_on_both_sides(labels):
@@ -44,10 +51,29 @@ def test_every_pair_meets_on_both_sides(labels):
     assert sorted((m, r if left == LETHAL else left) for left, m, r in triples) == sorted(itertools.permutations(safe, 2))
 
 
-def test_every_class_lies_alone_twice():
+def test_every_class_lies_alone_and_every_feature_class_as_a_lane(labels):
     scenario = resolve_scenario("teach_course")
     lone = [z for z in scenario.zones if z.expect == "avoid"]
-    assert Counter(z.label for z in lone) == {c: 2 for c in CLASSES}
+    assert Counter(z.label for z in lone) == {c: 1 if c != LETHAL else 2 for c in CLASSES}  # a lane stands for the second
+    assert sorted(_lanes(labels)) == sorted(c for c in CLASSES if c != LETHAL)
+
+
+def test_the_driver_shows_every_class_at_a_steady_speed_within_seven_minutes(tmp_path):
+    from terrapref.dataset import build_dataset
+    from terrapref.features import FeatureConfig
+    from terrapref.learning.train import FitData
+    from terrapref.recipes import RecipeSetup, demonstrate, recipe_named
+    from terrapref.rules import SpeedConfig
+
+    speeds = (("grass", 1.6), ("rock", 1.0), ("mud", 0.5), ("water", 0.3))
+    setup = RecipeSetup(0, PreferenceProfile(("rock", "mud", "water", LETHAL)), speeds=speeds)
+    (recording,) = demonstrate(recipe_named("teach"), tmp_path, setup, write=False)
+    assert recording.duration_s < 420.0  # simulated time, not wall clock
+    rule = SpeedConfig().fit(FitData(build_dataset([recording], FeatureConfig(), rules=(SpeedConfig(),)), mirror=False))
+    names = (*FeatureConfig().feature_classes, "grass")
+    learned = {name: (rule.model.speeds_mps[k], rule.fit.intervals[k]) for k, name in enumerate(names) if name != LETHAL}
+    assert all(interval is not None for _, interval in learned.values()), learned  # every class shown steady
+    assert {name: round(v, 2) for name, (v, _) in learned.items()} == dict(speeds)
 
 
 @pytest.mark.parametrize("order", [("mud", "rock", "water", LETHAL), ("water", "rock", "mud", LETHAL)])

@@ -141,6 +141,21 @@ def study_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_cmd_study)
 
 
+def _select_speeds(text: str | None, table) -> str | None:
+    """``--speeds`` checked before any work: ``random``, or cruising speeds by class of the table."""
+    if text is None or text == "random":
+        return text
+    from terrapref.demos.expert import ExpertConfig
+    from terrapref.demos.speed_style import parse_speeds
+    from terrapref.terrain import default_classes
+
+    try:
+        ExpertConfig(speeds=parse_speeds(text)).speed_table(table or default_classes())
+    except ValueError as exc:
+        raise UserError("--speeds", str(exc)) from None
+    return text
+
+
 def _cmd_select(args: argparse.Namespace) -> int:
     import time
 
@@ -177,7 +192,18 @@ def _cmd_select(args: argparse.Namespace) -> int:
         course = _selection_course(args, table)
         t0 = time.perf_counter()
         selection = Selection(
-            tuple(names), orders, args.seeds, args.first, args.courses, args.style, perceptions, taught_under, table, course, args.follow_up
+            tuple(names),
+            orders,
+            args.seeds,
+            args.first,
+            args.courses,
+            args.style,
+            perceptions,
+            taught_under,
+            table,
+            course,
+            args.follow_up,
+            _select_speeds(args.speeds, table),
         )
         path = run_selection(args.out, selection, engine, log=lambda m: print(m, flush=True))
         print(f"done ({time.perf_counter() - t0:.0f} s): {path}")
@@ -212,6 +238,12 @@ def select_parser(sub: argparse._SubParsersAction) -> None:
         "drawn at random, the same N every time) or orders separated by ';', e.g. 'rock,mud,water;water,mud,rock' (default: all)",
     )
     p.add_argument("--style", default="default", help="the synthetic driver's style (default: default; terrapref record --help lists them)")
+    p.add_argument(
+        "--speeds",
+        metavar="random|CLASS=MPS,...",
+        help="the driver's cruising speeds: drawn for each order and seed (random), or given by class; SELECT.md then "
+        "reports the planner's speed against its driver's",
+    )
     p.add_argument("--seeds", type=int, default=5, help="training seeds per recipe and order (default: 5)")
     p.add_argument(
         "--first", type=int, default=1000, help="first generated layout (1000-1999: for choosing; 2000 on: for confirming; default: 1000)"

@@ -129,12 +129,15 @@ class ExpertConfig:
         return not self.speeds and self.ranked_speeds_mps is None and self.lateral_accel_mps2 is None and self.near_lethal_mps is None
 
     @classmethod
-    def styled(cls, style: str = "default", profile: tuple[str, ...] | None = None) -> ExpertConfig:
-        """The driver of a named style (:data:`STYLES`) with a preference ``profile``; an unknown
-        style is a ValueError listing the styles."""
+    def styled(
+        cls, style: str = "default", profile: tuple[str, ...] | None = None, speeds: tuple[tuple[str, float], ...] = ()
+    ) -> ExpertConfig:
+        """The driver of a named style (:data:`STYLES`) with a preference ``profile``, and ``speeds``
+        by class over its style's; an unknown style is a ValueError listing the styles."""
         changes = STYLES[style].changes
         base = cls() if profile is None else cls(profile=tuple(profile))
-        return replace(base, **changes)
+        styled = replace(base, **changes)
+        return replace(styled, speeds=tuple({**dict(styled.speeds), **dict(speeds)}.items())) if speeds else styled
 
     def speed_table(self, classes: ClassTable) -> np.ndarray:
         """Cruising speed [m/s] per class id (256,): NaN for lethal classes and ids the table does

@@ -53,6 +53,7 @@ class RunSpec:
     keep_run: bool = False  # keep every decision (pose, choice, F_t) of a planner run, for an MCAP of it
     classes: ClassTable | None = None  # the class table the scenario is read with (None: the default)
     vehicle: VehicleConfig | None = None  # the vehicle driven (None: the default field UGV; VehicleConfig.paper(): the paper's)
+    speeds: tuple[tuple[str, float], ...] = ()  # the synthetic driver's cruising speeds by class, over its style's (EXPERT runs)
 
     @property
     def perceived_as(self) -> str:
@@ -252,7 +253,7 @@ def _sim_config(spec: RunSpec) -> SimConfig:
 def _expert(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: PreferenceProfile) -> tuple[Simulation, Driver]:
     """The synthetic driver of the run's profile and style, on the cached raster (not a new one)."""
     return Simulation(scenario, config=_sim_config(spec), world=world), ExpertDriver(
-        ExpertConfig.styled(spec.style, profile.order), world=world
+        ExpertConfig.styled(spec.style, profile.order, spec.speeds), world=world
     )
 
 

@@ -149,6 +149,7 @@ class RecipeSetup:
             left unidentified (terrapref.scenario.teaching.follow_up), and train on both.
         vehicle: the vehicle driven (None: the default, a field UGV; ``VehicleConfig.paper()`` for
             the paper's setting).
+        speeds: the synthetic driver's cruising speeds by class, over its style's [m/s].
     """
 
     seed: int
@@ -160,6 +161,7 @@ class RecipeSetup:
     classes: ClassTable | None = None
     follow_up: bool = False
     vehicle: VehicleConfig | None = None
+    speeds: tuple[tuple[str, float], ...] = ()
 
 
 @dataclass
@@ -188,6 +190,7 @@ class _Drive:
     perception: PerceptionModel | None = None
     classes: ClassTable | None = None
     vehicle: VehicleConfig | None = None
+    speeds: tuple[tuple[str, float], ...] = ()
 
 
 def _drive(drive: _Drive, features: FeatureConfig, write: bool) -> tuple[Recording, bool]:
@@ -201,7 +204,7 @@ def _drive(drive: _Drive, features: FeatureConfig, write: bool) -> tuple[Recordi
     scenario = resolve_scenario(drive.course, drive.classes)
     profile = drive.profile or PreferenceProfile.default(scenario.classes)
     camera, sim_cfg = CameraConfig(), SimConfig(vehicle=drive.vehicle or VehicleConfig())
-    expert_cfg = ExpertConfig.styled(drive.style, profile.order)
+    expert_cfg = ExpertConfig.styled(drive.style, profile.order, drive.speeds)
     pushes = drive.disturbance.to_dict() if drive.disturbance is not None else None
     perception = drive.perception or PerceptionModel()
     if (drive.out / "meta.json").exists():
@@ -264,6 +267,7 @@ def demonstrate(
             setup.perception,
             setup.classes,
             setup.vehicle,
+            setup.speeds,
         )
         for k in range(recipe.demonstrations)
     ]
@@ -370,7 +374,7 @@ def run_recipe(
     )
     if recipe.corrections:  # the planner drives the course; only then is a simulation needed here
         camera, sim_cfg = CameraConfig(), SimConfig(vehicle=setup.vehicle or VehicleConfig())
-        expert_cfg = ExpertConfig.styled(setup.style, profile.order)
+        expert_cfg = ExpertConfig.styled(setup.style, profile.order, setup.speeds)
         sim = Simulation(scenario, camera, sim_cfg)
     for r in range(recipe.corrections):
         out = own / f"corrections_{r}"

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, run_many, zone_agrees
+from terrapref.evaluation.speed import SpeedComparison
 from terrapref.evaluation.stats import cluster_bootstrap, rate_text
 from terrapref.fileio import write_text_atomic
 from terrapref.grid import Engine, run_grid
@@ -35,6 +36,9 @@ from terrapref.terrain import ClassTable, PreferenceProfile, default_classes
 from terrapref.terrain.classes import LETHAL_COLUMN
 
 RANDOM_ORDERS_SEED = 4343  # `--orders random:N` draws its orders with this seed (stated in the report)
+RANDOM_SPEEDS_SEED = 6464  # `--speeds random` draws each order and seed's speeds with this seed and theirs
+BACKGROUND_SPEEDS_MPS = (1.0, 2.0)  # `--speeds random`: the range of the background's cruising speed [m/s]
+FEATURE_SPEEDS_MPS = (0.3, 1.5)  # and of every feature class's [m/s]
 TARGET = 0.95  # agreement the default recipe must keep on clean frames
 PERCEIVED_TARGET = 0.90  # and under a perception model's errors (docs/perception.md)
 
@@ -54,6 +58,7 @@ class Selection:
     classes: ClassTable | None = None  # the class table of the layouts and demonstrations (None: the default)
     course: str | None = None  # the course every recipe demonstrates (None: each recipe's own)
     follow_up: bool = False  # also drive a follow-up course of the pairs the demonstrations left open
+    speeds: str | None = None  # the driver's cruising speeds: ``random`` (drawn per order and seed) or CLASS=MPS,...; None: the style's
 
     @property
     def driven_under(self) -> tuple[PerceptionModel, ...]:
@@ -124,6 +129,24 @@ class _OrderJob:
     classes: ClassTable | None = None  # the class table of the course
     course: str | None = None  # the course demonstrated (None: each recipe's own)
     follow_up: bool = False  # and a follow-up course of what it left open
+    speeds: tuple[tuple[str, float], ...] = ()  # the driver's cruising speeds by class (none: its style's)
+
+
+def job_speeds(sel: Selection, order_index: int, seed: int) -> tuple[tuple[str, float], ...]:
+    """The driver's cruising speeds of one order and seed: drawn (``random``: the background in
+    :data:`BACKGROUND_SPEEDS_MPS`, each feature class in :data:`FEATURE_SPEEDS_MPS`, to 0.05 m/s),
+    as given, or none (the style's)."""
+    if sel.speeds is None:
+        return ()
+    if sel.speeds != "random":
+        from terrapref.demos.speed_style import parse_speeds
+
+        return parse_speeds(sel.speeds)
+    classes = sel.classes or default_classes()
+    rng = np.random.default_rng([RANDOM_SPEEDS_SEED, order_index, seed])
+    drawn = [(classes.background, rng.uniform(*BACKGROUND_SPEEDS_MPS))]
+    drawn += [(name, rng.uniform(*FEATURE_SPEEDS_MPS)) for name in classes.terrain_names]
+    return tuple((name, round(round(v / 0.05) * 0.05, 2)) for name, v in drawn)
 
 
 @dataclass(frozen=True)
@@ -144,6 +167,7 @@ def _train(job: _OrderJob) -> list[str]:
         perception=job.perception,
         classes=job.classes,
         follow_up=job.follow_up,
+        speeds=job.speeds,
     )
     return [str(run_recipe(recipe_named(r), job.workdir, setup).model) for r in job.recipes]
 
@@ -203,7 +227,8 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
         for path, m in models.items()
         for c in layouts
     ]
-    specs += [RunSpec(c, 0, EXPERT, None, o, style=sel.style, classes=sel.classes) for o in sel.orders for c in layouts]
+    drivers = dict.fromkeys((tuple(m.job.order), m.job.speeds) for m in models.values())  # each driver once
+    specs += [RunSpec(c, 0, EXPERT, None, o, style=sel.style, classes=sel.classes, speeds=v) for o, v in drivers for c in layouts]
     log(f"[2/2] closed-loop runs: {len(specs)} on {len(layouts)} layouts ...")
     results = run_many(specs, progress=every_tenth(log), engine=engine)
     t_eval = time.perf_counter() - t0 - t_train
@@ -221,6 +246,7 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
             **({"classes": sel.classes.to_dict()} if sel.classes is not None else {}),
             **({"course": sel.course} if sel.course is not None else {}),
             **({"follow_up": True} if sel.follow_up else {}),
+            **({"speeds": sel.speeds} if sel.speeds is not None else {}),
         },
         "engine": engine.describe(),
         "zones": rows,
@@ -248,8 +274,9 @@ def _train_all(out: Path, sel: Selection, engine: Engine, log: Callable[[str], N
             sel.classes,
             sel.course,
             sel.follow_up,
+            job_speeds(sel, i, s),
         )
-        for o in sel.orders
+        for i, o in enumerate(sel.orders)
         for s in range(sel.seeds)
     ]
     log(
@@ -263,8 +290,12 @@ def _train_all(out: Path, sel: Selection, engine: Engine, log: Callable[[str], N
 def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict[str, _Model]) -> tuple[list[dict], list[dict]]:
     """select.json's rows: every planner zone beside the same order's driver in the same zone, and every planner run's collisions."""
     driver = {
-        (tuple(s.profile), r.scenario, z.id): z for s, r in zip(specs, results, strict=True) if r.driver == EXPERT for z in r.metrics.zones
+        (tuple(s.profile), s.speeds, r.scenario, z.id): z
+        for s, r in zip(specs, results, strict=True)
+        if r.driver == EXPERT
+        for z in r.metrics.zones
     }
+    driver_runs = {(tuple(s.profile), s.speeds, r.scenario): r.metrics for s, r in zip(specs, results, strict=True) if r.driver == EXPERT}
     rows, runs = [], []
     for spec, r in zip(specs, results, strict=True):
         if r.driver != PLANNER:
@@ -278,6 +309,8 @@ def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict
             "perception": spec.perceived_as,
         }
         m = r.metrics
+        speeds = model.job.speeds
+        dm = driver_runs[(tuple(spec.profile), speeds, r.scenario)]
         runs.append(
             {
                 **who,
@@ -288,10 +321,16 @@ def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict
                 "driven_m": round(m.driven_m, 3),
                 "stops": m.stop_count,
                 "stops_s": m.stops_s,
+                "time_s": m.time_s,
+                "driver_time_s": dm.time_s,
+                "driver_completed": dm.completed,
+                "max_lateral_accel_mps2": m.max_lateral_accel_mps2,
+                "driver_max_lateral_accel_mps2": dm.max_lateral_accel_mps2,
+                **({"speeds": [list(p) for p in speeds]} if speeds else {}),
             }
         )
         for z in r.metrics.zones:
-            d = driver[(tuple(spec.profile), r.scenario, z.id)]
+            d = driver[(tuple(spec.profile), speeds, r.scenario, z.id)]
             rows.append(
                 {
                     **who,
@@ -302,6 +341,8 @@ def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict
                     "agrees": zone_agrees(z, d),
                     "success": z.success,
                     "driver_success": d.success,
+                    "speed_mps": z.speed_mps,
+                    "driver_speed_mps": d.speed_mps,
                 }
             )
     return rows, runs
@@ -391,6 +432,8 @@ def write_selection_report(out: Path, saved: dict) -> Path:
         # Several perception models: a bar per recipe and model in the figure (the orders are in the tables).
         table, bars = _selection_table(sel, part, part_runs, order_bars=len(seen) == 1)
         lines += table + [""]
+        if sel.get("speeds") is not None:
+            lines += speed_section(part, part_runs) + [""]
         for label, rate, interval in bars:
             points.append(RateRow(f"{label}, {name}" if len(seen) > 1 else label, rate, interval))
             targets.append(TARGET if name == "clean" else PERCEIVED_TARGET)
@@ -410,6 +453,18 @@ def write_selection_report(out: Path, saved: dict) -> Path:
     path = out / "SELECT.md"
     write_text_atomic(path, "\n".join(lines))
     return path
+
+
+def speed_section(rows: Sequence[dict], runs: Sequence[dict]) -> list[str]:
+    """The planner's speed against its own driver's (terrapref.evaluation.speed), a line each."""
+    compared = SpeedComparison.of(rows, runs)
+    lines = [
+        "Speed against the driver (each order and seed with its own cruising speeds): per class the driver took, the mean "
+        "absolute error of the mean speed through a zone over the zones where the planner took it too; 95% intervals "
+        "resampling layouts.",
+        "",
+    ]
+    return lines + [f"- {line}" for line in compared.lines()]
 
 
 def _selection_table(

@@ -8,14 +8,18 @@ when the course shows
 - every feature class as a **strip** on the path between lethal terrain and another class (the
   driver keeps to the strip or moves over: how much worse one class is than another against a
   2 m detour, and every class beside lethal terrain);
-- every class **alone** on the path (driven through or passed on the background).
+- every class **alone** on the path (driven through or passed on the background);
+- every feature class as a **lane**: on the path between lethal walls too wide to pass round
+  (or, in a table without lethal classes, across the whole way), so that every driver drives
+  along it at its own speed on that class (SPEC 18).
 
 Pairs grow as K(K-1)/2. The course shows each pair once on each side, each strip with the
-lethal terrain once on each side and each class alone twice (once a little left of the path,
-once a little right) while that drive stays within :data:`BUDGET_M` (10 minutes at the driver's
-1 m/s: up to 4 feature classes). Beyond it the course is *compact*: each pair once, with every
-class on the left as often as on the right (to within one), each strip and each lone patch
-once, the sides alternating. Six feature classes then drive about 8 minutes; ten about 18.
+lethal terrain once on each side, each lethal class alone twice (once a little left of the path,
+once a little right) and each feature class alone once and as a lane once, while that drive stays
+within :data:`BUDGET_M` (10 minutes at the driver's 1 m/s: up to 4 feature classes). Beyond it
+the course is *compact*: each pair once, with every class on the left as often as on the right
+(to within one), each strip, each lone patch and each lane once, the sides alternating. Six
+feature classes then drive about 8 minutes; ten about 18.
 
 Situations sit on straight legs; the trail bends a little between them (keeping to the path is
 part of the lesson) and turns round every :data:`LANE` situations, so that a long course folds
@@ -37,11 +41,14 @@ from terrapref.terrain import ClassTable
 DRIVER_SPEED_MPS = 1.0  # the speed a teaching drive is timed at (the synthetic driver's)
 BUDGET_M = 600.0  # the longest full design [m]: 10 minutes at 1 m/s
 LANE = 8  # situations between two turns round
-HALF_M = {"lone": 6.0, "pair": 8.5, "strip": 8.5}  # half a situation's leg [m]
+HALF_M = {"lone": 6.0, "lane": 6.0, "pair": 8.5, "strip": 8.5}  # half a situation's leg [m]
 START_M, END_M = 8.0, 5.0  # trail before the first situation and after the last [m]
 PAIR_SIZES = ((8.0, 5.0), (7.0, 5.5), (7.5, 5.0), (8.0, 5.5))  # (length, width) of a pair's patches [m]
 STRIP_M = 2.8  # width of a strip on the path [m]
 LONE_OFFSET_M = 0.3  # a lone patch lies this far left or right of the path [m]
+LANE_M, LANE_WIDTH_M = 6.0, 4.0  # a lane's length and width: lethal walls more than 1 m from a 1.2 m vehicle on its middle [m]
+LANE_WALL_M = 9.0  # each wall's width: no driver leaves the path that far (8 m at most) [m]
+BAND_WIDTH_M = 20.0  # a lane without lethal walls: the class across the whole way [m]
 BEND_DEG, TURN_DEG = 12.0, 36.0  # the bend between two situations; each of a turn round's five
 
 
@@ -50,8 +57,8 @@ class Situation:
     """One scored situation of a teaching course.
 
     Attributes:
-        kind: ``pair`` (classes[0] left, classes[1] right), ``strip`` (left, middle, right) or
-            ``lone`` (one class).
+        kind: ``pair`` (classes[0] left, classes[1] right), ``strip`` (left, middle, right),
+            ``lone`` (one class) or ``lane`` (wall, class, wall; or the class alone without lethal classes).
         classes: the classes, left to right.
         offset_m: a lone patch's lateral offset, left positive [m].
     """
@@ -66,7 +73,7 @@ class Situation:
 
     @property
     def label(self) -> str:
-        return {"pair": " vs ", "strip": " | ", "lone": ""}[self.kind].join(self.classes)
+        return {"pair": " vs ", "strip": " | ", "lone": "", "lane": " | "}[self.kind].join(self.classes)
 
 
 def balanced_pairs(names: Sequence[str]) -> list[tuple[str, str]]:
@@ -118,9 +125,12 @@ def situations(classes: ClassTable, full: bool | None = None) -> list[Situation]
                 strips.append(Situation("strip", (neighbour, middle, others[(k + 1 + (side < 0)) % len(others)])))
     lone = []
     for k, name in enumerate([*terrain, *lethal]):
-        sides = (1, -1) if full else ((1, -1)[k % 2],)
+        sides = (1, -1) if full and name in lethal else ((1, -1)[k % 2],)
         lone += [Situation("lone", (name,), side * LONE_OFFSET_M) for side in sides]
-    return _interleave([[Situation("pair", p) for p in pairs], strips, lone])
+    lanes = [
+        Situation("lane", (lethal[k % len(lethal)], name, lethal[k % len(lethal)]) if lethal else (name,)) for k, name in enumerate(terrain)
+    ]
+    return _interleave([[Situation("pair", p) for p in pairs], strips, lone, lanes])
 
 
 def fits(classes: ClassTable) -> bool:
@@ -198,6 +208,9 @@ def build_course(classes: ClassTable, items: Sequence[Situation], name: str, des
             name_ = item.classes[0]
             _lone(c, name_, order[name_], s, item.offset_m)
             c.zone(zid, item.label, s, (9.0, 9.0), "avoid")
+        elif item.kind == "lane":
+            _lane(c, item.classes, s)
+            c.zone(zid, item.label, s, (LANE_M + 4.0, LANE_WIDTH_M + 2.0), "best")
         elif item.kind == "pair":
             c.pair(zid, item.classes[0], item.classes[1], s, PAIR_SIZES[pairs % len(PAIR_SIZES)])
             pairs += 1
@@ -210,6 +223,18 @@ def build_course(classes: ClassTable, items: Sequence[Situation], name: str, des
             c.zone(zid, item.label, s, (11.0, 17.0), "avoid" if classes.background in item.classes else "best")
         s += HALF_M[item.kind]
     return c
+
+
+def _lane(c: CourseBuilder, classes: tuple[str, ...], s: float) -> None:
+    """A class on the path between lethal walls no driver passes round (wall, class, wall), or across
+    the whole way (the class alone)."""
+    if len(classes) == 1:
+        c.rect(classes[0], s, 0.0, LANE_M, BAND_WIDTH_M)
+        return
+    wall, name, _ = classes
+    c.rect(name, s, 0.0, LANE_M, LANE_WIDTH_M)
+    for side in (1.0, -1.0):
+        c.rect(wall, s, side * (LANE_WIDTH_M + LANE_WALL_M) / 2, LANE_M, LANE_WALL_M)
 
 
 def _lone(c: CourseBuilder, name: str, index: int, s: float, lat: float) -> None:
@@ -277,5 +302,6 @@ def description(classes: ClassTable, full: bool) -> str:
     )
     return (
         f"Teaching course for {n} feature class{'es' if n != 1 else ''} ({', '.join(classes.terrain_names)}): {design}; "
-        f"every class as a strip on the path between lethal terrain and another class; every class alone on the path."
+        f"every class as a strip on the path between lethal terrain and another class; every class alone on the path; "
+        f"every feature class as a lane, driven along at the driver's speed on it."
     )

@@ -1,0 +1,124 @@
+"""The planner's speed against its own driver's (SPEC 18): per class over zones, time to the end of
+the path, lateral acceleration; shared by ``evaluate`` (metrics.json) and ``select`` (SELECT.md).
+
+Rows are plain mappings, as select.json keeps them: a zone row has ``scenario``,
+``driver_choice``, ``agrees``, ``speed_mps`` and ``driver_speed_mps``; a run row has
+``scenario``, ``completed``, ``driver_completed``, ``time_s``, ``driver_time_s``,
+``max_lateral_accel_mps2`` and ``driver_max_lateral_accel_mps2``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from terrapref.evaluation.stats import cluster_bootstrap, rate_text
+
+SPEED_TARGET_MPS = 0.08  # the planner's speed error per class against its driver must stay within this [m/s]
+TIME_TOLERANCE = 0.05  # and its time to the end of the path within this share of the driver's
+LATERAL_TOLERANCE = 0.10  # and its lateral acceleration no more than this share above the driver's
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A mean with its 95% interval resampling layouts, over ``n`` values."""
+
+    mean: float
+    low: float
+    high: float
+    n: int
+
+    def text(self, digits: int = 3) -> str:
+        return f"{self.mean:.{digits}f} (95% CI {self.low:.{digits}f}-{self.high:.{digits}f}, {self.n})"
+
+
+@dataclass(frozen=True)
+class SpeedComparison:
+    """The planner's speed against its driver's.
+
+    Attributes:
+        by_class: per class the driver took (its background when it passed a zone by), the
+            mean absolute error of the mean speed through a zone [m/s], over the zones where
+            the planner took that class too.
+        time_ratio: the planner's time to the end of the path over the driver's, over runs both completed.
+        time_within: runs whose time is within :data:`TIME_TOLERANCE` of the driver's, and runs compared.
+        lateral_over: runs whose largest lateral acceleration is more than :data:`LATERAL_TOLERANCE`
+            above the driver's on the same layout, and runs compared.
+        lateral_worst: the largest ratio of the two.
+    """
+
+    by_class: dict[str, Estimate]
+    time_ratio: Estimate | None
+    time_within: tuple[int, int]
+    lateral_over: tuple[int, int]
+    lateral_worst: float | None
+
+    @classmethod
+    def of(cls, zones: Sequence[Mapping[str, Any]], runs: Sequence[Mapping[str, Any]]) -> SpeedComparison:
+        errors: dict[str, dict[str, list[float]]] = {}
+        for z in zones:
+            if z.get("speed_mps") is None or z.get("driver_speed_mps") is None or not z.get("agrees"):
+                continue
+            errors.setdefault(z["driver_choice"], {}).setdefault(z["scenario"], []).append(abs(z["speed_mps"] - z["driver_speed_mps"]))
+        by_class = {name: _estimate(groups) for name, groups in sorted(errors.items())}
+        ratios: dict[str, list[float]] = {}
+        for r in runs:
+            if r.get("completed") and r.get("driver_completed") and r.get("driver_time_s"):
+                ratios.setdefault(r["scenario"], []).append(r["time_s"] / r["driver_time_s"])
+        compared = [x for v in ratios.values() for x in v]
+        within = sum(abs(x - 1) <= TIME_TOLERANCE for x in compared)
+        lateral = [r["max_lateral_accel_mps2"] / r["driver_max_lateral_accel_mps2"] for r in runs if r.get("driver_max_lateral_accel_mps2")]
+        over = sum(x > 1 + LATERAL_TOLERANCE for x in lateral)
+        return cls(
+            by_class,
+            _estimate(ratios) if compared else None,
+            (within, len(compared)),
+            (over, len(lateral)),
+            max(lateral) if lateral else None,
+        )
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    def lines(self) -> list[str]:
+        """What it says, a line each."""
+        out = [
+            f"speed error against the driver, {name}: {e.text()} m/s over zones (target <= {SPEED_TARGET_MPS})"
+            for name, e in self.by_class.items()
+        ]
+        if self.time_ratio is not None:
+            out.append(
+                f"time to the end of the path over the driver's: {self.time_ratio.text()}; within {TIME_TOLERANCE:.0%} in "
+                f"{rate_text(*self.time_within)} of the runs"
+            )
+        if self.lateral_worst is not None:
+            out.append(
+                f"lateral acceleration more than {LATERAL_TOLERANCE:.0%} above the driver's: {rate_text(*self.lateral_over)} of the runs; "
+                f"at most {self.lateral_worst:.2f} times the driver's"
+            )
+        return out
+
+
+def _estimate(groups: Mapping[str, list[float]]) -> Estimate:
+    mean, low, high = cluster_bootstrap(list(groups.values()))
+    return Estimate(mean, low, high, sum(len(v) for v in groups.values()))
+
+
+def trained_driver(meta: Mapping[str, Any]) -> tuple[str, tuple[tuple[str, float], ...]] | None:
+    """The synthetic driver a model's recordings were driven by: its style and cruising speeds by
+    class, when every recording names the same; None for a person's drives or a mix."""
+    data = meta.get("data")
+    recordings = data.get("recordings") if isinstance(data, Mapping) else None
+    if not isinstance(recordings, (list, tuple)) or not recordings:
+        return None
+    drivers = [r.get("driver") if isinstance(r, Mapping) else None for r in recordings]
+    if not all(isinstance(d, Mapping) and d.get("kind") == "expert" for d in drivers):
+        return None
+    found = {(d.get("style", "default"), tuple(tuple(p) for p in (d.get("config") or {}).get("speeds") or ())) for d in drivers}
+    if len(found) != 1:
+        return None
+    style, speeds = next(iter(found))
+    if not isinstance(style, str) or not all(len(p) == 2 and isinstance(p[0], str) and isinstance(p[1], (int, float)) for p in speeds):
+        return None
+    return style, tuple((str(n), float(v)) for n, v in speeds)
