@@ -13,7 +13,7 @@ bags needs the robot extra (rosbags).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -137,6 +137,7 @@ class _LogOptions:
     max_seconds: float | None
     repeat_images: int
     classes: ClassTable | None = None
+    speed_mps: float | None = None
 
 
 def write_synthetic_bag(
@@ -150,15 +151,17 @@ def write_synthetic_bag(
     max_seconds: float | None = None,
     repeat_images: int = 1,
     classes: ClassTable | None = None,
+    speed_mps: float | None = None,
 ) -> Path:
     """Drive ``scenario`` with the synthetic driver and write the log; returns the bag's path.
 
     ``repeat_images`` > 1 publishes each frame that many times per 0.1 s (a faster camera), to
     make large logs for benchmarks. ``classes``: the scenario's class table (None: the
     default; examples/classes/rellis3d.yaml's classes are labelled by :data:`RELLIS_OF_EXAMPLE`).
+    ``speed_mps``: the driver's cruising speed [m/s] (None: the default driver's, 1 m/s).
     """
     out = Path(out)
-    options = _LogOptions(quirks, max_seconds, repeat_images, classes)
+    options = _LogOptions(quirks, max_seconds, repeat_images, classes, speed_mps)
     ros1 = storage == "rosbag1"
     sc = resolve_scenario(scenario, classes)
     sim = Simulation(sc)
@@ -309,7 +312,10 @@ def _put_fixed(log: _Log, path_xy: list[tuple[float, float]]) -> None:
 def _drive(sim: Simulation, sc: Scenario, seed: int, profile: tuple[str, ...] | None, log: _Log) -> None:
     """Drive ``sc`` as ``terrapref record`` does, publishing each step as it goes."""
     rng = np.random.default_rng(seed)
-    driver = ExpertDriver(ExpertConfig.styled("default", profile), world=sim.world)
+    config = ExpertConfig.styled("default", profile)
+    if log.options.speed_mps is not None:
+        config = replace(config, speed_mps=log.options.speed_mps)
+    driver = ExpertDriver(config, world=sim.world)
     protocol = RECIPES[DEFAULT_RECIPE].disturbance
     frame = sim.reset()
     driver.reset(sc, rng)  # then the pushes' stream, in the order `terrapref record` draws them: the same drive

@@ -263,7 +263,7 @@ def test_a_damaged_bag_is_one_line_and_leaves_nothing(tmp_path: Path, logs, caps
     assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
 
 
-def test_a_failed_force_import_keeps_the_old_recording(tmp_path: Path, logs, capsys):
+def test_a_failed_force_import_keeps_the_old_recording(tmp_path: Path, logs, imported, capsys):
     out = tmp_path / "rec"
     shutil.copytree(logs["root"] / "rec_mcap", out)
     before = (out / "frames.jsonl").read_bytes()
@@ -427,6 +427,7 @@ def test_replay_reports_agreement_with_the_operator(tmp_path: Path, logs, capsys
     assert o["frames"] == len(read_recording(out / "recording")) and 0.0 <= o["top1"] <= 1.0
     c = result["classifier_overall"]
     assert 0.0 <= c["top1"] <= c["top3"] <= 1.0 and o["top3"] is None  # the planner ranks nothing: only C has a top-3
+    assert o["mean_abs_v_error_mps"] == 0.0  # the operator drove at 1 m/s, the model (no speed rule) commands 1 m/s
     assert "planner, all frames" in text and "top-3" not in text.split("planner, all frames")[1].splitlines()[0]
     assert "the planner's rules choose one trajectory and rank none, so only C has a top-3" in text
     assert result["terrain_in_view"]["frames"] < o["frames"] and (out / "replay.png").stat().st_size > 10_000
@@ -455,6 +456,87 @@ def test_replay_reports_agreement_with_the_operator(tmp_path: Path, logs, capsys
     )
     _one_line(capsys, "other.safetensors", "another camera")
     assert not (tmp_path / "r2").exists()  # refused as soon as the log's camera is known, nothing left half-made
+
+
+# --- speed: the recorded speed kept, learned, commanded and compared --------------------------
+
+FAST_MPS = 1.5  # the operator of the fast log drives at this speed, not the control set's 1 m/s
+
+
+@pytest.fixture(scope="module")
+def fast(tmp_path_factory) -> dict:
+    """A drive at FAST_MPS as a quirky MCAP log, imported, and a model taught by it (recipe teach)."""
+    root = tmp_path_factory.mktemp("fast")
+    robot = write_robot(root / "robot.yaml", robot_yaml())
+    bag = write_synthetic_bag(root / "fast.mcap", "mcap", max_seconds=10.0, speed_mps=FAST_MPS)
+    report = import_bag(bag, load_robot(robot), root / "rec", show_progress=False)
+    assert main(["train", str(root / "rec"), "--out", str(root / "taught.safetensors")]) == 0
+    return {"bag": bag, "report": report, "rec": read_recording(root / "rec"), "model": root / "taught.safetensors"}
+
+
+def _logged_commands(bag: Path) -> set[tuple[float, float]]:
+    """Every (v, w) the log's command topic holds, as published."""
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([bag]) as reader:
+        conns = [c for c in reader.connections if c.topic == TOPICS["command"]]
+        msgs = (reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages(connections=conns))
+        return {(float(m.linear.x), float(m.angular.z)) for m in msgs}
+
+
+def test_an_imported_log_keeps_the_speed_driven_and_labels_each_frame_by_its_curvature(fast):
+    from terrapref.vehicle import ControlSet
+
+    rec, report = fast["rec"], fast["report"]
+    assert rec.commands[:, 0] == pytest.approx([FAST_MPS] * len(rec)), "the speed the operator drove, not the control set's"
+    logged = _logged_commands(fast["bag"])
+    assert all((v, w) in logged for v, w in rec.commands.tolist()), "each frame's command as the log holds it"
+    control = ControlSet()
+    # The label is the trajectory of the same curvature at the control set's 1 m/s: w x 1 / 1.5.
+    at_set = np.clip(rec.commands[:, 1] * control.v_mps / FAST_MPS, min(control.w_rps), max(control.w_rps))
+    np.testing.assert_array_equal(rec.labels, control.label_of(at_set))
+    assert len(set(rec.labels.tolist())) > 1  # it steered
+    assert report.speed_mps == pytest.approx((FAST_MPS, FAST_MPS, FAST_MPS))
+    assert "speed            1.50 m/s on average (1.50-1.50)" in "\n".join(report.lines())
+
+
+def test_a_model_taught_by_a_log_driven_at_1_5_mps_commands_1_5_mps_on_open_ground(fast):
+    from terrapref.learning.model_file import load_model
+    from terrapref.rules import rules_of, speed_rule
+    from terrapref.runtime import PlannerRuntime
+
+    rules, _ = rules_of(load_model(fast["model"]))
+    assert speed_rule(rules) is not None
+    scenario = resolve_scenario("demo_course")
+    runtime = PlannerRuntime(fast["model"])
+    runtime.set_path(scenario.waypoints)
+    frame = Simulation(scenario).reset()
+    decision = runtime.decide(frame.image, frame.time_s, frame.pose)
+    assert decision.stop is None and decision.command.v == pytest.approx(FAST_MPS)
+    assert runtime.command_at(frame.time_s + 0.1) == decision.command  # what a node sends: the learned speed
+
+
+def test_replay_compares_the_models_speed_with_the_operators(tmp_path: Path, fast):
+    from helpers import linear_model
+    from terrapref.interop.replay import replay, summary_lines
+    from terrapref.planner.model import Model
+
+    rec = fast["rec"]
+    plain = replay(Model.load(linear_model(tmp_path / "linear.safetensors")), rec)  # no speed rule: the control set's 1 m/s
+    series = plain["series"]
+    assert series["v_operator"] == pytest.approx([FAST_MPS] * len(rec)) and series["v_model"] == pytest.approx([1.0] * len(rec))
+    assert plain["overall"]["mean_abs_v_error_mps"] == pytest.approx(FAST_MPS - 1.0)
+    # The ways compared like with like: the operator's w brought to the control set's speed, as the label is.
+    np.testing.assert_allclose(series["w_operator"], rec.commands[:, 1] / FAST_MPS)
+    w_error = np.abs(np.asarray(series["w_model"]) - np.asarray(series["w_operator"])).mean()
+    assert plain["overall"]["mean_abs_w_error_rps"] == pytest.approx(w_error)
+    assert plain["classifier_overall"]["mean_abs_v_error_mps"] is None  # C alone picks no speed
+    taught = replay(Model.load(fast["model"]), rec)
+    v_error = np.abs(np.asarray(taught["series"]["v_model"]) - FAST_MPS).mean()
+    assert taught["overall"]["mean_abs_v_error_mps"] == pytest.approx(v_error)
+    assert v_error < 0.2  # it learned the operator's speed (slowing where its speed rule says so), not 1 m/s
+    lines = summary_lines(taught)
+    assert f"mean |v| error {v_error:.3f} m/s over {len(rec)} frames" in lines[0] and "|v|" not in lines[2]
 
 
 def test_colour_segmentation_through_the_label_maps_colour_table(tmp_path: Path, imported):

@@ -18,6 +18,7 @@ from terrapref.learning import ClassifierConfig, load_model, numpy_forward, save
 from terrapref.learning.mlp import init_weights
 from terrapref.learning.network import member_prefix
 from terrapref.planner.planner import Planner
+from terrapref.rules import rules_in, speed_rule
 from terrapref.runtime import STOP, PlannerRuntime
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation
@@ -32,7 +33,12 @@ CONFIGS = [
 ]
 
 
-def _model(path: Path, config: ClassifierConfig, seed: int = 0, utility: bool = False) -> Path:
+def speed_block(v_mps: float) -> dict:
+    """A speed rule's block in a model file: every terrain column and the background at ``v_mps`` [m/s]."""
+    return {"type": "speed", "half_width_m": 0.6, "max_speed_mps": 2.0, "speeds_mps": [v_mps] * 5, "preview_m": 1.0, "lethal": []}
+
+
+def _model(path: Path, config: ClassifierConfig, seed: int = 0, utility: bool = False, speed_mps: float | None = None) -> Path:
     rng = np.random.default_rng(seed)
     if config.members == 1:
         weights = init_weights(config, rng)
@@ -42,6 +48,8 @@ def _model(path: Path, config: ClassifierConfig, seed: int = 0, utility: bool = 
     if utility:
         meta["rules"] = [{"type": "second_stage", "weight": 5.0, "w": [-1.0, -2.0, -3.0, -9.0, 4.0], "b": [0.0] * 21, "fit": "frames"}]
         meta["drives"] = "second_stage"
+    if speed_mps is not None:
+        meta["rules"] = [*meta.get("rules", []), speed_block(speed_mps)]
     return save_model(path, config, weights, meta)
 
 
@@ -89,6 +97,32 @@ def test_onnx_metadata_carries_the_configuration(tmp_path: Path):
     (stage,) = meta["rules"]
     assert stage["type"] == "second_stage" and stage["weight"] == 5.0 and stage["w"] == [-1.0, -2.0, -3.0, -9.0, 4.0]
     assert meta["drives"] == "second_stage"
+
+
+def test_onnx_metadata_says_the_speed_runs_in_the_planner_and_reads_back_the_speed_rule(tmp_path: Path):
+    model = load_model(_model(tmp_path / "m.safetensors", CONFIGS[1], utility=True, speed_mps=1.5))
+    meta = read_onnx_metadata(export_onnx(model, tmp_path / "m.onnx"))
+    assert [r["type"] for r in meta["rules"]] == ["second_stage", "speed"] and meta["drives"] == "second_stage"
+    speed = meta["speed"]
+    assert speed["rule"] == 1 and speed["type"] == "speed" and speed["decided_in"] == "planner"
+    assert "runs in terrapref's planner" in speed["note"] and "not in this graph" in speed["note"]
+    rules, driving = rules_in(meta, "m.onnx")  # as a runtime reading the exported metadata finds them
+    assert driving.type == "second_stage"
+    assert speed_rule(rules).model.speeds_mps == (1.5,) * 5
+    plain = read_onnx_metadata(export_onnx(load_model(_model(tmp_path / "p.safetensors", CONFIGS[0])), tmp_path / "p.onnx"))
+    assert plain["speed"]["rule"] is None and "the control set's speed, 1 m/s" in plain["speed"]["note"]
+
+
+def test_an_onnx_export_of_a_file_that_names_no_driving_rule_names_the_one_that_steers(tmp_path: Path):
+    """A speed rule listed last drives no way: the export names the last rule that steers."""
+    path = _model(tmp_path / "m.safetensors", CONFIGS[1], utility=True, speed_mps=1.5)
+    model = load_model(path)
+    meta = dict(model.meta)
+    del meta["drives"]
+    model = load_model(save_model(tmp_path / "undriven.safetensors", model.classifier, model.weights, meta))
+    exported = read_onnx_metadata(export_onnx(model, tmp_path / "m.onnx"))
+    assert exported["drives"] == "second_stage"
+    assert rules_in(exported, "m.onnx")[1].type == "second_stage"
 
 
 def test_cli_export_onnx(tmp_path: Path, capsys):
@@ -182,6 +216,24 @@ def test_runtime_drives_as_the_planner_decides(linear_model_file: Path):
         indices.add(decision.index)
         frame = sim.step(runtime.command_at(frame.time_s + 0.1))
     assert len(indices) > 1  # it steered
+
+
+def test_runtime_commands_the_speed_rules_speed_along_the_way_chosen(tmp_path: Path, linear_model_file: Path):
+    """A model whose speed rule cruises at 1.5 m/s commands 1.5 m/s on open ground, at the chosen
+    way's curvature; without a speed rule the control set's 1 m/s."""
+    linear = load_model(linear_model_file)
+    meta = {**linear.meta, "rules": [speed_block(1.5)]}
+    fast = save_model(tmp_path / "fast.safetensors", linear.classifier, linear.weights, meta)
+    scenario = resolve_scenario("demo_course")
+    image = Simulation(scenario).reset().image
+    w_grid = np.asarray(linear.features.preference.control.w_rps)
+    for model, v in ((fast, 1.5), (linear_model_file, 1.0)):
+        runtime = PlannerRuntime(model)
+        runtime.set_path(scenario.waypoints)
+        d = runtime.decide(image, 10.0, scenario.start)
+        assert d.stop is None and d.command.v == pytest.approx(v)
+        assert d.command.w == pytest.approx(w_grid[d.index] * v)  # the chosen trajectory's curvature (at 1 m/s), at v
+        assert runtime.command_at(10.1) == d.command
 
 
 def test_runtime_holds_then_stops(linear_model_file: Path):

@@ -136,3 +136,23 @@ def test_the_node_says_why_it_stops(setup):
     command, reason = core.status_at(decision.stamp_s + 0.05)
     assert (command, reason) == (decision.command, decision.stop)
     assert core.status_at(decision.stamp_s + 1.0) == ((0.0, 0.0), "stale")
+
+
+def test_the_node_commands_the_speed_the_models_speed_rule_sets(setup, tmp_path):
+    """A model whose speed rule cruises at 1.3 m/s: the node sends 1.3 m/s along the way the offset
+    rule chose (its curvature kept), not the control set's 1 m/s."""
+    from test_interop import speed_block
+
+    model, robot, path, _ = setup
+    meta = {**model.meta, "rules": [*model.meta["rules"], speed_block(1.3)]}
+    fast = load_model(save_model(tmp_path / "fast.safetensors", model.classifier, model.weights, meta))
+    core = PlannerNodeCore(fast, robot, path)
+    core.on_camera_info(camera_info(TS, header(TS, 0.0, "camera_optical"), CameraConfig()))
+    core.on_odometry(_odom(0))
+    decision = core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0))
+    slow = PlannerRuntime(model)  # the same model without its speed rule
+    slow.set_path(path)
+    plain = slow.decide(setup[3][0], decision.stamp_s, POSES[0])
+    assert decision.stop is None and plain.stop is None
+    (v, w), reason = core.status_at(decision.stamp_s + 0.05)
+    assert reason is None and v == pytest.approx(1.3) and w == pytest.approx(plain.command.w * 1.3)

@@ -10,7 +10,9 @@ What real logs contain is handled and reported: topics at their own rates (image
 to ``rate_hz``), stamp jitter, out-of-order images (a short reorder buffer; older stragglers are
 dropped), gaps in odometry (frames inside a gap are skipped), label ids the label map does not
 list (their share is reported), the operator stopped or reversing (no trajectory choice: skipped).
-Commands at speeds other than the preference set's are labelled by curvature: w x v_set / v.
+Each frame keeps the operator's command as it was logged, at its own speed (v, w), so that a speed
+rule learns the speeds driven; its label is the trajectory of the preference set of the same
+curvature, at the set's speed: w x v_set / v.
 
 The recording is written to a temporary folder beside ``out`` and renamed into place only when
 complete; an error leaves nothing behind.
@@ -74,6 +76,7 @@ class ImportReport:
     path_source: str = ""
     order: str = ""  # the preference order the recording carries, and where it came from
     duration_s: float = 0.0
+    speed_mps: tuple[float, float, float] | None = None  # the kept frames' slowest, mean and fastest speed [m/s]
     notes: list[str] = field(default_factory=list)
 
     def lines(self) -> list[str]:
@@ -86,6 +89,9 @@ class ImportReport:
             out.append(
                 f"image gaps       {self.image_gaps} longer than max_gap_s (longest {self.longest_gap_s:.2f} s); frames on either side kept"
             )
+        if self.speed_mps is not None:
+            slow, mean, fast = self.speed_mps
+            out.append(f"speed            {mean:.2f} m/s on average ({slow:.2f}-{fast:.2f}), kept as the commands give it")
         out.append(f"path             {self.path_source}")
         out.append(f"order            {self.order}")
         out += [f"note             {n}" for n in self.notes]
@@ -796,6 +802,7 @@ class _Frames:
     last_t: float = -math.inf  # the stamp of the last frame kept [s]
     t_first: float | None = None  # the stamp of the first frame kept [s]
     image_span: tuple[float, float] = (math.inf, -math.inf)  # the images' first and last stamps [s]
+    speeds: list[float] = field(default_factory=list)  # the speed of each frame kept [m/s]
 
     def emit(self, t: float, ids: np.ndarray) -> None:
         """The image ``ids`` (H, W) stamped ``t`` [s] as the next frame, unless it is skipped."""
@@ -805,13 +812,14 @@ class _Frames:
             self.report.skipped[reason] += 1
             return
         c = self.conversion
-        v, w = self.streams.cmd[self._command_index(t)]
+        v, w = (float(u) for u in self.streams.cmd[self._command_index(t)])  # v >= MIN_SPEED_MPS: slower frames are skipped
         w_set = float(np.clip(w * c.control.v_mps / v, min(c.control.w_rps), max(c.control.w_rps)))  # same curvature at the set's speed
         pose = self._pose_at(t)
         image = self._classes(ids, t)
         if self.t_first is None:
             self.t_first = t
-        self.writer.append(t - self.t_first, pose, image, (c.control.v_mps, w_set), int(c.control.label_of(w_set)))
+        self.writer.append(t - self.t_first, pose, image, (v, w), int(c.control.label_of(w_set)))
+        self.speeds.append(v)
         self.last_t = t
 
     def _skip_reason(self, t: float) -> str | None:
@@ -893,6 +901,7 @@ class _Frames:
                 field="topics.segmentation",
             )
         report.frames = writer.count
+        report.speed_mps = (min(self.speeds), float(np.mean(self.speeds)), max(self.speeds))
         report.duration_s = float(self.last_t - self.t_first) + 1.0 / self.conversion.rate_hz
         report.unmapped_share = self.unmapped / max(self.pixels, 1)
         report.unknown_share = self.unknown / max(self.pixels, 1)

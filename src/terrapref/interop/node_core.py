@@ -6,7 +6,10 @@ Messages come in as they would from rospy or rclpy (attribute access: ``header.s
 camera is refused); odometry is kept for the last seconds and interpolated to each image's
 stamp; the reference path comes from a Path message or a waypoint file; each label image is
 decoded through the robot file's label map and decided on by :class:`PlannerRuntime`, which
-ignores frames older than the last one and holds a command for ``hold_s`` after its frame.
+ignores frames older than the last one and holds a command for ``hold_s`` after its frame. The
+command sent is the decision's (v, w): the way chosen at the speed the model's speed rule sets
+(the control set's speed for a model without one); the trajectories drawn for display are the
+control set's, at its speed.
 """
 
 from __future__ import annotations

@@ -5,9 +5,16 @@ terrain classes + distance). Output ``logits``, float32 (N, m): C's scores, whos
 F_t, computed in float64 inside the graph like the planner's own forward pass (an ensemble's logits are the log of its members' mean softmax, as in
 :func:`terrapref.learning.numpy_forward`). Everything the model was trained under (preference
 set, camera, classes, profile, feature configuration, the decision rules: the second stage's
-linear utility, the offset rule's utility) is in the model's metadata as JSON strings under
-``terrapref.*`` keys. The offset rule itself (terrapref.rules.offset.rule: a ground map, the
-offsets' features, pure pursuit) is not a network and is not in the graph; ``terrapref.runtime`` runs it.
+linear utility, the offset rule's utility, the speed rule's speeds) is in the model's metadata as
+JSON strings under ``terrapref.*`` keys. The offset rule itself (terrapref.rules.offset.rule: a
+ground map, the offsets' features, pure pursuit) is not a network and is not in the graph;
+``terrapref.runtime`` runs it.
+
+Nor is the speed: C scores the trajectories at the control set's speed (``preference_set.v_mps``),
+and the speed along the way chosen is the speed rule's (terrapref.rules.speed), which the planner
+runs, not the graph. ``terrapref.speed`` says so: which block of ``terrapref.rules`` is the speed
+rule (None: the model has none and drives at the control set's speed), and where the speed is
+decided, in words; ``terrapref.rules.rules_in`` reads the rules back, the speed rule among them.
 """
 
 from __future__ import annotations
@@ -21,6 +28,7 @@ from terrapref.extras import needs
 from terrapref.fileio import write_bytes_atomic
 from terrapref.learning.model_file import LoadedModel
 from terrapref.learning.network import ClassifierConfig, member_prefix
+from terrapref.rules import Rule, driving_rule, rules_of, speed_rule
 
 with needs("robot", "ONNX files"):  # this module is imported only for them
     import onnx
@@ -129,17 +137,33 @@ def export_onnx(model: LoadedModel, out: str | Path) -> Path:
         "profile": list(model.profile),
         "feature_classes": list(model.features.feature_classes),
     }
-    from terrapref.rules import rules_of
-
     rules, drives = rules_of(model)  # the decision rules' blocks, read (older files' too) and written as this version writes them
     props["rules"] = [rule.header() for rule in rules]
     if drives is not None or rules:
-        props["drives"] = drives or rules[-1].type
+        props["drives"] = driving_rule(rules, drives, model.path).type  # a rule that steers: a speed rule drives no way
+    props["speed"] = speed_metadata(rules, model.features.preference.control.v_mps)
     for key in ("recipe", "identifiability", "created", "sources", "fingerprint"):
         if key in meta:
             props[key] = meta[key]
     helper.set_model_props(proto, {f"terrapref.{k}": json.dumps(v) for k, v in props.items()})
     return write_bytes_atomic(out, proto.SerializeToString())
+
+
+def speed_metadata(rules: tuple[Rule, ...], v_set_mps: float) -> dict:
+    """``terrapref.speed``: which of ``rules`` sets the speed (its index in ``terrapref.rules`` and
+    its type, None without one) and where the speed is decided, in words; ``v_set_mps`` [m/s] is
+    the control set's speed, at which C scores the trajectories."""
+    rule = speed_rule(rules)
+    if rule is None:
+        where = f"no speed rule: the planner commands the control set's speed, {v_set_mps:g} m/s, along the way chosen"
+        return {"rule": None, "type": None, "decided_in": "planner", "note": where}
+    note = (
+        f"the graph holds C alone, which scores the trajectories at the control set's speed ({v_set_mps:g} m/s); "
+        f"the speed along the way chosen is the speed rule's (terrapref.rules[{rules.index(rule)}], type {rule.type!r}), "
+        "which is not a network and runs in terrapref's planner (terrapref.runtime.PlannerRuntime), not in this graph; "
+        "the command is (v, curvature x v) at that speed"
+    )
+    return {"rule": rules.index(rule), "type": rule.type, "decided_in": "planner", "note": note}
 
 
 def read_onnx_metadata(path: str | Path) -> dict:

@@ -43,7 +43,9 @@ class RuntimeDecision:
 
     Attributes:
         stamp_s: the frame's stamp [s].
-        command: (v [m/s], w [rad/s]) of the chosen trajectory; (0, 0) when the planner stops.
+        command: (v [m/s], w [rad/s]): the chosen way at the speed the model's speed rule sets
+            along it (the same curvature, w = curvature x v), or at the control set's speed for a
+            model without one; (0, 0) when the planner stops. This is what a node sends.
         index: the chosen trajectory (0..m-1, the control set's order).
         probs: C's F_t over the m trajectories.
         progress_m: progress along the path [m].
