@@ -52,9 +52,11 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     profile = PreferenceProfile.parse(args.profile, model.classes) if args.profile is not None else None
     perception = perception_model(args.perception, classes=model.classes)
     from terrapref.demos.expert import STYLES
+    from terrapref.evaluation.speed import SpeedComparison, trained_driver
     from terrapref.evaluation.stats import rate_text
 
-    STYLES.get(args.style, "--style")
+    style, speeds = _driver_of(args, trained_driver(getattr(getattr(model, "model", None), "meta", {})))
+    STYLES.get(style, "--style")
     with output_folder(args.out, args.force):
         bar = Progress("evaluate", len(args.scenarios) * args.seeds * (1 if args.no_driver else 2))
         view = live_view(args)
@@ -65,7 +67,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
                 args.seeds,
                 profile=profile,
                 with_driver=not args.no_driver,
-                style=args.style,
+                style=style,
+                speeds=speeds,
                 frames=tuple(frames),
                 mcap=args.mcap,
                 perception=perception,
@@ -86,7 +89,10 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
             print(f"planner: {line}")
         compared = [z for z in zones if "agrees" in z]
         if compared:
-            print(f"planner: agreement with the driver ({args.style}) {rate_text(sum(z['agrees'] for z in compared), len(compared))}")
+            print(f"planner: agreement with the driver ({style}) {rate_text(sum(z['agrees'] for z in compared), len(compared))}")
+        if "speed" in metrics:
+            for line in SpeedComparison.from_dict(metrics["speed"]).lines():
+                print(f"planner: {line}")
         if "driver_summary" in metrics:
             d = metrics["driver_summary"]
             success = f"{d['zone_success_rate']:.1%}" if d["zones"] else "-"
@@ -104,6 +110,15 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
             + (f"; runs as MCAP in {Path(args.out) / 'runs'}" if args.mcap else "")
         )
         return 0
+
+
+def _driver_of(args: argparse.Namespace, trained: tuple[str, tuple[tuple[str, float], ...]] | None) -> tuple[str, tuple]:
+    """The comparison driver's style and speeds: as given, else the model's own synthetic driver's, else the default."""
+    from terrapref.demos.speed_style import parse_speeds
+
+    style = args.style or (trained[0] if trained is not None and args.speeds is None else "default")
+    speeds = parse_speeds(args.speeds) if args.speeds is not None else (trained[1] if trained is not None and args.style is None else ())
+    return style, speeds
 
 
 def _check_frames(frames: Sequence[int], scenarios: Sequence[str], classes) -> None:
@@ -144,7 +159,12 @@ def evaluate_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--profile", help="resolve `best` zones under this profile instead of the model's")
     p.add_argument("--frames", help="comma-separated frame numbers of seed 0 to draw as decision pictures")
     p.add_argument("--no-driver", action="store_true", help="skip the synthetic driver's comparison runs")
-    p.add_argument("--style", default="default", help="the synthetic driver's style for the comparison runs (agreement; default: default)")
+    p.add_argument(
+        "--style",
+        help="the synthetic driver's style for the comparison runs (agreement, speed; default: the style and speeds of the "
+        "synthetic driver the model was trained from, else default)",
+    )
+    p.add_argument("--speeds", metavar="CLASS=MPS,...", help="the comparison driver's cruising speeds by class, over its style's")
     add_engine_args(p)
     p.add_argument("--mcap", action="store_true", help="also write each planner run as ROS 2 MCAP in OUT/runs (Foxglove, RViz)")
     p.add_argument("--perception", metavar="PRESET|FILE", help=PERCEPTION_HELP + " (default: clean); the driver always sees the truth")

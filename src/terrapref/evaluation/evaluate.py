@@ -24,6 +24,7 @@ from terrapref.evaluation.runner import (
     summarise,
 )
 from terrapref.evaluation.scoring import classes_in_zone
+from terrapref.evaluation.speed import SpeedComparison
 from terrapref.features import PreferenceSet
 from terrapref.fileio import write_text_atomic
 from terrapref.grid import Engine
@@ -47,6 +48,7 @@ class Evaluation:
         profile: the order ``best`` zones resolve under; None: the model's.
         with_driver: also drive the synthetic driver, for the agreement with it.
         style: the synthetic driver's style.
+        speeds: the synthetic driver's cruising speeds by class, over its style's [m/s].
         frames: decision numbers of seed 0 to draw.
         mcap: write every planner run as ROS 2 MCAP.
         perception: what the planner receives instead of the truth; None: the truth.
@@ -58,6 +60,7 @@ class Evaluation:
     profile: PreferenceProfile | None = None
     with_driver: bool = True
     style: str = "default"
+    speeds: tuple[tuple[str, float], ...] = ()
     frames: tuple[int, ...] = ()
     mcap: bool = False
     perception: PerceptionModel | None = None
@@ -87,7 +90,7 @@ class Evaluation:
         ]
         if self.with_driver:
             specs += [
-                RunSpec(name, seed, EXPERT, None, profile.order, style=self.style, classes=classes)
+                RunSpec(name, seed, EXPERT, None, profile.order, style=self.style, classes=classes, speeds=self.speeds)
                 for name in self.scenarios
                 for seed in range(self.seeds)
             ]
@@ -170,6 +173,7 @@ def _metrics(ev: Evaluation, profile: PreferenceProfile, results: list[RunResult
         "profile": list(profile.order),
         "seeds": ev.seeds,
         "driver_style": ev.style,
+        "driver_speeds": {name: v for name, v in ev.speeds},
         "perception": ev.perceived.to_dict(),
         "unidentified_pairs": [f"{p.first} vs {p.second}" for p in evidence.identified.unidentified()] if evidence is not None else None,
         "scenarios": {name: _course_runs(results, name, evidence) for name in ev.scenarios},
@@ -177,7 +181,43 @@ def _metrics(ev: Evaluation, profile: PreferenceProfile, results: list[RunResult
     }
     if ev.with_driver:
         metrics["driver_summary"] = summarise(results, EXPERT).to_dict()
+        metrics["speed"] = speed_comparison(results).to_dict()
     return metrics
+
+
+def speed_comparison(results: list[RunResult]) -> SpeedComparison:
+    """The planner's speed against the driver's in the same runs (course and seed) (terrapref.evaluation.speed)."""
+    driver = {(r.scenario, r.seed): r for r in results if r.driver == EXPERT}
+    zones, runs = [], []
+    for r in results:
+        d = driver.get((r.scenario, r.seed))
+        if r.driver != PLANNER or d is None:
+            continue
+        m, dm = r.metrics, d.metrics
+        runs.append(
+            {
+                "scenario": r.scenario,
+                "completed": m.completed,
+                "driver_completed": dm.completed,
+                "time_s": m.time_s,
+                "driver_time_s": dm.time_s,
+                "max_lateral_accel_mps2": m.max_lateral_accel_mps2,
+                "driver_max_lateral_accel_mps2": dm.max_lateral_accel_mps2,
+            }
+        )
+        theirs = {z.id: z for z in dm.zones}
+        for z, a in zip(m.zones, r.agreement or (), strict=False):
+            if z.id in theirs:
+                zones.append(
+                    {
+                        "scenario": r.scenario,
+                        "driver_choice": a.driver_choice,
+                        "agrees": a.agrees,
+                        "speed_mps": z.speed_mps,
+                        "driver_speed_mps": theirs[z.id].speed_mps,
+                    }
+                )
+    return SpeedComparison.of(zones, runs)
 
 
 def _course_runs(results: list[RunResult], name: str, evidence: _Evidence | None) -> dict:

@@ -81,6 +81,19 @@ class SpeedComparison:
     def to_dict(self) -> dict:
         return asdict(self)
 
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> SpeedComparison:
+        def estimate(e: Mapping[str, Any] | None) -> Estimate | None:
+            return Estimate(**e) if e is not None else None
+
+        return cls(
+            {name: Estimate(**e) for name, e in data["by_class"].items()},
+            estimate(data["time_ratio"]),
+            tuple(data["time_within"]),
+            tuple(data["lateral_over"]),
+            data["lateral_worst"],
+        )
+
     def lines(self) -> list[str]:
         """What it says, a line each."""
         out = [

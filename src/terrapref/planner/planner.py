@@ -116,7 +116,7 @@ class Planner:
         self.runner = self.rule.runner(context)
         control = policy.features.preference.control
         speed = speed_rule(policy.rules)
-        self.speed = speed.runner(context) if speed is not None else None
+        self.speed = speed.runner(context, self.runner.ground_map) if speed is not None else None
         self._set_v, self._max_w = float(control.v_mps), float(np.max(np.abs(control.w_rps)))
         half_width = self.runner.half_width_m
         self.stop_rule = StopRule(
@@ -169,22 +169,24 @@ class Planner:
         s = self.tracker.update(np.array(pose[:2]))
         outputs = functools.partial(_outputs, self.featurizer, self.policy, view, pose, self.path, s)
         if not self.runner.reads_probs and view is image:  # an array the caller may reuse is read now
-            choice = self._at_speed(self.runner.decide(RuleInput(None, view, pose, self.path, s)), view, pose)
+            choice = self._at_speed(self.runner.decide(RuleInput(None, view, pose, self.path, s)), view, pose, s)
             stop = self.stop_rule.check(view, pose, choice.command.v, choice.command.w, time_s)
             return Decision(choice.index, STOP_COMMAND if stop else choice.command, s, pending=outputs, stop=stop)
         probs, U = outputs()
-        choice = self._at_speed(self.runner.decide(RuleInput(probs, view, pose, self.path, s)), view, pose)
+        choice = self._at_speed(self.runner.decide(RuleInput(probs, view, pose, self.path, s)), view, pose, s)
         stop = self.stop_rule.check(view, pose, choice.command.v, choice.command.w, time_s)
         return Decision(choice.index, STOP_COMMAND if stop else choice.command, s, (probs, U), stop=stop)
 
-    def _at_speed(self, choice: Choice, view: SegmentationView, pose: Pose) -> Choice:
+    def _at_speed(self, choice: Choice, view: SegmentationView, pose: Pose, progress_m: float) -> Choice:
         """The steering rule's choice at the speed rule's speed along its way (the same curvature);
         as chosen without a speed rule."""
         if self.speed is None:
             return choice
         self.speed.observe(view, pose)
         curvature = choice.command.w / self._set_v
-        v = self.speed.speed(pose, curvature, self._max_w)
+        held = self.runner.held_offset_m
+        along = (self.path, progress_m, held) if held is not None and self.path is not None else None
+        v = self.speed.speed(pose, curvature, self._max_w, along)
         return Choice(choice.index, Command(v, curvature * v))
 
     def costmap(self) -> Costmap | None:

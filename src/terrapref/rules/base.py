@@ -127,6 +127,12 @@ class RuleRunner(abc.ABC):
         """The ground map the rule keeps, updated as it decides (the stop rule reads it); None for a rule that keeps none."""
         return None
 
+    @property
+    def held_offset_m(self) -> float | None:
+        """The lateral offset from the path the rule steers to, left positive [m]: the speed rule
+        reads the way along the path shifted by it; None for a rule that steers arcs."""
+        return None
+
 
 @dataclass(frozen=True)
 class HeaderContext:

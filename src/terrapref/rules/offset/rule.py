@@ -356,6 +356,10 @@ class OffsetSteering(RuleRunner):
     def ground_map(self) -> GroundMap:
         return self.map
 
+    @property
+    def held_offset_m(self) -> float:
+        return float(self.held)
+
     def route_prices(self) -> RoutePrices:
         """The class prices and the price of holding off the path this rule learned (``-w_detour``), for a route search."""
         return RoutePrices(self._prior, float(-self.utility.weights[self.k + 1]), float(self.utility.config.span_m))

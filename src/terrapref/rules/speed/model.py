@@ -14,16 +14,19 @@ lethal rings' 4). The fit reads the way the driver drove; the planner reads the 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 
 STATION_STEP_M = 0.25
 STATIONS = 24  # the way is read to 6 m ahead
-PREVIEWS_M = tuple(0.25 * k for k in range(1, STATIONS + 1))  # the previews the fit tries [m]
+PREVIEWS_M = tuple(0.5 * k for k in range(1, 9))  # the previews the fit tries [m]
+MIN_POINTS = (1, 2, 3)  # how many of a station's footprint points a class must hold to count, for the fit to choose
 RINGS_M = (0.5, 1.0)  # lethal terrain this far beside the footprint is near, for the fit to choose [m]
-LAGS = (0, 1, 2, 3, 4)  # frames between what a frame shows and the speed commanded for it, for the fit to choose
-STRAIGHT = 0.05  # a way of less curvature is straight, for the cruising speeds [1/m]
+LAGS = (0, 1, 2, 3)  # frames between what a frame shows and the speed commanded for it, for the fit to choose
+STEADY_CURVATURE = 0.25  # a way of less curvature counts for a cruising speed (the median keeps out the few bends that slowed) [1/m]
+BEND_CURVATURE = 0.1  # a way of more curvature may be slowed by the bend [1/m]
 MIN_FRAMES = 10  # frames a cruising speed, a bend or a lethal neighbour needs to be fitted
 MIN_SPEED_MPS = 0.1  # the slowest the rule commands while it drives [m/s]
 
@@ -46,6 +49,11 @@ class SpeedModel:
         near_lethal_m: lethal terrain this far beside the footprint is near; None: it does not slow for it [m].
         near_lethal_mps: the speed kept while lethal terrain is near [m/s].
         lethal: the lethal terrain columns.
+        min_points: a column counts at a station where it holds at least this many of the
+            footprint's 5 points there (the ground map's cells are 0.2 m, and a map gathered from
+            a robot's labels is ragged at a patch's edge: one point may fall on the next class).
+        drive_lateral_mps2: the largest lateral acceleration the drive showed, which the
+            planner never asks for more than, bend limit or none [m/s^2].
     """
 
     speeds_mps: tuple[float, ...]
@@ -54,12 +62,19 @@ class SpeedModel:
     near_lethal_m: float | None
     near_lethal_mps: float | None
     lethal: tuple[int, ...]
+    min_points: int = 1
+    drive_lateral_mps2: float | None = None
 
     def predict(self, way: np.ndarray, curvature: np.ndarray) -> np.ndarray:
         """The speed [m/s] (N,) for ways (N, STATIONS, 9) of terrain columns and their curvatures (N,) [1/m]."""
         speeds = _speed_table(self.speeds_mps, self.lethal)
         upto = _stations(self.preview_m)
-        v = np.nanmin(speeds[way[:, :upto, :5]].reshape(len(way), -1), axis=1, initial=np.inf)
+        foot = way[:, :upto, :5]
+        at = speeds[foot]
+        if self.min_points > 1:  # the points whose column too few of their station's points share
+            shared = (foot[..., :, None] == foot[..., None, :]).sum(axis=-1)
+            at = np.where(shared >= self.min_points, at, np.nan)
+        v = np.nanmin(at.reshape(len(way), -1), axis=1, initial=np.inf)
         v = np.where(np.isfinite(v), v, float(np.nanmin(self.speeds_mps)))  # nothing seen: the slowest cruising speed
         if self.lateral_accel_mps2 is not None:
             k = np.abs(curvature)
@@ -112,27 +127,40 @@ def fit_speed(
     at a steady speed on any column.
 
     For each preview and lag: a column's cruising speed is the median speed of the frames whose
-    way within the preview is that column alone and straight, with no lethal terrain near; the
+    way within the preview is that column alone and nearly straight, with no lethal terrain near
+    (where the drive shows too few such frames, beside lethal terrain too); the
     bend's limit the median ``v^2 * curvature`` of the frames slower than their terrain allows in
     bends; the lethal neighbour's speed the median of the frames slower than both near lethal
     terrain (the ring that explains them best). The preview and lag that explain all frames best
-    (mean absolute error) are kept.
+    (mean absolute error) are kept, then the footprint points a class must hold that do.
     """
-    best: SpeedFit | None = None
-    for lag in LAGS:
+
+    def fitted(lag: int, preview: float, points: int) -> SpeedFit | None:
         later = _shifted(v_mps, frame, lag)
         ok = np.isfinite(later) & (later > 0) & np.isfinite(curvature)
         if np.count_nonzero(ok) < MIN_FRAMES:
-            continue
+            return None
         w, c, v = way[ok], curvature[ok], later[ok]
+        found = _fit_at(_Frames(w, c, v, k, lethal), preview, points)
+        if found is None:
+            return None
+        model, intervals = found
+        return SpeedFit(model, intervals, lag, int(len(v)), float(np.mean(np.abs(model.predict(w, c) - v))))
+
+    def better(a: SpeedFit | None, b: SpeedFit | None) -> SpeedFit | None:
+        return b if a is None or (b is not None and b.error_mps < a.error_mps - 1e-9) else a
+
+    best: SpeedFit | None = None
+    for lag in LAGS:
         for preview in PREVIEWS_M:
-            fitted = _fit_at(w, c, v, k, lethal, preview)
-            if fitted is None:
-                continue
-            model, intervals = fitted
-            error = float(np.mean(np.abs(model.predict(w, c) - v)))
-            if best is None or error < best.error_mps - 1e-9:
-                best = SpeedFit(model, intervals, lag, int(len(v)), error)
+            best = better(best, fitted(lag, preview, MIN_POINTS[0]))
+    if best is not None:
+        for points in MIN_POINTS[1:]:
+            best = better(best, fitted(best.lag_frames, best.model.preview_m, points))
+    if best is not None:
+        moving = np.isfinite(curvature) & (v_mps > 0)
+        lateral = float(np.max(v_mps[moving] ** 2 * np.abs(curvature[moving]), initial=0.0))
+        best = replace(best, model=replace(best.model, drive_lateral_mps2=lateral if lateral > 0 else None))
     return best
 
 
@@ -146,20 +174,31 @@ def _shifted(v: np.ndarray, frame: np.ndarray, lag: int) -> np.ndarray:
     return out
 
 
-def _fit_at(
-    way: np.ndarray, curvature: np.ndarray, v: np.ndarray, k: int, lethal: tuple[int, ...], preview_m: float
-) -> tuple[SpeedModel, tuple[tuple[float, float] | None, ...]] | None:
+class _Frames(NamedTuple):
+    """The frames one fit reads: ways, curvatures, speeds (lagged), the terrain columns K and the lethal ones."""
+
+    way: np.ndarray
+    curvature: np.ndarray
+    v: np.ndarray
+    k: int
+    lethal: tuple[int, ...]
+
+
+def _fit_at(frames: _Frames, preview_m: float, min_points: int) -> tuple[SpeedModel, tuple[tuple[float, float] | None, ...]] | None:
+    way, curvature, v, k, lethal = frames
     upto = _stations(preview_m)
     foot = way[:, :upto, :5].reshape(len(way), -1)
     seen = foot <= k  # K + 1: never seen
     first = np.where(seen.any(axis=1), foot[np.arange(len(foot)), np.argmax(seen, axis=1)], k + 1)
     alone = seen.any(axis=1) & np.all((foot == first[:, None]) | ~seen, axis=1)
     near = _near(way, upto, lethal, RINGS_M[1])
-    steady = alone & (np.abs(curvature) < STRAIGHT) & ~near
+    steady = alone & (np.abs(curvature) < STEADY_CURVATURE)
     speeds: list[float] = []
     intervals: list[tuple[float, float] | None] = []
     for col in range(k + 1):
-        rows = np.flatnonzero(steady & (first == col))
+        rows = np.flatnonzero(steady & (first == col) & ~near)  # away from lethal terrain where the drive shows it so
+        if len(rows) < MIN_FRAMES:  # else beside it (a lane between lethal walls)
+            rows = np.flatnonzero(steady & (first == col))
         if col in lethal or len(rows) < MIN_FRAMES:
             speeds.append(math.nan)
             intervals.append(None)
@@ -171,13 +210,13 @@ def _fit_at(
         return None
     slowest = min(known)
     speeds = [slowest if math.isnan(s) else s for s in speeds]  # never shown steady: the slowest known, to be safe
-    base = SpeedModel(tuple(speeds), preview_m, None, None, None, lethal)
+    base = SpeedModel(tuple(speeds), preview_m, None, None, None, lethal, min_points)
     terrain_v = base.predict(way, curvature)
-    bend = (terrain_v > 1.1 * v) & (np.abs(curvature) >= 2 * STRAIGHT) & ~near
+    bend = (terrain_v > 1.1 * v) & (np.abs(curvature) >= BEND_CURVATURE) & ~near
     best, best_error = base, float(np.mean(np.abs(terrain_v - v)))
     if np.count_nonzero(bend) >= MIN_FRAMES:  # a limit in bends, kept only where it explains the frames better than none
         for a_lat in np.percentile(v[bend] ** 2 * np.abs(curvature[bend]), (25, 50, 75)):
-            trial = SpeedModel(tuple(speeds), preview_m, float(a_lat), None, None, lethal)
+            trial = SpeedModel(tuple(speeds), preview_m, float(a_lat), None, None, lethal, min_points)
             error = float(np.mean(np.abs(trial.predict(way, curvature) - v)))
             if error < best_error - 1e-9:
                 best, best_error = trial, error
@@ -187,7 +226,7 @@ def _fit_at(
         slowed = _near(way, upto, lethal, ring) & (allowed > 1.1 * v)
         if np.count_nonzero(slowed) < MIN_FRAMES:
             continue
-        trial = SpeedModel(tuple(speeds), preview_m, a_lat, ring, float(np.median(v[slowed])), lethal)
+        trial = SpeedModel(tuple(speeds), preview_m, a_lat, ring, float(np.median(v[slowed])), lethal, min_points)
         error = float(np.mean(np.abs(trial.predict(way, curvature) - v)))
         if error < best_error - 1e-9:
             best, best_error = trial, error

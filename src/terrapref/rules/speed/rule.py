@@ -33,19 +33,10 @@ if TYPE_CHECKING:
     from terrapref.demos.recording import Recording
     from terrapref.learning.train import FitData
 
-# The speed rule's ground map: 0.2 m cells, ground read every 0.2 m to 6.5 m ahead (the way's
-# reach) and 3 m each side, the last few seconds counting (fade 0.9 a frame), so that the ground
-# under the vehicle, which the camera showed a moment ago, is still known.
-MAP = OffsetGeometry(
-    stations_m=(-1.0, 6.0),
-    map_resolution_m=0.2,
-    sample_step_m=0.2,
-    map_half_size_m=8.0,
-    sample_range_m=6.5,
-    map_fade=0.9,
-    map_sky_attitude=False,
-)
-MAP_HALF_WIDTH_M = 3.0
+# The speed rule's ground map: the offset rule's (its default geometry: 0.1 m cells gathered over
+# the last seconds, placed with the camera's attitude from the sky line), so that a planner whose
+# offset rule steers reads the map that rule keeps, and a robot's ragged labels are outvoted alike.
+MAP = OffsetGeometry()
 # The ground around the vehicle each training frame keeps (the vehicle frame: x ahead, y left):
 # SNAPSHOT_X x SNAPSHOT_Y cells of SNAPSHOT_STEP_M from (SNAPSHOT_X0, -SNAPSHOT_Y0).
 SNAPSHOT_STEP_M = 0.2
@@ -110,7 +101,7 @@ class SpeedReader(FrameReader):
 
     def __init__(self, half_width_m: float, featurizer: UtilityFeaturizer, camera: PinholeCamera, classes: ClassTable, n: int) -> None:
         terrain = TerrainColumns.of(featurizer.class_columns, featurizer.config.n_terrain, classes)
-        self.map = GroundMap(camera, terrain, MAP, MAP_HALF_WIDTH_M)
+        self.map = GroundMap(camera, terrain, MAP)
         self.k = terrain.k
         self.across = across(half_width_m)
         xs = SNAPSHOT_X0 + SNAPSHOT_STEP_M * np.arange(SNAPSHOT_X)
@@ -196,6 +187,8 @@ class SpeedRule(Rule):
             "near_lethal_m": m.near_lethal_m,
             "near_lethal_mps": m.near_lethal_mps,
             "lethal": list(m.lethal),
+            "min_points": m.min_points,
+            "drive_lateral_mps2": m.drive_lateral_mps2,
         }
         if self.fit is not None:
             out |= {
@@ -229,6 +222,8 @@ class SpeedRule(Rule):
             optional["near_lethal_m"],
             optional["near_lethal_mps"],
             tuple(lethal),
+            _points(block, where),
+            None if block.get("drive_lateral_mps2") is None else number(block, "drive_lateral_mps2", where, positive=True),
         )
         fit = None
         intervals = block.get("intervals_mps")
@@ -245,8 +240,9 @@ class SpeedRule(Rule):
             )
         return cls(config, model, fit)
 
-    def runner(self, context: RuleContext) -> SpeedRunner:
-        return SpeedRunner(self, context)
+    def runner(self, context: RuleContext, shared: GroundMap | None = None) -> SpeedRunner:
+        """Bound to one planner; ``shared``: the steering rule's ground map, read where it has the speed rule's geometry."""
+        return SpeedRunner(self, context, shared)
 
     def describe(self, names: tuple[str, ...], lethal: frozenset[str]) -> str:
         """The cruising speed per class with its interval, the classes never shown at a steady speed, and the limits."""
@@ -255,8 +251,7 @@ class SpeedRule(Rule):
     def lines(self, names: tuple[str, ...], lethal: frozenset[str]) -> list[str]:
         """What was learned, a line each: the speed per class (interval), then the limits."""
         m, fit = self.model, self.fit
-        out = []
-        unseen = []
+        out, unseen = [], []
         for col, name in enumerate((*names, "background")):
             if name in lethal:
                 continue
@@ -267,13 +262,14 @@ class SpeedRule(Rule):
             around = f" (95% CI {interval[0]:.2f}-{interval[1]:.2f})" if interval is not None else ""
             out.append(f"{name} {m.speeds_mps[col]:.2f} m/s{around}")
         if unseen:
-            out.append(
-                f"never shown at a steady speed: {', '.join(unseen)} (driven at the slowest speed learned, {min(m.speeds_mps):.2f} m/s)"
-            )
-        out.append(f"slows {m.preview_m:g} m before a slower class")
-        out.append(
-            f"bends: at most {m.lateral_accel_mps2:.2f} m/s^2 sideways" if m.lateral_accel_mps2 is not None else "bends: no limit shown"
-        )
+            slowest = min(m.speeds_mps)
+            out.append(f"never shown at a steady speed: {', '.join(unseen)} (driven at the slowest speed learned, {slowest:.2f} m/s)")
+        points = f" on {m.min_points} of 5 footprint points" if m.min_points > 1 else ""
+        out.append(f"slows {m.preview_m:g} m before a slower class{points}")
+        bends = f"at most {m.lateral_accel_mps2:.2f} m/s^2 sideways" if m.lateral_accel_mps2 is not None else "no limit shown"
+        out.append(f"bends: {bends}")
+        if m.drive_lateral_mps2 is not None:
+            out.append(f"never more than {m.drive_lateral_mps2:.2f} m/s^2 sideways (the drive's most)")
         if m.near_lethal_m is not None and m.near_lethal_mps is not None:
             out.append(f"near lethal terrain (within {m.near_lethal_m:g} m): {m.near_lethal_mps:.2f} m/s")
         if fit is not None:
@@ -281,36 +277,64 @@ class SpeedRule(Rule):
         return out
 
 
+def _points(block: Mapping[str, Any], where: Where) -> int:
+    """A block's ``min_points``: 1 to 5 (1 where a file does not say)."""
+    points = block.get("min_points", 1)
+    if isinstance(points, bool) or not isinstance(points, int) or not 1 <= points <= 5:
+        raise where.error("min_points", "expected an integer from 1 to 5: the footprint points a class must hold to count")
+    return points
+
+
 def _number(value: object) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
 class SpeedRunner:
-    """The speed rule bound to one planner: its own ground map, and the speed along a chosen way."""
+    """The speed rule bound to one planner: the ground map it reads (the steering rule's where that
+    rule keeps one of the same geometry, else its own), and the speed along a chosen way."""
 
-    def __init__(self, rule: SpeedRule, context: RuleContext) -> None:
+    def __init__(self, rule: SpeedRule, context: RuleContext, shared: GroundMap | None = None) -> None:
         self.rule = rule
-        self.map = GroundMap(context.camera, context.terrain, MAP, MAP_HALF_WIDTH_M)
+        self.own_map = shared is None or shared.config != MAP
+        self.map = GroundMap(context.camera, context.terrain, MAP) if self.own_map else shared
         self.across = across(rule.config.half_width_m)
         self._d = STATION_STEP_M * np.arange(STATIONS)
 
     def reset(self) -> None:
-        """Forget the ground seen (a new path)."""
-        self.map.reset()
+        """Forget the ground seen (a new path): its own map only; a shared one is its keeper's to reset."""
+        if self.own_map:
+            self.map.reset()
 
     def observe(self, view: SegmentationView, pose: Pose) -> None:
-        self.map.update(view, pose)
+        """Take in a frame (its own map only; a shared one was updated by the rule that keeps it)."""
+        if self.own_map:
+            self.map.update(view, pose)
 
-    def speed(self, pose: Pose, curvature: float, max_yaw_rate_rps: float) -> float:
-        """The speed [m/s] along the arc of ``curvature`` [1/m] from ``pose``, within the rule's top
-        speed and the speed at which that arc needs no more than ``max_yaw_rate_rps``."""
+    def speed(
+        self, pose: Pose, curvature: float, max_yaw_rate_rps: float, along: tuple[ReferencePath, float, float] | None = None
+    ) -> float:
+        """The speed [m/s] along the way chosen, within the rule's top speed and the speed at which
+        an arc of ``curvature`` [1/m] needs no more than ``max_yaw_rate_rps``.
+
+        The way: with ``along`` (path, progress [m], offset [m]: a rule that holds an offset from
+        the path), the footprint where the vehicle is, then the path shifted by the offset ahead
+        of the progress, as the driver's way was read for the fit; else the arc of ``curvature``
+        from ``pose``."""
         x, y, yaw = pose
         d, k = self._d, curvature
-        heading = yaw + k * d
-        if abs(k) < 1e-9:
-            px, py = x + d * math.cos(yaw), y + d * math.sin(yaw)
+        if along is not None:
+            path, progress_m, offset_m = along
+            s = np.minimum(progress_m + d, path.length_m)
+            heading = path.heading_at(s)
+            centre = path.point_at(s) + offset_m * np.stack([-np.sin(heading), np.cos(heading)], axis=-1)
+            centre[0], heading[0] = (x, y), yaw
+            px, py = centre[:, 0], centre[:, 1]
         else:
-            px, py = x + (np.sin(heading) - math.sin(yaw)) / k, y - (np.cos(heading) - math.cos(yaw)) / k
+            heading = yaw + k * d
+            if abs(k) < 1e-9:
+                px, py = x + d * math.cos(yaw), y + d * math.sin(yaw)
+            else:
+                px, py = x + (np.sin(heading) - math.sin(yaw)) / k, y - (np.cos(heading) - math.cos(yaw)) / k
         normal = np.stack([-np.sin(heading), np.cos(heading)], axis=-1)
         points = np.stack([px, py], axis=-1)[:, None, :] + self.across[None, :, None] * normal[:, None, :]
         way = self.map.lookup(points)[None]
@@ -318,4 +342,6 @@ class SpeedRunner:
         top = self.rule.config.max_speed_mps
         if abs(k) > 1e-9:
             top = min(top, max_yaw_rate_rps / abs(k))
+            if self.rule.model.drive_lateral_mps2 is not None:  # never harder sideways than the drive went
+                top = min(top, math.sqrt(self.rule.model.drive_lateral_mps2 / abs(k)))
         return min(v, top)
