@@ -187,7 +187,7 @@ def featurize_recording(
             reader.read(j, view, pose, path, s)
         if on_frame is not None:
             on_frame(j + 1)
-    w = _at_set_speed(recording.commands[keep], features.preference.control.v_mps)
+    w = at_set_speed(recording.commands[keep], features.preference.control.v_mps)
     labels = np.asarray(features.preference.control.label_of(w), dtype=np.int64).reshape(n)
     return Featurised(U, labels, w, {name: reader.arrays(recording, keep, path) for name, reader in readers.items()})
 
@@ -213,7 +213,7 @@ def _frame_view(
     return SegmentationView.of(image)
 
 
-def _at_set_speed(commands: np.ndarray, v_set: float) -> np.ndarray:
+def at_set_speed(commands: np.ndarray, v_set: float) -> np.ndarray:
     """The yaw rates (F,) float32 of commands (F, 2) at the control set's speed ``v_set``: the same
     curvature w / v, the trajectory it drives (a command at v = 0 keeps its w)."""
     v, w = commands[:, 0].astype(float), commands[:, 1].astype(float)

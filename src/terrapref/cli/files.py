@@ -59,7 +59,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 def _replay_into(args: argparse.Namespace, model, robot, out: Path) -> int:
     from terrapref.demos.recording import read_recording
     from terrapref.interop.bag_import import ImportOptions, import_bag
-    from terrapref.interop.replay import replay, write_replay
+    from terrapref.interop.replay import replay, summary_lines, write_replay
     from terrapref.learning.model_file import check_compatible
     from terrapref.progress import Progress
 
@@ -74,18 +74,8 @@ def _replay_into(args: argparse.Namespace, model, robot, out: Path) -> int:
     result = replay(model, rec, progress=lambda k, n: bar.update(k, f"{k}/{n} frames"))
     bar.close()
     write_replay(result, out, f"{Path(args.model).name} on {Path(args.bag).name}")
-    for name, key in (
-        ("planner, all frames", "overall"),
-        ("planner, terrain", "terrain_in_view"),
-        ("C alone, all", "classifier_overall"),
-        ("C alone, terrain", "classifier_terrain_in_view"),
-    ):
-        r = result[key]
-        if r["frames"]:
-            top3 = f", top-3 {r['top3']:.1%}" if r["top3"] is not None else ""
-            print(f"{name:20s} top-1 {r['top1']:.1%}{top3}, mean |w| error {r['mean_abs_w_error_rps']:.3f} rad/s over {r['frames']} frames")
-        else:
-            print(f"{name:20s} no frames")
+    for line in summary_lines(result):
+        print(line)
     print(
         "top-3: how often the operator's trajectory is among the three C ranks most probable (F_t); the planner's rules "
         "choose one trajectory and rank none, so only C has a top-3"

@@ -14,6 +14,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from terrapref.evaluation.stats import cluster_bootstrap, rate_text
+from terrapref.scenario import AVOID
 
 SPEED_TARGET_MPS = 0.08  # the planner's speed error per class against its driver must stay within this [m/s]
 TIME_TOLERANCE = 0.05  # and its time to the end of the path within this share of the driver's
@@ -97,7 +98,8 @@ class SpeedComparison:
     def lines(self) -> list[str]:
         """What it says, a line each."""
         out = [
-            f"speed error against the driver, {name}: {e.text()} m/s over zones (target <= {SPEED_TARGET_MPS})"
+            f"speed error against the driver, {'the background (zones passed by)' if name == AVOID else name}: {e.text()} m/s "
+            f"over zones (target <= {SPEED_TARGET_MPS})"
             for name, e in self.by_class.items()
         ]
         if self.time_ratio is not None:

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from terrapref.camera import CameraConfig
-from terrapref.dataset import _at_set_speed  # the dataset's own: the replay compares ways as training labels them
+from terrapref.dataset import at_set_speed  # the dataset's own: the replay compares ways as training labels them
 from terrapref.demos.recording import Recording
 from terrapref.fileio import atomic_path, write_bytes_atomic
 from terrapref.interop.runtime import PlannerRuntime
@@ -92,9 +92,9 @@ def replay(model: Model, rec: Recording, progress=None) -> dict:
         terrain[i] = bool((d.U[:, :n_terrain] > 0).any())
         if progress is not None:
             progress(i + 1, len(rec))
-    w_operator = _at_set_speed(rec.commands, control.v_mps).astype(float)
+    w_operator = at_set_speed(rec.commands, control.v_mps).astype(float)
     v_operator, v_model = rec.commands[:, 0].astype(float), commands[:, 0]
-    w_model = np.where(v_model > 0, _at_set_speed(commands, control.v_mps).astype(float), w_grid[chosen])  # a stop keeps its way's w
+    w_model = np.where(v_model > 0, at_set_speed(commands, control.v_mps).astype(float), w_grid[chosen])  # a stop keeps its way's w
     hit1 = chosen == rec.labels
     werr = np.abs(w_model - w_operator)
     verr = np.abs(v_model - v_operator)
