@@ -521,3 +521,18 @@ def save_curves(
     ax.legend(fontsize=8)
     fig.tight_layout()
     return _save(fig, path)
+
+
+def save_speed_profile(path: str | Path, series: Sequence[tuple[str, np.ndarray, np.ndarray, str]], title: str) -> Path:
+    """Speed [m/s] against progress along the path [m], one line per (label, progress, speed, colour)."""
+    fig, ax = plt.subplots(figsize=(9, 3.6), dpi=120)
+    for label, s, v, colour in series:
+        ax.plot(s, v, color=colour, lw=1.2, label=label)
+    ax.set_xlabel("progress along the path [m]")
+    ax.set_ylabel("speed [m/s]")
+    ax.set_ylim(0, max([2.1, *(float(np.max(v)) + 0.1 for _, _, v, _ in series if len(v))]))
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return _save(fig, path)

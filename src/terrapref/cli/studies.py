@@ -41,7 +41,13 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         engine = grid_engine(args)
         t0 = time.perf_counter()
         setup = Reproduction(
-            recipes, args.seeds, args.eval_seeds, profile or PreferenceProfile.default(), args.write_recordings, perceptions
+            recipes,
+            args.seeds,
+            args.eval_seeds,
+            profile or PreferenceProfile.default(),
+            args.write_recordings,
+            perceptions,
+            speed_seeds=min(2, args.seeds),
         )
         report = reproduce(args.out, setup, engine, log=lambda m: print(m, flush=True))
         print(f"wrote {report} ({time.perf_counter() - t0:.0f} s)")

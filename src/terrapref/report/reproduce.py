@@ -18,7 +18,7 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -29,6 +29,7 @@ from terrapref.grid import Engine, run_grid
 from terrapref.perception import PerceptionModel
 from terrapref.progress import every_tenth
 from terrapref.recipes import OURS, PAPER, TEACH, Recipe, RecipeSetup, run_recipe
+from terrapref.report.reproduce_speed import SpeedPart, run_speed_part, speed_figure, speed_lines
 from terrapref.scenario import packaged_scenarios, resolve_scenario
 from terrapref.terrain import ClassTable, PreferenceProfile
 from terrapref.vehicle import VehicleConfig
@@ -88,6 +89,8 @@ class Reproduction:
             ``OUT/work`` (they are featurised as they are driven and kept in memory either way).
         perceptions: each drives the test courses once more (the clean model among them adds
             nothing: the runs above are clean).
+        speed_seeds: training seeds of the speed part (recipe teach taught by a driver with speed
+            preferences on the field UGV: terrapref.report.reproduce_speed); 0: none.
     """
 
     recipes: tuple[Recipe, ...] = (PAPER, OURS, TEACH)
@@ -96,6 +99,7 @@ class Reproduction:
     profile: PreferenceProfile = field(default_factory=PreferenceProfile.default)
     write_recordings: bool = False
     perceptions: tuple[PerceptionModel, ...] = ()
+    speed_seeds: int = 2
 
     @functools.cached_property
     def scenarios(self) -> tuple[str, ...]:
@@ -144,8 +148,14 @@ def reproduce(
     t0 = time.perf_counter()
     runs = _evaluate(setup, trained, engine, log)
     timings["closed-loop evaluation"] = time.perf_counter() - t0
+    speed = None
+    if setup.speed_seeds > 0 and any(r.name == TEACH.name for r in setup.recipes):
+        t0 = time.perf_counter()
+        part = SpeedPart(setup.speed_seeds, setup.profile.order, (*TEST_SET, *variations()))
+        speed = (part, run_speed_part(part, out, engine, log))
+        timings["speed: demonstrate, train, drive"] = time.perf_counter() - t0
     log("[3/3] figures and REPORT.md ...")
-    return _write_report(out, setup, runs, trained, timings, engine)
+    return _write_report(out, setup, _Outcome(runs, trained, timings, speed), engine)
 
 
 def _train_all(setup: Reproduction, out: Path, engine: Engine, log: Callable[[str], None]) -> list[RecipeModel]:
@@ -254,10 +264,18 @@ def _mode(choices: list[tuple[str, bool, str]]) -> str:
     return top if names.count(top) == len(names) else f"{top} ({names.count(top)}/{len(names)})"
 
 
-def _write_report(
-    out: Path, setup: Reproduction, runs: list[RecipeRun], trained: list[RecipeModel], timings: dict[str, float], engine: Engine
-) -> Path:
+class _Outcome(NamedTuple):
+    """What a reproduction ran: the runs, the models, the time per stage and the speed part's runs (None: not run)."""
+
+    runs: list[RecipeRun]
+    trained: list[RecipeModel]
+    timings: dict[str, float]
+    speed: tuple[SpeedPart, list[RunResult]] | None
+
+
+def _write_report(out: Path, setup: Reproduction, outcome: _Outcome, engine: Engine) -> Path:
     """REPORT.md, its figures and results.json (every run's metrics and the time per stage)."""
+    runs, trained, timings, speed = outcome
     t_fig = time.perf_counter()
     figs = out / "figures"
     figs.mkdir(exist_ok=True)
@@ -265,11 +283,18 @@ def _write_report(
     _draw_figures(figs, setup, clean, trained, engine)
     lines = _introduction(setup) + _summary_table(setup.recipes, clean) + _perception_table(setup, runs)
     lines += _zone_tables(setup.recipes, clean) + _training_lines(setup.recipes, trained)
+    if speed is not None:
+        part, results = speed
+        speed_figure(figs / "speed.png", results)
+        lines += [""] + speed_lines(part, results, "figures/speed.png")
     lines += ["", "## Figures", ""] + [f"- `figures/{sc}.png`" for sc in setup.scenarios]
     timings = {**timings, "figures": time.perf_counter() - t_fig}
     lines += ["", "## Time per stage (wall clock)", "", "| stage | seconds |", "|---|---|"]
     lines += [f"| {k} | {v:.1f} |" for k, v in timings.items()] + [f"| total | {sum(timings.values()):.1f} |"]
-    write_text_atomic(out / "results.json", json.dumps({"runs": [r.to_dict() for r in runs], "timings": timings}, indent=1))
+    speed_runs = [r.to_dict() for r in speed[1]] if speed is not None else []
+    write_text_atomic(
+        out / "results.json", json.dumps({"runs": [r.to_dict() for r in runs], "speed_runs": speed_runs, "timings": timings}, indent=1)
+    )
     return write_text_atomic(out / "REPORT.md", "\n".join(lines) + "\n")
 
 

@@ -1,0 +1,127 @@
+"""The reproduction's speed part: recipe ``teach`` taught by a driver with speed preferences on the
+field UGV (SPEC 18), beside the paper's setting at 1 m/s; a table of speed by class (driver,
+planner, error) and a figure of speed along one course, driver against planner."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, annotate_agreement, run_many
+from terrapref.evaluation.speed import SpeedComparison
+from terrapref.evaluation.stats import rate_text
+from terrapref.grid import Engine, run_grid
+from terrapref.recipes import TEACH, RecipeSetup, run_recipe
+from terrapref.scenario import AVOID, resolve_scenario
+from terrapref.scenario.path import ReferencePath
+from terrapref.terrain import PreferenceProfile, default_classes
+
+SPEEDS = (("grass", 1.6), ("rock", 1.0), ("mud", 0.5), ("water", 0.3))  # the driver's cruising speeds [m/s]
+FIGURE_COURSE = "test_course"  # the course of the speed-along-the-path figure
+
+
+@dataclass(frozen=True)
+class SpeedPart:
+    """What the speed part runs: recipe ``teach`` for ``seeds`` seeds, taught by the driver of ``speeds``, on ``courses``."""
+
+    seeds: int
+    profile: tuple[str, ...]
+    courses: tuple[str, ...]
+    speeds: tuple[tuple[str, float], ...] = SPEEDS
+
+
+def _train(job: tuple[str, int, tuple[str, ...], tuple[tuple[str, float], ...]]) -> str:
+    workdir, seed, profile, speeds = job
+    return str(run_recipe(TEACH, workdir, RecipeSetup(seed, PreferenceProfile(profile), speeds=speeds)).model)
+
+
+def run_speed_part(part: SpeedPart, out: Path, engine: Engine, log: Callable[[str], None]) -> list[RunResult]:
+    """Train, then drive every course with each model and with the driver (the field UGV); the runs, annotated with agreement."""
+    jobs = [(str(out / "work" / f"speed_seed{s}"), s, part.profile, part.speeds) for s in range(part.seeds)]
+    log(f"      speed: recipe teach x {part.seeds} seeds, the driver at {_speeds_text(part.speeds)} ...")
+    models = run_grid(_train, jobs, engine, describe=lambda j: f"speed, seed {j[1]}")
+    specs = [RunSpec(c, s, PLANNER, m, part.profile) for s, m in enumerate(models) for c in part.courses]
+    specs += [RunSpec(c, s, EXPERT, None, part.profile, speeds=part.speeds) for s in range(part.seeds) for c in part.courses]
+    return annotate_agreement(run_many(specs, engine=engine))
+
+
+def _speeds_text(speeds: Sequence[tuple[str, float]]) -> str:
+    return ", ".join(f"{name} {v:g} m/s" for name, v in speeds)
+
+
+def speed_lines(part: SpeedPart, results: list[RunResult], figure: str) -> list[str]:
+    """REPORT.md's speed section: the setting, speed by class (driver, planner, error), time to the end of the path, the figure."""
+    comparison = _comparison(results)
+    lines = [
+        "## Speed (recipe teach, a driver with speed preferences)",
+        "",
+        f"Recipe teach taught by the synthetic driver of the same order at {_speeds_text(part.speeds)}, on the field UGV "
+        "(0-2 m/s, 1 m/s^2 up, 2 m/s^2 down) instead of the paper's 1 m/s; "
+        f"{part.seeds} training seed(s); planner and driver each drive the test course and the figure variations once per seed. "
+        "Speed on a class: the mean speed while the vehicle's centre is on it, over all runs; error: the mean absolute "
+        "difference of the mean speed through a zone, over the zones where both took the class (95% intervals resampling courses).",
+        "",
+        "| class | driver [m/s] | planner [m/s] | error [m/s] |",
+        "|---|---|---|---|",
+    ]
+    driver, planner = _by_class(results, EXPERT), _by_class(results, PLANNER)
+    background = default_classes().background  # its zones' error: those both passed by (AVOID)
+    for name in sorted(set(driver) | set(planner)):
+        error = comparison.by_class.get(AVOID if name == background else name)
+        lines.append(f"| {name} | {_mean(driver.get(name))} | {_mean(planner.get(name))} | {error.text() if error else '-'} |")
+    if comparison.time_ratio is not None:
+        lines += [
+            "",
+            f"Time to the end of the path, the planner's over the driver's: {comparison.time_ratio.text()}; within 5% in "
+            f"{rate_text(*comparison.time_within)} of the runs.",
+        ]
+    return lines + ["", f"![speed along {FIGURE_COURSE}]({figure})", ""]
+
+
+def _comparison(results: list[RunResult]) -> SpeedComparison:
+    from terrapref.evaluation.evaluate import speed_comparison
+
+    return speed_comparison(results)
+
+
+def _by_class(results: list[RunResult], driver: str) -> dict[str, tuple[float, float]]:
+    """Per class, (seconds, metres) on it over the runs of ``driver``."""
+    out: dict[str, tuple[float, float]] = {}
+    for r in results:
+        if r.driver != driver:
+            continue
+        for name, entry in r.metrics.speed_by_class_mps.items():
+            s, m = out.get(name, (0.0, 0.0))
+            out[name] = (s + entry["s"], m + entry["s"] * entry["mps"])
+    return out
+
+
+def _mean(entry: tuple[float, float] | None) -> str:
+    return f"{entry[1] / entry[0]:.2f}" if entry and entry[0] > 0 else "-"
+
+
+def speed_figure(path: Path, results: list[RunResult], course: str = FIGURE_COURSE) -> Path:
+    """Speed along ``course``'s path, the driver's against the planner's (seed 0)."""
+    from terrapref.plots import save_speed_profile
+
+    reference = ReferencePath(resolve_scenario(course).waypoints)
+    series = []
+    for who, colour in ((EXPERT, "black"), (PLANNER, "red")):
+        run = next((r for r in results if r.driver == who and r.scenario == course and r.seed == 0), None)
+        if run is not None:
+            series.append((who, *_along(run.xy, reference), colour))
+    return save_speed_profile(path, series, f"{course}: speed along the path, driver and planner (seed 0)")
+
+
+def _along(xy: np.ndarray, path: ReferencePath) -> tuple[np.ndarray, np.ndarray]:
+    """Progress along ``path`` [m] and speed [m/s] of a run's reference point (every third 30 Hz tick: 0.1 s apart)."""
+    xy = np.asarray(xy, dtype=float)
+    speed = np.hypot(*np.diff(xy, axis=0).T) / 0.1
+    s, progress = [], 0.0
+    for point in xy[1:]:
+        progress = max(progress, path.project(point, progress - 2.0, progress + 10.0)[0])
+        s.append(progress)
+    return np.array(s), speed
