@@ -281,9 +281,10 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
 def _print_what_the_drive_shows(rec) -> None:
     """The identifiability report of a recording (featurised as the default recipe would), before any training."""
     from terrapref.dataset import build_dataset
-    from terrapref.learning.train import identify
+    from terrapref.learning.train import FitData, identify
     from terrapref.progress import Progress
     from terrapref.recipes import DEFAULT_RECIPE, recipe_named
+    from terrapref.rules import SpeedConfig
 
     if len(rec) == 0:
         print("what the drive shows: nothing (no frames)")
@@ -297,6 +298,11 @@ def _print_what_the_drive_shows(rec) -> None:
     print(f"what the drive shows (recipe {DEFAULT_RECIPE}'s features, {len(dataset)} frames):")
     for line in identify(dataset, steady=recipe.train.data.steady_labels).lines(rec.meta.get("profile")):
         print(f"  {line}")
+    speed = next((rule for rule in recipe.rules if isinstance(rule, SpeedConfig)), None)
+    fitted = speed.fit(FitData(dataset, mirror=False)) if speed is not None else None
+    if fitted is not None:
+        lethal = frozenset({rec.classes.lethal_column} if rec.classes.lethal else ())
+        print("  the speed it shows: " + "; ".join(fitted.lines(dataset.feature_config.feature_classes, lethal)))
 
 
 def inspect_parser(sub: argparse._SubParsersAction) -> None:
