@@ -89,7 +89,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
             print(f"planner: {line}")
         compared = [z for z in zones if "agrees" in z]
         if compared:
-            print(f"planner: agreement with the driver ({style}) {rate_text(sum(z['agrees'] for z in compared), len(compared))}")
+            driver = style + "".join(f", {name} {v:g} m/s" for name, v in speeds)
+            print(f"planner: agreement with the driver ({driver}) {rate_text(sum(z['agrees'] for z in compared), len(compared))}")
         if "speed" in metrics:
             for line in SpeedComparison.from_dict(metrics["speed"]).lines():
                 print(f"planner: {line}")
