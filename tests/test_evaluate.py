@@ -193,6 +193,14 @@ def test_cli_evaluate_bad_profile(model_path: Path, tmp_path: Path, capsys):
     one_line_error(capsys, "--profile")
 
 
+@pytest.mark.parametrize("speeds", ["nosuch=1", "grass=3", "grass", "grass=0"])
+def test_cli_evaluate_bad_driver_speeds_are_refused_before_any_run(model_path: Path, tmp_path: Path, capsys, speeds: str):
+    rc = main(["evaluate", str(model_path), "demo_course", "--seeds", "1", "--out", str(tmp_path / "ev"), "--speeds", speeds])
+    assert rc == 2
+    one_line_error(capsys, "--speeds")
+    assert not (tmp_path / "ev").exists()
+
+
 def test_cli_evaluate_zero_seeds_is_a_user_error(model_path: Path, tmp_path: Path, capsys):
     rc = main(["evaluate", str(model_path), "demo_course", "--seeds", "0", "--out", str(tmp_path / "ev"), "--workers", "1"])
     assert rc == 2

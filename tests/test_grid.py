@@ -102,6 +102,9 @@ def test_select_refuses_bad_flags_before_any_work(tmp_path, capsys):
         (["--style", "sleepy"], "--style"),
         (["--first", "-1"], "--first"),
         (["--address", "h:1"], "--address"),
+        (["--speeds", "nosuch=1"], "--speeds"),
+        (["--speeds", "grass=3"], "--speeds"),
+        (["--speeds", "fast"], "--speeds"),
     ):
         assert main(["select", "--out", str(out), *argv]) == 2
         err = capsys.readouterr().err.strip().splitlines()

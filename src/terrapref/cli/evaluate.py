@@ -57,6 +57,12 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
     style, speeds = _driver_of(args, trained_driver(getattr(getattr(model, "model", None), "meta", {})))
     STYLES.get(style, "--style")
+    if speeds:  # checked against the model's table and the vehicle before any run
+        from terrapref.demos.speed_style import driver_style
+        from terrapref.vehicle import VehicleConfig
+
+        order = profile.order if profile is not None else tuple(model.profile or model.classes.profile)
+        driver_style(style, order, model.classes, VehicleConfig().max_speed_mps, {"speeds": speeds})
     with output_folder(args.out, args.force):
         bar = Progress("evaluate", len(args.scenarios) * args.seeds * (1 if args.no_driver else 2))
         view = live_view(args)

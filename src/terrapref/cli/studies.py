@@ -151,14 +151,12 @@ def _select_speeds(text: str | None, table) -> str | None:
     """``--speeds`` checked before any work: ``random``, or cruising speeds by class of the table."""
     if text is None or text == "random":
         return text
-    from terrapref.demos.expert import ExpertConfig
-    from terrapref.demos.speed_style import parse_speeds
+    from terrapref.demos.speed_style import driver_style, parse_speeds
     from terrapref.terrain import default_classes
+    from terrapref.vehicle import VehicleConfig
 
-    try:
-        ExpertConfig(speeds=parse_speeds(text)).speed_table(table or default_classes())
-    except ValueError as exc:
-        raise UserError("--speeds", str(exc)) from None
+    classes = table or default_classes()
+    driver_style("default", classes.profile, classes, VehicleConfig().max_speed_mps, {"speeds": parse_speeds(text)})
     return text
 
 
