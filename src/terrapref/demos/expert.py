@@ -7,8 +7,8 @@ It drives the way a person with a gamepad does, not the way an optimal planner d
   is already on the planner's trajectories (SPEC 15: a clairvoyant driver teaches nothing).
 - Within that window it picks one lateral offset from the path ("I'll pass left of the
   puddle"), trading the terrain its 1.2 m wide footprint would cross, costed by its preference
-  profile, against a quadratic cost of leaving the path. It never re-plans into a circle: v is
-  fixed and it always commits to a side and drives forward.
+  profile, against a quadratic cost of leaving the path. It never re-plans into a circle: it
+  always commits to a side and drives forward.
 - It steers toward the offset path by pure pursuit, through a stick that rests at exactly zero
   when no correction is needed, moves at a limited rate, lags by a reaction delay, and shakes a
   little only while it is deflected.
