@@ -84,11 +84,11 @@ class SpeedConfig(RuleConfig):
         recorded, arrays = found
         config = replace(self, half_width_m=float(recorded["half_width_m"]))
         features = data.dataset.feature_config
-        column = ClassTable.from_dict(data.dataset.meta["classes"]).lethal_column
-        lethal = (features.feature_classes.index(column),) if column in features.feature_classes else ()
+        table = ClassTable.from_dict(data.dataset.meta["classes"])
+        lethal = (features.feature_classes.index(table.lethal_column),) if table.lethal_column in features.feature_classes else ()
         frame = arrays["frame"].astype(np.int64)
         fitted = fit_speed(arrays["way"], arrays["curvature"], arrays["v_mps"], frame, features.n_terrain, lethal)
-        return None if fitted is None else SpeedRule(config, fitted.model, fitted)
+        return None if fitted is None else SpeedRule(config, fitted.model, fitted, table.background)
 
 
 class SpeedReader(FrameReader):
@@ -175,6 +175,7 @@ class SpeedRule(Rule):
     config: SpeedConfig
     model: SpeedModel
     fit: SpeedFit | None = None
+    background: str = "background"  # the class table's background class, by name (the last terrain column's)
 
     def header(self) -> dict[str, Any]:
         m = self.model
@@ -189,6 +190,7 @@ class SpeedRule(Rule):
             "lethal": list(m.lethal),
             "min_points": m.min_points,
             "drive_lateral_mps2": m.drive_lateral_mps2,
+            "background": self.background,
         }
         if self.fit is not None:
             out |= {
@@ -238,7 +240,10 @@ class SpeedRule(Rule):
                 int(number(block, "samples", where, 0.0, low=0.0)),
                 number(block, "error_mps", where, 0.0, low=0.0),
             )
-        return cls(config, model, fit)
+        background = block.get("background", "background")
+        if not isinstance(background, str) or not background:
+            raise where.error("background", "expected the background class's name")
+        return cls(config, model, fit, background)
 
     def runner(self, context: RuleContext, shared: GroundMap | None = None) -> SpeedRunner:
         """Bound to one planner; ``shared``: the steering rule's ground map, read where it has the speed rule's geometry."""
@@ -252,7 +257,7 @@ class SpeedRule(Rule):
         """What was learned, a line each: the speed per class (interval), then the limits."""
         m, fit = self.model, self.fit
         out, unseen = [], []
-        for col, name in enumerate((*names, "background")):
+        for col, name in enumerate((*names, self.background)):
             if name in lethal:
                 continue
             interval = fit.intervals[col] if fit is not None else None
