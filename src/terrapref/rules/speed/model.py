@@ -13,6 +13,7 @@ lethal rings' 4). The fit reads the way the driver drove; the planner reads the 
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
 from typing import NamedTuple
@@ -67,10 +68,9 @@ class SpeedModel:
 
     def predict(self, way: np.ndarray, curvature: np.ndarray) -> np.ndarray:
         """The speed [m/s] (N,) for ways (N, STATIONS, 9) of terrain columns and their curvatures (N,) [1/m]."""
-        speeds = _speed_table(self.speeds_mps, self.lethal)
         upto = _stations(self.preview_m)
         foot = way[:, :upto, :5]
-        at = speeds[foot]
+        at = self._speeds[foot]
         if self.min_points > 1:  # the points whose column too few of their station's points share
             shared = (foot[..., :, None] == foot[..., None, :]).sum(axis=-1)
             at = np.where(shared >= self.min_points, at, np.nan)
@@ -81,8 +81,20 @@ class SpeedModel:
             with np.errstate(divide="ignore"):
                 v = np.minimum(v, np.where(k > 0, np.sqrt(self.lateral_accel_mps2 / np.where(k > 0, k, 1.0)), np.inf))
         if self.near_lethal_m is not None and self.near_lethal_mps is not None:
-            v = np.where(_near(way, upto, self.lethal, self.near_lethal_m), np.minimum(v, self.near_lethal_mps), v)
+            v = np.where(_near(way, upto, self._is_lethal, self.near_lethal_m), np.minimum(v, self.near_lethal_mps), v)
         return np.maximum(v, MIN_SPEED_MPS)
+
+    @functools.cached_property
+    def _speeds(self) -> np.ndarray:
+        """Cruising speed per column value (256,): NaN for lethal and never-seen ground (made once per model)."""
+        table = np.full(256, np.nan)
+        table[: len(self.speeds_mps)] = self.speeds_mps
+        table[list(self.lethal)] = np.nan
+        return table
+
+    @functools.cached_property
+    def _is_lethal(self) -> np.ndarray:
+        return lethal_mask(self.lethal)
 
 
 def _stations(preview_m: float) -> int:
@@ -90,18 +102,15 @@ def _stations(preview_m: float) -> int:
     return min(STATIONS, round(preview_m / STATION_STEP_M) + 1)
 
 
-def _speed_table(speeds_mps: tuple[float, ...], lethal: tuple[int, ...]) -> np.ndarray:
-    """Cruising speed per column value (K + 2 and up to 256): NaN for lethal and never-seen ground."""
-    table = np.full(256, np.nan)
-    table[: len(speeds_mps)] = speeds_mps
-    table[list(lethal)] = np.nan
-    return table
-
-
-def _near(way: np.ndarray, upto: int, lethal: tuple[int, ...], ring_m: float) -> np.ndarray:
-    """Whether lethal terrain lies on the footprint or within ``ring_m`` beside it on each way (N,)."""
+def lethal_mask(lethal: tuple[int, ...]) -> np.ndarray:
+    """Which column values (256,) are lethal."""
     is_lethal = np.zeros(256, dtype=bool)
     is_lethal[list(lethal)] = True
+    return is_lethal
+
+
+def _near(way: np.ndarray, upto: int, is_lethal: np.ndarray, ring_m: float) -> np.ndarray:
+    """Whether lethal terrain (``is_lethal``, by column value) lies on the footprint or within ``ring_m`` beside it on each way (N,)."""
     points = [0, 1, 2, 3, 4, 6, 7] if ring_m <= RINGS_M[0] else list(range(9))
     return is_lethal[way[:, :upto, points]].any(axis=(1, 2))
 
@@ -191,7 +200,8 @@ def _fit_at(frames: _Frames, preview_m: float, min_points: int) -> tuple[SpeedMo
     seen = foot <= k  # K + 1: never seen
     first = np.where(seen.any(axis=1), foot[np.arange(len(foot)), np.argmax(seen, axis=1)], k + 1)
     alone = seen.any(axis=1) & np.all((foot == first[:, None]) | ~seen, axis=1)
-    near = _near(way, upto, lethal, RINGS_M[1])
+    is_lethal = lethal_mask(lethal)
+    near = _near(way, upto, is_lethal, RINGS_M[1])
     steady = alone & (np.abs(curvature) < STEADY_CURVATURE)
     speeds: list[float] = []
     intervals: list[tuple[float, float] | None] = []
@@ -223,7 +233,7 @@ def _fit_at(frames: _Frames, preview_m: float, min_points: int) -> tuple[SpeedMo
     a_lat = best.lateral_accel_mps2
     allowed = best.predict(way, curvature)
     for ring in RINGS_M:
-        slowed = _near(way, upto, lethal, ring) & (allowed > 1.1 * v)
+        slowed = _near(way, upto, is_lethal, ring) & (allowed > 1.1 * v)
         if np.count_nonzero(slowed) < MIN_FRAMES:
             continue
         trial = SpeedModel(tuple(speeds), preview_m, a_lat, ring, float(np.median(v[slowed])), lethal, min_points)
