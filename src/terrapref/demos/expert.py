@@ -136,8 +136,11 @@ class ExpertConfig:
         by class over its style's; an unknown style is a ValueError listing the styles."""
         changes = STYLES[style].changes
         base = cls() if profile is None else cls(profile=tuple(profile))
-        styled = replace(base, **changes)
-        return replace(styled, speeds=tuple({**dict(styled.speeds), **dict(speeds)}.items())) if speeds else styled
+        return replace(base, **changes).with_speeds(speeds)
+
+    def with_speeds(self, speeds: tuple[tuple[str, float], ...]) -> ExpertConfig:
+        """This driver with ``speeds`` by class over its own (the classes not named keep theirs)."""
+        return replace(self, speeds=tuple({**dict(self.speeds), **dict(speeds)}.items())) if speeds else self
 
     def speed_table(self, classes: ClassTable) -> np.ndarray:
         """Cruising speed [m/s] per class id (256,): NaN for lethal classes and ids the table does

@@ -108,10 +108,8 @@ def driver_style(
     except ValueError as exc:
         raise UserError(source, str(exc)) from None
     for field, value in flags.items():
-        if field == "speeds":  # the classes the flag names; the others keep the style's
-            value = tuple({**dict(config.speeds), **dict(value)}.items())
-        try:
-            config = replace(config, **{field: value})
+        try:  # speeds: the classes the flag names; the others keep the style's
+            config = config.with_speeds(value) if field == "speeds" else replace(config, **{field: value})
         except ValueError as exc:
             raise UserError(FLAGS.get(field, source), str(exc)) from None
     blame = FLAGS["speeds"] if "speeds" in flags else source

@@ -245,21 +245,16 @@ def drivers() -> list[str]:
     return DRIVERS.names()
 
 
-def _sim_config(spec: RunSpec) -> SimConfig:
-    """The simulation of a run: the default but for the vehicle it names."""
-    return SimConfig(vehicle=spec.vehicle or VehicleConfig())
-
-
 def _expert(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: PreferenceProfile) -> tuple[Simulation, Driver]:
     """The synthetic driver of the run's profile and style, on the cached raster (not a new one)."""
-    return Simulation(scenario, config=_sim_config(spec), world=world), ExpertDriver(
+    return Simulation(scenario, config=SimConfig.driving(spec.vehicle), world=world), ExpertDriver(
         ExpertConfig.styled(spec.style, profile.order, spec.speeds), world=world
     )
 
 
 def _through_planner(policy: Policy, spec: RunSpec, scenario: Scenario, world: WorldMap) -> tuple[Simulation, Driver]:
     """The planner driving with ``policy``, seeing through the camera the policy was built for."""
-    sim = Simulation(scenario, policy.camera, _sim_config(spec), world=world)
+    sim = Simulation(scenario, policy.camera, SimConfig.driving(spec.vehicle), world=world)
     return sim, PlannerDriver(Planner(policy), keep=bool(spec.keep_frames) or spec.keep_run, images=spec.keep_frames)
 
 

@@ -203,7 +203,7 @@ def _drive(drive: _Drive, features: FeatureConfig, write: bool) -> tuple[Recordi
     """
     scenario = resolve_scenario(drive.course, drive.classes)
     profile = drive.profile or PreferenceProfile.default(scenario.classes)
-    camera, sim_cfg = CameraConfig(), SimConfig(vehicle=drive.vehicle or VehicleConfig())
+    camera, sim_cfg = CameraConfig(), SimConfig.driving(drive.vehicle)
     expert_cfg = ExpertConfig.styled(drive.style, profile.order, drive.speeds)
     pushes = drive.disturbance.to_dict() if drive.disturbance is not None else None
     perception = drive.perception or PerceptionModel()
@@ -373,7 +373,7 @@ def run_recipe(
         options=RunOptions(checkpoints=False),
     )
     if recipe.corrections:  # the planner drives the course; only then is a simulation needed here
-        camera, sim_cfg = CameraConfig(), SimConfig(vehicle=setup.vehicle or VehicleConfig())
+        camera, sim_cfg = CameraConfig(), SimConfig.driving(setup.vehicle)
         expert_cfg = ExpertConfig.styled(setup.style, profile.order, setup.speeds)
         sim = Simulation(scenario, camera, sim_cfg)
     for r in range(recipe.corrections):

@@ -47,6 +47,11 @@ class SimConfig:
         return self.time_limit_s if self.time_limit_s is not None else 2.0 * path_length_m / 1.0 + 60.0
 
     @classmethod
+    def driving(cls, vehicle: VehicleConfig | None) -> SimConfig:
+        """The default simulation of ``vehicle`` (None: the default vehicle, a field UGV)."""
+        return cls(vehicle=vehicle or VehicleConfig())
+
+    @classmethod
     def paper(cls) -> SimConfig:
         """The paper's setting: its vehicle (:meth:`VehicleConfig.paper`), the rest as default."""
         return cls(vehicle=VehicleConfig.paper())
