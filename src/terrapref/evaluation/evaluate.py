@@ -181,43 +181,8 @@ def _metrics(ev: Evaluation, profile: PreferenceProfile, results: list[RunResult
     }
     if ev.with_driver:
         metrics["driver_summary"] = summarise(results, EXPERT).to_dict()
-        metrics["speed"] = speed_comparison(results).to_dict()
+        metrics["speed"] = SpeedComparison.of_results(results).to_dict()
     return metrics
-
-
-def speed_comparison(results: list[RunResult]) -> SpeedComparison:
-    """The planner's speed against the driver's in the same runs (course and seed) (terrapref.evaluation.speed)."""
-    driver = {(r.scenario, r.seed): r for r in results if r.driver == EXPERT}
-    zones, runs = [], []
-    for r in results:
-        d = driver.get((r.scenario, r.seed))
-        if r.driver != PLANNER or d is None:
-            continue
-        m, dm = r.metrics, d.metrics
-        runs.append(
-            {
-                "scenario": r.scenario,
-                "completed": m.completed,
-                "driver_completed": dm.completed,
-                "time_s": m.time_s,
-                "driver_time_s": dm.time_s,
-                "max_lateral_accel_mps2": m.max_lateral_accel_mps2,
-                "driver_max_lateral_accel_mps2": dm.max_lateral_accel_mps2,
-            }
-        )
-        theirs = {z.id: z for z in dm.zones}
-        for z, a in zip(m.zones, r.agreement or (), strict=False):
-            if z.id in theirs:
-                zones.append(
-                    {
-                        "scenario": r.scenario,
-                        "driver_choice": a.driver_choice,
-                        "agrees": a.agrees,
-                        "speed_mps": z.speed_mps,
-                        "driver_speed_mps": theirs[z.id].speed_mps,
-                    }
-                )
-    return SpeedComparison.of(zones, runs)
 
 
 def _course_runs(results: list[RunResult], name: str, evidence: _Evidence | None) -> dict:

@@ -13,6 +13,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult
+from terrapref.evaluation.scoring import RunMetrics
 from terrapref.evaluation.stats import cluster_bootstrap, rate_text
 from terrapref.scenario import AVOID
 
@@ -79,6 +81,30 @@ class SpeedComparison:
             max(lateral) if lateral else None,
         )
 
+    @classmethod
+    def of_results(cls, results: Sequence[RunResult]) -> SpeedComparison:
+        """The planner's runs against the driver's of the same course and seed (zones annotated with agreement)."""
+        driver = {(r.scenario, r.seed): r for r in results if r.driver == EXPERT}
+        zones, runs = [], []
+        for r in results:
+            d = driver.get((r.scenario, r.seed))
+            if r.driver != PLANNER or d is None:
+                continue
+            runs.append({"scenario": r.scenario, **run_fields(r.metrics, d.metrics)})
+            theirs = {z.id: z for z in d.metrics.zones}
+            for z, a in zip(r.metrics.zones, r.agreement or (), strict=False):
+                if z.id in theirs:
+                    zones.append(
+                        {
+                            "scenario": r.scenario,
+                            "driver_choice": a.driver_choice,
+                            "agrees": a.agrees,
+                            "speed_mps": z.speed_mps,
+                            "driver_speed_mps": theirs[z.id].speed_mps,
+                        }
+                    )
+        return cls.of(zones, runs)
+
     def to_dict(self) -> dict:
         return asdict(self)
 
@@ -113,6 +139,18 @@ class SpeedComparison:
                 f"at most {self.lateral_worst:.2f} times the driver's"
             )
         return out
+
+
+def run_fields(metrics: RunMetrics, driver: RunMetrics) -> dict[str, Any]:
+    """A planner run's fields that :meth:`SpeedComparison.of` reads, beside its driver's run on the same course."""
+    return {
+        "completed": metrics.completed,
+        "driver_completed": driver.completed,
+        "time_s": metrics.time_s,
+        "driver_time_s": driver.time_s,
+        "max_lateral_accel_mps2": metrics.max_lateral_accel_mps2,
+        "driver_max_lateral_accel_mps2": driver.max_lateral_accel_mps2,
+    }
 
 
 def _estimate(groups: Mapping[str, list[float]]) -> Estimate:

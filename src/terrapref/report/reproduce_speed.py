@@ -54,7 +54,7 @@ def _speeds_text(speeds: Sequence[tuple[str, float]]) -> str:
 
 def speed_lines(part: SpeedPart, results: list[RunResult], figure: str) -> list[str]:
     """REPORT.md's speed section: the setting, speed by class (driver, planner, error), time to the end of the path, the figure."""
-    comparison = _comparison(results)
+    comparison = SpeedComparison.of_results(results)
     lines = [
         "## Speed (recipe teach, a driver with speed preferences)",
         "",
@@ -79,12 +79,6 @@ def speed_lines(part: SpeedPart, results: list[RunResult], figure: str) -> list[
             f"{rate_text(*comparison.time_within)} of the runs.",
         ]
     return lines + ["", f"![speed along {FIGURE_COURSE}]({figure})", ""]
-
-
-def _comparison(results: list[RunResult]) -> SpeedComparison:
-    from terrapref.evaluation.evaluate import speed_comparison
-
-    return speed_comparison(results)
 
 
 def _by_class(results: list[RunResult], driver: str) -> dict[str, tuple[float, float]]:

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, run_many, zone_agrees
-from terrapref.evaluation.speed import SpeedComparison
+from terrapref.evaluation.speed import SpeedComparison, run_fields
 from terrapref.evaluation.stats import cluster_bootstrap, rate_text
 from terrapref.fileio import write_text_atomic
 from terrapref.grid import Engine, run_grid
@@ -315,17 +315,12 @@ def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict
             {
                 **who,
                 "collisions": m.collisions,
-                "completed": m.completed,
                 "ended": m.ending,
                 "contact_s": m.contact_s,
                 "driven_m": round(m.driven_m, 3),
                 "stops": m.stop_count,
                 "stops_s": m.stops_s,
-                "time_s": m.time_s,
-                "driver_time_s": dm.time_s,
-                "driver_completed": dm.completed,
-                "max_lateral_accel_mps2": m.max_lateral_accel_mps2,
-                "driver_max_lateral_accel_mps2": dm.max_lateral_accel_mps2,
+                **run_fields(m, dm),
                 **({"speeds": [list(p) for p in speeds]} if speeds else {}),
             }
         )
