@@ -373,18 +373,19 @@ class ExpertDriver:
         s = s[s <= self.path.length_m]
         x, y, yaw = pose
         ids = [self.world.class_at_point(x - a * math.sin(yaw), y + a * math.cos(yaw)) for a in self._foot]
+        near_lethal = False
         if len(s):
             centre, heading = self.path.point_at(s), self.path.heading_at(s)
             normal = np.stack([-np.sin(heading), np.cos(heading)], axis=1)
-            way = self.offset + self._foot[None, :]
-            ids += _offset_classes(centre, normal, way, len(s), self.world.raster, self.world.resolution_m).ravel().tolist()
+            raster, res = self.world.raster, self.world.resolution_m
+            ids += _offset_classes(centre, normal, self.offset + self._foot[None, :], len(s), raster, res).ravel().tolist()
             if c.near_lethal_mps is not None:
-                near = _offset_hits(
-                    centre, normal, self.offset + self._near_lat[None, :], len(s), self.world.raster, self.world.resolution_m, self._lethal
+                near_lethal = bool(
+                    _offset_hits(centre, normal, self.offset + self._near_lat[None, :], len(s), raster, res, self._lethal)[0]
                 )
         speeds = self._speed[np.asarray(ids, dtype=np.intp)]
         v = float(np.nanmin(speeds)) if np.isfinite(speeds).any() else c.speed_mps
-        if c.near_lethal_mps is not None and len(s) and near[0]:
+        if near_lethal:
             v = min(v, c.near_lethal_mps)
         if c.lateral_accel_mps2 is not None and curvature != 0.0:
             v = min(v, math.sqrt(c.lateral_accel_mps2 / abs(curvature)))
