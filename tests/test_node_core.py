@@ -90,7 +90,7 @@ def test_a_distorted_lens_is_undone_before_the_planner_sees_the_frame(setup):
     core.on_camera_info(info)
     core.on_odometry(_odom(0))
     seen = []
-    core.runtime.decide = lambda ids, t, p: seen.append(ids)  # what the planner is handed
+    core.runtime.decide = lambda ids, t, p, v=None: seen.append(ids)  # what the planner is handed
     core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0))
     assert seen[0].shape == images[0].shape and not np.array_equal(seen[0], images[0])
     centre = (slice(200, 280), slice(280, 360))  # barrel distortion leaves the middle as it was
@@ -156,3 +156,20 @@ def test_the_node_commands_the_speed_the_models_speed_rule_sets(setup, tmp_path)
     assert decision.stop is None and plain.stop is None
     (v, w), reason = core.status_at(decision.stamp_s + 0.05)
     assert reason is None and v == pytest.approx(1.3) and w == pytest.approx(plain.command.w * 1.3)
+
+
+def test_the_robots_speed_at_an_image_is_its_odometrys_forward_motion(setup):
+    """1 m/s along the path (0.1 m every 0.1 s), going forward or reversing; None before the
+    odometry spans the window the speed is read over."""
+    core, _ = _core(setup)
+    t0 = 1_700_000_000  # header() stamps on the epoch-like clock
+    for i in range(6):
+        core.on_odometry(_odom(i))
+    assert core.speed_at(t0 + 0.05) is None  # the odometry begins at t0: no 0.2 s before it
+    assert core.speed_at(t0 + 0.5) == pytest.approx(1.0)
+    assert core.speed_at(t0 + 0.35) == pytest.approx(1.0)  # between poses: interpolated
+    backwards, _ = _core(setup)
+    for i in range(6):
+        x, y, _ = POSES[i]
+        backwards.on_odometry(odometry(TS, header(TS, 0.1 * i, "odom"), pose(TS, x, y, yaw_quaternion(TS, np.pi))))
+    assert backwards.speed_at(t0 + 0.5) == pytest.approx(1.0)  # reversing at 1 m/s: a speed of 1 m/s

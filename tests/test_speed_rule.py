@@ -22,7 +22,7 @@ from terrapref.camera import PinholeCamera, SegmentationRenderer, SegmentationVi
 from terrapref.demos.expert import ExpertConfig
 from terrapref.demos.meta import ExpertInfo, HumanInfo
 from terrapref.errors import UserError
-from terrapref.evaluation.speed import LATERAL_TOLERANCE, TIME_TOLERANCE, SpeedComparison, trained_driver
+from terrapref.evaluation.speed import LATERAL_TOLERANCE, TIME_TOLERANCE, SpeedComparison, driver_lateral_limit, trained_driver
 from terrapref.features import FeatureConfig, UtilityFeaturizer
 from terrapref.learning.model_file import load_model, save_model
 from terrapref.learning.network import ClassifierConfig
@@ -399,6 +399,22 @@ def test_the_runner_keeps_to_the_drives_lateral_acceleration(curvature: float):
     assert runner.speed(AT, curvature, 0.1) == pytest.approx(0.1 / abs(curvature))  # the tighter of the two caps
 
 
+@pytest.mark.parametrize("curvature", [0.5, -0.5, 2.0])
+def test_the_yaw_rate_keeps_to_the_lateral_limit_at_the_vehicles_speed(curvature: float):
+    runner = _runner(replace(MODEL, drive_lateral_mps2=0.6), ALL_MUD)
+    v = runner.speed(AT, curvature, 5.0)
+    assert runner.yaw_rate(curvature, v) == pytest.approx(curvature * v)  # at the speed it commands: within the limit
+    assert runner.yaw_rate(curvature, v, speed_mps=v / 2) == pytest.approx(curvature * v)  # still speeding up: no faster than v
+    braking = runner.yaw_rate(curvature, v, speed_mps=1.5)  # still faster than v: a wider arc for now
+    assert braking == pytest.approx(math.copysign(0.6 / 1.5, curvature)) and abs(braking) * 1.5 == pytest.approx(0.6)
+    assert runner.yaw_rate(0.0, v, speed_mps=1.5) == 0.0
+    bends = _runner(replace(MODEL, lateral_accel_mps2=0.3, drive_lateral_mps2=0.6), ALL_MUD)
+    assert bends.rule.model.lateral_limit_mps2 == 0.3  # a bend limit shown is the tighter limit
+    assert abs(bends.yaw_rate(curvature, 0.9, speed_mps=1.5)) * 1.5 == pytest.approx(min(0.3, abs(curvature) * 0.9 * 1.5))
+    free = _runner(MODEL, ALL_MUD)  # neither known: the arc asked for
+    assert free.rule.model.lateral_limit_mps2 is None and free.yaw_rate(curvature, 0.9, speed_mps=2.0) == curvature * 0.9
+
+
 def test_the_runner_never_exceeds_the_rules_top_speed():
     runner = _runner(replace(MODEL, speeds_mps=(3.0,) * 5), ALL_MUD)
     assert runner.speed(AT, 0.0, 1.0) == SpeedConfig().max_speed_mps
@@ -418,6 +434,25 @@ def test_the_planner_drives_the_steering_rules_curvature_at_the_speed_rules_spee
     w_grid = np.asarray(FEATURES.preference.control.w_rps)
     assert d.stop is None and d.command.v == 0.9
     assert d.command.w == pytest.approx(w_grid[d.index] * 0.9)
+
+
+def test_a_planner_told_its_speed_turns_no_harder_than_the_lateral_limit_allows_there(tmp_path: Path):
+    """Still going 2 m/s while it commands the mud's 0.9, the planner widens its arc so that
+    v * w stays within the drive's largest lateral acceleration; told nothing, it keeps the curvature."""
+    classifier = ClassifierConfig(hidden=8, skip=True)
+    rule = SpeedRule(SpeedConfig(), replace(MODEL, drive_lateral_mps2=0.05))
+    meta = {**model_meta(), "rules": [rule.header()], "drives": "argmax"}
+    planner = Planner(load_model(save_model(tmp_path / "speed.safetensors", classifier, skip_path_weights(classifier), meta)))
+    planner.set_path(ALL_MUD.waypoints)
+    renderer = SegmentationRenderer(planner.camera, rasterise(ALL_MUD))
+    start = (2.0, 10.0, 0.3)  # turned off the path: the argmax turns back
+    view = SegmentationView.of(renderer.render(start))
+    told = planner.decide(view, start, speed_mps=2.0)
+    planner.set_path(ALL_MUD.waypoints)
+    untold = planner.decide(view, start)
+    assert told.index == untold.index and told.command.v == untold.command.v
+    assert abs(untold.command.w) * 2.0 > 0.05  # the arc chosen would be harder sideways at 2 m/s
+    assert abs(told.command.w) * 2.0 == pytest.approx(0.05) and np.sign(told.command.w) == np.sign(untold.command.w)
 
 
 # --- 5. the rule that drives beside a speed rule -------------------------------------------------------------
@@ -466,6 +501,7 @@ def _run(scenario: str, time_s: float, driver_time_s: float | None, lateral: flo
         "driver_time_s": driver_time_s,
         "max_lateral_accel_mps2": lateral,
         "driver_max_lateral_accel_mps2": driver_lateral,
+        "driver_lateral_limit_mps2": flags.get("limit"),
     }
 
 
@@ -478,10 +514,10 @@ ZONES = [
     _zone("b", "water", 0.5, None),  # nor the driver
 ]
 RUNS = [
-    _run("a", 10.4, 10.0, 1.09, 1.0),  # 4% slower: within; lateral 9% above: not over
-    _run("b", 9.0, 10.0, 1.2, 1.0),  # 10% faster: not within; 20% above: over
-    _run("b", 50.0, 10.0, 0.5, None, completed=False),  # the planner did not finish: no time; no driver's lateral
-    _run("a", 10.0, 10.0, 0.5, 0.0, driver_completed=False),  # nor did the driver; a driver's 0: no ratio
+    _run("a", 10.4, 10.0, 1.09, 1.0, limit=1.0),  # 4% slower: within; lateral 9% above: not over
+    _run("b", 9.0, 10.0, 1.2, 1.0, limit=1.5),  # 10% faster: not within; 20% above the driver's run: over; under its limit
+    _run("b", 50.0, 10.0, 0.5, None, completed=False, limit=0.4),  # the planner did not finish: no time; no driver's lateral
+    _run("a", 10.0, 10.0, 0.5, 0.0, driver_completed=False),  # nor did the driver; a driver's 0: no ratio; no limit known
 ]
 
 
@@ -498,20 +534,34 @@ def test_the_time_and_lateral_acceleration_against_the_drivers():
     assert c.time_ratio is not None and c.time_ratio.n == 2 and c.time_ratio.mean == pytest.approx((1.04 + 0.9) / 2)
     assert c.time_within == (1, 2)
     assert c.lateral_over == (1, 2) and c.lateral_worst == pytest.approx(1.2)
+    assert c.limit_over == (1, 3) and c.limit_worst == pytest.approx(0.5 / 0.4)  # runs whose driver's limit is known
     assert TIME_TOLERANCE == 0.05 and LATERAL_TOLERANCE == 0.10
     edge = SpeedComparison.of([], [_run("a", 10.49, 10.0, 1.0999, 1.0), _run("a", 10.51, 10.0, 1.1001, 1.0)])
     assert edge.time_within == (1, 2) and edge.lateral_over == (1, 2)
     none = SpeedComparison.of([], [])
     assert none.by_class == {} and none.time_ratio is None and none.time_within == (0, 0) and none.lateral_worst is None
+    assert none.limit_over == (0, 0) and none.limit_worst is None
 
 
 def test_a_comparison_reads_back_what_it_writes():
     for c in (SpeedComparison.of(ZONES, RUNS), SpeedComparison.of([], [])):
         assert SpeedComparison.from_dict(json.loads(json.dumps(c.to_dict()))) == c
     lines = SpeedComparison.of(ZONES, RUNS).lines()
-    assert len(lines) == 4  # a line per class, the time, the lateral acceleration
+    assert len(lines) == 5  # a line per class, the time, the lateral acceleration against the limit and the driver's run
     assert "the background (zones passed by): 0.100" in lines[0] and "mud: 0.150" in lines[1]
-    assert "within 5% in 50.0% (1/2" in lines[2] and "at most 1.20 times the driver's" in lines[3]
+    assert "within 5% in 50.0% (1/2" in lines[2]
+    assert "above the driver's limit: 33.3% (1/3" in lines[3] and "at most 1.25 times the limit" in lines[3]
+    assert "on the same layout: 50.0% (1/2" in lines[4] and "at most 1.20 times it" in lines[4]
+    old = {k: v for k, v in SpeedComparison.of(ZONES, RUNS).to_dict().items() if not k.startswith("limit")}
+    assert SpeedComparison.from_dict(old).limit_over == (0, 0)  # a metrics.json from before the limit was compared
+
+
+def test_the_drivers_lateral_limit_is_its_styles_else_the_most_its_drive_showed():
+    shown = SpeedRule(SpeedConfig(), replace(MODEL, drive_lateral_mps2=0.9))
+    assert driver_lateral_limit("default", (), [_offset_rule(), shown]) == 0.9
+    wide = ExpertConfig.styled("wide").lateral_accel_mps2
+    assert wide is not None and driver_lateral_limit("wide", (), [_offset_rule(), shown]) == wide  # the style's own limit
+    assert driver_lateral_limit("default", (("mud", 0.5),), [_offset_rule()]) is None  # no speed rule: not known
 
 
 def _meta(*drivers: dict | None) -> dict:

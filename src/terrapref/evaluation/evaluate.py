@@ -24,7 +24,7 @@ from terrapref.evaluation.runner import (
     summarise,
 )
 from terrapref.evaluation.scoring import classes_in_zone
-from terrapref.evaluation.speed import SpeedComparison
+from terrapref.evaluation.speed import SpeedComparison, driver_lateral_limit
 from terrapref.features import PreferenceSet
 from terrapref.fileio import write_text_atomic
 from terrapref.grid import Engine
@@ -128,7 +128,8 @@ def evaluate_model(
     evidence = _evidence(model, ev.scenarios)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    metrics = _metrics(ev, profile, results, evidence)
+    limit = driver_lateral_limit(ev.style, ev.speeds, getattr(model, "rules", ()))
+    metrics = _metrics(ev, profile, results, evidence, limit)
     beyond = {r.scenario: sorted(set(ev.frames) - {f.number for f in r.frames}) for r in results if r.driver == PLANNER and r.seed == 0}
     if any(beyond.values()):
         metrics["frames_beyond_the_run"] = {name: numbers for name, numbers in beyond.items() if numbers}
@@ -166,8 +167,11 @@ def _evidence(model, scenarios: Sequence[str]) -> _Evidence | None:
     return _Evidence(identified, present, model.classes)
 
 
-def _metrics(ev: Evaluation, profile: PreferenceProfile, results: list[RunResult], evidence: _Evidence | None) -> dict:
-    """metrics.json: what was evaluated, every run's metrics by course, driver and seed, and the summaries."""
+def _metrics(
+    ev: Evaluation, profile: PreferenceProfile, results: list[RunResult], evidence: _Evidence | None, lateral_limit_mps2: float | None
+) -> dict:
+    """metrics.json: what was evaluated, every run's metrics by course, driver and seed, and the
+    summaries (the speed's against the driver's lateral-acceleration limit, where known)."""
     metrics: dict = {
         "model": str(ev.model_path),
         "profile": list(profile.order),
@@ -181,7 +185,8 @@ def _metrics(ev: Evaluation, profile: PreferenceProfile, results: list[RunResult
     }
     if ev.with_driver:
         metrics["driver_summary"] = summarise(results, EXPERT).to_dict()
-        metrics["speed"] = SpeedComparison.of_results(results).to_dict()
+        metrics["driver_lateral_limit_mps2"] = lateral_limit_mps2
+        metrics["speed"] = SpeedComparison.of_results(results, lateral_limit_mps2).to_dict()
     return metrics
 
 

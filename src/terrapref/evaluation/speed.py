@@ -4,7 +4,8 @@ the path, lateral acceleration; shared by ``evaluate`` (metrics.json) and ``sele
 Rows are plain mappings, as select.json keeps them: a zone row has ``scenario``,
 ``driver_choice``, ``agrees``, ``speed_mps`` and ``driver_speed_mps``; a run row has
 ``scenario``, ``completed``, ``driver_completed``, ``time_s``, ``driver_time_s``,
-``max_lateral_accel_mps2`` and ``driver_max_lateral_accel_mps2``.
+``max_lateral_accel_mps2``, ``driver_max_lateral_accel_mps2`` and ``driver_lateral_limit_mps2``
+(None where the driver's limit is not known).
 """
 
 from __future__ import annotations
@@ -13,14 +14,16 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from terrapref.demos.expert import ExpertConfig
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult
 from terrapref.evaluation.scoring import RunMetrics
 from terrapref.evaluation.stats import cluster_bootstrap, rate_text
+from terrapref.rules import Rule, speed_rule
 from terrapref.scenario import AVOID
 
 SPEED_TARGET_MPS = 0.08  # the planner's speed error per class against its driver must stay within this [m/s]
 TIME_TOLERANCE = 0.05  # and its time to the end of the path within this share of the driver's
-LATERAL_TOLERANCE = 0.10  # and its lateral acceleration no more than this share above the driver's
+LATERAL_TOLERANCE = 0.10  # and its lateral acceleration no more than this share above the driver's limit
 
 
 @dataclass(frozen=True)
@@ -46,8 +49,11 @@ class SpeedComparison:
             the planner took that class too.
         time_ratio: the planner's time to the end of the path over the driver's, over runs both completed.
         time_within: runs whose time is within :data:`TIME_TOLERANCE` of the driver's, and runs compared.
+        limit_over: runs whose largest lateral acceleration is more than :data:`LATERAL_TOLERANCE`
+            above the driver's limit (:func:`driver_lateral_limit`), and runs compared.
+        limit_worst: the largest ratio of the two.
         lateral_over: runs whose largest lateral acceleration is more than :data:`LATERAL_TOLERANCE`
-            above the driver's on the same layout, and runs compared.
+            above the largest of the driver's own run on the same layout, and runs compared.
         lateral_worst: the largest ratio of the two.
     """
 
@@ -56,6 +62,8 @@ class SpeedComparison:
     time_within: tuple[int, int]
     lateral_over: tuple[int, int]
     lateral_worst: float | None
+    limit_over: tuple[int, int] = (0, 0)
+    limit_worst: float | None = None
 
     @classmethod
     def of(cls, zones: Sequence[Mapping[str, Any]], runs: Sequence[Mapping[str, Any]]) -> SpeedComparison:
@@ -71,26 +79,29 @@ class SpeedComparison:
                 ratios.setdefault(r["scenario"], []).append(r["time_s"] / r["driver_time_s"])
         compared = [x for v in ratios.values() for x in v]
         within = sum(abs(x - 1) <= TIME_TOLERANCE for x in compared)
-        lateral = [r["max_lateral_accel_mps2"] / r["driver_max_lateral_accel_mps2"] for r in runs if r.get("driver_max_lateral_accel_mps2")]
-        over = sum(x > 1 + LATERAL_TOLERANCE for x in lateral)
+        same = [r["max_lateral_accel_mps2"] / r["driver_max_lateral_accel_mps2"] for r in runs if r.get("driver_max_lateral_accel_mps2")]
+        limit = [r["max_lateral_accel_mps2"] / r["driver_lateral_limit_mps2"] for r in runs if r.get("driver_lateral_limit_mps2")]
         return cls(
             by_class,
             _estimate(ratios) if compared else None,
             (within, len(compared)),
-            (over, len(lateral)),
-            max(lateral) if lateral else None,
+            (sum(x > 1 + LATERAL_TOLERANCE for x in same), len(same)),
+            max(same) if same else None,
+            (sum(x > 1 + LATERAL_TOLERANCE for x in limit), len(limit)),
+            max(limit) if limit else None,
         )
 
     @classmethod
-    def of_results(cls, results: Sequence[RunResult]) -> SpeedComparison:
-        """The planner's runs against the driver's of the same course and seed (zones annotated with agreement)."""
+    def of_results(cls, results: Sequence[RunResult], lateral_limit_mps2: float | None = None) -> SpeedComparison:
+        """The planner's runs against the driver's of the same course and seed (zones annotated with
+        agreement), and against the driver's lateral-acceleration limit where it is known."""
         driver = {(r.scenario, r.seed): r for r in results if r.driver == EXPERT}
         zones, runs = [], []
         for r in results:
             d = driver.get((r.scenario, r.seed))
             if r.driver != PLANNER or d is None:
                 continue
-            runs.append({"scenario": r.scenario, **run_fields(r.metrics, d.metrics)})
+            runs.append({"scenario": r.scenario, **run_fields(r.metrics, d.metrics, lateral_limit_mps2)})
             theirs = {z.id: z for z in d.metrics.zones}
             for z, a in zip(r.metrics.zones, r.agreement or (), strict=False):
                 if z.id in theirs:
@@ -119,6 +130,8 @@ class SpeedComparison:
             tuple(data["time_within"]),
             tuple(data["lateral_over"]),
             data["lateral_worst"],
+            tuple(data.get("limit_over", (0, 0))),
+            data.get("limit_worst"),
         )
 
     def lines(self) -> list[str]:
@@ -133,16 +146,33 @@ class SpeedComparison:
                 f"time to the end of the path over the driver's: {self.time_ratio.text()}; within {TIME_TOLERANCE:.0%} in "
                 f"{rate_text(*self.time_within)} of the runs"
             )
+        if self.limit_worst is not None:
+            out.append(
+                f"lateral acceleration more than {LATERAL_TOLERANCE:.0%} above the driver's limit: {rate_text(*self.limit_over)} "
+                f"of the runs; at most {self.limit_worst:.2f} times the limit"
+            )
         if self.lateral_worst is not None:
             out.append(
-                f"lateral acceleration more than {LATERAL_TOLERANCE:.0%} above the driver's: {rate_text(*self.lateral_over)} of the runs; "
-                f"at most {self.lateral_worst:.2f} times the driver's"
+                f"lateral acceleration more than {LATERAL_TOLERANCE:.0%} above the most of the driver's run on the same layout: "
+                f"{rate_text(*self.lateral_over)} of the runs; at most {self.lateral_worst:.2f} times it"
             )
         return out
 
 
-def run_fields(metrics: RunMetrics, driver: RunMetrics) -> dict[str, Any]:
-    """A planner run's fields that :meth:`SpeedComparison.of` reads, beside its driver's run on the same course."""
+def driver_lateral_limit(style: str, speeds: tuple[tuple[str, float], ...], rules: Sequence[Rule]) -> float | None:
+    """The lateral acceleration [m/s^2] a driver keeps: its style's limit in bends, else (a style
+    without one) the largest its teaching drive showed, which a model's speed rule keeps; None
+    where neither is known (a model without a speed rule)."""
+    own = ExpertConfig.styled(style, None, speeds).lateral_accel_mps2
+    if own is not None:
+        return own
+    model = getattr(speed_rule(rules), "model", None)
+    return getattr(model, "drive_lateral_mps2", None)
+
+
+def run_fields(metrics: RunMetrics, driver: RunMetrics, lateral_limit_mps2: float | None = None) -> dict[str, Any]:
+    """A planner run's fields that :meth:`SpeedComparison.of` reads, beside its driver's run on the
+    same course and the driver's lateral-acceleration limit (None: not known)."""
     return {
         "completed": metrics.completed,
         "driver_completed": driver.completed,
@@ -150,6 +180,7 @@ def run_fields(metrics: RunMetrics, driver: RunMetrics) -> dict[str, Any]:
         "driver_time_s": driver.time_s,
         "max_lateral_accel_mps2": metrics.max_lateral_accel_mps2,
         "driver_max_lateral_accel_mps2": driver.max_lateral_accel_mps2,
+        "driver_lateral_limit_mps2": lateral_limit_mps2,
     }
 
 

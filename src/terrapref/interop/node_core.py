@@ -42,6 +42,7 @@ if TYPE_CHECKING:
 ODOMETRY_KEPT_S = 5.0  # how far back odometry is kept for interpolating to an image's stamp [s]
 ODOMETRY_WAIT_S = 0.5  # how long an image newer than the odometry waits for it [s]
 ODOMETRY_AHEAD_S = 1.0  # odometry stamped further ahead of the node's clock is refused [s]
+SPEED_WINDOW_S = 0.2  # the robot's speed at an image: its odometry's forward motion over this long before the stamp [s]
 
 
 def stamp_s(header) -> float:
@@ -189,6 +190,15 @@ class PlannerNodeCore:
         da = (a1 - a0 + math.pi) % (2 * math.pi) - math.pi
         return Pose(x0 + f * (x1 - x0), y0 + f * (y1 - y0), a0 + f * da)
 
+    def speed_at(self, t: float) -> float | None:
+        """The robot's forward speed [m/s] at ``t`` [s]: its odometry's motion along its heading
+        over the :data:`SPEED_WINDOW_S` before ``t``; None where odometry does not span it."""
+        now, before = self.pose_at(t), self.pose_at(t - SPEED_WINDOW_S)
+        if now is None or before is None:
+            return None
+        forward = (now.x - before.x) * math.cos(now.yaw) + (now.y - before.y) * math.sin(now.yaw)
+        return abs(forward) / SPEED_WINDOW_S
+
     def on_image(self, msgtype: str, msg, topic: str = "") -> RuntimeDecision | None:
         """A label image (``sensor_msgs/msg/Image`` or ``.../CompressedImage``): the decision on
         it, or None when it is skipped (counted in :attr:`skipped`) or waits for odometry.
@@ -233,7 +243,7 @@ class PlannerNodeCore:
             )
         if self._undistort is not None:  # a lens with distortion: each pinhole pixel from where the lens put it
             ids = np.where(self._undistort >= 0, ids.reshape(-1)[np.maximum(self._undistort, 0)], UNKNOWN).astype(np.uint8)
-        decision = self.runtime.decide(ids, t, pose)
+        decision = self.runtime.decide(ids, t, pose, self.speed_at(t))
         if decision is None:
             self.skipped["out of order"] += 1
             return None

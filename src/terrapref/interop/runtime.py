@@ -115,8 +115,12 @@ class PlannerRuntime:
         self.planner.set_path(waypoints)
         self.last = None
 
-    def decide(self, image: np.ndarray, stamp_s: float, pose: Pose | tuple[float, float, float]) -> RuntimeDecision | None:
-        """Decide on one label image taken at ``stamp_s`` from ``pose`` (x [m], y [m], yaw [rad]).
+    def decide(
+        self, image: np.ndarray, stamp_s: float, pose: Pose | tuple[float, float, float], speed_mps: float | None = None
+    ) -> RuntimeDecision | None:
+        """Decide on one label image taken at ``stamp_s`` from ``pose`` (x [m], y [m], yaw [rad]),
+        the robot going at ``speed_mps`` [m/s] by its odometry (None: not known; a model's speed
+        rule then keeps its lateral acceleration at the speed it commands).
 
         Returns None for a frame older than the last one decided on (out of order); such a frame
         changes nothing.
@@ -142,9 +146,11 @@ class PlannerRuntime:
         pose = Pose(*(float(v) for v in pose))
         if not (math.isfinite(stamp_s) and all(math.isfinite(v) for v in pose)):
             raise ValueError("stamp and pose must be finite")
+        if speed_mps is not None and not math.isfinite(speed_mps):
+            raise ValueError(f"speed must be finite, got {speed_mps!r}")
         if self.last is not None and stamp_s <= self.last.stamp_s:
             return None
-        d = self.planner.decide(image, pose, float(stamp_s))
+        d = self.planner.decide(image, pose, float(stamp_s), None if speed_mps is None else abs(float(speed_mps)))
         self.last = RuntimeDecision(float(stamp_s), d.command, d.index, d.probs, d.progress_m, d.U, d.stop)
         return self.last
 

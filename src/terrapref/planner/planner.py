@@ -154,9 +154,13 @@ class Planner:
         if self.speed is not None:
             self.speed.reset()
 
-    def decide(self, image: np.ndarray | SegmentationView, pose: Pose, time_s: float | None = None) -> Decision:
+    def decide(
+        self, image: np.ndarray | SegmentationView, pose: Pose, time_s: float | None = None, speed_mps: float | None = None
+    ) -> Decision:
         """Choose a command for one segmentation frame (H, W) uint8 at ``pose``, taken at ``time_s``
-        [s] (None: frames 0.1 s apart; the stop rule times blind frames by it).
+        [s] (None: frames 0.1 s apart; the stop rule times blind frames by it), the vehicle going
+        at ``speed_mps`` [m/s] by its odometry (None: unknown; a speed rule then takes the vehicle
+        to go at the speed it commands).
 
         ``image`` may be a :class:`SegmentationView`, of which only the pixels the policy reads
         are rendered (the preference set's, for C). Given a view, a rule that steers without
@@ -169,16 +173,17 @@ class Planner:
         s = self.tracker.update(np.array(pose[:2]))
         outputs = functools.partial(_outputs, self.featurizer, self.policy, view, pose, self.path, s)
         if not self.runner.reads_probs and view is image:  # an array the caller may reuse is read now
-            choice = self._at_speed(self.runner.decide(RuleInput(None, view, pose, self.path, s)), view, pose, s)
+            choice = self._at_speed(self.runner.decide(RuleInput(None, view, pose, self.path, s)), view, pose, s, speed_mps)
             stop = self.stop_rule.check(view, pose, choice.command.v, choice.command.w, time_s)
             return Decision(choice.index, STOP_COMMAND if stop else choice.command, s, pending=outputs, stop=stop)
         probs, U = outputs()
-        choice = self._at_speed(self.runner.decide(RuleInput(probs, view, pose, self.path, s)), view, pose, s)
+        choice = self._at_speed(self.runner.decide(RuleInput(probs, view, pose, self.path, s)), view, pose, s, speed_mps)
         stop = self.stop_rule.check(view, pose, choice.command.v, choice.command.w, time_s)
         return Decision(choice.index, STOP_COMMAND if stop else choice.command, s, (probs, U), stop=stop)
 
-    def _at_speed(self, choice: Choice, view: SegmentationView, pose: Pose, progress_m: float) -> Choice:
-        """The steering rule's choice at the speed rule's speed along its way (the same curvature);
+    def _at_speed(self, choice: Choice, view: SegmentationView, pose: Pose, progress_m: float, speed_mps: float | None) -> Choice:
+        """The steering rule's choice at the speed rule's speed along its way (the same curvature,
+        turned no harder than the rule's lateral acceleration allows at the vehicle's speed);
         as chosen without a speed rule."""
         if self.speed is None:
             return choice
@@ -187,7 +192,7 @@ class Planner:
         held = self.runner.held_offset_m
         along = (self.path, progress_m, held) if held is not None and self.path is not None else None
         v = self.speed.speed(pose, curvature, self._max_w, along)
-        return Choice(choice.index, Command(v, curvature * v))
+        return Choice(choice.index, Command(v, self.speed.yaw_rate(curvature, v, speed_mps)))
 
     def costmap(self) -> Costmap | None:
         """The ground seen so far as the driving rule prices it (terrapref.rules.costmap);
@@ -246,7 +251,7 @@ class PlannerDriver:
         self.decisions, self.frames, self.image_of, self.last = [], [], {}, None
 
     def act(self, frame: Frame) -> Command:
-        d = self.last = self.planner.decide(frame.view, frame.pose, frame.time_s)
+        d = self.last = self.planner.decide(frame.view, frame.pose, frame.time_s, frame.speed_mps)
         if self.keep:
             d.probs  # noqa: B018 (computed now, so that the kept decisions do not hold their frames)
             self.decisions.append(d)

@@ -23,11 +23,12 @@ from pathlib import Path
 import numpy as np
 
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, run_many, zone_agrees
-from terrapref.evaluation.speed import SpeedComparison, run_fields
+from terrapref.evaluation.speed import SpeedComparison, driver_lateral_limit, run_fields
 from terrapref.evaluation.stats import cluster_bootstrap, rate_text
 from terrapref.fileio import write_text_atomic
 from terrapref.grid import Engine, run_grid
 from terrapref.perception import PRESETS, PerceptionModel
+from terrapref.planner.model import Model
 from terrapref.plots import RateRow, save_intervals
 from terrapref.progress import every_tenth
 from terrapref.recipes import RecipeSetup, recipe_named, run_recipe
@@ -296,6 +297,8 @@ def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict
         for z in r.metrics.zones
     }
     driver_runs = {(tuple(s.profile), s.speeds, r.scenario): r.metrics for s, r in zip(specs, results, strict=True) if r.driver == EXPERT}
+    styles = {s.speeds: s.style for s in specs if s.driver == EXPERT}
+    limits: dict[str, float | None] = {}  # by model file: its driver's lateral-acceleration limit
     rows, runs = [], []
     for spec, r in zip(specs, results, strict=True):
         if r.driver != PLANNER:
@@ -311,6 +314,9 @@ def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict
         m = r.metrics
         speeds = model.job.speeds
         dm = driver_runs[(tuple(spec.profile), speeds, r.scenario)]
+        if spec.model_path not in limits:
+            policy = Model.load(spec.model_path).policy
+            limits[spec.model_path] = driver_lateral_limit(styles.get(speeds, "default"), speeds, getattr(policy, "rules", ()))
         runs.append(
             {
                 **who,
@@ -320,7 +326,7 @@ def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict
                 "driven_m": round(m.driven_m, 3),
                 "stops": m.stop_count,
                 "stops_s": m.stops_s,
-                **run_fields(m, dm),
+                **run_fields(m, dm, limits[spec.model_path]),
                 **({"speeds": [list(p) for p in speeds]} if speeds else {}),
             }
         )

@@ -84,6 +84,13 @@ class SpeedModel:
             v = np.where(_near(way, upto, self._is_lethal, self.near_lethal_m), np.minimum(v, self.near_lethal_mps), v)
         return np.maximum(v, MIN_SPEED_MPS)
 
+    @property
+    def lateral_limit_mps2(self) -> float | None:
+        """The most lateral acceleration the planner asks for: the bend limit where the drive showed
+        one, else the largest the drive showed; None: neither known [m/s^2]."""
+        known = [a for a in (self.lateral_accel_mps2, self.drive_lateral_mps2) if a is not None]
+        return min(known) if known else None
+
     @functools.cached_property
     def _speeds(self) -> np.ndarray:
         """Cruising speed per column value (256,): NaN for lethal and never-seen ground (made once per model)."""

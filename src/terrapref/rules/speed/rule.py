@@ -350,3 +350,16 @@ class SpeedRunner:
             if self.rule.model.drive_lateral_mps2 is not None:  # never harder sideways than the drive went
                 top = min(top, math.sqrt(self.rule.model.drive_lateral_mps2 / abs(k)))
         return min(v, top)
+
+    def yaw_rate(self, curvature: float, v_mps: float, speed_mps: float | None = None) -> float:
+        """The yaw rate [rad/s] that drives an arc of ``curvature`` [1/m] at the commanded ``v_mps``,
+        turned no harder than the model's lateral limit (SpeedModel.lateral_limit_mps2) allows at
+        the faster of ``v_mps`` and the vehicle's speed ``speed_mps`` [m/s] (None: unknown). A
+        vehicle still braking to ``v_mps`` widens its arc for a moment instead of going harder
+        sideways than the driver did."""
+        w = curvature * v_mps
+        lateral = self.rule.model.lateral_limit_mps2
+        fastest = max(v_mps, speed_mps or 0.0)
+        if lateral is None or fastest <= 0 or abs(w) * fastest <= lateral:
+            return w
+        return math.copysign(lateral / fastest, w)
