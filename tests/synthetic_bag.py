@@ -5,7 +5,9 @@ The quirks (``quirks=True``): label images in RELLIS-3D ids (plus a few ids no m
 stamps from an epoch-like clock with jitter and a transport delay, odometry at 30 Hz in a frame
 that starts at the robot, commands published only when they change, the path published once,
 an unrelated topic, dropped images, pairs of images whose stamps arrive out of order, and a
-one-second gap in the odometry. Used by the tests, the import benchmark and
+one-second gap in the odometry. Without commands (``commands=False``) the log has no command
+topic, and its odometry may carry the vehicle's measured motion as Odometry's twist (``twist=True``;
+else the twist is zero, as some drivers leave it) or be PoseStamped, which has none. Used by the tests, the import benchmark and
 examples/robot_logs.py (which import it from this folder); not part of the package. Writing the
 bags needs the robot extra (rosbags).
 """
@@ -45,13 +47,14 @@ from terrapref.recipes import DEFAULT_RECIPE, RECIPES
 from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.sim import Frame, Simulation
 from terrapref.terrain import ClassTable, default_classes
-from terrapref.vehicle import Command, Pose
+from terrapref.vehicle import Command
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
 Storage = Literal["rosbag1", "sqlite3", "mcap"]
 Encoding = Literal["mono8", "mono16", "png", "rgb8"]
+OdometryType = Literal["nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped"]
 TOPICS = {
     "segmentation": "/robot/seg/labels",
     "camera_info": "/robot/camera/camera_info",
@@ -120,11 +123,13 @@ def write_robot(path: Path, text: str | None = None) -> Path:
     return path
 
 
-def robot_yaml(labels: str = LENIENT_LABELS, path_topic: bool = True, profile: bool = True) -> str:
+def robot_yaml(labels: str = LENIENT_LABELS, path_topic: bool = True, profile: bool = True, command: bool = True) -> str:
     """The robot file that matches :func:`write_synthetic_bag`'s topics (by default with the
     label map :func:`write_robot` writes beside it, which makes the quirks' unlisted ids unknown,
-    and with the order the synthetic operator drives by, the default's; ``profile=False``: none declared)."""
-    topics = "\n".join(f"  {k}: {v}" for k, v in TOPICS.items() if path_topic or k != "path")
+    and with the order the synthetic operator drives by, the default's; ``profile=False``: none
+    declared; ``command=False``: no command topic, for a log without commands)."""
+    left_out = {k for k, keep in (("path", path_topic), ("command", command)) if not keep}
+    topics = "\n".join(f"  {k}: {v}" for k, v in TOPICS.items() if k not in left_out)
     order = f"profile: [{', '.join(default_classes().profile)}]\n" if profile else ""
     return f"format: terrapref-robot/1\ntopics:\n{topics}\ncamera:\n  height_m: 1.0\n  pitch_deg: 30.0\nlabels: {labels}\n{order}"
 
@@ -138,6 +143,9 @@ class _LogOptions:
     repeat_images: int
     classes: ClassTable | None = None
     speed_mps: float | None = None
+    commands: bool = True
+    odometry_type: OdometryType = "nav_msgs/msg/Odometry"
+    twist: bool = False
 
 
 def write_synthetic_bag(
@@ -152,6 +160,9 @@ def write_synthetic_bag(
     repeat_images: int = 1,
     classes: ClassTable | None = None,
     speed_mps: float | None = None,
+    commands: bool = True,
+    odometry_type: OdometryType = "nav_msgs/msg/Odometry",
+    twist: bool = False,
 ) -> Path:
     """Drive ``scenario`` with the synthetic driver and write the log; returns the bag's path.
 
@@ -159,16 +170,18 @@ def write_synthetic_bag(
     make large logs for benchmarks. ``classes``: the scenario's class table (None: the
     default; examples/classes/rellis3d.yaml's classes are labelled by :data:`RELLIS_OF_EXAMPLE`).
     ``speed_mps``: the driver's cruising speed [m/s] (None: the default driver's, 1 m/s).
+    ``commands=False``: no command topic. ``odometry_type``: the odometry's message type; an
+    Odometry's twist is zero unless ``twist``, which fills it with the vehicle's speed and yaw rate.
     """
     out = Path(out)
-    options = _LogOptions(quirks, max_seconds, repeat_images, classes, speed_mps)
+    options = _LogOptions(quirks, max_seconds, repeat_images, classes, speed_mps, commands, odometry_type, twist)
     ros1 = storage == "rosbag1"
     sc = resolve_scenario(scenario, classes)
     sim = Simulation(sc)
     messages = _Messages(typestore(ros1), ros1, encoding, sim.camera.config)
     odom = _OdomFrame(*(sc.start if quirks else (0.0, 0.0, 0.0)))
     with _open_writer(out, storage) as writer:
-        log = _Log(messages, _Queue(add_topics(writer, messages.ts, _topics(encoding), ros1)), odom, options)
+        log = _Log(messages, _Queue(add_topics(writer, messages.ts, _topics(encoding, options), ros1)), odom, options)
         _put_fixed(log, [odom.pose(x, y, 0.0)[:2] for x, y in sc.waypoints])
         _drive(sim, sc, seed, profile, log)
         log.queue.flush(math.inf)
@@ -186,18 +199,21 @@ def _open_writer(out: Path, storage: Storage) -> Any:
     return Writer2(out, version=9, storage_plugin=StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3)
 
 
-def _topics(encoding: Encoding) -> dict[str, tuple[str, str]]:
+def _topics(encoding: Encoding, options: _LogOptions) -> dict[str, tuple[str, str]]:
     """The log's roles as (topic, type), in the order the bag lists them."""
     seg_type = "sensor_msgs/msg/CompressedImage" if encoding == "png" else "sensor_msgs/msg/Image"
-    return {
+    topics = {
         "segmentation": (TOPICS["segmentation"], seg_type),
         "camera_info": (TOPICS["camera_info"], "sensor_msgs/msg/CameraInfo"),
-        "odometry": (TOPICS["odometry"], "nav_msgs/msg/Odometry"),
+        "odometry": (TOPICS["odometry"], options.odometry_type),
         "command": (TOPICS["command"], "geometry_msgs/msg/Twist"),
         "path": (TOPICS["path"], "nav_msgs/msg/Path"),
         "other": ("/diagnostics/status", "std_msgs/msg/String"),
         "tf_static": ("/tf_static", "tf2_msgs/msg/TFMessage"),
     }
+    if not options.commands:
+        del topics["command"]
+    return topics
 
 
 @dataclass(frozen=True)
@@ -242,9 +258,18 @@ class _Messages:
             data=data,
         )
 
-    def odometry(self, t_s: float, x: float, y: float, yaw: float) -> Message:
-        """Odometry of base_link at (x, y [m], yaw [rad]) in the odom frame, stamped ``t_s``."""
-        return odometry(self.ts, self.header(t_s, "odom"), pose(self.ts, x, y, yaw_quaternion(self.ts, yaw)))
+    def odometry(self, t_s: float, x: float, y: float, yaw: float, moving: tuple[float, float] | None = None) -> Message:
+        """Odometry of base_link at (x, y [m], yaw [rad]) in the odom frame, stamped ``t_s``; its
+        twist ``moving`` (v [m/s], w [rad/s] in base_link), or zero when None."""
+        msg = odometry(self.ts, self.header(t_s, "odom"), pose(self.ts, x, y, yaw_quaternion(self.ts, yaw)))
+        if moving is not None:
+            msg.twist.twist = twist(self.ts, *moving)
+        return msg
+
+    def pose_stamped(self, t_s: float, x: float, y: float, yaw: float) -> Message:
+        """geometry_msgs/PoseStamped of base_link at (x, y [m], yaw [rad]) in the odom frame, stamped ``t_s``."""
+        at = pose(self.ts, x, y, yaw_quaternion(self.ts, yaw))
+        return self.ts.types["geometry_msgs/msg/PoseStamped"](header=self.header(t_s, "odom"), pose=at)
 
 
 class _Queue:
@@ -329,7 +354,7 @@ def _drive(sim: Simulation, sc: Scenario, seed: int, profile: tuple[str, ...] | 
         _put_camera(log, frame, to_ids[frame.image], jitter, state)
         _put_command(log, frame.time_s, command, state)
         frame = sim.step(disturb(command) if disturb is not None else command)
-        _put_odometry(log, sim.trace, state)
+        _put_odometry(log, sim, state)
         log.queue.flush(frame.time_s - 0.2)
 
 
@@ -377,21 +402,29 @@ def _put_images(log: _Log, index: int, ids: np.ndarray, stamp: float, state: _Dr
 
 
 def _put_command(log: _Log, t_s: float, command: Command, state: _DriveState) -> None:
-    """The operator's command (with quirks, only when it changes)."""
+    """The operator's command (with quirks, only when it changes; none in a log without commands)."""
+    if not log.options.commands:
+        return
     if command != state.last_command or not log.options.quirks:
         log.queue.put(t_s + 0.005, "command", twist(log.messages.ts, command[0], command[1]))
         state.last_command = command
 
 
-def _put_odometry(log: _Log, trace: list[Pose], state: _DriveState) -> None:
+def _put_odometry(log: _Log, sim: Simulation, state: _DriveState) -> None:
     """The vehicle's steps since the last call, in the odom frame at ODOMETRY_RATE_HZ (with
-    quirks, delayed, and none in ODOMETRY_GAP_S)."""
-    quirks = log.options.quirks
-    gap = ODOMETRY_GAP_S if quirks else (math.inf, math.inf)
-    for x, y, yaw in trace[state.tick + 1 :]:
+    quirks, delayed, and none in ODOMETRY_GAP_S); with ``twist``, each Odometry moving at the
+    vehicle's speed after its tick and the yaw rate it held (the command it executed)."""
+    options, messages = log.options, log.messages
+    gap = ODOMETRY_GAP_S if options.quirks else (math.inf, math.inf)
+    for x, y, yaw in sim.trace[state.tick + 1 :]:
         state.tick += 1
         t_odom = state.tick / ODOMETRY_RATE_HZ
         if gap[0] <= t_odom < gap[1]:
             continue
         ox, oy, oyaw = log.odom.pose(x, y, yaw)
-        log.queue.put(t_odom + (ODOMETRY_DELAY_S if quirks else 0.0), "odometry", log.messages.odometry(t_odom, ox, oy, oyaw))
+        if options.odometry_type == "geometry_msgs/msg/PoseStamped":
+            msg = messages.pose_stamped(t_odom, ox, oy, oyaw)
+        else:
+            moving = (sim.speeds[state.tick - 1], sim.vehicle.command.w) if options.twist else None  # speeds[k - 1]: after tick k
+            msg = messages.odometry(t_odom, ox, oy, oyaw, moving)
+        log.queue.put(t_odom + (ODOMETRY_DELAY_S if options.quirks else 0.0), "odometry", msg)

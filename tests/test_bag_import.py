@@ -278,7 +278,8 @@ def test_a_failed_force_import_keeps_the_old_recording(tmp_path: Path, logs, imp
         (lambda t: t + "speed: 3\n", "speed"),
         (lambda t: t.replace("  pitch_deg: 30.0\n", ""), "camera.pitch_deg"),
         (lambda t: t.replace("height_m: 1.0", "height_m: -1"), "camera.height_m"),
-        (lambda t: t.replace(f"  command: {TOPICS['command']}\n", ""), "topics.command"),
+        (lambda t: t.replace(f"command: {TOPICS['command']}", "command: cmd_vel"), "topics.command"),
+        (lambda t: t.replace(f"  odometry: {TOPICS['odometry']}\n", ""), "topics.odometry"),
         (lambda t: t.replace(TOPICS["segmentation"], "seg"), "topics.segmentation"),
         (lambda t: t.replace(f"labels: {LENIENT_LABELS}", "labels: cityscapes"), "labels"),
         (lambda t: t.replace("terrapref-robot/1", "terrapref-robot/9"), "format"),
@@ -537,6 +538,98 @@ def test_replay_compares_the_models_speed_with_the_operators(tmp_path: Path, fas
     assert v_error < 0.2  # it learned the operator's speed (slowing where its speed rule says so), not 1 m/s
     lines = summary_lines(taught)
     assert f"mean |v| error {v_error:.3f} m/s over {len(rec)} frames" in lines[0] and "|v|" not in lines[2]
+
+
+# --- speed without commands: the odometry's twist, or differences of its poses ----------------
+
+
+@pytest.fixture(scope="module")
+def measured(tmp_path_factory) -> dict:
+    """The drive of ``fast`` (FAST_MPS) logged without commands, its odometry an Odometry with its
+    twist filled, a PoseStamped, and an Odometry whose twist is zero; each imported by a robot
+    file without a command topic, and a model taught by the first."""
+    root = tmp_path_factory.mktemp("measured")
+    robot = write_robot(root / "robot.yaml", robot_yaml(command=False))
+    kinds = {
+        "twist": {"twist": True},
+        "poses": {"odometry_type": "geometry_msgs/msg/PoseStamped"},
+        "zero_twist": {},
+    }
+    out: dict = {"robot": robot}
+    for name, kind in kinds.items():
+        bag = write_synthetic_bag(root / f"{name}.mcap", "mcap", max_seconds=10.0, speed_mps=FAST_MPS, commands=False, **kind)
+        rec = root / f"rec_{name}"
+        out[name] = {"bag": bag, "report": import_bag(bag, load_robot(robot), rec, show_progress=False), "rec": read_recording(rec)}
+    assert main(["train", str(root / "rec_twist"), "--out", str(root / "taught.safetensors")]) == 0
+    out["model"] = root / "taught.safetensors"
+    return out
+
+
+def _same_frames(a, b) -> tuple[np.ndarray, np.ndarray]:
+    """The indices in recordings ``a`` and ``b`` of the frames both kept (of one drive: the same poses)."""
+    where = {tuple(np.round(p[:2], 6)): i for i, p in enumerate(b.poses)}
+    pairs = [(i, where[key]) for i, p in enumerate(a.poses) if (key := tuple(np.round(p[:2], 6))) in where]
+    assert len(pairs) > 0.9 * min(len(a), len(b))
+    return np.array([i for i, _ in pairs]), np.array([j for _, j in pairs])
+
+
+def test_without_a_command_topic_each_frame_is_labelled_by_the_odometrys_twist(measured):
+    from terrapref.interop.bag_import import MIN_SPEED_MPS
+    from terrapref.vehicle import ControlSet
+
+    assert load_robot(measured["robot"]).command_topic is None
+    report, rec = measured["twist"]["report"], measured["twist"]["rec"]
+    assert report.speed_source == "twist"
+    assert "measured by the odometry's twist (no command topic)" in "\n".join(report.lines())
+    v, w = rec.commands.T
+    # Driven at 1.5 m/s once it has sped up from rest at 1 m/s^2: the measured speed, not a command's.
+    assert np.median(v) == pytest.approx(FAST_MPS, abs=0.01) and np.mean(np.abs(v - FAST_MPS) < 0.05) > 0.8
+    assert v.min() >= MIN_SPEED_MPS and v.max() <= FAST_MPS + 1e-9 and v[0] < 0.5 * FAST_MPS
+    assert report.skipped["images while stopped or reversing"] >= 1  # at rest before the drive: the same reason as a stop command
+    control = ControlSet()
+    np.testing.assert_array_equal(rec.labels, control.label_of(np.clip(w * control.v_mps / v, min(control.w_rps), max(control.w_rps))))
+    assert len(set(rec.labels.tolist())) > 1  # it steered
+
+
+def test_without_twist_the_speed_is_measured_by_differences_of_odometry_poses(measured):
+    twist, poses = measured["twist"]["rec"], measured["poses"]["rec"]
+    report = measured["poses"]["report"]
+    assert report.speed_source == "poses" and not report.notes
+    assert "measured by differences of odometry poses over 0.2 s (no command topic)" in "\n".join(report.lines())
+    assert np.median(poses.commands[:, 0]) == pytest.approx(FAST_MPS, abs=0.01)
+    # Two measurements of one drive: the twist and the poses' differences agree frame by frame.
+    a, b = _same_frames(twist, poses)
+    np.testing.assert_allclose(poses.commands[b, 0], twist.commands[a, 0], atol=0.05)
+    assert np.median(np.abs(poses.commands[b, 1] - twist.commands[a, 1])) < 0.05  # yaw rate (smoothed where it steps)
+
+
+def test_an_odometry_twist_that_is_zero_throughout_falls_back_to_pose_differences_and_says_so(measured):
+    report, rec = measured["zero_twist"]["report"], measured["zero_twist"]["rec"]
+    assert report.speed_source == "poses"
+    assert len(rec) > 0.8 * 10.0 * 10 and np.median(rec.commands[:, 0]) == pytest.approx(FAST_MPS, abs=0.01)  # not 0 m/s
+    np.testing.assert_array_equal(rec.commands, measured["poses"]["rec"].commands)  # the same poses, the same differences
+    lines = "\n".join(report.lines())
+    assert f"note             the twist of {TOPICS['odometry']} is zero throughout while its pose moves" in lines
+    assert "measured by differences of odometry poses" in lines
+
+
+def test_a_command_topic_the_robot_file_names_but_the_bag_lacks_is_an_error_not_a_fallback(tmp_path: Path, measured, capsys):
+    bag = str(measured["twist"]["bag"])
+    robot = write_robot(tmp_path / "robot.yaml", robot_yaml())  # names /robot/cmd_vel, which this log lacks
+    assert main(["import", bag, "--robot", str(robot), "--out", str(tmp_path / "rec")]) == 2
+    _one_line(capsys, bag, "topics.command", TOPICS["command"], "is not in the bag")
+    assert not (tmp_path / "rec").exists()
+
+
+def test_a_model_taught_by_a_log_without_commands_commands_the_speed_driven(measured):
+    from terrapref.runtime import PlannerRuntime
+
+    scenario = resolve_scenario("demo_course")
+    runtime = PlannerRuntime(measured["model"])
+    runtime.set_path(scenario.waypoints)
+    frame = Simulation(scenario).reset()
+    decision = runtime.decide(frame.image, frame.time_s, frame.pose)
+    assert decision.stop is None and decision.command.v == pytest.approx(FAST_MPS, abs=0.05)
 
 
 def test_colour_segmentation_through_the_label_maps_colour_table(tmp_path: Path, imported):

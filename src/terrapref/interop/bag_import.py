@@ -6,13 +6,20 @@ stays flat however large the bag. Each kept image becomes a frame whose pose is 
 interpolated to the image's header stamp and whose label is the operator's command in force at
 that stamp (zero-order hold: commands may come at their own rate or only on change).
 
+A robot file without ``topics.command`` labels each frame by the vehicle's measured motion (v, w)
+instead: an Odometry's twist (``twist.twist.linear.x``, ``twist.twist.angular.z``) interpolated to
+the stamp, or, for a pose topic (PoseStamped, PoseWithCovarianceStamped) and for an Odometry whose
+twist is zero throughout while its pose moves (a driver that never fills it), a centred difference
+of the poses around the stamp. The report says which. A command topic the robot file names but
+the bag lacks stays an error: a misspelt topic must not turn into a quiet fallback.
+
 What real logs contain is handled and reported: topics at their own rates (images are thinned
 to ``rate_hz``), stamp jitter, out-of-order images (a short reorder buffer; older stragglers are
 dropped), gaps in odometry (frames inside a gap are skipped), label ids the label map does not
 list (their share is reported), the operator stopped or reversing (no trajectory choice: skipped).
-Each frame keeps the operator's command as it was logged, at its own speed (v, w), so that a speed
-rule learns the speeds driven; its label is the trajectory of the preference set of the same
-curvature, at the set's speed: w x v_set / v.
+Each frame keeps the operator's command as it was logged (or the motion measured), at its own
+speed (v, w), so that a speed rule learns the speeds driven; its label is the trajectory of the
+preference set of the same curvature, at the set's speed: w x v_set / v.
 
 The recording is written to a temporary folder beside ``out`` and renamed into place only when
 complete; an error leaves nothing behind.
@@ -57,6 +64,13 @@ TYPES = {
 }
 REORDER_FRAMES = 16  # images held back to put slightly out-of-order stamps right
 MIN_SPEED_MPS = 0.1  # slower than this the operator is stopped: no trajectory choice
+POSE_DIFFERENCE_HALF_S = 0.1  # a pose's motion: the poses this long before and after it, differenced (centred, over 0.2 s)
+STILL_TWIST_MOVED_M = 1.0  # an Odometry whose twist is zero throughout while its pose goes farther than this never filled it
+SPEED_SOURCES = {  # where each frame's speed (v, w) comes from, as the report names it
+    "commands": "the commands",
+    "twist": "the odometry's twist",
+    "poses": f"differences of odometry poses over {2 * POSE_DIFFERENCE_HALF_S:g} s",
+}
 MAP_MARGIN_M = 15.0
 PATH_SMOOTHING_M = 5.0  # half-width of the moving average that turns driven odometry into a path
 
@@ -77,6 +91,7 @@ class ImportReport:
     order: str = ""  # the preference order the recording carries, and where it came from
     duration_s: float = 0.0
     speed_mps: tuple[float, float, float] | None = None  # the kept frames' slowest, mean and fastest speed [m/s]
+    speed_source: str = "commands"  # a key of SPEED_SOURCES
     notes: list[str] = field(default_factory=list)
 
     def lines(self) -> list[str]:
@@ -91,11 +106,18 @@ class ImportReport:
             )
         if self.speed_mps is not None:
             slow, mean, fast = self.speed_mps
-            out.append(f"speed            {mean:.2f} m/s on average ({slow:.2f}-{fast:.2f}), kept as the commands give it")
+            out.append(f"speed            {mean:.2f} m/s on average ({slow:.2f}-{fast:.2f}), {self.speed_how}")
         out.append(f"path             {self.path_source}")
         out.append(f"order            {self.order}")
         out += [f"note             {n}" for n in self.notes]
         return out
+
+    @property
+    def speed_how(self) -> str:
+        """Where the frames' speeds come from, in words."""
+        if self.speed_source == "commands":
+            return "kept as the commands give it"
+        return f"measured by {SPEED_SOURCES[self.speed_source]} (no command topic)"
 
 
 CLOCK_TOLERANCE_S = 5.0  # header stamps this far from the log's receive times are on another clock (simulated time)
@@ -204,6 +226,7 @@ class _Bag:
 class _Streams:
     odom_t: np.ndarray
     odom: np.ndarray  # (N, 3) x, y, yaw
+    odom_twist: np.ndarray  # (N, 2) v [m/s], w [rad/s] of each pose as an Odometry's twist gives it; NaN: a pose without twist
     cmd_t: np.ndarray
     cmd: np.ndarray  # (N, 2) v, w
     path: np.ndarray | None
@@ -324,7 +347,7 @@ def _open_reader(path: Path):
 def _read_small_topics(bag: _Bag, robot: RobotConfig) -> _Streams:
     """Odometry, commands, the path, the calibration and (for ``camera.tf``) /tf_static, read whole."""
     topics = robot.topics
-    wanted = ["odometry", "command", "camera_info"] + (["path"] if robot.path_topic else [])
+    wanted = [role for role in ("odometry", "command", "camera_info", "path") if role in topics]
     by_role = {role: bag.connections(topics[role], role, robot.source) for role in wanted}  # each checked for its own type
     roles = {topics[role]: role for role in wanted}
     conns = list({id(c): c for cs in by_role.values() for c in cs}.values())
@@ -356,6 +379,7 @@ class _SmallTopics:
 
     odom_t: list[float] = field(default_factory=list)
     odom: list[tuple[float, float, float]] = field(default_factory=list)
+    odom_twist: list[tuple[float, float]] = field(default_factory=list)
     cmd_t: list[float] = field(default_factory=list)
     cmd: list[tuple[float, float]] = field(default_factory=list)
     path: np.ndarray | None = None  # the first path of two or more poses
@@ -373,6 +397,8 @@ class _SmallTopics:
                 self.stamp_minus_receive.append(stamp - t_ns * 1e-9)
             self.odom_t.append(_stamp(msg, t_ns))
             self.odom.append((pose.position.x, pose.position.y, _yaw(pose.orientation)))
+            moving = msg.twist.twist if conn.msgtype == "nav_msgs/msg/Odometry" else None  # in the robot's own frame: x ahead
+            self.odom_twist.append((moving.linear.x, moving.angular.z) if moving is not None else (math.nan, math.nan))
         elif role == "command":
             twist = msg.twist if conn.msgtype == "geometry_msgs/msg/TwistStamped" else msg
             stamp = _stamp(msg, 0) if conn.msgtype == "geometry_msgs/msg/TwistStamped" else 0.0
@@ -395,7 +421,8 @@ class _SmallTopics:
     def streams(self) -> _Streams:
         """The streams without non-finite samples, each sorted by time, yaw unwrapped."""
         o_t, o = np.array(self.odom_t), np.array(self.odom, dtype=float)
-        c_t, c = np.array(self.cmd_t), np.array(self.cmd, dtype=float)
+        o_twist = np.array(self.odom_twist, dtype=float).reshape(-1, 2)
+        c_t, c = np.array(self.cmd_t), np.array(self.cmd, dtype=float).reshape(-1, 2)  # (0, 2) without a command topic
         # Stamps on another clock than the log's (simulated time recorded by wall clock): what
         # is timed by receive time is moved onto the stamps' clock, by the odometry's offset.
         offset = float(np.median(self.stamp_minus_receive)) if self.stamp_minus_receive else 0.0
@@ -403,14 +430,14 @@ class _SmallTopics:
         c_t = c_t + shift * np.array(self.cmd_received, dtype=bool)
         if not (np.isfinite(o).all() and np.isfinite(o_t).all()):
             keep = np.isfinite(o).all(axis=1) & np.isfinite(o_t)
-            o_t, o = o_t[keep], o[keep]
+            o_t, o, o_twist = o_t[keep], o[keep], o_twist[keep]
         keep = np.isfinite(c).all(axis=1) & np.isfinite(c_t)
         c_t, c = c_t[keep], c[keep]
         order = np.argsort(o_t, kind="stable")
-        o_t, o = o_t[order], o[order]
+        o_t, o, o_twist = o_t[order], o[order], o_twist[order]
         o[:, 2] = np.unwrap(o[:, 2])  # so interpolation between stamps never spins the long way round
         order = np.argsort(c_t, kind="stable")
-        return _Streams(o_t, o, c_t[order], c[order], self.path, self.info, self.static, shift)
+        return _Streams(o_t, o, o_twist, c_t[order], c[order], self.path, self.info, self.static, shift)
 
 
 def camera_from_info(
@@ -641,7 +668,7 @@ def import_bag(
 def _import(req: _Request, out: Path, show_progress: bool, report: ImportReport) -> None:
     """The recording of ``req.bag`` at ``out``: the small topics read first, then the images streamed."""
     bag, robot = req.bag, req.robot
-    bag.check_topics(robot, ["segmentation", "odometry", "command", "camera_info"] + (["path"] if robot.path_topic else []))
+    bag.check_topics(robot, [role for role in ("segmentation", "odometry", "command", "camera_info", "path") if role in robot.topics])
     if bag.unreadable:
         shown = ", ".join(f"{topic} ({msgtype})" for topic, (msgtype, _) in sorted(bag.unreadable.items())[:4])
         report.notes.append(
@@ -650,8 +677,9 @@ def _import(req: _Request, out: Path, show_progress: bool, report: ImportReport)
         )
     seg_conns = bag.connections(robot.topics["segmentation"], "segmentation", robot.source)
     streams = _read_small_topics(bag, robot)
-    if len(streams.cmd_t) == 0:
-        raise UserError(bag.source, f"topic {robot.topics['command']} holds no usable command", field="topics.command")
+    if robot.command_topic is not None and len(streams.cmd_t) == 0:
+        raise UserError(bag.source, f"topic {robot.command_topic} holds no usable command", field="topics.command")
+    motion = _Motion.of(streams, robot, bag.source, report)
     if streams.receive_shift_s:
         report.notes.append(
             f"header stamps run {streams.receive_shift_s:+.1f} s from when the log received the messages (simulated time?); "
@@ -675,7 +703,7 @@ def _import(req: _Request, out: Path, show_progress: bool, report: ImportReport)
     scenario = _scenario(bag_path_name(bag.source), placement.path, placement.start(streams.odom[0]), tuple(placement.size), req.classes)
     meta = _meta(req, scenario, camera, preference, placement)
     progress = Progress("import", sum(c.msgcount for c in seg_conns), enabled=show_progress)
-    frames = _Frames(streams, conversion, RecordingWriter(out, meta, scenario), report)
+    frames = _Frames(streams, motion, conversion, RecordingWriter(out, meta, scenario), report)
     try:
         _stream_images(req, seg_conns, (camera.height_px, camera.width_px), frames, progress)
     except UserError:
@@ -787,12 +815,77 @@ class _Conversion:
     labels: LabelMap  # the label map (whether ids it does not list are an error)
 
 
+@dataclass(frozen=True)
+class _Motion:
+    """Each frame's (v, w) over time: the operator's commands, each in force until the next
+    (zero-order hold), or the vehicle's motion measured at the odometry's stamps, interpolated."""
+
+    t: np.ndarray  # (N,) [s], sorted
+    vw: np.ndarray  # (N, 2) v [m/s], w [rad/s]
+    held: bool  # commands, held; else measured motion, interpolated
+
+    @classmethod
+    def of(cls, streams: _Streams, robot: RobotConfig, source: str, report: ImportReport) -> _Motion:
+        """The commands where the robot file names a command topic; else the odometry's twist, or
+        differences of its poses where it has none (or fills none); the source goes in ``report``.
+        Poses that all carry one stamp, which measure no motion, are an error about ``source`` (the bag)."""
+        if robot.command_topic is not None:
+            return cls(streams.cmd_t, streams.cmd, held=True)
+        twist, poses = streams.odom_twist, streams.odom
+        filled = np.isfinite(twist).all(axis=1)
+        moved_m = float(np.hypot(*(poses[:, :2] - poses[0, :2]).T).max())  # the farthest from the first pose
+        never_filled = filled.any() and not np.any(twist[filled]) and moved_m > STILL_TWIST_MOVED_M
+        if filled.any() and not never_filled:
+            report.speed_source = "twist"
+            return cls(streams.odom_t[filled], twist[filled], held=False)
+        if never_filled:
+            report.notes.append(
+                f"the twist of {robot.topics['odometry']} is zero throughout while its pose moves {moved_m:.1f} m "
+                "(its driver fills no twist): the speed is measured by differences of its poses"
+            )
+        report.speed_source = "poses"
+        vw = _pose_differences(streams.odom_t, poses)
+        known = np.isfinite(vw).all(axis=1)
+        if not known.any():
+            odometry = robot.topics["odometry"]
+            raise UserError(source, f"topic {odometry}: every pose has one stamp, so no motion can be measured", field="topics.odometry")
+        return cls(streams.odom_t[known], vw[known], held=False)
+
+    def at(self, t: float) -> tuple[float, float] | None:
+        """(v, w) at ``t`` [s]; None before the first command."""
+        if self.held:
+            k = int(np.searchsorted(self.t, t, side="right")) - 1
+            return None if k < 0 else (float(self.vw[k, 0]), float(self.vw[k, 1]))
+        return float(np.interp(t, self.t, self.vw[:, 0])), float(np.interp(t, self.t, self.vw[:, 1]))
+
+
+def _pose_differences(t: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """(v [m/s], w [rad/s]) (N, 2) at each of ``poses`` (N, 3: x, y, unwrapped yaw) stamped ``t`` (N,) [s], sorted.
+
+    A centred difference of the poses POSE_DIFFERENCE_HALF_S before and after each one
+    (interpolated; one-sided at the log's ends), over a window rather than between neighbours so
+    that jitter in the stamps and positions averages out: v is the displacement along the heading
+    (negative when reversing) over dt, w the yaw change, wrapped, over dt. NaN where dt is 0.
+    """
+    lo = np.maximum(t - POSE_DIFFERENCE_HALF_S, t[0])
+    hi = np.minimum(t + POSE_DIFFERENCE_HALF_S, t[-1])
+    before = np.stack([np.interp(lo, t, poses[:, k]) for k in range(3)], axis=1)
+    after = np.stack([np.interp(hi, t, poses[:, k]) for k in range(3)], axis=1)
+    step = after - before
+    forward = step[:, 0] * np.cos(poses[:, 2]) + step[:, 1] * np.sin(poses[:, 2])
+    turn = (step[:, 2] + math.pi) % (2 * math.pi) - math.pi
+    dt = np.where(hi > lo, hi - lo, math.nan)
+    return np.stack([forward / dt, turn / dt], axis=1)
+
+
 @dataclass
 class _Frames:
     """The recording being written: each image kept gets the odometry pose interpolated at its
-    stamp and the command in force then; what is skipped is counted in the report."""
+    stamp and the command in force then (or the motion measured then); what is skipped is counted
+    in the report."""
 
     streams: _Streams
+    motion: _Motion
     conversion: _Conversion
     writer: RecordingWriter
     report: ImportReport
@@ -807,12 +900,13 @@ class _Frames:
     def emit(self, t: float, ids: np.ndarray) -> None:
         """The image ``ids`` (H, W) stamped ``t`` [s] as the next frame, unless it is skipped."""
         self.image_span = (min(self.image_span[0], t), max(self.image_span[1], t))
-        reason = self._skip_reason(t)
+        vw = self.motion.at(t)
+        reason = self._skip_reason(t, vw)
         if reason is not None:
             self.report.skipped[reason] += 1
             return
         c = self.conversion
-        v, w = (float(u) for u in self.streams.cmd[self._command_index(t)])  # v >= MIN_SPEED_MPS: slower frames are skipped
+        v, w = vw  # not None, and v >= MIN_SPEED_MPS: _skip_reason refuses the others
         w_set = float(np.clip(w * c.control.v_mps / v, min(c.control.w_rps), max(c.control.w_rps)))  # same curvature at the set's speed
         pose = self._pose_at(t)
         image = self._classes(ids, t)
@@ -822,8 +916,8 @@ class _Frames:
         self.speeds.append(v)
         self.last_t = t
 
-    def _skip_reason(self, t: float) -> str | None:
-        """Why the image stamped ``t`` [s] makes no frame, or None."""
+    def _skip_reason(self, t: float, vw: tuple[float, float] | None) -> str | None:
+        """Why the image stamped ``t`` [s], whose (v, w) is ``vw``, makes no frame, or None."""
         rate_hz, odom_t = self.conversion.rate_hz, self.streams.odom_t
         if t <= self.last_t:
             return "images out of order beyond the reorder buffer"
@@ -835,10 +929,9 @@ class _Frames:
         t0, t1 = odom_t[j - 1], odom_t[j]
         if t1 - t0 > self.conversion.max_gap_s and t != t0 and t != t1:  # a pose at the very stamp needs no interpolation
             return "images in an odometry gap"
-        k = self._command_index(t)
-        if k < 0:
+        if vw is None:
             return "images before the first command"
-        if self.streams.cmd[k][0] < MIN_SPEED_MPS:
+        if vw[0] < MIN_SPEED_MPS:
             return "images while stopped or reversing"
         return None
 
@@ -849,10 +942,6 @@ class _Frames:
         if j == len(odom_t) and t == odom_t[-1]:
             j -= 1  # exactly on the last pose
         return j
-
-    def _command_index(self, t: float) -> int:
-        """The command in force at ``t`` [s] (zero-order hold); -1 before the first."""
-        return int(np.searchsorted(self.streams.cmd_t, t, side="right")) - 1
 
     def _pose_at(self, t: float) -> tuple[float, float, float]:
         """The pose (x, y [m], yaw [rad]) in the map at ``t`` [s], interpolated between odometry poses."""
@@ -897,6 +986,7 @@ class _Frames:
             raise UserError(
                 source,
                 f"no usable frame: {', '.join(f'{n} {r}' for r, n in report.skipped.items()) or 'no images'}"
+                + (f"; speeds {report.speed_how}" if report.speed_source != "commands" else "")
                 + (f" (stamps: {when})" if when else ""),
                 field="topics.segmentation",
             )

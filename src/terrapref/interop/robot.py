@@ -6,8 +6,8 @@
     topics:
       segmentation: /warthog/seg/labels        # sensor_msgs/Image (mono8/mono16 ids) or CompressedImage (png)
       camera_info: /warthog/camera/camera_info # sensor_msgs/CameraInfo (K; plumb_bob distortion)
-      odometry: /warthog/odom                  # nav_msgs/Odometry or geometry_msgs/PoseStamped
-      command: /warthog/cmd_vel                # geometry_msgs/Twist or TwistStamped: the label
+      odometry: /warthog/odom                  # nav_msgs/Odometry, PoseStamped or PoseWithCovarianceStamped
+      command: /warthog/cmd_vel                # optional: geometry_msgs/Twist or TwistStamped, the label
       path: /route/plan                        # nav_msgs/Path; optional (see path_file)
     camera:
       height_m: 1.0                            # optical centre above the ground [m]
@@ -28,7 +28,10 @@
       margin_m: 0.3                            # kept from lethal or unseen ground when stopped [m]
       blind_after_s: 0.5                       # blind frames tolerated before a stop [s]
 
-Without ``topics.path`` or ``path_file`` the reference path is the driven odometry, smoothed.
+Without ``topics.command`` each frame is labelled by the vehicle's measured motion (v, w): the
+odometry's twist, or differences of its poses where it carries none (terrapref.interop.bag_import).
+A command topic that is named must be in the bag. Without ``topics.path`` or ``path_file`` the
+reference path is the driven odometry, smoothed.
 Relative file names are relative to the robot file.
 """
 
@@ -51,8 +54,9 @@ from terrapref.yamlio import load_yaml_text, read_yaml_mapping
 
 ROBOT_FORMAT = "terrapref-robot/1"
 _TOP = {"format", "topics", "camera", "labels", "path_file", "profile", "max_gap_s", "description", "stop"}
-_TOPICS_REQUIRED = ("segmentation", "camera_info", "odometry", "command")
-_TOPICS = set(_TOPICS_REQUIRED) | {"path"}
+_TOPICS_REQUIRED = ("segmentation", "camera_info", "odometry")
+_TOPICS_OPTIONAL = ("command", "path")
+_TOPICS = set(_TOPICS_REQUIRED) | set(_TOPICS_OPTIONAL)
 _CAMERA = {
     "height_m": (0.05, 10.0),
     "pitch_deg": (-89.0, 89.0),
@@ -78,6 +82,11 @@ class RobotConfig:
     @property
     def path_topic(self) -> str | None:
         return self.topics.get("path")
+
+    @property
+    def command_topic(self) -> str | None:
+        """The operator's commands; None: frames are labelled by the odometry's measured motion."""
+        return self.topics.get("command")
 
 
 def _number(value: object) -> float | None:
@@ -142,7 +151,9 @@ def _stop(block: object, source: str) -> StopConfig:
 def _check_topics(topics: object, problems: list[Problem]) -> dict[str, str]:
     """The topic of each role in ``topics`` (the file's ``topics``); what is wrong goes in ``problems``."""
     if not isinstance(topics, dict):  # one problem, not one per topic
-        problems.append(Problem("topics", f"expected a mapping with {', '.join(_TOPICS_REQUIRED)} (and optionally path)"))
+        problems.append(
+            Problem("topics", f"expected a mapping with {', '.join(_TOPICS_REQUIRED)} (and optionally {', '.join(_TOPICS_OPTIONAL)})")
+        )
         return {}
     out: dict[str, str] = {}
     for key, value in topics.items():
