@@ -173,3 +173,20 @@ def test_the_robots_speed_at_an_image_is_its_odometrys_forward_motion(setup):
         x, y, _ = POSES[i]
         backwards.on_odometry(odometry(TS, header(TS, 0.1 * i, "odom"), pose(TS, x, y, yaw_quaternion(TS, np.pi))))
     assert backwards.speed_at(t0 + 0.5) == pytest.approx(1.0)  # reversing at 1 m/s: a speed of 1 m/s
+
+
+def test_a_node_publishes_on_the_robot_files_command_topic_or_its_flag_and_refuses_neither(setup, tmp_path):
+    from terrapref.errors import UserError
+    from terrapref.interop.node_core import NodeOptions
+
+    _, robot, _, _ = setup
+    assert NodeOptions().command_topic(robot) == "/cmd" and NodeOptions(cmd_topic="/out").command_topic(robot) == "/out"
+    (tmp_path / "robot.yaml").write_text(
+        "format: terrapref-robot/1\ntopics: {segmentation: /seg, camera_info: /info, odometry: /odom}\n"
+        "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n"
+    )
+    bare = load_robot(tmp_path / "robot.yaml")  # a robot file for logs without commands
+    assert NodeOptions(cmd_topic="/out").command_topic(bare) == "/out"
+    with pytest.raises(UserError) as raised:
+        NodeOptions().command_topic(bare)
+    assert raised.value.problems[0].field == "topics.command" and "--cmd-topic" in str(raised.value)

@@ -338,6 +338,18 @@ class NodeOptions:
                 raise UserError(origin[name], f"expected a non-empty string, got {values[name]!r}")
         return NodeOptions(**values)
 
+    def command_topic(self, robot: RobotConfig) -> str:
+        """Where the command goes: ``cmd_topic``, else the robot file's command topic (a robot file
+        may leave it out: its logs are then labelled by odometry); neither is a UserError."""
+        topic = self.cmd_topic or robot.command_topic
+        if topic is None:
+            raise UserError(
+                robot.source,
+                "names no command topic for the node to publish on: give --cmd-topic (ROS parameter cmd_topic) or topics.command",
+                field="topics.command",
+            )
+        return topic
+
 
 class NodeLog:
     """What a node says about its work, whatever its transport: each problem with an incoming

@@ -126,7 +126,7 @@ class _Node:
             "geometry_msgs/PoseStamped": PoseStamped,
             "geometry_msgs/PoseWithCovarianceStamped": PoseWithCovarianceStamped,
         }
-        self.cmd_pub = rospy.Publisher(opts.cmd_topic or robot.topics["command"], TwistStamped if opts.stamped else Twist, queue_size=10)
+        self.cmd_pub = rospy.Publisher(opts.command_topic(robot), TwistStamped if opts.stamped else Twist, queue_size=10)
         self.traj_pub = rospy.Publisher("~trajectories", MarkerArray, queue_size=2)
         self.cost_pub = rospy.Publisher("~costmap", OccupancyGrid, queue_size=1, latch=True)
         self.markers = _TrajectoryMarkers(model, rospy)

@@ -241,7 +241,7 @@ def endpoints(robot, opts: NodeOptions, names: Names, sim: bool, path_topic: boo
         out.append(Endpoint("clock", "/clock", ("rosgraph_msgs/msg/Clock",), CLOCK, False))
     twist = "geometry_msgs/msg/TwistStamped" if opts.stamped else "geometry_msgs/msg/Twist"
     out += [
-        Endpoint("command", names.resolve(opts.cmd_topic or t["command"]), (twist,), DEFAULT, True),
+        Endpoint("command", names.resolve(opts.command_topic(robot)), (twist,), DEFAULT, True),
         Endpoint("trajectories", names.resolve("~/trajectories"), ("visualization_msgs/msg/MarkerArray",), DEFAULT, True),
         Endpoint("costmap", names.resolve("~/costmap"), ("nav_msgs/msg/OccupancyGrid",), LATCHED, True),
     ]
