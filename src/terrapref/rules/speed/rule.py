@@ -304,11 +304,14 @@ class SpeedRunner:
         self.map = GroundMap(context.camera, context.terrain, MAP) if self.own_map else shared
         self.across = across(rule.config.half_width_m)
         self._d = STATION_STEP_M * np.arange(STATIONS)
+        self._last_v = 0.0  # the speed commanded last [m/s]
 
     def reset(self) -> None:
-        """Forget the ground seen (a new path): its own map only; a shared one is its keeper's to reset."""
+        """Forget the ground seen (a new path; its own map only: a shared one is its keeper's to
+        reset) and the speed commanded last."""
         if self.own_map:
             self.map.reset()
+        self._last_v = 0.0
 
     def observe(self, view: SegmentationView, pose: Pose) -> None:
         """Take in a frame (its own map only; a shared one was updated by the rule that keeps it)."""
@@ -354,12 +357,15 @@ class SpeedRunner:
     def yaw_rate(self, curvature: float, v_mps: float, speed_mps: float | None = None) -> float:
         """The yaw rate [rad/s] that drives an arc of ``curvature`` [1/m] at the commanded ``v_mps``,
         turned no harder than the model's lateral limit (SpeedModel.lateral_limit_mps2) allows at
-        the faster of ``v_mps`` and the vehicle's speed ``speed_mps`` [m/s] (None: unknown). A
-        vehicle still braking to ``v_mps`` widens its arc for a moment instead of going harder
-        sideways than the driver did."""
+        the fastest the vehicle may go until the next decision: ``v_mps``, its speed ``speed_mps``
+        [m/s] when the frame was taken (None: unknown), or the speed commanded last, toward which
+        it may have gone on speeding up since. A vehicle still faster than ``v_mps`` (braking into
+        a bend) widens its arc for a moment instead of going harder sideways than the driver did.
+        Each call is a command given: the next call takes its ``v_mps`` as the speed commanded last."""
         w = curvature * v_mps
+        fastest = max(v_mps, speed_mps or 0.0, self._last_v)
+        self._last_v = v_mps
         lateral = self.rule.model.lateral_limit_mps2
-        fastest = max(v_mps, speed_mps or 0.0)
         if lateral is None or fastest <= 0 or abs(w) * fastest <= lateral:
             return w
         return math.copysign(lateral / fastest, w)
