@@ -419,10 +419,14 @@ def test_the_yaw_rate_keeps_to_the_lateral_limit_while_the_vehicle_may_still_spe
     """A frame taken at 1.0 m/s while the vehicle sped up toward the 2.0 m/s commanded last: until
     the next decision it may reach 2.0 m/s, so the arc of a slower command keeps to the limit there."""
     runner = _runner(replace(MODEL, drive_lateral_mps2=0.6), ALL_MUD)
-    assert runner.yaw_rate(0.1, 2.0) == pytest.approx(0.2)  # 0.4 m/s^2 at 2 m/s: within the limit
+    assert runner.yaw_rate(0.5, 0.9, speed_mps=1.0) == pytest.approx(0.45)  # nothing commanded yet: 0.45 m/s^2 at 1 m/s
+    runner.commanded(2.0)
     assert runner.yaw_rate(0.5, 0.9, speed_mps=1.0) == pytest.approx(0.6 / 2.0)  # not 0.45: 0.9 m/s^2 at 2 m/s
+    runner.commanded(0.9)
     assert runner.yaw_rate(0.5, 0.9, speed_mps=1.0) == pytest.approx(0.45)  # 0.9 commanded last, 1.0 measured: 0.45 m/s^2
-    runner.yaw_rate(0.0, 2.0)
+    runner.commanded(0.0)  # the planner stopped
+    assert runner.yaw_rate(0.5, 0.9, speed_mps=0.5) == pytest.approx(0.45)
+    runner.commanded(2.0)
     runner.reset()  # a new path: no speed commanded yet
     assert runner.yaw_rate(0.5, 0.9, speed_mps=0.5) == pytest.approx(0.45)
 

@@ -174,12 +174,20 @@ class Planner:
         outputs = functools.partial(_outputs, self.featurizer, self.policy, view, pose, self.path, s)
         if not self.runner.reads_probs and view is image:  # an array the caller may reuse is read now
             choice = self._at_speed(self.runner.decide(RuleInput(None, view, pose, self.path, s)), view, pose, s, speed_mps)
-            stop = self.stop_rule.check(view, pose, choice.command.v, choice.command.w, time_s)
+            stop = self._stop(choice, view, pose, time_s)
             return Decision(choice.index, STOP_COMMAND if stop else choice.command, s, pending=outputs, stop=stop)
         probs, U = outputs()
         choice = self._at_speed(self.runner.decide(RuleInput(probs, view, pose, self.path, s)), view, pose, s, speed_mps)
-        stop = self.stop_rule.check(view, pose, choice.command.v, choice.command.w, time_s)
+        stop = self._stop(choice, view, pose, time_s)
         return Decision(choice.index, STOP_COMMAND if stop else choice.command, s, (probs, U), stop=stop)
+
+    def _stop(self, choice: Choice, view: SegmentationView, pose: Pose, time_s: float | None) -> str | None:
+        """Why the stop rule stops instead of ``choice`` (None: it does not); the speed rule is told
+        the speed commanded."""
+        stop = self.stop_rule.check(view, pose, choice.command.v, choice.command.w, time_s)
+        if self.speed is not None:
+            self.speed.commanded(0.0 if stop else choice.command.v)
+        return stop
 
     def _at_speed(self, choice: Choice, view: SegmentationView, pose: Pose, progress_m: float, speed_mps: float | None) -> Choice:
         """The steering rule's choice at the speed rule's speed along its way (the same curvature,

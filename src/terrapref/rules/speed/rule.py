@@ -313,6 +313,10 @@ class SpeedRunner:
             self.map.reset()
         self._last_v = 0.0
 
+    def commanded(self, v_mps: float) -> None:
+        """The speed [m/s] the planner commanded (0 when it stopped), for the next :meth:`yaw_rate`."""
+        self._last_v = float(v_mps)
+
     def observe(self, view: SegmentationView, pose: Pose) -> None:
         """Take in a frame (its own map only; a shared one was updated by the rule that keeps it)."""
         if self.own_map:
@@ -358,13 +362,12 @@ class SpeedRunner:
         """The yaw rate [rad/s] that drives an arc of ``curvature`` [1/m] at the commanded ``v_mps``,
         turned no harder than the model's lateral limit (SpeedModel.lateral_limit_mps2) allows at
         the fastest the vehicle may go until the next decision: ``v_mps``, its speed ``speed_mps``
-        [m/s] when the frame was taken (None: unknown), or the speed commanded last, toward which
-        it may have gone on speeding up since. A vehicle still faster than ``v_mps`` (braking into
-        a bend) widens its arc for a moment instead of going harder sideways than the driver did.
-        Each call is a command given: the next call takes its ``v_mps`` as the speed commanded last."""
+        [m/s] when the frame was taken (None: unknown), or the speed commanded last
+        (:meth:`commanded`), toward which it may have gone on speeding up since. A vehicle still
+        faster than ``v_mps`` (braking into a bend) widens its arc for a moment instead of going
+        harder sideways than the driver did."""
         w = curvature * v_mps
         fastest = max(v_mps, speed_mps or 0.0, self._last_v)
-        self._last_v = v_mps
         lateral = self.rule.model.lateral_limit_mps2
         if lateral is None or fastest <= 0 or abs(w) * fastest <= lateral:
             return w
