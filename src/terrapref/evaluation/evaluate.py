@@ -128,7 +128,7 @@ def evaluate_model(
     evidence = _evidence(model, ev.scenarios)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    limit = driver_lateral_limit(ev.style, ev.speeds, getattr(model, "rules", ()))
+    limit = driver_lateral_limit(ev.style, ev.speeds, model.rules)
     metrics = _metrics(ev, profile, results, evidence, limit)
     beyond = {r.scenario: sorted(set(ev.frames) - {f.number for f in r.frames}) for r in results if r.driver == PLANNER and r.seed == 0}
     if any(beyond.values()):

@@ -24,6 +24,7 @@ from terrapref.scenario import AVOID, Scenario, Zone
 from terrapref.scenario.path import ReferencePath
 from terrapref.sim import EpisodeLog
 from terrapref.terrain import PreferenceProfile
+from terrapref.vehicle import wrap_angle
 from terrapref.world import WorldMap
 
 NOT_REACHED = "not reached"  # a zone's choice when the vehicle did not get past it
@@ -334,5 +335,5 @@ def _max_lateral_accel(trace: np.ndarray, dt_s: float) -> float:
         return 0.0
     step = np.diff(trace, axis=0)
     v = np.hypot(step[:, 0], step[:, 1]) / dt_s
-    w = (step[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    w = wrap_angle(step[:, 2])
     return float(np.max(np.abs(v * w / dt_s)))

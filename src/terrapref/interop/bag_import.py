@@ -53,7 +53,7 @@ from terrapref.progress import Progress
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.terrain.classes import UNKNOWN
 from terrapref.terrain.profile import PreferenceProfile
-from terrapref.vehicle import ControlSet
+from terrapref.vehicle import ControlSet, wrap_angle
 
 TYPES = {
     "segmentation": ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"),
@@ -873,7 +873,7 @@ def _pose_differences(t: np.ndarray, poses: np.ndarray) -> np.ndarray:
     after = np.stack([np.interp(hi, t, poses[:, k]) for k in range(3)], axis=1)
     step = after - before
     forward = step[:, 0] * np.cos(poses[:, 2]) + step[:, 1] * np.sin(poses[:, 2])
-    turn = (step[:, 2] + math.pi) % (2 * math.pi) - math.pi
+    turn = wrap_angle(step[:, 2])
     dt = np.where(hi > lo, hi - lo, math.nan)
     return np.stack([forward / dt, turn / dt], axis=1)
 

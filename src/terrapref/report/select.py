@@ -315,8 +315,7 @@ def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict
         speeds = model.job.speeds
         dm = driver_runs[(tuple(spec.profile), speeds, r.scenario)]
         if spec.model_path not in limits:
-            policy = Model.load(spec.model_path).policy
-            limits[spec.model_path] = driver_lateral_limit(styles.get(speeds, "default"), speeds, getattr(policy, "rules", ()))
+            limits[spec.model_path] = driver_lateral_limit(styles.get(speeds, "default"), speeds, Model.load(spec.model_path).rules)
         runs.append(
             {
                 **who,

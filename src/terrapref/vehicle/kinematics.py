@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 from terrapref.records import to_plain
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 class Pose(NamedTuple):
@@ -24,8 +27,8 @@ class Command(NamedTuple):
     w: float
 
 
-def wrap_angle(a: float) -> float:
-    """Angle wrapped to [-pi, pi)."""
+def wrap_angle(a: float | np.ndarray) -> float | np.ndarray:
+    """Angle (or angles, element by element) wrapped to [-pi, pi)."""
     return (a + math.pi) % (2 * math.pi) - math.pi
 
 
