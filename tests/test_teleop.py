@@ -31,6 +31,21 @@ def script_from(events: dict[int, list]) -> callable:
     return lambda state: events.get(state.index, [])
 
 
+def ride_along(out, model, events: dict[int, list], **options):
+    """A ride-along run of ``model`` with ``events`` by frame (200 frames at most); its result, and
+    who drove and the stick's w as seen before each frame."""
+    drivers: list[str] = []
+    stick: list[float] = []
+
+    def script(state):
+        drivers.append(state.driver)
+        stick.append(state.w)
+        return events.get(state.index, [])
+
+    result = run_teleop("demo_course", out, realtime=False, wait_for_start=False, script=script, max_frames=200, model=model, **options)
+    return result, drivers, stick
+
+
 def test_left_then_release_then_right_is_recorded_and_labelled(tmp_path):
     out = tmp_path / "rec"
     events = {
@@ -340,15 +355,7 @@ def test_riding_along_records_only_the_takeover_and_train_accepts_it(tmp_path):
     model = linear_model(tmp_path / "m.safetensors")
     out = tmp_path / "corrections"
     events = {20: [key(pygame.KEYDOWN, pygame.K_LEFT)], 23: [key(pygame.KEYUP, pygame.K_LEFT)], 80: [pygame.event.Event(pygame.QUIT)]}
-    drivers: list[str] = []
-    stick: list[float] = []
-
-    def script(state):
-        drivers.append(state.driver)
-        stick.append(state.w)
-        return events.get(state.index, [])
-
-    result = run_teleop("demo_course", out, realtime=False, wait_for_start=False, script=script, max_frames=200, model=model)
+    result, drivers, stick = ride_along(out, model, events)
     handback = round(HANDBACK_S * 10)
     # State is seen before each frame: the driver steers frames 20-22 (Left held) and 15 more untouched.
     assert drivers[:21] == ["planner"] * 21 and drivers[21 : 24 + handback] == ["you"] * (3 + handback)
@@ -911,17 +918,7 @@ def test_the_throttle_takes_over_from_the_planner_and_is_recorded_as_a_correctio
     model = linear_model(tmp_path / "m.safetensors")
     out = tmp_path / "corrections"
     events = {20: [key(pygame.KEYDOWN, pygame.K_w), key(pygame.KEYUP, pygame.K_w)], 80: [pygame.event.Event(pygame.QUIT)]}
-    drivers: list[str] = []
-    stick: list[float] = []
-
-    def script(state):
-        drivers.append(state.driver)
-        stick.append(state.w)
-        return events.get(state.index, [])
-
-    result = run_teleop(
-        "demo_course", out, realtime=False, wait_for_start=False, script=script, max_frames=200, model=model, v_mps=0.5
-    )  # the driver's own starting speed is not the planner's
+    result, drivers, stick = ride_along(out, model, events, v_mps=0.5)  # the driver's own starting speed is not the planner's
     handback = round(HANDBACK_S * 10)
     assert drivers[:21] == ["planner"] * 21 and drivers[21 : 21 + handback + 1] == ["you"] * (1 + handback)
     assert drivers[21 + handback + 1] == "planner"
