@@ -500,6 +500,41 @@ def test_map_read_beside_gives_the_numpy_forms_columns(seed: int, n_st: int, n_o
     assert np.array_equal(lazy[read], cells[read])  # the cells it decided are kept as decided
 
 
+def _map_read_split_numpy(cells, evidence, lethal, ox, oy, inv_res, px, py, never, lead, second) -> np.ndarray:
+    """The NumPy form of ground_map_compiled.map_read_split: the map's column, never where the cell's
+    terrain column (not lethal) holds under ``lead`` of its evidence and another such column at
+    least ``second``."""
+    out = _map_read_numpy(cells, ox, oy, inv_res, px, py, never)
+    k = evidence.shape[2] - 1
+    for p in np.flatnonzero((out < k) & ~lethal[np.minimum(out, k + 1)]):
+        e = evidence[int(math.floor((py[p] - oy) * inv_res)), int(math.floor((px[p] - ox) * inv_res))]
+        total = np.float32(e[k])
+        for q in range(k):  # float32, in column order
+            total = np.float32(total + e[q])
+        others = [e[q] for q in range(k) if q != out[p] and not lethal[q]]
+        if e[out[p]] < np.float32(lead) * total and max(others, default=-1.0) >= np.float32(second) * total:
+            out[p] = never
+    return out
+
+
+@FAST
+@given(
+    seed=st.integers(0, 2**32 - 1), n=st.integers(1, 300), lead=st.sampled_from([0.5, 0.6, 1.1]), second=st.sampled_from([0.0, 0.15, 0.3])
+)
+def test_map_read_split_gives_the_numpy_forms_columns(seed: int, n: int, lead: float, second: float):
+    rng = np.random.default_rng(seed)
+    k = int(rng.integers(1, 6))
+    cells, ox, oy, inv_res = _random_map(rng, _path(rng), k)
+    lazy, (evidence, lethal, shares), cells = _undecided(rng, cells, k)
+    px, py = ox + rng.uniform(-2.0, 18.0, n), oy + rng.uniform(-2.0, 18.0, n)
+    layers = MapLayers(lazy, evidence, lethal, shares, ox, oy, inv_res)
+    got = ground_map_compiled.map_read_split(layers, px, py, k + 1, np.float32(lead), np.float32(second))
+    want = _map_read_split_numpy(cells, evidence, lethal, ox, oy, inv_res, px, py, k + 1, lead, second)
+    assert _same(got, want)
+    plain = _map_read_numpy(cells, ox, oy, inv_res, px, py, k + 1)
+    assert np.all((got == plain) | (got == k + 1))  # a split cell reads as never seen; no other cell changes
+
+
 def _lethal_hits_numpy(
     cells: np.ndarray,
     ox: float,

@@ -175,13 +175,21 @@ class GroundMap:
             self.layers(), path.s, a, d, length, np.asarray(s, dtype=np.float64), np.ascontiguousarray(lat, dtype=np.float64), self.k + 1
         )
 
-    def lookup(self, points: np.ndarray) -> np.ndarray:
-        """Terrain column at each world point (..., 2); K + 1 (never seen) outside the map."""
+    def lookup(self, points: np.ndarray, split: tuple[float, float] | None = None) -> np.ndarray:
+        """Terrain column at each world point (..., 2); K + 1 (never seen) outside the map.
+
+        ``split`` (lead, second): a cell split between two terrain classes reads as never seen too,
+        its terrain class (not lethal) holding less than ``lead`` of its evidence while another
+        such class holds at least ``second`` (kernels.map_read_split): a reader for which the
+        two classes differ, and the neighbouring cells tell which it is."""
         if self.origin is None:
             return np.full(points.shape[:-1], self.k + 1, dtype=np.uint8)
         px = np.ascontiguousarray(points[..., 0], dtype=np.float64).reshape(-1)
         py = np.ascontiguousarray(points[..., 1], dtype=np.float64).reshape(-1)
-        out = kernels.map_read(self.layers(), px, py, self.k + 1)
+        if split is None:
+            out = kernels.map_read(self.layers(), px, py, self.k + 1)
+        else:
+            out = kernels.map_read_split(self.layers(), px, py, self.k + 1, np.float32(split[0]), np.float32(split[1]))
         return out.reshape(points.shape[:-1])
 
 

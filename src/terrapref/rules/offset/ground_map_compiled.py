@@ -212,6 +212,37 @@ def map_read(layers: MapLayers, px: np.ndarray, py: np.ndarray, never: int) -> n
 
 
 @njit(cache=True, nogil=True)
+def map_read_split(layers: MapLayers, px: np.ndarray, py: np.ndarray, never: int, lead: np.float32, second: np.float32) -> np.ndarray:
+    """:func:`map_read`, where a cell split between two terrain classes reads as ``never``: its
+    column a terrain column that is not lethal and holds less than ``lead`` of the cell's evidence,
+    while another such column holds at least ``second`` of it.
+
+    The NumPy form: ``col = map_read(...)``; where ``col < K`` and not lethal, with ``e`` the
+    cell's evidence and ``total = e.sum()`` (float32, in column order), ``never`` if ``e[col] <
+    lead * total`` and ``max(e[q] for q < K, q != col, not lethal) >= second * total``.
+    """
+    cols = map_read(layers, px, py, never)
+    _, evidence, lethal, _, ox, oy, inv_res = layers
+    k = evidence.shape[2] - 1
+    for p in range(px.shape[0]):
+        col = cols[p]
+        if col >= k or lethal[col]:
+            continue
+        i = math.floor((px[p] - ox) * inv_res)
+        j = math.floor((py[p] - oy) * inv_res)
+        total = evidence[j, i, k]
+        other = np.float32(-1.0)  # no other terrain column: not split
+        for q in range(k):
+            e = evidence[j, i, q]
+            total += e
+            if q != col and not lethal[q] and e > other:
+                other = e
+        if evidence[j, i, col] < lead * total and other >= second * total:
+            cols[p] = never
+    return cols
+
+
+@njit(cache=True, nogil=True)
 def path_frame(
     path_s: np.ndarray, path_a: np.ndarray, path_d: np.ndarray, path_len: np.ndarray, s: float
 ) -> tuple[float, float, float, float]:

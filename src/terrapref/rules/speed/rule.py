@@ -37,6 +37,13 @@ if TYPE_CHECKING:
 # the last seconds, placed with the camera's attitude from the sky line), so that a planner whose
 # offset rule steers reads the map that rule keeps, and a robot's ragged labels are outvoted alike.
 MAP = OffsetGeometry()
+# A cell split between two terrain classes (its class holding under half its evidence, another
+# at least 0.15) reads as never seen: a robot's network takes a patch of one class for another in
+# regions that last a few frames (rock for mud under the `field` preset, docs/perception.md), and one such cell in the few
+# dozen the way ahead crosses would slow the vehicle to the other class's speed; the cells around
+# it tell which class it is. The edge of a patch against the ground is not split (the ground is
+# not a terrain class), so a footprint that touches a patch in passing still slows for it.
+SPLIT = (0.5, 0.15)
 # The ground around the vehicle each training frame keeps (the vehicle frame: x ahead, y left):
 # SNAPSHOT_X x SNAPSHOT_Y cells of SNAPSHOT_STEP_M from (SNAPSHOT_X0, -SNAPSHOT_Y0).
 SNAPSHOT_STEP_M = 0.2
@@ -111,7 +118,7 @@ class SpeedReader(FrameReader):
 
     def read(self, j: int, view: SegmentationView, pose: Pose, path: ReferencePath, progress_m: float) -> None:
         self.map.update(view, pose)
-        self.snapshots[j] = self.map.lookup(_to_world(self._grid, pose))
+        self.snapshots[j] = self.map.lookup(_to_world(self._grid, pose), SPLIT)
 
     def arrays(self, recording: Recording, keep: np.ndarray, path: ReferencePath) -> dict[str, np.ndarray]:
         poses = recording.poses[keep].astype(float)
@@ -349,7 +356,7 @@ class SpeedRunner:
                 px, py = x + (np.sin(heading) - math.sin(yaw)) / k, y - (np.cos(heading) - math.cos(yaw)) / k
         normal = np.stack([-np.sin(heading), np.cos(heading)], axis=-1)
         points = np.stack([px, py], axis=-1)[:, None, :] + self.across[None, :, None] * normal[:, None, :]
-        way = self.map.lookup(points)[None]
+        way = self.map.lookup(points, SPLIT)[None]
         v = float(self.rule.model.predict(way, np.array([k]))[0])
         top = self.rule.config.max_speed_mps
         if abs(k) > 1e-9:
