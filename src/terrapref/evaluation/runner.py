@@ -54,6 +54,9 @@ class RunSpec:
     classes: ClassTable | None = None  # the class table the scenario is read with (None: the default)
     vehicle: VehicleConfig | None = None  # the vehicle driven (None: the default field UGV; VehicleConfig.paper(): the paper's)
     speeds: tuple[tuple[str, float], ...] = ()  # the synthetic driver's cruising speeds by class, over its style's (EXPERT runs)
+    perception_draw: int = (
+        0  # which draw of the perception model's errors (terrapref.perception.run_stream): models of different draws meet different errors
+    )
 
     @property
     def perceived_as(self) -> str:
@@ -293,7 +296,9 @@ def run_one(spec: RunSpec, watch: Watch | None = None) -> RunResult:
     perceived = spec.perception is not None and spec.perception.active and spec.driver != EXPERT
     watched = watch(driver) if watch is not None and isinstance(driver, PlannerDriver) else driver
     runner = (
-        PerceivedDriver(watched, Perceiver(spec.perception, sim.renderer, scenario.classes, sim.config.camera_rate_hz))
+        PerceivedDriver(
+            watched, Perceiver(spec.perception, sim.renderer, scenario.classes, sim.config.camera_rate_hz), draw=spec.perception_draw
+        )
         if perceived
         else watched
     )

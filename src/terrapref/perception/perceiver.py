@@ -160,11 +160,14 @@ class Perceiver:
         return newest
 
 
-def run_stream(rng: np.random.Generator, scenario_name: str) -> np.random.Generator:
+def run_stream(rng: np.random.Generator, scenario_name: str, draw: int = 0) -> np.random.Generator:
     """A run's perception stream: one draw from ``rng`` keyed by the scenario's name, so that runs
     with the same seed on different layouts see different errors (one drift, one set of
-    mislabelled frames shared by every layout of a study would bias all of them alike)."""
-    return np.random.default_rng([int(rng.integers(2**63)), zlib.crc32(scenario_name.encode())])
+    mislabelled frames shared by every layout of a study would bias all of them alike), and by
+    ``draw`` where it is not 0, so that several models driving the same layout with the same seed
+    can each meet errors of their own."""
+    keys = [int(rng.integers(2**63)), zlib.crc32(scenario_name.encode())]
+    return np.random.default_rng(keys + [draw] if draw else keys)
 
 
 class PerceivedDriver:
@@ -174,8 +177,8 @@ class PerceivedDriver:
     frame is at most ``hold_s`` old, and the vehicle stops after that, until a frame arrives.
     """
 
-    def __init__(self, inner: Driver, perceiver: Perceiver, hold_s: float = COMMAND_HOLD_S) -> None:
-        self.inner, self.perceiver, self.hold_s = inner, perceiver, hold_s
+    def __init__(self, inner: Driver, perceiver: Perceiver, hold_s: float = COMMAND_HOLD_S, draw: int = 0) -> None:
+        self.inner, self.perceiver, self.hold_s, self.draw = inner, perceiver, hold_s, draw
         self.stops = 0  # periods the vehicle was stopped for want of a fresh frame
         self.stop_reason: str | None = None  # why the last command stops (the inner driver's, or stale)
         self._last: Command | None = None
@@ -184,7 +187,7 @@ class PerceivedDriver:
 
     def reset(self, scenario: Any, rng: np.random.Generator) -> None:
         self.inner.reset(scenario, rng)
-        self.perceiver.reset(run_stream(rng, getattr(scenario, "name", "")))
+        self.perceiver.reset(run_stream(rng, getattr(scenario, "name", ""), self.draw))
         self._last, self._last_reason, self._stamp_s, self.stops, self.stop_reason = None, None, -math.inf, 0, None
 
     def act(self, frame: Frame) -> Command:

@@ -201,7 +201,7 @@ def _evaluate(setup: Reproduction, trained: list[RecipeModel], engine: Engine, l
         for e in range(setup.eval_seeds)
     ]
     specs += [
-        RunSpec(sc, e, PLANNER, t.model, setup.profile.order, perception=p, vehicle=PAPER_VEHICLE)
+        RunSpec(sc, e, PLANNER, t.model, setup.profile.order, perception=p, vehicle=PAPER_VEHICLE, perception_draw=t.seed)
         for p in setup.perceptions
         if p.active
         for t in trained
@@ -416,8 +416,8 @@ def _perception_table(setup: Reproduction, runs: list[RecipeRun]) -> list[str]:
         "## Under what a robot sees (test_course and the figure variations)",
         "",
         "The same models, each planner receiving what a robot's segmentation, localisation and camera would give instead of "
-        "the truth (terrapref.perception; `terrapref perception` lists the presets, docs/perception.md derives them); the "
-        "driver sees the truth. Each cell: agreement with the driver, zone success, collisions, runs completed and stops; "
+        "the truth (terrapref.perception; `terrapref perception` lists the presets, docs/perception.md derives them), each "
+        "training seed's model meeting errors of its own draw; the driver sees the truth. Each cell: agreement with the driver, zone success, collisions, runs completed and stops; "
         "95% Wilson intervals.",
         "",
         "| recipe | " + " | ".join(names) + " |",
