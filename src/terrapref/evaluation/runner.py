@@ -54,9 +54,7 @@ class RunSpec:
     classes: ClassTable | None = None  # the class table the scenario is read with (None: the default)
     vehicle: VehicleConfig | None = None  # the vehicle driven (None: the default field UGV; VehicleConfig.paper(): the paper's)
     speeds: tuple[tuple[str, float], ...] = ()  # the synthetic driver's cruising speeds by class, over its style's (EXPERT runs)
-    perception_draw: int = (
-        0  # which draw of the perception model's errors (terrapref.perception.run_stream): models of different draws meet different errors
-    )
+    perception_draw: int = 0  # which draw of the perception model's errors (terrapref.perception.run_stream)
 
     @property
     def perceived_as(self) -> str:

@@ -417,8 +417,8 @@ def _perception_table(setup: Reproduction, runs: list[RecipeRun]) -> list[str]:
         "",
         "The same models, each planner receiving what a robot's segmentation, localisation and camera would give instead of "
         "the truth (terrapref.perception; `terrapref perception` lists the presets, docs/perception.md derives them), each "
-        "training seed's model meeting errors of its own draw; the driver sees the truth. Each cell: agreement with the driver, zone success, collisions, runs completed and stops; "
-        "95% Wilson intervals.",
+        "training seed's model meeting errors of its own draw; the driver sees the truth. Each cell: agreement with the "
+        "driver, zone success, collisions, runs completed and stops; 95% Wilson intervals.",
         "",
         "| recipe | " + " | ".join(names) + " |",
         "|---|" + "---|" * len(names),

@@ -218,7 +218,7 @@ def map_read_split(layers: MapLayers, px: np.ndarray, py: np.ndarray, never: int
     while another such column holds at least ``second`` of it.
 
     The NumPy form: ``col = map_read(...)``; where ``col < K`` and not lethal, with ``e`` the
-    cell's evidence and ``total = e.sum()`` (float32, in column order), ``never`` if ``e[col] <
+    cell's evidence and ``total`` its float32 sum (column K first, then 0..K-1), ``never`` if ``e[col] <
     lead * total`` and ``max(e[q] for q < K, q != col, not lethal) >= second * total``.
     """
     cols = map_read(layers, px, py, never)
