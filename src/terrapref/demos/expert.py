@@ -38,7 +38,7 @@ from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim.loop import Frame
 from terrapref.sums import numpy_sum
 from terrapref.terrain import UNKNOWN, ClassTable, PreferenceProfile
-from terrapref.vehicle import Command, pure_pursuit_yaw_rate
+from terrapref.vehicle import Command, pure_pursuit_yaw_rate, wrap_angle
 from terrapref.world import WorldMap, rasterise
 
 
@@ -353,7 +353,7 @@ class ExpertDriver:
         target = self.path.point_at(s_t) + offset * np.array([-math.sin(heading), math.cos(heading)])
         x, y, yaw = pose
         alpha = math.atan2(target[1] - y, target[0] - x) - yaw
-        alpha = (alpha + math.pi) % (2 * math.pi) - math.pi
+        alpha = wrap_angle(alpha)
         return math.sin(alpha), max(math.hypot(target[0] - x, target[1] - y), 1e-6)
 
     def steer(self, pose: tuple[float, float, float], s_now: float, offset: float, v_mps: float | None = None) -> float:

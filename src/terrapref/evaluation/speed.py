@@ -19,6 +19,7 @@ from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult
 from terrapref.evaluation.scoring import RunMetrics
 from terrapref.evaluation.stats import cluster_bootstrap, rate_text
 from terrapref.rules import Rule, speed_rule
+from terrapref.rules.speed.rule import SpeedRule
 from terrapref.scenario import AVOID
 
 SPEED_TARGET_MPS = 0.08  # the planner's speed error per class against its driver must stay within this [m/s]
@@ -166,8 +167,8 @@ def driver_lateral_limit(style: str, speeds: tuple[tuple[str, float], ...], rule
     own = ExpertConfig.styled(style, None, speeds).lateral_accel_mps2
     if own is not None:
         return own
-    model = getattr(speed_rule(rules), "model", None)
-    return getattr(model, "drive_lateral_mps2", None)
+    rule = speed_rule(rules)
+    return rule.model.drive_lateral_mps2 if isinstance(rule, SpeedRule) else None
 
 
 def run_fields(metrics: RunMetrics, driver: RunMetrics, lateral_limit_mps2: float | None = None) -> dict[str, Any]:

@@ -953,7 +953,7 @@ class _Frames:
         else:
             x, y, yaw = odom[j - 1] + (t - t0) / (t1 - t0) * (odom[j] - odom[j - 1])
         if abs(yaw) > math.pi:  # unwrapped for the interpolation; wrapped back only where needed
-            yaw = (yaw + math.pi) % (2 * math.pi) - math.pi
+            yaw = wrap_angle(yaw)
         return x + shift[0], y + shift[1], yaw
 
     def _classes(self, ids: np.ndarray, t: float) -> np.ndarray:

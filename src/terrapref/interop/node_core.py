@@ -34,7 +34,7 @@ from terrapref.rules.costmap import Costmap
 from terrapref.scenario.path import ReferencePath
 from terrapref.stops import REASONS, STALE
 from terrapref.terrain import UNKNOWN
-from terrapref.vehicle import Command, Pose
+from terrapref.vehicle import Command, Pose, wrap_angle
 
 if TYPE_CHECKING:
     from terrapref.interop.live import LiveRun, LiveView
@@ -187,7 +187,7 @@ class PlannerNodeCore:
         if t1 - t0 > self.robot.max_gap_s:
             return None
         f = (t - t0) / (t1 - t0)
-        da = (a1 - a0 + math.pi) % (2 * math.pi) - math.pi
+        da = wrap_angle(a1 - a0)
         return Pose(x0 + f * (x1 - x0), y0 + f * (y1 - y0), a0 + f * da)
 
     def speed_at(self, t: float) -> float | None:

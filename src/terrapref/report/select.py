@@ -297,7 +297,6 @@ def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict
         for z in r.metrics.zones
     }
     driver_runs = {(tuple(s.profile), s.speeds, r.scenario): r.metrics for s, r in zip(specs, results, strict=True) if r.driver == EXPERT}
-    styles = {s.speeds: s.style for s in specs if s.driver == EXPERT}
     limits: dict[str, float | None] = {}  # by model file: its driver's lateral-acceleration limit
     rows, runs = [], []
     for spec, r in zip(specs, results, strict=True):
@@ -315,7 +314,7 @@ def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict
         speeds = model.job.speeds
         dm = driver_runs[(tuple(spec.profile), speeds, r.scenario)]
         if spec.model_path not in limits:
-            limits[spec.model_path] = driver_lateral_limit(styles.get(speeds, "default"), speeds, Model.load(spec.model_path).rules)
+            limits[spec.model_path] = driver_lateral_limit(model.job.style, speeds, Model.load(spec.model_path).rules)
         runs.append(
             {
                 **who,

@@ -39,7 +39,7 @@ from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.sim.loop import SimConfig, Simulation
 from terrapref.terrain import ClassTable, load_classes
 from terrapref.terrain.profile import PreferenceProfile
-from terrapref.vehicle import Command, ControlSet, Pose
+from terrapref.vehicle import Command, ControlSet, Pose, wrap_angle
 
 ENV_ID = "terrapref/OffRoadNav-v1"
 ENV_ID_CONTINUOUS = "terrapref/OffRoadNavContinuous-v1"
@@ -442,7 +442,7 @@ class OffRoadNavEnv(gym.Env):
         x, y, yaw = pose
         path, r = self.sim.path, WAYPOINT_RANGE_M
         _, offset = path.project(np.array([x, y]), self._progress_m - 2.0, self._progress_m + 10.0)
-        heading = (yaw - float(path.heading_at(self._progress_m)) + math.pi) % (2 * math.pi) - math.pi
+        heading = wrap_angle(yaw - float(path.heading_at(self._progress_m)))
         s = self._progress_m + self.waypoint_spacing_m * np.arange(1, self.n_waypoints + 1)
         d = path.point_at(s) - (x, y)
         c, sn = math.cos(yaw), math.sin(yaw)

@@ -11,7 +11,7 @@ import numpy as np
 
 from terrapref.features import PreferenceSet
 from terrapref.scenario.path import ReferencePath
-from terrapref.vehicle import Command, Pose, integrate_unicycle
+from terrapref.vehicle import Command, Pose, integrate_unicycle, wrap_angle
 from terrapref.world import WorldMap
 
 SAMPLE_STEP_M = 0.5
@@ -178,7 +178,7 @@ class CourseGuide:
 
 def _bearing(dx: float, dy: float, yaw: float) -> float:
     """The direction of (dx, dy) [m] from heading ``yaw`` [rad], in [-pi, pi), positive to the left."""
-    return (math.atan2(dy, dx) - yaw + math.pi) % (2 * math.pi) - math.pi
+    return wrap_angle(math.atan2(dy, dx) - yaw)
 
 
 def stays_on_map(
