@@ -43,6 +43,9 @@ def test_default_config_is_valid():
         {"min_duration_s": 2.0, "max_duration_s": 1.0},
         {"min_duration_s": 0.0},
         {"max_command_rps": 0.0},
+        {"clear_m": -0.5},
+        {"clear_s": float("nan")},
+        {"clear_m": float("inf")},
     ],
 )
 def test_invalid_config_is_refused(kw: dict):
@@ -129,6 +132,35 @@ def test_disturber_is_reproducible():
     assert a == b and a != c
 
 
+def test_no_push_begins_within_reach_of_lethal_terrain_and_the_others_are_drawn_as_before():
+    config = DisturbanceConfig(rate_hz=2.0, clear_m=1.0, clear_s=1.5)
+    free = Disturber(config, np.random.default_rng(3), DT)
+    near = Disturber(config, np.random.default_rng(3), DT)
+    asked: list[float] = []
+    command = Command(1.2, 0.0)
+    pushed_free, pushed_near = [], []
+    for i in range(400):
+        lethal_near = 100 <= i < 200  # lethal terrain within reach for these frames only
+
+        def within(r: float, lethal_near: bool = lethal_near) -> bool:
+            asked.append(r)
+            return lethal_near
+
+        pushed_free.append(free(command, 1.2, lambda r: False) != command)
+        pushed_near.append(near(command, 1.2, within) != command)
+    assert asked and all(r == pytest.approx(1.0 + 1.5 * 1.2) for r in asked)  # the reach grows with speed
+    assert any(pushed_free[100:200]) and not any(pushed_near[110:200])  # a push begun before 100 may run on
+    # The same pushes before and after: the left-out pushes' time passed as if they had run.
+    assert pushed_near[:100] == pushed_free[:100] and pushed_near[200:] == pushed_free[200:] and any(pushed_near[200:])
+
+
+def test_without_a_clearance_pushes_begin_anywhere():
+    config = DisturbanceConfig(rate_hz=2.0)
+    a, b = Disturber(config, np.random.default_rng(4), DT), Disturber(config, np.random.default_rng(4), DT)
+    command = Command(1.0, 0.0)
+    assert [a(command, 1.0, lambda r: True) for _ in range(300)] == [b(command) for _ in range(300)]
+
+
 # --- disturbed recordings ------------------------------------------------------------------------
 
 
@@ -204,3 +236,26 @@ def test_disturbance_changes_the_drive(disturbed, tmp_path: Path):
     assert not np.array_equal(clean.rec.poses, disturbed.rec.poses[:n])
     off = _record(tmp_path / "d", 0, DisturbanceConfig(rate_hz=0.0), time_limit_s=20.0)
     np.testing.assert_array_equal(off.rec.poses, clean.rec.poses)  # rate 0 is no disturbance at all
+
+
+def _push_starts(run: SimpleNamespace) -> list[tuple[float, float, float]]:
+    """(x, y, speed) where each push of a recorded run began (a push's first frame)."""
+    lines = run.lines
+    out = []
+    for j in range(1, len(lines)):
+        if "executed" in lines[j] and "executed" not in lines[j - 1]:
+            x, y, _ = lines[j]["pose"]
+            out.append((x, y, float(np.hypot(*np.subtract(lines[j]["pose"][:2], lines[j - 1]["pose"][:2]))) / DT))
+    return out
+
+
+def test_the_teaching_protocol_pushes_only_away_from_lethal_terrain(tmp_path: Path):
+    """demo_course's first minute, with and without the clearance: without it some push begins
+    with lethal terrain within reach; with it none does."""
+    config = DisturbanceConfig(rate_hz=1.0, clear_m=1.0, clear_s=1.5)
+    world = Simulation(resolve_scenario("demo_course")).world
+    free = _push_starts(_record(tmp_path / "f", 0, DisturbanceConfig(rate_hz=1.0), time_limit_s=60.0))
+    assert any(world.lethal_within(x, y, config.clearance_m(v) - 0.1) for x, y, v in free)
+    kept = _push_starts(_record(tmp_path / "k", 0, config, time_limit_s=60.0))
+    assert kept and len(kept) < len(free)
+    assert not any(world.lethal_within(x, y, config.clearance_m(v) - 0.1) for x, y, v in kept)

@@ -217,6 +217,26 @@ def test_class_at_point_is_class_at(x, y, resolution):
     assert world.class_at_point(x32, y32) == world.class_at(np.array([x32, y32]))
 
 
+@settings(max_examples=300, derandomize=True, deadline=None, database=None)
+@given(
+    st.floats(-2.0, 6.0, allow_nan=False),
+    st.floats(-2.0, 5.0, allow_nan=False),
+    st.floats(0.0, 4.0, allow_nan=False),
+    st.sampled_from([0.1, 0.25, 0.5]),
+    st.integers(0, 2**32 - 1),
+)
+def test_lethal_within_is_any_lethal_cell_centre_within_the_radius(x, y, radius, resolution, seed):
+    lethal = CLASSES.lethal_ids[0]
+    raster = np.where(np.random.default_rng(seed).random((12, 10)) < 0.03, lethal, GRASS).astype(np.uint8)
+    world = WorldMap(raster, resolution, CLASSES)
+    rows, cols = np.nonzero(raster == lethal)
+    centres = np.stack([(cols + 0.5) * resolution, (rows + 0.5) * resolution], axis=1)
+    expected = bool(len(centres)) and bool((np.hypot(centres[:, 0] - x, centres[:, 1] - y) <= radius).any())
+    if len(centres) and abs(np.hypot(centres[:, 0] - x, centres[:, 1] - y).min() - radius) < 1e-9:
+        return  # a centre on the circle itself: either answer is the rounding's
+    assert world.lethal_within(x, y, radius) == expected
+
+
 def test_grid_shape_is_exact_for_decimal_resolutions():
     assert grid_shape((100.0, 100.0), 0.05) == (2000, 2000)
     assert grid_shape((120.0, 80.0), 0.05) == (1600, 2400)

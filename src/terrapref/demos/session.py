@@ -72,7 +72,10 @@ class RecordLoop:
 
     def executed(self, command: Command) -> Command:
         """What the vehicle executes this frame instead of ``command`` (often ``command`` itself)."""
-        return self.disturb(command) if self.disturb is not None else command
+        if self.disturb is None:
+            return command
+        x, y, _ = self.sim.vehicle.pose
+        return self.disturb(command, self.sim.vehicle.speed_mps, lambda r: self.sim.world.lethal_within(x, y, r))
 
     def perceive(self, frame: Frame) -> Frame | None:
         """What reaches the robot in ``frame``'s period (``frame`` itself without a perceiver; None

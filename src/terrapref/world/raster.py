@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -49,6 +50,23 @@ class WorldMap:
         col, row = math.floor(x / self.resolution_m), math.floor(y / self.resolution_m)
         ny, nx = self.raster.shape
         return int(self.raster[row, col]) if 0 <= col < nx and 0 <= row < ny else UNKNOWN
+
+    def lethal_within(self, x: float, y: float, radius_m: float) -> bool:
+        """Whether the centre of a lethal cell lies within ``radius_m`` of the point ``(x, y)`` [m]
+        (the map's edge is not lethal)."""
+        res = self.resolution_m
+        ny, nx = self.raster.shape
+        rows = np.arange(max(math.floor((y - radius_m) / res), 0), min(math.floor((y + radius_m) / res) + 1, ny))
+        cols = np.arange(max(math.floor((x - radius_m) / res), 0), min(math.floor((x + radius_m) / res) + 1, nx))
+        if not (len(rows) and len(cols)):
+            return False
+        near = ((rows[:, None] + 0.5) * res - y) ** 2 + ((cols[None, :] + 0.5) * res - x) ** 2 <= radius_m**2
+        return bool((self._lethal[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1] & near).any())
+
+    @functools.cached_property
+    def _lethal(self) -> np.ndarray:
+        """Which cells are lethal (ny, nx), made on first use."""
+        return np.isin(self.raster, np.asarray(self.classes.lethal_ids, dtype=self.raster.dtype))
 
     def class_at(self, xy: np.ndarray) -> np.ndarray:
         """Class id at world points (..., 2) [m]; 255 (unknown) off the map."""
