@@ -69,7 +69,11 @@ def test_ours_drives_train_course_twice_with_pushes():
 
 def test_teach_drives_teach_course_once_and_fits_through_the_lookahead():
     teach = RECIPES["teach"]
-    assert (teach.demonstrations, teach.course, teach.disturbance) == (1, "teach_course", DisturbanceConfig(rate_hz=0.3, clear_m=1.0, clear_s=1.5))
+    assert (teach.demonstrations, teach.course, teach.disturbance) == (
+        1,
+        "teach_course",
+        DisturbanceConfig(rate_hz=0.3, clear_m=1.0, clear_s=1.5),
+    )
     assert (teach.train.optimiser.epochs, teach.train.optimiser.lr, teach.train.classifier.members) == (100, 3e-3, 3)
     assert teach.train.classifier.skip and teach.train.data.class_balance and teach.train.data.mirror
     # the offset rule, the last that steers, drives; the speed rule sets its speed
