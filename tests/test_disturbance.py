@@ -252,7 +252,7 @@ def _push_starts(run: SimpleNamespace) -> list[tuple[float, float, float]]:
 def test_the_teaching_protocol_pushes_only_away_from_lethal_terrain(tmp_path: Path):
     """demo_course's first minute, with and without the clearance: without it some push begins
     with lethal terrain within reach; with it none does."""
-    config = DisturbanceConfig(rate_hz=1.0, clear_m=1.0, clear_s=1.5)
+    config = DisturbanceConfig(rate_hz=1.0, clear_m=3.0, clear_s=2.0)
     world = Simulation(resolve_scenario("demo_course")).world
     free = _push_starts(_record(tmp_path / "f", 0, DisturbanceConfig(rate_hz=1.0), time_limit_s=60.0))
     assert any(world.lethal_within(x, y, config.clearance_m(v) - 0.1) for x, y, v in free)
