@@ -72,7 +72,7 @@ def test_teach_drives_teach_course_once_and_fits_through_the_lookahead():
     assert (teach.demonstrations, teach.course, teach.disturbance) == (
         1,
         "teach_course",
-        DisturbanceConfig(rate_hz=0.3, clear_m=3.0, clear_s=2.0),
+        DisturbanceConfig(rate_hz=0.6, clear_m=3.0, clear_s=2.0),
     )
     assert (teach.train.optimiser.epochs, teach.train.optimiser.lr, teach.train.classifier.members) == (100, 3e-3, 3)
     assert teach.train.classifier.skip and teach.train.data.class_balance and teach.train.data.mirror

@@ -113,7 +113,7 @@ TEACH = Recipe(
     course="teach_course",
     train=replace(_RECOMMENDED, classifier=ClassifierConfig(skip=True, members=3), data=replace(_RECOMMENDED.data, steady_labels=True)),
     rules=(SecondStageConfig(weight=5.0, lookahead=True), OffsetConfig(), SpeedConfig()),
-    disturbance=DisturbanceConfig(rate_hz=0.3, clear_m=3.0, clear_s=2.0),
+    disturbance=DisturbanceConfig(rate_hz=0.6, clear_m=3.0, clear_s=2.0),
     summary="one drive of teach_course: any preference order from five minutes (the default); the offset rule drives (docs/learning.md)",
 )
 RECIPES: Registry[Recipe] = Registry("recipe")
