@@ -101,8 +101,8 @@ def test_the_planner_makes_the_decisions_it_made_before_the_forward_pass_was_com
     golden = json.loads((DATA / "planner_decisions.json").read_text())
     # the training schedule pinned as it was when the file was made (teach trained at lr 1e-3 then)
     recipe = replace(recipe, train=replace(recipe.train, optimiser=replace(recipe.train.optimiser, epochs=epochs, lr=1e-3)))
-    if recipe.disturbance is not None:  # and the pushes as they were then: beginning anywhere, lethal terrain near or not
-        recipe = replace(recipe, disturbance=replace(recipe.disturbance, clear_m=0.0, clear_s=0.0))
+    if recipe.disturbance is not None:  # and the pushes as they were then: 0.3 a second, beginning anywhere
+        recipe = replace(recipe, disturbance=replace(recipe.disturbance, rate_hz=0.3, clear_m=0.0, clear_s=0.0))
     features = recipe.features()
     rules = tuple(r for r in recipe.rules if r.type != "offset")  # C and its second stage drive, as when the file was made
     recordings = demonstrate(

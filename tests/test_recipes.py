@@ -99,7 +99,7 @@ def test_recipes_are_validated(bad: dict):
 
 def test_to_dict_is_plain_data():
     data = RECIPES["teach"].to_dict()
-    assert data["name"] == "teach" and data["train"]["optimiser"]["epochs"] == 100 and data["disturbance"]["rate_hz"] == 0.3
+    assert data["name"] == "teach" and data["train"]["optimiser"]["epochs"] == 100 and data["disturbance"]["rate_hz"] == 0.6
 
 
 # --- the driver's styles -------------------------------------------------------------------------------
