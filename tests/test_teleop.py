@@ -709,7 +709,7 @@ def test_each_push_is_shown_as_it_happens_and_marked_on_the_map(tmp_path, monkey
         screenshot=tmp_path / "shot.png",
     )
     start = drawn[0].banner
-    assert start is not None and any("a push turns the vehicle" in line for line in start.lines)
+    assert start is not None and any("never near lethal terrain) turn the" in line for line in start.lines)
     assert any("--disturb 0" in line for line in start.lines), "the start screen says how to turn them off"
     frames = [json.loads(x) for x in (out / "frames.jsonl").read_text().splitlines()]
     pushed = [("executed" in f) for f in frames]

@@ -433,8 +433,8 @@ class _Session:
             if self.disturbance is not None:
                 every_s = 1.0 / self.disturbance.rate_hz
                 pushes = (
-                    f"Now and then (about every {every_s:.0f} s) a push turns the vehicle off",
-                    "its line, as a rut would: steer back. A red alert shows it.",
+                    f"Pushes (about every {every_s:.0f} s, never near lethal terrain) turn the",
+                    "vehicle off its line, as a rut would: steer back (red alert).",
                     "(terrapref drive --disturb 0: no pushes)",
                 )
             else:
