@@ -356,9 +356,15 @@ def _recipe_lines(recipes: tuple[Recipe, ...]) -> list[str]:
     """One line per recipe: its demonstrations, pushes, corrections and training."""
     lines = []
     for r in recipes:
+        d = r.disturbance
+        clear = (
+            f", beginning {d.clear_m:g} m + {d.clear_s:g} s x the speed from lethal terrain"
+            if d is not None and (d.clear_m or d.clear_s)
+            else ""
+        )
         pushes = (
-            f"with disturbances ({r.disturbance.rate_hz:g} pushes/s of {r.disturbance.min_yaw_rate_rps:g}-{r.disturbance.max_yaw_rate_rps:g} rad/s)"
-            if r.disturbance is not None
+            f"with disturbances ({d.rate_hz:g} pushes/s of {d.min_yaw_rate_rps:g}-{d.max_yaw_rate_rps:g} rad/s{clear})"
+            if d is not None
             else "undisturbed"
         )
         lines.append(
