@@ -207,6 +207,22 @@ def test_the_fit_recovers_the_speeds_preview_and_lag_that_drove(preview_m: float
     assert m.speeds_mps[MUD] == slowest and m.speeds_mps[LETHAL] == slowest  # the slowest learned, to be safe
 
 
+def test_the_fit_reads_a_class_wherever_one_footprint_point_meets_it():
+    """A driver who never slowed for a patch one footprint point brushes is explained better by
+    two points; the fit still reads one, as a driver who slows for such a patch elsewhere would
+    be read (docs/design.md: two points passed at full speed the patches drivers brush)."""
+    track = _track()
+    for station in np.flatnonzero(track[:, 0] == BACKGROUND)[4::8][:16]:
+        track[station, 0] = WATER  # the footprint's left edge only
+    ignores = replace(DRIVER, min_points=2)
+    way, curvature, v, frame = _drive(ignores, track)
+    fit = fit_speed(way, curvature, v, frame, K, (LETHAL,))
+    assert fit is not None and fit.model.min_points == 1
+    lag = fit.lag_frames
+    two = np.mean(np.abs(replace(fit.model, min_points=2).predict(way, curvature)[: len(v) - lag] - v[lag:]))
+    assert two < 0.5 * fit.error_mps, "two points explain the drive far better"
+
+
 def test_a_lag_pairs_frames_only_within_one_recording():
     way, curvature, v, _ = _drive(DRIVER, _track())
     half = len(v) // 2

@@ -23,7 +23,6 @@ import numpy as np
 STATION_STEP_M = 0.25
 STATIONS = 24  # the way is read to 6 m ahead
 PREVIEWS_M = tuple(0.5 * k for k in range(1, 9))  # the previews the fit tries [m]
-MIN_POINTS = (1, 2, 3)  # how many of a station's footprint points a class must hold to count, for the fit to choose
 RINGS_M = (0.5, 1.0)  # lethal terrain this far beside the footprint is near, for the fit to choose [m]
 LAGS = (0, 1, 2, 3)  # frames between what a frame shows and the speed commanded for it, for the fit to choose
 STEADY_CURVATURE = 0.25  # a way of less curvature counts for a cruising speed (the median keeps out the few bends that slowed) [1/m]
@@ -51,8 +50,8 @@ class SpeedModel:
         near_lethal_mps: the speed kept while lethal terrain is near [m/s].
         lethal: the lethal terrain columns.
         min_points: a column counts at a station where it holds at least this many of the
-            footprint's 5 points there (the ground map's cells are 0.2 m, and a map gathered from
-            a robot's labels is ragged at a patch's edge: one point may fall on the next class).
+            footprint's 5 points there. The fit keeps 1 (:func:`fit_speed`); a model file may ask
+            for more, for a map whose patch edges are too ragged to trust one point.
         drive_lateral_mps2: the largest lateral acceleration the drive showed, which the
             planner never asks for more than, bend limit or none [m/s^2].
     """
@@ -148,31 +147,30 @@ def fit_speed(
     bend's limit the median ``v^2 * curvature`` of the frames slower than their terrain allows in
     bends; the lethal neighbour's speed the median of the frames slower than both near lethal
     terrain (the ring that explains them best). The preview and lag that explain all frames best
-    (mean absolute error) are kept, then the footprint points a class must hold that do.
+    (mean absolute error) are kept. A class counts where it meets any one of the footprint's
+    points (``min_points`` 1), as the driver reads its footprint: a model that asked for two passed
+    at full speed the patches its driver brushes, on clean frames and under label errors alike,
+    even where two points explained its drive better.
     """
 
-    def fitted(lag: int, preview: float, points: int) -> SpeedFit | None:
+    def fitted(lag: int, preview: float) -> SpeedFit | None:
         later = _shifted(v_mps, frame, lag)
         ok = np.isfinite(later) & (later > 0) & np.isfinite(curvature)
         if np.count_nonzero(ok) < MIN_FRAMES:
             return None
         w, c, v = way[ok], curvature[ok], later[ok]
-        found = _fit_at(_Frames(w, c, v, k, lethal), preview, points)
+        found = _fit_at(_Frames(w, c, v, k, lethal), preview)
         if found is None:
             return None
         model, intervals = found
         return SpeedFit(model, intervals, lag, int(len(v)), float(np.mean(np.abs(model.predict(w, c) - v))))
 
-    def better(a: SpeedFit | None, b: SpeedFit | None) -> SpeedFit | None:
-        return b if a is None or (b is not None and b.error_mps < a.error_mps - 1e-9) else a
-
     best: SpeedFit | None = None
     for lag in LAGS:
         for preview in PREVIEWS_M:
-            best = better(best, fitted(lag, preview, MIN_POINTS[0]))
-    if best is not None:
-        for points in MIN_POINTS[1:]:
-            best = better(best, fitted(best.lag_frames, best.model.preview_m, points))
+            trial = fitted(lag, preview)
+            if best is None or (trial is not None and trial.error_mps < best.error_mps - 1e-9):
+                best = trial
     if best is not None:
         moving = np.isfinite(curvature) & (v_mps > 0)
         lateral = float(np.max(v_mps[moving] ** 2 * np.abs(curvature[moving]), initial=0.0))
@@ -200,7 +198,7 @@ class _Frames(NamedTuple):
     lethal: tuple[int, ...]
 
 
-def _fit_at(frames: _Frames, preview_m: float, min_points: int) -> tuple[SpeedModel, tuple[tuple[float, float] | None, ...]] | None:
+def _fit_at(frames: _Frames, preview_m: float) -> tuple[SpeedModel, tuple[tuple[float, float] | None, ...]] | None:
     way, curvature, v, k, lethal = frames
     upto = _stations(preview_m)
     foot = way[:, :upto, :5].reshape(len(way), -1)
@@ -227,13 +225,13 @@ def _fit_at(frames: _Frames, preview_m: float, min_points: int) -> tuple[SpeedMo
         return None
     slowest = min(known)
     speeds = [slowest if math.isnan(s) else s for s in speeds]  # never shown steady: the slowest known, to be safe
-    base = SpeedModel(tuple(speeds), preview_m, None, None, None, lethal, min_points)
+    base = SpeedModel(tuple(speeds), preview_m, None, None, None, lethal)
     terrain_v = base.predict(way, curvature)
     bend = (terrain_v > 1.1 * v) & (np.abs(curvature) >= BEND_CURVATURE) & ~near
     best, best_error = base, float(np.mean(np.abs(terrain_v - v)))
     if np.count_nonzero(bend) >= MIN_FRAMES:  # a limit in bends, kept only where it explains the frames better than none
         for a_lat in np.percentile(v[bend] ** 2 * np.abs(curvature[bend]), (25, 50, 75)):
-            trial = SpeedModel(tuple(speeds), preview_m, float(a_lat), None, None, lethal, min_points)
+            trial = SpeedModel(tuple(speeds), preview_m, float(a_lat), None, None, lethal)
             error = float(np.mean(np.abs(trial.predict(way, curvature) - v)))
             if error < best_error - 1e-9:
                 best, best_error = trial, error
@@ -243,7 +241,7 @@ def _fit_at(frames: _Frames, preview_m: float, min_points: int) -> tuple[SpeedMo
         slowed = _near(way, upto, is_lethal, ring) & (allowed > 1.1 * v)
         if np.count_nonzero(slowed) < MIN_FRAMES:
             continue
-        trial = SpeedModel(tuple(speeds), preview_m, a_lat, ring, float(np.median(v[slowed])), lethal, min_points)
+        trial = SpeedModel(tuple(speeds), preview_m, a_lat, ring, float(np.median(v[slowed])), lethal)
         error = float(np.mean(np.abs(trial.predict(way, curvature) - v)))
         if error < best_error - 1e-9:
             best, best_error = trial, error
