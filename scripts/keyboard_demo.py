@@ -8,14 +8,19 @@ default recipe:
 - *keyboard*: through the teleop window's own event handling (SDL's dummy video driver), as a
   person at a keyboard would: it wants what the driver wants (its intent), reacts 0.3 s later,
   and can only hold Left/Right (a step at the press, then gently on) or tap Down
-  (terrapref.teleop.keyboard).
+  (terrapref.teleop.keyboard); with ``--speeds`` it also works the throttle (W/S) toward the
+  speed the driver wants.
 
 A model is trained from each drive with the default recipe, and every model and the driver drive
 the generated layouts. Reported per input: zone success and agreement with the driver, with 95%
-Wilson intervals over all zones, and collisions.
+Wilson intervals over all zones, and collisions; with ``--speeds`` (a driver of cruising speeds
+by class, as ``terrapref record --speeds`` takes them), also each input's speed against the
+driver's (``terrapref evaluate``'s speed error per class and time to the end of the path).
 
     .venv/bin/python scripts/keyboard_demo.py --out runs/keyboard                  # 5 seeds x gen:2000-2031
     .venv/bin/python scripts/keyboard_demo.py --seeds 1 --courses 4 --out runs/kb_smoke
+    .venv/bin/python scripts/keyboard_demo.py --profile rock,mud,water,non_traversable \
+        --speeds grass=1.6,rock=1.0,mud=0.5,water=0.3 --out runs/kb_speed       # the throttle too
 
 Writes KEYBOARD.md, keyboard.json (every zone) and keyboard.png.
 """
@@ -37,7 +42,10 @@ import numpy as np  # noqa: E402
 
 from terrapref.dataset import build_dataset  # noqa: E402
 from terrapref.demos.recording import read_recording  # noqa: E402
+from terrapref.demos.speed_style import parse_speeds  # noqa: E402
+from terrapref.errors import UserError  # noqa: E402
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, run_many, zone_agrees  # noqa: E402
+from terrapref.evaluation.speed import SpeedComparison, run_fields  # noqa: E402
 from terrapref.evaluation.stats import rate_text, wilson  # noqa: E402
 from terrapref.grid import Engine, run_grid  # noqa: E402
 from terrapref.learning.pipeline import RunOptions, train_and_save  # noqa: E402
@@ -49,15 +57,18 @@ from terrapref.terrain import PreferenceProfile  # noqa: E402
 INPUTS = ("stick", "keyboard")
 
 
-def _demonstrate(job: tuple[str, str, int, tuple[str, ...]]) -> tuple[str, str, int, float, str]:
+Speeds = tuple[tuple[str, float], ...]
+
+
+def _demonstrate(job: tuple[str, str, int, tuple[str, ...], Speeds]) -> tuple[str, str, int, float, str]:
     """One drive and its model: (input, model path, seed, seconds, recording folder)."""
-    kind, workdir, seed, order = job
+    kind, workdir, seed, order, speeds = job
     t0 = time.perf_counter()
     recipe = recipe_named(DEFAULT_RECIPE)
     profile = PreferenceProfile(order)
     work = Path(workdir)
     if kind == "stick":
-        rec = record_demonstrations(recipe, work, RecipeSetup(seed, profile))[0]
+        rec = record_demonstrations(recipe, work, RecipeSetup(seed, profile, speeds=speeds))[0]
     else:
         from terrapref.demos.expert import ExpertConfig, ExpertDriver
         from terrapref.teleop import run_teleop
@@ -65,7 +76,7 @@ def _demonstrate(job: tuple[str, str, int, tuple[str, ...]]) -> tuple[str, str, 
 
         scenario = resolve_scenario(recipe.course)
         rec = work / "demo_keyboard"
-        person = KeyboardPerson(ExpertDriver(ExpertConfig.styled("default", order)), scenario, np.random.default_rng(seed * 100))
+        person = KeyboardPerson(ExpertDriver(ExpertConfig.styled("default", order, speeds)), scenario, np.random.default_rng(seed * 100))
         # Pushes with the default recipe's protocol (recipe.disturbance), drawn from their own
         # stream: the same kind of pushes as the stick's drive, not at the same moments.
         run_teleop(
@@ -90,13 +101,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--first", type=int, default=2000, help="first generated layout")
     ap.add_argument("--courses", type=int, default=32)
+    ap.add_argument("--speeds", help="the driver's cruising speeds by class, e.g. grass=1.6,rock=1.0,mud=0.5,water=0.3 (default: 1 m/s)")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     args = ap.parse_args(argv)
     order = tuple(args.profile.split(","))
+    try:
+        speeds = parse_speeds(args.speeds) if args.speeds else ()
+    except UserError as e:
+        ap.error(str(e))
     layouts = [f"gen:{args.first + i}" for i in range(args.courses)]
     args.out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    jobs = [(kind, str(args.out / "work" / f"{kind}_s{s}"), s, order) for s in range(args.seeds) for kind in INPUTS]
+    jobs = [(kind, str(args.out / "work" / f"{kind}_s{s}"), s, order, speeds) for s in range(args.seeds) for kind in INPUTS]
     done = run_grid(
         _demonstrate,
         jobs,
@@ -110,14 +126,15 @@ def main(argv: list[str] | None = None) -> int:
 
     keys = sorted(models)
     specs = [RunSpec(c, 0, PLANNER, models[key], order) for key in keys for c in layouts]
-    specs += [RunSpec(c, 0, EXPERT, None, order) for c in layouts]
+    specs += [RunSpec(c, 0, EXPERT, None, order, speeds=speeds) for c in layouts]
     results = run_many(
         specs, args.workers, lambda k, n: print(f"run {k}/{n}", file=sys.stderr, flush=True) if k % 20 == 0 or k == n else None
     )
     t_eval = time.perf_counter() - t0 - t_train
 
-    rows, collisions = _zone_rows(specs, results, {models[key]: key for key in keys})
+    rows, collisions, runs = _zone_rows(specs, results, {models[key]: key for key in keys})
     drives = _drives(recordings)
+    speed = {kind: SpeedComparison.of([r for r in rows if r["input"] == kind], [r for r in runs if r["input"] == kind]) for kind in INPUTS}
     (args.out / "keyboard.json").write_text(
         json.dumps(
             {
@@ -126,26 +143,33 @@ def main(argv: list[str] | None = None) -> int:
                 "zones": rows,
                 "collisions": collisions,
                 "drives": drives,
+                "speeds": dict(speeds),
+                "speed": {kind: c.to_dict() for kind, c in speed.items()} if speeds else None,
                 "train_s": t_train,
                 "eval_s": t_eval,
             },
             indent=0,
         )
     )
-    write_report(args.out, order, layouts, rows, collisions, drives, t_train, t_eval, args.workers)
+    write_report(args.out, order, layouts, rows, collisions, drives, t_train, t_eval, args.workers, speed if speeds else None, speeds)
     return 0
 
 
-def _zone_rows(specs: list[RunSpec], results: list[RunResult], kind_of: dict[str, tuple[str, int]]) -> tuple[list[dict], dict[str, int]]:
-    """Every planner zone beside the driver's choice in the same zone (keyboard.json's rows), and each input's collisions."""
-    driver = {(r.scenario, z.id): z for r in results if r.driver == EXPERT for z in r.metrics.zones}
-    rows = []
+def _zone_rows(
+    specs: list[RunSpec], results: list[RunResult], kind_of: dict[str, tuple[str, int]]
+) -> tuple[list[dict], dict[str, int], list[dict]]:
+    """Every planner zone beside the driver's choice in the same zone (keyboard.json's rows), each
+    input's collisions, and every planner run beside the driver's (what SpeedComparison reads)."""
+    driver_runs = {r.scenario: r for r in results if r.driver == EXPERT}
+    driver = {(r.scenario, z.id): z for r in driver_runs.values() for z in r.metrics.zones}
+    rows, runs = [], []
     collisions = dict.fromkeys(INPUTS, 0)
     for spec, r in zip(specs, results, strict=True):
         if r.driver != PLANNER:
             continue
         kind, seed = kind_of[spec.model_path]
         collisions[kind] += r.metrics.collisions
+        runs.append({"input": kind, "scenario": r.scenario, **run_fields(r.metrics, driver_runs[r.scenario].metrics)})
         for z in r.metrics.zones:
             d = driver[(r.scenario, z.id)]
             rows.append(
@@ -158,9 +182,11 @@ def _zone_rows(specs: list[RunSpec], results: list[RunResult], kind_of: dict[str
                     "driver_choice": d.choice,
                     "agrees": zone_agrees(z, d),
                     "success": z.success,
+                    "speed_mps": z.speed_mps,
+                    "driver_speed_mps": d.speed_mps,
                 }
             )
-    return rows, collisions
+    return rows, collisions, runs
 
 
 def _drives(recordings: dict[tuple[str, int], str]) -> dict[str, dict]:
@@ -169,22 +195,36 @@ def _drives(recordings: dict[tuple[str, int], str]) -> dict[str, dict]:
     for key in sorted(recordings):
         kind, seed = key
         rec = read_recording(recordings[key])
-        w = rec.commands[:, 1]
+        v, w = rec.commands[:, 0], rec.commands[:, 1]
         drives[f"{kind}_s{seed}"] = {
             "frames": len(rec),
             "minutes": rec.duration_s / 60,
             "straight_share": float(np.mean(w == 0.0)),
+            "speeds_mps": [float(np.min(v)), float(np.max(v))],
             "collisions": rec.meta.get("summary", {}).get("collisions"),
         }
     return drives
 
 
-def write_report(out: Path, order, layouts, rows, collisions, drives, t_train: float, t_eval: float, workers: int) -> None:
+def write_report(
+    out: Path,
+    order,
+    layouts,
+    rows,
+    collisions,
+    drives,
+    t_train: float,
+    t_eval: float,
+    workers: int,
+    speed: dict[str, SpeedComparison] | None = None,
+    speeds: Speeds = (),
+) -> None:
     seeds = sorted({r["seed"] for r in rows})
+    at = f", cruising at {', '.join(f'{name} {mps:g}' for name, mps in speeds)} m/s" if speeds else ""
     lines = [
         "# A keyboard demonstration against a stick: one drive of teach_course each",
         "",
-        f"Driver: the synthetic driver, default style, order {' > '.join(order)}; {len(seeds)} training seed(s); every model "
+        f"Driver: the synthetic driver, default style{at}, order {' > '.join(order)}; {len(seeds)} training seed(s); every model "
         f"drives {len(layouts)} generated layouts ({layouts[0]} to {layouts[-1]}). Rates with 95% Wilson intervals over all zones.",
         "",
         "| demonstration | zone success | agreement with the driver | collisions | drive: frames at w = 0 | drive: collisions | per seed (agreement) |",
@@ -205,6 +245,10 @@ def write_report(out: Path, order, layouts, rows, collisions, drives, t_train: f
         for key, name in (("success", "zone success"), ("agrees", "agreement")):
             ok = sum(r[key] for r in sel)
             points.append(RateRow(f"{kind}: {name}", ok / len(sel), wilson(ok, len(sel))))
+    if speed is not None:
+        lines += ["", "Speed against the driver's (95% intervals resampling layouts):", ""]
+        for kind, comparison in speed.items():
+            lines += [f"- {kind}: {line}" for line in comparison.lines()]
     lines += [
         "",
         f"Demonstrating and training {t_train:.0f} s, evaluation {t_eval:.0f} s (wall, {workers} workers).",

@@ -444,6 +444,35 @@ def test_a_simulated_keyboard_person_drives_the_course_through_the_window(tmp_pa
     )
     assert len(set(rec.labels.tolist())) >= 5 and 0.2 < np.mean(w == 0.0) < 0.9, "curves of several widths, and straight stretches"
     assert person.presses > 10
+    assert person.throttle_presses == 0 and (rec.commands[:, 0] == 1.0).all(), "a driver of one speed leaves the throttle at it"
+
+
+def test_a_simulated_keyboard_person_works_the_throttle_toward_the_speeds_it_wants(tmp_path):
+    """W and S through the window's own events: the set speed moves by a tap's step or a held key's
+    ramp, and settles at each cruising speed the driver wants (within half a step)."""
+    import numpy as np
+
+    from terrapref.demos.expert import ExpertConfig, ExpertDriver
+    from terrapref.scenario import resolve_scenario
+    from terrapref.teleop.keyboard import KeyboardPerson
+    from terrapref.teleop.throttle import KEY_RATE_MPS2, KEY_STEP_MPS
+
+    scenario = resolve_scenario("demo_course")
+    order = ("rock", "mud", "water", "non_traversable")
+    speeds = (("grass", 1.3), ("rock", 0.8), ("mud", 0.5), ("water", 0.3))
+    person = KeyboardPerson(ExpertDriver(ExpertConfig.styled("default", order, speeds)), scenario, np.random.default_rng(0))
+    out = tmp_path / "rec"
+    result = run_teleop(scenario, out, realtime=False, script=person, max_frames=3000)
+    rec = read_recording(out)
+    assert result.completed and result.collisions == 0
+    v = rec.commands[:, 0]
+    steps = np.round(np.abs(np.diff(v)), 6)
+    ramp = round(KEY_RATE_MPS2 / 10.0, 6)  # a held key, per camera frame
+    assert set(steps.tolist()) <= {0.0, KEY_STEP_MPS, ramp}, "a tap moves a step, a held key the ramp"
+    held = np.round(v, 2)
+    for _, mps in speeds:
+        assert np.count_nonzero(np.abs(held - mps) <= 0.5 * KEY_STEP_MPS + 1e-9) >= 20, f"held near {mps} m/s for 2 s or more"
+    assert person.throttle_presses > 5 and v.min() >= 0.3 - 1e-9 and v.max() <= 1.3 + 1e-9
 
 
 @pytest.mark.slow
