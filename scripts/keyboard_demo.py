@@ -134,7 +134,11 @@ def main(argv: list[str] | None = None) -> int:
 
     rows, collisions, runs = _zone_rows(specs, results, {models[key]: key for key in keys})
     drives = _drives(recordings)
-    speed = {kind: SpeedComparison.of([r for r in rows if r["input"] == kind], [r for r in runs if r["input"] == kind]) for kind in INPUTS}
+    speed = (
+        {kind: SpeedComparison.of([r for r in rows if r["input"] == kind], [r for r in runs if r["input"] == kind]) for kind in INPUTS}
+        if speeds
+        else None
+    )
     (args.out / "keyboard.json").write_text(
         json.dumps(
             {
@@ -144,14 +148,14 @@ def main(argv: list[str] | None = None) -> int:
                 "collisions": collisions,
                 "drives": drives,
                 "speeds": dict(speeds),
-                "speed": {kind: c.to_dict() for kind, c in speed.items()} if speeds else None,
+                "speed": None if speed is None else {kind: c.to_dict() for kind, c in speed.items()},
                 "train_s": t_train,
                 "eval_s": t_eval,
             },
             indent=0,
         )
     )
-    write_report(args.out, order, layouts, rows, collisions, drives, t_train, t_eval, args.workers, speed if speeds else None, speeds)
+    write_report(args.out, order, layouts, rows, collisions, drives, t_train, t_eval, args.workers, speed, speeds)
     return 0
 
 

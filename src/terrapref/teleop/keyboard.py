@@ -66,9 +66,8 @@ class KeyboardPerson:
         self.expert = expert
         self.expert.reset(scenario, rng, world=world)
         self.step = KEY_STEP_RPS  # how far a press moves the stick [rad/s]; holding it, less per frame at first
-        delay = max(0, round(reaction_s * camera_rate_hz))
-        self.queue: deque[float] = deque([0.0] * delay)
-        self.speeds: deque[float | None] = deque([None] * delay)  # the speed wanted, as late (None: not yet seen)
+        # The yaw rate and the speed wanted, reaction_s late (a speed of None: not yet seen).
+        self.queue: deque[tuple[float, float | None]] = deque([(0.0, None)] * max(0, round(reaction_s * camera_rate_hz)))
         self.held: int | None = None  # the arrow held down, if any
         self.throttle_held: int | None = None  # W or S held down, if any
         self.last_tap = -TAP_EVERY_FRAMES
@@ -80,10 +79,9 @@ class KeyboardPerson:
             return [_key(pygame.KEYDOWN, pygame.K_SPACE)] if state.index >= START_AFTER_FRAMES else []
         if state.phase != "driving":
             return []
-        self.queue.append(self.expert.intent(state.frame))
-        self.speeds.append(self.expert.wanted_mps)
-        target = self.queue.popleft()
-        events = self._throttle(state, self.speeds.popleft())
+        self.queue.append((self.expert.intent(state.frame), self.expert.wanted_mps))
+        target, wanted = self.queue.popleft()
+        events = self._throttle(state, wanted)
         want: int | None = None
         centre = False
         if abs(target - state.w) > 0.5 * self.step:
