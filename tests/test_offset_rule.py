@@ -293,6 +293,44 @@ def test_trees_wider_than_every_fitted_offset_are_escaped_beyond_them(camera):
     assert _clearance(_drive(stuck, scenario, camera, 34.0), (16.0, 10.0), (2.5, 7.0)) == 0.0  # without escape it drives in
 
 
+def test_an_escape_is_taken_on_the_side_of_the_offset_held(camera):
+    # Trees 7 m across, 0.4 m left of the path: the nearest escape clear of them is right of it
+    # (4.2 m), the left one lies 0.6 m further out (4.8 m). Holding nothing, the vehicle takes the
+    # nearest; holding an offset on the left, it stays on the left rather than cross in front of them.
+    wall = {"class": "non_traversable", "rectangle": {"center": [16.0, 10.4], "size": [2.5, 7.0]}}
+    scenario = _scenario([wall])
+    path = ReferencePath(scenario.waypoints)
+    pose = (9.0, 10.0, 0.0)
+    taken = {}
+    for held in (0.0, 2.0, -2.0):
+        stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
+        stage.held = held
+        stage.yaw_rate(_seen_from(scenario, camera, pose), pose, path, 7.0)
+        taken[held] = stage.held
+    reach = stage.offsets[-1]
+    assert taken[0.0] < -reach and taken[-2.0] == taken[0.0]  # the nearest, on the right
+    assert taken[2.0] > reach  # held on the left: the escape on the left
+
+
+def test_at_speed_an_offset_ruled_out_is_traded_for_one_on_the_same_side(camera):
+    # A tree 2.2 m across on the path, 5 m ahead; the vehicle holds an offset right of the path
+    # whose way meets it. The utility prefers the left side, by less than the switch margin. At
+    # the control set's speed the rule takes the best, on the left; faster than that it keeps to the
+    # right, where it was already going.
+    tree = {"class": "non_traversable", "rectangle": {"center": [14.0, 10.0], "size": [2.0, 2.2]}}
+    scenario = _scenario([tree])
+    path = ReferencePath(scenario.waypoints)
+    pose = (8.0, 10.0, 0.0)
+    taken = {}
+    for speed in (None, 1.0, 1.5):
+        stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
+        stage.held = -1.0
+        stage.yaw_rate(_seen_from(scenario, camera, pose), pose, path, 6.0, speed)
+        taken[speed] = stage.held
+    assert taken[None] == taken[1.0] > 2.0  # the best, across
+    assert taken[1.5] < -2.0  # clear of the tree on the right
+
+
 def test_the_stage_goes_back_to_the_path_only_when_the_way_back_is_clear(camera):
     # A thin strip of trees 0.65-1.0 m right of the path: off the footprint of offset 0 (0.6 m
     # each side) but inside its clearance (0.9 m), so nothing lies on the path, yet the way

@@ -487,6 +487,22 @@ def test_a_planner_told_its_speed_turns_no_harder_than_the_lateral_limit_allows_
     assert abs(told.command.w) * 2.0 == pytest.approx(0.05) and np.sign(told.command.w) == np.sign(untold.command.w)
 
 
+def test_the_steering_rule_is_told_the_faster_of_the_odometrys_speed_and_the_last_command(tmp_path: Path):
+    """RuleInput.speed_mps: nothing before a speed rule has commanded and nothing measured is 0;
+    then the speed commanded last, or the odometry's where that is faster."""
+    classifier = ClassifierConfig(hidden=8, skip=True)
+    meta = {**model_meta(), "rules": [SpeedRule(SpeedConfig(), MODEL).header()], "drives": "argmax"}
+    planner = Planner(load_model(save_model(tmp_path / "speed.safetensors", classifier, skip_path_weights(classifier), meta)))
+    told = []
+    decide = planner.runner.decide
+    planner.runner.decide = lambda frame: told.append(frame.speed_mps) or decide(frame)
+    planner.set_path(ALL_MUD.waypoints)
+    view = SegmentationView.of(SegmentationRenderer(planner.camera, rasterise(ALL_MUD)).render((2.0, 10.0, 0.0)))
+    for measured in (None, 0.5, 1.7):
+        planner.decide(view, (2.0, 10.0, 0.0), speed_mps=measured)
+    assert told == [0.0, 0.9, 1.7]  # the mud's 0.9 commanded at each frame
+
+
 # --- 5. the rule that drives beside a speed rule -------------------------------------------------------------
 
 

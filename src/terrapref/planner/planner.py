@@ -173,13 +173,24 @@ class Planner:
         s = self.tracker.update(np.array(pose[:2]))
         outputs = functools.partial(_outputs, self.featurizer, self.policy, view, pose, self.path, s)
         if not self.runner.reads_probs and view is image:  # an array the caller may reuse is read now
-            choice = self._at_speed(self.runner.decide(RuleInput(None, view, pose, self.path, s)), view, pose, s, speed_mps)
+            choice = self._at_speed(
+                self.runner.decide(RuleInput(None, view, pose, self.path, s, self._going(speed_mps))), view, pose, s, speed_mps
+            )
             stop = self._stop(choice, view, pose, time_s)
             return Decision(choice.index, STOP_COMMAND if stop else choice.command, s, pending=outputs, stop=stop)
         probs, U = outputs()
-        choice = self._at_speed(self.runner.decide(RuleInput(probs, view, pose, self.path, s)), view, pose, s, speed_mps)
+        choice = self._at_speed(
+            self.runner.decide(RuleInput(probs, view, pose, self.path, s, self._going(speed_mps))), view, pose, s, speed_mps
+        )
         stop = self._stop(choice, view, pose, time_s)
         return Decision(choice.index, STOP_COMMAND if stop else choice.command, s, (probs, U), stop=stop)
+
+    def _going(self, speed_mps: float | None) -> float | None:
+        """How fast the vehicle goes as the steering rule is told (RuleInput.speed_mps): the faster
+        of its odometry's speed and the speed commanded last; None without a speed rule."""
+        if self.speed is None:
+            return None
+        return max(speed_mps or 0.0, self.speed.last_commanded_mps)
 
     def _stop(self, choice: Choice, view: SegmentationView, pose: Pose, time_s: float | None) -> str | None:
         """Why the stop rule stops instead of ``choice`` (None: it does not); the speed rule is told

@@ -58,6 +58,8 @@ class RuleInput:
         pose: the vehicle's pose.
         path: the reference path.
         progress_m: the vehicle's progress along it [m].
+        speed_mps: how fast the vehicle goes: its odometry's speed, or the speed commanded last
+            if that is faster [m/s]; None where the planner sets no speed (the control set's).
     """
 
     probs: np.ndarray | None
@@ -65,6 +67,7 @@ class RuleInput:
     pose: Pose
     path: ReferencePath
     progress_m: float
+    speed_mps: float | None = None
 
 
 @dataclass(frozen=True)

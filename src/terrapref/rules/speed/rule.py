@@ -324,6 +324,11 @@ class SpeedRunner:
         """The speed [m/s] the planner commanded (0 when it stopped), for the next :meth:`yaw_rate`."""
         self._last_v = float(v_mps)
 
+    @property
+    def last_commanded_mps(self) -> float:
+        """The speed the planner commanded last [m/s] (0 before the first)."""
+        return self._last_v
+
     def observe(self, view: SegmentationView, pose: Pose) -> None:
         """Take in a frame (its own map only; a shared one was updated by the rule that keeps it)."""
         if self.own_map:
