@@ -293,21 +293,22 @@ def test_trees_wider_than_every_fitted_offset_are_escaped_beyond_them(camera):
     assert _clearance(_drive(stuck, scenario, camera, 34.0), (16.0, 10.0), (2.5, 7.0)) == 0.0  # without escape it drives in
 
 
+def _taken(scenario, camera: PinholeCamera, pose, held: float, speed_mps: float | None = None) -> float:
+    """The offset a fresh rule holds after one frame seen at ``pose`` (on the test path, which
+    starts at x = 2 m), holding ``held`` before it, the vehicle going at ``speed_mps``."""
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
+    stage.held = held
+    stage.yaw_rate(_seen_from(scenario, camera, pose), pose, ReferencePath(scenario.waypoints), pose[0] - 2.0, speed_mps)
+    return stage.held
+
+
 def test_an_escape_is_taken_on_the_side_of_the_offset_held(camera):
     # Trees 7 m across, 0.4 m left of the path: the nearest escape clear of them is right of it
     # (4.2 m), the left one lies 0.6 m further out (4.8 m). Holding nothing, the vehicle takes the
     # nearest; holding an offset on the left, it stays on the left rather than cross in front of them.
     wall = {"class": "non_traversable", "rectangle": {"center": [16.0, 10.4], "size": [2.5, 7.0]}}
-    scenario = _scenario([wall])
-    path = ReferencePath(scenario.waypoints)
-    pose = (9.0, 10.0, 0.0)
-    taken = {}
-    for held in (0.0, 2.0, -2.0):
-        stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
-        stage.held = held
-        stage.yaw_rate(_seen_from(scenario, camera, pose), pose, path, 7.0)
-        taken[held] = stage.held
-    reach = stage.offsets[-1]
+    taken = {held: _taken(_scenario([wall]), camera, (9.0, 10.0, 0.0), held) for held in (0.0, 2.0, -2.0)}
+    reach = OffsetGeometry().max_offset_m
     assert taken[0.0] < -reach and taken[-2.0] == taken[0.0]  # the nearest, on the right
     assert taken[2.0] > reach  # held on the left: the escape on the left
 
@@ -318,15 +319,7 @@ def test_at_speed_an_offset_ruled_out_is_traded_for_one_on_the_same_side(camera)
     # the control set's speed the rule takes the best, on the left; faster than that it keeps to the
     # right, where it was already going.
     tree = {"class": "non_traversable", "rectangle": {"center": [14.0, 10.0], "size": [2.0, 2.2]}}
-    scenario = _scenario([tree])
-    path = ReferencePath(scenario.waypoints)
-    pose = (8.0, 10.0, 0.0)
-    taken = {}
-    for speed in (None, 1.0, 1.5):
-        stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
-        stage.held = -1.0
-        stage.yaw_rate(_seen_from(scenario, camera, pose), pose, path, 6.0, speed)
-        taken[speed] = stage.held
+    taken = {speed: _taken(_scenario([tree]), camera, (8.0, 10.0, 0.0), -1.0, speed) for speed in (None, 1.0, 1.5)}
     assert taken[None] == taken[1.0] > 2.0  # the best, across
     assert taken[1.5] < -2.0  # clear of the tree on the right
 
