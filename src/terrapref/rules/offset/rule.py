@@ -391,8 +391,8 @@ class OffsetSteering(RuleRunner):
         side = (np.sign(self.offsets) == np.sign(self.held)) & np.isfinite(value)
         if not side.any():
             return best
-        nearest = int(np.flatnonzero(side)[np.argmax(value[side])])
-        return nearest if keeps(value[nearest], value[best], self.config.switch_margin) else best
+        kept = int(np.flatnonzero(side)[np.argmax(value[side])])
+        return kept if keeps(value[kept], value[best], self.config.switch_margin) else best
 
     def _escape(self, value: np.ndarray, path: ReferencePath, progress_m: float) -> float | None:
         """The escape offset to hold when lethal terrain lies across every fitted offset, or None
@@ -400,7 +400,8 @@ class OffsetSteering(RuleRunner):
         the nearest clear one on the side of the offset held (a swap of sides while going round
         heads across the patch: under a robot's pose noise one such swap, 2.5 m before a lone
         tree at 1.5 m/s, brushed it), and of two as near, the one on the side whose outermost fitted
-        offset the utility prefers. Holding none, either side."""
+        offset the utility prefers; none clear on that side, the nearest on the other. Holding
+        none, the nearest on either side."""
         if self.escapes.size == 0:
             return None
         clear = ~self._lines(self.escapes, path, progress_m, self._far_stations)
