@@ -188,9 +188,7 @@ class Planner:
     def _going(self, speed_mps: float | None) -> float | None:
         """How fast the vehicle goes as the steering rule is told (RuleInput.speed_mps): the faster
         of its odometry's speed and the speed commanded last; None without a speed rule."""
-        if self.speed is None:
-            return None
-        return max(speed_mps or 0.0, self.speed.last_commanded_mps)
+        return self.speed.going_mps(speed_mps) if self.speed is not None else None
 
     def _stop(self, choice: Choice, view: SegmentationView, pose: Pose, time_s: float | None) -> str | None:
         """Why the stop rule stops instead of ``choice`` (None: it does not); the speed rule is told

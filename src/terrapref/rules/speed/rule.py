@@ -324,10 +324,11 @@ class SpeedRunner:
         """The speed [m/s] the planner commanded (0 when it stopped), for the next :meth:`yaw_rate`."""
         self._last_v = float(v_mps)
 
-    @property
-    def last_commanded_mps(self) -> float:
-        """The speed the planner commanded last [m/s] (0 before the first)."""
-        return self._last_v
+    def going_mps(self, speed_mps: float | None) -> float:
+        """How fast the vehicle may be going [m/s]: the faster of its odometry's ``speed_mps``
+        (None: unknown) and the speed commanded last (:meth:`commanded`; 0 before the first),
+        toward which it may still be speeding up."""
+        return max(speed_mps or 0.0, self._last_v)
 
     def observe(self, view: SegmentationView, pose: Pose) -> None:
         """Take in a frame (its own map only; a shared one was updated by the rule that keeps it)."""
@@ -379,7 +380,7 @@ class SpeedRunner:
         faster than ``v_mps`` (braking into a bend) widens its arc for a moment instead of going
         harder sideways than the driver did."""
         w = curvature * v_mps
-        fastest = max(v_mps, speed_mps or 0.0, self._last_v)
+        fastest = max(v_mps, self.going_mps(speed_mps))
         lateral = self.rule.model.lateral_limit_mps2
         if lateral is None or fastest <= 0 or abs(w) * fastest <= lateral:
             return w
