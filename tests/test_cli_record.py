@@ -24,3 +24,17 @@ def test_record_refuses_a_negative_rate(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "--disturb" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "rec").exists()
+
+
+def test_disturb_help_names_the_rate_a_recording_stores_by_default():
+    import argparse
+    import re
+
+    from terrapref.cli import build_parser
+    from terrapref.cli.demos import _disturbance
+
+    stored = _disturbance(None).rate_hz  # what a recording made without --disturb holds
+    commands = next(a for a in build_parser(train_flags=False)._actions if isinstance(a, argparse._SubParsersAction)).choices
+    for name in ("record", "drive"):
+        help_text = next(a.help for a in commands[name]._actions if "--disturb" in a.option_strings)
+        assert re.findall(r"default: the recommended protocol's ([0-9.]+)", help_text) == [f"{stored:g}"], (name, help_text)

@@ -151,7 +151,7 @@ def record_parser(sub: argparse._SubParsersAction) -> None:
         default=None,
         metavar="RATE",
         help="push the executed yaw rate off the driver's command RATE times per second, so recoveries are shown "
-        "(default: the recommended protocol's 0.3; 0: none)",
+        "(default: the recommended protocol's 0.6, recipe teach's; 0: none)",
     )
     p.add_argument(
         "--perception",
@@ -234,7 +234,7 @@ def drive_parser(sub: argparse._SubParsersAction) -> None:
         default=None,
         metavar="RATE",
         help="pushes per second on the executed yaw rate, each shown in the window as it happens "
-        "(default: the recommended protocol's 0.3; 0: none)",
+        "(default: the recommended protocol's 0.6, recipe teach's; 0: none)",
     )
     p.add_argument("--seed", type=int, default=0, help="seeds the pushes")
     p.add_argument("--profile", help="your preference order, best first, stored with the recording (default: the class table's)")
