@@ -232,7 +232,7 @@ def test_lines_give_the_order_every_pair_and_the_warnings(report: Identifiabilit
     assert len(flagged) == 1 and flagged[0].startswith("  mud > water: margin ") and "never compared" in flagged[0]
     mud_rock = next(line for line in lines if line.startswith("  mud > rock:"))
     p = report.pair("mud", "rock")
-    assert f"margin {p.margin:.2f} +- {1.96 * p.stderr:.2f}, compared in {p.frames} frames" in mud_rock
+    assert f"margin {p.margin:.2f}, standard error {p.stderr:.2f}, compared in {p.frames} frames" in mud_rock
     assert f"({p.for_first} for mud, {p.for_second} for rock;" in mud_rock
     assert lines[-1] == "warning: mud vs water: never compared; the planner's choice between them is a guess"
 

@@ -299,7 +299,7 @@ def test_inspect_tells_what_the_drive_shows_of_the_preference(demo_recording: Fu
     assert learned.split(": ", 1)[1].split(" > ")[0] == "grass"  # the driver keeps to grass where it can
     # demo_course never puts rock beside water: that pair is a guess, and the report says so
     assert re.search(r"warning: (rock vs water|water vs rock): never compared; the planner's choice between them is a guess", out)
-    assert re.search(r"mud > rock: margin [0-9.]+ \+- [0-9.]+, compared in [1-9][0-9]* frames", out)
+    assert re.search(r"mud > rock: margin [0-9.]+, standard error [0-9.]+, compared in [1-9][0-9]* frames", out)
     assert main(["inspect", str(rec.path), "--out", str(tmp_path / "b.png"), "--no-preference"]) == 0
     assert "what the drive shows" not in capsys.readouterr().out
 

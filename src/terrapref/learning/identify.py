@@ -68,7 +68,8 @@ class PairEvidence:
         return self.frames >= MIN_FRAMES and self.stderr is not None and self.margin > 2.0 * self.stderr
 
     def describe(self) -> str:
-        interval = f" +- {1.96 * self.stderr:.2f}" if self.stderr is not None else ""
+        # the standard error itself, the unit of the identification rule (margin > 2 standard errors)
+        interval = f", standard error {self.stderr:.2f}" if self.stderr is not None else ""
         seen = (
             f"compared in {self.frames} frames ({self.for_first} for {self.first}, {self.for_second} for {self.second}; "
             f"{self.first} on the left {self.sides[0]}, on the right {self.sides[1]})"
