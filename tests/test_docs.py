@@ -1,5 +1,5 @@
-"""The documentation: no dated measurement outside the lab book, and no link to a file or heading
-that is not there.
+"""The documentation: no dated measurement outside the lab book, no link to a file or heading
+that is not there, and the teaching courses' lengths as the code builds them.
 
 The how-to, reference and design pages state the current state; dated measurements and history
 live in the lab book, ``docs/lab/`` (STYLE 15). A lab-book entry is named by its date, so a link
@@ -11,9 +11,13 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 from urllib.parse import unquote
 
 import pytest
+
+if TYPE_CHECKING:
+    from terrapref.terrain.classes import ClassTable
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -199,3 +203,69 @@ def test_every_part_the_layout_tree_names_exists() -> None:
         if not ((PACKAGE / path).is_dir() if path.endswith("/") else (PACKAGE / path).is_file())
     ]
     assert not gone, "docs/layout.md's tree names what src/terrapref/ does not hold:\n" + "\n".join(gone)
+
+
+# --- teaching courses' lengths and times: the docs state what `terrapref course` computes ---------
+
+
+def _course_text(length_m: float, unit: str = "min") -> str:
+    """A course's length and expected drive as the docs write them: ``586 m, about 9.8 min``."""
+    from terrapref.scenario.teaching import DRIVER_SPEED_MPS
+
+    return f"{length_m:,.0f} m, about {length_m / DRIVER_SPEED_MPS / 60:.1f} {unit}"
+
+
+def _feature_table(k: int) -> ClassTable:
+    """A table of ``k`` feature classes and one lethal class (the docs' table of lengths)."""
+    from terrapref.terrain.classes import ClassTable, TerrainClass
+
+    names = ["grass", *(f"c{i}" for i in range(k)), "tree"]
+    return ClassTable(tuple(TerrainClass(i, n, (i, i, i)) for i, n in enumerate(names)), "grass", ("tree",), tuple(names[1:]))
+
+
+def test_the_table_of_teaching_course_lengths_is_what_the_code_builds() -> None:
+    from terrapref.scenario.teaching import course_length, fits, situations
+
+    text = (DOCS / "classes.md").read_text(encoding="utf-8")
+    rows = re.findall(r"^\| (\d+) \| (\d+) \| ([^|]+) \| ([^|]+) \| (full|compact) \|$", text, flags=re.MULTILINE)
+    assert len(rows) >= 8, "the scan finds the table of lengths in docs/classes.md"
+    wrong = []
+    for row in rows:
+        k = int(row[0])
+        table = _feature_table(k)
+        cells = [_course_text(course_length(situations(table, full))).replace("about ", "") for full in (True, False)]
+        expected = (str(k), str(k * (k - 1) // 2), *cells, "full" if fits(table) else "compact")
+        if row != expected:
+            wrong.append(f"docs/classes.md: | {' | '.join(row)} | should be | {' | '.join(expected)} |")
+    assert not wrong, "\n".join(wrong)
+
+
+def test_the_example_courses_lengths_in_the_docs_are_what_the_code_builds() -> None:
+    from collections import Counter
+
+    from terrapref.scenario import resolve_scenario
+    from terrapref.scenario.teaching import course_length, designed_course
+    from terrapref.terrain.classes import load_classes
+
+    _, items = designed_course(load_classes(ROOT / "examples" / "classes" / "rellis3d.yaml"))
+    rellis_m, kinds = course_length(items), Counter(item.kind for item in items)
+    small_m = course_length(designed_course(load_classes(ROOT / "examples" / "classes" / "small.yaml"))[1])
+    teach_m = resolve_scenario("teach_course").path_length_m()
+    readme, classes, teaching = ((ROOT / "README.md").read_text(), (DOCS / "classes.md").read_text(), (DOCS / "teaching.md").read_text())
+    results = (DOCS / "results.md").read_text()
+    claims = {
+        "README.md: the example table's course": (readme, f"# its teaching course: {_course_text(rellis_m)} at 1 m/s"),
+        "docs/classes.md: the example table's course": (
+            " ".join(classes.split()),
+            f"gives a {rellis_m:,.0f} m course: {kinds['pair']} pairs, {kinds['strip']} strips, {kinds['lone']} lone patches, "
+            f"{kinds['lane']} lanes, about {rellis_m / 60:.1f} minutes at 1 m/s",
+        ),
+        "docs/results.md: small.yaml's course": (
+            " ".join(results.split()),
+            f"has a {small_m:.0f} m teaching course ({small_m / 60:.1f} minutes",
+        ),
+        "README.md: teach_course": (readme, f"`teach_course` is the demonstration course ({teach_m:.0f} m;"),
+        "docs/teaching.md: teach_course": (teaching, f"`teach_course` is the demonstration course ({teach_m:.0f} m;"),
+    }
+    wrong = [f"{where}: expected {claim!r}" for where, (text, claim) in claims.items() if claim not in text]
+    assert not wrong, "\n".join(wrong)

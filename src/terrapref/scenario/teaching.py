@@ -18,8 +18,8 @@ lethal terrain once on each side, each lethal class alone twice (once a little l
 once a little right) and each feature class alone once and as a lane once, while that drive stays
 within :data:`BUDGET_M` (10 minutes at the driver's 1 m/s: up to 4 feature classes). Beyond it
 the course is *compact*: each pair once, with every class on the left as often as on the right
-(to within one), each strip, each lone patch and each lane once, the sides alternating. Six
-feature classes then drive about 8 minutes; ten about 18.
+(to within one), each strip, each lone patch and each lane once, the sides alternating (the
+lengths of both designs: docs/classes.md).
 
 Situations sit on straight legs; the trail bends a little between them (keeping to the path is
 part of the lesson) and turns round every :data:`LANE` situations, so that a long course folds
