@@ -346,6 +346,23 @@ def test_the_guide_reads_progress_the_next_patch_and_the_terrain_underneath():
     assert guide.readout(Pose(4.0, 6.0, 0.0), 2.0, label=20).lines()[3] == "label 20: left 57 deg/s, a 1.0 m radius"  # was 332 deg left
 
 
+def test_the_guide_gives_the_turn_radius_at_the_vehicle_speed():
+    """The radius is v / |w| at the speed the vehicle goes, not at the control set's 1 m/s."""
+    from terrapref.features import PreferenceSet, PreferenceSetConfig
+    from terrapref.sim import Simulation
+    from terrapref.teleop.guide import CourseGuide, turn_radius_m
+    from terrapref.vehicle import Pose
+
+    sim = Simulation(_tiny([]))
+    guide = CourseGuide(sim.world, sim.path, PreferenceSet(PreferenceSetConfig(), sim.camera))
+    at = (Pose(4.0, 6.0, 0.0), 2.0)
+    assert guide.readout(*at, label=15, speed_mps=1.6).lines()[3] == "label 15: left 29 deg/s, a 3.2 m radius"  # 1.6 m/s / 0.5 rad/s
+    assert guide.readout(*at, label=5, speed_mps=0.5).radius_m == pytest.approx(1.0)
+    assert guide.readout(*at, label=20, speed_mps=0.0).lines()[3] == "label 20: left 57 deg/s, on the spot"
+    assert guide.readout(*at, label=10, speed_mps=2.0).lines()[3] == "label 10: straight"
+    assert turn_radius_m(2.0, -0.25) == pytest.approx(8.0) and turn_radius_m(2.0, 0.0) == math.inf
+
+
 def test_riding_along_records_only_the_takeover_and_train_accepts_it(tmp_path):
     """The planner drives; Left takes over from the planner's command; 1.5 s untouched hands back."""
     from helpers import linear_model
@@ -751,6 +768,17 @@ def test_each_push_is_shown_as_it_happens_and_marked_on_the_map(tmp_path, monkey
             side = "LEFT" if f["executed"][1] > f["cmd"][1] else "RIGHT"
             assert any(a.startswith(f"PUSHED {side}") for a in driving[i + 1].alerts)
     assert len(drawn[-1].pushes_px) == result.pushes and f"pushes {result.pushes}" in drawn[-1].status
+
+
+def test_the_display_gives_the_turn_radius_at_the_speed_driven(monkeypatch):
+    drawn = _overlays(monkeypatch)
+    events = {5: [key(pygame.KEYDOWN, pygame.K_LEFT)] * 3}
+    run_teleop("demo_course", None, realtime=False, wait_for_start=False, script=script_from(events), max_frames=90, v_mps=2.0)
+    last = drawn[-1]
+    speed_mps = float(re.search(r"v (\d+\.\d+) m/s", last.status)[1])
+    turn = next(line for line in last.hud if line.startswith("label "))
+    deg_s, radius_m = (float(x) for x in re.search(r"left (\d+) deg/s, a (\d+\.\d) m radius", turn).groups())
+    assert speed_mps > 1.5 and radius_m == pytest.approx(speed_mps / math.radians(deg_s), abs=0.1)  # not the 1 m/s radius
 
 
 def test_without_pushes_the_start_screen_says_so_and_nothing_is_pushed(tmp_path, monkeypatch):

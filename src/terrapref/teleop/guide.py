@@ -29,6 +29,8 @@ REJOIN_AHEAD_M = 3.0
 rejoins it heading along it rather than square to it."""
 ON_LINE_M = 0.25
 """Nearer the route than this, the display says the vehicle is on it [m]."""
+STANDING_MPS = 0.05
+"""Slower than this the vehicle turns on the spot: the display gives no radius [m/s]."""
 
 
 @dataclass(frozen=True)
@@ -42,7 +44,8 @@ class Readout:
         next_patch_m: distance along the path to it [m] (0 while beside it).
         label: the current label (the control set's index).
         turn_deg_s: the label's turn rate [deg/s], positive to the left.
-        radius_m: the label's turn radius at the control set's speed [m] (inf: straight).
+        radius_m: the label's turn radius at the vehicle's speed [m] (inf: straight; 0: standing,
+            turning on the spot).
         at_edge: the vehicle is held at the map's edge.
         offset_m: the vehicle's distance from the route [m] (the cross-track error, >= 0).
         foot_rad: the bearing of the route's nearest point from the vehicle's heading [rad],
@@ -88,7 +91,8 @@ class Readout:
         else:
             patch = f"next patch: {self.next_patch} in {self.next_patch_m:.0f} m"
         side = "left" if self.turn_deg_s > 0.05 else "right" if self.turn_deg_s < -0.05 else ""
-        turn = f"label {self.label}: {f'{side} {abs(self.turn_deg_s):.0f} deg/s, a {self.radius_m:.1f} m radius' if side else 'straight'}"
+        radius = f"a {self.radius_m:.1f} m radius" if self.radius_m > 0 else "on the spot"
+        turn = f"label {self.label}: {f'{side} {abs(self.turn_deg_s):.0f} deg/s, {radius}' if side else 'straight'}"
         if self.offset_m < ON_LINE_M:
             route = "route: on it"
         else:
@@ -128,15 +132,11 @@ class CourseGuide:
         for i in range(len(s) - 1, -1, -1):
             nxt[i] = i if self.cls[i] >= 0 else nxt[i + 1]
         self.next_index = nxt[:-1]
-        control = prefs.config.control
-        w = np.asarray(control.w_rps, dtype=float)
-        self.turn_deg_s = np.degrees(w)
-        with np.errstate(divide="ignore"):
-            self.radius_m = np.where(w != 0.0, control.v_mps / np.abs(w), np.inf)
+        self.w_rps = np.asarray(prefs.config.control.w_rps, dtype=float)
 
-    def readout(self, pose: Pose, progress_m: float, label: int, at_edge: bool = False) -> Readout:
+    def readout(self, pose: Pose, progress_m: float, label: int, at_edge: bool = False, speed_mps: float = 1.0) -> Readout:
         """The display for the vehicle at ``pose`` having come ``progress_m`` [m] along the path
-        (the simulation's progress), its stick on ``label``."""
+        (the simulation's progress) at ``speed_mps`` [m/s], its stick on ``label``."""
         i = min(int(math.ceil(progress_m / SAMPLE_STEP_M - 1e-9)), len(self.s) - 1)
         # Beside a patch now, if the sample just passed has one.
         j = i - 1 if i > 0 and self.cls[i - 1] >= 0 else int(self.next_index[i])
@@ -154,8 +154,8 @@ class CourseGuide:
             name,
             dist,
             label,
-            float(self.turn_deg_s[label]),
-            float(self.radius_m[label]),
+            math.degrees(self.w_rps[label]),
+            turn_radius_m(speed_mps, float(self.w_rps[label])),
             at_edge,
             offset_m,
             foot_rad,
@@ -174,6 +174,14 @@ class CourseGuide:
         fx, fy = self.path.point_at(float(s))
         tx, ty = self.path.point_at(float(min(s + REJOIN_AHEAD_M, self.path.length_m)))
         return abs(float(offset)), _bearing(fx - x, fy - y, yaw), _bearing(tx - x, ty - y, yaw)
+
+
+def turn_radius_m(speed_mps: float, w_rps: float) -> float:
+    """The radius [m] a vehicle at ``speed_mps`` [m/s] turns at ``w_rps`` [rad/s]: v / |w|
+    (inf: straight; 0: standing, below :data:`STANDING_MPS`, it turns on the spot)."""
+    if w_rps == 0.0:
+        return math.inf
+    return abs(speed_mps) / abs(w_rps) if abs(speed_mps) >= STANDING_MPS else 0.0
 
 
 def _bearing(dx: float, dy: float, yaw: float) -> float:

@@ -463,7 +463,7 @@ class _Session:
         return None
 
     def draw(self, command: Command, label: int, end_banner: Banner | None = None, note: str = "") -> None:
-        readout = self.guide.readout(self.frame.pose, self.sim.progress_m, label, self.at_edge)
+        readout = self.guide.readout(self.frame.pose, self.sim.progress_m, label, self.at_edge, self.sim.vehicle.speed_mps)
         mode = None
         if self.planner is not None:
             mode = ("PLANNER DRIVING", PLANNER_COLOR) if self.driver == "planner" else ("YOU DRIVE: recording corrections", HIGHLIGHT_COLOR)
