@@ -11,6 +11,8 @@ import pytest
 from helpers import one_line_error
 from terrapref.cli import main
 from terrapref.demos.recording import read_recording
+from terrapref.learning.identify import NO_DECLARED_ORDER
+from terrapref.learning.model_file import load_model
 
 ORDER = ["water", "rock", "mud", "non_traversable"]  # not the default order
 
@@ -34,7 +36,7 @@ def test_the_drivers_order_survives_an_export_and_an_import(tmp_path: Path, orde
     assert read_recording(tmp_path / "back").meta["profile"] == ORDER
 
 
-def test_an_import_with_no_declared_order_says_so_and_training_refuses_it(tmp_path: Path, ordered_recording: Path, capsys):
+def test_an_import_with_no_declared_order_says_so_and_its_model_names_none(tmp_path: Path, ordered_recording: Path, capsys):
     bag = tmp_path / "run.mcap"
     assert main(["export", str(ordered_recording), "--format", "mcap", "--out", str(bag)]) == 0
     robot = Path(f"{bag}.robot.yaml")
@@ -43,11 +45,19 @@ def test_an_import_with_no_declared_order_says_so_and_training_refuses_it(tmp_pa
     out = capsys.readouterr().out
     assert "none declared" in out and "default" not in out.split("order", 1)[1].splitlines()[0]
     assert read_recording(tmp_path / "none").meta.get("profile") is None
-    assert main(["inspect", str(tmp_path / "none"), "--no-preference"]) == 0
-    assert "order      none declared" in capsys.readouterr().out
-    assert main(["featurize", str(tmp_path / "none"), "--out", str(tmp_path / "ds.safetensors")]) == 2
-    one_line_error(capsys, "meta.json", "profile", "--profile")
-    assert not (tmp_path / "ds.safetensors").exists()
+    assert main(["inspect", str(tmp_path / "none"), "--out", str(tmp_path / "none.png")]) == 0
+    out = capsys.readouterr().out
+    assert "order      none declared" in out and f"  {NO_DECLARED_ORDER}" in out and "the profile stored with" not in out
+    # The model learns the drive and names no order; evaluate needs one to score zones and drive its driver by.
+    assert main(["featurize", str(tmp_path / "none"), "--out", str(tmp_path / "ds.safetensors")]) == 0
+    model = tmp_path / "m.safetensors"
+    assert main(["train", str(tmp_path / "none"), "--recipe", "paper", "--epochs", "1", "--out", str(model)]) == 0
+    out = capsys.readouterr().out
+    assert f"  {NO_DECLARED_ORDER}" in out and "the profile stored with the drive" not in out
+    assert load_model(model).profile == ()
+    assert main(["evaluate", str(model), "fig7a_non_traversable_longer", "--out", str(tmp_path / "eval")]) == 2
+    one_line_error(capsys, str(model), "profile", "--profile ORDER")
+    assert not (tmp_path / "eval").exists()
     # --profile declares it at the import
     assert (
         main(["import", str(bag), "--robot", str(robot), "--out", str(tmp_path / "given"), "--profile", "rock,mud,water,non_traversable"])

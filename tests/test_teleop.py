@@ -105,6 +105,16 @@ def test_max_frames_stops_the_run(tmp_path):
     assert len(read_recording(tmp_path / "rec")) == 12
 
 
+def test_a_drive_declares_the_order_given_and_none_without_one(tmp_path):
+    from terrapref.terrain import PreferenceProfile
+
+    run_teleop("demo_course", tmp_path / "none", realtime=False, wait_for_start=False, max_frames=3)
+    assert "profile" not in read_recording(tmp_path / "none").meta  # not the class table's order, as if declared
+    order = PreferenceProfile(("water", "rock", "mud", "non_traversable"))
+    run_teleop("demo_course", tmp_path / "given", realtime=False, wait_for_start=False, max_frames=3, profile=order)
+    assert read_recording(tmp_path / "given").meta["profile"] == list(order.order)
+
+
 def test_driving_without_recording(tmp_path):
     result = run_teleop("demo_course", None, realtime=False, wait_for_start=False, max_frames=5)
     assert result.record_dir is None and result.frames == 5
@@ -367,6 +377,7 @@ def test_riding_along_records_only_the_takeover_and_train_accepts_it(tmp_path):
     """The planner drives; Left takes over from the planner's command; 1.5 s untouched hands back."""
     from helpers import linear_model
     from terrapref.cli import main
+    from terrapref.learning.model_file import load_model
     from terrapref.teleop import HANDBACK_S
 
     model = linear_model(tmp_path / "m.safetensors")
@@ -380,6 +391,7 @@ def test_riding_along_records_only_the_takeover_and_train_accepts_it(tmp_path):
     rec = read_recording(out)
     assert result.frames == len(rec) == 3 + handback and result.planner_frames == 80 - len(rec)
     assert rec.meta["driver"]["kind"] == "corrections" and rec.meta["driver"]["model"] == str(model)
+    assert rec.meta["profile"] == list(load_model(model).profile)  # riding along, the driver is the one the model learned
     w = rec.commands[:, 1]
     assert w[0] == pytest.approx(stick[20] + 0.1), "the takeover starts from the planner's command, one step left"
     assert (w[3:] == w[2]).all(), "released, the stick holds until it hands back"

@@ -255,8 +255,9 @@ def build_dataset(
     cache: dict | None = None,
     progress: Callable[[Featuring], None] | None = None,
 ) -> Dataset:
-    """Featurise several recordings into one dataset (they must share classes and profile), with
-    the arrays each of the decision ``rules`` (a recipe's) reads for its fit.
+    """Featurise several recordings into one dataset (they must share classes, and the
+    preference order those that declare one declare), with the arrays each of the decision
+    ``rules`` (a recipe's) reads for its fit.
 
     ``progress`` is called after each frame and after each recording.
 
@@ -267,17 +268,12 @@ def build_dataset(
     if not recordings:
         raise UserError("featurize", "no recordings given")
     first = recordings[0]
-    if first.meta.get("profile") is None:
-        raise UserError(
-            str(first.path / "meta.json"),
-            "names no preference order; a model needs the order its driver had "
-            "(an imported drive: import it again with --profile, or add profile: to its robot file)",
-            field="profile",
-        )
     for rec in recordings[1:]:
-        for key in ("classes", "profile"):
-            if rec.meta.get(key) != first.meta.get(key):
-                raise UserError(str(rec.path / "meta.json"), f"differs from {first.path} in {key}; featurise them separately", field=key)
+        if rec.meta.get("classes") != first.meta.get("classes"):
+            raise UserError(
+                str(rec.path / "meta.json"), f"differs from {first.path} in classes; featurise them separately", field="classes"
+            )
+    profile = _declared_order(recordings)
     # The terrain columns are the recordings' class table's.
     require_meta(first, "classes")
     features = replace(features, feature_classes=first.classes.feature_names)
@@ -308,7 +304,7 @@ def build_dataset(
         "features": features.to_dict(),
         "camera": (camera or CameraConfig.from_dict(first.meta["camera"])).to_dict(),
         "classes": first.meta["classes"],
-        "profile": first.meta.get("profile"),
+        "profile": profile,
         "rules": {rule.type: {"config": rule.data(), "arrays": {name: rule.arrays[name] for name in arrays[rule.type]}} for rule in rules},
         "recordings": [
             {
@@ -325,6 +321,22 @@ def build_dataset(
         ],
     }
     return Dataset(U, labels, w.astype(np.float32), source, meta, arrays)
+
+
+def _declared_order(recordings: list[Recording]) -> list[str] | None:
+    """The preference order the recordings' driver declared: one order, which a recording that
+    declares none does not contradict (a drive without ``--profile``); None where none declares one.
+
+    Raises:
+        UserError: two recordings declare different orders (two drivers, or one driver's two orders).
+    """
+    declared = [rec for rec in recordings if rec.meta.get("profile") is not None]
+    for rec in declared[1:]:
+        if rec.meta["profile"] != declared[0].meta["profile"]:
+            raise UserError(
+                str(rec.path / "meta.json"), f"differs from {declared[0].path} in profile; featurise them separately", field="profile"
+            )
+    return declared[0].meta["profile"] if declared else None
 
 
 def save_dataset(dataset: Dataset, path: str | Path) -> Path:
@@ -356,7 +368,7 @@ def load_dataset(path: str | Path) -> Dataset:
         raise UserError(str(path), "missing", field=str(exc.args[0])) from None
     except (TypeError, ValueError, AttributeError) as exc:
         raise UserError(str(path), f"invalid configuration ({type(exc).__name__}: {exc})", field="metadata") from None
-    if not isinstance(meta.get("profile"), list):
+    if not (meta.get("profile") is None or isinstance(meta.get("profile"), list)):  # None: the drives declared none
         raise UserError(str(path), "expected a list of class names", field="profile")
     rules = _rule_arrays(tensors, meta, str(path))
     return Dataset(tensors["U"], tensors["labels"], tensors["w"], tensors["source"], meta, rules)

@@ -237,7 +237,11 @@ def drive_parser(sub: argparse._SubParsersAction) -> None:
         "(default: the recommended protocol's 0.6, recipe teach's; 0: none)",
     )
     p.add_argument("--seed", type=int, default=0, help="seeds the pushes")
-    p.add_argument("--profile", help="your preference order, best first, stored with the recording (default: the class table's)")
+    p.add_argument(
+        "--profile",
+        help="your preference order, best first, stored with the recording and compared with the order your drive shows "
+        "(default: riding along, the model's; else none is declared)",
+    )
     p.add_argument(
         "--model",
         type=Path,
@@ -296,7 +300,7 @@ def _print_what_the_drive_shows(rec) -> None:
     )
     bar.close()
     print(f"what the drive shows (recipe {DEFAULT_RECIPE}'s features, {len(dataset)} frames):")
-    for line in identify(dataset, steady=recipe.train.data.steady_labels).lines(rec.meta.get("profile")):
+    for line in identify(dataset, steady=recipe.train.data.steady_labels).lines_with_order(rec.meta.get("profile")):
         print(f"  {line}")
     speed = next((rule for rule in recipe.rules if isinstance(rule, SpeedConfig)), None)
     fitted = speed.fit(FitData(dataset, mirror=False)) if speed is not None else None

@@ -26,7 +26,7 @@ from terrapref.fileio import check_distinct, check_output, output_folder
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from terrapref.evaluation.evaluate import Evaluation, evaluate_model
+    from terrapref.evaluation.evaluate import Evaluation, evaluate_model, scoring_profile
     from terrapref.evaluation.runner import Summary
     from terrapref.planner.model import Model
     from terrapref.progress import Progress
@@ -50,6 +50,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if args.classes is not None:  # the model carries its table (the scenarios are read with it); --classes must be it
         check_table(args, model.classes, args.model)
     profile = PreferenceProfile.parse(args.profile, model.classes) if args.profile is not None else None
+    scored = scoring_profile(model, profile, args.model)  # a model whose drives declared no order needs one, before any run
     perception = perception_model(args.perception, classes=model.classes)
     from terrapref.demos.expert import STYLES
     from terrapref.evaluation.speed import SpeedComparison, trained_driver
@@ -61,8 +62,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         from terrapref.demos.speed_style import driver_style
         from terrapref.vehicle import VehicleConfig
 
-        order = profile.order if profile is not None else tuple(model.profile or model.classes.profile)
-        driver_style(style, order, model.classes, VehicleConfig().max_speed_mps, {"speeds": speeds})
+        driver_style(style, scored.order, model.classes, VehicleConfig().max_speed_mps, {"speeds": speeds})
     with output_folder(args.out, args.force):
         bar = Progress("evaluate", len(args.scenarios) * args.seeds * (1 if args.no_driver else 2))
         view = live_view(args)
@@ -163,7 +163,11 @@ def evaluate_parser(sub: argparse._SubParsersAction) -> None:
         help="runs per scenario (default 3): seed 0 starts at the scenario's start, the others up to 0.3 m and 3 degrees off it",
     )
     p.add_argument("--out", required=True, type=Path, help="folder for metrics.json and the figures")
-    p.add_argument("--profile", help="resolve `best` zones under this profile instead of the model's")
+    p.add_argument(
+        "--profile",
+        help="resolve `best` zones, and drive the synthetic driver, under this order instead of the model's "
+        "(needed for a model whose drives declared none)",
+    )
     p.add_argument("--frames", help="comma-separated frame numbers of seed 0 to draw as decision pictures")
     p.add_argument("--no-driver", action="store_true", help="skip the synthetic driver's comparison runs")
     p.add_argument(

@@ -170,7 +170,7 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
         print(f"  {rule.describe(data.feature_config.feature_classes, lethal)}{note}")
     if result.identifiability is not None:
         print("what the demonstrations show (stored in the model):")
-        for line in result.identifiability.lines(data.meta.get("profile")):
+        for line in result.identifiability.lines_with_order(data.meta.get("profile")):
             print(f"  {line}")
     m = len(data.feature_config.preference.control.w_rps)
     print(

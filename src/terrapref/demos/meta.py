@@ -346,18 +346,18 @@ class RecordingMeta:
         scenario: Scenario,
         setup: RecordingSetup,
         driver: DriverInfo,
-        profile: PreferenceProfile,
+        profile: PreferenceProfile | None,
         perception: PerceptionModel | None = None,
     ) -> RecordingMeta:
-        """The meta of a run of ``scenario`` driven by ``driver`` under ``setup``, whose frames went
-        through ``perception`` (None: the truth)."""
+        """The meta of a run of ``scenario`` driven by ``driver`` of the declared order ``profile``
+        (None: none declared), whose frames went through ``perception`` (None: the truth)."""
         return cls(
             scenario.name,
             setup.camera,
             setup.preference,
             SimMeta.of(setup.sim),
             scenario.classes,
-            tuple(profile.order),
+            tuple(profile.order) if profile is not None else None,
             driver,
             _points(scenario.waypoints),
             perception or PerceptionModel(),

@@ -97,6 +97,25 @@ class Evaluation:
         return specs
 
 
+def scoring_profile(model, given: PreferenceProfile | None, source: str | Path) -> PreferenceProfile:
+    """The order a run of ``model`` (a policy) is scored under and its synthetic driver drives by:
+    ``given``, else the order the model's drives declared.
+
+    Raises:
+        UserError: neither: the model's drives declared no order (``drive`` without ``--profile``).
+    """
+    if given is not None:
+        return given
+    if not model.profile:
+        raise UserError(
+            str(source),
+            "names no driver's order (its drives declared none): give --profile ORDER, the order `best` zones are scored "
+            "under and the synthetic driver it is compared with drives by",
+            field="profile",
+        )
+    return PreferenceProfile.parse(list(model.profile), model.classes, source=f"{source}: profile")
+
+
 def evaluate_model(
     evaluation: Evaluation,
     out_dir: str | Path,
@@ -123,7 +142,7 @@ def evaluate_model(
     model = Model.load(ev.model_path).policy  # C, or a learned baseline (linear, CNN)
     for name in ev.scenarios:
         resolve_scenario(name, model.classes)  # fail early, with the file and field, before any run
-    profile = ev.profile or PreferenceProfile.parse(list(model.profile), model.classes, source=f"{ev.model_path}: profile")
+    profile = scoring_profile(model, ev.profile, ev.model_path)
     results = annotate_agreement(run_many(ev.specs(profile, model.classes), progress=progress, engine=engine, watch=watch))
     evidence = _evidence(model, ev.scenarios)
     out = Path(out_dir)

@@ -89,8 +89,8 @@ class ModelHeader:
         classifier: C's shape.
         recipe: the name of the recipe that made the model.
         features, camera, classes: the configuration C was trained under.
-        profile: the demonstrating driver's preference order (None only where the data named none;
-            such a file is refused when read).
+        profile: the demonstrating driver's declared preference order (None: the drives declared
+            none; ``evaluate`` then needs the order to score under).
         training: the training's configuration (``TrainConfig.to_dict``), as written.
         data: the data it was trained on.
         history, best_epoch, steps: every epoch's scores, the epoch chosen and the optimiser's steps
@@ -186,9 +186,10 @@ class ModelHeader:
         )
 
 
-def model_context(meta: Mapping[str, Any], source: str) -> tuple[FeatureConfig, CameraConfig, ClassTable, tuple[str, ...]]:
+def model_context(meta: Mapping[str, Any], source: str) -> tuple[FeatureConfig, CameraConfig, ClassTable, tuple[str, ...] | None]:
     """The configuration every model file carries (C's and the baselines'): features, camera,
-    classes, profile; a missing or invalid one is a UserError naming the file and the field."""
+    classes, profile (None: its drives declared none); a missing or invalid one is a UserError
+    naming the file and the field."""
     for key in ("features", "camera", "classes"):
         if key in meta and not isinstance(meta[key], dict):
             raise UserError(source, "expected a mapping", field=key)
@@ -196,7 +197,7 @@ def model_context(meta: Mapping[str, Any], source: str) -> tuple[FeatureConfig, 
         features = FeatureConfig.from_dict(meta["features"])
         camera = CameraConfig.from_dict(meta["camera"])
         classes = ClassTable.from_dict(meta["classes"], source)
-        profile = tuple(meta["profile"])
+        profile = None if meta["profile"] is None else tuple(meta["profile"])
     except KeyError as exc:
         raise UserError(source, "missing", field=str(exc.args[0])) from None
     except (TypeError, ValueError) as exc:

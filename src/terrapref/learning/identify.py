@@ -38,6 +38,7 @@ GRASS = "grass"  # the default table's background, compared like a class
 SHARE = 0.2  # a trajectory "runs over" a class when at least this share of its points do
 NEAR = 0.5  # trajectories whose distance utility is below this have left the path: not an option
 MIN_FRAMES = 10  # fewer comparing frames than this leave a pair unidentified
+NO_DECLARED_ORDER = "no order was declared with the drive (--profile): the learned order is compared with none"
 
 
 @dataclass(frozen=True)
@@ -129,6 +130,12 @@ class Identifiability:
             out += [f"  {p.describe()}{'' if p.identified else '  <- not identified'}" for p in self.pairs]
         out += [f"warning: {w}" for w in self.warnings()]
         return out + (self.against(profile) if profile else [])
+
+    def lines_with_order(self, declared: Sequence[str] | None) -> list[str]:
+        """The report (:meth:`lines`) of data whose drives declared the order ``declared``, and
+        how the learned order compares with it; with none declared, that there is nothing to
+        compare it with (an order nobody declared is not made up)."""
+        return self.lines(declared) if declared else [*self.lines(), NO_DECLARED_ORDER]
 
     def against(self, profile: Sequence[str]) -> list[str]:
         """How the learned order compares with ``profile``, pair by pair of the classes both name:

@@ -34,6 +34,8 @@ def _common(meta: dict) -> list[str]:
         out.append(f"preference set  {_preference(pref)}")
     if isinstance(meta.get("profile"), list):
         out.append(f"profile         {' > '.join(meta['profile'])}")
+    elif isinstance(meta.get("classes"), dict):  # a file of driven frames that names no order: its drives declared none
+        out.append("profile         none declared")
     classes = meta.get("classes")
     if isinstance(classes, dict) and isinstance(classes.get("classes"), list):
         out.append(f"classes         {', '.join(str(c.get('name')) for c in classes['classes'])} (background {classes.get('background')})")
@@ -51,7 +53,7 @@ def _identifiability(meta: dict) -> list[str]:
     except (KeyError, TypeError, ValueError):
         return ["identifiability (unreadable)"]
     profile = meta.get("profile") if isinstance(meta.get("profile"), list) else None
-    return ["what the demonstrations show:"] + [f"  {line}" for line in report.lines(profile)]
+    return ["what the demonstrations show:"] + [f"  {line}" for line in report.lines_with_order(profile)]
 
 
 def info_lines(path: str | Path) -> list[str]:

@@ -167,7 +167,7 @@ class TeleopOptions:
             shows the driver's recoveries (the stick stays the label); drawn from ``seed``.
         seed: seeds the pushes' stream.
         profile: the driver's declared preference order, stored with the recording (default:
-            the class table's).
+            riding along, the model's; else none: the recording declares no order).
         model: ride along with this model file: the planner drives, the driver's takeovers are
             recorded as corrections.
         wait_for_start: open paused and start after a key and a countdown (False: drive from
@@ -205,6 +205,7 @@ class _Setup:
     preference: PreferenceSetConfig
     sim: SimConfig
     planner: Any
+    profile: PreferenceProfile | None = None  # the order the recording declares (None: none)
 
 
 def _check_display() -> None:
@@ -616,24 +617,28 @@ def _resolve(scenario: Scenario | str, options: TeleopOptions) -> _Setup:
         raise UserError(SOURCE, f"speed must be in (0, {sim_cfg.vehicle.max_speed_mps:g}] m/s, got {options.v_mps:g}", field="v_mps")
     if options.max_frames is not None and options.max_frames < 0:
         raise UserError(SOURCE, "max_frames must be >= 0", field="max_frames")
-    camera, preference, planner = options.camera, options.preference, None
+    camera, preference, planner, profile = options.camera, options.preference, None, options.profile
     if options.model is not None:
-        camera, preference, planner = _load_planner(options.model, camera, preference)
-    return _Setup(scenario, camera or CameraConfig(), preference or PreferenceSetConfig(), sim_cfg, planner)
+        camera, preference, planner, learned_from = _load_planner(options.model, camera, preference)
+        # The person riding along is the driver the model learned from: their drive's order, unless told another.
+        profile = profile or learned_from
+    return _Setup(scenario, camera or CameraConfig(), preference or PreferenceSetConfig(), sim_cfg, planner, profile)
 
 
 def _load_planner(
     model: str | Path, camera: CameraConfig | None, preference: PreferenceSetConfig | None
-) -> tuple[CameraConfig, PreferenceSetConfig, Any]:
-    """The planner of the model file ``model``, with the camera and preference set it needs where not given."""
+) -> tuple[CameraConfig, PreferenceSetConfig, Any, PreferenceProfile | None]:
+    """The planner of the model file ``model``, with the camera and preference set it needs where not
+    given, and the order the model's drive declared (None: none)."""
     from terrapref.learning.model_file import load_model
     from terrapref.planner import Planner
 
     loaded = load_model(model)
     camera = camera or loaded.camera
     preference = preference or loaded.features.preference
+    declared = PreferenceProfile(loaded.profile) if loaded.profile else None
     try:
-        return camera, preference, Planner(loaded, camera)
+        return camera, preference, Planner(loaded, camera), declared
     except ValueError as exc:
         raise UserError(str(model), str(exc), field="camera") from None
 
@@ -656,8 +661,9 @@ def _open_recording(setup: _Setup, options: TeleopOptions) -> RecordingWriter | 
         HumanInfo(INPUT, pushes, options.seed) if setup.planner is None else RideAlongInfo(INPUT, pushes, options.seed, str(options.model))
     )
     scenario = setup.scenario
-    profile = options.profile or PreferenceProfile.default(scenario.classes)
-    meta = RecordingMeta.driven(scenario, RecordingSetup(setup.camera, setup.preference, setup.sim), driver, profile, options.perception)
+    meta = RecordingMeta.driven(
+        scenario, RecordingSetup(setup.camera, setup.preference, setup.sim), driver, setup.profile, options.perception
+    )
     return RecordingWriter(options.record_dir, meta, scenario.to_dict(), overwrite=options.overwrite)
 
 
