@@ -354,6 +354,9 @@ def test_a_follow_up_is_named_after_the_courses_driven(example):
     assert "3 drives of courses/a.yaml and b together left open (grass vs mud)" in course.description
     assert follow_up_after(example, pairs, ["a"], "more")[0].name == "more"
     assert "the drive of a left open" in follow_up_after(example, pairs, ["a"])[0].description
+    course, items = follow_up_after(example, [("dirt", "bush")], ["a"], neighbours=[("water", "dirt")])
+    assert items == follow_up(example, [("dirt", "bush"), ("water", "dirt")])
+    assert "left open (dirt vs bush), beside their neighbours in the learned order (water vs dirt), each both ways" in course.description
 
 
 def test_a_table_without_feature_classes_has_no_teaching_course(tmp_path, capsys):
@@ -687,7 +690,10 @@ def test_the_follow_up_loop_runs_without_classes_and_asks_what_drives_leave_open
     capsys.readouterr()
     assert main(["course", "--after", str(me), "--out", str(more)]) == 0
     printed = capsys.readouterr().out
-    assert "the drive left 1 pairs open: mud vs tree" in printed
+    assert (
+        "the drive left 1 pair open for a follow-up: mud vs tree; beside them, their neighbours in the learned order: grass vs mud"
+        in printed
+    )
     assert f"(record it: terrapref record {more} --out DIR)" in printed, "the command that works, not a --classes FILE placeholder"
     assert main(["record", str(more), "--out", str(me_more), "--quiet"]) == 0
     assert read_recording(me_more).classes == load_classes(small)
@@ -713,6 +719,22 @@ def test_the_follow_up_loop_runs_without_classes_and_asks_what_drives_leave_open
     )
     _one_error(capsys, str(model), "classes", str(EXAMPLE))
     assert not (tmp_path / "ev2").exists()
+
+
+@pytest.mark.slow
+def test_the_readmes_follow_up_loop_on_the_example_table_ends_after_one_follow_up(tmp_path, capsys):
+    """README "Your own classes": the teaching drive, the follow-up course it asks for, and then
+    nothing left open, as the README says (a follow-up of the open pairs alone reopened one the
+    teaching drive had identified)."""
+    profile = "mud,water,dirt,bush,puddle,gravel,lethal"
+    course, me, more, me_more, more2 = (tmp_path / n for n in ("course.yaml", "me", "more.yaml", "me_more", "more2.yaml"))
+    assert main(["course", "--classes", str(EXAMPLE), "--out", str(course)]) == 0
+    assert main(["record", str(course), "--profile", profile, "--out", str(me), "--quiet"]) == 0
+    assert main(["course", "--after", str(me), "--out", str(more)]) == 0
+    assert main(["record", str(more), "--profile", profile, "--out", str(me_more), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["course", "--after", str(me), str(me_more), "--out", str(more2)]) == 0
+    assert "the drives together identified every pair of classes" in capsys.readouterr().out and not more2.exists()
 
 
 def test_a_scenario_carrying_a_bad_table_is_refused_naming_the_field(tmp_path, capsys):

@@ -12,11 +12,14 @@ import pytest
 from terrapref.learning.identify import (
     GRASS,
     MIN_FRAMES,
+    FollowUp,
     Identifiability,
     PairEvidence,
+    bracketed,
     count_comparisons,
     fisher_covariance,
     identifiability,
+    plan_follow_up,
 )
 from terrapref.learning.linear import LinearUtility, fit_linear_utility
 
@@ -346,3 +349,78 @@ def test_an_unordered_pair_with_a_lethal_class_is_left_to_the_class_table():
     assert "non_traversable is lethal" in lethal and "offset rule never drives onto it" in lethal
     assert plain == "mud vs water: never compared; the planner's choice between them is a guess"
     assert Identifiability.from_dict(report.to_dict()) == report
+
+
+# --- the follow-up loop: what a further course shows, and what it leaves -------------------------
+
+ORDER = ("grass", "mud", "water", "dirt", "bush", "puddle", "lethal")
+
+
+def _report(margins: dict[tuple[str, str], tuple[float, int]], order: tuple[str, ...] = ORDER) -> Identifiability:
+    """A report of ``order`` in which each pair has margin 1.0 over 20 frames (identified), but
+    those ``margins`` names: (margin, frames), with standard error 0.1."""
+    pairs = []
+    for i, a in enumerate(order):
+        for b in order[i + 1 :]:
+            margin, frames = margins.get((a, b), (1.0, 20))
+            pairs.append(PairEvidence(a, b, frames, frames, 0, (frames, 0), margin, 0.1))
+    return Identifiability(order, tuple(pairs))
+
+
+def _took(counts: dict[tuple[str, str], tuple[int, int]]) -> dict[tuple[str, str], np.ndarray]:
+    """One drive's comparisons: (frames for a, frames for b) of each pair (a, b), all on the left."""
+    return {pair: np.array([for_a, 0, for_b, 0]) for pair, (for_a, for_b) in counts.items()}
+
+
+def test_a_follow_up_shows_each_open_pair_beside_its_neighbours_in_the_learned_order():
+    assert bracketed(ORDER, [("dirt", "bush")]) == [("water", "dirt"), ("bush", "puddle")]
+    assert bracketed(ORDER, [("grass", "mud")]) == [("mud", "water")]  # nothing above the best
+    # Neighbours shared or open themselves are shown once, as the open pair they are.
+    assert bracketed(ORDER, [("dirt", "bush"), ("puddle", "lethal"), ("water", "dirt")]) == [("bush", "puddle"), ("mud", "water")]
+
+
+def test_one_drive_leaves_every_open_pair_to_a_follow_up():
+    plan = plan_follow_up(_report({("dirt", "bush"): (0.02, 79)}), [_took({("dirt", "bush"): (67, 12)})])
+    assert plan == FollowUp(open=(("dirt", "bush"),), neighbours=(("water", "dirt"), ("bush", "puddle")))
+
+
+def test_a_pair_open_before_the_last_drive_and_after_it_is_left_saying_why():
+    earlier = _report({("dirt", "bush"): (0.02, 79)})
+    plan = plan_follow_up(_report({("dirt", "bush"): (0.05, 184)}), [_took({}), _took({("dirt", "bush"): (92, 13)})], earlier, "me_more")
+    assert plan.open == () and plan.neighbours == () and plan.reopened == ()
+    assert plan.left == (
+        "dirt vs bush: open before me_more and after it (margin 0.05, standard error 0.10, 184 frames): driving it again "
+        "would show the same; the planner's choice between them stays a guess",
+    )
+
+
+def test_a_pair_the_last_drive_reopened_without_choosing_against_it_is_shown_again():
+    """The last drive never compared water with dirt, but its frames moved dirt's weight."""
+    earlier = _report({("water", "dirt"): (0.28, 29)})
+    pooled = _report({("water", "dirt"): (0.03, 29)})
+    plan = plan_follow_up(pooled, [_took({("water", "dirt"): (29, 0)}), _took({("dirt", "bush"): (92, 13)})], earlier, "me_more")
+    assert plan.open == (("water", "dirt"),) and plan.neighbours == (("mud", "water"), ("dirt", "bush")) and plan.left == ()
+    assert plan.reopened == (
+        "water vs dirt: the drives before me_more identified water > dirt (margin 0.28); me_more did not choose against it, "
+        "but its frames moved the weights (margin 0.03, standard error 0.10): shown again",
+    )
+
+
+def test_a_pair_the_last_drive_contradicts_is_left_naming_the_choices():
+    earlier = _report({("water", "dirt"): (0.28, 29)})
+    pooled = _report({("water", "dirt"): (0.05, 45)})
+    plan = plan_follow_up(pooled, [_took({("water", "dirt"): (29, 0)}), _took({("water", "dirt"): (2, 14)})], earlier, "me_more")
+    assert plan.open == () and plan.left == (
+        "water vs dirt: the drives before me_more identified water > dirt (margin 0.28), but in me_more the driver took "
+        "dirt over water in 14 of 16 frames: the drives contradict each other",
+    )
+
+
+def test_a_pair_two_drives_compared_and_the_last_reopened_is_left():
+    """Shown by the teaching drive and a follow-up already: a third showing would not settle it."""
+    earlier = _report({("water", "dirt"): (0.28, 60)})
+    pooled = _report({("water", "dirt"): (0.03, 75)})
+    drives = [_took({("water", "dirt"): (29, 0)}), _took({("water", "dirt"): (31, 0)}), _took({("water", "dirt"): (15, 0)})]
+    plan = plan_follow_up(pooled, drives, earlier, "me_more2")
+    assert plan.open == () and plan.left[0].startswith("water vs dirt: the drives before me_more2 identified water > dirt")
+    assert plan.left[0].endswith("it is open again after 3 drives compared it: their choices do not settle it")

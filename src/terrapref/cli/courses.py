@@ -6,11 +6,15 @@ import argparse
 import math
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from terrapref.cli.common import SCENARIO_HELP, add_classes_arg, add_force_arg, check_table, class_table
 from terrapref.configargs import finite_float
 from terrapref.errors import UserError
 from terrapref.fileio import check_distinct, check_figure, check_output, write_text_atomic
+
+if TYPE_CHECKING:  # for the hints only: the command line imports what a command needs when it runs
+    from terrapref.learning.identify import FollowUp
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
@@ -160,15 +164,11 @@ def _cmd_course(args: argparse.Namespace) -> int:
     if args.after is not None:
         recs = _drives_of_one_table(args, args.after)
         table = recs[0].classes
-        open_pairs = _open_pairs(recs)
-        drives = "drives together" if len(recs) > 1 else "drive"
-        if not open_pairs:
-            print(
-                f"{', '.join(map(str, args.after))}: the {drives} identified every pair of classes; no follow-up course is needed (nothing written)"
-            )
+        plan = _follow_up_plan(recs)
+        if not _says_what_is_left(plan, args.after):
             return 0
-        course, items = follow_up_after(table, open_pairs, [str(r.meta.get("scenario")) for r in recs], args.name)
-        print(f"the {drives} left {len(open_pairs)} pairs open: {', '.join(f'{a} vs {b}' for a, b in open_pairs)}")
+        courses = [str(r.meta.get("scenario")) for r in recs]
+        course, items = follow_up_after(table, plan.open, courses, args.name, plan.neighbours)
     else:
         table = table or default_classes()
         try:
@@ -217,20 +217,46 @@ def _drives_of_one_table(args: argparse.Namespace, paths: Sequence[Path]) -> lis
     return recs
 
 
-def _open_pairs(recs: Sequence) -> list[tuple[str, str]]:
-    """The pairs of classes that recordings' drives together leave unidentified (the report ``inspect`` prints)."""
-    from terrapref.recipes import DEFAULT_RECIPE, open_pairs, recipe_named
+def _follow_up_plan(recs: Sequence) -> FollowUp:
+    """What recordings' drives together leave open and a follow-up course can settle (the report ``inspect`` prints)."""
+    from terrapref.progress import Progress
+    from terrapref.recipes import DEFAULT_RECIPE, follow_up_plan, recipe_named
 
     for rec in recs:
         if len(rec) == 0:
             raise UserError(str(rec.path), "holds no frames: drive the teaching course first", field="frames")
-    from terrapref.progress import Progress
-
     total = sum(len(r) for r in recs)
     bar = Progress(f"featurising the drive{'s' if len(recs) > 1 else ''} to find the pairs left open", total, unit="frames")
-    pairs = open_pairs(list(recs), recipe_named(DEFAULT_RECIPE), frames=lambda done, n: bar.update(done, f"{done}/{n} frames"))
+    plan = follow_up_plan(list(recs), recipe_named(DEFAULT_RECIPE), frames=lambda done, n: bar.update(done, f"{done}/{n} frames"))
     bar.close(f"{total} frames")
-    return pairs
+    return plan
+
+
+def _says_what_is_left(plan: FollowUp, paths: Sequence[Path]) -> bool:
+    """Print what the drives left open, what no further course settles and why; whether a follow-up course is to be written."""
+    drives = "drives together" if len(paths) > 1 else "drive"
+    left = len(plan.open) + len(plan.left)
+    if not left:
+        print(
+            f"{', '.join(map(str, paths))}: the {drives} identified every pair of classes; no follow-up course is needed (nothing written)"
+        )
+        return False
+    for line in plan.reopened + plan.left:
+        print(f"note: {line}")
+    if not plan.open:
+        print(
+            f"the {drives} left {len(plan.left)} pair{'s' if len(plan.left) > 1 else ''} open that no further course settles (above); nothing written"
+        )
+        return False
+    neighbours = f"; beside them, their neighbours in the learned order: {_pairs(plan.neighbours)}" if plan.neighbours else ""
+    print(
+        f"the {drives} left {len(plan.open)} pair{'s' if len(plan.open) > 1 else ''} open for a follow-up: {_pairs(plan.open)}{neighbours}"
+    )
+    return True
+
+
+def _pairs(pairs: Sequence[tuple[str, str]]) -> str:
+    return ", ".join(f"{a} vs {b}" for a, b in pairs)
 
 
 def course_parser(sub: argparse._SubParsersAction) -> None:
@@ -241,8 +267,9 @@ def course_parser(sub: argparse._SubParsersAction) -> None:
         type=Path,
         nargs="+",
         metavar="REC",
-        help="recordings of the teaching course (and of earlier follow-ups): write a short course of only the pairs "
-        "their drives together left unidentified (train on all the recordings after)",
+        help="recordings of the teaching course (and of the follow-ups since, in the order driven): write a short course "
+        "of the pairs their drives together left unidentified, beside their neighbours in the learned order, or say "
+        "what no further course settles (train on all the recordings after)",
     )
     p.add_argument(
         "--design",

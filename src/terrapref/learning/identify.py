@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -317,3 +317,105 @@ def identifiability(
             PairEvidence(a, b, int(for_a + for_b), int(for_a), int(for_b), (int(a_left), int(a_right)), weight[a] - weight[b], stderr)
         )
     return Identifiability(order, tuple(pairs), names.lethal, background)
+
+
+Comparisons = Mapping[tuple[str, str], np.ndarray]
+"""One drive's comparisons, as :func:`count_comparisons` counts them."""
+
+
+def favoured(comparisons: Comparisons, a: str, b: str) -> tuple[int, int]:
+    """How many of one drive's frames comparing ``a`` with ``b`` favoured each: (for a, for b)."""
+    if (a, b) in comparisons:
+        c = comparisons[(a, b)]
+        return int(c[0] + c[1]), int(c[2] + c[3])
+    c = comparisons.get((b, a), np.zeros(4))
+    return int(c[2] + c[3]), int(c[0] + c[1])
+
+
+def bracketed(order: Sequence[str], pairs: Sequence[tuple[str, str]]) -> list[tuple[str, str]]:
+    """The neighbours a follow-up shows beside ``pairs``: for each pair, the class just above its
+    better class in the learned ``order`` (best first) with that class, and its worse class with
+    the class just below it; each once, and none of ``pairs`` themselves.
+
+    Frames of a pair alone move its two classes' weights, and can move one past a neighbour it
+    was identified against (the neighbour's margin is often the next smallest); frames of the
+    neighbours as well hold both ends in place.
+    """
+    shown = {frozenset(p) for p in pairs}
+    out = []
+    for a, b in pairs:
+        i, j = sorted((order.index(a), order.index(b)))
+        for k in (i - 1, j):  # (the class above, the better one) and (the worse one, the class below)
+            if k >= 0 and k + 1 < len(order) and frozenset(order[k : k + 2]) not in shown:
+                shown.add(frozenset(order[k : k + 2]))
+                out.append((order[k], order[k + 1]))
+    return out
+
+
+@dataclass(frozen=True)
+class FollowUp:
+    """What a follow-up course after some drives shows (``terrapref course --after``).
+
+    Attributes:
+        open: the pairs the drives leave unidentified that a further drive can still settle.
+        neighbours: their neighbours in the learned order (:func:`bracketed`), shown beside them.
+        left: one line per pair left open that no further course settles, saying why.
+        reopened: one line per pair the drives before the last identified and the last reopened,
+            shown again, saying how.
+    """
+
+    open: tuple[tuple[str, str], ...] = ()
+    neighbours: tuple[tuple[str, str], ...] = ()
+    left: tuple[str, ...] = ()
+    reopened: tuple[str, ...] = ()
+
+
+def plan_follow_up(
+    pooled: Identifiability, drives: Sequence[Comparisons], earlier: Identifiability | None = None, last: str = "the last drive"
+) -> FollowUp:
+    """Which pairs the drives together (``pooled``, as ``train`` sees them) leave open, and which of
+    them a follow-up course can still settle.
+
+    The follow-up loop (drive, ``course --after`` every drive so far, drive what it writes) ends:
+    a pair open before the last drive and still open after it is left, since driving it again
+    gives the same; so is a pair the last drive reopened by choosing against the order the
+    drives before it identified (the drives contradict each other), or that two drives have
+    compared in ``MIN_FRAMES`` frames or more each. A pair the last drive reopened without
+    contradicting it (its frames moved the weights) is shown again, beside its neighbours.
+
+    Args:
+        pooled: what all the drives show together.
+        drives: each drive's comparisons, in the order driven (:func:`count_comparisons`).
+        earlier: what the drives before the last show together (None: a single drive).
+        last: the last drive's name, for the lines.
+    """
+    show, left, reopened = [], [], []
+    for p in pooled.unidentified():
+        now = f"margin {p.margin:.2f}" + (f", standard error {p.stderr:.2f}" if p.stderr is not None else "")
+        before = earlier.pair(p.first, p.second) if earlier is not None else None
+        compared = sum(sum(favoured(d, p.first, p.second)) >= MIN_FRAMES for d in drives)
+        if before is None:
+            show.append((p.first, p.second))
+        elif not before.identified:
+            left.append(
+                f"{p.first} vs {p.second}: open before {last} and after it ({now}, {p.frames} frames): driving it again "
+                f"would show the same; the planner's choice between them stays a guess"
+            )
+        else:
+            x, y = before.first, before.second  # the order identified before the last drive
+            for_x, for_y = favoured(drives[-1], x, y)
+            was = f"the drives before {last} identified {x} > {y} (margin {before.margin:.2f})"
+            if for_y > for_x:
+                left.append(
+                    f"{p.first} vs {p.second}: {was}, but in {last} the driver took {y} over {x} in {for_y} of {for_x + for_y} frames: the drives contradict each other"
+                )
+            elif compared >= 2:
+                left.append(
+                    f"{p.first} vs {p.second}: {was}; with {last} ({now}) it is open again after {compared} drives compared it: their choices do not settle it"
+                )
+            else:
+                show.append((p.first, p.second))
+                reopened.append(
+                    f"{p.first} vs {p.second}: {was}; {last} did not choose against it, but its frames moved the weights ({now}): shown again"
+                )
+    return FollowUp(tuple(show), tuple(bracketed(pooled.order, show)), tuple(left), tuple(reopened))

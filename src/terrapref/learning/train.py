@@ -21,7 +21,7 @@ from terrapref.configargs import option
 from terrapref.dataset import Dataset
 from terrapref.learning import exact
 from terrapref.learning import layers_compiled as kernels
-from terrapref.learning.identify import FittedLookahead, Identifiability, TableNames, identifiability
+from terrapref.learning.identify import Comparisons, FittedLookahead, Identifiability, TableNames, count_comparisons, identifiability
 from terrapref.learning.linear import LinearUtility, fit_linear_utility, fit_lookahead_utility
 from terrapref.learning.mlp import Adam, TrainableClassifier, cross_entropy, init_weights, round_inputs
 from terrapref.learning.network import ClassifierConfig, member_prefix
@@ -327,13 +327,30 @@ def identify(dataset: Dataset, mirror: bool = True, steady: bool = False) -> Ide
     return _identifiability(dataset, utility, gamma)
 
 
-def _identifiability(dataset: Dataset, utility: LinearUtility, gamma: float) -> Identifiability:
+def comparisons_by_drive(dataset: Dataset, steady: bool = False) -> list[Comparisons]:
+    """Each recording's comparisons of every pair of classes (:func:`~terrapref.learning.identify.count_comparisons`),
+    in the dataset's order, the labels steadied over the whole dataset as :func:`identify` steadies them."""
+    if steady:
+        dataset, _ = steady_labels(dataset)
+    U, classes, background = _terrain_and_distance(dataset)
+    drives = range(int(dataset.source.max()) + 1 if len(dataset) else 0)
+    return [count_comparisons(U[dataset.source == k], dataset.labels[dataset.source == k], classes, background) for k in drives]
+
+
+def _terrain_and_distance(dataset: Dataset) -> tuple[np.ndarray, tuple[str, ...], str]:
+    """The utilities the identifiability report reads (terrain shares, distance), the terrain
+    columns' names and the background's."""
     features = dataset.feature_config
     U = dataset.U[..., [*range(features.n_terrain), features.n_features - 1]]
+    return U, tuple(features.feature_classes), ClassTable.from_dict(dataset.meta["classes"], "dataset").background
+
+
+def _identifiability(dataset: Dataset, utility: LinearUtility, gamma: float) -> Identifiability:
+    U, classes, _ = _terrain_and_distance(dataset)
     table = ClassTable.from_dict(dataset.meta["classes"], "dataset")
     names = TableNames(table.background, (table.lethal_column,) if table.lethal else ())
     lookahead = FittedLookahead(dataset.U2, gamma) if dataset.U2 is not None else None
-    return identifiability(U, dataset.labels, tuple(features.feature_classes), utility, lookahead, names)
+    return identifiability(U, dataset.labels, classes, utility, lookahead, names)
 
 
 def _fit_utility(dataset: Dataset, mirror: bool) -> tuple[LinearUtility, float]:

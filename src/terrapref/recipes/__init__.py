@@ -30,12 +30,13 @@ from pathlib import Path
 import numpy as np
 
 from terrapref.camera import CameraConfig
-from terrapref.dataset import build_dataset
+from terrapref.dataset import Dataset, build_dataset
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.demos.meta import CorrectionRoundInfo, ExpertInfo, RecordingMeta, RecordingSetup
 from terrapref.demos.recording import MemoryRecordingWriter, Recording, RecordingWriter, read_recording
 from terrapref.demos.session import DisturbanceConfig, RunSettings, record_run
 from terrapref.features import FeatureConfig
+from terrapref.learning.identify import FollowUp
 from terrapref.learning.model_file import load_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.learning.pipeline import RunOptions, train_and_save
@@ -280,27 +281,31 @@ def demonstrate(
     return recordings
 
 
-def open_pairs(
+def follow_up_plan(
     recordings: list[Recording],
     recipe: Recipe,
     features: FeatureConfig | None = None,
     cache: dict | None = None,
     frames: Callable[[int, int], None] | None = None,
-) -> list[tuple[str, str]]:
-    """The pairs of classes (terrain columns, the background among them) that ``recordings``
-    leave unidentified, featurised (with ``recipe.features(features)``; ``cache`` and ``frames``,
-    the progress by frame, as build_dataset takes them) and steadied as ``recipe`` trains (the
-    report ``inspect`` prints)."""
-    from terrapref.learning.train import identify
+) -> FollowUp:
+    """What a follow-up course after ``recordings`` (in the order driven) shows, and what it
+    leaves (:func:`~terrapref.learning.identify.plan_follow_up`): the drives featurised (with
+    ``recipe.features(features)``; ``cache`` and ``frames``, the progress by frame, as
+    build_dataset takes them) and steadied as ``recipe`` trains; the report ``inspect`` prints
+    of all of them, and of all but the last."""
+    from terrapref.learning.identify import plan_follow_up
+    from terrapref.learning.train import comparisons_by_drive, identify
 
-    dataset = build_dataset(
-        recordings,
-        recipe.features(features),
-        rules=recipe.rules,
-        cache=cache,
-        progress=None if frames is None else lambda p: frames(p.frames_done, p.frames),
-    )
-    return [(p.first, p.second) for p in identify(dataset, steady=recipe.train.data.steady_labels).unidentified()]
+    cache = {} if cache is None else cache  # the drives before the last are featurised once for both reports
+    steady = recipe.train.data.steady_labels
+
+    def dataset(recs: list[Recording], progress: Callable | None = None) -> Dataset:
+        return build_dataset(recs, recipe.features(features), rules=recipe.rules, cache=cache, progress=progress)
+
+    pooled = dataset(recordings, None if frames is None else lambda p: frames(p.frames_done, p.frames))
+    earlier = identify(dataset(recordings[:-1]), steady=steady) if len(recordings) > 1 else None
+    last = str(recordings[-1].path)
+    return plan_follow_up(identify(pooled, steady=steady), comparisons_by_drive(pooled, steady), earlier, last)
 
 
 def _follow_up(
@@ -317,17 +322,17 @@ def _follow_up(
     from terrapref.fileio import write_text_atomic
     from terrapref.scenario.teaching import follow_up_course
 
-    pairs = open_pairs(recordings, recipe, setup.features, cache)
-    if not pairs:
+    plan = follow_up_plan(recordings, recipe, setup.features, cache)
+    if not plan.open:
         return []
     scenario = resolve_scenario(str(setup.course), setup.classes)
     name = f"{scenario.name}_more"
-    course = follow_up_course(scenario.classes, pairs, name, scenario.name)
+    course = follow_up_course(scenario.classes, plan.open, name, scenario.name, neighbours=plan.neighbours)
     path = workdir / f"{name}_s{setup.seed}_{'_'.join(c[:2] for c in (setup.profile.order if setup.profile else ()))}.yaml"
     workdir.mkdir(parents=True, exist_ok=True)
     write_text_atomic(path, course.to_yaml())
     if log:
-        log(f"follow-up course: {len(pairs)} pairs open ({', '.join(f'{a} vs {b}' for a, b in pairs)})")
+        log(f"follow-up course: {len(plan.open)} pairs open ({', '.join(f'{a} vs {b}' for a, b in plan.open)})")
     return demonstrate(replace(recipe, demonstrations=1), workdir, replace(setup, course=str(path)), log, write=False)
 
 

@@ -25,8 +25,8 @@ Situations sit on straight legs; the trail bends a little between them (keeping 
 part of the lesson) and turns round every :data:`LANE` situations, so that a long course folds
 into a compact map.
 
-:func:`follow_up` makes a short course of only the pairs a drive left open (``terrapref course
---after REC``).
+:func:`follow_up` makes a short course of the pairs a drive left open and their neighbours in
+the learned order (``terrapref course --after REC``).
 """
 
 from __future__ import annotations
@@ -138,12 +138,25 @@ def fits(classes: ClassTable) -> bool:
     return course_length(situations(classes, True)) <= BUDGET_M
 
 
-def follow_up_course(classes: ClassTable, open_pairs: Sequence[tuple[str, str]], name: str, driven: str, drives: int = 1) -> CourseBuilder:
-    """The follow-up course of ``open_pairs``, which ``drives`` drives of the course(s) ``driven`` left open together."""
+def follow_up_course(
+    classes: ClassTable,
+    open_pairs: Sequence[tuple[str, str]],
+    name: str,
+    driven: str,
+    drives: int = 1,
+    neighbours: Sequence[tuple[str, str]] = (),
+) -> CourseBuilder:
+    """The follow-up course of ``open_pairs``, which ``drives`` drives of the course(s) ``driven``
+    left open together, and of their ``neighbours`` in the learned order
+    (:func:`~terrapref.learning.identify.bracketed`), which keep what is identified so."""
     listed = "; ".join(f"{a} vs {b}" for a, b in open_pairs)
+    beside = f", beside their neighbours in the learned order ({'; '.join(f'{a} vs {b}' for a, b in neighbours)})" if neighbours else ""
     what = f"the drive of {driven}" if drives == 1 else f"{drives} drives of {driven} together"
     return build_course(
-        classes, follow_up(classes, open_pairs), name, f"Follow-up course: the pairs {what} left open ({listed}), each both ways round."
+        classes,
+        follow_up(classes, [*open_pairs, *neighbours]),
+        name,
+        f"Follow-up course: the pairs {what} left open ({listed}){beside}, each both ways round.",
     )
 
 
@@ -269,14 +282,21 @@ def designed_course(classes: ClassTable, design: str = "auto", name: str = "teac
 
 
 def follow_up_after(
-    classes: ClassTable, open_pairs: Sequence[tuple[str, str]], courses: Sequence[str], name: str | None = None
+    classes: ClassTable,
+    open_pairs: Sequence[tuple[str, str]],
+    courses: Sequence[str],
+    name: str | None = None,
+    neighbours: Sequence[tuple[str, str]] = (),
 ) -> tuple[CourseBuilder, list[Situation]]:
     """The follow-up course of ``open_pairs``, which drives of ``courses`` (each drive's course, by
-    name) left open together (``terrapref course --after``), with its situations in driving order;
-    named ``name``, by default the first course's name followed by ``_more``."""
+    name) left open together (``terrapref course --after``), beside their ``neighbours`` in the
+    learned order, with its situations in driving order; named ``name``, by default the first
+    course's name followed by ``_more``."""
     driven = list(dict.fromkeys(courses))
-    course = follow_up_course(classes, open_pairs, name or f"{Path(driven[0]).name}_more", " and ".join(driven), drives=len(courses))
-    return course, follow_up(classes, open_pairs)
+    course = follow_up_course(
+        classes, open_pairs, name or f"{Path(driven[0]).name}_more", " and ".join(driven), drives=len(courses), neighbours=neighbours
+    )
+    return course, follow_up(classes, [*open_pairs, *neighbours])
 
 
 def write_teaching_course(folder: str | Path, classes: ClassTable) -> Path:
