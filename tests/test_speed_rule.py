@@ -207,6 +207,24 @@ def test_the_fit_recovers_the_speeds_preview_and_lag_that_drove(preview_m: float
     assert m.speeds_mps[MUD] == slowest and m.speeds_mps[LETHAL] == slowest  # the slowest learned, to be safe
 
 
+def test_a_class_never_shown_steady_is_driven_at_the_slowest_speed_the_drive_showed_and_warned_of():
+    """A drive that shows only the background steady (1.6 m/s) and its mud too briefly, slowly: the
+    mud is not driven at the background's speed, the one learned, but at the drive's slowest."""
+    columns = np.concatenate([np.full(n, c, dtype=np.uint8) for c, n in ((BACKGROUND, 100), (MUD, 8), (BACKGROUND, 100))])
+    fit = fit_speed(*_drive(DRIVER, np.repeat(columns[:, None], 9, axis=1)), K, (LETHAL,))
+    assert fit is not None and fit.intervals[MUD] is None and fit.intervals[BACKGROUND] is not None
+    speeds = fit.model.speeds_mps
+    assert speeds[BACKGROUND] == pytest.approx(1.6) and speeds[MUD] == speeds[WATER] == speeds[ROCK] == pytest.approx(0.5)
+    rule = SpeedRule(SpeedConfig(), fit.model, fit, "grass")
+    names, lethal = FEATURES.feature_classes, frozenset({"non_traversable"})
+    assert rule.warnings(names, lethal) == [
+        "water, rock, mud: never shown at a steady speed; driven at 0.50 m/s, the slowest the drive showed "
+        "(a lane of each, as teaching courses lay them, shows the speed kept on it)"
+    ]
+    assert "mud" not in rule.describe(names, lethal) and "grass 1.60 m/s" in rule.describe(names, lethal)
+    assert rule.warnings(names, frozenset({"non_traversable", "water", "rock", "mud"})) == []
+
+
 def test_the_fit_reads_a_class_wherever_one_footprint_point_meets_it():
     """A driver who never slowed for a patch one footprint point brushes is explained better by
     two points; the fit still reads one, as a driver who slows for such a patch elsewhere would

@@ -307,6 +307,8 @@ def _print_what_the_drive_shows(rec) -> None:
     if fitted is not None:
         lethal = frozenset({rec.classes.lethal_column} if rec.classes.lethal else ())
         print("  the speed it shows: " + "; ".join(fitted.lines(dataset.feature_config.feature_classes, lethal)))
+        for warning in fitted.warnings(dataset.feature_config.feature_classes, lethal):
+            print(f"  warning: {warning}")
 
 
 def inspect_parser(sub: argparse._SubParsersAction) -> None:

@@ -168,6 +168,8 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
     for rule in result.rules:
         note = "" if rule.type == result.drives or not rule.steers else " (fitted to be reported; it does not drive)"
         print(f"  {rule.describe(data.feature_config.feature_classes, lethal)}{note}")
+        for warning in rule.warnings(data.feature_config.feature_classes, lethal):
+            print(f"  warning: {warning}")
     if result.identifiability is not None:
         print("what the demonstrations show (stored in the model):")
         for line in result.identifiability.lines_with_order(data.meta.get("profile")):

@@ -143,10 +143,12 @@ def _rules(rules, driving, names: tuple[str, ...], classes, graph_note: bool = F
     lethal = frozenset({classes.lethal_column} if classes.lethal else ())  # the terrain column the lethal classes share
     note = " (in the metadata; the graph holds C alone)" if graph_note and not driving.graph else ""
     lines = [f"drives          {driving.type}{note}"]
-    lines += [
-        f"  {rule.describe(names, lethal)}" + ("" if rule is driving or not rule.steers else " (fitted to be reported; it does not drive)")
-        for rule in rules
-    ]
+    for rule in rules:
+        lines.append(
+            f"  {rule.describe(names, lethal)}"
+            + ("" if rule is driving or not rule.steers else " (fitted to be reported; it does not drive)")
+        )
+        lines += [f"  warning: {warning}" for warning in rule.warnings(names, lethal)]
     return lines
 
 

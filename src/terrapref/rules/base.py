@@ -184,6 +184,11 @@ class Rule(abc.ABC):
         """One line on what was fitted (``terrapref train``, ``terrapref info``); ``names`` the terrain columns' classes."""
         return self.type
 
+    def warnings(self, names: tuple[str, ...], lethal: frozenset[str]) -> list[str]:
+        """What the drive did not show the fit, and what the rule does there instead, a line each
+        (``train``, ``inspect`` and ``info`` print them as warnings)."""
+        return []
+
 
 class FrameReader(abc.ABC):
     """What one rule reads of each frame of one recording while it is featurised, for its fit."""

@@ -29,6 +29,7 @@ STEADY_CURVATURE = 0.25  # a way of less curvature counts for a cruising speed (
 BEND_CURVATURE = 0.1  # a way of more curvature may be slowed by the bend [1/m]
 MIN_FRAMES = 10  # frames a cruising speed, a bend or a lethal neighbour needs to be fitted
 MIN_SPEED_MPS = 0.1  # the slowest the rule commands while it drives [m/s]
+SLOWEST_PERCENTILE = 5  # the slowest speed a drive showed: this percentile of its speeds while moving (not a moment's)
 
 
 def across(half_width_m: float) -> np.ndarray:
@@ -147,10 +148,13 @@ def fit_speed(
     bend's limit the median ``v^2 * curvature`` of the frames slower than their terrain allows in
     bends; the lethal neighbour's speed the median of the frames slower than both near lethal
     terrain (the ring that explains them best). The preview and lag that explain all frames best
-    (mean absolute error) are kept. A class counts where it meets any one of the footprint's
-    points (``min_points`` 1), as the driver reads its footprint: a model that asked for two passed
-    at full speed the patches its driver brushes, on clean frames and under label errors alike,
-    even where two points explained its drive better.
+    (mean absolute error) are kept. A class the drive never showed at a steady speed is driven at
+    the slowest speed the drive showed: the slowest cruising speed learned, or the
+    :data:`SLOWEST_PERCENTILE` th percentile of its speeds while moving where that is slower. A
+    class counts where it meets any one of the footprint's points (``min_points`` 1), as the
+    driver reads its footprint: a model that asked for two passed at full speed the patches its
+    driver brushes, on clean frames and under label errors alike, even where two points explained
+    its drive better.
     """
 
     def fitted(lag: int, preview: float) -> SpeedFit | None:
@@ -223,8 +227,13 @@ def _fit_at(frames: _Frames, preview_m: float) -> tuple[SpeedModel, tuple[tuple[
     known = [s for s in speeds if not math.isnan(s)]
     if not known:
         return None
+    # A class never shown steady is driven at the slowest speed the drive showed, not at a class's
+    # it may be far faster than (a drive that showed only its grass steady). A lethal column's speed
+    # is never read; it stays the slowest known, so that a drive that showed every other class
+    # steady fits the model it always did.
     slowest = min(known)
-    speeds = [slowest if math.isnan(s) else s for s in speeds]  # never shown steady: the slowest known, to be safe
+    unseen_mps = min(slowest, float(np.percentile(v, SLOWEST_PERCENTILE)))
+    speeds = [(slowest if col in lethal else unseen_mps) if math.isnan(s) else s for col, s in enumerate(speeds)]
     base = SpeedModel(tuple(speeds), preview_m, None, None, None, lethal)
     terrain_v = base.predict(way, curvature)
     bend = (terrain_v > 1.1 * v) & (np.abs(curvature) >= BEND_CURVATURE) & ~near

@@ -257,25 +257,31 @@ class SpeedRule(Rule):
         return SpeedRunner(self, context, shared)
 
     def describe(self, names: tuple[str, ...], lethal: frozenset[str]) -> str:
-        """The cruising speed per class with its interval, the classes never shown at a steady speed, and the limits."""
+        """The cruising speed per class with its interval, and the limits."""
         return "speed rule: " + "; ".join(self.lines(names, lethal))
 
+    def warnings(self, names: tuple[str, ...], lethal: frozenset[str]) -> list[str]:
+        """The classes the drive never showed at a steady speed, and the speed they are driven at:
+        the slowest the drive showed (:func:`~terrapref.rules.speed.model.fit_speed`)."""
+        unseen = [(name, col) for col, name in self._classes(names, lethal) if self.fit is not None and self.fit.intervals[col] is None]
+        if not unseen:
+            return []
+        v = min(self.model.speeds_mps[col] for _, col in unseen)
+        return [
+            f"{', '.join(name for name, _ in unseen)}: never shown at a steady speed; driven at {v:.2f} m/s, the slowest the drive "
+            f"showed (a lane of {'each' if len(unseen) > 1 else 'it'}, as teaching courses lay them, shows the speed kept on it)"
+        ]
+
     def lines(self, names: tuple[str, ...], lethal: frozenset[str]) -> list[str]:
-        """What was learned, a line each: the speed per class (interval), then the limits."""
+        """What was learned, a line each: the speed per class the drive showed at a steady speed (interval), then the limits."""
         m, fit = self.model, self.fit
-        out, unseen = [], []
-        for col, name in enumerate((*names, self.background)):
-            if name in lethal:
-                continue
+        out = []
+        for col, name in self._classes(names, lethal):
             interval = fit.intervals[col] if fit is not None else None
-            if fit is not None and interval is None:
-                unseen.append(name)
+            if fit is not None and interval is None:  # never shown at a steady speed: :meth:`warnings`
                 continue
             around = f" (95% CI {interval[0]:.2f}-{interval[1]:.2f})" if interval is not None else ""
             out.append(f"{name} {m.speeds_mps[col]:.2f} m/s{around}")
-        if unseen:
-            slowest = min(m.speeds_mps)
-            out.append(f"never shown at a steady speed: {', '.join(unseen)} (driven at the slowest speed learned, {slowest:.2f} m/s)")
         points = f" on {m.min_points} of 5 footprint points" if m.min_points > 1 else ""
         out.append(f"slows {m.preview_m:g} m before a slower class{points}")
         bends = f"at most {m.lateral_accel_mps2:.2f} m/s^2 sideways" if m.lateral_accel_mps2 is not None else "no limit shown"
@@ -287,6 +293,10 @@ class SpeedRule(Rule):
         if fit is not None:
             out.append(f"fitted to {fit.samples} frames, mean error {fit.error_mps:.3f} m/s")
         return out
+
+    def _classes(self, names: tuple[str, ...], lethal: frozenset[str]) -> list[tuple[int, str]]:
+        """(column, class) of every terrain column a speed is kept for: ``names``, then the background; not the lethal ones."""
+        return [(col, name) for col, name in enumerate((*names, self.background)) if name not in lethal]
 
 
 def _points(block: Mapping[str, Any], where: Where) -> int:
