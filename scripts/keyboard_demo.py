@@ -52,9 +52,10 @@ from terrapref.learning.pipeline import RunOptions, train_and_save  # noqa: E402
 from terrapref.plots import RateRow, save_intervals  # noqa: E402
 from terrapref.recipes import DEFAULT_RECIPE, RecipeSetup, recipe_named, record_demonstrations  # noqa: E402
 from terrapref.scenario import resolve_scenario  # noqa: E402
-from terrapref.terrain import PreferenceProfile  # noqa: E402
+from terrapref.terrain import PreferenceProfile, default_classes  # noqa: E402
 
 INPUTS = ("stick", "keyboard")
+BACKGROUND = default_classes().background  # the zones passed by count for it in the speed comparison
 
 
 Speeds = tuple[tuple[str, float], ...]
@@ -135,7 +136,10 @@ def main(argv: list[str] | None = None) -> int:
     rows, collisions, runs = _zone_rows(specs, results, {models[key]: key for key in keys})
     drives = _drives(recordings)
     speed = (
-        {kind: SpeedComparison.of([r for r in rows if r["input"] == kind], [r for r in runs if r["input"] == kind]) for kind in INPUTS}
+        {
+            kind: SpeedComparison.of([r for r in rows if r["input"] == kind], [r for r in runs if r["input"] == kind], BACKGROUND)
+            for kind in INPUTS
+        }
         if speeds
         else None
     )

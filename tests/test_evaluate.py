@@ -99,6 +99,13 @@ def test_summary_counts_the_runs(evaluated, key: str, driver: str):
     assert summary["completed_rate"] == pytest.approx(sum(r["completed"] for r in runs) / len(runs))
 
 
+def test_the_speed_against_the_driver_names_the_background_by_its_class(evaluated):
+    """The zones both passed by count for the background, named as SPEC 18 keys classes (not `avoid`;
+    the keying itself: tests/test_speed_rule.py)."""
+    speed = evaluated.metrics["speed"]
+    assert speed["background"] == "grass" and set(speed["by_class"]) <= set(default_classes().names)
+
+
 def test_figures_are_written(evaluated):
     for name in ("demo_course.png", "demo_course_frame00005.png"):
         data = (evaluated.out / name).read_bytes()

@@ -588,38 +588,41 @@ RUNS = [
 
 
 def test_the_speed_error_per_class_is_over_the_zones_both_took():
-    c = SpeedComparison.of(ZONES, RUNS)
-    assert set(c.by_class) == {"mud", AVOID}
+    c = SpeedComparison.of(ZONES, RUNS, "grass")
+    assert set(c.by_class) == {"mud", "grass"}  # the zones passed by: on the background, by its name (SPEC 18)
     assert c.by_class["mud"].mean == pytest.approx(0.15) and c.by_class["mud"].n == 2
     assert c.by_class["mud"].low == pytest.approx(0.1) and c.by_class["mud"].high == pytest.approx(0.2)  # resampling layouts a, b
-    assert c.by_class[AVOID].mean == pytest.approx(0.1) and c.by_class[AVOID].n == 1
+    assert c.by_class["grass"].mean == pytest.approx(0.1) and c.by_class["grass"].n == 1
 
 
 def test_the_time_and_lateral_acceleration_against_the_drivers():
-    c = SpeedComparison.of(ZONES, RUNS)
+    c = SpeedComparison.of(ZONES, RUNS, "grass")
     assert c.time_ratio is not None and c.time_ratio.n == 2 and c.time_ratio.mean == pytest.approx((1.04 + 0.9) / 2)
     assert c.time_within == (1, 2)
     assert c.lateral_over == (1, 2) and c.lateral_worst == pytest.approx(1.2)
     assert c.limit_over == (1, 3) and c.limit_worst == pytest.approx(0.5 / 0.4)  # runs whose driver's limit is known
     assert TIME_TOLERANCE == 0.05 and LATERAL_TOLERANCE == 0.10
-    edge = SpeedComparison.of([], [_run("a", 10.49, 10.0, 1.0999, 1.0), _run("a", 10.51, 10.0, 1.1001, 1.0)])
+    edge = SpeedComparison.of([], [_run("a", 10.49, 10.0, 1.0999, 1.0), _run("a", 10.51, 10.0, 1.1001, 1.0)], "grass")
     assert edge.time_within == (1, 2) and edge.lateral_over == (1, 2)
-    none = SpeedComparison.of([], [])
+    none = SpeedComparison.of([], [], "grass")
     assert none.by_class == {} and none.time_ratio is None and none.time_within == (0, 0) and none.lateral_worst is None
     assert none.limit_over == (0, 0) and none.limit_worst is None
 
 
 def test_a_comparison_reads_back_what_it_writes():
-    for c in (SpeedComparison.of(ZONES, RUNS), SpeedComparison.of([], [])):
+    for c in (SpeedComparison.of(ZONES, RUNS, "grass"), SpeedComparison.of([], [], "grass")):
         assert SpeedComparison.from_dict(json.loads(json.dumps(c.to_dict()))) == c
-    lines = SpeedComparison.of(ZONES, RUNS).lines()
+    lines = SpeedComparison.of(ZONES, RUNS, "grass").lines()
     assert len(lines) == 5  # a line per class, the time, the lateral acceleration against the limit and the driver's run
-    assert "the background (zones passed by): 0.100" in lines[0] and "mud: 0.150" in lines[1]
+    assert "against the driver, grass (zones passed by): 0.100" in lines[0] and "mud: 0.150" in lines[1]
     assert "within 5% in 50.0% (1/2" in lines[2]
     assert "above the driver's limit: 33.3% (1/3" in lines[3] and "at most 1.25 times the limit" in lines[3]
     assert "on the same layout: 50.0% (1/2" in lines[4] and "at most 1.20 times it" in lines[4]
-    old = {k: v for k, v in SpeedComparison.of(ZONES, RUNS).to_dict().items() if not k.startswith("limit")}
+    old = {k: v for k, v in SpeedComparison.of(ZONES, RUNS, "grass").to_dict().items() if not k.startswith("limit")}
     assert SpeedComparison.from_dict(old).limit_over == (0, 0)  # a metrics.json from before the limit was compared
+    older = {**old, "by_class": {AVOID if k == "grass" else k: v for k, v in old["by_class"].items()}}
+    del older["background"]  # from before the background was named
+    assert "against the driver, the background (zones passed by): 0.100" in SpeedComparison.from_dict(older).lines()[0]
 
 
 def test_the_drivers_lateral_limit_is_its_styles_else_the_most_its_drive_showed():

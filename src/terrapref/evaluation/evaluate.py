@@ -148,7 +148,7 @@ def evaluate_model(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     limit = driver_lateral_limit(ev.style, ev.speeds, model.rules)
-    metrics = _metrics(ev, profile, results, evidence, limit)
+    metrics = _metrics(ev, profile, results, evidence, limit, model.classes.background)
     beyond = {r.scenario: sorted(set(ev.frames) - {f.number for f in r.frames}) for r in results if r.driver == PLANNER and r.seed == 0}
     if any(beyond.values()):
         metrics["frames_beyond_the_run"] = {name: numbers for name, numbers in beyond.items() if numbers}
@@ -187,10 +187,16 @@ def _evidence(model, scenarios: Sequence[str]) -> _Evidence | None:
 
 
 def _metrics(
-    ev: Evaluation, profile: PreferenceProfile, results: list[RunResult], evidence: _Evidence | None, lateral_limit_mps2: float | None
+    ev: Evaluation,
+    profile: PreferenceProfile,
+    results: list[RunResult],
+    evidence: _Evidence | None,
+    lateral_limit_mps2: float | None,
+    background: str,
 ) -> dict:
     """metrics.json: what was evaluated, every run's metrics by course, driver and seed, and the
-    summaries (the speed's against the driver's lateral-acceleration limit, where known)."""
+    summaries (the speed's against the driver's lateral-acceleration limit, where known; by class,
+    the ``background`` class's name for the zones passed by)."""
     metrics: dict = {
         "model": str(ev.model_path),
         "profile": list(profile.order),
@@ -205,7 +211,7 @@ def _metrics(
     if ev.with_driver:
         metrics["driver_summary"] = summarise(results, EXPERT).to_dict()
         metrics["driver_lateral_limit_mps2"] = lateral_limit_mps2
-        metrics["speed"] = SpeedComparison.of_results(results, lateral_limit_mps2).to_dict()
+        metrics["speed"] = SpeedComparison.of_results(results, background, lateral_limit_mps2).to_dict()
     return metrics
 
 

@@ -45,9 +45,9 @@ class SpeedComparison:
     """The planner's speed against its driver's.
 
     Attributes:
-        by_class: per class the driver took (its background when it passed a zone by), the
-            mean absolute error of the mean speed through a zone [m/s], over the zones where
-            the planner took that class too.
+        by_class: per class the driver took, by name (the background, ``background``, where it
+            passed a zone by), the mean absolute error of the mean speed through a zone [m/s],
+            over the zones where the planner took that class too.
         time_ratio: the planner's time to the end of the path over the driver's, over runs both completed.
         time_within: runs whose time is within :data:`TIME_TOLERANCE` of the driver's, and runs compared.
         limit_over: runs whose largest lateral acceleration is more than :data:`LATERAL_TOLERANCE`
@@ -56,6 +56,8 @@ class SpeedComparison:
         lateral_over: runs whose largest lateral acceleration is more than :data:`LATERAL_TOLERANCE`
             above the largest of the driver's own run on the same layout, and runs compared.
         lateral_worst: the largest ratio of the two.
+        background: the class table's background class (None in a file written before it was named:
+            its zones passed by are keyed ``avoid`` there).
     """
 
     by_class: dict[str, Estimate]
@@ -65,14 +67,18 @@ class SpeedComparison:
     lateral_worst: float | None
     limit_over: tuple[int, int] = (0, 0)
     limit_worst: float | None = None
+    background: str | None = None
 
     @classmethod
-    def of(cls, zones: Sequence[Mapping[str, Any]], runs: Sequence[Mapping[str, Any]]) -> SpeedComparison:
+    def of(cls, zones: Sequence[Mapping[str, Any]], runs: Sequence[Mapping[str, Any]], background: str) -> SpeedComparison:
+        """The comparison of zone and run rows (module docstring), a zone the driver passed by
+        counted for the ``background`` class."""
         errors: dict[str, dict[str, list[float]]] = {}
         for z in zones:
             if z.get("speed_mps") is None or z.get("driver_speed_mps") is None or not z.get("agrees"):
                 continue
-            errors.setdefault(z["driver_choice"], {}).setdefault(z["scenario"], []).append(abs(z["speed_mps"] - z["driver_speed_mps"]))
+            name = background if z["driver_choice"] == AVOID else z["driver_choice"]  # passed by: on the background
+            errors.setdefault(name, {}).setdefault(z["scenario"], []).append(abs(z["speed_mps"] - z["driver_speed_mps"]))
         by_class = {name: _estimate(groups) for name, groups in sorted(errors.items())}
         ratios: dict[str, list[float]] = {}
         for r in runs:
@@ -90,12 +96,14 @@ class SpeedComparison:
             max(same) if same else None,
             (sum(x > 1 + LATERAL_TOLERANCE for x in limit), len(limit)),
             max(limit) if limit else None,
+            background,
         )
 
     @classmethod
-    def of_results(cls, results: Sequence[RunResult], lateral_limit_mps2: float | None = None) -> SpeedComparison:
+    def of_results(cls, results: Sequence[RunResult], background: str, lateral_limit_mps2: float | None = None) -> SpeedComparison:
         """The planner's runs against the driver's of the same course and seed (zones annotated with
-        agreement), and against the driver's lateral-acceleration limit where it is known."""
+        agreement; those passed by counted for the ``background`` class), and against the driver's
+        lateral-acceleration limit where it is known."""
         driver = {(r.scenario, r.seed): r for r in results if r.driver == EXPERT}
         zones, runs = [], []
         for r in results:
@@ -115,7 +123,7 @@ class SpeedComparison:
                             "driver_speed_mps": theirs[z.id].speed_mps,
                         }
                     )
-        return cls.of(zones, runs)
+        return cls.of(zones, runs, background)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -133,13 +141,14 @@ class SpeedComparison:
             data["lateral_worst"],
             tuple(data.get("limit_over", (0, 0))),
             data.get("limit_worst"),
+            data.get("background"),
         )
 
     def lines(self) -> list[str]:
         """What it says, a line each."""
+        passed_by = {self.background: f"{self.background} (zones passed by)", AVOID: "the background (zones passed by)"}
         out = [
-            f"speed error against the driver, {'the background (zones passed by)' if name == AVOID else name}: {e.text()} m/s "
-            f"over zones (target <= {SPEED_TARGET_MPS})"
+            f"speed error against the driver, {passed_by.get(name, name)}: {e.text()} m/s over zones (target <= {SPEED_TARGET_MPS})"
             for name, e in self.by_class.items()
         ]
         if self.time_ratio is not None:

@@ -15,7 +15,7 @@ from terrapref.evaluation.speed import SpeedComparison
 from terrapref.evaluation.stats import rate_text
 from terrapref.grid import Engine, run_grid
 from terrapref.recipes import TEACH, RecipeSetup, run_recipe
-from terrapref.scenario import AVOID, resolve_scenario
+from terrapref.scenario import resolve_scenario
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import PreferenceProfile, default_classes
 
@@ -54,7 +54,7 @@ def _speeds_text(speeds: Sequence[tuple[str, float]]) -> str:
 
 def speed_lines(part: SpeedPart, results: list[RunResult], figure: str) -> list[str]:
     """REPORT.md's speed section: the setting, speed by class (driver, planner, error), time to the end of the path, the figure."""
-    comparison = SpeedComparison.of_results(results)
+    comparison = SpeedComparison.of_results(results, default_classes().background)
     lines = [
         "## Speed (recipe teach, a driver with speed preferences)",
         "",
@@ -68,9 +68,8 @@ def speed_lines(part: SpeedPart, results: list[RunResult], figure: str) -> list[
         "|---|---|---|---|",
     ]
     driver, planner = _by_class(results, EXPERT), _by_class(results, PLANNER)
-    background = default_classes().background  # its zones' error: those both passed by (AVOID)
     for name in sorted(set(driver) | set(planner)):
-        error = comparison.by_class.get(AVOID if name == background else name)
+        error = comparison.by_class.get(name)
         lines.append(f"| {name} | {_mean(driver.get(name))} | {_mean(planner.get(name))} | {error.text() if error else '-'} |")
     if comparison.time_ratio is not None:
         lines += [

@@ -199,7 +199,12 @@ def _chosen(order: Sequence[str], lethal: str | None = "non_traversable") -> Seq
 
 def _lethal_of(sel: dict) -> str | None:
     """The lethal column of the class table select.json's selection names (the default table's when none)."""
-    return (ClassTable.from_dict(sel["classes"], "select.json") if "classes" in sel else default_classes()).lethal_column
+    return _table_of(sel).lethal_column
+
+
+def _table_of(sel: dict) -> ClassTable:
+    """The class table select.json's selection names (the default table when none)."""
+    return ClassTable.from_dict(sel["classes"], "select.json") if "classes" in sel else default_classes()
 
 
 def perception_tag(model: PerceptionModel) -> str:
@@ -432,7 +437,7 @@ def write_selection_report(out: Path, saved: dict) -> Path:
         table, bars = _selection_table(sel, part, part_runs, order_bars=len(seen) == 1)
         lines += table + [""]
         if sel.get("speeds") is not None:
-            lines += speed_section(part, part_runs) + [""]
+            lines += speed_section(part, part_runs, _table_of(sel).background) + [""]
         for label, rate, interval in bars:
             points.append(RateRow(f"{label}, {name}" if len(seen) > 1 else label, rate, interval))
             targets.append(TARGET if name == "clean" else PERCEIVED_TARGET)
@@ -454,9 +459,10 @@ def write_selection_report(out: Path, saved: dict) -> Path:
     return path
 
 
-def speed_section(rows: Sequence[dict], runs: Sequence[dict]) -> list[str]:
-    """The planner's speed against its own driver's (terrapref.evaluation.speed), a line each."""
-    compared = SpeedComparison.of(rows, runs)
+def speed_section(rows: Sequence[dict], runs: Sequence[dict], background: str) -> list[str]:
+    """The planner's speed against its own driver's (terrapref.evaluation.speed), a line each (the
+    zones passed by counted for the ``background`` class)."""
+    compared = SpeedComparison.of(rows, runs, background)
     lines = [
         "Speed against the driver (each order and seed with its own cruising speeds): per class the driver took, the mean "
         "absolute error of the mean speed through a zone over the zones where the planner took it too; 95% intervals "
