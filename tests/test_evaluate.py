@@ -113,6 +113,23 @@ def test_figures_are_written(evaluated):
     assert sorted(p.name for p in evaluated.out.glob("*.png")) == ["demo_course.png", "demo_course_frame00005.png"]
 
 
+def test_a_model_with_a_speed_rule_gets_a_figure_of_speed_along_each_path(tmp_path: Path):
+    """The skip-path model with a speed rule: its runs' speed along demo_course, driver and planner (seed 0)."""
+    from helpers import model_meta, skip_path_weights
+    from terrapref.learning.model_file import save_model
+    from terrapref.learning.network import ClassifierConfig
+    from terrapref.rules.speed.model import SpeedModel
+    from terrapref.rules.speed.rule import SpeedConfig, SpeedRule
+
+    speeds = SpeedModel((0.5, 0.5, 0.8, 0.9, 1.6), 1.5, None, None, None, (0,))
+    classifier = ClassifierConfig(hidden=8, skip=True)
+    meta = {**model_meta(), "rules": [SpeedRule(SpeedConfig(), speeds).header()], "drives": "argmax"}
+    model = save_model(tmp_path / "speed.safetensors", classifier, skip_path_weights(classifier), meta)
+    evaluate_model(Evaluation(str(model), ("demo_course",), seeds=1), tmp_path / "ev", engine=Engine(workers=1))
+    figure = (tmp_path / "ev" / "demo_course_speed.png").read_bytes()
+    assert figure.startswith(PNG) and len(figure) > 1000
+
+
 def test_evaluation_is_deterministic(model_path: Path, evaluated, tmp_path: Path):
     again = evaluate_model(Evaluation(str(model_path), ("demo_course",), seeds=2, with_driver=False), tmp_path, engine=Engine(workers=1))
 

@@ -523,9 +523,18 @@ def save_curves(
     return _save(fig, path)
 
 
-def save_speed_profile(path: str | Path, series: Sequence[tuple[str, np.ndarray, np.ndarray, str]], title: str) -> Path:
-    """Speed [m/s] against progress along the path [m], one line per (label, progress, speed, colour)."""
+def save_speed_profile(
+    path: str | Path,
+    series: Sequence[tuple[str, np.ndarray, np.ndarray, str]],
+    title: str,
+    spans: Sequence[tuple[str, float, float]] = (),
+) -> Path:
+    """Speed [m/s] against progress along the path [m], one line per (label, progress, speed,
+    colour), over the stretches ``spans`` (label, first and last progress [m]: the zones) shaded."""
     fig, ax = plt.subplots(figsize=(9, 3.6), dpi=120)
+    for label, s0, s1 in spans:
+        ax.axvspan(s0, s1, color="0.85", lw=0)
+        ax.text((s0 + s1) / 2, 0.02, label, transform=ax.get_xaxis_transform(), ha="center", va="bottom", fontsize=7, color="0.35")
     for label, s, v, colour in series:
         ax.plot(s, v, color=colour, lw=1.2, label=label)
     ax.set_xlabel("progress along the path [m]")

@@ -24,13 +24,14 @@ from terrapref.evaluation.runner import (
     summarise,
 )
 from terrapref.evaluation.scoring import classes_in_zone
-from terrapref.evaluation.speed import SpeedComparison, driver_lateral_limit
+from terrapref.evaluation.speed import SpeedComparison, driver_lateral_limit, save_speed_along
 from terrapref.features import PreferenceSet
 from terrapref.fileio import write_text_atomic
 from terrapref.grid import Engine
 from terrapref.learning.identify import Identifiability
 from terrapref.perception import PerceptionModel
 from terrapref.planner.model import Model
+from terrapref.rules import speed_rule
 from terrapref.scenario import AVOID, resolve_scenario
 from terrapref.terrain import ClassTable, PreferenceProfile
 from terrapref.vehicle import Pose
@@ -130,9 +131,10 @@ def evaluate_model(
     run and whether the planner agreed (SPEC 12), and, when the model's demonstrations left a
     pair of classes unidentified (terrapref.learning.identify), the pairs its expected choice
     rests on. Writes ``metrics.json``, one top-down figure per scenario and the decision
-    pictures of ``frames`` (for seed 0) into ``out_dir``, and with ``mcap`` every planner run as
-    ROS 2 MCAP (``runs/SCENARIO_seedN.mcap``: the camera, the pose, the 21 trajectories and the
-    one chosen); returns the metrics. ``engine``: where the runs go (default: local processes,
+    pictures of ``frames`` (for seed 0) into ``out_dir``; for a model with a speed rule, one
+    figure per scenario of the speed along its path (``SCENARIO_speed.png``: driver and planner,
+    seed 0); and with ``mcap`` every planner run as ROS 2 MCAP (``runs/SCENARIO_seedN.mcap``: the
+    camera, the pose, the 21 trajectories and the one chosen); returns the metrics. ``engine``: where the runs go (default: local processes,
     one per core). With ``perception``, the planner receives what a robot would
     (terrapref.perception) while the driver and the scoring see the truth; metrics.json names the
     model. With ``watch``, the runs go one after another in this process, each planner driving as
@@ -153,6 +155,8 @@ def evaluate_model(
     if any(beyond.values()):
         metrics["frames_beyond_the_run"] = {name: numbers for name, numbers in beyond.items() if numbers}
     _figures(results, ev.scenarios, out, model, profile, ev.perceived)
+    if speed_rule(model.rules) is not None:  # a model that learned its driver's speed: where it went how fast
+        _speed_figures(results, ev.scenarios, out, model.classes)
     if ev.mcap:
         _write_runs(results, out / "runs", model)
     write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=2))
@@ -323,6 +327,13 @@ def _figures(
                     classes=model.classes,
                     title=f"{name}, frame {f.number}, pose ({x:.1f} m, {y:.1f} m, yaw {np.degrees(yaw):.0f} deg)",
                 )
+
+
+def _speed_figures(results: list[RunResult], scenarios: Sequence[str], out: Path, classes: ClassTable) -> None:
+    """Per course, the speed along its path of the driver's and the planner's run of seed 0, its zones shaded."""
+    for name in scenarios:
+        scenario, _ = scenario_and_world(name, classes)
+        save_speed_along(out / f"{file_stem(name)}_speed.png", results, scenario, name, zones=True)
 
 
 def _zone_successes(runs: list[RunResult]) -> dict[str, tuple[int, int]]:

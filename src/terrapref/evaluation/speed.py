@@ -1,5 +1,6 @@
 """The planner's speed against its own driver's (SPEC 18): per class over zones, time to the end of
-the path, lateral acceleration; shared by ``evaluate`` (metrics.json) and ``select`` (SELECT.md).
+the path, lateral acceleration; shared by ``evaluate`` (metrics.json) and ``select`` (SELECT.md);
+and the figure of speed along a course's path, driver and planner (``evaluate``, ``reproduce``).
 
 Rows are plain mappings, as select.json keeps them: a zone row has ``scenario``,
 ``driver_choice``, ``agrees``, ``speed_mps`` and ``driver_speed_mps``; a run row has
@@ -12,7 +13,10 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from terrapref.demos.expert import ExpertConfig
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult
@@ -20,7 +24,8 @@ from terrapref.evaluation.scoring import RunMetrics
 from terrapref.evaluation.stats import cluster_bootstrap, rate_text
 from terrapref.rules import Rule, speed_rule
 from terrapref.rules.speed.rule import SpeedRule
-from terrapref.scenario import AVOID
+from terrapref.scenario import AVOID, Scenario
+from terrapref.scenario.path import ReferencePath
 
 SPEED_TARGET_MPS = 0.08  # the planner's speed error per class against its driver must stay within this [m/s]
 TIME_TOLERANCE = 0.05  # and its time to the end of the path within this share of the driver's
@@ -216,3 +221,52 @@ def trained_driver(meta: Mapping[str, Any]) -> tuple[str, tuple[tuple[str, float
     if not isinstance(style, str) or not all(len(p) == 2 and isinstance(p[0], str) and isinstance(p[1], (int, float)) for p in speeds):
         return None
     return style, tuple((str(n), float(v)) for n, v in speeds)
+
+
+RUN_XY_STEP_S = 0.1  # a run's kept path (RunResult.xy): its reference point every third 30 Hz tick [s]
+
+
+def speed_along(xy: np.ndarray, path: ReferencePath) -> tuple[np.ndarray, np.ndarray]:
+    """Progress along ``path`` [m] and speed [m/s] of a run's kept reference points ``xy`` (T, 2)
+    (:data:`RUN_XY_STEP_S` apart), both (T - 1,)."""
+    xy = np.asarray(xy, dtype=float)
+    speed = np.hypot(*np.diff(xy, axis=0).T) / RUN_XY_STEP_S
+    s, progress = [], 0.0
+    for point in xy[1:]:
+        progress = max(progress, path.project(point, progress - 2.0, progress + 10.0)[0])
+        s.append(progress)
+    return np.array(s), speed
+
+
+def zone_spans(scenario: Scenario, step_m: float = 0.25) -> list[tuple[str, float, float]]:
+    """(zone id and label, first and last progress [m]) of the stretch of the path inside each zone the path crosses."""
+    path = ReferencePath(scenario.waypoints)
+    s = np.arange(0.0, path.length_m + 1e-9, step_m)
+    points = path.point_at(s)
+    spans = []
+    for zone in scenario.zones:
+        inside = zone.shape.contains(points)
+        if inside.any():
+            spans.append((f"{zone.id}: {zone.label}" if zone.label else zone.id, float(s[inside].min()), float(s[inside].max())))
+    return spans
+
+
+def save_speed_along(
+    out: str | Path, results: Sequence[RunResult], scenario: Scenario, name: str, zones: bool = False, seed: int = 0
+) -> Path | None:
+    """The figure of speed along ``scenario``'s path (run as ``name``), the driver's and the
+    planner's run of ``seed`` (each where it ran), with the zones shaded (``zones``); None
+    when neither ran."""
+    from terrapref.plots import save_speed_profile
+
+    reference = ReferencePath(scenario.waypoints)
+    series = []
+    for who, colour in ((EXPERT, "black"), (PLANNER, "red")):
+        run = next((r for r in results if r.driver == who and r.scenario == name and r.seed == seed), None)
+        if run is not None:
+            series.append((who, *speed_along(run.xy, reference), colour))
+    if not series:
+        return None
+    drivers = " and ".join(label for label, *_ in series)
+    spans = zone_spans(scenario) if zones else ()
+    return save_speed_profile(out, series, f"{name}: speed along the path, {drivers} (seed {seed})", spans)

@@ -8,15 +8,12 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, annotate_agreement, run_many
-from terrapref.evaluation.speed import SpeedComparison
+from terrapref.evaluation.speed import SpeedComparison, save_speed_along
 from terrapref.evaluation.stats import rate_text
 from terrapref.grid import Engine, run_grid
 from terrapref.recipes import TEACH, RecipeSetup, run_recipe
 from terrapref.scenario import resolve_scenario
-from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import PreferenceProfile, default_classes
 
 SPEEDS = (("grass", 1.6), ("rock", 1.0), ("mud", 0.5), ("water", 0.3))  # the driver's cruising speeds [m/s]
@@ -96,25 +93,6 @@ def _mean(entry: tuple[float, float] | None) -> str:
     return f"{entry[1] / entry[0]:.2f}" if entry and entry[0] > 0 else "-"
 
 
-def speed_figure(path: Path, results: list[RunResult], course: str = FIGURE_COURSE) -> Path:
-    """Speed along ``course``'s path, the driver's against the planner's (seed 0)."""
-    from terrapref.plots import save_speed_profile
-
-    reference = ReferencePath(resolve_scenario(course).waypoints)
-    series = []
-    for who, colour in ((EXPERT, "black"), (PLANNER, "red")):
-        run = next((r for r in results if r.driver == who and r.scenario == course and r.seed == 0), None)
-        if run is not None:
-            series.append((who, *_along(run.xy, reference), colour))
-    return save_speed_profile(path, series, f"{course}: speed along the path, driver and planner (seed 0)")
-
-
-def _along(xy: np.ndarray, path: ReferencePath) -> tuple[np.ndarray, np.ndarray]:
-    """Progress along ``path`` [m] and speed [m/s] of a run's reference point (every third 30 Hz tick: 0.1 s apart)."""
-    xy = np.asarray(xy, dtype=float)
-    speed = np.hypot(*np.diff(xy, axis=0).T) / 0.1
-    s, progress = [], 0.0
-    for point in xy[1:]:
-        progress = max(progress, path.project(point, progress - 2.0, progress + 10.0)[0])
-        s.append(progress)
-    return np.array(s), speed
+def speed_figure(path: Path, results: list[RunResult], course: str = FIGURE_COURSE) -> Path | None:
+    """Speed along ``course``'s path, the driver's against the planner's (seed 0); None when neither ran it."""
+    return save_speed_along(path, results, resolve_scenario(course), course)
