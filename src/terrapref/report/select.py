@@ -423,7 +423,8 @@ def write_selection_report(out: Path, saved: dict) -> Path:
     if "course" in sel or sel.get("follow_up"):
         course = f"`{Path(sel['course']).name}`" if "course" in sel else "its own course"
         lines += [
-            f"Every recipe demonstrated {course}{', then a follow-up course of the pairs its drive left open' if sel.get('follow_up') else ''}.",
+            f"Every recipe demonstrated {course}"
+            f"{', then a follow-up course of the pairs its drive left open, beside their neighbours' if sel.get('follow_up') else ''}.",
             "",
         ]
     points: list[RateRow] = []
