@@ -505,11 +505,12 @@ def test_a_model_taught_by_a_log_driven_at_1_5_mps_commands_1_5_mps_on_open_grou
     from terrapref.learning.model_file import load_model
     from terrapref.rules import rules_of, speed_rule
     from terrapref.runtime import PlannerRuntime
+    from test_interop import UNSMOOTHED
 
     rules, _ = rules_of(load_model(fast["model"]))
     assert speed_rule(rules) is not None
     scenario = resolve_scenario("demo_course")
-    runtime = PlannerRuntime(fast["model"])
+    runtime = PlannerRuntime(fast["model"], limits=UNSMOOTHED)
     runtime.set_path(scenario.waypoints)
     frame = Simulation(scenario).reset()
     decision = runtime.decide(frame.image, frame.time_s, frame.pose)
