@@ -228,3 +228,76 @@ def test_an_input_given_twice_is_refused_by_either_name(tmp_path: Path):
     alias = tmp_path / "link"
     alias.symlink_to(rec)
     assert _refusal(check_distinct, [rec, alias], "recording") == f"{alias}: is given twice (the same as {rec}); give each recording once"
+
+
+# --- a command killed (kill -9) at any step of a replacement, then the next command -----------------
+
+
+@pytest.fixture(scope="module")
+def killer():
+    """tests/killed_steps.py as a process of its own: ``killer(case, work, step)`` runs ``case``
+    in ``work``, killed before its ``step``-th change on disk; whether the kill came."""
+    import subprocess
+    import sys
+
+    import terrapref
+
+    src = str(Path(terrapref.__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([src, os.environ.get("PYTHONPATH", "")])}
+    driver = subprocess.Popen(
+        [sys.executable, str(Path(__file__).with_name("killed_steps.py"))],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+
+    def run(case: str, work: Path, step: int) -> bool:
+        driver.stdin.write(f"{case}\t{work}\t{step}\n")
+        driver.stdin.flush()
+        answer = driver.stdout.readline().strip()
+        assert answer in ("killed", "ended"), f"the driver said {answer!r}"
+        return answer == "killed"
+
+    yield run
+    driver.stdin.close()
+    driver.wait()
+
+
+def _visible(work: Path) -> dict[str, dict[str, str]]:
+    """What a user sees in ``work``: each folder that is not hidden and holds files, with its files."""
+    return {p.name: _files(p) for p in sorted(work.iterdir()) if not p.name.startswith(".") and _files(p)}
+
+
+@pytest.mark.parametrize("case", ["replace", "first run", "replace, failing", "swap"])
+def test_a_command_killed_at_any_step_loses_nothing_and_the_next_one_puts_it_right(tmp_path: Path, capsys, killer, case: str):
+    """`kill -9` at each change on disk of a command replacing a folder (writing it in place with
+    --force, the first run into it, undoing a run stopped by Ctrl-C, swapping a finished one in),
+    then the next command's check of an output beside it: the output is whole (the old one, or the
+    new one once complete), an unfinished run is only ever OUT.partial, and what was put right is
+    said in one line."""
+    from killed_steps import NEW, OLD, write
+
+    seen = set()
+    for step in range(1, 100):
+        work = tmp_path / str(step)
+        work.mkdir()
+        out = work / "ev"
+        if case != "first run":
+            write(out, OLD)
+        killed = killer(case, work, step)
+        before = _visible(work)
+        check_output(work / "map.png", "--out")  # the first step of any command writing beside it
+        notes = capsys.readouterr().err.splitlines()
+        after = _visible(work)
+        assert set(after) <= {"ev", "ev.partial"}, after
+        assert [p.name for p in work.iterdir() if p.name.startswith(".")] in ([], [".ev.new"])  # (the swap not begun)
+        assert after.get("ev") in ((OLD, NEW) if case != "first run" else (None, NEW)), (step, after)
+        assert after.get("ev.partial", {}).items() <= NEW.items()
+        assert len(notes) == (before != after) and all(str(out) in n for n in notes), (step, notes)
+        if case == "replace, failing":
+            assert after["ev"] == OLD
+        seen.add("new" if after.get("ev") == NEW else "old")
+        if not killed:
+            break
+    assert step > 5 and seen == ({"old"} if case == "replace, failing" else {"old", "new"})
