@@ -10,9 +10,10 @@ A folder is replaced with a journal: a hidden folder beside it, ``.NAME.XXXXXXXX
 (a command writing NAME in place) or ``.NAME.XXXXXXXX.swapping`` (a finished folder being put at
 NAME), which holds the old folder until the new one is complete and is locked by its command for
 as long as that runs. A journal nobody holds was left by a command that was killed (``kill -9``,
-a power cut): the next command that checks an output in that folder, or replaces one there,
-finishes what the journal says first (the old output back, or the finished swap) and says so in
-one line. Every step is one rename, so a kill between any two leaves a state the journal names.
+out of memory): the next command that checks an output or an input in that folder, or replaces
+a folder there, finishes what the journal says first (the old output back, or the finished swap)
+and says so in one line. Every step is one rename, so a kill between any two leaves a state the
+journal names.
 """
 
 from __future__ import annotations
