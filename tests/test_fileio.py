@@ -301,3 +301,21 @@ def test_a_command_killed_at_any_step_loses_nothing_and_the_next_one_puts_it_rig
         if not killed:
             break
     assert step > 5 and seen == ({"old"} if case == "replace, failing" else {"old", "new"})
+
+
+def test_any_command_writing_beside_a_killed_replacement_first_puts_the_old_output_back(tmp_path: Path, capsys):
+    """What `kill -9` leaves in the middle of `evaluate --out ev --force`: the unfinished run at ev,
+    the old one in its journal. The next command writing beside it (an import that is then
+    refused) puts the old one back first, says so, and keeps the unfinished one as ev.partial."""
+    from killed_steps import OLD, write
+    from terrapref.cli import main
+
+    write(tmp_path / ".ev.k1ll3d00.replacing" / "old", OLD)
+    write(tmp_path / "ev", {"metrics.json": "new"})
+    assert main(["import", str(tmp_path / "drive.bag"), "--robot", str(tmp_path / "robot.yaml"), "--out", str(tmp_path / "rec")]) == 2
+    note, error = capsys.readouterr().err.splitlines()
+    ev = tmp_path / "ev"
+    assert note == f"note: {ev}: put back the output a stopped command was replacing; its unfinished one is in {ev}.partial"
+    assert error.startswith(f"error: {tmp_path / 'robot.yaml'}")
+    assert _visible(tmp_path) == {"ev": OLD, "ev.partial": {"metrics.json": "new"}}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ev", "ev.partial"]
