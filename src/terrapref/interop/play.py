@@ -55,7 +55,7 @@ class BagPlayer:
 
         self.path = Path(path)
         self.published = 0  # messages published so far (what a play that stops half-way did)
-        self.skipped_s = 0.0  # [s of log] of gaps longer than the longest played
+        self.skipped_s = 0.0  # [s of log] the clock jumped over in gaps longer than the longest played
         if not self.path.exists():
             raise UserError(str(path), "no such file or folder")
         if self.path.suffix == ".bag":
