@@ -148,6 +148,16 @@ def test_a_replacement_that_fails_puts_the_old_folder_back_and_keeps_the_new_one
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "out.partial"]
 
 
+def test_a_first_run_that_fails_is_kept_as_partial_never_at_the_outputs_name(tmp_path: Path):
+    # (evaluate --mcap failing on its last file left a half-made folder at --out)
+    with pytest.raises(OSError):
+        with output_folder(tmp_path / "ev", force=False) as out:
+            (out / "metrics.json").write_text("half")
+            raise OSError(18, "Invalid cross-device link")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ev.partial"]
+    assert _files(tmp_path / "ev.partial") == {"metrics.json": "half"}
+
+
 def test_a_folder_another_command_is_writing_is_refused_even_with_force(tmp_path: Path):
     with output_folder(tmp_path / "out", force=False) as out:
         (out / "metrics.json").write_text("running")
