@@ -52,7 +52,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     robot = load_robot(args.robot, model.classes)
     out = Path(args.out)
     check_output(out, "--out", [args.bag, args.model, args.robot], folder=True)
-    with output_folder(out, args.force):  # refused (another camera) or stopped: nothing of a new OUT is left
+    with output_folder(out, args.force):  # refused (another camera) or stopped: nothing unfinished is left at OUT
         return _replay_into(args, model, robot, out)
 
 
