@@ -11,10 +11,15 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from helpers import linear_model, one_line_error
+from helpers import linear_model, model_meta, one_line_error, skip_path_weights
 from terrapref.cli import main
+from terrapref.demos.expert import ExpertConfig
+from terrapref.demos.meta import ExpertInfo
+from terrapref.errors import UserError
 from terrapref.evaluation.evaluate import Evaluation, evaluate_model, file_stem
 from terrapref.grid import Engine
+from terrapref.learning.model_file import save_model
+from terrapref.learning.network import ClassifierConfig
 from terrapref.scenario import resolve_scenario
 from terrapref.terrain import PreferenceProfile, default_classes
 
@@ -193,12 +198,34 @@ def test_cli_evaluate_bad_profile(model_path: Path, tmp_path: Path, capsys):
     one_line_error(capsys, "--profile")
 
 
-@pytest.mark.parametrize("speeds", ["nosuch=1", "grass=3", "grass", "grass=0"])
+@pytest.mark.parametrize("speeds", ["nosuch=1", "grass=3", "grass", "grass=0", "grass=0.05", "non_traversable=0.4"])
 def test_cli_evaluate_bad_driver_speeds_are_refused_before_any_run(model_path: Path, tmp_path: Path, capsys, speeds: str):
     rc = main(["evaluate", str(model_path), "demo_course", "--seeds", "1", "--out", str(tmp_path / "ev"), "--speeds", speeds])
     assert rc == 2
     one_line_error(capsys, "--speeds")
     assert not (tmp_path / "ev").exists()
+
+
+def test_cli_evaluate_speeds_change_only_the_classes_they_name_of_the_models_driver(tmp_path: Path, capsys, monkeypatch):
+    speeds = (("grass", 1.6), ("mud", 0.5), ("water", 0.3))
+    driver = ExpertInfo.of(0, "wide", ExpertConfig(speeds=speeds)).to_dict()
+    config = ClassifierConfig(hidden=8, skip=True)
+    meta = {**model_meta(), "data": {"fingerprint": "0" * 16, "samples": 1, "recordings": [{"path": "rec0", "driver": driver}]}}
+    model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), meta)
+    compared: list[Evaluation] = []
+
+    def read_driver(evaluation: Evaluation, *args, **kwargs) -> dict:  # the driver is all this test asks about: no runs
+        compared.append(evaluation)
+        raise UserError("runs", "not driven here")
+
+    monkeypatch.setattr("terrapref.evaluation.evaluate.evaluate_model", read_driver)
+    for flags, style, expected in [
+        (["--speeds", "grass=1.2"], "wide", {"grass": 1.2, "mud": 0.5, "water": 0.3}),
+        ([], "wide", dict(speeds)),
+        (["--style", "default", "--speeds", "grass=1.2"], "default", {"grass": 1.2}),  # another style: the speeds given alone
+    ]:
+        assert main(["evaluate", str(model), "demo_course", "--seeds", "1", "--out", str(tmp_path / "ev"), *flags]) == 2
+        assert (compared[-1].style, dict(compared[-1].speeds)) == (style, expected), flags
 
 
 def test_cli_evaluate_zero_seeds_is_a_user_error(model_path: Path, tmp_path: Path, capsys):
