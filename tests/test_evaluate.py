@@ -192,6 +192,18 @@ def test_cli_evaluate_unknown_scenario(model_path: Path, tmp_path: Path, capsys)
     assert not (tmp_path / "ev").exists()
 
 
+def test_cli_evaluate_refuses_a_scenario_that_starts_on_lethal_terrain(model_path: Path, tmp_path: Path, capsys):
+    course = tmp_path / "in_the_trees.yaml"
+    course.write_text(
+        "format: terrapref-scenario/1\nname: in_the_trees\nworld: {size_m: [20.0, 10.0], resolution_m: 0.05, background: grass}\n"
+        "terrain: [{class: non_traversable, circle: {center: [2.0, 5.0], radius: 1.0}}]\npath: {waypoints: [[2.0, 5.0], [18.0, 5.0]]}\n"
+    )
+    rc = main(["evaluate", str(model_path), str(course), "--seeds", "1", "--out", str(tmp_path / "ev"), "--workers", "1"])
+    assert rc == 2  # not a run that stands still and is charged a collision
+    one_line_error(capsys, str(course), "start:", "lethal terrain")
+    assert not (tmp_path / "ev").exists()
+
+
 def test_cli_evaluate_bad_profile(model_path: Path, tmp_path: Path, capsys):
     rc = main(["evaluate", str(model_path), "demo_course", "--seeds", "1", "--out", str(tmp_path / "ev"), "--profile", "rock,mud"])
     assert rc == 2

@@ -143,7 +143,7 @@ def featurize_recording(
     classes = recording.classes
     rec_camera = CameraConfig.from_dict(recording.meta["camera"])
     camera = camera or rec_camera
-    scenario = parse_scenario(recording.scenario, str(recording.path / "scenario.yaml"), classes)
+    scenario = parse_scenario(recording.scenario, str(recording.path / "scenario.yaml"), classes, driven=True)
     featurizer = UtilityFeaturizer(features, PinholeCamera(camera), classes)
     path = ReferencePath(np.asarray(recording.meta.get("path", scenario.waypoints), dtype=float))
     tracker = PathTracker(path)
