@@ -18,9 +18,11 @@ from terrapref.demos.meta import ExpertInfo
 from terrapref.errors import UserError
 from terrapref.evaluation.evaluate import Evaluation, evaluate_model, file_stem
 from terrapref.grid import Engine
+from terrapref.learning.model_file import FORMAT as MODEL_FORMAT
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.scenario import resolve_scenario
+from terrapref.tensorfile import write_tensor_file
 from terrapref.terrain import PreferenceProfile, default_classes
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -201,6 +203,15 @@ def test_cli_evaluate_refuses_a_scenario_that_starts_on_lethal_terrain(model_pat
     rc = main(["evaluate", str(model_path), str(course), "--seeds", "1", "--out", str(tmp_path / "ev"), "--workers", "1"])
     assert rc == 2  # not a run that stands still and is charged a collision
     one_line_error(capsys, str(course), "start:", "lethal terrain")
+    assert not (tmp_path / "ev").exists()
+
+
+def test_cli_evaluate_refuses_a_model_of_nan_weights_before_any_run(tmp_path: Path, capsys):
+    header = {"format": MODEL_FORMAT, "kind": "linear", **model_meta()}
+    model = write_tensor_file(tmp_path / "nan.safetensors", {"w": np.full(5, np.nan, np.float32), "b": np.zeros(21, np.float32)}, header)
+    rc = main(["evaluate", str(model), "demo_course", "--seeds", "1", "--out", str(tmp_path / "ev"), "--workers", "1"])
+    assert rc == 2  # not runs of a planner that stands still, reported as blind
+    one_line_error(capsys, str(model), "weights.w", "NaN")
     assert not (tmp_path / "ev").exists()
 
 
