@@ -62,7 +62,8 @@ class NotReadable(UserError):
         super().__init__(refused.source, refused.problems)
         self.shown = shown
 
-    def __reduce__(self):
+    def __reduce__(self) -> tuple:
+        # Rebuilt from its own arguments, as UserError is (its signature differs).
         return (type(self), (UserError(self.source, self.problems), self.shown))
 
 
