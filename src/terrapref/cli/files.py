@@ -198,14 +198,23 @@ def export_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
-    from terrapref.report.info import info_lines
+    """Each file's summary; a model file no command can use is shown as far as its header goes,
+    its refusal on stderr, and the exit code is 2 (the others are still shown)."""
+    from terrapref.report.info import NotReadable, info_lines
 
+    status = 0
     for i, path in enumerate(args.files):
         if i:
             print()
-        for line in info_lines(path):
+        try:
+            lines = info_lines(path)
+        except NotReadable as exc:
+            lines, status = exc.shown, 2
+            for line in exc.lines():
+                print(f"error: {line}", file=sys.stderr)
+        for line in lines:
             print(line)
-    return 0
+    return status
 
 
 def info_parser(sub: argparse._SubParsersAction) -> None:

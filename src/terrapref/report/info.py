@@ -54,8 +54,22 @@ def _identifiability(meta: dict) -> list[str]:
     return ["what the demonstrations show:"] + [f"  {line}" for line in report.lines(profile)]
 
 
+class NotReadable(UserError):
+    """A model file the reader refuses, which ``info`` still shows as far as its header can be
+    read: ``shown`` holds those lines, the problems why it is refused."""
+
+    def __init__(self, refused: UserError, shown: list[str]) -> None:
+        super().__init__(refused.source, refused.problems)
+        self.shown = shown
+
+    def __reduce__(self) -> tuple:
+        # Rebuilt from its own arguments, as UserError is (its signature differs).
+        return (type(self), (UserError(self.source, self.problems), self.shown))
+
+
 def info_lines(path: str | Path) -> list[str]:
-    """A summary of ``path`` for people; every problem is a UserError naming the file."""
+    """A summary of ``path`` for people; every problem is a UserError naming the file (a model
+    file the reader refuses: :class:`NotReadable`, with what its header still shows)."""
     p = Path(path)
     if p.is_dir():
         return _recording_lines(p)
@@ -191,15 +205,15 @@ def _dataset_lines(p: Path, meta: dict, shapes: dict[str, tuple[int, ...]]) -> l
 
 def _model_lines(p: Path, meta: dict) -> list[str]:
     """A model: its state, recipe, network, decision rules, training data and chosen epoch, as
-    terrapref.planner.model.Model reads the file; a file it refuses is shown as far as its
-    header can be read, with the refusal."""
+    terrapref.planner.model.Model reads the file; a file it refuses is :class:`NotReadable`,
+    shown as far as its header can be read, with the refusal."""
     from terrapref.errors import UserError
     from terrapref.planner.model import Model
 
     try:
         model = Model.load(p)
     except UserError as exc:
-        return _damaged_model_lines(p, meta, exc)
+        raise NotReadable(exc, _damaged_model_lines(p, meta, exc)) from None
     loaded = model.classifier
     if loaded is None:  # a learned baseline: its kind and configuration
         return [f"{p}: terrapref model ({model.kind})"] + _common(meta)
