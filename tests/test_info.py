@@ -86,3 +86,13 @@ def test_info_on_a_model_of_nan_weights_shows_it_not_readable_and_exits_2(tmp_pa
     shown = f"{path}: terrapref model (classifier), NOT READABLE: weights.compress.weight: 1 of its 5 weights are NaN or infinite"
     assert shown in captured.out and "profile         mud > rock" in captured.out  # what its header still says
     assert captured.err.splitlines() == [f"error: {path}: weights.compress.weight: 1 of its 5 weights are NaN or infinite"]
+
+
+def test_info_flags_a_speed_rule_faster_than_the_vehicle(tmp_path: Path, capsys):
+    from test_runtime import _model
+
+    assert main(["info", str(_model(tmp_path, 8.0, top_mps=8.0))]) == 0
+    out = capsys.readouterr().out
+    assert "WARNING: its speed rule goes up to 8 m/s, above the default vehicle's 2 m/s" in out
+    assert main(["info", str(_model(tmp_path, 1.6))]) == 0
+    assert "WARNING" not in capsys.readouterr().out

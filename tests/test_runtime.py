@@ -92,3 +92,18 @@ def test_a_stop_is_never_held_back(cruising):
     runtime.decide(GRASS, 0.0, (5.0, 0.0, 0.0), speed_mps=1.6)
     assert runtime.status_at(0.05)[0].v == pytest.approx(1.6)
     assert runtime.status_at(1.0) == ((0.0, 0.0), "stale")  # at once, not ramped down
+
+
+def test_the_runtime_example_in_the_docs_runs(tmp_path, monkeypatch, capsys):
+    """docs/robot.md's control-loop example, as written, with a model file of its name."""
+    import re
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "robot.md").read_text()
+    code = re.search(r"A control loop around it.*?```python\n(.*?)```", page, re.S).group(1)
+    _model(tmp_path, 8.0, top_mps=8.0).rename(tmp_path / "me.safetensors")  # a speed rule faster than the example's robot
+    monkeypatch.chdir(tmp_path)
+    exec(compile(code, "docs/robot.md", "exec"), {})
+    printed = capsys.readouterr().out.splitlines()
+    assert "1.5 m/s" in printed[-1] and "8 m/s" in printed[-1]  # the note: held to the example robot's 1.5 m/s
+    assert printed[0].split()[0].isdigit()  # the decision's trajectory, then its command and the one given out

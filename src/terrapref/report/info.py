@@ -231,6 +231,7 @@ def _model_lines(p: Path, meta: dict) -> list[str]:
             f"recipe          {h.recipe or '?'}",
             f"network         {c.members} member(s), hidden {c.hidden}, {c.activation}, skip {c.skip}",
             *_rules(model.rules, model.driving, h.features.feature_classes, h.classes),
+            *_limit_lines(model),
             "data            "
             + (
                 f"{data.samples} samples, fingerprint {data.fingerprint}, {len(data.recordings)} recording(s)"
@@ -242,6 +243,18 @@ def _model_lines(p: Path, meta: dict) -> list[str]:
         + _common(meta)
         + _identifiability(meta)
     )
+
+
+def _limit_lines(model) -> list[str]:
+    """A flag where the model's speed rule goes faster than the default vehicle's top speed: a robot holds it to its own."""
+    from terrapref.vehicle import VehicleConfig
+
+    top, limit = model.top_speed_mps, VehicleConfig().max_speed_mps
+    if top is None or top <= limit:
+        return []
+    return [
+        f"  WARNING: its speed rule goes up to {top:g} m/s, above the default vehicle's {limit:g} m/s; a robot holds it to its own top speed"
+    ]
 
 
 def _chosen(history, best) -> bool:
