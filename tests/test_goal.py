@@ -126,6 +126,17 @@ def test_evaluate_sees_the_planner_stand_at_its_goal(fast_model, open_ground):
     assert log.duration_s < sim.time_s  # the log's run ends where it was scored complete; the sim drove on
 
 
+def test_evaluate_of_a_start_facing_away_turns_back_and_completes(fast_model):
+    """A course whose start faces away from its path: the planner turns back and drives it to its
+    goal, where it used to arc away to the map's edge and end blind."""
+    from terrapref.planner import Planner, PlannerDriver
+    from terrapref.planner.model import Model
+
+    backwards = parse_scenario({**OPEN, "path": {"waypoints": [[20.0, 20.0], [40.0, 20.0]]}, "start": [20.0, 20.0, 180.0]})
+    log = run_episode(Simulation(backwards), PlannerDriver(Planner(Model.load(fast_model).policy)), np.random.default_rng(0))
+    assert log.completed and log.ended == "goal" and log.trace[:, 0].min() > 18.0 and not log.stops
+
+
 # --- the check itself -----------------------------------------------------------------------------
 
 
