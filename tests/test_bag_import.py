@@ -339,6 +339,41 @@ def _check_with_the_reference_mcap_reader(path: Path, frames: int) -> None:
         assert sum(1 for _ in reader.iter_messages()) == sum(counts.values())
 
 
+def test_a_run_is_written_as_mcap_beside_its_output_not_in_the_systems_tmp(tmp_path: Path, fig7_recording: Path, monkeypatch):
+    """`evaluate --mcap` writes runs/NAME.mcap into a folder that does not exist yet: the file is
+    made beside it, so its rename never crosses file systems (the system's tmp is often another:
+    a rename across is refused with EXDEV)."""
+    import errno
+    import os
+    import tempfile
+    from dataclasses import replace
+
+    from terrapref.interop.mcap_export import recording_frames, write_mcap
+
+    system_tmp = tmp_path / "system_tmp"  # another file system, as far as renames go
+    system_tmp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(system_tmp))
+    real_replace, real_rename = os.replace, os.rename
+
+    def across(real):
+        def move(src, dst, *args, **kwargs):
+            if Path(src).is_relative_to(system_tmp) != Path(dst).is_relative_to(system_tmp):
+                raise OSError(errno.EXDEV, "Invalid cross-device link", str(src), None, str(dst))
+            return real(src, dst, *args, **kwargs)
+
+        return move
+
+    monkeypatch.setattr(os, "replace", across(real_replace))
+    monkeypatch.setattr(os, "rename", across(real_rename))
+    rec = read_recording(fig7_recording)
+    frames = recording_frames(rec)
+    frames = replace(frames, times=frames.times[:3], poses=frames.poses[:3], commands=frames.commands[:3], chosen=frames.chosen[:3])
+    out = tmp_path / "ev" / "runs" / "fig7_seed0.mcap"
+    write_mcap(out, frames, robot_file=False)
+    assert _topics(out)["/terrapref/labels"] == ("sensor_msgs/msg/CompressedImage", 3)
+    assert [p.name for p in out.parent.iterdir()] == [out.name] and not any(system_tmp.iterdir())
+
+
 @pytest.mark.parametrize("fmt", ["mcap", "rosbag1"])
 def test_an_exported_recording_imports_to_the_same_dataset(tmp_path: Path, imported, capsys, fmt: str):
     from terrapref.dataset import build_dataset
@@ -505,11 +540,12 @@ def test_a_model_taught_by_a_log_driven_at_1_5_mps_commands_1_5_mps_on_open_grou
     from terrapref.learning.model_file import load_model
     from terrapref.rules import rules_of, speed_rule
     from terrapref.runtime import PlannerRuntime
+    from test_interop import UNSMOOTHED
 
     rules, _ = rules_of(load_model(fast["model"]))
     assert speed_rule(rules) is not None
     scenario = resolve_scenario("demo_course")
-    runtime = PlannerRuntime(fast["model"])
+    runtime = PlannerRuntime(fast["model"], limits=UNSMOOTHED)
     runtime.set_path(scenario.waypoints)
     frame = Simulation(scenario).reset()
     decision = runtime.decide(frame.image, frame.time_s, frame.pose)

@@ -74,6 +74,24 @@ def test_cli_train_writes_model_curve_and_checkpoints(tmp_path: Path, capsys):
     assert f"epoch {model.meta['best_epoch']}" in last
 
 
+def test_a_featurized_recording_trains_as_the_recording_does(tmp_path: Path, capsys):
+    """featurize then train (the default recipe, its speed rule's class ids included) fits the rules that training on the recording fits."""
+    course = tmp_path / "course.yaml"
+    course.write_text(
+        "format: terrapref-scenario/1\nname: mud_across\nworld: {size_m: [10.0, 6.0], resolution_m: 0.05, background: grass}\n"
+        "terrain: [{class: mud, rectangle: {center: [6.0, 3.0], size: [1.5, 6.0]}}]\npath: {waypoints: [[1.0, 3.0], [9.0, 3.0]]}\n"
+    )
+    rec, data = tmp_path / "rec", tmp_path / "d.safetensors"
+    assert main(["record", str(course), "--out", str(rec), "--quiet"]) == 0
+    assert main(["featurize", str(rec), "--out", str(data)]) == 0
+    for source, out in ((data, tmp_path / "from_data.safetensors"), (rec, tmp_path / "from_rec.safetensors")):
+        rc = main(["train", str(source), "--out", str(out), "--epochs", "1", "--members", "1"])
+        assert rc == 0, capsys.readouterr().err
+    from_data, from_rec = load_model(tmp_path / "from_data.safetensors"), load_model(tmp_path / "from_rec.safetensors")
+    assert [b["type"] for b in from_data.meta["rules"]] == ["second_stage", "offset", "speed"]
+    assert from_data.meta["rules"] == from_rec.meta["rules"]
+
+
 def test_cli_train_on_two_dataset_files(tmp_path: Path, capsys):
     a, b = dataset_file(tmp_path / "a.safetensors", 120, 0), dataset_file(tmp_path / "b.safetensors", 80, 1)
     out = tmp_path / "m.safetensors"

@@ -169,6 +169,11 @@ BAD_FILES: list[tuple[str, str | bytes, str]] = [
     ("duplicate-zone", edit('{id: "2",', "{id: 1,"), "zones[1].id: duplicate zone id '1' (also zones[0])"),
     ("bad-expect", edit("expect: avoid", "expect: maybe"), "zones[1].expect: 'maybe' is neither 'avoid', 'best' nor a known class..."),
     ("bad-name", edit("name: tiny_course", "name: tiny course!"), "name: must match [A-Za-z0-9_-]+"),
+    (
+        "start-in-trees",
+        edit("path:", "  - {class: non_traversable, circle: {center: [1.0, 5.0], radius: 1.0}}\npath:"),
+        "start: (1, 5) (the first waypoint, facing the second) puts the vehicle's footprint on lethal terrain (non_traversable)...",
+    ),
 ]
 
 

@@ -11,11 +11,18 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from helpers import linear_model, one_line_error
+from helpers import linear_model, model_meta, one_line_error, skip_path_weights
 from terrapref.cli import main
+from terrapref.demos.expert import ExpertConfig
+from terrapref.demos.meta import ExpertInfo
+from terrapref.errors import UserError
 from terrapref.evaluation.evaluate import Evaluation, evaluate_model, file_stem
 from terrapref.grid import Engine
+from terrapref.learning.model_file import FORMAT as MODEL_FORMAT
+from terrapref.learning.model_file import save_model
+from terrapref.learning.network import ClassifierConfig
 from terrapref.scenario import resolve_scenario
+from terrapref.tensorfile import write_tensor_file
 from terrapref.terrain import PreferenceProfile, default_classes
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -211,18 +218,61 @@ def test_cli_evaluate_unknown_scenario(model_path: Path, tmp_path: Path, capsys)
     assert not (tmp_path / "ev").exists()
 
 
+def test_cli_evaluate_refuses_a_scenario_that_starts_on_lethal_terrain(model_path: Path, tmp_path: Path, capsys):
+    course = tmp_path / "in_the_trees.yaml"
+    course.write_text(
+        "format: terrapref-scenario/1\nname: in_the_trees\nworld: {size_m: [20.0, 10.0], resolution_m: 0.05, background: grass}\n"
+        "terrain: [{class: non_traversable, circle: {center: [2.0, 5.0], radius: 1.0}}]\npath: {waypoints: [[2.0, 5.0], [18.0, 5.0]]}\n"
+    )
+    rc = main(["evaluate", str(model_path), str(course), "--seeds", "1", "--out", str(tmp_path / "ev"), "--workers", "1"])
+    assert rc == 2  # not a run that stands still and is charged a collision
+    one_line_error(capsys, str(course), "start:", "lethal terrain")
+    assert not (tmp_path / "ev").exists()
+
+
+def test_cli_evaluate_refuses_a_model_of_nan_weights_before_any_run(tmp_path: Path, capsys):
+    header = {"format": MODEL_FORMAT, "kind": "linear", **model_meta()}
+    model = write_tensor_file(tmp_path / "nan.safetensors", {"w": np.full(5, np.nan, np.float32), "b": np.zeros(21, np.float32)}, header)
+    rc = main(["evaluate", str(model), "demo_course", "--seeds", "1", "--out", str(tmp_path / "ev"), "--workers", "1"])
+    assert rc == 2  # not runs of a planner that stands still, reported as blind
+    one_line_error(capsys, str(model), "weights.w", "NaN")
+    assert not (tmp_path / "ev").exists()
+
+
 def test_cli_evaluate_bad_profile(model_path: Path, tmp_path: Path, capsys):
     rc = main(["evaluate", str(model_path), "demo_course", "--seeds", "1", "--out", str(tmp_path / "ev"), "--profile", "rock,mud"])
     assert rc == 2
     one_line_error(capsys, "--profile")
 
 
-@pytest.mark.parametrize("speeds", ["nosuch=1", "grass=3", "grass", "grass=0"])
+@pytest.mark.parametrize("speeds", ["nosuch=1", "grass=3", "grass", "grass=0", "grass=0.05", "non_traversable=0.4"])
 def test_cli_evaluate_bad_driver_speeds_are_refused_before_any_run(model_path: Path, tmp_path: Path, capsys, speeds: str):
     rc = main(["evaluate", str(model_path), "demo_course", "--seeds", "1", "--out", str(tmp_path / "ev"), "--speeds", speeds])
     assert rc == 2
     one_line_error(capsys, "--speeds")
     assert not (tmp_path / "ev").exists()
+
+
+def test_cli_evaluate_speeds_change_only_the_classes_they_name_of_the_models_driver(tmp_path: Path, capsys, monkeypatch):
+    speeds = (("grass", 1.6), ("mud", 0.5), ("water", 0.3))
+    driver = ExpertInfo.of(0, "wide", ExpertConfig(speeds=speeds)).to_dict()
+    config = ClassifierConfig(hidden=8, skip=True)
+    meta = {**model_meta(), "data": {"fingerprint": "0" * 16, "samples": 1, "recordings": [{"path": "rec0", "driver": driver}]}}
+    model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), meta)
+    compared: list[Evaluation] = []
+
+    def read_driver(evaluation: Evaluation, *args, **kwargs) -> dict:  # the driver is all this test asks about: no runs
+        compared.append(evaluation)
+        raise UserError("runs", "not driven here")
+
+    monkeypatch.setattr("terrapref.evaluation.evaluate.evaluate_model", read_driver)
+    for flags, style, expected in [
+        (["--speeds", "grass=1.2"], "wide", {"grass": 1.2, "mud": 0.5, "water": 0.3}),
+        ([], "wide", dict(speeds)),
+        (["--style", "default", "--speeds", "grass=1.2"], "default", {"grass": 1.2}),  # another style: the speeds given alone
+    ]:
+        assert main(["evaluate", str(model), "demo_course", "--seeds", "1", "--out", str(tmp_path / "ev"), *flags]) == 2
+        assert (compared[-1].style, dict(compared[-1].speeds)) == (style, expected), flags
 
 
 def test_cli_evaluate_zero_seeds_is_a_user_error(model_path: Path, tmp_path: Path, capsys):

@@ -148,6 +148,16 @@ def test_a_replacement_that_fails_puts_the_old_folder_back_and_keeps_the_new_one
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "out.partial"]
 
 
+def test_a_first_run_that_fails_is_kept_as_partial_never_at_the_outputs_name(tmp_path: Path):
+    # (evaluate --mcap failing on its last file left a half-made folder at --out)
+    with pytest.raises(OSError):
+        with output_folder(tmp_path / "ev", force=False) as out:
+            (out / "metrics.json").write_text("half")
+            raise OSError(18, "Invalid cross-device link")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ev.partial"]
+    assert _files(tmp_path / "ev.partial") == {"metrics.json": "half"}
+
+
 def test_a_folder_another_command_is_writing_is_refused_even_with_force(tmp_path: Path):
     with output_folder(tmp_path / "out", force=False) as out:
         (out / "metrics.json").write_text("running")
@@ -228,3 +238,94 @@ def test_an_input_given_twice_is_refused_by_either_name(tmp_path: Path):
     alias = tmp_path / "link"
     alias.symlink_to(rec)
     assert _refusal(check_distinct, [rec, alias], "recording") == f"{alias}: is given twice (the same as {rec}); give each recording once"
+
+
+# --- a command killed (kill -9) at any step of a replacement, then the next command -----------------
+
+
+@pytest.fixture(scope="module")
+def killer():
+    """tests/killed_steps.py as a process of its own: ``killer(case, work, step)`` runs ``case``
+    in ``work``, killed before its ``step``-th change on disk; whether the kill came."""
+    import subprocess
+    import sys
+
+    import terrapref
+
+    src = str(Path(terrapref.__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([src, os.environ.get("PYTHONPATH", "")])}
+    driver = subprocess.Popen(
+        [sys.executable, str(Path(__file__).with_name("killed_steps.py"))],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+
+    def run(case: str, work: Path, step: int) -> bool:
+        driver.stdin.write(f"{case}\t{work}\t{step}\n")
+        driver.stdin.flush()
+        answer = driver.stdout.readline().strip()
+        assert answer in ("killed", "ended"), f"the driver said {answer!r}"
+        return answer == "killed"
+
+    yield run
+    driver.stdin.close()
+    driver.wait()
+
+
+def _visible(work: Path) -> dict[str, dict[str, str]]:
+    """What a user sees in ``work``: each folder that is not hidden and holds files, with its files."""
+    return {p.name: _files(p) for p in sorted(work.iterdir()) if not p.name.startswith(".") and _files(p)}
+
+
+@pytest.mark.parametrize("case", ["replace", "first run", "replace, failing", "swap"])
+def test_a_command_killed_at_any_step_loses_nothing_and_the_next_one_puts_it_right(tmp_path: Path, capsys, killer, case: str):
+    """`kill -9` at each change on disk of a command replacing a folder (writing it in place with
+    --force, the first run into it, undoing a run stopped by Ctrl-C, swapping a finished one in),
+    then the next command's check of an output beside it: the output is whole (the old one, or the
+    new one once complete), an unfinished run is only ever OUT.partial, and what was put right is
+    said in one line."""
+    from killed_steps import NEW, OLD, write
+
+    seen = set()
+    for step in range(1, 100):
+        work = tmp_path / str(step)
+        work.mkdir()
+        out = work / "ev"
+        if case != "first run":
+            write(out, OLD)
+        killed = killer(case, work, step)
+        before = _visible(work)
+        check_output(work / "map.png", "--out")  # the first step of any command writing beside it
+        notes = capsys.readouterr().err.splitlines()
+        after = _visible(work)
+        assert set(after) <= {"ev", "ev.partial"}, after
+        assert [p.name for p in work.iterdir() if p.name.startswith(".")] in ([], [".ev.new"])  # (the swap not begun)
+        assert after.get("ev") in ((OLD, NEW) if case != "first run" else (None, NEW)), (step, after)
+        assert after.get("ev.partial", {}).items() <= NEW.items()
+        assert len(notes) == (before != after) and all(str(out) in n for n in notes), (step, notes)
+        if case == "replace, failing":
+            assert after["ev"] == OLD
+        seen.add("new" if after.get("ev") == NEW else "old")
+        if not killed:
+            break
+    assert step > 5 and seen == ({"old"} if case == "replace, failing" else {"old", "new"})
+
+
+def test_any_command_writing_beside_a_killed_replacement_first_puts_the_old_output_back(tmp_path: Path, capsys):
+    """What `kill -9` leaves in the middle of `evaluate --out ev --force`: the unfinished run at ev,
+    the old one in its journal. The next command writing beside it (an import that is then
+    refused) puts the old one back first, says so, and keeps the unfinished one as ev.partial."""
+    from killed_steps import OLD, write
+    from terrapref.cli import main
+
+    write(tmp_path / ".ev.k1ll3d00.replacing" / "old", OLD)
+    write(tmp_path / "ev", {"metrics.json": "new"})
+    assert main(["import", str(tmp_path / "drive.bag"), "--robot", str(tmp_path / "robot.yaml"), "--out", str(tmp_path / "rec")]) == 2
+    note, error = capsys.readouterr().err.splitlines()
+    ev = tmp_path / "ev"
+    assert note == f"note: {ev}: put back the output a stopped command was replacing; its unfinished one is in {ev}.partial"
+    assert error.startswith(f"error: {tmp_path / 'robot.yaml'}")
+    assert _visible(tmp_path) == {"ev": OLD, "ev.partial": {"metrics.json": "new"}}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ev", "ev.partial"]

@@ -4,13 +4,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from helpers import dataset_file, linear_model, model_meta, skip_path_weights
 from terrapref import __version__
 from terrapref.cli import main
+from terrapref.learning.header import FORMAT as MODEL_FORMAT
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
+from terrapref.tensorfile import write_tensor_file
 
 
 def test_version(capsys):
@@ -60,8 +63,36 @@ def test_info_reads_older_stage_blocks_and_shows_what_it_can_of_a_damaged_list(t
         tmp_path / "old.safetensors", config, skip_path_weights(config), {**model_meta(), "utility": {"w": [0.0] * 5, "b": [0.0] * 21}}
     )
     bad = save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), {**model_meta(), "stages": "offset"})
-    assert main(["info", str(old), str(bad)]) == 0
+    assert main(["info", str(bad), str(old)]) == 2  # a file no command can use; the others are still shown
     out = capsys.readouterr().out
     # a utility block written before rules were listed: the second stage, which drives
     assert "drives          second_stage\n  second stage: weight 1.5, linear utility fitted frame by frame\n" in out
     assert "rules           unreadable (stages: expected a list of rules)" in out and "profile         mud > rock" in out
+
+
+def _diverged_model(path: Path) -> Path:
+    """C's file with one NaN weight, as a diverged fit would have written it (training refuses to)."""
+    config = ClassifierConfig(hidden=8, skip=True)
+    weights = skip_path_weights(config)
+    weights["compress.weight"][0, 3] = np.nan
+    write_tensor_file(path, weights, {"format": MODEL_FORMAT, "kind": "classifier", "classifier": config.to_dict(), **model_meta()})
+    return path
+
+
+def test_info_on_a_model_of_nan_weights_shows_it_not_readable_and_exits_2(tmp_path: Path, capsys):
+    path = _diverged_model(tmp_path / "diverged.safetensors")
+    assert main(["info", str(path)]) == 2
+    captured = capsys.readouterr()
+    shown = f"{path}: terrapref model (classifier), NOT READABLE: weights.compress.weight: 1 of its 5 weights are NaN or infinite"
+    assert shown in captured.out and "profile         mud > rock" in captured.out  # what its header still says
+    assert captured.err.splitlines() == [f"error: {path}: weights.compress.weight: 1 of its 5 weights are NaN or infinite"]
+
+
+def test_info_flags_a_speed_rule_faster_than_the_vehicle(tmp_path: Path, capsys):
+    from test_runtime import _model
+
+    assert main(["info", str(_model(tmp_path, 8.0, top_mps=8.0))]) == 0
+    out = capsys.readouterr().out
+    assert "WARNING: its speed rule goes up to 8 m/s, above the default vehicle's 2 m/s" in out
+    assert main(["info", str(_model(tmp_path, 1.6))]) == 0
+    assert "WARNING" not in capsys.readouterr().out

@@ -23,7 +23,7 @@ from terrapref.runtime import STOP, PlannerRuntime
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation
 from terrapref.terrain import default_classes
-from terrapref.vehicle import Command
+from terrapref.vehicle import Command, VehicleConfig
 
 CONFIGS = [
     ClassifierConfig(),  # the paper's C
@@ -31,6 +31,9 @@ CONFIGS = [
     ClassifierConfig(activation="tanh", skip=True, depth=2),
     ClassifierConfig(compress=False, activation="elu", ignore=(1,)),
 ]
+
+
+UNSMOOTHED = VehicleConfig(max_accel_mps2=None)  # a robot whose base ramps its speed itself: the command sent is the decision's
 
 
 def speed_block(v_mps: float) -> dict:
@@ -201,7 +204,7 @@ def linear_model_file(tmp_path_factory) -> Path:
 def test_runtime_drives_as_the_planner_decides(linear_model_file: Path):
     scenario = resolve_scenario("demo_course")
     sim = Simulation(scenario)
-    runtime = PlannerRuntime(linear_model_file)
+    runtime = PlannerRuntime(linear_model_file, limits=UNSMOOTHED)
     runtime.set_path(scenario.waypoints)
     planner = Planner(load_model(linear_model_file))
     planner.set_path(scenario.waypoints)
@@ -228,7 +231,7 @@ def test_runtime_commands_the_speed_rules_speed_along_the_way_chosen(tmp_path: P
     image = Simulation(scenario).reset().image
     w_grid = np.asarray(linear.features.preference.control.w_rps)
     for model, v in ((fast, 1.5), (linear_model_file, 1.0)):
-        runtime = PlannerRuntime(model)
+        runtime = PlannerRuntime(model, limits=UNSMOOTHED)
         runtime.set_path(scenario.waypoints)
         d = runtime.decide(image, 10.0, scenario.start)
         assert d.stop is None and d.command.v == pytest.approx(v)
@@ -271,7 +274,7 @@ def test_runtime_refuses_what_it_cannot_drive_on(linear_model_file: Path):
 def test_runtime_maps_a_networks_label_ids(linear_model_file: Path):
     classes = default_classes()
     labels = load_label_map("rellis3d", classes)
-    runtime = PlannerRuntime(linear_model_file, labels=labels)
+    runtime = PlannerRuntime(linear_model_file, labels=labels, limits=UNSMOOTHED)
     plain = PlannerRuntime(linear_model_file)
     scenario = resolve_scenario("demo_course")
     for r in (runtime, plain):

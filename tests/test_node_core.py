@@ -3,6 +3,8 @@ ROS: messages built with rosbags' ROS 2 types stand in for rospy's or rclpy's.""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -30,6 +32,7 @@ def setup(tmp_path_factory):
     (root / "robot.yaml").write_text(
         "format: terrapref-robot/1\ntopics: {segmentation: /seg, camera_info: /info, odometry: /odom, command: /cmd}\n"
         "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n"
+        "limits: {max_accel_mps2: null}\n"  # the base ramps its speed itself: the command sent is the decision's
     )
     scenario = resolve_scenario("fig7_rock_vs_non_traversable_left")
     renderer = SegmentationRenderer(PinholeCamera(CameraConfig()), rasterise(scenario))
@@ -190,3 +193,90 @@ def test_a_node_publishes_on_the_robot_files_command_topic_or_its_flag_and_refus
     with pytest.raises(UserError) as raised:
         NodeOptions().command_topic(bare)
     assert raised.value.problems[0].field == "topics.command" and "--cmd-topic" in str(raised.value)
+
+
+# --- clocks, limits and the goal on a robot -------------------------------------------------------
+
+
+def test_an_image_stamped_far_ahead_of_the_nodes_clock_is_refused_and_counted(setup):
+    core, told = _core(setup)
+    core.on_odometry(_odom(0))
+    now = 1_700_000_000.0  # the node's clock, at the first frame's stamp
+    with pytest.raises(ValueError, match="ahead of the node's clock"):
+        core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0), now_s=now - 3600.0)
+    assert core.skipped["images ahead of the clock"] == 1 and told == []
+    assert core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0), now_s=now) is not None
+
+
+def test_the_node_stops_when_no_frame_has_been_decided_on_for_a_while_by_the_wall_clock(setup):
+    """A simulated clock that froze (the log player died) holds the node's time still, so by its
+    own clock the last command would stay fresh for ever; the wall clock's watchdog stops it."""
+    model, robot, path, _ = setup
+    wall = [100.0]
+    core = PlannerNodeCore(model, robot, path, watchdog_s=1.0, wall=lambda: wall[0])
+    core.on_camera_info(camera_info(TS, header(TS, 0.0, "camera_optical"), CameraConfig()))
+    core.on_odometry(_odom(0))
+    decision = core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0))
+    frozen = decision.stamp_s + 0.05  # the node's clock, stuck here
+    assert core.status_at(frozen) == (decision.command, None)
+    wall[0] += 0.9
+    assert core.status_at(frozen)[1] is None
+    wall[0] += 0.2  # 1.1 s by the wall clock without a decision
+    assert core.status_at(frozen) == ((0.0, 0.0), "stale")
+
+
+def test_the_robots_limits_and_goal_come_from_its_file_then_its_parameters(setup, tmp_path):
+    from terrapref.errors import ConfigError, UserError
+    from terrapref.interop.node_core import NodeOptions
+
+    text = (
+        "format: terrapref-robot/1\ntopics: {segmentation: /seg, camera_info: /info, odometry: /odom, command: /cmd}\n"
+        "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n"
+        "limits: {max_speed_mps: 1.2, max_accel_mps2: 0.5}\nstop: {goal_tolerance_m: 1.0, goal_yaw_tolerance_deg: null}\n"
+    )
+    (tmp_path / "robot.yaml").write_text(text)
+    robot = load_robot(tmp_path / "robot.yaml")
+    assert (robot.limits.max_speed_mps, robot.limits.max_yaw_rate_rps, robot.limits.max_accel_mps2) == (1.2, 1.0, 0.5)
+    assert robot.stop.goal_tolerance_m == 1.0 and robot.stop.goal_yaw_tolerance_deg is None
+    params = {"~max_speed_mps": 0.8, "~goal_tolerance_m": 0.3}
+    opts = NodeOptions().resolved(lambda name, default: params.get(name, default))
+    applied = opts.applied_to(robot)
+    assert applied.limits.max_speed_mps == 0.8 and applied.limits.max_accel_mps2 == 0.5 and applied.stop.goal_tolerance_m == 0.3
+    with pytest.raises(UserError, match=r"~max_speed_mps: expected a number > 0"):
+        NodeOptions().resolved(lambda name, default: -1.0 if name == "~max_speed_mps" else default)
+    with pytest.raises(UserError, match="~goal_tolerance_m"):  # beyond the off-path distance
+        NodeOptions().resolved(lambda name, default: 50.0 if name == "~goal_tolerance_m" else default)
+    for bad, field in (("limits: {max_speed_mps: fast}", "limits.max_speed_mps"), ("limits: {top: 1}", "limits.top")):
+        (tmp_path / "bad.yaml").write_text(text.replace("limits: {max_speed_mps: 1.2, max_accel_mps2: 0.5}", bad))
+        with pytest.raises(ConfigError) as raised:
+            load_robot(tmp_path / "bad.yaml")
+        assert raised.value.problems[0].field == field
+
+
+def test_the_node_holds_a_fast_model_to_the_robots_limits_and_says_it_arrived(setup, tmp_path):
+    """A model asking for 8 m/s on a robot of 1.2 m/s: 1.2 m/s at most, said; along a 0.3 m path the
+    node stands at its goal at once and says it arrived; a new path, and it has not."""
+    from dataclasses import replace
+
+    from terrapref.vehicle import VehicleConfig
+    from test_interop import speed_block
+
+    model, robot, _, _ = setup
+    meta = {**model.meta, "rules": [*model.meta["rules"], {**speed_block(8.0), "max_speed_mps": 8.0}]}
+    fast = load_model(save_model(tmp_path / "fast.safetensors", model.classifier, model.weights, meta))
+    slow_robot = replace(robot, limits=VehicleConfig(max_speed_mps=1.2, max_accel_mps2=None))
+    core = PlannerNodeCore(fast, slow_robot, np.array([[20.0, 15.0], [60.0, 15.0]]))
+    core.on_camera_info(camera_info(TS, header(TS, 0.0, "camera_optical"), CameraConfig()))
+    assert any("8 m/s" in note and "1.2 m/s" in note for note in core.runtime.notes)
+    core.on_odometry(_odom(0))
+    decision = core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0))
+    assert decision.command.v == pytest.approx(1.2) and not core.arrived
+    near = PlannerNodeCore(fast, slow_robot, np.array([[20.0, 15.0], [20.3, 15.0]]))
+    near.on_camera_info(camera_info(TS, header(TS, 0.0, "camera_optical"), CameraConfig()))
+    near.on_odometry(_odom(0))
+    decision = near.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0))
+    assert decision.stop == "goal" and decision.command == (0.0, 0.0) and near.arrived
+    near.on_path(
+        SimpleNamespace(poses=[SimpleNamespace(pose=SimpleNamespace(position=SimpleNamespace(x=x, y=15.0))) for x in (20.0, 40.0)])
+    )
+    assert not near.arrived

@@ -256,6 +256,18 @@ def test_load_policy_refuses_a_linear_file_with_wrong_shapes(tmp_path: Path):
     assert err.value.problems[0].field == "weights.w"
 
 
+@pytest.mark.parametrize("value", [np.nan, -np.inf])
+def test_load_policy_refuses_a_linear_file_of_weights_that_are_not_finite(tmp_path: Path, value: float):
+    w = np.zeros(K, np.float32)
+    w[2] = value
+    header = {"format": FORMAT, "kind": "linear", **model_meta()}
+    path = write_tensor_file(tmp_path / "lin.safetensors", {"w": w, "b": np.zeros(M, np.float32)}, header)
+    with pytest.raises(UserError) as err:  # not a policy that scores every trajectory NaN
+        load_policy(path)
+    assert err.value.source == str(path) and [p.field for p in err.value.problems] == ["weights.w"]
+    assert "1 of its 5 weights are NaN or infinite" in str(err.value)
+
+
 # --- the planner takes any policy -------------------------------------------------------------------
 
 

@@ -117,6 +117,7 @@ def setup(tmp_path_factory, fig7_recording):
         "format: terrapref-robot/1\n"
         "topics: {segmentation: /seg, camera_info: /cam/info, odometry: /odom, command: /cmd, path: /plan}\n"
         "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n"
+        "limits: {max_accel_mps2: null}\n"  # the base ramps its speed itself: the command sent is the decision's
     )
     return root, model
 

@@ -29,7 +29,10 @@ from terrapref.scenario import (
     resolve_scenario,
 )
 from terrapref.scenario.catalog import scenario_path
+from terrapref.scenario.generate import generate_course
 from terrapref.scenario.loader import MAX_CELLS
+from terrapref.scenario.teaching import designed_course
+from terrapref.terrain import default_classes, load_classes
 
 # A 20 m x 10 m map with one patch of each shape type and one zone. Indices used below:
 # terrain[0] circle, terrain[1] rectangle, terrain[2] polygon; zones[0] rectangle.
@@ -770,6 +773,59 @@ def test_start_off_the_map() -> None:
     problem = only_problem(scenario(start=[30.0, 5.0, 0.0]))
     assert problem.field == "start"
     assert "off the map" in problem.message
+
+
+# Trees (lethal) over x 8-12 m, y 7-10 m; the footprint is the line 0.6 m either side of the start,
+# and a point counts where its 0.1 m cell's centre is under the trees, as the simulator reads it.
+TREES = {"class": "non_traversable", "rectangle": {"center": [10.0, 8.5], "size": [4.0, 3.0]}}
+
+
+@pytest.mark.parametrize(
+    ("start", "lethal"),
+    [
+        ([10.0, 8.5, 0.0], True),  # inside the trees
+        ([10.0, 6.45, 0.0], True),  # the footprint's left end at y 7.05 m: under the trees
+        ([10.0, 6.35, 0.0], False),  # its left end at y 6.95 m: its cell's centre below their edge
+        ([10.0, 6.45, 90.0], False),  # facing them: the footprint lies along y = 6.45 m
+        ([7.55, 8.5, 90.0], True),  # beside them, facing along them: its right end at x 8.15 m
+        ([7.35, 8.5, 90.0], False),
+    ],
+)
+def test_a_start_that_puts_the_footprint_on_lethal_terrain_is_refused(start: list, lethal: bool) -> None:
+    data = scenario(terrain=[*GOOD["terrain"], TREES], start=start)
+    if not lethal:
+        assert parse_scenario(data).start[:2] == tuple(start[:2])
+        return
+    problem = only_problem(data)
+    assert problem.field == "start"
+    assert problem.message.startswith(
+        f"({start[0]:g}, {start[1]:g}) (given) puts the vehicle's footprint on lethal terrain (non_traversable)"
+    )
+
+
+def test_the_default_start_on_lethal_terrain_is_refused_and_a_recordings_scenario_is_read() -> None:
+    data = scenario(terrain=[*GOOD["terrain"], TREES], path={"waypoints": [[10.0, 8.5], [19.0, 5.0]]})
+    problem = only_problem(data)
+    assert problem.field == "start" and "(the first waypoint, facing the second)" in problem.message
+    assert parse_scenario(data, driven=True).start[:2] == (10.0, 8.5)  # a drive already made from there stays readable
+
+
+def test_generated_layouts_and_teaching_courses_start_clear_of_lethal_terrain() -> None:
+    """Each is read as every command reads it, which refuses a start on lethal terrain (the
+    packaged scenarios: test_every_packaged_scenario_validates_and_round_trips)."""
+    rellis = load_classes(Path(__file__).resolve().parent.parent / "examples" / "classes" / "rellis3d.yaml")
+    for seed in range(0, 2048, 32):  # the layouts for choosing (gen:1000-) and for checking (gen:2000-) among them
+        generate_course(seed)
+    for seed in range(16):
+        generate_course(seed, classes=rellis)
+    for table in (default_classes(), rellis):
+        for design in ("full", "compact"):
+            parse_scenario(designed_course(table, design)[0].data(), "course", table)
+
+
+def test_a_later_patch_over_the_trees_clears_the_start() -> None:
+    grass = {"class": "grass", "rectangle": {"center": [10.0, 8.5], "size": [2.0, 2.0]}}  # painted last, as the raster is
+    assert parse_scenario(scenario(terrain=[TREES, grass], start=[10.0, 8.5, 0.0])).start[:2] == (10.0, 8.5)
 
 
 @pytest.mark.parametrize(

@@ -1,7 +1,15 @@
-"""SELECT.md's intervals: Wilson over zones, and whole layouts resampled."""
+"""SELECT.md's intervals: Wilson over zones, and whole layouts resampled; the size `select`
+announces before any work, and the bound beyond which it needs --large."""
 
+from pathlib import Path
+
+import pytest
+
+from terrapref.cli import main
+from terrapref.errors import UserError
 from terrapref.evaluation.stats import cluster_bootstrap, wilson
-from terrapref.report.select import layout_interval, write_selection_report
+from terrapref.report.select import SelectionSize, count_orders, layout_interval, parse_orders, write_selection_report
+from terrapref.terrain import default_classes
 
 ORDER = ["mud", "rock", "water", "non_traversable"]
 
@@ -97,3 +105,66 @@ def test_the_figure_marks_each_row_with_its_own_target(tmp_path, monkeypatch):
     write_selection_report(tmp_path, saved)
     assert drawn["labels"] == ["teach, all orders, clean", "teach, all orders, field"]
     assert drawn["target"] == [select_report.TARGET, select_report.PERCEIVED_TARGET]  # 95% on clean frames, 90% under errors
+
+
+# --- the size, before any work -----------------------------------------------------------------
+
+
+def _ten_classes(tmp_path: Path) -> Path:
+    """A table of ten feature classes (the most a table may have): 3,628,800 orders."""
+    names = ["grass", *(f"c{i}" for i in range(10)), "tree"]
+    rows = "".join(f"  - {{id: {i}, name: {n}, color: [{i * 20}, {i * 5}, 0]}}\n" for i, n in enumerate(names))
+    path = tmp_path / "ten.yaml"
+    path.write_text(f"format: terrapref-classes/1\nbackground: grass\nlethal: [tree]\nclasses:\n{rows}profile: [{', '.join(names[1:])}]\n")
+    return path
+
+
+def test_the_orders_are_counted_as_parse_orders_makes_them():
+    table = default_classes()
+    for text in ("all", "random:4", "mud,rock,water;rock,mud,water"):
+        assert count_orders(text, table) == len(parse_orders(text, table))
+    with pytest.raises(ValueError, match="random:N"):
+        count_orders("random:7", table)
+
+
+def test_the_size_counts_every_model_and_run():
+    size = SelectionSize.of(recipes=2, orders=6, seeds=1, courses=1, perceptions=2, random_speeds=True)
+    assert (size.models, size.runs) == (12, 30)  # 12 models under 2 perception models, and a driver per order and seed
+    assert SelectionSize.of(1, 6, 5, 32, 1, random_speeds=False).runs == (30 + 6) * 32  # a driver per order
+    assert not SelectionSize.of(1, 200, 5, 1, 1, False).large and SelectionSize.of(1, 201, 5, 1, 1, False).large  # 1,000 models
+    assert SelectionSize.of(1, 1, 1, 100_000, 1, False).large  # 200,000 runs
+    assert (
+        SelectionSize.of(1, 6, 5, 32, 1, False)
+        .describe(2)
+        .startswith("30 models (1 recipe x 6 orders x 5 seeds) and 1,152 closed-loop runs on 32 layouts: about ")
+    )
+
+
+@pytest.mark.parametrize("orders", ["random:3628800", "all"])
+def test_select_says_at_once_how_much_it_would_make_and_refuses_an_absurd_size(tmp_path, capsys, monkeypatch, orders: str):
+    def drawn(*args, **kwargs):
+        raise AssertionError("the orders were drawn or listed before the size was announced")
+
+    monkeypatch.setattr("terrapref.report.select._draw_orders", drawn)
+    monkeypatch.setattr("terrapref.report.select.itertools.permutations", drawn)
+    out = tmp_path / "sel"
+    assert main(["select", "--classes", str(_ten_classes(tmp_path)), "--orders", orders, "--workers", "2", "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out.startswith(
+        "select: 18,144,000 models (1 recipe x 3,628,800 orders x 5 seeds) and 696,729,600 closed-loop runs on 32 layouts: about "
+    )
+    assert "years on 2 workers" in captured.out
+    (line,) = captured.err.strip().splitlines()
+    assert line.startswith("error: --orders: 18,144,000 models") and "--large" in line and "internal error" not in line
+    assert not out.exists()
+
+
+def test_large_runs_a_selection_beyond_the_bound(tmp_path, capsys, monkeypatch):
+    def started(*args, **kwargs):
+        raise UserError("run_selection", "started")
+
+    monkeypatch.setattr("terrapref.report.select.run_selection", started)
+    argv = ["select", "--seeds", "200", "--courses", "1", "--out", str(tmp_path / "sel")]  # 6 orders x 200 seeds: 1,200 models
+    assert main(argv) == 2 and "--large" in capsys.readouterr().err
+    assert main([*argv, "--large"]) == 2
+    assert "run_selection: started" in capsys.readouterr().err

@@ -19,6 +19,8 @@ import pytest
 
 from helpers import model_meta, skip_path_weights
 from terrapref.camera import PinholeCamera, SegmentationRenderer, SegmentationView
+from terrapref.dataset import FORMAT as DATASET_FORMAT
+from terrapref.dataset import Dataset, load_dataset, save_dataset
 from terrapref.demos.expert import ExpertConfig
 from terrapref.demos.meta import ExpertInfo, HumanInfo
 from terrapref.errors import UserError
@@ -357,6 +359,28 @@ def test_an_older_block_without_min_points_or_the_drives_lateral_reads_with_thei
     model = _read(block).model
     assert model.min_points == 1 and model.drive_lateral_mps2 is None
     assert model.speeds_mps == SPEEDS and model.lateral_accel_mps2 == 0.4
+
+
+def test_the_ways_class_ids_survive_a_dataset_file_and_wider_integers_are_refused(tmp_path: Path):
+    n = 12
+    rng = np.random.default_rng(0)
+    arrays = {
+        "way": rng.integers(0, NEVER + 1, (n, STATIONS, 9)).astype(np.uint8),
+        "curvature": np.zeros(n, np.float32),
+        "v_mps": np.ones(n, np.float32),
+        "frame": np.arange(n, dtype=np.float32),
+    }
+    rules = {"speed": {"config": SpeedConfig().data(), "arrays": dict(SpeedConfig.arrays)}}
+    meta = {"format": DATASET_FORMAT, **model_meta(), "rules": rules}
+    U, labels = rng.uniform(0, 1, (n, 21, 5)).astype(np.float32), rng.integers(0, 21, n)
+    data = Dataset(U, labels, np.zeros(n, np.float32), np.zeros(n, np.int64), meta, {"speed": arrays})
+    back = load_dataset(save_dataset(data, tmp_path / "d.safetensors")).rules["speed"]
+    assert back["way"].dtype == np.uint8
+    np.testing.assert_array_equal(back["way"], arrays["way"])
+    wide = Dataset(U, labels, data.w, data.source, meta, {"speed": {**arrays, "way": arrays["way"].astype(np.int64) + 300}})
+    with pytest.raises(UserError) as exc:  # beyond the 256 class ids a rule's tables read: refused, not an index error in the fit
+        load_dataset(save_dataset(wide, tmp_path / "bad.safetensors"))
+    assert exc.value.problems[0].field == "rules.speed.way"
 
 
 # --- 4. the runner on a ground map a tiny scenario fills ---------------------------------------------------

@@ -402,6 +402,11 @@ def test_a_style_file_of_another_format_is_refused(tmp_path):
         ("speeds: {grass: 2.5}\n", ["2.5 m/s", "2 m/s"]),
         ("speed_mps: 2.5\n", ["2.5 m/s"]),
         ("ranked_speeds_mps: [2.5, 1.0]\n", ["2.5 m/s"]),
+        ("speeds: {non_traversable: 0.5}\n", ["speeds:", "'non_traversable'", "lethal"]),
+        ("speeds: {mud: 0.05}\n", ["speeds:", "'mud'", "0.1 m/s"]),
+        ("ranked_speeds_mps: [1.0, 0.05]\n", ["ranked_speeds_mps:", "0.05 m/s"]),
+        ("speed_mps: 0.01\n", ["speed_mps:", "'grass'", "0.01 m/s"]),
+        ("near_lethal_mps: 0.02\n", ["near_lethal_mps:", "0.02 m/s"]),
     ],
 )
 def test_a_style_file_the_driver_or_the_vehicle_cannot_take_is_refused_naming_the_file(tmp_path, text: str, words: list[str]):
@@ -419,6 +424,8 @@ def test_a_style_file_the_driver_or_the_vehicle_cannot_take_is_refused_naming_th
         ((("mud", 2.01),), ["2.01 m/s"]),
         ((("nosuch", 1.0),), ["'nosuch'", "not in the class table"]),
         ((("grass", 0.0),), ["cruising speeds"]),
+        ((("grass", 1e-9),), ["'grass'", "below 0.1 m/s"]),
+        ((("non_traversable", 0.4),), ["'non_traversable'", "lethal"]),
     ],
 )
 def test_speeds_the_vehicle_or_the_table_cannot_take_blame_the_flag(tmp_path, speeds, words: list[str]):
@@ -487,6 +494,9 @@ def test_record_with_speeds_drives_at_them(tmp_path, tiny_scenario, capsys):
         (["--speeds", "grass"], ["--speeds", "CLASS=SPEED"]),
         (["--speeds", "grass=1,grass=2"], ["--speeds", "twice"]),
         (["--speeds", "grass=0"], ["--speeds"]),
+        (["--speeds", "grass=1e-9"], ["--speeds", "'grass'", "1e-09 m/s", "0.1 m/s"]),  # a vehicle that never moves
+        (["--speeds", "mud=0.05"], ["--speeds", "'mud'", "0.05 m/s", "0.1 m/s"]),
+        (["--speeds", "non_traversable=0.5"], ["--speeds", "'non_traversable'", "lethal"]),
         (["--lateral-accel", "0"], ["--lateral-accel"]),
         (["--preview", "-1"], ["--preview"]),
     ],

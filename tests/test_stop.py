@@ -4,6 +4,7 @@ under the whole footprint, and scores that count only what was driven."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -230,8 +231,10 @@ profile: [mud, tree]
 
 
 def _strip_scenario(tmp_path: Path, y_min: float) -> str:
-    """A straight path along y = 10 with a lethal strip from ``y_min`` to 20, beside it."""
+    """A straight path along y = 10 with a lethal strip from ``y_min`` to 20, beside it; the file's
+    start is clear of it (a file may not start on lethal terrain), the tests put the vehicle there."""
     text = WALL.replace("center: [20.0, 10.0], size: [2.0, 20.0]", f"center: [20.0, {(y_min + 20.0) / 2}], size: [40.0, {20.0 - y_min}]")
+    text += "start: [2.0, 5.0, 0.0]\n"
     path = tmp_path / "strip.yaml"
     path.write_text(text)
     return str(path)
@@ -250,6 +253,7 @@ def test_contact_counts_under_the_whole_footprint_not_only_its_centre(tmp_path: 
 
 def test_contact_is_counted_wherever_it_starts_and_in_every_zone(tmp_path: Path):
     scenario = resolve_scenario(_strip_scenario(tmp_path, 9.0))  # the path itself runs on lethal terrain
+    scenario = replace(scenario, start=(2.0, 10.0, 0.0))  # on it from the start, as a seed's shifted start may be
     sim = Simulation(scenario)
     log = run_episode(sim, _Straight(), np.random.default_rng(0))
     assert log.collisions == 1 and log.contact_s > 30.0

@@ -143,7 +143,7 @@ def featurize_recording(
     classes = recording.classes
     rec_camera = CameraConfig.from_dict(recording.meta["camera"])
     camera = camera or rec_camera
-    scenario = parse_scenario(recording.scenario, str(recording.path / "scenario.yaml"), classes)
+    scenario = parse_scenario(recording.scenario, str(recording.path / "scenario.yaml"), classes, driven=True)
     featurizer = UtilityFeaturizer(features, PinholeCamera(camera), classes)
     path = ReferencePath(np.asarray(recording.meta.get("path", scenario.waypoints), dtype=float))
     tracker = PathTracker(path)
@@ -376,7 +376,7 @@ def load_dataset(path: str | Path) -> Dataset:
 
 def _rule_arrays(tensors: dict[str, np.ndarray], meta: dict, source: str) -> dict[str, dict[str, np.ndarray]]:
     """The rules' arrays of a dataset file, each as ``meta["rules"]`` declares it: one row per
-    sample, floats, and only the values its kind allows (:data:`ARRAY_KINDS`)."""
+    sample, floats or uint8 class ids, and only the values its kind allows (:data:`ARRAY_KINDS`)."""
     declared = meta.get("rules", {})
     if not isinstance(declared, dict) or not all(isinstance(d, dict) and isinstance(d.get("arrays"), dict) for d in declared.values()):
         raise UserError(source, "expected a mapping of rules, each with its config and arrays", field="rules")
@@ -393,14 +393,15 @@ def _rule_arrays(tensors: dict[str, np.ndarray], meta: dict, source: str) -> dic
                 raise UserError(
                     source, f"unknown kind {kind!r}; expected one of {', '.join(ARRAY_KINDS)}", field=f"rules.{rule}.arrays.{name}"
                 )
-            bad = (
-                {"finite": ~np.isfinite(a), "finite >= 0": ~(np.isfinite(a) & (a >= 0)), "no NaN": np.isnan(a), "no inf": np.isinf(a)}[kind]
-                if a.dtype.kind == "f"
-                else None
-            )
-            if len(a) != n or a.dtype.kind != "f" or bad.any():
+            if a.dtype.kind == "f":
+                bad = {"finite": ~np.isfinite(a), "finite >= 0": ~(np.isfinite(a) & (a >= 0)), "no NaN": np.isnan(a), "no inf": np.isinf(a)}
+            else:  # class ids (the speed rule's way): one byte each, so every kind holds and every 256-entry table reads them
+                bad = {}
+            if len(a) != n or (a.dtype.kind != "f" and a.dtype != np.uint8) or np.any(bad.get(kind, False)):
                 raise UserError(
-                    source, f"expected {ARRAY_KINDS[kind]}, a row for each of the {n} samples; got {a.dtype} {a.shape}", field=key
+                    source,
+                    f"expected {ARRAY_KINDS[kind]} (floats, or uint8 class ids), a row for each of the {n} samples; got {a.dtype} {a.shape}",
+                    field=key,
                 )
             out[rule][name] = a
     stray = sorted(k for k in tensors if k.startswith("rules.") and k.split(".")[1] not in out)

@@ -5,16 +5,28 @@ names is checked here before any work (:func:`check_output`, :func:`output_folde
 The temporary name is unique (two writers of the same target cannot collide), keeps the
 target's suffix (writers such as matplotlib choose the format by it), and the finished file's
 mode follows the umask like any other new file (temporary files are created 0600).
+
+A folder is replaced with a journal: a hidden folder beside it, ``.NAME.XXXXXXXX.replacing``
+(a command writing NAME in place) or ``.NAME.XXXXXXXX.swapping`` (a finished folder being put at
+NAME), which holds the old folder until the new one is complete and is locked by its command for
+as long as that runs. A journal nobody holds was left by a command that was killed (``kill -9``,
+out of memory): the next command that checks an output or an input in that folder, or replaces
+a folder there, finishes what the journal says first (the old output back, or the finished swap)
+and says so in one line. Every step is one rename, so a kill between any two leaves a state the
+journal names.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import re
 import shutil
 import stat
+import sys
 import tempfile
 from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 
@@ -65,17 +77,13 @@ def new_folder(beside: Path, suffix: str) -> Path:
 
 
 def replace_dir(new: str | Path, target: str | Path) -> Path:
-    """Put the folder ``new`` at ``target``, replacing what was there: the old folder is first
-    moved aside under a unique temporary name, so ``target`` is never missing half-way through a
-    delete, and removed once the new one is in place."""
+    """Put the finished folder ``new`` at ``target``, replacing what was there, through a journal
+    beside ``target``: ``target`` is at every moment the old folder or the new one (or, after a
+    kill between two renames, the next command puts the new one there), never half of either."""
     new, target = Path(new), Path(target)
-    if target.exists():
-        aside = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".old", dir=target.parent))
-        os.replace(target, aside / "old")
-        os.replace(new, target)
-        shutil.rmtree(aside, ignore_errors=True)
-    else:
-        os.replace(new, target)
+    with _folder_held(target.parent):
+        _recover(target.parent)
+        _swap(new, target)
     return target
 
 
@@ -118,6 +126,10 @@ def check_output(out: str | Path, flag: str, inputs: Sequence[str | Path] = (), 
     from terrapref.errors import UserError
 
     out = Path(out)
+    for beside in {_existing_parent(out), *(p.parent for p in map(Path, inputs) if p.exists())}:
+        if beside.is_dir() and _journals(beside):  # a command killed while it replaced something here
+            with _folder_held(beside):
+                _recover(beside)
     target = out.resolve()
     for given in map(Path, inputs):
         if not given.exists():
@@ -137,9 +149,7 @@ def check_output(out: str | Path, flag: str, inputs: Sequence[str | Path] = (), 
         raise UserError(
             str(out), f"exists; choose another {flag}, or pass --force to replace it (only once the new one is complete)", field=flag
         )
-    parent = out if folder and out.exists() else out.parent
-    while not parent.exists() and parent != parent.parent:
-        parent = parent.parent
+    parent = out if folder and out.exists() else _existing_parent(out)
     try:  # a file made and removed at once: permissions alone miss read-only and virtual file systems
         with tempfile.TemporaryFile(dir=parent):
             pass
@@ -176,69 +186,230 @@ def _special_file(path: Path) -> str | None:
     return next((name for test, name in kinds if test(mode)), None)
 
 
+def _existing_parent(path: Path) -> Path:
+    """The nearest folder above ``path`` that exists."""
+    parent = path.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    return parent
+
+
 @contextlib.contextmanager
 def output_folder(out: str | Path, force: bool, flag: str = "--out") -> Iterator[Path]:
     """``out``, made fresh for one command to write all its outputs into, and held against every
     other command while it does: the one rule for a folder output.
 
     A folder that exists and holds anything is refused unless ``force``; with ``force`` it is moved
-    aside, and removed only once the block ends without an exception. Otherwise the new, unfinished
-    folder is kept as ``OUT.partial`` (unless it is empty) and the old one put back; a new folder
-    that fails empty is removed. A run never leaves two runs' files
-    mixed in one folder, and a replacement that fails loses nothing. Another command writing the
-    same folder (a lock on it) is refused, with or without ``force``.
+    into a journal beside ``out`` and removed only once the block ends without an exception.
+    Otherwise the new, unfinished folder is moved to ``OUT.partial`` (one that holds nothing is
+    removed) and the old one put back. A run never leaves two runs' files mixed in one folder, nor
+    an unfinished run at ``out``'s name, and a replacement that fails loses nothing; a command
+    killed half-way is undone the same way by the next command that checks an output beside
+    ``out`` (see the module's docstring). Another command writing the same folder is refused,
+    with or without ``force``.
 
     Raises:
         UserError: ``out`` exists and is not empty (without ``force``), or is being written.
     """
-    from terrapref.errors import UserError
-
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    aside: Path | None = None
-    if out.is_dir() and any(out.iterdir()):
-        with _locked(out, flag):  # held while it is moved: refused if another command is writing it
-            if not force:
-                raise UserError(
-                    str(out),
-                    f"exists; choose another {flag}, or pass --force to replace it (the old folder stays until the new one is complete)",
-                    field=flag,
-                )
-            aside = new_folder(out, ".old")
-            os.replace(out, aside / "old")
-    out.mkdir(exist_ok=True)
-    with _locked(out, flag):  # (another command that made the folder first in the meantime: the old one stays aside, hidden)
+    with _folder_held(out.parent):
+        running = _recover(out.parent)
+        journal = _begin(out, force, flag, out.name in running)
+    try:
         try:
             yield out
         except BaseException:
-            empty = not out.is_dir() or not any(out.iterdir())
-            if empty:  # refused before it wrote anything: nothing of it is kept
-                shutil.rmtree(out, ignore_errors=True)
-            if aside is not None:
-                if not empty:
-                    replace_dir(out, out.with_name(out.name + ".partial"))
-                os.replace(aside / "old", out)
-                shutil.rmtree(aside, ignore_errors=True)
+            with _folder_held(out.parent):
+                _put_back(journal.path, out)
             raise
-    if aside is not None:
-        shutil.rmtree(aside, ignore_errors=True)
+        journal.commit()
+    except BaseException:
+        journal.close(remove=not journal.holds_old())  # a failure to put back or commit leaves it for the next command
+        raise
+    journal.close()
+
+
+# --- journals: a folder replaced so that a kill at any point loses nothing -------------------------
+
+_REPLACING = ".replacing"  # a command writes NAME in place: holds old/ (what it replaces) or fresh/ (nothing was there)
+_SWAPPING = ".swapping"  # a finished folder is put at NAME: holds new/ until it is there, and old/
+_JOURNAL = re.compile(r"\.(?P<name>.+)\.[a-z0-9_]{8}(?P<kind>\.replacing|\.swapping)")  # tempfile.mkdtemp's 8 characters
+
+
+@dataclass
+class _Journal:
+    """A journal this process made and holds (its lock) until :meth:`close`."""
+
+    path: Path
+    fd: int
+
+    @classmethod
+    def start(cls, target: Path, kind: str) -> _Journal:
+        """A new journal for ``target``, in its folder (held by the caller, so that no other
+        command sees it before it is locked)."""
+        path = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=kind, dir=target.parent))
+        fd = _lock(path)
+        assert fd is not None  # made just now, in a folder this process holds
+        return cls(path, fd)
+
+    def commit(self) -> None:
+        """The new output is complete: one rename (or removal) says so, before the old one is removed."""
+        if (self.path / "old").exists():
+            os.replace(self.path / "old", self.path / "done")
+        else:
+            (self.path / "fresh").rmdir()
+
+    def holds_old(self) -> bool:
+        """Whether the old output is still in the journal (the new one not complete)."""
+        return (self.path / "old").exists()
+
+    def close(self, remove: bool = True) -> None:
+        """Remove the journal (and the old output a completed replacement left in it), then let go of it."""
+        if remove:
+            shutil.rmtree(self.path, ignore_errors=True)
+        os.close(self.fd)
+
+
+def _journals(folder: Path) -> list[tuple[Path, str, str]]:
+    """The journals in ``folder``: (path, the name of the output it concerns, its kind)."""
+    found = []
+    with os.scandir(folder) as entries:
+        for entry in entries:
+            m = _JOURNAL.fullmatch(entry.name)
+            if m and entry.is_dir(follow_symlinks=False):
+                found.append((Path(entry.path), m["name"], m["kind"]))
+    return sorted(found, key=lambda j: (j[2] != _SWAPPING, j[0].name))  # swaps first: each stands alone
+
+
+def _recover(folder: Path) -> set[str]:
+    """Finish what every journal in ``folder`` (held by the caller) whose command was killed
+    says, each in one line on stderr; the names of the outputs whose commands still run."""
+    running: set[str] = set()
+    for path, name, kind in _journals(folder):
+        fd = _lock(path)
+        if fd is None:  # its command is running
+            running.add(name)
+            continue
+        journal = _Journal(path, fd)
+        try:
+            note = (_finish_swap if kind == _SWAPPING else _put_back)(path, folder / name)
+        except BaseException:
+            journal.close(remove=False)
+            raise
+        journal.close()
+        if note:
+            print(note, file=sys.stderr)
+    return running
+
+
+def _begin(out: Path, force: bool, flag: str, running: bool) -> _Journal:
+    """The journal of a command about to write ``out`` in place (its folder held by the caller):
+    the old output moved into it (one rename), or a mark that there was none.
+
+    Raises:
+        UserError: another command is writing ``out``, or it holds something and not ``force``.
+    """
+    from terrapref.errors import UserError
+
+    if running:
+        raise UserError(str(out), f"is being written by another terrapref command; choose another {flag} or wait for it to end", field=flag)
+    occupied = out.is_dir() and any(out.iterdir())
+    if occupied and not force:
+        raise UserError(
+            str(out),
+            f"exists; choose another {flag}, or pass --force to replace it (the old folder stays until the new one is complete)",
+            field=flag,
+        )
+    journal = _Journal.start(out, _REPLACING)
+    try:
+        if occupied:
+            os.replace(out, journal.path / "old")
+        else:
+            (journal.path / "fresh").mkdir()
+        out.mkdir(exist_ok=True)
+    except BaseException:
+        _put_back(journal.path, out)
+        journal.close()
+        raise
+    return journal
+
+
+def _put_back(journal: Path, target: Path) -> str | None:
+    """Undo a replacement of ``target`` that did not complete (its folder held by the caller):
+    the unfinished new output to ``TARGET.partial`` (one that holds nothing removed), the old one
+    back at ``target``. What was done, as a note, or None if there was nothing to undo."""
+    old, fresh = journal / "old", journal / "fresh"
+    if not old.exists() and not fresh.exists():  # complete, or never begun
+        return None
+    partial = target.with_name(target.name + ".partial")
+    kept = target.is_dir() and any(target.iterdir())
+    if kept:
+        _swap(target, partial)
+    elif target.is_dir():
+        target.rmdir()
+    if old.exists():
+        os.replace(old, target)
+        return f"note: {target}: put back the output a stopped command was replacing" + (
+            f"; its unfinished one is in {partial}" if kept else ""
+        )
+    return f"note: {target}: a stopped command left it unfinished; moved to {partial}" if kept else None
+
+
+def _swap(new: Path, target: Path) -> None:
+    """Put the finished folder ``new`` at ``target`` (its folder held by the caller): both moved
+    into a journal, then the new one out to ``target``; the old one removed."""
+    if not target.exists():
+        os.replace(new, target)
+        return
+    journal = _Journal.start(target, _SWAPPING)
+    try:
+        os.replace(new, journal.path / "new")
+        os.replace(target, journal.path / "old")
+        os.replace(journal.path / "new", target)
+    except BaseException:
+        journal.close(remove=False)  # the next command finishes the swap from what the journal holds
+        raise
+    journal.close()
+
+
+def _finish_swap(journal: Path, target: Path) -> str | None:
+    """Finish a swap a killed command left half-way: its new folder, which was complete, at ``target``."""
+    new = journal / "new"
+    if not new.exists():  # done, the old one partly removed, or never begun
+        return None
+    if target.exists():
+        os.replace(target, journal / "old")
+    os.replace(new, target)
+    return f"note: {target}: put in place the new one a stopped command had finished"
+
+
+def _lock(path: Path) -> int | None:
+    """A descriptor of ``path`` holding an exclusive lock on it, released when it is closed or
+    the process ends, however it ends; None if another holds it."""
+    import fcntl
+
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        return None
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd
 
 
 @contextlib.contextmanager
-def _locked(folder: Path, flag: str) -> Iterator[None]:
-    """An exclusive lock on ``folder`` for the block; refused (UserError) if another process holds it."""
+def _folder_held(folder: Path) -> Iterator[None]:
+    """``folder`` held against every other command's journal work in it for the block (waiting
+    for one that holds it: each holds it only for a few renames)."""
     import fcntl
-
-    from terrapref.errors import UserError
 
     fd = os.open(folder, os.O_RDONLY)
     try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise UserError(
-                str(folder), f"is being written by another terrapref command; choose another {flag} or wait for it to end", field=flag
-            ) from None
+        fcntl.flock(fd, fcntl.LOCK_EX)
         yield
     finally:
-        os.close(fd)  # releases the lock
+        os.close(fd)

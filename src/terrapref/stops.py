@@ -1,14 +1,18 @@
 """Why a vehicle stands still: the reasons a stop is given with (SPEC 18), shared by the
-planner's stop rule (terrapref.planner.stop), the command holders that stop on stale frames
-(the simulated robot's perception, the runtime) and the scores that count stops."""
+planner's stop rule and its goal check (terrapref.planner.stop, terrapref.planner.goal), the
+command holders that stop on stale frames (the simulated robot's perception, the runtime, the
+nodes) and the scores that count stops."""
 
 NO_FREE_WAY, BLIND, STALE = "no_free_way", "blind", "stale"
+GOAL, OFF_PATH = "goal", "off_path"
 UNSAID = "unsaid"  # a stop whose driver gave no reason (a person letting go of the throttle)
 
 REASONS = {
     NO_FREE_WAY: "no way ahead is free of lethal or unseen ground within the stopping distance",
     BLIND: "too little of the ground ahead seen for too long",
-    STALE: "no fresh frame within the time a command is held",
+    STALE: "no fresh frame within the time a command is held, or a clock that does not move on",
+    GOAL: "at the end of the path: within the goal tolerance of its last point, or past it",
+    OFF_PATH: "farther from the path than the planner may be",
     UNSAID: "the driver stopped without giving a reason",
 }
 

@@ -53,16 +53,17 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     scored = scoring_profile(model, profile, args.model)  # a model whose drives declared no order needs one, before any run
     perception = perception_model(args.perception, classes=model.classes)
     from terrapref.demos.expert import STYLES
+    from terrapref.demos.speed_style import driver_style, parse_speeds
     from terrapref.evaluation.speed import SpeedComparison, trained_driver
     from terrapref.evaluation.stats import rate_text
 
-    style, speeds = _driver_of(args, trained_driver(getattr(getattr(model, "model", None), "meta", {})))
+    given = parse_speeds(args.speeds) if args.speeds is not None else ()
+    style, speeds = _driver_of(args.style, given, trained_driver(getattr(getattr(model, "model", None), "meta", {})))
     STYLES.get(style, "--style")
-    if speeds:  # checked against the model's table and the vehicle before any run
-        from terrapref.demos.speed_style import driver_style
+    if given:  # checked against the model's table and the vehicle before any run (the trained driver's were when it drove)
         from terrapref.vehicle import VehicleConfig
 
-        driver_style(style, scored.order, model.classes, VehicleConfig().max_speed_mps, {"speeds": speeds})
+        driver_style(style, scored.order, model.classes, VehicleConfig().max_speed_mps, {"speeds": given})
     with output_folder(args.out, args.force):
         bar = Progress("evaluate", len(args.scenarios) * args.seeds * (1 if args.no_driver else 2))
         view = live_view(args)
@@ -119,13 +120,15 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         return 0
 
 
-def _driver_of(args: argparse.Namespace, trained: tuple[str, tuple[tuple[str, float], ...]] | None) -> tuple[str, tuple]:
-    """The comparison driver's style and speeds: as given, else the model's own synthetic driver's, else the default."""
-    from terrapref.demos.speed_style import parse_speeds
-
-    style = args.style or (trained[0] if trained is not None and args.speeds is None else "default")
-    speeds = parse_speeds(args.speeds) if args.speeds is not None else (trained[1] if trained is not None and args.style is None else ())
-    return style, speeds
+def _driver_of(
+    style: str | None, given: tuple[tuple[str, float], ...], trained: tuple[str, tuple[tuple[str, float], ...]] | None
+) -> tuple[str, tuple[tuple[str, float], ...]]:
+    """The comparison driver's style and speeds by class: without ``--style``, the model's own
+    synthetic driver (``trained``) where it has one, the classes ``--speeds`` names (``given``)
+    changed and the others kept; else the style given (or the default) with the speeds given."""
+    if style is None and trained is not None:
+        return trained[0], tuple({**dict(trained[1]), **dict(given)}.items())
+    return style or "default", given
 
 
 def _check_frames(frames: Sequence[int], scenarios: Sequence[str], classes) -> None:
@@ -175,7 +178,11 @@ def evaluate_parser(sub: argparse._SubParsersAction) -> None:
         help="the synthetic driver's style for the comparison runs (agreement, speed; default: the style and speeds of the "
         "synthetic driver the model was trained from, else default)",
     )
-    p.add_argument("--speeds", metavar="CLASS=MPS,...", help="the comparison driver's cruising speeds by class, over its style's")
+    p.add_argument(
+        "--speeds",
+        metavar="CLASS=MPS,...",
+        help="cruising speeds by class, e.g. grass=1.2: the comparison driver's classes named change, the others keep its speeds",
+    )
     add_engine_args(p)
     p.add_argument("--mcap", action="store_true", help="also write each planner run as ROS 2 MCAP in OUT/runs (Foxglove, RViz)")
     p.add_argument("--perception", metavar="PRESET|FILE", help=PERCEPTION_HELP + " (default: clean); the driver always sees the truth")

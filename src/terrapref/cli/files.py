@@ -52,7 +52,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     robot = load_robot(args.robot, model.classes)
     out = Path(args.out)
     check_output(out, "--out", [args.bag, args.model, args.robot], folder=True)
-    with output_folder(out, args.force):  # refused (another camera) or stopped: nothing of a new OUT is left
+    with output_folder(out, args.force):  # refused (another camera) or stopped: nothing unfinished is left at OUT
         return _replay_into(args, model, robot, out)
 
 
@@ -198,14 +198,23 @@ def export_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
-    from terrapref.report.info import info_lines
+    """Each file's summary; a model file no command can use is shown as far as its header goes,
+    its refusal on stderr, and the exit code is 2 (the others are still shown)."""
+    from terrapref.report.info import NotReadable, info_lines
 
+    status = 0
     for i, path in enumerate(args.files):
         if i:
             print()
-        for line in info_lines(path):
+        try:
+            lines = info_lines(path)
+        except NotReadable as exc:
+            lines, status = exc.shown, 2
+            for line in exc.lines():
+                print(f"error: {line}", file=sys.stderr)
+        for line in lines:
             print(line)
-    return 0
+    return status
 
 
 def info_parser(sub: argparse._SubParsersAction) -> None:

@@ -117,6 +117,8 @@ def _cmd_play(args: argparse.Namespace) -> int:
         raise UserError("--clock", f"expected a rate in [1, 1000] Hz, got {args.clock:g}")
     if not 0 <= args.delay <= 60:
         raise UserError("--delay", f"expected [0, 60] s, got {args.delay:g}")
+    if not 1 <= args.max_gap <= 1e9:
+        raise UserError("--max-gap", f"expected [1, 1e9] s of log, got {args.max_gap:g}")
     domain = domain_id()
     topics = set(args.topics) if args.topics else None
     if args.robot:  # what the node reads, and the transforms that place it; the log's commands and markers stay out
@@ -131,13 +133,22 @@ def _cmd_play(args: argparse.Namespace) -> int:
         flush=True,
     )
     bar = Progress("play", span_s, "s")
-    count = 0
+    ended = False
     try:
-        count = player.play(rate=args.rate, clock_hz=args.clock, delay_s=args.delay, progress=lambda ns: bar.update(ns * 1e-9))
-    finally:
-        bar.close(f"{count} messages")
+        player.play(
+            rate=args.rate,
+            clock_hz=args.clock,
+            delay_s=args.delay,
+            progress=lambda ns: bar.update(ns * 1e-9, f"{ns * 1e-9:.1f} of {span_s:.1f} s"),
+            max_gap_s=args.max_gap,
+            log=lambda line: print(f"play: {line}", flush=True),
+        )
+        ended = True
+    finally:  # stopped (Ctrl-C, a damaged log) or not: what was published
+        bar.close(f"{player.published} messages published" + ("" if ended else ", then stopped"))
         player.close()
-    print(f"played {count} messages on {len(player.writers)} topics and /clock: {span_s:.1f} s of {args.bag}")
+    skipped = f" ({player.skipped_s:.1f} s of gaps longer than --max-gap skipped)" if player.skipped_s else ""
+    print(f"played {player.published} messages on {len(player.writers)} topics and /clock: {span_s:.1f} s of {args.bag}{skipped}")
     return 0
 
 
@@ -157,6 +168,13 @@ def play_parser(sub: argparse._SubParsersAction) -> None:
         type=finite_float,
         default=1.0,
         help="seconds between joining the domain and the first message, for subscribers to discover the topics (default 1)",
+    )
+    p.add_argument(
+        "--max-gap",
+        type=finite_float,
+        default=5.0,
+        help="a stretch of the log without a message longer than this many seconds is played as this long, the clock "
+        "jumping over the rest, as rosbag play --skip-empty does (default 5)",
     )
     p.set_defaults(func=_cmd_play)
 

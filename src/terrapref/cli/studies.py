@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from terrapref.cli.common import (
     PERCEPTION_HELP,
@@ -17,6 +18,10 @@ from terrapref.cli.common import (
 )
 from terrapref.errors import UserError
 from terrapref.fileio import check_output, output_folder
+
+if TYPE_CHECKING:
+    from terrapref.grid import Engine
+    from terrapref.terrain import ClassTable
 
 
 def _cmd_reproduce(args: argparse.Namespace) -> int:
@@ -174,14 +179,6 @@ def _cmd_select(args: argparse.Namespace) -> int:
     for n in names:
         recipe_named(n, "--recipes")
     table = teachable_table(args)
-    try:
-        orders = parse_orders(args.orders, table)
-    except ValueError as exc:
-        raise UserError("--orders", str(exc)) from None
-    for o in orders:
-        PreferenceProfile.parse(list(o), table, source="--orders")
-    if len(set(orders)) != len(orders):
-        raise UserError("--orders", f"names an order twice: {args.orders!r}")
     STYLES.get(args.style, "--style")
     for flag, value, low in (("--seeds", args.seeds, 1), ("--courses", args.courses, 1), ("--first", args.first, 0)):
         if value < low:
@@ -191,8 +188,18 @@ def _cmd_select(args: argparse.Namespace) -> int:
     if args.taught_under == "same" and len(perceptions) != 1:
         raise UserError("--taught-under", "'same' needs exactly one --perception model")
     taught_under = perceptions[0] if args.taught_under == "same" else perception_model(args.taught_under, "--taught-under", table)
+    speeds = _select_speeds(args.speeds, table)
+    engine = grid_engine(args)
+    _announce_size(args, len(names), table, len(perceptions), engine)
+    try:
+        orders = parse_orders(args.orders, table)
+    except ValueError as exc:
+        raise UserError("--orders", str(exc)) from None
+    for o in orders:
+        PreferenceProfile.parse(list(o), table, source="--orders")
+    if len(set(orders)) != len(orders):
+        raise UserError("--orders", f"names an order twice: {args.orders!r}")
     with output_folder(args.out, args.force):
-        engine = grid_engine(args)
         course = _selection_course(args, table)
         t0 = time.perf_counter()
         selection = Selection(
@@ -207,11 +214,30 @@ def _cmd_select(args: argparse.Namespace) -> int:
             table,
             course,
             args.follow_up,
-            _select_speeds(args.speeds, table),
+            speeds,
         )
         path = run_selection(args.out, selection, engine, log=lambda m: print(m, flush=True))
         print(f"done ({time.perf_counter() - t0:.0f} s): {path}")
         return 0
+
+
+def _announce_size(args: argparse.Namespace, recipes: int, table: ClassTable | None, perceptions: int, engine: Engine) -> None:
+    """Print at once how many models and runs the selection makes and about how long they take,
+    counted without drawing or listing the orders; refuse one beyond the bound unless --large."""
+    from terrapref.report.select import LARGE_MODELS, LARGE_RUNS, SelectionSize, count_orders
+
+    try:
+        orders = count_orders(args.orders, table)
+    except ValueError as exc:
+        raise UserError("--orders", str(exc)) from None
+    size = SelectionSize.of(recipes, orders, args.seeds, args.courses, perceptions, args.speeds == "random")
+    print(f"select: {size.describe(engine.n_workers if engine.address is None else None)}", flush=True)
+    if size.large and not args.large:
+        raise UserError(
+            "--orders",
+            f"{size.models:,} models and {size.runs:,} runs are more than {LARGE_MODELS:,} models or {LARGE_RUNS:,} runs: "
+            "name fewer orders (random:N), seeds or layouts, or add --large to run them all",
+        )
 
 
 def _selection_course(args: argparse.Namespace, table) -> str | None:
@@ -276,6 +302,11 @@ def select_parser(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="after each demonstration, the driver also drives a follow-up course of the pairs it left unidentified "
         "(terrapref course --after), and the model trains on both",
+    )
+    p.add_argument(
+        "--large",
+        action="store_true",
+        help="run a selection of more than 1,000 models or 100,000 runs (select first prints how many, and about how long)",
     )
     add_classes_arg(p)
     add_engine_args(p)

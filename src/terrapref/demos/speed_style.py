@@ -16,12 +16,16 @@ changes; a flag given beside it wins::
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from terrapref.demos.expert import STYLES, ExpertConfig
 from terrapref.errors import UserError
+from terrapref.rules.speed.model import MIN_SPEED_MPS
 from terrapref.terrain import ClassTable
 from terrapref.yamlio import read_yaml_mapping
 
@@ -95,7 +99,8 @@ def driver_style(
     ``changes`` (flags' fields) on top, checked against ``classes`` and the vehicle's top speed.
 
     Raises:
-        UserError: an unknown preset, a bad file, a class the table lacks, a speed out of (0, max].
+        UserError: an unknown preset, a bad file, a class the table lacks, a speed for a lethal
+            class, a speed out of [MIN_SPEED_MPS, max].
     """
     source, file_changes = ("--style", {}) if style in STYLES.names() else (style, None)
     if file_changes is None:
@@ -117,10 +122,37 @@ def driver_style(
         table = config.speed_table(classes)
     except ValueError as exc:
         raise UserError(blame, str(exc)) from None
+    named = dict(flags.get("speeds", ()))
+    _check_drivable(config, classes, table, lambda name: FLAGS["speeds"] if name in named else source)
     fastest = max(config.speed_mps, float(max((v for v in table if v == v), default=0.0)))
     if fastest > max_speed_mps + 1e-9:
         raise UserError(blame, f"a cruising speed of {fastest:g} m/s is above the vehicle's {max_speed_mps:g} m/s")
     return config
+
+
+def _check_drivable(config: ExpertConfig, classes: ClassTable, table: np.ndarray, blame: Callable[[str], str]) -> None:
+    """Refuse a speed for a lethal class (the driver never drives on one: the speed would be
+    stored and never used) and a cruising speed below :data:`MIN_SPEED_MPS`, the least the
+    planner's speed rule commands: a driver that slow never gets anywhere in a run's time, and a
+    model learned from it could not follow it. ``blame(name)`` is the flag or file that set a class's speed.
+    """
+
+    def refuse(name: str, field: str, message: str) -> UserError:
+        source = blame(name)
+        return UserError(source, message, field="" if source.startswith("--") else field)
+
+    lethal = [name for name, _ in config.speeds if name in classes.names and classes.id_of(name) in classes.lethal_ids]
+    if lethal:
+        raise refuse(lethal[0], "speeds", f"class {lethal[0]!r} is lethal: the driver never drives on it, so it takes no speed")
+    slow = [(c.name, float(table[c.id])) for c in classes.classes if table[c.id] < MIN_SPEED_MPS]
+    if slow:
+        name, v = slow[0]
+        ranked = config.ranked_speeds_mps is not None and name in classes.terrain_names
+        field = "speeds" if name in dict(config.speeds) else "ranked_speeds_mps" if ranked else "speed_mps"
+        raise refuse(name, field, f"class {name!r}: {v:g} m/s is below {MIN_SPEED_MPS:g} m/s, the least the planner commands")
+    if config.near_lethal_mps is not None and config.near_lethal_mps < MIN_SPEED_MPS:
+        v = config.near_lethal_mps
+        raise refuse("", "near_lethal_mps", f"{v:g} m/s is below {MIN_SPEED_MPS:g} m/s, the least the planner commands")
 
 
 FLAGS = {"speeds": "--speeds", "lateral_accel_mps2": "--lateral-accel", "preview_m": "--preview"}  # the fields flags set

@@ -38,6 +38,7 @@ PLANNER = "planner"  # a model file: C, or a learned baseline (linear, CNN)
 EXPERT = "driver"  # the synthetic demonstrator, for comparison
 PURE_PURSUIT = PurePursuitPolicy.name  # baselines that need no model file (policies registered in terrapref.planner.registry)
 HAND_COST = CostPolicy.name
+GOAL_SETTLE_S = 10.0  # a planner run that completed is driven on this long at most, to see it stand at its own goal [s]
 
 
 @dataclass(frozen=True)
@@ -145,6 +146,9 @@ class Summary:
     driven_m: float = 0.0  # distance driven, all runs [m]
     stop_count: int = 0  # stops, all runs
     stops_s: dict[str, float] = field(default_factory=dict)  # seconds stood still by reason, all runs
+    goal_watched: int = 0  # completed runs driven on to see the planner stand at its goal
+    goal_stops: int = 0  # those in which it stood still saying `goal`
+    goal_from_end_m: float | None = None  # the farthest from the path's end it stood (or was when the time ran out) [m]
 
     @property
     def stops_per_100m(self) -> float | None:
@@ -176,6 +180,11 @@ class Summary:
             lines.append(f"{self.stop_count} stops{per}; stood still: {reasons}")
         else:
             lines.append("no stop")
+        if self.goal_watched:
+            lines.append(
+                f"stood at its goal (stop `goal`) in {self.goal_stops} of {self.goal_watched} completed runs, "
+                f"at most {self.goal_from_end_m:.2f} m from the path's end"
+            )
         return lines
 
     def to_dict(self) -> dict:
@@ -206,6 +215,11 @@ class Summary:
             "stop_count": self.stop_count,
             "stops_per_100m": self.stops_per_100m,
             "stops_s": self.stops_s,
+            **(
+                {"goal_watched": self.goal_watched, "goal_stops": self.goal_stops, "goal_from_end_m": self.goal_from_end_m}
+                if self.goal_watched
+                else {}
+            ),
         }
 
 
@@ -256,7 +270,8 @@ def _expert(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: Prefere
 def _through_planner(policy: Policy, spec: RunSpec, scenario: Scenario, world: WorldMap) -> tuple[Simulation, Driver]:
     """The planner driving with ``policy``, seeing through the camera the policy was built for."""
     sim = Simulation(scenario, policy.camera, SimConfig.driving(spec.vehicle), world=world)
-    return sim, PlannerDriver(Planner(policy), keep=bool(spec.keep_frames) or spec.keep_run, images=spec.keep_frames)
+    planner = Planner(policy, vehicle=sim.config.vehicle)
+    return sim, PlannerDriver(planner, keep=bool(spec.keep_frames) or spec.keep_run, images=spec.keep_frames)
 
 
 def _model_file(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: PreferenceProfile) -> tuple[Simulation, Driver]:
@@ -300,7 +315,8 @@ def run_one(spec: RunSpec, watch: Watch | None = None) -> RunResult:
         if perceived
         else watched
     )
-    log = run_episode(sim, runner, np.random.default_rng(spec.seed), start_pose(scenario.start, spec.seed))
+    settle = GOAL_SETTLE_S if isinstance(driver, PlannerDriver) else 0.0
+    log = run_episode(sim, runner, np.random.default_rng(spec.seed), start_pose(scenario.start, spec.seed), settle_s=settle)
     metrics = score_run(log, scenario, sim.world, profile, ZoneRules(footprint_m=sim.config.vehicle.footprint_m))
     planner = driver if isinstance(driver, PlannerDriver) else None
     return RunResult(
@@ -427,7 +443,18 @@ def summarise(results: list[RunResult], driver: str) -> Summary:
         driven_m=round(sum(r.metrics.driven_m for r in runs), 3),
         stop_count=sum(r.metrics.stop_count for r in runs),
         stops_s=dict(sorted(stops.items())),
+        **_goal_counts(runs),
     )
+
+
+def _goal_counts(runs: list[RunResult]) -> dict:
+    """Summary's goal fields: the runs watched at their goal, those that stood there saying ``goal``, and the farthest from the end."""
+    watched = [r.metrics.goal_stop for r in runs if r.metrics.goal_stop is not None]
+    return {
+        "goal_watched": len(watched),
+        "goal_stops": sum(bool(g["stopped"]) for g in watched),
+        "goal_from_end_m": round(max(float(g["from_end_m"]) for g in watched), 3) if watched else None,
+    }
 
 
 def _rounded(interval: tuple[float, float]) -> tuple[float, float]:

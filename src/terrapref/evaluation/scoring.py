@@ -15,7 +15,7 @@ under the whole footprint (the line across the vehicle), not only under its refe
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 
 import numpy as np
 
@@ -249,6 +249,8 @@ class RunMetrics:
     speed_by_class_mps: dict[str, dict[str, float]] = field(default_factory=dict)
     time_s: float | None = None  # the time to the end of the path, or to the end of the run [s]
     max_lateral_accel_mps2: float = 0.0  # the largest |v w| over the run's controller ticks [m/s^2]
+    # A planner's stop at its own goal, driven on past completion: {"stopped", "after_s", "from_end_m"} (None: not watched).
+    goal_stop: dict[str, float | bool] | None = None
 
     @property
     def zone_successes(self) -> int:
@@ -325,6 +327,7 @@ def score_run(
         speed_by_class_mps=speeds,
         time_s=round(log.duration_s, 3),
         max_lateral_accel_mps2=round(_max_lateral_accel(log.trace, dt_s), 4),
+        goal_stop=asdict(log.goal_stop) if log.goal_stop is not None else None,
     )
 
 

@@ -33,9 +33,10 @@ import math
 import re
 import shutil
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from PIL import Image as PILImage
@@ -162,7 +163,7 @@ class _Bag:
         if not path.exists():
             raise UserError(self.source, "no such bag")
         try:
-            self.reader = _open_reader(path)
+            self.reader = open_reader(path)
         except UserError:  # the robot extra is missing
             raise
         except Exception as exc:  # the reader's errors on a damaged or foreign file are many kinds
@@ -202,18 +203,7 @@ class _Bag:
 
     def messages(self, conns: list):
         """(connection, bag time [ns], message), deserialised; a damaged message is a UserError."""
-        it = self.reader.messages(connections=conns)
-        n = 0
-        while True:
-            try:
-                conn, t_ns, raw = next(it)
-                msg = self.reader.deserialize(raw, conn.msgtype)
-            except StopIteration:
-                return
-            except Exception as exc:  # damaged chunk or message: the reader's own error types vary
-                raise UserError(self.source, f"message {n + 1} after the start of the read is damaged ({_one_line(exc)})") from None
-            n += 1
-            yield conn, t_ns, msg
+        return read_messages(self.reader, conns, self.source)
 
     def close(self) -> None:
         try:
@@ -304,7 +294,31 @@ def _definition_types(connection) -> dict:
     return {}
 
 
-def _open_reader(path: Path):
+def read_messages(reader, connections: list, source: str) -> Iterator[tuple[Any, int, Any]]:
+    """(connection, log time [ns], message) of ``connections`` in the log's order, deserialised,
+    from a reader :func:`open_reader` opened. A damaged chunk or message stops the read with a
+    one-line UserError naming ``source`` and where the damage was met, once everything before it
+    has been yielded.
+
+    Raises:
+        UserError: a chunk or message of the log cannot be read.
+    """
+    it = reader.messages(connections=connections)
+    n, last_ns = 0, None
+    while True:
+        try:
+            conn, t_ns, raw = next(it)
+            msg = reader.deserialize(raw, conn.msgtype)
+        except StopIteration:
+            return
+        except Exception as exc:  # damaged chunk or message: the reader's own error types vary
+            after = "at its start" if last_ns is None else f"{(last_ns - reader.start_time) * 1e-9:.3f} s into the log"
+            raise UserError(source, f"damaged: message {n + 1} of the read ({after}) cannot be read ({_one_line(exc)})") from None
+        n, last_ns = n + 1, t_ns
+        yield conn, t_ns, msg
+
+
+def open_reader(path: Path):
     """rosbags' AnyReader over ``path``, opened, except that a connection whose message definition
     cannot be parsed (or whose hash does not match it) is left out, in ``unreadable``, instead of
     failing the whole log. As AnyReader, the ROS 2 Humble types serve a log that carries no

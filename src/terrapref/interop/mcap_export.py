@@ -27,7 +27,6 @@ same frames, so it featurises to the same dataset.
 from __future__ import annotations
 
 import shutil
-import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,7 +38,7 @@ from terrapref.camera import CameraConfig
 from terrapref.extras import needs
 from terrapref.features import PreferenceSetConfig
 from terrapref.features.preference_set import forward_simulate
-from terrapref.fileio import write_text_atomic
+from terrapref.fileio import new_folder, write_text_atomic
 from terrapref.interop.ros_messages import (
     EPOCH_S,
     OPTICAL_FRAME,
@@ -177,10 +176,10 @@ def write_bag(
     (the same topics, ROS 1's types; the costmap as OccupancyGrid alone, Foxglove's Grid being a
     ROS 2 type); with ``robot_file``, also the terrapref-robot/1 file that imports it back."""
     out = Path(out)
-    tmpdir = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".writing", dir=out.parent if out.parent.exists() else None))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmpdir = new_folder(out, ".writing")  # beside it, never in the system's tmp: the rename below stays on one file system
     try:
         written = _write_ros1(tmpdir / "run.bag", run, progress) if ros1 else _write_ros2(tmpdir / "bag", run, progress)
-        out.parent.mkdir(parents=True, exist_ok=True)
         written.replace(out)
     finally:
         shutil.rmtree(tmpdir, ignore_errors=True)

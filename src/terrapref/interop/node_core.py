@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
@@ -27,21 +28,23 @@ import numpy as np
 from terrapref.errors import UserError
 from terrapref.interop.bag_import import _decode, _yaw, camera_from_info
 from terrapref.interop.labels import unlisted_message
-from terrapref.interop.robot import RobotConfig
+from terrapref.interop.robot import LIMITS, RobotConfig
 from terrapref.interop.runtime import PlannerRuntime, RuntimeDecision
 from terrapref.learning.model_file import LoadedModel
+from terrapref.planner.stop import StopConfig
 from terrapref.rules.costmap import Costmap
 from terrapref.scenario.path import ReferencePath
 from terrapref.stops import REASONS, STALE
 from terrapref.terrain import UNKNOWN
-from terrapref.vehicle import Command, Pose, wrap_angle
+from terrapref.vehicle import Command, Pose, VehicleConfig, wrap_angle
 
 if TYPE_CHECKING:
     from terrapref.interop.live import LiveRun, LiveView
 
 ODOMETRY_KEPT_S = 5.0  # how far back odometry is kept for interpolating to an image's stamp [s]
 ODOMETRY_WAIT_S = 0.5  # how long an image newer than the odometry waits for it [s]
-ODOMETRY_AHEAD_S = 1.0  # odometry stamped further ahead of the node's clock is refused [s]
+AHEAD_S = 1.0  # odometry and images stamped further ahead of the node's clock are refused [s] (the system's clock)
+SIM_AHEAD_S = 10.0  # the same under a simulated clock, whose /clock messages may come late (a node busy making its planner) [s]
 SPEED_WINDOW_S = 0.2  # the robot's speed at an image: its odometry's forward motion over this long before the stamp [s]
 
 
@@ -62,14 +65,32 @@ class PlannerNodeCore:
 
     Args:
         model: the model the node drives with.
-        robot: the robot file (topics, camera mounting, label map, the odometry's gaps).
+        robot: the robot file (topics, camera mounting, label map, the odometry's gaps, when to
+            stop, the robot's limits).
         path: the reference path (N, 2) [m] in the odometry frame, when it comes from a file;
             otherwise the first Path message sets it.
         hold_s: how long a decision's command stays in force after its frame's stamp [s].
+        watchdog_s: a stop (``stale``) once no frame has been decided on for this long by the wall
+            clock [s], whatever the node's clock says: a simulated clock that froze (the log
+            player died) would otherwise hold the last command for ever.
+        wall: the wall clock [s] (a monotonic one).
+        ahead_s: how far ahead of the node's clock an input's stamp may be [s] (:data:`AHEAD_S`, or
+            :data:`SIM_AHEAD_S` under a simulated clock).
     """
 
-    def __init__(self, model: LoadedModel, robot: RobotConfig, path: np.ndarray | None = None, hold_s: float = 0.3) -> None:
+    def __init__(
+        self,
+        model: LoadedModel,
+        robot: RobotConfig,
+        path: np.ndarray | None = None,
+        hold_s: float = 0.3,
+        watchdog_s: float = 1.0,
+        wall: Callable[[], float] = time.monotonic,
+        ahead_s: float = AHEAD_S,
+    ) -> None:
         self.model, self.robot, self.hold_s, self.stop = model, robot, hold_s, robot.stop
+        self.watchdog_s, self.wall, self.ahead_s = watchdog_s, wall, ahead_s
+        self._decided_wall: float | None = None  # when the last frame was decided on, by the wall clock [s]
         self.runtime: PlannerRuntime | None = None
         self.path = None if path is None else np.asarray(path, dtype=float)
         self.odometry: deque[tuple[float, float, float, float]] = deque()  # (stamp [s], x, y, yaw)
@@ -80,6 +101,7 @@ class PlannerNodeCore:
             "superseded while waiting for odometry": 0,
             "paths of fewer than two distinct points": 0,
             "odometry ahead of the clock": 0,
+            "images ahead of the clock": 0,
             "calibrations of another size": 0,
         }
         self.decided = 0  # frames decided on
@@ -118,7 +140,8 @@ class PlannerNodeCore:
                     raise ValueError(f"a camera_info of another image size than the {w} x {h} px the planner was made with; ignored")
                 return
             camera, self._undistort = camera_from_info(info, self.robot, self.robot.source)
-            runtime = PlannerRuntime(self.model, camera, hold_s=self.hold_s, stop=self.stop)  # fed class ids, mapped and undistorted here
+            # fed class ids, mapped and undistorted here
+            runtime = PlannerRuntime(self.model, camera, hold_s=self.hold_s, stop=self.stop, limits=self.robot.limits, ahead_s=self.ahead_s)
             labels = self.robot.labels
             # An id the label map does not list becomes one the class table does not name, and is refused with it.
             self._lut = labels.lut(self.model.classes, UNKNOWN if labels.unlisted == "unknown" else runtime.foreign.unnamed)
@@ -147,16 +170,16 @@ class PlannerNodeCore:
         image that waited for it, if one did.
 
         With ``now_s``, the node's clock [s] (None before it runs), a pose stamped more than
-        :data:`ODOMETRY_AHEAD_S` ahead of it is refused (ValueError, counted): kept, it would
+        ``ahead_s`` ahead of it is refused (ValueError, counted): kept, it would
         make every later pose look older than the newest and be dropped.
         """
         with self._lock:
             p = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
             t = stamp_s(msg.header)
-            if now_s is not None and now_s > 0 and t > now_s + ODOMETRY_AHEAD_S:
+            if now_s is not None and now_s > 0 and t > now_s + self.ahead_s:
                 self.skipped["odometry ahead of the clock"] += 1
                 raise ValueError(
-                    f"odometry stamped more than {ODOMETRY_AHEAD_S:g} s ahead of the node's clock (another clock, or "
+                    f"odometry stamped more than {self.ahead_s:g} s ahead of the node's clock (another clock, or "
                     "use_sim_time unset while a log plays?)"
                 )
             if self.odometry and t < self.odometry[-1][0]:
@@ -199,19 +222,26 @@ class PlannerNodeCore:
         forward = (now.x - before.x) * math.cos(now.yaw) + (now.y - before.y) * math.sin(now.yaw)
         return abs(forward) / SPEED_WINDOW_S
 
-    def on_image(self, msgtype: str, msg, topic: str = "") -> RuntimeDecision | None:
+    def on_image(self, msgtype: str, msg, topic: str = "", now_s: float | None = None) -> RuntimeDecision | None:
         """A label image (``sensor_msgs/msg/Image`` or ``.../CompressedImage``): the decision on
         it, or None when it is skipped (counted in :attr:`skipped`) or waits for odometry.
 
         An image newer than the last odometry (they travel on separate topics and either may
         come first) waits, the newest one only, until odometry at or past its stamp arrives
-        (:meth:`on_odometry` then decides on it), for up to :data:`ODOMETRY_WAIT_S`.
+        (:meth:`on_odometry` then decides on it), for up to :data:`ODOMETRY_WAIT_S`. With
+        ``now_s``, the node's clock [s] (None before it runs), an image stamped ahead of it by
+        more than the runtime allows is refused (ValueError, counted).
         """
         with self._lock:
             if not self.ready:
                 self.skipped["before the calibration or the path"] += 1
                 return None
             t = stamp_s(msg.header)
+            if now_s is not None and now_s > 0 and t > now_s + self.ahead_s:
+                self.skipped["images ahead of the clock"] += 1
+                raise ValueError(
+                    f"an image stamped {t - now_s:.3g} s ahead of the node's clock; refused (another clock, or use_sim_time unset while a log plays?)"
+                )
             pose = self.pose_at(t)
             if pose is None:
                 if self.odometry and 0 < t - self.odometry[-1][0] <= ODOMETRY_WAIT_S:
@@ -248,6 +278,7 @@ class PlannerNodeCore:
             self.skipped["out of order"] += 1
             return None
         self.decided += 1
+        self._decided_wall = self.wall()
         if self.view is not None:
             self._send(decision, ids, pose)
         if self.on_decision is not None:
@@ -283,9 +314,25 @@ class PlannerNodeCore:
         return self.status_at(now_s)[0]
 
     def status_at(self, now_s: float) -> tuple[Command, str | None]:
-        """The command to send now and why it stops (None while it drives; ``stale`` before any frame)."""
+        """The command to send now and why it stops (None while it drives; ``stale`` before any
+        frame, and once none has been decided on for ``watchdog_s`` by the wall clock)."""
         with self._lock:
-            return self.runtime.status_at(now_s) if self.runtime is not None else (Command(0.0, 0.0), STALE)
+            if self.runtime is None:
+                return Command(0.0, 0.0), STALE
+            command, reason = self.runtime.status_at(now_s)
+            if self.quiet_s() > self.watchdog_s:
+                return Command(0.0, 0.0), STALE
+            return command, reason
+
+    def quiet_s(self) -> float:
+        """How long no frame has been decided on, by the wall clock [s] (0 before the first)."""
+        return 0.0 if self._decided_wall is None else self.wall() - self._decided_wall
+
+    @property
+    def arrived(self) -> bool:
+        """Whether the planner stands at the end of its path (its goal: terrapref.planner.goal)."""
+        with self._lock:
+            return self.runtime is not None and self.runtime.planner.goal.reached
 
     def costmap(self) -> Costmap | None:
         """The learned preference over the ground seen, when the planner keeps a ground map."""
@@ -295,12 +342,16 @@ class PlannerNodeCore:
             return self.runtime.costmap()
 
 
+# The parameters that set the robot's limits and when it stops, over its robot file's (None: the file's).
+ROBOT_PARAMETERS = (*LIMITS, "goal_tolerance_m", "goal_yaw_tolerance_deg", "off_path_m")
+
+
 @dataclass(frozen=True)
 class NodeOptions:
-    """How a node runs: each from the command line (``hold_s`` has no flag), else from the
-    node's ROS parameter of the same name (ROS 1: the private ``~stamped``, ``~rate``,
-    ``~path_file``, ``~cmd_topic``, ``~hold_s``; ROS 2: ``-p stamped:=true`` and so on), else
-    the default.
+    """How a node runs: each from the command line (``hold_s``, ``watchdog_s`` and the robot's
+    parameters have no flag), else from the node's ROS parameter of the same name (ROS 1: the
+    private ``~stamped``, ``~rate``, ``~path_file``, ``~cmd_topic``, ``~hold_s``, ...; ROS 2:
+    ``-p stamped:=true`` and so on), else the default.
 
     Attributes:
         stamped: publish TwistStamped instead of Twist (default False).
@@ -308,6 +359,10 @@ class NodeOptions:
         path_file: waypoints of the reference path, instead of the path topic.
         cmd_topic: where the command goes (default: the robot file's command topic).
         hold_s: how long a decision's command holds after its frame's stamp [s] (default 0.3).
+        watchdog_s: a stop once no frame has been decided on for this long by the wall clock [s]
+            (default 1).
+        max_speed_mps, max_yaw_rate_rps, max_accel_mps2: the robot's limits (robot file ``limits``).
+        goal_tolerance_m, goal_yaw_tolerance_deg, off_path_m: the goal check's settings (robot file ``stop``).
     """
 
     stamped: bool | None = None
@@ -315,12 +370,21 @@ class NodeOptions:
     path_file: str | None = None
     cmd_topic: str | None = None
     hold_s: float | None = None
+    watchdog_s: float | None = None
+    max_speed_mps: float | None = None
+    max_yaw_rate_rps: float | None = None
+    max_accel_mps2: float | None = None
+    goal_tolerance_m: float | None = None
+    goal_yaw_tolerance_deg: float | None = None
+    off_path_m: float | None = None
 
     def resolved(self, get_param: Callable[[str, Any], Any], param: Callable[[str], str] = lambda name: f"~{name}") -> NodeOptions:
         """Every option set: the given ones, the rest from ``get_param(param(name), default)``
         (rospy's ``get_param`` with ``~name`` by default), checked (a bad value is a UserError
-        naming the option and where it came from)."""
-        defaults = {"stamped": False, "rate": 20.0, "path_file": None, "cmd_topic": None, "hold_s": 0.3}
+        naming the option and where it came from). The robot's parameters stay None where not
+        given: the robot file's values hold."""
+        defaults = {"stamped": False, "rate": 20.0, "path_file": None, "cmd_topic": None, "hold_s": 0.3, "watchdog_s": 1.0}
+        defaults |= dict.fromkeys(ROBOT_PARAMETERS)
         values, origin = {}, {}
         for name, default in defaults.items():
             given = getattr(self, name)
@@ -329,14 +393,38 @@ class NodeOptions:
             )
         if not isinstance(values["stamped"], bool):
             raise UserError(origin["stamped"], f"expected true or false, got {values['stamped']!r}")
-        for name, top in (("rate", 200.0), ("hold_s", 5.0)):
+        for name, top in (("rate", 200.0), ("hold_s", 5.0), ("watchdog_s", 60.0)):
             v = values[name]
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and 0 < v <= top):
                 raise UserError(origin[name], f"expected a number in (0, {top:g}], got {v!r}")
+        for name in ROBOT_PARAMETERS:
+            v = values[name]
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0)):
+                raise UserError(origin[name], f"expected a number > 0, got {v!r}")
         for name in ("path_file", "cmd_topic"):
             if values[name] is not None and (not isinstance(values[name], str) or not values[name]):
                 raise UserError(origin[name], f"expected a non-empty string, got {values[name]!r}")
-        return NodeOptions(**values)
+        resolved = NodeOptions(**values)
+        resolved._settings(StopConfig(), VehicleConfig(), origin)  # checked together now, over the defaults
+        return resolved
+
+    def applied_to(self, robot: RobotConfig) -> RobotConfig:
+        """``robot`` with the robot's parameters given here in place of its file's (checked
+        together: a goal tolerance beyond the off-path distance is a UserError naming them)."""
+        stop, limits = self._settings(robot.stop, robot.limits, {})
+        return robot if (stop, limits) == (robot.stop, robot.limits) else replace(robot, stop=stop, limits=limits)
+
+    def _settings(self, stop: StopConfig, limits: VehicleConfig, origin: dict[str, str]) -> tuple[StopConfig, VehicleConfig]:
+        """``stop`` and ``limits`` with the robot's parameters given here in their place."""
+        given = {name: getattr(self, name) for name in ROBOT_PARAMETERS if getattr(self, name) is not None}
+        stop_names = {f.name for f in fields(StopConfig)}
+        try:
+            return (
+                replace(stop, **{k: v for k, v in given.items() if k in stop_names}),
+                replace(limits, **{k: v for k, v in given.items() if k in LIMITS}),
+            )
+        except ValueError as exc:
+            raise UserError(", ".join(origin.get(name, name) for name in given), str(exc)) from None
 
     def command_topic(self, robot: RobotConfig) -> str:
         """Where the command goes: ``cmd_topic``, else the robot file's command topic (a robot file

@@ -27,6 +27,13 @@
       reaction_s: 0.2                          # frame to brakes [s]
       margin_m: 0.3                            # kept from lethal or unseen ground when stopped [m]
       blind_after_s: 0.5                       # blind frames tolerated before a stop [s]
+      goal_tolerance_m: 0.5                    # at the goal within this of the path's last point [m]
+      goal_yaw_tolerance_deg: null             # a number: also turn in place to the path's last direction
+      off_path_m: 10.0                         # farther from the path: stop, off_path [m]
+    limits:                                    # optional: what the robot may be commanded, whatever the model asks
+      max_speed_mps: 2.0                       # top speed [m/s]
+      max_yaw_rate_rps: 1.0                    # [rad/s]
+      max_accel_mps2: 1.0                      # the speed given out rises no faster [m/s^2]; null: the base ramps it
 
 Without ``topics.command`` each frame is labelled by the vehicle's measured motion (v, w): the
 odometry's twist, or differences of its poses where it carries none (terrapref.interop.bag_import).
@@ -50,10 +57,12 @@ from terrapref.planner.stop import StopConfig
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.terrain.profile import PreferenceProfile
+from terrapref.vehicle import VehicleConfig
 from terrapref.yamlio import load_yaml_text, read_yaml_mapping
 
 ROBOT_FORMAT = "terrapref-robot/1"
-_TOP = {"format", "topics", "camera", "labels", "path_file", "profile", "max_gap_s", "description", "stop"}
+_TOP = {"format", "topics", "camera", "labels", "path_file", "profile", "max_gap_s", "description", "stop", "limits"}
+LIMITS = ("max_speed_mps", "max_yaw_rate_rps", "max_accel_mps2")  # the robot's limits a file (or a node's parameters) may set
 _TOPICS_REQUIRED = ("segmentation", "camera_info", "odometry")
 _TOPICS_OPTIONAL = ("command", "path")
 _TOPICS = set(_TOPICS_REQUIRED) | set(_TOPICS_OPTIONAL)
@@ -78,6 +87,7 @@ class RobotConfig:
     path_file: Path | None
     max_gap_s: float
     stop: StopConfig = field(default_factory=StopConfig)
+    limits: VehicleConfig = field(default_factory=VehicleConfig)
 
     @property
     def path_topic(self) -> str | None:
@@ -115,7 +125,15 @@ def load_robot(path: str | Path, classes: ClassTable | None = None) -> RobotConf
     if path_file is not None:
         resolved = Path(path_file) if Path(path_file).is_absolute() else here / path_file
     return RobotConfig(
-        source, topics, camera, labels, profile, resolved, float(data.get("max_gap_s", 0.5)), _stop(data.get("stop"), source)
+        source,
+        topics,
+        camera,
+        labels,
+        profile,
+        resolved,
+        float(data.get("max_gap_s", 0.5)),
+        _stop(data.get("stop"), source),
+        _limits(data.get("limits"), source),
     )
 
 
@@ -140,12 +158,31 @@ def _stop(block: object, source: str) -> StopConfig:
         if key not in names:
             raise ConfigError(source, f"unknown key; expected {', '.join(names)}", field=f"stop.{key}")
         wanted = int if key == "arcs" else (int, float)
+        if value is None and key == "goal_yaw_tolerance_deg":
+            continue
         if isinstance(value, bool) or not isinstance(value, wanted):
             raise ConfigError(source, f"expected {'a whole number' if key == 'arcs' else 'a number'}", field=f"stop.{key}")
     try:
         return StopConfig(**block)
     except ValueError as exc:
         raise ConfigError(source, str(exc), field="stop") from None
+
+
+def _limits(block: object, source: str) -> VehicleConfig:
+    """The robot's limits from the file's ``limits`` block (absent: the default vehicle's)."""
+    if block is None:
+        return VehicleConfig()
+    if not isinstance(block, dict):
+        raise ConfigError(source, f"expected a mapping of {', '.join(LIMITS)}", field="limits")
+    for key, value in block.items():
+        if key not in LIMITS:
+            raise ConfigError(source, f"unknown key; expected {', '.join(LIMITS)}", field=f"limits.{key}")
+        if not (value is None and key == "max_accel_mps2") and _number(value) is None:
+            raise ConfigError(source, "expected a finite number" + (" (or null)" if key == "max_accel_mps2" else ""), field=f"limits.{key}")
+    try:
+        return VehicleConfig(**block)
+    except ValueError as exc:
+        raise ConfigError(source, str(exc), field="limits") from None
 
 
 def _check_topics(topics: object, problems: list[Problem]) -> dict[str, str]:

@@ -4,9 +4,12 @@ Subscribes to the robot file's label image, camera calibration, odometry and (wi
 file) path topics; publishes the command on the robot file's command topic (``Twist``, or
 ``TwistStamped`` with ``--stamped``, stamped with the frame it was decided on; a stop once that
 frame is ``hold_s`` old by the node's clock) at the control rate and at once on each decision, the 21 trajectories with F_t and the chosen one
-(``~trajectories``, ``visualization_msgs/MarkerArray``) on each decision, and the learned costmap
-(``~costmap``, ``nav_msgs/OccupancyGrid``) once a second. Its options come from the command
-line or its private ROS parameters (:class:`NodeOptions`). What is not ROS 1 transport lives in
+(``~trajectories``, ``visualization_msgs/MarkerArray``) on each decision, the learned costmap
+(``~costmap``, ``nav_msgs/OccupancyGrid``) once a second, and whether it stands at the end of its
+path (``~arrived``, ``std_msgs/Bool``, latched). The command is sent from a wall-clock timer, so
+that a ``/clock`` that stops (under ``use_sim_time``) cannot stop the node from sending the stop
+that follows: once no frame has been decided on for ``watchdog_s`` by the wall clock it stops
+(``stale``). Its options come from the command line or its private ROS parameters (:class:`NodeOptions`). What is not ROS 1 transport lives in
 :mod:`terrapref.interop.node_core`, which the ROS 2 node shares.
 
 ROS 1's Python packages come from Debian (``ros-core``, ``python3-rospy`` and the message
@@ -20,6 +23,8 @@ import importlib
 import os
 import socket
 import sys
+import threading
+import time
 import urllib.parse
 from pathlib import Path
 
@@ -53,7 +58,7 @@ def run_node(model_path: str, robot_path: str, options: NodeOptions | None = Non
     """Run the node until ROS shuts it down; with ``live`` (a terrapref.interop.live.LiveView),
     every decision is also sent there."""
     rospy = import_rospy()
-    from terrapref.interop.node_core import PlannerNodeCore
+    from terrapref.interop.node_core import AHEAD_S, SIM_AHEAD_S, PlannerNodeCore
     from terrapref.interop.robot import load_robot, load_waypoints
     from terrapref.learning.model_file import load_model
 
@@ -62,17 +67,20 @@ def run_node(model_path: str, robot_path: str, options: NodeOptions | None = Non
     check_master(os.environ.get("ROS_MASTER_URI", DEFAULT_MASTER_URI))  # rospy would wait for one for ever
     rospy.init_node("terrapref", anonymous=False)
     opts = (options or NodeOptions()).resolved(rospy.get_param)
+    robot = opts.applied_to(robot)
     path = (
         load_waypoints(Path(opts.path_file), "path_file")
         if opts.path_file
         else (load_waypoints(robot.path_file, robot.source) if robot.path_file else None)
     )
-    core = PlannerNodeCore(model, robot, path, hold_s=float(opts.hold_s))
+    ahead = SIM_AHEAD_S if rospy.get_param("/use_sim_time", False) is True else AHEAD_S
+    core = PlannerNodeCore(model, robot, path, hold_s=float(opts.hold_s), watchdog_s=float(opts.watchdog_s), ahead_s=ahead)
     if live is not None:
         core.watch(live)
     node = _Node(rospy, core, model, robot, opts)
     rospy.on_shutdown(node.report)
     rospy.spin()
+    node.done.set()
     if node.failure:
         raise node.failure[0]
 
@@ -108,6 +116,7 @@ class _Node:
         from nav_msgs.msg import OccupancyGrid, Odometry
         from nav_msgs.msg import Path as PathMsg
         from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+        from std_msgs.msg import Bool
         from visualization_msgs.msg import MarkerArray
 
         from terrapref.interop.node_core import NodeLog
@@ -129,14 +138,17 @@ class _Node:
         self.cmd_pub = rospy.Publisher(opts.command_topic(robot), TwistStamped if opts.stamped else Twist, queue_size=10)
         self.traj_pub = rospy.Publisher("~trajectories", MarkerArray, queue_size=2)
         self.cost_pub = rospy.Publisher("~costmap", OccupancyGrid, queue_size=1, latch=True)
+        self.arrived_pub, self.Bool, self.arrived = rospy.Publisher("~arrived", Bool, queue_size=1, latch=True), Bool, None
         self.markers = _TrajectoryMarkers(model, rospy)
         core.on_decision = self.on_decision
         rospy.Subscriber(robot.topics["camera_info"], CameraInfo, self.on_camera_info, queue_size=1)
         rospy.Subscriber(robot.topics["odometry"], rospy.AnyMsg, self.on_odometry, queue_size=50)
         if core.path is None and robot.path_topic:
-            rospy.Subscriber(robot.path_topic, PathMsg, core.on_path, queue_size=1)
+            rospy.Subscriber(robot.path_topic, PathMsg, self.on_path, queue_size=1)
         rospy.Subscriber(robot.topics["segmentation"], rospy.AnyMsg, self.on_image, queue_size=1)
-        rospy.Timer(rospy.Duration(1.0 / float(opts.rate)), self.tick)
+        self.publish_arrived()
+        self.done = threading.Event()
+        threading.Thread(target=self.ticks, name="terrapref-commands", daemon=True).start()  # the wall clock's, not ROS time's
         rospy.Timer(rospy.Duration(COSTMAP_PERIOD_S), self.publish_costmap)
 
     def publish_command(self, stamp_s: float) -> None:
@@ -158,10 +170,28 @@ class _Node:
         self.last_stamp = decision.stamp_s
         self.publish_command(decision.stamp_s)
         self.traj_pub.publish(self.markers.of(decision, self.rospy.Time.from_sec(decision.stamp_s)))
+        self.publish_arrived()
+
+    def publish_arrived(self) -> None:
+        """``~arrived`` when it changes (true once the planner stands at its goal, false on a new path)."""
+        arrived = self.core.arrived
+        if arrived != self.arrived:
+            self.arrived = arrived
+            self.arrived_pub.publish(self.Bool(data=arrived))
+            if arrived:
+                self.log.info("terrapref: arrived at the end of the path (goal)")
+
+    def on_path(self, msg) -> None:
+        self.core.on_path(msg)
+        self.publish_arrived()
 
     def on_camera_info(self, msg) -> None:
+        first = self.core.runtime is None
         try:
             self.core.on_camera_info(msg)
+            if first:  # the planner is made now: what it holds the model to is said once
+                for note in self.core.runtime.notes:
+                    self.log.warn(f"terrapref: {note}")
         except UserError as exc:  # a model for another camera: said once, and the node stops
             self.failure.append(exc)
             self.rospy.signal_shutdown(exc.lines()[0])
@@ -176,7 +206,8 @@ class _Node:
                 f"{self.robot.topics['segmentation']}: {kind} is not a label image (sensor_msgs/Image or CompressedImage); ignored"
             )
         cls, msgtype = self.image_types[kind]
-        self.log.guarded(lambda: self.core.on_image(msgtype, cls().deserialize(raw._buff), self.robot.topics["segmentation"]))
+        now = self.rospy.get_time()
+        self.log.guarded(lambda: self.core.on_image(msgtype, cls().deserialize(raw._buff), self.robot.topics["segmentation"], now or None))
 
     def on_odometry(self, raw) -> None:
         """Odometry, or a PoseStamped or PoseWithCovarianceStamped, as the robot file allows."""
@@ -187,9 +218,14 @@ class _Node:
             )
         self.log.guarded(lambda: self.core.on_odometry(self.pose_types[kind]().deserialize(raw._buff), self.rospy.get_time()))
 
-    def tick(self, event) -> None:
-        if self.last_stamp is not None:
-            self.publish_command(self.last_stamp)
+    def ticks(self) -> None:
+        """The command at the control rate by the wall clock, until the node shuts down."""
+        period = 1.0 / float(self.opts.rate)
+        while not (self.done.is_set() or self.rospy.is_shutdown()):
+            time.sleep(period)
+            if self.last_stamp is not None:
+                with self.core.lock:
+                    self.publish_command(self.last_stamp)
 
     def publish_costmap(self, event) -> None:
         grid = self.core.costmap()

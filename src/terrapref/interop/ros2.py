@@ -8,12 +8,16 @@ calibration, odometry (``nav_msgs/Odometry``, ``PoseStamped`` or ``PoseWithCovar
 and, without a path file, path (``nav_msgs/Path``); it publishes the command (``Twist``, or
 ``TwistStamped`` with ``stamped``) at the control rate and at once on each decision, the
 trajectories with F_t (``~/trajectories``) on each decision, the learned costmap (``~/costmap``,
-transient local) once a second, and the camera mounting it assumes on ``/tf_static``.
+transient local) once a second, whether it stands at the end of its path (``~/arrived``,
+``std_msgs/Bool``, transient local: false until it arrives, false again on a new path), and the
+camera mounting it assumes on ``/tf_static``.
 
 Its options come from the command line or ROS 2 parameters (``--ros-args -p rate:=10``), its
 topic names can be remapped (``-r /cmd_vel:=/robot/cmd_vel``, ``-r __node:=NAME``,
 ``-r __ns:=/NS``), ``ROS_DOMAIN_ID`` picks the domain, and ``-p use_sim_time:=true`` takes the
-node's clock from ``/clock``.
+node's clock from ``/clock``. Whatever its clock says, it stops (``stale``) once no frame has been
+decided on for ``watchdog_s`` by the wall clock, and says why: a ``/clock`` that stopped (the log
+player died) would otherwise hold the last command for ever.
 """
 
 from __future__ import annotations
@@ -32,7 +36,16 @@ import yaml
 
 from terrapref.errors import UserError
 from terrapref.interop.dds import CLOCK, DEFAULT, LATCHED, SENSOR_DATA, MessageTypes, Participant, QosProfile, domain_id
-from terrapref.interop.node_core import NodeLog, NodeOptions, PlannerNodeCore, TrajectoryShapes, report_line
+from terrapref.interop.node_core import (
+    AHEAD_S,
+    ROBOT_PARAMETERS,
+    SIM_AHEAD_S,
+    NodeLog,
+    NodeOptions,
+    PlannerNodeCore,
+    TrajectoryShapes,
+    report_line,
+)
 
 NODE_NAME = "terrapref"
 COSTMAP_PERIOD_S = 1.0  # between two costmaps [s]
@@ -41,7 +54,7 @@ MARKER_LIFETIME_S = 0.5
 MOUNT_FRAMES = ("terrapref_camera_link", "terrapref_camera_optical")  # the node's own names: never a second parent in the robot's tree
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 POSE_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
-PARAMETERS = ("stamped", "rate", "path_file", "cmd_topic", "hold_s", "use_sim_time")
+PARAMETERS = ("stamped", "rate", "path_file", "cmd_topic", "hold_s", "watchdog_s", *ROBOT_PARAMETERS, "use_sim_time")
 
 
 @dataclass(frozen=True)
@@ -138,10 +151,18 @@ class NodeClock:
     def __init__(self, sim: bool) -> None:
         self.sim = sim
         self._sim_s: float | None = None
+        self._moved_wall: float | None = None  # when /clock last moved on, by the wall clock [s]
 
     def on_clock(self, msg) -> None:
         """A rosgraph_msgs/Clock from /clock."""
-        self._sim_s = int(msg.clock.sec) + int(msg.clock.nanosec) * 1e-9
+        t = int(msg.clock.sec) + int(msg.clock.nanosec) * 1e-9
+        if self._sim_s is None or t > self._sim_s:
+            self._moved_wall = time.monotonic()
+        self._sim_s = t
+
+    def still_s(self) -> float:
+        """How long a simulated clock has not moved on, by the wall clock [s] (0 for the system's clock, or before /clock speaks)."""
+        return 0.0 if not self.sim or self._moved_wall is None else time.monotonic() - self._moved_wall
 
     def now(self) -> float:
         """The node's time now [s]."""
@@ -182,13 +203,14 @@ def run_node(
     clock = NodeClock(args.use_sim_time)
     domain = domain_id()
     model = load_model(model_path)
-    robot = load_robot(robot_path, model.classes)
+    robot = opts.applied_to(load_robot(robot_path, model.classes))
     path = (
         load_waypoints(Path(opts.path_file), "path_file")
         if opts.path_file
         else (load_waypoints(robot.path_file, robot.source) if robot.path_file else None)
     )
-    core = PlannerNodeCore(model, robot, path, hold_s=float(opts.hold_s))
+    ahead = SIM_AHEAD_S if clock.sim else AHEAD_S
+    core = PlannerNodeCore(model, robot, path, hold_s=float(opts.hold_s), watchdog_s=float(opts.watchdog_s), ahead_s=ahead)
     if live is not None:
         core.watch(live)
     node = _Node(core, opts, names, clock, Participant(domain, MessageTypes(typestore())))
@@ -244,6 +266,7 @@ def endpoints(robot, opts: NodeOptions, names: Names, sim: bool, path_topic: boo
         Endpoint("command", names.resolve(opts.command_topic(robot)), (twist,), DEFAULT, True),
         Endpoint("trajectories", names.resolve("~/trajectories"), ("visualization_msgs/msg/MarkerArray",), DEFAULT, True),
         Endpoint("costmap", names.resolve("~/costmap"), ("nav_msgs/msg/OccupancyGrid",), LATCHED, True),
+        Endpoint("arrived", names.resolve("~/arrived"), ("std_msgs/msg/Bool",), LATCHED, True),
     ]
     if "tf" not in robot.camera:  # the mounting comes from the robot file; with camera.tf the robot's own tree has it
         out.append(Endpoint("tf_static", "/tf_static", ("tf2_msgs/msg/TFMessage",), LATCHED, True))
@@ -260,6 +283,8 @@ class _Node:
         self.failure: list[UserError] = []
         self.log = NodeLog(_stderr("INFO", names.node), _stderr("WARN", names.node), _stderr("ERROR", names.node), prefix="")
         self.last_stamp: float | None = None  # the frame of the command in force
+        self.arrived: bool | None = None  # what ~/arrived last said
+        self.clock_said = False  # a /clock that stopped has been said
         self.odom_frame = "odom"  # the odometry's frame, which the costmap is in
         self.shapes = TrajectoryShapes(core.model)
         self.failed = threading.Event()
@@ -271,7 +296,7 @@ class _Node:
             "segmentation": self.on_image,
             "camera_info": self.on_camera_info,
             "odometry": self.on_odometry,
-            "path": core.on_path,
+            "path": self.on_path,
             "clock": clock.on_clock,
         }
         core.on_decision = self.on_decision
@@ -290,6 +315,15 @@ class _Node:
                         self.dds.subscribe(e.topic, msgtype, e.profile, callback, newest_only=e.role == "segmentation")
                     )
         self.publish_mount()
+        self.publish_arrived()
+        limits, stop = robot.limits, robot.stop
+        self.log.info(
+            f"limits: {limits.max_speed_mps:g} m/s, {limits.max_yaw_rate_rps:g} rad/s"
+            + (f", speeding up at {limits.max_accel_mps2:g} m/s^2 at most" if limits.max_accel_mps2 is not None else "")
+            + f"; at the goal within {stop.goal_tolerance_m:g} m"
+            + (f" and {stop.goal_yaw_tolerance_deg:g} deg" if stop.goal_yaw_tolerance_deg is not None else "")
+            + f"; off the path beyond {stop.off_path_m:g} m; stops {core.watchdog_s:g} s after its last decision by the wall clock"
+        )
         self.log.info(
             f"in ROS_DOMAIN_ID {self.domain} as {names.fqn}: "
             + "; ".join(
@@ -346,6 +380,23 @@ class _Node:
         self.last_stamp = decision.stamp_s
         self.publish_command(decision.stamp_s)
         self.writers["trajectories"].publish(self.markers(decision))
+        self.publish_arrived()
+
+    def publish_arrived(self) -> None:
+        """``~/arrived`` when it changes: true once the planner stands at its goal, false until then
+        and again on a new path; the log says when it arrives."""
+        arrived = self.core.arrived
+        if arrived == self.arrived:
+            return
+        self.arrived = arrived
+        self.writers["arrived"].publish(self.ts.types["std_msgs/msg/Bool"](data=arrived))
+        if arrived:
+            self.log.info("arrived at the end of the path (goal)")
+
+    def on_path(self, msg) -> None:
+        """A path message: the core's to take; a new path means not arrived."""
+        self.core.on_path(msg)
+        self.publish_arrived()
 
     def markers(self, decision) -> Any:
         """The trajectories of ``decision`` as visualization_msgs/MarkerArray (line strips in base_link)."""
@@ -377,8 +428,12 @@ class _Node:
         return T["visualization_msgs/msg/MarkerArray"](markers=out)
 
     def on_camera_info(self, msg) -> None:
+        first = self.core.runtime is None
         try:
             self.core.on_camera_info(msg)
+            if first:  # the planner is made now: what it holds the model to is said once
+                for note in self.core.runtime.notes:
+                    self.log.warn(note)
         except UserError as exc:  # a model for another camera: said once, and the node stops
             self.failure.append(exc)
             self.log.error(exc.lines()[0])
@@ -389,7 +444,8 @@ class _Node:
     def on_image(self, msg, msgtype: str) -> None:
         """A label image, Image or CompressedImage, as the robot publishes it on the topic."""
         topic = self.names.resolve(self.robot.topics["segmentation"])
-        self.log.guarded(lambda: self.core.on_image(msgtype, msg, topic))
+        now = self.clock.now() if self.clock.running() else None
+        self.log.guarded(lambda: self.core.on_image(msgtype, msg, topic, now))
 
     def on_odometry(self, msg, msgtype: str) -> None:
         """Odometry, or a PoseStamped or PoseWithCovarianceStamped, as the robot file allows."""
@@ -435,12 +491,23 @@ class _Node:
             now = time.monotonic()
             if self.last_stamp is not None:
                 self.publish_command(self.last_stamp)
+            self.check_clock()
             if now >= next_costmap:
                 next_costmap = now + COSTMAP_PERIOD_S
                 self.publish_costmap()
             if not checked and now - start >= SILENT_AFTER_S:
                 checked = True
                 self.check_publishers()
+
+    def check_clock(self) -> None:
+        """A simulated clock that has not moved on for ``watchdog_s`` by the wall clock, said once
+        (until it moves again): the node has stopped (``stale``) by then, as no frame came."""
+        still = self.clock.still_s()
+        if still > self.core.watchdog_s and not self.clock_said:
+            self.clock_said = True
+            self.log.warn(f"/clock has not moved for {still:.1f} s by the wall clock (did the log player stop?); stopping")
+        elif still <= self.core.watchdog_s:
+            self.clock_said = False
 
     def close(self) -> None:
         """Leave the domain: subscribers see the node's publishers go."""

@@ -6,12 +6,18 @@ and publishes the trajectory probabilities if it likes. Nothing here needs ROS.
 
 Safety: the planner stops, and says why, when no way ahead is free of lethal or unseen ground
 within its stopping distance, or when its frames have seen too little ground for too long
-(terrapref.planner.stop); the last decision's command is held for ``hold_s`` after its frame's
-stamp, and past that (the camera stopped, frames are late) the runtime commands a stop, reason
-``stale``, until a fresh frame arrives. An image of the wrong size, a camera other than the
-model's, or ids that neither the class table (nor the label map) names are refused with a
-``ValueError`` rather than driven on, unless ``unknown_ids="unknown"`` says such ids are unknown
-ground (255), which is then never free for the stop rule.
+(terrapref.planner.stop), at the end of its path (``goal``) and farther from it than it may be
+(``off_path``: terrapref.planner.goal); the last decision's command is held for ``hold_s`` after
+its frame's stamp, and past that (the camera stopped, frames are late) the runtime commands a
+stop, reason ``stale``, until a fresh frame arrives. A frame stamped more than ``ahead_s``
+ahead of the caller's clock is refused (given the clock), and a decision that the clock finds
+that far in its future is dropped (a stop, ``stale``) rather than held until the clock catches up. Every command stays within the robot's limits (``limits``: top
+speed and yaw rate in the planner, keeping the way's curvature; the speed rising no faster than
+its acceleration from the last command given out, as a velocity smoother does; a stop is never
+held back). An image of the wrong size, a camera other than the model's, or ids that neither the
+class table (nor the label map) names are refused with a ``ValueError`` rather than driven on,
+unless ``unknown_ids="unknown"`` says such ids are unknown ground (255), which is then never free
+for the stop rule.
 """
 
 from __future__ import annotations
@@ -31,9 +37,10 @@ from terrapref.rules.costmap import Costmap
 from terrapref.scenario.path import ReferencePath
 from terrapref.stops import STALE
 from terrapref.terrain.classes import UNKNOWN, ForeignIds
-from terrapref.vehicle import Command, Pose
+from terrapref.vehicle import Command, Pose, VehicleConfig
 
 STOP = Command(0.0, 0.0)
+FRAME_AHEAD_S = 1.0  # by default, a frame (or a decision) stamped further ahead of the caller's clock is refused [s]
 UNKNOWN_IDS = ("error", "unknown")  # what the runtime makes of an id no table or map names (PlannerRuntime's unknown_ids)
 
 
@@ -78,6 +85,15 @@ class PlannerRuntime:
         unknown_ids: what an id that neither the class table nor the label map names is:
             ``"error"`` (a ValueError naming it) or ``"unknown"`` (unknown ground, 255). A label
             map whose file says ``unlisted: unknown`` makes its unlisted ids unknown either way.
+        limits: the robot's limits (top speed, yaw rate, acceleration), which bound every command
+            whatever the model asks for (default: the default vehicle's: 2 m/s, 1 rad/s, 1 m/s^2).
+        ahead_s: how far a frame's stamp may be ahead of the caller's clock [s]: clock skew, or a
+            simulated clock whose messages come late (default :data:`FRAME_AHEAD_S`).
+
+    Attributes:
+        notes: what the runtime holds the model to that the model asks to exceed (a speed rule
+            faster than the robot's top speed), a line each, for a node to log at its start.
+        refused: frames refused, and decisions dropped, by why.
     """
 
     def __init__(
@@ -88,13 +104,22 @@ class PlannerRuntime:
         hold_s: float = 0.3,
         stop: StopConfig | None = None,
         unknown_ids: str = "error",
+        limits: VehicleConfig | None = None,
+        ahead_s: float = FRAME_AHEAD_S,
     ) -> None:
         if not (math.isfinite(hold_s) and hold_s >= 0):
             raise ValueError("hold_s must be a finite number >= 0")
+        if not (math.isfinite(ahead_s) and ahead_s >= 0):
+            raise ValueError("ahead_s must be a finite number >= 0")
+        self.ahead_s = ahead_s
         if unknown_ids not in UNKNOWN_IDS:
             raise ValueError(f"unknown_ids must be one of {', '.join(UNKNOWN_IDS)}, got {unknown_ids!r}")
         self.model = model if isinstance(model, Model) else Model.of(model) if isinstance(model, LoadedModel) else Model.load(model)
-        self.planner = self.model.planner(camera, stop=stop)  # refuses a camera the model was not trained for
+        self.limits = limits or VehicleConfig()
+        self.planner = self.model.planner(camera, stop=stop, vehicle=self.limits)  # refuses a camera the model was not trained for
+        self.notes = limit_notes(self.model, self.limits)
+        self.refused = {"stamped ahead of the clock": 0, "decisions the clock found in its future": 0}
+        self._sent: tuple[float, float] | None = None  # (time [s], v [m/s]) of the last command given out (or the first frame's speed)
         self.planner.warm_up()  # the compiled loops ready before the first frame
         self.shape = self.planner.camera.shape
         self.labels = labels
@@ -114,16 +139,28 @@ class PlannerRuntime:
         ReferencePath(waypoints)  # refuses (ValueError) fewer than two distinct finite points, before anything changes
         self.planner.set_path(waypoints)
         self.last = None
+        self._sent = None
 
     def decide(
-        self, image: np.ndarray, stamp_s: float, pose: Pose | tuple[float, float, float], speed_mps: float | None = None
+        self,
+        image: np.ndarray,
+        stamp_s: float,
+        pose: Pose | tuple[float, float, float],
+        speed_mps: float | None = None,
+        now_s: float | None = None,
     ) -> RuntimeDecision | None:
         """Decide on one label image taken at ``stamp_s`` from ``pose`` (x [m], y [m], yaw [rad]),
         the robot going at ``speed_mps`` [m/s] by its odometry (None: not known; a model's speed
-        rule then keeps its lateral acceleration at the speed it commands).
+        rule then keeps its lateral acceleration at the speed it commands), the caller's clock
+        reading ``now_s`` [s] (None: not given).
 
         Returns None for a frame older than the last one decided on (out of order); such a frame
         changes nothing.
+
+        Raises:
+            ValueError: a frame stamped more than ``ahead_s`` ahead of ``now_s`` (its
+                clock and the caller's disagree: kept, it would make every later frame look old),
+                counted in :attr:`refused`; or a frame the runtime cannot read (size, type, ids).
         """
         if self.planner.path is None:
             raise RuntimeError("call set_path() before decide()")
@@ -148,8 +185,15 @@ class PlannerRuntime:
             raise ValueError("stamp and pose must be finite")
         if speed_mps is not None and not math.isfinite(speed_mps):
             raise ValueError(f"speed must be finite, got {speed_mps!r}")
+        if now_s is not None and math.isfinite(now_s) and stamp_s > now_s + self.ahead_s:
+            self.refused["stamped ahead of the clock"] += 1
+            raise ValueError(
+                f"a frame stamped {stamp_s - now_s:.3g} s ahead of the clock; refused (another clock, or use_sim_time unset while a log plays?)"
+            )
         if self.last is not None and stamp_s <= self.last.stamp_s:
             return None
+        if self._sent is None:  # nothing given out yet: the robot's speed at this frame is where the speed rises from
+            self._sent = (float(stamp_s), 0.0 if speed_mps is None else abs(float(speed_mps)))
         d = self.planner.decide(image, pose, float(stamp_s), None if speed_mps is None else abs(float(speed_mps)))
         self.last = RuntimeDecision(float(stamp_s), d.command, d.index, d.probs, d.progress_m, d.U, d.stop)
         return self.last
@@ -188,7 +232,37 @@ class PlannerRuntime:
 
     def status_at(self, now_s: float) -> tuple[Command, str | None]:
         """The command to send at ``now_s`` and why it stops (None while it drives): the last
-        decision's while it is fresh, else a stop for ``stale`` frames."""
+        decision's while it is fresh (its speed rising no faster than the robot's acceleration
+        from the last command given out), else a stop for ``stale`` frames. A decision stamped
+        more than ``ahead_s`` after ``now_s`` is dropped, counted in :attr:`refused`."""
+        if self.last is not None and now_s - self.last.stamp_s < -self.ahead_s:
+            self.refused["decisions the clock found in its future"] += 1
+            self.last = None  # a later frame stamped by the clock is then taken, not ignored as older
         if self.last is None or not now_s - self.last.stamp_s <= self.hold_s:
-            return STOP, STALE
-        return self.last.command, self.last.stop
+            return self._given(now_s, STOP), STALE
+        return self._given(now_s, self.last.command), self.last.stop
+
+    def _given(self, now_s: float, command: Command) -> Command:
+        """``command`` as given out at ``now_s``: its speed no more than the robot's acceleration
+        allows above the last one given out (the robot's speed by odometry before the first), its
+        curvature kept; a slower command, a stop among them, at once."""
+        v, w = command
+        accel = self.limits.max_accel_mps2
+        if v > 0.0 and accel is not None:
+            since, before = self._sent if self._sent is not None else (now_s, 0.0)
+            allowed = before + accel * max(0.0, now_s - since)
+            if v > allowed:
+                v, w = allowed, w * (allowed / v)
+        self._sent = (now_s, v)
+        return Command(v, w)
+
+
+def limit_notes(model: Model, limits: VehicleConfig) -> list[str]:
+    """What ``model`` asks for beyond the robot's ``limits``, a line each (its speed rule's top speed)."""
+    top = model.top_speed_mps
+    if top is None or top <= limits.max_speed_mps:
+        return []
+    return [
+        f"the model's speed rule goes up to {top:g} m/s; the robot's top speed is "
+        f"{limits.max_speed_mps:g} m/s: its commands are held to that"
+    ]

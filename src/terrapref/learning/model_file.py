@@ -106,8 +106,17 @@ def _write(path: str | Path, weights: dict[str, np.ndarray], header: dict[str, A
 
 
 def read_model_file(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
-    """Tensors and metadata of any model file (C or a baseline); ``meta["kind"]`` says which."""
+    """Tensors and metadata of any model file (C or a baseline); ``meta["kind"]`` says which.
+
+    Raises:
+        UserError: besides the file's own problems, a weight that is NaN or infinite, naming the
+            tensor: a policy of such weights scores every trajectory NaN and drives nowhere.
+    """
     weights, meta = read_tensor_file(path, FORMAT, "no such model file", "not a safetensors model file")
+    for name, value in weights.items():
+        if value.dtype.kind == "f" and not np.isfinite(value).all():
+            bad = int(value.size - np.isfinite(value).sum())
+            raise UserError(str(path), f"{bad} of its {value.size} weights are NaN or infinite", field=f"weights.{name}")
     meta.setdefault("kind", CLASSIFIER)
     return weights, meta
 

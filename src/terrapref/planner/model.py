@@ -23,8 +23,9 @@ from terrapref.planner.planner import Planner
 from terrapref.planner.policy import ClassifierPolicy, Policy
 from terrapref.planner.registry import policy_from
 from terrapref.planner.stop import StopConfig
-from terrapref.rules import Rule, chosen_rule
+from terrapref.rules import Rule, chosen_rule, speed_rule
 from terrapref.terrain import ClassTable
+from terrapref.vehicle import VehicleConfig
 
 
 @dataclass(frozen=True)
@@ -92,7 +93,20 @@ class Model:
     def profile(self) -> tuple[str, ...]:
         return tuple(self.policy.profile or ())
 
-    def planner(self, camera: CameraConfig | None = None, rule: Rule | str | None = None, stop: StopConfig | None = None) -> Planner:
-        """The planner this model drives (``rule``: another of its rules, or ``argmax``); a model
-        trained for another camera than ``camera`` is refused."""
-        return Planner(self.classifier or self.policy, camera, rule=rule, stop=stop)
+    @property
+    def top_speed_mps(self) -> float | None:
+        """The fastest its speed rule commands [m/s]; None without one (the control set's speed)."""
+        speed = speed_rule(self.policy.rules)
+        return None if speed is None else float(speed.config.max_speed_mps)
+
+    def planner(
+        self,
+        camera: CameraConfig | None = None,
+        rule: Rule | str | None = None,
+        stop: StopConfig | None = None,
+        vehicle: VehicleConfig | None = None,
+    ) -> Planner:
+        """The planner this model drives (``rule``: another of its rules, or ``argmax``) within the
+        robot's limits ``vehicle`` (default: the default vehicle's); a model trained for another
+        camera than ``camera`` is refused."""
+        return Planner(self.classifier or self.policy, camera, rule=rule, stop=stop, vehicle=vehicle)

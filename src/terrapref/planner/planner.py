@@ -16,6 +16,7 @@ import numpy as np
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationView, as_view
 from terrapref.features import UtilityFeaturizer
 from terrapref.learning.model_file import LoadedModel, check_compatible
+from terrapref.planner.goal import GoalCheck, PathState
 from terrapref.planner.policy import ClassifierPolicy, Observation, Policy
 from terrapref.planner.stop import StopConfig, StopRule
 from terrapref.rules import Choice, Rule, RuleContext, RuleInput, chosen_rule, speed_rule
@@ -23,8 +24,9 @@ from terrapref.rules.costmap import Costmap
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim.loop import Frame
+from terrapref.stops import NO_FREE_WAY
 from terrapref.terrain import UNKNOWN
-from terrapref.vehicle import Command, Pose
+from terrapref.vehicle import Command, Pose, VehicleConfig
 
 
 class Decision:
@@ -83,7 +85,10 @@ class Planner:
 
     Each frame: U, the policy's F_t, and the command of the driving rule
     (terrapref.rules): by default the one the model file names to drive, or C's
-    argmax when it lists none; then the stop rule (terrapref.planner.stop), which commands a
+    argmax when it lists none; the goal check (terrapref.planner.goal), which stops at the end
+    of the path or far off it, caps the speed on the approach to the goal and turns back to a
+    path that lies behind; the robot's limits (top speed and yaw rate: a faster command keeps
+    its curvature at the top speed); then the stop rule (terrapref.planner.stop), which commands a
     stop, with its reason, when no way ahead is free or the frames have been blind too long.
 
     Args:
@@ -92,7 +97,8 @@ class Planner:
         rule: the rule that drives instead of the one the file names: one of the file's by its
             type (or ``"argmax"``, which every policy has), or a :class:`Rule` (e.g. with another
             configuration).
-        stop: when to stop (default: :class:`StopConfig`'s defaults).
+        stop: when to stop, the goal check's settings included (default: :class:`StopConfig`'s defaults).
+        vehicle: the robot's limits, which bound every command (default: the default vehicle's).
     """
 
     def __init__(
@@ -101,6 +107,7 @@ class Planner:
         camera: CameraConfig | None = None,
         rule: Rule | str | None = None,
         stop: StopConfig | None = None,
+        vehicle: VehicleConfig | None = None,
     ) -> None:
         policy = model if isinstance(model, Policy) else ClassifierPolicy(model)
         camera = camera or policy.camera
@@ -114,7 +121,8 @@ class Planner:
         self.rule = _chosen(policy, rule)
         context = RuleContext(self.camera, self.featurizer, policy.features, policy.classes)
         self.runner = self.rule.runner(context)
-        control = policy.features.preference.control
+        self.control = control = policy.features.preference.control
+        self.vehicle = vehicle or VehicleConfig()
         speed = speed_rule(policy.rules)
         self.speed = speed.runner(context, self.runner.ground_map) if speed is not None else None
         self._set_v, self._max_w = float(control.v_mps), float(np.max(np.abs(control.w_rps)))
@@ -127,6 +135,7 @@ class Planner:
             stop,
             self.runner.ground_map,
         )
+        self.goal = GoalCheck(self.stop_rule.config, min(self._max_w, self.vehicle.max_yaw_rate_rps))
         self.path: ReferencePath | None = None
         self.tracker: PathTracker | None = None
 
@@ -136,6 +145,7 @@ class Planner:
         self.tracker = PathTracker(self.path)
         self.runner.reset()
         self.stop_rule.reset()
+        self.goal.reset()
         if self.speed is not None:
             self.speed.reset()
 
@@ -151,6 +161,7 @@ class Planner:
         self.path, self.tracker = path, tracker
         self.runner.reset()  # the blank frame is not ground seen
         self.stop_rule.reset()
+        self.goal.reset()
         if self.speed is not None:
             self.speed.reset()
 
@@ -171,32 +182,69 @@ class Planner:
             raise RuntimeError("call set_path() first")
         view = as_view(image)
         s = self.tracker.update(np.array(pose[:2]))
+        state = self.goal.check(pose, self.path, s, self.tracker.lateral_m)
         outputs = functools.partial(_outputs, self.featurizer, self.policy, view, pose, self.path, s)
+        if state.stop is not None:  # at the goal or off the path: nothing to steer for (and a pose far off is not computed with)
+            if self.speed is not None:
+                self.speed.commanded(0.0)
+            return Decision(int(self.control.label_of(0.0)), STOP_COMMAND, s, pending=outputs, stop=state.stop)
         if not self.runner.reads_probs and view is image:  # an array the caller may reuse is read now
-            choice = self._at_speed(
-                self.runner.decide(RuleInput(None, view, pose, self.path, s, self._going(speed_mps))), view, pose, s, speed_mps
-            )
-            stop = self._stop(choice, view, pose, time_s)
-            return Decision(choice.index, STOP_COMMAND if stop else choice.command, s, pending=outputs, stop=stop)
-        probs, U = outputs()
-        choice = self._at_speed(
-            self.runner.decide(RuleInput(probs, view, pose, self.path, s, self._going(speed_mps))), view, pose, s, speed_mps
-        )
-        stop = self._stop(choice, view, pose, time_s)
-        return Decision(choice.index, STOP_COMMAND if stop else choice.command, s, (probs, U), stop=stop)
+            probs = U = None
+        else:
+            probs, U = outputs()
+        choice = self.runner.decide(RuleInput(probs, view, pose, self.path, s, self._going(speed_mps)))
+        choice = self._bounded(self._at_speed(choice, view, pose, s, speed_mps), state)
+        choice, stop = self._stop(choice, view, pose, time_s, state)
+        command = STOP_COMMAND if stop else choice.command
+        if probs is None:
+            return Decision(choice.index, command, s, pending=outputs, stop=stop)
+        return Decision(choice.index, command, s, (probs, U), stop=stop)
 
     def _going(self, speed_mps: float | None) -> float | None:
         """How fast the vehicle goes as the steering rule is told (RuleInput.speed_mps): the faster
         of its odometry's speed and the speed commanded last; None without a speed rule."""
         return self.speed.going_mps(speed_mps) if self.speed is not None else None
 
-    def _stop(self, choice: Choice, view: SegmentationView, pose: Pose, time_s: float | None) -> str | None:
-        """Why the stop rule stops instead of ``choice`` (None: it does not); the speed rule is told
-        the speed commanded."""
+    def _stop(
+        self, choice: Choice, view: SegmentationView, pose: Pose, time_s: float | None, state: PathState
+    ) -> tuple[Choice, str | None]:
+        """``choice`` (turned the other way where a turn back to the path is blocked one way and
+        free the other) and why the stop rule stops instead (None: it does not); the speed rule is
+        told the speed commanded."""
         stop = self.stop_rule.check(view, pose, choice.command.v, choice.command.w, time_s)
+        if stop is None and state.turn_rps is not None and choice.command.v > 0:
+            choice, stop = self._free_turn(choice, pose)
         if self.speed is not None:
             self.speed.commanded(0.0 if stop else choice.command.v)
-        return stop
+        return choice, stop
+
+    def _free_turn(self, choice: Choice, pose: Pose) -> tuple[Choice, str | None]:
+        """A turn back to the path on its own arc where that is free, else the other way round
+        where that is, else a stop (``no_free_way``)."""
+        v, w = choice.command
+        for turn in (w, -w):
+            if self.stop_rule.arc_free(pose, v, turn):
+                return Choice(int(self.control.label_of(float(turn))), Command(v, turn)), None
+        return choice, NO_FREE_WAY
+
+    def _bounded(self, choice: Choice, state: PathState) -> Choice:
+        """``choice`` within the goal check's say and the robot's limits: the turn the check asks
+        for instead of the rule's, or the rule's command no faster than the approach to the goal
+        and the robot's top speed allow (the same curvature, slower), and no harder a turn than its
+        yaw rate allows. A command within them comes back as it was."""
+        v, w = choice.command
+        if state.turn_rps is not None:
+            v, w = min(state.turn_mps, self.vehicle.max_speed_mps), state.turn_rps
+        else:
+            top = min(state.cap_mps, self.vehicle.max_speed_mps)
+            if v > top:
+                v, w = top, w * (top / v)
+        limit = self.vehicle.max_yaw_rate_rps
+        w = min(max(w, -limit), limit)
+        if (v, w) == tuple(choice.command):
+            return choice
+        index = choice.index if state.turn_rps is None else int(self.control.label_of(float(w)))
+        return Choice(index, Command(v, w))
 
     def _at_speed(self, choice: Choice, view: SegmentationView, pose: Pose, progress_m: float, speed_mps: float | None) -> Choice:
         """The steering rule's choice at the speed rule's speed along its way (the same curvature,

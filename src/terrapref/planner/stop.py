@@ -68,6 +68,13 @@ class StopConfig:
             less it does not: a region mislabelled for a few frames while the vehicle stood
             would otherwise hold it for ever, as no later frame can see that ground again. Where
             the camera looks, every lethal cell blocks (the next frames confirm or clear it).
+        goal_tolerance_m: the goal is reached within this distance of the path's last point (or
+            once the vehicle has passed that point) [m] (terrapref.planner.goal).
+        goal_yaw_tolerance_deg: with a value, the goal also needs the heading within this many
+            degrees of the path's last direction: the vehicle turns in place there until it is;
+            None: the heading is not checked.
+        off_path_m: farther than this from the path the planner stops (``off_path``) rather than
+            drive on [m].
     """
 
     reaction_s: float = 0.2
@@ -80,6 +87,9 @@ class StopConfig:
     arcs: int = 21
     step_m: float = 0.1
     lethal_evidence: float = 5.0
+    goal_tolerance_m: float = 0.5
+    goal_yaw_tolerance_deg: float | None = None
+    off_path_m: float = 10.0
 
     def __post_init__(self) -> None:
         finite = (
@@ -92,9 +102,16 @@ class StopConfig:
             self.look_m,
             self.step_m,
             self.lethal_evidence,
+            self.goal_tolerance_m,
+            self.off_path_m,
+            *(() if self.goal_yaw_tolerance_deg is None else (self.goal_yaw_tolerance_deg,)),
         )
         if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in finite):
             raise ValueError("the stop rule's settings must be finite numbers")
+        if self.goal_tolerance_m <= 0 or self.off_path_m <= self.goal_tolerance_m:
+            raise ValueError("the stop rule needs goal_tolerance_m > 0 and off_path_m greater than it")
+        if self.goal_yaw_tolerance_deg is not None and not 0 < self.goal_yaw_tolerance_deg <= 180:
+            raise ValueError("goal_yaw_tolerance_deg must be in (0, 180], or null not to check the heading")
         if (
             self.reaction_s < 0
             or self.decel_mps2 <= 0
@@ -246,32 +263,39 @@ class StopRule:
     def free_way(self, pose: Pose, v_mps: float, w_rps: float = 0.0) -> bool:
         """Whether some way ahead keeps the footprint on seen, non-lethal ground over the
         stopping distance at ``v_mps``; the arc nearest ``w_rps`` is tried first."""
+        first = int(np.argmin(np.abs(self.yaw_rates - w_rps)))
+        return self._first_free(pose, v_mps, self.yaw_rates, first) >= 0
+
+    def arc_free(self, pose: Pose, v_mps: float, w_rps: float) -> bool:
+        """Whether the arc of ``w_rps`` [rad/s] at ``v_mps`` [m/s] itself keeps the footprint on
+        seen, non-lethal ground over the stopping distance (no other way is tried)."""
+        return self._first_free(pose, v_mps, np.array([float(w_rps)]), 0) >= 0
+
+    def _first_free(self, pose: Pose, v_mps: float, yaw_rates: np.ndarray, first: int) -> int:
+        """The first of ``yaw_rates`` (``first`` tried first) whose arc at ``v_mps`` is free over
+        the stopping distance (:func:`first_free_arc`); -1 when none is."""
         if self.map.origin is None:
-            return False
+            return -1
         c = self.config
         distance = c.stopping_distance_m(v_mps)
         steps = max(1, math.ceil(distance / c.step_m - 1e-9))
         v = max(abs(float(v_mps)), 1e-3)
-        first = int(np.argmin(np.abs(self.yaw_rates - w_rps)))
-        return (
-            first_free_arc(
-                float(pose[0]),
-                float(pose[1]),
-                float(pose[2]),
-                self.yaw_rates / v,
-                first,
-                c.step_m,
-                steps,
-                self.across,
-                self.map.layers(),
-                self.lethal,
-                self.k + 1,
-                np.float32(c.lethal_evidence),
-                self.visible,
-                *self._vis_origin,
-                self._vis_inv_res,
-            )
-            >= 0
+        return first_free_arc(
+            float(pose[0]),
+            float(pose[1]),
+            float(pose[2]),
+            yaw_rates / v,
+            first,
+            c.step_m,
+            steps,
+            self.across,
+            self.map.layers(),
+            self.lethal,
+            self.k + 1,
+            np.float32(c.lethal_evidence),
+            self.visible,
+            *self._vis_origin,
+            self._vis_inv_res,
         )
 
 

@@ -56,8 +56,22 @@ def _identifiability(meta: dict) -> list[str]:
     return ["what the demonstrations show:"] + [f"  {line}" for line in report.lines_with_order(profile)]
 
 
+class NotReadable(UserError):
+    """A model file the reader refuses, which ``info`` still shows as far as its header can be
+    read: ``shown`` holds those lines, the problems why it is refused."""
+
+    def __init__(self, refused: UserError, shown: list[str]) -> None:
+        super().__init__(refused.source, refused.problems)
+        self.shown = shown
+
+    def __reduce__(self) -> tuple:
+        # Rebuilt from its own arguments, as UserError is (its signature differs).
+        return (type(self), (UserError(self.source, self.problems), self.shown))
+
+
 def info_lines(path: str | Path) -> list[str]:
-    """A summary of ``path`` for people; every problem is a UserError naming the file."""
+    """A summary of ``path`` for people; every problem is a UserError naming the file (a model
+    file the reader refuses: :class:`NotReadable`, with what its header still shows)."""
     p = Path(path)
     if p.is_dir():
         return _recording_lines(p)
@@ -195,15 +209,15 @@ def _dataset_lines(p: Path, meta: dict, shapes: dict[str, tuple[int, ...]]) -> l
 
 def _model_lines(p: Path, meta: dict) -> list[str]:
     """A model: its state, recipe, network, decision rules, training data and chosen epoch, as
-    terrapref.planner.model.Model reads the file; a file it refuses is shown as far as its
-    header can be read, with the refusal."""
+    terrapref.planner.model.Model reads the file; a file it refuses is :class:`NotReadable`,
+    shown as far as its header can be read, with the refusal."""
     from terrapref.errors import UserError
     from terrapref.planner.model import Model
 
     try:
         model = Model.load(p)
     except UserError as exc:
-        return _damaged_model_lines(p, meta, exc)
+        raise NotReadable(exc, _damaged_model_lines(p, meta, exc)) from None
     loaded = model.classifier
     if loaded is None:  # a learned baseline: its kind and configuration
         return [f"{p}: terrapref model ({model.kind})"] + _common(meta)
@@ -221,6 +235,7 @@ def _model_lines(p: Path, meta: dict) -> list[str]:
             f"recipe          {h.recipe or '?'}",
             f"network         {c.members} member(s), hidden {c.hidden}, {c.activation}, skip {c.skip}",
             *_rules(model.rules, model.driving, h.features.feature_classes, h.classes),
+            *_limit_lines(model),
             "data            "
             + (
                 f"{data.samples} samples, fingerprint {data.fingerprint}, {len(data.recordings)} recording(s)"
@@ -232,6 +247,18 @@ def _model_lines(p: Path, meta: dict) -> list[str]:
         + _common(meta)
         + _identifiability(meta)
     )
+
+
+def _limit_lines(model) -> list[str]:
+    """A flag where the model's speed rule goes faster than the default vehicle's top speed: a robot holds it to its own."""
+    from terrapref.vehicle import VehicleConfig
+
+    top, limit = model.top_speed_mps, VehicleConfig().max_speed_mps
+    if top is None or top <= limit:
+        return []
+    return [
+        f"  WARNING: its speed rule goes up to {top:g} m/s, above the default vehicle's {limit:g} m/s; a robot holds it to its own top speed"
+    ]
 
 
 def _chosen(history, best) -> bool:

@@ -67,7 +67,7 @@ def summarise(recording: Recording) -> RecordingSummary:
     """Label histogram and zone choices (SPEC 12) of a recording, under its own profile."""
     meta = recording.meta
     classes = recording.classes
-    scenario = parse_scenario(recording.scenario, str(recording.path / "scenario.yaml"), classes)
+    scenario = parse_scenario(recording.scenario, str(recording.path / "scenario.yaml"), classes, driven=True)
     world = rasterise(scenario)
     profile = PreferenceProfile.parse(meta.get("profile") or list(classes.profile), classes, source=str(recording.path / "meta.json"))
     control = ControlSet.from_dict(meta["preference_set"]["control"])

@@ -19,6 +19,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -30,7 +31,7 @@ from terrapref.grid import Engine, run_grid
 from terrapref.perception import PRESETS, PerceptionModel
 from terrapref.planner.model import Model
 from terrapref.plots import RateRow, save_intervals
-from terrapref.progress import every_tenth
+from terrapref.progress import duration_text, every_tenth
 from terrapref.recipes import RecipeSetup, recipe_named, run_recipe
 from terrapref.scenario.generate import zone_kind
 from terrapref.terrain import ClassTable, PreferenceProfile, default_classes
@@ -42,6 +43,11 @@ BACKGROUND_SPEEDS_MPS = (1.0, 2.0)  # `--speeds random`: the range of the backgr
 FEATURE_SPEEDS_MPS = (0.3, 1.5)  # and of every feature class's [m/s]
 TARGET = 0.95  # agreement the default recipe must keep on clean frames
 PERCEIVED_TARGET = 0.90  # and under a perception model's errors (docs/perception.md)
+LARGE_MODELS = 1_000  # a selection of more models than this, or of more runs than LARGE_RUNS, is run only when asked (--large)
+LARGE_RUNS = 100_000
+# The rates of the estimate `select` prints before it starts, as docs/benchmarks.md states and measures them.
+MODEL_CORE_S = 40.0  # one model: its order and seed's demonstration and its training [s of one core]
+RUN_CORE_S = 0.8  # one closed-loop run of a generated layout, the planner's or the driver's [s of one core]
 
 
 @dataclass(frozen=True)
@@ -80,19 +86,101 @@ def parse_orders(text: str, classes: ClassTable | None = None) -> tuple[tuple[st
     if text == "all":  # in the order of the table's profile
         return tuple((*p, *last) for p in itertools.permutations(c for c in classes.profile if c in classes.terrain_names))
     if text.startswith("random:"):
-        try:
-            n = int(text[len("random:") :])
-        except ValueError:
-            raise ValueError(f"random:N needs an integer N, got {text!r}") from None
-        total = math.factorial(len(classes.terrain_names))
-        if not 1 <= n <= total:
-            raise ValueError(f"random:N needs 1 <= N <= {total} (the orders of {len(classes.terrain_names)} classes), got {n}")
+        n = _random_count(text, classes)
         return tuple((*order, *last) for order in _draw_orders(classes.terrain_names, n, np.random.default_rng(RANDOM_ORDERS_SEED)))
     orders = []
     for item in text.split(";"):
         names = tuple(n.strip() for n in item.split(",") if n.strip())
         orders.append(names if not last or last[0] in names else (*names, *last))
     return tuple(orders)
+
+
+def count_orders(text: str, classes: ClassTable | None = None) -> int:
+    """How many orders :func:`parse_orders` makes of ``text``, without drawing or listing them
+    (``all`` of ten classes is 3,628,800); a ValueError for a bad ``random:N``."""
+    classes = classes or default_classes()
+    if text == "all":
+        return math.factorial(len(classes.terrain_names))
+    if text.startswith("random:"):
+        return _random_count(text, classes)
+    return len(text.split(";"))
+
+
+def _random_count(text: str, classes: ClassTable) -> int:
+    """The N of ``random:N``, checked: 1 to the number of orders of the table's feature classes."""
+    try:
+        n = int(text[len("random:") :])
+    except ValueError:
+        raise ValueError(f"random:N needs an integer N, got {text!r}") from None
+    total = math.factorial(len(classes.terrain_names))
+    if not 1 <= n <= total:
+        raise ValueError(f"random:N needs 1 <= N <= {total} (the orders of {len(classes.terrain_names)} classes), got {n}")
+    return n
+
+
+class SelectionSize(NamedTuple):
+    """How much a selection trains and drives, known before anything is drawn or run.
+
+    Attributes:
+        recipes, orders, seeds: the models are every recipe for every order and seed.
+        courses: the generated layouts each model and driver drives.
+        perceptions: the perception models every model drives them under, in turn.
+        drivers: the distinct synthetic drivers driving them (one per order; per order and seed
+            where the speeds are drawn for each).
+    """
+
+    recipes: int
+    orders: int
+    seeds: int
+    courses: int
+    perceptions: int
+    drivers: int
+
+    @classmethod
+    def of(cls, recipes: int, orders: int, seeds: int, courses: int, perceptions: int, random_speeds: bool) -> SelectionSize:
+        return cls(recipes, orders, seeds, courses, perceptions, orders * seeds if random_speeds else orders)
+
+    @property
+    def models(self) -> int:
+        return self.recipes * self.orders * self.seeds
+
+    @property
+    def runs(self) -> int:
+        """Closed-loop runs: every model under every perception model, and every driver, on every layout."""
+        return (self.models * self.perceptions + self.drivers) * self.courses
+
+    @property
+    def core_s(self) -> float:
+        """The estimated time of it all on one core [s] (:data:`MODEL_CORE_S`, :data:`RUN_CORE_S`)."""
+        return self.models * MODEL_CORE_S + self.runs * RUN_CORE_S
+
+    @property
+    def large(self) -> bool:
+        """Beyond :data:`LARGE_MODELS` models or :data:`LARGE_RUNS` runs: run only when asked."""
+        return self.models > LARGE_MODELS or self.runs > LARGE_RUNS
+
+    def describe(self, workers: int | None) -> str:
+        """One line: the models, the runs and about how long they take on ``workers`` cores
+        (None: a cluster's, unknown here: one core's time alone)."""
+        where = f"about {_rough_duration(self.core_s)} of one core"
+        if workers is not None:
+            where = f"about {_rough_duration(self.core_s / workers)} on {workers} worker{'s' if workers > 1 else ''} ({where})"
+        factors = " x ".join(_count(n, what) for n, what in ((self.recipes, "recipe"), (self.orders, "order"), (self.seeds, "seed")))
+        return f"{_count(self.models, 'model')} ({factors}) and {_count(self.runs, 'closed-loop run')} on {_count(self.courses, 'layout')}: {where}"
+
+
+def _count(n: int, what: str) -> str:
+    """``1 seed``, ``5 seeds``, ``3,628,800 orders``."""
+    return f"{n:,} {what}{'s' if n != 1 else ''}"
+
+
+def _rough_duration(seconds: float) -> str:
+    """A duration for an estimate: minutes and hours as :func:`duration_text` gives them, then days, then years."""
+    if seconds < 2 * 86400:
+        return duration_text(seconds)
+    if seconds < 2 * 365 * 86400:
+        return f"{seconds / 86400:,.0f} days"
+    return f"{seconds / (365 * 86400):,.0f} years"
 
 
 def _draw_orders(names: tuple[str, ...], n: int, rng: np.random.Generator) -> list[tuple[str, ...]]:

@@ -192,13 +192,15 @@ def _on_map(p: np.ndarray, size_m: tuple[float, float]) -> np.ndarray:
     return (p[..., 0] >= 0) & (p[..., 0] <= size_m[0]) & (p[..., 1] >= 0) & (p[..., 1] <= size_m[1])
 
 
-def parse_scenario(data: dict[str, Any], source: str = "", classes: ClassTable | None = None) -> Scenario:
+def parse_scenario(data: dict[str, Any], source: str = "", classes: ClassTable | None = None, driven: bool = False) -> Scenario:
     """Validate a parsed mapping and build a :class:`Scenario`, its class names read with
     ``classes`` or the table the scenario carries (``classes:``; neither: the default table).
+    ``driven``: the scenario of a recording, whose start is history; else a start that puts the
+    vehicle's footprint on lethal terrain is refused.
 
     Raises:
         ScenarioError: listing every problem found, each with its field path; a carried table
-            that is not ``classes`` (by :meth:`ClassTable.same_classes`) alone.
+            that is not ``classes`` (by :meth:`ClassTable.same_classes`) alone; a start on lethal terrain alone.
     """
     c = _Checker()
     data = _header(c, data, source)
@@ -215,6 +217,15 @@ def parse_scenario(data: dict[str, Any], source: str = "", classes: ClassTable |
         raise ScenarioError(source, c.problems)
     assert name is not None and world.size_m is not None and world.resolution_m is not None and world.background is not None
     assert waypoints is not None and start is not None
+    lethal = None if driven else _lethal_under_start(start, world, terrain, classes)
+    if lethal is not None:
+        where = "given" if "start" in data else "the first waypoint, facing the second"
+        raise ScenarioError(
+            source,
+            f"({start[0]:g}, {start[1]:g}) ({where}) puts the vehicle's footprint on lethal terrain ({lethal}); "
+            "start it clear of lethal terrain",
+            field="start",
+        )
     return Scenario(
         name=name,
         size_m=world.size_m,
@@ -388,6 +399,29 @@ def _start(
         c.fail("start", f"({s[0]:g}, {s[1]:g}) is off the map")
         return None
     return (s[0], s[1], math.radians(s[2]))
+
+
+def _lethal_under_start(start: tuple[float, float, float], world: _World, terrain: list[TerrainPatch], classes: ClassTable) -> str | None:
+    """The lethal class under the vehicle's footprint at ``start`` as the simulator reads it (the
+    class of the cell each footprint point falls in, painted as :func:`terrapref.world.rasterise`
+    paints: the last patch holding the cell's centre, else the background); None where it is clear.
+    A run started there would count a collision before it moved."""
+    from terrapref.vehicle.kinematics import VehicleConfig  # the simulator's vehicle, whose footprint a run starts with
+
+    assert world.size_m is not None and world.resolution_m is not None and world.background is not None
+    x, y, yaw = start
+    across = np.asarray(VehicleConfig().footprint_m)
+    points = np.stack([x - across * math.sin(yaw), y + across * math.cos(yaw)], axis=1)
+    res = world.resolution_m
+    cells = np.floor(points / res)
+    ny, nx = grid_shape(world.size_m, res)
+    cells = cells[(cells[:, 0] >= 0) & (cells[:, 0] < nx) & (cells[:, 1] >= 0) & (cells[:, 1] < ny)]  # off the map: not lethal
+    centres = (cells + 0.5) * res
+    names = np.full(len(centres), world.background, dtype=object)
+    with np.errstate(over="ignore", invalid="ignore"):  # a polygon of huge (finite) vertices, as the raster paints it
+        for patch in terrain:
+            names[patch.shape.contains(centres)] = patch.class_name
+    return next((str(n) for n in names if n in classes.lethal), None)
 
 
 def _zones(c: _Checker, raw: Any, size_m: tuple[float, float] | None, classes: ClassTable) -> list[Zone]:

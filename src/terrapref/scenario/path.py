@@ -117,23 +117,27 @@ class ReferencePath:
         # Plain floats for a short window; NumPy for a long one, or for a non-finite point or a
         # NaN bound, whose NaN results only NumPy's argmin and clip give as they always have.
         if i1 - i0 <= _SCALAR_SEGMENTS and math.isfinite(px) and math.isfinite(py) and not (math.isnan(s_lo) or math.isnan(s_hi)):
-            return self._project_scalar(px, py, s_lo, s_hi, i0, i1)
+            found = self._project_scalar(px, py, s_lo, s_hi, i0, i1)
+            if found is not None:
+                return found
         seg_lo, a, d, ln = self.s[i0:i1], self._a[i0:i1], self._d[i0:i1], self._len[i0:i1]
-        t = np.einsum("ij,ij->i", p - a, d) / ln**2
-        t_lo = np.clip((s_lo - seg_lo) / ln, 0.0, 1.0)
-        t_hi = np.clip((s_hi - seg_lo) / ln, 0.0, 1.0)
-        t = np.clip(t, t_lo, t_hi)
-        foot = a + t[:, None] * d
-        dist = np.linalg.norm(p - foot, axis=1)
-        k = int(np.argmin(dist))
-        cross = d[k, 0] * (p[1] - a[k, 1]) - d[k, 1] * (p[0] - a[k, 0])
+        with np.errstate(over="ignore", invalid="ignore"):  # a point too far off for float arithmetic: an infinite distance
+            t = np.einsum("ij,ij->i", p - a, d) / ln**2
+            t_lo = np.clip((s_lo - seg_lo) / ln, 0.0, 1.0)
+            t_hi = np.clip((s_hi - seg_lo) / ln, 0.0, 1.0)
+            t = np.clip(t, t_lo, t_hi)
+            foot = a + t[:, None] * d
+            dist = np.linalg.norm(p - foot, axis=1)
+            k = int(np.argmin(dist))
+            cross = d[k, 0] * (p[1] - a[k, 1]) - d[k, 1] * (p[0] - a[k, 0])
         return float(seg_lo[k] + t[k] * ln[k]), float(np.copysign(dist[k], cross))
 
-    def _project_scalar(self, px: float, py: float, s_lo: float, s_hi: float, i0: int, i1: int) -> tuple[float, float]:
+    def _project_scalar(self, px: float, py: float, s_lo: float, s_hi: float, i0: int, i1: int) -> tuple[float, float] | None:
         """:meth:`project` over segments i0..i1-1 in plain floats, the same arithmetic in the
         same order (a control-loop window holds a few segments, where NumPy's per-call cost
-        dominates)."""
-        best = math.inf
+        dominates); None where no distance is finite (a point so far off that the arithmetic
+        overflows), which NumPy's form answers."""
+        best, k = math.inf, -1
         for i in range(i0, i1):
             ax, ay = self._a_list[i]
             dx, dy = self._d_list[i]
@@ -146,6 +150,8 @@ class ReferencePath:
             dist = math.sqrt(ex * ex + ey * ey)
             if dist < best:  # the first of equal distances, as argmin
                 best, k, tk = dist, i, t
+        if k < 0:
+            return None
         ax, ay = self._a_list[k]
         dx, dy = self._d_list[k]
         cross = dx * (py - ay) - dy * (px - ax)

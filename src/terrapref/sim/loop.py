@@ -7,7 +7,7 @@ which the vehicle's controller holds until the next frame (SPEC section 4).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import numpy as np
@@ -15,6 +15,7 @@ import numpy as np
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer, SegmentationView
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import ReferencePath
+from terrapref.stops import GOAL as GOAL_REASON
 from terrapref.stops import UNSAID, stop_reason_of
 from terrapref.vehicle import Command, Pose, Vehicle, VehicleConfig
 from terrapref.world import WorldMap, rasterise
@@ -233,6 +234,22 @@ GOAL, STOPPED, TIME_LIMIT = "goal", "stopped", "time limit"
 ENDINGS = (GOAL, STOPPED, TIME_LIMIT)  # how a run ends (EpisodeLog.ended)
 
 
+@dataclass(frozen=True)
+class GoalStop:
+    """How a driver that stops at its own goal (the planner's goal check) came to stand there,
+    driven on past the point where the run was scored complete (:func:`run_episode`'s ``settle_s``).
+
+    Attributes:
+        stopped: it stood still, saying ``goal``, within the time it was given.
+        after_s: from the run's completion to standing still (or the time given) [s].
+        from_end_m: how far from the path's last point it stood (or was when the time ran out) [m].
+    """
+
+    stopped: bool
+    after_s: float
+    from_end_m: float
+
+
 @dataclass
 class EpisodeLog:
     """A driven run: the 30 Hz pose trace and the per-frame commands.
@@ -250,6 +267,8 @@ class EpisodeLog:
         stop_count: times the vehicle came to a stop.
         progress_m: how far along the path the vehicle got [m].
         speeds: the vehicle's speed at every controller tick, shape (T,) [m/s]; None: not kept.
+        goal_stop: how the driver came to stand at its goal after the run completed, for a
+            driver watched for it (:func:`run_episode`'s ``settle_s``); None otherwise.
     """
 
     scenario: str
@@ -265,6 +284,7 @@ class EpisodeLog:
     stop_count: int = 0
     progress_m: float = 0.0
     speeds: np.ndarray | None = None
+    goal_stop: GoalStop | None = None
 
     @classmethod
     def of(cls, sim: Simulation) -> EpisodeLog:
@@ -296,11 +316,34 @@ class EpisodeLog:
         }
 
 
-def run_episode(sim: Simulation, driver: Driver, rng: np.random.Generator, start: Pose | None = None) -> EpisodeLog:
-    """Drive one episode to the goal or the time limit."""
+def run_episode(sim: Simulation, driver: Driver, rng: np.random.Generator, start: Pose | None = None, settle_s: float = 0.0) -> EpisodeLog:
+    """Drive one episode to the goal or the time limit.
+
+    With ``settle_s`` > 0, a run that completed is driven on for up to that long [s], until the
+    driver stands still saying ``goal`` (a planner's goal check), and the log says how it came to
+    stand (:class:`GoalStop`); what the log holds otherwise is the run up to its completion."""
     frame = sim.reset(start)
     driver.reset(sim.scenario, rng)
     while not sim.done:
         command = driver.act(frame)
         frame = sim.step(command, stop_reason_of(driver))
-    return EpisodeLog.of(sim)
+    log = EpisodeLog.of(sim)
+    if settle_s > 0 and sim.reached_goal:
+        log = replace(log, goal_stop=_settle(sim, driver, frame, settle_s))
+    return log
+
+
+def _settle(sim: Simulation, driver: Driver, frame: Frame, settle_s: float) -> GoalStop:
+    """Drive ``sim`` on from ``frame`` for up to ``settle_s`` [s] until ``driver`` stands still saying ``goal``."""
+    start_s, end = sim.time_s, sim.path.waypoints[-1]
+
+    def from_end_m() -> float:
+        return round(math.hypot(sim.vehicle.pose.x - end[0], sim.vehicle.pose.y - end[1]), 3)
+
+    while sim.time_s - start_s < settle_s - 1e-9:
+        command = driver.act(frame)
+        reason = stop_reason_of(driver)
+        if reason == GOAL_REASON and command[0] == 0.0 and sim.vehicle.speed_mps == 0.0:
+            return GoalStop(True, round(sim.time_s - start_s, 3), from_end_m())
+        frame = sim.step(command, reason)
+    return GoalStop(False, round(sim.time_s - start_s, 3), from_end_m())
