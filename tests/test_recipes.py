@@ -287,6 +287,14 @@ def test_datasets_made_differently_are_refused_naming_the_file_and_field(field: 
     ]
 
 
+def test_a_dataset_that_declares_no_order_joins_one_that_does():
+    """A drive without --profile declares none: it contradicts no order, and the merge takes the one declared."""
+    order = ["water", "rock", "mud", "non_traversable"]
+    none, declared = _dataset(3, 1, 0, profile=None), _dataset(3, 1, 1, profile=order)
+    assert merge_datasets([("a", none), ("b", declared)]).meta["profile"] == order
+    assert merge_datasets([("a", none), ("b", _dataset(2, 1, 2, profile=None))]).meta["profile"] is None
+
+
 @pytest.mark.parametrize("first, second", [(False, True), (True, False)])
 def test_datasets_with_and_without_lookahead_are_refused(first: bool, second: bool):
     a, b = _dataset(3, 1, 0, lookahead=first), _dataset(3, 1, 1, lookahead=second)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, NamedTuple, Protocol
@@ -273,7 +273,7 @@ def build_dataset(
             raise UserError(
                 str(rec.path / "meta.json"), f"differs from {first.path} in classes; featurise them separately", field="classes"
             )
-    profile = _declared_order(recordings)
+    profile = _declared_order([(str(r.path / "meta.json"), str(r.path), r.meta) for r in recordings], "featurise them separately")
     # The terrain columns are the recordings' class table's.
     require_meta(first, "classes")
     features = replace(features, feature_classes=first.classes.feature_names)
@@ -323,20 +323,19 @@ def build_dataset(
     return Dataset(U, labels, w.astype(np.float32), source, meta, arrays)
 
 
-def _declared_order(recordings: list[Recording]) -> list[str] | None:
-    """The preference order the recordings' driver declared: one order, which a recording that
-    declares none does not contradict (a drive without ``--profile``); None where none declares one.
+def _declared_order(files: Sequence[tuple[str, str, dict]], advice: str) -> list[str] | None:
+    """The preference order the drives of ``files`` (each: the file to name in an error, the name
+    to name it by to another, its meta) declared: one order, which a drive that declares none
+    does not contradict (a drive without ``--profile``); None where none declares one.
 
     Raises:
-        UserError: two recordings declare different orders (two drivers, or one driver's two orders).
+        UserError: two declare different orders (two drivers, or one driver's two orders), with ``advice``.
     """
-    declared = [rec for rec in recordings if rec.meta.get("profile") is not None]
-    for rec in declared[1:]:
-        if rec.meta["profile"] != declared[0].meta["profile"]:
-            raise UserError(
-                str(rec.path / "meta.json"), f"differs from {declared[0].path} in profile; featurise them separately", field="profile"
-            )
-    return declared[0].meta["profile"] if declared else None
+    declared = [(source, name, meta["profile"]) for source, name, meta in files if meta.get("profile") is not None]
+    for source, _, order in declared[1:]:
+        if order != declared[0][2]:
+            raise UserError(source, f"differs from {declared[0][1]} in profile; {advice}", field="profile")
+    return declared[0][2] if declared else None
 
 
 def save_dataset(dataset: Dataset, path: str | Path) -> Path:
@@ -433,14 +432,16 @@ def _check_tensors(t: dict[str, np.ndarray], source: str) -> None:
 
 def merge_datasets(sets: list[tuple[str, Dataset]]) -> Dataset:
     """One dataset from several (named by their files), which must share features, camera, classes
-    and profile; samples keep their order, and ``source`` numbers the recordings across all."""
+    and the order those that declare one declare; samples keep their order, and ``source`` numbers
+    the recordings across all."""
     if not sets:
         raise UserError("train", "no training data given")
     first_name, first = sets[0]
     for name, d in sets[1:]:
-        for key in ("features", "camera", "classes", "profile", "rules"):
+        for key in ("features", "camera", "classes", "rules"):
             if d.meta.get(key) != first.meta.get(key):
                 raise UserError(name, f"differs from {first_name} in {key}; featurise all recordings the same way", field=key)
+    profile = _declared_order([(name, name, d.meta) for name, d in sets], "featurise all recordings the same way")
     if len(sets) == 1:
         return first
     # Each dataset's recordings are numbered after those of the datasets before it: by the
@@ -452,7 +453,7 @@ def merge_datasets(sets: list[tuple[str, Dataset]]) -> Dataset:
         np.concatenate([d.labels for _, d in sets]),
         np.concatenate([d.w for _, d in sets]),
         np.concatenate([d.source + off for off, (_, d) in zip(offsets, sets)]),
-        {**first.meta, "recordings": [r for _, d in sets for r in d.meta.get("recordings", [])]},
+        {**first.meta, "profile": profile, "recordings": [r for _, d in sets for r in d.meta.get("recordings", [])]},
         {rule: {name: np.concatenate([d.rules[rule][name] for _, d in sets]) for name in arrays} for rule, arrays in first.rules.items()},
     )
 
