@@ -721,6 +721,21 @@ def test_the_follow_up_loop_runs_without_classes_and_asks_what_drives_leave_open
     assert not (tmp_path / "ev2").exists()
 
 
+def test_course_after_names_what_no_further_course_settles_and_writes_nothing(tmp_path, capsys, monkeypatch, fig7_recording):
+    """The loop ends when nothing is left that a course settles: the pairs left are named with their reasons."""
+    import terrapref.recipes as recipes
+    from terrapref.learning.identify import FollowUp
+
+    why = "rock vs non_traversable: open before rec and after it (margin 0.10, 30 frames): driving it again would show the same"
+    monkeypatch.setattr(recipes, "follow_up_plan", lambda *args, **kwargs: FollowUp(left=(why,)))
+    assert main(["course", "--after", str(fig7_recording), "--out", str(tmp_path / "more.yaml")]) == 0
+    assert capsys.readouterr().out.splitlines() == [
+        f"note: {why}",
+        "the drive left 1 pair open that no further course settles (above); nothing written",
+    ]
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.slow
 def test_the_readmes_follow_up_loop_on_the_example_table_ends_after_one_follow_up(tmp_path, capsys):
     """README "Your own classes": the teaching drive, the follow-up course it asks for, and then
