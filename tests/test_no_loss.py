@@ -45,13 +45,12 @@ def test_an_import_with_no_declared_order_says_so_and_its_model_names_none(tmp_p
     out = capsys.readouterr().out
     assert "none declared" in out and "default" not in out.split("order", 1)[1].splitlines()[0]
     assert read_recording(tmp_path / "none").meta.get("profile") is None
-    assert main(["inspect", str(tmp_path / "none"), "--out", str(tmp_path / "none.png")]) == 0
-    out = capsys.readouterr().out
-    assert "order      none declared" in out and f"  {NO_DECLARED_ORDER}" in out and "the profile stored with" not in out
-    # The model learns the drive and names no order; evaluate needs one to score zones and drive its driver by.
-    assert main(["featurize", str(tmp_path / "none"), "--out", str(tmp_path / "ds.safetensors")]) == 0
+    assert main(["inspect", str(tmp_path / "none"), "--no-preference", "--out", str(tmp_path / "none.png")]) == 0
+    assert "order      none declared" in capsys.readouterr().out
+    # The model learns the drive and names no order (train says so); evaluate needs one to score zones and drive its driver by.
+    assert main(["featurize", str(tmp_path / "none"), "--out", str(tmp_path / "ds.safetensors"), "--recipe", "paper"]) == 0
     model = tmp_path / "m.safetensors"
-    assert main(["train", str(tmp_path / "none"), "--recipe", "paper", "--epochs", "1", "--out", str(model)]) == 0
+    assert main(["train", str(tmp_path / "ds.safetensors"), "--recipe", "paper", "--epochs", "1", "--out", str(model)]) == 0
     out = capsys.readouterr().out
     assert f"  {NO_DECLARED_ORDER}" in out and "the profile stored with the drive" not in out
     assert load_model(model).profile == ()
