@@ -545,7 +545,7 @@ def test_a_model_taught_by_a_log_driven_at_1_5_mps_commands_1_5_mps_on_open_grou
     rules, _ = rules_of(load_model(fast["model"]))
     assert speed_rule(rules) is not None
     scenario = resolve_scenario("demo_course")
-    runtime = PlannerRuntime(fast["model"], limits=UNSMOOTHED)
+    runtime = PlannerRuntime(fast["model"], robot=UNSMOOTHED)
     runtime.set_path(scenario.waypoints)
     frame = Simulation(scenario).reset()
     decision = runtime.decide(frame.image, frame.time_s, frame.pose)

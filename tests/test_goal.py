@@ -18,7 +18,7 @@ from terrapref.planner.stop import StopConfig
 from terrapref.scenario.loader import parse_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim import SimConfig, Simulation
-from terrapref.sim.loop import run_episode
+from terrapref.sim.loop import run_episode, settle
 from terrapref.vehicle import Pose
 from test_interop import speed_block
 from test_offset_rule import DRIVER_LIKE, _offset_meta
@@ -120,10 +120,11 @@ def test_evaluate_sees_the_planner_stand_at_its_goal(fast_model, open_ground):
     from terrapref.planner.model import Model
 
     sim = Simulation(open_ground)
-    log = run_episode(sim, PlannerDriver(Planner(Model.load(fast_model).policy)), np.random.default_rng(0), settle_s=10.0)
-    assert log.completed and log.goal_stop is not None
-    assert log.goal_stop.stopped and log.goal_stop.from_end_m < 0.5 and 0 < log.goal_stop.after_s < 10.0
-    assert log.duration_s < sim.time_s  # the log's run ends where it was scored complete; the sim drove on
+    driver = PlannerDriver(Planner(Model.load(fast_model).policy))
+    log = run_episode(sim, driver, np.random.default_rng(0))
+    assert log.completed and sim.vehicle.speed_mps > 1.0  # scored complete 2 m from the end, still going
+    stood = settle(sim, driver, 10.0)
+    assert stood.stopped and stood.from_end_m < 0.5 and 0 < stood.after_s < 10.0 and sim.vehicle.speed_mps == 0.0
 
 
 def test_evaluate_of_a_start_facing_away_turns_back_and_completes(fast_model):

@@ -19,7 +19,7 @@ from terrapref.learning.mlp import init_weights
 from terrapref.learning.network import member_prefix
 from terrapref.planner.planner import Planner
 from terrapref.rules import rules_in, speed_rule
-from terrapref.runtime import STOP, PlannerRuntime
+from terrapref.runtime import STOP, PlannerRuntime, RobotSettings
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation
 from terrapref.terrain import default_classes
@@ -33,7 +33,9 @@ CONFIGS = [
 ]
 
 
-UNSMOOTHED = VehicleConfig(max_accel_mps2=None)  # a robot whose base ramps its speed itself: the command sent is the decision's
+UNSMOOTHED = RobotSettings(
+    limits=VehicleConfig(max_accel_mps2=None)
+)  # a base that ramps its speed itself: the command sent is the decision's
 
 
 def speed_block(v_mps: float) -> dict:
@@ -204,7 +206,7 @@ def linear_model_file(tmp_path_factory) -> Path:
 def test_runtime_drives_as_the_planner_decides(linear_model_file: Path):
     scenario = resolve_scenario("demo_course")
     sim = Simulation(scenario)
-    runtime = PlannerRuntime(linear_model_file, limits=UNSMOOTHED)
+    runtime = PlannerRuntime(linear_model_file, robot=UNSMOOTHED)
     runtime.set_path(scenario.waypoints)
     planner = Planner(load_model(linear_model_file))
     planner.set_path(scenario.waypoints)
@@ -231,7 +233,7 @@ def test_runtime_commands_the_speed_rules_speed_along_the_way_chosen(tmp_path: P
     image = Simulation(scenario).reset().image
     w_grid = np.asarray(linear.features.preference.control.w_rps)
     for model, v in ((fast, 1.5), (linear_model_file, 1.0)):
-        runtime = PlannerRuntime(model, limits=UNSMOOTHED)
+        runtime = PlannerRuntime(model, robot=UNSMOOTHED)
         runtime.set_path(scenario.waypoints)
         d = runtime.decide(image, 10.0, scenario.start)
         assert d.stop is None and d.command.v == pytest.approx(v)
@@ -240,7 +242,7 @@ def test_runtime_commands_the_speed_rules_speed_along_the_way_chosen(tmp_path: P
 
 
 def test_runtime_holds_then_stops(linear_model_file: Path):
-    runtime = PlannerRuntime(linear_model_file, hold_s=0.3)
+    runtime = PlannerRuntime(linear_model_file, robot=RobotSettings(hold_s=0.3))
     scenario = resolve_scenario("demo_course")
     runtime.set_path(scenario.waypoints)
     assert runtime.command_at(0.0) == STOP  # nothing decided yet
@@ -274,7 +276,7 @@ def test_runtime_refuses_what_it_cannot_drive_on(linear_model_file: Path):
 def test_runtime_maps_a_networks_label_ids(linear_model_file: Path):
     classes = default_classes()
     labels = load_label_map("rellis3d", classes)
-    runtime = PlannerRuntime(linear_model_file, labels=labels, limits=UNSMOOTHED)
+    runtime = PlannerRuntime(linear_model_file, labels=labels, robot=UNSMOOTHED)
     plain = PlannerRuntime(linear_model_file)
     scenario = resolve_scenario("demo_course")
     for r in (runtime, plain):

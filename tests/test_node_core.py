@@ -10,7 +10,7 @@ import pytest
 
 from helpers import skip_path_weights
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer
-from terrapref.interop.node_core import PlannerNodeCore
+from terrapref.interop.node_core import PlannerNodeCore, Watchdog
 from terrapref.interop.robot import load_robot
 from terrapref.interop.ros_messages import camera_info, compressed_image, header, odometry, png, pose, typestore, yaw_quaternion
 from terrapref.interop.runtime import PlannerRuntime
@@ -213,7 +213,7 @@ def test_the_node_stops_when_no_frame_has_been_decided_on_for_a_while_by_the_wal
     own clock the last command would stay fresh for ever; the wall clock's watchdog stops it."""
     model, robot, path, _ = setup
     wall = [100.0]
-    core = PlannerNodeCore(model, robot, path, watchdog_s=1.0, wall=lambda: wall[0])
+    core = PlannerNodeCore(model, robot, path, watchdog=Watchdog(1.0, wall=lambda: wall[0]))
     core.on_camera_info(camera_info(TS, header(TS, 0.0, "camera_optical"), CameraConfig()))
     core.on_odometry(_odom(0))
     decision = core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0))

@@ -585,3 +585,24 @@ def test_a_bad_argument_is_one_line_naming_it(argv, env, words, capsys, monkeypa
         monkeypatch.setenv(key, value)
     assert main(argv) == 2
     one_line_error(capsys, *words)
+
+
+def test_a_simulated_clock_that_stops_is_seen_by_the_wall_clock(monkeypatch):
+    """The node's /clock: how long it has not moved on by the wall clock (what the node says, and
+    stops for, when the log player dies); the system's clock never stands still."""
+    from types import SimpleNamespace
+
+    from terrapref.interop import ros2
+
+    wall = [50.0]
+    monkeypatch.setattr(ros2.time, "monotonic", lambda: wall[0])
+    clock = ros2.NodeClock(sim=True)
+    assert clock.still_s() == 0.0 and not clock.running()
+    for t in (10.0, 10.1):
+        clock.on_clock(SimpleNamespace(clock=SimpleNamespace(sec=int(t), nanosec=round((t % 1) * 1e9))))
+        wall[0] += 0.1
+    assert clock.now() == pytest.approx(10.1) and clock.still_s() == pytest.approx(0.1)
+    wall[0] += 1.5  # the player died: no /clock for 1.5 s
+    clock.on_clock(SimpleNamespace(clock=SimpleNamespace(sec=10, nanosec=100_000_000)))  # the same time again is not moving on
+    assert clock.still_s() == pytest.approx(1.6)
+    assert ros2.NodeClock(sim=False).still_s() == 0.0

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from helpers import skip_path_weights
-from terrapref.interop.runtime import FRAME_AHEAD_S, PlannerRuntime
+from terrapref.interop.runtime import FRAME_AHEAD_S, PlannerRuntime, RobotSettings
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.vehicle import VehicleConfig
@@ -70,13 +70,13 @@ def test_no_model_file_raises_the_robots_top_speed(tmp_path):
         runtime.decide(GRASS, t, (5.0 + 0.15 * i, 0.0, 0.0), speed_mps=1.5)
         commands.append(runtime.status_at(t + 0.05)[0])
     assert max(c.v for c in commands) == pytest.approx(2.0)
-    slower = _runtime(_model(tmp_path, 8.0, top_mps=8.0), limits=VehicleConfig(max_speed_mps=1.2))
+    slower = _runtime(_model(tmp_path, 8.0, top_mps=8.0), robot=RobotSettings(limits=VehicleConfig(max_speed_mps=1.2)))
     slower.decide(GRASS, 0.0, (5.0, 0.0, 0.0), speed_mps=1.2)
     assert slower.status_at(3.0 - 2.9)[0].v <= 1.2 and "1.2 m/s" in slower.notes[0]
 
 
 def test_the_speed_given_out_rises_no_faster_than_the_robot_accelerates(cruising):
-    runtime = _runtime(cruising, limits=VehicleConfig(max_accel_mps2=0.5))
+    runtime = _runtime(cruising, robot=RobotSettings(limits=VehicleConfig(max_accel_mps2=0.5)))
     runtime.decide(GRASS, 0.0, (5.0, 0.0, 0.0), speed_mps=0.0)
     given = [runtime.status_at(0.05 * k)[0].v for k in range(6)]  # a node's timer at 20 Hz
     assert given == pytest.approx([0.0, 0.025, 0.05, 0.075, 0.1, 0.125])

@@ -1000,3 +1000,10 @@ def test_parse_scenario_refuses_what_is_not_a_mapping_in_one_line(data) -> None:
         parse_scenario(data, "s.yaml")
     lines = caught.value.lines()
     assert len(lines) == 1 and lines[0].startswith("s.yaml: expected a mapping of scenario fields")
+
+
+def test_the_start_clearance_is_the_default_vehicles_footprint() -> None:
+    from terrapref.scenario.loader import START_HALF_WIDTH_M
+    from terrapref.vehicle import VehicleConfig
+
+    assert START_HALF_WIDTH_M * np.array([-1.0, -0.5, 0.0, 0.5, 1.0]) == pytest.approx(VehicleConfig().footprint_m)

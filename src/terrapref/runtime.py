@@ -4,7 +4,7 @@ It lives in :mod:`terrapref.interop.runtime` beside the other robot-facing code;
 its public name.
 """
 
-from terrapref.interop.runtime import STOP, PlannerRuntime, RuntimeDecision
+from terrapref.interop.runtime import STOP, PlannerRuntime, RobotSettings, RuntimeDecision
 from terrapref.rules.costmap import Costmap
 
-__all__ = ["STOP", "Costmap", "PlannerRuntime", "RuntimeDecision"]
+__all__ = ["STOP", "Costmap", "PlannerRuntime", "RobotSettings", "RuntimeDecision"]

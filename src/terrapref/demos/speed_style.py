@@ -25,8 +25,8 @@ import numpy as np
 
 from terrapref.demos.expert import STYLES, ExpertConfig
 from terrapref.errors import UserError
-from terrapref.rules.speed.model import MIN_SPEED_MPS
 from terrapref.terrain import ClassTable
+from terrapref.vehicle import MIN_CRUISE_MPS as MIN_SPEED_MPS
 from terrapref.yamlio import read_yaml_mapping
 
 STYLE_FORMAT = "terrapref-driver-style/1"

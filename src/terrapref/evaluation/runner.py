@@ -25,11 +25,13 @@ from terrapref.grid import Engine, run_grid
 from terrapref.perception import PerceivedDriver, Perceiver, PerceptionModel
 from terrapref.planner import Planner, PlannerDriver
 from terrapref.planner.model import Model
+from terrapref.planner.planner import Decision
 from terrapref.planner.policy import CostPolicy, Policy, PurePursuitPolicy
 from terrapref.planner.registry import make as make_policy
 from terrapref.registry import Registry
 from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.sim import EpisodeLog, SimConfig, Simulation, run_episode
+from terrapref.sim.loop import settle
 from terrapref.terrain import ClassTable, PreferenceProfile
 from terrapref.vehicle import Pose, VehicleConfig
 from terrapref.world import WorldMap, rasterise
@@ -297,7 +299,9 @@ register_driver(PURE_PURSUIT, _baseline(PURE_PURSUIT), "the planner with the pur
 register_driver(HAND_COST, _baseline(HAND_COST), "the planner with the hand-tuned cost policy (no model file)")
 
 
-Watch = Callable[[PlannerDriver], Driver]  # puts a planner driver where it can be watched (terrapref.interop.live)
+# Puts a planner driver where it can be watched (terrapref.interop.live); the driver it gives can be
+# muted (``mute()``), as it is once the run is scored and only its stop at the goal is awaited.
+Watch = Callable[[PlannerDriver], Driver]
 
 
 def run_one(spec: RunSpec, watch: Watch | None = None) -> RunResult:
@@ -315,8 +319,11 @@ def run_one(spec: RunSpec, watch: Watch | None = None) -> RunResult:
         if perceived
         else watched
     )
-    settle = GOAL_SETTLE_S if isinstance(driver, PlannerDriver) else 0.0
-    log = run_episode(sim, runner, np.random.default_rng(spec.seed), start_pose(scenario.start, spec.seed), settle_s=settle)
+    log = run_episode(sim, runner, np.random.default_rng(spec.seed), start_pose(scenario.start, spec.seed))
+    if isinstance(driver, PlannerDriver) and log.completed:  # driven on, unwatched, to see it stand at its goal
+        if watched is not driver:
+            watched.mute()
+        log = replace(log, goal_stop=settle(sim, runner, GOAL_SETTLE_S))
     metrics = score_run(log, scenario, sim.world, profile, ZoneRules(footprint_m=sim.config.vehicle.footprint_m))
     planner = driver if isinstance(driver, PlannerDriver) else None
     return RunResult(
@@ -342,7 +349,7 @@ def _kept_frames(planner: PlannerDriver | None, log: EpisodeLog) -> tuple[KeptFr
         return ()
     frames = [
         KeptFrame(number, tuple(log.trace[3 * number]), d.probs, d.index, planner.image_of[number])
-        for number, d in zip(planner.frames, planner.decisions, strict=True)
+        for number, d in _scored(planner, log)
         if number in planner.image_of
     ]
     return tuple(sorted(frames, key=lambda f: f.number))
@@ -351,16 +358,24 @@ def _kept_frames(planner: PlannerDriver | None, log: EpisodeLog) -> tuple[KeptFr
 def _kept_run(spec: RunSpec, planner: PlannerDriver | None, log: EpisodeLog) -> KeptRun | None:
     """Every decision of a planner run, where ``spec.keep_run`` asks for them and it made any: the
     pose at its frame, the trajectory chosen, F_t, and the command the vehicle held after that frame."""
-    if not spec.keep_run or planner is None or not planner.decisions:
+    kept = _scored(planner, log) if planner is not None else []
+    if not spec.keep_run or not kept:
         return None
-    numbers = np.array(planner.frames, dtype=np.int64)
+    numbers = np.array([number for number, _ in kept], dtype=np.int64)
+    decisions = [d for _, d in kept]
     return KeptRun(
         log.trace[3 * numbers].copy(),
-        np.array([d.index for d in planner.decisions]),
-        np.stack([d.probs for d in planner.decisions]).astype(np.float32),
+        np.array([d.index for d in decisions]),
+        np.stack([d.probs for d in decisions]).astype(np.float32),
         log.commands[numbers].copy(),
-        tuple(d.stop for d in planner.decisions),
+        tuple(d.stop for d in decisions),
     )
+
+
+def _scored(planner: PlannerDriver, log: EpisodeLog) -> list[tuple[int, Decision]]:
+    """The planner's kept decisions, with their frame numbers, in the run as scored (not those
+    made while it was driven on to stand at its goal)."""
+    return [(number, d) for number, d in zip(planner.frames, planner.decisions, strict=True) if number < len(log.commands)]
 
 
 def run_many(

@@ -200,8 +200,14 @@ class WatchedDriver:
     def stop_reason(self) -> str | None:
         return self.inner.stop_reason
 
+    def mute(self) -> None:
+        """Send nothing more to the view (the run it shows has been scored)."""
+        self.run = None
+
     def act(self, frame: Any) -> Any:
         command = self.inner.act(frame)
+        if self.run is None:
+            return command
         decision = self.inner.last
         x, y, yaw = (float(v) for v in frame.pose)
         self.run.frame(

@@ -29,7 +29,7 @@ from terrapref.errors import UserError
 from terrapref.interop.bag_import import _decode, _yaw, camera_from_info
 from terrapref.interop.labels import unlisted_message
 from terrapref.interop.robot import LIMITS, RobotConfig
-from terrapref.interop.runtime import PlannerRuntime, RuntimeDecision
+from terrapref.interop.runtime import PlannerRuntime, RobotSettings, RuntimeDecision
 from terrapref.learning.model_file import LoadedModel
 from terrapref.planner.stop import StopConfig
 from terrapref.rules.costmap import Costmap
@@ -60,6 +60,33 @@ def stamp_s(header) -> float:
     return int(sec) + int(nsec) * 1e-9
 
 
+class Watchdog:
+    """A stop once nothing has fed it for ``limit_s`` by the wall clock, whatever the node's own
+    clock says: a simulated clock that froze (the log player died) would otherwise hold the last
+    command for ever.
+
+    Args:
+        limit_s: how long it waits [s].
+        wall: the wall clock [s] (a monotonic one).
+    """
+
+    def __init__(self, limit_s: float = 1.0, wall: Callable[[], float] = time.monotonic) -> None:
+        self.limit_s, self.wall = limit_s, wall
+        self._fed: float | None = None
+
+    def feed(self) -> None:
+        """Something happened (a frame was decided on)."""
+        self._fed = self.wall()
+
+    def quiet_s(self) -> float:
+        """How long since it was last fed [s] (0 before the first time)."""
+        return 0.0 if self._fed is None else self.wall() - self._fed
+
+    def barks(self) -> bool:
+        """Whether it has waited longer than its limit."""
+        return self.quiet_s() > self.limit_s
+
+
 class PlannerNodeCore:
     """The planner behind a ROS node: messages in, decisions, commands and costmaps out.
 
@@ -70,12 +97,10 @@ class PlannerNodeCore:
         path: the reference path (N, 2) [m] in the odometry frame, when it comes from a file;
             otherwise the first Path message sets it.
         hold_s: how long a decision's command stays in force after its frame's stamp [s].
-        watchdog_s: a stop (``stale``) once no frame has been decided on for this long by the wall
-            clock [s], whatever the node's clock says: a simulated clock that froze (the log
-            player died) would otherwise hold the last command for ever.
-        wall: the wall clock [s] (a monotonic one).
         ahead_s: how far ahead of the node's clock an input's stamp may be [s] (:data:`AHEAD_S`, or
             :data:`SIM_AHEAD_S` under a simulated clock).
+        watchdog: stops the node (``stale``) once no frame has been decided on for its limit by
+            the wall clock (default: 1 s).
     """
 
     def __init__(
@@ -84,13 +109,13 @@ class PlannerNodeCore:
         robot: RobotConfig,
         path: np.ndarray | None = None,
         hold_s: float = 0.3,
-        watchdog_s: float = 1.0,
-        wall: Callable[[], float] = time.monotonic,
         ahead_s: float = AHEAD_S,
+        watchdog: Watchdog | None = None,
     ) -> None:
-        self.model, self.robot, self.hold_s, self.stop = model, robot, hold_s, robot.stop
-        self.watchdog_s, self.wall, self.ahead_s = watchdog_s, wall, ahead_s
-        self._decided_wall: float | None = None  # when the last frame was decided on, by the wall clock [s]
+        self.model, self.robot, self.stop = model, robot, robot.stop
+        self.settings = RobotSettings(robot.stop, robot.limits, hold_s, ahead_s)
+        self.hold_s, self.ahead_s = hold_s, ahead_s
+        self.watchdog = watchdog or Watchdog()
         self.runtime: PlannerRuntime | None = None
         self.path = None if path is None else np.asarray(path, dtype=float)
         self.odometry: deque[tuple[float, float, float, float]] = deque()  # (stamp [s], x, y, yaw)
@@ -141,7 +166,7 @@ class PlannerNodeCore:
                 return
             camera, self._undistort = camera_from_info(info, self.robot, self.robot.source)
             # fed class ids, mapped and undistorted here
-            runtime = PlannerRuntime(self.model, camera, hold_s=self.hold_s, stop=self.stop, limits=self.robot.limits, ahead_s=self.ahead_s)
+            runtime = PlannerRuntime(self.model, camera, robot=self.settings)
             labels = self.robot.labels
             # An id the label map does not list becomes one the class table does not name, and is refused with it.
             self._lut = labels.lut(self.model.classes, UNKNOWN if labels.unlisted == "unknown" else runtime.foreign.unnamed)
@@ -278,7 +303,7 @@ class PlannerNodeCore:
             self.skipped["out of order"] += 1
             return None
         self.decided += 1
-        self._decided_wall = self.wall()
+        self.watchdog.feed()
         if self.view is not None:
             self._send(decision, ids, pose)
         if self.on_decision is not None:
@@ -315,18 +340,12 @@ class PlannerNodeCore:
 
     def status_at(self, now_s: float) -> tuple[Command, str | None]:
         """The command to send now and why it stops (None while it drives; ``stale`` before any
-        frame, and once none has been decided on for ``watchdog_s`` by the wall clock)."""
+        frame, and once none has been decided on for the watchdog's limit by the wall clock)."""
         with self._lock:
             if self.runtime is None:
                 return Command(0.0, 0.0), STALE
             command, reason = self.runtime.status_at(now_s)
-            if self.quiet_s() > self.watchdog_s:
-                return Command(0.0, 0.0), STALE
-            return command, reason
-
-    def quiet_s(self) -> float:
-        """How long no frame has been decided on, by the wall clock [s] (0 before the first)."""
-        return 0.0 if self._decided_wall is None else self.wall() - self._decided_wall
+            return (Command(0.0, 0.0), STALE) if self.watchdog.barks() else (command, reason)
 
     @property
     def arrived(self) -> bool:

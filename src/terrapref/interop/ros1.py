@@ -58,7 +58,7 @@ def run_node(model_path: str, robot_path: str, options: NodeOptions | None = Non
     """Run the node until ROS shuts it down; with ``live`` (a terrapref.interop.live.LiveView),
     every decision is also sent there."""
     rospy = import_rospy()
-    from terrapref.interop.node_core import AHEAD_S, SIM_AHEAD_S, PlannerNodeCore
+    from terrapref.interop.node_core import AHEAD_S, SIM_AHEAD_S, PlannerNodeCore, Watchdog
     from terrapref.interop.robot import load_robot, load_waypoints
     from terrapref.learning.model_file import load_model
 
@@ -74,7 +74,7 @@ def run_node(model_path: str, robot_path: str, options: NodeOptions | None = Non
         else (load_waypoints(robot.path_file, robot.source) if robot.path_file else None)
     )
     ahead = SIM_AHEAD_S if rospy.get_param("/use_sim_time", False) is True else AHEAD_S
-    core = PlannerNodeCore(model, robot, path, hold_s=float(opts.hold_s), watchdog_s=float(opts.watchdog_s), ahead_s=ahead)
+    core = PlannerNodeCore(model, robot, path, float(opts.hold_s), ahead, Watchdog(float(opts.watchdog_s)))
     if live is not None:
         core.watch(live)
     node = _Node(rospy, core, model, robot, opts)

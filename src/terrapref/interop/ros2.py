@@ -44,6 +44,7 @@ from terrapref.interop.node_core import (
     NodeOptions,
     PlannerNodeCore,
     TrajectoryShapes,
+    Watchdog,
     report_line,
 )
 
@@ -210,7 +211,7 @@ def run_node(
         else (load_waypoints(robot.path_file, robot.source) if robot.path_file else None)
     )
     ahead = SIM_AHEAD_S if clock.sim else AHEAD_S
-    core = PlannerNodeCore(model, robot, path, hold_s=float(opts.hold_s), watchdog_s=float(opts.watchdog_s), ahead_s=ahead)
+    core = PlannerNodeCore(model, robot, path, float(opts.hold_s), ahead, Watchdog(float(opts.watchdog_s)))
     if live is not None:
         core.watch(live)
     node = _Node(core, opts, names, clock, Participant(domain, MessageTypes(typestore())))
@@ -322,7 +323,7 @@ class _Node:
             + (f", speeding up at {limits.max_accel_mps2:g} m/s^2 at most" if limits.max_accel_mps2 is not None else "")
             + f"; at the goal within {stop.goal_tolerance_m:g} m"
             + (f" and {stop.goal_yaw_tolerance_deg:g} deg" if stop.goal_yaw_tolerance_deg is not None else "")
-            + f"; off the path beyond {stop.off_path_m:g} m; stops {core.watchdog_s:g} s after its last decision by the wall clock"
+            + f"; off the path beyond {stop.off_path_m:g} m; stops {core.watchdog.limit_s:g} s after its last decision by the wall clock"
         )
         self.log.info(
             f"in ROS_DOMAIN_ID {self.domain} as {names.fqn}: "
@@ -500,13 +501,13 @@ class _Node:
                 self.check_publishers()
 
     def check_clock(self) -> None:
-        """A simulated clock that has not moved on for ``watchdog_s`` by the wall clock, said once
+        """A simulated clock that has not moved on for the watchdog's limit by the wall clock, said once
         (until it moves again): the node has stopped (``stale``) by then, as no frame came."""
         still = self.clock.still_s()
-        if still > self.core.watchdog_s and not self.clock_said:
+        if still > self.core.watchdog.limit_s and not self.clock_said:
             self.clock_said = True
             self.log.warn(f"/clock has not moved for {still:.1f} s by the wall clock (did the log player stop?); stopping")
-        elif still <= self.core.watchdog_s:
+        elif still <= self.core.watchdog.limit_s:
             self.clock_said = False
 
     def close(self) -> None:

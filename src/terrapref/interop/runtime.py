@@ -23,7 +23,7 @@ for the stop rule.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -69,6 +69,32 @@ class RuntimeDecision:
     stop: str | None = None
 
 
+@dataclass(frozen=True)
+class RobotSettings:
+    """What the robot sets of the runtime, never a model file: when it stops, what it may be
+    commanded, and how it reads time.
+
+    Attributes:
+        stop: when the planner stops, its goal check included (terrapref.planner.stop.StopConfig).
+        limits: the robot's limits (top speed, yaw rate, acceleration), which bound every command
+            whatever the model asks for (default: the default vehicle's: 2 m/s, 1 rad/s, 1 m/s^2).
+        hold_s: how long a decision's command stays in force after its frame's stamp [s].
+        ahead_s: how far a frame's stamp may be ahead of the caller's clock [s]: clock skew, or a
+            simulated clock whose messages come late (default :data:`FRAME_AHEAD_S`).
+    """
+
+    stop: StopConfig = field(default_factory=StopConfig)
+    limits: VehicleConfig = field(default_factory=VehicleConfig)
+    hold_s: float = 0.3
+    ahead_s: float = FRAME_AHEAD_S
+
+    def __post_init__(self) -> None:
+        for name in ("hold_s", "ahead_s"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0")
+
+
 class PlannerRuntime:
     """A trained model driving from label images.
 
@@ -80,15 +106,11 @@ class PlannerRuntime:
         labels: the segmentation network's label map; images then hold its ids (uint8 or
             uint16) and are mapped onto the model's classes. None: images hold terrapref class
             ids (uint8, 255 unknown).
-        hold_s: how long a decision's command stays in force after its frame's stamp [s].
-        stop: when the planner stops (terrapref.planner.stop; default: its defaults).
+        robot: what the robot sets: when to stop, its limits, how long a command holds and how
+            far ahead of the clock a frame may be (:class:`RobotSettings`; default: its defaults).
         unknown_ids: what an id that neither the class table nor the label map names is:
             ``"error"`` (a ValueError naming it) or ``"unknown"`` (unknown ground, 255). A label
             map whose file says ``unlisted: unknown`` makes its unlisted ids unknown either way.
-        limits: the robot's limits (top speed, yaw rate, acceleration), which bound every command
-            whatever the model asks for (default: the default vehicle's: 2 m/s, 1 rad/s, 1 m/s^2).
-        ahead_s: how far a frame's stamp may be ahead of the caller's clock [s]: clock skew, or a
-            simulated clock whose messages come late (default :data:`FRAME_AHEAD_S`).
 
     Attributes:
         notes: what the runtime holds the model to that the model asks to exceed (a speed rule
@@ -101,22 +123,15 @@ class PlannerRuntime:
         model: str | Path | Model | LoadedModel,
         camera: CameraConfig | None = None,
         labels: LabelMap | None = None,
-        hold_s: float = 0.3,
-        stop: StopConfig | None = None,
+        robot: RobotSettings | None = None,
         unknown_ids: str = "error",
-        limits: VehicleConfig | None = None,
-        ahead_s: float = FRAME_AHEAD_S,
     ) -> None:
-        if not (math.isfinite(hold_s) and hold_s >= 0):
-            raise ValueError("hold_s must be a finite number >= 0")
-        if not (math.isfinite(ahead_s) and ahead_s >= 0):
-            raise ValueError("ahead_s must be a finite number >= 0")
-        self.ahead_s = ahead_s
         if unknown_ids not in UNKNOWN_IDS:
             raise ValueError(f"unknown_ids must be one of {', '.join(UNKNOWN_IDS)}, got {unknown_ids!r}")
+        self.robot = robot = robot or RobotSettings()
+        self.hold_s, self.ahead_s, self.limits = robot.hold_s, robot.ahead_s, robot.limits
         self.model = model if isinstance(model, Model) else Model.of(model) if isinstance(model, LoadedModel) else Model.load(model)
-        self.limits = limits or VehicleConfig()
-        self.planner = self.model.planner(camera, stop=stop, vehicle=self.limits)  # refuses a camera the model was not trained for
+        self.planner = self.model.planner(camera, stop=robot.stop, vehicle=robot.limits)  # refuses a camera the model was not trained for
         self.notes = limit_notes(self.model, self.limits)
         self.refused = {"stamped ahead of the clock": 0, "decisions the clock found in its future": 0}
         self._sent: tuple[float, float] | None = None  # (time [s], v [m/s]) of the last command given out (or the first frame's speed)
@@ -130,7 +145,6 @@ class PlannerRuntime:
             self.lut = labels.lut(self.model.classes, UNKNOWN if lenient else self.foreign.unnamed)
         else:
             self.lut = None
-        self.hold_s = hold_s
         self.last: RuntimeDecision | None = None
 
     def set_path(self, waypoints: np.ndarray) -> None:

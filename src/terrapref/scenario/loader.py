@@ -20,6 +20,9 @@ from terrapref.yamlio import read_yaml_mapping
 
 FORMAT = "terrapref-scenario/1"
 MAX_CELLS = 100_000_000
+# A start must leave clear of lethal terrain the footprint of the simulator's default vehicle (half
+# its width, terrapref.vehicle.VehicleConfig, which lies in a layer above scenarios; a test keeps them equal) [m].
+START_HALF_WIDTH_M = 0.6
 _NAME = re.compile(r"[A-Za-z0-9_-]+")
 _TOP_KEYS = frozenset({"format", "name", "description", "world", "terrain", "path", "start", "zones", "classes"})
 _REQUIRED_KEYS = frozenset({"format", "name", "world", "path"})
@@ -406,11 +409,9 @@ def _lethal_under_start(start: tuple[float, float, float], world: _World, terrai
     class of the cell each footprint point falls in, painted as :func:`terrapref.world.rasterise`
     paints: the last patch holding the cell's centre, else the background); None where it is clear.
     A run started there would count a collision before it moved."""
-    from terrapref.vehicle.kinematics import VehicleConfig  # the simulator's vehicle, whose footprint a run starts with
-
     assert world.size_m is not None and world.resolution_m is not None and world.background is not None
     x, y, yaw = start
-    across = np.asarray(VehicleConfig().footprint_m)
+    across = START_HALF_WIDTH_M * np.array([-1.0, -0.5, 0.0, 0.5, 1.0])  # the footprint's 5 points, as the simulator's vehicle has them
     points = np.stack([x - across * math.sin(yaw), y + across * math.cos(yaw)], axis=1)
     res = world.resolution_m
     cells = np.floor(points / res)

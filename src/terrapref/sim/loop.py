@@ -7,7 +7,7 @@ which the vehicle's controller holds until the next frame (SPEC section 4).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -237,7 +237,7 @@ ENDINGS = (GOAL, STOPPED, TIME_LIMIT)  # how a run ends (EpisodeLog.ended)
 @dataclass(frozen=True)
 class GoalStop:
     """How a driver that stops at its own goal (the planner's goal check) came to stand there,
-    driven on past the point where the run was scored complete (:func:`run_episode`'s ``settle_s``).
+    driven on past the point where the run was scored complete (:func:`settle`).
 
     Attributes:
         stopped: it stood still, saying ``goal``, within the time it was given.
@@ -268,7 +268,7 @@ class EpisodeLog:
         progress_m: how far along the path the vehicle got [m].
         speeds: the vehicle's speed at every controller tick, shape (T,) [m/s]; None: not kept.
         goal_stop: how the driver came to stand at its goal after the run completed, for a
-            driver watched for it (:func:`run_episode`'s ``settle_s``); None otherwise.
+            driver watched for it (:func:`settle`); None otherwise.
     """
 
     scenario: str
@@ -316,30 +316,26 @@ class EpisodeLog:
         }
 
 
-def run_episode(sim: Simulation, driver: Driver, rng: np.random.Generator, start: Pose | None = None, settle_s: float = 0.0) -> EpisodeLog:
-    """Drive one episode to the goal or the time limit.
-
-    With ``settle_s`` > 0, a run that completed is driven on for up to that long [s], until the
-    driver stands still saying ``goal`` (a planner's goal check), and the log says how it came to
-    stand (:class:`GoalStop`); what the log holds otherwise is the run up to its completion."""
+def run_episode(sim: Simulation, driver: Driver, rng: np.random.Generator, start: Pose | None = None) -> EpisodeLog:
+    """Drive one episode to the goal or the time limit."""
     frame = sim.reset(start)
     driver.reset(sim.scenario, rng)
     while not sim.done:
         command = driver.act(frame)
         frame = sim.step(command, stop_reason_of(driver))
-    log = EpisodeLog.of(sim)
-    if settle_s > 0 and sim.reached_goal:
-        log = replace(log, goal_stop=_settle(sim, driver, frame, settle_s))
-    return log
+    return EpisodeLog.of(sim)
 
 
-def _settle(sim: Simulation, driver: Driver, frame: Frame, settle_s: float) -> GoalStop:
-    """Drive ``sim`` on from ``frame`` for up to ``settle_s`` [s] until ``driver`` stands still saying ``goal``."""
+def settle(sim: Simulation, driver: Driver, settle_s: float) -> GoalStop:
+    """Drive ``sim`` on from where its episode ended for up to ``settle_s`` [s], until ``driver``
+    stands still saying ``goal`` (a planner's goal check): how it came to stand at its goal, for a
+    run that completed (:func:`run_episode`'s log holds the run up to its completion)."""
     start_s, end = sim.time_s, sim.path.waypoints[-1]
 
     def from_end_m() -> float:
         return round(math.hypot(sim.vehicle.pose.x - end[0], sim.vehicle.pose.y - end[1]), 3)
 
+    frame = sim.frame()
     while sim.time_s - start_s < settle_s - 1e-9:
         command = driver.act(frame)
         reason = stop_reason_of(driver)

@@ -12,6 +12,9 @@ if TYPE_CHECKING:
     import numpy as np
 
 
+MIN_CRUISE_MPS = 0.1  # the slowest a driver cruises, or the planner's speed rule commands while it drives [m/s]; slower is standing
+
+
 class Pose(NamedTuple):
     """Planar pose in the world frame: x [m] east, y [m] north, yaw [rad] CCW from +x."""
 

@@ -20,6 +20,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from terrapref.vehicle import MIN_CRUISE_MPS
+
 STATION_STEP_M = 0.25
 STATIONS = 24  # the way is read to 6 m ahead
 PREVIEWS_M = tuple(0.5 * k for k in range(1, 9))  # the previews the fit tries [m]
@@ -28,7 +30,7 @@ LAGS = (0, 1, 2, 3)  # frames between what a frame shows and the speed commanded
 STEADY_CURVATURE = 0.25  # a way of less curvature counts for a cruising speed (the median keeps out the few bends that slowed) [1/m]
 BEND_CURVATURE = 0.1  # a way of more curvature may be slowed by the bend [1/m]
 MIN_FRAMES = 10  # frames a cruising speed, a bend or a lethal neighbour needs to be fitted
-MIN_SPEED_MPS = 0.1  # the slowest the rule commands while it drives [m/s]
+MIN_SPEED_MPS = MIN_CRUISE_MPS  # the slowest the rule commands while it drives [m/s]
 SLOWEST_PERCENTILE = 5  # the slowest speed a drive showed: this percentile of its speeds while moving (not a moment's)
 
 
