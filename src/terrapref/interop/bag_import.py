@@ -666,8 +666,8 @@ def import_bag(
         report.order = f"{' > '.join(profile.order)} (the robot file's profile)"
     else:
         report.order = (
-            "none declared (the robot file has no profile:); featurize and train need the order the driver had: "
-            "import again with --profile or add profile: to the robot file"
+            "none declared (the robot file has no profile:); a model trained on it names no order, and evaluate "
+            "then asks for --profile: import again with --profile, or add profile: to the robot file, to keep the driver's"
         )
     tmp = new_folder(out, ".importing")
     try:
