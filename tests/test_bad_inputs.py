@@ -101,7 +101,6 @@ def _damage(rec: Path, how: str) -> None:
         ("empty", "frames.jsonl"),
         ("scenario list", "scenario.yaml"),
         ("camera str", "camera"),
-        ("no profile", "profile"),
         ("class 200", "000003.png"),
         ("rgb frame", "000003.png"),
         ("small frame", "000003.png"),
@@ -114,6 +113,14 @@ def test_a_broken_recording_is_refused_by_featurize(tmp_path: Path, capsys, reco
     assert main(["featurize", str(rec), "--out", str(tmp_path / "d.safetensors")]) == 2
     _one_error(capsys, needle)
     assert not (tmp_path / "d.safetensors").exists()
+
+
+def test_a_recording_that_declares_no_order_is_featurized(tmp_path: Path, recording):
+    """No ``profile`` in its metadata: a drive whose order nobody declared (a person's, a robot's log), not a broken file."""
+    rec = tmp_path / "rec"
+    shutil.copytree(recording, rec)
+    _damage(rec, "no profile")
+    assert main(["featurize", str(rec), "--out", str(tmp_path / "d.safetensors")]) == 0
 
 
 def _dataset_with(tmp_path: Path, **change) -> Path:
