@@ -159,13 +159,16 @@ class _Heard:
             return list(self.by_topic.get(topic, []))
 
 
-def _listen(dds, heard: _Heard) -> None:
+def _listen(dds, heard: _Heard) -> list:
+    """Subscriptions to the node's topics, kept in ``heard``: the readers."""
     from terrapref.interop.dds import DEFAULT, LATCHED
 
-    dds.subscribe("/terrapref/cmd_vel", "geometry_msgs/msg/TwistStamped", DEFAULT, heard.keeper("cmd"))
-    dds.subscribe("/terrapref/trajectories", "visualization_msgs/msg/MarkerArray", DEFAULT, heard.keeper("trajectories"))
-    dds.subscribe("/terrapref/costmap", "nav_msgs/msg/OccupancyGrid", LATCHED, heard.keeper("costmap"))
-    dds.subscribe("/tf_static", "tf2_msgs/msg/TFMessage", LATCHED, heard.keeper("tf_static"))
+    return [
+        dds.subscribe("/terrapref/cmd_vel", "geometry_msgs/msg/TwistStamped", DEFAULT, heard.keeper("cmd")),
+        dds.subscribe("/terrapref/trajectories", "visualization_msgs/msg/MarkerArray", DEFAULT, heard.keeper("trajectories")),
+        dds.subscribe("/terrapref/costmap", "nav_msgs/msg/OccupancyGrid", LATCHED, heard.keeper("costmap")),
+        dds.subscribe("/tf_static", "tf2_msgs/msg/TFMessage", LATCHED, heard.keeper("tf_static")),
+    ]
 
 
 def _endpoints(dp, own) -> list:
@@ -254,13 +257,13 @@ def system(tmp_path_factory, fig7_recording):
         _wait(lambda: all(w.matched() for w in player.writers.values()), what="the node's subscriptions")
         messages = list(player.messages())
         times = sorted({m.t_ns for m in messages})
-        images = {}  # the stamp of each image published -> its frame
+        # the stamp of each image of the log -> its frame
+        out["frame_of"] = {round(stamp_s(m.msg.header), 6): times.index(m.t_ns) for m in messages if m.topic == "/terrapref/labels"}
         got: dict[float, tuple[float, float]] = {}
-        for k, t_ns in enumerate(times[:FRAMES]):
+        for t_ns in times[:FRAMES]:
             group = [m for m in messages if m.t_ns == t_ns]
             image = next(m for m in group if m.topic == "/terrapref/labels")
             stamp = round(stamp_s(image.msg.header), 6)
-            images[stamp] = k
             _publish_until_commanded(player, heard, t_ns, group, stamp)
             got[stamp] = next((c.twist.linear.x, c.twist.angular.z) for c in heard.get("cmd") if round(stamp_s(c.header), 6) == stamp)
         out["commands"] = [got[s] for s in sorted(got)]
@@ -272,7 +275,8 @@ def system(tmp_path_factory, fig7_recording):
         out["heard"] = heard
         # The idle node heard nobody for its first seconds; now `terrapref play` drives it, and a subscriber sees it drive.
         idle_heard, idle_listener = _Heard(), Participant(idle, MessageTypes(typestore()))
-        _listen(idle_listener, idle_heard)
+        readers = _listen(idle_listener, idle_heard)
+        _wait(lambda: all(r.get_matched_publications() for r in readers), what="the idle node's publications")
         _wait(lambda: any("/clock: no publisher" in line for line in idle_log), what="the idle node to say nobody publishes")
         play = subprocess.run(
             [
@@ -284,7 +288,7 @@ def system(tmp_path_factory, fig7_recording):
                 "--robot",
                 str(robot),
                 "--rate",
-                "2",
+                "1",
                 "--delay",
                 "0.5",
             ],
@@ -442,7 +446,15 @@ def test_bad_input_is_said_once_and_skipped(system):
 def test_play_drives_a_node_that_waited_in_an_empty_domain(system):
     """A node alone in its domain says once that nobody publishes its inputs, then `terrapref play`
     publishes a log there and a DDS subscriber sees the node's commands, markers and costmap; started
-    with SIGINT ignored (as a script's background job is), it ends on Ctrl-C all the same."""
+    with SIGINT ignored (as a script's background job is), it ends on Ctrl-C all the same.
+
+    Played in real time, a node on a slow machine keeps up with only some of the frames (it
+    hears the others too late, or not at all): what is checked is what it decided on those, not
+    how many they were."""
+    from terrapref.interop.node_core import stamp_s
+    from terrapref.interop.runtime import PlannerRuntime
+    from terrapref.learning.model_file import load_model
+
     play = system["play"]
     assert play.returncode == 0, play.stderr[-2000:]
     assert "played" in play.stdout and "/clock" in play.stdout
@@ -451,9 +463,21 @@ def test_play_drives_a_node_that_waited_in_an_empty_domain(system):
     for topic in ("/terrapref/labels", "/terrapref/camera_info", "/terrapref/odom", "/terrapref/path", "/clock"):
         assert sum(f"{topic}: no publisher of" in line for line in stderr.splitlines()) == 1, stderr
     heard = system["idle_heard"]
-    assert len(heard.get("cmd")) >= FRAMES // 2 and heard.get("trajectories") and heard.get("costmap")
+    assert heard.get("costmap")
+    # Each decision's markers, stamped with its frame's time in the log: the frame, and the trajectory drawn as chosen.
+    chosen = {
+        round(stamp_s(m.markers[0].header), 6): [j for j, k in enumerate(m.markers) if k.scale.x > 0.05] for m in heard.get("trajectories")
+    }
     decided = int(stdout.split("terrapref ros2: ")[1].split()[0])
-    assert decided >= FRAMES // 2, stdout
+    assert 1 <= len(chosen) <= decided <= len(system["frame_of"]), stdout
+    assert heard.get("cmd") and {round(stamp_s(c.header), 6) for c in heard.get("cmd")} <= set(system["frame_of"])  # in the log's time
+    # The planner fed the frames the node decided on, in their order, chooses what the node chose.
+    rec, frame_of = system["rec"], system["frame_of"]
+    runtime = PlannerRuntime(load_model(system["model"]))
+    runtime.set_path(np.asarray(rec.meta.get("path") or rec.scenario["path"]["waypoints"], dtype=float))
+    for stamp in sorted(chosen):
+        k = FIRST + frame_of[stamp]
+        assert chosen[stamp] == [runtime.decide(rec.image(k), stamp, tuple(rec.poses[k])).index], (stamp, stdout)
 
 
 def test_each_message_type_is_cdr_identical_to_rosbags_and_announces_its_rihs01():
