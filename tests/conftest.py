@@ -59,6 +59,16 @@ def fig7_recording(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def short_recording(tmp_path_factory) -> Path:
+    """An undisturbed recording of the synthetic driver on tests/data/short_course.yaml (about 320
+    frames, every class of the default table): for a test that needs a drive, not a particular
+    one. Shared: read it, never write into it (copy it first)."""
+    from helpers import SHORT_COURSE
+
+    return built_once(tmp_path_factory, "short", lambda out: _record(out, str(SHORT_COURSE), "--disturb", "0")) / "rec"
+
+
+@pytest.fixture(scope="session")
 def demo_course_recording(tmp_path_factory) -> Path:
     """``terrapref record demo_course`` as a user runs it: the synthetic driver, seed 0, pushed at
     the default rate (about 575 frames). Shared: read it, never write into it (copy it first)."""
