@@ -452,12 +452,13 @@ def test_a_simulated_keyboard_person_works_the_throttle_toward_the_speeds_it_wan
     ramp, and settles at each cruising speed the driver wants (within half a step)."""
     import numpy as np
 
+    from helpers import SHORT_COURSE
     from terrapref.demos.expert import ExpertConfig, ExpertDriver
     from terrapref.scenario import resolve_scenario
     from terrapref.teleop.keyboard import KeyboardPerson
     from terrapref.teleop.throttle import KEY_RATE_MPS2, KEY_STEP_MPS
 
-    scenario = resolve_scenario("demo_course")
+    scenario = resolve_scenario(str(SHORT_COURSE))
     order = ("rock", "mud", "water", "non_traversable")
     speeds = (("grass", 1.3), ("rock", 0.8), ("mud", 0.5), ("water", 0.3))
     person = KeyboardPerson(ExpertDriver(ExpertConfig.styled("default", order, speeds)), scenario, np.random.default_rng(0))
@@ -521,7 +522,7 @@ def test_the_gamepad_stick_springs_back_and_takes_over_from_the_keys():
     assert stick.update(0.1) == pytest.approx(0.1) and stick.source == "keys", "the input used last drives"
 
 
-def test_frames_after_a_gap_get_the_features_of_a_recording_without_one(tmp_path, demo_course_recording):
+def test_frames_after_a_gap_get_the_features_of_a_recording_without_one(tmp_path, short_recording):
     """A ride-along records only the takeovers: the path progress must jump the gap, so that
     the frames after it are featurised as they would be in one continuous recording."""
     import json
@@ -532,11 +533,11 @@ def test_frames_after_a_gap_get_the_features_of_a_recording_without_one(tmp_path
     from terrapref.dataset import featurize_recording
     from terrapref.features import FeatureConfig
 
-    full = demo_course_recording  # the synthetic driver, along the path
+    full = short_recording  # the synthetic driver, along the path
     gappy = tmp_path / "gappy"
     shutil.copytree(full, gappy)
     lines = (gappy / "frames.jsonl").read_text().splitlines()
-    kept = list(range(20)) + list(range(300, 330))  # 28 s (about 28 m) of path missing
+    kept = list(range(20)) + list(range(200, 230))  # 18 s (about 18 m) of path missing
     (gappy / "frames.jsonl").write_text("".join(lines[i] + "\n" for i in kept))
     meta = json.loads((gappy / "meta.json").read_text())
     (gappy / "meta.json").write_text(json.dumps({**meta, "frames": len(kept)}))
