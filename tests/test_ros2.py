@@ -273,6 +273,8 @@ def system(tmp_path_factory, fig7_recording):
         _bad_input(player, messages, times, heard, out)
         _wait(lambda: heard.get("costmap"), timeout_s=5.0, what="a costmap")
         out["heard"] = heard
+        # Its part is done: Ctrl-C now (it is awaited below), for a costmap a second heard is a costly message to read.
+        node.send_signal(signal.SIGINT)
         # The idle node heard nobody for its first seconds; now `terrapref play` drives it, and a subscriber sees it drive.
         idle_heard, idle_listener = _Heard(), Participant(idle, MessageTypes(typestore()))
         readers = _listen(idle_listener, idle_heard)
@@ -478,6 +480,33 @@ def test_play_drives_a_node_that_waited_in_an_empty_domain(system):
     for stamp in sorted(chosen):
         k = FIRST + frame_of[stamp]
         assert chosen[stamp] == [runtime.decide(rec.image(k), stamp, tuple(rec.poses[k])).index], (stamp, stdout)
+
+
+def test_a_participant_without_subscriptions_waits_instead_of_spinning(monkeypatch):
+    """A publisher alone (`terrapref play`'s) has nothing on its wait set: its thread must still
+    wait there, up to WAIT_NS at a time, not loop on a wait that returns at once and take a core
+    from the node it feeds. (A slower machine only waits fewer times.)"""
+    from terrapref.interop.dds import WAIT_NS, MessageTypes, Participant
+    from terrapref.interop.ros_messages import typestore
+
+    monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
+
+    class Counted:
+        def __init__(self, waitset) -> None:
+            self.waitset, self.waits = waitset, 0
+
+        def wait(self, timeout_ns: int) -> int:
+            self.waits += 1
+            return self.waitset.wait(timeout_ns)
+
+    participant = Participant(230, MessageTypes(typestore()))
+    try:
+        participant._waitset = counted = Counted(participant._waitset)
+        time.sleep(0.5)
+        assert counted.waits <= 0.5 / (WAIT_NS * 1e-9) + 5, counted.waits
+    finally:
+        participant._waitset = counted.waitset
+        participant.close()
 
 
 def test_each_message_type_is_cdr_identical_to_rosbags_and_announces_its_rihs01():
