@@ -474,26 +474,28 @@ def test_an_explicit_order_gets_the_lethal_column_appended(example):
 # --- The command line ----------------------------------------------------------------------------
 
 
-def test_course_writes_the_example_tables_teaching_course(tmp_path, capsys, example):
+def test_course_writes_a_tables_teaching_course_that_carries_the_table(tmp_path, capsys):
+    small = EXAMPLES / "small.yaml"  # a course of a few situations: its picture draws quickly
+    table = load_classes(small)
     out = tmp_path / "c.yaml"
-    assert main(["course", "--classes", str(EXAMPLE), "--out", str(out)]) == 0
+    assert main(["course", "--classes", str(small), "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert out.is_file() and (tmp_path / "c.png").is_file()
     minutes = re.search(r"expected drive about ([0-9.]+) minutes", printed)
     assert minutes is not None, printed
-    assert float(minutes.group(1)) == round(course_length(situations(example)) / 60, 1)
-    assert f"{len(situations(example))} situations" in printed
-    assert yaml.safe_load(out.read_text()) == yaml.safe_load(yaml.safe_dump(teaching_course(example).data()))
-    # The course carries its table: it reads without --classes, with the example table, and not with another.
+    assert float(minutes.group(1)) == round(course_length(situations(table)) / 60, 1)
+    assert f"{len(situations(table))} situations" in printed
+    assert yaml.safe_load(out.read_text()) == yaml.safe_load(yaml.safe_dump(teaching_course(table).data()))
+    # The course carries its table: it reads without --classes, with its table, and not with another.
     assert "(record it: terrapref record " + str(out) + " --out DIR)" in printed
     assert main(["validate", str(out)]) == 0
-    assert main(["validate", str(out), "--classes", str(EXAMPLE)]) == 0
+    assert main(["validate", str(out), "--classes", str(small)]) == 0
     assert main(["show", str(out), "--out", str(tmp_path / "map.png")]) == 0
     capsys.readouterr()
     default_file = Path(__file__).resolve().parent.parent / "src" / "terrapref" / "data" / "classes.yaml"
     assert main(["show", str(out), "--classes", str(default_file), "--out", str(tmp_path / "map2.png")]) == 2
     line = _one_error(
-        capsys, str(out), "classes: the scenario carries the class table of grass, dirt", "not the one given (grass, non_traversable"
+        capsys, str(out), "classes: the scenario carries the class table of grass, mud, tree", "not the one given (grass, non_traversable"
     )
     assert not (tmp_path / "map2.png").exists(), line
 
