@@ -107,21 +107,33 @@ def demo_course_drive(tmp_path_factory) -> SimpleNamespace:
     return SimpleNamespace(scenario=scenario, sim=sim, log=log, path=out)
 
 
-@pytest.fixture(scope="session")
-def cpu_outputs(request, tmp_path_factory) -> dict:
+def _cpu_outputs(request, tmp_path_factory, fixture: str, every: bool) -> dict:
     """What each module's bit-for-bit check (its ``CPU_CHECK``, tests/cpu_settings.py) printed
-    under each of its CPU settings, by check name: one fresh interpreter per setting runs the
-    checks of every collected test that takes this fixture, once for the run (every worker
-    collects the same tests, so each would ask for the same checks)."""
+    under its CPU settings (every one, or the quick ones), by check name: one fresh interpreter
+    per setting runs the checks of every collected test that takes ``fixture``, once for the run
+    (every worker collects the same tests, so each would ask for the same checks)."""
     from cpu_settings import run_checks
 
     checks = sorted(
-        {item.module.CPU_CHECK for item in request.session.items if "cpu_outputs" in getattr(item, "fixturenames", ())},
+        {item.module.CPU_CHECK for item in request.session.items if fixture in getattr(item, "fixturenames", ())},
         key=lambda c: c.name,
     )
+    checks = checks if every else [c.quick() for c in checks]
 
     def build(out: Path) -> None:
         (out / "outputs.json").write_text(json.dumps(run_checks(checks, MACHINE_ENVIRON)))
 
-    outputs = json.loads((built_once(tmp_path_factory, "cpu_outputs", build) / "outputs.json").read_text())
+    outputs = json.loads((built_once(tmp_path_factory, fixture, build) / "outputs.json").read_text())
     return {name: [(setting, printed) for setting, printed in runs] for name, runs in outputs.items()}
+
+
+@pytest.fixture(scope="session")
+def cpu_outputs(request, tmp_path_factory) -> dict:
+    """The checks under the quick settings (cpu_settings.QUICK), for the default run."""
+    return _cpu_outputs(request, tmp_path_factory, "cpu_outputs", every=False)
+
+
+@pytest.fixture(scope="session")
+def cpu_outputs_every(request, tmp_path_factory) -> dict:
+    """The checks under every one of their settings, for the slow tests."""
+    return _cpu_outputs(request, tmp_path_factory, "cpu_outputs_every", every=True)
