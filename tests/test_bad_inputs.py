@@ -15,9 +15,9 @@ from terrapref.cli import main
 
 
 @pytest.fixture(scope="module")
-def recording(fig7_recording) -> Path:
-    """An undisturbed recording of fig7 (tests/conftest.py): copy it before changing it."""
-    return fig7_recording
+def recording(short_recording) -> Path:
+    """An undisturbed recording of the short course (tests/conftest.py): copy it before changing it."""
+    return short_recording
 
 
 def _one_error(capsys, *needles: str) -> str:
