@@ -22,7 +22,7 @@ from typing import Callable
 import numpy as np
 import pytest
 
-FIRST, FRAMES = 190, 40  # the recording's frames published: the drive comes up to the rock and the trees
+FIRST, FRAMES = 200, 40  # the short recording's frames published: the drive comes up to the non_traversable patch
 LOOPBACK = (
     '<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>'
     "<AllowMulticast>false</AllowMulticast></General><Discovery><ParticipantIndex>auto</ParticipantIndex>"
@@ -183,7 +183,7 @@ def _endpoints(dp, own) -> list:
 
 
 @pytest.fixture(scope="module")
-def system(tmp_path_factory, fig7_recording):
+def system(tmp_path_factory, short_recording):
     """Two nodes: one driven frame by frame from this process (with bad input after the drive),
     one that starts in a domain where nobody publishes and is then driven by `terrapref play`."""
     from helpers import skip_path_weights
@@ -201,7 +201,7 @@ def system(tmp_path_factory, fig7_recording):
     root = tmp_path_factory.mktemp("ros2")
     config = ClassifierConfig(hidden=8, skip=True)
     model = save_model(root / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
-    rec = read_recording(fig7_recording)
+    rec = read_recording(short_recording)
     frames = recording_frames(rec)
     part = slice(FIRST, FIRST + FRAMES + 1)  # one frame more, for after the bad input
     frames = replace(
