@@ -69,6 +69,16 @@ def short_recording(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def tiny_recording(tmp_path_factory) -> Path:
+    """An undisturbed recording of the synthetic driver on tests/data/tiny_course.yaml (about 106
+    frames, grass and mud): for a test that needs a recording, not what it shows. Shared: read it,
+    never write into it (copy it first)."""
+    from helpers import TINY_COURSE
+
+    return built_once(tmp_path_factory, "tiny", lambda out: _record(out, str(TINY_COURSE), "--disturb", "0")) / "rec"
+
+
+@pytest.fixture(scope="session")
 def demo_course_recording(tmp_path_factory) -> Path:
     """``terrapref record demo_course`` as a user runs it: the synthetic driver, seed 0, pushed at
     the default rate (about 575 frames). Shared: read it, never write into it (copy it first)."""

@@ -534,14 +534,14 @@ def test_a_malformed_classes_file_is_refused_in_one_line(tmp_path, capsys, monke
     assert not (tmp_path / "c.yaml").exists() and not (tmp_path / "m.png").exists()
 
 
-def test_a_recording_of_another_table_is_refused_naming_both(short_recording, tmp_path, capsys):
-    assert main(["inspect", str(short_recording), "--classes", str(EXAMPLE), "--no-preference", "--out", str(tmp_path / "p.png")]) == 2
-    line = _one_error(capsys, str(short_recording), "non_traversable", str(EXAMPLE), "person")
+def test_a_recording_of_another_table_is_refused_naming_both(tiny_recording, tmp_path, capsys):
+    assert main(["inspect", str(tiny_recording), "--classes", str(EXAMPLE), "--no-preference", "--out", str(tmp_path / "p.png")]) == 2
+    line = _one_error(capsys, str(tiny_recording), "non_traversable", str(EXAMPLE), "person")
     assert "classes" in line
     assert not (tmp_path / "p.png").exists()
     # The table the recording was made for is accepted.
     default_file = Path(__file__).resolve().parent.parent / "src" / "terrapref" / "data" / "classes.yaml"
-    assert main(["inspect", str(short_recording), "--classes", str(default_file), "--no-preference", "--out", str(tmp_path / "p.png")]) == 0
+    assert main(["inspect", str(tiny_recording), "--classes", str(default_file), "--no-preference", "--out", str(tmp_path / "p.png")]) == 0
 
 
 def test_evaluate_refuses_a_model_of_another_table(tmp_path, capsys):
@@ -624,7 +624,7 @@ def test_a_bad_colour_of_a_lethal_class_is_one_problem(tmp_path):
     assert len(lines) == 1 and lines[0].startswith(f"{path}: classes[2].color: "), lines
 
 
-def test_a_table_that_differs_only_in_colours_or_profile_is_the_same_table(short_recording, tmp_path, capsys):
+def test_a_table_that_differs_only_in_colours_or_profile_is_the_same_table(tiny_recording, tmp_path, capsys):
     default_file = Path(__file__).resolve().parent.parent / "src" / "terrapref" / "data" / "classes.yaml"
     text = (
         default_file.read_text()
@@ -635,7 +635,7 @@ def test_a_table_that_differs_only_in_colours_or_profile_is_the_same_table(short
     recoloured.write_text(text)
     table = load_classes(recoloured)
     assert table != default_classes() and table.same_classes(default_classes())
-    assert main(["inspect", str(short_recording), "--classes", str(recoloured), "--no-preference", "--out", str(tmp_path / "p.png")]) == 0
+    assert main(["inspect", str(tiny_recording), "--classes", str(recoloured), "--no-preference", "--out", str(tmp_path / "p.png")]) == 0
     renamed = tmp_path / "renamed.yaml"
     renamed.write_text(default_file.read_text().replace("name: rock", "name: stone").replace("rock, water", "stone, water"))
     assert not load_classes(renamed).same_classes(default_classes())
@@ -659,12 +659,12 @@ def test_a_presets_pose_camera_and_frames_suit_any_table(example):
         load_perception("field:labels", example)
 
 
-def test_a_recording_whose_meta_names_no_class_table_is_one_line(short_recording, tmp_path, capsys):
+def test_a_recording_whose_meta_names_no_class_table_is_one_line(tiny_recording, tmp_path, capsys):
     import json
     import shutil
 
     rec = tmp_path / "rec"
-    shutil.copytree(short_recording, rec)
+    shutil.copytree(tiny_recording, rec)
     meta = json.loads((rec / "meta.json").read_text())
     del meta["classes"]
     (rec / "meta.json").write_text(json.dumps(meta))
@@ -677,7 +677,7 @@ def test_a_recording_whose_meta_names_no_class_table_is_one_line(short_recording
         _one_error(capsys, f"{rec / 'meta.json'}: classes: missing")
 
 
-def test_the_follow_up_loop_runs_without_classes_and_asks_what_drives_leave_open_together(tmp_path, capsys, short_recording):
+def test_the_follow_up_loop_runs_without_classes_and_asks_what_drives_leave_open_together(tmp_path, capsys, tiny_recording):
     """A course carries its table: record, course --after (of several drives), train and evaluate
     never need --classes again."""
     from terrapref.demos.recording import read_recording
@@ -698,8 +698,8 @@ def test_the_follow_up_loop_runs_without_classes_and_asks_what_drives_leave_open
     assert "the drives together identified every pair of classes" in capsys.readouterr().out
     assert not (tmp_path / "more2.yaml").exists()
     # Drives of two tables, or one drive twice, are refused in one line naming the file.
-    assert main(["course", "--after", str(me), str(short_recording), "--out", str(tmp_path / "x.yaml")]) == 2
-    _one_error(capsys, str(short_recording), "classes", "give drives of one table")
+    assert main(["course", "--after", str(me), str(tiny_recording), "--out", str(tmp_path / "x.yaml")]) == 2
+    _one_error(capsys, str(tiny_recording), "classes", "give drives of one table")
     assert main(["course", "--after", str(me), str(me), "--out", str(tmp_path / "x.yaml")]) == 2
     _one_error(capsys, str(me), "given twice")
     assert not (tmp_path / "x.yaml").exists()

@@ -525,13 +525,13 @@ def test_the_gymnasium_env_observes_what_the_robot_would(tmp_path):
         OffRoadNavEnv("demo_course", perception="nowhere")
 
 
-def test_a_recordings_perception_is_checked_when_it_is_read(tmp_path, short_recording):
+def test_a_recordings_perception_is_checked_when_it_is_read(tmp_path, tiny_recording):
     import json
     import shutil
 
     from terrapref.demos.recording import read_recording
 
-    out = shutil.copytree(short_recording, tmp_path / "rec")
+    out = shutil.copytree(tiny_recording, tmp_path / "rec")
     meta = json.loads((out / "meta.json").read_text())
     meta["perception"] = load_perception("rellis").to_dict()  # the section a recording made under rellis carries
     (out / "meta.json").write_text(json.dumps(meta))
