@@ -677,6 +677,46 @@ def test_a_recording_whose_meta_names_no_class_table_is_one_line(tiny_recording,
         _one_error(capsys, f"{rec / 'meta.json'}: classes: missing")
 
 
+def test_a_courses_table_goes_with_its_drive_to_the_follow_up_training_and_evaluation(tmp_path, capsys, tiny_recording):
+    """The follow-up loop's steps on a 12 m course of the small table (the whole loop, two drives
+    that together leave nothing open, is a slow test below): the course carries its table, so
+    record, course --after, train and evaluate never need --classes; drives of two tables, or one
+    drive twice, are refused in one line naming the file."""
+    from helpers import TINY_COURSE
+    from terrapref.scenario import resolve_scenario
+
+    small = EXAMPLES / "small.yaml"
+    course, me, more = tmp_path / "c.yaml", tmp_path / "me", tmp_path / "more.yaml"
+    tiny = yaml.safe_load(TINY_COURSE.read_text())  # grass and mud, which the small table has too
+    course.write_text(yaml.safe_dump({**tiny, "classes": teaching_course(load_classes(small)).data()["classes"]}, sort_keys=False))
+    assert main(["record", str(course), "--out", str(me), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["course", "--after", str(me), "--out", str(more)]) == 0
+    printed = capsys.readouterr().out
+    assert "pairs open: " in printed and "tree" in printed.split("pairs open: ")[1].splitlines()[0]  # no tree was driven beside
+    assert f"(record it: terrapref record {more} --out DIR)" in printed, "the command that works, not a --classes FILE placeholder"
+    assert resolve_scenario(str(more)).classes == load_classes(small)
+    assert main(["course", "--after", str(me), str(tiny_recording), "--out", str(tmp_path / "x.yaml")]) == 2
+    _one_error(capsys, str(tiny_recording), "classes", "give drives of one table")
+    assert main(["course", "--after", str(me), str(me), "--out", str(tmp_path / "x.yaml")]) == 2
+    _one_error(capsys, str(me), "given twice")
+    assert not (tmp_path / "x.yaml").exists()
+    model = tmp_path / "m.safetensors"
+    assert main(["train", str(me), "--recipe", "paper", "--epochs", "2", "--out", str(model)]) == 0
+    assert main(["evaluate", str(model), str(course), "--seeds", "1", "--no-driver", "--out", str(tmp_path / "ev")]) == 0
+    assert (tmp_path / "ev" / "metrics.json").is_file()
+    capsys.readouterr()
+    assert (
+        main(
+            ["evaluate", str(model), str(course), "--classes", str(EXAMPLE), "--seeds", "1", "--no-driver", "--out", str(tmp_path / "ev2")]
+        )
+        == 2
+    )
+    _one_error(capsys, str(model), "classes", str(EXAMPLE))
+    assert not (tmp_path / "ev2").exists()
+
+
+@pytest.mark.slow  # two drives of a teaching course and its follow-up; its steps run on a short course above
 def test_the_follow_up_loop_runs_without_classes_and_asks_what_drives_leave_open_together(tmp_path, capsys, tiny_recording):
     """A course carries its table: record, course --after (of several drives), train and evaluate
     never need --classes again."""
