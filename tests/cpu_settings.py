@@ -46,9 +46,10 @@ SETTINGS = _settings()
 
 QUICK = [{}, {"OPENBLAS_CORETYPE": "Prescott"} if platform.machine().lower() in ("x86_64", "amd64") else {"OPENBLAS_NUM_THREADS": "2"}]
 QUICK += [{"NUMBA_CPU_NAME": "generic"}]
-"""The settings of the default test run (each costs a fresh interpreter): the machine's own, an
-older BLAS kernel (on arm64 another thread count) and compiled loops for a generic CPU. Every
-setting of a check runs in the slow tests."""
+"""The settings of the default test run (each costs a fresh interpreter; all with the tests' one
+BLAS thread unless they say otherwise): the machine's kernels, an older BLAS kernel (on arm64
+another thread count) and compiled loops for a generic CPU. Every setting of a check, in the
+machine's own environment, runs in the slow tests."""
 
 
 @dataclass(frozen=True)
