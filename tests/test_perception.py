@@ -548,15 +548,18 @@ def test_a_recordings_perception_is_checked_when_it_is_read(tmp_path, tiny_recor
 
 
 def test_select_drives_the_same_models_under_several_perception_models(tmp_path):
-    """The paper's recipe (quick to train) taught from a drive recorded under field, driving one
-    layout on clean frames and under rellis: one table each, every zone tagged."""
+    """The paper's recipe (quick to train) taught from a drive of the short course recorded under
+    field, driving one layout on clean frames and under rellis: one table each, every zone tagged."""
     import json
 
+    from helpers import SHORT_COURSE
     from terrapref.cli import main
 
     out = tmp_path / "sel"
     argv = [
         "select",
+        "--course",
+        str(SHORT_COURSE),
         "--recipes",
         "paper",
         "--orders",
