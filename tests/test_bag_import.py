@@ -384,7 +384,7 @@ def _chunk_compression(path: Path) -> set[str]:
 
 
 def test_evaluate_writes_each_run_as_mcap(tmp_path: Path, capsys):
-    from helpers import SHORT_COURSE, linear_model
+    from helpers import TINY_COURSE, linear_model
 
     model = linear_model(tmp_path / "linear.safetensors")
     out = tmp_path / "ev"
@@ -393,7 +393,7 @@ def test_evaluate_writes_each_run_as_mcap(tmp_path: Path, capsys):
             [
                 "evaluate",
                 str(model),
-                str(SHORT_COURSE),
+                str(TINY_COURSE),
                 "--seeds",
                 "1",
                 "--no-driver",
@@ -406,7 +406,7 @@ def test_evaluate_writes_each_run_as_mcap(tmp_path: Path, capsys):
         )
         == 0
     )
-    (run,) = (out / "runs").glob("*short_course_seed0.mcap")  # named after the course file's path
+    (run,) = (out / "runs").glob("*tiny_course_seed0.mcap")  # named after the course file's path
     topics = _topics(run)
     frames = topics["/terrapref/labels"][1]
     assert frames > 50 and topics["/terrapref/trajectories"][1] == frames and topics["/terrapref/odom"][1] == frames
