@@ -421,6 +421,7 @@ def test_frames_taken_off_the_map_are_not_training_data(tmp_path):
         build_dataset([read_recording(out)], FeatureConfig())
 
 
+@pytest.mark.slow  # the whole of demo_course; a press's step and a hold's ramp are tested above, the person on the short course below
 def test_a_simulated_keyboard_person_drives_the_course_through_the_window(tmp_path):
     """Key presses from the synthetic driver's intent, 0.3 s late: the course driven with gentle curves, no collision."""
     import numpy as np
