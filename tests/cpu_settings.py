@@ -44,6 +44,13 @@ def _settings() -> list[Setting]:
 SETTINGS = _settings()
 """Every BLAS kernel, SIMD level and thread count this machine can be made to use."""
 
+QUICK = [{}, {"OPENBLAS_CORETYPE": "Prescott"} if platform.machine().lower() in ("x86_64", "amd64") else {"OPENBLAS_NUM_THREADS": "2"}]
+QUICK += [{"NUMBA_CPU_NAME": "generic"}]
+"""The settings of the default test run (each costs a fresh interpreter; all with the tests' one
+BLAS thread unless they say otherwise): the machine's kernels, an older BLAS kernel (on arm64
+another thread count) and compiled loops for a generic CPU. Every setting of a check, in the
+machine's own environment, runs in the slow tests."""
+
 
 @dataclass(frozen=True)
 class CpuCheck:
@@ -56,6 +63,11 @@ class CpuCheck:
     @classmethod
     def of(cls, name: str, code: str, settings: list[Setting]) -> "CpuCheck":
         return cls(name, code, tuple(tuple(sorted(s.items())) for s in settings))
+
+    def quick(self) -> "CpuCheck":
+        """The check under those of its settings that are :data:`QUICK`."""
+        quick = {tuple(sorted(s.items())) for s in QUICK}
+        return CpuCheck(self.name, self.code, tuple(s for s in self.settings if s in quick))
 
 
 def _run_all(code: list[tuple[str, str]]) -> dict[str, str]:

@@ -15,9 +15,9 @@ from terrapref.cli import main
 
 
 @pytest.fixture(scope="module")
-def recording(fig7_recording) -> Path:
-    """An undisturbed recording of fig7 (tests/conftest.py): copy it before changing it."""
-    return fig7_recording
+def recording(tiny_recording) -> Path:
+    """An undisturbed recording of the tiny course (tests/conftest.py): copy it before changing it."""
+    return tiny_recording
 
 
 def _one_error(capsys, *needles: str) -> str:

@@ -21,7 +21,7 @@ from terrapref.report.inspect import summarise
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation
 
-SECONDS = 12.0
+SECONDS = 10.0  # of demo_course: past its quirks' odometry gap (8-9 s)
 FORMATS = [("mcap", "mono8", "drive.mcapbag"), ("rosbag1", "mono16", "drive.bag"), ("sqlite3", "png", "drive.db3bag")]
 
 
@@ -419,7 +419,7 @@ def _chunk_compression(path: Path) -> set[str]:
 
 
 def test_evaluate_writes_each_run_as_mcap(tmp_path: Path, capsys):
-    from helpers import linear_model
+    from helpers import TINY_COURSE, linear_model
 
     model = linear_model(tmp_path / "linear.safetensors")
     out = tmp_path / "ev"
@@ -428,7 +428,7 @@ def test_evaluate_writes_each_run_as_mcap(tmp_path: Path, capsys):
             [
                 "evaluate",
                 str(model),
-                "fig7_rock_vs_non_traversable_left",
+                str(TINY_COURSE),
                 "--seeds",
                 "1",
                 "--no-driver",
@@ -441,7 +441,7 @@ def test_evaluate_writes_each_run_as_mcap(tmp_path: Path, capsys):
         )
         == 0
     )
-    run = out / "runs" / "fig7_rock_vs_non_traversable_left_seed0.mcap"
+    (run,) = (out / "runs").glob("*tiny_course_seed0.mcap")  # named after the course file's path
     topics = _topics(run)
     frames = topics["/terrapref/labels"][1]
     assert frames > 50 and topics["/terrapref/trajectories"][1] == frames and topics["/terrapref/odom"][1] == frames
@@ -506,7 +506,8 @@ def fast(tmp_path_factory) -> dict:
     robot = write_robot(root / "robot.yaml", robot_yaml())
     bag = write_synthetic_bag(root / "fast.mcap", "mcap", max_seconds=10.0, speed_mps=FAST_MPS)
     report = import_bag(bag, load_robot(robot), root / "rec", show_progress=False)
-    assert main(["train", str(root / "rec"), "--out", str(root / "taught.safetensors")]) == 0
+    # C's epochs cut short: what is read of the model is its speed rule, fitted to the drive's speeds.
+    assert main(["train", str(root / "rec"), "--out", str(root / "taught.safetensors"), "--epochs", "5"]) == 0
     return {"bag": bag, "report": report, "rec": read_recording(root / "rec"), "model": root / "taught.safetensors"}
 
 
@@ -596,7 +597,7 @@ def measured(tmp_path_factory) -> dict:
         bag = write_synthetic_bag(root / f"{name}.mcap", "mcap", max_seconds=10.0, speed_mps=FAST_MPS, commands=False, **kind)
         rec = root / f"rec_{name}"
         out[name] = {"bag": bag, "report": import_bag(bag, load_robot(robot), rec, show_progress=False), "rec": read_recording(rec)}
-    assert main(["train", str(root / "rec_twist"), "--out", str(root / "taught.safetensors")]) == 0
+    assert main(["train", str(root / "rec_twist"), "--out", str(root / "taught.safetensors"), "--epochs", "5"]) == 0  # as fast's
     out["model"] = root / "taught.safetensors"
     return out
 

@@ -477,26 +477,28 @@ def test_an_explicit_order_gets_the_lethal_column_appended(example):
 # --- The command line ----------------------------------------------------------------------------
 
 
-def test_course_writes_the_example_tables_teaching_course(tmp_path, capsys, example):
+def test_course_writes_a_tables_teaching_course_that_carries_the_table(tmp_path, capsys):
+    small = EXAMPLES / "small.yaml"  # a course of a few situations: its picture draws quickly
+    table = load_classes(small)
     out = tmp_path / "c.yaml"
-    assert main(["course", "--classes", str(EXAMPLE), "--out", str(out)]) == 0
+    assert main(["course", "--classes", str(small), "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert out.is_file() and (tmp_path / "c.png").is_file()
     minutes = re.search(r"expected drive about ([0-9.]+) minutes", printed)
     assert minutes is not None, printed
-    assert float(minutes.group(1)) == round(course_length(situations(example)) / 60, 1)
-    assert f"{len(situations(example))} situations" in printed
-    assert yaml.safe_load(out.read_text()) == yaml.safe_load(yaml.safe_dump(teaching_course(example).data()))
-    # The course carries its table: it reads without --classes, with the example table, and not with another.
+    assert float(minutes.group(1)) == round(course_length(situations(table)) / 60, 1)
+    assert f"{len(situations(table))} situations" in printed
+    assert yaml.safe_load(out.read_text()) == yaml.safe_load(yaml.safe_dump(teaching_course(table).data()))
+    # The course carries its table: it reads without --classes, with its table, and not with another.
     assert "(record it: terrapref record " + str(out) + " --out DIR)" in printed
     assert main(["validate", str(out)]) == 0
-    assert main(["validate", str(out), "--classes", str(EXAMPLE)]) == 0
+    assert main(["validate", str(out), "--classes", str(small)]) == 0
     assert main(["show", str(out), "--out", str(tmp_path / "map.png")]) == 0
     capsys.readouterr()
     default_file = Path(__file__).resolve().parent.parent / "src" / "terrapref" / "data" / "classes.yaml"
     assert main(["show", str(out), "--classes", str(default_file), "--out", str(tmp_path / "map2.png")]) == 2
     line = _one_error(
-        capsys, str(out), "classes: the scenario carries the class table of grass, dirt", "not the one given (grass, non_traversable"
+        capsys, str(out), "classes: the scenario carries the class table of grass, mud, tree", "not the one given (grass, non_traversable"
     )
     assert not (tmp_path / "map2.png").exists(), line
 
@@ -535,21 +537,21 @@ def test_a_malformed_classes_file_is_refused_in_one_line(tmp_path, capsys, monke
     assert not (tmp_path / "c.yaml").exists() and not (tmp_path / "m.png").exists()
 
 
-def test_a_recording_of_another_table_is_refused_naming_both(fig7_recording, tmp_path, capsys):
-    assert main(["inspect", str(fig7_recording), "--classes", str(EXAMPLE), "--no-preference", "--out", str(tmp_path / "p.png")]) == 2
-    line = _one_error(capsys, str(fig7_recording), "non_traversable", str(EXAMPLE), "person")
+def test_a_recording_of_another_table_is_refused_naming_both(tiny_recording, tmp_path, capsys):
+    assert main(["inspect", str(tiny_recording), "--classes", str(EXAMPLE), "--no-preference", "--out", str(tmp_path / "p.png")]) == 2
+    line = _one_error(capsys, str(tiny_recording), "non_traversable", str(EXAMPLE), "person")
     assert "classes" in line
     assert not (tmp_path / "p.png").exists()
     # The table the recording was made for is accepted.
     default_file = Path(__file__).resolve().parent.parent / "src" / "terrapref" / "data" / "classes.yaml"
-    assert main(["inspect", str(fig7_recording), "--classes", str(default_file), "--no-preference", "--out", str(tmp_path / "p.png")]) == 0
+    assert main(["inspect", str(tiny_recording), "--classes", str(default_file), "--no-preference", "--out", str(tmp_path / "p.png")]) == 0
 
 
 def test_evaluate_refuses_a_model_of_another_table(tmp_path, capsys):
     from helpers import linear_model
 
-    course = tmp_path / "c.yaml"
-    assert main(["course", "--classes", str(EXAMPLE), "--out", str(course)]) == 0
+    course = tmp_path / "c.yaml"  # the example table's course, as `terrapref course --classes` writes it (without its picture)
+    course.write_text(yaml.safe_dump(teaching_course(load_classes(EXAMPLE)).data(), sort_keys=False))
     model = linear_model(tmp_path / "m.safetensors")  # made for the default table
     capsys.readouterr()
     assert (
@@ -625,7 +627,7 @@ def test_a_bad_colour_of_a_lethal_class_is_one_problem(tmp_path):
     assert len(lines) == 1 and lines[0].startswith(f"{path}: classes[2].color: "), lines
 
 
-def test_a_table_that_differs_only_in_colours_or_profile_is_the_same_table(fig7_recording, tmp_path, capsys):
+def test_a_table_that_differs_only_in_colours_or_profile_is_the_same_table(tiny_recording, tmp_path, capsys):
     default_file = Path(__file__).resolve().parent.parent / "src" / "terrapref" / "data" / "classes.yaml"
     text = (
         default_file.read_text()
@@ -636,7 +638,7 @@ def test_a_table_that_differs_only_in_colours_or_profile_is_the_same_table(fig7_
     recoloured.write_text(text)
     table = load_classes(recoloured)
     assert table != default_classes() and table.same_classes(default_classes())
-    assert main(["inspect", str(fig7_recording), "--classes", str(recoloured), "--no-preference", "--out", str(tmp_path / "p.png")]) == 0
+    assert main(["inspect", str(tiny_recording), "--classes", str(recoloured), "--no-preference", "--out", str(tmp_path / "p.png")]) == 0
     renamed = tmp_path / "renamed.yaml"
     renamed.write_text(default_file.read_text().replace("name: rock", "name: stone").replace("rock, water", "stone, water"))
     assert not load_classes(renamed).same_classes(default_classes())
@@ -660,12 +662,12 @@ def test_a_presets_pose_camera_and_frames_suit_any_table(example):
         load_perception("field:labels", example)
 
 
-def test_a_recording_whose_meta_names_no_class_table_is_one_line(fig7_recording, tmp_path, capsys):
+def test_a_recording_whose_meta_names_no_class_table_is_one_line(tiny_recording, tmp_path, capsys):
     import json
     import shutil
 
     rec = tmp_path / "rec"
-    shutil.copytree(fig7_recording, rec)
+    shutil.copytree(tiny_recording, rec)
     meta = json.loads((rec / "meta.json").read_text())
     del meta["classes"]
     (rec / "meta.json").write_text(json.dumps(meta))
@@ -678,14 +680,56 @@ def test_a_recording_whose_meta_names_no_class_table_is_one_line(fig7_recording,
         _one_error(capsys, f"{rec / 'meta.json'}: classes: missing")
 
 
-def test_the_follow_up_loop_runs_without_classes_and_asks_what_drives_leave_open_together(tmp_path, capsys, fig7_recording):
+def test_a_courses_table_goes_with_its_drive_to_the_follow_up_training_and_evaluation(tmp_path, capsys, tiny_recording):
+    """The follow-up loop's steps on a 12 m course of the small table (the whole loop, two drives
+    that together leave nothing open, is a slow test below): the course carries its table, so
+    record, course --after, train and evaluate never need --classes; drives of two tables, or one
+    drive twice, are refused in one line naming the file."""
+    from helpers import TINY_COURSE
+    from terrapref.scenario import resolve_scenario
+
+    small = EXAMPLES / "small.yaml"
+    course, me, more = tmp_path / "c.yaml", tmp_path / "me", tmp_path / "more.yaml"
+    tiny = yaml.safe_load(TINY_COURSE.read_text())  # grass, mud and trees: the small table's, its trees called tree
+    for patch in tiny["terrain"]:
+        patch["class"] = {"non_traversable": "tree"}.get(patch["class"], patch["class"])
+    course.write_text(yaml.safe_dump({**tiny, "classes": teaching_course(load_classes(small)).data()["classes"]}, sort_keys=False))
+    assert main(["record", str(course), "--out", str(me), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["course", "--after", str(me), "--out", str(more)]) == 0
+    printed = capsys.readouterr().out
+    assert "pairs open: " in printed and "tree" in printed.split("pairs open: ")[1].splitlines()[0]  # no tree was driven beside
+    assert f"(record it: terrapref record {more} --out DIR)" in printed, "the command that works, not a --classes FILE placeholder"
+    assert resolve_scenario(str(more)).classes == load_classes(small)
+    assert main(["course", "--after", str(me), str(tiny_recording), "--out", str(tmp_path / "x.yaml")]) == 2
+    _one_error(capsys, str(tiny_recording), "classes", "give drives of one table")
+    assert main(["course", "--after", str(me), str(me), "--out", str(tmp_path / "x.yaml")]) == 2
+    _one_error(capsys, str(me), "given twice")
+    assert not (tmp_path / "x.yaml").exists()
+    model = tmp_path / "m.safetensors"
+    assert main(["train", str(me), "--recipe", "paper", "--epochs", "2", "--out", str(model)]) == 0
+    assert main(["evaluate", str(model), str(course), "--seeds", "1", "--no-driver", "--out", str(tmp_path / "ev")]) == 0
+    assert (tmp_path / "ev" / "metrics.json").is_file()
+    capsys.readouterr()
+    assert (
+        main(
+            ["evaluate", str(model), str(course), "--classes", str(EXAMPLE), "--seeds", "1", "--no-driver", "--out", str(tmp_path / "ev2")]
+        )
+        == 2
+    )
+    _one_error(capsys, str(model), "classes", str(EXAMPLE))
+    assert not (tmp_path / "ev2").exists()
+
+
+@pytest.mark.slow  # two drives of a teaching course and its follow-up; its steps run on a short course above
+def test_the_follow_up_loop_runs_without_classes_and_asks_what_drives_leave_open_together(tmp_path, capsys, tiny_recording):
     """A course carries its table: record, course --after (of several drives), train and evaluate
     never need --classes again."""
     from terrapref.demos.recording import read_recording
 
     small = EXAMPLES / "small.yaml"
     course, me, more, me_more = tmp_path / "c.yaml", tmp_path / "me", tmp_path / "more.yaml", tmp_path / "me_more"
-    assert main(["course", "--classes", str(small), "--out", str(course)]) == 0
+    assert main(["course", "--classes", str(small), "--out", str(course), "--design", "compact"]) == 0  # the shorter drive
     assert main(["record", str(course), "--out", str(me), "--quiet"]) == 0
     capsys.readouterr()
     assert main(["course", "--after", str(me), "--out", str(more)]) == 0
@@ -702,8 +746,8 @@ def test_the_follow_up_loop_runs_without_classes_and_asks_what_drives_leave_open
     assert "the drives together identified every pair of classes" in capsys.readouterr().out
     assert not (tmp_path / "more2.yaml").exists()
     # Drives of two tables, or one drive twice, are refused in one line naming the file.
-    assert main(["course", "--after", str(me), str(fig7_recording), "--out", str(tmp_path / "x.yaml")]) == 2
-    _one_error(capsys, str(fig7_recording), "classes", "give drives of one table")
+    assert main(["course", "--after", str(me), str(tiny_recording), "--out", str(tmp_path / "x.yaml")]) == 2
+    _one_error(capsys, str(tiny_recording), "classes", "give drives of one table")
     assert main(["course", "--after", str(me), str(me), "--out", str(tmp_path / "x.yaml")]) == 2
     _one_error(capsys, str(me), "given twice")
     assert not (tmp_path / "x.yaml").exists()

@@ -31,7 +31,7 @@ def log(tmp_path_factory, table) -> dict:
     """A short course of the example table (grass, puddle beside water, mud beside a tree), driven
     and written as an MCAP log in RELLIS-3D ids, and a robot file naming the example label map."""
     root = tmp_path_factory.mktemp("rellis_table")
-    items = [Situation("pair", ("puddle", "water")), Situation("strip", ("tree", "mud", "dirt")), Situation("lone", ("bush",), 0.3)]
+    items = [Situation("pair", ("puddle", "water")), Situation("strip", ("tree", "mud", "dirt"))]
     course = root / "course.yaml"
     course.write_text(yaml.safe_dump(build_course(table, items, "short", "three situations").data(), sort_keys=False))
     bag = write_synthetic_bag(root / "drive.mcapbag", "mcap", scenario=str(course), profile=table.profile, quirks=False, classes=table)

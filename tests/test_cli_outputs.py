@@ -119,10 +119,10 @@ def test_time_left_is_estimated_from_the_pace_so_far():
     assert time_left(12.0, 1.0) == "12 s" and duration_text(4000) == "1 h 6 min"
 
 
-def test_long_jobs_report_what_they_have_done_and_the_time_left(fig7_recording: Path, tmp_path: Path, capsys):
-    assert main(["course", "--after", str(fig7_recording), "--out", str(tmp_path / "more.yaml")]) == 0
+def test_long_jobs_report_what_they_have_done_and_the_time_left(tiny_recording: Path, tmp_path: Path, capsys):
+    assert main(["course", "--after", str(tiny_recording), "--out", str(tmp_path / "more.yaml")]) == 0
     lines = capsys.readouterr().err.splitlines()
-    frames = len((fig7_recording / "frames.jsonl").read_text().splitlines())
+    frames = len((tiny_recording / "frames.jsonl").read_text().splitlines())
     ticks = [line for line in lines if line.startswith("featurising the drive to find the pairs left open:") and "% " in line]
     assert len(ticks) >= 10 and f"{frames}/{frames} frames" in ticks[-1]  # a line per tenth of the frames, not one at the end
     assert all(line.rstrip().endswith(")") for line in ticks)  # each with the time so far (and what is left, once it can be told)

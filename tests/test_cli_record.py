@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import json
 
+from helpers import TINY_COURSE
 from terrapref.cli import main
 from terrapref.demos.recording import read_recording
 
 
 def test_record_with_disturbances(tmp_path, capsys):
     out = tmp_path / "rec"
-    assert main(["record", "demo_course", "--seed", "1", "--out", str(out), "--disturb", "1.0", "--quiet"]) == 0
+    assert main(["record", str(TINY_COURSE), "--seed", "1", "--out", str(out), "--disturb", "1.0", "--quiet"]) == 0
     rec = read_recording(out)
     assert rec.complete
     assert rec.meta["driver"]["disturbance"]["rate_hz"] == 1.0

@@ -48,12 +48,13 @@ def test_samples_of_a_drive_kept_in_memory_are_those_of_the_same_drive_on_disk(t
     """A recording kept in memory reads only the pixels the downsampling keeps: the same samples."""
     from dataclasses import replace
 
+    from helpers import TINY_COURSE
     from terrapref.baselines.cnn import cnn_samples
     from terrapref.features import FeatureConfig
     from terrapref.recipes import OURS, RecipeSetup, demonstrate
 
     first = replace(OURS, demonstrations=1)  # its first demonstration, the one compared
-    setup = RecipeSetup(2, course="demo_course")
+    setup = RecipeSetup(2, course=str(TINY_COURSE))
     kept = demonstrate(first, tmp_path / "mem", setup, write=False)
     written = demonstrate(first, tmp_path / "disk", setup, write=True)
     a, b = cnn_samples(kept, FeatureConfig(), 16), cnn_samples(written, FeatureConfig(), 16)

@@ -117,13 +117,13 @@ def _costmaps_in(mcap) -> tuple[dict[str, int], np.ndarray]:
     return counts, cost
 
 
-def test_an_exported_recording_carries_the_costmap_a_model_sees_in_it(tmp_path, capsys, fig7_recording):
+def test_an_exported_recording_carries_the_costmap_a_model_sees_in_it(tmp_path, capsys, short_recording):
     from helpers import model_meta, one_line_error
     from terrapref.cli import main
 
     config = ClassifierConfig(hidden=8, skip=True)
     model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
-    rec = fig7_recording
+    rec = short_recording
     assert main(["export", str(rec), "--format", "mcap", "--model", str(model), "--out", str(tmp_path / "run.mcap")]) == 0
     counts, cost = _costmaps_in(tmp_path / "run.mcap")
     assert counts["/terrapref/costmap"] == -(-counts["/terrapref/labels"] // 10)

@@ -10,6 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from helpers import SHORT_COURSE
 from terrapref.demos.expert import ExpertDriver
 from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
 from terrapref.demos.recording import FRAMES, RecordingWriter, read_recording
@@ -165,8 +166,8 @@ def test_without_a_clearance_pushes_begin_anywhere():
 
 
 def _record(out: Path, seed: int, disturbance: DisturbanceConfig | None, time_limit_s: float | None = None):
-    """Record demo_course (the first ``time_limit_s`` seconds only, if given)."""
-    scenario = resolve_scenario("demo_course")
+    """Record the short course (tests/data/short_course.yaml; the first ``time_limit_s`` seconds only, if given)."""
+    scenario = resolve_scenario(str(SHORT_COURSE))
     sim = Simulation(scenario)
     if time_limit_s is not None:
         sim.time_limit_s = time_limit_s
@@ -250,10 +251,10 @@ def _push_starts(run: SimpleNamespace) -> list[tuple[float, float, float]]:
 
 
 def test_the_teaching_protocol_pushes_only_away_from_lethal_terrain(tmp_path: Path):
-    """demo_course's first minute, with and without the clearance: without it some push begins
-    with lethal terrain within reach; with it none does."""
+    """The short course, with and without the clearance: without it some push begins with lethal
+    terrain within reach; with it none does."""
     config = DisturbanceConfig(rate_hz=1.0, clear_m=3.0, clear_s=2.0)
-    world = Simulation(resolve_scenario("demo_course")).world
+    world = Simulation(resolve_scenario(str(SHORT_COURSE))).world
     free = _push_starts(_record(tmp_path / "f", 0, DisturbanceConfig(rate_hz=1.0), time_limit_s=60.0))
     assert any(world.lethal_within(x, y, config.clearance_m(v) - 0.1) for x, y, v in free)
     kept = _push_starts(_record(tmp_path / "k", 0, config, time_limit_s=60.0))

@@ -11,7 +11,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from helpers import linear_model, model_meta, one_line_error, skip_path_weights
+from helpers import SHORT_COURSE, linear_model, model_meta, one_line_error, skip_path_weights
 from terrapref.cli import main
 from terrapref.demos.expert import ExpertConfig
 from terrapref.demos.meta import ExpertInfo
@@ -29,6 +29,8 @@ PNG = b"\x89PNG\r\n\x1a\n"
 RUN_KEYS = {"completed", "collisions", "duration_s", "rms_cross_track_m", "max_cross_track_m", "distance_m", "zones"}
 ZONE_KEYS = {"id", "expect", "choice", "success"}
 ROCK_FIRST = "rock,mud,water,non_traversable"
+COURSE = str(SHORT_COURSE)  # demo_course's zones (lone water, mud vs rock, lone non_traversable) on a shorter trail
+STEM = file_stem(COURSE)  # its figures' names
 
 
 @pytest.fixture(scope="module")
@@ -39,7 +41,7 @@ def model_path(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def evaluated(model_path: Path, tmp_path_factory) -> SimpleNamespace:
     out = tmp_path_factory.mktemp("eval") / "ev"
-    metrics = evaluate_model(Evaluation(str(model_path), ("demo_course",), seeds=2, frames=(5,)), out, engine=Engine(workers=1))
+    metrics = evaluate_model(Evaluation(str(model_path), (COURSE,), seeds=2, frames=(5,)), out, engine=Engine(workers=1))
     return SimpleNamespace(out=out, metrics=metrics)
 
 
@@ -56,8 +58,8 @@ def test_metrics_file_is_what_was_returned(evaluated):
 
 @pytest.mark.parametrize("driver", ["planner", "driver"])
 def test_every_run_is_scored(evaluated, driver: str):
-    scenario = resolve_scenario("demo_course")
-    runs = evaluated.metrics["scenarios"]["demo_course"][driver]
+    scenario = resolve_scenario(COURSE)
+    runs = evaluated.metrics["scenarios"][COURSE][driver]
     assert sorted(runs) == ["0", "1"]
     goal = scenario.waypoints[-1]
     for seed, run in runs.items():
@@ -83,14 +85,14 @@ def test_every_run_is_scored(evaluated, driver: str):
                 assert not z["success"]
 
 
-def test_the_synthetic_driver_drives_the_demo_course(evaluated):
-    for run in evaluated.metrics["scenarios"]["demo_course"]["driver"].values():
+def test_the_synthetic_driver_drives_the_course(evaluated):
+    for run in evaluated.metrics["scenarios"][COURSE]["driver"].values():
         assert run["completed"] and run["collisions"] == 0
 
 
 def test_best_zone_resolves_under_the_models_profile(evaluated):
     for driver in ("planner", "driver"):
-        for run in evaluated.metrics["scenarios"]["demo_course"][driver].values():
+        for run in evaluated.metrics["scenarios"][COURSE][driver].values():
             expect = {z["id"]: z["expect"] for z in run["zones"]}
             assert expect == {"1": "avoid", "2": "mud", "3": "avoid"}
 
@@ -98,7 +100,7 @@ def test_best_zone_resolves_under_the_models_profile(evaluated):
 @pytest.mark.parametrize("key, driver", [("summary", "planner"), ("driver_summary", "driver")])
 def test_summary_counts_the_runs(evaluated, key: str, driver: str):
     summary = evaluated.metrics[key]
-    runs = list(evaluated.metrics["scenarios"]["demo_course"][driver].values())
+    runs = list(evaluated.metrics["scenarios"][COURSE][driver].values())
     zones = [z for r in runs for z in r["zones"]]
     assert summary["runs"] == 2 and summary["zones"] == len(zones) == 6
     assert summary["zone_success_rate"] == pytest.approx(sum(z["success"] for z in zones) / len(zones), abs=1e-4)
@@ -114,17 +116,14 @@ def test_the_speed_against_the_driver_names_the_background_by_its_class(evaluate
 
 
 def test_figures_are_written(evaluated):
-    for name in ("demo_course.png", "demo_course_frame00005.png"):
+    for name in (f"{STEM}.png", f"{STEM}_frame00005.png"):
         data = (evaluated.out / name).read_bytes()
         assert data.startswith(PNG) and len(data) > 1000, name
-    assert sorted(p.name for p in evaluated.out.glob("*.png")) == ["demo_course.png", "demo_course_frame00005.png"]
+    assert sorted(p.name for p in evaluated.out.glob("*.png")) == [f"{STEM}.png", f"{STEM}_frame00005.png"]
 
 
 def test_a_model_with_a_speed_rule_gets_a_figure_of_speed_along_each_path(tmp_path: Path):
-    """The skip-path model with a speed rule: its runs' speed along demo_course, driver and planner (seed 0)."""
-    from helpers import model_meta, skip_path_weights
-    from terrapref.learning.model_file import save_model
-    from terrapref.learning.network import ClassifierConfig
+    """The skip-path model with a speed rule: its runs' speed along the short course, driver and planner (seed 0)."""
     from terrapref.rules.speed.model import SpeedModel
     from terrapref.rules.speed.rule import SpeedConfig, SpeedRule
 
@@ -132,13 +131,13 @@ def test_a_model_with_a_speed_rule_gets_a_figure_of_speed_along_each_path(tmp_pa
     classifier = ClassifierConfig(hidden=8, skip=True)
     meta = {**model_meta(), "rules": [SpeedRule(SpeedConfig(), speeds).header()], "drives": "argmax"}
     model = save_model(tmp_path / "speed.safetensors", classifier, skip_path_weights(classifier), meta)
-    evaluate_model(Evaluation(str(model), ("demo_course",), seeds=1), tmp_path / "ev", engine=Engine(workers=1))
-    figure = (tmp_path / "ev" / "demo_course_speed.png").read_bytes()
+    evaluate_model(Evaluation(str(model), (COURSE,), seeds=1), tmp_path / "ev", engine=Engine(workers=1))
+    figure = (tmp_path / "ev" / f"{STEM}_speed.png").read_bytes()
     assert figure.startswith(PNG) and len(figure) > 1000
 
 
 def test_evaluation_is_deterministic(model_path: Path, evaluated, tmp_path: Path):
-    again = evaluate_model(Evaluation(str(model_path), ("demo_course",), seeds=2, with_driver=False), tmp_path, engine=Engine(workers=1))
+    again = evaluate_model(Evaluation(str(model_path), (COURSE,), seeds=2, with_driver=False), tmp_path, engine=Engine(workers=1))
 
     def without_agreement(runs: dict) -> dict:  # the driver's run adds its choices to the planner's zones
         return {
@@ -146,26 +145,26 @@ def test_evaluation_is_deterministic(model_path: Path, evaluated, tmp_path: Path
             for seed, run in runs.items()
         }
 
-    assert again["scenarios"]["demo_course"]["planner"] == without_agreement(evaluated.metrics["scenarios"]["demo_course"]["planner"])
+    assert again["scenarios"][COURSE]["planner"] == without_agreement(evaluated.metrics["scenarios"][COURSE]["planner"])
     summary = {k: v for k, v in evaluated.metrics["summary"].items() if not k.startswith("agreement")}
     assert again["summary"] == summary
 
 
 def test_without_the_driver(model_path: Path, tmp_path: Path):
-    metrics = evaluate_model(Evaluation(str(model_path), ("demo_course",), seeds=1, with_driver=False), tmp_path, engine=Engine(workers=1))
-    assert list(metrics["scenarios"]["demo_course"]) == ["planner"]
+    metrics = evaluate_model(Evaluation(str(model_path), (COURSE,), seeds=1, with_driver=False), tmp_path, engine=Engine(workers=1))
+    assert list(metrics["scenarios"][COURSE]) == ["planner"]
     assert "driver_summary" not in metrics
     assert json.loads((tmp_path / "metrics.json").read_text()) == json.loads(json.dumps(metrics))
-    assert (tmp_path / "demo_course.png").is_file() and not list(tmp_path.glob("*_frame*.png"))
+    assert (tmp_path / f"{STEM}.png").is_file() and not list(tmp_path.glob("*_frame*.png"))
 
 
 def test_profile_changes_how_best_resolves(model_path: Path, tmp_path: Path):
     profile = PreferenceProfile.parse(ROCK_FIRST)
     metrics = evaluate_model(
-        Evaluation(str(model_path), ("demo_course",), seeds=1, profile=profile, with_driver=False), tmp_path, engine=Engine(workers=1)
+        Evaluation(str(model_path), (COURSE,), seeds=1, profile=profile, with_driver=False), tmp_path, engine=Engine(workers=1)
     )
     assert metrics["profile"] == ROCK_FIRST.split(",")
-    zones = {z["id"]: z for z in metrics["scenarios"]["demo_course"]["planner"]["0"]["zones"]}
+    zones = {z["id"]: z for z in metrics["scenarios"][COURSE]["planner"]["0"]["zones"]}
     assert zones["2"]["expect"] == "rock"
     assert zones["1"]["expect"] == zones["3"]["expect"] == "avoid"  # expect: avoid does not depend on the profile
 
@@ -179,7 +178,7 @@ def test_cli_evaluate_with_a_profile(model_path: Path, tmp_path: Path, capsys):
         [
             "evaluate",
             str(model_path),
-            "demo_course",
+            COURSE,
             "--seeds",
             "1",
             "--out",
@@ -194,12 +193,12 @@ def test_cli_evaluate_with_a_profile(model_path: Path, tmp_path: Path, capsys):
     captured = capsys.readouterr()
     assert rc == 0, captured.err
     metrics = json.loads((out / "metrics.json").read_text())
-    assert {z["id"]: z["expect"] for z in metrics["scenarios"]["demo_course"]["planner"]["0"]["zones"]} == {
+    assert {z["id"]: z["expect"] for z in metrics["scenarios"][COURSE]["planner"]["0"]["zones"]} == {
         "1": "avoid",
         "2": "rock",
         "3": "avoid",
     }
-    assert "driver" not in metrics["scenarios"]["demo_course"]
+    assert "driver" not in metrics["scenarios"][COURSE]
     assert "planner: zone success" in captured.out and str(out / "metrics.json") in captured.out
 
 

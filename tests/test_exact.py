@@ -290,10 +290,19 @@ print(h.hexdigest(), plain)
 CPU_CHECK = CpuCheck.of("training", _TRAIN.format(tests=os.path.dirname(__file__)), SETTINGS)
 
 
-def test_training_gives_the_same_bits_under_every_cpu_setting(cpu_outputs):
-    outputs = [(extra, *out.split()) for extra, out in cpu_outputs["training"]]
+def _same_training(runs: list) -> None:
+    outputs = [(extra, *out.split()) for extra, out in runs]
     trained = {h for _, h, _ in outputs}
     assert len(trained) == 1, outputs
     if platform.machine().lower() in ("x86_64", "amd64"):
         # The settings do change plain float64 products or exponentials: the check above has teeth.
         assert len({p for _, _, p in outputs}) > 1, outputs
+
+
+def test_training_gives_the_same_bits_under_an_older_blas_kernel(cpu_outputs):
+    _same_training(cpu_outputs["training"])
+
+
+@pytest.mark.slow
+def test_training_gives_the_same_bits_under_every_cpu_setting(cpu_outputs_every):
+    _same_training(cpu_outputs_every["training"])

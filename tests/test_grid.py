@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from helpers import linear_model
+from helpers import SHORT_COURSE, linear_model
 from terrapref.cli import main
 from terrapref.errors import UserError
 from terrapref.grid import Engine, GridError, run_grid
@@ -72,8 +72,20 @@ def test_cli_engine_flags_are_checked_before_any_work(tmp_path, capsys):
     assert not out.exists()
 
 
-def test_ray_reports_a_failed_job_with_its_inputs():
-    """A Ray instance started for the grid (2 CPUs) and shut down after it."""
+@pytest.fixture(scope="module")
+def ray_instance():
+    """A local Ray instance with 2 CPUs for the module's grids (starting one takes seconds): a grid
+    on the ray engine uses the instance this process is connected to, and leaves it running."""
+    import ray
+
+    from terrapref.grid import start_ray
+
+    assert start_ray(Engine("ray", workers=2))
+    yield
+    ray.shutdown()
+
+
+def test_ray_reports_a_failed_job_with_its_inputs(ray_instance):
     import math
 
     with pytest.raises(GridError) as info:
@@ -81,13 +93,11 @@ def test_ray_reports_a_failed_job_with_its_inputs():
     assert info.value.failures == [("sqrt(-1.0)", "ValueError: math domain error")]
 
 
-def test_cli_evaluate_on_ray_gives_the_local_engines_results(tmp_path, capsys):
+def test_cli_evaluate_on_ray_gives_the_local_engines_results(tmp_path, capsys, ray_instance):
     """The planner and the driver on a local Ray instance with 2 CPUs: the same runs, the same numbers."""
-    model = str(linear_model(tmp_path / "m.safetensors"))
-    assert main(["evaluate", model, "demo_course", "--seeds", "2", "--out", str(tmp_path / "local"), "--workers", "2"]) == 0
-    assert (
-        main(["evaluate", model, "demo_course", "--seeds", "2", "--out", str(tmp_path / "ray"), "--engine", "ray", "--workers", "2"]) == 0
-    )
+    model, course = str(linear_model(tmp_path / "m.safetensors")), str(SHORT_COURSE)
+    assert main(["evaluate", model, course, "--seeds", "2", "--out", str(tmp_path / "local"), "--workers", "2"]) == 0
+    assert main(["evaluate", model, course, "--seeds", "2", "--out", str(tmp_path / "ray"), "--engine", "ray", "--workers", "2"]) == 0
     a, b = (json.loads(Path(tmp_path / d / "metrics.json").read_text()) for d in ("local", "ray"))
     assert a["summary"]["zones"] > 0 and a == b
 

@@ -22,12 +22,12 @@ def test_version(capsys):
     assert exit_.value.code == 0 and capsys.readouterr().out.strip() == f"terrapref {__version__}"
 
 
-def test_info_on_a_model_a_dataset_an_onnx_file_and_a_recording(tmp_path: Path, capsys, fig7_recording):
+def test_info_on_a_model_a_dataset_an_onnx_file_and_a_recording(tmp_path: Path, capsys, tiny_recording):
     model = linear_model(tmp_path / "m.safetensors")
     data = dataset_file(tmp_path / "d.safetensors")
     assert main(["export", str(model), "--format", "onnx", "--out", str(tmp_path / "m.onnx")]) == 0
     capsys.readouterr()
-    assert main(["info", str(model), str(data), str(tmp_path / "m.onnx"), str(fig7_recording)]) == 0
+    assert main(["info", str(model), str(data), str(tmp_path / "m.onnx"), str(tiny_recording)]) == 0
     out = capsys.readouterr().out
     assert "terrapref model" in out and "terrapref dataset" in out and "exported as ONNX" in out and "terrapref recording (complete)" in out
     assert out.count("camera          640x480") == 4 and "profile         mud > rock > water > non_traversable" in out

@@ -4,6 +4,7 @@ lazy imports inside functions included (a lazy import hides a cycle from Python,
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import terrapref
@@ -11,12 +12,18 @@ import terrapref
 ROOT = Path(terrapref.__file__).parent
 
 
+@functools.cache
+def _parsed(path: Path) -> ast.Module:
+    """The module at ``path``, parsed once for all of this file's checks."""
+    return ast.parse(path.read_text(), str(path))
+
+
 def _package_imports() -> dict[str, set[str]]:
     """Top-level part (package or module) -> the other top-level parts it imports anywhere."""
     edges: dict[str, set[str]] = {}
     for path in ROOT.rglob("*.py"):
         part = path.relative_to(ROOT).parts[0].removesuffix(".py")
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        for node in ast.walk(_parsed(path)):
             names = (
                 [a.name for a in node.names]
                 if isinstance(node, ast.Import)
@@ -39,7 +46,7 @@ def _module_imports() -> dict[str, set[str]]:
         modules[name] = path
     edges: dict[str, set[str]] = {}
     for name, path in modules.items():
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        for node in ast.walk(_parsed(path)):
             if isinstance(node, ast.ImportFrom) and node.level == 0 and (node.module or "").startswith("terrapref"):
                 targets = [f"{node.module}.{a.name}" if f"{node.module}.{a.name}" in modules else node.module for a in node.names]
             elif isinstance(node, ast.Import):
@@ -162,7 +169,7 @@ def test_entry_points_that_point_up_the_layers_are_the_named_ones():
     found = set()
     for path in ROOT.rglob("*.py"):
         part = path.relative_to(ROOT).parts[0].removesuffix(".py")
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        for node in ast.walk(_parsed(path)):
             if (
                 isinstance(node, ast.Constant)
                 and isinstance(node.value, str)
@@ -203,7 +210,7 @@ def _long_signatures(tree: ast.AST) -> set[str]:
 
 
 def test_no_function_takes_more_than_six_parameters():
-    found = {name for path in ROOT.rglob("*.py") for name in _long_signatures(ast.parse(path.read_text(), str(path)))}
+    found = {name for path in ROOT.rglob("*.py") for name in _long_signatures(_parsed(path))}
     assert not found, f"more than {MAX_PARAMETERS} parameters: {sorted(found)}"
 
 

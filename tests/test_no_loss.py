@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from helpers import one_line_error
+from helpers import TINY_COURSE, one_line_error
 from terrapref.cli import main
 from terrapref.demos.recording import read_recording
 from terrapref.learning.identify import NO_DECLARED_ORDER
@@ -21,9 +21,7 @@ ORDER = ["water", "rock", "mud", "non_traversable"]  # not the default order
 def ordered_recording(tmp_path_factory) -> Path:
     """A short undisturbed drive by a driver with a non-default order."""
     out = tmp_path_factory.mktemp("ordered") / "rec"
-    assert (
-        main(["record", "fig7a_non_traversable_longer", "--out", str(out), "--quiet", "--disturb", "0", "--profile", ",".join(ORDER)]) == 0
-    )
+    assert main(["record", str(TINY_COURSE), "--out", str(out), "--quiet", "--disturb", "0", "--profile", ",".join(ORDER)]) == 0
     return out
 
 
@@ -67,7 +65,7 @@ def test_an_import_with_no_declared_order_says_so_and_its_model_names_none(tmp_p
 
 
 def test_a_recording_replaced_while_it_is_featurised_fails_clearly(
-    tmp_path: Path, fig7_recording: Path, ordered_recording: Path, monkeypatch, capsys
+    tmp_path: Path, tiny_recording: Path, ordered_recording: Path, monkeypatch, capsys
 ):
     """`record --force --out REC` swapping a new drive in while `featurize REC` reads it: the
     reader would take one recording's frame list and the other's images; it must fail instead."""
@@ -77,7 +75,7 @@ def test_a_recording_replaced_while_it_is_featurised_fails_clearly(
     from terrapref.fileio import replace_dir
 
     rec, other = tmp_path / "rec", tmp_path / "other"
-    shutil.copytree(fig7_recording, rec)
+    shutil.copytree(tiny_recording, rec)
     shutil.copytree(ordered_recording, other)
     reads = []
     real = recording_module.read_label_png
@@ -123,20 +121,20 @@ def test_weights_that_are_not_finite_are_never_written(tmp_path: Path):
     assert not (tmp_path / "m.safetensors").exists()
 
 
-def test_a_drive_whose_every_frame_is_dropped_writes_no_recording(tmp_path: Path, fig7_recording: Path, capsys):
+def test_a_drive_whose_every_frame_is_dropped_writes_no_recording(tmp_path: Path, tiny_recording: Path, capsys):
     import shutil
 
     drop_all = tmp_path / "drop.yaml"
     drop_all.write_text("format: terrapref-perception/1\nframes: {drop_rate: 1.0}\n")
-    args = ["record", "fig7a_non_traversable_longer", "--quiet", "--disturb", "0", "--perception", str(drop_all)]
+    args = ["record", str(TINY_COURSE), "--quiet", "--disturb", "0", "--perception", str(drop_all)]
     assert main([*args, "--out", str(tmp_path / "new")]) == 2
     one_line_error(capsys, "new", "no frame")
     assert not (tmp_path / "new").exists()
     old = tmp_path / "old"
-    shutil.copytree(fig7_recording, old)
+    shutil.copytree(tiny_recording, old)
     assert main([*args, "--out", str(old), "--force"]) == 2
     one_line_error(capsys, "old", "no frame")
-    assert len(read_recording(old)) == len(read_recording(fig7_recording)) and read_recording(old).complete
+    assert len(read_recording(old)) == len(read_recording(tiny_recording)) and read_recording(old).complete
     assert sorted(p.name for p in tmp_path.iterdir()) == ["drop.yaml", "old"]
 
 
@@ -161,7 +159,7 @@ def _writers(tmp: Path, rec: Path) -> dict[str, tuple[list[str], Path]]:
             [
                 "evaluate",
                 str(model),
-                "fig7a_non_traversable_longer",
+                str(TINY_COURSE),
                 "--seeds",
                 "1",
                 "--no-driver",
@@ -182,10 +180,10 @@ def _state(path: Path) -> dict[str, bytes]:
 
 @pytest.mark.parametrize("command", ["render", "show", "course", "inspect", "featurize", "train", "export onnx", "export mcap", "evaluate"])
 def test_every_command_refuses_an_existing_output_without_force_and_replaces_it_with_force(
-    tmp_path: Path, fig7_recording: Path, monkeypatch, capsys, command: str
+    tmp_path: Path, tiny_recording: Path, monkeypatch, capsys, command: str
 ):
     monkeypatch.chdir(Path(__file__).resolve().parent.parent)  # examples/ as a user's clone has it
-    argv, out = _writers(tmp_path, fig7_recording)[command]
+    argv, out = _writers(tmp_path, tiny_recording)[command]
     assert main(argv) == 0
     before = _state(out)
     capsys.readouterr()
@@ -195,14 +193,14 @@ def test_every_command_refuses_an_existing_output_without_force_and_replaces_it_
     assert main([*argv, "--force"]) == 0
 
 
-def test_two_evaluations_into_one_folder_leave_one_run_whole(tmp_path: Path, fig7_recording: Path, capsys):
+def test_two_evaluations_into_one_folder_leave_one_run_whole(tmp_path: Path, tiny_recording: Path, capsys):
     """A second evaluate while the first writes is refused, even with --force; one after another,
     the second (with --force) replaces the first whole: no figure of the first is left beside it."""
     from terrapref.fileio import output_folder
 
-    argv, out = _writers(tmp_path, fig7_recording)["evaluate"]
+    argv, out = _writers(tmp_path, tiny_recording)["evaluate"]
     with output_folder(out, force=False):  # as a first evaluate holds it while it runs
-        (out / "fig7a_non_traversable_longer_seed0.png").write_bytes(b"first")
+        (out / "tiny_course_seed0.png").write_bytes(b"first")
         assert main([*argv, "--force"]) == 2
         one_line_error(capsys, str(out), "being written by another terrapref command")
     (out / "from_the_first_run.png").write_bytes(b"first")

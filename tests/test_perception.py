@@ -455,18 +455,19 @@ def test_a_sky_line_the_map_cuts_short_gives_no_estimate(renderer):
 # --- perceived recordings, evaluations and environments -------------------------------------------------
 
 
-def test_a_recording_under_perception_holds_what_the_robot_received(tmp_path, capsys, demo_course_recording):
+def test_a_recording_under_perception_holds_what_the_robot_received(tmp_path, capsys, short_recording):
     """The driver sees the truth (the same drive as without perception); the recording holds the
     frames that reached the robot (fewer, late, their labels and poses off the truth) and names
     the model; it is featurised and trained from as any recording."""
     import json
 
+    from helpers import SHORT_COURSE
     from terrapref.cli import main
     from terrapref.demos.recording import read_recording
     from terrapref.perception.model import from_dict
 
-    clean, seen = demo_course_recording, tmp_path / "seen"
-    assert main(["record", "demo_course", "--out", str(seen), "--quiet", "--perception", "field"]) == 0
+    clean, seen = short_recording, tmp_path / "seen"
+    assert main(["record", str(SHORT_COURSE), "--out", str(seen), "--quiet", "--disturb", "0", "--perception", "field"]) == 0
     assert "under perception field" in capsys.readouterr().out
     a, b = read_recording(clean), read_recording(seen)
     assert a.meta["perception"]["name"] == "clean" and from_dict(b.meta["perception"], "meta", default_classes()) == load_perception(
@@ -490,12 +491,14 @@ def test_a_recording_under_perception_holds_what_the_robot_received(tmp_path, ca
 def test_evaluate_under_a_perception_preset_names_it_in_metrics_json(tmp_path, capsys):
     import json
 
-    from helpers import linear_model
+    from helpers import SHORT_COURSE, linear_model
     from terrapref.cli import main
 
     model = linear_model(tmp_path / "m.safetensors")
     out = tmp_path / "ev"
-    assert main(["evaluate", str(model), "demo_course", "--seeds", "1", "--out", str(out), "--perception", "field", "--workers", "1"]) == 0
+    assert (
+        main(["evaluate", str(model), str(SHORT_COURSE), "--seeds", "1", "--out", str(out), "--perception", "field", "--workers", "1"]) == 0
+    )
     assert "perception: field" in capsys.readouterr().out
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["perception"] == load_perception("field").to_dict()
@@ -522,13 +525,13 @@ def test_the_gymnasium_env_observes_what_the_robot_would(tmp_path):
         OffRoadNavEnv("demo_course", perception="nowhere")
 
 
-def test_a_recordings_perception_is_checked_when_it_is_read(tmp_path, demo_course_recording):
+def test_a_recordings_perception_is_checked_when_it_is_read(tmp_path, tiny_recording):
     import json
     import shutil
 
     from terrapref.demos.recording import read_recording
 
-    out = shutil.copytree(demo_course_recording, tmp_path / "rec")
+    out = shutil.copytree(tiny_recording, tmp_path / "rec")
     meta = json.loads((out / "meta.json").read_text())
     meta["perception"] = load_perception("rellis").to_dict()  # the section a recording made under rellis carries
     (out / "meta.json").write_text(json.dumps(meta))
@@ -545,15 +548,18 @@ def test_a_recordings_perception_is_checked_when_it_is_read(tmp_path, demo_cours
 
 
 def test_select_drives_the_same_models_under_several_perception_models(tmp_path):
-    """The paper's recipe (quick to train) taught from a drive recorded under field, driving one
-    layout on clean frames and under rellis: one table each, every zone tagged."""
+    """The paper's recipe (quick to train) taught from a drive of the short course recorded under
+    field, driving one layout on clean frames and under rellis: one table each, every zone tagged."""
     import json
 
+    from helpers import SHORT_COURSE
     from terrapref.cli import main
 
     out = tmp_path / "sel"
     argv = [
         "select",
+        "--course",
+        str(SHORT_COURSE),
         "--recipes",
         "paper",
         "--orders",

@@ -9,7 +9,7 @@ from dataclasses import fields, replace
 import numpy as np
 import pytest
 
-from helpers import model_meta, train_config
+from helpers import TINY_COURSE, model_meta, train_config
 from terrapref.camera import CameraConfig
 from terrapref.dataset import FORMAT as DATASET_FORMAT
 from terrapref.dataset import Dataset, build_dataset, check_learnable, merge_datasets, save_dataset, training_data
@@ -351,15 +351,15 @@ def test_run_recipe_demonstrates_corrects_and_reuses_demonstrations(tmp_path):
     # The skip path: a planner that drives the course to the goal, so that the correction session
     # is one drive of the course rather than one until the time limit.
     recipe = Recipe("tiny", demonstrations=1, corrections=1, train=train_config(epochs=2, skip=True))
-    setup = RecipeSetup(0, course="demo_course")
+    setup = RecipeSetup(0, course=str(TINY_COURSE))
     out = run_recipe(recipe, tmp_path, setup, write_recordings=True)
     assert out.model.exists()
-    assert [p.name for p in out.recordings] == ["demo_course_0", "corrections_0"]
+    assert [p.name for p in out.recordings] == ["tiny_course_0", "corrections_0"]
     assert out.demo_minutes > 0 and out.correction_minutes > 0
-    stamp = (tmp_path / "demo_course_0" / "meta.json").stat().st_mtime_ns
+    stamp = (tmp_path / "tiny_course_0" / "meta.json").stat().st_mtime_ns
     again = run_recipe(Recipe("plain", demonstrations=1, train=train_config(epochs=2)), tmp_path, setup)
-    assert again.recordings == [tmp_path / "demo_course_0"] and again.correction_minutes == 0
-    assert (tmp_path / "demo_course_0" / "meta.json").stat().st_mtime_ns == stamp  # reused, not recorded again
+    assert again.recordings == [tmp_path / "tiny_course_0"] and again.correction_minutes == 0
+    assert (tmp_path / "tiny_course_0" / "meta.json").stat().st_mtime_ns == stamp  # reused, not recorded again
 
 
 def test_demonstrations_kept_in_memory_train_what_their_recordings_train(tmp_path):
@@ -368,7 +368,7 @@ def test_demonstrations_kept_in_memory_train_what_their_recordings_train(tmp_pat
     from terrapref.recipes import TEACH, RecipeSetup, demonstrate, run_recipe
 
     features = TEACH.features()
-    setup = RecipeSetup(3, course="demo_course", features=features)
+    setup = RecipeSetup(3, course=str(TINY_COURSE), features=features)
     kept = demonstrate(TEACH, tmp_path / "mem", setup, write=False)
     written = demonstrate(TEACH, tmp_path / "disk", setup, write=True)
     assert kept[0].in_memory and not written[0].in_memory and not (tmp_path / "mem").exists()
@@ -377,8 +377,8 @@ def test_demonstrations_kept_in_memory_train_what_their_recordings_train(tmp_pat
     np.testing.assert_array_equal(a.w, b.w)
     np.testing.assert_array_equal(kept[0].poses, written[0].poses)
     assert a.meta["recordings"][0]["written"] is False and "written" not in b.meta["recordings"][0]
-    out = run_recipe(replace(TEACH, train=train_config(epochs=1)), tmp_path / "job", RecipeSetup(3, course="demo_course"))
-    assert out.recordings == [] and out.model.exists() and not (tmp_path / "job" / "demo_course_0_disturbed").exists()
+    out = run_recipe(replace(TEACH, train=train_config(epochs=1)), tmp_path / "job", RecipeSetup(3, course=str(TINY_COURSE)))
+    assert out.recordings == [] and out.model.exists() and not (tmp_path / "job" / "tiny_course_0_disturbed").exists()
 
 
 def test_a_cache_featurises_each_recording_once_into_the_same_dataset(tmp_path, monkeypatch):
@@ -388,7 +388,7 @@ def test_a_cache_featurises_each_recording_once_into_the_same_dataset(tmp_path, 
     from terrapref.recipes import TEACH, RecipeSetup, demonstrate
 
     features, rules = TEACH.features(), TEACH.rules
-    recordings = demonstrate(Recipe("two", demonstrations=2), tmp_path, RecipeSetup(3, course="demo_course"), write=False)
+    recordings = demonstrate(Recipe("two", demonstrations=2), tmp_path, RecipeSetup(3, course=str(TINY_COURSE)), write=False)
     plain, one = build_dataset(recordings, features, rules=rules), build_dataset(recordings[:1], features, rules=rules)
     calls: list[int] = []
     featurise = dataset_module.featurize_recording
@@ -411,12 +411,12 @@ def test_a_recorded_demonstration_of_another_course_is_recorded_again(tmp_path):
 
     recipe = Recipe("one", demonstrations=2)
     logged: list[str] = []
-    setup = RecipeSetup(0, course="demo_course")
+    setup = RecipeSetup(0, course=str(TINY_COURSE))
     record_demonstrations(recipe, tmp_path, setup, log=logged.append)
     assert len(logged) == 2
-    meta_path = tmp_path / "demo_course_1" / "meta.json"
+    meta_path = tmp_path / "tiny_course_1" / "meta.json"
     meta_path.write_text(json.dumps({**json.loads(meta_path.read_text()), "scenario": "another_course"}))
     logged.clear()
     record_demonstrations(recipe, tmp_path, setup, log=logged.append)
-    assert read_recording(tmp_path / "demo_course_1").meta["scenario"] == "demo_course"
-    assert len(logged) == 1 and logged[0].startswith("demonstration 2/2 (demo_course)"), "run 0 reused, run 1 recorded again"
+    assert read_recording(tmp_path / "tiny_course_1").meta["scenario"] == "tiny_course"
+    assert len(logged) == 1 and logged[0].startswith(f"demonstration 2/2 ({TINY_COURSE})"), "run 0 reused, run 1 recorded again"

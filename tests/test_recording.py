@@ -354,11 +354,11 @@ def test_inspect_says_quit_and_not_reached(tmp_path: Path):
     assert zone_lines and all(" -> -" in line for line in zone_lines)
 
 
-def test_sigterm_during_record_force_says_so_and_keeps_the_old_recording(tmp_path, fig7_recording):
+def test_sigterm_during_record_force_says_so_and_keeps_the_old_recording(tmp_path, tiny_recording):
     # As after Ctrl-C: the old recording stays as it was, the unfinished one is OUT.partial (not
     # a hidden folder beside it), and the command says it was terminated.
 
-    out = shutil.copytree(fig7_recording, tmp_path / "rec")
+    out = shutil.copytree(tiny_recording, tmp_path / "rec")
     before = (out / "frames.jsonl").read_bytes()
     command = [
         sys.executable,

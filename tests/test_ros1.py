@@ -20,7 +20,7 @@ import time
 import numpy as np
 import pytest
 
-FIRST, FRAMES = 190, 40  # the recording's frames published: the drive comes up to the rock and the trees
+FIRST, FRAMES = 200, 40  # the short recording's frames published: the drive comes up to the non_traversable patch
 
 
 def _ros1_missing() -> str | None:
@@ -103,14 +103,14 @@ PLAYER = textwrap.dedent('''
 
 
 @pytest.fixture(scope="module")
-def setup(tmp_path_factory, fig7_recording):
+def setup(tmp_path_factory, short_recording):
     from helpers import skip_path_weights
     from terrapref.learning.model_file import save_model
     from terrapref.learning.network import ClassifierConfig
     from test_offset_rule import DRIVER_LIKE, _offset_meta
 
     root = tmp_path_factory.mktemp("ros1")
-    (root / "rec").symlink_to(fig7_recording, target_is_directory=True)
+    (root / "rec").symlink_to(short_recording, target_is_directory=True)
     config = ClassifierConfig(hidden=8, skip=True)
     model = save_model(root / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
     (root / "robot.yaml").write_text(

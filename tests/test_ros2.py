@@ -22,7 +22,7 @@ from typing import Callable
 import numpy as np
 import pytest
 
-FIRST, FRAMES = 190, 40  # the recording's frames published: the drive comes up to the rock and the trees
+FIRST, FRAMES = 200, 40  # the short recording's frames published: the drive comes up to the non_traversable patch
 LOOPBACK = (
     '<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>'
     "<AllowMulticast>false</AllowMulticast></General><Discovery><ParticipantIndex>auto</ParticipantIndex>"
@@ -159,13 +159,16 @@ class _Heard:
             return list(self.by_topic.get(topic, []))
 
 
-def _listen(dds, heard: _Heard) -> None:
+def _listen(dds, heard: _Heard) -> list:
+    """Subscriptions to the node's topics, kept in ``heard``: the readers."""
     from terrapref.interop.dds import DEFAULT, LATCHED
 
-    dds.subscribe("/terrapref/cmd_vel", "geometry_msgs/msg/TwistStamped", DEFAULT, heard.keeper("cmd"))
-    dds.subscribe("/terrapref/trajectories", "visualization_msgs/msg/MarkerArray", DEFAULT, heard.keeper("trajectories"))
-    dds.subscribe("/terrapref/costmap", "nav_msgs/msg/OccupancyGrid", LATCHED, heard.keeper("costmap"))
-    dds.subscribe("/tf_static", "tf2_msgs/msg/TFMessage", LATCHED, heard.keeper("tf_static"))
+    return [
+        dds.subscribe("/terrapref/cmd_vel", "geometry_msgs/msg/TwistStamped", DEFAULT, heard.keeper("cmd")),
+        dds.subscribe("/terrapref/trajectories", "visualization_msgs/msg/MarkerArray", DEFAULT, heard.keeper("trajectories")),
+        dds.subscribe("/terrapref/costmap", "nav_msgs/msg/OccupancyGrid", LATCHED, heard.keeper("costmap")),
+        dds.subscribe("/tf_static", "tf2_msgs/msg/TFMessage", LATCHED, heard.keeper("tf_static")),
+    ]
 
 
 def _endpoints(dp, own) -> list:
@@ -180,7 +183,7 @@ def _endpoints(dp, own) -> list:
 
 
 @pytest.fixture(scope="module")
-def system(tmp_path_factory, fig7_recording):
+def system(tmp_path_factory, short_recording):
     """Two nodes: one driven frame by frame from this process (with bad input after the drive),
     one that starts in a domain where nobody publishes and is then driven by `terrapref play`."""
     from helpers import skip_path_weights
@@ -198,7 +201,7 @@ def system(tmp_path_factory, fig7_recording):
     root = tmp_path_factory.mktemp("ros2")
     config = ClassifierConfig(hidden=8, skip=True)
     model = save_model(root / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
-    rec = read_recording(fig7_recording)
+    rec = read_recording(short_recording)
     frames = recording_frames(rec)
     part = slice(FIRST, FIRST + FRAMES + 1)  # one frame more, for after the bad input
     frames = replace(
@@ -256,13 +259,13 @@ def system(tmp_path_factory, fig7_recording):
         _wait(lambda: all(w.matched() for w in player.writers.values()), what="the node's subscriptions")
         messages = list(player.messages())
         times = sorted({m.t_ns for m in messages})
-        images = {}  # the stamp of each image published -> its frame
+        # the stamp of each image of the log -> its frame
+        out["frame_of"] = {round(stamp_s(m.msg.header), 6): times.index(m.t_ns) for m in messages if m.topic == "/terrapref/labels"}
         got: dict[float, tuple[float, float]] = {}
-        for k, t_ns in enumerate(times[:FRAMES]):
+        for t_ns in times[:FRAMES]:
             group = [m for m in messages if m.t_ns == t_ns]
             image = next(m for m in group if m.topic == "/terrapref/labels")
             stamp = round(stamp_s(image.msg.header), 6)
-            images[stamp] = k
             _publish_until_commanded(player, heard, t_ns, group, stamp)
             got[stamp] = next((c.twist.linear.x, c.twist.angular.z) for c in heard.get("cmd") if round(stamp_s(c.header), 6) == stamp)
         out["commands"] = [got[s] for s in sorted(got)]
@@ -272,9 +275,12 @@ def system(tmp_path_factory, fig7_recording):
         _bad_input(player, messages, times, heard, out)
         _wait(lambda: heard.get("costmap"), timeout_s=5.0, what="a costmap")
         out["heard"] = heard
+        # Its part is done: Ctrl-C now (it is awaited below), for a costmap a second heard is a costly message to read.
+        node.send_signal(signal.SIGINT)
         # The idle node heard nobody for its first seconds; now `terrapref play` drives it, and a subscriber sees it drive.
         idle_heard, idle_listener = _Heard(), Participant(idle, MessageTypes(typestore()))
-        _listen(idle_listener, idle_heard)
+        readers = _listen(idle_listener, idle_heard)
+        _wait(lambda: all(r.get_matched_publications() for r in readers), what="the idle node's publications")
         _wait(lambda: any("/clock: no publisher" in line for line in idle_log), what="the idle node to say nobody publishes")
         play = subprocess.run(
             [
@@ -286,7 +292,7 @@ def system(tmp_path_factory, fig7_recording):
                 "--robot",
                 str(robot),
                 "--rate",
-                "2",
+                "1",
                 "--delay",
                 "0.5",
             ],
@@ -445,7 +451,15 @@ def test_bad_input_is_said_once_and_skipped(system):
 def test_play_drives_a_node_that_waited_in_an_empty_domain(system):
     """A node alone in its domain says once that nobody publishes its inputs, then `terrapref play`
     publishes a log there and a DDS subscriber sees the node's commands, markers and costmap; started
-    with SIGINT ignored (as a script's background job is), it ends on Ctrl-C all the same."""
+    with SIGINT ignored (as a script's background job is), it ends on Ctrl-C all the same.
+
+    Played in real time, a node on a slow machine keeps up with only some of the frames (it
+    hears the others too late, or not at all): what is checked is what it decided on those, not
+    how many they were."""
+    from terrapref.interop.node_core import stamp_s
+    from terrapref.interop.runtime import PlannerRuntime
+    from terrapref.learning.model_file import load_model
+
     play = system["play"]
     assert play.returncode == 0, play.stderr[-2000:]
     assert "played" in play.stdout and "/clock" in play.stdout
@@ -454,9 +468,48 @@ def test_play_drives_a_node_that_waited_in_an_empty_domain(system):
     for topic in ("/terrapref/labels", "/terrapref/camera_info", "/terrapref/odom", "/terrapref/path", "/clock"):
         assert sum(f"{topic}: no publisher of" in line for line in stderr.splitlines()) == 1, stderr
     heard = system["idle_heard"]
-    assert len(heard.get("cmd")) >= FRAMES // 2 and heard.get("trajectories") and heard.get("costmap")
+    assert heard.get("costmap")
+    # Each decision's markers, stamped with its frame's time in the log: the frame, and the trajectory drawn as chosen.
+    chosen = {
+        round(stamp_s(m.markers[0].header), 6): [j for j, k in enumerate(m.markers) if k.scale.x > 0.05] for m in heard.get("trajectories")
+    }
     decided = int(stdout.split("terrapref ros2: ")[1].split()[0])
-    assert decided >= FRAMES // 2, stdout
+    assert 1 <= len(chosen) <= decided <= len(system["frame_of"]), stdout
+    assert heard.get("cmd") and {round(stamp_s(c.header), 6) for c in heard.get("cmd")} <= set(system["frame_of"])  # in the log's time
+    # The planner fed the frames the node decided on, in their order, chooses what the node chose.
+    rec, frame_of = system["rec"], system["frame_of"]
+    runtime = PlannerRuntime(load_model(system["model"]))
+    runtime.set_path(np.asarray(rec.meta.get("path") or rec.scenario["path"]["waypoints"], dtype=float))
+    for stamp in sorted(chosen):
+        k = FIRST + frame_of[stamp]
+        assert chosen[stamp] == [runtime.decide(rec.image(k), stamp, tuple(rec.poses[k])).index], (stamp, stdout)
+
+
+def test_a_participant_without_subscriptions_waits_instead_of_spinning(monkeypatch):
+    """A publisher alone (`terrapref play`'s) has nothing on its wait set: its thread must still
+    wait there, up to WAIT_NS at a time, not loop on a wait that returns at once and take a core
+    from the node it feeds. (A slower machine only waits fewer times.)"""
+    from terrapref.interop.dds import WAIT_NS, MessageTypes, Participant
+    from terrapref.interop.ros_messages import typestore
+
+    monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
+
+    class Counted:
+        def __init__(self, waitset) -> None:
+            self.waitset, self.waits = waitset, 0
+
+        def wait(self, timeout_ns: int) -> int:
+            self.waits += 1
+            return self.waitset.wait(timeout_ns)
+
+    participant = Participant(230, MessageTypes(typestore()))
+    try:
+        participant._waitset = counted = Counted(participant._waitset)
+        time.sleep(0.5)
+        assert counted.waits <= 0.5 / (WAIT_NS * 1e-9) + 5, counted.waits
+    finally:
+        participant._waitset = counted.waitset
+        participant.close()
 
 
 def test_each_message_type_is_cdr_identical_to_rosbags_and_announces_its_rihs01():

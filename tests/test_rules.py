@@ -4,7 +4,7 @@ later is checked without editing this file.
 
 Each rule is fitted honestly: the recipe config that names it (an ``argmax`` rule is its own
 config) fitted, as training fits it, to the samples featurised from a recording the fixtures
-make (``fig7_recording``). Then, for each rule:
+make (``short_recording``). Then, for each rule:
 
 1. its file block is JSON and reads back as the same rule, alone and through a model file that
    lists it and names it to drive (a rule that does not steer, the speed rule, sets the speed of
@@ -90,11 +90,11 @@ def _config_of(rule_type: str, rule_class: type[Rule]) -> RuleConfig:
 
 
 @pytest.fixture(scope="module")
-def fitted(fig7_recording, tmp_path_factory) -> SimpleNamespace:
-    """Every registered rule fitted to the fig7 recording's samples, as the teach recipe fits its
+def fitted(short_recording, tmp_path_factory) -> SimpleNamespace:
+    """Every registered rule fitted to the short recording's samples, as the teach recipe fits its
     rules after C (labels steadied and samples mirrored as its training says), and a model file
     per rule that lists it and names it to drive (C reduced to its skip path: tests/helpers.py)."""
-    recording = read_recording(fig7_recording)
+    recording = read_recording(short_recording)
     configs = {name: _config_of(name, cls) for name, cls in RULES.items()}
     dataset = build_dataset([recording], FeatureConfig(), rules=tuple(configs.values()))
     options = RECIPES["teach"].train.data

@@ -58,6 +58,7 @@ def test_every_class_lies_alone_and_every_feature_class_as_a_lane(labels):
     assert sorted(_lanes(labels)) == sorted(c for c in CLASSES if c != LETHAL)
 
 
+@pytest.mark.slow  # a study of the course (a 7-minute drive featurised whole); the speed rule's fit is tested in test_speed_rule
 def test_the_driver_shows_every_class_at_a_steady_speed_within_seven_minutes(tmp_path):
     from terrapref.dataset import build_dataset
     from terrapref.features import FeatureConfig

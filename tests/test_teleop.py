@@ -450,6 +450,7 @@ def test_frames_taken_off_the_map_are_not_training_data(tmp_path):
         build_dataset([read_recording(out)], FeatureConfig())
 
 
+@pytest.mark.slow  # the whole of demo_course; a press's step and a hold's ramp are tested above, the person on the short course below
 def test_a_simulated_keyboard_person_drives_the_course_through_the_window(tmp_path):
     """Key presses from the synthetic driver's intent, 0.3 s late: the course driven with gentle curves, no collision."""
     import numpy as np
@@ -481,12 +482,13 @@ def test_a_simulated_keyboard_person_works_the_throttle_toward_the_speeds_it_wan
     ramp, and settles at each cruising speed the driver wants (within half a step)."""
     import numpy as np
 
+    from helpers import SHORT_COURSE
     from terrapref.demos.expert import ExpertConfig, ExpertDriver
     from terrapref.scenario import resolve_scenario
     from terrapref.teleop.keyboard import KeyboardPerson
     from terrapref.teleop.throttle import KEY_RATE_MPS2, KEY_STEP_MPS
 
-    scenario = resolve_scenario("demo_course")
+    scenario = resolve_scenario(str(SHORT_COURSE))
     order = ("rock", "mud", "water", "non_traversable")
     speeds = (("grass", 1.3), ("rock", 0.8), ("mud", 0.5), ("water", 0.3))
     person = KeyboardPerson(ExpertDriver(ExpertConfig.styled("default", order, speeds)), scenario, np.random.default_rng(0))
@@ -550,7 +552,7 @@ def test_the_gamepad_stick_springs_back_and_takes_over_from_the_keys():
     assert stick.update(0.1) == pytest.approx(0.1) and stick.source == "keys", "the input used last drives"
 
 
-def test_frames_after_a_gap_get_the_features_of_a_recording_without_one(tmp_path, demo_course_recording):
+def test_frames_after_a_gap_get_the_features_of_a_recording_without_one(tmp_path, short_recording):
     """A ride-along records only the takeovers: the path progress must jump the gap, so that
     the frames after it are featurised as they would be in one continuous recording."""
     import json
@@ -561,11 +563,11 @@ def test_frames_after_a_gap_get_the_features_of_a_recording_without_one(tmp_path
     from terrapref.dataset import featurize_recording
     from terrapref.features import FeatureConfig
 
-    full = demo_course_recording  # the synthetic driver, along the path
+    full = short_recording  # the synthetic driver, along the path
     gappy = tmp_path / "gappy"
     shutil.copytree(full, gappy)
     lines = (gappy / "frames.jsonl").read_text().splitlines()
-    kept = list(range(20)) + list(range(300, 330))  # 28 s (about 28 m) of path missing
+    kept = list(range(20)) + list(range(200, 230))  # 18 s (about 18 m) of path missing
     (gappy / "frames.jsonl").write_text("".join(lines[i] + "\n" for i in kept))
     meta = json.loads((gappy / "meta.json").read_text())
     (gappy / "meta.json").write_text(json.dumps({**meta, "frames": len(kept)}))

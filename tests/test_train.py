@@ -222,7 +222,7 @@ def test_train_and_save_without_checkpoints(tmp_path: Path):
 def test_mirror_learns_the_unseen_side():
     """A dataset whose preference is only ever shown with the better arcs on the left is learned
     for the right side too when mirrored copies are added (the preference has no side)."""
-    data = linear_dataset(4000)
+    data = linear_dataset(2000)
     left = data.labels >= 10  # keep only decisions toward w >= 0
     shown = dataset_of(data.U[left], data.labels[left])
     mirrored = dataset_of(data.U[~left], data.labels[~left])  # the other side, never shown

@@ -223,13 +223,17 @@ class Participant:
 
     def __init__(self, domain: int, types: MessageTypes, on_error: Callable[[BaseException], None] | None = None) -> None:
         with needs("ros2", "ROS 2 over DDS"):
-            from cyclonedds.core import Policy, Qos, WaitSet
+            from cyclonedds.core import GuardCondition, Policy, Qos, WaitSet
             from cyclonedds.domain import DomainParticipant
         self.types, self.domain = types, domain
         self.dp = DomainParticipant(domain, qos=Qos(Policy.Userdata(ENCLAVE)))
         self._topics: dict[tuple[str, str], Any] = {}
         self._readers: list[Any] = []  # kept alive: cyclonedds deletes an entity its Python object no longer holds
         self._waitset = WaitSet(self.dp)
+        # A wait set with nothing attached returns at once: without this a participant that only
+        # publishes (terrapref play's) would spin a core. Set on close, it also ends the wait then.
+        self._wake = GuardCondition(self.dp)
+        self._waitset.attach(self._wake)
         self._handlers: list[tuple[Any, Callable[[], None]]] = []  # (read condition, what takes and hands on its reader's samples)
         self._lock = threading.Lock()  # guards _handlers: subscriptions may come while the thread runs
         self._closing = False
@@ -301,6 +305,7 @@ class Participant:
     def close(self) -> None:
         """Stop handing messages to callbacks and leave the domain (remote participants see it go)."""
         self._closing = True
+        self._wake.set(True)
         self._thread.join(timeout=5)
         if self._thread.is_alive():  # a callback still runs: its entities are left to the process's end
             return
