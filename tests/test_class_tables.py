@@ -698,7 +698,8 @@ def test_a_courses_table_goes_with_its_drive_to_the_follow_up_training_and_evalu
     capsys.readouterr()
     assert main(["course", "--after", str(me), "--out", str(more)]) == 0
     printed = capsys.readouterr().out
-    assert "pairs open: " in printed and "tree" in printed.split("pairs open: ")[1].splitlines()[0]  # no tree was driven beside
+    left_open = "pairs open for a follow-up: "
+    assert left_open in printed and "tree" in printed.split(left_open)[1].split(";")[0]  # no tree was driven beside
     assert f"(record it: terrapref record {more} --out DIR)" in printed, "the command that works, not a --classes FILE placeholder"
     assert resolve_scenario(str(more)).classes == load_classes(small)
     assert main(["course", "--after", str(me), str(tiny_recording), "--out", str(tmp_path / "x.yaml")]) == 2
