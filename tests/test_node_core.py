@@ -280,3 +280,37 @@ def test_the_node_holds_a_fast_model_to_the_robots_limits_and_says_it_arrived(se
         SimpleNamespace(poses=[SimpleNamespace(pose=SimpleNamespace(position=SimpleNamespace(x=x, y=15.0))) for x in (20.0, 40.0)])
     )
     assert not near.arrived
+
+
+def test_the_rules_settings_come_from_the_robot_file_then_the_nodes_parameters(setup, tmp_path):
+    """The robot file's ``rules`` block, then a node's parameters over it (ROS 2's flat
+    ``offset.switch_margin``, ROS 1's nested ``~offset``), are what the node's planner decides
+    with; an unknown name or a value a rule cannot take is refused in one line when the node starts."""
+    from terrapref.errors import ConfigError, UserError
+    from terrapref.interop.node_core import NodeOptions, nested_rule_params
+    from terrapref.interop.ros2 import RosArgs
+
+    model, _, path, images = setup
+    text = (
+        "format: terrapref-robot/1\ntopics: {segmentation: /seg, camera_info: /info, odometry: /odom, command: /cmd}\n"
+        "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\nrules: {offset: {switch_margin: 0.25, pursuit_m: 3.0}}\n"
+    )
+    (tmp_path / "robot.yaml").write_text(text)
+    robot = load_robot(tmp_path / "robot.yaml")
+    args = RosArgs.parse(["-p", "offset.switch_margin:=0.3", "-p", "rate:=10"])
+    opts = NodeOptions().with_rule_params(args.rule_params, "--ros-args").resolved(args.get_param, param=lambda name: f"-p {name}")
+    core = PlannerNodeCore(model, opts.applied_to(robot), path)
+    core.on_camera_info(camera_info(TS, header(TS, 0.0, "camera_optical"), CameraConfig()))
+    held = core.runtime.planner.runner.config
+    assert (held.switch_margin, held.pursuit_m) == (0.3, 3.0)  # the parameter over the file, the file over the model
+    assert "offset.switch_margin 0.3" in core.runtime.notes[0] and "offset.pursuit_m 3" in core.runtime.notes[0]
+    ros1 = {"~offset": {"switch_margin": 0.4}}
+    assert nested_rule_params(lambda name, default: ros1.get(name, default)) == {"offset.switch_margin": 0.4}
+    with pytest.raises(UserError, match=r"^--ros-args: offset.switch_margn: the offset rule has no setting 'switch_margn'"):
+        NodeOptions().with_rule_params(RosArgs.parse(["-p", "offset.switch_margn:=0.3"]).rule_params, "--ros-args")
+    with pytest.raises(UserError, match=r"robot.yaml and --ros-args: offset.switch_margin, pursuit_m: .*switch_margin >= 0"):
+        PlannerNodeCore(model, NodeOptions().with_rule_params({"offset.switch_margin": -0.1}, "--ros-args").applied_to(robot), path)
+    (tmp_path / "bad.yaml").write_text(text.replace("switch_margin: 0.25", "margin: 0.25"))
+    with pytest.raises(ConfigError) as raised:
+        load_robot(tmp_path / "bad.yaml")
+    assert raised.value.problems[0].field == "rules.offset.margin"

@@ -7,9 +7,12 @@ import numpy as np
 import pytest
 
 from helpers import skip_path_weights
+from terrapref.errors import UserError
 from terrapref.interop.runtime import FRAME_AHEAD_S, PlannerRuntime, RobotSettings
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
+from terrapref.rules import RULES
+from terrapref.rules.settings import RuleSettings
 from terrapref.vehicle import VehicleConfig
 from test_interop import speed_block
 from test_offset_rule import DRIVER_LIKE, _offset_meta
@@ -21,7 +24,7 @@ GRASS = np.zeros((480, 640), dtype=np.uint8)  # grass all round: nothing to stop
 def _model(root, v_mps: float, top_mps: float = 2.0):
     config = ClassifierConfig(hidden=8, skip=True)
     meta = _offset_meta(DRIVER_LIKE)
-    meta["rules"] = [*meta["rules"], {**speed_block(v_mps), "max_speed_mps": top_mps}]
+    meta["rules"] = [*meta["rules"], {**speed_block(v_mps), "max_speed_mps": top_mps, "background": "grass"}]
     return save_model(root / f"v{v_mps}.safetensors", config, skip_path_weights(config), meta)
 
 
@@ -107,3 +110,55 @@ def test_the_runtime_example_in_the_docs_runs(tmp_path, monkeypatch, capsys):
     printed = capsys.readouterr().out.splitlines()
     assert "1.5 m/s" in printed[-1] and "8 m/s" in printed[-1]  # the note: held to the example robot's 1.5 m/s
     assert printed[0].split()[0].isdigit()  # the decision's trajectory, then its command and the one given out
+
+
+def _settings(**flat) -> RobotSettings:
+    """Settings of the model's rules as a node's parameters give them: ``offset__switch_margin`` for ``offset.switch_margin``."""
+    return RobotSettings(rules=RuleSettings.parse({k.replace("__", "."): v for k, v in flat.items()}, "--ros-args", RULES))
+
+
+def test_a_robot_sets_a_speed_cap_overall_and_per_class_over_the_model_files(cruising):
+    """The model cruises at 1.6 m/s on every class: a robot's cap of 1.2 m/s holds every command
+    to it, a cap on grass alone (the background, all this frame shows) to that, and both are said."""
+    for settings, top in (
+        (_settings(speed__max_speed_mps=1.2), 1.2),
+        (_settings(speed__class_max_mps__grass=0.7, speed__class_max_mps__mud=0.4), 0.7),
+    ):
+        runtime = _runtime(cruising, robot=settings)
+        for i in range(30):
+            runtime.decide(GRASS, 0.1 * i, (5.0 + 0.1 * i, 0.0, 0.0), speed_mps=top)
+        assert runtime.last.command.v == pytest.approx(top)
+        assert any(line.startswith("rule settings over the model file's: speed.") for line in runtime.notes)
+    plain = _runtime(cruising)
+    plain.decide(GRASS, 0.0, (5.0, 0.0, 0.0), speed_mps=1.6)
+    assert plain.last.command.v == pytest.approx(1.6)  # the file's own, where the robot sets nothing
+
+
+def test_a_robot_sets_the_offset_rules_switch_margin(cruising):
+    runtime = _runtime(cruising, robot=_settings(offset__switch_margin=0.3))
+    offset = next(r for r in runtime.planner.rules if r.type == "offset")
+    assert offset.config.switch_margin == 0.3 and runtime.planner.rule is offset
+    assert runtime.planner.runner.config.switch_margin == 0.3  # what the rule decides with
+
+
+@pytest.mark.parametrize(
+    "flat, words",
+    [
+        ({"offset.switch_margin": -1.0}, ["--ros-args", "offset.switch_margin", ">= 0"]),
+        ({"speed.class_max_mps.sand": 0.5}, ["--ros-args", "speed.class_max_mps", "'sand'", "grass"]),
+        ({"speed.class_max_mps.non_traversable": 0.5}, ["--ros-args", "non_traversable"]),  # lethal: no speed is kept there
+        ({"speed.class_max_mps.mud": 0.01}, ["--ros-args", "least cruising speed"]),
+        ({"speed.max_speed_mps": 0.0}, ["--ros-args", "speed.max_speed_mps", "top speed > 0"]),
+    ],
+)
+def test_a_setting_a_rule_cannot_take_is_refused_in_one_line(cruising, flat, words):
+    with pytest.raises(UserError) as caught:
+        PlannerRuntime(cruising, robot=RobotSettings(rules=RuleSettings.parse(flat, "--ros-args", RULES)))
+    assert len(caught.value.lines()) == 1 and all(w in caught.value.lines()[0] for w in words), caught.value.lines()
+
+
+def test_settings_of_a_rule_the_model_lacks_are_said_unused(tmp_path):
+    from helpers import linear_model
+
+    runtime = PlannerRuntime(linear_model(tmp_path / "m.safetensors"), robot=_settings(speed__max_speed_mps=1.0))
+    assert "the model lists no speed rule: its settings are not used" in runtime.notes

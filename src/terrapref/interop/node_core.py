@@ -18,8 +18,8 @@ import math
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
-from dataclasses import dataclass, fields, replace
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, fields, replace
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
@@ -31,8 +31,11 @@ from terrapref.interop.labels import unlisted_message
 from terrapref.interop.robot import LIMITS, RobotConfig
 from terrapref.interop.runtime import SPEED_WINDOW_S, PlannerRuntime, RobotSettings, RuntimeDecision, odometry_speed_mps
 from terrapref.learning.model_file import LoadedModel
+from terrapref.planner.model import Model
 from terrapref.planner.stop import StopConfig
+from terrapref.rules import RULES
 from terrapref.rules.costmap import Costmap
+from terrapref.rules.settings import RuleSettings
 from terrapref.scenario.path import ReferencePath
 from terrapref.stops import REASONS, STALE
 from terrapref.terrain import UNKNOWN
@@ -112,7 +115,8 @@ class PlannerNodeCore:
         watchdog: Watchdog | None = None,
     ) -> None:
         self.model, self.robot, self.stop = model, robot, robot.stop
-        self.settings = RobotSettings(robot.stop, robot.limits, hold_s, ahead_s)
+        Model.of(model).rules_with(robot.rules)  # a setting the model's rules cannot take is refused now, not at the first frame
+        self.settings = RobotSettings(robot.stop, robot.limits, hold_s, ahead_s, robot.rules)
         self.hold_s, self.ahead_s = hold_s, ahead_s
         self.watchdog = watchdog or Watchdog()
         self.runtime: PlannerRuntime | None = None
@@ -363,6 +367,24 @@ class PlannerNodeCore:
 ROBOT_PARAMETERS = (*LIMITS, "goal_tolerance_m", "goal_yaw_tolerance_deg", "off_path_m")
 
 
+def nested_rule_params(get_param: Callable[[str, Any], Any], prefix: str = "~") -> dict[str, Any]:
+    """The rule settings of a parameter server that nests them (ROS 1: ``~offset/switch_margin``,
+    read as ``get_param("~offset")``, a dict), flat as ``RULE.NAME[.CLASS]`` -> value."""
+    flat: dict[str, Any] = {}
+    for rule in RULES:
+        if not RULES[rule].settable:
+            continue
+        named = get_param(f"{prefix}{rule}", None)
+        if named is None:
+            continue
+        if not isinstance(named, Mapping):
+            raise UserError(f"{prefix}{rule}", f"expected the {rule} rule's settings by name, got {named!r}")
+        for name, value in named.items():
+            items = value.items() if isinstance(value, Mapping) else [(None, value)]
+            flat |= {f"{rule}.{name}" + ("" if c is None else f".{c}"): v for c, v in items}
+    return flat
+
+
 @dataclass(frozen=True)
 class NodeOptions:
     """How a node runs: each from the command line (``hold_s``, ``watchdog_s`` and the robot's
@@ -380,6 +402,9 @@ class NodeOptions:
             (default 1).
         max_speed_mps, max_yaw_rate_rps, max_accel_mps2: the robot's limits (robot file ``limits``).
         goal_tolerance_m, goal_yaw_tolerance_deg, off_path_m: the goal check's settings (robot file ``stop``).
+        rules: the robot's settings of the model's rules, given over the robot file's ``rules``
+            (ROS 2: ``-p offset.switch_margin:=0.3``; ROS 1: ``~offset/switch_margin``;
+            terrapref.rules.settings); read by each transport (:meth:`with_rule_params`).
     """
 
     stamped: bool | None = None
@@ -394,6 +419,13 @@ class NodeOptions:
     goal_tolerance_m: float | None = None
     goal_yaw_tolerance_deg: float | None = None
     off_path_m: float | None = None
+    rules: RuleSettings = field(default_factory=RuleSettings)
+
+    def with_rule_params(self, flat: Mapping[str, Any], origin: str) -> NodeOptions:
+        """These options with the rule settings ``flat`` gives (``RULE.NAME`` or
+        ``RULE.NAME.CLASS`` -> value), checked by name and kind (a UserError naming ``origin``
+        and the parameter); their ranges are checked against the model when the node starts."""
+        return replace(self, rules=RuleSettings.parse(flat, origin, RULES)) if flat else self
 
     def resolved(self, get_param: Callable[[str, Any], Any], param: Callable[[str], str] = lambda name: f"~{name}") -> NodeOptions:
         """Every option set: the given ones, the rest from ``get_param(param(name), default)``
@@ -421,7 +453,7 @@ class NodeOptions:
         for name in ("path_file", "cmd_topic"):
             if values[name] is not None and (not isinstance(values[name], str) or not values[name]):
                 raise UserError(origin[name], f"expected a non-empty string, got {values[name]!r}")
-        resolved = NodeOptions(**values)
+        resolved = NodeOptions(**values, rules=self.rules)
         resolved._settings(StopConfig(), VehicleConfig(), origin)  # checked together now, over the defaults
         return resolved
 
@@ -429,7 +461,9 @@ class NodeOptions:
         """``robot`` with the robot's parameters given here in place of its file's (checked
         together: a goal tolerance beyond the off-path distance is a UserError naming them)."""
         stop, limits = self._settings(robot.stop, robot.limits, {})
-        return robot if (stop, limits) == (robot.stop, robot.limits) else replace(robot, stop=stop, limits=limits)
+        rules = self.rules.over(robot.rules) if self.rules else robot.rules
+        same = (stop, limits, rules) == (robot.stop, robot.limits, robot.rules)
+        return robot if same else replace(robot, stop=stop, limits=limits, rules=rules)
 
     def _settings(self, stop: StopConfig, limits: VehicleConfig, origin: dict[str, str]) -> tuple[StopConfig, VehicleConfig]:
         """``stop`` and ``limits`` with the robot's parameters given here in their place."""

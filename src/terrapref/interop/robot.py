@@ -34,6 +34,9 @@
       max_speed_mps: 2.0                       # top speed [m/s]
       max_yaw_rate_rps: 1.0                    # [rad/s]
       max_accel_mps2: 1.0                      # the speed given out rises no faster [m/s^2]; null: the base ramps it
+    rules:                                     # optional: the robot's settings of the model's rules (terrapref.rules.settings)
+      offset: {switch_margin: 0.3}             # RULE: {NAME: value}; docs/robot.md lists them
+      speed: {max_speed_mps: 1.5, class_max_mps: {mud: 0.5}}
 
 Without ``topics.command`` each frame is labelled by the vehicle's measured motion (v, w): the
 odometry's twist, or differences of its poses where it carries none (terrapref.interop.bag_import).
@@ -54,6 +57,8 @@ import yaml
 from terrapref.errors import ConfigError, Problem, UserError
 from terrapref.interop.labels import LabelMap, load_label_map
 from terrapref.planner.stop import StopConfig
+from terrapref.rules import RULES
+from terrapref.rules.settings import RuleSettings
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.terrain.profile import PreferenceProfile
@@ -61,7 +66,7 @@ from terrapref.vehicle import VehicleConfig
 from terrapref.yamlio import load_yaml_text, read_yaml_mapping
 
 ROBOT_FORMAT = "terrapref-robot/1"
-_TOP = {"format", "topics", "camera", "labels", "path_file", "profile", "max_gap_s", "description", "stop", "limits"}
+_TOP = {"format", "topics", "camera", "labels", "path_file", "profile", "max_gap_s", "description", "stop", "limits", "rules"}
 LIMITS = ("max_speed_mps", "max_yaw_rate_rps", "max_accel_mps2")  # the robot's limits a file (or a node's parameters) may set
 _TOPICS_REQUIRED = ("segmentation", "camera_info", "odometry")
 _TOPICS_OPTIONAL = ("command", "path")
@@ -88,6 +93,7 @@ class RobotConfig:
     max_gap_s: float
     stop: StopConfig = field(default_factory=StopConfig)
     limits: VehicleConfig = field(default_factory=VehicleConfig)
+    rules: RuleSettings = field(default_factory=RuleSettings)
 
     @property
     def path_topic(self) -> str | None:
@@ -134,6 +140,7 @@ def load_robot(path: str | Path, classes: ClassTable | None = None) -> RobotConf
         float(data.get("max_gap_s", 0.5)),
         _stop(data.get("stop"), source),
         _limits(data.get("limits"), source),
+        RuleSettings.from_block(data.get("rules"), source, RULES),
     )
 
 

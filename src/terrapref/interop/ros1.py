@@ -58,7 +58,7 @@ def run_node(model_path: str, robot_path: str, options: NodeOptions | None = Non
     """Run the node until ROS shuts it down; with ``live`` (a terrapref.interop.live.LiveView),
     every decision is also sent there."""
     rospy = import_rospy()
-    from terrapref.interop.node_core import AHEAD_S, SIM_AHEAD_S, PlannerNodeCore, Watchdog
+    from terrapref.interop.node_core import AHEAD_S, SIM_AHEAD_S, PlannerNodeCore, Watchdog, nested_rule_params
     from terrapref.interop.robot import load_robot, load_waypoints
     from terrapref.learning.model_file import load_model
 
@@ -66,7 +66,8 @@ def run_node(model_path: str, robot_path: str, options: NodeOptions | None = Non
     robot = load_robot(robot_path, model.classes)
     check_master(os.environ.get("ROS_MASTER_URI", DEFAULT_MASTER_URI))  # rospy would wait for one for ever
     rospy.init_node("terrapref", anonymous=False)
-    opts = (options or NodeOptions()).resolved(rospy.get_param)
+    opts = (options or NodeOptions()).with_rule_params(nested_rule_params(rospy.get_param), "~RULE/NAME")
+    opts = opts.resolved(rospy.get_param)
     robot = opts.applied_to(robot)
     path = (
         load_waypoints(Path(opts.path_file), "path_file")
@@ -147,6 +148,8 @@ class _Node:
             rospy.Subscriber(robot.path_topic, PathMsg, self.on_path, queue_size=1)
         rospy.Subscriber(robot.topics["segmentation"], rospy.AnyMsg, self.on_image, queue_size=1)
         self.publish_arrived()
+        if robot.rules:
+            self.log.info(f"terrapref: rule settings over the model file's: {'; '.join(robot.rules.lines())}")
         self.done = threading.Event()
         threading.Thread(target=self.ticks, name="terrapref-commands", daemon=True).start()  # the wall clock's, not ROS time's
         rospy.Timer(rospy.Duration(COSTMAP_PERIOD_S), self.publish_costmap)

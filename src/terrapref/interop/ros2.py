@@ -92,8 +92,10 @@ class RosArgs:
                 raise UserError("--ros-args", f"{flag} needs NAME:=VALUE, got {words[0] if words else 'nothing'}")
             name, _, value = words.pop(0).partition(":=")
             if flag in ("-p", "--param"):
-                if name not in PARAMETERS:
-                    raise UserError("--ros-args", f"-p {name}: no such parameter; the node's are {', '.join(PARAMETERS)}")
+                if name not in PARAMETERS and "." not in name:  # RULE.NAME: a rule's setting, checked by NodeOptions
+                    raise UserError(
+                        "--ros-args", f"-p {name}: no such parameter; the node's are {', '.join(PARAMETERS)}, and RULE.NAME (its rules')"
+                    )
                 try:
                     params[name] = yaml.safe_load(value) if value else ""
                 except yaml.YAMLError:
@@ -103,6 +105,11 @@ class RosArgs:
                     raise UserError("--ros-args", f"-r {name}:={value}: expected FROM:=TO, both names")
                 remaps[name] = value
         return cls(params, remaps)
+
+    @property
+    def rule_params(self) -> dict[str, Any]:
+        """The parameters that set the model's rules (``RULE.NAME``; terrapref.rules.settings)."""
+        return {name: value for name, value in self.params.items() if "." in name}
 
     def get_param(self, key: str, default: Any) -> Any:
         """A parameter's value (``key`` as :meth:`NodeOptions.resolved` asks: ``-p NAME``), else ``default``."""
@@ -200,7 +207,8 @@ def run_node(
 
     args = RosArgs.parse(ros_args)
     names = Names(args.remaps)
-    opts = (options or NodeOptions()).resolved(args.get_param, param=lambda name: f"-p {name}")
+    opts = (options or NodeOptions()).with_rule_params(args.rule_params, "--ros-args")
+    opts = opts.resolved(args.get_param, param=lambda name: f"-p {name}")
     clock = NodeClock(args.use_sim_time)
     domain = domain_id()
     model = load_model(model_path)
@@ -325,6 +333,8 @@ class _Node:
             + (f" and {stop.goal_yaw_tolerance_deg:g} deg" if stop.goal_yaw_tolerance_deg is not None else "")
             + f"; off the path beyond {stop.off_path_m:g} m; stops {core.watchdog.limit_s:g} s after its last decision by the wall clock"
         )
+        if robot.rules:
+            self.log.info(f"rule settings over the model file's: {'; '.join(robot.rules.lines())}")
         self.log.info(
             f"in ROS_DOMAIN_ID {self.domain} as {names.fqn}: "
             + "; ".join(

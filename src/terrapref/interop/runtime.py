@@ -34,6 +34,7 @@ from terrapref.learning.model_file import LoadedModel
 from terrapref.planner.model import Model
 from terrapref.planner.stop import StopConfig
 from terrapref.rules.costmap import Costmap
+from terrapref.rules.settings import RuleSettings
 from terrapref.scenario.path import ReferencePath
 from terrapref.stops import STALE
 from terrapref.terrain.classes import UNKNOWN, ForeignIds
@@ -81,12 +82,15 @@ class RobotSettings:
         hold_s: how long a decision's command stays in force after its frame's stamp [s].
         ahead_s: how far a frame's stamp may be ahead of the caller's clock [s]: clock skew, or a
             simulated clock whose messages come late (default :data:`FRAME_AHEAD_S`).
+        rules: the robot's settings of the model's rules, in place of the file's (a speed cap,
+            overall or per class, the offset rule's switch margin: terrapref.rules.settings).
     """
 
     stop: StopConfig = field(default_factory=StopConfig)
     limits: VehicleConfig = field(default_factory=VehicleConfig)
     hold_s: float = 0.3
     ahead_s: float = FRAME_AHEAD_S
+    rules: RuleSettings = field(default_factory=RuleSettings)
 
     def __post_init__(self) -> None:
         for name in ("hold_s", "ahead_s"):
@@ -131,8 +135,9 @@ class PlannerRuntime:
         self.robot = robot = robot or RobotSettings()
         self.hold_s, self.ahead_s, self.limits = robot.hold_s, robot.ahead_s, robot.limits
         self.model = model if isinstance(model, Model) else Model.of(model) if isinstance(model, LoadedModel) else Model.load(model)
-        self.planner = self.model.planner(camera, stop=robot.stop, vehicle=robot.limits)  # refuses a camera the model was not trained for
-        self.notes = limit_notes(self.model, self.limits)
+        # Refuses a camera the model was not trained for, and a rule setting a rule cannot take.
+        self.planner = self.model.planner(camera, stop=robot.stop, vehicle=robot.limits, settings=robot.rules)
+        self.notes = limit_notes(self.model, self.limits) + settings_notes(self.model, robot.rules)
         self.refused = {"stamped ahead of the clock": 0, "decisions the clock found in its future": 0}
         self._sent: tuple[float, float] | None = None  # (time [s], v [m/s]) of the last command given out (or the first frame's speed)
         self.planner.warm_up()  # the compiled loops ready before the first frame
@@ -279,6 +284,17 @@ def odometry_speed_mps(now: Pose, before: Pose, window_s: float = SPEED_WINDOW_S
     ``before``, ``window_s`` [s] earlier (reversing counts as going: the speed is its magnitude)."""
     forward = (now.x - before.x) * math.cos(now.yaw) + (now.y - before.y) * math.sin(now.yaw)
     return abs(forward) / window_s
+
+
+def settings_notes(model: Model, settings: RuleSettings) -> list[str]:
+    """The robot's settings of the model's rules, a line, and a line for those of rules it does not list."""
+    if not settings:
+        return []
+    lines = [f"rule settings over the model file's: {'; '.join(settings.lines())}"]
+    unused = settings.unused(model.rules)
+    if unused:
+        lines.append(f"the model lists no {' or '.join(unused)} rule: its settings are not used")
+    return lines
 
 
 def limit_notes(model: Model, limits: VehicleConfig) -> list[str]:

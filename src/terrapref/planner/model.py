@@ -19,11 +19,12 @@ import numpy as np
 from terrapref.camera import CameraConfig
 from terrapref.features import FeatureConfig
 from terrapref.learning.model_file import CLASSIFIER, LoadedModel, read_model_file, write_model_file
-from terrapref.planner.planner import Planner
+from terrapref.planner.planner import Planner, rules_with_settings
 from terrapref.planner.policy import ClassifierPolicy, Policy
 from terrapref.planner.registry import policy_from
 from terrapref.planner.stop import StopConfig
 from terrapref.rules import Rule, chosen_rule, speed_rule
+from terrapref.rules.settings import RuleSettings
 from terrapref.terrain import ClassTable
 from terrapref.vehicle import VehicleConfig
 
@@ -72,6 +73,10 @@ class Model:
         """The decision rules fitted with the model, in the file's order (none for a baseline)."""
         return self.policy.rules
 
+    def rules_with(self, settings: RuleSettings) -> tuple[Rule, ...]:
+        """The rules as a robot's ``settings`` set them (a value a rule cannot take: a UserError)."""
+        return rules_with_settings(self.policy, settings)
+
     @property
     def driving(self) -> Rule:
         """The rule that drives: the one the file names, else the last listed; C's argmax when none is."""
@@ -105,8 +110,9 @@ class Model:
         rule: Rule | str | None = None,
         stop: StopConfig | None = None,
         vehicle: VehicleConfig | None = None,
+        settings: RuleSettings | None = None,
     ) -> Planner:
         """The planner this model drives (``rule``: another of its rules, or ``argmax``) within the
-        robot's limits ``vehicle`` (default: the default vehicle's); a model trained for another
-        camera than ``camera`` is refused."""
-        return Planner(self.classifier or self.policy, camera, rule=rule, stop=stop, vehicle=vehicle)
+        robot's limits ``vehicle`` (default: the default vehicle's), its rules set as the robot's
+        ``settings`` say where they do; a model trained for another camera than ``camera`` is refused."""
+        return Planner(self.classifier or self.policy, camera, rule=rule, stop=stop, vehicle=vehicle, settings=settings)

@@ -21,6 +21,7 @@ from terrapref.planner.policy import ClassifierPolicy, Observation, Policy
 from terrapref.planner.stop import StopConfig, StopRule
 from terrapref.rules import Choice, Rule, RuleContext, RuleInput, chosen_rule, speed_rule
 from terrapref.rules.costmap import Costmap
+from terrapref.rules.settings import RuleSettings
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim.loop import Frame
@@ -99,6 +100,8 @@ class Planner:
             configuration).
         stop: when to stop, the goal check's settings included (default: :class:`StopConfig`'s defaults).
         vehicle: the robot's limits, which bound every command (default: the default vehicle's).
+        settings: a robot's settings of the model's rules, in place of the file's
+            (terrapref.rules.settings); a value a rule cannot take is a UserError.
     """
 
     def __init__(
@@ -108,6 +111,7 @@ class Planner:
         rule: Rule | str | None = None,
         stop: StopConfig | None = None,
         vehicle: VehicleConfig | None = None,
+        settings: RuleSettings | None = None,
     ) -> None:
         policy = model if isinstance(model, Policy) else ClassifierPolicy(model)
         camera = camera or policy.camera
@@ -118,12 +122,13 @@ class Planner:
         self.policy = policy
         self.camera = PinholeCamera(camera)
         self.featurizer = UtilityFeaturizer(policy.features, self.camera, policy.classes)
-        self.rule = _chosen(policy, rule)
+        self.rules = rules_with_settings(policy, settings)
+        self.rule = rule if isinstance(rule, Rule) else chosen_rule(self.rules, policy.drives, rule, policy.path or policy.name)
         context = RuleContext(self.camera, self.featurizer, policy.features, policy.classes)
         self.runner = self.rule.runner(context)
         self.control = control = policy.features.preference.control
         self.vehicle = vehicle or VehicleConfig()
-        speed = speed_rule(policy.rules)
+        speed = speed_rule(self.rules)
         self.speed = speed.runner(context, self.runner.ground_map) if speed is not None else None
         self._set_v, self._max_w = float(control.v_mps), float(np.max(np.abs(control.w_rps)))
         half_width = self.runner.half_width_m
@@ -265,11 +270,13 @@ class Planner:
         return self.runner.costmap()
 
 
-def _chosen(policy: Policy, rule: Rule | str | None) -> Rule:
-    """The rule that drives (:class:`Planner`'s ``rule``)."""
-    if isinstance(rule, Rule):
-        return rule
-    return chosen_rule(policy.rules, policy.drives, rule, policy.path or policy.name)
+def rules_with_settings(policy: Policy, settings: RuleSettings | None) -> tuple[Rule, ...]:
+    """The policy's rules with a robot's ``settings`` in place of the file's; a value a rule
+    cannot take is a UserError naming where the settings came from."""
+    if not settings:
+        return policy.rules
+    lethal = frozenset({policy.classes.lethal_column} if policy.classes.lethal else ())
+    return settings.applied(policy.rules, tuple(policy.features.feature_classes), lethal)
 
 
 def _outputs(

@@ -158,6 +158,9 @@ class Rule(abc.ABC):
     type: ClassVar[str]
     graph: ClassVar[bool] = False
     steers: ClassVar[bool] = True  # False: it sets the speed along the way another rule steers (the speed rule)
+    # What a robot may set of the rule at run time (terrapref.rules.settings): name -> (kind:
+    # "number" or "class", a number per class; what it sets, with its unit).
+    settable: ClassVar[dict[str, tuple[str, str]]] = {}
 
     @abc.abstractmethod
     def header(self) -> dict[str, Any]:
@@ -179,6 +182,12 @@ class Rule(abc.ABC):
     @abc.abstractmethod
     def runner(self, context: RuleContext) -> RuleRunner:
         """This rule bound to one planner."""
+
+    def with_settings(self, values: Mapping[str, Any], names: tuple[str, ...], lethal: frozenset[str]) -> Rule:
+        """This rule with a robot's ``values`` of its :attr:`settable` settings in place of its
+        file's (``names``: the terrain columns' classes; ``lethal``: the lethal ones). A value the
+        rule cannot take is a ValueError saying why."""
+        raise ValueError(f"the {self.type} rule takes no settings")
 
     def describe(self, names: tuple[str, ...], lethal: frozenset[str]) -> str:
         """One line on what was fitted (``terrapref train``, ``terrapref info``); ``names`` the terrain columns' classes."""

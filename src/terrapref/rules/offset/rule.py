@@ -190,10 +190,20 @@ class OffsetRule(Rule):
     (``fit``: how the fit went, for a rule just fitted)."""
 
     type: ClassVar[str] = "offset"
+    settable: ClassVar[dict[str, tuple[str, str]]] = {
+        "switch_margin": ("number", "the share of the best offset's utility the held offset may fall short by before a switch"),
+        "pursuit_m": ("number", "how far ahead along the path pure pursuit aims [m]"),
+        "lethal_margin_m": ("number", "the clearance kept from lethal terrain beside the footprint [m]"),
+        "lethal_horizon_m": ("number", "how far ahead the way to each offset is checked for lethal terrain [m]"),
+    }
 
     config: OffsetConfig
     utility: OffsetUtility
     fit: OffsetFit | None = None
+
+    def with_settings(self, values: Mapping[str, Any], names: tuple[str, ...], lethal: frozenset[str]) -> OffsetRule:
+        """The rule holding offsets as ``values`` say (its fitted utility unchanged)."""
+        return replace(self, config=replace(self.config, **{k: float(v) for k, v in values.items()}))
 
     def header(self) -> dict[str, Any]:
         u = self.utility

@@ -24,7 +24,7 @@ from terrapref.rules.base import FrameReader, HeaderContext, Rule, RuleConfig, R
 from terrapref.rules.columns import TerrainColumns
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.offset.ground_map import GroundMap
-from terrapref.rules.speed.model import STATION_STEP_M, STATIONS, SpeedFit, SpeedModel, across, fit_speed
+from terrapref.rules.speed.model import MIN_SPEED_MPS, STATION_STEP_M, STATIONS, SpeedFit, SpeedModel, across, fit_speed
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable
 from terrapref.vehicle import Pose
@@ -178,11 +178,34 @@ class SpeedRule(Rule):
 
     type: ClassVar[str] = "speed"
     steers: ClassVar[bool] = False
+    settable: ClassVar[dict[str, tuple[str, str]]] = {
+        "max_speed_mps": ("number", "the fastest it commands [m/s]"),
+        "class_max_mps": ("class", "the fastest it commands on a class, below the speed learned there [m/s]"),
+    }
 
     config: SpeedConfig
     model: SpeedModel
     fit: SpeedFit | None = None
     background: str = "background"  # the class table's background class, by name (the last terrain column's)
+
+    def with_settings(self, values: Mapping[str, Any], names: tuple[str, ...], lethal: frozenset[str]) -> SpeedRule:
+        """The rule no faster than ``values`` say: overall (``max_speed_mps``) and on each class
+        named (``class_max_mps``: the cruising speed learned there, capped). A class it keeps no
+        speed for (unknown, or lethal), or a cap below the least cruising speed, is a ValueError."""
+        rule = self
+        if "max_speed_mps" in values:
+            rule = replace(rule, config=replace(rule.config, max_speed_mps=float(values["max_speed_mps"])))
+        caps = values.get("class_max_mps", {})
+        columns = {name: col for col, name in self._classes(names, lethal)}
+        for name, cap in caps.items():
+            if name not in columns:
+                raise ValueError(f"no speed is kept for {name!r}; the classes: {', '.join(columns)}")
+            if cap < MIN_SPEED_MPS:
+                raise ValueError(f"{name}: expected at least {MIN_SPEED_MPS:g} m/s, the least cruising speed")
+        speeds = list(rule.model.speeds_mps)
+        for name, cap in caps.items():
+            speeds[columns[name]] = min(speeds[columns[name]], float(cap))
+        return replace(rule, model=replace(rule.model, speeds_mps=tuple(speeds)))
 
     def header(self) -> dict[str, Any]:
         m = self.model
