@@ -6,6 +6,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from terrapref.cli.common import (
     PERCEPTION_HELP,
@@ -24,13 +25,13 @@ from terrapref.cli.common import (
 from terrapref.errors import UserError
 from terrapref.fileio import check_distinct, check_output, output_folder
 
+if TYPE_CHECKING:
+    from terrapref.evaluation.evaluate import Evaluation
+
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from terrapref.evaluation.evaluate import Evaluation, evaluate_model, scoring_profile
-    from terrapref.evaluation.runner import Summary
-    from terrapref.planner.model import Model
+    from terrapref.evaluation.evaluate import evaluate_model
     from terrapref.progress import Progress
-    from terrapref.terrain import PreferenceProfile
 
     if args.seeds < 1:
         raise UserError("--seeds", "must be >= 1")
@@ -41,6 +42,32 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         from terrapref.extras import check
 
         check("robot", "--mcap", "rosbags")  # before the runs, not after them
+    evaluation = _evaluation(args)  # every input checked before the first run
+    with output_folder(args.out, args.force):
+        bar = Progress("evaluate", len(args.scenarios) * args.seeds * (1 if args.no_driver else 2))
+        view = live_view(args)
+        try:
+            metrics = evaluate_model(
+                evaluation, args.out, engine, progress=lambda k, n: bar.update(k, f"{k}/{n} runs"), watch=watching(view)
+            )
+        finally:
+            if view is not None:
+                view.stop()
+        bar.close()
+        _print_results(evaluation, metrics, args)
+        return 0
+
+
+def _evaluation(args: argparse.Namespace) -> Evaluation:
+    """What ``evaluate`` runs, from its flags, each checked (the frames before the model is read;
+    the driver's speeds against the model's table and the vehicle)."""
+    from terrapref.demos.expert import STYLES
+    from terrapref.demos.speed_style import driver_style, parse_speeds
+    from terrapref.evaluation.evaluate import Evaluation, scoring_profile
+    from terrapref.evaluation.speed import trained_driver
+    from terrapref.planner.model import Model
+    from terrapref.terrain import PreferenceProfile
+
     try:
         frames = sorted({int(f) for f in args.frames.split(",") if f.strip()}) if args.frames else []
     except ValueError:
@@ -52,11 +79,6 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     profile = PreferenceProfile.parse(args.profile, model.classes) if args.profile is not None else None
     scored = scoring_profile(model, profile, args.model)  # a model whose drives declared no order needs one, before any run
     perception = perception_model(args.perception, classes=model.classes)
-    from terrapref.demos.expert import STYLES
-    from terrapref.demos.speed_style import driver_style, parse_speeds
-    from terrapref.evaluation.speed import SpeedComparison, trained_driver
-    from terrapref.evaluation.stats import rate_text
-
     given = parse_speeds(args.speeds) if args.speeds is not None else ()
     style, speeds = _driver_of(args.style, given, trained_driver(getattr(getattr(model, "model", None), "meta", {})))
     STYLES.get(style, "--style")
@@ -64,60 +86,58 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         from terrapref.vehicle import VehicleConfig
 
         driver_style(style, scored.order, model.classes, VehicleConfig().max_speed_mps, {"speeds": given})
-    with output_folder(args.out, args.force):
-        bar = Progress("evaluate", len(args.scenarios) * args.seeds * (1 if args.no_driver else 2))
-        view = live_view(args)
-        try:
-            evaluation = Evaluation(
-                args.model,
-                tuple(args.scenarios),
-                args.seeds,
-                profile=profile,
-                with_driver=not args.no_driver,
-                style=style,
-                speeds=speeds,
-                frames=tuple(frames),
-                mcap=args.mcap,
-                perception=perception,
-            )
-            metrics = evaluate_model(
-                evaluation, args.out, engine, progress=lambda k, n: bar.update(k, f"{k}/{n} runs"), watch=watching(view)
-            )
-        finally:
-            if view is not None:
-                view.stop()
-        bar.close()
-        if perception is not None and perception.active:
-            print(f"perception: {perception.name} ({perception.summary()}); the driver sees the truth")
-        zones = [z for sc in metrics["scenarios"].values() for run in sc.get("planner", {}).values() for z in run["zones"]]
-        s = metrics["summary"]
-        print(f"planner: zone success {rate_text(sum(z['success'] for z in zones), len(zones))}, {s['collision_count']} collisions")
-        for line in Summary.from_dict(s).driving_lines():
+    return Evaluation(
+        args.model,
+        tuple(args.scenarios),
+        args.seeds,
+        profile=profile,
+        with_driver=not args.no_driver,
+        style=style,
+        speeds=speeds,
+        frames=tuple(frames),
+        mcap=args.mcap,
+        perception=perception,
+    )
+
+
+def _print_results(evaluation: Evaluation, metrics: dict, args: argparse.Namespace) -> None:
+    """What ``evaluate`` prints of its metrics: the planner's zones, driving and agreement, the
+    speed against the driver, the driver's zones, and notes."""
+    from terrapref.evaluation.runner import Summary
+    from terrapref.evaluation.speed import SpeedComparison
+    from terrapref.evaluation.stats import rate_text
+
+    perception = evaluation.perception
+    if perception is not None and perception.active:
+        print(f"perception: {perception.name} ({perception.summary()}); the driver sees the truth")
+    zones = [z for sc in metrics["scenarios"].values() for run in sc.get("planner", {}).values() for z in run["zones"]]
+    s = metrics["summary"]
+    print(f"planner: zone success {rate_text(sum(z['success'] for z in zones), len(zones))}, {s['collision_count']} collisions")
+    for line in Summary.from_dict(s).driving_lines():
+        print(f"planner: {line}")
+    compared = [z for z in zones if "agrees" in z]
+    if compared:
+        driver = evaluation.style + "".join(f", {name} {v:g} m/s" for name, v in evaluation.speeds)
+        print(f"planner: agreement with the driver ({driver}) {rate_text(sum(z['agrees'] for z in compared), len(compared))}")
+    if "speed" in metrics:
+        for line in SpeedComparison.from_dict(metrics["speed"]).lines():
             print(f"planner: {line}")
-        compared = [z for z in zones if "agrees" in z]
-        if compared:
-            driver = style + "".join(f", {name} {v:g} m/s" for name, v in speeds)
-            print(f"planner: agreement with the driver ({driver}) {rate_text(sum(z['agrees'] for z in compared), len(compared))}")
-        if "speed" in metrics:
-            for line in SpeedComparison.from_dict(metrics["speed"]).lines():
-                print(f"planner: {line}")
-        if "driver_summary" in metrics:
-            d = metrics["driver_summary"]
-            success = f"{d['zone_success_rate']:.1%}" if d["zones"] else "-"
-            print(f"driver:  zone success {success} over {d['zones']} zones, {d['collision_count']} collisions")
-        for name, numbers in metrics.get("frames_beyond_the_run", {}).items():
-            print(f"note: --frames {','.join(map(str, numbers))}: {name}'s run (seed 0) ended before them; no picture", file=sys.stderr)
-        guesses = [z for z in zones if z.get("rests_on_unidentified")]
-        if metrics.get("unidentified_pairs"):
-            print(
-                f"note: the model's demonstrations did not identify {', '.join(metrics['unidentified_pairs'])}; "
-                f"{len(guesses)} of {len(zones)} zone runs rest on them (marked in metrics.json)"
-            )
+    if "driver_summary" in metrics:
+        d = metrics["driver_summary"]
+        success = f"{d['zone_success_rate']:.1%}" if d["zones"] else "-"
+        print(f"driver:  zone success {success} over {d['zones']} zones, {d['collision_count']} collisions")
+    for name, numbers in metrics.get("frames_beyond_the_run", {}).items():
+        print(f"note: --frames {','.join(map(str, numbers))}: {name}'s run (seed 0) ended before them; no picture", file=sys.stderr)
+    guesses = [z for z in zones if z.get("rests_on_unidentified")]
+    if metrics.get("unidentified_pairs"):
         print(
-            f"wrote {Path(args.out) / 'metrics.json'} and figures in {args.out}"
-            + (f"; runs as MCAP in {Path(args.out) / 'runs'}" if args.mcap else "")
+            f"note: the model's demonstrations did not identify {', '.join(metrics['unidentified_pairs'])}; "
+            f"{len(guesses)} of {len(zones)} zone runs rest on them (marked in metrics.json)"
         )
-        return 0
+    print(
+        f"wrote {Path(args.out) / 'metrics.json'} and figures in {args.out}"
+        + (f"; runs as MCAP in {Path(args.out) / 'runs'}" if args.mcap else "")
+    )
 
 
 def _driver_of(

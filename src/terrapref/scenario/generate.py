@@ -74,16 +74,7 @@ def generate_course(seed: int, zones: int = 8, kinds: tuple[str, ...] = ZONE_KIN
     classes = classes or default_classes()
     rng = np.random.default_rng([seed, 4242])
     spacing = 26.0
-    length = spacing * (zones + 1)
-    # A trail of 30 m legs, each turning by up to 20 degrees, kept inside a margin.
-    heading, pts = 0.0, [np.array([10.0, 0.0])]
-    while sum(np.linalg.norm(np.diff(np.array(pts), axis=0), axis=1)) < length:
-        heading = float(np.clip(heading + math.radians(rng.uniform(-20, 20)), -0.6, 0.6))
-        pts.append(pts[-1] + 30.0 * np.array([math.cos(heading), math.sin(heading)]))
-    wp = np.array(pts)
-    lo, hi = wp.min(axis=0), wp.max(axis=0)
-    wp = wp - lo + 20.0
-    size = (float(hi[0] - lo[0] + 40.0), float(hi[1] - lo[1] + 40.0))
+    wp, size = _trail(rng, spacing * (zones + 1))
     names = list(classes.feature_names)
     # A small table may have too few classes for pairs or triples.
     kinds = tuple(k for k in kinds if ZONE_CLASSES[k] <= len(names)) or ("lone",)
@@ -100,42 +91,11 @@ def generate_course(seed: int, zones: int = 8, kinds: tuple[str, ...] = ZONE_KIN
             cls = concrete(names[int(rng.integers(len(names)))])
             terrain.append(_patch(rng, wp, s, cls, (0.0, rng.uniform(-0.4, 0.4)), (rng.uniform(2.2, 3.4), rng.uniform(2.2, 3.0))))
             expect, label, half = "avoid", f"lone {cls}", (6.0, 5.0)
-        elif kind == "pair":
-            a, b = (concrete(str(n)) for n in rng.choice(names, 2, replace=False))
-            length_m, edge = rng.uniform(7.0, 10.0), rng.uniform(-0.3, 0.3)
-            for cls, side in ((a, 1.0), (b, -1.0)):
-                width = rng.uniform(5.0, 6.5)
-                terrain.append(
-                    {
-                        "class": str(cls),
-                        "polygon": _to_world(
-                            wp,
-                            s,
-                            np.array(
-                                [
-                                    [-length_m / 2, edge],
-                                    [length_m / 2, edge],
-                                    [length_m / 2, edge + side * width],
-                                    [-length_m / 2, edge + side * width],
-                                ]
-                            ),
-                        ),
-                    }
-                )
-            expect, label, half = "best", f"{a} | {b}", (length_m / 2 + 2.0, 8.5)
         else:
-            a, b, c = (concrete(str(n)) for n in rng.choice(names, 3, replace=False))
-            length_m, mid = rng.uniform(6.0, 8.0), rng.uniform(2.4, 3.2)
-            for cls, l0, l1 in ((a, mid / 2, mid / 2 + 4.5), (b, -mid / 2, mid / 2), (c, -mid / 2 - 4.5, -mid / 2)):
-                terrain.append(
-                    {
-                        "class": str(cls),
-                        "polygon": _to_world(
-                            wp, s, np.array([[-length_m / 2, l0], [length_m / 2, l0], [length_m / 2, l1], [-length_m / 2, l1]])
-                        ),
-                    }
-                )
-            expect, label, half = "best", f"{a} | {b} | {c}", (length_m / 2 + 2.0, 8.5)
+            picked = [concrete(str(n)) for n in rng.choice(names, ZONE_CLASSES[kind], replace=False)]
+            patches, half = (_pair if kind == "pair" else _triple)(rng, wp, s, picked)
+            terrain += patches
+            expect, label = "best", " | ".join(picked)
         box = np.array([[-half[0], -half[1]], [half[0], -half[1]], [half[0], half[1]], [-half[0], half[1]]])
         zone_list.append({"id": str(z + 1), "label": label, "polygon": _to_world(wp, s, box), "expect": expect})
     data = {
@@ -148,3 +108,39 @@ def generate_course(seed: int, zones: int = 8, kinds: tuple[str, ...] = ZONE_KIN
         "zones": zone_list,
     }
     return parse_scenario(data, f"gen_{seed}", classes)
+
+
+def _trail(rng: np.random.Generator, length_m: float) -> tuple[np.ndarray, tuple[float, float]]:
+    """A trail at least ``length_m`` long of 30 m legs, each turning by up to 20 degrees, its
+    heading kept within 0.6 rad of the x axis; its waypoints, moved 20 m inside a world of the
+    size returned (x, y) [m]."""
+    heading, pts = 0.0, [np.array([10.0, 0.0])]
+    while sum(np.linalg.norm(np.diff(np.array(pts), axis=0), axis=1)) < length_m:
+        heading = float(np.clip(heading + math.radians(rng.uniform(-20, 20)), -0.6, 0.6))
+        pts.append(pts[-1] + 30.0 * np.array([math.cos(heading), math.sin(heading)]))
+    wp = np.array(pts)
+    lo, hi = wp.min(axis=0), wp.max(axis=0)
+    return wp - lo + 20.0, (float(hi[0] - lo[0] + 40.0), float(hi[1] - lo[1] + 40.0))
+
+
+def _pair(rng: np.random.Generator, wp: np.ndarray, s: float, picked: list[str]) -> tuple[list[dict], tuple[float, float]]:
+    """Two patches side by side across the path at arc length ``s``, the first on the left; and
+    the half length and half width of their zone [m]."""
+    length_m, edge = rng.uniform(7.0, 10.0), rng.uniform(-0.3, 0.3)
+    patches = []
+    for cls, side in zip(picked, (1.0, -1.0)):
+        width = rng.uniform(5.0, 6.5)
+        corners = [[-length_m / 2, edge], [length_m / 2, edge], [length_m / 2, edge + side * width], [-length_m / 2, edge + side * width]]
+        patches.append({"class": str(cls), "polygon": _to_world(wp, s, np.array(corners))})
+    return patches, (length_m / 2 + 2.0, 8.5)
+
+
+def _triple(rng: np.random.Generator, wp: np.ndarray, s: float, picked: list[str]) -> tuple[list[dict], tuple[float, float]]:
+    """Three patches across the path at arc length ``s`` (left, on it, right); and the half
+    length and half width of their zone [m]."""
+    length_m, mid = rng.uniform(6.0, 8.0), rng.uniform(2.4, 3.2)
+    patches = []
+    for cls, l0, l1 in zip(picked, (mid / 2, -mid / 2, -mid / 2 - 4.5), (mid / 2 + 4.5, mid / 2, -mid / 2)):
+        corners = [[-length_m / 2, l0], [length_m / 2, l0], [length_m / 2, l1], [-length_m / 2, l1]]
+        patches.append({"class": str(cls), "polygon": _to_world(wp, s, np.array(corners))})
+    return patches, (length_m / 2 + 2.0, 8.5)
