@@ -143,10 +143,23 @@ def featurize_recording(
     classes = recording.classes
     rec_camera = CameraConfig.from_dict(recording.meta["camera"])
     camera = camera or rec_camera
-    scenario = parse_scenario(recording.scenario, str(recording.path / "scenario.yaml"), classes, driven=True)
+    scenario, renderer, keep = _to_featurise(recording, camera, rec_camera)
     featurizer = UtilityFeaturizer(features, PinholeCamera(camera), classes)
     path = ReferencePath(np.asarray(recording.meta.get("path", scenario.waypoints), dtype=float))
-    tracker = PathTracker(path)
+    readers = {rule.type: rule.reader(featurizer, PinholeCamera(camera), classes, len(keep)) for rule in rules if rule.data() is not None}
+    U = _read_frames(recording, keep, featurizer, path, renderer, list(readers.values()), on_frame)
+    w = at_set_speed(recording.commands[keep], features.preference.control.v_mps)
+    labels = np.asarray(features.preference.control.label_of(w), dtype=np.int64).reshape(len(keep))
+    return Featurised(U, labels, w, {name: reader.arrays(recording, keep, path) for name, reader in readers.items()})
+
+
+def _to_featurise(
+    recording: Recording, camera: CameraConfig, rec_camera: CameraConfig
+) -> tuple[Scenario, SegmentationRenderer | None, np.ndarray]:
+    """The recording's scenario, the renderer of its frames under ``camera`` (None: its own
+    frames are read), and the frames taken on the map; a recording that cannot be featurised so
+    is a UserError naming its file and field."""
+    scenario = parse_scenario(recording.scenario, str(recording.path / "scenario.yaml"), recording.classes, driven=True)
     perceived = recording.perception
     if not camera.same_geometry(rec_camera) and perceived != "clean":
         raise UserError(
@@ -165,31 +178,42 @@ def featurize_recording(
             f"every frame was taken off the {scenario.size_m[0]:g} x {scenario.size_m[1]:g} m map",
             field="pose",
         )
-    n, m = len(keep), featurizer.m
+    return scenario, renderer, keep
+
+
+def _read_frames(
+    recording: Recording,
+    keep: np.ndarray,
+    featurizer: UtilityFeaturizer,
+    path: ReferencePath,
+    renderer: SegmentationRenderer | None,
+    readers: list,
+    on_frame: Callable[[int], None] | None,
+) -> np.ndarray:
+    """U (F, m, K + 1) of the ``keep`` frames, each frame also given to the rules' ``readers``."""
     known = np.zeros(256, dtype=bool)
-    known[[c.id for c in classes.classes]] = True
+    known[[c.id for c in recording.classes.classes]] = True
     known[255] = True
+    rec_camera = CameraConfig.from_dict(recording.meta["camera"])
     shape = (rec_camera.height_px, rec_camera.width_px)
-    U = np.empty((n, m, features.n_features), dtype=np.float32)
+    U = np.empty((len(keep), featurizer.m, featurizer.config.n_features), dtype=np.float32)
+    tracker = PathTracker(path)
     # Between frames that are not consecutive (a ride-along's corrections, frames left out off
     # the map) the vehicle may have gone further than the tracker's window: widen it by what
     # the vehicle could have driven in the gap.
     period = recording.frame_period_s
     v_max = _max_speed(recording.meta)
-    readers = {rule.type: rule.reader(featurizer, PinholeCamera(camera), classes, n) for rule in rules if rule.data() is not None}
     for j, i in enumerate(keep):
         pose = tuple(recording.poses[i])
         view = _frame_view(recording, i, renderer, pose, shape, known)
         gap_s = recording.times[i] - recording.times[keep[j - 1]] if j > 0 else 0.0
         s = tracker.update(recording.poses[i, :2], ahead_m=v_max * gap_s + 2.0 if gap_s > 1.5 * period else None)
         U[j] = featurizer(view, pose, path, s)
-        for reader in readers.values():
+        for reader in readers:
             reader.read(j, view, pose, path, s)
         if on_frame is not None:
             on_frame(j + 1)
-    w = at_set_speed(recording.commands[keep], features.preference.control.v_mps)
-    labels = np.asarray(features.preference.control.label_of(w), dtype=np.int64).reshape(n)
-    return Featurised(U, labels, w, {name: reader.arrays(recording, keep, path) for name, reader in readers.items()})
+    return U
 
 
 def _frame_view(
@@ -278,20 +302,7 @@ def build_dataset(
     require_meta(first, "classes")
     features = replace(features, feature_classes=first.classes.feature_names)
     rules = tuple(rule for rule in rules if rule.data() is not None)
-    reads = tuple((rule.type, repr(rule.data())) for rule in rules)
-    parts = []
-    total, before, n = sum(len(r) for r in recordings), 0, len(recordings)
-    for k, rec in enumerate(recordings):
-        key = (id(rec), features, camera, reads)
-        if cache is None or key not in cache:
-            on_frame = None if progress is None else (lambda j, b=before, k=k: progress(Featuring(k, n, b + j, total)))
-            part = featurize_recording(rec, features, camera, on_frame, rules)
-            if cache is not None:
-                cache[key] = (rec, part)  # the recording held with its features: its id is not reused while the cache lives
-        parts.append(part if cache is None else cache[key][1])
-        before += len(rec)
-        if progress is not None:
-            progress(Featuring(k + 1, n, before, total))
+    parts = _featurized(recordings, features, camera, rules, cache, progress)
     U = np.concatenate([p[0] for p in parts])
     labels = np.concatenate([p[1] for p in parts])
     w = np.concatenate([p[2] for p in parts])
@@ -306,21 +317,50 @@ def build_dataset(
         "classes": first.meta["classes"],
         "profile": profile,
         "rules": {rule.type: {"config": rule.data(), "arrays": {name: rule.arrays[name] for name in arrays[rule.type]}} for rule in rules},
-        "recordings": [
-            {
-                "path": str(r.path),
-                "scenario": r.meta.get("scenario"),
-                "frames": len(r),
-                "frames_used": len(p[1]),
-                "complete": r.complete,
-                "driver": r.meta.get("driver"),
-                "perception": r.perception,
-                **({"written": False} if r.in_memory else {}),
-            }
-            for r, p in zip(recordings, parts, strict=True)
-        ],
+        "recordings": [_recording_entry(r, len(p[1])) for r, p in zip(recordings, parts, strict=True)],
     }
     return Dataset(U, labels, w.astype(np.float32), source, meta, arrays)
+
+
+def _featurized(
+    recordings: list[Recording],
+    features: FeatureConfig,
+    camera: CameraConfig | None,
+    rules: tuple[RuleData, ...],
+    cache: dict | None,
+    progress: Callable[[Featuring], None] | None,
+) -> list:
+    """Each recording's features (:func:`featurize_recording`), from ``cache`` where it holds them
+    (:func:`build_dataset`), ``progress`` told after each frame and each recording."""
+    reads = tuple((rule.type, repr(rule.data())) for rule in rules)
+    parts = []
+    total, before, n = sum(len(r) for r in recordings), 0, len(recordings)
+    for k, rec in enumerate(recordings):
+        key = (id(rec), features, camera, reads)
+        if cache is None or key not in cache:
+            on_frame = None if progress is None else (lambda j, b=before, k=k: progress(Featuring(k, n, b + j, total)))
+            part = featurize_recording(rec, features, camera, on_frame, rules)
+            if cache is not None:
+                cache[key] = (rec, part)  # the recording held with its features: its id is not reused while the cache lives
+        parts.append(part if cache is None else cache[key][1])
+        before += len(rec)
+        if progress is not None:
+            progress(Featuring(k + 1, n, before, total))
+    return parts
+
+
+def _recording_entry(rec: Recording, used: int) -> dict[str, Any]:
+    """What a dataset's ``recordings`` list says of one recording, ``used`` of its frames kept."""
+    return {
+        "path": str(rec.path),
+        "scenario": rec.meta.get("scenario"),
+        "frames": len(rec),
+        "frames_used": used,
+        "complete": rec.complete,
+        "driver": rec.meta.get("driver"),
+        "perception": rec.perception,
+        **({"written": False} if rec.in_memory else {}),
+    }
 
 
 def _declared_order(files: Sequence[tuple[str, str, dict]], advice: str) -> list[str] | None:
