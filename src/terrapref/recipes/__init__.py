@@ -47,6 +47,7 @@ from terrapref.registry import Registry
 from terrapref.rules import OffsetConfig, RuleConfig, SecondStageConfig, SpeedConfig
 from terrapref.rules.second.rule import with_second_stage
 from terrapref.scenario import resolve_scenario
+from terrapref.sim.loop import Simulation
 from terrapref.terrain import ClassTable, PreferenceProfile
 from terrapref.vehicle import VehicleConfig
 
@@ -350,48 +351,49 @@ def run_recipe(
     scenario = resolve_scenario(course, setup.classes)
     profile = setup.profile or PreferenceProfile.default(scenario.classes)
     features = recipe.features(setup.features)
-    seed = setup.seed
-    recordings = demonstrate(
-        recipe, workdir, replace(setup, profile=profile, course=course, features=features), log, write=write_recordings
-    )
+    setup = replace(setup, profile=profile, course=course, features=features)
+    recordings = demonstrate(recipe, workdir, setup, log, write=write_recordings)
     cache: dict = {}  # the recordings' features, computed once for the follow-up's question, training and retraining
     if setup.follow_up:
-        recordings += _follow_up(recipe, recordings, workdir, replace(setup, profile=profile, course=course, features=features), log, cache)
+        recordings += _follow_up(recipe, recordings, workdir, setup, log, cache)
     paths = [r.path for r in recordings if not r.in_memory]
     demo_s = sum(r.duration_s for r in recordings)
-    corr_s = 0.0
-    train_cfg = replace(recipe.train, seed=seed)
     model = own / "model.safetensors"
-    result = train_and_save(
-        build_dataset(recordings, features, cache=cache, rules=recipe.rules),
+    result = _trained(recipe, recordings, model, setup, cache)
+    corr_s = 0.0
+    if recipe.corrections:  # the planner drives the course; only then is a simulation needed here
+        drive = DriveSetup.of(scenario, setup.vehicle, preference=features.preference)
+        sim = drive.simulation()
+    for r in range(recipe.corrections):
+        out = own / f"corrections_{r}"
+        corr_s += _correction_round(drive, sim, setup, model, out, r)
+        recordings.append(read_recording(out))
+        paths.append(out)
+        result = _trained(recipe, recordings, model, setup, cache)
+        if log:
+            log(f"correction session {r + 1}/{recipe.corrections}: {len(recordings[-1])} frames, retrained")
+    return RecipeOutput(model, paths, result, demo_s / 60.0, corr_s / 60.0)
+
+
+def _trained(recipe: Recipe, recordings: list[Recording], model: Path, setup: RecipeSetup, cache: dict) -> TrainResult:
+    """The recipe's model trained on ``recordings`` and written to ``model``."""
+    return train_and_save(
+        build_dataset(recordings, setup.features, cache=cache, rules=recipe.rules),
         model,
-        train_cfg,
+        replace(recipe.train, seed=setup.seed),
         rules=recipe.rules,
         recipe=recipe.name,
         options=RunOptions(checkpoints=False),
     )
-    if recipe.corrections:  # the planner drives the course; only then is a simulation needed here
-        drive = DriveSetup.of(scenario, setup.vehicle, preference=features.preference)
-        expert_cfg = ExpertConfig.styled(setup.style, profile.order, setup.speeds)
-        sim = drive.simulation()
-    for r in range(recipe.corrections):
-        out = own / f"corrections_{r}"
-        meta = drive.meta(CorrectionRoundInfo(r, seed), profile)
-        writer = RecordingWriter(out, meta, scenario.to_dict(), overwrite=True)
-        planner = PlannerDriver(Planner(load_model(model)))
-        drivers = CorrectionDrivers(planner, ExpertDriver(expert_cfg, drive.sim.camera_rate_hz))
-        run = record_corrections(sim, drivers, writer, features.preference, np.random.default_rng(seed * 100 + 50 + r))
-        corr_s += run.duration_s
-        recordings.append(read_recording(out))
-        paths.append(out)
-        result = train_and_save(
-            build_dataset(recordings, features, cache=cache, rules=recipe.rules),
-            model,
-            train_cfg,
-            rules=recipe.rules,
-            recipe=recipe.name,
-            options=RunOptions(checkpoints=False),
-        )
-        if log:
-            log(f"correction session {r + 1}/{recipe.corrections}: {len(recordings[-1])} frames, retrained")
-    return RecipeOutput(model, paths, result, demo_s / 60.0, corr_s / 60.0)
+
+
+def _correction_round(drive: DriveSetup, sim: Simulation, setup: RecipeSetup, model: Path, out: Path, r: int) -> float:
+    """Correction round ``r`` in ``sim``: the planner of ``model`` drives the course, the driver
+    takes over where it would not have done the same, recorded into ``out``; its duration [s]."""
+    expert_cfg = ExpertConfig.styled(setup.style, setup.profile.order, setup.speeds)
+    meta = drive.meta(CorrectionRoundInfo(r, setup.seed), setup.profile)
+    writer = RecordingWriter(out, meta, drive.scenario.to_dict(), overwrite=True)
+    planner = PlannerDriver(Planner(load_model(model)))
+    drivers = CorrectionDrivers(planner, ExpertDriver(expert_cfg, drive.sim.camera_rate_hz))
+    rng = np.random.default_rng(setup.seed * 100 + 50 + r)
+    return record_corrections(sim, drivers, writer, setup.features.preference, rng).duration_s
