@@ -484,37 +484,7 @@ def write_selection_report(out: Path, saved: dict) -> Path:
     sel, rows, runs = saved["selection"], saved["zones"], saved["runs"]
     layouts = sel["layouts"]
     seen = [p["name"] for p in sel.get("perceptions", [{"name": "clean"}])]
-    lines = [
-        "# Recipe selection: agreement with the driver on generated layouts",
-        "",
-        f"{len(sel['recipes'])} recipe(s) x {len(sel['orders'])} order(s) x {sel['seeds']} training seed(s), {_drives(sel)} each; every model and "
-        f"its driver (style {sel['style']}) drive {len(layouts)} generated layouts ({layouts[0]} to {layouts[-1]}). Rates with 95% Wilson "
-        "intervals over all zones; the layouts column resamples whole layouts instead (a cluster bootstrap: a layout's zones are "
-        "alike across seeds), the spread another set of layouts would show.",
-        "",
-        f"The demonstrations recorded: {_perception_line(sel.get('taught_under'))}. The models drive the layouts receiving "
-        + ", then ".join(f"`{name}`" for name in seen)
-        + " (terrapref.perception); the driver always sees the truth.",
-        "",
-    ]
-    lethal = _lethal_of(sel)
-    if "classes" in sel:
-        table = sel["classes"]
-        lines += [
-            f"Class table: background {table['background']}; feature classes "
-            f"{', '.join(c['name'] for c in table['classes'] if c['name'] != table['background'] and c['name'] not in table['lethal'])}; "
-            f"lethal {', '.join(table['lethal']) or 'none'}. Orders: "
-            + "; ".join(" > ".join(_chosen(o, lethal)) for o in sel["orders"])
-            + ".",
-            "",
-        ]
-    if "course" in sel or sel.get("follow_up"):
-        course = f"`{Path(sel['course']).name}`" if "course" in sel else "its own course"
-        lines += [
-            f"Every recipe demonstrated {course}"
-            f"{', then a follow-up course of the pairs its drive left open, beside their neighbours' if sel.get('follow_up') else ''}.",
-            "",
-        ]
+    lines = _selection_preamble(sel, seen)
     points: list[RateRow] = []
     targets: list[float] = []
     for name in seen:
@@ -546,6 +516,44 @@ def write_selection_report(out: Path, saved: dict) -> Path:
     path = out / "SELECT.md"
     write_text_atomic(path, "\n".join(lines))
     return path
+
+
+def _selection_preamble(sel: dict, seen: list[str]) -> list[str]:
+    """SELECT.md's title and what was run: the recipes, orders, seeds and layouts, the
+    perception models (``seen``), the class table and the course."""
+    layouts = sel["layouts"]
+    lines = [
+        "# Recipe selection: agreement with the driver on generated layouts",
+        "",
+        f"{len(sel['recipes'])} recipe(s) x {len(sel['orders'])} order(s) x {sel['seeds']} training seed(s), {_drives(sel)} each; every model and "
+        f"its driver (style {sel['style']}) drive {len(layouts)} generated layouts ({layouts[0]} to {layouts[-1]}). Rates with 95% Wilson "
+        "intervals over all zones; the layouts column resamples whole layouts instead (a cluster bootstrap: a layout's zones are "
+        "alike across seeds), the spread another set of layouts would show.",
+        "",
+        f"The demonstrations recorded: {_perception_line(sel.get('taught_under'))}. The models drive the layouts receiving "
+        + ", then ".join(f"`{name}`" for name in seen)
+        + " (terrapref.perception); the driver always sees the truth.",
+        "",
+    ]
+    lethal = _lethal_of(sel)
+    if "classes" in sel:
+        table = sel["classes"]
+        lines += [
+            f"Class table: background {table['background']}; feature classes "
+            f"{', '.join(c['name'] for c in table['classes'] if c['name'] != table['background'] and c['name'] not in table['lethal'])}; "
+            f"lethal {', '.join(table['lethal']) or 'none'}. Orders: "
+            + "; ".join(" > ".join(_chosen(o, lethal)) for o in sel["orders"])
+            + ".",
+            "",
+        ]
+    if "course" in sel or sel.get("follow_up"):
+        course = f"`{Path(sel['course']).name}`" if "course" in sel else "its own course"
+        lines += [
+            f"Every recipe demonstrated {course}"
+            f"{', then a follow-up course of the pairs its drive left open, beside their neighbours' if sel.get('follow_up') else ''}.",
+            "",
+        ]
+    return lines
 
 
 def speed_section(rows: Sequence[dict], runs: Sequence[dict], background: str) -> list[str]:
