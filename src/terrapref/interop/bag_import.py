@@ -43,7 +43,7 @@ from PIL import Image as PILImage
 
 from terrapref.camera import CameraConfig
 from terrapref.demos.meta import ImportedInfo, RecordingMeta, SimMeta
-from terrapref.demos.recording import RecordingWriter, _is_recording
+from terrapref.demos.recording import RecordingWriter, is_recording
 from terrapref.errors import UserError
 from terrapref.extras import needs
 from terrapref.features import PreferenceSetConfig
@@ -654,7 +654,7 @@ def import_bag(
     classes = options.classes or default_classes()
     if not (math.isfinite(rate_hz) and 0 < rate_hz <= 100):
         raise UserError("--rate", "expected frames per second in (0, 100]")
-    if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not (force and _is_recording(out)))):
+    if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not (force and is_recording(out)))):
         raise UserError(str(out), "exists; choose another --out (or --force to replace a recording)", field="--out")
     out.parent.mkdir(parents=True, exist_ok=True)
     bag = _Bag(bag_path)
