@@ -821,3 +821,15 @@ def test_the_sample_logs_robot_file_reads_with_the_label_map_written_beside_it(t
     runpy.run_path(str(Path(__file__).parents[1] / "examples" / "robot_logs.py"), run_name="__main__")
     assert main(["validate", str(tmp_path / "logs" / "robot.yaml")]) == 0
     assert capsys.readouterr().out.splitlines()[-1] == f"{tmp_path / 'logs' / 'robot.yaml'}: ok (robot file)"
+
+
+def test_replay_reads_the_robots_speed_as_a_node_reads_it_from_odometry():
+    """Frames 0.1 s apart driven at 1.5 m/s: 1.5 m/s from the third frame on (0.2 s of log behind
+    it), none before, whichever way the robot faces or goes."""
+    from terrapref.interop.replay import frame_speeds
+
+    t = 0.1 * np.arange(8)
+    for yaw, sign in ((0.0, 1.0), (2.0, 1.0), (0.5, -1.0)):
+        poses = np.stack([sign * 1.5 * t * np.cos(yaw), sign * 1.5 * t * np.sin(yaw), np.full_like(t, yaw)], axis=1)
+        speeds = frame_speeds(t, poses)
+        assert np.isnan(speeds[:2]).all() and speeds[2:] == pytest.approx(1.5)

@@ -27,16 +27,13 @@ from terrapref.fileio import check_distinct, check_figure, check_output
 def _cmd_record(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from terrapref.camera import CameraConfig
     from terrapref.demos.expert import ExpertDriver
-    from terrapref.demos.meta import ExpertInfo, RecordingMeta, RecordingSetup
+    from terrapref.demos.meta import ExpertInfo
     from terrapref.demos.recording import RecordingWriter
-    from terrapref.demos.session import RunSettings, record_run
+    from terrapref.demos.session import DriveSetup, RunSettings, record_run
     from terrapref.demos.speed_style import driver_style
-    from terrapref.features import PreferenceSetConfig
     from terrapref.progress import Progress
     from terrapref.scenario import resolve_scenario
-    from terrapref.sim import SimConfig, Simulation
     from terrapref.terrain import PreferenceProfile
 
     if args.seed < 0:
@@ -46,27 +43,20 @@ def _cmd_record(args: argparse.Namespace) -> int:
     profile = (
         PreferenceProfile.parse(args.profile, scenario.classes) if args.profile is not None else PreferenceProfile.default(scenario.classes)
     )
-    sim_config = SimConfig()
-    expert = driver_style(args.style, profile.order, scenario.classes, sim_config.vehicle.max_speed_mps, _style_flags(args))
+    drive = DriveSetup.of(scenario)
+    expert = driver_style(args.style, profile.order, scenario.classes, drive.sim.vehicle.max_speed_mps, _style_flags(args))
     disturbance = _disturbance(args.disturb)
     perception = perception_model(args.perception, classes=scenario.classes)
-    camera, preference = CameraConfig(), PreferenceSetConfig()
-    meta = RecordingMeta.driven(
-        scenario,
-        RecordingSetup(camera, preference, sim_config),
-        ExpertInfo.of(args.seed, args.style, expert, disturbance),
-        profile,
-        perception,
-    )
-    sim = Simulation(scenario, camera, sim_config)
+    meta = drive.meta(ExpertInfo.of(args.seed, args.style, expert, disturbance), profile, perception)
+    sim = drive.simulation()
     writer = RecordingWriter(args.out, meta, scenario.to_dict(), overwrite=args.force)
     bar = Progress(f"record {scenario.name}", sim.path.length_m, enabled=not args.quiet)
     try:
         log = record_run(
             sim,
-            ExpertDriver(expert, sim_config.camera_rate_hz),
+            ExpertDriver(expert, drive.sim.camera_rate_hz),
             writer,
-            RunSettings(preference, disturbance, perception),
+            RunSettings(drive.preference, disturbance, perception),
             np.random.default_rng(args.seed),
             progress=lambda s: bar.update(s.progress_m, f"t={s.time_s:6.1f}s frames={writer.count}"),
         )

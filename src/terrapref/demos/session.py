@@ -9,17 +9,65 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from terrapref.camera import CameraConfig
 from terrapref.demos.disturbance import DisturbanceConfig, Disturber  # DisturbanceConfig: imported from here by callers too
+from terrapref.demos.meta import DriverInfo, RecordingMeta, RecordingSetup
 from terrapref.demos.recording import MemoryRecordingWriter, RecordingWriter
 from terrapref.features import PreferenceSetConfig
 from terrapref.perception import Perceiver, PerceptionModel, run_stream
-from terrapref.sim import Driver, EpisodeLog, Frame, Simulation
-from terrapref.vehicle import Command, ControlSet
+from terrapref.scenario import Scenario
+from terrapref.sim import Driver, EpisodeLog, Frame, SimConfig, Simulation
+from terrapref.terrain import PreferenceProfile
+from terrapref.vehicle import Command, ControlSet, VehicleConfig
+
+
+@dataclass(frozen=True)
+class DriveSetup:
+    """A drive that records, whoever drives it (``record``'s synthetic driver, a person in
+    ``drive``'s window, a recipe's demonstrations): the course, the camera, the simulation of the
+    vehicle and the preference set whose indices label the frames. The one place a drive is set up.
+
+    Attributes:
+        scenario: the course.
+        camera: the camera the frames are taken with.
+        sim: the simulation (its vehicle, the camera rate, when a run ends).
+        preference: the control and preference set its commands are labelled with.
+    """
+
+    scenario: Scenario
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    sim: SimConfig = field(default_factory=SimConfig)
+    preference: PreferenceSetConfig = field(default_factory=PreferenceSetConfig)
+
+    @classmethod
+    def of(
+        cls,
+        scenario: Scenario,
+        vehicle: VehicleConfig | None = None,
+        camera: CameraConfig | None = None,
+        preference: PreferenceSetConfig | None = None,
+        person: bool = False,
+    ) -> DriveSetup:
+        """The drive of ``scenario`` with ``vehicle`` (None: the default field UGV), the camera and
+        preference set given (None: the defaults); a ``person``'s drive never ends for standing
+        still (they may stop as long as they like)."""
+        sim = SimConfig.driving(vehicle)
+        if person:
+            sim = replace(sim, stopped_limit_s=None)
+        return cls(scenario, camera or CameraConfig(), sim, preference or PreferenceSetConfig())
+
+    def simulation(self) -> Simulation:
+        """The simulation the drive runs in, reset to the course's start."""
+        return Simulation(self.scenario, self.camera, self.sim)
+
+    def meta(self, driver: DriverInfo, profile: PreferenceProfile | None, perception: PerceptionModel | None = None) -> RecordingMeta:
+        """The recording's metadata: who drove (``driver``), the order they declared (None: none), what the robot received."""
+        return RecordingMeta.driven(self.scenario, RecordingSetup(self.camera, self.preference, self.sim), driver, profile, perception)
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,7 @@ from terrapref.errors import UserError
 from terrapref.interop.bag_import import _decode, _yaw, camera_from_info
 from terrapref.interop.labels import unlisted_message
 from terrapref.interop.robot import LIMITS, RobotConfig
-from terrapref.interop.runtime import PlannerRuntime, RobotSettings, RuntimeDecision
+from terrapref.interop.runtime import SPEED_WINDOW_S, PlannerRuntime, RobotSettings, RuntimeDecision, odometry_speed_mps
 from terrapref.learning.model_file import LoadedModel
 from terrapref.planner.stop import StopConfig
 from terrapref.rules.costmap import Costmap
@@ -45,7 +45,6 @@ ODOMETRY_KEPT_S = 5.0  # how far back odometry is kept for interpolating to an i
 ODOMETRY_WAIT_S = 0.5  # how long an image newer than the odometry waits for it [s]
 AHEAD_S = 1.0  # odometry and images stamped further ahead of the node's clock are refused [s] (the system's clock)
 SIM_AHEAD_S = 10.0  # the same under a simulated clock, whose /clock messages may come late (a node busy making its planner) [s]
-SPEED_WINDOW_S = 0.2  # the robot's speed at an image: its odometry's forward motion over this long before the stamp [s]
 
 
 def stamp_s(header) -> float:
@@ -244,8 +243,7 @@ class PlannerNodeCore:
         now, before = self.pose_at(t), self.pose_at(t - SPEED_WINDOW_S)
         if now is None or before is None:
             return None
-        forward = (now.x - before.x) * math.cos(now.yaw) + (now.y - before.y) * math.sin(now.yaw)
-        return abs(forward) / SPEED_WINDOW_S
+        return odometry_speed_mps(now, before)
 
     def on_image(self, msgtype: str, msg, topic: str = "", now_s: float | None = None) -> RuntimeDecision | None:
         """A label image (``sensor_msgs/msg/Image`` or ``.../CompressedImage``): the decision on

@@ -1,7 +1,7 @@
 """Open-loop replay: the runtime over a held-out log, against what the operator did.
 
 For every frame of the log the model decides from the same label image, stamp and pose as the
-operator had, and the replay counts how often its trajectory is the operator's (top-1), how
+operator had, and the robot's speed as a node reads it from odometry, and the replay counts how often its trajectory is the operator's (top-1), how
 often the operator's is among the three C finds most probable (top-3: C's alone, since the
 planner's rules choose one trajectory and rank none), how far its way bends from the operator's
 (mean |w| error) and how far its speed is from the operator's (mean |v| error), over all frames
@@ -27,8 +27,9 @@ from terrapref.camera import CameraConfig
 from terrapref.dataset import at_set_speed  # the dataset's own: the replay compares ways as training labels them
 from terrapref.demos.recording import Recording
 from terrapref.fileio import atomic_path, write_bytes_atomic
-from terrapref.interop.runtime import PlannerRuntime
+from terrapref.interop.runtime import SPEED_WINDOW_S, PlannerRuntime, odometry_speed_mps
 from terrapref.planner.model import Model
+from terrapref.vehicle import Pose
 
 
 def _rates(hit1: np.ndarray, hit3: np.ndarray | None, werr: np.ndarray, verr: np.ndarray | None) -> dict:
@@ -65,6 +66,20 @@ def summary_lines(result: dict) -> list[str]:
     return out
 
 
+def frame_speeds(times: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """The robot's speed at each frame [m/s] as a node reads it from odometry
+    (terrapref.interop.runtime.odometry_speed_mps): its forward motion over the
+    :data:`SPEED_WINDOW_S` before the frame, the poses between frames interpolated; NaN where the
+    log does not reach that far back. ``times`` (F,) [s], ``poses`` (F, 3)."""
+    times = np.asarray(times, dtype=float)
+    back = times - SPEED_WINDOW_S
+    yaw = np.unwrap(poses[:, 2])
+    before = np.stack([np.interp(back, times, poses[:, 0]), np.interp(back, times, poses[:, 1]), np.interp(back, times, yaw)], axis=1)
+    out = np.array([odometry_speed_mps(Pose(*poses[i]), Pose(*before[i])) for i in range(len(times))])
+    out[back < times[0] - 1e-9] = np.nan
+    return out
+
+
 def replay(model: Model, rec: Recording, progress=None) -> dict:
     """Decide on every frame of ``rec`` with ``model``; the metrics and the per-frame series.
 
@@ -81,10 +96,10 @@ def replay(model: Model, rec: Recording, progress=None) -> dict:
     c_best = np.empty(len(rec), dtype=np.int64)
     top3 = np.empty(len(rec), dtype=bool)
     terrain = np.empty(len(rec), dtype=bool)
+    speeds = frame_speeds(rec.times, rec.poses)
     for i in range(len(rec)):
-        d = runtime.decide(
-            rec.image(i), float(rec.times[i]), tuple(rec.poses[i])
-        )  # never None: read_recording refuses times that do not grow
+        # never None: read_recording refuses times that do not grow
+        d = runtime.decide(rec.image(i), float(rec.times[i]), tuple(rec.poses[i]), None if np.isnan(speeds[i]) else float(speeds[i]))
         chosen[i] = d.index
         commands[i] = d.command
         c_best[i] = int(np.argmax(d.probs))

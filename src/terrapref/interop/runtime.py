@@ -271,6 +271,16 @@ class PlannerRuntime:
         return Command(v, w)
 
 
+SPEED_WINDOW_S = 0.2  # a robot's speed at a frame: its odometry's forward motion over this long before the frame's stamp [s]
+
+
+def odometry_speed_mps(now: Pose, before: Pose, window_s: float = SPEED_WINDOW_S) -> float:
+    """The robot's speed [m/s] by its odometry: its motion along its heading at ``now`` since
+    ``before``, ``window_s`` [s] earlier (reversing counts as going: the speed is its magnitude)."""
+    forward = (now.x - before.x) * math.cos(now.yaw) + (now.y - before.y) * math.sin(now.yaw)
+    return abs(forward) / window_s
+
+
 def limit_notes(model: Model, limits: VehicleConfig) -> list[str]:
     """What ``model`` asks for beyond the robot's ``limits``, a line each (its speed rule's top speed)."""
     top = model.top_speed_mps

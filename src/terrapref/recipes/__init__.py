@@ -29,12 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-from terrapref.camera import CameraConfig
 from terrapref.dataset import Dataset, build_dataset
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
-from terrapref.demos.meta import CorrectionRoundInfo, ExpertInfo, RecordingMeta, RecordingSetup
+from terrapref.demos.meta import CorrectionRoundInfo, ExpertInfo
 from terrapref.demos.recording import MemoryRecordingWriter, Recording, RecordingWriter, read_recording
-from terrapref.demos.session import DisturbanceConfig, RunSettings, record_run
+from terrapref.demos.session import DisturbanceConfig, DriveSetup, RunSettings, record_run
 from terrapref.features import FeatureConfig
 from terrapref.learning.identify import FollowUp
 from terrapref.learning.model_file import load_model
@@ -48,7 +47,6 @@ from terrapref.registry import Registry
 from terrapref.rules import OffsetConfig, RuleConfig, SecondStageConfig, SpeedConfig
 from terrapref.rules.second.rule import with_second_stage
 from terrapref.scenario import resolve_scenario
-from terrapref.sim import SimConfig, Simulation
 from terrapref.terrain import ClassTable, PreferenceProfile
 from terrapref.vehicle import VehicleConfig
 
@@ -204,7 +202,7 @@ def _drive(drive: _Drive, features: FeatureConfig, write: bool) -> tuple[Recordi
     """
     scenario = resolve_scenario(drive.course, drive.classes)
     profile = drive.profile or PreferenceProfile.default(scenario.classes)
-    camera, sim_cfg = CameraConfig(), SimConfig.driving(drive.vehicle)
+    setup = DriveSetup.of(scenario, drive.vehicle, preference=features.preference)
     expert_cfg = ExpertConfig.styled(drive.style, profile.order, drive.speeds)
     pushes = drive.disturbance.to_dict() if drive.disturbance is not None else None
     perception = drive.perception or PerceptionModel()
@@ -219,23 +217,18 @@ def _drive(drive: _Drive, features: FeatureConfig, write: bool) -> tuple[Recordi
             and driver.get("disturbance") == pushes
             and driver.get("config") == expert_cfg.to_dict()
             and existing.meta.get("perception", PerceptionModel().to_dict()) == perception.to_dict()
-            and existing.meta.get("sim", {}).get("vehicle") == sim_cfg.vehicle.to_dict()
+            and existing.meta.get("sim", {}).get("vehicle") == setup.sim.vehicle.to_dict()
         ):
             return existing, False
-    meta = RecordingMeta.driven(
-        scenario,
-        RecordingSetup(camera, features.preference, sim_cfg),
-        ExpertInfo.of(drive.seed, drive.style, expert_cfg, drive.disturbance),
-        profile,
-        perception,
-    )
+    meta = setup.meta(ExpertInfo.of(drive.seed, drive.style, expert_cfg, drive.disturbance), profile, perception)
     writer = (
         RecordingWriter(drive.out, meta, scenario.to_dict(), overwrite=True)
         if write
         else MemoryRecordingWriter(drive.out, meta, scenario.to_dict())
     )
-    settings = RunSettings(features.preference, drive.disturbance, perception)
-    record_run(Simulation(scenario, camera, sim_cfg), ExpertDriver(expert_cfg), writer, settings, np.random.default_rng(drive.seed))
+    settings = RunSettings(setup.preference, drive.disturbance, perception)
+    driver = ExpertDriver(expert_cfg, setup.sim.camera_rate_hz)
+    record_run(setup.simulation(), driver, writer, settings, np.random.default_rng(drive.seed))
     return (read_recording(drive.out) if write else writer.recording()), True
 
 
@@ -378,15 +371,15 @@ def run_recipe(
         options=RunOptions(checkpoints=False),
     )
     if recipe.corrections:  # the planner drives the course; only then is a simulation needed here
-        camera, sim_cfg = CameraConfig(), SimConfig.driving(setup.vehicle)
+        drive = DriveSetup.of(scenario, setup.vehicle, preference=features.preference)
         expert_cfg = ExpertConfig.styled(setup.style, profile.order, setup.speeds)
-        sim = Simulation(scenario, camera, sim_cfg)
+        sim = drive.simulation()
     for r in range(recipe.corrections):
         out = own / f"corrections_{r}"
-        meta = RecordingMeta.driven(scenario, RecordingSetup(camera, features.preference, sim_cfg), CorrectionRoundInfo(r, seed), profile)
+        meta = drive.meta(CorrectionRoundInfo(r, seed), profile)
         writer = RecordingWriter(out, meta, scenario.to_dict(), overwrite=True)
         planner = PlannerDriver(Planner(load_model(model)))
-        drivers = CorrectionDrivers(planner, ExpertDriver(expert_cfg))
+        drivers = CorrectionDrivers(planner, ExpertDriver(expert_cfg, drive.sim.camera_rate_hz))
         run = record_corrections(sim, drivers, writer, features.preference, np.random.default_rng(seed * 100 + 50 + r))
         corr_s += run.duration_s
         recordings.append(read_recording(out))

@@ -47,9 +47,9 @@ import numpy as np
 import pygame
 
 from terrapref.camera import CameraConfig
-from terrapref.demos.meta import HumanInfo, RecordingMeta, RecordingSetup, RideAlongInfo
+from terrapref.demos.meta import HumanInfo, RideAlongInfo
 from terrapref.demos.recording import RecordingWriter
-from terrapref.demos.session import DisturbanceConfig, Disturber, RecordLoop, abort_recording, run_perceiver
+from terrapref.demos.session import DisturbanceConfig, Disturber, DriveSetup, RecordLoop, abort_recording, run_perceiver
 from terrapref.errors import Terminated, UserError
 from terrapref.features import PreferenceSet, PreferenceSetConfig
 from terrapref.perception import PerceptionModel
@@ -198,14 +198,19 @@ class TeleopOptions:
 
 @dataclass(frozen=True)
 class _Setup:
-    """A session's configuration with its defaults filled in, and the planner riding along (or None)."""
+    """A session's drive with its defaults filled in, and the planner riding along (or None)."""
 
-    scenario: Scenario
-    camera: CameraConfig
-    preference: PreferenceSetConfig
-    sim: SimConfig
+    drive: DriveSetup
     planner: Any
     profile: PreferenceProfile | None = None  # the order the recording declares (None: none)
+
+    @property
+    def scenario(self) -> Scenario:
+        return self.drive.scenario
+
+    @property
+    def sim(self) -> SimConfig:
+        return self.drive.sim
 
 
 def _check_display() -> None:
@@ -612,7 +617,7 @@ def run_session(scenario: Scenario | str, options: TeleopOptions) -> TeleopResul
 def _resolve(scenario: Scenario | str, options: TeleopOptions) -> _Setup:
     """The scenario and configurations the session drives with, checked, and the planner riding along."""
     scenario = resolve_scenario(scenario) if isinstance(scenario, str) else scenario
-    sim_cfg = options.sim_config or SimConfig(stopped_limit_s=None)  # a person may stand still as long as they like
+    sim_cfg = options.sim_config or DriveSetup.of(scenario, person=True).sim  # a person may stand still as long as they like
     if not 0.0 < options.v_mps <= sim_cfg.vehicle.max_speed_mps:
         raise UserError(SOURCE, f"speed must be in (0, {sim_cfg.vehicle.max_speed_mps:g}] m/s, got {options.v_mps:g}", field="v_mps")
     if options.max_frames is not None and options.max_frames < 0:
@@ -622,7 +627,7 @@ def _resolve(scenario: Scenario | str, options: TeleopOptions) -> _Setup:
         camera, preference, planner, learned_from = _load_planner(options.model, camera, preference)
         # The person riding along is the driver the model learned from: their drive's order, unless told another.
         profile = profile or learned_from
-    return _Setup(scenario, camera or CameraConfig(), preference or PreferenceSetConfig(), sim_cfg, planner, profile)
+    return _Setup(DriveSetup(scenario, camera or CameraConfig(), sim_cfg, preference or PreferenceSetConfig()), planner, profile)
 
 
 def _load_planner(
@@ -645,8 +650,8 @@ def _load_planner(
 
 def _open_window(setup: _Setup, record_dir: str | Path | None) -> tuple[Simulation, PreferenceSet, Window]:
     """The simulation, its preference set and the window that shows them."""
-    sim = Simulation(setup.scenario, setup.camera, setup.sim)
-    prefs = PreferenceSet(setup.preference, sim.camera)
+    sim = setup.drive.simulation()
+    prefs = PreferenceSet(setup.drive.preference, sim.camera)
     instructions = INSTRUCTIONS + (RIDE_ALONG_INSTRUCTIONS if setup.planner is not None else ())
     title = f"terrapref drive - {setup.scenario.name}" + (f" -> {record_dir}" if record_dir else "")
     return sim, prefs, Window(sim, prefs, title, instructions)
@@ -660,11 +665,8 @@ def _open_recording(setup: _Setup, options: TeleopOptions) -> RecordingWriter | 
     driver = (
         HumanInfo(INPUT, pushes, options.seed) if setup.planner is None else RideAlongInfo(INPUT, pushes, options.seed, str(options.model))
     )
-    scenario = setup.scenario
-    meta = RecordingMeta.driven(
-        scenario, RecordingSetup(setup.camera, setup.preference, setup.sim), driver, setup.profile, options.perception
-    )
-    return RecordingWriter(options.record_dir, meta, scenario.to_dict(), overwrite=options.overwrite)
+    meta = setup.drive.meta(driver, setup.profile, options.perception)
+    return RecordingWriter(options.record_dir, meta, setup.scenario.to_dict(), overwrite=options.overwrite)
 
 
 def _disturber(options: TeleopOptions, frame_dt_s: float) -> Disturber | None:
