@@ -20,15 +20,14 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, fields, replace
-from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from terrapref.errors import UserError
-from terrapref.interop.bag_import import _decode, _yaw, camera_from_info
 from terrapref.interop.labels import unlisted_message
 from terrapref.interop.robot import LIMITS, RobotConfig
+from terrapref.interop.ros_decode import camera_from_info, label_ids, stamp_s, yaw_rad
 from terrapref.interop.runtime import SPEED_WINDOW_S, PlannerRuntime, RobotSettings, RuntimeDecision, odometry_speed_mps
 from terrapref.learning.model_file import LoadedModel
 from terrapref.planner.stop import StopConfig
@@ -45,18 +44,6 @@ ODOMETRY_KEPT_S = 5.0  # how far back odometry is kept for interpolating to an i
 ODOMETRY_WAIT_S = 0.5  # how long an image newer than the odometry waits for it [s]
 AHEAD_S = 1.0  # odometry and images stamped further ahead of the node's clock are refused [s] (the system's clock)
 SIM_AHEAD_S = 10.0  # the same under a simulated clock, whose /clock messages may come late (a node busy making its planner) [s]
-
-
-def stamp_s(header) -> float:
-    """A header's stamp [s] (ROS 1's ``secs``/``nsecs`` or ROS 2's ``sec``/``nanosec``)."""
-    stamp = header.stamp
-    sec = getattr(stamp, "sec", None)
-    if sec is None:
-        sec = stamp.secs
-    nsec = getattr(stamp, "nanosec", None)
-    if nsec is None:
-        nsec = stamp.nsecs
-    return int(sec) + int(nsec) * 1e-9
 
 
 class Watchdog:
@@ -208,7 +195,7 @@ class PlannerNodeCore:
                 )
             if self.odometry and t < self.odometry[-1][0]:
                 return None  # an older pose than one kept: odometry arrives in order or not at all
-            self.odometry.append((t, float(p.position.x), float(p.position.y), _yaw(p.orientation)))
+            self.odometry.append((t, float(p.position.x), float(p.position.y), yaw_rad(p.orientation)))
             while self.odometry and self.odometry[0][0] < t - ODOMETRY_KEPT_S:
                 self.odometry.popleft()
             if self._pending is None or self._pending[3] > t:
@@ -279,7 +266,7 @@ class PlannerNodeCore:
 
     def _decide(self, msgtype: str, msg, topic: str, t: float, pose: Pose) -> RuntimeDecision | None:
         # No time in the error: a node says each problem once, and a stream of bad frames is one problem.
-        raw = _decode(SimpleNamespace(topic=topic, msgtype=msgtype), msg, self.robot.source, self.robot.labels)
+        raw = label_ids(msg, msgtype, topic, self.robot.source, self.robot.labels)
         if raw.shape != self.runtime.shape:
             raise UserError(
                 self.robot.source,

@@ -36,7 +36,7 @@
       max_accel_mps2: 1.0                      # the speed given out rises no faster [m/s^2]; null: the base ramps it
 
 Without ``topics.command`` each frame is labelled by the vehicle's measured motion (v, w): the
-odometry's twist, or differences of its poses where it carries none (terrapref.interop.bag_import).
+odometry's twist, or differences of its poses where it carries none (terrapref.interop.bag_frames).
 A command topic that is named must be in the bag. Without ``topics.path`` or ``path_file`` the
 reference path is the driven odometry, smoothed.
 Relative file names are relative to the robot file.
