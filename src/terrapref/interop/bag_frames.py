@@ -38,7 +38,7 @@ from terrapref.errors import UserError
 from terrapref.interop.bag_reader import Bag
 from terrapref.interop.labels import LabelMap
 from terrapref.interop.robot import RobotConfig
-from terrapref.interop.ros_decode import label_ids, message_time_s, static_transforms, yaw_rad
+from terrapref.interop.ros_decode import label_ids, message_time_s, path_xy, static_transforms, yaw_rad
 from terrapref.progress import Progress
 from terrapref.terrain.classes import UNKNOWN
 from terrapref.vehicle import ControlSet, wrap_angle
@@ -178,7 +178,7 @@ class _SmallTopics:
             self.cmd_received.append(stamp <= 0)
             self.cmd.append((twist.linear.x, twist.angular.z))
         elif role == "path" and self.path is None and len(msg.poses) >= 2:
-            self.path = np.array([(p.pose.position.x, p.pose.position.y) for p in msg.poses], dtype=float)
+            self.path = path_xy(msg)
         elif role == "camera_info" and self.info is None:
             self.info = msg
         elif role == "tf_static":

@@ -27,7 +27,7 @@ import numpy as np
 from terrapref.errors import UserError
 from terrapref.interop.labels import unlisted_message
 from terrapref.interop.robot import LIMITS, RobotConfig
-from terrapref.interop.ros_decode import camera_from_info, label_ids, stamp_s, yaw_rad
+from terrapref.interop.ros_decode import camera_from_info, label_ids, path_xy, stamp_s, yaw_rad
 from terrapref.interop.runtime import SPEED_WINDOW_S, PlannerRuntime, RobotSettings, RuntimeDecision, odometry_speed_mps
 from terrapref.learning.model_file import LoadedModel
 from terrapref.planner.stop import StopConfig
@@ -163,7 +163,7 @@ class PlannerNodeCore:
     def on_path(self, msg) -> None:
         """A nav_msgs/Path of two distinct points or more (re)sets the reference path; another is skipped (counted)."""
         with self._lock:
-            xy = np.array([(p.pose.position.x, p.pose.position.y) for p in msg.poses], dtype=float).reshape(-1, 2)
+            xy = path_xy(msg)
             try:
                 ReferencePath(xy)
             except ValueError:  # fewer than two distinct finite points: the path in force stays

@@ -1,4 +1,4 @@
-"""ROS messages decoded into what terrapref uses: header stamps, yaw, label images of every
+"""ROS messages decoded into what terrapref uses: header stamps, yaw, paths, label images of every
 encoding a robot sends ids in, the camera's calibration, and its mounting from /tf_static.
 
 Messages are read by attribute (``header.stamp``, ``pose.orientation``, ``data``), so the same
@@ -23,9 +23,8 @@ from terrapref.interop.robot import RobotConfig
 COMPRESSED_DEPTH_HEADER = 12  # compressed_depth_image_transport's ConfigHeader before the png: format, two floats
 
 
-def stamp_s(header) -> float:
-    """A header's stamp [s] (ROS 1's ``secs``/``nsecs`` or ROS 2's ``sec``/``nanosec``)."""
-    stamp = header.stamp
+def time_s(stamp) -> float:
+    """A ROS time [s] (ROS 1's ``secs``/``nsecs`` or ROS 2's ``sec``/``nanosec``)."""
     sec = getattr(stamp, "sec", None)
     if sec is None:
         sec = stamp.secs
@@ -33,6 +32,11 @@ def stamp_s(header) -> float:
     if nsec is None:
         nsec = stamp.nsecs
     return int(sec) + int(nsec) * 1e-9
+
+
+def stamp_s(header) -> float:
+    """A header's stamp [s] (ROS 1's or ROS 2's)."""
+    return time_s(header.stamp)
 
 
 def message_time_s(msg, fallback_ns: int, shift_s: float = 0.0) -> float:
@@ -61,6 +65,11 @@ def _rotation(q) -> np.ndarray:
             [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
         ]
     )
+
+
+def path_xy(msg) -> np.ndarray:
+    """The positions (K, 2) x, y [m] of a nav_msgs/Path's poses (K may be 0 or 1)."""
+    return np.array([(p.pose.position.x, p.pose.position.y) for p in msg.poses], dtype=float).reshape(-1, 2)
 
 
 def static_transforms(msg) -> dict[str, tuple[str, np.ndarray, np.ndarray]]:
