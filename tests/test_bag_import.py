@@ -611,7 +611,7 @@ def _same_frames(a, b) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_without_a_command_topic_each_frame_is_labelled_by_the_odometrys_twist(measured):
-    from terrapref.interop.bag_import import MIN_SPEED_MPS
+    from terrapref.interop.bag_frames import MIN_SPEED_MPS
     from terrapref.vehicle import ControlSet
 
     assert load_robot(measured["robot"]).command_topic is None
@@ -709,7 +709,7 @@ def test_an_export_stamps_its_images_in_the_optical_frame_and_latches_its_static
     from rosbags.interfaces import QosDurability
 
     from terrapref.camera import CameraConfig, PinholeCamera
-    from terrapref.interop.bag_import import _rotation, camera_mount_from_tf
+    from terrapref.interop.ros_decode import camera_mount_from_tf, static_transforms
 
     _, rec = imported["mcap"]
     out = tmp_path / "run.mcap"
@@ -724,17 +724,10 @@ def test_an_export_stamps_its_images_in_the_optical_frame_and_latches_its_static
             for _, _, raw in [next(reader.messages(connections=[conns[topic]]))]
         }
         static = next(reader.messages(connections=[conns["/tf_static"]]))
-        transforms = reader.deserialize(static[2], "tf2_msgs/msg/TFMessage").transforms
+        tf_message = reader.deserialize(static[2], "tf2_msgs/msg/TFMessage")
     assert set(frames.values()) == {"camera_optical"}
     # The optical axes, carried to base_link through the chain, are the camera model's.
-    static = {
-        t.child_frame_id: (
-            t.header.frame_id,
-            np.array([t.transform.translation.x, t.transform.translation.y, t.transform.translation.z]),
-            _rotation(t.transform.rotation),
-        )
-        for t in transforms
-    }
+    static = static_transforms(tf_message)
     assert static["camera_link"][0] == "base_link" and static["camera_optical"][0] == "camera_link"
     camera = PinholeCamera(CameraConfig.from_dict(rec.meta["camera"]))
     np.testing.assert_allclose(
@@ -782,11 +775,11 @@ def _compressed(fmt: str, data: bytes):
 
 def test_a_png_that_cannot_be_decoded_names_the_log_the_topic_and_the_time(tmp_path: Path):
     from terrapref.errors import UserError
-    from terrapref.interop.bag_import import _decode
+    from terrapref.interop.ros_decode import label_ids
 
     conn, msg = _compressed("mono8; png compressed", b"\x89PNG\r\n\x1a\n" + bytes(100))
     with pytest.raises(UserError) as err:
-        _decode(conn, msg, "drive.bag", t_s=12.3)
+        label_ids(msg, conn.msgtype, conn.topic, "drive.bag", t_s=12.3)
     line = err.value.lines()[0]
     assert "drive.bag" in line and "/seg" in line and "12.300 s into the log" in line and "not a decodable png" in line
 
@@ -797,17 +790,17 @@ def test_compressed_depth_png_of_label_ids_is_read_and_of_depth_refused_by_name(
     from PIL import Image
 
     from terrapref.errors import UserError
-    from terrapref.interop.bag_import import COMPRESSED_DEPTH_HEADER, _decode
+    from terrapref.interop.ros_decode import COMPRESSED_DEPTH_HEADER, label_ids
 
     ids = (np.arange(12 * 16).reshape(12, 16) % 40).astype(np.uint16)
     png = io.BytesIO()
     Image.fromarray(ids).save(png, format="PNG")
     header = bytes(COMPRESSED_DEPTH_HEADER)  # format enum and two quantisation floats
     conn, msg = _compressed("16UC1; compressedDepth png", header + png.getvalue())
-    np.testing.assert_array_equal(_decode(conn, msg, "drive.bag", t_s=1.0), ids)
+    np.testing.assert_array_equal(label_ids(msg, conn.msgtype, conn.topic, "drive.bag", t_s=1.0), ids)
     conn, msg = _compressed("32FC1; compressedDepth png", header + png.getvalue())
     with pytest.raises(UserError, match="compressedDepth of '32FC1' holds depth"):
-        _decode(conn, msg, "drive.bag", t_s=1.0)
+        label_ids(msg, conn.msgtype, conn.topic, "drive.bag", t_s=1.0)
 
 
 def test_the_sample_logs_robot_file_reads_with_the_label_map_written_beside_it(tmp_path: Path, monkeypatch, capsys):

@@ -135,8 +135,8 @@ def test_matmul_is_the_exact_product_of_the_rounded_operands(k: int):
     rng = np.random.default_rng(k)
     a, b = rng.normal(size=(6, k)) * 3.0, rng.normal(size=(k, 4)) / 7.0
     out = exact.matmul(a, b)
-    ra = exact.rounded(a, (53 - exact._sum_bits(k)) // 2)
-    rb = exact.rounded(b, min(26, 53 - exact._sum_bits(k) - ra.bits))
+    ra = exact.rounded(a, (53 - exact.sum_bits(k)) // 2)
+    rb = exact.rounded(b, min(26, 53 - exact.sum_bits(k) - ra.bits))
     for i in range(6):
         for j in range(4):
             terms = (ra.ints[i] * rb.ints[:, j]).tolist()  # products of integers below 2 ** 53: exact

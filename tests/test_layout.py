@@ -227,3 +227,90 @@ class Thing:
     def make(cls, a, b, c, d, e, f, g): ...
 """
     assert _long_signatures(ast.parse(code)) == {"seven", "rest", "Thing.make"}
+
+
+# A name that starts with one underscore is its module's own: no other module of the package
+# imports it (``from terrapref.a import _x``) or reaches for it on a module it imported
+# (``a._x``). What two modules share is public in one of them. The scan covers src/terrapref/
+# only: a test may use the private names of the module it tests.
+
+
+def _private_uses(tree: ast.AST, module: str, modules: set[str]) -> set[str]:
+    """``used._name`` for each private name of another terrapref module that the code in ``tree``
+    (the module ``module``; ``modules``: every module of the package) imports or reads off a
+    module it imported. Dunder names (``__version__``) are not private."""
+
+    def private(name: str) -> bool:
+        return name.startswith("_") and not name.endswith("__")
+
+    found, bound = set(), {}  # bound: a name in the file -> the terrapref module it is
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:  # relative: resolved against the module's own package
+                base = ".".join([*module.split(".")[: -node.level], *([base] if base else [])])
+            if not base.startswith("terrapref"):
+                continue
+            for alias in node.names:
+                if f"{base}.{alias.name}" in modules:
+                    bound[alias.asname or alias.name] = f"{base}.{alias.name}"
+                elif private(alias.name) and base != module:
+                    found.add(f"{base}.{alias.name}")
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.startswith("terrapref"):  # ``import terrapref.a.b`` binds terrapref; ``... as m``, the module
+                    bound[alias.asname or "terrapref"] = alias.name if alias.asname else "terrapref"
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and private(node.attr):
+            first, *rest = ast.unparse(node.value).split(".")
+            target = ".".join([bound[first], *rest]) if first in bound else None  # ``pkg.b._x``: pkg's module, then b
+            if target in modules and target != module:
+                found.add(f"{target}.{node.attr}")
+    return found
+
+
+def _modules() -> dict[str, Path]:
+    """Module name (``terrapref.x.y``; a package is its ``__init__``) -> its file."""
+    return {
+        ".".join(("terrapref", *path.relative_to(ROOT).with_suffix("").parts)).removesuffix(".__init__"): path
+        for path in ROOT.rglob("*.py")
+    }
+
+
+def test_no_module_uses_a_private_name_of_another():
+    modules = _modules()
+    assert len(modules) > 50, "the scan sees the modules"
+    found = {f"{name}: {used}" for name, path in modules.items() for used in _private_uses(ast.parse(path.read_text()), name, set(modules))}
+    assert not found, "private names used outside their module (make them public where they belong): " + ", ".join(sorted(found))
+
+
+def test_the_private_name_check_finds_each_way_of_reaching_one():
+    modules = {"terrapref", "terrapref.a", "terrapref.a.b", "terrapref.c"}
+    code = """
+from terrapref.a.b import _hidden, shown, __version__
+from terrapref.a import b
+from terrapref import a as pkg
+from . import b as sibling
+from .b import _relative
+import terrapref.c
+import terrapref.c as c_alias
+b._through_module
+pkg._through_package
+pkg.b._through_package_then_module
+sibling._through_relative
+terrapref.c._through_dotted
+c_alias._through_alias
+b.shown._attribute_of_a_value
+self._own
+"""
+    assert _private_uses(ast.parse(code), "terrapref.a.x", modules) == {
+        "terrapref.a.b._hidden",
+        "terrapref.a.b._through_module",
+        "terrapref.a._through_package",
+        "terrapref.a.b._through_package_then_module",
+        "terrapref.a.b._through_relative",
+        "terrapref.a.b._relative",
+        "terrapref.c._through_dotted",
+        "terrapref.c._through_alias",
+    }
+    assert _private_uses(ast.parse("from terrapref.a.x import _mine\n"), "terrapref.a.x", modules) == set()

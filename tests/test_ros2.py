@@ -114,7 +114,7 @@ def _node(
 def _publish_until_commanded(player, heard, t_ns: int, group: list, stamp: float, tries: int = 20) -> None:
     """Publish the clock at ``t_ns`` and the messages of one stamp, again until a command of the
     image's ``stamp`` is heard (best effort: a message may be lost), at most ``tries`` times."""
-    from terrapref.interop.node_core import stamp_s
+    from terrapref.interop.ros_decode import stamp_s
 
     for _ in range(tries):
         player.publish_clock(t_ns)
@@ -190,8 +190,8 @@ def system(tmp_path_factory, short_recording):
     from terrapref.demos.recording import read_recording
     from terrapref.interop.dds import MessageTypes, Participant
     from terrapref.interop.mcap_export import recording_frames, write_bag
-    from terrapref.interop.node_core import stamp_s
     from terrapref.interop.play import BagPlayer
+    from terrapref.interop.ros_decode import stamp_s
     from terrapref.interop.ros_messages import typestore
     from terrapref.learning.model_file import save_model
     from terrapref.learning.network import ClassifierConfig
@@ -326,7 +326,7 @@ def system(tmp_path_factory, short_recording):
 
 def _bad_input(player, messages, times, heard, out) -> None:
     """Each bad message twice, then the next good frame, which is decided on as ever."""
-    from terrapref.interop.node_core import stamp_s
+    from terrapref.interop.ros_decode import stamp_s
 
     ts = player.types.ts
     t_ns = times[FRAMES - 1]

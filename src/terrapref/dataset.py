@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, NamedTuple, Protocol
@@ -147,7 +147,11 @@ def featurize_recording(
     featurizer = UtilityFeaturizer(features, PinholeCamera(camera), classes)
     path = ReferencePath(np.asarray(recording.meta.get("path", scenario.waypoints), dtype=float))
     readers = {rule.type: rule.reader(featurizer, PinholeCamera(camera), classes, len(keep)) for rule in rules if rule.data() is not None}
-    U = _read_frames(recording, keep, featurizer, path, renderer, list(readers.values()), on_frame)
+    U = np.empty((len(keep), featurizer.m, features.n_features), dtype=np.float32)
+    for j, frame_u in _read_frames(recording, keep, featurizer, path, renderer, list(readers.values())):
+        U[j] = frame_u
+        if on_frame is not None:
+            on_frame(j + 1)
     w = at_set_speed(recording.commands[keep], features.preference.control.v_mps)
     labels = np.asarray(features.preference.control.label_of(w), dtype=np.int64).reshape(len(keep))
     return Featurised(U, labels, w, {name: reader.arrays(recording, keep, path) for name, reader in readers.items()})
@@ -188,15 +192,13 @@ def _read_frames(
     path: ReferencePath,
     renderer: SegmentationRenderer | None,
     readers: list,
-    on_frame: Callable[[int], None] | None,
-) -> np.ndarray:
-    """U (F, m, K + 1) of the ``keep`` frames, each frame also given to the rules' ``readers``."""
+) -> Iterator[tuple[int, np.ndarray]]:
+    """(j, U of the j-th of the ``keep`` frames), in order, each frame also given to the rules' ``readers``."""
     known = np.zeros(256, dtype=bool)
     known[[c.id for c in recording.classes.classes]] = True
     known[255] = True
     rec_camera = CameraConfig.from_dict(recording.meta["camera"])
     shape = (rec_camera.height_px, rec_camera.width_px)
-    U = np.empty((len(keep), featurizer.m, featurizer.config.n_features), dtype=np.float32)
     tracker = PathTracker(path)
     # Between frames that are not consecutive (a ride-along's corrections, frames left out off
     # the map) the vehicle may have gone further than the tracker's window: widen it by what
@@ -208,12 +210,10 @@ def _read_frames(
         view = _frame_view(recording, i, renderer, pose, shape, known)
         gap_s = recording.times[i] - recording.times[keep[j - 1]] if j > 0 else 0.0
         s = tracker.update(recording.poses[i, :2], ahead_m=v_max * gap_s + 2.0 if gap_s > 1.5 * period else None)
-        U[j] = featurizer(view, pose, path, s)
+        frame_u = featurizer(view, pose, path, s)
         for reader in readers:
             reader.read(j, view, pose, path, s)
-        if on_frame is not None:
-            on_frame(j + 1)
-    return U
+        yield j, frame_u
 
 
 def _frame_view(

@@ -6,6 +6,7 @@ else reaching the user would be a bug.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -54,3 +55,11 @@ class ConfigError(UserError):
 class Terminated(KeyboardInterrupt):
     """SIGTERM, raised where the command was (terrapref.cli installs the handler), so that it
     cleans up as after Ctrl-C."""
+
+
+def one_line(exc: BaseException, limit: int = 160) -> str:
+    """An exception's text on one line (a reader's errors quote whole message definitions), without
+    the memory addresses some quote (PIL's ``<_io.BytesIO object at 0x...>``), so that the same
+    problem reads the same each time."""
+    text = re.sub(r" at 0x[0-9a-fA-F]+", "", " ".join(str(exc).split()))
+    return f"{type(exc).__name__}: {text[:limit]}{'...' if len(text) > limit else ''}"

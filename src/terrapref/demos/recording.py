@@ -58,7 +58,8 @@ def _entries(meta: RecordingMeta | dict[str, Any]) -> dict[str, Any]:
     return meta if isinstance(meta, dict) else meta.to_dict()
 
 
-def _is_recording(path: Path) -> bool:
+def is_recording(path: Path) -> bool:
+    """Whether the folder ``path`` holds a recording (complete or not)."""
     return (path / META).exists() or (path / FRAMES).exists()
 
 
@@ -85,7 +86,7 @@ class RecordingWriter:
         if self.target.exists():
             if not self.target.is_dir():
                 raise UserError(str(self.target), "exists and is not a directory")
-            if _is_recording(self.target):
+            if is_recording(self.target):
                 if not overwrite:
                     raise UserError(str(self.target), "a recording already exists here; choose another --out or pass --force to replace it")
                 self.dir = new_folder(self.target, ".new")

@@ -20,15 +20,14 @@ import time
 from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields, replace
-from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from terrapref.errors import UserError
-from terrapref.interop.bag_import import _decode, _yaw, camera_from_info
 from terrapref.interop.labels import unlisted_message
 from terrapref.interop.robot import LIMITS, RobotConfig
+from terrapref.interop.ros_decode import camera_from_info, label_ids, path_xy, stamp_s, yaw_rad
 from terrapref.interop.runtime import SPEED_WINDOW_S, PlannerRuntime, RobotSettings, RuntimeDecision, odometry_speed_mps
 from terrapref.learning.model_file import LoadedModel
 from terrapref.planner.model import Model
@@ -48,18 +47,6 @@ ODOMETRY_KEPT_S = 5.0  # how far back odometry is kept for interpolating to an i
 ODOMETRY_WAIT_S = 0.5  # how long an image newer than the odometry waits for it [s]
 AHEAD_S = 1.0  # odometry and images stamped further ahead of the node's clock are refused [s] (the system's clock)
 SIM_AHEAD_S = 10.0  # the same under a simulated clock, whose /clock messages may come late (a node busy making its planner) [s]
-
-
-def stamp_s(header) -> float:
-    """A header's stamp [s] (ROS 1's ``secs``/``nsecs`` or ROS 2's ``sec``/``nanosec``)."""
-    stamp = header.stamp
-    sec = getattr(stamp, "sec", None)
-    if sec is None:
-        sec = stamp.secs
-    nsec = getattr(stamp, "nanosec", None)
-    if nsec is None:
-        nsec = stamp.nsecs
-    return int(sec) + int(nsec) * 1e-9
 
 
 class Watchdog:
@@ -180,7 +167,7 @@ class PlannerNodeCore:
     def on_path(self, msg) -> None:
         """A nav_msgs/Path of two distinct points or more (re)sets the reference path; another is skipped (counted)."""
         with self._lock:
-            xy = np.array([(p.pose.position.x, p.pose.position.y) for p in msg.poses], dtype=float).reshape(-1, 2)
+            xy = path_xy(msg)
             try:
                 ReferencePath(xy)
             except ValueError:  # fewer than two distinct finite points: the path in force stays
@@ -212,7 +199,7 @@ class PlannerNodeCore:
                 )
             if self.odometry and t < self.odometry[-1][0]:
                 return None  # an older pose than one kept: odometry arrives in order or not at all
-            self.odometry.append((t, float(p.position.x), float(p.position.y), _yaw(p.orientation)))
+            self.odometry.append((t, float(p.position.x), float(p.position.y), yaw_rad(p.orientation)))
             while self.odometry and self.odometry[0][0] < t - ODOMETRY_KEPT_S:
                 self.odometry.popleft()
             if self._pending is None or self._pending[3] > t:
@@ -283,7 +270,7 @@ class PlannerNodeCore:
 
     def _decide(self, msgtype: str, msg, topic: str, t: float, pose: Pose) -> RuntimeDecision | None:
         # No time in the error: a node says each problem once, and a stream of bad frames is one problem.
-        raw = _decode(SimpleNamespace(topic=topic, msgtype=msgtype), msg, self.robot.source, self.robot.labels)
+        raw = label_ids(msg, msgtype, topic, self.robot.source, self.robot.labels)
         if raw.shape != self.runtime.shape:
             raise UserError(
                 self.robot.source,

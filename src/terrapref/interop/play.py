@@ -51,7 +51,7 @@ class BagPlayer:
     """
 
     def __init__(self, path: str | Path, domain: int, topics: Collection[str] | None = None, optional: Collection[str] = ()) -> None:
-        from terrapref.interop.bag_import import open_reader
+        from terrapref.interop.bag_reader import open_reader
 
         self.path = Path(path)
         self.published = 0  # messages published so far (what a play that stops half-way did)
@@ -114,7 +114,7 @@ class BagPlayer:
         Raises:
             UserError: a chunk or message of the log is damaged (met when it is read).
         """
-        from terrapref.interop.bag_import import read_messages
+        from terrapref.interop.bag_reader import read_messages
 
         for conn, t_ns, msg in read_messages(self.reader, self.connections, str(self.path)):
             yield Message(t_ns, conn.topic, conn.msgtype, msg)

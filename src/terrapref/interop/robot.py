@@ -39,7 +39,7 @@
       speed: {max_speed_mps: 1.5, class_max_mps: {mud: 0.5}}
 
 Without ``topics.command`` each frame is labelled by the vehicle's measured motion (v, w): the
-odometry's twist, or differences of its poses where it carries none (terrapref.interop.bag_import).
+odometry's twist, or differences of its poses where it carries none (terrapref.interop.bag_frames).
 A command topic that is named must be in the bag. Without ``topics.path`` or ``path_file`` the
 reference path is the driven odometry, smoothed.
 Relative file names are relative to the robot file.

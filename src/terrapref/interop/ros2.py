@@ -47,6 +47,7 @@ from terrapref.interop.node_core import (
     Watchdog,
     report_line,
 )
+from terrapref.interop.ros_decode import time_s
 
 NODE_NAME = "terrapref"
 COSTMAP_PERIOD_S = 1.0  # between two costmaps [s]
@@ -163,7 +164,7 @@ class NodeClock:
 
     def on_clock(self, msg) -> None:
         """A rosgraph_msgs/Clock from /clock."""
-        t = int(msg.clock.sec) + int(msg.clock.nanosec) * 1e-9
+        t = time_s(msg.clock)
         if self._sim_s is None or t > self._sim_s:
             self._moved_wall = time.monotonic()
         self._sim_s = t

@@ -5,6 +5,7 @@ they are written to.
 Every builder takes the typestore whose message classes it makes, so the same builders serve
 ROS 1 (``ros1=True``: headers with ``seq``, CameraInfo's matrices in upper case) and ROS 2.
 Stamps come from an epoch-like clock: time 0 [s] is :data:`EPOCH_S` seconds after 1970.
+The other direction, ROS messages decoded into terrapref's data, is :mod:`terrapref.interop.ros_decode`.
 """
 
 from __future__ import annotations

@@ -67,7 +67,7 @@ def rounded(x: np.ndarray, bits: int) -> Rounded:
     return Rounded(ints.reshape(x.shape), unit, bits)
 
 
-def _sum_bits(k: int) -> int:
+def sum_bits(k: int) -> int:
     """Bits a sum of ``k`` terms can add to its terms'."""
     return max(0, k - 1).bit_length()
 
@@ -94,7 +94,7 @@ def matmul(a: np.ndarray | Rounded, b: np.ndarray | Rounded) -> np.ndarray:
             part = matmul(_columns(a, start), _rows(b, start))
             out = part if out is None else out + part
         return out
-    room = 53 - _sum_bits(k)
+    room = 53 - sum_bits(k)
     if not isinstance(a, Rounded):
         a = rounded(a_ints, min(26, room - b.bits) if isinstance(b, Rounded) else room // 2)
     if not isinstance(b, Rounded):
@@ -121,7 +121,7 @@ def exp(x: np.ndarray) -> np.ndarray:
     e ** r, and an exact scaling by 2 ** k.
     """
     x = np.asarray(x, dtype=np.float64)
-    return _exp(np.ascontiguousarray(x).reshape(-1)).reshape(x.shape)
+    return exp_flat(np.ascontiguousarray(x).reshape(-1)).reshape(x.shape)
 
 
 _EXP_HORNER = tuple(_EXP_COEF[-2::-1])  # a constant tuple, so the compiled polynomial is unrolled
@@ -144,8 +144,8 @@ def exp1(v: float) -> float:
 
 
 @njit(cache=True, nogil=True)
-def _exp(x: np.ndarray) -> np.ndarray:
-    """Per element, the NumPy form:
+def exp_flat(x: np.ndarray) -> np.ndarray:
+    """:func:`exp` of a flat array (for compiled callers). Per element, the NumPy form:
     ``x = clip(x, -740, 709); k = rint(x / ln 2); r = (x - k ln2_hi) - k ln2_lo;
     p = coef[-1]; p = p * r + c for c in coef[-2::-1]; ldexp(p, k)``,
     the scaling as a product with the exact power of two from a table (a library ldexp call
@@ -164,12 +164,12 @@ def log(x: np.ndarray) -> np.ndarray:
     its series (|s| < 0.172, 11 terms). Non-positive input gives -inf (0) or nan (< 0).
     """
     x = np.asarray(x, dtype=np.float64)
-    return _log(np.ascontiguousarray(x).reshape(-1)).reshape(x.shape)
+    return log_flat(np.ascontiguousarray(x).reshape(-1)).reshape(x.shape)
 
 
 @njit(cache=True, nogil=True)
-def _log(x: np.ndarray) -> np.ndarray:
-    """Per element, the NumPy form: ``f, e = frexp(x); f, e = (2 f, e - 1) if f < sqrt(1/2);
+def log_flat(x: np.ndarray) -> np.ndarray:
+    """:func:`log` of a flat array (for compiled callers). Per element, the NumPy form: ``f, e = frexp(x); f, e = (2 f, e - 1) if f < sqrt(1/2);
     s = (f - 1) / (f + 1); series = 1/21; series = series * s**2 + 1/j for j = 19, 17, ..., 1;
     2 s series + e ln2_lo + e ln2_hi``."""
     out = np.empty_like(x)
@@ -228,7 +228,7 @@ _INF_BITS = np.int64(0x7FF0000000000000)  # +inf's; any larger magnitude's bits 
 
 
 @njit(cache=True, nogil=True)
-def _top(x: np.ndarray) -> float:
+def largest_magnitude(x: np.ndarray) -> float:
     """``max(x.max(), -x.min())`` of a flat array, NaN if any entry is NaN (as :func:`rounded`).
 
     Non-negative floats order as their bit patterns do, and a NaN's magnitude bits exceed
@@ -247,7 +247,7 @@ def _top(x: np.ndarray) -> float:
 @njit(cache=True, nogil=True)
 def round_into(x: np.ndarray, bits: int, out: np.ndarray) -> float:
     """:func:`rounded` of a flat array into ``out`` (the integers); returns the grid's unit."""
-    e = math.frexp(_top(x))[1] if x.shape[0] else 0
+    e = math.frexp(largest_magnitude(x))[1] if x.shape[0] else 0
     scale = math.ldexp(1.0, bits - e)
     for i in range(x.shape[0]):
         out[i] = np.rint(x[i] * scale)
@@ -255,8 +255,8 @@ def round_into(x: np.ndarray, bits: int, out: np.ndarray) -> float:
 
 
 @njit(cache=True, nogil=True)
-def _chunk_bits(k: int) -> int:
-    """Bits left to the operands of an exact sum of ``k`` products (``53 - _sum_bits(k)``)."""
+def chunk_bits(k: int) -> int:
+    """Bits left to the operands of an exact sum of ``k`` products (``53 - sum_bits(k)``)."""
     bits, top = 0, k - 1
     while top > 0:
         bits += 1
@@ -295,7 +295,7 @@ def vec_mat_rounded(a: np.ndarray, b_columns: np.ndarray, b_unit: float, b_bits:
     ints = np.empty(min(k, MAX_EXACT))
     for start in range(0, k, MAX_EXACT):
         stop = min(k, start + MAX_EXACT)
-        bits = min(26, _chunk_bits(stop - start) - b_bits)
+        bits = min(26, chunk_bits(stop - start) - b_bits)
         unit = round_into(a[start:stop], bits, ints) * b_unit
         for j in range(p):
             part = _dot(ints[: stop - start], b_columns[j, start:stop]) * unit
@@ -313,7 +313,7 @@ def vec_mat(a: np.ndarray, b: np.ndarray, p: int, out: np.ndarray) -> None:
     acc = np.empty(p)
     for start in range(0, k, MAX_EXACT):
         stop = min(k, start + MAX_EXACT)
-        room = _chunk_bits(stop - start)
+        room = chunk_bits(stop - start)
         a_bits = room // 2
         a_unit = round_into(a[start:stop], a_bits, a_ints)
         b_unit = round_into(b[start * p : stop * p], min(26, room - a_bits), b_ints)

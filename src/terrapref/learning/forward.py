@@ -134,11 +134,11 @@ def _layer(h: np.ndarray, weights: np.ndarray, where: np.ndarray, activation: in
         for j in range(n_out):
             z[j] = z[j] if (z[j] > 0.0 or z[j] != z[j]) else 0.0
     elif activation == 1:  # tanh = 1 - 2 / (e^2z + 1)
-        e = exact._exp(2.0 * z)
+        e = exact.exp_flat(2.0 * z)
         for j in range(n_out):
             z[j] = 1.0 - 2.0 / (e[j] + 1.0)
     elif activation == 2:  # elu, alpha 1
-        e = exact._exp(np.minimum(z, 0.0))
+        e = exact.exp_flat(np.minimum(z, 0.0))
         for j in range(n_out):
             z[j] = z[j] if z[j] > 0.0 else e[j] - 1.0
     return z
@@ -151,7 +151,7 @@ def _softmax(z: np.ndarray) -> np.ndarray:
     for i in range(1, z.shape[0]):
         if z[i] > top or z[i] != z[i]:
             top = z[i]
-    e = exact._exp(z - top)
+    e = exact.exp_flat(z - top)
     total = e[0]
     for i in range(1, e.shape[0]):
         total = total + e[i]

@@ -27,7 +27,7 @@ def compress_forward(x: np.ndarray, x_unit: float, x_bits: int, weight: np.ndarr
     """
     rows, k = x.shape
     w_ints = np.empty(k)
-    unit = x_unit * exact.round_into(weight.reshape(-1), min(26, exact._chunk_bits(k) - x_bits), w_ints)
+    unit = x_unit * exact.round_into(weight.reshape(-1), min(26, exact.chunk_bits(k) - x_bits), w_ints)
     out = np.empty(rows)
     b = bias[0]
     for r in range(rows):
@@ -70,7 +70,7 @@ def round_twice(x: np.ndarray, bits_a: int, bits_b: int) -> tuple[np.ndarray, fl
     """``exact.rounded(x, bits_a)`` and ``exact.rounded(x, bits_b)`` of a C-contiguous array: both
     grids relative to the one largest magnitude, in one pass for it and one for the integers."""
     flat = x.reshape(-1)
-    e = math.frexp(exact._top(flat))[1] if flat.shape[0] else 0
+    e = math.frexp(exact.largest_magnitude(flat))[1] if flat.shape[0] else 0
     scale_a, scale_b = math.ldexp(1.0, bits_a - e), math.ldexp(1.0, bits_b - e)
     a, b = np.empty(x.shape), np.empty(x.shape)
     fa, fb = a.reshape(-1), b.reshape(-1)
@@ -160,14 +160,14 @@ def cross_entropy_grad(logits: np.ndarray, labels: np.ndarray, class_w: np.ndarr
         hits += arg == labels[i]
         for j in range(m):
             shifted[i, j] = logits[i, j] - t
-    e = exact._exp(shifted.reshape(-1)).reshape(n, m)
+    e = exact.exp_flat(shifted.reshape(-1)).reshape(n, m)
     total = np.empty(n)
     for i in range(n):
         s = e[i, 0]
         for j in range(1, m):
             s = s + e[i, j]
         total[i] = s
-    logs = exact._log(total)
+    logs = exact.log_flat(total)
     loss = np.empty(n)
     grad = np.empty((n, m))
     size = float(n)

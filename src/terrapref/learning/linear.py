@@ -69,7 +69,7 @@ def _fit_frames(rows: np.ndarray, unit: float, bits: int, labels: np.ndarray, sw
     k, nm = rows.shape
     params, mom, vel = np.zeros(k + m), np.zeros(k + m), np.zeros(k + m)
     power1 = power2 = 1.0
-    w_bits = min(26, exact._chunk_bits(k) - bits)
+    w_bits = min(26, exact.chunk_bits(k) - bits)
     w_ints, g, grad = np.empty(k), np.empty(nm), np.empty(k + m)
     for _ in range(steps):
         u = exact.round_into(params[:k], w_bits, w_ints) * unit
@@ -160,7 +160,7 @@ def _softmax_minus_label(z: np.ndarray, labels: np.ndarray, m: int) -> np.ndarra
                 top = v
         for j in range(m):
             shifted[i * m + j] = z[i * m + j] - top
-    p = exact._exp(shifted)
+    p = exact.exp_flat(shifted)
     for i in range(n):
         total = p[i * m]
         for j in range(1, m):
@@ -339,7 +339,7 @@ def _fit_through(
     params = params.copy()
     mom, vel = np.zeros_like(params), np.zeros_like(params)
     power1 = power2 = 1.0
-    w_bits = min(26, exact._chunk_bits(k) - bits)
+    w_bits = min(26, exact.chunk_bits(k) - bits)
     w_ints, grad, ones = np.empty(k), np.empty(params.shape[0]), np.ones(n)
     best, value, z = np.empty(nm, np.int64), np.empty(nm), np.empty(nm)
     chosen, spare, counts = np.empty((k, nm)), np.empty(k), np.empty(m)

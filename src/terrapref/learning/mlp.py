@@ -87,7 +87,7 @@ class _Cache:
 def _bits(k: int) -> tuple[int, int]:
     """The bits :func:`exact.matmul` gives two plain operands of a sum of ``k`` exact products:
     the first half the room the sum leaves, the second the rest (at most 26)."""
-    room = 53 - exact._sum_bits(k)
+    room = 53 - exact.sum_bits(k)
     return room // 2, min(26, room - room // 2)
 
 

@@ -1,0 +1,177 @@
+"""Robot logs read with ``rosbags``: ROS 1 bags, ROS 2 bags (sqlite3 or MCAP) and MCAP files.
+
+:func:`open_reader` opens a log with rosbags' AnyReader, leaving out (and listing) the topics
+whose message definition in the log cannot be read instead of refusing the whole log;
+:func:`read_messages` yields its messages deserialised, and a damaged chunk or message ends the
+read with one line naming the log and where the damage was met. :class:`Bag` is a log as an
+import reads it: the topics a robot file names checked for their types and messages, every
+failure of the reader a one-line UserError.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+from terrapref.errors import UserError, one_line
+from terrapref.extras import needs
+from terrapref.interop.robot import RobotConfig
+
+TYPES = {  # the message types each role of a robot file's topics may have
+    "segmentation": ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"),
+    "camera_info": ("sensor_msgs/msg/CameraInfo",),
+    "odometry": ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped"),
+    "command": ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped"),
+    "path": ("nav_msgs/msg/Path",),
+}
+
+
+def open_reader(path: Path):
+    """rosbags' AnyReader over ``path``, opened, except that a connection whose message definition
+    cannot be parsed (or whose hash does not match it) is left out, in ``unreadable``, instead of
+    failing the whole log. As AnyReader, the ROS 2 Humble types serve a log that carries no
+    definitions at all."""
+    with needs("robot", "reading ROS bags"):
+        from rosbags.highlevel import AnyReader
+        from rosbags.interfaces import MessageDefinitionFormat
+        from rosbags.typesys import Stores, get_typestore
+
+    class TolerantReader(AnyReader):
+        def _open(self) -> None:
+            for reader in self.readers:
+                self.stack.enter_context(reader)
+            connections = [c for reader in self.readers for c in reader.connections]
+            defined = any(c.msgdef.format != MessageDefinitionFormat.NONE for c in connections)
+            types = {} if defined else dict(self.default_typestore.fielddefs)
+            self.unreadable, self.connections = {}, []
+            for connection in connections:
+                try:
+                    own = _definition_types(connection)
+                    if own and connection.digest:  # a definition and its hash: checked against each other
+                        trial = get_typestore(Stores.EMPTY)
+                        trial.register({**types, **own})
+                        digest = trial.hash_rihs01(connection.msgtype) if self.is2 else trial.generate_msgdef(connection.msgtype)[1]
+                        if digest != connection.digest:
+                            raise ValueError("its hash does not match its definition")
+                except Exception as exc:  # the type system's errors vary with the definition's flaw
+                    self.unreadable[connection.topic] = (connection.msgtype, one_line(exc, 80))
+                    continue
+                types.update(own)
+                self.connections.append(connection)
+            self.typestore = get_typestore(Stores.EMPTY)
+            self.typestore.register(types)
+
+    reader = TolerantReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+    reader.open()
+    return reader
+
+
+def _definition_types(connection) -> dict:
+    """The message types a connection's own definition declares (none when it carries none)."""
+    from rosbags.interfaces import MessageDefinitionFormat
+    from rosbags.typesys import get_types_from_idl, get_types_from_msg
+
+    definition = connection.msgdef
+    if definition.format == MessageDefinitionFormat.MSG:
+        return get_types_from_msg(definition.data, connection.msgtype)
+    if definition.format == MessageDefinitionFormat.IDL:
+        sep = "=" * 80 + "\n"
+        parts = (
+            [p.split("\n", 1)[1] for p in definition.data.split(sep)[1:]]
+            if definition.data.startswith(f"{sep}IDL: ")
+            else [definition.data]
+        )
+        types: dict = {}
+        for idl in parts:
+            types.update(get_types_from_idl(idl))
+        return types
+    return {}
+
+
+def read_messages(reader, connections: list, source: str) -> Iterator[tuple[Any, int, Any]]:
+    """(connection, log time [ns], message) of ``connections`` in the log's order, deserialised,
+    from a reader :func:`open_reader` opened. A damaged chunk or message stops the read with a
+    one-line UserError naming ``source`` and where the damage was met, once everything before it
+    has been yielded.
+
+    Raises:
+        UserError: a chunk or message of the log cannot be read.
+    """
+    it = reader.messages(connections=connections)
+    n, last_ns = 0, None
+    while True:
+        try:
+            conn, t_ns, raw = next(it)
+            msg = reader.deserialize(raw, conn.msgtype)
+        except StopIteration:
+            return
+        except Exception as exc:  # damaged chunk or message: the reader's own error types vary
+            after = "at its start" if last_ns is None else f"{(last_ns - reader.start_time) * 1e-9:.3f} s into the log"
+            raise UserError(source, f"damaged: message {n + 1} of the read ({after}) cannot be read ({one_line(exc)})") from None
+        n, last_ns = n + 1, t_ns
+        yield conn, t_ns, msg
+
+
+class Bag:
+    """The bag, opened with rosbags; every failure of the reader is a one-line UserError.
+
+    A topic whose message definition in the log cannot be read (``ros2 bag record -a`` stores
+    service events' ``*_Event`` types as the raw service definition) is left out and listed in
+    ``unreadable``; only a topic the robot file asks for makes that an error."""
+
+    def __init__(self, path: Path) -> None:
+        self.source = str(path)
+        if not path.exists():
+            raise UserError(self.source, "no such bag")
+        try:
+            self.reader = open_reader(path)
+        except UserError:  # the robot extra is missing
+            raise
+        except Exception as exc:  # the reader's errors on a damaged or foreign file are many kinds
+            raise UserError(self.source, f"not a readable ROS 1 bag, ROS 2 bag or MCAP file ({one_line(exc)})") from None
+        self.unreadable: dict[str, tuple[str, str]] = self.reader.unreadable  # topic -> (type, why)
+
+    def check_topics(self, robot: RobotConfig, roles: Sequence[str]) -> None:
+        """Every topic of ``roles`` in the robot file is in the bag, of a type it may have, with
+        messages; what is not is said at once, every topic in one message."""
+        problems = [p for role in roles if (p := self._topic_problem(robot.topics[role], role))]
+        if problems:
+            have = sorted({c.topic for c in self.reader.connections})
+            shown = ", ".join(have[:12]) + (" ..." if len(have) > 12 else "")
+            raise UserError(
+                self.source, f"{'; '.join(problems)} (topics in {robot.source}; the bag has {shown or 'no topics'})", field="topics"
+            )
+
+    def _topic_problem(self, topic: str, role: str) -> str | None:
+        conns = [c for c in self.reader.connections if c.topic == topic]
+        if not conns and topic in self.unreadable:
+            msgtype, why = self.unreadable[topic]
+            return f"topics.{role} {topic} has type {msgtype}, whose definition in the log cannot be read ({why})"
+        if not conns:
+            return f"topics.{role} {topic} is not in the bag"
+        wrong = sorted({c.msgtype for c in conns if c.msgtype not in TYPES[role]})
+        if wrong:
+            return f"topics.{role} {topic} has type {', '.join(wrong)}, expected {' or '.join(TYPES[role])}"
+        if sum(c.msgcount for c in conns) == 0:
+            return f"topics.{role} {topic} has no messages"
+        return None
+
+    def connections(self, topic: str, role: str, source: str) -> list:
+        """The connections of ``topic``, checked as the topic of ``role`` that the robot file
+        ``source`` names; a problem is a UserError naming the field."""
+        problem = self._topic_problem(topic, role)
+        if problem:
+            raise UserError(self.source, f"{problem} (topics in {source})", field=f"topics.{role}")
+        return [c for c in self.reader.connections if c.topic == topic]
+
+    def messages(self, conns: list) -> Iterator[tuple[Any, int, Any]]:
+        """(connection, bag time [ns], message), deserialised; a damaged message is a UserError."""
+        return read_messages(self.reader, conns, self.source)
+
+    def close(self) -> None:
+        """Close the reader, quietly."""
+        try:
+            self.reader.close()
+        except Exception:  # closing a half-read damaged file must not hide the real error
+            pass
