@@ -456,7 +456,7 @@ def test_play_drives_a_node_that_waited_in_an_empty_domain(system):
     Played in real time, a node on a slow machine keeps up with only some of the frames (it
     hears the others too late, or not at all): what is checked is what it decided on those, not
     how many they were."""
-    from terrapref.interop.node_core import stamp_s
+    from terrapref.interop.ros_decode import stamp_s
     from terrapref.interop.runtime import PlannerRuntime
     from terrapref.learning.model_file import load_model
 
