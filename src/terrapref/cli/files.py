@@ -102,46 +102,55 @@ def _cmd_export(args: argparse.Namespace) -> int:
     if args.format in ("mcap", "rosbag1"):
         check_output(Path(f"{out}.robot.yaml"), "--out", inputs, force=args.force)
         check_output(Path(f"{out}.labels.yaml"), "--out", inputs, force=args.force)
-        from dataclasses import replace
+        _export_bag(args, out)
+    else:
+        _export_onnx(args, out)
+    return 0
 
-        from terrapref.demos.recording import read_recording
-        from terrapref.extras import check
-        from terrapref.interop.mcap_export import recording_frames, write_bag
-        from terrapref.progress import Progress
 
-        check("robot", f"terrapref export --format {args.format}", "rosbags")  # before the frames are read
+def _export_bag(args: argparse.Namespace, out: Path) -> None:
+    """A recording as a ROS 2 MCAP or a ROS 1 bag, with the robot file and label map that import it again."""
+    from dataclasses import replace
 
-        rec = read_recording(args.input)
-        if args.classes is not None:
-            check_table(args, rec.classes, args.input)
-        if len(rec) == 0:
-            raise UserError(args.input, "holds no frames", field="frames.jsonl")
-        frames = recording_frames(rec)
-        if args.model:
-            frames = replace(frames, costmap=_model_costmaps(args.model, frames))
-        bar = Progress("export", len(rec))
-        write_bag(out, frames, ros1=args.format == "rosbag1", progress=lambda done, total: bar.update(done, f"{done}/{total} frames"))
-        bar.close(f"{len(rec)} frames")
-        what = "ROS 1 bag; rosbag play it" if args.format == "rosbag1" else "ROS 2 MCAP; open it in Foxglove"
-        from terrapref.terrain import default_classes
+    from terrapref.demos.recording import read_recording
+    from terrapref.extras import check
+    from terrapref.interop.mcap_export import recording_frames, write_bag
+    from terrapref.progress import Progress
+    from terrapref.terrain import default_classes
 
-        if not frames.classes.same_classes(default_classes()):
-            print(
-                f"wrote {out} ({what}), {out.name}.robot.yaml and its label map {out.name}.labels.yaml "
-                f"(terrapref import {out} --robot {out}.robot.yaml --classes FILE, the recording's class table)"
-            )
-        else:
-            print(f"wrote {out} ({what}) and {out.name}.robot.yaml (terrapref import {out} --robot {out}.robot.yaml)")
-        return 0
+    check("robot", f"terrapref export --format {args.format}", "rosbags")  # before the frames are read
+    rec = read_recording(args.input)
+    if args.classes is not None:
+        check_table(args, rec.classes, args.input)
+    if len(rec) == 0:
+        raise UserError(args.input, "holds no frames", field="frames.jsonl")
+    frames = recording_frames(rec)
+    if args.model:
+        frames = replace(frames, costmap=_model_costmaps(args.model, frames))
+    bar = Progress("export", len(rec))
+    write_bag(out, frames, ros1=args.format == "rosbag1", progress=lambda done, total: bar.update(done, f"{done}/{total} frames"))
+    bar.close(f"{len(rec)} frames")
+    what = "ROS 1 bag; rosbag play it" if args.format == "rosbag1" else "ROS 2 MCAP; open it in Foxglove"
+    if not frames.classes.same_classes(default_classes()):
+        print(
+            f"wrote {out} ({what}), {out.name}.robot.yaml and its label map {out.name}.labels.yaml "
+            f"(terrapref import {out} --robot {out}.robot.yaml --classes FILE, the recording's class table)"
+        )
+    else:
+        print(f"wrote {out} ({what}) and {out.name}.robot.yaml (terrapref import {out} --robot {out}.robot.yaml)")
+
+
+def _export_onnx(args: argparse.Namespace, out: Path) -> None:
+    """A model's classifier C as ONNX; a rule that is not a network is said to stay out of the graph."""
+    from terrapref.interop.onnx_export import export_onnx
+    from terrapref.planner.model import Model
+
     if args.model:
         raise UserError(
             args.model,
             "--model goes with --format mcap or rosbag1 (a recording's costmap); for onnx the model is the input",
             field="--model",
         )
-    from terrapref.interop.onnx_export import export_onnx
-    from terrapref.planner.model import Model
-
     if Path(args.input).is_dir():
         raise UserError(
             args.input,
@@ -164,7 +173,6 @@ def _cmd_export(args: argparse.Namespace) -> int:
             "(or terrapref ros1 / ros2), docs/robot.md",
             file=sys.stderr,
         )
-    return 0
 
 
 def _model_costmaps(model_path: str, frames):

@@ -303,6 +303,36 @@ def _distinct_columns(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @njit(cache=True, nogil=True)
+def _with_continuations(z: np.ndarray, u1: float, b: np.ndarray, gamma: float, value: np.ndarray) -> None:
+    """First pieces' logits in place: each (N m) exact score ``z`` times its unit ``u1``, plus its
+    trajectory's bias ``b`` (m,), plus ``gamma`` times the value of its best continuation."""
+    m = b.shape[0]
+    for i in range(z.shape[0] // m):
+        for j in range(m):
+            r = i * m + j
+            z[r] = (z[r] * u1 + b[j]) + gamma * value[r]
+
+
+@njit(cache=True, nogil=True)
+def _per_frame(d: np.ndarray, n: int, best: np.ndarray, counts: np.ndarray) -> None:
+    """The softmax's residuals ``d`` (N m) divided by the frames ``n``, in place, and summed by the
+    trajectory of each piece's best continuation into ``counts`` (m,)."""
+    counts[:] = 0.0
+    for r in range(d.shape[0]):
+        d[r] = d[r] / n
+        counts[best[r]] += d[r]
+
+
+@njit(cache=True, nogil=True)
+def _gather_rows(by_rows: np.ndarray, rows: np.ndarray, out: np.ndarray) -> None:
+    """``out[:, r] = by_rows[rows[r]]`` for every piece r: the utilities of each best continuation, by columns."""
+    for r in range(rows.shape[0]):
+        u = rows[r]
+        for c in range(out.shape[0]):
+            out[c, r] = by_rows[u, c]
+
+
+@njit(cache=True, nogil=True)
 def _fit_through(
     first: np.ndarray,
     first_unit: float,
@@ -352,20 +382,10 @@ def _fit_through(
         _exact_scores(distinct, w_ints, scores)
         _best_continuations(scores, which, second_unit * w_unit, params[k : k + m], best, value, best_row)
         _exact_scores(first, w_ints, z)
-        u1 = first_unit * w_unit
-        for i in range(n):
-            for j in range(m):
-                r = i * m + j
-                z[r] = (z[r] * u1 + params[k + j]) + gamma * value[r]
+        _with_continuations(z, first_unit * w_unit, params[k : k + m], gamma, value)
         d = _softmax_minus_label(z, labels, m)
-        counts[:] = 0.0
-        for r in range(nm):
-            d[r] = d[r] / n
-            counts[best[r]] += d[r]
-        for r in range(nm):
-            u = best_row[r]
-            for c in range(k):
-                chosen[c, r] = by_rows[u, c]
+        _per_frame(d, n, best, counts)
+        _gather_rows(by_rows, best_row, chosen)
         exact.vec_mat_rounded(d, first, first_unit, bits, grad[:k])
         exact.vec_mat_rounded(d, chosen, second_unit, bits, spare)
         exact.vec_mat(ones, d, m, grad[k : k + m])
