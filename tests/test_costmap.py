@@ -1,4 +1,4 @@
-"""The learned preference as a costmap (terrapref.rules.costmap)."""
+"""The learned preference as a costmap (terrapref.groundmap.costmap)."""
 
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ import pytest
 from helpers import skip_path_weights
 from terrapref.camera import PinholeCamera
 from terrapref.features import FeatureConfig
+from terrapref.groundmap.costmap import LETHAL_COST, UNKNOWN_COST, class_costs
 from terrapref.interop.runtime import PlannerRuntime
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
-from terrapref.rules.costmap import LETHAL_COST, UNKNOWN_COST, class_costs
 from terrapref.rules.offset.fit import OffsetUtility
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.offset.rule import OffsetSteering
@@ -90,7 +90,7 @@ def _costmaps_in(mcap) -> tuple[dict[str, int], np.ndarray]:
     whole map the planner keeps."""
     from rosbags.highlevel import AnyReader
 
-    from terrapref.rules.costmap import cost_colours
+    from terrapref.groundmap.costmap import cost_colours
 
     with AnyReader([mcap]) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}

@@ -117,6 +117,7 @@ LAYERS = [
     {"demos"},
     {"dataset"},
     {"learning"},
+    {"groundmap"},
     {"rules"},
     {"planner"},
     {"baselines", "recipes"},

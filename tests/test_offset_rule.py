@@ -16,15 +16,16 @@ from terrapref.dataset import FORMAT as DATASET_FORMAT
 from terrapref.dataset import Dataset, load_dataset, save_dataset
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
+from terrapref.groundmap.columns import TerrainColumns
+from terrapref.groundmap.map import GroundMap
+from terrapref.groundmap.settings import MapSettings
 from terrapref.learning.model_file import load_model, save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.planner import Planner
 from terrapref.planner.registry import load_policy
-from terrapref.rules.columns import TerrainColumns
 from terrapref.rules.offset.features import OffsetFeatures, gated
 from terrapref.rules.offset.fit import OffsetUtility, fit_offset_utility, fit_softmax, soft_labels
 from terrapref.rules.offset.geometry import OffsetGeometry
-from terrapref.rules.offset.ground_map import GroundMap
 from terrapref.rules.offset.rule import OffsetConfig, OffsetSteering
 from terrapref.rules.offset.steering import intent_offsets, steer
 from terrapref.scenario import parse_scenario
@@ -148,7 +149,7 @@ def test_the_ground_map_outvotes_labels_a_few_frames_get_wrong(camera):
     voted = GroundMap(camera, _terrain((0,)))
     for view in _noisy_views(scenario, camera, pose, {"flip_rate": 0.2}, 30):
         voted.update(view, pose)
-    last = GroundMap(camera, _terrain((0,)), OffsetGeometry(map_fade=0.0))
+    last = GroundMap(camera, _terrain((0,)), MapSettings(map_fade=0.0))
     last.update(view, pose)
     seen = truth.cells != K + 1
     assert (voted.cells[seen] == truth.cells[seen]).mean() > 0.999
@@ -172,7 +173,7 @@ def test_a_lethal_share_of_the_evidence_makes_a_cell_lethal(camera):
         ("mud", dict(map_terrain_share=0.35), 3),
         ("mud", dict(map_terrain_share=0.5), K),
     ):
-        gmap = GroundMap(camera, _terrain((0,)), OffsetGeometry(map_fade=1.0, **share))
+        gmap = GroundMap(camera, _terrain((0,)), MapSettings(map_fade=1.0, **share))
         for k in range(10):
             view = views[patch] if k % 5 in (1, 3) else plain
             gmap.update(view, pose)
@@ -183,7 +184,7 @@ def test_the_ground_map_waits_for_enough_evidence_before_a_cell_counts_as_seen(c
     scenario = _scenario([MUD])
     pose = (2.0, 10.0, 0.0)
     view = _seen_from(scenario, camera, pose)
-    gmap = GroundMap(camera, _terrain(), OffsetGeometry(map_min_evidence=0.5))
+    gmap = GroundMap(camera, _terrain(), MapSettings(map_min_evidence=0.5))
     gmap.update(view, pose)
     near, far = np.array([[4.0, 10.0]]), np.array([[14.5, 10.0]])  # 2 m ahead: a vote of 0.8; 12.5 m: 0.09
     assert gmap.lookup(near)[0] == K and gmap.lookup(far)[0] == K + 1
@@ -574,16 +575,16 @@ def test_the_offset_fit_gives_the_same_weights_under_every_cpu_setting(cpu_outpu
 def test_the_map_reads_every_voted_cell_as_decided_and_refuses_too_many_columns():
     """After votes, ``cells`` holds no undecided marker (it decides them) and is read-only; a
     class table with 254 terrain columns would need the marker as a column and is refused."""
-    from terrapref.rules.offset import ground_map_compiled
+    from terrapref.groundmap import map_compiled
 
     scenario = _scenario([MUD])
     camera = PinholeCamera()
     gmap = GroundMap(camera, _terrain())
     for pose in ((2.0, 10.0, 0.0), (4.0, 10.2, 0.05)):
         gmap.update(_seen_from(scenario, camera, pose), pose)
-    assert (gmap._cells == ground_map_compiled.UNSETTLED).any()  # the votes left cells to decide
+    assert (gmap._cells == map_compiled.UNSETTLED).any()  # the votes left cells to decide
     cells = gmap.cells
-    assert not (cells == ground_map_compiled.UNSETTLED).any() and (cells < gmap.k + 1).any()
+    assert not (cells == map_compiled.UNSETTLED).any() and (cells < gmap.k + 1).any()
     assert not cells.flags.writeable
     with pytest.raises(ValueError, match="terrain columns"):
         GroundMap(camera, TerrainColumns(np.zeros(256, np.uint8), 254))

@@ -39,6 +39,7 @@ from terrapref.extras import needs
 from terrapref.features import PreferenceSetConfig
 from terrapref.features.preference_set import forward_simulate
 from terrapref.fileio import new_folder, write_text_atomic
+from terrapref.groundmap.costmap import Costmap
 from terrapref.interop.ros_messages import (
     EPOCH_S,
     OPTICAL_FRAME,
@@ -64,7 +65,6 @@ from terrapref.interop.ros_messages import (
     vector3,
     zeroed,
 )
-from terrapref.rules.costmap import Costmap
 from terrapref.stops import REASONS
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.terrain.classes import UNKNOWN

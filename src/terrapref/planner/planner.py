@@ -15,12 +15,12 @@ import numpy as np
 
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationView, as_view
 from terrapref.features import UtilityFeaturizer
+from terrapref.groundmap.costmap import Costmap
 from terrapref.learning.model_file import LoadedModel, check_compatible
 from terrapref.planner.goal import GoalCheck, PathState
 from terrapref.planner.policy import ClassifierPolicy, Observation, Policy
 from terrapref.planner.stop import StopConfig, StopRule
 from terrapref.rules import Choice, Rule, RuleContext, RuleInput, chosen_rule, speed_rule
-from terrapref.rules.costmap import Costmap
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim.loop import Frame
@@ -260,7 +260,7 @@ class Planner:
         return Choice(choice.index, Command(v, self.speed.yaw_rate(curvature, v, speed_mps)))
 
     def costmap(self) -> Costmap | None:
-        """The ground seen so far as the driving rule prices it (terrapref.rules.costmap);
+        """The ground seen so far as the driving rule prices it (terrapref.groundmap.costmap);
         None when that rule keeps no ground map (only the offset rule does)."""
         return self.runner.costmap()
 

@@ -34,11 +34,11 @@ import numpy as np
 from numba import njit
 
 from terrapref.camera import PinholeCamera, PixelSet, SegmentationView
+from terrapref.groundmap.columns import TerrainColumns
+from terrapref.groundmap.map import GroundMap
+from terrapref.groundmap.map_compiled import UNSETTLED, MapLayers, map_decide
+from terrapref.groundmap.settings import MapSettings
 from terrapref.records import to_plain
-from terrapref.rules.columns import TerrainColumns
-from terrapref.rules.offset.geometry import OffsetGeometry
-from terrapref.rules.offset.ground_map import GroundMap
-from terrapref.rules.offset.ground_map_compiled import UNSETTLED, MapLayers, map_decide
 from terrapref.stops import BLIND, NO_FREE_WAY
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose
@@ -149,16 +149,15 @@ class StopConfig:
 # counting (fade 0.8 a frame), placed with the mount's attitude, otherwise as the offset rule's
 # map. It is much coarser than the offset rule's (a fortieth of the samples): it decides only
 # whether to go, and the decision it guards (C's) costs 20 us.
-_OWN_MAP = OffsetGeometry(
-    stations_m=(-1.0, 3.0),
+_OWN_MAP = MapSettings(
     map_resolution_m=0.2,
     sample_step_m=0.2,
     map_half_size_m=5.0,
     sample_range_m=3.5,
+    sample_half_width_m=3.0,
     map_fade=0.8,
     map_sky_attitude=False,
 )
-_OWN_MAP_HALF_WIDTH_M = 3.0
 
 
 class StopRule:
@@ -185,7 +184,7 @@ class StopRule:
     ) -> None:
         self.config = c = config or StopConfig()
         self.own_map = ground_map is None
-        self.map = GroundMap(camera, terrain, _OWN_MAP, _OWN_MAP_HALF_WIDTH_M) if ground_map is None else ground_map
+        self.map = GroundMap(camera, terrain, _OWN_MAP) if ground_map is None else ground_map
         self.k = terrain.k
         self.lethal = np.zeros(self.k + 2, dtype=np.bool_)
         self.lethal[np.asarray(terrain.lethal, dtype=np.int64)] = True
@@ -339,7 +338,7 @@ def first_free_arc(
     cells unvoted between them, which are not unseen ground. A lethal cell none of whose
     4-neighbours is lethal does not block (a speckle: labels flipped in a few frames; the
     footprint's points, 0.3 m apart, do not resolve a 0.1 m obstacle either). The map's cells
-    (``layers``) are read as :func:`terrapref.rules.offset.ground_map_compiled.map_decide` says.
+    (``layers``) are read as :func:`terrapref.groundmap.map_compiled.map_decide` says.
     """
     cells, evidence, map_lethal, shares, ox, oy, inv_res = layers
     n_rows, n_cols = cells.shape
@@ -412,7 +411,7 @@ def _lethal_evidence(evidence: np.ndarray, map_lethal: np.ndarray, j: int, i: in
 @njit(cache=True, nogil=True, inline="always")
 def _column(cells: np.ndarray, evidence: np.ndarray, map_lethal: np.ndarray, shares: np.ndarray, j: int, i: int, never: int) -> int:
     """The column of map cell ``(j, i)``, decided first if it is UNSETTLED (as
-    :func:`terrapref.rules.offset.ground_map_compiled.map_decide` says); ``never`` outside the map."""
+    :func:`terrapref.groundmap.map_compiled.map_decide` says); ``never`` outside the map."""
     if not (0 <= i < cells.shape[1] and 0 <= j < cells.shape[0]):
         return never
     col = cells[j, i]

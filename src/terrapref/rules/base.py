@@ -19,16 +19,16 @@ import numpy as np
 from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
-from terrapref.rules.columns import TerrainColumns
+from terrapref.groundmap.columns import TerrainColumns
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable
 from terrapref.vehicle import Command, Pose
 
 if TYPE_CHECKING:
     from terrapref.demos.recording import Recording
+    from terrapref.groundmap.costmap import Costmap
+    from terrapref.groundmap.map import GroundMap
     from terrapref.learning.train import FitData
-    from terrapref.rules.costmap import Costmap
-    from terrapref.rules.offset.ground_map import GroundMap
     from terrapref.world import WorldMap
 
 
@@ -117,7 +117,7 @@ class RuleRunner(abc.ABC):
         """Take in a frame's view without deciding (a rule that keeps no ground map ignores it)."""
 
     def costmap(self) -> Costmap | None:
-        """The ground seen so far priced by what the rule learned (terrapref.rules.costmap),
+        """The ground seen so far priced by what the rule learned (terrapref.groundmap.costmap),
         for a rule that keeps a ground map; None otherwise."""
         return None
 

@@ -42,6 +42,8 @@ import numpy as np
 from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.errors import UserError
 from terrapref.features import UtilityFeaturizer
+from terrapref.groundmap.costmap import Costmap, costmap_of
+from terrapref.groundmap.map import GroundMap
 from terrapref.records import to_plain
 from terrapref.rules.base import (
     Choice,
@@ -58,11 +60,9 @@ from terrapref.rules.base import (
     number,
     vector,
 )
-from terrapref.rules.costmap import Costmap, costmap_of
 from terrapref.rules.offset.features import OffsetFeatures
 from terrapref.rules.offset.fit import OffsetFit, OffsetUtility, fit_offset_utility
 from terrapref.rules.offset.geometry import OffsetGeometry
-from terrapref.rules.offset.ground_map import GroundMap
 from terrapref.rules.offset.offsets_compiled import gated_value
 from terrapref.rules.offset.reach_compiled import lethal_hits, swept_reach
 from terrapref.rules.offset.steering import intent_offsets, steer
@@ -158,7 +158,7 @@ class OffsetReader(FrameReader):
     def __init__(self, geometry: OffsetGeometry, featurizer: UtilityFeaturizer, camera: PinholeCamera, classes: ClassTable, n: int) -> None:
         k = featurizer.config.n_terrain
         self.geometry = geometry
-        self.map = GroundMap(camera, TerrainColumns.of(featurizer.class_columns, k, classes), geometry)
+        self.map = GroundMap(camera, TerrainColumns.of(featurizer.class_columns, k, classes), geometry.map)
         self.offsets = OffsetFeatures(geometry, k)
         self.features = np.empty((n, len(self.offsets.offsets), k + 2), dtype=np.float32)
         self.near = np.empty(n, dtype=np.float32)
@@ -296,7 +296,7 @@ class OffsetSteering(RuleRunner):
         if safe:
             weights[k] = weights[safe].mean()
         self.weights = weights
-        self.map = GroundMap(camera, terrain, utility.config)
+        self.map = GroundMap(camera, terrain, utility.config.map)
         self.features = OffsetFeatures(utility.config, k)
         self.offsets = self.features.offsets
         m = utility.config.half_width_m + self.config.lethal_margin_m
@@ -381,8 +381,10 @@ class OffsetSteering(RuleRunner):
         return costmap_of(cells, np.zeros(2), world.resolution_m, self.utility.weights, self.lethal, self.names)
 
     def costmap(self) -> Costmap:
-        """The ground map seen so far priced by the learned utility (terrapref.rules.costmap)."""
-        return costmap_of(self.map.cells, self.map.origin, self.map.config.map_resolution_m, self.utility.weights, self.lethal, self.names)
+        """The ground map seen so far priced by the learned utility (terrapref.groundmap.costmap)."""
+        return costmap_of(
+            self.map.cells, self.map.origin, self.map.settings.map_resolution_m, self.utility.weights, self.lethal, self.names
+        )
 
     def _same_side(self, value: np.ndarray, best: int) -> int:
         """The offset to take when lethal terrain rules out the one held, the vehicle faster than the

@@ -2,7 +2,7 @@
 
 It does not steer: the rule that steers picks the way (a trajectory's or an offset's curvature),
 and this rule picks the speed along it (:class:`SpeedRunner`), from what its own ground map
-(terrapref.rules.offset.ground_map) has gathered of the ground the camera has shown, under and
+(terrapref.groundmap.map) has gathered of the ground the camera has shown, under and
 ahead of the vehicle. The model and its fit are :mod:`.model`. Its fit reads, for every frame of
 a drive, the ground map around the vehicle as the camera had shown it by then, along the way the
 driver then drove (:class:`SpeedReader`).
@@ -19,11 +19,11 @@ import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.features import UtilityFeaturizer
+from terrapref.groundmap.columns import TerrainColumns
+from terrapref.groundmap.map import GroundMap
+from terrapref.groundmap.settings import MapSettings
 from terrapref.records import to_plain
 from terrapref.rules.base import FrameReader, HeaderContext, Rule, RuleConfig, RuleContext, Where, number
-from terrapref.rules.columns import TerrainColumns
-from terrapref.rules.offset.geometry import OffsetGeometry
-from terrapref.rules.offset.ground_map import GroundMap
 from terrapref.rules.speed.model import STATION_STEP_M, STATIONS, SpeedFit, SpeedModel, across, fit_speed
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable
@@ -36,7 +36,7 @@ if TYPE_CHECKING:
 # The speed rule's ground map: the offset rule's (its default geometry: 0.1 m cells gathered over
 # the last seconds, placed with the camera's attitude from the sky line), so that a planner whose
 # offset rule steers reads the map that rule keeps, and a robot's ragged labels are outvoted alike.
-MAP = OffsetGeometry()
+MAP = MapSettings()
 # A cell split between two terrain classes (its class holding under half its evidence, another
 # at least 0.15) reads as never seen: a robot's network takes a patch of one class for another in
 # regions that last a few frames (rock for mud under the `field` preset, docs/perception.md), and one such cell in the few
@@ -317,7 +317,7 @@ class SpeedRunner:
 
     def __init__(self, rule: SpeedRule, context: RuleContext, shared: GroundMap | None = None) -> None:
         self.rule = rule
-        self.own_map = shared is None or shared.config != MAP
+        self.own_map = shared is None or shared.settings != MAP
         self.map = GroundMap(context.camera, context.terrain, MAP) if self.own_map else shared
         self.across = across(rule.config.half_width_m)
         self._d = STATION_STEP_M * np.arange(STATIONS)

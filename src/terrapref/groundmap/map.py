@@ -8,10 +8,10 @@ import math
 import numpy as np
 
 from terrapref.camera import PinholeCamera, PixelSet, SegmentationView
-from terrapref.features.attitude import HorizonAttitude
-from terrapref.rules.columns import TerrainColumns
-from terrapref.rules.offset import ground_map_compiled as kernels
-from terrapref.rules.offset.geometry import OffsetGeometry
+from terrapref.groundmap import map_compiled as kernels
+from terrapref.groundmap.attitude import HorizonAttitude
+from terrapref.groundmap.columns import TerrainColumns
+from terrapref.groundmap.settings import MapSettings
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose
@@ -36,14 +36,11 @@ class GroundMap:
     Args:
         camera: the camera whose images update the map.
         terrain: the class table's terrain columns.
-        config: the offset rule's geometry (map resolution, size and voting, image sampling).
-        sample_half_width_m: ground is read this far each side of the vehicle [m].
+        settings: its resolution, size and voting, and the ground read from each image.
     """
 
-    def __init__(
-        self, camera: PinholeCamera, terrain: TerrainColumns, config: OffsetGeometry | None = None, sample_half_width_m: float = 8.0
-    ) -> None:
-        self.config = c = config or OffsetGeometry()
+    def __init__(self, camera: PinholeCamera, terrain: TerrainColumns, settings: MapSettings | None = None) -> None:
+        self.settings = c = settings or MapSettings()
         self.k = k = terrain.k
         self.columns = np.asarray(terrain.of_class, dtype=np.uint8).copy()
         self.columns[UNKNOWN] = k + 1  # a pixel that sees no ground casts no vote
@@ -55,7 +52,7 @@ class GroundMap:
         self._shares = np.array([c.map_lethal_share, c.map_terrain_share, c.map_min_evidence], dtype=np.float32)
         # The ground points read from each image: a vehicle-frame grid, those the camera sees.
         xs = np.arange(0.2, c.sample_range_m, c.sample_step_m)
-        ys = np.arange(-sample_half_width_m, sample_half_width_m, c.sample_step_m)
+        ys = np.arange(-c.sample_half_width_m, c.sample_half_width_m, c.sample_step_m)
         grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1).reshape(-1, 2)
         pix = camera.pixel_indices(grid)
         seen = pix >= 0
@@ -96,7 +93,7 @@ class GroundMap:
             self.attitude.reset()
 
     def _recentre(self, x: float, y: float) -> None:
-        c = self.config
+        c = self.settings
         # Re-centred while all the camera writes and the offset features read stays inside (checked in
         # plain floats: the same arithmetic as NumPy's on the two coordinates; a NaN re-centres).
         if self._origin_xy is not None:
@@ -117,7 +114,7 @@ class GroundMap:
     def update(self, view: SegmentationView, pose: Pose) -> None:
         """Add what ``view``, taken at ``pose``, shows of the ground."""
         x, y, yaw = pose
-        c = self.config
+        c = self.settings
         self._recentre(float(x), float(y))
         self.frame += 1
         ids = view.pixels(self._pixels)
@@ -164,7 +161,7 @@ class GroundMap:
         the lethal columns, the shares that decide a column, its corner and cells per metre).
         Read once the map has been placed (its first update: ``origin`` is not None)."""
         ox, oy = self._origin_xy
-        return kernels.MapLayers(self._cells, self.evidence, self.lethal, self._shares, ox, oy, 1.0 / self.config.map_resolution_m)
+        return kernels.MapLayers(self._cells, self.evidence, self.lethal, self._shares, ox, oy, 1.0 / self.settings.map_resolution_m)
 
     def beside(self, path: ReferencePath, s: np.ndarray, lat: np.ndarray) -> np.ndarray:
         """Terrain column (O, S, F) at the points ``lat`` (O, F) [m] left of the path at arc lengths ``s`` (S,)."""
