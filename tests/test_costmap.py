@@ -9,6 +9,7 @@ from helpers import skip_path_weights
 from terrapref.camera import PinholeCamera
 from terrapref.features import FeatureConfig
 from terrapref.groundmap.costmap import LETHAL_COST, UNKNOWN_COST, class_costs
+from terrapref.groundmap.map import GroundMap
 from terrapref.interop.runtime import PlannerRuntime
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
@@ -34,9 +35,10 @@ def seen():
     scenario = _scenario(PATCHES)
     stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,), default_classes().feature_names), CONTROL)
     pose = (10.0, 10.0, 0.0)
+    gmap = GroundMap(camera, _terrain((0,), default_classes().feature_names), stage.map_settings)
     for _ in range(3):
-        stage.map.update(_seen_from(scenario, camera, pose), pose)
-    return stage.costmap()
+        gmap.update(_seen_from(scenario, camera, pose), pose)
+    return stage.costmap(gmap)
 
 
 def test_the_cells_of_each_patch_are_priced_in_the_learned_order(seen):
