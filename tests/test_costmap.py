@@ -1,4 +1,4 @@
-"""The learned preference as a costmap (terrapref.rules.costmap)."""
+"""The learned preference as a costmap (terrapref.groundmap.costmap)."""
 
 from __future__ import annotations
 
@@ -8,10 +8,11 @@ import pytest
 from helpers import skip_path_weights
 from terrapref.camera import PinholeCamera
 from terrapref.features import FeatureConfig
+from terrapref.groundmap.costmap import LETHAL_COST, UNKNOWN_COST, class_costs
+from terrapref.groundmap.map import GroundMap
 from terrapref.interop.runtime import PlannerRuntime
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
-from terrapref.rules.costmap import LETHAL_COST, UNKNOWN_COST, class_costs
 from terrapref.rules.offset.fit import OffsetUtility
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.offset.rule import OffsetSteering
@@ -34,9 +35,10 @@ def seen():
     scenario = _scenario(PATCHES)
     stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,), default_classes().feature_names), CONTROL)
     pose = (10.0, 10.0, 0.0)
+    gmap = GroundMap(camera, _terrain((0,), default_classes().feature_names), stage.map_settings)
     for _ in range(3):
-        stage.map.update(_seen_from(scenario, camera, pose), pose)
-    return stage.costmap()
+        gmap.update(_seen_from(scenario, camera, pose), pose)
+    return stage.costmap(gmap)
 
 
 def test_the_cells_of_each_patch_are_priced_in_the_learned_order(seen):
@@ -90,7 +92,7 @@ def _costmaps_in(mcap) -> tuple[dict[str, int], np.ndarray]:
     whole map the planner keeps."""
     from rosbags.highlevel import AnyReader
 
-    from terrapref.rules.costmap import cost_colours
+    from terrapref.groundmap.costmap import cost_colours
 
     with AnyReader([mcap]) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}

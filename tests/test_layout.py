@@ -93,6 +93,21 @@ def test_no_import_cycle_between_files():
     assert cycle is None, "import cycle: " + " -> ".join(cycle)
 
 
+def test_no_rule_package_imports_another():
+    """What several rules read (the ground map, terrapref.groundmap) lives below the rules, never in one rule's package."""
+    packages = {p.name for p in (ROOT / "rules").iterdir() if (p / "__init__.py").is_file()}
+
+    def package(module: str) -> str | None:
+        bits = module.split(".")
+        return bits[2] if bits[:2] == ["terrapref", "rules"] and len(bits) > 2 and bits[2] in packages else None
+
+    across = sorted(
+        f"{a} -> {b}" for a, targets in _module_imports().items() for b in targets if package(a) and package(b) not in (None, package(a))
+    )
+    assert len(packages) >= 4, "the scan sees the rule packages"
+    assert not across, "a rule package imports another: " + ", ".join(across)
+
+
 def test_the_cycle_finder_finds_one():
     assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert _cycle({"a": {"b"}, "b": {"c"}}) is None
@@ -117,6 +132,7 @@ LAYERS = [
     {"demos"},
     {"dataset"},
     {"learning"},
+    {"groundmap"},
     {"rules"},
     {"planner"},
     {"baselines", "recipes"},

@@ -16,11 +16,11 @@ from PIL import Image
 
 from helpers import TINY_COURSE, skip_path_weights
 from terrapref.cli import main
+from terrapref.groundmap.costmap import LETHAL_COST
 from terrapref.interop.mcap_export import TOPICS
 from terrapref.interop.ros_messages import typestore
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
-from terrapref.rules.costmap import LETHAL_COST
 from test_offset_rule import DRIVER_LIKE, _offset_meta
 
 websockets = pytest.importorskip("websockets.sync.client", reason="the WebSocket client of the tests (websockets) is not installed")

@@ -20,10 +20,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from terrapref.camera import PinholeCamera
-from terrapref.features import attitude_compiled
-from terrapref.rules.offset import ground_map_compiled, offsets_compiled
+from terrapref.groundmap import attitude_compiled, map_compiled
+from terrapref.groundmap.map_compiled import MapLayers
+from terrapref.rules.offset import offsets_compiled
 from terrapref.rules.offset.geometry import OffsetGeometry
-from terrapref.rules.offset.ground_map_compiled import MapLayers
 from terrapref.rules.offset.reach_compiled import lethal_hits, swept_reach
 from terrapref.rules.offset.steering import pursuit_yaw_rates, steer
 from terrapref.scenario.path import ReferencePath
@@ -286,7 +286,7 @@ def test_attitude_fit_rejects_what_the_python_form_rejects():
 
 def _ground_numpy(ray: np.ndarray, axes: np.ndarray, t: np.ndarray) -> np.ndarray:
     """The NumPy form of where rays (N, 2) of a camera at ``t`` with ``axes`` meet the ground,
-    (N, 2) in the vehicle frame [m]; NaN for rays that do not (terrapref.rules.offset.ground_map._ground)."""
+    (N, 2) in the vehicle frame [m]; NaN for rays that do not (terrapref.groundmap.map._ground)."""
     d = [ray[:, 0] * axes[0, i] + ray[:, 1] * axes[1, i] + axes[2, i] for i in range(3)]
     with np.errstate(divide="ignore", invalid="ignore"):
         scale = np.where(d[2] < -1e-12, -t[2] / d[2], np.nan)
@@ -315,7 +315,7 @@ def _map_vote_python(
     terrain_share,
     min_evidence,
 ) -> None:
-    """The Python form of ground_map_compiled.map_vote's votes, sample by sample, with each sample's column
+    """The Python form of map_compiled.map_vote's votes, sample by sample, with each sample's column
     ``cols`` given and placed at (vx, vy): float32 evidence, faded by the frames since a cell's
     last vote; a cell's column the lethal one, else the terrain one, else K (K + 1: too little)."""
     n_rows, n_cols = cells.shape
@@ -415,22 +415,20 @@ def test_map_vote_gives_the_numpy_forms_map(tilted: bool):
             yaw = rng.uniform(-math.pi, math.pi)
             axes = camera.tilted(rng.uniform(-0.06, 0.06), rng.uniform(-0.06, 0.06)) if tilted else camera.R
             pose = (float(origin[0]), float(origin[1]), 1.0 / res, float(x), float(y), math.cos(yaw), math.sin(yaw), vx, vy, weight)
-            ground_map_compiled.map_vote(*maps[0], *pose, distinct, pixel_of, columns, frame, fade, tilted, ray, ground0, axes, camera.t)
+            map_compiled.map_vote(*maps[0], *pose, distinct, pixel_of, columns, frame, fade, tilted, ray, ground0, axes, camera.t)
             _update_numpy(*maps[1], *pose, ids, columns, frame, fade, lethal, shares, axes if tilted else None, ray, ground0, camera.t)
             (evidence, stamp, cells), (want_evidence, want_stamp, want_cells) = maps
             assert _same(evidence, want_evidence) and _same(stamp, want_stamp), (seed, frame)
             # The votes leave their cells undecided; a read decides each as deciding after every vote did.
-            voted = cells == ground_map_compiled.UNSETTLED
+            voted = cells == map_compiled.UNSETTLED
             assert voted.any() and np.array_equal(cells[~voted], want_cells[~voted]), (seed, frame)
             centres = (np.arange(n) + 0.5) * res
             px, py = np.meshgrid(origin[0] + centres, origin[1] + centres)
-            layers = ground_map_compiled.MapLayers(
-                cells.copy(), evidence, lethal, np.array(shares), float(origin[0]), float(origin[1]), 1.0 / res
-            )
-            read = ground_map_compiled.map_read(layers, px.ravel(), py.ravel(), k + 1)
+            layers = map_compiled.MapLayers(cells.copy(), evidence, lethal, np.array(shares), float(origin[0]), float(origin[1]), 1.0 / res)
+            read = map_compiled.map_read(layers, px.ravel(), py.ravel(), k + 1)
             assert np.array_equal(read.reshape(n, n), want_cells), (seed, frame)
             if rng.random() < 0.5:  # some frames' cells decided before the next votes, some not
-                ground_map_compiled.map_settle(cells, evidence, lethal, np.array(shares))
+                map_compiled.map_settle(cells, evidence, lethal, np.array(shares))
                 assert _same(cells, want_cells), (seed, frame)
         evidence, _, cells = maps[1]
         assert (cells < k + 1).sum() > 50 and (evidence > 0).sum(axis=2).max() > 1  # cells voted on, some by several columns
@@ -440,7 +438,7 @@ def test_map_vote_gives_the_numpy_forms_map(tilted: bool):
 
 
 def _map_read_numpy(cells: np.ndarray, ox: float, oy: float, inv_res: float, px: np.ndarray, py: np.ndarray, never: int) -> np.ndarray:
-    """The NumPy form of ground_map_compiled.map_read: ``cells[floor((py - oy) * inv_res), floor((px - ox) *
+    """The NumPy form of map_compiled.map_read: ``cells[floor((py - oy) * inv_res), floor((px - ox) *
     inv_res)]`` where inside, ``never`` elsewhere."""
     n_rows, n_cols = cells.shape
     i, j = np.floor((px - ox) * inv_res), np.floor((py - oy) * inv_res)
@@ -453,7 +451,7 @@ def _map_read_numpy(cells: np.ndarray, ox: float, oy: float, inv_res: float, px:
 def _map_read_beside_numpy(
     cells: np.ndarray, ox: float, oy: float, inv_res: float, path: ReferencePath, s: np.ndarray, lat: np.ndarray, never: int
 ) -> np.ndarray:
-    """The NumPy form of ground_map_compiled.map_read_beside: the map's column (O, S, F) at ``centre + lat *
+    """The NumPy form of map_compiled.map_read_beside: the map's column (O, S, F) at ``centre + lat *
     normal``, ``centre = path.point_at(s)``, ``normal`` the path's direction there turned left."""
     u = path.direction_at(s)
     normal = np.stack([-u[:, 1], u[:, 0]], axis=-1)
@@ -470,7 +468,7 @@ def _random_map(rng: np.random.Generator, path: ReferencePath, k: int) -> tuple[
 
 
 def _undecided(rng: np.random.Generator, cells: np.ndarray, k: int) -> tuple[np.ndarray, tuple, np.ndarray]:
-    """``cells`` with about a third of them voted on since decided (ground_map_compiled.UNSETTLED), the map's
+    """``cells`` with about a third of them voted on since decided (map_compiled.UNSETTLED), the map's
     layers a compiled read takes (cells, evidence, lethal columns, shares), and every cell as a
     read decides it (_column_python where undecided)."""
     evidence = (rng.random((*cells.shape, k + 1)) * (rng.random((*cells.shape, k + 1)) < 0.5)).astype(np.float32)
@@ -480,7 +478,7 @@ def _undecided(rng: np.random.Generator, cells: np.ndarray, k: int) -> tuple[np.
     decided = cells.copy()
     for j, i in zip(*np.nonzero(undecided)):
         decided[j, i] = _column_python(evidence[j, i], lethal, *shares)
-    return np.where(undecided, ground_map_compiled.UNSETTLED, cells).astype(np.uint8), (evidence, lethal, shares), decided
+    return np.where(undecided, map_compiled.UNSETTLED, cells).astype(np.uint8), (evidence, lethal, shares), decided
 
 
 @FAST
@@ -494,14 +492,14 @@ def test_map_read_beside_gives_the_numpy_forms_columns(seed: int, n_st: int, n_o
     lat = rng.uniform(-4.0, 4.0, (n_off, n_f))
     a, d, length = path.segments
     lazy, layers, cells = _undecided(rng, cells, k)
-    got = ground_map_compiled.map_read_beside(MapLayers(lazy, *layers, ox, oy, inv_res), path.s, a, d, length, s, lat, k + 1)
+    got = map_compiled.map_read_beside(MapLayers(lazy, *layers, ox, oy, inv_res), path.s, a, d, length, s, lat, k + 1)
     assert _same(got, _map_read_beside_numpy(cells, ox, oy, inv_res, path, s, lat, k + 1))
-    read = lazy != ground_map_compiled.UNSETTLED
+    read = lazy != map_compiled.UNSETTLED
     assert np.array_equal(lazy[read], cells[read])  # the cells it decided are kept as decided
 
 
 def _map_read_split_numpy(cells, evidence, lethal, ox, oy, inv_res, px, py, never, lead, second) -> np.ndarray:
-    """The NumPy form of ground_map_compiled.map_read_split: the map's column, never where the cell's
+    """The NumPy form of map_compiled.map_read_split: the map's column, never where the cell's
     terrain column (not lethal) holds under ``lead`` of its evidence and another such column at
     least ``second``."""
     out = _map_read_numpy(cells, ox, oy, inv_res, px, py, never)
@@ -528,7 +526,7 @@ def test_map_read_split_gives_the_numpy_forms_columns(seed: int, n: int, lead: f
     lazy, (evidence, lethal, shares), cells = _undecided(rng, cells, k)
     px, py = ox + rng.uniform(-2.0, 18.0, n), oy + rng.uniform(-2.0, 18.0, n)
     layers = MapLayers(lazy, evidence, lethal, shares, ox, oy, inv_res)
-    got = ground_map_compiled.map_read_split(layers, px, py, k + 1, np.float32(lead), np.float32(second))
+    got = map_compiled.map_read_split(layers, px, py, k + 1, np.float32(lead), np.float32(second))
     want = _map_read_split_numpy(cells, evidence, lethal, ox, oy, inv_res, px, py, k + 1, lead, second)
     assert _same(got, want)
     plain = _map_read_numpy(cells, ox, oy, inv_res, px, py, k + 1)
@@ -571,7 +569,7 @@ def test_lethal_hits_gives_the_numpy_forms_lines(seed: int, n_off: int, n_across
     lazy, layers, cells = _undecided(rng, cells, k)
     got = lethal_hits(MapLayers(lazy, *layers, ox, oy, inv_res), path.s, a, d, length, progress_m, stations, offsets, across, lethal, k + 1)
     assert _same(got, _lethal_hits_numpy(cells, ox, oy, inv_res, path, progress_m, stations, offsets, across, lethal, k + 1))
-    read = lazy != ground_map_compiled.UNSETTLED
+    read = lazy != map_compiled.UNSETTLED
     assert np.array_equal(lazy[read], cells[read])
 
 
@@ -594,7 +592,7 @@ def test_swept_reach_reads_undecided_cells_as_decided(seed: int, n_off: int):
     got = swept_reach(*args, MapLayers(lazy, *layers, ox, oy, inv_res), lethal, k + 1)
     want = swept_reach(*args, MapLayers(cells, *layers, ox, oy, inv_res), lethal, k + 1)  # no cell left to decide
     assert _same(got, want)
-    read = lazy != ground_map_compiled.UNSETTLED
+    read = lazy != map_compiled.UNSETTLED
     assert np.array_equal(lazy[read], cells[read])
 
 

@@ -16,15 +16,16 @@ from terrapref.dataset import FORMAT as DATASET_FORMAT
 from terrapref.dataset import Dataset, load_dataset, save_dataset
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
+from terrapref.groundmap.columns import TerrainColumns
+from terrapref.groundmap.map import GroundMap
+from terrapref.groundmap.settings import MapSettings
 from terrapref.learning.model_file import load_model, save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.planner import Planner
 from terrapref.planner.registry import load_policy
-from terrapref.rules.columns import TerrainColumns
 from terrapref.rules.offset.features import OffsetFeatures, gated
 from terrapref.rules.offset.fit import OffsetUtility, fit_offset_utility, fit_softmax, soft_labels
 from terrapref.rules.offset.geometry import OffsetGeometry
-from terrapref.rules.offset.ground_map import GroundMap
 from terrapref.rules.offset.rule import OffsetConfig, OffsetSteering
 from terrapref.rules.offset.steering import intent_offsets, steer
 from terrapref.scenario import parse_scenario
@@ -67,6 +68,17 @@ def _columns() -> np.ndarray:
 
 def _terrain(lethal: tuple[int, ...] = (), names: tuple[str, ...] = ()) -> TerrainColumns:
     return TerrainColumns(_columns(), K, lethal, names)
+
+
+def _map_of(stage: OffsetSteering, camera: PinholeCamera) -> GroundMap:
+    """The ground map a planner keeps for ``stage``: its settings, with its lethal columns."""
+    return GroundMap(camera, _terrain(tuple(int(c) for c in np.flatnonzero(stage.lethal[:K]))), stage.map_settings)
+
+
+def _steer(stage: OffsetSteering, gmap: GroundMap, view: SegmentationView, pose, path, s: float, speed_mps: float | None = None) -> float:
+    """One frame as the planner gives it to ``stage``: ``gmap`` gathers ``view``, then the rule steers."""
+    gmap.update(view, pose)
+    return stage.yaw_rate(gmap, pose, path, s, speed_mps)
 
 
 def _seen_from(scenario, camera: PinholeCamera, pose) -> SegmentationView:
@@ -148,7 +160,7 @@ def test_the_ground_map_outvotes_labels_a_few_frames_get_wrong(camera):
     voted = GroundMap(camera, _terrain((0,)))
     for view in _noisy_views(scenario, camera, pose, {"flip_rate": 0.2}, 30):
         voted.update(view, pose)
-    last = GroundMap(camera, _terrain((0,)), OffsetGeometry(map_fade=0.0))
+    last = GroundMap(camera, _terrain((0,)), MapSettings(map_fade=0.0))
     last.update(view, pose)
     seen = truth.cells != K + 1
     assert (voted.cells[seen] == truth.cells[seen]).mean() > 0.999
@@ -172,7 +184,7 @@ def test_a_lethal_share_of_the_evidence_makes_a_cell_lethal(camera):
         ("mud", dict(map_terrain_share=0.35), 3),
         ("mud", dict(map_terrain_share=0.5), K),
     ):
-        gmap = GroundMap(camera, _terrain((0,)), OffsetGeometry(map_fade=1.0, **share))
+        gmap = GroundMap(camera, _terrain((0,)), MapSettings(map_fade=1.0, **share))
         for k in range(10):
             view = views[patch] if k % 5 in (1, 3) else plain
             gmap.update(view, pose)
@@ -183,7 +195,7 @@ def test_the_ground_map_waits_for_enough_evidence_before_a_cell_counts_as_seen(c
     scenario = _scenario([MUD])
     pose = (2.0, 10.0, 0.0)
     view = _seen_from(scenario, camera, pose)
-    gmap = GroundMap(camera, _terrain(), OffsetGeometry(map_min_evidence=0.5))
+    gmap = GroundMap(camera, _terrain(), MapSettings(map_min_evidence=0.5))
     gmap.update(view, pose)
     near, far = np.array([[4.0, 10.0]]), np.array([[14.5, 10.0]])  # 2 m ahead: a vote of 0.8; 12.5 m: 0.09
     assert gmap.lookup(near)[0] == K and gmap.lookup(far)[0] == K + 1
@@ -251,9 +263,10 @@ def _drive(stage: OffsetSteering, scenario, camera: PinholeCamera, seconds: floa
     tracker = PathTracker(path)
     pose = (2.0, 10.0, 0.0)
     poses = []
+    gmap = _map_of(stage, camera)
     for _ in range(round(seconds * 10)):
         s = tracker.update(np.array(pose[:2]))
-        w = stage.yaw_rate(SegmentationView.of(renderer.render(pose)), pose, path, s)
+        w = _steer(stage, gmap, SegmentationView.of(renderer.render(pose)), pose, path, s)
         pose = integrate_unicycle(pose, Command(1.0, w), 0.1)
         poses.append(pose)
     return np.array(poses)
@@ -271,7 +284,7 @@ def test_the_offset_stage_goes_round_trees_on_the_path_and_comes_back(camera):
     assert outside.all() and gap.min() > 0.6
     assert abs(poses[-1, 1] - 10.0) < 0.3  # back on the path
     stage.reset()
-    assert stage.held == 0.0 and (stage.map.lookup(np.array([[14.0, 10.0]])) == K + 1).all()
+    assert stage.held == 0.0
 
 
 def _clearance(poses: np.ndarray, centre: tuple[float, float], size: tuple[float, float]) -> float:
@@ -298,7 +311,9 @@ def _taken(scenario, camera: PinholeCamera, pose, held: float, speed_mps: float 
     starts at x = 2 m), holding ``held`` before it, the vehicle going at ``speed_mps``."""
     stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
     stage.held = held
-    stage.yaw_rate(_seen_from(scenario, camera, pose), pose, ReferencePath(scenario.waypoints), pose[0] - 2.0, speed_mps)
+    _steer(
+        stage, _map_of(stage, camera), _seen_from(scenario, camera, pose), pose, ReferencePath(scenario.waypoints), pose[0] - 2.0, speed_mps
+    )
     return stage.held
 
 
@@ -334,12 +349,12 @@ def test_the_stage_goes_back_to_the_path_only_when_the_way_back_is_clear(camera)
     stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
     pose = (9.0, 11.4, 0.0)
     stage.held = 1.4
-    stage.yaw_rate(_seen_from(scenario, camera, pose), pose, path, 7.0)
+    _steer(stage, _map_of(stage, camera), _seen_from(scenario, camera, pose), pose, path, 7.0)
     assert stage.held > 0.0
     free = _scenario([])
     stage.reset()
     stage.held = 1.4
-    stage.yaw_rate(_seen_from(free, camera, pose), pose, path, 7.0)
+    _steer(stage, _map_of(stage, camera), _seen_from(free, camera, pose), pose, path, 7.0)
     assert stage.held == 0.0  # with nothing there it goes back
 
 
@@ -353,14 +368,16 @@ def test_a_side_only_the_margin_rules_out_is_kept_rather_than_a_way_across_letha
     path = ReferencePath(scenario.waypoints)
     stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
     pose = (10.5, 11.8, 0.0)
-    stage.map.update(_seen_from(scenario, camera, pose), pose)
-    assert (stage._swept(stage.offsets, pose, path, 8.5) < stage._steps).all()  # every way brushes the clearance
+    gmap = _map_of(stage, camera)
+    gmap.update(_seen_from(scenario, camera, pose), pose)
+    assert (stage._swept(gmap, stage.offsets, pose, path, 8.5) < stage._steps).all()  # every way brushes the clearance
     stage.reset()
+    gmap.reset()
     stage.held = 2.8
     poses = []
     while pose[0] < 20.0:  # until past the trees
         s = path.project(np.array(pose[:2]))[0]
-        w = stage.yaw_rate(_seen_from(scenario, camera, pose), pose, path, s)
+        w = _steer(stage, gmap, _seen_from(scenario, camera, pose), pose, path, s)
         pose = integrate_unicycle(pose, Command(1.0, w), 0.1)
         poses.append(pose)
         assert stage.held > 0.0  # never the way across
@@ -378,13 +395,14 @@ def test_when_lethal_terrain_lies_across_every_way_the_side_held_is_kept(camera)
     path = ReferencePath(scenario.waypoints)
     stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
     pose = (10.5, 10.0, 0.0)
-    stage.map.update(_seen_from(scenario, camera, pose), pose)
-    reach = stage._swept(stage.offsets, pose, path, 8.5, stage._bare)
+    gmap = _map_of(stage, camera)
+    gmap.update(_seen_from(scenario, camera, pose), pose)
+    reach = stage._swept(gmap, stage.offsets, pose, path, 8.5, stage._bare)
     assert (reach < stage._steps).all()  # even the footprint alone meets the strip on every way
     assert stage.offsets[np.argmax(reach)] < 0.0  # the farthest way is on the right
     for held, side in ((1.0, 1.0), (-1.0, -1.0), (0.0, -1.0)):
         stage.held = held
-        kept = stage.offsets[~stage._blocked(stage.offsets, pose, path, 8.5)]
+        kept = stage.offsets[~stage._blocked(gmap, stage.offsets, pose, path, 8.5)]
         assert kept.size > 0 and (np.sign(kept) == side).all(), (held, kept)
 
 
@@ -512,8 +530,9 @@ def test_the_compiled_swept_check_is_the_numpy_form(camera):
     scenario = _scenario([TREES])
     stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
     path = ReferencePath(scenario.waypoints)
+    gmap = _map_of(stage, camera)
     for pose, s in (((8.0, 10.0, 0.0), 6.0), ((9.0, 10.5, 0.2), 7.0), ((10.0, 9.3, -0.3), 8.0)):
-        stage.map.update(_seen_from(scenario, camera, pose), pose)
+        gmap.update(_seen_from(scenario, camera, pose), pose)
         n = len(stage.offsets)
         x, y, yaw = (np.full(n, v) for v in pose)
         first = np.full(n, 60)  # the step where each way first meets the trees
@@ -528,10 +547,10 @@ def test_the_compiled_swept_check_is_the_numpy_form(camera):
             x, y = x + np.cos(yaw) * 0.1, y + np.sin(yaw) * 0.1
             if i % 2 == 0:
                 points = np.stack([x[:, None] - stage._clear * np.sin(yaw)[:, None], y[:, None] + stage._clear * np.cos(yaw)[:, None]], -1)
-                hit = (stage.map.lookup(points) == 0).any(axis=1)
+                hit = (gmap.lookup(points) == 0).any(axis=1)
                 first = np.where(hit & (first == 60), i, first)
         assert (first < 60).any() and not (first < 60).all()
-        np.testing.assert_array_equal(stage._swept(stage.offsets, pose, path, s), first)
+        np.testing.assert_array_equal(stage._swept(gmap, stage.offsets, pose, path, s), first)
 
 
 _FIT = """
@@ -574,16 +593,16 @@ def test_the_offset_fit_gives_the_same_weights_under_every_cpu_setting(cpu_outpu
 def test_the_map_reads_every_voted_cell_as_decided_and_refuses_too_many_columns():
     """After votes, ``cells`` holds no undecided marker (it decides them) and is read-only; a
     class table with 254 terrain columns would need the marker as a column and is refused."""
-    from terrapref.rules.offset import ground_map_compiled
+    from terrapref.groundmap import map_compiled
 
     scenario = _scenario([MUD])
     camera = PinholeCamera()
     gmap = GroundMap(camera, _terrain())
     for pose in ((2.0, 10.0, 0.0), (4.0, 10.2, 0.05)):
         gmap.update(_seen_from(scenario, camera, pose), pose)
-    assert (gmap._cells == ground_map_compiled.UNSETTLED).any()  # the votes left cells to decide
+    assert (gmap._cells == map_compiled.UNSETTLED).any()  # the votes left cells to decide
     cells = gmap.cells
-    assert not (cells == ground_map_compiled.UNSETTLED).any() and (cells < gmap.k + 1).any()
+    assert not (cells == map_compiled.UNSETTLED).any() and (cells < gmap.k + 1).any()
     assert not cells.flags.writeable
     with pytest.raises(ValueError, match="terrain columns"):
         GroundMap(camera, TerrainColumns(np.zeros(256, np.uint8), 254))
@@ -608,7 +627,7 @@ def test_a_driver_who_likes_a_patch_is_not_switched_off_a_held_offset_by_a_slive
     stage = OffsetSteering(OffsetUtility(likes_mud, 5.0), camera, _terrain((0,)), CONTROL)
     pose = (6.0, 10.2, 0.0)
     stage.held = 0.2
-    stage.yaw_rate(_seen_from(scenario, camera, pose), pose, path, 4.0)
+    _steer(stage, _map_of(stage, camera), _seen_from(scenario, camera, pose), pose, path, 4.0)
     assert stage.held == pytest.approx(0.2)  # kept: a margin of the best's magnitude, not of its signed value
 
 

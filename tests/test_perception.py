@@ -428,7 +428,7 @@ def test_models_of_different_draws_see_different_errors_on_one_layout(renderer):
 def test_the_sky_line_gives_the_cameras_pitch_and_roll(renderer):
     """Five frames at the mount's attitude set the reference; a frame tilted by a known pitch and
     roll is read back within a tenth of a degree; a frame at the mount reads as no tilt at all."""
-    from terrapref.features.attitude import HorizonAttitude
+    from terrapref.groundmap.attitude import HorizonAttitude
 
     estimate = HorizonAttitude(renderer.camera)
     pose = Pose(20.0, 15.0, 0.3)
@@ -443,7 +443,7 @@ def test_the_sky_line_gives_the_cameras_pitch_and_roll(renderer):
 
 
 def test_a_sky_line_the_map_cuts_short_gives_no_estimate(renderer):
-    from terrapref.features.attitude import HorizonAttitude
+    from terrapref.groundmap.attitude import HorizonAttitude
 
     estimate = HorizonAttitude(renderer.camera)
     for _ in range(5):

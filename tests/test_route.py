@@ -10,11 +10,11 @@ from helpers import model_meta, one_line_error, skip_path_weights
 from terrapref.camera import PinholeCamera
 from terrapref.cli import main
 from terrapref.features import FeatureConfig
+from terrapref.groundmap.costmap import LETHAL_COST
 from terrapref.interop.robot import load_waypoints
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.planner.route import RouteConfig, RouteError, plan_route
-from terrapref.rules.costmap import LETHAL_COST
 from terrapref.rules.offset.fit import OffsetUtility
 from terrapref.rules.offset.rule import OffsetSteering
 from terrapref.scenario import load_scenario

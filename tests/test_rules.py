@@ -295,8 +295,9 @@ def test_what_a_runner_offers_is_consistent(fitted, rule_type):
     i = len(rec) // 2
     planner.decide(rec.image(i), Pose(*rec.poses[i]), float(rec.times[i]))
     runner = planner.runner
-    assert runner.keeps_ground_map == (runner.ground_map is not None)
-    assert (runner.costmap() is None) == (not runner.keeps_ground_map)
+    assert runner.keeps_ground_map == (planner.ground_map is not None)
+    assert planner.ground_map is None or planner.ground_map.settings == runner.map_settings
+    assert (planner.ground_map is None or runner.costmap(planner.ground_map) is None) == (not runner.keeps_ground_map)
     assert (planner.costmap() is None) == (not runner.keeps_ground_map)
     prices = runner.route_prices()
     if prices is not None:

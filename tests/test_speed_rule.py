@@ -26,6 +26,7 @@ from terrapref.demos.meta import ExpertInfo, HumanInfo
 from terrapref.errors import UserError
 from terrapref.evaluation.speed import LATERAL_TOLERANCE, TIME_TOLERANCE, SpeedComparison, driver_lateral_limit, trained_driver
 from terrapref.features import FeatureConfig, UtilityFeaturizer
+from terrapref.groundmap.map import GroundMap
 from terrapref.learning.model_file import load_model, save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.planner import Planner
@@ -405,78 +406,80 @@ MUD_LEFT = _scenario([{"class": "mud", "rectangle": {"center": [20.0, 14.0], "si
 AT = (8.0, 10.0, 0.0)  # 6 m along the path
 
 
-def _runner(model: SpeedModel, scenario: Scenario | None) -> SpeedRunner:
-    """The rule's runner with its own ground map, fed the views of ``scenario`` from 2 m to 8 m
-    along its path (every 0.5 m); ``None``: nothing seen."""
+def _runner(model: SpeedModel, scenario: Scenario | None) -> tuple[SpeedRunner, GroundMap]:
+    """The rule's runner and the ground map a planner keeps for it, fed the views of ``scenario``
+    from 2 m to 8 m along its path (every 0.5 m); ``None``: nothing seen."""
     camera = PinholeCamera()
     context = RuleContext(camera, UtilityFeaturizer(FEATURES, camera, CLASSES), FEATURES, CLASSES)
     runner = SpeedRule(SpeedConfig(), model).runner(context)
-    assert isinstance(runner, SpeedRunner) and runner.own_map
+    assert isinstance(runner, SpeedRunner)
+    seen = GroundMap(camera, context.terrain, runner.map_settings)
     if scenario is not None:
         renderer = SegmentationRenderer(camera, rasterise(scenario))
         for x in np.arange(2.0, AT[0] + 1e-9, 0.5):
             pose = (float(x), 10.0, 0.0)
-            runner.observe(SegmentationView.of(renderer.render(pose)), pose)
-    return runner
+            seen.update(SegmentationView.of(renderer.render(pose)), pose)
+    return runner, seen
 
 
 def test_on_ground_of_one_class_the_runner_drives_at_its_speed():
-    runner = _runner(MODEL, ALL_MUD)
-    assert runner.speed(AT, 0.0, 1.0) == 0.9
-    assert runner.speed(AT, 0.2, 1.0) == 0.9 and runner.speed(AT, -0.2, 1.0) == 0.9  # every way is on mud
-    runner.reset()
-    assert runner.speed(AT, 0.0, 1.0) == 0.5  # forgotten: nothing seen, the slowest cruising speed
-    assert _runner(MODEL, None).speed(AT, 0.0, 1.0) == 0.5
+    runner, seen = _runner(MODEL, ALL_MUD)
+    assert runner.speed(seen, AT, 0.0, 1.0) == 0.9
+    assert runner.speed(seen, AT, 0.2, 1.0) == 0.9 and runner.speed(seen, AT, -0.2, 1.0) == 0.9  # every way is on mud
+    seen.reset()
+    assert runner.speed(seen, AT, 0.0, 1.0) == 0.5  # forgotten: nothing seen, the slowest cruising speed
+    blank, nothing = _runner(MODEL, None)
+    assert blank.speed(nothing, AT, 0.0, 1.0) == 0.5
 
 
 def test_the_runner_reads_the_way_of_the_arc_or_of_the_offset_held():
-    runner = _runner(MODEL, MUD_LEFT)
+    runner, seen = _runner(MODEL, MUD_LEFT)
     path = ReferencePath(MUD_LEFT.waypoints)
-    assert runner.speed(AT, 0.0, 1.0) == 1.6  # straight on: the footprint stays below y = 10.6 m
-    assert runner.speed(AT, 0.5, 1.0) == 0.9  # the left arc reaches the mud within 1.5 m
-    assert runner.speed(AT, -0.5, 1.0) == 1.6
-    assert runner.speed(AT, 0.0, 1.0, (path, 6.0, 4.0)) == 0.9  # the path shifted 4 m left: on the mud
-    assert runner.speed(AT, 0.0, 1.0, (path, 6.0, 0.0)) == 1.6
-    assert runner.speed(AT, 0.0, 1.0, (path, 6.0, -4.0)) == 1.6
+    assert runner.speed(seen, AT, 0.0, 1.0) == 1.6  # straight on: the footprint stays below y = 10.6 m
+    assert runner.speed(seen, AT, 0.5, 1.0) == 0.9  # the left arc reaches the mud within 1.5 m
+    assert runner.speed(seen, AT, -0.5, 1.0) == 1.6
+    assert runner.speed(seen, AT, 0.0, 1.0, (path, 6.0, 4.0)) == 0.9  # the path shifted 4 m left: on the mud
+    assert runner.speed(seen, AT, 0.0, 1.0, (path, 6.0, 0.0)) == 1.6
+    assert runner.speed(seen, AT, 0.0, 1.0, (path, 6.0, -4.0)) == 1.6
 
 
 @pytest.mark.parametrize("curvature", [0.5, -0.5, 1.0])
 def test_the_runner_keeps_to_the_largest_yaw_rate(curvature: float):
-    runner = _runner(MODEL, ALL_MUD)
-    assert runner.speed(AT, curvature, 0.3) == pytest.approx(0.3 / abs(curvature))  # below the mud's 0.9 m/s
-    assert runner.speed(AT, curvature, 5.0) == 0.9
+    runner, seen = _runner(MODEL, ALL_MUD)
+    assert runner.speed(seen, AT, curvature, 0.3) == pytest.approx(0.3 / abs(curvature))  # below the mud's 0.9 m/s
+    assert runner.speed(seen, AT, curvature, 5.0) == 0.9
 
 
 @pytest.mark.parametrize("curvature", [0.5, -0.5, 1.0])
 def test_the_runner_keeps_to_the_drives_lateral_acceleration(curvature: float):
-    runner = _runner(replace(MODEL, drive_lateral_mps2=0.2), ALL_MUD)
-    v = runner.speed(AT, curvature, 5.0)
+    runner, seen = _runner(replace(MODEL, drive_lateral_mps2=0.2), ALL_MUD)
+    v = runner.speed(seen, AT, curvature, 5.0)
     assert v == pytest.approx(math.sqrt(0.2 / abs(curvature)))  # below the mud's 0.9 m/s
     assert v**2 * abs(curvature) <= 0.2 + 1e-12
-    assert runner.speed(AT, 0.0, 5.0) == 0.9  # straight on: no sideways acceleration to keep to
-    assert runner.speed(AT, curvature, 0.1) == pytest.approx(0.1 / abs(curvature))  # the tighter of the two caps
+    assert runner.speed(seen, AT, 0.0, 5.0) == 0.9  # straight on: no sideways acceleration to keep to
+    assert runner.speed(seen, AT, curvature, 0.1) == pytest.approx(0.1 / abs(curvature))  # the tighter of the two caps
 
 
 @pytest.mark.parametrize("curvature", [0.5, -0.5, 2.0])
 def test_the_yaw_rate_keeps_to_the_lateral_limit_at_the_vehicles_speed(curvature: float):
-    runner = _runner(replace(MODEL, drive_lateral_mps2=0.6), ALL_MUD)
-    v = runner.speed(AT, curvature, 5.0)
+    runner, seen = _runner(replace(MODEL, drive_lateral_mps2=0.6), ALL_MUD)
+    v = runner.speed(seen, AT, curvature, 5.0)
     assert runner.yaw_rate(curvature, v) == pytest.approx(curvature * v)  # at the speed it commands: within the limit
     assert runner.yaw_rate(curvature, v, speed_mps=v / 2) == pytest.approx(curvature * v)  # still speeding up: no faster than v
     braking = runner.yaw_rate(curvature, v, speed_mps=1.5)  # still faster than v: a wider arc for now
     assert braking == pytest.approx(math.copysign(0.6 / 1.5, curvature)) and abs(braking) * 1.5 == pytest.approx(0.6)
     assert runner.yaw_rate(0.0, v, speed_mps=1.5) == 0.0
-    bends = _runner(replace(MODEL, lateral_accel_mps2=0.3, drive_lateral_mps2=0.6), ALL_MUD)
+    bends, _ = _runner(replace(MODEL, lateral_accel_mps2=0.3, drive_lateral_mps2=0.6), ALL_MUD)
     assert bends.rule.model.lateral_limit_mps2 == 0.3  # a bend limit shown is the tighter limit
     assert abs(bends.yaw_rate(curvature, 0.9, speed_mps=1.5)) * 1.5 == pytest.approx(min(0.3, abs(curvature) * 0.9 * 1.5))
-    free = _runner(MODEL, ALL_MUD)  # neither known: the arc asked for
+    free, _ = _runner(MODEL, ALL_MUD)  # neither known: the arc asked for
     assert free.rule.model.lateral_limit_mps2 is None and free.yaw_rate(curvature, 0.9, speed_mps=2.0) == curvature * 0.9
 
 
 def test_the_yaw_rate_keeps_to_the_lateral_limit_while_the_vehicle_may_still_speed_up_to_the_last_command():
     """A frame taken at 1.0 m/s while the vehicle sped up toward the 2.0 m/s commanded last: until
     the next decision it may reach 2.0 m/s, so the arc of a slower command keeps to the limit there."""
-    runner = _runner(replace(MODEL, drive_lateral_mps2=0.6), ALL_MUD)
+    runner, seen = _runner(replace(MODEL, drive_lateral_mps2=0.6), ALL_MUD)
     assert runner.yaw_rate(0.5, 0.9, speed_mps=1.0) == pytest.approx(0.45)  # nothing commanded yet: 0.45 m/s^2 at 1 m/s
     runner.commanded(2.0)
     assert runner.yaw_rate(0.5, 0.9, speed_mps=1.0) == pytest.approx(0.6 / 2.0)  # not 0.45: 0.9 m/s^2 at 2 m/s
@@ -490,8 +493,8 @@ def test_the_yaw_rate_keeps_to_the_lateral_limit_while_the_vehicle_may_still_spe
 
 
 def test_the_runner_never_exceeds_the_rules_top_speed():
-    runner = _runner(replace(MODEL, speeds_mps=(3.0,) * 5), ALL_MUD)
-    assert runner.speed(AT, 0.0, 1.0) == SpeedConfig().max_speed_mps
+    runner, seen = _runner(replace(MODEL, speeds_mps=(3.0,) * 5), ALL_MUD)
+    assert runner.speed(seen, AT, 0.0, 1.0) == SpeedConfig().max_speed_mps
 
 
 def test_the_planner_drives_the_steering_rules_curvature_at_the_speed_rules_speed(tmp_path: Path):

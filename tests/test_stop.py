@@ -21,7 +21,7 @@ from terrapref.learning.linear import LinearUtility
 from terrapref.perception.model import load_perception
 from terrapref.planner import Planner, PlannerDriver
 from terrapref.planner.policy import LinearPolicy, PurePursuitPolicy
-from terrapref.planner.stop import StopConfig
+from terrapref.planner.stop import StopConfig, StopRule
 from terrapref.runtime import PlannerRuntime
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import SimConfig, Simulation, run_episode
@@ -319,8 +319,8 @@ def test_the_robot_file_sets_the_stop_rule(tmp_path: Path):
 def test_the_rule_reads_the_offset_stages_map_and_keeps_its_own_otherwise(model: Path):
     from terrapref.learning.model_file import load_model
 
-    planner = Planner(load_model(model))  # C's argmax: no map of its own
-    assert planner.stop_rule.own_map and planner.runner.ground_map is None
+    planner = Planner(load_model(model))  # C's argmax: it reads no map, the stop rule its own small one
+    assert planner.ground_map is None and planner._stop_map.settings == StopRule.map_settings
     assert 0.4 <= planner.stop_rule.near_m < 0.5  # the footprint's whole width is in view from the image's bottom edge, 0.43 m (SPEC 5)
 
 
@@ -333,7 +333,7 @@ def test_the_offset_stage_stops_at_the_wall_reading_its_own_ground_map(tmp_path:
     config = ClassifierConfig(hidden=8, skip=True)
     path = save_model(tmp_path / "offset.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
     planner = Planner(load_model(path))
-    assert not planner.stop_rule.own_map and planner.stop_rule.map is planner.runner.ground_map  # one map, the stage's
+    assert planner._stop_map is planner.ground_map is not None and len(planner._maps) == 1  # one map, the stage's
     m = run_one(RunSpec(wall, 0, "planner", str(path), PROFILE)).metrics
     assert m.collisions == 0 and m.ended == "stopped" and set(m.stops_s) == {NO_FREE_WAY}
 

@@ -13,17 +13,18 @@ the layers below it (tests/test_layout.py checks this list against the code):
 8. camera (sensing)
 9. perception (what a robot's segmentation gets wrong)
 10. sim (closed loop, Gymnasium env)
-11. features (utility features U, the sky line's attitude)
+11. features (utility features U)
 12. demos (driving and recording demonstrations)
 13. dataset (featurising recordings into training sets, with what the rules read)
 14. learning (C, the linear utility, model files)
-15. rules (decision rules, one package each: argmax, second stage, offset with its ground map)
-16. planner (policies, the stop rule, route)
-17. baselines, recipes
-18. interop (robot logs, ONNX, MCAP, ROS)
-19. evaluation, teleop
-20. report, filekinds (which reader checks a file, templates)
-21. cli, runtime, warm_up
+15. groundmap (what the camera has shown of the ground, as layers over one grid; its costmap)
+16. rules (decision rules, one package each: argmax, second stage, offset, speed)
+17. planner (policies, the stop rule, route; it keeps the ground maps the rules read)
+18. baselines, recipes
+19. interop (robot logs, ONNX, MCAP, ROS)
+20. evaluation, teleop
+21. report, filekinds (which reader checks a file, templates)
+22. cli, runtime, warm_up
 """
 
 import os

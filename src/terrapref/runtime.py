@@ -4,7 +4,7 @@ It lives in :mod:`terrapref.interop.runtime` beside the other robot-facing code;
 its public name.
 """
 
+from terrapref.groundmap.costmap import Costmap
 from terrapref.interop.runtime import STOP, PlannerRuntime, RobotSettings, RuntimeDecision
-from terrapref.rules.costmap import Costmap
 
 __all__ = ["STOP", "Costmap", "PlannerRuntime", "RobotSettings", "RuntimeDecision"]

@@ -242,7 +242,7 @@ def _write_runs(results: list[RunResult], folder: Path, model) -> None:
     from terrapref.planner import Planner
 
     camera = PinholeCamera(model.camera)
-    runner = Planner(model).runner  # its costmap only where it keeps a ground map (the offset rule)
+    planner = Planner(model)  # its costmap only where its steering rule reads a ground map (the offset rule)
     for r in results:
         run = r.run
         if r.driver != PLANNER or run is None:
@@ -261,7 +261,7 @@ def _write_runs(results: list[RunResult], folder: Path, model) -> None:
             classes=model.classes,
             preference=model.features.preference,
             probs=run.probs,
-            costmap=costmaps_of(runner, poses) if runner.keeps_ground_map else None,
+            costmap=costmaps_of(planner, poses) if planner.ground_map is not None else None,
             stops=run.stops or None,
         )
         write_mcap(folder / f"{file_stem(r.scenario)}_seed{r.seed}.mcap", frames, robot_file=False)

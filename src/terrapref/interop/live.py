@@ -27,8 +27,8 @@ from terrapref.interop.ros_messages import Message, typestore
 if TYPE_CHECKING:
     from terrapref.camera import CameraConfig
     from terrapref.features import PreferenceSetConfig
+    from terrapref.groundmap.costmap import Costmap
     from terrapref.planner.planner import Planner, PlannerDriver
-    from terrapref.rules.costmap import Costmap
     from terrapref.terrain import ClassTable
 
 DEFAULT_HOST, DEFAULT_PORT = "127.0.0.1", 8765  # Foxglove's own default

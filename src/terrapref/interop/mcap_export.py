@@ -39,6 +39,7 @@ from terrapref.extras import needs
 from terrapref.features import PreferenceSetConfig
 from terrapref.features.preference_set import forward_simulate
 from terrapref.fileio import new_folder, write_text_atomic
+from terrapref.groundmap.costmap import Costmap
 from terrapref.interop.ros_messages import (
     EPOCH_S,
     OPTICAL_FRAME,
@@ -64,7 +65,6 @@ from terrapref.interop.ros_messages import (
     vector3,
     zeroed,
 )
-from terrapref.rules.costmap import Costmap
 from terrapref.stops import REASONS
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.terrain.classes import UNKNOWN
@@ -350,19 +350,19 @@ def _robot_yaml(cam: CameraConfig, labels: str, profile: tuple[str, ...] | None 
     )
 
 
-def costmaps_of(runner, poses: np.ndarray) -> Callable[[int, np.ndarray], Costmap | None]:
-    """The costmaps of one run for :attr:`RunFrames.costmap`: ``runner`` (a planner's rule that
-    keeps a ground map, terrapref.rules), its map emptied, takes each frame in turn as
+def costmaps_of(planner, poses: np.ndarray) -> Callable[[int, np.ndarray], Costmap | None]:
+    """The costmaps of one run for :attr:`RunFrames.costmap`: ``planner`` (a terrapref.planner.Planner
+    whose steering rule reads a ground map), its maps emptied, takes each frame in turn as
     it was seen from ``poses`` (F, 3), and every :data:`COSTMAP_EVERY`-th frame gives its
     costmap. Frames are to be asked for in order."""
     from terrapref.camera import SegmentationView
     from terrapref.vehicle import Pose
 
-    runner.reset()
+    planner.forget_ground()
 
     def costmap(i: int, ids: np.ndarray) -> Costmap | None:
-        runner.observe(SegmentationView.of(ids), Pose(*poses[i]))
-        return runner.costmap() if i % COSTMAP_EVERY == 0 else None
+        planner.observe(SegmentationView.of(ids), Pose(*poses[i]))
+        return planner.costmap() if i % COSTMAP_EVERY == 0 else None
 
     return costmap
 
@@ -376,10 +376,10 @@ def model_costmaps(model, frames: RunFrames) -> Callable[[int, np.ndarray], Cost
     """
     if not model.classes.same_classes(frames.classes):
         raise ValueError("was trained for another class table than the recording's")
-    runner = model.planner(frames.camera).runner
-    if not runner.keeps_ground_map:
+    planner = model.planner(frames.camera)
+    if planner.ground_map is None:
         raise ValueError("has no offset rule, whose ground map the costmap prices (train it with recipe teach)")
-    return costmaps_of(runner, frames.poses)
+    return costmaps_of(planner, frames.poses)
 
 
 def recording_frames(rec) -> RunFrames:

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from terrapref.errors import UserError
+from terrapref.groundmap.costmap import Costmap
 from terrapref.interop.labels import unlisted_message
 from terrapref.interop.robot import LIMITS, RobotConfig
 from terrapref.interop.ros_decode import camera_from_info, label_ids, path_xy, stamp_s, yaw_rad
@@ -33,7 +34,6 @@ from terrapref.learning.model_file import LoadedModel
 from terrapref.planner.model import Model
 from terrapref.planner.stop import StopConfig
 from terrapref.rules import RULES
-from terrapref.rules.costmap import Costmap
 from terrapref.rules.settings import RuleSettings
 from terrapref.scenario.path import ReferencePath
 from terrapref.stops import REASONS, STALE

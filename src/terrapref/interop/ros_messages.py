@@ -25,7 +25,7 @@ if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
     from terrapref.camera import CameraConfig
-    from terrapref.rules.costmap import Costmap
+    from terrapref.groundmap.costmap import Costmap
 
 Message = Any  # an instance of a message class that rosbags makes at run time from the typestore
 EPOCH_S = 1_700_000_000
@@ -275,8 +275,8 @@ GRID_FIELDS = (
 def foxglove_grid(ts: Typestore, t_s: float, frame_id: str, costmap: Costmap) -> Message:
     """foxglove_msgs/Grid of ``costmap`` in ``frame_id``, stamped ``t_s`` [s]: per cell its cost as
     int8 (0-100, -1 unknown, as in OccupancyGrid) and its colour
-    (:func:`terrapref.rules.costmap.cost_colours`), 5 bytes a cell."""
-    from terrapref.rules.costmap import cost_colours
+    (:func:`terrapref.groundmap.costmap.cost_colours`), 5 bytes a cell."""
+    from terrapref.groundmap.costmap import cost_colours
 
     T = ts.types
     h, w = costmap.cost.shape

@@ -29,11 +29,11 @@ from pathlib import Path
 import numpy as np
 
 from terrapref.camera import CameraConfig
+from terrapref.groundmap.costmap import Costmap
 from terrapref.interop.labels import LabelMap, unlisted_message
 from terrapref.learning.model_file import LoadedModel
 from terrapref.planner.model import Model
 from terrapref.planner.stop import StopConfig
-from terrapref.rules.costmap import Costmap
 from terrapref.rules.settings import RuleSettings
 from terrapref.scenario.path import ReferencePath
 from terrapref.stops import STALE
@@ -233,7 +233,7 @@ class PlannerRuntime:
 
     def costmap(self) -> Costmap:
         """The learned preference over the ground seen so far, in the frame of the poses given
-        (terrapref.rules.costmap): 0-99 by learned price, 100 lethal, -1 never seen.
+        (terrapref.groundmap.costmap): 0-99 by learned price, 100 lethal, -1 never seen.
 
         Raises:
             ValueError: the rule that drives keeps no ground map (recipe teach's offset rule does).

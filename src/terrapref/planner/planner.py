@@ -15,12 +15,14 @@ import numpy as np
 
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationView, as_view
 from terrapref.features import UtilityFeaturizer
+from terrapref.groundmap.costmap import Costmap
+from terrapref.groundmap.map import GroundMap
+from terrapref.groundmap.settings import MapSettings
 from terrapref.learning.model_file import LoadedModel, check_compatible
 from terrapref.planner.goal import GoalCheck, PathState
 from terrapref.planner.policy import ClassifierPolicy, Observation, Policy
 from terrapref.planner.stop import StopConfig, StopRule
 from terrapref.rules import Choice, Rule, RuleContext, RuleInput, chosen_rule, speed_rule
-from terrapref.rules.costmap import Costmap
 from terrapref.rules.settings import RuleSettings
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
@@ -92,6 +94,11 @@ class Planner:
     its curvature at the top speed); then the stop rule (terrapref.planner.stop), which commands a
     stop, with its reason, when no way ahead is free or the frames have been blind too long.
 
+    The planner keeps the ground maps the rules read (terrapref.groundmap): one for each distinct
+    settings the rules name (the steering rule's, the speed rule's; the stop rule reads the
+    steering rule's, or a small one of its own settings where that rule reads none), each updated
+    once a frame before any rule reads it, and forgotten with the path.
+
     Args:
         model: a loaded model file (C) or any :class:`Policy`.
         camera: the robot's camera; a model trained for another camera is refused.
@@ -129,7 +136,7 @@ class Planner:
         self.control = control = policy.features.preference.control
         self.vehicle = vehicle or VehicleConfig()
         speed = speed_rule(self.rules)
-        self.speed = speed.runner(context, self.runner.ground_map) if speed is not None else None
+        self.speed = speed.runner(context) if speed is not None else None
         self._set_v, self._max_w = float(control.v_mps), float(np.max(np.abs(control.w_rps)))
         half_width = self.runner.half_width_m
         self.stop_rule = StopRule(
@@ -138,8 +145,11 @@ class Planner:
             float(np.max(np.abs(control.w_rps))),
             half_width if half_width is not None else DEFAULT_HALF_WIDTH_M,
             stop,
-            self.runner.ground_map,
         )
+        self._maps: dict[MapSettings, GroundMap] = {}  # one per distinct settings, updated in this order
+        self.ground_map = self._map(context, self.runner.map_settings)  # the steering rule's (None: it reads none)
+        self._speed_map = self._map(context, self.speed.map_settings) if self.speed is not None else None
+        self._stop_map = self.ground_map if self.ground_map is not None else self._map(context, self.stop_rule.map_settings)
         self.goal = GoalCheck(self.stop_rule.config, min(self._max_w, self.vehicle.max_yaw_rate_rps))
         self.path: ReferencePath | None = None
         self.tracker: PathTracker | None = None
@@ -153,6 +163,26 @@ class Planner:
         self.goal.reset()
         if self.speed is not None:
             self.speed.reset()
+        self.forget_ground()
+
+    def _map(self, context: RuleContext, settings: MapSettings | None) -> GroundMap | None:
+        """The ground map of ``settings`` (None: none), one for all the rules that name the same settings."""
+        if settings is None:
+            return None
+        if settings not in self._maps:
+            self._maps[settings] = GroundMap(self.camera, context.terrain, settings)
+        return self._maps[settings]
+
+    def forget_ground(self) -> None:
+        """Forget the ground seen: every ground map the planner keeps is emptied."""
+        for ground_map in self._maps.values():
+            ground_map.reset()
+
+    def observe(self, image: np.ndarray | SegmentationView, pose: Pose) -> None:
+        """Take in a frame (H, W) uint8 at ``pose`` without deciding: every ground map the planner keeps gathers it."""
+        view = as_view(image)
+        for ground_map in self._maps.values():
+            ground_map.update(view, pose)
 
     def warm_up(self) -> None:
         """Decide once on a blank frame along a straight path, then forget that path.
@@ -169,6 +199,7 @@ class Planner:
         self.goal.reset()
         if self.speed is not None:
             self.speed.reset()
+        self.forget_ground()
 
     def decide(
         self, image: np.ndarray | SegmentationView, pose: Pose, time_s: float | None = None, speed_mps: float | None = None
@@ -197,7 +228,8 @@ class Planner:
             probs = U = None
         else:
             probs, U = outputs()
-        choice = self.runner.decide(RuleInput(probs, view, pose, self.path, s, self._going(speed_mps)))
+        self.observe(view, pose)
+        choice = self.runner.decide(RuleInput(probs, view, pose, self.path, s, self._going(speed_mps), self.ground_map))
         choice = self._bounded(self._at_speed(choice, view, pose, s, speed_mps), state)
         choice, stop = self._stop(choice, view, pose, time_s, state)
         command = STOP_COMMAND if stop else choice.command
@@ -216,7 +248,7 @@ class Planner:
         """``choice`` (turned the other way where a turn back to the path is blocked one way and
         free the other) and why the stop rule stops instead (None: it does not); the speed rule is
         told the speed commanded."""
-        stop = self.stop_rule.check(view, pose, choice.command.v, choice.command.w, time_s)
+        stop = self.stop_rule.check(self._stop_map, view, pose, choice.command.v, choice.command.w, time_s)
         if stop is None and state.turn_rps is not None and choice.command.v > 0:
             choice, stop = self._free_turn(choice, pose)
         if self.speed is not None:
@@ -228,7 +260,7 @@ class Planner:
         where that is, else a stop (``no_free_way``)."""
         v, w = choice.command
         for turn in (w, -w):
-            if self.stop_rule.arc_free(pose, v, turn):
+            if self.stop_rule.arc_free(self._stop_map, pose, v, turn):
                 return Choice(int(self.control.label_of(float(turn))), Command(v, turn)), None
         return choice, NO_FREE_WAY
 
@@ -257,17 +289,16 @@ class Planner:
         as chosen without a speed rule."""
         if self.speed is None:
             return choice
-        self.speed.observe(view, pose)
         curvature = choice.command.w / self._set_v
         held = self.runner.held_offset_m
         along = (self.path, progress_m, held) if held is not None and self.path is not None else None
-        v = self.speed.speed(pose, curvature, self._max_w, along)
+        v = self.speed.speed(self._speed_map, pose, curvature, self._max_w, along)
         return Choice(choice.index, Command(v, self.speed.yaw_rate(curvature, v, speed_mps)))
 
     def costmap(self) -> Costmap | None:
-        """The ground seen so far as the driving rule prices it (terrapref.rules.costmap);
-        None when that rule keeps no ground map (only the offset rule does)."""
-        return self.runner.costmap()
+        """The ground seen so far as the driving rule prices it (terrapref.groundmap.costmap);
+        None when that rule reads no ground map (only the offset rule does)."""
+        return self.runner.costmap(self.ground_map) if self.ground_map is not None else None
 
 
 def rules_with_settings(policy: Policy, settings: RuleSettings | None) -> tuple[Rule, ...]:

@@ -6,7 +6,7 @@ route planned over a prior map of the course (the scenario's terrain here, stand
 labelled aerial imagery on a robot) moves the reference path itself.
 
 The route is the least-cost way from the path's start to its end through the costmap of that
-map (:mod:`terrapref.rules.costmap`: the learned per-class prices, lethal classes lethal) with
+map (:mod:`terrapref.groundmap.costmap`: the learned per-class prices, lethal classes lethal) with
 the price the model learned for leaving the path: the offset utility prices a metre on class
 k at ``-w_k`` and an offset of d metres held for L metres of path at ``-w_detour * d^2 * (L +
 span)``, the span standing for swerving out and back. So a metre of route at distance d from
@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from terrapref.rules.costmap import LETHAL_COST, MAX_COST, UNKNOWN_COST, Costmap
+from terrapref.groundmap.costmap import LETHAL_COST, MAX_COST, UNKNOWN_COST, Costmap
 from terrapref.scenario.path import ReferencePath
 
 if TYPE_CHECKING:

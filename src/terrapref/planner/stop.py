@@ -9,8 +9,8 @@ its command, the planner commands v = 0 instead when:
   from just short of it is what the rule exists to prevent. The ways are arcs of constant yaw rate across the stick's range, at
   the commanded speed; the stopping distance is what the vehicle covers before it stands
   (``reaction_s`` at that speed, then braking at ``decel_mps2``) plus ``margin_m``. Ground is
-  read from the ground map the planner keeps (the offset rule's, or a small one of the rule's
-  own). Unknown ground (never seen, 255, beyond the camera's range) is never free where the
+  read from the ground map the planner keeps (the steering rule's, or, for a rule that reads
+  none, a small one of the stop rule's settings). Unknown ground (never seen, 255, beyond the camera's range) is never free where the
   camera looks from the pose it stands at; under and right beside the vehicle, where it cannot
   look, the rule goes by what the map remembers from earlier frames, and a vehicle that starts
   on ground it has never seen takes that ground as the ground it stands on.
@@ -34,11 +34,11 @@ import numpy as np
 from numba import njit
 
 from terrapref.camera import PinholeCamera, PixelSet, SegmentationView
+from terrapref.groundmap.columns import TerrainColumns
+from terrapref.groundmap.map import GroundMap
+from terrapref.groundmap.map_compiled import UNSETTLED, MapLayers, map_decide
+from terrapref.groundmap.settings import MapSettings
 from terrapref.records import to_plain
-from terrapref.rules.columns import TerrainColumns
-from terrapref.rules.offset.geometry import OffsetGeometry
-from terrapref.rules.offset.ground_map import GroundMap
-from terrapref.rules.offset.ground_map_compiled import UNSETTLED, MapLayers, map_decide
 from terrapref.stops import BLIND, NO_FREE_WAY
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose
@@ -144,21 +144,20 @@ class StopConfig:
         return cls(**data)
 
 
-# The small ground map the stop rule keeps for a decision rule that keeps none: 0.2 m cells, ground read every
+# The small ground map the stop rule reads where the steering rule reads none: 0.2 m cells, ground read every
 # 0.2 m to 3.5 m ahead and 3 m each side (the ways' reach at 2 m/s), the last few frames
 # counting (fade 0.8 a frame), placed with the mount's attitude, otherwise as the offset rule's
 # map. It is much coarser than the offset rule's (a fortieth of the samples): it decides only
 # whether to go, and the decision it guards (C's) costs 20 us.
-_OWN_MAP = OffsetGeometry(
-    stations_m=(-1.0, 3.0),
+_OWN_MAP = MapSettings(
     map_resolution_m=0.2,
     sample_step_m=0.2,
     map_half_size_m=5.0,
     sample_range_m=3.5,
+    sample_half_width_m=3.0,
     map_fade=0.8,
     map_sky_attitude=False,
 )
-_OWN_MAP_HALF_WIDTH_M = 3.0
 
 
 class StopRule:
@@ -170,9 +169,12 @@ class StopRule:
         max_yaw_rate_rps: the stick's range of yaw rates; the ways checked span it [rad/s].
         half_width_m: half the vehicle's width; the footprint is 5 points across it [m].
         config: the rule's settings.
-        ground_map: the driving rule's ground map, updated by that rule before the stop rule reads
-            it; None: the rule keeps a small one of its own.
+
+    The rule reads the ground map the planner keeps, handed to each check: the steering rule's,
+    or where that rule reads none, the small one of :attr:`map_settings`.
     """
+
+    map_settings: MapSettings = _OWN_MAP  # the map read where the steering rule reads none
 
     def __init__(
         self,
@@ -181,11 +183,8 @@ class StopRule:
         max_yaw_rate_rps: float = 1.0,
         half_width_m: float = 0.6,
         config: StopConfig | None = None,
-        ground_map: GroundMap | None = None,
     ) -> None:
         self.config = c = config or StopConfig()
-        self.own_map = ground_map is None
-        self.map = GroundMap(camera, terrain, _OWN_MAP, _OWN_MAP_HALF_WIDTH_M) if ground_map is None else ground_map
         self.k = terrain.k
         self.lethal = np.zeros(self.k + 2, dtype=np.bool_)
         self.lethal[np.asarray(terrain.lethal, dtype=np.int64)] = True
@@ -211,17 +210,10 @@ class StopRule:
         self._frames = 0
 
     def reset(self) -> None:
-        """Start a new run: forget the ground seen (the rule's own map), how long frames were blind and any stop."""
-        if self.own_map:
-            self.map.reset()
+        """Start a new run: forget how long frames were blind and any stop."""
         self._blind_since = None
         self._stopped, self._free_since = False, None
         self._frames = 0
-
-    def observe(self, view: SegmentationView, pose: Pose) -> None:
-        """Take in a frame's view (the stop rule's own map only; a decision rule's map is that rule's to update)."""
-        if self.own_map:
-            self.map.update(view, pose)
 
     def seen_share(self, view: SegmentationView) -> float:
         """The share of the ground ahead (the footprint's width, near edge to ``look_m``) that ``view`` shows as ground."""
@@ -230,17 +222,19 @@ class StopRule:
         ids = view.pixels(self._ahead)
         return float(np.count_nonzero(ids != UNKNOWN)) / ids.shape[0]
 
-    def check(self, view: SegmentationView, pose: Pose, v_mps: float, w_rps: float, time_s: float | None = None) -> str | None:
+    def check(
+        self, gmap: GroundMap, view: SegmentationView, pose: Pose, v_mps: float, w_rps: float, time_s: float | None = None
+    ) -> str | None:
         """The reason to stop at this frame, or None to drive the driving rule's command (``v_mps``, ``w_rps``).
 
         Args:
+            gmap: the ground map read (the planner's, updated with the frame).
             view: the frame's segmentation image.
             pose: the pose it was taken at.
             v_mps: the speed the driving rule commands: the stopping distance is worked out at it.
             w_rps: the yaw rate it commands: its arc is checked first.
             time_s: the frame's time [s]; None: frames are taken 0.1 s apart.
         """
-        self.observe(view, pose)
         self._frames += 1
         now = time_s if time_s is not None else 0.1 * (self._frames - 1)
         if self.seen_share(view) < self.config.seen_share:
@@ -250,7 +244,7 @@ class StopRule:
                 return BLIND
         else:
             self._blind_since = None
-        if not self.free_way(pose, v_mps, w_rps):
+        if not self.free_way(gmap, pose, v_mps, w_rps):
             self._stopped, self._free_since = True, None
             return NO_FREE_WAY
         if self._stopped:  # free again: moves on once it has stayed free resume_after_s
@@ -260,21 +254,21 @@ class StopRule:
             self._stopped, self._free_since = False, None
         return None
 
-    def free_way(self, pose: Pose, v_mps: float, w_rps: float = 0.0) -> bool:
-        """Whether some way ahead keeps the footprint on seen, non-lethal ground over the
+    def free_way(self, gmap: GroundMap, pose: Pose, v_mps: float, w_rps: float = 0.0) -> bool:
+        """Whether some way ahead keeps the footprint on seen, non-lethal ground of ``gmap`` over the
         stopping distance at ``v_mps``; the arc nearest ``w_rps`` is tried first."""
         first = int(np.argmin(np.abs(self.yaw_rates - w_rps)))
-        return self._first_free(pose, v_mps, self.yaw_rates, first) >= 0
+        return self._first_free(gmap, pose, v_mps, self.yaw_rates, first) >= 0
 
-    def arc_free(self, pose: Pose, v_mps: float, w_rps: float) -> bool:
+    def arc_free(self, gmap: GroundMap, pose: Pose, v_mps: float, w_rps: float) -> bool:
         """Whether the arc of ``w_rps`` [rad/s] at ``v_mps`` [m/s] itself keeps the footprint on
-        seen, non-lethal ground over the stopping distance (no other way is tried)."""
-        return self._first_free(pose, v_mps, np.array([float(w_rps)]), 0) >= 0
+        seen, non-lethal ground of ``gmap`` over the stopping distance (no other way is tried)."""
+        return self._first_free(gmap, pose, v_mps, np.array([float(w_rps)]), 0) >= 0
 
-    def _first_free(self, pose: Pose, v_mps: float, yaw_rates: np.ndarray, first: int) -> int:
+    def _first_free(self, gmap: GroundMap, pose: Pose, v_mps: float, yaw_rates: np.ndarray, first: int) -> int:
         """The first of ``yaw_rates`` (``first`` tried first) whose arc at ``v_mps`` is free over
-        the stopping distance (:func:`first_free_arc`); -1 when none is."""
-        if self.map.origin is None:
+        the stopping distance on ``gmap`` (:func:`first_free_arc`); -1 when none is."""
+        if gmap.origin is None:
             return -1
         c = self.config
         distance = c.stopping_distance_m(v_mps)
@@ -289,7 +283,7 @@ class StopRule:
             c.step_m,
             steps,
             self.across,
-            self.map.layers(),
+            gmap.layers(),
             self.lethal,
             self.k + 1,
             np.float32(c.lethal_evidence),
@@ -339,7 +333,7 @@ def first_free_arc(
     cells unvoted between them, which are not unseen ground. A lethal cell none of whose
     4-neighbours is lethal does not block (a speckle: labels flipped in a few frames; the
     footprint's points, 0.3 m apart, do not resolve a 0.1 m obstacle either). The map's cells
-    (``layers``) are read as :func:`terrapref.rules.offset.ground_map_compiled.map_decide` says.
+    (``layers``) are read as :func:`terrapref.groundmap.map_compiled.map_decide` says.
     """
     cells, evidence, map_lethal, shares, ox, oy, inv_res = layers
     n_rows, n_cols = cells.shape
@@ -412,7 +406,7 @@ def _lethal_evidence(evidence: np.ndarray, map_lethal: np.ndarray, j: int, i: in
 @njit(cache=True, nogil=True, inline="always")
 def _column(cells: np.ndarray, evidence: np.ndarray, map_lethal: np.ndarray, shares: np.ndarray, j: int, i: int, never: int) -> int:
     """The column of map cell ``(j, i)``, decided first if it is UNSETTLED (as
-    :func:`terrapref.rules.offset.ground_map_compiled.map_decide` says); ``never`` outside the map."""
+    :func:`terrapref.groundmap.map_compiled.map_decide` says); ``never`` outside the map."""
     if not (0 <= i < cells.shape[1] and 0 <= j < cells.shape[0]):
         return never
     col = cells[j, i]

@@ -19,16 +19,17 @@ import numpy as np
 from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.errors import UserError
 from terrapref.features import FeatureConfig, UtilityFeaturizer
-from terrapref.rules.columns import TerrainColumns
+from terrapref.groundmap.columns import TerrainColumns
+from terrapref.groundmap.map import GroundMap
+from terrapref.groundmap.settings import MapSettings
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable
 from terrapref.vehicle import Command, Pose
 
 if TYPE_CHECKING:
     from terrapref.demos.recording import Recording
+    from terrapref.groundmap.costmap import Costmap
     from terrapref.learning.train import FitData
-    from terrapref.rules.costmap import Costmap
-    from terrapref.rules.offset.ground_map import GroundMap
     from terrapref.world import WorldMap
 
 
@@ -60,6 +61,8 @@ class RuleInput:
         progress_m: the vehicle's progress along it [m].
         speed_mps: how fast the vehicle goes: its odometry's speed, or the speed commanded last
             if that is faster [m/s]; None where the planner sets no speed (the control set's).
+        ground_map: the ground map of the rule's ``map_settings``, which the planner keeps and
+            has updated with this frame; None for a rule that reads none.
     """
 
     probs: np.ndarray | None
@@ -68,6 +71,7 @@ class RuleInput:
     path: ReferencePath
     progress_m: float
     speed_mps: float | None = None
+    ground_map: GroundMap | None = None
 
 
 @dataclass(frozen=True)
@@ -97,12 +101,13 @@ class RoutePrices:
 class RuleRunner(abc.ABC):
     """A rule bound to one planner: decides each frame, and forgets what it kept when a run starts.
 
-    A rule that keeps a ground map (``keeps_ground_map``) also takes in frames without deciding
-    (:meth:`observe`) and prices what it has seen (:meth:`costmap`). A rule that steers without
-    C's F_t (``reads_probs`` False) is given none, and the planner computes it only when asked.
+    A rule that reads a ground map names its settings (``map_settings``); the planner keeps that
+    map (terrapref.groundmap), updates it once a frame and hands it to the rule in
+    :class:`RuleInput`, and the rule prices what it shows (:meth:`costmap`). A rule that steers
+    without C's F_t (``reads_probs`` False) is given none, and the planner computes it only when asked.
     """
 
-    keeps_ground_map: ClassVar[bool] = False
+    map_settings: MapSettings | None = None  # the ground map the rule reads (None: none)
     reads_probs: ClassVar[bool] = True
     half_width_m: float | None = None  # the footprint's half width the rule keeps clear [m] (None: the planner's default)
 
@@ -113,21 +118,18 @@ class RuleRunner(abc.ABC):
     def reset(self) -> None:
         """Start a new run (a new path)."""
 
-    def observe(self, view: SegmentationView, pose: Pose) -> None:
-        """Take in a frame's view without deciding (a rule that keeps no ground map ignores it)."""
+    @property
+    def keeps_ground_map(self) -> bool:
+        """Whether the rule reads a ground map (``map_settings``), which the planner keeps for it and prices by it."""
+        return self.map_settings is not None
 
-    def costmap(self) -> Costmap | None:
-        """The ground seen so far priced by what the rule learned (terrapref.rules.costmap),
-        for a rule that keeps a ground map; None otherwise."""
+    def costmap(self, ground_map: GroundMap) -> Costmap | None:
+        """``ground_map`` (the map of the rule's ``map_settings``) priced by what the rule learned
+        (terrapref.groundmap.costmap); None for a rule that learned no prices."""
         return None
 
     def route_prices(self) -> RoutePrices | None:
         """What a route search prices ground with (terrapref.planner.route); None for a rule that learned no prices."""
-        return None
-
-    @property
-    def ground_map(self) -> GroundMap | None:
-        """The ground map the rule keeps, updated as it decides (the stop rule reads it); None for a rule that keeps none."""
         return None
 
     @property

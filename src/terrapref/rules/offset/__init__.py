@@ -2,9 +2,8 @@
 utility learned from the driver prices best, and steer to it.
 
 - :mod:`.geometry`: the candidate offsets, the stations read along the path, the footprint and
-  the ground map's size and voting (:class:`~.geometry.OffsetGeometry`);
-- :mod:`.ground_map`: what the camera has shown of the ground, gathered over frames
-  (its compiled votes and reads: :mod:`.ground_map_compiled`);
+  the settings of the ground map it reads (:class:`~.geometry.OffsetGeometry`; the map itself is
+  terrapref.groundmap's, kept by the planner);
 - :mod:`.features`: what driving at each offset would cross (:mod:`.offsets_compiled`);
 - :mod:`.steering`: pure pursuit toward an offset, and its inverse, the offset a driver's
   command was steering for (the training labels);

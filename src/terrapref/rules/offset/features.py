@@ -26,9 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from terrapref.groundmap.map import GroundMap
 from terrapref.rules.offset import offsets_compiled as kernels
 from terrapref.rules.offset.geometry import OffsetGeometry
-from terrapref.rules.offset.ground_map import GroundMap
 from terrapref.scenario.path import ReferencePath
 
 

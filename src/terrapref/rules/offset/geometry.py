@@ -1,5 +1,6 @@
 """The offset rule's geometry: the candidate offsets, the stations read along the path, the
-footprint, and the ground map's size, resolution and voting (:class:`OffsetGeometry`)."""
+footprint, and the settings of the ground map it reads (:class:`OffsetGeometry`; the map's own
+settings: terrapref.groundmap.settings.MapSettings, :attr:`OffsetGeometry.map`)."""
 
 from __future__ import annotations
 
@@ -8,17 +9,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from terrapref.groundmap.settings import MAX_MAP_CELLS, MapSettings
 from terrapref.records import to_plain
 
 MAX_COUNT = 10_000
 """The most offsets, stations or camera samples an offset geometry may have."""
-MAX_MAP_CELLS = 4096
-"""The most ground-map cells a side (640 by default: 64 m at 0.1 m)."""
 
 
 @dataclass(frozen=True)
 class OffsetGeometry:
     """Geometry of the candidate offsets, what is read along them, and of the ground map behind them.
+
+    The ``map_*`` and ``sample_*`` fields are the ground map's settings (:attr:`map`), kept in
+    this block of the model file, where files have always held them.
 
     Attributes:
         max_offset_m: candidate offsets run from -max to +max [m].
@@ -51,7 +54,7 @@ class OffsetGeometry:
         map_min_evidence: a cell counts as seen once its evidence totals this much (a vote at
             0 m weighs 1).
         map_sky_attitude: place the ground samples with the camera's pitch and roll off its mount
-            as the sky line of each frame shows them (terrapref.features.attitude), not with the
+            as the sky line of each frame shows them (terrapref.groundmap.attitude), not with the
             mount's.
     """
 
@@ -121,6 +124,22 @@ class OffsetGeometry:
                 "the ground map needs map_range_m > 0, map_fade in [0, 1], map_lethal_share and map_terrain_share in (0, 1] "
                 "and map_min_evidence >= 0"
             )
+
+    @property
+    def map(self) -> MapSettings:
+        """The settings of the ground map the offsets are read from (ground read 8 m each side of the vehicle)."""
+        return MapSettings(
+            map_resolution_m=self.map_resolution_m,
+            map_half_size_m=self.map_half_size_m,
+            sample_step_m=self.sample_step_m,
+            sample_range_m=self.sample_range_m,
+            map_range_m=self.map_range_m,
+            map_fade=self.map_fade,
+            map_lethal_share=self.map_lethal_share,
+            map_terrain_share=self.map_terrain_share,
+            map_min_evidence=self.map_min_evidence,
+            map_sky_attitude=self.map_sky_attitude,
+        )
 
     @property
     def offsets(self) -> np.ndarray:

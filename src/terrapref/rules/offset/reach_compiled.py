@@ -10,7 +10,7 @@ import math
 import numpy as np
 from numba import njit
 
-from terrapref.rules.offset.ground_map_compiled import UNSETTLED, MapLayers, map_decide, path_frame
+from terrapref.groundmap.map_compiled import UNSETTLED, MapLayers, map_decide, path_frame
 
 
 @njit(cache=True, nogil=True)
@@ -37,7 +37,7 @@ def swept_reach(
     ``steps`` steps of ``dt`` from the pose, first brings a point across the footprint (``clear``,
     every other step) onto a lethal column of the map (``lethal`` by column, ``never`` for cells
     outside the map); ``steps`` where it never does. The map's cells (``layers``) are read as
-    :func:`terrapref.rules.offset.ground_map_compiled.map_decide` says.
+    :func:`terrapref.groundmap.map_compiled.map_decide` says.
 
     The NumPy form: pure pursuit as :func:`terrapref.rules.offset.steering.steer` gives it (clipped
     to +-1 rad/s, but with the C library's ``hypot``, as ``np.hypot``, where steer has Python's)

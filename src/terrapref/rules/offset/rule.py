@@ -1,6 +1,6 @@
 """The ``offset`` rule: choose a lateral offset from the path with a learned utility, hold it, steer to it.
 
-Each frame the ground map (:mod:`.ground_map`) takes in the camera's view and the offset
+Each frame the ground map (terrapref.groundmap, kept by the planner) takes in the camera's view and the offset
 utility ``weights . features(d)`` (:mod:`.features`, fitted by :mod:`.fit`) scores every
 candidate offset d. The rule then:
 
@@ -42,6 +42,8 @@ import numpy as np
 from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.errors import UserError
 from terrapref.features import UtilityFeaturizer
+from terrapref.groundmap.costmap import Costmap, costmap_of
+from terrapref.groundmap.map import GroundMap
 from terrapref.records import to_plain
 from terrapref.rules.base import (
     Choice,
@@ -58,11 +60,9 @@ from terrapref.rules.base import (
     number,
     vector,
 )
-from terrapref.rules.costmap import Costmap, costmap_of
 from terrapref.rules.offset.features import OffsetFeatures
 from terrapref.rules.offset.fit import OffsetFit, OffsetUtility, fit_offset_utility
 from terrapref.rules.offset.geometry import OffsetGeometry
-from terrapref.rules.offset.ground_map import GroundMap
 from terrapref.rules.offset.offsets_compiled import gated_value
 from terrapref.rules.offset.reach_compiled import lethal_hits, swept_reach
 from terrapref.rules.offset.steering import intent_offsets, steer
@@ -158,7 +158,7 @@ class OffsetReader(FrameReader):
     def __init__(self, geometry: OffsetGeometry, featurizer: UtilityFeaturizer, camera: PinholeCamera, classes: ClassTable, n: int) -> None:
         k = featurizer.config.n_terrain
         self.geometry = geometry
-        self.map = GroundMap(camera, TerrainColumns.of(featurizer.class_columns, k, classes), geometry)
+        self.map = GroundMap(camera, TerrainColumns.of(featurizer.class_columns, k, classes), geometry.map)
         self.offsets = OffsetFeatures(geometry, k)
         self.features = np.empty((n, len(self.offsets.offsets), k + 2), dtype=np.float32)
         self.near = np.empty(n, dtype=np.float32)
@@ -306,7 +306,8 @@ class OffsetSteering(RuleRunner):
         if safe:
             weights[k] = weights[safe].mean()
         self.weights = weights
-        self.map = GroundMap(camera, terrain, utility.config)
+        self.map_settings = utility.config.map
+        self._columns = terrain.map_columns  # a prior map's class ids as the ground map's columns
         self.features = OffsetFeatures(utility.config, k)
         self.offsets = self.features.offsets
         m = utility.config.half_width_m + self.config.lethal_margin_m
@@ -322,44 +323,41 @@ class OffsetSteering(RuleRunner):
         self._centre = int(np.argmin(np.abs(self.offsets)))
         self.held = 0.0
 
-    keeps_ground_map = True
     reads_probs = False
 
     def reset(self) -> None:
-        """Start a new run: forget the map and the held offset."""
-        self.map.reset()
+        """Start a new run: forget the held offset."""
         self.held = 0.0
-
-    def observe(self, view: SegmentationView, pose: Pose) -> None:
-        self.map.update(view, pose)
 
     def decide(self, frame: RuleInput) -> Choice:
         """Steered continuously within the control set's range of yaw rates; the index names the nearest trajectory."""
+        if frame.ground_map is None:
+            raise ValueError("the offset rule reads a ground map: the frame has none")
         w = float(
             np.clip(
-                self.yaw_rate(frame.view, frame.pose, frame.path, frame.progress_m, frame.speed_mps),
+                self.yaw_rate(frame.ground_map, frame.pose, frame.path, frame.progress_m, frame.speed_mps),
                 self.control.w_rps[0],
                 self.control.w_rps[-1],
             )
         )
         return Choice(int(self.control.label_of(w)), Command(self.control.v_mps, w))
 
-    def yaw_rate(self, view: SegmentationView, pose: Pose, path: ReferencePath, progress_m: float, speed_mps: float | None = None) -> float:
-        """The yaw rate [rad/s] toward the offset held after this frame, the vehicle going at
+    def yaw_rate(self, gmap: GroundMap, pose: Pose, path: ReferencePath, progress_m: float, speed_mps: float | None = None) -> float:
+        """The yaw rate [rad/s] toward the offset held after this frame, read from ``gmap`` (the
+        ground map of :attr:`map_settings`, updated with the frame), the vehicle going at
         ``speed_mps`` [m/s] (None: the control set's speed)."""
-        self.observe(view, pose)
-        seen = self.features(self.map, path, progress_m)
+        seen = self.features(gmap, path, progress_m)
         value = gated_value(seen.features, self.offsets, seen.near_m > self.utility.near_m, self.weights)
         escape = None
         if self.lethal[: self.k].any():
             lines = None  # the offsets' lines to the horizon, when the far read below already holds them
-            if self._lines(self._outermost, path, progress_m, self._far_stations).all():  # the outermost two first: cheaper
-                far = self._hits(self.offsets, path, progress_m, self._far_stations)
+            if self._lines(gmap, self._outermost, path, progress_m, self._far_stations).all():  # the outermost two first: cheaper
+                far = self._hits(gmap, self.offsets, path, progress_m, self._far_stations)
                 if far.any(axis=1).all():
-                    escape = self._escape(value, path, progress_m)
+                    escape = self._escape(gmap, value, path, progress_m)
                 if len(self._line_stations) <= far.shape[1]:
                     lines = far[:, : len(self._line_stations)].any(axis=1)  # the same stations, from the same start and step
-            blocked = self._blocked(self.offsets, pose, path, progress_m, lines)
+            blocked = self._blocked(gmap, self.offsets, pose, path, progress_m, lines)
             if not blocked.all():
                 value = np.where(blocked, -np.inf, value)
         best = int(np.argmax(value))
@@ -374,10 +372,6 @@ class OffsetSteering(RuleRunner):
         return float(steer(path, pose, progress_m, self.held, self.config.pursuit_m, self.v_mps))
 
     @property
-    def ground_map(self) -> GroundMap:
-        return self.map
-
-    @property
     def held_offset_m(self) -> float:
         return float(self.held)
 
@@ -387,12 +381,14 @@ class OffsetSteering(RuleRunner):
 
     def _prior(self, world: WorldMap) -> Costmap:
         """The costmap of a prior map ``world`` (every cell known), priced as the ground map's cells are."""
-        cells = self.map.columns[world.raster]
+        cells = self._columns[world.raster]
         return costmap_of(cells, np.zeros(2), world.resolution_m, self.utility.weights, self.lethal, self.names)
 
-    def costmap(self) -> Costmap:
-        """The ground map seen so far priced by the learned utility (terrapref.rules.costmap)."""
-        return costmap_of(self.map.cells, self.map.origin, self.map.config.map_resolution_m, self.utility.weights, self.lethal, self.names)
+    def costmap(self, ground_map: GroundMap) -> Costmap:
+        """``ground_map`` (of :attr:`map_settings`) priced by the learned utility (terrapref.groundmap.costmap)."""
+        return costmap_of(
+            ground_map.cells, ground_map.origin, ground_map.settings.map_resolution_m, self.utility.weights, self.lethal, self.names
+        )
 
     def _same_side(self, value: np.ndarray, best: int) -> int:
         """The offset to take when lethal terrain rules out the one held, the vehicle faster than the
@@ -404,7 +400,7 @@ class OffsetSteering(RuleRunner):
         kept = int(np.flatnonzero(side)[np.argmax(value[side])])
         return kept if keeps(value[kept], value[best], self.config.switch_margin) else best
 
-    def _escape(self, value: np.ndarray, path: ReferencePath, progress_m: float) -> float | None:
+    def _escape(self, gmap: GroundMap, value: np.ndarray, path: ReferencePath, progress_m: float) -> float | None:
         """The escape offset to hold when lethal terrain lies across every fitted offset, or None
         if none is clear as far as the offset features read. The one held is kept while clear; otherwise
         the nearest clear one on the side of the offset held (a swap of sides while going round
@@ -414,7 +410,7 @@ class OffsetSteering(RuleRunner):
         none, the nearest on either side."""
         if self.escapes.size == 0:
             return None
-        clear = ~self._lines(self.escapes, path, progress_m, self._far_stations)
+        clear = ~self._lines(gmap, self.escapes, path, progress_m, self._far_stations)
         if not clear.any():
             return None
         if abs(self.held) > self.offsets[-1] and clear[np.argmin(np.abs(self.escapes - self.held))]:
@@ -425,9 +421,9 @@ class OffsetSteering(RuleRunner):
         return float(self.escapes[order[np.argmax(clear[order])]])
 
     def _blocked(
-        self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_m: float, lines: np.ndarray | None = None
+        self, gmap: GroundMap, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_m: float, lines: np.ndarray | None = None
     ) -> np.ndarray:
-        """Which of ``offsets`` (O,) lethal terrain rules out.
+        """Which of ``offsets`` (O,) lethal terrain rules out (on ``gmap``).
 
         First each offset's line parallel to the path, from 0.5 m behind to the horizon, with the
         footprint and its clearance (``lines``, when already read). Where some line meets lethal
@@ -443,15 +439,15 @@ class OffsetSteering(RuleRunner):
         Of those that stay, the ones whose line is clear with the margin, if any is.
         """
         if lines is None:
-            lines = self._lines(offsets, path, progress_m, self._line_stations)
+            lines = self._lines(gmap, offsets, path, progress_m, self._line_stations)
         if not lines.any():
             return lines
-        reach = self._swept(offsets, pose, path, progress_m)
+        reach = self._swept(gmap, offsets, pose, path, progress_m)
         both = lines | (reach < self._steps)
         if not both.all():
             return both
-        reach = self._swept(offsets, pose, path, progress_m, self._bare)
-        keep = ~self._lines(offsets, path, progress_m, self._line_stations, self._bare) & (reach == self._steps)
+        reach = self._swept(gmap, offsets, pose, path, progress_m, self._bare)
+        keep = ~self._lines(gmap, offsets, path, progress_m, self._line_stations, self._bare) & (reach == self._steps)
         if not keep.any():
             side = np.sign(offsets) == np.sign(self.held) if self.held != 0.0 else np.ones(len(offsets), bool)
             side = side if side.any() else np.ones(len(offsets), bool)
@@ -459,20 +455,31 @@ class OffsetSteering(RuleRunner):
         return ~(keep & ~lines if (keep & ~lines).any() else keep)
 
     def _lines(
-        self, offsets: np.ndarray, path: ReferencePath, progress_m: float, stations: np.ndarray, across: np.ndarray | None = None
+        self,
+        gmap: GroundMap,
+        offsets: np.ndarray,
+        path: ReferencePath,
+        progress_m: float,
+        stations: np.ndarray,
+        across: np.ndarray | None = None,
     ) -> np.ndarray:
         """Which of ``offsets`` (O,) have lethal terrain on their line parallel to the path, at
         ``stations`` (S,) from the vehicle's progress, across the footprint and its clearance
         (``across``, by default)."""
-        return self._hits(offsets, path, progress_m, stations, across).any(axis=1)
+        return self._hits(gmap, offsets, path, progress_m, stations, across).any(axis=1)
 
     def _hits(
-        self, offsets: np.ndarray, path: ReferencePath, progress_m: float, stations: np.ndarray, across: np.ndarray | None = None
+        self,
+        gmap: GroundMap,
+        offsets: np.ndarray,
+        path: ReferencePath,
+        progress_m: float,
+        stations: np.ndarray,
+        across: np.ndarray | None = None,
     ) -> np.ndarray:
         """:meth:`_lines` station by station, (O, S); ``across`` the points across each line (the
         footprint and its clearance by default)."""
         across = self._clear if across is None else across
-        gmap = self.map
         if gmap.origin is None:
             return np.broadcast_to(self.lethal[self.k + 1], (len(offsets), len(stations))).copy()
         a, d, length = path.segments
@@ -491,13 +498,13 @@ class OffsetSteering(RuleRunner):
         )
 
     def _swept(
-        self, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_m: float, across: np.ndarray | None = None
+        self, gmap: GroundMap, offsets: np.ndarray, pose: Pose, path: ReferencePath, progress_m: float, across: np.ndarray | None = None
     ) -> np.ndarray:
         """For each of ``offsets`` (O,), the step of ``dt_s`` at which pure pursuit toward it first drives
         the footprint (``across``, with its clearance by default) onto lethal terrain, ``self._steps``
         where it does not within the horizon."""
         across = self._clear if across is None else across
-        c, gmap = self.config, self.map
+        c = self.config
         a, d, length = path.segments
         return swept_reach(
             float(pose[0]),

@@ -1,8 +1,8 @@
 """The ``speed`` rule: how fast to drive the way the steering chose, learned from the same drive.
 
 It does not steer: the rule that steers picks the way (a trajectory's or an offset's curvature),
-and this rule picks the speed along it (:class:`SpeedRunner`), from what its own ground map
-(terrapref.rules.offset.ground_map) has gathered of the ground the camera has shown, under and
+and this rule picks the speed along it (:class:`SpeedRunner`), from what the ground map the
+planner keeps for it (terrapref.groundmap) has gathered of the ground the camera has shown, under and
 ahead of the vehicle. The model and its fit are :mod:`.model`. Its fit reads, for every frame of
 a drive, the ground map around the vehicle as the camera had shown it by then, along the way the
 driver then drove (:class:`SpeedReader`).
@@ -19,11 +19,11 @@ import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.features import UtilityFeaturizer
+from terrapref.groundmap.columns import TerrainColumns
+from terrapref.groundmap.map import GroundMap
+from terrapref.groundmap.settings import MapSettings
 from terrapref.records import to_plain
 from terrapref.rules.base import FrameReader, HeaderContext, Rule, RuleConfig, RuleContext, Where, number
-from terrapref.rules.columns import TerrainColumns
-from terrapref.rules.offset.geometry import OffsetGeometry
-from terrapref.rules.offset.ground_map import GroundMap
 from terrapref.rules.speed.model import MIN_SPEED_MPS, STATION_STEP_M, STATIONS, SpeedFit, SpeedModel, across, fit_speed
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable
@@ -35,8 +35,8 @@ if TYPE_CHECKING:
 
 # The speed rule's ground map: the offset rule's (its default geometry: 0.1 m cells gathered over
 # the last seconds, placed with the camera's attitude from the sky line), so that a planner whose
-# offset rule steers reads the map that rule keeps, and a robot's ragged labels are outvoted alike.
-MAP = OffsetGeometry()
+# offset rule steers keeps one map for both, and a robot's ragged labels are outvoted alike.
+MAP = MapSettings()
 # A cell split between two terrain classes (its class holding under half its evidence, another
 # at least 0.15) reads as never seen: a robot's network takes a patch of one class for another in
 # regions that last a few frames (rock for mud under the `field` preset, docs/perception.md), and one such cell in the few
@@ -275,9 +275,9 @@ class SpeedRule(Rule):
             raise where.error("background", "expected the background class's name")
         return cls(config, model, fit, background)
 
-    def runner(self, context: RuleContext, shared: GroundMap | None = None) -> SpeedRunner:
-        """Bound to one planner; ``shared``: the steering rule's ground map, read where it has the speed rule's geometry."""
-        return SpeedRunner(self, context, shared)
+    def runner(self, context: RuleContext) -> SpeedRunner:
+        """Bound to one planner."""
+        return SpeedRunner(self)
 
     def describe(self, names: tuple[str, ...], lethal: frozenset[str]) -> str:
         """The cruising speed per class with its interval, and the limits."""
@@ -335,22 +335,20 @@ def _number(value: object) -> bool:
 
 
 class SpeedRunner:
-    """The speed rule bound to one planner: the ground map it reads (the steering rule's where that
-    rule keeps one of the same geometry, else its own), and the speed along a chosen way."""
+    """The speed rule bound to one planner: the speed along a chosen way, read from the ground map
+    of :attr:`map_settings` that the planner keeps (one map with the steering rule's where their
+    settings are the same)."""
 
-    def __init__(self, rule: SpeedRule, context: RuleContext, shared: GroundMap | None = None) -> None:
+    map_settings: MapSettings = MAP
+
+    def __init__(self, rule: SpeedRule) -> None:
         self.rule = rule
-        self.own_map = shared is None or shared.config != MAP
-        self.map = GroundMap(context.camera, context.terrain, MAP) if self.own_map else shared
         self.across = across(rule.config.half_width_m)
         self._d = STATION_STEP_M * np.arange(STATIONS)
         self._last_v = 0.0  # the speed commanded last [m/s]
 
     def reset(self) -> None:
-        """Forget the ground seen (a new path; its own map only: a shared one is its keeper's to
-        reset) and the speed commanded last."""
-        if self.own_map:
-            self.map.reset()
+        """Forget the speed commanded last (a new path)."""
         self._last_v = 0.0
 
     def commanded(self, v_mps: float) -> None:
@@ -363,16 +361,17 @@ class SpeedRunner:
         toward which it may still be speeding up."""
         return max(speed_mps or 0.0, self._last_v)
 
-    def observe(self, view: SegmentationView, pose: Pose) -> None:
-        """Take in a frame (its own map only; a shared one was updated by the rule that keeps it)."""
-        if self.own_map:
-            self.map.update(view, pose)
-
     def speed(
-        self, pose: Pose, curvature: float, max_yaw_rate_rps: float, along: tuple[ReferencePath, float, float] | None = None
+        self,
+        gmap: GroundMap,
+        pose: Pose,
+        curvature: float,
+        max_yaw_rate_rps: float,
+        along: tuple[ReferencePath, float, float] | None = None,
     ) -> float:
-        """The speed [m/s] along the way chosen, within the rule's top speed and the speed at which
-        an arc of ``curvature`` [1/m] needs no more than ``max_yaw_rate_rps``.
+        """The speed [m/s] along the way chosen, as ``gmap`` (the ground map of :attr:`map_settings`,
+        updated with the frame) shows it, within the rule's top speed and the speed at which an arc
+        of ``curvature`` [1/m] needs no more than ``max_yaw_rate_rps``.
 
         The way: with ``along`` (path, progress [m], offset [m]: a rule that holds an offset from
         the path), the footprint where the vehicle is, then the path shifted by the offset ahead
@@ -395,7 +394,7 @@ class SpeedRunner:
                 px, py = x + (np.sin(heading) - math.sin(yaw)) / k, y - (np.cos(heading) - math.cos(yaw)) / k
         normal = np.stack([-np.sin(heading), np.cos(heading)], axis=-1)
         points = np.stack([px, py], axis=-1)[:, None, :] + self.across[None, :, None] * normal[:, None, :]
-        way = self.map.lookup(points, SPLIT)[None]
+        way = gmap.lookup(points, SPLIT)[None]
         v = float(self.rule.model.predict(way, np.array([k]))[0])
         top = self.rule.config.max_speed_mps
         if abs(k) > 1e-9:

@@ -1,5 +1,5 @@
 """The camera's pitch and roll off its mount from the sky line of a frame, compiled (Numba)
-(terrapref.features.attitude).
+(terrapref.groundmap.attitude).
 
 Each loop does, element by element, exactly the IEEE 754 operations of the NumPy form its
 docstring gives, in the same order (compiled without fast-math: nothing is reassociated or
@@ -175,7 +175,7 @@ def attitude_fit(departure: np.ndarray, reference: np.ndarray, u: np.ndarray, fy
     """(pitch, roll) [rad] off the mount from the sky line's ``departure`` (C,) [rows] from its
     ``reference`` (C,) at column offsets ``u`` (C,) [px]; (0, 0) when fewer than half the columns
     support it, or the estimate exceeds ``max_rad``. The least squares of
-    terrapref.features.attitude's module docstring, twice (the second time without the columns
+    terrapref.groundmap.attitude's module docstring, twice (the second time without the columns
     that miss the first fit by more than 3 rows), with exactly rounded sums (:func:`exact_sum`);
     tests/test_offset_kernels.py keeps its NumPy form and compares."""
     n = departure.shape[0]

@@ -4,16 +4,17 @@ frames (:class:`GroundMap`), in the terrain columns of a class table (:class:`Te
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 import numpy as np
 
 from terrapref.camera import PinholeCamera, PixelSet, SegmentationView
-from terrapref.features.attitude import HorizonAttitude
-from terrapref.rules.columns import TerrainColumns
-from terrapref.rules.offset import ground_map_compiled as kernels
-from terrapref.rules.offset.geometry import OffsetGeometry
+from terrapref.groundmap import map_compiled as kernels
+from terrapref.groundmap.attitude import HorizonAttitude
+from terrapref.groundmap.columns import TerrainColumns
+from terrapref.groundmap.layers import LAYERS, Layer
+from terrapref.groundmap.settings import MapSettings
 from terrapref.scenario.path import ReferencePath
-from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose
 
 
@@ -31,22 +32,21 @@ class GroundMap:
     neither entered nor seen where it is not because of a few frames.
 
     Cells hold a terrain column (0..K-1), K for ground that is none of the K classes, K + 1 for
-    ground never seen.
+    ground never seen. The map's arrays are the layers of :attr:`LAYERS` over one grid
+    (terrapref.groundmap.layers), moved and emptied together; :meth:`layer` gives one by name.
 
     Args:
         camera: the camera whose images update the map.
         terrain: the class table's terrain columns.
-        config: the offset rule's geometry (map resolution, size and voting, image sampling).
-        sample_half_width_m: ground is read this far each side of the vehicle [m].
+        settings: its resolution, size and voting, and the ground read from each image.
     """
 
-    def __init__(
-        self, camera: PinholeCamera, terrain: TerrainColumns, config: OffsetGeometry | None = None, sample_half_width_m: float = 8.0
-    ) -> None:
-        self.config = c = config or OffsetGeometry()
+    LAYERS: ClassVar[tuple[Layer, ...]] = LAYERS
+
+    def __init__(self, camera: PinholeCamera, terrain: TerrainColumns, settings: MapSettings | None = None) -> None:
+        self.settings = c = settings or MapSettings()
         self.k = k = terrain.k
-        self.columns = np.asarray(terrain.of_class, dtype=np.uint8).copy()
-        self.columns[UNKNOWN] = k + 1  # a pixel that sees no ground casts no vote
+        self.columns = terrain.map_columns  # a pixel that sees no ground casts no vote
         if k + 1 >= kernels.UNSETTLED:
             raise ValueError(f"a ground map holds at most {kernels.UNSETTLED - 2} terrain columns, got {k}")
         self.lethal = np.zeros(k + 2, dtype=np.bool_)
@@ -55,7 +55,7 @@ class GroundMap:
         self._shares = np.array([c.map_lethal_share, c.map_terrain_share, c.map_min_evidence], dtype=np.float32)
         # The ground points read from each image: a vehicle-frame grid, those the camera sees.
         xs = np.arange(0.2, c.sample_range_m, c.sample_step_m)
-        ys = np.arange(-sample_half_width_m, sample_half_width_m, c.sample_step_m)
+        ys = np.arange(-c.sample_half_width_m, c.sample_half_width_m, c.sample_step_m)
         grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1).reshape(-1, 2)
         pix = camera.pixel_indices(grid)
         seen = pix >= 0
@@ -77,26 +77,41 @@ class GroundMap:
             fade[g] = fade[g - 1] * np.float32(c.map_fade)
         self._fade = fade
         self._n = int(round(2 * c.map_half_size_m / c.map_resolution_m))
-        # Each cell's column (row: y, col: x), kernels.UNSETTLED where voted on since last decided.
-        self._cells = np.full((self._n, self._n), k + 1, dtype=np.uint8)
-        self.evidence = np.zeros((self._n, self._n, k + 1), dtype=np.float32)
-        self.stamp = np.zeros((self._n, self._n), dtype=np.int64)
+        self._layers = {layer.name: layer.empty(self._n, k) for layer in self.LAYERS}
         self.frame = 0
         self.origin: np.ndarray | None = None  # world position of cell (0, 0)'s corner [m]
         self._origin_xy: tuple[float, float] | None = None  # the same, in plain floats
 
+    def layer(self, name: str) -> np.ndarray:
+        """The layer ``name`` of :attr:`LAYERS`, (n, n) or (n, n, K + 1) (rows y, columns x): the
+        map's own array, for the code that writes it; valid until the map is next re-centred."""
+        return self._layers[name]
+
+    @property
+    def _cells(self) -> np.ndarray:
+        return self._layers["column"]
+
+    @property
+    def evidence(self) -> np.ndarray:
+        """Each cell's votes per column (n, n, K + 1) float32 (the ``evidence`` layer)."""
+        return self._layers["evidence"]
+
+    @property
+    def stamp(self) -> np.ndarray:
+        """The frame of each cell's last vote (n, n) int64 (the ``stamp`` layer)."""
+        return self._layers["stamp"]
+
     def reset(self) -> None:
         """Forget everything seen."""
-        self._cells.fill(self.k + 1)
-        self.evidence.fill(0.0)
-        self.stamp.fill(0)
+        for layer in self.LAYERS:
+            self._layers[layer.name].fill(layer.fill_value(self.k))
         self.frame = 0
         self.origin = self._origin_xy = None
         if self.attitude is not None:
             self.attitude.reset()
 
     def _recentre(self, x: float, y: float) -> None:
-        c = self.config
+        c = self.settings
         # Re-centred while all the camera writes and the offset features read stays inside (checked in
         # plain floats: the same arithmetic as NumPy's on the two coordinates; a NaN re-centres).
         if self._origin_xy is not None:
@@ -108,16 +123,15 @@ class GroundMap:
         if self.origin is not None:  # keep what the old square and the new one share
             old = np.round(self.origin / c.map_resolution_m).astype(np.int64)
             dx, dy = int(new[0] - old[0]), int(new[1] - old[1])
-            self._cells = _shifted(self._cells, dx, dy, self.k + 1)
-            self.evidence = _shifted(self.evidence, dx, dy, 0.0)
-            self.stamp = _shifted(self.stamp, dx, dy, 0)
+            for layer in self.LAYERS:
+                self._layers[layer.name] = _shifted(self._layers[layer.name], dx, dy, layer.fill_value(self.k))
         self.origin = new * c.map_resolution_m
         self._origin_xy = (float(self.origin[0]), float(self.origin[1]))
 
     def update(self, view: SegmentationView, pose: Pose) -> None:
         """Add what ``view``, taken at ``pose``, shows of the ground."""
         x, y, yaw = pose
-        c = self.config
+        c = self.settings
         self._recentre(float(x), float(y))
         self.frame += 1
         ids = view.pixels(self._pixels)
@@ -164,7 +178,7 @@ class GroundMap:
         the lethal columns, the shares that decide a column, its corner and cells per metre).
         Read once the map has been placed (its first update: ``origin`` is not None)."""
         ox, oy = self._origin_xy
-        return kernels.MapLayers(self._cells, self.evidence, self.lethal, self._shares, ox, oy, 1.0 / self.config.map_resolution_m)
+        return kernels.MapLayers(self._cells, self.evidence, self.lethal, self._shares, ox, oy, 1.0 / self.settings.map_resolution_m)
 
     def beside(self, path: ReferencePath, s: np.ndarray, lat: np.ndarray) -> np.ndarray:
         """Terrain column (O, S, F) at the points ``lat`` (O, F) [m] left of the path at arc lengths ``s`` (S,)."""

@@ -1,4 +1,4 @@
-"""The ground map's votes and reads, compiled (Numba) (terrapref.rules.offset.ground_map): the
+"""The ground map's votes and reads, compiled (Numba) (terrapref.groundmap.map): the
 samples of a frame voting in their cells, a cell's column decided from its evidence, and the
 map read at world points or beside the path.
 
@@ -21,7 +21,7 @@ UNSETTLED = 255  # a ground-map cell voted on since its column was last decided 
 
 
 class MapLayers(NamedTuple):
-    """The ground map as a compiled read takes it (terrapref.rules.offset.ground_map.GroundMap.layers).
+    """The ground map as a compiled read takes it (terrapref.groundmap.map.GroundMap.layers).
 
     Attributes:
         cells: each cell's column (rows y, columns x) (n, n) uint8, :data:`UNSETTLED` where voted
@@ -83,7 +83,7 @@ def map_vote(
     ``t``): a sample moves by where its pixel's ray ``ray[p]`` (camera frame, z = 1) now meets the
     ground less where the mount's camera saw it meet it (``ground0[p]``), and a ray that no longer
     meets it casts no vote; the NumPy form of that point is
-    ``terrapref.rules.offset.ground_map._ground``.
+    ``terrapref.groundmap.map._ground``.
     """
     n_rows, n_cols = cells.shape
     k = evidence.shape[2] - 1

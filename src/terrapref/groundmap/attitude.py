@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from terrapref.camera import PinholeCamera, PixelSet, SegmentationView
-from terrapref.features import attitude_compiled as kernels
+from terrapref.groundmap import attitude_compiled as kernels
 from terrapref.terrain import UNKNOWN
 
 REFERENCE_EVERY = 4  # frames between updates of the reference line (it moves slowly)

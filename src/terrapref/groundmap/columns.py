@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from terrapref.terrain import ClassTable
+from terrapref.terrain import UNKNOWN, ClassTable
 
 
 @dataclass(frozen=True, eq=False)
@@ -28,6 +28,14 @@ class TerrainColumns:
     def __post_init__(self) -> None:
         if np.shape(self.of_class) != (256,) or self.k < 0 or not all(0 <= c <= self.k + 1 for c in self.lethal):
             raise ValueError("terrain columns need a column for each of the 256 class ids, K >= 0 and lethal columns up to K + 1")
+
+    @property
+    def map_columns(self) -> np.ndarray:
+        """The terrain column of each class id (256,) uint8 as the ground map counts it: K + 1
+        (never seen) for UNKNOWN, the pixel that sees no ground."""
+        columns = np.asarray(self.of_class, dtype=np.uint8).copy()
+        columns[UNKNOWN] = self.k + 1
+        return columns
 
     @classmethod
     def of(cls, of_class: np.ndarray, k: int, classes: ClassTable, names: tuple[str, ...] = ()) -> TerrainColumns:

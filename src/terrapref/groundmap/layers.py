@@ -1,0 +1,55 @@
+"""The layers a ground map holds over its grid (:data:`LAYERS`), each named and typed.
+
+Every layer is an array over the same square of cells (rows y, columns x), moved with it when
+the map is re-centred and emptied with it when the map is reset. A new layer (a height from a
+depth sensor, say) is one more entry in :data:`LAYERS` plus the code that writes it; the rules
+read the layers they need and are not touched.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Layer:
+    """One layer of a ground map.
+
+    Attributes:
+        name: what the map calls it (``GroundMap.layer(name)``).
+        dtype: the type of its values.
+        fill: the value of a cell nothing was written to (the map's start, a cell newly come
+            into the square); ignored with ``fill_unseen``.
+        per_column: one value per terrain column (K + 1: the K terrain classes and the
+            background) in each cell, (n, n, K + 1), instead of one per cell, (n, n).
+        fill_unseen: the fill is the column of ground never seen, K + 1.
+    """
+
+    name: str
+    dtype: type
+    fill: float = 0
+    per_column: bool = False
+    fill_unseen: bool = False
+
+    def fill_value(self, k: int) -> float:
+        """The value of an empty cell, for a map of ``k`` terrain columns."""
+        return k + 1 if self.fill_unseen else self.fill
+
+    def empty(self, n: int, k: int) -> np.ndarray:
+        """The layer of a map of ``n`` by ``n`` cells and ``k`` terrain columns with nothing written."""
+        shape = (n, n, k + 1) if self.per_column else (n, n)
+        return np.full(shape, self.fill_value(k), dtype=self.dtype)
+
+
+LAYERS: tuple[Layer, ...] = (
+    # Each cell's terrain column (0..K-1, K the background, K + 1 never seen), or
+    # terrapref.groundmap.map_compiled.UNSETTLED where voted on since it was last decided.
+    Layer("column", np.uint8, fill_unseen=True),
+    # Each cell's votes per column, faded with the frames since its last vote (map_compiled.map_vote).
+    Layer("evidence", np.float32, 0.0, per_column=True),
+    # The frame of each cell's last vote (its fading is counted from it).
+    Layer("stamp", np.int64, 0),
+)
+"""The ground map's layers, in the order they are made (module docstring)."""
