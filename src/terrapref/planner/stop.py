@@ -335,8 +335,7 @@ def first_free_arc(
     footprint's points, 0.3 m apart, do not resolve a 0.1 m obstacle either). The map's cells
     (``layers``) are read as :func:`terrapref.groundmap.map_compiled.map_decide` says.
     """
-    cells, evidence, map_lethal, shares, ox, oy, inv_res = layers
-    n_rows, n_cols = cells.shape
+    ox, oy, inv_res = layers.ox, layers.oy, layers.inv_res
     vis_x, vis_y = visible.shape
     c0, s0 = math.cos(yaw0), math.sin(yaw0)
     for t in range(curvatures.shape[0]):
@@ -361,29 +360,7 @@ def first_free_arc(
                 looks = 0 <= gi < vis_x and 0 <= gj < vis_y and visible[gi, gj]
                 i = math.floor((wx - ox) * inv_res)
                 j = math.floor((wy - oy) * inv_res)
-                col = _column(cells, evidence, map_lethal, shares, j, i, never)
-                if col == never and 0 <= i < n_cols and 0 <= j < n_rows:  # a cell between samples: read its neighbours
-                    seen, deadly = False, False
-                    for dj, di in ((0, 1), (0, -1), (1, 0), (-1, 0)):
-                        cn = _column(cells, evidence, map_lethal, shares, j + dj, i + di, never)
-                        if cn != never:
-                            seen = True
-                            deadly = deadly or (
-                                lethal[cn] and (looks or _lethal_evidence(evidence, map_lethal, j + dj, i + di) >= confirmed)
-                            )
-                    if seen:
-                        if deadly:
-                            free = False
-                            break
-                        continue
-                if (
-                    lethal[col]
-                    and (looks or _lethal_evidence(evidence, map_lethal, j, i) >= confirmed)
-                    and _lethal_neighbour(cells, evidence, map_lethal, shares, lethal, j, i, never)
-                ):
-                    free = False
-                    break
-                if col == never and looks:
+                if _blocked(layers, lethal, never, confirmed, j, i, looks):
                     free = False
                     break
             if not free:
@@ -391,6 +368,31 @@ def first_free_arc(
         if free:
             return a
     return -1
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _blocked(layers: MapLayers, lethal: np.ndarray, never: int, confirmed: np.float32, j: int, i: int, looks: bool) -> bool:
+    """Whether the footprint may not stand on cell (row ``j``, column ``i``): :func:`first_free_arc`
+    says when (``looks``: the camera looks at the point from the pose)."""
+    cells, evidence, map_lethal, shares = layers.cells, layers.evidence, layers.lethal, layers.shares
+    n_rows, n_cols = cells.shape
+    col = _column(cells, evidence, map_lethal, shares, j, i, never)
+    if col == never and 0 <= i < n_cols and 0 <= j < n_rows:  # a cell between samples: read its neighbours
+        seen, deadly = False, False
+        for dj, di in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+            cn = _column(cells, evidence, map_lethal, shares, j + dj, i + di, never)
+            if cn != never:
+                seen = True
+                deadly = deadly or (lethal[cn] and (looks or _lethal_evidence(evidence, map_lethal, j + dj, i + di) >= confirmed))
+        if seen:
+            return deadly
+    if (
+        lethal[col]
+        and (looks or _lethal_evidence(evidence, map_lethal, j, i) >= confirmed)
+        and _lethal_neighbour(cells, evidence, map_lethal, shares, lethal, j, i, never)
+    ):
+        return True
+    return col == never and looks
 
 
 @njit(cache=True, nogil=True, inline="always")
