@@ -85,10 +85,68 @@ def map_vote(
     meets it casts no vote; the NumPy form of that point is
     ``terrapref.groundmap.map._ground``.
     """
+    # First every sample's cell, in a loop without stores to the map, then the votes.
     n_rows, n_cols = cells.shape
+    column_of = columns[ids[pixel_of]]  # each sample's column
+    cell = _sample_cells(
+        n_rows, n_cols, x - ox, y - oy, inv_res, c, s, vx, vy, column_of, evidence.shape[2] - 1, tilted, ray, ground0, axes, t
+    )
+    _add_votes(evidence, stamp, cells, cell, column_of, weight, frame, fade)
+
+
+@njit(cache=True, nogil=True)
+def _add_votes(
+    evidence: np.ndarray,
+    stamp: np.ndarray,
+    cells: np.ndarray,
+    cell: np.ndarray,
+    column_of: np.ndarray,
+    weight: np.ndarray,
+    frame: int,
+    fade: np.ndarray,
+) -> None:
+    """Each sample's vote (``column_of``, ``weight``) added to the evidence of its ``cell`` (-1: none),
+    faded first, the cell marked :data:`UNSETTLED`; :func:`map_vote` says how. The map is read
+    through flat views (2-D indexing cost the loop a fifth)."""
     k = evidence.shape[2] - 1
-    # First every sample's cell (j * n_cols + i; -1: no vote), in a loop without stores to the
-    # map, then the votes, reading the map through flat views (2-D indexing cost the loop a fifth).
+    votes, stamps, columns_of = evidence.reshape(-1), stamp.reshape(-1), cells.reshape(-1)
+    for p in range(cell.shape[0]):
+        here = cell[p]
+        if here < 0:
+            continue
+        col = column_of[p]
+        gap = frame - stamps[here]
+        at = here * (k + 1)
+        if gap != 0:
+            f = fade[min(gap, fade.shape[0] - 1)]
+            for q in range(k + 1):
+                votes[at + q] *= f
+            stamps[here] = frame
+        votes[at + col] += weight[p]
+        columns_of[here] = UNSETTLED
+
+
+@njit(cache=True, nogil=True)
+def _sample_cells(
+    n_rows: int,
+    n_cols: int,
+    ex: float,
+    ey: float,
+    inv_res: float,
+    c: float,
+    s: float,
+    vx: np.ndarray,
+    vy: np.ndarray,
+    column_of: np.ndarray,
+    k: int,
+    tilted: bool,
+    ray: np.ndarray,
+    ground0: np.ndarray,
+    axes: np.ndarray,
+    t: np.ndarray,
+) -> np.ndarray:
+    """Each sample's cell of the map (j * n_cols + i; -1: no vote), the vehicle at (``ex``, ``ey``)
+    from the map's corner [m]; :func:`map_vote` says how."""
     n = vx.shape[0]
     cell = np.empty(n, np.int64)
     # The tilted camera's axes and centre in locals: read once, not again after every store.
@@ -96,7 +154,7 @@ def map_vote(
     a20, a21, a22, t0, t1, t2 = axes[2, 0], axes[2, 1], axes[2, 2], t[0], t[1], t[2]
     for p in range(n):
         cell[p] = -1
-        if columns[ids[pixel_of[p]]] > k:
+        if column_of[p] > k:
             continue
         px, py = vx[p], vy[p]
         if tilted:
@@ -110,25 +168,11 @@ def map_vote(
             px, py = px + (gx - ground0[p, 0]), py + (gy - ground0[p, 1])
             if not (math.isfinite(px) and math.isfinite(py)):
                 continue
-        i = math.floor((x - ox + px * c - py * s) * inv_res)
-        j = math.floor((y - oy + px * s + py * c) * inv_res)
+        i = math.floor((ex + px * c - py * s) * inv_res)
+        j = math.floor((ey + px * s + py * c) * inv_res)
         if 0 <= i < n_cols and 0 <= j < n_rows:
             cell[p] = j * n_cols + i
-    votes, stamps, columns_of = evidence.reshape(-1), stamp.reshape(-1), cells.reshape(-1)
-    for p in range(n):
-        here = cell[p]
-        if here < 0:
-            continue
-        col = columns[ids[pixel_of[p]]]
-        gap = frame - stamps[here]
-        at = here * (k + 1)
-        if gap != 0:
-            f = fade[min(gap, fade.shape[0] - 1)]
-            for q in range(k + 1):
-                votes[at + q] *= f
-            stamps[here] = frame
-        votes[at + col] += weight[p]
-        columns_of[here] = UNSETTLED
+    return cell
 
 
 @njit(cache=True, nogil=True, inline="always")
