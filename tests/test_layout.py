@@ -230,6 +230,50 @@ def test_no_function_takes_more_than_six_parameters():
     assert not found, f"more than {MAX_PARAMETERS} parameters: {sorted(found)}"
 
 
+MAX_LINES = 60  # a function's lines, its decorators, signature and docstring included; compiled kernels too
+
+
+def _long_functions(tree: ast.AST) -> set[str]:
+    """``name`` (``Class.name`` for a method) of each function in ``tree`` longer than MAX_LINES."""
+    found = set()
+
+    def visit(node: ast.AST, owner: str) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                first = min([child.lineno, *(d.lineno for d in child.decorator_list)])
+                if child.end_lineno - first + 1 > MAX_LINES:
+                    found.add(f"{owner}{child.name}")
+                visit(child, f"{owner}{child.name}.")
+            elif isinstance(child, ast.ClassDef):
+                visit(child, f"{owner}{child.name}.")
+            else:
+                visit(child, owner)
+
+    visit(tree, "")
+    return found
+
+
+def test_no_function_is_longer_than_60_lines():
+    """Split a longer one by what its parts compute (a kernel too: into kernels that inline)."""
+    found = {f"{path.relative_to(ROOT)}:{name}" for path in ROOT.rglob("*.py") for name in _long_functions(_parsed(path))}
+    assert not found, f"more than {MAX_LINES} lines: {sorted(found)}"
+
+
+def test_the_length_check_counts_lines_as_written():
+    def lines(indent: str, n: int) -> str:
+        return "".join(f"{indent}x{i} = {i}\n" for i in range(n))
+
+    code = (
+        'def fits():\n    """doc"""\n'
+        + lines("    ", 58)  # 60 lines
+        + "@njit(cache=True)\ndef kernel():\n"
+        + lines("    ", 59)  # 61 with its decorator
+        + "class A:\n    def long(self):\n"
+        + lines("        ", 60)  # 61
+    )
+    assert _long_functions(ast.parse(code)) == {"kernel", "A.long"}
+
+
 def test_the_signature_check_counts_parameters_as_written():
     code = """
 def six(a, b, c, d, e, f): ...

@@ -302,6 +302,13 @@ def _distinct_columns(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return distinct, which
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _add_times(out: np.ndarray, start: int, factor: float, v: np.ndarray) -> None:
+    """``out[start + i] = out[start + i] + factor * v[i]`` for every i."""
+    for i in range(v.shape[0]):
+        out[start + i] = out[start + i] + factor * v[i]
+
+
 @njit(cache=True, nogil=True)
 def _with_continuations(z: np.ndarray, u1: float, b: np.ndarray, gamma: float, value: np.ndarray) -> None:
     """First pieces' logits in place: each (N m) exact score ``z`` times its unit ``u1``, plus its
@@ -364,16 +371,13 @@ def _fit_through(
         grad = concatenate([grad_w, grad_b, matmul(d.reshape(1, n m), value.reshape(n m, 1))[0]])
         then Adam as in _fit_frames
     """
-    k, nm = first.shape
-    n = nm // m
+    k, nm, n = first.shape[0], first.shape[1], first.shape[1] // m
     params = params.copy()
-    mom, vel = np.zeros_like(params), np.zeros_like(params)
-    power1 = power2 = 1.0
+    mom, vel, power1, power2 = np.zeros_like(params), np.zeros_like(params), 1.0, 1.0
     w_bits = min(26, exact.chunk_bits(k) - bits)
-    w_ints, grad, ones = np.empty(k), np.empty(params.shape[0]), np.ones(n)
+    w_ints, grad, ones, scores = np.empty(k), np.empty(params.shape[0]), np.ones(n), np.empty(distinct.shape[1])
     best, value, z = np.empty(nm, np.int64), np.empty(nm), np.empty(nm)
     chosen, spare, counts = np.empty((k, nm)), np.empty(k), np.empty(m)
-    scores = np.empty(distinct.shape[1])
     by_rows = np.ascontiguousarray(distinct.T)  # a chosen column's k values in one cache line
     best_row = np.empty(nm, np.int32)  # the distinct row of each first piece's best continuation
     for _ in range(steps):
@@ -390,10 +394,8 @@ def _fit_through(
         exact.vec_mat_rounded(d, chosen, second_unit, bits, spare)
         exact.vec_mat(ones, d, m, grad[k : k + m])
         exact.vec_mat(d, value, 1, grad[k + m :])
-        for c in range(k):
-            grad[c] = grad[c] + gamma * spare[c]
-        for j in range(m):
-            grad[k + j] = grad[k + j] + gamma * counts[j]
+        _add_times(grad, 0, gamma, spare)
+        _add_times(grad, k, gamma, counts)
         power1, power2 = power1 * 0.9, power2 * 0.999
         _adam_step(params, mom, vel, grad, lr, power1, power2)
     return params

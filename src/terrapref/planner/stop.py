@@ -335,39 +335,55 @@ def first_free_arc(
     footprint's points, 0.3 m apart, do not resolve a 0.1 m obstacle either). The map's cells
     (``layers``) are read as :func:`terrapref.groundmap.map_compiled.map_decide` says.
     """
+    for t in range(curvatures.shape[0]):
+        a = first if t == 0 else (t - 1 if t <= first else t)
+        reach = (step_m, steps, across)
+        if not _arc_blocked(x0, y0, yaw0, curvatures[a], reach, layers, lethal, never, confirmed, visible, vx0, vy0, vis_inv_res):
+            return a
+    return -1
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _arc_blocked(
+    x0: float,
+    y0: float,
+    yaw0: float,
+    kappa: float,
+    reach: tuple,
+    layers: MapLayers,
+    lethal: np.ndarray,
+    never: int,
+    confirmed: np.float32,
+    visible: np.ndarray,
+    vx0: float,
+    vy0: float,
+    vis_inv_res: float,
+) -> bool:
+    """Whether the arc of curvature ``kappa`` is blocked within ``reach`` (step [m], steps, the
+    footprint's points across): :func:`first_free_arc` says when."""
+    step_m, steps, across = reach
     ox, oy, inv_res = layers.ox, layers.oy, layers.inv_res
     vis_x, vis_y = visible.shape
     c0, s0 = math.cos(yaw0), math.sin(yaw0)
-    for t in range(curvatures.shape[0]):
-        a = first if t == 0 else (t - 1 if t <= first else t)
-        kappa = curvatures[a]
-        free = True
-        for q in range(1, steps + 1):
-            d = q * step_m
-            heading = kappa * d
-            if abs(kappa) < 1e-9:
-                bx, by = d, 0.0
-            else:
-                bx, by = math.sin(heading) / kappa, (1.0 - math.cos(heading)) / kappa
-            sh, ch = math.sin(heading), math.cos(heading)
-            for f in range(across.shape[0]):
-                px = bx - across[f] * sh  # vehicle frame
-                py = by + across[f] * ch
-                wx = x0 + px * c0 - py * s0
-                wy = y0 + px * s0 + py * c0
-                gi = math.floor((px - vx0) * vis_inv_res)
-                gj = math.floor((py - vy0) * vis_inv_res)
-                looks = 0 <= gi < vis_x and 0 <= gj < vis_y and visible[gi, gj]
-                i = math.floor((wx - ox) * inv_res)
-                j = math.floor((wy - oy) * inv_res)
-                if _blocked(layers, lethal, never, confirmed, j, i, looks):
-                    free = False
-                    break
-            if not free:
-                break
-        if free:
-            return a
-    return -1
+    for q in range(1, steps + 1):
+        d = q * step_m
+        heading = kappa * d
+        if abs(kappa) < 1e-9:
+            bx, by = d, 0.0
+        else:
+            bx, by = math.sin(heading) / kappa, (1.0 - math.cos(heading)) / kappa
+        sh, ch = math.sin(heading), math.cos(heading)
+        for f in range(across.shape[0]):
+            px = bx - across[f] * sh  # vehicle frame
+            py = by + across[f] * ch
+            wx = x0 + px * c0 - py * s0
+            wy = y0 + px * s0 + py * c0
+            gi = math.floor((px - vx0) * vis_inv_res)
+            gj = math.floor((py - vy0) * vis_inv_res)
+            looks = 0 <= gi < vis_x and 0 <= gj < vis_y and visible[gi, gj]
+            if _blocked(layers, lethal, never, confirmed, math.floor((wy - oy) * inv_res), math.floor((wx - ox) * inv_res), looks):
+                return True
+    return False
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -44,8 +44,6 @@ def swept_reach(
     toward every offset at progress ``progress_m + step * dt * v``, then ``yaw += w dt``, ``x += v
     cos(yaw) dt``, ``y += v sin(yaw) dt``.
     """
-    cells, evidence, map_lethal, shares, ox, oy, inv_res = layers
-    n_rows, n_cols = cells.shape
     out = np.full(offsets.shape[0], steps, np.int64)
     for o in range(offsets.shape[0]):
         x, y, yaw = x0, y0, yaw0
@@ -60,23 +58,32 @@ def swept_reach(
             yaw = yaw + w * dt
             x = x + v * math.cos(yaw) * dt
             y = y + v * math.sin(yaw) * dt
-            if k % 2 == 0:
-                for c in range(clear.shape[0]):
-                    px = x - clear[c] * math.sin(yaw)
-                    py = y + clear[c] * math.cos(yaw)
-                    ci = math.floor((px - ox) * inv_res)
-                    cj = math.floor((py - oy) * inv_res)
-                    col = never
-                    if 0 <= ci < n_cols and 0 <= cj < n_rows:
-                        col = cells[cj, ci]
-                        if col == UNSETTLED:
-                            col = cells[cj, ci] = map_decide(evidence, map_lethal, shares[0], shares[1], shares[2], cj, ci)
-                    if lethal[col]:
-                        out[o] = k
-                        break
+            if k % 2 == 0 and _lethal_across(x, y, yaw, clear, layers, lethal, never):
+                out[o] = k
             if out[o] < steps:
                 break
     return out
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _lethal_across(x: float, y: float, yaw: float, clear: np.ndarray, layers: MapLayers, lethal: np.ndarray, never: int) -> bool:
+    """Whether a point across the footprint (``clear``, left positive) at the pose stands on a
+    lethal column of the map (``never`` outside it), its undecided cells decided as read."""
+    cells, evidence, map_lethal, shares, ox, oy, inv_res = layers
+    n_rows, n_cols = cells.shape
+    for c in range(clear.shape[0]):
+        px = x - clear[c] * math.sin(yaw)
+        py = y + clear[c] * math.cos(yaw)
+        ci = math.floor((px - ox) * inv_res)
+        cj = math.floor((py - oy) * inv_res)
+        col = never
+        if 0 <= ci < n_cols and 0 <= cj < n_rows:
+            col = cells[cj, ci]
+            if col == UNSETTLED:
+                col = cells[cj, ci] = map_decide(evidence, map_lethal, shares[0], shares[1], shares[2], cj, ci)
+        if lethal[col]:
+            return True
+    return False
 
 
 @njit(cache=True, nogil=True)
