@@ -120,3 +120,42 @@ def test_a_flat_scenario_has_no_height_layer_and_relief_leaves_the_classes_alone
         np.testing.assert_array_equal(same.raster, world.raster)
     hilly = rasterise(parse_scenario({**copy.deepcopy(FLAT), "relief": [MOUND]}, "hilly.yaml"))
     np.testing.assert_array_equal(hilly.raster, world.raster)
+
+
+# --- relief for a course that has none (genrelief:N, teach_relief) ------------------------------
+
+
+def _layout(data: dict) -> dict:
+    """A scenario mapping without its name, description and relief: the layout alone."""
+    return {k: v for k, v in data.items() if k not in ("name", "description", "relief")}
+
+
+def test_genrelief_is_gen_with_seeded_relief_clear_of_its_zones() -> None:
+    from terrapref.scenario import resolve_scenario
+
+    gen, hilly = resolve_scenario("gen:7"), resolve_scenario("genrelief:7")
+    assert hilly.name == "genrelief_7" and not gen.has_relief and "relief" not in gen.to_dict()
+    assert _layout(hilly.to_dict()) == _layout(gen.to_dict())
+    assert hilly.to_dict() == resolve_scenario("genrelief:7").to_dict()  # the same bits for one seed
+    assert hilly.to_dict()["relief"] != resolve_scenario("genrelief:8").to_dict()["relief"]
+    kinds = [next(iter(e.to_dict())) for e in hilly.relief]
+    assert kinds[0] == "noise" and len(kinds) >= 6 and set(kinds[1:]) <= {"mound", "ridge", "plateau"}
+    features = parse_scenario({**hilly.to_dict(), "relief": hilly.to_dict()["relief"][1:]}, "features.yaml")  # no noise
+    world = rasterise(features)
+    s = np.arange(0.0, 240.0, 0.25)
+    from terrapref.scenario.path import ReferencePath
+
+    points = ReferencePath(hilly.waypoints).point_at(s)
+    in_zones = np.any([z.shape.contains(points) for z in hilly.zones], axis=0)
+    assert in_zones.sum() > 100 and not world.height_at(points[in_zones]).any()  # a zone's ground is as gen's
+    assert world.height_at(points[~in_zones]).any()
+
+
+def test_teach_relief_is_teach_course_with_the_relief_of_seed_0() -> None:
+    from terrapref.scenario import resolve_scenario
+    from terrapref.scenario.relief_layout import relief_for
+
+    teach, hilly = resolve_scenario("teach_course"), resolve_scenario("teach_relief")
+    assert _layout(hilly.to_dict()) == _layout(teach.to_dict())
+    assert hilly.to_dict()["relief"] == relief_for(teach, 0)  # as scripts/make_courses.py writes it
+    assert len(hilly.relief) >= 15  # a feature between most situations, and the noise
