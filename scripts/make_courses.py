@@ -18,7 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
+from terrapref.scenario import parse_scenario
 from terrapref.scenario.builder import CourseBuilder, trail
+from terrapref.scenario.relief_layout import relief_for
 
 OUT = Path(__file__).resolve().parent.parent / "src" / "terrapref" / "data" / "scenarios"
 
@@ -214,6 +216,15 @@ def teach_course(
     return c
 
 
+def teach_relief() -> Course:
+    """teach_course with relief between its situations (SPEC 19; terrapref.scenario.relief_layout, seed 0):
+    its lessons stay on the ground they were made for, and the drive between them crosses relief."""
+    c = teach_course(name="teach_relief")
+    c.description += " With relief: bumps and dips across the trail between the situations, on gently rolling ground."
+    c.relief = relief_for(parse_scenario(c.data(), c.name), 0)
+    return c
+
+
 def variation(name: str, description: str, build) -> Course:
     c = Course(name, description, (70.0, 30.0), [(5, 15), (30, 15), (40, 17), (65, 17)])
     build(c)
@@ -275,7 +286,7 @@ def variations() -> list[Course]:
 
 
 def main() -> int:
-    courses = [train_course(), test_course(), teach_course(), *variations()]
+    courses = [train_course(), test_course(), teach_course(), teach_relief(), *variations()]
     for c in courses:
         print(c.write())
     return 0

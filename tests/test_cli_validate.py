@@ -170,6 +170,12 @@ BAD_FILES: list[tuple[str, str | bytes, str]] = [
     ("bad-expect", edit("expect: avoid", "expect: maybe"), "zones[1].expect: 'maybe' is neither 'avoid', 'best' nor a known class..."),
     ("bad-name", edit("name: tiny_course", "name: tiny course!"), "name: must match [A-Za-z0-9_-]+"),
     (
+        "relief-radius",
+        GOOD_YAML
+        + "relief:\n  - {noise: {amplitude_m: 0.3, wavelength_m: 5.0, seed: 1}}\n  - {mound: {center: [5, 5], radius: -2, height_m: 1}}\n",
+        "relief[1].mound.radius: must be > 0",
+    ),
+    (
         "start-in-trees",
         edit("path:", "  - {class: non_traversable, circle: {center: [1.0, 5.0], radius: 1.0}}\npath:"),
         "start: (1, 5) (the first waypoint, facing the second) puts the vehicle's footprint on lethal terrain (non_traversable)...",

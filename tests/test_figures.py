@@ -207,3 +207,27 @@ def test_the_evaluation_figure_gives_each_seed_its_colour_and_keeps_its_legend_o
     legend = overview.get_legend()
     assert _overlap(legend.get_window_extent(renderer), overview.get_window_extent(renderer)) == 0.0
     assert {"seed 0", "seed 1"} <= {t.get_text() for t in legend.get_texts()}
+
+
+def test_relief_is_drawn_as_hillshade_and_labelled_contours_and_a_flat_map_as_before():
+    import numpy as np
+    from matplotlib.contour import ContourSet
+
+    flat = resolve_scenario("demo_course")
+    hilly = resolve_scenario("relief_demo")
+    for scenario, has_relief in ((flat, False), (hilly, True)):
+        world = rasterise(scenario)
+        fig, ax = plt.subplots()
+        names = [h.get_label() for h in draw_map(ax, scenario, world)]
+        (image,) = ax.get_images()
+        shown = np.asarray(image.get_array())
+        contours = [c for c in ax.collections if isinstance(c, ContourSet)]
+        if has_relief:
+            assert "height contours [m]" in names and len(contours) == 1 and len(contours[0].levels) >= 3
+            assert any(t.get_text().endswith(" m") for t in ax.texts)  # the contours' heights
+            flat_colours = scenario.classes.palette()[world.raster] / 255.0
+            assert shown.shape == flat_colours.shape and np.abs(shown - flat_colours).max() > 0.1  # shaded
+        else:
+            assert "height contours [m]" not in names and not contours
+            np.testing.assert_array_equal(shown, scenario.classes.palette()[world.raster])  # the class colours, as always
+        plt.close(fig)

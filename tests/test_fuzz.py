@@ -36,7 +36,15 @@ from terrapref.scenario import load_scenario, resolve_scenario
 from terrapref.sim import Simulation
 from terrapref.tensorfile import write_tensor_file
 from terrapref.terrain.classes import load_classes
+from terrapref.world import rasterise
 
+TINY_COURSE = Path(__file__).parent / "data" / "tiny_course.yaml"
+RELIEF = [  # one entry of each kind (SPEC 19), on the tiny course's map
+    {"noise": {"amplitude_m": 0.3, "wavelength_m": 4.0, "seed": 3}},
+    {"mound": {"center": [6.0, 3.0], "radius": 2.0, "height_m": -0.5}},
+    {"ridge": {"polyline": [[2.0, 1.0], [2.0, 5.0], [8.0, 6.0]], "width_m": 1.5, "height_m": 0.4}},
+    {"plateau": {"polygon": [[10.0, 1.0], [14.0, 1.0], [14.0, 5.0]], "height_m": 0.8, "edge_m": 2.0}},
+]
 COMMON = dict(deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 FAST = settings(max_examples=60, derandomize=True, **COMMON)  # the default run; THOROUGH is the slow tests'
 THOROUGH = settings(max_examples=2000, **COMMON)
@@ -113,6 +121,7 @@ def base(tmp_path_factory) -> dict:
     )
     save_model(root / "model.safetensors", ClassifierConfig(hidden=4), init_weights(ClassifierConfig(hidden=4), rng), model_meta())
     (root / "scenario.yaml").write_text(yaml.safe_dump(resolve_scenario("fig7_rock_vs_non_traversable_left").to_dict(), sort_keys=False))
+    (root / "relief.yaml").write_text(yaml.safe_dump({**load_scenario(TINY_COURSE).to_dict(), "relief": RELIEF}, sort_keys=False))
     write_robot(root / "robot.yaml", robot_yaml())
     (root / "camera.yaml").write_text(
         "image_width: 640\nimage_height: 480\ncamera_matrix: {rows: 3, cols: 3, data: [320.0, 0.0, 320.0, 0.0, 320.0, 240.0, 0.0, 0.0, 1.0]}\n"
@@ -135,6 +144,12 @@ def _fresh(base: dict, tmp: Path, name: str) -> Path:
     src = base["root"] / name
     shutil.copytree(src, dst) if src.is_dir() else shutil.copy(src, dst)
     return dst
+
+
+def _finite_relief(path: Path) -> None:
+    """Load a scenario and build its world: relief it accepts is a finite height everywhere."""
+    world = rasterise(load_scenario(path))
+    assert world.height is None or np.isfinite(world.height).all()
 
 
 def _featurize(path: Path) -> None:
@@ -230,15 +245,17 @@ def tensor_fields(base, tmp_path_factory, kind: str):
     return run
 
 
-def yaml_fields(base, tmp_path_factory, name: str, read):
+def yaml_fields(base, tmp_path_factory, name: str, read, under: str | None = None, depth: int = 2):
+    """Fields of the YAML file ``name`` replaced by random values, a few levels down from the top
+    (or from its block ``under``)."""
     tmp = tmp_path_factory.mktemp(f"yaml_{name.split('.')[0]}")
     original = yaml.safe_load((base["root"] / name).read_text())
 
     @given(st.data())
     def run(data):
         doc = json.loads(json.dumps(original))
-        node = doc
-        for _ in range(data.draw(st.integers(0, 2))):  # walk down a little, then replace a value
+        node = doc if under is None else doc[under]
+        for _ in range(data.draw(st.integers(0, depth))):  # walk down a little, then replace a value
             if isinstance(node, dict) and node:
                 child = node[data.draw(st.sampled_from(sorted(node, key=str)))]
                 if isinstance(child, (dict, list)) and child:
@@ -272,6 +289,7 @@ READERS = {
     "model fields": lambda b, f: tensor_fields(b, f, "model"),
     "scenario bytes": lambda b, f: file_bytes(b, f, "scenario.yaml", load_scenario),
     "scenario fields": lambda b, f: yaml_fields(b, f, "scenario.yaml", load_scenario),
+    "scenario relief fields": lambda b, f: yaml_fields(b, f, "relief.yaml", _finite_relief, under="relief", depth=3),
     "robot file bytes": lambda b, f: file_bytes(b, f, "robot.yaml", load_robot),
     "robot file fields": lambda b, f: yaml_fields(b, f, "robot.yaml", load_robot),
     "camera file bytes": lambda b, f: file_bytes(b, f, "camera.yaml", load_camera),

@@ -31,6 +31,7 @@ from terrapref.scenario import (
 from terrapref.scenario.catalog import scenario_path
 from terrapref.scenario.generate import generate_course
 from terrapref.scenario.loader import MAX_CELLS
+from terrapref.scenario.relief import Mound, Noise, Plateau, Ridge
 from terrapref.scenario.teaching import designed_course
 from terrapref.terrain import default_classes, load_classes
 
@@ -1007,3 +1008,88 @@ def test_the_start_clearance_is_the_default_vehicles_footprint() -> None:
     from terrapref.vehicle import VehicleConfig
 
     assert START_HALF_WIDTH_M * np.array([-1.0, -0.5, 0.0, 0.5, 1.0]) == pytest.approx(VehicleConfig().footprint_m)
+
+
+# --- relief (SPEC 19) ---------------------------------------------------------------------------
+
+RELIEF = [
+    {"noise": {"amplitude_m": 0.6, "wavelength_m": 15.0, "seed": 3}},
+    {"mound": {"center": [5.0, 5.0], "radius": 3.0, "height_m": -1.0}},
+    {"ridge": {"polyline": [[10.0, 2.0], [10.0, 8.0], [12.0, 9.0]], "width_m": 2.0, "height_m": 0.8}},
+    {"plateau": {"polygon": [[14, 2], [18, 2], [18, 8], [14, 8]], "height_m": 1.5, "edge_m": 0}},
+]
+
+
+def test_relief_parses_into_typed_entries_in_order_and_round_trips() -> None:
+    s = parse_scenario(scenario(relief=copy.deepcopy(RELIEF)), "x.yaml")
+    assert [type(e) for e in s.relief] == [Noise, Mound, Ridge, Plateau] and s.has_relief
+    assert s.relief[0] == Noise(0.6, 15.0, 3) and s.relief[1] == Mound((5.0, 5.0), 3.0, -1.0)
+    assert s.relief[2].polyline.tolist() == [[10.0, 2.0], [10.0, 8.0], [12.0, 9.0]] and s.relief[3].edge_m == 0.0
+    assert s.to_dict()["relief"] == yaml.safe_load(yaml.safe_dump(RELIEF))
+    assert parse_scenario(s.to_dict(), "y.yaml").to_dict() == s.to_dict()
+    assert not parse_scenario(scenario(relief=None), "x.yaml").has_relief
+
+
+def relief_with(i: int, kind: str, **fields: Any) -> dict[str, Any]:
+    """GOOD with RELIEF, its entry ``i`` (of ``kind``) given ``fields`` (None: removed)."""
+    relief = copy.deepcopy(RELIEF)
+    for key, value in fields.items():
+        if value is None:
+            del relief[i][kind][key]
+        else:
+            relief[i][kind][key] = value
+    return scenario(relief=relief)
+
+
+@pytest.mark.parametrize(
+    ("data", "field", "message"),
+    [
+        (scenario(relief={"mound": {}}), "relief", "expected a list, got a mapping"),
+        (scenario(relief=["mound"]), "relief[0]", "expected a mapping, got string 'mound'"),
+        (scenario(relief=[{}]), "relief[0]", "expected exactly one of noise, mound, ridge, plateau, got 0"),
+        (scenario(relief=[{**RELIEF[1], **RELIEF[2]}]), "relief[0]", "expected exactly one of noise, mound, ridge, plateau, got 2"),
+        (scenario(relief=[{"hill": {}}]), "relief[0].hill", "unknown key"),
+        (relief_with(1, "mound", slope=2), "relief[1].mound.slope", "unknown key"),
+        (relief_with(1, "mound", radius=None), "relief[1].mound.radius", "missing"),
+        (relief_with(1, "mound", radius=0), "relief[1].mound.radius", "must be > 0"),
+        (relief_with(1, "mound", height_m="high"), "relief[1].mound.height_m", "expected a number, got string 'high'"),
+        (relief_with(1, "mound", height_m=1e4), "relief[1].mound.height_m", "must be at most 1000 m either way"),
+        (
+            relief_with(1, "mound", center=[40.0, 5.0]),
+            "relief[1].mound",
+            "lies wholly off the map (bounds x 37..43, y 2..8; map 0..20 x 0..10)",
+        ),
+        (relief_with(1, "mound", center=[5.0, 1e300]), "relief[1].mound.center", "lies more than 1e+06 m from the map"),
+        (relief_with(0, "noise", seed=-1), "relief[0].noise.seed", "expected an integer from 0 to 2^63 - 1, got number -1"),
+        (relief_with(0, "noise", seed=1.5), "relief[0].noise.seed", "expected an integer from 0 to 2^63 - 1, got number 1.5"),
+        (relief_with(0, "noise", seed=True), "relief[0].noise.seed", "expected an integer from 0 to 2^63 - 1, got boolean True"),
+        (relief_with(0, "noise", amplitude_m=0), "relief[0].noise.amplitude_m", "must be > 0"),
+        (
+            relief_with(0, "noise", wavelength_m=0.15),
+            "relief[0].noise.wavelength_m",
+            "must be at least two cells (2 x world.resolution_m = 0.2 m)",
+        ),
+        (
+            relief_with(2, "ridge", polyline=[[1.0, 1.0]]),
+            "relief[2].ridge.polyline",
+            "expected a list of at least 2 [x, y] points, got a list of 1",
+        ),
+        (relief_with(2, "ridge", polyline=[[1.0, 1.0], [1.0, 1.0]]), "relief[2].ridge.polyline", "needs at least 2 distinct points"),
+        (
+            relief_with(2, "ridge", polyline=[[1.0, 1.0], [1e300, 1.0]]),
+            "relief[2].ridge.polyline",
+            "has a point more than 1e+06 m from the map",
+        ),
+        (relief_with(2, "ridge", width_m=-2), "relief[2].ridge.width_m", "must be > 0"),
+        (relief_with(3, "plateau", edge_m=-1), "relief[3].plateau.edge_m", "must be >= 0 (0: a vertical step)"),
+        (relief_with(3, "plateau", edge_m=None), "relief[3].plateau.edge_m", "missing"),
+        (
+            relief_with(3, "plateau", polygon=[[1, 1], [2, 2], [3, 3]]),
+            "relief[3].plateau.polygon",
+            "has zero area (vertices are collinear)",
+        ),
+        (relief_with(3, "plateau", edge_m=float("nan")), "relief[3].plateau.edge_m", "must be finite (got NaN or infinity)"),
+    ],
+)
+def test_bad_relief_is_one_problem_naming_its_field(data: dict[str, Any], field: str, message: str) -> None:
+    assert only_problem(data) == Problem(field, message)

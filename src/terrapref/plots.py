@@ -96,11 +96,16 @@ def draw_map(ax: plt.Axes, scenario: Scenario, world: WorldMap, zones: bool = Tr
     classes = scenario.classes
     sx, sy = world.size_m
     handles: list = []
-    if scenario.has_terrain:
+    if scenario.has_terrain and world.height is not None:
+        ax.imshow(_hillshaded(classes.palette()[world.raster], world), origin="lower", extent=(0, sx, 0, sy), interpolation="nearest")
+        handles = class_handles(classes, np.unique(world.raster).tolist())
+    elif scenario.has_terrain:
         ax.imshow(classes.palette()[world.raster], origin="lower", extent=(0, sx, 0, sy), interpolation="nearest")
         handles = class_handles(classes, np.unique(world.raster).tolist())
     else:
         ax.set_facecolor("whitesmoke")
+    if world.height is not None:
+        handles.append(_draw_contours(ax, world))
     wp = scenario.waypoints
     ax.plot(
         wp[:, 0],
@@ -125,6 +130,49 @@ def draw_map(ax: plt.Axes, scenario: Scenario, world: WorldMap, zones: bool = Tr
     if zones:
         _label_zones(ax, scenario.zones, marks or {}, classes)
     return handles
+
+
+RELIEF_EXAGGERATION = 3.0  # hillshade's vertical exaggeration: gentle slopes (a few degrees) still show
+CONTOUR_LEVELS = 6  # about this many contour lines on a map with relief
+CONTOUR_CELLS = 400  # contours are traced on at most this many cells a side (finer adds nothing at a figure's size)
+
+
+def _hillshaded(rgb: np.ndarray, world: WorldMap) -> np.ndarray:
+    """The class colours ``rgb`` (ny, nx, 3) uint8 shaded by the world's relief, lit from the
+    north-west as maps are, shape (ny, nx, 3) float in [0, 1]."""
+    from matplotlib.colors import LightSource
+
+    assert world.height is not None
+    # LightSource reads row 0 as the top of the picture; the map's row 0 is its southern edge.
+    shaded = LightSource(azdeg=315, altdeg=45).shade_rgb(
+        rgb[::-1] / 255.0,
+        world.height[::-1].astype(np.float64),
+        blend_mode="soft",
+        vert_exag=RELIEF_EXAGGERATION,
+        dx=world.resolution_m,
+        dy=world.resolution_m,
+    )
+    return shaded[::-1]
+
+
+def _draw_contours(ax: plt.Axes, world: WorldMap) -> Line2D:
+    """A few labelled contour lines of the world's height [m] (on a grid of at most
+    CONTOUR_CELLS a side); returns their legend entry."""
+    from matplotlib.ticker import MaxNLocator
+
+    assert world.height is not None
+    step = max(1, -(-max(world.height.shape) // CONTOUR_CELLS))
+    z = world.height[::step, ::step].astype(np.float64)
+    x = (np.arange(world.height.shape[1])[::step] + 0.5) * world.resolution_m
+    y = (np.arange(world.height.shape[0])[::step] + 0.5) * world.resolution_m
+    levels = MaxNLocator(CONTOUR_LEVELS).tick_values(float(z.min()), float(z.max()))
+    levels = levels[(levels > z.min()) & (levels < z.max())]
+    entry = Line2D([], [], color="black", lw=0.7, label="height contours [m]")
+    if not len(levels):  # relief too slight for a contour between its lowest and highest cell
+        return entry
+    lines = ax.contour(x, y, z, levels=levels, colors="black", linewidths=0.7, alpha=0.6, zorder=PATH_ZORDER - 1)
+    ax.clabel(lines, fmt=lambda v: f"{v:g} m", fontsize=6, inline=True)
+    return entry
 
 
 def _label_zones(ax: plt.Axes, zones: Sequence[Zone], marks: dict[str, str], classes: ClassTable) -> None:

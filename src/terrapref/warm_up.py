@@ -6,8 +6,8 @@ ten seconds of its first run compiling them in every worker. ``python -m terrapr
 (run by ``scripts/setup.sh``) drives the same code paths on a short course with tiny settings:
 a demonstration with disturbances, featurising with and without the look-ahead, training each
 named recipe for one epoch (both utility fits), one closed-loop run of each model and of the
-synthetic driver, and one run through the ``field`` perception model (label errors, a tilted
-camera). What it writes goes to a temporary folder and is removed.
+synthetic driver, one run through the ``field`` perception model (label errors, a tilted
+camera), and the height field of a course with relief (its noise is compiled too). What it writes goes to a temporary folder and is removed.
 """
 
 from __future__ import annotations
@@ -20,7 +20,9 @@ from pathlib import Path
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunSpec, run_one
 from terrapref.perception import load_perception
 from terrapref.recipes import RECIPES, RecipeSetup, run_recipe
+from terrapref.scenario import resolve_scenario
 from terrapref.terrain import PreferenceProfile
+from terrapref.world import rasterise
 
 COURSE = "fig7_rock_vs_non_traversable_left"  # short: a few hundred frames
 
@@ -38,6 +40,7 @@ def warm_up(log=print) -> float:
             run_one(RunSpec(COURSE, 1, PLANNER, str(out.model), profile.order))
         run_one(RunSpec(COURSE, 1, PLANNER, str(out.model), profile.order, perception=load_perception("field")))
         run_one(RunSpec(COURSE, 1, EXPERT, None, profile.order))
+    rasterise(resolve_scenario("relief_demo"))
     seconds = time.perf_counter() - t0
     log(f"compiled loops ready ({seconds:.0f} s)")
     return seconds

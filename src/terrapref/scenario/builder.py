@@ -39,6 +39,7 @@ class CourseBuilder:
         self.s = np.concatenate([[0], np.cumsum(self.seg_len)])
         self.terrain: list[dict] = []
         self.zones: list[dict] = []
+        self.relief: list[dict] = []  # the file's relief: entries (SPEC 19); none: flat
 
     def frame(self, s: float) -> tuple[np.ndarray, float]:
         """The path's point and heading [rad] at arc length ``s``."""
@@ -94,6 +95,7 @@ class CourseBuilder:
             "path": {"waypoints": [[round(float(x), 3), round(float(y), 3)] for x, y in self.wp]},
             "zones": self.zones,
             **({"classes": self.classes.to_dict()} if self.classes is not None else {}),
+            **({"relief": self.relief} if self.relief else {}),
         }
 
     def to_yaml(self) -> str:

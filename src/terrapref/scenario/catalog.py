@@ -31,18 +31,30 @@ def scenario_path(name_or_path: str) -> Path:
 
 
 def resolve_scenario(name_or_path: str, classes: ClassTable | None = None) -> Scenario:
-    """Load a scenario by packaged name (``train_course``), by path, or generate one (``gen:SEED``)."""
-    if name_or_path.startswith("gen:"):
-        from terrapref.scenario.generate import generate_course
-
-        try:
-            seed = int(name_or_path[4:])
-        except ValueError:
-            raise ScenarioError(name_or_path, "a generated course is named gen:SEED with an integer SEED") from None
-        if not 0 <= seed < 2**63:
-            raise ScenarioError(name_or_path, "a generated course's SEED is an integer >= 0")
-        return generate_course(seed, classes=classes)
+    """Load a scenario by packaged name (``train_course``), by path, or generate one (``gen:SEED``;
+    ``genrelief:SEED``: the same layout with relief of the same seed)."""
+    for prefix in ("gen:", "genrelief:"):
+        if name_or_path.startswith(prefix):
+            return _generated(name_or_path, prefix, classes)
     return load_scenario(scenario_path(name_or_path), classes)
+
+
+def _generated(name: str, prefix: str, classes: ClassTable | None) -> Scenario:
+    """The generated course ``name`` (``gen:SEED`` or ``genrelief:SEED``)."""
+    from terrapref.scenario.generate import generate_course
+
+    try:
+        seed = int(name[len(prefix) :])
+    except ValueError:
+        raise ScenarioError(name, f"a generated course is named {prefix}SEED with an integer SEED") from None
+    if not 0 <= seed < 2**63:
+        raise ScenarioError(name, "a generated course's SEED is an integer >= 0")
+    course = generate_course(seed, classes=classes)
+    if prefix == "gen:":
+        return course
+    from terrapref.scenario.relief_layout import with_relief
+
+    return with_relief(course, seed, f"genrelief_{seed}")
 
 
 def _exists(p: Path) -> bool:

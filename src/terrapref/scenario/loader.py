@@ -14,6 +14,7 @@ import numpy as np
 
 from terrapref.errors import ConfigError, Problem, ScenarioError, UserError
 from terrapref.scenario.model import AVOID, BEST, Scenario, TerrainPatch, Zone, grid_shape
+from terrapref.scenario.relief import RELIEF_KINDS, Mound, Noise, Plateau, ReliefEntry, Ridge
 from terrapref.scenario.shapes import Circle, Polygon, Rectangle, Shape
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.yamlio import read_yaml_mapping
@@ -24,9 +25,11 @@ MAX_CELLS = 100_000_000
 # its width, terrapref.vehicle.VehicleConfig, which lies in a layer above scenarios; a test keeps them equal) [m].
 START_HALF_WIDTH_M = 0.6
 _NAME = re.compile(r"[A-Za-z0-9_-]+")
-_TOP_KEYS = frozenset({"format", "name", "description", "world", "terrain", "path", "start", "zones", "classes"})
+_TOP_KEYS = frozenset({"format", "name", "description", "world", "terrain", "path", "start", "zones", "classes", "relief"})
 _REQUIRED_KEYS = frozenset({"format", "name", "world", "path"})
 _SHAPE_KEYS = ("polygon", "circle", "rectangle")
+MAX_RELIEF_M = 1000.0  # the largest height or noise amplitude of one relief entry [m]
+MAX_RELIEF_REACH_M = 1e6  # relief's points lie within this distance of the map [m]
 
 
 class _Checker:
@@ -215,6 +218,7 @@ def parse_scenario(data: dict[str, Any], source: str = "", classes: ClassTable |
     waypoints = _waypoints(c, data, world.size_m)
     start = _start(c, data, waypoints, world.size_m)
     zones = _zones(c, data.get("zones", []), world.size_m, classes)
+    relief = _relief(c, data.get("relief", []), world)
     c.unknown_classes(classes)
     if c.problems:
         raise ScenarioError(source, c.problems)
@@ -241,6 +245,7 @@ def parse_scenario(data: dict[str, Any], source: str = "", classes: ClassTable |
         description=description,
         source=source,
         classes=classes,
+        relief=tuple(relief),
     )
 
 
@@ -472,6 +477,135 @@ def _zone(c: _Checker, item: dict, field: str, zid: str, size_m: tuple[float, fl
     if shape is not None and expect is not None and isinstance(label, str):
         return Zone(zid, shape, expect, label)
     return None
+
+
+def _relief(c: _Checker, raw: Any, world: _World) -> list[ReliefEntry]:
+    """The ``relief`` list (``null`` is an empty one: flat ground), each entry of one kind."""
+    if raw is None:
+        raw = []
+    if not isinstance(raw, list):
+        c.fail("relief", f"expected a list, got {_describe(raw)}")
+        return []
+    entries: list[ReliefEntry] = []
+    for i, item in enumerate(raw):
+        f = f"relief[{i}]"
+        item = c.mapping(item, f, set(), set(RELIEF_KINDS))
+        if item is None:
+            continue
+        if len(item) != 1:
+            c.fail(f, f"expected exactly one of {', '.join(RELIEF_KINDS)}, got {len(item)}")
+            continue
+        ((kind, spec),) = item.items()
+        read = {"noise": _noise, "mound": _mound, "ridge": _ridge, "plateau": _plateau}[kind]
+        entry = read(c, spec, f"{f}.{kind}", world)
+        if entry is not None and world.size_m is not None and _relief_off_map(c, entry, f"{f}.{kind}", world.size_m):
+            entry = None
+        if entry is not None:
+            entries.append(entry)
+    return entries
+
+
+def _relief_height(c: _Checker, value: Any, field: str, *, positive: bool = False) -> float | None:
+    """A height [m] of at most :data:`MAX_RELIEF_M` either way."""
+    x = c.number(value, field, positive=positive)
+    if x is not None and abs(x) > MAX_RELIEF_M:
+        c.fail(field, f"must be at most {MAX_RELIEF_M:g} m either way")
+        return None
+    return x
+
+
+def _relief_points(c: _Checker, value: Any, field: str, minimum: int) -> np.ndarray | None:
+    """Points (k, 2) [m], at least ``minimum`` of them distinct, none far beyond the map."""
+    pts = c.points(value, field, minimum)
+    if pts is None:
+        return None
+    if len(np.unique(pts, axis=0)) < minimum:
+        c.fail(field, f"needs at least {minimum} distinct points")
+        return None
+    if np.abs(pts).max() > MAX_RELIEF_REACH_M:
+        c.fail(field, f"has a point more than {MAX_RELIEF_REACH_M:g} m from the map")
+        return None
+    return pts
+
+
+def _noise(c: _Checker, spec: Any, f: str, world: _World) -> Noise | None:
+    """A ``noise`` entry: amplitude [m], wavelength [m] of at least two cells, integer seed."""
+    spec = c.mapping(spec, f, {"amplitude_m", "wavelength_m", "seed"})
+    if spec is None:
+        return None
+    amplitude = _relief_height(c, spec["amplitude_m"], f"{f}.amplitude_m", positive=True)
+    wavelength = c.number(spec["wavelength_m"], f"{f}.wavelength_m", positive=True)
+    if wavelength is not None and world.resolution_m is not None and wavelength < 2 * world.resolution_m:
+        # Finer noise than two cells is aliased on the grid: the ground would not be what was asked.
+        c.fail(f"{f}.wavelength_m", f"must be at least two cells (2 x world.resolution_m = {2 * world.resolution_m:g} m)")
+        wavelength = None
+    seed = spec["seed"]
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
+        c.fail(f"{f}.seed", f"expected an integer from 0 to 2^63 - 1, got {_describe(seed)}")
+        seed = None
+    if amplitude is None or wavelength is None or seed is None:
+        return None
+    return Noise(amplitude, wavelength, seed)
+
+
+def _mound(c: _Checker, spec: Any, f: str, world: _World) -> Mound | None:
+    """A ``mound`` entry: centre [m], radius [m] > 0, height [m] (< 0: a pit)."""
+    spec = c.mapping(spec, f, {"center", "radius", "height_m"})
+    if spec is None:
+        return None
+    center = c.vector(spec["center"], f"{f}.center", 2)
+    if center is not None and max(abs(center[0]), abs(center[1])) > MAX_RELIEF_REACH_M:
+        c.fail(f"{f}.center", f"lies more than {MAX_RELIEF_REACH_M:g} m from the map")
+        center = None
+    radius = c.number(spec["radius"], f"{f}.radius", positive=True)
+    height = _relief_height(c, spec["height_m"], f"{f}.height_m")
+    if center is None or radius is None or height is None:
+        return None
+    return Mound((center[0], center[1]), radius, height)
+
+
+def _ridge(c: _Checker, spec: Any, f: str, world: _World) -> Ridge | None:
+    """A ``ridge`` entry: a polyline of at least 2 distinct points, width [m] > 0, height [m] (< 0: a ditch)."""
+    spec = c.mapping(spec, f, {"polyline", "width_m", "height_m"})
+    if spec is None:
+        return None
+    polyline = _relief_points(c, spec["polyline"], f"{f}.polyline", 2)
+    width = c.number(spec["width_m"], f"{f}.width_m", positive=True)
+    height = _relief_height(c, spec["height_m"], f"{f}.height_m")
+    if polyline is None or width is None or height is None:
+        return None
+    return Ridge(polyline, width, height)
+
+
+def _plateau(c: _Checker, spec: Any, f: str, world: _World) -> Plateau | None:
+    """A ``plateau`` entry: a polygon of non-zero area, height [m], its sides' run ``edge_m`` >= 0 (0: a ledge)."""
+    spec = c.mapping(spec, f, {"polygon", "height_m", "edge_m"})
+    if spec is None:
+        return None
+    polygon = c.shape({"polygon": spec["polygon"]}, f, None)  # the polygon checks of terrain, at {f}.polygon
+    if polygon is not None and np.abs(polygon.vertices).max() > MAX_RELIEF_REACH_M:  # type: ignore[union-attr]
+        c.fail(f"{f}.polygon", f"has a point more than {MAX_RELIEF_REACH_M:g} m from the map")
+        polygon = None
+    height = _relief_height(c, spec["height_m"], f"{f}.height_m")
+    edge = c.number(spec["edge_m"], f"{f}.edge_m")
+    if edge is not None and edge < 0:
+        c.fail(f"{f}.edge_m", "must be >= 0 (0: a vertical step)")
+        edge = None
+    if not isinstance(polygon, Polygon) or height is None or edge is None:
+        return None
+    return Plateau(polygon, height, edge)
+
+
+def _relief_off_map(c: _Checker, entry: ReliefEntry, f: str, size_m: tuple[float, float]) -> bool:
+    """Whether ``entry`` reaches no point of the map (a mistake: it would change nothing); says so."""
+    bounds = entry.bounds()
+    if bounds is None:
+        return False
+    x0, y0, x1, y1 = bounds
+    if x1 <= 0 or y1 <= 0 or x0 >= size_m[0] or y0 >= size_m[1]:
+        c.fail(f, f"lies wholly off the map (bounds x {x0:g}..{x1:g}, y {y0:g}..{y1:g}; map 0..{size_m[0]:g} x 0..{size_m[1]:g})")
+        return True
+    return False
 
 
 def load_scenario(path: str | Path, classes: ClassTable | None = None) -> Scenario:

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from terrapref.scenario.relief import ReliefEntry
 from terrapref.scenario.shapes import Shape
 from terrapref.terrain import ClassTable, PreferenceProfile, default_classes
 
@@ -52,6 +53,7 @@ class Scenario:
         resolution_m: raster cell size [m].
         waypoints: reference path, shape (N, 2) [m].
         start: start pose (x [m], y [m], yaw [rad]).
+        relief: what raises and lowers the ground, added in order (SPEC 19); none: flat.
     """
 
     name: str
@@ -65,6 +67,12 @@ class Scenario:
     description: str = ""
     source: str = ""
     classes: ClassTable = field(default_factory=default_classes)
+    relief: tuple[ReliefEntry, ...] = ()
+
+    @property
+    def has_relief(self) -> bool:
+        """Whether the ground has relief (else it is the plane z = 0)."""
+        return bool(self.relief)
 
     @property
     def grid_shape(self) -> tuple[int, int]:
@@ -92,6 +100,8 @@ class Scenario:
             "start": [self.start[0], self.start[1], math.degrees(self.start[2])],
             "zones": [{"id": z.id, **({"label": z.label} if z.label else {}), **z.shape.to_dict(), "expect": z.expect} for z in self.zones],
         }
+        if self.relief:  # a flat scenario's mapping stays as it was
+            out["relief"] = [entry.to_dict() for entry in self.relief]
         if self.description:
             out["description"] = self.description
         if self.classes != default_classes():

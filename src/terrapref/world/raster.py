@@ -1,4 +1,5 @@
-"""Rasterise a scenario's terrain shapes into a class-id grid and look classes up by position."""
+"""Rasterise a scenario's terrain shapes into a class-id grid and its relief into a height grid, and
+look classes and heights up by position."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import numpy as np
 from terrapref.scenario.model import Scenario
 from terrapref.scenario.shapes import Shape
 from terrapref.terrain import UNKNOWN, ClassTable
+from terrapref.world.relief import height_field
 
 
 @dataclass(frozen=True, eq=False)
@@ -22,11 +24,39 @@ class WorldMap:
             column c covers x in [c*res, (c+1)*res) (row 0 is the southern edge).
         resolution_m: cell size [m].
         classes: the class table the ids refer to.
+        height: the ground's height at each cell centre, shape (ny, nx) float32 [m], z up; None
+            where the ground is flat (z = 0 everywhere: nothing is built for it).
     """
 
     raster: np.ndarray
     resolution_m: float
     classes: ClassTable
+    height: np.ndarray | None = None
+
+    @property
+    def has_relief(self) -> bool:
+        """Whether the ground has a height layer (else it is the plane z = 0)."""
+        return self.height is not None
+
+    def height_at(self, xy: np.ndarray) -> np.ndarray:
+        """The ground's height [m] at world points (..., 2) [m], shape (...,) float64: bilinear
+        between the four nearest cell centres; beyond the outermost centres, the edge's heights
+        (the ground goes on level off the map); NaN at a non-finite point. 0 on flat ground."""
+        xy = np.asarray(xy, dtype=float)
+        if self.height is None:
+            return np.zeros(xy.shape[:-1])
+        ny, nx = self.height.shape
+        finite = np.isfinite(xy).all(axis=-1)
+        with np.errstate(invalid="ignore"):
+            u = np.clip(np.where(finite, xy[..., 0], 0.0) / self.resolution_m - 0.5, 0.0, nx - 1)  # in cell-centre units
+            v = np.clip(np.where(finite, xy[..., 1], 0.0) / self.resolution_m - 0.5, 0.0, ny - 1)
+        c0, r0 = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
+        c1, r1 = np.minimum(c0 + 1, nx - 1), np.minimum(r0 + 1, ny - 1)
+        fu, fv = u - c0, v - r0
+        z = self.height.astype(np.float64, copy=False)
+        south = z[r0, c0] * (1.0 - fu) + z[r0, c1] * fu
+        north = z[r1, c0] * (1.0 - fu) + z[r1, c1] * fu
+        return np.where(finite, south * (1.0 - fv) + north * fv, np.nan)
 
     @property
     def size_m(self) -> tuple[float, float]:
@@ -95,9 +125,11 @@ def paint(raster: np.ndarray, shape: Shape, class_id: int, resolution_m: float) 
 
 
 def rasterise(scenario: Scenario) -> WorldMap:
-    """Paint the scenario's terrain, in order, over its background class."""
+    """Paint the scenario's terrain, in order, over its background class; and build its height
+    layer where it has relief (a flat scenario's world has none)."""
     classes = scenario.classes
     raster = np.full(scenario.grid_shape, classes.id_of(scenario.background), dtype=np.uint8)
     for patch in scenario.terrain:
         paint(raster, patch.shape, classes.id_of(patch.class_name), scenario.resolution_m)
-    return WorldMap(raster, scenario.resolution_m, classes)
+    height = height_field(scenario.relief, scenario.grid_shape, scenario.resolution_m) if scenario.has_relief else None
+    return WorldMap(raster, scenario.resolution_m, classes, height)

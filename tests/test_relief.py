@@ -1,0 +1,161 @@
+"""The height field of a scenario's relief (SPEC 19) against closed-form answers: cosine mounds and
+ridges, plateaus with ramps and ledges, entries adding up in order, seeded noise, bilinear
+sampling between cell centres; and a flat scenario's world as it always was."""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+import numpy as np
+import pytest
+
+from terrapref.scenario import FORMAT, parse_scenario
+from terrapref.scenario.relief import Noise
+from terrapref.terrain import default_classes
+from terrapref.world import WorldMap, rasterise
+from terrapref.world.relief import noise_height
+
+# A 20 m x 10 m map of 0.1 m cells: cell (row r, column c) has its centre at (0.1 c + 0.05, 0.1 r + 0.05).
+FLAT: dict[str, Any] = {
+    "format": FORMAT,
+    "name": "relief_test",
+    "world": {"size_m": [20.0, 10.0], "resolution_m": 0.1, "background": "grass"},
+    "terrain": [{"class": "mud", "circle": {"center": [5.0, 5.0], "radius": 1.0}}],
+    "path": {"waypoints": [[1.0, 5.0], [19.0, 5.0]]},
+}
+
+
+def height_of(*relief: dict) -> np.ndarray:
+    """The height layer (10 m / 0.1 rows, 20 m / 0.1 columns) of FLAT with ``relief``."""
+    world = rasterise(parse_scenario({**copy.deepcopy(FLAT), "relief": list(relief)}, "relief_test.yaml"))
+    assert world.height is not None and world.height.dtype == np.float32 and world.height.shape == (100, 200)
+    return world.height
+
+
+def at(z: np.ndarray, x_m: float, y_m: float) -> float:
+    """The height of the cell whose centre is (x_m, y_m)."""
+    return float(z[round((y_m - 0.05) / 0.1), round((x_m - 0.05) / 0.1)])
+
+
+MOUND = {"mound": {"center": [5.05, 5.05], "radius": 2.0, "height_m": 1.0}}
+
+
+def test_a_mound_is_its_height_at_the_centre_half_of_it_at_half_its_radius_and_nothing_beyond() -> None:
+    z = height_of(MOUND)
+    assert at(z, 5.05, 5.05) == 1.0
+    assert at(z, 6.05, 5.05) == pytest.approx(0.5, abs=1e-6)  # 1 m: half the radius
+    assert at(z, 5.05, 6.45) == pytest.approx(0.5 * (1 + np.cos(np.pi * 1.4 / 2.0)), abs=1e-6)
+    assert at(z, 7.05, 5.05) == 0.0 and at(z, 5.05, 7.15) == 0.0  # at and beyond the radius
+    pit = height_of({"mound": {**MOUND["mound"], "height_m": -0.4}})
+    assert at(pit, 5.05, 5.05) == pytest.approx(-0.4) and at(pit, 6.05, 5.05) == pytest.approx(-0.2, abs=1e-6)
+
+
+def test_a_ridge_is_its_height_on_its_polyline_and_falls_off_as_a_cosine_across_it() -> None:
+    line = [[2.05, 1.05], [2.05, 8.05], [12.05, 8.05]]
+    z = height_of({"ridge": {"polyline": line, "width_m": 2.0, "height_m": -0.8}})
+    for x, y in [(2.05, 1.05), (2.05, 4.05), (2.05, 8.05), (7.05, 8.05), (12.05, 8.05)]:
+        assert at(z, x, y) == pytest.approx(-0.8), (x, y)
+    assert at(z, 2.55, 4.05) == pytest.approx(-0.4, abs=1e-6)  # a quarter of the width off the line: half the depth
+    assert at(z, 7.05, 7.55) == pytest.approx(-0.4, abs=1e-6)
+    assert at(z, 3.05, 4.05) == 0.0 and at(z, 7.05, 9.15) == 0.0  # half the width off the line, and beyond
+    assert at(z, 13.05, 8.05) == 0.0  # beyond the end by half the width: the end is rounded
+
+
+def test_a_plateau_is_raised_inside_and_ramps_down_over_its_edge() -> None:
+    square = [[10.0, 2.0], [14.0, 2.0], [14.0, 8.0], [10.0, 8.0]]
+    z = height_of({"plateau": {"polygon": square, "height_m": 1.5, "edge_m": 2.1}})
+    assert at(z, 12.05, 5.05) == pytest.approx(1.5) and at(z, 13.95, 2.05) == pytest.approx(1.5)
+    assert at(z, 15.05, 5.05) == pytest.approx(0.75, abs=1e-6)  # edge_m / 2 out: half the height
+    assert at(z, 12.05, 9.05) == pytest.approx(0.75, abs=1e-6)
+    assert at(z, 14.55, 5.05) == pytest.approx(1.5 * (1 - 0.55 / 2.1), abs=1e-6)  # a straight ramp
+    assert at(z, 16.15, 5.05) == 0.0
+    ledge = height_of({"plateau": {"polygon": square, "height_m": 0.3, "edge_m": 0.0}})
+    assert at(ledge, 13.95, 5.05) == pytest.approx(0.3) and at(ledge, 14.05, 5.05) == 0.0  # a vertical step at x = 14
+
+
+def test_entries_add_up_in_order() -> None:
+    plateau = {"plateau": {"polygon": [[2.0, 2.0], [9.0, 2.0], [9.0, 8.0], [2.0, 8.0]], "height_m": 1.5, "edge_m": 1.0}}
+    ditch = {"ridge": {"polyline": [[15.05, 0.0], [15.05, 10.0]], "width_m": 2.0, "height_m": -0.5}}
+    z = height_of(plateau, MOUND, ditch)
+    assert at(z, 5.05, 5.05) == pytest.approx(2.5)  # the mound stands on the plateau
+    assert at(z, 6.05, 5.05) == pytest.approx(2.0, abs=1e-6)
+    assert at(z, 15.05, 5.05) == pytest.approx(-0.5)
+    alone = [height_of(e).astype(np.float64) for e in (plateau, MOUND, ditch)]
+    np.testing.assert_allclose(z, alone[0] + alone[1] + alone[2], atol=1e-6)  # each alone was rounded to float32
+
+
+def test_noise_of_a_known_seed_has_known_values_and_is_the_same_on_every_build() -> None:
+    noise = Noise(amplitude_m=1.0, wavelength_m=15.0, seed=3)
+    grid = noise_height(noise, np.array([7.5, 20.0]), np.array([15.0, 3.3]))
+    assert grid.shape == (2, 2) and grid.dtype == np.float64
+    assert abs(grid[1, 1] - -0.2560099749419541) < 1e-12
+    assert abs(noise_height(Noise(0.6, 15.0, 12345), np.array([20.0]), np.array([3.3]))[0, 0] - 0.12850726309672128) < 1e-12
+    assert noise_height(noise, np.array([20.0]), np.array([3.3]))[0, 0] == grid[1, 1]  # a point does not depend on the others
+    entry = {"noise": {"amplitude_m": 0.6, "wavelength_m": 4.0, "seed": 7}}
+    z = height_of(entry)
+    np.testing.assert_array_equal(z, height_of(entry))
+    assert 0.1 < float(np.abs(z).max()) <= 0.6 and not np.array_equal(z, height_of({"noise": {**entry["noise"], "seed": 8}}))
+
+
+def test_heights_are_sampled_bilinearly_between_cell_centres_and_level_beyond_the_edge() -> None:
+    z = np.array([[0.0, 1.0], [2.0, 3.0]], dtype=np.float32)  # centres (0.5, 0.5) (1.5, 0.5) (0.5, 1.5) (1.5, 1.5)
+    world = WorldMap(np.zeros((2, 2), np.uint8), 1.0, default_classes(), z)
+    points = np.array([[0.5, 0.5], [1.5, 1.5], [1.0, 1.0], [1.25, 0.5], [0.5, 1.25], [-3.0, 0.5], [9.0, 9.0], [np.nan, 1.0]])
+    np.testing.assert_allclose(world.height_at(points), [0.0, 3.0, 1.5, 0.75, 1.5, 0.0, 3.0, np.nan])
+    plane = np.add.outer(0.3 * np.arange(5), 0.2 * np.arange(7)).astype(np.float32)  # z = 0.2 x + 0.3 y at centres, 1 m cells
+    world = WorldMap(np.zeros((5, 7), np.uint8), 1.0, default_classes(), plane)
+    xy = np.random.default_rng(0).uniform(0.5, 4.5, (3, 4, 2))
+    np.testing.assert_allclose(world.height_at(xy), 0.2 * (xy[..., 0] - 0.5) + 0.3 * (xy[..., 1] - 0.5), atol=1e-6)
+
+
+def test_a_flat_scenario_has_no_height_layer_and_relief_leaves_the_classes_alone() -> None:
+    flat = parse_scenario(copy.deepcopy(FLAT), "flat.yaml")
+    world = rasterise(flat)
+    assert not flat.has_relief and world.height is None and not world.has_relief and "relief" not in flat.to_dict()
+    np.testing.assert_array_equal(world.height_at(np.array([[3.0, 4.0], [50.0, -1.0]])), [0.0, 0.0])
+    for empty in ([], None):
+        same = rasterise(parse_scenario({**copy.deepcopy(FLAT), "relief": empty}, "flat.yaml"))
+        assert same.height is None
+        np.testing.assert_array_equal(same.raster, world.raster)
+    hilly = rasterise(parse_scenario({**copy.deepcopy(FLAT), "relief": [MOUND]}, "hilly.yaml"))
+    np.testing.assert_array_equal(hilly.raster, world.raster)
+
+
+# --- relief for a course that has none (genrelief:N, teach_relief) ------------------------------
+
+
+def _layout(data: dict) -> dict:
+    """A scenario mapping without its name, description and relief: the layout alone."""
+    return {k: v for k, v in data.items() if k not in ("name", "description", "relief")}
+
+
+def test_genrelief_is_gen_with_seeded_relief_clear_of_its_zones() -> None:
+    from terrapref.scenario import resolve_scenario
+
+    gen, hilly = resolve_scenario("gen:7"), resolve_scenario("genrelief:7")
+    assert hilly.name == "genrelief_7" and not gen.has_relief and "relief" not in gen.to_dict()
+    assert _layout(hilly.to_dict()) == _layout(gen.to_dict())
+    assert hilly.to_dict() == resolve_scenario("genrelief:7").to_dict()  # the same bits for one seed
+    assert hilly.to_dict()["relief"] != resolve_scenario("genrelief:8").to_dict()["relief"]
+    kinds = [next(iter(e.to_dict())) for e in hilly.relief]
+    assert kinds[0] == "noise" and len(kinds) >= 6 and set(kinds[1:]) <= {"mound", "ridge", "plateau"}
+    features = parse_scenario({**hilly.to_dict(), "relief": hilly.to_dict()["relief"][1:]}, "features.yaml")  # no noise
+    world = rasterise(features)
+    s = np.arange(0.0, 240.0, 0.25)
+    from terrapref.scenario.path import ReferencePath
+
+    points = ReferencePath(hilly.waypoints).point_at(s)
+    in_zones = np.any([z.shape.contains(points) for z in hilly.zones], axis=0)
+    assert in_zones.sum() > 100 and not world.height_at(points[in_zones]).any()  # a zone's ground is as gen's
+    assert world.height_at(points[~in_zones]).any()
+
+
+def test_teach_relief_is_teach_course_with_the_relief_of_seed_0() -> None:
+    from terrapref.scenario import resolve_scenario
+    from terrapref.scenario.relief_layout import relief_for
+
+    teach, hilly = resolve_scenario("teach_course"), resolve_scenario("teach_relief")
+    assert _layout(hilly.to_dict()) == _layout(teach.to_dict())
+    assert hilly.to_dict()["relief"] == relief_for(teach, 0)  # as scripts/make_courses.py writes it
+    assert len(hilly.relief) >= 15  # a feature between most situations, and the noise
