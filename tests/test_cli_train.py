@@ -58,6 +58,7 @@ def test_cli_train_writes_model_curve_and_checkpoints(tmp_path: Path, capsys):
     blocks = model.meta["rules"]
     assert not training["data"]["mirror"] and [s["type"] for s in blocks] == ["second_stage"] and blocks[0]["weight"] == 2.5
     assert model.meta["drives"] == "second_stage" and "carries no data for the offset rule" in captured.err
+    assert "sets_speed" not in model.meta  # no speed rule: the control set's speed
     curve = tmp_path / "models" / "pref.loss.png"
     assert curve.read_bytes().startswith(PNG)
     folder = tmp_path / "models" / "pref.checkpoints"

@@ -33,7 +33,9 @@ def test_info_on_a_model_a_dataset_an_onnx_file_and_a_recording(tmp_path: Path, 
     assert out.count("camera          640x480") == 4 and "profile         mud > rock > water > non_traversable" in out
     assert "samples         300" in out and "driver          expert" in out
     # the linear model lists no rule: C's argmax drives, and the graph is that decision
-    assert out.count("drives          argmax\n") == 2 and "the graph holds C alone" not in out
+    assert (
+        out.count("steers          argmax\nsets the speed  none (the control set's speed)\n") == 2 and "the graph holds C alone" not in out
+    )
 
 
 @pytest.mark.parametrize("content", [b"", b"not safetensors at all", b"\x00" * 64])
@@ -66,7 +68,10 @@ def test_info_reads_older_stage_blocks_and_shows_what_it_can_of_a_damaged_list(t
     assert main(["info", str(bad), str(old)]) == 2  # a file no command can use; the others are still shown
     out = capsys.readouterr().out
     # a utility block written before rules were listed: the second stage, which drives
-    assert "drives          second_stage\n  second stage: weight 1.5, linear utility fitted frame by frame\n" in out
+    assert (
+        "steers          second_stage\nsets the speed  none (the control set's speed)\n  second stage: weight 1.5, linear utility fitted frame by frame\n"
+        in out
+    )
     assert "rules           unreadable (stages: expected a list of rules)" in out and "profile         mud > rock" in out
 
 

@@ -365,6 +365,7 @@ def test_run_recipe_demonstrates_corrects_and_reuses_demonstrations(tmp_path):
 def test_demonstrations_kept_in_memory_train_what_their_recordings_train(tmp_path):
     """A demonstration kept in memory is featurised from the simulation's own views: the same
     samples, look-ahead and fingerprint as the same run written to disk and read back."""
+    from terrapref.learning.model_file import read_model_file
     from terrapref.recipes import TEACH, RecipeSetup, demonstrate, run_recipe
 
     features = TEACH.features()
@@ -379,6 +380,8 @@ def test_demonstrations_kept_in_memory_train_what_their_recordings_train(tmp_pat
     assert a.meta["recordings"][0]["written"] is False and "written" not in b.meta["recordings"][0]
     out = run_recipe(replace(TEACH, train=train_config(epochs=1)), tmp_path / "job", RecipeSetup(3, course=str(TINY_COURSE)))
     assert out.recordings == [] and out.model.exists() and not (tmp_path / "job" / "tiny_course_0_disturbed").exists()
+    header = read_model_file(out.model)[1]  # the model file says which rule steers and which sets the speed
+    assert (header["drives"], header["sets_speed"]) == ("offset", "speed")
 
 
 def test_a_cache_featurises_each_recording_once_into_the_same_dataset(tmp_path, monkeypatch):

@@ -46,8 +46,8 @@ from terrapref.learning.steady import steady_labels
 from terrapref.learning.train import FitData
 from terrapref.planner import Planner
 from terrapref.recipes import RECIPES
-from terrapref.rules import RULES, HeaderContext, Rule, RuleConfig, read_rules
-from terrapref.rules.base import Where
+from terrapref.rules import RULES, HeaderContext, Rule, RuleConfig, read_rules, rule_roles, rules_in
+from terrapref.rules.base import SPEED, STEERING, SpeedRunner, SteeringRunner, StopRunner, Where
 from terrapref.terrain import UNKNOWN, ClassTable
 from terrapref.vehicle import Pose
 
@@ -121,7 +121,11 @@ def fitted(short_recording, tmp_path_factory) -> SimpleNamespace:
             folder / f"{name}.safetensors",
             classifier,
             skip_path_weights(classifier),
-            {**meta, "rules": [rule.header()], "drives": name if rule.steers else "argmax"},  # a speed rule sets the speed of C's way
+            {
+                **meta,
+                "rules": [rule.header()],
+                "drives": name if rule.kind == STEERING else "argmax",
+            },  # a speed rule sets the speed of C's way
         )
         for name, rule in rules.items()
     }
@@ -168,7 +172,7 @@ def test_a_rule_reads_back_the_block_it_writes(fitted, rule_type):
     assert type(back) is type(rule)
     _same_block(header, back.header())
     planner = Planner(load_model(fitted.files[rule_type]))  # through a model file that names it to drive (or sets the speed)
-    read = planner.rule if rule.steers else planner.speed.rule
+    read = planner.rule if rule.kind == STEERING else planner.speed.rule
     assert read.type == rule_type
     _same_block(header, read.header())
 
@@ -303,6 +307,35 @@ def test_what_a_runner_offers_is_consistent(fitted, rule_type):
     if prices is not None:
         assert np.isfinite(prices.detour_price) and np.isfinite(prices.span_m), prices
     assert runner.half_width_m is None or (np.isfinite(runner.half_width_m) and runner.half_width_m > 0)
+
+
+@pytest.mark.parametrize("rule_type", RULES.names())
+def test_each_rule_is_of_a_kind_and_runs_as_one(fitted, rule_type):
+    """A steering rule runs as a SteeringRunner, the speed rule as a SpeedRunner, and the stop rule
+    every planner has as a StopRunner; the planner hands the speed rule the steering rule's choice."""
+    cls = RULES[rule_type]
+    assert cls.kind in (STEERING, SPEED)
+    planner = _planner(fitted, rule_type)
+    runners = {STEERING: planner.runner, SPEED: planner.speed}
+    assert isinstance(runners[cls.kind], {STEERING: SteeringRunner, SPEED: SpeedRunner}[cls.kind])
+    assert isinstance(planner.stop_rule, StopRunner)
+    assert planner.stop_rule.stale(1.0, None, 0.3) and planner.stop_rule.stale(1.31, 1.0, 0.3)
+    assert not planner.stop_rule.stale(1.3, 1.0, 0.3)  # held exactly hold_s: fresh
+
+
+def test_a_model_file_names_the_rule_that_steers_and_the_one_that_sets_the_speed():
+    from test_interop import speed_block
+    from test_offset_rule import DRIVER_LIKE, _offset_meta
+
+    meta = _offset_meta(DRIVER_LIKE)
+    meta |= {"rules": [*meta["rules"], speed_block(1.0)], "drives": "offset", "sets_speed": "speed"}
+    rules, steering = rules_in(meta, "m.safetensors")
+    assert steering.type == "offset" and [r.kind for r in rules] == [STEERING, SPEED]
+    assert rule_roles(["second_stage", "offset", "speed"]) == "steers: offset; sets the speed: speed; fitted to be reported: second_stage"
+    with pytest.raises(
+        UserError, match="m.safetensors: sets_speed: names rule 'offset' to set the speed, but the speed rule it lists is speed"
+    ):
+        rules_in({**meta, "sets_speed": "offset"}, "m.safetensors")
 
 
 # --- 7. the registry ---------------------------------------------------------------------------------

@@ -31,10 +31,10 @@ from terrapref.learning.model_file import load_model, save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.planner import Planner
 from terrapref.rules import ArgmaxRule, HeaderContext, OffsetConfig, OffsetRule, RuleContext, chosen_rule, driving_rule, speed_rule
-from terrapref.rules.base import Where
+from terrapref.rules.base import SPEED, STEERING, Where
 from terrapref.rules.offset.fit import OffsetUtility
 from terrapref.rules.speed.model import MIN_SPEED_MPS, STATIONS, SpeedModel, across, fit_speed
-from terrapref.rules.speed.rule import SpeedConfig, SpeedRule, SpeedRunner
+from terrapref.rules.speed.rule import LearnedSpeed, SpeedConfig, SpeedRule
 from terrapref.scenario import AVOID, Scenario, parse_scenario
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import default_classes
@@ -406,13 +406,13 @@ MUD_LEFT = _scenario([{"class": "mud", "rectangle": {"center": [20.0, 14.0], "si
 AT = (8.0, 10.0, 0.0)  # 6 m along the path
 
 
-def _runner(model: SpeedModel, scenario: Scenario | None) -> tuple[SpeedRunner, GroundMap]:
+def _runner(model: SpeedModel, scenario: Scenario | None) -> tuple[LearnedSpeed, GroundMap]:
     """The rule's runner and the ground map a planner keeps for it, fed the views of ``scenario``
     from 2 m to 8 m along its path (every 0.5 m); ``None``: nothing seen."""
     camera = PinholeCamera()
     context = RuleContext(camera, UtilityFeaturizer(FEATURES, camera, CLASSES), FEATURES, CLASSES)
     runner = SpeedRule(SpeedConfig(), model).runner(context)
-    assert isinstance(runner, SpeedRunner)
+    assert isinstance(runner, LearnedSpeed)
     seen = GroundMap(camera, context.terrain, runner.map_settings)
     if scenario is not None:
         renderer = SegmentationRenderer(camera, rasterise(scenario))
@@ -557,7 +557,7 @@ def _offset_rule() -> OffsetRule:
 
 def test_a_speed_rule_sets_the_speed_but_never_drives():
     speed, offset = SpeedRule(SpeedConfig(), MODEL), _offset_rule()
-    assert not speed.steers and offset.steers
+    assert (speed.kind, offset.kind) == (SPEED, STEERING)
     assert driving_rule([offset, speed], None) is offset  # the last rule that steers, not the last listed
     assert driving_rule([speed, offset], None) is offset
     assert driving_rule([offset, speed], "offset") is offset

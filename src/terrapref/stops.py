@@ -20,3 +20,13 @@ REASONS = {
 def stop_reason_of(driver: object) -> str | None:
     """The reason ``driver`` gave for its last command (its ``stop_reason``), None if it drives or gives none."""
     return getattr(driver, "stop_reason", None)
+
+
+STALE_SLACK_S = 1e-9  # a command held exactly its hold time is still fresh, whatever rounding a clock's sums carry [s]
+
+
+def held_too_long(now_s: float, frame_s: float | None, hold_s: float) -> bool:
+    """Whether a command decided on a frame stamped ``frame_s`` (None: none yet) is stale at
+    ``now_s``, held for longer than ``hold_s`` [s]: the planner's stop rule decides ``stale`` so
+    (terrapref.planner.stop.StopRule.stale), and a robot driven by a driver without one too."""
+    return frame_s is None or not now_s - frame_s <= hold_s + STALE_SLACK_S

@@ -146,6 +146,7 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
     from dataclasses import asdict
 
     from terrapref.plots import save_loss_curve
+    from terrapref.rules.base import STEERING
     from terrapref.terrain import ClassTable
 
     members = config.classifier.members
@@ -166,7 +167,7 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
     lethal = frozenset({table.lethal_column} if table.lethal else ())  # the terrain column the lethal classes share
     print(f"drives: {result.drives or 'argmax'}" + ("" if result.rules else " (C's argmax: the recipe fits no decision rule)"))
     for rule in result.rules:
-        note = "" if rule.type == result.drives or not rule.steers else " (fitted to be reported; it does not drive)"
+        note = "" if rule.type == result.drives or rule.kind != STEERING else " (fitted to be reported; it does not drive)"
         print(f"  {rule.describe(data.feature_config.feature_classes, lethal)}{note}")
         for warning in rule.warnings(data.feature_config.feature_classes, lethal):
             print(f"  warning: {warning}")
@@ -226,14 +227,15 @@ def train_parser(sub: argparse._SubParsersAction, flags: bool = True) -> None:
 
 def _cmd_recipes(args: argparse.Namespace) -> int:
     from terrapref.recipes import DEFAULT_RECIPE, RECIPES
+    from terrapref.rules import rule_roles
 
     for name, r in RECIPES.items():
         tag = " (default)" if name == DEFAULT_RECIPE else ""
         drives = f"{r.demonstrations} drive{'s' if r.demonstrations > 1 else ''} of {r.course}"
-        stages = ", then ".join(s.type for s in r.rules) or "none"
+        types = [rule.type for rule in r.rules]
         print(
             f"{name}{tag}: {drives}, {r.train.optimiser.epochs} epochs{f', {r.train.classifier.members} members' if r.train.classifier.members > 1 else ''}; "
-            f"rules: {stages} (the last drives; none: C's argmax)"
+            f"rules: {', '.join(types) or 'none'} ({rule_roles(types)})"
         )
         print(f"    {r.summary}")
     return 0

@@ -257,7 +257,7 @@ class PlannerRuntime:
         if self.last is not None and now_s - self.last.stamp_s < -self.ahead_s:
             self.refused["decisions the clock found in its future"] += 1
             self.last = None  # a later frame stamped by the clock is then taken, not ignored as older
-        if self.last is None or not now_s - self.last.stamp_s <= self.hold_s:
+        if self.planner.stop_rule.stale(now_s, None if self.last is None else self.last.stamp_s, self.hold_s):
             return self._given(now_s, STOP), STALE
         return self._given(now_s, self.last.command), self.last.stop
 

@@ -98,7 +98,9 @@ class ModelHeader:
         identifiability, steadying: what the demonstrations identify and what steadying the labels
             did, as written (terrapref.learning.identify, .steady).
         rules: the decision rules' blocks, in order; None: the file lists none (a checkpoint).
-        drives: the type of the rule that drives (one of ``rules``, or ``argmax``).
+        drives: the type of the rule that steers (one of ``rules``, or ``argmax``).
+        sets_speed: the type of the rule that sets the speed (one of ``rules``; None: none does,
+            the control set's speed).
         stages: an older file's list of rules (the last one drove); never written.
         members: an ensemble's members.
         member_count: a checkpoint's number of members (``members`` in older files, which held
@@ -124,6 +126,7 @@ class ModelHeader:
     steadying: Section | None = None
     rules: tuple[Block, ...] | None = None
     drives: str | None = None
+    sets_speed: str | None = None
     stages: tuple[Block, ...] | None = None
     members: tuple[MemberRun, ...] | None = None
     member_count: int | None = None
@@ -176,6 +179,7 @@ class ModelHeader:
             steadying=_entry(meta, "steadying", _section, source),
             rules=rule_blocks(meta, "rules", source),
             drives=_entry(meta, "drives", _text, source),
+            sets_speed=_entry(meta, "sets_speed", _text, source),
             stages=rule_blocks(meta, "stages", source),
             members=members if isinstance(members, tuple) else None,
             member_count=members if isinstance(members, int) else _entry(meta, "member_count", _integer, source),

@@ -61,6 +61,7 @@ def model_header(config: TrainConfig, result: TrainResult, source: ModelHeader) 
         steadying=result.steadying.to_dict() if result.steadying is not None else None,
         rules=tuple(rule.header() for rule in result.rules),
         drives=result.drives,
+        sets_speed=result.sets_speed,
         members=members or None,
         epoch=result.best_epoch,
     )

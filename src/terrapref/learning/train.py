@@ -196,9 +196,15 @@ class TrainResult:
 
     @property
     def drives(self) -> str | None:
-        """The type of the rule that drives the model: the last one fitted that steers (None: none was, C's argmax drives)."""
-        steering = [r for r in self.rules if getattr(r, "steers", True)]
+        """The type of the rule that steers the model: the last steering rule fitted (None: none
+        was, C's argmax steers). A rule's ``kind`` is terrapref.rules.base's (``steering``, ``speed``)."""
+        steering = [r for r in self.rules if r.kind == "steering"]
         return steering[-1].type if steering else None
+
+    @property
+    def sets_speed(self) -> str | None:
+        """The type of the rule that sets the model's speed (None: none was fitted; the control set's speed)."""
+        return next((r.type for r in self.rules if r.kind == "speed"), None)
 
 
 def _ensemble(results: list[TrainResult]) -> TrainResult:

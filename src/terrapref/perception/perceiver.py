@@ -29,7 +29,7 @@ import numpy as np
 from terrapref.camera import PixelSet, SegmentationRenderer, SegmentationView
 from terrapref.perception.labels import LabelledView, LabelNoise
 from terrapref.perception.model import PerceptionModel
-from terrapref.stops import STALE, stop_reason_of
+from terrapref.stops import STALE, held_too_long, stop_reason_of
 from terrapref.terrain import ClassTable
 from terrapref.vehicle import Command, Pose
 
@@ -195,9 +195,15 @@ class PerceivedDriver:
         if got is not None:
             self._last, self._stamp_s = self.inner.act(got), got.time_s
             self._last_reason = stop_reason_of(self.inner)
-        if self._last is not None and frame.time_s - self._stamp_s <= self.hold_s + 1e-9:
+        if self._last is not None and not self._stale(frame.time_s):
             self.stop_reason = self._last_reason
             return self._last
         self.stops += 1
         self.stop_reason = STALE
         return STOP
+
+    def _stale(self, now_s: float) -> bool:
+        """Whether the command held is stale at ``now_s``: as the inner driver's stop rule says
+        (a planner's: terrapref.planner.stop), or for a driver without one, held over ``hold_s``."""
+        stale = getattr(self.inner, "stale", held_too_long)
+        return stale(now_s, self._stamp_s, self.hold_s)

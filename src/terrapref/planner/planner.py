@@ -228,10 +228,11 @@ class Planner:
             probs = U = None
         else:
             probs, U = outputs()
-        self.observe(view, pose)
-        choice = self.runner.decide(RuleInput(probs, view, pose, self.path, s, self._going(speed_mps), self.ground_map))
-        choice = self._bounded(self._at_speed(choice, view, pose, s, speed_mps), state)
-        choice, stop = self._stop(choice, view, pose, time_s, state)
+        self.observe(view, pose)  # every ground map updated, once
+        frame = RuleInput(probs, view, pose, self.path, s, self._going(speed_mps), self.ground_map)
+        choice = self.runner.decide(frame)  # the steering rule
+        choice = self._bounded(self._at_speed(choice, frame), state)  # the speed rule, within the goal check's and the robot's limits
+        choice, stop = self._stop(choice, view, pose, time_s, state)  # the stop rule
         command = STOP_COMMAND if stop else choice.command
         if probs is None:
             return Decision(choice.index, command, s, pending=outputs, stop=stop)
@@ -283,17 +284,13 @@ class Planner:
         index = choice.index if state.turn_rps is None else int(self.control.label_of(float(w)))
         return Choice(index, Command(v, w))
 
-    def _at_speed(self, choice: Choice, view: SegmentationView, pose: Pose, progress_m: float, speed_mps: float | None) -> Choice:
+    def _at_speed(self, choice: Choice, frame: RuleInput) -> Choice:
         """The steering rule's choice at the speed rule's speed along its way (the same curvature,
         turned no harder than the rule's lateral acceleration allows at the vehicle's speed);
         as chosen without a speed rule."""
         if self.speed is None:
             return choice
-        curvature = choice.command.w / self._set_v
-        held = self.runner.held_offset_m
-        along = (self.path, progress_m, held) if held is not None and self.path is not None else None
-        v = self.speed.speed(self._speed_map, pose, curvature, self._max_w, along)
-        return Choice(choice.index, Command(v, self.speed.yaw_rate(curvature, v, speed_mps)))
+        return self.speed.along(self._speed_map, frame, choice, self._set_v, self._max_w)
 
     def costmap(self) -> Costmap | None:
         """The ground seen so far as the driving rule prices it (terrapref.groundmap.costmap);
@@ -352,6 +349,11 @@ class PlannerDriver:
     def reset(self, scenario: Scenario, rng: np.random.Generator) -> None:
         self.planner.set_path(scenario.waypoints)
         self.decisions, self.frames, self.image_of, self.last = [], [], {}, None
+
+    def stale(self, now_s: float, frame_s: float | None, hold_s: float) -> bool:
+        """Whether a command decided on a frame stamped ``frame_s`` is stale at ``now_s``: the
+        planner's stop rule says (a robot that holds commands asks it: terrapref.perception)."""
+        return self.planner.stop_rule.stale(now_s, frame_s, hold_s)
 
     def act(self, frame: Frame) -> Command:
         d = self.last = self.planner.decide(frame.view, frame.pose, frame.time_s, frame.speed_mps)

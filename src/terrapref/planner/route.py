@@ -97,7 +97,7 @@ class RouteError(ValueError):
 def route_over(scenario: Scenario, model: Model, config: RouteConfig | None = None, world: WorldMap | None = None) -> Route:
     """The route along ``scenario``'s path over its map (the prior; ``world``, its raster, when
     the caller has it), priced as ``model``'s driving rule learned: its class prices and price of
-    leaving the path (:meth:`terrapref.rules.RuleRunner.route_prices`).
+    leaving the path (:meth:`terrapref.rules.SteeringRunner.route_prices`).
 
     Raises:
         ValueError: the model's driving rule learned no prices to route with.

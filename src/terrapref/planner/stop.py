@@ -18,8 +18,8 @@ its command, the planner commands v = 0 instead when:
   ground ahead (the footprint's width, from the camera's near edge to ``look_m``): a lens
   covered, a segmentation that failed, a range cut short.
 - ``stale``: no fresh frame for longer than the command is held (the runtime's and the
-  simulated robot's ``hold_s``); the command holder says so, not this rule (no frame arrives to
-  check).
+  simulated robot's ``hold_s``): they give the rule the time and the last frame's stamp
+  (:meth:`StopRule.stale`), as no frame arrives to check.
 
 The planner moves on by itself once the reason has cleared (a free way, for ``resume_after_s``). The reasons'
 names are terrapref.stops'.
@@ -39,7 +39,8 @@ from terrapref.groundmap.map import GroundMap
 from terrapref.groundmap.map_compiled import UNSETTLED, MapLayers, map_decide
 from terrapref.groundmap.settings import MapSettings
 from terrapref.records import to_plain
-from terrapref.stops import BLIND, NO_FREE_WAY
+from terrapref.rules.base import StopRunner
+from terrapref.stops import BLIND, NO_FREE_WAY, held_too_long
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose
 
@@ -160,7 +161,7 @@ _OWN_MAP = MapSettings(
 )
 
 
-class StopRule:
+class StopRule(StopRunner):
     """The stop rule (module docstring) for one planner's camera and class table.
 
     Args:
@@ -253,6 +254,11 @@ class StopRule:
                 return NO_FREE_WAY
             self._stopped, self._free_since = False, None
         return None
+
+    def stale(self, now_s: float, frame_s: float | None, hold_s: float) -> bool:
+        """Whether a command decided on a frame stamped ``frame_s`` (None: none yet) is stale at
+        ``now_s``: held for longer than ``hold_s`` [s] (terrapref.stops.held_too_long)."""
+        return held_too_long(now_s, frame_s, hold_s)
 
     def free_way(self, gmap: GroundMap, pose: Pose, v_mps: float, w_rps: float = 0.0) -> bool:
         """Whether some way ahead keeps the footprint on seen, non-lethal ground of ``gmap`` over the

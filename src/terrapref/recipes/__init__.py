@@ -64,8 +64,9 @@ class Recipe:
         train: training hyperparameters.
         disturbance: pushes injected while demonstrating, so that recoveries are shown
             (None: the driver drives undisturbed).
-        rules: the decision rules fitted with C, in order; the last drives (terrapref.rules;
-            none: C's argmax). Each says what its fit reads of the frames.
+        rules: the decision rules fitted with C, in order: the last steering rule steers (none:
+            C's argmax), a speed rule sets the speed (terrapref.rules). Each says what its fit
+            reads of the frames.
         course: the demonstration course.
         summary: one line on what the recipe is for (``terrapref recipes``).
     """
@@ -114,7 +115,7 @@ TEACH = Recipe(
     train=replace(_RECOMMENDED, classifier=ClassifierConfig(skip=True, members=3), data=replace(_RECOMMENDED.data, steady_labels=True)),
     rules=(SecondStageConfig(weight=5.0, lookahead=True), OffsetConfig(), SpeedConfig()),
     disturbance=DisturbanceConfig(rate_hz=0.6, clear_m=3.0, clear_s=2.0),
-    summary="one drive of teach_course: any preference order from five minutes (the default); the offset rule drives (docs/learning.md)",
+    summary="one drive of teach_course: any preference order from five minutes (the default); the offset rule steers, the speed rule sets the speed (docs/learning.md)",
 )
 RECIPES: Registry[Recipe] = Registry("recipe")
 for _recipe in (TEACH, OURS, PAPER):

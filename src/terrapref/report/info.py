@@ -154,13 +154,16 @@ def _rule_lines(meta: dict, source: str, graph_note: bool = False) -> list[str]:
 
 def _rules(rules, driving, names: tuple[str, ...], classes, graph_note: bool = False) -> list[str]:
     """The rule that drives and the rules fitted only to be reported, each as it describes itself."""
+    from terrapref.rules.base import SPEED, STEERING
+
     lethal = frozenset({classes.lethal_column} if classes.lethal else ())  # the terrain column the lethal classes share
     note = " (in the metadata; the graph holds C alone)" if graph_note and not driving.graph else ""
-    lines = [f"drives          {driving.type}{note}"]
+    speed = next((r.type for r in rules if r.kind == SPEED), "none (the control set's speed)")
+    lines = [f"steers          {driving.type}{note}", f"sets the speed  {speed}"]
     for rule in rules:
         lines.append(
             f"  {rule.describe(names, lethal)}"
-            + ("" if rule is driving or not rule.steers else " (fitted to be reported; it does not drive)")
+            + ("" if rule is driving or rule.kind != STEERING else " (fitted to be reported; it does not steer)")
         )
         lines += [f"  warning: {warning}" for warning in rule.warnings(names, lethal)]
     return lines

@@ -32,7 +32,22 @@ from terrapref.features import FeatureConfig
 from terrapref.learning.header import rule_blocks
 from terrapref.registry import Registry
 from terrapref.rules.argmax import ArgmaxRule
-from terrapref.rules.base import Choice, HeaderContext, Rule, RuleConfig, RuleContext, RuleInput, RuleRunner, Where
+from terrapref.rules.base import (
+    RULE_KINDS,
+    SPEED,
+    STEERING,
+    STOP,
+    Choice,
+    HeaderContext,
+    Rule,
+    RuleConfig,
+    RuleContext,
+    RuleInput,
+    SpeedRunner,
+    SteeringRunner,
+    StopRunner,
+    Where,
+)
 from terrapref.rules.offset.rule import OffsetConfig, OffsetRule
 from terrapref.rules.second.rule import SecondStageConfig, SecondStageRule
 from terrapref.rules.speed.rule import SpeedConfig, SpeedRule
@@ -42,6 +57,12 @@ if TYPE_CHECKING:
 
 __all__ = [
     "RULES",
+    "RULE_KINDS",
+    "SPEED",
+    "STEERING",
+    "STOP",
+    "SpeedRunner",
+    "StopRunner",
     "ArgmaxRule",
     "Choice",
     "HeaderContext",
@@ -51,7 +72,7 @@ __all__ = [
     "RuleConfig",
     "RuleContext",
     "RuleInput",
-    "RuleRunner",
+    "SteeringRunner",
     "SecondStageConfig",
     "SecondStageRule",
     "SpeedConfig",
@@ -61,6 +82,7 @@ __all__ = [
     "legacy_blocks",
     "read_rules",
     "rules_in",
+    "rule_roles",
     "rules_of",
     "speed_rule",
 ]
@@ -108,7 +130,9 @@ def rules_of(model: LoadedModel) -> tuple[tuple[Rule, ...], str | None]:
     """The rules a model file of C lists, read, and the type of the one it names to drive (None: not named)."""
     blocks, key = _listed(model.header.rules, model.header.stages, model.meta, model.path)
     raw = model.meta.get("features")
-    return read_rules(blocks, model.features, raw if isinstance(raw, Mapping) else {}, model.path, key), model.header.drives
+    read = read_rules(blocks, model.features, raw if isinstance(raw, Mapping) else {}, model.path, key)
+    _check_sets_speed(read, model.header.sets_speed, model.path)
+    return read, model.header.drives
 
 
 def rules_in(meta: Mapping[str, Any], source: str) -> tuple[tuple[Rule, ...], Rule]:
@@ -122,21 +146,43 @@ def rules_in(meta: Mapping[str, Any], source: str) -> tuple[tuple[Rule, ...], Ru
         raise UserError(source, f"invalid configuration ({exc})", field="features") from None
     blocks, key = _listed(rule_blocks(meta, "rules", source), rule_blocks(meta, "stages", source), meta, source)
     read = read_rules(blocks, features, raw, source, key)
-    drives = meta.get("drives")
-    if drives is not None and not isinstance(drives, str):
-        raise UserError(source, "expected a rule's type", field="drives")
+    drives, sets_speed = meta.get("drives"), meta.get("sets_speed")
+    for name, value in (("drives", drives), ("sets_speed", sets_speed)):
+        if value is not None and not isinstance(value, str):
+            raise UserError(source, "expected a rule's type", field=name)
+    _check_sets_speed(read, sets_speed, source)
     return read, driving_rule(read, drives, source)
+
+
+def _check_sets_speed(rules: Sequence[Rule], sets_speed: str | None, source: str) -> None:
+    """A file's ``sets_speed`` (None: older files, or no speed rule) must name the speed rule it lists."""
+    speed = speed_rule(rules)
+    if sets_speed is not None and (speed is None or speed.type != sets_speed):
+        listed = speed.type if speed is not None else "none"
+        raise UserError(source, f"names rule {sets_speed!r} to set the speed, but the speed rule it lists is {listed}", field="sets_speed")
+
+
+def rule_roles(types: Sequence[str]) -> str:
+    """What rules of ``types`` (a recipe's, in order) do, in words: which steers (the last
+    steering rule; C's argmax where none is), which sets the speed, and which are fitted to be
+    reported."""
+    steering = [t for t in types if RULES[t].kind == STEERING]
+    speed = [t for t in types if RULES[t].kind == SPEED]
+    steers = steering[-1] if steering else "C's argmax"
+    sets = speed[0] if speed else "none (the control set's speed)"
+    reported = f"; fitted to be reported: {', '.join(steering[:-1])}" if len(steering) > 1 else ""
+    return f"steers: {steers}; sets the speed: {sets}{reported}"
 
 
 def speed_rule(rules: Sequence[Rule]) -> Rule | None:
     """The rule that sets the speed (one that does not steer), or None: the control set's speed."""
-    return next((r for r in rules if not r.steers), None)
+    return next((r for r in rules if r.kind == SPEED), None)
 
 
 def driving_rule(rules: Sequence[Rule], drives: str | None, source: str = "model") -> Rule:
     """The rule that drives: the one ``drives`` names (a file's ``drives``), else the last one
     listed that steers (older files); C's argmax when none is listed."""
-    rules = [r for r in rules if r.steers]
+    rules = [r for r in rules if r.kind == STEERING]
     if drives is None:
         return rules[-1] if rules else ArgmaxRule()
     if drives == ArgmaxRule.type:
@@ -158,7 +204,7 @@ def chosen_rule(rules: Sequence[Rule], drives: str | None, wanted: str | None, s
         return driving_rule(rules, drives, source)
     if wanted == ArgmaxRule.type:
         return ArgmaxRule()
-    found = [r for r in rules if r.type == wanted and r.steers]
+    found = [r for r in rules if r.type == wanted and r.kind == STEERING]
     if not found:
         have = ", ".join([ArgmaxRule.type, *(r.type for r in rules)])
         raise ValueError(f"{source}: no {wanted!r} rule (rules: {', '.join(RULES.names())}); it has {have}")

@@ -2,7 +2,7 @@
 
 A rule is three objects: its configuration before fitting (:class:`RuleConfig`, what a recipe
 names), the fitted rule (:class:`Rule`, one block of a model file's ``rules`` list), and the
-fitted rule bound to one planner (:class:`RuleRunner`, which decides each frame). A rule whose
+fitted rule bound to one planner (:class:`SteeringRunner`, which decides each frame). A rule whose
 fit needs more than C's samples reads it from each frame while recordings are featurised
 (:meth:`RuleConfig.reader`), and the dataset keeps those arrays under the rule's name.
 """
@@ -54,7 +54,7 @@ class RuleInput:
 
     Attributes:
         probs: F_t, C's distribution over the m trajectories (m,); None for a rule that does
-            not read it (``RuleRunner.reads_probs``).
+            not read it (``SteeringRunner.reads_probs``).
         view: the segmentation image.
         pose: the vehicle's pose.
         path: the reference path.
@@ -76,10 +76,13 @@ class RuleInput:
 
 @dataclass(frozen=True)
 class Choice:
-    """What a rule drives: the command, and the trajectory it is (or, steered continuously, the nearest one)."""
+    """What the steering rule chose: the command, the trajectory it is (or, steered continuously,
+    the nearest one), and for a rule that holds a lateral offset from the path, that offset (left
+    positive [m]; the speed rule reads the way along the path shifted by it; None: an arc)."""
 
     index: int
     command: Command
+    offset_m: float | None = None
 
 
 @dataclass(frozen=True)
@@ -98,8 +101,15 @@ class RoutePrices:
     span_m: float
 
 
-class RuleRunner(abc.ABC):
-    """A rule bound to one planner: decides each frame, and forgets what it kept when a run starts.
+STEERING, SPEED, STOP = "steering", "speed", "stop"
+"""The three kinds of rule: one steers (a yaw rate, or a choice of trajectory), one sets the speed
+along the way it steers, one stops (v = 0, with a reason). A model file lists steering and speed
+rules; the stop rule is the robot's (terrapref.planner.stop), set by its robot file."""
+RULE_KINDS = (STEERING, SPEED, STOP)
+
+
+class SteeringRunner(abc.ABC):
+    """A steering rule bound to one planner: decides each frame, and forgets what it kept when a run starts.
 
     A rule that reads a ground map names its settings (``map_settings``); the planner keeps that
     map (terrapref.groundmap), updates it once a frame and hands it to the rule in
@@ -132,11 +142,49 @@ class RuleRunner(abc.ABC):
         """What a route search prices ground with (terrapref.planner.route); None for a rule that learned no prices."""
         return None
 
-    @property
-    def held_offset_m(self) -> float | None:
-        """The lateral offset from the path the rule steers to, left positive [m]: the speed rule
-        reads the way along the path shifted by it; None for a rule that steers arcs."""
-        return None
+
+class SpeedRunner(abc.ABC):
+    """A speed rule bound to one planner: the speed along the way the steering rule chose, read
+    from the ground map of ``map_settings`` that the planner keeps."""
+
+    map_settings: MapSettings | None = None
+
+    @abc.abstractmethod
+    def reset(self) -> None:
+        """Start a new run (a new path): forget the speed commanded last."""
+
+    @abc.abstractmethod
+    def commanded(self, v_mps: float) -> None:
+        """The speed [m/s] the planner commanded (0 when it stopped)."""
+
+    @abc.abstractmethod
+    def going_mps(self, speed_mps: float | None) -> float:
+        """How fast the vehicle may be going [m/s], its odometry saying ``speed_mps`` (None: unknown)."""
+
+    @abc.abstractmethod
+    def along(self, ground_map: GroundMap, frame: RuleInput, choice: Choice, max_yaw_rate_rps: float) -> Choice:
+        """``choice`` (steered at the control set's speed) at this rule's speed along its way: the
+        same curvature, turned no harder than the rule allows at the vehicle's speed."""
+
+
+class StopRunner(abc.ABC):
+    """The stop rule bound to one planner (terrapref.planner.stop): whether to command v = 0, and
+    why (terrapref.stops.REASONS), given the frame, the command chosen and the frames' times."""
+
+    map_settings: MapSettings | None = None
+
+    @abc.abstractmethod
+    def reset(self) -> None:
+        """Start a new run (a new path)."""
+
+    @abc.abstractmethod
+    def check(self, ground_map: GroundMap, view: SegmentationView, pose: Pose, v: float, w: float, time_s: float | None) -> str | None:
+        """Why the command (``v``, ``w``) chosen on this frame, taken at ``time_s``, must be a stop; None: it need not."""
+
+    @abc.abstractmethod
+    def stale(self, now_s: float, frame_s: float | None, hold_s: float) -> bool:
+        """Whether a command decided on a frame stamped ``frame_s`` (None: none yet) is stale at
+        ``now_s`` after holding ``hold_s`` [s]: a stop, ``stale``."""
 
 
 @dataclass(frozen=True)
@@ -152,14 +200,14 @@ class Rule(abc.ABC):
     """A fitted decision rule: its configuration and what was fitted, as one block of a model
     file's ``rules`` list (``type`` names it in :data:`terrapref.rules.RULES`).
 
-    ``graph``: the rule's decision is C's graph (what ``terrapref export --format onnx`` writes);
-    otherwise the graph holds C alone and the rule runs in the planner. ``steers``: whether it
-    chooses the way; a rule that does not (the speed rule) sets the speed along the way chosen.
+    ``kind``: :data:`STEERING` (it chooses the way) or :data:`SPEED` (it sets the speed along the
+    way the steering rule chose). ``graph``: the rule's decision is C's graph (what ``terrapref
+    export --format onnx`` writes); otherwise the graph holds C alone and the rule runs in the planner.
     """
 
     type: ClassVar[str]
+    kind: ClassVar[str] = STEERING  # or SPEED: it sets the speed along the way another rule steers
     graph: ClassVar[bool] = False
-    steers: ClassVar[bool] = True  # False: it sets the speed along the way another rule steers (the speed rule)
     # What a robot may set of the rule at run time (terrapref.rules.settings): name -> (kind:
     # "number" or "class", a number per class; what it sets, with its unit).
     settable: ClassVar[dict[str, tuple[str, str]]] = {}
@@ -182,8 +230,8 @@ class Rule(abc.ABC):
         return None
 
     @abc.abstractmethod
-    def runner(self, context: RuleContext) -> RuleRunner:
-        """This rule bound to one planner."""
+    def runner(self, context: RuleContext) -> SteeringRunner | SpeedRunner:
+        """This rule bound to one planner (a runner of its kind)."""
 
     def with_settings(self, values: Mapping[str, Any], names: tuple[str, ...], lethal: frozenset[str]) -> Rule:
         """This rule with a robot's ``values`` of its :attr:`settable` settings in place of its

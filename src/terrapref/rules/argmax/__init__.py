@@ -8,7 +8,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from terrapref.rules.base import Choice, HeaderContext, Rule, RuleConfig, RuleContext, RuleInput, RuleRunner, Where
+from terrapref.rules.base import Choice, HeaderContext, Rule, RuleConfig, RuleContext, RuleInput, SteeringRunner, Where
 from terrapref.vehicle import Command, ControlSet
 
 
@@ -29,14 +29,14 @@ class ArgmaxRule(Rule, RuleConfig):
     def from_header(cls, block: Mapping[str, Any], context: HeaderContext, where: Where) -> ArgmaxRule:
         return cls()
 
-    def runner(self, context: RuleContext) -> RuleRunner:
+    def runner(self, context: RuleContext) -> SteeringRunner:
         return _Argmax(context.features.preference.control)
 
     def describe(self, names: tuple[str, ...], lethal: frozenset[str]) -> str:
         return "argmax: the trajectory C ranks first"
 
 
-class _Argmax(RuleRunner):
+class _Argmax(SteeringRunner):
     def __init__(self, control: ControlSet) -> None:
         self.control = control
 

@@ -54,7 +54,7 @@ from terrapref.rules.base import (
     RuleConfig,
     RuleContext,
     RuleInput,
-    RuleRunner,
+    SteeringRunner,
     TerrainColumns,
     Where,
     number,
@@ -274,7 +274,7 @@ def keeps(held: float, best: float, margin: float) -> bool:
     return held >= best - margin * abs(best)
 
 
-class OffsetSteering(RuleRunner):
+class OffsetSteering(SteeringRunner):
     """The offset rule (module docstring) of one camera, class table and offset utility.
 
     Args:
@@ -340,7 +340,7 @@ class OffsetSteering(RuleRunner):
                 self.control.w_rps[-1],
             )
         )
-        return Choice(int(self.control.label_of(w)), Command(self.control.v_mps, w))
+        return Choice(int(self.control.label_of(w)), Command(self.control.v_mps, w), float(self.held))
 
     def yaw_rate(self, gmap: GroundMap, pose: Pose, path: ReferencePath, progress_m: float, speed_mps: float | None = None) -> float:
         """The yaw rate [rad/s] toward the offset held after this frame, read from ``gmap`` (the
@@ -370,10 +370,6 @@ class OffsetSteering(RuleRunner):
             fast = speed_mps is not None and speed_mps > self.v_mps
             self.held = float(self.offsets[self._same_side(value, best) if fast and not np.isfinite(value[held]) else best])
         return float(steer(path, pose, progress_m, self.held, self.config.pursuit_m, self.v_mps))
-
-    @property
-    def held_offset_m(self) -> float:
-        return float(self.held)
 
     def route_prices(self) -> RoutePrices:
         """The class prices and the price of holding off the path this rule learned (``-w_detour``), for a route search."""

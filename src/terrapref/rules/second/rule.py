@@ -35,7 +35,7 @@ from terrapref.rules.base import (
     RuleConfig,
     RuleContext,
     RuleInput,
-    RuleRunner,
+    SteeringRunner,
     Where,
     number,
     vector,
@@ -219,14 +219,14 @@ class SecondStageRule(Rule):
         look = {"after_s": look.get("after_s"), "stride": look.get("stride")} if isinstance(look, dict) else {}
         return {"type": cls.type, "weight": LEGACY_WEIGHT, **look, **data}
 
-    def runner(self, context: RuleContext) -> RuleRunner:
+    def runner(self, context: RuleContext) -> SteeringRunner:
         return SecondStageScores(self.config, context.featurizer, context.camera, self.utility)
 
     def describe(self, names: tuple[str, ...], lethal: frozenset[str]) -> str:
         return f"second stage: weight {self.config.weight:g}, linear utility fitted {'through the look-ahead' if self.fit == 'lookahead' else 'frame by frame'}"
 
 
-class SecondStageScores(Lookahead, RuleRunner):
+class SecondStageScores(Lookahead, SteeringRunner):
     """The look-ahead of one featurizer (preference set and camera), scored by a linear utility."""
 
     def __init__(self, config: SecondStageConfig, featurizer: UtilityFeaturizer, camera: PinholeCamera, utility: LinearUtility) -> None:

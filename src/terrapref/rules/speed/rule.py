@@ -1,7 +1,7 @@
 """The ``speed`` rule: how fast to drive the way the steering chose, learned from the same drive.
 
 It does not steer: the rule that steers picks the way (a trajectory's or an offset's curvature),
-and this rule picks the speed along it (:class:`SpeedRunner`), from what the ground map the
+and this rule picks the speed along it (:class:`LearnedSpeed`), from what the ground map the
 planner keeps for it (terrapref.groundmap) has gathered of the ground the camera has shown, under and
 ahead of the vehicle. The model and its fit are :mod:`.model`. Its fit reads, for every frame of
 a drive, the ground map around the vehicle as the camera had shown it by then, along the way the
@@ -23,11 +23,23 @@ from terrapref.groundmap.columns import TerrainColumns
 from terrapref.groundmap.map import GroundMap
 from terrapref.groundmap.settings import MapSettings
 from terrapref.records import to_plain
-from terrapref.rules.base import FrameReader, HeaderContext, Rule, RuleConfig, RuleContext, Where, number
+from terrapref.rules.base import (
+    SPEED,
+    Choice,
+    FrameReader,
+    HeaderContext,
+    Rule,
+    RuleConfig,
+    RuleContext,
+    RuleInput,
+    SpeedRunner,
+    Where,
+    number,
+)
 from terrapref.rules.speed.model import MIN_SPEED_MPS, STATION_STEP_M, STATIONS, SpeedFit, SpeedModel, across, fit_speed
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable
-from terrapref.vehicle import Pose
+from terrapref.vehicle import Command, Pose
 
 if TYPE_CHECKING:
     from terrapref.demos.recording import Recording
@@ -177,7 +189,7 @@ class SpeedRule(Rule):
     """A fitted speed rule (``fit``: how the fit went, for a rule just fitted)."""
 
     type: ClassVar[str] = "speed"
-    steers: ClassVar[bool] = False
+    kind: ClassVar[str] = SPEED
     settable: ClassVar[dict[str, tuple[str, str]]] = {
         "max_speed_mps": ("number", "the fastest it commands [m/s]"),
         "class_max_mps": ("class", "the fastest it commands on a class, below the speed learned there [m/s]"),
@@ -275,9 +287,9 @@ class SpeedRule(Rule):
             raise where.error("background", "expected the background class's name")
         return cls(config, model, fit, background)
 
-    def runner(self, context: RuleContext) -> SpeedRunner:
+    def runner(self, context: RuleContext) -> LearnedSpeed:
         """Bound to one planner."""
-        return SpeedRunner(self)
+        return LearnedSpeed(self)
 
     def describe(self, names: tuple[str, ...], lethal: frozenset[str]) -> str:
         """The cruising speed per class with its interval, and the limits."""
@@ -334,7 +346,7 @@ def _number(value: object) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
-class SpeedRunner:
+class LearnedSpeed(SpeedRunner):
     """The speed rule bound to one planner: the speed along a chosen way, read from the ground map
     of :attr:`map_settings` that the planner keeps (one map with the steering rule's where their
     settings are the same)."""
@@ -360,6 +372,15 @@ class SpeedRunner:
         (None: unknown) and the speed commanded last (:meth:`commanded`; 0 before the first),
         toward which it may still be speeding up."""
         return max(speed_mps or 0.0, self._last_v)
+
+    def along(self, ground_map: GroundMap, frame: RuleInput, choice: Choice, set_v_mps: float, max_yaw_rate_rps: float) -> Choice:
+        """``choice``, steered at the control set's ``set_v_mps``, at this rule's speed along its way
+        (:meth:`speed`: along the path shifted by the choice's offset, or its arc) with the yaw rate
+        of the same curvature (:meth:`yaw_rate`, at the vehicle's speed the frame gives)."""
+        curvature = choice.command.w / set_v_mps
+        way = (frame.path, frame.progress_m, choice.offset_m) if choice.offset_m is not None else None
+        v = self.speed(ground_map, frame.pose, curvature, max_yaw_rate_rps, way)
+        return Choice(choice.index, Command(v, self.yaw_rate(curvature, v, frame.speed_mps)), choice.offset_m)
 
     def speed(
         self,
