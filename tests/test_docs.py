@@ -269,3 +269,27 @@ def test_the_example_courses_lengths_in_the_docs_are_what_the_code_builds() -> N
     }
     wrong = [f"{where}: expected {claim!r}" for where, (text, claim) in claims.items() if claim not in text]
     assert not wrong, "\n".join(wrong)
+
+
+def _words(text: str) -> str:
+    """``text`` lowercased, underscores and runs of spaces as one space: a term as code or prose spells it."""
+    return re.sub(r"[_\s]+", " ", text.lower())
+
+
+def glossary_terms_the_code_does_not_use(glossary: str, code: str) -> list[str]:
+    """The glossary's terms (its bold words; ``a / b`` is two) that ``code`` never spells, in the
+    singular or the plural."""
+    code = _words(code)
+    terms = [t.strip() for bold in re.findall(r"\*\*([^*]+)\*\*", glossary) for t in bold.split(" / ")]
+    return [t for t in terms if not any(w in code for w in {_words(t), _words(t).removesuffix("s")})]
+
+
+def test_every_glossary_term_is_a_word_the_code_uses():
+    """A term the code no longer says (renamed, or gone) is a stale entry: rename it or remove it."""
+    code = " ".join(p.read_text() for p in (ROOT / "src" / "terrapref").rglob("*.py"))
+    assert not glossary_terms_the_code_does_not_use((DOCS / "glossary.md").read_text(), code)
+
+
+def test_the_glossary_check_finds_a_term_the_code_does_not_use():
+    glossary = "- **ground map**: ...\n- **val acc / val top3**: ...\n- **stage plan**: ..."
+    assert glossary_terms_the_code_does_not_use(glossary, "self.ground_map = ...; print('val acc', val_top3)") == ["stage plan"]

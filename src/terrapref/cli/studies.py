@@ -96,7 +96,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
     from terrapref.report.study_plan import FULL, QUICK, for_table, with_perception
     from terrapref.terrain import default_classes
 
-    check("cnn", "terrapref study (its end-to-end CNN baseline)")  # before the stages that come before the CNN's
+    check("cnn", "terrapref study (its end-to-end CNN baseline)")  # before the steps that come before the CNN's
     plan = QUICK if args.quick else FULL
     if args.seeds is not None:
         if args.seeds < 1:

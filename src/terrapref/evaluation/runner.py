@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 import numpy as np
 
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
-from terrapref.evaluation.scoring import RunMetrics, ZoneResult, ZoneRules, score_run
+from terrapref.evaluation.scoring import RunMetrics, ZoneResult, ZoneScoring, score_run
 from terrapref.evaluation.stats import wilson
 from terrapref.grid import Engine, run_grid
 from terrapref.perception import PerceivedDriver, Perceiver, PerceptionModel
@@ -324,7 +324,7 @@ def run_one(spec: RunSpec, watch: Watch | None = None) -> RunResult:
         if watched is not driver:
             watched.mute()
         log = replace(log, goal_stop=settle(sim, runner, GOAL_SETTLE_S))
-    metrics = score_run(log, scenario, sim.world, profile, ZoneRules(footprint_m=sim.config.vehicle.footprint_m))
+    metrics = score_run(log, scenario, sim.world, profile, ZoneScoring(footprint_m=sim.config.vehicle.footprint_m))
     planner = driver if isinstance(driver, PlannerDriver) else None
     return RunResult(
         spec.scenario,

@@ -32,7 +32,7 @@ REACHED_TOLERANCE_M = 0.5  # progress this short of the zone's end along the pat
 
 
 @dataclass(frozen=True)
-class ZoneRules:
+class ZoneScoring:
     """How zones are scored.
 
     Attributes:
@@ -116,7 +116,7 @@ def score_zones(
     world: WorldMap,
     profile: PreferenceProfile,
     progress_m: float | None = None,
-    rules: ZoneRules = ZoneRules(),
+    rules: ZoneScoring = ZoneScoring(),
 ) -> list[ZoneResult]:
     """Score every zone of ``scenario`` for the driven path ``trace``.
 
@@ -276,7 +276,7 @@ class RunMetrics:
 
 
 def score_run(
-    log: EpisodeLog, scenario: Scenario, world: WorldMap, profile: PreferenceProfile, rules: ZoneRules = ZoneRules()
+    log: EpisodeLog, scenario: Scenario, world: WorldMap, profile: PreferenceProfile, rules: ZoneScoring = ZoneScoring()
 ) -> RunMetrics:
     """All metrics of the run ``log`` of ``scenario`` on ``world``: from its path (every controller
     tick's pose), whether it completed and how it ended, its collisions and contact, its stops

@@ -204,7 +204,7 @@ def fit_lookahead_utility(
     grass, not only against each other.
 
     Args:
-        U: (N, m, K + 1) first-stage utilities (terrain shares, distance).
+        U: (N, m, K + 1) the trajectories' utility features (terrain shares, distance).
         U2: (N, m, m, K + 1) look-ahead utilities of the same frames.
         labels: (N,) demonstrated trajectory indices.
     """

@@ -5,7 +5,7 @@ For each training seed, the synthetic driver demonstrates on each recipe's cours
 ``teach``) and a model is trained by each recipe; every model then drives ``train_course``,
 ``test_course`` and the figure variations, and so does the synthetic driver. The report gives
 the paper's Table 1 and Table 2 with success over seeds (and the planner's agreement with the
-driver), each rate with its 95% Wilson interval, the figures, and each stage's time; then every
+driver), each rate with its 95% Wilson interval, the figures, and each step's time; then every
 recipe's models once more on the test courses under each perception model asked for (the planner
 receives what a robot would; the driver sees the truth), in one table.
 """
@@ -265,7 +265,7 @@ def _mode(choices: list[tuple[str, bool, str]]) -> str:
 
 
 class _Outcome(NamedTuple):
-    """What a reproduction ran: the runs, the models, the time per stage and the speed part's runs (None: not run)."""
+    """What a reproduction ran: the runs, the models, the time per step and the speed part's runs (None: not run)."""
 
     runs: list[RecipeRun]
     trained: list[RecipeModel]
@@ -274,7 +274,7 @@ class _Outcome(NamedTuple):
 
 
 def _write_report(out: Path, setup: Reproduction, outcome: _Outcome, engine: Engine) -> Path:
-    """REPORT.md, its figures and results.json (every run's metrics and the time per stage)."""
+    """REPORT.md, its figures and results.json (every run's metrics and the time per step)."""
     runs, trained, timings, speed = outcome
     t_fig = time.perf_counter()
     figs = out / "figures"
@@ -289,7 +289,7 @@ def _write_report(out: Path, setup: Reproduction, outcome: _Outcome, engine: Eng
         lines += [""] + speed_lines(part, results, "figures/speed.png")
     lines += ["", "## Figures", ""] + [f"- `figures/{sc}.png`" for sc in setup.scenarios]
     timings = {**timings, "figures": time.perf_counter() - t_fig}
-    lines += ["", "## Time per stage (wall clock)", "", "| stage | seconds |", "|---|---|"]
+    lines += ["", "## Time per step (wall clock)", "", "| step | seconds |", "|---|---|"]
     lines += [f"| {k} | {v:.1f} |" for k, v in timings.items()] + [f"| total | {sum(timings.values()):.1f} |"]
     speed_runs = [r.to_dict() for r in speed[1]] if speed is not None else []
     write_text_atomic(

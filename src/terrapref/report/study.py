@@ -1,6 +1,6 @@
 """`terrapref study`: the paper's claims as measured figures, over seeds, with one evaluation.
 
-Stages (each parallel across processes):
+Steps (each parallel across processes):
 1. Demonstrations: per training seed, the synthetic driver demonstrates on ``train_course`` (with
    a class table of one's own: the table's teaching course) with the protocol of the recipe
    ``ours`` (two runs with disturbances), once under the default profile and once under another
@@ -71,7 +71,7 @@ def swept(plan: StudyPlan, part: str, level: float) -> PerceptionModel:
 
 @dataclass(frozen=True)
 class DemonstrationJob:
-    """One seed's demonstrations of ``course`` under one profile (stage 1), kept in memory and
+    """One seed's demonstrations of ``course`` under one profile (step 1), kept in memory and
     featurised into ``sets``: (file, kind, horizon) each, a dataset (``kind`` "U", with horizon n)
     or the CNN's samples."""
 
@@ -121,7 +121,7 @@ def _frames_for(minutes: float | None, rate_hz: float = 10.0) -> int | None:
 
 @dataclass(frozen=True)
 class TeachJob:
-    """One drive of the teaching recipe's course by the driver of ``order`` and ``style``, and its model (stage 4)."""
+    """One drive of the teaching recipe's course by the driver of ``order`` and ``style``, and its model (step 4)."""
 
     seed: int
     order: tuple[str, ...]
@@ -197,7 +197,7 @@ def _train_on_utilities(job: TrainJob) -> int:
 
 def _c_config(job: TrainJob) -> TrainConfig:
     """C's training settings for a job: recipe ours's, with the job's seed, epochs and changes."""
-    # The study compares C itself with the baselines: its models are trained without stages (C's argmax drives).
+    # The study compares C itself with the baselines: its models are trained without decision rules (C's argmax steers).
     return OURS.train.updated({"seed": job.seed, "optimiser": {"epochs": job.epochs}, **(job.train or {})})
 
 
@@ -250,7 +250,7 @@ def teach_jobs(plan: StudyPlan, work: Path) -> list[TeachJob]:
 
 @dataclass(frozen=True)
 class _Workspace:
-    """What every stage of a study shares: the plan, the work folder, where the jobs run, the log."""
+    """What every step of a study shares: the plan, the work folder, where the jobs run, the log."""
 
     plan: StudyPlan
     work: Path
@@ -267,15 +267,15 @@ class _Workspace:
 
 
 @contextmanager
-def _timed(timings: dict[str, float], stage: str) -> Iterator[None]:
-    """Record the wall time of the ``with`` block as ``timings[stage]`` [s]."""
+def _timed(timings: dict[str, float], step: str) -> Iterator[None]:
+    """Record the wall time of the ``with`` block as ``timings[step]`` [s]."""
     t0 = time.perf_counter()
     yield
-    timings[stage] = time.perf_counter() - t0
+    timings[step] = time.perf_counter() - t0
 
 
 def run_study(out_dir: str | Path, plan: StudyPlan = FULL, engine: Engine | None = None, log: Callable[[str], None] = print) -> Path:
-    """Run every stage into ``out_dir`` on ``engine`` (default: local processes, one per core);
+    """Run every step into ``out_dir`` on ``engine`` (default: local processes, one per core);
     returns the path of STUDY.md."""
     out = Path(out_dir)
     work = out / "work"
@@ -340,7 +340,7 @@ def _train_and_teach(ws: _Workspace) -> tuple[list[TrainedModel], list[TaughtMod
 
 
 def _model_job(job: TrainJob | TeachJob) -> TrainedModel | TaughtModel:
-    """A job of stage 3: a model trained from the demonstrations, or a drive taught by the recipe."""
+    """A job of step 3: a model trained from the demonstrations, or a drive taught by the recipe."""
     return _teach_job(job) if isinstance(job, TeachJob) else _train_job(job)
 
 

@@ -185,7 +185,7 @@ QUICK = StudyPlan(
 
 @dataclass(frozen=True)
 class TrainJob:
-    """One model the study trains (stage 3): what, from which featurised set, into which file."""
+    """One model the study trains (step 3): what, from which featurised set, into which file."""
 
     study: str  # the report's part: baselines, efficiency, profile or ablation
     method: str  # C, linear or cnn

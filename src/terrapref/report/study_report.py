@@ -225,7 +225,7 @@ def write_study(
     timings: dict[str, float],
     report_started: float | None = None,
 ) -> Path:
-    """Write STUDY.md and the figures; ``report_started`` (perf_counter) times this stage in the table."""
+    """Write STUDY.md and the figures; ``report_started`` (perf_counter) times this step in the table."""
     figs = out / "figures"
     figs.mkdir(exist_ok=True)
     base = _Baselines.of(runs)
@@ -240,7 +240,7 @@ def write_study(
     lines += teaching_section(plan, runs, figs)
     if report_started is not None:
         timings = {**timings, "tables and figures": time.perf_counter() - report_started}
-    lines += ["", "## Time per stage (wall clock)", "", "| stage | seconds |", "|---|---|"]
+    lines += ["", "## Time per step (wall clock)", "", "| step | seconds |", "|---|---|"]
     lines += [f"| {k} | {v:.1f} |" for k, v in timings.items()] + [f"| total | {sum(timings.values()):.1f} |", ""]
     return write_text_atomic(out / "STUDY.md", "\n".join(lines))
 
