@@ -67,13 +67,15 @@ class Watchdog:
         """Something happened (a frame was decided on)."""
         self._fed = self.wall()
 
-    def quiet_s(self) -> float:
-        """How long since it was last fed [s] (0 before the first time)."""
-        return 0.0 if self._fed is None else self.wall() - self._fed
+    @property
+    def fed_s(self) -> float | None:
+        """When it was last fed, by its wall clock [s] (None: not yet)."""
+        return self._fed
 
-    def barks(self) -> bool:
-        """Whether it has waited longer than its limit."""
-        return self.quiet_s() > self.limit_s
+    def barks(self, stale: Callable[[float, float | None, float], bool]) -> bool:
+        """Whether it has waited longer than its limit since it was last fed (never before the
+        first time), as ``stale`` (the stop rule's: terrapref.planner.stop.StopRule.stale) says."""
+        return self._fed is not None and stale(self.wall(), self._fed, self.limit_s)
 
 
 class PlannerNodeCore:
@@ -334,7 +336,7 @@ class PlannerNodeCore:
             if self.runtime is None:
                 return Command(0.0, 0.0), STALE
             command, reason = self.runtime.status_at(now_s)
-            return (Command(0.0, 0.0), STALE) if self.watchdog.barks() else (command, reason)
+            return (Command(0.0, 0.0), STALE) if self.watchdog.barks(self.runtime.planner.stop_rule.stale) else (command, reason)
 
     @property
     def arrived(self) -> bool:

@@ -18,8 +18,9 @@ its command, the planner commands v = 0 instead when:
   ground ahead (the footprint's width, from the camera's near edge to ``look_m``): a lens
   covered, a segmentation that failed, a range cut short.
 - ``stale``: no fresh frame for longer than the command is held (the runtime's and the
-  simulated robot's ``hold_s``): they give the rule the time and the last frame's stamp
-  (:meth:`StopRule.stale`), as no frame arrives to check.
+  simulated robot's ``hold_s``), or, on a robot's node, no frame decided on for the watchdog's
+  limit by the wall clock: they give the rule the time and the last frame's (:meth:`StopRule.stale`),
+  as no frame arrives to check.
 
 The planner moves on by itself once the reason has cleared (a free way, for ``resume_after_s``). The reasons'
 names are terrapref.stops'.
