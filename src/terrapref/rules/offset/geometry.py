@@ -112,18 +112,7 @@ class OffsetGeometry:
         for what, (count, most) in counts.items():  # a size read from a file is bounded before anything is allocated by it
             if count > most:
                 raise ValueError(f"the offset geometry's steps give {count:.3g} {what}; at most {most}")
-        if not (
-            math.isfinite(self.map_range_m)
-            and self.map_range_m > 0
-            and 0 <= self.map_fade <= 1
-            and 0 < self.map_lethal_share <= 1
-            and 0 < self.map_terrain_share <= 1
-            and 0 <= self.map_min_evidence < 1e3
-        ):
-            raise ValueError(
-                "the ground map needs map_range_m > 0, map_fade in [0, 1], map_lethal_share and map_terrain_share in (0, 1] "
-                "and map_min_evidence >= 0"
-            )
+        self.map  # noqa: B018 (the ground map's settings, checked by their own rules: terrapref.groundmap.settings)
 
     @property
     def map(self) -> MapSettings:
