@@ -10,13 +10,21 @@ if [ ! -x .venv/bin/python ]; then
 fi
 stamp=.venv/.terrapref-installed
 want=$(cat pyproject.toml requirements.lock | sha256sum | cut -d' ' -f1)
+# The compiled loops are cached beside their sources, and a cache names the modules its types
+# came from: one written before a module moved cannot be read after. When the package's modules
+# change (a pull, a checkout), the caches are removed and the loops compiled again.
+modules=$(find src/terrapref -name '*.py' | sort | sha256sum | cut -d' ' -f1)
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   echo "setting up .venv (pinned dependencies from requirements.lock) ..."
   .venv/bin/python -m pip install --quiet --disable-pip-version-check "torch==2.13.0"
   .venv/bin/python -m pip install --quiet --disable-pip-version-check -c requirements.lock -e ".[all,test]"
+  echo "$want" > "$stamp"
+fi
+if [ "$(cat .venv/.terrapref-modules 2>/dev/null)" != "$modules" ]; then
+  find src/terrapref -path '*/__pycache__/*' \( -name '*.nbi' -o -name '*.nbc' \) -delete
   # Compile the numerical loops now (kept beside their sources) rather than in the first job.
   .venv/bin/python -m terrapref.warm_up
-  echo "$want" > "$stamp"
+  echo "$modules" > .venv/.terrapref-modules
 fi
 # ROS 1 (Debian's packages) for `terrapref ros1` and its test; never fails the set-up.
 bash scripts/setup_ros1.sh
