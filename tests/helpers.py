@@ -15,11 +15,13 @@ from terrapref.learning.network import ClassifierConfig
 from terrapref.learning.train import TrainConfig
 from terrapref.terrain import default_classes
 
-SHORT_COURSE = Path(__file__).parent / "data" / "short_course.yaml"
+TESTS = Path(__file__).resolve().parent  # the tests' folder: their data, and the modules they share
+REPO = TESTS.parent  # the repository: examples/, docs/, scripts/
+SHORT_COURSE = TESTS / "data" / "short_course.yaml"
 """demo_course's classes on a 32 m trail (about 320 frames at 1 m/s, demo_course's 575): a
 course for tests that need a drive of every class, not a long one."""
 
-TINY_COURSE = Path(__file__).parent / "data" / "tiny_course.yaml"
+TINY_COURSE = TESTS / "data" / "tiny_course.yaml"
 """A 12 m trail past a mud patch (about 106 frames): a course for tests that need a drive, not
 what it shows."""
 

@@ -374,3 +374,17 @@ self._own
         "terrapref.c._through_alias",
     }
     assert _private_uses(ast.parse("from terrapref.a.x import _mine\n"), "terrapref.a.x", modules) == set()
+
+
+def test_the_tests_are_in_folders_that_mirror_the_packages():
+    """A package's tests are in tests/<package>/; at the top, only what spans the whole project
+    (layout, docs, fuzzing the file formats, the small shared modules) and the tests' own helpers."""
+    tests = Path(__file__).resolve().parent
+    folders = {p.name for p in tests.iterdir() if p.is_dir() and p.name not in ("data", "__pycache__")}
+    packages = {p.name for p in ROOT.iterdir() if (p / "__init__.py").is_file()}
+    assert folders <= packages, sorted(folders - packages)
+    for folder in folders:
+        assert list((tests / folder).glob("test_*.py")), folder
+    top = {p.stem for p in tests.glob("test_*.py")}
+    modules = {p.stem for p in ROOT.glob("*.py")}
+    assert all(name.removeprefix("test_") in modules | {"layout", "docs", "fuzz"} for name in top), sorted(top)

@@ -2,7 +2,7 @@
 trained here (training is the same on every CPU, so the models are too).
 
 The file was made before the classifier's forward pass and the second stage's distances were
-compiled (commit 7a92879); tests/test_forward.py checks that the planner still makes exactly
+compiled (commit 7a92879); tests/learning/test_forward.py checks that the planner still makes exactly
 these decisions. Run from the repository root: ``.venv/bin/python tests/data/make_planner_decisions.py``.
 """
 

@@ -5,7 +5,7 @@ pixel with exactly the IEEE 754 operations, types and order of its vectorised Nu
 cell of column offset 0 and the change per column in float64 and then rounded to float32, the
 pixel's cell ``B * u + A`` in float32, clipped into the padded raster and truncated. Numba
 compiles without fast-math, so nothing is reassociated or fused into a multiply-add, and the
-class ids are the same, pixel for pixel, as the NumPy form gives (tests/test_camera.py keeps that
+class ids are the same, pixel for pixel, as the NumPy form gives (tests/camera/test_camera.py keeps that
 form and compares). One pass per frame instead of a dozen, and no index arrays: the frame is
 written once, and the raster read once per pixel.
 

@@ -6,7 +6,7 @@ its arithmetic, set their cost. Each loop does, element by element, exactly the 
 docstring gives, in the same order (compiled without fast-math: nothing is reassociated or
 fused into a multiply-add), so the results, and every decision made from them, are the same
 bits as the NumPy forms give.
-(tests/test_features.py compares.)
+(tests/features/test_features.py compares.)
 """
 
 from __future__ import annotations

@@ -18,7 +18,7 @@ def sky_line(ids: np.ndarray, rows: np.ndarray, n_cols: int, unknown: int) -> np
     """The first band row of each column below which ground is seen, (n_cols,) float; NaN where none.
 
     ``ids`` (len(rows) * n_cols,) are the class ids of the band, row by row. The NumPy form
-    (tests/test_offset_kernels.py keeps it): ``ground = ids != unknown``, the first row r with at
+    (tests/rules/test_offset_kernels.py keeps it): ``ground = ids != unknown``, the first row r with at
     least 3 of rows r..r+3 ground; all NaN when the band holds fewer than 4 rows.
     """
     out = np.full(n_cols, np.nan)
@@ -177,7 +177,7 @@ def attitude_fit(departure: np.ndarray, reference: np.ndarray, u: np.ndarray, fy
     support it, or the estimate exceeds ``max_rad``. The least squares of
     terrapref.groundmap.attitude's module docstring, twice (the second time without the columns
     that miss the first fit by more than 3 rows), with exactly rounded sums (:func:`exact_sum`);
-    tests/test_offset_kernels.py keeps its NumPy form and compares."""
+    tests/rules/test_offset_kernels.py keeps its NumPy form and compares."""
     n = departure.shape[0]
     if n < 2:  # no slope to read along a single column
         return 0.0, 0.0

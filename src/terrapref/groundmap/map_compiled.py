@@ -6,7 +6,7 @@ The map's samples are a loop, not a vector. Each loop does, element by element, 
 docstring gives, in the same order (compiled without fast-math: nothing is reassociated or
 fused into a multiply-add), so the results, and every decision made from them, are the same
 bits as the NumPy forms give.
-(tests/test_offset_kernels.py compares.)
+(tests/rules/test_offset_kernels.py compares.)
 """
 
 from __future__ import annotations

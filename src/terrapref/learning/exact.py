@@ -24,7 +24,7 @@ nothing more; NumPy never fuses two ufunc calls into one multiply-add.
 The elementwise chains (exp's and log's polynomials, a row's sum, an operand's rounding) run as
 compiled loops (Numba, without fast-math, so nothing is reassociated or fused): each element
 goes through exactly the operations, in exactly the order, that the NumPy form written in their
-comments would apply, in one pass instead of a dozen (tests/test_exact.py compares the two).
+comments would apply, in one pass instead of a dozen (tests/learning/test_exact.py compares the two).
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ nothing is left to a library whose kernels differ between CPUs (BLAS's sum order
 ``exp``), so the same model and frame give the same F_t, and the same decision, on any machine.
 
 :func:`terrapref.learning.network.numpy_forward` stays as the readable NumPy form; the two agree
-to float32 rounding (tests/test_forward.py).
+to float32 rounding (tests/learning/test_forward.py).
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ A training step of C is about sixty small array operations around a dozen BLAS p
 per-call overhead, not the arithmetic, set its cost. Each loop here does, element by element,
 exactly the IEEE 754 operations of the NumPy form its docstring gives, in the same order
 (compiled without fast-math: nothing is reassociated or fused into a multiply-add), so a trained
-model keeps its bits (tests/test_mlp.py keeps the NumPy forms and compares). The products
+model keeps its bits (tests/learning/test_mlp.py keeps the NumPy forms and compares). The products
 themselves stay in BLAS on integers (:mod:`terrapref.learning.exact`), exact in any order.
 """
 

@@ -3,7 +3,7 @@
 It scores trajectory i with ``w . U_i + b_i``: the multi-criteria decision function with learned
 weights. Fitted by full-batch Adam on the cross entropy, with :mod:`terrapref.learning.exact`'s
 arithmetic (the same bits on every CPU), each fit one compiled loop over its steps (Numba,
-without fast-math; tests/test_linear.py holds the NumPy form and compares the bits). Used three ways: to check that demonstrations identify the preference
+without fast-math; tests/learning/test_linear.py holds the NumPy form and compares the bits). Used three ways: to check that demonstrations identify the preference
 (the weights come out in the profile's order), as a baseline planner, and to initialise C's
 row-wise compression so that training starts from a utility that already ranks the terrain.
 """

@@ -9,7 +9,7 @@ near distance; the near distance of the lowest loss is kept.
 Float64 NumPy throughout, and the problem is convex: NumPy's exp, its sums and BLAS's matrix
 products may differ in their last bits between CPUs and thread counts, the Newton steps do not
 amplify that, and the weights are kept to 12 decimals, so the same data give the same weights
-on any machine (tests/test_offset_rule.py runs the fit under NumPy's and OpenBLAS's CPU settings).
+on any machine (tests/rules/test_offset_rule.py runs the fit under NumPy's and OpenBLAS's CPU settings).
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ Each loop does, element by element, exactly the IEEE 754 operations of the NumPy
 docstring gives, in the same order (compiled without fast-math: nothing is reassociated or
 fused into a multiply-add), so the results, and every decision made from them, are the same
 bits as the NumPy forms give.
-(tests/test_offset_kernels.py compares.)
+(tests/rules/test_offset_kernels.py compares.)
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ def offset_features(
     (inf: none), from the terrain column (O, S, F) under every footprint point.
 
     As terrapref.rules.offset.features' module docstring says, and as the NumPy form that
-    tests/test_offset_kernels.py keeps computes it: the first patch on the path (row ``centre``; gaps of at most ``gap`` stations do not split
+    tests/rules/test_offset_kernels.py keeps computes it: the first patch on the path (row ``centre``; gaps of at most ``gap`` stations do not split
     it) and ``beyond`` stations after it are counted, metres per column (count * step / F), the
     never-seen column, and the detour's price ``offset^2 * (on-path metres + span)``.
     """
@@ -66,7 +66,7 @@ def gated_value(features: np.ndarray, offsets: np.ndarray, gate: bool, weights: 
     """Each offset's utility (O,): its features (O, K + 2), then the gate column (``offset^2`` while
     ``gate``, else 0), times ``weights`` (K + 3,), summed column by column in order. The NumPy form:
     ``terrapref.rules.offset.features.gated``, then the weighted sum column by column
-    (tests/test_offset_kernels.py keeps it)."""
+    (tests/rules/test_offset_kernels.py keeps it)."""
     n_off, n_feat = features.shape
     g = 1.0 if gate else 0.0
     out = np.empty(n_off)

@@ -1,0 +1,137 @@
+"""The learned preference as a costmap (terrapref.groundmap.costmap)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_offset_rule import DRIVER_LIKE, _offset_meta, _scenario, _seen_from, _terrain
+
+from helpers import skip_path_weights
+from terrapref.camera import PinholeCamera
+from terrapref.features import FeatureConfig
+from terrapref.groundmap.costmap import LETHAL_COST, UNKNOWN_COST, class_costs
+from terrapref.groundmap.map import GroundMap
+from terrapref.interop.runtime import PlannerRuntime
+from terrapref.learning.model_file import save_model
+from terrapref.learning.network import ClassifierConfig
+from terrapref.rules.offset.fit import OffsetUtility
+from terrapref.rules.offset.geometry import OffsetGeometry
+from terrapref.rules.offset.rule import OffsetSteering
+from terrapref.terrain import default_classes
+
+CONTROL = FeatureConfig().preference.control  # the default control set: 1 m/s
+
+PATCHES = [  # 4 m wide, 3 m deep, 6-9 m ahead of a vehicle at (10, 10) looking along +x
+    {"class": "mud", "rectangle": {"center": [17.5, 14.0], "size": [3.0, 3.0]}},
+    {"class": "rock", "rectangle": {"center": [17.5, 10.0], "size": [3.0, 3.0]}},
+    {"class": "water", "rectangle": {"center": [17.5, 6.0], "size": [3.0, 3.0]}},
+    {"class": "non_traversable", "rectangle": {"center": [23.0, 10.0], "size": [2.0, 2.0]}},
+]
+
+
+@pytest.fixture(scope="module")
+def seen():
+    camera = PinholeCamera()
+    scenario = _scenario(PATCHES)
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,), default_classes().feature_names), CONTROL)
+    pose = (10.0, 10.0, 0.0)
+    gmap = GroundMap(camera, _terrain((0,), default_classes().feature_names), stage.map_settings)
+    for _ in range(3):
+        gmap.update(_seen_from(scenario, camera, pose), pose)
+    return stage.costmap(gmap)
+
+
+def test_the_cells_of_each_patch_are_priced_in_the_learned_order(seen):
+    # DRIVER_LIKE: water dearer than rock, rock dearer than mud; grass costs nothing.
+    mud, rock, water, grass = seen.at(17.5, 14.0), seen.at(17.5, 10.0), seen.at(17.5, 6.0), seen.at(13.0, 10.0)
+    assert grass == 0 < mud < rock < water == 99
+    assert seen.prices["water"] > seen.prices["rock"] > seen.prices["mud"] > 0
+
+
+def test_lethal_cells_are_lethal_and_ground_never_seen_is_unknown(seen):
+    assert seen.at(23.0, 10.0) == LETHAL_COST
+    assert seen.at(5.0, 10.0) == UNKNOWN_COST  # behind the camera
+    assert seen.at(1e6, 0.0) == UNKNOWN_COST  # off the grid
+    assert set(np.unique(seen.cost).tolist()) <= {UNKNOWN_COST, LETHAL_COST, *range(0, 100)}
+    assert seen.cost.dtype == np.int8
+
+
+def test_a_class_liked_better_than_the_background_costs_nothing():
+    weights = np.array([-25.5, 0.4, -1.0, -0.5, 0.0, -0.07, -1.3])  # water liked above grass
+    lethal = np.array([True, False, False, False, False, False])
+    costs, prices = class_costs(weights, lethal, 4)
+    assert costs.tolist() == [LETHAL_COST, 0, 99, 50, 0, UNKNOWN_COST] and prices[1] < 0
+
+
+def test_the_runtime_gives_the_costmap_of_the_ground_it_has_seen(tmp_path):
+    config = ClassifierConfig(hidden=8, skip=True)
+    path = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
+    runtime = PlannerRuntime(path)
+    runtime.set_path(np.array([[2.0, 10.0], [38.0, 10.0]]))
+    assert (runtime.costmap().cost == UNKNOWN_COST).all()  # nothing seen yet
+    scenario = _scenario(PATCHES)
+    view = _seen_from(scenario, PinholeCamera(), (10.0, 10.0, 0.0))
+    runtime.decide(view.image, 0.0, (10.0, 10.0, 0.0))
+    grid = runtime.costmap()
+    assert grid.at(23.0, 10.0) == LETHAL_COST and 0 < grid.at(17.5, 14.0) < grid.at(17.5, 6.0)
+
+
+def test_a_planner_without_a_ground_map_says_so(tmp_path):
+    from helpers import model_meta
+
+    config = ClassifierConfig(hidden=8, skip=True)
+    runtime = PlannerRuntime(save_model(tmp_path / "c.safetensors", config, skip_path_weights(config), model_meta()))
+    with pytest.raises(ValueError, match="keeps no ground map"):
+        runtime.costmap()
+
+
+def _costmaps_in(mcap) -> tuple[dict[str, int], np.ndarray]:
+    """The message count of each topic of an MCAP run and its last costmap's cells, read from
+    the OccupancyGrid, after checking that the Foxglove Grid beside it holds the same costs, in
+    the same place, in the colours of cost_colours, and that both cover the ground seen, not the
+    whole map the planner keeps."""
+    from rosbags.highlevel import AnyReader
+
+    from terrapref.groundmap.costmap import cost_colours
+
+    with AnyReader([mcap]) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+        last = {c.topic: reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages() if c.topic.startswith("/terrapref/costmap")}
+    occupancy, grid = last["/terrapref/costmap"], last["/terrapref/costmap_grid"]
+    cost = np.asarray(occupancy.data, dtype=np.int8).reshape(occupancy.info.height, occupancy.info.width)
+    assert occupancy.header.frame_id == grid.frame_id == "odom" and occupancy.info.resolution > 0
+    full = round(2 * OffsetGeometry().map_half_size_m / OffsetGeometry().map_resolution_m)
+    assert occupancy.info.width * occupancy.info.height < full * full  # cropped to the ground seen
+    assert (grid.timestamp.sec, grid.timestamp.nanosec) == (occupancy.header.stamp.sec, occupancy.header.stamp.nanosec)
+    assert grid.column_count == occupancy.info.width and grid.cell_size.x == grid.cell_size.y == pytest.approx(occupancy.info.resolution)
+    assert (grid.pose.position.x, grid.pose.position.y) == (occupancy.info.origin.position.x, occupancy.info.origin.position.y)
+    assert [(f.name, f.offset, f.type) for f in grid.fields] == [
+        ("cost", 0, 2),
+        ("red", 1, 1),
+        ("green", 2, 1),
+        ("blue", 3, 1),
+        ("alpha", 4, 1),
+    ]
+    cells = np.asarray(grid.data, dtype=np.uint8).reshape(-1, grid.column_count, grid.cell_stride)
+    assert grid.row_stride == grid.column_count * grid.cell_stride and cells.shape[0] == occupancy.info.height
+    np.testing.assert_array_equal(cells[..., 0].view(np.int8), cost)
+    np.testing.assert_array_equal(cells[..., 1:], cost_colours(cost))
+    return counts, cost
+
+
+def test_an_exported_recording_carries_the_costmap_a_model_sees_in_it(tmp_path, capsys, short_recording):
+    from helpers import model_meta, one_line_error
+    from terrapref.cli import main
+
+    config = ClassifierConfig(hidden=8, skip=True)
+    model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
+    rec = short_recording
+    assert main(["export", str(rec), "--format", "mcap", "--model", str(model), "--out", str(tmp_path / "run.mcap")]) == 0
+    counts, cost = _costmaps_in(tmp_path / "run.mcap")
+    assert counts["/terrapref/costmap"] == -(-counts["/terrapref/labels"] // 10)
+    assert (cost == LETHAL_COST).any() and ((cost > 0) & (cost < LETHAL_COST)).any()
+    capsys.readouterr()
+    plain = save_model(tmp_path / "c.safetensors", config, skip_path_weights(config), model_meta())
+    assert main(["export", str(rec), "--format", "mcap", "--model", str(plain), "--out", str(tmp_path / "c.mcap")]) == 2
+    one_line_error(capsys, "c.safetensors", "no offset rule")
+    assert not (tmp_path / "c.mcap").exists()

@@ -1,0 +1,95 @@
+"""The ground map's layers (terrapref.groundmap.layers) and the maps the planner keeps for the rules."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from test_offset_rule import CONTROL, DRIVER_LIKE, TREES, _offset_meta, _scenario, _seen_from, _terrain
+from test_speed_rule import MODEL as SPEED_MODEL
+
+from helpers import skip_path_weights
+from terrapref.camera import PinholeCamera, SegmentationView
+from terrapref.groundmap.layers import LAYERS, Layer
+from terrapref.groundmap.map import GroundMap
+from terrapref.learning.model_file import load_model, save_model
+from terrapref.learning.network import ClassifierConfig
+from terrapref.planner import Planner
+from terrapref.rules.offset.fit import OffsetUtility
+from terrapref.rules.offset.rule import OffsetSteering
+from terrapref.rules.speed.rule import SpeedConfig, SpeedRule
+from terrapref.scenario.path import ReferencePath
+
+
+class HeightMap(GroundMap):
+    """A ground map with one more layer, as a height from a depth sensor would be added: one
+    entry in the list, and the code that writes it (here: the frame number under the vehicle)."""
+
+    LAYERS = (*LAYERS, Layer("height", np.float32, np.nan))
+
+    def update(self, view: SegmentationView, pose) -> None:
+        super().update(view, pose)
+        i, j = self.cell_of(pose[0], pose[1])
+        self.layer("height")[j, i] = self.frame
+
+    def cell_of(self, x: float, y: float) -> tuple[int, int]:
+        res = self.settings.map_resolution_m
+        return int(np.floor((x - self.origin[0]) / res)), int(np.floor((y - self.origin[1]) / res))
+
+
+def test_a_layer_added_to_the_list_moves_and_empties_with_the_map():
+    camera = PinholeCamera()
+    scenario = _scenario([TREES])
+    plain, tall = GroundMap(camera, _terrain((0,))), HeightMap(camera, _terrain((0,)))
+    height = tall.layer("height")
+    assert height.shape == tall.layer("column").shape and height.dtype == np.float32 and np.isnan(height).all()
+    first, far = (4.0, 10.0, 0.0), (24.0, 10.0, 0.0)  # 20 m on: past the 17 m the map lets the vehicle go before re-centring
+    corners = []
+    for pose in (first, far):
+        view = _seen_from(scenario, camera, pose)
+        plain.update(view, pose)
+        tall.update(view, pose)
+        corners.append(tall.origin[0])
+    assert corners[1] - corners[0] == 20.0  # re-centred: the square moved on
+    i, j = tall.cell_of(*first[:2])
+    assert tall.layer("height")[j, i] == 1.0  # the first frame's cell, moved with the square
+    assert np.count_nonzero(~np.isnan(tall.layer("height"))) == 2  # and only the two written
+    np.testing.assert_array_equal(tall.evidence, plain.evidence)  # the votes as a map without the layer holds them
+    np.testing.assert_array_equal(tall.cells, plain.cells)
+    tall.reset()
+    assert np.isnan(tall.layer("height")).all() and not tall.evidence.any() and tall.origin is None
+
+
+def test_a_rule_reads_a_map_with_a_layer_added_as_it_reads_one_without():
+    camera = PinholeCamera()
+    scenario = _scenario([TREES])
+    path = ReferencePath(scenario.waypoints)
+    steered = []
+    for gmap in (GroundMap(camera, _terrain((0,))), HeightMap(camera, _terrain((0,)))):
+        stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
+        for x in np.arange(6.0, 12.0, 0.5):  # up to the trees, which lie on the path from x = 13.1 m
+            pose = (float(x), 10.0, 0.0)
+            gmap.update(_seen_from(scenario, camera, pose), pose)
+            steered.append((type(gmap), stage.yaw_rate(gmap, pose, path, x - 2.0), stage.held))
+    half = len(steered) // 2
+    assert [s[1:] for s in steered[:half]] == [s[1:] for s in steered[half:]]
+    assert any(held != 0.0 for _, _, held in steered)  # the trees ahead moved the offset held
+
+
+def test_the_planner_keeps_one_map_per_settings_updates_it_once_a_frame_and_forgets_it_with_the_path(tmp_path: Path):
+    classifier = ClassifierConfig(hidden=8, skip=True)
+    meta = _offset_meta(DRIVER_LIKE)
+    meta["rules"].append(SpeedRule(SpeedConfig(), SPEED_MODEL).header())
+    model = load_model(save_model(tmp_path / "m.safetensors", classifier, skip_path_weights(classifier), meta))
+    planner = Planner(model)
+    assert planner.speed is not None and list(planner._maps.values()) == [planner.ground_map]  # offset, speed and stop: one map
+    scenario = _scenario([TREES])
+    planner.set_path(scenario.waypoints)
+    for x in (2.0, 2.5, 3.0):
+        pose = (x, 10.0, 0.0)
+        planner.decide(_seen_from(scenario, planner.camera, pose), pose)
+    assert planner.ground_map.frame == 3 and planner.costmap() is not None
+    planner.set_path(scenario.waypoints)
+    assert planner.ground_map.frame == 0 and planner.ground_map.origin is None
+    argmax = Planner(model, rule="argmax")  # C steers and reads no map: the speed rule's, and the stop rule's small one
+    assert argmax.ground_map is None and argmax.costmap() is None and len(argmax._maps) == 2

@@ -1,0 +1,317 @@
+"""What a ROS node of the planner does with its messages (terrapref.interop.node_core), without
+ROS: messages built with rosbags' ROS 2 types stand in for rospy's or rclpy's."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from test_offset_rule import DRIVER_LIKE, _offset_meta
+
+from helpers import skip_path_weights
+from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer
+from terrapref.interop.node_core import PlannerNodeCore, Watchdog
+from terrapref.interop.robot import load_robot
+from terrapref.interop.ros_messages import camera_info, compressed_image, header, odometry, png, pose, typestore, yaw_quaternion
+from terrapref.interop.runtime import PlannerRuntime
+from terrapref.learning.model_file import load_model, save_model
+from terrapref.learning.network import ClassifierConfig
+from terrapref.scenario import resolve_scenario
+from terrapref.world import rasterise
+
+TS = typestore()
+POSES = [(20.0 + 0.1 * i, 15.0, 0.0) for i in range(6)]  # 0.1 m a frame along fig7's path, frames 0.1 s apart
+
+
+@pytest.fixture(scope="module")
+def setup(tmp_path_factory):
+    root = tmp_path_factory.mktemp("node")
+    config = ClassifierConfig(hidden=8, skip=True)
+    model = save_model(root / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
+    (root / "robot.yaml").write_text(
+        "format: terrapref-robot/1\ntopics: {segmentation: /seg, camera_info: /info, odometry: /odom, command: /cmd}\n"
+        "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n"
+        "limits: {max_accel_mps2: null}\n"  # the base ramps its speed itself: the command sent is the decision's
+    )
+    scenario = resolve_scenario("fig7_rock_vs_non_traversable_left")
+    renderer = SegmentationRenderer(PinholeCamera(CameraConfig()), rasterise(scenario))
+    images = [renderer.render(p) for p in POSES]
+    return load_model(model), load_robot(root / "robot.yaml"), scenario.waypoints, images
+
+
+def _core(setup) -> tuple[PlannerNodeCore, list]:
+    model, robot, path, _ = setup
+    core, told = PlannerNodeCore(model, robot, path), []
+    core.on_decision = told.append
+    core.on_camera_info(camera_info(TS, header(TS, 0.0, "camera_optical"), CameraConfig()))
+    return core, told
+
+
+def _odom(i: int):
+    x, y, yaw = POSES[i]
+    return odometry(TS, header(TS, 0.1 * i, "odom"), pose(TS, x, y, yaw_quaternion(TS, yaw)))
+
+
+def _image(setup, i: int):
+    return compressed_image(TS, header(TS, 0.1 * i, "camera_optical"), "png", png(setup[3][i]))
+
+
+def test_an_image_before_its_odometry_waits_for_it_and_is_decided_as_the_runtime_decides(setup):
+    model, _, path, images = setup
+    core, told = _core(setup)
+    runtime = PlannerRuntime(model)
+    runtime.set_path(path)
+    stamps = [1_700_000_000 + 0.1 * i for i in range(6)]  # header() stamps on the epoch-like clock
+    expected = [runtime.decide(images[i], stamps[i], POSES[i]) for i in range(6)]
+    core.on_odometry(_odom(0))
+    assert core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0)) is not None  # its pose is there: decided at once
+    for i in range(1, 6):  # each image comes before the odometry of its stamp, as on separate topics it may
+        assert core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, i)) is None
+        decision = core.on_odometry(_odom(i))
+        assert decision is not None and decision.stamp_s == pytest.approx(stamps[i])
+    assert [d.command for d in told] == [e.command for e in expected] and core.decided == 6
+    assert sum(core.skipped.values()) == 0
+
+
+def test_a_newer_image_supersedes_one_waiting_and_one_far_ahead_of_the_odometry_is_skipped(setup):
+    core, told = _core(setup)
+    core.on_odometry(_odom(0))
+    core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 2))
+    core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 3))  # the newer one waits instead
+    core.on_odometry(_odom(3))
+    assert [round(d.stamp_s - 1_700_000_000, 6) for d in told] == [0.3] and core.skipped["superseded while waiting for odometry"] == 1
+    far = compressed_image(TS, header(TS, 5.0, "camera_optical"), "png", png(setup[3][0]))
+    assert core.on_image("sensor_msgs/msg/CompressedImage", far) is None and core.skipped["without odometry at the stamp"] == 1
+
+
+def test_a_distorted_lens_is_undone_before_the_planner_sees_the_frame(setup):
+    model, robot, path, images = setup
+    core = PlannerNodeCore(model, robot, path)
+    info = camera_info(TS, header(TS, 0.0, "camera_optical"), CameraConfig())
+    info.d = np.array([-0.2, 0.05, 0.0, 0.0, 0.0])
+    core.on_camera_info(info)
+    core.on_odometry(_odom(0))
+    seen = []
+    core.runtime.decide = lambda ids, t, p, v=None: seen.append(ids)  # what the planner is handed
+    core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0))
+    assert seen[0].shape == images[0].shape and not np.array_equal(seen[0], images[0])
+    centre = (slice(200, 280), slice(280, 360))  # barrel distortion leaves the middle as it was
+    np.testing.assert_array_equal(seen[0][centre], images[0][centre])
+
+
+def test_an_image_of_another_size_than_the_calibration_is_refused_by_name(setup):
+    from terrapref.errors import UserError
+
+    core, _ = _core(setup)
+    core.on_odometry(_odom(0))
+    small = compressed_image(TS, header(TS, 0.0, "camera_optical"), "png", png(setup[3][0][::2, ::2].copy()))
+    with pytest.raises(UserError, match="320 x 240 px; the calibration says 640 x 480"):
+        core.on_image("sensor_msgs/msg/CompressedImage", small)
+
+
+def test_an_older_image_does_not_displace_a_newer_one_waiting_for_odometry(setup):
+    core, told = _core(setup)
+    core.on_odometry(_odom(0))
+    core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 3))
+    core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 2))  # late: the newer one keeps waiting
+    core.on_odometry(_odom(3))
+    assert [round(d.stamp_s - 1_700_000_000, 6) for d in told] == [0.3]
+
+
+def test_an_id_the_label_map_does_not_list_is_refused_by_name_and_nothing_is_decided(setup):
+    from terrapref.errors import UserError
+
+    core, told = _core(setup)  # labels: terrapref (ids 0-4 and 255)
+    core.on_odometry(_odom(0))
+    ids = setup[3][0].copy()
+    ids[470:, :8] = 9  # a class nobody mapped
+    with pytest.raises(UserError, match=r"terrapref\.yaml: ids: label id 9 in a label image not listed"):
+        core.on_image("sensor_msgs/msg/CompressedImage", compressed_image(TS, header(TS, 0.0, "camera_optical"), "png", png(ids)))
+    assert told == [] and core.decided == 0
+
+
+def test_the_node_says_why_it_stops(setup):
+    core, told = _core(setup)
+    assert core.status_at(0.0)[1] == "stale"  # nothing decided yet
+    core.on_odometry(_odom(0))
+    decision = core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0))
+    command, reason = core.status_at(decision.stamp_s + 0.05)
+    assert (command, reason) == (decision.command, decision.stop)
+    assert core.status_at(decision.stamp_s + 1.0) == ((0.0, 0.0), "stale")
+
+
+def test_the_node_commands_the_speed_the_models_speed_rule_sets(setup, tmp_path):
+    """A model whose speed rule cruises at 1.3 m/s: the node sends 1.3 m/s along the way the offset
+    rule chose (its curvature kept), not the control set's 1 m/s."""
+    from test_interop import speed_block
+
+    model, robot, path, _ = setup
+    meta = {**model.meta, "rules": [*model.meta["rules"], speed_block(1.3)]}
+    fast = load_model(save_model(tmp_path / "fast.safetensors", model.classifier, model.weights, meta))
+    core = PlannerNodeCore(fast, robot, path)
+    core.on_camera_info(camera_info(TS, header(TS, 0.0, "camera_optical"), CameraConfig()))
+    core.on_odometry(_odom(0))
+    decision = core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0))
+    slow = PlannerRuntime(model)  # the same model without its speed rule
+    slow.set_path(path)
+    plain = slow.decide(setup[3][0], decision.stamp_s, POSES[0])
+    assert decision.stop is None and plain.stop is None
+    (v, w), reason = core.status_at(decision.stamp_s + 0.05)
+    assert reason is None and v == pytest.approx(1.3) and w == pytest.approx(plain.command.w * 1.3)
+
+
+def test_the_robots_speed_at_an_image_is_its_odometrys_forward_motion(setup):
+    """1 m/s along the path (0.1 m every 0.1 s), going forward or reversing; None before the
+    odometry spans the window the speed is read over."""
+    core, _ = _core(setup)
+    t0 = 1_700_000_000  # header() stamps on the epoch-like clock
+    for i in range(6):
+        core.on_odometry(_odom(i))
+    assert core.speed_at(t0 + 0.05) is None  # the odometry begins at t0: no 0.2 s before it
+    assert core.speed_at(t0 + 0.5) == pytest.approx(1.0)
+    assert core.speed_at(t0 + 0.35) == pytest.approx(1.0)  # between poses: interpolated
+    backwards, _ = _core(setup)
+    for i in range(6):
+        x, y, _ = POSES[i]
+        backwards.on_odometry(odometry(TS, header(TS, 0.1 * i, "odom"), pose(TS, x, y, yaw_quaternion(TS, np.pi))))
+    assert backwards.speed_at(t0 + 0.5) == pytest.approx(1.0)  # reversing at 1 m/s: a speed of 1 m/s
+
+
+def test_a_node_publishes_on_the_robot_files_command_topic_or_its_flag_and_refuses_neither(setup, tmp_path):
+    from terrapref.errors import UserError
+    from terrapref.interop.node_core import NodeOptions
+
+    _, robot, _, _ = setup
+    assert NodeOptions().command_topic(robot) == "/cmd" and NodeOptions(cmd_topic="/out").command_topic(robot) == "/out"
+    (tmp_path / "robot.yaml").write_text(
+        "format: terrapref-robot/1\ntopics: {segmentation: /seg, camera_info: /info, odometry: /odom}\n"
+        "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n"
+    )
+    bare = load_robot(tmp_path / "robot.yaml")  # a robot file for logs without commands
+    assert NodeOptions(cmd_topic="/out").command_topic(bare) == "/out"
+    with pytest.raises(UserError) as raised:
+        NodeOptions().command_topic(bare)
+    assert raised.value.problems[0].field == "topics.command" and "--cmd-topic" in str(raised.value)
+
+
+# --- clocks, limits and the goal on a robot -------------------------------------------------------
+
+
+def test_an_image_stamped_far_ahead_of_the_nodes_clock_is_refused_and_counted(setup):
+    core, told = _core(setup)
+    core.on_odometry(_odom(0))
+    now = 1_700_000_000.0  # the node's clock, at the first frame's stamp
+    with pytest.raises(ValueError, match="ahead of the node's clock"):
+        core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0), now_s=now - 3600.0)
+    assert core.skipped["images ahead of the clock"] == 1 and told == []
+    assert core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0), now_s=now) is not None
+
+
+def test_the_node_stops_when_no_frame_has_been_decided_on_for_a_while_by_the_wall_clock(setup):
+    """A simulated clock that froze (the log player died) holds the node's time still, so by its
+    own clock the last command would stay fresh for ever; the wall clock's watchdog stops it."""
+    model, robot, path, _ = setup
+    wall = [100.0]
+    core = PlannerNodeCore(model, robot, path, watchdog=Watchdog(1.0, wall=lambda: wall[0]))
+    core.on_camera_info(camera_info(TS, header(TS, 0.0, "camera_optical"), CameraConfig()))
+    core.on_odometry(_odom(0))
+    decision = core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0))
+    frozen = decision.stamp_s + 0.05  # the node's clock, stuck here
+    assert core.status_at(frozen) == (decision.command, None)
+    wall[0] += 0.9
+    assert core.status_at(frozen)[1] is None
+    wall[0] += 0.2  # 1.1 s by the wall clock without a decision
+    assert core.status_at(frozen) == ((0.0, 0.0), "stale")
+
+
+def test_the_robots_limits_and_goal_come_from_its_file_then_its_parameters(setup, tmp_path):
+    from terrapref.errors import ConfigError, UserError
+    from terrapref.interop.node_core import NodeOptions
+
+    text = (
+        "format: terrapref-robot/1\ntopics: {segmentation: /seg, camera_info: /info, odometry: /odom, command: /cmd}\n"
+        "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n"
+        "limits: {max_speed_mps: 1.2, max_accel_mps2: 0.5}\nstop: {goal_tolerance_m: 1.0, goal_yaw_tolerance_deg: null}\n"
+    )
+    (tmp_path / "robot.yaml").write_text(text)
+    robot = load_robot(tmp_path / "robot.yaml")
+    assert (robot.limits.max_speed_mps, robot.limits.max_yaw_rate_rps, robot.limits.max_accel_mps2) == (1.2, 1.0, 0.5)
+    assert robot.stop.goal_tolerance_m == 1.0 and robot.stop.goal_yaw_tolerance_deg is None
+    params = {"~max_speed_mps": 0.8, "~goal_tolerance_m": 0.3}
+    opts = NodeOptions().resolved(lambda name, default: params.get(name, default))
+    applied = opts.applied_to(robot)
+    assert applied.limits.max_speed_mps == 0.8 and applied.limits.max_accel_mps2 == 0.5 and applied.stop.goal_tolerance_m == 0.3
+    with pytest.raises(UserError, match=r"~max_speed_mps: expected a number > 0"):
+        NodeOptions().resolved(lambda name, default: -1.0 if name == "~max_speed_mps" else default)
+    with pytest.raises(UserError, match="~goal_tolerance_m"):  # beyond the off-path distance
+        NodeOptions().resolved(lambda name, default: 50.0 if name == "~goal_tolerance_m" else default)
+    for bad, field in (("limits: {max_speed_mps: fast}", "limits.max_speed_mps"), ("limits: {top: 1}", "limits.top")):
+        (tmp_path / "bad.yaml").write_text(text.replace("limits: {max_speed_mps: 1.2, max_accel_mps2: 0.5}", bad))
+        with pytest.raises(ConfigError) as raised:
+            load_robot(tmp_path / "bad.yaml")
+        assert raised.value.problems[0].field == field
+
+
+def test_the_node_holds_a_fast_model_to_the_robots_limits_and_says_it_arrived(setup, tmp_path):
+    """A model asking for 8 m/s on a robot of 1.2 m/s: 1.2 m/s at most, said; along a 0.3 m path the
+    node stands at its goal at once and says it arrived; a new path, and it has not."""
+    from dataclasses import replace
+
+    from test_interop import speed_block
+
+    from terrapref.vehicle import VehicleConfig
+
+    model, robot, _, _ = setup
+    meta = {**model.meta, "rules": [*model.meta["rules"], {**speed_block(8.0), "max_speed_mps": 8.0}]}
+    fast = load_model(save_model(tmp_path / "fast.safetensors", model.classifier, model.weights, meta))
+    slow_robot = replace(robot, limits=VehicleConfig(max_speed_mps=1.2, max_accel_mps2=None))
+    core = PlannerNodeCore(fast, slow_robot, np.array([[20.0, 15.0], [60.0, 15.0]]))
+    core.on_camera_info(camera_info(TS, header(TS, 0.0, "camera_optical"), CameraConfig()))
+    assert any("8 m/s" in note and "1.2 m/s" in note for note in core.runtime.notes)
+    core.on_odometry(_odom(0))
+    decision = core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0))
+    assert decision.command.v == pytest.approx(1.2) and not core.arrived
+    near = PlannerNodeCore(fast, slow_robot, np.array([[20.0, 15.0], [20.3, 15.0]]))
+    near.on_camera_info(camera_info(TS, header(TS, 0.0, "camera_optical"), CameraConfig()))
+    near.on_odometry(_odom(0))
+    decision = near.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0))
+    assert decision.stop == "goal" and decision.command == (0.0, 0.0) and near.arrived
+    near.on_path(
+        SimpleNamespace(poses=[SimpleNamespace(pose=SimpleNamespace(position=SimpleNamespace(x=x, y=15.0))) for x in (20.0, 40.0)])
+    )
+    assert not near.arrived
+
+
+def test_the_rules_settings_come_from_the_robot_file_then_the_nodes_parameters(setup, tmp_path):
+    """The robot file's ``rules`` block, then a node's parameters over it (ROS 2's flat
+    ``offset.switch_margin``, ROS 1's nested ``~offset``), are what the node's planner decides
+    with; an unknown name or a value a rule cannot take is refused in one line when the node starts."""
+    from terrapref.errors import ConfigError, UserError
+    from terrapref.interop.node_core import NodeOptions, nested_rule_params
+    from terrapref.interop.ros2 import RosArgs
+
+    model, _, path, images = setup
+    text = (
+        "format: terrapref-robot/1\ntopics: {segmentation: /seg, camera_info: /info, odometry: /odom, command: /cmd}\n"
+        "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\nrules: {offset: {switch_margin: 0.25, pursuit_m: 3.0}}\n"
+    )
+    (tmp_path / "robot.yaml").write_text(text)
+    robot = load_robot(tmp_path / "robot.yaml")
+    args = RosArgs.parse(["-p", "offset.switch_margin:=0.3", "-p", "rate:=10"])
+    opts = NodeOptions().with_rule_params(args.rule_params, "--ros-args").resolved(args.get_param, param=lambda name: f"-p {name}")
+    core = PlannerNodeCore(model, opts.applied_to(robot), path)
+    core.on_camera_info(camera_info(TS, header(TS, 0.0, "camera_optical"), CameraConfig()))
+    held = core.runtime.planner.runner.config
+    assert (held.switch_margin, held.pursuit_m) == (0.3, 3.0)  # the parameter over the file, the file over the model
+    assert "offset.switch_margin 0.3" in core.runtime.notes[0] and "offset.pursuit_m 3" in core.runtime.notes[0]
+    ros1 = {"~offset": {"switch_margin": 0.4}}
+    assert nested_rule_params(lambda name, default: ros1.get(name, default)) == {"offset.switch_margin": 0.4}
+    with pytest.raises(UserError, match=r"^--ros-args: offset.switch_margn: the offset rule has no setting 'switch_margn'"):
+        NodeOptions().with_rule_params(RosArgs.parse(["-p", "offset.switch_margn:=0.3"]).rule_params, "--ros-args")
+    with pytest.raises(UserError, match=r"robot.yaml and --ros-args: offset.switch_margin, pursuit_m: .*switch_margin >= 0"):
+        PlannerNodeCore(model, NodeOptions().with_rule_params({"offset.switch_margin": -0.1}, "--ros-args").applied_to(robot), path)
+    (tmp_path / "bad.yaml").write_text(text.replace("switch_margin: 0.25", "margin: 0.25"))
+    with pytest.raises(ConfigError) as raised:
+        load_robot(tmp_path / "bad.yaml")
+    assert raised.value.problems[0].field == "rules.offset.margin"

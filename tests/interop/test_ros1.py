@@ -1,0 +1,222 @@
+"""The ROS 1 node against a real ROS master: a recording's frames published one by one, the
+node's commands the same as PlannerRuntime's on the same frames.
+
+Needs Debian's ROS 1 packages (``roscore``, ``python3-rospy`` and the message packages); skipped
+with the reason where they are missing.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+
+import numpy as np
+import pytest
+
+FIRST, FRAMES = 200, 40  # the short recording's frames published: the drive comes up to the non_traversable patch
+
+
+def _ros1_missing() -> str | None:
+    if shutil.which("roscore") is None:
+        return "roscore is not installed (Debian: apt install ros-core)"
+    probe = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "from terrapref.interop.ros1 import import_rospy; import_rospy(); "
+            "import sensor_msgs.msg, nav_msgs.msg, geometry_msgs.msg, visualization_msgs.msg",
+        ],
+        capture_output=True,
+        text=True,
+    )
+    return None if probe.returncode == 0 else f"rospy or ROS 1 message packages are missing ({probe.stderr.strip().splitlines()[-1:]})"
+
+
+_MISSING = _ros1_missing()
+pytestmark = pytest.mark.skipif(_MISSING is not None, reason=str(_MISSING))
+
+PLAYER = textwrap.dedent('''
+    """Publish a recording's first frames to the node, one at a time, and keep the command each gets."""
+    import json, sys, time
+    from terrapref.interop.ros1 import import_rospy
+    rospy = import_rospy()
+    import numpy as np
+    from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, TwistStamped
+    from nav_msgs.msg import Path
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import CameraInfo, Image
+    from terrapref.demos.recording import read_recording
+
+    rec_dir, first, frames, out = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+    rec = read_recording(rec_dir)
+    rospy.init_node("player")
+    info_pub = rospy.Publisher("/cam/info", CameraInfo, queue_size=1, latch=True)
+    path_pub = rospy.Publisher("/plan", Path, queue_size=1, latch=True)
+    odom_pub = rospy.Publisher("/odom", PoseWithCovarianceStamped, queue_size=10)  # a localiser's pose, as the robot file allows
+    seg_pub = rospy.Publisher("/seg", Image, queue_size=10)
+    clock_pub = rospy.Publisher("/clock", Clock, queue_size=10)  # the log's clock, as rosbag play --clock gives it
+    got = {}
+    rospy.Subscriber("/cmd", TwistStamped, lambda m: got.__setitem__(round(m.header.stamp.to_sec(), 3), (m.twist.linear.x, m.twist.angular.z)))
+    while min(seg_pub.get_num_connections(), odom_pub.get_num_connections(), clock_pub.get_num_connections()) == 0:  # the node subscribes
+        time.sleep(0.05)
+    from terrapref.camera import CameraConfig
+    fx, fy, cx, cy = CameraConfig().intrinsics  # the camera the model was trained for
+    info = CameraInfo(width=640, height=480, distortion_model="plumb_bob", D=[0.0] * 5,
+                      K=[fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0], P=[fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0])
+    info.header.frame_id = "camera"
+    info_pub.publish(info)
+    path = Path()
+    path.header.frame_id = "odom"
+    for x, y in np.asarray(rec.meta.get("path") or rec.scenario["path"]["waypoints"], dtype=float):
+        p = PoseStamped()
+        p.pose.position.x, p.pose.position.y, p.pose.orientation.w = float(x), float(y), 1.0
+        path.poses.append(p)
+    path_pub.publish(path)
+    results = []
+    for i in range(first, first + frames):
+        t = 100.0 + 0.1 * i
+        x, y, yaw = (float(v) for v in rec.poses[i])
+        odom = PoseWithCovarianceStamped()
+        odom.header.stamp = rospy.Time.from_sec(t)
+        odom.header.frame_id = "odom"
+        odom.pose.pose.position.x, odom.pose.pose.position.y = x, y
+        odom.pose.pose.orientation.z, odom.pose.pose.orientation.w = np.sin(yaw / 2), np.cos(yaw / 2)
+        image = Image(height=480, width=640, encoding="mono8", step=640, data=rec.image(i).tobytes())
+        image.header.stamp = rospy.Time.from_sec(t)
+        clock_pub.publish(Clock(clock=rospy.Time.from_sec(t)))
+        while round(t, 3) not in got:  # sent again until decided on (the node may not have the calibration yet)
+            odom_pub.publish(odom)
+            seg_pub.publish(image)
+            deadline = time.time() + 1.0
+            while round(t, 3) not in got and time.time() < deadline:
+                time.sleep(0.005)
+        results.append(got[round(t, 3)])
+    json.dump(results, open(out, "w"))
+''')
+
+
+@pytest.fixture(scope="module")
+def setup(tmp_path_factory, short_recording):
+    from test_offset_rule import DRIVER_LIKE, _offset_meta
+
+    from helpers import skip_path_weights
+    from terrapref.learning.model_file import save_model
+    from terrapref.learning.network import ClassifierConfig
+
+    root = tmp_path_factory.mktemp("ros1")
+    (root / "rec").symlink_to(short_recording, target_is_directory=True)
+    config = ClassifierConfig(hidden=8, skip=True)
+    model = save_model(root / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
+    (root / "robot.yaml").write_text(
+        "format: terrapref-robot/1\n"
+        "topics: {segmentation: /seg, camera_info: /cam/info, odometry: /odom, command: /cmd, path: /plan}\n"
+        "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n"
+        "limits: {max_accel_mps2: null}\n"  # the base ramps its speed itself: the command sent is the decision's
+    )
+    return root, model
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_the_node_commands_what_the_runtime_commands_on_the_same_frames(setup, tmp_path):
+    from test_live import _watch
+
+    from terrapref.demos.recording import read_recording
+    from terrapref.runtime import PlannerRuntime
+
+    root, model = setup
+    port, live_port, seen = _free_port(), _free_port(), {}
+    env = {**os.environ, "ROS_MASTER_URI": f"http://127.0.0.1:{port}", "ROS_HOME": str(tmp_path / "ros"), "ROS_IP": "127.0.0.1"}
+    master = subprocess.Popen(
+        ["roscore", "-p", str(port)], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
+    )
+    node = player = None
+    try:
+        # TwistStamped through the node's private ROS parameter, as a launch file would set it, and
+        # the node's clock the player's (a command is in force until its frame is 0.3 s old by it).
+        for _ in range(100):
+            if subprocess.run(["rosparam", "set", "/terrapref/stamped", "true"], env=env, capture_output=True).returncode == 0:
+                break
+            time.sleep(0.1)
+        subprocess.run(["rosparam", "set", "/use_sim_time", "true"], env=env, check=True, capture_output=True)
+        node = subprocess.Popen(
+            [
+                sys.executable,
+                "-c",
+                "import sys; from terrapref.cli import main; sys.exit(main())",
+                "ros1",
+                "--model",
+                str(model),
+                "--robot",
+                str(root / "robot.yaml"),
+                "--live",
+                "--live-port",
+                str(live_port),
+            ],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            start_new_session=True,
+        )
+        client = threading.Thread(target=_watch, args=(live_port, seen), daemon=True)
+        client.start()
+        (tmp_path / "player.py").write_text(PLAYER)
+        player = subprocess.run(
+            [sys.executable, str(tmp_path / "player.py"), str(root / "rec"), str(FIRST), str(FRAMES), str(tmp_path / "got.json")],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+        assert player.returncode == 0, player.stderr[-2000:]
+    finally:
+        for proc in (node, master):
+            if proc is not None:
+                os.killpg(proc.pid, 15)
+                proc.wait(timeout=30)
+    got = np.array(json.loads((tmp_path / "got.json").read_text()))
+    rec = read_recording(root / "rec")
+    runtime = PlannerRuntime(model)
+    runtime.set_path(np.asarray(rec.meta.get("path") or rec.scenario["path"]["waypoints"], dtype=float))
+    expected = np.array([runtime.decide(rec.image(i), 100.0 + 0.1 * i, tuple(rec.poses[i])).command for i in range(FIRST, FIRST + FRAMES)])
+    assert got.shape == (FRAMES, 2)
+    np.testing.assert_allclose(got, expected, atol=1e-6)
+    assert len(np.unique(expected[:, 1])) > 1  # the frames make it steer, not only drive straight
+    # The live view carried the decisions as they were made, stamped with the frames' ROS times.
+    client.join(timeout=30)
+    labels = seen.get("/terrapref/labels", [])
+    assert "error" not in seen and len(labels) >= FRAMES // 2
+    stamps = sorted(log_ns for log_ns, _ in labels)
+    assert abs(stamps[-1] * 1e-9 - (100.0 + 0.1 * (FIRST + FRAMES - 1))) < 1e-6
+    assert seen.get("/terrapref/costmap") and seen.get("/terrapref/trajectories")
+
+
+def test_node_options_come_from_the_command_line_then_ros_parameters_then_defaults():
+    from terrapref.errors import UserError
+    from terrapref.interop.ros1 import NodeOptions
+
+    params = {"~rate": 50, "~stamped": True, "~cmd_topic": "/robot/cmd"}
+    got = NodeOptions(rate=10.0).resolved(lambda name, default: params.get(name, default))
+    assert (got.rate, got.stamped, got.cmd_topic, got.path_file, got.hold_s) == (10.0, True, "/robot/cmd", None, 0.3)
+    for bad, field in (
+        ({"~rate": "fast"}, "~rate"),
+        ({"~hold_s": -1}, "~hold_s"),
+        ({"~stamped": "yes"}, "~stamped"),
+        ({"~cmd_topic": ""}, "~cmd_topic"),
+    ):
+        with pytest.raises(UserError, match=field):
+            NodeOptions().resolved(lambda name, default, bad=bad: bad.get(name, default))
+    with pytest.raises(UserError, match="--rate"):
+        NodeOptions(rate=float("nan")).resolved(lambda name, default: default)

@@ -1,0 +1,662 @@
+"""The ROS 2 node (terrapref.interop.ros2) as a ROS 2 system over DDS on this machine: the node in
+one process; in this one, a recording exported as ROS 2 MCAP published frame by frame with
+/clock (terrapref.interop.play), a subscriber of the node's topics, and DDS discovery read back.
+
+Every participant keeps to the loopback interface (a Cyclone DDS configuration in CYCLONEDDS_URI)
+and to a domain of its own test run, so that parallel runs never hear each other.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pytest
+
+FIRST, FRAMES = 200, 40  # the short recording's frames published: the drive comes up to the non_traversable patch
+LOOPBACK = (
+    '<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>'
+    "<AllowMulticast>false</AllowMulticast></General><Discovery><ParticipantIndex>auto</ParticipantIndex>"
+    '<MaxAutoParticipantIndex>60</MaxAutoParticipantIndex><Peers><Peer address="127.0.0.1"/></Peers></Discovery></Domain></CycloneDDS>'
+)
+NODE_TYPES = (
+    "sensor_msgs/msg/Image",
+    "sensor_msgs/msg/CompressedImage",
+    "sensor_msgs/msg/CameraInfo",
+    "nav_msgs/msg/Odometry",
+    "geometry_msgs/msg/PoseStamped",
+    "geometry_msgs/msg/PoseWithCovarianceStamped",
+    "nav_msgs/msg/Path",
+    "rosgraph_msgs/msg/Clock",
+    "geometry_msgs/msg/Twist",
+    "geometry_msgs/msg/TwistStamped",
+    "visualization_msgs/msg/MarkerArray",
+    "nav_msgs/msg/OccupancyGrid",
+    "tf2_msgs/msg/TFMessage",
+)
+# As `ros2 topic info --verbose` prints them on ROS 2 Jazzy: hashes of the real message packages.
+JAZZY_HASHES = {
+    "geometry_msgs/msg/Twist": "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a",
+    "geometry_msgs/msg/PoseStamped": "RIHS01_10f3786d7d40fd2b54367835614bff85d4ad3b5dab62bf8bca0cc232d73b4cd8",
+}
+
+
+def _domains() -> tuple[int, int]:
+    """Two DDS domains where no other participant is heard (pytest-xdist runs workers side by
+    side, and another run may share the machine): tried from one the process id picks."""
+    from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsParticipant
+    from cyclonedds.domain import DomainParticipant
+
+    quiet, start = [], os.getpid() % 200
+    for k in range(200):
+        domain = 20 + (start + k) % 200
+        dp = DomainParticipant(domain)
+        reader = BuiltinDataReader(dp, BuiltinTopicDcpsParticipant)
+        time.sleep(0.3)  # a participant there announces itself within this on loopback
+        others = [p for p in reader.take(N=20) if p.key != dp.get_guid()]
+        del reader, dp
+        if not others:
+            quiet.append(domain)
+        if len(quiet) == 2:
+            return quiet[0], quiet[1]
+    raise AssertionError("no quiet DDS domain")
+
+
+# The node as `terrapref ros2` runs, with every thread's stack written to stderr on SIGUSR1: what a node that
+# does not end on Ctrl-C was doing is then in the test's failure.
+NODE_MAIN = (
+    "import faulthandler, signal, sys; faulthandler.register(signal.SIGUSR1, all_threads=True); "
+    "from terrapref.cli import main; sys.exit(main())"
+)
+
+
+def _end(proc: subprocess.Popen, readers: list[threading.Thread], output: Callable[[], str], what: str) -> str | None:
+    """Ctrl-C has been sent to ``proc``: wait for it to end. If it does not within 30 s, write
+    its threads' stacks (SIGUSR1), kill it, and return what it was doing, for the failure."""
+    stuck = None
+    try:
+        proc.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGUSR1)
+        time.sleep(2.0)
+        proc.kill()
+        proc.wait()
+        stuck = f"{what} did not end within 30 s of Ctrl-C; its threads then:\n"
+    for reader in readers:
+        reader.join(timeout=10)
+    return None if stuck is None else stuck + output()[-12000:]
+
+
+def _node(
+    model: Path, robot: Path, env: dict, *ros_args: str, flags: tuple[str, ...] = (), sigint_ignored: bool = False
+) -> subprocess.Popen:
+    """The node in a process of its own; ``sigint_ignored``: started as a script's background job
+    is (SIGINT ignored, which a child inherits), and Ctrl-C must end it all the same."""
+    return subprocess.Popen(
+        [sys.executable, "-c", NODE_MAIN, "ros2", "--model", str(model), "--robot", str(robot), *flags, "--ros-args", *ros_args],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=(lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if sigint_ignored else None,
+    )
+
+
+def _publish_until_commanded(player, heard, t_ns: int, group: list, stamp: float, tries: int = 20) -> None:
+    """Publish the clock at ``t_ns`` and the messages of one stamp, again until a command of the
+    image's ``stamp`` is heard (best effort: a message may be lost), at most ``tries`` times."""
+    from terrapref.interop.ros_decode import stamp_s
+
+    for _ in range(tries):
+        player.publish_clock(t_ns)
+        for m in group:
+            player.publish(m)
+        try:
+            _wait(lambda: any(round(stamp_s(c.header), 6) == stamp for c in heard.get("cmd")), timeout_s=1.0, what="a command")
+            return
+        except AssertionError:
+            continue
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _wait(condition, timeout_s: float = 20.0, what: str = "") -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.01)
+
+
+class _Heard:
+    """What a subscriber of the node's topics received, by topic."""
+
+    def __init__(self) -> None:
+        self.lock, self.by_topic = threading.Lock(), {}
+
+    def keeper(self, topic: str):
+        def keep(msg) -> None:
+            with self.lock:
+                self.by_topic.setdefault(topic, []).append(msg)
+
+        return keep
+
+    def get(self, topic: str) -> list:
+        with self.lock:
+            return list(self.by_topic.get(topic, []))
+
+
+def _listen(dds, heard: _Heard) -> list:
+    """Subscriptions to the node's topics, kept in ``heard``: the readers."""
+    from terrapref.interop.dds import DEFAULT, LATCHED
+
+    return [
+        dds.subscribe("/terrapref/cmd_vel", "geometry_msgs/msg/TwistStamped", DEFAULT, heard.keeper("cmd")),
+        dds.subscribe("/terrapref/trajectories", "visualization_msgs/msg/MarkerArray", DEFAULT, heard.keeper("trajectories")),
+        dds.subscribe("/terrapref/costmap", "nav_msgs/msg/OccupancyGrid", LATCHED, heard.keeper("costmap")),
+        dds.subscribe("/tf_static", "tf2_msgs/msg/TFMessage", LATCHED, heard.keeper("tf_static")),
+    ]
+
+
+def _endpoints(dp, own) -> list:
+    """The publications and subscriptions discovery reports for participants other than ``own``."""
+    from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription
+
+    out = []
+    for kind, topic in (("publishes", BuiltinTopicDcpsPublication), ("hears", BuiltinTopicDcpsSubscription)):
+        reader = BuiltinDataReader(dp, topic)
+        out += [(kind, s) for s in reader.take(N=500) if s.participant_key != own]
+    return out
+
+
+@pytest.fixture(scope="module")
+def system(tmp_path_factory, short_recording):
+    """Two nodes: one driven frame by frame from this process (with bad input after the drive),
+    one that starts in a domain where nobody publishes and is then driven by `terrapref play`."""
+    from test_live import _watch
+    from test_offset_rule import DRIVER_LIKE, _offset_meta
+
+    from helpers import skip_path_weights
+    from terrapref.demos.recording import read_recording
+    from terrapref.interop.dds import MessageTypes, Participant
+    from terrapref.interop.mcap_export import recording_frames, write_bag
+    from terrapref.interop.play import BagPlayer
+    from terrapref.interop.ros_decode import stamp_s
+    from terrapref.interop.ros_messages import typestore
+    from terrapref.learning.model_file import save_model
+    from terrapref.learning.network import ClassifierConfig
+
+    root = tmp_path_factory.mktemp("ros2")
+    config = ClassifierConfig(hidden=8, skip=True)
+    model = save_model(root / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
+    rec = read_recording(short_recording)
+    frames = recording_frames(rec)
+    part = slice(FIRST, FIRST + FRAMES + 1)  # one frame more, for after the bad input
+    frames = replace(
+        frames,
+        times=frames.times[part],
+        poses=frames.poses[part],
+        commands=frames.commands[part],
+        chosen=frames.chosen[part],
+        image=lambda i: rec.image(FIRST + i),
+    )
+    bag = write_bag(root / "drive.mcap", frames)
+    robot = root / "drive.mcap.robot.yaml"
+    with robot.open("a") as f:  # the base ramps its speed itself: the command sent is the decision's, as the runtime's
+        f.write("limits: {max_accel_mps2: null}\n")
+
+    previous_uri = os.environ.get("CYCLONEDDS_URI")
+    os.environ["CYCLONEDDS_URI"] = LOOPBACK  # this process's participants, before its first one
+    driven, idle = _domains()
+    env = {**os.environ, "CYCLONEDDS_URI": LOOPBACK, "TERRAPREF_DEBUG": ""}
+    idle_node = _node(
+        model, robot, {**env, "ROS_DOMAIN_ID": str(idle)}, "-p", "use_sim_time:=true", "-p", "stamped:=true", sigint_ignored=True
+    )
+    idle_log: list[str] = []  # read as it comes: the node says it waits, then play starts
+    idle_reader = threading.Thread(target=lambda: idle_log.extend(idle_node.stderr), daemon=True)
+    idle_reader.start()
+    live_port, live = _free_port(), {}
+    node = _node(
+        model,
+        robot,
+        {**env, "ROS_DOMAIN_ID": str(driven)},
+        "-p",
+        "use_sim_time:=true",
+        "-p",
+        "stamped:=true",
+        "-p",
+        "rate:=50",
+        flags=("--live", "--live-port", str(live_port)),
+    )
+    node_output: dict[str, list[str]] = {"stdout": [], "stderr": []}  # read as it comes: a pipe nobody reads fills and stops the node
+    node_readers = [
+        threading.Thread(target=lambda name=name: node_output[name].extend(getattr(node, name)), daemon=True)
+        for name in ("stdout", "stderr")
+    ]
+    for reader in node_readers:
+        reader.start()
+    live_client = threading.Thread(target=_watch, args=(live_port, live), daemon=True)
+    live_client.start()
+    out = {"model": model, "bag": bag, "rec": rec}
+    player = listener = None
+    try:
+        player = BagPlayer(bag, driven, topics=["/terrapref/labels", "/terrapref/camera_info", "/terrapref/odom", "/terrapref/path"])
+        listener = Participant(driven, MessageTypes(typestore()))
+        heard = _Heard()
+        _listen(listener, heard)
+        _wait(lambda: all(w.matched() for w in player.writers.values()), what="the node's subscriptions")
+        messages = list(player.messages())
+        times = sorted({m.t_ns for m in messages})
+        # the stamp of each image of the log -> its frame
+        out["frame_of"] = {round(stamp_s(m.msg.header), 6): times.index(m.t_ns) for m in messages if m.topic == "/terrapref/labels"}
+        got: dict[float, tuple[float, float]] = {}
+        for t_ns in times[:FRAMES]:
+            group = [m for m in messages if m.t_ns == t_ns]
+            image = next(m for m in group if m.topic == "/terrapref/labels")
+            stamp = round(stamp_s(image.msg.header), 6)
+            _publish_until_commanded(player, heard, t_ns, group, stamp)
+            got[stamp] = next((c.twist.linear.x, c.twist.angular.z) for c in heard.get("cmd") if round(stamp_s(c.header), 6) == stamp)
+        out["commands"] = [got[s] for s in sorted(got)]
+        out["stamps"] = sorted(got)
+        out["discovered"] = _endpoints(listener.dp, listener.dp.get_guid())
+        out["own_endpoints"] = {("publishes", t) for t, _ in player.writers} | {("publishes", "/clock")}
+        _bad_input(player, messages, times, heard, out)
+        _wait(lambda: heard.get("costmap"), timeout_s=5.0, what="a costmap")
+        out["heard"] = heard
+        # Its part is done: Ctrl-C now (it is awaited below), for a costmap a second heard is a costly message to read.
+        node.send_signal(signal.SIGINT)
+        # The idle node heard nobody for its first seconds; now `terrapref play` drives it, and a subscriber sees it drive.
+        idle_heard, idle_listener = _Heard(), Participant(idle, MessageTypes(typestore()))
+        readers = _listen(idle_listener, idle_heard)
+        _wait(lambda: all(r.get_matched_publications() for r in readers), what="the idle node's publications")
+        _wait(lambda: any("/clock: no publisher" in line for line in idle_log), what="the idle node to say nobody publishes")
+        play = subprocess.run(
+            [
+                sys.executable,
+                "-c",
+                "import sys; from terrapref.cli import main; sys.exit(main())",
+                "play",
+                str(bag),
+                "--robot",
+                str(robot),
+                "--rate",
+                "1",
+                "--delay",
+                "0.5",
+            ],
+            env={**env, "ROS_DOMAIN_ID": str(idle)},
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        _wait(lambda: idle_heard.get("costmap"), timeout_s=5.0, what="the idle node's costmap")
+        out["play"], out["idle_heard"] = play, idle_heard
+        idle_listener.close()
+    finally:
+        for proc in (node, idle_node):
+            proc.send_signal(signal.SIGINT)
+        stuck = [_end(node, node_readers, lambda: "".join(node_output["stderr"]), "the node")]
+        out["node"] = (node.returncode, "".join(node_output["stdout"]), "".join(node_output["stderr"]))
+        live_client.join(timeout=30)
+        out["live"] = live
+        stuck.append(_end(idle_node, [idle_reader], lambda: "".join(idle_log), "the idle node"))
+        out["idle"] = (idle_node.returncode, idle_node.stdout.read(), "".join(idle_log))
+        for dds in (player, listener):
+            if dds is not None:
+                dds.close()
+        if previous_uri is None:
+            os.environ.pop("CYCLONEDDS_URI", None)
+        else:
+            os.environ["CYCLONEDDS_URI"] = previous_uri
+    assert not any(stuck), "\n".join(s for s in stuck if s)
+    return out
+
+
+def _bad_input(player, messages, times, heard, out) -> None:
+    """Each bad message twice, then the next good frame, which is decided on as ever."""
+    from terrapref.interop.ros_decode import stamp_s
+
+    ts = player.types.ts
+    t_ns = times[FRAMES - 1]
+    group = {m.topic: m for m in messages if m.t_ns == t_ns}
+    image, info, odom = group["/terrapref/labels"].msg, group["/terrapref/camera_info"].msg, group["/terrapref/odom"].msg
+    future = ts.types["nav_msgs/msg/Odometry"](
+        header=ts.types["std_msgs/msg/Header"](
+            stamp=ts.types["builtin_interfaces/msg/Time"](sec=odom.header.stamp.sec + 3600, nanosec=0), frame_id="odom"
+        ),
+        child_frame_id="base_link",
+        pose=odom.pose,
+        twist=odom.twist,
+    )
+    smaller = replace_fields(ts, info, "sensor_msgs/msg/CameraInfo", width=320, height=240)
+    garbled = replace_fields(ts, image, "sensor_msgs/msg/CompressedImage", data=np.frombuffer(b"not a png at all", dtype=np.uint8))
+    for _ in range(2):
+        player.writers["/terrapref/odom", "nav_msgs/msg/Odometry"].publish(future)
+        player.writers["/terrapref/camera_info", "sensor_msgs/msg/CameraInfo"].publish(smaller)
+        player.writers["/terrapref/labels", "sensor_msgs/msg/CompressedImage"].publish(garbled)
+        time.sleep(0.1)
+    last = [m for m in messages if m.t_ns == times[FRAMES]]
+    stamp = round(stamp_s(next(m for m in last if m.topic == "/terrapref/labels").msg.header), 6)
+    _publish_until_commanded(player, heard, times[FRAMES], last, stamp)
+    out["after_bad"] = any(round(stamp_s(c.header), 6) == stamp for c in heard.get("cmd"))
+
+
+def replace_fields(ts, msg, msgtype: str, **fields):
+    """A copy of rosbags' ``msg`` with ``fields`` changed."""
+    from dataclasses import fields as dc_fields
+
+    return ts.types[msgtype](**{f.name: fields.get(f.name, getattr(msg, f.name)) for f in dc_fields(msg)})
+
+
+def test_the_node_commands_what_the_runtime_commands_frame_by_frame(system):
+    """Each image's command, matched by its stamp (TwistStamped), is the runtime's on the same frame."""
+    from terrapref.interop.runtime import PlannerRuntime
+    from terrapref.learning.model_file import load_model
+
+    rec = system["rec"]
+    runtime = PlannerRuntime(load_model(system["model"]))
+    runtime.set_path(np.asarray(rec.meta.get("path") or rec.scenario["path"]["waypoints"], dtype=float))
+    expected = np.array(
+        [runtime.decide(rec.image(FIRST + k), s, tuple(rec.poses[FIRST + k])).command for k, s in enumerate(system["stamps"])]
+    )
+    got = np.array(system["commands"])
+    assert got.shape == (FRAMES, 2)
+    np.testing.assert_allclose(got, expected, atol=1e-6)
+    assert len(np.unique(expected[:, 1])) > 1  # the frames make it steer, not only drive straight
+    code, stdout, stderr = system["node"]
+    assert code == 0, stderr[-2000:]
+    assert f"terrapref ros2: {FRAMES + 1} frames decided on" in stdout, stdout
+    markers = system["heard"].get("trajectories")[-1].markers
+    assert len(markers) == 21 and markers[0].header.frame_id == "base_link" and len(markers[0].points) > 2
+    costmap = system["heard"].get("costmap")[-1]
+    assert costmap.header.frame_id == "odom" and costmap.info.width * costmap.info.height == len(costmap.data) > 0
+    live = system["live"]  # --live: the decisions also went to the live view, stamped with the frames' ROS times
+    assert "error" not in live and len(live.get("/terrapref/labels", [])) >= FRAMES // 2 and live.get("/terrapref/trajectories")
+    assert abs(max(ns for ns, _ in live["/terrapref/labels"]) * 1e-9 - system["stamps"][-1]) < 0.2
+    transforms = [t for m in system["heard"].get("tf_static") for t in m.transforms]
+    assert [(t.header.frame_id, t.child_frame_id) for t in transforms] == [
+        ("base_link", "terrapref_camera_link"),
+        ("terrapref_camera_link", "terrapref_camera_optical"),
+    ]
+    assert transforms[0].transform.translation.z == pytest.approx(1.0)
+
+
+def test_every_endpoint_is_named_typed_and_offered_as_ros2_expects(system):
+    """Read back from DDS discovery: rt/ topic names, pkg::msg::dds_::T_ types, QoS and the type hash."""
+    from cyclonedds.core import Policy
+
+    from terrapref.interop.ros_messages import typestore
+
+    ts = typestore()
+    seen = {}
+    for kind, e in system["discovered"]:
+        if (kind, e.topic_name[2:]) in system["own_endpoints"]:
+            continue
+        assert e.topic_name.startswith("rt/"), e.topic_name
+        pkg, msg, dds_, name = e.type_name.split("::")
+        assert msg == "msg" and dds_ == "dds_" and name.endswith("_")
+        msgtype = f"{pkg}/msg/{name[:-1]}"
+        assert e.qos[Policy.Userdata].data == f"typehash={ts.hash_rihs01(msgtype)};".encode()
+        assert e.qos[Policy.DataRepresentation] == Policy.DataRepresentation(use_cdrv0_representation=True)  # XCDR1, as ROS 2's middlewares
+        reliable = isinstance(e.qos[Policy.Reliability], Policy.Reliability.Reliable)
+        latched = e.qos[Policy.Durability] == Policy.Durability.TransientLocal
+        seen.setdefault((kind, e.topic_name[2:]), set()).add((msgtype, reliable, latched, e.qos[Policy.History].depth))
+    assert seen == {
+        ("hears", "/terrapref/labels"): {("sensor_msgs/msg/Image", False, False, 5), ("sensor_msgs/msg/CompressedImage", False, False, 5)},
+        ("hears", "/terrapref/camera_info"): {("sensor_msgs/msg/CameraInfo", False, False, 5)},
+        ("hears", "/terrapref/odom"): {
+            (t, False, False, 5)
+            for t in ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
+        },
+        ("hears", "/terrapref/path"): {("nav_msgs/msg/Path", True, False, 10), ("nav_msgs/msg/Path", True, True, 1)},
+        ("hears", "/clock"): {("rosgraph_msgs/msg/Clock", False, False, 1)},
+        ("publishes", "/terrapref/cmd_vel"): {("geometry_msgs/msg/TwistStamped", True, False, 10)},
+        ("publishes", "/terrapref/trajectories"): {("visualization_msgs/msg/MarkerArray", True, False, 10)},
+        ("publishes", "/terrapref/costmap"): {("nav_msgs/msg/OccupancyGrid", True, True, 1)},
+        ("publishes", "/terrapref/arrived"): {("std_msgs/msg/Bool", True, True, 1)},
+        ("publishes", "/tf_static"): {("tf2_msgs/msg/TFMessage", True, True, 1)},
+    }
+
+
+def test_bad_input_is_said_once_and_skipped(system):
+    """An undecodable image, a calibration of another size and odometry from the future, each sent
+    twice: each said once, counted, and the next good frame is decided on as ever."""
+    import re
+
+    code, stdout, stderr = system["node"]
+    for said in (
+        "topic /terrapref/labels: not a decodable png",
+        "/terrapref/camera_info: a camera_info of another image size than the 640 x 480 px",
+        "/terrapref/odom: odometry stamped more than 10 s ahead of the node's clock",  # a simulated clock: 10 s of lag allowed
+    ):
+        assert sum(said in line for line in stderr.splitlines()) == 1, (said, stderr)
+    assert "Traceback" not in stderr and "internal error" not in stderr and system["after_bad"]
+    for counted in ("odometry ahead of the clock", "calibrations of another size"):
+        found = re.search(rf"(\d+) {counted}", stdout)
+        assert found and 1 <= int(found.group(1)) <= 2, stdout
+
+
+def test_play_drives_a_node_that_waited_in_an_empty_domain(system):
+    """A node alone in its domain says once that nobody publishes its inputs, then `terrapref play`
+    publishes a log there and a DDS subscriber sees the node's commands, markers and costmap; started
+    with SIGINT ignored (as a script's background job is), it ends on Ctrl-C all the same.
+
+    Played in real time, a node on a slow machine keeps up with only some of the frames (it
+    hears the others too late, or not at all): what is checked is what it decided on those, not
+    how many they were."""
+    from terrapref.interop.ros_decode import stamp_s
+    from terrapref.interop.runtime import PlannerRuntime
+    from terrapref.learning.model_file import load_model
+
+    play = system["play"]
+    assert play.returncode == 0, play.stderr[-2000:]
+    assert "played" in play.stdout and "/clock" in play.stdout
+    code, stdout, stderr = system["idle"]
+    assert code == 0, stderr[-2000:]
+    for topic in ("/terrapref/labels", "/terrapref/camera_info", "/terrapref/odom", "/terrapref/path", "/clock"):
+        assert sum(f"{topic}: no publisher of" in line for line in stderr.splitlines()) == 1, stderr
+    heard = system["idle_heard"]
+    assert heard.get("costmap")
+    # Each decision's markers, stamped with its frame's time in the log: the frame, and the trajectory drawn as chosen.
+    chosen = {
+        round(stamp_s(m.markers[0].header), 6): [j for j, k in enumerate(m.markers) if k.scale.x > 0.05] for m in heard.get("trajectories")
+    }
+    decided = int(stdout.split("terrapref ros2: ")[1].split()[0])
+    assert 1 <= len(chosen) <= decided <= len(system["frame_of"]), stdout
+    assert heard.get("cmd") and {round(stamp_s(c.header), 6) for c in heard.get("cmd")} <= set(system["frame_of"])  # in the log's time
+    # The planner fed the frames the node decided on, in their order, chooses what the node chose.
+    rec, frame_of = system["rec"], system["frame_of"]
+    runtime = PlannerRuntime(load_model(system["model"]))
+    runtime.set_path(np.asarray(rec.meta.get("path") or rec.scenario["path"]["waypoints"], dtype=float))
+    for stamp in sorted(chosen):
+        k = FIRST + frame_of[stamp]
+        assert chosen[stamp] == [runtime.decide(rec.image(k), stamp, tuple(rec.poses[k])).index], (stamp, stdout)
+
+
+def test_a_participant_without_subscriptions_waits_instead_of_spinning(monkeypatch):
+    """A publisher alone (`terrapref play`'s) has nothing on its wait set: its thread must still
+    wait there, up to WAIT_NS at a time, not loop on a wait that returns at once and take a core
+    from the node it feeds. (A slower machine only waits fewer times.)"""
+    from terrapref.interop.dds import WAIT_NS, MessageTypes, Participant
+    from terrapref.interop.ros_messages import typestore
+
+    monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
+
+    class Counted:
+        def __init__(self, waitset) -> None:
+            self.waitset, self.waits = waitset, 0
+
+        def wait(self, timeout_ns: int) -> int:
+            self.waits += 1
+            return self.waitset.wait(timeout_ns)
+
+    participant = Participant(230, MessageTypes(typestore()))
+    try:
+        participant._waitset = counted = Counted(participant._waitset)
+        time.sleep(0.5)
+        assert counted.waits <= 0.5 / (WAIT_NS * 1e-9) + 5, counted.waits
+    finally:
+        participant._waitset = counted.waitset
+        participant.close()
+
+
+def test_each_message_type_is_cdr_identical_to_rosbags_and_announces_its_rihs01():
+    """Two independent serialisers (cyclonedds' from the generated types, rosbags') give the same
+    bytes for every type the node sends or reads, filled in as the node fills them."""
+    from terrapref.camera import CameraConfig
+    from terrapref.interop import ros_messages as rm
+    from terrapref.interop.dds import MessageTypes, dds_topic, dds_type
+
+    ts = rm.typestore()
+    types = MessageTypes(ts)
+    T = ts.types
+    h = rm.header(ts, 1.25, "camera_optical")
+    pose = rm.pose(ts, 3.0, -4.5, rm.yaw_quaternion(ts, 0.7))
+    odom = rm.odometry(ts, rm.header(ts, 1.25, "odom"), pose)
+    odom.pose.covariance = np.arange(36, dtype=float)
+    info = rm.camera_info(ts, h, CameraConfig())
+    info.d = np.array([-0.2, 0.05, 0.001, 0.0, 0.0])
+    ids = np.arange(48, dtype=np.uint8).reshape(6, 8)
+    marker = rm.zeroed(
+        ts,
+        "visualization_msgs/msg/Marker",
+        header=h,
+        ns="trajectories",
+        id=3,
+        type=4,
+        action=0,
+        scale=rm.vector3(ts, x=0.06),
+        color=T["std_msgs/msg/ColorRGBA"](r=0.1, g=0.9, b=0.2, a=1.0),
+        points=[rm.point(ts, 0.1 * k, 0.01 * k * k, 0.02) for k in range(30)],
+    )
+    messages = {
+        "sensor_msgs/msg/Image": T["sensor_msgs/msg/Image"](
+            header=h, height=6, width=8, encoding="mono8", is_bigendian=0, step=8, data=ids.ravel()
+        ),
+        "sensor_msgs/msg/CompressedImage": rm.compressed_image(ts, h, "png", rm.png(ids)),
+        "sensor_msgs/msg/CameraInfo": info,
+        "nav_msgs/msg/Odometry": odom,
+        "geometry_msgs/msg/PoseStamped": T["geometry_msgs/msg/PoseStamped"](header=h, pose=pose),
+        "geometry_msgs/msg/PoseWithCovarianceStamped": T["geometry_msgs/msg/PoseWithCovarianceStamped"](header=h, pose=odom.pose),
+        "nav_msgs/msg/Path": rm.path_message(ts, [(0.0, 0.0), (5.0, 1.0), (9.5, -2.0)], t_s=2.0),
+        "rosgraph_msgs/msg/Clock": T["rosgraph_msgs/msg/Clock"](clock=h.stamp),
+        "geometry_msgs/msg/Twist": rm.twist(ts, 1.0, -0.3),
+        "geometry_msgs/msg/TwistStamped": T["geometry_msgs/msg/TwistStamped"](header=h, twist=rm.twist(ts, 0.5, 0.25)),
+        "visualization_msgs/msg/MarkerArray": T["visualization_msgs/msg/MarkerArray"](markers=[marker, marker]),
+        "nav_msgs/msg/OccupancyGrid": rm.occupancy_grid(ts, h, np.array([[-1, 0, 50], [99, 100, 7]], np.int8), 0.25, (-3.0, 4.0)),
+        "tf2_msgs/msg/TFMessage": rm.tf_message(ts, rm.camera_mount(ts, CameraConfig(), t_s=1.0, frames=("a", "b"))),
+    }
+    assert set(messages) == set(NODE_TYPES)
+    for msgtype, msg in messages.items():
+        ours = types.to_idl(msg, msgtype).serialize()
+        theirs = bytes(ts.serialize_cdr(msg, msgtype))
+        assert ours[:4] == b"\x00\x01\x00\x00", msgtype  # CDR little endian, XCDR1
+        assert ours == theirs, msgtype
+        back = types.idl(msgtype).deserialize(theirs)  # and each reads the other's
+        assert back.serialize() == theirs, msgtype
+        cls = types.idl(msgtype)
+        assert cls.__idl_typename__ == dds_type(msgtype) == msgtype.replace("/msg/", "::msg::dds_::") + "_"
+        assert cls.__idl__.keyless, msgtype
+        assert types.user_data(msgtype) == f"typehash={ts.hash_rihs01(msgtype)};".encode(), msgtype
+        assert types.type_hash(msgtype).startswith("RIHS01_") and len(types.type_hash(msgtype)) == 7 + 64
+    for msgtype, known in JAZZY_HASHES.items():
+        assert types.type_hash(msgtype) == known
+    assert dds_topic("/terrapref/cmd_vel") == "rt/terrapref/cmd_vel"
+
+
+def test_ros_args_set_parameters_and_remap_names():
+    from terrapref.errors import UserError
+    from terrapref.interop.node_core import NodeOptions
+    from terrapref.interop.ros2 import Names, RosArgs
+
+    args = RosArgs.parse(
+        [
+            "-p",
+            "rate:=10",
+            "-p",
+            "stamped:=true",
+            "-p",
+            "use_sim_time:=true",
+            "-r",
+            "__ns:=/robot",
+            "-r",
+            "/seg:=/cam/labels",
+            "-r",
+            "cmd_vel:=/mux/planner",
+        ]
+    )
+    opts = NodeOptions().resolved(args.get_param, param=lambda name: f"-p {name}")
+    assert (opts.rate, opts.stamped, args.use_sim_time) == (10, True, True)
+    names = Names(args.remaps)
+    assert names.fqn == "/robot/terrapref"
+    assert names.resolve("~/trajectories") == "/robot/terrapref/trajectories"
+    assert names.resolve("/seg") == "/cam/labels" and names.resolve("cmd_vel") == "/mux/planner" and names.resolve("/odom") == "/odom"
+    for bad, match in (
+        (["-p", "rate:=fast"], "-p rate"),
+        (["-p", "speed:=1"], "no such parameter"),
+        (["--log-level", "debug"], "--log-level"),
+        (["-r", "a"], "-r needs"),
+    ):
+        with pytest.raises(UserError, match=match):
+            NodeOptions().resolved(RosArgs.parse(bad).get_param, param=lambda name: f"-p {name}")
+
+
+@pytest.mark.parametrize(
+    "argv, env, words",
+    [
+        (["ros2", "--model", "M", "--robot", "R", "--ros-args", "-p", "rate:=0"], {}, ["-p rate", "(0, 200]"]),
+        (["ros2", "--model", "M", "--robot", "R"], {"ROS_DOMAIN_ID": "999"}, ["ROS_DOMAIN_ID", "[0, 232]"]),
+        (["play", "nowhere.mcap"], {}, ["nowhere.mcap", "no such file"]),
+        (["play", "drive.bag"], {}, ["ROS 1 bag", "rosbag play"]),
+        (["play", "nowhere.mcap", "--rate", "0"], {}, ["--rate"]),
+    ],
+)
+def test_a_bad_argument_is_one_line_naming_it(argv, env, words, capsys, monkeypatch, tmp_path):
+    from helpers import linear_model, one_line_error
+    from terrapref.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "drive.bag").write_bytes(b"")
+    linear_model(tmp_path / "M")
+    (tmp_path / "R").write_text(
+        "format: terrapref-robot/1\ntopics: {segmentation: /s, camera_info: /i, odometry: /o, command: /c}\n"
+        "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n"
+    )
+    for key, value in env.items():
+        monkeypatch.setenv(key, value)
+    assert main(argv) == 2
+    one_line_error(capsys, *words)
+
+
+def test_a_simulated_clock_that_stops_is_seen_by_the_wall_clock(monkeypatch):
+    """The node's /clock: how long it has not moved on by the wall clock (what the node says, and
+    stops for, when the log player dies); the system's clock never stands still."""
+    from types import SimpleNamespace
+
+    from terrapref.interop import ros2
+
+    wall = [50.0]
+    monkeypatch.setattr(ros2.time, "monotonic", lambda: wall[0])
+    clock = ros2.NodeClock(sim=True)
+    assert clock.still_s() == 0.0 and not clock.running()
+    for t in (10.0, 10.1):
+        clock.on_clock(SimpleNamespace(clock=SimpleNamespace(sec=int(t), nanosec=round((t % 1) * 1e9))))
+        wall[0] += 0.1
+    assert clock.now() == pytest.approx(10.1) and clock.still_s() == pytest.approx(0.1)
+    wall[0] += 1.5  # the player died: no /clock for 1.5 s
+    clock.on_clock(SimpleNamespace(clock=SimpleNamespace(sec=10, nanosec=100_000_000)))  # the same time again is not moving on
+    assert clock.still_s() == pytest.approx(1.6)
+    assert ros2.NodeClock(sim=False).still_s() == 0.0

@@ -1,0 +1,99 @@
+"""Higher-level planning (terrapref.planner.route): a global route over a prior map, priced by
+the learned costmap, and ``terrapref route``."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_offset_rule import DRIVER_LIKE, _offset_meta, _scenario, _terrain
+
+from helpers import model_meta, one_line_error, skip_path_weights
+from terrapref.camera import PinholeCamera
+from terrapref.cli import main
+from terrapref.features import FeatureConfig
+from terrapref.groundmap.costmap import LETHAL_COST
+from terrapref.interop.robot import load_waypoints
+from terrapref.learning.model_file import save_model
+from terrapref.learning.network import ClassifierConfig
+from terrapref.planner.route import RouteConfig, RouteError, plan_route
+from terrapref.rules.offset.fit import OffsetUtility
+from terrapref.rules.offset.rule import OffsetSteering
+from terrapref.scenario import load_scenario
+from terrapref.scenario.path import ReferencePath
+from terrapref.terrain import default_classes
+from terrapref.world import rasterise
+
+CONTROL = FeatureConfig().preference.control  # the default control set: 1 m/s
+
+NAMES = default_classes().feature_names
+PATH = ReferencePath(np.array([[2.0, 10.0], [38.0, 10.0]]))
+
+
+def _route(patches: list[dict], config: RouteConfig | None = None):
+    """The route along PATH over ``patches``, priced as DRIVER_LIKE prices them, and its costmap."""
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), PinholeCamera(), _terrain((0,), NAMES), CONTROL)
+    prices = stage.route_prices()
+    costmap = prices.prior(rasterise(_scenario(patches)))
+    return plan_route(costmap, PATH, prices.detour_price, prices.span_m, config=config), costmap
+
+
+def _band(cls: str, x: tuple[float, float], y: tuple[float, float]) -> dict:
+    return {"class": cls, "rectangle": {"center": [sum(x) / 2, sum(y) / 2], "size": [x[1] - x[0], y[1] - y[0]]}}
+
+
+def test_a_long_dear_patch_is_gone_round_on_its_near_side_and_the_route_agrees_with_the_costmap():
+    # 16 m of water across the path, 2.5 m of it to the right and 4 m to the left: 0.068 per m^2
+    # per metre for about 3 m off the path is far less than 1.9 per metre of water.
+    route, costmap = _route([_band("water", (12.0, 28.0), (7.5, 14.0))])
+    offsets = route.waypoints[:, 1] - 10.0
+    assert offsets.min() < -3.0 and offsets.max() < 0.3  # round the right, the near side
+    assert 3.0 < route.max_offset_m < 4.5
+    cells = [costmap.at(x, y) for x, y in route.waypoints]
+    assert max(cells) == 0  # the route keeps to the background the costmap prices at nothing ...
+    assert route.cost < route.along_path_cost  # ... and costs less than the path through the water
+    np.testing.assert_allclose(route.waypoints[[0, -1]], PATH.waypoints[[0, -1]])
+
+
+def test_a_short_cheap_patch_is_crossed():
+    route, _ = _route([_band("mud", (17.0, 23.0), (7.5, 14.0))])  # 6 m of mud: cheaper than going 3 m out
+    assert route.max_offset_m < 1.0
+
+
+def test_lethal_terrain_is_kept_clear_by_half_the_width_and_the_margin_or_refused():
+    config = RouteConfig(half_width_m=0.6, lethal_margin_m=0.3)
+    route, costmap = _route([_band("non_traversable", (18.0, 21.0), (8.5, 11.5))], config)
+    assert LETHAL_COST not in [costmap.at(x, y) for x, y in route.waypoints]
+    dense = ReferencePath(route.waypoints).resampled(0.05)[0]
+    gap = np.hypot(np.maximum(np.abs(dense[:, 0] - 19.5) - 1.5, 0), np.maximum(np.abs(dense[:, 1] - 10.0) - 1.5, 0))
+    assert gap.min() > 0.6  # 0.9 m kept from the block, less a search cell and the cut of a bend's chord
+    with pytest.raises(RouteError, match="cuts the path's start from its end"):
+        _route([_band("non_traversable", (18.0, 21.0), (0.0, 20.0))])
+
+
+def test_terrapref_route_writes_a_scenario_that_follows_the_route(tmp_path, capsys):
+    config = ClassifierConfig(hidden=8, skip=True)
+    model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
+    out = tmp_path / "route.yaml"
+    assert main(["route", "fig7_rock_vs_non_traversable_left", "--model", str(model), "--out", str(out)]) == 0
+    assert "meets lethal terrain" in capsys.readouterr().out  # the path itself clips the trees
+    routed = load_scenario(out)
+    world = rasterise(routed)
+    row, col, inside = world.cells_of(routed.waypoints)
+    assert inside.all() and not np.isin(world.raster[row, col], list(routed.classes.lethal_ids)).any()
+    np.testing.assert_array_equal(load_waypoints(out, "test"), routed.waypoints)  # ros1 --path-file reads it
+    assert (tmp_path / "route.png").stat().st_size > 10_000
+    plain = save_model(tmp_path / "c.safetensors", config, skip_path_weights(config), model_meta())
+    assert main(["route", "fig7_rock_vs_non_traversable_left", "--model", str(plain), "--out", str(tmp_path / "c.yaml")]) == 2
+    one_line_error(capsys, "c.safetensors", "learned no prices")
+    assert not (tmp_path / "c.yaml").exists()
+
+
+def test_a_route_keeps_off_the_maps_edge_and_a_path_that_ends_where_it_starts_is_refused():
+    edge = ReferencePath(np.array([[2.0, 1.5], [38.0, 1.5]]))  # 1.5 m from the map's southern edge, beside a strip of water
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), PinholeCamera(), _terrain((0,), NAMES), CONTROL)
+    prices = stage.route_prices()
+    costmap = prices.prior(rasterise(_scenario([_band("water", (15.0, 25.0), (1.0, 4.0))])))
+    route = plan_route(costmap, edge, prices.detour_price, prices.span_m)
+    assert ReferencePath(route.waypoints).resampled(0.05)[0][:, 1].min() > 0.8  # never within 0.9 m (less a cell) of the edge
+    with pytest.raises(RouteError, match="ends in the search cell it starts in"):
+        plan_route(costmap, ReferencePath(np.array([[10.0, 10.0], [10.1, 10.1]])), prices.detour_price, prices.span_m)

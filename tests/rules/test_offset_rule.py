@@ -1,0 +1,643 @@
+"""The offset rule (terrapref.rules.offset): its offsets' features, ground map, fit and decision, on
+tiny scenarios with closed-form answers."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cpu_settings import SETTINGS, CpuCheck
+from helpers import TESTS, model_meta, skip_path_weights
+from terrapref.camera import PinholeCamera, SegmentationRenderer, SegmentationView
+from terrapref.dataset import FORMAT as DATASET_FORMAT
+from terrapref.dataset import Dataset, load_dataset, save_dataset
+from terrapref.errors import UserError
+from terrapref.features import FeatureConfig, UtilityFeaturizer
+from terrapref.groundmap.columns import TerrainColumns
+from terrapref.groundmap.map import GroundMap
+from terrapref.groundmap.settings import MapSettings
+from terrapref.learning.model_file import load_model, save_model
+from terrapref.learning.network import ClassifierConfig
+from terrapref.planner import Planner
+from terrapref.planner.registry import load_policy
+from terrapref.rules.offset.features import OffsetFeatures, gated
+from terrapref.rules.offset.fit import OffsetUtility, fit_offset_utility, fit_softmax, soft_labels
+from terrapref.rules.offset.geometry import OffsetGeometry
+from terrapref.rules.offset.rule import OffsetConfig, OffsetSteering
+from terrapref.rules.offset.steering import intent_offsets, steer
+from terrapref.scenario import parse_scenario
+from terrapref.scenario.path import ReferencePath
+from terrapref.terrain import default_classes
+from terrapref.vehicle import Command, integrate_unicycle
+
+CONTROL = FeatureConfig().preference.control  # the default control set: 1 m/s
+
+K = len(default_classes().feature_names)  # columns: non_traversable, water, rock, mud
+# The synthetic driver's own costs relative to its detour price (per metre 1, 1.5, 2.25 by rank
+# for mud > rock > water, 30 for non_traversable, 0.08 per m^2 per metre of detour), scaled.
+DRIVER_LIKE = np.array([-25.5, -1.9125, -1.275, -0.85, 0.0, -0.068, -1.3])
+
+
+def _scenario(terrain: list[dict]):
+    return parse_scenario(
+        {
+            "format": "terrapref-scenario/1",
+            "name": "corridor_test",
+            "world": {"size_m": [40.0, 20.0], "resolution_m": 0.05, "background": "grass"},
+            "terrain": terrain,
+            "path": {"waypoints": [[2.0, 10.0], [38.0, 10.0]]},
+        }
+    )
+
+
+MUD = {"class": "mud", "rectangle": {"center": [12.1, 10.0], "size": [3.0, 2.0]}}  # 8.6-11.6 m along the path, 1 m each side
+TREES = {"class": "non_traversable", "rectangle": {"center": [14.1, 10.2], "size": [2.0, 2.2]}}
+
+
+@pytest.fixture(scope="module")
+def camera() -> PinholeCamera:
+    return PinholeCamera()
+
+
+def _columns() -> np.ndarray:
+    return UtilityFeaturizer(FeatureConfig(), PinholeCamera()).class_columns
+
+
+def _terrain(lethal: tuple[int, ...] = (), names: tuple[str, ...] = ()) -> TerrainColumns:
+    return TerrainColumns(_columns(), K, lethal, names)
+
+
+def _map_of(stage: OffsetSteering, camera: PinholeCamera) -> GroundMap:
+    """The ground map a planner keeps for ``stage``: its settings, with its lethal columns."""
+    return GroundMap(camera, _terrain(tuple(int(c) for c in np.flatnonzero(stage.lethal[:K]))), stage.map_settings)
+
+
+def _steer(stage: OffsetSteering, gmap: GroundMap, view: SegmentationView, pose, path, s: float, speed_mps: float | None = None) -> float:
+    """One frame as the planner gives it to ``stage``: ``gmap`` gathers ``view``, then the rule steers."""
+    gmap.update(view, pose)
+    return stage.yaw_rate(gmap, pose, path, s, speed_mps)
+
+
+def _seen_from(scenario, camera: PinholeCamera, pose) -> SegmentationView:
+    from terrapref.world import rasterise
+
+    return SegmentationView.of(SegmentationRenderer(camera, rasterise(scenario)).render(pose))
+
+
+def test_offsets_and_stations_are_symmetric_grids():
+    c = OffsetGeometry()
+    assert len(c.offsets) == 31 and c.offsets[15] == 0.0
+    np.testing.assert_allclose(c.offsets, -c.offsets[::-1])
+    assert c.stations[0] == -1.0 and c.stations[-1] == 11.0 and len(c.stations) == 49
+    assert OffsetGeometry.from_dict(c.to_dict()) == c
+    with pytest.raises(ValueError):
+        OffsetGeometry(offset_step_m=0.0)
+    with pytest.raises(ValueError):
+        OffsetGeometry(stations_m=(5.0, 1.0))
+
+
+def test_a_patch_ahead_on_the_path_is_metres_on_its_class_and_sets_the_near_distance(camera):
+    scenario = _scenario([MUD])
+    gmap = GroundMap(camera, _terrain())
+    gmap.update(_seen_from(scenario, camera, (2.0, 10.0, 0.0)), (2.0, 10.0, 0.0))
+    corridor = OffsetFeatures(OffsetGeometry(), K)
+    view = corridor(gmap, ReferencePath(scenario.waypoints), 0.0)
+    offsets = corridor.offsets
+    mud = view.features[:, 3]
+    centre = int(np.argmin(np.abs(offsets)))
+    # Stations 8.75 ... 11.0 lie on the mud (the corridor ends 11 m ahead): 10 x 0.25 m.
+    assert mud[centre] == pytest.approx(2.5, abs=0.3)
+    assert view.near_m == pytest.approx(8.75, abs=0.3)
+    # 1.4 m aside or more, the 1.2 m footprint is off the 2 m wide patch.
+    assert (mud[np.abs(offsets) >= 1.6 + 1e-9] == 0).all()
+    # The detour's price: d^2 * (on-path length + 5 m).
+    on_path = view.features[centre + 5, 5] / offsets[centre + 5] ** 2 - 5.0
+    assert on_path == pytest.approx(2.5, abs=0.3)
+    # Behind the camera nothing has been seen: the first metres of every offset are unseen.
+    assert (view.features[:, 4] >= 1.0).all()
+    gate = gated(view, offsets, near_m=5.0)
+    assert (gate[:, -1] == offsets**2).all()  # nothing on the path within 5 m
+    assert (gated(view, offsets, near_m=10.0)[:, -1] == 0).all()
+
+
+def test_the_ground_map_keeps_the_world_fixed_when_it_recentres(camera):
+    scenario = _scenario([MUD])
+    gmap = GroundMap(camera, _terrain())
+    gmap.update(_seen_from(scenario, camera, (2.0, 10.0, 0.0)), (2.0, 10.0, 0.0))
+    points = np.stack(np.meshgrid(np.arange(0.0, 20.0, 0.07), np.arange(5.0, 15.0, 0.07)), axis=-1)
+    before = gmap.lookup(points)
+    origin = gmap.origin.copy()
+    gmap.update(SegmentationView.of(np.full(camera.shape, 255, np.uint8)), (20.0, 9.0, 0.0))  # far enough to recentre; sees nothing
+    assert not np.allclose(gmap.origin, origin)
+    after = gmap.lookup(points)
+    kept = after != K + 1
+    assert (after[kept] == before[kept]).all() and kept.sum() > 0.5 * (before != K + 1).sum()
+
+
+def _noisy_views(scenario, camera: PinholeCamera, pose, errors, frames: int, seed: int = 0):
+    """``frames`` views of ``scenario`` from ``pose``, each with its own draw of the label errors ``errors``."""
+    from terrapref.perception import LabelErrors
+    from terrapref.perception.labels import LabelledView, LabelNoise
+    from terrapref.world import rasterise
+
+    renderer = SegmentationRenderer(camera, rasterise(scenario))
+    noise = LabelNoise(LabelErrors(**errors), camera, scenario.classes)
+    rng = np.random.default_rng(seed)
+    noise.reset(rng)
+    return [LabelledView(SegmentationView(renderer, pose), noise.draw(rng, k)) for k in range(frames)]
+
+
+def test_the_ground_map_outvotes_labels_a_few_frames_get_wrong(camera):
+    """With 20% of pixels flipped in every frame (a fifth of them to trees), a map of the last view
+    shows trees all over; the votes of thirty frames show the mud where it is and no tree at all."""
+    scenario = _scenario([MUD])
+    pose = (2.0, 10.0, 0.0)
+    truth = GroundMap(camera, _terrain((0,)))
+    truth.update(_seen_from(scenario, camera, pose), pose)
+    voted = GroundMap(camera, _terrain((0,)))
+    for view in _noisy_views(scenario, camera, pose, {"flip_rate": 0.2}, 30):
+        voted.update(view, pose)
+    last = GroundMap(camera, _terrain((0,)), MapSettings(map_fade=0.0))
+    last.update(view, pose)
+    seen = truth.cells != K + 1
+    assert (voted.cells[seen] == truth.cells[seen]).mean() > 0.999
+    assert (voted.cells == 0).sum() == 0  # not one cell of phantom trees
+    assert (last.cells[seen] == 0).mean() > 0.02  # the last view alone: trees everywhere
+
+
+def test_a_lethal_share_of_the_evidence_makes_a_cell_lethal(camera):
+    """Trees seen in 40% of the frames are lethal at a lethal share of 0.35, not at 0.5; mud seen as
+    often (and grass the rest) is terrain at a terrain share of 0.35, and grass at 0.5."""
+    pose = (2.0, 10.0, 0.0)
+    views = {
+        c: _seen_from(_scenario([{"class": c, "rectangle": {"center": [12.1, 10.0], "size": [3.0, 2.0]}}]), camera, pose)
+        for c in ("non_traversable", "mud")
+    }
+    plain = _seen_from(_scenario([]), camera, pose)
+    centre = np.array([[12.1, 10.0]])
+    for patch, share, expect in (
+        ("non_traversable", dict(map_lethal_share=0.35), 0),
+        ("non_traversable", dict(map_lethal_share=0.5), K),
+        ("mud", dict(map_terrain_share=0.35), 3),
+        ("mud", dict(map_terrain_share=0.5), K),
+    ):
+        gmap = GroundMap(camera, _terrain((0,)), MapSettings(map_fade=1.0, **share))
+        for k in range(10):
+            view = views[patch] if k % 5 in (1, 3) else plain
+            gmap.update(view, pose)
+        assert gmap.lookup(centre)[0] == expect, (patch, share)
+
+
+def test_the_ground_map_waits_for_enough_evidence_before_a_cell_counts_as_seen(camera):
+    scenario = _scenario([MUD])
+    pose = (2.0, 10.0, 0.0)
+    view = _seen_from(scenario, camera, pose)
+    gmap = GroundMap(camera, _terrain(), MapSettings(map_min_evidence=0.5))
+    gmap.update(view, pose)
+    near, far = np.array([[4.0, 10.0]]), np.array([[14.5, 10.0]])  # 2 m ahead: a vote of 0.8; 12.5 m: 0.09
+    assert gmap.lookup(near)[0] == K and gmap.lookup(far)[0] == K + 1
+    for _ in range(6):
+        gmap.update(view, pose)
+    assert gmap.lookup(far)[0] == K
+
+
+def test_steering_toward_an_offset_is_pure_pursuit():
+    path = ReferencePath(np.array([[0.0, 0.0], [30.0, 0.0]]))
+    w = steer(path, (0.0, 0.0, 0.0), 0.0, np.array([0.0, 1.0, -1.0]), 2.5, 1.0)
+    # Target 2.5 m ahead, 1 m aside: w = 2 v sin(alpha) / L = 2 * 1 / L^2 with L^2 = 7.25.
+    np.testing.assert_allclose(w, [0.0, 2.0 / 7.25, -2.0 / 7.25])
+
+
+def test_the_intended_offset_inverts_pure_pursuit():
+    path = ReferencePath(np.array([[0.0, 0.0], [30.0, 0.0]]))
+    offsets = OffsetGeometry().offsets
+    # Heading 0.2 rad to the left at 0.3 m: straight ahead, 2.5 m on, is 0.3 + 2.5 tan(0.2) = 0.807 m.
+    poses = np.array([[5.0, 0.0, 0.0], [6.0, 0.3, 0.2], [7.0, 0.0, 0.0]])
+    w = steer(path, tuple(poses[0]), 5.0, 1.2, 2.5, 1.0)
+    later = np.array([[1.0, float(w)], [1.0, 0.0], [np.nan, np.nan]])
+    intent = intent_offsets(poses, later, np.array([5.0, 6.0, 7.0]), path, offsets, 2.5)
+    assert intent[0] == pytest.approx(1.2)
+    assert intent[1] == pytest.approx(0.8)  # the stick at rest: the offset it is heading for, not where it is
+    assert np.isnan(intent[2])
+
+
+def test_the_softmax_fit_recovers_the_weights_that_made_the_labels():
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(4000, 9, 3))
+    truth = np.array([1.5, -0.7, 0.3])
+    z = X @ truth
+    Y = np.exp(z - z.max(axis=1, keepdims=True))
+    Y /= Y.sum(axis=1, keepdims=True)
+    theta, _ = fit_softmax(X, Y, l2=0.0)
+    np.testing.assert_allclose(theta, truth, atol=1e-6)
+
+
+def test_the_offset_fit_picks_the_near_distance_that_explains_the_labels():
+    """Frames where the driver keeps to the path while a patch is far and swerves once it is near."""
+    rng = np.random.default_rng(1)
+    c = OffsetGeometry()
+    offsets = c.offsets
+    n = 600
+    near = rng.uniform(1.0, 10.0, n)
+    features = np.zeros((n, len(offsets), K + 2))
+    features[:, :, 3] = np.where(np.abs(offsets) < 1.0, 2.0, 0.0)  # 2 m of mud near the path, on every frame
+    features[:, :, 5] = offsets**2 * 7.0
+    intent = np.where(near > 4.0, 0.0, 1.4 * rng.choice([-1.0, 1.0], n))
+    fit = fit_offset_utility(features, near, intent, offsets)
+    assert fit.near_m == 4.0 and fit.samples == n
+    assert fit.weights[3] < 0 and fit.weights[-1] < 0  # mud costs; far from a patch, so does leaving the path
+    assert soft_labels(np.array([0.0]), offsets, 0.3).sum() == pytest.approx(1.0)
+    with pytest.raises(ValueError):
+        fit_offset_utility(features, near, np.full(n, np.nan), offsets)
+
+
+def _drive(stage: OffsetSteering, scenario, camera: PinholeCamera, seconds: float) -> np.ndarray:
+    from terrapref.scenario.path import PathTracker
+    from terrapref.world import rasterise
+
+    renderer = SegmentationRenderer(camera, rasterise(scenario))
+    path = ReferencePath(scenario.waypoints)
+    tracker = PathTracker(path)
+    pose = (2.0, 10.0, 0.0)
+    poses = []
+    gmap = _map_of(stage, camera)
+    for _ in range(round(seconds * 10)):
+        s = tracker.update(np.array(pose[:2]))
+        w = _steer(stage, gmap, SegmentationView.of(renderer.render(pose)), pose, path, s)
+        pose = integrate_unicycle(pose, Command(1.0, w), 0.1)
+        poses.append(pose)
+    return np.array(poses)
+
+
+def test_the_offset_stage_goes_round_trees_on_the_path_and_comes_back(camera):
+    scenario = _scenario([TREES])
+    lethal = np.array([0])
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain(tuple(int(c) for c in lethal)), CONTROL)
+    poses = _drive(stage, scenario, camera, 30.0)
+    # Clear of the 2 x 2.2 m trees (x 13.1-15.1, y 9.1-11.3) by the half-width 0.6 m at least.
+    beside = (poses[:, 0] > 13.1 - 0.6) & (poses[:, 0] < 15.1 + 0.6)
+    gap = np.minimum(np.abs(poses[beside, 1] - 9.1), np.abs(poses[beside, 1] - 11.3))
+    outside = (poses[beside, 1] < 9.1) | (poses[beside, 1] > 11.3)
+    assert outside.all() and gap.min() > 0.6
+    assert abs(poses[-1, 1] - 10.0) < 0.3  # back on the path
+    stage.reset()
+    assert stage.held == 0.0
+
+
+def _clearance(poses: np.ndarray, centre: tuple[float, float], size: tuple[float, float]) -> float:
+    """Least distance [m] from the driven centre line to an axis-aligned rectangle."""
+    dx = np.maximum(np.abs(poses[:, 0] - centre[0]) - size[0] / 2, 0.0)
+    dy = np.maximum(np.abs(poses[:, 1] - centre[1]) - size[1] / 2, 0.0)
+    return float(np.hypot(dx, dy).min())
+
+
+def test_trees_wider_than_every_fitted_offset_are_escaped_beyond_them(camera):
+    # 7 m across: the fitted offsets reach 3 m, getting round needs 3.5 + 0.6 + 0.3 = 4.4 m or more.
+    wide = {"class": "non_traversable", "rectangle": {"center": [16.0, 10.0], "size": [2.5, 7.0]}}
+    scenario = _scenario([wide])
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
+    poses = _drive(stage, scenario, camera, 34.0)
+    assert _clearance(poses, (16.0, 10.0), (2.5, 7.0)) > 0.6 + 0.3
+    assert abs(poses[-1, 1] - 10.0) < 0.3 and stage.held == 0.0  # back on the path
+    stuck = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL, OffsetConfig(escape_factor=1.0))
+    assert _clearance(_drive(stuck, scenario, camera, 34.0), (16.0, 10.0), (2.5, 7.0)) == 0.0  # without escape it drives in
+
+
+def _taken(scenario, camera: PinholeCamera, pose, held: float, speed_mps: float | None = None) -> float:
+    """The offset a fresh rule holds after one frame seen at ``pose`` (on the test path, which
+    starts at x = 2 m), holding ``held`` before it, the vehicle going at ``speed_mps``."""
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
+    stage.held = held
+    _steer(
+        stage, _map_of(stage, camera), _seen_from(scenario, camera, pose), pose, ReferencePath(scenario.waypoints), pose[0] - 2.0, speed_mps
+    )
+    return stage.held
+
+
+def test_an_escape_is_taken_on_the_side_of_the_offset_held(camera):
+    # Trees 7 m across, 0.4 m left of the path: the nearest escape clear of them is right of it
+    # (4.2 m), the left one lies 0.6 m further out (4.8 m). Holding nothing, the vehicle takes the
+    # nearest; holding an offset on the left, it stays on the left rather than cross in front of them.
+    wall = {"class": "non_traversable", "rectangle": {"center": [16.0, 10.4], "size": [2.5, 7.0]}}
+    taken = {held: _taken(_scenario([wall]), camera, (9.0, 10.0, 0.0), held) for held in (0.0, 2.0, -2.0)}
+    reach = OffsetGeometry().max_offset_m
+    assert taken[0.0] < -reach and taken[-2.0] == taken[0.0]  # the nearest, on the right
+    assert taken[2.0] > reach  # held on the left: the escape on the left
+
+
+def test_at_speed_an_offset_ruled_out_is_traded_for_one_on_the_same_side(camera):
+    # A tree 2.2 m across on the path, 5 m ahead; the vehicle holds an offset right of the path
+    # whose way meets it. The utility prefers the left side, by less than the switch margin. At
+    # the control set's speed the rule takes the best, on the left; faster than that it keeps to the
+    # right, where it was already going.
+    tree = {"class": "non_traversable", "rectangle": {"center": [14.0, 10.0], "size": [2.0, 2.2]}}
+    taken = {speed: _taken(_scenario([tree]), camera, (8.0, 10.0, 0.0), -1.0, speed) for speed in (None, 1.0, 1.5)}
+    assert taken[None] == taken[1.0] > 2.0  # the best, across
+    assert taken[1.5] < -2.0  # clear of the tree on the right
+
+
+def test_the_stage_goes_back_to_the_path_only_when_the_way_back_is_clear(camera):
+    # A thin strip of trees 0.65-1.0 m right of the path: off the footprint of offset 0 (0.6 m
+    # each side) but inside its clearance (0.9 m), so nothing lies on the path, yet the way
+    # back from 1.4 m left is ruled out.
+    strip = {"class": "non_traversable", "rectangle": {"center": [11.0, 9.175], "size": [4.0, 0.35]}}
+    scenario = _scenario([strip])
+    path = ReferencePath(scenario.waypoints)
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
+    pose = (9.0, 11.4, 0.0)
+    stage.held = 1.4
+    _steer(stage, _map_of(stage, camera), _seen_from(scenario, camera, pose), pose, path, 7.0)
+    assert stage.held > 0.0
+    free = _scenario([])
+    stage.reset()
+    stage.held = 1.4
+    _steer(stage, _map_of(stage, camera), _seen_from(free, camera, pose), pose, path, 7.0)
+    assert stage.held == 0.0  # with nothing there it goes back
+
+
+def test_a_side_only_the_margin_rules_out_is_kept_rather_than_a_way_across_lethal_terrain(camera):
+    # Trees on the path, 2.5 m across (1.25 m each side), from 1.5 m ahead. The vehicle is 1.8 m
+    # left of the path: its footprint (0.6 m each side) passes them, its clearance (0.9 m) does
+    # not, so the way to every offset brushes the clearance. The ways to the right offsets touch
+    # it later (only once they are across), which is no reason to cross the trees.
+    trees = {"class": "non_traversable", "rectangle": {"center": [16.0, 10.0], "size": [8.0, 2.5]}}
+    scenario = _scenario([trees])
+    path = ReferencePath(scenario.waypoints)
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
+    pose = (10.5, 11.8, 0.0)
+    gmap = _map_of(stage, camera)
+    gmap.update(_seen_from(scenario, camera, pose), pose)
+    assert (stage._swept(gmap, stage.offsets, pose, path, 8.5) < stage._steps).all()  # every way brushes the clearance
+    stage.reset()
+    gmap.reset()
+    stage.held = 2.8
+    poses = []
+    while pose[0] < 20.0:  # until past the trees
+        s = path.project(np.array(pose[:2]))[0]
+        w = _steer(stage, gmap, _seen_from(scenario, camera, pose), pose, path, s)
+        pose = integrate_unicycle(pose, Command(1.0, w), 0.1)
+        poses.append(pose)
+        assert stage.held > 0.0  # never the way across
+    assert _clearance(np.array(poses), (16.0, 10.0), (8.0, 2.5)) > 0.6
+
+
+def test_when_lethal_terrain_lies_across_every_way_the_side_held_is_kept(camera):
+    # A slanted non_traversable strip across the whole corridor, nearer on the left: the footprint
+    # meets it on the way to every offset, and the ways to the right run farthest before it.
+    # Holding a left offset, the stage keeps to the left rather than swinging across in front of
+    # the strip (which way runs farthest turns on a step of pose noise); holding none, it takes
+    # the farthest way.
+    strip = {"class": "non_traversable", "polygon": [[14.5, 18.0], [15.1, 18.0], [16.9, 2.0], [16.3, 2.0]]}
+    scenario = _scenario([strip])
+    path = ReferencePath(scenario.waypoints)
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
+    pose = (10.5, 10.0, 0.0)
+    gmap = _map_of(stage, camera)
+    gmap.update(_seen_from(scenario, camera, pose), pose)
+    reach = stage._swept(gmap, stage.offsets, pose, path, 8.5, stage._bare)
+    assert (reach < stage._steps).all()  # even the footprint alone meets the strip on every way
+    assert stage.offsets[np.argmax(reach)] < 0.0  # the farthest way is on the right
+    for held, side in ((1.0, 1.0), (-1.0, -1.0), (0.0, -1.0)):
+        stage.held = held
+        kept = stage.offsets[~stage._blocked(gmap, stage.offsets, pose, path, 8.5)]
+        assert kept.size > 0 and (np.sign(kept) == side).all(), (held, kept)
+
+
+def test_ground_never_seen_is_priced_at_the_mean_of_the_non_lethal_classes(camera):
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
+    assert stage.weights[K] == pytest.approx(DRIVER_LIKE[1:K].mean())
+    with pytest.raises(ValueError):
+        OffsetSteering(OffsetUtility(DRIVER_LIKE[:-1], 5.0), camera, _terrain((0,)), CONTROL)
+
+
+def _oldest_offset_meta(weights, near_m=5.0) -> dict:
+    """A model file's header as files before the ``stages`` list wrote it: the offset rule's
+    utility as ``corridor``, its geometry in the features' ``corridor``."""
+    meta = model_meta()
+    meta["features"]["corridor"] = OffsetGeometry().to_dict()
+    return {**meta, "corridor": {"weights": list(weights), "near_m": near_m}}
+
+
+def _offset_meta(weights, near_m=5.0) -> dict:
+    """A model file's header as this version writes it: the offset rule in ``rules``, driving."""
+    block = {"type": "offset", **OffsetConfig().to_dict(), "weights": list(weights), "near_m": near_m}
+    return {**model_meta(), "rules": [block], "drives": "offset"}
+
+
+@pytest.mark.parametrize("make, key", [(_oldest_offset_meta, "rules"), (_offset_meta, "rules")])
+def test_a_model_file_with_an_offset_utility_drives_by_the_offset_rule_old_or_new(tmp_path, make, key):
+    config = ClassifierConfig(hidden=8, skip=True)
+    path = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), make(DRIVER_LIKE))
+    model = load_model(path)
+    planner = Planner(model)
+    assert planner.rule.type == "offset" and planner.rule.utility.near_m == 5.0 and planner.rule.config == OffsetConfig()
+    assert planner.runner.keeps_ground_map
+    assert not Planner(model, rule="argmax").runner.keeps_ground_map
+    for weights, near, field in (
+        (DRIVER_LIKE[:-1], 5.0, f"{key}[0].weights"),
+        ([math.nan] * 7, 5.0, f"{key}[0].weights"),
+        (DRIVER_LIKE, -1.0, f"{key}[0].near_m"),
+    ):
+        bad = save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), make(weights, near))
+        with pytest.raises(UserError) as exc:
+            load_policy(bad)
+        assert exc.value.problems[0].field == field
+
+
+def test_a_file_that_names_a_rule_it_does_not_list_to_drive_is_refused(tmp_path):
+    config = ClassifierConfig(hidden=8, skip=True)
+    bad = save_model(
+        tmp_path / "bad.safetensors", config, skip_path_weights(config), {**_offset_meta(DRIVER_LIKE), "drives": "second_stage"}
+    )
+    with pytest.raises(UserError) as exc:
+        Planner(load_model(bad))
+    assert exc.value.problems[0].field == "drives" and "second_stage" in str(exc.value)
+
+
+class _CountingFeaturizer:
+    """A featurizer that counts its calls."""
+
+    def __init__(self, inner: UtilityFeaturizer) -> None:
+        self.inner, self.calls = inner, 0
+
+    def __call__(self, *args, **kwargs):
+        self.calls += 1
+        return self.inner(*args, **kwargs)
+
+
+def test_the_offset_stage_leaves_u_and_c_until_a_decision_reports_them(tmp_path, camera):
+    config = ClassifierConfig(hidden=8, skip=True)
+    model = load_model(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _oldest_offset_meta(DRIVER_LIKE)))
+    scenario = _scenario([MUD])
+    image = _seen_from(scenario, camera, (5.0, 10.0, 0.0)).image
+    planners = {how: Planner(model) for how in ("view", "array")} | {"argmax": Planner(model, rule="argmax")}
+    for planner in planners.values():
+        planner.set_path(scenario.waypoints)
+        planner.featurizer = _CountingFeaturizer(planner.featurizer)
+    lazy = planners["view"].decide(SegmentationView.of(image), (5.0, 10.0, 0.0))
+    assert planners["view"].featurizer.calls == 0  # the offset rule steered without them
+    now = planners["array"].decide(image, (5.0, 10.0, 0.0))  # an array the caller may reuse: read at once
+    assert planners["array"].featurizer.calls == 1
+    argmax = planners["argmax"].decide(SegmentationView.of(image), (5.0, 10.0, 0.0))  # a stage that steers by F_t
+    assert planners["argmax"].featurizer.calls == 1
+    assert lazy.command == now.command and lazy.index == now.index and lazy.progress_m == now.progress_m
+    for a, b in ((lazy, now), (lazy, argmax)):
+        np.testing.assert_array_equal(a.probs, b.probs)
+        np.testing.assert_array_equal(a.U, b.U)
+    assert lazy.U[:, :K].sum() > 0  # the mud is in view
+    assert planners["view"].featurizer.calls == 1  # computed once, when first read
+
+
+def _offset_dataset(n: int = 40) -> Dataset:
+    rng = np.random.default_rng(2)
+    rule = OffsetConfig()
+    o = len(rule.geometry.offsets)
+    arrays = {
+        "features": rng.uniform(0, 3, (n, o, K + 2)).astype(np.float32),
+        "near_m": np.full(n, np.inf, np.float32),
+        "intent_m": np.append(rng.uniform(-1, 1, n - 2), [np.nan, np.nan]).astype(np.float32),
+    }
+    meta = {"format": DATASET_FORMAT, **model_meta(), "rules": {"offset": {"config": rule.data(), "arrays": dict(OffsetConfig.arrays)}}}
+    return Dataset(
+        rng.uniform(0, 1, (n, 21, 5)).astype(np.float32),
+        rng.integers(0, 21, n),
+        np.zeros(n, np.float32),
+        np.zeros(n, np.int64),
+        meta,
+        {"offset": arrays},
+    )
+
+
+def test_the_offset_rules_arrays_survive_a_dataset_file_and_bad_values_are_refused(tmp_path):
+    data = _offset_dataset()
+    back = load_dataset(save_dataset(data, tmp_path / "d.safetensors"))
+    for name, a in data.rules["offset"].items():
+        np.testing.assert_array_equal(a, back.rules["offset"][name])
+    assert back.fingerprint == data.fingerprint and back.rule_data("offset")[0] == OffsetConfig().data()
+    broken = data.rules["offset"]["features"].copy()
+    broken[3, 4, 1] = np.nan
+    bad = Dataset(data.U, data.labels, data.w, data.source, data.meta, {"offset": {**data.rules["offset"], "features": broken}})
+    with pytest.raises(UserError) as exc:
+        load_dataset(save_dataset(bad, tmp_path / "bad.safetensors"))
+    assert exc.value.problems[0].field == "rules.offset.features"
+
+
+def test_the_compiled_swept_check_is_the_numpy_form(camera):
+    """The way to each offset, stepped by pure pursuit in NumPy, meets the trees at the step the kernel says."""
+    scenario = _scenario([TREES])
+    stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL)
+    path = ReferencePath(scenario.waypoints)
+    gmap = _map_of(stage, camera)
+    for pose, s in (((8.0, 10.0, 0.0), 6.0), ((9.0, 10.5, 0.2), 7.0), ((10.0, 9.3, -0.3), 8.0)):
+        gmap.update(_seen_from(scenario, camera, pose), pose)
+        n = len(stage.offsets)
+        x, y, yaw = (np.full(n, v) for v in pose)
+        first = np.full(n, 60)  # the step where each way first meets the trees
+        for i in range(60):
+            ahead = s + i * 0.1 + 2.5
+            heading = float(path.heading_at(ahead))
+            tx = path.point_at(ahead)[0] - stage.offsets * math.sin(heading) - x
+            ty = path.point_at(ahead)[1] + stage.offsets * math.cos(heading) - y
+            alpha = (np.arctan2(ty, tx) - yaw + math.pi) % (2 * math.pi) - math.pi
+            w = np.clip(2.0 * np.sin(alpha) / np.maximum(np.hypot(tx, ty), 1e-6), -1.0, 1.0)
+            yaw = yaw + w * 0.1
+            x, y = x + np.cos(yaw) * 0.1, y + np.sin(yaw) * 0.1
+            if i % 2 == 0:
+                points = np.stack([x[:, None] - stage._clear * np.sin(yaw)[:, None], y[:, None] + stage._clear * np.cos(yaw)[:, None]], -1)
+                hit = (gmap.lookup(points) == 0).any(axis=1)
+                first = np.where(hit & (first == 60), i, first)
+        assert (first < 60).any() and not (first < 60).all()
+        np.testing.assert_array_equal(stage._swept(gmap, stage.offsets, pose, path, s), first)
+
+
+_FIT = """
+import sys, hashlib
+import numpy as np
+sys.path[:0] = {tests!r}
+from test_offset_rule import _fit_case
+
+print(hashlib.sha256(_fit_case().tobytes()).hexdigest())
+"""
+
+
+def _fit_case() -> np.ndarray:
+    """Weights of a corridor fit to random frames, with labels from a known utility."""
+    rng = np.random.default_rng(3)
+    offsets = OffsetGeometry().offsets
+    n = 800
+    features = rng.uniform(0.0, 3.0, (n, len(offsets), K + 2)) * (rng.uniform(size=(n, 1, K + 2)) < 0.5)
+    features[:, :, K + 1] = offsets**2 * rng.uniform(5.0, 12.0, (n, 1))
+    near = rng.uniform(1.0, 12.0, n)
+    value = np.concatenate([features, (offsets**2)[None, :, None] * (near > 5.0)[:, None, None]], axis=2) @ DRIVER_LIKE
+    intent = offsets[np.argmax(value + rng.gumbel(size=value.shape), axis=1)]
+    return fit_offset_utility(features, near, intent, offsets).weights
+
+
+CPU_CHECK = CpuCheck.of("corridor fit", _FIT.format(tests=[str(TESTS), str(Path(__file__).resolve().parent)]), SETTINGS)
+
+
+def test_the_offset_fit_gives_the_same_weights_under_an_older_blas_kernel(cpu_outputs):
+    hashes = {out.strip() for _, out in cpu_outputs["corridor fit"]}
+    assert len(cpu_outputs["corridor fit"]) >= 2 and len(hashes) == 1
+
+
+@pytest.mark.slow
+def test_the_offset_fit_gives_the_same_weights_under_every_cpu_setting(cpu_outputs_every):
+    hashes = {out.strip() for _, out in cpu_outputs_every["corridor fit"]}
+    assert len(hashes) == 1
+
+
+def test_the_map_reads_every_voted_cell_as_decided_and_refuses_too_many_columns():
+    """After votes, ``cells`` holds no undecided marker (it decides them) and is read-only; a
+    class table with 254 terrain columns would need the marker as a column and is refused."""
+    from terrapref.groundmap import map_compiled
+
+    scenario = _scenario([MUD])
+    camera = PinholeCamera()
+    gmap = GroundMap(camera, _terrain())
+    for pose in ((2.0, 10.0, 0.0), (4.0, 10.2, 0.05)):
+        gmap.update(_seen_from(scenario, camera, pose), pose)
+    assert (gmap._cells == map_compiled.UNSETTLED).any()  # the votes left cells to decide
+    cells = gmap.cells
+    assert not (cells == map_compiled.UNSETTLED).any() and (cells < gmap.k + 1).any()
+    assert not cells.flags.writeable
+    with pytest.raises(ValueError, match="terrain columns"):
+        GroundMap(camera, TerrainColumns(np.zeros(256, np.uint8), 254))
+
+
+@pytest.mark.parametrize("best", [-4.0, 4.0])
+def test_the_held_offset_is_kept_within_the_margin_whatever_the_sign_of_the_best_utility(best):
+    from terrapref.rules.offset.rule import keeps
+
+    short = 0.1 * abs(best)  # within a margin of 0.15 of the best's magnitude
+    assert keeps(best - short, best, 0.15) and not keeps(best - 2 * short, best, 0.15)
+    assert keeps(best, best, 0.0) and not keeps(best - 1e-9, best, 0.0)
+
+
+def test_a_driver_who_likes_a_patch_is_not_switched_off_a_held_offset_by_a_sliver(camera):
+    # A utility that prices mud above the grass around it: every offset's utility on the patch is
+    # positive, and one a step off the best is short of it by the detour's price alone.
+    likes_mud = DRIVER_LIKE.copy()
+    likes_mud[3] = 2.0
+    scenario = _scenario([MUD])
+    path = ReferencePath(scenario.waypoints)
+    stage = OffsetSteering(OffsetUtility(likes_mud, 5.0), camera, _terrain((0,)), CONTROL)
+    pose = (6.0, 10.2, 0.0)
+    stage.held = 0.2
+    _steer(stage, _map_of(stage, camera), _seen_from(scenario, camera, pose), pose, path, 4.0)
+    assert stage.held == pytest.approx(0.2)  # kept: a margin of the best's magnitude, not of its signed value
+
+
+def test_an_offset_block_written_before_the_pursuit_distances_were_renamed_reads_the_same(tmp_path):
+    config = ClassifierConfig(hidden=8, skip=True)
+    block = {"type": "offset", **OffsetConfig(pursuit_m=3.0).to_dict(), "weights": list(DRIVER_LIKE), "near_m": 5.0}
+    block["pursuit_lookahead_m"] = block.pop("pursuit_m")
+    block["geometry"]["intent_lookahead_m"] = block["geometry"].pop("intent_pursuit_m")
+    path = save_model(
+        tmp_path / "old.safetensors", config, skip_path_weights(config), {**model_meta(), "rules": [block], "drives": "offset"}
+    )
+    rule = Planner(load_model(path)).rule
+    assert rule.config == OffsetConfig(pursuit_m=3.0)
