@@ -311,6 +311,16 @@ def test_the_rules_settings_come_from_the_robot_file_then_the_nodes_parameters(s
         NodeOptions().with_rule_params(RosArgs.parse(["-p", "offset.switch_margn:=0.3"]).rule_params, "--ros-args")
     with pytest.raises(UserError, match=r"robot.yaml and --ros-args: offset.switch_margin, pursuit_m: .*switch_margin >= 0"):
         PlannerNodeCore(model, NodeOptions().with_rule_params({"offset.switch_margin": -0.1}, "--ros-args").applied_to(robot), path)
+    stopping = NodeOptions().with_rule_params(
+        RosArgs.parse(["-p", "stop.decel_mps2:=0.5", "-p", "stop.margin_m:=0.6"]).rule_params, "--ros-args"
+    )
+    braking = stopping.applied_to(robot).stop  # the stop rule's stopping distance, over the robot file's
+    assert (braking.decel_mps2, braking.margin_m, braking.reaction_s) == (0.5, 0.6, robot.stop.reaction_s)
+    assert nested_rule_params(lambda name, default: {"~stop": {"margin_m": 0.6}}.get(name, default)) == {"stop.margin_m": 0.6}
+    with pytest.raises(UserError, match=r"^--ros-args: stop.brakes: the stop rule has no setting 'brakes'"):
+        NodeOptions().with_rule_params({"stop.brakes": 1.0}, "--ros-args")
+    with pytest.raises(UserError, match=r"^stop.decel_mps2: "):
+        NodeOptions().with_rule_params({"stop.decel_mps2": -1.0}, "--ros-args").applied_to(robot)
     (tmp_path / "bad.yaml").write_text(text.replace("switch_margin: 0.25", "margin: 0.25"))
     with pytest.raises(ConfigError) as raised:
         load_robot(tmp_path / "bad.yaml")

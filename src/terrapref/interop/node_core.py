@@ -360,9 +360,7 @@ def nested_rule_params(get_param: Callable[[str, Any], Any], prefix: str = "~") 
     """The rule settings of a parameter server that nests them (ROS 1: ``~offset/switch_margin``,
     read as ``get_param("~offset")``, a dict), flat as ``RULE.NAME[.CLASS]`` -> value."""
     flat: dict[str, Any] = {}
-    for rule in RULES:
-        if not RULES[rule].settable:
-            continue
+    for rule in [*(r for r in RULES if RULES[r].settable), "stop"]:
         named = get_param(f"{prefix}{rule}", None)
         if named is None:
             continue
@@ -394,6 +392,8 @@ class NodeOptions:
         rules: the robot's settings of the model's rules, given over the robot file's ``rules``
             (ROS 2: ``-p offset.switch_margin:=0.3``; ROS 1: ``~offset/switch_margin``;
             terrapref.rules.settings); read by each transport (:meth:`with_rule_params`).
+        stop: the stop rule's settings given the same way (``stop.decel_mps2`` and so on: its
+            stopping distance), over the robot file's ``stop`` block.
     """
 
     stamped: bool | None = None
@@ -409,12 +409,24 @@ class NodeOptions:
     goal_yaw_tolerance_deg: float | None = None
     off_path_m: float | None = None
     rules: RuleSettings = field(default_factory=RuleSettings)
+    stop: tuple[tuple[str, float], ...] = ()
 
     def with_rule_params(self, flat: Mapping[str, Any], origin: str) -> NodeOptions:
         """These options with the rule settings ``flat`` gives (``RULE.NAME`` or
-        ``RULE.NAME.CLASS`` -> value), checked by name and kind (a UserError naming ``origin``
-        and the parameter); their ranges are checked against the model when the node starts."""
-        return replace(self, rules=RuleSettings.parse(flat, origin, RULES)) if flat else self
+        ``RULE.NAME.CLASS`` -> value; ``stop.NAME`` for the stop rule's, over the robot file's
+        ``stop`` block), checked by name and kind (a UserError naming ``origin`` and the
+        parameter); their ranges are checked against the model when the node starts."""
+        stop = {k: v for k, v in flat.items() if str(k).startswith("stop.")}
+        rules = {k: v for k, v in flat.items() if k not in stop}
+        names = [f.name for f in fields(StopConfig)]
+        for key, value in stop.items():
+            name = str(key).removeprefix("stop.")
+            if name not in names:
+                raise UserError(origin, f"the stop rule has no setting {name!r}; its settings: {', '.join(names)}", field=str(key))
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise UserError(origin, f"expected a finite number, got {value!r}", field=str(key))
+        given = tuple((str(k).removeprefix("stop."), int(v) if str(k) == "stop.arcs" else float(v)) for k, v in stop.items())
+        return replace(self, rules=RuleSettings.parse(rules, origin, RULES) if rules else self.rules, stop=self.stop + given)
 
     def resolved(self, get_param: Callable[[str, Any], Any], param: Callable[[str], str] = lambda name: f"~{name}") -> NodeOptions:
         """Every option set: the given ones, the rest from ``get_param(param(name), default)``
@@ -442,7 +454,7 @@ class NodeOptions:
         for name in ("path_file", "cmd_topic"):
             if values[name] is not None and (not isinstance(values[name], str) or not values[name]):
                 raise UserError(origin[name], f"expected a non-empty string, got {values[name]!r}")
-        resolved = NodeOptions(**values, rules=self.rules)
+        resolved = NodeOptions(**values, rules=self.rules, stop=self.stop)
         resolved._settings(StopConfig(), VehicleConfig(), origin)  # checked together now, over the defaults
         return resolved
 
@@ -450,6 +462,10 @@ class NodeOptions:
         """``robot`` with the robot's parameters given here in place of its file's (checked
         together: a goal tolerance beyond the off-path distance is a UserError naming them)."""
         stop, limits = self._settings(robot.stop, robot.limits, {})
+        try:
+            stop = replace(stop, **dict(self.stop))
+        except ValueError as exc:
+            raise UserError(", ".join(f"stop.{name}" for name, _ in self.stop), str(exc)) from None
         rules = self.rules.over(robot.rules) if self.rules else robot.rules
         same = (stop, limits, rules) == (robot.stop, robot.limits, robot.rules)
         return robot if same else replace(robot, stop=stop, limits=limits, rules=rules)

@@ -332,7 +332,8 @@ class _Node:
             + (f", speeding up at {limits.max_accel_mps2:g} m/s^2 at most" if limits.max_accel_mps2 is not None else "")
             + f"; at the goal within {stop.goal_tolerance_m:g} m"
             + (f" and {stop.goal_yaw_tolerance_deg:g} deg" if stop.goal_yaw_tolerance_deg is not None else "")
-            + f"; off the path beyond {stop.off_path_m:g} m; stops {core.watchdog.limit_s:g} s after its last decision by the wall clock"
+            + f"; off the path beyond {stop.off_path_m:g} m; brakes at {stop.decel_mps2:g} m/s^2 {stop.reaction_s:g} s after a frame,"
+            + f" {stop.margin_m:g} m short; stops {core.watchdog.limit_s:g} s after its last decision by the wall clock"
         )
         if robot.rules:
             self.log.info(f"rule settings over the model file's: {'; '.join(robot.rules.lines())}")
