@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from helpers import SHORT_COURSE, linear_model
+from helpers import TINY_COURSE, linear_model
 from terrapref.cli import main
 from terrapref.errors import UserError
 from terrapref.grid import Engine, GridError, run_grid
@@ -95,7 +95,7 @@ def test_ray_reports_a_failed_job_with_its_inputs(ray_instance):
 
 def test_cli_evaluate_on_ray_gives_the_local_engines_results(tmp_path, capsys, ray_instance):
     """The planner and the driver on a local Ray instance with 2 CPUs: the same runs, the same numbers."""
-    model, course = str(linear_model(tmp_path / "m.safetensors")), str(SHORT_COURSE)
+    model, course = str(linear_model(tmp_path / "m.safetensors")), str(TINY_COURSE)
     assert main(["evaluate", model, course, "--seeds", "2", "--out", str(tmp_path / "local"), "--workers", "2"]) == 0
     assert main(["evaluate", model, course, "--seeds", "2", "--out", str(tmp_path / "ray"), "--engine", "ray", "--workers", "2"]) == 0
     a, b = (json.loads(Path(tmp_path / d / "metrics.json").read_text()) for d in ("local", "ray"))
