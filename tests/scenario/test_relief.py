@@ -159,3 +159,22 @@ def test_teach_relief_is_teach_course_with_the_relief_of_seed_0() -> None:
     assert _layout(hilly.to_dict()) == _layout(teach.to_dict())
     assert hilly.to_dict()["relief"] == relief_for(teach, 0)  # as scripts/make_courses.py writes it
     assert len(hilly.relief) >= 15  # a feature between most situations, and the noise
+
+
+def test_course_relief_gives_a_tables_teaching_course_relief_between_its_situations(tmp_path, capsys) -> None:
+    """`terrapref course --relief [SEED]`: the table's course, its layout as without the flag,
+    with the relief of the seed (teach_relief's way); a negative seed is refused in one line."""
+    from helpers import REPO
+    from terrapref.cli import main
+    from terrapref.scenario import load_scenario
+    from terrapref.scenario.relief_layout import relief_for
+
+    small = str(REPO / "examples" / "classes" / "small.yaml")
+    assert main(["course", "--classes", small, "--out", str(tmp_path / "flat.yaml")]) == 0
+    assert main(["course", "--classes", small, "--relief", "3", "--out", str(tmp_path / "hilly.yaml")]) == 0
+    flat, hilly = load_scenario(tmp_path / "flat.yaml"), load_scenario(tmp_path / "hilly.yaml")
+    assert not flat.has_relief and _layout(hilly.to_dict()) == _layout(flat.to_dict())
+    assert hilly.to_dict()["relief"] == relief_for(flat, 3)
+    capsys.readouterr()
+    assert main(["course", "--relief", "-1", "--out", str(tmp_path / "bad.yaml")]) == 2
+    assert capsys.readouterr().err.strip() == "error: --relief: expected a seed >= 0, got -1"

@@ -149,6 +149,7 @@ def _cmd_course(args: argparse.Namespace) -> int:
 
     from terrapref.plots import save_map
     from terrapref.scenario import parse_scenario
+    from terrapref.scenario.relief_layout import relief_for
     from terrapref.scenario.teaching import DRIVER_SPEED_MPS, designed_course, follow_up_after
     from terrapref.terrain import default_classes
     from terrapref.world import rasterise
@@ -175,6 +176,10 @@ def _cmd_course(args: argparse.Namespace) -> int:
             course, items = designed_course(table, args.design, args.name or "teaching_course")
         except ValueError as exc:
             raise UserError(str(args.classes or "classes"), str(exc), field="classes") from None
+    if args.relief is not None:  # relief between the situations, whose own ground stays as designed (SPEC 19)
+        if args.relief < 0:
+            raise UserError("--relief", f"expected a seed >= 0, got {args.relief}")
+        course.relief = relief_for(parse_scenario(course.data(), str(out), table), args.relief)
     scenario = parse_scenario(course.data(), str(out), table)  # checked as every command will read it
     source = (
         f"--classes {args.classes}"
@@ -279,6 +284,15 @@ def course_parser(sub: argparse._SubParsersAction) -> None:
         "the drive stays within 10 minutes at 1 m/s",
     )
     p.add_argument("--name", help="the scenario's name (default: teaching_course, or the course driven + _more)")
+    p.add_argument(
+        "--relief",
+        type=int,
+        nargs="?",
+        const=0,
+        metavar="SEED",
+        help="give the course relief between its situations (bumps, dips, ramps, ditches and gently rolling ground, drawn "
+        "from SEED, default 0; the situations' own ground stays flat), as teach_relief has (docs/cli.md, Relief)",
+    )
     add_classes_arg(p)
     add_force_arg(p)
     p.set_defaults(func=_cmd_course)
