@@ -1,8 +1,11 @@
 """The interface every decision rule implements (terrapref.rules), and the checks its file blocks share.
 
-A rule is three objects: its configuration before fitting (:class:`RuleConfig`, what a recipe
+Rules are of three kinds (:data:`RULE_KINDS`): a steering rule chooses the way, the speed rule
+sets the speed along it, the stop rule (terrapref.planner.stop, the robot's) stops. A rule of a
+model file is three objects: its configuration before fitting (:class:`RuleConfig`, what a recipe
 names), the fitted rule (:class:`Rule`, one block of a model file's ``rules`` list), and the
-fitted rule bound to one planner (:class:`SteeringRunner`, which decides each frame). A rule whose
+fitted rule bound to one planner, a runner of its kind (:class:`SteeringRunner`,
+:class:`SpeedRunner`; the stop rule is a :class:`StopRunner`). A rule whose
 fit needs more than C's samples reads it from each frame while recordings are featurised
 (:meth:`RuleConfig.reader`), and the dataset keeps those arrays under the rule's name.
 """
