@@ -33,7 +33,11 @@ class MapSettings:
         map_lethal_share: a cell is lethal when lethal classes hold at least this share of its
             evidence ...
         map_terrain_share: ... else terrain (its class with the most evidence) when the K
-            terrain classes hold at least this share, else background.
+            terrain classes hold at least this share, else background: a segmentation network
+            misses a patch into the ground around it far more often than it sees a patch in plain
+            ground, and a patch blurred over frames must not vanish into the ground around it
+            (0.4 rather than a majority: a patch's edge cells stay the patch under the `field`
+            preset's misses, so a detour keeps its width; docs/perception.md).
         map_min_evidence: a cell counts as seen once its evidence totals this much (a vote at
             0 m weighs 1).
         map_sky_attitude: place the ground samples with the camera's pitch and roll off its mount

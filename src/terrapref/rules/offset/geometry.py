@@ -5,7 +5,7 @@ settings: terrapref.groundmap.settings.MapSettings, :attr:`OffsetGeometry.map`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -14,6 +14,8 @@ from terrapref.records import to_plain
 
 MAX_COUNT = 10_000
 """The most offsets, stations or camera samples an offset geometry may have."""
+MAP_FIELDS = tuple(f.name for f in fields(MapSettings) if f.name != "sample_half_width_m")
+"""The ground map's settings this block holds (the map reads 8 m each side, MapSettings' default)."""
 
 
 @dataclass(frozen=True)
@@ -31,31 +33,13 @@ class OffsetGeometry:
         half_width_m: half the footprint's width; 5 points across it [m].
         span_m: metres added to the on-path length in the detour's price (swerving in and out) [m].
         gap_m: gaps along the path shorter than this do not split a patch [m].
-        map_resolution_m: cell size of the ground map [m].
-        map_half_size_m: the ground map covers this much around its centre, each way [m].
-        sample_step_m: spacing of the ground points read from each image [m].
-        sample_range_m: ground read up to this far ahead of the camera [m].
+        map_resolution_m, map_half_size_m, sample_step_m, sample_range_m, map_range_m, map_fade,
+            map_lethal_share, map_terrain_share, map_min_evidence, map_sky_attitude: the ground
+            map's settings, with its defaults (MapSettings says what each is).
         intent_delay_s: a demonstrator's command is read as what it meant this long before (its
             reaction time) [s] ...
         intent_pursuit_m: ... and inverted through pure pursuit this far ahead along the path
             into the offset it was steering for [m] (terrapref.rules.offset.fit).
-        map_range_m: a ground sample's vote in the map weighs 1 / (1 + (r / map_range_m)^2) at r
-            metres from the vehicle: near ground is seen sharper and placed better [m].
-        map_fade: each frame a cell is not voted on, its evidence fades by this factor, so that
-            recent views count more than old ones (0: the last view alone).
-        map_lethal_share: a cell is lethal when lethal classes hold at least this share of its
-            evidence ...
-        map_terrain_share: ... else terrain (its class with the most evidence) when the K
-            terrain classes hold at least this share, else background: a segmentation network
-            misses a patch into the ground around it far more often than it sees a patch in plain
-            ground, and a patch blurred over frames must not vanish into the ground around it
-            (0.4 rather than a majority: a patch's edge cells stay the patch under the `field`
-            preset's misses, so a detour keeps its width; docs/perception.md).
-        map_min_evidence: a cell counts as seen once its evidence totals this much (a vote at
-            0 m weighs 1).
-        map_sky_attitude: place the ground samples with the camera's pitch and roll off its mount
-            as the sky line of each frame shows them (terrapref.groundmap.attitude), not with the
-            mount's.
     """
 
     max_offset_m: float = 3.0
@@ -65,18 +49,18 @@ class OffsetGeometry:
     half_width_m: float = 0.6
     span_m: float = 5.0
     gap_m: float = 1.0
-    map_resolution_m: float = 0.1
-    map_half_size_m: float = 32.0
-    sample_step_m: float = 0.1
-    sample_range_m: float = 14.0
+    map_resolution_m: float = MapSettings.map_resolution_m
+    map_half_size_m: float = MapSettings.map_half_size_m
+    sample_step_m: float = MapSettings.sample_step_m
+    sample_range_m: float = MapSettings.sample_range_m
     intent_delay_s: float = 0.2
     intent_pursuit_m: float = 2.5
-    map_range_m: float = 4.0
-    map_fade: float = 0.97
-    map_lethal_share: float = 0.35
-    map_terrain_share: float = 0.4
-    map_min_evidence: float = 0.0
-    map_sky_attitude: bool = True
+    map_range_m: float = MapSettings.map_range_m
+    map_fade: float = MapSettings.map_fade
+    map_lethal_share: float = MapSettings.map_lethal_share
+    map_terrain_share: float = MapSettings.map_terrain_share
+    map_min_evidence: float = MapSettings.map_min_evidence
+    map_sky_attitude: bool = MapSettings.map_sky_attitude
 
     def __post_init__(self) -> None:
         stations = self.stations_m
@@ -117,18 +101,7 @@ class OffsetGeometry:
     @property
     def map(self) -> MapSettings:
         """The settings of the ground map the offsets are read from (ground read 8 m each side of the vehicle)."""
-        return MapSettings(
-            map_resolution_m=self.map_resolution_m,
-            map_half_size_m=self.map_half_size_m,
-            sample_step_m=self.sample_step_m,
-            sample_range_m=self.sample_range_m,
-            map_range_m=self.map_range_m,
-            map_fade=self.map_fade,
-            map_lethal_share=self.map_lethal_share,
-            map_terrain_share=self.map_terrain_share,
-            map_min_evidence=self.map_min_evidence,
-            map_sky_attitude=self.map_sky_attitude,
-        )
+        return MapSettings(**{name: getattr(self, name) for name in MAP_FIELDS})
 
     @property
     def offsets(self) -> np.ndarray:
