@@ -344,8 +344,9 @@ def first_free_arc(
     """
     for t in range(curvatures.shape[0]):
         a = first if t == 0 else (t - 1 if t <= first else t)
-        reach = (step_m, steps, across)
-        if not _arc_blocked(x0, y0, yaw0, curvatures[a], reach, layers, lethal, never, confirmed, visible, vx0, vy0, vis_inv_res):
+        if not _arc_blocked(
+            x0, y0, yaw0, curvatures[a], step_m, steps, across, layers, lethal, never, confirmed, visible, vx0, vy0, vis_inv_res
+        ):
             return a
     return -1
 
@@ -356,7 +357,9 @@ def _arc_blocked(
     y0: float,
     yaw0: float,
     kappa: float,
-    reach: tuple,
+    step_m: float,
+    steps: int,
+    across: np.ndarray,
     layers: MapLayers,
     lethal: np.ndarray,
     never: int,
@@ -366,9 +369,8 @@ def _arc_blocked(
     vy0: float,
     vis_inv_res: float,
 ) -> bool:
-    """Whether the arc of curvature ``kappa`` is blocked within ``reach`` (step [m], steps, the
-    footprint's points across): :func:`first_free_arc` says when."""
-    step_m, steps, across = reach
+    """Whether the arc of curvature ``kappa`` is blocked within ``steps`` steps of ``step_m``
+    for the footprint's points ``across``: :func:`first_free_arc` says when."""
     ox, oy, inv_res = layers.ox, layers.oy, layers.inv_res
     vis_x, vis_y = visible.shape
     c0, s0 = math.cos(yaw0), math.sin(yaw0)
