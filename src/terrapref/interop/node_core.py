@@ -27,7 +27,7 @@ import numpy as np
 from terrapref.errors import UserError
 from terrapref.groundmap.costmap import Costmap
 from terrapref.interop.labels import unlisted_message
-from terrapref.interop.robot import LIMITS, RobotConfig
+from terrapref.interop.robot import LIMITS, RobotConfig, stop_value_problem
 from terrapref.interop.ros_decode import camera_from_info, label_ids, path_xy, stamp_s, yaw_rad
 from terrapref.interop.runtime import SPEED_WINDOW_S, PlannerRuntime, RobotSettings, RuntimeDecision, odometry_speed_mps
 from terrapref.learning.model_file import LoadedModel
@@ -409,7 +409,7 @@ class NodeOptions:
     goal_yaw_tolerance_deg: float | None = None
     off_path_m: float | None = None
     rules: RuleSettings = field(default_factory=RuleSettings)
-    stop: tuple[tuple[str, float], ...] = ()
+    stop: tuple[tuple[str, float | None], ...] = ()
 
     def with_rule_params(self, flat: Mapping[str, Any], origin: str) -> NodeOptions:
         """These options with the rule settings ``flat`` gives (``RULE.NAME`` or
@@ -423,9 +423,10 @@ class NodeOptions:
             name = str(key).removeprefix("stop.")
             if name not in names:
                 raise UserError(origin, f"the stop rule has no setting {name!r}; its settings: {', '.join(names)}", field=str(key))
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise UserError(origin, f"expected a finite number, got {value!r}", field=str(key))
-        given = tuple((str(k).removeprefix("stop."), int(v) if str(k) == "stop.arcs" else float(v)) for k, v in stop.items())
+            problem = stop_value_problem(name, value)
+            if problem is not None:
+                raise UserError(origin, f"{problem}, got {value!r}", field=str(key))
+        given = tuple((str(k).removeprefix("stop."), v) for k, v in stop.items())
         return replace(self, rules=RuleSettings.parse(rules, origin, RULES) if rules else self.rules, stop=self.stop + given)
 
     def resolved(self, get_param: Callable[[str, Any], Any], param: Callable[[str], str] = lambda name: f"~{name}") -> NodeOptions:

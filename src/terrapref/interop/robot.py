@@ -154,6 +154,17 @@ def load_robot_topics(path: str | Path) -> dict[str, str]:
     return topics
 
 
+def stop_value_problem(name: str, value: object) -> str | None:
+    """What is wrong with ``value`` for the stop rule's setting ``name`` (a StopConfig field), by
+    its kind; None: nothing (its range is StopConfig's to check). The robot file's ``stop`` block
+    and a node's ``stop.NAME`` parameters are read so."""
+    if value is None and name == "goal_yaw_tolerance_deg":  # the heading not checked
+        return None
+    if isinstance(value, bool) or not isinstance(value, int if name == "arcs" else (int, float)):
+        return "expected a whole number" if name == "arcs" else "expected a number"
+    return None
+
+
 def _stop(block: object, source: str) -> StopConfig:
     """The stop rule's settings from the file's ``stop`` block (absent: the defaults)."""
     if block is None:
@@ -164,11 +175,9 @@ def _stop(block: object, source: str) -> StopConfig:
     for key, value in block.items():
         if key not in names:
             raise ConfigError(source, f"unknown key; expected {', '.join(names)}", field=f"stop.{key}")
-        wanted = int if key == "arcs" else (int, float)
-        if value is None and key == "goal_yaw_tolerance_deg":
-            continue
-        if isinstance(value, bool) or not isinstance(value, wanted):
-            raise ConfigError(source, f"expected {'a whole number' if key == 'arcs' else 'a number'}", field=f"stop.{key}")
+        problem = stop_value_problem(key, value)
+        if problem is not None:
+            raise ConfigError(source, problem, field=f"stop.{key}")
     try:
         return StopConfig(**block)
     except ValueError as exc:
