@@ -66,6 +66,7 @@ from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.offset.offsets_compiled import gated_value
 from terrapref.rules.offset.reach_compiled import lethal_hits, swept_reach
 from terrapref.rules.offset.steering import intent_offsets, steer
+from terrapref.rules.settings import NUMBER
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable
 from terrapref.vehicle import Command, ControlSet, Pose
@@ -191,10 +192,10 @@ class OffsetRule(Rule):
 
     type: ClassVar[str] = "offset"
     settable: ClassVar[dict[str, tuple[str, str]]] = {
-        "switch_margin": ("number", "the share of the best offset's utility the held offset may fall short by before a switch"),
-        "pursuit_m": ("number", "how far ahead along the path pure pursuit aims [m]"),
-        "lethal_margin_m": ("number", "the clearance kept from lethal terrain beside the footprint [m]"),
-        "lethal_horizon_m": ("number", "how far ahead the way to each offset is checked for lethal terrain [m]"),
+        "switch_margin": (NUMBER, "the share of the best offset's utility the held offset may fall short by before a switch"),
+        "pursuit_m": (NUMBER, "how far ahead along the path pure pursuit aims [m]"),
+        "lethal_margin_m": (NUMBER, "the clearance kept from lethal terrain beside the footprint [m]"),
+        "lethal_horizon_m": (NUMBER, "how far ahead the way to each offset is checked for lethal terrain [m]"),
     }
 
     config: OffsetConfig

@@ -36,6 +36,7 @@ from terrapref.rules.base import (
     Where,
     number,
 )
+from terrapref.rules.settings import NUMBER, PER_CLASS
 from terrapref.rules.speed.model import MIN_SPEED_MPS, STATION_STEP_M, STATIONS, SpeedFit, SpeedModel, across, fit_speed
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable
@@ -191,8 +192,8 @@ class SpeedRule(Rule):
     type: ClassVar[str] = "speed"
     kind: ClassVar[str] = SPEED
     settable: ClassVar[dict[str, tuple[str, str]]] = {
-        "max_speed_mps": ("number", "the fastest it commands [m/s]"),
-        "class_max_mps": ("class", "the fastest it commands on a class, below the speed learned there [m/s]"),
+        "max_speed_mps": (NUMBER, "the fastest it commands [m/s]"),
+        "class_max_mps": (PER_CLASS, "the fastest it commands on a class, below the speed learned there [m/s]"),
     }
 
     config: SpeedConfig
