@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import ast
 import functools
+from collections.abc import Iterator
 from pathlib import Path
 
 import terrapref
@@ -202,26 +203,32 @@ def test_entry_points_that_point_up_the_layers_are_the_named_ones():
 MAX_PARAMETERS = 6
 
 
+def _functions(tree: ast.AST) -> Iterator[tuple[str, ast.FunctionDef | ast.AsyncFunctionDef]]:
+    """Every function in ``tree`` with its name (``Class.name`` for a method, ``outer.inner`` for a nested one)."""
+
+    def visit(node: ast.AST, owner: str) -> Iterator[tuple[str, ast.FunctionDef | ast.AsyncFunctionDef]]:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                yield f"{owner}{child.name}", child
+                yield from visit(child, f"{owner}{child.name}.")
+            elif isinstance(child, ast.ClassDef):
+                yield from visit(child, f"{owner}{child.name}.")
+            else:
+                yield from visit(child, owner)
+
+    return visit(tree, "")
+
+
 def _long_signatures(tree: ast.AST) -> set[str]:
     """``name`` (``Class.name`` for a method) of each function in ``tree`` that takes more than
     MAX_PARAMETERS parameters and is not an @njit kernel."""
     found = set()
-
-    def visit(node: ast.AST, owner: str) -> None:
-        for child in ast.iter_child_nodes(node):
-            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
-                a = child.args
-                names = [x.arg for x in a.posonlyargs + a.args + a.kwonlyargs if x.arg not in ("self", "cls")]
-                names += [x.arg for x in (a.vararg, a.kwarg) if x is not None]
-                if len(names) > MAX_PARAMETERS and not any("njit" in ast.unparse(d) for d in child.decorator_list):
-                    found.add(f"{owner}{child.name}")
-                visit(child, f"{owner}{child.name}.")
-            elif isinstance(child, ast.ClassDef):
-                visit(child, f"{owner}{child.name}.")
-            else:
-                visit(child, owner)
-
-    visit(tree, "")
+    for name, f in _functions(tree):
+        a = f.args
+        names = [x.arg for x in a.posonlyargs + a.args + a.kwonlyargs if x.arg not in ("self", "cls")]
+        names += [x.arg for x in (a.vararg, a.kwarg) if x is not None]
+        if len(names) > MAX_PARAMETERS and not any("njit" in ast.unparse(d) for d in f.decorator_list):
+            found.add(name)
     return found
 
 
@@ -235,22 +242,7 @@ MAX_LINES = 60  # a function's lines, its decorators, signature and docstring in
 
 def _long_functions(tree: ast.AST) -> set[str]:
     """``name`` (``Class.name`` for a method) of each function in ``tree`` longer than MAX_LINES."""
-    found = set()
-
-    def visit(node: ast.AST, owner: str) -> None:
-        for child in ast.iter_child_nodes(node):
-            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
-                first = min([child.lineno, *(d.lineno for d in child.decorator_list)])
-                if child.end_lineno - first + 1 > MAX_LINES:
-                    found.add(f"{owner}{child.name}")
-                visit(child, f"{owner}{child.name}.")
-            elif isinstance(child, ast.ClassDef):
-                visit(child, f"{owner}{child.name}.")
-            else:
-                visit(child, owner)
-
-    visit(tree, "")
-    return found
+    return {name for name, f in _functions(tree) if f.end_lineno - min([f.lineno, *(d.lineno for d in f.decorator_list)]) + 1 > MAX_LINES}
 
 
 def test_no_function_is_longer_than_60_lines():
