@@ -112,7 +112,8 @@ def _print_results(evaluation: Evaluation, metrics: dict, args: argparse.Namespa
         print(f"perception: {perception.name} ({perception.summary()}); the driver sees the truth")
     zones = [z for sc in metrics["scenarios"].values() for run in sc.get("planner", {}).values() for z in run["zones"]]
     s = metrics["summary"]
-    print(f"planner: zone success {rate_text(sum(z['success'] for z in zones), len(zones))}, {s['collision_count']} collisions")
+    incidents = f", {s['tip_count']} tips, {s['stuck_count']} stuck" if s.get("tip_count") or s.get("stuck_count") else ""
+    print(f"planner: zone success {rate_text(sum(z['success'] for z in zones), len(zones))}, {s['collision_count']} collisions{incidents}")
     for line in Summary.from_dict(s).driving_lines():
         print(f"planner: {line}")
     compared = [z for z in zones if "agrees" in z]
@@ -125,7 +126,8 @@ def _print_results(evaluation: Evaluation, metrics: dict, args: argparse.Namespa
     if "driver_summary" in metrics:
         d = metrics["driver_summary"]
         success = f"{d['zone_success_rate']:.1%}" if d["zones"] else "-"
-        print(f"driver:  zone success {success} over {d['zones']} zones, {d['collision_count']} collisions")
+        incidents = f", {d['tip_count']} tips, {d['stuck_count']} stuck" if d.get("tip_count") or d.get("stuck_count") else ""
+        print(f"driver:  zone success {success} over {d['zones']} zones, {d['collision_count']} collisions{incidents}")
     for name, numbers in metrics.get("frames_beyond_the_run", {}).items():
         print(f"note: --frames {','.join(map(str, numbers))}: {name}'s run (seed 0) ended before them; no picture", file=sys.stderr)
     guesses = [z for z in zones if z.get("rests_on_unidentified")]

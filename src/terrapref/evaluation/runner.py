@@ -151,6 +151,10 @@ class Summary:
     goal_watched: int = 0  # completed runs driven on to see the planner stand at its goal
     goal_stops: int = 0  # those in which it stood still saying `goal`
     goal_from_end_m: float | None = None  # the farthest from the path's end it stood (or was when the time ran out) [m]
+    tip_count: int = 0  # entries past the vehicle's roll or pitch limit, all runs (SPEC 19)
+    stuck_count: int = 0  # times a step too high held the vehicle, all runs
+    max_roll_deg: float = 0.0  # the largest |roll| of any run [deg]
+    max_pitch_deg: float = 0.0  # the largest |pitch| of any run [deg]
 
     @property
     def stops_per_100m(self) -> float | None:
@@ -176,6 +180,11 @@ class Summary:
             lines.append(f"{self.not_reached} of {self.zones} zones not reached (each a failure)")
         if self.contact_s:
             lines.append(f"lethal terrain under the vehicle for {self.contact_s:.1f} s")
+        if self.max_roll_deg or self.max_pitch_deg:
+            lines.append(
+                f"on relief: {self.tip_count} tips, {self.stuck_count} times stuck; "
+                f"roll at most {self.max_roll_deg:.1f} deg, pitch {self.max_pitch_deg:.1f} deg"
+            )
         if self.stop_count:
             reasons = ", ".join(f"{why} {seconds:.1f} s" for why, seconds in self.stops_s.items())
             per = f", {self.stops_per_100m:.2f} per 100 m driven" if self.stops_per_100m is not None else ", nothing driven"
@@ -208,6 +217,10 @@ class Summary:
             **agreement,
             "not_reached": self.not_reached,
             "collision_count": self.collision_count,
+            "tip_count": self.tip_count,
+            "stuck_count": self.stuck_count,
+            "max_roll_deg": self.max_roll_deg,
+            "max_pitch_deg": self.max_pitch_deg,
             "contact_s": self.contact_s,
             "completed_rate": self.completed_rate,
             "completed_ci95": list(self.completed_ci95),
@@ -455,6 +468,10 @@ def summarise(results: list[RunResult], driver: str) -> Summary:
         not_reached=sum(not z.reached for z in zones),
         ended=dict(sorted(Counter(r.metrics.ending for r in runs).items())),
         contact_s=round(sum(r.metrics.contact_s for r in runs), 3),
+        tip_count=sum(r.metrics.tips for r in runs),
+        stuck_count=sum(r.metrics.stuck for r in runs),
+        max_roll_deg=max((r.metrics.max_roll_deg for r in runs), default=0.0),
+        max_pitch_deg=max((r.metrics.max_pitch_deg for r in runs), default=0.0),
         driven_m=round(sum(r.metrics.driven_m for r in runs), 3),
         stop_count=sum(r.metrics.stop_count for r in runs),
         stops_s=dict(sorted(stops.items())),

@@ -251,6 +251,15 @@ class RunMetrics:
     max_lateral_accel_mps2: float = 0.0  # the largest |v w| over the run's controller ticks [m/s^2]
     # A planner's stop at its own goal, driven on past completion: {"stopped", "after_s", "from_end_m"} (None: not watched).
     goal_stop: dict[str, float | bool] | None = None
+    tips: int = 0  # entries past the vehicle's roll or pitch limit (SPEC 19)
+    stuck: int = 0  # times a step higher than the vehicle climbs held it
+    max_roll_deg: float = 0.0  # the largest |roll| of any controller tick [deg]
+    max_pitch_deg: float = 0.0  # the largest |pitch| [deg]
+
+    @property
+    def incidents(self) -> int:
+        """Collisions, tips and times stuck: what counts against the run's safety."""
+        return self.collisions + self.tips + self.stuck
 
     @property
     def zone_successes(self) -> int:
@@ -328,6 +337,7 @@ def score_run(
         time_s=round(log.duration_s, 3),
         max_lateral_accel_mps2=round(_max_lateral_accel(log.trace, dt_s), 4),
         goal_stop=asdict(log.goal_stop) if log.goal_stop is not None else None,
+        **log.relief_summary(),
     )
 
 

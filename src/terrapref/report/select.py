@@ -412,6 +412,8 @@ def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict
             {
                 **who,
                 "collisions": m.collisions,
+                "tips": m.tips,
+                "stuck": m.stuck,
                 "ended": m.ending,
                 "contact_s": m.contact_s,
                 "driven_m": round(m.driven_m, 3),
@@ -589,7 +591,9 @@ def _selection_table(
             if not sub:
                 continue
             its = [r for r in runs if r["recipe"] == recipe and (order is None or r["order"] == order)]
-            coll = sum(r["collisions"] for r in its)
+            coll = str(sum(r["collisions"] for r in its))
+            tips, stuck = sum(r.get("tips", 0) for r in its), sum(r.get("stuck", 0) for r in its)
+            coll += f" (and {tips} tips, {stuck} stuck)" if tips or stuck else ""
             completed = _completion(its)
             per_seed = {}
             for r in sub:

@@ -18,6 +18,7 @@ from terrapref.scenario.path import ReferencePath
 from terrapref.stops import GOAL as GOAL_REASON
 from terrapref.stops import UNSAID, stop_reason_of
 from terrapref.vehicle import Command, Pose, Vehicle, VehicleConfig
+from terrapref.vehicle.ground import LEVEL, Attitude
 from terrapref.world import WorldMap, rasterise
 
 
@@ -81,6 +82,7 @@ class Frame:
         pose: vehicle pose in the world frame.
         waypoints: the reference path, shape (N, 2) [m].
         speed_mps: the vehicle's forward speed, as its odometry gives it [m/s].
+        attitude: the body's height, pitch and roll on the ground (level on flat ground).
     """
 
     index: int
@@ -89,6 +91,7 @@ class Frame:
     pose: Pose
     waypoints: np.ndarray
     speed_mps: float = 0.0
+    attitude: Attitude = LEVEL
 
     @property
     def image(self) -> np.ndarray:
@@ -131,7 +134,8 @@ class Simulation:
 
     def reset(self, pose: Pose | None = None) -> Frame:
         """Put the vehicle at ``pose`` (default: the scenario's start) and render the first frame."""
-        self.vehicle = Vehicle(Pose(*(self.scenario.start if pose is None else pose)), self.config.vehicle)
+        ground = self.world if self.world.has_relief else None
+        self.vehicle = Vehicle(Pose(*(self.scenario.start if pose is None else pose)), self.config.vehicle, ground=ground)
         self.tick = 0
         self.frame_index = 0
         self.progress_m = self.path.project(self.vehicle.pose[:2], 0.0, 5.0)[0]
@@ -140,6 +144,10 @@ class Simulation:
         self.collisions = int(self._on_lethal)  # a start in contact with lethal terrain is one
         self.contact_s = 0.0
         self.contact_m = 0.0
+        self.tips = int(self.vehicle.tipped)  # entries past the roll or pitch limit (a start past one is one)
+        self.stuck = 0  # times a step too high held the vehicle
+        self.max_roll_deg = self.max_pitch_deg = 0.0  # the largest |roll| and |pitch| of any tick [deg]
+        self._relief_tick()
         self.stops: dict[str, float] = {}  # seconds stood still, by the reason given
         self.stop_count = 0  # times the vehicle came to a stop
         self.stopped_s = 0.0  # how long it has stood still without a break
@@ -155,7 +163,13 @@ class Simulation:
     def frame(self) -> Frame:
         pose = self.vehicle.pose
         return Frame(
-            self.frame_index, self.time_s, SegmentationView(self.renderer, pose), pose, self.scenario.waypoints, self.vehicle.speed_mps
+            self.frame_index,
+            self.time_s,
+            SegmentationView(self.renderer, pose),
+            pose,
+            self.scenario.waypoints,
+            self.vehicle.speed_mps,
+            self.vehicle.attitude,
         )
 
     def _in_contact(self, pose: Pose) -> bool:
@@ -186,7 +200,12 @@ class Simulation:
             self.stopped_s = 0.0
         poses, steps_m = [], []
         for _ in range(c.ticks_per_frame):
+            tipped, stuck = self.vehicle.tipped, self.vehicle.stuck
             pose = self.vehicle.tick()
+            if self.vehicle.contact is not None:
+                self.tips += self.vehicle.tipped and not tipped
+                self.stuck += self.vehicle.stuck and not stuck
+                self._relief_tick()
             self.tick += 1
             self.trace.append(pose)
             self.speeds.append(self.vehicle.speed_mps)
@@ -202,6 +221,12 @@ class Simulation:
         self.progress_m = max(self.progress_m, self.path.project(self.vehicle.pose[:2], self.progress_m - 2.0, self.progress_m + 10.0)[0])
         self.frame_index += 1
         return self.frame()
+
+    def _relief_tick(self) -> None:
+        """Keep the largest roll and pitch so far."""
+        attitude = self.vehicle.attitude
+        self.max_roll_deg = max(self.max_roll_deg, abs(math.degrees(attitude.roll_rad)))
+        self.max_pitch_deg = max(self.max_pitch_deg, abs(math.degrees(attitude.pitch_rad)))
 
     @property
     def reached_goal(self) -> bool:
@@ -269,6 +294,10 @@ class EpisodeLog:
         speeds: the vehicle's speed at every controller tick, shape (T,) [m/s]; None: not kept.
         goal_stop: how the driver came to stand at its goal after the run completed, for a
             driver watched for it (:func:`settle`); None otherwise.
+        tips: entries past the vehicle's roll or pitch limit (terrapref.vehicle.ground).
+        stuck: times a step higher than the vehicle climbs held it.
+        max_roll_deg: the largest |roll| of any controller tick [deg].
+        max_pitch_deg: the largest |pitch| of any controller tick [deg].
     """
 
     scenario: str
@@ -285,6 +314,10 @@ class EpisodeLog:
     progress_m: float = 0.0
     speeds: np.ndarray | None = None
     goal_stop: GoalStop | None = None
+    tips: int = 0
+    stuck: int = 0
+    max_roll_deg: float = 0.0
+    max_pitch_deg: float = 0.0
 
     @classmethod
     def of(cls, sim: Simulation) -> EpisodeLog:
@@ -303,16 +336,33 @@ class EpisodeLog:
             stop_count=sim.stop_count,
             progress_m=float(sim.progress_m),
             speeds=np.array(sim.speeds, dtype=float),
+            tips=sim.tips,
+            stuck=sim.stuck,
+            max_roll_deg=sim.max_roll_deg,
+            max_pitch_deg=sim.max_pitch_deg,
         )
 
     def summary(self) -> dict:
-        """What a recording's metadata keeps of the run."""
-        return {
+        """What a recording's metadata keeps of the run (on relief, its tips, times stuck and
+        largest roll and pitch too)."""
+        summary = {
             "completed": self.completed,
             "collisions": self.collisions,
             "duration_s": round(self.duration_s, 3),
             "contact_s": round(self.contact_s, 3),
             "contact_m": round(self.contact_m, 3),
+        }
+        if self.tips or self.stuck or self.max_roll_deg or self.max_pitch_deg:
+            summary.update(self.relief_summary())
+        return summary
+
+    def relief_summary(self) -> dict:
+        """The run's tips, times stuck and largest roll and pitch [deg]."""
+        return {
+            "tips": self.tips,
+            "stuck": self.stuck,
+            "max_roll_deg": round(self.max_roll_deg, 2),
+            "max_pitch_deg": round(self.max_pitch_deg, 2),
         }
 
 

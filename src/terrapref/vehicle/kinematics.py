@@ -74,6 +74,13 @@ class VehicleConfig:
             reference point, and lethal terrain under any part of that line is contact [m].
         max_accel_mps2: how fast the speed may rise toward the command [m/s^2]; None: at once.
         max_decel_mps2: how fast the speed may fall toward the command [m/s^2]; None: at once.
+        wheelbase_m: from the rear wheels to the front ones, the reference point midway; on relief
+            the body rests on the four wheels (terrapref.vehicle.ground) [m].
+        max_roll_deg: past this roll the vehicle has tipped over [deg].
+        max_pitch_deg: past this pitch, nose up or down, it has tipped over [deg].
+        max_step_m: the highest step its wheels climb; a higher one stops it (stuck) [m].
+        rolling_resistance: the ground's rolling resistance coefficient, which sets how much a
+            grade slows it (:meth:`terrapref.vehicle.ground.GroundContact.top_speed_mps`).
     """
 
     control_rate_hz: float = 30.0
@@ -82,11 +89,20 @@ class VehicleConfig:
     half_width_m: float = 0.6
     max_accel_mps2: float | None = 1.0
     max_decel_mps2: float | None = 2.0
+    wheelbase_m: float = 1.0
+    max_roll_deg: float = 25.0
+    max_pitch_deg: float = 30.0
+    max_step_m: float = 0.15
+    rolling_resistance: float = 0.15
 
     def __post_init__(self) -> None:
-        values = (self.control_rate_hz, self.max_speed_mps, self.max_yaw_rate_rps, self.half_width_m)
+        values = (self.control_rate_hz, self.max_speed_mps, self.max_yaw_rate_rps, self.half_width_m, self.wheelbase_m, self.max_step_m)
         if not all(_positive(v) for v in values):
-            raise ValueError("vehicle rates, limits and half width must be finite and > 0")
+            raise ValueError("vehicle rates, limits, half width, wheelbase and step must be finite and > 0")
+        if not all(_positive(a) and a < 90.0 for a in (self.max_roll_deg, self.max_pitch_deg)):
+            raise ValueError(f"max_roll_deg and max_pitch_deg must be in (0, 90), got {self.max_roll_deg!r} and {self.max_pitch_deg!r}")
+        if not (_positive(self.rolling_resistance) and self.rolling_resistance <= 1.0):
+            raise ValueError(f"rolling_resistance must be in (0, 1], got {self.rolling_resistance!r}")
         if not all(a is None or _positive(a) for a in (self.max_accel_mps2, self.max_decel_mps2)):
             raise ValueError(
                 f"max_accel_mps2 and max_decel_mps2 must be None (at once) or finite and > 0, got {self.max_accel_mps2!r} and {self.max_decel_mps2!r}"
@@ -131,40 +147,3 @@ class VehicleConfig:
 
 def _positive(x: float) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) and x > 0
-
-
-class Vehicle:
-    """A differential-drive vehicle whose controller holds the last command between ticks.
-
-    The yaw rate follows the command at once; the forward speed moves toward it within the
-    acceleration limits, so ``speed_mps`` (what the vehicle does) may differ from
-    ``command.v`` (what it was told).
-    """
-
-    def __init__(self, pose: Pose, config: VehicleConfig | None = None, speed_mps: float = 0.0) -> None:
-        self.config = config or VehicleConfig()
-        self.pose = Pose(*pose)
-        self.command = Command(0.0, 0.0)
-        self.speed_mps = min(max(float(speed_mps), 0.0), self.config.max_speed_mps)
-        self.step_m = 0.0  # the distance driven in the last tick [m]
-
-    def set_command(self, cmd: Command) -> None:
-        """Latch a new command, clipped to the vehicle's limits; it is held until the next one."""
-        c = self.config
-        v = min(max(float(cmd.v), 0.0), c.max_speed_mps)
-        w = min(max(float(cmd.w), -c.max_yaw_rate_rps), c.max_yaw_rate_rps)
-        self.command = Command(v, w)
-
-    def tick(self) -> Pose:
-        """Advance one controller period (1 / control_rate_hz) with the held command: the speed
-        ramps within the limits (the distance of the period is its mean speed's) and the yaw rate
-        is the command's."""
-        c, v0 = self.config, self.speed_mps
-        v1 = c.next_speed(v0, self.command.v)
-        at_once = (c.max_accel_mps2 if v1 > v0 else c.max_decel_mps2) is None
-        self.speed_mps = v1
-        v = v1 if at_once or v0 == v1 else 0.5 * (v0 + v1)
-        self.step_m = v * c.dt_s
-        x, y, yaw = integrate_unicycle(self.pose, Command(v, self.command.w), self.config.dt_s)
-        self.pose = Pose(x, y, wrap_angle(yaw))
-        return self.pose

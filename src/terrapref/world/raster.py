@@ -58,6 +58,28 @@ class WorldMap:
         north = z[r1, c0] * (1.0 - fu) + z[r1, c1] * fu
         return np.where(finite, south * (1.0 - fv) + north * fv, np.nan)
 
+    def height_at_point(self, x: float, y: float) -> float:
+        """:meth:`height_at` of one point, in plain floats (the vehicle asks it at every tick)."""
+        if self.height is None:
+            return 0.0
+        if not (math.isfinite(x) and math.isfinite(y)):
+            return math.nan
+        ny, nx = self.height.shape
+        u = min(max(x / self.resolution_m - 0.5, 0.0), nx - 1.0)
+        v = min(max(y / self.resolution_m - 0.5, 0.0), ny - 1.0)
+        c0, r0 = math.floor(u), math.floor(v)
+        c1, r1 = min(c0 + 1, nx - 1), min(r0 + 1, ny - 1)
+        fu, fv = u - c0, v - r0
+        z = self._heights.item
+        south = z(r0, c0) * (1.0 - fu) + z(r0, c1) * fu
+        north = z(r1, c0) * (1.0 - fu) + z(r1, c1) * fu
+        return south * (1.0 - fv) + north * fv
+
+    @functools.cached_property
+    def _heights(self) -> np.ndarray:
+        """The height layer in float64, made on first use."""
+        return np.asarray(self.height, dtype=np.float64)
+
     @property
     def size_m(self) -> tuple[float, float]:
         ny, nx = self.raster.shape

@@ -1,0 +1,120 @@
+"""The vehicle on relief (SPEC 19): a rigid body on four wheels, without suspension.
+
+Each controller tick the body takes its height, pitch and roll from the ground under its four
+wheels (at +-``wheelbase_m / 2`` along it and +-``half_width_m`` across it, about the reference
+point): the height is the mean of the four, the pitch the rise of the rear axle's mean over the
+front's along the wheelbase, the roll the rise of the left side's mean over the right's across
+the track. On a plane that is the plane's own attitude; on curved ground it is the attitude of
+the plane fitted to the four contacts.
+
+Angles follow REP 103 (body x forward, y left, z up): pitch is positive nose down, roll positive
+with the left side up. Driving up a grade of ``g`` rad, the pitch is ``-g``.
+
+Limits (:class:`~terrapref.vehicle.kinematics.VehicleConfig`): past ``max_roll_deg`` or
+``max_pitch_deg`` the vehicle has tipped; ground rising by more than ``max_step_m`` just ahead of
+a front wheel stops it where it stands (stuck): it can still turn in place. Up a grade its top
+speed is that of a drive of constant power (:meth:`GroundContact.top_speed_mps`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple, Protocol
+
+from terrapref.vehicle.kinematics import Pose, VehicleConfig
+
+
+class Attitude(NamedTuple):
+    """The body's height and orientation on the ground.
+
+    Attributes:
+        z_m: the reference point's height: the mean of the ground under the four wheels [m].
+        pitch_rad: about the body's left axis, positive nose down (REP 103) [rad].
+        roll_rad: about the body's forward axis, positive with the left side up [rad].
+    """
+
+    z_m: float
+    pitch_rad: float
+    roll_rad: float
+
+    @property
+    def grade_rad(self) -> float:
+        """The grade along the heading, positive uphill [rad]: ``-pitch_rad``."""
+        return -self.pitch_rad
+
+
+LEVEL = Attitude(0.0, 0.0, 0.0)  # the attitude on flat ground
+
+
+class Ground(Protocol):
+    """Anything that gives the ground's height at a point (a world map with relief)."""
+
+    resolution_m: float  # the side of its grid's cells [m]
+
+    def height_at_point(self, x: float, y: float) -> float: ...
+
+
+class GroundContact:
+    """The ground under one vehicle's wheels: its attitude, the step ahead of it and its top speed
+    up a grade, in plain floats (asked at every controller tick).
+
+    Args:
+        ground: the ground's heights.
+        config: the vehicle's geometry and limits.
+    """
+
+    def __init__(self, ground: Ground, config: VehicleConfig) -> None:
+        self.height_at = ground.height_at_point
+        self.config = config
+        self.half_length_m = 0.5 * config.wheelbase_m
+        self.half_width_m = config.half_width_m
+        # Long enough that a ledge one grid cell wide (a rasterised vertical step) is seen whole
+        # from some tick: the distance of one tick at top speed, and a cell.
+        self.probe_m = config.max_speed_mps * config.dt_s + ground.resolution_m
+
+    def _wheels(self, pose: Pose) -> tuple[float, float, float, float]:
+        """The ground's height [m] under the front-left, front-right, rear-left and rear-right wheels."""
+        x, y, yaw = pose
+        cos, sin = math.cos(yaw), math.sin(yaw)
+        ax, ay = self.half_length_m * cos, self.half_length_m * sin  # half the wheelbase, along
+        cx, cy = -self.half_width_m * sin, self.half_width_m * cos  # half the track, to the left
+        z = self.height_at
+        return z(x + ax + cx, y + ay + cy), z(x + ax - cx, y + ay - cy), z(x - ax + cx, y - ay + cy), z(x - ax - cx, y - ay - cy)
+
+    def attitude(self, pose: Pose) -> Attitude:
+        """The body's height and orientation at ``pose``."""
+        fl, fr, rl, rr = self._wheels(pose)
+        pitch = math.atan2(0.5 * (rl + rr) - 0.5 * (fl + fr), 2.0 * self.half_length_m)
+        roll = math.atan2(0.5 * (fl + rl) - 0.5 * (fr + rr), 2.0 * self.half_width_m)
+        return Attitude(0.25 * (fl + fr + rl + rr), pitch, roll)
+
+    def rise_ahead_m(self, pose: Pose) -> float:
+        """The largest rise of the ground [m] from a front wheel (or the middle of the front axle)
+        to ``probe_m`` ahead of it: the step the vehicle is about to climb."""
+        x, y, yaw = pose
+        cos, sin = math.cos(yaw), math.sin(yaw)
+        ax, ay = self.half_length_m * cos, self.half_length_m * sin
+        px, py = self.probe_m * cos, self.probe_m * sin
+        rise = -math.inf
+        for side in (-1.0, 0.0, 1.0):
+            wx, wy = x + ax - side * self.half_width_m * sin, y + ay + side * self.half_width_m * cos
+            rise = max(rise, self.height_at(wx + px, wy + py) - self.height_at(wx, wy))
+        return rise
+
+    def blocked(self, pose: Pose) -> bool:
+        """Whether the step ahead at ``pose`` is higher than the vehicle climbs."""
+        return self.rise_ahead_m(pose) > self.config.max_step_m
+
+    def tipped(self, attitude: Attitude) -> bool:
+        """Whether ``attitude`` is past the vehicle's roll or pitch limit."""
+        c = self.config
+        return abs(attitude.roll_rad) > math.radians(c.max_roll_deg) or abs(attitude.pitch_rad) > math.radians(c.max_pitch_deg)
+
+    def top_speed_mps(self, attitude: Attitude) -> float:
+        """The fastest the vehicle goes [m/s] at ``attitude``: up a grade, a drive of constant power
+        that reaches ``max_speed_mps`` on the level against rolling resistance ``c`` climbs at
+        ``max_speed_mps * c / (c cos g + sin g)`` (level and downhill: ``max_speed_mps``)."""
+        g, c = attitude.grade_rad, self.config.rolling_resistance
+        if g <= 0.0:
+            return self.config.max_speed_mps
+        return self.config.max_speed_mps * c / (c * math.cos(g) + math.sin(g))
