@@ -19,10 +19,14 @@ import math
 import numpy as np
 
 from terrapref.camera.pinhole import PinholeCamera
+from terrapref.camera.relief_compiled import render_relief
 from terrapref.camera.render_compiled import pixels_at, pixels_of_rows, ray_pixels, render_frame, rows_and_columns, take
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose
+from terrapref.vehicle.ground import LEVEL, Attitude
 from terrapref.world import WorldMap
+
+_LEVEL_GROUND = np.zeros((1, 1), dtype=np.float32)  # the plane z = 0, as a height field
 
 
 class SegmentationRenderer:
@@ -78,8 +82,61 @@ class SegmentationRenderer:
     def shape(self) -> tuple[int, int]:
         return self.camera.shape
 
-    def render(self, pose: Pose) -> np.ndarray:
-        """Segmentation image at ``pose``: class ids, shape (height, width) uint8."""
+    @property
+    def relief(self) -> bool:
+        """Whether the world's ground has relief (frames are then rendered by following each ray
+        to the height field, with the body's attitude)."""
+        return self.world.has_relief
+
+    def placement(self, pose: Pose, attitude: Attitude = LEVEL) -> tuple[np.ndarray, np.ndarray]:
+        """The camera's axes (3, 3; rows right, down, forward) and optical centre (3,) [m] in the
+        world frame, for the body at ``pose`` with ``attitude`` (its height, then yaw, pitch and
+        roll applied in that order, REP 103)."""
+        x, y, yaw = _finite(pose)
+        cz, sz = math.cos(yaw), math.sin(yaw)
+        cp, sp = math.cos(attitude.pitch_rad), math.sin(attitude.pitch_rad)
+        cr, sr = math.cos(attitude.roll_rad), math.sin(attitude.roll_rad)
+        body = np.array(
+            [
+                [cz * cp, cz * sp * sr - sz * cr, cz * sp * cr + sz * sr],
+                [sz * cp, sz * sp * sr + cz * cr, sz * sp * cr - cz * sr],
+                [-sp, cp * sr, cp * cr],
+            ]
+        )  # world from body: Rz(yaw) Ry(pitch) Rx(roll)
+        return self.camera.R @ body.T, np.array([x, y, attitude.z_m]) + body @ self.camera.t
+
+    def render_with_depth(self, pose: Pose, attitude: Attitude = LEVEL) -> tuple[np.ndarray, np.ndarray]:
+        """Class ids (H, W) uint8 and depth (H, W) float32 [m along the optical axis, NaN where no
+        ground is seen, REP 118] of the frame at ``pose`` with ``attitude``, every ray followed to
+        the height field (:mod:`terrapref.camera.relief_compiled`; the plane z = 0 on flat ground)."""
+        axes, centre = self.placement(pose, attitude)
+        ids = np.empty(self.camera.shape, dtype=np.uint8)
+        depth = np.empty(self.camera.shape, dtype=np.float32)
+        heights = self.world.height if self.world.height is not None else _LEVEL_GROUND
+        render_relief(
+            axes,
+            centre,
+            self._ray_a,
+            self._ray_b,
+            self.camera.config.max_range_m,
+            self.camera.fy,
+            heights,
+            self.world.resolution_m,
+            self._flat,
+            self._nx_pad,
+            float(self._x_max),
+            float(self._y_max),
+            UNKNOWN,
+            ids,
+            depth,
+        )
+        return ids, depth
+
+    def render(self, pose: Pose, attitude: Attitude = LEVEL) -> np.ndarray:
+        """Segmentation image at ``pose``: class ids, shape (height, width) uint8 (on relief, with
+        the body's ``attitude``)."""
+        if self.relief:
+            return self.render_with_depth(pose, attitude)[0]
         x, y, yaw = _finite(pose)
         out = np.empty(self.camera.shape, dtype=np.uint8)
         render_frame(
@@ -231,27 +288,50 @@ class SegmentationView:
     """One camera frame's segmentation, rendered only as far as it is read.
 
     ``image`` is the whole frame (rendered on first use, then kept); ``pixels`` reads a few
-    pixels, from the kept image if there is one, else by rendering just those.
+    pixels, from the kept image if there is one, else by rendering just those (on relief the
+    whole frame is rendered: a ray's pixel depends on the ground before it). ``depth`` is the
+    frame's depth image, rendered on first use.
     """
 
-    __slots__ = ("_image", "_renderer", "_pose")
+    __slots__ = ("_image", "_renderer", "_pose", "_attitude", "_depth")
 
-    def __init__(self, renderer: SegmentationRenderer | None = None, pose: Pose | None = None, image: np.ndarray | None = None) -> None:
+    def __init__(
+        self,
+        renderer: SegmentationRenderer | None = None,
+        pose: Pose | None = None,
+        image: np.ndarray | None = None,
+        attitude: Attitude = LEVEL,
+        depth: np.ndarray | None = None,
+    ) -> None:
         if image is None and (renderer is None or pose is None):
             raise ValueError("a SegmentationView needs an image, or a renderer and a pose")
-        self._image, self._renderer, self._pose = image, renderer, pose
+        self._image, self._renderer, self._pose, self._attitude, self._depth = image, renderer, pose, attitude, depth
 
     @classmethod
-    def of(cls, image: np.ndarray) -> SegmentationView:
-        """A view of an image already in hand."""
-        return cls(image=image)
+    def of(cls, image: np.ndarray, depth: np.ndarray | None = None) -> SegmentationView:
+        """A view of an image (and its depth image, if any) already in hand."""
+        return cls(image=image, depth=depth)
 
     @property
     def image(self) -> np.ndarray:
         """The segmentation image, shape (height, width) uint8."""
         if self._image is None:
-            self._image = self._renderer.render(self._pose)
+            if self._renderer.relief:
+                self._image, self._depth = self._renderer.render_with_depth(self._pose, self._attitude)
+            else:
+                self._image = self._renderer.render(self._pose)
         return self._image
+
+    @property
+    def depth(self) -> np.ndarray | None:
+        """The depth image, shape (height, width) float32 [m along the optical axis, NaN where
+        nothing is seen, REP 118]; None for a view of an image that came without one."""
+        if self._depth is None and self._renderer is not None:
+            if self._renderer.relief and self._image is None:
+                self._image, self._depth = self._renderer.render_with_depth(self._pose, self._attitude)
+            else:
+                self._depth = self._renderer.render_with_depth(self._pose, self._attitude)[1]
+        return self._depth
 
     @property
     def rendered(self) -> bool:
@@ -271,6 +351,8 @@ class SegmentationView:
             if image.dtype == np.uint8 and image.ndim == 2 and image.flags.c_contiguous and flat_index.dtype.kind == "i":
                 return take(image, flat_index).reshape(np.shape(flat_index))  # NumPy's fancy indexing, without its overhead
             return image.reshape(-1)[flat_index]
+        if self._renderer.relief:
+            return self.image.reshape(-1)[flat_of(flat_index)].reshape(np.shape(flat_index))
         return self._renderer.pixels(self._pose, flat_index)
 
 

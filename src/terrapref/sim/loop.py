@@ -98,6 +98,12 @@ class Frame:
         """The segmentation image, shape (H, W) uint8 class ids."""
         return self.view.image
 
+    @property
+    def depth(self) -> np.ndarray | None:
+        """The depth image, shape (H, W) float32 [m along the optical axis, NaN where nothing is
+        seen, REP 118]."""
+        return self.view.depth
+
 
 class Driver(Protocol):
     """Anything that turns frames into commands: the synthetic demonstrator, a human, a planner.
@@ -165,7 +171,7 @@ class Simulation:
         return Frame(
             self.frame_index,
             self.time_s,
-            SegmentationView(self.renderer, pose),
+            SegmentationView(self.renderer, pose, attitude=self.vehicle.attitude),
             pose,
             self.scenario.waypoints,
             self.vehicle.speed_mps,

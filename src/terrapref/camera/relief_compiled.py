@@ -1,0 +1,200 @@
+"""The relief renderer's inner loop, compiled (Numba): a frame's classes and depth over a height
+field, one image column at a time.
+
+An image column back-projects to a plane through the optical centre. The loop walks that plane's
+trace on the ground away from the camera, sampling the height field; each sample projects to a
+(continuous) row of the column. Rows fill from the bottom of the image up: the rows whose
+centres lie between two samples' rows see the ground between them, where the pixel's ray meets
+the segment joining the two ground points (the ground is taken as linear between samples, so
+on a plane every pixel is exact). A sample projecting below the rows already filled is hidden
+(behind a crest), and fills nothing. Steps are two grid cells near the camera and about a pixel
+row's ground farther out.
+
+Float64 throughout. Compiled on first use and cached beside this file.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True, inline="always")
+def height_at(heights: np.ndarray, per_m: float, x: float, y: float) -> float:
+    """The ground's height at (x, y) [m], bilinear between cell centres as
+    :meth:`terrapref.world.WorldMap.height_at` (the edge's heights beyond the outermost
+    centres); ``per_m`` is cells per metre."""
+    ny, nx = heights.shape
+    u = min(max(x * per_m - 0.5, 0.0), nx - 1.0)
+    v = min(max(y * per_m - 0.5, 0.0), ny - 1.0)
+    c0, r0 = int(math.floor(u)), int(math.floor(v))
+    c1, r1 = min(c0 + 1, nx - 1), min(r0 + 1, ny - 1)
+    fu, fv = u - c0, v - r0
+    south = np.float64(heights[r0, c0]) * (1.0 - fu) + np.float64(heights[r0, c1]) * fu
+    north = np.float64(heights[r1, c0]) * (1.0 - fu) + np.float64(heights[r1, c1]) * fu
+    return south * (1.0 - fv) + north * fv
+
+
+@njit(cache=True, nogil=True)
+def render_relief(
+    axes: np.ndarray,
+    centre: np.ndarray,
+    ray_a: np.ndarray,
+    ray_b: np.ndarray,
+    max_range_m: float,
+    fy: float,
+    heights: np.ndarray,
+    res: float,
+    raster: np.ndarray,
+    nx: int,
+    x_max: float,
+    y_max: float,
+    unknown: int,
+    ids: np.ndarray,
+    depth: np.ndarray,
+) -> None:
+    """Fill ``ids`` (H, W) uint8 and ``depth`` (H, W) float32 of a camera over a height field.
+
+    Args:
+        axes: (3, 3) the camera's axes in the world frame (rows: right, down, forward).
+        centre: (3,) the optical centre in the world frame [m].
+        ray_a, ray_b: (W,) and (H,) each column's and row's ray offset through the pixel
+            centres, ``(col + 0.5 - cx) / fx`` and ``(row + 0.5 - cy) / fy``.
+        max_range_m: pixels whose ray meets the ground farther from the centre see nothing.
+        fy: the vertical focal length [px] (sets the step far from the camera).
+        heights: (ny, nx) float32 ground heights at the cell centres [m].
+        res: the grid's cell size [m].
+        raster: the padded class raster, flat (uint8), ``nx`` cells a row.
+        x_max, y_max: the largest cell coordinates clipped to (just inside the padded border).
+        unknown: the class id of a pixel that sees no ground.
+        ids, depth: filled: class ids, and metres along the optical axis (NaN: no ground).
+    """
+    height, width = ids.shape
+    ids[:, :] = unknown
+    depth[:, :] = np.nan
+    r0, r1 = axes[0, 0], axes[0, 1]
+    d0, d1, d2 = axes[1, 0], axes[1, 1], axes[1, 2]
+    f0, f1, f2 = axes[2, 0], axes[2, 1], axes[2, 2]
+    cx, cy, cz = centre[0], centre[1], centre[2]
+    per_m, range2 = 1.0 / res, max_range_m * max_range_m
+    clearance = max(cz - height_at(heights, per_m, cx, cy), 0.2)  # the camera over the ground below it [m]
+    far = 1.0 / (clearance * fy)
+    # Every column's state: its trace's direction, the lowest row not yet filled, the last sample.
+    hx, hy, row = _traces(axes, ray_a, height)
+    vz = height_at(heights, per_m, cx, cy) - cz
+    vd, vf = np.full(width, vz * d2), np.full(width, vz * f2)  # the last sample's down and forward coordinates
+    open_columns = np.sum(row >= 0)
+    r = 0.0
+    # All columns step out together, so that neighbouring columns read neighbouring cells.
+    while open_columns > 0 and r <= max_range_m:  # no ground farther horizontally is in range
+        r += max(2.0 * res, (r * r + clearance * clearance) * far)  # two cells near, about a row farther
+        for col in range(width):
+            if row[col] < 0:
+                continue
+            px, py = cx + r * hx[col], cy + r * hy[col]
+            wx, wy, wz = px - cx, py - cy, height_at(heights, per_m, px, py) - cz
+            wd = wx * d0 + wy * d1 + wz * d2
+            wf = wx * f0 + wy * f1 + wz * f2
+            if wf > 1e-9:
+                a = ray_a[col]
+                ax, ay = a * r0 + f0, a * r1 + f1
+                k = _fill(
+                    col,
+                    row[col],
+                    ray_b,
+                    1.0 + a * a,
+                    ax,
+                    ay,
+                    d0,
+                    d1,
+                    cx,
+                    cy,
+                    vd[col],
+                    vf[col],
+                    wd,
+                    wf,
+                    range2,
+                    per_m,
+                    raster,
+                    nx,
+                    x_max,
+                    y_max,
+                    ids,
+                    depth,
+                )
+                row[col] = k
+                open_columns -= k < 0
+            vd[col], vf[col] = wd, wf
+
+
+@njit(cache=True, nogil=True)
+def _traces(axes: np.ndarray, ray_a: np.ndarray, height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each column's plane's trace on the ground: the horizontal direction in it away from the
+    camera, (W,) x and y; and the lowest row to fill, (W,): ``height - 1``, or -1 for a column
+    whose plane is level (it sees no ground)."""
+    width = ray_a.shape[0]
+    hx, hy, row = np.zeros(width), np.zeros(width), np.full(width, height - 1, np.int64)
+    for col in range(width):
+        a = ray_a[col]
+        # The plane holds the column's centre ray (a, 0, 1) and the camera's down axis.
+        px, py, pz = a * axes[0, 0] + axes[2, 0], a * axes[0, 1] + axes[2, 1], a * axes[0, 2] + axes[2, 2]
+        nxv = py * axes[1, 2] - pz * axes[1, 1]
+        nyv = pz * axes[1, 0] - px * axes[1, 2]
+        nzv = px * axes[1, 1] - py * axes[1, 0]
+        norm = math.sqrt(nxv * nxv + nyv * nyv)  # of the normal x up
+        if norm < 1e-9 * math.sqrt(nxv * nxv + nyv * nyv + nzv * nzv):
+            row[col] = -1
+            continue
+        x, y = nyv / norm, -nxv / norm
+        sign = 1.0 if x * px + y * py >= 0.0 else -1.0
+        hx[col], hy[col] = sign * x, sign * y
+    return hx, hy, row
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _fill(
+    col: int,
+    row: int,
+    ray_b: np.ndarray,
+    scale: float,
+    ax: float,
+    ay: float,
+    d0: float,
+    d1: float,
+    cx: float,
+    cy: float,
+    vd: float,
+    vf: float,
+    wd: float,
+    wf: float,
+    range2: float,
+    per_m: float,
+    raster: np.ndarray,
+    nx: int,
+    x_max: float,
+    y_max: float,
+    ids: np.ndarray,
+    depth: np.ndarray,
+) -> int:
+    """Fill column ``col`` from ``row`` up with the rows whose rays meet the ground between the
+    last sample (camera coordinates down ``vd`` and forward ``vf``) and this one (``wd``, ``wf``):
+    the rows whose centres lie at or below this sample's. A row's ray (offsets a and b: forward
+    s, down b s) meets the segment's line at depth s; its ground point is the centre (cx, cy)
+    plus s times the ray's world direction, ``(ax + b d0, ay + b d1)`` across the ground
+    (``scale`` = 1 + a^2). The lowest row left unfilled."""
+    top = wd / wf  # this sample's ray offset: rows with ray_b >= top see it or nearer
+    dd, df = wd - vd, wf - vf
+    cross = vf * dd - vd * df
+    while row >= 0 and ray_b[row] >= top:
+        b = ray_b[row]
+        den = dd - b * df
+        along = cross / den if den != 0.0 else wf  # depth along the optical axis [m]
+        if along > 0.0 and along * along * (scale + b * b) <= range2:
+            ux = min(max((cx + along * (ax + b * d0)) * per_m + 1.0, 0.0), x_max)
+            uy = min(max((cy + along * (ay + b * d1)) * per_m + 1.0, 0.0), y_max)
+            ids[row, col] = raster[np.int64(uy) * nx + np.int64(ux)]
+            depth[row, col] = along
+        row -= 1
+    return row

@@ -1,0 +1,121 @@
+"""The camera on relief (SPEC 19) against closed-form answers: the depth of flat ground, a wall
+that hides the ground behind it as far as its crest's shadow reaches, a ramp that tilts the body
+and moves the horizon by its grade while the ground ahead looks as the flat ground does; and the
+frames a simulation hands out."""
+
+from __future__ import annotations
+
+import copy
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+
+from terrapref.camera import CameraConfig, PinholeCamera
+from terrapref.camera.render import SegmentationRenderer
+from terrapref.scenario import FORMAT, parse_scenario
+from terrapref.sim import Simulation
+from terrapref.terrain import UNKNOWN
+from terrapref.vehicle import Pose, Vehicle
+from terrapref.world import WorldMap, rasterise
+
+FLAT: dict[str, Any] = {
+    "format": FORMAT,
+    "name": "relief_render_test",
+    "world": {"size_m": [60.0, 40.0], "resolution_m": 0.05, "background": "grass"},
+    "terrain": [],
+    "path": {"waypoints": [[1.0, 20.0], [59.0, 20.0]]},
+}
+
+
+def world(relief: list[dict] | None = None, terrain: list[dict] | None = None) -> WorldMap:
+    data = copy.deepcopy(FLAT)
+    data["terrain"] = terrain or []
+    if relief:
+        data["relief"] = relief
+    return rasterise(parse_scenario(data, "relief_render_test.yaml"))
+
+
+def flat_depth(camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
+    """Every pixel's depth along the optical axis on the plane z = 0 (NaN: no ground in range),
+    and its ground distance ahead of the camera [m], from the pinhole model alone."""
+    rows, cols = np.mgrid[0 : camera.config.height_px, 0 : camera.config.width_px]
+    ground, ok = camera.back_project(np.stack([cols + 0.5, rows + 0.5], axis=-1))
+    point = np.concatenate([ground, np.zeros(ground.shape[:-1] + (1,))], axis=-1) - camera.t
+    return np.where(ok, point @ camera.R[2], np.nan), np.where(ok, ground[..., 0] - camera.t[0], np.nan)
+
+
+def test_on_flat_ground_every_depth_pixel_is_its_analytic_depth_and_the_classes_are_the_flat_renderers() -> None:
+    flat = world(terrain=[{"class": "mud", "circle": {"center": [14.0, 21.0], "radius": 2.0}}])
+    renderer = SegmentationRenderer(PinholeCamera(), flat)
+    pose = Pose(10.0, 20.3, 0.1)
+    ids, depth = renderer.render_with_depth(pose)
+    expected, _ = flat_depth(renderer.camera)
+    assert depth.dtype == np.float32 and ids.dtype == np.uint8
+    np.testing.assert_array_equal(np.isnan(depth), np.isnan(expected))
+    np.testing.assert_allclose(depth[~np.isnan(depth)], expected[~np.isnan(expected)], rtol=1e-6)
+    np.testing.assert_array_equal(ids, renderer.render(pose))
+    assert (ids == flat.classes.id_of("mud")).sum() > 1000
+
+
+def test_a_wall_hides_the_ground_behind_it_as_far_as_its_crests_shadow() -> None:
+    """A wall 0.5 m high from 3.0 to 3.2 m ahead of a camera 1 m up, pitched 30 deg down: its far
+    top edge shades the ground out to 3.2 * 1 / (1 - 0.5) = 6.4 m. Rows whose flat-ground point
+    lies in that shadow see the wall instead, its face or its top, at depths from
+    3.0 cos 30 deg + 0.25 = 2.85 m to 3.0 cos 30 deg + 0.5 = 3.10 m (3.2 m ahead on its top:
+    3.02 m); the rows of its top (flat points from 6.0 to 6.4 m) see rock; rows beyond the shadow
+    see the grass at its own depth."""
+    box = [[13.0, 0.0], [13.2, 0.0], [13.2, 40.0], [13.0, 40.0]]
+    walled = world([{"plateau": {"polygon": box, "height_m": 0.5, "edge_m": 0.0}}], [{"class": "rock", "polygon": box}])
+    renderer = SegmentationRenderer(PinholeCamera(), walled)
+    vehicle = Vehicle(Pose(10.0, 20.0, 0.0), ground=walled)
+    assert vehicle.attitude.z_m == 0.0 and vehicle.attitude.pitch_rad == 0.0  # its wheels are on the flat
+    ids, depth = renderer.render_with_depth(vehicle.pose, vehicle.attitude)
+    expected, ahead = flat_depth(renderer.camera)
+    column = renderer.camera.config.width_px // 2
+    rock, grass = walled.classes.id_of("rock"), walled.classes.id_of("grass")
+    # Each edge of the wall is a slope over one 5 cm cell (bilinear heights): margins of a cell or two.
+    shadow = (ahead[:, column] > 3.05) & (ahead[:, column] < 6.25)
+    top = (ahead[:, column] > 6.05) & (ahead[:, column] < 6.25)
+    beyond = ahead[:, column] > 6.5
+    assert shadow.sum() > 40 and top.sum() >= 2 and beyond.sum() > 20
+    assert ((depth[shadow, column] > 2.84) & (depth[shadow, column] < 3.11)).all()
+    assert (ids[top, column] == rock).all()
+    assert (ids[beyond, column] == grass).all()
+    np.testing.assert_allclose(depth[beyond, column], expected[beyond, column], rtol=1e-5)
+    near = ahead[:, column] < 2.9  # before the wall: the ground as it is
+    np.testing.assert_allclose(depth[near, column], expected[near, column], rtol=1e-5)
+
+
+def test_on_a_ramp_the_horizon_moves_by_the_grade_and_the_ramp_ahead_looks_as_flat_ground_does() -> None:
+    """A ramp of grade 0.2 from x = 5 to 55 m: the body pitches up by atan(0.2), so the level
+    horizon drops in the image from cy - fy tan(30 deg) to cy - fy tan(30 deg - atan(0.2)); the
+    camera rides the body, so the ramp ahead (within its 30 m range) is imaged as flat ground is."""
+    ramp = world([{"plateau": {"polygon": [[55, -10], [80, -10], [80, 50], [55, 50]], "height_m": 10.0, "edge_m": 50.0}}])
+    renderer = SegmentationRenderer(PinholeCamera(CameraConfig(max_range_m=20.0)), ramp)
+    vehicle = Vehicle(Pose(15.0, 20.0, 0.0), ground=ramp)
+    grade = math.atan(0.2)
+    assert vehicle.attitude.grade_rad == pytest.approx(grade, abs=1e-6)
+    axes, _ = renderer.placement(vehicle.pose, vehicle.attitude)
+    level = np.array([1.0, 0.0, 0.0])  # a level ray straight ahead
+    row = renderer.camera.cy + renderer.camera.fy * (axes[1] @ level) / (axes[2] @ level)
+    assert row == pytest.approx(renderer.camera.cy - renderer.camera.fy * math.tan(math.radians(30.0) - grade), abs=1e-3)
+    ids, depth = renderer.render_with_depth(vehicle.pose, vehicle.attitude)
+    expected, _ = flat_depth(renderer.camera)
+    both = ~np.isnan(depth) & ~np.isnan(expected)
+    assert (np.isnan(depth) != np.isnan(expected)).sum() <= 10  # a few pixels at the range's edge, on either side of it
+    np.testing.assert_allclose(depth[both], expected[both], rtol=1e-4)
+    assert both.sum() > 200_000 and (ids[~np.isnan(depth)] != UNKNOWN).all()
+
+
+def test_a_simulations_frames_carry_depth_and_on_relief_the_body_attitude() -> None:
+    data = copy.deepcopy(FLAT)
+    data["relief"] = [{"mound": {"center": [3.0, 20.0], "radius": 3.0, "height_m": 0.3}}]
+    sim = Simulation(parse_scenario(data, "relief_render_test.yaml"))
+    frame = sim.reset()
+    assert frame.attitude.pitch_rad != 0.0  # the start is on the mound's flank
+    assert frame.depth is not None and frame.depth.shape == frame.image.shape and np.isfinite(frame.depth).sum() > 1000
+    flat_frame = Simulation(parse_scenario(copy.deepcopy(FLAT), "relief_render_test.yaml")).reset()
+    expected, _ = flat_depth(PinholeCamera())
+    np.testing.assert_allclose(flat_frame.depth, expected, rtol=1e-6)
