@@ -74,23 +74,50 @@ def render_relief(
     height, width = ids.shape
     ids[:, :] = unknown
     depth[:, :] = np.nan
-    r0, r1 = axes[0, 0], axes[0, 1]
+    per_m = 1.0 / res
+    below = height_at(heights, per_m, centre[0], centre[1]) - centre[2]  # the ground under the camera, from it [m]
+    clearance = max(-below, 0.2)
+    # Every column's state: its trace's direction, the lowest row not yet filled, its last sample
+    # (first, the ground under the camera) in camera coordinates, down and forward.
+    hx, hy, row = _traces(axes, ray_a, height)
+    columns = np.stack((hx, hy, np.full(width, below * axes[1, 2]), np.full(width, below * axes[2, 2])))
+    cells = (raster, nx, x_max, y_max)
+    _march(columns, row, axes, centre, ray_a, ray_b, max_range_m, clearance, fy, heights, per_m, cells, ids, depth)
+
+
+@njit(cache=True, nogil=True)
+def _march(
+    columns: np.ndarray,
+    row: np.ndarray,
+    axes: np.ndarray,
+    centre: np.ndarray,
+    ray_a: np.ndarray,
+    ray_b: np.ndarray,
+    max_range_m: float,
+    clearance: float,
+    fy: float,
+    heights: np.ndarray,
+    per_m: float,
+    cells: tuple[np.ndarray, int, float, float],
+    ids: np.ndarray,
+    depth: np.ndarray,
+) -> None:
+    """Step every column's trace out together (so that neighbouring columns read neighbouring
+    cells), filling each column's rows from ``row`` up. ``columns`` (4, W): each column's trace's
+    direction (x, y) and its last sample's camera coordinates (down, forward); ``cells``: the
+    padded raster, its row length and the largest cell coordinates. Steps: two cells, or
+    farther out about a pixel row's ground, (r^2 + c^2) / (c fy) at r for a camera
+    ``clearance`` c over the ground."""
     d0, d1, d2 = axes[1, 0], axes[1, 1], axes[1, 2]
     f0, f1, f2 = axes[2, 0], axes[2, 1], axes[2, 2]
     cx, cy, cz = centre[0], centre[1], centre[2]
-    per_m, range2 = 1.0 / res, max_range_m * max_range_m
-    clearance = max(cz - height_at(heights, per_m, cx, cy), 0.2)  # the camera over the ground below it [m]
-    far = 1.0 / (clearance * fy)
-    # Every column's state: its trace's direction, the lowest row not yet filled, the last sample.
-    hx, hy, row = _traces(axes, ray_a, height)
-    vz = height_at(heights, per_m, cx, cy) - cz
-    vd, vf = np.full(width, vz * d2), np.full(width, vz * f2)  # the last sample's down and forward coordinates
+    hx, hy, vd, vf = columns[0], columns[1], columns[2], columns[3]
+    range2, step_m, per_row = max_range_m * max_range_m, 2.0 / per_m, 1.0 / (clearance * fy)
     open_columns = np.sum(row >= 0)
     r = 0.0
-    # All columns step out together, so that neighbouring columns read neighbouring cells.
     while open_columns > 0 and r <= max_range_m:  # no ground farther horizontally is in range
-        r += max(2.0 * res, (r * r + clearance * clearance) * far)  # two cells near, about a row farther
-        for col in range(width):
+        r += max(step_m, (r * r + clearance * clearance) * per_row)
+        for col in range(row.shape[0]):
             if row[col] < 0:
                 continue
             px, py = cx + r * hx[col], cy + r * hy[col]
@@ -98,32 +125,8 @@ def render_relief(
             wd = wx * d0 + wy * d1 + wz * d2
             wf = wx * f0 + wy * f1 + wz * f2
             if wf > 1e-9:
-                a = ray_a[col]
-                ax, ay = a * r0 + f0, a * r1 + f1
-                k = _fill(
-                    col,
-                    row[col],
-                    ray_b,
-                    1.0 + a * a,
-                    ax,
-                    ay,
-                    d0,
-                    d1,
-                    cx,
-                    cy,
-                    vd[col],
-                    vf[col],
-                    wd,
-                    wf,
-                    range2,
-                    per_m,
-                    raster,
-                    nx,
-                    x_max,
-                    y_max,
-                    ids,
-                    depth,
-                )
+                segment = (vd[col], vf[col], wd, wf)
+                k = _fill(col, row[col], ray_b, ray_a[col], axes, centre, segment, range2, per_m, cells, ids, depth)
                 row[col] = k
                 open_columns -= k < 0
             vd[col], vf[col] = wd, wf
@@ -158,32 +161,26 @@ def _fill(
     col: int,
     row: int,
     ray_b: np.ndarray,
-    scale: float,
-    ax: float,
-    ay: float,
-    d0: float,
-    d1: float,
-    cx: float,
-    cy: float,
-    vd: float,
-    vf: float,
-    wd: float,
-    wf: float,
+    a: float,
+    axes: np.ndarray,
+    centre: np.ndarray,
+    segment: tuple[float, float, float, float],
     range2: float,
     per_m: float,
-    raster: np.ndarray,
-    nx: int,
-    x_max: float,
-    y_max: float,
+    cells: tuple[np.ndarray, int, float, float],
     ids: np.ndarray,
     depth: np.ndarray,
 ) -> int:
-    """Fill column ``col`` from ``row`` up with the rows whose rays meet the ground between the
-    last sample (camera coordinates down ``vd`` and forward ``vf``) and this one (``wd``, ``wf``):
-    the rows whose centres lie at or below this sample's. A row's ray (offsets a and b: forward
-    s, down b s) meets the segment's line at depth s; its ground point is the centre (cx, cy)
-    plus s times the ray's world direction, ``(ax + b d0, ay + b d1)`` across the ground
-    (``scale`` = 1 + a^2). The lowest row left unfilled."""
+    """Fill column ``col`` (ray offset ``a``) from ``row`` up with the rows whose rays meet the
+    ground between the last sample (camera coordinates down ``vd`` and forward ``vf``) and this
+    one (``wd``, ``wf``), ``segment = (vd, vf, wd, wf)``: the rows whose centres lie at or below
+    this sample's. A row's ray (offsets a and b: forward s, down b s) meets the segment's line at
+    depth s; its ground point is the centre plus s times the ray's direction in the world. The
+    lowest row left unfilled."""
+    vd, vf, wd, wf = segment
+    raster, nx, x_max, y_max = cells
+    ax, ay = a * axes[0, 0] + axes[2, 0], a * axes[0, 1] + axes[2, 1]  # the ray's direction at b = 0, across the ground
+    d0, d1, cx, cy, scale = axes[1, 0], axes[1, 1], centre[0], centre[1], 1.0 + a * a
     top = wd / wf  # this sample's ray offset: rows with ray_b >= top see it or nearer
     dd, df = wd - vd, wf - vf
     cross = vf * dd - vd * df

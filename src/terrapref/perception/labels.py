@@ -156,6 +156,11 @@ class LabelledView(SegmentationView):
             return super().pixels(flat_index)
         return self._errors.apply(self._base, flat_index)
 
+    @property
+    def depth(self) -> np.ndarray | None:
+        """The base's depth image: label errors leave the depth as it was."""
+        return self._base.depth
+
 
 @functools.lru_cache(maxsize=8)
 def far_pixels(camera: CameraConfig, max_range_m: float) -> np.ndarray:

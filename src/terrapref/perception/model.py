@@ -30,10 +30,16 @@ a planner receives differ from the simulator's truth (SPEC 16). Every field is o
       delay: 1                 # every frame arrives this many camera periods late
       late_rate: 0.1           # ... and one period later still, this share of them
       drop_rate: 0.1           # share of frames lost
+    depth:
+      noise_m: 0.003           # the depth image's noise (std) at 1 m; it grows with the square of
+                               # the depth, as a stereo camera's does (0.3 m at 10 m)
+      dropout_rate: 0.05       # share of pixels with no return (NaN)
+      max_range_m: 20          # farther returns are NaN
 
 Presets by name (``terrapref perception`` lists them): ``clean``, ``rellis`` (label errors at the
 rates of a segmentation network on RELLIS-3D; docs/perception.md derives them) and ``field``
-(``rellis`` with pose noise and drift, camera jitter, and a late or lost frame now and then).
+(``rellis`` with pose noise and drift, camera jitter, a late or lost frame now and then, and a
+stereo camera's depth errors).
 """
 
 from __future__ import annotations
@@ -148,6 +154,26 @@ class FrameTiming:
 
 
 @dataclass(frozen=True)
+class DepthErrors:
+    """How the depth image differs from the truth, drawn afresh for every frame.
+
+    Attributes:
+        noise_m: the noise's std at 1 m of depth [m]; at depth d it is ``noise_m * d ** 2``, as a
+            stereo camera's error grows (its disparity's error is constant).
+        dropout_rate: share of pixels with no return (NaN), each drawn alone.
+        max_range_m: returns farther than this along the optical axis are NaN; None: every one.
+    """
+
+    noise_m: float = 0.0
+    dropout_rate: float = 0.0
+    max_range_m: float | None = None
+
+    @property
+    def active(self) -> bool:
+        return bool(self.noise_m or self.dropout_rate or self.max_range_m is not None)
+
+
+@dataclass(frozen=True)
 class PerceptionModel:
     """A perception model: what differs between the truth and what a planner receives.
 
@@ -160,14 +186,15 @@ class PerceptionModel:
     camera: CameraJitter = field(default_factory=CameraJitter)
     frames: FrameTiming = field(default_factory=FrameTiming)
     name: str = "clean"
+    depth: DepthErrors = field(default_factory=DepthErrors)
 
     @property
     def active(self) -> bool:
         """Whether anything differs from the truth."""
-        return self.labels.active or self.pose.active or self.camera.active or self.frames.active
+        return self.labels.active or self.pose.active or self.camera.active or self.frames.active or self.depth.active
 
     def part(self, section: str) -> PerceptionModel:
-        """This model with only ``section`` (labels, pose, camera or frames) kept, named ``NAME:SECTION``."""
+        """This model with only ``section`` (labels, pose, camera, frames or depth) kept, named ``NAME:SECTION``."""
         if section not in _SECTIONS:
             raise ValueError(f"unknown section {section!r}")
         return replace(PerceptionModel(), **{section: getattr(self, section)}, name=f"{self.name}:{section}")
@@ -175,7 +202,8 @@ class PerceptionModel:
     def scaled(self, factor: float) -> PerceptionModel:
         """This model with every error ``factor`` times as large, named ``NAME x FACTOR``: rates and
         shares (capped at 1), blobs per frame, the border's width, noises, drifts and jitters, and
-        the delay (rounded to whole periods); sizes (blob radii, regions) and their persistence stay."""
+        the delay (rounded to whole periods); sizes (blob radii, regions), their persistence and
+        the depth's range stay."""
         if not (math.isfinite(factor) and factor >= 0):
             raise ValueError("a scale factor must be finite and >= 0")
         lab, pose, cam, fr = self.labels, self.pose, self.camera, self.frames
@@ -193,6 +221,7 @@ class PerceptionModel:
             replace(cam, pitch_jitter_deg=cam.pitch_jitter_deg * factor, roll_jitter_deg=cam.roll_jitter_deg * factor),
             FrameTiming(round(fr.delay * factor), min(1.0, fr.late_rate * factor), min(1.0, fr.drop_rate * factor)),
             name=f"{self.name} x {factor:g}",
+            depth=replace(self.depth, noise_m=self.depth.noise_m * factor, dropout_rate=min(1.0, self.depth.dropout_rate * factor)),
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -223,7 +252,7 @@ class PerceptionModel:
         return "; ".join(parts) or "clean (the truth)"
 
 
-_SECTIONS = ("labels", "pose", "camera", "frames")
+_SECTIONS = ("labels", "pose", "camera", "frames", "depth")
 
 
 def _short(value: Any) -> str:
@@ -257,6 +286,7 @@ _SCHEMA: dict[str, dict[str, tuple[str, float, float]]] = {
     },
     "camera": {"pitch_jitter_deg": (_NUMBER, 0.0, 30.0), "roll_jitter_deg": (_NUMBER, 0.0, 30.0), "jitter_time_s": (_NUMBER, 0.0, 1e4)},
     "frames": {"delay": (_INT, 0, 100), "late_rate": (_NUMBER, 0.0, 1.0), "drop_rate": (_NUMBER, 0.0, 1.0)},
+    "depth": {"noise_m": (_NUMBER, 0.0, 10.0), "dropout_rate": (_NUMBER, 0.0, 1.0), "max_range_m": (_OPTIONAL, 0.1, 1e6)},
 }
 _TOP = {"format", "description", *_SCHEMA}
 
@@ -294,7 +324,12 @@ def parse_perception(data: dict[str, Any], source: str, classes: ClassTable, nam
     if labels.blob_radius_px[0] > labels.blob_radius_px[1]:
         raise ConfigError(source, "the smallest radius must not exceed the largest", field="labels.blob_radius_px")
     return PerceptionModel(
-        labels, PoseErrors(**sections["pose"]), CameraJitter(**sections["camera"]), FrameTiming(**sections["frames"]), name=name or source
+        labels,
+        PoseErrors(**sections["pose"]),
+        CameraJitter(**sections["camera"]),
+        FrameTiming(**sections["frames"]),
+        name=name or source,
+        depth=DepthErrors(**sections["depth"]),
     )
 
 

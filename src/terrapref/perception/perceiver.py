@@ -6,6 +6,7 @@
   the ground a tilted camera sees, while the planner still assumes the nominal mount;
 - the segmentation labels it with errors (terrapref.perception.labels);
 - the pose it is told carries white noise and a slowly drifting offset;
+- its depth image carries a depth camera's noise, dropouts and range;
 - it arrives ``delay`` camera periods after it was taken (a share of frames one more), or never;
   a frame older than one already delivered is stale and dropped, as
   :class:`terrapref.interop.runtime.PlannerRuntime` drops it.
@@ -28,10 +29,11 @@ import numpy as np
 
 from terrapref.camera import PixelSet, SegmentationRenderer, SegmentationView
 from terrapref.perception.labels import LabelledView, LabelNoise
-from terrapref.perception.model import PerceptionModel
+from terrapref.perception.model import DepthErrors, PerceptionModel
 from terrapref.stops import STALE, held_too_long, stop_reason_of
-from terrapref.terrain import ClassTable
+from terrapref.terrain import UNKNOWN, ClassTable
 from terrapref.vehicle import Command, Pose
+from terrapref.vehicle.ground import LEVEL, Attitude
 
 COMMAND_HOLD_S = 0.3
 """How long a decision's command stays in force after its frame's stamp [s]; then the vehicle stops."""
@@ -46,6 +48,7 @@ class Frame(Protocol):
     time_s: float  # when it was taken [s]
     view: SegmentationView
     pose: Pose
+    attitude: Attitude  # the body's on the ground
 
 
 class Driver(Protocol):
@@ -58,27 +61,93 @@ class Driver(Protocol):
 
 class TiltedView(SegmentationView):
     """The true ground through the camera at an attitude off its mount, up to ``max_range_m`` along
-    each ray (None: the camera's own range), rendered as far as it is read."""
+    each ray (None: the camera's own range), rendered as far as it is read. The depth image, and
+    on relief the whole frame, is rendered with the wander added to the body's ``attitude``
+    (pitch down, roll)."""
 
     __slots__ = ("_tilt",)
 
     def __init__(
-        self, renderer: SegmentationRenderer, pose: Pose, dpitch_rad: float, droll_rad: float, max_range_m: float | None = None
+        self,
+        renderer: SegmentationRenderer,
+        pose: Pose,
+        dpitch_rad: float,
+        droll_rad: float,
+        max_range_m: float | None = None,
+        attitude: Attitude = LEVEL,
     ) -> None:
-        super().__init__(renderer, pose)
+        attitude = Attitude(attitude.z_m, attitude.pitch_rad + dpitch_rad, attitude.roll_rad + droll_rad)
+        super().__init__(renderer, pose, attitude=attitude)
         self._tilt = (dpitch_rad, droll_rad, max_range_m)
 
     @property
     def image(self) -> np.ndarray:
+        if self._image is None and self._renderer.relief:
+            self._render_relief()
         if self._image is None:
             h, w = self._renderer.shape
             self._image = self._renderer.pixels_tilted(self._pose, np.arange(h * w, dtype=np.int64), *self._tilt).reshape(h, w)
         return self._image
 
+    @property
+    def depth(self) -> np.ndarray | None:
+        if self._depth is None and self._renderer.relief:
+            self._render_relief()
+        return super().depth
+
+    def _render_relief(self) -> None:
+        """The frame and its depth over the relief, pixels beyond the range unknown."""
+        image, depth = self._renderer.render_with_depth(self._pose, self._attitude)
+        reach = self._tilt[2]
+        if reach is not None:
+            rays = np.sqrt(1.0 + self._renderer._ray_a[None, :] ** 2 + self._renderer._ray_b[:, None] ** 2)  # range per metre of depth
+            far = ~(depth * rays <= reach)
+            image[far] = UNKNOWN
+            depth[far] = np.nan
+        self._image, self._depth = image, depth
+
     def pixels(self, flat_index: np.ndarray | PixelSet) -> np.ndarray:
-        if self._image is not None:
+        if self._image is not None or self._renderer.relief:
+            self.image  # noqa: B018 - rendered whole on relief
             return super().pixels(flat_index)
         return self._renderer.pixels_tilted(self._pose, flat_index, *self._tilt)
+
+
+class DepthErrorView(SegmentationView):
+    """``base``'s labels, and its depth image with a depth camera's errors (:class:`DepthErrors`),
+    drawn from ``seed`` when first read (so a frame's errors do not depend on whether, or when,
+    its depth is read)."""
+
+    __slots__ = ("_base", "_errors", "_seed")
+
+    def __init__(self, base: SegmentationView, errors: DepthErrors, seed: int) -> None:
+        self._image, self._renderer, self._pose, self._attitude, self._depth = None, None, None, LEVEL, None
+        self._base, self._errors, self._seed = base, errors, seed
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self._base.shape
+
+    @property
+    def image(self) -> np.ndarray:
+        return self._base.image
+
+    def pixels(self, flat_index: np.ndarray | PixelSet) -> np.ndarray:
+        return self._base.pixels(flat_index)
+
+    @property
+    def depth(self) -> np.ndarray | None:
+        if self._depth is None:
+            true = self._base.depth
+            if true is None:
+                return None
+            e, rng = self._errors, np.random.default_rng(self._seed)
+            noisy = true + (e.noise_m * true * true * rng.standard_normal(true.shape)).astype(np.float32)
+            gone = rng.random(true.shape) < e.dropout_rate
+            if e.max_range_m is not None:
+                gone |= ~(true <= e.max_range_m)
+            self._depth = np.where(gone | ~(noisy > 0), np.float32(np.nan), noisy).astype(np.float32)
+        return self._depth
 
 
 class Perceiver:
@@ -101,8 +170,8 @@ class Perceiver:
 
     def reset(self, rng: np.random.Generator) -> None:
         """Start a run: every part's random stream seeded from ``rng``, no drift, no frame pending."""
-        self._rng_labels, self._rng_pose, self._rng_camera, self._rng_frames = (
-            np.random.default_rng(rng.integers(2**63)) for _ in range(4)
+        self._rng_labels, self._rng_pose, self._rng_camera, self._rng_frames, self._rng_depth = (
+            np.random.default_rng(rng.integers(2**63)) for _ in range(5)
         )
         if self.labels is not None:
             self.labels.reset(self._rng_labels)
@@ -118,9 +187,12 @@ class Perceiver:
         view = frame.view
         if m.camera.active:
             self._attitude = self._rho * self._attitude + math.sqrt(1.0 - self._rho**2) * self._sigma * self._rng_camera.normal(0.0, 1.0, 2)
-            view = TiltedView(self.renderer, frame.pose, float(self._attitude[0]), float(self._attitude[1]), m.labels.max_range_m)
+            attitude = getattr(frame, "attitude", LEVEL)
+            view = TiltedView(self.renderer, frame.pose, float(self._attitude[0]), float(self._attitude[1]), m.labels.max_range_m, attitude)
         if self.labels is not None:
             view = LabelledView(view, self.labels.draw(self._rng_labels, frame.index))
+        if m.depth.active:
+            view = DepthErrorView(view, m.depth, int(self._rng_depth.integers(2**63)))
         return replace(frame, view=view, pose=self._told(frame.pose))
 
     def _told(self, pose: Pose) -> Pose:
