@@ -5,6 +5,8 @@ Run through ``scripts/bench.sh`` (which pins one core); the numbers it prints go
 
 (a) render: one 640 x 480 frame on a 100 m x 100 m map at 0.05 m cells (2000 x 2000) filled with
     random classes, timed per frame at random poses; median over ``--poses`` (>= 500) frames.
+    The same with relief (rolling ground, a mound, a pit, a ridge; the body resting on it at
+    each pose): the frame and its depth image, every ray followed to the height field.
 (b) loop: ``Simulation.step`` with a constant command on the packaged ``demo_course``: three
     30 Hz vehicle ticks, collision checks, progress along the path and one frame per step,
     rendered whole (as a recording or a human's display reads it) or not at all (a frame is
@@ -30,7 +32,7 @@ from terrapref.camera import PinholeCamera, SegmentationRenderer
 from terrapref.scenario import resolve_scenario
 from terrapref.sim import Simulation
 from terrapref.terrain import default_classes
-from terrapref.vehicle import Command, Pose
+from terrapref.vehicle import Command, Pose, Vehicle
 from terrapref.world import WorldMap
 
 RENDER_TARGET_MS = 0.5
@@ -76,6 +78,41 @@ def bench_render(n_poses: int, rng: np.random.Generator, size_m: float = 100.0, 
     return Timing(samples)
 
 
+def bench_render_relief(
+    n_poses: int, rng: np.random.Generator, size_m: float = 100.0, resolution_m: float = 0.05, warmup: int = 20
+) -> Timing:
+    """Time full frames with their depth (``render_with_depth``) at ``n_poses`` random poses on a
+    random-terrain map with relief: rolling ground (0.6 m of noise over 15 m) and a mound, a pit
+    and a ridge, the body resting on the ground at each pose."""
+    from terrapref.scenario.relief import Mound, Noise, Ridge
+    from terrapref.world.relief import height_field
+
+    n = round(size_m / resolution_m)
+    classes = default_classes()
+    ids = np.array([c.id for c in classes.classes], dtype=np.uint8)
+    relief = (
+        Noise(amplitude_m=0.6, wavelength_m=15.0, seed=3),
+        Mound(center=(30.0, 40.0), radius_m=4.0, height_m=1.0),
+        Mound(center=(60.0, 60.0), radius_m=3.0, height_m=-0.6),
+        Ridge(polyline=np.array([[20.0, 70.0], [80.0, 75.0]]), width_m=3.0, height_m=0.8),
+    )
+    world = WorldMap(rng.choice(ids, size=(n, n)), resolution_m, classes, height_field(relief, (n, n), resolution_m))
+    renderer = SegmentationRenderer(PinholeCamera(), world)
+    poses = [
+        Pose(float(x), float(y), float(a))
+        for x, y, a in zip(rng.uniform(0, size_m, n_poses), rng.uniform(0, size_m, n_poses), rng.uniform(-math.pi, math.pi, n_poses))
+    ]
+    bodies = [Vehicle(pose, ground=world).attitude for pose in poses]
+    for pose, attitude in zip(poses[:warmup], bodies):
+        renderer.render_with_depth(pose, attitude)
+    samples = np.empty(n_poses)
+    for i, (pose, attitude) in enumerate(zip(poses, bodies)):
+        t0 = time.perf_counter()
+        renderer.render_with_depth(pose, attitude)
+        samples[i] = time.perf_counter() - t0
+    return Timing(samples)
+
+
 def bench_loop(
     n_frames: int,
     command: Command = Command(1.0, 0.0),
@@ -117,6 +154,7 @@ def main(argv: list[str] | None = None) -> int:
     ref = reference_ms()
     rng = np.random.default_rng(args.seed)
     render = bench_render(args.poses, rng)
+    relief = bench_render_relief(args.poses, rng)
     loop = bench_loop(args.frames)
     bare = bench_loop(args.frames, whole_frame=False)
 
@@ -137,6 +175,16 @@ def main(argv: list[str] | None = None) -> int:
             f"{1e3 / render.median_ms:.0f} fps",
             f"{render.median_ms / ref:.4f}",
             f"<= {RENDER_TARGET_MS:g} ms: {'met' if render.median_ms <= RENDER_TARGET_MS else 'MISSED'}",
+        ),
+        (
+            f"render 640x480 with its depth, on relief, 100 m map @ 0.05 m ({args.poses} poses)",
+            f"{relief.median_ms:.3f} ms",
+            f"{relief.p90_ms:.3f} ms",
+            f"{relief.mean_ms:.3f} ms",
+            f"{1e3 / relief.median_ms:.0f} fps",
+            f"{relief.median_ms / ref:.4f}",
+            f"<= 3x the flat frame's ({relief.median_ms / render.median_ms:.1f}x): "
+            + ("met" if relief.median_ms <= 3 * render.median_ms else "MISSED"),
         ),
         (
             f"Simulation.step + whole frame, demo_course ({args.frames} frames)",

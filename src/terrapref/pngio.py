@@ -22,6 +22,27 @@ def colorise(labels: np.ndarray, classes: ClassTable) -> np.ndarray:
     return classes.palette()[labels]
 
 
+def depth_to_millimetres(depth: np.ndarray) -> np.ndarray:
+    """A depth image (H, W) float32 [m, NaN where nothing is seen] as REP 118's 16UC1 (H, W)
+    uint16 millimetres, 0 where nothing is seen (and beyond 65.534 m)."""
+    mm = np.where(np.isfinite(depth), np.rint(np.nan_to_num(depth, nan=0.0) * 1000.0), 0.0)
+    return np.where(mm <= 65534, np.maximum(mm, 0), 0).astype(np.uint16)
+
+
+def depth_preview(depth: np.ndarray, height_px: int) -> np.ndarray:
+    """A picture (height_px, W, 3) uint8 of a depth image: near light, far dark (by the square
+    root of the depth over its farthest return, so the near ground's shape shows), nothing seen
+    in grey blue; the rows below the image, to ``height_px``, white."""
+    seen = np.isfinite(depth)
+    far = float(depth[seen].max()) if seen.any() else 1.0
+    shade = np.where(seen, 235.0 - 200.0 * np.sqrt(np.maximum(np.nan_to_num(depth, nan=0.0), 0.0) / far), 0.0).astype(np.uint8)
+    rgb = np.repeat(shade[:, :, None], 3, axis=2)
+    rgb[~seen] = (150, 170, 200)
+    out = np.full((height_px, depth.shape[1], 3), 255, dtype=np.uint8)
+    out[: depth.shape[0]] = rgb
+    return out
+
+
 LEGEND_WIDTH_PX = 170
 
 

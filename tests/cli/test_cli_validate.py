@@ -403,6 +403,28 @@ def test_render_writes_class_id_png_and_preview(tmp_path: Path, capsys: pytest.C
         assert (band == c.color).all(axis=1).sum() >= 100, c.name
 
 
+def test_render_of_a_relief_course_writes_the_depth_image_and_shows_it_beside_the_segmentation(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """relief_demo from (8, 12) facing +x: the 0.6 m mound 8 m ahead hides part of the ground
+    behind it; the depth PNG holds millimetres (0: no return) and the preview shows it."""
+    seg, col, depth = tmp_path / "seg.png", tmp_path / "col.png", tmp_path / "depth.png"
+    code, out, err = run_cli(
+        capsys, "render", "relief_demo", "--pose", "8", "12", "0", "--out", str(seg), "--preview", str(col), "--depth", str(depth)
+    )
+    assert code == 0 and err == [] and out[0].startswith("on relief: the body at") and len(out) == 4
+    with Image.open(depth) as im:
+        mm = np.asarray(im)
+    assert mm.dtype == np.uint16 and mm.shape == (480, 640)
+    with Image.open(seg) as im:
+        labels = np.asarray(im)
+    assert (labels[mm == 0] == UNKNOWN).all()  # no return: nothing seen (ground off the map returns depth, unlabelled)
+    assert (mm[labels != UNKNOWN] > 0).all()
+    assert 300 < mm[mm > 0].min() and mm.max() <= 30_000
+    with Image.open(col) as im:
+        assert im.size == (640 + LEGEND_WIDTH_PX + 640, 480)
+
+
 def test_render_defaults_to_the_start_pose(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = write(tmp_path, "s.yaml", GOOD_YAML)
     seg = tmp_path / "seg.png"

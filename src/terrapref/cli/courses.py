@@ -75,10 +75,12 @@ def validate_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_render(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from terrapref.camera import PinholeCamera, SegmentationRenderer
-    from terrapref.pngio import preview_with_legend, write_png_atomic
+    from terrapref.pngio import depth_preview, depth_to_millimetres, preview_with_legend, write_png_atomic
     from terrapref.scenario import resolve_scenario
-    from terrapref.vehicle import Pose
+    from terrapref.vehicle import Pose, Vehicle
     from terrapref.world import rasterise
 
     if args.pose is not None and not all(math.isfinite(v) for v in args.pose):
@@ -86,7 +88,9 @@ def _cmd_render(args: argparse.Namespace) -> int:
     check_output(args.out, "--out", [args.scenario], force=args.force)
     if args.preview:
         check_output(args.preview, "--preview", [args.scenario, args.out], force=args.force)
-    for flag, path in (("--out", args.out), ("--preview", args.preview)):
+    if args.depth:
+        check_output(args.depth, "--depth", [args.scenario, args.out, *([args.preview] if args.preview else [])], force=args.force)
+    for flag, path in (("--out", args.out), ("--preview", args.preview), ("--depth", args.depth)):
         if path is not None and Path(path).suffix.lower() != ".png":  # a lossy format would change the class ids
             raise UserError(str(path), "render writes PNG (class ids need a lossless format): give it the suffix .png", field=flag)
     scenario = resolve_scenario(args.scenario, class_table(args))
@@ -99,13 +103,32 @@ def _cmd_render(args: argparse.Namespace) -> int:
             f"({x:g}, {y:g}, {yaw_deg:g} deg) is not a pose the camera sees {scenario.name}'s {w:g} x {h:g} m world from "
             f"(x and y within {reach:g} m of it, |yaw| <= 1e6 deg)",
         )
-    renderer = SegmentationRenderer(camera, rasterise(scenario))
-    image = renderer.render(Pose(x, y, math.radians(yaw_deg)))
+    world = rasterise(scenario)
+    renderer = SegmentationRenderer(camera, world)
+    vehicle = Vehicle(Pose(x, y, math.radians(yaw_deg)), ground=world if world.has_relief else None)
+    image, depth = (
+        renderer.render_with_depth(vehicle.pose, vehicle.attitude)
+        if world.has_relief or args.depth
+        else (renderer.render(vehicle.pose), None)
+    )
+    if world.has_relief:
+        a = vehicle.attitude
+        print(
+            f"on relief: the body at {a.z_m:.2f} m, pitch {math.degrees(a.pitch_rad):.1f} deg (nose down positive), "
+            f"roll {math.degrees(a.roll_rad):.1f} deg (left side up positive){'; past its limits (tipped)' if vehicle.tipped else ''}"
+        )
     write_png_atomic(args.out, image)
     print(f"wrote {args.out} ({image.shape[1]}x{image.shape[0]} class ids)")
+    if args.depth:
+        write_png_atomic(args.depth, depth_to_millimetres(depth))
+        print(f"wrote {args.depth} (16-bit depth in millimetres along the optical axis, 0 where nothing is seen; REP 118's 16UC1)")
     if args.preview:
-        write_png_atomic(args.preview, preview_with_legend(image, scenario.classes))
-        print(f"wrote {args.preview} (colour preview, the image and a legend beside it)")
+        preview = preview_with_legend(image, scenario.classes)
+        if depth is not None:
+            preview = np.concatenate([preview, depth_preview(depth, preview.shape[0])], axis=1)
+        write_png_atomic(args.preview, preview)
+        shown = "the image, a legend" + (" and the depth image (near light, far dark)" if depth is not None else "")
+        print(f"wrote {args.preview} (colour preview: {shown})")
     return 0
 
 
@@ -114,7 +137,10 @@ def render_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("scenario", metavar="SCENARIO", help="packaged scenario name or file")
     p.add_argument("--pose", nargs=3, type=finite_float, metavar=("X", "Y", "YAW_DEG"), help="vehicle pose [m, m, deg]; default: the start")
     p.add_argument("--out", required=True, type=Path, help="single-channel PNG of class ids")
-    p.add_argument("--preview", type=Path, help="also write a colour preview PNG")
+    p.add_argument(
+        "--preview", type=Path, help="also write a colour preview PNG (with the depth image beside it on relief or with --depth)"
+    )
+    p.add_argument("--depth", type=Path, help="also write the depth image: a 16-bit PNG of millimetres, 0 where nothing is seen")
     add_classes_arg(p)
     add_force_arg(p)
     p.set_defaults(func=_cmd_render)
