@@ -119,3 +119,20 @@ def test_a_simulations_frames_carry_depth_and_on_relief_the_body_attitude() -> N
     flat_frame = Simulation(parse_scenario(copy.deepcopy(FLAT), "relief_render_test.yaml")).reset()
     expected, _ = flat_depth(PinholeCamera())
     np.testing.assert_allclose(flat_frame.depth, expected, rtol=1e-6)
+
+
+def test_a_nearer_range_leaves_the_ground_beyond_it_unseen_and_the_rest_as_it_was() -> None:
+    rolling = world([{"noise": {"amplitude_m": 0.5, "wavelength_m": 10.0, "seed": 1}}])
+    renderer = SegmentationRenderer(PinholeCamera(), rolling)
+    vehicle = Vehicle(Pose(20.0, 20.0, 0.4), ground=rolling)
+    ids, depth = renderer.render_with_depth(vehicle.pose, vehicle.attitude)
+    near_ids, near_depth = renderer.render_with_depth(vehicle.pose, vehicle.attitude, max_range_m=10.0)
+    cam = renderer.camera
+    rows, cols = np.mgrid[0 : cam.config.height_px, 0 : cam.config.width_px]
+    per_depth = np.sqrt(1.0 + ((cols + 0.5 - cam.cx) / cam.fx) ** 2 + ((rows + 0.5 - cam.cy) / cam.fy) ** 2)  # range per metre of depth
+    kept = ~np.isnan(near_depth)
+    assert (near_depth[kept] * per_depth[kept] <= 10.0 + 1e-4).all() and (near_ids[~kept] == UNKNOWN).all()
+    np.testing.assert_array_equal(near_ids[kept], ids[kept])
+    np.testing.assert_array_equal(near_depth[kept], depth[kept])
+    lost = ~kept & ~np.isnan(depth)  # seen only with the camera's own range: farther than 10 m
+    assert lost.sum() > 1000 and (depth[lost] * per_depth[lost] > 10.0 - 1e-4).all()

@@ -105,11 +105,14 @@ class SegmentationRenderer:
         )  # world from body: Rz(yaw) Ry(pitch) Rx(roll)
         return self.camera.R @ body.T, np.array([x, y, attitude.z_m]) + body @ self.camera.t
 
-    def render_with_depth(self, pose: Pose, attitude: Attitude = LEVEL) -> tuple[np.ndarray, np.ndarray]:
+    def render_with_depth(self, pose: Pose, attitude: Attitude = LEVEL, max_range_m: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Class ids (H, W) uint8 and depth (H, W) float32 [m along the optical axis, NaN where no
         ground is seen, REP 118] of the frame at ``pose`` with ``attitude``, every ray followed to
-        the height field (:mod:`terrapref.camera.relief_compiled`; the plane z = 0 on flat ground)."""
+        the height field (:mod:`terrapref.camera.relief_compiled`; the plane z = 0 on flat ground),
+        up to ``max_range_m`` from the optical centre or the camera's range if that is nearer."""
         axes, centre = self.placement(pose, attitude)
+        c = self.camera.config
+        reach = c.max_range_m if max_range_m is None else min(c.max_range_m, max_range_m)
         ids = np.empty(self.camera.shape, dtype=np.uint8)
         depth = np.empty(self.camera.shape, dtype=np.float32)
         heights = self.world.height if self.world.height is not None else _LEVEL_GROUND
@@ -118,7 +121,7 @@ class SegmentationRenderer:
             centre,
             self._ray_a,
             self._ray_b,
-            self.camera.config.max_range_m,
+            reach,
             self.camera.fy,
             heights,
             self.world.resolution_m,
@@ -317,7 +320,7 @@ class SegmentationView:
         """The segmentation image, shape (height, width) uint8."""
         if self._image is None:
             if self._renderer.relief:
-                self._image, self._depth = self._renderer.render_with_depth(self._pose, self._attitude)
+                self._image, self._depth = self._with_depth()
             else:
                 self._image = self._renderer.render(self._pose)
         return self._image
@@ -328,10 +331,14 @@ class SegmentationView:
         nothing is seen, REP 118]; None for a view of an image that came without one."""
         if self._depth is None and self._renderer is not None:
             if self._renderer.relief and self._image is None:
-                self._image, self._depth = self._renderer.render_with_depth(self._pose, self._attitude)
+                self._image, self._depth = self._with_depth()
             else:
-                self._depth = self._renderer.render_with_depth(self._pose, self._attitude)[1]
+                self._depth = self._with_depth()[1]
         return self._depth
+
+    def _with_depth(self) -> tuple[np.ndarray, np.ndarray]:
+        """The whole frame and its depth image, every ray followed to the ground."""
+        return self._renderer.render_with_depth(self._pose, self._attitude)
 
     @property
     def rendered(self) -> bool:
@@ -352,7 +359,8 @@ class SegmentationView:
                 return take(image, flat_index).reshape(np.shape(flat_index))  # NumPy's fancy indexing, without its overhead
             return image.reshape(-1)[flat_index]
         if self._renderer.relief:
-            return self.image.reshape(-1)[flat_of(flat_index)].reshape(np.shape(flat_index))
+            self.image  # noqa: B018 - rendered whole on relief, then read as any kept image
+            return self.pixels(flat_index)
         return self._renderer.pixels(self._pose, flat_index)
 
 

@@ -31,7 +31,7 @@ from terrapref.camera import PixelSet, SegmentationRenderer, SegmentationView
 from terrapref.perception.labels import LabelledView, LabelNoise
 from terrapref.perception.model import DepthErrors, PerceptionModel
 from terrapref.stops import STALE, held_too_long, stop_reason_of
-from terrapref.terrain import UNKNOWN, ClassTable
+from terrapref.terrain import ClassTable
 from terrapref.vehicle import Command, Pose
 from terrapref.vehicle.ground import LEVEL, Attitude
 
@@ -82,35 +82,18 @@ class TiltedView(SegmentationView):
 
     @property
     def image(self) -> np.ndarray:
-        if self._image is None and self._renderer.relief:
-            self._render_relief()
-        if self._image is None:
+        if self._image is None and not self._renderer.relief:
             h, w = self._renderer.shape
             self._image = self._renderer.pixels_tilted(self._pose, np.arange(h * w, dtype=np.int64), *self._tilt).reshape(h, w)
-        return self._image
+        return super().image
 
-    @property
-    def depth(self) -> np.ndarray | None:
-        if self._depth is None and self._renderer.relief:
-            self._render_relief()
-        return super().depth
-
-    def _render_relief(self) -> None:
-        """The frame and its depth over the relief, pixels beyond the range unknown."""
-        image, depth = self._renderer.render_with_depth(self._pose, self._attitude)
-        reach = self._tilt[2]
-        if reach is not None:
-            rays = np.sqrt(1.0 + self._renderer._ray_a[None, :] ** 2 + self._renderer._ray_b[:, None] ** 2)  # range per metre of depth
-            far = ~(depth * rays <= reach)
-            image[far] = UNKNOWN
-            depth[far] = np.nan
-        self._image, self._depth = image, depth
+    def _with_depth(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._renderer.render_with_depth(self._pose, self._attitude, self._tilt[2])
 
     def pixels(self, flat_index: np.ndarray | PixelSet) -> np.ndarray:
-        if self._image is not None or self._renderer.relief:
-            self.image  # noqa: B018 - rendered whole on relief
-            return super().pixels(flat_index)
-        return self._renderer.pixels_tilted(self._pose, flat_index, *self._tilt)
+        if self._image is None and not self._renderer.relief:
+            return self._renderer.pixels_tilted(self._pose, flat_index, *self._tilt)
+        return super().pixels(flat_index)
 
 
 class DepthErrorView(SegmentationView):
