@@ -12,6 +12,7 @@ import numpy as np
 from terrapref.scenario.model import Scenario
 from terrapref.scenario.shapes import Shape
 from terrapref.terrain import UNKNOWN, ClassTable
+from terrapref.world.height_compiled import height_at
 from terrapref.world.relief import height_field
 
 
@@ -59,26 +60,13 @@ class WorldMap:
         return np.where(finite, south * (1.0 - fv) + north * fv, np.nan)
 
     def height_at_point(self, x: float, y: float) -> float:
-        """:meth:`height_at` of one point, in plain floats (the vehicle asks it at every tick)."""
+        """:meth:`height_at` of one point (the vehicle asks it at every tick), by the compiled kernel
+        the renderer's rays read the heights with."""
         if self.height is None:
             return 0.0
         if not (math.isfinite(x) and math.isfinite(y)):
             return math.nan
-        ny, nx = self.height.shape
-        u = min(max(x / self.resolution_m - 0.5, 0.0), nx - 1.0)
-        v = min(max(y / self.resolution_m - 0.5, 0.0), ny - 1.0)
-        c0, r0 = math.floor(u), math.floor(v)
-        c1, r1 = min(c0 + 1, nx - 1), min(r0 + 1, ny - 1)
-        fu, fv = u - c0, v - r0
-        z = self._heights.item
-        south = z(r0, c0) * (1.0 - fu) + z(r0, c1) * fu
-        north = z(r1, c0) * (1.0 - fu) + z(r1, c1) * fu
-        return south * (1.0 - fv) + north * fv
-
-    @functools.cached_property
-    def _heights(self) -> np.ndarray:
-        """The height layer in float64, made on first use."""
-        return np.asarray(self.height, dtype=np.float64)
+        return height_at(self.height, 1.0 / self.resolution_m, float(x), float(y))
 
     @property
     def size_m(self) -> tuple[float, float]:
