@@ -51,5 +51,9 @@ LAYERS: tuple[Layer, ...] = (
     Layer("evidence", np.float32, 0.0, per_column=True),
     # The frame of each cell's last vote (its fading is counted from it).
     Layer("stamp", np.int64, 0),
+    # The mean height of the depth returns that fell in each cell [m], NaN where none did
+    # (terrapref.groundmap.height), and how many did.
+    Layer("elevation", np.float32, np.nan),
+    Layer("returns", np.uint32, 0),
 )
 """The ground map's layers, in the order they are made (module docstring)."""

@@ -12,6 +12,7 @@ from terrapref.camera import PinholeCamera, PixelSet, SegmentationView
 from terrapref.groundmap import map_compiled as kernels
 from terrapref.groundmap.attitude import HorizonAttitude
 from terrapref.groundmap.columns import TerrainColumns
+from terrapref.groundmap.height import DepthRays, geometry_of_cells, vote_heights
 from terrapref.groundmap.layers import LAYERS, Layer
 from terrapref.groundmap.settings import MapSettings
 from terrapref.scenario.path import ReferencePath
@@ -65,6 +66,7 @@ class GroundMap:
         self._pixels = PixelSet(distinct)  # read every frame: their rows and columns worked out once
         self._vx, self._vy = grid[seen, 0].copy(), grid[seen, 1].copy()
         self.camera = camera
+        self._depth_rays: DepthRays | None = None  # made on the first depth image
         self.attitude = HorizonAttitude(camera) if c.map_sky_attitude else None
         # The ray through each sample's pixel centre (camera frame, z = 1), and where the mount's
         # camera sees it meet the ground: a tilted camera moves each sample by where its ray lands.
@@ -81,6 +83,33 @@ class GroundMap:
         self.frame = 0
         self.origin: np.ndarray | None = None  # world position of cell (0, 0)'s corner [m]
         self._origin_xy: tuple[float, float] | None = None  # the same, in plain floats
+
+    def update_height(self, depth: np.ndarray, axes: np.ndarray, centre: np.ndarray) -> None:
+        """Add the returns of ``depth`` (a frame's depth image, read at the pixels the classes are
+        read at) of a camera with ``axes`` at ``centre`` in the world (terrapref.groundmap.height)
+        to the height layer. Call after :meth:`update` of the same frame (which places the map)."""
+        if self._origin_xy is None:
+            raise ValueError("the map is placed by its first update(); update_height comes after it")
+        if self._depth_rays is None:
+            self._depth_rays = DepthRays(self.camera, self._pixels.flat)
+        points = self._depth_rays.points(depth, axes, centre)
+        vote_heights(self._layers["elevation"], self._layers["returns"], self._origin_xy, self.settings.map_resolution_m, points)
+
+    def geometry_at(self, points: np.ndarray, radius_m: float) -> np.ndarray:
+        """Slope [rad], roughness [m] and step [m] (..., 3) of the cells under the world points
+        (..., 2), from the height layer within ``radius_m`` of each (terrapref.groundmap.height);
+        NaN where unknown or off the map."""
+        flat = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        if self.origin is None:
+            return np.full((*np.shape(points)[:-1], 3), np.nan)
+        res = self.settings.map_resolution_m
+        with np.errstate(invalid="ignore"):
+            cols = np.floor((flat[:, 0] - self._origin_xy[0]) / res)
+            rows = np.floor((flat[:, 1] - self._origin_xy[1]) / res)
+        inside = np.isfinite(cols) & np.isfinite(rows)
+        cols, rows = np.where(inside, cols, -1).astype(np.int64), np.where(inside, rows, -1).astype(np.int64)
+        out = geometry_of_cells(self._layers["elevation"], rows, cols, res, radius_m)
+        return out.reshape(*np.shape(points)[:-1], 3)
 
     def layer(self, name: str) -> np.ndarray:
         """The layer ``name`` of :attr:`LAYERS`, (n, n) or (n, n, K + 1) (rows y, columns x): the

@@ -1,0 +1,87 @@
+"""The ground map's height layer (terrapref.groundmap.height) against closed-form answers: the
+heights of a ramp seen through the depth camera, its slope equal to its grade and no roughness;
+a step one centimetre over the vehicle's limit is lethal and one under it is not; unseen ground
+is unknown, never lethal."""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import pytest
+from test_offset_rule import _terrain
+
+from terrapref.camera import PinholeCamera, SegmentationView
+from terrapref.camera.render import SegmentationRenderer
+from terrapref.groundmap.height import GeometryLimits, HeightSettings, geometry_of_cells
+from terrapref.groundmap.map import GroundMap
+from terrapref.scenario import FORMAT, parse_scenario
+from terrapref.vehicle import Pose, Vehicle, VehicleConfig
+from terrapref.world import rasterise
+
+# A ramp of grade 0.2 from x = 10 m to 40 m, level across (y).
+RAMP = {
+    "format": FORMAT,
+    "name": "height_test",
+    "world": {"size_m": [60.0, 30.0], "resolution_m": 0.05, "background": "grass"},
+    "terrain": [],
+    "path": {"waypoints": [[1.0, 15.0], [59.0, 15.0]]},
+    "relief": [{"plateau": {"polygon": [[40, -10], [80, -10], [80, 40], [40, 40]], "height_m": 6.0, "edge_m": 30.0}}],
+}
+
+
+def _seen_ramp() -> tuple[GroundMap, object]:
+    """A ground map that gathered three frames of the ramp, from 15, 16 and 17 m up it."""
+    world = rasterise(parse_scenario(copy.deepcopy(RAMP), "height_test.yaml"))
+    camera = PinholeCamera()
+    renderer, gmap = SegmentationRenderer(camera, world), GroundMap(camera, _terrain(()))
+    for x in (15.0, 16.0, 17.0):
+        vehicle = Vehicle(Pose(x, 15.0, 0.0), ground=world)
+        ids, depth = renderer.render_with_depth(vehicle.pose, vehicle.attitude)
+        gmap.update(SegmentationView.of(ids), vehicle.pose)
+        gmap.update_height(depth, *renderer.placement(vehicle.pose, vehicle.attitude))
+    return gmap, world
+
+
+def test_the_height_layer_holds_the_ramps_heights_and_its_slope_is_the_grade() -> None:
+    gmap, world = _seen_ramp()
+    elevation, returns = gmap.layer("elevation"), gmap.layer("returns")
+    seen = returns > 0
+    assert seen.sum() > 2000 and np.isnan(elevation[~seen]).all()
+    rows, cols = np.nonzero(seen)
+    res = gmap.settings.map_resolution_m
+    centres = np.stack([gmap.origin[0] + (cols + 0.5) * res, gmap.origin[1] + (rows + 0.5) * res], axis=1)
+    on_ramp = (centres[:, 0] > 11.0) & (centres[:, 0] < 39.0)
+    truth = world.height_at(centres[on_ramp])
+    assert np.abs(elevation[rows[on_ramp], cols[on_ramp]] - truth).max() < 0.02  # a return anywhere in its 0.1 m cell
+    ahead = np.array([[x, y] for x in np.arange(19.0, 24.0, 0.5) for y in (14.0, 15.0, 16.0)])
+    geometry = gmap.geometry_at(ahead, HeightSettings().radius_m)
+    assert np.degrees(geometry[:, 0]) == pytest.approx(np.full(len(ahead), math.degrees(math.atan(0.2))), abs=1.0)
+    assert (geometry[:, 1] < 0.01).all()  # a plane: no roughness
+    assert (geometry[:, 2] < 0.2 * 0.2 * math.sqrt(2) + 0.01).all()  # the step across a cell's neighbours: the grade's rise over them
+    assert not GeometryLimits.of(VehicleConfig()).lethal(geometry).any()
+
+
+@pytest.mark.parametrize(("height_m", "lethal"), [(0.14, False), (0.16, True)])
+def test_a_step_one_centimetre_over_the_limit_is_lethal_and_one_under_is_not(height_m: float, lethal: bool) -> None:
+    elevation = np.zeros((20, 20), dtype=np.float32)
+    elevation[:, 10:] = height_m  # a ledge between columns 9 and 10 of 0.1 m cells
+    limits = GeometryLimits.of(VehicleConfig())
+    assert limits.max_step_m == 0.15 and limits.max_slope_rad == pytest.approx(math.radians(25.0))
+    at_ledge = geometry_of_cells(elevation, np.array([10, 10]), np.array([9, 10]), 0.1, 0.3)
+    assert at_ledge[:, 2] == pytest.approx([height_m, height_m], abs=1e-6)
+    assert (at_ledge[:, 0] < limits.max_slope_rad).all()  # the plane over the ledge is not what decides
+    assert limits.lethal(at_ledge).tolist() == [lethal, lethal]
+    away = geometry_of_cells(elevation, np.array([10, 10]), np.array([3, 16]), 0.1, 0.3)
+    assert not limits.lethal(away).any() and (away[:, 2] == 0).all()
+
+
+def test_unseen_ground_has_no_geometry_and_is_not_lethal() -> None:
+    elevation = np.full((20, 20), np.nan, dtype=np.float32)
+    elevation[5, 5] = 0.0  # one cell: no plane, no step
+    geometry = geometry_of_cells(elevation, np.array([5, 15, -1]), np.array([5, 15, 3]), 0.1, 0.3)
+    assert np.isnan(geometry).all() and not GeometryLimits.of(VehicleConfig()).lethal(geometry).any()
+    elevation[5, 6] = 0.5  # two: a step between them, still too few for a plane
+    pair = geometry_of_cells(elevation, np.array([5]), np.array([5]), 0.1, 0.3)
+    assert np.isnan(pair[0, :2]).all() and pair[0, 2] == 0.5
