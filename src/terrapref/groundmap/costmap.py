@@ -12,9 +12,16 @@ unknown.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+from terrapref.groundmap.height import HeightSettings, geometry_of_cells
+
+if TYPE_CHECKING:
+    from terrapref.groundmap.map import GroundMap
 
 LETHAL_COST = 100
 UNKNOWN_COST = -1
@@ -33,6 +40,9 @@ class Costmap:
         prices: each class's learned price per metre (against the background), by name; the
             costs are these scaled to 0-99.
         lethal: the classes among ``prices`` that are lethal (cost 100 whatever their price).
+        layers: more layers over the same cells, (H, W) float32 each, NaN where unknown
+            (:func:`with_layers`: ``speed`` [m/s], ``elevation`` [m], ``slope`` [rad],
+            ``roughness`` [m], ``step`` [m]).
     """
 
     cost: np.ndarray
@@ -40,6 +50,7 @@ class Costmap:
     origin: tuple[float, float]
     prices: dict[str, float]
     lethal: frozenset[str] = frozenset()
+    layers: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def price_per_cost(self) -> float:
@@ -100,6 +111,39 @@ def costmap_of(
         {n: float(p) for n, p in zip(names, prices, strict=True)},
         frozenset(n for n, is_lethal in zip(names, lethal[:k]) if is_lethal),
     )
+
+
+GEOMETRY_LAYERS = ("elevation", "slope", "roughness", "step")
+
+
+def with_layers(
+    costmap: Costmap, ground_map: GroundMap, speeds_mps: np.ndarray | None, radius_m: float = HeightSettings.radius_m
+) -> Costmap:
+    """``costmap`` (of ``ground_map``'s cells) with its other layers over the same cells: the
+    ``speed`` [m/s] a speed rule drives each cell's column at (``speeds_mps``, (K + 2,): the K
+    terrain columns, the background, NaN for ground never seen; 0 on lethal ground; None: no
+    speed rule, no layer), and the height layer's ``elevation`` with the ``slope``, ``roughness``
+    and ``step`` read from it within ``radius_m`` (terrapref.groundmap.height), NaN where unknown."""
+    h, w = costmap.cost.shape
+    layers: dict[str, np.ndarray] = {}
+    if ground_map.origin is None:
+        for name in (("speed",) if speeds_mps is not None else ()) + GEOMETRY_LAYERS:
+            layers[name] = np.full((h, w), np.nan, dtype=np.float32)
+        return replace(costmap, layers=layers)
+    res = ground_map.settings.map_resolution_m
+    r0 = int(round((costmap.origin[1] - float(ground_map.origin[1])) / res))
+    c0 = int(round((costmap.origin[0] - float(ground_map.origin[0])) / res))
+    rows, cols = np.mgrid[r0 : r0 + h, c0 : c0 + w]
+    if speeds_mps is not None:
+        layers["speed"] = np.asarray(speeds_mps, dtype=np.float32)[ground_map.cells[r0 : r0 + h, c0 : c0 + w]]
+    layers["elevation"] = ground_map.layer("elevation")[r0 : r0 + h, c0 : c0 + w].copy()
+    if np.isfinite(layers["elevation"]).any():
+        geometry = geometry_of_cells(ground_map.layer("elevation"), rows.ravel(), cols.ravel(), res, radius_m).reshape(h, w, 3)
+    else:
+        geometry = np.full((h, w, 3), np.nan)
+    for i, name in enumerate(GEOMETRY_LAYERS[1:]):
+        layers[name] = geometry[..., i].astype(np.float32)
+    return replace(costmap, layers=layers)
 
 
 _CHEAP, _DEAR, _LETHAL = np.array([40, 200, 60]), np.array([230, 40, 30]), np.array([20, 20, 20])

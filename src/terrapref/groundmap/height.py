@@ -20,12 +20,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from terrapref.camera import PinholeCamera
 from terrapref.groundmap import height_compiled as kernels
-from terrapref.vehicle import VehicleConfig
+
+if TYPE_CHECKING:
+    from terrapref.camera import PinholeCamera
+    from terrapref.vehicle import VehicleConfig
 
 
 @dataclass(frozen=True)

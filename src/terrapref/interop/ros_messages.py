@@ -54,9 +54,9 @@ def typestore(ros1: bool = False) -> Typestore:
     ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
     if "tf2_msgs/msg/TFMessage" not in ts.fielddefs:  # not in rosbags' ROS 1 store: registered from its definition
         ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
-    if not ros1:
-        for name, definition in _FOXGLOVE_MSGS.items():
-            ts.register(get_types_from_msg(definition, name))
+    own = (_GRID_MAP_MSGS_ROS1 if ros1 else {**_FOXGLOVE_MSGS, **_GRID_MAP_MSGS, **_NAV2_MSGS}).items()
+    for name, definition in own:  # one at a time: each may use the ones before it
+        ts.register(get_types_from_msg(definition, name))
     return ts
 
 
@@ -69,6 +69,25 @@ _FOXGLOVE_MSGS = {
         "foxglove_msgs/Vector2 cell_size\nuint32 row_stride\nuint32 cell_stride\n"
         "foxglove_msgs/PackedElementField[] fields\nuint8[] data\n"
     ),
+}
+
+
+# grid_map's message types (the grid_map_msgs package), ROS 2's and ROS 1's (whose GridMapInfo
+# holds the header), and Nav2's costmap filter description (nav2_msgs).
+_GRID_MAP = (
+    "string[] layers\nstring[] basic_layers\nstd_msgs/Float32MultiArray[] data\nuint16 outer_start_index\nuint16 inner_start_index\n"
+)
+_GRID_MAP_INFO = "float64 resolution\nfloat64 length_x\nfloat64 length_y\ngeometry_msgs/Pose pose\n"
+_GRID_MAP_MSGS = {
+    "grid_map_msgs/msg/GridMapInfo": _GRID_MAP_INFO,
+    "grid_map_msgs/msg/GridMap": "std_msgs/Header header\ngrid_map_msgs/GridMapInfo info\n" + _GRID_MAP,
+}
+_GRID_MAP_MSGS_ROS1 = {
+    "grid_map_msgs/msg/GridMapInfo": "std_msgs/Header header\n" + _GRID_MAP_INFO,
+    "grid_map_msgs/msg/GridMap": "grid_map_msgs/GridMapInfo info\n" + _GRID_MAP,
+}
+_NAV2_MSGS = {
+    "nav2_msgs/msg/CostmapFilterInfo": "std_msgs/Header header\nuint8 type\nstring filter_mask_topic\nfloat32 base\nfloat32 multiplier\n",
 }
 
 
@@ -261,6 +280,66 @@ def occupancy_grid(ts: Typestore, stamped: Message, cost: np.ndarray, resolution
         origin=pose(ts, float(origin[0]), float(origin[1]), rpy_quaternion(ts, 0.0, 0.0, 0.0)),
     )
     return T["nav_msgs/msg/OccupancyGrid"](header=stamped, info=info, data=np.ascontiguousarray(cost, dtype=np.int8).ravel())
+
+
+def grid_map(
+    ts: Typestore, stamped: Message, layers: dict[str, np.ndarray], resolution_m: float, origin: tuple[float, float], ros1: bool = False
+) -> Message:
+    """grid_map_msgs/GridMap of ``layers`` (each (H, W) float32, row i along y, NaN unknown) whose
+    cell (0, 0) has its corner at ``origin`` [m] in the frame of the header ``stamped``.
+
+    grid_map's layout: the map's pose is its centre; its matrices have a row per x (index 0 at
+    the largest x) and a column per y (index 0 at the largest y), and are stored column-major
+    (``column_index`` outer), so each layer goes out as ``layer[::-1, ::-1]`` row by row."""
+    T = ts.types
+    h, w = next(iter(layers.values())).shape
+    centre = pose(ts, origin[0] + 0.5 * w * resolution_m, origin[1] + 0.5 * h * resolution_m, rpy_quaternion(ts, 0.0, 0.0, 0.0))
+    info = {"resolution": float(resolution_m), "length_x": w * float(resolution_m), "length_y": h * float(resolution_m), "pose": centre}
+    dim = T["std_msgs/msg/MultiArrayDimension"]
+    layout = T["std_msgs/msg/MultiArrayLayout"](
+        dim=[dim(label="column_index", size=h, stride=h * w), dim(label="row_index", size=w, stride=w)], data_offset=0
+    )
+    data = [
+        T["std_msgs/msg/Float32MultiArray"](layout=layout, data=np.ascontiguousarray(layer[::-1, ::-1], dtype=np.float32).ravel())
+        for layer in layers.values()
+    ]
+    grid = {"layers": list(layers), "basic_layers": [], "data": data, "outer_start_index": 0, "inner_start_index": 0}
+    if ros1:
+        return T["grid_map_msgs/msg/GridMap"](info=T["grid_map_msgs/msg/GridMapInfo"](header=stamped, **info), **grid)
+    return T["grid_map_msgs/msg/GridMap"](header=stamped, info=T["grid_map_msgs/msg/GridMapInfo"](**info), **grid)
+
+
+def grid_map_layer(msg: Message, name: str) -> np.ndarray:
+    """The layer ``name`` of a grid_map_msgs/GridMap, (H, W) float32 with row i along y as
+    :func:`grid_map` takes it."""
+    array = msg.data[list(msg.layers).index(name)]
+    h, w = array.layout.dim[0].size, array.layout.dim[1].size
+    return np.asarray(array.data, dtype=np.float32).reshape(h, w)[::-1, ::-1]
+
+
+SPEED_PERCENT, SPEED_ABSOLUTE = 1, 2  # CostmapFilterInfo's types of a speed filter: percent of the top speed, or m/s
+
+
+def speed_filter(
+    ts: Typestore, stamped: Message, speed_mps: np.ndarray, top_mps: float, mask_topic: str, percent: bool = True
+) -> tuple[Message, np.ndarray]:
+    """Nav2's speed filter of ``speed_mps`` (H, W) [m/s, NaN unknown]: its nav2_msgs/CostmapFilterInfo
+    (naming ``mask_topic``) and the mask's values (H, W) int8 for an OccupancyGrid. Nav2 reads a
+    cell's limit as ``base + multiplier * value`` and 0 or -1 as no limit: in percent of
+    ``top_mps`` (type 1: base 0, multiplier 1) or in m/s (type 2: base 0, multiplier
+    ``top_mps / 100``), each value rounded to the nearest step and at least 1 (a learned speed
+    is never "no limit"); unknown ground -1."""
+    known = np.isfinite(speed_mps)
+    share = np.clip(np.where(known, speed_mps, 0.0) / top_mps, 0.0, 1.0)
+    mask = np.where(known, np.maximum(np.round(100.0 * share), 1), -1).astype(np.int8)
+    info = ts.types["nav2_msgs/msg/CostmapFilterInfo"](
+        header=stamped,
+        type=SPEED_PERCENT if percent else SPEED_ABSOLUTE,
+        filter_mask_topic=mask_topic,
+        base=0.0,
+        multiplier=1.0 if percent else float(top_mps) / 100.0,
+    )
+    return info, mask
 
 
 GRID_FIELDS = (

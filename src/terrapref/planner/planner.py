@@ -15,7 +15,7 @@ import numpy as np
 
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationView, as_view
 from terrapref.features import UtilityFeaturizer
-from terrapref.groundmap.costmap import Costmap
+from terrapref.groundmap.costmap import Costmap, with_layers
 from terrapref.groundmap.map import GroundMap
 from terrapref.groundmap.settings import MapSettings
 from terrapref.learning.model_file import LoadedModel, check_compatible
@@ -293,9 +293,25 @@ class Planner:
         return self.speed.along(self._speed_map, frame, choice, self._set_v, self._max_w)
 
     def costmap(self) -> Costmap | None:
-        """The ground seen so far as the driving rule prices it (terrapref.groundmap.costmap);
-        None when that rule reads no ground map (only the offset rule does)."""
-        return self.runner.costmap(self.ground_map) if self.ground_map is not None else None
+        """The ground seen so far as the driving rule prices it (terrapref.groundmap.costmap),
+        with the speed the speed rule drives each cell at and the ground's height and geometry
+        as further layers (:func:`terrapref.groundmap.costmap.with_layers`); None when the
+        driving rule reads no ground map (only the offset rule does)."""
+        if self.ground_map is None:
+            return None
+        return with_layers(self.runner.costmap(self.ground_map), self.ground_map, self._cell_speeds())
+
+    def _cell_speeds(self) -> np.ndarray | None:
+        """The speed [m/s] (K + 2,) the speed rule cruises at on each map column (the K terrain
+        columns, the background; never-seen ground NaN, lethal ground 0), within its top speed
+        and the robot's; None without a speed rule."""
+        if self.speed is None:
+            return None
+        rule = self.speed.rule
+        top = min(rule.config.max_speed_mps, self.vehicle.max_speed_mps)
+        speeds = np.append(np.minimum(np.asarray(rule.model.speeds_mps, dtype=float), top), np.nan)
+        speeds[list(rule.model.lethal)] = 0.0
+        return speeds
 
 
 def rules_with_settings(policy: Policy, settings: RuleSettings | None) -> tuple[Rule, ...]:
