@@ -9,7 +9,7 @@ from test_offset_rule import DRIVER_LIKE, _offset_meta, _scenario, _seen_from, _
 from helpers import skip_path_weights
 from terrapref.camera import PinholeCamera
 from terrapref.features import FeatureConfig
-from terrapref.groundmap.costmap import LETHAL_COST, UNKNOWN_COST, class_costs
+from terrapref.groundmap.costmap import LETHAL_COST, UNKNOWN_COST, class_costs, with_layers
 from terrapref.groundmap.map import GroundMap
 from terrapref.interop.runtime import PlannerRuntime
 from terrapref.learning.model_file import save_model
@@ -29,8 +29,8 @@ PATCHES = [  # 4 m wide, 3 m deep, 6-9 m ahead of a vehicle at (10, 10) looking 
 ]
 
 
-@pytest.fixture(scope="module")
-def seen():
+def _seen_patches() -> tuple[OffsetSteering, GroundMap]:
+    """An offset rule and its ground map after three frames of PATCHES from (10, 10) along +x."""
     camera = PinholeCamera()
     scenario = _scenario(PATCHES)
     stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,), default_classes().feature_names), CONTROL)
@@ -38,6 +38,12 @@ def seen():
     gmap = GroundMap(camera, _terrain((0,), default_classes().feature_names), stage.map_settings)
     for _ in range(3):
         gmap.update(_seen_from(scenario, camera, pose), pose)
+    return stage, gmap
+
+
+@pytest.fixture(scope="module")
+def seen():
+    stage, gmap = _seen_patches()
     return stage.costmap(gmap)
 
 
@@ -61,6 +67,32 @@ def test_a_class_liked_better_than_the_background_costs_nothing():
     lethal = np.array([True, False, False, False, False, False])
     costs, prices = class_costs(weights, lethal, 4)
     assert costs.tolist() == [LETHAL_COST, 0, 99, 50, 0, UNKNOWN_COST] and prices[1] < 0
+
+
+def test_the_costmaps_layers_hold_each_cells_speed_and_the_height_layers_geometry():
+    """The speed of each cell's column (lethal 0, never seen NaN), and the elevation written into
+    the height layer with the slope of a plane through it, over exactly the costmap's cells."""
+    stage, gmap = _seen_patches()
+    res = gmap.settings.map_resolution_m
+    elevation = gmap.layer("elevation")
+    rows, cols = np.mgrid[0 : elevation.shape[0], 0 : elevation.shape[1]]
+    elevation[...] = (0.2 * res * cols).astype(np.float32)  # a ramp up along x of grade 0.2
+    costmap = stage.costmap(gmap)
+    speeds = np.array([0.0, 0.4, 0.6, 0.8, 1.5, np.nan])  # K = 4 columns, the background, never seen
+    full = with_layers(costmap, gmap, speeds, 2.0)
+    assert full.top_speed_mps == 2.0 and set(full.layers) == {"speed", "elevation", "slope", "roughness", "step"}
+    r0 = round((costmap.origin[1] - gmap.origin[1]) / res)
+    c0 = round((costmap.origin[0] - gmap.origin[0]) / res)
+    h, w = costmap.cost.shape
+    cells = gmap.cells[r0 : r0 + h, c0 : c0 + w]
+    np.testing.assert_array_equal(full.layers["speed"], speeds.astype(np.float32)[cells])
+    assert (full.layers["speed"][costmap.cost == LETHAL_COST] == 0.0).all()
+    assert np.isnan(full.layers["speed"][costmap.cost == UNKNOWN_COST]).all()
+    np.testing.assert_array_equal(full.layers["elevation"], elevation[r0 : r0 + h, c0 : c0 + w])
+    inner = full.layers["slope"][3:-3, 3:-3]
+    np.testing.assert_allclose(inner, np.arctan(0.2), atol=1e-4)
+    assert np.nanmax(full.layers["roughness"]) < 1e-4
+    assert "speed" not in with_layers(costmap, gmap, None, 2.0).layers
 
 
 def test_the_runtime_gives_the_costmap_of_the_ground_it_has_seen(tmp_path):
@@ -93,12 +125,19 @@ def _costmaps_in(mcap) -> tuple[dict[str, int], np.ndarray]:
     from rosbags.highlevel import AnyReader
 
     from terrapref.groundmap.costmap import cost_colours
+    from terrapref.interop.ros_messages import grid_map_layer
 
     with AnyReader([mcap]) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
-        last = {c.topic: reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages() if c.topic.startswith("/terrapref/costmap")}
+        wanted = ("/terrapref/costmap", "/terrapref/grid_map")
+        last = {c.topic: reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages() if c.topic.startswith(wanted)}
     occupancy, grid = last["/terrapref/costmap"], last["/terrapref/costmap_grid"]
     cost = np.asarray(occupancy.data, dtype=np.int8).reshape(occupancy.info.height, occupancy.info.width)
+    layers = last["/terrapref/grid_map"]  # the same cells' layers, as grid_map lays them out
+    assert layers.layers == ["cost", "elevation", "slope", "roughness", "step"]  # no speed rule, no speed layer
+    assert layers.info.length_x == pytest.approx(occupancy.info.width * occupancy.info.resolution)
+    np.testing.assert_array_equal(grid_map_layer(layers, "cost"), np.where(cost == UNKNOWN_COST, np.nan, cost).astype(np.float32))
+    assert np.isnan(grid_map_layer(layers, "elevation")).all()  # a recording carries no depth
     assert occupancy.header.frame_id == grid.frame_id == "odom" and occupancy.info.resolution > 0
     full = round(2 * OffsetGeometry().map_half_size_m / OffsetGeometry().map_resolution_m)
     assert occupancy.info.width * occupancy.info.height < full * full  # cropped to the ground seen

@@ -89,6 +89,12 @@ def test_the_planner_keeps_one_map_per_settings_updates_it_once_a_frame_and_forg
         pose = (x, 10.0, 0.0)
         planner.decide(_seen_from(scenario, planner.camera, pose), pose)
     assert planner.ground_map.frame == 3 and planner.costmap() is not None
+    costmap = planner.costmap()  # with the speed the speed rule cruises at on each cell, for Nav2's speed filter
+    assert costmap.top_speed_mps == planner.vehicle.max_speed_mps
+    speed, cost = costmap.layers["speed"], costmap.cost
+    assert (speed[cost == 100] == 0.0).all() and np.isnan(speed[cost == -1]).all()
+    background = np.float32(min(SPEED_MODEL.speeds_mps[-1], SpeedConfig().max_speed_mps, planner.vehicle.max_speed_mps))
+    assert (speed == background).any()
     planner.set_path(scenario.waypoints)
     assert planner.ground_map.frame == 0 and planner.ground_map.origin is None
     argmax = Planner(model, rule="argmax")  # C steers and reads no map: the speed rule's, and the stop rule's small one

@@ -167,6 +167,7 @@ def _listen(dds, heard: _Heard) -> list:
         dds.subscribe("/terrapref/cmd_vel", "geometry_msgs/msg/TwistStamped", DEFAULT, heard.keeper("cmd")),
         dds.subscribe("/terrapref/trajectories", "visualization_msgs/msg/MarkerArray", DEFAULT, heard.keeper("trajectories")),
         dds.subscribe("/terrapref/costmap", "nav_msgs/msg/OccupancyGrid", LATCHED, heard.keeper("costmap")),
+        dds.subscribe("/terrapref/grid_map", "grid_map_msgs/msg/GridMap", LATCHED, heard.keeper("grid_map")),
         dds.subscribe("/tf_static", "tf2_msgs/msg/TFMessage", LATCHED, heard.keeper("tf_static")),
     ]
 
@@ -383,6 +384,12 @@ def test_the_node_commands_what_the_runtime_commands_frame_by_frame(system):
     assert len(markers) == 21 and markers[0].header.frame_id == "base_link" and len(markers[0].points) > 2
     costmap = system["heard"].get("costmap")[-1]
     assert costmap.header.frame_id == "odom" and costmap.info.width * costmap.info.height == len(costmap.data) > 0
+    layers = system["heard"].get("grid_map")[-1]  # the same cells' layers, as grid_map lays them out
+    from terrapref.interop.ros_messages import grid_map_layer
+
+    assert layers.header.frame_id == "odom" and layers.info.length_x == pytest.approx(costmap.info.width * costmap.info.resolution)
+    cost = np.asarray(costmap.data, dtype=np.int8).reshape(costmap.info.height, costmap.info.width)
+    np.testing.assert_array_equal(grid_map_layer(layers, "cost"), np.where(cost == -1, np.nan, cost).astype(np.float32))
     live = system["live"]  # --live: the decisions also went to the live view, stamped with the frames' ROS times
     assert "error" not in live and len(live.get("/terrapref/labels", [])) >= FRAMES // 2 and live.get("/terrapref/trajectories")
     assert abs(max(ns for ns, _ in live["/terrapref/labels"]) * 1e-9 - system["stamps"][-1]) < 0.2
@@ -426,6 +433,9 @@ def test_every_endpoint_is_named_typed_and_offered_as_ros2_expects(system):
         ("publishes", "/terrapref/cmd_vel"): {("geometry_msgs/msg/TwistStamped", True, False, 10)},
         ("publishes", "/terrapref/trajectories"): {("visualization_msgs/msg/MarkerArray", True, False, 10)},
         ("publishes", "/terrapref/costmap"): {("nav_msgs/msg/OccupancyGrid", True, True, 1)},
+        ("publishes", "/terrapref/grid_map"): {("grid_map_msgs/msg/GridMap", True, True, 1)},
+        ("publishes", "/terrapref/speed_filter_info"): {("nav2_msgs/msg/CostmapFilterInfo", True, True, 1)},
+        ("publishes", "/terrapref/speed_mask"): {("nav_msgs/msg/OccupancyGrid", True, True, 1)},
         ("publishes", "/terrapref/arrived"): {("std_msgs/msg/Bool", True, True, 1)},
         ("publishes", "/tf_static"): {("tf2_msgs/msg/TFMessage", True, True, 1)},
     }

@@ -43,6 +43,8 @@ class Costmap:
         layers: more layers over the same cells, (H, W) float32 each, NaN where unknown
             (:func:`with_layers`: ``speed`` [m/s], ``elevation`` [m], ``slope`` [rad],
             ``roughness`` [m], ``step`` [m]).
+        top_speed_mps: the fastest the ``speed`` layer may say, the robot's top speed (Nav2's
+            speed filter gives speeds in percent of it) [m/s]; None without a speed layer.
     """
 
     cost: np.ndarray
@@ -51,6 +53,11 @@ class Costmap:
     prices: dict[str, float]
     lethal: frozenset[str] = frozenset()
     layers: Mapping[str, np.ndarray] = field(default_factory=dict)
+    top_speed_mps: float | None = None
+
+    def grid_layers(self) -> dict[str, np.ndarray]:
+        """Every layer as float32 (H, W), NaN where unknown: ``cost`` (-1 unknown becomes NaN) and :attr:`layers`."""
+        return {"cost": np.where(self.cost == UNKNOWN_COST, np.nan, self.cost).astype(np.float32), **self.layers}
 
     @property
     def price_per_cost(self) -> float:
@@ -117,19 +124,19 @@ GEOMETRY_LAYERS = ("elevation", "slope", "roughness", "step")
 
 
 def with_layers(
-    costmap: Costmap, ground_map: GroundMap, speeds_mps: np.ndarray | None, radius_m: float = HeightSettings.radius_m
+    costmap: Costmap, ground_map: GroundMap, speeds_mps: np.ndarray | None, top_mps: float, radius_m: float = HeightSettings.radius_m
 ) -> Costmap:
     """``costmap`` (of ``ground_map``'s cells) with its other layers over the same cells: the
     ``speed`` [m/s] a speed rule drives each cell's column at (``speeds_mps``, (K + 2,): the K
     terrain columns, the background, NaN for ground never seen; 0 on lethal ground; None: no
-    speed rule, no layer), and the height layer's ``elevation`` with the ``slope``, ``roughness``
+    speed rule, no layer) up to the robot's ``top_mps``, and the height layer's ``elevation`` with the ``slope``, ``roughness``
     and ``step`` read from it within ``radius_m`` (terrapref.groundmap.height), NaN where unknown."""
     h, w = costmap.cost.shape
     layers: dict[str, np.ndarray] = {}
     if ground_map.origin is None:
         for name in (("speed",) if speeds_mps is not None else ()) + GEOMETRY_LAYERS:
             layers[name] = np.full((h, w), np.nan, dtype=np.float32)
-        return replace(costmap, layers=layers)
+        return replace(costmap, layers=layers, top_speed_mps=top_mps if speeds_mps is not None else None)
     res = ground_map.settings.map_resolution_m
     r0 = int(round((costmap.origin[1] - float(ground_map.origin[1])) / res))
     c0 = int(round((costmap.origin[0] - float(ground_map.origin[0])) / res))
@@ -143,7 +150,7 @@ def with_layers(
         geometry = np.full((h, w, 3), np.nan)
     for i, name in enumerate(GEOMETRY_LAYERS[1:]):
         layers[name] = geometry[..., i].astype(np.float32)
-    return replace(costmap, layers=layers)
+    return replace(costmap, layers=layers, top_speed_mps=top_mps if speeds_mps is not None else None)
 
 
 _CHEAP, _DEAR, _LETHAL = np.array([40, 200, 60]), np.array([230, 40, 30]), np.array([20, 20, 20])

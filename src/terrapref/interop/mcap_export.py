@@ -13,6 +13,10 @@ Topics (all in the ``odom`` frame, the recording's world frame; stamps from an e
                                                               (a run of a model with an offset rule; 1 Hz)
     /terrapref/costmap_grid     foxglove_msgs/Grid            the same costmap as Foxglove's Grid: cost
                                                               (int8, -1 unknown) and its colour per cell
+    /terrapref/grid_map         grid_map_msgs/GridMap         the same cells' layers: cost, speed, elevation,
+                                                              slope, roughness, step (float32, NaN unknown)
+    /terrapref/speed_filter_info nav2_msgs/CostmapFilterInfo  the learned speed as Nav2's speed filter (a model
+    /terrapref/speed_mask       nav_msgs/OccupancyGrid        with a speed rule): percent of the top speed
     /tf, /tf_static             tf2_msgs/TFMessage            odom -> base_link; base_link -> camera_link ->
                                                               camera_optical (z forward, x right, y down), the
                                                               frame of the images and calibration; /tf_static
@@ -50,6 +54,7 @@ from terrapref.interop.ros_messages import (
     camera_mount,
     compressed_image,
     foxglove_grid,
+    grid_map,
     header,
     occupancy_grid,
     odometry,
@@ -58,6 +63,7 @@ from terrapref.interop.ros_messages import (
     point,
     pose,
     rpy_quaternion,
+    speed_filter,
     tf_message,
     transform,
     twist,
@@ -97,7 +103,11 @@ class RunFrames:
 COSTMAP_TOPICS = {
     "costmap": (f"{PREFIX}/costmap", "nav_msgs/msg/OccupancyGrid"),
     "costmap_grid": (f"{PREFIX}/costmap_grid", "foxglove_msgs/msg/Grid"),
+    "grid_map": (f"{PREFIX}/grid_map", "grid_map_msgs/msg/GridMap"),
+    "speed_filter_info": (f"{PREFIX}/speed_filter_info", "nav2_msgs/msg/CostmapFilterInfo"),
+    "speed_mask": (f"{PREFIX}/speed_mask", "nav_msgs/msg/OccupancyGrid"),
 }
+ROS1_COSTMAP_ROLES = ("costmap", "grid_map")  # a ROS 1 bag's (Foxglove's Grid and Nav2's filter are ROS 2's)
 # Frames between two costmaps: 1 Hz at 10 frames a second. The ground map the costmap shows
 # grows by about a metre of driving per second while the camera sees 20-30 m ahead, so a
 # costmap a second shows every change a viewer can see; compressed (zstd), the costmaps are
@@ -215,7 +225,7 @@ def _write_ros1(path: Path, run: RunFrames, progress: Callable[[int, int], None]
         from rosbags.rosbag1 import Writer
 
     ts = typestore(ros1=True)
-    topics = _TOPICS if run.costmap is None else {**_TOPICS, "costmap": COSTMAP_TOPICS["costmap"]}
+    topics = _TOPICS if run.costmap is None else {**_TOPICS, **{role: COSTMAP_TOPICS[role] for role in ROS1_COSTMAP_ROLES}}
     writer = Writer(path)
     writer.set_compression(Writer.CompressionFormat.LZ4)  # a ROS 1 bag's own chunk compression (zstd is not one): rosbag play reads it
     with writer:
@@ -279,6 +289,22 @@ def _write_frame(topics: Topics, scene: Scene, i: int) -> None:
     )
 
 
+def _write_costmap(topics: Topics, scene: Scene, t: float, ns: int, costmap: Costmap) -> None:
+    """The costmap as an OccupancyGrid and its layers as a GridMap; in ROS 2, also as Foxglove's
+    Grid and, with a speed layer, the speed as Nav2's speed filter."""
+    ts, res, origin = scene.ts, costmap.resolution_m, costmap.origin
+    topics.write("costmap", ns, occupancy_grid(ts, scene.header(t, "odom"), costmap.cost, res, origin))
+    topics.write("grid_map", ns, grid_map(ts, scene.header(t, "odom"), costmap.grid_layers(), res, origin, scene.ros1))
+    if scene.ros1:
+        return
+    topics.write("costmap_grid", ns, foxglove_grid(ts, t, "odom", costmap))
+    if "speed" in costmap.layers and costmap.top_speed_mps is not None:
+        mask_topic = COSTMAP_TOPICS["speed_mask"][0]
+        info, mask = speed_filter(ts, scene.header(t, "odom"), costmap.layers["speed"], costmap.top_speed_mps, mask_topic)
+        topics.write("speed_filter_info", ns, info)
+        topics.write("speed_mask", ns, occupancy_grid(ts, scene.header(t, "odom"), mask, res, origin))
+
+
 def write_frame(topics: Topics, scene: Scene, frame: FrameData) -> None:
     """One frame: calibration, class ids and their colours, pose, costmap, command and trajectories."""
     ts = scene.ts
@@ -295,11 +321,7 @@ def write_frame(topics: Topics, scene: Scene, frame: FrameData) -> None:
     topics.write("labels", ns, compressed_image(ts, optical, "mono8; png compressed class ids", png(frame.ids)))
     topics.write("labels_color", ns, compressed_image(ts, optical, "png", png(frame.ids, scene.palette)))
     if frame.costmap is not None:
-        topics.write(
-            "costmap", ns, occupancy_grid(ts, scene.header(t, "odom"), frame.costmap.cost, frame.costmap.resolution_m, frame.costmap.origin)
-        )
-        if not scene.ros1:
-            topics.write("costmap_grid", ns, foxglove_grid(ts, t, "odom", frame.costmap))
+        _write_costmap(topics, scene, t, ns, frame.costmap)
     topics.write("cmd_vel", ns, twist(ts, *frame.command))
     _restyle_markers(scene, frame.chosen, frame.probs, scene.header(t, "base_link"))
     topics.write("trajectories", ns, scene.marker_array)

@@ -276,6 +276,9 @@ def endpoints(robot, opts: NodeOptions, names: Names, sim: bool, path_topic: boo
         Endpoint("command", names.resolve(opts.command_topic(robot)), (twist,), DEFAULT, True),
         Endpoint("trajectories", names.resolve("~/trajectories"), ("visualization_msgs/msg/MarkerArray",), DEFAULT, True),
         Endpoint("costmap", names.resolve("~/costmap"), ("nav_msgs/msg/OccupancyGrid",), LATCHED, True),
+        Endpoint("grid_map", names.resolve("~/grid_map"), ("grid_map_msgs/msg/GridMap",), LATCHED, True),
+        Endpoint("speed_filter_info", names.resolve("~/speed_filter_info"), ("nav2_msgs/msg/CostmapFilterInfo",), LATCHED, True),
+        Endpoint("speed_mask", names.resolve("~/speed_mask"), ("nav_msgs/msg/OccupancyGrid",), LATCHED, True),
         Endpoint("arrived", names.resolve("~/arrived"), ("std_msgs/msg/Bool",), LATCHED, True),
     ]
     if "tf" not in robot.camera:  # the mounting comes from the robot file; with camera.tf the robot's own tree has it
@@ -474,14 +477,21 @@ class _Node:
         self.log.guarded(handle)
 
     def publish_costmap(self) -> None:
-        """The learned costmap, when the model keeps a ground map, in the odometry's frame."""
-        from terrapref.interop.ros_messages import occupancy_grid
+        """The learned costmap, when the model keeps a ground map, in the odometry's frame; its
+        layers as a GridMap, and with a speed rule the learned speed as Nav2's speed filter."""
+        from terrapref.interop.ros_messages import grid_map, occupancy_grid, speed_filter
 
         grid = self.core.costmap()
-        if grid is not None:
-            self.writers["costmap"].publish(
-                occupancy_grid(self.ts, self.header(self.clock.now(), self.odom_frame), grid.cost, grid.resolution_m, grid.origin)
-            )
+        if grid is None:
+            return
+        stamped = self.header(self.clock.now(), self.odom_frame)
+        self.writers["costmap"].publish(occupancy_grid(self.ts, stamped, grid.cost, grid.resolution_m, grid.origin))
+        self.writers["grid_map"].publish(grid_map(self.ts, stamped, grid.grid_layers(), grid.resolution_m, grid.origin))
+        if "speed" in grid.layers and grid.top_speed_mps is not None:
+            mask_topic = next(e.topic for e in self.endpoints if e.role == "speed_mask")
+            info, mask = speed_filter(self.ts, stamped, grid.layers["speed"], grid.top_speed_mps, mask_topic)
+            self.writers["speed_filter_info"].publish(info)
+            self.writers["speed_mask"].publish(occupancy_grid(self.ts, stamped, mask, grid.resolution_m, grid.origin))
 
     def check_publishers(self) -> None:
         """Each input topic that no publisher in the domain offers, said once: a robot in

@@ -299,7 +299,7 @@ class Planner:
         driving rule reads no ground map (only the offset rule does)."""
         if self.ground_map is None:
             return None
-        return with_layers(self.runner.costmap(self.ground_map), self.ground_map, self._cell_speeds())
+        return with_layers(self.runner.costmap(self.ground_map), self.ground_map, self._cell_speeds(), self.vehicle.max_speed_mps)
 
     def _cell_speeds(self) -> np.ndarray | None:
         """The speed [m/s] (K + 2,) the speed rule cruises at on each map column (the K terrain
