@@ -1,5 +1,9 @@
 """Decision time of a model file in closed loop: the planner drives a course, and each decision is timed.
 
+On a course with relief (``genrelief:2000``) each frame comes with its depth image, rendered
+before the decision is timed, as a robot's camera gives it; the decision then gathers heights
+and blocks ground past the robot's limits (terrapref.groundmap.height).
+
 For models of any class table (``--classes FILE`` reads the course with that table), beside the
 reference the other benchmarks use, measured in the same run:
 
@@ -31,6 +35,8 @@ def decision_times(model_path: str, scenario: str, classes_file: str | None) -> 
     act = driver.act
 
     def timed(frame):
+        if frame.view.carries_depth:  # on relief: the frame and its depth rendered first, as a robot's come
+            frame.view.depth  # noqa: B018
         t0 = time.perf_counter()
         command = act(frame)
         times.append(time.perf_counter() - t0)

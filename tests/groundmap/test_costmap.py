@@ -77,6 +77,7 @@ def test_the_costmaps_layers_hold_each_cells_speed_and_the_height_layers_geometr
     elevation = gmap.layer("elevation")
     rows, cols = np.mgrid[0 : elevation.shape[0], 0 : elevation.shape[1]]
     elevation[...] = (0.2 * res * cols).astype(np.float32)  # a ramp up along x of grade 0.2
+    gmap.layer("returns")[...] = 3  # each cell's returns agreeing
     costmap = stage.costmap(gmap)
     speeds = np.array([0.0, 0.4, 0.6, 0.8, 1.5, np.nan])  # K = 4 columns, the background, never seen
     full = with_layers(costmap, gmap, speeds, 2.0)

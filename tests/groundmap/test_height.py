@@ -14,7 +14,7 @@ from test_offset_rule import _terrain
 
 from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.camera.render import SegmentationRenderer
-from terrapref.groundmap.height import GeometryLimits, HeightSettings, geometry_of_cells
+from terrapref.groundmap.height import DepthImage, GeometryLimits, Heights, HeightSettings, geometry_of_cells
 from terrapref.groundmap.map import GroundMap
 from terrapref.scenario import FORMAT, parse_scenario
 from terrapref.vehicle import Pose, Vehicle, VehicleConfig
@@ -39,8 +39,7 @@ def _seen_ramp() -> tuple[GroundMap, object]:
     for x in (15.0, 16.0, 17.0):
         vehicle = Vehicle(Pose(x, 15.0, 0.0), ground=world)
         ids, depth = renderer.render_with_depth(vehicle.pose, vehicle.attitude)
-        gmap.update(SegmentationView.of(ids), vehicle.pose)
-        gmap.update_height(depth, *renderer.placement(vehicle.pose, vehicle.attitude))
+        gmap.update(SegmentationView.of(ids), vehicle.pose, DepthImage(depth, *renderer.placement(vehicle.pose, vehicle.attitude)))
     return gmap, world
 
 
@@ -56,11 +55,33 @@ def test_the_height_layer_holds_the_ramps_heights_and_its_slope_is_the_grade() -
     truth = world.height_at(centres[on_ramp])
     assert np.abs(elevation[rows[on_ramp], cols[on_ramp]] - truth).max() < 0.02  # a return anywhere in its 0.1 m cell
     ahead = np.array([[x, y] for x in np.arange(19.0, 24.0, 0.5) for y in (14.0, 15.0, 16.0)])
-    geometry = gmap.geometry_at(ahead, HeightSettings().radius_m)
+    geometry = gmap.geometry_at(ahead)
     assert np.degrees(geometry[:, 0]) == pytest.approx(np.full(len(ahead), math.degrees(math.atan(0.2))), abs=1.0)
     assert (geometry[:, 1] < 0.01).all()  # a plane: no roughness
     assert (geometry[:, 2] < 0.2 * 0.2 * math.sqrt(2) + 0.01).all()  # the step across a cell's neighbours: the grade's rise over them
     assert not GeometryLimits.of(VehicleConfig()).lethal(geometry).any()
+
+
+def _trusted(elevation: np.ndarray) -> Heights:
+    """``elevation`` as height layers whose known cells each hold four returns that agree."""
+    returns = np.where(np.isnan(elevation), 0, 4).astype(np.uint32)
+    return Heights(elevation, returns, np.zeros(elevation.shape, dtype=np.float32))
+
+
+def test_a_cell_counts_once_enough_returns_agree() -> None:
+    """A ledge of 0.5 m seen through returns that disagree by 0.2 m (a far, noisy return each)
+    is not yet trusted, and blocks nothing; with agreeing returns it is, and does."""
+    elevation = np.zeros((20, 20), dtype=np.float32)
+    elevation[:, 10:] = 0.5
+    returns = np.full(elevation.shape, 3, dtype=np.uint32)
+    noisy = Heights(elevation, returns, np.full(elevation.shape, 2 * 0.2**2, dtype=np.float32))  # std 0.2 m, error 0.115 m
+    agreeing = Heights(elevation, returns, np.full(elevation.shape, 2 * 0.01**2, dtype=np.float32))  # error 0.006 m
+    limits = GeometryLimits.of(VehicleConfig())
+    cells = (np.array([10]), np.array([9]))
+    assert np.isnan(geometry_of_cells(noisy, *cells, 0.1, HeightSettings())).all()
+    assert limits.lethal(geometry_of_cells(agreeing, *cells, 0.1, HeightSettings())).all()
+    single = Heights(elevation, np.ones(elevation.shape, dtype=np.uint32), np.zeros(elevation.shape, dtype=np.float32))
+    assert np.isnan(geometry_of_cells(single, *cells, 0.1, HeightSettings())).all()  # one return: not yet
 
 
 @pytest.mark.parametrize(("height_m", "lethal"), [(0.14, False), (0.16, True)])
@@ -69,19 +90,19 @@ def test_a_step_one_centimetre_over_the_limit_is_lethal_and_one_under_is_not(hei
     elevation[:, 10:] = height_m  # a ledge between columns 9 and 10 of 0.1 m cells
     limits = GeometryLimits.of(VehicleConfig())
     assert limits.max_step_m == 0.15 and limits.max_slope_rad == pytest.approx(math.radians(25.0))
-    at_ledge = geometry_of_cells(elevation, np.array([10, 10]), np.array([9, 10]), 0.1, 0.3)
+    at_ledge = geometry_of_cells(_trusted(elevation), np.array([10, 10]), np.array([9, 10]), 0.1, HeightSettings())
     assert at_ledge[:, 2] == pytest.approx([height_m, height_m], abs=1e-6)
     assert (at_ledge[:, 0] < limits.max_slope_rad).all()  # the plane over the ledge is not what decides
     assert limits.lethal(at_ledge).tolist() == [lethal, lethal]
-    away = geometry_of_cells(elevation, np.array([10, 10]), np.array([3, 16]), 0.1, 0.3)
+    away = geometry_of_cells(_trusted(elevation), np.array([10, 10]), np.array([3, 16]), 0.1, HeightSettings())
     assert not limits.lethal(away).any() and (away[:, 2] == 0).all()
 
 
 def test_unseen_ground_has_no_geometry_and_is_not_lethal() -> None:
     elevation = np.full((20, 20), np.nan, dtype=np.float32)
     elevation[5, 5] = 0.0  # one cell: no plane, no step
-    geometry = geometry_of_cells(elevation, np.array([5, 15, -1]), np.array([5, 15, 3]), 0.1, 0.3)
+    geometry = geometry_of_cells(_trusted(elevation), np.array([5, 15, -1]), np.array([5, 15, 3]), 0.1, HeightSettings())
     assert np.isnan(geometry).all() and not GeometryLimits.of(VehicleConfig()).lethal(geometry).any()
     elevation[5, 6] = 0.5  # two: a step between them, still too few for a plane
-    pair = geometry_of_cells(elevation, np.array([5]), np.array([5]), 0.1, 0.3)
+    pair = geometry_of_cells(_trusted(elevation), np.array([5]), np.array([5]), 0.1, HeightSettings())
     assert np.isnan(pair[0, :2]).all() and pair[0, 2] == 0.5

@@ -125,6 +125,26 @@ class PinholeCamera:
         cr, sr = math.cos(droll_rad), math.sin(droll_rad)
         return np.array([[cr * r + sr * d for r, d in zip(right, down)], [-sr * r + cr * d for r, d in zip(right, down)], forward])
 
+    def placement(
+        self, pose: tuple[float, float, float], attitude: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The camera's axes (3, 3; rows right, down, forward) and optical centre (3,) [m] in the
+        world frame, for the vehicle at ``pose`` (x, y, yaw) with ``attitude`` (its height [m],
+        pitch and roll [rad]: yaw, pitch and roll applied in that order, REP 103)."""
+        x, y, yaw = pose
+        z, pitch, roll = attitude
+        cz, sz = math.cos(yaw), math.sin(yaw)
+        cp, sp = math.cos(pitch), math.sin(pitch)
+        cr, sr = math.cos(roll), math.sin(roll)
+        body = np.array(
+            [
+                [cz * cp, cz * sp * sr - sz * cr, cz * sp * cr + sz * sr],
+                [sz * cp, sz * sp * sr + cz * cr, sz * sp * cr - cz * sr],
+                [-sp, cp * sr, cp * cr],
+            ]
+        )  # world from body: Rz(yaw) Ry(pitch) Rx(roll)
+        return self.R @ body.T, np.array([x, y, z]) + body @ self.t
+
     @property
     def shape(self) -> tuple[int, int]:
         """Image shape (rows, cols)."""

@@ -89,21 +89,8 @@ class SegmentationRenderer:
         return self.world.has_relief
 
     def placement(self, pose: Pose, attitude: Attitude = LEVEL) -> tuple[np.ndarray, np.ndarray]:
-        """The camera's axes (3, 3; rows right, down, forward) and optical centre (3,) [m] in the
-        world frame, for the body at ``pose`` with ``attitude`` (its height, then yaw, pitch and
-        roll applied in that order, REP 103)."""
-        x, y, yaw = _finite(pose)
-        cz, sz = math.cos(yaw), math.sin(yaw)
-        cp, sp = math.cos(attitude.pitch_rad), math.sin(attitude.pitch_rad)
-        cr, sr = math.cos(attitude.roll_rad), math.sin(attitude.roll_rad)
-        body = np.array(
-            [
-                [cz * cp, cz * sp * sr - sz * cr, cz * sp * cr + sz * sr],
-                [sz * cp, sz * sp * sr + cz * cr, sz * sp * cr - cz * sr],
-                [-sp, cp * sr, cp * cr],
-            ]
-        )  # world from body: Rz(yaw) Ry(pitch) Rx(roll)
-        return self.camera.R @ body.T, np.array([x, y, attitude.z_m]) + body @ self.camera.t
+        """The camera's axes and optical centre in the world (:meth:`PinholeCamera.placement`)."""
+        return self.camera.placement(_finite(pose), attitude)
 
     def render_with_depth(self, pose: Pose, attitude: Attitude = LEVEL, max_range_m: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Class ids (H, W) uint8 and depth (H, W) float32 [m along the optical axis, NaN where no
@@ -339,6 +326,13 @@ class SegmentationView:
     def _with_depth(self) -> tuple[np.ndarray, np.ndarray]:
         """The whole frame and its depth image, every ray followed to the ground."""
         return self._renderer.render_with_depth(self._pose, self._attitude)
+
+    @property
+    def carries_depth(self) -> bool:
+        """Whether the frame comes with a depth image: given with it, or rendered over relief (a
+        view of flat ground can render one too, but a planner need not ask: the height layer of
+        a plane blocks nothing)."""
+        return self._depth is not None or (self._renderer is not None and self._renderer.relief)
 
     @property
     def rendered(self) -> bool:

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from terrapref.groundmap.height import HeightSettings, geometry_of_cells
+from terrapref.groundmap.height import geometry_of_cells
 
 if TYPE_CHECKING:
     from terrapref.groundmap.map import GroundMap
@@ -123,14 +123,13 @@ def costmap_of(
 GEOMETRY_LAYERS = ("elevation", "slope", "roughness", "step")
 
 
-def with_layers(
-    costmap: Costmap, ground_map: GroundMap, speeds_mps: np.ndarray | None, top_mps: float, radius_m: float = HeightSettings.radius_m
-) -> Costmap:
+def with_layers(costmap: Costmap, ground_map: GroundMap, speeds_mps: np.ndarray | None, top_mps: float) -> Costmap:
     """``costmap`` (of ``ground_map``'s cells) with its other layers over the same cells: the
     ``speed`` [m/s] a speed rule drives each cell's column at (``speeds_mps``, (K + 2,): the K
     terrain columns, the background, NaN for ground never seen; 0 on lethal ground; None: no
     speed rule, no layer) up to the robot's ``top_mps``, and the height layer's ``elevation`` with the ``slope``, ``roughness``
-    and ``step`` read from it within ``radius_m`` (terrapref.groundmap.height), NaN where unknown."""
+    and ``step`` read from it as the map's height settings say (terrapref.groundmap.height), NaN
+    where unknown."""
     h, w = costmap.cost.shape
     layers: dict[str, np.ndarray] = {}
     if ground_map.origin is None:
@@ -145,7 +144,7 @@ def with_layers(
         layers["speed"] = np.asarray(speeds_mps, dtype=np.float32)[ground_map.cells[r0 : r0 + h, c0 : c0 + w]]
     layers["elevation"] = ground_map.layer("elevation")[r0 : r0 + h, c0 : c0 + w].copy()
     if np.isfinite(layers["elevation"]).any():
-        geometry = geometry_of_cells(ground_map.layer("elevation"), rows.ravel(), cols.ravel(), res, radius_m).reshape(h, w, 3)
+        geometry = geometry_of_cells(ground_map.heights, rows.ravel(), cols.ravel(), res, ground_map.height_settings).reshape(h, w, 3)
     else:
         geometry = np.full((h, w, 3), np.nan)
     for i, name in enumerate(GEOMETRY_LAYERS[1:]):

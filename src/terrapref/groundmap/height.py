@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -38,26 +38,52 @@ class HeightSettings:
     Attributes:
         radius_m: the disc round a cell its plane is fitted in [m] (0.3 m: half the vehicle's
             width, as grid_map's slope filter is set for a robot of this size).
+        min_returns: a cell's elevation counts toward geometry once this many returns fell in it.
+        max_error_m: ... and once the standard error of their mean is at most this [m]: a noisy
+            depth camera's far returns count once enough of them agree (a stereo camera's error
+            grows with the square of the range), as an elevation map's variance gates its cells.
+        max_range_m: returns deeper than this [m along the optical axis] are not gathered (a
+            camera's attitude known to a degree or two puts far ground's heights that far off).
     """
 
     radius_m: float = 0.3
+    min_returns: int = 2
+    max_error_m: float = 0.03
+    max_range_m: float = 30.0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.radius_m) and self.radius_m > 0):
             raise ValueError(f"radius_m must be finite and > 0, got {self.radius_m!r}")
 
 
+class DepthImage(NamedTuple):
+    """A frame's depth image and where its camera was.
+
+    Attributes:
+        image: (H, W) float32 [m along the optical axis, NaN: no return].
+        axes: (3, 3) the camera's axes in the world (rows right, down, forward).
+        centre: (3,) its optical centre in the world [m].
+    """
+
+    image: np.ndarray
+    axes: np.ndarray
+    centre: np.ndarray
+
+
 @dataclass(frozen=True)
 class GeometryLimits:
-    """The ground a vehicle cannot cross: a slope past ``max_slope_rad``, a step over ``max_step_m``."""
+    """The ground a vehicle cannot cross: a slope past ``max_slope_rad``, a step over ``max_step_m``;
+    kept ``reach_m`` further off than lethal terrain is, since the planner's footprint is the line
+    across the vehicle at its reference point, and its wheels reach half the wheelbase ahead of it."""
 
     max_slope_rad: float
     max_step_m: float
+    reach_m: float = 0.0
 
     @classmethod
     def of(cls, vehicle: VehicleConfig) -> GeometryLimits:
-        """The limits of ``vehicle``: its smaller tilt limit (roll or pitch) and its step."""
-        return cls(math.radians(min(vehicle.max_roll_deg, vehicle.max_pitch_deg)), vehicle.max_step_m)
+        """The limits of ``vehicle``: its smaller tilt limit (roll or pitch), its step, half its wheelbase."""
+        return cls(math.radians(min(vehicle.max_roll_deg, vehicle.max_pitch_deg)), vehicle.max_step_m, 0.5 * vehicle.wheelbase_m)
 
     def lethal(self, geometry: np.ndarray) -> np.ndarray:
         """Which cells of ``geometry`` (..., 3: slope, roughness, step) are past the limits;
@@ -81,22 +107,70 @@ class DepthRays:
             [(self.cols + 0.5 - camera.cx) / camera.fx, (self.rows + 0.5 - camera.cy) / camera.fy, np.ones(len(self.rows))], axis=1
         )
 
-    def points(self, depth: np.ndarray, axes: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    def points(self, depth: np.ndarray, axes: np.ndarray, centre: np.ndarray, max_range_m: float = math.inf) -> np.ndarray:
         """The returns (N, 3) in the world [m] of ``depth`` (H, W) [m along the optical axis, NaN:
         none] seen by a camera with ``axes`` (3, 3; rows right, down, forward in the world) at
-        ``centre`` (3,); NaN rows for pixels without a return."""
+        ``centre`` (3,); NaN rows for pixels without a return, or one deeper than ``max_range_m``."""
         d = depth[self.rows, self.cols].astype(np.float64)
+        d[~(d <= max_range_m)] = np.nan
         return centre + (d[:, None] * self.ray) @ axes
 
 
-def vote_heights(elevation: np.ndarray, returns: np.ndarray, corner: tuple[float, float], res_m: float, points: np.ndarray) -> None:
-    """Fold the returns ``points`` (N, 3) [m] into the layers of a map whose corner is ``corner``."""
-    kernels.height_vote(elevation, returns, corner[0], corner[1], 1.0 / res_m, np.ascontiguousarray(points, dtype=np.float64))
+class Heights(NamedTuple):
+    """A ground map's height layers: ``elevation`` (n, n) float32 [m, NaN: none], ``returns`` (n, n)
+    uint32, ``spread`` (n, n) float32 (the returns' sum of squared deviations from the mean [m^2])."""
+
+    elevation: np.ndarray
+    returns: np.ndarray
+    spread: np.ndarray
 
 
-def geometry_of_cells(elevation: np.ndarray, rows: np.ndarray, cols: np.ndarray, res_m: float, radius_m: float) -> np.ndarray:
-    """Slope [rad], roughness [m] and step [m] of the cells (``rows``, ``cols``), (N, 3); NaN where unknown."""
+def vote_heights(heights: Heights, corner: tuple[float, float], res_m: float, points: np.ndarray) -> np.ndarray:
+    """Fold the returns ``points`` (N, 3) [m] into the layers of a map whose corner is ``corner``;
+    the cells they fell in (flat indices, each once)."""
+    elevation = heights.elevation
+    kernels.height_vote(*heights, corner[0], corner[1], 1.0 / res_m, np.ascontiguousarray(points, dtype=np.float64))
+    n = elevation.shape[0]
+    with np.errstate(invalid="ignore"):
+        col = np.floor((points[:, 0] - corner[0]) / res_m)
+        row = np.floor((points[:, 1] - corner[1]) / res_m)
+    inside = (col >= 0) & (col < n) & (row >= 0) & (row < n) & np.isfinite(points[:, 2])
+    return np.unique(row[inside].astype(np.int64) * n + col[inside].astype(np.int64))
+
+
+def clustered(cells: np.ndarray, n: int) -> np.ndarray:
+    """Those of ``cells`` (flat indices of an n by n grid, sorted) with another of them among their
+    eight neighbours: a lone cell past the limits is a speckle of noise (a ledge or a bank is a
+    line of cells), as a lone lethal cell is to the stop rule."""
+    rows, cols = cells // n, cells % n
+    has = np.zeros(len(cells), dtype=bool)
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            if dr or dc:
+                r, c = rows + dr, cols + dc
+                inside = (r >= 0) & (r < n) & (c >= 0) & (c < n)
+                at = np.searchsorted(cells, r * n + c)
+                found = inside & (at < len(cells)) & (cells[np.minimum(at, len(cells) - 1)] == r * n + c)
+                has |= found
+    return cells[has]
+
+
+def within_reach(cells: np.ndarray, n: int, reach: int) -> np.ndarray:
+    """The cells (flat indices of an n by n grid, each once) within ``reach`` cells (a disc) of any of ``cells``."""
+    dr, dc = np.mgrid[-reach : reach + 1, -reach : reach + 1]
+    disc = dr * dr + dc * dc <= reach * reach
+    rows = cells[:, None] // n + dr[disc][None, :]
+    cols = cells[:, None] % n + dc[disc][None, :]
+    inside = (rows >= 0) & (rows < n) & (cols >= 0) & (cols < n)
+    return np.unique(rows[inside] * n + cols[inside])
+
+
+def geometry_of_cells(heights: Heights, rows: np.ndarray, cols: np.ndarray, res_m: float, settings: HeightSettings) -> np.ndarray:
+    """Slope [rad], roughness [m] and step [m] of the cells (``rows``, ``cols``), (N, 3), from the
+    trusted elevations round them (``settings``); NaN where unknown."""
     out = np.empty((len(rows), 3))
-    reach = max(1, int(math.floor(radius_m / res_m + 1e-9)))
-    kernels.cell_geometry(elevation, np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64), reach, res_m, out)
+    reach = max(1, int(math.floor(settings.radius_m / res_m + 1e-9)))
+    trust = (settings.min_returns, settings.max_error_m**2)
+    rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
+    kernels.cell_geometry(tuple(heights), trust, rows, cols, reach, res_m, out)
     return out

@@ -15,13 +15,15 @@ from numba import njit
 def height_vote(
     elevation: np.ndarray,
     returns: np.ndarray,
+    spread: np.ndarray,
     ox: float,
     oy: float,
     inv_res: float,
     points: np.ndarray,
 ) -> None:
     """Fold the returns ``points`` (N, 3) world [m] (NaN rows: no return) into each cell's mean
-    height (``elevation`` (n, n) float32, NaN where none fell yet) and count (``returns``)."""
+    height (``elevation`` (n, n) float32, NaN where none fell yet), count (``returns``) and sum
+    of squared deviations from the mean (``spread``, Welford's update)."""
     n = elevation.shape[0]
     for i in range(points.shape[0]):
         x, y, z = points[i, 0], points[i, 1], points[i, 2]
@@ -33,14 +35,27 @@ def height_vote(
         col, row = int(u), int(v)
         k = returns[row, col] + 1
         returns[row, col] = k
-        old = elevation[row, col]
-        elevation[row, col] = z if k == 1 else old + (z - old) / k
+        old = np.float64(elevation[row, col]) if k > 1 else z
+        mean = old + (z - old) / k
+        elevation[row, col] = mean
+        spread[row, col] += (z - old) * (z - mean)
 
 
 @njit(cache=True, nogil=True)
-def cell_geometry(elevation: np.ndarray, rows: np.ndarray, cols: np.ndarray, reach: int, res: float, out: np.ndarray) -> None:
+def cell_geometry(
+    heights: tuple[np.ndarray, np.ndarray, np.ndarray],
+    trust: tuple[int, float],
+    rows: np.ndarray,
+    cols: np.ndarray,
+    reach: int,
+    res: float,
+    out: np.ndarray,
+) -> None:
     """Slope [rad], roughness [m] and step [m] of the cells (``rows``, ``cols``) into ``out`` (N, 3),
-    from the cells with an elevation within ``reach`` cells (a disc) of each: the least-squares
+    from the cells with a trusted elevation within ``reach`` cells (a disc) of each. ``heights``:
+    the elevation, returns and spread layers; ``trust`` (least returns, largest variance of the
+    mean [m^2]): a cell's elevation counts when at least that many returns fell in it and its
+    mean's variance (spread / (n (n - 1))) is at most that. The least-squares
     plane z = a x + b y + c through them gives the slope, atan(sqrt(a^2 + b^2)), and the roughness,
     the standard deviation of their heights about it. The step is the height range over the cell
     and its eight neighbours (a slope adds little to it there: 0.13 m over a 25 deg slope of
@@ -48,51 +63,55 @@ def cell_geometry(elevation: np.ndarray, rows: np.ndarray, cols: np.ndarray, rea
     ground between the returns of far, sparsely sampled ground); slope and roughness are NaN
     where fewer than three cells of the disc are known, the step where fewer than two of the
     nine are."""
+    elevation, returns, spread = heights
+    least, largest = trust
     n = elevation.shape[0]
+    sums = np.empty(10)  # the normal equations' sums: m, x, y, z, xx, yy, xy, xz, yz, zz
     for i in range(rows.shape[0]):
         r0, c0 = rows[i], cols[i]
         out[i, 0] = out[i, 1] = out[i, 2] = np.nan
         if not (0 <= r0 < n and 0 <= c0 < n):
             continue
-        # Sums for the normal equations, in cell offsets (x = dc * res, y = dr * res).
-        m = sx = sy = sz = sxx = syy = sxy = sxz = syz = szz = near = 0.0
-        low, high = np.inf, -np.inf
+        sums[:] = 0.0
+        near, low, high = 0, np.inf, -np.inf
         for dr in range(-reach, reach + 1):
             for dc in range(-reach, reach + 1):
-                if dr * dr + dc * dc > reach * reach:
-                    continue
                 r, c = r0 + dr, c0 + dc
-                if not (0 <= r < n and 0 <= c < n):
+                if dr * dr + dc * dc > reach * reach or not (0 <= r < n and 0 <= c < n):
+                    continue
+                k = returns[r, c]
+                if k < least or k < 2 or spread[r, c] > largest * k * (k - 1):
                     continue
                 z = np.float64(elevation[r, c])
-                if not math.isfinite(z):
-                    continue
-                x, y = dc * res, dr * res
-                m += 1.0
-                sx += x
-                sy += y
-                sz += z
-                sxx += x * x
-                syy += y * y
-                sxy += x * y
-                sxz += x * z
-                syz += y * z
-                szz += z * z
+                _add(sums, dc * res, dr * res, z)  # in offsets from the cell [m]
                 if abs(dr) <= 1 and abs(dc) <= 1:
-                    near += 1.0
-                    low, high = min(low, z), max(high, z)
-        if m >= 3.0:
-            out[i, 0], out[i, 1] = _plane(m, sx, sy, sz, sxx, syy, sxy, sxz, syz, szz)
-        if near >= 2.0:
+                    near, low, high = near + 1, min(low, z), max(high, z)
+        if sums[0] >= 3.0:
+            out[i, 0], out[i, 1] = _plane(sums)
+        if near >= 2:
             out[i, 2] = high - low
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _plane(
-    m: float, sx: float, sy: float, sz: float, sxx: float, syy: float, sxy: float, sxz: float, syz: float, szz: float
-) -> tuple[float, float]:
-    """Slope [rad] and roughness [m] of the least-squares plane through ``m`` points with these
-    sums; the slope NaN where the points are on a line (the plane is not determined)."""
+def _add(sums: np.ndarray, x: float, y: float, z: float) -> None:
+    """The point (x, y, z) added to the normal equations' ``sums`` (m, x, y, z, xx, yy, xy, xz, yz, zz)."""
+    sums[0] += 1.0
+    sums[1] += x
+    sums[2] += y
+    sums[3] += z
+    sums[4] += x * x
+    sums[5] += y * y
+    sums[6] += x * y
+    sums[7] += x * z
+    sums[8] += y * z
+    sums[9] += z * z
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _plane(sums: np.ndarray) -> tuple[float, float]:
+    """Slope [rad] and roughness [m] of the least-squares plane through the points of ``sums``
+    (:func:`_add`); NaN where the points are on a line (the plane is not determined)."""
+    m, sx, sy, sz, sxx, syy, sxy, sxz, syz, szz = sums[0], sums[1], sums[2], sums[3], sums[4], sums[5], sums[6], sums[7], sums[8], sums[9]
     # Centred second moments.
     cxx, cyy, cxy = sxx - sx * sx / m, syy - sy * sy / m, sxy - sx * sy / m
     cxz, cyz, czz = sxz - sx * sz / m, syz - sy * sz / m, szz - sz * sz / m

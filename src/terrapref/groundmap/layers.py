@@ -52,8 +52,12 @@ LAYERS: tuple[Layer, ...] = (
     # The frame of each cell's last vote (its fading is counted from it).
     Layer("stamp", np.int64, 0),
     # The mean height of the depth returns that fell in each cell [m], NaN where none did
-    # (terrapref.groundmap.height), and how many did.
+    # (terrapref.groundmap.height), how many did, and their sum of squared deviations [m^2].
     Layer("elevation", np.float32, np.nan),
     Layer("returns", np.uint32, 0),
+    Layer("spread", np.float32, 0.0),
+    # 1 where the ground's geometry is past the vehicle's limits (terrapref.groundmap.height):
+    # the cell reads as lethal whatever its evidence.
+    Layer("blocked", np.uint8, 0),
 )
 """The ground map's layers, in the order they are made (module docstring)."""

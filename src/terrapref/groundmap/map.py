@@ -12,7 +12,17 @@ from terrapref.camera import PinholeCamera, PixelSet, SegmentationView
 from terrapref.groundmap import map_compiled as kernels
 from terrapref.groundmap.attitude import HorizonAttitude
 from terrapref.groundmap.columns import TerrainColumns
-from terrapref.groundmap.height import DepthRays, geometry_of_cells, vote_heights
+from terrapref.groundmap.height import (
+    DepthImage,
+    DepthRays,
+    GeometryLimits,
+    Heights,
+    HeightSettings,
+    clustered,
+    geometry_of_cells,
+    vote_heights,
+    within_reach,
+)
 from terrapref.groundmap.layers import LAYERS, Layer
 from terrapref.groundmap.settings import MapSettings
 from terrapref.scenario.path import ReferencePath
@@ -67,6 +77,14 @@ class GroundMap:
         self._vx, self._vy = grid[seen, 0].copy(), grid[seen, 1].copy()
         self.camera = camera
         self._depth_rays: DepthRays | None = None  # made on the first depth image
+        # Ground past these limits reads as lethal (update with a depth image); None: not blocked.
+        self.limits: GeometryLimits | None = None
+        self.height_settings = HeightSettings()
+        lethal_columns = np.flatnonzero(self.lethal[:k])
+        self.geometry_column = int(lethal_columns[0]) if len(lethal_columns) else None  # what blocked ground reads as
+        self._blocking = False  # whether any cell is blocked
+        self._lethal_by_geometry = np.empty(0, dtype=np.int64)  # the cells that read as lethal for it (flat indices)
+        self._moved = False  # the blocked cells changed since those were found
         self.attitude = HorizonAttitude(camera) if c.map_sky_attitude else None
         # The ray through each sample's pixel centre (camera frame, z = 1), and where the mount's
         # camera sees it meet the ground: a tilted camera moves each sample by where its ray lands.
@@ -84,21 +102,68 @@ class GroundMap:
         self.origin: np.ndarray | None = None  # world position of cell (0, 0)'s corner [m]
         self._origin_xy: tuple[float, float] | None = None  # the same, in plain floats
 
-    def update_height(self, depth: np.ndarray, axes: np.ndarray, centre: np.ndarray) -> None:
-        """Add the returns of ``depth`` (a frame's depth image, read at the pixels the classes are
-        read at) of a camera with ``axes`` at ``centre`` in the world (terrapref.groundmap.height)
-        to the height layer. Call after :meth:`update` of the same frame (which places the map)."""
-        if self._origin_xy is None:
-            raise ValueError("the map is placed by its first update(); update_height comes after it")
+    def _update_at_depth(self, ids: np.ndarray, depth: DepthImage) -> None:
+        """:meth:`update` with a depth image: the votes at the returns, the heights, the blocks."""
+        c = self.settings
         if self._depth_rays is None:
             self._depth_rays = DepthRays(self.camera, self._pixels.flat)
-        points = self._depth_rays.points(depth, axes, centre)
-        vote_heights(self._layers["elevation"], self._layers["returns"], self._origin_xy, self.settings.map_resolution_m, points)
+        points = self._depth_rays.points(depth.image, depth.axes, depth.centre)  # one per distinct pixel
+        near = self._depth_rays.points(depth.image, depth.axes, depth.centre, self.height_settings.max_range_m)
+        at = np.ascontiguousarray(points[self._sample_pix, :2])
+        kernels.map_vote_at(
+            self.evidence,
+            self.stamp,
+            self._cells,
+            *self._origin_xy,
+            1.0 / c.map_resolution_m,
+            at,
+            self._weight,
+            self.columns[ids[self._sample_pix]],
+            self.frame,
+            self._fade,
+        )
+        touched = vote_heights(self.heights, self._origin_xy, c.map_resolution_m, near)
+        self._block(touched)
 
-    def geometry_at(self, points: np.ndarray, radius_m: float) -> np.ndarray:
+    def _block(self, touched: np.ndarray) -> None:
+        """Cells (flat indices ``touched``) whose geometry is past :attr:`limits` are blocked until
+        their geometry no longer is (the ``blocked`` layer); the cells within the limits' reach
+        of a blocked one read as the first lethal column (:meth:`_reblock`)."""
+        if self.limits is None or self.geometry_column is None:
+            return
+        n, res = self._n, self.settings.map_resolution_m
+        geometry = geometry_of_cells(self.heights, touched // n, touched % n, res, self.height_settings)
+        lethal = self.limits.lethal(geometry)
+        blocked = self._layers["blocked"].reshape(-1)
+        was = blocked[touched].copy()
+        blocked[touched] = lethal
+        self._moved |= bool((blocked[touched] != was).any())
+        self._blocking = bool(blocked.any()) if self._moved else self._blocking
+        self._reblock()
+
+    def _reblock(self) -> None:
+        """The cells within the limits' reach of a blocked cell (one of a cluster: a lone one is
+        noise, terrapref.groundmap.height.clustered) set to read as lethal, again after
+        each frame's votes (which leave the cells they fall in to be decided from their evidence);
+        those no longer within reach of one decided from their evidence again."""
+        if not self._blocking and not len(self._lethal_by_geometry):
+            return
+        cells = self._cells.reshape(-1)
+        if self._moved:  # the blocked cells changed (or the map moved): the cells near them found again
+            reach = round(self.limits.reach_m / self.settings.map_resolution_m) if self.limits is not None else 0
+            near = within_reach(clustered(np.flatnonzero(self._layers["blocked"]), self._n), self._n, reach)
+            cells[np.setdiff1d(self._lethal_by_geometry, near, assume_unique=True)] = kernels.UNSETTLED
+            self._lethal_by_geometry, self._moved = near, False
+        cells[self._lethal_by_geometry] = self.geometry_column
+
+    @property
+    def heights(self) -> Heights:
+        """The height layers (terrapref.groundmap.height), valid until the map is next re-centred."""
+        return Heights(self._layers["elevation"], self._layers["returns"], self._layers["spread"])
+
+    def geometry_at(self, points: np.ndarray) -> np.ndarray:
         """Slope [rad], roughness [m] and step [m] (..., 3) of the cells under the world points
-        (..., 2), from the height layer within ``radius_m`` of each (terrapref.groundmap.height);
-        NaN where unknown or off the map."""
+        (..., 2), from the height layer (terrapref.groundmap.height); NaN where unknown or off the map."""
         flat = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         if self.origin is None:
             return np.full((*np.shape(points)[:-1], 3), np.nan)
@@ -108,7 +173,7 @@ class GroundMap:
             rows = np.floor((flat[:, 1] - self._origin_xy[1]) / res)
         inside = np.isfinite(cols) & np.isfinite(rows)
         cols, rows = np.where(inside, cols, -1).astype(np.int64), np.where(inside, rows, -1).astype(np.int64)
-        out = geometry_of_cells(self._layers["elevation"], rows, cols, res, radius_m)
+        out = geometry_of_cells(self.heights, rows, cols, res, self.height_settings)
         return out.reshape(*np.shape(points)[:-1], 3)
 
     def layer(self, name: str) -> np.ndarray:
@@ -134,6 +199,8 @@ class GroundMap:
         """Forget everything seen."""
         for layer in self.LAYERS:
             self._layers[layer.name].fill(layer.fill_value(self.k))
+        self._blocking, self._moved = False, False
+        self._lethal_by_geometry = np.empty(0, dtype=np.int64)
         self.frame = 0
         self.origin = self._origin_xy = None
         if self.attitude is not None:
@@ -154,16 +221,25 @@ class GroundMap:
             dx, dy = int(new[0] - old[0]), int(new[1] - old[1])
             for layer in self.LAYERS:
                 self._layers[layer.name] = _shifted(self._layers[layer.name], dx, dy, layer.fill_value(self.k))
+            self._lethal_by_geometry, self._moved = np.empty(0, dtype=np.int64), True  # moved with the cells; found again
         self.origin = new * c.map_resolution_m
         self._origin_xy = (float(self.origin[0]), float(self.origin[1]))
 
-    def update(self, view: SegmentationView, pose: Pose) -> None:
-        """Add what ``view``, taken at ``pose``, shows of the ground."""
+    def update(self, view: SegmentationView, pose: Pose, depth: DepthImage | None = None) -> None:
+        """Add what ``view``, taken at ``pose``, shows of the ground.
+
+        With the frame's ``depth`` image (on relief, where a plane would put the ground a pixel
+        sees in the wrong place), each sample votes where its pixel's depth return lies, the
+        returns go into the height layer, and the ground they show past :attr:`limits` is
+        blocked (terrapref.groundmap.height)."""
         x, y, yaw = pose
         c = self.settings
         self._recentre(float(x), float(y))
         self.frame += 1
         ids = view.pixels(self._pixels)
+        if depth is not None:
+            self._update_at_depth(ids, depth)
+            return
         dpitch, droll = self.attitude(view) if self.attitude is not None else (0.0, 0.0)
         tilted = bool(dpitch or droll)
         axes = self.camera.tilted(dpitch, droll) if tilted else self.camera.R
@@ -191,6 +267,7 @@ class GroundMap:
             axes,
             self.camera.t,
         )  # the camera off its mount
+        self._reblock()
 
     @property
     def cells(self) -> np.ndarray:

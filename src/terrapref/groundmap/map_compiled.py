@@ -95,6 +95,37 @@ def map_vote(
 
 
 @njit(cache=True, nogil=True)
+def map_vote_at(
+    evidence: np.ndarray,
+    stamp: np.ndarray,
+    cells: np.ndarray,
+    ox: float,
+    oy: float,
+    inv_res: float,
+    points: np.ndarray,
+    weight: np.ndarray,
+    column_of: np.ndarray,
+    frame: int,
+    fade: np.ndarray,
+) -> None:
+    """:func:`map_vote` with each sample's ground point given, ``points`` (N, 2) world [m] (a
+    depth return's: on relief the ground a pixel sees is not where a plane would put it; NaN:
+    no return, no vote), and its column ``column_of`` (N,)."""
+    n_rows, n_cols = cells.shape
+    k = evidence.shape[2] - 1
+    cell = np.full(points.shape[0], -1, np.int64)
+    for p in range(points.shape[0]):
+        px, py = points[p, 0], points[p, 1]
+        if column_of[p] > k or not (math.isfinite(px) and math.isfinite(py)):
+            continue
+        i = math.floor((px - ox) * inv_res)
+        j = math.floor((py - oy) * inv_res)
+        if 0 <= i < n_cols and 0 <= j < n_rows:
+            cell[p] = j * n_cols + i
+    _add_votes(evidence, stamp, cells, cell, column_of, weight, frame, fade)
+
+
+@njit(cache=True, nogil=True)
 def _add_votes(
     evidence: np.ndarray,
     stamp: np.ndarray,

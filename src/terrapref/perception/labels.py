@@ -161,6 +161,10 @@ class LabelledView(SegmentationView):
         """The base's depth image: label errors leave the depth as it was."""
         return self._base.depth
 
+    @property
+    def carries_depth(self) -> bool:
+        return self._base.carries_depth
+
 
 @functools.lru_cache(maxsize=8)
 def far_pixels(camera: CameraConfig, max_range_m: float) -> np.ndarray:

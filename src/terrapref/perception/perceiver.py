@@ -119,6 +119,10 @@ class DepthErrorView(SegmentationView):
         return self._base.pixels(flat_index)
 
     @property
+    def carries_depth(self) -> bool:
+        return self._base.carries_depth
+
+    @property
     def depth(self) -> np.ndarray | None:
         if self._depth is None:
             true = self._base.depth

@@ -16,6 +16,7 @@ import numpy as np
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationView, as_view
 from terrapref.features import UtilityFeaturizer
 from terrapref.groundmap.costmap import Costmap, with_layers
+from terrapref.groundmap.height import DepthImage, GeometryLimits
 from terrapref.groundmap.map import GroundMap
 from terrapref.groundmap.settings import MapSettings
 from terrapref.learning.model_file import LoadedModel, check_compatible
@@ -30,6 +31,7 @@ from terrapref.sim.loop import Frame
 from terrapref.stops import NO_FREE_WAY
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Command, Pose, VehicleConfig
+from terrapref.vehicle.ground import LEVEL, Attitude
 
 
 class Decision:
@@ -171,6 +173,7 @@ class Planner:
             return None
         if settings not in self._maps:
             self._maps[settings] = GroundMap(self.camera, context.terrain, settings)
+            self._maps[settings].limits = GeometryLimits.of(self.vehicle)  # ground it cannot cross, where depth shows it
         return self._maps[settings]
 
     def forget_ground(self) -> None:
@@ -178,11 +181,18 @@ class Planner:
         for ground_map in self._maps.values():
             ground_map.reset()
 
-    def observe(self, image: np.ndarray | SegmentationView, pose: Pose) -> None:
-        """Take in a frame (H, W) uint8 at ``pose`` without deciding: every ground map the planner keeps gathers it."""
+    def observe(
+        self, image: np.ndarray | SegmentationView, pose: Pose, depth: np.ndarray | None = None, attitude: Attitude = LEVEL
+    ) -> None:
+        """Take in a frame (H, W) uint8 at ``pose`` without deciding: every ground map the planner
+        keeps gathers it. With its ``depth`` image (H, W) [m, NaN: no return], the camera placed
+        by the pose and the body's ``attitude``, the maps place what it shows where the depth
+        says, gather the ground's heights, and block the ground past the robot's limits
+        (terrapref.groundmap.height)."""
         view = as_view(image)
+        seen = DepthImage(depth, *self.camera.placement(pose, attitude)) if depth is not None else None
         for ground_map in self._maps.values():
-            ground_map.update(view, pose)
+            ground_map.update(view, pose, seen)
 
     def warm_up(self) -> None:
         """Decide once on a blank frame along a straight path, then forget that path.
@@ -202,12 +212,19 @@ class Planner:
         self.forget_ground()
 
     def decide(
-        self, image: np.ndarray | SegmentationView, pose: Pose, time_s: float | None = None, speed_mps: float | None = None
+        self,
+        image: np.ndarray | SegmentationView,
+        pose: Pose,
+        time_s: float | None = None,
+        speed_mps: float | None = None,
+        depth: np.ndarray | None = None,
+        attitude: Attitude = LEVEL,
     ) -> Decision:
         """Choose a command for one segmentation frame (H, W) uint8 at ``pose``, taken at ``time_s``
         [s] (None: frames 0.1 s apart; the stop rule times blind frames by it), the vehicle going
         at ``speed_mps`` [m/s] by its odometry (None: unknown; a speed rule then takes the vehicle
-        to go at the speed it commands).
+        to go at the speed it commands); with the frame's ``depth`` image and the body's
+        ``attitude``, the ground maps gather heights too (:meth:`observe`).
 
         ``image`` may be a :class:`SegmentationView`, of which only the pixels the policy reads
         are rendered (the preference set's, for C). Given a view, a rule that steers without
@@ -228,7 +245,7 @@ class Planner:
             probs = U = None
         else:
             probs, U = outputs()
-        self.observe(view, pose)  # every ground map updated, once
+        self.observe(view, pose, depth, attitude)  # every ground map updated, once
         frame = RuleInput(probs, view, pose, self.path, s, self._going(speed_mps), self.ground_map)
         choice = self.runner.decide(frame)  # the steering rule
         choice = self._bounded(self._at_speed(choice, frame), state)  # the speed rule, within the goal check's and the robot's limits
@@ -372,7 +389,8 @@ class PlannerDriver:
         return self.planner.stop_rule.stale(now_s, frame_s, hold_s)
 
     def act(self, frame: Frame) -> Command:
-        d = self.last = self.planner.decide(frame.view, frame.pose, frame.time_s, frame.speed_mps)
+        depth = frame.view.depth if frame.view.carries_depth else None
+        d = self.last = self.planner.decide(frame.view, frame.pose, frame.time_s, frame.speed_mps, depth, frame.attitude)
         if self.keep:
             d.probs  # noqa: B018 (computed now, so that the kept decisions do not hold their frames)
             self.decisions.append(d)
