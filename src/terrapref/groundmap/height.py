@@ -44,12 +44,15 @@ class HeightSettings:
             grows with the square of the range), as an elevation map's variance gates its cells.
         max_range_m: returns deeper than this [m along the optical axis] are not gathered (a
             camera's attitude known to a degree or two puts far ground's heights that far off).
+        block_range_m: the ground this near the vehicle has its geometry checked against the
+            limits as returns fall in it [m]; farther ground is checked as the vehicle nears it.
     """
 
     radius_m: float = 0.3
     min_returns: int = 2
     max_error_m: float = 0.03
     max_range_m: float = 30.0
+    block_range_m: float = 10.0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.radius_m) and self.radius_m > 0):
@@ -107,12 +110,11 @@ class DepthRays:
             [(self.cols + 0.5 - camera.cx) / camera.fx, (self.rows + 0.5 - camera.cy) / camera.fy, np.ones(len(self.rows))], axis=1
         )
 
-    def points(self, depth: np.ndarray, axes: np.ndarray, centre: np.ndarray, max_range_m: float = math.inf) -> np.ndarray:
+    def points(self, depth: np.ndarray, axes: np.ndarray, centre: np.ndarray) -> np.ndarray:
         """The returns (N, 3) in the world [m] of ``depth`` (H, W) [m along the optical axis, NaN:
         none] seen by a camera with ``axes`` (3, 3; rows right, down, forward in the world) at
-        ``centre`` (3,); NaN rows for pixels without a return, or one deeper than ``max_range_m``."""
+        ``centre`` (3,); NaN rows for pixels without a return."""
         d = depth[self.rows, self.cols].astype(np.float64)
-        d[~(d <= max_range_m)] = np.nan
         return centre + (d[:, None] * self.ray) @ axes
 
 
@@ -125,17 +127,11 @@ class Heights(NamedTuple):
     spread: np.ndarray
 
 
-def vote_heights(heights: Heights, corner: tuple[float, float], res_m: float, points: np.ndarray) -> np.ndarray:
+def vote_heights(heights: Heights, corner: tuple[float, float], res_m: float, points: np.ndarray, mark: np.ndarray) -> np.ndarray:
     """Fold the returns ``points`` (N, 3) [m] into the layers of a map whose corner is ``corner``;
-    the cells they fell in (flat indices, each once)."""
-    elevation = heights.elevation
-    kernels.height_vote(*heights, corner[0], corner[1], 1.0 / res_m, np.ascontiguousarray(points, dtype=np.float64))
-    n = elevation.shape[0]
-    with np.errstate(invalid="ignore"):
-        col = np.floor((points[:, 0] - corner[0]) / res_m)
-        row = np.floor((points[:, 1] - corner[1]) / res_m)
-    inside = (col >= 0) & (col < n) & (row >= 0) & (row < n) & np.isfinite(points[:, 2])
-    return np.unique(row[inside].astype(np.int64) * n + col[inside].astype(np.int64))
+    the cells they fell in (flat indices, each once). ``mark``: scratch (n * n,) uint8, all 0."""
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    return kernels.height_vote(*heights, corner[0], corner[1], 1.0 / res_m, points, mark)
 
 
 def clustered(cells: np.ndarray, n: int) -> np.ndarray:

@@ -77,6 +77,7 @@ class GroundMap:
         self._vx, self._vy = grid[seen, 0].copy(), grid[seen, 1].copy()
         self.camera = camera
         self._depth_rays: DepthRays | None = None  # made on the first depth image
+        self._mark: np.ndarray | None = None  # scratch for the height layer's votes (made on the first depth image)
         # Ground past these limits reads as lethal (update with a depth image); None: not blocked.
         self.limits: GeometryLimits | None = None
         self.height_settings = HeightSettings()
@@ -102,13 +103,15 @@ class GroundMap:
         self.origin: np.ndarray | None = None  # world position of cell (0, 0)'s corner [m]
         self._origin_xy: tuple[float, float] | None = None  # the same, in plain floats
 
-    def _update_at_depth(self, ids: np.ndarray, depth: DepthImage) -> None:
-        """:meth:`update` with a depth image: the votes at the returns, the heights, the blocks."""
+    def _update_at_depth(self, ids: np.ndarray, depth: DepthImage, at_xy: tuple[float, float]) -> None:
+        """:meth:`update` with a depth image, the vehicle at ``at_xy``: the votes at the returns,
+        the heights, the blocks (of the ground within the height settings' block range)."""
         c = self.settings
         if self._depth_rays is None:
             self._depth_rays = DepthRays(self.camera, self._pixels.flat)
         points = self._depth_rays.points(depth.image, depth.axes, depth.centre)  # one per distinct pixel
-        near = self._depth_rays.points(depth.image, depth.axes, depth.centre, self.height_settings.max_range_m)
+        near = points.copy()
+        near[~(depth.image[self._depth_rays.rows, self._depth_rays.cols] <= self.height_settings.max_range_m)] = np.nan
         at = np.ascontiguousarray(points[self._sample_pix, :2])
         kernels.map_vote_at(
             self.evidence,
@@ -122,8 +125,13 @@ class GroundMap:
             self.frame,
             self._fade,
         )
-        touched = vote_heights(self.heights, self._origin_xy, c.map_resolution_m, near)
-        self._block(touched)
+        if self._mark is None:
+            self._mark = np.zeros(self._n * self._n, dtype=np.uint8)
+        touched = vote_heights(self.heights, self._origin_xy, c.map_resolution_m, near, self._mark)
+        res, reach = c.map_resolution_m, self.height_settings.block_range_m
+        dx = self._origin_xy[0] + (touched % self._n + 0.5) * res - at_xy[0]
+        dy = self._origin_xy[1] + (touched // self._n + 0.5) * res - at_xy[1]
+        self._block(touched[dx * dx + dy * dy <= reach * reach])
 
     def _block(self, touched: np.ndarray) -> None:
         """Cells (flat indices ``touched``) whose geometry is past :attr:`limits` are blocked until
@@ -238,7 +246,7 @@ class GroundMap:
         self.frame += 1
         ids = view.pixels(self._pixels)
         if depth is not None:
-            self._update_at_depth(ids, depth)
+            self._update_at_depth(ids, depth, (float(x), float(y)))
             return
         dpitch, droll = self.attitude(view) if self.attitude is not None else (0.0, 0.0)
         tilted = bool(dpitch or droll)
