@@ -7,7 +7,8 @@ ten seconds of its first run compiling them in every worker. ``python -m terrapr
 a demonstration with disturbances, featurising with and without the look-ahead, training each
 named recipe for one epoch (both utility fits), one closed-loop run of each model and of the
 synthetic driver, one run through the ``field`` perception model (label errors, a tilted
-camera), and the height field of a course with relief (its noise is compiled too). What it writes goes to a temporary folder and is removed.
+camera), and a few frames of the default recipe's model on a course with relief (its height
+field and noise, the relief renderer with depth, the height layer's votes and geometry). What it writes goes to a temporary folder and is removed.
 """
 
 from __future__ import annotations
@@ -22,7 +23,6 @@ from terrapref.perception import load_perception
 from terrapref.recipes import RECIPES, RecipeSetup, run_recipe
 from terrapref.scenario import resolve_scenario
 from terrapref.terrain import PreferenceProfile
-from terrapref.world import rasterise
 
 COURSE = "fig7_rock_vs_non_traversable_left"  # short: a few hundred frames
 
@@ -38,12 +38,29 @@ def warm_up(log=print) -> float:
             )
             out = run_recipe(small, Path(tmp) / "work", RecipeSetup(0, profile, course=COURSE))
             run_one(RunSpec(COURSE, 1, PLANNER, str(out.model), profile.order))
+            if recipe.name == "teach":
+                _relief_frames(out.model)
         run_one(RunSpec(COURSE, 1, PLANNER, str(out.model), profile.order, perception=load_perception("field")))
         run_one(RunSpec(COURSE, 1, EXPERT, None, profile.order))
-    rasterise(resolve_scenario("relief_demo"))
     seconds = time.perf_counter() - t0
     log(f"compiled loops ready ({seconds:.0f} s)")
     return seconds
+
+
+def _relief_frames(model_path: Path, frames: int = 5) -> None:
+    """A few frames of the model at ``model_path`` deciding on ``relief_demo`` with their depth."""
+    import numpy as np
+
+    from terrapref.learning.model_file import load_model
+    from terrapref.planner import Planner, PlannerDriver
+    from terrapref.sim import Simulation
+
+    sim = Simulation(resolve_scenario("relief_demo"))
+    driver = PlannerDriver(Planner(load_model(model_path)))
+    driver.reset(sim.scenario, np.random.default_rng(0))
+    frame = sim.reset()
+    for _ in range(frames):
+        frame = sim.step(driver.act(frame))
 
 
 if __name__ == "__main__":

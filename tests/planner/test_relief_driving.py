@@ -62,7 +62,7 @@ def test_a_wall_across_the_way_is_stopped_short_of_and_never_run_into(model) -> 
 
 
 def test_without_the_height_layers_limits_the_planner_drives_into_the_wall(model) -> None:
-    log = _drive(model, 0.4, limits=False, seconds=12.0)
+    log = _drive(model, 0.4, limits=False, seconds=8.0)
     assert log.stuck >= 1 and NO_FREE_WAY not in log.stops
 
 
