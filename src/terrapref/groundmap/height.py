@@ -4,12 +4,13 @@ pose, and the ground's geometry read from it as grid_map's traversability filter
 Each frame's depth image, read at the pixels the map reads its classes at (the ground every
 0.1 m ahead, as a level camera over flat ground sees it: about one return a cell), gives returns
 in the world: the optical centre plus the depth times the pixel's ray (the camera placed by the
-robot's pose, its height, pitch and roll). Each cell keeps the mean height of the returns that fell in it and how many did
-(the ``elevation`` and ``returns`` layers, terrapref.groundmap.layers). A cell's geometry comes
-from the cells with an elevation within ``radius_m`` of it: the slope of the least-squares plane
-through them and the roughness (their heights' standard deviation about that plane), unknown
-(NaN) where fewer than three are known; and the step, the height range over the cell and its
-eight neighbours, unknown where fewer than two of them are.
+robot's pose, its height, pitch and roll). Each cell keeps the mean height of the returns that
+fell in it, how many did and their spread (the ``elevation``, ``returns`` and ``spread`` layers,
+terrapref.groundmap.layers); its height is trusted once enough returns agree
+(:class:`HeightSettings`). A cell's geometry comes from the trusted cells within ``radius_m`` of
+it: the slope of the least-squares plane through them and the roughness (their heights' standard
+deviation about that plane), unknown (NaN) where fewer than three are trusted; and the step, the
+height range over the cell and its eight neighbours, unknown where fewer than two of them are.
 
 Ground the vehicle cannot cross within its limits is lethal, from its config and never learned
 (:class:`GeometryLimits`): a slope past its roll or its pitch limit, whichever is smaller (a
