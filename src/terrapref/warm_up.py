@@ -8,7 +8,8 @@ a demonstration with disturbances, featurising with and without the look-ahead, 
 named recipe for one epoch (both utility fits), one closed-loop run of each model and of the
 synthetic driver, one run through the ``field`` perception model (label errors, a tilted
 camera), and a few frames of the default recipe's model on a course with relief (its height
-field and noise, the relief renderer with depth, the height layer's votes and geometry). What it writes goes to a temporary folder and is removed.
+field and noise, the relief renderer with depth, the height layer's votes and geometry), its
+costmap, and a whole flat frame. What it writes goes to a temporary folder and is removed.
 """
 
 from __future__ import annotations
@@ -61,6 +62,8 @@ def _relief_frames(model_path: Path, frames: int = 5) -> None:
     frame = sim.reset()
     for _ in range(frames):
         frame = sim.step(driver.act(frame))
+    driver.planner.costmap()  # the map's cells all decided at once
+    Simulation(resolve_scenario(COURSE)).reset().image  # noqa: B018 - a whole flat frame rendered
 
 
 if __name__ == "__main__":
