@@ -6,9 +6,14 @@ nodes) and the scores that count stops."""
 NO_FREE_WAY, BLIND, STALE = "no_free_way", "blind", "stale"
 GOAL, OFF_PATH = "goal", "off_path"
 UNSAID = "unsaid"  # a stop whose driver gave no reason (a person letting go of the throttle)
+# A reason with its cause after a colon: no way is free, and ground the vehicle cannot take by
+# its geometry (a slope past its tilt limits, a step higher than it climbs) is what closes them.
+NO_FREE_WAY_GEOMETRY = f"{NO_FREE_WAY}:geometry"
 
 REASONS = {
     NO_FREE_WAY: "no way ahead is free of lethal or unseen ground within the stopping distance",
+    NO_FREE_WAY_GEOMETRY: "no way ahead is free within the stopping distance, and the ground past the vehicle's limits "
+    "(a slope it would tip on, a step it cannot climb) is what closes them",
     BLIND: "too little of the ground ahead seen for too long",
     STALE: "no fresh frame within the time a command is held, or a clock that does not move on",
     GOAL: "at the end of the path: within the goal tolerance of its last point, or past it",

@@ -52,6 +52,7 @@ def _relief_frames(model_path: Path, frames: int = 5) -> None:
     """A few frames of the model at ``model_path`` deciding on ``relief_demo`` with their depth."""
     import numpy as np
 
+    from terrapref.groundmap.height_compiled import near_blocked
     from terrapref.learning.model_file import load_model
     from terrapref.planner import Planner, PlannerDriver
     from terrapref.sim import Simulation
@@ -63,6 +64,7 @@ def _relief_frames(model_path: Path, frames: int = 5) -> None:
     for _ in range(frames):
         frame = sim.step(driver.act(frame))
     driver.planner.costmap()  # the map's cells all decided at once
+    near_blocked(np.ones((2, 2), dtype=np.uint8), 1, np.zeros(4, dtype=np.uint8))  # blocked ground, which these frames have none of
     Simulation(resolve_scenario(COURSE)).reset().image  # noqa: B018 - a whole flat frame rendered
 
 

@@ -32,6 +32,12 @@ if TYPE_CHECKING:
     from terrapref.vehicle import VehicleConfig
 
 
+# A cell's geometry is read again when the trusted elevation of a cell within its disc has moved
+# by more than this since it was last read [m] (a twentieth of the step the vehicle climbs), or
+# has come to be trusted or ceased to be: ground whose heights have settled is not read again.
+CHECK_TOLERANCE_M = 0.005
+
+
 @dataclass(frozen=True)
 class HeightSettings:
     """How the height layer is read from depth and its geometry from the layer.
@@ -111,12 +117,15 @@ class DepthRays:
             [(self.cols + 0.5 - camera.cx) / camera.fx, (self.rows + 0.5 - camera.cy) / camera.fy, np.ones(len(self.rows))], axis=1
         )
 
-    def points(self, depth: np.ndarray, axes: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    def points(self, depth: np.ndarray, axes: np.ndarray, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The returns (N, 3) in the world [m] of ``depth`` (H, W) [m along the optical axis, NaN:
         none] seen by a camera with ``axes`` (3, 3; rows right, down, forward in the world) at
-        ``centre`` (3,); NaN rows for pixels without a return."""
-        d = depth[self.rows, self.cols].astype(np.float64)
-        return centre + (d[:, None] * self.ray) @ axes
+        ``centre`` (3,), NaN rows for pixels without a return; and their depths (N,) [m]."""
+        out = np.empty((len(self.rows), 3))
+        d = kernels.depth_points(
+            depth, self.rows, self.cols, self.ray, np.asarray(axes, dtype=np.float64), np.asarray(centre, dtype=np.float64), out
+        )
+        return out, d
 
 
 class Heights(NamedTuple):
@@ -128,46 +137,29 @@ class Heights(NamedTuple):
     spread: np.ndarray
 
 
-def vote_heights(heights: Heights, corner: tuple[float, float], res_m: float, points: np.ndarray, mark: np.ndarray) -> np.ndarray:
-    """Fold the returns ``points`` (N, 3) [m] into the layers of a map whose corner is ``corner``;
-    the cells they fell in (flat indices, each once). ``mark``: scratch (n * n,) uint8, all 0."""
-    points = np.ascontiguousarray(points, dtype=np.float64)
-    return kernels.height_vote(*heights, corner[0], corner[1], 1.0 / res_m, points, mark)
+def trusted_elevation(heights: Heights, settings: HeightSettings) -> np.ndarray:
+    """Each cell's elevation where it is trusted (``settings``: at least ``min_returns`` returns,
+    and 2, and the standard error of their mean at most ``max_error_m``), else NaN: (n, n) float32."""
+    elevation, returns, spread = heights
+    k = returns.astype(np.float64)
+    with np.errstate(invalid="ignore"):
+        ok = (k >= max(settings.min_returns, 2)) & (spread <= settings.max_error_m**2 * k * (k - 1))
+    return np.where(ok, elevation, np.float32(np.nan)).astype(np.float32)
 
 
-def clustered(cells: np.ndarray, n: int) -> np.ndarray:
-    """Those of ``cells`` (flat indices of an n by n grid, sorted) with another of them among their
-    eight neighbours: a lone cell past the limits is a speckle of noise (a ledge or a bank is a
-    line of cells), as a lone lethal cell is to the stop rule."""
-    rows, cols = cells // n, cells % n
-    has = np.zeros(len(cells), dtype=bool)
-    for dr in (-1, 0, 1):
-        for dc in (-1, 0, 1):
-            if dr or dc:
-                r, c = rows + dr, cols + dc
-                inside = (r >= 0) & (r < n) & (c >= 0) & (c < n)
-                at = np.searchsorted(cells, r * n + c)
-                found = inside & (at < len(cells)) & (cells[np.minimum(at, len(cells) - 1)] == r * n + c)
-                has |= found
-    return cells[has]
+def disc_reach(settings: HeightSettings, res_m: float) -> int:
+    """The radius, in cells of ``res_m``, of the disc a cell's plane is fitted in."""
+    return max(1, int(math.floor(settings.radius_m / res_m + 1e-9)))
 
 
-def within_reach(cells: np.ndarray, n: int, reach: int) -> np.ndarray:
-    """The cells (flat indices of an n by n grid, each once) within ``reach`` cells (a disc) of any of ``cells``."""
-    dr, dc = np.mgrid[-reach : reach + 1, -reach : reach + 1]
-    disc = dr * dr + dc * dc <= reach * reach
-    rows = cells[:, None] // n + dr[disc][None, :]
-    cols = cells[:, None] % n + dc[disc][None, :]
-    inside = (rows >= 0) & (rows < n) & (cols >= 0) & (cols < n)
-    return np.unique(rows[inside] * n + cols[inside])
-
-
-def geometry_of_cells(heights: Heights, rows: np.ndarray, cols: np.ndarray, res_m: float, settings: HeightSettings) -> np.ndarray:
+def geometry_of_cells(
+    heights: Heights, rows: np.ndarray, cols: np.ndarray, res_m: float, settings: HeightSettings, trusted: np.ndarray | None = None
+) -> np.ndarray:
     """Slope [rad], roughness [m] and step [m] of the cells (``rows``, ``cols``), (N, 3), from the
-    trusted elevations round them (``settings``); NaN where unknown."""
+    trusted elevations round them (``settings``; ``trusted``: those elevations, if already
+    worked out, :func:`trusted_elevation`); NaN where unknown."""
     out = np.empty((len(rows), 3))
-    reach = max(1, int(math.floor(settings.radius_m / res_m + 1e-9)))
-    trust = (settings.min_returns, settings.max_error_m**2)
+    trusted = trusted_elevation(heights, settings) if trusted is None else trusted
     rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
-    kernels.cell_geometry(tuple(heights), trust, rows, cols, reach, res_m, out)
+    kernels.cell_geometry(trusted, rows, cols, disc_reach(settings, res_m), res_m, out)
     return out

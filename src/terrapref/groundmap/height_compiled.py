@@ -12,27 +12,48 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
+def depth_points(
+    depth: np.ndarray, rows: np.ndarray, cols: np.ndarray, ray: np.ndarray, axes: np.ndarray, centre: np.ndarray, out: np.ndarray
+) -> np.ndarray:
+    """The returns of ``depth`` (H, W) [m along the optical axis, NaN: none] at the pixels
+    (``rows``, ``cols``) into ``out`` (N, 3), world [m]: the optical ``centre`` (3,) plus the depth
+    times each pixel's ``ray`` (N, 3; camera frame, forward 1) turned by ``axes`` (3, 3; rows
+    right, down, forward in the world); NaN rows where a pixel has no return. Their depths (N,)."""
+    d = np.empty(rows.shape[0])
+    for i in range(rows.shape[0]):
+        z = np.float64(depth[rows[i], cols[i]])
+        d[i] = z
+        for a in range(3):
+            out[i, a] = centre[a] + z * (ray[i, 0] * axes[0, a] + ray[i, 1] * axes[1, a] + ray[i, 2] * axes[2, a])
+    return d
+
+
+@njit(cache=True, nogil=True)
 def height_vote(
-    elevation: np.ndarray,
-    returns: np.ndarray,
-    spread: np.ndarray,
+    heights: tuple[np.ndarray, np.ndarray, np.ndarray],
+    trusted: np.ndarray,
+    trust: tuple[int, float],
     ox: float,
     oy: float,
     inv_res: float,
     points: np.ndarray,
+    depth: np.ndarray,
+    max_range_m: float,
     mark: np.ndarray,
 ) -> np.ndarray:
-    """Fold the returns ``points`` (N, 3) world [m] (NaN rows: no return) into each cell's mean
-    height (``elevation`` (n, n) float32, NaN where none fell yet), count (``returns``) and sum
-    of squared deviations from the mean (``spread``, Welford's update); the cells they fell in
-    (flat indices, each once, in the order first fallen in). ``mark`` (n * n,) uint8, all 0:
-    scratch, left all 0."""
+    """Fold the returns ``points`` (N, 3) world [m] (NaN rows: no return) no deeper than
+    ``max_range_m`` (their ``depth`` (N,)) into each cell's mean height (``heights``' elevation
+    (n, n) float32, NaN where none fell yet), count (returns) and sum of squared deviations from the
+    mean (spread, Welford's update); the cells they fell in (flat indices, each once, in the order
+    first fallen in), whose ``trusted`` elevation (NaN: not trusted, :func:`trusted_elevation`)
+    is brought up to date. ``mark`` (n * n,) uint8, all 0: scratch, left all 0."""
+    elevation, returns, spread = heights
     n = elevation.shape[0]
     touched = np.empty(points.shape[0], np.int64)
     count = 0
     for i in range(points.shape[0]):
         x, y, z = points[i, 0], points[i, 1], points[i, 2]
-        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+        if not (depth[i] <= max_range_m and math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
             continue
         u, v = (x - ox) * inv_res, (y - oy) * inv_res
         if not (0.0 <= u < n and 0.0 <= v < n):
@@ -48,40 +69,78 @@ def height_vote(
         mean = old + (z - old) / k
         elevation[row, col] = mean
         spread[row, col] += (z - old) * (z - mean)
+    least, largest = trust
     for i in range(count):
-        mark[touched[i]] = 0
+        t = touched[i]
+        mark[t] = 0
+        row, col = t // n, t % n
+        k = returns[row, col]
+        trusted[row, col] = elevation[row, col] if k >= least and k >= 2 and spread[row, col] <= largest * k * (k - 1) else np.nan
     return touched[:count]
 
 
 @njit(cache=True, nogil=True)
-def cell_geometry(
-    heights: tuple[np.ndarray, np.ndarray, np.ndarray],
-    trust: tuple[int, float],
-    rows: np.ndarray,
-    cols: np.ndarray,
+def to_check(
+    touched: np.ndarray,
+    trusted: np.ndarray,
+    checked: np.ndarray,
+    tolerance_m: float,
+    near: tuple[float, float, float, float, float, float],
     reach: int,
-    res: float,
-    out: np.ndarray,
-) -> None:
+    mark: np.ndarray,
+) -> np.ndarray:
+    """The cells (flat indices, each once) whose geometry may have changed with this frame's
+    returns: those within ``reach`` cells (a disc) of a cell of ``touched`` near the vehicle whose
+    ``trusted`` elevation moved by more than ``tolerance_m`` since its geometry was last read
+    (``checked``: the trusted elevation then, NaN as it, +inf: never read), or came to be trusted
+    or ceased to be. ``near``: the map's corner (x, y), its resolution, the vehicle's (x, y) and
+    the range within which cells are read [m]. ``checked`` is brought up to date; ``mark`` (n * n,)
+    uint8, all 0: scratch, left all 0."""
+    n = trusted.shape[0]
+    ox, oy, res, x, y, range_m = near
+    out = np.empty(touched.shape[0] * (2 * reach + 1) ** 2, np.int64)
+    count = 0
+    for i in range(touched.shape[0]):
+        t = touched[i]
+        row, col = t // n, t % n
+        dx, dy = ox + (col + 0.5) * res - x, oy + (row + 0.5) * res - y
+        if dx * dx + dy * dy > range_m * range_m:
+            continue
+        now, then = trusted[row, col], checked[row, col]
+        if (math.isnan(now) and math.isnan(then)) or abs(now - then) <= tolerance_m:
+            continue
+        checked[row, col] = now
+        for dr in range(-reach, reach + 1):
+            for dc in range(-reach, reach + 1):
+                r, c = row + dr, col + dc
+                if dr * dr + dc * dc > reach * reach or not (0 <= r < n and 0 <= c < n) or mark[r * n + c]:
+                    continue
+                mark[r * n + c] = 1
+                out[count] = r * n + c
+                count += 1
+    for i in range(count):
+        mark[out[i]] = 0
+    return out[:count]
+
+
+@njit(cache=True, nogil=True)
+def cell_geometry(trusted: np.ndarray, rows: np.ndarray, cols: np.ndarray, reach: int, res: float, out: np.ndarray) -> None:
     """Slope [rad], roughness [m] and step [m] of the cells (``rows``, ``cols``) into ``out`` (N, 3),
-    from the cells with a trusted elevation within ``reach`` cells (a disc) of each. ``heights``:
-    the elevation, returns and spread layers; ``trust`` (least returns, largest variance of the
-    mean [m^2]): a cell's elevation counts when at least that many returns fell in it and its
-    mean's variance (spread / (n (n - 1))) is at most that. The least-squares
-    plane z = a x + b y + c through them gives the slope, atan(sqrt(a^2 + b^2)), and the roughness,
-    the standard deviation of their heights about it. The step is the height range over the cell
-    and its eight neighbours (a slope adds little to it there: 0.13 m over a 25 deg slope of
-    0.1 m cells). A cell no return fell in still has a geometry from the cells round it (the
-    ground between the returns of far, sparsely sampled ground); slope and roughness are NaN
-    where fewer than three cells of the disc are known, the step where fewer than two of the
-    nine are."""
-    n = heights[0].shape[0]
+    from the cells with a ``trusted`` elevation (n, n) float32 [m, NaN: not trusted] within
+    ``reach`` cells (a disc) of each. The least-squares plane z = a x + b y + c through them gives
+    the slope, atan(sqrt(a^2 + b^2)), and the roughness, the standard deviation of their heights
+    about it. The step is the height range over the cell and its eight neighbours (a slope adds
+    little to it there: 0.13 m over a 25 deg slope of 0.1 m cells). A cell no return fell in still
+    has a geometry from the cells round it (the ground between the returns of far, sparsely
+    sampled ground); slope and roughness are NaN where fewer than three cells of the disc are
+    trusted, the step where fewer than two of the nine are."""
+    n = trusted.shape[0]
     for i in range(rows.shape[0]):
         r0, c0 = rows[i], cols[i]
         out[i, 0] = out[i, 1] = out[i, 2] = np.nan
         if not (0 <= r0 < n and 0 <= c0 < n):
             continue
-        sums, near, step = _disc(heights, trust, r0, c0, reach, res)
+        sums, near, step = _disc(trusted, r0, c0, reach, res)
         if sums[0] >= 3.0:
             out[i, 0], out[i, 1] = _plane(sums)
         if near >= 2:
@@ -89,26 +148,21 @@ def cell_geometry(
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _disc(
-    heights: tuple[np.ndarray, np.ndarray, np.ndarray], trust: tuple[int, float], r0: int, c0: int, reach: int, res: float
-) -> tuple[tuple[float, ...], int, float]:
+def _disc(trusted: np.ndarray, r0: int, c0: int, reach: int, res: float) -> tuple[tuple[float, ...], int, float]:
     """The normal equations' sums (m, x, y, z, xx, yy, xy, xz, yz, zz; x, y the offsets from cell
     (r0, c0) [m]) over the trusted cells within ``reach`` of it, how many of its nine (the cell
     and its neighbours) are trusted, and their height range."""
-    elevation, returns, spread = heights
-    least, largest = trust
-    n = elevation.shape[0]
+    n = trusted.shape[0]
     m = sx = sy = sz = sxx = syy = sxy = sxz = syz = szz = 0.0
     near, low, high = 0, np.inf, -np.inf
-    for dr in range(-reach, reach + 1):
-        for dc in range(-reach, reach + 1):
-            r, c = r0 + dr, c0 + dc
-            if dr * dr + dc * dc > reach * reach or not (0 <= r < n and 0 <= c < n):
+    for dr in range(max(-reach, -r0), min(reach, n - 1 - r0) + 1):
+        span = int(math.sqrt(reach * reach - dr * dr) + 1e-9)
+        r = r0 + dr
+        for dc in range(max(-span, -c0), min(span, n - 1 - c0) + 1):
+            z = np.float64(trusted[r, c0 + dc])
+            if math.isnan(z):
                 continue
-            k = returns[r, c]
-            if k < least or k < 2 or spread[r, c] > largest * k * (k - 1):
-                continue
-            z, x, y = np.float64(elevation[r, c]), dc * res, dr * res
+            x, y = dc * res, dr * res
             m, sx, sy, sz = m + 1.0, sx + x, sy + y, sz + z
             sxx, syy, sxy, sxz, syz, szz = sxx + x * x, syy + y * y, sxy + x * y, sxz + x * z, syz + y * z, szz + z * z
             if abs(dr) <= 1 and abs(dc) <= 1:
@@ -131,3 +185,45 @@ def _plane(sums: tuple[float, ...]) -> tuple[float, float]:
     b = (cyz * cxx - cxz * cxy) / det
     residual = czz - a * cxz - b * cyz  # the residual sum of squares
     return math.atan(math.sqrt(a * a + b * b)), math.sqrt(max(residual, 0.0) / m)
+
+
+@njit(cache=True, nogil=True)
+def near_blocked(blocked: np.ndarray, reach: int, mark: np.ndarray) -> np.ndarray:
+    """The cells (flat indices, each once) within ``reach`` cells (a disc) of a cell of
+    ``blocked`` (n, n) uint8 that has another blocked cell among its eight neighbours (a lone
+    one is a speckle of noise: a ledge or a bank is a line of cells, as a lone lethal cell is to
+    the stop rule). ``mark`` (n * n,) uint8, all 0: scratch, left all 0."""
+    n = blocked.shape[0]
+    out = np.empty(1024, np.int64)
+    count = 0
+    for row in range(n):
+        for col in range(n):
+            if not blocked[row, col] or not _blocked_beside(blocked, row, col):
+                continue
+            for dr in range(-reach, reach + 1):
+                for dc in range(-reach, reach + 1):
+                    r, c = row + dr, col + dc
+                    if dr * dr + dc * dc > reach * reach or not (0 <= r < n and 0 <= c < n) or mark[r * n + c]:
+                        continue
+                    mark[r * n + c] = 1
+                    if count == out.shape[0]:
+                        grown = np.empty(2 * count, np.int64)
+                        grown[:count] = out
+                        out = grown
+                    out[count] = r * n + c
+                    count += 1
+    for i in range(count):
+        mark[out[i]] = 0
+    return out[:count]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _blocked_beside(blocked: np.ndarray, row: int, col: int) -> bool:
+    """Whether a cell among the eight round (``row``, ``col``) is blocked."""
+    n = blocked.shape[0]
+    for dr in range(-1, 2):
+        for dc in range(-1, 2):
+            r, c = row + dr, col + dc
+            if (dr or dc) and 0 <= r < n and 0 <= c < n and blocked[r, c]:
+                return True
+    return False

@@ -56,6 +56,11 @@ LAYERS: tuple[Layer, ...] = (
     Layer("elevation", np.float32, np.nan),
     Layer("returns", np.uint32, 0),
     Layer("spread", np.float32, 0.0),
+    # The elevation where it is trusted (enough returns that agree), NaN where not; and what it
+    # was when the cell's geometry was last read (+inf: never), so that only the cells round a
+    # changed one are read again.
+    Layer("trusted", np.float32, np.nan),
+    Layer("checked", np.float32, np.inf),
     # 1 where the ground's geometry is past the vehicle's limits (terrapref.groundmap.height):
     # the cell reads as lethal whatever its evidence.
     Layer("blocked", np.uint8, 0),

@@ -9,19 +9,19 @@ from typing import ClassVar
 import numpy as np
 
 from terrapref.camera import PinholeCamera, PixelSet, SegmentationView
+from terrapref.groundmap import height_compiled as height_kernels
 from terrapref.groundmap import map_compiled as kernels
 from terrapref.groundmap.attitude import HorizonAttitude
 from terrapref.groundmap.columns import TerrainColumns
 from terrapref.groundmap.height import (
+    CHECK_TOLERANCE_M,
     DepthImage,
     DepthRays,
     GeometryLimits,
     Heights,
     HeightSettings,
-    clustered,
+    disc_reach,
     geometry_of_cells,
-    vote_heights,
-    within_reach,
 )
 from terrapref.groundmap.layers import LAYERS, Layer
 from terrapref.groundmap.settings import MapSettings
@@ -77,7 +77,7 @@ class GroundMap:
         self._vx, self._vy = grid[seen, 0].copy(), grid[seen, 1].copy()
         self.camera = camera
         self._depth_rays: DepthRays | None = None  # made on the first depth image
-        self._mark: np.ndarray | None = None  # scratch for the height layer's votes (made on the first depth image)
+        self._mark: np.ndarray | None = None  # scratch for the height layer's kernels (made with the rays)
         # Ground past these limits reads as lethal (update with a depth image); None: not blocked.
         self.limits: GeometryLimits | None = None
         self.height_settings = HeightSettings()
@@ -109,49 +109,58 @@ class GroundMap:
         c = self.settings
         if self._depth_rays is None:
             self._depth_rays = DepthRays(self.camera, self._pixels.flat)
-        points = self._depth_rays.points(depth.image, depth.axes, depth.centre)  # one per distinct pixel
-        near = points.copy()
-        near[~(depth.image[self._depth_rays.rows, self._depth_rays.cols] <= self.height_settings.max_range_m)] = np.nan
-        at = np.ascontiguousarray(points[self._sample_pix, :2])
+            self._mark = np.zeros(self._n * self._n, dtype=np.uint8)
+        points, depths = self._depth_rays.points(depth.image, depth.axes, depth.centre)  # one per distinct pixel
         kernels.map_vote_at(
             self.evidence,
             self.stamp,
             self._cells,
             *self._origin_xy,
             1.0 / c.map_resolution_m,
-            at,
+            points,
             self._weight,
-            self.columns[ids[self._sample_pix]],
+            ids,
+            self._sample_pix,
+            self.columns,
             self.frame,
             self._fade,
         )
-        if self._mark is None:
-            self._mark = np.zeros(self._n * self._n, dtype=np.uint8)
-        touched = vote_heights(self.heights, self._origin_xy, c.map_resolution_m, near, self._mark)
-        res, reach = c.map_resolution_m, self.height_settings.block_range_m
-        dx = self._origin_xy[0] + (touched % self._n + 0.5) * res - at_xy[0]
-        dy = self._origin_xy[1] + (touched // self._n + 0.5) * res - at_xy[1]
-        self._block(touched[dx * dx + dy * dy <= reach * reach])
-
-    def _block(self, touched: np.ndarray) -> None:
-        """Cells (flat indices ``touched``) whose geometry is past :attr:`limits` are blocked until
-        their geometry no longer is (the ``blocked`` layer); the cells within the limits' reach
-        of a blocked one read as the first lethal column (:meth:`_reblock`)."""
+        h, res = self.height_settings, c.map_resolution_m
+        trusted = self._layers["trusted"]
+        touched = height_kernels.height_vote(
+            tuple(self.heights),
+            trusted,
+            (h.min_returns, h.max_error_m**2),
+            *self._origin_xy,
+            1.0 / res,
+            points,
+            depths,
+            h.max_range_m,
+            self._mark,
+        )
         if self.limits is None or self.geometry_column is None:
             return
+        near = (*self._origin_xy, res, *at_xy, h.block_range_m)
+        cells = height_kernels.to_check(touched, trusted, self._layers["checked"], CHECK_TOLERANCE_M, near, disc_reach(h, res), self._mark)
+        self._block(cells)
+
+    def _block(self, cells: np.ndarray) -> None:
+        """Cells (flat indices ``cells``) whose geometry is past :attr:`limits` are blocked until
+        their geometry no longer is (the ``blocked`` layer); the cells within the limits' reach
+        of a blocked one read as the first lethal column (:meth:`_reblock`)."""
         n, res = self._n, self.settings.map_resolution_m
-        geometry = geometry_of_cells(self.heights, touched // n, touched % n, res, self.height_settings)
+        geometry = geometry_of_cells(self.heights, cells // n, cells % n, res, self.height_settings, self._layers["trusted"])
         lethal = self.limits.lethal(geometry)
         blocked = self._layers["blocked"].reshape(-1)
-        was = blocked[touched].copy()
-        blocked[touched] = lethal
-        self._moved |= bool((blocked[touched] != was).any())
+        was = blocked[cells].copy()
+        blocked[cells] = lethal
+        self._moved |= bool((blocked[cells] != was).any())
         self._blocking = bool(blocked.any()) if self._moved else self._blocking
         self._reblock()
 
     def _reblock(self) -> None:
         """The cells within the limits' reach of a blocked cell (one of a cluster: a lone one is
-        noise, terrapref.groundmap.height.clustered) set to read as lethal, again after
+        noise, terrapref.groundmap.height_compiled.near_blocked) set to read as lethal, again after
         each frame's votes (which leave the cells they fall in to be decided from their evidence);
         those no longer within reach of one decided from their evidence again."""
         if not self._blocking and not len(self._lethal_by_geometry):
@@ -159,7 +168,7 @@ class GroundMap:
         cells = self._cells.reshape(-1)
         if self._moved:  # the blocked cells changed (or the map moved): the cells near them found again
             reach = round(self.limits.reach_m / self.settings.map_resolution_m) if self.limits is not None else 0
-            near = within_reach(clustered(np.flatnonzero(self._layers["blocked"]), self._n), self._n, reach)
+            near = height_kernels.near_blocked(self._layers["blocked"], reach, self._mark)
             cells[np.setdiff1d(self._lethal_by_geometry, near, assume_unique=True)] = kernels.UNSETTLED
             self._lethal_by_geometry, self._moved = near, False
         cells[self._lethal_by_geometry] = self.geometry_column
@@ -293,6 +302,17 @@ class GroundMap:
         Read once the map has been placed (its first update: ``origin`` is not None)."""
         ox, oy = self._origin_xy
         return kernels.MapLayers(self._cells, self.evidence, self.lethal, self._shares, ox, oy, 1.0 / self.settings.map_resolution_m)
+
+    def layers_without_geometry(self) -> kernels.MapLayers | None:
+        """The map as :meth:`layers` gives it, but with the ground that reads as lethal for its
+        geometry alone (past :attr:`limits`) decided from its class evidence instead: what the
+        way would be if the ground were flat. None while no ground reads so."""
+        if not len(self._lethal_by_geometry):
+            return None
+        cells = self._cells.copy()
+        cells.reshape(-1)[self._lethal_by_geometry] = kernels.UNSETTLED
+        ox, oy = self._origin_xy
+        return kernels.MapLayers(cells, self.evidence, self.lethal, self._shares, ox, oy, 1.0 / self.settings.map_resolution_m)
 
     def beside(self, path: ReferencePath, s: np.ndarray, lat: np.ndarray) -> np.ndarray:
         """Terrain column (O, S, F) at the points ``lat`` (O, F) [m] left of the path at arc lengths ``s`` (S,)."""

@@ -104,18 +104,23 @@ def map_vote_at(
     inv_res: float,
     points: np.ndarray,
     weight: np.ndarray,
-    column_of: np.ndarray,
+    ids: np.ndarray,
+    pixel_of: np.ndarray,
+    columns: np.ndarray,
     frame: int,
     fade: np.ndarray,
 ) -> None:
-    """:func:`map_vote` with each sample's ground point given, ``points`` (N, 2) world [m] (a
-    depth return's: on relief the ground a pixel sees is not where a plane would put it; NaN:
-    no return, no vote), and its column ``column_of`` (N,)."""
+    """:func:`map_vote` with each sample's ground point given: ``points`` (P, 2 or more) world [m],
+    one per distinct pixel (a depth return's: on relief the ground a pixel sees is not where a
+    plane would put it; NaN: no return, no vote), sample ``p`` reading pixel ``pixel_of[p]``."""
     n_rows, n_cols = cells.shape
     k = evidence.shape[2] - 1
-    cell = np.full(points.shape[0], -1, np.int64)
-    for p in range(points.shape[0]):
-        px, py = points[p, 0], points[p, 1]
+    cell = np.full(pixel_of.shape[0], -1, np.int64)
+    column_of = np.empty(pixel_of.shape[0], np.int64)
+    for p in range(pixel_of.shape[0]):
+        q = pixel_of[p]
+        column_of[p] = columns[ids[q]]
+        px, py = points[q, 0], points[q, 1]
         if column_of[p] > k or not (math.isfinite(px) and math.isfinite(py)):
             continue
         i = math.floor((px - ox) * inv_res)

@@ -28,7 +28,6 @@ from terrapref.rules.settings import RuleSettings
 from terrapref.scenario import Scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim.loop import Frame
-from terrapref.stops import NO_FREE_WAY
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Command, Pose, VehicleConfig
 from terrapref.vehicle.ground import LEVEL, Attitude
@@ -280,7 +279,7 @@ class Planner:
         for turn in (w, -w):
             if self.stop_rule.arc_free(self._stop_map, pose, v, turn):
                 return Choice(int(self.control.label_of(float(turn))), Command(v, turn)), None
-        return choice, NO_FREE_WAY
+        return choice, self.stop_rule.closed_by(self._stop_map, pose, v, np.array([w, -w]))
 
     def _bounded(self, choice: Choice, state: PathState) -> Choice:
         """``choice`` within the goal check's say and the robot's limits: the turn the check asks

@@ -4,7 +4,9 @@ A stop is a decision with a reason, not a failure to hide. After the driving rul
 its command, the planner commands v = 0 instead when:
 
 - ``no_free_way``: no way ahead keeps the footprint on ground that is seen and not lethal over
-  the stopping distance. A vehicle whose footprint is on lethal terrain already stands there
+  the stopping distance. Where ground past the vehicle's limits by its geometry (a slope it would
+  tip on, a step it cannot climb: terrapref.groundmap.height) is what closes them, the ways
+  being free were that ground read by its class alone, the stop says so: ``no_free_way:geometry``. A vehicle whose footprint is on lethal terrain already stands there
   too: under pose noise, "on it" and "just short of it" cannot be told apart, and driving on
   from just short of it is what the rule exists to prevent. The ways are arcs of constant yaw rate across the stick's range, at
   the commanded speed; the stopping distance is what the vehicle covers before it stands
@@ -41,7 +43,7 @@ from terrapref.groundmap.map_compiled import UNSETTLED, MapLayers, map_decide
 from terrapref.groundmap.settings import MapSettings
 from terrapref.records import to_plain
 from terrapref.rules.base import StopRunner
-from terrapref.stops import BLIND, NO_FREE_WAY, held_too_long
+from terrapref.stops import BLIND, NO_FREE_WAY, NO_FREE_WAY_GEOMETRY, held_too_long
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose
 
@@ -207,14 +209,14 @@ class StopRule(StopRunner):
         pix = camera.pixel_indices(points)
         self._ahead = PixelSet(pix[pix >= 0])
         self._blind_since: float | None = None
-        self._stopped = False  # the last frame stopped for want of a free way
+        self._stopped: str | None = None  # the reason the last frame stopped with for want of a free way
         self._free_since: float | None = None  # since when a way has been free again, while so stopped
         self._frames = 0
 
     def reset(self) -> None:
         """Start a new run: forget how long frames were blind and any stop."""
         self._blind_since = None
-        self._stopped, self._free_since = False, None
+        self._stopped, self._free_since = None, None
         self._frames = 0
 
     def seen_share(self, view: SegmentationView) -> float:
@@ -247,14 +249,23 @@ class StopRule(StopRunner):
         else:
             self._blind_since = None
         if not self.free_way(gmap, pose, v_mps, w_rps):
-            self._stopped, self._free_since = True, None
-            return NO_FREE_WAY
+            self._stopped, self._free_since = self.closed_by(gmap, pose, v_mps, self.yaw_rates), None
+            return self._stopped
         if self._stopped:  # free again: moves on once it has stayed free resume_after_s
             self._free_since = now if self._free_since is None else self._free_since
             if now - self._free_since < self.config.resume_after_s - 1e-9:
-                return NO_FREE_WAY
-            self._stopped, self._free_since = False, None
+                return self._stopped
+            self._stopped, self._free_since = None, None
         return None
+
+    def closed_by(self, gmap: GroundMap, pose: Pose, v_mps: float, yaw_rates: np.ndarray) -> str:
+        """Why the ways of ``yaw_rates`` at ``v_mps``, none of them free on ``gmap``, are closed:
+        ``no_free_way:geometry`` where one would be free were the ground past the vehicle's
+        limits read by its class alone, else ``no_free_way``."""
+        flat = gmap.layers_without_geometry()
+        if flat is not None and self._first_free(gmap, pose, v_mps, yaw_rates, 0, flat) >= 0:
+            return NO_FREE_WAY_GEOMETRY
+        return NO_FREE_WAY
 
     def stale(self, now_s: float, frame_s: float | None, hold_s: float) -> bool:
         """Whether a command decided on a frame stamped ``frame_s`` (None: none yet) is stale at
@@ -272,9 +283,12 @@ class StopRule(StopRunner):
         seen, non-lethal ground of ``gmap`` over the stopping distance (no other way is tried)."""
         return self._first_free(gmap, pose, v_mps, np.array([float(w_rps)]), 0) >= 0
 
-    def _first_free(self, gmap: GroundMap, pose: Pose, v_mps: float, yaw_rates: np.ndarray, first: int) -> int:
+    def _first_free(
+        self, gmap: GroundMap, pose: Pose, v_mps: float, yaw_rates: np.ndarray, first: int, layers: MapLayers | None = None
+    ) -> int:
         """The first of ``yaw_rates`` (``first`` tried first) whose arc at ``v_mps`` is free over
-        the stopping distance on ``gmap`` (:func:`first_free_arc`); -1 when none is."""
+        the stopping distance on ``gmap`` (read as ``layers``; None: as it is) (:func:`first_free_arc`);
+        -1 when none is."""
         if gmap.origin is None:
             return -1
         c = self.config
@@ -290,7 +304,7 @@ class StopRule(StopRunner):
             c.step_m,
             steps,
             self.across,
-            gmap.layers(),
+            gmap.layers() if layers is None else layers,
             self.lethal,
             self.k + 1,
             np.float32(c.lethal_evidence),
