@@ -1,5 +1,6 @@
 """The ROS 1 node against a real ROS master: a recording's frames published one by one, the
-node's commands the same as PlannerRuntime's on the same frames.
+node's commands the same as PlannerRuntime's on the same frames, and its GridMap the runtime's
+costmap layer for layer.
 
 Needs Debian's ROS 1 packages (``roscore``, ``python3-rospy`` and the message packages); skipped
 with the reason where they are missing.
@@ -16,6 +17,7 @@ import sys
 import textwrap
 import threading
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -43,7 +45,8 @@ _MISSING = _ros1_missing()
 pytestmark = pytest.mark.skipif(_MISSING is not None, reason=str(_MISSING))
 
 PLAYER = textwrap.dedent('''
-    """Publish a recording's first frames to the node, one at a time, and keep the command each gets."""
+    """Publish a recording's first frames to the node, one at a time, and keep the command each gets,
+    then the GridMap the node publishes once it has all of them."""
     import json, sys, time
     from terrapref.interop.ros1 import import_rospy
     rospy = import_rospy()
@@ -53,6 +56,7 @@ PLAYER = textwrap.dedent('''
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import CameraInfo, Image
     from terrapref.demos.recording import read_recording
+    from terrapref.interop.ros_messages import typestore
 
     rec_dir, first, frames, out = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
     rec = read_recording(rec_dir)
@@ -64,6 +68,8 @@ PLAYER = textwrap.dedent('''
     clock_pub = rospy.Publisher("/clock", Clock, queue_size=10)  # the log's clock, as rosbag play --clock gives it
     got = {}
     rospy.Subscriber("/cmd", TwistStamped, lambda m: got.__setitem__(round(m.header.stamp.to_sec(), 3), (m.twist.linear.x, m.twist.angular.z)))
+    maps = []  # each GridMap heard: its connection header and bytes (grid_map_msgs has no Python class here)
+    rospy.Subscriber("/terrapref/grid_map", rospy.AnyMsg, lambda m: maps.append((m._connection_header, bytes(m._buff))))
     while min(seg_pub.get_num_connections(), odom_pub.get_num_connections(), clock_pub.get_num_connections()) == 0:  # the node subscribes
         time.sleep(0.05)
     from terrapref.camera import CameraConfig
@@ -98,7 +104,17 @@ PLAYER = textwrap.dedent('''
             while round(t, 3) not in got and time.time() < deadline:
                 time.sleep(0.005)
         results.append(got[round(t, 3)])
-    json.dump(results, open(out, "w"))
+    # The node's clock moved on by more than its costmap's period: the GridMap stamped then holds every frame.
+    ts, later = typestore(ros1=True), t + 1.5
+    def stamp(raw):
+        s = ts.deserialize_ros1(raw, "grid_map_msgs/msg/GridMap").info.header.stamp
+        return s.sec + 1e-9 * s.nanosec
+    while not any(stamp(raw) >= later - 1e-6 for _, raw in maps):
+        clock_pub.publish(Clock(clock=rospy.Time.from_sec(later)))
+        time.sleep(0.1)
+    header, raw = next((h, raw) for h, raw in maps if stamp(raw) >= later - 1e-6)
+    heard = {k: header[k] for k in ("type", "md5sum", "latching")} | {"raw": raw.hex()}
+    json.dump({"commands": results, "grid_map": heard}, open(out, "w"))
 ''')
 
 
@@ -130,9 +146,11 @@ def _free_port() -> int:
 
 
 def test_the_node_commands_what_the_runtime_commands_on_the_same_frames(setup, tmp_path):
+    from test_grid_map_msgs import GRID_MAP_MD5
     from test_live import _watch
 
     from terrapref.demos.recording import read_recording
+    from terrapref.interop.ros_messages import grid_map_layer, typestore
     from terrapref.runtime import PlannerRuntime
 
     root, model = setup
@@ -186,7 +204,8 @@ def test_the_node_commands_what_the_runtime_commands_on_the_same_frames(setup, t
             if proc is not None:
                 os.killpg(proc.pid, 15)
                 proc.wait(timeout=30)
-    got = np.array(json.loads((tmp_path / "got.json").read_text()))
+    heard = json.loads((tmp_path / "got.json").read_text())
+    got = np.array(heard["commands"])
     rec = read_recording(root / "rec")
     runtime = PlannerRuntime(model)
     runtime.set_path(np.asarray(rec.meta.get("path") or rec.scenario["path"]["waypoints"], dtype=float))
@@ -194,6 +213,18 @@ def test_the_node_commands_what_the_runtime_commands_on_the_same_frames(setup, t
     assert got.shape == (FRAMES, 2)
     np.testing.assert_allclose(got, expected, atol=1e-6)
     assert len(np.unique(expected[:, 1])) > 1  # the frames make it steer, not only drive straight
+    # Beside its OccupancyGrid, the costmap's layers as ROS 1's grid_map_msgs/GridMap (latched),
+    # cell for cell the runtime's after the same frames.
+    grid_map = heard["grid_map"]
+    assert (grid_map["type"], grid_map["md5sum"], grid_map["latching"]) == ("grid_map_msgs/GridMap", GRID_MAP_MD5, "1")
+    msg = typestore(ros1=True).deserialize_ros1(bytes.fromhex(grid_map["raw"]), "grid_map_msgs/msg/GridMap")
+    costmap = runtime.costmap()
+    layers = costmap.grid_layers()
+    assert list(msg.layers) == list(layers) and {"cost", "elevation", "slope", "roughness", "step"} <= set(layers)
+    assert (msg.info.header.frame_id, msg.info.resolution) == ("odom", costmap.resolution_m)
+    for name, layer in layers.items():
+        np.testing.assert_array_equal(grid_map_layer(msg, name), layer, err_msg=name)
+    assert np.isfinite(layers["cost"]).any()  # the ground seen (its geometry needs depth, which these frames lack)
     # The live view carried the decisions as they were made, stamped with the frames' ROS times.
     client.join(timeout=30)
     labels = seen.get("/terrapref/labels", [])
@@ -220,3 +251,15 @@ def test_node_options_come_from_the_command_line_then_ros_parameters_then_defaul
             NodeOptions().resolved(lambda name, default, bad=bad: bad.get(name, default))
     with pytest.raises(UserError, match="--rate"):
         NodeOptions(rate=float("nan")).resolved(lambda name, default: default)
+
+
+def test_without_rosbags_the_node_says_once_that_its_grid_map_needs_the_robot_extra(monkeypatch):
+    from terrapref.interop.ros1 import _GridMaps
+
+    monkeypatch.setitem(sys.modules, "rosbags", None)  # not installed
+    said: list[str] = []
+    assert _GridMaps.made(None, SimpleNamespace(warn=said.append)) is None
+    assert said == [
+        "terrapref: ~grid_map (grid_map_msgs/GridMap): needs the robot extra: pip install 'terrapref[robot]' "
+        "(rosbags is not installed); the costmap goes out as an OccupancyGrid only"
+    ]

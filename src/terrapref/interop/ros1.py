@@ -5,7 +5,8 @@ file) path topics; publishes the command on the robot file's command topic (``Tw
 ``TwistStamped`` with ``--stamped``, stamped with the frame it was decided on; a stop once that
 frame is ``hold_s`` old by the node's clock) at the control rate and at once on each decision, the 21 trajectories with F_t and the chosen one
 (``~trajectories``, ``visualization_msgs/MarkerArray``) on each decision, the learned costmap
-(``~costmap``, ``nav_msgs/OccupancyGrid``) once a second, and whether it stands at the end of its
+(``~costmap``, ``nav_msgs/OccupancyGrid``, latched) once a second with its layers beside it
+(``~grid_map``, ``grid_map_msgs/GridMap``, latched), and whether it stands at the end of its
 path (``~arrived``, ``std_msgs/Bool``, latched). The command is sent from a wall-clock timer, so
 that a ``/clock`` that stops (under ``use_sim_time``) cannot stop the node from sending the stop
 that follows: once no frame has been decided on for ``watchdog_s`` by the wall clock it stops
@@ -27,9 +28,13 @@ import threading
 import time
 import urllib.parse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from terrapref.errors import UserError
 from terrapref.interop.node_core import NodeOptions
+
+if TYPE_CHECKING:
+    from terrapref.groundmap.costmap import Costmap
 
 __all__ = ["NodeOptions", "check_master", "import_rospy", "run_node"]
 
@@ -139,6 +144,7 @@ class _Node:
         self.cmd_pub = rospy.Publisher(opts.command_topic(robot), TwistStamped if opts.stamped else Twist, queue_size=10)
         self.traj_pub = rospy.Publisher("~trajectories", MarkerArray, queue_size=2)
         self.cost_pub = rospy.Publisher("~costmap", OccupancyGrid, queue_size=1, latch=True)
+        self.grid_maps = _GridMaps.made(rospy, self.log)
         self.arrived_pub, self.Bool, self.arrived = rospy.Publisher("~arrived", Bool, queue_size=1, latch=True), Bool, None
         self.markers = _TrajectoryMarkers(model, rospy)
         core.on_decision = self.on_decision
@@ -231,9 +237,15 @@ class _Node:
                     self.publish_command(self.last_stamp)
 
     def publish_costmap(self, event) -> None:
+        """The learned costmap, when the model keeps a ground map, and its layers as a GridMap,
+        both stamped now in the odom frame."""
         grid = self.core.costmap()
-        if grid is not None:
-            self.cost_pub.publish(_occupancy_grid(grid, self.OccupancyGrid, self.rospy))
+        if grid is None:
+            return
+        stamp = self.rospy.Time.now()
+        self.cost_pub.publish(_occupancy_grid(grid, self.OccupancyGrid, stamp))
+        if self.grid_maps is not None:
+            self.grid_maps.publish(grid, stamp)
 
     def report(self) -> None:
         from terrapref.interop.node_core import report_line
@@ -270,10 +282,59 @@ class _TrajectoryMarkers:
         return out
 
 
-def _occupancy_grid(grid, OccupancyGrid, rospy):
+COSTMAP_FRAME = "odom"  # the frame the costmap and its layers are stamped in
+
+
+class _GridMaps:
+    """``~grid_map``: the costmap's layers as grid_map_msgs/GridMap, latched.
+
+    No Debian package carries grid_map_msgs' Python classes, so the message is built and
+    serialised with rosbags' ROS 1 typestore, as a ROS 1 bag's (:func:`terrapref.interop.ros_messages.grid_map`),
+    and published as its bytes through a rospy.AnyMsg whose class names the type, its md5sum
+    and its definition: what rospy sends for a message class, so that grid_map's own
+    subscribers (rviz's GridMap display, grid_map_visualization) match it.
+    """
+
+    MSGTYPE = "grid_map_msgs/msg/GridMap"
+
+    def __init__(self, rospy) -> None:
+        from terrapref.interop.ros_messages import typestore
+
+        self.ts = typestore(ros1=True)
+        definition, md5sum = self.ts.generate_msgdef(self.MSGTYPE, ros_version=1)
+        attrs = {"_type": "grid_map_msgs/GridMap", "_md5sum": md5sum, "_full_text": definition, "__slots__": []}
+        self.Raw = type("GridMap", (rospy.AnyMsg,), attrs)
+        self.pub = rospy.Publisher("~grid_map", self.Raw, queue_size=1, latch=True)
+
+    @classmethod
+    def made(cls, rospy, log) -> _GridMaps | None:
+        """The publisher; without rosbags (the robot extra), None and a warning that says so once."""
+        from terrapref.extras import MissingExtra, check
+
+        try:
+            check("robot", "~grid_map (grid_map_msgs/GridMap)", "rosbags")
+        except MissingExtra as exc:
+            log.warn(f"terrapref: {exc.lines()[0]}; the costmap goes out as an OccupancyGrid only")
+            return None
+        return cls(rospy)
+
+    def publish(self, grid: Costmap, stamp) -> None:
+        """The layers of ``grid`` (:meth:`Costmap.grid_layers`), stamped ``stamp`` (a rospy.Time)."""
+        from terrapref.interop.ros_messages import grid_map
+
+        T = self.ts.types
+        when = T["builtin_interfaces/msg/Time"](sec=stamp.secs, nanosec=stamp.nsecs)
+        header = T["std_msgs/msg/Header"](seq=0, stamp=when, frame_id=COSTMAP_FRAME)
+        msg = grid_map(self.ts, header, grid.grid_layers(), grid.resolution_m, grid.origin, ros1=True)
+        raw = self.Raw()
+        raw._buff = bytes(self.ts.serialize_ros1(msg, self.MSGTYPE))
+        self.pub.publish(raw)
+
+
+def _occupancy_grid(grid: Costmap, OccupancyGrid, stamp):
     msg = OccupancyGrid()
-    msg.header.stamp = rospy.Time.now()
-    msg.header.frame_id = "odom"
+    msg.header.stamp = stamp
+    msg.header.frame_id = COSTMAP_FRAME
     h, w = grid.cost.shape
     msg.info.resolution = grid.resolution_m
     msg.info.width, msg.info.height = w, h
