@@ -46,9 +46,17 @@ class HeightSettings:
         radius_m: the disc round a cell its plane is fitted in [m] (0.3 m: half the vehicle's
             width, as grid_map's slope filter is set for a robot of this size).
         min_returns: a cell's elevation counts toward geometry once this many returns fell in it.
-        max_error_m: ... and once the standard error of their mean is at most this [m]: a noisy
-            depth camera's far returns count once enough of them agree (a stereo camera's error
-            grows with the square of the range), as an elevation map's variance gates its cells.
+        max_error_m: ... and once the standard error of their mean is at most this [m], both as
+            their spread shows it and as the sensor's errors below put it: a noisy depth
+            camera's far returns count once enough of them agree, as an elevation map's variance
+            gates its cells.
+        base_error_m, depth_error_per_m2, attitude_error_deg: a return's height error (one
+            standard deviation) as the map takes it: ``base_error_m``, a stereo camera's depth
+            error of ``depth_error_per_m2`` times the depth squared, and the camera's attitude
+            known to ``attitude_error_deg`` (its mount's play and vibration: a height off by the
+            return's distance times its tangent), added in quadrature. Each return weighs the
+            inverse of its variance, so the near returns of ground the vehicle comes to outweigh
+            the far ones it first saw it by (as elevation mapping fuses its measurements).
         max_range_m: returns deeper than this [m along the optical axis] are not gathered (a
             camera's attitude known to a degree or two puts far ground's heights that far off).
         block_range_m: the ground this near the vehicle has its geometry checked against the
@@ -58,12 +66,24 @@ class HeightSettings:
     radius_m: float = 0.3
     min_returns: int = 2
     max_error_m: float = 0.03
+    base_error_m: float = 0.01
+    depth_error_per_m2: float = 0.003
+    attitude_error_deg: float = 1.0
     max_range_m: float = 30.0
     block_range_m: float = 10.0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.radius_m) and self.radius_m > 0):
             raise ValueError(f"radius_m must be finite and > 0, got {self.radius_m!r}")
+        errors = (self.base_error_m, self.depth_error_per_m2, self.attitude_error_deg)
+        if not all(math.isfinite(e) and e >= 0 for e in errors) or self.base_error_m <= 0 or self.attitude_error_deg >= 45:
+            raise ValueError("a return's errors must be finite and >= 0, base_error_m > 0 and attitude_error_deg < 45")
+
+    @property
+    def errors(self) -> tuple[float, float, float]:
+        """A return's errors as the height layer's kernels take them: the base [m], per m^2 of
+        depth, and the tangent of the attitude's."""
+        return self.base_error_m, self.depth_error_per_m2, math.tan(math.radians(self.attitude_error_deg))
 
 
 class DepthImage(NamedTuple):
@@ -129,21 +149,31 @@ class DepthRays:
 
 
 class Heights(NamedTuple):
-    """A ground map's height layers: ``elevation`` (n, n) float32 [m, NaN: none], ``returns`` (n, n)
-    uint32, ``spread`` (n, n) float32 (the returns' sum of squared deviations from the mean [m^2])."""
+    """A ground map's height layers: ``elevation`` (n, n) float32 [m, NaN: none], the returns'
+    mean weighted by the inverse of their variance, ``returns`` (n, n) uint32, how many, ``spread``
+    (n, n) float32, their weighted sum of squared deviations from the mean [m^2 / m^2], and
+    ``weight`` (n, n) float32, their weights' sum [1 / m^2] (None: returns of equal weight whose
+    errors are not known)."""
 
     elevation: np.ndarray
     returns: np.ndarray
     spread: np.ndarray
+    weight: np.ndarray | None = None
 
 
 def trusted_elevation(heights: Heights, settings: HeightSettings) -> np.ndarray:
-    """Each cell's elevation where it is trusted (``settings``: at least ``min_returns`` returns,
-    and 2, and the standard error of their mean at most ``max_error_m``), else NaN: (n, n) float32."""
-    elevation, returns, spread = heights
+    """Each cell's elevation where it is trusted, else NaN: (n, n) float32. Trusted: at least
+    ``min_returns`` returns (and 2), and the standard error of their mean at most
+    ``max_error_m``, both as the sensor's errors put it (the inverse of the weights' sum) and
+    as their spread shows it (the weighted variance over one less than their count)."""
+    elevation, returns, spread, weight = heights
     k = returns.astype(np.float64)
-    with np.errstate(invalid="ignore"):
-        ok = (k >= max(settings.min_returns, 2)) & (spread <= settings.max_error_m**2 * k * (k - 1))
+    w = k if weight is None else weight.astype(np.float64)
+    limit = settings.max_error_m**2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ok = (k >= max(settings.min_returns, 2)) & (spread <= limit * w * (k - 1))
+        if weight is not None:
+            ok &= w * limit >= 1.0
     return np.where(ok, elevation, np.float32(np.nan)).astype(np.float32)
 
 

@@ -30,7 +30,7 @@ def depth_points(
 
 @njit(cache=True, nogil=True)
 def height_vote(
-    heights: tuple[np.ndarray, np.ndarray, np.ndarray],
+    heights: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     trusted: np.ndarray,
     trust: tuple[int, float],
     ox: float,
@@ -39,15 +39,23 @@ def height_vote(
     points: np.ndarray,
     depth: np.ndarray,
     max_range_m: float,
+    centre: np.ndarray,
+    errors: tuple[float, float, float],
     mark: np.ndarray,
 ) -> np.ndarray:
     """Fold the returns ``points`` (N, 3) world [m] (NaN rows: no return) no deeper than
-    ``max_range_m`` (their ``depth`` (N,)) into each cell's mean height (``heights``' elevation
-    (n, n) float32, NaN where none fell yet), count (returns) and sum of squared deviations from the
-    mean (spread, Welford's update); the cells they fell in (flat indices, each once, in the order
-    first fallen in), whose ``trusted`` elevation (NaN: not trusted, :func:`trusted_elevation`)
-    is brought up to date. ``mark`` (n * n,) uint8, all 0: scratch, left all 0."""
-    elevation, returns, spread = heights
+    ``max_range_m`` (their ``depth`` (N,)), seen from the optical ``centre`` (3,), into each
+    cell's layers (``heights``: elevation (n, n) float32, NaN where none fell yet, returns,
+    spread, weight; terrapref.groundmap.height.Heights): a return of variance v weighs 1 / v, v
+    the sum of the squares of ``errors``' base [m], its per m^2 of depth times the depth squared,
+    and its attitude's tangent times the return's distance from the centre across the ground
+    (the weighted mean and sum of squared deviations updated as West's algorithm does). The
+    cells they fell in (flat indices, each once, in the order first fallen in), whose ``trusted``
+    elevation (NaN: not trusted; ``trust``: the least returns and the largest variance of the
+    mean [m^2], terrapref.groundmap.height.trusted_elevation) is brought up to date. ``mark``
+    (n * n,) uint8, all 0: scratch, left all 0."""
+    elevation, returns, spread, weight = heights
+    base, per_m2, tilt = errors
     n = elevation.shape[0]
     touched = np.empty(points.shape[0], np.int64)
     count = 0
@@ -59,23 +67,26 @@ def height_vote(
         if not (0.0 <= u < n and 0.0 <= v < n):
             continue
         col, row = int(u), int(v)
-        k = returns[row, col] + 1
         if mark[row * n + col] == 0:
             mark[row * n + col] = 1
             touched[count] = row * n + col
             count += 1
-        returns[row, col] = k
+        across = (x - centre[0]) ** 2 + (y - centre[1]) ** 2
+        w = 1.0 / (base * base + (per_m2 * depth[i] * depth[i]) ** 2 + tilt * tilt * across)
+        k = returns[row, col] + 1
+        total = np.float64(weight[row, col]) + w if k > 1 else w
         old = np.float64(elevation[row, col]) if k > 1 else z
-        mean = old + (z - old) / k
-        elevation[row, col] = mean
-        spread[row, col] += (z - old) * (z - mean)
+        mean = old + (z - old) * (w / total)
+        returns[row, col], weight[row, col], elevation[row, col] = k, total, mean
+        spread[row, col] += w * (z - old) * (z - mean)
     least, largest = trust
     for i in range(count):
         t = touched[i]
         mark[t] = 0
         row, col = t // n, t % n
-        k = returns[row, col]
-        trusted[row, col] = elevation[row, col] if k >= least and k >= 2 and spread[row, col] <= largest * k * (k - 1) else np.nan
+        k, w = returns[row, col], np.float64(weight[row, col])
+        ok = k >= least and k >= 2 and spread[row, col] <= largest * w * (k - 1) and w * largest >= 1.0
+        trusted[row, col] = elevation[row, col] if ok else np.nan
     return touched[:count]
 
 

@@ -51,11 +51,13 @@ LAYERS: tuple[Layer, ...] = (
     Layer("evidence", np.float32, 0.0, per_column=True),
     # The frame of each cell's last vote (its fading is counted from it).
     Layer("stamp", np.int64, 0),
-    # The mean height of the depth returns that fell in each cell [m], NaN where none did
-    # (terrapref.groundmap.height), how many did, and their sum of squared deviations [m^2].
+    # The mean height of the depth returns that fell in each cell [m], NaN where none did, each
+    # weighed by the inverse of its variance (terrapref.groundmap.height), how many did, their
+    # weighted sum of squared deviations, and their weights' sum [1 / m^2].
     Layer("elevation", np.float32, np.nan),
     Layer("returns", np.uint32, 0),
     Layer("spread", np.float32, 0.0),
+    Layer("weight", np.float32, 0.0),
     # The elevation where it is trusted (enough returns that agree), NaN where not; and what it
     # was when the cell's geometry was last read (+inf: never), so that only the cells round a
     # changed one are read again.

@@ -136,6 +136,8 @@ class GroundMap:
             points,
             depths,
             h.max_range_m,
+            np.asarray(depth.centre, dtype=np.float64),
+            h.errors,
             self._mark,
         )
         if self.limits is None or self.geometry_column is None:
@@ -176,7 +178,7 @@ class GroundMap:
     @property
     def heights(self) -> Heights:
         """The height layers (terrapref.groundmap.height), valid until the map is next re-centred."""
-        return Heights(self._layers["elevation"], self._layers["returns"], self._layers["spread"])
+        return Heights(self._layers["elevation"], self._layers["returns"], self._layers["spread"], self._layers["weight"])
 
     def geometry_at(self, points: np.ndarray) -> np.ndarray:
         """Slope [rad], roughness [m] and step [m] (..., 3) of the cells under the world points
