@@ -25,8 +25,8 @@ def colorise(labels: np.ndarray, classes: ClassTable) -> np.ndarray:
 def depth_to_millimetres(depth: np.ndarray) -> np.ndarray:
     """A depth image (H, W) float32 [m, NaN where nothing is seen] as REP 118's 16UC1 (H, W)
     uint16 millimetres, 0 where nothing is seen (and beyond 65.534 m)."""
-    mm = np.where(np.isfinite(depth), np.rint(np.nan_to_num(depth, nan=0.0) * 1000.0), 0.0)
-    return np.where(mm <= 65534, np.maximum(mm, 0), 0).astype(np.uint16)
+    mm = np.rint(depth * np.float32(1000.0))  # NaN and infinities stay so, and fail both tests below
+    return np.where((mm > 0) & (mm <= 65534), mm, 0).astype(np.uint16)
 
 
 def millimetres_to_depth(mm: np.ndarray) -> np.ndarray:

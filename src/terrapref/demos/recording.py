@@ -167,11 +167,7 @@ class RecordingWriter:
 
     def _depth(self, view: SegmentationView) -> dict[str, Any]:
         """Write ``view``'s depth image (as whole millimetres) for the next frame; its line's entries."""
-        name = f"{DEPTH}/{self.count:06d}.png"
-        try:
-            (self.dir / DEPTH).mkdir(exist_ok=True)
-        except OSError as exc:
-            raise OSError(exc.errno, exc.strerror or str(exc), str(self.dir / DEPTH)) from None
+        name = f"{DEPTH}/{self.count:06d}.png"  # its folder made with the first
         write_png_atomic(self.dir / name, depth_to_millimetres(view.depth), compress_level=3)
         return {"depth": name, "attitude": [float(a) for a in view.attitude]}
 
