@@ -98,6 +98,16 @@ def tiny_recording(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def relief_recording(tmp_path_factory) -> Path:
+    """An undisturbed recording of the synthetic driver on tests/data/tiny_relief.yaml (about 56
+    frames over a low mound, each with its depth image and the body's attitude): for a test that
+    needs a recording on relief. Shared: read it, never write into it (copy it first)."""
+    from helpers import TINY_RELIEF
+
+    return built_once(tmp_path_factory, "relief", lambda out: _record(out, str(TINY_RELIEF), "--disturb", "0")) / "rec"
+
+
+@pytest.fixture(scope="session")
 def demo_course_recording(tmp_path_factory) -> Path:
     """``terrapref record demo_course`` as a user runs it: the synthetic driver, seed 0, pushed at
     the default rate (about 575 frames). Shared: read it, never write into it (copy it first)."""

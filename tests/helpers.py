@@ -25,6 +25,10 @@ TINY_COURSE = TESTS / "data" / "tiny_course.yaml"
 """A 12 m trail past a mud patch (about 106 frames): a course for tests that need a drive, not
 what it shows."""
 
+TINY_RELIEF = TESTS / "data" / "tiny_relief.yaml"
+"""A 7 m trail over a low mound (about 56 frames, every one with a depth image): a course for
+tests that need a drive on relief, not what it shows."""
+
 
 def model_meta(features: FeatureConfig | None = None, camera: CameraConfig | None = None, profile: tuple[str, ...] | None = None) -> dict:
     """The configuration a model or dataset file carries, defaults unless given."""

@@ -219,13 +219,20 @@ def _read_frames(
 def _frame_view(
     recording: Recording, i: int, renderer: SegmentationRenderer | None, pose: tuple, shape: tuple[int, int], known: np.ndarray
 ) -> SegmentationView:
-    """Frame ``i`` as the featurizer reads it: re-rendered under another camera, the simulation's
-    own view for a recording kept in memory (only the pixels read are rendered), or the recorded
-    image, refused when its size or class ids do not fit the recording's camera and classes."""
+    """Frame ``i`` as the featurizer reads it, with its depth image and the body's attitude where
+    it carries one (a recording without an attitude is taken as level): re-rendered under
+    another camera (on relief with its depth, at the recorded attitude), the simulation's own
+    view for a recording kept in memory (only the pixels read are rendered), or the recorded
+    images, refused when their size or class ids do not fit the recording's camera and classes."""
     if renderer is not None:
-        return SegmentationView.of(renderer.render(pose))
+        attitude = recording.attitude(i)
+        return (
+            SegmentationView.of(*renderer.render_with_depth(pose, attitude), attitude)
+            if renderer.relief
+            else SegmentationView.of(renderer.render(pose))
+        )
     if recording.views is not None:
-        return recording.views[i]
+        return recording.view(i)
     image = recording.image(i)
     if image.shape != shape or not known[image].all():
         what = (
@@ -234,7 +241,12 @@ def _frame_view(
             else f"holds class ids {sorted(set(np.unique(image).tolist()) - set(np.flatnonzero(known).tolist()))[:5]} that the class table does not have"
         )
         raise UserError(str(recording.path / recording.image_files[i]), what)
-    return SegmentationView.of(image)
+    depth = recording.depth(i)
+    if depth is not None and depth.shape != shape:
+        raise UserError(
+            str(recording.path / recording.depth_files[i]), f"is {depth.shape[1]} x {depth.shape[0]}, the camera's {shape[1]} x {shape[0]}"
+        )
+    return SegmentationView.of(image, depth, recording.attitude(i))
 
 
 def at_set_speed(commands: np.ndarray, v_set: float) -> np.ndarray:

@@ -25,8 +25,22 @@ def colorise(labels: np.ndarray, classes: ClassTable) -> np.ndarray:
 def depth_to_millimetres(depth: np.ndarray) -> np.ndarray:
     """A depth image (H, W) float32 [m, NaN where nothing is seen] as REP 118's 16UC1 (H, W)
     uint16 millimetres, 0 where nothing is seen (and beyond 65.534 m)."""
-    mm = np.where(np.isfinite(depth), np.rint(np.nan_to_num(depth, nan=0.0) * 1000.0), 0.0)
-    return np.where(mm <= 65534, np.maximum(mm, 0), 0).astype(np.uint16)
+    mm = np.rint(depth * np.float32(1000.0))  # NaN and infinities stay so, and fail both tests below
+    return np.where((mm > 0) & (mm <= 65534), mm, 0).astype(np.uint16)
+
+
+def millimetres_to_depth(mm: np.ndarray) -> np.ndarray:
+    """REP 118's 16UC1 depth (H, W) [mm, 0 where nothing is seen] as float32 metres, NaN where nothing is seen."""
+    return np.where(mm > 0, mm.astype(np.float32) / np.float32(1000.0), np.float32(np.nan)).astype(np.float32)
+
+
+def read_depth_png(path: str | Path) -> np.ndarray:
+    """A 16-bit single-channel PNG of millimetres (0: no return; :func:`depth_to_millimetres`'s)
+    as a depth image (H, W) float32 [m, NaN where nothing is seen]."""
+    with Image.open(path) as im:
+        if im.mode not in ("I;16", "I;16B", "I;16L"):
+            raise ValueError(f"{path}: expected a single-channel 16-bit PNG, got mode {im.mode}")
+        return millimetres_to_depth(np.asarray(im, dtype=np.uint16))
 
 
 def depth_preview(depth: np.ndarray, height_px: int) -> np.ndarray:

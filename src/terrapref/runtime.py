@@ -5,6 +5,6 @@ its public name.
 """
 
 from terrapref.groundmap.costmap import Costmap
-from terrapref.interop.runtime import STOP, PlannerRuntime, RobotSettings, RuntimeDecision
+from terrapref.interop.runtime import STOP, DepthFrame, PlannerRuntime, RobotSettings, RuntimeDecision
 
-__all__ = ["STOP", "Costmap", "PlannerRuntime", "RobotSettings", "RuntimeDecision"]
+__all__ = ["STOP", "Costmap", "DepthFrame", "PlannerRuntime", "RobotSettings", "RuntimeDecision"]

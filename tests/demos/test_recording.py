@@ -10,7 +10,7 @@ import signal
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -452,3 +452,132 @@ def test_the_meta_module_examples_run():
     import terrapref.demos.meta
 
     assert doctest.testmod(terrapref.demos.meta, verbose=False).failed == 0
+
+
+# --- depth images (relief) ------------------------------------------------------------------------
+
+
+def _lines(rec: Path) -> list[dict]:
+    return [json.loads(line) for line in (rec / FRAMES).read_text().splitlines()]
+
+
+def test_a_relief_frames_depth_is_stored_to_the_millimetre_with_the_bodys_attitude(relief_recording: Path):
+    from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer
+    from terrapref.scenario import parse_scenario
+    from terrapref.world import rasterise
+
+    rec = read_recording(relief_recording)
+    lines = _lines(relief_recording)
+    assert rec.has_depth and all(line["depth"] == f"depth/{line['i']:06d}.png" and len(line["attitude"]) == 3 for line in lines)
+    assert np.abs(rec.attitudes[:, 1]).max() > 0.05  # the mound pitches the body
+    scenario = parse_scenario(rec.scenario, "scenario.yaml", rec.classes, driven=True)
+    renderer = SegmentationRenderer(PinholeCamera(CameraConfig.from_dict(rec.meta["camera"])), rasterise(scenario))
+    for i in (0, len(rec) // 2, len(rec) - 1):
+        ids, depth = renderer.render_with_depth(tuple(rec.poses[i]), rec.attitude(i))
+        stored = rec.depth(i)
+        assert stored.dtype == np.float32 and np.array_equal(np.isnan(stored), np.isnan(depth)) and np.isnan(depth).any()
+        assert np.nanmax(np.abs(stored - depth)) <= 0.001  # whole millimetres
+        np.testing.assert_array_equal(rec.image(i), ids)
+        view = rec.view(i)
+        assert view.carries_depth and view.attitude == rec.attitude(i) and view.depth is not None
+
+
+def test_a_flat_recording_holds_no_depth_and_reads_as_before(tiny_recording: Path):
+    from terrapref.vehicle.ground import LEVEL
+
+    rec = read_recording(tiny_recording)
+    assert not (tiny_recording / "depth").exists()
+    assert all(set(line) == {"i", "t", "pose", "cmd", "label", "image"} for line in _lines(tiny_recording))
+    assert not rec.has_depth and rec.depth_files == () and rec.attitudes is None
+    assert rec.depth(0) is None and rec.attitude(0) == LEVEL and not rec.view(0).carries_depth
+
+
+def test_a_relief_recording_made_before_depth_was_kept_reads_level_and_its_depth_changes_only_the_ground_maps(
+    tmp_path: Path, relief_recording: Path
+):
+    from terrapref.dataset import build_dataset
+    from terrapref.recipes import DEFAULT_RECIPE, recipe_named, rules_with
+
+    old = tmp_path / "old"
+    shutil.copytree(relief_recording, old)
+    shutil.rmtree(old / "depth")
+    lines = [{k: v for k, v in line.items() if k not in ("depth", "attitude")} for line in _lines(old)]
+    (old / FRAMES).write_text("".join(json.dumps(line) + "\n" for line in lines))
+    before, now = read_recording(old), read_recording(relief_recording)
+    assert not before.has_depth and before.attitudes is None and before.complete
+    recipe = recipe_named(DEFAULT_RECIPE)
+    a, b = (build_dataset([r], recipe.features(), rules=rules_with(recipe)) for r in (before, now))
+    np.testing.assert_array_equal(a.U, b.U)  # C's features read the image's pixels: depth does not change them
+    np.testing.assert_array_equal(a.rules["second_stage"]["U2"], b.rules["second_stage"]["U2"])
+    assert not np.array_equal(a.rules["offset"]["features"], b.rules["offset"]["features"])  # the ground maps place what depth shows
+
+
+def test_a_missing_depth_image_is_named_and_at_the_end_is_a_cut_frame(tmp_path: Path, relief_recording: Path):
+    rec = tmp_path / "rec"
+    shutil.copytree(relief_recording, rec)
+    n = len(_lines(rec))
+    (rec / "depth" / f"{n - 1:06d}.png").unlink()  # killed between the depth image and its line
+    cut = read_recording(rec)
+    assert len(cut) == n - 1 and not cut.complete
+    (rec / "depth" / "000003.png").unlink()
+    with pytest.raises(UserError) as err:
+        read_recording(rec)
+    assert err.value.problems[0].field == "line 4.depth" and "depth/000003.png is missing" in err.value.problems[0].message
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        ("depth", "images/000001.png", "expected a file name under depth/"),
+        ("depth", "depth/../meta.json", "expected a file name under depth/"),
+        ("attitude", [0.0, 0.1], "expected 3 finite numbers"),
+        ("attitude", [0.0, None, 0.1], "expected 3 finite numbers"),
+    ],
+)
+def test_a_wrong_depth_or_attitude_entry_is_one_line_naming_the_field(tmp_path: Path, relief_recording: Path, key, value, message):
+    rec = tmp_path / "rec"
+    shutil.copytree(relief_recording, rec)
+    lines = _lines(rec)
+    lines[1][key] = value
+    (rec / FRAMES).write_text("".join(json.dumps(line) + "\n" for line in lines))
+    with pytest.raises(UserError) as err:
+        read_recording(rec)
+    assert len(err.value.lines()) == 1 and err.value.problems[0].field == f"line 2.{key}" and message in err.value.problems[0].message
+
+
+def test_a_depth_file_that_is_not_16_bit_millimetres_is_named_when_read(tmp_path: Path, relief_recording: Path):
+    from terrapref.pngio import write_png_atomic
+
+    rec = tmp_path / "rec"
+    shutil.copytree(relief_recording, rec)
+    write_png_atomic(rec / "depth" / "000002.png", np.zeros((H, W), np.uint8))
+    with pytest.raises(UserError) as err:
+        read_recording(rec).depth(2)
+    assert err.value.source == str(rec / "depth" / "000002.png") and "16-bit depth PNG" in err.value.lines()[0]
+
+
+def test_a_relief_drive_kept_in_memory_featurises_as_written(tmp_path: Path):
+    from helpers import TINY_RELIEF
+    from terrapref.dataset import build_dataset
+    from terrapref.demos.expert import ExpertDriver
+    from terrapref.demos.recording import MemoryRecordingWriter
+    from terrapref.demos.session import DriveSetup, RunSettings, record_run
+    from terrapref.recipes import DEFAULT_RECIPE, recipe_named, rules_with
+    from terrapref.scenario import load_scenario
+
+    setup = DriveSetup.of(load_scenario(TINY_RELIEF))
+    setup = replace(setup, sim=replace(setup.sim, time_limit_s=2.5))  # up onto the mound, no further
+    meta = setup.meta(ExpertInfo.of(0, "default", ExpertDriver().config), PreferenceProfile.default())
+    kept = MemoryRecordingWriter(tmp_path / "mem", meta, setup.scenario.to_dict())
+    written = RecordingWriter(tmp_path / "disk", meta, setup.scenario.to_dict())
+    for writer in (kept, written):
+        record_run(setup.simulation(), ExpertDriver(), writer, RunSettings(setup.preference), np.random.default_rng(0))
+    a, b = kept.recording(), read_recording(tmp_path / "disk")
+    assert a.has_depth and b.has_depth and len(a) == len(b) == 25
+    i = len(a) - 1
+    np.testing.assert_array_equal(a.depth(i), b.depth(i))  # the memory's depth as the file holds it: whole millimetres
+    assert a.attitude(i) == b.attitude(i) and abs(a.attitude(i).pitch_rad) > 0.05
+    recipe = recipe_named(DEFAULT_RECIPE)
+    assert build_dataset([a], recipe.features(), rules=rules_with(recipe)).fingerprint == (
+        build_dataset([b], recipe.features(), rules=rules_with(recipe)).fingerprint
+    )

@@ -284,6 +284,9 @@ def test_a_failed_force_import_keeps_the_old_recording(tmp_path: Path, logs, imp
         (lambda t: t.replace(TOPICS["segmentation"], "seg"), "topics.segmentation"),
         (lambda t: t.replace(f"labels: {LENIENT_LABELS}", "labels: cityscapes"), "labels"),
         (lambda t: t.replace("terrapref-robot/1", "terrapref-robot/9"), "format"),
+        (lambda t: t.replace("topics:\n", "topics:\n  depth: depth\n"), "topics.depth"),
+        (lambda t: t.replace("topics:\n", f"topics:\n  depth: {TOPICS['segmentation']}\n"), "topics.depth"),
+        (lambda t: t.replace("topics:\n", "topics:\n  depth_info: /cam/depth_info\n"), "topics.depth_info"),
     ],
 )
 def test_a_bad_robot_file_is_one_line_naming_file_and_field(tmp_path: Path, edit, field: str):

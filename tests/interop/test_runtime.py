@@ -10,7 +10,7 @@ from test_offset_rule import DRIVER_LIKE, _offset_meta
 
 from helpers import REPO, skip_path_weights
 from terrapref.errors import UserError
-from terrapref.interop.runtime import FRAME_AHEAD_S, PlannerRuntime, RobotSettings
+from terrapref.interop.runtime import FRAME_AHEAD_S, DepthFrame, PlannerRuntime, RobotSettings
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.rules import RULES
@@ -161,3 +161,27 @@ def test_settings_of_a_rule_the_model_lacks_are_said_unused(tmp_path):
 
     runtime = PlannerRuntime(linear_model(tmp_path / "m.safetensors"), robot=_settings(speed__max_speed_mps=1.0))
     assert "the model lists no speed rule: its settings are not used" in runtime.notes
+
+
+def test_a_depth_image_places_the_ground_and_one_that_does_not_fit_the_camera_is_refused(cruising):
+    """A frame of flat ground at the origin with its depth image: the ground map gathers heights
+    of about 0 m (the plane z = 0) where the returns fall; without one, none."""
+    from terrapref.camera import PinholeCamera, SegmentationRenderer
+    from terrapref.scenario import resolve_scenario
+    from terrapref.world import rasterise
+
+    renderer = SegmentationRenderer(PinholeCamera(), rasterise(resolve_scenario("demo_course")))
+    pose = (5.0, 12.0, 0.0)
+    ids, depth = renderer.render_with_depth(pose)
+    flat, seen = _runtime(cruising), _runtime(cruising)
+    for runtime in (flat, seen):
+        runtime.set_path(PATH + [0.0, 12.0])
+    flat.decide(ids, 1.0, pose)
+    assert flat.planner.ground_map.layer("returns").sum() == 0
+    seen.decide(ids, 1.0, pose, depth=DepthFrame(depth))
+    returns, elevation = seen.planner.ground_map.layer("returns"), seen.planner.ground_map.layer("elevation")
+    assert returns.sum() > 1000 and np.nanmax(np.abs(elevation[returns > 0])) < 1e-3
+    with pytest.raises(ValueError, match="depth image of shape"):
+        seen.decide(ids, 1.1, pose, depth=DepthFrame(depth[:-1]))
+    with pytest.raises(ValueError, match="attitude must be finite"):
+        seen.decide(ids, 1.2, pose, depth=DepthFrame(depth, (0.0, float("nan"), 0.0)))

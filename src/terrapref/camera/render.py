@@ -280,7 +280,8 @@ class SegmentationView:
     ``image`` is the whole frame (rendered on first use, then kept); ``pixels`` reads a few
     pixels, from the kept image if there is one, else by rendering just those (on relief the
     whole frame is rendered: a ray's pixel depends on the ground before it). ``depth`` is the
-    frame's depth image, rendered on first use.
+    frame's depth image, rendered on first use, and ``attitude`` the body's when the frame was
+    taken: with the pose, what places the depth image's returns in the world.
     """
 
     __slots__ = ("_image", "_renderer", "_pose", "_attitude", "_depth")
@@ -298,9 +299,9 @@ class SegmentationView:
         self._image, self._renderer, self._pose, self._attitude, self._depth = image, renderer, pose, attitude, depth
 
     @classmethod
-    def of(cls, image: np.ndarray, depth: np.ndarray | None = None) -> SegmentationView:
-        """A view of an image (and its depth image, if any) already in hand."""
-        return cls(image=image, depth=depth)
+    def of(cls, image: np.ndarray, depth: np.ndarray | None = None, attitude: Attitude = LEVEL) -> SegmentationView:
+        """A view of an image (and its depth image, if any, taken with the body at ``attitude``) already in hand."""
+        return cls(image=image, depth=depth, attitude=attitude)
 
     @property
     def image(self) -> np.ndarray:
@@ -326,6 +327,14 @@ class SegmentationView:
     def _with_depth(self) -> tuple[np.ndarray, np.ndarray]:
         """The whole frame and its depth image, every ray followed to the ground."""
         return self._renderer.render_with_depth(self._pose, self._attitude)
+
+    @property
+    def attitude(self) -> Attitude:
+        """The body's height, pitch and roll when the frame was taken (the camera rides the body;
+        a camera's own wander off its mount is not in it): what, with the pose, places the
+        depth image's returns in the world. Level on flat ground, and for an image in hand
+        whose attitude was not given."""
+        return self._attitude
 
     @property
     def carries_depth(self) -> bool:

@@ -9,11 +9,24 @@ Layout of a recording directory::
                      {"i", "t", "pose": [x, y, yaw_rad], "cmd": [v, w], "label", "image"}
                      (+ "executed": [v, w] in correction sessions, where the planner drove
                      and "cmd" is the demonstrator's correction)
+                     (+ "depth" and "attitude": [z_m, pitch_rad, roll_rad] for a frame that
+                     carries a depth image: on relief, or imported from a log with a depth topic)
     images/NNNNNN.png  the segmentation frame, single-channel class ids
+    depth/NNNNNN.png   the frame's depth image, if it carries one: 16-bit millimetres along the
+                     optical axis, 0 where nothing is seen (REP 118's 16UC1)
 
-A frame's image is written (atomically, via rename) before its line is appended, so if the
-process is killed, every line in ``frames.jsonl`` refers to a complete image and at most the
-last line is cut short; the reader drops a cut line and reports the recording as partial.
+A frame's image and depth image are written (atomically, via rename) before its line is
+appended, so if the process is killed, every line in ``frames.jsonl`` refers to complete images
+and at most the last line is cut short; the reader drops a cut line and reports the recording as
+partial.
+
+A depth image is placed in the world by the frame's pose and the body's ``attitude`` (its
+height, pitch and roll, REP 103: terrapref.vehicle.ground.Attitude), written with it. Frames
+without a depth image (flat ground, a log without a depth topic, recordings made before depth
+was kept) have neither key and read as before: no depth, the body level. A frame with a depth
+image but no attitude (written by another tool) is taken as level at height 0. The format stays
+``terrapref-recording/1``: the keys are optional, and a reader that does not know them reads the
+recording's frames as they were.
 """
 
 from __future__ import annotations
@@ -34,7 +47,8 @@ import yaml
 from terrapref.camera import SegmentationView, as_view
 from terrapref.errors import UserError
 from terrapref.fileio import new_folder, replace_dir, write_text_atomic
-from terrapref.pngio import read_label_png, write_png_atomic
+from terrapref.pngio import depth_to_millimetres, millimetres_to_depth, read_depth_png, read_label_png, write_png_atomic
+from terrapref.vehicle.ground import LEVEL, Attitude
 from terrapref.yamlio import load_yaml_text
 
 if TYPE_CHECKING:
@@ -46,6 +60,7 @@ META = "meta.json"
 FRAMES = "frames.jsonl"
 SCENARIO = "scenario.yaml"
 IMAGES = "images"
+DEPTH = "depth"
 
 
 def write_json_atomic(path: Path, data: Any) -> None:
@@ -120,13 +135,17 @@ class RecordingWriter:
         label: int,
         executed: tuple[float, float] | None = None,
     ) -> None:
-        """Store one frame: its image first, then its line (flushed), so a kill never orphans a line.
+        """Store one frame: its images first, then its line (flushed), so a kill never orphans a line.
 
-        ``command`` is the demonstrated command (the label's source); ``executed``, when given,
-        is what the vehicle actually did instead (a correction session: the planner drove).
+        ``image`` is the frame's class ids, or its view: a view that carries a depth image
+        (:attr:`SegmentationView.carries_depth`) has it stored too, with the body's attitude
+        (:attr:`SegmentationView.attitude`). ``command`` is the demonstrated command (the
+        label's source); ``executed``, when given, is what the vehicle actually did instead (a
+        correction session: the planner drove).
         """
+        view = as_view(image)
         name = f"{IMAGES}/{self.count:06d}.png"
-        write_png_atomic(self.dir / name, as_view(image).image, compress_level=3)
+        write_png_atomic(self.dir / name, view.image, compress_level=3)
         line = {
             "i": self.count,
             "t": round(float(time_s), 6),
@@ -137,12 +156,20 @@ class RecordingWriter:
         }
         if executed is not None:
             line["executed"] = [float(executed[0]), float(executed[1])]
+        if view.carries_depth:
+            line.update(self._depth(view))
         try:
             self._frames.write(json.dumps(line) + "\n")
             self._frames.flush()
         except OSError as exc:
             raise OSError(exc.errno, exc.strerror or str(exc), str(self.dir / FRAMES)) from None
         self.count += 1
+
+    def _depth(self, view: SegmentationView) -> dict[str, Any]:
+        """Write ``view``'s depth image (as whole millimetres) for the next frame; its line's entries."""
+        name = f"{DEPTH}/{self.count:06d}.png"  # its folder made with the first
+        write_png_atomic(self.dir / name, depth_to_millimetres(view.depth), compress_level=3)
+        return {"depth": name, "attitude": [float(a) for a in view.attitude]}
 
     def close(self, summary: dict[str, Any] | None = None) -> None:
         """Mark the recording complete (atomically) with an optional summary. A run that kept no
@@ -260,6 +287,10 @@ class Recording:
         folder: the identity (device, inode) of the folder it was read from: a recording
             replaced while it is read (``record --force`` into it) is another folder, and each
             image read checks it, so a reader sees one whole recording or fails clearly.
+        depth_files: each frame's depth image file (None: the frame carries none); empty when
+            no frame does (read from disk; a recording kept in memory has its views' depths).
+        attitudes: the body's attitude (z [m], pitch, roll [rad]) at each frame, shape (F, 3);
+            None where no frame carries one (level: flat ground).
     """
 
     path: Path
@@ -273,6 +304,8 @@ class Recording:
     complete: bool
     views: tuple[SegmentationView, ...] | None = None
     folder: tuple[int, int] | None = None
+    depth_files: tuple[str | None, ...] = ()
+    attitudes: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.times)
@@ -342,6 +375,46 @@ class Recording:
         self._check_same_folder()  # after the read: an image of a recording swapped in meanwhile is never used
         return image
 
+    @property
+    def has_depth(self) -> bool:
+        """Whether any frame carries a depth image (a drive on relief, a log with a depth topic)."""
+        if self.views is not None:
+            return any(view.carries_depth for view in self.views)
+        return any(name is not None for name in self.depth_files)
+
+    def depth(self, i: int) -> np.ndarray | None:
+        """Frame ``i``'s depth image (H, W) float32 [m along the optical axis, NaN: no return], in
+        whole millimetres as the file holds it (a recording kept in memory gives its view's
+        depth so rounded too: the same frames either way); None for a frame without one. An
+        unreadable or foreign file is a UserError."""
+        if self.views is not None:
+            view = self.views[i]
+            return millimetres_to_depth(depth_to_millimetres(view.depth)) if view.carries_depth else None
+        name = self.depth_files[i] if self.depth_files else None
+        if name is None:
+            return None
+        path = self.path / name
+        try:
+            depth = read_depth_png(path)
+        except (OSError, ValueError, SyntaxError) as exc:  # Pillow's errors on damaged or foreign files
+            self._check_same_folder()
+            raise UserError(str(path), f"not a single-channel 16-bit depth PNG of millimetres ({exc})") from None
+        self._check_same_folder()
+        return depth
+
+    def attitude(self, i: int) -> Attitude:
+        """The body's height, pitch and roll at frame ``i`` (level where the recording holds none)."""
+        if self.views is not None:
+            return self.views[i].attitude
+        return LEVEL if self.attitudes is None else Attitude(*(float(a) for a in self.attitudes[i]))
+
+    def view(self, i: int) -> SegmentationView:
+        """Frame ``i`` as a view: its class ids, its depth image if it carries one, and the body's attitude."""
+        depth = self.depth(i)
+        if self.views is not None and depth is None:
+            return self.views[i]
+        return SegmentationView.of(self.image(i), depth, self.attitude(i))
+
     def _check_same_folder(self) -> None:
         if self.folder is not None and _folder_identity(self.path) != self.folder:
             raise UserError(str(self.path), "was replaced or removed while it was being read (another command wrote it); run this again")
@@ -368,6 +441,12 @@ def _frame_problem(row: dict) -> tuple[str, str] | None:
     image = row["image"]
     if not isinstance(image, str) or not image.startswith(f"{IMAGES}/") or ".." in image:
         return "image", f"expected a file name under {IMAGES}/"
+    depth = row.get("depth")
+    if depth is not None and (not isinstance(depth, str) or not depth.startswith(f"{DEPTH}/") or ".." in depth):
+        return "depth", f"expected a file name under {DEPTH}/"
+    attitude = row.get("attitude")
+    if attitude is not None and not (isinstance(attitude, list) and len(attitude) == 3 and all(finite(x) for x in attitude)):
+        return "attitude", "expected 3 finite numbers: z [m], pitch and roll [rad]"
     return None
 
 
@@ -401,6 +480,7 @@ def read_recording(path: str | Path) -> Recording:
     if _folder_identity(root) != folder:  # what was read may be of two recordings
         raise UserError(str(root), "was replaced or removed while it was being read (another command wrote it); run this again")
     rows, f = frames.rows, len(frames.rows)
+    tilted = any(r.get("attitude") is not None for r in rows)
     return Recording(
         path=root,
         meta=meta,
@@ -412,6 +492,8 @@ def read_recording(path: str | Path) -> Recording:
         image_files=tuple(r["image"] for r in rows),
         complete=complete,
         folder=folder,
+        depth_files=tuple(r.get("depth") for r in rows) if any(r.get("depth") is not None for r in rows) else (),
+        attitudes=np.array([r.get("attitude") or LEVEL for r in rows], dtype=float).reshape(f, 3) if tilted else None,
     )
 
 
@@ -491,10 +573,11 @@ def _read_frames(root: Path) -> _Frames:
                 return _Frames(tuple(rows), cut=True)
             raise UserError(str(frames_path), f"line {n + 1} is not a frame record", field=f"line {n + 1}")
         _check_frame(row, rows[-1] if rows else None, frames_path, n + 1)
-        if not (root / row["image"]).exists():
-            if n >= len(lines) - 2:
-                return _Frames(tuple(rows), cut=True)
-            raise UserError(str(frames_path), f"line {n + 1}: image {row['image']} is missing", field=f"line {n + 1}.image")
+        for key in ("image", "depth"):
+            if row.get(key) is not None and not (root / row[key]).exists():
+                if n >= len(lines) - 2:
+                    return _Frames(tuple(rows), cut=True)
+                raise UserError(str(frames_path), f"line {n + 1}: {key} {row[key]} is missing", field=f"line {n + 1}.{key}")
         rows.append(row)
     return _Frames(tuple(rows), cut=False)
 

@@ -28,8 +28,8 @@ import numpy as np
 from terrapref.groundmap import height_compiled as kernels
 
 if TYPE_CHECKING:
-    from terrapref.camera import PinholeCamera
-    from terrapref.vehicle import VehicleConfig
+    from terrapref.camera import PinholeCamera, SegmentationView
+    from terrapref.vehicle import Pose, VehicleConfig
 
 
 # A cell's geometry is read again when the trusted elevation of a cell within its disc has moved
@@ -98,6 +98,12 @@ class DepthImage(NamedTuple):
     image: np.ndarray
     axes: np.ndarray
     centre: np.ndarray
+
+    @classmethod
+    def of(cls, view: SegmentationView, camera: PinholeCamera, pose: Pose) -> DepthImage | None:
+        """``view``'s depth image with ``camera`` placed by ``pose`` and the view's attitude
+        (:attr:`SegmentationView.attitude`); None when the view carries none (flat ground)."""
+        return cls(view.depth, *camera.placement(pose, view.attitude)) if view.carries_depth else None
 
 
 @dataclass(frozen=True)

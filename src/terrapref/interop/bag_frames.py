@@ -22,6 +22,17 @@ list (their share is reported), the operator stopped or reversing (no trajectory
 Each frame keeps the operator's command as it was logged (or the motion measured), at its own
 speed (v, w), so that a speed rule learns the speeds driven; its label is the trajectory of the
 preference set of the same curvature, at the set's speed: w x v_set / v.
+
+With a depth topic (``topics.depth``), each label image is paired with the depth image of the
+nearest header stamp, within :data:`DEPTH_PAIRING_S` (an RGB-D camera's depth and colour frames
+share a stamp, or lie a few milliseconds apart); a label image with none that near is skipped and
+counted, for a frame whose ground cannot be placed is not the frames around it. Depth images
+are read in the same pass as the label images and held only until the label images near their
+stamps have been paired (:class:`DepthImages`). The frame then keeps the body's attitude at its
+stamp: the odometry's height (``position.z``, taken as the ground's height under the robot: a
+base frame above the ground raises every height alike, which slope and step do not see) and its
+orientation's pitch and roll, interpolated; a planar odometry (z 0, no pitch or roll) gives a
+level body.
 """
 
 from __future__ import annotations
@@ -33,15 +44,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from terrapref.camera import SegmentationView
 from terrapref.demos.recording import RecordingWriter
 from terrapref.errors import UserError
 from terrapref.interop.bag_reader import Bag
 from terrapref.interop.labels import LabelMap
 from terrapref.interop.robot import RobotConfig
-from terrapref.interop.ros_decode import label_ids, message_time_s, path_xy, static_transforms, yaw_rad
+from terrapref.interop.ros_decode import depth_metres, label_ids, message_time_s, path_xy, pitch_roll_rad, static_transforms, yaw_rad
+from terrapref.pngio import depth_to_millimetres, millimetres_to_depth
 from terrapref.progress import Progress
 from terrapref.terrain.classes import UNKNOWN
 from terrapref.vehicle import ControlSet, wrap_angle
+from terrapref.vehicle.ground import Attitude
 
 REORDER_FRAMES = 16  # images held back to put slightly out-of-order stamps right
 MIN_SPEED_MPS = 0.1  # slower than this the operator is stopped: no trajectory choice
@@ -53,6 +67,8 @@ SPEED_SOURCES = {  # where each frame's speed (v, w) comes from, as the report n
     "poses": f"differences of odometry poses over {2 * POSE_DIFFERENCE_HALF_S:g} s",
 }
 CLOCK_TOLERANCE_S = 5.0  # header stamps this far from the log's receive times are on another clock (simulated time)
+DEPTH_PAIRING_S = 0.05  # a label image takes the depth image of the nearest stamp within this [s]; half a frame at 10 Hz
+DEPTH_HELD = 128  # depth images held at most while they wait for label images near their stamps (the newest kept)
 
 
 @dataclass
@@ -72,6 +88,7 @@ class ImportReport:
     duration_s: float = 0.0
     speed_mps: tuple[float, float, float] | None = None  # the kept frames' slowest, mean and fastest speed [m/s]
     speed_source: str = "commands"  # a key of SPEED_SOURCES
+    depth: str = ""  # the depth images the frames carry, and from where (empty: none)
     notes: list[str] = field(default_factory=list)
 
     def lines(self) -> list[str]:
@@ -87,6 +104,8 @@ class ImportReport:
         if self.speed_mps is not None:
             slow, mean, fast = self.speed_mps
             out.append(f"speed            {mean:.2f} m/s on average ({slow:.2f}-{fast:.2f}), {self.speed_how}")
+        if self.depth:
+            out.append(f"depth            {self.depth}")
         out.append(f"path             {self.path_source}")
         out.append(f"order            {self.order}")
         out += [f"note             {n}" for n in self.notes]
@@ -114,12 +133,16 @@ class Streams:
     info: object  # the first camera_info
     static: dict[str, tuple[str, np.ndarray, np.ndarray]] = field(default_factory=dict)  # child -> (parent, t, R)
     receive_shift_s: float = 0.0  # added to a receive time to put it on the header stamps' clock
+    odom_attitude: np.ndarray | None = None  # (N, 3) the body's z [m], pitch, roll [rad] at each pose (None: level)
+    depth_info: object = None  # the depth topic's first camera_info (None: none named)
 
 
 def read_small_topics(bag: Bag, robot: RobotConfig) -> Streams:
     """Odometry, commands, the path, the calibration and (for ``camera.tf``) /tf_static, read whole."""
     topics = robot.topics
-    wanted = [role for role in ("odometry", "command", "camera_info", "path") if role in topics]
+    wanted = [role for role in ("odometry", "command", "camera_info", "path", "depth_info") if role in topics]
+    if topics.get("depth_info") == topics["camera_info"]:  # the label camera's own calibration: nothing to compare
+        wanted.remove("depth_info")
     by_role = {role: bag.connections(topics[role], role, robot.source) for role in wanted}  # each checked for its own type
     roles = {topics[role]: role for role in wanted}
     conns = list({id(c): c for cs in by_role.values() for c in cs}.values())
@@ -152,10 +175,12 @@ class _SmallTopics:
     odom_t: list[float] = field(default_factory=list)
     odom: list[tuple[float, float, float]] = field(default_factory=list)
     odom_twist: list[tuple[float, float]] = field(default_factory=list)
+    odom_attitude: list[tuple[float, float, float]] = field(default_factory=list)  # z [m], pitch, roll [rad]
     cmd_t: list[float] = field(default_factory=list)
     cmd: list[tuple[float, float]] = field(default_factory=list)
     path: np.ndarray | None = None  # the first path of two or more poses
     info: object = None  # the first camera_info
+    depth_info: object = None  # the depth topic's first camera_info
     static: dict[str, tuple[str, np.ndarray, np.ndarray]] = field(default_factory=dict)  # child -> (parent, t, R)
     stamp_minus_receive: list[float] = field(default_factory=list)  # of stamped odometry [s]
     cmd_received: list[bool] = field(default_factory=list)  # each command timed by receive time (Twist carries no stamp)
@@ -169,6 +194,7 @@ class _SmallTopics:
                 self.stamp_minus_receive.append(stamp - t_ns * 1e-9)
             self.odom_t.append(message_time_s(msg, t_ns))
             self.odom.append((pose.position.x, pose.position.y, yaw_rad(pose.orientation)))
+            self.odom_attitude.append((pose.position.z, *pitch_roll_rad(pose.orientation)))
             moving = msg.twist.twist if conn.msgtype == "nav_msgs/msg/Odometry" else None  # in the robot's own frame: x ahead
             self.odom_twist.append((moving.linear.x, moving.angular.z) if moving is not None else (math.nan, math.nan))
         elif role == "command":
@@ -181,6 +207,8 @@ class _SmallTopics:
             self.path = path_xy(msg)
         elif role == "camera_info" and self.info is None:
             self.info = msg
+        elif role == "depth_info" and self.depth_info is None:
+            self.depth_info = msg
         elif role == "tf_static":
             self.static.update(static_transforms(msg))
 
@@ -188,6 +216,8 @@ class _SmallTopics:
         """The streams without non-finite samples, each sorted by time, yaw unwrapped."""
         o_t, o = np.array(self.odom_t), np.array(self.odom, dtype=float)
         o_twist = np.array(self.odom_twist, dtype=float).reshape(-1, 2)
+        o_att = np.array(self.odom_attitude, dtype=float).reshape(-1, 3)
+        o_att[~np.isfinite(o_att)] = 0.0  # a pose's height or tilt not given: level
         c_t, c = np.array(self.cmd_t), np.array(self.cmd, dtype=float).reshape(-1, 2)  # (0, 2) without a command topic
         # Stamps on another clock than the log's (simulated time recorded by wall clock): what
         # is timed by receive time is moved onto the stamps' clock, by the odometry's offset.
@@ -196,14 +226,14 @@ class _SmallTopics:
         c_t = c_t + shift * np.array(self.cmd_received, dtype=bool)
         if not (np.isfinite(o).all() and np.isfinite(o_t).all()):
             keep = np.isfinite(o).all(axis=1) & np.isfinite(o_t)
-            o_t, o, o_twist = o_t[keep], o[keep], o_twist[keep]
+            o_t, o, o_twist, o_att = o_t[keep], o[keep], o_twist[keep], o_att[keep]
         keep = np.isfinite(c).all(axis=1) & np.isfinite(c_t)
         c_t, c = c_t[keep], c[keep]
         order = np.argsort(o_t, kind="stable")
-        o_t, o, o_twist = o_t[order], o[order], o_twist[order]
+        o_t, o, o_twist, o_att = o_t[order], o[order], o_twist[order], o_att[order]
         o[:, 2] = np.unwrap(o[:, 2])  # so interpolation between stamps never spins the long way round
         order = np.argsort(c_t, kind="stable")
-        return Streams(o_t, o, o_twist, c_t[order], c[order], self.path, self.info, self.static, shift)
+        return Streams(o_t, o, o_twist, c_t[order], c[order], self.path, self.info, self.static, shift, o_att, self.depth_info)
 
 
 @dataclass(frozen=True)
@@ -284,16 +314,77 @@ def _pose_differences(t: np.ndarray, poses: np.ndarray) -> np.ndarray:
 
 
 @dataclass
+class DepthImages:
+    """The depth topic's images read so far that a label image still to come may pair with: each
+    label image takes the one of the nearest stamp within :data:`DEPTH_PAIRING_S` (label images
+    come in stamp order, so older ones are then let go). They are held as whole millimetres, as
+    the recording stores them, and at most :data:`DEPTH_HELD` of them (the newest): a label
+    image waits in the reorder buffer for :data:`REORDER_FRAMES` more, so a depth camera up to
+    eight times as fast as the label images pairs every one."""
+
+    topic: str
+    connections: list  # the bag's connections of the topic
+    shape: tuple[int, int]  # the label camera's (H, W), which each depth image must have
+    held: list[tuple[float, np.ndarray]] = field(default_factory=list)  # (stamp [s], depth (H, W) uint16 [mm, 0: none]), by stamp
+    paired: int = 0  # label images paired so far
+    largest_offset_s: float = 0.0  # the largest stamp difference of a pair [s]
+
+    def take_in(self, bag: Bag, conn, t_ns: int, msg, shift_s: float) -> None:
+        """Decode and hold a depth message of the log (received at ``t_ns`` [ns]); its stamp moved
+        by ``shift_s`` [s] when it has none. Another encoding or size is a UserError naming the topic."""
+        received_s = (t_ns - bag.reader.start_time) * 1e-9
+        try:
+            t = message_time_s(msg, t_ns, shift_s)
+        except AttributeError as exc:
+            raise UserError(bag.source, f"topic {conn.topic}: no header stamp ({exc})", field="topics.depth") from None
+        depth = depth_metres(msg, conn.topic, bag.source, received_s)
+        if depth.shape != self.shape:
+            raise UserError(
+                bag.source,
+                f"topic {conn.topic}: depth image {depth.shape[1]} x {depth.shape[0]}, the label camera's is "
+                f"{self.shape[1]} x {self.shape[0]}; the depth images must be registered to the label images",
+                field="topics.depth",
+            )
+        k = len(self.held)
+        while k > 0 and self.held[k - 1][0] > t:
+            k -= 1
+        self.held.insert(k, (t, depth_to_millimetres(depth)))
+        del self.held[:-DEPTH_HELD]
+
+    def take(self, t: float) -> np.ndarray | None:
+        """The depth image of the stamp nearest ``t`` [s] within :data:`DEPTH_PAIRING_S`, or None;
+        those older than that window are let go."""
+        self.held = [(s, d) for s, d in self.held if s >= t - DEPTH_PAIRING_S]
+        if not self.held:
+            return None
+        offset, mm = min(((abs(s - t), d) for s, d in self.held), key=lambda pair: pair[0])
+        if offset > DEPTH_PAIRING_S:
+            return None
+        self.paired += 1
+        self.largest_offset_s = max(self.largest_offset_s, offset)
+        return millimetres_to_depth(mm)
+
+    def summary(self) -> str:
+        """What the frames' depth images are, for the import's report."""
+        return (
+            f"{self.paired} frames carry a depth image of {self.topic} "
+            f"(paired by stamp, at most {1000 * self.largest_offset_s:.0f} ms apart; {1000 * DEPTH_PAIRING_S:.0f} ms allowed)"
+        )
+
+
+@dataclass
 class Frames:
     """The recording being written: each image kept gets the odometry pose interpolated at its
-    stamp and the command in force then (or the motion measured then); what is skipped is counted
-    in the report."""
+    stamp and the command in force then (or the motion measured then), and with a depth topic
+    the depth image of its stamp and the body's attitude then; what is skipped is counted in the
+    report."""
 
     streams: Streams
     motion: Motion
     conversion: Conversion
     writer: RecordingWriter
     report: ImportReport
+    depth: DepthImages | None = None  # the depth topic's images (None: the frames carry none)
     pixels: int = 0
     unmapped: int = 0  # pixels whose id the label map does not list
     unknown: int = 0  # pixels unknown after mapping
@@ -310,6 +401,10 @@ class Frames:
         if reason is not None:
             self.report.skipped[reason] += 1
             return
+        depth = self.depth.take(t) if self.depth is not None else None
+        if self.depth is not None and depth is None:
+            self.report.skipped[f"images without a depth image within {1000 * DEPTH_PAIRING_S:.0f} ms"] += 1
+            return
         c = self.conversion
         v, w = vw  # not None, and v >= MIN_SPEED_MPS: _skip_reason refuses the others
         w_set = float(np.clip(w * c.control.v_mps / v, min(c.control.w_rps), max(c.control.w_rps)))  # same curvature at the set's speed
@@ -317,7 +412,8 @@ class Frames:
         image = self._classes(ids, t)
         if self.t_first is None:
             self.t_first = t
-        self.writer.append(t - self.t_first, pose, image, (v, w), int(c.control.label_of(w_set)))
+        seen = image if depth is None else SegmentationView.of(image, self._undistorted(depth), self._attitude_at(t))
+        self.writer.append(t - self.t_first, pose, seen, (v, w), int(c.control.label_of(w_set)))
         self.speeds.append(v)
         self.last_t = t
 
@@ -361,6 +457,24 @@ class Frames:
             yaw = wrap_angle(yaw)
         return x + shift[0], y + shift[1], yaw
 
+    def _attitude_at(self, t: float) -> Attitude:
+        """The body's attitude at ``t`` [s] (z [m], pitch, roll [rad]), interpolated between odometry poses."""
+        odom_t, tilt = self.streams.odom_t, self.streams.odom_attitude
+        if tilt is None:
+            return Attitude(0.0, 0.0, 0.0)
+        j = self._odom_index(t)
+        t0, t1 = odom_t[j - 1], odom_t[j]
+        if t == t1 or t == t0:
+            return Attitude(*(float(a) for a in tilt[j if t == t1 else j - 1]))
+        return Attitude(*(float(a) for a in tilt[j - 1] + (t - t0) / (t1 - t0) * (tilt[j] - tilt[j - 1])))
+
+    def _undistorted(self, depth: np.ndarray) -> np.ndarray:
+        """A depth image (H, W) [m] through the label images' undistortion (NaN where no lens pixel falls)."""
+        u = self.conversion.undistort
+        if u is None:
+            return depth
+        return np.where(u >= 0, depth.reshape(-1)[np.maximum(u, 0)], np.float32(np.nan)).astype(np.float32)
+
     def _classes(self, ids: np.ndarray, t: float) -> np.ndarray:
         """Class ids (H, W) uint8 of the label ids ``ids`` (the image stamped ``t`` [s]), undistorted;
         the pixels counted. An id the label map does not list is an error unless the map makes it unknown."""
@@ -400,16 +514,23 @@ class Frames:
         report.duration_s = float(self.last_t - self.t_first) + 1.0 / self.conversion.rate_hz
         report.unmapped_share = self.unmapped / max(self.pixels, 1)
         report.unknown_share = self.unknown / max(self.pixels, 1)
+        if self.depth is not None:
+            report.depth = self.depth.summary()
         writer.close({"completed": True, "collisions": 0, "duration_s": round(report.duration_s, 3), "import": report.lines()})
 
 
 def stream_images(bag: Bag, robot: RobotConfig, seg_conns: list, shape: tuple[int, int], frames: Frames, progress: Progress) -> None:
     """Decode the segmentation images one at a time, put back in stamp order through a short
-    reorder buffer, and hand each to ``frames``; ``shape`` is the camera's (H, W)."""
-    report = frames.report
+    reorder buffer, and hand each to ``frames``; ``shape`` is the camera's (H, W). The depth
+    topic's images, if any, are read in the same pass (in the log's order) and held for the
+    label images near their stamps (:class:`DepthImages`)."""
+    report, depth = frames.report, frames.depth
     heap: list = []
     last_image_t = None
-    for seq, (conn, t_ns, msg) in enumerate(bag.messages(seg_conns)):
+    for seq, (conn, t_ns, msg) in enumerate(bag.messages(seg_conns + (depth.connections if depth is not None else []))):
+        if depth is not None and conn.topic == depth.topic:
+            depth.take_in(bag, conn, t_ns, msg, frames.streams.receive_shift_s)
+            continue
         try:
             t = message_time_s(msg, t_ns, frames.streams.receive_shift_s)
         except AttributeError as exc:

@@ -3,10 +3,11 @@
 An import reads the log (:mod:`terrapref.interop.bag_reader`) in two passes: the small topics
 whole, then the label images one at a time, each decoded (:mod:`terrapref.interop.ros_decode`)
 and synchronised with the odometry and the commands into a frame
-(:mod:`terrapref.interop.bag_frames`, which says how real logs' quirks are handled). Here the
-recording is written: the camera from the log's calibration, the reference path (the path
-topic's, the robot file's path_file, or the driven odometry smoothed), the map placed around the
-drive, and the frames.
+(:mod:`terrapref.interop.bag_frames`, which says how real logs' quirks are handled), with the
+depth image of its stamp where the robot file names a depth topic. Here the recording is
+written: the camera from the log's calibration (a depth camera's must be the same), the
+reference path (the path topic's, the robot file's path_file, or the driven odometry smoothed),
+the map placed around the drive, and the frames.
 
 The recording is written to a temporary folder beside ``out`` and renamed into place only when
 complete; an error leaves nothing behind.
@@ -28,10 +29,10 @@ from terrapref.demos.recording import RecordingWriter, is_recording
 from terrapref.errors import UserError
 from terrapref.features import PreferenceSetConfig
 from terrapref.fileio import new_folder, replace_dir
-from terrapref.interop.bag_frames import Conversion, Frames, ImportReport, Motion, Streams, read_small_topics, stream_images
+from terrapref.interop.bag_frames import Conversion, DepthImages, Frames, ImportReport, Motion, Streams, read_small_topics, stream_images
 from terrapref.interop.bag_reader import Bag
 from terrapref.interop.robot import RobotConfig, load_waypoints
-from terrapref.interop.ros_decode import camera_from_info
+from terrapref.interop.ros_decode import camera_from_info, check_depth_info
 from terrapref.progress import Progress
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.terrain.profile import PreferenceProfile
@@ -138,7 +139,8 @@ def import_bag(
 def _import(req: _Request, out: Path, show_progress: bool, report: ImportReport) -> None:
     """The recording of ``req.bag`` at ``out``: the small topics read first, then the images streamed."""
     bag, robot = req.bag, req.robot
-    bag.check_topics(robot, [role for role in ("segmentation", "odometry", "command", "camera_info", "path") if role in robot.topics])
+    roles = ("segmentation", "odometry", "command", "camera_info", "path", "depth", "depth_info")
+    bag.check_topics(robot, [role for role in roles if role in robot.topics])
     if bag.unreadable:
         shown = ", ".join(f"{topic} ({msgtype})" for topic, (msgtype, _) in sorted(bag.unreadable.items())[:4])
         report.notes.append(
@@ -173,13 +175,24 @@ def _import(req: _Request, out: Path, show_progress: bool, report: ImportReport)
     scenario = _scenario(bag_path_name(bag.source), placement.path, placement.start(streams.odom[0]), tuple(placement.size), req.classes)
     meta = _meta(req, scenario, camera, preference, placement)
     progress = Progress("import", sum(c.msgcount for c in seg_conns), enabled=show_progress)
-    frames = Frames(streams, motion, conversion, RecordingWriter(out, meta, scenario), report)
+    frames = Frames(streams, motion, conversion, RecordingWriter(out, meta, scenario), report, _depth_images(req, streams, camera))
     try:
         stream_images(bag, robot, seg_conns, (camera.height_px, camera.width_px), frames, progress)
     except UserError:
         frames.writer.abort()  # nothing half-written: a replaced recording stays as it was
         raise
     frames.close(bag.source, progress)
+
+
+def _depth_images(req: _Request, streams: Streams, camera: CameraConfig) -> DepthImages | None:
+    """The depth topic's images as the frames will pair them (None: the robot file names none);
+    a depth camera whose calibration is not the label camera's is refused."""
+    robot = req.robot
+    if robot.depth_topic is None:
+        return None
+    check_depth_info(streams.depth_info, streams.info, robot, req.bag.source)
+    conns = req.bag.connections(robot.depth_topic, "depth", robot.source)
+    return DepthImages(robot.depth_topic, conns, (camera.height_px, camera.width_px))
 
 
 def _reference_path(req: _Request, streams: Streams, report: ImportReport) -> np.ndarray:

@@ -24,6 +24,8 @@ TYPES = {  # the message types each role of a robot file's topics may have
     "odometry": ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped"),
     "command": ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped"),
     "path": ("nav_msgs/msg/Path",),
+    "depth": ("sensor_msgs/msg/Image",),
+    "depth_info": ("sensor_msgs/msg/CameraInfo",),
 }
 
 

@@ -4,8 +4,12 @@ Topics (all in the ``odom`` frame, the recording's world frame; stamps from an e
 
     /terrapref/labels           sensor_msgs/CompressedImage   class ids as a single-channel png
     /terrapref/labels_color     sensor_msgs/CompressedImage   the same frame in the class colours
-    /terrapref/camera_info      sensor_msgs/CameraInfo        K of the camera, no distortion
-    /terrapref/odom             nav_msgs/Odometry             the pose at each frame
+    /terrapref/depth            sensor_msgs/Image             the frame's depth image (16UC1: millimetres,
+                                                              0 no return; REP 118), where frames carry one
+    /terrapref/camera_info      sensor_msgs/CameraInfo        K of the camera, no distortion (the depth
+                                                              image's too: it is the same camera's)
+    /terrapref/odom             nav_msgs/Odometry             the pose at each frame (with depth, its
+                                                              height, pitch and roll: the body's attitude)
     /terrapref/cmd_vel          geometry_msgs/Twist           the command (label) of each frame
     /terrapref/path             nav_msgs/Path                 the reference path, once
     /terrapref/trajectories     visualization_msgs/MarkerArray the 21 trajectories, the chosen one green
@@ -25,7 +29,8 @@ Topics (all in the ``odom`` frame, the recording's world frame; stamps from an e
 An MCAP file's chunks are compressed with zstd, a ROS 1 bag's with lz4 (each format's own
 compression, which Foxglove, ``ros2 bag`` and ``rosbag play`` read as they are). Importing an
 exported recording with the robot file written beside it (``FILE.robot.yaml``) gives back the
-same frames, so it featurises to the same dataset.
+same frames (their depth images and the body's attitude among them), so it featurises to the
+same dataset.
 """
 
 from __future__ import annotations
@@ -53,6 +58,7 @@ from terrapref.interop.ros_messages import (
     camera_info,
     camera_mount,
     compressed_image,
+    depth_image,
     foxglove_grid,
     grid_map,
     header,
@@ -74,6 +80,7 @@ from terrapref.interop.ros_messages import (
 from terrapref.stops import REASONS
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.terrain.classes import UNKNOWN
+from terrapref.vehicle.ground import LEVEL, Attitude
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
@@ -98,6 +105,8 @@ class RunFrames:
     costmap: Callable[[int, np.ndarray], Costmap | None] | None = None  # frame, its class ids -> the costmap to publish then
     stops: tuple[str | None, ...] | None = None  # (F,) why the planner stopped at each frame (None: it drove), when a planner drove
     profile: tuple[str, ...] | None = None  # the driver's declared preference order (a recording's), for the robot file
+    depth: Callable[[int], np.ndarray | None] | None = None  # frame index -> (H, W) [m, NaN: none] or None; None: no frame has one
+    attitude: Callable[[int], Attitude] | None = None  # frame index -> the body's attitude (with depth; None: level)
 
 
 COSTMAP_TOPICS = {
@@ -125,7 +134,18 @@ _TOPICS = {  # role: (topic, type), in the order the file lists them
     "tf": ("/tf", "tf2_msgs/msg/TFMessage"),
     "tf_static": ("/tf_static", "tf2_msgs/msg/TFMessage"),
 }
-TOPICS = {**_TOPICS, **COSTMAP_TOPICS}  # every channel of a file, by role
+DEPTH_TOPIC = {"depth": (f"{PREFIX}/depth", "sensor_msgs/msg/Image")}  # a file whose frames carry depth images
+TOPICS = {**_TOPICS, **COSTMAP_TOPICS}  # every channel of a live view (and of a file, with DEPTH_TOPIC), by role
+
+
+def _topics_of(run: RunFrames, ros1: bool) -> dict[str, tuple[str, str]]:
+    """The channels of ``run``'s file, in the order it lists them: with a depth topic where its
+    frames carry depth, with the costmap's where it has one (a ROS 1 bag's costmap as
+    OccupancyGrid and GridMap alone: Foxglove's Grid and Nav2's filter are ROS 2's)."""
+    topics = {**_TOPICS, **(DEPTH_TOPIC if run.depth is not None else {})}
+    if run.costmap is not None:
+        topics |= {role: COSTMAP_TOPICS[role] for role in (ROS1_COSTMAP_ROLES if ros1 else COSTMAP_TOPICS)}
+    return topics
 
 
 @dataclass(frozen=True)
@@ -199,7 +219,7 @@ def write_bag(
             labels_file = out.with_name(out.name + ".labels.yaml")
             write_text_atomic(labels_file, _label_map_yaml(run.classes))
             labels = f"{labels_file.name}   # the ids of the class table the run was made with (terrapref import --classes FILE)"
-        write_text_atomic(out.with_name(out.name + ".robot.yaml"), _robot_yaml(run.camera, labels, run.profile))
+        write_text_atomic(out.with_name(out.name + ".robot.yaml"), _robot_yaml(run.camera, labels, run.profile, run.depth is not None))
     return out
 
 
@@ -215,7 +235,7 @@ def _write_ros2(bag_dir: Path, run: RunFrames, progress: Callable[[int, int], No
         CompressionMode.STORAGE, CompressionFormat.ZSTD
     )  # MCAP's own zstd chunks: Foxglove and ros2 bag read them as they are
     with writer:
-        _write_frames(add_topics(writer, ts, _TOPICS if run.costmap is None else TOPICS), Scene.of(ts, run), progress)
+        _write_frames(add_topics(writer, ts, _topics_of(run, ros1=False)), Scene.of(ts, run), progress)
     return next(bag_dir.glob("*.mcap"))
 
 
@@ -225,11 +245,10 @@ def _write_ros1(path: Path, run: RunFrames, progress: Callable[[int, int], None]
         from rosbags.rosbag1 import Writer
 
     ts = typestore(ros1=True)
-    topics = _TOPICS if run.costmap is None else {**_TOPICS, **{role: COSTMAP_TOPICS[role] for role in ROS1_COSTMAP_ROLES}}
     writer = Writer(path)
     writer.set_compression(Writer.CompressionFormat.LZ4)  # a ROS 1 bag's own chunk compression (zstd is not one): rosbag play reads it
     with writer:
-        _write_frames(add_topics(writer, ts, topics, ros1=True), Scene.of(ts, run, ros1=True), progress)
+        _write_frames(add_topics(writer, ts, _topics_of(run, ros1=True), ros1=True), Scene.of(ts, run, ros1=True), progress)
     return path
 
 
@@ -265,6 +284,8 @@ class FrameData:
     probs: np.ndarray | None = None  # F_t (m,), when a planner drove
     costmap: Costmap | None = None  # the costmap to publish with this frame
     stop: str | None = None  # why the planner stopped (None: it drove), when a planner drove
+    depth: np.ndarray | None = None  # (H, W) [m, NaN where nothing is seen], when the frame carries one
+    attitude: Attitude | None = None  # the body's height, pitch and roll (None: level at height 0)
 
 
 def _write_frame(topics: Topics, scene: Scene, i: int) -> None:
@@ -285,6 +306,8 @@ def _write_frame(topics: Topics, scene: Scene, i: int) -> None:
             run.probs[i] if run.probs is not None else None,
             run.costmap(i, ids) if run.costmap is not None else None,
             run.stops[i] if run.stops is not None else None,
+            run.depth(i) if run.depth is not None else None,
+            run.attitude(i) if run.attitude is not None else None,
         ),
     )
 
@@ -311,15 +334,18 @@ def write_frame(topics: Topics, scene: Scene, frame: FrameData) -> None:
     t = frame.t_s - scene.t0_s
     ns = scene.bag_ns(frame.t_s)
     x, y, yaw = frame.pose
+    z, pitch, roll = frame.attitude if frame.attitude is not None else (0.0, 0.0, 0.0)
+    turn = rpy_quaternion(ts, roll, pitch, yaw)
     # The pose first: a player sends messages of one stamp in the order written, and a node that
     # interpolates odometry to an image's stamp needs the pose of that stamp when the image comes.
-    topics.write("odom", ns, odometry(ts, scene.header(t, "odom"), pose(ts, x, y, rpy_quaternion(ts, 0, 0, yaw))))
-    base = transform(ts, scene.header(t, "odom"), "base_link", (x, y, 0.0), rpy_quaternion(ts, 0, 0, yaw))
-    topics.write("tf", ns, tf_message(ts, [base]))
+    topics.write("odom", ns, odometry(ts, scene.header(t, "odom"), pose(ts, x, y, turn, z)))
+    topics.write("tf", ns, tf_message(ts, [transform(ts, scene.header(t, "odom"), "base_link", (x, y, z), turn)]))
     optical = scene.header(t, OPTICAL_FRAME)
     topics.write("camera_info", ns, camera_info(ts, optical, scene.run.camera, scene.ros1))
     topics.write("labels", ns, compressed_image(ts, optical, "mono8; png compressed class ids", png(frame.ids)))
     topics.write("labels_color", ns, compressed_image(ts, optical, "png", png(frame.ids, scene.palette)))
+    if frame.depth is not None:
+        topics.write("depth", ns, depth_image(ts, optical, frame.depth))
     if frame.costmap is not None:
         _write_costmap(topics, scene, t, ns, frame.costmap)
     topics.write("cmd_vel", ns, twist(ts, *frame.command))
@@ -358,32 +384,42 @@ def _label_map_yaml(classes: ClassTable) -> str:
     )
 
 
-def _robot_yaml(cam: CameraConfig, labels: str, profile: tuple[str, ...] | None = None) -> str:
+def _robot_yaml(cam: CameraConfig, labels: str, profile: tuple[str, ...] | None = None, depth: bool = False) -> str:
     """The terrapref-robot/1 file that imports the exported topics back with ``cam``'s mounting,
-    ``labels`` (the robot file's ``labels`` entry) and the driver's declared ``profile``, if any."""
+    ``labels`` (the robot file's ``labels`` entry), the driver's declared ``profile``, if any,
+    and with ``depth`` the depth topic (the label camera's own: no calibration of its own)."""
     order = f"profile: [{', '.join(profile)}]   # the driver's declared order, from the recording\n" if profile else ""
+    depth_topic = (
+        f"  depth: {DEPTH_TOPIC['depth'][0]}   # 16UC1, registered to the labels (camera_info is its calibration)\n" if depth else ""
+    )
     return (
         "format: terrapref-robot/1\n"
         f"topics:\n  segmentation: {PREFIX}/labels\n  camera_info: {PREFIX}/camera_info\n  odometry: {PREFIX}/odom\n"
-        f"  command: {PREFIX}/cmd_vel\n  path: {PREFIX}/path\n"
+        f"  command: {PREFIX}/cmd_vel\n  path: {PREFIX}/path\n{depth_topic}"
         f"camera:\n  height_m: {cam.mount_height_m!r}\n  pitch_deg: {cam.pitch_deg!r}\n  forward_m: {cam.mount_forward_m!r}\n"
         f"  yaw_deg: {cam.yaw_deg!r}\n  max_range_m: {cam.max_range_m!r}\n"
         f"labels: {labels}\n" + order
     )
 
 
-def costmaps_of(planner, poses: np.ndarray) -> Callable[[int, np.ndarray], Costmap | None]:
+def costmaps_of(
+    planner, poses: np.ndarray, depth: Callable[[int], np.ndarray | None] | None = None, attitude: Callable[[int], Attitude] | None = None
+) -> Callable[[int, np.ndarray], Costmap | None]:
     """The costmaps of one run for :attr:`RunFrames.costmap`: ``planner`` (a terrapref.planner.Planner
     whose steering rule reads a ground map), its maps emptied, takes each frame in turn as
-    it was seen from ``poses`` (F, 3), and every :data:`COSTMAP_EVERY`-th frame gives its
-    costmap. Frames are to be asked for in order."""
+    it was seen from ``poses`` (F, 3), with its ``depth`` image and the body's ``attitude``
+    where the run has them (:attr:`RunFrames.depth`, :attr:`RunFrames.attitude`), and every
+    :data:`COSTMAP_EVERY`-th frame gives its costmap. Frames are to be asked for in order."""
     from terrapref.camera import SegmentationView
     from terrapref.vehicle import Pose
 
     planner.forget_ground()
 
     def costmap(i: int, ids: np.ndarray) -> Costmap | None:
-        planner.observe(SegmentationView.of(ids), Pose(*poses[i]))
+        seen = depth(i) if depth is not None else None
+        planner.observe(
+            SegmentationView.of(ids), Pose(*poses[i]), seen, attitude(i) if seen is not None and attitude is not None else LEVEL
+        )
         return planner.costmap() if i % COSTMAP_EVERY == 0 else None
 
     return costmap
@@ -401,7 +437,7 @@ def model_costmaps(model, frames: RunFrames) -> Callable[[int, np.ndarray], Cost
     planner = model.planner(frames.camera)
     if planner.ground_map is None:
         raise ValueError("has no offset rule, whose ground map the costmap prices (train it with recipe teach)")
-    return costmaps_of(planner, frames.poses)
+    return costmaps_of(planner, frames.poses, frames.depth, frames.attitude)
 
 
 def recording_frames(rec) -> RunFrames:
@@ -421,6 +457,8 @@ def recording_frames(rec) -> RunFrames:
         classes=classes,
         preference=PreferenceSetConfig.from_dict(rec.meta["preference_set"]),
         profile=_declared_order(rec.meta.get("profile")),
+        depth=rec.depth if rec.has_depth else None,
+        attitude=rec.attitude if rec.has_depth else None,
     )
 
 

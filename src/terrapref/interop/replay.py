@@ -27,7 +27,7 @@ from terrapref.camera import CameraConfig
 from terrapref.dataset import at_set_speed  # the dataset's own: the replay compares ways as training labels them
 from terrapref.demos.recording import Recording
 from terrapref.fileio import atomic_path, write_bytes_atomic
-from terrapref.interop.runtime import SPEED_WINDOW_S, PlannerRuntime, odometry_speed_mps
+from terrapref.interop.runtime import SPEED_WINDOW_S, DepthFrame, PlannerRuntime, odometry_speed_mps
 from terrapref.planner.model import Model
 from terrapref.vehicle import Pose
 
@@ -83,6 +83,8 @@ def frame_speeds(times: np.ndarray, poses: np.ndarray) -> np.ndarray:
 def replay(model: Model, rec: Recording, progress=None) -> dict:
     """Decide on every frame of ``rec`` with ``model``; the metrics and the per-frame series.
 
+    A frame that carries a depth image is decided on with it and the body's attitude the
+    recording holds (level where it holds none), as a robot's node would hand them over.
     A model trained for another camera than the log's is refused (UserError).
     """
     runtime = PlannerRuntime(model, camera=CameraConfig.from_dict(rec.meta["camera"]))
@@ -90,23 +92,7 @@ def replay(model: Model, rec: Recording, progress=None) -> dict:
     runtime.set_path(path)
     control = model.features.preference.control
     w_grid = np.asarray(control.w_rps)
-    n_terrain = model.features.n_terrain
-    chosen = np.empty(len(rec), dtype=np.int64)
-    commands = np.empty((len(rec), 2))  # the model's (v [m/s], w [rad/s])
-    c_best = np.empty(len(rec), dtype=np.int64)
-    top3 = np.empty(len(rec), dtype=bool)
-    terrain = np.empty(len(rec), dtype=bool)
-    speeds = frame_speeds(rec.times, rec.poses)
-    for i in range(len(rec)):
-        # never None: read_recording refuses times that do not grow
-        d = runtime.decide(rec.image(i), float(rec.times[i]), tuple(rec.poses[i]), None if np.isnan(speeds[i]) else float(speeds[i]))
-        chosen[i] = d.index
-        commands[i] = d.command
-        c_best[i] = int(np.argmax(d.probs))
-        top3[i] = rec.labels[i] in np.argsort(d.probs)[-3:]
-        terrain[i] = bool((d.U[:, :n_terrain] > 0).any())
-        if progress is not None:
-            progress(i + 1, len(rec))
+    chosen, commands, c_best, top3, terrain = _decisions(runtime, rec, model.features.n_terrain, progress)
     w_operator = at_set_speed(rec.commands, control.v_mps).astype(float)
     v_operator, v_model = rec.commands[:, 0].astype(float), commands[:, 0]
     w_model = np.where(v_model > 0, at_set_speed(commands, control.v_mps).astype(float), w_grid[chosen])  # a stop keeps its way's w
@@ -135,6 +121,32 @@ def replay(model: Model, rec: Recording, progress=None) -> dict:
             "xy": rec.poses[:, :2].tolist(),
         },
     }
+
+
+def _decisions(runtime: PlannerRuntime, rec: Recording, n_terrain: int, progress=None) -> tuple[np.ndarray, ...]:
+    """The runtime's decision on each frame of ``rec``: the trajectory chosen (F,), the command
+    (F, 2: v [m/s], w [rad/s]), C's argmax (F,), whether the operator's trajectory is among C's
+    three likeliest (F,) and whether terrain lies on some trajectory (F,)."""
+    chosen = np.empty(len(rec), dtype=np.int64)
+    commands = np.empty((len(rec), 2))
+    c_best = np.empty(len(rec), dtype=np.int64)
+    top3 = np.empty(len(rec), dtype=bool)
+    terrain = np.empty(len(rec), dtype=bool)
+    speeds = frame_speeds(rec.times, rec.poses)
+    for i in range(len(rec)):
+        depth = rec.depth(i)
+        seen = DepthFrame(depth, rec.attitude(i)) if depth is not None else None
+        speed = None if np.isnan(speeds[i]) else float(speeds[i])
+        # never None: read_recording refuses times that do not grow
+        d = runtime.decide(rec.image(i), float(rec.times[i]), tuple(rec.poses[i]), speed, depth=seen)
+        chosen[i] = d.index
+        commands[i] = d.command
+        c_best[i] = int(np.argmax(d.probs))
+        top3[i] = rec.labels[i] in np.argsort(d.probs)[-3:]
+        terrain[i] = bool((d.U[:, :n_terrain] > 0).any())
+        if progress is not None:
+            progress(i + 1, len(rec))
+    return chosen, commands, c_best, top3, terrain
 
 
 def write_replay(result: dict, out: Path, title: str) -> tuple[Path, Path]:

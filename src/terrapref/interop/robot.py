@@ -9,6 +9,8 @@
       odometry: /warthog/odom                  # nav_msgs/Odometry, PoseStamped or PoseWithCovarianceStamped
       command: /warthog/cmd_vel                # optional: geometry_msgs/Twist or TwistStamped, the label
       path: /route/plan                        # nav_msgs/Path; optional (see path_file)
+      depth: /warthog/camera/depth             # optional: sensor_msgs/Image 32FC1 [m] or 16UC1 [mm, 0: none]
+      depth_info: /warthog/camera/depth_info   # optional: its CameraInfo (default: camera_info's)
     camera:
       height_m: 1.0                            # optical centre above the ground [m]
       pitch_deg: 30.0                          # downward tilt [deg]
@@ -42,6 +44,12 @@ Without ``topics.command`` each frame is labelled by the vehicle's measured moti
 odometry's twist, or differences of its poses where it carries none (terrapref.interop.bag_frames).
 A command topic that is named must be in the bag. Without ``topics.path`` or ``path_file`` the
 reference path is the driven odometry, smoothed.
+
+``topics.depth`` is a depth image registered to the label images (REP 118): the same camera, or
+one resampled onto it, as an RGB-D driver's aligned depth is; each label image is paired with the
+depth image of the nearest stamp (terrapref.interop.bag_frames). Its ``depth_info`` must give the
+label camera's size and intrinsics (absent: the depth images are taken to be the label camera's,
+and must have its size); a depth camera of other intrinsics is refused, not resampled.
 Relative file names are relative to the robot file.
 """
 
@@ -69,7 +77,7 @@ ROBOT_FORMAT = "terrapref-robot/1"
 _TOP = {"format", "topics", "camera", "labels", "path_file", "profile", "max_gap_s", "description", "stop", "limits", "rules"}
 LIMITS = ("max_speed_mps", "max_yaw_rate_rps", "max_accel_mps2")  # the robot's limits a file (or a node's parameters) may set
 _TOPICS_REQUIRED = ("segmentation", "camera_info", "odometry")
-_TOPICS_OPTIONAL = ("command", "path")
+_TOPICS_OPTIONAL = ("command", "path", "depth", "depth_info")
 _TOPICS = set(_TOPICS_REQUIRED) | set(_TOPICS_OPTIONAL)
 _CAMERA = {
     "height_m": (0.05, 10.0),
@@ -103,6 +111,11 @@ class RobotConfig:
     def command_topic(self) -> str | None:
         """The operator's commands; None: frames are labelled by the odometry's measured motion."""
         return self.topics.get("command")
+
+    @property
+    def depth_topic(self) -> str | None:
+        """The depth images registered to the label images; None: the frames carry none."""
+        return self.topics.get("depth")
 
 
 def _number(value: object) -> float | None:
@@ -217,6 +230,10 @@ def _check_topics(topics: object, problems: list[Problem]) -> dict[str, str]:
         else:
             out[key] = value
     problems += [Problem(f"topics.{k}", "missing") for k in _TOPICS_REQUIRED if k not in topics]
+    if "depth_info" in out and "depth" not in out:
+        problems.append(Problem("topics.depth_info", "is the depth images' calibration; name their topic as topics.depth too"))
+    if "depth" in out and out["depth"] == out.get("segmentation"):
+        problems.append(Problem("topics.depth", "is the segmentation topic; the depth images come on a topic of their own"))
     return out
 
 

@@ -1,5 +1,6 @@
-"""ROS messages decoded into what terrapref uses: header stamps, yaw, paths, label images of every
-encoding a robot sends ids in, the camera's calibration, and its mounting from /tf_static.
+"""ROS messages decoded into what terrapref uses: header stamps, yaw and the body's attitude,
+paths, label images of every encoding a robot sends ids in, depth images (REP 118), the camera's
+calibration, and its mounting from /tf_static.
 
 Messages are read by attribute (``header.stamp``, ``pose.orientation``, ``data``), so the same
 functions serve rosbags' messages (an import, ``play``), rospy's (the ROS 1 node) and the
@@ -19,6 +20,7 @@ from terrapref.camera import CameraConfig
 from terrapref.errors import UserError, one_line
 from terrapref.interop.labels import LabelMap
 from terrapref.interop.robot import RobotConfig
+from terrapref.pngio import millimetres_to_depth
 
 COMPRESSED_DEPTH_HEADER = 12  # compressed_depth_image_transport's ConfigHeader before the png: format, two floats
 
@@ -51,6 +53,14 @@ def message_time_s(msg, fallback_ns: int, shift_s: float = 0.0) -> float:
 def yaw_rad(q) -> float:
     """The yaw [rad] of the quaternion ``q`` (x, y, z, w): its turn about z."""
     return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def pitch_roll_rad(q) -> tuple[float, float]:
+    """The pitch and roll [rad] of the quaternion ``q`` (x, y, z, w), as yaw, pitch and roll turn
+    the body in that order (REP 103: pitch positive nose down, roll positive left side up)."""
+    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (q.w * q.y - q.z * q.x))))
+    roll = math.atan2(2.0 * (q.w * q.x + q.y * q.z), 1.0 - 2.0 * (q.x * q.x + q.y * q.y))
+    return pitch, roll
 
 
 def _rotation(q) -> np.ndarray:
@@ -177,6 +187,30 @@ def camera_from_info(
     return camera, _undistortion(k, d, model, (height, width), source)
 
 
+def check_depth_info(depth_info, info, robot: RobotConfig, source: str) -> None:
+    """Refuse a depth camera calibration ``depth_info`` (None: none named, the label camera's is
+    taken) whose image size or intrinsics K are not the label camera's ``info``: its images are
+    not registered to the label images, and terrapref does not resample them."""
+    if depth_info is None:
+        return
+    try:
+        sizes = [(int(i.width), int(i.height)) for i in (depth_info, info)]
+        ks = [np.asarray(_field(i, "k", "K"), dtype=float).reshape(3, 3) for i in (depth_info, info)]
+    except (AttributeError, TypeError, ValueError) as exc:
+        raise UserError(source, f"camera_info unreadable ({exc})", field="topics.depth_info") from None
+    if sizes[0] != sizes[1] or not np.allclose(ks[0], ks[1], rtol=1e-6, atol=1e-9):
+        (w, h), (lw, lh) = sizes
+        fx, fy, cx, cy = (float(ks[0][0, 0]), float(ks[0][1, 1]), float(ks[0][0, 2]), float(ks[0][1, 2]))
+        lfx, lfy, lcx, lcy = (float(ks[1][0, 0]), float(ks[1][1, 1]), float(ks[1][0, 2]), float(ks[1][1, 2]))
+        raise UserError(
+            source,
+            f"{robot.topics['depth_info']} says the depth camera is {w} x {h}, fx {fx:g} fy {fy:g} cx {cx:g} cy {cy:g}; "
+            f"the label camera ({robot.topics['camera_info']}) is {lw} x {lh}, fx {lfx:g} fy {lfy:g} cx {lcx:g} cy {lcy:g}: "
+            f"depth must be registered to the label images (the same size and intrinsics; topics in {robot.source})",
+            field="topics.depth_info",
+        )
+
+
 def _undistortion(k: np.ndarray, d: np.ndarray, model: str, shape: tuple[int, int], source: str) -> np.ndarray:
     """The nearest-pixel undistortion map (H, W) of a lens of intrinsics ``k`` (3, 3) and
     distortion ``d`` (plumb_bob's k1, k2, p1, p2[, k3]): the flat index of each pinhole pixel in
@@ -267,3 +301,35 @@ def _decode_png(msg, topic: str, source: str, t_s: float | None) -> np.ndarray:
     except (OSError, ValueError, SyntaxError) as exc:  # PIL's errors on data that is not a png (UnidentifiedImageError is an OSError)
         raise UserError(source, f"{where}: not a decodable png ({one_line(exc, 80)})", field="topics.segmentation") from None
     return ids.astype(np.uint16) if ids.dtype != np.uint8 else ids
+
+
+DEPTH_ENCODINGS = ("32FC1", "16UC1")  # REP 118: metres as float32; millimetres as uint16, 0 where nothing is seen
+
+
+def depth_metres(msg, topic: str, source: str, t_s: float | None = None) -> np.ndarray:
+    """The depth image (H, W) float32 [m along the optical axis, NaN where nothing is seen] of a
+    sensor_msgs/Image on ``topic``: 32FC1 metres (not finite or not above 0: nothing seen) or
+    16UC1 millimetres (0: nothing seen). ``t_s``, when the log received it from its start [s],
+    names it in an error.
+
+    Raises:
+        UserError: about ``source``, naming the topic: another encoding, or data that does not hold the image.
+    """
+    where = f"topic {topic}, message received {t_s:.3f} s into the log" if t_s is not None else f"topic {topic}"
+    encoding = str(msg.encoding).upper()
+    if encoding not in DEPTH_ENCODINGS:
+        raise UserError(
+            source,
+            f"{where}: depth image encoding {msg.encoding!r}; expected 32FC1 (metres) or 16UC1 (millimetres, 0: no return), REP 118",
+            field="topics.depth",
+        )
+    h, w, step = int(msg.height), int(msg.width), int(msg.step)
+    dtype = np.dtype(("f4" if encoding == "32FC1" else "u2")).newbyteorder(">" if msg.is_bigendian else "<")
+    data = np.frombuffer(bytes(msg.data), dtype=np.uint8)
+    if step < w * dtype.itemsize or len(data) < step * h:
+        raise UserError(source, f"{where}: depth data of {len(data)} bytes does not hold {h} rows of {step}", field="topics.depth")
+    values = np.ascontiguousarray(data[: step * h].reshape(h, step)[:, : w * dtype.itemsize]).view(dtype).reshape(h, w)
+    if encoding == "16UC1":
+        return millimetres_to_depth(values)
+    metres = values.astype(np.float32)
+    return np.where(np.isfinite(metres) & (metres > 0), metres, np.float32(np.nan)).astype(np.float32)

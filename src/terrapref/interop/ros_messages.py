@@ -20,6 +20,7 @@ import numpy as np
 from PIL import Image as PILImage
 
 from terrapref.extras import needs
+from terrapref.pngio import depth_to_millimetres
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
@@ -217,9 +218,9 @@ def rpy_quaternion(ts: Typestore, roll_rad: float, pitch_rad: float, yaw_rad: fl
     )
 
 
-def pose(ts: Typestore, x: float, y: float, orientation: Message) -> Message:
-    """geometry_msgs/Pose at (x, y, 0) [m] turned by ``orientation`` (a Quaternion)."""
-    return ts.types["geometry_msgs/msg/Pose"](position=point(ts, x, y), orientation=orientation)
+def pose(ts: Typestore, x: float, y: float, orientation: Message, z: float = 0.0) -> Message:
+    """geometry_msgs/Pose at (x, y, z) [m] turned by ``orientation`` (a Quaternion)."""
+    return ts.types["geometry_msgs/msg/Pose"](position=point(ts, x, y, z), orientation=orientation)
 
 
 def path_message(ts: Typestore, xy: Iterable[tuple[float, float]], ros1: bool = False, t_s: float = 0.0) -> Message:
@@ -420,6 +421,15 @@ def png(ids: np.ndarray, palette: np.ndarray | None = None) -> np.ndarray:
         image.putpalette(palette.astype(np.uint8).ravel().tolist())
     image.save(buf, format="PNG", compress_level=1)
     return np.frombuffer(buf.getvalue(), dtype=np.uint8)
+
+
+def depth_image(ts: Typestore, stamped: Message, depth: np.ndarray) -> Message:
+    """sensor_msgs/Image of a depth image (H, W) [m, NaN where nothing is seen] as REP 118's 16UC1:
+    little-endian millimetres, 0 where nothing is seen (terrapref.pngio.depth_to_millimetres)."""
+    mm = depth_to_millimetres(depth).astype("<u2")
+    h, w = mm.shape
+    data = np.frombuffer(mm.tobytes(), dtype=np.uint8)
+    return ts.types["sensor_msgs/msg/Image"](header=stamped, height=h, width=w, encoding="16UC1", is_bigendian=0, step=2 * w, data=data)
 
 
 def compressed_image(ts: Typestore, stamped: Message, image_format: str, data: np.ndarray) -> Message:

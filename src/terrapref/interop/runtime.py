@@ -18,6 +18,12 @@ held back). An image of the wrong size, a camera other than the model's, or ids 
 class table (nor the label map) names are refused with a ``ValueError`` rather than driven on,
 unless ``unknown_ids="unknown"`` says such ids are unknown ground (255), which is then never free
 for the stop rule.
+
+On uneven ground each label image may come with its depth image (:class:`DepthFrame`: REP 118
+metres along the optical axis, of the label camera's size and intrinsics, and the body's
+attitude when it was taken): the planner's ground maps then place what the image shows where
+the depth returns lie, gather the ground's heights, and block ground past the robot's limits
+(terrapref.groundmap.height). Without one, the ground is taken as flat.
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -39,10 +46,25 @@ from terrapref.scenario.path import ReferencePath
 from terrapref.stops import STALE
 from terrapref.terrain.classes import UNKNOWN, ForeignIds
 from terrapref.vehicle import Command, Pose, VehicleConfig
+from terrapref.vehicle.ground import LEVEL, Attitude
 
 STOP = Command(0.0, 0.0)
 FRAME_AHEAD_S = 1.0  # by default, a frame (or a decision) stamped further ahead of the caller's clock is refused [s]
 UNKNOWN_IDS = ("error", "unknown")  # what the runtime makes of an id no table or map names (PlannerRuntime's unknown_ids)
+
+
+class DepthFrame(NamedTuple):
+    """A label image's depth image and the body's attitude when it was taken.
+
+    Attributes:
+        image: (H, W) float [m along the optical axis, NaN where nothing is seen; REP 118],
+            registered to the label image (its camera's size and intrinsics).
+        attitude: the body's height [m], pitch and roll [rad] (REP 103: pitch positive nose
+            down, roll positive left side up); level where the robot does not know it.
+    """
+
+    image: np.ndarray
+    attitude: Attitude = LEVEL
 
 
 @dataclass(frozen=True)
@@ -167,11 +189,13 @@ class PlannerRuntime:
         pose: Pose | tuple[float, float, float],
         speed_mps: float | None = None,
         now_s: float | None = None,
+        depth: DepthFrame | None = None,
     ) -> RuntimeDecision | None:
         """Decide on one label image taken at ``stamp_s`` from ``pose`` (x [m], y [m], yaw [rad]),
         the robot going at ``speed_mps`` [m/s] by its odometry (None: not known; a model's speed
         rule then keeps its lateral acceleration at the speed it commands), the caller's clock
-        reading ``now_s`` [s] (None: not given).
+        reading ``now_s`` [s] (None: not given), with the image's ``depth`` image and the body's
+        attitude (None: the ground is taken as flat).
 
         Returns None for a frame older than the last one decided on (out of order); such a frame
         changes nothing.
@@ -179,26 +203,13 @@ class PlannerRuntime:
         Raises:
             ValueError: a frame stamped more than ``ahead_s`` ahead of ``now_s`` (its
                 clock and the caller's disagree: kept, it would make every later frame look old),
-                counted in :attr:`refused`; or a frame the runtime cannot read (size, type, ids).
+                counted in :attr:`refused`; or a frame the runtime cannot read (size, type, ids,
+                a depth image of another size or not of floats, an attitude not finite).
         """
         if self.planner.path is None:
             raise RuntimeError("call set_path() before decide()")
-        image = np.asarray(image)
-        if image.shape != self.shape:
-            raise ValueError(f"label image of shape {image.shape}; the model's camera gives {self.shape}")
-        if self.lut is not None:
-            if image.dtype not in (np.uint8, np.uint16):
-                raise ValueError(f"label image of dtype {image.dtype}; expected uint8 or uint16 label ids")
-            raw, image = image, self.lut[image]
-            if self.foreign(image):
-                raise ValueError(
-                    unlisted_message(self.labels.unlisted_in(raw), "a label image")
-                    + f" (label map {self.labels.source or self.labels.name})"
-                )
-        elif image.dtype != np.uint8:
-            raise ValueError(f"label image of dtype {image.dtype}; expected uint8 class ids (or give a label map)")
-        else:
-            image = self._named(image)
+        image = self._ids(np.asarray(image))
+        depth_image, attitude = self._depth(depth)
         pose = Pose(*(float(v) for v in pose))
         if not (math.isfinite(stamp_s) and all(math.isfinite(v) for v in pose)):
             raise ValueError("stamp and pose must be finite")
@@ -213,9 +224,44 @@ class PlannerRuntime:
             return None
         if self._sent is None:  # nothing given out yet: the robot's speed at this frame is where the speed rises from
             self._sent = (float(stamp_s), 0.0 if speed_mps is None else abs(float(speed_mps)))
-        d = self.planner.decide(image, pose, float(stamp_s), None if speed_mps is None else abs(float(speed_mps)))
+        going = None if speed_mps is None else abs(float(speed_mps))
+        d = self.planner.decide(image, pose, float(stamp_s), going, depth_image, attitude)
         self.last = RuntimeDecision(float(stamp_s), d.command, d.index, d.probs, d.progress_m, d.U, d.stop)
         return self.last
+
+    def _ids(self, image: np.ndarray) -> np.ndarray:
+        """The class ids (H, W) uint8 of a label image: of the camera's size, its ids through the
+        label map or named by the class table (a ValueError says what is wrong)."""
+        if image.shape != self.shape:
+            raise ValueError(f"label image of shape {image.shape}; the model's camera gives {self.shape}")
+        if self.lut is not None:
+            if image.dtype not in (np.uint8, np.uint16):
+                raise ValueError(f"label image of dtype {image.dtype}; expected uint8 or uint16 label ids")
+            raw, image = image, self.lut[image]
+            if self.foreign(image):
+                raise ValueError(
+                    unlisted_message(self.labels.unlisted_in(raw), "a label image")
+                    + f" (label map {self.labels.source or self.labels.name})"
+                )
+            return image
+        if image.dtype != np.uint8:
+            raise ValueError(f"label image of dtype {image.dtype}; expected uint8 class ids (or give a label map)")
+        return self._named(image)
+
+    def _depth(self, depth: DepthFrame | None) -> tuple[np.ndarray | None, Attitude]:
+        """``depth``'s image as float32 and its attitude, checked against the camera (a ValueError
+        says what is wrong); (None, level) without one."""
+        if depth is None:
+            return None, LEVEL
+        image = np.asarray(depth.image)
+        if image.shape != self.shape or image.dtype.kind != "f":
+            raise ValueError(
+                f"depth image of shape {image.shape} and dtype {image.dtype}; expected floats [m] of the label image's shape {self.shape}"
+            )
+        attitude = Attitude(*(float(a) for a in depth.attitude))
+        if not all(math.isfinite(a) for a in attitude):
+            raise ValueError(f"attitude must be finite, got {tuple(attitude)}")
+        return image.astype(np.float32, copy=False), attitude
 
     def _named(self, image: np.ndarray) -> np.ndarray:
         """``image`` with class ids the table does not name refused (ValueError), or made unknown."""

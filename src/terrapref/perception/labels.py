@@ -29,6 +29,7 @@ from terrapref.camera import CameraConfig, PinholeCamera, PixelSet, Segmentation
 from terrapref.camera.render_compiled import row_col
 from terrapref.perception.model import LabelErrors
 from terrapref.terrain import ClassTable
+from terrapref.vehicle.ground import Attitude
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 
@@ -164,6 +165,10 @@ class LabelledView(SegmentationView):
     @property
     def carries_depth(self) -> bool:
         return self._base.carries_depth
+
+    @property
+    def attitude(self) -> Attitude:
+        return self._base.attitude
 
 
 @functools.lru_cache(maxsize=8)

@@ -63,7 +63,8 @@ class TiltedView(SegmentationView):
     """The true ground through the camera at an attitude off its mount, up to ``max_range_m`` along
     each ray (None: the camera's own range), rendered as far as it is read. The depth image, and
     on relief the whole frame, is rendered with the wander added to the body's ``attitude``
-    (pitch down, roll)."""
+    (pitch down, roll); the view's :attr:`attitude` stays the body's (the robot does not know
+    the wander)."""
 
     __slots__ = ("_tilt",)
 
@@ -76,7 +77,6 @@ class TiltedView(SegmentationView):
         max_range_m: float | None = None,
         attitude: Attitude = LEVEL,
     ) -> None:
-        attitude = Attitude(attitude.z_m, attitude.pitch_rad + dpitch_rad, attitude.roll_rad + droll_rad)
         super().__init__(renderer, pose, attitude=attitude)
         self._tilt = (dpitch_rad, droll_rad, max_range_m)
 
@@ -88,7 +88,8 @@ class TiltedView(SegmentationView):
         return super().image
 
     def _with_depth(self) -> tuple[np.ndarray, np.ndarray]:
-        return self._renderer.render_with_depth(self._pose, self._attitude, self._tilt[2])
+        a, (dpitch_rad, droll_rad, max_range_m) = self._attitude, self._tilt
+        return self._renderer.render_with_depth(self._pose, Attitude(a.z_m, a.pitch_rad + dpitch_rad, a.roll_rad + droll_rad), max_range_m)
 
     def pixels(self, flat_index: np.ndarray | PixelSet) -> np.ndarray:
         if self._image is None and not self._renderer.relief:
@@ -121,6 +122,10 @@ class DepthErrorView(SegmentationView):
     @property
     def carries_depth(self) -> bool:
         return self._base.carries_depth
+
+    @property
+    def attitude(self) -> Attitude:
+        return self._base.attitude
 
     @property
     def depth(self) -> np.ndarray | None:

@@ -58,7 +58,7 @@ def record_corrections(
         executed = planner.act(frame)
         if takeover > 0 and rng.random() < takeover:
             executed = Command(v, w_label)
-        writer.append(frame.time_s, frame.pose, frame.image, (v, w_label), control.label_of(w_label), executed=executed)
+        writer.append(frame.time_s, frame.pose, frame.view, (v, w_label), control.label_of(w_label), executed=executed)
         frame = sim.step(executed)
     log = EpisodeLog.of(sim)
     writer.close({**log.summary(), "session": "corrections"})

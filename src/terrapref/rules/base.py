@@ -257,7 +257,11 @@ class FrameReader(abc.ABC):
 
     @abc.abstractmethod
     def read(self, j: int, view: SegmentationView, pose: Pose, path: ReferencePath, progress_m: float) -> None:
-        """Take in frame ``j`` (frames come in order)."""
+        """Take in frame ``j`` (frames come in order). A ``view`` that carries a depth image
+        (relief) gives it with the body's attitude: a reader's ground map places the frame's
+        classes where its returns lie and gathers their heights, as the planner's does
+        (terrapref.groundmap.height.DepthImage.of); the robot's limits are not applied there
+        (they are the robot's, applied where it drives, never learned)."""
 
     @abc.abstractmethod
     def arrays(self, recording: Recording, keep: np.ndarray, path: ReferencePath) -> dict[str, np.ndarray]:

@@ -43,6 +43,7 @@ from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.errors import UserError
 from terrapref.features import UtilityFeaturizer
 from terrapref.groundmap.costmap import Costmap, costmap_of
+from terrapref.groundmap.height import DepthImage
 from terrapref.groundmap.map import GroundMap
 from terrapref.records import to_plain
 from terrapref.rules.base import (
@@ -166,7 +167,7 @@ class OffsetReader(FrameReader):
         self.progress = np.empty(n)
 
     def read(self, j: int, view: SegmentationView, pose: Pose, path: ReferencePath, progress_m: float) -> None:
-        self.map.update(view, pose)
+        self.map.update(view, pose, DepthImage.of(view, self.map.camera, pose))
         frame = self.offsets(self.map, path, progress_m)
         self.features[j], self.near[j] = frame.features, frame.near_m
         self.progress[j] = progress_m

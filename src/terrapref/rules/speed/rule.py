@@ -20,6 +20,7 @@ import numpy as np
 from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.features import UtilityFeaturizer
 from terrapref.groundmap.columns import TerrainColumns
+from terrapref.groundmap.height import DepthImage
 from terrapref.groundmap.map import GroundMap
 from terrapref.groundmap.settings import MapSettings
 from terrapref.records import to_plain
@@ -130,7 +131,7 @@ class SpeedReader(FrameReader):
         self.snapshots = np.empty((n, SNAPSHOT_X, SNAPSHOT_Y), dtype=np.uint8)
 
     def read(self, j: int, view: SegmentationView, pose: Pose, path: ReferencePath, progress_m: float) -> None:
-        self.map.update(view, pose)
+        self.map.update(view, pose, DepthImage.of(view, self.map.camera, pose))
         self.snapshots[j] = self.map.lookup(_to_world(self._grid, pose), SPLIT)
 
     def arrays(self, recording: Recording, keep: np.ndarray, path: ReferencePath) -> dict[str, np.ndarray]:
