@@ -18,8 +18,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from terrapref.groundmap.height import geometry_of_cells
-
 if TYPE_CHECKING:
     from terrapref.groundmap.map import GroundMap
 
@@ -144,7 +142,7 @@ def with_layers(costmap: Costmap, ground_map: GroundMap, speeds_mps: np.ndarray 
         layers["speed"] = np.asarray(speeds_mps, dtype=np.float32)[ground_map.cells[r0 : r0 + h, c0 : c0 + w]]
     layers["elevation"] = ground_map.layer("elevation")[r0 : r0 + h, c0 : c0 + w].copy()
     if np.isfinite(layers["elevation"]).any():
-        geometry = geometry_of_cells(ground_map.heights, rows.ravel(), cols.ravel(), res, ground_map.height_settings).reshape(h, w, 3)
+        geometry = ground_map.geometry_of(rows.ravel(), cols.ravel()).reshape(h, w, 3)
     else:
         geometry = np.full((h, w, 3), np.nan)
     for i, name in enumerate(GEOMETRY_LAYERS[1:]):

@@ -32,12 +32,6 @@ if TYPE_CHECKING:
     from terrapref.vehicle import Pose, VehicleConfig
 
 
-# A cell's geometry is read again when the trusted elevation of a cell within its disc has moved
-# by more than this since it was last read [m] (a twentieth of the step the vehicle climbs), or
-# has come to be trusted or ceased to be: ground whose heights have settled is not read again.
-CHECK_TOLERANCE_M = 0.005
-
-
 @dataclass(frozen=True)
 class HeightSettings:
     """How the height layer is read from depth and its geometry from the layer.

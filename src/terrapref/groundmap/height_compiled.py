@@ -31,8 +31,6 @@ def depth_points(
 @njit(cache=True, nogil=True)
 def height_vote(
     heights: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-    trusted: np.ndarray,
-    trust: tuple[int, float],
     ox: float,
     oy: float,
     inv_res: float,
@@ -50,10 +48,8 @@ def height_vote(
     the sum of the squares of ``errors``' base [m], its per m^2 of depth times the depth squared,
     and its attitude's tangent times the return's distance from the centre across the ground
     (the weighted mean and sum of squared deviations updated as West's algorithm does). The
-    cells they fell in (flat indices, each once, in the order first fallen in), whose ``trusted``
-    elevation (NaN: not trusted; ``trust``: the least returns and the largest variance of the
-    mean [m^2], terrapref.groundmap.height.trusted_elevation) is brought up to date. ``mark``
-    (n * n,) uint8, all 0: scratch, left all 0."""
+    cells they fell in (flat indices, each once, in the order first fallen in). ``mark`` (n * n,)
+    uint8, all 0: scratch, left all 0."""
     elevation, returns, spread, weight = heights
     base, per_m2, tilt = errors
     n = elevation.shape[0]
@@ -79,59 +75,9 @@ def height_vote(
         mean = old + (z - old) * (w / total)
         returns[row, col], weight[row, col], elevation[row, col] = k, total, mean
         spread[row, col] += w * (z - old) * (z - mean)
-    least, largest = trust
     for i in range(count):
-        t = touched[i]
-        mark[t] = 0
-        row, col = t // n, t % n
-        k, w = returns[row, col], np.float64(weight[row, col])
-        ok = k >= least and k >= 2 and spread[row, col] <= largest * w * (k - 1) and w * largest >= 1.0
-        trusted[row, col] = elevation[row, col] if ok else np.nan
+        mark[touched[i]] = 0
     return touched[:count]
-
-
-@njit(cache=True, nogil=True)
-def to_check(
-    touched: np.ndarray,
-    trusted: np.ndarray,
-    checked: np.ndarray,
-    tolerance_m: float,
-    near: tuple[float, float, float, float, float, float],
-    reach: int,
-    mark: np.ndarray,
-) -> np.ndarray:
-    """The cells (flat indices, each once) whose geometry may have changed with this frame's
-    returns: those within ``reach`` cells (a disc) of a cell of ``touched`` near the vehicle whose
-    ``trusted`` elevation moved by more than ``tolerance_m`` since its geometry was last read
-    (``checked``: the trusted elevation then, NaN as it, +inf: never read), or came to be trusted
-    or ceased to be. ``near``: the map's corner (x, y), its resolution, the vehicle's (x, y) and
-    the range within which cells are read [m]. ``checked`` is brought up to date; ``mark`` (n * n,)
-    uint8, all 0: scratch, left all 0."""
-    n = trusted.shape[0]
-    ox, oy, res, x, y, range_m = near
-    out = np.empty(touched.shape[0] * (2 * reach + 1) ** 2, np.int64)
-    count = 0
-    for i in range(touched.shape[0]):
-        t = touched[i]
-        row, col = t // n, t % n
-        dx, dy = ox + (col + 0.5) * res - x, oy + (row + 0.5) * res - y
-        if dx * dx + dy * dy > range_m * range_m:
-            continue
-        now, then = trusted[row, col], checked[row, col]
-        if (math.isnan(now) and math.isnan(then)) or abs(now - then) <= tolerance_m:
-            continue
-        checked[row, col] = now
-        for dr in range(-reach, reach + 1):
-            for dc in range(-reach, reach + 1):
-                r, c = row + dr, col + dc
-                if dr * dr + dc * dc > reach * reach or not (0 <= r < n and 0 <= c < n) or mark[r * n + c]:
-                    continue
-                mark[r * n + c] = 1
-                out[count] = r * n + c
-                count += 1
-    for i in range(count):
-        mark[out[i]] = 0
-    return out[:count]
 
 
 @njit(cache=True, nogil=True)
@@ -238,3 +184,169 @@ def _blocked_beside(blocked: np.ndarray, row: int, col: int) -> bool:
             if (dr or dc) and 0 <= r < n and 0 <= c < n and blocked[r, c]:
                 return True
     return False
+
+
+@njit(cache=True, nogil=True)
+def frame_shape(
+    points: np.ndarray,
+    depth: np.ndarray,
+    max_range_m: float,
+    ox: float,
+    oy: float,
+    inv_res: float,
+    errors: tuple[float, float, float],
+    scratch: np.ndarray,
+    shape: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    mark: np.ndarray,
+) -> np.ndarray:
+    """Fold one frame's returns (``points`` (N, 3) world [m], NaN rows none; their ``depth`` (N,),
+    those deeper than ``max_range_m`` left out) into the ground's ``shape``: each cell's gradient,
+    as the height differences over one cell along x and along y it gives (``shape``: the x
+    difference, its weight, the y difference, its weight; (n, n) float32), as this frame alone
+    shows them. The frame's own returns in each cell are averaged, weighted by the inverse of
+    their variance from ``errors``' base and depth terms (``scratch`` (n, n, 5) float64: the
+    weighted sums of x, y, z, the weights, all 0, left all 0); the plane through a cell's mean
+    point and those of its neighbours along x and along y gives the frame's gradient there,
+    folded into the cell's weighted means, weighed by the inverse of its variance. The frame's
+    attitude error tilts all its returns as one plane through the camera, which changes a
+    gradient by the tangent of the error (0.035 for 2 deg) but makes no step: gradients gathered
+    over frames whose attitudes erred differently agree, where heights do not. The cells the
+    frame's returns fell in (flat indices, each once). ``mark`` (n * n,) uint8, all 0: scratch,
+    left all 0."""
+    gx, wx, gy, wy = shape
+    base, per_m2, _ = errors
+    n = scratch.shape[0]
+    res = 1.0 / inv_res
+    touched = np.empty(points.shape[0], np.int64)
+    count = 0
+    for i in range(points.shape[0]):
+        x, y, z = points[i, 0], points[i, 1], points[i, 2]
+        if not (depth[i] <= max_range_m and math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+            continue
+        u, v = (x - ox) * inv_res, (y - oy) * inv_res
+        if not (0.0 <= u < n and 0.0 <= v < n):
+            continue
+        col, row = int(u), int(v)
+        if mark[row * n + col] == 0:
+            mark[row * n + col] = 1
+            touched[count] = row * n + col
+            count += 1
+        w = 1.0 / (base * base + (per_m2 * depth[i] * depth[i]) ** 2)
+        scratch[row, col, 0] += w * x
+        scratch[row, col, 1] += w * y
+        scratch[row, col, 2] += w * z
+        scratch[row, col, 3] += w
+    for i in range(count):
+        t = touched[i]
+        row, col = t // n, t % n
+        if col + 1 >= n or row + 1 >= n or scratch[row, col + 1, 3] == 0.0 or scratch[row + 1, col, 3] == 0.0:
+            continue
+        w0, w1, w2 = scratch[row, col, 3], scratch[row, col + 1, 3], scratch[row + 1, col, 3]
+        x0, y0, z0 = scratch[row, col, 0] / w0, scratch[row, col, 1] / w0, scratch[row, col, 2] / w0
+        ax, ay, az = scratch[row, col + 1, 0] / w1 - x0, scratch[row, col + 1, 1] / w1 - y0, scratch[row, col + 1, 2] / w1 - z0
+        bx, by, bz = scratch[row + 1, col, 0] / w2 - x0, scratch[row + 1, col, 1] / w2 - y0, scratch[row + 1, col, 2] / w2 - z0
+        det = ax * by - ay * bx
+        if abs(det) < 0.25 * res * res:  # the three points nearly on a line: no plane
+            continue
+        a = (az * by - ay * bz) / det  # dz/dx
+        b = (ax * bz - az * bx) / det  # dz/dy
+        w = 1.0 / (1.0 / w0 + 0.5 / w1 + 0.5 / w2)  # roughly: a difference's variance, over one cell
+        _fold(gx, wx, row, col, a * res, w)
+        _fold(gy, wy, row, col, b * res, w)
+    for i in range(count):
+        t = touched[i]
+        mark[t] = 0
+        scratch[t // n, t % n, :] = 0.0
+    return touched[:count]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _fold(mean: np.ndarray, weight: np.ndarray, row: int, col: int, value: float, w: float) -> None:
+    """``value`` of weight ``w`` folded into the weighted mean ``mean[row, col]`` (its weights' sum ``weight[row, col]``)."""
+    total = np.float64(weight[row, col]) + w
+    mean[row, col] = np.float64(mean[row, col]) + (value - np.float64(mean[row, col])) * (w / total)
+    weight[row, col] = total
+
+
+@njit(cache=True, nogil=True)
+def shape_geometry(
+    shape: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    least_weight: float,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    reach: int,
+    res: float,
+    out: np.ndarray,
+) -> None:
+    """Slope [rad] and step [m] of the cells (``rows``, ``cols``) into ``out`` (N, 3: slope, NaN
+    for the roughness, which heights give, step), from the ground's ``shape`` (:func:`frame_shape`): a difference counts once its weight is at least
+    ``least_weight`` (its standard error at most 1 / sqrt of it). The slope is that of the mean
+    gradient over the cells within ``reach`` cells (a disc) of the cell, the differences' mean
+    per ``res`` (the gradient of the least-squares plane through heights on a regular grid);
+    NaN where fewer than three differences along x or along y are known. The step is the height
+    range over the cell and its eight neighbours, their heights relative to it summed from the
+    differences between them (a corner by either way round, averaged where both are known); NaN
+    where fewer than two of the nine are known."""
+    gx, wx, gy, wy = shape
+    n = gx.shape[0]
+    h = np.empty((3, 3))
+    for i in range(rows.shape[0]):
+        r0, c0 = rows[i], cols[i]
+        out[i, 0] = out[i, 1] = out[i, 2] = np.nan
+        if not (1 <= r0 < n - 1 and 1 <= c0 < n - 1):
+            continue
+        sx = sy = 0.0
+        mx = my = 0
+        for dr in range(max(-reach, -r0), min(reach, n - 1 - r0) + 1):
+            span = int(math.sqrt(reach * reach - dr * dr) + 1e-9)
+            r = r0 + dr
+            for dc in range(max(-span, -c0), min(span, n - 1 - c0) + 1):
+                c = c0 + dc
+                if wx[r, c] >= least_weight:
+                    sx += gx[r, c]
+                    mx += 1
+                if wy[r, c] >= least_weight:
+                    sy += gy[r, c]
+                    my += 1
+        if mx >= 3 and my >= 3:
+            out[i, 0] = math.atan(math.hypot(sx / mx, sy / my) / res)
+        out[i, 2] = _step(gx, wx, gy, wy, least_weight, r0, c0, h)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _step(gx: np.ndarray, wx: np.ndarray, gy: np.ndarray, wy: np.ndarray, least: float, r0: int, c0: int, h: np.ndarray) -> float:
+    """The height range over cell (``r0``, ``c0``) and its eight neighbours (``h`` (3, 3): scratch),
+    from the differences between them (:func:`shape_geometry`); NaN where fewer than two are known."""
+    h[:] = np.nan
+    h[1, 1] = 0.0
+    # Along the row and the column through the cell: h[1, 2] - h[1, 1] is the x difference at (r0, c0).
+    if wx[r0, c0] >= least:
+        h[1, 2] = gx[r0, c0]
+    if wx[r0, c0 - 1] >= least:
+        h[1, 0] = -gx[r0, c0 - 1]
+    if wy[r0, c0] >= least:
+        h[2, 1] = gy[r0, c0]
+    if wy[r0 - 1, c0] >= least:
+        h[0, 1] = -gy[r0 - 1, c0]
+    # The corners: from their row's middle cell along x, and from their column's middle cell along y.
+    for a in (0, 2):
+        r = r0 + a - 1
+        for b in (0, 2):
+            c = c0 + b - 1
+            total, ways = 0.0, 0
+            cx = c0 if b == 2 else c0 - 1  # the x difference between the middle of row a and the corner
+            if not math.isnan(h[a, 1]) and wx[r, cx] >= least:
+                total += h[a, 1] + (gx[r, cx] if b == 2 else -gx[r, cx])
+                ways += 1
+            ry = r0 if a == 2 else r0 - 1  # the y difference between the middle of column b and the corner
+            if not math.isnan(h[1, b]) and wy[ry, c] >= least:
+                total += h[1, b] + (gy[ry, c] if a == 2 else -gy[ry, c])
+                ways += 1
+            if ways:
+                h[a, b] = total / ways
+    low, high, known = np.inf, -np.inf, 0
+    for a in range(3):
+        for b in range(3):
+            if not math.isnan(h[a, b]):
+                low, high, known = min(low, h[a, b]), max(high, h[a, b]), known + 1
+    return high - low if known >= 2 else np.nan

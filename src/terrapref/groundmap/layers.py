@@ -58,11 +58,13 @@ LAYERS: tuple[Layer, ...] = (
     Layer("returns", np.uint32, 0),
     Layer("spread", np.float32, 0.0),
     Layer("weight", np.float32, 0.0),
-    # The elevation where it is trusted (enough returns that agree), NaN where not; and what it
-    # was when the cell's geometry was last read (+inf: never), so that only the cells round a
-    # changed one are read again.
-    Layer("trusted", np.float32, np.nan),
-    Layer("checked", np.float32, np.inf),
+    # The ground's shape: each cell's height difference to its neighbour along x and along y as
+    # each frame alone shows it, weighted means over the frames, and their weights' sums [1 / m^2]
+    # (terrapref.groundmap.height_compiled.frame_shape): what its slope and steps are read from.
+    Layer("dx", np.float32, 0.0),
+    Layer("dx_weight", np.float32, 0.0),
+    Layer("dy", np.float32, 0.0),
+    Layer("dy_weight", np.float32, 0.0),
     # 1 where the ground's geometry is past the vehicle's limits (terrapref.groundmap.height):
     # the cell reads as lethal whatever its evidence.
     Layer("blocked", np.uint8, 0),

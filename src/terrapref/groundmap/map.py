@@ -14,7 +14,6 @@ from terrapref.groundmap import map_compiled as kernels
 from terrapref.groundmap.attitude import HorizonAttitude
 from terrapref.groundmap.columns import TerrainColumns
 from terrapref.groundmap.height import (
-    CHECK_TOLERANCE_M,
     DepthImage,
     DepthRays,
     GeometryLimits,
@@ -78,6 +77,7 @@ class GroundMap:
         self.camera = camera
         self._depth_rays: DepthRays | None = None  # made on the first depth image
         self._mark: np.ndarray | None = None  # scratch for the height layer's kernels (made with the rays)
+        self._scratch: np.ndarray | None = None
         # Ground past these limits reads as lethal (update with a depth image); None: not blocked.
         self.limits: GeometryLimits | None = None
         self.height_settings = HeightSettings()
@@ -110,6 +110,7 @@ class GroundMap:
         if self._depth_rays is None:
             self._depth_rays = DepthRays(self.camera, self._pixels.flat)
             self._mark = np.zeros(self._n * self._n, dtype=np.uint8)
+            self._scratch = np.zeros((self._n, self._n, 4))  # a frame's own mean returns (frame_shape)
         points, depths = self._depth_rays.points(depth.image, depth.axes, depth.centre)  # one per distinct pixel
         kernels.map_vote_at(
             self.evidence,
@@ -126,33 +127,24 @@ class GroundMap:
             self._fade,
         )
         h, res = self.height_settings, c.map_resolution_m
-        trusted = self._layers["trusted"]
-        touched = height_kernels.height_vote(
-            tuple(self.heights),
-            trusted,
-            (h.min_returns, h.max_error_m**2),
-            *self._origin_xy,
-            1.0 / res,
-            points,
-            depths,
-            h.max_range_m,
-            np.asarray(depth.centre, dtype=np.float64),
-            h.errors,
-            self._mark,
+        limits = self.limits is not None and self.geometry_column is not None
+        height_kernels.height_vote(
+            tuple(self.heights), *self._origin_xy, 1.0 / res, points, depths, h.max_range_m, depth.centre, h.errors, self._mark
         )
-        if self.limits is None or self.geometry_column is None:
-            return
-        near = (*self._origin_xy, res, *at_xy, h.block_range_m)
-        cells = height_kernels.to_check(touched, trusted, self._layers["checked"], CHECK_TOLERANCE_M, near, disc_reach(h, res), self._mark)
-        self._block(cells)
+        touched = height_kernels.frame_shape(
+            points, depths, h.max_range_m, *self._origin_xy, 1.0 / res, h.errors, self._scratch, self._shape, self._mark
+        )
+        if limits:
+            dx = self._origin_xy[0] + (touched % self._n + 0.5) * res - at_xy[0]
+            dy = self._origin_xy[1] + (touched // self._n + 0.5) * res - at_xy[1]
+            self._block(touched[dx * dx + dy * dy <= h.block_range_m**2])
 
     def _block(self, cells: np.ndarray) -> None:
         """Cells (flat indices ``cells``) whose geometry is past :attr:`limits` are blocked until
         their geometry no longer is (the ``blocked`` layer); the cells within the limits' reach
         of a blocked one read as the first lethal column (:meth:`_reblock`)."""
-        n, res = self._n, self.settings.map_resolution_m
-        geometry = geometry_of_cells(self.heights, cells // n, cells % n, res, self.height_settings, self._layers["trusted"])
-        lethal = self.limits.lethal(geometry)
+        n = self._n
+        lethal = self.limits.lethal(self._shape_geometry(cells // n, cells % n))
         blocked = self._layers["blocked"].reshape(-1)
         was = blocked[cells].copy()
         blocked[cells] = lethal
@@ -192,8 +184,30 @@ class GroundMap:
             rows = np.floor((flat[:, 1] - self._origin_xy[1]) / res)
         inside = np.isfinite(cols) & np.isfinite(rows)
         cols, rows = np.where(inside, cols, -1).astype(np.int64), np.where(inside, rows, -1).astype(np.int64)
-        out = geometry_of_cells(self.heights, rows, cols, res, self.height_settings)
+        out = self.geometry_of(rows, cols)
         return out.reshape(*np.shape(points)[:-1], 3)
+
+    def geometry_of(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Slope [rad], roughness [m] and step [m] (N, 3) of the cells (``rows``, ``cols``): the
+        slope and the step from the ground's shape (the height differences the frames show,
+        :func:`terrapref.groundmap.height_compiled.shape_geometry`), what the limits are checked
+        against; the roughness from the heights (:func:`geometry_of_cells`). NaN where unknown."""
+        out = self._shape_geometry(rows, cols)
+        heights = geometry_of_cells(self.heights, rows, cols, self.settings.map_resolution_m, self.height_settings)
+        out[:, 1] = heights[:, 1]
+        return out
+
+    def _shape_geometry(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Slope [rad], NaN and step [m] (N, 3) of the cells (``rows``, ``cols``) from the ground's shape."""
+        h, res = self.height_settings, self.settings.map_resolution_m
+        out = np.empty((len(rows), 3))
+        rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
+        height_kernels.shape_geometry(self._shape, 1.0 / h.max_error_m**2, rows, cols, disc_reach(h, res), res, out)
+        return out
+
+    @property
+    def _shape(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        return self._layers["dx"], self._layers["dx_weight"], self._layers["dy"], self._layers["dy_weight"]
 
     def layer(self, name: str) -> np.ndarray:
         """The layer ``name`` of :attr:`LAYERS`, (n, n) or (n, n, K + 1) (rows y, columns x): the
