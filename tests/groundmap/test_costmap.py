@@ -79,8 +79,8 @@ def test_the_costmaps_layers_hold_each_cells_speed_and_the_height_layers_geometr
     elevation[...] = (0.2 * res * cols).astype(np.float32)  # a ramp up along x of grade 0.2
     gmap.layer("returns")[...] = 3  # each cell's returns agreeing
     gmap.layer("weight")[...] = 3 / 0.01**2  # ... each known to 1 cm
-    gmap.layer("dx")[...], gmap.layer("dx_weight")[...] = 0.2 * res, 1e4  # and the differences along x and y the frames showed
-    gmap.layer("dy_weight")[...] = 1e4
+    for axis, rise in (("x", 0.2 * res), ("y", 0.0)):  # and the differences between neighbours the frames showed
+        gmap.layer(f"d{axis}")[...], gmap.layer(f"d{axis}_run")[...], gmap.layer(f"d{axis}_weight")[...] = rise, res, 1e4
     costmap = stage.costmap(gmap)
     speeds = np.array([0.0, 0.4, 0.6, 0.8, 1.5, np.nan])  # K = 4 columns, the background, never seen
     full = with_layers(costmap, gmap, speeds, 2.0)

@@ -4,13 +4,26 @@ pose, and the ground's geometry read from it as grid_map's traversability filter
 Each frame's depth image, read at the pixels the map reads its classes at (the ground every
 0.1 m ahead, as a level camera over flat ground sees it: about one return a cell), gives returns
 in the world: the optical centre plus the depth times the pixel's ray (the camera placed by the
-robot's pose, its height, pitch and roll). Each cell keeps the mean height of the returns that
-fell in it, how many did and their spread (the ``elevation``, ``returns`` and ``spread`` layers,
-terrapref.groundmap.layers); its height is trusted once enough returns agree
-(:class:`HeightSettings`). A cell's geometry comes from the trusted cells within ``radius_m`` of
-it: the slope of the least-squares plane through them and the roughness (their heights' standard
-deviation about that plane), unknown (NaN) where fewer than three are trusted; and the step, the
-height range over the cell and its eight neighbours, unknown where fewer than two of them are.
+robot's pose, its height, pitch and roll). Each return weighs the inverse of its variance
+(:class:`HeightSettings`: a stereo camera's error growing with the square of the depth, the
+camera's attitude known to a degree or so). Each cell keeps the weighted mean height of the
+returns that fell in it, how many did, their spread and their weights (the ``elevation``,
+``returns``, ``spread`` and ``weight`` layers, terrapref.groundmap.layers); its height is trusted
+once its standard error, by the sensor's errors and by the spread alike, is small enough.
+
+The ground's geometry is read from its shape rather than from those heights. A camera whose
+attitude errs by a degree or two (its mount's play and vibration, unknown to the planner) puts
+every return of a frame off by one plane through the camera: 0.17-0.35 m at 5-10 m. Ground seen
+in different frames (at the edge of the view, behind a mound, as the vehicle turns) then gets
+heights that disagree by as much, and a step or a slope read across them is a ghost. Within one
+frame there is none: so each frame's returns give each cell its gradient (the plane through its
+own mean return and its two neighbours' along x and y), and the gradients, weighed by their
+variance, are fused over frames (the ``dx`` and ``dy`` layers). A cell's slope is that of the
+mean gradient within ``radius_m`` of it (a least-squares plane's, on a regular grid), unknown
+where fewer than three gradients are known; its step is the height range over the cell and its
+eight neighbours, their heights summed from the differences between them, unknown where fewer
+than two of them are. The roughness (the heights' standard deviation about the plane fitted
+through the trusted heights within ``radius_m``) is read from the heights, for the costmap only.
 
 Ground the vehicle cannot cross within its limits is lethal, from its config and never learned
 (:class:`GeometryLimits`): a slope past its roll or its pitch limit, whichever is smaller (a
@@ -37,20 +50,23 @@ class HeightSettings:
     """How the height layer is read from depth and its geometry from the layer.
 
     Attributes:
-        radius_m: the disc round a cell its plane is fitted in [m] (0.3 m: half the vehicle's
-            width, as grid_map's slope filter is set for a robot of this size).
-        min_returns: a cell's elevation counts toward geometry once this many returns fell in it.
+        radius_m: the disc round a cell its slope (and its plane, for the roughness) is read
+            over [m] (0.3 m: half the vehicle's width, as grid_map's slope filter is set for a
+            robot of this size).
+        min_returns: a cell's elevation is trusted once this many returns fell in it...
         max_error_m: ... and once the standard error of their mean is at most this [m], both as
             their spread shows it and as the sensor's errors below put it: a noisy depth
             camera's far returns count once enough of them agree, as an elevation map's variance
-            gates its cells.
+            gates its cells. A gradient of the ground's shape counts once its difference over
+            a cell is known so well.
         base_error_m, depth_error_per_m2, attitude_error_deg: a return's height error (one
             standard deviation) as the map takes it: ``base_error_m``, a stereo camera's depth
             error of ``depth_error_per_m2`` times the depth squared, and the camera's attitude
             known to ``attitude_error_deg`` (its mount's play and vibration: a height off by the
             return's distance times its tangent), added in quadrature. Each return weighs the
             inverse of its variance, so the near returns of ground the vehicle comes to outweigh
-            the far ones it first saw it by (as elevation mapping fuses its measurements).
+            the far ones it first saw it by (as elevation mapping fuses its measurements). The
+            gradients of one frame leave the attitude's error out: it tilts the whole frame.
         max_range_m: returns deeper than this [m along the optical axis] are not gathered (a
             camera's attitude known to a degree or two puts far ground's heights that far off).
         block_range_m: the ground this near the vehicle has its geometry checked against the

@@ -196,27 +196,25 @@ def frame_shape(
     inv_res: float,
     errors: tuple[float, float, float],
     scratch: np.ndarray,
-    shape: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    shape: tuple[np.ndarray, ...],
     mark: np.ndarray,
 ) -> np.ndarray:
     """Fold one frame's returns (``points`` (N, 3) world [m], NaN rows none; their ``depth`` (N,),
-    those deeper than ``max_range_m`` left out) into the ground's ``shape``: each cell's gradient,
-    as the height differences over one cell along x and along y it gives (``shape``: the x
-    difference, its weight, the y difference, its weight; (n, n) float32), as this frame alone
-    shows them. The frame's own returns in each cell are averaged, weighted by the inverse of
-    their variance from ``errors``' base and depth terms (``scratch`` (n, n, 5) float64: the
-    weighted sums of x, y, z, the weights, all 0, left all 0); the plane through a cell's mean
-    point and those of its neighbours along x and along y gives the frame's gradient there,
-    folded into the cell's weighted means, weighed by the inverse of its variance. The frame's
-    attitude error tilts all its returns as one plane through the camera, which changes a
-    gradient by the tangent of the error (0.035 for 2 deg) but makes no step: gradients gathered
-    over frames whose attitudes erred differently agree, where heights do not. The cells the
-    frame's returns fell in (flat indices, each once). ``mark`` (n * n,) uint8, all 0: scratch,
+    those deeper than ``max_range_m`` left out) into the ground's ``shape`` (terrapref.groundmap.layers):
+    each cell's height difference to its neighbour along x (and the run between them along x, and
+    their weight) and likewise along y, as this frame alone shows them. The frame's own returns in
+    each cell are averaged, weighted by the inverse of their variance from ``errors``' base and
+    depth terms (``scratch`` (n, n, 4) float64: the weighted sums of x, y, z and the weights, all
+    0, left all 0); a cell's mean return differenced with its neighbours' gives its differences,
+    each folded into the cell's weighted mean, weighed by the inverse of its variance. The
+    frame's attitude error tilts all its returns as one plane through the camera, which changes
+    a difference over a cell by a few millimetres (0.035 of its run for 2 deg): gathered over
+    frames whose attitudes erred differently, differences agree, where heights do not. The cells
+    the frame's returns fell in (flat indices, each once). ``mark`` (n * n,) uint8, all 0: scratch,
     left all 0."""
-    gx, wx, gy, wy = shape
+    dx, dx_run, dxw, dy, dy_run, dyw = shape
     base, per_m2, _ = errors
     n = scratch.shape[0]
-    res = 1.0 / inv_res
     touched = np.empty(points.shape[0], np.int64)
     count = 0
     for i in range(points.shape[0]):
@@ -239,20 +237,18 @@ def frame_shape(
     for i in range(count):
         t = touched[i]
         row, col = t // n, t % n
-        if col + 1 >= n or row + 1 >= n or scratch[row, col + 1, 3] == 0.0 or scratch[row + 1, col, 3] == 0.0:
-            continue
-        w0, w1, w2 = scratch[row, col, 3], scratch[row, col + 1, 3], scratch[row + 1, col, 3]
+        w0 = scratch[row, col, 3]
         x0, y0, z0 = scratch[row, col, 0] / w0, scratch[row, col, 1] / w0, scratch[row, col, 2] / w0
-        ax, ay, az = scratch[row, col + 1, 0] / w1 - x0, scratch[row, col + 1, 1] / w1 - y0, scratch[row, col + 1, 2] / w1 - z0
-        bx, by, bz = scratch[row + 1, col, 0] / w2 - x0, scratch[row + 1, col, 1] / w2 - y0, scratch[row + 1, col, 2] / w2 - z0
-        det = ax * by - ay * bx
-        if abs(det) < 0.25 * res * res:  # the three points nearly on a line: no plane
-            continue
-        a = (az * by - ay * bz) / det  # dz/dx
-        b = (ax * bz - az * bx) / det  # dz/dy
-        w = 1.0 / (1.0 / w0 + 0.5 / w1 + 0.5 / w2)  # roughly: a difference's variance, over one cell
-        _fold(gx, wx, row, col, a * res, w)
-        _fold(gy, wy, row, col, b * res, w)
+        w1 = scratch[row, col + 1, 3] if col + 1 < n else 0.0
+        w2 = scratch[row + 1, col, 3] if row + 1 < n else 0.0
+        if w1 > 0.0:
+            w = 1.0 / (1.0 / w0 + 1.0 / w1)
+            _fold(dx, dxw, row, col, scratch[row, col + 1, 2] / w1 - z0, w)
+            _fold(dx_run, dxw, row, col, scratch[row, col + 1, 0] / w1 - x0, w, False)
+        if w2 > 0.0:
+            w = 1.0 / (1.0 / w0 + 1.0 / w2)
+            _fold(dy, dyw, row, col, scratch[row + 1, col, 2] / w2 - z0, w)
+            _fold(dy_run, dyw, row, col, scratch[row + 1, col, 1] / w2 - y0, w, False)
     for i in range(count):
         t = touched[i]
         mark[t] = 0
@@ -261,16 +257,20 @@ def frame_shape(
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _fold(mean: np.ndarray, weight: np.ndarray, row: int, col: int, value: float, w: float) -> None:
-    """``value`` of weight ``w`` folded into the weighted mean ``mean[row, col]`` (its weights' sum ``weight[row, col]``)."""
+def _fold(mean: np.ndarray, weight: np.ndarray, row: int, col: int, value: float, w: float, add: bool = True) -> None:
+    """``value`` of weight ``w`` folded into the weighted mean ``mean[row, col]`` (its weights' sum
+    ``weight[row, col]``, grown by ``w`` where ``add``: one sum kept for means folded together)."""
     total = np.float64(weight[row, col]) + w
+    if not add:
+        total = np.float64(weight[row, col])
     mean[row, col] = np.float64(mean[row, col]) + (value - np.float64(mean[row, col])) * (w / total)
-    weight[row, col] = total
+    if add:
+        weight[row, col] = total
 
 
 @njit(cache=True, nogil=True)
 def shape_geometry(
-    shape: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    shape: tuple[np.ndarray, ...],
     least_weight: float,
     rows: np.ndarray,
     cols: np.ndarray,
@@ -279,38 +279,38 @@ def shape_geometry(
     out: np.ndarray,
 ) -> None:
     """Slope [rad] and step [m] of the cells (``rows``, ``cols``) into ``out`` (N, 3: slope, NaN
-    for the roughness, which heights give, step), from the ground's ``shape`` (:func:`frame_shape`): a difference counts once its weight is at least
-    ``least_weight`` (its standard error at most 1 / sqrt of it). The slope is that of the mean
-    gradient over the cells within ``reach`` cells (a disc) of the cell, the differences' mean
-    per ``res`` (the gradient of the least-squares plane through heights on a regular grid);
-    NaN where fewer than three differences along x or along y are known. The step is the height
-    range over the cell and its eight neighbours, their heights relative to it summed from the
-    differences between them (a corner by either way round, averaged where both are known); NaN
-    where fewer than two of the nine are known."""
-    gx, wx, gy, wy = shape
-    n = gx.shape[0]
+    for the roughness, which heights give, step), from the ground's ``shape`` (:func:`frame_shape`):
+    a difference counts once its weight is at least ``least_weight`` (its standard error at most 1
+    / sqrt of it). The slope is that of the gradient over the cells within ``reach`` cells (a disc)
+    of the cell: along x, the rise of their differences along x over their run, and along y
+    likewise; NaN where fewer than three differences are known along either. A step within the
+    disc adds its height once to each row (or column) it crosses, however the returns fell about
+    it, so it reads as the slope of its height over the disc, not as a wall. The step is the height range over the cell
+    and its eight neighbours, their heights relative to it summed from the differences between
+    them (a corner by either way round, averaged where both are known); NaN where fewer than two
+    of the nine are known."""
+    dx, dx_run, dxw, dy, dy_run, dyw = shape
+    n = dx.shape[0]
     h = np.empty((3, 3))
     for i in range(rows.shape[0]):
         r0, c0 = rows[i], cols[i]
         out[i, 0] = out[i, 1] = out[i, 2] = np.nan
         if not (1 <= r0 < n - 1 and 1 <= c0 < n - 1):
             continue
-        sx = sy = 0.0
+        rise_x = run_x = rise_y = run_y = 0.0
         mx = my = 0
         for dr in range(max(-reach, -r0), min(reach, n - 1 - r0) + 1):
             span = int(math.sqrt(reach * reach - dr * dr) + 1e-9)
             r = r0 + dr
             for dc in range(max(-span, -c0), min(span, n - 1 - c0) + 1):
                 c = c0 + dc
-                if wx[r, c] >= least_weight:
-                    sx += gx[r, c]
-                    mx += 1
-                if wy[r, c] >= least_weight:
-                    sy += gy[r, c]
-                    my += 1
-        if mx >= 3 and my >= 3:
-            out[i, 0] = math.atan(math.hypot(sx / mx, sy / my) / res)
-        out[i, 2] = _step(gx, wx, gy, wy, least_weight, r0, c0, h)
+                if dxw[r, c] >= least_weight:
+                    rise_x, run_x, mx = rise_x + dx[r, c], run_x + dx_run[r, c], mx + 1
+                if dyw[r, c] >= least_weight:
+                    rise_y, run_y, my = rise_y + dy[r, c], run_y + dy_run[r, c], my + 1
+        if mx >= 3 and my >= 3 and run_x > 0.0 and run_y > 0.0:
+            out[i, 0] = math.atan(math.hypot(rise_x / run_x, rise_y / run_y))
+        out[i, 2] = _step(dx, dxw, dy, dyw, least_weight, r0, c0, h)
 
 
 @njit(cache=True, nogil=True, inline="always")

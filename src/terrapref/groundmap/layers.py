@@ -58,12 +58,15 @@ LAYERS: tuple[Layer, ...] = (
     Layer("returns", np.uint32, 0),
     Layer("spread", np.float32, 0.0),
     Layer("weight", np.float32, 0.0),
-    # The ground's shape: each cell's height difference to its neighbour along x and along y as
-    # each frame alone shows it, weighted means over the frames, and their weights' sums [1 / m^2]
-    # (terrapref.groundmap.height_compiled.frame_shape): what its slope and steps are read from.
+    # The ground's shape, as each frame alone shows it, fused over frames (weighted means;
+    # terrapref.groundmap.height_compiled.frame_shape): each cell's height difference to its
+    # neighbour along x [m], the run between their returns along x [m], the weights' sum
+    # [1 / m^2], and likewise along y. What its slope and steps are read from.
     Layer("dx", np.float32, 0.0),
+    Layer("dx_run", np.float32, 0.0),
     Layer("dx_weight", np.float32, 0.0),
     Layer("dy", np.float32, 0.0),
+    Layer("dy_run", np.float32, 0.0),
     Layer("dy_weight", np.float32, 0.0),
     # 1 where the ground's geometry is past the vehicle's limits (terrapref.groundmap.height):
     # the cell reads as lethal whatever its evidence.

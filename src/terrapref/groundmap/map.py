@@ -206,8 +206,9 @@ class GroundMap:
         return out
 
     @property
-    def _shape(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        return self._layers["dx"], self._layers["dx_weight"], self._layers["dy"], self._layers["dy_weight"]
+    def _shape(self) -> tuple[np.ndarray, ...]:
+        """The ground's shape as the kernels take it (terrapref.groundmap.height_compiled.frame_shape)."""
+        return tuple(self._layers[name] for name in ("dx", "dx_run", "dx_weight", "dy", "dy_run", "dy_weight"))
 
     def layer(self, name: str) -> np.ndarray:
         """The layer ``name`` of :attr:`LAYERS`, (n, n) or (n, n, K + 1) (rows y, columns x): the
