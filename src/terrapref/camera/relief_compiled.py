@@ -14,7 +14,7 @@ them, where the pixel's ray meets the segment joining the two ground points (the
 as straight between samples, so on a plane every pixel is exact). A sample projecting below the
 rows already filled is hidden (behind a crest) and fills nothing. Along a segment the inverse of
 the depth is affine in the row's ray offset, so the march writes each pixel's inverse depth with
-one addition.
+one multiply-add.
 
 The step after a sample is the longer of two: the ground of about one pixel row of a flat
 ground's image there, ``(u^2 + c^2) / (c fy)`` for a camera ``c`` over the ground (a crest
@@ -204,8 +204,6 @@ def _march(
     ny, nx = heights.shape
     where = (centre[0] * per_m - 0.5, centre[1] * per_m - 0.5, per_m, nx - 1.0 - 1e-9, ny - 1.0 - 1e-9, nx, shift, steps.shape[1])
     per_row, clearance2, cap = 1.0 / (clearance * fy), clearance * clearance, 2.0 * max_range_m + 1.0
-    flat_depth = depth.reshape(-1)
-    down = ray_b[1] - ray_b[0] if height > 1 else 0.0  # the ray offset's change from one row to the next
     first = True
     while n_live > 0:
         _where(u, ratio, last, before, hx, hy, mx, my, where, new, fu, fv, cell, block)
@@ -214,40 +212,60 @@ def _march(
         _project(new, u, dh, dm, fh, fm, wd, wf, stop, fy, cy)
         before, last, new = last, new, before
         if not first:
-            for col in range(width):
-                if not live[col]:
-                    continue
-                r = row[col]
-                lo = max(stop[col], 0)
-                if lo <= r:
-                    # Rows lo..r see this sample or nearer: their rays meet the segment from the
-                    # last sample at depth cross / (dd - b df), so 1 / depth = p + q b.
-                    d, f = wd[col], wf[col]
-                    dd, df = d - vd[col], f - vf[col]
-                    cross = vf[col] * dd - vd[col] * df
-                    if cross != 0.0:
-                        p, q = dd / cross, -df / cross
-                    else:
-                        p, q = 1.0 / f, 0.0
-                    inverse, change = p + q * ray_b[r], q * down
-                    at = np.uint64(r * width + col)
-                    for _ in range(r + 1 - lo):
-                        flat_depth[at] = inverse
-                        inverse -= change
-                        at -= np.uint64(width)
-                    row[col] = lo - 1
-                    if lo == 0:
-                        live[col] = False
-                        n_live -= 1
-                        continue
-                if u[col] > max_range_m:
-                    live[col] = False
-                    n_live -= 1
+            n_live -= _fill(row, live, stop, (vd, vf, wd, wf), u, max_range_m, ray_b, depth)
         first = False
         vd, wd = wd, vd
         vf, wf = wf, vf
         _advance(u, taken, ratio, longest, per_row, clearance2, cap)
     return row
+
+
+@njit(cache=True, nogil=True)
+def _fill(
+    row: np.ndarray,
+    live: np.ndarray,
+    stop: np.ndarray,
+    samples: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    u: np.ndarray,
+    max_range_m: float,
+    ray_b: np.ndarray,
+    depth: np.ndarray,
+) -> int:
+    """Fill each live column's rows from ``row`` up to ``stop`` (its sample's, :func:`_project`)
+    with their inverse depths [1/m] in ``depth`` (H, W), and move ``row`` past them; ``samples``:
+    each column's last sample and this one, down and forward (``vd``, ``vf``, ``wd``, ``wf``).
+    A column stops (``live``) at the image's top row or with its sample past ``max_range_m``.
+    Returns how many stopped."""
+    vd, vf, wd, wf = samples
+    height, width = depth.shape
+    flat_depth = depth.reshape(-1)
+    down = ray_b[1] - ray_b[0] if height > 1 else 0.0  # the ray offset's change from one row to the next
+    stopped = 0
+    for col in range(width):
+        if not live[col]:
+            continue
+        r = row[col]
+        lo = max(stop[col], 0)
+        if lo <= r:
+            # Rows lo..r see this sample or nearer: their rays meet the segment from the last
+            # sample at depth cross / (dd - b df), so 1 / depth = p + q b.
+            d, f = wd[col], wf[col]
+            dd, df = d - vd[col], f - vf[col]
+            cross = vf[col] * dd - vd[col] * df
+            if cross != 0.0:
+                p, q = dd / cross, -df / cross
+            else:
+                p, q = 1.0 / f, 0.0
+            inverse, change = p + q * ray_b[r], q * down
+            at = np.uint64(r * width + col)
+            for k in range(r + 1 - lo):  # each row's value on its own: no chain of additions to wait on
+                flat_depth[at] = inverse - k * change
+                at -= np.uint64(width)
+            row[col] = lo - 1
+        if row[col] < 0 or u[col] > max_range_m:
+            live[col] = False
+            stopped += 1
+    return stopped
 
 
 @njit(cache=True, nogil=True)
@@ -381,6 +399,7 @@ def _shade(
     none or out of range, and classes, row by row."""
     height, width = ids.shape
     top = filled.min()
+    lowest = filled.astype(np.int32)  # compared in 32 bits, as wide as the float32 lanes it masks
     range2 = max_range_m * max_range_m
     # Per column: the ray's change per metre of depth in padded-raster cells, and (1 + a^2) / R^2.
     ax, ay, reach = np.empty(width, np.float32), np.empty(width, np.float32), np.empty(width, np.float32)
@@ -400,13 +419,13 @@ def _shade(
             out_ids[:] = unknown
             out_depth[:] = np.nan
             continue
-        b = ray_b[row]
+        b, row32 = ray_b[row], np.int32(row)
         kx, ky = np.float32((b * axes[1, 0] + axes[2, 0]) * per_m), np.float32((b * axes[1, 1] + axes[2, 1]) * per_m)
         bb = np.float32(b * b / range2)
         for col in range(width):
             inverse = out_depth[col]
             # Within range: depth^2 (1 + a^2 + b^2) <= R^2.
-            seen = (row > filled[col]) & (inverse > zero) & (inverse * inverse >= reach[col] + bb)
+            seen = (row32 > lowest[col]) & (inverse > zero) & (inverse * inverse >= reach[col] + bb)
             along = one / inverse if seen else zero
             gx = min(max(x0 + along * (ax[col] + kx), zero), xm)
             gy = min(max(y0 + along * (ay[col] + ky), zero), ym)
