@@ -13,11 +13,13 @@ import numpy as np
 import pytest
 
 from terrapref.camera import CameraConfig, PinholeCamera
+from terrapref.camera.relief_compiled import step_lengths
 from terrapref.camera.render import SegmentationRenderer
 from terrapref.scenario import FORMAT, parse_scenario
 from terrapref.sim import Simulation
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose, Vehicle
+from terrapref.vehicle.ground import Attitude
 from terrapref.world import WorldMap, rasterise
 
 FLAT: dict[str, Any] = {
@@ -136,3 +138,90 @@ def test_a_nearer_range_leaves_the_ground_beyond_it_unseen_and_the_rest_as_it_wa
     np.testing.assert_array_equal(near_depth[kept], depth[kept])
     lost = ~kept & ~np.isnan(depth)  # seen only with the camera's own range: farther than 10 m
     assert lost.sum() > 1000 and (depth[lost] * per_depth[lost] > 10.0 - 1e-4).all()
+
+
+def marched(
+    renderer: SegmentationRenderer, pose: Pose, attitude: Attitude, pixels: np.ndarray, step_m: float = 0.02
+) -> tuple[np.ndarray, np.ndarray]:
+    """Class ids and depths [m along the optical axis, NaN: no ground] of the flat pixel indices
+    ``pixels`` (n,), the slow and plain way: each pixel's ray walked out from the optical centre
+    in steps of ``step_m`` until it first ends below the height field, the crossing then halved
+    down to a micrometre; the class of the cell it meets, unknown past the camera's range."""
+    camera, world = renderer.camera, renderer.world
+    axes, centre = renderer.placement(pose, attitude)
+    rows, cols = np.divmod(pixels, camera.config.width_px)
+    a, b = (cols + 0.5 - camera.cx) / camera.fx, (rows + 0.5 - camera.cy) / camera.fy
+    rays = a[:, None] * axes[0] + b[:, None] * axes[1] + axes[2]  # (n, 3): a metre of depth
+    per_m = np.linalg.norm(rays, axis=1)  # metres of ray per metre of depth
+
+    far = camera.config.max_range_m / per_m
+    before, hit = np.zeros(len(pixels)), np.full(len(pixels), np.nan)
+    for k in range(1, math.ceil(camera.config.max_range_m / step_m) + 1):
+        depth = np.minimum(k * step_m / per_m, far)
+        crossed = np.isnan(hit) & under_at(depth, rays, centre, world)
+        hit[crossed] = depth[crossed]
+        before = np.where(np.isnan(hit), depth, before)
+    found = ~np.isnan(hit)
+    low, high = before[found], hit[found]
+    while (high - low).max(initial=0.0) > 1e-6:
+        middle = 0.5 * (low + high)
+        below = under_at(middle, rays[found], centre, world)
+        low, high = np.where(below, low, middle), np.where(below, middle, high)
+    depth = np.full(len(pixels), np.nan)
+    depth[found] = high
+    ids = np.full(len(pixels), UNKNOWN, dtype=np.uint8)
+    ids[found] = world.class_at((centre + high[:, None] * rays[found])[:, :2])
+    return ids, depth
+
+
+def under_at(depth: np.ndarray, rays: np.ndarray, centre: np.ndarray, ground: WorldMap) -> np.ndarray:
+    """Whether the points at ``depth`` along ``rays`` from ``centre`` lie on or under the ground."""
+    point = centre + depth[:, None] * rays
+    return point[:, 2] <= ground.height_at(point[:, :2])
+
+
+@pytest.mark.parametrize("attitude", [Attitude(0.0, -0.05, 0.15), Attitude(0.0, 0.12, -0.2)], ids=["rolled-left", "pitched-rolled-right"])
+def test_over_rolling_ground_and_a_mound_the_frame_agrees_with_each_rays_own_march(attitude: Attitude) -> None:
+    """The march samples each column's ground and takes it as straight between samples; against
+    every pixel's ray walked to the ground on its own (2,000 pixels of the full frame, the camera
+    rolled and pitched off the ground's own attitude), 99.5% of them see the same class, and of
+    the pixels both see ground at, 99.5% at depths within 1% or 2 cm (the rest lie on the
+    silhouettes of crests, a row's breadth off)."""
+    relief = [
+        {"noise": {"amplitude_m": 0.5, "wavelength_m": 10.0, "seed": 1}},
+        {"mound": {"center": [18.0, 21.0], "radius": 2.5, "height_m": 0.8}},
+    ]
+    terrain = [
+        {"class": "mud", "circle": {"center": [16.0, 17.0], "radius": 2.0}},
+        {"class": "rock", "polygon": [[20.0, 19.0], [24.0, 19.0], [24.0, 26.0], [20.0, 26.0]]},
+        {"class": "water", "circle": {"center": [30.0, 24.0], "radius": 4.0}},
+    ]
+    ground = world(relief, terrain)
+    renderer = SegmentationRenderer(PinholeCamera(), ground)
+    pose = Pose(10.0, 20.0, 0.1)
+    attitude = attitude._replace(z_m=Vehicle(pose, ground=ground).attitude.z_m)
+    ids, depth = renderer.render_with_depth(pose, attitude)
+    pixels = np.random.default_rng(0).choice(ids.size, 2000, replace=False)
+    expected_ids, expected_depth = marched(renderer, pose, attitude, pixels)
+    got_ids, got_depth = ids.reshape(-1)[pixels], depth.reshape(-1)[pixels]
+    assert (expected_ids != UNKNOWN).sum() > 1000 and len(np.unique(expected_ids)) >= 4  # ground, mud, rock, water, sky
+    assert (got_ids == expected_ids).mean() >= 0.995
+    assert (np.isnan(got_depth) == np.isnan(expected_depth)).mean() >= 0.995
+    both = ~np.isnan(got_depth) & ~np.isnan(expected_depth)
+    close = np.abs(got_depth[both] - expected_depth[both]) <= np.maximum(0.01 * expected_depth[both], 0.02)
+    assert close.mean() >= 0.995
+
+
+def test_the_marchs_step_is_a_block_on_a_plane_and_on_a_parabola_the_step_that_keeps_its_chord_within_the_tolerance() -> None:
+    """Ground taken as straight over a step L strays from ground of curvature c by c L^2 / 8: on
+    z = x^2 / 2 (c = 1 /m) a tolerance of 5 mm allows L = sqrt(8 * 0.005) = 0.2 m; a plane
+    allows any step, and gets the longest, a block (16 cells of 5 cm). Blocks within two of the
+    field's edge are left aside: beyond it the ground goes on level, a crease."""
+    res, tolerance = 0.05, 0.005
+    x = (np.arange(160) + 0.5) * res
+    plane = np.broadcast_to(0.3 * x[None, :] - 0.1 * x[:, None] + 2.0, (160, 160)).astype(np.float32)
+    parabola = np.broadcast_to(0.5 * x[None, :] ** 2, (160, 160)).astype(np.float32)
+    inner = (slice(2, -2), slice(2, -2))
+    np.testing.assert_allclose(step_lengths(plane, res, 4, tolerance, 2 * res)[inner], 16 * res)
+    np.testing.assert_allclose(step_lengths(parabola, res, 4, tolerance, 2 * res)[inner], 0.2, rtol=1e-3)
+    assert step_lengths(parabola, res, 4, 1e-6, 2 * res).max() == pytest.approx(2 * res)  # never under two cells

@@ -1,16 +1,35 @@
-"""The relief renderer's inner loop, compiled (Numba): a frame's classes and depth over a height
-field, one image column at a time.
+"""The relief renderer's inner loops, compiled (Numba): a frame's classes and depth over a height
+field, in two passes.
 
-An image column back-projects to a plane through the optical centre. The loop walks that plane's
-trace on the ground away from the camera, sampling the height field; each sample projects to a
-(continuous) row of the column. Rows fill from the bottom of the image up: the rows whose
-centres lie between two samples' rows see the ground between them, where the pixel's ray meets
-the segment joining the two ground points (the ground is taken as linear between samples, so
-on a plane every pixel is exact). A sample projecting below the rows already filled is hidden
-(behind a crest), and fills nothing. Steps are two grid cells near the camera and about a pixel
-row's ground farther out.
+**March**, every image column together, one sample each at a time. An image column
+back-projects to a plane through the optical centre, tilted when the camera is pitched or
+rolled. Each column walks the ground's trace in its plane away from the camera, a sample at each
+horizontal distance ``u`` along the plane's level direction: the plane's point at a drop
+``delta`` below the optical centre lies ``delta * m`` to the side of that line (``m``: the
+plane's level offset per metre of drop), so the drop at which the plane meets the ground is
+found by one Newton step on the bilinear height field from the drop the last two samples
+predict. Each sample projects to a (continuous) row of its column, and rows fill from the bottom
+of the image up: the rows whose centres lie between two samples' rows see the ground between
+them, where the pixel's ray meets the segment joining the two ground points (the ground is taken
+as straight between samples, so on a plane every pixel is exact). A sample projecting below the
+rows already filled is hidden (behind a crest) and fills nothing. Along a segment the inverse of
+the depth is affine in the row's ray offset, so the march writes each pixel's inverse depth with
+one multiply-add.
 
-Float64 throughout. Compiled on first use and cached beside this file.
+The step after a sample is the longer of two: the ground of about one pixel row of a flat
+ground's image there, ``(u^2 + c^2) / (c fy)`` for a camera ``c`` over the ground (a crest
+between samples then moves a silhouette by less than a row); and the longest over which the
+ground, taken as straight, stays within a tolerance of the height field around the sample
+(:func:`step_lengths`, from the field's curvature, at least two cells: a wall or a ledge is
+walked two cells a step, smooth ground in longer strides).
+
+**Shade**, one image row at a time: each pixel's depth from its inverse, the range check and
+the class of its ground point, in loops the compiler vectorises, as the flat renderer's.
+
+The march's loops over the columns are split so that the compiler vectorises the arithmetic
+(the height field's four corners are read in a loop of their own). Float64 in the march; the
+shading in float32 (depths are float32, and a class cell is found to within 1e-4 of a cell).
+Compiled on first use and cached beside this file.
 """
 
 from __future__ import annotations
@@ -24,6 +43,44 @@ from terrapref.world.height_compiled import height_at
 
 
 @njit(cache=True, nogil=True)
+def step_lengths(heights: np.ndarray, res: float, shift: int, tolerance_m: float, near_m: float) -> np.ndarray:
+    """The longest step of the march [m] from a point in each block of ``2**shift`` x
+    ``2**shift`` cells of the height field ``heights`` (ny, nx) [m] (cells of ``res`` [m]):
+    shape (ceil(ny / 2**shift), ceil(nx / 2**shift)) float64.
+
+    Ground taken as straight over a step of ``L`` strays from the height field by at most
+    ``K L^2 / 8``, where ``K`` bounds the field's second derivative along the step; ``K`` is
+    taken from the cells' second differences (across, along, and the twist) over the block and
+    the blocks around it (a step is at most a block long, so it stays among them). The step is
+    the ``L`` that keeps this within ``tolerance_m``, at least ``near_m`` and at most a block.
+    """
+    ny, nx = heights.shape
+    block = 1 << shift
+    by, bx = (ny + block - 1) >> shift, (nx + block - 1) >> shift
+    bend = np.zeros((by, bx))
+    for r in range(ny):
+        rm, rp = max(r - 1, 0), min(r + 1, ny - 1)
+        for c in range(nx):
+            cm, cp = max(c - 1, 0), min(c + 1, nx - 1)
+            h = np.float64(heights[r, c])
+            across = abs(np.float64(heights[r, cp]) - 2.0 * h + np.float64(heights[r, cm]))
+            along = abs(np.float64(heights[rp, c]) - 2.0 * h + np.float64(heights[rm, c]))
+            twist = abs(np.float64(heights[rp, cp]) - np.float64(heights[rp, c]) - np.float64(heights[r, cp]) + h)
+            bend[r >> shift, c >> shift] = max(bend[r >> shift, c >> shift], across + along + twist)
+    out = np.empty((by, bx))
+    longest = block * res
+    for i in range(by):
+        for j in range(bx):
+            k = 0.0  # [m per cell^2]
+            for ii in range(max(i - 1, 0), min(i + 2, by)):
+                for jj in range(max(j - 1, 0), min(j + 2, bx)):
+                    k = max(k, bend[ii, jj])
+            step = res * math.sqrt(8.0 * tolerance_m / k) if k > 0.0 else longest
+            out[i, j] = min(max(step, near_m), longest)
+    return out
+
+
+@njit(cache=True, nogil=True)
 def render_relief(
     axes: np.ndarray,
     centre: np.ndarray,
@@ -31,8 +88,11 @@ def render_relief(
     ray_b: np.ndarray,
     max_range_m: float,
     fy: float,
+    cy: float,
     heights: np.ndarray,
     res: float,
+    steps: np.ndarray,
+    shift: int,
     raster: np.ndarray,
     nx: int,
     x_max: float,
@@ -49,135 +109,327 @@ def render_relief(
         ray_a, ray_b: (W,) and (H,) each column's and row's ray offset through the pixel
             centres, ``(col + 0.5 - cx) / fx`` and ``(row + 0.5 - cy) / fy``.
         max_range_m: pixels whose ray meets the ground farther from the centre see nothing.
-        fy: the vertical focal length [px] (sets the step far from the camera).
-        heights: (ny, nx) float32 ground heights at the cell centres [m].
+        fy, cy: the vertical focal length and principal point [px].
+        heights: (ny, nx) float32 ground heights at the cell centres [m], at least 2 x 2.
         res: the grid's cell size [m].
+        steps, shift: the longest step from each block of ``2**shift`` cells
+            (:func:`step_lengths`).
         raster: the padded class raster, flat (uint8), ``nx`` cells a row.
         x_max, y_max: the largest cell coordinates clipped to (just inside the padded border).
         unknown: the class id of a pixel that sees no ground.
         ids, depth: filled: class ids, and metres along the optical axis (NaN: no ground).
     """
-    height, width = ids.shape
-    ids[:, :] = unknown
-    depth[:, :] = np.nan
     per_m = 1.0 / res
     below = height_at(heights, per_m, centre[0], centre[1]) - centre[2]  # the ground under the camera, from it [m]
     clearance = max(-below, 0.2)
-    # Every column's state: its trace's direction, the lowest row not yet filled, its last sample
-    # (first, the ground under the camera) in camera coordinates, down and forward.
-    hx, hy, row = _traces(axes, ray_a, height)
-    columns = np.stack((hx, hy, np.full(width, below * axes[1, 2]), np.full(width, below * axes[2, 2])))
-    cells = (raster, nx, x_max, y_max)
-    _march(columns, row, axes, centre, ray_a, ray_b, max_range_m, clearance, fy, heights, per_m, cells, ids, depth)
+    planes = _planes(axes, ray_a)
+    ground = (heights, per_m, steps, shift)
+    filled = _march(planes, -below, clearance, fy, cy, max_range_m, centre, ray_b, ground, depth)
+    _shade(filled, axes, centre, ray_a, ray_b, max_range_m, per_m, raster, nx, x_max, y_max, unknown, ids, depth)
+
+
+@njit(cache=True, nogil=True)
+def _planes(axes: np.ndarray, ray_a: np.ndarray) -> np.ndarray:
+    """Each column's plane, (9, W): its level direction away from the camera (x, y); its level
+    offset per metre of drop ``m`` (x, y); the down and forward camera coordinates of a metre
+    along the level direction (``Dh``, ``Fh``) and of a metre of drop (``Dm``, ``Fm``); and 1
+    where the plane meets the ground (0 for a level plane, which sees none). The plane's point
+    at ``u`` along the level direction and a drop ``delta`` lies at ``(u Dh + delta Dm, u Fh +
+    delta Fm)`` in the column's camera coordinates (down, forward)."""
+    width = ray_a.shape[0]
+    out = np.zeros((9, width))
+    r0, r1, r2 = axes[0, 0], axes[0, 1], axes[0, 2]
+    d0, d1, d2 = axes[1, 0], axes[1, 1], axes[1, 2]
+    f0, f1, f2 = axes[2, 0], axes[2, 1], axes[2, 2]
+    for col in range(width):
+        a = ray_a[col]
+        # The plane holds the column's centre ray p = (a, 0, 1) and the camera's down axis.
+        px, py, pz = a * r0 + f0, a * r1 + f1, a * r2 + f2
+        nxv = py * d2 - pz * d1
+        nyv = pz * d0 - px * d2
+        nzv = px * d1 - py * d0
+        level2 = nxv * nxv + nyv * nyv
+        if level2 < 1e-18 * (level2 + nzv * nzv):
+            continue
+        norm = math.sqrt(level2)
+        hx, hy = nyv / norm, -nxv / norm
+        if hx * px + hy * py < 0.0:
+            hx, hy = -hx, -hy
+        mx, my = nzv * nxv / level2, nzv * nyv / level2  # n . (m, -1) = 0: the plane's point a metre lower
+        out[0, col], out[1, col], out[2, col], out[3, col] = hx, hy, mx, my
+        out[4, col], out[5, col] = d0 * hx + d1 * hy, f0 * hx + f1 * hy
+        out[6, col], out[7, col] = d0 * mx + d1 * my - d2, f0 * mx + f1 * my - f2
+        out[8, col] = 1.0
+    return out
 
 
 @njit(cache=True, nogil=True)
 def _march(
-    columns: np.ndarray,
+    planes: np.ndarray,
+    drop: float,
+    clearance: float,
+    fy: float,
+    cy: float,
+    max_range_m: float,
+    centre: np.ndarray,
+    ray_b: np.ndarray,
+    ground: tuple[np.ndarray, float, np.ndarray, int],
+    depth: np.ndarray,
+) -> np.ndarray:
+    """Walk every column's plane (``planes``, :func:`_planes`) out from the ground under the
+    camera (``drop`` [m] below the optical centre) to the first sample past ``max_range_m``,
+    writing each row's inverse depth [1/m] into ``depth`` (H, W) from the bottom row up.
+    ``ground``: the height field, its cells per metre, and the step lengths and their block's
+    shift (:func:`step_lengths`). Returns each column's lowest row left unwritten, (W,).
+
+    A sample at a time for every column, rather than a column at a time: a column's sample
+    waits on its last (the drop it predicts), and neighbouring columns read neighbouring
+    cells."""
+    heights, per_m, steps, shift = ground
+    height, width = depth.shape
+    hx, hy, mx, my, dh, fh, dm, fm = planes[0], planes[1], planes[2], planes[3], planes[4], planes[5], planes[6], planes[7]
+    row = np.where(planes[8] != 0.0, height - 1, -1)
+    live = planes[8] != 0.0
+    n_live = np.sum(live)
+    # Each column's state: its sample's distance [m], the step to it and that step over the one
+    # before; the drops of its last two samples [m]; its last sample, down and forward.
+    u, taken, ratio = np.zeros(width), np.zeros(width), np.zeros(width)
+    last, before, new = np.full(width, drop), np.full(width, drop), np.empty(width)
+    vd, vf, wd, wf = np.zeros(width), np.zeros(width), np.zeros(width), np.zeros(width)
+    # The sample's cell, its place in it, the cell's corner heights and the longest next step.
+    cell, block, fu, fv = np.empty(width, np.int64), np.empty(width, np.int64), np.empty(width), np.empty(width)
+    corners = np.empty((4, width), np.float32)
+    longest = np.empty(width)
+    stop = np.empty(width, np.int64)  # the highest row a sample fills to
+    ny, nx = heights.shape
+    where = (centre[0] * per_m - 0.5, centre[1] * per_m - 0.5, per_m, nx - 1.0 - 1e-9, ny - 1.0 - 1e-9, nx, shift, steps.shape[1])
+    per_row, clearance2, cap = 1.0 / (clearance * fy), clearance * clearance, 2.0 * max_range_m + 1.0
+    first = True
+    while n_live > 0:
+        _where(u, ratio, last, before, hx, hy, mx, my, where, new, fu, fv, cell, block)
+        _read(cell, block, heights.reshape(-1), nx, steps.reshape(-1), corners, longest)
+        _newton(corners, fu, fv, mx, my, new, centre[2], per_m)
+        _project(new, u, dh, dm, fh, fm, wd, wf, stop, fy, cy)
+        before, last, new = last, new, before
+        if not first:
+            n_live -= _fill(row, live, stop, (vd, vf, wd, wf), u, max_range_m, ray_b, depth)
+        first = False
+        vd, wd = wd, vd
+        vf, wf = wf, vf
+        _advance(u, taken, ratio, longest, per_row, clearance2, cap)
+    return row
+
+
+@njit(cache=True, nogil=True)
+def _fill(
     row: np.ndarray,
+    live: np.ndarray,
+    stop: np.ndarray,
+    samples: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    u: np.ndarray,
+    max_range_m: float,
+    ray_b: np.ndarray,
+    depth: np.ndarray,
+) -> int:
+    """Fill each live column's rows from ``row`` up to ``stop`` (its sample's, :func:`_project`)
+    with their inverse depths [1/m] in ``depth`` (H, W), and move ``row`` past them; ``samples``:
+    each column's last sample and this one, down and forward (``vd``, ``vf``, ``wd``, ``wf``).
+    A column stops (``live``) at the image's top row or with its sample past ``max_range_m``.
+    Returns how many stopped."""
+    vd, vf, wd, wf = samples
+    height, width = depth.shape
+    flat_depth = depth.reshape(-1)
+    down = ray_b[1] - ray_b[0] if height > 1 else 0.0  # the ray offset's change from one row to the next
+    stopped = 0
+    for col in range(width):
+        if not live[col]:
+            continue
+        r = row[col]
+        lo = max(stop[col], 0)
+        if lo <= r:
+            # Rows lo..r see this sample or nearer: their rays meet the segment from the last
+            # sample at depth cross / (dd - b df), so 1 / depth = p + q b.
+            d, f = wd[col], wf[col]
+            dd, df = d - vd[col], f - vf[col]
+            cross = vf[col] * dd - vd[col] * df
+            if cross != 0.0:
+                p, q = dd / cross, -df / cross
+            else:
+                p, q = 1.0 / f, 0.0
+            inverse, change = p + q * ray_b[r], q * down
+            at = np.uint64(r * width + col)
+            for k in range(r + 1 - lo):  # each row's value on its own: no chain of additions to wait on
+                flat_depth[at] = inverse - k * change
+                at -= np.uint64(width)
+            row[col] = lo - 1
+        if row[col] < 0 or u[col] > max_range_m:
+            live[col] = False
+            stopped += 1
+    return stopped
+
+
+@njit(cache=True, nogil=True)
+def _where(
+    u: np.ndarray,
+    ratio: np.ndarray,
+    last: np.ndarray,
+    before: np.ndarray,
+    hx: np.ndarray,
+    hy: np.ndarray,
+    mx: np.ndarray,
+    my: np.ndarray,
+    where: tuple[float, float, float, float, float, int, int, int],
+    guess: np.ndarray,
+    fu: np.ndarray,
+    fv: np.ndarray,
+    cell: np.ndarray,
+    block: np.ndarray,
+) -> None:
+    """Each column's next sample: the drop its last two predict (into ``guess``), the plane's
+    point there, its cell (flat index of the lower-left of the four centres around it), its place
+    in that cell (``fu``, ``fv``) and its block of the step lengths. ``where``: the optical
+    centre in cell-centre units, cells per metre, the largest cell coordinates, the grid's row
+    length, the blocks' shift and their row length."""
+    x0, y0, per_m, x_top, y_top, nx, shift, blocks = where
+    for col in range(u.shape[0]):
+        g = last[col] + (last[col] - before[col]) * ratio[col]
+        guess[col] = g
+        # Just inside the outermost centres, so that the four corners are on the grid.
+        x = min(max(x0 + (u[col] * hx[col] + g * mx[col]) * per_m, 0.0), x_top)
+        y = min(max(y0 + (u[col] * hy[col] + g * my[col]) * per_m, 0.0), y_top)
+        c0, r0 = np.int64(x), np.int64(y)
+        fu[col], fv[col] = x - c0, y - r0
+        cell[col] = r0 * nx + c0
+        block[col] = (r0 >> shift) * blocks + (c0 >> shift)
+
+
+@njit(cache=True, nogil=True)
+def _read(
+    cell: np.ndarray, block: np.ndarray, heights: np.ndarray, nx: int, steps: np.ndarray, corners: np.ndarray, longest: np.ndarray
+) -> None:
+    """The four corner heights (4, W) of each column's cell and its block's longest step."""
+    for col in range(cell.shape[0]):
+        i = np.uint64(cell[col])
+        corners[0, col] = heights[i]
+        corners[1, col] = heights[i + np.uint64(1)]
+        corners[2, col] = heights[i + np.uint64(nx)]
+        corners[3, col] = heights[i + np.uint64(nx + 1)]
+        longest[col] = steps[np.uint64(block[col])]
+
+
+@njit(cache=True, nogil=True)
+def _newton(
+    corners: np.ndarray, fu: np.ndarray, fv: np.ndarray, mx: np.ndarray, my: np.ndarray, drop: np.ndarray, cz: float, per_m: float
+) -> None:
+    """Each column's drop where its plane meets the ground, from its guess in ``drop``: one Newton
+    step on the bilinear field (its height and gradient at the guess's point)."""
+    h00, h01, h10, h11 = corners[0], corners[1], corners[2], corners[3]
+    for col in range(drop.shape[0]):
+        a, b, c, d = np.float64(h00[col]), np.float64(h01[col]), np.float64(h10[col]), np.float64(h11[col])
+        south = a + (b - a) * fu[col]
+        north = c + (d - c) * fu[col]
+        z = south + (north - south) * fv[col]
+        gx = ((b - a) + ((d - c) - (b - a)) * fv[col]) * per_m
+        gy = (north - south) * per_m
+        # The gap between the plane and the ground closes by this much per metre of drop; kept
+        # from vanishing where the plane runs along a steep face.
+        closing = max(1.0 + gx * mx[col] + gy * my[col], 0.5)
+        g = drop[col]
+        drop[col] = g + (cz - g - z) / closing
+
+
+@njit(cache=True, nogil=True)
+def _project(
+    drop: np.ndarray,
+    u: np.ndarray,
+    dh: np.ndarray,
+    dm: np.ndarray,
+    fh: np.ndarray,
+    fm: np.ndarray,
+    wd: np.ndarray,
+    wf: np.ndarray,
+    stop: np.ndarray,
+    fy: float,
+    cy: float,
+) -> None:
+    """Each column's sample in its camera coordinates (down ``wd``, forward ``wf``) and the
+    highest row it fills to: rows whose ray offset is at least ``wd / wf``
+    (a number past the image where the sample is not in front of the camera)."""
+    for col in range(drop.shape[0]):
+        d = u[col] * dh[col] + drop[col] * dm[col]
+        f = u[col] * fh[col] + drop[col] * fm[col]
+        wd[col], wf[col] = d, f
+        at = min(max(d / f * fy + cy - 0.5, -1.0), 1e9) if f > 1e-9 else 1e9
+        stop[col] = np.int64(math.ceil(at))
+
+
+@njit(cache=True, nogil=True)
+def _advance(
+    u: np.ndarray, taken: np.ndarray, ratio: np.ndarray, longest: np.ndarray, per_row: float, clearance2: float, cap: float
+) -> None:
+    """Each column's next distance: a step of a pixel row's ground (``(u^2 + c^2) per_row``) or
+    the ground's ``longest``, whichever is longer; ``taken`` and ``ratio`` follow (the step, and
+    it over the one before, 0 for the second sample). Distances stop at ``cap``."""
+    for col in range(u.shape[0]):
+        r = u[col]
+        step = max((r * r + clearance2) * per_row, longest[col])
+        ratio[col] = step / taken[col] if taken[col] > 0.0 else 0.0
+        taken[col] = step
+        u[col] = min(r + step, cap)
+
+
+@njit(cache=True, nogil=True)
+def _shade(
+    filled: np.ndarray,
     axes: np.ndarray,
     centre: np.ndarray,
     ray_a: np.ndarray,
     ray_b: np.ndarray,
     max_range_m: float,
-    clearance: float,
-    fy: float,
-    heights: np.ndarray,
     per_m: float,
-    cells: tuple[np.ndarray, int, float, float],
+    raster: np.ndarray,
+    nx: int,
+    x_max: float,
+    y_max: float,
+    unknown: int,
     ids: np.ndarray,
     depth: np.ndarray,
 ) -> None:
-    """Step every column's trace out together (so that neighbouring columns read neighbouring
-    cells), filling each column's rows from ``row`` up. ``columns`` (4, W): each column's trace's
-    direction (x, y) and its last sample's camera coordinates (down, forward); ``cells``: the
-    padded raster, its row length and the largest cell coordinates. Steps: two cells, or
-    farther out about a pixel row's ground, (r^2 + c^2) / (c fy) at r for a camera
-    ``clearance`` c over the ground."""
-    d0, d1, d2 = axes[1, 0], axes[1, 1], axes[1, 2]
-    f0, f1, f2 = axes[2, 0], axes[2, 1], axes[2, 2]
-    cx, cy, cz = centre[0], centre[1], centre[2]
-    hx, hy, vd, vf = columns[0], columns[1], columns[2], columns[3]
-    range2, step_m, per_row = max_range_m * max_range_m, 2.0 / per_m, 1.0 / (clearance * fy)
-    open_columns = np.sum(row >= 0)
-    r = 0.0
-    while open_columns > 0 and r <= max_range_m:  # no ground farther horizontally is in range
-        r += max(step_m, (r * r + clearance * clearance) * per_row)
-        for col in range(row.shape[0]):
-            if row[col] < 0:
-                continue
-            px, py = cx + r * hx[col], cy + r * hy[col]
-            wx, wy, wz = px - cx, py - cy, height_at(heights, per_m, px, py) - cz
-            wd = wx * d0 + wy * d1 + wz * d2
-            wf = wx * f0 + wy * f1 + wz * f2
-            if wf > 1e-9:
-                segment = (vd[col], vf[col], wd, wf)
-                k = _fill(col, row[col], ray_b, ray_a[col], axes, centre, segment, range2, per_m, cells, ids, depth)
-                row[col] = k
-                open_columns -= k < 0
-            vd[col], vf[col] = wd, wf
-
-
-@njit(cache=True, nogil=True)
-def _traces(axes: np.ndarray, ray_a: np.ndarray, height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Each column's plane's trace on the ground: the horizontal direction in it away from the
-    camera, (W,) x and y; and the lowest row to fill, (W,): ``height - 1``, or -1 for a column
-    whose plane is level (it sees no ground)."""
-    width = ray_a.shape[0]
-    hx, hy, row = np.zeros(width), np.zeros(width), np.full(width, height - 1, np.int64)
+    """Turn the inverse depths the march wrote (rows below ``filled`` (W,)) into depths, NaN where
+    none or out of range, and classes, row by row."""
+    height, width = ids.shape
+    top = filled.min()
+    lowest = filled.astype(np.int32)  # compared in 32 bits, as wide as the float32 lanes it masks
+    range2 = max_range_m * max_range_m
+    # Per column: the ray's change per metre of depth in padded-raster cells, and (1 + a^2) / R^2.
+    ax, ay, reach = np.empty(width, np.float32), np.empty(width, np.float32), np.empty(width, np.float32)
     for col in range(width):
         a = ray_a[col]
-        # The plane holds the column's centre ray (a, 0, 1) and the camera's down axis.
-        px, py, pz = a * axes[0, 0] + axes[2, 0], a * axes[0, 1] + axes[2, 1], a * axes[0, 2] + axes[2, 2]
-        nxv = py * axes[1, 2] - pz * axes[1, 1]
-        nyv = pz * axes[1, 0] - px * axes[1, 2]
-        nzv = px * axes[1, 1] - py * axes[1, 0]
-        norm = math.sqrt(nxv * nxv + nyv * nyv)  # of the normal x up
-        if norm < 1e-9 * math.sqrt(nxv * nxv + nyv * nyv + nzv * nzv):
-            row[col] = -1
+        ax[col] = a * axes[0, 0] * per_m
+        ay[col] = a * axes[0, 1] * per_m
+        reach[col] = (1.0 + a * a) / range2
+    x0, y0 = np.float32(centre[0] * per_m + 1.0), np.float32(centre[1] * per_m + 1.0)
+    xm, ym = np.float32(x_max), np.float32(y_max)
+    cells = np.empty(width, np.uint32)
+    nx32 = np.uint32(nx)
+    zero, one, nan = np.float32(0.0), np.float32(1.0), np.float32(np.nan)
+    for row in range(height):
+        out_ids, out_depth = ids[row], depth[row]
+        if row <= top:
+            out_ids[:] = unknown
+            out_depth[:] = np.nan
             continue
-        x, y = nyv / norm, -nxv / norm
-        sign = 1.0 if x * px + y * py >= 0.0 else -1.0
-        hx[col], hy[col] = sign * x, sign * y
-    return hx, hy, row
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _fill(
-    col: int,
-    row: int,
-    ray_b: np.ndarray,
-    a: float,
-    axes: np.ndarray,
-    centre: np.ndarray,
-    segment: tuple[float, float, float, float],
-    range2: float,
-    per_m: float,
-    cells: tuple[np.ndarray, int, float, float],
-    ids: np.ndarray,
-    depth: np.ndarray,
-) -> int:
-    """Fill column ``col`` (ray offset ``a``) from ``row`` up with the rows whose rays meet the
-    ground between the last sample (camera coordinates down ``vd`` and forward ``vf``) and this
-    one (``wd``, ``wf``), ``segment = (vd, vf, wd, wf)``: the rows whose centres lie at or below
-    this sample's. A row's ray (offsets a and b: forward s, down b s) meets the segment's line at
-    depth s; its ground point is the centre plus s times the ray's direction in the world. The
-    lowest row left unfilled."""
-    vd, vf, wd, wf = segment
-    raster, nx, x_max, y_max = cells
-    ax, ay = a * axes[0, 0] + axes[2, 0], a * axes[0, 1] + axes[2, 1]  # the ray's direction at b = 0, across the ground
-    d0, d1, cx, cy, scale = axes[1, 0], axes[1, 1], centre[0], centre[1], 1.0 + a * a
-    top = wd / wf  # this sample's ray offset: rows with ray_b >= top see it or nearer
-    dd, df = wd - vd, wf - vf
-    cross = vf * dd - vd * df
-    while row >= 0 and ray_b[row] >= top:
-        b = ray_b[row]
-        den = dd - b * df
-        along = cross / den if den != 0.0 else wf  # depth along the optical axis [m]
-        if along > 0.0 and along * along * (scale + b * b) <= range2:
-            ux = min(max((cx + along * (ax + b * d0)) * per_m + 1.0, 0.0), x_max)
-            uy = min(max((cy + along * (ay + b * d1)) * per_m + 1.0, 0.0), y_max)
-            ids[row, col] = raster[np.int64(uy) * nx + np.int64(ux)]
-            depth[row, col] = along
-        row -= 1
-    return row
+        b, row32 = ray_b[row], np.int32(row)
+        kx, ky = np.float32((b * axes[1, 0] + axes[2, 0]) * per_m), np.float32((b * axes[1, 1] + axes[2, 1]) * per_m)
+        bb = np.float32(b * b / range2)
+        for col in range(width):
+            inverse = out_depth[col]
+            # Within range: depth^2 (1 + a^2 + b^2) <= R^2.
+            seen = (row32 > lowest[col]) & (inverse > zero) & (inverse * inverse >= reach[col] + bb)
+            along = one / inverse if seen else zero
+            gx = min(max(x0 + along * (ax[col] + kx), zero), xm)
+            gy = min(max(y0 + along * (ay[col] + ky), zero), ym)
+            cells[col] = np.uint32(gy) * nx32 + np.uint32(gx) if seen else np.uint32(0)  # cell 0: the border, unknown
+            out_depth[col] = along if seen else nan
+        for col in range(width):
+            out_ids[col] = raster[cells[col]]

@@ -19,14 +19,19 @@ import math
 import numpy as np
 
 from terrapref.camera.pinhole import PinholeCamera
-from terrapref.camera.relief_compiled import render_relief
+from terrapref.camera.relief_compiled import render_relief, step_lengths
 from terrapref.camera.render_compiled import pixels_at, pixels_of_rows, ray_pixels, render_frame, rows_and_columns, take
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose
 from terrapref.vehicle.ground import LEVEL, Attitude
 from terrapref.world import WorldMap
 
-_LEVEL_GROUND = np.zeros((1, 1), dtype=np.float32)  # the plane z = 0, as a height field
+RELIEF_TOLERANCE_M = 0.005
+"""How far the ground, taken as straight between two samples of the relief renderer's march,
+may stray from the height field [m] (:func:`~terrapref.camera.relief_compiled.step_lengths`)."""
+RELIEF_LONGEST_STEP_M = 0.8
+"""The longest step of that march where the ground is smooth [m], rounded down to a power of two
+of cells (the blocks its step lengths are kept for; far out a step is a pixel row's ground)."""
 
 
 class SegmentationRenderer:
@@ -77,6 +82,7 @@ class SegmentationRenderer:
         # Cell coordinates are clipped to just inside the padded raster (in float32, as NumPy's
         # clip of a float32 array by a Python float).
         self._x_max, self._y_max = np.float32(nx + 2 - 1e-2), np.float32(ny + 2 - 1e-2)
+        self._ground: tuple[np.ndarray, np.ndarray, int] | None = None  # the relief march's height field and steps, made when first asked
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -102,7 +108,9 @@ class SegmentationRenderer:
         reach = c.max_range_m if max_range_m is None else min(c.max_range_m, max_range_m)
         ids = np.empty(self.camera.shape, dtype=np.uint8)
         depth = np.empty(self.camera.shape, dtype=np.float32)
-        heights = self.world.height if self.world.height is not None else _LEVEL_GROUND
+        if self._ground is None:
+            self._ground = _march_ground(self.world)
+        heights, steps, shift = self._ground
         render_relief(
             axes,
             centre,
@@ -110,8 +118,11 @@ class SegmentationRenderer:
             self._ray_b,
             reach,
             self.camera.fy,
+            self.camera.cy,
             heights,
             self.world.resolution_m,
+            steps,
+            shift,
             self._flat,
             self._nx_pad,
             float(self._x_max),
@@ -265,6 +276,18 @@ class PixelSet:
 def flat_of(flat_index: np.ndarray | PixelSet) -> np.ndarray:
     """The pixel indices of ``flat_index``: an array as given, a :class:`PixelSet`'s ``flat``."""
     return flat_index.flat if isinstance(flat_index, PixelSet) else flat_index
+
+
+def _march_ground(world: WorldMap) -> tuple[np.ndarray, np.ndarray, int]:
+    """The relief march's ground for ``world``: its height field (the plane z = 0 on flat ground;
+    a one-cell side repeated, so that every cell has four corners), the longest step from each
+    block of cells and the blocks' size as a power of two of cells (:func:`step_lengths`)."""
+    heights = world.height if world.height is not None else np.zeros((2, 2), dtype=np.float32)
+    if min(heights.shape) < 2:
+        heights = np.pad(heights, ((0, heights.shape[0] < 2), (0, heights.shape[1] < 2)), mode="edge")
+    res = world.resolution_m
+    shift = max(0, min(8, math.floor(math.log2(RELIEF_LONGEST_STEP_M / res)))) if res < RELIEF_LONGEST_STEP_M else 0
+    return heights, step_lengths(heights, res, shift, RELIEF_TOLERANCE_M, 2.0 * res), shift
 
 
 def _finite(pose: Pose) -> Pose:
