@@ -85,6 +85,7 @@ def ray_instance():
     ray.shutdown()
 
 
+@pytest.mark.slow  # a Ray instance takes seconds to start and to stop; the local engine's grids are tested above
 def test_ray_reports_a_failed_job_with_its_inputs(ray_instance):
     import math
 
@@ -93,6 +94,7 @@ def test_ray_reports_a_failed_job_with_its_inputs(ray_instance):
     assert info.value.failures == [("sqrt(-1.0)", "ValueError: math domain error")]
 
 
+@pytest.mark.slow  # as above
 def test_cli_evaluate_on_ray_gives_the_local_engines_results(tmp_path, capsys, ray_instance):
     """The planner and the driver on a local Ray instance with 2 CPUs: the same runs, the same numbers."""
     model, course = str(linear_model(tmp_path / "m.safetensors")), str(TINY_COURSE)
