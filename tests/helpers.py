@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from terrapref.camera import CameraConfig
+from terrapref.camera import CameraConfig, PinholeCamera
 from terrapref.dataset import FORMAT as DATASET_FORMAT
 from terrapref.dataset import Dataset, save_dataset
 from terrapref.features import FeatureConfig
@@ -161,3 +161,13 @@ def train_config(base: TrainConfig | None = None, **options) -> TrainConfig:
         part = next(p for p in ("optimiser", "classifier", "data") if name in {f.name for f in fields(getattr(config, p))})
         parts.setdefault(part, {})[name] = value
     return config.updated(parts)
+
+
+def flat_depth(camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
+    """Every pixel's depth along the optical axis on the plane z = 0 (NaN: no ground in range),
+    and its ground distance ahead of the camera [m], from the pinhole model alone: the depth
+    image of level ground, (H, W) each."""
+    rows, cols = np.mgrid[0 : camera.config.height_px, 0 : camera.config.width_px]
+    ground, ok = camera.back_project(np.stack([cols + 0.5, rows + 0.5], axis=-1))
+    point = np.concatenate([ground, np.zeros(ground.shape[:-1] + (1,))], axis=-1) - camera.t
+    return np.where(ok, point @ camera.R[2], np.nan), np.where(ok, ground[..., 0] - camera.t[0], np.nan)

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from helpers import flat_depth
 from terrapref.camera import CameraConfig, PinholeCamera
 from terrapref.camera.relief_compiled import step_lengths
 from terrapref.camera.render import SegmentationRenderer
@@ -37,15 +38,6 @@ def world(relief: list[dict] | None = None, terrain: list[dict] | None = None) -
     if relief:
         data["relief"] = relief
     return rasterise(parse_scenario(data, "relief_render_test.yaml"))
-
-
-def flat_depth(camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
-    """Every pixel's depth along the optical axis on the plane z = 0 (NaN: no ground in range),
-    and its ground distance ahead of the camera [m], from the pinhole model alone."""
-    rows, cols = np.mgrid[0 : camera.config.height_px, 0 : camera.config.width_px]
-    ground, ok = camera.back_project(np.stack([cols + 0.5, rows + 0.5], axis=-1))
-    point = np.concatenate([ground, np.zeros(ground.shape[:-1] + (1,))], axis=-1) - camera.t
-    return np.where(ok, point @ camera.R[2], np.nan), np.where(ok, ground[..., 0] - camera.t[0], np.nan)
 
 
 def test_on_flat_ground_every_depth_pixel_is_its_analytic_depth_and_the_classes_are_the_flat_renderers() -> None:

@@ -3,6 +3,7 @@ ROS: messages built with rosbags' ROS 2 types stand in for rospy's or rclpy's.""
 
 from __future__ import annotations
 
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -80,7 +81,9 @@ def test_a_newer_image_supersedes_one_waiting_and_one_far_ahead_of_the_odometry_
     core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 2))
     core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 3))  # the newer one waits instead
     core.on_odometry(_odom(3))
-    assert [round(d.stamp_s - 1_700_000_000, 6) for d in told] == [0.3] and core.skipped["superseded while waiting for odometry"] == 1
+    assert [round(d.stamp_s - 1_700_000_000, 6) for d in told] == [0.3] and core.skipped[
+        "superseded while waiting for odometry or depth"
+    ] == 1
     far = compressed_image(TS, header(TS, 5.0, "camera_optical"), "png", png(setup[3][0]))
     assert core.on_image("sensor_msgs/msg/CompressedImage", far) is None and core.skipped["without odometry at the stamp"] == 1
 
@@ -93,7 +96,7 @@ def test_a_distorted_lens_is_undone_before_the_planner_sees_the_frame(setup):
     core.on_camera_info(info)
     core.on_odometry(_odom(0))
     seen = []
-    core.runtime.decide = lambda ids, t, p, v=None: seen.append(ids)  # what the planner is handed
+    core.runtime.decide = lambda ids, t, p, v=None, depth=None: seen.append(ids)  # what the planner is handed
     core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0))
     assert seen[0].shape == images[0].shape and not np.array_equal(seen[0], images[0])
     centre = (slice(200, 280), slice(280, 360))  # barrel distortion leaves the middle as it was
@@ -327,3 +330,116 @@ def test_the_rules_settings_come_from_the_robot_file_then_the_nodes_parameters(s
     with pytest.raises(ConfigError) as raised:
         load_robot(tmp_path / "bad.yaml")
     assert raised.value.problems[0].field == "rules.offset.margin"
+
+
+# --- depth on a robot that names a depth topic ----------------------------------------------------
+
+EPOCH = 1_700_000_000  # header() stamps on the epoch-like clock [s]
+TILT_PER_S = (0.5, 0.1, -0.05)  # the odometry's height [m], pitch and roll [rad] per second of the drive
+
+
+def _depth_core(setup, tmp_path, depth_info: bool = False, info: bool = True) -> tuple[PlannerNodeCore, list]:
+    """A node whose robot file names a depth topic (and its calibration), odometry over 1 s with
+    the body's height and tilt changing, and what its runtime is handed: (stamp, DepthFrame)."""
+    from terrapref.interop.ros_messages import rpy_quaternion
+
+    model, _, path, _ = setup
+    topics = "segmentation: /seg, camera_info: /info, odometry: /odom, command: /cmd, depth: /depth"
+    (tmp_path / "robot.yaml").write_text(
+        f"format: terrapref-robot/1\ntopics: {{{topics}{', depth_info: /depth_info' if depth_info else ''}}}\n"
+        "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\nlimits: {max_accel_mps2: null}\n"
+    )
+    core, handed = PlannerNodeCore(model, load_robot(tmp_path / "robot.yaml"), path), []
+    if info:
+        core.on_camera_info(camera_info(TS, header(TS, 0.0, "camera_optical"), CameraConfig()))
+        decide = core.runtime.decide
+        core.runtime.decide = lambda ids, t, p, v=None, depth=None: (
+            handed.append((round(t - EPOCH, 6), depth)) or decide(ids, t, p, v, depth=depth)
+        )
+    for i in range(11):
+        t = 0.1 * i
+        z, pitch, roll = (k * t for k in TILT_PER_S)
+        core.on_odometry(odometry(TS, header(TS, t, "odom"), pose(TS, 20.0 + t, 15.0, rpy_quaternion(TS, roll, pitch, 0.0), z)))
+    return core, handed
+
+
+def _label(setup, t: float):
+    return compressed_image(TS, header(TS, t, "camera_optical"), "png", png(setup[3][0]))
+
+
+def _depth(t: float, metres: float, shape: tuple[int, int] = (480, 640), encoding: str = "16UC1"):
+    """A depth image stamped ``t`` [s], ``metres`` everywhere (which one the node pairs, by its value)."""
+    from terrapref.interop.ros_messages import depth_image
+
+    msg = depth_image(TS, header(TS, t, "camera_optical"), np.full(shape, metres, np.float32))
+    msg.encoding = encoding
+    return msg
+
+
+def test_on_a_robot_with_depth_each_image_takes_the_depth_image_of_the_nearest_stamp_and_waits_for_a_nearer_one(setup, tmp_path):
+    """Within 50 ms, as import pairs them, with the body's attitude from the odometry at the
+    image's stamp; an image newer than every depth image waits for the next; one with none that
+    near is skipped and counted, never decided on as if the ground were flat."""
+    from terrapref.interop.node_core import NO_DEPTH
+    from terrapref.vehicle.ground import Attitude
+
+    core, handed = _depth_core(setup, tmp_path)
+    seg = "sensor_msgs/msg/CompressedImage"
+    core.on_depth(_depth(0.07, 7.0), "/depth")
+    core.on_depth(_depth(0.11, 11.0), "/depth")
+    assert core.on_image(seg, _label(setup, 0.1)) is not None  # 10 ms from 0.11, 30 from 0.07
+    assert core.on_image(seg, _label(setup, 0.25)) is None  # newer than every depth image: it waits
+    assert core.on_depth(_depth(0.24, 24.0), "/depth") is None  # a nearer one may still come
+    decision = core.on_depth(_depth(0.27, 27.0), "/depth")  # past its stamp: the nearest is 0.24
+    assert decision is not None and round(decision.stamp_s - EPOCH, 6) == 0.25
+    assert core.on_image(seg, _label(setup, 0.4)) is None
+    assert core.on_depth(_depth(0.46, 46.0), "/depth") is None  # 60 ms away: skipped
+    assert core.on_image(seg, _label(setup, 1.0)) is None  # the depth images stopped 0.54 s before: skipped at once
+    assert [(t, float(np.nanmax(d.image))) for t, d in handed] == [(0.1, 11.0), (0.25, 24.0)]
+    expected = Attitude(*(k * 0.25 for k in TILT_PER_S))  # interpolated between the poses at 0.2 and 0.3 s
+    np.testing.assert_allclose(handed[1][1].attitude, expected, atol=1e-6)  # (stamps on the epoch-like clock: to 2e-7 s)
+    assert core.decided == 2 and core.skipped[NO_DEPTH] == 2 and sum(core.skipped.values()) == 2
+
+
+def test_a_depth_image_the_node_cannot_use_is_refused_by_name_and_counted(setup, tmp_path):
+    from terrapref.errors import UserError
+
+    core, _ = _depth_core(setup, tmp_path)
+    for bad, said in (
+        (_depth(0.1, 2.0, encoding="mono16"), "/depth: depth image encoding 'mono16'; expected 32FC1 (metres) or 16UC1"),
+        (_depth(0.1, 2.0, shape=(240, 320)), "/depth: depth image 320 x 240, the label camera's is 640 x 480"),
+    ):
+        with pytest.raises(UserError, match=re.escape(said)) as raised:
+            core.on_depth(bad, "/depth")
+        assert raised.value.problems[0].field == "topics.depth" and raised.value.source.endswith("robot.yaml")
+    with pytest.raises(ValueError, match="/depth: a depth image stamped more than 1 s ahead of the node's clock"):
+        core.on_depth(_depth(3600.0, 2.0), "/depth", now_s=EPOCH + 0.0)
+    assert core.skipped["depth images of another encoding or size"] == 2 and core.skipped["depth images ahead of the clock"] == 1
+    assert core.depth.held == []
+    early, _ = _depth_core(setup, tmp_path, info=False)
+    assert early.on_depth(_depth(0.1, 2.0), "/depth") is None and early.depth.held == []  # before the calibration: let go
+
+
+def test_a_depth_camera_of_its_own_calibration_must_be_the_label_cameras_and_frames_wait_for_it(setup, tmp_path):
+    from dataclasses import replace
+
+    from terrapref.errors import UserError
+
+    core, _ = _depth_core(setup, tmp_path, depth_info=True)
+    core.on_depth(_depth(0.1, 2.0), "/depth")
+    assert core.on_image("sensor_msgs/msg/CompressedImage", _label(setup, 0.1)) is None
+    assert core.skipped["before the calibration or the path"] == 1
+    label_info = camera_info(TS, header(TS, 0.0, "camera_optical"), CameraConfig())
+    core.on_depth_info(label_info)  # the label camera's: registered
+    assert core.on_image("sensor_msgs/msg/CompressedImage", _label(setup, 0.1)) is not None
+    other = camera_info(TS, header(TS, 0.0, "camera_optical"), replace(CameraConfig(), hfov_deg=60.0))
+    for depth_first in (True, False):  # whichever comes first, the second is checked against it
+        late, _ = _depth_core(setup, tmp_path, depth_info=True, info=False)
+        first, then = (late.on_depth_info, late.on_camera_info) if depth_first else (late.on_camera_info, late.on_depth_info)
+        first(other if depth_first else label_info)
+        with pytest.raises(
+            UserError,
+            match="/depth_info says the depth camera is 640 x 480, fx 554.256 .*the label camera \\(/info\\) is 640 x 480, fx 320",
+        ) as raised:
+            then(label_info if depth_first else other)
+        assert raised.value.problems[0].field == "topics.depth_info"

@@ -1,6 +1,6 @@
-"""The ROS 1 node against a real ROS master: a recording's frames published one by one, the
-node's commands the same as PlannerRuntime's on the same frames, and its GridMap the runtime's
-costmap layer for layer.
+"""The ROS 1 node against a real ROS master: a recording's frames published one by one, each with
+the depth image of level ground (32FC1), the node's commands the same as PlannerRuntime's on the
+same frames, and its GridMap the runtime's costmap layer for layer.
 
 Needs Debian's ROS 1 packages (``roscore``, ``python3-rospy`` and the message packages); skipped
 with the reason where they are missing.
@@ -45,8 +45,8 @@ _MISSING = _ros1_missing()
 pytestmark = pytest.mark.skipif(_MISSING is not None, reason=str(_MISSING))
 
 PLAYER = textwrap.dedent('''
-    """Publish a recording's first frames to the node, one at a time, and keep the command each gets,
-    then the GridMap the node publishes once it has all of them."""
+    """Publish a recording's first frames to the node, one at a time, each with a depth image, and keep
+    the command each gets, then the GridMap the node publishes once it has all of them."""
     import json, sys, time
     from terrapref.interop.ros1 import import_rospy
     rospy = import_rospy()
@@ -58,19 +58,21 @@ PLAYER = textwrap.dedent('''
     from terrapref.demos.recording import read_recording
     from terrapref.interop.ros_messages import typestore
 
-    rec_dir, first, frames, out = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+    rec_dir, first, frames, out, depth_file = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4], sys.argv[5]
     rec = read_recording(rec_dir)
+    level = np.load(depth_file).astype("<f4")  # REP 118's 32FC1: metres, NaN where nothing is seen
     rospy.init_node("player")
     info_pub = rospy.Publisher("/cam/info", CameraInfo, queue_size=1, latch=True)
     path_pub = rospy.Publisher("/plan", Path, queue_size=1, latch=True)
     odom_pub = rospy.Publisher("/odom", PoseWithCovarianceStamped, queue_size=10)  # a localiser's pose, as the robot file allows
     seg_pub = rospy.Publisher("/seg", Image, queue_size=10)
+    depth_pub = rospy.Publisher("/depth", Image, queue_size=10)
     clock_pub = rospy.Publisher("/clock", Clock, queue_size=10)  # the log's clock, as rosbag play --clock gives it
     got = {}
     rospy.Subscriber("/cmd", TwistStamped, lambda m: got.__setitem__(round(m.header.stamp.to_sec(), 3), (m.twist.linear.x, m.twist.angular.z)))
     maps = []  # each GridMap heard: its connection header and bytes (grid_map_msgs has no Python class here)
     rospy.Subscriber("/terrapref/grid_map", rospy.AnyMsg, lambda m: maps.append((m._connection_header, bytes(m._buff))))
-    while min(seg_pub.get_num_connections(), odom_pub.get_num_connections(), clock_pub.get_num_connections()) == 0:  # the node subscribes
+    while min(p.get_num_connections() for p in (seg_pub, depth_pub, odom_pub, clock_pub)) == 0:  # the node subscribes
         time.sleep(0.05)
     from terrapref.camera import CameraConfig
     fx, fy, cx, cy = CameraConfig().intrinsics  # the camera the model was trained for
@@ -96,9 +98,12 @@ PLAYER = textwrap.dedent('''
         odom.pose.pose.orientation.z, odom.pose.pose.orientation.w = np.sin(yaw / 2), np.cos(yaw / 2)
         image = Image(height=480, width=640, encoding="mono8", step=640, data=rec.image(i).tobytes())
         image.header.stamp = rospy.Time.from_sec(t)
+        depth = Image(height=480, width=640, encoding="32FC1", is_bigendian=0, step=4 * 640, data=level.tobytes())
+        depth.header.stamp = rospy.Time.from_sec(t)
         clock_pub.publish(Clock(clock=rospy.Time.from_sec(t)))
         while round(t, 3) not in got:  # sent again until decided on (the node may not have the calibration yet)
             odom_pub.publish(odom)
+            depth_pub.publish(depth)
             seg_pub.publish(image)
             deadline = time.time() + 1.0
             while round(t, 3) not in got and time.time() < deadline:
@@ -122,7 +127,8 @@ PLAYER = textwrap.dedent('''
 def setup(tmp_path_factory, short_recording):
     from test_offset_rule import DRIVER_LIKE, _offset_meta
 
-    from helpers import skip_path_weights
+    from helpers import flat_depth, skip_path_weights
+    from terrapref.camera import CameraConfig, PinholeCamera
     from terrapref.learning.model_file import save_model
     from terrapref.learning.network import ClassifierConfig
 
@@ -132,10 +138,11 @@ def setup(tmp_path_factory, short_recording):
     model = save_model(root / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
     (root / "robot.yaml").write_text(
         "format: terrapref-robot/1\n"
-        "topics: {segmentation: /seg, camera_info: /cam/info, odometry: /odom, command: /cmd, path: /plan}\n"
+        "topics: {segmentation: /seg, camera_info: /cam/info, odometry: /odom, command: /cmd, path: /plan, depth: /depth}\n"
         "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n"
         "limits: {max_accel_mps2: null}\n"  # the base ramps its speed itself: the command sent is the decision's
     )
+    np.save(root / "level.npy", flat_depth(PinholeCamera(CameraConfig()))[0].astype(np.float32))  # the camera the robot file mounts
     return root, model
 
 
@@ -151,7 +158,7 @@ def test_the_node_commands_what_the_runtime_commands_on_the_same_frames(setup, t
 
     from terrapref.demos.recording import read_recording
     from terrapref.interop.ros_messages import grid_map_layer, typestore
-    from terrapref.runtime import PlannerRuntime
+    from terrapref.runtime import DepthFrame, PlannerRuntime
 
     root, model = setup
     port, live_port, seen = _free_port(), _free_port(), {}
@@ -192,7 +199,15 @@ def test_the_node_commands_what_the_runtime_commands_on_the_same_frames(setup, t
         client.start()
         (tmp_path / "player.py").write_text(PLAYER)
         player = subprocess.run(
-            [sys.executable, str(tmp_path / "player.py"), str(root / "rec"), str(FIRST), str(FRAMES), str(tmp_path / "got.json")],
+            [
+                sys.executable,
+                str(tmp_path / "player.py"),
+                str(root / "rec"),
+                str(FIRST),
+                str(FRAMES),
+                str(tmp_path / "got.json"),
+                str(root / "level.npy"),
+            ],
             env=env,
             capture_output=True,
             text=True,
@@ -209,7 +224,10 @@ def test_the_node_commands_what_the_runtime_commands_on_the_same_frames(setup, t
     rec = read_recording(root / "rec")
     runtime = PlannerRuntime(model)
     runtime.set_path(np.asarray(rec.meta.get("path") or rec.scenario["path"]["waypoints"], dtype=float))
-    expected = np.array([runtime.decide(rec.image(i), 100.0 + 0.1 * i, tuple(rec.poses[i])).command for i in range(FIRST, FIRST + FRAMES)])
+    depth = DepthFrame(np.load(root / "level.npy"))
+    expected = np.array(
+        [runtime.decide(rec.image(i), 100.0 + 0.1 * i, tuple(rec.poses[i]), depth=depth).command for i in range(FIRST, FIRST + FRAMES)]
+    )
     assert got.shape == (FRAMES, 2)
     np.testing.assert_allclose(got, expected, atol=1e-6)
     assert len(np.unique(expected[:, 1])) > 1  # the frames make it steer, not only drive straight
@@ -224,7 +242,8 @@ def test_the_node_commands_what_the_runtime_commands_on_the_same_frames(setup, t
     assert (msg.info.header.frame_id, msg.info.resolution) == ("odom", costmap.resolution_m)
     for name, layer in layers.items():
         np.testing.assert_array_equal(grid_map_layer(msg, name), layer, err_msg=name)
-    assert np.isfinite(layers["cost"]).any()  # the ground seen (its geometry needs depth, which these frames lack)
+    ground = np.isfinite(layers["cost"])  # the ground seen, and through the depth images its height: level, 0 m
+    assert ground.sum() > 1000 and np.isfinite(layers["elevation"][ground]).all() and np.abs(layers["elevation"][ground]).max() < 0.01
     # The live view carried the decisions as they were made, stamped with the frames' ROS times.
     client.join(timeout=30)
     labels = seen.get("/terrapref/labels", [])

@@ -1,6 +1,7 @@
 """The ROS 2 node (terrapref.interop.ros2) as a ROS 2 system over DDS on this machine: the node in
 one process; in this one, a recording exported as ROS 2 MCAP published frame by frame with
 /clock (terrapref.interop.play), a subscriber of the node's topics, and DDS discovery read back.
+Each frame carries the depth image of level ground (16UC1), which the robot file names.
 
 Every participant keeps to the loopback interface (a Cyclone DDS configuration in CYCLONEDDS_URI)
 and to a domain of its own test run, so that parallel runs never hear each other.
@@ -190,7 +191,8 @@ def system(tmp_path_factory, short_recording):
     from test_live import _watch
     from test_offset_rule import DRIVER_LIKE, _offset_meta
 
-    from helpers import skip_path_weights
+    from helpers import flat_depth, skip_path_weights
+    from terrapref.camera import PinholeCamera
     from terrapref.demos.recording import read_recording
     from terrapref.interop.dds import MessageTypes, Participant
     from terrapref.interop.mcap_export import recording_frames, write_bag
@@ -199,6 +201,8 @@ def system(tmp_path_factory, short_recording):
     from terrapref.interop.ros_messages import typestore
     from terrapref.learning.model_file import save_model
     from terrapref.learning.network import ClassifierConfig
+    from terrapref.pngio import depth_to_millimetres, millimetres_to_depth
+    from terrapref.vehicle.ground import LEVEL
 
     root = tmp_path_factory.mktemp("ros2")
     config = ClassifierConfig(hidden=8, skip=True)
@@ -206,6 +210,7 @@ def system(tmp_path_factory, short_recording):
     rec = read_recording(short_recording)
     frames = recording_frames(rec)
     part = slice(FIRST, FIRST + FRAMES + 1)  # one frame more, for after the bad input
+    level = flat_depth(PinholeCamera(frames.camera))[0].astype(np.float32)  # the depth image of level ground
     frames = replace(
         frames,
         times=frames.times[part],
@@ -213,8 +218,10 @@ def system(tmp_path_factory, short_recording):
         commands=frames.commands[part],
         chosen=frames.chosen[part],
         image=lambda i: rec.image(FIRST + i),
+        depth=lambda i: level,
+        attitude=lambda i: LEVEL,
     )
-    bag = write_bag(root / "drive.mcap", frames)
+    bag = write_bag(root / "drive.mcap", frames)  # the robot file beside it names the depth topic
     robot = root / "drive.mcap.robot.yaml"
     with robot.open("a") as f:  # the base ramps its speed itself: the command sent is the decision's, as the runtime's
         f.write("limits: {max_accel_mps2: null}\n")
@@ -251,10 +258,12 @@ def system(tmp_path_factory, short_recording):
         reader.start()
     live_client = threading.Thread(target=_watch, args=(live_port, live), daemon=True)
     live_client.start()
-    out = {"model": model, "bag": bag, "rec": rec}
+    out = {"model": model, "bag": bag, "rec": rec, "depth": millimetres_to_depth(depth_to_millimetres(level))}  # as 16UC1 carries it
     player = listener = None
     try:
-        player = BagPlayer(bag, driven, topics=["/terrapref/labels", "/terrapref/camera_info", "/terrapref/odom", "/terrapref/path"])
+        player = BagPlayer(
+            bag, driven, topics=["/terrapref/labels", "/terrapref/depth", "/terrapref/camera_info", "/terrapref/odom", "/terrapref/path"]
+        )
         listener = Participant(driven, MessageTypes(typestore()))
         heard = _Heard()
         _listen(listener, heard)
@@ -343,11 +352,14 @@ def _bad_input(player, messages, times, heard, out) -> None:
         twist=odom.twist,
     )
     smaller = replace_fields(ts, info, "sensor_msgs/msg/CameraInfo", width=320, height=240)
+    depth = group["/terrapref/depth"].msg
+    small_depth = replace_fields(ts, depth, "sensor_msgs/msg/Image", width=320, height=240, step=640)
     garbled = replace_fields(ts, image, "sensor_msgs/msg/CompressedImage", data=np.frombuffer(b"not a png at all", dtype=np.uint8))
     for _ in range(2):
         player.writers["/terrapref/odom", "nav_msgs/msg/Odometry"].publish(future)
         player.writers["/terrapref/camera_info", "sensor_msgs/msg/CameraInfo"].publish(smaller)
         player.writers["/terrapref/labels", "sensor_msgs/msg/CompressedImage"].publish(garbled)
+        player.writers["/terrapref/depth", "sensor_msgs/msg/Image"].publish(small_depth)
         time.sleep(0.1)
     last = [m for m in messages if m.t_ns == times[FRAMES]]
     stamp = round(stamp_s(next(m for m in last if m.topic == "/terrapref/labels").msg.header), 6)
@@ -363,15 +375,16 @@ def replace_fields(ts, msg, msgtype: str, **fields):
 
 
 def test_the_node_commands_what_the_runtime_commands_frame_by_frame(system):
-    """Each image's command, matched by its stamp (TwistStamped), is the runtime's on the same frame."""
-    from terrapref.interop.runtime import PlannerRuntime
+    """Each image's command, matched by its stamp (TwistStamped), is the runtime's on the same frame
+    with its depth image; the GridMap's elevation is the level ground's where the camera saw it."""
+    from terrapref.interop.runtime import DepthFrame, PlannerRuntime
     from terrapref.learning.model_file import load_model
 
-    rec = system["rec"]
+    rec, depth = system["rec"], DepthFrame(system["depth"])
     runtime = PlannerRuntime(load_model(system["model"]))
     runtime.set_path(np.asarray(rec.meta.get("path") or rec.scenario["path"]["waypoints"], dtype=float))
     expected = np.array(
-        [runtime.decide(rec.image(FIRST + k), s, tuple(rec.poses[FIRST + k])).command for k, s in enumerate(system["stamps"])]
+        [runtime.decide(rec.image(FIRST + k), s, tuple(rec.poses[FIRST + k]), depth=depth).command for k, s in enumerate(system["stamps"])]
     )
     got = np.array(system["commands"])
     assert got.shape == (FRAMES, 2)
@@ -390,6 +403,8 @@ def test_the_node_commands_what_the_runtime_commands_frame_by_frame(system):
     assert layers.header.frame_id == "odom" and layers.info.length_x == pytest.approx(costmap.info.width * costmap.info.resolution)
     cost = np.asarray(costmap.data, dtype=np.int8).reshape(costmap.info.height, costmap.info.width)
     np.testing.assert_array_equal(grid_map_layer(layers, "cost"), np.where(cost == -1, np.nan, cost).astype(np.float32))
+    seen, elevation = cost != -1, grid_map_layer(layers, "elevation")
+    assert seen.sum() > 1000 and np.isfinite(elevation[seen]).all() and np.abs(elevation[seen]).max() < 0.01  # level ground: 0 m
     live = system["live"]  # --live: the decisions also went to the live view, stamped with the frames' ROS times
     assert "error" not in live and len(live.get("/terrapref/labels", [])) >= FRAMES // 2 and live.get("/terrapref/trajectories")
     assert abs(max(ns for ns, _ in live["/terrapref/labels"]) * 1e-9 - system["stamps"][-1]) < 0.2
@@ -424,6 +439,7 @@ def test_every_endpoint_is_named_typed_and_offered_as_ros2_expects(system):
     assert seen == {
         ("hears", "/terrapref/labels"): {("sensor_msgs/msg/Image", False, False, 5), ("sensor_msgs/msg/CompressedImage", False, False, 5)},
         ("hears", "/terrapref/camera_info"): {("sensor_msgs/msg/CameraInfo", False, False, 5)},
+        ("hears", "/terrapref/depth"): {("sensor_msgs/msg/Image", False, False, 5)},
         ("hears", "/terrapref/odom"): {
             (t, False, False, 5)
             for t in ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
@@ -442,8 +458,9 @@ def test_every_endpoint_is_named_typed_and_offered_as_ros2_expects(system):
 
 
 def test_bad_input_is_said_once_and_skipped(system):
-    """An undecodable image, a calibration of another size and odometry from the future, each sent
-    twice: each said once, counted, and the next good frame is decided on as ever."""
+    """An undecodable image, a calibration of another size, odometry from the future and a depth
+    image of another size, each sent twice: each said once, counted, and the next good frame is
+    decided on as ever."""
     import re
 
     code, stdout, stderr = system["node"]
@@ -451,10 +468,11 @@ def test_bad_input_is_said_once_and_skipped(system):
         "topic /terrapref/labels: not a decodable png",
         "/terrapref/camera_info: a camera_info of another image size than the 640 x 480 px",
         "/terrapref/odom: odometry stamped more than 10 s ahead of the node's clock",  # a simulated clock: 10 s of lag allowed
+        "topics.depth: topic /terrapref/depth: depth image 320 x 240, the label camera's is 640 x 480",
     ):
         assert sum(said in line for line in stderr.splitlines()) == 1, (said, stderr)
     assert "Traceback" not in stderr and "internal error" not in stderr and system["after_bad"]
-    for counted in ("odometry ahead of the clock", "calibrations of another size"):
+    for counted in ("odometry ahead of the clock", "calibrations of another size", "depth images of another encoding or size"):
         found = re.search(rf"(\d+) {counted}", stdout)
         assert found and 1 <= int(found.group(1)) <= 2, stdout
 
@@ -468,15 +486,15 @@ def test_play_drives_a_node_that_waited_in_an_empty_domain(system):
     hears the others too late, or not at all): what is checked is what it decided on those, not
     how many they were."""
     from terrapref.interop.ros_decode import stamp_s
-    from terrapref.interop.runtime import PlannerRuntime
+    from terrapref.interop.runtime import DepthFrame, PlannerRuntime
     from terrapref.learning.model_file import load_model
 
     play = system["play"]
     assert play.returncode == 0, play.stderr[-2000:]
-    assert "played" in play.stdout and "/clock" in play.stdout
+    assert "played" in play.stdout and "/clock" in play.stdout and "/terrapref/depth" in play.stdout  # the robot file's depth topic
     code, stdout, stderr = system["idle"]
     assert code == 0, stderr[-2000:]
-    for topic in ("/terrapref/labels", "/terrapref/camera_info", "/terrapref/odom", "/terrapref/path", "/clock"):
+    for topic in ("/terrapref/labels", "/terrapref/depth", "/terrapref/camera_info", "/terrapref/odom", "/terrapref/path", "/clock"):
         assert sum(f"{topic}: no publisher of" in line for line in stderr.splitlines()) == 1, stderr
     heard = system["idle_heard"]
     assert heard.get("costmap")
@@ -493,7 +511,8 @@ def test_play_drives_a_node_that_waited_in_an_empty_domain(system):
     runtime.set_path(np.asarray(rec.meta.get("path") or rec.scenario["path"]["waypoints"], dtype=float))
     for stamp in sorted(chosen):
         k = FIRST + frame_of[stamp]
-        assert chosen[stamp] == [runtime.decide(rec.image(k), stamp, tuple(rec.poses[k])).index], (stamp, stdout)
+        planned = runtime.decide(rec.image(k), stamp, tuple(rec.poses[k]), depth=DepthFrame(system["depth"]))
+        assert chosen[stamp] == [planned.index], (stamp, stdout)
 
 
 def test_a_participant_without_subscriptions_waits_instead_of_spinning(monkeypatch):

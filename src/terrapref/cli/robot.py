@@ -158,7 +158,7 @@ def play_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("bag", help="a ROS 2 bag folder or .mcap file (terrapref export --format mcap writes one)")
     p.add_argument(
         "--robot",
-        help="play only what this robot file's node reads (image, camera_info, odometry, path) and /tf, /tf_static, "
+        help="play only what this robot file's node reads (image, camera_info, odometry, path, depth) and /tf, /tf_static, "
         "so that the log's own commands and markers stay off the node's topics",
     )
     p.add_argument("--topics", nargs="+", metavar="TOPIC", help="play only these topics (with --robot: these as well)")

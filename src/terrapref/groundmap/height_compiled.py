@@ -216,24 +216,7 @@ def frame_shape(
     base, per_m2, _ = errors
     n = scratch.shape[0]
     touched = np.empty(points.shape[0], np.int64)
-    count = 0
-    for i in range(points.shape[0]):
-        x, y, z = points[i, 0], points[i, 1], points[i, 2]
-        if not (depth[i] <= max_range_m and math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
-            continue
-        u, v = (x - ox) * inv_res, (y - oy) * inv_res
-        if not (0.0 <= u < n and 0.0 <= v < n):
-            continue
-        col, row = int(u), int(v)
-        if mark[row * n + col] == 0:
-            mark[row * n + col] = 1
-            touched[count] = row * n + col
-            count += 1
-        w = 1.0 / (base * base + (per_m2 * depth[i] * depth[i]) ** 2)
-        scratch[row, col, 0] += w * x
-        scratch[row, col, 1] += w * y
-        scratch[row, col, 2] += w * z
-        scratch[row, col, 3] += w
+    count = _gather_returns(points, depth, max_range_m, ox, oy, inv_res, base, per_m2, scratch, mark, touched)
     for i in range(count):
         t = touched[i]
         row, col = t // n, t % n
@@ -254,6 +237,45 @@ def frame_shape(
         mark[t] = 0
         scratch[t // n, t % n, :] = 0.0
     return touched[:count]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _gather_returns(
+    points: np.ndarray,
+    depth: np.ndarray,
+    max_range_m: float,
+    ox: float,
+    oy: float,
+    inv_res: float,
+    base: float,
+    per_m2: float,
+    scratch: np.ndarray,
+    mark: np.ndarray,
+    touched: np.ndarray,
+) -> int:
+    """:func:`frame_shape`'s first part: each return within range summed into its cell of
+    ``scratch``, weighted by the inverse of its variance (``base`` [m] and ``per_m2`` of its
+    depth squared), and each cell it falls in listed in ``touched`` once (``mark``): how many."""
+    n = scratch.shape[0]
+    count = 0
+    for i in range(points.shape[0]):
+        x, y, z = points[i, 0], points[i, 1], points[i, 2]
+        if not (depth[i] <= max_range_m and math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+            continue
+        u, v = (x - ox) * inv_res, (y - oy) * inv_res
+        if not (0.0 <= u < n and 0.0 <= v < n):
+            continue
+        col, row = int(u), int(v)
+        if mark[row * n + col] == 0:
+            mark[row * n + col] = 1
+            touched[count] = row * n + col
+            count += 1
+        w = 1.0 / (base * base + (per_m2 * depth[i] * depth[i]) ** 2)
+        scratch[row, col, 0] += w * x
+        scratch[row, col, 1] += w * y
+        scratch[row, col, 2] += w * z
+        scratch[row, col, 3] += w
+    return count
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -24,9 +24,9 @@ speed (v, w), so that a speed rule learns the speeds driven; its label is the tr
 preference set of the same curvature, at the set's speed: w x v_set / v.
 
 With a depth topic (``topics.depth``), each label image is paired with the depth image of the
-nearest header stamp, within :data:`DEPTH_PAIRING_S` (an RGB-D camera's depth and colour frames
-share a stamp, or lie a few milliseconds apart); a label image with none that near is skipped and
-counted, for a frame whose ground cannot be placed is not the frames around it. Depth images
+nearest header stamp, within :data:`DEPTH_PAIRING_S` (terrapref.interop.depth_pairing, the rule
+the ROS nodes pair by too); a label image with none that near is skipped and counted, for a
+frame whose ground cannot be placed is not the frames around it. Depth images
 are read in the same pass as the label images and held only until the label images near their
 stamps have been paired (:class:`DepthImages`). The frame then keeps the body's attitude at its
 stamp: the odometry's height (``position.z``, taken as the ground's height under the robot: a
@@ -48,9 +48,19 @@ from terrapref.camera import SegmentationView
 from terrapref.demos.recording import RecordingWriter
 from terrapref.errors import UserError
 from terrapref.interop.bag_reader import Bag
+from terrapref.interop.depth_pairing import DEPTH_PAIRING_S, DepthPairing
 from terrapref.interop.labels import LabelMap
 from terrapref.interop.robot import RobotConfig
-from terrapref.interop.ros_decode import depth_metres, label_ids, message_time_s, path_xy, pitch_roll_rad, static_transforms, yaw_rad
+from terrapref.interop.ros_decode import (
+    label_ids,
+    message_time_s,
+    path_xy,
+    pitch_roll_rad,
+    registered_depth,
+    static_transforms,
+    undistorted,
+    yaw_rad,
+)
 from terrapref.pngio import depth_to_millimetres, millimetres_to_depth
 from terrapref.progress import Progress
 from terrapref.terrain.classes import UNKNOWN
@@ -67,7 +77,6 @@ SPEED_SOURCES = {  # where each frame's speed (v, w) comes from, as the report n
     "poses": f"differences of odometry poses over {2 * POSE_DIFFERENCE_HALF_S:g} s",
 }
 CLOCK_TOLERANCE_S = 5.0  # header stamps this far from the log's receive times are on another clock (simulated time)
-DEPTH_PAIRING_S = 0.05  # a label image takes the depth image of the nearest stamp within this [s]; half a frame at 10 Hz
 DEPTH_HELD = 128  # depth images held at most while they wait for label images near their stamps (the newest kept)
 
 
@@ -315,51 +324,35 @@ def _pose_differences(t: np.ndarray, poses: np.ndarray) -> np.ndarray:
 
 @dataclass
 class DepthImages:
-    """The depth topic's images read so far that a label image still to come may pair with: each
-    label image takes the one of the nearest stamp within :data:`DEPTH_PAIRING_S` (label images
-    come in stamp order, so older ones are then let go). They are held as whole millimetres, as
-    the recording stores them, and at most :data:`DEPTH_HELD` of them (the newest): a label
-    image waits in the reorder buffer for :data:`REORDER_FRAMES` more, so a depth camera up to
-    eight times as fast as the label images pairs every one."""
+    """The depth topic's images read so far that a label image still to come may pair with
+    (:class:`DepthPairing`'s rule). They are held as whole millimetres, as the recording stores
+    them, and at most :data:`DEPTH_HELD` of them (the newest): a label image waits in the reorder
+    buffer for :data:`REORDER_FRAMES` more, so a depth camera up to eight times as fast as the
+    label images pairs every one."""
 
     topic: str
     connections: list  # the bag's connections of the topic
     shape: tuple[int, int]  # the label camera's (H, W), which each depth image must have
-    held: list[tuple[float, np.ndarray]] = field(default_factory=list)  # (stamp [s], depth (H, W) uint16 [mm, 0: none]), by stamp
+    pairing: DepthPairing = field(default_factory=lambda: DepthPairing(DEPTH_HELD))  # depth (H, W) uint16 [mm, 0: none] by stamp
     paired: int = 0  # label images paired so far
     largest_offset_s: float = 0.0  # the largest stamp difference of a pair [s]
 
     def take_in(self, bag: Bag, conn, t_ns: int, msg, shift_s: float) -> None:
         """Decode and hold a depth message of the log (received at ``t_ns`` [ns]); its stamp moved
         by ``shift_s`` [s] when it has none. Another encoding or size is a UserError naming the topic."""
-        received_s = (t_ns - bag.reader.start_time) * 1e-9
         try:
             t = message_time_s(msg, t_ns, shift_s)
         except AttributeError as exc:
             raise UserError(bag.source, f"topic {conn.topic}: no header stamp ({exc})", field="topics.depth") from None
-        depth = depth_metres(msg, conn.topic, bag.source, received_s)
-        if depth.shape != self.shape:
-            raise UserError(
-                bag.source,
-                f"topic {conn.topic}: depth image {depth.shape[1]} x {depth.shape[0]}, the label camera's is "
-                f"{self.shape[1]} x {self.shape[0]}; the depth images must be registered to the label images",
-                field="topics.depth",
-            )
-        k = len(self.held)
-        while k > 0 and self.held[k - 1][0] > t:
-            k -= 1
-        self.held.insert(k, (t, depth_to_millimetres(depth)))
-        del self.held[:-DEPTH_HELD]
+        depth = registered_depth(msg, conn.topic, bag.source, self.shape, (t_ns - bag.reader.start_time) * 1e-9)
+        self.pairing.put(t, depth_to_millimetres(depth))
 
     def take(self, t: float) -> np.ndarray | None:
-        """The depth image of the stamp nearest ``t`` [s] within :data:`DEPTH_PAIRING_S`, or None;
-        those older than that window are let go."""
-        self.held = [(s, d) for s, d in self.held if s >= t - DEPTH_PAIRING_S]
-        if not self.held:
+        """The depth image [m] of the stamp nearest ``t`` [s] within :data:`DEPTH_PAIRING_S`, or None."""
+        paired = self.pairing.nearest(t)
+        if paired is None:
             return None
-        offset, mm = min(((abs(s - t), d) for s, d in self.held), key=lambda pair: pair[0])
-        if offset > DEPTH_PAIRING_S:
-            return None
+        offset, mm = paired
         self.paired += 1
         self.largest_offset_s = max(self.largest_offset_s, offset)
         return millimetres_to_depth(mm)
@@ -470,10 +463,7 @@ class Frames:
 
     def _undistorted(self, depth: np.ndarray) -> np.ndarray:
         """A depth image (H, W) [m] through the label images' undistortion (NaN where no lens pixel falls)."""
-        u = self.conversion.undistort
-        if u is None:
-            return depth
-        return np.where(u >= 0, depth.reshape(-1)[np.maximum(u, 0)], np.float32(np.nan)).astype(np.float32)
+        return undistorted(depth, self.conversion.undistort, np.float32(np.nan))
 
     def _classes(self, ids: np.ndarray, t: float) -> np.ndarray:
         """Class ids (H, W) uint8 of the label ids ``ids`` (the image stamped ``t`` [s]), undistorted;
@@ -483,8 +473,7 @@ class Frames:
         if unmapped:
             c.labels.refuse_unlisted(ids, f"the image stamped {t:.3f} s")
         image = c.lut[ids]
-        if c.undistort is not None:
-            image = np.where(c.undistort >= 0, image.reshape(-1)[np.maximum(c.undistort, 0)], UNKNOWN).astype(np.uint8)
+        image = undistorted(image, c.undistort, UNKNOWN)
         self.pixels += ids.size
         self.unmapped += unmapped
         self.unknown += int(np.count_nonzero(image == UNKNOWN))

@@ -6,7 +6,12 @@ Messages come in as they would from rospy or rclpy (attribute access: ``header.s
 camera is refused); odometry is kept for the last seconds and interpolated to each image's
 stamp; the reference path comes from a Path message or a waypoint file; each label image is
 decoded through the robot file's label map and decided on by :class:`PlannerRuntime`, which
-ignores frames older than the last one and holds a command for ``hold_s`` after its frame. The
+ignores frames older than the last one and holds a command for ``hold_s`` after its frame. With
+a depth topic in the robot file, each label image is decided on with the depth image of the
+nearest stamp within :data:`DEPTH_PAIRING_S`, as ``import`` pairs them
+(terrapref.interop.depth_pairing), and the body's attitude from the odometry at its stamp; one
+with no depth image that near is skipped and counted, never decided on as if the ground were
+flat: on a robot that declared depth, that would drop the limits its geometry sets. The
 command sent is the decision's (v, w): the way chosen at the speed the model's speed rule sets
 (the control set's speed for a model without one); the trajectories drawn for display are the
 control set's, at its speed.
@@ -26,10 +31,21 @@ import numpy as np
 
 from terrapref.errors import UserError
 from terrapref.groundmap.costmap import Costmap
+from terrapref.interop.depth_pairing import DEPTH_PAIRING_S, DepthPairing
 from terrapref.interop.labels import unlisted_message
 from terrapref.interop.robot import LIMITS, RobotConfig, stop_value_problem
-from terrapref.interop.ros_decode import camera_from_info, label_ids, path_xy, stamp_s, yaw_rad
-from terrapref.interop.runtime import SPEED_WINDOW_S, PlannerRuntime, RobotSettings, RuntimeDecision, odometry_speed_mps
+from terrapref.interop.ros_decode import (
+    camera_from_info,
+    check_depth_info,
+    label_ids,
+    path_xy,
+    pitch_roll_rad,
+    registered_depth,
+    stamp_s,
+    undistorted,
+    yaw_rad,
+)
+from terrapref.interop.runtime import SPEED_WINDOW_S, DepthFrame, PlannerRuntime, RobotSettings, RuntimeDecision, odometry_speed_mps
 from terrapref.learning.model_file import LoadedModel
 from terrapref.planner.model import Model
 from terrapref.planner.stop import StopConfig
@@ -39,12 +55,16 @@ from terrapref.scenario.path import ReferencePath
 from terrapref.stops import REASONS, STALE
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Command, Pose, VehicleConfig, wrap_angle
+from terrapref.vehicle.ground import Attitude
 
 if TYPE_CHECKING:
     from terrapref.interop.live import LiveRun, LiveView
 
 ODOMETRY_KEPT_S = 5.0  # how far back odometry is kept for interpolating to an image's stamp [s]
 ODOMETRY_WAIT_S = 0.5  # how long an image newer than the odometry waits for it [s]
+DEPTH_WAIT_S = 0.5  # how far an image's stamp may be past the newest depth image's for it to wait for a nearer one [s]
+DEPTH_KEPT = 32  # depth images held at most for label images still to come (the newest): about 1 s of a 30 Hz camera
+NO_DEPTH = f"without a depth image within {1000 * DEPTH_PAIRING_S:.0f} ms"  # why a frame on a robot with depth is skipped
 AHEAD_S = 1.0  # odometry and images stamped further ahead of the node's clock are refused [s] (the system's clock)
 SIM_AHEAD_S = 10.0  # the same under a simulated clock, whose /clock messages may come late (a node busy making its planner) [s]
 
@@ -110,20 +130,29 @@ class PlannerNodeCore:
         self.watchdog = watchdog or Watchdog()
         self.runtime: PlannerRuntime | None = None
         self.path = None if path is None else np.asarray(path, dtype=float)
-        self.odometry: deque[tuple[float, float, float, float]] = deque()  # (stamp [s], x, y, yaw)
+        # (stamp [s], x [m], y [m], yaw [rad], z [m], pitch [rad], roll [rad])
+        self.odometry: deque[tuple[float, float, float, float, float, float, float]] = deque()
+        # The depth images held for the label images near their stamps (None: the robot file names no depth topic).
+        self.depth: DepthPairing[np.ndarray] | None = DepthPairing(DEPTH_KEPT) if robot.depth_topic else None
+        depth_info = robot.topics.get("depth_info")
+        self.depth_info_topic = depth_info if depth_info not in (None, robot.topics["camera_info"]) else None
+        self._info = self._depth_info = None  # the first calibrations of the label and the depth camera
         self.skipped = {
             "before the calibration or the path": 0,
             "without odometry at the stamp": 0,
+            NO_DEPTH: 0,
             "out of order": 0,
-            "superseded while waiting for odometry": 0,
+            "superseded while waiting for odometry or depth": 0,
             "paths of fewer than two distinct points": 0,
             "odometry ahead of the clock": 0,
             "images ahead of the clock": 0,
             "calibrations of another size": 0,
+            "depth images ahead of the clock": 0,
+            "depth images of another encoding or size": 0,
         }
         self.decided = 0  # frames decided on
         self.on_decision: Callable[[RuntimeDecision], None] | None = None  # told of every decision, whichever message brought it
-        self._pending: tuple[str, object, str, float] | None = None  # an image waiting for odometry at its stamp
+        self._pending: tuple[str, object, str, float] | None = None  # an image waiting for odometry or a depth image at its stamp
         self._lut: np.ndarray | None = None  # the robot's label ids -> class ids, once the calibration has come
         self._undistort: np.ndarray | None = None  # a distorted lens's pinhole pixel -> its pixel (flat; -1 outside)
         self._lock = threading.RLock()  # ROS calls back from a thread per topic
@@ -143,7 +172,9 @@ class PlannerNodeCore:
 
     @property
     def ready(self) -> bool:
-        return self.runtime is not None and self.path is not None
+        """Whether frames can be decided on: the calibration (and a depth camera's of its own,
+        where the robot file names one, checked against it) and the path have come."""
+        return self.runtime is not None and self.path is not None and (self.depth_info_topic is None or self._depth_info is not None)
 
     def on_camera_info(self, info) -> None:
         """The first calibration makes the planner; a model for another camera is refused
@@ -157,6 +188,8 @@ class PlannerNodeCore:
                     raise ValueError(f"a camera_info of another image size than the {w} x {h} px the planner was made with; ignored")
                 return
             camera, self._undistort = camera_from_info(info, self.robot, self.robot.source)
+            check_depth_info(self._depth_info, info, self.robot, self.robot.source)
+            self._info = info
             # fed class ids, mapped and undistorted here
             runtime = PlannerRuntime(self.model, camera, robot=self.settings)
             labels = self.robot.labels
@@ -165,6 +198,46 @@ class PlannerNodeCore:
             self.runtime = runtime
             if self.path is not None:
                 self.runtime.set_path(self.path)
+
+    def on_depth_info(self, info) -> None:
+        """The depth camera's calibration, where the robot file names one of its own: the first is
+        checked against the label camera's (now, or when that comes): a depth camera of another
+        size or intrinsics is refused (UserError), for its images are not registered to the
+        label images. Frames wait for it (:attr:`ready`)."""
+        with self._lock:
+            if self._depth_info is not None:
+                return
+            if self._info is not None:
+                check_depth_info(info, self._info, self.robot, self.robot.source)
+            self._depth_info = info
+
+    def on_depth(self, msg, topic: str = "", now_s: float | None = None) -> RuntimeDecision | None:
+        """A depth image (sensor_msgs/Image 32FC1 [m] or 16UC1 [mm], REP 118), held for the label
+        images near its stamp; the decision on an image that waited for it, if one did. One
+        before the calibration is let go (its size cannot be checked yet).
+
+        Raises:
+            UserError: another encoding, or another size than the label camera's (counted).
+            ValueError: stamped more than ``ahead_s`` ahead of the node's clock ``now_s`` (counted):
+                kept, it would be the newest for ever and no label image would wait for a nearer one.
+        """
+        with self._lock:
+            if self.depth is None or self.runtime is None:
+                return None
+            t = stamp_s(msg.header)
+            if now_s is not None and now_s > 0 and t > now_s + self.ahead_s:
+                self.skipped["depth images ahead of the clock"] += 1
+                raise ValueError(
+                    f"{topic}: a depth image stamped more than {self.ahead_s:g} s ahead of the node's clock; refused "
+                    "(another clock, or use_sim_time unset while a log plays?)"
+                )
+            try:
+                depth = registered_depth(msg, topic, self.robot.source, self.runtime.shape)
+            except UserError:
+                self.skipped["depth images of another encoding or size"] += 1
+                raise
+            self.depth.put(t, depth)
+            return self._resume()
 
     def on_path(self, msg) -> None:
         """A nav_msgs/Path of two distinct points or more (re)sets the reference path; another is skipped (counted)."""
@@ -201,20 +274,38 @@ class PlannerNodeCore:
                 )
             if self.odometry and t < self.odometry[-1][0]:
                 return None  # an older pose than one kept: odometry arrives in order or not at all
-            self.odometry.append((t, float(p.position.x), float(p.position.y), yaw_rad(p.orientation)))
+            # The body's height, pitch and roll beside the pose, as import keeps them: a planar odometry's are level.
+            tilt = (float(p.position.z), *pitch_roll_rad(p.orientation))
+            tilt = tuple(a if math.isfinite(a) else 0.0 for a in tilt)
+            self.odometry.append((t, float(p.position.x), float(p.position.y), yaw_rad(p.orientation), *tilt))
             while self.odometry and self.odometry[0][0] < t - ODOMETRY_KEPT_S:
                 self.odometry.popleft()
-            if self._pending is None or self._pending[3] > t:
-                return None
-            (msgtype, image, topic, stamp), self._pending = self._pending, None
-            pose = self.pose_at(stamp)
-            if pose is None:
-                self.skipped["without odometry at the stamp"] += 1
-                return None
-            return self._decide(msgtype, image, topic, stamp, pose)
+            return self._resume()
 
-    def pose_at(self, t: float) -> Pose | None:
-        """The odometry interpolated to ``t`` [s]; None outside what is kept or across a gap."""
+    def _resume(self) -> RuntimeDecision | None:
+        """The decision on the image waiting, once what it waits for has come: odometry at or
+        past its stamp, and on a robot with depth, a depth image at or past it (or none still
+        worth waiting for)."""
+        pending = self._pending
+        if pending is None or not self.odometry or self.odometry[-1][0] < pending[3] or self._waits_for_depth(pending[3]):
+            return None
+        (msgtype, image, topic, stamp), self._pending = self._pending, None
+        pose = self.pose_at(stamp)
+        if pose is None:
+            self.skipped["without odometry at the stamp"] += 1
+            return None
+        return self._decide(msgtype, image, topic, stamp, pose)
+
+    def _waits_for_depth(self, t: float) -> bool:
+        """Whether an image stamped ``t`` [s] waits for a depth image nearer its stamp than those
+        held: none at or past its stamp has come yet, and the newest is at most
+        :data:`DEPTH_WAIT_S` older (a depth stream that stopped is not waited for)."""
+        depth = self.depth
+        return depth is not None and depth.newest_s is not None and not depth.settled(t) and t - depth.newest_s <= DEPTH_WAIT_S
+
+    def _odometry_at(self, t: float) -> tuple[float, ...] | None:
+        """The odometry (x, y, yaw, z, pitch, roll) interpolated to ``t`` [s]; None outside what is
+        kept or across a gap."""
         if not self.odometry:
             return None
         times = np.array([o[0] for o in self.odometry])
@@ -222,13 +313,24 @@ class PlannerNodeCore:
         if j == 0 or (j == len(times) and t > times[-1]):
             return None
         if j == len(times) or times[j - 1] == t:
-            return Pose(*self.odometry[j - 1][1:])
-        (t0, x0, y0, a0), (t1, x1, y1, a1) = self.odometry[j - 1], self.odometry[j]
-        if t1 - t0 > self.robot.max_gap_s:
+            return self.odometry[j - 1][1:]
+        before, after = self.odometry[j - 1], self.odometry[j]
+        if after[0] - before[0] > self.robot.max_gap_s:
             return None
-        f = (t - t0) / (t1 - t0)
-        da = wrap_angle(a1 - a0)
-        return Pose(x0 + f * (x1 - x0), y0 + f * (y1 - y0), a0 + f * da)
+        f = (t - before[0]) / (after[0] - before[0])
+        x, y, _, z, pitch, roll = (a + f * (b - a) for a, b in zip(before[1:], after[1:]))
+        return x, y, before[3] + f * wrap_angle(after[3] - before[3]), z, pitch, roll
+
+    def pose_at(self, t: float) -> Pose | None:
+        """The odometry interpolated to ``t`` [s]; None outside what is kept or across a gap."""
+        at = self._odometry_at(t)
+        return None if at is None else Pose(*at[:3])
+
+    def attitude_at(self, t: float) -> Attitude | None:
+        """The body's height [m], pitch and roll [rad] by the odometry, interpolated to ``t`` [s]
+        (its ``position.z`` and orientation, as import reads them); None where :meth:`pose_at` is."""
+        at = self._odometry_at(t)
+        return None if at is None else Attitude(*at[3:])
 
     def speed_at(self, t: float) -> float | None:
         """The robot's forward speed [m/s] at ``t`` [s]: its odometry's motion along its heading
@@ -244,9 +346,12 @@ class PlannerNodeCore:
 
         An image newer than the last odometry (they travel on separate topics and either may
         come first) waits, the newest one only, until odometry at or past its stamp arrives
-        (:meth:`on_odometry` then decides on it), for up to :data:`ODOMETRY_WAIT_S`. With
-        ``now_s``, the node's clock [s] (None before it runs), an image stamped ahead of it by
-        more than the runtime allows is refused (ValueError, counted).
+        (:meth:`on_odometry` then decides on it), for up to :data:`ODOMETRY_WAIT_S`. On a robot
+        with depth it waits the same way for a depth image at or past its stamp, while the
+        newest depth image is at most :data:`DEPTH_WAIT_S` older (:meth:`on_depth` then decides
+        on it, with the nearest one within :data:`DEPTH_PAIRING_S`); with none that near it is
+        skipped (counted). With ``now_s``, the node's clock [s] (None before it runs), an image
+        stamped ahead of it by more than the runtime allows is refused (ValueError, counted).
         """
         with self._lock:
             if not self.ready:
@@ -259,18 +364,25 @@ class PlannerNodeCore:
                     f"an image stamped {t - now_s:.3g} s ahead of the node's clock; refused (another clock, or use_sim_time unset while a log plays?)"
                 )
             pose = self.pose_at(t)
-            if pose is None:
-                if self.odometry and 0 < t - self.odometry[-1][0] <= ODOMETRY_WAIT_S:
-                    if self._pending is not None:
-                        self.skipped["superseded while waiting for odometry"] += 1
-                    if self._pending is None or t > self._pending[3]:  # the newest image waits
-                        self._pending = (msgtype, msg, topic, t)
-                else:
-                    self.skipped["without odometry at the stamp"] += 1
+            if pose is None and not (self.odometry and 0 < t - self.odometry[-1][0] <= ODOMETRY_WAIT_S):
+                self.skipped["without odometry at the stamp"] += 1
                 return None
-            return self._decide(msgtype, msg, topic, t, pose)
+            if pose is not None and not self._waits_for_depth(t):
+                return self._decide(msgtype, msg, topic, t, pose)
+            if self._pending is not None:
+                self.skipped["superseded while waiting for odometry or depth"] += 1
+            if self._pending is None or t > self._pending[3]:  # the newest image waits
+                self._pending = (msgtype, msg, topic, t)
+            return None
 
     def _decide(self, msgtype: str, msg, topic: str, t: float, pose: Pose) -> RuntimeDecision | None:
+        depth = None
+        if self.depth is not None:
+            paired = self.depth.nearest(t)
+            if paired is None:
+                self.skipped[NO_DEPTH] += 1
+                return None
+            depth = DepthFrame(undistorted(paired[1], self._undistort, np.float32(np.nan)), self.attitude_at(t))
         # No time in the error: a node says each problem once, and a stream of bad frames is one problem.
         raw = label_ids(msg, msgtype, topic, self.robot.source, self.robot.labels)
         if raw.shape != self.runtime.shape:
@@ -287,9 +399,8 @@ class PlannerNodeCore:
                 unlisted_message(self.robot.labels.unlisted_in(raw), "a label image"),
                 field="ids",
             )
-        if self._undistort is not None:  # a lens with distortion: each pinhole pixel from where the lens put it
-            ids = np.where(self._undistort >= 0, ids.reshape(-1)[np.maximum(self._undistort, 0)], UNKNOWN).astype(np.uint8)
-        decision = self.runtime.decide(ids, t, pose, self.speed_at(t))
+        ids = undistorted(ids, self._undistort, UNKNOWN)  # a lens with distortion: each pinhole pixel from where the lens put it
+        decision = self.runtime.decide(ids, t, pose, self.speed_at(t), depth=depth)
         if decision is None:
             self.skipped["out of order"] += 1
             return None

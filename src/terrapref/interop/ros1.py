@@ -1,7 +1,7 @@
 """``terrapref ros1``: the planner as a ROS 1 node (rospy), around :class:`PlannerNodeCore`.
 
-Subscribes to the robot file's label image, camera calibration, odometry and (without a path
-file) path topics; publishes the command on the robot file's command topic (``Twist``, or
+Subscribes to the robot file's label image, camera calibration, odometry, (where it names them)
+depth image and depth calibration, and (without a path file) path topics; publishes the command on the robot file's command topic (``Twist``, or
 ``TwistStamped`` with ``--stamped``, stamped with the frame it was decided on; a stop once that
 frame is ``hold_s`` old by the node's clock) at the control rate and at once on each decision, the 21 trajectories with F_t and the chosen one
 (``~trajectories``, ``visualization_msgs/MarkerArray``) on each decision, the learned costmap
@@ -43,6 +43,7 @@ ROS_PACKAGES = (
     "ros-core python3-rospy python3-geometry-msgs python3-sensor-msgs python3-nav-msgs python3-visualization-msgs python3-std-msgs"
 )
 COSTMAP_PERIOD_S = 1.0
+DEPTH_BUFFER_BYTES = 1 << 24  # a depth subscriber's receive buffer: a 32FC1 image of 2 megapixels
 
 
 def import_rospy():
@@ -153,6 +154,13 @@ class _Node:
         if core.path is None and robot.path_topic:
             rospy.Subscriber(robot.path_topic, PathMsg, self.on_path, queue_size=1)
         rospy.Subscriber(robot.topics["segmentation"], rospy.AnyMsg, self.on_image, queue_size=1)
+        if robot.depth_topic:
+            self.Image = Image
+            # Every depth image near a label image's stamp is wanted, not the newest only; a buffer that
+            # holds a whole one, for rospy's default (64 KiB) makes a large message wait.
+            rospy.Subscriber(robot.depth_topic, rospy.AnyMsg, self.on_depth, queue_size=10, buff_size=DEPTH_BUFFER_BYTES)
+            if core.depth_info_topic:
+                rospy.Subscriber(core.depth_info_topic, CameraInfo, self.on_depth_info, queue_size=1)
         self.publish_arrived()
         if robot.rules:
             self.log.info(f"terrapref: rule settings over the model file's: {'; '.join(robot.rules.lines())}")
@@ -201,11 +209,31 @@ class _Node:
             if first:  # the planner is made now: what it holds the model to is said once
                 for note in self.core.runtime.notes:
                     self.log.warn(f"terrapref: {note}")
-        except UserError as exc:  # a model for another camera: said once, and the node stops
-            self.failure.append(exc)
-            self.rospy.signal_shutdown(exc.lines()[0])
+        except UserError as exc:  # a model for another camera, a depth camera not registered to it: said once, and the node stops
+            self.fail(exc)
         except ValueError as exc:  # a later calibration of another size: said once, ignored
             self.log.say(str(exc))
+
+    def on_depth_info(self, msg) -> None:
+        """The depth camera's calibration: one not registered to the label camera ends the node."""
+        try:
+            self.core.on_depth_info(msg)
+        except UserError as exc:
+            self.fail(exc)
+
+    def fail(self, exc: UserError) -> None:
+        """A calibration the node cannot drive with: the node stops with its line (exit 2)."""
+        self.failure.append(exc)
+        self.rospy.signal_shutdown(exc.lines()[0])
+
+    def on_depth(self, raw) -> None:
+        """A depth image (sensor_msgs/Image 32FC1 or 16UC1), held for the label images near its stamp."""
+        topic = self.robot.depth_topic
+        kind = raw._connection_header.get("type", "")
+        if kind != "sensor_msgs/Image":
+            return self.log.say(f"{topic}: {kind} is not a depth image (sensor_msgs/Image 32FC1 or 16UC1, REP 118); ignored")
+        now = self.rospy.get_time()
+        self.log.guarded(lambda: self.core.on_depth(self.Image().deserialize(raw._buff), topic, now or None))
 
     def on_image(self, raw) -> None:
         """A label image, Image or CompressedImage, as the robot publishes it on the topic."""

@@ -4,8 +4,9 @@
 The same node as ``terrapref ros1`` (:mod:`terrapref.interop.ros1`), on ROS 2's wire
 (:mod:`terrapref.interop.dds`): it subscribes to the robot file's label image
 (``sensor_msgs/Image`` or ``CompressedImage``, whichever the robot publishes), camera
-calibration, odometry (``nav_msgs/Odometry``, ``PoseStamped`` or ``PoseWithCovarianceStamped``)
-and, without a path file, path (``nav_msgs/Path``); it publishes the command (``Twist``, or
+calibration, odometry (``nav_msgs/Odometry``, ``PoseStamped`` or ``PoseWithCovarianceStamped``),
+where the robot file names them its depth images (``sensor_msgs/Image`` 32FC1 or 16UC1) and
+their calibration, and, without a path file, path (``nav_msgs/Path``); it publishes the command (``Twist``, or
 ``TwistStamped`` with ``stamped``) at the control rate and at once on each decision, the
 trajectories with F_t (``~/trajectories``) on each decision, the learned costmap (``~/costmap``,
 transient local) once a second, whether it stands at the end of its path (``~/arrived``,
@@ -264,6 +265,10 @@ def endpoints(robot, opts: NodeOptions, names: Names, sim: bool, path_topic: boo
         Endpoint("camera_info", names.resolve(t["camera_info"]), ("sensor_msgs/msg/CameraInfo",), SENSOR_DATA, False),
         Endpoint("odometry", names.resolve(t["odometry"]), POSE_TYPES, SENSOR_DATA, False),
     ]
+    if robot.depth_topic:  # a camera stream like the label images: sensor-data QoS
+        out.append(Endpoint("depth", names.resolve(robot.depth_topic), ("sensor_msgs/msg/Image",), SENSOR_DATA, False))
+        if t.get("depth_info") not in (None, t["camera_info"]):
+            out.append(Endpoint("depth_info", names.resolve(t["depth_info"]), ("sensor_msgs/msg/CameraInfo",), SENSOR_DATA, False))
     if path_topic:
         out += [
             Endpoint("path", names.resolve(robot.path_topic), ("nav_msgs/msg/Path",), DEFAULT, False),
@@ -309,6 +314,8 @@ class _Node:
             "segmentation": self.on_image,
             "camera_info": self.on_camera_info,
             "odometry": self.on_odometry,
+            "depth": self.on_depth,
+            "depth_info": self.on_depth_info,
             "path": self.on_path,
             "clock": clock.on_clock,
         }
@@ -450,18 +457,35 @@ class _Node:
             if first:  # the planner is made now: what it holds the model to is said once
                 for note in self.core.runtime.notes:
                     self.log.warn(note)
-        except UserError as exc:  # a model for another camera: said once, and the node stops
-            self.failure.append(exc)
-            self.log.error(exc.lines()[0])
-            self.failed.set()
+        except UserError as exc:  # a model for another camera, a depth camera not registered to it: said once, and the node stops
+            self.fail(exc)
         except ValueError as exc:  # a later calibration of another size: said once, ignored
             self.log.say(f"{self.names.resolve(self.robot.topics['camera_info'])}: {exc}")
+
+    def on_depth_info(self, msg) -> None:
+        """The depth camera's calibration: one not registered to the label camera ends the node."""
+        try:
+            self.core.on_depth_info(msg)
+        except UserError as exc:
+            self.fail(exc)
+
+    def fail(self, exc: UserError) -> None:
+        """A calibration the node cannot drive with: said, and the node stops (exit 2)."""
+        self.failure.append(exc)
+        self.log.error(exc.lines()[0])
+        self.failed.set()
 
     def on_image(self, msg, msgtype: str) -> None:
         """A label image, Image or CompressedImage, as the robot publishes it on the topic."""
         topic = self.names.resolve(self.robot.topics["segmentation"])
         now = self.clock.now() if self.clock.running() else None
         self.log.guarded(lambda: self.core.on_image(msgtype, msg, topic, now))
+
+    def on_depth(self, msg) -> None:
+        """A depth image, held for the label images near its stamp."""
+        topic = self.names.resolve(self.robot.depth_topic)
+        now = self.clock.now() if self.clock.running() else None
+        self.log.guarded(lambda: self.core.on_depth(msg, topic, now))
 
     def on_odometry(self, msg, msgtype: str) -> None:
         """Odometry, or a PoseStamped or PoseWithCovarianceStamped, as the robot file allows."""

@@ -333,3 +333,34 @@ def depth_metres(msg, topic: str, source: str, t_s: float | None = None) -> np.n
         return millimetres_to_depth(values)
     metres = values.astype(np.float32)
     return np.where(np.isfinite(metres) & (metres > 0), metres, np.float32(np.nan)).astype(np.float32)
+
+
+def registered_depth(msg, topic: str, source: str, shape: tuple[int, int], t_s: float | None = None) -> np.ndarray:
+    """The depth image (H, W) float32 [m, NaN where nothing is seen] of ``msg`` on ``topic``
+    (:func:`depth_metres`), which must be of the label camera's ``shape`` (H, W): registered to
+    the label images, as terrapref does not resample a depth camera onto them. ``t_s``, when the
+    log received it from its start [s], names it in an error.
+
+    Raises:
+        UserError: about ``source``, naming the topic: another encoding, data that does not hold
+            the image, or another size than the label camera's.
+    """
+    depth = depth_metres(msg, topic, source, t_s)
+    if depth.shape != tuple(shape):
+        where = f"topic {topic}, message received {t_s:.3f} s into the log" if t_s is not None else f"topic {topic}"
+        raise UserError(
+            source,
+            f"{where}: depth image {depth.shape[1]} x {depth.shape[0]}, the label camera's is {shape[1]} x {shape[0]}; "
+            "the depth images must be registered to the label images",
+            field="topics.depth",
+        )
+    return depth
+
+
+def undistorted(image: np.ndarray, undistort: np.ndarray | None, fill: float | int) -> np.ndarray:
+    """``image`` (H, W) through a distorted lens's undistortion map (the flat index of each
+    pinhole pixel in the lens's image, -1 outside: :func:`camera_from_info`), ``fill`` where no
+    lens pixel falls; ``image`` itself without one. Label ids and depth images alike."""
+    if undistort is None:
+        return image
+    return np.where(undistort >= 0, image.reshape(-1)[np.maximum(undistort, 0)], fill).astype(image.dtype)
