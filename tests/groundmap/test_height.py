@@ -110,7 +110,7 @@ def test_a_step_one_centimetre_over_the_limit_is_lethal_and_one_under_is_not(hei
 def _shape_geometry(elevation: np.ndarray, rows: np.ndarray, cols: np.ndarray, res: float = 0.1) -> np.ndarray:
     """Slope, NaN and step (terrapref.groundmap.height_compiled.shape_geometry) of the cells (``rows``,
     ``cols``) of ground of heights ``elevation`` on 0.1 m cells, as the differences between its
-    neighbours, each known to 1 mm, give them."""
+    neighbours, each known to 1 mm (the layers hold sums weighed by 1 / 0.001^2), give them."""
     from terrapref.groundmap import height_compiled as kernels
 
     known = np.full(elevation.shape, 1e6, dtype=np.float32)
@@ -118,7 +118,7 @@ def _shape_geometry(elevation: np.ndarray, rows: np.ndarray, cols: np.ndarray, r
     dx[:, :-1], dy[:-1, :] = np.diff(elevation, axis=1), np.diff(elevation, axis=0)
     run = np.full(elevation.shape, res, dtype=np.float32)
     out = np.empty((len(rows), 3))
-    kernels.shape_geometry((dx, run, known, dy, run, known), 1.0 / 0.03**2, rows, cols, 3, res, out)
+    kernels.shape_geometry((dx * known, run * known, known, dy * known, run * known, known), 1.0 / 0.03**2, rows, cols, 3, res, out)
     return out
 
 

@@ -45,6 +45,12 @@ if TYPE_CHECKING:
     from terrapref.vehicle import Pose, VehicleConfig
 
 
+# The cells round a cell are read again when its difference to a neighbour has moved by more
+# than this since they were last read [m] (a thirtieth of the step the vehicle climbs), or has come
+# to be known: ground whose shape has settled is not read again every frame.
+CHECK_TOLERANCE_M = 0.005
+
+
 @dataclass(frozen=True)
 class HeightSettings:
     """How the height layer is read from depth and its geometry from the layer.

@@ -206,7 +206,8 @@ def frame_shape(
     each cell are averaged, weighted by the inverse of their variance from ``errors``' base and
     depth terms (``scratch`` (n, n, 4) float64: the weighted sums of x, y, z and the weights, all
     0, left all 0); a cell's mean return differenced with its neighbours' gives its differences,
-    each folded into the cell's weighted mean, weighed by the inverse of its variance. The
+    each added to the cell's sums weighed by the inverse of its variance (``shape`` holds the
+    weighted sums and the weights' sums: a weighted mean is one over the other). The
     frame's attitude error tilts all its returns as one plane through the camera, which changes
     a difference over a cell by a few millimetres (0.035 of its run for 2 deg): gathered over
     frames whose attitudes erred differently, differences agree, where heights do not. The cells
@@ -226,12 +227,14 @@ def frame_shape(
         w2 = scratch[row + 1, col, 3] if row + 1 < n else 0.0
         if w1 > 0.0:
             w = 1.0 / (1.0 / w0 + 1.0 / w1)
-            _fold(dx, dxw, row, col, scratch[row, col + 1, 2] / w1 - z0, w)
-            _fold(dx_run, dxw, row, col, scratch[row, col + 1, 0] / w1 - x0, w, False)
+            dx[row, col] += w * (scratch[row, col + 1, 2] / w1 - z0)
+            dx_run[row, col] += w * (scratch[row, col + 1, 0] / w1 - x0)
+            dxw[row, col] += w
         if w2 > 0.0:
             w = 1.0 / (1.0 / w0 + 1.0 / w2)
-            _fold(dy, dyw, row, col, scratch[row + 1, col, 2] / w2 - z0, w)
-            _fold(dy_run, dyw, row, col, scratch[row + 1, col, 1] / w2 - y0, w, False)
+            dy[row, col] += w * (scratch[row + 1, col, 2] / w2 - z0)
+            dy_run[row, col] += w * (scratch[row + 1, col, 1] / w2 - y0)
+            dyw[row, col] += w
     for i in range(count):
         t = touched[i]
         mark[t] = 0
@@ -278,18 +281,6 @@ def _gather_returns(
     return count
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _fold(mean: np.ndarray, weight: np.ndarray, row: int, col: int, value: float, w: float, add: bool = True) -> None:
-    """``value`` of weight ``w`` folded into the weighted mean ``mean[row, col]`` (its weights' sum
-    ``weight[row, col]``, grown by ``w`` where ``add``: one sum kept for means folded together)."""
-    total = np.float64(weight[row, col]) + w
-    if not add:
-        total = np.float64(weight[row, col])
-    mean[row, col] = np.float64(mean[row, col]) + (value - np.float64(mean[row, col])) * (w / total)
-    if add:
-        weight[row, col] = total
-
-
 @njit(cache=True, nogil=True)
 def shape_geometry(
     shape: tuple[np.ndarray, ...],
@@ -327,9 +318,9 @@ def shape_geometry(
             for dc in range(max(-span, -c0), min(span, n - 1 - c0) + 1):
                 c = c0 + dc
                 if dxw[r, c] >= least_weight:
-                    rise_x, run_x, mx = rise_x + dx[r, c], run_x + dx_run[r, c], mx + 1
+                    rise_x, run_x, mx = rise_x + dx[r, c] / dxw[r, c], run_x + dx_run[r, c] / dxw[r, c], mx + 1
                 if dyw[r, c] >= least_weight:
-                    rise_y, run_y, my = rise_y + dy[r, c], run_y + dy_run[r, c], my + 1
+                    rise_y, run_y, my = rise_y + dy[r, c] / dyw[r, c], run_y + dy_run[r, c] / dyw[r, c], my + 1
         if mx >= 3 and my >= 3 and run_x > 0.0 and run_y > 0.0:
             out[i, 0] = math.atan(math.hypot(rise_x / run_x, rise_y / run_y))
         out[i, 2] = _step(dx, dxw, dy, dyw, least_weight, r0, c0, h)
@@ -343,13 +334,13 @@ def _step(gx: np.ndarray, wx: np.ndarray, gy: np.ndarray, wy: np.ndarray, least:
     h[1, 1] = 0.0
     # Along the row and the column through the cell: h[1, 2] - h[1, 1] is the x difference at (r0, c0).
     if wx[r0, c0] >= least:
-        h[1, 2] = gx[r0, c0]
+        h[1, 2] = gx[r0, c0] / wx[r0, c0]
     if wx[r0, c0 - 1] >= least:
-        h[1, 0] = -gx[r0, c0 - 1]
+        h[1, 0] = -gx[r0, c0 - 1] / wx[r0, c0 - 1]
     if wy[r0, c0] >= least:
-        h[2, 1] = gy[r0, c0]
+        h[2, 1] = gy[r0, c0] / wy[r0, c0]
     if wy[r0 - 1, c0] >= least:
-        h[0, 1] = -gy[r0 - 1, c0]
+        h[0, 1] = -gy[r0 - 1, c0] / wy[r0 - 1, c0]
     # The corners: from their row's middle cell along x, and from their column's middle cell along y.
     for a in (0, 2):
         r = r0 + a - 1
@@ -358,11 +349,11 @@ def _step(gx: np.ndarray, wx: np.ndarray, gy: np.ndarray, wy: np.ndarray, least:
             total, ways = 0.0, 0
             cx = c0 if b == 2 else c0 - 1  # the x difference between the middle of row a and the corner
             if not math.isnan(h[a, 1]) and wx[r, cx] >= least:
-                total += h[a, 1] + (gx[r, cx] if b == 2 else -gx[r, cx])
+                total += h[a, 1] + (gx[r, cx] if b == 2 else -gx[r, cx]) / wx[r, cx]
                 ways += 1
             ry = r0 if a == 2 else r0 - 1  # the y difference between the middle of column b and the corner
             if not math.isnan(h[1, b]) and wy[ry, c] >= least:
-                total += h[1, b] + (gy[ry, c] if a == 2 else -gy[ry, c])
+                total += h[1, b] + (gy[ry, c] if a == 2 else -gy[ry, c]) / wy[ry, c]
                 ways += 1
             if ways:
                 h[a, b] = total / ways
@@ -372,3 +363,62 @@ def _step(gx: np.ndarray, wx: np.ndarray, gy: np.ndarray, wy: np.ndarray, least:
             if not math.isnan(h[a, b]):
                 low, high, known = min(low, h[a, b]), max(high, h[a, b]), known + 1
     return high - low if known >= 2 else np.nan
+
+
+@njit(cache=True, nogil=True)
+def shape_to_check(
+    touched: np.ndarray,
+    shape: tuple[np.ndarray, ...],
+    least_weight: float,
+    checked: tuple[np.ndarray, np.ndarray],
+    tolerance_m: float,
+    near: tuple[float, float, float, float, float, float],
+    reach: int,
+    mark: np.ndarray,
+) -> np.ndarray:
+    """The cells (flat indices, each once) whose slope or step may have changed with this frame:
+    those within ``reach`` cells (a disc) of a cell of ``touched`` near the vehicle whose
+    difference along x or along y (``shape``, counted from ``least_weight``: :func:`shape_geometry`)
+    moved by more than ``tolerance_m`` since the cells round it were last read (``checked``: the differences
+    along x and along y then, (n, n) float32 each, NaN where not yet known, +inf never read), or came to be known.
+    ``near``: the map's corner (x, y), its resolution, the vehicle's (x, y) and the range within
+    which cells are read [m]. ``checked`` is brought up to date; ``mark`` (n * n,) uint8, all 0:
+    scratch, left all 0."""
+    dx, _, dxw, dy, _, dyw = shape
+    checked_x, checked_y = checked
+    n = dx.shape[0]
+    ox, oy, res, x, y, range_m = near
+    out = np.empty(1024, np.int64)
+    count = 0
+    for i in range(touched.shape[0]):
+        t = touched[i]
+        row, col = t // n, t % n
+        ex, ey = ox + (col + 0.5) * res - x, oy + (row + 0.5) * res - y
+        if ex * ex + ey * ey > range_m * range_m:
+            continue
+        now_x = dx[row, col] / dxw[row, col] if dxw[row, col] >= least_weight else np.nan
+        now_y = dy[row, col] / dyw[row, col] if dyw[row, col] >= least_weight else np.nan
+        if _same(now_x, checked_x[row, col], tolerance_m) and _same(now_y, checked_y[row, col], tolerance_m):
+            continue
+        checked_x[row, col], checked_y[row, col] = now_x, now_y
+        for dr in range(-reach, reach + 1):
+            for dc in range(-reach, reach + 1):
+                r, c = row + dr, col + dc
+                if dr * dr + dc * dc > reach * reach or not (0 <= r < n and 0 <= c < n) or mark[r * n + c]:
+                    continue
+                mark[r * n + c] = 1
+                if count == out.shape[0]:
+                    grown = np.empty(2 * count, np.int64)
+                    grown[:count] = out
+                    out = grown
+                out[count] = r * n + c
+                count += 1
+    for i in range(count):
+        mark[out[i]] = 0
+    return out[:count]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _same(now: float, then: float, tolerance: float) -> bool:
+    """Whether a value ``now`` (NaN: unknown) is ``then`` within ``tolerance``."""
+    return (math.isnan(now) and math.isnan(then)) or abs(now - then) <= tolerance

@@ -58,16 +58,21 @@ LAYERS: tuple[Layer, ...] = (
     Layer("returns", np.uint32, 0),
     Layer("spread", np.float32, 0.0),
     Layer("weight", np.float32, 0.0),
-    # The ground's shape, as each frame alone shows it, fused over frames (weighted means;
-    # terrapref.groundmap.height_compiled.frame_shape): each cell's height difference to its
-    # neighbour along x [m], the run between their returns along x [m], the weights' sum
-    # [1 / m^2], and likewise along y. What its slope and steps are read from.
+    # The ground's shape, as each frame alone shows it, fused over frames
+    # (terrapref.groundmap.height_compiled.frame_shape): each cell's height difference to its
+    # neighbour along x and the run between their returns along x, each summed weighed by the
+    # inverse of its variance [m / m^2], the weights' sum [1 / m^2] (a weighted mean is one over
+    # the other), and likewise along y. What its slope and steps are read from.
     Layer("dx", np.float32, 0.0),
     Layer("dx_run", np.float32, 0.0),
     Layer("dx_weight", np.float32, 0.0),
     Layer("dy", np.float32, 0.0),
     Layer("dy_run", np.float32, 0.0),
     Layer("dy_weight", np.float32, 0.0),
+    # The differences along x and y as the cells round each were last read (NaN: not known then;
+    # +inf: never read), so that only the cells round a changed one are read again.
+    Layer("checked_dx", np.float32, np.inf),
+    Layer("checked_dy", np.float32, np.inf),
     # 1 where the ground's geometry is past the vehicle's limits (terrapref.groundmap.height):
     # the cell reads as lethal whatever its evidence.
     Layer("blocked", np.uint8, 0),

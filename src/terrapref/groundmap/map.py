@@ -14,6 +14,7 @@ from terrapref.groundmap import map_compiled as kernels
 from terrapref.groundmap.attitude import HorizonAttitude
 from terrapref.groundmap.columns import TerrainColumns
 from terrapref.groundmap.height import (
+    CHECK_TOLERANCE_M,
     DepthImage,
     DepthRays,
     GeometryLimits,
@@ -135,9 +136,13 @@ class GroundMap:
             points, depths, h.max_range_m, *self._origin_xy, 1.0 / res, h.errors, self._scratch, self._shape, self._mark
         )
         if limits:
-            dx = self._origin_xy[0] + (touched % self._n + 0.5) * res - at_xy[0]
-            dy = self._origin_xy[1] + (touched // self._n + 0.5) * res - at_xy[1]
-            self._block(touched[dx * dx + dy * dy <= h.block_range_m**2])
+            near = (*self._origin_xy, res, *at_xy, h.block_range_m)
+            least = 1.0 / h.max_error_m**2
+            self._block(
+                height_kernels.shape_to_check(
+                    touched, self._shape, least, self._checked, CHECK_TOLERANCE_M, near, disc_reach(h, res), self._mark
+                )
+            )
 
     def _block(self, cells: np.ndarray) -> None:
         """Cells (flat indices ``cells``) whose geometry is past :attr:`limits` are blocked until
@@ -204,6 +209,11 @@ class GroundMap:
         rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
         height_kernels.shape_geometry(self._shape, 1.0 / h.max_error_m**2, rows, cols, disc_reach(h, res), res, out)
         return out
+
+    @property
+    def _checked(self) -> tuple[np.ndarray, np.ndarray]:
+        """The differences as the cells round each were last read (terrapref.groundmap.height_compiled.shape_to_check)."""
+        return self._layers["checked_dx"], self._layers["checked_dy"]
 
     @property
     def _shape(self) -> tuple[np.ndarray, ...]:
