@@ -119,6 +119,7 @@ def test_time_left_is_estimated_from_the_pace_so_far():
     assert time_left(12.0, 1.0) == "12 s" and duration_text(4000) == "1 h 6 min"
 
 
+@pytest.mark.slow  # a whole drive or export end to end, its steps tested apart in the default run
 def test_long_jobs_report_what_they_have_done_and_the_time_left(tiny_recording: Path, tmp_path: Path, capsys):
     assert main(["course", "--after", str(tiny_recording), "--out", str(tmp_path / "more.yaml")]) == 0
     lines = capsys.readouterr().err.splitlines()

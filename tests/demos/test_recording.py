@@ -288,6 +288,7 @@ def test_five_minutes_fit_in_100_mb(demo_recording: FullRecording):
     assert (rec.path / META).is_file()
 
 
+@pytest.mark.slow  # a whole drive or export end to end, its steps tested apart in the default run
 def test_inspect_tells_what_the_drive_shows_of_the_preference(demo_recording: FullRecording, tmp_path: Path, capsys):
     from terrapref.cli import main
 

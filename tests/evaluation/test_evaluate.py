@@ -122,6 +122,7 @@ def test_figures_are_written(evaluated):
     assert sorted(p.name for p in evaluated.out.glob("*.png")) == [f"{STEM}.png", f"{STEM}_frame00005.png"]
 
 
+@pytest.mark.slow  # a whole drive or export end to end, its steps tested apart in the default run
 def test_a_model_with_a_speed_rule_gets_a_figure_of_speed_along_each_path(tmp_path: Path):
     """The skip-path model with a speed rule: its runs' speed along the short course, driver and planner (seed 0)."""
     from terrapref.rules.speed.model import SpeedModel

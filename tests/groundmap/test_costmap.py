@@ -162,6 +162,7 @@ def _costmaps_in(mcap) -> tuple[dict[str, int], np.ndarray]:
     return counts, cost
 
 
+@pytest.mark.slow  # a whole drive or export end to end, its steps tested apart in the default run
 def test_an_exported_recording_carries_the_costmap_a_model_sees_in_it(tmp_path, capsys, short_recording):
     from helpers import model_meta, one_line_error
     from terrapref.cli import main

@@ -674,6 +674,7 @@ def test_a_model_taught_by_a_log_without_commands_commands_the_speed_driven(meas
     assert decision.stop is None and decision.command.v == pytest.approx(FAST_MPS, abs=0.05)
 
 
+@pytest.mark.slow  # a whole drive or export end to end, its steps tested apart in the default run
 def test_colour_segmentation_through_the_label_maps_colour_table(tmp_path: Path, imported):
     from synthetic_bag import colour_label_map
 

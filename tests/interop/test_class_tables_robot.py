@@ -76,6 +76,7 @@ def test_the_imported_log_trains_a_model_for_the_table(log, rec_dir, table, caps
     assert len(err) == 1 and "dirt" in err[0] and "non_traversable" in err[0]
 
 
+@pytest.mark.slow  # a whole drive or export end to end, its steps tested apart in the default run
 def test_an_export_of_the_tables_recording_imports_back_only_with_its_table(log, rec_dir, capsys):
     out = log["root"] / "back.mcap"
     assert main(["export", str(rec_dir), "--format", "mcap", "--out", str(out)]) == 0

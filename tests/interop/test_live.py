@@ -65,6 +65,7 @@ def _watch(port: int, got: dict) -> None:
     got["channels"] = channels
 
 
+@pytest.mark.slow  # a whole drive or export end to end, its steps tested apart in the default run
 def test_evaluate_live_serves_the_export_channels_to_a_websocket_client(tmp_path):
     """The same run is also written as MCAP (--mcap): its costmaps, as OccupancyGrid and as
     Foxglove Grid, once a second, are the ones the live view sent."""

@@ -455,6 +455,7 @@ def test_a_sky_line_the_map_cuts_short_gives_no_estimate(renderer):
 # --- perceived recordings, evaluations and environments -------------------------------------------------
 
 
+@pytest.mark.slow  # a whole drive or export end to end, its steps tested apart in the default run
 def test_a_recording_under_perception_holds_what_the_robot_received(tmp_path, capsys, short_recording):
     """The driver sees the truth (the same drive as without perception); the recording holds the
     frames that reached the robot (fewer, late, their labels and poses off the truth) and names
@@ -488,6 +489,7 @@ def test_a_recording_under_perception_holds_what_the_robot_received(tmp_path, ca
     assert all(differ)
 
 
+@pytest.mark.slow  # a whole evaluation end to end, its steps tested apart in the default run
 def test_evaluate_under_a_perception_preset_names_it_in_metrics_json(tmp_path, capsys):
     import json
 
@@ -547,6 +549,7 @@ def test_a_recordings_perception_is_checked_when_it_is_read(tmp_path, tiny_recor
         read_recording(out)
 
 
+@pytest.mark.slow  # a whole drive or export end to end, its steps tested apart in the default run
 def test_select_drives_the_same_models_under_several_perception_models(tmp_path):
     """The paper's recipe (quick to train) taught from a drive of the short course recorded under
     field, driving one layout on clean frames and under rellis: one table each, every zone tagged."""

@@ -370,6 +370,7 @@ def test_torch_and_numpy_agree_with_ignore(kw: dict):
     np.testing.assert_allclose(t2, t, atol=1e-6)  # torch ignores the column too
 
 
+@pytest.mark.slow  # a whole drive or export end to end, its steps tested apart in the default run
 def test_evaluate_command_drives_a_linear_model_file(tmp_path, capsys):
     """`terrapref evaluate` takes a baseline's model file as well as C's."""
     from terrapref.cli import main

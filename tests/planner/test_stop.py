@@ -354,6 +354,7 @@ def test_a_runs_mcap_says_when_and_why_the_planner_stopped(tmp_path: Path, wall:
     assert said.index(said[-1]) == said.count("driving")  # it drove, then stood, and never drove again
 
 
+@pytest.mark.slow  # a whole drive or export end to end, its steps tested apart in the default run
 def test_a_drive_through_lethal_terrain_says_so_and_training_on_it_warns(tmp_path: Path, wall: str, capsys):
     from terrapref.cli import main
     from terrapref.cli.train import _warn_lethal_contact

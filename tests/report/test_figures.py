@@ -18,7 +18,9 @@ def _overlap(a, b) -> float:
     return max(0.0, min(a.x1, b.x1) - max(a.x0, b.x0)) * max(0.0, min(a.y1, b.y1) - max(a.y0, b.y0))
 
 
-@pytest.mark.parametrize("name", ["teach_course", "train_course", "demo_course"])
+@pytest.mark.parametrize(
+    "name", [pytest.param("teach_course", marks=pytest.mark.slow), "train_course", "demo_course"]
+)  # the teaching course's many zones take the longest; the two others run by default
 def test_zone_labels_do_not_overlap_and_the_legend_stays_off_the_map(name):
     scenario = resolve_scenario(name)
     fig, ax = plt.subplots(figsize=(11.5, 6), dpi=120)

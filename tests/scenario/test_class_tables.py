@@ -681,6 +681,7 @@ def test_a_recording_whose_meta_names_no_class_table_is_one_line(tiny_recording,
         _one_error(capsys, f"{rec / 'meta.json'}: classes: missing")
 
 
+@pytest.mark.slow  # a whole drive or export end to end, its steps tested apart in the default run
 def test_a_courses_table_goes_with_its_drive_to_the_follow_up_training_and_evaluation(tmp_path, capsys, tiny_recording):
     """The follow-up loop's steps on a 12 m course of the small table (the whole loop, two drives
     that together leave nothing open, is a slow test below): the course carries its table, so

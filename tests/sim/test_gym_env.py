@@ -395,6 +395,7 @@ def test_a_gymnasium_vector_env_mixes_courses():
     envs.close()
 
 
+@pytest.mark.slow  # a whole drive or export end to end, its steps tested apart in the default run
 def test_sb3_ppo_trains_on_two_courses_through_make_vec_env(tmp_path, monkeypatch):
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
