@@ -195,50 +195,49 @@ def frame_shape(
     oy: float,
     inv_res: float,
     errors: tuple[float, float, float],
-    scratch: np.ndarray,
+    slot: np.ndarray,
     shape: tuple[np.ndarray, ...],
-    mark: np.ndarray,
 ) -> np.ndarray:
     """Fold one frame's returns (``points`` (N, 3) world [m], NaN rows none; their ``depth`` (N,),
     those deeper than ``max_range_m`` left out) into the ground's ``shape`` (terrapref.groundmap.layers):
     each cell's height difference to its neighbour along x (and the run between them along x, and
     their weight) and likewise along y, as this frame alone shows them. The frame's own returns in
     each cell are averaged, weighted by the inverse of their variance from ``errors``' base and
-    depth terms (``scratch`` (n, n, 4) float64: the weighted sums of x, y, z and the weights, all
-    0, left all 0); a cell's mean return differenced with its neighbours' gives its differences,
+    depth terms (summed in a list of the cells the frame's returns fall in: ``slot`` (n * n,) int32,
+    each cell's place in it, all -1, scratch, left all -1); a cell's mean return differenced with its neighbours' gives its differences,
     each added to the cell's sums weighed by the inverse of its variance (``shape`` holds the
     weighted sums and the weights' sums: a weighted mean is one over the other). The
     frame's attitude error tilts all its returns as one plane through the camera, which changes
     a difference over a cell by a few millimetres (0.035 of its run for 2 deg): gathered over
     frames whose attitudes erred differently, differences agree, where heights do not. The cells
-    the frame's returns fell in (flat indices, each once). ``mark`` (n * n,) uint8, all 0: scratch,
-    left all 0."""
+    the frame's returns fell in (flat indices, each once)."""
     dx, dx_run, dxw, dy, dy_run, dyw = shape
     base, per_m2, _ = errors
-    n = scratch.shape[0]
+    n = dx.shape[0]
     touched = np.empty(points.shape[0], np.int64)
-    count = _gather_returns(points, depth, max_range_m, ox, oy, inv_res, base, per_m2, scratch, mark, touched)
+    sums = np.zeros((points.shape[0], 4))
+    count = _gather_returns(points, depth, max_range_m, ox, oy, inv_res, base, per_m2, slot, sums, touched)
     for i in range(count):
         t = touched[i]
         row, col = t // n, t % n
-        w0 = scratch[row, col, 3]
-        x0, y0, z0 = scratch[row, col, 0] / w0, scratch[row, col, 1] / w0, scratch[row, col, 2] / w0
-        w1 = scratch[row, col + 1, 3] if col + 1 < n else 0.0
-        w2 = scratch[row + 1, col, 3] if row + 1 < n else 0.0
-        if w1 > 0.0:
+        w0 = sums[i, 3]
+        x0, y0, z0 = sums[i, 0] / w0, sums[i, 1] / w0, sums[i, 2] / w0
+        right = slot[t + 1] if col + 1 < n else -1
+        above = slot[t + n] if row + 1 < n else -1
+        if right >= 0:
+            w1 = sums[right, 3]
             w = 1.0 / (1.0 / w0 + 1.0 / w1)
-            dx[row, col] += w * (scratch[row, col + 1, 2] / w1 - z0)
-            dx_run[row, col] += w * (scratch[row, col + 1, 0] / w1 - x0)
+            dx[row, col] += w * (sums[right, 2] / w1 - z0)
+            dx_run[row, col] += w * (sums[right, 0] / w1 - x0)
             dxw[row, col] += w
-        if w2 > 0.0:
+        if above >= 0:
+            w2 = sums[above, 3]
             w = 1.0 / (1.0 / w0 + 1.0 / w2)
-            dy[row, col] += w * (scratch[row + 1, col, 2] / w2 - z0)
-            dy_run[row, col] += w * (scratch[row + 1, col, 1] / w2 - y0)
+            dy[row, col] += w * (sums[above, 2] / w2 - z0)
+            dy_run[row, col] += w * (sums[above, 1] / w2 - y0)
             dyw[row, col] += w
     for i in range(count):
-        t = touched[i]
-        mark[t] = 0
-        scratch[t // n, t % n, :] = 0.0
+        slot[touched[i]] = -1
     return touched[:count]
 
 
@@ -252,14 +251,15 @@ def _gather_returns(
     inv_res: float,
     base: float,
     per_m2: float,
-    scratch: np.ndarray,
-    mark: np.ndarray,
+    slot: np.ndarray,
+    sums: np.ndarray,
     touched: np.ndarray,
 ) -> int:
-    """:func:`frame_shape`'s first part: each return within range summed into its cell of
-    ``scratch``, weighted by the inverse of its variance (``base`` [m] and ``per_m2`` of its
-    depth squared), and each cell it falls in listed in ``touched`` once (``mark``): how many."""
-    n = scratch.shape[0]
+    """:func:`frame_shape`'s first part: each return within range summed into its cell's row of
+    ``sums`` (rows in the order the cells are first fallen in; ``slot`` (n * n,): each cell's row,
+    -1 for none), weighted by the inverse of its variance (``base`` [m] and ``per_m2`` of its
+    depth squared), and each cell it falls in listed in ``touched`` once: how many."""
+    n = int(math.sqrt(slot.shape[0]) + 0.5)
     count = 0
     for i in range(points.shape[0]):
         x, y, z = points[i, 0], points[i, 1], points[i, 2]
@@ -268,16 +268,18 @@ def _gather_returns(
         u, v = (x - ox) * inv_res, (y - oy) * inv_res
         if not (0.0 <= u < n and 0.0 <= v < n):
             continue
-        col, row = int(u), int(v)
-        if mark[row * n + col] == 0:
-            mark[row * n + col] = 1
-            touched[count] = row * n + col
+        cell = int(v) * n + int(u)
+        row = slot[cell]
+        if row < 0:
+            row = count
+            slot[cell] = count
+            touched[count] = cell
             count += 1
         w = 1.0 / (base * base + (per_m2 * depth[i] * depth[i]) ** 2)
-        scratch[row, col, 0] += w * x
-        scratch[row, col, 1] += w * y
-        scratch[row, col, 2] += w * z
-        scratch[row, col, 3] += w
+        sums[row, 0] += w * x
+        sums[row, 1] += w * y
+        sums[row, 2] += w * z
+        sums[row, 3] += w
     return count
 
 

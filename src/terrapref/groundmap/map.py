@@ -78,7 +78,7 @@ class GroundMap:
         self.camera = camera
         self._depth_rays: DepthRays | None = None  # made on the first depth image
         self._mark: np.ndarray | None = None  # scratch for the height layer's kernels (made with the rays)
-        self._scratch: np.ndarray | None = None
+        self._slot: np.ndarray | None = None
         # Ground past these limits reads as lethal (update with a depth image); None: not blocked.
         self.limits: GeometryLimits | None = None
         self.height_settings = HeightSettings()
@@ -111,7 +111,9 @@ class GroundMap:
         if self._depth_rays is None:
             self._depth_rays = DepthRays(self.camera, self._pixels.flat)
             self._mark = np.zeros(self._n * self._n, dtype=np.uint8)
-            self._scratch = np.zeros((self._n, self._n, 4))  # a frame's own mean returns (frame_shape)
+            self._slot = np.full(
+                self._n * self._n, -1, dtype=np.int32
+            )  # scratch: where each cell's returns of a frame are summed (frame_shape)
         points, depths = self._depth_rays.points(depth.image, depth.axes, depth.centre)  # one per distinct pixel
         kernels.map_vote_at(
             self.evidence,
@@ -132,9 +134,7 @@ class GroundMap:
         height_kernels.height_vote(
             tuple(self.heights), *self._origin_xy, 1.0 / res, points, depths, h.max_range_m, depth.centre, h.errors, self._mark
         )
-        touched = height_kernels.frame_shape(
-            points, depths, h.max_range_m, *self._origin_xy, 1.0 / res, h.errors, self._scratch, self._shape, self._mark
-        )
+        touched = height_kernels.frame_shape(points, depths, h.max_range_m, *self._origin_xy, 1.0 / res, h.errors, self._slot, self._shape)
         if limits:
             near = (*self._origin_xy, res, *at_xy, h.block_range_m)
             least = 1.0 / h.max_error_m**2
