@@ -157,21 +157,30 @@ def near_blocked(blocked: np.ndarray, reach: int, mark: np.ndarray) -> np.ndarra
         for col in range(n):
             if not blocked[row, col] or not _blocked_beside(blocked, row, col):
                 continue
-            for dr in range(-reach, reach + 1):
-                for dc in range(-reach, reach + 1):
-                    r, c = row + dr, col + dc
-                    if dr * dr + dc * dc > reach * reach or not (0 <= r < n and 0 <= c < n) or mark[r * n + c]:
-                        continue
-                    mark[r * n + c] = 1
-                    if count == out.shape[0]:
-                        grown = np.empty(2 * count, np.int64)
-                        grown[:count] = out
-                        out = grown
-                    out[count] = r * n + c
-                    count += 1
+            out, count = _mark_disc(row, col, reach, mark, n, out, count)
     for i in range(count):
         mark[out[i]] = 0
     return out[:count]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _mark_disc(row: int, col: int, reach: int, mark: np.ndarray, n: int, out: np.ndarray, count: int) -> tuple[np.ndarray, int]:
+    """The cells within ``reach`` cells (a disc) of (``row``, ``col``) on an n by n grid not yet in
+    ``mark`` (n * n,) uint8, marked and listed after the first ``count`` of ``out`` (flat
+    indices; grown when full): the list and how many it holds."""
+    for dr in range(-reach, reach + 1):
+        for dc in range(-reach, reach + 1):
+            r, c = row + dr, col + dc
+            if dr * dr + dc * dc > reach * reach or not (0 <= r < n and 0 <= c < n) or mark[r * n + c]:
+                continue
+            mark[r * n + c] = 1
+            if count == out.shape[0]:
+                grown = np.empty(2 * count, np.int64)
+                grown[:count] = out
+                out = grown
+            out[count] = r * n + c
+            count += 1
+    return out, count
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -403,18 +412,7 @@ def shape_to_check(
         if _same(now_x, checked_x[row, col], tolerance_m) and _same(now_y, checked_y[row, col], tolerance_m):
             continue
         checked_x[row, col], checked_y[row, col] = now_x, now_y
-        for dr in range(-reach, reach + 1):
-            for dc in range(-reach, reach + 1):
-                r, c = row + dr, col + dc
-                if dr * dr + dc * dc > reach * reach or not (0 <= r < n and 0 <= c < n) or mark[r * n + c]:
-                    continue
-                mark[r * n + c] = 1
-                if count == out.shape[0]:
-                    grown = np.empty(2 * count, np.int64)
-                    grown[:count] = out
-                    out = grown
-                out[count] = r * n + c
-                count += 1
+        out, count = _mark_disc(row, col, reach, mark, n, out, count)
     for i in range(count):
         mark[out[i]] = 0
     return out[:count]
