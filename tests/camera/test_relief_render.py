@@ -217,3 +217,25 @@ def test_the_marchs_step_is_a_block_on_a_plane_and_on_a_parabola_the_step_that_k
     np.testing.assert_allclose(step_lengths(plane, res, 4, tolerance, 2 * res)[inner], 16 * res)
     np.testing.assert_allclose(step_lengths(parabola, res, 4, tolerance, 2 * res)[inner], 0.2, rtol=1e-3)
     assert step_lengths(parabola, res, 4, 1e-6, 2 * res).max() == pytest.approx(2 * res)  # never under two cells
+
+
+def test_past_a_wall_no_column_shows_ground_above_its_own_silhouette() -> None:
+    """A wall 0.4 m high and 0.5 m thick across the way, seen from a rolled camera: where a column's plane meets
+    its wall, a Newton step from the level ground before it lands in the air, and the rows it
+    would fill above the true silhouette show ground that is not there. In every fourth column,
+    the ground the frame shows in the 40 rows under its top agrees with each ray's own march in
+    all but two of them."""
+    ledge = [{"plateau": {"polygon": [[25.0, 0.0], [25.5, 0.0], [25.5, 40.0], [25.0, 40.0]], "height_m": 0.4, "edge_m": 0.0}}]
+    renderer = SegmentationRenderer(PinholeCamera(), world(ledge))
+    pose, attitude = Pose(18.0, 20.0, 0.15), Attitude(0.0, 0.02, 0.12)
+    depth = renderer.render_with_depth(pose, attitude)[1]
+    height, width = depth.shape
+    seen = ~np.isnan(depth)
+    columns = np.arange(0, width, 4)
+    top = seen[:, columns].argmax(axis=0)
+    band = np.arange(-3, 40)
+    rows = np.clip(top[:, None] + band[None, :], 0, height - 1)
+    pixels = (rows * width + columns[:, None]).reshape(-1)
+    expected = ~np.isnan(marched(renderer, pose, attitude, pixels)[1]).reshape(len(columns), len(band))
+    wrong = (seen.reshape(-1)[pixels].reshape(len(columns), len(band)) != expected).sum(axis=1)
+    assert seen[:, columns].any(axis=0).all() and wrong.max() <= 2, columns[wrong > 2]

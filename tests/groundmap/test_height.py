@@ -110,7 +110,7 @@ def test_a_step_one_centimetre_over_the_limit_is_lethal_and_one_under_is_not(hei
 def _shape_geometry(elevation: np.ndarray, rows: np.ndarray, cols: np.ndarray, res: float = 0.1) -> np.ndarray:
     """Slope, NaN and step (terrapref.groundmap.height_compiled.shape_geometry) of the cells (``rows``,
     ``cols``) of ground of heights ``elevation`` on 0.1 m cells, as the differences between its
-    neighbours, each known to 1 mm (the layers hold sums weighed by 1 / 0.001^2), give them."""
+    neighbours, each known to 1 mm (weighing 1 / 0.001^2), give them."""
     from terrapref.groundmap import height_compiled as kernels
 
     known = np.full(elevation.shape, 1e6, dtype=np.float32)
@@ -118,7 +118,7 @@ def _shape_geometry(elevation: np.ndarray, rows: np.ndarray, cols: np.ndarray, r
     dx[:, :-1], dy[:-1, :] = np.diff(elevation, axis=1), np.diff(elevation, axis=0)
     run = np.full(elevation.shape, res, dtype=np.float32)
     out = np.empty((len(rows), 3))
-    kernels.shape_geometry((dx * known, run * known, known, dy * known, run * known, known), 1.0 / 0.03**2, rows, cols, 3, res, out)
+    kernels.shape_geometry((dx, run, known, dy, run, known), 1.0 / 0.03**2, rows, cols, 3, res, out)
     return out
 
 
@@ -145,13 +145,21 @@ def test_a_near_return_outweighs_a_far_one_by_the_inverse_of_their_variances() -
     layers = Heights(
         np.full((n, n), np.nan, np.float32), np.zeros((n, n), np.uint32), np.zeros((n, n), np.float32), np.zeros((n, n), np.float32)
     )
-    mark = np.zeros(n * n, np.uint8)
+    slot, sums = np.full(n * n, -1, np.int32), np.empty((1, kernels.FRAME_SUMS))
+    shape = tuple(np.zeros((n, n), np.float32) for _ in range(6))
 
     def vote(x: float, y: float, z: float, across_m: float) -> None:
+        """One frame of one return at (x, y, z) seen from ``across_m`` behind it, 0.8 m up (a camera
+        whose optical axis points at it: the return's depth is its distance)."""
         centre = np.array([x - across_m, y, 0.8])
-        point = np.array([[x, y, z]])
-        depth = np.array([float(np.linalg.norm(point[0] - centre))])
-        kernels.height_vote(tuple(layers), 0.0, 0.0, 1.0 / res, point, depth, 30.0, centre, settings.errors, mark)
+        offset = np.array([x, y, z]) - centre
+        depth = np.float64(np.linalg.norm(offset))
+        votes = (np.zeros(1, np.int64), np.zeros(1, np.int64), 0, np.empty(1, np.int64), np.empty(1, np.int64))
+        pixels = (np.zeros(1, np.int64), np.zeros(1, np.int64), (offset / depth)[None, :])
+        image = np.full((1, 1), depth, np.float32)
+        kernels.depth_frame(
+            image, pixels, np.eye(3), centre, (0.0, 0.0, 1.0 / res), 30.0, settings.errors, votes, tuple(layers), shape, (slot, sums)
+        )
 
     def weight(across_m: float, z: float) -> float:
         depth_m = math.hypot(across_m, 0.8 - z)

@@ -41,6 +41,10 @@ from numba import njit
 
 from terrapref.world.height_compiled import height_at
 
+# A Newton step that moves a column's drop by more than this [m] is checked and, if need be,
+# settled by a bracketing search (:func:`_settle`).
+SETTLE_M = 0.01
+
 
 @njit(cache=True, nogil=True)
 def step_lengths(heights: np.ndarray, res: float, shift: int, tolerance_m: float, near_m: float) -> np.ndarray:
@@ -93,6 +97,7 @@ def render_relief(
     res: float,
     steps: np.ndarray,
     shift: int,
+    span: tuple[float, float],
     raster: np.ndarray,
     nx: int,
     x_max: float,
@@ -114,6 +119,7 @@ def render_relief(
         res: the grid's cell size [m].
         steps, shift: the longest step from each block of ``2**shift`` cells
             (:func:`step_lengths`).
+        span: the height field's lowest and highest heights [m].
         raster: the padded class raster, flat (uint8), ``nx`` cells a row.
         x_max, y_max: the largest cell coordinates clipped to (just inside the padded border).
         unknown: the class id of a pixel that sees no ground.
@@ -123,7 +129,7 @@ def render_relief(
     below = height_at(heights, per_m, centre[0], centre[1]) - centre[2]  # the ground under the camera, from it [m]
     clearance = max(-below, 0.2)
     planes = _planes(axes, ray_a)
-    ground = (heights, per_m, steps, shift)
+    ground = (heights, per_m, steps, shift, span)
     filled = _march(planes, -below, clearance, fy, cy, max_range_m, centre, ray_b, ground, depth)
     _shade(filled, axes, centre, ray_a, ray_b, max_range_m, per_m, raster, nx, x_max, y_max, unknown, ids, depth)
 
@@ -173,19 +179,19 @@ def _march(
     max_range_m: float,
     centre: np.ndarray,
     ray_b: np.ndarray,
-    ground: tuple[np.ndarray, float, np.ndarray, int],
+    ground: tuple[np.ndarray, float, np.ndarray, int, tuple[float, float]],
     depth: np.ndarray,
 ) -> np.ndarray:
     """Walk every column's plane (``planes``, :func:`_planes`) out from the ground under the
     camera (``drop`` [m] below the optical centre) to the first sample past ``max_range_m``,
     writing each row's inverse depth [1/m] into ``depth`` (H, W) from the bottom row up.
-    ``ground``: the height field, its cells per metre, and the step lengths and their block's
-    shift (:func:`step_lengths`). Returns each column's lowest row left unwritten, (W,).
+    ``ground``: the height field, its cells per metre, the step lengths and their block's
+    shift (:func:`step_lengths`), and the field's lowest and highest heights. Returns each column's lowest row left unwritten, (W,).
 
     A sample at a time for every column, rather than a column at a time: a column's sample
     waits on its last (the drop it predicts), and neighbouring columns read neighbouring
     cells."""
-    heights, per_m, steps, shift = ground
+    heights, per_m, steps, shift, span = ground
     height, width = depth.shape
     hx, hy, mx, my, dh, fh, dm, fm = planes[0], planes[1], planes[2], planes[3], planes[4], planes[5], planes[6], planes[7]
     row = np.where(planes[8] != 0.0, height - 1, -1)
@@ -201,6 +207,7 @@ def _march(
     corners = np.empty((4, width), np.float32)
     longest = np.empty(width)
     stop = np.empty(width, np.int64)  # the highest row a sample fills to
+    moved = np.empty(width)  # how far the Newton step moved each column's drop [m]
     ny, nx = heights.shape
     where = (centre[0] * per_m - 0.5, centre[1] * per_m - 0.5, per_m, nx - 1.0 - 1e-9, ny - 1.0 - 1e-9, nx, shift, steps.shape[1])
     per_row, clearance2, cap = 1.0 / (clearance * fy), clearance * clearance, 2.0 * max_range_m + 1.0
@@ -208,7 +215,8 @@ def _march(
     while n_live > 0:
         _where(u, ratio, last, before, hx, hy, mx, my, where, new, fu, fv, cell, block)
         _read(cell, block, heights.reshape(-1), nx, steps.reshape(-1), corners, longest)
-        _newton(corners, fu, fv, mx, my, new, centre[2], per_m)
+        if _newton(corners, fu, fv, mx, my, new, centre[2], per_m, moved):
+            _settle(moved, new, u, planes, centre, heights, per_m, span)
         _project(new, u, dh, dm, fh, fm, wd, wf, stop, fy, cy)
         before, last, new = last, new, before
         if not first:
@@ -319,10 +327,19 @@ def _read(
 
 @njit(cache=True, nogil=True)
 def _newton(
-    corners: np.ndarray, fu: np.ndarray, fv: np.ndarray, mx: np.ndarray, my: np.ndarray, drop: np.ndarray, cz: float, per_m: float
-) -> None:
+    corners: np.ndarray,
+    fu: np.ndarray,
+    fv: np.ndarray,
+    mx: np.ndarray,
+    my: np.ndarray,
+    drop: np.ndarray,
+    cz: float,
+    per_m: float,
+    moved: np.ndarray,
+) -> int:
     """Each column's drop where its plane meets the ground, from its guess in ``drop``: one Newton
-    step on the bilinear field (its height and gradient at the guess's point)."""
+    step on the bilinear field (its height and gradient at the guess's point); how far it moved
+    the drop into ``moved``. How many it moved by more than :data:`SETTLE_M`."""
     h00, h01, h10, h11 = corners[0], corners[1], corners[2], corners[3]
     for col in range(drop.shape[0]):
         a, b, c, d = np.float64(h00[col]), np.float64(h01[col]), np.float64(h10[col]), np.float64(h11[col])
@@ -336,6 +353,72 @@ def _newton(
         closing = max(1.0 + gx * mx[col] + gy * my[col], 0.5)
         g = drop[col]
         drop[col] = g + (cz - g - z) / closing
+        moved[col] = abs(drop[col] - g)
+    far = 0
+    for col in range(drop.shape[0]):
+        far += moved[col] > SETTLE_M
+    return far
+
+
+@njit(cache=True, nogil=True)
+def _settle(
+    moved: np.ndarray,
+    drop: np.ndarray,
+    u: np.ndarray,
+    planes: np.ndarray,
+    centre: np.ndarray,
+    heights: np.ndarray,
+    per_m: float,
+    span: tuple[float, float],
+) -> None:
+    """The drop of each column whose Newton step moved it by more than :data:`SETTLE_M` and left
+    its plane's point more than a tenth of that off the ground (it met a wall, a ledge or a
+    crest's far side, where the ground is not near its tangent), found again where the point
+    meets the ground to :data:`SETTLE_M` / 100, by regula falsi (Illinois)
+    between the guess and the step's result, widened to the field's lowest and highest heights
+    (``span``) where both lie on one side: one Newton step alone can leave the point in the air,
+    and the rows it fills above the true silhouette then show ground that is not there."""
+    for col in range(drop.shape[0]):
+        if not moved[col] > SETTLE_M:
+            continue
+        point = (centre[0] + u[col] * planes[0, col], centre[1] + u[col] * planes[1, col], planes[2, col], planes[3, col], centre[2])
+        b = drop[col]
+        fb = _gap(point, b, heights, per_m)
+        if abs(fb) <= 0.1 * SETTLE_M:  # on smooth ground the step lands on it: a tenth of a pixel row at 10 m
+            continue
+        a = b - moved[col] if fb * _gap(point, b - moved[col], heights, per_m) <= 0.0 else np.nan
+        if math.isnan(a):
+            a = centre[2] - span[0] if fb > 0.0 else centre[2] - span[1]
+        drop[col] = _root(point, a, b, heights, per_m)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _gap(point: tuple[float, float, float, float, float], drop: float, heights: np.ndarray, per_m: float) -> float:
+    """How far a column's plane's point at ``drop`` lies above the ground [m] (``point``: the
+    point at no drop, x and y, the plane's level offset per metre of drop, the optical centre's z)."""
+    x, y, mx, my, cz = point
+    return cz - drop - height_at(heights, per_m, x + drop * mx, y + drop * my)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _root(point: tuple[float, float, float, float, float], a: float, b: float, heights: np.ndarray, per_m: float) -> float:
+    """The drop between ``a`` and ``b`` (the gap of opposite signs at them, :func:`_gap`) at which
+    the gap closes to within :data:`SETTLE_M` / 100, by the Illinois method (at most 60 steps)."""
+    fa, fb = _gap(point, a, heights, per_m), _gap(point, b, heights, per_m)
+    side = 0
+    for _ in range(60):
+        if abs(fb) <= 0.01 * SETTLE_M or fa == fb:
+            break
+        c = b - fb * (b - a) / (fb - fa)
+        fc = _gap(point, c, heights, per_m)
+        if fc * fb < 0.0:
+            a, fa = b, fb
+            side = 0
+        else:
+            fa = 0.5 * fa if side == 1 else fa
+            side = 1
+        b, fb = c, fc
+    return b
 
 
 @njit(cache=True, nogil=True)

@@ -82,7 +82,9 @@ class SegmentationRenderer:
         # Cell coordinates are clipped to just inside the padded raster (in float32, as NumPy's
         # clip of a float32 array by a Python float).
         self._x_max, self._y_max = np.float32(nx + 2 - 1e-2), np.float32(ny + 2 - 1e-2)
-        self._ground: tuple[np.ndarray, np.ndarray, int] | None = None  # the relief march's height field and steps, made when first asked
+        self._ground: tuple[np.ndarray, np.ndarray, int, tuple[float, float]] | None = (
+            None  # the relief march's ground, made when first asked
+        )
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -110,7 +112,7 @@ class SegmentationRenderer:
         depth = np.empty(self.camera.shape, dtype=np.float32)
         if self._ground is None:
             self._ground = _march_ground(self.world)
-        heights, steps, shift = self._ground
+        heights, steps, shift, span = self._ground
         render_relief(
             axes,
             centre,
@@ -123,6 +125,7 @@ class SegmentationRenderer:
             self.world.resolution_m,
             steps,
             shift,
+            span,
             self._flat,
             self._nx_pad,
             float(self._x_max),
@@ -278,16 +281,18 @@ def flat_of(flat_index: np.ndarray | PixelSet) -> np.ndarray:
     return flat_index.flat if isinstance(flat_index, PixelSet) else flat_index
 
 
-def _march_ground(world: WorldMap) -> tuple[np.ndarray, np.ndarray, int]:
+def _march_ground(world: WorldMap) -> tuple[np.ndarray, np.ndarray, int, tuple[float, float]]:
     """The relief march's ground for ``world``: its height field (the plane z = 0 on flat ground;
     a one-cell side repeated, so that every cell has four corners), the longest step from each
-    block of cells and the blocks' size as a power of two of cells (:func:`step_lengths`)."""
+    block of cells, the blocks' size as a power of two of cells (:func:`step_lengths`), and the
+    field's lowest and highest heights [m]."""
     heights = world.height if world.height is not None else np.zeros((2, 2), dtype=np.float32)
     if min(heights.shape) < 2:
         heights = np.pad(heights, ((0, heights.shape[0] < 2), (0, heights.shape[1] < 2)), mode="edge")
     res = world.resolution_m
     shift = max(0, min(8, math.floor(math.log2(RELIEF_LONGEST_STEP_M / res)))) if res < RELIEF_LONGEST_STEP_M else 0
-    return heights, step_lengths(heights, res, shift, RELIEF_TOLERANCE_M, 2.0 * res), shift
+    span = (float(heights.min()), float(heights.max()))
+    return heights, step_lengths(heights, res, shift, RELIEF_TOLERANCE_M, 2.0 * res), shift, span
 
 
 def _finite(pose: Pose) -> Pose:

@@ -12,75 +12,6 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
-def depth_points(
-    depth: np.ndarray, rows: np.ndarray, cols: np.ndarray, ray: np.ndarray, axes: np.ndarray, centre: np.ndarray, out: np.ndarray
-) -> np.ndarray:
-    """The returns of ``depth`` (H, W) [m along the optical axis, NaN: none] at the pixels
-    (``rows``, ``cols``) into ``out`` (N, 3), world [m]: the optical ``centre`` (3,) plus the depth
-    times each pixel's ``ray`` (N, 3; camera frame, forward 1) turned by ``axes`` (3, 3; rows
-    right, down, forward in the world); NaN rows where a pixel has no return. Their depths (N,)."""
-    d = np.empty(rows.shape[0])
-    for i in range(rows.shape[0]):
-        z = np.float64(depth[rows[i], cols[i]])
-        d[i] = z
-        for a in range(3):
-            out[i, a] = centre[a] + z * (ray[i, 0] * axes[0, a] + ray[i, 1] * axes[1, a] + ray[i, 2] * axes[2, a])
-    return d
-
-
-@njit(cache=True, nogil=True)
-def height_vote(
-    heights: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-    ox: float,
-    oy: float,
-    inv_res: float,
-    points: np.ndarray,
-    depth: np.ndarray,
-    max_range_m: float,
-    centre: np.ndarray,
-    errors: tuple[float, float, float],
-    mark: np.ndarray,
-) -> np.ndarray:
-    """Fold the returns ``points`` (N, 3) world [m] (NaN rows: no return) no deeper than
-    ``max_range_m`` (their ``depth`` (N,)), seen from the optical ``centre`` (3,), into each
-    cell's layers (``heights``: elevation (n, n) float32, NaN where none fell yet, returns,
-    spread, weight; terrapref.groundmap.height.Heights): a return of variance v weighs 1 / v, v
-    the sum of the squares of ``errors``' base [m], its per m^2 of depth times the depth squared,
-    and its attitude's tangent times the return's distance from the centre across the ground
-    (the weighted mean and sum of squared deviations updated as West's algorithm does). The
-    cells they fell in (flat indices, each once, in the order first fallen in). ``mark`` (n * n,)
-    uint8, all 0: scratch, left all 0."""
-    elevation, returns, spread, weight = heights
-    base, per_m2, tilt = errors
-    n = elevation.shape[0]
-    touched = np.empty(points.shape[0], np.int64)
-    count = 0
-    for i in range(points.shape[0]):
-        x, y, z = points[i, 0], points[i, 1], points[i, 2]
-        if not (depth[i] <= max_range_m and math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
-            continue
-        u, v = (x - ox) * inv_res, (y - oy) * inv_res
-        if not (0.0 <= u < n and 0.0 <= v < n):
-            continue
-        col, row = int(u), int(v)
-        if mark[row * n + col] == 0:
-            mark[row * n + col] = 1
-            touched[count] = row * n + col
-            count += 1
-        across = (x - centre[0]) ** 2 + (y - centre[1]) ** 2
-        w = 1.0 / (base * base + (per_m2 * depth[i] * depth[i]) ** 2 + tilt * tilt * across)
-        k = returns[row, col] + 1
-        total = np.float64(weight[row, col]) + w if k > 1 else w
-        old = np.float64(elevation[row, col]) if k > 1 else z
-        mean = old + (z - old) * (w / total)
-        returns[row, col], weight[row, col], elevation[row, col] = k, total, mean
-        spread[row, col] += w * (z - old) * (z - mean)
-    for i in range(count):
-        mark[touched[i]] = 0
-    return touched[:count]
-
-
-@njit(cache=True, nogil=True)
 def cell_geometry(trusted: np.ndarray, rows: np.ndarray, cols: np.ndarray, reach: int, res: float, out: np.ndarray) -> None:
     """Slope [rad], roughness [m] and step [m] of the cells (``rows``, ``cols``) into ``out`` (N, 3),
     from the cells with a ``trusted`` elevation (n, n) float32 [m, NaN: not trusted] within
@@ -195,56 +126,64 @@ def _blocked_beside(blocked: np.ndarray, row: int, col: int) -> bool:
     return False
 
 
+# A frame's returns summed per cell (:func:`depth_frame`'s ``sums``, one row per cell the frame's
+# returns fall in): weighed by the sensor's errors alone (the frame's shape) ...
+SUM_WX, SUM_WY, SUM_WZ, SUM_W = 0, 1, 2, 3
+# ... and with the attitude's error too (its heights), with their squares, and how many.
+SUM_VZ, SUM_VZZ, SUM_V, SUM_COUNT = 4, 5, 6, 7
+FRAME_SUMS = 8
+
+
 @njit(cache=True, nogil=True)
-def frame_shape(
-    points: np.ndarray,
+def depth_frame(
     depth: np.ndarray,
+    pixels: tuple[np.ndarray, np.ndarray, np.ndarray],
+    axes: np.ndarray,
+    centre: np.ndarray,
+    grid: tuple[float, float, float],
     max_range_m: float,
-    ox: float,
-    oy: float,
-    inv_res: float,
     errors: tuple[float, float, float],
-    slot: np.ndarray,
+    votes: tuple[np.ndarray, np.ndarray, int, np.ndarray, np.ndarray],
+    heights: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     shape: tuple[np.ndarray, ...],
+    scratch: tuple[np.ndarray, np.ndarray],
 ) -> np.ndarray:
-    """Fold one frame's returns (``points`` (N, 3) world [m], NaN rows none; their ``depth`` (N,),
-    those deeper than ``max_range_m`` left out) into the ground's ``shape`` (terrapref.groundmap.layers):
-    each cell's height difference to its neighbour along x (and the run between them along x, and
-    their weight) and likewise along y, as this frame alone shows them. The frame's own returns in
-    each cell are averaged, weighted by the inverse of their variance from ``errors``' base and
-    depth terms (summed in a list of the cells the frame's returns fall in: ``slot`` (n * n,) int32,
-    each cell's place in it, all -1, scratch, left all -1); a cell's mean return differenced with its neighbours' gives its differences,
-    each added to the cell's sums weighed by the inverse of its variance (``shape`` holds the
-    weighted sums and the weights' sums: a weighted mean is one over the other). The
-    frame's attitude error tilts all its returns as one plane through the camera, which changes
-    a difference over a cell by a few millimetres (0.035 of its run for 2 deg): gathered over
-    frames whose attitudes erred differently, differences agree, where heights do not. The cells
-    the frame's returns fell in (flat indices, each once)."""
-    dx, dx_run, dxw, dy, dy_run, dyw = shape
-    base, per_m2, _ = errors
-    n = dx.shape[0]
-    touched = np.empty(points.shape[0], np.int64)
-    sums = np.zeros((points.shape[0], 4))
-    count = _gather_returns(points, depth, max_range_m, ox, oy, inv_res, base, per_m2, slot, sums, touched)
-    for i in range(count):
-        t = touched[i]
-        row, col = t // n, t % n
-        w0 = sums[i, 3]
-        x0, y0, z0 = sums[i, 0] / w0, sums[i, 1] / w0, sums[i, 2] / w0
-        right = slot[t + 1] if col + 1 < n else -1
-        above = slot[t + n] if row + 1 < n else -1
-        if right >= 0:
-            w1 = sums[right, 3]
-            w = 1.0 / (1.0 / w0 + 1.0 / w1)
-            dx[row, col] += w * (sums[right, 2] / w1 - z0)
-            dx_run[row, col] += w * (sums[right, 0] / w1 - x0)
-            dxw[row, col] += w
-        if above >= 0:
-            w2 = sums[above, 3]
-            w = 1.0 / (1.0 / w0 + 1.0 / w2)
-            dy[row, col] += w * (sums[above, 2] / w2 - z0)
-            dy_run[row, col] += w * (sums[above, 1] / w2 - y0)
-            dyw[row, col] += w
+    """Fold one frame's depth image into a ground map's height layers and its ground's shape.
+
+    ``depth`` (H, W) [m along the optical axis, NaN: no return] is read at ``pixels`` (rows,
+    columns, and each one's ray (N, 3) in the camera frame, forward 1): a return is the optical
+    ``centre`` (3,) plus the depth times the ray turned by ``axes`` (3, 3; rows right, down,
+    forward in the world), and falls in the cell of the map ``grid`` (its corner x, y [m] and
+    cells per metre) under it. ``votes`` (each pixel's class id, the columns of the ids, K, and
+    the two outputs: each pixel's cell (flat index; -1: no vote, for a pixel without a return
+    or one seeing no ground) and column) says where each pixel votes its class
+    (terrapref.groundmap.map_compiled.map_vote_cells).
+
+    The returns no deeper than ``max_range_m`` are summed per cell, each weighed by the inverse
+    of its variance: ``errors``' base [m] and its per m^2 of depth times the depth squared,
+    added in quadrature, and, for the heights, its attitude's tangent times the return's
+    distance from the centre across the ground as well. Then each cell they fell in gets:
+
+    - in ``heights`` (elevation (n, n) float32, NaN where nothing fell yet, returns, spread,
+      weight; terrapref.groundmap.height.Heights) the frame's returns, folded in as the
+      weighted mean and sum of squared deviations of all its returns would take them one by one
+      (the frame's sums combined with the cell's, as Chan's parallel update combines two sets);
+    - in ``shape`` (terrapref.groundmap.layers) its height difference to its neighbour along x
+      (and the run between them along x, and their weight), and likewise along y, as this frame
+      alone shows them: its mean return differenced with theirs, each difference folded into
+      the cell's means of them weighed by the inverse of its variance (``shape`` holds the
+      weighted means and the weights' sums). The attitude's error is left out of these: it tilts
+      all the frame's returns as one plane through the camera, which changes a difference over
+      a cell by a few millimetres (0.035 of its run for 2 deg). Gathered over frames whose
+      attitudes erred differently, differences agree where heights do not.
+
+    ``scratch``: ``slot`` (n * n,) int32, all -1 (each cell's row of the frame's sums), left all
+    -1, and room for the sums ((N, :data:`FRAME_SUMS`) float64). The cells the frame's returns
+    fell in (flat indices, each once, in the order first fallen in)."""
+    slot, sums = scratch
+    count, touched = _gather_returns(depth, pixels, axes, centre, grid, max_range_m, errors, votes, slot, sums)
+    _fold_heights(heights, sums, touched, count)
+    _fold_shape(shape, sums, slot, touched, count)
     for i in range(count):
         slot[touched[i]] = -1
     return touched[:count]
@@ -252,44 +191,140 @@ def frame_shape(
 
 @njit(cache=True, nogil=True, inline="always")
 def _gather_returns(
-    points: np.ndarray,
     depth: np.ndarray,
+    pixels: tuple[np.ndarray, np.ndarray, np.ndarray],
+    axes: np.ndarray,
+    centre: np.ndarray,
+    grid: tuple[float, float, float],
     max_range_m: float,
-    ox: float,
-    oy: float,
-    inv_res: float,
-    base: float,
-    per_m2: float,
+    errors: tuple[float, float, float],
+    votes: tuple[np.ndarray, np.ndarray, int, np.ndarray, np.ndarray],
     slot: np.ndarray,
     sums: np.ndarray,
-    touched: np.ndarray,
-) -> int:
-    """:func:`frame_shape`'s first part: each return within range summed into its cell's row of
-    ``sums`` (rows in the order the cells are first fallen in; ``slot`` (n * n,): each cell's row,
-    -1 for none), weighted by the inverse of its variance (``base`` [m] and ``per_m2`` of its
-    depth squared), and each cell it falls in listed in ``touched`` once: how many."""
+) -> tuple[int, np.ndarray]:
+    """:func:`depth_frame`'s first part: each pixel's return, its vote's cell, and the returns
+    within range summed into their cell's row of ``sums`` (rows in the order the cells are first
+    fallen in, each zeroed then; ``slot``: each cell's row): how many cells, and which."""
+    rows, cols, ray = pixels
+    base, per_m2, tilt = errors
+    ids, columns, k, vote_cell, vote_column = votes
     n = int(math.sqrt(slot.shape[0]) + 0.5)
+    touched = np.empty(rows.shape[0], np.int64)
     count = 0
-    for i in range(points.shape[0]):
-        x, y, z = points[i, 0], points[i, 1], points[i, 2]
-        if not (depth[i] <= max_range_m and math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+    for i in range(rows.shape[0]):
+        vote_cell[i] = -1
+        d = np.float64(depth[rows[i], cols[i]])
+        x, y, z, cell = _return_at(d, ray[i], axes, centre, grid, n)
+        if cell < 0:
             continue
-        u, v = (x - ox) * inv_res, (y - oy) * inv_res
-        if not (0.0 <= u < n and 0.0 <= v < n):
+        column = columns[ids[i]]
+        vote_column[i] = column
+        if column <= k:
+            vote_cell[i] = cell
+        if not d <= max_range_m:
             continue
-        cell = int(v) * n + int(u)
         row = slot[cell]
         if row < 0:
             row = count
             slot[cell] = count
             touched[count] = cell
             count += 1
-        w = 1.0 / (base * base + (per_m2 * depth[i] * depth[i]) ** 2)
-        sums[row, 0] += w * x
-        sums[row, 1] += w * y
-        sums[row, 2] += w * z
-        sums[row, 3] += w
-    return count
+            for j in range(FRAME_SUMS):
+                sums[row, j] = 0.0
+        noise = base * base + (per_m2 * d * d) ** 2
+        w = 1.0 / noise
+        wv = 1.0 / (noise + tilt * tilt * ((x - centre[0]) ** 2 + (y - centre[1]) ** 2))
+        sums[row, SUM_WX] += w * x
+        sums[row, SUM_WY] += w * y
+        sums[row, SUM_WZ] += w * z
+        sums[row, SUM_W] += w
+        sums[row, SUM_VZ] += wv * z
+        sums[row, SUM_VZZ] += wv * z * z
+        sums[row, SUM_V] += wv
+        sums[row, SUM_COUNT] += 1.0
+    return count, touched
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _return_at(
+    d: float, ray: np.ndarray, axes: np.ndarray, centre: np.ndarray, grid: tuple[float, float, float], n: int
+) -> tuple[float, float, float, int]:
+    """The return of depth ``d`` along ``ray`` (3,) (:func:`depth_frame`) and the cell of the n by
+    n ``grid`` it falls in (flat index; -1 where it falls off the grid or there is no return)."""
+    ox, oy, inv_res = grid
+    x = centre[0] + d * (ray[0] * axes[0, 0] + ray[1] * axes[1, 0] + ray[2] * axes[2, 0])
+    y = centre[1] + d * (ray[0] * axes[0, 1] + ray[1] * axes[1, 1] + ray[2] * axes[2, 1])
+    z = centre[2] + d * (ray[0] * axes[0, 2] + ray[1] * axes[1, 2] + ray[2] * axes[2, 2])
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+        return x, y, z, -1
+    u, v = (x - ox) * inv_res, (y - oy) * inv_res
+    if not (0.0 <= u < n and 0.0 <= v < n):
+        return x, y, z, -1
+    return x, y, z, int(v) * n + int(u)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _fold_heights(heights: tuple[np.ndarray, ...], sums: np.ndarray, touched: np.ndarray, count: int) -> None:
+    """:func:`depth_frame`'s heights: each cell's returns of the frame combined with those it holds."""
+    elevation, returns, spread, weight = heights
+    n = elevation.shape[0]
+    for i in range(count):
+        row, col = touched[i] // n, touched[i] % n
+        w = sums[i, SUM_V]
+        mean = sums[i, SUM_VZ] / w
+        scatter = max(sums[i, SUM_VZZ] - mean * sums[i, SUM_VZ], 0.0)  # the frame's own squared deviations, weighted
+        k = returns[row, col]
+        if k == 0:
+            elevation[row, col], spread[row, col], weight[row, col] = mean, scatter, w
+        else:
+            held = np.float64(weight[row, col])
+            total = held + w
+            delta = mean - np.float64(elevation[row, col])
+            elevation[row, col] = np.float64(elevation[row, col]) + delta * (w / total)
+            spread[row, col] = np.float64(spread[row, col]) + scatter + delta * delta * (held * w / total)
+            weight[row, col] = total
+        returns[row, col] = k + np.uint32(sums[i, SUM_COUNT])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _fold_shape(shape: tuple[np.ndarray, ...], sums: np.ndarray, slot: np.ndarray, touched: np.ndarray, count: int) -> None:
+    """:func:`depth_frame`'s shape: each cell's differences to its neighbours along x and y, as
+    the frame shows them. Each cell's sums (its row of ``sums``) become its mean return and the
+    variance of that mean (the inverse of its weight) first."""
+    dx, dx_run, dxw, dy, dy_run, dyw = shape
+    n = dx.shape[0]
+    for i in range(count):
+        variance = 1.0 / sums[i, SUM_W]
+        sums[i, SUM_WX], sums[i, SUM_WY], sums[i, SUM_WZ] = (
+            sums[i, SUM_WX] * variance,
+            sums[i, SUM_WY] * variance,
+            sums[i, SUM_WZ] * variance,
+        )
+        sums[i, SUM_W] = variance
+    for i in range(count):
+        t = touched[i]
+        row, col = t // n, t % n
+        right = slot[t + 1] if col + 1 < n else -1
+        above = slot[t + n] if row + 1 < n else -1
+        if right >= 0:
+            w = 1.0 / (sums[i, SUM_W] + sums[right, SUM_W])
+            _fold_difference(dx, dx_run, dxw, row, col, w, sums[right, SUM_WZ] - sums[i, SUM_WZ], sums[right, SUM_WX] - sums[i, SUM_WX])
+        if above >= 0:
+            w = 1.0 / (sums[i, SUM_W] + sums[above, SUM_W])
+            _fold_difference(dy, dy_run, dyw, row, col, w, sums[above, SUM_WZ] - sums[i, SUM_WZ], sums[above, SUM_WY] - sums[i, SUM_WY])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _fold_difference(
+    mean: np.ndarray, mean_run: np.ndarray, weight: np.ndarray, row: int, col: int, w: float, rise: float, run: float
+) -> None:
+    """A difference (``rise`` over ``run`` [m]) of weight ``w`` folded into cell (``row``, ``col``)'s
+    weighted means of them and their weights' sum."""
+    total = np.float64(weight[row, col]) + w
+    share = w / total
+    mean[row, col] = np.float64(mean[row, col]) + (rise - np.float64(mean[row, col])) * share
+    mean_run[row, col] = np.float64(mean_run[row, col]) + (run - np.float64(mean_run[row, col])) * share
+    weight[row, col] = total
 
 
 @njit(cache=True, nogil=True)
@@ -303,7 +338,7 @@ def shape_geometry(
     out: np.ndarray,
 ) -> None:
     """Slope [rad] and step [m] of the cells (``rows``, ``cols``) into ``out`` (N, 3: slope, NaN
-    for the roughness, which heights give, step), from the ground's ``shape`` (:func:`frame_shape`):
+    for the roughness, which heights give, step), from the ground's ``shape`` (:func:`depth_frame`):
     a difference counts once its weight is at least ``least_weight`` (its standard error at most 1
     / sqrt of it). The slope is that of the gradient over the cells within ``reach`` cells (a disc)
     of the cell: along x, the rise of their differences along x over their run, and along y
@@ -329,9 +364,9 @@ def shape_geometry(
             for dc in range(max(-span, -c0), min(span, n - 1 - c0) + 1):
                 c = c0 + dc
                 if dxw[r, c] >= least_weight:
-                    rise_x, run_x, mx = rise_x + dx[r, c] / dxw[r, c], run_x + dx_run[r, c] / dxw[r, c], mx + 1
+                    rise_x, run_x, mx = rise_x + dx[r, c], run_x + dx_run[r, c], mx + 1
                 if dyw[r, c] >= least_weight:
-                    rise_y, run_y, my = rise_y + dy[r, c] / dyw[r, c], run_y + dy_run[r, c] / dyw[r, c], my + 1
+                    rise_y, run_y, my = rise_y + dy[r, c], run_y + dy_run[r, c], my + 1
         if mx >= 3 and my >= 3 and run_x > 0.0 and run_y > 0.0:
             out[i, 0] = math.atan(math.hypot(rise_x / run_x, rise_y / run_y))
         out[i, 2] = _step(dx, dxw, dy, dyw, least_weight, r0, c0, h)
@@ -345,13 +380,13 @@ def _step(gx: np.ndarray, wx: np.ndarray, gy: np.ndarray, wy: np.ndarray, least:
     h[1, 1] = 0.0
     # Along the row and the column through the cell: h[1, 2] - h[1, 1] is the x difference at (r0, c0).
     if wx[r0, c0] >= least:
-        h[1, 2] = gx[r0, c0] / wx[r0, c0]
+        h[1, 2] = gx[r0, c0]
     if wx[r0, c0 - 1] >= least:
-        h[1, 0] = -gx[r0, c0 - 1] / wx[r0, c0 - 1]
+        h[1, 0] = -gx[r0, c0 - 1]
     if wy[r0, c0] >= least:
-        h[2, 1] = gy[r0, c0] / wy[r0, c0]
+        h[2, 1] = gy[r0, c0]
     if wy[r0 - 1, c0] >= least:
-        h[0, 1] = -gy[r0 - 1, c0] / wy[r0 - 1, c0]
+        h[0, 1] = -gy[r0 - 1, c0]
     # The corners: from their row's middle cell along x, and from their column's middle cell along y.
     for a in (0, 2):
         r = r0 + a - 1
@@ -360,11 +395,11 @@ def _step(gx: np.ndarray, wx: np.ndarray, gy: np.ndarray, wy: np.ndarray, least:
             total, ways = 0.0, 0
             cx = c0 if b == 2 else c0 - 1  # the x difference between the middle of row a and the corner
             if not math.isnan(h[a, 1]) and wx[r, cx] >= least:
-                total += h[a, 1] + (gx[r, cx] if b == 2 else -gx[r, cx]) / wx[r, cx]
+                total += h[a, 1] + (gx[r, cx] if b == 2 else -gx[r, cx])
                 ways += 1
             ry = r0 if a == 2 else r0 - 1  # the y difference between the middle of column b and the corner
             if not math.isnan(h[1, b]) and wy[ry, c] >= least:
-                total += h[1, b] + (gy[ry, c] if a == 2 else -gy[ry, c]) / wy[ry, c]
+                total += h[1, b] + (gy[ry, c] if a == 2 else -gy[ry, c])
                 ways += 1
             if ways:
                 h[a, b] = total / ways
@@ -407,8 +442,8 @@ def shape_to_check(
         ex, ey = ox + (col + 0.5) * res - x, oy + (row + 0.5) * res - y
         if ex * ex + ey * ey > range_m * range_m:
             continue
-        now_x = dx[row, col] / dxw[row, col] if dxw[row, col] >= least_weight else np.nan
-        now_y = dy[row, col] / dyw[row, col] if dyw[row, col] >= least_weight else np.nan
+        now_x = dx[row, col] if dxw[row, col] >= least_weight else np.nan
+        now_y = dy[row, col] if dyw[row, col] >= least_weight else np.nan
         if _same(now_x, checked_x[row, col], tolerance_m) and _same(now_y, checked_y[row, col], tolerance_m):
             continue
         checked_x[row, col], checked_y[row, col] = now_x, now_y
@@ -420,5 +455,6 @@ def shape_to_check(
 
 @njit(cache=True, nogil=True, inline="always")
 def _same(now: float, then: float, tolerance: float) -> bool:
-    """Whether a value ``now`` (NaN: unknown) is ``then`` within ``tolerance``."""
-    return (math.isnan(now) and math.isnan(then)) or abs(now - then) <= tolerance
+    """Whether a difference ``now`` (NaN: unknown) is ``then`` (NaN: unknown; +inf: never read)
+    within ``tolerance``: one still unknown changes no cell's geometry, read or not."""
+    return (math.isnan(now) and not math.isfinite(then)) or abs(now - then) <= tolerance

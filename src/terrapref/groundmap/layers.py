@@ -59,10 +59,10 @@ LAYERS: tuple[Layer, ...] = (
     Layer("spread", np.float32, 0.0),
     Layer("weight", np.float32, 0.0),
     # The ground's shape, as each frame alone shows it, fused over frames
-    # (terrapref.groundmap.height_compiled.frame_shape): each cell's height difference to its
-    # neighbour along x and the run between their returns along x, each summed weighed by the
-    # inverse of its variance [m / m^2], the weights' sum [1 / m^2] (a weighted mean is one over
-    # the other), and likewise along y. What its slope and steps are read from.
+    # (terrapref.groundmap.height_compiled.depth_frame): each cell's height difference to its
+    # neighbour along x and the run between their returns along x, each the mean of the frames'
+    # weighed by the inverse of its variance [m], the weights' sum [1 / m^2], and likewise along
+    # y. What its slope and steps are read from.
     Layer("dx", np.float32, 0.0),
     Layer("dx_run", np.float32, 0.0),
     Layer("dx_weight", np.float32, 0.0),

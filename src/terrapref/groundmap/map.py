@@ -77,7 +77,7 @@ class GroundMap:
         self._vx, self._vy = grid[seen, 0].copy(), grid[seen, 1].copy()
         self.camera = camera
         self._depth_rays: DepthRays | None = None  # made on the first depth image
-        self._mark: np.ndarray | None = None  # scratch for the height layer's kernels (made with the rays)
+        self._mark: np.ndarray | None = None  # scratch for the height layer's kernels (made with the rays, as the others below)
         self._slot: np.ndarray | None = None
         # Ground past these limits reads as lethal (update with a depth image); None: not blocked.
         self.limits: GeometryLimits | None = None
@@ -111,31 +111,31 @@ class GroundMap:
         if self._depth_rays is None:
             self._depth_rays = DepthRays(self.camera, self._pixels.flat)
             self._mark = np.zeros(self._n * self._n, dtype=np.uint8)
-            self._slot = np.full(
-                self._n * self._n, -1, dtype=np.int32
-            )  # scratch: where each cell's returns of a frame are summed (frame_shape)
-        points, depths = self._depth_rays.points(depth.image, depth.axes, depth.centre)  # one per distinct pixel
-        kernels.map_vote_at(
-            self.evidence,
-            self.stamp,
-            self._cells,
-            *self._origin_xy,
-            1.0 / c.map_resolution_m,
-            points,
-            self._weight,
-            ids,
-            self._sample_pix,
-            self.columns,
-            self.frame,
-            self._fade,
-        )
+            # Scratch for the frame's returns summed per cell (height_compiled.depth_frame).
+            self._slot = np.full(self._n * self._n, -1, dtype=np.int32)
+            self._sums = np.empty((len(self._pixels.flat), height_kernels.FRAME_SUMS))
+            # Each distinct pixel's vote: where and for what, and the weight of its samples together.
+            self._vote_cell = np.empty(len(self._pixels.flat), dtype=np.int64)
+            self._vote_column = np.empty(len(self._pixels.flat), dtype=np.int64)
+            self._pixel_weight = np.bincount(self._sample_pix, weights=self._weight, minlength=len(self._pixels.flat)).astype(np.float32)
         h, res = self.height_settings, c.map_resolution_m
-        limits = self.limits is not None and self.geometry_column is not None
-        height_kernels.height_vote(
-            tuple(self.heights), *self._origin_xy, 1.0 / res, points, depths, h.max_range_m, depth.centre, h.errors, self._mark
+        touched = height_kernels.depth_frame(
+            depth.image,
+            self._depth_rays.pixels,
+            np.asarray(depth.axes, dtype=np.float64),
+            np.asarray(depth.centre, dtype=np.float64),
+            (*self._origin_xy, 1.0 / res),
+            h.max_range_m,
+            h.errors,
+            (ids, self.columns, self.k, self._vote_cell, self._vote_column),
+            tuple(self.heights),
+            self._shape,
+            (self._slot, self._sums),
         )
-        touched = height_kernels.frame_shape(points, depths, h.max_range_m, *self._origin_xy, 1.0 / res, h.errors, self._slot, self._shape)
-        if limits:
+        kernels.map_vote_cells(
+            self.evidence, self.stamp, self._cells, self._vote_cell, self._vote_column, self._pixel_weight, self.frame, self._fade
+        )
+        if self.limits is not None and self.geometry_column is not None:
             near = (*self._origin_xy, res, *at_xy, h.block_range_m)
             least = 1.0 / h.max_error_m**2
             self._block(
@@ -217,7 +217,7 @@ class GroundMap:
 
     @property
     def _shape(self) -> tuple[np.ndarray, ...]:
-        """The ground's shape as the kernels take it (terrapref.groundmap.height_compiled.frame_shape)."""
+        """The ground's shape as the kernels take it (terrapref.groundmap.height_compiled.depth_frame)."""
         return tuple(self._layers[name] for name in ("dx", "dx_run", "dx_weight", "dy", "dy_run", "dy_weight"))
 
     def layer(self, name: str) -> np.ndarray:

@@ -91,47 +91,11 @@ def map_vote(
     cell = _sample_cells(
         n_rows, n_cols, x - ox, y - oy, inv_res, c, s, vx, vy, column_of, evidence.shape[2] - 1, tilted, ray, ground0, axes, t
     )
-    _add_votes(evidence, stamp, cells, cell, column_of, weight, frame, fade)
+    map_vote_cells(evidence, stamp, cells, cell, column_of, weight, frame, fade)
 
 
 @njit(cache=True, nogil=True)
-def map_vote_at(
-    evidence: np.ndarray,
-    stamp: np.ndarray,
-    cells: np.ndarray,
-    ox: float,
-    oy: float,
-    inv_res: float,
-    points: np.ndarray,
-    weight: np.ndarray,
-    ids: np.ndarray,
-    pixel_of: np.ndarray,
-    columns: np.ndarray,
-    frame: int,
-    fade: np.ndarray,
-) -> None:
-    """:func:`map_vote` with each sample's ground point given: ``points`` (P, 2 or more) world [m],
-    one per distinct pixel (a depth return's: on relief the ground a pixel sees is not where a
-    plane would put it; NaN: no return, no vote), sample ``p`` reading pixel ``pixel_of[p]``."""
-    n_rows, n_cols = cells.shape
-    k = evidence.shape[2] - 1
-    cell = np.full(pixel_of.shape[0], -1, np.int64)
-    column_of = np.empty(pixel_of.shape[0], np.int64)
-    for p in range(pixel_of.shape[0]):
-        q = pixel_of[p]
-        column_of[p] = columns[ids[q]]
-        px, py = points[q, 0], points[q, 1]
-        if column_of[p] > k or not (math.isfinite(px) and math.isfinite(py)):
-            continue
-        i = math.floor((px - ox) * inv_res)
-        j = math.floor((py - oy) * inv_res)
-        if 0 <= i < n_cols and 0 <= j < n_rows:
-            cell[p] = j * n_cols + i
-    _add_votes(evidence, stamp, cells, cell, column_of, weight, frame, fade)
-
-
-@njit(cache=True, nogil=True)
-def _add_votes(
+def map_vote_cells(
     evidence: np.ndarray,
     stamp: np.ndarray,
     cells: np.ndarray,
@@ -141,8 +105,10 @@ def _add_votes(
     frame: int,
     fade: np.ndarray,
 ) -> None:
-    """Each sample's vote (``column_of``, ``weight``) added to the evidence of its ``cell`` (-1: none),
-    faded first, the cell marked :data:`UNSETTLED`; :func:`map_vote` says how. The map is read
+    """Each sample's vote (``column_of``, ``weight``) added to the evidence of its ``cell`` (flat
+    index; -1: none), faded first, the cell marked :data:`UNSETTLED`; :func:`map_vote` says how.
+    On relief, where a sample votes at its pixel's depth return, the samples are the distinct
+    pixels, each weighing its samples' weights together (terrapref.groundmap.map). The map is read
     through flat views (2-D indexing cost the loop a fifth)."""
     k = evidence.shape[2] - 1
     votes, stamps, columns_of = evidence.reshape(-1), stamp.reshape(-1), cells.reshape(-1)
