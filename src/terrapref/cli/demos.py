@@ -100,10 +100,13 @@ def _disturbance(rate_hz: float | None):
 
 
 def _style_flags(args: argparse.Namespace) -> dict:
-    """The driver's fields the speed flags set (none given: none)."""
+    """The driver's fields the speed and relief flags set (none given: none)."""
+    from terrapref.demos.relief_style import parse_relief_style
     from terrapref.demos.speed_style import parse_speeds
 
     flags: dict = {}
+    if args.relief_style is not None:
+        flags["relief"] = parse_relief_style(args.relief_style)[1]
     if args.speeds is not None:
         flags["speeds"] = parse_speeds(args.speeds)
     if args.lateral_accel is not None:
@@ -131,6 +134,13 @@ def record_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--lateral-accel", type=finite_float, metavar="MPS2", help="lateral acceleration the driver keeps to in bends [m/s^2]")
     p.add_argument("--preview", type=finite_float, metavar="M", help="how early the driver slows before a slower class [m]")
+    p.add_argument(
+        "--relief-style",
+        metavar="NAME[,K=V,...]",
+        help="how the driver takes relief: default (round side slopes past 12 deg and grades past 15 deg, 0.03 m/s less per deg up), "
+        "bold, cautious, each with K=V changes (roll_deg, grade_deg, up_mps_per_deg, down_mps_per_deg, rough_mps, rough_m); "
+        "not given: it drives relief as if it were flat (docs/cli.md, Relief)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seeds the driver's hand and the pushes (default 0)")
     p.add_argument("--out", required=True, type=Path, help="recording directory to create")
     p.add_argument("--force", action="store_true", help="replace an existing recording at --out")

@@ -62,9 +62,10 @@ def _evaluation(args: argparse.Namespace) -> Evaluation:
     """What ``evaluate`` runs, from its flags, each checked (the frames before the model is read;
     the driver's speeds against the model's table and the vehicle)."""
     from terrapref.demos.expert import STYLES
+    from terrapref.demos.relief_style import parse_relief_style
     from terrapref.demos.speed_style import driver_style, parse_speeds
     from terrapref.evaluation.evaluate import Evaluation, scoring_profile
-    from terrapref.evaluation.speed import trained_driver
+    from terrapref.evaluation.speed import trained_driver, trained_relief
     from terrapref.planner.model import Model
     from terrapref.terrain import PreferenceProfile
 
@@ -80,7 +81,9 @@ def _evaluation(args: argparse.Namespace) -> Evaluation:
     scored = scoring_profile(model, profile, args.model)  # a model whose drives declared no order needs one, before any run
     perception = perception_model(args.perception, classes=model.classes)
     given = parse_speeds(args.speeds) if args.speeds is not None else ()
-    style, speeds = _driver_of(args.style, given, trained_driver(getattr(getattr(model, "model", None), "meta", {})))
+    meta = getattr(getattr(model, "model", None), "meta", {})
+    style, speeds = _driver_of(args.style, given, trained_driver(meta))
+    relief = parse_relief_style(args.relief_style)[1] if args.relief_style is not None else trained_relief(meta)
     STYLES.get(style, "--style")
     if given:  # checked against the model's table and the vehicle before any run (the trained driver's were when it drove)
         from terrapref.vehicle import VehicleConfig
@@ -97,6 +100,7 @@ def _evaluation(args: argparse.Namespace) -> Evaluation:
         frames=tuple(frames),
         mcap=args.mcap,
         perception=perception,
+        relief=relief,
     )
 
 
@@ -119,6 +123,9 @@ def _print_results(evaluation: Evaluation, metrics: dict, args: argparse.Namespa
     compared = [z for z in zones if "agrees" in z]
     if compared:
         driver = evaluation.style + "".join(f", {name} {v:g} m/s" for name, v in evaluation.speeds)
+        if evaluation.relief is not None:
+            r = evaluation.relief
+            driver += f", relief: round side slopes past {r.roll_deg:g} deg and grades past {r.grade_deg:g} deg"
         print(f"planner: agreement with the driver ({driver}) {rate_text(sum(z['agrees'] for z in compared), len(compared))}")
     if "speed" in metrics:
         for line in SpeedComparison.from_dict(metrics["speed"]).lines():
@@ -204,6 +211,12 @@ def evaluate_parser(sub: argparse._SubParsersAction) -> None:
         "--speeds",
         metavar="CLASS=MPS,...",
         help="cruising speeds by class, e.g. grass=1.2: the comparison driver's classes named change, the others keep its speeds",
+    )
+    p.add_argument(
+        "--relief-style",
+        metavar="NAME[,K=V,...]",
+        help="the comparison driver's relief style, as record takes it (default: that of the synthetic driver the model was "
+        "trained from; none: it drives relief as if it were flat)",
     )
     add_engine_args(p)
     p.add_argument("--mcap", action="store_true", help="also write each planner run as ROS 2 MCAP in OUT/runs (Foxglove, RViz)")

@@ -17,6 +17,9 @@ It drives the way a person with a gamepad does, not the way an optimal planner d
   its lateral-acceleration limit allows; slower still while lethal terrain lies near that way.
   The throttle lags by the same reaction delay as the stick. The default driver keeps 1 m/s
   everywhere (the paper's).
+- Its relief style (SPEC 19, terrapref.demos.relief_style), when it has one, prices ground
+  steeper than it takes above any terrain class, so it goes round a bank or a steep ramp where
+  it can, and slows on grades and rough ground; without one it drives relief as if it were flat.
 
 It reads the map (privileged knowledge) and never uses the planner's feature pipeline.
 """
@@ -31,6 +34,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
+from terrapref.demos.relief_style import ReliefSight, ReliefStyle
 from terrapref.records import to_plain
 from terrapref.registry import Registry
 from terrapref.scenario import Scenario
@@ -38,7 +42,7 @@ from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim.loop import Frame
 from terrapref.sums import numpy_sum
 from terrapref.terrain import UNKNOWN, ClassTable, PreferenceProfile
-from terrapref.vehicle import Command, pure_pursuit_yaw_rate, wrap_angle
+from terrapref.vehicle import MIN_CRUISE_MPS, Command, pure_pursuit_yaw_rate, wrap_angle
 from terrapref.world import WorldMap, rasterise
 
 
@@ -80,6 +84,8 @@ class ExpertConfig:
         deadzone_rps: corrections below this leave the stick at zero [rad/s].
         reaction_delay_s: delay between seeing and the stick moving [s].
         stick_noise_rps: std of the hand's tremor while the stick is deflected [rad/s].
+        relief: how it takes relief (terrapref.demos.relief_style); None: it drives as if the
+            ground were flat, as the paper's driver does.
     """
 
     profile: tuple[str, ...] = ("mud", "rock", "water", "non_traversable")
@@ -109,6 +115,7 @@ class ExpertConfig:
     deadzone_rps: float = 0.06
     reaction_delay_s: float = 0.2
     stick_noise_rps: float = 0.02
+    relief: ReliefStyle | None = None
 
     def __post_init__(self) -> None:
         speeds = [self.speed_mps, *(v for _, v in self.speeds), *(self.ranked_speeds_mps or ())]
@@ -121,7 +128,7 @@ class ExpertConfig:
             raise ValueError(f"preview_m must be > 0 and near_lethal_m >= 0, got {self.preview_m!r} and {self.near_lethal_m!r}")
 
     def to_dict(self) -> dict:
-        return to_plain(self)
+        return to_plain(self, omit_none=("relief",))
 
     @property
     def steady(self) -> bool:
@@ -282,6 +289,11 @@ class ExpertDriver:
         self._throttle: deque[float] | None = None  # the speeds wanted, as the reaction delay holds them
         self._speed = c.speed_table(classes)
         self.wanted_mps = c.speed_mps
+        # Relief: what it reads of the ground, and what a way over ground steeper than it takes costs
+        # a metre (more than any terrain class, less than lethal terrain: it goes round where it can).
+        height = self.world.height
+        self._sight = ReliefSight(height, self.world.resolution_m) if c.relief is not None and height is not None else None
+        self._steep_cost = 2.0 * float(cost[np.isfinite(cost) & ~lethal].max(initial=c.rank_cost))
 
     # -- decision --------------------------------------------------------------------------
 
@@ -297,6 +309,8 @@ class ExpertDriver:
         # A detour lasts as long as the obstacle ahead lies on the path itself (gaps under 1 m
         # do not split it), plus the swerves in and out; later patches wait for their own turn.
         on_path = (self._cost[self._classes(centre, normal, self._foot[None, :], len(s))[0]] > 0).any(axis=1)
+        if self._sight is not None:  # ground steeper than it takes is a reason to leave the path too
+            on_path |= self._sight.steep(centre, normal, self._foot[None, :], len(s), c.relief)[0].any(axis=1)
         reach = np.flatnonzero(on_path & in_reach)
         if len(reach) == 0:
             return 0.0
@@ -310,6 +324,9 @@ class ExpertDriver:
         terrain = self._costs(centre, normal, self._lat, upto) * self.sample_step_m  # (O,)
         if self._margin_lat is not None:  # the berth beside the footprint: half the cost of driving on it
             terrain = terrain + 0.5 * self._costs(centre, normal, self._margin_lat, upto) * self.sample_step_m
+        if self._sight is not None:
+            steep = self._sight.steep(centre, normal, self._lat, upto, c.relief)
+            terrain = terrain + steep.mean(axis=2).sum(axis=1) * self._steep_cost * self.sample_step_m
         hits_lethal = _offset_hits(centre, normal, self._lethal_lat, upto, self.world.raster, self.world.resolution_m, self._lethal)
         terrain = terrain + hits_lethal * c.lethal_cost
         span = (last - first + 1) * self.sample_step_m + 2.0 * c.pursuit_m
@@ -365,25 +382,36 @@ class ExpertDriver:
         """The speed [m/s] the driver's style asks for now (before its hand's delay): the slowest
         cruising speed of the classes its footprint meets now and on its way over the next
         ``preview_m``, no more than its lateral-acceleration limit allows at ``curvature``
-        [1/m], nor than ``near_lethal_mps`` while lethal terrain lies near that way."""
+        [1/m], nor than ``near_lethal_mps`` while lethal terrain lies near that way. With a
+        relief style, each point's speed is its class's less what its grade along the way and
+        its roughness take off (terrapref.demos.relief_style)."""
         c = self.config
-        if c.steady:
+        if c.steady and self._sight is None:
             return c.speed_mps
         s = s_now + self._way_s
         s = s[s <= self.path.length_m]
         x, y, yaw = pose
-        ids = [self.world.class_at_point(x - a * math.sin(yaw), y + a * math.cos(yaw)) for a in self._foot]
+        across = np.array([(x - a * math.sin(yaw), y + a * math.cos(yaw)) for a in self._foot])
+        ids = [self.world.class_at_point(px, py) for px, py in across]
+        headings = [yaw] * len(ids)
         near_lethal = False
         if len(s):
             centre, heading = self.path.point_at(s), self.path.heading_at(s)
             normal = np.stack([-np.sin(heading), np.cos(heading)], axis=1)
             raster, res = self.world.raster, self.world.resolution_m
             ids += _offset_classes(centre, normal, self.offset + self._foot[None, :], len(s), raster, res).ravel().tolist()
+            if self._sight is not None:
+                lat = self.offset + self._foot
+                across = np.concatenate([across, (centre[:, None, :] + lat[None, :, None] * normal[:, None, :]).reshape(-1, 2)])
+                headings += np.repeat(heading, len(lat)).tolist()
             if c.near_lethal_mps is not None:
                 near_lethal = bool(
                     _offset_hits(centre, normal, self.offset + self._near_lat[None, :], len(s), raster, res, self._lethal)[0]
                 )
         speeds = self._speed[np.asarray(ids, dtype=np.intp)]
+        if self._sight is not None:  # each point's speed less what its grade and roughness take off
+            grade, rough = self._sight.along(across, np.asarray(headings))
+            speeds = np.array([c.relief.speed(v, g, r, MIN_CRUISE_MPS) if v == v else v for v, g, r in zip(speeds, grade, rough)])
         v = float(np.nanmin(speeds)) if np.isfinite(speeds).any() else c.speed_mps
         if near_lethal:
             v = min(v, c.near_lethal_mps)

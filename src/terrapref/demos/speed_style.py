@@ -155,4 +155,9 @@ def _check_drivable(config: ExpertConfig, classes: ClassTable, table: np.ndarray
         raise refuse("", "near_lethal_mps", f"{v:g} m/s is below {MIN_SPEED_MPS:g} m/s, the least the planner commands")
 
 
-FLAGS = {"speeds": "--speeds", "lateral_accel_mps2": "--lateral-accel", "preview_m": "--preview"}  # the fields flags set
+FLAGS = {
+    "speeds": "--speeds",
+    "lateral_accel_mps2": "--lateral-accel",
+    "preview_m": "--preview",
+    "relief": "--relief-style",
+}  # the fields flags set

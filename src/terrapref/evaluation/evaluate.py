@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from terrapref.camera import PinholeCamera
+from terrapref.demos.relief_style import ReliefStyle
 from terrapref.errors import UserError
 from terrapref.evaluation.runner import (
     EXPERT,
@@ -50,6 +51,8 @@ class Evaluation:
         with_driver: also drive the synthetic driver, for the agreement with it.
         style: the synthetic driver's style.
         speeds: the synthetic driver's cruising speeds by class, over its style's [m/s].
+        relief: the synthetic driver's relief style (terrapref.demos.relief_style); None: it
+            drives relief as if it were flat.
         frames: decision numbers of seed 0 to draw.
         mcap: write every planner run as ROS 2 MCAP.
         perception: what the planner receives instead of the truth; None: the truth.
@@ -65,6 +68,7 @@ class Evaluation:
     frames: tuple[int, ...] = ()
     mcap: bool = False
     perception: PerceptionModel | None = None
+    relief: ReliefStyle | None = None
 
     @property
     def perceived(self) -> PerceptionModel:
@@ -91,7 +95,7 @@ class Evaluation:
         ]
         if self.with_driver:
             specs += [
-                RunSpec(name, seed, EXPERT, None, profile.order, style=self.style, classes=classes, speeds=self.speeds)
+                RunSpec(name, seed, EXPERT, None, profile.order, style=self.style, classes=classes, speeds=self.speeds, relief=self.relief)
                 for name in self.scenarios
                 for seed in range(self.seeds)
             ]

@@ -19,6 +19,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 import numpy as np
 
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
+from terrapref.demos.relief_style import ReliefStyle
 from terrapref.evaluation.scoring import RunMetrics, ZoneResult, ZoneScoring, score_run
 from terrapref.evaluation.stats import wilson
 from terrapref.grid import Engine, run_grid
@@ -58,6 +59,7 @@ class RunSpec:
     vehicle: VehicleConfig | None = None  # the vehicle driven (None: the default field UGV; VehicleConfig.paper(): the paper's)
     speeds: tuple[tuple[str, float], ...] = ()  # the synthetic driver's cruising speeds by class, over its style's (EXPERT runs)
     perception_draw: int = 0  # which draw of the perception model's errors (terrapref.perception.run_stream)
+    relief: ReliefStyle | None = None  # the synthetic driver's relief style (EXPERT runs; None: it drives relief as if flat)
 
     @property
     def perceived_as(self) -> str:
@@ -278,7 +280,7 @@ def drivers() -> list[str]:
 def _expert(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: PreferenceProfile) -> tuple[Simulation, Driver]:
     """The synthetic driver of the run's profile and style, on the cached raster (not a new one)."""
     return Simulation(scenario, config=SimConfig.driving(spec.vehicle), world=world), ExpertDriver(
-        ExpertConfig.styled(spec.style, profile.order, spec.speeds), world=world
+        replace(ExpertConfig.styled(spec.style, profile.order, spec.speeds), relief=spec.relief), world=world
     )
 
 

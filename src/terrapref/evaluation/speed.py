@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from terrapref.demos.expert import ExpertConfig
+from terrapref.demos.relief_style import ReliefStyle
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult
 from terrapref.evaluation.scoring import RunMetrics
 from terrapref.evaluation.stats import cluster_bootstrap, rate_text
@@ -221,6 +222,25 @@ def trained_driver(meta: Mapping[str, Any]) -> tuple[str, tuple[tuple[str, float
     if not isinstance(style, str) or not all(len(p) == 2 and isinstance(p[0], str) and isinstance(p[1], (int, float)) for p in speeds):
         return None
     return style, tuple((str(n), float(v)) for n, v in speeds)
+
+
+def trained_relief(meta: Mapping[str, Any]) -> ReliefStyle | None:
+    """The relief style of the synthetic driver a model's recordings were driven by, when every
+    recording names the same one (terrapref.demos.relief_style); None where none names one (it
+    drove relief as if it were flat), for a person's drives, a mix, or a style this code cannot read."""
+    data = meta.get("data")
+    recordings = data.get("recordings") if isinstance(data, Mapping) else None
+    if not isinstance(recordings, (list, tuple)) or not recordings:
+        return None
+    drivers = [r.get("driver") if isinstance(r, Mapping) else None for r in recordings]
+    configs = [d.get("config") if isinstance(d, Mapping) and d.get("kind") == "expert" else None for d in drivers]
+    found = [c.get("relief") if isinstance(c, Mapping) else None for c in configs]
+    if not found or not isinstance(found[0], Mapping) or any(f != found[0] for f in found):
+        return None
+    try:
+        return ReliefStyle(**found[0])
+    except (TypeError, ValueError):
+        return None
 
 
 RUN_XY_STEP_S = 0.1  # a run's kept path (RunResult.xy): its reference point every third 30 Hz tick [s]

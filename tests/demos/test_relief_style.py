@@ -1,0 +1,162 @@
+"""The synthetic driver's relief style (SPEC 19): the named styles and ``k=v`` pairs of
+``terrapref record --relief-style``, the speed it sheds on grades and rough ground (closed form),
+and, driven on small relief courses, going round a side slope steeper than it takes and keeping
+to one it takes, and its speed up and down a ramp of known grade."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from helpers import one_line_error
+from terrapref.cli import main
+from terrapref.demos.expert import ExpertConfig, ExpertDriver
+from terrapref.demos.recording import read_recording
+from terrapref.demos.relief_style import RELIEF_STYLES, ReliefStyle, parse_relief_style
+from terrapref.errors import UserError
+from terrapref.scenario import Scenario, parse_scenario
+from terrapref.sim import EpisodeLog, Simulation, run_episode
+
+
+def _scenario(relief: list[dict], waypoints: list[list[float]]) -> Scenario:
+    return parse_scenario(
+        {
+            "format": "terrapref-scenario/1",
+            "name": "relief_style",
+            "world": {"size_m": [40.0, 20.0], "resolution_m": 0.05, "background": "grass"},
+            "terrain": [],
+            "relief": relief,
+            "path": {"waypoints": waypoints},
+        }
+    )
+
+
+def _drive(scenario: Scenario, config: ExpertConfig) -> tuple[Simulation, EpisodeLog]:
+    sim = Simulation(scenario)
+    log = run_episode(sim, ExpertDriver(config), np.random.default_rng(0))
+    assert log.completed and log.collisions == 0
+    return sim, log
+
+
+# --- the style -------------------------------------------------------------------------------------
+
+
+def test_named_styles_and_pairs_over_them_are_read():
+    assert parse_relief_style("default") == ("default", ReliefStyle())
+    name, cautious = parse_relief_style("cautious")
+    assert name == "cautious" and (cautious.roll_deg, cautious.grade_deg) == (7.0, 9.0)
+    assert parse_relief_style("bold,roll_deg=18, up_mps_per_deg=0")[1] == ReliefStyle(
+        roll_deg=18.0, grade_deg=22.0, up_mps_per_deg=0.0, down_mps_per_deg=0.01, rough_mps=1.2
+    )
+    assert parse_relief_style("grade_deg=10")[1] == ReliefStyle(grade_deg=10.0)  # pairs over the default
+    assert RELIEF_STYLES.names() == ["default", "bold", "cautious"]
+
+
+@pytest.mark.parametrize(
+    ("text", "says"),
+    [
+        ("steep", "'steep' is not a relief style"),
+        ("roll=8", "expected NAME or k=v pairs"),
+        ("roll_deg=eight", "roll_deg: expected a number"),
+        ("roll_deg=nan", "roll_deg: expected a number"),
+        ("roll_deg=95", "roll_deg and grade_deg must lie in (0, 90) deg"),
+        ("rough_mps=0", "rough_mps and rough_m > 0"),
+        ("up_mps_per_deg=-0.1", "must be >= 0"),
+        ("roll_deg=8,roll_deg=9", "roll_deg is given twice"),
+    ],
+)
+def test_a_bad_relief_style_is_refused_naming_the_flag(text: str, says: str):
+    with pytest.raises(UserError) as caught:
+        parse_relief_style(text)
+    assert caught.value.source == "--relief-style" and says in str(caught.value)
+
+
+def test_its_speed_sheds_per_degree_up_and_down_and_is_capped_on_rough_ground():
+    style = ReliefStyle()  # 0.03 m/s per deg up, 0.02 down, 0.8 m/s where rougher than 0.03 m
+    assert style.speed(1.6, math.radians(10.0), 0.0, 0.1) == pytest.approx(1.3)
+    assert style.speed(1.6, math.radians(-10.0), 0.0, 0.1) == pytest.approx(1.4)
+    assert style.speed(1.6, 0.0, 0.05, 0.1) == 0.8 and style.speed(1.6, 0.0, 0.02, 0.1) == 1.6
+    assert style.speed(0.5, math.radians(20.0), 0.0, 0.1) == 0.1  # it crawls up a grade it takes
+
+
+# --- driven -------------------------------------------------------------------------------------
+
+# A plateau 1 m up north of y = 12 between x = 14 and 26, its side a ramp 3.5 m wide outside it: a
+# side slope of atan(1 / 3.5) = 15.9 deg under a path along y = 10.25, the middle of the ramp.
+BANK = [{"plateau": {"polygon": [[14.0, 12.0], [26.0, 12.0], [26.0, 30.0], [14.0, 30.0]], "height_m": 1.0, "edge_m": 3.5}}]
+ALONG_BANK = [[2.0, 10.25], [38.0, 10.25]]
+
+
+def _side_slope_deg(sim: Simulation, xy: np.ndarray) -> np.ndarray:
+    """The ground's slope across the x axis [deg] at the points ``xy``, from its heights 5 cm apart."""
+    dy = np.array([0.0, 0.05])
+    rise = sim.world.height_at(xy + dy) - sim.world.height_at(xy - dy)
+    return np.degrees(np.arctan(np.abs(rise) / 0.1))
+
+
+@pytest.mark.parametrize(("style", "goes_round"), [("default", True), ("bold", False)])
+def test_a_side_slope_steeper_than_it_takes_is_gone_round_and_one_it_takes_is_kept_to(style: str, goes_round: bool):
+    sim, log = _drive(_scenario(BANK, ALONG_BANK), ExpertConfig(relief=parse_relief_style(style)[1]))
+    stretch = (log.trace[:, 0] > 17.0) & (log.trace[:, 0] < 23.0)
+    slope = _side_slope_deg(sim, log.trace[stretch, :2])
+    if goes_round:  # the default takes 12 deg: off the bank, on the flat ground below it
+        assert slope.max() < 12.0 and (log.trace[stretch, 1] < 8.5).all()
+    else:  # the bold driver takes 20 deg: along the path, on the bank
+        assert np.abs(log.trace[stretch, 1] - 10.25).max() < 0.3 and slope.min() > 15.0
+
+
+def test_without_a_relief_style_it_drives_along_the_bank_as_if_it_were_flat():
+    sim, log = _drive(_scenario(BANK, ALONG_BANK), ExpertConfig())
+    stretch = (log.trace[:, 0] > 17.0) & (log.trace[:, 0] < 23.0)
+    assert np.abs(log.trace[stretch, 1] - 10.25).max() < 0.3
+
+
+# A plateau 1 m up east of x = 20, its ramp 6 m wide (x = 14 to 20): a grade of atan(1 / 6) = 9.46 deg.
+RAMP = [{"plateau": {"polygon": [[20.0, -10.0], [60.0, -10.0], [60.0, 30.0], [20.0, 30.0]], "height_m": 1.0, "edge_m": 6.0}}]
+
+
+@pytest.mark.parametrize(("waypoints", "shed_per_deg"), [([[2.0, 10.0], [38.0, 10.0]], 0.03), ([[38.0, 10.0], [2.0, 10.0]], 0.02)])
+def test_on_a_ramp_it_asks_for_its_speed_less_what_the_grade_takes(waypoints: list[list[float]], shed_per_deg: float):
+    """Up (0.03 m/s per deg) and down (0.02): 1 m/s less 9.46 deg's worth, asked for while its
+    footprint and its way over the next 3 m lie on the ramp; 1 m/s on the level."""
+    sim, log = _drive(_scenario(RAMP, waypoints), ExpertConfig(relief=ReliefStyle()))
+    x = log.trace[np.minimum(3 * np.arange(len(log.commands)), len(log.trace) - 1), 0]  # each frame's (3 ticks of 30 Hz)
+    on_ramp = (x > 14.5 + 3.5) & (x < 19.5) if waypoints[0][0] < 20 else (x < 19.5 - 3.5) & (x > 14.5)
+    wanted = 1.0 - shed_per_deg * math.degrees(math.atan(1.0 / 6.0))
+    # The command lags the wish by the hand's 0.2 s (2 frames), well inside the stretch.
+    assert on_ramp.sum() > 10 and np.abs(log.commands[on_ramp, 0] - wanted).max() < 0.01
+    level = (x < 8.0) if waypoints[0][0] < 20 else (x > 28.0)
+    assert np.abs(log.commands[level & (log.commands[:, 0] > 0.5), 0] - 1.0).max() < 1e-9
+
+
+def test_record_stores_the_relief_style_and_refuses_a_bad_one(tmp_path, capsys):
+    out = tmp_path / "rec"
+    assert main(["record", "relief_hazards", "--relief-style", "cautious,rough_mps=0.6", "--out", str(out), "--quiet"]) == 0
+    relief = read_recording(out).meta["driver"]["config"]["relief"]
+    assert relief == {**ReliefStyle(roll_deg=7.0, grade_deg=9.0, up_mps_per_deg=0.05, down_mps_per_deg=0.05, rough_mps=0.6).to_dict()}
+    capsys.readouterr()
+    assert main(["record", "relief_hazards", "--relief-style", "roll_deg=91", "--out", str(tmp_path / "bad"), "--quiet"]) == 2
+    one_line_error(capsys, "--relief-style", "roll_deg")
+    assert not (tmp_path / "bad").exists()
+
+
+def test_a_models_relief_style_is_that_of_its_recordings_driver_and_the_comparison_runs_carry_it():
+    from terrapref.evaluation.evaluate import Evaluation
+    from terrapref.evaluation.runner import EXPERT
+    from terrapref.evaluation.speed import trained_relief
+    from terrapref.terrain import PreferenceProfile
+
+    cautious = parse_relief_style("cautious")[1]
+
+    def meta(*reliefs: dict | None) -> dict:
+        configs = [{"speeds": []} if r is None else {"speeds": [], "relief": r} for r in reliefs]
+        return {"data": {"recordings": [{"driver": {"kind": "expert", "style": "default", "config": c}} for c in configs]}}
+
+    assert trained_relief(meta(cautious.to_dict(), cautious.to_dict())) == cautious
+    assert trained_relief(meta(None)) is None  # a driver that drove relief as if flat
+    assert trained_relief(meta(cautious.to_dict(), ReliefStyle().to_dict())) is None  # a mix
+    assert trained_relief(meta({**cautious.to_dict(), "roll_deg": "steep"})) is None  # not readable: none, never a guess
+    specs = Evaluation("m.safetensors", ("relief_hazards",), 1, relief=cautious).specs(PreferenceProfile.default())
+    assert [s.relief for s in specs if s.driver == EXPERT] == [cautious] and all(s.relief is None for s in specs if s.driver != EXPERT)
