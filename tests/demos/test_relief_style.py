@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+import yaml
 
 from helpers import one_line_error
 from terrapref.cli import main
@@ -89,22 +90,23 @@ BANK = [{"plateau": {"polygon": [[14.0, 12.0], [26.0, 12.0], [26.0, 30.0], [14.0
 ALONG_BANK = [[2.0, 10.25], [38.0, 10.25]]
 
 
-def _side_slope_deg(sim: Simulation, xy: np.ndarray) -> np.ndarray:
-    """The ground's slope across the x axis [deg] at the points ``xy``, from its heights 5 cm apart."""
-    dy = np.array([0.0, 0.05])
+def _roll_deg(sim: Simulation, xy: np.ndarray) -> np.ndarray:
+    """The body's roll [deg] heading along x at the points ``xy``: the heights under its wheels
+    0.6 m either side (the vehicle's track, as its attitude is set)."""
+    dy = np.array([0.0, 0.6])
     rise = sim.world.height_at(xy + dy) - sim.world.height_at(xy - dy)
-    return np.degrees(np.arctan(np.abs(rise) / 0.1))
+    return np.degrees(np.arctan(np.abs(rise) / 1.2))
 
 
 @pytest.mark.parametrize(("style", "goes_round"), [("default", True), ("bold", False)])
 def test_a_side_slope_steeper_than_it_takes_is_gone_round_and_one_it_takes_is_kept_to(style: str, goes_round: bool):
     sim, log = _drive(_scenario(BANK, ALONG_BANK), ExpertConfig(relief=parse_relief_style(style)[1]))
     stretch = (log.trace[:, 0] > 17.0) & (log.trace[:, 0] < 23.0)
-    slope = _side_slope_deg(sim, log.trace[stretch, :2])
-    if goes_round:  # the default takes 12 deg: off the bank, on the flat ground below it
-        assert slope.max() < 12.0 and (log.trace[stretch, 1] < 8.5).all()
+    roll = _roll_deg(sim, log.trace[stretch, :2])
+    if goes_round:  # the default takes 12 deg: down off the bank, its wheels on the flat ground below it
+        assert roll.max() < 12.0 and (log.trace[stretch, 1] < 9.0).all()
     else:  # the bold driver takes 20 deg: along the path, on the bank
-        assert np.abs(log.trace[stretch, 1] - 10.25).max() < 0.3 and slope.min() > 15.0
+        assert np.abs(log.trace[stretch, 1] - 10.25).max() < 0.3 and roll.min() > 15.0
 
 
 def test_without_a_relief_style_it_drives_along_the_bank_as_if_it_were_flat():
@@ -132,12 +134,13 @@ def test_on_a_ramp_it_asks_for_its_speed_less_what_the_grade_takes(waypoints: li
 
 
 def test_record_stores_the_relief_style_and_refuses_a_bad_one(tmp_path, capsys):
-    out = tmp_path / "rec"
-    assert main(["record", "relief_hazards", "--relief-style", "cautious,rough_mps=0.6", "--out", str(out), "--quiet"]) == 0
+    course, out = tmp_path / "bank.yaml", tmp_path / "rec"
+    course.write_text(yaml.safe_dump(_scenario(BANK, [[8.0, 10.25], [20.0, 10.25]]).to_dict()))
+    assert main(["record", str(course), "--relief-style", "cautious,rough_mps=0.6", "--out", str(out), "--quiet"]) == 0
     relief = read_recording(out).meta["driver"]["config"]["relief"]
     assert relief == {**ReliefStyle(roll_deg=7.0, grade_deg=9.0, up_mps_per_deg=0.05, down_mps_per_deg=0.05, rough_mps=0.6).to_dict()}
     capsys.readouterr()
-    assert main(["record", "relief_hazards", "--relief-style", "roll_deg=91", "--out", str(tmp_path / "bad"), "--quiet"]) == 2
+    assert main(["record", str(course), "--relief-style", "roll_deg=91", "--out", str(tmp_path / "bad"), "--quiet"]) == 2
     one_line_error(capsys, "--relief-style", "roll_deg")
     assert not (tmp_path / "bad").exists()
 

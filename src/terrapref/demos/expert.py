@@ -42,7 +42,7 @@ from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim.loop import Frame
 from terrapref.sums import numpy_sum
 from terrapref.terrain import UNKNOWN, ClassTable, PreferenceProfile
-from terrapref.vehicle import MIN_CRUISE_MPS, Command, pure_pursuit_yaw_rate, wrap_angle
+from terrapref.vehicle import MIN_CRUISE_MPS, Command, VehicleConfig, pure_pursuit_yaw_rate, wrap_angle
 from terrapref.world import WorldMap, rasterise
 
 
@@ -292,7 +292,8 @@ class ExpertDriver:
         # Relief: what it reads of the ground, and what a way over ground steeper than it takes costs
         # a metre (more than any terrain class, less than lethal terrain: it goes round where it can).
         height = self.world.height
-        self._sight = ReliefSight(height, self.world.resolution_m) if c.relief is not None and height is not None else None
+        body = (c.half_width_m, VehicleConfig().wheelbase_m)
+        self._sight = ReliefSight(height, self.world.resolution_m, *body) if c.relief is not None and height is not None else None
         self._steep_cost = 2.0 * float(cost[np.isfinite(cost) & ~lethal].max(initial=c.rank_cost))
 
     # -- decision --------------------------------------------------------------------------
@@ -310,7 +311,7 @@ class ExpertDriver:
         # do not split it), plus the swerves in and out; later patches wait for their own turn.
         on_path = (self._cost[self._classes(centre, normal, self._foot[None, :], len(s))[0]] > 0).any(axis=1)
         if self._sight is not None:  # ground steeper than it takes is a reason to leave the path too
-            on_path |= self._sight.steep(centre, normal, self._foot[None, :], len(s), c.relief)[0].any(axis=1)
+            on_path |= self._sight.steep(centre, normal, np.zeros(1), len(s), c.relief)[0]
         reach = np.flatnonzero(on_path & in_reach)
         if len(reach) == 0:
             return 0.0
@@ -325,9 +326,12 @@ class ExpertDriver:
         if self._margin_lat is not None:  # the berth beside the footprint: half the cost of driving on it
             terrain = terrain + 0.5 * self._costs(centre, normal, self._margin_lat, upto) * self.sample_step_m
         if self._sight is not None:
-            steep = self._sight.steep(centre, normal, self._lat, upto, c.relief)
-            terrain = terrain + steep.mean(axis=2).sum(axis=1) * self._steep_cost * self.sample_step_m
-        hits_lethal = _offset_hits(centre, normal, self._lethal_lat, upto, self.world.raster, self.world.resolution_m, self._lethal)
+            steep = self._sight.steep(centre, normal, self.offsets, upto, c.relief)
+            terrain = terrain + steep.sum(axis=1) * self._steep_cost * self.sample_step_m
+        # Lethal terrain within the whole window is kept clear of while steep ground sets the detour:
+        # a bump across the way must not leave the next lethal patch to be seen too late.
+        near = len(s) if self._sight is not None else upto
+        hits_lethal = _offset_hits(centre, normal, self._lethal_lat, near, self.world.raster, self.world.resolution_m, self._lethal)
         terrain = terrain + hits_lethal * c.lethal_cost
         span = (last - first + 1) * self.sample_step_m + 2.0 * c.pursuit_m
         total = terrain + c.deviation_cost * self.offsets**2 * span

@@ -1,10 +1,10 @@
 """A driver's relief style (SPEC 19): how much side slope and grade it takes before going round,
 how much speed it sheds per degree up and down, and its speed on rough ground.
 
-The synthetic driver (terrapref.demos.expert) reads the ground as a person sees it: the grade
-of each point of a way along the way's heading, and its side slope across it, from the world's
-height field; its roughness, the heights' standard deviation about their plane within
-:data:`ROUGH_RADIUS_M`. A way over ground steeper than the style takes costs more than any terrain
+The synthetic driver (terrapref.demos.expert) reads the ground as a person feels it: how its
+body would roll and pitch at each point of a way, heading along it, its wheels on the world's
+height field (:class:`ReliefSight`); and the ground's roughness, the heights' standard deviation
+about their plane within :data:`ROUGH_RADIUS_M`. A way over ground steeper than the style takes costs more than any terrain
 class, so the driver goes round it where it can, weighed against the terrain it would cross to
 do so; its speed is that of the terrain it drives on, less ``up_mps_per_deg`` for each degree of
 grade up (``down_mps_per_deg`` down), and at most ``rough_mps`` where the ground is rougher than
@@ -28,6 +28,7 @@ from numba import njit
 from terrapref.errors import UserError
 from terrapref.records import to_plain
 from terrapref.registry import Registry
+from terrapref.world.height_compiled import height_at
 
 ROUGH_RADIUS_M = 0.3  # the disc a point's roughness is read over [m]: as the planner's height layer reads it
 
@@ -37,8 +38,10 @@ class ReliefStyle:
     """How a driver takes relief.
 
     Attributes:
-        roll_deg: the steepest side slope it drives along without going round [deg].
-        grade_deg: the steepest grade, up or down, it takes without going round [deg].
+        roll_deg: the steepest side slope it drives along without going round (its body's roll
+            there) [deg].
+        grade_deg: the steepest grade, up or down, it takes without going round (its body's
+            pitch there) [deg].
         up_mps_per_deg: the speed it sheds per degree of grade up [m/s per deg] ...
         down_mps_per_deg: ... and down.
         rough_mps: its top speed where the ground is rougher than ``rough_m`` [m/s].
@@ -124,91 +127,102 @@ def parse_relief_style(text: str, source: str = "--relief-style") -> tuple[str, 
 
 
 class ReliefSight:
-    """The relief of a world as the driver reads it (module docstring): the height field's
-    gradient (central differences) and, at points, the roughness.
+    """The relief of a world as the driver reads it (module docstring): where its body would sit,
+    its roll across the way and its pitch along it, as its wheels would set them (the heights
+    under its wheels, a track of ``2 * half_width_m`` and a wheelbase of ``wheelbase_m``, as
+    terrapref.vehicle.ground sets the vehicle's), and the ground's roughness at points.
 
     Args:
         heights: the world's height field (ny, nx) [m] at its cell centres.
         res: its cell size [m].
+        half_width_m, wheelbase_m: the body's.
     """
 
-    def __init__(self, heights: np.ndarray, res: float) -> None:
-        z = np.asarray(heights, dtype=np.float64)
-        gy, gx = np.gradient(z, res) if min(z.shape) > 1 else (np.zeros_like(z), np.zeros_like(z))
+    def __init__(self, heights: np.ndarray, res: float, half_width_m: float, wheelbase_m: float) -> None:
         self.heights = np.ascontiguousarray(heights, dtype=np.float32)
-        self.gx, self.gy = gx.astype(np.float32), gy.astype(np.float32)
         self.res = float(res)
+        self.body = (float(half_width_m), 0.5 * float(wheelbase_m))
         self.reach = max(1, int(math.floor(ROUGH_RADIUS_M / res + 1e-9)))
 
-    def steep(self, centre: np.ndarray, normal: np.ndarray, lat: np.ndarray, upto: int, style: ReliefStyle) -> np.ndarray:
-        """Whether each point ``centre[s] + lat[o, f] * normal[s]`` (O, upto, F) lies on ground
-        steeper than ``style`` takes, driven along the path (its tangent at ``s``, left of which
-        ``normal`` points): a side slope past ``roll_deg`` or a grade past ``grade_deg``."""
+    def steep(self, centre: np.ndarray, normal: np.ndarray, offsets: np.ndarray, upto: int, style: ReliefStyle) -> np.ndarray:
+        """Whether the body, centred ``offsets[o]`` left of the path at its first ``upto`` points
+        ``centre`` (``normal`` pointing left) and heading along it, would roll past ``style``'s
+        ``roll_deg`` or pitch past its ``grade_deg``: (O, upto) bool."""
         limits = (math.tan(math.radians(style.roll_deg)), math.tan(math.radians(style.grade_deg)))
-        return _steep(centre, normal, lat, upto, self.gx, self.gy, self.res, limits)
+        return _steep(centre, normal, np.asarray(offsets, dtype=np.float64), upto, self.heights, 1.0 / self.res, self.body, limits)
 
     def along(self, xy: np.ndarray, heading: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The grade [rad, positive up] along ``heading`` (N,) [rad] and the roughness [m] at the
-        points ``xy`` (N, 2); level and smooth off the map."""
+        """The body's pitch [rad, positive nose up] heading ``heading`` (N,) [rad] at the points
+        ``xy`` (N, 2), and the roughness [m] there; smooth off the map."""
         xy = np.ascontiguousarray(xy, dtype=np.float64)
-        return _grade_and_roughness(xy, np.asarray(heading, dtype=np.float64), self.heights, self.gx, self.gy, self.res, self.reach)
+        heading = np.asarray(heading, dtype=np.float64)
+        return _pitch_and_roughness(xy, heading, self.heights, self.res, self.body[1], self.reach)
 
 
 @njit(cache=True, nogil=True)
 def _steep(
     centre: np.ndarray,
     normal: np.ndarray,
-    lat: np.ndarray,
+    offsets: np.ndarray,
     upto: int,
-    gx: np.ndarray,
-    gy: np.ndarray,
-    res: float,
+    heights: np.ndarray,
+    per_m: float,
+    body: tuple[float, float],
     limits: tuple[float, float],
 ) -> np.ndarray:
-    """:meth:`ReliefSight.steep`: ``limits``, the tangents of the side slope and the grade taken."""
-    n_rows, n_cols = gx.shape
+    """:meth:`ReliefSight.steep`: ``limits``, the tangents of the roll and the pitch taken."""
+    half_width, half_length = body
     tan_roll, tan_grade = limits
-    out = np.zeros((lat.shape[0], upto, lat.shape[1]), np.bool_)
-    for o in range(lat.shape[0]):
+    out = np.zeros((offsets.shape[0], upto), np.bool_)
+    for o in range(offsets.shape[0]):
         for k in range(upto):
             nx, ny = normal[k, 0], normal[k, 1]
-            for f in range(lat.shape[1]):
-                row = int(math.floor((centre[k, 1] + lat[o, f] * ny) / res))
-                col = int(math.floor((centre[k, 0] + lat[o, f] * nx) / res))
-                if not (0 <= row < n_rows and 0 <= col < n_cols):
-                    continue
-                side = gx[row, col] * nx + gy[row, col] * ny
-                grade = gx[row, col] * ny - gy[row, col] * nx  # along the tangent (ny, -nx)
-                out[o, k, f] = abs(side) > tan_roll or abs(grade) > tan_grade
+            x, y = centre[k, 0] + offsets[o] * nx, centre[k, 1] + offsets[o] * ny
+            left = height_at(heights, per_m, x + half_width * nx, y + half_width * ny)
+            right = height_at(heights, per_m, x - half_width * nx, y - half_width * ny)
+            front = height_at(heights, per_m, x + half_length * ny, y - half_length * nx)  # along the tangent (ny, -nx)
+            back = height_at(heights, per_m, x - half_length * ny, y + half_length * nx)
+            out[o, k] = abs(left - right) > 2.0 * half_width * tan_roll or abs(front - back) > 2.0 * half_length * tan_grade
     return out
 
 
 @njit(cache=True, nogil=True)
-def _grade_and_roughness(
-    xy: np.ndarray, heading: np.ndarray, heights: np.ndarray, gx: np.ndarray, gy: np.ndarray, res: float, reach: int
+def _pitch_and_roughness(
+    xy: np.ndarray, heading: np.ndarray, heights: np.ndarray, res: float, half_length: float, reach: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """:meth:`ReliefSight.along`: the roughness the standard deviation of the heights within
     ``reach`` cells (a disc) about their least-squares plane."""
     n_rows, n_cols = heights.shape
-    grade, rough = np.zeros(xy.shape[0]), np.zeros(xy.shape[0])
+    pitch, rough = np.zeros(xy.shape[0]), np.zeros(xy.shape[0])
     for i in range(xy.shape[0]):
-        r0, c0 = int(math.floor(xy[i, 1] / res)), int(math.floor(xy[i, 0] / res))
-        if not (0 <= r0 < n_rows and 0 <= c0 < n_cols):
-            continue
-        grade[i] = math.atan(gx[r0, c0] * math.cos(heading[i]) + gy[r0, c0] * math.sin(heading[i]))
-        m = sx = sy = sz = sxx = syy = sxy = sxz = syz = szz = 0.0
-        for dr in range(-reach, reach + 1):
-            for dc in range(-reach, reach + 1):
-                r, c = r0 + dr, c0 + dc
-                if dr * dr + dc * dc > reach * reach or not (0 <= r < n_rows and 0 <= c < n_cols):
-                    continue
-                x, y, z = dc * res, dr * res, np.float64(heights[r, c])
-                m, sx, sy, sz = m + 1.0, sx + x, sy + y, sz + z
-                sxx, syy, sxy, sxz, syz, szz = sxx + x * x, syy + y * y, sxy + x * y, sxz + x * z, syz + y * z, szz + z * z
-        cxx, cyy, cxy = sxx - sx * sx / m, syy - sy * sy / m, sxy - sx * sy / m
-        cxz, cyz, czz = sxz - sx * sz / m, syz - sy * sz / m, szz - sz * sz / m
-        det = cxx * cyy - cxy * cxy
-        if det > 0.0:
-            a, b = (cxz * cyy - cyz * cxy) / det, (cyz * cxx - cxz * cxy) / det
-            rough[i] = math.sqrt(max(czz - a * cxz - b * cyz, 0.0) / m)
-    return grade, rough
+        x, y, c, s = xy[i, 0], xy[i, 1], math.cos(heading[i]), math.sin(heading[i])
+        rise = height_at(heights, 1.0 / res, x + half_length * c, y + half_length * s)
+        rise -= height_at(heights, 1.0 / res, x - half_length * c, y - half_length * s)
+        pitch[i] = math.atan(rise / (2.0 * half_length))
+        r0, c0 = int(math.floor(y / res)), int(math.floor(x / res))
+        if 0 <= r0 < n_rows and 0 <= c0 < n_cols:
+            rough[i] = _roughness(heights, r0, c0, res, reach)
+    return pitch, rough
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _roughness(heights: np.ndarray, r0: int, c0: int, res: float, reach: int) -> float:
+    """The standard deviation of the heights within ``reach`` cells (a disc) of cell (r0, c0)
+    about their least-squares plane [m]; 0 where the plane is not determined."""
+    n_rows, n_cols = heights.shape
+    m = sx = sy = sz = sxx = syy = sxy = sxz = syz = szz = 0.0
+    for dr in range(-reach, reach + 1):
+        for dc in range(-reach, reach + 1):
+            r, c = r0 + dr, c0 + dc
+            if dr * dr + dc * dc > reach * reach or not (0 <= r < n_rows and 0 <= c < n_cols):
+                continue
+            x, y, z = dc * res, dr * res, np.float64(heights[r, c])
+            m, sx, sy, sz = m + 1.0, sx + x, sy + y, sz + z
+            sxx, syy, sxy, sxz, syz, szz = sxx + x * x, syy + y * y, sxy + x * y, sxz + x * z, syz + y * z, szz + z * z
+    cxx, cyy, cxy = sxx - sx * sx / m, syy - sy * sy / m, sxy - sx * sy / m
+    cxz, cyz, czz = sxz - sx * sz / m, syz - sy * sz / m, szz - sz * sz / m
+    det = cxx * cyy - cxy * cxy
+    if det <= 0.0:
+        return 0.0
+    a, b = (cxz * cyy - cyz * cxy) / det, (cyz * cxx - cxz * cxy) / det
+    return math.sqrt(max(czz - a * cxz - b * cyz, 0.0) / m)
