@@ -15,6 +15,7 @@ under the whole footprint (the line across the vehicle), not only under its refe
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field, fields, replace
 
 import numpy as np
@@ -24,7 +25,7 @@ from terrapref.scenario import AVOID, Scenario, Zone
 from terrapref.scenario.path import ReferencePath
 from terrapref.sim import EpisodeLog
 from terrapref.terrain import PreferenceProfile
-from terrapref.vehicle import wrap_angle
+from terrapref.vehicle import VehicleConfig, wrap_angle
 from terrapref.world import WorldMap
 
 NOT_REACHED = "not reached"  # a zone's choice when the vehicle did not get past it
@@ -100,9 +101,10 @@ class ZoneResult:
     clearance_m: float | None = None  # closest approach to terrain not chosen; None: none in reach
     reached: bool = True  # the vehicle got past the zone (else its choice is NOT_REACHED)
     speed_mps: float | None = None  # the mean speed while the reference point was in the zone [m/s]; None: never in it, or not timed
+    grade_band: str | None = None  # on relief, the zone's grade as driven (GRADE_BANDS: its mean over the time in it); None: flat
 
     def to_dict(self) -> dict:
-        return to_plain(self)
+        return to_plain(self, omit_none=("grade_band",))
 
     @classmethod
     def from_dict(cls, data: dict) -> ZoneResult:
@@ -255,6 +257,8 @@ class RunMetrics:
     stuck: int = 0  # times a step higher than the vehicle climbs held it
     max_roll_deg: float = 0.0  # the largest |roll| of any controller tick [deg]
     max_pitch_deg: float = 0.0  # the largest |pitch| [deg]
+    # On relief, by grade band (GRADE_BANDS) of the ground driven: the mean speed ("mps") and the seconds ("s"); None: flat.
+    speed_by_grade_mps: dict[str, dict[str, float]] | None = None
 
     @property
     def incidents(self) -> int:
@@ -276,7 +280,7 @@ class RunMetrics:
         return float(sum(self.distance_m.values()))
 
     def to_dict(self) -> dict:
-        return to_plain(self)
+        return to_plain(self, omit_none=("speed_by_grade_mps",))
 
     @classmethod
     def from_dict(cls, data: dict) -> RunMetrics:
@@ -313,11 +317,8 @@ def score_run(
         for c in classes.classes
         if (on := cls == c.id).any() and time[on].sum() > 0
     }
-    zones = [
-        replace(z, speed_mps=round(float(length[inside].sum() / time[inside].sum()), 4) if time[inside].sum() > 0 else None)
-        for z, zone in zip(score_zones(log.trace, scenario, world, profile, log.progress_m, rules), scenario.zones, strict=True)
-        for inside in [zone.shape.contains(mid) if len(mid) else np.zeros(0, bool)]
-    ]
+    grade = grade_along(log.trace, world) if world.has_relief else None
+    zones = _timed(score_zones(log.trace, scenario, world, profile, log.progress_m, rules), scenario, (mid, length, time, grade))
     return RunMetrics(
         completed=log.completed,
         collisions=log.collisions,
@@ -337,8 +338,64 @@ def score_run(
         time_s=round(log.duration_s, 3),
         max_lateral_accel_mps2=round(_max_lateral_accel(log.trace, dt_s), 4),
         goal_stop=asdict(log.goal_stop) if log.goal_stop is not None else None,
+        speed_by_grade_mps=_by_grade(grade, length, time) if grade is not None else None,
         **log.relief_summary(),
     )
+
+
+def _timed(zones: list[ZoneResult], scenario: Scenario, pieces: tuple[np.ndarray, ...]) -> list[ZoneResult]:
+    """``zones`` (of ``scenario``'s) with the mean speed and, on relief, the grade band of the
+    run's ``pieces`` in each (their midpoints, lengths, times and grades: None on flat ground)."""
+    mid, length, time, grade = pieces
+    out = []
+    for z, zone in zip(zones, scenario.zones, strict=True):
+        inside = zone.shape.contains(mid) if len(mid) else np.zeros(0, bool)
+        timed = time[inside].sum() > 0
+        speed = round(float(length[inside].sum() / time[inside].sum()), 4) if timed else None
+        band = grade_band(float(np.average(grade[inside], weights=time[inside]))) if grade is not None and timed else None
+        out.append(replace(z, speed_mps=speed, grade_band=band))
+    return out
+
+
+# A run's ground on relief, by the body's pitch along its heading as driven: up past this
+# angle, down past it, level between [deg] (a grade of about 1:19, which the synthetic driver's
+# default relief style slows for by 0.09 m/s).
+GRADE_BAND_DEG = 3.0
+GRADE_BANDS = ("up", "level", "down")
+
+
+def grade_band(grade_rad: float) -> str:
+    """The band (:data:`GRADE_BANDS`) of a grade [rad, positive up]."""
+    degrees = math.degrees(grade_rad)
+    return "up" if degrees > GRADE_BAND_DEG else "down" if degrees < -GRADE_BAND_DEG else "level"
+
+
+def grade_along(trace: np.ndarray, world: WorldMap, max_step_m: float = 0.05) -> np.ndarray:
+    """The grade [rad, positive up] of each piece :func:`segments` cuts the driven path into:
+    the body's pitch there heading as it did at the piece's step (the heights under its wheels
+    half the default vehicle's wheelbase ahead and behind, as terrapref.vehicle.ground sets its
+    attitude)."""
+    xy = np.asarray(trace[:, :2], dtype=float)
+    if len(xy) < 2:
+        return np.zeros(0)
+    mid, _ = segments(xy, max_step_m)
+    parts = np.maximum(1, np.ceil(np.linalg.norm(np.diff(xy, axis=0), axis=1) / max_step_m).astype(int))
+    yaw = np.repeat(trace[:-1, 2], parts)
+    half = 0.5 * VehicleConfig().wheelbase_m
+    ahead = np.stack([np.cos(yaw), np.sin(yaw)], axis=1) * half
+    return np.arctan((world.height_at(mid + ahead) - world.height_at(mid - ahead)) / (2.0 * half))
+
+
+def _by_grade(grade: np.ndarray, length: np.ndarray, time: np.ndarray) -> dict[str, dict[str, float]]:
+    """The mean speed and the seconds of each grade band a run's pieces (``grade``, ``length``,
+    ``time``) fall in, the bands with time in them."""
+    degrees = np.degrees(grade)
+    bands = np.where(degrees > GRADE_BAND_DEG, "up", np.where(degrees < -GRADE_BAND_DEG, "down", "level"))
+    return {
+        band: {"mps": round(float(length[on].sum() / time[on].sum()), 4), "s": round(float(time[on].sum()), 3)}
+        for band in GRADE_BANDS
+        if (on := bands == band).any() and time[on].sum() > 0
+    }
 
 
 def _max_lateral_accel(trace: np.ndarray, dt_s: float) -> float:

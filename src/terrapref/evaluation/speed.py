@@ -12,7 +12,7 @@ Rows are plain mappings, as select.json keeps them: a zone row has ``scenario``,
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +21,7 @@ import numpy as np
 from terrapref.demos.expert import ExpertConfig
 from terrapref.demos.relief_style import ReliefStyle
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult
-from terrapref.evaluation.scoring import RunMetrics
+from terrapref.evaluation.scoring import GRADE_BAND_DEG, GRADE_BANDS, RunMetrics
 from terrapref.evaluation.stats import cluster_bootstrap, rate_text
 from terrapref.rules import Rule, speed_rule
 from terrapref.rules.speed.rule import SpeedRule
@@ -31,6 +31,7 @@ from terrapref.scenario.path import ReferencePath
 SPEED_TARGET_MPS = 0.08  # the planner's speed error per class against its driver must stay within this [m/s]
 TIME_TOLERANCE = 0.05  # and its time to the end of the path within this share of the driver's
 LATERAL_TOLERANCE = 0.10  # and its lateral acceleration no more than this share above the driver's limit
+GRADE_MIN_S = 1.0  # a run's speed on a grade band is compared where both runs spent at least this long on it [s]
 
 
 @dataclass(frozen=True)
@@ -64,6 +65,9 @@ class SpeedComparison:
         lateral_worst: the largest ratio of the two.
         background: the class table's background class (None in a file written before it was named:
             its zones passed by are keyed ``avoid`` there).
+        by_grade: on relief, per grade band (terrapref.evaluation.scoring.GRADE_BANDS), the
+            absolute error of a run's mean speed on ground of that band [m/s], over the runs
+            where both it and the driver's run on the same layout spent :data:`GRADE_MIN_S` there.
     """
 
     by_class: dict[str, Estimate]
@@ -74,6 +78,7 @@ class SpeedComparison:
     limit_over: tuple[int, int] = (0, 0)
     limit_worst: float | None = None
     background: str | None = None
+    by_grade: dict[str, Estimate] = field(default_factory=dict)
 
     @classmethod
     def of(cls, zones: Sequence[Mapping[str, Any]], runs: Sequence[Mapping[str, Any]], background: str) -> SpeedComparison:
@@ -92,6 +97,12 @@ class SpeedComparison:
                 ratios.setdefault(r["scenario"], []).append(r["time_s"] / r["driver_time_s"])
         compared = [x for v in ratios.values() for x in v]
         within = sum(abs(x - 1) <= TIME_TOLERANCE for x in compared)
+        grades: dict[str, dict[str, list[float]]] = {}
+        for r in runs:
+            mine, theirs = r.get("speed_by_grade_mps") or {}, r.get("driver_speed_by_grade_mps") or {}
+            for band in (b for b in GRADE_BANDS if b in mine and b in theirs):
+                if min(mine[band]["s"], theirs[band]["s"]) >= GRADE_MIN_S:
+                    grades.setdefault(band, {}).setdefault(r["scenario"], []).append(abs(mine[band]["mps"] - theirs[band]["mps"]))
         same = [r["max_lateral_accel_mps2"] / r["driver_max_lateral_accel_mps2"] for r in runs if r.get("driver_max_lateral_accel_mps2")]
         limit = [r["max_lateral_accel_mps2"] / r["driver_lateral_limit_mps2"] for r in runs if r.get("driver_lateral_limit_mps2")]
         return cls(
@@ -103,6 +114,7 @@ class SpeedComparison:
             (sum(x > 1 + LATERAL_TOLERANCE for x in limit), len(limit)),
             max(limit) if limit else None,
             background,
+            {band: _estimate(grades[band]) for band in GRADE_BANDS if band in grades},
         )
 
     @classmethod
@@ -132,7 +144,10 @@ class SpeedComparison:
         return cls.of(zones, runs, background)
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        out = asdict(self)
+        if not self.by_grade:  # flat ground: no grade bands
+            del out["by_grade"]
+        return out
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> SpeedComparison:
@@ -148,6 +163,7 @@ class SpeedComparison:
             tuple(data.get("limit_over", (0, 0))),
             data.get("limit_worst"),
             data.get("background"),
+            {band: Estimate(**e) for band, e in (data.get("by_grade") or {}).items()},
         )
 
     def lines(self) -> list[str]:
@@ -156,6 +172,12 @@ class SpeedComparison:
         out = [
             f"speed error against the driver, {passed_by.get(name, name)}: {e.text()} m/s over zones (target <= {SPEED_TARGET_MPS})"
             for name, e in self.by_class.items()
+        ]
+        out += [
+            f"speed error against the driver, "
+            f"{f'level ground (grade within {GRADE_BAND_DEG:g} deg)' if band == 'level' else f'going {band} (grade past {GRADE_BAND_DEG:g} deg)'}"
+            f": {e.text()} m/s over runs (target <= {SPEED_TARGET_MPS})"
+            for band, e in self.by_grade.items()
         ]
         if self.time_ratio is not None:
             out.append(
@@ -197,6 +219,8 @@ def run_fields(metrics: RunMetrics, driver: RunMetrics, lateral_limit_mps2: floa
         "max_lateral_accel_mps2": metrics.max_lateral_accel_mps2,
         "driver_max_lateral_accel_mps2": driver.max_lateral_accel_mps2,
         "driver_lateral_limit_mps2": lateral_limit_mps2,
+        "speed_by_grade_mps": metrics.speed_by_grade_mps,
+        "driver_speed_by_grade_mps": driver.speed_by_grade_mps,
     }
 
 
