@@ -140,17 +140,19 @@ CONTOUR_CELLS = 400  # contours are traced on at most this many cells a side (fi
 def _hillshaded(rgb: np.ndarray, world: WorldMap) -> np.ndarray:
     """The class colours ``rgb`` (ny, nx, 3) uint8 shaded by the world's relief, lit from the
     north-west as maps are, shape (ny, nx, 3) float in [0, 1]."""
+    assert world.height is not None
+    return hillshade(rgb, world.height, world.resolution_m)
+
+
+def hillshade(rgb: np.ndarray, height: np.ndarray, res_m: float) -> np.ndarray:
+    """Colours ``rgb`` (ny, nx, 3) uint8 shaded by the heights ``height`` (ny, nx) [m] on cells of
+    ``res_m`` [m] (row 0 the southern edge), lit from the north-west as maps are, with
+    :data:`RELIEF_EXAGGERATION`: (ny, nx, 3) float in [0, 1]."""
     from matplotlib.colors import LightSource
 
-    assert world.height is not None
     # LightSource reads row 0 as the top of the picture; the map's row 0 is its southern edge.
     shaded = LightSource(azdeg=315, altdeg=45).shade_rgb(
-        rgb[::-1] / 255.0,
-        world.height[::-1].astype(np.float64),
-        blend_mode="soft",
-        vert_exag=RELIEF_EXAGGERATION,
-        dx=world.resolution_m,
-        dy=world.resolution_m,
+        rgb[::-1] / 255.0, height[::-1].astype(np.float64), blend_mode="soft", vert_exag=RELIEF_EXAGGERATION, dx=res_m, dy=res_m
     )
     return shaded[::-1]
 

@@ -1004,3 +1004,54 @@ def test_the_throttle_takes_over_from_the_planner_and_is_recorded_as_a_correctio
 def test_a_starting_speed_above_the_vehicles_top_speed_is_a_user_error():
     with pytest.raises(UserError, match=r"speed must be in \(0, 2\] m/s, got 2.5"):
         run_teleop("demo_course", realtime=False, wait_for_start=False, v_mps=2.5, max_frames=1)
+
+
+# --- relief: the map hillshaded, the body's roll and pitch, a warning near its limits --------------
+
+
+def test_the_attitude_readout_names_the_limits_and_warns_within_a_fifth_of_them():
+    from terrapref.teleop.guide import attitude_readout
+    from terrapref.vehicle import VehicleConfig
+    from terrapref.vehicle.ground import Attitude
+
+    ugv = VehicleConfig()  # tips past 25 deg of roll, 30 of pitch
+    line, warning = attitude_readout(Attitude(0.0, math.radians(-6.0), math.radians(12.0)), ugv)
+    assert line == "roll 12 deg left side up (tips at 25), pitch 6 deg nose up (tips at 30)" and warning is None
+    assert attitude_readout(Attitude(0.0, 0.0, math.radians(-20.5)), ugv)[1] == "NEAR TIPPING: roll 20 of 25 deg, turn down the slope"
+    assert attitude_readout(Attitude(0.0, math.radians(19.9), 0.0), ugv)[1] is None  # under 20 deg: not yet
+    assert attitude_readout(Attitude(0.0, math.radians(24.0), 0.0), ugv)[1].startswith("NEAR TIPPING: pitch 24 of 30 deg")
+
+
+def test_on_relief_the_window_shows_the_bodys_attitude_and_warns_on_a_steep_bank(tmp_path, monkeypatch):
+    """Along a bank of 22 deg (a plateau's ramp beside the path): the display gives the roll and,
+    past 20 deg of it, the warning; the map in the panel is hillshaded (its grass is not all one colour)."""
+    import numpy as np
+
+    from terrapref.scenario import parse_scenario
+    from terrapref.teleop.window import Window
+
+    drawn, insets = _overlays(monkeypatch), []
+    build = Window._build_inset
+
+    def keep_inset(self):
+        build(self)
+        insets.append(pygame.surfarray.array3d(self.inset).reshape(-1, 3))
+
+    monkeypatch.setattr(Window, "_build_inset", keep_inset)
+    data = {
+        "format": "terrapref-scenario/1",
+        "name": "bank",
+        "world": {"size_m": [30.0, 20.0], "resolution_m": 0.05, "background": "grass"},
+        "terrain": [],
+        "relief": [{"plateau": {"polygon": [[10.0, 11.0], [30.0, 11.0], [30.0, 20.0], [10.0, 20.0]], "height_m": 1.0, "edge_m": 2.5}}],
+        "path": {"waypoints": [[2.0, 9.75], [28.0, 9.75]]},
+    }
+    run_teleop(
+        parse_scenario(data), None, realtime=False, wait_for_start=False, max_frames=160, disturbance=None, screenshot=tmp_path / "shot.png"
+    )
+    first, last = drawn[0], drawn[-1]
+    assert first.hud[-1] == "roll 0 deg right side up (tips at 25), pitch 0 deg nose up (tips at 30)" and not first.alerts
+    # The bank rises to the left of the way (north): the left wheels ride higher.
+    assert re.fullmatch(r"roll 2[0-2] deg left side up \(tips at 25\), pitch \d deg nose (up|down) \(tips at 30\)", last.hud[-1])
+    assert last.alerts[0].startswith("NEAR TIPPING: roll 2")
+    assert len(np.unique(insets[-1], axis=0)) > 5  # grass lit, in shadow and flat: not the one colour of a flat map

@@ -11,7 +11,8 @@ import numpy as np
 
 from terrapref.features import PreferenceSet
 from terrapref.scenario.path import ReferencePath
-from terrapref.vehicle import Command, Pose, integrate_unicycle, wrap_angle
+from terrapref.vehicle import Command, Pose, VehicleConfig, integrate_unicycle, wrap_angle
+from terrapref.vehicle.ground import Attitude
 from terrapref.world import WorldMap
 
 SAMPLE_STEP_M = 0.5
@@ -204,3 +205,21 @@ def stays_on_map(
     x, y = x + brake_m * math.cos(yaw), y + brake_m * math.sin(yaw)
     after = clearance(x, y)
     return after >= margin_m or after >= clearance(pose[0], pose[1])
+
+
+NEAR_TIPPING = 0.8  # the share of its roll or pitch limit at which the vehicle is said to be near tipping
+
+
+def attitude_readout(attitude: Attitude, vehicle: VehicleConfig) -> tuple[str, str | None]:
+    """On relief, the body's roll and pitch in words with the limits past which it tips (a line of
+    the heads-up display), and a warning once either is within :data:`NEAR_TIPPING` of its limit
+    (None before)."""
+    roll, pitch = math.degrees(attitude.roll_rad), math.degrees(attitude.pitch_rad)
+    side = "left side up" if roll > 0 else "right side up"
+    nose = "nose down" if pitch > 0 else "nose up"
+    line = f"roll {abs(roll):.0f} deg {side} (tips at {vehicle.max_roll_deg:g}), pitch {abs(pitch):.0f} deg {nose} (tips at {vehicle.max_pitch_deg:g})"
+    if abs(roll) >= NEAR_TIPPING * vehicle.max_roll_deg:
+        return line, f"NEAR TIPPING: roll {abs(roll):.0f} of {vehicle.max_roll_deg:g} deg, turn down the slope"
+    if abs(pitch) >= NEAR_TIPPING * vehicle.max_pitch_deg:
+        return line, f"NEAR TIPPING: pitch {abs(pitch):.0f} of {vehicle.max_pitch_deg:g} deg, take it at an angle or go round"
+    return line, None

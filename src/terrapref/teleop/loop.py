@@ -55,7 +55,7 @@ from terrapref.features import PreferenceSet, PreferenceSetConfig
 from terrapref.perception import PerceptionModel
 from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.sim import Frame, SimConfig, Simulation
-from terrapref.teleop.guide import CourseGuide, stays_on_map
+from terrapref.teleop.guide import CourseGuide, attitude_readout, stays_on_map
 from terrapref.teleop.stick import Stick
 from terrapref.teleop.throttle import PAD_AXIS, Throttle
 from terrapref.teleop.window import ALERT_COLOR, HIGHLIGHT_COLOR, PLANNER_COLOR, Banner, Overlay, Window
@@ -475,10 +475,14 @@ class _Session:
             mode = ("PLANNER DRIVING", PLANNER_COLOR) if self.driver == "planner" else ("YOU DRIVE: recording corrections", HIGHLIGHT_COLOR)
             if self.driver == "planner" and self.decision is not None and self.decision.stop is not None:
                 mode = (f"PLANNER STOPPED: {self.decision.stop}", ALERT_COLOR)
-        alerts = tuple(a for a in (self.push_alert(), readout.warning()) if a is not None)
+        hud, tipping = readout.lines(), None
+        if self.sim.world.has_relief:  # the body's roll and pitch, and a warning near its limits
+            line, tipping = attitude_readout(self.sim.vehicle.attitude, self.sim.vehicle.config)
+            hud = [*hud, line]
+        alerts = tuple(a for a in (tipping, self.push_alert(), readout.warning()) if a is not None)
         overlay = Overlay(
             self.status(command, label) + note,
-            readout.lines(),
+            hud,
             end_banner or self.banner(),
             mode,
             alerts=alerts,

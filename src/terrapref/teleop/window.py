@@ -153,7 +153,7 @@ class Window:
         return out
 
     def _build_inset(self) -> None:
-        """The map, north up, coloured by class and downsampled by plain slicing."""
+        """The map, north up, coloured by class (hillshaded on relief) and downsampled by plain slicing."""
         world = self.sim.world
         ny, nx = world.raster.shape
         w_m, h_m = world.size_m
@@ -162,8 +162,12 @@ class Window:
         self.inset_scale = scale
         self.inset_size = (max(1, round(w_m * scale)), max(1, round(h_m * scale)))
         step = max(1, int(min(nx / self.inset_size[0], ny / self.inset_size[1])))
-        small = world.raster[::step, ::step][::-1]  # row 0 is south in the raster; north up here
-        rgb = np.ascontiguousarray(self.palette[small])
+        rgb = self.palette[world.raster[::step, ::step]]
+        if world.height is not None:  # relief: the classes hillshaded, as the figures show it
+            from terrapref.plots import hillshade
+
+            rgb = np.round(255.0 * hillshade(rgb, world.height[::step, ::step], world.resolution_m * step)).astype(np.uint8)
+        rgb = np.ascontiguousarray(rgb[::-1])  # row 0 is south in the raster; north up here
         surf = pygame.image.frombuffer(rgb.tobytes(), (rgb.shape[1], rgb.shape[0]), "RGB")
         self.inset = pygame.transform.smoothscale(surf, self.inset_size)
         self.inset_origin = (self.panel_x + PANEL_MARGIN_PX, PANEL_MARGIN_PX + 18)
