@@ -9,7 +9,7 @@ named recipe for one epoch (both utility fits), one closed-loop run of each mode
 synthetic driver, one run through the ``field`` perception model (label errors, a tilted
 camera), and a few frames of the default recipe's model on a course with relief (its height
 field and noise, the relief renderer with depth, the height layer's votes and geometry), its
-costmap, and a whole flat frame. What it writes goes to a temporary folder and is removed.
+costmap, and of the synthetic driver with a relief style there, and a whole flat frame. What it writes goes to a temporary folder and is removed.
 """
 
 from __future__ import annotations
@@ -49,9 +49,12 @@ def warm_up(log=print) -> float:
 
 
 def _relief_frames(model_path: Path, frames: int = 5) -> None:
-    """A few frames of the model at ``model_path`` deciding on ``relief_demo`` with their depth."""
+    """A few frames of the model at ``model_path`` deciding on ``relief_demo`` with their depth,
+    and of the synthetic driver with a relief style."""
     import numpy as np
 
+    from terrapref.demos.expert import ExpertConfig, ExpertDriver
+    from terrapref.demos.relief_style import ReliefStyle
     from terrapref.groundmap.height_compiled import near_blocked
     from terrapref.learning.model_file import load_model
     from terrapref.planner import Planner, PlannerDriver
@@ -64,6 +67,10 @@ def _relief_frames(model_path: Path, frames: int = 5) -> None:
     for _ in range(frames):
         frame = sim.step(driver.act(frame))
     driver.planner.costmap()  # the map's cells all decided at once
+    expert = ExpertDriver(ExpertConfig(relief=ReliefStyle()))
+    expert.reset(sim.scenario, np.random.default_rng(0))
+    for _ in range(frames):
+        frame = sim.step(expert.act(frame))
     near_blocked(np.ones((2, 2), dtype=np.uint8), 1, np.zeros(4, dtype=np.uint8))  # blocked ground, which these frames have none of
     Simulation(resolve_scenario(COURSE)).reset().image  # noqa: B018 - a whole flat frame rendered
 

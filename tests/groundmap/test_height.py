@@ -154,7 +154,7 @@ def test_a_near_return_outweighs_a_far_one_by_the_inverse_of_their_variances() -
         centre = np.array([x - across_m, y, 0.8])
         offset = np.array([x, y, z]) - centre
         depth = np.float64(np.linalg.norm(offset))
-        votes = (np.zeros(1, np.int64), np.zeros(1, np.int64), 0, np.empty(1, np.int64), np.empty(1, np.int64))
+        votes = (np.zeros(1, np.uint8), np.zeros(1, np.uint8), 0, np.empty(1, np.int64), np.empty(1, np.int64))  # as a map's
         pixels = (np.zeros(1, np.int64), np.zeros(1, np.int64), (offset / depth)[None, :])
         image = np.full((1, 1), depth, np.float32)
         kernels.depth_frame(
