@@ -22,7 +22,9 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
 fi
 if [ "$(cat .venv/.terrapref-modules 2>/dev/null)" != "$modules" ]; then
   find src/terrapref -path '*/__pycache__/*' \( -name '*.nbi' -o -name '*.nbc' \) -delete
-  # Compile the numerical loops now (kept beside their sources) rather than in the first job.
+  # Compile the package's bytecode and its numerical loops now (kept beside their sources)
+  # rather than in the first job, as an installed package's would be.
+  .venv/bin/python -m compileall -q src/terrapref
   .venv/bin/python -m terrapref.warm_up
   echo "$modules" > .venv/.terrapref-modules
 fi
