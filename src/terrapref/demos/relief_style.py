@@ -28,7 +28,7 @@ from numba import njit
 from terrapref.errors import UserError
 from terrapref.records import to_plain
 from terrapref.registry import Registry
-from terrapref.world.height_compiled import height_at
+from terrapref.world.height_compiled import height_at, plane_fit
 
 ROUGH_RADIUS_M = 0.3  # the disc a point's roughness is read over [m]: as the planner's height layer reads it
 
@@ -208,7 +208,8 @@ def _pitch_and_roughness(
 @njit(cache=True, nogil=True, inline="always")
 def _roughness(heights: np.ndarray, r0: int, c0: int, res: float, reach: int) -> float:
     """The standard deviation of the heights within ``reach`` cells (a disc) of cell (r0, c0)
-    about their least-squares plane [m]; 0 where the plane is not determined."""
+    about their least-squares plane [m] (as the planner's height layer reads its roughness,
+    terrapref.world.height_compiled.plane_fit); 0 where the plane is not determined."""
     n_rows, n_cols = heights.shape
     m = sx = sy = sz = sxx = syy = sxy = sxz = syz = szz = 0.0
     for dr in range(-reach, reach + 1):
@@ -219,10 +220,5 @@ def _roughness(heights: np.ndarray, r0: int, c0: int, res: float, reach: int) ->
             x, y, z = dc * res, dr * res, np.float64(heights[r, c])
             m, sx, sy, sz = m + 1.0, sx + x, sy + y, sz + z
             sxx, syy, sxy, sxz, syz, szz = sxx + x * x, syy + y * y, sxy + x * y, sxz + x * z, syz + y * z, szz + z * z
-    cxx, cyy, cxy = sxx - sx * sx / m, syy - sy * sy / m, sxy - sx * sy / m
-    cxz, cyz, czz = sxz - sx * sz / m, syz - sy * sz / m, szz - sz * sz / m
-    det = cxx * cyy - cxy * cxy
-    if det <= 0.0:
-        return 0.0
-    a, b = (cxz * cyy - cyz * cxy) / det, (cyz * cxx - cxz * cxy) / det
-    return math.sqrt(max(czz - a * cxz - b * cyz, 0.0) / m)
+    rough = plane_fit((m, sx, sy, sz, sxx, syy, sxy, sxz, syz, szz))[1]
+    return 0.0 if math.isnan(rough) else rough

@@ -10,6 +10,8 @@ import math
 import numpy as np
 from numba import njit
 
+from terrapref.world.height_compiled import plane_fit
+
 
 @njit(cache=True, nogil=True)
 def cell_geometry(trusted: np.ndarray, rows: np.ndarray, cols: np.ndarray, reach: int, res: float, out: np.ndarray) -> None:
@@ -30,7 +32,7 @@ def cell_geometry(trusted: np.ndarray, rows: np.ndarray, cols: np.ndarray, reach
             continue
         sums, near, step = _disc(trusted, r0, c0, reach, res)
         if sums[0] >= 3.0:
-            out[i, 0], out[i, 1] = _plane(sums)
+            out[i, 0], out[i, 1] = plane_fit(sums)
         if near >= 2:
             out[i, 2] = step
 
@@ -56,23 +58,6 @@ def _disc(trusted: np.ndarray, r0: int, c0: int, reach: int, res: float) -> tupl
             if abs(dr) <= 1 and abs(dc) <= 1:
                 near, low, high = near + 1, min(low, z), max(high, z)
     return (m, sx, sy, sz, sxx, syy, sxy, sxz, syz, szz), near, high - low
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _plane(sums: tuple[float, ...]) -> tuple[float, float]:
-    """Slope [rad] and roughness [m] of the least-squares plane through the points of ``sums``
-    (:func:`_disc`); NaN where the points are on a line (the plane is not determined)."""
-    m, sx, sy, sz, sxx, syy, sxy, sxz, syz, szz = sums
-    # Centred second moments.
-    cxx, cyy, cxy = sxx - sx * sx / m, syy - sy * sy / m, sxy - sx * sy / m
-    cxz, cyz, czz = sxz - sx * sz / m, syz - sy * sz / m, szz - sz * sz / m
-    det = cxx * cyy - cxy * cxy
-    if det <= 1e-12 * max(cxx * cyy, 1e-300):
-        return np.nan, np.nan
-    a = (cxz * cyy - cyz * cxy) / det
-    b = (cyz * cxx - cxz * cxy) / det
-    residual = czz - a * cxz - b * cyz  # the residual sum of squares
-    return math.atan(math.sqrt(a * a + b * b)), math.sqrt(max(residual, 0.0) / m)
 
 
 @njit(cache=True, nogil=True)

@@ -1,5 +1,6 @@
 """The ground's height at a point, compiled (Numba): the renderer's rays and the vehicle's wheels
-read the height field through it."""
+read the height field through it; and the least-squares plane through heights, which the planner's
+height layer and the synthetic driver read slope and roughness from."""
 
 from __future__ import annotations
 
@@ -23,3 +24,22 @@ def height_at(heights: np.ndarray, per_m: float, x: float, y: float) -> float:
     south = np.float64(heights[r0, c0]) * (1.0 - fu) + np.float64(heights[r0, c1]) * fu
     north = np.float64(heights[r1, c0]) * (1.0 - fu) + np.float64(heights[r1, c1]) * fu
     return south * (1.0 - fv) + north * fv
+
+
+@njit(cache=True, nogil=True, inline="always")
+def plane_fit(sums: tuple[float, ...]) -> tuple[float, float]:
+    """Slope [rad] and roughness [m] of the least-squares plane through the points of ``sums``
+    (the normal equations' sums m, x, y, z, xx, yy, xy, xz, yz, zz, as the height layer's disc gives them,
+    terrapref.groundmap.height_compiled;
+    x and y offsets from any point); NaN where the points are on a line (the plane is not determined)."""
+    m, sx, sy, sz, sxx, syy, sxy, sxz, syz, szz = sums
+    # Centred second moments.
+    cxx, cyy, cxy = sxx - sx * sx / m, syy - sy * sy / m, sxy - sx * sy / m
+    cxz, cyz, czz = sxz - sx * sz / m, syz - sy * sz / m, szz - sz * sz / m
+    det = cxx * cyy - cxy * cxy
+    if det <= 1e-12 * max(cxx * cyy, 1e-300):
+        return np.nan, np.nan
+    a = (cxz * cyy - cyz * cxy) / det
+    b = (cyz * cxx - cxz * cxy) / det
+    residual = czz - a * cxz - b * cyz  # the residual sum of squares
+    return math.atan(math.sqrt(a * a + b * b)), math.sqrt(max(residual, 0.0) / m)
