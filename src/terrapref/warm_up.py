@@ -72,7 +72,25 @@ def _relief_frames(model_path: Path, frames: int = 5) -> None:
     for _ in range(frames):
         frame = sim.step(expert.act(frame))
     near_blocked(np.ones((2, 2), dtype=np.uint8), 1, np.zeros(4, dtype=np.uint8))  # blocked ground, which these frames have none of
-    Simulation(resolve_scenario(COURSE)).reset().image  # noqa: B018 - a whole flat frame rendered
+    _frames_as_they_come(Simulation(resolve_scenario(COURSE)))
+
+
+def _frames_as_they_come(sim) -> None:
+    """A flat frame rendered whole, and frames read as robots' come: pixels as a PixelSet (its
+    indices read-only) or as plain indices, of a frame not yet rendered and of an image in hand,
+    writable or read-only (decoded from a message's buffer)."""
+    import numpy as np
+
+    from terrapref.camera import PixelSet, SegmentationView
+
+    image = sim.reset().image  # a whole flat frame rendered
+    frozen = image.copy()
+    frozen.flags.writeable = False
+    indices = np.arange(16, dtype=np.int64)
+    for pixels in (indices, PixelSet(indices)):
+        sim.reset().view.pixels(pixels)  # read before the frame is rendered: only these pixels
+        for held in (image, frozen):
+            SegmentationView.of(held).pixels(pixels)
 
 
 if __name__ == "__main__":

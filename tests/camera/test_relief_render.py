@@ -211,8 +211,9 @@ def test_the_marchs_step_is_a_block_on_a_plane_and_on_a_parabola_the_step_that_k
     field's edge are left aside: beyond it the ground goes on level, a crease."""
     res, tolerance = 0.05, 0.005
     x = (np.arange(160) + 0.5) * res
-    plane = np.broadcast_to(0.3 * x[None, :] - 0.1 * x[:, None] + 2.0, (160, 160)).astype(np.float32)
-    parabola = np.broadcast_to(0.5 * x[None, :] ** 2, (160, 160)).astype(np.float32)
+    # Row-major float32, as a world's height field is.
+    plane = np.ascontiguousarray(np.broadcast_to(0.3 * x[None, :] - 0.1 * x[:, None] + 2.0, (160, 160)), dtype=np.float32)
+    parabola = np.ascontiguousarray(np.broadcast_to(0.5 * x[None, :] ** 2, (160, 160)), dtype=np.float32)
     inner = (slice(2, -2), slice(2, -2))
     np.testing.assert_allclose(step_lengths(plane, res, 4, tolerance, 2 * res)[inner], 16 * res)
     np.testing.assert_allclose(step_lengths(parabola, res, 4, tolerance, 2 * res)[inner], 0.2, rtol=1e-3)
