@@ -240,3 +240,25 @@ def test_past_a_wall_no_column_shows_ground_above_its_own_silhouette() -> None:
     expected = ~np.isnan(marched(renderer, pose, attitude, pixels)[1]).reshape(len(columns), len(band))
     wrong = (seen.reshape(-1)[pixels].reshape(len(columns), len(band)) != expected).sum(axis=1)
     assert seen[:, columns].any(axis=0).all() and wrong.max() <= 2, columns[wrong > 2]
+
+
+def test_a_newton_step_that_overshoots_a_post_is_settled_on_its_near_face_not_the_ground_behind() -> None:
+    """A post 1 m high and a cell wide, a column's plane leaning (0.15 m sideways per metre of
+    drop) from a centre 1.2 m up: from a guess of 0.5 m (inside the post) one Newton step lands
+    0.1 m above the centre, in the air. Settled, the drop is where the plane's point meets the
+    post's near face (its gap closed; the post bilinear between cell centres), not 1.2 m, the
+    ground behind it, which the far end of the field's heights also reaches."""
+    from terrapref.camera.relief_compiled import SETTLE_M, settle_drops
+    from terrapref.world.height_compiled import height_at
+
+    res, cz, lean, x0 = 0.05, 1.2, 0.15, 4.95
+    heights = np.zeros((4, 200), np.float32)
+    heights[:, 100] = 1.0  # the cell centred at x = 5.025
+    guess, stepped = 0.5, -0.1
+    drop, moved = np.array([stepped]), np.array([stepped - guess])
+    planes = np.zeros((9, 1))
+    planes[0, 0], planes[2, 0] = 1.0, lean  # level direction +x; a metre of drop moves the point 0.15 m along x
+    settle_drops(moved, drop, np.array([x0]), planes, np.array([0.0, 0.1, cz]), heights, 1.0 / res, (0.0, 1.0))
+    face = x0 + drop[0] * lean
+    assert 0.2 < drop[0] < 1.0 and 5.0 < face < 5.025
+    assert abs(cz - drop[0] - height_at(heights, 1.0 / res, face, 0.1)) <= 0.01 * SETTLE_M

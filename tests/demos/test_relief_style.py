@@ -52,6 +52,7 @@ def test_named_styles_and_pairs_over_them_are_read():
         roll_deg=18.0, grade_deg=22.0, up_mps_per_deg=0.0, down_mps_per_deg=0.01, rough_mps=1.2
     )
     assert parse_relief_style("grade_deg=10")[1] == ReliefStyle(grade_deg=10.0)  # pairs over the default
+    assert parse_relief_style("none") == ("none", None)  # relief driven as if it were flat
     assert RELIEF_STYLES.names() == ["default", "bold", "cautious"]
 
 

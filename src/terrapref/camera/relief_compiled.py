@@ -42,7 +42,7 @@ from numba import njit
 from terrapref.world.height_compiled import height_at
 
 # A Newton step that moves a column's drop by more than this [m] is checked and, if need be,
-# settled by a bracketing search (:func:`_settle`).
+# settled by a bracketing search (:func:`settle_drops`).
 SETTLE_M = 0.01
 
 
@@ -207,7 +207,7 @@ def _march(
     corners = np.empty((4, width), np.float32)
     longest = np.empty(width)
     stop = np.empty(width, np.int64)  # the highest row a sample fills to
-    moved = np.empty(width)  # how far the Newton step moved each column's drop [m]
+    moved = np.empty(width)  # how far the Newton step moved each column's drop, signed [m]
     ny, nx = heights.shape
     where = (centre[0] * per_m - 0.5, centre[1] * per_m - 0.5, per_m, nx - 1.0 - 1e-9, ny - 1.0 - 1e-9, nx, shift, steps.shape[1])
     per_row, clearance2, cap = 1.0 / (clearance * fy), clearance * clearance, 2.0 * max_range_m + 1.0
@@ -216,7 +216,7 @@ def _march(
         _where(u, ratio, last, before, hx, hy, mx, my, where, new, fu, fv, cell, block)
         _read(cell, block, heights.reshape(-1), nx, steps.reshape(-1), corners, longest)
         if _newton(corners, fu, fv, mx, my, new, centre[2], per_m, moved):
-            _settle(moved, new, u, planes, centre, heights, per_m, span)
+            settle_drops(moved, new, u, planes, centre, heights, per_m, span)
         _project(new, u, dh, dm, fh, fm, wd, wf, stop, fy, cy)
         before, last, new = last, new, before
         if not first:
@@ -339,7 +339,8 @@ def _newton(
 ) -> int:
     """Each column's drop where its plane meets the ground, from its guess in ``drop``: one Newton
     step on the bilinear field (its height and gradient at the guess's point); how far it moved
-    the drop into ``moved``. How many it moved by more than :data:`SETTLE_M`."""
+    the drop into ``moved`` (signed: the step's result less the guess). How many it moved by
+    more than :data:`SETTLE_M`."""
     h00, h01, h10, h11 = corners[0], corners[1], corners[2], corners[3]
     for col in range(drop.shape[0]):
         a, b, c, d = np.float64(h00[col]), np.float64(h01[col]), np.float64(h10[col]), np.float64(h11[col])
@@ -353,15 +354,15 @@ def _newton(
         closing = max(1.0 + gx * mx[col] + gy * my[col], 0.5)
         g = drop[col]
         drop[col] = g + (cz - g - z) / closing
-        moved[col] = abs(drop[col] - g)
+        moved[col] = drop[col] - g
     far = 0
     for col in range(drop.shape[0]):
-        far += moved[col] > SETTLE_M
+        far += abs(moved[col]) > SETTLE_M
     return far
 
 
 @njit(cache=True, nogil=True)
-def _settle(
+def settle_drops(
     moved: np.ndarray,
     drop: np.ndarray,
     u: np.ndarray,
@@ -375,21 +376,40 @@ def _settle(
     its plane's point more than a tenth of that off the ground (it met a wall, a ledge or a
     crest's far side, where the ground is not near its tangent), found again where the point
     meets the ground to :data:`SETTLE_M` / 100, by regula falsi (Illinois)
-    between the guess and the step's result, widened to the field's lowest and highest heights
-    (``span``) where both lie on one side: one Newton step alone can leave the point in the air,
+    between the guess and the step's result, or, where both lie on one side, between the result
+    and the nearest drop past which the gap turns (:func:`_bracket`, within the field's lowest and
+    highest heights, ``span``): one Newton step alone can leave the point in the air,
     and the rows it fills above the true silhouette then show ground that is not there."""
     for col in range(drop.shape[0]):
-        if not moved[col] > SETTLE_M:
+        if not abs(moved[col]) > SETTLE_M:
             continue
         point = (centre[0] + u[col] * planes[0, col], centre[1] + u[col] * planes[1, col], planes[2, col], planes[3, col], centre[2])
         b = drop[col]
         fb = _gap(point, b, heights, per_m)
         if abs(fb) <= 0.1 * SETTLE_M:  # on smooth ground the step lands on it: a tenth of a pixel row at 10 m
             continue
-        a = b - moved[col] if fb * _gap(point, b - moved[col], heights, per_m) <= 0.0 else np.nan
-        if math.isnan(a):
-            a = centre[2] - span[0] if fb > 0.0 else centre[2] - span[1]
+        guess = b - moved[col]
+        a = guess if fb * _gap(point, guess, heights, per_m) <= 0.0 else _bracket(point, b, fb, heights, per_m, span)
         drop[col] = _root(point, a, b, heights, per_m)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _bracket(
+    point: tuple[float, float, float, float, float], b: float, fb: float, heights: np.ndarray, per_m: float, span: tuple[float, float]
+) -> float:
+    """The drop nearest ``b`` on the side that closes its gap ``fb`` at which the gap's sign has
+    turned, stepping out from ``b`` by a centimetre doubled each step: down (a larger drop) from a
+    point in the air, up from one under the ground. The field's lowest (highest) height bounds
+    the search: there the gap has turned for certain, so the nearest crossing wins over a farther one."""
+    end = point[4] - span[0] if fb > 0.0 else point[4] - span[1]
+    step = SETTLE_M if fb > 0.0 else -SETTLE_M
+    at = b
+    while (end - at) * step > 0.0:
+        at = min(at + step, end) if step > 0.0 else max(at + step, end)
+        if fb * _gap(point, at, heights, per_m) <= 0.0:
+            return at
+        step *= 2.0
+    return end
 
 
 @njit(cache=True, nogil=True, inline="always")

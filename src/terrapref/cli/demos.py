@@ -139,7 +139,7 @@ def record_parser(sub: argparse._SubParsersAction) -> None:
         metavar="NAME[,K=V,...]",
         help="how the driver takes relief: default (round side slopes past 12 deg and grades past 15 deg, 0.03 m/s less per deg up), "
         "bold, cautious, each with K=V changes (roll_deg, grade_deg, up_mps_per_deg, down_mps_per_deg, rough_mps, rough_m); "
-        "not given: it drives relief as if it were flat (docs/cli.md, Relief)",
+        "none, or not given: it drives relief as if it were flat (docs/cli.md, Relief)",
     )
     p.add_argument("--seed", type=int, default=0, help="seeds the driver's hand and the pushes (default 0)")
     p.add_argument("--out", required=True, type=Path, help="recording directory to create")

@@ -215,8 +215,8 @@ def evaluate_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--relief-style",
         metavar="NAME[,K=V,...]",
-        help="the comparison driver's relief style, as record takes it (default: that of the synthetic driver the model was "
-        "trained from; none: it drives relief as if it were flat)",
+        help="the comparison driver's relief style, as record takes it, or none: relief driven as if it were flat (default: that "
+        "of the synthetic driver the model was trained from, none where it had none)",
     )
     add_engine_args(p)
     p.add_argument("--mcap", action="store_true", help="also write each planner run as ROS 2 MCAP in OUT/runs (Foxglove, RViz)")

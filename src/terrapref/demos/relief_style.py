@@ -30,6 +30,7 @@ from terrapref.records import to_plain
 from terrapref.registry import Registry
 from terrapref.world.height_compiled import height_at, plane_fit
 
+NO_RELIEF_STYLE = "none"  # --relief-style none: a driver that drives relief as if it were flat
 ROUGH_RADIUS_M = 0.3  # the disc a point's roughness is read over [m]: as the planner's height layer reads it
 
 
@@ -94,15 +95,18 @@ RELIEF_STYLES.register(
 )
 
 
-def parse_relief_style(text: str, source: str = "--relief-style") -> tuple[str, ReliefStyle]:
+def parse_relief_style(text: str, source: str = "--relief-style") -> tuple[str, ReliefStyle | None]:
     """``NAME``, ``NAME,k=v,...`` or ``k=v,...`` (over the default) as the style's name and the
-    style; an unknown name or field, a bad value or one out of range is a UserError."""
+    style, or ``none`` (a driver that drives relief as if it were flat: None); an unknown name or
+    field, a bad value or one out of range is a UserError."""
+    if text.strip() == NO_RELIEF_STYLE:
+        return NO_RELIEF_STYLE, None
     parts = [p.strip() for p in text.split(",")]
     name = "default"
     if parts and "=" not in parts[0]:
         name = parts.pop(0)
         if name not in RELIEF_STYLES.names():
-            raise UserError(source, f"{name!r} is not a relief style ({', '.join(RELIEF_STYLES.names())})")
+            raise UserError(source, f"{name!r} is not a relief style ({', '.join(RELIEF_STYLES.names())}, or {NO_RELIEF_STYLE})")
     changes: dict[str, float] = dict(RELIEF_STYLES[name])
     known = [f.name for f in fields(ReliefStyle)]
     given: set[str] = set()

@@ -211,6 +211,7 @@ def _metrics(
         "seeds": ev.seeds,
         "driver_style": ev.style,
         "driver_speeds": {name: v for name, v in ev.speeds},
+        **({"driver_relief": ev.relief.to_dict()} if ev.relief is not None else {}),  # its relief style, where it has one
         "perception": ev.perceived.to_dict(),
         "unidentified_pairs": [f"{p.first} vs {p.second}" for p in evidence.identified.unidentified()] if evidence is not None else None,
         "scenarios": {name: _course_runs(results, name, evidence) for name in ev.scenarios},

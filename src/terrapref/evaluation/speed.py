@@ -219,8 +219,11 @@ def run_fields(metrics: RunMetrics, driver: RunMetrics, lateral_limit_mps2: floa
         "max_lateral_accel_mps2": metrics.max_lateral_accel_mps2,
         "driver_max_lateral_accel_mps2": driver.max_lateral_accel_mps2,
         "driver_lateral_limit_mps2": lateral_limit_mps2,
-        "speed_by_grade_mps": metrics.speed_by_grade_mps,
-        "driver_speed_by_grade_mps": driver.speed_by_grade_mps,
+        **(
+            {"speed_by_grade_mps": metrics.speed_by_grade_mps, "driver_speed_by_grade_mps": driver.speed_by_grade_mps}
+            if metrics.speed_by_grade_mps is not None and driver.speed_by_grade_mps is not None
+            else {}
+        ),  # on relief: the speed by grade band of both runs
     }
 
 
