@@ -225,8 +225,7 @@ class PlannerNodeCore:
             if self.depth is None or self.runtime is None:
                 return None
             t = stamp_s(msg.header)
-            if now_s is not None and now_s > 0 and t > now_s + self.ahead_s:
-                self.skipped["depth images ahead of the clock"] += 1
+            if self._ahead(t, now_s, "depth images"):
                 raise ValueError(
                     f"{topic}: a depth image stamped more than {self.ahead_s:g} s ahead of the node's clock; refused "
                     "(another clock, or use_sim_time unset while a log plays?)"
@@ -266,8 +265,7 @@ class PlannerNodeCore:
         with self._lock:
             p = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
             t = stamp_s(msg.header)
-            if now_s is not None and now_s > 0 and t > now_s + self.ahead_s:
-                self.skipped["odometry ahead of the clock"] += 1
+            if self._ahead(t, now_s, "odometry"):
                 raise ValueError(
                     f"odometry stamped more than {self.ahead_s:g} s ahead of the node's clock (another clock, or "
                     "use_sim_time unset while a log plays?)"
@@ -321,6 +319,14 @@ class PlannerNodeCore:
         x, y, _, z, pitch, roll = (a + f * (b - a) for a, b in zip(before[1:], after[1:]))
         return x, y, before[3] + f * wrap_angle(after[3] - before[3]), z, pitch, roll
 
+    def _ahead(self, t: float, now_s: float | None, inputs: str) -> bool:
+        """Whether a stamp ``t`` [s] lies more than ``ahead_s`` past the node's clock ``now_s`` (None or
+        0: not running yet), counted as one of the ``inputs`` ahead of the clock if it does."""
+        if now_s is not None and now_s > 0 and t > now_s + self.ahead_s:
+            self.skipped[f"{inputs} ahead of the clock"] += 1
+            return True
+        return False
+
     def pose_at(self, t: float) -> Pose | None:
         """The odometry interpolated to ``t`` [s]; None outside what is kept or across a gap."""
         at = self._odometry_at(t)
@@ -358,8 +364,7 @@ class PlannerNodeCore:
                 self.skipped["before the calibration or the path"] += 1
                 return None
             t = stamp_s(msg.header)
-            if now_s is not None and now_s > 0 and t > now_s + self.ahead_s:
-                self.skipped["images ahead of the clock"] += 1
+            if self._ahead(t, now_s, "images"):
                 raise ValueError(
                     f"an image stamped {t - now_s:.3g} s ahead of the node's clock; refused (another clock, or use_sim_time unset while a log plays?)"
                 )
