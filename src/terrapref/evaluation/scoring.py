@@ -53,7 +53,7 @@ def segments(xy: np.ndarray, max_step_m: float = 0.05) -> tuple[np.ndarray, np.n
         return np.zeros((0, 2)), np.zeros(0)
     d = np.diff(xy, axis=0)
     length = np.linalg.norm(d, axis=1)
-    parts = np.maximum(1, np.ceil(length / max_step_m).astype(int))
+    parts = _parts(length, max_step_m)
     seg = np.repeat(np.arange(len(d)), parts)
     # Fraction along each segment of every piece's midpoint.
     first = np.concatenate([[0], np.cumsum(parts)[:-1]])
@@ -69,8 +69,13 @@ def piece_times(xy: np.ndarray, dt_s: float, max_step_m: float = 0.05) -> np.nda
     xy = np.asarray(xy, dtype=float)
     if len(xy) < 2:
         return np.zeros(0)
-    parts = np.maximum(1, np.ceil(np.linalg.norm(np.diff(xy, axis=0), axis=1) / max_step_m).astype(int))
+    parts = _parts(np.linalg.norm(np.diff(xy, axis=0), axis=1), max_step_m)
     return np.repeat(dt_s / parts, parts)
+
+
+def _parts(length: np.ndarray, max_step_m: float) -> np.ndarray:
+    """How many pieces of at most ``max_step_m`` each step of ``length`` [m] is cut into (at least one)."""
+    return np.maximum(1, np.ceil(length / max_step_m).astype(int))
 
 
 def classes_in_zone(zone: Zone, world: WorldMap) -> list[str]:
@@ -317,7 +322,7 @@ def score_run(
         for c in classes.classes
         if (on := cls == c.id).any() and time[on].sum() > 0
     }
-    grade = grade_along(log.trace, world) if world.has_relief else None
+    grade = grade_along(log.trace, mid, world) if world.has_relief else None
     zones = _timed(score_zones(log.trace, scenario, world, profile, log.progress_m, rules), scenario, (mid, length, time, grade))
     return RunMetrics(
         completed=log.completed,
@@ -370,17 +375,15 @@ def grade_band(grade_rad: float) -> str:
     return "up" if degrees > GRADE_BAND_DEG else "down" if degrees < -GRADE_BAND_DEG else "level"
 
 
-def grade_along(trace: np.ndarray, world: WorldMap, max_step_m: float = 0.05) -> np.ndarray:
-    """The grade [rad, positive up] of each piece :func:`segments` cuts the driven path into:
-    the body's pitch there heading as it did at the piece's step (the heights under its wheels
-    half the default vehicle's wheelbase ahead and behind, as terrapref.vehicle.ground sets its
-    attitude)."""
+def grade_along(trace: np.ndarray, mid: np.ndarray, world: WorldMap, max_step_m: float = 0.05) -> np.ndarray:
+    """The grade [rad, positive up] of each piece :func:`segments` cut the driven path ``trace``
+    into (their midpoints ``mid``): the body's pitch there heading as it did at the piece's step
+    (the heights under its wheels half the default vehicle's wheelbase ahead and behind, as
+    terrapref.vehicle.ground sets its attitude)."""
     xy = np.asarray(trace[:, :2], dtype=float)
     if len(xy) < 2:
         return np.zeros(0)
-    mid, _ = segments(xy, max_step_m)
-    parts = np.maximum(1, np.ceil(np.linalg.norm(np.diff(xy, axis=0), axis=1) / max_step_m).astype(int))
-    yaw = np.repeat(trace[:-1, 2], parts)
+    yaw = np.repeat(trace[:-1, 2], _parts(np.linalg.norm(np.diff(xy, axis=0), axis=1), max_step_m))
     half = 0.5 * VehicleConfig().wheelbase_m
     ahead = np.stack([np.cos(yaw), np.sin(yaw)], axis=1) * half
     return np.arctan((world.height_at(mid + ahead) - world.height_at(mid - ahead)) / (2.0 * half))
