@@ -97,6 +97,14 @@ def test_the_costmaps_layers_hold_each_cells_speed_and_the_height_layers_geometr
     np.testing.assert_allclose(inner, np.arctan(0.2), atol=1e-4)
     assert np.nanmax(full.layers["roughness"]) < 1e-4
     assert "speed" not in with_layers(costmap, gmap, None, 2.0).layers
+    # A speed rule that sheds 0.03 m/s per degree of grade: each cell's speed less that for its
+    # slope's degrees (11.3), down to the least; lethal and never-seen ground as they were.
+    shed = with_layers(costmap, gmap, speeds, 2.0, (0.03, 0.3)).layers["speed"]
+    known = np.isfinite(full.layers["slope"]) & (full.layers["speed"] > 0)
+    expected = np.maximum(full.layers["speed"] - 0.03 * np.degrees(full.layers["slope"]), 0.3)
+    np.testing.assert_allclose(shed[known], expected[known], rtol=1e-6)
+    assert known[3:-3, 3:-3].any() and (shed[known] < full.layers["speed"][known]).all()
+    np.testing.assert_array_equal(shed[~known], full.layers["speed"][~known])
 
 
 def test_the_runtime_gives_the_costmap_of_the_ground_it_has_seen(tmp_path):

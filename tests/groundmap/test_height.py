@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import copy
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -16,6 +17,8 @@ from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.camera.render import SegmentationRenderer
 from terrapref.groundmap.height import DepthImage, GeometryLimits, Heights, HeightSettings, geometry_of_cells
 from terrapref.groundmap.map import GroundMap
+from terrapref.rules.speed.model import SpeedModel, body_grade
+from terrapref.rules.speed.rule import LearnedSpeed, SpeedConfig, SpeedRule
 from terrapref.scenario import FORMAT, parse_scenario
 from terrapref.vehicle import Pose, Vehicle, VehicleConfig
 from terrapref.world import rasterise
@@ -65,6 +68,26 @@ def test_the_height_layer_holds_the_ramps_heights_and_its_slope_is_the_grade() -
     known = step[np.isfinite(step)]
     assert len(known) >= 25 and np.median(known) == pytest.approx(0.04, abs=0.005) and (known < 0.06).all()
     assert not GeometryLimits.of(VehicleConfig()).lethal(geometry).any()
+
+
+def test_the_gradient_and_the_bodys_grade_on_the_ramp_are_its_grade_heading_along_it() -> None:
+    """The ramp rises 0.2 a metre along x: the gradient there is (0.2, 0); a body heading up it is
+    pitched atan(0.2) up, heading down it as much down, heading across it not at all; and the speed
+    rule, which sheds 0.03 m/s a degree up and 0.02 down, slows by as much there."""
+    gmap, _ = _seen_ramp()
+    ahead = np.array([[x, y] for x in np.arange(19.0, 24.0, 0.5) for y in (14.0, 15.0, 16.0)])
+    np.testing.assert_allclose(gmap.gradient_at(ahead), np.tile([0.2, 0.0], (len(ahead), 1)), atol=0.02)
+    assert np.isnan(gmap.gradient_at(np.array([[2.0, 15.0], [np.nan, 15.0]]))).all()  # never seen; not a point
+    grade = math.degrees(math.atan(0.2))
+    centre, n = np.array([[21.0, 15.0]] * 3), np.array([0.0, math.pi, math.pi / 2])
+    np.testing.assert_allclose(body_grade(gmap.gradient_at, centre, n), [grade, -grade, 0.0], atol=1.0)
+    assert np.isnan(body_grade(gmap.gradient_at, np.array([[2.0, 15.0]]), np.zeros(1))).all()
+    model = SpeedModel((1.0,) * 5, 1.5, None, None, None, (0,), up_mps_per_deg=0.03, down_mps_per_deg=0.02)
+    runner = LearnedSpeed(SpeedRule(SpeedConfig(), model))
+    assert runner.speed(gmap, (21.0, 15.0, 0.0), 0.0, 1.0) == pytest.approx(1.0 - 0.03 * grade, abs=0.03)
+    assert runner.speed(gmap, (23.0, 15.0, math.pi), 0.0, 1.0) == pytest.approx(1.0 - 0.02 * grade, abs=0.02)
+    flat = LearnedSpeed(SpeedRule(SpeedConfig(), replace(model, up_mps_per_deg=None, down_mps_per_deg=None)))
+    assert flat.speed(gmap, (21.0, 15.0, 0.0), 0.0, 1.0) == 1.0
 
 
 def _trusted(elevation: np.ndarray) -> Heights:

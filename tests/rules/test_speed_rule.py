@@ -33,7 +33,7 @@ from terrapref.planner import Planner
 from terrapref.rules import ArgmaxRule, HeaderContext, OffsetConfig, OffsetRule, RuleContext, chosen_rule, driving_rule, speed_rule
 from terrapref.rules.base import SPEED, STEERING, Where
 from terrapref.rules.offset.fit import OffsetUtility
-from terrapref.rules.speed.model import MIN_SPEED_MPS, STATIONS, SpeedModel, across, fit_speed
+from terrapref.rules.speed.model import MIN_SPEED_MPS, STATIONS, Drive, SpeedFit, SpeedModel, across, fit_speed
 from terrapref.rules.speed.rule import LearnedSpeed, SpeedConfig, SpeedRule
 from terrapref.scenario import AVOID, Scenario, parse_scenario
 from terrapref.scenario.path import ReferencePath
@@ -142,6 +142,34 @@ def test_near_lethal_terrain_slows_within_its_ring_and_the_preview(ring_m: float
     assert _predict(near, _way((station, point, WATER))) == (0.5 if point < 5 else 1.6)  # no lethal terrain: cruising speeds alone
 
 
+GRADED = replace(MODEL, up_mps_per_deg=0.03, down_mps_per_deg=0.02)
+
+
+def _graded(*marks: tuple[int, float]) -> np.ndarray:
+    """One way's grades (1, STATIONS) [deg], level but for ``(station, grade)`` marks."""
+    grade = np.zeros((1, STATIONS))
+    for station, g in marks:
+        grade[0, station] = g
+    return grade
+
+
+def test_grades_within_the_preview_shed_speed_per_degree_up_and_down():
+    (up,) = GRADED.predict(_way(), np.zeros(1), _graded((2, 10.0)))
+    (down,) = GRADED.predict(_way(), np.zeros(1), _graded((2, -10.0)))
+    assert up == pytest.approx(1.6 - 0.3) and down == pytest.approx(1.6 - 0.2)
+    (both,) = GRADED.predict(_way(), np.zeros(1), _graded((1, 5.0), (4, -12.0)))
+    assert both == pytest.approx(1.6 - 0.24)  # the station that sheds most
+    (beyond,) = GRADED.predict(_way(), np.zeros(1), _graded((PREVIEW_STATIONS, 20.0)))
+    (unknown,) = GRADED.predict(_way(), np.zeros(1), _graded((2, math.nan)))
+    assert beyond == unknown == 1.6 == GRADED.predict(_way(), np.zeros(1))[0]  # beyond the preview, unknown or not given: level
+    (on_rock,) = GRADED.predict(_way((2, 1, ROCK)), np.zeros(1), _graded((5, 10.0)))
+    assert on_rock == 0.8  # the rock on level ground is slower than the grass on the grade (1.3)
+    assert GRADED.predict(_way((5, 1, ROCK)), np.zeros(1), _graded((5, 10.0)))[0] == pytest.approx(0.8 - 0.3)  # shed from the class's speed
+    (flat,) = MODEL.predict(_way(), np.zeros(1), _graded((2, 10.0)))
+    assert flat == 1.6 and not MODEL.sheds_on_grades  # a model from a flat drive sheds nothing
+    assert GRADED.predict(_way(), np.zeros(1), _graded((2, 60.0)))[0] == MIN_SPEED_MPS
+
+
 def test_the_speed_is_never_below_the_rules_slowest():
     assert _predict(replace(MODEL, speeds_mps=(0.05,) * 5), _way()) == MIN_SPEED_MPS
     assert _predict(replace(MODEL, lateral_accel_mps2=0.01), _way(), 10.0) == MIN_SPEED_MPS  # sqrt(0.001) ~ 0.03 m/s
@@ -194,7 +222,7 @@ def _drive(
 @pytest.mark.parametrize(("preview_m", "lag"), [(1.5, 2), (0.5, 0), (3.0, 1), (2.0, 3)])
 def test_the_fit_recovers_the_speeds_preview_and_lag_that_drove(preview_m: float, lag: int):
     track = _track()
-    fit = fit_speed(*_drive(replace(DRIVER, preview_m=preview_m), track, lag=lag), K, (LETHAL,))
+    fit = fit_speed(Drive(*_drive(replace(DRIVER, preview_m=preview_m), track, lag=lag)), K, (LETHAL,))
     assert fit is not None
     m = fit.model
     assert m.preview_m == preview_m and fit.lag_frames == lag
@@ -214,7 +242,7 @@ def test_a_class_never_shown_steady_is_driven_at_the_slowest_speed_the_drive_sho
     """A drive that shows only the background steady (1.6 m/s) and its mud too briefly, slowly: the
     mud is not driven at the background's speed, the one learned, but at the drive's slowest."""
     columns = np.concatenate([np.full(n, c, dtype=np.uint8) for c, n in ((BACKGROUND, 100), (MUD, 8), (BACKGROUND, 100))])
-    fit = fit_speed(*_drive(DRIVER, np.repeat(columns[:, None], 9, axis=1)), K, (LETHAL,))
+    fit = fit_speed(Drive(*_drive(DRIVER, np.repeat(columns[:, None], 9, axis=1))), K, (LETHAL,))
     assert fit is not None and fit.intervals[MUD] is None and fit.intervals[BACKGROUND] is not None
     speeds = fit.model.speeds_mps
     assert speeds[BACKGROUND] == pytest.approx(1.6) and speeds[MUD] == speeds[WATER] == speeds[ROCK] == pytest.approx(0.5)
@@ -237,7 +265,7 @@ def test_the_fit_reads_a_class_wherever_one_footprint_point_meets_it():
         track[station, 0] = WATER  # the footprint's left edge only
     ignores = replace(DRIVER, min_points=2)
     way, curvature, v, frame = _drive(ignores, track)
-    fit = fit_speed(way, curvature, v, frame, K, (LETHAL,))
+    fit = fit_speed(Drive(way, curvature, v, frame), K, (LETHAL,))
     assert fit is not None and fit.model.min_points == 1
     lag = fit.lag_frames
     two = np.mean(np.abs(replace(fit.model, min_points=2).predict(way, curvature)[: len(v) - lag] - v[lag:]))
@@ -248,7 +276,7 @@ def test_a_lag_pairs_frames_only_within_one_recording():
     way, curvature, v, _ = _drive(DRIVER, _track())
     half = len(v) // 2
     frame = np.concatenate([np.arange(half), np.arange(len(v) - half)])  # two recordings, each numbered from 0
-    fit = fit_speed(way, curvature, v, frame, K, (LETHAL,))
+    fit = fit_speed(Drive(way, curvature, v, frame), K, (LETHAL,))
     assert fit is not None and fit.lag_frames == 2
     assert fit.samples == len(v) - 2 * 2  # each recording's last 2 frames have no speed 2 frames later
 
@@ -257,7 +285,7 @@ def test_the_fit_recovers_a_bend_limit_the_speeds_show():
     curvature = np.zeros(len(_track()))
     curvature[BEND] = 0.5
     data = _drive(replace(DRIVER, lateral_accel_mps2=0.4), _track(), curvature)
-    fit = fit_speed(*data, K, (LETHAL,))
+    fit = fit_speed(Drive(*data), K, (LETHAL,))
     assert fit is not None
     assert fit.model.lateral_accel_mps2 == pytest.approx(0.4, rel=1e-9)
     assert fit.error_mps == pytest.approx(0.0, abs=1e-6)
@@ -271,7 +299,7 @@ def test_the_fit_recovers_a_bend_limit_the_speeds_show():
 def test_the_fit_invents_no_bend_limit_the_speeds_do_not_show():
     curvature = np.zeros(len(_track()))
     curvature[BEND] = 0.5  # as sharp a bend, driven at the cruising speed
-    fit = fit_speed(*_drive(DRIVER, _track(), curvature), K, (LETHAL,))
+    fit = fit_speed(Drive(*_drive(DRIVER, _track(), curvature)), K, (LETHAL,))
     assert fit is not None and fit.model.lateral_accel_mps2 is None
     assert fit.error_mps == pytest.approx(0.0, abs=1e-6)
 
@@ -283,7 +311,7 @@ def test_the_drives_lateral_acceleration_is_its_largest():
     curvature[70:75] = 0.05  # gentle curves on the background at 1.6 m/s: 0.128 m/s^2
     curvature[90] = -0.08  # and one frame of 0.2048 m/s^2
     _, _, v, _ = data = _drive(DRIVER, _track(), curvature)
-    fit = fit_speed(*data, K, (LETHAL,))
+    fit = fit_speed(Drive(*data), K, (LETHAL,))
     assert fit is not None
     assert fit.model.drive_lateral_mps2 == pytest.approx(1.6**2 * 0.08, rel=1e-12)
     assert fit.model.drive_lateral_mps2 > np.percentile(v**2 * np.abs(curvature), 99)
@@ -294,17 +322,53 @@ def test_the_drives_lateral_acceleration_is_its_largest():
 def test_the_fit_recovers_the_speed_near_lethal_terrain_and_its_ring(point: int, ring_m: float):
     track = _track()
     track[70:100, point] = LETHAL  # beside the long background stretch
-    fit = fit_speed(*_drive(replace(DRIVER, near_lethal_m=ring_m, near_lethal_mps=0.7), track), K, (LETHAL,))
+    fit = fit_speed(Drive(*_drive(replace(DRIVER, near_lethal_m=ring_m, near_lethal_mps=0.7), track)), K, (LETHAL,))
     assert fit is not None
     assert fit.model.near_lethal_m == ring_m and fit.model.near_lethal_mps == pytest.approx(0.7)
     assert fit.error_mps == pytest.approx(0.0, abs=1e-6)
     assert fit.model.speeds_mps[BACKGROUND] == pytest.approx(1.6)  # from the frames away from it
 
 
+def _grades(track_grades: np.ndarray) -> np.ndarray:
+    """Each frame's way's grades (L, STATIONS) [deg] of a drive whose station i has grade ``track_grades[i]``."""
+    padded = np.concatenate([track_grades, np.full(STATIONS, np.nan)])
+    return np.stack([padded[i : i + STATIONS] for i in range(len(track_grades))])
+
+
+def test_the_fit_recovers_what_grades_shed_up_and_down():
+    """The long background stretch (frames 60-110) climbs 6 deg, then descends 8 deg; the class
+    speeds are read from the level frames, what a degree sheds from the frames on one grade."""
+    track = _track()
+    track_grades = np.zeros(len(track))
+    track_grades[62:78], track_grades[90:106] = 6.0, -8.0
+    assert (track[60:110, 0] == BACKGROUND).all()
+    way, curvature, _, frame = _drive(DRIVER, track)
+    grade = _grades(track_grades)
+    target = replace(DRIVER, up_mps_per_deg=0.03, down_mps_per_deg=0.02).predict(way, curvature, grade)
+    v = np.concatenate([np.full(2, target[0]), target[:-2]])
+    fit = fit_speed(Drive(way, curvature, v, frame, grade), K, (LETHAL,))
+    assert fit is not None and fit.lag_frames == 2 and fit.error_mps == pytest.approx(0.0, abs=1e-6)
+    m = fit.model
+    assert m.up_mps_per_deg == pytest.approx(0.03) and m.down_mps_per_deg == pytest.approx(0.02)
+    np.testing.assert_allclose(m.speeds_mps[WATER : BACKGROUND + 1], [0.5, 0.8, 0.5, 1.6], atol=1e-6)
+    (up_low, up_high), (down_low, down_high) = fit.grade_intervals
+    assert up_low - 1e-9 <= 0.03 <= up_high + 1e-9 and down_low - 1e-9 <= 0.02 <= down_high + 1e-9
+    assert all(n >= 10 for n in fit.grade_frames)
+    # A driver who kept its speed on the same grades: nothing learned, the model a flat drive gives.
+    kept = fit_speed(Drive(*_drive(DRIVER, track), grade), K, (LETHAL,))
+    flat = fit_speed(Drive(*_drive(DRIVER, track)), K, (LETHAL,))
+    assert kept is not None and flat is not None and not kept.model.sheds_on_grades and kept.model == flat.model
+    assert kept.grade_intervals == (None, None) and kept.on_grades and kept.grade_frames[0] >= 10
+    line = next(
+        x for x in SpeedRule(SpeedConfig(), kept.model, kept).lines(FEATURES.feature_classes, frozenset()) if x.startswith("grades")
+    )
+    assert line.startswith(f"grades: nothing learned up ({kept.grade_frames[0]} frames on one class past 3 deg up: slowing there explains")
+
+
 def test_the_fit_finds_nothing_without_a_steady_frame():
-    assert fit_speed(*_drive(DRIVER, _track()[:9], lag=0), K, (LETHAL,)) is None  # fewer than 10 frames
+    assert fit_speed(Drive(*_drive(DRIVER, _track()[:9], lag=0)), K, (LETHAL,)) is None  # fewer than 10 frames
     way, curvature, v, frame = _drive(DRIVER, _track())
-    assert fit_speed(way, np.full(len(v), 0.5), v, frame, K, (LETHAL,)) is None  # every frame in a bend
+    assert fit_speed(Drive(way, np.full(len(v), 0.5), v, frame), K, (LETHAL,)) is None  # every frame in a bend
 
 
 # --- 3. the file block -----------------------------------------------------------------------------------
@@ -354,6 +418,20 @@ def test_a_bad_block_is_a_user_error_naming_the_field(field: str, value):
     assert [p.field for p in raised.value.problems] == [f"rules[0].{field}"]
 
 
+def test_a_block_with_what_grades_shed_reads_back_and_a_flat_drives_block_holds_none():
+    fit = SpeedFit(GRADED, (None,) * (K + 1), 2, 100, 0.01, ((0.025, 0.035), None), (40, 0), True)
+    rule = SpeedRule(SpeedConfig(), GRADED, fit)
+    back = _read(json.loads(json.dumps(rule.header())))
+    assert back.model == GRADED and back.fit is not None
+    assert back.fit.grade_intervals == ((0.025, 0.035), None) and back.fit.grade_frames == (40, 0)
+    line = next(x for x in back.lines(FEATURES.feature_classes, frozenset({"non_traversable"})) if x.startswith("grades"))
+    assert line.startswith("grades: 0.030 m/s per deg up (95% CI 0.025-0.035, 40 frames); 0.020 m/s per deg down")
+    assert "up_mps_per_deg" not in SpeedRule(SpeedConfig(), MODEL).header()  # a flat drive's file is as before
+    with pytest.raises(UserError) as raised:
+        _read(_block(up_mps_per_deg=-0.01))
+    assert [p.field for p in raised.value.problems] == ["rules[0].up_mps_per_deg"]
+
+
 def test_an_older_block_without_min_points_or_the_drives_lateral_reads_with_their_defaults():
     block = _block()
     del block["min_points"], block["drive_lateral_mps2"]
@@ -370,6 +448,7 @@ def test_the_ways_class_ids_survive_a_dataset_file_and_wider_integers_are_refuse
         "curvature": np.zeros(n, np.float32),
         "v_mps": np.ones(n, np.float32),
         "frame": np.arange(n, dtype=np.float32),
+        "grade": np.full((n, STATIONS), np.nan, np.float32),
     }
     rules = {"speed": {"config": SpeedConfig().data(), "arrays": dict(SpeedConfig.arrays)}}
     meta = {"format": DATASET_FORMAT, **model_meta(), "rules": rules}

@@ -121,13 +121,18 @@ def costmap_of(
 GEOMETRY_LAYERS = ("elevation", "slope", "roughness", "step")
 
 
-def with_layers(costmap: Costmap, ground_map: GroundMap, speeds_mps: np.ndarray | None, top_mps: float) -> Costmap:
+def with_layers(
+    costmap: Costmap, ground_map: GroundMap, speeds_mps: np.ndarray | None, top_mps: float, shed: tuple[float, float] = (0.0, 0.0)
+) -> Costmap:
     """``costmap`` (of ``ground_map``'s cells) with its other layers over the same cells: the
     ``speed`` [m/s] a speed rule drives each cell's column at (``speeds_mps``, (K + 2,): the K
     terrain columns, the background, NaN for ground never seen; 0 on lethal ground; None: no
     speed rule, no layer) up to the robot's ``top_mps``, and the height layer's ``elevation`` with the ``slope``, ``roughness``
     and ``step`` read from it as the map's height settings say (terrapref.groundmap.height), NaN
-    where unknown."""
+    where unknown. ``shed``: the speed a speed rule sheds per degree of grade [m/s per deg], the
+    more of up and down, and the least it slows to [m/s]; a cell's speed is then its column's
+    less that for each degree of its slope (a limit whichever way the cell is crossed, as a speed
+    filter reads its mask), down to the least."""
     h, w = costmap.cost.shape
     layers: dict[str, np.ndarray] = {}
     if ground_map.origin is None:
@@ -147,6 +152,11 @@ def with_layers(costmap: Costmap, ground_map: GroundMap, speeds_mps: np.ndarray 
         geometry = np.full((h, w, 3), np.nan)
     for i, name in enumerate(GEOMETRY_LAYERS[1:]):
         layers[name] = geometry[..., i].astype(np.float32)
+    per_deg, least_mps = shed
+    if speeds_mps is not None and per_deg > 0.0:
+        speed, slope = layers["speed"], np.degrees(geometry[..., 0])
+        slowed = np.isfinite(slope) & (speed > 0)  # never-seen (NaN) and lethal (0) ground as they are
+        layers["speed"] = np.where(slowed, np.maximum(speed - per_deg * np.where(slowed, slope, 0.0), least_mps), speed).astype(np.float32)
     return replace(costmap, layers=layers, top_speed_mps=top_mps if speeds_mps is not None else None)
 
 

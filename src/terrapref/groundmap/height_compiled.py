@@ -333,7 +333,7 @@ def shape_geometry(
     and its eight neighbours, their heights relative to it summed from the differences between
     them (a corner by either way round, averaged where both are known); NaN where fewer than two
     of the nine are known."""
-    dx, dx_run, dxw, dy, dy_run, dyw = shape
+    dx, _, dxw, dy, _, dyw = shape
     n = dx.shape[0]
     h = np.empty((3, 3))
     for i in range(rows.shape[0]):
@@ -341,20 +341,46 @@ def shape_geometry(
         out[i, 0] = out[i, 1] = out[i, 2] = np.nan
         if not (1 <= r0 < n - 1 and 1 <= c0 < n - 1):
             continue
-        rise_x = run_x = rise_y = run_y = 0.0
-        mx = my = 0
-        for dr in range(max(-reach, -r0), min(reach, n - 1 - r0) + 1):
-            span = int(math.sqrt(reach * reach - dr * dr) + 1e-9)
-            r = r0 + dr
-            for dc in range(max(-span, -c0), min(span, n - 1 - c0) + 1):
-                c = c0 + dc
-                if dxw[r, c] >= least_weight:
-                    rise_x, run_x, mx = rise_x + dx[r, c], run_x + dx_run[r, c], mx + 1
-                if dyw[r, c] >= least_weight:
-                    rise_y, run_y, my = rise_y + dy[r, c], run_y + dy_run[r, c], my + 1
-        if mx >= 3 and my >= 3 and run_x > 0.0 and run_y > 0.0:
-            out[i, 0] = math.atan(math.hypot(rise_x / run_x, rise_y / run_y))
+        gx, gy = _disc_gradient(shape, least_weight, r0, c0, reach)
+        out[i, 0] = math.atan(math.hypot(gx, gy))
         out[i, 2] = _step(dx, dxw, dy, dyw, least_weight, r0, c0, h)
+
+
+@njit(cache=True, nogil=True)
+def shape_gradient(
+    shape: tuple[np.ndarray, ...], least_weight: float, rows: np.ndarray, cols: np.ndarray, reach: int, out: np.ndarray
+) -> None:
+    """The ground's gradient (rise per metre along x, along y) of the cells (``rows``, ``cols``)
+    into ``out`` (N, 2), as :func:`shape_geometry` reads its slope from it; NaN where unknown."""
+    n = shape[0].shape[0]
+    for i in range(rows.shape[0]):
+        r0, c0 = rows[i], cols[i]
+        out[i, 0] = out[i, 1] = np.nan
+        if 1 <= r0 < n - 1 and 1 <= c0 < n - 1:
+            out[i, 0], out[i, 1] = _disc_gradient(shape, least_weight, r0, c0, reach)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _disc_gradient(shape: tuple[np.ndarray, ...], least_weight: float, r0: int, c0: int, reach: int) -> tuple[float, float]:
+    """The gradient over the cells within ``reach`` cells (a disc) of cell (``r0``, ``c0``): along
+    x the rise of their known differences along x over their run, along y likewise; NaN where
+    fewer than three are known along either (:func:`shape_geometry`)."""
+    dx, dx_run, dxw, dy, dy_run, dyw = shape
+    n = dx.shape[0]
+    rise_x = run_x = rise_y = run_y = 0.0
+    mx = my = 0
+    for dr in range(max(-reach, -r0), min(reach, n - 1 - r0) + 1):
+        span = int(math.sqrt(reach * reach - dr * dr) + 1e-9)
+        r = r0 + dr
+        for dc in range(max(-span, -c0), min(span, n - 1 - c0) + 1):
+            c = c0 + dc
+            if dxw[r, c] >= least_weight:
+                rise_x, run_x, mx = rise_x + dx[r, c], run_x + dx_run[r, c], mx + 1
+            if dyw[r, c] >= least_weight:
+                rise_y, run_y, my = rise_y + dy[r, c], run_y + dy_run[r, c], my + 1
+    if mx >= 3 and my >= 3 and run_x > 0.0 and run_y > 0.0:
+        return rise_x / run_x, rise_y / run_y
+    return np.nan, np.nan
 
 
 @njit(cache=True, nogil=True, inline="always")

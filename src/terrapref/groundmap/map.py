@@ -180,17 +180,31 @@ class GroundMap:
     def geometry_at(self, points: np.ndarray) -> np.ndarray:
         """Slope [rad], roughness [m] and step [m] (..., 3) of the cells under the world points
         (..., 2), from the height layer (terrapref.groundmap.height); NaN where unknown or off the map."""
-        flat = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         if self.origin is None:
             return np.full((*np.shape(points)[:-1], 3), np.nan)
+        out = self.geometry_of(*self._cells_under(points))
+        return out.reshape(*np.shape(points)[:-1], 3)
+
+    def gradient_at(self, points: np.ndarray) -> np.ndarray:
+        """The ground's gradient (rise per metre along x, along y) (..., 2) under the world points
+        (..., 2), from its shape as the slope is read (:meth:`geometry_of`); NaN where unknown or off the map."""
+        if self.origin is None:
+            return np.full(np.shape(points), np.nan)
+        rows, cols = self._cells_under(points)
+        out = np.empty((len(rows), 2))
+        h = self.height_settings
+        height_kernels.shape_gradient(self._shape, 1.0 / h.max_error_m**2, rows, cols, disc_reach(h, self.settings.map_resolution_m), out)
+        return out.reshape(np.shape(points))
+
+    def _cells_under(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The rows and columns (N,) of the cells under the world points (..., 2); -1 for a point not a number."""
+        flat = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         res = self.settings.map_resolution_m
         with np.errstate(invalid="ignore"):
             cols = np.floor((flat[:, 0] - self._origin_xy[0]) / res)
             rows = np.floor((flat[:, 1] - self._origin_xy[1]) / res)
         inside = np.isfinite(cols) & np.isfinite(rows)
-        cols, rows = np.where(inside, cols, -1).astype(np.int64), np.where(inside, rows, -1).astype(np.int64)
-        out = self.geometry_of(rows, cols)
-        return out.reshape(*np.shape(points)[:-1], 3)
+        return np.where(inside, rows, -1).astype(np.int64), np.where(inside, cols, -1).astype(np.int64)
 
     def geometry_of(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """Slope [rad], roughness [m] and step [m] (N, 3) of the cells (``rows``, ``cols``): the

@@ -29,7 +29,7 @@ from terrapref.scenario import Scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.sim.loop import Frame
 from terrapref.terrain import UNKNOWN
-from terrapref.vehicle import Command, Pose, VehicleConfig
+from terrapref.vehicle import MIN_CRUISE_MPS, Command, Pose, VehicleConfig
 from terrapref.vehicle.ground import LEVEL, Attitude
 
 
@@ -315,7 +315,11 @@ class Planner:
         driving rule reads no ground map (only the offset rule does)."""
         if self.ground_map is None:
             return None
-        return with_layers(self.runner.costmap(self.ground_map), self.ground_map, self._cell_speeds(), self.vehicle.max_speed_mps)
+        shed = (0.0, 0.0)
+        if self.speed is not None and self.speed.rule.model.sheds_on_grades:
+            m = self.speed.rule.model
+            shed = (max(m.up_mps_per_deg or 0.0, m.down_mps_per_deg or 0.0), MIN_CRUISE_MPS)
+        return with_layers(self.runner.costmap(self.ground_map), self.ground_map, self._cell_speeds(), self.vehicle.max_speed_mps, shed)
 
     def _cell_speeds(self) -> np.ndarray | None:
         """The speed [m/s] (K + 2,) the speed rule cruises at on each map column (the K terrain

@@ -2,19 +2,22 @@
 
 What a person's speed depends on, written as a few numbers that one drive can pin down: a
 cruising speed per terrain column (the background included), taken as the slowest of the columns
-the footprint meets on its way over the next ``preview_m``; no more than ``lateral_accel_mps2``
-allows in a bend of the way's curvature; and no more than ``near_lethal_mps`` while lethal terrain
-lies within ``near_lethal_m`` beside the footprint on that way.
+the footprint meets on its way over the next ``preview_m``; on relief, less ``up_mps_per_deg`` for
+each degree of grade up at each station of that way (``down_mps_per_deg`` down); no more than
+``lateral_accel_mps2`` allows in a bend of the way's curvature; and no more than
+``near_lethal_mps`` while lethal terrain lies within ``near_lethal_m`` beside the footprint on that way.
 
 A frame's way is read as terrain columns at stations ``STATION_STEP_M`` apart (the first under
 the vehicle) and at the footprint's points across (:data:`ACROSS`: the footprint's 5, then the
-lethal rings' 4). The fit reads the way the driver drove; the planner reads the way it chose.
+lethal rings' 4), and the grade of the way at each station [deg, positive up, NaN where the
+ground map does not know it]. The fit reads the way the driver drove; the planner reads the way it chose.
 """
 
 from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
@@ -32,6 +35,31 @@ BEND_CURVATURE = 0.1  # a way of more curvature may be slowed by the bend [1/m]
 MIN_FRAMES = 10  # frames a cruising speed, a bend or a lethal neighbour needs to be fitted
 MIN_SPEED_MPS = MIN_CRUISE_MPS  # the slowest the rule commands while it drives [m/s]
 SLOWEST_PERCENTILE = 5  # the slowest speed a drive showed: this percentile of its speeds while moving (not a moment's)
+LEVEL_DEG = 3.0  # a way whose grade stays within this of level shows its class's cruising speed; steeper, what a grade sheds [deg]
+
+
+# The body's pitch at a station: the ground's gradient along the heading, averaged over a chord of
+# the field UGV's wheelbase centred there (trapezoid weights): the rise from its rear axle to its
+# front one, as a rigid body feels a grade, rather than the gradient of the ground under one point
+# (over a mound's flank the two differ by a fifth).
+CHORD_M = np.array([-0.5, -0.25, 0.0, 0.25, 0.5])
+CHORD_WEIGHTS = np.array([0.5, 1.0, 1.0, 1.0, 0.5]) / 4.0
+
+
+def body_grade(gradient_at: Callable[[np.ndarray], np.ndarray], centre: np.ndarray, heading: np.ndarray) -> np.ndarray:
+    """The grade [deg, positive up] (S,) the body would be pitched at, centred at the points
+    ``centre`` (S, 2) heading ``heading`` (S,) [rad], from ``gradient_at`` (world points (..., 2)
+    to the ground's gradient there (..., 2), NaN where unknown); NaN where the gradient is known
+    under less than half the chord's weight."""
+    tangent = np.stack([np.cos(heading), np.sin(heading)], axis=-1)
+    points = centre[:, None, :] + CHORD_M[None, :, None] * tangent[:, None, :]
+    g = gradient_at(points)
+    rise = g[..., 0] * tangent[:, None, 0] + g[..., 1] * tangent[:, None, 1]
+    known = np.isfinite(rise)
+    weight = np.where(known, CHORD_WEIGHTS[None, :], 0.0).sum(axis=1)
+    total = np.where(known, rise, 0.0) @ CHORD_WEIGHTS
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(weight >= 0.5, np.degrees(np.arctan(total / weight)), np.nan)
 
 
 def across(half_width_m: float) -> np.ndarray:
@@ -57,6 +85,9 @@ class SpeedModel:
             for more, for a map whose patch edges are too ragged to trust one point.
         drive_lateral_mps2: the largest lateral acceleration the drive showed, which the
             planner never asks for more than, bend limit or none [m/s^2].
+        up_mps_per_deg: the speed shed per degree of grade up [m/s per deg]; None: not learned
+            (a drive on flat ground) ...
+        down_mps_per_deg: ... and down.
     """
 
     speeds_mps: tuple[float, ...]
@@ -67,15 +98,26 @@ class SpeedModel:
     lethal: tuple[int, ...]
     min_points: int = 1
     drive_lateral_mps2: float | None = None
+    up_mps_per_deg: float | None = None
+    down_mps_per_deg: float | None = None
 
-    def predict(self, way: np.ndarray, curvature: np.ndarray) -> np.ndarray:
-        """The speed [m/s] (N,) for ways (N, STATIONS, 9) of terrain columns and their curvatures (N,) [1/m]."""
+    @property
+    def sheds_on_grades(self) -> bool:
+        """Whether the model slows on grades (a drive on relief showed it)."""
+        return self.up_mps_per_deg is not None or self.down_mps_per_deg is not None
+
+    def predict(self, way: np.ndarray, curvature: np.ndarray, grade: np.ndarray | None = None) -> np.ndarray:
+        """The speed [m/s] (N,) for ways (N, STATIONS, 9) of terrain columns, their curvatures (N,)
+        [1/m] and their grades (N, STATIONS) [deg, positive up; NaN: unknown, taken as level;
+        None: all unknown]."""
         upto = _stations(self.preview_m)
         foot = way[:, :upto, :5]
         at = self._speeds[foot]
         if self.min_points > 1:  # the points whose column too few of their station's points share
             shared = (foot[..., :, None] == foot[..., None, :]).sum(axis=-1)
             at = np.where(shared >= self.min_points, at, np.nan)
+        if grade is not None and self.sheds_on_grades:
+            at = at - self.shed(grade[:, :upto])[:, :, None]
         v = np.nanmin(at.reshape(len(way), -1), axis=1, initial=np.inf)
         v = np.where(np.isfinite(v), v, float(np.nanmin(self.speeds_mps)))  # nothing seen: the slowest cruising speed
         if self.lateral_accel_mps2 is not None:
@@ -85,6 +127,11 @@ class SpeedModel:
         if self.near_lethal_m is not None and self.near_lethal_mps is not None:
             v = np.where(_near(way, upto, self._is_lethal, self.near_lethal_m), np.minimum(v, self.near_lethal_mps), v)
         return np.maximum(v, MIN_SPEED_MPS)
+
+    def shed(self, grade: np.ndarray) -> np.ndarray:
+        """The speed [m/s] shed on grades ``grade`` [deg, positive up; NaN: level], of the same shape."""
+        g = np.nan_to_num(np.asarray(grade, dtype=np.float64))
+        return (self.up_mps_per_deg or 0.0) * np.maximum(g, 0.0) + (self.down_mps_per_deg or 0.0) * np.maximum(-g, 0.0)
 
     @property
     def lateral_limit_mps2(self) -> float | None:
@@ -127,37 +174,69 @@ def _near(way: np.ndarray, upto: int, is_lethal: np.ndarray, ring_m: float) -> n
 @dataclass(frozen=True)
 class SpeedFit:
     """How the fit went: the model, each column's cruising speed's 95% interval (None: never
-    shown at a steady speed), the lag chosen, frames fitted and the mean absolute error on them."""
+    shown at a steady speed), the lag chosen, frames fitted and the mean absolute error on them;
+    and, for a drive on relief (``on_grades``), the 95% intervals of what grades shed, up and down
+    (None: not learned), and the frames on one grade each was read from (or would have been)."""
 
     model: SpeedModel
     intervals: tuple[tuple[float, float] | None, ...]
     lag_frames: int
     samples: int
     error_mps: float
+    grade_intervals: tuple[tuple[float, float] | None, tuple[float, float] | None] = (None, None)
+    grade_frames: tuple[int, int] = (0, 0)
+    on_grades: bool = False
 
 
-def fit_speed(
-    way: np.ndarray, curvature: np.ndarray, v_mps: np.ndarray, frame: np.ndarray, k: int, lethal: tuple[int, ...]
-) -> SpeedFit | None:
-    """The speed model that best explains the speeds commanded (``v_mps``, N) from the ways driven
-    (N, STATIONS, 9), their curvatures (N, NaN where the vehicle stood) and the frames' numbers
-    in their recordings (N; a lag pairs frames only within one recording); None without a frame
-    at a steady speed on any column.
+class _Grades(NamedTuple):
+    """What grades shed, as :func:`_fit_grades` found it: per degree up and down (None: not
+    learned), their intervals and the frames each was read from."""
+
+    up: float | None = None
+    down: float | None = None
+    intervals: tuple[tuple[float, float] | None, tuple[float, float] | None] = (None, None)
+    frames: tuple[int, int] = (0, 0)
+
+
+class Drive(NamedTuple):
+    """The frames of a drive as the fit reads them (terrapref.rules.speed.rule.SpeedReader's arrays):
+    the ways driven (N, STATIONS, 9), their curvatures (N, NaN where the vehicle stood), the speeds
+    commanded (N) [m/s], the frames' numbers in their recordings (N; a lag pairs frames only within
+    one recording) and the ways' grades (N, STATIONS) [deg, positive up, NaN where unknown; None: a
+    drive on flat ground]."""
+
+    way: np.ndarray
+    curvature: np.ndarray
+    v_mps: np.ndarray
+    frame: np.ndarray
+    grade: np.ndarray | None = None
+
+
+def fit_speed(drive: Drive, k: int, lethal: tuple[int, ...]) -> SpeedFit | None:
+    """The speed model that best explains the speeds a ``drive`` commanded, with K terrain columns
+    ``k`` of which ``lethal`` are lethal; None without a frame at a steady speed on any column.
 
     For each preview and lag: a column's cruising speed is the median speed of the frames whose
-    way within the preview is that column alone and nearly straight, with no lethal terrain near
-    (where the drive shows too few such frames, beside lethal terrain too); the
+    way within the preview is that column alone, level (within :data:`LEVEL_DEG`) and nearly
+    straight, with no lethal terrain near (where the drive shows too few such frames, not level
+    too, then beside lethal terrain too); the
     bend's limit the median ``v^2 * curvature`` of the frames slower than their terrain allows in
     bends; the lethal neighbour's speed the median of the frames slower than both near lethal
     terrain (the ring that explains them best). The preview and lag that explain all frames best
     (mean absolute error) are kept. A class the drive never showed at a steady speed is driven at
     the slowest speed the drive showed: the slowest cruising speed learned, or the
-    :data:`SLOWEST_PERCENTILE` th percentile of its speeds while moving where that is slower. A
+    :data:`SLOWEST_PERCENTILE` th percentile of its speeds while moving where that is slower.
+    What a degree of grade up sheds is the median, over the frames whose way is one column alone
+    and nearly straight, climbing past :data:`LEVEL_DEG` and nowhere going down past it, of the
+    speed they fall short of that column's cruising speed by per degree of their steepest grade
+    up (down likewise); each is kept where it explains the frames better than none. A
     class counts where it meets any one of the footprint's points (``min_points`` 1), as the
     driver reads its footprint: a model that asked for two passed at full speed the patches its
     driver brushes, on clean frames and under label errors alike, even where two points explained
     its drive better.
     """
+
+    way, curvature, v_mps, frame, grade = drive
 
     def fitted(lag: int, preview: float) -> SpeedFit | None:
         later = _shifted(v_mps, frame, lag)
@@ -165,11 +244,13 @@ def fit_speed(
         if np.count_nonzero(ok) < MIN_FRAMES:
             return None
         w, c, v = way[ok], curvature[ok], later[ok]
-        found = _fit_at(_Frames(w, c, v, k, lethal), preview)
+        g = None if grade is None else grade[ok]
+        found = _fit_at(_Frames(w, c, v, k, lethal, g), preview)
         if found is None:
             return None
-        model, intervals = found
-        return SpeedFit(model, intervals, lag, int(len(v)), float(np.mean(np.abs(model.predict(w, c) - v))))
+        model, intervals, grades = found
+        error = float(np.mean(np.abs(model.predict(w, c, g) - v)))
+        return SpeedFit(model, intervals, lag, int(len(v)), error, grades.intervals, grades.frames, g is not None)
 
     best: SpeedFit | None = None
     for lag in LAGS:
@@ -195,17 +276,19 @@ def _shifted(v: np.ndarray, frame: np.ndarray, lag: int) -> np.ndarray:
 
 
 class _Frames(NamedTuple):
-    """The frames one fit reads: ways, curvatures, speeds (lagged), the terrain columns K and the lethal ones."""
+    """The frames one fit reads: ways, curvatures, speeds (lagged), the terrain columns K, the
+    lethal ones, and the ways' grades (None: flat ground)."""
 
     way: np.ndarray
     curvature: np.ndarray
     v: np.ndarray
     k: int
     lethal: tuple[int, ...]
+    grade: np.ndarray | None = None
 
 
-def _fit_at(frames: _Frames, preview_m: float) -> tuple[SpeedModel, tuple[tuple[float, float] | None, ...]] | None:
-    way, curvature, v, k, lethal = frames
+def _fit_at(frames: _Frames, preview_m: float) -> tuple[SpeedModel, tuple[tuple[float, float] | None, ...], _Grades] | None:
+    way, curvature, v, k, lethal, grade = frames
     upto = _stations(preview_m)
     foot = way[:, :upto, :5].reshape(len(way), -1)
     seen = foot <= k  # K + 1: never seen
@@ -214,18 +297,10 @@ def _fit_at(frames: _Frames, preview_m: float) -> tuple[SpeedModel, tuple[tuple[
     is_lethal = lethal_mask(lethal)
     near = _near(way, upto, is_lethal, RINGS_M[1])
     steady = alone & (np.abs(curvature) < STEADY_CURVATURE)
-    speeds: list[float] = []
-    intervals: list[tuple[float, float] | None] = []
-    for col in range(k + 1):
-        rows = np.flatnonzero(steady & (first == col) & ~near)  # away from lethal terrain where the drive shows it so
-        if len(rows) < MIN_FRAMES:  # else beside it (a lane between lethal walls)
-            rows = np.flatnonzero(steady & (first == col))
-        if col in lethal or len(rows) < MIN_FRAMES:
-            speeds.append(math.nan)
-            intervals.append(None)
-            continue
-        speeds.append(float(np.median(v[rows])))
-        intervals.append(_interval(v[rows], rows))
+    climb, descent = _steepest(grade, upto, len(way))
+    speeds, intervals = _cruising(
+        frames, steady & (first[:, None] == np.arange(k + 1)).T, near, (climb < LEVEL_DEG) & (descent < LEVEL_DEG)
+    )
     known = [s for s in speeds if not math.isnan(s)]
     if not known:
         return None
@@ -256,7 +331,64 @@ def _fit_at(frames: _Frames, preview_m: float) -> tuple[SpeedModel, tuple[tuple[
         error = float(np.mean(np.abs(trial.predict(way, curvature) - v)))
         if error < best_error - 1e-9:
             best, best_error = trial, error
-    return best, tuple(intervals)
+    grades = _Grades()
+    if grade is not None:
+        best, grades = _fit_grades(best, best_error, frames, steady & ~near, (climb, descent))
+    return best, tuple(intervals), grades
+
+
+def _cruising(frames: _Frames, on: np.ndarray, near: np.ndarray, level: np.ndarray) -> tuple[list[float], list[tuple[float, float] | None]]:
+    """Each column's cruising speed (NaN: not shown, or lethal) and its interval, from the frames
+    ``on`` it alone, steady ((K + 1, N)): level and away from lethal terrain (``near``) where the
+    drive shows enough such frames; else on grades; else beside lethal terrain too (a lane
+    between lethal walls)."""
+    speeds: list[float] = []
+    intervals: list[tuple[float, float] | None] = []
+    for col in range(frames.k + 1):
+        for where in (~near & level, ~near, level, None):
+            rows = np.flatnonzero(on[col] & (True if where is None else where))
+            if len(rows) >= MIN_FRAMES:
+                break
+        if col in frames.lethal or len(rows) < MIN_FRAMES:
+            speeds.append(math.nan)
+            intervals.append(None)
+            continue
+        speeds.append(float(np.median(frames.v[rows])))
+        intervals.append(_interval(frames.v[rows], rows))
+    return speeds, intervals
+
+
+def _steepest(grade: np.ndarray | None, upto: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The steepest grade up and down [deg, >= 0] (N,) on each way's first ``upto`` stations (0 where unknown)."""
+    if grade is None:
+        return np.zeros(n), np.zeros(n)
+    g = np.nan_to_num(grade[:, :upto].astype(np.float64))
+    return np.maximum(g.max(axis=1, initial=0.0), 0.0), np.maximum(-g.min(axis=1, initial=0.0), 0.0)
+
+
+def _fit_grades(
+    model: SpeedModel, error: float, frames: _Frames, steady: np.ndarray, steepest: tuple[np.ndarray, np.ndarray]
+) -> tuple[SpeedModel, _Grades]:
+    """``model`` with what grades shed, up and down, each kept where it explains ``frames`` better
+    than none (:func:`fit_speed`); ``steady``: the frames on one column alone, nearly straight,
+    with no lethal terrain near; ``steepest``: each way's steepest grade up and down [deg]."""
+    way, curvature, v, grade = frames.way, frames.curvature, frames.v, frames.grade
+    level_v = model.predict(way, curvature)  # what the terrain alone asks for
+    intervals: list[tuple[float, float] | None] = [None, None]
+    counts = [0, 0]
+    for i, (name, along, against) in enumerate((("up_mps_per_deg", *steepest), ("down_mps_per_deg", *steepest[::-1]))):
+        # Frames at the least speed may have been held there, short of what the grade sheds.
+        rows = np.flatnonzero(steady & (along >= LEVEL_DEG) & (against < LEVEL_DEG) & (v > MIN_SPEED_MPS + 0.05))
+        counts[i] = len(rows)
+        if len(rows) < MIN_FRAMES:
+            continue
+        per_deg = np.maximum((level_v[rows] - v[rows]) / along[rows], 0.0)
+        trial = replace(model, **{name: float(np.median(per_deg))})
+        trial_error = float(np.mean(np.abs(trial.predict(way, curvature, grade) - v)))
+        if trial_error < error - 1e-9:
+            model, error = trial, trial_error
+            intervals[i] = _interval(per_deg, rows)
+    return model, _Grades(model.up_mps_per_deg, model.down_mps_per_deg, (intervals[0], intervals[1]), (counts[0], counts[1]))
 
 
 def _interval(v: np.ndarray, rows: np.ndarray, resamples: int = 200) -> tuple[float, float]:

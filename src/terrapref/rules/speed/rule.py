@@ -10,6 +10,7 @@ driver then drove (:class:`SpeedReader`).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
@@ -38,7 +39,19 @@ from terrapref.rules.base import (
     number,
 )
 from terrapref.rules.settings import NUMBER, PER_CLASS
-from terrapref.rules.speed.model import MIN_SPEED_MPS, STATION_STEP_M, STATIONS, SpeedFit, SpeedModel, across, fit_speed
+from terrapref.rules.speed.model import (
+    LEVEL_DEG,
+    MIN_FRAMES,
+    MIN_SPEED_MPS,
+    STATION_STEP_M,
+    STATIONS,
+    Drive,
+    SpeedFit,
+    SpeedModel,
+    across,
+    body_grade,
+    fit_speed,
+)
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable
 from terrapref.vehicle import Command, Pose
@@ -63,6 +76,7 @@ SPLIT = (0.5, 0.15)
 SNAPSHOT_STEP_M = 0.2
 SNAPSHOT_X0, SNAPSHOT_Y0 = -1.0, 2.8
 SNAPSHOT_X, SNAPSHOT_Y = 40, 29
+CENTRE = 2  # the footprint point on the way's centre line (model.across)
 
 
 @dataclass(frozen=True)
@@ -75,7 +89,13 @@ class SpeedConfig(RuleConfig):
     """
 
     type: ClassVar[str] = "speed"
-    arrays: ClassVar[dict[str, str]] = {"way": "finite >= 0", "curvature": "no inf", "v_mps": "finite >= 0", "frame": "finite >= 0"}
+    arrays: ClassVar[dict[str, str]] = {
+        "way": "finite >= 0",
+        "curvature": "no inf",
+        "v_mps": "finite >= 0",
+        "frame": "finite >= 0",
+        "grade": "no inf",
+    }
     without_data: ClassVar[str] = "the model gets no speed rule and drives at the control set's speed"
 
     half_width_m: float = 0.6
@@ -89,7 +109,7 @@ class SpeedConfig(RuleConfig):
         return to_plain(self)
 
     def summary(self) -> str:
-        return "the speed rule, a cruising speed per class, in bends and near lethal terrain, learned from the drive"
+        return "the speed rule, a cruising speed per class, on grades, in bends and near lethal terrain, learned from the drive"
 
     def data(self) -> dict[str, Any]:
         return {"half_width_m": self.half_width_m}
@@ -108,7 +128,10 @@ class SpeedConfig(RuleConfig):
         table = ClassTable.from_dict(data.dataset.meta["classes"])
         lethal = (features.feature_classes.index(table.lethal_column),) if table.lethal_column in features.feature_classes else ()
         frame = arrays["frame"].astype(np.int64)
-        fitted = fit_speed(arrays["way"], arrays["curvature"], arrays["v_mps"], frame, features.n_terrain, lethal)
+        grade = arrays.get("grade")  # absent from datasets featurised before grades were read: flat
+        if grade is not None and not np.isfinite(grade).any():
+            grade = None  # a drive on flat ground
+        fitted = fit_speed(Drive(arrays["way"], arrays["curvature"], arrays["v_mps"], frame, grade), features.n_terrain, lethal)
         return None if fitted is None else SpeedRule(config, fitted.model, fitted, table.background)
 
 
@@ -118,7 +141,10 @@ class SpeedReader(FrameReader):
 
     Arrays: ``way`` (N, STATIONS, 9) uint8 terrain columns along the way driven (module
     :mod:`.model`); ``curvature`` (N,) the command's curvature w / v (NaN where v = 0) [1/m];
-    ``v_mps`` (N,) the speed commanded [m/s]; ``frame`` (N,) the frame's number in its recording."""
+    ``v_mps`` (N,) the speed commanded [m/s]; ``frame`` (N,) the frame's number in its recording;
+    ``grade`` (N, STATIONS) the grade of the way driven at each station, heading along it, as the
+    ground map's height layer then showed it [deg, positive up; NaN: unknown, all of it on flat
+    ground]."""
 
     def __init__(self, half_width_m: float, featurizer: UtilityFeaturizer, camera: PinholeCamera, classes: ClassTable, n: int) -> None:
         terrain = TerrainColumns.of(featurizer.class_columns, featurizer.config.n_terrain, classes)
@@ -129,10 +155,17 @@ class SpeedReader(FrameReader):
         ys = -SNAPSHOT_Y0 + SNAPSHOT_STEP_M * np.arange(SNAPSHOT_Y)
         self._grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1)  # (X, Y, 2) vehicle frame
         self.snapshots = np.empty((n, SNAPSHOT_X, SNAPSHOT_Y), dtype=np.uint8)
+        self.gradients: np.ndarray | None = None  # the ground's gradient there (n, X, Y, 2), from the first depth image
 
     def read(self, j: int, view: SegmentationView, pose: Pose, path: ReferencePath, progress_m: float) -> None:
-        self.map.update(view, pose, DepthImage.of(view, self.map.camera, pose))
-        self.snapshots[j] = self.map.lookup(_to_world(self._grid, pose), SPLIT)
+        depth = DepthImage.of(view, self.map.camera, pose)
+        self.map.update(view, pose, depth)
+        grid = _to_world(self._grid, pose)
+        self.snapshots[j] = self.map.lookup(grid, SPLIT)
+        if depth is not None:
+            if self.gradients is None:
+                self.gradients = np.full((len(self.snapshots), SNAPSHOT_X, SNAPSHOT_Y, 2), np.nan, dtype=np.float32)
+            self.gradients[j] = self.map.gradient_at(grid)
 
     def arrays(self, recording: Recording, keep: np.ndarray, path: ReferencePath) -> dict[str, np.ndarray]:
         poses = recording.poses[keep].astype(float)
@@ -140,6 +173,7 @@ class SpeedReader(FrameReader):
         with np.errstate(divide="ignore", invalid="ignore"):
             curvature = np.where(v > 0, w / v, np.nan)
         way = np.full((len(keep), STATIONS, len(self.across)), self.k + 1, dtype=np.uint8)
+        grade = np.full((len(keep), STATIONS), np.nan, dtype=np.float32)
         step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
         gap = np.diff(keep) != 1  # frames not next to each other (left out, or another session): the way ends there
         step[gap] = np.inf
@@ -158,25 +192,33 @@ class SpeedReader(FrameReader):
                 np.stack([x, y], axis=-1)[:, None, :]
                 + self.across[None, :, None] * np.stack([-np.sin(yaw), np.cos(yaw)], axis=-1)[:, None, :]
             )
-            way[j, reach] = self._snapshot_at(j, points, tuple(poses[j]))
+            i, k, inside = self._snapshot_cells(points, tuple(poses[j]))
+            way[j, reach] = np.where(inside, self.snapshots[j, i, k], self.k + 1)
+            if self.gradients is not None:  # the body's pitch heading along the way, on its centre line
+                grade[j, reach] = body_grade(functools.partial(self._gradient_at, j, tuple(poses[j])), points[:, CENTRE], yaw)
         return {
             "way": way,
             "curvature": curvature.astype(np.float32),
             "v_mps": v.astype(np.float32),
             "frame": keep.astype(np.float32),
+            "grade": grade,
         }
 
-    def _snapshot_at(self, j: int, points: np.ndarray, pose: tuple[float, float, float]) -> np.ndarray:
-        """Terrain column in frame ``j``'s snapshot at world ``points`` (..., 2); K + 1 outside it."""
+    def _gradient_at(self, j: int, pose: tuple[float, float, float], points: np.ndarray) -> np.ndarray:
+        """The ground's gradient in frame ``j``'s snapshot at world ``points`` (..., 2); NaN outside it."""
+        i, k, inside = self._snapshot_cells(points, pose)
+        return np.where(inside[..., None], self.gradients[j, i, k], np.nan)
+
+    def _snapshot_cells(self, points: np.ndarray, pose: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The snapshot cells (row, column) under world ``points`` (..., 2) with the vehicle at
+        ``pose``, clipped to the snapshot, and whether each point lies inside it."""
         x, y, yaw = pose
         dx, dy = points[..., 0] - x, points[..., 1] - y
         c, s = math.cos(yaw), math.sin(yaw)
         i = np.floor((dx * c + dy * s - SNAPSHOT_X0) / SNAPSHOT_STEP_M + 0.5).astype(np.int64)
         k = np.floor((-dx * s + dy * c + SNAPSHOT_Y0) / SNAPSHOT_STEP_M + 0.5).astype(np.int64)
         inside = (i >= 0) & (i < SNAPSHOT_X) & (k >= 0) & (k < SNAPSHOT_Y)
-        out = np.full(points.shape[:-1], self.k + 1, dtype=np.uint8)
-        out[inside] = self.snapshots[j, i[inside], k[inside]]
-        return out
+        return np.clip(i, 0, SNAPSHOT_X - 1), np.clip(k, 0, SNAPSHOT_Y - 1), inside
 
 
 def _to_world(points: np.ndarray, pose: Pose) -> np.ndarray:
@@ -236,6 +278,8 @@ class SpeedRule(Rule):
             "drive_lateral_mps2": m.drive_lateral_mps2,
             "background": self.background,
         }
+        if m.sheds_on_grades:  # a flat drive's model file is as it was before grades were learned
+            out |= {"up_mps_per_deg": m.up_mps_per_deg, "down_mps_per_deg": m.down_mps_per_deg}
         if self.fit is not None:
             out |= {
                 "intervals_mps": [list(i) if i is not None else None for i in self.fit.intervals],
@@ -243,6 +287,11 @@ class SpeedRule(Rule):
                 "samples": self.fit.samples,
                 "error_mps": self.fit.error_mps,
             }
+            if self.fit.on_grades:  # a drive on relief: what it showed of grades, learned or not
+                out |= {
+                    "grade_intervals": [list(i) if i is not None else None for i in self.fit.grade_intervals],
+                    "grade_frames": list(self.fit.grade_frames),
+                }
         return out
 
     @classmethod
@@ -257,6 +306,8 @@ class SpeedRule(Rule):
         optional = {}
         for name in ("lateral_accel_mps2", "near_lethal_m", "near_lethal_mps"):
             optional[name] = None if block.get(name) is None else number(block, name, where, positive=True)
+        for name in ("up_mps_per_deg", "down_mps_per_deg"):  # absent from a flat drive's file
+            optional[name] = None if block.get(name) is None else number(block, name, where, low=0.0)
         try:
             config = SpeedConfig(number(block, "half_width_m", where, 0.6), number(block, "max_speed_mps", where, 2.0))
         except ValueError as exc:
@@ -270,6 +321,8 @@ class SpeedRule(Rule):
             tuple(lethal),
             _points(block, where),
             None if block.get("drive_lateral_mps2") is None else number(block, "drive_lateral_mps2", where, positive=True),
+            optional["up_mps_per_deg"],
+            optional["down_mps_per_deg"],
         )
         fit = None
         intervals = block.get("intervals_mps")
@@ -283,6 +336,9 @@ class SpeedRule(Rule):
                 int(number(block, "lag_frames", where, 0.0, low=0.0)),
                 int(number(block, "samples", where, 0.0, low=0.0)),
                 number(block, "error_mps", where, 0.0, low=0.0),
+                _grade_intervals(block.get("grade_intervals")),
+                _grade_frames(block.get("grade_frames")),
+                "grade_frames" in block,
             )
         background = block.get("background", "background")
         if not isinstance(background, str) or not background:
@@ -321,6 +377,8 @@ class SpeedRule(Rule):
             out.append(f"{name} {m.speeds_mps[col]:.2f} m/s{around}")
         points = f" on {m.min_points} of 5 footprint points" if m.min_points > 1 else ""
         out.append(f"slows {m.preview_m:g} m before a slower class{points}")
+        if m.sheds_on_grades or (fit is not None and fit.on_grades):
+            out.append(f"grades: {self._grade_line(0, m.up_mps_per_deg, 'up')}; {self._grade_line(1, m.down_mps_per_deg, 'down')}")
         bends = f"at most {m.lateral_accel_mps2:.2f} m/s^2 sideways" if m.lateral_accel_mps2 is not None else "no limit shown"
         out.append(f"bends: {bends}")
         if m.drive_lateral_mps2 is not None:
@@ -331,9 +389,33 @@ class SpeedRule(Rule):
             out.append(f"fitted to {fit.samples} frames, mean error {fit.error_mps:.3f} m/s")
         return out
 
+    def _grade_line(self, i: int, per_deg: float | None, way: str) -> str:
+        """What a degree of grade ``way`` (index ``i``: up 0, down 1) sheds, with its interval and frames."""
+        frames = self.fit.grade_frames[i] if self.fit is not None else 0
+        if per_deg is None:
+            shown = f"{frames} frames on one class past {LEVEL_DEG:g} deg {way}"
+            why = f"fewer than {MIN_FRAMES}" if frames < MIN_FRAMES else "slowing there explains them no better"
+            return f"nothing learned {way} ({shown}: {why})"
+        interval = self.fit.grade_intervals[i] if self.fit is not None else None
+        around = f" (95% CI {interval[0]:.3f}-{interval[1]:.3f}, {frames} frames)" if interval is not None else ""
+        return f"{per_deg:.3f} m/s per deg {way}{around}"
+
     def _classes(self, names: tuple[str, ...], lethal: frozenset[str]) -> list[tuple[int, str]]:
         """(column, class) of every terrain column a speed is kept for: ``names``, then the background; not the lethal ones."""
         return [(col, name) for col, name in enumerate((*names, self.background)) if name not in lethal]
+
+
+def _grade_intervals(value: object) -> tuple[tuple[float, float] | None, tuple[float, float] | None]:
+    """A block's ``grade_intervals`` (up, down), each None where not given or not two numbers."""
+    pairs = value if isinstance(value, list) and len(value) == 2 else [None, None]
+    out = [tuple(float(x) for x in i) if isinstance(i, list) and len(i) == 2 and all(_number(x) for x in i) else None for i in pairs]
+    return out[0], out[1]
+
+
+def _grade_frames(value: object) -> tuple[int, int]:
+    """A block's ``grade_frames`` (up, down); 0 where not given."""
+    ok = isinstance(value, list) and len(value) == 2 and all(isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in value)
+    return (value[0], value[1]) if ok else (0, 0)
 
 
 def _points(block: Mapping[str, Any], where: Where) -> int:
@@ -416,9 +498,13 @@ class LearnedSpeed(SpeedRunner):
             else:
                 px, py = x + (np.sin(heading) - math.sin(yaw)) / k, y - (np.cos(heading) - math.cos(yaw)) / k
         normal = np.stack([-np.sin(heading), np.cos(heading)], axis=-1)
-        points = np.stack([px, py], axis=-1)[:, None, :] + self.across[None, :, None] * normal[:, None, :]
+        centre = np.stack([px, py], axis=-1)
+        points = centre[:, None, :] + self.across[None, :, None] * normal[:, None, :]
         way = gmap.lookup(points, SPLIT)[None]
-        v = float(self.rule.model.predict(way, np.array([k]))[0])
+        grade = None
+        if self.rule.model.sheds_on_grades:  # the body's pitch along the way, as the height layer shows the ground
+            grade = body_grade(gmap.gradient_at, centre, heading)[None]
+        v = float(self.rule.model.predict(way, np.array([k]), grade)[0])
         top = self.rule.config.max_speed_mps
         if abs(k) > 1e-9:
             top = min(top, max_yaw_rate_rps / abs(k))
