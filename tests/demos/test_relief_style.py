@@ -164,3 +164,37 @@ def test_a_models_relief_style_is_that_of_its_recordings_driver_and_the_comparis
     assert trained_relief(meta({**cautious.to_dict(), "roll_deg": "steep"})) is None  # not readable: none, never a guess
     specs = Evaluation("m.safetensors", ("relief_hazards",), 1, relief=cautious).specs(PreferenceProfile.default())
     assert [s.relief for s in specs if s.driver == EXPERT] == [cautious] and all(s.relief is None for s in specs if s.driver != EXPERT)
+
+
+# A plateau 1 m high between x = 16 and 24 m, its sides ramps of 6 m: up from x = 10, down to x = 30.
+HILL = [{"plateau": {"polygon": [[16.0, -10.0], [24.0, -10.0], [24.0, 30.0], [16.0, 30.0]], "height_m": 1.0, "edge_m": 6.0}}]
+
+
+def test_the_speed_rule_learns_what_the_drivers_grades_shed_from_its_drive(tmp_path):
+    """The driver (0.03 m/s per deg up, 0.02 down) drives over the hill once, through the depth
+    camera; the speed rule fitted to that drive sheds what it sheds, to within a tenth, with
+    intervals, and its level speed is the driver's 1 m/s."""
+    from terrapref.dataset import build_dataset
+    from terrapref.demos.meta import ExpertInfo
+    from terrapref.demos.recording import MemoryRecordingWriter
+    from terrapref.demos.session import DriveSetup, RunSettings, record_run
+    from terrapref.learning.train import FitData
+    from terrapref.recipes import DEFAULT_RECIPE, recipe_named, rules_with
+    from terrapref.rules.speed.rule import SpeedConfig
+    from terrapref.terrain import PreferenceProfile
+
+    setup = DriveSetup.of(_scenario(HILL, [[2.0, 10.0], [38.0, 10.0]]))
+    config = ExpertConfig(relief=ReliefStyle())
+    writer = MemoryRecordingWriter(
+        tmp_path / "mem", setup.meta(ExpertInfo.of(0, "default", config), PreferenceProfile.default()), setup.scenario.to_dict()
+    )
+    record_run(setup.simulation(), ExpertDriver(config), writer, RunSettings(setup.preference), np.random.default_rng(0))
+    recipe = recipe_named(DEFAULT_RECIPE)
+    data = build_dataset([writer.recording()], recipe.features(), rules=rules_with(recipe))
+    rule = SpeedConfig().fit(FitData(data, mirror=False))
+    assert rule is not None and rule.fit is not None and rule.fit.on_grades
+    m = rule.model
+    assert m.up_mps_per_deg == pytest.approx(0.03, rel=0.1) and m.down_mps_per_deg == pytest.approx(0.02, rel=0.1)
+    (up_low, up_high), (down_low, down_high) = rule.fit.grade_intervals
+    assert up_low <= m.up_mps_per_deg <= up_high and down_low <= m.down_mps_per_deg <= down_high
+    assert m.speeds_mps[-1] == pytest.approx(1.0, abs=0.02)

@@ -29,6 +29,7 @@ from terrapref.scenario import AVOID, Scenario
 from terrapref.scenario.path import ReferencePath
 
 SPEED_TARGET_MPS = 0.08  # the planner's speed error per class against its driver must stay within this [m/s]
+GRADE_SPEED_TARGET_MPS = 0.10  # and per grade band (up, level, down) on relief within this [m/s]
 TIME_TOLERANCE = 0.05  # and its time to the end of the path within this share of the driver's
 LATERAL_TOLERANCE = 0.10  # and its lateral acceleration no more than this share above the driver's limit
 GRADE_MIN_S = 1.0  # a run's speed on a grade band is compared where both runs spent at least this long on it [s]
@@ -176,7 +177,7 @@ class SpeedComparison:
         out += [
             f"speed error against the driver, "
             f"{f'level ground (grade within {GRADE_BAND_DEG:g} deg)' if band == 'level' else f'going {band} (grade past {GRADE_BAND_DEG:g} deg)'}"
-            f": {e.text()} m/s over runs (target <= {SPEED_TARGET_MPS})"
+            f": {e.text()} m/s over runs (target <= {GRADE_SPEED_TARGET_MPS})"
             for band, e in self.by_grade.items()
         ]
         if self.time_ratio is not None:
