@@ -238,14 +238,14 @@ def fit_speed(drive: Drive, k: int, lethal: tuple[int, ...]) -> SpeedFit | None:
 
     way, curvature, v_mps, frame, grade = drive
 
-    def fitted(lag: int, preview: float) -> SpeedFit | None:
+    def fitted(lag: int, preview: float, intervals: bool = False) -> SpeedFit | None:
         later = _shifted(v_mps, frame, lag)
         ok = np.isfinite(later) & (later > 0) & np.isfinite(curvature)
         if np.count_nonzero(ok) < MIN_FRAMES:
             return None
         w, c, v = way[ok], curvature[ok], later[ok]
         g = None if grade is None else grade[ok]
-        found = _fit_at(_Frames(w, c, v, k, lethal, g), preview)
+        found = _fit_at(_Frames(w, c, v, k, lethal, g, intervals), preview)
         if found is None:
             return None
         model, intervals, grades = found
@@ -258,7 +258,8 @@ def fit_speed(drive: Drive, k: int, lethal: tuple[int, ...]) -> SpeedFit | None:
             trial = fitted(lag, preview)
             if best is None or (trial is not None and trial.error_mps < best.error_mps - 1e-9):
                 best = trial
-    if best is not None:
+    if best is not None:  # the intervals, for the fit kept alone (their resampling is most of a fit's time)
+        best = fitted(best.lag_frames, best.model.preview_m, intervals=True)
         moving = np.isfinite(curvature) & (v_mps > 0)
         lateral = float(np.max(v_mps[moving] ** 2 * np.abs(curvature[moving]), initial=0.0))
         best = replace(best, model=replace(best.model, drive_lateral_mps2=lateral if lateral > 0 else None))
@@ -277,7 +278,7 @@ def _shifted(v: np.ndarray, frame: np.ndarray, lag: int) -> np.ndarray:
 
 class _Frames(NamedTuple):
     """The frames one fit reads: ways, curvatures, speeds (lagged), the terrain columns K, the
-    lethal ones, and the ways' grades (None: flat ground)."""
+    lethal ones, the ways' grades (None: flat ground), and whether to find the intervals."""
 
     way: np.ndarray
     curvature: np.ndarray
@@ -285,10 +286,11 @@ class _Frames(NamedTuple):
     k: int
     lethal: tuple[int, ...]
     grade: np.ndarray | None = None
+    intervals: bool = True
 
 
 def _fit_at(frames: _Frames, preview_m: float) -> tuple[SpeedModel, tuple[tuple[float, float] | None, ...], _Grades] | None:
-    way, curvature, v, k, lethal, grade = frames
+    way, curvature, v, k, lethal, grade, _ = frames
     upto = _stations(preview_m)
     foot = way[:, :upto, :5].reshape(len(way), -1)
     seen = foot <= k  # K + 1: never seen
@@ -354,7 +356,7 @@ def _cruising(frames: _Frames, on: np.ndarray, near: np.ndarray, level: np.ndarr
             intervals.append(None)
             continue
         speeds.append(float(np.median(frames.v[rows])))
-        intervals.append(_interval(frames.v[rows], rows))
+        intervals.append(_interval(frames.v[rows], rows) if frames.intervals else None)
     return speeds, intervals
 
 
@@ -387,7 +389,7 @@ def _fit_grades(
         trial_error = float(np.mean(np.abs(trial.predict(way, curvature, grade) - v)))
         if trial_error < error - 1e-9:
             model, error = trial, trial_error
-            intervals[i] = _interval(per_deg, rows)
+            intervals[i] = _interval(per_deg, rows) if frames.intervals else None
     return model, _Grades(model.up_mps_per_deg, model.down_mps_per_deg, (intervals[0], intervals[1]), (counts[0], counts[1]))
 
 

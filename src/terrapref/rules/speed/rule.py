@@ -39,6 +39,7 @@ from terrapref.rules.base import (
     number,
 )
 from terrapref.rules.settings import NUMBER, PER_CLASS
+from terrapref.rules.speed.calibration import GradeCheck
 from terrapref.rules.speed.model import (
     LEVEL_DEG,
     MIN_FRAMES,
@@ -55,6 +56,7 @@ from terrapref.rules.speed.model import (
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable
 from terrapref.vehicle import Command, Pose
+from terrapref.vehicle.ground import Attitude
 
 if TYPE_CHECKING:
     from terrapref.demos.recording import Recording
@@ -442,10 +444,12 @@ class LearnedSpeed(SpeedRunner):
         self.across = across(rule.config.half_width_m)
         self._d = STATION_STEP_M * np.arange(STATIONS)
         self._last_v = 0.0  # the speed commanded last [m/s]
+        self.grades = GradeCheck(STATIONS)  # the grades read ahead against the body's pitch once there
 
     def reset(self) -> None:
-        """Forget the speed commanded last (a new path)."""
+        """Forget the speed commanded last and the grades' errors (a new path)."""
         self._last_v = 0.0
+        self.grades.reset()
 
     def commanded(self, v_mps: float) -> None:
         """The speed [m/s] the planner commanded (0 when it stopped), for the next :meth:`yaw_rate`."""
@@ -463,7 +467,7 @@ class LearnedSpeed(SpeedRunner):
         of the same curvature (:meth:`yaw_rate`, at the vehicle's speed the frame gives)."""
         curvature = choice.command.w / set_v_mps
         way = (frame.path, frame.progress_m, choice.offset_m) if choice.offset_m is not None else None
-        v = self.speed(ground_map, frame.pose, curvature, max_yaw_rate_rps, way)
+        v = self.speed(ground_map, frame.pose, curvature, max_yaw_rate_rps, way, frame.view.attitude)
         return Choice(choice.index, Command(v, self.yaw_rate(curvature, v, frame.speed_mps)), choice.offset_m)
 
     def speed(
@@ -473,10 +477,14 @@ class LearnedSpeed(SpeedRunner):
         curvature: float,
         max_yaw_rate_rps: float,
         along: tuple[ReferencePath, float, float] | None = None,
+        attitude: Attitude | None = None,
     ) -> float:
         """The speed [m/s] along the way chosen, as ``gmap`` (the ground map of :attr:`map_settings`,
         updated with the frame) shows it, within the rule's top speed and the speed at which an arc
-        of ``curvature`` [1/m] needs no more than ``max_yaw_rate_rps``.
+        of ``curvature`` [1/m] needs no more than ``max_yaw_rate_rps``. With the body's ``attitude``
+        (its odometry's; None: not known), a model that sheds speed on grades checks the grades it
+        read ahead against the body's pitch once there, and corrects what it reads by their errors
+        (terrapref.rules.speed.calibration).
 
         The way: with ``along`` (path, progress [m], offset [m]: a rule that holds an offset from
         the path), the footprint where the vehicle is, then the path shifted by the offset ahead
@@ -503,7 +511,12 @@ class LearnedSpeed(SpeedRunner):
         way = gmap.lookup(points, SPLIT)[None]
         grade = None
         if self.rule.model.sheds_on_grades:  # the body's pitch along the way, as the height layer shows the ground
-            grade = body_grade(gmap.gradient_at, centre, heading)[None]
+            read = body_grade(gmap.gradient_at, centre, heading)
+            if attitude is not None:
+                self.grades.keep(centre, np.broadcast_to(heading, (len(centre),)), read)  # station 0 is checked at once
+                self.grades.arrived(x, y, yaw, math.degrees(attitude.grade_rad))
+                read = read - self.grades.correction
+            grade = read[None]
         v = float(self.rule.model.predict(way, np.array([k]), grade)[0])
         top = self.rule.config.max_speed_mps
         if abs(k) > 1e-9:
