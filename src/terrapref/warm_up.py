@@ -8,7 +8,7 @@ a demonstration with disturbances, featurising with and without the look-ahead, 
 named recipe for one epoch (both utility fits), one closed-loop run of each model and of the
 synthetic driver, one run through the ``field`` perception model (label errors, a tilted
 camera), and a few frames of the default recipe's model on a course with relief (its height
-field and noise, the relief renderer with depth, the height layer's votes and geometry), its
+field and noise, the relief renderer with depth, the height layer's votes, geometry and grades), its
 costmap, and of the synthetic driver with a relief style there, and a whole flat frame. What it writes goes to a temporary folder and is removed.
 """
 
@@ -67,6 +67,7 @@ def _relief_frames(model_path: Path, frames: int = 5) -> None:
     for _ in range(frames):
         frame = sim.step(driver.act(frame))
     driver.planner.costmap()  # the map's cells all decided at once
+    driver.planner.ground_map.gradient_at(np.zeros((1, 2)))  # the grades a speed rule learned on relief reads
     expert = ExpertDriver(ExpertConfig(relief=ReliefStyle()))
     expert.reset(sim.scenario, np.random.default_rng(0))
     for _ in range(frames):
