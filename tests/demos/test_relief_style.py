@@ -183,7 +183,7 @@ def test_the_speed_rule_learns_what_the_drivers_grades_shed_from_its_drive(tmp_p
     from terrapref.rules.speed.rule import SpeedConfig
     from terrapref.terrain import PreferenceProfile
 
-    setup = DriveSetup.of(_scenario(HILL, [[2.0, 10.0], [38.0, 10.0]]))
+    setup = DriveSetup.of(_scenario(HILL, [[5.0, 10.0], [35.0, 10.0]]))
     config = ExpertConfig(relief=ReliefStyle())
     writer = MemoryRecordingWriter(
         tmp_path / "mem", setup.meta(ExpertInfo.of(0, "default", config), PreferenceProfile.default()), setup.scenario.to_dict()
