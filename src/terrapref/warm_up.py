@@ -67,7 +67,11 @@ def _relief_frames(model_path: Path, frames: int = 5) -> None:
     for _ in range(frames):
         frame = sim.step(driver.act(frame))
     driver.planner.costmap()  # the map's cells all decided at once
-    driver.planner.ground_map.gradient_at(np.zeros((1, 2)))  # the grades a speed rule learned on relief reads
+    from terrapref.rules.speed.model import CHORD_M, CHORD_WEIGHTS
+
+    gmap = driver.planner.ground_map  # the grades a speed rule learned on relief reads, and its fit
+    gmap.gradient_at(np.zeros((1, 2)))
+    gmap.body_grades(np.zeros((1, 2)), np.zeros(1), (CHORD_M, CHORD_WEIGHTS))
     expert = ExpertDriver(ExpertConfig(relief=ReliefStyle()))
     expert.reset(sim.scenario, np.random.default_rng(0))
     for _ in range(frames):

@@ -17,7 +17,7 @@ from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.camera.render import SegmentationRenderer
 from terrapref.groundmap.height import DepthImage, GeometryLimits, Heights, HeightSettings, geometry_of_cells
 from terrapref.groundmap.map import GroundMap
-from terrapref.rules.speed.model import SpeedModel, body_grade
+from terrapref.rules.speed.model import CHORD_M, CHORD_WEIGHTS, SpeedModel, body_grade
 from terrapref.rules.speed.rule import LearnedSpeed, SpeedConfig, SpeedRule
 from terrapref.scenario import FORMAT, parse_scenario
 from terrapref.vehicle import Pose, Vehicle, VehicleConfig
@@ -82,6 +82,12 @@ def test_the_gradient_and_the_bodys_grade_on_the_ramp_are_its_grade_heading_alon
     centre, n = np.array([[21.0, 15.0]] * 3), np.array([0.0, math.pi, math.pi / 2])
     np.testing.assert_allclose(body_grade(gmap.gradient_at, centre, n), [grade, -grade, 0.0], atol=1.0)
     assert np.isnan(body_grade(gmap.gradient_at, np.array([[2.0, 15.0]]), np.zeros(1))).all()
+    # The map's own compiled pass reads the same grades (the planner's; the fit's reads body_grade).
+    anywhere = np.array([[x, y] for x in np.arange(1.0, 30.0, 0.7) for y in (12.0, 15.0, 18.0)])
+    turns = np.linspace(-math.pi, math.pi, len(anywhere))
+    np.testing.assert_allclose(
+        gmap.body_grades(anywhere, turns, (CHORD_M, CHORD_WEIGHTS)), body_grade(gmap.gradient_at, anywhere, turns), atol=1e-9
+    )
     model = SpeedModel((1.0,) * 5, 1.5, None, None, None, (0,), up_mps_per_deg=0.03, down_mps_per_deg=0.02)
     runner = LearnedSpeed(SpeedRule(SpeedConfig(), model))
     assert runner.speed(gmap, (21.0, 15.0, 0.0), 0.0, 1.0) == pytest.approx(1.0 - 0.03 * grade, abs=0.03)

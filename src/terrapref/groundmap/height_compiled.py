@@ -469,3 +469,38 @@ def _same(now: float, then: float, tolerance: float) -> bool:
     """Whether a difference ``now`` (NaN: unknown) is ``then`` (NaN: unknown; +inf: never read)
     within ``tolerance``: one still unknown changes no cell's geometry, read or not."""
     return (math.isnan(now) and not math.isfinite(then)) or abs(now - then) <= tolerance
+
+
+@njit(cache=True, nogil=True)
+def chord_grades(
+    shape: tuple[np.ndarray, ...],
+    least_weight: float,
+    grid: tuple[float, float, float],
+    reach: int,
+    centre: np.ndarray,
+    heading: np.ndarray,
+    chord: tuple[np.ndarray, np.ndarray],
+    out: np.ndarray,
+) -> None:
+    """The grade [deg, positive up] (S,) into ``out`` a body would be pitched at, centred at the
+    points ``centre`` (S, 2) heading ``heading`` (S,) [rad]: the ground's gradient (:func:`_disc_gradient`)
+    along the heading at the ``chord``'s offsets along it [m], weighed by its weights, as
+    terrapref.rules.speed.model.body_grade reads it from any gradient; NaN where the gradient is
+    known under less than half the chord's weight. ``grid``: the map's origin (x, y) [m] and its
+    cell size [m]."""
+    n = shape[0].shape[0]
+    x0, y0, res = grid
+    offsets, weights = chord
+    for i in range(centre.shape[0]):
+        c, s = math.cos(heading[i]), math.sin(heading[i])
+        total = weight = 0.0
+        for j in range(offsets.shape[0]):
+            col = math.floor((centre[i, 0] + offsets[j] * c - x0) / res)
+            row = math.floor((centre[i, 1] + offsets[j] * s - y0) / res)
+            if not (1 <= row < n - 1 and 1 <= col < n - 1):
+                continue
+            gx, gy = _disc_gradient(shape, least_weight, int(row), int(col), reach)
+            if gx == gx:
+                total += weights[j] * (gx * c + gy * s)
+                weight += weights[j]
+        out[i] = math.degrees(math.atan(total / weight)) if weight >= 0.5 else np.nan

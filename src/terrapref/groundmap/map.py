@@ -196,6 +196,22 @@ class GroundMap:
         height_kernels.shape_gradient(self._shape, 1.0 / h.max_error_m**2, rows, cols, disc_reach(h, self.settings.map_resolution_m), out)
         return out.reshape(np.shape(points))
 
+    def body_grades(self, centre: np.ndarray, heading: np.ndarray, chord: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        """The grade [deg, positive up] (S,) a body centred at ``centre`` (S, 2) heading ``heading``
+        (S,) [rad] would be pitched at: the ground's gradient (:meth:`gradient_at`) along the heading,
+        averaged over the ``chord`` (offsets along the heading [m], their weights); NaN where the
+        gradient is known under less than half the chord's weight (in one compiled pass,
+        terrapref.groundmap.height_compiled.chord_grades)."""
+        out = np.full(len(centre), np.nan)
+        if self.origin is None:
+            return out
+        h, res = self.height_settings, self.settings.map_resolution_m
+        grid = (*self._origin_xy, res)
+        centre = np.ascontiguousarray(centre, dtype=np.float64)
+        heading = np.ascontiguousarray(np.broadcast_to(heading, (len(centre),)), dtype=np.float64)
+        height_kernels.chord_grades(self._shape, 1.0 / h.max_error_m**2, grid, disc_reach(h, res), centre, heading, chord, out)
+        return out
+
     def _cells_under(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The rows and columns (N,) of the cells under the world points (..., 2); -1 for a point not a number."""
         flat = np.asarray(points, dtype=np.float64).reshape(-1, 2)

@@ -58,12 +58,13 @@ class GradeCheck:
             here = (d2 < REACH_M**2) & (turn < HEADING_RAD) & np.isfinite(self._read)
         if not here.any():
             return
-        rows, stations = np.nonzero(here)
-        for station in range(self.stations):  # each station's errors in the order kept: the same sums on any machine
-            for error in self._read[rows[stations == station], station] - grade_deg:
-                self._sum[station] = FADE * self._sum[station] + error
-                self._count[station] = FADE * self._count[station] + 1.0
-        self._read[here] = np.nan  # each checked once
+        rows, stations = np.nonzero(here)  # row by row, each row's stations in order: the same sums on any machine
+        errors = self._read[rows, stations] - grade_deg
+        total, count = self._sum, self._count
+        for station, error in zip(stations.tolist(), errors.tolist()):
+            total[station] = FADE * total[station] + error
+            count[station] = FADE * count[station] + 1.0
+        self._read[rows, stations] = np.nan  # each checked once
 
     def keep(self, points: np.ndarray, heading: np.ndarray, read_deg: np.ndarray) -> None:
         """Keep the grades ``read_deg`` (stations,) read for the body at ``points`` (stations, 2)

@@ -41,6 +41,8 @@ from terrapref.rules.base import (
 from terrapref.rules.settings import NUMBER, PER_CLASS
 from terrapref.rules.speed.calibration import GradeCheck
 from terrapref.rules.speed.model import (
+    CHORD_M,
+    CHORD_WEIGHTS,
     LEVEL_DEG,
     MIN_FRAMES,
     MIN_SPEED_MPS,
@@ -511,7 +513,7 @@ class LearnedSpeed(SpeedRunner):
         way = gmap.lookup(points, SPLIT)[None]
         grade = None
         if self.rule.model.sheds_on_grades:  # the body's pitch along the way, as the height layer shows the ground
-            read = body_grade(gmap.gradient_at, centre, heading)
+            read = gmap.body_grades(centre, heading, (CHORD_M, CHORD_WEIGHTS))
             if attitude is not None:
                 self.grades.keep(centre, np.broadcast_to(heading, (len(centre),)), read)  # station 0 is checked at once
                 self.grades.arrived(x, y, yaw, math.degrees(attitude.grade_rad))
