@@ -156,7 +156,8 @@ def with_layers(
     if speeds_mps is not None and per_deg > 0.0:
         speed, slope = layers["speed"], np.degrees(geometry[..., 0])
         slowed = np.isfinite(slope) & (speed > 0)  # never-seen (NaN) and lethal (0) ground as they are
-        layers["speed"] = np.where(slowed, np.maximum(speed - per_deg * np.where(slowed, slope, 0.0), least_mps), speed).astype(np.float32)
+        shed = np.maximum(speed - per_deg * np.where(slowed, slope, 0.0), least_mps)  # down to the least, never above the column's
+        layers["speed"] = np.where(slowed, np.minimum(speed, shed), speed).astype(np.float32)
     return replace(costmap, layers=layers, top_speed_mps=top_mps if speeds_mps is not None else None)
 
 
