@@ -236,12 +236,8 @@ def _estimate(groups: Mapping[str, list[float]]) -> Estimate:
 def trained_driver(meta: Mapping[str, Any]) -> tuple[str, tuple[tuple[str, float], ...]] | None:
     """The synthetic driver a model's recordings were driven by: its style and cruising speeds by
     class, when every recording names the same; None for a person's drives or a mix."""
-    data = meta.get("data")
-    recordings = data.get("recordings") if isinstance(data, Mapping) else None
-    if not isinstance(recordings, (list, tuple)) or not recordings:
-        return None
-    drivers = [r.get("driver") if isinstance(r, Mapping) else None for r in recordings]
-    if not all(isinstance(d, Mapping) and d.get("kind") == "expert" for d in drivers):
+    drivers = _recorded_drivers(meta)
+    if not drivers or not all(isinstance(d, Mapping) and d.get("kind") == "expert" for d in drivers):
         return None
     found = {(d.get("style", "default"), tuple(tuple(p) for p in (d.get("config") or {}).get("speeds") or ())) for d in drivers}
     if len(found) != 1:
@@ -252,15 +248,21 @@ def trained_driver(meta: Mapping[str, Any]) -> tuple[str, tuple[tuple[str, float
     return style, tuple((str(n), float(v)) for n, v in speeds)
 
 
+def _recorded_drivers(meta: Mapping[str, Any]) -> list[Any]:
+    """The driver entry of each recording a model was trained on, as its file names them (None
+    for a recording that is not a mapping; none where the file lists no recordings)."""
+    data = meta.get("data")
+    recordings = data.get("recordings") if isinstance(data, Mapping) else None
+    if not isinstance(recordings, (list, tuple)):
+        return []
+    return [r.get("driver") if isinstance(r, Mapping) else None for r in recordings]
+
+
 def trained_relief(meta: Mapping[str, Any]) -> ReliefStyle | None:
     """The relief style of the synthetic driver a model's recordings were driven by, when every
     recording names the same one (terrapref.demos.relief_style); None where none names one (it
     drove relief as if it were flat), for a person's drives, a mix, or a style this code cannot read."""
-    data = meta.get("data")
-    recordings = data.get("recordings") if isinstance(data, Mapping) else None
-    if not isinstance(recordings, (list, tuple)) or not recordings:
-        return None
-    drivers = [r.get("driver") if isinstance(r, Mapping) else None for r in recordings]
+    drivers = _recorded_drivers(meta)
     configs = [d.get("config") if isinstance(d, Mapping) and d.get("kind") == "expert" else None for d in drivers]
     found = [c.get("relief") if isinstance(c, Mapping) else None for c in configs]
     if not found or not isinstance(found[0], Mapping) or any(f != found[0] for f in found):

@@ -333,10 +333,7 @@ class SpeedRule(Rule):
         if isinstance(intervals, list) and len(intervals) == k + 1:
             fit = SpeedFit(
                 model,
-                tuple(
-                    tuple(float(x) for x in i) if isinstance(i, list) and len(i) == 2 and all(_number(x) for x in i) else None
-                    for i in intervals
-                ),
+                tuple(_interval_of(i) for i in intervals),
                 int(number(block, "lag_frames", where, 0.0, low=0.0)),
                 int(number(block, "samples", where, 0.0, low=0.0)),
                 number(block, "error_mps", where, 0.0, low=0.0),
@@ -409,11 +406,15 @@ class SpeedRule(Rule):
         return [(col, name) for col, name in enumerate((*names, self.background)) if name not in lethal]
 
 
+def _interval_of(value: object) -> tuple[float, float] | None:
+    """An interval a block keeps: two numbers, else None (not given, or not readable)."""
+    return (float(value[0]), float(value[1])) if isinstance(value, list) and len(value) == 2 and all(_number(x) for x in value) else None
+
+
 def _grade_intervals(value: object) -> tuple[tuple[float, float] | None, tuple[float, float] | None]:
     """A block's ``grade_intervals`` (up, down), each None where not given or not two numbers."""
-    pairs = value if isinstance(value, list) and len(value) == 2 else [None, None]
-    out = [tuple(float(x) for x in i) if isinstance(i, list) and len(i) == 2 and all(_number(x) for x in i) else None for i in pairs]
-    return out[0], out[1]
+    up, down = value if isinstance(value, list) and len(value) == 2 else (None, None)
+    return _interval_of(up), _interval_of(down)
 
 
 def _grade_frames(value: object) -> tuple[int, int]:
