@@ -2,9 +2,8 @@
 
 The height layer reads the ground's shape through the depth camera, and a real one reads it with
 a bias that grows with range: a stereo camera's noise along each ray (growing with the square of
-the depth) and a mount that wanders by a degree or two make level ground ahead look as if it rose
-(under the `field` preset, 0.7 deg under the vehicle and 1.9 deg 3 m ahead, on
-`genrelief:101`). A speed rule that sheds speed per degree then slows on level ground. The body's
+the depth) and a mount that wanders by a degree or two make level ground ahead look as if it rose,
+the more so the farther ahead (docs/lab/2026-11-29-relief-speed.md). A speed rule that sheds speed per degree then slows on level ground. The body's
 pitch where it stands is known (its odometry's attitude), so each grade read ahead is kept with
 where it was read for, and once the vehicle stands there, heading the same way, the difference
 is that station's error; the mean error per station (shrunk toward none until enough are seen)

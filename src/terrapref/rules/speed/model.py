@@ -41,7 +41,7 @@ LEVEL_DEG = 3.0  # a way whose grade stays within this of level shows its class'
 # The body's pitch at a station: the ground's gradient along the heading, averaged over a chord of
 # the field UGV's wheelbase centred there (trapezoid weights): the rise from its rear axle to its
 # front one, as a rigid body feels a grade, rather than the gradient of the ground under one point
-# (over a mound's flank the two differ by a fifth).
+# (over a mound's flank the two differ; docs/design.md).
 CHORD_M = np.array([-0.5, -0.25, 0.0, 0.25, 0.5])
 CHORD_WEIGHTS = np.array([0.5, 1.0, 1.0, 1.0, 0.5]) / 4.0
 
