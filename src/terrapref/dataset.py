@@ -318,9 +318,7 @@ def build_dataset(
     U = np.concatenate([p[0] for p in parts])
     labels = np.concatenate([p[1] for p in parts])
     w = np.concatenate([p[2] for p in parts])
-    arrays = {
-        rule.type: {name: np.concatenate([p.rules[rule.type][name] for p in parts]) for name in parts[0].rules[rule.type]} for rule in rules
-    }
+    arrays = {rule.type: _joined([p.rules[rule.type] for p in parts]) for rule in rules}
     source = np.concatenate([np.full(len(p[1]), k, dtype=np.int64) for k, p in enumerate(parts)])
     meta = {
         "format": FORMAT,
@@ -332,6 +330,22 @@ def build_dataset(
         "recordings": [_recording_entry(r, len(p[1])) for r, p in zip(recordings, parts, strict=True)],
     }
     return Dataset(U, labels, w.astype(np.float32), source, meta, arrays)
+
+
+def _joined(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """One rule's arrays of several recordings, joined; an array only some recordings have (the
+    offset rule's relief columns, for drives on relief) is zeros for the others."""
+    names = list(dict.fromkeys(name for part in parts for name in part))
+    shapes = {name: next(part[name] for part in parts if name in part) for name in names}
+    return {
+        name: np.concatenate(
+            [
+                part[name] if name in part else np.zeros((len(next(iter(part.values()))), *shapes[name].shape[1:]), shapes[name].dtype)
+                for part in parts
+            ]
+        )
+        for name in names
+    }
 
 
 def _featurized(

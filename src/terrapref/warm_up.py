@@ -72,6 +72,7 @@ def _relief_frames(model_path: Path, frames: int = 5) -> None:
     gmap = driver.planner.ground_map  # the grades a speed rule learned on relief reads, and its fit
     gmap.gradient_at(np.zeros((1, 2)))
     gmap.body_grades(np.zeros((1, 2)), np.zeros(1), (CHORD_M, CHORD_WEIGHTS))
+    gmap.beside_attitudes(np.zeros((1, 2)), np.array([[0.0, 1.0]]), np.zeros(1))  # the relief an offset rule learned prices
     expert = ExpertDriver(ExpertConfig(relief=ReliefStyle()))
     expert.reset(sim.scenario, np.random.default_rng(0))
     for _ in range(frames):

@@ -1,7 +1,8 @@
 """The synthetic driver's relief style (SPEC 19): the named styles and ``k=v`` pairs of
 ``terrapref record --relief-style``, the speed it sheds on grades and rough ground (closed form),
 and, driven on small relief courses, going round a side slope steeper than it takes and keeping
-to one it takes, and its speed up and down a ramp of known grade."""
+to one it takes, and its speed up and down a ramp of known grade; and what the speed rule and
+the offset rule learn of it from one drive."""
 
 from __future__ import annotations
 
@@ -198,3 +199,53 @@ def test_the_speed_rule_learns_what_the_drivers_grades_shed_from_its_drive(tmp_p
     (up_low, up_high), (down_low, down_high) = rule.fit.grade_intervals
     assert up_low <= m.up_mps_per_deg <= up_high and down_low <= m.down_mps_per_deg <= down_high
     assert m.speeds_mps[-1] == pytest.approx(1.0, abs=0.02)
+
+
+# A bank beside the path along y = 10 m: a ridge 5 m wide along y = 11.25 m from x = 12 to 28 m, the
+# path on its flank, rolling a body of 1.2 m track heading along it by 16 deg (SPEC 19 ridge, cosine).
+BANK = [{"ridge": {"polyline": [[12.0, 11.25], [28.0, 11.25]], "width_m": 5.0, "height_m": 0.503}}]
+
+
+def _relief_prices(tmp_path, style: str) -> tuple[np.ndarray, float]:
+    """The offset rule fitted to one drive of the bank by the driver of relief style ``style``:
+    the price of a metre of side slope past each band (the cumulative weights, less is dearer),
+    and the detour's weight."""
+    from terrapref.dataset import build_dataset
+    from terrapref.demos.meta import ExpertInfo
+    from terrapref.demos.recording import MemoryRecordingWriter
+    from terrapref.demos.session import DriveSetup, RunSettings, record_run
+    from terrapref.learning.train import FitData
+    from terrapref.recipes import DEFAULT_RECIPE, recipe_named, rules_with
+    from terrapref.rules.offset.features import RELIEF_BANDS_DEG
+    from terrapref.rules.offset.rule import OffsetConfig
+    from terrapref.terrain import PreferenceProfile
+
+    setup = DriveSetup.of(_scenario(BANK, [[3.0, 10.0], [37.0, 10.0]]))
+    config = ExpertConfig(relief=parse_relief_style(style)[1])
+    writer = MemoryRecordingWriter(
+        tmp_path / style, setup.meta(ExpertInfo.of(0, "default", config), PreferenceProfile.default()), setup.scenario.to_dict()
+    )
+    record_run(setup.simulation(), ExpertDriver(config), writer, RunSettings(setup.preference), np.random.default_rng(0))
+    recipe = recipe_named(DEFAULT_RECIPE)
+    data = build_dataset([writer.recording()], recipe.features(), rules=rules_with(recipe))
+    rule = OffsetConfig().fit(FitData(data, mirror=False))
+    assert rule is not None and rule.utility.relief is not None
+    relief, bands = rule.utility.relief, len(RELIEF_BANDS_DEG)
+    assert (relief <= 0).all()  # steeper never costs less
+    return np.cumsum(relief[:bands]), float(rule.utility.weights[-2])
+
+
+def test_the_offset_rule_learns_the_side_slope_a_driver_goes_round_from_its_drive(tmp_path):
+    """The cautious driver (round side slopes past 7 deg) leaves the path beside the 16 deg bank;
+    the bold one (20 deg) keeps to it. The offset rule fitted to each drive prices a metre along
+    the bank as each drove it, on the scale of the detour's price: the cautious driver's dearer
+    than holding 1.5 m off the path for it (1.5^2), the bold one's under a third of that, and the
+    cautious driver's ten times the bold one's."""
+    from terrapref.rules.offset.features import RELIEF_BANDS_DEG
+
+    at = RELIEF_BANDS_DEG.index(14.0)
+    prices, detour = _relief_prices(tmp_path, "cautious")
+    cautious = prices[at] / detour
+    prices, detour = _relief_prices(tmp_path, "bold")
+    bold = prices[at] / detour
+    assert cautious > 1.5**2 > 3 * bold and cautious > 10 * bold

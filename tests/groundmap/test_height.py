@@ -233,3 +233,37 @@ def test_a_ledge_seen_through_the_depth_camera_is_blocked_twice_the_step_high_an
         assert ((np.abs(y - 15.0) < 2.0) & (np.abs(x - 20.0) < 0.4)).sum() >= 10 and (np.abs(x - 20.0) < 0.4).all()
     else:
         assert len(x) == 0
+
+
+def test_the_ground_under_a_body_beside_a_path_up_the_ramp_tilts_it_by_the_grade_along_and_not_across() -> None:
+    """The offset rule's relief (terrapref.groundmap.map.GroundMap.beside_attitudes): a body heading
+    up the ramp at any offset is pitched by its grade, atan(0.2), and not rolled; heading across
+    it, rolled by as much and not pitched; where the map saw nothing, both are unknown. Its relief
+    columns then count every station read past each band below the grade, and none above it."""
+    from terrapref.rules.offset.features import RELIEF_BANDS_DEG, OffsetFeatures
+    from terrapref.rules.offset.geometry import OffsetGeometry
+    from terrapref.scenario.path import ReferencePath
+
+    gmap, _ = _seen_ramp()
+    grade = math.degrees(math.atan(0.2))
+    offsets = np.array([-1.0, 0.0, 1.0])
+    centre = np.array([[x, 15.0] for x in np.arange(19.0, 24.0, 0.5)])
+    up = gmap.beside_attitudes(centre, np.tile([0.0, 1.0], (len(centre), 1)), offsets)  # heading +x: left is +y
+    np.testing.assert_allclose(up[..., 1], grade, atol=1.0)
+    np.testing.assert_allclose(up[..., 0], 0.0, atol=1.0)
+    across = gmap.beside_attitudes(np.array([[21.0, 15.0]]), np.array([[-1.0, 0.0]]), offsets)  # heading +y: left is -x
+    np.testing.assert_allclose(across[..., 0], grade, atol=1.0)
+    np.testing.assert_allclose(across[..., 1], 0.0, atol=1.0)
+    assert np.isnan(gmap.beside_attitudes(np.array([[2.0, 15.0]]), np.array([[0.0, 1.0]]), offsets)).all()
+    # The offset features of a path up the ramp, read from 20 m: every offset over the ramp's grade.
+    geometry = OffsetGeometry(max_offset_m=1.0, stations_m=(0.0, 2.0))
+    features = OffsetFeatures(geometry, 0)
+    view = features(gmap, ReferencePath(np.array([[1.0, 15.0], [59.0, 15.0]])), 19.0, relief=True)
+    bands = len(RELIEF_BANDS_DEG)
+    metres = len(geometry.stations) * geometry.station_step_m
+    past = np.array(RELIEF_BANDS_DEG) < grade
+    assert view.near_m == 0.0  # steep ground on the path from the first station: a patch on the path
+    np.testing.assert_array_equal(view.relief[:, :bands], 0.0)  # not rolled
+    np.testing.assert_array_equal(view.relief[:, bands:], np.where(past, metres, 0.0)[None, :].repeat(len(geometry.offsets), 0))
+    flat = features(gmap, ReferencePath(np.array([[1.0, 15.0], [59.0, 15.0]])), 19.0)
+    assert flat.relief is None and flat.near_m == math.inf  # without relief: the classes alone, as on flat ground

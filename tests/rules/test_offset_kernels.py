@@ -600,11 +600,21 @@ def test_swept_reach_reads_undecided_cells_as_decided(seed: int, n_off: int):
 
 
 def _corridor_features_numpy(
-    col: np.ndarray, centre: int, k: int, gap: int, beyond: int, step: float, stations: np.ndarray, offsets: np.ndarray, span: float
-) -> tuple[np.ndarray, float]:
+    col: np.ndarray,
+    steep: np.ndarray,
+    centre: int,
+    k: int,
+    gap: int,
+    beyond: int,
+    step: float,
+    stations: np.ndarray,
+    offsets: np.ndarray,
+    span: float,
+) -> tuple[np.ndarray, float, int]:
     """The NumPy form of offsets_compiled.offset_features (OffsetFeatures.__call__): metres on each
-    column up to ``beyond`` stations past the first patch on the path, and the detour's price."""
-    on = (col[centre] < k).any(axis=1)  # (S,): terrain on the path itself
+    column up to ``beyond`` stations past the first patch on the path (terrain or steep ground),
+    the detour's price, and the stations counted."""
+    on = (col[centre] < k).any(axis=1) | steep  # (S,): terrain or steep ground on the path itself
     upto, on_path_m, near_m = len(stations), 0.0, math.inf
     if on.any():
         idx = np.flatnonzero(on)
@@ -621,7 +631,7 @@ def _corridor_features_numpy(
     counts = np.bincount((np.arange(n_off)[:, None] * (k + 2) + flat).ravel(), minlength=n_off * (k + 2)).reshape(n_off, k + 2)
     metres = counts * (step / col.shape[2])
     detour = offsets**2 * (on_path_m + span)
-    return np.concatenate([metres[:, :k], metres[:, k + 1 :], detour[:, None]], axis=1), near_m
+    return np.concatenate([metres[:, :k], metres[:, k + 1 :], detour[:, None]], axis=1), near_m, upto
 
 
 @FAST
@@ -631,8 +641,9 @@ def _corridor_features_numpy(
     gap=st.integers(0, 5),
     beyond=st.integers(0, 12),
     on_path=st.sampled_from([0.0, 0.05, 0.3, 1.0]),
+    steep_share=st.sampled_from([0.0, 0.05, 0.3]),
 )
-def test_offset_rule_features_give_the_numpy_forms_features(seed: int, k: int, gap: int, beyond: int, on_path: float):
+def test_offset_rule_features_give_the_numpy_forms_features(seed: int, k: int, gap: int, beyond: int, on_path: float, steep_share: float):
     rng = np.random.default_rng(seed)
     config = OffsetGeometry(station_step_m=float(rng.choice([0.25, 0.1, 0.3])), span_m=float(rng.uniform(0.0, 8.0)))
     stations, offsets = config.stations, config.offsets
@@ -644,9 +655,11 @@ def test_offset_rule_features_give_the_numpy_forms_features(seed: int, k: int, g
     col[centre] = np.where(
         terrain[:, None] & (rng.random((n_st, n_f)) < 0.5), rng.integers(0, k, (n_st, n_f)), rng.integers(k, k + 2, (n_st, n_f))
     )
-    got, near_m = offsets_compiled.offset_features(col, centre, k, gap, beyond, config.station_step_m, stations, offsets, config.span_m)
-    want, want_near_m = _corridor_features_numpy(col, centre, k, gap, beyond, config.station_step_m, stations, offsets, config.span_m)
-    assert _same(got, want) and _same(near_m, want_near_m)
+    steep = rng.random(n_st) < steep_share  # steep ground on the path (relief), alone or beside terrain
+    args = (centre, k, gap, beyond, config.station_step_m, stations, offsets, config.span_m)
+    got, near_m, upto = offsets_compiled.offset_features(col, steep, *args)
+    want, want_near_m, want_upto = _corridor_features_numpy(col, steep, *args)
+    assert _same(got, want) and _same(near_m, want_near_m) and upto == want_upto
 
 
 def _gated_numpy(features: np.ndarray, view_near_m: float, offsets: np.ndarray, near_m: float) -> np.ndarray:

@@ -447,6 +447,37 @@ def test_a_model_file_with_an_offset_utility_drives_by_the_offset_rule_old_or_ne
         assert exc.value.problems[0].field == field
 
 
+def test_an_offset_utility_that_prices_relief_keeps_its_prices_in_the_file_and_bad_ones_are_refused(tmp_path):
+    """A utility fitted on relief writes its relief block (the bands, a weight per column, the
+    steepest band its drive showed); it reads back the same, a flat one writes none, and a block
+    with a band, a weight or a shown band this version does not read is refused naming it."""
+    from terrapref.rules.offset.features import RELIEF_BANDS_DEG
+    from terrapref.rules.offset.rule import OffsetRule
+
+    config = ClassifierConfig(hidden=8, skip=True)
+    relief = -np.linspace(0.0, 0.5, 2 * len(RELIEF_BANDS_DEG))
+    rule = OffsetRule(OffsetConfig(), OffsetUtility(np.array(DRIVER_LIKE), 5.0, OffsetGeometry(), relief, (22.0, math.nan)))
+    block = rule.header()
+    assert block["relief"] == {"bands_deg": list(RELIEF_BANDS_DEG), "weights": relief.tolist(), "shown_deg": [22.0, None]}
+    meta = {**model_meta(), "rules": [block], "drives": "offset"}
+    back = Planner(load_model(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), meta))).rule
+    np.testing.assert_array_equal(back.utility.relief, relief)
+    assert back.utility.relief_shown[0] == 22.0 and math.isnan(back.utility.relief_shown[1])
+    assert "relief" not in OffsetRule(OffsetConfig(), OffsetUtility(np.array(DRIVER_LIKE), 5.0)).header()
+    for change, field in (
+        ({"bands_deg": [5.0, 10.0]}, "rules[0].relief.bands_deg"),
+        ({"weights": [0.0] * 3}, "rules[0].relief.weights"),
+        ({"weights": ["steep"] * (2 * len(RELIEF_BANDS_DEG))}, "rules[0].relief.weights"),
+        ({"shown_deg": [13.0, None]}, "rules[0].relief.shown_deg"),
+        ({"extra": 1}, "rules[0].relief"),
+    ):
+        bad_block = {**block, "relief": {**block["relief"], **change}}
+        bad = save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), {**meta, "rules": [bad_block]})
+        with pytest.raises(UserError) as exc:
+            load_policy(bad)
+        assert exc.value.problems[0].field == field
+
+
 def test_a_file_that_names_a_rule_it_does_not_list_to_drive_is_refused(tmp_path):
     config = ClassifierConfig(hidden=8, skip=True)
     bad = save_model(
@@ -500,7 +531,11 @@ def _offset_dataset(n: int = 40) -> Dataset:
         "near_m": np.full(n, np.inf, np.float32),
         "intent_m": np.append(rng.uniform(-1, 1, n - 2), [np.nan, np.nan]).astype(np.float32),
     }
-    meta = {"format": DATASET_FORMAT, **model_meta(), "rules": {"offset": {"config": rule.data(), "arrays": dict(OffsetConfig.arrays)}}}
+    meta = {
+        "format": DATASET_FORMAT,
+        **model_meta(),
+        "rules": {"offset": {"config": rule.data(), "arrays": {name: OffsetConfig.arrays[name] for name in arrays}}},
+    }
     return Dataset(
         rng.uniform(0, 1, (n, 21, 5)).astype(np.float32),
         rng.integers(0, 21, n),
@@ -641,3 +676,21 @@ def test_an_offset_block_written_before_the_pursuit_distances_were_renamed_reads
     )
     rule = Planner(load_model(path)).rule
     assert rule.config == OffsetConfig(pursuit_m=3.0)
+
+
+def test_a_dataset_of_flat_and_relief_drives_reads_the_flat_ones_relief_columns_as_zero():
+    """The offset rule's relief columns come only with a drive on relief; joined with a flat
+    drive's arrays, the flat one's read 0 (no ground past any band), its other arrays as they were."""
+    from terrapref.dataset import _joined
+
+    flat = {"features": np.ones((2, 3, 4), np.float32), "near_m": np.full(2, 5.0, np.float32)}
+    relief = {
+        "features": np.full((3, 3, 4), 2.0, np.float32),
+        "near_m": np.ones(3, np.float32),
+        "relief_m": np.ones((3, 3, 20), np.float32),
+    }
+    joined = _joined([flat, relief])
+    assert joined["features"].shape == (5, 3, 4) and joined["relief_m"].shape == (5, 3, 20) and joined["relief_m"].dtype == np.float32
+    assert not joined["relief_m"][:2].any() and joined["relief_m"][2:].all()
+    np.testing.assert_array_equal(joined["near_m"], [5.0, 5.0, 1.0, 1.0, 1.0])
+    assert set(_joined([flat, flat])) == {"features", "near_m"}  # flat drives alone: no relief columns

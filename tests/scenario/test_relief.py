@@ -151,30 +151,78 @@ def test_genrelief_is_gen_with_seeded_relief_clear_of_its_zones() -> None:
     assert world.height_at(points[~in_zones]).any()
 
 
-def test_teach_relief_is_teach_course_with_the_relief_of_seed_0() -> None:
+def _tilt_along(scenario) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stations (S,) [m] of ``scenario``'s path every 0.1 m, and the ground's grade and side slope
+    there [deg, >= 0] over the default vehicle's wheelbase and track (as evaluate's relief zones read them)."""
+    from terrapref.scenario.path import ReferencePath
+
+    world, path = rasterise(scenario), ReferencePath(scenario.waypoints)
+    s = np.arange(0.0, path.length_m, 0.1)
+    centre, d = path.point_at(s), path.direction_at(s)
+    n = np.stack([-d[:, 1], d[:, 0]], axis=1)
+    grade = np.abs(world.height_at(centre + 0.5 * d) - world.height_at(centre - 0.5 * d)) / 1.0
+    side = np.abs(world.height_at(centre + 0.6 * n) - world.height_at(centre - 0.6 * n)) / 1.2
+    return s, np.degrees(np.arctan(grade)), np.degrees(np.arctan(side))
+
+
+def test_teach_relief_shows_each_relief_situation_within_seven_minutes() -> None:
+    """teach_relief is the default table's teaching course with relief (`course --relief`): every
+    terrain situation of the flat course, and each relief situation alone on its own leg: mounds
+    on the path whose steepest grade is the one designed, banks whose side slope under the path
+    is, a ramp, and each class beside a bank; the drive within 7 minutes at 1 m/s."""
     from terrapref.scenario import resolve_scenario
-    from terrapref.scenario.relief_layout import relief_for
+    from terrapref.scenario.teaching import HALF_M, RELIEF_DEG, START_M, designed_course, relief_course
 
-    teach, hilly = resolve_scenario("teach_course"), resolve_scenario("teach_relief")
-    assert _layout(hilly.to_dict()) == _layout(teach.to_dict())
-    assert hilly.to_dict()["relief"] == relief_for(teach, 0)  # as scripts/make_courses.py writes it
-    assert len(hilly.relief) >= 15  # a feature between most situations, and the noise
+    classes = default_classes()
+    hilly = resolve_scenario("teach_relief")
+    course, items = relief_course(classes, name="teach_relief")
+    assert hilly.to_dict() == parse_scenario(course.data(), "teach_relief.yaml", classes).to_dict()  # as make_courses writes it
+    flat_items = designed_course(classes)[1]
+    assert [i for i in items if i.kind not in ("mound", "bank", "ramp", "slope")] == flat_items  # every terrain lesson kept
+    kinds = [i.kind for i in items]
+    assert kinds.count("mound") == 2 and kinds.count("bank") == 2 and kinds.count("ramp") == 1
+    assert sorted(i.classes[0] for i in items if i.kind == "slope") == sorted(classes.terrain_names)
+    assert hilly.path_length_m() <= 7 * 60 * 1.0  # 7 minutes at the teaching drive's 1 m/s
+    s, grade, side = _tilt_along(hilly)
+    at = START_M
+    for item in items:
+        mid = at + HALF_M[item.kind]
+        leg = np.abs(s - mid) < HALF_M[item.kind] - 0.5
+        if item.kind == "mound":  # the steepest grade on the path, on its flank, is the one designed
+            assert grade[leg].max() == pytest.approx(item.deg, abs=0.6)
+        elif item.kind in ("bank", "slope"):  # the path runs on the flank: its side slope there is the one designed
+            middle = np.abs(s - mid) < 1.0
+            assert side[middle].mean() == pytest.approx(item.deg, abs=0.8)
+        elif item.kind == "ramp":
+            assert grade[leg].max() == pytest.approx(item.deg, abs=0.6)
+        at += 2 * HALF_M[item.kind]
+    assert {i.deg for i in items if i.kind == "mound"} == {RELIEF_DEG["gentle mound"], RELIEF_DEG["steep mound"]}
 
 
-def test_course_relief_gives_a_tables_teaching_course_relief_between_its_situations(tmp_path, capsys) -> None:
-    """`terrapref course --relief [SEED]`: the table's course, its layout as without the flag,
-    with the relief of the seed (teach_relief's way); a negative seed is refused in one line."""
+def test_course_relief_gives_a_tables_teaching_course_its_relief_situations_and_relief_between(tmp_path, capsys) -> None:
+    """`terrapref course --relief [SEED]`: the table's course with its relief situations (each
+    class against a bank), their own relief, and the relief of the seed between the situations
+    (teach_relief's way); a negative seed is refused in one line."""
     from helpers import REPO
     from terrapref.cli import main
     from terrapref.scenario import load_scenario
     from terrapref.scenario.relief_layout import relief_for
+    from terrapref.scenario.teaching import designed_course
 
     small = str(REPO / "examples" / "classes" / "small.yaml")
     assert main(["course", "--classes", small, "--out", str(tmp_path / "flat.yaml")]) == 0
     assert main(["course", "--classes", small, "--relief", "3", "--out", str(tmp_path / "hilly.yaml")]) == 0
     flat, hilly = load_scenario(tmp_path / "flat.yaml"), load_scenario(tmp_path / "hilly.yaml")
-    assert not flat.has_relief and _layout(hilly.to_dict()) == _layout(flat.to_dict())
-    assert hilly.to_dict()["relief"] == relief_for(flat, 3)
+    assert (
+        not flat.has_relief
+        and hilly.zones == flat.zones[: len(hilly.zones)]
+        or [z.label for z in hilly.zones] == [z.label for z in flat.zones]
+    )
+    designed = designed_course(hilly.classes, relief=True)[0]
+    situations = parse_scenario(designed.data(), "situations.yaml", hilly.classes)
+    own = [e.to_dict() for e in situations.relief]
+    assert hilly.to_dict()["relief"] == own + relief_for(situations, 3)
+    assert len(own) == 5 + len(hilly.classes.terrain_names)  # two mounds, two banks, a ramp, a bank beside each class
     capsys.readouterr()
     assert main(["course", "--relief", "-1", "--out", str(tmp_path / "bad.yaml")]) == 2
     assert capsys.readouterr().err.strip() == "error: --relief: expected a seed >= 0, got -1"

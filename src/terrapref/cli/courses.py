@@ -176,7 +176,7 @@ def _cmd_course(args: argparse.Namespace) -> int:
     from terrapref.plots import save_map
     from terrapref.scenario import parse_scenario
     from terrapref.scenario.relief_layout import relief_for
-    from terrapref.scenario.teaching import DRIVER_SPEED_MPS, designed_course, follow_up_after
+    from terrapref.scenario.teaching import DRIVER_SPEED_MPS, designed_course, follow_up_after, relief_course
     from terrapref.terrain import default_classes
     from terrapref.world import rasterise
 
@@ -199,13 +199,17 @@ def _cmd_course(args: argparse.Namespace) -> int:
     else:
         table = table or default_classes()
         try:
-            course, items = designed_course(table, args.design, args.name or "teaching_course")
+            if args.relief is not None and args.relief >= 0:  # the relief situations, and relief between them (SPEC 19)
+                course, items = relief_course(table, args.design, args.name or "teaching_course", args.relief)
+            else:
+                course, items = designed_course(table, args.design, args.name or "teaching_course")
         except ValueError as exc:
             raise UserError(str(args.classes or "classes"), str(exc), field="classes") from None
-    if args.relief is not None:  # relief between the situations, whose own ground stays as designed (SPEC 19)
+    if args.relief is not None:
         if args.relief < 0:
             raise UserError("--relief", f"expected a seed >= 0, got {args.relief}")
-        course.relief = relief_for(parse_scenario(course.data(), str(out), table), args.relief)
+        if args.after is not None:  # a follow-up's relief: between its situations
+            course.relief = relief_for(parse_scenario(course.data(), str(out), table), args.relief)
     scenario = parse_scenario(course.data(), str(out), table)  # checked as every command will read it
     source = (
         f"--classes {args.classes}"
@@ -316,8 +320,9 @@ def course_parser(sub: argparse._SubParsersAction) -> None:
         nargs="?",
         const=0,
         metavar="SEED",
-        help="give the course relief between its situations (bumps, dips, ramps, ditches and gently rolling ground, drawn "
-        "from SEED, default 0; the situations' own ground stays flat), as teach_relief has (docs/cli.md, Relief)",
+        help="a course with relief, as teach_relief is: the relief situations (mounds on the path, banks beside it, a ramp, "
+        "each class against a bank) among the others, and relief between the situations (bumps, dips, ramps, ditches and "
+        "gently rolling ground, drawn from SEED, default 0; the terrain situations' own ground stays flat) (docs/cli.md, Relief)",
     )
     add_classes_arg(p)
     add_force_arg(p)

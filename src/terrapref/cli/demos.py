@@ -289,6 +289,7 @@ def _print_what_the_drive_shows(rec) -> None:
     from terrapref.progress import Progress
     from terrapref.recipes import DEFAULT_RECIPE, recipe_named
     from terrapref.rules import SpeedConfig
+    from terrapref.rules.offset.rule import OffsetConfig
 
     if len(rec) == 0:
         print("what the drive shows: nothing (no frames)")
@@ -309,6 +310,12 @@ def _print_what_the_drive_shows(rec) -> None:
         print("  the speed it shows: " + "; ".join(fitted.lines(dataset.feature_config.feature_classes, lethal)))
         for warning in fitted.warnings(dataset.feature_config.feature_classes, lethal):
             print(f"  warning: {warning}")
+    offset = next((rule for rule in recipe.rules if isinstance(rule, OffsetConfig)), None)
+    found = dataset.rule_data(offset.type) if offset is not None else None
+    if found is not None and "relief_m" in found[1]:  # a drive on relief: the steering's prices of it
+        steering = offset.fit(FitData(dataset, mirror=False))
+        for line in steering.relief_lines() if steering is not None else ():
+            print(f"  {line}")
 
 
 def inspect_parser(sub: argparse._SubParsersAction) -> None:

@@ -127,6 +127,14 @@ def _print_results(evaluation: Evaluation, metrics: dict, args: argparse.Namespa
             r = evaluation.relief
             driver += f", relief: round side slopes past {r.roll_deg:g} deg and grades past {r.grade_deg:g} deg"
         print(f"planner: agreement with the driver ({driver}) {rate_text(sum(z['agrees'] for z in compared), len(compared))}")
+    relief = [z for sc in metrics["scenarios"].values() for run in sc.get("planner", {}).values() for z in run.get("relief_zones", ())]
+    relief = [z for z in relief if "agrees" in z]
+    if relief:
+        both = [z["agrees"] for z in compared] + [z["agrees"] for z in relief]
+        print(
+            f"planner: agreement with the driver on relief zones (over, or round on the same side) "
+            f"{rate_text(sum(z['agrees'] for z in relief), len(relief))}; on terrain and relief zones {rate_text(sum(both), len(both))}"
+        )
     if "speed" in metrics:
         for line in SpeedComparison.from_dict(metrics["speed"]).lines():
             print(f"planner: {line}")

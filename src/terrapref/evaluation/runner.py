@@ -112,6 +112,7 @@ class RunResult:
     frames: tuple[KeptFrame, ...] = ()
     run: KeptRun | None = None
     agreement: tuple[ZoneAgreement, ...] | None = None  # per zone of ``metrics.zones``; see annotate_agreement
+    relief_agreement: tuple[ZoneAgreement, ...] | None = None  # per relief zone of ``metrics.relief_zones``, likewise
 
     def zone_dicts(self) -> list[dict]:
         """The zones as JSON, each with the driver's choice and the agreement where they were compared."""
@@ -121,8 +122,12 @@ class RunResult:
         return [z | asdict(a) for z, a in zip(zones, self.agreement, strict=True)]
 
     def metrics_dict(self) -> dict:
-        """The metrics as JSON, the zones as :meth:`zone_dicts` writes them."""
-        return self.metrics.to_dict() | {"zones": self.zone_dicts()}
+        """The metrics as JSON, the zones as :meth:`zone_dicts` writes them, the relief zones
+        (on relief) likewise with the driver's choice and the agreement where compared."""
+        out = self.metrics.to_dict() | {"zones": self.zone_dicts()}
+        if self.relief_agreement is not None:
+            out["relief_zones"] = [z | asdict(a) for z, a in zip(out["relief_zones"], self.relief_agreement, strict=True)]
+        return out
 
     def to_dict(self) -> dict:
         """Which run and its metrics, as JSON (the path and the kept decisions are arrays, not written)."""
@@ -143,6 +148,9 @@ class Summary:
     agreement_zones: int = 0  # zones compared with the driver's; the agreement fields are None without any
     agreement_rate: float | None = None
     agreement_ci95: tuple[float, float] | None = None
+    relief_agreement_zones: int = 0  # on relief, relief zones compared with the driver's (SPEC 19); the fields are None without any
+    relief_agreement_rate: float | None = None
+    relief_agreement_ci95: tuple[float, float] | None = None
     completed_ci95: tuple[float, float] = (0.0, 1.0)
     not_reached: int = 0  # zones the vehicle did not get past (each a failure)
     ended: dict[str, int] = field(default_factory=dict)  # runs by how they ended (goal, stopped, time limit)
@@ -211,6 +219,12 @@ class Summary:
             if self.agreement_zones
             else {}
         )
+        if self.relief_agreement_zones:
+            agreement |= {
+                "relief_agreement_rate": self.relief_agreement_rate,
+                "relief_agreement_ci95": list(self.relief_agreement_ci95 or ()),
+                "relief_agreement_zones": self.relief_agreement_zones,
+            }
         return {
             "runs": self.runs,
             "zones": self.zones,
@@ -439,7 +453,11 @@ def _with_agreement(run: RunResult, ref: RunResult | None) -> RunResult:
         return run
     by_id = {z.id: z for z in ref.metrics.zones}
     agreement = tuple(ZoneAgreement(by_id[z.id].choice, zone_agrees(z, by_id[z.id])) for z in run.metrics.zones)
-    return replace(run, agreement=agreement)
+    relief = None
+    mine, theirs = run.metrics.relief_zones, ref.metrics.relief_zones
+    if mine is not None and theirs is not None and len(mine) == len(theirs):  # the same course: the same relief zones
+        relief = tuple(ZoneAgreement(t.choice, m.choice == t.choice) for m, t in zip(mine, theirs))
+    return replace(run, agreement=agreement, relief_agreement=relief)
 
 
 def summarise(results: list[RunResult], driver: str) -> Summary:
@@ -450,6 +468,8 @@ def summarise(results: list[RunResult], driver: str) -> Summary:
     ok = sum(z.success for z in zones)
     compared = [a for r in runs if r.agreement is not None for a in r.agreement]
     agree = sum(a.agrees for a in compared)
+    relief = [a for r in runs if r.relief_agreement is not None for a in r.relief_agreement]
+    relief_agree = sum(a.agrees for a in relief)
     completed = sum(r.metrics.completed for r in runs)
     stops: dict[str, float] = {}
     for r in runs:
@@ -466,6 +486,9 @@ def summarise(results: list[RunResult], driver: str) -> Summary:
         agreement_zones=len(compared),
         agreement_rate=round(agree / len(compared), 4) if compared else None,
         agreement_ci95=_rounded(wilson(agree, len(compared))) if compared else None,
+        relief_agreement_zones=len(relief),
+        relief_agreement_rate=round(relief_agree / len(relief), 4) if relief else None,
+        relief_agreement_ci95=_rounded(wilson(relief_agree, len(relief))) if relief else None,
         completed_ci95=_rounded(wilson(completed, len(runs))),
         not_reached=sum(not z.reached for z in zones),
         ended=dict(sorted(Counter(r.metrics.ending for r in runs).items())),

@@ -264,6 +264,7 @@ class RunMetrics:
     max_pitch_deg: float = 0.0  # the largest |pitch| [deg]
     # On relief, by grade band (GRADE_BANDS) of the ground driven: the mean speed ("mps") and the seconds ("s"); None: flat.
     speed_by_grade_mps: dict[str, dict[str, float]] | None = None
+    relief_zones: list[ReliefZoneResult] | None = None  # on relief, how it passed each relief zone (relief_zones); None: flat
 
     @property
     def incidents(self) -> int:
@@ -285,7 +286,7 @@ class RunMetrics:
         return float(sum(self.distance_m.values()))
 
     def to_dict(self) -> dict:
-        return to_plain(self, omit_none=("speed_by_grade_mps",))
+        return to_plain(self, omit_none=("speed_by_grade_mps", "relief_zones"))
 
     @classmethod
     def from_dict(cls, data: dict) -> RunMetrics:
@@ -344,6 +345,7 @@ def score_run(
         max_lateral_accel_mps2=round(_max_lateral_accel(log.trace, dt_s), 4),
         goal_stop=asdict(log.goal_stop) if log.goal_stop is not None else None,
         speed_by_grade_mps=_by_grade(grade, length, time) if grade is not None else None,
+        relief_zones=score_relief_zones(xy, path, relief_zones(path, world), log.progress_m) if world.has_relief else None,
         **log.relief_summary(),
     )
 
@@ -387,6 +389,90 @@ def grade_along(trace: np.ndarray, mid: np.ndarray, world: WorldMap, max_step_m:
     half = 0.5 * VehicleConfig().wheelbase_m
     ahead = np.stack([np.cos(yaw), np.sin(yaw)], axis=1) * half
     return np.arctan((world.height_at(mid + ahead) - world.height_at(mid - ahead)) / (2.0 * half))
+
+
+# A relief zone: a stretch of the path whose own ground would tilt the body, heading along the
+# path, past this angle across or along [deg] (the gentlest band the offset rule prices), its
+# stretches less than RELIEF_GAP_M apart joined. Its choice: where the run's reference point
+# held, on average over the stretch, more than RELIEF_SIDE_M off the path, the side it went round
+# by (``left``, ``right``); else ``over``.
+RELIEF_ZONE_DEG = 4.0
+RELIEF_GAP_M = 5.0
+RELIEF_SIDE_M = 0.5
+RELIEF_STEP_M = 0.25  # the path is read this often [m]
+RELIEF_CHOICES = ("over", "left", "right")
+
+
+@dataclass(frozen=True)
+class ReliefZoneResult:
+    """How a run passed one relief zone (:func:`relief_zones`).
+
+    Attributes:
+        from_m, to_m: the zone's stretch of the path [m of arc length].
+        choice: ``over``, ``left`` or ``right`` (RELIEF_CHOICES), or :data:`NOT_REACHED`.
+        offset_m: the reference point's mean offset from the path over the stretch [m, left
+            positive]; None where not reached.
+    """
+
+    from_m: float
+    to_m: float
+    choice: str
+    offset_m: float | None = None
+
+    def to_dict(self) -> dict:
+        return to_plain(self)
+
+
+def relief_zones(path: ReferencePath, world: WorldMap) -> list[tuple[float, float]]:
+    """The relief zones (module comment above) of ``path`` on ``world``: their stretches (from, to)
+    [m of arc length]; none on flat ground. The body is the default vehicle's: its track across,
+    its wheelbase along, the heights under its wheels as terrapref.vehicle.ground sets its attitude."""
+    if not world.has_relief or path.length_m < RELIEF_STEP_M:
+        return []
+    vehicle = VehicleConfig()
+    across, along = vehicle.half_width_m, 0.5 * vehicle.wheelbase_m
+    s = np.arange(0.0, path.length_m, RELIEF_STEP_M)
+    centre, direction = path.point_at(s), path.direction_at(s)
+    normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1)
+    roll = np.abs(world.height_at(centre + across * normal) - world.height_at(centre - across * normal)) / (2.0 * across)
+    pitch = np.abs(world.height_at(centre + along * direction) - world.height_at(centre - along * direction)) / (2.0 * along)
+    steep = np.flatnonzero(np.degrees(np.arctan(np.maximum(roll, pitch))) > RELIEF_ZONE_DEG)
+    out: list[tuple[float, float]] = []
+    for i in steep:
+        if out and s[i] - out[-1][1] < RELIEF_GAP_M:
+            out[-1] = (out[-1][0], float(s[i]))
+        else:
+            out.append((float(s[i]), float(s[i])))
+    return [(round(a, 3), round(b, 3)) for a, b in out]
+
+
+def score_relief_zones(
+    xy: np.ndarray, path: ReferencePath, zones: list[tuple[float, float]], progress_m: float | None
+) -> list[ReliefZoneResult]:
+    """How the run whose reference point drove ``xy`` (T, 2) [m] passed each relief zone (from
+    :func:`relief_zones`): its mean offset from the path over the zone's stretch (each station's
+    from the points within half a step of its line across the path, up to 5 m off), and the side
+    that makes (module comment above). A zone the run's progress did not get past, or whose
+    stations no point passed, is :data:`NOT_REACHED`."""
+    xy = np.asarray(xy, dtype=float)
+    out = []
+    for s0, s1 in zones:
+        s = np.arange(s0, s1 + 1e-9, RELIEF_STEP_M)
+        centre, direction = path.point_at(s), path.direction_at(s)
+        rel = xy[None, :, :] - centre[:, None, :]  # (Q, T, 2)
+        ahead = np.einsum("qtk,qk->qt", rel, direction)
+        side = rel[..., 1] * direction[:, None, 0] - rel[..., 0] * direction[:, None, 1]  # left of the path positive
+        near = (np.abs(ahead) <= RELIEF_STEP_M / 2) & (np.abs(side) <= 5.0)
+        seen = near.any(axis=1)
+        passed = progress_m is None or progress_m >= s1 - REACHED_TOLERANCE_M
+        if not seen.any() or not passed:
+            out.append(ReliefZoneResult(s0, s1, NOT_REACHED))
+            continue
+        per_station = np.where(near, side, 0.0).sum(axis=1)[seen] / near.sum(axis=1)[seen]
+        offset = float(per_station.mean())
+        choice = "left" if offset > RELIEF_SIDE_M else "right" if offset < -RELIEF_SIDE_M else "over"
+        out.append(ReliefZoneResult(s0, s1, choice, round(offset, 3)))
+    return out
 
 
 def _by_grade(grade: np.ndarray, length: np.ndarray, time: np.ndarray) -> dict[str, dict[str, float]]:

@@ -504,3 +504,35 @@ def chord_grades(
                 total += weights[j] * (gx * c + gy * s)
                 weight += weights[j]
         out[i] = math.degrees(math.atan(total / weight)) if weight >= 0.5 else np.nan
+
+
+@njit(cache=True, nogil=True)
+def beside_attitudes(
+    shape: tuple[np.ndarray, ...],
+    least_weight: float,
+    grid: tuple[float, float, float],
+    reach: int,
+    centre: np.ndarray,
+    normal: np.ndarray,
+    offsets: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """The side slope and the grade [deg, both >= 0] (O, S, 2) into ``out`` of the ground under a
+    body heading along a path, centred ``offsets`` (O,) [m] left of its points ``centre`` (S, 2)
+    (``normal`` (S, 2): the unit vectors to its left): the ground's gradient (:func:`_disc_gradient`)
+    across the way and along it. NaN where the gradient is unknown. ``grid``: the map's origin
+    (x, y) [m] and its cell size [m]."""
+    n = shape[0].shape[0]
+    x0, y0, res = grid
+    for o in range(offsets.shape[0]):
+        for q in range(centre.shape[0]):
+            nx, ny = normal[q, 0], normal[q, 1]
+            col = math.floor((centre[q, 0] + offsets[o] * nx - x0) / res)
+            row = math.floor((centre[q, 1] + offsets[o] * ny - y0) / res)
+            out[o, q, 0] = out[o, q, 1] = np.nan
+            if not (1 <= row < n - 1 and 1 <= col < n - 1):
+                continue
+            gx, gy = _disc_gradient(shape, least_weight, int(row), int(col), reach)
+            if gx == gx:
+                out[o, q, 0] = math.degrees(math.atan(abs(gx * nx + gy * ny)))
+                out[o, q, 1] = math.degrees(math.atan(abs(gx * ny - gy * nx)))  # along the tangent (ny, -nx)

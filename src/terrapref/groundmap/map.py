@@ -212,6 +212,28 @@ class GroundMap:
         height_kernels.chord_grades(self._shape, 1.0 / h.max_error_m**2, grid, disc_reach(h, res), centre, heading, chord, out)
         return out
 
+    def beside_attitudes(self, centre: np.ndarray, normal: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+        """The side slope and the grade [deg, both >= 0] (O, S, 2) of the ground under a body
+        heading along a path, centred ``offsets`` (O,) [m] left of its points ``centre`` (S, 2)
+        (``normal`` (S, 2) pointing left): the ground's gradient (:meth:`gradient_at`) across the
+        way and along it; NaN where unknown or off the map (in one compiled pass,
+        terrapref.groundmap.height_compiled.beside_attitudes)."""
+        out = np.full((len(offsets), len(centre), 2), np.nan)
+        if self.origin is None:
+            return out
+        h, res = self.height_settings, self.settings.map_resolution_m
+        height_kernels.beside_attitudes(
+            self._shape,
+            1.0 / h.max_error_m**2,
+            (*self._origin_xy, res),
+            disc_reach(h, res),
+            np.ascontiguousarray(centre, dtype=np.float64),
+            np.ascontiguousarray(normal, dtype=np.float64),
+            np.ascontiguousarray(offsets, dtype=np.float64),
+            out,
+        )
+        return out
+
     def _cells_under(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The rows and columns (N,) of the cells under the world points (..., 2); -1 for a point not a number."""
         flat = np.asarray(points, dtype=np.float64).reshape(-1, 2)

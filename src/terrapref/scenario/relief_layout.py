@@ -1,7 +1,7 @@
 """Relief for a course that has none: features placed by the course's own geometry, from a seed.
 
-The path is cut into the stretches between its zones (a zone's situation stays on the ground it
-was made for), each at most :data:`STRETCH_M` long, the first :data:`CLEAR_M` of the path (the
+The path is cut into the stretches between its zones and the relief it has (a zone's situation,
+and a teaching course's relief situation, stays on the ground it was made for), each at most :data:`STRETCH_M` long, the first :data:`CLEAR_M` of the path (the
 start) and its last metres left out. Each stretch gets one feature drawn at random among
 those that fit in it, a bump or a dip only where no larger one fits:
 
@@ -66,6 +66,11 @@ def _stretches(scenario: Scenario, path: ReferencePath) -> list[tuple[float, flo
     points = path.point_at(s)
     for zone in scenario.zones:
         free &= ~zone.shape.contains(points)
+    for entry in scenario.relief:  # relief the course has (its relief situations) keeps its own ground
+        box = entry.bounds()
+        if box is not None:
+            x0, y0, x1, y1 = box
+            free &= ~((points[:, 0] >= x0 - 1.0) & (points[:, 0] <= x1 + 1.0) & (points[:, 1] >= y0 - 1.0) & (points[:, 1] <= y1 + 1.0))
     out: list[tuple[float, float]] = []
     edges = np.flatnonzero(np.diff(np.concatenate([[0], free.astype(np.int8), [0]])))
     for start, stop in zip(edges[::2], edges[1::2]):

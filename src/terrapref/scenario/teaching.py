@@ -13,6 +13,13 @@ when the course shows
   (or, in a table without lethal classes, across the whole way), so that every driver drives
   along it at its own speed on that class (SPEC 18).
 
+With relief (``terrapref course --relief``, the packaged ``teach_relief``) it also shows each
+relief situation alone and relief against terrain (:func:`relief_situations`): a mound on the
+path of a gentle and of a steep grade, a bank beside the path (the path on its flank) of a gentle
+and of a steep side slope, a ramp up and down across the way, and each feature class as a flat
+patch beside the path against the path's own ground sloping across the way as a bank of the
+background. Which of them a driver goes round, and how it slows on them, is its relief style.
+
 Pairs grow as K(K-1)/2. The course shows each pair once on each side, each strip with the
 lethal terrain once on each side, each lethal class alone twice (once a little left of the path,
 once a little right) and each feature class alone once and as a lane once, while that drive stays
@@ -31,17 +38,25 @@ the learned order (``terrapref course --after REC``).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 from terrapref.scenario.builder import CourseBuilder, trail
 from terrapref.terrain import ClassTable
+from terrapref.vehicle import VehicleConfig
 
 DRIVER_SPEED_MPS = 1.0  # the speed a teaching drive is timed at (the synthetic driver's)
 BUDGET_M = 600.0  # the longest full design [m]: 10 minutes at 1 m/s
 LANE = 8  # situations between two turns round
-HALF_M = {"lone": 6.0, "lane": 6.0, "pair": 8.5, "strip": 8.5}  # half a situation's leg [m]
+HALF_M = {"lone": 6.0, "lane": 6.0, "pair": 8.5, "strip": 8.5, "mound": 6.5, "bank": 6.5, "ramp": 6.5, "slope": 6.5}  # half a leg [m]
+RELIEF_KINDS = ("mound", "bank", "ramp", "slope")  # the situations of relief (module docstring)
+MOUND_RADIUS_M = 3.0  # a mound on the path: its radius; its height sets its steepest grade [m]
+BANK_WIDTH_M, BANK_LENGTH_M = 5.0, 9.0  # a bank beside the path: its full width and length; the path on its flank [m]
+RAMP_TOP_M, RAMP_EDGE_M, RAMP_ACROSS_M = 3.0, 4.0, 14.0  # a ramp across the way: its top, each ramp, across [m]
+SLOPE_PATCH_M = (8.0, 4.0)  # relief against terrain: the flat patch beside the path, (length, width) [m]
+RELIEF_DEG = {"gentle mound": 8.0, "steep mound": 16.0, "gentle bank": 10.0, "steep bank": 16.0, "ramp": 7.0, "slope": 14.0}
 START_M, END_M = 8.0, 5.0  # trail before the first situation and after the last [m]
 PAIR_SIZES = ((8.0, 5.0), (7.0, 5.5), (7.5, 5.0), (8.0, 5.5))  # (length, width) of a pair's patches [m]
 STRIP_M = 2.8  # width of a strip on the path [m]
@@ -66,6 +81,7 @@ class Situation:
     kind: str
     classes: tuple[str, ...]
     offset_m: float = 0.0
+    deg: float = 0.0
 
     @property
     def length_m(self) -> float:
@@ -73,6 +89,13 @@ class Situation:
 
     @property
     def label(self) -> str:
+        side = "left" if self.offset_m > 0 else "right"
+        if self.kind == "mound" or self.kind == "ramp":
+            return f"{self.kind} {self.deg:g} deg"
+        if self.kind == "bank":
+            return f"bank {self.deg:g} deg {side}"
+        if self.kind == "slope":
+            return f"{self.classes[0]} {side} vs bank {self.deg:g} deg"
         return {"pair": " vs ", "strip": " | ", "lone": "", "lane": " | "}[self.kind].join(self.classes)
 
 
@@ -101,11 +124,11 @@ def balanced_pairs(names: Sequence[str]) -> list[tuple[str, str]]:
     return pairs
 
 
-def situations(classes: ClassTable, full: bool | None = None) -> list[Situation]:
+def situations(classes: ClassTable, full: bool | None = None, relief: bool = False) -> list[Situation]:
     """The situations of ``classes``' teaching course, in driving order.
 
     ``full``: each pair on both sides (True), once (False), or whichever fits
-    :data:`BUDGET_M` (None)."""
+    :data:`BUDGET_M` (None); ``relief``: with the relief situations (:func:`relief_situations`)."""
     terrain, lethal = list(classes.terrain_names), list(classes.lethal)
     if not terrain:
         raise ValueError("the class table has no feature class (neither background nor lethal) to teach")
@@ -130,7 +153,51 @@ def situations(classes: ClassTable, full: bool | None = None) -> list[Situation]
     lanes = [
         Situation("lane", (lethal[k % len(lethal)], name, lethal[k % len(lethal)]) if lethal else (name,)) for k, name in enumerate(terrain)
     ]
-    return _interleave([[Situation("pair", p) for p in pairs], strips, lone, lanes])
+    return _interleave([[Situation("pair", p) for p in pairs], strips, lone, lanes, relief_situations(classes) if relief else []])
+
+
+def relief_situations(classes: ClassTable) -> list[Situation]:
+    """The relief situations (module docstring) of ``classes``' teaching course: two mounds, two
+    banks (one on each side), a ramp, and each feature class against a bank, sides alternating;
+    each shows the steepest grade or side slope :data:`RELIEF_DEG` gives it."""
+    d = RELIEF_DEG
+    items = [
+        Situation("mound", (), 0.0, d["gentle mound"]),
+        Situation("bank", (), 1.0, d["gentle bank"]),
+        Situation("ramp", (), 0.0, d["ramp"]),
+        Situation("mound", (), 0.0, d["steep mound"]),
+        Situation("bank", (), -1.0, d["steep bank"]),
+    ]
+    return items + [Situation("slope", (name,), (1.0, -1.0)[k % 2], d["slope"]) for k, name in enumerate(classes.terrain_names)]
+
+
+def place_relief(c: CourseBuilder, item: Situation, s: float) -> None:
+    """The relief situation ``item`` (module docstring) centred at arc length ``s`` of ``c``'s path:
+    its relief entries, and a slope's flat patch. Each is as steep as ``item.deg`` for the default
+    vehicle's body (its wheels ``a`` = half its wheelbase ahead and behind, or half its track to
+    each side): a mound's cosine profile of height h and radius R pitches it most, by
+    ``atan(h sin(pi a / R) / (2 a))``, halfway out; a bank's (a ridge of width w) rolls it by
+    ``atan(h sin(2 pi a / w) / (2 a))`` a quarter of its width from its line, where the path runs;
+    a ramp rises its height over its edge."""
+    vehicle = VehicleConfig()
+    tan = math.tan(math.radians(item.deg))
+    if item.kind == "mound":
+        a = 0.5 * vehicle.wheelbase_m
+        height = tan * 2.0 * a / math.sin(math.pi * a / MOUND_RADIUS_M)
+        c.relief.append({"mound": {"center": c.to_world(s, [(0.0, 0.0)])[0], "radius": MOUND_RADIUS_M, "height_m": round(height, 3)}})
+    elif item.kind == "ramp":
+        a, b = RAMP_TOP_M / 2, RAMP_ACROSS_M / 2
+        corners = c.to_world(s, [(-a, -b), (a, -b), (a, b), (-a, b)])
+        c.relief.append({"plateau": {"polygon": corners, "height_m": round(tan * RAMP_EDGE_M, 3), "edge_m": RAMP_EDGE_M}})
+    else:  # a bank with the path on its flank: rising on the side of the offset, or across from a slope's patch
+        side = math.copysign(1.0, item.offset_m) * (1.0 if item.kind == "bank" else -1.0)
+        line = c.to_world(s, [(-BANK_LENGTH_M / 2, side * BANK_WIDTH_M / 4), (BANK_LENGTH_M / 2, side * BANK_WIDTH_M / 4)])
+        a = vehicle.half_width_m
+        height = tan * 2.0 * a / math.sin(2.0 * math.pi * a / BANK_WIDTH_M)
+        c.relief.append({"ridge": {"polyline": line, "width_m": BANK_WIDTH_M, "height_m": round(height, 3)}})
+        if item.kind == "slope":
+            length, width = SLOPE_PATCH_M
+            c.rect(item.classes[0], s, math.copysign(0.6 + width / 2, item.offset_m), length, width)
 
 
 def fits(classes: ClassTable) -> bool:
@@ -217,7 +284,9 @@ def build_course(classes: ClassTable, items: Sequence[Situation], name: str, des
     for k, item in enumerate(items):
         s += HALF_M[item.kind]
         zid = str(k + 1)
-        if item.kind == "lone":
+        if item.kind in RELIEF_KINDS:  # no zone: evaluate finds relief zones by the ground's own tilt
+            place_relief(c, item, s)
+        elif item.kind == "lone":
             name_ = item.classes[0]
             _lone(c, name_, order[name_], s, item.offset_m)
             c.zone(zid, item.label, s, (9.0, 9.0), "avoid")
@@ -268,17 +337,36 @@ def teaching_course(classes: ClassTable, name: str = "teaching_course", full: bo
     return build_course(classes, situations(classes, full), name, description(classes, full))
 
 
-def designed_course(classes: ClassTable, design: str = "auto", name: str = "teaching_course") -> tuple[CourseBuilder, list[Situation]]:
+def designed_course(
+    classes: ClassTable, design: str = "auto", name: str = "teaching_course", relief: bool = False
+) -> tuple[CourseBuilder, list[Situation]]:
     """The teaching course of ``classes`` in ``design`` (``terrapref course --design``): ``full``
     (every pair once on each side), ``compact`` (every pair once, sides balanced) or ``auto`` (full
-    while it stays within :data:`BUDGET_M`); with its situations in driving order.
+    while it stays within :data:`BUDGET_M`); with the relief situations where ``relief``; with its
+    situations in driving order.
 
     Raises:
         ValueError: the table has no feature class to teach.
     """
     full = fits(classes) if design == "auto" else design == "full"
-    items = situations(classes, full)
-    return build_course(classes, items, name, description(classes, full)), items
+    items = situations(classes, full, relief)
+    text = description(classes, full) + (f" {RELIEF_DESCRIPTION}" if relief else "")
+    return build_course(classes, items, name, text), items
+
+
+def relief_course(
+    classes: ClassTable, design: str = "auto", name: str = "teaching_course", seed: int = 0
+) -> tuple[CourseBuilder, list[Situation]]:
+    """The teaching course of ``classes`` with relief (``terrapref course --relief SEED``, and the
+    packaged ``teach_relief`` of the default table with seed 0): :func:`designed_course` with the
+    relief situations, and the relief of ``seed`` between the situations
+    (terrapref.scenario.relief_layout)."""
+    from terrapref.scenario.loader import parse_scenario
+    from terrapref.scenario.relief_layout import relief_for
+
+    course, items = designed_course(classes, design, name, relief=True)
+    course.relief = [*course.relief, *relief_for(parse_scenario(course.data(), name, classes), seed)]
+    return course, items
 
 
 def follow_up_after(
@@ -308,6 +396,12 @@ def write_teaching_course(folder: str | Path, classes: ClassTable) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     write_text_atomic(path, teaching_course(classes).to_yaml())
     return path
+
+
+RELIEF_DESCRIPTION = (
+    "With relief: a gentle and a steep mound on the path, a gentle and a steep bank beside it, a ramp up and down, "
+    "each feature class flat beside the path against a bank of the background, and bumps and dips between the situations."
+)
 
 
 def description(classes: ClassTable, full: bool) -> str:

@@ -18,6 +18,14 @@ and one gated column (:func:`gated`): d^2 while nothing lies on the path within 
 distance, so that a utility can learn to keep to the path until a patch is close. Only the
 first patch on the path (gaps under ``gap_m`` do not split it) and ``span_m / 2`` beyond it
 are weighed; later patches wait for their own turn.
+
+On relief (a map that holds the ground's shape, read from depth), and for a utility that prices
+it, each offset also has its relief columns (:meth:`OffsetFeatures.relief`): the metres over
+which the ground under the body, heading along the path, slopes across the way more than each
+of :data:`RELIEF_BANDS_DEG`, then the metres over which it climbs or falls along the way more
+than each of them. Weighed beside the terrain classes, the bands price each side slope and grade
+the way a driver goes round them or not. Ground on the path steeper than the first band is a
+patch on the path as terrain is.
 """
 
 from __future__ import annotations
@@ -31,6 +39,9 @@ from terrapref.rules.offset import offsets_compiled as kernels
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.scenario.path import ReferencePath
 
+RELIEF_BANDS_DEG = (4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 18.0, 20.0, 22.0)
+"""The side slopes and grades [deg] past which the relief columns count the metres of the way."""
+
 
 @dataclass(frozen=True)
 class OffsetView:
@@ -39,11 +50,15 @@ class OffsetView:
     Attributes:
         features: per offset, metres on each terrain class, metres never seen and the detour's
             price, shape (O, K + 2).
-        near_m: distance along the path to the first terrain on it [m] (inf: none in reach).
+        near_m: distance along the path to the first terrain (or steep ground) on it [m] (inf:
+            none in reach).
+        relief: per offset, the metres sloping across the way past each band, then along it
+            (O, 2 * len(RELIEF_BANDS_DEG)); None where relief was not read.
     """
 
     features: np.ndarray
     near_m: float
+    relief: np.ndarray | None = None
 
 
 class OffsetFeatures:
@@ -62,10 +77,25 @@ class OffsetFeatures:
         """Terrain column under every footprint point, shape (O, S, F)."""
         return gmap.beside(path, np.minimum(progress_m + self.stations, path.length_m), self._lat)
 
-    def __call__(self, gmap: GroundMap, path: ReferencePath, progress_m: float) -> OffsetView:
+    def attitudes(self, gmap: GroundMap, path: ReferencePath, progress_m: float) -> np.ndarray:
+        """The side slope and the grade [deg] (O, S, 2) of the ground under the body at every
+        offset and station, heading along the path; NaN where the map does not know them."""
+        s = np.minimum(progress_m + self.stations, path.length_m)
+        heading = path.heading_at(s)
+        normal = np.stack([-np.sin(heading), np.cos(heading)], axis=1)
+        return gmap.beside_attitudes(path.point_at(s), normal, self.offsets)
+
+    def __call__(self, gmap: GroundMap, path: ReferencePath, progress_m: float, relief: bool = False) -> OffsetView:
+        """The features at ``progress_m`` [m] along ``path``, with the relief columns when ``relief``."""
         c = self.config
-        features, near_m = kernels.offset_features(
+        attitudes = self.attitudes(gmap, path, progress_m) if relief else None
+        if attitudes is None:
+            steep = np.zeros(len(self.stations), dtype=np.bool_)
+        else:
+            steep = (attitudes[self._centre] > RELIEF_BANDS_DEG[0]).any(axis=1)
+        features, near_m, upto = kernels.offset_features(
             self.columns(gmap, path, progress_m),
+            steep,
             self._centre,
             self.k,
             self._gap,
@@ -75,7 +105,11 @@ class OffsetFeatures:
             self.offsets,
             c.span_m,
         )
-        return OffsetView(features, float(near_m))
+        if attitudes is None:
+            return OffsetView(features, float(near_m))
+        bands = np.asarray(RELIEF_BANDS_DEG)
+        past = attitudes[:, :upto, :, None] > bands  # (O, upto, 2, B); unknown ground is past none
+        return OffsetView(features, float(near_m), past.sum(axis=1).reshape(len(self.offsets), -1) * c.station_step_m)
 
 
 def gated(view: OffsetView, offsets: np.ndarray, near_m: float) -> np.ndarray:

@@ -34,11 +34,18 @@ class OffsetUtility:
             K terrain classes, never seen, the detour's price, the gate.
         near_m: the gate's near distance [m].
         config: the offset rule's geometry.
+        relief: one weight per relief column (terrapref.rules.offset.features.OffsetView.relief):
+            side slope past each band, then grade past each; None: a utility that prices no
+            relief (fitted on flat ground).
+        relief_shown: the steepest band the drive showed ground past, of side slope and of
+            grade [deg] (NaN: none): past it, its fit could not tell the price; None without relief.
     """
 
     weights: np.ndarray
     near_m: float
     config: OffsetGeometry = field(default_factory=OffsetGeometry)
+    relief: np.ndarray | None = None
+    relief_shown: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -52,6 +59,8 @@ class OffsetFit:
             the weights).
         losses: the loss at every candidate near distance.
         samples: frames fitted.
+        relief: the relief columns' weights, for frames read with them; else None.
+        relief_shown: the steepest bands the frames showed (OffsetUtility.relief_shown).
     """
 
     weights: np.ndarray
@@ -59,6 +68,8 @@ class OffsetFit:
     loss: float
     losses: dict[float, float]
     samples: int
+    relief: np.ndarray | None = None
+    relief_shown: tuple[float, float] | None = None
 
 
 def soft_labels(intent: np.ndarray, offsets: np.ndarray, sigma_m: float) -> np.ndarray:
@@ -104,6 +115,23 @@ def fit_softmax(X: np.ndarray, Y: np.ndarray, l2: float = 1e-3, iterations: int 
     return theta, float(evaluate(theta)[0])
 
 
+def _fit_steeper_costs_more(X: np.ndarray, Y: np.ndarray, l2: float, relief: range) -> tuple[np.ndarray, float]:
+    """:func:`fit_softmax` with the relief columns' weights (``relief``) at most 0: each band past
+    the one below it adds a price, never takes one off, so steeper ground never costs less than
+    gentler (a drive that shows no reason to go round some relief says nothing for driving onto it).
+    The columns whose weight comes out positive are held at 0 and the rest fitted again, until
+    none does."""
+    free = np.ones(X.shape[2], dtype=bool)
+    while True:
+        fitted, loss = fit_softmax(X[:, :, free], Y, l2)
+        theta = np.zeros(X.shape[2])
+        theta[free] = fitted
+        positive = [j for j in relief if free[j] and theta[j] > 0.0]
+        if not positive:
+            return theta, loss
+        free[positive] = False
+
+
 @dataclass(frozen=True)
 class OffsetFitConfig:
     """How the offset utility is fitted.
@@ -120,21 +148,34 @@ class OffsetFitConfig:
 
 
 def fit_offset_utility(
-    features: np.ndarray, near_m: np.ndarray, intent: np.ndarray, offsets: np.ndarray, config: OffsetFitConfig | None = None
+    features: np.ndarray,
+    near_m: np.ndarray,
+    intent: np.ndarray,
+    offsets: np.ndarray,
+    config: OffsetFitConfig | None = None,
+    relief: np.ndarray | None = None,
+    bands: tuple[float, ...] = (),
 ) -> OffsetFit:
     """Fit the offset utility to frames' offset features (N, O, K + 2), near distances (N,)
-    and intended offsets (N,) over the candidate ``offsets`` (O,) [m]; frames without an intended
-    offset (NaN) are left out; ``config`` None: the default fit."""
+    and intended offsets (N,) over the candidate ``offsets`` (O,) [m], with their relief columns
+    (N, O, R) when given, past each of ``bands`` [deg] (side slope, then grade); frames without
+    an intended offset (NaN) are left out; ``config`` None: the default fit."""
     config = config or OffsetFitConfig()
     keep = np.isfinite(intent)
     if not keep.any():
         raise ValueError("no frame has an intended offset to fit")
     X, near, Y = features[keep].astype(np.float64), near_m[keep], soft_labels(intent[keep], offsets, config.sigma_m)
+    columns = X.shape[2]
+    if relief is not None:
+        X = np.concatenate([X, relief[keep].astype(np.float64)], axis=2)
     best: tuple[np.ndarray, float, float] | None = None
     losses = {}
     for candidate in config.near_candidates:
         gate = (offsets**2)[None, :, None] * (near > candidate)[:, None, None]
-        theta, loss = fit_softmax(np.concatenate([X, gate], axis=2), Y, config.l2)
+        if relief is None:
+            theta, loss = fit_softmax(np.concatenate([X, gate], axis=2), Y, config.l2)
+        else:
+            theta, loss = _fit_steeper_costs_more(np.concatenate([X, gate], axis=2), Y, config.l2, range(columns, X.shape[2]))
         losses[candidate] = loss
         if best is None or loss < best[1] - 1e-9:
             best = (theta, loss, candidate)
@@ -143,4 +184,16 @@ def fit_offset_utility(
     # fit does not amplify them, and rounding leaves the same weights (and losses) everywhere but
     # at a rounding boundary.
     losses = {near: round(value, WEIGHT_DECIMALS) for near, value in losses.items()}
-    return OffsetFit(np.round(theta, WEIGHT_DECIMALS), chosen, round(loss, WEIGHT_DECIMALS), losses, int(keep.sum()))
+    theta = np.round(theta, WEIGHT_DECIMALS)
+    weights = np.concatenate([theta[:columns], theta[-1:]])  # the relief columns' weights stand between those and the gate
+    priced = theta[columns:-1] if relief is not None else None
+    shown = _shown(relief[keep], bands) if relief is not None else None
+    return OffsetFit(weights, chosen, round(loss, WEIGHT_DECIMALS), losses, int(keep.sum()), priced, shown)
+
+
+def _shown(relief: np.ndarray, bands: tuple[float, ...]) -> tuple[float, float]:
+    """The steepest of ``bands`` [deg] any frame's relief columns (N, O, 2B) count ground past, of
+    side slope and of grade (NaN: none)."""
+    seen = (relief > 0).any(axis=(0, 1)).reshape(2, len(bands))
+    roll, grade = (float(bands[np.flatnonzero(row)[-1]]) if row.any() else math.nan for row in seen)
+    return roll, grade

@@ -15,20 +15,32 @@ from numba import njit
 
 @njit(cache=True, nogil=True)
 def offset_features(
-    col: np.ndarray, centre: int, k: int, gap: int, beyond: int, step: float, stations: np.ndarray, offsets: np.ndarray, span: float
-) -> tuple[np.ndarray, float]:
-    """The offsets' features (O, K + 2) and the distance to the first terrain on the path [m]
-    (inf: none), from the terrain column (O, S, F) under every footprint point.
+    col: np.ndarray,
+    steep: np.ndarray,
+    centre: int,
+    k: int,
+    gap: int,
+    beyond: int,
+    step: float,
+    stations: np.ndarray,
+    offsets: np.ndarray,
+    span: float,
+) -> tuple[np.ndarray, float, int]:
+    """The offsets' features (O, K + 2), the distance to the first terrain on the path [m]
+    (inf: none) and the stations counted, from the terrain column (O, S, F) under every
+    footprint point and where the path's own ground is steep (``steep`` (S,), all False on flat
+    ground or for a utility that prices no relief).
 
     As terrapref.rules.offset.features' module docstring says, and as the NumPy form that
-    tests/rules/test_offset_kernels.py keeps computes it: the first patch on the path (row ``centre``; gaps of at most ``gap`` stations do not split
-    it) and ``beyond`` stations after it are counted, metres per column (count * step / F), the
+    tests/rules/test_offset_kernels.py keeps computes it: the first patch on the path (row
+    ``centre``, terrain or steep ground; gaps of at most ``gap`` stations do not split it) and
+    ``beyond`` stations after it are counted, metres per column (count * step / F), the
     never-seen column, and the detour's price ``offset^2 * (on-path metres + span)``.
     """
     n_off, n_st, n_f = col.shape
     first, last = -1, -1
     for q in range(n_st):
-        on = False
+        on = steep[q]
         for f in range(n_f):
             if col[centre, q, f] < k:
                 on = True
@@ -58,7 +70,7 @@ def offset_features(
             out[o, v] = counts[v] * scale
         out[o, k] = counts[k + 1] * scale
         out[o, k + 1] = offsets[o] * offsets[o] * (on_path_m + span)
-    return out, near_m
+    return out, near_m, upto
 
 
 @njit(cache=True, nogil=True)

@@ -61,7 +61,7 @@ from terrapref.rules.base import (
     number,
     vector,
 )
-from terrapref.rules.offset.features import OffsetFeatures
+from terrapref.rules.offset.features import RELIEF_BANDS_DEG, OffsetFeatures
 from terrapref.rules.offset.fit import OffsetFit, OffsetUtility, fit_offset_utility
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.offset.offsets_compiled import gated_value
@@ -97,7 +97,7 @@ class OffsetConfig(RuleConfig):
     """
 
     type: ClassVar[str] = "offset"
-    arrays: ClassVar[dict[str, str]] = {"features": "finite >= 0", "near_m": "no NaN", "intent_m": "no inf"}
+    arrays: ClassVar[dict[str, str]] = {"features": "finite >= 0", "near_m": "no NaN", "intent_m": "no inf", "relief_m": "finite >= 0"}
     without_data: ClassVar[str] = "the model gets no offset rule and drives C's trajectories"
 
     switch_margin: float = 0.15
@@ -144,8 +144,14 @@ class OffsetConfig(RuleConfig):
             return None
         recorded, arrays = found
         geometry = OffsetGeometry.from_dict(recorded["geometry"])  # the geometry the frames were read with
-        fitted = fit_offset_utility(arrays["features"], arrays["near_m"], arrays["intent_m"], geometry.offsets)
-        return OffsetRule(replace(self, geometry=geometry), OffsetUtility(fitted.weights, fitted.near_m, geometry), fitted)
+        relief = arrays.get("relief_m")
+        if relief is not None and relief.shape[2] != 2 * len(RELIEF_BANDS_DEG):
+            raise UserError("offset rule", f"relief columns of {relief.shape[2]} bands; this version reads {2 * len(RELIEF_BANDS_DEG)}")
+        fitted = fit_offset_utility(
+            arrays["features"], arrays["near_m"], arrays["intent_m"], geometry.offsets, relief=relief, bands=RELIEF_BANDS_DEG
+        )
+        utility = OffsetUtility(fitted.weights, fitted.near_m, geometry, fitted.relief, fitted.relief_shown)
+        return OffsetRule(replace(self, geometry=geometry), utility, fitted)
 
 
 class OffsetReader(FrameReader):
@@ -154,8 +160,10 @@ class OffsetReader(FrameReader):
 
     Arrays: ``features`` (N, O, K + 2) float32, metres per terrain class, never seen, and the
     detour's price per candidate offset; ``near_m`` (N,) float32, the distance along the path to
-    the first terrain on it (inf: none within reach); ``intent_m`` (N,) float32, the offset the
-    driver was steering for (NaN: the recording ends before its reaction time has passed)."""
+    the first terrain (or, on relief, steep ground) on it (inf: none within reach); ``intent_m``
+    (N,) float32, the offset the driver was steering for (NaN: the recording ends before its
+    reaction time has passed); and, for a drive whose frames carry depth (relief), ``relief_m``
+    (N, O, 2 * len(RELIEF_BANDS_DEG)) float32, the relief columns (0 for a frame without depth)."""
 
     def __init__(self, geometry: OffsetGeometry, featurizer: UtilityFeaturizer, camera: PinholeCamera, classes: ClassTable, n: int) -> None:
         k = featurizer.config.n_terrain
@@ -164,12 +172,18 @@ class OffsetReader(FrameReader):
         self.offsets = OffsetFeatures(geometry, k)
         self.features = np.empty((n, len(self.offsets.offsets), k + 2), dtype=np.float32)
         self.near = np.empty(n, dtype=np.float32)
+        self.relief: np.ndarray | None = None  # (N, O, R), from the first frame with depth
         self.progress = np.empty(n)
 
     def read(self, j: int, view: SegmentationView, pose: Pose, path: ReferencePath, progress_m: float) -> None:
-        self.map.update(view, pose, DepthImage.of(view, self.map.camera, pose))
-        frame = self.offsets(self.map, path, progress_m)
+        depth = DepthImage.of(view, self.map.camera, pose)
+        self.map.update(view, pose, depth)
+        frame = self.offsets(self.map, path, progress_m, relief=depth is not None)
         self.features[j], self.near[j] = frame.features, frame.near_m
+        if frame.relief is not None:
+            if self.relief is None:
+                self.relief = np.zeros((len(self.features), *frame.relief.shape), dtype=np.float32)
+            self.relief[j] = frame.relief
         self.progress[j] = progress_m
 
     def arrays(self, recording: Recording, keep: np.ndarray, path: ReferencePath) -> dict[str, np.ndarray]:
@@ -183,7 +197,8 @@ class OffsetReader(FrameReader):
         ok[ok] &= np.abs(recording.times[ahead[ok]] - recording.times[keep[ok]] - delay * period) < 0.5 * period
         later[ok] = recording.commands[ahead[ok]]
         intent = intent_offsets(recording.poses[keep], later, self.progress, path, self.offsets.offsets, self.geometry.intent_pursuit_m)
-        return {"features": self.features, "near_m": self.near, "intent_m": intent.astype(np.float32)}
+        out = {"features": self.features, "near_m": self.near, "intent_m": intent.astype(np.float32)}
+        return out if self.relief is None else {**out, "relief_m": self.relief}
 
 
 @dataclass(frozen=True)
@@ -214,6 +229,7 @@ class OffsetRule(Rule):
             **self.config.to_dict(),
             "weights": u.weights.tolist(),
             "near_m": u.near_m,
+            **({"relief": _relief_block(u)} if u.relief is not None else {}),
             **({"loss": self.fit.loss, "samples": self.fit.samples} if self.fit is not None else {}),
         }
 
@@ -237,13 +253,14 @@ class OffsetRule(Rule):
             config = OffsetConfig(**settings, geometry=geometry)
         except ValueError as exc:
             raise where.error("", str(exc)) from None
+        relief, shown = _relief_weights(block, where)
         fit = None
         if "loss" in block or "samples" in block:  # how the fit went, as training wrote it
             samples = block.get("samples")
             if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
                 raise where.error("samples", "expected the number of frames fitted, an integer >= 1")
-            fit = OffsetFit(weights, near, number(block, "loss", where, low=0.0), {}, samples)
-        return cls(config, OffsetUtility(weights, near, geometry), fit)
+            fit = OffsetFit(weights, near, number(block, "loss", where, low=0.0), {}, samples, relief, shown)
+        return cls(config, OffsetUtility(weights, near, geometry, relief, shown), fit)
 
     @classmethod
     def legacy_block(cls, meta: Mapping[str, Any], source: str) -> dict[str, Any] | None:
@@ -262,10 +279,68 @@ class OffsetRule(Rule):
         w = self.utility.weights
         prices = ", ".join(f"{c} {p / w[len(names) + 1]:.1f}{' (lethal: ruled out)' if c in lethal else ''}" for c, p in zip(names, w))
         fitted = f"fitted to {self.fit.samples} frames, " if self.fit is not None else ""
-        return (
+        text = (
             f"offset rule: {fitted}near distance {self.utility.near_m:g} m; each class's price per metre, "
             f"relative to the detour's per m^2 of offset per metre: {prices}"
         )
+        return "\n  ".join([text, *self.relief_lines()])  # under the first line, as train and info indent it
+
+    def relief_lines(self) -> list[str]:
+        """The relief the utility prices, a line for side slope and one for grade: a metre's price
+        past each band, on the classes' scale, and the bands past the steepest ground its drive
+        showed; none for a utility that prices no relief."""
+        u = self.utility
+        if u.relief is None:
+            return []
+        w, bands = u.weights, len(RELIEF_BANDS_DEG)
+        detour = w[len(w) - 2]
+        lines = []
+        for k, (what, weights) in enumerate((("side slope", u.relief[:bands]), ("grade", u.relief[bands:]))):
+            price = np.cumsum(weights)  # a metre's price past each band: the band's and those below it
+            shown = ", ".join(f"{b:g} {p / detour + 0.0:.1f}" for b, p in zip(RELIEF_BANDS_DEG, price))
+            steepest = (u.relief_shown or (math.nan, math.nan))[k]
+            told = (
+                "the drive showed none past the first band: it cannot tell these prices"
+                if math.isnan(steepest)
+                else f"the drive showed none past {steepest:g} deg: steeper is priced as that band"
+                if steepest < RELIEF_BANDS_DEG[-1]
+                else "the drive showed every band"
+            )
+            lines.append(
+                f"relief, the body heading along the path: {what} past each band [deg] (its price per metre, as the classes'): {shown}; {told}"
+            )
+        return lines
+
+
+def _relief_block(utility: OffsetUtility) -> dict[str, Any]:
+    """The ``relief`` mapping of a rule's block: the bands, a weight per column, and the steepest
+    band of each the drive showed (null: none)."""
+    shown = [None if math.isnan(v) else v for v in utility.relief_shown or (math.nan, math.nan)]
+    return {"bands_deg": list(RELIEF_BANDS_DEG), "weights": utility.relief.tolist(), "shown_deg": shown}
+
+
+def _relief_weights(block: Mapping[str, Any], where: Where) -> tuple[np.ndarray | None, tuple[float, float] | None]:
+    """The relief columns' weights of a rule's block (its ``relief`` mapping, :func:`_relief_block`)
+    and the steepest bands its drive showed, or None, None where it has none (a utility fitted on
+    flat ground)."""
+    relief = block.get("relief")
+    if relief is None:
+        return None, None
+    if not isinstance(relief, Mapping) or set(relief) != {"bands_deg", "weights", "shown_deg"}:
+        raise where.error("relief", "expected a mapping of bands_deg, weights and shown_deg")
+    shown = relief["shown_deg"]
+    if not (isinstance(shown, list) and len(shown) == 2 and all(v is None or v in RELIEF_BANDS_DEG for v in shown)):
+        raise where.error("relief.shown_deg", "expected two of the bands (side slope, grade), each or null")
+    if relief["bands_deg"] != list(RELIEF_BANDS_DEG):
+        raise where.error("relief.bands_deg", f"expected the bands this version reads, {list(RELIEF_BANDS_DEG)}")
+    try:
+        weights = np.asarray(relief["weights"], dtype=float) if isinstance(relief["weights"], list) else None
+    except (TypeError, ValueError):
+        weights = None
+    if weights is None or weights.shape != (2 * len(RELIEF_BANDS_DEG),) or not np.isfinite(weights).all():
+        raise where.error("relief.weights", f"expected {2 * len(RELIEF_BANDS_DEG)} finite numbers")
+    roll, grade = (math.nan if v is None else float(v) for v in shown)
+    return weights, (roll, grade)
 
 
 def keeps(held: float, best: float, margin: float) -> bool:
@@ -348,8 +423,10 @@ class OffsetSteering(SteeringRunner):
         """The yaw rate [rad/s] toward the offset held after this frame, read from ``gmap`` (the
         ground map of :attr:`map_settings`, updated with the frame), the vehicle going at
         ``speed_mps`` [m/s] (None: the control set's speed)."""
-        seen = self.features(gmap, path, progress_m)
+        seen = self.features(gmap, path, progress_m, relief=self.utility.relief is not None)
         value = gated_value(seen.features, self.offsets, seen.near_m > self.utility.near_m, self.weights)
+        if seen.relief is not None:
+            value = value + seen.relief @ self.utility.relief
         escape = None
         if self.lethal[: self.k].any():
             lines = None  # the offsets' lines to the horizon, when the far read below already holds them
