@@ -203,7 +203,7 @@ def test_the_speed_rule_learns_what_the_drivers_grades_shed_from_its_drive(tmp_p
 
 # A bank beside the path along y = 10 m: a ridge 5 m wide along y = 11.25 m from x = 12 to 28 m, the
 # path on its flank, rolling a body of 1.2 m track heading along it by 16 deg (SPEC 19 ridge, cosine).
-BANK = [{"ridge": {"polyline": [[12.0, 11.25], [28.0, 11.25]], "width_m": 5.0, "height_m": 0.503}}]
+RIDGE_BANK = [{"ridge": {"polyline": [[12.0, 11.25], [28.0, 11.25]], "width_m": 5.0, "height_m": 0.503}}]
 
 
 def _relief_prices(tmp_path, style: str) -> tuple[np.ndarray, float]:
@@ -220,7 +220,7 @@ def _relief_prices(tmp_path, style: str) -> tuple[np.ndarray, float]:
     from terrapref.rules.offset.rule import OffsetConfig
     from terrapref.terrain import PreferenceProfile
 
-    setup = DriveSetup.of(_scenario(BANK, [[3.0, 10.0], [37.0, 10.0]]))
+    setup = DriveSetup.of(_scenario(RIDGE_BANK, [[3.0, 10.0], [37.0, 10.0]]))
     config = ExpertConfig(relief=parse_relief_style(style)[1])
     writer = MemoryRecordingWriter(
         tmp_path / style, setup.meta(ExpertInfo.of(0, "default", config), PreferenceProfile.default()), setup.scenario.to_dict()

@@ -515,24 +515,51 @@ def beside_attitudes(
     centre: np.ndarray,
     normal: np.ndarray,
     offsets: np.ndarray,
+    chord: tuple[int, int],
     out: np.ndarray,
 ) -> None:
-    """The side slope and the grade [deg, both >= 0] (O, S, 2) into ``out`` of the ground under a
-    body heading along a path, centred ``offsets`` (O,) [m] left of its points ``centre`` (S, 2)
-    (``normal`` (S, 2): the unit vectors to its left): the ground's gradient (:func:`_disc_gradient`)
-    across the way and along it. NaN where the gradient is unknown. ``grid``: the map's origin
-    (x, y) [m] and its cell size [m]."""
+    """The side slope and the grade [deg, both >= 0] (O - 2c, S - 2a, 2) into ``out`` of a body
+    heading along a path, on a lattice of the points ``offsets`` (O,) [m, evenly spaced] left of
+    the path's points ``centre`` (S, 2, evenly spaced along it; ``normal`` (S, 2): the unit
+    vectors to their left): the ground's gradient (:func:`_disc_gradient`) across the way averaged
+    over ``2c + 1`` lattice points across (the track), and along it over ``2a + 1`` points along
+    (the wheelbase), ``chord`` = (a, c), each by the trapezoid rule (the rise between the chord's
+    ends over its length, as the heights under the wheels tilt the body). Body (o, q) stands at
+    lattice point (o + c, q + a). NaN where the gradient is known under less than half the chord's
+    weight. ``grid``: the map's origin (x, y) [m] and its cell size [m]."""
     n = shape[0].shape[0]
     x0, y0, res = grid
-    for o in range(offsets.shape[0]):
-        for q in range(centre.shape[0]):
+    along, across = chord
+    n_off, n_st = offsets.shape[0], centre.shape[0]
+    across_slope = np.full((n_off, n_st), np.nan)
+    along_slope = np.full((n_off, n_st), np.nan)
+    for o in range(n_off):
+        for q in range(n_st):
             nx, ny = normal[q, 0], normal[q, 1]
             col = math.floor((centre[q, 0] + offsets[o] * nx - x0) / res)
             row = math.floor((centre[q, 1] + offsets[o] * ny - y0) / res)
-            out[o, q, 0] = out[o, q, 1] = np.nan
-            if not (1 <= row < n - 1 and 1 <= col < n - 1):
-                continue
-            gx, gy = _disc_gradient(shape, least_weight, int(row), int(col), reach)
-            if gx == gx:
-                out[o, q, 0] = math.degrees(math.atan(abs(gx * nx + gy * ny)))
-                out[o, q, 1] = math.degrees(math.atan(abs(gx * ny - gy * nx)))  # along the tangent (ny, -nx)
+            if 1 <= row < n - 1 and 1 <= col < n - 1:
+                gx, gy = _disc_gradient(shape, least_weight, int(row), int(col), reach)
+                if gx == gx:
+                    across_slope[o, q] = gx * nx + gy * ny
+                    along_slope[o, q] = gx * ny - gy * nx  # along the tangent (ny, -nx)
+    for o in range(n_off - 2 * across):
+        for q in range(n_st - 2 * along):
+            out[o, q, 0] = _chord_mean(across_slope[o : o + 2 * across + 1, q + along])
+            out[o, q, 1] = _chord_mean(along_slope[o + across, q : q + 2 * along + 1])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _chord_mean(values: np.ndarray) -> float:
+    """The trapezoid-rule mean of ``values`` (evenly spaced along a chord) as an angle [deg, >= 0],
+    over the known ones; NaN where they weigh less than half the chord."""
+    total = weight = 0.0
+    last = values.shape[0] - 1
+    for k in range(values.shape[0]):
+        w = 0.5 if k == 0 or k == last else 1.0
+        if values[k] == values[k]:
+            total += w * values[k]
+            weight += w
+    if last == 0:
+        return math.degrees(math.atan(abs(values[0]))) if values[0] == values[0] else np.nan
+    return math.degrees(math.atan(abs(total / weight))) if weight >= 0.5 * last else np.nan

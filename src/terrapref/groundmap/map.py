@@ -212,13 +212,16 @@ class GroundMap:
         height_kernels.chord_grades(self._shape, 1.0 / h.max_error_m**2, grid, disc_reach(h, res), centre, heading, chord, out)
         return out
 
-    def beside_attitudes(self, centre: np.ndarray, normal: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-        """The side slope and the grade [deg, both >= 0] (O, S, 2) of the ground under a body
-        heading along a path, centred ``offsets`` (O,) [m] left of its points ``centre`` (S, 2)
-        (``normal`` (S, 2) pointing left): the ground's gradient (:meth:`gradient_at`) across the
-        way and along it; NaN where unknown or off the map (in one compiled pass,
-        terrapref.groundmap.height_compiled.beside_attitudes)."""
-        out = np.full((len(offsets), len(centre), 2), np.nan)
+    def beside_attitudes(self, centre: np.ndarray, normal: np.ndarray, offsets: np.ndarray, chord: tuple[int, int] = (0, 0)) -> np.ndarray:
+        """The side slope and the grade [deg, both >= 0] (O - 2c, S - 2a, 2) of the ground under a
+        body heading along a path, on the lattice of the points ``offsets`` (O,) [m, evenly spaced]
+        left of the path's points ``centre`` (S, 2, evenly spaced; ``normal`` (S, 2) pointing left):
+        the ground's gradient (:meth:`gradient_at`) across the way averaged over ``2c + 1`` points
+        across, along it over ``2a + 1`` points along (``chord`` = (a, c); (0, 0): the gradient at
+        each point alone), body (o, q) at lattice point (o + c, q + a); NaN where unknown or off
+        the map (in one compiled pass, terrapref.groundmap.height_compiled.beside_attitudes)."""
+        along, across = chord
+        out = np.full((len(offsets) - 2 * across, len(centre) - 2 * along, 2), np.nan)
         if self.origin is None:
             return out
         h, res = self.height_settings, self.settings.map_resolution_m
@@ -230,6 +233,7 @@ class GroundMap:
             np.ascontiguousarray(centre, dtype=np.float64),
             np.ascontiguousarray(normal, dtype=np.float64),
             np.ascontiguousarray(offsets, dtype=np.float64),
+            (int(along), int(across)),
             out,
         )
         return out

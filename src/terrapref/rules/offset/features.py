@@ -20,10 +20,11 @@ first patch on the path (gaps under ``gap_m`` do not split it) and ``span_m / 2`
 are weighed; later patches wait for their own turn.
 
 On relief (a map that holds the ground's shape, read from depth), and for a utility that prices
-it, each offset also has its relief columns (:meth:`OffsetFeatures.relief`): the metres over
-which the ground under the body, heading along the path, slopes across the way more than each
-of :data:`RELIEF_BANDS_DEG`, then the metres over which it climbs or falls along the way more
-than each of them. Weighed beside the terrain classes, the bands price each side slope and grade
+it, each offset also has its relief columns (:meth:`OffsetFeatures.attitudes`): the metres over
+which the body, heading along the path, would be rolled more than each of
+:data:`RELIEF_BANDS_DEG` (the ground's slope across the way over the footprint's width), then
+the metres over which it would be pitched more than each of them (its slope along the way over
+the wheelbase). Weighed beside the terrain classes, the bands price each side slope and grade
 the way a driver goes round them or not. Ground on the path steeper than the first band is a
 patch on the path as terrain is.
 """
@@ -38,9 +39,12 @@ from terrapref.groundmap.map import GroundMap
 from terrapref.rules.offset import offsets_compiled as kernels
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.scenario.path import ReferencePath
+from terrapref.vehicle import VehicleConfig
 
 RELIEF_BANDS_DEG = (4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 18.0, 20.0, 22.0)
 """The side slopes and grades [deg] past which the relief columns count the metres of the way."""
+WHEELBASE_M = VehicleConfig.wheelbase_m
+"""The body's wheelbase the relief columns read its pitch over [m] (the default vehicle's)."""
 
 
 @dataclass(frozen=True)
@@ -72,6 +76,8 @@ class OffsetFeatures:
         self._centre = int(np.argmin(np.abs(self.offsets)))
         self._gap = round(config.gap_m / config.station_step_m)
         self._beyond = round(config.span_m / 2 / config.station_step_m)
+        # The body's chord along (half the wheelbase) and across (half the footprint), in stations and offsets.
+        self._chord = (round(WHEELBASE_M / 2 / config.station_step_m), round(config.half_width_m / config.offset_step_m))
 
     def columns(self, gmap: GroundMap, path: ReferencePath, progress_m: float) -> np.ndarray:
         """Terrain column under every footprint point, shape (O, S, F)."""
@@ -79,11 +85,19 @@ class OffsetFeatures:
 
     def attitudes(self, gmap: GroundMap, path: ReferencePath, progress_m: float) -> np.ndarray:
         """The side slope and the grade [deg] (O, S, 2) of the ground under the body at every
-        offset and station, heading along the path; NaN where the map does not know them."""
-        s = np.minimum(progress_m + self.stations, path.length_m)
+        offset and station, heading along the path: the ground's gradient across the way averaged
+        over the footprint's width, along it over the wheelbase (:data:`WHEELBASE_M`), as the
+        heights under its wheels would tilt it; NaN where the map does not know them."""
+        along, across = self._chord
+        c = self.config
+        stations = progress_m + np.concatenate([self.stations[0] - c.station_step_m * np.arange(along, 0, -1), self.stations])
+        stations = np.concatenate([stations, stations[-1] + c.station_step_m * np.arange(1, along + 1)])
+        s = np.clip(stations, 0.0, path.length_m)
         heading = path.heading_at(s)
         normal = np.stack([-np.sin(heading), np.cos(heading)], axis=1)
-        return gmap.beside_attitudes(path.point_at(s), normal, self.offsets)
+        beyond = c.offset_step_m * np.arange(1, across + 1)
+        lattice = np.concatenate([self.offsets[0] - beyond[::-1], self.offsets, self.offsets[-1] + beyond])
+        return gmap.beside_attitudes(path.point_at(s), normal, lattice, self._chord)
 
     def __call__(self, gmap: GroundMap, path: ReferencePath, progress_m: float, relief: bool = False) -> OffsetView:
         """The features at ``progress_m`` [m] along ``path``, with the relief columns when ``relief``."""
