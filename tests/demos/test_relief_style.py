@@ -220,7 +220,7 @@ def _relief_prices(tmp_path, style: str) -> tuple[np.ndarray, float]:
     from terrapref.rules.offset.rule import OffsetConfig
     from terrapref.terrain import PreferenceProfile
 
-    setup = DriveSetup.of(_scenario(RIDGE_BANK, [[3.0, 10.0], [37.0, 10.0]]))
+    setup = DriveSetup.of(_scenario(RIDGE_BANK, [[6.0, 10.0], [34.0, 10.0]]))
     config = ExpertConfig(relief=parse_relief_style(style)[1])
     writer = MemoryRecordingWriter(
         tmp_path / style, setup.meta(ExpertInfo.of(0, "default", config), PreferenceProfile.default()), setup.scenario.to_dict()

@@ -45,7 +45,6 @@ from pathlib import Path
 
 from terrapref.scenario.builder import CourseBuilder, trail
 from terrapref.terrain import ClassTable
-from terrapref.vehicle import VehicleConfig
 
 DRIVER_SPEED_MPS = 1.0  # the speed a teaching drive is timed at (the synthetic driver's)
 BUDGET_M = 600.0  # the longest full design [m]: 10 minutes at 1 m/s
@@ -55,7 +54,11 @@ RELIEF_KINDS = ("mound", "bank", "ramp", "slope")  # the situations of relief (m
 MOUND_RADIUS_M = 3.0  # a mound on the path: its radius; its height sets its steepest grade [m]
 BANK_WIDTH_M, BANK_LENGTH_M = 5.0, 9.0  # a bank beside the path: its full width and length; the path on its flank [m]
 RAMP_TOP_M, RAMP_EDGE_M, RAMP_ACROSS_M = 3.0, 4.0, 14.0  # a ramp across the way: its top, each ramp, across [m]
-SLOPE_PATCH_M = (8.0, 4.0)  # relief against terrain: the flat patch beside the path, (length, width) [m]
+SLOPE_PATCH_M = (8.0, 4.0)
+# The default vehicle's half track and wheelbase [m], the body the relief situations are as steep
+# for (terrapref.vehicle.VehicleConfig's; the scenario sits below the vehicle, and
+# tests/scenario/test_relief.py holds the two equal).
+BODY_M = (0.6, 1.0)  # relief against terrain: the flat patch beside the path, (length, width) [m]
 RELIEF_DEG = {"gentle mound": 8.0, "steep mound": 16.0, "gentle bank": 10.0, "steep bank": 16.0, "ramp": 7.0, "slope": 14.0}
 START_M, END_M = 8.0, 5.0  # trail before the first situation and after the last [m]
 PAIR_SIZES = ((8.0, 5.0), (7.0, 5.5), (7.5, 5.0), (8.0, 5.5))  # (length, width) of a pair's patches [m]
@@ -179,10 +182,10 @@ def place_relief(c: CourseBuilder, item: Situation, s: float) -> None:
     ``atan(h sin(pi a / R) / (2 a))``, halfway out; a bank's (a ridge of width w) rolls it by
     ``atan(h sin(2 pi a / w) / (2 a))`` a quarter of its width from its line, where the path runs;
     a ramp rises its height over its edge."""
-    vehicle = VehicleConfig()
+    half_track, wheelbase = BODY_M
     tan = math.tan(math.radians(item.deg))
     if item.kind == "mound":
-        a = 0.5 * vehicle.wheelbase_m
+        a = 0.5 * wheelbase
         height = tan * 2.0 * a / math.sin(math.pi * a / MOUND_RADIUS_M)
         c.relief.append({"mound": {"center": c.to_world(s, [(0.0, 0.0)])[0], "radius": MOUND_RADIUS_M, "height_m": round(height, 3)}})
     elif item.kind == "ramp":
@@ -192,7 +195,7 @@ def place_relief(c: CourseBuilder, item: Situation, s: float) -> None:
     else:  # a bank with the path on its flank: rising on the side of the offset, or across from a slope's patch
         side = math.copysign(1.0, item.offset_m) * (1.0 if item.kind == "bank" else -1.0)
         line = c.to_world(s, [(-BANK_LENGTH_M / 2, side * BANK_WIDTH_M / 4), (BANK_LENGTH_M / 2, side * BANK_WIDTH_M / 4)])
-        a = vehicle.half_width_m
+        a = half_track
         height = tan * 2.0 * a / math.sin(2.0 * math.pi * a / BANK_WIDTH_M)
         c.relief.append({"ridge": {"polyline": line, "width_m": BANK_WIDTH_M, "height_m": round(height, 3)}})
         if item.kind == "slope":

@@ -153,13 +153,13 @@ def fit_offset_utility(
     intent: np.ndarray,
     offsets: np.ndarray,
     config: OffsetFitConfig | None = None,
-    relief: np.ndarray | None = None,
-    bands: tuple[float, ...] = (),
+    relief: tuple[np.ndarray, tuple[float, ...]] | None = None,
 ) -> OffsetFit:
     """Fit the offset utility to frames' offset features (N, O, K + 2), near distances (N,)
     and intended offsets (N,) over the candidate ``offsets`` (O,) [m], with their relief columns
-    (N, O, R) when given, past each of ``bands`` [deg] (side slope, then grade); frames without
-    an intended offset (NaN) are left out; ``config`` None: the default fit."""
+    when given (``relief``: the columns (N, O, R) and the bands [deg] they count past, side slope
+    then grade); frames without an intended offset (NaN) are left out; ``config`` None: the
+    default fit."""
     config = config or OffsetFitConfig()
     keep = np.isfinite(intent)
     if not keep.any():
@@ -167,7 +167,7 @@ def fit_offset_utility(
     X, near, Y = features[keep].astype(np.float64), near_m[keep], soft_labels(intent[keep], offsets, config.sigma_m)
     columns = X.shape[2]
     if relief is not None:
-        X = np.concatenate([X, relief[keep].astype(np.float64)], axis=2)
+        X = np.concatenate([X, relief[0][keep].astype(np.float64)], axis=2)
     best: tuple[np.ndarray, float, float] | None = None
     losses = {}
     for candidate in config.near_candidates:
@@ -187,7 +187,7 @@ def fit_offset_utility(
     theta = np.round(theta, WEIGHT_DECIMALS)
     weights = np.concatenate([theta[:columns], theta[-1:]])  # the relief columns' weights stand between those and the gate
     priced = theta[columns:-1] if relief is not None else None
-    shown = _shown(relief[keep], bands) if relief is not None else None
+    shown = _shown(relief[0][keep], relief[1]) if relief is not None else None
     return OffsetFit(weights, chosen, round(loss, WEIGHT_DECIMALS), losses, int(keep.sum()), priced, shown)
 
 

@@ -147,9 +147,8 @@ class OffsetConfig(RuleConfig):
         relief = arrays.get("relief_m")
         if relief is not None and relief.shape[2] != 2 * len(RELIEF_BANDS_DEG):
             raise UserError("offset rule", f"relief columns of {relief.shape[2]} bands; this version reads {2 * len(RELIEF_BANDS_DEG)}")
-        fitted = fit_offset_utility(
-            arrays["features"], arrays["near_m"], arrays["intent_m"], geometry.offsets, relief=relief, bands=RELIEF_BANDS_DEG
-        )
+        columns = (relief, RELIEF_BANDS_DEG) if relief is not None else None
+        fitted = fit_offset_utility(arrays["features"], arrays["near_m"], arrays["intent_m"], geometry.offsets, relief=columns)
         utility = OffsetUtility(fitted.weights, fitted.near_m, geometry, fitted.relief, fitted.relief_shown)
         return OffsetRule(replace(self, geometry=geometry), utility, fitted)
 
