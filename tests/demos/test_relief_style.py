@@ -235,6 +235,7 @@ def _relief_prices(tmp_path, style: str) -> tuple[np.ndarray, float]:
     return np.cumsum(relief[:bands]), float(rule.utility.weights[-2])
 
 
+@pytest.mark.slow  # two whole drives recorded and fitted; the fit's parts are tested apart in the default run
 def test_the_offset_rule_learns_the_side_slope_a_driver_goes_round_from_its_drive(tmp_path):
     """The cautious driver (round side slopes past 7 deg) leaves the path beside the 16 deg bank;
     the bold one (20 deg) keeps to it. The offset rule fitted to each drive prices a metre along
