@@ -25,9 +25,7 @@ from terrapref.terrain import default_classes
 OUT = Path(__file__).resolve().parent.parent / "src" / "terrapref" / "data" / "scenarios"
 
 
-class Course(CourseBuilder):
-    def write(self) -> Path:
-        return write(self)
+Course = CourseBuilder
 
 
 def write(course: CourseBuilder) -> Path:
@@ -221,7 +219,7 @@ def teach_course(
     return c
 
 
-def teach_relief() -> CourseBuilder:
+def teach_relief() -> Course:
     """The default table's teaching course with relief (SPEC 19; terrapref.scenario.teaching.relief_course,
     seed 0), as ``terrapref course --relief`` writes it: its relief situations among the terrain
     ones, which stay on the ground they were made for, and relief between them."""

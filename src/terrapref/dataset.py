@@ -336,12 +336,13 @@ def _joined(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
     """One rule's arrays of several recordings, joined; an array only some recordings have (the
     offset rule's relief columns, for drives on relief) is zeros for the others."""
     names = list(dict.fromkeys(name for part in parts for name in part))
-    shapes = {name: next(part[name] for part in parts if name in part) for name in names}
+    example = {name: next(part[name] for part in parts if name in part) for name in names}  # a row's shape and type
+    rows = [len(next(iter(part.values()))) for part in parts]
     return {
         name: np.concatenate(
             [
-                part[name] if name in part else np.zeros((len(next(iter(part.values()))), *shapes[name].shape[1:]), shapes[name].dtype)
-                for part in parts
+                part[name] if name in part else np.zeros((n, *example[name].shape[1:]), example[name].dtype)
+                for part, n in zip(parts, rows, strict=True)
             ]
         )
         for name in names

@@ -188,6 +188,8 @@ def _cmd_course(args: argparse.Namespace) -> int:
     for path in (out, figure):
         check_output(path, "--out", inputs, force=args.force)
     table = class_table(args)
+    if args.relief is not None and args.relief < 0:
+        raise UserError("--relief", f"expected a seed >= 0, got {args.relief}")
     if args.after is not None:
         recs = _drives_of_one_table(args, args.after)
         table = recs[0].classes
@@ -199,17 +201,14 @@ def _cmd_course(args: argparse.Namespace) -> int:
     else:
         table = table or default_classes()
         try:
-            if args.relief is not None and args.relief >= 0:  # the relief situations, and relief between them (SPEC 19)
+            if args.relief is not None:  # the relief situations, and relief between them (SPEC 19)
                 course, items = relief_course(table, args.design, args.name or "teaching_course", args.relief)
             else:
                 course, items = designed_course(table, args.design, args.name or "teaching_course")
         except ValueError as exc:
             raise UserError(str(args.classes or "classes"), str(exc), field="classes") from None
-    if args.relief is not None:
-        if args.relief < 0:
-            raise UserError("--relief", f"expected a seed >= 0, got {args.relief}")
-        if args.after is not None:  # a follow-up's relief: between its situations
-            course.relief = relief_for(parse_scenario(course.data(), str(out), table), args.relief)
+    if args.relief is not None and args.after is not None:  # a follow-up's relief: between its situations
+        course.relief = relief_for(parse_scenario(course.data(), str(out), table), args.relief)
     scenario = parse_scenario(course.data(), str(out), table)  # checked as every command will read it
     source = (
         f"--classes {args.classes}"

@@ -488,18 +488,12 @@ def chord_grades(
     terrapref.rules.speed.model.body_grade reads it from any gradient; NaN where the gradient is
     known under less than half the chord's weight. ``grid``: the map's origin (x, y) [m] and its
     cell size [m]."""
-    n = shape[0].shape[0]
-    x0, y0, res = grid
     offsets, weights = chord
     for i in range(centre.shape[0]):
         c, s = math.cos(heading[i]), math.sin(heading[i])
         total = weight = 0.0
         for j in range(offsets.shape[0]):
-            col = math.floor((centre[i, 0] + offsets[j] * c - x0) / res)
-            row = math.floor((centre[i, 1] + offsets[j] * s - y0) / res)
-            if not (1 <= row < n - 1 and 1 <= col < n - 1):
-                continue
-            gx, gy = _disc_gradient(shape, least_weight, int(row), int(col), reach)
+            gx, gy = _gradient_under(shape, least_weight, grid, reach, centre[i, 0] + offsets[j] * c, centre[i, 1] + offsets[j] * s)
             if gx == gx:
                 total += weights[j] * (gx * c + gy * s)
                 weight += weights[j]
@@ -527,22 +521,16 @@ def beside_attitudes(
     ends over its length, as the heights under the wheels tilt the body). Body (o, q) stands at
     lattice point (o + c, q + a). NaN where the gradient is known under less than half the chord's
     weight. ``grid``: the map's origin (x, y) [m] and its cell size [m]."""
-    n = shape[0].shape[0]
-    x0, y0, res = grid
     along, across = chord
     n_off, n_st = offsets.shape[0], centre.shape[0]
-    across_slope = np.full((n_off, n_st), np.nan)
-    along_slope = np.full((n_off, n_st), np.nan)
+    across_slope = np.empty((n_off, n_st))
+    along_slope = np.empty((n_off, n_st))
     for o in range(n_off):
         for q in range(n_st):
             nx, ny = normal[q, 0], normal[q, 1]
-            col = math.floor((centre[q, 0] + offsets[o] * nx - x0) / res)
-            row = math.floor((centre[q, 1] + offsets[o] * ny - y0) / res)
-            if 1 <= row < n - 1 and 1 <= col < n - 1:
-                gx, gy = _disc_gradient(shape, least_weight, int(row), int(col), reach)
-                if gx == gx:
-                    across_slope[o, q] = gx * nx + gy * ny
-                    along_slope[o, q] = gx * ny - gy * nx  # along the tangent (ny, -nx)
+            gx, gy = _gradient_under(shape, least_weight, grid, reach, centre[q, 0] + offsets[o] * nx, centre[q, 1] + offsets[o] * ny)
+            across_slope[o, q] = gx * nx + gy * ny  # NaN where unknown
+            along_slope[o, q] = gx * ny - gy * nx  # along the tangent (ny, -nx)
     for o in range(n_off - 2 * across):
         for q in range(n_st - 2 * along):
             out[o, q, 0] = _chord_mean(across_slope[o : o + 2 * across + 1, q + along])
@@ -550,16 +538,29 @@ def beside_attitudes(
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _gradient_under(
+    shape: tuple[np.ndarray, ...], least_weight: float, grid: tuple[float, float, float], reach: int, x: float, y: float
+) -> tuple[float, float]:
+    """The ground's gradient (:func:`_disc_gradient`) of the cell under the world point (``x``,
+    ``y``) [m]; NaN off the map (or its edge) and where unknown. ``grid``: the map's origin (x, y)
+    [m] and its cell size [m]."""
+    n = shape[0].shape[0]
+    x0, y0, res = grid
+    col, row = math.floor((x - x0) / res), math.floor((y - y0) / res)
+    if 1 <= row < n - 1 and 1 <= col < n - 1:
+        return _disc_gradient(shape, least_weight, int(row), int(col), reach)
+    return np.nan, np.nan
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _chord_mean(values: np.ndarray) -> float:
-    """The trapezoid-rule mean of ``values`` (evenly spaced along a chord) as an angle [deg, >= 0],
-    over the known ones; NaN where they weigh less than half the chord."""
+    """The trapezoid-rule mean of ``values`` (evenly spaced along a chord; one value: itself) as
+    an angle [deg, >= 0], over the known ones; NaN where they weigh less than half the chord."""
     total = weight = 0.0
     last = values.shape[0] - 1
     for k in range(values.shape[0]):
-        w = 0.5 if k == 0 or k == last else 1.0
+        w = 0.5 if last > 0 and (k == 0 or k == last) else 1.0
         if values[k] == values[k]:
             total += w * values[k]
             weight += w
-    if last == 0:
-        return math.degrees(math.atan(abs(values[0]))) if values[0] == values[0] else np.nan
-    return math.degrees(math.atan(abs(total / weight))) if weight >= 0.5 * last else np.nan
+    return math.degrees(math.atan(abs(total / weight))) if weight > 0.0 and weight >= 0.5 * last else np.nan

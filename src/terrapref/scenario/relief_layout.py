@@ -1,8 +1,9 @@
 """Relief for a course that has none: features placed by the course's own geometry, from a seed.
 
 The path is cut into the stretches between its zones and the relief it has (a zone's situation,
-and a teaching course's relief situation, stays on the ground it was made for), each at most :data:`STRETCH_M` long, the first :data:`CLEAR_M` of the path (the
-start) and its last metres left out. Each stretch gets one feature drawn at random among
+and a teaching course's relief situation, stays on the ground it was made for), each at most
+:data:`STRETCH_M` long, the first :data:`CLEAR_M` of the path (the start) and its last metres
+left out. Each stretch gets one feature drawn at random among
 those that fit in it, a bump or a dip only where no larger one fits:
 
 - ``mound``: a round hill on the path, 0.3-0.5 m high, 2.5-4 m in radius;

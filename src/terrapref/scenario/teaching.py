@@ -54,11 +54,11 @@ RELIEF_KINDS = ("mound", "bank", "ramp", "slope")  # the situations of relief (m
 MOUND_RADIUS_M = 3.0  # a mound on the path: its radius; its height sets its steepest grade [m]
 BANK_WIDTH_M, BANK_LENGTH_M = 5.0, 9.0  # a bank beside the path: its full width and length; the path on its flank [m]
 RAMP_TOP_M, RAMP_EDGE_M, RAMP_ACROSS_M = 3.0, 4.0, 14.0  # a ramp across the way: its top, each ramp, across [m]
-SLOPE_PATCH_M = (8.0, 4.0)
+SLOPE_PATCH_M = (8.0, 4.0)  # relief against terrain: the flat patch beside the path, (length, width) [m]
 # The default vehicle's half track and wheelbase [m], the body the relief situations are as steep
 # for (terrapref.vehicle.VehicleConfig's; the scenario sits below the vehicle, and
 # tests/scenario/test_relief.py holds the two equal).
-BODY_M = (0.6, 1.0)  # relief against terrain: the flat patch beside the path, (length, width) [m]
+BODY_M = (0.6, 1.0)
 RELIEF_DEG = {"gentle mound": 8.0, "steep mound": 16.0, "gentle bank": 10.0, "steep bank": 16.0, "ramp": 7.0, "slope": 14.0}
 START_M, END_M = 8.0, 5.0  # trail before the first situation and after the last [m]
 PAIR_SIZES = ((8.0, 5.0), (7.0, 5.5), (7.5, 5.0), (8.0, 5.5))  # (length, width) of a pair's patches [m]
@@ -200,7 +200,7 @@ def place_relief(c: CourseBuilder, item: Situation, s: float) -> None:
         c.relief.append({"ridge": {"polyline": line, "width_m": BANK_WIDTH_M, "height_m": round(height, 3)}})
         if item.kind == "slope":
             length, width = SLOPE_PATCH_M
-            c.rect(item.classes[0], s, math.copysign(0.6 + width / 2, item.offset_m), length, width)
+            c.rect(item.classes[0], s, math.copysign(half_track + width / 2, item.offset_m), length, width)  # from beside the footprint
 
 
 def fits(classes: ClassTable) -> bool:

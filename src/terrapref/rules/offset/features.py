@@ -76,8 +76,17 @@ class OffsetFeatures:
         self._centre = int(np.argmin(np.abs(self.offsets)))
         self._gap = round(config.gap_m / config.station_step_m)
         self._beyond = round(config.span_m / 2 / config.station_step_m)
-        # The body's chord along (half the wheelbase) and across (half the footprint), in stations and offsets.
-        self._chord = (round(WHEELBASE_M / 2 / config.station_step_m), round(config.half_width_m / config.offset_step_m))
+        # The body's chord along (half the wheelbase) and across (half the footprint), in stations and offsets,
+        # and the lattice its attitude is read on: the stations and offsets, that many more at each end.
+        along, across = self._chord = (round(WHEELBASE_M / 2 / config.station_step_m), round(config.half_width_m / config.offset_step_m))
+        step = config.station_step_m
+        self._lattice_stations = (
+            np.concatenate([self.stations[0] - step * np.arange(along, 0, -1), self.stations]),
+            step * np.arange(1, along + 1),
+        )
+        beyond = config.offset_step_m * np.arange(1, across + 1)
+        self._lattice_offsets = np.concatenate([self.offsets[0] - beyond[::-1], self.offsets, self.offsets[-1] + beyond])
+        self._level = np.zeros(len(self.stations), dtype=np.bool_)  # no steep ground: flat, or relief not read
 
     def columns(self, gmap: GroundMap, path: ReferencePath, progress_m: float) -> np.ndarray:
         """Terrain column under every footprint point, shape (O, S, F)."""
@@ -88,25 +97,18 @@ class OffsetFeatures:
         offset and station, heading along the path: the ground's gradient across the way averaged
         over the footprint's width, along it over the wheelbase (:data:`WHEELBASE_M`), as the
         heights under its wheels would tilt it; NaN where the map does not know them."""
-        along, across = self._chord
-        c = self.config
-        stations = progress_m + np.concatenate([self.stations[0] - c.station_step_m * np.arange(along, 0, -1), self.stations])
-        stations = np.concatenate([stations, stations[-1] + c.station_step_m * np.arange(1, along + 1)])
-        s = np.clip(stations, 0.0, path.length_m)
+        behind_and_at, after = self._lattice_stations
+        stations = progress_m + behind_and_at
+        s = np.clip(np.concatenate([stations, stations[-1] + after]), 0.0, path.length_m)
         heading = path.heading_at(s)
         normal = np.stack([-np.sin(heading), np.cos(heading)], axis=1)
-        beyond = c.offset_step_m * np.arange(1, across + 1)
-        lattice = np.concatenate([self.offsets[0] - beyond[::-1], self.offsets, self.offsets[-1] + beyond])
-        return gmap.beside_attitudes(path.point_at(s), normal, lattice, self._chord)
+        return gmap.beside_attitudes(path.point_at(s), normal, self._lattice_offsets, self._chord)
 
     def __call__(self, gmap: GroundMap, path: ReferencePath, progress_m: float, relief: bool = False) -> OffsetView:
         """The features at ``progress_m`` [m] along ``path``, with the relief columns when ``relief``."""
         c = self.config
         attitudes = self.attitudes(gmap, path, progress_m) if relief else None
-        if attitudes is None:
-            steep = np.zeros(len(self.stations), dtype=np.bool_)
-        else:
-            steep = (attitudes[self._centre] > RELIEF_BANDS_DEG[0]).any(axis=1)
+        steep = self._level if attitudes is None else (attitudes[self._centre] > RELIEF_BANDS_DEG[0]).any(axis=1)
         features, near_m, upto = kernels.offset_features(
             self.columns(gmap, path, progress_m),
             steep,
