@@ -449,6 +449,7 @@ def test_the_ways_class_ids_survive_a_dataset_file_and_wider_integers_are_refuse
         "v_mps": np.ones(n, np.float32),
         "frame": np.arange(n, dtype=np.float32),
         "grade": np.full((n, STATIONS), np.nan, np.float32),
+        "rough": np.full((n, STATIONS), np.nan, np.float32),
     }
     rules = {"speed": {"config": SpeedConfig().data(), "arrays": dict(SpeedConfig.arrays)}}
     meta = {"format": DATASET_FORMAT, **model_meta(), "rules": rules}

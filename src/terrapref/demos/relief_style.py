@@ -4,7 +4,7 @@ how much speed it sheds per degree up and down, and its speed on rough ground.
 The synthetic driver (terrapref.demos.expert) reads the ground as a person feels it: how its
 body would roll and pitch at each point of a way, heading along it, its wheels on the world's
 height field (:class:`ReliefSight`); and the ground's roughness, the heights' standard deviation
-about their plane within :data:`ROUGH_RADIUS_M`. A way over ground steeper than the style takes costs more than any terrain
+about their plane within 0.3 m (terrapref.world.raster.ROUGH_RADIUS_M). A way over ground steeper than the style takes costs more than any terrain
 class, so the driver goes round it where it can, weighed against the terrain it would cross to
 do so; its speed is that of the terrain it drives on, less ``up_mps_per_deg`` for each degree of
 grade up (``down_mps_per_deg`` down), and at most ``rough_mps`` where the ground is rougher than
@@ -28,10 +28,10 @@ from numba import njit
 from terrapref.errors import UserError
 from terrapref.records import to_plain
 from terrapref.registry import Registry
-from terrapref.world.height_compiled import height_at, plane_fit
+from terrapref.world.height_compiled import height_at, roughness
+from terrapref.world.raster import rough_reach
 
 NO_RELIEF_STYLE = "none"  # --relief-style none: a driver that drives relief as if it were flat
-ROUGH_RADIUS_M = 0.3  # the disc a point's roughness is read over [m]: as the planner's height layer reads it
 
 
 @dataclass(frozen=True)
@@ -54,7 +54,7 @@ class ReliefStyle:
     up_mps_per_deg: float = 0.03
     down_mps_per_deg: float = 0.02
     rough_mps: float = 0.8
-    rough_m: float = 0.03
+    rough_m: float = 0.02
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -146,7 +146,7 @@ class ReliefSight:
         self.heights = np.ascontiguousarray(heights, dtype=np.float32)
         self.res = float(res)
         self.body = (float(half_width_m), 0.5 * float(wheelbase_m))
-        self.reach = max(1, int(math.floor(ROUGH_RADIUS_M / res + 1e-9)))
+        self.reach = rough_reach(res)
 
     def steep(self, centre: np.ndarray, normal: np.ndarray, offsets: np.ndarray, upto: int, style: ReliefStyle) -> np.ndarray:
         """Whether the body, centred ``offsets[o]`` left of the path at its first ``upto`` points
@@ -205,24 +205,5 @@ def _pitch_and_roughness(
         pitch[i] = math.atan(rise / (2.0 * half_length))
         r0, c0 = int(math.floor(y / res)), int(math.floor(x / res))
         if 0 <= r0 < n_rows and 0 <= c0 < n_cols:
-            rough[i] = _roughness(heights, r0, c0, res, reach)
+            rough[i] = roughness(heights, r0, c0, res, reach)
     return pitch, rough
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _roughness(heights: np.ndarray, r0: int, c0: int, res: float, reach: int) -> float:
-    """The standard deviation of the heights within ``reach`` cells (a disc) of cell (r0, c0)
-    about their least-squares plane [m] (as the planner's height layer reads its roughness,
-    terrapref.world.height_compiled.plane_fit); 0 where the plane is not determined."""
-    n_rows, n_cols = heights.shape
-    m = sx = sy = sz = sxx = syy = sxy = sxz = syz = szz = 0.0
-    for dr in range(-reach, reach + 1):
-        for dc in range(-reach, reach + 1):
-            r, c = r0 + dr, c0 + dc
-            if dr * dr + dc * dc > reach * reach or not (0 <= r < n_rows and 0 <= c < n_cols):
-                continue
-            x, y, z = dc * res, dr * res, np.float64(heights[r, c])
-            m, sx, sy, sz = m + 1.0, sx + x, sy + y, sz + z
-            sxx, syy, sxy, sxz, syz, szz = sxx + x * x, syy + y * y, sxy + x * y, sxz + x * z, syz + y * z, szz + z * z
-    rough = plane_fit((m, sx, sy, sz, sxx, syy, sxy, sxz, syz, szz))[1]
-    return 0.0 if math.isnan(rough) else rough

@@ -264,6 +264,8 @@ class RunMetrics:
     max_pitch_deg: float = 0.0  # the largest |pitch| [deg]
     # On relief, by grade band (GRADE_BANDS) of the ground driven: the mean speed ("mps") and the seconds ("s"); None: flat.
     speed_by_grade_mps: dict[str, dict[str, float]] | None = None
+    # On relief, by roughness band (ROUGH_BANDS) of the ground driven, likewise; None: flat.
+    speed_by_roughness_mps: dict[str, dict[str, float]] | None = None
     relief_zones: list[ReliefZoneResult] | None = None  # on relief, how it passed each relief zone (relief_zones); None: flat
 
     @property
@@ -286,7 +288,7 @@ class RunMetrics:
         return float(sum(self.distance_m.values()))
 
     def to_dict(self) -> dict:
-        return to_plain(self, omit_none=("speed_by_grade_mps", "relief_zones"))
+        return to_plain(self, omit_none=("speed_by_grade_mps", "speed_by_roughness_mps", "relief_zones"))
 
     @classmethod
     def from_dict(cls, data: dict) -> RunMetrics:
@@ -344,7 +346,8 @@ def score_run(
         time_s=round(log.duration_s, 3),
         max_lateral_accel_mps2=round(_max_lateral_accel(log.trace, dt_s), 4),
         goal_stop=asdict(log.goal_stop) if log.goal_stop is not None else None,
-        speed_by_grade_mps=_by_grade(grade, length, time) if grade is not None else None,
+        speed_by_grade_mps=_by_band(_grade_bands(grade), GRADE_BANDS, length, time) if grade is not None else None,
+        speed_by_roughness_mps=_by_band(_rough_bands(world.roughness_at(mid)), ROUGH_BANDS, length, time) if world.has_relief else None,
         relief_zones=score_relief_zones(xy, path, relief_zones(path, world), log.progress_m) if world.has_relief else None,
         **log.relief_summary(),
     )
@@ -369,6 +372,10 @@ def _timed(zones: list[ZoneResult], scenario: Scenario, pieces: tuple[np.ndarray
 # default relief style slows for by 0.09 m/s).
 GRADE_BAND_DEG = 3.0
 GRADE_BANDS = ("up", "level", "down")
+# And by the ground's roughness under its reference point (terrapref.world.WorldMap.roughness_at):
+# rough past this [m] (the default relief style's rough_m), smooth up to it.
+ROUGH_BAND_M = 0.02
+ROUGH_BANDS = ("rough", "smooth")
 
 
 def grade_band(grade_rad: float) -> str:
@@ -475,14 +482,23 @@ def score_relief_zones(
     return out
 
 
-def _by_grade(grade: np.ndarray, length: np.ndarray, time: np.ndarray) -> dict[str, dict[str, float]]:
-    """The mean speed and the seconds of each grade band a run's pieces (``grade``, ``length``,
-    ``time``) fall in, the bands with time in them."""
+def _grade_bands(grade: np.ndarray) -> np.ndarray:
+    """The band (:data:`GRADE_BANDS`) of each grade [rad, positive up] of ``grade``."""
     degrees = np.degrees(grade)
-    bands = np.where(degrees > GRADE_BAND_DEG, "up", np.where(degrees < -GRADE_BAND_DEG, "down", "level"))
+    return np.where(degrees > GRADE_BAND_DEG, "up", np.where(degrees < -GRADE_BAND_DEG, "down", "level"))
+
+
+def _rough_bands(roughness: np.ndarray) -> np.ndarray:
+    """The band (:data:`ROUGH_BANDS`) of each roughness [m] of ``roughness``."""
+    return np.where(roughness > ROUGH_BAND_M, "rough", "smooth")
+
+
+def _by_band(bands: np.ndarray, names: tuple[str, ...], length: np.ndarray, time: np.ndarray) -> dict[str, dict[str, float]]:
+    """The mean speed and the seconds of each band of ``names`` a run's pieces (their ``bands``,
+    ``length`` and ``time``) fall in, the bands with time in them."""
     return {
         band: {"mps": round(float(length[on].sum() / time[on].sum()), 4), "s": round(float(time[on].sum()), 3)}
-        for band in GRADE_BANDS
+        for band in names
         if (on := bands == band).any() and time[on].sum() > 0
     }
 

@@ -21,7 +21,7 @@ import numpy as np
 from terrapref.demos.expert import ExpertConfig
 from terrapref.demos.relief_style import ReliefStyle
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult
-from terrapref.evaluation.scoring import GRADE_BAND_DEG, GRADE_BANDS, RunMetrics
+from terrapref.evaluation.scoring import GRADE_BAND_DEG, GRADE_BANDS, ROUGH_BAND_M, ROUGH_BANDS, RunMetrics
 from terrapref.evaluation.stats import cluster_bootstrap, rate_text
 from terrapref.rules import Rule, speed_rule
 from terrapref.rules.speed.rule import SpeedRule
@@ -69,6 +69,7 @@ class SpeedComparison:
         by_grade: on relief, per grade band (terrapref.evaluation.scoring.GRADE_BANDS), the
             absolute error of a run's mean speed on ground of that band [m/s], over the runs
             where both it and the driver's run on the same layout spent :data:`GRADE_MIN_S` there.
+        by_roughness: likewise per roughness band (terrapref.evaluation.scoring.ROUGH_BANDS).
     """
 
     by_class: dict[str, Estimate]
@@ -80,6 +81,7 @@ class SpeedComparison:
     limit_worst: float | None = None
     background: str | None = None
     by_grade: dict[str, Estimate] = field(default_factory=dict)
+    by_roughness: dict[str, Estimate] = field(default_factory=dict)
 
     @classmethod
     def of(cls, zones: Sequence[Mapping[str, Any]], runs: Sequence[Mapping[str, Any]], background: str) -> SpeedComparison:
@@ -98,12 +100,7 @@ class SpeedComparison:
                 ratios.setdefault(r["scenario"], []).append(r["time_s"] / r["driver_time_s"])
         compared = [x for v in ratios.values() for x in v]
         within = sum(abs(x - 1) <= TIME_TOLERANCE for x in compared)
-        grades: dict[str, dict[str, list[float]]] = {}
-        for r in runs:
-            mine, theirs = r.get("speed_by_grade_mps") or {}, r.get("driver_speed_by_grade_mps") or {}
-            for band in (b for b in GRADE_BANDS if b in mine and b in theirs):
-                if min(mine[band]["s"], theirs[band]["s"]) >= GRADE_MIN_S:
-                    grades.setdefault(band, {}).setdefault(r["scenario"], []).append(abs(mine[band]["mps"] - theirs[band]["mps"]))
+        grades, roughness = _band_errors(runs, "speed_by_grade_mps", GRADE_BANDS), _band_errors(runs, "speed_by_roughness_mps", ROUGH_BANDS)
         same = [r["max_lateral_accel_mps2"] / r["driver_max_lateral_accel_mps2"] for r in runs if r.get("driver_max_lateral_accel_mps2")]
         limit = [r["max_lateral_accel_mps2"] / r["driver_lateral_limit_mps2"] for r in runs if r.get("driver_lateral_limit_mps2")]
         return cls(
@@ -116,6 +113,7 @@ class SpeedComparison:
             max(limit) if limit else None,
             background,
             {band: _estimate(grades[band]) for band in GRADE_BANDS if band in grades},
+            {band: _estimate(roughness[band]) for band in ROUGH_BANDS if band in roughness},
         )
 
     @classmethod
@@ -146,8 +144,9 @@ class SpeedComparison:
 
     def to_dict(self) -> dict:
         out = asdict(self)
-        if not self.by_grade:  # flat ground: no grade bands
-            del out["by_grade"]
+        for name in ("by_grade", "by_roughness"):
+            if not out[name]:  # flat ground: no bands
+                del out[name]
         return out
 
     @classmethod
@@ -165,6 +164,7 @@ class SpeedComparison:
             data.get("limit_worst"),
             data.get("background"),
             {band: Estimate(**e) for band, e in (data.get("by_grade") or {}).items()},
+            {band: Estimate(**e) for band, e in (data.get("by_roughness") or {}).items()},
         )
 
     def lines(self) -> list[str]:
@@ -179,6 +179,11 @@ class SpeedComparison:
             f"{f'level ground (grade within {GRADE_BAND_DEG:g} deg)' if band == 'level' else f'going {band} (grade past {GRADE_BAND_DEG:g} deg)'}"
             f": {e.text()} m/s over runs (target <= {GRADE_SPEED_TARGET_MPS})"
             for band, e in self.by_grade.items()
+        ]
+        out += [
+            f"speed error against the driver, {band} ground (roughness {'past' if band == 'rough' else 'up to'} {ROUGH_BAND_M:g} m)"
+            f": {e.text()} m/s over runs (target <= {GRADE_SPEED_TARGET_MPS})"
+            for band, e in self.by_roughness.items()
         ]
         if self.time_ratio is not None:
             out.append(
@@ -224,8 +229,25 @@ def run_fields(metrics: RunMetrics, driver: RunMetrics, lateral_limit_mps2: floa
             {"speed_by_grade_mps": metrics.speed_by_grade_mps, "driver_speed_by_grade_mps": driver.speed_by_grade_mps}
             if metrics.speed_by_grade_mps is not None and driver.speed_by_grade_mps is not None
             else {}
-        ),  # on relief: the speed by grade band of both runs
+        ),  # on relief: the speed by grade band of both runs ...
+        **(
+            {"speed_by_roughness_mps": metrics.speed_by_roughness_mps, "driver_speed_by_roughness_mps": driver.speed_by_roughness_mps}
+            if metrics.speed_by_roughness_mps is not None and driver.speed_by_roughness_mps is not None
+            else {}
+        ),  # ... and by roughness band
     }
+
+
+def _band_errors(runs: Sequence[Mapping[str, Any]], key: str, bands: tuple[str, ...]) -> dict[str, dict[str, list[float]]]:
+    """Per band of ``bands``, per layout, the absolute errors of the runs' mean speed there
+    against their driver's (``key`` and ``driver_`` + ``key``), where both spent :data:`GRADE_MIN_S` there."""
+    errors: dict[str, dict[str, list[float]]] = {}
+    for r in runs:
+        mine, theirs = r.get(key) or {}, r.get(f"driver_{key}") or {}
+        for band in (b for b in bands if b in mine and b in theirs):
+            if min(mine[band]["s"], theirs[band]["s"]) >= GRADE_MIN_S:
+                errors.setdefault(band, {}).setdefault(r["scenario"], []).append(abs(mine[band]["mps"] - theirs[band]["mps"]))
+    return errors
 
 
 def _estimate(groups: Mapping[str, list[float]]) -> Estimate:

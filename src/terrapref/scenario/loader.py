@@ -529,10 +529,16 @@ def _relief_points(c: _Checker, value: Any, field: str, minimum: int) -> np.ndar
 
 
 def _noise(c: _Checker, spec: Any, f: str, world: _World) -> Noise | None:
-    """A ``noise`` entry: amplitude [m], wavelength [m] of at least two cells, integer seed."""
-    spec = c.mapping(spec, f, {"amplitude_m", "wavelength_m", "seed"})
+    """A ``noise`` entry: amplitude [m], wavelength [m] of at least two cells, integer seed, and
+    optionally the polygon it stays inside."""
+    spec = c.mapping(spec, f, {"amplitude_m", "wavelength_m", "seed"}, {"polygon"})
     if spec is None:
         return None
+    polygon = None
+    if "polygon" in spec:
+        polygon = _relief_polygon(c, spec["polygon"], f)
+        if polygon is None:
+            return None
     amplitude = _relief_height(c, spec["amplitude_m"], f"{f}.amplitude_m", positive=True)
     wavelength = c.number(spec["wavelength_m"], f"{f}.wavelength_m", positive=True)
     if wavelength is not None and world.resolution_m is not None and wavelength < 2 * world.resolution_m:
@@ -545,7 +551,7 @@ def _noise(c: _Checker, spec: Any, f: str, world: _World) -> Noise | None:
         seed = None
     if amplitude is None or wavelength is None or seed is None:
         return None
-    return Noise(amplitude, wavelength, seed)
+    return Noise(amplitude, wavelength, seed, polygon)
 
 
 def _mound(c: _Checker, spec: Any, f: str, world: _World) -> Mound | None:
@@ -582,18 +588,26 @@ def _plateau(c: _Checker, spec: Any, f: str, world: _World) -> Plateau | None:
     spec = c.mapping(spec, f, {"polygon", "height_m", "edge_m"})
     if spec is None:
         return None
-    polygon = c.shape({"polygon": spec["polygon"]}, f, None)  # the polygon checks of terrain, at {f}.polygon
-    if polygon is not None and np.abs(polygon.vertices).max() > MAX_RELIEF_REACH_M:  # type: ignore[union-attr]
-        c.fail(f"{f}.polygon", f"has a point more than {MAX_RELIEF_REACH_M:g} m from the map")
-        polygon = None
+    polygon = _relief_polygon(c, spec["polygon"], f)
     height = _relief_height(c, spec["height_m"], f"{f}.height_m")
     edge = c.number(spec["edge_m"], f"{f}.edge_m")
     if edge is not None and edge < 0:
         c.fail(f"{f}.edge_m", "must be >= 0 (0: a vertical step)")
         edge = None
-    if not isinstance(polygon, Polygon) or height is None or edge is None:
+    if polygon is None or height is None or edge is None:
         return None
     return Plateau(polygon, height, edge)
+
+
+def _relief_polygon(c: _Checker, value: Any, f: str) -> Polygon | None:
+    """An entry's ``polygon``, checked as a terrain polygon is (at ``{f}.polygon``), none of its points far beyond the map."""
+    polygon = c.shape({"polygon": value}, f, None)
+    if not isinstance(polygon, Polygon):
+        return None
+    if np.abs(polygon.vertices).max() > MAX_RELIEF_REACH_M:
+        c.fail(f"{f}.polygon", f"has a point more than {MAX_RELIEF_REACH_M:g} m from the map")
+        return None
+    return polygon
 
 
 def _relief_off_map(c: _Checker, entry: ReliefEntry, f: str, size_m: tuple[float, float]) -> bool:

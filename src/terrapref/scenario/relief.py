@@ -17,18 +17,24 @@ from terrapref.scenario.shapes import Polygon
 @dataclass(frozen=True)
 class Noise:
     """Smooth OpenSimplex noise: ``amplitude_m`` times a value in about [-1, 1], its features
-    about ``wavelength_m`` across, the same on any machine for one ``seed``."""
+    about ``wavelength_m`` across, the same on any machine for one ``seed``; over the whole map,
+    or only inside ``polygon`` (rough ground: short noise on a patch), faded in over one
+    wavelength inside its edge so that the patch has no step at its border."""
 
     amplitude_m: float
     wavelength_m: float
     seed: int
+    polygon: Polygon | None = None
 
-    def bounds(self) -> None:
-        """None: noise covers the whole map."""
-        return None
+    def bounds(self) -> tuple[float, float, float, float] | None:
+        """The polygon's box (x0, y0, x1, y1) [m] outside which the noise adds nothing; None: the whole map."""
+        return None if self.polygon is None else self.polygon.bounds()
 
     def to_dict(self) -> dict:
-        return {"noise": {"amplitude_m": self.amplitude_m, "wavelength_m": self.wavelength_m, "seed": self.seed}}
+        spec: dict = {"amplitude_m": self.amplitude_m, "wavelength_m": self.wavelength_m, "seed": self.seed}
+        if self.polygon is not None:
+            spec["polygon"] = self.polygon.vertices.tolist()
+        return {"noise": spec}
 
 
 @dataclass(frozen=True)

@@ -11,6 +11,9 @@ those that fit in it, a bump or a dip only where no larger one fits:
   0.15) up to a 3-5 m top;
 - ``ditch``: a ditch 0.3-0.5 m deep and 2.5-3.5 m wide beside the path, 3.5-5 m off it;
 - ``bank``: the same, raised;
+- ``rough``: a rough patch across the path, 5-9 m long and 8 m across: short noise (0.3 m
+  across) of 0.05-0.11 m, rough from about 0.01 to 0.03 m (the heights' deviation about their
+  plane within 0.3 m), on both sides of the default relief style's 0.02 m;
 - ``bump``: a low ridge across the path, 0.1-0.2 m high and 1.5-2.5 m wide;
 - ``dip``: the same, sunken (a swale);
 
@@ -32,7 +35,7 @@ from terrapref.scenario.path import ReferencePath
 STRETCH_M = 20.0  # the longest stretch of path one feature is placed in [m]
 CLEAR_M = 8.0  # the path's first and last metres stay flat (the start and the goal) [m]
 STEP_M = 0.5  # the path is sampled this often when finding what its zones cover [m]
-NEEDS_M = {"mound": 7.0, "ramp": 13.0, "ditch": 8.0, "bank": 8.0}  # the shortest stretch each kind fits in [m]
+NEEDS_M = {"mound": 7.0, "ramp": 13.0, "ditch": 8.0, "bank": 8.0, "rough": 8.0}  # the shortest stretch each kind fits in [m]
 SMALL_NEEDS_M = {"bump": 3.0, "dip": 3.0}  # the same, of the kinds for a stretch too short for the others [m]
 NOISE = {"amplitude_m": 0.1, "wavelength_m": 15.0}
 
@@ -95,6 +98,12 @@ def _feature(rng: np.random.Generator, kind: str, path: ReferencePath, s0: float
         corners = [(-top / 2, -half_across), (top / 2, -half_across), (top / 2, half_across), (-top / 2, half_across)]
         polygon = [[x + a * ux - b * uy, y + a * uy + b * ux] for a, b in corners]
         return {"plateau": {"polygon": _rounded(polygon), "height_m": round(rng.uniform(0.3, 0.6), 3), "edge_m": round(ramp, 3)}}
+    if kind == "rough":
+        length, half_across = min(rng.uniform(5.0, 9.0), room), 4.0
+        corners = [(-length / 2, -half_across), (length / 2, -half_across), (length / 2, half_across), (-length / 2, half_across)]
+        polygon = [[x + a * ux - b * uy, y + a * uy + b * ux] for a, b in corners]
+        noise = {"amplitude_m": round(rng.uniform(0.05, 0.11), 3), "wavelength_m": 0.3, "seed": int(rng.integers(2**31))}
+        return {"noise": {**noise, "polygon": _rounded(polygon)}}
     if kind in ("bump", "dip"):
         width, half_across = min(rng.uniform(1.5, 2.5), room), 6.0
         line = [[x + uy * half_across, y - ux * half_across], [x - uy * half_across, y + ux * half_across]]

@@ -16,9 +16,10 @@ when the course shows
 With relief (``terrapref course --relief``, the packaged ``teach_relief``) it also shows each
 relief situation alone and relief against terrain (:func:`relief_situations`): a mound on the
 path of a gentle and of a steep grade, a bank beside the path (the path on its flank) of a gentle
-and of a steep side slope, a ramp up and down across the way, and each feature class as a flat
-patch beside the path against the path's own ground sloping across the way as a bank of the
-background. Which of them a driver goes round, and how it slows on them, is its relief style.
+and of a steep side slope, a ramp up and down across the way, a rough patch across the way (short
+noise: rocks and ruts), and each feature class as a flat patch beside the path against the path's
+own ground sloping across the way as a bank of the background. Which of them a driver goes
+round, and how it slows on them, is its relief style.
 
 Pairs grow as K(K-1)/2. The course shows each pair once on each side, each strip with the
 lethal terrain once on each side, each lethal class alone twice (once a little left of the path,
@@ -49,11 +50,26 @@ from terrapref.terrain import ClassTable
 DRIVER_SPEED_MPS = 1.0  # the speed a teaching drive is timed at (the synthetic driver's)
 BUDGET_M = 600.0  # the longest full design [m]: 10 minutes at 1 m/s
 LANE = 8  # situations between two turns round
-HALF_M = {"lone": 6.0, "lane": 6.0, "pair": 8.5, "strip": 8.5, "mound": 6.5, "bank": 6.5, "ramp": 6.5, "slope": 6.5}  # half a leg [m]
-RELIEF_KINDS = ("mound", "bank", "ramp", "slope")  # the situations of relief (module docstring)
+HALF_M = {
+    "lone": 6.0,
+    "lane": 6.0,
+    "pair": 8.5,
+    "strip": 8.5,
+    "mound": 6.5,
+    "bank": 6.5,
+    "ramp": 6.5,
+    "slope": 6.5,
+    "rough": 6.5,
+}  # half a leg [m]
+RELIEF_KINDS = ("mound", "bank", "ramp", "rough", "slope")  # the situations of relief (module docstring)
 MOUND_RADIUS_M = 3.0  # a mound on the path: its radius; its height sets its steepest grade [m]
 BANK_WIDTH_M, BANK_LENGTH_M = 5.0, 9.0  # a bank beside the path: its full width and length; the path on its flank [m]
 RAMP_TOP_M, RAMP_EDGE_M, RAMP_ACROSS_M = 3.0, 4.0, 14.0  # a ramp across the way: its top, each ramp, across [m]
+# A rough patch across the way: (length, width) [m], and its noise (amplitude [m], wavelength [m]):
+# the heights' deviation about their plane within 0.3 m (the roughness the planner reads) about
+# 0.03 m, past the default relief style's 0.02 m, with steps well under what the vehicle climbs.
+ROUGH_PATCH_M = (8.0, 8.0)
+ROUGH_NOISE_M = (0.11, 0.3)
 SLOPE_PATCH_M = (8.0, 4.0)  # relief against terrain: the flat patch beside the path, (length, width) [m]
 # The default vehicle's half track and wheelbase [m], the body the relief situations are as steep
 # for (terrapref.vehicle.VehicleConfig's; the scenario sits below the vehicle, and
@@ -161,8 +177,8 @@ def situations(classes: ClassTable, full: bool | None = None, relief: bool = Fal
 
 def relief_situations(classes: ClassTable) -> list[Situation]:
     """The relief situations (module docstring) of ``classes``' teaching course: two mounds, two
-    banks (one on each side), a ramp, and each feature class against a bank, sides alternating;
-    each shows the steepest grade or side slope :data:`RELIEF_DEG` gives it."""
+    banks (one on each side), a ramp, a rough patch, and each feature class against a bank, sides
+    alternating; each shows the steepest grade or side slope :data:`RELIEF_DEG` gives it."""
     d = RELIEF_DEG
     items = [
         Situation("mound", (), 0.0, d["gentle mound"]),
@@ -170,6 +186,7 @@ def relief_situations(classes: ClassTable) -> list[Situation]:
         Situation("ramp", (), 0.0, d["ramp"]),
         Situation("mound", (), 0.0, d["steep mound"]),
         Situation("bank", (), -1.0, d["steep bank"]),
+        Situation("rough", (), 0.0, 0.0),
     ]
     return items + [Situation("slope", (name,), (1.0, -1.0)[k % 2], d["slope"]) for k, name in enumerate(classes.terrain_names)]
 
@@ -181,7 +198,7 @@ def place_relief(c: CourseBuilder, item: Situation, s: float) -> None:
     each side): a mound's cosine profile of height h and radius R pitches it most, by
     ``atan(h sin(pi a / R) / (2 a))``, halfway out; a bank's (a ridge of width w) rolls it by
     ``atan(h sin(2 pi a / w) / (2 a))`` a quarter of its width from its line, where the path runs;
-    a ramp rises its height over its edge."""
+    a ramp rises its height over its edge. A rough patch is level (:data:`ROUGH_NOISE_M`)."""
     half_track, wheelbase = BODY_M
     tan = math.tan(math.radians(item.deg))
     if item.kind == "mound":
@@ -192,6 +209,11 @@ def place_relief(c: CourseBuilder, item: Situation, s: float) -> None:
         a, b = RAMP_TOP_M / 2, RAMP_ACROSS_M / 2
         corners = c.to_world(s, [(-a, -b), (a, -b), (a, b), (-a, b)])
         c.relief.append({"plateau": {"polygon": corners, "height_m": round(tan * RAMP_EDGE_M, 3), "edge_m": RAMP_EDGE_M}})
+    elif item.kind == "rough":
+        (length, width), (amplitude, wavelength) = ROUGH_PATCH_M, ROUGH_NOISE_M
+        a, b = length / 2, width / 2
+        corners = c.to_world(s, [(-a, -b), (a, -b), (a, b), (-a, b)])
+        c.relief.append({"noise": {"amplitude_m": amplitude, "wavelength_m": wavelength, "seed": 1, "polygon": corners}})
     else:  # a bank with the path on its flank: rising on the side of the offset, or across from a slope's patch
         side = math.copysign(1.0, item.offset_m) * (1.0 if item.kind == "bank" else -1.0)
         line = c.to_world(s, [(-BANK_LENGTH_M / 2, side * BANK_WIDTH_M / 4), (BANK_LENGTH_M / 2, side * BANK_WIDTH_M / 4)])
@@ -402,7 +424,7 @@ def write_teaching_course(folder: str | Path, classes: ClassTable) -> Path:
 
 
 RELIEF_DESCRIPTION = (
-    "With relief: a gentle and a steep mound on the path, a gentle and a steep bank beside it, a ramp up and down, "
+    "With relief: a gentle and a steep mound on the path, a gentle and a steep bank beside it, a ramp up and down, a rough patch, "
     "each feature class flat beside the path against a bank of the background, and bumps and dips between the situations."
 )
 

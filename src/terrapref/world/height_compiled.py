@@ -43,3 +43,34 @@ def plane_fit(sums: tuple[float, ...]) -> tuple[float, float]:
     b = (cyz * cxx - cxz * cxy) / det
     residual = czz - a * cxz - b * cyz  # the residual sum of squares
     return math.atan(math.sqrt(a * a + b * b)), math.sqrt(max(residual, 0.0) / m)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def roughness(heights: np.ndarray, r0: int, c0: int, res: float, reach: int) -> float:
+    """The standard deviation of the heights within ``reach`` cells (a disc) of cell (r0, c0)
+    about their least-squares plane [m] (as the planner's height layer reads its roughness:
+    :func:`plane_fit`); 0 where the plane is not determined."""
+    n_rows, n_cols = heights.shape
+    m = sx = sy = sz = sxx = syy = sxy = sxz = syz = szz = 0.0
+    for dr in range(-reach, reach + 1):
+        for dc in range(-reach, reach + 1):
+            r, c = r0 + dr, c0 + dc
+            if dr * dr + dc * dc > reach * reach or not (0 <= r < n_rows and 0 <= c < n_cols):
+                continue
+            x, y, z = dc * res, dr * res, np.float64(heights[r, c])
+            m, sx, sy, sz = m + 1.0, sx + x, sy + y, sz + z
+            sxx, syy, sxy, sxz, syz, szz = sxx + x * x, syy + y * y, sxy + x * y, sxz + x * z, syz + y * z, szz + z * z
+    rough = plane_fit((m, sx, sy, sz, sxx, syy, sxy, sxz, syz, szz))[1]
+    return 0.0 if math.isnan(rough) else rough
+
+
+@njit(cache=True, nogil=True)
+def roughness_at(heights: np.ndarray, res: float, xy: np.ndarray, reach: int) -> np.ndarray:
+    """:func:`roughness` of the cell under each point ``xy`` (N, 2) [m]; 0 off the map."""
+    n_rows, n_cols = heights.shape
+    out = np.zeros(xy.shape[0])
+    for i in range(xy.shape[0]):
+        r0, c0 = int(math.floor(xy[i, 1] / res)), int(math.floor(xy[i, 0] / res))
+        if 0 <= r0 < n_rows and 0 <= c0 < n_cols:
+            out[i] = roughness(heights, r0, c0, res, reach)
+    return out

@@ -12,8 +12,10 @@ import numpy as np
 from terrapref.scenario.model import Scenario
 from terrapref.scenario.shapes import Shape
 from terrapref.terrain import UNKNOWN, ClassTable
-from terrapref.world.height_compiled import height_at
+from terrapref.world.height_compiled import height_at, roughness_at
 from terrapref.world.relief import height_field
+
+ROUGH_RADIUS_M = 0.3  # the disc a point's roughness is read over [m]: as the planner's height layer reads it
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,6 +69,15 @@ class WorldMap:
         if not (math.isfinite(x) and math.isfinite(y)):
             return math.nan
         return height_at(self.height, 1.0 / self.resolution_m, float(x), float(y))
+
+    def roughness_at(self, xy: np.ndarray) -> np.ndarray:
+        """The ground's roughness [m] (N,) at world points (N, 2): the standard deviation of the
+        heights within :data:`ROUGH_RADIUS_M` of the cell under each about their least-squares
+        plane, as the planner's height layer reads it; 0 off the map and on flat ground."""
+        xy = np.ascontiguousarray(xy, dtype=np.float64).reshape(-1, 2)
+        if self.height is None:
+            return np.zeros(len(xy))
+        return roughness_at(self.height, self.resolution_m, xy, rough_reach(self.resolution_m))
 
     @property
     def size_m(self) -> tuple[float, float]:
@@ -143,3 +154,8 @@ def rasterise(scenario: Scenario) -> WorldMap:
         paint(raster, patch.shape, classes.id_of(patch.class_name), scenario.resolution_m)
     height = height_field(scenario.relief, scenario.grid_shape, scenario.resolution_m) if scenario.has_relief else None
     return WorldMap(raster, scenario.resolution_m, classes, height)
+
+
+def rough_reach(resolution_m: float) -> int:
+    """The cells :data:`ROUGH_RADIUS_M` spans on a grid of ``resolution_m`` (at least one)."""
+    return max(1, int(math.floor(ROUGH_RADIUS_M / resolution_m + 1e-9)))

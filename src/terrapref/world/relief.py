@@ -22,7 +22,7 @@ def height_field(relief: Sequence[ReliefEntry], grid_shape: tuple[int, int], res
     the entries of ``relief`` added in order to flat ground (z = 0)."""
     z = np.zeros(grid_shape, dtype=np.float64)
     for entry in relief:
-        if isinstance(entry, Noise):
+        if isinstance(entry, Noise) and entry.polygon is None:
             ny, nx = grid_shape
             z += noise_height(entry, (np.arange(nx) + 0.5) * resolution_m, (np.arange(ny) + 0.5) * resolution_m)
             continue
@@ -37,8 +37,13 @@ def height_field(relief: Sequence[ReliefEntry], grid_shape: tuple[int, int], res
     return z.astype(np.float32)
 
 
-def _entry_height(entry: Mound | Ridge | Plateau, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+def _entry_height(entry: Noise | Mound | Ridge | Plateau, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """The height one entry adds at the cell centres ``x`` (1, n) and ``y`` (m, 1) [m], shape (m, n)."""
+    if isinstance(entry, Noise):  # on a patch: faded in over one wavelength inside the polygon's edge
+        gx, gy = np.broadcast_arrays(x, y)
+        inside = entry.polygon.contains(np.stack([gx.ravel(), gy.ravel()], axis=1)).reshape(gx.shape)
+        fade = np.clip(_polyline_distance(entry.polygon.vertices, x, y, closed=True) / entry.wavelength_m, 0.0, 1.0)
+        return np.where(inside, fade, 0.0) * noise_height(entry, x[0], y[:, 0])
     if isinstance(entry, Mound):
         d = np.hypot(x - entry.center[0], y - entry.center[1])
         return _cosine(d, entry.radius_m, entry.height_m)

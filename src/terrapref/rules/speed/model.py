@@ -4,13 +4,15 @@ What a person's speed depends on, written as a few numbers that one drive can pi
 cruising speed per terrain column (the background included), taken as the slowest of the columns
 the footprint meets on its way over the next ``preview_m``; on relief, less ``up_mps_per_deg`` for
 each degree of grade up at each station of that way (``down_mps_per_deg`` down); no more than
-``lateral_accel_mps2`` allows in a bend of the way's curvature; and no more than
-``near_lethal_mps`` while lethal terrain lies within ``near_lethal_m`` beside the footprint on that way.
+``rough_mps`` where the ground within :data:`ROUGH_PREVIEW_M` of the vehicle on that way is
+rougher than ``rough_m``; no more than ``lateral_accel_mps2`` allows in a bend of the way's
+curvature; and no more than ``near_lethal_mps`` while lethal terrain lies within ``near_lethal_m``
+beside the footprint on that way.
 
 A frame's way is read as terrain columns at stations ``STATION_STEP_M`` apart (the first under
 the vehicle) and at the footprint's points across (:data:`ACROSS`: the footprint's 5, then the
-lethal rings' 4), and the grade of the way at each station [deg, positive up, NaN where the
-ground map does not know it]. The fit reads the way the driver drove; the planner reads the way it chose.
+lethal rings' 4), the grade of the way at each station [deg, positive up, NaN where the
+ground map does not know it] and its roughness there [m, the same]. The fit reads the way the driver drove; the planner reads the way it chose.
 """
 
 from __future__ import annotations
@@ -36,6 +38,11 @@ MIN_FRAMES = 10  # frames a cruising speed, a bend or a lethal neighbour needs t
 MIN_SPEED_MPS = MIN_CRUISE_MPS  # the slowest the rule commands while it drives [m/s]
 SLOWEST_PERCENTILE = 5  # the slowest speed a drive showed: this percentile of its speeds while moving (not a moment's)
 LEVEL_DEG = 3.0  # a way whose grade stays within this of level shows its class's cruising speed; steeper, what a grade sheds [deg]
+# Roughness is read on the way's first metre: a depth camera's far returns scatter (under
+# `field`, smooth ground 2-3 m ahead reads as rough as a patch of 0.01-0.02 m does at the vehicle),
+# while ground under the footprint has been seen from close by.
+ROUGH_PREVIEW_M = 1.0
+ROUGH_BANDS_M = (0.01, 0.0125, 0.015, 0.0175, 0.02, 0.025, 0.03, 0.035, 0.04)  # the roughness past which the fit tries a top speed [m]
 
 
 # The body's pitch at a station: the ground's gradient along the heading, averaged over a chord of
@@ -88,6 +95,8 @@ class SpeedModel:
         up_mps_per_deg: the speed shed per degree of grade up [m/s per deg]; None: not learned
             (a drive on flat ground) ...
         down_mps_per_deg: ... and down.
+        rough_m: the roughness past which ``rough_mps`` holds [m]; None: not learned ...
+        rough_mps: ... the top speed there [m/s].
     """
 
     speeds_mps: tuple[float, ...]
@@ -100,16 +109,25 @@ class SpeedModel:
     drive_lateral_mps2: float | None = None
     up_mps_per_deg: float | None = None
     down_mps_per_deg: float | None = None
+    rough_m: float | None = None
+    rough_mps: float | None = None
+
+    @property
+    def slows_on_rough(self) -> bool:
+        """Whether the model keeps a top speed on rough ground (a drive on relief showed it)."""
+        return self.rough_m is not None and self.rough_mps is not None
 
     @property
     def sheds_on_grades(self) -> bool:
         """Whether the model slows on grades (a drive on relief showed it)."""
         return self.up_mps_per_deg is not None or self.down_mps_per_deg is not None
 
-    def predict(self, way: np.ndarray, curvature: np.ndarray, grade: np.ndarray | None = None) -> np.ndarray:
+    def predict(
+        self, way: np.ndarray, curvature: np.ndarray, grade: np.ndarray | None = None, rough: np.ndarray | None = None
+    ) -> np.ndarray:
         """The speed [m/s] (N,) for ways (N, STATIONS, 9) of terrain columns, their curvatures (N,)
-        [1/m] and their grades (N, STATIONS) [deg, positive up; NaN: unknown, taken as level;
-        None: all unknown]."""
+        [1/m], their grades (N, STATIONS) [deg, positive up; NaN: unknown, taken as level; None:
+        all unknown] and their roughness (N, STATIONS) [m; NaN or None: unknown, taken as smooth]."""
         upto = _stations(self.preview_m)
         foot = way[:, :upto, :5]
         at = self._speeds[foot]
@@ -120,6 +138,8 @@ class SpeedModel:
             at = at - self.shed(grade[:, :upto])[:, :, None]
         v = np.nanmin(at.reshape(len(way), -1), axis=1, initial=np.inf)
         v = np.where(np.isfinite(v), v, float(np.nanmin(self.speeds_mps)))  # nothing seen: the slowest cruising speed
+        if rough is not None and self.slows_on_rough:
+            v = np.where(roughest(rough) > self.rough_m, np.minimum(v, self.rough_mps), v)
         if self.lateral_accel_mps2 is not None:
             k = np.abs(curvature)
             with np.errstate(divide="ignore"):
@@ -153,6 +173,16 @@ class SpeedModel:
         return lethal_mask(self.lethal)
 
 
+def roughest(rough: np.ndarray) -> np.ndarray:
+    """The roughest ground [m] (N,) within :data:`ROUGH_PREVIEW_M` on each way of ``rough`` (N, STATIONS) (0 where unknown)."""
+    return np.nan_to_num(rough[:, : rough_stations()].astype(np.float64)).max(axis=1, initial=0.0)
+
+
+def rough_stations() -> int:
+    """The stations of a way whose roughness counts (those within :data:`ROUGH_PREVIEW_M`)."""
+    return _stations(ROUGH_PREVIEW_M)
+
+
 def _stations(preview_m: float) -> int:
     """Stations of a way within ``preview_m`` (the one under the vehicle included)."""
     return min(STATIONS, round(preview_m / STATION_STEP_M) + 1)
@@ -176,7 +206,8 @@ class SpeedFit:
     """How the fit went: the model, each column's cruising speed's 95% interval (None: never
     shown at a steady speed), the lag chosen, frames fitted and the mean absolute error on them;
     and, for a drive on relief (``on_grades``), the 95% intervals of what grades shed, up and down
-    (None: not learned), and the frames on one grade each was read from (or would have been)."""
+    (None: not learned), and the frames on one grade each was read from (or would have been);
+    and what rough ground showed (:class:`Rough`)."""
 
     model: SpeedModel
     intervals: tuple[tuple[float, float] | None, ...]
@@ -186,6 +217,19 @@ class SpeedFit:
     grade_intervals: tuple[tuple[float, float] | None, tuple[float, float] | None] = (None, None)
     grade_frames: tuple[int, int] = (0, 0)
     on_grades: bool = False
+    rough: Rough | None = None
+
+
+class Rough(NamedTuple):
+    """What a drive on relief showed of rough ground: the frames on one class, away from lethal
+    terrain and slower than the terrain and grades ask, on ground past the roughness learned
+    (or past the smoothest band tried, where nothing was learned); the top speed's 95% interval
+    (None: not learned); and the roughness bands [m] that explain the drive within a tenth of a
+    percent as well as the one kept (the drive cannot tell them apart)."""
+
+    frames: int = 0
+    interval: tuple[float, float] | None = None
+    alike_m: tuple[float, float] | None = None
 
 
 class _Grades(NamedTuple):
@@ -202,14 +246,15 @@ class Drive(NamedTuple):
     """The frames of a drive as the fit reads them (terrapref.rules.speed.rule.SpeedReader's arrays):
     the ways driven (N, STATIONS, 9), their curvatures (N, NaN where the vehicle stood), the speeds
     commanded (N) [m/s], the frames' numbers in their recordings (N; a lag pairs frames only within
-    one recording) and the ways' grades (N, STATIONS) [deg, positive up, NaN where unknown; None: a
-    drive on flat ground]."""
+    one recording), the ways' grades (N, STATIONS) [deg, positive up, NaN where unknown; None: a
+    drive on flat ground] and their roughness (N, STATIONS) [m, the same]."""
 
     way: np.ndarray
     curvature: np.ndarray
     v_mps: np.ndarray
     frame: np.ndarray
     grade: np.ndarray | None = None
+    rough: np.ndarray | None = None
 
 
 def fit_speed(drive: Drive, k: int, lethal: tuple[int, ...]) -> SpeedFit | None:
@@ -229,14 +274,18 @@ def fit_speed(drive: Drive, k: int, lethal: tuple[int, ...]) -> SpeedFit | None:
     What a degree of grade up sheds is the median, over the frames whose way is one column alone
     and nearly straight, climbing past :data:`LEVEL_DEG` and nowhere going down past it, of the
     speed they fall short of that column's cruising speed by per degree of their steepest grade
-    up (down likewise); each is kept where it explains the frames better than none. A
+    up (down likewise); each is kept where it explains the frames better than none. On rough
+    ground: for each band of :data:`ROUGH_BANDS_M`, the median speed of the frames on one column
+    alone, nearly straight, away from lethal terrain, slower than the terrain and grades ask
+    and past the band within :data:`ROUGH_PREVIEW_M`; the band that explains the frames best is
+    kept where it explains them better than none. A
     class counts where it meets any one of the footprint's points (``min_points`` 1), as the
     driver reads its footprint: a model that asked for two passed at full speed the patches its
     driver brushes, on clean frames and under label errors alike, even where two points explained
     its drive better.
     """
 
-    way, curvature, v_mps, frame, grade = drive
+    way, curvature, v_mps, frame, grade, rough = drive
 
     def fitted(lag: int, preview: float, intervals: bool = False) -> SpeedFit | None:
         later = _shifted(v_mps, frame, lag)
@@ -245,12 +294,13 @@ def fit_speed(drive: Drive, k: int, lethal: tuple[int, ...]) -> SpeedFit | None:
             return None
         w, c, v = way[ok], curvature[ok], later[ok]
         g = None if grade is None else grade[ok]
-        found = _fit_at(_Frames(w, c, v, k, lethal, g, intervals), preview)
+        r = None if rough is None else rough[ok]
+        found = _fit_at(_Frames(w, c, v, k, lethal, g, intervals, r), preview)
         if found is None:
             return None
-        model, intervals, grades = found
-        error = float(np.mean(np.abs(model.predict(w, c, g) - v)))
-        return SpeedFit(model, intervals, lag, int(len(v)), error, grades.intervals, grades.frames, g is not None)
+        model, intervals, grades, shown = found
+        error = float(np.mean(np.abs(model.predict(w, c, g, r) - v)))
+        return SpeedFit(model, intervals, lag, int(len(v)), error, grades.intervals, grades.frames, g is not None, shown)
 
     best: SpeedFit | None = None
     for lag in LAGS:
@@ -278,7 +328,8 @@ def _shifted(v: np.ndarray, frame: np.ndarray, lag: int) -> np.ndarray:
 
 class _Frames(NamedTuple):
     """The frames one fit reads: ways, curvatures, speeds (lagged), the terrain columns K, the
-    lethal ones, the ways' grades (None: flat ground), and whether to find the intervals."""
+    lethal ones, the ways' grades (None: flat ground), whether to find the intervals, and the
+    ways' roughness (None: flat ground)."""
 
     way: np.ndarray
     curvature: np.ndarray
@@ -287,10 +338,11 @@ class _Frames(NamedTuple):
     lethal: tuple[int, ...]
     grade: np.ndarray | None = None
     intervals: bool = True
+    rough: np.ndarray | None = None
 
 
-def _fit_at(frames: _Frames, preview_m: float) -> tuple[SpeedModel, tuple[tuple[float, float] | None, ...], _Grades] | None:
-    way, curvature, v, k, lethal, grade, _ = frames
+def _fit_at(frames: _Frames, preview_m: float) -> tuple[SpeedModel, tuple[tuple[float, float] | None, ...], _Grades, Rough | None] | None:
+    way, curvature, v, k, lethal, grade, _, rough = frames
     upto = _stations(preview_m)
     foot = way[:, :upto, :5].reshape(len(way), -1)
     seen = foot <= k  # K + 1: never seen
@@ -336,7 +388,10 @@ def _fit_at(frames: _Frames, preview_m: float) -> tuple[SpeedModel, tuple[tuple[
     grades = _Grades()
     if grade is not None:
         best, grades = _fit_grades(best, best_error, frames, steady & ~near, (climb, descent))
-    return best, tuple(intervals), grades
+    shown = None
+    if rough is not None:
+        best, shown = _fit_rough(best, frames, steady & ~near)
+    return best, tuple(intervals), grades, shown
 
 
 def _cruising(frames: _Frames, on: np.ndarray, near: np.ndarray, level: np.ndarray) -> tuple[list[float], list[tuple[float, float] | None]]:
@@ -391,6 +446,31 @@ def _fit_grades(
             model, error = trial, trial_error
             intervals[i] = _interval(per_deg, rows) if frames.intervals else None
     return model, _Grades(model.up_mps_per_deg, model.down_mps_per_deg, (intervals[0], intervals[1]), (counts[0], counts[1]))
+
+
+def _fit_rough(model: SpeedModel, frames: _Frames, steady: np.ndarray) -> tuple[SpeedModel, Rough]:
+    """``model`` with a top speed on rough ground where one explains ``frames`` better than none
+    (:func:`fit_speed`), and what the drive showed of it; ``steady``: the frames on one column
+    alone, nearly straight, with no lethal terrain near."""
+    way, curvature, v, grade, rough = frames.way, frames.curvature, frames.v, frames.grade, frames.rough
+    asked = model.predict(way, curvature, grade)  # what terrain and grades alone ask for
+    error = float(np.mean(np.abs(asked - v)))
+    roughness = roughest(rough)
+    slowed = steady & (asked > 1.05 * v)
+    tried: list[tuple[float, SpeedModel, np.ndarray]] = []
+    for band in ROUGH_BANDS_M:
+        rows = np.flatnonzero(slowed & (roughness > band))
+        if len(rows) < MIN_FRAMES:
+            continue
+        trial = replace(model, rough_m=band, rough_mps=max(float(np.median(v[rows])), MIN_SPEED_MPS))
+        tried.append((float(np.mean(np.abs(trial.predict(way, curvature, grade, rough) - v))), trial, rows))
+    better = [t for t in tried if t[0] < error - 1e-9]
+    if not better:
+        return model, Rough(int(np.count_nonzero(slowed & (roughness > ROUGH_BANDS_M[0]))))
+    best_error, best, rows = min(better, key=lambda t: t[0])
+    alike = [t[1].rough_m for t in better if t[0] <= best_error * 1.001]
+    interval = _interval(v[rows], rows) if frames.intervals else None
+    return best, Rough(len(rows), interval, (min(alike), max(alike)))
 
 
 def _interval(v: np.ndarray, rows: np.ndarray, resamples: int = 200) -> tuple[float, float]:

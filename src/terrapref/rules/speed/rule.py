@@ -46,14 +46,18 @@ from terrapref.rules.speed.model import (
     LEVEL_DEG,
     MIN_FRAMES,
     MIN_SPEED_MPS,
+    ROUGH_BANDS_M,
+    ROUGH_PREVIEW_M,
     STATION_STEP_M,
     STATIONS,
     Drive,
+    Rough,
     SpeedFit,
     SpeedModel,
     across,
     body_grade,
     fit_speed,
+    rough_stations,
 )
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable
@@ -99,6 +103,7 @@ class SpeedConfig(RuleConfig):
         "v_mps": "finite >= 0",
         "frame": "finite >= 0",
         "grade": "no inf",
+        "rough": "no inf",
     }
     without_data: ClassVar[str] = "the model gets no speed rule and drives at the control set's speed"
 
@@ -113,7 +118,7 @@ class SpeedConfig(RuleConfig):
         return to_plain(self)
 
     def summary(self) -> str:
-        return "the speed rule, a cruising speed per class, on grades, in bends and near lethal terrain, learned from the drive"
+        return "the speed rule, a cruising speed per class, on grades, on rough ground, in bends and near lethal terrain, learned from the drive"
 
     def data(self) -> dict[str, Any]:
         return {"half_width_m": self.half_width_m}
@@ -132,10 +137,9 @@ class SpeedConfig(RuleConfig):
         table = ClassTable.from_dict(data.dataset.meta["classes"])
         lethal = (features.feature_classes.index(table.lethal_column),) if table.lethal_column in features.feature_classes else ()
         frame = arrays["frame"].astype(np.int64)
-        grade = arrays.get("grade")  # absent from datasets featurised before grades were read: flat
-        if grade is not None and not np.isfinite(grade).any():
-            grade = None  # a drive on flat ground
-        fitted = fit_speed(Drive(arrays["way"], arrays["curvature"], arrays["v_mps"], frame, grade), features.n_terrain, lethal)
+        grade, rough = (arrays.get(name) for name in ("grade", "rough"))  # absent from datasets featurised before they were read: flat
+        grade, rough = (None if a is None or not np.isfinite(a).any() else a for a in (grade, rough))  # a drive on flat ground
+        fitted = fit_speed(Drive(arrays["way"], arrays["curvature"], arrays["v_mps"], frame, grade, rough), features.n_terrain, lethal)
         return None if fitted is None else SpeedRule(config, fitted.model, fitted, table.background)
 
 
@@ -148,7 +152,7 @@ class SpeedReader(FrameReader):
     ``v_mps`` (N,) the speed commanded [m/s]; ``frame`` (N,) the frame's number in its recording;
     ``grade`` (N, STATIONS) the grade of the way driven at each station, heading along it, as the
     ground map's height layer then showed it [deg, positive up; NaN: unknown, all of it on flat
-    ground]."""
+    ground]; ``rough`` (N, STATIONS) the ground's roughness there, the same way [m]."""
 
     def __init__(self, half_width_m: float, featurizer: UtilityFeaturizer, camera: PinholeCamera, classes: ClassTable, n: int) -> None:
         terrain = TerrainColumns.of(featurizer.class_columns, featurizer.config.n_terrain, classes)
@@ -160,6 +164,7 @@ class SpeedReader(FrameReader):
         self._grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1)  # (X, Y, 2) vehicle frame
         self.snapshots = np.empty((n, SNAPSHOT_X, SNAPSHOT_Y), dtype=np.uint8)
         self.gradients: np.ndarray | None = None  # the ground's gradient there (n, X, Y, 2), from the first depth image
+        self.roughness: np.ndarray | None = None  # and its roughness (n, X, Y) [m]
 
     def read(self, j: int, view: SegmentationView, pose: Pose, path: ReferencePath, progress_m: float) -> None:
         depth = DepthImage.of(view, self.map.camera, pose)
@@ -169,7 +174,9 @@ class SpeedReader(FrameReader):
         if depth is not None:
             if self.gradients is None:
                 self.gradients = np.full((len(self.snapshots), SNAPSHOT_X, SNAPSHOT_Y, 2), np.nan, dtype=np.float32)
+                self.roughness = np.full((len(self.snapshots), SNAPSHOT_X, SNAPSHOT_Y), np.nan, dtype=np.float32)
             self.gradients[j] = self.map.gradient_at(grid)
+            self.roughness[j] = self.map.geometry_at(grid)[..., 1]
 
     def arrays(self, recording: Recording, keep: np.ndarray, path: ReferencePath) -> dict[str, np.ndarray]:
         poses = recording.poses[keep].astype(float)
@@ -178,6 +185,7 @@ class SpeedReader(FrameReader):
             curvature = np.where(v > 0, w / v, np.nan)
         way = np.full((len(keep), STATIONS, len(self.across)), self.k + 1, dtype=np.uint8)
         grade = np.full((len(keep), STATIONS), np.nan, dtype=np.float32)
+        rough = np.full((len(keep), STATIONS), np.nan, dtype=np.float32)
         step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
         gap = np.diff(keep) != 1  # frames not next to each other (left out, or another session): the way ends there
         step[gap] = np.inf
@@ -198,14 +206,17 @@ class SpeedReader(FrameReader):
             )
             i, k, inside = self._snapshot_cells(points, tuple(poses[j]))
             way[j, reach] = np.where(inside, self.snapshots[j, i, k], self.k + 1)
-            if self.gradients is not None:  # the body's pitch heading along the way, on its centre line
+            if self.gradients is not None:  # the body's pitch heading along the way, and the roughness, on its centre line
                 grade[j, reach] = body_grade(functools.partial(self._gradient_at, j, tuple(poses[j])), points[:, CENTRE], yaw)
+                centre = (i[:, CENTRE], k[:, CENTRE])
+                rough[j, reach] = np.where(inside[:, CENTRE], self.roughness[j][centre], np.nan)
         return {
             "way": way,
             "curvature": curvature.astype(np.float32),
             "v_mps": v.astype(np.float32),
             "frame": keep.astype(np.float32),
             "grade": grade,
+            "rough": rough,
         }
 
     def _gradient_at(self, j: int, pose: tuple[float, float, float], points: np.ndarray) -> np.ndarray:
@@ -284,6 +295,8 @@ class SpeedRule(Rule):
         }
         if m.sheds_on_grades:  # a flat drive's model file is as it was before grades were learned
             out |= {"up_mps_per_deg": m.up_mps_per_deg, "down_mps_per_deg": m.down_mps_per_deg}
+        if m.slows_on_rough:  # and before rough ground was
+            out |= {"rough_m": m.rough_m, "rough_mps": m.rough_mps}
         if self.fit is not None:
             out |= {
                 "intervals_mps": [list(i) if i is not None else None for i in self.fit.intervals],
@@ -295,6 +308,13 @@ class SpeedRule(Rule):
                 out |= {
                     "grade_intervals": [list(i) if i is not None else None for i in self.fit.grade_intervals],
                     "grade_frames": list(self.fit.grade_frames),
+                }
+            if self.fit.rough is not None:  # what it showed of rough ground, learned or not
+                shown = self.fit.rough
+                out |= {
+                    "rough_frames": shown.frames,
+                    "rough_interval": list(shown.interval) if shown.interval is not None else None,
+                    "rough_alike_m": list(shown.alike_m) if shown.alike_m is not None else None,
                 }
         return out
 
@@ -312,6 +332,14 @@ class SpeedRule(Rule):
             optional[name] = None if block.get(name) is None else number(block, name, where, positive=True)
         for name in ("up_mps_per_deg", "down_mps_per_deg"):  # absent from a flat drive's file
             optional[name] = None if block.get(name) is None else number(block, name, where, low=0.0)
+        for name in ("rough_m", "rough_mps"):  # likewise
+            optional[name] = None if block.get(name) is None else number(block, name, where, positive=True)
+        if (optional["rough_m"] is None) != (optional["rough_mps"] is None):
+            raise where.error(
+                "rough_m", "rough_m and rough_mps come together: the roughness past which the top speed holds, and that speed"
+            )
+        if optional["rough_mps"] is not None and optional["rough_mps"] < MIN_SPEED_MPS:
+            raise where.error("rough_mps", f"expected at least {MIN_SPEED_MPS:g} m/s, the least cruising speed")
         try:
             config = SpeedConfig(number(block, "half_width_m", where, 0.6), number(block, "max_speed_mps", where, 2.0))
         except ValueError as exc:
@@ -327,6 +355,8 @@ class SpeedRule(Rule):
             None if block.get("drive_lateral_mps2") is None else number(block, "drive_lateral_mps2", where, positive=True),
             optional["up_mps_per_deg"],
             optional["down_mps_per_deg"],
+            optional["rough_m"],
+            optional["rough_mps"],
         )
         fit = None
         intervals = block.get("intervals_mps")
@@ -340,6 +370,7 @@ class SpeedRule(Rule):
                 _grade_intervals(block.get("grade_intervals")),
                 _grade_frames(block.get("grade_frames")),
                 "grade_frames" in block,
+                _rough_shown(block),
             )
         background = block.get("background", "background")
         if not isinstance(background, str) or not background:
@@ -380,6 +411,8 @@ class SpeedRule(Rule):
         out.append(f"slows {m.preview_m:g} m before a slower class{points}")
         if m.sheds_on_grades or (fit is not None and fit.on_grades):
             out.append(f"grades: {self._grade_line(0, m.up_mps_per_deg, 'up')}; {self._grade_line(1, m.down_mps_per_deg, 'down')}")
+        if m.slows_on_rough or (fit is not None and fit.rough is not None):
+            out.append(f"rough ground: {self._rough_line()}")
         bends = f"at most {m.lateral_accel_mps2:.2f} m/s^2 sideways" if m.lateral_accel_mps2 is not None else "no limit shown"
         out.append(f"bends: {bends}")
         if m.drive_lateral_mps2 is not None:
@@ -401,6 +434,22 @@ class SpeedRule(Rule):
         around = f" (95% CI {interval[0]:.3f}-{interval[1]:.3f}, {frames} frames)" if interval is not None else ""
         return f"{per_deg:.3f} m/s per deg {way}{around}"
 
+    def _rough_line(self) -> str:
+        """The top speed on rough ground, past which roughness, with its interval, its frames and
+        the roughness the drive cannot tell from the one kept; or what the drive showed."""
+        m, shown = self.model, self.fit.rough if self.fit is not None else None
+        where = f"within {ROUGH_PREVIEW_M:g} m ahead"
+        if not m.slows_on_rough:
+            frames = shown.frames if shown is not None else 0
+            why = f"fewer than {MIN_FRAMES}" if frames < MIN_FRAMES else "a top speed there explains them no better"
+            return f"nothing learned ({frames} frames slower than terrain and grades ask, past {ROUGH_BANDS_M[0]:g} m {where}: {why})"
+        line = f"at most {m.rough_mps:.2f} m/s where the ground {where} is rougher than {m.rough_m:g} m"
+        if shown is not None and shown.interval is not None:
+            line += f" (95% CI {shown.interval[0]:.2f}-{shown.interval[1]:.2f} m/s, {shown.frames} frames)"
+        if shown is not None and shown.alike_m is not None and shown.alike_m[0] != shown.alike_m[1]:
+            line += f"; the drive cannot tell a roughness of {shown.alike_m[0]:g}-{shown.alike_m[1]:g} m from it"
+        return line
+
     def _classes(self, names: tuple[str, ...], lethal: frozenset[str]) -> list[tuple[int, str]]:
         """(column, class) of every terrain column a speed is kept for: ``names``, then the background; not the lethal ones."""
         return [(col, name) for col, name in enumerate((*names, self.background)) if name not in lethal]
@@ -415,6 +464,15 @@ def _grade_intervals(value: object) -> tuple[tuple[float, float] | None, tuple[f
     """A block's ``grade_intervals`` (up, down), each None where not given or not two numbers."""
     up, down = value if isinstance(value, list) and len(value) == 2 else (None, None)
     return _interval_of(up), _interval_of(down)
+
+
+def _rough_shown(block: Mapping[str, Any]) -> Rough | None:
+    """What a block says the drive showed of rough ground (None: a file without it)."""
+    if "rough_frames" not in block:
+        return None
+    frames = block["rough_frames"]
+    alike = _interval_of(block.get("rough_alike_m"))
+    return Rough(int(frames) if _number(frames) and frames >= 0 else 0, _interval_of(block.get("rough_interval")), alike)
 
 
 def _grade_frames(value: object) -> tuple[int, int]:
@@ -446,6 +504,7 @@ class LearnedSpeed(SpeedRunner):
         self.rule = rule
         self.across = across(rule.config.half_width_m)
         self._d = STATION_STEP_M * np.arange(STATIONS)
+        self._rough_stations = rough_stations()
         self._last_v = 0.0  # the speed commanded last [m/s]
         self.grades = GradeCheck(STATIONS)  # the grades read ahead against the body's pitch once there
 
@@ -520,7 +579,12 @@ class LearnedSpeed(SpeedRunner):
                 self.grades.arrived(x, y, yaw, math.degrees(attitude.grade_rad))
                 read = read - self.grades.correction
             grade = read[None]
-        v = float(self.rule.model.predict(way, np.array([k]), grade)[0])
+        rough = None
+        if self.rule.model.slows_on_rough:  # the roughness on the way's first stations (model.roughest reads no further)
+            near = self._rough_stations
+            rough = np.full((1, STATIONS), np.nan)
+            rough[0, :near] = gmap.geometry_at(centre[:near])[:, 1]
+        v = float(self.rule.model.predict(way, np.array([k]), grade, rough)[0])
         top = self.rule.config.max_speed_mps
         if abs(k) > 1e-9:
             top = min(top, max_yaw_rate_rps / abs(k))
