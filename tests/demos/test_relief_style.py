@@ -171,10 +171,17 @@ def test_a_models_relief_style_is_that_of_its_recordings_driver_and_the_comparis
 HILL = [{"plateau": {"polygon": [[16.0, -10.0], [24.0, -10.0], [24.0, 30.0], [16.0, 30.0]], "height_m": 1.0, "edge_m": 6.0}}]
 
 
+# Its level top rough (0.03 m of roughness, past the default relief style's 0.02 m).
+ROUGH_TOP = [
+    {"noise": {"amplitude_m": 0.11, "wavelength_m": 0.3, "seed": 1, "polygon": [[16.5, 5.0], [23.5, 5.0], [23.5, 15.0], [16.5, 15.0]]}}
+]
+
+
 def test_the_speed_rule_learns_what_the_drivers_grades_shed_from_its_drive(tmp_path):
-    """The driver (0.03 m/s per deg up, 0.02 down) drives over the hill once, through the depth
-    camera; the speed rule fitted to that drive sheds what it sheds, to within a tenth, with
-    intervals, and its level speed is the driver's 1 m/s."""
+    """The driver (0.03 m/s per deg up, 0.02 down, 0.8 m/s on rough ground) drives over the hill
+    once, through the depth camera; the speed rule fitted to that drive sheds what it sheds, to
+    within a tenth, with intervals, keeps its speed on the rough top, and its level speed is the
+    driver's 1 m/s."""
     from terrapref.dataset import build_dataset
     from terrapref.demos.meta import ExpertInfo
     from terrapref.demos.recording import MemoryRecordingWriter
@@ -184,7 +191,7 @@ def test_the_speed_rule_learns_what_the_drivers_grades_shed_from_its_drive(tmp_p
     from terrapref.rules.speed.rule import SpeedConfig
     from terrapref.terrain import PreferenceProfile
 
-    setup = DriveSetup.of(_scenario(HILL, [[5.0, 10.0], [35.0, 10.0]]))
+    setup = DriveSetup.of(_scenario(HILL + ROUGH_TOP, [[5.0, 10.0], [35.0, 10.0]]))
     config = ExpertConfig(relief=ReliefStyle())
     writer = MemoryRecordingWriter(
         tmp_path / "mem", setup.meta(ExpertInfo.of(0, "default", config), PreferenceProfile.default()), setup.scenario.to_dict()
@@ -199,6 +206,9 @@ def test_the_speed_rule_learns_what_the_drivers_grades_shed_from_its_drive(tmp_p
     (up_low, up_high), (down_low, down_high) = rule.fit.grade_intervals
     assert up_low <= m.up_mps_per_deg <= up_high and down_low <= m.down_mps_per_deg <= down_high
     assert m.speeds_mps[-1] == pytest.approx(1.0, abs=0.02)
+    assert m.rough_mps == pytest.approx(ReliefStyle().rough_mps, abs=0.03) and rule.fit.rough.frames >= 10
+    low, high = rule.fit.rough.interval
+    assert low <= m.rough_mps <= high and 0.0 < m.rough_m < 0.03
 
 
 # A bank beside the path along y = 10 m: a ridge 5 m wide along y = 11.25 m from x = 12 to 28 m, the

@@ -1,6 +1,7 @@
 """Speed by grade band on relief (SPEC 19): each run's mean speed going up, going down and on the
 level (the body's pitch past 3 deg), each zone's band, and ``evaluate``'s speed error against the
-driver by band; flat runs' metrics as they were."""
+driver by band; and likewise by roughness band (rough past 0.02 m, smooth); flat runs' metrics as
+they were."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import pytest
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.demos.relief_style import ReliefStyle
 from terrapref.evaluation import score_run
-from terrapref.evaluation.scoring import GRADE_BAND_DEG, grade_band
+from terrapref.evaluation.scoring import GRADE_BAND_DEG, ROUGH_BAND_M, grade_band
 from terrapref.evaluation.speed import SpeedComparison
 from terrapref.scenario import parse_scenario
 from terrapref.sim import Simulation, run_episode
@@ -65,8 +66,21 @@ def test_a_ramp_driven_is_timed_in_its_band_and_its_zone_says_so(waypoints, band
 
 def test_on_flat_ground_there_are_no_bands_and_the_metrics_read_as_before():
     metrics = _run([], [[2.0, 10.0], [38.0, 10.0]])
-    assert metrics.speed_by_grade_mps is None and metrics.zones[0].grade_band is None
+    assert metrics.speed_by_grade_mps is None and metrics.zones[0].grade_band is None and metrics.speed_by_roughness_mps is None
     assert "speed_by_grade_mps" not in metrics.to_dict() and "grade_band" not in metrics.zones[0].to_dict()
+    assert "speed_by_roughness_mps" not in metrics.to_dict()
+
+
+def test_a_rough_patch_driven_is_timed_in_the_rough_band_at_the_drivers_speed_there():
+    """A rough patch 10 m long (x = 15 to 25) across the way: the driver's relief style holds
+    0.8 m/s past 0.02 m there and 1 m/s on the smooth ground before and after it."""
+    assert ROUGH_BAND_M == ReliefStyle().rough_m == 0.02 and ReliefStyle().rough_mps == 0.8
+    patch = [[15.0, 4.0], [25.0, 4.0], [25.0, 16.0], [15.0, 16.0]]
+    metrics = _run([{"noise": {"amplitude_m": 0.11, "wavelength_m": 0.3, "seed": 1, "polygon": patch}}], [[2.0, 10.0], [38.0, 10.0]])
+    bands = metrics.speed_by_roughness_mps
+    assert set(bands) == {"rough", "smooth"} and 5.0 < bands["rough"]["mps"] * bands["rough"]["s"] < 10.0
+    assert sum(v["mps"] * v["s"] for v in bands.values()) == pytest.approx(metrics.driven_m, rel=1e-3)
+    assert bands["rough"]["mps"] < 0.82 and bands["smooth"]["mps"] > 0.9
 
 
 def test_the_speed_error_by_band_compares_the_runs_on_the_same_layout():
@@ -89,3 +103,15 @@ def test_the_speed_error_by_band_compares_the_runs_on_the_same_layout():
     again = SpeedComparison.from_dict(comparison.to_dict())
     assert again.by_grade == comparison.by_grade and any("going up" in line for line in comparison.lines())
     assert "by_grade" not in SpeedComparison.of([], [], "grass").to_dict()  # flat: as before
+    rough = [
+        {
+            "scenario": "a",
+            "speed_by_roughness_mps": {"rough": {"mps": 0.7, "s": 4.0}},
+            "driver_speed_by_roughness_mps": {"rough": {"mps": 0.8, "s": 5.0}},
+        }
+    ]
+    comparison = SpeedComparison.of([], rough, "grass")
+    assert set(comparison.by_roughness) == {"rough"} and comparison.by_roughness["rough"].mean == pytest.approx(0.1)
+    assert SpeedComparison.from_dict(comparison.to_dict()).by_roughness == comparison.by_roughness
+    assert any(line.startswith("speed error against the driver, rough ground (roughness past 0.02 m)") for line in comparison.lines())
+    assert "by_roughness" not in SpeedComparison.of([], [], "grass").to_dict()

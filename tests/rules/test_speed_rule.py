@@ -33,7 +33,7 @@ from terrapref.planner import Planner
 from terrapref.rules import ArgmaxRule, HeaderContext, OffsetConfig, OffsetRule, RuleContext, chosen_rule, driving_rule, speed_rule
 from terrapref.rules.base import SPEED, STEERING, Where
 from terrapref.rules.offset.fit import OffsetUtility
-from terrapref.rules.speed.model import MIN_SPEED_MPS, STATIONS, Drive, SpeedFit, SpeedModel, across, fit_speed
+from terrapref.rules.speed.model import MIN_SPEED_MPS, STATIONS, Drive, Rough, SpeedFit, SpeedModel, across, fit_speed
 from terrapref.rules.speed.rule import LearnedSpeed, SpeedConfig, SpeedRule
 from terrapref.scenario import AVOID, Scenario, parse_scenario
 from terrapref.scenario.path import ReferencePath
@@ -168,6 +168,23 @@ def test_grades_within_the_preview_shed_speed_per_degree_up_and_down():
     (flat,) = MODEL.predict(_way(), np.zeros(1), _graded((2, 10.0)))
     assert flat == 1.6 and not MODEL.sheds_on_grades  # a model from a flat drive sheds nothing
     assert GRADED.predict(_way(), np.zeros(1), _graded((2, 60.0)))[0] == MIN_SPEED_MPS
+
+
+ROUGH = replace(MODEL, rough_m=0.02, rough_mps=0.8)
+
+
+def test_rough_ground_within_the_first_metre_caps_the_speed():
+    def rough_at(station: int, roughness: float) -> np.ndarray:
+        rough = np.zeros((1, STATIONS))
+        rough[0, station] = roughness
+        return rough
+
+    assert ROUGH.predict(_way(), np.zeros(1), None, rough_at(4, 0.03))[0] == 0.8  # a metre ahead: capped
+    assert ROUGH.predict(_way(), np.zeros(1), None, rough_at(5, 0.03))[0] == 1.6  # beyond it: not yet
+    assert ROUGH.predict(_way(), np.zeros(1), None, rough_at(0, 0.02))[0] == 1.6  # not past the band
+    assert ROUGH.predict(_way(), np.zeros(1), None, rough_at(0, math.nan))[0] == 1.6  # unknown: smooth
+    assert ROUGH.predict(_way((1, 2, WATER)), np.zeros(1), None, rough_at(0, 0.05))[0] == 0.5  # water is slower still
+    assert MODEL.predict(_way(), np.zeros(1), None, rough_at(0, 0.05))[0] == 1.6 and not MODEL.slows_on_rough
 
 
 def test_the_speed_is_never_below_the_rules_slowest():
@@ -365,6 +382,35 @@ def test_the_fit_recovers_what_grades_shed_up_and_down():
     assert line.startswith(f"grades: nothing learned up ({kept.grade_frames[0]} frames on one class past 3 deg up: slowing there explains")
 
 
+def test_the_fit_recovers_a_top_speed_on_rough_ground_and_says_which_roughness_it_cannot_tell():
+    """The long background stretch (frames 60-110) is rough (0.03 m) from frame 70 to 90; the
+    driver keeps 0.8 m/s there past 0.02 m. The drive shows nothing between the smooth ground's 0
+    and 0.03 m, so every band below 0.03 m explains it alike; one that kept its speed shows nothing."""
+    track = _track()
+    track_rough = np.zeros(len(track))
+    track_rough[70:90] = 0.03
+    way, curvature, _, frame = _drive(DRIVER, track)
+    rough = _grades(track_rough)
+    target = replace(DRIVER, rough_m=0.02, rough_mps=0.8).predict(way, curvature, None, rough)
+    v = np.concatenate([np.full(2, target[0]), target[:-2]])
+    fit = fit_speed(Drive(way, curvature, v, frame, None, rough), K, (LETHAL,))
+    assert fit is not None and fit.lag_frames == 2 and fit.error_mps == pytest.approx(0.0, abs=1e-6)
+    m, shown = fit.model, fit.rough
+    assert m.rough_mps == pytest.approx(0.8) and m.slows_on_rough and shown is not None and shown.frames >= 10
+    assert shown.alike_m == (0.01, 0.025) and m.rough_m == 0.01  # the bands below 0.03 m alike; the first of them kept
+    low, high = shown.interval
+    assert low - 1e-9 <= 0.8 <= high + 1e-9
+    line = next(x for x in SpeedRule(SpeedConfig(), m, fit).lines(FEATURES.feature_classes, frozenset()) if x.startswith("rough"))
+    assert line.startswith("rough ground: at most 0.80 m/s where the ground within 1 m ahead is rougher than 0.01 m (95% CI")
+    assert line.endswith("the drive cannot tell a roughness of 0.01-0.025 m from it")
+    kept = fit_speed(Drive(*_drive(DRIVER, track), None, rough), K, (LETHAL,))
+    assert kept is not None and not kept.model.slows_on_rough and kept.rough is not None and kept.rough.interval is None
+    line = next(x for x in SpeedRule(SpeedConfig(), kept.model, kept).lines(FEATURES.feature_classes, frozenset()) if x.startswith("rough"))
+    assert (
+        line == "rough ground: nothing learned (0 frames slower than terrain and grades ask, past 0.01 m within 1 m ahead: fewer than 10)"
+    )
+
+
 def test_the_fit_finds_nothing_without_a_steady_frame():
     assert fit_speed(Drive(*_drive(DRIVER, _track()[:9], lag=0)), K, (LETHAL,)) is None  # fewer than 10 frames
     way, curvature, v, frame = _drive(DRIVER, _track())
@@ -430,6 +476,22 @@ def test_a_block_with_what_grades_shed_reads_back_and_a_flat_drives_block_holds_
     with pytest.raises(UserError) as raised:
         _read(_block(up_mps_per_deg=-0.01))
     assert [p.field for p in raised.value.problems] == ["rules[0].up_mps_per_deg"]
+
+
+def test_a_block_with_a_top_speed_on_rough_ground_reads_back_and_a_half_one_is_refused():
+    fit = SpeedFit(ROUGH, (None,) * (K + 1), 2, 100, 0.01, rough=Rough(30, (0.75, 0.82), (0.015, 0.025)))
+    back = _read(json.loads(json.dumps(SpeedRule(SpeedConfig(), ROUGH, fit).header())))
+    assert back.model == ROUGH and back.fit is not None and back.fit.rough == Rough(30, (0.75, 0.82), (0.015, 0.025))
+    assert "rough_m" not in SpeedRule(SpeedConfig(), MODEL).header()  # a flat drive's file is as before
+    bad = (
+        ({"rough_m": 0.02}, "rough_m"),
+        ({"rough_m": 0.02, "rough_mps": 0.01}, "rough_mps"),
+        ({"rough_m": -1.0, "rough_mps": 0.8}, "rough_m"),
+    )
+    for changes, field in bad:  # half of it; a top speed below the least; a roughness below 0
+        with pytest.raises(UserError) as raised:
+            _read(_block(**changes))
+        assert [p.field for p in raised.value.problems] == [f"rules[0].{field}"]
 
 
 def test_an_older_block_without_min_points_or_the_drives_lateral_reads_with_their_defaults():

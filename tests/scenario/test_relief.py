@@ -74,6 +74,39 @@ def test_a_plateau_is_raised_inside_and_ramps_down_over_its_edge() -> None:
     assert at(ledge, 13.95, 5.05) == pytest.approx(0.3) and at(ledge, 14.05, 5.05) == 0.0  # a vertical step at x = 14
 
 
+def test_noise_on_a_polygon_stays_inside_it_fading_in_over_a_wavelength() -> None:
+    square = [[2.0, 2.0], [9.0, 2.0], [9.0, 8.0], [2.0, 8.0]]
+    noise = {"amplitude_m": 0.1, "wavelength_m": 0.5, "seed": 4}
+    z = height_of({"noise": {**noise, "polygon": square}}).astype(np.float64)
+    everywhere = height_of({"noise": noise}).astype(np.float64)
+    x, y = (np.arange(z.shape[1]) + 0.5) * 0.1, (np.arange(z.shape[0]) + 0.5) * 0.1
+    inner = (x[None, :] > 2.5) & (x[None, :] < 8.5) & (y[:, None] > 2.5) & (y[:, None] < 7.5)
+    outside = (x[None, :] < 2.0) | (x[None, :] > 9.0) | (y[:, None] < 2.0) | (y[:, None] > 8.0)
+    np.testing.assert_allclose(z[inner], everywhere[inner], atol=1e-7)  # a wavelength in: the noise itself
+    assert not z[outside].any() and np.abs(z[inner]).max() > 0.03
+    edge = (np.abs(x[None, :] - 5.5) < 0.5) & (y[:, None] > 2.0) & (y[:, None] < 2.5)  # within a wavelength of the edge
+    depth = (y[:, None] - 2.0) / 0.5 * np.ones_like(z)
+    np.testing.assert_allclose(z[edge], (depth * everywhere)[edge], atol=1e-7)  # faded in: no step at the border
+
+
+def test_the_worlds_roughness_is_the_heights_deviation_about_their_plane() -> None:
+    """On a tilted plane it is 0; on the plane plus a checkerboard of +-2 cm (symmetric about each
+    cell, so the plane fitted through the disc is the tilted one raised by the disc's mean), it is
+    the checkerboard's standard deviation over the disc's cells (terrapref.world.raster.ROUGH_RADIUS_M: 3 cells)."""
+    flat = rasterise(parse_scenario(copy.deepcopy(FLAT), "relief_test.yaml"))
+    rows, cols = np.indices(flat.raster.shape)
+    tilted = 0.3 * (cols + 0.5) * 0.1 + 0.1 * (rows + 0.5) * 0.1
+    checker = 0.02 * np.where((rows + cols) % 2 == 0, 1.0, -1.0)
+    points = np.array([[5.05, 5.05], [12.05, 4.05]])  # cells (50, 50) and (40, 120): even, so +2 cm at the centre
+    plane = WorldMap(flat.raster, flat.resolution_m, flat.classes, tilted.astype(np.float32))
+    assert plane.roughness_at(points) == pytest.approx([0.0, 0.0], abs=1e-5)
+    dr, dc = np.indices((7, 7)) - 3
+    disc = 0.02 * np.where((dr + dc) % 2 == 0, 1.0, -1.0)[dr**2 + dc**2 <= 9]
+    rough = WorldMap(flat.raster, flat.resolution_m, flat.classes, (tilted + checker).astype(np.float32))
+    assert rough.roughness_at(points) == pytest.approx([disc.std()] * 2, rel=1e-4)
+    assert not flat.roughness_at(points).any()  # flat ground
+
+
 def test_entries_add_up_in_order() -> None:
     plateau = {"plateau": {"polygon": [[2.0, 2.0], [9.0, 2.0], [9.0, 8.0], [2.0, 8.0]], "height_m": 1.5, "edge_m": 1.0}}
     ditch = {"ridge": {"polyline": [[15.05, 0.0], [15.05, 10.0]], "width_m": 2.0, "height_m": -0.5}}
@@ -171,8 +204,8 @@ def test_teach_relief_shows_each_relief_situation_on_its_own_leg() -> None:
     terrain situation of the flat course, and each relief situation alone on its own leg: mounds
     on the path whose steepest grade is the one designed, banks whose side slope under the path
     is, a ramp, and each class beside a bank."""
-    from terrapref.scenario import resolve_scenario
     from terrapref.demos.relief_style import ReliefStyle
+    from terrapref.scenario import resolve_scenario
     from terrapref.scenario.path import ReferencePath
     from terrapref.scenario.teaching import BODY_M, HALF_M, RELIEF_DEG, START_M, designed_course, relief_course
     from terrapref.vehicle import VehicleConfig

@@ -1029,6 +1029,9 @@ def test_relief_parses_into_typed_entries_in_order_and_round_trips() -> None:
     assert s.to_dict()["relief"] == yaml.safe_load(yaml.safe_dump(RELIEF))
     assert parse_scenario(s.to_dict(), "y.yaml").to_dict() == s.to_dict()
     assert not parse_scenario(scenario(relief=None), "x.yaml").has_relief
+    patch = [{"noise": {"amplitude_m": 0.1, "wavelength_m": 0.3, "seed": 1, "polygon": [[2.0, 2.0], [6.0, 2.0], [6.0, 6.0]]}}]
+    rough = parse_scenario(scenario(relief=copy.deepcopy(patch)), "x.yaml")
+    assert rough.relief[0].polygon.vertices.tolist() == patch[0]["noise"]["polygon"] and rough.to_dict()["relief"] == patch
 
 
 def relief_with(i: int, kind: str, **fields: Any) -> dict[str, Any]:
@@ -1090,6 +1093,21 @@ def relief_with(i: int, kind: str, **fields: Any) -> dict[str, Any]:
             "has zero area (vertices are collinear)",
         ),
         (relief_with(3, "plateau", edge_m=float("nan")), "relief[3].plateau.edge_m", "must be finite (got NaN or infinity)"),
+        (
+            relief_with(0, "noise", polygon=[[1, 1], [2, 2], [3, 3]]),
+            "relief[0].noise.polygon",
+            "has zero area (vertices are collinear)",
+        ),
+        (
+            relief_with(0, "noise", polygon=[[1, 1], [2e6, 1], [2e6, 2e6]]),
+            "relief[0].noise.polygon",
+            "has a point more than 1e+06 m from the map",
+        ),
+        (
+            relief_with(0, "noise", polygon=[[40, 1], [42, 1], [42, 3]]),
+            "relief[0].noise",
+            "lies wholly off the map (bounds x 40..42, y 1..3; map 0..20 x 0..10)",
+        ),
     ],
 )
 def test_bad_relief_is_one_problem_naming_its_field(data: dict[str, Any], field: str, message: str) -> None:
