@@ -171,9 +171,9 @@ def test_a_models_relief_style_is_that_of_its_recordings_driver_and_the_comparis
 HILL = [{"plateau": {"polygon": [[16.0, -10.0], [24.0, -10.0], [24.0, 30.0], [16.0, 30.0]], "height_m": 1.0, "edge_m": 6.0}}]
 
 
-# Its level top rough (0.03 m of roughness, past the default relief style's 0.02 m).
+# Its level top rough (0.025 m of roughness, past the default relief style's 0.02 m).
 ROUGH_TOP = [
-    {"noise": {"amplitude_m": 0.11, "wavelength_m": 0.3, "seed": 1, "polygon": [[16.5, 5.0], [23.5, 5.0], [23.5, 15.0], [16.5, 15.0]]}}
+    {"noise": {"amplitude_m": 0.09, "wavelength_m": 0.3, "seed": 1, "polygon": [[16.5, 5.0], [23.5, 5.0], [23.5, 15.0], [16.5, 15.0]]}}
 ]
 
 

@@ -197,7 +197,7 @@ def _cmd_course(args: argparse.Namespace) -> int:
         if not _says_what_is_left(plan, args.after):
             return 0
         courses = [str(r.meta.get("scenario")) for r in recs]
-        course, items = follow_up_after(table, plan.open, courses, args.name, plan.neighbours)
+        course, items = follow_up_after(table, plan.open, courses, args.name, plan.neighbours, plan.relief)
     else:
         table = table or default_classes()
         try:
@@ -269,24 +269,30 @@ def _follow_up_plan(recs: Sequence) -> FollowUp:
 def _says_what_is_left(plan: FollowUp, paths: Sequence[Path]) -> bool:
     """Print what the drives left open, what no further course settles and why; whether a follow-up course is to be written."""
     drives = "drives together" if len(paths) > 1 else "drive"
-    left = len(plan.open) + len(plan.left)
+    left = len(plan.open) + len(plan.left) + len(plan.relief) + len(plan.relief_left)
     if not left:
         print(
-            f"{', '.join(map(str, paths))}: the {drives} identified every pair of classes; no follow-up course is needed (nothing written)"
+            f"{', '.join(map(str, paths))}: the {drives} identified every pair of classes"
+            f"{' and showed all the relief it teaches' if plan.on_relief else ''}; no follow-up course is needed (nothing written)"
         )
         return False
-    for line in plan.reopened + plan.left:
+    for line in plan.reopened + plan.left + plan.relief_left:
         print(f"note: {line}")
-    if not plan.open:
-        print(
-            f"the {drives} left {len(plan.left)} pair{'s' if len(plan.left) > 1 else ''} open that no further course settles (above); nothing written"
-        )
+    if not plan.anything:
+        what = " and ".join(x for x in (_count(plan.left, "pair"), _count(plan.relief_left, "relief lesson")) if x)
+        print(f"the {drives} left {what} open that no further course settles (above); nothing written")
         return False
-    neighbours = f"; beside them, their neighbours in the learned order: {_pairs(plan.neighbours)}" if plan.neighbours else ""
-    print(
-        f"the {drives} left {len(plan.open)} pair{'s' if len(plan.open) > 1 else ''} open for a follow-up: {_pairs(plan.open)}{neighbours}"
-    )
+    if plan.open:
+        neighbours = f"; beside them, their neighbours in the learned order: {_pairs(plan.neighbours)}" if plan.neighbours else ""
+        print(f"the {drives} left {_count(plan.open, 'pair')} open for a follow-up: {_pairs(plan.open)}{neighbours}")
+    if plan.relief:
+        print(f"the {drives} left relief unshown for a follow-up: {', '.join(plan.relief)}")
     return True
+
+
+def _count(items: Sequence, what: str) -> str:
+    """``N what(s)``; empty for no items."""
+    return f"{len(items)} {what}{'s' if len(items) > 1 else ''}" if items else ""
 
 
 def _pairs(pairs: Sequence[tuple[str, str]]) -> str:

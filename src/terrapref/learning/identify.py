@@ -362,12 +362,24 @@ class FollowUp:
         left: one line per pair left open that no further course settles, saying why.
         reopened: one line per pair the drives before the last identified and the last reopened,
             shown again, saying how.
+        relief: the relief lessons (terrapref.scenario.teaching.RELIEF_LESSONS) drives on relief
+            left unshown that a further drive can still show.
+        relief_left: one line per relief lesson left unshown that no further course shows, saying why.
+        on_relief: whether the drives were on relief (their frames carry depth).
     """
 
     open: tuple[tuple[str, str], ...] = ()
     neighbours: tuple[tuple[str, str], ...] = ()
     left: tuple[str, ...] = ()
     reopened: tuple[str, ...] = ()
+    relief: tuple[str, ...] = ()
+    relief_left: tuple[str, ...] = ()
+    on_relief: bool = False
+
+    @property
+    def anything(self) -> bool:
+        """Whether a follow-up course has something to show."""
+        return bool(self.open or self.relief)
 
 
 def plan_follow_up(

@@ -290,6 +290,7 @@ def follow_up_plan(
     of all of them, and of all but the last."""
     from terrapref.learning.identify import plan_follow_up
     from terrapref.learning.train import comparisons_by_drive, identify
+    from terrapref.recipes.lessons import relief_plan
 
     cache = {} if cache is None else cache  # the drives before the last are featurised once for both reports
     steady = recipe.train.data.steady_labels
@@ -298,9 +299,12 @@ def follow_up_plan(
         return build_dataset(recs, recipe.features(features), rules=recipe.rules, cache=cache, progress=progress)
 
     pooled = dataset(recordings, None if frames is None else lambda p: frames(p.frames_done, p.frames))
-    earlier = identify(dataset(recordings[:-1]), steady=steady) if len(recordings) > 1 else None
+    before = dataset(recordings[:-1]) if len(recordings) > 1 else None
+    earlier = identify(before, steady=steady) if before is not None else None
     last = str(recordings[-1].path)
-    return plan_follow_up(identify(pooled, steady=steady), comparisons_by_drive(pooled, steady), earlier, last)
+    plan = plan_follow_up(identify(pooled, steady=steady), comparisons_by_drive(pooled, steady), earlier, last)
+    relief, relief_left, on_relief = relief_plan(pooled, before, last)
+    return replace(plan, relief=relief, relief_left=relief_left, on_relief=on_relief)
 
 
 def _follow_up(

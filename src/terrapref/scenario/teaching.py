@@ -67,9 +67,10 @@ BANK_WIDTH_M, BANK_LENGTH_M = 5.0, 9.0  # a bank beside the path: its full width
 RAMP_TOP_M, RAMP_EDGE_M, RAMP_ACROSS_M = 3.0, 4.0, 14.0  # a ramp across the way: its top, each ramp, across [m]
 # A rough patch across the way: (length, width) [m], and its noise (amplitude [m], wavelength [m]):
 # the heights' deviation about their plane within 0.3 m (the roughness the planner reads) about
-# 0.03 m, past the default relief style's 0.02 m, with steps well under what the vehicle climbs.
+# 0.025 m, past the default relief style's 0.02 m, its steps (the height range over 0.3 m, as the
+# planner's height layer reads a step) at most 0.12 m, under the 0.15 m the vehicle climbs.
 ROUGH_PATCH_M = (8.0, 8.0)
-ROUGH_NOISE_M = (0.11, 0.3)
+ROUGH_NOISE_M = (0.09, 0.3)
 SLOPE_PATCH_M = (8.0, 4.0)  # relief against terrain: the flat patch beside the path, (length, width) [m]
 # The default vehicle's half track and wheelbase [m], the body the relief situations are as steep
 # for (terrapref.vehicle.VehicleConfig's; the scenario sits below the vehicle, and
@@ -225,6 +226,18 @@ def place_relief(c: CourseBuilder, item: Situation, s: float) -> None:
             c.rect(item.classes[0], s, math.copysign(half_track + width / 2, item.offset_m), length, width)  # from beside the footprint
 
 
+# What a drive on relief may leave unshown, and the situation that shows it (``course --after``):
+# ground past the steep bank's side slope or the steep mound's grade among the ways it could have
+# taken (the steering prices nothing steeper than it saw); enough frames climbing, descending, and
+# on rough ground for the speed rule to read what each sheds.
+RELIEF_LESSONS = {
+    "steep side slope": Situation("bank", (), 1.0, RELIEF_DEG["steep bank"]),
+    "steep grade": Situation("mound", (), 0.0, RELIEF_DEG["steep mound"]),
+    "grades": Situation("ramp", (), 0.0, RELIEF_DEG["ramp"]),
+    "rough ground": Situation("rough", (), 0.0, 0.0),
+}
+
+
 def fits(classes: ClassTable) -> bool:
     """Whether the full design of ``classes``' course stays within :data:`BUDGET_M`."""
     return course_length(situations(classes, True)) <= BUDGET_M
@@ -237,19 +250,22 @@ def follow_up_course(
     driven: str,
     drives: int = 1,
     neighbours: Sequence[tuple[str, str]] = (),
+    relief: Sequence[str] = (),
 ) -> CourseBuilder:
     """The follow-up course of ``open_pairs``, which ``drives`` drives of the course(s) ``driven``
     left open together, and of their ``neighbours`` in the learned order
-    (:func:`~terrapref.learning.identify.bracketed`), which keep what is identified so."""
-    listed = "; ".join(f"{a} vs {b}" for a, b in open_pairs)
-    beside = f", beside their neighbours in the learned order ({'; '.join(f'{a} vs {b}' for a, b in neighbours)})" if neighbours else ""
+    (:func:`~terrapref.learning.identify.bracketed`), which keep what is identified so; and of
+    the ``relief`` lessons (:data:`RELIEF_LESSONS`) they left unshown."""
     what = f"the drive of {driven}" if drives == 1 else f"{drives} drives of {driven} together"
-    return build_course(
-        classes,
-        follow_up(classes, [*open_pairs, *neighbours]),
-        name,
-        f"Follow-up course: the pairs {what} left open ({listed}){beside}, each both ways round.",
-    )
+    parts = []
+    if open_pairs:
+        listed = "; ".join(f"{a} vs {b}" for a, b in open_pairs)
+        beside = f", beside their neighbours in the learned order ({'; '.join(f'{a} vs {b}' for a, b in neighbours)})" if neighbours else ""
+        parts.append(f"the pairs {what} left open ({listed}){beside}, each both ways round")
+    if relief:
+        parts.append(f"the relief {'left' if open_pairs else what + ' left'} unshown ({', '.join(relief)})")
+    items = _interleave([follow_up(classes, [*open_pairs, *neighbours]), [RELIEF_LESSONS[r] for r in relief]])
+    return build_course(classes, items, name, f"Follow-up course: {'; and '.join(parts)}.")
 
 
 def follow_up(classes: ClassTable, open_pairs: Sequence[tuple[str, str]]) -> list[Situation]:
@@ -400,16 +416,23 @@ def follow_up_after(
     courses: Sequence[str],
     name: str | None = None,
     neighbours: Sequence[tuple[str, str]] = (),
+    relief: Sequence[str] = (),
 ) -> tuple[CourseBuilder, list[Situation]]:
     """The follow-up course of ``open_pairs``, which drives of ``courses`` (each drive's course, by
     name) left open together (``terrapref course --after``), beside their ``neighbours`` in the
-    learned order, with its situations in driving order; named ``name``, by default the first
-    course's name followed by ``_more``."""
+    learned order, and of the ``relief`` lessons they left unshown, with its situations in driving
+    order; named ``name``, by default the first course's name followed by ``_more``."""
     driven = list(dict.fromkeys(courses))
     course = follow_up_course(
-        classes, open_pairs, name or f"{Path(driven[0]).name}_more", " and ".join(driven), drives=len(courses), neighbours=neighbours
+        classes,
+        open_pairs,
+        name or f"{Path(driven[0]).name}_more",
+        " and ".join(driven),
+        drives=len(courses),
+        neighbours=neighbours,
+        relief=relief,
     )
-    return course, follow_up(classes, [*open_pairs, *neighbours])
+    return course, _interleave([follow_up(classes, [*open_pairs, *neighbours]), [RELIEF_LESSONS[r] for r in relief]])
 
 
 def write_teaching_course(folder: str | Path, classes: ClassTable) -> Path:

@@ -187,11 +187,11 @@ def fit_offset_utility(
     theta = np.round(theta, WEIGHT_DECIMALS)
     weights = np.concatenate([theta[:columns], theta[-1:]])  # the relief columns' weights stand between those and the gate
     priced = theta[columns:-1] if relief is not None else None
-    shown = _shown(relief[0][keep], relief[1]) if relief is not None else None
+    shown = relief_shown(relief[0][keep], relief[1]) if relief is not None else None
     return OffsetFit(weights, chosen, round(loss, WEIGHT_DECIMALS), losses, int(keep.sum()), priced, shown)
 
 
-def _shown(relief: np.ndarray, bands: tuple[float, ...]) -> tuple[float, float]:
+def relief_shown(relief: np.ndarray, bands: tuple[float, ...]) -> tuple[float, float]:
     """The steepest of ``bands`` [deg] any frame's relief columns (N, O, 2B) count ground past, of
     side slope and of grade (NaN: none)."""
     seen = (relief > 0).any(axis=(0, 1)).reshape(2, len(bands))
