@@ -578,20 +578,35 @@ def save_speed_profile(
     series: Sequence[tuple[str, np.ndarray, np.ndarray, str]],
     title: str,
     spans: Sequence[tuple[str, float, float]] = (),
+    heights: Sequence[np.ndarray] | None = None,
 ) -> Path:
     """Speed [m/s] against progress along the path [m], one line per (label, progress, speed,
-    colour), over the stretches ``spans`` (label, first and last progress [m]: the zones) shaded."""
-    fig, ax = plt.subplots(figsize=(9, 3.6), dpi=120)
+    colour), over the stretches ``spans`` (label, first and last progress [m]: the zones) shaded;
+    with ``heights`` (one per series: the ground's height [m] under it at each progress), a
+    panel below of height along the path, in the same colours."""
+    if heights is None:
+        fig, ax = plt.subplots(figsize=(9, 3.6), dpi=120)
+        axes = [ax]
+    else:
+        fig, axes = plt.subplots(2, 1, figsize=(9, 5.4), dpi=120, sharex=True, gridspec_kw={"height_ratios": [3, 2]})
+        ax = axes[0]
+    for a in axes:
+        for label, s0, s1 in spans:
+            a.axvspan(s0, s1, color="0.85", lw=0)
     for label, s0, s1 in spans:
-        ax.axvspan(s0, s1, color="0.85", lw=0)
         ax.text((s0 + s1) / 2, 0.02, label, transform=ax.get_xaxis_transform(), ha="center", va="bottom", fontsize=7, color="0.35")
     for label, s, v, colour in series:
         ax.plot(s, v, color=colour, lw=1.2, label=label)
-    ax.set_xlabel("progress along the path [m]")
     ax.set_ylabel("speed [m/s]")
     ax.set_ylim(0, max([2.1, *(float(np.max(v)) + 0.1 for _, _, v, _ in series if len(v))]))
     ax.set_title(title, fontsize=10)
-    ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
+    if heights is not None:
+        for (label, s, _, colour), z in zip(series, heights, strict=True):
+            axes[1].plot(s, z, color=colour, lw=1.2, label=label)
+        axes[1].set_ylabel("ground height [m]")
+    for a in axes:
+        a.grid(alpha=0.3)
+    axes[-1].set_xlabel("progress along the path [m]")
     fig.tight_layout()
     return _save(fig, path)

@@ -115,3 +115,32 @@ def test_the_speed_error_by_band_compares_the_runs_on_the_same_layout():
     assert SpeedComparison.from_dict(comparison.to_dict()).by_roughness == comparison.by_roughness
     assert any(line.startswith("speed error against the driver, rough ground (roughness past 0.02 m)") for line in comparison.lines())
     assert "by_roughness" not in SpeedComparison.of([], [], "grass").to_dict()
+
+
+def test_on_relief_the_speed_figure_has_a_panel_of_the_ground_height_under_each_run(tmp_path):
+    """The driver's and the planner's runs up the ramp: speed above, the ground's height under
+    each below (a taller figure than a flat course's, which has no height panel)."""
+    from types import SimpleNamespace
+
+    from matplotlib.image import imread
+
+    from terrapref.evaluation.runner import EXPERT, PLANNER
+    from terrapref.evaluation.speed import RUN_XY_STEP_S, save_speed_along
+
+    def scenario(relief: list[dict]):
+        data = {
+            "format": "terrapref-scenario/1",
+            "name": "grades",
+            "world": {"size_m": [40.0, 20.0], "resolution_m": 0.05, "background": "grass"},
+            "terrain": [],
+            "path": {"waypoints": [[2.0, 10.0], [38.0, 10.0]]},
+        }
+        return parse_scenario({**data, "relief": relief} if relief else data)
+
+    x = np.arange(2.0, 38.0, 1.0 * RUN_XY_STEP_S)
+    runs = [
+        SimpleNamespace(driver=who, scenario="grades", seed=0, xy=np.stack([x, np.full_like(x, 10.0)], axis=1)) for who in (EXPERT, PLANNER)
+    ]
+    hilly = save_speed_along(tmp_path / "hilly.png", runs, scenario(RAMP), "grades")
+    flat = save_speed_along(tmp_path / "flat.png", runs, scenario([]), "grades")
+    assert imread(hilly).shape[0] > 1.4 * imread(flat).shape[0]

@@ -620,7 +620,9 @@ def test_reproduce_reports_each_recipe_under_each_perception_model(tmp_path):
     from terrapref.recipes import TEACH
     from terrapref.report.reproduce import Reproduction, reproduce
 
-    setup = Reproduction(recipes=(TEACH,), seeds=1, perceptions=(load_perception("clean"), load_perception("field")), speed_seeds=0)
+    setup = Reproduction(
+        recipes=(TEACH,), seeds=1, perceptions=(load_perception("clean"), load_perception("field")), speed_seeds=0, relief_seeds=0
+    )
     report_path = reproduce(tmp_path / "rep", setup, log=lambda _: None)
     report = report_path.read_text()
     table = report.split("## Under what a robot sees")[1].split("\n## ")[0]

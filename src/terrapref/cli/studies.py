@@ -53,6 +53,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
             args.write_recordings,
             perceptions,
             speed_seeds=min(2, args.seeds),
+            relief_seeds=1,
         )
         report = reproduce(args.out, setup, engine, log=lambda m: print(m, flush=True))
         print(f"wrote {report} ({time.perf_counter() - t0:.0f} s)")

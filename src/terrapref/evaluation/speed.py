@@ -327,18 +327,24 @@ def save_speed_along(
     out: str | Path, results: Sequence[RunResult], scenario: Scenario, name: str, zones: bool = False, seed: int = 0
 ) -> Path | None:
     """The figure of speed along ``scenario``'s path (run as ``name``), the driver's and the
-    planner's run of ``seed`` (each where it ran), with the zones shaded (``zones``); None
-    when neither ran."""
+    planner's run of ``seed`` (each where it ran), with the zones shaded (``zones``); on relief,
+    with the ground's height under each run below; None when neither ran."""
     from terrapref.plots import save_speed_profile
+    from terrapref.world import rasterise
 
     reference = ReferencePath(scenario.waypoints)
-    series = []
+    series, tracks = [], []
     for who, colour in ((EXPERT, "black"), (PLANNER, "red")):
         run = next((r for r in results if r.driver == who and r.scenario == name and r.seed == seed), None)
         if run is not None:
             series.append((who, *speed_along(run.xy, reference), colour))
+            tracks.append(np.asarray(run.xy, dtype=float)[1:])
     if not series:
         return None
     drivers = " and ".join(label for label, *_ in series)
     spans = zone_spans(scenario) if zones else ()
-    return save_speed_profile(out, series, f"{name}: speed along the path, {drivers} (seed {seed})", spans)
+    if not scenario.has_relief:
+        return save_speed_profile(out, series, f"{name}: speed along the path, {drivers} (seed {seed})", spans)
+    world = rasterise(scenario)
+    heights = [world.height_at(xy) for xy in tracks]
+    return save_speed_profile(out, series, f"{name}: speed and ground height along the path, {drivers} (seed {seed})", spans, heights)

@@ -33,6 +33,7 @@ from terrapref.dataset import Dataset, build_dataset
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.demos.meta import CorrectionRoundInfo, ExpertInfo
 from terrapref.demos.recording import MemoryRecordingWriter, Recording, RecordingWriter, read_recording
+from terrapref.demos.relief_style import ReliefStyle
 from terrapref.demos.session import DisturbanceConfig, DriveSetup, RunSettings, record_run
 from terrapref.features import FeatureConfig
 from terrapref.learning.identify import FollowUp
@@ -151,6 +152,7 @@ class RecipeSetup:
         vehicle: the vehicle driven (None: the default, a field UGV; ``VehicleConfig.paper()`` for
             the paper's setting).
         speeds: the synthetic driver's cruising speeds by class, over its style's [m/s].
+        relief: the synthetic driver's relief style (None: it drives relief as if it were flat).
     """
 
     seed: int
@@ -163,6 +165,7 @@ class RecipeSetup:
     follow_up: bool = False
     vehicle: VehicleConfig | None = None
     speeds: tuple[tuple[str, float], ...] = ()
+    relief: ReliefStyle | None = None
 
 
 @dataclass
@@ -192,6 +195,7 @@ class _Drive:
     classes: ClassTable | None = None
     vehicle: VehicleConfig | None = None
     speeds: tuple[tuple[str, float], ...] = ()
+    relief: ReliefStyle | None = None
 
 
 def _drive(drive: _Drive, features: FeatureConfig, write: bool) -> tuple[Recording, bool]:
@@ -205,7 +209,7 @@ def _drive(drive: _Drive, features: FeatureConfig, write: bool) -> tuple[Recordi
     scenario = resolve_scenario(drive.course, drive.classes)
     profile = drive.profile or PreferenceProfile.default(scenario.classes)
     setup = DriveSetup.of(scenario, drive.vehicle, preference=features.preference)
-    expert_cfg = ExpertConfig.styled(drive.style, profile.order, drive.speeds)
+    expert_cfg = replace(ExpertConfig.styled(drive.style, profile.order, drive.speeds), relief=drive.relief)
     pushes = drive.disturbance.to_dict() if drive.disturbance is not None else None
     perception = drive.perception or PerceptionModel()
     if (drive.out / "meta.json").exists():
@@ -264,6 +268,7 @@ def demonstrate(
             setup.classes,
             setup.vehicle,
             setup.speeds,
+            setup.relief,
         )
         for k in range(recipe.demonstrations)
     ]
@@ -395,7 +400,7 @@ def _trained(recipe: Recipe, recordings: list[Recording], model: Path, setup: Re
 def _correction_round(drive: DriveSetup, sim: Simulation, setup: RecipeSetup, model: Path, out: Path, r: int) -> float:
     """Correction round ``r`` in ``sim``: the planner of ``model`` drives the course, the driver
     takes over where it would not have done the same, recorded into ``out``; its duration [s]."""
-    expert_cfg = ExpertConfig.styled(setup.style, setup.profile.order, setup.speeds)
+    expert_cfg = replace(ExpertConfig.styled(setup.style, setup.profile.order, setup.speeds), relief=setup.relief)
     meta = drive.meta(CorrectionRoundInfo(r, setup.seed), setup.profile)
     writer = RecordingWriter(out, meta, drive.scenario.to_dict(), overwrite=True)
     planner = PlannerDriver(Planner(load_model(model)))

@@ -29,6 +29,7 @@ from terrapref.grid import Engine, run_grid
 from terrapref.perception import PerceptionModel
 from terrapref.progress import every_tenth
 from terrapref.recipes import OURS, PAPER, TEACH, Recipe, RecipeSetup, run_recipe
+from terrapref.report.reproduce_relief import ReliefPart, relief_figure, relief_lines, run_relief_part
 from terrapref.report.reproduce_speed import SpeedPart, run_speed_part, speed_figure, speed_lines
 from terrapref.scenario import packaged_scenarios, resolve_scenario
 from terrapref.terrain import ClassTable, PreferenceProfile
@@ -91,6 +92,8 @@ class Reproduction:
             nothing: the runs above are clean).
         speed_seeds: training seeds of the speed part (recipe teach taught by a driver with speed
             preferences on the field UGV: terrapref.report.reproduce_speed); 0: none.
+        relief_seeds: training seeds of the relief part (recipe teach taught on the relief
+            teaching course by a driver with a relief style: terrapref.report.reproduce_relief); 0: none.
     """
 
     recipes: tuple[Recipe, ...] = (PAPER, OURS, TEACH)
@@ -100,6 +103,7 @@ class Reproduction:
     write_recordings: bool = False
     perceptions: tuple[PerceptionModel, ...] = ()
     speed_seeds: int = 2
+    relief_seeds: int = 1
 
     @functools.cached_property
     def scenarios(self) -> tuple[str, ...]:
@@ -154,8 +158,14 @@ def reproduce(
         part = SpeedPart(setup.speed_seeds, setup.profile.order, (*TEST_SET, *variations()))
         speed = (part, run_speed_part(part, out, engine, log))
         timings["speed: demonstrate, train, drive"] = time.perf_counter() - t0
+    relief = None
+    if setup.relief_seeds > 0 and any(r.name == TEACH.name for r in setup.recipes):
+        t0 = time.perf_counter()
+        relief_part = ReliefPart(setup.relief_seeds, setup.profile.order)
+        relief = (relief_part, run_relief_part(relief_part, out, engine, log))
+        timings["relief: demonstrate, train, drive"] = time.perf_counter() - t0
     log("[3/3] figures and REPORT.md ...")
-    return _write_report(out, setup, _Outcome(runs, trained, timings, speed), engine)
+    return _write_report(out, setup, _Outcome(runs, trained, timings, speed, relief), engine)
 
 
 def _train_all(setup: Reproduction, out: Path, engine: Engine, log: Callable[[str], None]) -> list[RecipeModel]:
@@ -265,17 +275,19 @@ def _mode(choices: list[tuple[str, bool, str]]) -> str:
 
 
 class _Outcome(NamedTuple):
-    """What a reproduction ran: the runs, the models, the time per step and the speed part's runs (None: not run)."""
+    """What a reproduction ran: the runs, the models, the time per step, and the speed part's and
+    the relief part's runs (None: not run)."""
 
     runs: list[RecipeRun]
     trained: list[RecipeModel]
     timings: dict[str, float]
     speed: tuple[SpeedPart, list[RunResult]] | None
+    relief: tuple[ReliefPart, list[RunResult]] | None = None
 
 
 def _write_report(out: Path, setup: Reproduction, outcome: _Outcome, engine: Engine) -> Path:
     """REPORT.md, its figures and results.json (every run's metrics and the time per step)."""
-    runs, trained, timings, speed = outcome
+    runs, trained, timings, speed, relief = outcome
     t_fig = time.perf_counter()
     figs = out / "figures"
     figs.mkdir(exist_ok=True)
@@ -287,14 +299,18 @@ def _write_report(out: Path, setup: Reproduction, outcome: _Outcome, engine: Eng
         part, results = speed
         speed_figure(figs / "speed.png", results)
         lines += [""] + speed_lines(part, results, "figures/speed.png")
+    if relief is not None:
+        relief_part, relief_results = relief
+        relief_figure(figs / "relief.png", relief_results)
+        lines += [""] + relief_lines(relief_part, relief_results, "figures/relief.png")
     lines += ["", "## Figures", ""] + [f"- `figures/{sc}.png`" for sc in setup.scenarios]
     timings = {**timings, "figures": time.perf_counter() - t_fig}
     lines += ["", "## Time per step (wall clock)", "", "| step | seconds |", "|---|---|"]
     lines += [f"| {k} | {v:.1f} |" for k, v in timings.items()] + [f"| total | {sum(timings.values()):.1f} |"]
     speed_runs = [r.to_dict() for r in speed[1]] if speed is not None else []
-    write_text_atomic(
-        out / "results.json", json.dumps({"runs": [r.to_dict() for r in runs], "speed_runs": speed_runs, "timings": timings}, indent=1)
-    )
+    relief_runs = [r.to_dict() for r in relief[1]] if relief is not None else []
+    results = {"runs": [r.to_dict() for r in runs], "speed_runs": speed_runs, "relief_runs": relief_runs, "timings": timings}
+    write_text_atomic(out / "results.json", json.dumps(results, indent=1))
     return write_text_atomic(out / "REPORT.md", "\n".join(lines) + "\n")
 
 

@@ -38,14 +38,14 @@ def _train(job: tuple[str, int, tuple[str, ...], tuple[tuple[str, float], ...]])
 def run_speed_part(part: SpeedPart, out: Path, engine: Engine, log: Callable[[str], None]) -> list[RunResult]:
     """Train, then drive every course with each model and with the driver (the field UGV); the runs, annotated with agreement."""
     jobs = [(str(out / "work" / f"speed_seed{s}"), s, part.profile, part.speeds) for s in range(part.seeds)]
-    log(f"      speed: recipe teach x {part.seeds} seeds, the driver at {_speeds_text(part.speeds)} ...")
+    log(f"      speed: recipe teach x {part.seeds} seeds, the driver at {speeds_text(part.speeds)} ...")
     models = run_grid(_train, jobs, engine, describe=lambda j: f"speed, seed {j[1]}")
     specs = [RunSpec(c, s, PLANNER, m, part.profile) for s, m in enumerate(models) for c in part.courses]
     specs += [RunSpec(c, s, EXPERT, None, part.profile, speeds=part.speeds) for s in range(part.seeds) for c in part.courses]
     return annotate_agreement(run_many(specs, engine=engine))
 
 
-def _speeds_text(speeds: Sequence[tuple[str, float]]) -> str:
+def speeds_text(speeds: Sequence[tuple[str, float]]) -> str:
     return ", ".join(f"{name} {v:g} m/s" for name, v in speeds)
 
 
@@ -55,7 +55,7 @@ def speed_lines(part: SpeedPart, results: list[RunResult], figure: str) -> list[
     lines = [
         "## Speed (recipe teach, a driver with speed preferences)",
         "",
-        f"Recipe teach taught by the synthetic driver of the same order at {_speeds_text(part.speeds)}, on the field UGV "
+        f"Recipe teach taught by the synthetic driver of the same order at {speeds_text(part.speeds)}, on the field UGV "
         "(0-2 m/s, 1 m/s^2 up, 2 m/s^2 down) instead of the paper's 1 m/s; "
         f"{part.seeds} training seed(s); planner and driver each drive the test course and the figure variations once per seed. "
         "Speed on a class: the mean speed while the vehicle's centre is on it, over all runs; error: the mean absolute "

@@ -1,0 +1,104 @@
+"""The reproduction's relief part (SPEC 19): recipe ``teach`` taught by a driver with a relief
+style on the relief teaching course (``teach_relief``), judged on a packaged relief course and on
+generated relief layouts; agreement with the driver on terrain and relief zones, speed error by
+grade and roughness band, tips, time stuck and contact, and a figure of speed and height along
+one relief course, driver against planner."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from terrapref.demos.relief_style import RELIEF_STYLES, ReliefStyle
+from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, annotate_agreement, run_many, summarise
+from terrapref.evaluation.speed import SpeedComparison, save_speed_along
+from terrapref.evaluation.stats import rate_text
+from terrapref.grid import Engine, run_grid
+from terrapref.recipes import TEACH, RecipeSetup, run_recipe
+from terrapref.report.reproduce_speed import SPEEDS, speeds_text
+from terrapref.scenario import resolve_scenario
+from terrapref.terrain import PreferenceProfile, default_classes
+
+COURSE = "teach_relief"  # the course the driver teaches on
+JUDGED = ("relief_demo", "genrelief:101", "genrelief:102")  # the courses driven: a packaged relief course, generated relief layouts
+FIGURE_COURSE = "relief_demo"  # the course of the speed-and-height figure
+STYLE = "default"  # the driver's relief style (terrapref.demos.relief_style.RELIEF_STYLES)
+
+
+@dataclass(frozen=True)
+class ReliefPart:
+    """What the relief part runs: recipe ``teach`` for ``seeds`` seeds, taught on :data:`COURSE` by
+    the driver of ``speeds`` and the relief style named ``style``, on ``courses``."""
+
+    seeds: int
+    profile: tuple[str, ...]
+    courses: tuple[str, ...] = JUDGED
+    speeds: tuple[tuple[str, float], ...] = SPEEDS
+    style: str = STYLE
+
+    @property
+    def relief(self) -> ReliefStyle:
+        return ReliefStyle(**RELIEF_STYLES[self.style])
+
+
+def _train(job: tuple[str, int, tuple[str, ...], tuple[tuple[str, float], ...], ReliefStyle]) -> str:
+    workdir, seed, profile, speeds, relief = job
+    setup = RecipeSetup(seed, PreferenceProfile(profile), course=COURSE, speeds=speeds, relief=relief)
+    return str(run_recipe(TEACH, workdir, setup).model)
+
+
+def run_relief_part(part: ReliefPart, out: Path, engine: Engine, log: Callable[[str], None]) -> list[RunResult]:
+    """Train, then drive every course with each model and with the driver; the runs, annotated with agreement."""
+    jobs = [(str(out / "work" / f"relief_seed{s}"), s, part.profile, part.speeds, part.relief) for s in range(part.seeds)]
+    log(f"      relief: recipe teach x {part.seeds} seeds on {COURSE}, the driver of relief style {part.style} ...")
+    models = run_grid(_train, jobs, engine, describe=lambda j: f"relief, seed {j[1]}")
+    specs = [RunSpec(c, s, PLANNER, m, part.profile) for s, m in enumerate(models) for c in part.courses]
+    specs += [
+        RunSpec(c, s, EXPERT, None, part.profile, speeds=part.speeds, relief=part.relief) for s in range(part.seeds) for c in part.courses
+    ]
+    return annotate_agreement(run_many(specs, engine=engine))
+
+
+def relief_lines(part: ReliefPart, results: list[RunResult], figure: str) -> list[str]:
+    """REPORT.md's relief section: the setting, agreement on terrain and relief zones, speed error
+    by grade and roughness band, safety, the time to the end, the figure."""
+    planner = summarise(results, PLANNER)
+    comparison = SpeedComparison.of_results(results, default_classes().background)
+    lines = [
+        "## Relief (recipe teach, a driver with a relief style)",
+        "",
+        f"Recipe teach taught by one drive of `{COURSE}` by the synthetic driver of the same order at {speeds_text(part.speeds)} "
+        f"and relief style `{part.style}` ({RELIEF_STYLES.entry(part.style).doc}); {part.seeds} training seed(s); planner and driver "
+        f"each drive {', '.join(f'`{c}`' for c in part.courses)} once per seed, clean frames. Relief zones: stretches of the "
+        "path whose ground tilts the body past 4 deg, passed over or round on one side.",
+        "",
+        "| measure | planner against its driver |",
+        "|---|---|",
+        f"| agreement on terrain zones | {_rate(planner.agreement_rate, planner.agreement_ci95, planner.agreement_zones)} |",
+        f"| agreement on relief zones | {_rate(planner.relief_agreement_rate, planner.relief_agreement_ci95, planner.relief_agreement_zones)} |",
+    ]
+    lines += [f"| speed error going {band} [m/s] | {e.text()} |" for band, e in comparison.by_grade.items() if band != "level"]
+    lines += [f"| speed error on level ground [m/s] | {e.text()} |" for band, e in comparison.by_grade.items() if band == "level"]
+    lines += [f"| speed error on {band} ground [m/s] | {e.text()} |" for band, e in comparison.by_roughness.items()]
+    if comparison.time_ratio is not None:
+        lines.append(
+            f"| time to the end over the driver's | {comparison.time_ratio.text()}; within 5% in {rate_text(*comparison.time_within)} |"
+        )
+    lines += [
+        f"| completed | {rate_text(round(planner.completed_rate * planner.runs), planner.runs) if planner.completed_rate is not None else '-'} |",
+        f"| tips, times stuck, contact with lethal terrain | {planner.tip_count}, {planner.stuck_count}, {planner.contact_s:.1f} s |",
+        f"| stops per 100 m | {100 * planner.stop_count / planner.driven_m:.2f} |" if planner.driven_m > 0 else "| stops per 100 m | - |",
+    ]
+    return lines + ["", f"![speed and height along {FIGURE_COURSE}]({figure})", ""]
+
+
+def _rate(rate: float | None, ci: tuple[float, float] | None, n: int) -> str:
+    if rate is None or ci is None:
+        return "-"
+    return f"{100 * rate:.1f}% (95% CI {100 * ci[0]:.1f}-{100 * ci[1]:.1f}%, {n} zones)"
+
+
+def relief_figure(path: Path, results: list[RunResult], course: str = FIGURE_COURSE) -> Path | None:
+    """Speed and height along ``course``'s path, the driver's against the planner's (seed 0); None when neither ran it."""
+    return save_speed_along(path, results, resolve_scenario(course), course)
