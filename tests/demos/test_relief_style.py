@@ -209,6 +209,25 @@ def test_the_speed_rule_learns_what_the_drivers_grades_shed_from_its_drive(tmp_p
     assert m.rough_mps == pytest.approx(ReliefStyle().rough_mps, abs=0.03) and rule.fit.rough.frames >= 10
     low, high = rule.fit.rough.interval
     assert low <= m.rough_mps <= high and 0.0 < m.rough_m < 0.03
+    # The rule bound to a planner, on the ground map its frames fill: the rough top's cap where the
+    # first metre ahead is rough, the level speed beyond the hill.
+    from terrapref.camera import CameraConfig, PinholeCamera
+    from terrapref.features import UtilityFeaturizer
+    from terrapref.groundmap.height import DepthImage
+    from terrapref.groundmap.map import GroundMap
+    from terrapref.rules.base import RuleContext
+
+    rec = writer.recording()
+    camera = PinholeCamera(CameraConfig.from_dict(rec.meta["camera"]))
+    context = RuleContext(camera, UtilityFeaturizer(recipe.features(), camera, rec.classes), recipe.features(), rec.classes)
+    runner = rule.runner(context)
+    ground = GroundMap(camera, context.terrain, runner.map_settings)
+    level, rough = [], []
+    for i in np.flatnonzero((rec.poses[:, 0] > 13.0) & (rec.poses[:, 0] < 33.0)):  # from the top's first sight
+        view, pose = rec.view(i), tuple(float(v) for v in rec.poses[i])
+        ground.update(view, pose, DepthImage.of(view, camera, pose))
+        (level if 30.5 < pose[0] < 33.0 else rough if 17.5 < pose[0] < 22.5 else []).append(runner.speed(ground, pose, 0.0, 1.0))
+    assert np.median(level) == pytest.approx(m.speeds_mps[-1], abs=0.01) and np.median(rough) == pytest.approx(m.rough_mps, abs=0.01)
 
 
 # A bank beside the path along y = 10 m: a ridge 5 m wide along y = 11.25 m from x = 12 to 28 m, the
