@@ -45,6 +45,25 @@ def test_a_failed_job_is_reported_with_its_inputs_after_the_others_ran(workers):
     assert str(info.value).startswith("1 of 6 jobs failed: job x=3: ZeroDivisionError")
 
 
+def test_workers_fork_after_this_process_made_a_relief_noise(tmp_path):
+    """A relief's noise is computed in compiled parallel loops; the local grid's workers, forked
+    after it (`reproduce` rasterises teach_relief, then drives), still run (a fresh interpreter:
+    the threading layer is chosen once per process)."""
+    import subprocess
+    import sys
+
+    script = (
+        "import numpy as np\n"
+        "from terrapref.grid import Engine, run_grid\n"
+        "from terrapref.scenario.relief import Noise\n"
+        "from terrapref.world.relief import noise_height\n"
+        "noise_height(Noise(0.1, 0.3, 1), np.arange(200) * 0.05, np.arange(200) * 0.05)\n"
+        "print(run_grid(abs, [-1, -2, -3], Engine(workers=2)))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert done.returncode == 0 and done.stdout.strip() == "[1, 2, 3]", done.stderr[-2000:]
+
+
 def test_a_bad_input_in_a_job_is_the_users_error_naming_the_file():
     with pytest.raises(UserError, match="input_0.yaml"):
         run_grid(bad_input, [0, 1], Engine(workers=2))

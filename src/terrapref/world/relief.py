@@ -81,8 +81,14 @@ def _polyline_distance(vertices: np.ndarray, x: np.ndarray, y: np.ndarray, close
 def noise_height(noise: Noise, x_m: np.ndarray, y_m: np.ndarray) -> np.ndarray:
     """The height [m] ``noise`` adds at the grid of points ``x_m`` (n,) by ``y_m`` (m,), shape
     (m, n) float64; a point's value does not depend on the other points asked."""
+    import numba
     from opensimplex import OpenSimplex  # only a scenario with noise needs it
 
+    # opensimplex's arrays are compiled parallel loops; Numba's default threading layer there is
+    # GNU OpenMP, after which a forked worker (the local grid's) aborts. Numba's own work queue is
+    # fork safe, and the noise is the same bits whichever layer computes it.
+    if numba.config.THREADING_LAYER == "default":
+        numba.config.THREADING_LAYER = "workqueue"
     grid = OpenSimplex(noise.seed).noise2array(
         np.asarray(x_m, dtype=np.float64) / noise.wavelength_m, np.asarray(y_m, dtype=np.float64) / noise.wavelength_m
     )
