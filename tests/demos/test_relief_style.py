@@ -77,10 +77,10 @@ def test_a_bad_relief_style_is_refused_naming_the_flag(text: str, says: str):
 
 
 def test_its_speed_sheds_per_degree_up_and_down_and_is_capped_on_rough_ground():
-    style = ReliefStyle()  # 0.03 m/s per deg up, 0.02 down, 0.8 m/s where rougher than 0.03 m
+    style = ReliefStyle()  # 0.03 m/s per deg up, 0.02 down, 0.8 m/s where rougher than 0.015 m
     assert style.speed(1.6, math.radians(10.0), 0.0, 0.1) == pytest.approx(1.3)
     assert style.speed(1.6, math.radians(-10.0), 0.0, 0.1) == pytest.approx(1.4)
-    assert style.speed(1.6, 0.0, 0.05, 0.1) == 0.8 and style.speed(1.6, 0.0, 0.02, 0.1) == 1.6
+    assert style.speed(1.6, 0.0, 0.05, 0.1) == 0.8 and style.speed(1.6, 0.0, 0.015, 0.1) == 1.6
     assert style.speed(0.5, math.radians(20.0), 0.0, 0.1) == 0.1  # it crawls up a grade it takes
 
 
@@ -171,9 +171,9 @@ def test_a_models_relief_style_is_that_of_its_recordings_driver_and_the_comparis
 HILL = [{"plateau": {"polygon": [[16.0, -10.0], [24.0, -10.0], [24.0, 30.0], [16.0, 30.0]], "height_m": 1.0, "edge_m": 6.0}}]
 
 
-# Its level top rough (0.025 m of roughness, past the default relief style's 0.02 m).
+# Its level top rough (0.019 m of roughness, past the default relief style's 0.015 m).
 ROUGH_TOP = [
-    {"noise": {"amplitude_m": 0.09, "wavelength_m": 0.3, "seed": 1, "polygon": [[16.5, 5.0], [23.5, 5.0], [23.5, 15.0], [16.5, 15.0]]}}
+    {"noise": {"amplitude_m": 0.07, "wavelength_m": 0.3, "seed": 1, "polygon": [[16.5, 5.0], [23.5, 5.0], [23.5, 15.0], [16.5, 15.0]]}}
 ]
 
 

@@ -1,6 +1,6 @@
 """Speed by grade band on relief (SPEC 19): each run's mean speed going up, going down and on the
 level (the body's pitch past 3 deg), each zone's band, and ``evaluate``'s speed error against the
-driver by band; and likewise by roughness band (rough past 0.02 m, smooth); flat runs' metrics as
+driver by band; and likewise by roughness band (rough past 0.015 m, smooth); flat runs' metrics as
 they were."""
 
 from __future__ import annotations
@@ -73,10 +73,10 @@ def test_on_flat_ground_there_are_no_bands_and_the_metrics_read_as_before():
 
 def test_a_rough_patch_driven_is_timed_in_the_rough_band_at_the_drivers_speed_there():
     """A rough patch 10 m long (x = 15 to 25) across the way: the driver's relief style holds
-    0.8 m/s past 0.02 m there and 1 m/s on the smooth ground before and after it."""
-    assert ROUGH_BAND_M == ReliefStyle().rough_m == 0.02 and ReliefStyle().rough_mps == 0.8
+    0.8 m/s past 0.015 m there and 1 m/s on the smooth ground before and after it."""
+    assert ROUGH_BAND_M == ReliefStyle().rough_m == 0.015 and ReliefStyle().rough_mps == 0.8
     patch = [[15.0, 4.0], [25.0, 4.0], [25.0, 16.0], [15.0, 16.0]]
-    metrics = _run([{"noise": {"amplitude_m": 0.09, "wavelength_m": 0.3, "seed": 1, "polygon": patch}}], [[2.0, 10.0], [38.0, 10.0]])
+    metrics = _run([{"noise": {"amplitude_m": 0.07, "wavelength_m": 0.3, "seed": 1, "polygon": patch}}], [[2.0, 10.0], [38.0, 10.0]])
     bands = metrics.speed_by_roughness_mps
     assert set(bands) == {"rough", "smooth"} and 5.0 < bands["rough"]["mps"] * bands["rough"]["s"] < 10.0
     assert sum(v["mps"] * v["s"] for v in bands.values()) == pytest.approx(metrics.driven_m, rel=1e-3)
@@ -113,7 +113,7 @@ def test_the_speed_error_by_band_compares_the_runs_on_the_same_layout():
     comparison = SpeedComparison.of([], rough, "grass")
     assert set(comparison.by_roughness) == {"rough"} and comparison.by_roughness["rough"].mean == pytest.approx(0.1)
     assert SpeedComparison.from_dict(comparison.to_dict()).by_roughness == comparison.by_roughness
-    assert any(line.startswith("speed error against the driver, rough ground (roughness past 0.02 m)") for line in comparison.lines())
+    assert any(line.startswith("speed error against the driver, rough ground (roughness past 0.015 m)") for line in comparison.lines())
     assert "by_roughness" not in SpeedComparison.of([], [], "grass").to_dict()
 
 

@@ -54,7 +54,7 @@ class ReliefStyle:
     up_mps_per_deg: float = 0.03
     down_mps_per_deg: float = 0.02
     rough_mps: float = 0.8
-    rough_m: float = 0.02
+    rough_m: float = 0.015
 
     def __post_init__(self) -> None:
         for f in fields(self):

@@ -374,7 +374,7 @@ GRADE_BAND_DEG = 3.0
 GRADE_BANDS = ("up", "level", "down")
 # And by the ground's roughness under its reference point (terrapref.world.WorldMap.roughness_at):
 # rough past this [m] (the default relief style's rough_m), smooth up to it.
-ROUGH_BAND_M = 0.02
+ROUGH_BAND_M = 0.015
 ROUGH_BANDS = ("rough", "smooth")
 
 

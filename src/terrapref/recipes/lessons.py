@@ -26,7 +26,7 @@ from terrapref.rules.speed.model import LEVEL_DEG, MIN_FRAMES, STATION_STEP_M, r
 from terrapref.scenario.teaching import RELIEF_DEG, RELIEF_LESSONS
 
 GRADE_REACH_M = 2.0  # a frame climbs or descends where its way does within this [m]
-ROUGH_SHOWN_M = 0.02  # ground this rough shows the speed kept on rough ground [m] (the default relief style's rough_m)
+ROUGH_SHOWN_M = 0.015  # ground this rough shows the speed kept on rough ground [m] (the default relief style's rough_m)
 
 
 def relief_unshown(dataset: Dataset) -> tuple[str, ...] | None:

@@ -12,8 +12,8 @@ those that fit in it, a bump or a dip only where no larger one fits:
 - ``ditch``: a ditch 0.3-0.5 m deep and 2.5-3.5 m wide beside the path, 3.5-5 m off it;
 - ``bank``: the same, raised;
 - ``rough``: a rough patch across the path, 5-9 m long and 8 m across: short noise (0.3 m
-  across) of 0.05-0.09 m, rough from about 0.014 to 0.025 m (the heights' deviation about their
-  plane within 0.3 m), on both sides of the default relief style's 0.02 m, its steps under 0.12 m;
+  across) of 0.04-0.07 m, rough from about 0.011 to 0.019 m (the heights' deviation about their
+  plane within 0.3 m), on both sides of the default relief style's 0.015 m, its steps under 0.1 m;
 - ``bump``: a low ridge across the path, 0.1-0.2 m high and 1.5-2.5 m wide;
 - ``dip``: the same, sunken (a swale);
 
@@ -102,7 +102,7 @@ def _feature(rng: np.random.Generator, kind: str, path: ReferencePath, s0: float
         length, half_across = min(rng.uniform(5.0, 9.0), room), 4.0
         corners = [(-length / 2, -half_across), (length / 2, -half_across), (length / 2, half_across), (-length / 2, half_across)]
         polygon = [[x + a * ux - b * uy, y + a * uy + b * ux] for a, b in corners]
-        noise = {"amplitude_m": round(rng.uniform(0.05, 0.09), 3), "wavelength_m": 0.3, "seed": int(rng.integers(2**31))}
+        noise = {"amplitude_m": round(rng.uniform(0.04, 0.07), 3), "wavelength_m": 0.3, "seed": int(rng.integers(2**31))}
         return {"noise": {**noise, "polygon": _rounded(polygon)}}
     if kind in ("bump", "dip"):
         width, half_across = min(rng.uniform(1.5, 2.5), room), 6.0

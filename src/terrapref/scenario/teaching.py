@@ -67,10 +67,11 @@ BANK_WIDTH_M, BANK_LENGTH_M = 5.0, 9.0  # a bank beside the path: its full width
 RAMP_TOP_M, RAMP_EDGE_M, RAMP_ACROSS_M = 3.0, 4.0, 14.0  # a ramp across the way: its top, each ramp, across [m]
 # A rough patch across the way: (length, width) [m], and its noise (amplitude [m], wavelength [m]):
 # the heights' deviation about their plane within 0.3 m (the roughness the planner reads) about
-# 0.025 m, past the default relief style's 0.02 m, its steps (the height range over 0.3 m, as the
-# planner's height layer reads a step) at most 0.12 m, under the 0.15 m the vehicle climbs.
+# 0.019 m, past the default relief style's 0.015 m, its steps (the height range over 0.3 m, as the
+# planner's height layer reads a step) at most 0.09 m, well under the 0.15 m the vehicle climbs:
+# rougher patches read past that step where bumps hide the ground behind them, and stop the planner.
 ROUGH_PATCH_M = (8.0, 8.0)
-ROUGH_NOISE_M = (0.09, 0.3)
+ROUGH_NOISE_M = (0.07, 0.3)
 SLOPE_PATCH_M = (8.0, 4.0)  # relief against terrain: the flat patch beside the path, (length, width) [m]
 # The default vehicle's half track and wheelbase [m], the body the relief situations are as steep
 # for (terrapref.vehicle.VehicleConfig's; the scenario sits below the vehicle, and
