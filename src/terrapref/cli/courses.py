@@ -308,8 +308,9 @@ def course_parser(sub: argparse._SubParsersAction) -> None:
         nargs="+",
         metavar="REC",
         help="recordings of the teaching course (and of the follow-ups since, in the order driven): write a short course "
-        "of the pairs their drives together left unidentified, beside their neighbours in the learned order, or say "
-        "what no further course settles (train on all the recordings after)",
+        "of the pairs their drives together left unidentified, beside their neighbours in the learned order, and of the "
+        "relief drives on relief left unshown (a steep bank or mound, a ramp, a rough patch), or say what no further "
+        "course settles (train on all the recordings after)",
     )
     p.add_argument(
         "--design",
