@@ -209,7 +209,18 @@ def geometry_of_cells(
     trusted elevations round them (``settings``; ``trusted``: those elevations, if already
     worked out, :func:`trusted_elevation`); NaN where unknown."""
     out = np.empty((len(rows), 3))
-    trusted = trusted_elevation(heights, settings) if trusted is None else trusted
     rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
-    kernels.cell_geometry(trusted, rows, cols, disc_reach(settings, res_m), res_m, out)
+    reach = disc_reach(settings, res_m)
+    if trusted is None:  # the elevations trusted round the cells asked, not over the whole map
+        n_rows, n_cols = heights.elevation.shape
+        inside = (rows >= 0) & (rows < n_rows) & (cols >= 0) & (cols < n_cols)
+        if not inside.any():
+            out.fill(np.nan)
+            return out
+        r0, c0 = max(int(rows[inside].min()) - reach, 0), max(int(cols[inside].min()) - reach, 0)
+        r1, c1 = min(int(rows[inside].max()) + reach + 1, n_rows), min(int(cols[inside].max()) + reach + 1, n_cols)
+        window = Heights(*(None if a is None else a[r0:r1, c0:c1] for a in heights))
+        trusted = trusted_elevation(window, settings)
+        rows, cols = np.where(inside, rows - r0, -1), np.where(inside, cols - c0, -1)
+    kernels.cell_geometry(trusted, rows, cols, reach, res_m, out)
     return out

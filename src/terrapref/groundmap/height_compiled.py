@@ -16,7 +16,7 @@ from terrapref.world.height_compiled import plane_fit
 @njit(cache=True, nogil=True)
 def cell_geometry(trusted: np.ndarray, rows: np.ndarray, cols: np.ndarray, reach: int, res: float, out: np.ndarray) -> None:
     """Slope [rad], roughness [m] and step [m] of the cells (``rows``, ``cols``) into ``out`` (N, 3),
-    from the cells with a ``trusted`` elevation (n, n) float32 [m, NaN: not trusted] within
+    from the cells with a ``trusted`` elevation (rows, columns) float32 [m, NaN: not trusted] within
     ``reach`` cells (a disc) of each. The least-squares plane z = a x + b y + c through them gives
     the slope, atan(sqrt(a^2 + b^2)), and the roughness, the standard deviation of their heights
     about it. The step is the height range over the cell and its eight neighbours (a slope adds
@@ -24,11 +24,11 @@ def cell_geometry(trusted: np.ndarray, rows: np.ndarray, cols: np.ndarray, reach
     has a geometry from the cells round it (the ground between the returns of far, sparsely
     sampled ground); slope and roughness are NaN where fewer than three cells of the disc are
     trusted, the step where fewer than two of the nine are."""
-    n = trusted.shape[0]
+    n_rows, n_cols = trusted.shape
     for i in range(rows.shape[0]):
         r0, c0 = rows[i], cols[i]
         out[i, 0] = out[i, 1] = out[i, 2] = np.nan
-        if not (0 <= r0 < n and 0 <= c0 < n):
+        if not (0 <= r0 < n_rows and 0 <= c0 < n_cols):
             continue
         sums, near, step = _disc(trusted, r0, c0, reach, res)
         if sums[0] >= 3.0:
@@ -42,13 +42,13 @@ def _disc(trusted: np.ndarray, r0: int, c0: int, reach: int, res: float) -> tupl
     """The normal equations' sums (m, x, y, z, xx, yy, xy, xz, yz, zz; x, y the offsets from cell
     (r0, c0) [m]) over the trusted cells within ``reach`` of it, how many of its nine (the cell
     and its neighbours) are trusted, and their height range."""
-    n = trusted.shape[0]
+    n_rows, n_cols = trusted.shape
     m = sx = sy = sz = sxx = syy = sxy = sxz = syz = szz = 0.0
     near, low, high = 0, np.inf, -np.inf
-    for dr in range(max(-reach, -r0), min(reach, n - 1 - r0) + 1):
+    for dr in range(max(-reach, -r0), min(reach, n_rows - 1 - r0) + 1):
         span = int(math.sqrt(reach * reach - dr * dr) + 1e-9)
         r = r0 + dr
-        for dc in range(max(-span, -c0), min(span, n - 1 - c0) + 1):
+        for dc in range(max(-span, -c0), min(span, n_cols - 1 - c0) + 1):
             z = np.float64(trusted[r, c0 + dc])
             if math.isnan(z):
                 continue
