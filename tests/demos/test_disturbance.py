@@ -250,6 +250,7 @@ def _push_starts(run: SimpleNamespace) -> list[tuple[float, float, float]]:
     return out
 
 
+@pytest.mark.slow  # a whole drive, course or training end to end; the default run keeps the test suite's time
 def test_the_teaching_protocol_pushes_only_away_from_lethal_terrain(tmp_path: Path):
     """The short course, with and without the clearance: without it some push begins with lethal
     terrain within reach; with it none does."""

@@ -135,6 +135,7 @@ def test_on_a_ramp_it_asks_for_its_speed_less_what_the_grade_takes(waypoints: li
     assert np.abs(log.commands[level & (log.commands[:, 0] > 0.5), 0] - 1.0).max() < 1e-9
 
 
+@pytest.mark.slow  # a whole drive, course or training end to end; the default run keeps the test suite's time
 def test_record_stores_the_relief_style_and_refuses_a_bad_one(tmp_path, capsys):
     course, out = tmp_path / "bank.yaml", tmp_path / "rec"
     course.write_text(yaml.safe_dump(_scenario(BANK, [[8.0, 10.25], [20.0, 10.25]]).to_dict()))
@@ -177,6 +178,7 @@ ROUGH_TOP = [
 ]
 
 
+@pytest.mark.slow  # a whole drive, course or training end to end; the default run keeps the test suite's time
 def test_the_speed_rule_learns_what_the_drivers_grades_shed_from_its_drive(tmp_path):
     """The driver (0.03 m/s per deg up, 0.02 down, 0.8 m/s on rough ground) drives over the hill
     once, through the depth camera; the speed rule fitted to that drive sheds what it sheds, to

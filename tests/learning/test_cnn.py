@@ -22,6 +22,7 @@ def _samples(n: int = 64, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.nda
     return images, rng.normal(0, 0.1, (n, 2 * len(PATH_AHEAD_M))).astype(np.float32), labels.astype(np.int64)
 
 
+@pytest.mark.slow  # a whole drive, course or training end to end; the default run keeps the test suite's time
 @pytest.mark.parametrize("class_balance", [True, False])
 def test_training_runs_and_keeps_the_best_epoch(class_balance: bool):
     images, paths, labels = _samples()

@@ -339,6 +339,7 @@ def test_the_offset_stage_stops_at_the_wall_reading_its_own_ground_map(tmp_path:
     assert m.collisions == 0 and m.ended == "stopped" and set(m.stops_s) == {NO_FREE_WAY}
 
 
+@pytest.mark.slow  # a whole drive, course or training end to end; the default run keeps the test suite's time
 def test_a_runs_mcap_says_when_and_why_the_planner_stopped(tmp_path: Path, wall: str, model: Path):
     from rosbags.highlevel import AnyReader
 

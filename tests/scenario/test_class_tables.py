@@ -504,6 +504,7 @@ def test_course_writes_a_tables_teaching_course_that_carries_the_table(tmp_path,
     assert not (tmp_path / "map2.png").exists(), line
 
 
+@pytest.mark.slow  # a whole drive, course or training end to end; the default run keeps the test suite's time
 def test_course_design_and_name(tmp_path, capsys):
     out = tmp_path / "c.yaml"
     assert main(["course", "--out", str(out), "--design", "compact", "--name", "short"]) == 0  # the default table's is full

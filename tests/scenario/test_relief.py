@@ -242,6 +242,7 @@ def test_teach_relief_shows_each_relief_situation_on_its_own_leg() -> None:
     assert {i.deg for i in items if i.kind == "mound"} == {RELIEF_DEG["gentle mound"], RELIEF_DEG["steep mound"]}
 
 
+@pytest.mark.slow  # a whole drive, course or training end to end; the default run keeps the test suite's time
 def test_course_relief_gives_a_tables_teaching_course_its_relief_situations_and_relief_between(tmp_path, capsys) -> None:
     """`terrapref course --relief [SEED]`: the table's course with its relief situations (each
     class against a bank), their own relief, and the relief of the seed between the situations

@@ -77,6 +77,7 @@ def test_the_driver_shows_every_class_at_a_steady_speed_within_seven_minutes(tmp
     assert {name: round(v, 2) for name, (v, _) in learned.items()} == dict(speeds)
 
 
+@pytest.mark.slow  # a whole drive, course or training end to end; the default run keeps the test suite's time
 @pytest.mark.parametrize("order", [("mud", "rock", "water", LETHAL), ("water", "rock", "mud", LETHAL)])
 def test_the_synthetic_driver_shows_it_in_at_most_five_and_a_half_minutes(order):
     run = run_one(RunSpec("teach_course", 0, EXPERT, None, order))

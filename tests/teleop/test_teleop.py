@@ -478,6 +478,7 @@ def test_a_simulated_keyboard_person_drives_the_course_through_the_window(tmp_pa
     assert person.throttle_presses == 0 and (rec.commands[:, 0] == 1.0).all(), "a driver of one speed leaves the throttle at it"
 
 
+@pytest.mark.slow  # a whole drive, course or training end to end; the default run keeps the test suite's time
 def test_a_simulated_keyboard_person_works_the_throttle_toward_the_speeds_it_wants(tmp_path):
     """W and S through the window's own events: the set speed moves by a tap's step or a held key's
     ramp, and settles at each cruising speed the driver wants (within half a step)."""

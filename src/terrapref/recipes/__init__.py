@@ -331,7 +331,7 @@ def _follow_up(
         return []
     scenario = resolve_scenario(str(setup.course), setup.classes)
     name = f"{scenario.name}_more"
-    course = follow_up_course(scenario.classes, plan.open, name, scenario.name, neighbours=plan.neighbours)
+    course = follow_up_course(scenario.classes, plan.open, name, [scenario.name], neighbours=plan.neighbours)
     path = workdir / f"{name}_s{setup.seed}_{'_'.join(c[:2] for c in (setup.profile.order if setup.profile else ()))}.yaml"
     workdir.mkdir(parents=True, exist_ok=True)
     write_text_atomic(path, course.to_yaml())

@@ -248,16 +248,16 @@ def follow_up_course(
     classes: ClassTable,
     open_pairs: Sequence[tuple[str, str]],
     name: str,
-    driven: str,
-    drives: int = 1,
+    courses: Sequence[str],
     neighbours: Sequence[tuple[str, str]] = (),
     relief: Sequence[str] = (),
 ) -> CourseBuilder:
-    """The follow-up course of ``open_pairs``, which ``drives`` drives of the course(s) ``driven``
-    left open together, and of their ``neighbours`` in the learned order
+    """The follow-up course of ``open_pairs``, which the drives of ``courses`` (each drive's
+    course, by name) left open together, and of their ``neighbours`` in the learned order
     (:func:`~terrapref.learning.identify.bracketed`), which keep what is identified so; and of
     the ``relief`` lessons (:data:`RELIEF_LESSONS`) they left unshown."""
-    what = f"the drive of {driven}" if drives == 1 else f"{drives} drives of {driven} together"
+    driven = " and ".join(dict.fromkeys(courses))
+    what = f"the drive of {driven}" if len(courses) == 1 else f"{len(courses)} drives of {driven} together"
     parts = []
     if open_pairs:
         listed = "; ".join(f"{a} vs {b}" for a, b in open_pairs)
@@ -423,16 +423,7 @@ def follow_up_after(
     name) left open together (``terrapref course --after``), beside their ``neighbours`` in the
     learned order, and of the ``relief`` lessons they left unshown, with its situations in driving
     order; named ``name``, by default the first course's name followed by ``_more``."""
-    driven = list(dict.fromkeys(courses))
-    course = follow_up_course(
-        classes,
-        open_pairs,
-        name or f"{Path(driven[0]).name}_more",
-        " and ".join(driven),
-        drives=len(courses),
-        neighbours=neighbours,
-        relief=relief,
-    )
+    course = follow_up_course(classes, open_pairs, name or f"{Path(courses[0]).name}_more", courses, neighbours, relief)
     return course, _interleave([follow_up(classes, [*open_pairs, *neighbours]), [RELIEF_LESSONS[r] for r in relief]])
 
 
