@@ -22,7 +22,7 @@ import numpy as np
 from terrapref.dataset import Dataset
 from terrapref.rules.offset.features import RELIEF_BANDS_DEG
 from terrapref.rules.offset.fit import relief_shown
-from terrapref.rules.speed.model import LEVEL_DEG, MIN_FRAMES, STATION_STEP_M, roughest
+from terrapref.rules.speed.model import LEVEL_DEG, MIN_FRAMES, roughest, stations_within, steepest
 from terrapref.scenario.teaching import RELIEF_DEG, RELIEF_LESSONS
 
 GRADE_REACH_M = 2.0  # a frame climbs or descends where its way does within this [m]
@@ -43,9 +43,11 @@ def relief_unshown(dataset: Dataset) -> tuple[str, ...] | None:
             unshown.add("steep side slope")
         if not pitch >= RELIEF_DEG["steep mound"]:
             unshown.add("steep grade")
-    g = np.nan_to_num(grade[:, : int(GRADE_REACH_M / STATION_STEP_M) + 1].astype(np.float64))
-    climbs, descends = (g > LEVEL_DEG).any(axis=1), (g < -LEVEL_DEG).any(axis=1)
-    if min(np.count_nonzero(climbs & ~descends), np.count_nonzero(descends & ~climbs)) < MIN_FRAMES:
+    climb, descent = steepest(grade, stations_within(GRADE_REACH_M), len(grade))  # as the speed rule's fit counts them
+    if (
+        min(np.count_nonzero((climb >= LEVEL_DEG) & (descent < LEVEL_DEG)), np.count_nonzero((descent >= LEVEL_DEG) & (climb < LEVEL_DEG)))
+        < MIN_FRAMES
+    ):
         unshown.add("grades")
     if rough is None or np.count_nonzero(roughest(rough) > ROUGH_SHOWN_M) < MIN_FRAMES:
         unshown.add("rough ground")

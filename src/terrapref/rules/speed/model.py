@@ -128,7 +128,7 @@ class SpeedModel:
         """The speed [m/s] (N,) for ways (N, STATIONS, 9) of terrain columns, their curvatures (N,)
         [1/m], their grades (N, STATIONS) [deg, positive up; NaN: unknown, taken as level; None:
         all unknown] and their roughness (N, STATIONS) [m; NaN or None: unknown, taken as smooth]."""
-        upto = _stations(self.preview_m)
+        upto = stations_within(self.preview_m)
         foot = way[:, :upto, :5]
         at = self._speeds[foot]
         if self.min_points > 1:  # the points whose column too few of their station's points share
@@ -175,15 +175,15 @@ class SpeedModel:
 
 def roughest(rough: np.ndarray) -> np.ndarray:
     """The roughest ground [m] (N,) within :data:`ROUGH_PREVIEW_M` on each way of ``rough`` (N, STATIONS) (0 where unknown)."""
-    return np.nan_to_num(rough[:, : rough_stations()].astype(np.float64)).max(axis=1, initial=0.0)
+    return np.nan_to_num(rough[:, : roughstations_within()].astype(np.float64)).max(axis=1, initial=0.0)
 
 
-def rough_stations() -> int:
+def roughstations_within() -> int:
     """The stations of a way whose roughness counts (those within :data:`ROUGH_PREVIEW_M`)."""
-    return _stations(ROUGH_PREVIEW_M)
+    return stations_within(ROUGH_PREVIEW_M)
 
 
-def _stations(preview_m: float) -> int:
+def stations_within(preview_m: float) -> int:
     """Stations of a way within ``preview_m`` (the one under the vehicle included)."""
     return min(STATIONS, round(preview_m / STATION_STEP_M) + 1)
 
@@ -343,7 +343,7 @@ class _Frames(NamedTuple):
 
 def _fit_at(frames: _Frames, preview_m: float) -> tuple[SpeedModel, tuple[tuple[float, float] | None, ...], _Grades, Rough | None] | None:
     way, curvature, v, k, lethal, grade, _, rough = frames
-    upto = _stations(preview_m)
+    upto = stations_within(preview_m)
     foot = way[:, :upto, :5].reshape(len(way), -1)
     seen = foot <= k  # K + 1: never seen
     first = np.where(seen.any(axis=1), foot[np.arange(len(foot)), np.argmax(seen, axis=1)], k + 1)
@@ -351,7 +351,7 @@ def _fit_at(frames: _Frames, preview_m: float) -> tuple[SpeedModel, tuple[tuple[
     is_lethal = lethal_mask(lethal)
     near = _near(way, upto, is_lethal, RINGS_M[1])
     steady = alone & (np.abs(curvature) < STEADY_CURVATURE)
-    climb, descent = _steepest(grade, upto, len(way))
+    climb, descent = steepest(grade, upto, len(way))
     speeds, intervals = _cruising(
         frames, steady & (first[:, None] == np.arange(k + 1)).T, near, (climb < LEVEL_DEG) & (descent < LEVEL_DEG)
     )
@@ -415,7 +415,7 @@ def _cruising(frames: _Frames, on: np.ndarray, near: np.ndarray, level: np.ndarr
     return speeds, intervals
 
 
-def _steepest(grade: np.ndarray | None, upto: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+def steepest(grade: np.ndarray | None, upto: int, n: int) -> tuple[np.ndarray, np.ndarray]:
     """The steepest grade up and down [deg, >= 0] (N,) on each way's first ``upto`` stations (0 where unknown)."""
     if grade is None:
         return np.zeros(n), np.zeros(n)

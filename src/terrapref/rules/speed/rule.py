@@ -57,7 +57,7 @@ from terrapref.rules.speed.model import (
     across,
     body_grade,
     fit_speed,
-    rough_stations,
+    stations_within,
 )
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable
@@ -504,7 +504,7 @@ class LearnedSpeed(SpeedRunner):
         self.rule = rule
         self.across = across(rule.config.half_width_m)
         self._d = STATION_STEP_M * np.arange(STATIONS)
-        self._rough_stations = rough_stations()
+        self._rough_stations = stations_within(ROUGH_PREVIEW_M)
         self._last_v = 0.0  # the speed commanded last [m/s]
         self.grades = GradeCheck(STATIONS)  # the grades read ahead against the body's pitch once there
 
