@@ -265,7 +265,7 @@ def follow_up_course(
         parts.append(f"the pairs {what} left open ({listed}){beside}, each both ways round")
     if relief:
         parts.append(f"the relief {'left' if open_pairs else what + ' left'} unshown ({', '.join(relief)})")
-    items = _interleave([follow_up(classes, [*open_pairs, *neighbours]), [RELIEF_LESSONS[r] for r in relief]])
+    items = _follow_up_items(classes, [*open_pairs, *neighbours], relief)
     return build_course(classes, items, name, f"Follow-up course: {'; and '.join(parts)}.")
 
 
@@ -424,7 +424,13 @@ def follow_up_after(
     learned order, and of the ``relief`` lessons they left unshown, with its situations in driving
     order; named ``name``, by default the first course's name followed by ``_more``."""
     course = follow_up_course(classes, open_pairs, name or f"{Path(courses[0]).name}_more", courses, neighbours, relief)
-    return course, _interleave([follow_up(classes, [*open_pairs, *neighbours]), [RELIEF_LESSONS[r] for r in relief]])
+    return course, _follow_up_items(classes, [*open_pairs, *neighbours], relief)
+
+
+def _follow_up_items(classes: ClassTable, pairs: Sequence[tuple[str, str]], relief: Sequence[str]) -> list[Situation]:
+    """A follow-up course's situations in driving order: ``pairs``' (:func:`follow_up`) and the
+    ``relief`` lessons' (:data:`RELIEF_LESSONS`), each spread over the course."""
+    return _interleave([follow_up(classes, pairs), [RELIEF_LESSONS[r] for r in relief]])
 
 
 def write_teaching_course(folder: str | Path, classes: ClassTable) -> Path:
