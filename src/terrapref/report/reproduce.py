@@ -29,7 +29,8 @@ from terrapref.grid import Engine, run_grid
 from terrapref.perception import PerceptionModel
 from terrapref.progress import every_tenth
 from terrapref.recipes import OURS, PAPER, TEACH, Recipe, RecipeSetup, run_recipe
-from terrapref.report.reproduce_relief import ReliefPart, relief_figure, relief_lines, run_relief_part
+from terrapref.report.reproduce_relief import FIGURE_COURSE as RELIEF_FIGURE_COURSE
+from terrapref.report.reproduce_relief import ReliefPart, relief_lines
 from terrapref.report.reproduce_speed import SpeedPart, run_speed_part, speed_figure, speed_lines
 from terrapref.scenario import packaged_scenarios, resolve_scenario
 from terrapref.terrain import ClassTable, PreferenceProfile
@@ -162,7 +163,7 @@ def reproduce(
     if setup.relief_seeds > 0 and any(r.name == TEACH.name for r in setup.recipes):
         t0 = time.perf_counter()
         relief_part = ReliefPart(setup.relief_seeds, setup.profile.order)
-        relief = (relief_part, run_relief_part(relief_part, out, engine, log))
+        relief = (relief_part, run_speed_part(relief_part.drives, out, engine, log))
         timings["relief: demonstrate, train, drive"] = time.perf_counter() - t0
     log("[3/3] figures and REPORT.md ...")
     return _write_report(out, setup, _Outcome(runs, trained, timings, speed, relief), engine)
@@ -301,7 +302,7 @@ def _write_report(out: Path, setup: Reproduction, outcome: _Outcome, engine: Eng
         lines += [""] + speed_lines(part, results, "figures/speed.png")
     if relief is not None:
         relief_part, relief_results = relief
-        relief_figure(figs / "relief.png", relief_results)
+        speed_figure(figs / "relief.png", relief_results, RELIEF_FIGURE_COURSE)
         lines += [""] + relief_lines(relief_part, relief_results, "figures/relief.png")
     lines += ["", "## Figures", ""] + [f"- `figures/{sc}.png`" for sc in setup.scenarios]
     timings = {**timings, "figures": time.perf_counter() - t_fig}

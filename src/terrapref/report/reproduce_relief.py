@@ -6,19 +6,14 @@ one relief course, driver against planner."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 
 from terrapref.demos.relief_style import RELIEF_STYLES, ReliefStyle
-from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, annotate_agreement, run_many, summarise
-from terrapref.evaluation.speed import SpeedComparison, save_speed_along
+from terrapref.evaluation.runner import PLANNER, RunResult, summarise
+from terrapref.evaluation.speed import SpeedComparison
 from terrapref.evaluation.stats import rate_text
-from terrapref.grid import Engine, run_grid
-from terrapref.recipes import TEACH, RecipeSetup, run_recipe
-from terrapref.report.reproduce_speed import SPEEDS, speeds_text
-from terrapref.scenario import resolve_scenario
-from terrapref.terrain import PreferenceProfile, default_classes
+from terrapref.report.reproduce_speed import SPEEDS, SpeedPart, speeds_text
+from terrapref.terrain import default_classes
 
 COURSE = "teach_relief"  # the course the driver teaches on
 JUDGED = ("relief_demo", "genrelief:101", "genrelief:102")  # the courses driven: a packaged relief course, generated relief layouts
@@ -41,23 +36,10 @@ class ReliefPart:
     def relief(self) -> ReliefStyle:
         return ReliefStyle(**RELIEF_STYLES[self.style])
 
-
-def _train(job: tuple[str, int, tuple[str, ...], tuple[tuple[str, float], ...], ReliefStyle]) -> str:
-    workdir, seed, profile, speeds, relief = job
-    setup = RecipeSetup(seed, PreferenceProfile(profile), course=COURSE, speeds=speeds, relief=relief)
-    return str(run_recipe(TEACH, workdir, setup).model)
-
-
-def run_relief_part(part: ReliefPart, out: Path, engine: Engine, log: Callable[[str], None]) -> list[RunResult]:
-    """Train, then drive every course with each model and with the driver; the runs, annotated with agreement."""
-    jobs = [(str(out / "work" / f"relief_seed{s}"), s, part.profile, part.speeds, part.relief) for s in range(part.seeds)]
-    log(f"      relief: recipe teach x {part.seeds} seeds on {COURSE}, the driver of relief style {part.style} ...")
-    models = run_grid(_train, jobs, engine, describe=lambda j: f"relief, seed {j[1]}")
-    specs = [RunSpec(c, s, PLANNER, m, part.profile) for s, m in enumerate(models) for c in part.courses]
-    specs += [
-        RunSpec(c, s, EXPERT, None, part.profile, speeds=part.speeds, relief=part.relief) for s in range(part.seeds) for c in part.courses
-    ]
-    return annotate_agreement(run_many(specs, engine=engine))
+    @property
+    def drives(self) -> SpeedPart:
+        """The teaching drives, the training and the runs, as the speed part runs its own."""
+        return SpeedPart(self.seeds, self.profile, self.courses, self.speeds, COURSE, self.relief, "relief")
 
 
 def relief_lines(part: ReliefPart, results: list[RunResult], figure: str) -> list[str]:
@@ -97,8 +79,3 @@ def _rate(rate: float | None, ci: tuple[float, float] | None, n: int) -> str:
     if rate is None or ci is None:
         return "-"
     return f"{100 * rate:.1f}% (95% CI {100 * ci[0]:.1f}-{100 * ci[1]:.1f}%, {n} zones)"
-
-
-def relief_figure(path: Path, results: list[RunResult], course: str = FIGURE_COURSE) -> Path | None:
-    """Speed and height along ``course``'s path, the driver's against the planner's (seed 0); None when neither ran it."""
-    return save_speed_along(path, results, resolve_scenario(course), course)

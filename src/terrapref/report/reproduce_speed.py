@@ -8,6 +8,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from terrapref.demos.relief_style import ReliefStyle
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, annotate_agreement, run_many
 from terrapref.evaluation.speed import SpeedComparison, save_speed_along
 from terrapref.evaluation.stats import rate_text
@@ -22,26 +23,36 @@ FIGURE_COURSE = "test_course"  # the course of the speed-along-the-path figure
 
 @dataclass(frozen=True)
 class SpeedPart:
-    """What the speed part runs: recipe ``teach`` for ``seeds`` seeds, taught by the driver of ``speeds``, on ``courses``."""
+    """What the speed part runs: recipe ``teach`` for ``seeds`` seeds, taught by the driver of
+    ``speeds`` (and of the relief style ``relief``; None: it drives relief as if flat) on
+    ``course`` (None: the recipe's own), on ``courses``; ``name`` names its work folders and its
+    log line (the relief part runs as one: terrapref.report.reproduce_relief)."""
 
     seeds: int
     profile: tuple[str, ...]
     courses: tuple[str, ...]
     speeds: tuple[tuple[str, float], ...] = SPEEDS
+    course: str | None = None
+    relief: ReliefStyle | None = None
+    name: str = "speed"
 
 
-def _train(job: tuple[str, int, tuple[str, ...], tuple[tuple[str, float], ...]]) -> str:
-    workdir, seed, profile, speeds = job
-    return str(run_recipe(TEACH, workdir, RecipeSetup(seed, PreferenceProfile(profile), speeds=speeds)).model)
+def _train(job: tuple[str, int, SpeedPart]) -> str:
+    workdir, seed, part = job
+    setup = RecipeSetup(seed, PreferenceProfile(part.profile), course=part.course, speeds=part.speeds, relief=part.relief)
+    return str(run_recipe(TEACH, workdir, setup).model)
 
 
 def run_speed_part(part: SpeedPart, out: Path, engine: Engine, log: Callable[[str], None]) -> list[RunResult]:
     """Train, then drive every course with each model and with the driver (the field UGV); the runs, annotated with agreement."""
-    jobs = [(str(out / "work" / f"speed_seed{s}"), s, part.profile, part.speeds) for s in range(part.seeds)]
-    log(f"      speed: recipe teach x {part.seeds} seeds, the driver at {speeds_text(part.speeds)} ...")
-    models = run_grid(_train, jobs, engine, describe=lambda j: f"speed, seed {j[1]}")
+    jobs = [(str(out / "work" / f"{part.name}_seed{s}"), s, part) for s in range(part.seeds)]
+    taught = f" on {part.course}" if part.course is not None else ""
+    log(f"      {part.name}: recipe teach x {part.seeds} seeds{taught}, the driver at {speeds_text(part.speeds)} ...")
+    models = run_grid(_train, jobs, engine, describe=lambda j: f"{part.name}, seed {j[1]}")
     specs = [RunSpec(c, s, PLANNER, m, part.profile) for s, m in enumerate(models) for c in part.courses]
-    specs += [RunSpec(c, s, EXPERT, None, part.profile, speeds=part.speeds) for s in range(part.seeds) for c in part.courses]
+    specs += [
+        RunSpec(c, s, EXPERT, None, part.profile, speeds=part.speeds, relief=part.relief) for s in range(part.seeds) for c in part.courses
+    ]
     return annotate_agreement(run_many(specs, engine=engine))
 
 
