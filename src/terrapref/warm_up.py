@@ -67,11 +67,15 @@ def _relief_frames(model_path: Path, frames: int = 5) -> None:
     for _ in range(frames):
         frame = sim.step(driver.act(frame))
     driver.planner.costmap()  # the map's cells all decided at once
+    from terrapref.rules.speed.calibration import GradeCheck
     from terrapref.rules.speed.model import CHORD_M, CHORD_WEIGHTS
 
     gmap = driver.planner.ground_map  # the grades a speed rule learned on relief reads, and its fit
     gmap.gradient_at(np.zeros((1, 2)))
+    gmap.roughness_at(np.zeros((1, 2)))
     gmap.body_grades(np.zeros((1, 2)), np.zeros(1), (CHORD_M, CHORD_WEIGHTS))
+    GradeCheck(1).arrived(0.0, 0.0, 0.0, 0.0)  # the grades read ahead, checked once there
+    gmap.read_shape()  # the sums a re-centred map works out afresh
     gmap.beside_attitudes(np.zeros((1, 2)), np.array([[0.0, 1.0]]), np.zeros(1))  # the relief an offset rule learned prices
     expert = ExpertDriver(ExpertConfig(relief=ReliefStyle()))
     expert.reset(sim.scenario, np.random.default_rng(0))

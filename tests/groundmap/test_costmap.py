@@ -81,6 +81,7 @@ def test_the_costmaps_layers_hold_each_cells_speed_and_the_height_layers_geometr
     gmap.layer("weight")[...] = 3 / 0.01**2  # ... each known to 1 cm
     for axis, rise in (("x", 0.2 * res), ("y", 0.0)):  # and the differences between neighbours the frames showed
         gmap.layer(f"d{axis}")[...], gmap.layer(f"d{axis}_run")[...], gmap.layer(f"d{axis}_weight")[...] = rise * 1e4, res * 1e4, 1e4
+    gmap.read_shape()
     costmap = stage.costmap(gmap)
     speeds = np.array([0.0, 0.4, 0.6, 0.8, 1.5, np.nan])  # K = 4 columns, the background, never seen
     full = with_layers(costmap, gmap, speeds, 2.0)

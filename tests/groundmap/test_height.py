@@ -70,6 +70,33 @@ def test_the_height_layer_holds_the_ramps_heights_and_its_slope_is_the_grade() -
     assert not GeometryLimits.of(VehicleConfig()).lethal(geometry).any()
 
 
+def test_the_sums_over_each_cells_disc_are_those_of_the_differences_read_as_the_map_moves() -> None:
+    """The sums a cell's slope is read from (its disc's differences as last read), kept up to date
+    frame by frame and moved with the map, equal the sums worked out afresh from the differences
+    read: over a drive up the ramp and back that re-centres a small map each way."""
+    from terrapref.groundmap import height_compiled as kernels
+    from terrapref.groundmap.settings import MapSettings
+
+    world = rasterise(parse_scenario(copy.deepcopy(RAMP), "height_test.yaml"))
+    camera = PinholeCamera()
+    settings = MapSettings(map_half_size_m=5.0, sample_range_m=3.5, sample_half_width_m=3.0)
+    renderer, gmap = SegmentationRenderer(camera, world), GroundMap(camera, _terrain(()), settings)
+    reach, moves, origin = 3, 0, None
+    drive = [(x, 15.0 + 2.0 * math.sin(x), 0.3 * math.cos(x)) for x in np.arange(12.0, 26.0, 0.5)]
+    drive += [(x, 15.0 - 2.0 * math.sin(x), math.pi) for x in np.arange(26.0, 14.0, -0.5)]
+    for pose in drive:
+        vehicle = Vehicle(Pose(*pose), ground=world)
+        ids, depth = renderer.render_with_depth(vehicle.pose, vehicle.attitude)
+        gmap.update(SegmentationView.of(ids), vehicle.pose, DepthImage(depth, *renderer.placement(vehicle.pose, vehicle.attitude)))
+        moves += origin is not None and not np.array_equal(origin, gmap.origin)
+        origin = gmap.origin.copy()
+        checked = tuple(gmap.layer(name) for name in ("checked_dx", "checked_dx_run", "checked_dy", "checked_dy_run"))
+        afresh = np.empty_like(gmap.layer("disc"))
+        kernels.disc_sums(checked, reach, np.arange(afresh.shape[0] * afresh.shape[1]), afresh)
+        np.testing.assert_allclose(gmap.layer("disc"), afresh, rtol=0, atol=1e-5)  # float32 sums, moved as they are
+    assert moves >= 4 and (gmap.layer("disc")[..., kernels.DISC_KNOWN_X] >= 3).sum() > 500
+
+
 def test_the_gradient_and_the_bodys_grade_on_the_ramp_are_its_grade_heading_along_it() -> None:
     """The ramp rises 0.2 a metre along x: the gradient there is (0.2, 0); a body heading up it is
     pitched atan(0.2) up, heading down it as much down, heading across it not at all; and the speed
@@ -146,8 +173,10 @@ def _shape_geometry(elevation: np.ndarray, rows: np.ndarray, cols: np.ndarray, r
     dx, dy = np.zeros_like(elevation), np.zeros_like(elevation)
     dx[:, :-1], dy[:-1, :] = np.diff(elevation, axis=1), np.diff(elevation, axis=0)
     run = np.full(elevation.shape, res, dtype=np.float32)
+    disc = np.empty((*elevation.shape, kernels.DISC_SUMS))
+    kernels.disc_sums((dx, run, dy, run), 3, np.arange(elevation.size), disc)  # every difference read
     out = np.empty((len(rows), 3))
-    kernels.shape_geometry((dx, run, known, dy, run, known), 1.0 / 0.03**2, rows, cols, 3, res, out)
+    kernels.shape_geometry((dx, run, known, dy, run, known), 1.0 / 0.03**2, disc, rows, cols, out)
     return out
 
 

@@ -202,25 +202,14 @@ def disc_reach(settings: HeightSettings, res_m: float) -> int:
     return max(1, int(math.floor(settings.radius_m / res_m + 1e-9)))
 
 
-def geometry_of_cells(
-    heights: Heights, rows: np.ndarray, cols: np.ndarray, res_m: float, settings: HeightSettings, trusted: np.ndarray | None = None
-) -> np.ndarray:
+def geometry_of_cells(heights: Heights, rows: np.ndarray, cols: np.ndarray, res_m: float, settings: HeightSettings) -> np.ndarray:
     """Slope [rad], roughness [m] and step [m] of the cells (``rows``, ``cols``), (N, 3), from the
-    trusted elevations round them (``settings``; ``trusted``: those elevations, if already
-    worked out, :func:`trusted_elevation`); NaN where unknown."""
+    elevations trusted round them (``settings``, as :func:`trusted_elevation` trusts them; only
+    those round the cells asked are worked out); NaN where unknown."""
     out = np.empty((len(rows), 3))
     rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
-    reach = disc_reach(settings, res_m)
-    if trusted is None:  # the elevations trusted round the cells asked, not over the whole map
-        n_rows, n_cols = heights.elevation.shape
-        inside = (rows >= 0) & (rows < n_rows) & (cols >= 0) & (cols < n_cols)
-        if not inside.any():
-            out.fill(np.nan)
-            return out
-        r0, c0 = max(int(rows[inside].min()) - reach, 0), max(int(cols[inside].min()) - reach, 0)
-        r1, c1 = min(int(rows[inside].max()) + reach + 1, n_rows), min(int(cols[inside].max()) + reach + 1, n_cols)
-        window = Heights(*(None if a is None else a[r0:r1, c0:c1] for a in heights))
-        trusted = trusted_elevation(window, settings)
-        rows, cols = np.where(inside, rows - r0, -1), np.where(inside, cols - c0, -1)
-    kernels.cell_geometry(trusted, rows, cols, reach, res_m, out)
+    weighed = heights.weight is not None
+    layers = (heights.elevation, heights.returns, heights.spread, heights.weight if weighed else heights.elevation)
+    trust = (float(max(settings.min_returns, 2)), settings.max_error_m**2, weighed)
+    kernels.heights_geometry(layers, trust, rows, cols, disc_reach(settings, res_m), res_m, out)
     return out

@@ -37,6 +37,47 @@ def cell_geometry(trusted: np.ndarray, rows: np.ndarray, cols: np.ndarray, reach
             out[i, 2] = step
 
 
+@njit(cache=True, nogil=True)
+def heights_geometry(
+    heights: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    trust: tuple[float, float, bool],
+    rows: np.ndarray,
+    cols: np.ndarray,
+    reach: int,
+    res: float,
+    out: np.ndarray,
+) -> None:
+    """:func:`cell_geometry` of the cells (``rows``, ``cols``) of the height layers ``heights``
+    (elevation, returns, spread, weight: terrapref.groundmap.height.Heights; ``trust``'s last:
+    whether the weight is one, else the returns weigh one each), from the elevations trusted in
+    the window round them alone: at least ``trust``'s least returns, and the standard error of
+    their mean at most the square root of its limit [m^2], both as the weights put it and as the
+    spread shows it, as terrapref.groundmap.height.trusted_elevation trusts a cell."""
+    elevation, returns, spread, weight = heights
+    least, limit, weighed = trust
+    n_rows, n_cols = elevation.shape
+    r0, r1, c0, c1 = n_rows, -1, n_cols, -1
+    for i in range(rows.shape[0]):
+        if 0 <= rows[i] < n_rows and 0 <= cols[i] < n_cols:
+            r0, r1, c0, c1 = min(r0, rows[i]), max(r1, rows[i]), min(c0, cols[i]), max(c1, cols[i])
+    if r1 < 0:
+        out[:] = np.nan
+        return
+    r0, c0, r1, c1 = max(r0 - reach, 0), max(c0 - reach, 0), min(r1 + reach + 1, n_rows), min(c1 + reach + 1, n_cols)
+    trusted = np.empty((r1 - r0, c1 - c0), np.float32)
+    for r in range(r0, r1):
+        for c in range(c0, c1):
+            k = np.float64(returns[r, c])
+            w = np.float64(weight[r, c]) if weighed else k
+            ok = k >= least and np.float64(spread[r, c]) <= limit * w * (k - 1.0) and (not weighed or w * limit >= 1.0)
+            trusted[r - r0, c - c0] = elevation[r, c] if ok else np.float32(np.nan)
+    window_rows, window_cols = np.full(rows.shape[0], -1, np.int64), np.full(rows.shape[0], -1, np.int64)
+    for i in range(rows.shape[0]):
+        if 0 <= rows[i] < n_rows and 0 <= cols[i] < n_cols:
+            window_rows[i], window_cols[i] = rows[i] - r0, cols[i] - c0
+    cell_geometry(trusted, window_rows, window_cols, reach, res, out)
+
+
 @njit(cache=True, nogil=True, inline="always")
 def _disc(trusted: np.ndarray, r0: int, c0: int, reach: int, res: float) -> tuple[tuple[float, ...], int, float]:
     """The normal equations' sums (m, x, y, z, xx, yy, xy, xz, yz, zz; x, y the offsets from cell
@@ -312,27 +353,28 @@ def _fold_difference(
     weight[row, col] = total
 
 
+# Each cell's sums over its disc (the ``disc`` layer, terrapref.groundmap.layers): the read
+# differences along x, their runs and how many are known, then likewise along y.
+DISC_RISE_X, DISC_RUN_X, DISC_KNOWN_X, DISC_RISE_Y, DISC_RUN_Y, DISC_KNOWN_Y = range(6)
+DISC_SUMS = 6
+
+
 @njit(cache=True, nogil=True)
 def shape_geometry(
-    shape: tuple[np.ndarray, ...],
-    least_weight: float,
-    rows: np.ndarray,
-    cols: np.ndarray,
-    reach: int,
-    res: float,
-    out: np.ndarray,
+    shape: tuple[np.ndarray, ...], least_weight: float, disc: np.ndarray, rows: np.ndarray, cols: np.ndarray, out: np.ndarray
 ) -> None:
     """Slope [rad] and step [m] of the cells (``rows``, ``cols``) into ``out`` (N, 3: slope, NaN
-    for the roughness, which heights give, step), from the ground's ``shape`` (:func:`depth_frame`):
-    a difference counts once its weight is at least ``least_weight`` (its standard error at most 1
-    / sqrt of it). The slope is that of the gradient over the cells within ``reach`` cells (a disc)
-    of the cell: along x, the rise of their differences along x over their run, and along y
-    likewise; NaN where fewer than three differences are known along either. A step within the
-    disc adds its height once to each row (or column) it crosses, however the returns fell about
-    it, so it reads as the slope of its height over the disc, not as a wall. The step is the height range over the cell
-    and its eight neighbours, their heights relative to it summed from the differences between
-    them (a corner by either way round, averaged where both are known); NaN where fewer than two
-    of the nine are known."""
+    for the roughness, which heights give, step), from the ground's ``shape`` (:func:`depth_frame`)
+    as :func:`shape_to_check` last read it: a difference counts once its weight is at least
+    ``least_weight`` (its standard error at most 1 / sqrt of it). The slope is that of the
+    gradient over the cells within a disc round the cell (``disc``: its sums, :func:`disc_sums`):
+    along x, the rise of their differences along x over their run, and along y likewise; NaN
+    where fewer than three differences are known along either. A step within the disc adds its
+    height once to each row (or column) it crosses, however the returns fell about it, so it
+    reads as the slope of its height over the disc, not as a wall. The step is the height range
+    over the cell and its eight neighbours, their heights relative to it summed from the
+    differences between them (a corner by either way round, averaged where both are known); NaN
+    where fewer than two of the nine are known."""
     dx, _, dxw, dy, _, dyw = shape
     n = dx.shape[0]
     h = np.empty((3, 3))
@@ -341,46 +383,87 @@ def shape_geometry(
         out[i, 0] = out[i, 1] = out[i, 2] = np.nan
         if not (1 <= r0 < n - 1 and 1 <= c0 < n - 1):
             continue
-        gx, gy = _disc_gradient(shape, least_weight, r0, c0, reach)
+        gx, gy = _disc_gradient(disc, r0, c0)
         out[i, 0] = math.atan(math.hypot(gx, gy))
         out[i, 2] = _step(dx, dxw, dy, dyw, least_weight, r0, c0, h)
 
 
 @njit(cache=True, nogil=True)
-def shape_gradient(
-    shape: tuple[np.ndarray, ...], least_weight: float, rows: np.ndarray, cols: np.ndarray, reach: int, out: np.ndarray
-) -> None:
+def shape_gradient(disc: np.ndarray, rows: np.ndarray, cols: np.ndarray, out: np.ndarray) -> None:
     """The ground's gradient (rise per metre along x, along y) of the cells (``rows``, ``cols``)
     into ``out`` (N, 2), as :func:`shape_geometry` reads its slope from it; NaN where unknown."""
-    n = shape[0].shape[0]
+    n = disc.shape[0]
     for i in range(rows.shape[0]):
         r0, c0 = rows[i], cols[i]
         out[i, 0] = out[i, 1] = np.nan
         if 1 <= r0 < n - 1 and 1 <= c0 < n - 1:
-            out[i, 0], out[i, 1] = _disc_gradient(shape, least_weight, r0, c0, reach)
+            out[i, 0], out[i, 1] = _disc_gradient(disc, r0, c0)
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _disc_gradient(shape: tuple[np.ndarray, ...], least_weight: float, r0: int, c0: int, reach: int) -> tuple[float, float]:
-    """The gradient over the cells within ``reach`` cells (a disc) of cell (``r0``, ``c0``): along
-    x the rise of their known differences along x over their run, along y likewise; NaN where
-    fewer than three are known along either (:func:`shape_geometry`)."""
-    dx, dx_run, dxw, dy, dy_run, dyw = shape
-    n = dx.shape[0]
-    rise_x = run_x = rise_y = run_y = 0.0
-    mx = my = 0
-    for dr in range(max(-reach, -r0), min(reach, n - 1 - r0) + 1):
-        span = int(math.sqrt(reach * reach - dr * dr) + 1e-9)
-        r = r0 + dr
-        for dc in range(max(-span, -c0), min(span, n - 1 - c0) + 1):
-            c = c0 + dc
-            if dxw[r, c] >= least_weight:
-                rise_x, run_x, mx = rise_x + dx[r, c], run_x + dx_run[r, c], mx + 1
-            if dyw[r, c] >= least_weight:
-                rise_y, run_y, my = rise_y + dy[r, c], run_y + dy_run[r, c], my + 1
-    if mx >= 3 and my >= 3 and run_x > 0.0 and run_y > 0.0:
+def _disc_gradient(disc: np.ndarray, r0: int, c0: int) -> tuple[float, float]:
+    """The gradient over the disc round cell (``r0``, ``c0``) from its sums (``disc``,
+    :func:`disc_sums`): along x the rise of the known differences along x over their run, along
+    y likewise; NaN where fewer than three are known along either (:func:`shape_geometry`)."""
+    rise_x, run_x, mx = np.float64(disc[r0, c0, DISC_RISE_X]), np.float64(disc[r0, c0, DISC_RUN_X]), disc[r0, c0, DISC_KNOWN_X]
+    rise_y, run_y, my = np.float64(disc[r0, c0, DISC_RISE_Y]), np.float64(disc[r0, c0, DISC_RUN_Y]), disc[r0, c0, DISC_KNOWN_Y]
+    if mx >= 3.0 and my >= 3.0 and run_x > 0.0 and run_y > 0.0:
         return rise_x / run_x, rise_y / run_y
     return np.nan, np.nan
+
+
+@njit(cache=True, nogil=True)
+def disc_sums(checked: tuple[np.ndarray, ...], reach: int, cells: np.ndarray, disc: np.ndarray) -> None:
+    """The sums of the cells (flat indices ``cells``) over their discs into ``disc`` (n, n,
+    :data:`DISC_SUMS`) float32, worked out afresh: over the cells within ``reach`` cells (a disc) of each,
+    the differences along x of ``checked`` (along x, its runs, along y, its runs: (n, n) float32
+    each) that are numbers, their runs and how many, and likewise along y. :func:`shape_to_check`
+    keeps them up to date as it reads the differences; the map works them out afresh where it
+    was re-centred (a disc that reached past the old square)."""
+    checked_x, checked_x_run, checked_y, checked_y_run = checked
+    n = disc.shape[0]
+    sums = np.empty(DISC_SUMS)
+    for i in range(cells.shape[0]):
+        r0, c0 = cells[i] // n, cells[i] % n
+        sums[:] = 0.0
+        for dr in range(max(-reach, -r0), min(reach, n - 1 - r0) + 1):
+            span = int(math.sqrt(reach * reach - dr * dr) + 1e-9)
+            r = r0 + dr
+            for dc in range(max(-span, -c0), min(span, n - 1 - c0) + 1):
+                c = c0 + dc
+                if math.isfinite(checked_x[r, c]):
+                    sums[DISC_RISE_X] += np.float64(checked_x[r, c])
+                    sums[DISC_RUN_X] += np.float64(checked_x_run[r, c])
+                    sums[DISC_KNOWN_X] += 1.0
+                if math.isfinite(checked_y[r, c]):
+                    sums[DISC_RISE_Y] += np.float64(checked_y[r, c])
+                    sums[DISC_RUN_Y] += np.float64(checked_y_run[r, c])
+                    sums[DISC_KNOWN_Y] += 1.0
+        for j in range(DISC_SUMS):
+            disc[r0, c0, j] = sums[j]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _move_in_discs(
+    disc: np.ndarray, first: int, row: int, col: int, reach: int, was: tuple[float, float], now: tuple[float, float]
+) -> None:
+    """Cell (``row``, ``col``)'s read difference and run along one axis (``first``: that axis's
+    first sum) moved from ``was`` to ``now`` (each (difference, run); the difference not a
+    number: not counted) in the sums of the discs it lies in (those of the cells within ``reach``
+    of it: a disc is symmetric), each sum moved by the change once (one rounding to float32)."""
+    n = disc.shape[0]
+    take, add = math.isfinite(was[0]), math.isfinite(now[0])
+    rise = (now[0] if add else 0.0) - (was[0] if take else 0.0)
+    run = (now[1] if add else 0.0) - (was[1] if take else 0.0)
+    known = (1.0 if add else 0.0) - (1.0 if take else 0.0)
+    for dr in range(max(-reach, -row), min(reach, n - 1 - row) + 1):
+        span = int(math.sqrt(reach * reach - dr * dr) + 1e-9)
+        r = row + dr
+        for dc in range(max(-span, -col), min(span, n - 1 - col) + 1):
+            c = col + dc
+            disc[r, c, first] = np.float64(disc[r, c, first]) + rise
+            disc[r, c, first + 1] = np.float64(disc[r, c, first + 1]) + run
+            disc[r, c, first + 2] = np.float64(disc[r, c, first + 2]) + known
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -427,22 +510,25 @@ def shape_to_check(
     touched: np.ndarray,
     shape: tuple[np.ndarray, ...],
     least_weight: float,
-    checked: tuple[np.ndarray, np.ndarray],
+    checked: tuple[np.ndarray, ...],
+    disc: np.ndarray,
     tolerance_m: float,
     near: tuple[float, float, float, float, float, float],
     reach: int,
     mark: np.ndarray,
 ) -> np.ndarray:
-    """The cells (flat indices, each once) whose slope or step may have changed with this frame:
-    those within ``reach`` cells (a disc) of a cell of ``touched`` near the vehicle whose
-    difference along x or along y (``shape``, counted from ``least_weight``: :func:`shape_geometry`)
-    moved by more than ``tolerance_m`` since the cells round it were last read (``checked``: the differences
-    along x and along y then, (n, n) float32 each, NaN where not yet known, +inf never read), or came to be known.
-    ``near``: the map's corner (x, y), its resolution, the vehicle's (x, y) and the range within
-    which cells are read [m]. ``checked`` is brought up to date; ``mark`` (n * n,) uint8, all 0:
-    scratch, left all 0."""
-    dx, _, dxw, dy, _, dyw = shape
-    checked_x, checked_y = checked
+    """Read the ground's shape where this frame changed it: the cells of ``touched`` near the
+    vehicle whose difference along x or along y (``shape``, counted from ``least_weight``:
+    :func:`shape_geometry`) moved by more than ``tolerance_m`` since it was last read, or came to
+    be known, are read again (``checked``: the differences along x then, their runs, along y,
+    their runs, (n, n) float32 each; a difference NaN where not known then, +inf never read), and
+    the sums of the discs they lie in (``disc``, :func:`disc_sums`) moved with them. The cells
+    whose slope or step may have changed: those within ``reach`` cells (a disc) of a cell read
+    again (flat indices, each once). ``near``: the map's corner (x, y), its resolution, the
+    vehicle's (x, y) and the range within which cells are read [m]; ``mark`` (n * n,) uint8, all
+    0: scratch, left all 0."""
+    dx, dx_run, dxw, dy, dy_run, dyw = shape
+    checked_x, checked_x_run, checked_y, checked_y_run = checked
     n = dx.shape[0]
     ox, oy, res, x, y, range_m = near
     out = np.empty(1024, np.int64)
@@ -455,9 +541,20 @@ def shape_to_check(
             continue
         now_x = dx[row, col] if dxw[row, col] >= least_weight else np.nan
         now_y = dy[row, col] if dyw[row, col] >= least_weight else np.nan
-        if _same(now_x, checked_x[row, col], tolerance_m) and _same(now_y, checked_y[row, col], tolerance_m):
+        moved_x = not _same(now_x, checked_x[row, col], tolerance_m)
+        moved_y = not _same(now_y, checked_y[row, col], tolerance_m)
+        if not (moved_x or moved_y):
             continue
-        checked_x[row, col], checked_y[row, col] = now_x, now_y
+        if moved_x:
+            was = (np.float64(checked_x[row, col]), np.float64(checked_x_run[row, col]))
+            checked_x[row, col], checked_x_run[row, col] = now_x, dx_run[row, col]
+            now = (np.float64(checked_x[row, col]), np.float64(checked_x_run[row, col]))
+            _move_in_discs(disc, DISC_RISE_X, row, col, reach, was, now)
+        if moved_y:
+            was = (np.float64(checked_y[row, col]), np.float64(checked_y_run[row, col]))
+            checked_y[row, col], checked_y_run[row, col] = now_y, dy_run[row, col]
+            now = (np.float64(checked_y[row, col]), np.float64(checked_y_run[row, col]))
+            _move_in_discs(disc, DISC_RISE_Y, row, col, reach, was, now)
         out, count = _mark_disc(row, col, reach, mark, n, out, count)
     for i in range(count):
         mark[out[i]] = 0
@@ -473,10 +570,8 @@ def _same(now: float, then: float, tolerance: float) -> bool:
 
 @njit(cache=True, nogil=True)
 def chord_grades(
-    shape: tuple[np.ndarray, ...],
-    least_weight: float,
+    disc: np.ndarray,
     grid: tuple[float, float, float],
-    reach: int,
     centre: np.ndarray,
     heading: np.ndarray,
     chord: tuple[np.ndarray, np.ndarray],
@@ -493,7 +588,7 @@ def chord_grades(
         c, s = math.cos(heading[i]), math.sin(heading[i])
         total = weight = 0.0
         for j in range(offsets.shape[0]):
-            gx, gy = _gradient_under(shape, least_weight, grid, reach, centre[i, 0] + offsets[j] * c, centre[i, 1] + offsets[j] * s)
+            gx, gy = _gradient_under(disc, grid, centre[i, 0] + offsets[j] * c, centre[i, 1] + offsets[j] * s)
             if gx == gx:
                 total += weights[j] * (gx * c + gy * s)
                 weight += weights[j]
@@ -502,10 +597,8 @@ def chord_grades(
 
 @njit(cache=True, nogil=True)
 def beside_attitudes(
-    shape: tuple[np.ndarray, ...],
-    least_weight: float,
+    disc: np.ndarray,
     grid: tuple[float, float, float],
-    reach: int,
     centre: np.ndarray,
     normal: np.ndarray,
     offsets: np.ndarray,
@@ -528,7 +621,7 @@ def beside_attitudes(
     for o in range(n_off):
         for q in range(n_st):
             nx, ny = normal[q, 0], normal[q, 1]
-            gx, gy = _gradient_under(shape, least_weight, grid, reach, centre[q, 0] + offsets[o] * nx, centre[q, 1] + offsets[o] * ny)
+            gx, gy = _gradient_under(disc, grid, centre[q, 0] + offsets[o] * nx, centre[q, 1] + offsets[o] * ny)
             across_slope[o, q] = gx * nx + gy * ny  # NaN where unknown
             along_slope[o, q] = gx * ny - gy * nx  # along the tangent (ny, -nx)
     for o in range(n_off - 2 * across):
@@ -538,17 +631,15 @@ def beside_attitudes(
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _gradient_under(
-    shape: tuple[np.ndarray, ...], least_weight: float, grid: tuple[float, float, float], reach: int, x: float, y: float
-) -> tuple[float, float]:
+def _gradient_under(disc: np.ndarray, grid: tuple[float, float, float], x: float, y: float) -> tuple[float, float]:
     """The ground's gradient (:func:`_disc_gradient`) of the cell under the world point (``x``,
     ``y``) [m]; NaN off the map (or its edge) and where unknown. ``grid``: the map's origin (x, y)
     [m] and its cell size [m]."""
-    n = shape[0].shape[0]
+    n = disc.shape[0]
     x0, y0, res = grid
     col, row = math.floor((x - x0) / res), math.floor((y - y0) / res)
     if 1 <= row < n - 1 and 1 <= col < n - 1:
-        return _disc_gradient(shape, least_weight, int(row), int(col), reach)
+        return _disc_gradient(disc, int(row), int(col))
     return np.nan, np.nan
 
 

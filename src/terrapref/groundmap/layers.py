@@ -25,6 +25,8 @@ class Layer:
         per_column: one value per terrain column (K + 1: the K terrain classes and the
             background) in each cell, (n, n, K + 1), instead of one per cell, (n, n).
         fill_unseen: the fill is the column of ground never seen, K + 1.
+        values: this many values in each cell, (n, n, values), where more than one (and not
+            ``per_column``).
     """
 
     name: str
@@ -32,6 +34,7 @@ class Layer:
     fill: float = 0
     per_column: bool = False
     fill_unseen: bool = False
+    values: int = 1
 
     def fill_value(self, k: int) -> float:
         """The value of an empty cell, for a map of ``k`` terrain columns."""
@@ -39,7 +42,7 @@ class Layer:
 
     def empty(self, n: int, k: int) -> np.ndarray:
         """The layer of a map of ``n`` by ``n`` cells and ``k`` terrain columns with nothing written."""
-        shape = (n, n, k + 1) if self.per_column else (n, n)
+        shape = (n, n, k + 1) if self.per_column else (n, n, self.values) if self.values > 1 else (n, n)
         return np.full(shape, self.fill_value(k), dtype=self.dtype)
 
 
@@ -70,9 +73,16 @@ LAYERS: tuple[Layer, ...] = (
     Layer("dy_run", np.float32, 0.0),
     Layer("dy_weight", np.float32, 0.0),
     # The differences along x and y as the cells round each were last read (NaN: not known then;
-    # +inf: never read), so that only the cells round a changed one are read again.
+    # +inf: never read), so that only the cells round a changed one are read again, and the runs
+    # read with them (NaN where the difference is not a number).
     Layer("checked_dx", np.float32, np.inf),
     Layer("checked_dy", np.float32, np.inf),
+    Layer("checked_dx_run", np.float32, np.nan),
+    Layer("checked_dy_run", np.float32, np.nan),
+    # Over the disc round each cell its slope is read over, the sums of those read differences
+    # and runs and how many are known, along x and then y (height_compiled.DISC_SUMS): kept up to
+    # date as the differences are read, so that a cell's gradient is two quotients.
+    Layer("disc", np.float32, 0.0, values=6),
     # 1 where the ground's geometry is past the vehicle's limits (terrapref.groundmap.height):
     # the cell reads as lethal whatever its evidence.
     Layer("blocked", np.uint8, 0),

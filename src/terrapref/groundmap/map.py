@@ -106,7 +106,8 @@ class GroundMap:
 
     def _update_at_depth(self, ids: np.ndarray, depth: DepthImage, at_xy: tuple[float, float]) -> None:
         """:meth:`update` with a depth image, the vehicle at ``at_xy``: the votes at the returns,
-        the heights, the blocks (of the ground within the height settings' block range)."""
+        the heights, the ground's shape read (within the height settings' block range) and the
+        blocks."""
         c = self.settings
         if self._depth_rays is None:
             self._depth_rays = DepthRays(self.camera, self._pixels.flat)
@@ -135,14 +136,13 @@ class GroundMap:
         kernels.map_vote_cells(
             self.evidence, self.stamp, self._cells, self._vote_cell, self._vote_column, self._pixel_weight, self.frame, self._fade
         )
+        near = (*self._origin_xy, res, *at_xy, h.block_range_m)
+        least = 1.0 / h.max_error_m**2
+        changed = height_kernels.shape_to_check(
+            touched, self._shape, least, self._checked, self._disc, CHECK_TOLERANCE_M, near, disc_reach(h, res), self._mark
+        )
         if self.limits is not None and self.geometry_column is not None:
-            near = (*self._origin_xy, res, *at_xy, h.block_range_m)
-            least = 1.0 / h.max_error_m**2
-            self._block(
-                height_kernels.shape_to_check(
-                    touched, self._shape, least, self._checked, CHECK_TOLERANCE_M, near, disc_reach(h, res), self._mark
-                )
-            )
+            self._block(changed)
 
     def _block(self, cells: np.ndarray) -> None:
         """Cells (flat indices ``cells``) whose geometry is past :attr:`limits` are blocked until
@@ -185,6 +185,15 @@ class GroundMap:
         out = self.geometry_of(*self._cells_under(points))
         return out.reshape(*np.shape(points)[:-1], 3)
 
+    def roughness_at(self, points: np.ndarray) -> np.ndarray:
+        """The roughness [m] (...) of the cells under the world points (..., 2), as :meth:`geometry_at`
+        reads it (from the heights alone); NaN where unknown or off the map."""
+        if self.origin is None:
+            return np.full(np.shape(points)[:-1], np.nan)
+        rows, cols = self._cells_under(points)
+        rough = geometry_of_cells(self.heights, rows, cols, self.settings.map_resolution_m, self.height_settings)[:, 1]
+        return rough.reshape(np.shape(points)[:-1])
+
     def gradient_at(self, points: np.ndarray) -> np.ndarray:
         """The ground's gradient (rise per metre along x, along y) (..., 2) under the world points
         (..., 2), from its shape as the slope is read (:meth:`geometry_of`); NaN where unknown or off the map."""
@@ -192,8 +201,7 @@ class GroundMap:
             return np.full(np.shape(points), np.nan)
         rows, cols = self._cells_under(points)
         out = np.empty((len(rows), 2))
-        h = self.height_settings
-        height_kernels.shape_gradient(self._shape, 1.0 / h.max_error_m**2, rows, cols, disc_reach(h, self.settings.map_resolution_m), out)
+        height_kernels.shape_gradient(self._disc, rows, cols, out)
         return out.reshape(np.shape(points))
 
     def body_grades(self, centre: np.ndarray, heading: np.ndarray, chord: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
@@ -205,11 +213,10 @@ class GroundMap:
         out = np.full(len(centre), np.nan)
         if self.origin is None:
             return out
-        h, res = self.height_settings, self.settings.map_resolution_m
-        grid = (*self._origin_xy, res)
+        grid = (*self._origin_xy, self.settings.map_resolution_m)
         centre = np.ascontiguousarray(centre, dtype=np.float64)
         heading = np.ascontiguousarray(np.broadcast_to(heading, (len(centre),)), dtype=np.float64)
-        height_kernels.chord_grades(self._shape, 1.0 / h.max_error_m**2, grid, disc_reach(h, res), centre, heading, chord, out)
+        height_kernels.chord_grades(self._disc, grid, centre, heading, chord, out)
         return out
 
     def beside_attitudes(self, centre: np.ndarray, normal: np.ndarray, offsets: np.ndarray, chord: tuple[int, int] = (0, 0)) -> np.ndarray:
@@ -224,12 +231,9 @@ class GroundMap:
         out = np.full((len(offsets) - 2 * across, len(centre) - 2 * along, 2), np.nan)
         if self.origin is None:
             return out
-        h, res = self.height_settings, self.settings.map_resolution_m
         height_kernels.beside_attitudes(
-            self._shape,
-            1.0 / h.max_error_m**2,
-            (*self._origin_xy, res),
-            disc_reach(h, res),
+            self._disc,
+            (*self._origin_xy, self.settings.map_resolution_m),
             np.ascontiguousarray(centre, dtype=np.float64),
             np.ascontiguousarray(normal, dtype=np.float64),
             np.ascontiguousarray(offsets, dtype=np.float64),
@@ -260,21 +264,37 @@ class GroundMap:
 
     def _shape_geometry(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """Slope [rad], NaN and step [m] (N, 3) of the cells (``rows``, ``cols``) from the ground's shape."""
-        h, res = self.height_settings, self.settings.map_resolution_m
         out = np.empty((len(rows), 3))
         rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
-        height_kernels.shape_geometry(self._shape, 1.0 / h.max_error_m**2, rows, cols, disc_reach(h, res), res, out)
+        height_kernels.shape_geometry(self._shape, 1.0 / self.height_settings.max_error_m**2, self._disc, rows, cols, out)
         return out
 
     @property
-    def _checked(self) -> tuple[np.ndarray, np.ndarray]:
-        """The differences as the cells round each were last read (terrapref.groundmap.height_compiled.shape_to_check)."""
-        return self._layers["checked_dx"], self._layers["checked_dy"]
+    def _checked(self) -> tuple[np.ndarray, ...]:
+        """The differences and their runs as they were last read (terrapref.groundmap.height_compiled.shape_to_check)."""
+        return tuple(self._layers[name] for name in ("checked_dx", "checked_dx_run", "checked_dy", "checked_dy_run"))
+
+    @property
+    def _disc(self) -> np.ndarray:
+        """The sums over each cell's disc of the differences as they were last read (height_compiled.disc_sums)."""
+        return self._layers["disc"]
 
     @property
     def _shape(self) -> tuple[np.ndarray, ...]:
         """The ground's shape as the kernels take it (terrapref.groundmap.height_compiled.depth_frame)."""
         return tuple(self._layers[name] for name in ("dx", "dx_run", "dx_weight", "dy", "dy_run", "dy_weight"))
+
+    def read_shape(self) -> None:
+        """Read the ground's shape afresh over the whole map as its ``dx`` and ``dy`` layers now
+        hold it (each frame's depth image reads it where the frame changed it): for code that
+        writes those layers itself. The slope and the gradients are read from what was read."""
+        least = np.float32(1.0 / self.height_settings.max_error_m**2)
+        for axis in ("x", "y"):
+            known = self._layers[f"d{axis}_weight"] >= least
+            self._layers[f"checked_d{axis}"][...] = np.where(known, self._layers[f"d{axis}"], np.float32(np.nan))
+            self._layers[f"checked_d{axis}_run"][...] = self._layers[f"d{axis}_run"]
+        reach = disc_reach(self.height_settings, self.settings.map_resolution_m)
+        height_kernels.disc_sums(self._checked, reach, np.arange(self._n * self._n), self._disc)
 
     def layer(self, name: str) -> np.ndarray:
         """The layer ``name`` of :attr:`LAYERS`, (n, n) or (n, n, K + 1) (rows y, columns x): the
@@ -322,6 +342,9 @@ class GroundMap:
             for layer in self.LAYERS:
                 self._layers[layer.name] = _shifted(self._layers[layer.name], dx, dy, layer.fill_value(self.k))
             self._lethal_by_geometry, self._moved = np.empty(0, dtype=np.int64), True  # moved with the cells; found again
+            # The discs that reached past the old square, or now reach into it from outside, summed afresh.
+            reach = disc_reach(self.height_settings, c.map_resolution_m)
+            height_kernels.disc_sums(self._checked, reach, _across_the_edge(self._n, dx, dy, reach), self._disc)
         self.origin = new * c.map_resolution_m
         self._origin_xy = (float(self.origin[0]), float(self.origin[1]))
 
@@ -433,6 +456,22 @@ def _ground(ray: np.ndarray, axes: np.ndarray, t: np.ndarray) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         scale = np.where(d[2] < -1e-12, -t[2] / d[2], np.nan)
     return np.stack([t[0] + scale * d[0], t[1] + scale * d[1]], axis=1)
+
+
+def _across_the_edge(n: int, dx: int, dy: int, reach: int) -> np.ndarray:
+    """The cells (flat indices) of an n by n map moved as :func:`_shifted` moves it whose disc of
+    ``reach`` cells crosses the edge of what the old map and the new one share, along each axis
+    it moved along: their discs held cells the move dropped (the kept cells at the map's edge it
+    moved towards), or now hold cells it kept (the new cells beside the kept ones)."""
+    r0, r1, c0, c1 = max(0, -dy), n - max(0, dy), max(0, -dx), n - max(0, dx)  # the kept rows, then columns
+    if r0 >= r1 or c0 >= c1:
+        return np.empty(0, dtype=np.int64)
+    crossing = np.zeros((n, n), dtype=np.bool_)
+    crossing[max(r0 - reach, 0) : r1 + reach, max(c0 - reach, 0) : c1 + reach] = True
+    inner_rows = (r0 + reach, r1 - reach) if dy else (0, n)
+    inner_cols = (c0 + reach, c1 - reach) if dx else (0, n)
+    crossing[inner_rows[0] : max(inner_rows), inner_cols[0] : max(inner_cols)] = False
+    return np.flatnonzero(crossing)
 
 
 def _shifted(a: np.ndarray, dx: int, dy: int, fill: float) -> np.ndarray:

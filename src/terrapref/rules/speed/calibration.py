@@ -16,6 +16,8 @@ import math
 
 import numpy as np
 
+from terrapref.rules.speed.calibration_compiled import check_arrived
+
 KEPT_DECISIONS = 100  # the decisions whose grades are kept until the vehicle gets there (10 s at 10 Hz)
 REACH_M = 0.15  # a kept station counts once the vehicle stands this near it ...
 HEADING_RAD = math.radians(20.0)  # ... heading within this of the way there
@@ -51,19 +53,8 @@ class GradeCheck:
     def arrived(self, x: float, y: float, yaw: float, grade_deg: float) -> None:
         """The vehicle stands at (``x``, ``y``) heading ``yaw`` [rad], its body pitched ``grade_deg``
         (positive up): each kept grade read for here is checked against it, once."""
-        d2 = (self._points[..., 0] - x) ** 2 + (self._points[..., 1] - y) ** 2
-        turn = np.abs((self._heading - yaw + math.pi) % (2.0 * math.pi) - math.pi)
-        with np.errstate(invalid="ignore"):
-            here = (d2 < REACH_M**2) & (turn < HEADING_RAD) & np.isfinite(self._read)
-        if not here.any():
-            return
-        rows, stations = np.nonzero(here)  # row by row, each row's stations in order: the same sums on any machine
-        errors = self._read[rows, stations] - grade_deg
-        total, count = self._sum, self._count
-        for station, error in zip(stations.tolist(), errors.tolist()):
-            total[station] = FADE * total[station] + error
-            count[station] = FADE * count[station] + 1.0
-        self._read[rows, stations] = np.nan  # each checked once
+        kept = (self._points, self._heading, self._read)
+        check_arrived(kept, (x, y, yaw, grade_deg), (REACH_M, HEADING_RAD), FADE, (self._sum, self._count))
 
     def keep(self, points: np.ndarray, heading: np.ndarray, read_deg: np.ndarray) -> None:
         """Keep the grades ``read_deg`` (stations,) read for the body at ``points`` (stations, 2)

@@ -176,7 +176,7 @@ class SpeedReader(FrameReader):
                 self.gradients = np.full((len(self.snapshots), SNAPSHOT_X, SNAPSHOT_Y, 2), np.nan, dtype=np.float32)
                 self.roughness = np.full((len(self.snapshots), SNAPSHOT_X, SNAPSHOT_Y), np.nan, dtype=np.float32)
             self.gradients[j] = self.map.gradient_at(grid)
-            self.roughness[j] = self.map.geometry_at(grid)[..., 1]
+            self.roughness[j] = self.map.roughness_at(grid)
 
     def arrays(self, recording: Recording, keep: np.ndarray, path: ReferencePath) -> dict[str, np.ndarray]:
         poses = recording.poses[keep].astype(float)
@@ -583,7 +583,7 @@ class LearnedSpeed(SpeedRunner):
         if self.rule.model.slows_on_rough:  # the roughness on the way's first stations (model.roughest reads no further)
             near = self._rough_stations
             rough = np.full((1, STATIONS), np.nan)
-            rough[0, :near] = gmap.geometry_at(centre[:near])[:, 1]
+            rough[0, :near] = gmap.roughness_at(centre[:near])
         v = float(self.rule.model.predict(way, np.array([k]), grade, rough)[0])
         top = self.rule.config.max_speed_mps
         if abs(k) > 1e-9:
