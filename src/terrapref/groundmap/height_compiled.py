@@ -375,17 +375,52 @@ def shape_geometry(
     over the cell and its eight neighbours, their heights relative to it summed from the
     differences between them (a corner by either way round, averaged where both are known); NaN
     where fewer than two of the nine are known."""
-    dx, _, dxw, dy, _, dyw = shape
-    n = dx.shape[0]
+    n = disc.shape[0]
     h = np.empty((3, 3))
     for i in range(rows.shape[0]):
         r0, c0 = rows[i], cols[i]
         out[i, 0] = out[i, 1] = out[i, 2] = np.nan
-        if not (1 <= r0 < n - 1 and 1 <= c0 < n - 1):
-            continue
-        gx, gy = _disc_gradient(disc, r0, c0)
-        out[i, 0] = math.atan(math.hypot(gx, gy))
-        out[i, 2] = _step(dx, dxw, dy, dyw, least_weight, r0, c0, h)
+        if 1 <= r0 < n - 1 and 1 <= c0 < n - 1:
+            out[i, 0], out[i, 2] = _slope_and_step(shape, least_weight, disc, r0, c0, h)
+
+
+@njit(cache=True, nogil=True)
+def block_cells(
+    shape: tuple[np.ndarray, ...],
+    least_weight: float,
+    disc: np.ndarray,
+    cells: np.ndarray,
+    limits: tuple[float, float],
+    blocked: np.ndarray,
+) -> bool:
+    """Each cell of ``cells`` (flat indices) blocked in ``blocked`` (n, n) uint8 where its slope or
+    its step (:func:`shape_geometry`) is past ``limits`` (the steepest slope [rad], the highest
+    step [m]; unknown geometry is past neither, as terrapref.groundmap.height.GeometryLimits.lethal
+    has it), unblocked where neither is: whether any cell's block changed."""
+    n = disc.shape[0]
+    max_slope, max_step = limits
+    h = np.empty((3, 3))
+    changed = False
+    for i in range(cells.shape[0]):
+        r0, c0 = cells[i] // n, cells[i] % n
+        lethal = False
+        if 1 <= r0 < n - 1 and 1 <= c0 < n - 1:
+            slope, step = _slope_and_step(shape, least_weight, disc, r0, c0, h)
+            lethal = slope > max_slope or step > max_step
+        if bool(blocked[r0, c0]) != lethal:
+            blocked[r0, c0] = 1 if lethal else 0
+            changed = True
+    return changed
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _slope_and_step(
+    shape: tuple[np.ndarray, ...], least_weight: float, disc: np.ndarray, r0: int, c0: int, h: np.ndarray
+) -> tuple[float, float]:
+    """Cell (``r0``, ``c0``)'s slope [rad] and step [m] (:func:`shape_geometry`; ``h`` (3, 3): scratch)."""
+    dx, _, dxw, dy, _, dyw = shape
+    gx, gy = _disc_gradient(disc, r0, c0)
+    return math.atan(math.hypot(gx, gy)), _step(dx, dxw, dy, dyw, least_weight, r0, c0, h)
 
 
 @njit(cache=True, nogil=True)

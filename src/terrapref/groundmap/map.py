@@ -148,12 +148,9 @@ class GroundMap:
         """Cells (flat indices ``cells``) whose geometry is past :attr:`limits` are blocked until
         their geometry no longer is (the ``blocked`` layer); the cells within the limits' reach
         of a blocked one read as the first lethal column (:meth:`_reblock`)."""
-        n = self._n
-        lethal = self.limits.lethal(self._shape_geometry(cells // n, cells % n))
-        blocked = self._layers["blocked"].reshape(-1)
-        was = blocked[cells].copy()
-        blocked[cells] = lethal
-        self._moved |= bool((blocked[cells] != was).any())
+        blocked, limits = self._layers["blocked"], (self.limits.max_slope_rad, self.limits.max_step_m)
+        if height_kernels.block_cells(self._shape, 1.0 / self.height_settings.max_error_m**2, self._disc, cells, limits, blocked):
+            self._moved = True
         self._blocking = bool(blocked.any()) if self._moved else self._blocking
         self._reblock()
 
@@ -272,7 +269,7 @@ class GroundMap:
     @property
     def _checked(self) -> tuple[np.ndarray, ...]:
         """The differences and their runs as they were last read (terrapref.groundmap.height_compiled.shape_to_check)."""
-        return tuple(self._layers[name] for name in ("checked_dx", "checked_dx_run", "checked_dy", "checked_dy_run"))
+        return tuple(self.layer(name) for name in ("checked_dx", "checked_dx_run", "checked_dy", "checked_dy_run"))
 
     @property
     def _disc(self) -> np.ndarray:
@@ -282,7 +279,7 @@ class GroundMap:
     @property
     def _shape(self) -> tuple[np.ndarray, ...]:
         """The ground's shape as the kernels take it (terrapref.groundmap.height_compiled.depth_frame)."""
-        return tuple(self._layers[name] for name in ("dx", "dx_run", "dx_weight", "dy", "dy_run", "dy_weight"))
+        return tuple(self.layer(name) for name in ("dx", "dx_run", "dx_weight", "dy", "dy_run", "dy_weight"))
 
     def read_shape(self) -> None:
         """Read the ground's shape afresh over the whole map as its ``dx`` and ``dy`` layers now
@@ -290,9 +287,9 @@ class GroundMap:
         writes those layers itself. The slope and the gradients are read from what was read."""
         least = np.float32(1.0 / self.height_settings.max_error_m**2)
         for axis in ("x", "y"):
-            known = self._layers[f"d{axis}_weight"] >= least
-            self._layers[f"checked_d{axis}"][...] = np.where(known, self._layers[f"d{axis}"], np.float32(np.nan))
-            self._layers[f"checked_d{axis}_run"][...] = self._layers[f"d{axis}_run"]
+            known = self.layer(f"d{axis}_weight") >= least
+            self.layer(f"checked_d{axis}")[...] = np.where(known, self.layer(f"d{axis}"), np.float32(np.nan))
+            self.layer(f"checked_d{axis}_run")[...] = self.layer(f"d{axis}_run")
         reach = disc_reach(self.height_settings, self.settings.map_resolution_m)
         height_kernels.disc_sums(self._checked, reach, np.arange(self._n * self._n), self._disc)
 

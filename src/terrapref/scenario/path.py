@@ -98,6 +98,14 @@ class ReferencePath:
         i = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, len(self._len) - 1)
         return self._d[i] / self._len[i, None] if np.ndim(s) else self._d[i] / self._len[i]
 
+    def frames_at(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The points (S, 2) and unit directions (S, 2) at arc lengths ``s`` (S,) (clamped), as
+        :meth:`point_at` and :meth:`direction_at` give them, the segments found once."""
+        s = np.clip(np.asarray(s, dtype=float), 0.0, self.length_m)
+        i = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, len(self._len) - 1)
+        d, length = self._d[i], self._len[i, None]
+        return self._a[i] + ((s - self.s[i]) / self._len[i])[:, None] * d, d / length
+
     def project(self, xy: np.ndarray, s_lo: float = -np.inf, s_hi: float = np.inf) -> tuple[float, float]:
         """Nearest point of the path to ``xy`` among arc lengths in [s_lo, s_hi].
 

@@ -80,10 +80,8 @@ class OffsetFeatures:
         # and the lattice its attitude is read on: the stations and offsets, that many more at each end.
         along, across = self._chord = (round(WHEELBASE_M / 2 / config.station_step_m), round(config.half_width_m / config.offset_step_m))
         step = config.station_step_m
-        self._lattice_stations = (
-            np.concatenate([self.stations[0] - step * np.arange(along, 0, -1), self.stations]),
-            step * np.arange(1, along + 1),
-        )
+        behind_and_at = np.concatenate([self.stations[0] - step * np.arange(along, 0, -1), self.stations])
+        self._lattice_stations = np.concatenate([behind_and_at, behind_and_at[-1] + step * np.arange(1, along + 1)])
         beyond = config.offset_step_m * np.arange(1, across + 1)
         self._lattice_offsets = np.concatenate([self.offsets[0] - beyond[::-1], self.offsets, self.offsets[-1] + beyond])
         self._level = np.zeros(len(self.stations), dtype=np.bool_)  # no steep ground: flat, or relief not read
@@ -97,12 +95,9 @@ class OffsetFeatures:
         offset and station, heading along the path: the ground's gradient across the way averaged
         over the footprint's width, along it over the wheelbase (:data:`WHEELBASE_M`), as the
         heights under its wheels would tilt it; NaN where the map does not know them."""
-        behind_and_at, after = self._lattice_stations
-        stations = progress_m + behind_and_at
-        s = np.clip(np.concatenate([stations, stations[-1] + after]), 0.0, path.length_m)
-        heading = path.heading_at(s)
-        normal = np.stack([-np.sin(heading), np.cos(heading)], axis=1)
-        return gmap.beside_attitudes(path.point_at(s), normal, self._lattice_offsets, self._chord)
+        centre, direction = path.frames_at(progress_m + self._lattice_stations)
+        normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1)
+        return gmap.beside_attitudes(centre, normal, self._lattice_offsets, self._chord)
 
     def __call__(self, gmap: GroundMap, path: ReferencePath, progress_m: float, relief: bool = False) -> OffsetView:
         """The features at ``progress_m`` [m] along ``path``, with the relief columns when ``relief``."""
