@@ -150,8 +150,8 @@ class SpeedModel:
 
     def shed(self, grade: np.ndarray) -> np.ndarray:
         """The speed [m/s] shed on grades ``grade`` [deg, positive up; NaN: level], of the same shape."""
-        g = np.nan_to_num(np.asarray(grade, dtype=np.float64))
-        return (self.up_mps_per_deg or 0.0) * np.maximum(g, 0.0) + (self.down_mps_per_deg or 0.0) * np.maximum(-g, 0.0)
+        g = np.asarray(grade, dtype=np.float64)
+        return (self.up_mps_per_deg or 0.0) * np.fmax(g, 0.0) + (self.down_mps_per_deg or 0.0) * np.fmax(-g, 0.0)  # fmax: NaN is 0
 
     @property
     def lateral_limit_mps2(self) -> float | None:
@@ -175,7 +175,7 @@ class SpeedModel:
 
 def roughest(rough: np.ndarray) -> np.ndarray:
     """The roughest ground [m] (N,) within :data:`ROUGH_PREVIEW_M` on each way of ``rough`` (N, STATIONS) (0 where unknown)."""
-    return np.nan_to_num(rough[:, : roughstations_within()].astype(np.float64)).max(axis=1, initial=0.0)
+    return np.fmax.reduce(rough[:, : roughstations_within()].astype(np.float64), axis=1, initial=0.0)  # fmax: NaN is 0
 
 
 def roughstations_within() -> int:
