@@ -18,9 +18,12 @@ in different frames (at the edge of the view, behind a mound, as the vehicle tur
 heights that disagree by as much, and a step or a slope read across them is a ghost. Within one
 frame there is none: so each frame's returns give each cell its gradient (the plane through its
 own mean return and its two neighbours' along x and y), and the gradients, weighed by their
-variance, are fused over frames (the ``dx`` and ``dy`` layers). A cell's slope is that of the
-mean gradient within ``radius_m`` of it (a least-squares plane's, on a regular grid), unknown
-where fewer than three gradients are known; its step is the height range over the cell and its
+variance, are fused over frames (the ``dx`` and ``dy`` layers). Where a frame moves a cell's
+difference by more than :data:`CHECK_TOLERANCE_M` (or first makes it known), near the vehicle,
+the difference is read again, and the sums over the disc round each cell of the differences as
+read are moved with it (the ``checked`` and ``disc`` layers). A cell's slope is that of the mean
+gradient read within ``radius_m`` of it (a least-squares plane's, on a regular grid: two
+quotients of those sums), unknown where fewer than three gradients are known; its step is the height range over the cell and its
 eight neighbours, their heights summed from the differences between them, unknown where fewer
 than two of them are. The roughness (the heights' standard deviation about the plane fitted
 through the trusted heights within ``radius_m``) is read from the heights, for the costmap only.
@@ -45,10 +48,12 @@ if TYPE_CHECKING:
     from terrapref.vehicle import Pose, VehicleConfig
 
 
-# The cells round a cell are read again when its difference to a neighbour has moved by more
-# than this since they were last read [m] (a thirtieth of the step the vehicle climbs), or has come
-# to be known: ground whose shape has settled is not read again every frame.
-CHECK_TOLERANCE_M = 0.005
+# A cell's difference to a neighbour is read again when it has moved by more than this since it
+# was last read [m], or has come to be known: ground whose shape has settled is not read again
+# every frame. A slope is read from the differences as last read, so each axis of its gradient
+# is within this over the cell's size (0.01, 0.6 deg, at 0.1 m cells) of what the differences
+# now say; 5 mm let the relief the offset rule reads stray by up to 2 deg.
+CHECK_TOLERANCE_M = 0.001
 
 
 @dataclass(frozen=True)
@@ -78,8 +83,9 @@ class HeightSettings:
             needs to count (at 0.003 per m^2 of depth, 0.3 m a return), and far heights are
             off by as much as the camera's attitude is (0.17 m at 10 m for a degree); the ground
             there is gathered as the vehicle nears it.
-        block_range_m: the ground this near the vehicle has its geometry checked against the
-            limits as returns fall in it [m]; farther ground is checked as the vehicle nears it.
+        block_range_m: the ground this near the vehicle has its shape read, and its geometry
+            checked against the limits, as returns fall in it [m]; farther ground is read as the
+            vehicle nears it.
     """
 
     radius_m: float = 0.3
