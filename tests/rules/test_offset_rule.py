@@ -456,19 +456,36 @@ def test_an_offset_utility_that_prices_relief_keeps_its_prices_in_the_file_and_b
 
     config = ClassifierConfig(hidden=8, skip=True)
     relief = -np.linspace(0.0, 0.5, 2 * len(RELIEF_BANDS_DEG))
-    rule = OffsetRule(OffsetConfig(), OffsetUtility(np.array(DRIVER_LIKE), 5.0, OffsetGeometry(), relief, (22.0, math.nan)))
+    interval = np.stack([np.arange(20.0), np.arange(20.0) + 0.5], axis=1)
+    interval[0] = 0.0  # a band held at 0
+    rule = OffsetRule(OffsetConfig(), OffsetUtility(np.array(DRIVER_LIKE), 5.0, OffsetGeometry(), relief, (22.0, math.nan), interval))
     block = rule.header()
-    assert block["relief"] == {"bands_deg": list(RELIEF_BANDS_DEG), "weights": relief.tolist(), "shown_deg": [22.0, None]}
+    assert block["relief"] == {
+        "bands_deg": list(RELIEF_BANDS_DEG),
+        "weights": relief.tolist(),
+        "shown_deg": [22.0, None],
+        "price_interval": interval.tolist(),
+    }
     meta = {**model_meta(), "rules": [block], "drives": "offset"}
     back = Planner(load_model(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), meta))).rule
     np.testing.assert_array_equal(back.utility.relief, relief)
+    np.testing.assert_array_equal(back.utility.relief_interval, interval)
     assert back.utility.relief_shown[0] == 22.0 and math.isnan(back.utility.relief_shown[1])
+    assert "(19.0 to 19.5)" in back.relief_lines()[1] and "with its 95% interval" in back.relief_lines()[0]
+    assert ": 4 0.0 held, 6 " in back.relief_lines()[0]
+    older = {**block, "relief": {k: v for k, v in block["relief"].items() if k != "price_interval"}}  # a file before intervals
+    older_meta = {**meta, "rules": [older]}
+    before = Planner(load_model(save_model(tmp_path / "old.safetensors", config, skip_path_weights(config), older_meta))).rule
+    assert before.utility.relief_interval is None and " to " not in before.relief_lines()[0]
     assert "relief" not in OffsetRule(OffsetConfig(), OffsetUtility(np.array(DRIVER_LIKE), 5.0)).header()
     for change, field in (
         ({"bands_deg": [5.0, 10.0]}, "rules[0].relief.bands_deg"),
         ({"weights": [0.0] * 3}, "rules[0].relief.weights"),
         ({"weights": ["steep"] * (2 * len(RELIEF_BANDS_DEG))}, "rules[0].relief.weights"),
         ({"shown_deg": [13.0, None]}, "rules[0].relief.shown_deg"),
+        ({"price_interval": [[1.0, 0.0]] * 20}, "rules[0].relief.price_interval"),
+        ({"price_interval": [[0.0, math.nan]] * 20}, "rules[0].relief.price_interval"),
+        ({"price_interval": [[0.0, 1.0]] * 3}, "rules[0].relief.price_interval"),
         ({"extra": 1}, "rules[0].relief"),
     ):
         bad_block = {**block, "relief": {**block["relief"], **change}}
@@ -476,6 +493,54 @@ def test_an_offset_utility_that_prices_relief_keeps_its_prices_in_the_file_and_b
         with pytest.raises(UserError) as exc:
             load_policy(bad)
         assert exc.value.problems[0].field == field
+
+
+def test_the_relief_prices_intervals_cover_the_true_price_when_frames_come_in_runs():
+    """Drives simulated from a known utility (a terrain column, the detour, two relief columns, the
+    gate), each frame repeated for 10 in a row as a drive's neighbouring frames are: the fit's 95%
+    intervals of the printed relief prices (terrapref.rules.offset.fit.relief_price_intervals)
+    cover the true prices in about 95% of drives, where intervals that took each frame as
+    independent evidence (blocks of one frame) are about three times too narrow and miss far
+    more often."""
+    from terrapref.rules.offset.fit import (
+        INTERVAL_BLOCK_FRAMES,
+        fit_softmax,
+        relief_price_intervals,
+        relief_prices,
+        weight_covariance,
+    )
+
+    rng = np.random.default_rng(7)
+    truth = np.array([-1.0, -2.0, -0.8, -0.6, 0.0])  # terrain, detour, side slope past band 1, grade past band 1, gate
+    price = relief_prices(truth[2:4], truth[1])
+    offsets, runs, repeat = 7, 40, 10
+    covered = naive_covered = 0
+    widths, naive_widths = [], []
+    drives = 60
+    for _ in range(drives):
+        X = rng.uniform(0.0, 1.0, size=(runs, offsets, 5))
+        X[:, :, 1] = (np.linspace(-1.5, 1.5, offsets) ** 2)[None, :]  # the detour: the offset squared
+        X[:, :, 4] = 0.0  # no gate
+        X = np.repeat(X, repeat, axis=0)
+        z = X @ truth
+        p = np.exp(z - z.max(axis=1, keepdims=True))
+        p /= p.sum(axis=1, keepdims=True)
+        chosen = np.repeat(np.array([rng.choice(offsets, p=row) for row in p[::repeat]]), repeat)  # a choice held for its run
+        Y = np.eye(offsets)[chosen]
+        theta, _ = fit_softmax(X[:, :, :4], Y, 1e-6)
+        theta = np.append(theta, 0.0)
+        free = np.array([True, True, True, True, False])
+        for block, tally in ((INTERVAL_BLOCK_FRAMES, "blocks"), (1, "frames")):
+            covariance = weight_covariance(X, Y, theta, free, 1e-6, block)
+            interval = relief_price_intervals(theta, covariance, 2, 2)
+            inside = bool(((interval[:, 0] <= price) & (price <= interval[:, 1])).all())
+            width = float(np.mean(interval[:, 1] - interval[:, 0]))
+            if tally == "blocks":
+                covered, widths = covered + inside, [*widths, width]
+            else:
+                naive_covered, naive_widths = naive_covered + inside, [*naive_widths, width]
+    assert covered >= 0.8 * drives  # both prices at once: about 0.95^2 of the drives, with sampling error
+    assert naive_covered < covered and np.median(widths) > 2.0 * np.median(naive_widths)
 
 
 def test_a_file_that_names_a_rule_it_does_not_list_to_drive_is_refused(tmp_path):

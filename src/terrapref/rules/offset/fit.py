@@ -6,6 +6,11 @@ offsets, ``p(d) ~ exp(weights . gated(features)(d))``, is fitted to Gaussian sof
 (``sigma_m``) around that offset by Newton's method with a small ridge, once for each candidate
 near distance; the near distance of the lowest loss is kept.
 
+The relief prices come with 95% intervals: the fitted weights' covariance by the sandwich of
+an M-estimator, its meat summed over blocks of :data:`INTERVAL_BLOCK_FRAMES` consecutive frames
+(a drive's frames follow one another, so neighbours are not independent evidence), carried to
+each printed price (a band's weight and those below it, over the detour's) by the delta method.
+
 Float64 NumPy throughout, and the problem is convex: NumPy's exp, its sums and BLAS's matrix
 products may differ in their last bits between CPUs and thread counts, the Newton steps do not
 amplify that, and the weights are kept to 12 decimals, so the same data give the same weights
@@ -22,6 +27,8 @@ import numpy as np
 from terrapref.rules.offset.geometry import OffsetGeometry
 
 WEIGHT_DECIMALS = 12  # fitted weights are kept to this many decimals
+INTERVAL_BLOCK_FRAMES = 50  # the frames a relief price's interval takes as one piece of evidence (5 s at 10 Hz)
+INTERVAL_DECIMALS = 6  # its ends are kept to this many decimals
 NEAR_CANDIDATES_M = (2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 6.0, 7.0, 8.0)
 
 
@@ -39,6 +46,9 @@ class OffsetUtility:
             relief (fitted on flat ground).
         relief_shown: the steepest band the drive showed ground past, of side slope and of
             grade [deg] (NaN: none): past it, its fit could not tell the price; None without relief.
+        relief_interval: the 95% interval (R, 2) of each band's price as it is printed (its
+            weight and those of the bands below it, over the detour's price: :func:`relief_prices`);
+            None: not known (a utility without relief, or a file written before intervals).
     """
 
     weights: np.ndarray
@@ -46,6 +56,7 @@ class OffsetUtility:
     config: OffsetGeometry = field(default_factory=OffsetGeometry)
     relief: np.ndarray | None = None
     relief_shown: tuple[float, float] | None = None
+    relief_interval: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -61,6 +72,7 @@ class OffsetFit:
         samples: frames fitted.
         relief: the relief columns' weights, for frames read with them; else None.
         relief_shown: the steepest bands the frames showed (OffsetUtility.relief_shown).
+        relief_interval: the 95% intervals of the relief prices (OffsetUtility.relief_interval).
     """
 
     weights: np.ndarray
@@ -70,6 +82,7 @@ class OffsetFit:
     samples: int
     relief: np.ndarray | None = None
     relief_shown: tuple[float, float] | None = None
+    relief_interval: np.ndarray | None = None
 
 
 def soft_labels(intent: np.ndarray, offsets: np.ndarray, sigma_m: float) -> np.ndarray:
@@ -115,12 +128,12 @@ def fit_softmax(X: np.ndarray, Y: np.ndarray, l2: float = 1e-3, iterations: int 
     return theta, float(evaluate(theta)[0])
 
 
-def _fit_steeper_costs_more(X: np.ndarray, Y: np.ndarray, l2: float, relief: range) -> tuple[np.ndarray, float]:
+def _fit_steeper_costs_more(X: np.ndarray, Y: np.ndarray, l2: float, relief: range) -> tuple[np.ndarray, float, np.ndarray]:
     """:func:`fit_softmax` with the relief columns' weights (``relief``) at most 0: each band past
     the one below it adds a price, never takes one off, so steeper ground never costs less than
     gentler (a drive that shows no reason to go round some relief says nothing for driving onto it).
     The columns whose weight comes out positive are held at 0 and the rest fitted again, until
-    none does."""
+    none does. The weights, the loss, and which columns were fitted (not held)."""
     free = np.ones(X.shape[2], dtype=bool)
     while True:
         fitted, loss = fit_softmax(X[:, :, free], Y, l2)
@@ -128,7 +141,7 @@ def _fit_steeper_costs_more(X: np.ndarray, Y: np.ndarray, l2: float, relief: ran
         theta[free] = fitted
         positive = [j for j in relief if free[j] and theta[j] > 0.0]
         if not positive:
-            return theta, loss
+            return theta, loss, free
         free[positive] = False
 
 
@@ -168,18 +181,24 @@ def fit_offset_utility(
     columns = X.shape[2]
     if relief is not None:
         X = np.concatenate([X, relief[0][keep].astype(np.float64)], axis=2)
-    best: tuple[np.ndarray, float, float] | None = None
+    best: tuple[np.ndarray, float, float, np.ndarray] | None = None
     losses = {}
     for candidate in config.near_candidates:
         gate = (offsets**2)[None, :, None] * (near > candidate)[:, None, None]
         if relief is None:
             theta, loss = fit_softmax(np.concatenate([X, gate], axis=2), Y, config.l2)
+            free = np.ones(len(theta), dtype=bool)
         else:
-            theta, loss = _fit_steeper_costs_more(np.concatenate([X, gate], axis=2), Y, config.l2, range(columns, X.shape[2]))
+            theta, loss, free = _fit_steeper_costs_more(np.concatenate([X, gate], axis=2), Y, config.l2, range(columns, X.shape[2]))
         losses[candidate] = loss
         if best is None or loss < best[1] - 1e-9:
-            best = (theta, loss, candidate)
-    theta, loss, chosen = best
+            best = (theta, loss, candidate, free)
+    theta, loss, chosen, free = best
+    interval = None
+    if relief is not None:
+        gate = (offsets**2)[None, :, None] * (near > chosen)[:, None, None]
+        covariance = weight_covariance(np.concatenate([X, gate], axis=2), Y, theta, free, config.l2, INTERVAL_BLOCK_FRAMES)
+        interval = np.round(relief_price_intervals(theta, covariance, columns, X.shape[2] - columns), INTERVAL_DECIMALS)
     # NumPy's exp, sums and matrix products may differ in the last bits between CPUs; the convex
     # fit does not amplify them, and rounding leaves the same weights (and losses) everywhere but
     # at a rounding boundary.
@@ -188,7 +207,57 @@ def fit_offset_utility(
     weights = np.concatenate([theta[:columns], theta[-1:]])  # the relief columns' weights stand between those and the gate
     priced = theta[columns:-1] if relief is not None else None
     shown = relief_shown(relief[0][keep], relief[1]) if relief is not None else None
-    return OffsetFit(weights, chosen, round(loss, WEIGHT_DECIMALS), losses, int(keep.sum()), priced, shown)
+    return OffsetFit(weights, chosen, round(loss, WEIGHT_DECIMALS), losses, int(keep.sum()), priced, shown, interval)
+
+
+def weight_covariance(X: np.ndarray, Y: np.ndarray, theta: np.ndarray, free: np.ndarray, l2: float, block_frames: int) -> np.ndarray:
+    """The covariance (P, P) of the weights ``theta`` (P,) :func:`fit_softmax` fitted to ``X`` (N, O,
+    P) and ``Y`` (N, O) with ridge ``l2``, those of ``free`` (P,) bool fitted and the others held (no
+    variance): the sandwich H^-1 M H^-1 / N^2 of the objective's Hessian H (as the fit's) and the
+    frames' scores (each frame's gradient of its loss) summed over blocks of ``block_frames``
+    consecutive frames, M the sum of those sums' outer products."""
+    n = X.shape[0]
+    Xf = X[:, :, free]
+    z = Xf @ theta[free]
+    z = z - z.max(axis=1, keepdims=True)
+    prob = np.exp(z)
+    prob /= prob.sum(axis=1, keepdims=True)
+    scores = np.matmul((prob - Y)[:, None, :], Xf)[:, 0, :]  # (N, q)
+    blocks = np.zeros((-(-n // block_frames), Xf.shape[2]))
+    np.add.at(blocks, np.arange(n) // block_frames, scores)
+    rows = Xf.reshape(-1, Xf.shape[2])
+    mean = np.matmul(prob[:, None, :], Xf)[:, 0, :]
+    hess = ((rows * prob.reshape(-1, 1)).T @ rows - mean.T @ mean) / n + 2 * l2 * np.eye(Xf.shape[2])
+    inverse = np.linalg.inv(hess)
+    out = np.zeros((len(theta), len(theta)))
+    out[np.ix_(free, free)] = inverse @ (blocks.T @ blocks) @ inverse / n**2
+    return out
+
+
+def relief_prices(relief: np.ndarray, detour: float) -> np.ndarray:
+    """Each band's price as printed (R,): side slope then grade, a band's weight and those of the
+    bands below it (a metre past it is past them too), over the detour's price."""
+    half = len(relief) // 2
+    return np.concatenate([np.cumsum(relief[:half]), np.cumsum(relief[half:])]) / detour
+
+
+def relief_price_intervals(theta: np.ndarray, covariance: np.ndarray, columns: int, count: int, z: float = 1.96) -> np.ndarray:
+    """The 95% intervals (R, 2) of :func:`relief_prices` of the fitted ``theta`` (the terrain
+    ``columns``, the detour's price last among them, then ``count`` relief columns, then the
+    gate) with its ``covariance``, by the delta method: each price a sum of relief weights over
+    the detour's."""
+    detour, half = columns - 1, count // 2
+    out = np.empty((count, 2))
+    for k in range(count):
+        first = columns + (0 if k < half else half)
+        picked = np.zeros(len(theta))
+        picked[first : columns + k + 1] = 1.0
+        price = picked @ theta / theta[detour]
+        gradient = picked / theta[detour]
+        gradient[detour] -= price / theta[detour]
+        spread = z * math.sqrt(max(gradient @ covariance @ gradient, 0.0))
+        out[k] = price - spread, price + spread
+    return out
 
 
 def relief_shown(relief: np.ndarray, bands: tuple[float, ...]) -> tuple[float, float]:

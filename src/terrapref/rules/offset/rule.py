@@ -62,7 +62,7 @@ from terrapref.rules.base import (
     vector,
 )
 from terrapref.rules.offset.features import RELIEF_BANDS_DEG, OffsetFeatures
-from terrapref.rules.offset.fit import OffsetFit, OffsetUtility, fit_offset_utility
+from terrapref.rules.offset.fit import OffsetFit, OffsetUtility, fit_offset_utility, relief_prices
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.offset.offsets_compiled import gated_value
 from terrapref.rules.offset.reach_compiled import lethal_hits, swept_reach
@@ -149,7 +149,7 @@ class OffsetConfig(RuleConfig):
             raise UserError("offset rule", f"relief columns of {relief.shape[2]} bands; this version reads {2 * len(RELIEF_BANDS_DEG)}")
         columns = (relief, RELIEF_BANDS_DEG) if relief is not None else None
         fitted = fit_offset_utility(arrays["features"], arrays["near_m"], arrays["intent_m"], geometry.offsets, relief=columns)
-        utility = OffsetUtility(fitted.weights, fitted.near_m, geometry, fitted.relief, fitted.relief_shown)
+        utility = OffsetUtility(fitted.weights, fitted.near_m, geometry, fitted.relief, fitted.relief_shown, fitted.relief_interval)
         return OffsetRule(replace(self, geometry=geometry), utility, fitted)
 
 
@@ -252,14 +252,14 @@ class OffsetRule(Rule):
             config = OffsetConfig(**settings, geometry=geometry)
         except ValueError as exc:
             raise where.error("", str(exc)) from None
-        relief, shown = _relief_weights(block, where)
+        relief, shown, interval = _relief_weights(block, where)
         fit = None
         if "loss" in block or "samples" in block:  # how the fit went, as training wrote it
             samples = block.get("samples")
             if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
                 raise where.error("samples", "expected the number of frames fitted, an integer >= 1")
-            fit = OffsetFit(weights, near, number(block, "loss", where, low=0.0), {}, samples, relief, shown)
-        return cls(config, OffsetUtility(weights, near, geometry, relief, shown), fit)
+            fit = OffsetFit(weights, near, number(block, "loss", where, low=0.0), {}, samples, relief, shown, interval)
+        return cls(config, OffsetUtility(weights, near, geometry, relief, shown, interval), fit)
 
     @classmethod
     def legacy_block(cls, meta: Mapping[str, Any], source: str) -> dict[str, Any] | None:
@@ -294,9 +294,12 @@ class OffsetRule(Rule):
         w, bands = u.weights, len(RELIEF_BANDS_DEG)
         detour = w[len(w) - 2]
         lines = []
-        for k, (what, weights) in enumerate((("side slope", u.relief[:bands]), ("grade", u.relief[bands:]))):
-            price = np.cumsum(weights)  # a metre's price past each band: the band's and those below it
-            shown = ", ".join(f"{b:g} {p / detour + 0.0:.1f}" for b, p in zip(RELIEF_BANDS_DEG, price))
+        prices = relief_prices(u.relief, detour)  # a metre's price past each band: the band's and those below it
+        for k, what in enumerate(("side slope", "grade")):
+            shown = ", ".join(
+                f"{b:g} {prices[k * bands + j] + 0.0:.1f}" + _interval(u.relief_interval, k * bands + j)
+                for j, b in enumerate(RELIEF_BANDS_DEG)
+            )
             steepest = (u.relief_shown or (math.nan, math.nan))[k]
             told = (
                 "the drive showed none past the first band: it cannot tell these prices"
@@ -306,27 +309,47 @@ class OffsetRule(Rule):
                 else "the drive showed every band"
             )
             lines.append(
-                f"relief, the body heading along the path: {what} past each band [deg] (its price per metre, as the classes'): {shown}; {told}"
+                f"relief, the body heading along the path: {what} past each band [deg] (its price per metre, as the classes'"
+                f"{', with its 95% interval; held: held at 0, the drive showing no reason to go round' if u.relief_interval is not None else ''}): "
+                f"{shown}; {told}"
             )
         return lines
 
 
+def _interval(interval: np.ndarray | None, k: int) -> str:
+    """`` (low to high)`` of a relief price's 95% interval, `` held`` where the fit held it at 0 (no
+    spread: the drive showed no reason to go round the ground, so its price is not told), or
+    nothing where it is not known."""
+    if interval is None:
+        return ""
+    low, high = interval[k]
+    return " held" if low == high else f" ({low + 0.0:.1f} to {high + 0.0:.1f})"
+
+
 def _relief_block(utility: OffsetUtility) -> dict[str, Any]:
-    """The ``relief`` mapping of a rule's block: the bands, a weight per column, and the steepest
-    band of each the drive showed (null: none)."""
+    """The ``relief`` mapping of a rule's block: the bands, a weight per column, the steepest band
+    of each the drive showed (null: none) and, where known, each price's 95% interval."""
     shown = [None if math.isnan(v) else v for v in utility.relief_shown or (math.nan, math.nan)]
-    return {"bands_deg": list(RELIEF_BANDS_DEG), "weights": utility.relief.tolist(), "shown_deg": shown}
+    block = {"bands_deg": list(RELIEF_BANDS_DEG), "weights": utility.relief.tolist(), "shown_deg": shown}
+    if utility.relief_interval is not None:
+        block["price_interval"] = utility.relief_interval.tolist()
+    return block
 
 
-def _relief_weights(block: Mapping[str, Any], where: Where) -> tuple[np.ndarray | None, tuple[float, float] | None]:
-    """The relief columns' weights of a rule's block (its ``relief`` mapping, :func:`_relief_block`)
-    and the steepest bands its drive showed, or None, None where it has none (a utility fitted on
-    flat ground)."""
+def _relief_weights(block: Mapping[str, Any], where: Where) -> tuple[np.ndarray | None, tuple[float, float] | None, np.ndarray | None]:
+    """The relief columns' weights of a rule's block (its ``relief`` mapping, :func:`_relief_block`),
+    the steepest bands its drive showed and the prices' intervals (None: a file written before
+    them), or None, None, None where it has none (a utility fitted on flat ground)."""
     relief = block.get("relief")
     if relief is None:
-        return None, None
-    if not isinstance(relief, Mapping) or set(relief) != {"bands_deg", "weights", "shown_deg"}:
-        raise where.error("relief", "expected a mapping of bands_deg, weights and shown_deg")
+        return None, None, None
+    if not isinstance(relief, Mapping) or not {"bands_deg", "weights", "shown_deg"} <= set(relief) <= {
+        "bands_deg",
+        "weights",
+        "shown_deg",
+        "price_interval",
+    }:
+        raise where.error("relief", "expected a mapping of bands_deg, weights, shown_deg and optionally price_interval")
     shown = relief["shown_deg"]
     if not (isinstance(shown, list) and len(shown) == 2 and all(v is None or v in RELIEF_BANDS_DEG for v in shown)):
         raise where.error("relief.shown_deg", "expected two of the bands (side slope, grade), each or null")
@@ -339,7 +362,20 @@ def _relief_weights(block: Mapping[str, Any], where: Where) -> tuple[np.ndarray 
     if weights is None or weights.shape != (2 * len(RELIEF_BANDS_DEG),) or not np.isfinite(weights).all():
         raise where.error("relief.weights", f"expected {2 * len(RELIEF_BANDS_DEG)} finite numbers")
     roll, grade = (math.nan if v is None else float(v) for v in shown)
-    return weights, (roll, grade)
+    interval = None
+    if "price_interval" in relief:
+        try:
+            interval = np.asarray(relief["price_interval"], dtype=float) if isinstance(relief["price_interval"], list) else None
+        except (TypeError, ValueError):
+            interval = None
+        if (
+            interval is None
+            or interval.shape != (len(weights), 2)
+            or not np.isfinite(interval).all()
+            or (interval[:, 0] > interval[:, 1]).any()
+        ):
+            raise where.error("relief.price_interval", f"expected {len(weights)} pairs of finite numbers, low then high")
+    return weights, (roll, grade), interval
 
 
 def keeps(held: float, best: float, margin: float) -> bool:
