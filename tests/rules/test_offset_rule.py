@@ -541,6 +541,8 @@ def test_the_relief_prices_intervals_cover_the_true_price_when_frames_come_in_ru
                 naive_covered, naive_widths = naive_covered + inside, [*naive_widths, width]
     assert covered >= 0.8 * drives  # both prices at once: about 0.95^2 of the drives, with sampling error
     assert naive_covered < covered and np.median(widths) > 2.0 * np.median(naive_widths)
+    no_detour = np.array([-1.0, 0.0, -0.8, -0.6, 0.0])  # nothing is on the scale of a detour priced at 0
+    assert np.isnan(relief_price_intervals(no_detour, np.eye(5), 2, 2)).all()
 
 
 def test_a_file_that_names_a_rule_it_does_not_list_to_drive_is_refused(tmp_path):

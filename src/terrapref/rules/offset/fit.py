@@ -199,6 +199,8 @@ def fit_offset_utility(
         gate = (offsets**2)[None, :, None] * (near > chosen)[:, None, None]
         covariance = weight_covariance(np.concatenate([X, gate], axis=2), Y, theta, free, config.l2, INTERVAL_BLOCK_FRAMES)
         interval = np.round(relief_price_intervals(theta, covariance, columns, X.shape[2] - columns), INTERVAL_DECIMALS)
+        if not np.isfinite(interval).all():  # a detour priced at 0: prices on its scale are not told
+            interval = None
     # NumPy's exp, sums and matrix products may differ in the last bits between CPUs; the convex
     # fit does not amplify them, and rounding leaves the same weights (and losses) everywhere but
     # at a rounding boundary.
@@ -245,9 +247,11 @@ def relief_price_intervals(theta: np.ndarray, covariance: np.ndarray, columns: i
     """The 95% intervals (R, 2) of :func:`relief_prices` of the fitted ``theta`` (the terrain
     ``columns``, the detour's price last among them, then ``count`` relief columns, then the
     gate) with its ``covariance``, by the delta method: each price a sum of relief weights over
-    the detour's."""
+    the detour's; NaN where the detour is priced at 0 (nothing is on its scale)."""
     detour, half = columns - 1, count // 2
-    out = np.empty((count, 2))
+    out = np.full((count, 2), np.nan)
+    if theta[detour] == 0.0:
+        return out
     for k in range(count):
         first = columns + (0 if k < half else half)
         picked = np.zeros(len(theta))
