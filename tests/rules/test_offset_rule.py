@@ -486,6 +486,10 @@ def test_an_offset_utility_that_prices_relief_keeps_its_prices_in_the_file_and_b
         ({"price_interval": [[1.0, 0.0]] * 20}, "rules[0].relief.price_interval"),
         ({"price_interval": [[0.0, math.nan]] * 20}, "rules[0].relief.price_interval"),
         ({"price_interval": [[0.0, 1.0]] * 3}, "rules[0].relief.price_interval"),
+        ({"price_interval": [["0", "1"]] * 20}, "rules[0].relief.price_interval"),
+        ({"price_interval": [[0, 10**400]] * 20}, "rules[0].relief.price_interval"),  # past what a float holds
+        ({"weights": [10**400] * (2 * len(RELIEF_BANDS_DEG))}, "rules[0].relief.weights"),
+        ({"weights": [True] * (2 * len(RELIEF_BANDS_DEG))}, "rules[0].relief.weights"),
         ({"extra": 1}, "rules[0].relief"),
     ):
         bad_block = {**block, "relief": {**block["relief"], **change}}

@@ -285,9 +285,9 @@ class GroundMap:
         """Read the ground's shape afresh over the whole map as its ``dx`` and ``dy`` layers now
         hold it (each frame's depth image reads it where the frame changed it): for code that
         writes those layers itself. The slope and the gradients are read from what was read."""
-        least = np.float32(1.0 / self.height_settings.max_error_m**2)
+        least = 1.0 / self.height_settings.max_error_m**2
         for axis in ("x", "y"):
-            known = self.layer(f"d{axis}_weight") >= least
+            known = self.layer(f"d{axis}_weight").astype(np.float64) >= least  # as the kernels compare them
             self.layer(f"checked_d{axis}")[...] = np.where(known, self.layer(f"d{axis}"), np.float32(np.nan))
             self.layer(f"checked_d{axis}_run")[...] = self.layer(f"d{axis}_run")
         reach = disc_reach(self.height_settings, self.settings.map_resolution_m)

@@ -332,10 +332,24 @@ def number(
 
 def vector(block: Mapping[str, Any], name: str, size: int, where: Where) -> np.ndarray:
     """A field of ``size`` finite numbers."""
-    try:
-        value = np.asarray(block[name], dtype=float)
-    except (KeyError, TypeError, ValueError):
-        value = None
-    if value is None or value.shape != (size,) or not np.isfinite(value).all():
+    value = finite_array(block.get(name), (size,))
+    if value is None:
         raise where.error(name, f"expected {size} finite numbers")
     return value
+
+
+def finite_array(value: Any, shape: tuple[int, ...]) -> np.ndarray | None:
+    """``value`` (nested lists of numbers, as a file's JSON holds them) as a float array of
+    ``shape``; None where it is not one: another shape, an entry not a number (a string, a
+    boolean), or one not finite or past what a float holds."""
+
+    def numbers(v: Any) -> bool:
+        return all(numbers(x) for x in v) if isinstance(v, list) else isinstance(v, (int, float)) and not isinstance(v, bool)
+
+    if not isinstance(value, list) or not numbers(value):
+        return None
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        return None
+    return array if array.shape == shape and np.isfinite(array).all() else None

@@ -58,6 +58,7 @@ from terrapref.rules.base import (
     SteeringRunner,
     TerrainColumns,
     Where,
+    finite_array,
     number,
     vector,
 )
@@ -310,15 +311,15 @@ class OffsetRule(Rule):
             )
             lines.append(
                 f"relief, the body heading along the path: {what} past each band [deg] (its price per metre, as the classes'"
-                f"{', with its 95% interval; held: held at 0, the drive showing no reason to go round' if u.relief_interval is not None else ''}): "
+                f"{', with its 95% interval; held: no spread, held at 0 or past no ground the drive showed' if u.relief_interval is not None else ''}): "
                 f"{shown}; {told}"
             )
         return lines
 
 
 def _interval(interval: np.ndarray | None, k: int) -> str:
-    """`` (low to high)`` of a relief price's 95% interval, `` held`` where the fit held it at 0 (no
-    spread: the drive showed no reason to go round the ground, so its price is not told), or
+    """`` (low to high)`` of a relief price's 95% interval, `` held`` where it has no spread (its
+    bands held at 0 by the fit, or past no ground the drive showed: its price is not told), or
     nothing where it is not known."""
     if interval is None:
         return ""
@@ -355,25 +356,14 @@ def _relief_weights(block: Mapping[str, Any], where: Where) -> tuple[np.ndarray 
         raise where.error("relief.shown_deg", "expected two of the bands (side slope, grade), each or null")
     if relief["bands_deg"] != list(RELIEF_BANDS_DEG):
         raise where.error("relief.bands_deg", f"expected the bands this version reads, {list(RELIEF_BANDS_DEG)}")
-    try:
-        weights = np.asarray(relief["weights"], dtype=float) if isinstance(relief["weights"], list) else None
-    except (TypeError, ValueError):
-        weights = None
-    if weights is None or weights.shape != (2 * len(RELIEF_BANDS_DEG),) or not np.isfinite(weights).all():
+    weights = finite_array(relief["weights"], (2 * len(RELIEF_BANDS_DEG),))
+    if weights is None:
         raise where.error("relief.weights", f"expected {2 * len(RELIEF_BANDS_DEG)} finite numbers")
     roll, grade = (math.nan if v is None else float(v) for v in shown)
     interval = None
     if "price_interval" in relief:
-        try:
-            interval = np.asarray(relief["price_interval"], dtype=float) if isinstance(relief["price_interval"], list) else None
-        except (TypeError, ValueError):
-            interval = None
-        if (
-            interval is None
-            or interval.shape != (len(weights), 2)
-            or not np.isfinite(interval).all()
-            or (interval[:, 0] > interval[:, 1]).any()
-        ):
+        interval = finite_array(relief["price_interval"], (len(weights), 2))
+        if interval is None or (interval[:, 0] > interval[:, 1]).any():
             raise where.error("relief.price_interval", f"expected {len(weights)} pairs of finite numbers, low then high")
     return weights, (roll, grade), interval
 
