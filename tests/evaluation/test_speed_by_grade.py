@@ -123,19 +123,10 @@ def test_on_relief_the_speed_figure_has_a_panel_of_the_ground_height_under_each_
     from types import SimpleNamespace
 
     from matplotlib.image import imread
+    from test_relief_zones import _scenario as scenario  # a straight path along y = 10 m, 40 x 20 m
 
     from terrapref.evaluation.runner import EXPERT, PLANNER
     from terrapref.evaluation.speed import RUN_XY_STEP_S, save_speed_along
-
-    def scenario(relief: list[dict]):
-        data = {
-            "format": "terrapref-scenario/1",
-            "name": "grades",
-            "world": {"size_m": [40.0, 20.0], "resolution_m": 0.05, "background": "grass"},
-            "terrain": [],
-            "path": {"waypoints": [[2.0, 10.0], [38.0, 10.0]]},
-        }
-        return parse_scenario({**data, "relief": relief} if relief else data)
 
     x = np.arange(2.0, 38.0, 1.0 * RUN_XY_STEP_S)
     runs = [
