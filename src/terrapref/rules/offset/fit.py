@@ -101,15 +101,10 @@ def fit_softmax(X: np.ndarray, Y: np.ndarray, l2: float = 1e-3, iterations: int 
     rows = X.reshape(n * o, p)  # every (frame, offset) row: the sums over both as matrix products
 
     def evaluate(theta: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-        z = X @ theta
-        z = z - z.max(axis=1, keepdims=True)
-        logp = z - np.log(np.exp(z).sum(axis=1, keepdims=True))
-        prob = np.exp(logp)
+        logp, prob = _log_softmax(X, theta)
         loss = -(Y * logp).sum() / n + l2 * theta @ theta
         grad = (prob - Y).reshape(-1) @ rows / n + 2 * l2 * theta
-        mean = np.matmul(prob[:, None, :], X)[:, 0, :]  # (N, P): each frame's expected features
-        hess = ((rows * prob.reshape(-1, 1)).T @ rows - mean.T @ mean) / n + 2 * l2 * np.eye(p)
-        return loss, grad, hess
+        return loss, grad, _hessian(X, prob, l2)
 
     theta = np.zeros(p)
     loss = math.inf
@@ -126,6 +121,22 @@ def fit_softmax(X: np.ndarray, Y: np.ndarray, l2: float = 1e-3, iterations: int 
             t /= 2
         theta = theta - t * step
     return theta, float(evaluate(theta)[0])
+
+
+def _log_softmax(X: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The log-probabilities and probabilities (N, O) of ``softmax(X @ theta)`` over the offsets."""
+    z = X @ theta
+    z = z - z.max(axis=1, keepdims=True)
+    logp = z - np.log(np.exp(z).sum(axis=1, keepdims=True))
+    return logp, np.exp(logp)
+
+
+def _hessian(X: np.ndarray, prob: np.ndarray, l2: float) -> np.ndarray:
+    """The Hessian (P, P) of :func:`fit_softmax`'s objective at the probabilities ``prob`` (N, O)."""
+    n, o, p = X.shape
+    rows = X.reshape(n * o, p)
+    mean = np.matmul(prob[:, None, :], X)[:, 0, :]  # (N, P): each frame's expected features
+    return ((rows * prob.reshape(-1, 1)).T @ rows - mean.T @ mean) / n + 2 * l2 * np.eye(p)
 
 
 def _fit_steeper_costs_more(X: np.ndarray, Y: np.ndarray, l2: float, relief: range) -> tuple[np.ndarray, float, np.ndarray]:
@@ -220,17 +231,11 @@ def weight_covariance(X: np.ndarray, Y: np.ndarray, theta: np.ndarray, free: np.
     consecutive frames, M the sum of those sums' outer products."""
     n = X.shape[0]
     Xf = X[:, :, free]
-    z = Xf @ theta[free]
-    z = z - z.max(axis=1, keepdims=True)
-    prob = np.exp(z)
-    prob /= prob.sum(axis=1, keepdims=True)
+    _, prob = _log_softmax(Xf, theta[free])
     scores = np.matmul((prob - Y)[:, None, :], Xf)[:, 0, :]  # (N, q)
     blocks = np.zeros((-(-n // block_frames), Xf.shape[2]))
     np.add.at(blocks, np.arange(n) // block_frames, scores)
-    rows = Xf.reshape(-1, Xf.shape[2])
-    mean = np.matmul(prob[:, None, :], Xf)[:, 0, :]
-    hess = ((rows * prob.reshape(-1, 1)).T @ rows - mean.T @ mean) / n + 2 * l2 * np.eye(Xf.shape[2])
-    inverse = np.linalg.inv(hess)
+    inverse = np.linalg.inv(_hessian(Xf, prob, l2))
     out = np.zeros((len(theta), len(theta)))
     out[np.ix_(free, free)] = inverse @ (blocks.T @ blocks) @ inverse / n**2
     return out
