@@ -191,16 +191,17 @@ def trusted_elevation(heights: Heights, settings: HeightSettings) -> np.ndarray:
     """Each cell's elevation where it is trusted, else NaN: (n, n) float32. Trusted: at least
     ``min_returns`` returns (and 2), and the standard error of their mean at most
     ``max_error_m``, both as the sensor's errors put it (the inverse of the weights' sum) and
-    as their spread shows it (the weighted variance over one less than their count)."""
-    elevation, returns, spread, weight = heights
-    k = returns.astype(np.float64)
-    w = k if weight is None else weight.astype(np.float64)
-    limit = settings.max_error_m**2
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ok = (k >= max(settings.min_returns, 2)) & (spread <= limit * w * (k - 1))
-        if weight is not None:
-            ok &= w * limit >= 1.0
-    return np.where(ok, elevation, np.float32(np.nan)).astype(np.float32)
+    as their spread shows it (the weighted variance over one less than their count)
+    (terrapref.groundmap.height_compiled.trusted_window, which :func:`geometry_of_cells` reads too)."""
+    n_rows, n_cols = heights.elevation.shape
+    return kernels.trusted_window(*_trust(heights, settings), (0, n_rows), (0, n_cols))
+
+
+def _trust(heights: Heights, settings: HeightSettings) -> tuple[tuple[np.ndarray, ...], tuple[float, float, bool]]:
+    """The height layers and the trust test's terms as the kernels take them (height_compiled.trusted_window)."""
+    weighed = heights.weight is not None
+    layers = (heights.elevation, heights.returns, heights.spread, heights.weight if weighed else heights.elevation)
+    return layers, (float(max(settings.min_returns, 2)), settings.max_error_m**2, weighed)
 
 
 def disc_reach(settings: HeightSettings, res_m: float) -> int:
@@ -214,8 +215,5 @@ def geometry_of_cells(heights: Heights, rows: np.ndarray, cols: np.ndarray, res_
     those round the cells asked are worked out); NaN where unknown."""
     out = np.empty((len(rows), 3))
     rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
-    weighed = heights.weight is not None
-    layers = (heights.elevation, heights.returns, heights.spread, heights.weight if weighed else heights.elevation)
-    trust = (float(max(settings.min_returns, 2)), settings.max_error_m**2, weighed)
-    kernels.heights_geometry(layers, trust, rows, cols, disc_reach(settings, res_m), res_m, out)
+    kernels.heights_geometry(*_trust(heights, settings), rows, cols, disc_reach(settings, res_m), res_m, out)
     return out

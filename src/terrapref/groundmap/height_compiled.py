@@ -48,14 +48,8 @@ def heights_geometry(
     out: np.ndarray,
 ) -> None:
     """:func:`cell_geometry` of the cells (``rows``, ``cols``) of the height layers ``heights``
-    (elevation, returns, spread, weight: terrapref.groundmap.height.Heights; ``trust``'s last:
-    whether the weight is one, else the returns weigh one each), from the elevations trusted in
-    the window round them alone: at least ``trust``'s least returns, and the standard error of
-    their mean at most the square root of its limit [m^2], both as the weights put it and as the
-    spread shows it, as terrapref.groundmap.height.trusted_elevation trusts a cell."""
-    elevation, returns, spread, weight = heights
-    least, limit, weighed = trust
-    n_rows, n_cols = elevation.shape
+    from the elevations trusted (:func:`trusted_window`, ``trust``) in the window round them alone."""
+    n_rows, n_cols = heights[0].shape
     r0, r1, c0, c1 = n_rows, -1, n_cols, -1
     for i in range(rows.shape[0]):
         if 0 <= rows[i] < n_rows and 0 <= cols[i] < n_cols:
@@ -64,18 +58,38 @@ def heights_geometry(
         out[:] = np.nan
         return
     r0, c0, r1, c1 = max(r0 - reach, 0), max(c0 - reach, 0), min(r1 + reach + 1, n_rows), min(c1 + reach + 1, n_cols)
-    trusted = np.empty((r1 - r0, c1 - c0), np.float32)
-    for r in range(r0, r1):
-        for c in range(c0, c1):
-            k = np.float64(returns[r, c])
-            w = np.float64(weight[r, c]) if weighed else k
-            ok = k >= least and np.float64(spread[r, c]) <= limit * w * (k - 1.0) and (not weighed or w * limit >= 1.0)
-            trusted[r - r0, c - c0] = elevation[r, c] if ok else np.float32(np.nan)
+    trusted = trusted_window(heights, trust, (r0, r1), (c0, c1))
     window_rows, window_cols = np.full(rows.shape[0], -1, np.int64), np.full(rows.shape[0], -1, np.int64)
     for i in range(rows.shape[0]):
         if 0 <= rows[i] < n_rows and 0 <= cols[i] < n_cols:
             window_rows[i], window_cols[i] = rows[i] - r0, cols[i] - c0
     cell_geometry(trusted, window_rows, window_cols, reach, res, out)
+
+
+@njit(cache=True, nogil=True)
+def trusted_window(
+    heights: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    trust: tuple[float, float, bool],
+    rows: tuple[int, int],
+    cols: tuple[int, int],
+) -> np.ndarray:
+    """The elevations of the height layers ``heights`` (elevation, returns, spread, weight:
+    terrapref.groundmap.height.Heights) over the window ``rows`` x ``cols`` (each [first, past the
+    last)), where trusted, else NaN: (rows, columns) float32. Trusted (``trust``: the least
+    returns, the limit [m^2] and whether the weight is one, else the returns weigh one each): at
+    least the least returns, and the standard error of their mean at most the square root of the
+    limit, both as the weights put it and as the spread shows it."""
+    elevation, returns, spread, weight = heights
+    least, limit, weighed = trust
+    (r0, r1), (c0, c1) = rows, cols
+    out = np.empty((r1 - r0, c1 - c0), np.float32)
+    for r in range(r0, r1):
+        for c in range(c0, c1):
+            k = np.float64(returns[r, c])
+            w = np.float64(weight[r, c]) if weighed else k
+            ok = k >= least and np.float64(spread[r, c]) <= limit * w * (k - 1.0) and (not weighed or w * limit >= 1.0)
+            out[r - r0, c - c0] = elevation[r, c] if ok else np.float32(np.nan)
+    return out
 
 
 @njit(cache=True, nogil=True, inline="always")
