@@ -105,6 +105,12 @@ class HeightSettings:
             raise ValueError("a return's errors must be finite and >= 0, base_error_m > 0 and attitude_error_deg < 45")
 
     @property
+    def least_weight(self) -> float:
+        """The weight [1 / m^2] from which a difference between cells counts (its standard error
+        at most ``max_error_m``), as the ground's shape is read."""
+        return 1.0 / self.max_error_m**2
+
+    @property
     def errors(self) -> tuple[float, float, float]:
         """A return's errors as the height layer's kernels take them: the base [m], per m^2 of
         depth, and the tangent of the attitude's."""

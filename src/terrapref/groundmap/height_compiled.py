@@ -93,6 +93,22 @@ def trusted_window(
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _disc_rows(reach: int, r0: int, n_rows: int) -> tuple[int, int]:
+    """The rows of a disc of ``reach`` cells round row ``r0`` that lie on a grid of ``n_rows``,
+    as offsets from it: [first, past the last)."""
+    return max(-reach, -r0), min(reach, n_rows - 1 - r0) + 1
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _disc_columns(reach: int, dr: int, c0: int, n_cols: int) -> tuple[int, int]:
+    """The columns of a disc of ``reach`` cells round column ``c0``, in its row ``dr`` rows from the
+    centre, that lie on a grid of ``n_cols``, as offsets from it: [first, past the last) (the
+    cells within ``reach`` of the centre: dr^2 + dc^2 <= reach^2)."""
+    span = int(math.sqrt(reach * reach - dr * dr) + 1e-9)
+    return max(-span, -c0), min(span, n_cols - 1 - c0) + 1
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _disc(trusted: np.ndarray, r0: int, c0: int, reach: int, res: float) -> tuple[tuple[float, ...], int, float]:
     """The normal equations' sums (m, x, y, z, xx, yy, xy, xz, yz, zz; x, y the offsets from cell
     (r0, c0) [m]) over the trusted cells within ``reach`` of it, how many of its nine (the cell
@@ -100,10 +116,9 @@ def _disc(trusted: np.ndarray, r0: int, c0: int, reach: int, res: float) -> tupl
     n_rows, n_cols = trusted.shape
     m = sx = sy = sz = sxx = syy = sxy = sxz = syz = szz = 0.0
     near, low, high = 0, np.inf, -np.inf
-    for dr in range(max(-reach, -r0), min(reach, n_rows - 1 - r0) + 1):
-        span = int(math.sqrt(reach * reach - dr * dr) + 1e-9)
+    for dr in range(*_disc_rows(reach, r0, n_rows)):
         r = r0 + dr
-        for dc in range(max(-span, -c0), min(span, n_cols - 1 - c0) + 1):
+        for dc in range(*_disc_columns(reach, dr, c0, n_cols)):
             z = np.float64(trusted[r, c0 + dc])
             if math.isnan(z):
                 continue
@@ -475,10 +490,9 @@ def disc_sums(checked: tuple[np.ndarray, ...], reach: int, cells: np.ndarray, di
     for i in range(cells.shape[0]):
         r0, c0 = cells[i] // n, cells[i] % n
         sums[:] = 0.0
-        for dr in range(max(-reach, -r0), min(reach, n - 1 - r0) + 1):
-            span = int(math.sqrt(reach * reach - dr * dr) + 1e-9)
+        for dr in range(*_disc_rows(reach, r0, n)):
             r = r0 + dr
-            for dc in range(max(-span, -c0), min(span, n - 1 - c0) + 1):
+            for dc in range(*_disc_columns(reach, dr, c0, n)):
                 c = c0 + dc
                 if math.isfinite(checked_x[r, c]):
                     sums[DISC_RISE_X] += np.float64(checked_x[r, c])
@@ -505,10 +519,9 @@ def _move_in_discs(
     rise = (now[0] if add else 0.0) - (was[0] if take else 0.0)
     run = (now[1] if add else 0.0) - (was[1] if take else 0.0)
     known = (1.0 if add else 0.0) - (1.0 if take else 0.0)
-    for dr in range(max(-reach, -row), min(reach, n - 1 - row) + 1):
-        span = int(math.sqrt(reach * reach - dr * dr) + 1e-9)
+    for dr in range(*_disc_rows(reach, row, n)):
         r = row + dr
-        for dc in range(max(-span, -col), min(span, n - 1 - col) + 1):
+        for dc in range(*_disc_columns(reach, dr, col, n)):
             c = col + dc
             disc[r, c, first] = np.float64(disc[r, c, first]) + rise
             disc[r, c, first + 1] = np.float64(disc[r, c, first + 1]) + run

@@ -137,9 +137,8 @@ class GroundMap:
             self.evidence, self.stamp, self._cells, self._vote_cell, self._vote_column, self._pixel_weight, self.frame, self._fade
         )
         near = (*self._origin_xy, res, *at_xy, h.block_range_m)
-        least = 1.0 / h.max_error_m**2
         changed = height_kernels.shape_to_check(
-            touched, self._shape, least, self._checked, self._disc, CHECK_TOLERANCE_M, near, disc_reach(h, res), self._mark
+            touched, self._shape, h.least_weight, self._checked, self._disc, CHECK_TOLERANCE_M, near, disc_reach(h, res), self._mark
         )
         if self.limits is not None and self.geometry_column is not None:
             self._block(changed)
@@ -149,7 +148,7 @@ class GroundMap:
         their geometry no longer is (the ``blocked`` layer); the cells within the limits' reach
         of a blocked one read as the first lethal column (:meth:`_reblock`)."""
         blocked, limits = self._layers["blocked"], (self.limits.max_slope_rad, self.limits.max_step_m)
-        if height_kernels.block_cells(self._shape, 1.0 / self.height_settings.max_error_m**2, self._disc, cells, limits, blocked):
+        if height_kernels.block_cells(self._shape, self.height_settings.least_weight, self._disc, cells, limits, blocked):
             self._moved = True
         self._blocking = bool(blocked.any()) if self._moved else self._blocking
         self._reblock()
@@ -263,7 +262,7 @@ class GroundMap:
         """Slope [rad], NaN and step [m] (N, 3) of the cells (``rows``, ``cols``) from the ground's shape."""
         out = np.empty((len(rows), 3))
         rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
-        height_kernels.shape_geometry(self._shape, 1.0 / self.height_settings.max_error_m**2, self._disc, rows, cols, out)
+        height_kernels.shape_geometry(self._shape, self.height_settings.least_weight, self._disc, rows, cols, out)
         return out
 
     @property
@@ -285,7 +284,7 @@ class GroundMap:
         """Read the ground's shape afresh over the whole map as its ``dx`` and ``dy`` layers now
         hold it (each frame's depth image reads it where the frame changed it): for code that
         writes those layers itself. The slope and the gradients are read from what was read."""
-        least = 1.0 / self.height_settings.max_error_m**2
+        least = self.height_settings.least_weight
         for axis in ("x", "y"):
             known = self.layer(f"d{axis}_weight").astype(np.float64) >= least  # as the kernels compare them
             self.layer(f"checked_d{axis}")[...] = np.where(known, self.layer(f"d{axis}"), np.float32(np.nan))
