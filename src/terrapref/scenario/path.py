@@ -47,8 +47,7 @@ class ReferencePath:
         if isinstance(s, (float, int)):  # scalar fast path: used once per frame in the control loop
             x, y, _, _ = self.frame_at(s)
             return np.array([x, y])
-        s = np.clip(np.asarray(s, dtype=float), 0.0, self.length_m)
-        i = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, len(self._len) - 1)
+        s, i = self._segment_at(s)
         f = (s - self.s[i]) / self._len[i]
         return self._a[i] + f[..., None] * self._d[i]
 
@@ -87,24 +86,26 @@ class ReferencePath:
 
     def heading_at(self, s: float | np.ndarray) -> np.ndarray:
         """Path direction [rad] at arc lengths ``s``."""
-        s = np.clip(np.asarray(s, dtype=float), 0.0, self.length_m)
-        i = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, len(self._len) - 1)
+        _, i = self._segment_at(s)
         return np.arctan2(self._d[i, 1], self._d[i, 0])
 
     def direction_at(self, s: float | np.ndarray) -> np.ndarray:
         """Unit path directions (..., 2) at arc lengths ``s`` (clamped): each segment's vector over
         its length, so the same bits on every CPU (no trigonometry)."""
-        s = np.clip(np.asarray(s, dtype=float), 0.0, self.length_m)
-        i = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, len(self._len) - 1)
+        s, i = self._segment_at(s)
         return self._d[i] / self._len[i, None] if np.ndim(s) else self._d[i] / self._len[i]
 
     def frames_at(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The points (S, 2) and unit directions (S, 2) at arc lengths ``s`` (S,) (clamped), as
         :meth:`point_at` and :meth:`direction_at` give them, the segments found once."""
+        s, i = self._segment_at(s)
+        d, length = self._d[i], self._len[i]
+        return self._a[i] + ((s - self.s[i]) / length)[:, None] * d, d / length[:, None]
+
+    def _segment_at(self, s: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Arc lengths ``s`` clamped to the path, and the segment each lies on."""
         s = np.clip(np.asarray(s, dtype=float), 0.0, self.length_m)
-        i = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, len(self._len) - 1)
-        d, length = self._d[i], self._len[i, None]
-        return self._a[i] + ((s - self.s[i]) / self._len[i])[:, None] * d, d / length
+        return s, np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, len(self._len) - 1)
 
     def project(self, xy: np.ndarray, s_lo: float = -np.inf, s_hi: float = np.inf) -> tuple[float, float]:
         """Nearest point of the path to ``xy`` among arc lengths in [s_lo, s_hi].

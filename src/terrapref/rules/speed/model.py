@@ -175,12 +175,7 @@ class SpeedModel:
 
 def roughest(rough: np.ndarray) -> np.ndarray:
     """The roughest ground [m] (N,) within :data:`ROUGH_PREVIEW_M` on each way of ``rough`` (N, STATIONS) (0 where unknown)."""
-    return np.fmax.reduce(rough[:, : roughstations_within()].astype(np.float64), axis=1, initial=0.0)  # fmax: NaN is 0
-
-
-def roughstations_within() -> int:
-    """The stations of a way whose roughness counts (those within :data:`ROUGH_PREVIEW_M`)."""
-    return stations_within(ROUGH_PREVIEW_M)
+    return np.fmax.reduce(rough[:, : stations_within(ROUGH_PREVIEW_M)].astype(np.float64), axis=1, initial=0.0)  # fmax: NaN is 0
 
 
 def stations_within(preview_m: float) -> int:
