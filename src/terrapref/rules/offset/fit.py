@@ -257,11 +257,11 @@ def relief_price_intervals(theta: np.ndarray, covariance: np.ndarray, columns: i
     out = np.full((count, 2), np.nan)
     if theta[detour] == 0.0:
         return out
-    for k in range(count):
+    prices = relief_prices(theta[columns : columns + count], theta[detour])
+    for k, price in enumerate(prices):
         first = columns + (0 if k < half else half)
-        picked = np.zeros(len(theta))
+        picked = np.zeros(len(theta))  # the weights the price sums
         picked[first : columns + k + 1] = 1.0
-        price = picked @ theta / theta[detour]
         gradient = picked / theta[detour]
         gradient[detour] -= price / theta[detour]
         spread = z * math.sqrt(max(gradient @ covariance @ gradient, 0.0))
