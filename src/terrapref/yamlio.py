@@ -10,9 +10,15 @@ import yaml
 from terrapref.errors import UserError
 
 MAX_FILE_BYTES = 50_000_000
+MAX_DEPTH = 200  # mappings and lists inside one another; no terrapref file needs more than a handful
 
 
-class _UniqueKeyLoader(yaml.SafeLoader):
+# libyaml's parser where PyYAML was built with it (its wheels are): the same documents read about
+# ten times faster than by the pure-Python one, which stands in where it is missing.
+_SafeLoader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+class _UniqueKeyLoader(_SafeLoader):
     """PyYAML's safe loader, refusing a mapping that gives a key twice (PyYAML keeps the last)."""
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
@@ -30,9 +36,29 @@ class _UniqueKeyLoader(yaml.SafeLoader):
         return super().construct_mapping(node, deep)
 
 
+_OPEN = (yaml.MappingStartEvent, yaml.SequenceStartEvent)
+_CLOSE = (yaml.MappingEndEvent, yaml.SequenceEndEvent)
+
+
 def load_yaml_text(text: str) -> Any:
-    """``yaml.safe_load``, except that a mapping with a key given twice is a YAMLError."""
+    """``yaml.safe_load``, except that a mapping with a key given twice, or collections nested more
+    than :data:`MAX_DEPTH` deep, is a YAMLError."""
+    _check_depth(text)
     return yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
+
+
+def _check_depth(text: str) -> None:
+    """Refuse nesting deeper than :data:`MAX_DEPTH` before anything is built from it: the parser's
+    events come one by one, while building the nested objects recurses (in libyaml's composer, in
+    C, past what its stack holds)."""
+    depth = 0
+    for event in yaml.parse(text, Loader=_SafeLoader):
+        if isinstance(event, _OPEN):
+            depth += 1
+            if depth > MAX_DEPTH:
+                raise yaml.parser.ParserError(None, None, f"nested more than {MAX_DEPTH} levels deep", event.start_mark)
+        elif isinstance(event, _CLOSE):
+            depth -= 1
 
 
 def read_yaml_mapping(path: str | Path, expected_format: str | None = None) -> dict[str, Any]:

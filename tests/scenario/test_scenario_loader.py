@@ -438,10 +438,22 @@ def test_python_tags_are_refused_not_executed(tmp_path: Path) -> None:
     assert not marker.exists()
 
 
-def test_deeply_nested_yaml(tmp_path: Path) -> None:
-    content = "format: terrapref-scenario/1\nname: " + "[" * 5_000 + "]" * 5_000 + "\n"
+@pytest.mark.parametrize("depth", [201, 5_000, 200_000])  # the last is past what libyaml's composer's stack holds
+def test_deeply_nested_yaml(tmp_path: Path, depth: int) -> None:
+    content = "format: terrapref-scenario/1\nname: " + "[" * depth + "]" * depth + "\n"
     (problem,) = load_problems(write(tmp_path, content))
-    assert problem.message.startswith("malformed YAML")
+    assert problem.message == "malformed YAML at line 2, column 206: nested more than 200 levels deep"
+
+
+def test_nesting_as_deep_as_allowed_reads() -> None:
+    from terrapref.yamlio import MAX_DEPTH, load_yaml_text
+
+    levels = MAX_DEPTH - 1  # mappings, the list the last one holds the last level
+    block = "".join(f"{'  ' * i}k:\n" for i in range(levels - 1)) + "  " * (levels - 1) + "k: [1]\n"
+    data = load_yaml_text(block)
+    for _ in range(levels - 1):
+        data = data["k"]
+    assert data == {"k": [1]}
 
 
 @pytest.mark.parametrize(("content", "kind"), [("- a\n- b\n", "a list"), ("just text\n", "a string"), ("42\n", "a number")])

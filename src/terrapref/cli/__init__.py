@@ -15,6 +15,7 @@ several share are in :mod:`~terrapref.cli.common`.
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import signal
 import sys
@@ -69,8 +70,10 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"error: {self.prog}: {message} (see {self.prog} --help)\n")
 
 
+@functools.cache
 def build_parser(train_flags: bool = True) -> argparse.ArgumentParser:
-    """The ``terrapref`` command line (``train_flags``: with train's training flags)."""
+    """The ``terrapref`` command line (``train_flags``: with train's training flags), built once a
+    process: parsing leaves it as it was, and a program calling :func:`main` again reuses it."""
     from terrapref import __version__
 
     parser = _Parser(prog="terrapref", description="Learn off-road terrain preferences from a few minutes of driving.")
