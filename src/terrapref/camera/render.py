@@ -14,11 +14,13 @@ driver a frame that renders in full only if something asks for the whole image.
 
 from __future__ import annotations
 
+import functools
 import math
+from typing import NamedTuple
 
 import numpy as np
 
-from terrapref.camera.pinhole import PinholeCamera
+from terrapref.camera.pinhole import CameraConfig, PinholeCamera
 from terrapref.camera.relief_compiled import render_relief, step_lengths
 from terrapref.camera.render_compiled import pixels_at, pixels_of_rows, ray_pixels, render_frame, rows_and_columns, take
 from terrapref.terrain import UNKNOWN
@@ -34,42 +36,74 @@ RELIEF_LONGEST_STEP_M = 0.8
 of cells (the blocks its step lengths are kept for; far out a step is a pixel row's ground)."""
 
 
+class _GroundRows(NamedTuple):
+    """What a camera's pixels see of level ground, the same for every world (:func:`_ground_rows`)."""
+
+    row0: int  # the first row that sees ground in range
+    valid_flat: np.ndarray  # (H W,) bool: pixels that see ground in range
+    first: np.ndarray  # (rows,) int64: each row's first column in range, from row0 on
+    last: np.ndarray  # (rows,) int64: one past its last
+    P: np.ndarray  # (rows, 2): each row's ground point at the principal column [m]
+    Q: np.ndarray  # (rows, 2): and its change per column [m per px]
+    u: np.ndarray  # (W,) float32: the columns' offsets from the principal point [px]
+    ray_a: np.ndarray  # (W,): each column's ray offset through the pixel centres
+    ray_b: np.ndarray  # (H,): each row's
+
+
+@functools.lru_cache(maxsize=8)
+def _ground_rows(config: CameraConfig) -> _GroundRows:
+    """The rows and columns of level ground a camera of ``config`` sees, worked out once a process
+    for each camera (every simulation of a run has the same); the arrays are read-only."""
+    camera = PinholeCamera(config)
+    c = camera.config
+    width, height = c.width_px, c.height_px
+    right = camera.R[0]
+    if abs(right[2]) > 1e-12:  # pragma: no cover - CameraConfig has no roll
+        raise ValueError("the row-affine renderer needs a camera without roll")
+
+    rows = np.arange(height) + 0.5
+    b = np.outer((rows - camera.cy) / camera.fy, camera.R[1]) + camera.R[2]  # (H, 3)
+    a = right / camera.fx  # ray change per pixel column, (3,)
+    sees_ground = b[:, 2] < -1e-12
+    s = np.where(sees_ground, -camera.t[2] / np.where(sees_ground, b[:, 2], -1.0), 0.0)  # (H,)
+    u = np.arange(width) + 0.5 - camera.cx  # (W,)
+    ray_len = s[:, None] * np.linalg.norm(b[:, None, :] + u[None, :, None] * a, axis=-1)
+    valid = sees_ground[:, None] & (ray_len <= c.max_range_m)  # (H, W)
+
+    any_valid = np.flatnonzero(valid.any(axis=1))
+    row0 = int(any_valid[0]) if len(any_valid) else height
+    # Along a row the ray length is convex in the column, so the columns in range are one run.
+    block = valid[row0:]
+    first = np.where(block.any(axis=1), block.argmax(axis=1), 0).astype(np.int64)
+    last = first + block.sum(axis=1)
+    if not all(block[r, first[r] : last[r]].all() for r in range(len(block))):  # pragma: no cover
+        raise ValueError("the renderer needs the visible columns of each row to be one run")
+    rows = _GroundRows(
+        row0,
+        valid.ravel(),
+        first,
+        last,
+        (camera.t[:2] + s[:, None] * b[:, :2])[row0:],
+        (s[:, None] * a[:2])[row0:],
+        u.astype(np.float32),
+        # Each column's and row's ray offsets through the pixel centres, for a camera off its mount (kernels.ray_pixels).
+        (np.arange(width) + 0.5 - camera.cx) / camera.fx,
+        (np.arange(height) + 0.5 - camera.cy) / camera.fy,
+    )
+    for array in rows[1:]:
+        array.flags.writeable = False
+    return rows
+
+
 class SegmentationRenderer:
     """Renders the segmentation image (class ids, 255 where no ground is seen) of a world map."""
 
     def __init__(self, camera: PinholeCamera, world: WorldMap) -> None:
         self.camera = camera
         self.world = world
-        c = camera.config
-        width, height = c.width_px, c.height_px
-        right = camera.R[0]
-        if abs(right[2]) > 1e-12:  # pragma: no cover - CameraConfig has no roll
-            raise ValueError("the row-affine renderer needs a camera without roll")
-
-        rows = np.arange(height) + 0.5
-        b = np.outer((rows - camera.cy) / camera.fy, camera.R[1]) + camera.R[2]  # (H, 3)
-        a = right / camera.fx  # ray change per pixel column, (3,)
-        sees_ground = b[:, 2] < -1e-12
-        s = np.where(sees_ground, -camera.t[2] / np.where(sees_ground, b[:, 2], -1.0), 0.0)  # (H,)
-        u = np.arange(width) + 0.5 - camera.cx  # (W,)
-        ray_len = s[:, None] * np.linalg.norm(b[:, None, :] + u[None, :, None] * a, axis=-1)
-        valid = sees_ground[:, None] & (ray_len <= c.max_range_m)  # (H, W)
-
-        any_valid = np.flatnonzero(valid.any(axis=1))
-        self._row0 = int(any_valid[0]) if len(any_valid) else height
-        self._valid_flat = valid.ravel()
-        # Along a row the ray length is convex in the column, so the columns in range are one run.
-        block = valid[self._row0 :]
-        self._first = np.where(block.any(axis=1), block.argmax(axis=1), 0).astype(np.int64)
-        self._last = self._first + block.sum(axis=1)
-        if not all(block[r, self._first[r] : self._last[r]].all() for r in range(len(block))):  # pragma: no cover
-            raise ValueError("the renderer needs the visible columns of each row to be one run")
-        self._P = (camera.t[:2] + s[:, None] * b[:, :2])[self._row0 :]  # (rows, 2) [m]
-        self._Q = (s[:, None] * a[:2])[self._row0 :]  # (rows, 2) [m per px]
-        self._u = u.astype(np.float32)
-        # Each column's and row's ray offsets through the pixel centres, for a camera off its mount (kernels.ray_pixels).
-        self._ray_a = (np.arange(width) + 0.5 - camera.cx) / camera.fx
-        self._ray_b = (np.arange(height) + 0.5 - camera.cy) / camera.fy
+        rows = _ground_rows(camera.config)
+        self._row0, self._valid_flat, self._first, self._last = rows.row0, rows.valid_flat, rows.first, rows.last
+        self._P, self._Q, self._u, self._ray_a, self._ray_b = rows.P, rows.Q, rows.u, rows.ray_a, rows.ray_b
 
         # A one-cell border of 255 round the raster: clipped indices off the map read "unknown".
         ny, nx = world.raster.shape
