@@ -296,3 +296,36 @@ def test_the_ground_under_a_body_beside_a_path_up_the_ramp_tilts_it_by_the_grade
     np.testing.assert_array_equal(view.relief[:, bands:], np.where(past, metres, 0.0)[None, :].repeat(len(geometry.offsets), 0))
     flat = features(gmap, ReferencePath(np.array([[1.0, 15.0], [59.0, 15.0]])), 19.0)
     assert flat.relief is None and flat.near_m == math.inf  # without relief: the classes alone, as on flat ground
+
+
+def test_ground_past_no_band_the_utility_prices_is_no_patch_on_the_path() -> None:
+    """A fitted offset utility reads as a patch on the path only ground past the first band it
+    prices (terrapref.rules.offset.rule.steep_from): the ramp's grade, atan(0.2) = 11.3 deg, is one
+    for a utility that prices grades from 10 deg and none for one that prices them from 12 deg or
+    prices side slopes alone; there, with nothing else on the path, the detour keeps its price."""
+    from test_offset_rule import DRIVER_LIKE
+
+    from terrapref.rules.offset.features import FIRST_BAND, RELIEF_BANDS_DEG, OffsetFeatures
+    from terrapref.rules.offset.fit import OffsetUtility
+    from terrapref.rules.offset.geometry import OffsetGeometry
+    from terrapref.rules.offset.rule import steep_from
+    from terrapref.scenario.path import ReferencePath
+
+    gmap, _ = _seen_ramp()
+    geometry = OffsetGeometry(max_offset_m=1.0, stations_m=(0.0, 2.0))
+    features, path = OffsetFeatures(geometry, 0), ReferencePath(np.array([[1.0, 15.0], [59.0, 15.0]]))
+    bands = len(RELIEF_BANDS_DEG)
+
+    def priced_from(side_deg: float | None, grade_deg: float | None) -> tuple[float, float]:
+        relief = np.zeros(2 * bands)
+        for axis, deg in enumerate((side_deg, grade_deg)):
+            if deg is not None:
+                relief[axis * bands + RELIEF_BANDS_DEG.index(deg)] = -0.5
+        return steep_from(OffsetUtility(np.array(DRIVER_LIKE), 5.0, geometry, relief, (22.0, 22.0)))
+
+    assert priced_from(10.0, 12.0) == (10.0, 12.0) and priced_from(None, None) == (math.inf, math.inf)
+    assert steep_from(OffsetUtility(np.array(DRIVER_LIKE), 5.0, geometry)) == FIRST_BAND  # prices no relief: as a fit reads
+    for steep, patch in (((22.0, 10.0), True), ((22.0, 12.0), False), ((4.0, None), False), ((None, None), False)):
+        view = features(gmap, path, 19.0, relief=True, steep_deg=priced_from(*steep))
+        assert view.near_m == (0.0 if patch else math.inf), steep
+        np.testing.assert_array_equal(view.relief, features(gmap, path, 19.0, relief=True).relief)  # the same columns either way

@@ -26,7 +26,10 @@ which the body, heading along the path, would be rolled more than each of
 the metres over which it would be pitched more than each of them (its slope along the way over
 the wheelbase). Weighed beside the terrain classes, the bands price each side slope and grade
 the way a driver goes round them or not. Ground on the path steeper than the first band is a
-patch on the path as terrain is.
+patch on the path as terrain is, for the frames a fit reads; a fitted utility reads as a patch
+only ground past the first band it prices (:attr:`OffsetSteering.steep_deg`): ground it prices
+at nothing is no reason to leave the path, and counted as a patch it would lift the detour's
+price there and leave the way to small differences between the terrain either side.
 """
 
 from __future__ import annotations
@@ -43,6 +46,8 @@ from terrapref.vehicle import VehicleConfig
 
 RELIEF_BANDS_DEG = (4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 18.0, 20.0, 22.0)
 """The side slopes and grades [deg] past which the relief columns count the metres of the way."""
+FIRST_BAND = (RELIEF_BANDS_DEG[0], RELIEF_BANDS_DEG[0])
+"""Side slope and grade [deg] past which ground on the path is a patch on it, in the frames a fit reads."""
 WHEELBASE_M = VehicleConfig.wheelbase_m
 """The body's wheelbase the relief columns read its pitch over [m] (the default vehicle's)."""
 
@@ -99,11 +104,15 @@ class OffsetFeatures:
         normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1)
         return gmap.beside_attitudes(centre, normal, self._lattice_offsets, self._chord)
 
-    def __call__(self, gmap: GroundMap, path: ReferencePath, progress_m: float, relief: bool = False) -> OffsetView:
-        """The features at ``progress_m`` [m] along ``path``, with the relief columns when ``relief``."""
+    def __call__(
+        self, gmap: GroundMap, path: ReferencePath, progress_m: float, relief: bool = False, steep_deg: tuple[float, float] = FIRST_BAND
+    ) -> OffsetView:
+        """The features at ``progress_m`` [m] along ``path``, with the relief columns when ``relief``;
+        ground on the path sloping across it past ``steep_deg[0]`` or along it past ``steep_deg[1]``
+        [deg] is a patch on it (``near_m``)."""
         c = self.config
         attitudes = self.attitudes(gmap, path, progress_m) if relief else None
-        steep = self._level if attitudes is None else (attitudes[self._centre] > RELIEF_BANDS_DEG[0]).any(axis=1)
+        steep = self._level if attitudes is None else (attitudes[self._centre] > np.asarray(steep_deg)).any(axis=1)
         features, near_m, upto = kernels.offset_features(
             self.columns(gmap, path, progress_m),
             steep,

@@ -62,7 +62,7 @@ from terrapref.rules.base import (
     number,
     vector,
 )
-from terrapref.rules.offset.features import RELIEF_BANDS_DEG, OffsetFeatures
+from terrapref.rules.offset.features import FIRST_BAND, RELIEF_BANDS_DEG, OffsetFeatures
 from terrapref.rules.offset.fit import OffsetFit, OffsetUtility, fit_offset_utility, relief_prices
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.offset.offsets_compiled import gated_value
@@ -368,6 +368,16 @@ def _relief_weights(block: Mapping[str, Any], where: Where) -> tuple[np.ndarray 
     return weights, (roll, grade), interval
 
 
+def steep_from(utility: OffsetUtility) -> tuple[float, float]:
+    """The side slope and grade [deg] past which ground on the path is a patch on it for
+    ``utility``: the first band of each it prices (inf: none)."""
+    if utility.relief is None:
+        return FIRST_BAND
+    half = len(RELIEF_BANDS_DEG)
+    priced = np.cumsum(utility.relief[:half]) != 0.0, np.cumsum(utility.relief[half:]) != 0.0
+    return tuple(float(RELIEF_BANDS_DEG[int(np.argmax(p))]) if p.any() else math.inf for p in priced)
+
+
 def keeps(held: float, best: float, margin: float) -> bool:
     """Whether an offset whose utility is ``held`` is kept against the best one's, ``best``: it is
     while it falls short of the best by at most ``margin`` of the best's magnitude (a learned
@@ -423,6 +433,7 @@ class OffsetSteering(SteeringRunner):
         self.escapes = np.concatenate([-beyond[::-1], beyond])  # (E,) offsets only for getting round lethal terrain [m]
         self._outermost = self.offsets[[0, -1]]
         self._centre = int(np.argmin(np.abs(self.offsets)))
+        self.steep_deg = steep_from(utility)
         self.held = 0.0
 
     reads_probs = False
@@ -448,7 +459,7 @@ class OffsetSteering(SteeringRunner):
         """The yaw rate [rad/s] toward the offset held after this frame, read from ``gmap`` (the
         ground map of :attr:`map_settings`, updated with the frame), the vehicle going at
         ``speed_mps`` [m/s] (None: the control set's speed)."""
-        seen = self.features(gmap, path, progress_m, relief=self.utility.relief is not None)
+        seen = self.features(gmap, path, progress_m, relief=self.utility.relief is not None, steep_deg=self.steep_deg)
         value = gated_value(seen.features, self.offsets, seen.near_m > self.utility.near_m, self.weights)
         if seen.relief is not None:
             value = value + seen.relief @ self.utility.relief
