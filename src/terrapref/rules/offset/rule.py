@@ -374,8 +374,8 @@ def steep_from(utility: OffsetUtility) -> tuple[float, float]:
     if utility.relief is None:
         return FIRST_BAND
     half = len(RELIEF_BANDS_DEG)
-    priced = np.cumsum(utility.relief[:half]) != 0.0, np.cumsum(utility.relief[half:]) != 0.0
-    return tuple(float(RELIEF_BANDS_DEG[int(np.argmax(p))]) if p.any() else math.inf for p in priced)
+    first = [np.flatnonzero(weights) for weights in (utility.relief[:half], utility.relief[half:])]
+    return tuple(float(RELIEF_BANDS_DEG[f[0]]) if len(f) else math.inf for f in first)
 
 
 def keeps(held: float, best: float, margin: float) -> bool:
