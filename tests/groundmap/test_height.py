@@ -329,3 +329,40 @@ def test_ground_past_no_band_the_utility_prices_is_no_patch_on_the_path() -> Non
         view = features(gmap, path, 19.0, relief=True, steep_deg=priced_from(*steep))
         assert view.near_m == (0.0 if patch else math.inf), steep
         np.testing.assert_array_equal(view.relief, features(gmap, path, 19.0, relief=True).relief)  # the same columns either way
+
+
+def test_ground_a_depth_reading_map_has_not_seen_is_no_reason_to_go_round() -> None:
+    """On a map that reads depth (relief), ground never seen (behind a crest, as a rule) is priced
+    at nothing: with a speck of the cheapest class on the path 3 m ahead and 3 m of unseen ground
+    past it, the offset held is the one held when that ground is seen background. On a map
+    without depth, unseen ground is priced as an average class, and the planner goes round it."""
+    from test_offset_rule import CONTROL, DRIVER_LIKE, K
+
+    from terrapref.rules.offset.fit import OffsetUtility
+    from terrapref.rules.offset.rule import OffsetSteering
+    from terrapref.scenario.path import ReferencePath
+
+    camera, path, pose = PinholeCamera(), ReferencePath(np.array([[1.0, 15.0], [59.0, 15.0]])), Pose(17.0, 15.0, 0.0)
+    flat = GroundMap(camera, _terrain(()))
+    flat.update(SegmentationView.of(np.zeros((camera.config.height_px, camera.config.width_px), dtype=np.uint8)), pose)
+
+    def held(gmap: GroundMap, unseen: bool) -> float:
+        """The offset held after one frame on ``gmap``, its cells seen background but for the speck
+        and (``unseen``) the ground past it on the path."""
+        res, cells = gmap.settings.map_resolution_m, gmap.layer("column")
+        x = gmap.origin[0] + (np.arange(cells.shape[1]) + 0.5) * res
+        y = gmap.origin[1] + (np.arange(cells.shape[0]) + 0.5) * res
+        on_path = np.abs(y[:, None] - 15.0) < 0.6
+        cells[...] = K  # seen, none of the classes: the background
+        cells[on_path & (x[None, :] > 20.4) & (x[None, :] < 23.5)] = K + 1 if unseen else K
+        cells[(np.abs(y[:, None] - 15.0) < 0.06) & (x[None, :] > 20.0) & (x[None, :] < 20.2)] = K - 1  # the cheapest class
+        stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain(()), CONTROL)
+        stage.yaw_rate(gmap, pose, path, 16.0)
+        return stage.held
+
+    relief, _ = _seen_ramp()
+    assert relief.reads_depth and not flat.reads_depth
+    assert held(relief, unseen=True) == held(relief, unseen=False)
+    assert abs(held(flat, unseen=True)) > abs(held(flat, unseen=False)) + 0.5
+    relief.reset()
+    assert not relief.reads_depth  # a new run starts as a map that has read no depth

@@ -87,6 +87,7 @@ class GroundMap:
         self._blocking = False  # whether any cell is blocked
         self._lethal_by_geometry = np.empty(0, dtype=np.int64)  # the cells that read as lethal for it (flat indices)
         self._moved = False  # the blocked cells changed since those were found
+        self._read_depth = False  # whether a depth image updated the map since it was made or reset
         self.attitude = HorizonAttitude(camera) if c.map_sky_attitude else None
         # The ray through each sample's pixel centre (camera frame, z = 1), and where the mount's
         # camera sees it meet the ground: a tilted camera moves each sample by where its ray lands.
@@ -119,6 +120,7 @@ class GroundMap:
             self._vote_cell = np.empty(len(self._pixels.flat), dtype=np.int64)
             self._vote_column = np.empty(len(self._pixels.flat), dtype=np.int64)
             self._pixel_weight = np.bincount(self._sample_pix, weights=self._weight, minlength=len(self._pixels.flat)).astype(np.float32)
+        self._read_depth = True
         h, res = self.height_settings, c.map_resolution_m
         touched = height_kernels.depth_frame(
             depth.image,
@@ -167,6 +169,12 @@ class GroundMap:
             cells[np.setdiff1d(self._lethal_by_geometry, near, assume_unique=True)] = kernels.UNSETTLED
             self._lethal_by_geometry, self._moved = near, False
         cells[self._lethal_by_geometry] = self.geometry_column
+
+    @property
+    def reads_depth(self) -> bool:
+        """Whether depth images have updated the map (on relief): its votes fall where the returns
+        lie, and its heights and the ground's shape are read."""
+        return self._read_depth
 
     @property
     def heights(self) -> Heights:
@@ -315,7 +323,7 @@ class GroundMap:
         """Forget everything seen."""
         for layer in self.LAYERS:
             self._layers[layer.name].fill(layer.fill_value(self.k))
-        self._blocking, self._moved = False, False
+        self._blocking, self._moved, self._read_depth = False, False, False
         self._lethal_by_geometry = np.empty(0, dtype=np.int64)
         self.frame = 0
         self.origin = self._origin_xy = None

@@ -28,6 +28,11 @@ candidate offset d. The rule then:
 
 Ground never seen is priced at the mean of the non-lethal classes' weights: a fit sees too
 little unseen ground beside patches to price it, and an unknown cell is, on average, one of them.
+On a map that reads depth (relief), unseen ground is priced at nothing: there it is mostly ground
+that a crest, a mound or a bank hides from the camera, which a driver drives on to see, not round;
+priced as a class, the ground behind every mound on the path made a detour worth it as soon as
+anything (a mislabelled speck) lifted the gate. The stop rule still keeps the vehicle off ground
+it has not seen within its stopping distance.
 """
 
 from __future__ import annotations
@@ -418,6 +423,8 @@ class OffsetSteering(SteeringRunner):
         if safe:
             weights[k] = weights[safe].mean()
         self.weights = weights
+        self._weights_on_relief = weights.copy()  # on a map that reads depth: unseen ground priced at nothing
+        self._weights_on_relief[k] = 0.0
         self.map_settings = utility.config.map
         self._columns = terrain.map_columns  # a prior map's class ids as the ground map's columns
         self.features = OffsetFeatures(utility.config, k)
@@ -460,7 +467,8 @@ class OffsetSteering(SteeringRunner):
         ground map of :attr:`map_settings`, updated with the frame), the vehicle going at
         ``speed_mps`` [m/s] (None: the control set's speed)."""
         seen = self.features(gmap, path, progress_m, relief=self.utility.relief is not None, steep_deg=self.steep_deg)
-        value = gated_value(seen.features, self.offsets, seen.near_m > self.utility.near_m, self.weights)
+        weights = self._weights_on_relief if gmap.reads_depth else self.weights
+        value = gated_value(seen.features, self.offsets, seen.near_m > self.utility.near_m, weights)
         if seen.relief is not None:
             value = value + seen.relief @ self.utility.relief
         escape = None
