@@ -331,22 +331,30 @@ def test_ground_past_no_band_the_utility_prices_is_no_patch_on_the_path() -> Non
         np.testing.assert_array_equal(view.relief, features(gmap, path, 19.0, relief=True).relief)  # the same columns either way
 
 
-def test_ground_a_depth_reading_map_has_not_seen_is_no_reason_to_go_round() -> None:
+def test_ground_a_depth_reading_map_has_not_seen_is_priced_as_the_relief_drive_priced_it() -> None:
     """On a map that reads depth (relief), ground never seen (behind a crest, as a rule) is priced
-    at nothing: with a speck of the cheapest class on the path 3 m ahead and 3 m of unseen ground
-    past it, the offset held is the one held when that ground is seen background. On a map
-    without depth, unseen ground is priced as an average class, and the planner goes round it."""
+    as a utility fitted on relief priced it, at most 0. With a speck of the cheapest class on the
+    path 3 m ahead and 3 m of unseen ground past it: a relief utility whose drive priced unseen
+    ground at nothing or above holds the offset it holds when that ground is seen background,
+    and one whose drive priced it high goes round it. A utility fitted on flat ground prices it as
+    an average class, on either map, and goes round it."""
     from test_offset_rule import CONTROL, DRIVER_LIKE, K
 
+    from terrapref.rules.offset.features import RELIEF_BANDS_DEG
     from terrapref.rules.offset.fit import OffsetUtility
-    from terrapref.rules.offset.rule import OffsetSteering
+    from terrapref.rules.offset.rule import OffsetSteering, hidden_price
     from terrapref.scenario.path import ReferencePath
 
     camera, path, pose = PinholeCamera(), ReferencePath(np.array([[1.0, 15.0], [59.0, 15.0]])), Pose(17.0, 15.0, 0.0)
     flat = GroundMap(camera, _terrain(()))
     flat.update(SegmentationView.of(np.zeros((camera.config.height_px, camera.config.width_px), dtype=np.uint8)), pose)
 
-    def held(gmap: GroundMap, unseen: bool) -> float:
+    def relief_utility(unseen_weight: float) -> OffsetUtility:
+        weights = np.array(DRIVER_LIKE)
+        weights[K] = unseen_weight
+        return OffsetUtility(weights, 5.0, relief=np.zeros(2 * len(RELIEF_BANDS_DEG)), relief_shown=(22.0, 22.0))
+
+    def held(gmap: GroundMap, unseen: bool, utility: OffsetUtility | None = None) -> float:
         """The offset held after one frame on ``gmap``, its cells seen background but for the speck
         and (``unseen``) the ground past it on the path."""
         res, cells = gmap.settings.map_resolution_m, gmap.layer("column")
@@ -356,13 +364,17 @@ def test_ground_a_depth_reading_map_has_not_seen_is_no_reason_to_go_round() -> N
         cells[...] = K  # seen, none of the classes: the background
         cells[on_path & (x[None, :] > 20.4) & (x[None, :] < 23.5)] = K + 1 if unseen else K
         cells[(np.abs(y[:, None] - 15.0) < 0.06) & (x[None, :] > 20.0) & (x[None, :] < 20.2)] = K - 1  # the cheapest class
-        stage = OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain(()), CONTROL)
+        stage = OffsetSteering(utility or OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain(()), CONTROL)
         stage.yaw_rate(gmap, pose, path, 16.0)
         return stage.held
 
     relief, _ = _seen_ramp()
     assert relief.reads_depth and not flat.reads_depth
-    assert held(relief, unseen=True) == held(relief, unseen=False)
+    assert abs(held(relief, unseen=True)) > abs(held(relief, unseen=False)) + 0.5  # a flat utility: as on flat ground
+    assert hidden_price(OffsetUtility(DRIVER_LIKE, 5.0)) is None
+    assert hidden_price(relief_utility(0.5)) == 0.0 and hidden_price(relief_utility(-2.0)) == -2.0
+    assert held(relief, True, relief_utility(0.5)) == held(relief, False, relief_utility(0.5))
+    assert abs(held(relief, True, relief_utility(-2.0))) > abs(held(relief, False, relief_utility(-2.0))) + 0.5
     assert abs(held(flat, unseen=True)) > abs(held(flat, unseen=False)) + 0.5
     relief.reset()
     assert not relief.reads_depth  # a new run starts as a map that has read no depth

@@ -28,11 +28,14 @@ candidate offset d. The rule then:
 
 Ground never seen is priced at the mean of the non-lethal classes' weights: a fit sees too
 little unseen ground beside patches to price it, and an unknown cell is, on average, one of them.
-On a map that reads depth (relief), unseen ground is priced at nothing: there it is mostly ground
-that a crest, a mound or a bank hides from the camera, which a driver drives on to see, not round;
-priced as a class, the ground behind every mound on the path made a detour worth it as soon as
-anything (a mislabelled speck) lifted the gate. The stop rule still keeps the vehicle off ground
-it has not seen within its stopping distance.
+On a map that reads depth (relief), unseen ground is mostly ground that a crest, a mound or a bank
+hides from the camera, and how much a driver minds it is their own: one drives on over a mound to
+see, a cautious one goes round what it cannot see past. A utility fitted on relief has seen plenty
+of hidden ground, and there it prices it as its drive did (:func:`hidden_price`, at most 0); one
+fitted on flat ground has not, and prices it as on flat ground. Priced as an average class, the
+ground behind every mound on the path made a detour worth it, for a driver who drives over
+mounds, as soon as anything (a mislabelled speck) lifted the gate. The stop rule still keeps the
+vehicle off ground it has not seen within its stopping distance.
 """
 
 from __future__ import annotations
@@ -319,6 +322,12 @@ class OffsetRule(Rule):
                 f"{', with its 95% interval; held: no spread, held at 0 or past no ground the drive showed' if u.relief_interval is not None else ''}): "
                 f"{shown}; {told}"
             )
+        hidden = hidden_price(u)
+        if detour != 0.0 and hidden is not None:
+            lines.append(
+                f"relief, ground not yet seen (behind a crest, a mound, a bank): {hidden / detour + 0.0:.1f} per metre, "
+                "as the classes' (ground the camera has not shown, on a map that reads depth)"
+            )
         return lines
 
 
@@ -383,6 +392,16 @@ def steep_from(utility: OffsetUtility) -> tuple[float, float]:
     return tuple(float(RELIEF_BANDS_DEG[f[0]]) if len(f) else math.inf for f in first)
 
 
+def hidden_price(utility: OffsetUtility) -> float | None:
+    """The weight of a metre of ground never seen on a map that reads depth (module docstring): as
+    a utility fitted on relief weighs it, at most 0 (ground not seen is no reason to drive there);
+    None for one fitted on flat ground, whose drive showed too little of it to tell (it is priced
+    as on flat ground)."""
+    if utility.relief is None:
+        return None
+    return min(float(utility.weights[len(utility.weights) - 3]), 0.0)
+
+
 def keeps(held: float, best: float, margin: float) -> bool:
     """Whether an offset whose utility is ``held`` is kept against the best one's, ``best``: it is
     while it falls short of the best by at most ``margin`` of the best's magnitude (a learned
@@ -423,8 +442,10 @@ class OffsetSteering(SteeringRunner):
         if safe:
             weights[k] = weights[safe].mean()
         self.weights = weights
-        self._weights_on_relief = weights.copy()  # on a map that reads depth: unseen ground priced at nothing
-        self._weights_on_relief[k] = 0.0
+        self._weights_on_relief = weights.copy()  # on a map that reads depth: unseen ground priced as a relief drive did
+        hidden = hidden_price(utility)
+        if hidden is not None:
+            self._weights_on_relief[k] = hidden
         self.map_settings = utility.config.map
         self._columns = terrain.map_columns  # a prior map's class ids as the ground map's columns
         self.features = OffsetFeatures(utility.config, k)
