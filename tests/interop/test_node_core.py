@@ -228,6 +228,39 @@ def test_the_node_stops_when_no_frame_has_been_decided_on_for_a_while_by_the_wal
     assert core.status_at(frozen) == ((0.0, 0.0), "stale")
 
 
+def test_a_decision_goes_out_before_the_live_view_and_is_not_stale_however_long_the_view_takes(setup, monkeypatch):
+    """The live view's first frame starts its server (seconds on a loaded machine): sent before
+    the command, it made the watchdog call the decision it was sending stale."""
+    import terrapref.interop.live as live
+
+    model, robot, path, _ = setup
+    wall, sent = [100.0], []
+
+    class SlowRun:  # the live view, two seconds of the wall clock a frame
+        @classmethod
+        def start(cls, *args, **kwargs):
+            return cls()
+
+        def frame(self, frame, costmap=None):
+            wall[0] += 2.0
+            sent.append(frame.t_s)
+
+    monkeypatch.setattr(live, "LiveRun", SlowRun)
+    core = PlannerNodeCore(model, robot, path, watchdog=Watchdog(1.0, wall=lambda: wall[0]))
+    core.watch(object())
+    told = []
+    core.on_decision = lambda decision: told.append((core.status_at(decision.stamp_s), len(sent)))
+    core.on_camera_info(camera_info(TS, header(TS, 0.0, "camera_optical"), CameraConfig()))
+    for i in range(2):
+        core.on_odometry(_odom(i))
+        decision = core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, i))
+        assert decision is not None
+        (command, reason), views_before = told[-1]
+        assert reason is None and command == decision.command, "the decision's own command, not a stale stop"
+        assert views_before == i, "the command went out before the live view's frame"
+    assert len(sent) == 2
+
+
 def test_the_robots_limits_and_goal_come_from_its_file_then_its_parameters(setup, tmp_path):
     from terrapref.errors import ConfigError, UserError
     from terrapref.interop.node_core import NodeOptions

@@ -411,10 +411,12 @@ class PlannerNodeCore:
             return None
         self.decided += 1
         self.watchdog.feed()
-        if self.view is not None:
-            self._send(decision, ids, pose)
+        # The command goes out first: the live view's frame (a server started on the first) must
+        # neither delay it nor, by the wall clock, make the watchdog call the decision stale.
         if self.on_decision is not None:
             self.on_decision(decision)
+        if self.view is not None:
+            self._send(decision, ids, pose)
         return decision
 
     def _send(self, decision: RuntimeDecision, ids: np.ndarray, pose: Pose) -> None:
