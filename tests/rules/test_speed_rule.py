@@ -289,6 +289,26 @@ def test_the_fit_reads_a_class_wherever_one_footprint_point_meets_it():
     assert two < 0.5 * fit.error_mps, "two points explain the drive far better"
 
 
+def test_a_class_shown_mostly_at_its_edge_is_learned_at_its_own_speed_from_the_frames_well_inside_it():
+    """The driver brushes water at the edge of the rock stretches (its footprint's right edge
+    meets it) and drives the water's speed there, while the map puts that water just beyond the
+    footprint, in the ring 0.5 m beside it: those frames read as rock alone. They are most of the
+    rock frames; the fit learns rock from the frames well inside it (the ring rock too), not at
+    the water's speed."""
+    truth, seen = _track(), _track()
+    for start in np.flatnonzero((truth[1:, 2] == ROCK) & (truth[:-1, 2] != ROCK)) + 1:
+        edge = slice(start + 15, start + 30)  # the second half of each rock stretch
+        truth[edge, 0] = WATER  # the footprint's right edge: the driver's speed there is water's
+        seen[edge, 6] = WATER  # the ring's right point (model.across): the map's edge, 0.5 m further out
+    v = _drive(DRIVER, truth)[2]
+    way, curvature, _, frame = _drive(DRIVER, seen)
+    fit = fit_speed(Drive(way, curvature, v, frame), K, (LETHAL,))
+    assert fit is not None
+    alone = (way[:, :6, :5] == ROCK).all(axis=(1, 2))
+    assert np.median(v[alone]) == pytest.approx(0.5), "most frames of rock alone are at the water's speed"
+    assert fit.model.speeds_mps[ROCK] == pytest.approx(0.8) and fit.model.speeds_mps[WATER] == pytest.approx(0.5)
+
+
 def test_a_lag_pairs_frames_only_within_one_recording():
     way, curvature, v, _ = _drive(DRIVER, _track())
     half = len(v) // 2

@@ -190,9 +190,12 @@ def lethal_mask(lethal: tuple[int, ...]) -> np.ndarray:
     return is_lethal
 
 
+INSIDE = [0, 1, 2, 3, 4, 6, 7]  # the footprint's points and the nearer ring's (:func:`across`)
+
+
 def _near(way: np.ndarray, upto: int, is_lethal: np.ndarray, ring_m: float) -> np.ndarray:
     """Whether lethal terrain (``is_lethal``, by column value) lies on the footprint or within ``ring_m`` beside it on each way (N,)."""
-    points = [0, 1, 2, 3, 4, 6, 7] if ring_m <= RINGS_M[0] else list(range(9))
+    points = INSIDE if ring_m <= RINGS_M[0] else list(range(9))
     return is_lethal[way[:, :upto, points]].any(axis=(1, 2))
 
 
@@ -346,10 +349,12 @@ def _fit_at(frames: _Frames, preview_m: float) -> tuple[SpeedModel, tuple[tuple[
     is_lethal = lethal_mask(lethal)
     near = _near(way, upto, is_lethal, RINGS_M[1])
     steady = alone & (np.abs(curvature) < STEADY_CURVATURE)
+    # The way's column alone across the footprint and the ring nearer it: well inside a patch.
+    wide = way[:, :upto, INSIDE].reshape(len(way), -1)
+    inside = steady & np.all((wide == first[:, None]) | (wide > k), axis=1)
     climb, descent = steepest(grade, upto, len(way))
-    speeds, intervals = _cruising(
-        frames, steady & (first[:, None] == np.arange(k + 1)).T, near, (climb < LEVEL_DEG) & (descent < LEVEL_DEG)
-    )
+    on = (first[:, None] == np.arange(k + 1)).T
+    speeds, intervals = _cruising(frames, (steady & on, inside & on), near, (climb < LEVEL_DEG) & (descent < LEVEL_DEG))
     known = [s for s in speeds if not math.isnan(s)]
     if not known:
         return None
@@ -389,16 +394,23 @@ def _fit_at(frames: _Frames, preview_m: float) -> tuple[SpeedModel, tuple[tuple[
     return best, tuple(intervals), grades, shown
 
 
-def _cruising(frames: _Frames, on: np.ndarray, near: np.ndarray, level: np.ndarray) -> tuple[list[float], list[tuple[float, float] | None]]:
+def _cruising(
+    frames: _Frames, on: tuple[np.ndarray, np.ndarray], near: np.ndarray, level: np.ndarray
+) -> tuple[list[float], list[tuple[float, float] | None]]:
     """Each column's cruising speed (NaN: not shown, or lethal) and its interval, from the frames
-    ``on`` it alone, steady ((K + 1, N)): level and away from lethal terrain (``near``) where the
-    drive shows enough such frames; else on grades; else beside lethal terrain too (a lane
-    between lethal walls)."""
+    ``on`` it alone, steady, and of those the frames well inside it (its column alone within the
+    nearer ring too), each (K + 1, N): well inside it, level and away from lethal terrain
+    (``near``) where the drive shows enough such frames; else anywhere on it alone, level and
+    away from lethal terrain; else on grades; else beside lethal terrain too (a lane between
+    lethal walls). A frame at a patch's edge is the driver's or not by a few centimetres of
+    where the map puts the edge: the driver, brushing the next patch, drives at that patch's
+    speed there, and a class the drive shows mostly at its edges was learned at its neighbour's."""
+    alone, inside = on
     speeds: list[float] = []
     intervals: list[tuple[float, float] | None] = []
     for col in range(frames.k + 1):
-        for where in (~near & level, ~near, level, None):
-            rows = np.flatnonzero(on[col] & (True if where is None else where))
+        for rows_on, where in ((inside, ~near & level), (alone, ~near & level), (alone, ~near), (alone, level), (alone, None)):
+            rows = np.flatnonzero(rows_on[col] & (True if where is None else where))
             if len(rows) >= MIN_FRAMES:
                 break
         if col in frames.lethal or len(rows) < MIN_FRAMES:
