@@ -261,7 +261,8 @@ def fit_speed(drive: Drive, k: int, lethal: tuple[int, ...]) -> SpeedFit | None:
 
     For each preview and lag: a column's cruising speed is the median speed of the frames whose
     way within the preview is that column alone, level (within :data:`LEVEL_DEG`) and nearly
-    straight, with no lethal terrain near (where the drive shows too few such frames, not level
+    straight, with no lethal terrain near, well inside the column where the drive shows enough
+    such frames (:func:`_cruising`; where it shows too few, at its edges too, then not level
     too, then beside lethal terrain too); the
     bend's limit the median ``v^2 * curvature`` of the frames slower than their terrain allows in
     bends; the lethal neighbour's speed the median of the frames slower than both near lethal
