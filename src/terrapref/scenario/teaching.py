@@ -24,11 +24,10 @@ round, and how it slows on them, is its relief style.
 Pairs grow as K(K-1)/2. The course shows each pair once on each side, each strip with the
 lethal terrain once on each side, each lethal class alone twice (once a little left of the path,
 once a little right) and each feature class alone once and as a lane once, while that drive stays
-within :data:`BUDGET_M` (10 minutes at the driver's 1 m/s: up to 4 feature classes), and with
-relief while that drive stays within :data:`RELIEF_BUDGET_M` (7 minutes of a driver who slows on
-grades: up to 2 feature classes). Beyond it the course is *compact*: each pair once, with every
-class on the left as often as on the right (to within one), each strip, each lone patch and each
-lane once, the sides alternating (the lengths of both designs: docs/classes.md).
+within :data:`BUDGET_M` (10 minutes at the driver's 1 m/s: up to 4 feature classes). Beyond it
+the course is *compact*: each pair once, with every class on the left as often as on the right
+(to within one), each strip, each lone patch and each lane once, the sides alternating (the
+lengths of both designs: docs/classes.md).
 
 Situations sit on straight legs; the trail bends a little between them (keeping to the path is
 part of the lesson) and turns round every :data:`LANE` situations, so that a long course folds
@@ -50,11 +49,6 @@ from terrapref.terrain import ClassTable
 
 DRIVER_SPEED_MPS = 1.0  # the speed a teaching drive is timed at (the synthetic driver's)
 BUDGET_M = 600.0  # the longest full design [m]: 10 minutes at 1 m/s
-# The longest full design with relief [m]: a driver of the default relief style sheds speed on
-# grades and rough ground and drives a relief course at about 0.84 m/s where it keeps 1 m/s on
-# flat ground (504 s for the default table's full course of 430 m, 380 s for its compact one of
-# 316 m), so 7 minutes hold about 350 m.
-RELIEF_BUDGET_M = 350.0
 LANE = 8  # situations between two turns round
 HALF_M = {
     "lone": 6.0,
@@ -155,12 +149,11 @@ def situations(classes: ClassTable, full: bool | None = None, relief: bool = Fal
     """The situations of ``classes``' teaching course, in driving order.
 
     ``full``: each pair on both sides (True), once (False), or whichever fits
-    :data:`BUDGET_M` (None; with relief :data:`RELIEF_BUDGET_M`); ``relief``: with the relief
-    situations (:func:`relief_situations`)."""
+    :data:`BUDGET_M` (None); ``relief``: with the relief situations (:func:`relief_situations`)."""
     terrain, lethal = list(classes.terrain_names), list(classes.lethal)
     if not terrain:
         raise ValueError("the class table has no feature class (neither background nor lethal) to teach")
-    full = fits(classes, relief) if full is None else full
+    full = fits(classes) if full is None else full
     pairs = balanced_pairs(terrain)
     if full:
         pairs += [(b, a) for a, b in pairs]
@@ -246,10 +239,9 @@ RELIEF_LESSONS = {
 }
 
 
-def fits(classes: ClassTable, relief: bool = False) -> bool:
-    """Whether the full design of ``classes``' course stays within :data:`BUDGET_M`; with its
-    relief situations (``relief``), within :data:`RELIEF_BUDGET_M`."""
-    return course_length(situations(classes, True, relief)) <= (RELIEF_BUDGET_M if relief else BUDGET_M)
+def fits(classes: ClassTable) -> bool:
+    """Whether the full design of ``classes``' course stays within :data:`BUDGET_M`."""
+    return course_length(situations(classes, True)) <= BUDGET_M
 
 
 def follow_up_course(
@@ -392,13 +384,13 @@ def designed_course(
 ) -> tuple[CourseBuilder, list[Situation]]:
     """The teaching course of ``classes`` in ``design`` (``terrapref course --design``): ``full``
     (every pair once on each side), ``compact`` (every pair once, sides balanced) or ``auto`` (full
-    while it stays within :data:`BUDGET_M`, with relief :data:`RELIEF_BUDGET_M`); with the relief
-    situations where ``relief``; with its situations in driving order.
+    while it stays within :data:`BUDGET_M`); with the relief situations where ``relief``; with its
+    situations in driving order.
 
     Raises:
         ValueError: the table has no feature class to teach.
     """
-    full = fits(classes, relief) if design == "auto" else design == "full"
+    full = fits(classes) if design == "auto" else design == "full"
     items = situations(classes, full, relief)
     text = description(classes, full) + (f" {RELIEF_DESCRIPTION}" if relief else "")
     return build_course(classes, items, name, text), items
