@@ -205,7 +205,6 @@ def test_a_near_return_outweighs_a_far_one_by_the_inverse_of_their_variances() -
     )
     slot, sums = np.full(n * n, -1, np.int32), np.empty((1, kernels.FRAME_SUMS))
     shape = tuple(np.zeros((n, n), np.float32) for _ in range(6))
-    rough = (np.zeros((n, n), np.float32), np.zeros((n, n), np.float32), 3, res, settings.rough_error_m**2)
 
     def vote(x: float, y: float, z: float, across_m: float) -> None:
         """One frame of one return at (x, y, z) seen from ``across_m`` behind it, 0.8 m up (a camera
@@ -217,7 +216,7 @@ def test_a_near_return_outweighs_a_far_one_by_the_inverse_of_their_variances() -
         pixels = (np.zeros(1, np.int64), np.zeros(1, np.int64), (offset / depth)[None, :])
         image = np.full((1, 1), depth, np.float32)
         kernels.depth_frame(
-            image, pixels, np.eye(3), centre, (0.0, 0.0, 1.0 / res), 30.0, settings.errors, votes, tuple(layers), shape, rough, (slot, sums)
+            image, pixels, np.eye(3), centre, (0.0, 0.0, 1.0 / res), 30.0, settings.errors, votes, tuple(layers), shape, (slot, sums)
         )
 
     def weight(across_m: float, z: float) -> float:
@@ -379,42 +378,3 @@ def test_ground_a_depth_reading_map_has_not_seen_is_priced_as_the_relief_drive_p
     assert abs(held(flat, unseen=True)) > abs(held(flat, unseen=False)) + 0.5
     relief.reset()
     assert not relief.reads_depth  # a new run starts as a map that has read no depth
-
-
-def test_rough_ground_keeps_its_roughness_through_a_pose_that_errs_from_frame_to_frame() -> None:
-    """A rough patch (noise of 0.07 m and 0.3 m wavelength, as the teaching course's) seen in 20
-    frames from 0-5 m before a stretch of it. With the pose known, the roughness the map reads a metre
-    into the patch is the world's within 25%. With each frame's pose off by 0.1 m at random (a
-    localisation's jitter), the heights' means smooth the bumps out: read from the heights, the
-    roughness falls by more than a third; read frame by frame, as the map reads it, it stays
-    within 25% of the world's."""
-    data = copy.deepcopy(RAMP)
-    patch = [[20.0, 11.0], [26.0, 11.0], [26.0, 19.0], [20.0, 19.0]]
-    data["relief"] = [{"noise": {"amplitude_m": 0.07, "wavelength_m": 0.3, "seed": 1, "polygon": patch}}]
-    world = rasterise(parse_scenario(data, "rough_test.yaml"))
-    camera = PinholeCamera()
-    ahead = np.array([[x, y] for x in np.arange(21.0, 22.51, 0.25) for y in (14.5, 15.0, 15.5)])
-    truth = float(np.sqrt(np.mean(world.roughness_at(ahead) ** 2)))
-    assert truth > 0.015  # rough, as the evaluation's band counts it
-
-    def seen(jitter_m: float) -> GroundMap:
-        renderer, gmap = SegmentationRenderer(camera, world), GroundMap(camera, _terrain(()))
-        rng = np.random.default_rng(0)
-        for x in np.arange(16.0, 20.9, 0.25):
-            vehicle = Vehicle(Pose(x, 15.0, 0.0), ground=world)
-            ids, depth = renderer.render_with_depth(vehicle.pose, vehicle.attitude)
-            dx, dy = rng.normal(0.0, jitter_m, 2)
-            believed = Pose(x + dx, 15.0 + dy, 0.0)  # where the robot thinks it is
-            gmap.update(SegmentationView.of(ids), believed, DepthImage(depth, *renderer.placement(believed, vehicle.attitude)))
-        return gmap
-
-    def read(gmap: GroundMap) -> tuple[float, float]:
-        rows, cols = gmap._cells_under(ahead)
-        heights = geometry_of_cells(gmap.heights, rows, cols, gmap.settings.map_resolution_m, gmap.height_settings)[:, 1]
-        return float(np.sqrt(np.mean(gmap.roughness_at(ahead) ** 2))), float(np.sqrt(np.nanmean(heights**2)))
-
-    exact, _ = read(seen(0.0))
-    assert exact == pytest.approx(truth, rel=0.25)
-    by_frames, by_heights = read(seen(0.1))
-    assert by_heights < 0.65 * truth
-    assert by_frames == pytest.approx(truth, rel=0.25)

@@ -25,13 +25,8 @@ read are moved with it (the ``checked`` and ``disc`` layers). A cell's slope is 
 gradient read within ``radius_m`` of it (a least-squares plane's, on a regular grid: two
 quotients of those sums), unknown where fewer than three gradients are known; its step is the height range over the cell and its
 eight neighbours, their heights summed from the differences between them, unknown where fewer
-than two of them are. The roughness (the heights' standard deviation about their plane within
-``radius_m``) is read, as the shape is, frame by frame: round each cell a frame has seen
-precisely (the ground a few metres ahead), from that frame's own mean returns, its square
-averaged over the frames (the ``rough_sq`` layer). A pose that errs from frame to frame puts the
-heights of different frames side by side, and their means smooth rough ground out. Ground no
-frame has seen precisely has its roughness read from the trusted heights. The speed rule and
-the costmap read it.
+than two of them are. The roughness (the heights' standard deviation about the plane fitted
+through the trusted heights within ``radius_m``) is read from the heights, for the costmap only.
 
 Ground the vehicle cannot cross within its limits is lethal, from its config and never learned
 (:class:`GeometryLimits`): a slope past its roll or its pitch limit, whichever is smaller (a
@@ -91,11 +86,6 @@ class HeightSettings:
         block_range_m: the ground this near the vehicle has its shape read, and its geometry
             checked against the limits, as returns fall in it [m]; farther ground is read as the
             vehicle nears it.
-        rough_error_m: a frame's mean return in a cell counts toward the roughness that frame
-            shows once its standard error, as the sensor's errors put it, is at most this [m]:
-            the ground a few metres ahead, where the noise of a frame's own returns is small
-            against the roughness a vehicle slows for (1.5 cm). Farther ground, which no frame
-            has seen that well yet, has its roughness read from the heights.
     """
 
     radius_m: float = 0.3
@@ -106,13 +96,10 @@ class HeightSettings:
     attitude_error_deg: float = 1.0
     max_range_m: float = 10.0
     block_range_m: float = 10.0
-    rough_error_m: float = 0.015
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.radius_m) and self.radius_m > 0):
             raise ValueError(f"radius_m must be finite and > 0, got {self.radius_m!r}")
-        if not (math.isfinite(self.rough_error_m) and self.rough_error_m > 0):
-            raise ValueError(f"rough_error_m must be finite and > 0, got {self.rough_error_m!r}")
         errors = (self.base_error_m, self.depth_error_per_m2, self.attitude_error_deg)
         if not all(math.isfinite(e) and e >= 0 for e in errors) or self.base_error_m <= 0 or self.attitude_error_deg >= 45:
             raise ValueError("a return's errors must be finite and >= 0, base_error_m > 0 and attitude_error_deg < 45")
@@ -226,17 +213,6 @@ def _trust(heights: Heights, settings: HeightSettings) -> tuple[tuple[np.ndarray
 def disc_reach(settings: HeightSettings, res_m: float) -> int:
     """The radius, in cells of ``res_m``, of the disc a cell's plane is fitted in."""
     return max(1, int(math.floor(settings.radius_m / res_m + 1e-9)))
-
-
-def frame_roughness(mean_sq: np.ndarray, frames: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """The roughness [m] (N,) of the cells (``rows``, ``cols``) as the frames that saw them
-    precisely showed it (the root of the ``rough_sq`` layer ``mean_sq``); NaN where no frame did
-    (``frames``, the ``rough_frames`` layer, 0) or off the map."""
-    n_rows, n_cols = mean_sq.shape
-    inside = (rows >= 0) & (rows < n_rows) & (cols >= 0) & (cols < n_cols)
-    r, c = np.where(inside, rows, 0), np.where(inside, cols, 0)
-    seen = inside & (frames[r, c] > 0)
-    return np.where(seen, np.sqrt(mean_sq[r, c].astype(np.float64)), np.nan)
 
 
 def geometry_of_cells(heights: Heights, rows: np.ndarray, cols: np.ndarray, res_m: float, settings: HeightSettings) -> np.ndarray:

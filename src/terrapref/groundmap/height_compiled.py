@@ -201,10 +201,9 @@ def depth_frame(
     votes: tuple[np.ndarray, np.ndarray, int, np.ndarray, np.ndarray],
     heights: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     shape: tuple[np.ndarray, ...],
-    rough: tuple[np.ndarray, np.ndarray, int, float, float],
     scratch: tuple[np.ndarray, np.ndarray],
 ) -> np.ndarray:
-    """Fold one frame's depth image into a ground map's height layers, its ground's shape and its roughness.
+    """Fold one frame's depth image into a ground map's height layers and its ground's shape.
 
     ``depth`` (H, W) [m along the optical axis, NaN: no return] is read at ``pixels`` (rows,
     columns, and each one's ray (N, 3) in the camera frame, forward 1): a return is the optical
@@ -231,17 +230,7 @@ def depth_frame(
       weighted means and the weights' sums). The attitude's error is left out of these: it tilts
       all the frame's returns as one plane through the camera, which changes a difference over
       a cell by a few millimetres (0.035 of its run for 2 deg). Gathered over frames whose
-      attitudes erred differently, differences agree where heights do not;
-    - in ``rough`` (the mean square of the frames' roughness (n, n) float32 [m^2], how many
-      frames it holds (n, n) float32, the disc's reach [cells], the cell size [m], and the
-      largest variance [m^2] of a mean return that counts) the roughness this frame alone shows
-      round each cell whose mean return is that precise: the standard deviation, about their
-      least-squares plane, of the precise mean returns within the reach (at least
-      :data:`ROUGH_LEAST` of them), as :func:`cell_geometry` reads it from the heights. Within
-      a frame the returns lie as the ground does. A pose that errs from frame to frame by a
-      fraction of the ground's wavelength puts different frames' heights of the same bump in
-      one cell, and their means smooth the ground out (0.1 m of error flattens bumps 0.3 m
-      apart ninefold).
+      attitudes erred differently, differences agree where heights do not.
 
     ``scratch``: ``slot`` (n * n,) int32, all -1 (each cell's row of the frame's sums), left all
     -1, and room for the sums ((N, :data:`FRAME_SUMS`) float64). The cells the frame's returns
@@ -250,7 +239,6 @@ def depth_frame(
     count, touched = _gather_returns(depth, pixels, axes, centre, grid, max_range_m, errors, votes, slot, sums)
     _fold_heights(heights, sums, touched, count)
     _fold_shape(shape, sums, slot, touched, count)
-    _fold_rough(rough, sums, slot, touched, count)
     for i in range(count):
         slot[touched[i]] = -1
     return touched[:count]
@@ -379,44 +367,6 @@ def _fold_shape(shape: tuple[np.ndarray, ...], sums: np.ndarray, slot: np.ndarra
         if above >= 0:
             w = 1.0 / (sums[i, SUM_W] + sums[above, SUM_W])
             _fold_difference(dy, dy_run, dyw, row, col, w, sums[above, SUM_WZ] - sums[i, SUM_WZ], sums[above, SUM_WY] - sums[i, SUM_WY])
-
-
-# The fewest precise mean returns of one frame round a cell its roughness is read from (of the
-# 29 cells in a disc of 0.3 m at 0.1 m cells).
-ROUGH_LEAST = 10
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _fold_rough(
-    rough: tuple[np.ndarray, np.ndarray, int, float, float], sums: np.ndarray, slot: np.ndarray, touched: np.ndarray, count: int
-) -> None:
-    """:func:`depth_frame`'s roughness: each precise cell's roughness as the frame alone shows it,
-    its square folded into the cell's mean of them. ``sums`` holds each cell's mean return and
-    the variance of that mean (:func:`_fold_shape`)."""
-    mean_sq, frames, reach, res, precise = rough
-    n = mean_sq.shape[0]
-    for i in range(count):
-        if not sums[i, SUM_W] <= precise:
-            continue
-        t = touched[i]
-        r0, c0 = t // n, t % n
-        m = sx = sy = sz = sxx = syy = sxy = sxz = syz = szz = 0.0
-        for dr in range(*_disc_rows(reach, r0, n)):
-            for dc in range(*_disc_columns(reach, dr, c0, n)):
-                j = slot[t + dr * n + dc]
-                if j < 0 or not sums[j, SUM_W] <= precise:
-                    continue
-                x, y, z = dc * res, dr * res, sums[j, SUM_WZ] - sums[i, SUM_WZ]
-                m, sx, sy, sz = m + 1.0, sx + x, sy + y, sz + z
-                sxx, syy, sxy, sxz, syz, szz = sxx + x * x, syy + y * y, sxy + x * y, sxz + x * z, syz + y * z, szz + z * z
-        if m < ROUGH_LEAST:
-            continue
-        r = plane_fit((m, sx, sy, sz, sxx, syy, sxy, sxz, syz, szz))[1]
-        if math.isnan(r):
-            continue
-        held = np.float64(frames[r0, c0]) + 1.0
-        mean_sq[r0, c0] = np.float64(mean_sq[r0, c0]) + (r * r - np.float64(mean_sq[r0, c0])) / held
-        frames[r0, c0] = held
 
 
 @njit(cache=True, nogil=True, inline="always")

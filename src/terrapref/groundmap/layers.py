@@ -72,10 +72,6 @@ LAYERS: tuple[Layer, ...] = (
     Layer("dy", np.float32, 0.0),
     Layer("dy_run", np.float32, 0.0),
     Layer("dy_weight", np.float32, 0.0),
-    # The ground's roughness, as each frame alone shows it round each cell where its returns are
-    # precise (height_compiled.depth_frame): the mean of its squares [m^2], and how many frames.
-    Layer("rough_sq", np.float32, 0.0),
-    Layer("rough_frames", np.float32, 0.0),
     # The differences along x and y as the cells round each were last read (NaN: not known then;
     # +inf: never read), so that only the cells round a changed one are read again, and the runs
     # read with them (NaN where the difference is not a number).

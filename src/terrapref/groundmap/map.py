@@ -21,7 +21,6 @@ from terrapref.groundmap.height import (
     Heights,
     HeightSettings,
     disc_reach,
-    frame_roughness,
     geometry_of_cells,
 )
 from terrapref.groundmap.layers import LAYERS, Layer
@@ -134,7 +133,6 @@ class GroundMap:
             (ids, self.columns, self.k, self._vote_cell, self._vote_column),
             tuple(self.heights),
             self._shape,
-            (*self._rough, disc_reach(h, res), res, h.rough_error_m**2),
             (self._slot, self._sums),
         )
         kernels.map_vote_cells(
@@ -193,21 +191,12 @@ class GroundMap:
 
     def roughness_at(self, points: np.ndarray) -> np.ndarray:
         """The roughness [m] (...) of the cells under the world points (..., 2), as :meth:`geometry_at`
-        reads it; NaN where unknown or off the map."""
+        reads it (from the heights alone); NaN where unknown or off the map."""
         if self.origin is None:
             return np.full(np.shape(points)[:-1], np.nan)
-        return self._roughness(*self._cells_under(points)).reshape(np.shape(points)[:-1])
-
-    def _roughness(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-        """The roughness [m] (N,) of the cells (``rows``, ``cols``): as the frames that saw them
-        precisely showed it, else from the heights (terrapref.groundmap.height); NaN where unknown."""
-        rough = frame_roughness(*self._rough, rows, cols)
-        unseen = np.isnan(rough)
-        if unseen.any():
-            rough[unseen] = geometry_of_cells(
-                self.heights, rows[unseen], cols[unseen], self.settings.map_resolution_m, self.height_settings
-            )[:, 1]
-        return rough
+        rows, cols = self._cells_under(points)
+        rough = geometry_of_cells(self.heights, rows, cols, self.settings.map_resolution_m, self.height_settings)[:, 1]
+        return rough.reshape(np.shape(points)[:-1])
 
     def gradient_at(self, points: np.ndarray) -> np.ndarray:
         """The ground's gradient (rise per metre along x, along y) (..., 2) under the world points
@@ -271,9 +260,10 @@ class GroundMap:
         """Slope [rad], roughness [m] and step [m] (N, 3) of the cells (``rows``, ``cols``): the
         slope and the step from the ground's shape (the height differences the frames show,
         :func:`terrapref.groundmap.height_compiled.shape_geometry`), what the limits are checked
-        against; the roughness as :meth:`roughness_at` reads it. NaN where unknown."""
+        against; the roughness from the heights (:func:`geometry_of_cells`). NaN where unknown."""
         out = self._shape_geometry(rows, cols)
-        out[:, 1] = self._roughness(np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64))
+        heights = geometry_of_cells(self.heights, rows, cols, self.settings.map_resolution_m, self.height_settings)
+        out[:, 1] = heights[:, 1]
         return out
 
     def _shape_geometry(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
@@ -287,11 +277,6 @@ class GroundMap:
     def _checked(self) -> tuple[np.ndarray, ...]:
         """The differences and their runs as they were last read (terrapref.groundmap.height_compiled.shape_to_check)."""
         return tuple(self.layer(name) for name in ("checked_dx", "checked_dx_run", "checked_dy", "checked_dy_run"))
-
-    @property
-    def _rough(self) -> tuple[np.ndarray, np.ndarray]:
-        """The roughness as the frames showed it: the mean of its squares and how many frames (height_compiled.depth_frame)."""
-        return self._layers["rough_sq"], self._layers["rough_frames"]
 
     @property
     def _disc(self) -> np.ndarray:
