@@ -88,24 +88,33 @@ def class_handles(classes: ClassTable, present: Sequence[int] | None = None) -> 
     return [Patch(color=np.array(c.color) / 255, label=class_label(c)) for c in classes.classes if keep is None or c.id in keep]
 
 
-def draw_map(ax: plt.Axes, scenario: Scenario, world: WorldMap, zones: bool = True, marks: dict[str, str] | None = None) -> list:
+def draw_map(
+    ax: plt.Axes,
+    scenario: Scenario,
+    world: WorldMap,
+    zones: bool = True,
+    marks: dict[str, str] | None = None,
+    window: tuple[float, float, float, float] | None = None,
+    ground: np.ndarray | None = None,
+) -> list:
     """Top-down map with the reference path, the start and the labelled zones, each label placed
     clear of the others; ``marks`` (zone id -> text, a missed zone's expected and chosen) are
-    added to their zones' labels in red. Returns the legend handles: the classes the map shows
-    (none where it has no terrain, :attr:`Scenario.has_terrain`: the ground is left blank)."""
+    added to their zones' labels in red. ``window`` (x0, x1, y0, y1) [m]: only the ground within
+    it is drawn, and the axes show it (a zone's inset). ``ground``: the picture of the whole
+    world's ground (:func:`ground_picture`), where one is drawn several times; made when None.
+    Returns the legend handles: the classes the map shows (none where it has no terrain,
+    :attr:`Scenario.has_terrain`: the ground is left blank)."""
     classes = scenario.classes
-    sx, sy = world.size_m
+    rows, cols, extent = _cells_within(world, window)
     handles: list = []
-    if scenario.has_terrain and world.height is not None:
-        ax.imshow(_hillshaded(classes.palette()[world.raster], world), origin="lower", extent=(0, sx, 0, sy), interpolation="nearest")
-        handles = class_handles(classes, np.unique(world.raster).tolist())
-    elif scenario.has_terrain:
-        ax.imshow(classes.palette()[world.raster], origin="lower", extent=(0, sx, 0, sy), interpolation="nearest")
-        handles = class_handles(classes, np.unique(world.raster).tolist())
+    if scenario.has_terrain:
+        picture = ground if ground is not None else ground_picture(scenario, world)
+        ax.imshow(picture[rows, cols], origin="lower", extent=extent, interpolation="nearest")
+        handles = class_handles(classes, np.unique(world.raster[rows, cols]).tolist())
     else:
         ax.set_facecolor("whitesmoke")
     if world.height is not None:
-        handles.append(_draw_contours(ax, world))
+        handles.append(_draw_contours(ax, world, rows, cols))
     wp = scenario.waypoints
     ax.plot(
         wp[:, 0],
@@ -122,8 +131,9 @@ def draw_map(ax: plt.Axes, scenario: Scenario, world: WorldMap, zones: bool = Tr
         "", xy=(x + 2.5 * np.cos(yaw), y + 2.5 * np.sin(yaw)), xytext=(x, y), arrowprops={"arrowstyle": "-|>", "color": "black", "lw": 1.5}
     )
     ax.plot([x], [y], "o", color="black", ms=5, label="start", zorder=PATH_ZORDER + 0.5)
-    ax.set_xlim(0, sx)
-    ax.set_ylim(0, sy)
+    x0, x1, y0, y1 = window if window is not None else extent
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
@@ -137,11 +147,27 @@ CONTOUR_LEVELS = 6  # about this many contour lines on a map with relief
 CONTOUR_CELLS = 400  # contours are traced on at most this many cells a side (finer adds nothing at a figure's size)
 
 
-def _hillshaded(rgb: np.ndarray, world: WorldMap) -> np.ndarray:
-    """The class colours ``rgb`` (ny, nx, 3) uint8 shaded by the world's relief, lit from the
-    north-west as maps are, shape (ny, nx, 3) float in [0, 1]."""
-    assert world.height is not None
-    return hillshade(rgb, world.height, world.resolution_m)
+def ground_picture(scenario: Scenario, world: WorldMap) -> np.ndarray:
+    """The world's ground as :func:`draw_map` draws it: its classes' colours (ny, nx, 3) uint8,
+    shaded by its relief where it has one ((ny, nx, 3) float in [0, 1]; the shading's contrast
+    is set by the whole world, so a part of it cut out looks as it does on the whole map)."""
+    colours = scenario.classes.palette()[world.raster]
+    return hillshade(colours, world.height, world.resolution_m) if world.height is not None else colours
+
+
+def _cells_within(world: WorldMap, window: tuple[float, float, float, float] | None) -> tuple[slice, slice, tuple[float, ...]]:
+    """The rows and columns of ``world``'s cells within ``window`` (x0, x1, y0, y1) [m] and a cell
+    beyond it, and their extent (x0, x1, y0, y1) [m]; the whole world where ``window`` is None."""
+    ny, nx = world.raster.shape
+    if window is None:
+        sx, sy = world.size_m
+        return slice(None), slice(None), (0.0, sx, 0.0, sy)
+    res = world.resolution_m
+    x0, x1, y0, y1 = window
+    c0, c1 = int(np.clip(np.floor(x0 / res) - 1, 0, nx - 1)), int(np.clip(np.ceil(x1 / res) + 1, 1, nx))
+    r0, r1 = int(np.clip(np.floor(y0 / res) - 1, 0, ny - 1)), int(np.clip(np.ceil(y1 / res) + 1, 1, ny))
+    c1, r1 = max(c1, c0 + 1), max(r1, r0 + 1)
+    return slice(r0, r1), slice(c0, c1), (c0 * res, c1 * res, r0 * res, r1 * res)
 
 
 def hillshade(rgb: np.ndarray, height: np.ndarray, res_m: float) -> np.ndarray:
@@ -157,18 +183,25 @@ def hillshade(rgb: np.ndarray, height: np.ndarray, res_m: float) -> np.ndarray:
     return shaded[::-1]
 
 
-def _draw_contours(ax: plt.Axes, world: WorldMap) -> Line2D:
+def _draw_contours(ax: plt.Axes, world: WorldMap, rows: slice = slice(None), cols: slice = slice(None)) -> Line2D:
     """A few labelled contour lines of the world's height [m] (on a grid of at most
-    CONTOUR_CELLS a side); returns their legend entry."""
+    CONTOUR_CELLS a side), traced over its cells ``rows`` x ``cols`` at the levels of the whole
+    world; returns their legend entry."""
     from matplotlib.ticker import MaxNLocator
 
     assert world.height is not None
     step = max(1, -(-max(world.height.shape) // CONTOUR_CELLS))
-    z = world.height[::step, ::step].astype(np.float64)
-    x = (np.arange(world.height.shape[1])[::step] + 0.5) * world.resolution_m
-    y = (np.arange(world.height.shape[0])[::step] + 0.5) * world.resolution_m
-    levels = MaxNLocator(CONTOUR_LEVELS).tick_values(float(z.min()), float(z.max()))
-    levels = levels[(levels > z.min()) & (levels < z.max())]
+    whole = world.height[::step, ::step]
+    levels = MaxNLocator(CONTOUR_LEVELS).tick_values(float(whole.min()), float(whole.max()))
+    row_ids, col_ids = np.arange(world.height.shape[0])[rows], np.arange(world.height.shape[1])[cols]
+    row_ids, col_ids = row_ids[row_ids % step == 0], col_ids[col_ids % step == 0]
+    z = world.height[np.ix_(row_ids, col_ids)].astype(np.float64)
+    x, y = (col_ids + 0.5) * world.resolution_m, (row_ids + 0.5) * world.resolution_m
+    levels = levels[(levels > whole.min()) & (levels < whole.max())]
+    if min(z.shape) < 2:  # too few cells to trace a line through
+        levels = levels[:0]
+    else:  # the levels the cells shown cross
+        levels = levels[(levels > z.min()) & (levels < z.max())]
     entry = Line2D([], [], color="black", lw=0.7, label="height contours [m]")
     if not len(levels):  # relief too slight for a contour between its lowest and highest cell
         return entry
@@ -398,7 +431,8 @@ def save_evaluation(path: str | Path, runs: CourseRuns, title: str) -> Path:
     fig = plt.figure(figsize=(13, overview_h + 3.3 * rows + 0.6), dpi=110)
     grid = fig.add_gridspec(1 + rows, cols, height_ratios=[overview_h] + [3.3] * rows)
     ax = fig.add_subplot(grid[0, :])
-    classes_shown = draw_map(ax, scenario, world, zones=False)
+    ground = ground_picture(scenario, world) if scenario.has_terrain else None  # shaded once, for the course and each inset
+    classes_shown = draw_map(ax, scenario, world, zones=False, ground=ground)
     _draw_runs(ax, runs, scale=1.0)
     for z in zones:
         ok, n = zone_success.get(z.id, (0, 0))
@@ -434,20 +468,22 @@ def save_evaluation(path: str | Path, runs: CourseRuns, title: str) -> Path:
     )  # beside the course: never over the start or a zone
     ax.set_title(figure_text(title, scenario.classes))
     for k, z in enumerate(zones):
-        _draw_zone_inset(fig.add_subplot(grid[1 + k // cols, k % cols]), runs, z)
+        _draw_zone_inset(fig.add_subplot(grid[1 + k // cols, k % cols]), runs, z, ground)
     fig.tight_layout()
     return _save(fig, path, whole=True)
 
 
-def _draw_zone_inset(zax: plt.Axes, runs: CourseRuns, z: Zone) -> None:
-    """Zone ``z`` at a legible scale (4 m around it): its outline green when every planner run met
-    it, and the driver's and the planner's tracks."""
-    draw_map(zax, runs.scenario, runs.world, zones=False)
-    success = runs.zone_success.get(z.id, (0, 0))
+def _draw_zone_inset(zax: plt.Axes, runs: CourseRuns, z: Zone, ground: np.ndarray | None) -> None:
+    """Zone ``z`` at a legible scale (4 m around it) on the ``ground`` picture of the course (:func:`draw_map`):
+    its outline green when every planner run met it, and the driver's and the planner's tracks."""
     o = outline(z.shape)
     lo, hi = o.min(axis=0) - 4.0, o.max(axis=0) + 4.0
     half = max(hi - lo) / 2
     mid = (lo + hi) / 2
+    draw_map(
+        zax, runs.scenario, runs.world, zones=False, window=(mid[0] - half, mid[0] + half, mid[1] - half, mid[1] + half), ground=ground
+    )
+    success = runs.zone_success.get(z.id, (0, 0))
     ok, n = success
     colour = "lime" if n and ok == n else "red"
     zax.plot(o[:, 0], o[:, 1], color=colour, lw=1.2)

@@ -233,3 +233,31 @@ def test_relief_is_drawn_as_hillshade_and_labelled_contours_and_a_flat_map_as_be
             assert "height contours [m]" not in names and not contours
             np.testing.assert_array_equal(shown, scenario.classes.palette()[world.raster])  # the class colours, as always
         plt.close(fig)
+
+
+def test_a_zones_inset_draws_the_ground_within_its_window_alone_as_the_whole_map_draws_it_there():
+    """An inset shows the ground within its window alone (12 m of a 70 m world), its pixels those
+    the whole map shows there (the relief's shading set by the whole world), and the contours at
+    the whole map's levels."""
+    import numpy as np
+    from matplotlib.contour import ContourSet
+
+    from terrapref.plots import ground_picture
+
+    scenario = resolve_scenario("relief_demo")
+    world = rasterise(scenario)
+    fig, (whole_ax, inset_ax) = plt.subplots(1, 2)
+    draw_map(whole_ax, scenario, world, zones=False)
+    window = (20.0, 32.0, 10.0, 22.0)
+    draw_map(inset_ax, scenario, world, zones=False, window=window, ground=ground_picture(scenario, world))
+    whole, inset = (np.asarray(ax.get_images()[0].get_array()) for ax in (whole_ax, inset_ax))
+    x0, x1, y0, y1 = inset_ax.get_images()[0].get_extent()
+    assert x0 <= window[0] and y0 <= window[2] and x1 >= window[1] and y1 >= window[3]
+    assert inset.shape[0] * inset.shape[1] < whole.shape[0] * whole.shape[1] / 10
+    assert inset_ax.get_xlim() == window[:2] and inset_ax.get_ylim() == window[2:]
+    res = world.resolution_m
+    r0, c0 = round(y0 / res), round(x0 / res)
+    np.testing.assert_array_equal(inset, whole[r0 : r0 + inset.shape[0], c0 : c0 + inset.shape[1]])
+    levels = [tuple(c.levels) for ax in (whole_ax, inset_ax) for c in ax.collections if isinstance(c, ContourSet)]
+    assert len(levels) == 2 and set(levels[1]) <= set(levels[0])
+    plt.close(fig)
