@@ -88,27 +88,35 @@ def class_handles(classes: ClassTable, present: Sequence[int] | None = None) -> 
     return [Patch(color=np.array(c.color) / 255, label=class_label(c)) for c in classes.classes if keep is None or c.id in keep]
 
 
+class GroundView(NamedTuple):
+    """What of the ground a map draws: the picture of the whole world's ground
+    (:func:`ground_picture`, made once where a figure draws it several times) and the window
+    (x0, x1, y0, y1) [m] to show of it (None: all of it; a zone's inset shows a few metres)."""
+
+    picture: np.ndarray
+    window: tuple[float, float, float, float] | None = None
+
+
 def draw_map(
     ax: plt.Axes,
     scenario: Scenario,
     world: WorldMap,
     zones: bool = True,
     marks: dict[str, str] | None = None,
-    window: tuple[float, float, float, float] | None = None,
-    ground: np.ndarray | None = None,
+    view: GroundView | None = None,
 ) -> list:
     """Top-down map with the reference path, the start and the labelled zones, each label placed
     clear of the others; ``marks`` (zone id -> text, a missed zone's expected and chosen) are
-    added to their zones' labels in red. ``window`` (x0, x1, y0, y1) [m]: only the ground within
-    it is drawn, and the axes show it (a zone's inset). ``ground``: the picture of the whole
-    world's ground (:func:`ground_picture`), where one is drawn several times; made when None.
+    added to their zones' labels in red. ``view``: the ground's picture and the window of it
+    the axes show, only the cells within it drawn (None: the whole world, its picture made here).
     Returns the legend handles: the classes the map shows (none where it has no terrain,
     :attr:`Scenario.has_terrain`: the ground is left blank)."""
     classes = scenario.classes
+    window = view.window if view is not None else None
     rows, cols, extent = _cells_within(world, window)
     handles: list = []
     if scenario.has_terrain:
-        picture = ground if ground is not None else ground_picture(scenario, world)
+        picture = view.picture if view is not None else ground_picture(scenario, world)
         ax.imshow(picture[rows, cols], origin="lower", extent=extent, interpolation="nearest")
         handles = class_handles(classes, np.unique(world.raster[rows, cols]).tolist())
     else:
@@ -431,8 +439,8 @@ def save_evaluation(path: str | Path, runs: CourseRuns, title: str) -> Path:
     fig = plt.figure(figsize=(13, overview_h + 3.3 * rows + 0.6), dpi=110)
     grid = fig.add_gridspec(1 + rows, cols, height_ratios=[overview_h] + [3.3] * rows)
     ax = fig.add_subplot(grid[0, :])
-    ground = ground_picture(scenario, world) if scenario.has_terrain else None  # shaded once, for the course and each inset
-    classes_shown = draw_map(ax, scenario, world, zones=False, ground=ground)
+    ground = ground_picture(scenario, world)  # shaded once, for the course and each inset
+    classes_shown = draw_map(ax, scenario, world, zones=False, view=GroundView(ground))
     _draw_runs(ax, runs, scale=1.0)
     for z in zones:
         ok, n = zone_success.get(z.id, (0, 0))
@@ -473,16 +481,15 @@ def save_evaluation(path: str | Path, runs: CourseRuns, title: str) -> Path:
     return _save(fig, path, whole=True)
 
 
-def _draw_zone_inset(zax: plt.Axes, runs: CourseRuns, z: Zone, ground: np.ndarray | None) -> None:
+def _draw_zone_inset(zax: plt.Axes, runs: CourseRuns, z: Zone, ground: np.ndarray) -> None:
     """Zone ``z`` at a legible scale (4 m around it) on the ``ground`` picture of the course (:func:`draw_map`):
     its outline green when every planner run met it, and the driver's and the planner's tracks."""
     o = outline(z.shape)
     lo, hi = o.min(axis=0) - 4.0, o.max(axis=0) + 4.0
     half = max(hi - lo) / 2
     mid = (lo + hi) / 2
-    draw_map(
-        zax, runs.scenario, runs.world, zones=False, window=(mid[0] - half, mid[0] + half, mid[1] - half, mid[1] + half), ground=ground
-    )
+    window = (mid[0] - half, mid[0] + half, mid[1] - half, mid[1] + half)
+    draw_map(zax, runs.scenario, runs.world, zones=False, view=GroundView(ground, window))
     success = runs.zone_success.get(z.id, (0, 0))
     ok, n = success
     colour = "lime" if n and ok == n else "red"

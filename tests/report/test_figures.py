@@ -242,14 +242,14 @@ def test_a_zones_inset_draws_the_ground_within_its_window_alone_as_the_whole_map
     import numpy as np
     from matplotlib.contour import ContourSet
 
-    from terrapref.plots import ground_picture
+    from terrapref.plots import GroundView, ground_picture
 
     scenario = resolve_scenario("relief_demo")
     world = rasterise(scenario)
     fig, (whole_ax, inset_ax) = plt.subplots(1, 2)
     draw_map(whole_ax, scenario, world, zones=False)
     window = (20.0, 32.0, 10.0, 22.0)
-    draw_map(inset_ax, scenario, world, zones=False, window=window, ground=ground_picture(scenario, world))
+    draw_map(inset_ax, scenario, world, zones=False, view=GroundView(ground_picture(scenario, world), window))
     whole, inset = (np.asarray(ax.get_images()[0].get_array()) for ax in (whole_ax, inset_ax))
     x0, x1, y0, y1 = inset_ax.get_images()[0].get_extent()
     assert x0 <= window[0] and y0 <= window[2] and x1 >= window[1] and y1 >= window[3]
