@@ -99,6 +99,20 @@ def test_a_wall_of_lethal_terrain_across_the_map_ends_in_a_stop_not_in_contact(w
     assert [z.choice for z in m.zones] == [NOT_REACHED] and not m.zones[0].success
 
 
+def test_a_planner_whose_own_way_is_blocked_drives_the_nearest_free_one_rather_than_its_own(tmp_path: Path):
+    # Pure pursuit knows no terrain: from the start, 5 m right of the path, it heads for the path
+    # and so for a lethal strip that begins 0.5 m left of it, under the footprint's left edge. A
+    # way to its right stays free all along, so the stop rule never stops it; the command driven
+    # is then that way, not pure pursuit's own, and it runs beside the strip to the goal.
+    scenario = resolve_scenario(_strip_scenario(tmp_path, 10.5))
+    driver = PlannerDriver(Planner(PurePursuitPolicy()), keep=True)
+    log = run_episode(Simulation(scenario), driver, np.random.default_rng(0))
+    assert log.collisions == 0 and log.contact_s == 0.0
+    assert log.completed and NO_FREE_WAY not in log.stops  # some way was free at every frame
+    # Right of the path, pure pursuit turns left to it; the commands turned right, off the strip.
+    assert any(d.command[1] < 0 and d.stop is None for d in driver.decisions)
+
+
 def test_the_planner_says_why_it_stops_and_the_run_counts_it(wall: str):
     scenario = resolve_scenario(wall)
     driver = PlannerDriver(Planner(PurePursuitPolicy()), keep=True)
@@ -176,6 +190,32 @@ def test_every_ground_pixel_lethal_stops_the_runtime(model: Path):
     for i in range(3):
         d = runtime.decide(lethal, 0.1 * i, (0.0, 0.0, 0.0))
         assert d.stop == NO_FREE_WAY and tuple(d.command) == (0.0, 0.0)
+
+
+def test_the_way_driven_is_the_commands_own_where_free_else_the_nearest_free_one(model: Path):
+    runtime = _runtime(model)
+    camera = runtime.planner.camera
+    h, w = camera.shape
+    v, u = np.mgrid[0:h, 0:w]
+    points, hit = camera.back_project(np.stack([u + 0.5, v + 0.5], axis=-1))
+    classes = default_classes()
+    box = (points[..., 0] > 0.8) & (points[..., 0] < 2.0) & (np.abs(points[..., 1]) < 0.3)  # a lethal patch straight ahead
+    frame = np.where(hit, np.where(box, classes.id_of("non_traversable"), classes.id_of("grass")), UNKNOWN).astype(np.uint8)
+    for i in range(3):
+        runtime.decide(frame, 0.1 * i, (0.0, 0.0, 0.0))
+    rule, ground = runtime.planner.stop_rule, runtime.planner._stop_map
+    pose = Pose(0.0, 0.0, 0.0)
+    free = [float(r) for r in rule.yaw_rates if rule.arc_free(ground, pose, 1.0, r)]
+    assert free and not rule.arc_free(ground, pose, 1.0, 0.0)  # straight ahead is closed, some way is not
+    for own in free:
+        assert rule.way_rps(ground, pose, 1.0, own) == own  # a command whose own way is free is driven as it is
+    for own in (0.0, -0.05, 0.33, -1.0, 1.0):
+        if not rule.arc_free(ground, pose, 1.0, own):  # else the free way nearest to it, the lower on a tie
+            assert rule.way_rps(ground, pose, 1.0, own) == min(free, key=lambda r: (abs(r - own), r))
+    lethal = _ground(runtime, classes.id_of("non_traversable"))
+    for i in range(3, 8):
+        runtime.decide(lethal, 0.1 * i, (0.0, 0.0, 0.0))
+    assert rule.way_rps(ground, pose, 1.0, 0.0) is None and runtime.last.stop == NO_FREE_WAY
 
 
 def test_ids_no_class_table_names_are_refused_or_unknown_by_choice(model: Path):

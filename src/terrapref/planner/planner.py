@@ -262,12 +262,15 @@ class Planner:
     def _stop(
         self, choice: Choice, view: SegmentationView, pose: Pose, time_s: float | None, state: PathState
     ) -> tuple[Choice, str | None]:
-        """``choice`` (turned the other way where a turn back to the path is blocked one way and
-        free the other) and why the stop rule stops instead (None: it does not); the speed rule is
-        told the speed commanded."""
-        stop = self.stop_rule.check(self._stop_map, view, pose, choice.command.v, choice.command.w, time_s)
+        """``choice`` and why the stop rule stops instead (None: it does not); where the choice's
+        own way is not free and another is, ``choice`` steered onto the nearest free one (a turn
+        back to the path blocked one way, turned the other way where that is free); the speed
+        rule is told the speed commanded."""
+        stop, way = self.stop_rule.check(self._stop_map, view, pose, choice.command.v, choice.command.w, time_s)
         if stop is None and state.turn_rps is not None and choice.command.v > 0:
             choice, stop = self._free_turn(choice, pose)
+        elif stop is None and way != choice.command.w:
+            choice = Choice(int(self.control.label_of(way)), Command(choice.command.v, way))
         if self.speed is not None:
             self.speed.commanded(0.0 if stop else choice.command.v)
         return choice, stop

@@ -24,6 +24,10 @@ its command, the planner commands v = 0 instead when:
   limit by the wall clock: they give the rule the time and the last frame's (:meth:`StopRule.stale`),
   as no frame arrives to check.
 
+Where it does not stop, the command is driven on its own way if that is free, else on the free
+way nearest to it (the same speed, the nearest yaw rate: :meth:`StopRule.way_rps`): a vehicle
+never drives a way the rule reads as blocked because another was free.
+
 The planner moves on by itself once the reason has cleared (a free way, for ``resume_after_s``). The reasons'
 names are terrapref.stops'.
 """
@@ -42,7 +46,7 @@ from terrapref.groundmap.map import GroundMap
 from terrapref.groundmap.map_compiled import UNSETTLED, MapLayers, map_decide
 from terrapref.groundmap.settings import MapSettings
 from terrapref.records import to_plain
-from terrapref.rules.base import StopRunner
+from terrapref.rules.base import StopRunner, Verdict
 from terrapref.stops import BLIND, NO_FREE_WAY, NO_FREE_WAY_GEOMETRY, held_too_long
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose
@@ -228,8 +232,10 @@ class StopRule(StopRunner):
 
     def check(
         self, gmap: GroundMap, view: SegmentationView, pose: Pose, v_mps: float, w_rps: float, time_s: float | None = None
-    ) -> str | None:
-        """The reason to stop at this frame, or None to drive the driving rule's command (``v_mps``, ``w_rps``).
+    ) -> Verdict:
+        """The reason to stop at this frame (None: drive) and the yaw rate to drive the driving
+        rule's command (``v_mps``, ``w_rps``) with: ``w_rps`` where its own way is free, else the
+        nearest free way's (:meth:`way_rps`).
 
         Args:
             gmap: the ground map read (the planner's, updated with the frame).
@@ -245,18 +251,19 @@ class StopRule(StopRunner):
             if self._blind_since is None:
                 self._blind_since = now
             if now - self._blind_since >= self.config.blind_after_s - 1e-9:
-                return BLIND
+                return Verdict(BLIND, w_rps)
         else:
             self._blind_since = None
-        if not self.free_way(gmap, pose, v_mps, w_rps):
+        way = self.way_rps(gmap, pose, v_mps, w_rps)
+        if way is None:
             self._stopped, self._free_since = self.closed_by(gmap, pose, v_mps, self.yaw_rates), None
-            return self._stopped
+            return Verdict(self._stopped, w_rps)
         if self._stopped:  # free again: moves on once it has stayed free resume_after_s
             self._free_since = now if self._free_since is None else self._free_since
             if now - self._free_since < self.config.resume_after_s - 1e-9:
-                return self._stopped
+                return Verdict(self._stopped, w_rps)
             self._stopped, self._free_since = None, None
-        return None
+        return Verdict(None, way)
 
     def closed_by(self, gmap: GroundMap, pose: Pose, v_mps: float, yaw_rates: np.ndarray) -> str:
         """Why the ways of ``yaw_rates`` at ``v_mps``, none of them free on ``gmap``, are closed:
@@ -274,9 +281,18 @@ class StopRule(StopRunner):
 
     def free_way(self, gmap: GroundMap, pose: Pose, v_mps: float, w_rps: float = 0.0) -> bool:
         """Whether some way ahead keeps the footprint on seen, non-lethal ground of ``gmap`` over the
-        stopping distance at ``v_mps``; the arc nearest ``w_rps`` is tried first."""
-        first = int(np.argmin(np.abs(self.yaw_rates - w_rps)))
-        return self._first_free(gmap, pose, v_mps, self.yaw_rates, first) >= 0
+        stopping distance at ``v_mps``: the arc of ``w_rps`` or one of the ways checked."""
+        return self.way_rps(gmap, pose, v_mps, w_rps) is not None
+
+    def way_rps(self, gmap: GroundMap, pose: Pose, v_mps: float, w_rps: float) -> float | None:
+        """The yaw rate [rad/s] to drive at ``v_mps``: ``w_rps`` where its own arc is free on
+        ``gmap``, else that of the free way (of the ways checked) nearest to it, the lower on a
+        tie; None where none is free."""
+        if self.arc_free(gmap, pose, v_mps, w_rps):
+            return float(w_rps)
+        nearest = self.yaw_rates[np.argsort(np.abs(self.yaw_rates - w_rps), kind="stable")]
+        a = self._first_free(gmap, pose, v_mps, nearest, 0)
+        return None if a < 0 else float(nearest[a])
 
     def arc_free(self, gmap: GroundMap, pose: Pose, v_mps: float, w_rps: float) -> bool:
         """Whether the arc of ``w_rps`` [rad/s] at ``v_mps`` [m/s] itself keeps the footprint on

@@ -46,6 +46,7 @@ from terrapref.rules.base import (
     SpeedRunner,
     SteeringRunner,
     StopRunner,
+    Verdict,
     Where,
 )
 from terrapref.rules.offset.rule import OffsetConfig, OffsetRule
@@ -63,6 +64,7 @@ __all__ = [
     "STOP",
     "SpeedRunner",
     "StopRunner",
+    "Verdict",
     "ArgmaxRule",
     "Choice",
     "HeaderContext",

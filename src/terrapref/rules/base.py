@@ -15,7 +15,7 @@ from __future__ import annotations
 import abc
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 import numpy as np
 
@@ -170,6 +170,19 @@ class SpeedRunner(abc.ABC):
         same curvature, turned no harder than the rule allows at the vehicle's speed."""
 
 
+class Verdict(NamedTuple):
+    """What the stop rule says of one frame's command.
+
+    Attributes:
+        stop: why the command must be a stop (terrapref.stops.REASONS); None: it is driven.
+        w_rps: the yaw rate to drive it with [rad/s]: the command's own, or, where its way is not
+            free and another is, that other way's.
+    """
+
+    stop: str | None
+    w_rps: float
+
+
 class StopRunner(abc.ABC):
     """The stop rule bound to one planner (terrapref.planner.stop): whether to command v = 0, and
     why (terrapref.stops.REASONS), given the frame, the command chosen and the frames' times."""
@@ -181,8 +194,9 @@ class StopRunner(abc.ABC):
         """Start a new run (a new path)."""
 
     @abc.abstractmethod
-    def check(self, ground_map: GroundMap, view: SegmentationView, pose: Pose, v: float, w: float, time_s: float | None) -> str | None:
-        """Why the command (``v``, ``w``) chosen on this frame, taken at ``time_s``, must be a stop; None: it need not."""
+    def check(self, ground_map: GroundMap, view: SegmentationView, pose: Pose, v: float, w: float, time_s: float | None) -> Verdict:
+        """Why the command (``v``, ``w``) chosen on this frame, taken at ``time_s``, must be a stop
+        (None: it need not), and the yaw rate to drive it with."""
 
     @abc.abstractmethod
     def stale(self, now_s: float, frame_s: float | None, hold_s: float) -> bool:
