@@ -4,6 +4,7 @@ under the whole footprint, and scores that count only what was driven."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -161,13 +162,17 @@ def _runtime(model: Path, **kwargs) -> PlannerRuntime:
     return runtime
 
 
-def _ground(runtime: PlannerRuntime, class_id: int) -> np.ndarray:
-    """A frame whose ground pixels all show ``class_id`` (the sky 255)."""
+def _ground(
+    runtime: PlannerRuntime, class_id: int, patch: Callable[[np.ndarray], np.ndarray] | None = None, patch_id: int = 0
+) -> np.ndarray:
+    """A frame whose ground pixels all show ``class_id`` (the sky 255), or ``patch_id`` where
+    ``patch`` holds (given each pixel's ground point (H, W, 2) in the vehicle frame [m])."""
     camera = runtime.planner.camera
     h, w = camera.shape
     v, u = np.mgrid[0:h, 0:w]
     points, hit = camera.back_project(np.stack([u + 0.5, v + 0.5], axis=-1))
-    return np.where(hit, class_id, UNKNOWN).astype(np.uint8)
+    ids = np.where(patch(points), patch_id, class_id) if patch is not None else class_id
+    return np.where(hit, ids, UNKNOWN).astype(np.uint8)
 
 
 def test_every_pixel_unknown_stops_the_runtime_and_a_clear_frame_moves_it_on(model: Path):
@@ -194,13 +199,12 @@ def test_every_ground_pixel_lethal_stops_the_runtime(model: Path):
 
 def test_the_way_driven_is_the_commands_own_where_free_else_the_nearest_free_one(model: Path):
     runtime = _runtime(model)
-    camera = runtime.planner.camera
-    h, w = camera.shape
-    v, u = np.mgrid[0:h, 0:w]
-    points, hit = camera.back_project(np.stack([u + 0.5, v + 0.5], axis=-1))
     classes = default_classes()
-    box = (points[..., 0] > 0.8) & (points[..., 0] < 2.0) & (np.abs(points[..., 1]) < 0.3)  # a lethal patch straight ahead
-    frame = np.where(hit, np.where(box, classes.id_of("non_traversable"), classes.id_of("grass")), UNKNOWN).astype(np.uint8)
+
+    def ahead(points: np.ndarray) -> np.ndarray:  # a lethal patch straight ahead
+        return (points[..., 0] > 0.8) & (points[..., 0] < 2.0) & (np.abs(points[..., 1]) < 0.3)
+
+    frame = _ground(runtime, classes.id_of("grass"), ahead, classes.id_of("non_traversable"))
     for i in range(3):
         runtime.decide(frame, 0.1 * i, (0.0, 0.0, 0.0))
     rule, ground = runtime.planner.stop_rule, runtime.planner._stop_map

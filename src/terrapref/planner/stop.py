@@ -279,11 +279,6 @@ class StopRule(StopRunner):
         ``now_s``: held for longer than ``hold_s`` [s] (terrapref.stops.held_too_long)."""
         return held_too_long(now_s, frame_s, hold_s)
 
-    def free_way(self, gmap: GroundMap, pose: Pose, v_mps: float, w_rps: float = 0.0) -> bool:
-        """Whether some way ahead keeps the footprint on seen, non-lethal ground of ``gmap`` over the
-        stopping distance at ``v_mps``: the arc of ``w_rps`` or one of the ways checked."""
-        return self.way_rps(gmap, pose, v_mps, w_rps) is not None
-
     def way_rps(self, gmap: GroundMap, pose: Pose, v_mps: float, w_rps: float) -> float | None:
         """The yaw rate [rad/s] to drive at ``v_mps``: ``w_rps`` where its own arc is free on
         ``gmap``, else that of the free way (of the ways checked) nearest to it, the lower on a
