@@ -12,7 +12,7 @@ from test_offset_rule import DRIVER_LIKE, _offset_meta
 
 from helpers import skip_path_weights
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer
-from terrapref.interop.node_core import PlannerNodeCore, Watchdog
+from terrapref.interop.node_core import BEFORE_CLOCK, PlannerNodeCore, Watchdog
 from terrapref.interop.robot import load_robot
 from terrapref.interop.ros_messages import camera_info, compressed_image, header, odometry, png, pose, typestore, yaw_quaternion
 from terrapref.interop.runtime import PlannerRuntime
@@ -209,6 +209,20 @@ def test_an_image_stamped_far_ahead_of_the_nodes_clock_is_refused_and_counted(se
         core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0), now_s=now - 3600.0)
     assert core.skipped["images ahead of the clock"] == 1 and told == []
     assert core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0), now_s=now) is not None
+
+
+def test_an_image_that_comes_before_a_simulated_clock_ticks_is_skipped_not_driven_as_a_stop(setup):
+    """Under use_sim_time the node's time is 0 until the first /clock, which may come after the
+    first frame: a command decided on it would be found in the clock's future and turned into a
+    stop; the image is skipped instead, counted, and the next one, once the clock ticks, decided on."""
+    core, _ = _core(setup)
+    core.on_odometry(_odom(0))
+    assert core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0), now_s=0.0) is None
+    assert core.skipped[BEFORE_CLOCK] == 1 and core.decided == 0
+    t = 1_700_000_000.0  # the first frame's stamp, which the clock reaches now
+    assert core.on_image("sensor_msgs/msg/CompressedImage", _image(setup, 0), now_s=t) is not None
+    command, reason = core.status_at(t)
+    assert reason is None and command.v > 0.0
 
 
 def test_the_node_stops_when_no_frame_has_been_decided_on_for_a_while_by_the_wall_clock(setup):

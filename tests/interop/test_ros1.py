@@ -87,9 +87,7 @@ PLAYER = textwrap.dedent('''
         p.pose.position.x, p.pose.position.y, p.pose.orientation.w = float(x), float(y), 1.0
         path.poses.append(p)
     path_pub.publish(path)
-    results = []
-    for i in range(first, first + frames):
-        t = 100.0 + 0.1 * i
+    def messages(i, t):
         x, y, yaw = (float(v) for v in rec.poses[i])
         odom = PoseWithCovarianceStamped()
         odom.header.stamp = rospy.Time.from_sec(t)
@@ -100,6 +98,18 @@ PLAYER = textwrap.dedent('''
         image.header.stamp = rospy.Time.from_sec(t)
         depth = Image(height=480, width=640, encoding="32FC1", is_bigendian=0, step=4 * 640, data=level.tobytes())
         depth.header.stamp = rospy.Time.from_sec(t)
+        return odom, depth, image
+    # The first frame before any /clock (the node's time still 0), sent for 3 s while the node takes
+    # its calibration and path: no command can be timed by that clock, and none comes.
+    for _ in range(12):
+        for msg, pub in zip(messages(first, 100.0 + 0.1 * first), (odom_pub, depth_pub, seg_pub)):
+            pub.publish(msg)
+        time.sleep(0.25)
+    before_clock = got.get(round(100.0 + 0.1 * first, 3))
+    results = []
+    for i in range(first, first + frames):
+        t = 100.0 + 0.1 * i
+        odom, depth, image = messages(i, t)
         clock_pub.publish(Clock(clock=rospy.Time.from_sec(t)))
         while round(t, 3) not in got:  # sent again until decided on (the node may not have the calibration yet)
             odom_pub.publish(odom)
@@ -119,7 +129,7 @@ PLAYER = textwrap.dedent('''
         time.sleep(0.1)
     header, raw = next((h, raw) for h, raw in maps if stamp(raw) >= later - 1e-6)
     heard = {k: header[k] for k in ("type", "md5sum", "latching")} | {"raw": raw.hex()}
-    json.dump({"commands": results, "grid_map": heard}, open(out, "w"))
+    json.dump({"commands": results, "before_clock": before_clock, "grid_map": heard}, open(out, "w"))
 ''')
 
 
@@ -220,6 +230,7 @@ def test_the_node_commands_what_the_runtime_commands_on_the_same_frames(setup, t
                 os.killpg(proc.pid, 15)
                 proc.wait(timeout=30)
     heard = json.loads((tmp_path / "got.json").read_text())
+    assert heard["before_clock"] is None  # a frame before the first /clock is skipped, not answered with a stop
     got = np.array(heard["commands"])
     rec = read_recording(root / "rec")
     runtime = PlannerRuntime(model)

@@ -64,6 +64,7 @@ ODOMETRY_KEPT_S = 5.0  # how far back odometry is kept for interpolating to an i
 ODOMETRY_WAIT_S = 0.5  # how long an image newer than the odometry waits for it [s]
 DEPTH_WAIT_S = 0.5  # how far an image's stamp may be past the newest depth image's for it to wait for a nearer one [s]
 DEPTH_KEPT = 32  # depth images held at most for label images still to come (the newest): about 1 s of a 30 Hz camera
+BEFORE_CLOCK = "images before the node's clock started"  # why an image that came before a simulated clock's first tick is skipped
 NO_DEPTH = f"without a depth image within {1000 * DEPTH_PAIRING_S:.0f} ms"  # why a frame on a robot with depth is skipped
 AHEAD_S = 1.0  # odometry and images stamped further ahead of the node's clock are refused [s] (the system's clock)
 SIM_AHEAD_S = 10.0  # the same under a simulated clock, whose /clock messages may come late (a node busy making its planner) [s]
@@ -146,6 +147,7 @@ class PlannerNodeCore:
             "paths of fewer than two distinct points": 0,
             "odometry ahead of the clock": 0,
             "images ahead of the clock": 0,
+            BEFORE_CLOCK: 0,
             "calibrations of another size": 0,
             "depth images ahead of the clock": 0,
             "depth images of another encoding or size": 0,
@@ -356,12 +358,18 @@ class PlannerNodeCore:
         with depth it waits the same way for a depth image at or past its stamp, while the
         newest depth image is at most :data:`DEPTH_WAIT_S` older (:meth:`on_depth` then decides
         on it, with the nearest one within :data:`DEPTH_PAIRING_S`); with none that near it is
-        skipped (counted). With ``now_s``, the node's clock [s] (None before it runs), an image
-        stamped ahead of it by more than the runtime allows is refused (ValueError, counted).
+        skipped (counted). With ``now_s``, the node's clock [s], an image stamped ahead of it by
+        more than the runtime allows is refused (ValueError, counted); a clock of 0 is a simulated
+        one that has not ticked yet (ROS's time before the first ``/clock``), and the image is
+        skipped (counted): the command decided on it could not be timed, and would be refused as
+        lying in the clock's future. None: no clock to check against.
         """
         with self._lock:
             if not self.ready:
                 self.skipped["before the calibration or the path"] += 1
+                return None
+            if now_s == 0.0:
+                self.skipped[BEFORE_CLOCK] += 1
                 return None
             t = stamp_s(msg.header)
             if self._ahead(t, now_s, "images"):

@@ -243,8 +243,8 @@ class _Node:
                 f"{self.robot.topics['segmentation']}: {kind} is not a label image (sensor_msgs/Image or CompressedImage); ignored"
             )
         cls, msgtype = self.image_types[kind]
-        now = self.rospy.get_time()
-        self.log.guarded(lambda: self.core.on_image(msgtype, cls().deserialize(raw._buff), self.robot.topics["segmentation"], now or None))
+        now = self.rospy.get_time()  # 0 under use_sim_time before /clock ticks: the image is skipped
+        self.log.guarded(lambda: self.core.on_image(msgtype, cls().deserialize(raw._buff), self.robot.topics["segmentation"], now))
 
     def on_odometry(self, raw) -> None:
         """Odometry, or a PoseStamped or PoseWithCovarianceStamped, as the robot file allows."""

@@ -478,8 +478,7 @@ class _Node:
     def on_image(self, msg, msgtype: str) -> None:
         """A label image, Image or CompressedImage, as the robot publishes it on the topic."""
         topic = self.names.resolve(self.robot.topics["segmentation"])
-        now = self.clock.now() if self.clock.running() else None
-        self.log.guarded(lambda: self.core.on_image(msgtype, msg, topic, now))
+        self.log.guarded(lambda: self.core.on_image(msgtype, msg, topic, self.clock.now()))  # 0 before /clock ticks: skipped
 
     def on_depth(self, msg) -> None:
         """A depth image, held for the label images near its stamp."""
