@@ -114,6 +114,25 @@ def check_figure(out: str | Path, flag: str) -> None:
         raise UserError(str(out), f"a figure needs one of the suffixes {', '.join(FIGURE_FORMATS)}", field=flag)
 
 
+def check_distinct_outputs(outputs: Sequence[tuple[str, str | Path | None]]) -> None:
+    """Refuse two output flags of one command that name the same file: the second written would
+    replace the first. ``outputs``: (flag, path) pairs, a path None where the flag was not given.
+
+    Raises:
+        UserError: two paths resolve to the same file (naming the later flag, and the earlier).
+    """
+    from terrapref.errors import UserError
+
+    seen: dict[Path, str] = {}
+    for flag, path in outputs:
+        if path is None:
+            continue
+        target = Path(path).resolve()
+        if target in seen:
+            raise UserError(str(path), f"is also {seen[target]}'s file; {flag} must name a file of its own", field=flag)
+        seen[target] = flag
+
+
 def check_output(out: str | Path, flag: str, inputs: Sequence[str | Path] = (), folder: bool = False, force: bool | None = None) -> None:
     """Refuse an output before any work: one that is an input or lies inside one, a device, FIFO
     or socket, a file where a folder goes (or the reverse), a place that cannot be written, and,

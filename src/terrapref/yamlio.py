@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +35,24 @@ class _UniqueKeyLoader(_SafeLoader):
             if line != key_node.start_mark.line + 1:
                 raise yaml.constructor.ConstructorError(None, None, f"key {key!r} given twice (first at line {line})", key_node.start_mark)
         return super().construct_mapping(node, deep)
+
+
+class _Dumper(yaml.SafeDumper):
+    """PyYAML's safe dumper, quoting what the loader would read as a number (:data:`_EXPONENT`)."""
+
+
+# YAML 1.2 reads 5e-2 and 1E3 as numbers; PyYAML, by YAML 1.1, wants a dot in the mantissa
+# (5.0e-2) and reads them as strings: a file written by another tool would be refused field by field.
+# The dumper knows it too, so that a string such as "1e5" is written quoted and read back a string.
+_EXPONENT = re.compile(r"^[-+]?[0-9][0-9_]*[eE][-+]?[0-9]+$")
+for _cls in (_UniqueKeyLoader, _Dumper):
+    _cls.add_implicit_resolver("tag:yaml.org,2002:float", _EXPONENT, list("-+0123456789"))
+
+
+def dump_yaml(data: Any, **options: Any) -> str:
+    """``yaml.safe_dump(data, **options)``, with strings that :func:`load_yaml_text` would read as
+    numbers quoted."""
+    return yaml.dump(data, Dumper=_Dumper, **options)
 
 
 _OPEN = (yaml.MappingStartEvent, yaml.SequenceStartEvent)

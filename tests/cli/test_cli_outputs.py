@@ -87,6 +87,18 @@ def test_render_refuses_a_lossy_image_name_before_writing(tmp_path: Path, capsys
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("flags", [("--out", "--depth"), ("--out", "--preview"), ("--preview", "--depth")])
+def test_render_refuses_two_outputs_that_name_one_file_before_writing(tmp_path: Path, capsys, flags: tuple[str, str]):
+    """Written one after the other, the second would replace the first: the class ids lost."""
+    outputs = {"--out": tmp_path / "seg.png", "--preview": tmp_path / "view.png", "--depth": tmp_path / "depth.png"}
+    outputs[flags[1]] = outputs[flags[0]]
+    argv = [arg for flag, path in outputs.items() for arg in (flag, str(path))]
+    assert main(["render", "relief_demo", *argv]) == 2
+    same = outputs[flags[0]]
+    assert _error(capsys) == f"error: {same}: {flags[1]}: is also {flags[0]}'s file; {flags[1]} must name a file of its own"
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_export_onnx_of_a_recording_says_which_format_a_recording_takes(tmp_path: Path, capsys):
     (tmp_path / "rec").mkdir()
     assert main(["export", str(tmp_path / "rec"), "--format", "onnx", "--out", str(tmp_path / "m.onnx")]) == 2

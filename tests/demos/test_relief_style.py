@@ -68,6 +68,8 @@ def test_named_styles_and_pairs_over_them_are_read():
         ("rough_mps=0", "rough_mps and rough_m > 0"),
         ("up_mps_per_deg=-0.1", "must be >= 0"),
         ("roll_deg=8,roll_deg=9", "roll_deg is given twice"),
+        ("default,up_mps_per_deg=10", "must be at most 0.2"),  # a driver that crawls up any grade
+        ("none,roll_deg=8", "none (relief driven as if it were flat) takes no k=v changes"),
     ],
 )
 def test_a_bad_relief_style_is_refused_naming_the_flag(text: str, says: str):

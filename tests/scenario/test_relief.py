@@ -10,11 +10,14 @@ from typing import Any
 import numpy as np
 import pytest
 
+from terrapref.errors import ScenarioError
 from terrapref.scenario import FORMAT, parse_scenario
 from terrapref.scenario.relief import Noise
+from terrapref.sim import Simulation
 from terrapref.terrain import default_classes
+from terrapref.vehicle.ground import drivable, start_attitude
 from terrapref.world import WorldMap, rasterise
-from terrapref.world.relief import noise_height
+from terrapref.world.relief import height_field, noise_height
 
 # A 20 m x 10 m map of 0.1 m cells: cell (row r, column c) has its centre at (0.1 c + 0.05, 0.1 r + 0.05).
 FLAT: dict[str, Any] = {
@@ -108,7 +111,7 @@ def test_the_worlds_roughness_is_the_heights_deviation_about_their_plane() -> No
 
 
 def test_entries_add_up_in_order() -> None:
-    plateau = {"plateau": {"polygon": [[2.0, 2.0], [9.0, 2.0], [9.0, 8.0], [2.0, 8.0]], "height_m": 1.5, "edge_m": 1.0}}
+    plateau = {"plateau": {"polygon": [[3.0, 2.0], [9.0, 2.0], [9.0, 8.0], [3.0, 8.0]], "height_m": 1.5, "edge_m": 1.0}}
     ditch = {"ridge": {"polyline": [[15.05, 0.0], [15.05, 10.0]], "width_m": 2.0, "height_m": -0.5}}
     z = height_of(plateau, MOUND, ditch)
     assert at(z, 5.05, 5.05) == pytest.approx(2.5)  # the mound stands on the plateau
@@ -116,6 +119,70 @@ def test_entries_add_up_in_order() -> None:
     assert at(z, 15.05, 5.05) == pytest.approx(-0.5)
     alone = [height_of(e).astype(np.float64) for e in (plateau, MOUND, ditch)]
     np.testing.assert_allclose(z, alone[0] + alone[1] + alone[2], atol=1e-6)  # each alone was rounded to float32
+
+
+def test_a_part_of_the_height_field_holds_the_whole_fields_values_there() -> None:
+    """What the scenario reader reads round a start: the same cells, bit for bit, as the whole field."""
+    scenario = parse_scenario(
+        {
+            **copy.deepcopy(FLAT),
+            "relief": [
+                {"noise": {"amplitude_m": 0.3, "wavelength_m": 4.0, "seed": 7}},
+                MOUND,
+                {"plateau": {"polygon": [[12.0, 1.0], [18.0, 1.0], [15.0, 9.0]], "height_m": 0.4, "edge_m": 0.5}},
+            ],
+        },
+        "relief_test.yaml",
+    )
+    whole = height_field(scenario.relief, scenario.grid_shape, scenario.resolution_m)
+    for rows, cols in ((slice(0, 100), slice(0, 200)), (slice(30, 71), slice(20, 61)), (slice(0, 12), slice(150, 200))):
+        part = height_field(scenario.relief, scenario.grid_shape, scenario.resolution_m, (rows, cols))
+        assert np.array_equal(part, whole[rows, cols])
+
+
+@pytest.mark.parametrize(("height_m", "refused"), [(2.0, True), (0.2, False)])
+def test_a_start_that_would_tip_the_vehicle_is_refused(height_m: float, refused: bool) -> None:
+    """A bank rising beside the start: 2 m over 1.6 m rolls the default vehicle past 25 deg (a run
+    would count a tip before it moved), 0.2 m does not; the attitude read from the cells round the
+    start is the simulator's, to rounding."""
+    bank = {"plateau": {"polygon": [[0.0, 5.8], [20.0, 5.8], [20.0, 10.0], [0.0, 10.0]], "height_m": height_m, "edge_m": 1.6}}
+    scenario = parse_scenario({**copy.deepcopy(FLAT), "relief": [bank]}, "bank.yaml")
+    assert start_attitude(scenario) == pytest.approx(Simulation(scenario).reset().attitude, rel=1e-12, abs=1e-15)
+    if not refused:
+        assert drivable(scenario) is scenario
+        return
+    with pytest.raises(ScenarioError) as err:
+        drivable(scenario)
+    assert err.value.lines() == [
+        "bank.yaml: start: (1, 5) stands the vehicle at roll 51.3 deg, pitch 0.0 deg, "
+        "past the default vehicle's limits (25 deg of roll, 30 of pitch); start it on gentler ground"
+    ]
+
+
+@pytest.mark.parametrize(
+    ("entry", "problem"),
+    [
+        ({"mound": {"center": [12.03, 5.03], "radius": 0.02, "height_m": 1.0}}, "relief[0].mound.radius: must be at least one cell (0.1 m"),
+        (
+            {"ridge": {"polyline": [[12.03, 0.0], [12.03, 9.0]], "width_m": 0.05, "height_m": 1.0}},
+            "relief[0].ridge.width_m: must be at least 2 cells (0.2 m",
+        ),
+        (
+            {"plateau": {"polygon": [[12.0, 5.0], [12.03, 5.0], [12.0, 5.03]], "height_m": 1.0, "edge_m": 0.0}},
+            "relief[0].plateau.polygon: is smaller than one cell of the map (0.1 m square)",
+        ),
+    ],
+    ids=["mound", "ridge", "plateau"],
+)
+def test_relief_finer_than_the_grid_is_refused_rather_than_lost_between_the_cells(entry: dict, problem: str) -> None:
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario({**copy.deepcopy(FLAT), "relief": [entry]}, "fine.yaml")
+    assert len(err.value.lines()) == 1 and err.value.lines()[0].startswith(f"fine.yaml: {problem}")
+    smallest = {"mound": ("radius", 0.1), "ridge": ("width_m", 0.2)}.get(next(iter(entry)))
+    if smallest is not None:  # at the least size, the ground changes
+        kind = next(iter(entry))
+        z = height_of({kind: {**entry[kind], smallest[0]: smallest[1]}})
+        assert z.max() > 0.0
 
 
 def test_noise_of_a_known_seed_has_known_values_and_is_the_same_on_every_build() -> None:

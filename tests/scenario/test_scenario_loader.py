@@ -722,8 +722,13 @@ def test_good_name(name: str) -> None:
         ([[1.0, 1.0], [2.0, 2.0], [3.0, 3.0]], "has zero area (vertices are collinear)"),
         ([[1.0, 1.0], [5.0, 1.0], [3.0, 1.0], [2.0, 1.0]], "has zero area (vertices are collinear)"),
         ([[0.1, 0.3], [0.7, 2.1], [1.3, 3.9]], "has zero area (vertices are collinear)"),
+        (
+            [[1.0, 1.0], [3.0, 3.0], [3.0, 1.0], [1.0, 3.0]],  # a bow tie: its halves' areas cancel
+            "has zero area: it crosses itself (its edge from vertex 0 crosses the one from vertex 2) and its parts cancel; "
+            "give the vertices in order round it",
+        ),
     ],
-    ids=["two-vertices", "none", "duplicate", "all-same", "collinear", "collinear-4", "collinear-decimals"],
+    ids=["two-vertices", "none", "duplicate", "all-same", "collinear", "collinear-4", "collinear-decimals", "bow-tie"],
 )
 def test_degenerate_polygon(vertices: list, message: str) -> None:
     data = edited(lambda d: d["terrain"][2].update(polygon=vertices))

@@ -121,6 +121,7 @@ class Straight:
 
 
 def test_a_run_counts_its_tips_and_times_stuck_and_keeps_its_largest_roll_and_pitch() -> None:
+    from terrapref.cli.demos import incidents
     from terrapref.evaluation.scoring import score_run
     from terrapref.sim import run_episode
 
@@ -138,3 +139,6 @@ def test_a_run_counts_its_tips_and_times_stuck_and_keeps_its_largest_roll_and_pi
     flat = Simulation(parse_scenario(copy.deepcopy(FLAT), "ground_test.yaml"), config=SimConfig(time_limit_s=3.0))
     flat_log = run_episode(flat, Straight(Command(1.0, 0.0)), np.random.default_rng(0))
     assert (flat_log.tips, flat_log.stuck, flat_log.max_pitch_deg) == (0, 0, 0.0) and "tips" not in flat_log.summary()
+    # What record prints of the drive: the time stuck beside the collisions, as it counts; a drive without, as before.
+    assert incidents(log) == "0 collisions, 0 tips, 1 times stuck (roll at most 0 deg, pitch 11.31 deg)"
+    assert incidents(flat_log) == "0 collisions"

@@ -200,3 +200,19 @@ def watching(view):
 def by_recording(bar):
     """A featurising progress (terrapref.dataset.Featuring) that moves ``bar`` a whole recording at a time."""
     return lambda p: bar.update(p.recordings_done, f"{p.recordings_done}/{p.recordings} recordings") if p.recordings_done else None
+
+
+def incidents(log) -> str:
+    """What of a drive counts against its safety, in words: its collisions (and the time and
+    distance with lethal terrain under the vehicle), and on relief its tips and times stuck, which
+    count as they do."""
+    line = f"{log.collisions} collisions"
+    if log.contact_s:
+        line += f" ({log.contact_s:.1f} s, {log.contact_m:.1f} m with lethal terrain under the vehicle)"
+    relief = log.relief_summary()
+    if relief["tips"] or relief["stuck"]:
+        line += (
+            f", {relief['tips']} tips, {relief['stuck']} times stuck "
+            f"(roll at most {relief['max_roll_deg']:g} deg, pitch {relief['max_pitch_deg']:g} deg)"
+        )
+    return line

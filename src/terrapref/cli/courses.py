@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 from terrapref.cli.common import SCENARIO_HELP, add_classes_arg, add_force_arg, check_table, class_table
 from terrapref.configargs import finite_float
 from terrapref.errors import UserError
-from terrapref.fileio import check_distinct, check_figure, check_output, write_text_atomic
+from terrapref.fileio import check_distinct, check_distinct_outputs, check_figure, check_output, write_text_atomic
 
 if TYPE_CHECKING:  # for the hints only: the command line imports what a command needs when it runs
     from terrapref.learning.identify import FollowUp
@@ -21,6 +21,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     from terrapref.filekinds import KINDS, check_file, template
     from terrapref.scenario import load_scenario
     from terrapref.scenario.catalog import scenario_path
+    from terrapref.vehicle.ground import drivable
 
     if args.template is not None:
         if args.files:
@@ -34,9 +35,12 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     for name in args.files:
         try:
             if _is_file(name):
-                kind = check_file(name, table).title
+                kind = check_file(name, table)
+                if kind is KINDS["scenario"]:  # and where a run would begin: not past the vehicle's limits
+                    drivable(load_scenario(name, table))
+                kind = kind.title
             else:  # a packaged scenario's name
-                load_scenario(scenario_path(name), table)
+                drivable(load_scenario(scenario_path(name), table))
                 kind = KINDS["scenario"].title
         except UserError as exc:
             for line in exc.lines():
@@ -85,6 +89,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
 
     if args.pose is not None and not all(math.isfinite(v) for v in args.pose):
         raise UserError("--pose", "X, Y and YAW_DEG must be finite numbers")
+    check_distinct_outputs([("--out", args.out), ("--preview", args.preview), ("--depth", args.depth)])
     check_output(args.out, "--out", [args.scenario], force=args.force)
     if args.preview:
         check_output(args.preview, "--preview", [args.scenario, args.out], force=args.force)

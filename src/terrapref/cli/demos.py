@@ -16,6 +16,7 @@ from terrapref.cli.common import (
     by_recording,
     check_table,
     class_table,
+    incidents,
     live_view,
     perception_model,
 )
@@ -35,11 +36,12 @@ def _cmd_record(args: argparse.Namespace) -> int:
     from terrapref.progress import Progress
     from terrapref.scenario import resolve_scenario
     from terrapref.terrain import PreferenceProfile
+    from terrapref.vehicle.ground import drivable
 
     if args.seed < 0:
         raise UserError("--seed", f"must be an integer >= 0, got {args.seed}")
     check_output(args.out, "--out", [args.scenario], folder=True)
-    scenario = resolve_scenario(args.scenario, class_table(args))
+    scenario = drivable(resolve_scenario(args.scenario, class_table(args)))
     profile = (
         PreferenceProfile.parse(args.profile, scenario.classes) if args.profile is not None else PreferenceProfile.default(scenario.classes)
     )
@@ -77,10 +79,7 @@ def _cmd_record(args: argparse.Namespace) -> int:
         if perception is not None and perception.active
         else ""
     )
-    contact = f" ({log.contact_s:.1f} s, {log.contact_m:.1f} m with lethal terrain under the vehicle)" if log.contact_s else ""
-    print(
-        f"wrote {args.out}: {writer.count} frames, {log.duration_s:.1f} s, {state}, {log.collisions} collisions{contact} (complete){seen}"
-    )
+    print(f"wrote {args.out}: {writer.count} frames, {log.duration_s:.1f} s, {state}, {incidents(log)} (complete){seen}")
     return 0
 
 
@@ -167,6 +166,7 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     from terrapref.scenario import resolve_scenario
     from terrapref.teleop import TeleopOptions, run_session
     from terrapref.terrain import PreferenceProfile
+    from terrapref.vehicle.ground import drivable
 
     if args.seed < 0:
         raise UserError("--seed", f"must be an integer >= 0, got {args.seed}")
@@ -177,7 +177,7 @@ def _cmd_drive(args: argparse.Namespace) -> int:
         riding = load_model(args.model).classes
         if args.classes is not None:
             check_table(args, riding, args.model)
-    scenario = resolve_scenario(args.scenario, class_table(args) or riding)
+    scenario = drivable(resolve_scenario(args.scenario, class_table(args) or riding))
     profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile is not None else None
     if args.record is not None:
         check_output(args.record, "--record", [args.scenario, *([args.model] if args.model else [])], folder=True)

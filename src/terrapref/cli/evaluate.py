@@ -236,9 +236,8 @@ def evaluate_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_perception(args: argparse.Namespace) -> int:
-    import yaml
-
     from terrapref.perception import PRESETS, load_perception
+    from terrapref.yamlio import dump_yaml
 
     if not args.models:
         for name in PRESETS:
@@ -254,7 +253,7 @@ def _cmd_perception(args: argparse.Namespace) -> int:
         if i:
             print("---")
         print(f"# {model.name} as a terrapref-perception/1 file: save it, edit any field, give it to --perception FILE")
-        print(yaml.safe_dump(model.file_dict(), sort_keys=False, default_flow_style=None).rstrip())
+        print(dump_yaml(model.file_dict(), sort_keys=False, default_flow_style=None).rstrip())
     return 0
 
 

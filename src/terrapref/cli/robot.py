@@ -181,13 +181,12 @@ def play_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_route(args: argparse.Namespace) -> int:
-    import yaml
-
     from terrapref.planner.model import Model
     from terrapref.planner.route import RouteConfig, RouteError, route_over, routed_scenario
     from terrapref.plots import save_map
     from terrapref.scenario import resolve_scenario
     from terrapref.world import rasterise
+    from terrapref.yamlio import dump_yaml
 
     out, figure = Path(args.out), Path(args.out).with_suffix(".png")
     for path in (out, figure):
@@ -207,7 +206,7 @@ def _cmd_route(args: argparse.Namespace) -> int:
         raise UserError(args.scenario, str(exc), field="path") from None
     except ValueError as exc:
         raise UserError(args.model, str(exc), field="--model") from None
-    text = yaml.safe_dump(routed_scenario(scenario, route, Path(args.model).name), sort_keys=False, default_flow_style=None, width=120)
+    text = dump_yaml(routed_scenario(scenario, route, Path(args.model).name), sort_keys=False, default_flow_style=None, width=120)
     write_text_atomic(
         out,
         "# terrapref route: a scenario whose path is the route; every command that takes a scenario takes it,\n"

@@ -49,7 +49,7 @@ from terrapref.errors import UserError
 from terrapref.fileio import new_folder, replace_dir, write_text_atomic
 from terrapref.pngio import depth_to_millimetres, millimetres_to_depth, read_depth_png, read_label_png, write_png_atomic
 from terrapref.vehicle.ground import LEVEL, Attitude
-from terrapref.yamlio import load_yaml_text
+from terrapref.yamlio import dump_yaml, load_yaml_text
 
 if TYPE_CHECKING:
     from terrapref.demos.meta import RecordingMeta
@@ -116,7 +116,7 @@ class RecordingWriter:
         made = not self.dir.exists() or self.dir != self.target
         try:
             (self.dir / IMAGES).mkdir(parents=True, exist_ok=True)
-            write_text_atomic(self.dir / SCENARIO, yaml.safe_dump(scenario, sort_keys=False))
+            write_text_atomic(self.dir / SCENARIO, dump_yaml(scenario, sort_keys=False))
             write_json_atomic(self.dir / META, self.meta)
             self._frames = open(self.dir / FRAMES, "a", buffering=1)
         except OSError as exc:  # a full disk before the first frame: nothing is left behind

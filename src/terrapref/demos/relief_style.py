@@ -32,6 +32,7 @@ from terrapref.world.height_compiled import height_at, roughness
 from terrapref.world.raster import rough_reach
 
 NO_RELIEF_STYLE = "none"  # --relief-style none: a driver that drives relief as if it were flat
+MAX_SHED_MPS_PER_DEG = 0.2  # the most speed a relief style sheds per degree of grade [m/s per deg]: 2 m/s over 10 deg
 
 
 @dataclass(frozen=True)
@@ -65,6 +66,11 @@ class ReliefStyle:
             raise ValueError(f"roll_deg and grade_deg must lie in (0, 90) deg, got {self.roll_deg:g} and {self.grade_deg:g}")
         if min(self.up_mps_per_deg, self.down_mps_per_deg) < 0.0 or self.rough_mps <= 0.0 or self.rough_m <= 0.0:
             raise ValueError("up_mps_per_deg and down_mps_per_deg must be >= 0, rough_mps and rough_m > 0")
+        if max(self.up_mps_per_deg, self.down_mps_per_deg) > MAX_SHED_MPS_PER_DEG:
+            raise ValueError(
+                f"up_mps_per_deg and down_mps_per_deg must be at most {MAX_SHED_MPS_PER_DEG:g} "
+                f"(a vehicle's whole top speed shed over 10 deg), got {self.up_mps_per_deg:g} and {self.down_mps_per_deg:g}"
+            )
 
     def to_dict(self) -> dict[str, Any]:
         return to_plain(self)
@@ -102,6 +108,8 @@ def parse_relief_style(text: str, source: str = "--relief-style") -> tuple[str, 
     if text.strip() == NO_RELIEF_STYLE:
         return NO_RELIEF_STYLE, None
     parts = [p.strip() for p in text.split(",")]
+    if parts[0] == NO_RELIEF_STYLE:
+        raise UserError(source, f"{NO_RELIEF_STYLE} (relief driven as if it were flat) takes no k=v changes; got {text.strip()!r}")
     name = "default"
     if parts and "=" not in parts[0]:
         name = parts.pop(0)

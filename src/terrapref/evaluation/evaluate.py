@@ -36,6 +36,7 @@ from terrapref.rules import speed_rule
 from terrapref.scenario import AVOID, resolve_scenario
 from terrapref.terrain import ClassTable, PreferenceProfile
 from terrapref.vehicle import Pose
+from terrapref.vehicle.ground import drivable
 
 
 @dataclass(frozen=True)
@@ -147,7 +148,7 @@ def evaluate_model(
     ev = evaluation
     model = Model.load(ev.model_path).policy  # C, or a learned baseline (linear, CNN)
     for name in ev.scenarios:
-        resolve_scenario(name, model.classes)  # fail early, with the file and field, before any run
+        drivable(resolve_scenario(name, model.classes))  # fail early, with the file and field, before any run
     profile = scoring_profile(model, ev.profile, ev.model_path)
     results = annotate_agreement(run_many(ev.specs(profile, model.classes), progress=progress, engine=engine, watch=watch))
     evidence = _evidence(model, ev.scenarios)

@@ -11,10 +11,10 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-import yaml
 
 from terrapref.scenario.loader import FORMAT
 from terrapref.terrain import ClassTable
+from terrapref.yamlio import dump_yaml
 
 
 class CourseBuilder:
@@ -100,7 +100,7 @@ class CourseBuilder:
 
     def to_yaml(self) -> str:
         """The course as the text of a ``terrapref-scenario/1`` file."""
-        return yaml.safe_dump(self.data(), sort_keys=False, default_flow_style=None, width=120)
+        return dump_yaml(self.data(), sort_keys=False, default_flow_style=None, width=120)
 
 
 def trail(legs: Sequence[float], turns_deg: Sequence[float], margin_m: float = 12.0) -> tuple[np.ndarray, tuple[float, float]]:

@@ -48,7 +48,7 @@ def _generated(name: str, prefix: str, classes: ClassTable | None) -> Scenario:
     except ValueError:
         raise ScenarioError(name, f"a generated course is named {prefix}SEED with an integer SEED") from None
     if not 0 <= seed < 2**63:
-        raise ScenarioError(name, "a generated course's SEED is an integer >= 0")
+        raise ScenarioError(name, "a generated course's SEED is an integer from 0 to 2^63 - 1")
     course = generate_course(seed, classes=classes)
     if prefix == "gen:":
         return course

@@ -131,7 +131,14 @@ class _Checker:
                 if len(distinct) < 3:
                     self.fail(f, f"needs at least 3 distinct vertices, got {len(distinct)}")
                 elif area <= max(1e-12, 1e-9 / scale / scale):
-                    self.fail(f, "has zero area (vertices are collinear)")
+                    crossing = _crossing_edges(q)  # a bow tie's halves cancel in the shoelace sum
+                    self.fail(
+                        f,
+                        "has zero area (vertices are collinear)"
+                        if crossing is None
+                        else f"has zero area: it crosses itself (its edge from vertex {crossing[0]} crosses the one from vertex "
+                        f"{crossing[1]}) and its parts cancel; give the vertices in order round it",
+                    )
                 else:
                     shape = Polygon(pts)
         elif kind == "circle":
@@ -430,6 +437,27 @@ def _lethal_under_start(start: tuple[float, float, float], world: _World, terrai
     return next((str(n) for n in names if n in classes.lethal), None)
 
 
+def _crossing_edges(vertices: np.ndarray) -> tuple[int, int] | None:
+    """The first two edges of the closed polygon ``vertices`` (N, 2) that cross (each passes strictly
+    between the other's ends), by the vertices they start from; None for a simple polygon. Edges
+    that only touch, or overlap along a line, are not counted."""
+    a, b = vertices, np.roll(vertices, -1, axis=0)
+    d = b - a
+
+    def side(i: np.ndarray, p: np.ndarray) -> np.ndarray:  # which side of edge i each point p lies on: +1, -1 or 0
+        return np.sign(d[i, 0] * (p[..., 1] - a[i, 1]) - d[i, 1] * (p[..., 0] - a[i, 0]))
+
+    n = len(vertices)
+    i, j = np.triu_indices(n, k=2)
+    keep = ~((i == 0) & (j == n - 1))  # the last edge and the first share a vertex
+    i, j = i[keep], j[keep]
+    crosses = (side(i, a[j]) * side(i, b[j]) < 0) & (side(j, a[i]) * side(j, b[i]) < 0)
+    if not crosses.any():
+        return None
+    k = int(np.argmax(crosses))
+    return int(i[k]), int(j[k])
+
+
 def _zones(c: _Checker, raw: Any, size_m: tuple[float, float] | None, classes: ClassTable) -> list[Zone]:
     """The ``zones`` list (``null`` is an empty one), each zone with an id unique in the file."""
     if raw is None:
@@ -563,7 +591,7 @@ def _mound(c: _Checker, spec: Any, f: str, world: _World) -> Mound | None:
     if center is not None and max(abs(center[0]), abs(center[1])) > MAX_RELIEF_REACH_M:
         c.fail(f"{f}.center", f"lies more than {MAX_RELIEF_REACH_M:g} m from the map")
         center = None
-    radius = c.number(spec["radius"], f"{f}.radius", positive=True)
+    radius = _at_least_cells(c, c.number(spec["radius"], f"{f}.radius", positive=True), f"{f}.radius", 1, world)
     height = _relief_height(c, spec["height_m"], f"{f}.height_m")
     if center is None or radius is None or height is None:
         return None
@@ -576,7 +604,7 @@ def _ridge(c: _Checker, spec: Any, f: str, world: _World) -> Ridge | None:
     if spec is None:
         return None
     polyline = _relief_points(c, spec["polyline"], f"{f}.polyline", 2)
-    width = c.number(spec["width_m"], f"{f}.width_m", positive=True)
+    width = _at_least_cells(c, c.number(spec["width_m"], f"{f}.width_m", positive=True), f"{f}.width_m", 2, world)
     height = _relief_height(c, spec["height_m"], f"{f}.height_m")
     if polyline is None or width is None or height is None:
         return None
@@ -589,6 +617,9 @@ def _plateau(c: _Checker, spec: Any, f: str, world: _World) -> Plateau | None:
     if spec is None:
         return None
     polygon = _relief_polygon(c, spec["polygon"], f)
+    if polygon is not None and world.resolution_m is not None and _area(polygon.vertices) < world.resolution_m**2:
+        c.fail(f"{f}.polygon", f"is smaller than one cell of the map ({world.resolution_m:g} m square): the ground would not change")
+        polygon = None
     height = _relief_height(c, spec["height_m"], f"{f}.height_m")
     edge = c.number(spec["edge_m"], f"{f}.edge_m")
     if edge is not None and edge < 0:
@@ -597,6 +628,25 @@ def _plateau(c: _Checker, spec: Any, f: str, world: _World) -> Plateau | None:
     if polygon is None or height is None or edge is None:
         return None
     return Plateau(polygon, height, edge)
+
+
+def _at_least_cells(c: _Checker, value: float | None, field: str, cells: int, world: _World) -> float | None:
+    """``value`` [m] where it spans at least ``cells`` cells of the map; else said (a feature
+    finer than the grid falls between the cells' centres, and the ground would not change) and None."""
+    if value is None or world.resolution_m is None or value >= cells * world.resolution_m:
+        return value
+    span = "one cell" if cells == 1 else f"{cells} cells"
+    c.fail(
+        field,
+        f"must be at least {span} ({cells * world.resolution_m:g} m at world.resolution_m {world.resolution_m:g}): finer relief falls between the cells",
+    )
+    return None
+
+
+def _area(vertices: np.ndarray) -> float:
+    """The area [m^2] of the simple polygon ``vertices`` (N, 2) (the shoelace formula)."""
+    x, y = vertices[:, 0], vertices[:, 1]
+    return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
 
 
 def _relief_polygon(c: _Checker, value: Any, f: str) -> Polygon | None:

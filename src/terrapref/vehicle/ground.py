@@ -107,8 +107,12 @@ class GroundContact:
 
     def tipped(self, attitude: Attitude) -> bool:
         """Whether ``attitude`` is past the vehicle's roll or pitch limit."""
-        c = self.config
-        return abs(attitude.roll_rad) > math.radians(c.max_roll_deg) or abs(attitude.pitch_rad) > math.radians(c.max_pitch_deg)
+        return self.past_limits(attitude, self.config)
+
+    @staticmethod
+    def past_limits(attitude: Attitude, config: VehicleConfig) -> bool:
+        """Whether ``attitude`` is past ``config``'s roll or pitch limit."""
+        return abs(attitude.roll_rad) > math.radians(config.max_roll_deg) or abs(attitude.pitch_rad) > math.radians(config.max_pitch_deg)
 
     def top_speed_mps(self, attitude: Attitude) -> float:
         """The fastest the vehicle goes [m/s] at ``attitude``: up a grade, a drive of constant power
@@ -118,3 +122,58 @@ class GroundContact:
         if g <= 0.0:
             return self.config.max_speed_mps
         return self.config.max_speed_mps * c / (c * math.cos(g) + math.sin(g))
+
+
+START_REACH_M = 3.0  # the ground read round a start for the attitude there: past the wheels of any vehicle of ours [m]
+
+
+def start_attitude(scenario, config: VehicleConfig | None = None) -> Attitude:
+    """The body's attitude at ``scenario``'s start (a :class:`terrapref.scenario.Scenario`), as the
+    simulator's vehicle of ``config`` (default: the default vehicle) would stand there: from the
+    height field's cells round the start, each the value the whole field gives it (read from them,
+    the attitude is the simulator's to rounding), so a large map need not be built to check where
+    a run would begin. Level on a scenario without relief."""
+    from terrapref.world.height_compiled import height_at
+    from terrapref.world.relief import height_field
+
+    if not scenario.has_relief:
+        return LEVEL
+    config = config or VehicleConfig()
+    res, (ny, nx) = scenario.resolution_m, scenario.grid_shape
+    reach = math.ceil(START_REACH_M / res)
+    col, row = math.floor(scenario.start[0] / res), math.floor(scenario.start[1] / res)
+    rows, cols = slice(max(0, row - reach), min(ny, row + reach + 1)), slice(max(0, col - reach), min(nx, col + reach + 1))
+    part = height_field(scenario.relief, (ny, nx), res, (rows, cols))
+    x0, y0 = cols.start * res, rows.start * res
+
+    class Part:  # the field's cells round the start, read as the whole field's (the map's edge where it is one)
+        resolution_m = res
+
+        def height_at_point(self, x: float, y: float) -> float:
+            return height_at(part, 1.0 / res, x - x0, y - y0)
+
+    return GroundContact(Part(), config).attitude(Pose(*scenario.start))
+
+
+def drivable(scenario, config: VehicleConfig | None = None):
+    """``scenario`` (a :class:`terrapref.scenario.Scenario`), where a run may begin at its start: a
+    start whose ground tips the vehicle of ``config`` (default: the default vehicle) past its roll
+    or pitch limit is refused, as one on lethal terrain is (a run would count a tip before it moved).
+
+    Raises:
+        ScenarioError: naming the scenario's ``start``.
+    """
+    from terrapref.errors import ScenarioError
+
+    config = config or VehicleConfig()
+    attitude = start_attitude(scenario, config)
+    if not GroundContact.past_limits(attitude, config):
+        return scenario
+    x, y, _ = scenario.start
+    raise ScenarioError(
+        scenario.source or scenario.name,
+        f"({x:g}, {y:g}) stands the vehicle at roll {math.degrees(abs(attitude.roll_rad)):.1f} deg, pitch "
+        f"{math.degrees(abs(attitude.pitch_rad)):.1f} deg, past the default vehicle's limits ({config.max_roll_deg:g} deg of roll, "
+        f"{config.max_pitch_deg:g} of pitch); start it on gentler ground",
+        field="start",
+    )

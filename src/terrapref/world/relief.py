@@ -17,23 +17,36 @@ import numpy as np
 from terrapref.scenario.relief import Mound, Noise, Plateau, ReliefEntry, Ridge
 
 
-def height_field(relief: Sequence[ReliefEntry], grid_shape: tuple[int, int], resolution_m: float) -> np.ndarray:
+def height_field(
+    relief: Sequence[ReliefEntry], grid_shape: tuple[int, int], resolution_m: float, part: tuple[slice, slice] | None = None
+) -> np.ndarray:
     """The ground's height at every cell centre, shape ``grid_shape`` (ny, nx) float32 [m]:
-    the entries of ``relief`` added in order to flat ground (z = 0)."""
-    z = np.zeros(grid_shape, dtype=np.float64)
+    the entries of ``relief`` added in order to flat ground (z = 0). ``part``: only the cells of
+    these rows and columns (slices within the grid), each the same value as in the whole field."""
+    ny, nx = grid_shape
+    rows_in, cols_in = part if part is not None else (slice(0, ny), slice(0, nx))
+    z = np.zeros((rows_in.stop - rows_in.start, cols_in.stop - cols_in.start), dtype=np.float64)
     for entry in relief:
         if isinstance(entry, Noise) and entry.polygon is None:
-            ny, nx = grid_shape
-            z += noise_height(entry, (np.arange(nx) + 0.5) * resolution_m, (np.arange(ny) + 0.5) * resolution_m)
+            x, y = (
+                (np.arange(cols_in.start, cols_in.stop) + 0.5) * resolution_m,
+                (np.arange(rows_in.start, rows_in.stop) + 0.5) * resolution_m,
+            )
+            z += noise_height(entry, x, y)
             continue
         window = _window(entry.bounds(), grid_shape, resolution_m)
         if window is None:
             continue
-        rows, cols = window
+        rows = slice(max(window[0].start, rows_in.start), min(window[0].stop, rows_in.stop))
+        cols = slice(max(window[1].start, cols_in.start), min(window[1].stop, cols_in.stop))
+        if rows.start >= rows.stop or cols.start >= cols.stop:
+            continue
         x = ((np.arange(cols.start, cols.stop) + 0.5) * resolution_m)[None, :]
         y = ((np.arange(rows.start, rows.stop) + 0.5) * resolution_m)[:, None]
         with np.errstate(over="ignore", invalid="ignore"):  # far-off vertices: distances beyond the float range are simply far
-            z[rows, cols] += _entry_height(entry, x, y)
+            z[rows.start - rows_in.start : rows.stop - rows_in.start, cols.start - cols_in.start : cols.stop - cols_in.start] += (
+                _entry_height(entry, x, y)
+            )
     return z.astype(np.float32)
 
 
