@@ -1047,9 +1047,12 @@ def test_on_relief_the_window_shows_the_bodys_attitude_and_warns_on_a_steep_bank
         "relief": [{"plateau": {"polygon": [[10.0, 11.0], [30.0, 11.0], [30.0, 20.0], [10.0, 20.0]], "height_m": 1.0, "edge_m": 2.5}}],
         "path": {"waypoints": [[2.0, 9.75], [28.0, 9.75]]},
     }
-    run_teleop(
+    result = run_teleop(
         parse_scenario(data), None, realtime=False, wait_for_start=False, max_frames=160, disturbance=None, screenshot=tmp_path / "shot.png"
     )
+    # The drive keeps its attitude as a simulated run does (its recording's summary, drive's line).
+    summary = result.relief_summary()
+    assert (summary["tips"], summary["stuck"]) == (0, 0) and 20.0 < summary["max_roll_deg"] < 25.0
     first, last = drawn[0], drawn[-1]
     assert first.hud[-1] == "roll 0 deg right side up (tips at 25), pitch 0 deg nose up (tips at 30)" and not first.alerts
     # The bank rises to the left of the way (north): the left wheels ride higher.

@@ -208,10 +208,10 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     if args.model is not None:
         print(
             f"rode along: the planner drove {result.planner_frames} frames, you {result.frames} (corrections){where}; "
-            f"{state}, {result.collisions} collisions{edge}"
+            f"{state}, {incidents(result)}{edge}"
         )
     else:
-        print(f"drove {result.frames} frames, {state}, {result.collisions} collisions{where}{edge}")
+        print(f"drove {result.frames} frames, {state}, {incidents(result)}{where}{edge}")
     return 0
 
 

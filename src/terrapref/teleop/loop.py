@@ -105,6 +105,9 @@ class TeleopResult:
         contact_s: time with lethal terrain under the footprint [s].
         contact_m: distance driven so [m].
         pushes: pushes that turned the vehicle.
+        tips, stuck: on relief, entries past the vehicle's roll or pitch limit, and times a step
+            too high held it (terrapref.vehicle.ground).
+        max_roll_deg, max_pitch_deg: on relief, the largest roll and pitch of the drive [deg].
     """
 
     frames: int
@@ -119,6 +122,20 @@ class TeleopResult:
     contact_s: float = 0.0
     contact_m: float = 0.0
     pushes: int = 0
+    tips: int = 0
+    stuck: int = 0
+    max_roll_deg: float = 0.0
+    max_pitch_deg: float = 0.0
+
+    def relief_summary(self) -> dict[str, Any]:
+        """The drive's tips, times stuck and largest roll and pitch [deg], as a simulated run's
+        (terrapref.sim.EpisodeLog.relief_summary)."""
+        return {
+            "tips": self.tips,
+            "stuck": self.stuck,
+            "max_roll_deg": round(self.max_roll_deg, 2),
+            "max_pitch_deg": round(self.max_pitch_deg, 2),
+        }
 
 
 @dataclass(frozen=True)
@@ -547,12 +564,17 @@ class _Session:
             contact_s=self.sim.contact_s,
             contact_m=self.sim.contact_m,
             pushes=self.pushes,
+            tips=self.sim.tips,
+            stuck=self.sim.stuck,
+            max_roll_deg=self.sim.max_roll_deg,
+            max_pitch_deg=self.sim.max_pitch_deg,
         )
 
 
 def _summary(result: TeleopResult) -> dict[str, Any]:
-    """What the recording's metadata keeps of the session."""
-    return {
+    """What the recording's metadata keeps of the session (on relief, its tips, times stuck and
+    largest roll and pitch too, as a simulated run's)."""
+    summary = {
         "completed": result.completed,
         "collisions": result.collisions,
         "duration_s": round(result.duration_s, 3),
@@ -563,6 +585,9 @@ def _summary(result: TeleopResult) -> dict[str, Any]:
         "planner_frames": result.planner_frames,
         "standing_frames": result.standing_frames,
     }
+    if result.tips or result.stuck or result.max_roll_deg or result.max_pitch_deg:
+        summary.update(result.relief_summary())
+    return summary
 
 
 def run_teleop(scenario: Scenario | str, record_dir: str | Path | None = None, **options: Any) -> TeleopResult:
