@@ -155,7 +155,7 @@ def test_a_start_that_would_tip_the_vehicle_is_refused(height_m: float, refused:
         drivable(scenario)
     assert err.value.lines() == [
         "bank.yaml: start: (1, 5) stands the vehicle at roll 51.3 deg, pitch 0.0 deg, "
-        "past the default vehicle's limits (25 deg of roll, 30 of pitch); start it on gentler ground"
+        "past the vehicle's limits (25 deg of roll, 30 of pitch); start it on gentler ground"
     ]
 
 

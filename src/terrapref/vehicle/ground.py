@@ -173,7 +173,7 @@ def drivable(scenario, config: VehicleConfig | None = None):
     raise ScenarioError(
         scenario.source or scenario.name,
         f"({x:g}, {y:g}) stands the vehicle at roll {math.degrees(abs(attitude.roll_rad)):.1f} deg, pitch "
-        f"{math.degrees(abs(attitude.pitch_rad)):.1f} deg, past the default vehicle's limits ({config.max_roll_deg:g} deg of roll, "
+        f"{math.degrees(abs(attitude.pitch_rad)):.1f} deg, past the vehicle's limits ({config.max_roll_deg:g} deg of roll, "
         f"{config.max_pitch_deg:g} of pitch); start it on gentler ground",
         field="start",
     )
