@@ -460,7 +460,8 @@ def save_evaluation(path: str | Path, runs: CourseRuns, title: str) -> Path:
             bbox={"facecolor": colour, "alpha": 0.85, "pad": 1, "lw": 0},
         )
     seeds = max(len(driver), len(planner))
-    tracks = [Line2D([], [], color="grey", ls="--", label="driver"), Line2D([], [], color="grey", label="planner")]
+    tracks = [Line2D([], [], color="grey", ls="--", label="driver")] if len(driver) else []  # none with --no-driver
+    tracks += [Line2D([], [], color="grey", label="planner")]
     tracks += [Line2D([], [], color=_seed_colour(k), lw=3, label=f"seed {k}") for k in range(seeds)] if seeds > 1 else []
     tracks += [
         Patch(facecolor="none", edgecolor="lime", label="zone met in every run"),
@@ -636,8 +637,10 @@ def save_speed_profile(
     for a in axes:
         for label, s0, s1 in spans:
             a.axvspan(s0, s1, color="0.85", lw=0)
-    for label, s0, s1 in spans:
-        ax.text((s0 + s1) / 2, 0.02, label, transform=ax.get_xaxis_transform(), ha="center", va="bottom", fontsize=7, color="0.35")
+    for label, s0, s1 in spans:  # upright, each over its own stretch: side by side they would run into one another
+        ax.text(
+            (s0 + s1) / 2, 0.02, label, transform=ax.get_xaxis_transform(), rotation=90, ha="center", va="bottom", fontsize=7, color="0.35"
+        )
     for label, s, v, colour in series:
         ax.plot(s, v, color=colour, lw=1.2, label=label)
     ax.set_ylabel("speed [m/s]")

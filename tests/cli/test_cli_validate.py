@@ -83,6 +83,11 @@ def test_validate_every_packaged_scenario(capsys: pytest.CaptureFixture[str]) ->
     assert run_cli(capsys, "validate", *names) == (0, [f"{n}: ok (scenario)" for n in names], [])
 
 
+def test_validate_generated_layouts_by_name(capsys: pytest.CaptureFixture[str]) -> None:
+    """gen:SEED and genrelief:SEED, as every command that reads a scenario takes them."""
+    assert run_cli(capsys, "validate", "gen:7", "genrelief:101") == (0, ["gen:7: ok (scenario)", "genrelief:101: ok (scenario)"], [])
+
+
 def test_validate_a_relative_path(tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
     write(tmp_path, "x.yaml", GOOD_YAML)
     monkeypatch.chdir(tmp_path)

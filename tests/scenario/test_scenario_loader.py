@@ -1069,7 +1069,7 @@ def relief_with(i: int, kind: str, **fields: Any) -> dict[str, Any]:
         (scenario(relief=["mound"]), "relief[0]", "expected a mapping, got string 'mound'"),
         (scenario(relief=[{}]), "relief[0]", "expected exactly one of noise, mound, ridge, plateau, got 0"),
         (scenario(relief=[{**RELIEF[1], **RELIEF[2]}]), "relief[0]", "expected exactly one of noise, mound, ridge, plateau, got 2"),
-        (scenario(relief=[{"hill": {}}]), "relief[0].hill", "unknown key"),
+        (scenario(relief=[{"hill": {}}]), "relief[0].hill", "unknown kind of relief; the kinds are noise, mound, ridge, plateau"),
         (relief_with(1, "mound", slope=2), "relief[1].mound.slope", "unknown key"),
         (relief_with(1, "mound", radius=None), "relief[1].mound.radius", "missing"),
         (relief_with(1, "mound", radius=0), "relief[1].mound.radius", "must be > 0"),

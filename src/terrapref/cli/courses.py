@@ -19,8 +19,7 @@ if TYPE_CHECKING:  # for the hints only: the command line imports what a command
 
 def _cmd_validate(args: argparse.Namespace) -> int:
     from terrapref.filekinds import KINDS, check_file, template
-    from terrapref.scenario import load_scenario
-    from terrapref.scenario.catalog import scenario_path
+    from terrapref.scenario import load_scenario, resolve_scenario
     from terrapref.vehicle.ground import drivable
 
     if args.template is not None:
@@ -39,8 +38,8 @@ def _cmd_validate(args: argparse.Namespace) -> int:
                 if kind is KINDS["scenario"]:  # and where a run would begin: not past the vehicle's limits
                     drivable(load_scenario(name, table))
                 kind = kind.title
-            else:  # a packaged scenario's name
-                drivable(load_scenario(scenario_path(name), table))
+            else:  # a packaged scenario's name, or a generated layout's (gen:SEED, genrelief:SEED)
+                drivable(resolve_scenario(name, table))
                 kind = KINDS["scenario"].title
         except UserError as exc:
             for line in exc.lines():
@@ -292,6 +291,8 @@ def _says_what_is_left(plan: FollowUp, paths: Sequence[Path]) -> bool:
         print(f"the {drives} left {_count(plan.open, 'pair')} open for a follow-up: {_pairs(plan.open)}{neighbours}")
     if plan.relief:
         print(f"the {drives} left relief unshown for a follow-up: {', '.join(plan.relief)}")
+    elif plan.on_relief and not plan.relief_left:
+        print(f"the {drives} showed all the relief it teaches: the follow-up shows terrain only")
     return True
 
 

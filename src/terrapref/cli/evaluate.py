@@ -124,8 +124,7 @@ def _print_results(evaluation: Evaluation, metrics: dict, args: argparse.Namespa
     if compared:
         driver = evaluation.style + "".join(f", {name} {v:g} m/s" for name, v in evaluation.speeds)
         if evaluation.relief is not None:
-            r = evaluation.relief
-            driver += f", relief: round side slopes past {r.roll_deg:g} deg and grades past {r.grade_deg:g} deg"
+            driver += f", relief: {evaluation.relief.describe()}"
         print(f"planner: agreement with the driver ({driver}) {rate_text(sum(z['agrees'] for z in compared), len(compared))}")
     relief = [z for sc in metrics["scenarios"].values() for run in sc.get("planner", {}).values() for z in run.get("relief_zones", ())]
     relief = [z for z in relief if "agrees" in z]

@@ -167,7 +167,7 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
     lethal = frozenset({table.lethal_column} if table.lethal else ())  # the terrain column the lethal classes share
     print(f"drives: {result.drives or 'argmax'}" + ("" if result.rules else " (C's argmax: the recipe fits no decision rule)"))
     for rule in result.rules:
-        note = "" if rule.type == result.drives or rule.kind != STEERING else " (fitted to be reported; it does not drive)"
+        note = "" if rule.type == result.drives or rule.kind != STEERING else " (fitted to be reported; it does not steer)"
         print(f"  {rule.describe(data.feature_config.feature_classes, lethal)}{note}")
         for warning in rule.warnings(data.feature_config.feature_classes, lethal):
             print(f"  warning: {warning}")

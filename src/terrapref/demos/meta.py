@@ -25,13 +25,14 @@ A driver is one of four kinds, each with its own fields::
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from terrapref.camera import CameraConfig
+from terrapref.demos.relief_style import ReliefStyle
 from terrapref.errors import Problem, UserError
 from terrapref.features import PreferenceSetConfig
 from terrapref.perception import PerceptionModel
@@ -82,7 +83,14 @@ class ExpertInfo:
         return {"kind": self.kind, **to_plain(self)}
 
     def describe(self) -> str:
-        return _describe(self.kind, style=self.style, seed=self.seed)
+        text = _describe(self.kind, style=self.style, seed=self.seed)
+        relief = (self.config or {}).get("relief")
+        if isinstance(relief, Mapping):  # a relief style (terrapref.demos.relief_style), as written
+            try:
+                text += f", relief: {ReliefStyle(**relief).describe()}"
+            except (TypeError, ValueError):  # one this version does not read: said as written
+                text += f", relief: {dict(relief)}"
+        return text
 
 
 @dataclass(frozen=True)

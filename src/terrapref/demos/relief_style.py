@@ -75,6 +75,10 @@ class ReliefStyle:
     def to_dict(self) -> dict[str, Any]:
         return to_plain(self)
 
+    def describe(self) -> str:
+        """Where it goes round, in words."""
+        return f"round side slopes past {self.roll_deg:g} deg and grades past {self.grade_deg:g} deg"
+
     def speed(self, v_mps: float, grade_rad: float, rough_m: float, least_mps: float) -> float:
         """The speed [m/s] it drives at where its terrain's speed is ``v_mps``, on a grade of
         ``grade_rad`` along its heading (positive up) and ground of roughness ``rough_m``; never

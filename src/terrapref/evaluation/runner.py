@@ -198,7 +198,7 @@ class Summary:
         if self.stop_count:
             reasons = ", ".join(f"{why} {seconds:.1f} s" for why, seconds in self.stops_s.items())
             per = f", {self.stops_per_100m:.2f} per 100 m driven" if self.stops_per_100m is not None else ", nothing driven"
-            lines.append(f"{self.stop_count} stops{per}; stood still: {reasons}")
+            lines.append(f"{self.stop_count} stop{'' if self.stop_count == 1 else 's'}{per}; stood still: {reasons}")
         else:
             lines.append("no stop")
         if self.goal_watched:

@@ -517,6 +517,10 @@ def _relief(c: _Checker, raw: Any, world: _World) -> list[ReliefEntry]:
     entries: list[ReliefEntry] = []
     for i, item in enumerate(raw):
         f = f"relief[{i}]"
+        if isinstance(item, dict) and any(k not in RELIEF_KINDS for k in item):  # a kind misspelt: say which there are
+            for key in sorted((k for k in item if k not in RELIEF_KINDS), key=_key_text):
+                c.fail(_join(f, _key_text(key)), f"unknown kind of relief; the kinds are {', '.join(RELIEF_KINDS)}")
+            continue
         item = c.mapping(item, f, set(), set(RELIEF_KINDS))
         if item is None:
             continue
