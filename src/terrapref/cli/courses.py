@@ -64,7 +64,7 @@ def validate_parser(sub: argparse._SubParsersAction) -> None:
         nargs="*",
         metavar="FILE",
         help="files to check, each read as its format: field says (terrapref-scenario/1, -classes/1, -perception/1, -robot/1, "
-        "-labels/1), or packaged scenarios' names",
+        "-labels/1), packaged scenarios' names, or generated layouts (gen:SEED, genrelief:SEED)",
     )
     p.add_argument(
         "--template",
