@@ -278,7 +278,7 @@ def save_map(
     sx, sy = world.size_m
     width = 11.5
     fig, ax = plt.subplots(figsize=(width, max(3.0, (width - 1.5) * sy / sx * 0.95)), dpi=120)
-    classes_shown = draw_map(ax, scenario, world, marks=marks)
+    classes_shown = draw_map(ax, scenario, world, zones=False)  # the zones once the map has its final size
     for label, xy, color in tracks:  # wide and beneath the path: the dashed path stays seen along a track that follows it
         ax.plot(xy[:, 0], xy[:, 1], color=color, lw=TRACK_LW, alpha=0.85, label=label, zorder=PATH_ZORDER - 0.5, solid_capstyle="round")
     ax.legend(
@@ -291,6 +291,9 @@ def save_map(
     )  # beside the map: never over the start or a zone
     ax.set_title(figure_text(title or scenario.name, scenario.classes))
     fig.tight_layout()
+    # Labelled after the layout: placed while the map was larger, labels clear of one another there
+    # would run into one another once the legend and the title had shrunk it.
+    _label_zones(ax, scenario.zones, marks or {}, scenario.classes)
     return _save(fig, path)
 
 
