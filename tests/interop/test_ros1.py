@@ -99,9 +99,9 @@ PLAYER = textwrap.dedent('''
         depth = Image(height=480, width=640, encoding="32FC1", is_bigendian=0, step=4 * 640, data=level.tobytes())
         depth.header.stamp = rospy.Time.from_sec(t)
         return odom, depth, image
-    # The first frame before any /clock (the node's time still 0), sent for 3 s while the node takes
+    # The first frame before any /clock (the node's time still 0), sent for 2 s while the node takes
     # its calibration and path: no command can be timed by that clock, and none comes.
-    for _ in range(12):
+    for _ in range(8):
         for msg, pub in zip(messages(first, 100.0 + 0.1 * first), (odom_pub, depth_pub, seg_pub)):
             pub.publish(msg)
         time.sleep(0.25)
