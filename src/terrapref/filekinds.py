@@ -26,8 +26,9 @@ class FileKind(NamedTuple):
 
 def _scenario(path: Path, classes: ClassTable | None) -> object:
     from terrapref.scenario import load_scenario
+    from terrapref.vehicle.ground import drivable
 
-    return load_scenario(path, classes)
+    return drivable(load_scenario(path, classes))  # and where a run would begin: not past the vehicle's limits
 
 
 def _classes(path: Path, classes: ClassTable | None) -> object:
@@ -87,7 +88,8 @@ def kind_of(path: str | Path) -> FileKind:
 
 def check_file(path: str | Path, classes: ClassTable | None = None) -> FileKind:
     """Read ``path`` as its kind's reader reads it (scenarios, perception models, robot files and
-    label maps with ``classes``, the default table when None); its kind when it is sound.
+    label maps with ``classes``, the default table when None; a scenario's start checked as the
+    commands that drive it check it); its kind when it is sound.
 
     Raises:
         UserError: every problem the reader finds, each naming the file and the field.

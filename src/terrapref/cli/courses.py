@@ -19,7 +19,7 @@ if TYPE_CHECKING:  # for the hints only: the command line imports what a command
 
 def _cmd_validate(args: argparse.Namespace) -> int:
     from terrapref.filekinds import KINDS, check_file, template
-    from terrapref.scenario import load_scenario, resolve_scenario
+    from terrapref.scenario import resolve_scenario
     from terrapref.vehicle.ground import drivable
 
     if args.template is not None:
@@ -34,10 +34,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     for name in args.files:
         try:
             if _is_file(name):
-                kind = check_file(name, table)
-                if kind is KINDS["scenario"]:  # and where a run would begin: not past the vehicle's limits
-                    drivable(load_scenario(name, table))
-                kind = kind.title
+                kind = check_file(name, table).title
             else:  # a packaged scenario's name, or a generated layout's (gen:SEED, genrelief:SEED)
                 drivable(resolve_scenario(name, table))
                 kind = KINDS["scenario"].title
