@@ -127,7 +127,7 @@ class _Checker:
                 # vertices far from the origin leave a tiny area: judge it on scaled vertices.
                 scale = max(1.0, float(np.abs(pts).max()))
                 q = pts / scale
-                area = 0.5 * abs(float(np.dot(q[:, 0], np.roll(q[:, 1], -1)) - np.dot(q[:, 1], np.roll(q[:, 0], -1))))
+                area = _area(q)
                 if len(distinct) < 3:
                     self.fail(f, f"needs at least 3 distinct vertices, got {len(distinct)}")
                 elif area <= max(1e-12, 1e-9 / scale / scale):
