@@ -264,12 +264,13 @@ def test_the_offset_fit_picks_the_near_distance_that_explains_the_labels():
 
 
 def test_the_frames_where_the_driver_decides_are_those_just_after_something_comes_near():
-    """At 10 Hz: a patch comes within 5 m at frame 3 and stays; a second recording starts with one near."""
-    near = np.array([9.0, 8.5, 6.0, 4.9, 4.5, 4.0, 3.0, 2.0, 1.0, 20.0, 3.0, 3.0, 3.0, 9.0], np.float32)
+    """At 10 Hz: a patch comes within 5 m at frame 3; the vehicle is on it (-1 m) at frame 7 and
+    the next is 2.5 m ahead at frame 8; a second recording starts with one near."""
+    near = np.array([9.0, 8.5, 6.0, 4.9, 4.5, 4.0, 3.0, -1.0, 2.5, 20.0, 3.0, 3.0, 3.0, 9.0], np.float32)
     times = np.array([0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.0, 0.1, 0.2, 0.3], np.float32)
     deciding = decision_frames(near, times, 5.0, 0.3, 3.0)
-    # frames 3-5 (0.3 s from the onset), none after it; far frames (> 8 m); the new recording's first three
-    expected = [1, 1, 0, 1, 1, 1, 0, 0, 0, 1, 1, 1, 1, 1]
+    # frames 3-5 (0.3 s from the onset), none after it; frame 8; far frames (> 8 m); the new recording's first three
+    expected = [1, 1, 0, 1, 1, 1, 0, 0, 1, 1, 1, 1, 1, 1]
     np.testing.assert_array_equal(deciding, np.array(expected, bool))
 
 
@@ -302,6 +303,10 @@ def test_frames_that_hold_a_decision_past_its_first_seconds_do_not_move_the_pric
     assert base.samples == more.samples == 10 * (10 + 20)  # the far frames and the first 2 s near
     every = replace(config, decision_s=0.0)
     assert not np.allclose(fit_offset_utility(short, offsets, every).weights, fit_offset_utility(long, offsets, every).weights)
+    # A drive on relief: the distance to the first thing on the path counts tilted ground; every frame is fitted.
+    bands = (4.0, 8.0)
+    tilted = long._replace(relief=(np.zeros((len(long.near_m), len(offsets), 4)), bands))
+    assert fit_offset_utility(tilted, offsets, config).samples == len(long.near_m)
 
 
 def _drive(stage: OffsetSteering, scenario, camera: PinholeCamera, seconds: float) -> np.ndarray:
@@ -495,6 +500,29 @@ def test_a_model_file_with_an_offset_utility_drives_by_the_offset_rule_old_or_ne
         with pytest.raises(UserError) as exc:
             load_policy(bad)
         assert exc.value.problems[0].field == field
+
+
+def test_a_fit_on_the_frames_where_the_driver_decides_says_so_in_the_file_and_in_info(tmp_path):
+    """The model file keeps how many frames were fitted and of how many; a file before the count
+    reads as every frame fitted, and a count below the frames fitted is refused naming it."""
+    from terrapref.rules.offset.rule import OffsetRule
+
+    offsets = OffsetGeometry().offsets
+    fit = fit_offset_utility(_held_drive(30), offsets, OffsetFitConfig(near_candidates=(5.0,)))
+    rule = OffsetRule(OffsetConfig(), OffsetUtility(fit.weights, fit.near_m), fit)
+    config = ClassifierConfig(hidden=8, skip=True)
+    names = tuple(f"c{k}" for k in range(K))
+    for block, says in (
+        (rule.header(), "fitted to the 300 of 700 frames where the driver decides"),
+        ({k: v for k, v in rule.header().items() if k != "frames"}, "fitted to 300 frames,"),
+    ):
+        meta = {**model_meta(), "rules": [block], "drives": "offset"}
+        back = Planner(load_model(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), meta))).rule
+        assert says in back.describe(names, frozenset())
+    bad = {**model_meta(), "rules": [{**rule.header(), "frames": 299}], "drives": "offset"}
+    with pytest.raises(UserError) as exc:
+        Planner(load_model(save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), bad)))
+    assert exc.value.problems[0].field == "rules[0].frames"
 
 
 def test_an_offset_utility_that_prices_relief_keeps_its_prices_in_the_file_and_bad_ones_are_refused(tmp_path):

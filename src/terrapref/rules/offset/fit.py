@@ -31,6 +31,9 @@ WEIGHT_DECIMALS = 12  # fitted weights are kept to this many decimals
 INTERVAL_BLOCK_FRAMES = 50  # the frames a relief price's interval takes as one piece of evidence (5 s at 10 Hz)
 INTERVAL_DECIMALS = 6  # its ends are kept to this many decimals
 NEAR_CANDIDATES_M = (2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 6.0, 7.0, 8.0)
+# The distance to the first thing on the path grows by more than this from one frame to the next
+# when a new thing is first (the map's stations are 0.25 m apart; approaching, it shrinks) [m].
+NEW_FIRST_M = 1.0
 
 
 @dataclass(frozen=True)
@@ -166,9 +169,9 @@ class OffsetFitConfig:
         sigma_m: the width of the Gaussian soft labels around each intended offset [m].
         l2: the ridge on the weights.
         near_candidates: the near distances tried [m]; the one of the lowest loss is kept.
-        decision_s: with the frames' times, the weights are fitted again at the chosen near
-            distance on the frames where the driver decides (:func:`decision_frames`): this long
-            after something comes within it [s]; 0: every frame.
+        decision_s: with the frames' times (and no relief columns), the weights are fitted
+            again at the chosen near distance on the frames where the driver decides
+            (:func:`decision_frames`): this long after something comes within it [s]; 0: every frame.
         clear_m: and on the frames where nothing is within the near distance and this much more [m].
     """
 
@@ -201,8 +204,10 @@ class OffsetFrames(NamedTuple):
 
 def decision_frames(near_m: np.ndarray, times_s: np.ndarray, near: float, window_s: float, clear_m: float) -> np.ndarray:
     """Which frames (N,) bool show the driver deciding: those less than ``window_s`` after
-    something comes within ``near`` (its distance ``near_m`` (N,) falls to ``near`` or below, or a
-    recording starts with it there), and those where nothing is within ``near + clear_m``.
+    something comes within ``near`` (the distance ``near_m`` (N,) to the first thing on the path
+    falls to ``near`` or below, or a recording starts with it there, or it grows by more than
+    :data:`NEW_FIRST_M` while within: what was first is behind and the next is already near, as
+    on a dense course), and those where nothing is within ``near + clear_m``.
 
     The driver picks its offset when something comes within its reach and then holds it; the
     frames that follow repeat one choice, and fitted each as a fresh one they reward a price gap
@@ -212,7 +217,7 @@ def decision_frames(near_m: np.ndarray, times_s: np.ndarray, near: float, window
     start = np.ones(n, dtype=bool)
     start[1:] = times_s[1:] <= times_s[:-1]
     within = near_m <= near
-    onset = within & (start | ~np.roll(within, 1))
+    onset = within & (start | ~np.roll(within, 1) | (near_m > np.roll(near_m, 1) + NEW_FIRST_M))
     last_start = np.maximum.accumulate(np.where(start, index, 0))
     last_onset = np.maximum.accumulate(np.where(onset, index, -1))
     # To half a millisecond: a frame stamped window_s after the onset is not in it whichever way its time rounds.
@@ -224,7 +229,11 @@ def fit_offset_utility(frames: OffsetFrames, offsets: np.ndarray, config: Offset
     """Fit the offset utility to ``frames`` over the candidate ``offsets`` (O,) [m]: the near
     distance chosen on every frame with an intended offset, then, with the frames' times, the
     weights fitted again at that distance on the frames where the driver decides
-    (:func:`decision_frames`); ``config`` None: the default fit."""
+    (:func:`decision_frames`); ``config`` None: the default fit.
+
+    A drive on relief is fitted on every frame: there the distance to the first thing on the
+    path counts tilted ground, nearly always near, and fitted on the frames after it comes near
+    the relief prices took the planner round relief its driver drove over."""
     config = config or OffsetFitConfig()
     keep = np.isfinite(frames.intent)
     labelled = int(keep.sum())
@@ -238,7 +247,7 @@ def fit_offset_utility(frames: OffsetFrames, offsets: np.ndarray, config: Offset
     relief_from = columns if relief is not None else None
     Y = soft_labels(frames.intent[keep], offsets, config.sigma_m)
     theta, loss, chosen, free, losses = _fit_near(X[keep], frames.near_m[keep], Y, offsets, config, relief_from)
-    if frames.times_s is not None and config.decision_s > 0:
+    if frames.times_s is not None and config.decision_s > 0 and relief is None:
         deciding = decision_frames(frames.near_m, frames.times_s, chosen, config.decision_s, config.clear_m)
         if (deciding & keep).any():
             keep &= deciding

@@ -248,7 +248,7 @@ class OffsetRule(Rule):
             "weights": u.weights.tolist(),
             "near_m": u.near_m,
             **({"relief": _relief_block(u)} if u.relief is not None else {}),
-            **({"loss": self.fit.loss, "samples": self.fit.samples} if self.fit is not None else {}),
+            **({"loss": self.fit.loss, "samples": self.fit.samples, "frames": self.fit.frames} if self.fit is not None else {}),
         }
 
     @classmethod
@@ -277,7 +277,10 @@ class OffsetRule(Rule):
             samples = block.get("samples")
             if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
                 raise where.error("samples", "expected the number of frames fitted, an integer >= 1")
-            fit = OffsetFit(weights, near, number(block, "loss", where, low=0.0), {}, samples, relief, shown, interval)
+            frames = block.get("frames", 0)  # older files: not stored
+            if isinstance(frames, bool) or not isinstance(frames, int) or not (frames == 0 or frames >= samples):
+                raise where.error("frames", "expected the number of frames with an intended offset, an integer >= samples")
+            fit = OffsetFit(weights, near, number(block, "loss", where, low=0.0), {}, samples, relief, shown, interval, frames)
         return cls(config, OffsetUtility(weights, near, geometry, relief, shown, interval), fit)
 
     @classmethod
