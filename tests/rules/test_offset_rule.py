@@ -4,7 +4,6 @@ tiny scenarios with closed-form answers."""
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -25,15 +24,7 @@ from terrapref.learning.network import ClassifierConfig
 from terrapref.planner import Planner
 from terrapref.planner.registry import load_policy
 from terrapref.rules.offset.features import OffsetFeatures, gated
-from terrapref.rules.offset.fit import (
-    OffsetFitConfig,
-    OffsetFrames,
-    OffsetUtility,
-    decision_frames,
-    fit_offset_utility,
-    fit_softmax,
-    soft_labels,
-)
+from terrapref.rules.offset.fit import OffsetUtility, fit_offset_utility, fit_softmax, soft_labels
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.offset.rule import OffsetConfig, OffsetSteering
 from terrapref.rules.offset.steering import intent_offsets, steer
@@ -255,58 +246,12 @@ def test_the_offset_fit_picks_the_near_distance_that_explains_the_labels():
     features[:, :, 3] = np.where(np.abs(offsets) < 1.0, 2.0, 0.0)  # 2 m of mud near the path, on every frame
     features[:, :, 5] = offsets**2 * 7.0
     intent = np.where(near > 4.0, 0.0, 1.4 * rng.choice([-1.0, 1.0], n))
-    fit = fit_offset_utility(OffsetFrames(features, near, intent), offsets)
+    fit = fit_offset_utility(features, near, intent, offsets)
     assert fit.near_m == 4.0 and fit.samples == n
     assert fit.weights[3] < 0 and fit.weights[-1] < 0  # mud costs; far from a patch, so does leaving the path
     assert soft_labels(np.array([0.0]), offsets, 0.3).sum() == pytest.approx(1.0)
     with pytest.raises(ValueError):
-        fit_offset_utility(OffsetFrames(features, near, np.full(n, np.nan)), offsets)
-
-
-def test_the_frames_where_the_driver_decides_are_those_just_after_something_comes_near():
-    """At 10 Hz: a patch comes within 5 m at frame 3; the vehicle is on it (-1 m) at frame 7 and
-    the next is 2.5 m ahead at frame 8; a second recording starts with one near."""
-    near = np.array([9.0, 8.5, 6.0, 4.9, 4.5, 4.0, 3.0, -1.0, 2.5, 20.0, 3.0, 3.0, 3.0, 9.0], np.float32)
-    times = np.array([0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.0, 0.1, 0.2, 0.3], np.float32)
-    deciding = decision_frames(near, times, 5.0, 0.3, 3.0)
-    # frames 3-5 (0.3 s from the onset), none after it; frame 8; far frames (> 8 m); the new recording's first three
-    expected = [1, 1, 0, 1, 1, 1, 0, 0, 1, 1, 1, 1, 1, 1]
-    np.testing.assert_array_equal(deciding, np.array(expected, bool))
-
-
-def _held_drive(held_frames: int) -> OffsetFrames:
-    """Ten episodes at 10 Hz: 1 s with nothing near, then 3 s and ``held_frames`` more with a patch
-    3 m ahead, each frame's offset drawn from a known utility; the held frames come from their
-    own draws, so the frames before them are the same whatever their number."""
-    rng, extra = np.random.default_rng(4), np.random.default_rng(5)
-    offsets = OffsetGeometry().offsets
-    parts = []
-    for _ in range(10):
-        for g, count in ((rng, 40), (extra, held_frames)):
-            features = g.uniform(0.0, 3.0, (count, len(offsets), K + 2)) * (g.uniform(size=(count, 1, K + 2)) < 0.5)
-            features[:, :, K + 1] = offsets**2 * 7.0
-            near = np.where(np.arange(count) < (10 if g is rng else 0), 20.0, 3.0)
-            value = np.concatenate([features, (offsets**2)[None, :, None] * (near > 5.0)[:, None, None]], axis=2) @ DRIVER_LIKE
-            parts.append((features, near, offsets[np.argmax(value + g.gumbel(size=value.shape), axis=1)]))
-    features, near, intent = (np.concatenate([part[k] for part in parts]) for k in range(3))
-    return OffsetFrames(features, near, intent, times_s=np.arange(len(near)) * 0.1)
-
-
-def test_frames_that_hold_a_decision_past_its_first_seconds_do_not_move_the_prices():
-    """The driver decides in a patch's first seconds and then holds; more held frames (whatever
-    they show) change nothing the fit prices, where fitted as fresh choices they do."""
-    offsets = OffsetGeometry().offsets
-    config = OffsetFitConfig(near_candidates=(5.0,))
-    short, long = _held_drive(0), _held_drive(30)
-    base, more = (fit_offset_utility(frames, offsets, config) for frames in (short, long))
-    np.testing.assert_array_equal(base.weights, more.weights)
-    assert base.samples == more.samples == 10 * (10 + 20)  # the far frames and the first 2 s near
-    every = replace(config, decision_s=0.0)
-    assert not np.allclose(fit_offset_utility(short, offsets, every).weights, fit_offset_utility(long, offsets, every).weights)
-    # A drive on relief: the distance to the first thing on the path counts tilted ground; every frame is fitted.
-    bands = (4.0, 8.0)
-    tilted = long._replace(relief=(np.zeros((len(long.near_m), len(offsets), 4)), bands))
-    assert fit_offset_utility(tilted, offsets, config).samples == len(long.near_m)
+        fit_offset_utility(features, near, np.full(n, np.nan), offsets)
 
 
 def _drive(stage: OffsetSteering, scenario, camera: PinholeCamera, seconds: float) -> np.ndarray:
@@ -500,29 +445,6 @@ def test_a_model_file_with_an_offset_utility_drives_by_the_offset_rule_old_or_ne
         with pytest.raises(UserError) as exc:
             load_policy(bad)
         assert exc.value.problems[0].field == field
-
-
-def test_a_fit_on_the_frames_where_the_driver_decides_says_so_in_the_file_and_in_info(tmp_path):
-    """The model file keeps how many frames were fitted and of how many; a file before the count
-    reads as every frame fitted, and a count below the frames fitted is refused naming it."""
-    from terrapref.rules.offset.rule import OffsetRule
-
-    offsets = OffsetGeometry().offsets
-    fit = fit_offset_utility(_held_drive(30), offsets, OffsetFitConfig(near_candidates=(5.0,)))
-    rule = OffsetRule(OffsetConfig(), OffsetUtility(fit.weights, fit.near_m), fit)
-    config = ClassifierConfig(hidden=8, skip=True)
-    names = tuple(f"c{k}" for k in range(K))
-    for block, says in (
-        (rule.header(), "fitted to the 300 of 700 frames where the driver decides"),
-        ({k: v for k, v in rule.header().items() if k != "frames"}, "fitted to 300 frames,"),
-    ):
-        meta = {**model_meta(), "rules": [block], "drives": "offset"}
-        back = Planner(load_model(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), meta))).rule
-        assert says in back.describe(names, frozenset())
-    bad = {**model_meta(), "rules": [{**rule.header(), "frames": 299}], "drives": "offset"}
-    with pytest.raises(UserError) as exc:
-        Planner(load_model(save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), bad)))
-    assert exc.value.problems[0].field == "rules[0].frames"
 
 
 def test_an_offset_utility_that_prices_relief_keeps_its_prices_in_the_file_and_bad_ones_are_refused(tmp_path):
@@ -757,7 +679,7 @@ def _fit_case() -> np.ndarray:
     near = rng.uniform(1.0, 12.0, n)
     value = np.concatenate([features, (offsets**2)[None, :, None] * (near > 5.0)[:, None, None]], axis=2) @ DRIVER_LIKE
     intent = offsets[np.argmax(value + rng.gumbel(size=value.shape), axis=1)]
-    return fit_offset_utility(OffsetFrames(features, near, intent), offsets).weights
+    return fit_offset_utility(features, near, intent, offsets).weights
 
 
 CPU_CHECK = CpuCheck.of("corridor fit", _FIT.format(tests=[str(TESTS), str(Path(__file__).resolve().parent)]), SETTINGS)

@@ -20,8 +20,7 @@ on any machine (tests/rules/test_offset_rule.py runs the fit under NumPy's and O
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
-from typing import NamedTuple
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -31,9 +30,6 @@ WEIGHT_DECIMALS = 12  # fitted weights are kept to this many decimals
 INTERVAL_BLOCK_FRAMES = 50  # the frames a relief price's interval takes as one piece of evidence (5 s at 10 Hz)
 INTERVAL_DECIMALS = 6  # its ends are kept to this many decimals
 NEAR_CANDIDATES_M = (2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 6.0, 7.0, 8.0)
-# The distance to the first thing on the path grows by more than this from one frame to the next
-# when a new thing is first (the map's stations are 0.25 m apart; approaching, it shrinks) [m].
-NEW_FIRST_M = 1.0
 
 
 @dataclass(frozen=True)
@@ -70,10 +66,10 @@ class OffsetFit:
     Attributes:
         weights: (K + 3,), the columns of :func:`terrapref.rules.offset.features.gated`.
         near_m: the chosen near distance [m].
-        loss: mean cross-entropy of the soft labels on the frames fitted, at that near distance
-            (to 12 decimals, as the weights).
-        losses: the loss at every candidate near distance, on every frame with an intended offset.
-        samples: frames fitted (those where the driver decides, when their times are known).
+        loss: mean cross-entropy of the soft labels at that near distance (to 12 decimals, as
+            the weights).
+        losses: the loss at every candidate near distance.
+        samples: frames fitted.
         relief: the relief columns' weights, for frames read with them; else None.
         relief_shown: the steepest bands the frames showed (OffsetUtility.relief_shown).
         relief_interval: the 95% intervals of the relief prices (OffsetUtility.relief_interval).
@@ -87,7 +83,6 @@ class OffsetFit:
     relief: np.ndarray | None = None
     relief_shown: tuple[float, float] | None = None
     relief_interval: np.ndarray | None = None
-    frames: int = 0  # frames with an intended offset, of which ``samples`` were fitted
 
 
 def soft_labels(intent: np.ndarray, offsets: np.ndarray, sigma_m: float) -> np.ndarray:
@@ -169,95 +164,51 @@ class OffsetFitConfig:
         sigma_m: the width of the Gaussian soft labels around each intended offset [m].
         l2: the ridge on the weights.
         near_candidates: the near distances tried [m]; the one of the lowest loss is kept.
-        decision_s: with the frames' times (and no relief columns), the weights are fitted
-            again at the chosen near distance on the frames where the driver decides
-            (:func:`decision_frames`): this long after something comes within it [s]; 0: every frame.
-        clear_m: and on the frames where nothing is within the near distance and this much more [m].
     """
 
     sigma_m: float = 0.3
     l2: float = 1e-3
     near_candidates: tuple[float, ...] = NEAR_CANDIDATES_M
-    decision_s: float = 2.0
-    clear_m: float = 3.0
 
 
-class OffsetFrames(NamedTuple):
-    """The frames the offset utility is fitted to.
-
-    Attributes:
-        features: (N, O, K + 2) the offset features of each frame (terrapref.rules.offset.features).
-        near_m: (N,) the distance along the path to the first terrain on it [m] (inf: none).
-        intent: (N,) the offset the driver was steering for [m] (NaN: left out).
-        relief: the relief columns (N, O, R) and the bands [deg] they count past, side slope
-            then grade; None: a drive on flat ground.
-        times_s: (N,) each frame's time from the start of its recording [s] (a recording's frames
-            in order, one recording after another); None: not known, and every frame is fitted.
-    """
-
-    features: np.ndarray
-    near_m: np.ndarray
-    intent: np.ndarray
-    relief: tuple[np.ndarray, tuple[float, ...]] | None = None
-    times_s: np.ndarray | None = None
-
-
-def decision_frames(near_m: np.ndarray, times_s: np.ndarray, near: float, window_s: float, clear_m: float) -> np.ndarray:
-    """Which frames (N,) bool show the driver deciding: those less than ``window_s`` after
-    something comes within ``near`` (the distance ``near_m`` (N,) to the first thing on the path
-    falls to ``near`` or below, or a recording starts with it there, or it grows by more than
-    :data:`NEW_FIRST_M` while within: what was first is behind and the next is already near, as
-    on a dense course), and those where nothing is within ``near + clear_m``.
-
-    The driver picks its offset when something comes within its reach and then holds it; the
-    frames that follow repeat one choice, and fitted each as a fresh one they reward a price gap
-    wider than the choices need. A recording starts wherever ``times_s`` (N,) does not increase."""
-    n = len(near_m)
-    index = np.arange(n)
-    start = np.ones(n, dtype=bool)
-    start[1:] = times_s[1:] <= times_s[:-1]
-    within = near_m <= near
-    onset = within & (start | ~np.roll(within, 1) | (near_m > np.roll(near_m, 1) + NEW_FIRST_M))
-    last_start = np.maximum.accumulate(np.where(start, index, 0))
-    last_onset = np.maximum.accumulate(np.where(onset, index, -1))
-    # To half a millisecond: a frame stamped window_s after the onset is not in it whichever way its time rounds.
-    deciding = (last_onset >= last_start) & (times_s - times_s[np.maximum(last_onset, 0)] < window_s - 5e-4)
-    return deciding | (near_m > near + clear_m)
-
-
-def fit_offset_utility(frames: OffsetFrames, offsets: np.ndarray, config: OffsetFitConfig | None = None) -> OffsetFit:
-    """Fit the offset utility to ``frames`` over the candidate ``offsets`` (O,) [m]: the near
-    distance chosen on every frame with an intended offset, then, with the frames' times, the
-    weights fitted again at that distance on the frames where the driver decides
-    (:func:`decision_frames`); ``config`` None: the default fit.
-
-    A drive on relief is fitted on every frame: there the distance to the first thing on the
-    path counts tilted ground, nearly always near, and fitted on the frames after it comes near
-    the relief prices took the planner round relief its driver drove over."""
+def fit_offset_utility(
+    features: np.ndarray,
+    near_m: np.ndarray,
+    intent: np.ndarray,
+    offsets: np.ndarray,
+    config: OffsetFitConfig | None = None,
+    relief: tuple[np.ndarray, tuple[float, ...]] | None = None,
+) -> OffsetFit:
+    """Fit the offset utility to frames' offset features (N, O, K + 2), near distances (N,)
+    and intended offsets (N,) over the candidate ``offsets`` (O,) [m], with their relief columns
+    when given (``relief``: the columns (N, O, R) and the bands [deg] they count past, side slope
+    then grade); frames without an intended offset (NaN) are left out; ``config`` None: the
+    default fit."""
     config = config or OffsetFitConfig()
-    keep = np.isfinite(frames.intent)
-    labelled = int(keep.sum())
-    if not labelled:
+    keep = np.isfinite(intent)
+    if not keep.any():
         raise ValueError("no frame has an intended offset to fit")
-    relief = frames.relief
-    X = frames.features.astype(np.float64)
+    X, near, Y = features[keep].astype(np.float64), near_m[keep], soft_labels(intent[keep], offsets, config.sigma_m)
     columns = X.shape[2]
     if relief is not None:
-        X = np.concatenate([X, relief[0].astype(np.float64)], axis=2)
-    relief_from = columns if relief is not None else None
-    Y = soft_labels(frames.intent[keep], offsets, config.sigma_m)
-    theta, loss, chosen, free, losses = _fit_near(X[keep], frames.near_m[keep], Y, offsets, config, relief_from)
-    if frames.times_s is not None and config.decision_s > 0 and relief is None:
-        deciding = decision_frames(frames.near_m, frames.times_s, chosen, config.decision_s, config.clear_m)
-        if (deciding & keep).any():
-            keep &= deciding
-            Y = soft_labels(frames.intent[keep], offsets, config.sigma_m)
-            single = replace(config, near_candidates=(chosen,))
-            theta, loss, _, free, _ = _fit_near(X[keep], frames.near_m[keep], Y, offsets, single, relief_from)
+        X = np.concatenate([X, relief[0][keep].astype(np.float64)], axis=2)
+    best: tuple[np.ndarray, float, float, np.ndarray] | None = None
+    losses = {}
+    for candidate in config.near_candidates:
+        gate = (offsets**2)[None, :, None] * (near > candidate)[:, None, None]
+        if relief is None:
+            theta, loss = fit_softmax(np.concatenate([X, gate], axis=2), Y, config.l2)
+            free = np.ones(len(theta), dtype=bool)
+        else:
+            theta, loss, free = _fit_steeper_costs_more(np.concatenate([X, gate], axis=2), Y, config.l2, range(columns, X.shape[2]))
+        losses[candidate] = loss
+        if best is None or loss < best[1] - 1e-9:
+            best = (theta, loss, candidate, free)
+    theta, loss, chosen, free = best
     interval = None
     if relief is not None:
-        gate = (offsets**2)[None, :, None] * (frames.near_m[keep] > chosen)[:, None, None]
-        covariance = weight_covariance(np.concatenate([X[keep], gate], axis=2), Y, theta, free, config.l2, INTERVAL_BLOCK_FRAMES)
+        gate = (offsets**2)[None, :, None] * (near > chosen)[:, None, None]
+        covariance = weight_covariance(np.concatenate([X, gate], axis=2), Y, theta, free, config.l2, INTERVAL_BLOCK_FRAMES)
         interval = np.round(relief_price_intervals(theta, covariance, columns, X.shape[2] - columns), INTERVAL_DECIMALS)
         if not np.isfinite(interval).all():  # a detour priced at 0: prices on its scale are not told
             interval = None
@@ -269,30 +220,7 @@ def fit_offset_utility(frames: OffsetFrames, offsets: np.ndarray, config: Offset
     weights = np.concatenate([theta[:columns], theta[-1:]])  # the relief columns' weights stand between those and the gate
     priced = theta[columns:-1] if relief is not None else None
     shown = relief_shown(relief[0][keep], relief[1]) if relief is not None else None
-    return OffsetFit(weights, chosen, round(loss, WEIGHT_DECIMALS), losses, int(keep.sum()), priced, shown, interval, labelled)
-
-
-def _fit_near(
-    X: np.ndarray, near: np.ndarray, Y: np.ndarray, offsets: np.ndarray, config: OffsetFitConfig, relief_from: int | None
-) -> tuple:
-    """The weights, loss, near distance and fitted columns (as :func:`_fit_steeper_costs_more`)
-    of the lowest loss over ``config.near_candidates``, and every candidate's loss: ``X`` (N, O,
-    P) the frames' columns (``relief_from``: the first of the relief columns, which end it; None:
-    none), ``near`` (N,), ``Y`` (N, O) soft labels."""
-    best: tuple | None = None
-    losses = {}
-    for candidate in config.near_candidates:
-        gate = (offsets**2)[None, :, None] * (near > candidate)[:, None, None]
-        Xg = np.concatenate([X, gate], axis=2)
-        if relief_from is None:
-            theta, loss = fit_softmax(Xg, Y, config.l2)
-            free = np.ones(len(theta), dtype=bool)
-        else:
-            theta, loss, free = _fit_steeper_costs_more(Xg, Y, config.l2, range(relief_from, X.shape[2]))
-        losses[candidate] = loss
-        if best is None or loss < best[1] - 1e-9:
-            best = (theta, loss, candidate, free)
-    return (*best, losses)
+    return OffsetFit(weights, chosen, round(loss, WEIGHT_DECIMALS), losses, int(keep.sum()), priced, shown, interval)
 
 
 def weight_covariance(X: np.ndarray, Y: np.ndarray, theta: np.ndarray, free: np.ndarray, l2: float, block_frames: int) -> np.ndarray:

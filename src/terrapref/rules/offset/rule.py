@@ -71,7 +71,7 @@ from terrapref.rules.base import (
     vector,
 )
 from terrapref.rules.offset.features import FIRST_BAND, RELIEF_BANDS_DEG, OffsetFeatures
-from terrapref.rules.offset.fit import OffsetFit, OffsetFrames, OffsetUtility, fit_offset_utility, relief_prices
+from terrapref.rules.offset.fit import OffsetFit, OffsetUtility, fit_offset_utility, relief_prices
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.offset.offsets_compiled import gated_value
 from terrapref.rules.offset.reach_compiled import lethal_hits, swept_reach
@@ -106,13 +106,7 @@ class OffsetConfig(RuleConfig):
     """
 
     type: ClassVar[str] = "offset"
-    arrays: ClassVar[dict[str, str]] = {
-        "features": "finite >= 0",
-        "near_m": "no NaN",
-        "intent_m": "no inf",
-        "relief_m": "finite >= 0",
-        "time_s": "finite >= 0",
-    }
+    arrays: ClassVar[dict[str, str]] = {"features": "finite >= 0", "near_m": "no NaN", "intent_m": "no inf", "relief_m": "finite >= 0"}
     without_data: ClassVar[str] = "the model gets no offset rule and drives C's trajectories"
 
     switch_margin: float = 0.15
@@ -163,9 +157,7 @@ class OffsetConfig(RuleConfig):
         if relief is not None and relief.shape[2] != 2 * len(RELIEF_BANDS_DEG):
             raise UserError("offset rule", f"relief columns of {relief.shape[2]} bands; this version reads {2 * len(RELIEF_BANDS_DEG)}")
         columns = (relief, RELIEF_BANDS_DEG) if relief is not None else None
-        # time_s is absent from datasets featurised before the fit read it: every frame is fitted.
-        frames = OffsetFrames(arrays["features"], arrays["near_m"], arrays["intent_m"], columns, arrays.get("time_s"))
-        fitted = fit_offset_utility(frames, geometry.offsets)
+        fitted = fit_offset_utility(arrays["features"], arrays["near_m"], arrays["intent_m"], geometry.offsets, relief=columns)
         utility = OffsetUtility(fitted.weights, fitted.near_m, geometry, fitted.relief, fitted.relief_shown, fitted.relief_interval)
         return OffsetRule(replace(self, geometry=geometry), utility, fitted)
 
@@ -178,8 +170,7 @@ class OffsetReader(FrameReader):
     detour's price per candidate offset; ``near_m`` (N,) float32, the distance along the path to
     the first terrain (or, on relief, steep ground) on it (inf: none within reach); ``intent_m``
     (N,) float32, the offset the driver was steering for (NaN: the recording ends before its
-    reaction time has passed); ``time_s`` (N,) float32, the frame's time from the recording's
-    first [s]; and, for a drive whose frames carry depth (relief), ``relief_m``
+    reaction time has passed); and, for a drive whose frames carry depth (relief), ``relief_m``
     (N, O, 2 * len(RELIEF_BANDS_DEG)) float32, the relief columns (0 for a frame without depth)."""
 
     def __init__(self, geometry: OffsetGeometry, featurizer: UtilityFeaturizer, camera: PinholeCamera, classes: ClassTable, n: int) -> None:
@@ -214,8 +205,7 @@ class OffsetReader(FrameReader):
         ok[ok] &= np.abs(recording.times[ahead[ok]] - recording.times[keep[ok]] - delay * period) < 0.5 * period
         later[ok] = recording.commands[ahead[ok]]
         intent = intent_offsets(recording.poses[keep], later, self.progress, path, self.offsets.offsets, self.geometry.intent_pursuit_m)
-        times = recording.times[keep] - recording.times[0]  # from the recording's first frame: float32 holds it to 0.25 ms an hour in
-        out = {"features": self.features, "near_m": self.near, "intent_m": intent.astype(np.float32), "time_s": times.astype(np.float32)}
+        out = {"features": self.features, "near_m": self.near, "intent_m": intent.astype(np.float32)}
         return out if self.relief is None else {**out, "relief_m": self.relief}
 
 
@@ -248,7 +238,7 @@ class OffsetRule(Rule):
             "weights": u.weights.tolist(),
             "near_m": u.near_m,
             **({"relief": _relief_block(u)} if u.relief is not None else {}),
-            **({"loss": self.fit.loss, "samples": self.fit.samples, "frames": self.fit.frames} if self.fit is not None else {}),
+            **({"loss": self.fit.loss, "samples": self.fit.samples} if self.fit is not None else {}),
         }
 
     @classmethod
@@ -277,10 +267,7 @@ class OffsetRule(Rule):
             samples = block.get("samples")
             if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
                 raise where.error("samples", "expected the number of frames fitted, an integer >= 1")
-            frames = block.get("frames", 0)  # older files: not stored
-            if isinstance(frames, bool) or not isinstance(frames, int) or not (frames == 0 or frames >= samples):
-                raise where.error("frames", "expected the number of frames with an intended offset, an integer >= samples")
-            fit = OffsetFit(weights, near, number(block, "loss", where, low=0.0), {}, samples, relief, shown, interval, frames)
+            fit = OffsetFit(weights, near, number(block, "loss", where, low=0.0), {}, samples, relief, shown, interval)
         return cls(config, OffsetUtility(weights, near, geometry, relief, shown, interval), fit)
 
     @classmethod
@@ -299,13 +286,7 @@ class OffsetRule(Rule):
         """The learned price of each class per metre, relative to the detour's per m^2 of offset per metre."""
         w = self.utility.weights
         prices = ", ".join(f"{c} {p / w[len(names) + 1]:.1f}{' (lethal: ruled out)' if c in lethal else ''}" for c, p in zip(names, w))
-        fit = self.fit
-        if fit is None:
-            fitted = ""
-        elif fit.samples < fit.frames:
-            fitted = f"fitted to the {fit.samples} of {fit.frames} frames where the driver decides, "
-        else:
-            fitted = f"fitted to {fit.samples} frames, "
+        fitted = f"fitted to {self.fit.samples} frames, " if self.fit is not None else ""
         text = (
             f"offset rule: {fitted}near distance {self.utility.near_m:g} m; each class's price per metre, "
             f"relative to the detour's per m^2 of offset per metre: {prices}"
