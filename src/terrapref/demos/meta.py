@@ -86,10 +86,8 @@ class ExpertInfo:
         text = _describe(self.kind, style=self.style, seed=self.seed)
         relief = (self.config or {}).get("relief")
         if isinstance(relief, Mapping):  # a relief style (terrapref.demos.relief_style), as written
-            try:
-                text += f", relief: {ReliefStyle(**relief).describe()}"
-            except (TypeError, ValueError):  # one this version does not read: said as written
-                text += f", relief: {dict(relief)}"
+            style = ReliefStyle.written(relief)
+            text += f", relief: {style.describe() if style is not None else dict(relief)}"  # one this version does not read: as written
         return text
 
 

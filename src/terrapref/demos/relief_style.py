@@ -19,6 +19,7 @@ Named styles (:data:`RELIEF_STYLES`), and ``k=v`` pairs over one::
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
 from typing import Any
 
@@ -74,6 +75,16 @@ class ReliefStyle:
 
     def to_dict(self) -> dict[str, Any]:
         return to_plain(self)
+
+    @classmethod
+    def written(cls, raw: Any) -> ReliefStyle | None:
+        """The style a file wrote (:meth:`to_dict`); None for anything else, or one this version does not read."""
+        if not isinstance(raw, Mapping):
+            return None
+        try:
+            return cls(**raw)
+        except (TypeError, ValueError):
+            return None
 
     def describe(self) -> str:
         """Where it goes round, in words."""

@@ -287,12 +287,9 @@ def trained_relief(meta: Mapping[str, Any]) -> ReliefStyle | None:
     drivers = _recorded_drivers(meta)
     configs = [d.get("config") if isinstance(d, Mapping) and d.get("kind") == "expert" else None for d in drivers]
     found = [c.get("relief") if isinstance(c, Mapping) else None for c in configs]
-    if not found or not isinstance(found[0], Mapping) or any(f != found[0] for f in found):
+    if not found or any(f != found[0] for f in found):
         return None
-    try:
-        return ReliefStyle(**found[0])
-    except (TypeError, ValueError):
-        return None
+    return ReliefStyle.written(found[0])
 
 
 RUN_XY_STEP_S = 0.1  # a run's kept path (RunResult.xy): its reference point every third 30 Hz tick [s]

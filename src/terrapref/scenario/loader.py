@@ -53,7 +53,11 @@ class _Checker:
     def fail(self, field: str, message: str) -> None:
         self.problems.append(Problem(field, message))
 
-    def mapping(self, value: Any, field: str, required: AbstractSet[str], optional: AbstractSet[str] = frozenset()) -> dict | None:
+    def mapping(
+        self, value: Any, field: str, required: AbstractSet[str], optional: AbstractSet[str] = frozenset(), *, unknown: str = "unknown key"
+    ) -> dict | None:
+        """``value`` as a mapping of the ``required`` and ``optional`` keys, each other key failed
+        with the message ``unknown``; None after any failure."""
         if not isinstance(value, dict):
             self.fail(field, f"expected a mapping, got {_describe(value)}")
             return None
@@ -62,7 +66,7 @@ class _Checker:
             self.fail(_join(field, key), "missing")
             ok = False
         for key in sorted(set(value) - required - set(optional), key=_key_text):
-            self.fail(_join(field, _key_text(key)), "unknown key")
+            self.fail(_join(field, _key_text(key)), unknown)
             ok = False
         return value if ok else None
 
@@ -517,11 +521,7 @@ def _relief(c: _Checker, raw: Any, world: _World) -> list[ReliefEntry]:
     entries: list[ReliefEntry] = []
     for i, item in enumerate(raw):
         f = f"relief[{i}]"
-        if isinstance(item, dict) and any(k not in RELIEF_KINDS for k in item):  # a kind misspelt: say which there are
-            for key in sorted((k for k in item if k not in RELIEF_KINDS), key=_key_text):
-                c.fail(_join(f, _key_text(key)), f"unknown kind of relief; the kinds are {', '.join(RELIEF_KINDS)}")
-            continue
-        item = c.mapping(item, f, set(), set(RELIEF_KINDS))
+        item = c.mapping(item, f, set(), set(RELIEF_KINDS), unknown=f"unknown kind of relief; the kinds are {', '.join(RELIEF_KINDS)}")
         if item is None:
             continue
         if len(item) != 1:
