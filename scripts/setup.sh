@@ -11,9 +11,11 @@ fi
 stamp=.venv/.terrapref-installed
 want=$(cat pyproject.toml requirements.lock | sha256sum | cut -d' ' -f1)
 # The compiled loops are cached beside their sources, and a cache names the modules its types
-# came from: one written before a module moved cannot be read after. When the package's modules
-# change (a pull, a checkout), the caches are removed and the loops compiled again.
-modules=$(find src/terrapref -name '*.py' | sort | sha256sum | cut -d' ' -f1)
+# came from: one written before a module moved cannot be read after. A cache is also kept while
+# its own file is unchanged, though a loop it inlined from another file changed. When the
+# package's modules move or a module with compiled loops changes (a pull, a checkout, an edit),
+# the caches are removed and the loops compiled again.
+modules=$( (find src/terrapref -name '*.py' | sort; grep -rl --include='*.py' numba src/terrapref | sort | xargs sha256sum) | sha256sum | cut -d' ' -f1)
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   echo "setting up .venv (pinned dependencies from requirements.lock) ..."
   .venv/bin/python -m pip install --quiet --disable-pip-version-check "torch==2.13.0"

@@ -99,3 +99,38 @@ def test_the_planner_keeps_one_map_per_settings_updates_it_once_a_frame_and_forg
     assert planner.ground_map.frame == 0 and planner.ground_map.origin is None
     argmax = Planner(model, rule="argmax")  # C steers and reads no map: the speed rule's, and the stop rule's small one
     assert argmax.ground_map is None and argmax.costmap() is None and len(argmax._maps) == 2
+
+
+def test_a_cell_waits_for_its_evidence_unless_lethal_ground_holds_its_share():
+    """With ``map_min_evidence``, a cell that one far vote put in a terrain class reads as never
+    seen until enough evidence gathers; one whose lethal share is reached is lethal from its first
+    vote, as with no minimum (lethal ground never waits)."""
+    from terrapref.groundmap.map_compiled import map_decide
+
+    k = 3  # columns: two terrain classes, one lethal, then the ground (column K); K + 1: never seen
+    lethal = np.array([False, False, True])
+    shares = (np.float32(0.35), np.float32(0.4))
+    far = np.float32(1.0 / (1.0 + (12.0 / 4.0) ** 2))  # one vote at 12 m
+
+    def decided(votes: dict[int, float], min_evidence: float) -> int:
+        evidence = np.zeros((1, 1, k + 1), np.float32)
+        for column, weight in votes.items():
+            evidence[0, 0, column] = weight
+        return map_decide(evidence, lethal, *shares, np.float32(min_evidence), 0, 0)
+
+    assert decided({1: far}, 0.0) == 1 and decided({1: far}, 1.0) == k + 1
+    assert decided({1: far, k: 1.2}, 1.0) == k  # enough evidence: decided as without a minimum
+    assert decided({2: far}, 0.0) == 2 and decided({2: far}, 1.0) == 2  # lethal, at once
+    assert decided({2: far, k: 3 * far}, 1.0) == k + 1  # under its share: it waits as any cell
+
+
+def test_the_speed_rule_reads_the_steering_rules_map_whatever_its_settings(tmp_path: Path):
+    """An offset rule whose geometry names other map settings than the default: the speed rule
+    reads its map, so the planner still keeps and updates one."""
+    classifier = ClassifierConfig(hidden=8, skip=True)
+    meta = _offset_meta(DRIVER_LIKE)
+    meta["rules"][0]["geometry"] = {**meta["rules"][0]["geometry"], "map_min_evidence": 0.5, "map_fade": 0.9}
+    meta["rules"].append(SpeedRule(SpeedConfig(), SPEED_MODEL).header())
+    planner = Planner(load_model(save_model(tmp_path / "m.safetensors", classifier, skip_path_weights(classifier), meta)))
+    assert planner.ground_map.settings.map_min_evidence == 0.5 and planner.ground_map.settings.map_fade == 0.9
+    assert planner.speed is not None and list(planner._maps.values()) == [planner.ground_map]

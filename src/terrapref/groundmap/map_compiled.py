@@ -190,10 +190,10 @@ def map_decide(
     fifteen thousand cells it votes on. (The test stays in each reader's loop, and the shares come
     as numbers: each array a compiled helper takes costs every call more than the decision.)
 
-    The column: K + 1 (never seen) while the evidence totals less than ``min_evidence``; else the
-    lethal column (``lethal``, by column) with the most evidence when the lethal columns hold at
-    least ``lethal_share`` of it; else the other terrain column with the most when those columns
-    hold at least ``terrain_share``; else K. Ties go to the lowest column; float32 sums in column
+    The column: the lethal column (``lethal``, by column) with the most evidence when the lethal
+    columns hold at least ``lethal_share`` of it, however little it is (lethal ground never
+    waits); else K + 1 (never seen) while the evidence totals less than ``min_evidence``; else the
+    other terrain column with the most when those columns hold at least ``terrain_share``; else K. Ties go to the lowest column; float32 sums in column
     order, so every CPU agrees.
 
     Compiled into its callers, here and in terrapref.rules.offset.reach_compiled (see
@@ -215,10 +215,10 @@ def map_decide(
             terrain += e
             if best_terrain < 0 or e > evidence[j, i, best_terrain]:
                 best_terrain = q
-    if total < min_evidence:
-        return k + 1
     if best_lethal >= 0 and deadly >= lethal_share * total:
         return best_lethal
+    if total < min_evidence:
+        return k + 1
     if best_terrain >= 0 and terrain >= terrain_share * total:
         return best_terrain
     return k
@@ -297,7 +297,8 @@ def path_frame(
 
     Compiled into its callers, here and in terrapref.rules.offset.reach_compiled, whose cached copies
     Numba does not recompile when only this file changes: after editing it, delete the
-    ``__pycache__`` folders' ``*.nbi``/``*.nbc`` files (``python -m terrapref.warm_up`` rebuilds them)."""
+    ``__pycache__`` folders' ``*.nbi``/``*.nbc`` files (``scripts/setup.sh`` does when a module with
+    compiled loops changed; ``python -m terrapref.warm_up`` rebuilds them)."""
     n_seg = path_len.shape[0]
     s = min(max(s, 0.0), path_s[-1])
     i = min(max(np.searchsorted(path_s, s, side="right") - 1, 0), n_seg - 1)

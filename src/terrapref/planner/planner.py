@@ -149,7 +149,9 @@ class Planner:
         )
         self._maps: dict[MapSettings, GroundMap] = {}  # one per distinct settings, updated in this order
         self.ground_map = self._map(context, self.runner.map_settings)  # the steering rule's (None: it reads none)
-        self._speed_map = self._map(context, self.speed.map_settings) if self.speed is not None else None
+        # The speed rule reads the steering rule's map, or where that rule reads none, its own (as the stop rule).
+        speed_map = (self.runner.map_settings or self.speed.map_settings) if self.speed is not None else None
+        self._speed_map = self._map(context, speed_map)
         self._stop_map = self.ground_map if self.ground_map is not None else self._map(context, self.stop_rule.map_settings)
         self.goal = GoalCheck(self.stop_rule.config, min(self._max_w, self.vehicle.max_yaw_rate_rps))
         self.path: ReferencePath | None = None

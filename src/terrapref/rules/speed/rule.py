@@ -68,9 +68,10 @@ if TYPE_CHECKING:
     from terrapref.demos.recording import Recording
     from terrapref.learning.train import FitData
 
-# The speed rule's ground map: the offset rule's (its default geometry: 0.1 m cells gathered over
-# the last seconds, placed with the camera's attitude from the sky line), so that a planner whose
-# offset rule steers keeps one map for both, and a robot's ragged labels are outvoted alike.
+# The speed rule's ground map where the steering rule reads none, and the one its fit reads the
+# drive with: the offset rule's default geometry (0.1 m cells gathered over the last seconds, placed
+# with the camera's attitude from the sky line). Where the offset rule steers, the planner keeps its
+# map for both, so that a robot's ragged labels are outvoted alike.
 MAP = MapSettings()
 # A cell split between two terrain classes (its class holding under half its evidence, another
 # at least 0.15) reads as never seen: a robot's network takes a patch of one class for another in
@@ -495,8 +496,8 @@ def _number(value: object) -> bool:
 
 class LearnedSpeed(SpeedRunner):
     """The speed rule bound to one planner: the speed along a chosen way, read from the ground map
-    of :attr:`map_settings` that the planner keeps (one map with the steering rule's where their
-    settings are the same)."""
+    the planner keeps for the steering rule, or where that rule reads none, from one of
+    :attr:`map_settings`."""
 
     map_settings: MapSettings = MAP
 
@@ -541,8 +542,8 @@ class LearnedSpeed(SpeedRunner):
         along: tuple[ReferencePath, float, float] | None = None,
         attitude: Attitude | None = None,
     ) -> float:
-        """The speed [m/s] along the way chosen, as ``gmap`` (the ground map of :attr:`map_settings`,
-        updated with the frame) shows it, within the rule's top speed and the speed at which an arc
+        """The speed [m/s] along the way chosen, as ``gmap`` (the ground map it reads, updated with
+        the frame) shows it, within the rule's top speed and the speed at which an arc
         of ``curvature`` [1/m] needs no more than ``max_yaw_rate_rps``. With the body's ``attitude``
         (its odometry's; None: not known), a model that sheds speed on grades checks the grades it
         read ahead against the body's pitch once there, and corrects what it reads by their errors
