@@ -101,10 +101,10 @@ def test_the_planner_keeps_one_map_per_settings_updates_it_once_a_frame_and_forg
     assert argmax.ground_map is None and argmax.costmap() is None and len(argmax._maps) == 2
 
 
-def test_a_cell_waits_for_its_evidence_unless_lethal_ground_holds_its_share():
-    """With ``map_min_evidence``, a cell that one far vote put in a terrain class reads as never
-    seen until enough evidence gathers; one whose lethal share is reached is lethal from its first
-    vote, as with no minimum (lethal ground never waits)."""
+def test_a_cell_waits_for_its_evidence_lethal_or_not():
+    """With ``map_min_evidence``, a cell that one far vote put in a class, lethal or not, reads as
+    never seen until enough evidence gathers, then as it would without a minimum; with none
+    (the default), one vote decides it."""
     from terrapref.groundmap.map_compiled import map_decide
 
     k = 3  # columns: two terrain classes, one lethal, then the ground (column K); K + 1: never seen
@@ -119,9 +119,9 @@ def test_a_cell_waits_for_its_evidence_unless_lethal_ground_holds_its_share():
         return map_decide(evidence, lethal, *shares, np.float32(min_evidence), 0, 0)
 
     assert decided({1: far}, 0.0) == 1 and decided({1: far}, 1.0) == k + 1
-    assert decided({1: far, k: 1.2}, 1.0) == k  # enough evidence: decided as without a minimum
-    assert decided({2: far}, 0.0) == 2 and decided({2: far}, 1.0) == 2  # lethal, at once
-    assert decided({2: far, k: 3 * far}, 1.0) == k + 1  # under its share: it waits as any cell
+    assert decided({2: far}, 0.0) == 2 and decided({2: far}, 1.0) == k + 1  # a far glimpse of lethal ground waits too
+    assert decided({2: 12 * far}, 1.0) == 2  # a dozen such votes: lethal
+    assert decided({2: far, k: 1.2}, 1.0) == k  # enough evidence, the lethal share not reached: the ground
 
 
 def test_the_speed_rule_reads_the_steering_rules_map_whatever_its_settings(tmp_path: Path):

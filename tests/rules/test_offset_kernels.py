@@ -339,10 +339,10 @@ def _map_vote_python(
 
 
 def _column_python(e: np.ndarray, lethal: np.ndarray, lethal_share, terrain_share, min_evidence) -> int:
-    """A cell's column from its evidence ``e`` (K + 1,) float32: the lethal column with the most
-    (the first of equals) if the lethal ones hold ``lethal_share``, whatever the evidence; else K +
-    1 below ``min_evidence`` in all; else the terrain one if those hold ``terrain_share``; else K.
-    Sums in float32, column by column."""
+    """A cell's column from its evidence ``e`` (K + 1,) float32: K + 1 below ``min_evidence`` in all;
+    else the lethal column with the most (the first of equals) if the lethal ones hold
+    ``lethal_share``; else the terrain one if those hold ``terrain_share``; else K. Sums in float32,
+    column by column."""
     k = e.shape[0] - 1
     total, deadly, terrain = e[k], np.float32(0.0), np.float32(0.0)
     best_lethal, best_terrain = -1, -1
@@ -356,10 +356,10 @@ def _column_python(e: np.ndarray, lethal: np.ndarray, lethal_share, terrain_shar
             terrain += e[q]
             if best_terrain < 0 or e[q] > e[best_terrain]:
                 best_terrain = q
-    if best_lethal >= 0 and deadly >= lethal_share * total:
-        return best_lethal
     if total < min_evidence:
         return k + 1
+    if best_lethal >= 0 and deadly >= lethal_share * total:
+        return best_lethal
     if best_terrain >= 0 and terrain >= terrain_share * total:
         return best_terrain
     return k

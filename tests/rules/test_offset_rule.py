@@ -631,6 +631,41 @@ def test_the_offset_rules_arrays_survive_a_dataset_file_and_bad_values_are_refus
     assert exc.value.problems[0].field == "rules.offset.features"
 
 
+def test_a_rule_fitted_on_relief_waits_for_a_near_views_evidence_and_its_planner_keeps_one_map(tmp_path):
+    """Fitted on a drive whose frames carried depth (relief columns), the rule's map counts a cell
+    once it holds RELIEF_MIN_EVIDENCE, written in its file; fitted on flat ground it keeps the
+    geometry's own (0), as before. The speed rule reads the steering rule's map, so a planner with
+    both keeps one map whatever the offset rule's map settings."""
+    from test_speed_rule import MODEL as SPEED_MODEL
+
+    from terrapref.learning.train import FitData
+    from terrapref.rules.offset.features import RELIEF_BANDS_DEG
+    from terrapref.rules.offset.rule import RELIEF_MIN_EVIDENCE
+    from terrapref.rules.speed.rule import SpeedConfig, SpeedRule
+
+    flat = _offset_dataset()
+    arrays = flat.rules["offset"]
+    n, o = arrays["features"].shape[:2]
+    relief_m = np.zeros((n, o, 2 * len(RELIEF_BANDS_DEG)), np.float32)
+    relief_m[::3, o // 2 :, 3] = 2.0  # steep ground on one side in some frames
+    meta = {
+        **flat.meta,
+        "rules": {
+            "offset": {**flat.meta["rules"]["offset"], "arrays": {**flat.meta["rules"]["offset"]["arrays"], "relief_m": "finite >= 0"}}
+        },
+    }
+    on_relief = Dataset(flat.U, flat.labels, flat.w, flat.source, meta, {"offset": {**arrays, "relief_m": relief_m}})
+    assert OffsetConfig().fit(FitData(flat, mirror=False)).config.geometry.map_min_evidence == 0.0
+    rule = OffsetConfig().fit(FitData(on_relief, mirror=False))
+    assert RELIEF_MIN_EVIDENCE > 0 and rule.config.geometry.map_min_evidence == RELIEF_MIN_EVIDENCE
+    assert rule.header()["geometry"]["map_min_evidence"] == RELIEF_MIN_EVIDENCE
+    meta = {**model_meta(), "rules": [rule.header(), SpeedRule(SpeedConfig(), SPEED_MODEL).header()], "drives": "offset"}
+    config = ClassifierConfig(hidden=8, skip=True)
+    planner = Planner(load_model(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), meta)))
+    assert planner.ground_map.settings.map_min_evidence == RELIEF_MIN_EVIDENCE
+    assert planner.speed is not None and list(planner._maps.values()) == [planner.ground_map]  # offset, speed and stop: one map
+
+
 def test_the_compiled_swept_check_is_the_numpy_form(camera):
     """The way to each offset, stepped by pure pursuit in NumPy, meets the trees at the step the kernel says."""
     scenario = _scenario([TREES])

@@ -190,9 +190,10 @@ def map_decide(
     fifteen thousand cells it votes on. (The test stays in each reader's loop, and the shares come
     as numbers: each array a compiled helper takes costs every call more than the decision.)
 
-    The column: the lethal column (``lethal``, by column) with the most evidence when the lethal
-    columns hold at least ``lethal_share`` of it, however little it is (lethal ground never
-    waits); else K + 1 (never seen) while the evidence totals less than ``min_evidence``; else the
+    The column: K + 1 (never seen) while the evidence totals less than ``min_evidence``, lethal
+    or not (a far glimpse of a lethal class, which a network's errors give, waits for the views
+    that confirm or outvote it, as the rest does); else the lethal column (``lethal``, by column)
+    with the most evidence when the lethal columns hold at least ``lethal_share`` of it; else the
     other terrain column with the most when those columns hold at least ``terrain_share``; else K. Ties go to the lowest column; float32 sums in column
     order, so every CPU agrees.
 
@@ -215,10 +216,10 @@ def map_decide(
             terrain += e
             if best_terrain < 0 or e > evidence[j, i, best_terrain]:
                 best_terrain = q
-    if best_lethal >= 0 and deadly >= lethal_share * total:
-        return best_lethal
     if total < min_evidence:
         return k + 1
+    if best_lethal >= 0 and deadly >= lethal_share * total:
+        return best_lethal
     if best_terrain >= 0 and terrain >= terrain_share * total:
         return best_terrain
     return k

@@ -39,8 +39,9 @@ class MapSettings:
             (0.4 rather than a majority: a patch's edge cells stay the patch under the `field`
             preset's misses, so a detour keeps its width; docs/perception.md).
         map_min_evidence: a cell counts as seen once its evidence totals this much (a vote at
-            0 m weighs 1); lethal ground does not wait for it: a cell whose lethal share is
-            reached is lethal from its first vote.
+            0 m weighs 1), lethal or not: a far glimpse of a lethal class waits for the views
+            that confirm or outvote it, and the stop rule keeps the vehicle off ground not yet
+            seen within its stopping distance.
         map_sky_attitude: place the ground samples with the camera's pitch and roll off its mount
             as the sky line of each frame shows them (terrapref.groundmap.attitude), not with the
             mount's.

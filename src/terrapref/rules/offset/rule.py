@@ -86,6 +86,18 @@ if TYPE_CHECKING:
     from terrapref.learning.train import FitData
     from terrapref.world import WorldMap
 
+# The evidence a ground-map cell holds before it counts as seen, lethal or not, for a rule fitted
+# on relief (a vote at 0 m weighs 1; the drive's own frames are read without it, their labels
+# being true). A robot's network takes a few percent of the ground for a lethal class in blobs
+# that last a few frames; a far glimpse of one made a cell lethal at once, and on relief, where
+# ground comes into view late and far off past crests and mounds, such cells priced detours the
+# driver never took. Waiting for about one near view's evidence (ten votes at 12 m, two at 4 m)
+# lets the true labels outvote them; the stop rule keeps the vehicle off ground not yet seen
+# within its stopping distance. Chosen under `field` on generated relief layouts and confirmed on
+# others (docs/lab/2026-12-01-relief-evidence.md); a rule fitted on flat ground keeps the
+# geometry's own (0), its decisions as they were.
+RELIEF_MIN_EVIDENCE = 1.0
+
 
 @dataclass(frozen=True)
 class OffsetConfig(RuleConfig):
@@ -158,6 +170,8 @@ class OffsetConfig(RuleConfig):
             raise UserError("offset rule", f"relief columns of {relief.shape[2]} bands; this version reads {2 * len(RELIEF_BANDS_DEG)}")
         columns = (relief, RELIEF_BANDS_DEG) if relief is not None else None
         fitted = fit_offset_utility(arrays["features"], arrays["near_m"], arrays["intent_m"], geometry.offsets, relief=columns)
+        if relief is not None:  # a rule that drives relief waits, on the map, for the evidence of a near view
+            geometry = replace(geometry, map_min_evidence=max(geometry.map_min_evidence, RELIEF_MIN_EVIDENCE))
         utility = OffsetUtility(fitted.weights, fitted.near_m, geometry, fitted.relief, fitted.relief_shown, fitted.relief_interval)
         return OffsetRule(replace(self, geometry=geometry), utility, fitted)
 
