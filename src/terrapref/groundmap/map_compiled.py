@@ -194,8 +194,8 @@ def map_decide(
     or not (a far glimpse of a lethal class, which a network's errors give, waits for the views
     that confirm or outvote it, as the rest does); else the lethal column (``lethal``, by column)
     with the most evidence when the lethal columns hold at least ``lethal_share`` of it; else the
-    other terrain column with the most when those columns hold at least ``terrain_share``; else K. Ties go to the lowest column; float32 sums in column
-    order, so every CPU agrees.
+    other terrain column with the most when those columns hold at least ``terrain_share``; else
+    K. Ties go to the lowest column; float32 sums in column order, so every CPU agrees.
 
     Compiled into its callers, here and in terrapref.rules.offset.reach_compiled (see
     :func:`path_frame` on their cached copies).
