@@ -659,6 +659,7 @@ def test_a_rule_fitted_on_relief_waits_for_a_near_views_evidence_and_its_planner
     rule = OffsetConfig().fit(FitData(on_relief, mirror=False))
     assert RELIEF_MIN_EVIDENCE > 0 and rule.config.geometry.map_min_evidence == RELIEF_MIN_EVIDENCE
     assert rule.header()["geometry"]["map_min_evidence"] == RELIEF_MIN_EVIDENCE
+    assert any(line.startswith("map: a cell counts as seen, lethal or not, once it holds 1 of evidence") for line in rule.relief_lines())
     meta = {**model_meta(), "rules": [rule.header(), SpeedRule(SpeedConfig(), SPEED_MODEL).header()], "drives": "offset"}
     config = ClassifierConfig(hidden=8, skip=True)
     planner = Planner(load_model(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), meta)))

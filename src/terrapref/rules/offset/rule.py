@@ -310,7 +310,8 @@ class OffsetRule(Rule):
     def relief_lines(self) -> list[str]:
         """The relief the utility prices, a line for side slope and one for grade: a metre's price
         past each band, on the classes' scale, and the bands past the steepest ground its drive
-        showed; none for a utility that prices no relief."""
+        showed; the price of ground not yet seen, and the evidence its map waits for; none for a
+        utility that prices no relief."""
         u = self.utility
         if u.relief is None:
             return []
@@ -341,6 +342,12 @@ class OffsetRule(Rule):
             lines.append(
                 f"relief, ground not yet seen (behind a crest, a mound, a bank): {hidden / detour + 0.0:.1f} per metre, "
                 "as the classes' (ground the camera has not shown, on a map that reads depth)"
+            )
+        evidence = self.config.geometry.map_min_evidence
+        if evidence > 0.0:
+            lines.append(
+                f"map: a cell counts as seen, lethal or not, once it holds {evidence:g} of evidence "
+                f"(a vote at 0 m weighs 1: {math.ceil(evidence * 10 - 1e-9):g} votes at 12 m, {math.ceil(evidence * 2 - 1e-9):g} at 4 m)"
             )
         return lines
 
