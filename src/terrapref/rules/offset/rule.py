@@ -343,11 +343,12 @@ class OffsetRule(Rule):
                 f"relief, ground not yet seen (behind a crest, a mound, a bank): {hidden / detour + 0.0:.1f} per metre, "
                 "as the classes' (ground the camera has not shown, on a map that reads depth)"
             )
-        evidence = self.config.geometry.map_min_evidence
-        if evidence > 0.0:
+        g = self.config.geometry
+        if g.map_min_evidence > 0.0:  # a vote at r metres weighs 1 / (1 + (r / map_range_m)^2) (terrapref.groundmap.map)
+            far, near = (math.ceil(g.map_min_evidence * (1.0 + (r / g.map_range_m) ** 2) - 1e-9) for r in (12.0, 4.0))
             lines.append(
-                f"map: a cell counts as seen, lethal or not, once it holds {evidence:g} of evidence "
-                f"(a vote at 0 m weighs 1: {math.ceil(evidence * 10 - 1e-9):g} votes at 12 m, {math.ceil(evidence * 2 - 1e-9):g} at 4 m)"
+                f"map: a cell counts as seen, lethal or not, once it holds {g.map_min_evidence:g} of evidence "
+                f"(a vote at 0 m weighs 1: {far} votes at 12 m, {near} at 4 m)"
             )
         return lines
 
