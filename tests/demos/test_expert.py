@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import ast
 import inspect
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pytest
@@ -174,3 +174,82 @@ def test_offset_costs_and_hits_give_the_numpy_forms(n_f: int):
         hits = expert_module._offset_hits(centre, normal, lat, upto, raster, 0.05, lethal)
         assert np.array_equal(hits, lethal[classes].any(axis=(1, 2))), upto
         assert upto < 49 or (hits.any() and not hits.all())  # the long reaches hit on some offsets only
+
+
+def _disc_ahead(centre_y: float, radius_m: float) -> Scenario:
+    """A straight path along y = 10 from x = 2, with a lethal disc centred at x = 20."""
+    from terrapref.scenario import parse_scenario
+
+    return parse_scenario(
+        {
+            "format": "terrapref-scenario/1",
+            "name": "disc_ahead",
+            "world": {"size_m": [40.0, 20.0], "resolution_m": 0.05, "background": "grass"},
+            "terrain": [{"class": "non_traversable", "circle": {"center": [20.0, centre_y], "radius": radius_m}}],
+            "path": {"waypoints": [[2.0, 10.0], [38.0, 10.0]]},
+        }
+    )
+
+
+def _committed(scenario: Scenario, held_m: float) -> ExpertDriver:
+    driver = ExpertDriver(ExpertConfig.styled("shaky"))
+    driver.reset(scenario, np.random.default_rng(0))
+    driver.offset = held_m
+    return driver
+
+
+class _Scripted(ExpertDriver):
+    """A driver whose offsets are scripted up to given distances along the path, its own after."""
+
+    def __init__(self, script: list[tuple[float, float]], way_check: bool) -> None:
+        super().__init__(replace(ExpertConfig.styled("shaky"), stick_noise_rps=0.0))
+        self.script, self.way_check = script, way_check
+
+    def choose_offset(self, s_now: float, pose=None, v_mps=None) -> float:
+        for until_m, offset_m in self.script:
+            if s_now < until_m:
+                return offset_m
+        return super().choose_offset(s_now, pose if self.way_check else None, v_mps)
+
+
+def test_a_driver_late_in_front_of_lethal_terrain_keeps_to_its_side():
+    """A lethal disc on the path reaches 1.45 m left of it and 1.25 m right. The driver heads
+    for 2.4 m left of the path from 5.5 m before the disc, and decides on its own 1.4 m later:
+    the left line at 2.4 m is then grazed (it keeps 1.4 m), the right one at 2.4 m is clear and
+    cheaper than the left one at 2.6 m. By the lines alone it swaps sides and cuts across the
+    disc; its way to the right checked as its hand would steer it, it keeps left."""
+    scenario = _disc_ahead(10.1, 1.35)
+    edge_m = 20.0 - 1.35 - 2.0  # the disc's near edge along the path
+    script = [(edge_m - 5.5, 0.0), (edge_m - 4.1, 2.4)]
+    contact_s = {}
+    for way_check in (False, True):
+        driver = _Scripted(script, way_check)
+        sim = Simulation(scenario)
+        frame = sim.reset()
+        driver.reset(scenario, np.random.default_rng(0))
+        offsets = set()
+        while frame.pose[0] < 26.0:
+            frame = sim.step(driver.act(frame))
+            offsets.add(driver.offset)
+        contact_s[way_check] = sim.contact_s
+        assert min(offsets) < 0.0 if not way_check else max(offsets) >= 2.6
+    assert contact_s[False] > 0.5 and contact_s[True] == 0.0
+
+
+def test_the_way_check_passes_a_driver_settled_on_a_clear_line_and_flags_one_too_late():
+    scenario = _disc_ahead(10.0, 1.0)
+    driver = _committed(scenario, 2.4)
+
+    def way_hits(s_now: float, lateral_m: float) -> np.ndarray:
+        s = s_now + driver._s_rel
+        centre, heading = driver.path.point_at(s), driver.path.heading_at(s)
+        return driver._way_hits(s - s_now, len(s), centre, heading, (2.0 + s_now, 10.0 + lateral_m, 0.0), 1.4)
+
+    hits, offsets = way_hits(10.0, 2.4), driver.offsets
+    # On its line and straight: nothing pending, the way is the line, and lines 1.6 m or more
+    # from the path clear a disc of 1 m (the footprint's half-width 0.6 m).
+    assert not hits[np.isclose(offsets, 2.4)].any()
+    assert hits[np.abs(offsets) < 0.8].all()  # the path itself crosses the disc
+    # On the path 1.5 m before the disc: no way off it is quick enough (the path's own way is
+    # its line, which the line's check flags).
+    assert way_hits(15.5, 0.0)[offsets != 0.0].all()

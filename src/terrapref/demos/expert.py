@@ -8,7 +8,10 @@ It drives the way a person with a gamepad does, not the way an optimal planner d
 - Within that window it picks one lateral offset from the path ("I'll pass left of the
   puddle"), trading the terrain its 1.2 m wide footprint would cross, costed by its preference
   profile, against a quadratic cost of leaving the path. It never re-plans into a circle: it
-  always commits to a side and drives forward.
+  always commits to a side and drives forward. An offset whose way there, as its own hand
+  would steer it from where it is now, runs over lethal terrain costs as much as lethal
+  terrain on the offset's line: late in front of a patch it keeps to the side it is on rather
+  than cut across the patch to the other.
 - It steers toward the offset path by pure pursuit, through a stick that rests at exactly zero
   when no correction is needed, moves at a limited rate, lags by a reaction delay, and shakes a
   little only while it is deflected.
@@ -298,8 +301,10 @@ class ExpertDriver:
 
     # -- decision --------------------------------------------------------------------------
 
-    def choose_offset(self, s_now: float) -> float:
-        """The lateral offset [m] (left positive) to hold over the terrain ahead."""
+    def choose_offset(self, s_now: float, pose: tuple[float, float, float] | None = None, v_mps: float | None = None) -> float:
+        """The lateral offset [m] (left positive) to hold over the terrain ahead; with the vehicle's
+        ``pose`` and speed ``v_mps``, an offset it cannot reach from there without running over
+        lethal terrain costs as lethal terrain on its line does (:func:`_way_hits`)."""
         c = self.config
         s = s_now + self._s_rel  # (S,)
         valid = s <= self.path.length_m
@@ -333,6 +338,8 @@ class ExpertDriver:
         near = len(s) if self._sight is not None else upto
         hits_lethal = _offset_hits(centre, normal, self._lethal_lat, near, self.world.raster, self.world.resolution_m, self._lethal)
         terrain = terrain + hits_lethal * c.lethal_cost
+        if pose is not None:
+            terrain = terrain + self._way_hits(s - s_now, near, centre, heading, pose, v_mps or c.speed_mps) * c.lethal_cost
         span = (last - first + 1) * self.sample_step_m + 2.0 * c.pursuit_m
         total = terrain + c.deviation_cost * self.offsets**2 * span
         best = float(total.min())
@@ -348,6 +355,21 @@ class ExpertDriver:
         if self.offset != 0.0 and len(same_side):
             ties = same_side  # keep to the side already taken
         return float(self.offsets[ties[self.rng.integers(len(ties))]] if len(ties) > 1 else self.offsets[ties[0]])
+
+    def _way_hits(
+        self, s_rel: np.ndarray, upto: int, centre: np.ndarray, heading: np.ndarray, pose: tuple[float, float, float], v_mps: float
+    ) -> np.ndarray:
+        """(O,): whether the way to each candidate offset, from ``pose`` at ``v_mps`` through the
+        stick's pending moves, runs the footprint over lethal terrain before the station ``upto``
+        (the line's own check's reach; :func:`_way_hits`)."""
+        c = self.config
+        hand = (c.pursuit_m, c.max_yaw_rate_rps, c.stick_rate_rps2 * self.dt, c.deadzone_rps, self.stick)
+        pending = np.array(self._queue, dtype=np.float64)
+        ticks = VehicleConfig().control_rate_hz * self.dt
+        stations = (s_rel, centre, heading)
+        reach = float(s_rel[upto - 1])
+        args = (self._foot, self.world.raster, self.world.resolution_m, self._lethal)
+        return _way_hits(self.offsets, pose, v_mps, self.dt, max(1, round(ticks)), hand, pending, stations, reach, *args)
 
     def _costs(self, centre: np.ndarray, normal: np.ndarray, lat: np.ndarray, upto: int) -> np.ndarray:
         """``cost[_classes(centre, normal, lat, upto)].mean(axis=2).sum(axis=1)`` (O,): each offset's
@@ -431,7 +453,7 @@ class ExpertDriver:
         """
         c = self.config
         s_now = self.tracker.update(np.array(frame.pose[:2]))
-        self.offset = self.choose_offset(s_now)
+        self.offset = self.choose_offset(s_now, frame.pose, max(frame.speed_mps, self.wanted_mps))
         sin_alpha, distance = self.pursuit(frame.pose, s_now, self.offset)
         self.wanted_mps = self.wanted_speed(frame.pose, s_now, 2.0 * sin_alpha / distance)
         w = pure_pursuit_yaw_rate(max(frame.speed_mps, self.wanted_mps), sin_alpha, distance)
@@ -501,6 +523,95 @@ def _offset_hits(
                 if lethal[raster[row, col] if 0 <= col < n_cols and 0 <= row < n_rows else UNKNOWN]:
                     out[o] = True
                     break
+            if out[o]:
+                break
+    return out
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _along(s: float, s_rel: np.ndarray, centre: np.ndarray, heading: np.ndarray) -> tuple[float, float, float]:
+    """The path's point (x, y) and heading at ``s`` [m] (relative, as ``s_rel``), between the
+    stations ``s_rel`` (evenly spaced), held at the first and last."""
+    n = s_rel.shape[0]
+    t = (s - s_rel[0]) / (s_rel[1] - s_rel[0]) if n > 1 else 0.0
+    if t <= 0.0:
+        return centre[0, 0], centre[0, 1], heading[0]
+    if t >= n - 1:
+        return centre[n - 1, 0], centre[n - 1, 1], heading[n - 1]
+    k = np.int64(t)
+    f = t - k
+    turn = (heading[k + 1] - heading[k] + math.pi) % (2.0 * math.pi) - math.pi
+    return centre[k, 0] + f * (centre[k + 1, 0] - centre[k, 0]), centre[k, 1] + f * (centre[k + 1, 1] - centre[k, 1]), heading[k] + f * turn
+
+
+@njit(cache=True, nogil=True)
+def _way_hits(
+    offsets: np.ndarray,
+    pose: tuple[float, float, float],
+    v: float,
+    dt: float,
+    ticks: int,
+    hand: tuple[float, float, float, float, float],
+    pending: np.ndarray,
+    stations: tuple[np.ndarray, np.ndarray, np.ndarray],
+    reach: float,
+    foot: np.ndarray,
+    raster: np.ndarray,
+    res: float,
+    lethal: np.ndarray,
+) -> np.ndarray:
+    """(O,): whether the driver's way to each offset in ``offsets`` [m] runs the points ``foot``
+    [m] across its axle over lethal terrain.
+
+    The way is the driver's own steering imagined without its tremor: from ``pose`` at a steady
+    ``v`` [m/s], each camera period ``dt`` [s] a pure-pursuit yaw rate toward the offset's line,
+    through its reaction delay (the yaw rates already ``pending``, then this one) and its stick
+    (``hand``: pursuit distance [m], largest yaw rate [rad/s], the stick's largest move a period,
+    its deadzone, where it is now), held over ``ticks`` steps of the vehicle. ``stations``: the
+    path's stations ahead, their distances from the vehicle's along the path [m], points (S, 2)
+    and headings (S,) (the pursuit's target is held at the last). It ends past ``reach`` [m]
+    along the path, or once on the line, straight and with nothing pending (the line's own check
+    takes over there).
+    """
+    s_rel, centre, heading = stations
+    pursuit_m, max_w, stick_step, deadzone, stick0 = hand
+    n_rows, n_cols = raster.shape
+    h = dt / ticks
+    delay = pending.shape[0]
+    queue = np.empty(delay + 1)
+    out = np.zeros(offsets.shape[0], np.bool_)
+    for o in range(offsets.shape[0]):
+        off = offsets[o]
+        x, y, yaw = pose
+        s, stick = 0.0, stick0
+        queue[:delay] = pending
+        for _ in range(400):
+            px, py, ph = _along(s, s_rel, centre, heading)
+            e = (x - px) * -math.sin(ph) + (y - py) * math.cos(ph)
+            settled = stick == 0.0 and abs(e - off) < 0.05 and abs(math.sin(yaw - ph)) < 0.02
+            for k in range(delay):
+                settled &= queue[k] == 0.0
+            if s > reach or settled:
+                break
+            tx, ty, th = _along(s + pursuit_m, s_rel, centre, heading)
+            tx, ty = tx - off * math.sin(th), ty + off * math.cos(th)
+            dist = max(math.hypot(tx - x, ty - y), 1e-6)
+            w = 2.0 * v * math.sin(math.atan2(ty - y, tx - x) - yaw) / dist
+            queue[delay] = 0.0 if abs(w) < deadzone else min(max(w, -max_w), max_w)
+            wanted = queue[0]
+            queue[:delay] = queue[1:]
+            stick = min(max(wanted, stick - stick_step, -max_w), stick + stick_step, max_w)
+            if wanted == 0.0 and abs(stick) <= stick_step:
+                stick = 0.0
+            for _ in range(ticks):
+                x, y, yaw = x + v * h * math.cos(yaw + 0.5 * stick * h), y + v * h * math.sin(yaw + 0.5 * stick * h), yaw + stick * h
+                sin, cos = math.sin(yaw), math.cos(yaw)
+                for f in range(foot.shape[0]):
+                    row, col = np.int64(math.floor((y + foot[f] * cos) / res)), np.int64(math.floor((x - foot[f] * sin) / res))
+                    if lethal[raster[row, col] if 0 <= col < n_cols and 0 <= row < n_rows else UNKNOWN]:
+                        out[o] = True
+                px, py, ph = _along(s, s_rel, centre, heading)
+                s += (x - px) * math.cos(ph) + (y - py) * math.sin(ph)  # the pose's projection, a step at a time
             if out[o]:
                 break
     return out
