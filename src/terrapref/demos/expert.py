@@ -573,12 +573,10 @@ def _way_hits(
     along the path, or once on the line, straight and with nothing pending (the line's own check
     takes over there).
     """
-    s_rel, centre, heading = stations
     pursuit_m, max_w, stick_step, deadzone, stick0 = hand
-    n_rows, n_cols = raster.shape
-    h = dt / ticks
     delay = pending.shape[0]
     queue = np.empty(delay + 1)
+    ground, h = (foot, raster, res, lethal), dt / ticks
     out = np.zeros(offsets.shape[0], np.bool_)
     for o in range(offsets.shape[0]):
         off = offsets[o]
@@ -586,35 +584,82 @@ def _way_hits(
         s, stick = 0.0, stick0
         queue[:delay] = pending
         for _ in range(400):
-            px, py, ph = _along(s, s_rel, centre, heading)
-            e = (x - px) * -math.sin(ph) + (y - py) * math.cos(ph)
-            settled = stick == 0.0 and abs(e - off) < 0.05 and abs(math.sin(yaw - ph)) < 0.02
-            for k in range(delay):
-                settled &= queue[k] == 0.0
-            if s > reach or settled:
+            if s > reach or _settled(x, y, yaw, s, off, stick, queue[:delay], stations):
                 break
-            tx, ty, th = _along(s + pursuit_m, s_rel, centre, heading)
-            tx, ty = tx - off * math.sin(th), ty + off * math.cos(th)
-            dist = max(math.hypot(tx - x, ty - y), 1e-6)
-            w = 2.0 * v * math.sin(math.atan2(ty - y, tx - x) - yaw) / dist
+            w = _pursuit_rate(x, y, yaw, s + pursuit_m, off, v, stations)
             queue[delay] = 0.0 if abs(w) < deadzone else min(max(w, -max_w), max_w)
             wanted = queue[0]
             queue[:delay] = queue[1:]
             stick = min(max(wanted, stick - stick_step, -max_w), stick + stick_step, max_w)
             if wanted == 0.0 and abs(stick) <= stick_step:
                 stick = 0.0
-            for _ in range(ticks):
-                x, y, yaw = x + v * h * math.cos(yaw + 0.5 * stick * h), y + v * h * math.sin(yaw + 0.5 * stick * h), yaw + stick * h
-                sin, cos = math.sin(yaw), math.cos(yaw)
-                for f in range(foot.shape[0]):
-                    row, col = np.int64(math.floor((y + foot[f] * cos) / res)), np.int64(math.floor((x - foot[f] * sin) / res))
-                    if lethal[raster[row, col] if 0 <= col < n_cols and 0 <= row < n_rows else UNKNOWN]:
-                        out[o] = True
-                px, py, ph = _along(s, s_rel, centre, heading)
-                s += (x - px) * math.cos(ph) + (y - py) * math.sin(ph)  # the pose's projection, a step at a time
-            if out[o]:
+            x, y, yaw, s, hit = _ticks(x, y, yaw, s, v * h, stick * h, ticks, stations, ground)
+            if hit:
+                out[o] = True
                 break
     return out
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _settled(
+    x: float,
+    y: float,
+    yaw: float,
+    s: float,
+    off: float,
+    stick: float,
+    pending: np.ndarray,
+    stations: tuple[np.ndarray, np.ndarray, np.ndarray],
+) -> bool:
+    """Whether the vehicle at ``(x, y, yaw)``, ``s`` along the path, is on the offset ``off``'s line
+    (within 5 cm), straight along it, its stick at rest and no yaw rate ``pending``."""
+    px, py, ph = _along(s, stations[0], stations[1], stations[2])
+    if stick != 0.0 or abs((y - py) * math.cos(ph) - (x - px) * math.sin(ph) - off) >= 0.05 or abs(math.sin(yaw - ph)) >= 0.02:
+        return False
+    for k in range(pending.shape[0]):
+        if pending[k] != 0.0:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _pursuit_rate(
+    x: float, y: float, yaw: float, s_target: float, off: float, v: float, stations: tuple[np.ndarray, np.ndarray, np.ndarray]
+) -> float:
+    """Pure pursuit's yaw rate [rad/s] at ``v`` toward the point ``off`` [m] beside the path at
+    ``s_target`` along it."""
+    tx, ty, th = _along(s_target, stations[0], stations[1], stations[2])
+    tx, ty = tx - off * math.sin(th), ty + off * math.cos(th)
+    return 2.0 * v * math.sin(math.atan2(ty - y, tx - x) - yaw) / max(math.hypot(tx - x, ty - y), 1e-6)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _ticks(
+    x: float,
+    y: float,
+    yaw: float,
+    s: float,
+    step_m: float,
+    turn: float,
+    ticks: int,
+    stations: tuple[np.ndarray, np.ndarray, np.ndarray],
+    ground: tuple[np.ndarray, np.ndarray, float, np.ndarray],
+) -> tuple[float, float, float, float, bool]:
+    """``ticks`` steps of ``step_m`` [m] turning ``turn`` [rad] each, the pose's distance along
+    the path ``s`` following; and whether the points ``foot`` across the axle met lethal terrain
+    (``ground``: foot, raster, cell size, lethal classes) after any step."""
+    foot, raster, res, lethal = ground
+    n_rows, n_cols = raster.shape
+    hit = False
+    for _ in range(ticks):
+        x, y, yaw = x + step_m * math.cos(yaw + 0.5 * turn), y + step_m * math.sin(yaw + 0.5 * turn), yaw + turn
+        sin, cos = math.sin(yaw), math.cos(yaw)
+        for f in range(foot.shape[0]):
+            row, col = np.int64(math.floor((y + foot[f] * cos) / res)), np.int64(math.floor((x - foot[f] * sin) / res))
+            hit |= lethal[raster[row, col] if 0 <= col < n_cols and 0 <= row < n_rows else UNKNOWN]
+        px, py, ph = _along(s, stations[0], stations[1], stations[2])
+        s += (x - px) * math.cos(ph) + (y - py) * math.sin(ph)  # the pose's projection, a step at a time
+    return x, y, yaw, s, hit
 
 
 @njit(cache=True, nogil=True)
