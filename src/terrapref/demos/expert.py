@@ -369,7 +369,8 @@ class ExpertDriver:
         stations = (s_rel, centre, heading)
         reach = float(s_rel[upto - 1])
         args = (self._foot, self.world.raster, self.world.resolution_m, self._lethal)
-        return _way_hits(self.offsets, pose, v_mps, self.dt, max(1, round(ticks)), hand, pending, stations, reach, *args)
+        start = (float(pose[0]), float(pose[1]), float(pose[2]))  # a plain tuple: one compiled form for a Pose and any other
+        return _way_hits(self.offsets, start, float(v_mps), self.dt, max(1, round(ticks)), hand, pending, stations, reach, *args)
 
     def _costs(self, centre: np.ndarray, normal: np.ndarray, lat: np.ndarray, upto: int) -> np.ndarray:
         """``cost[_classes(centre, normal, lat, upto)].mean(axis=2).sum(axis=1)`` (O,): each offset's
