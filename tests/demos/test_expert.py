@@ -243,7 +243,7 @@ def test_the_way_check_passes_a_driver_settled_on_a_clear_line_and_flags_one_too
     def way_hits(s_now: float, lateral_m: float) -> np.ndarray:
         s = s_now + driver._s_rel
         centre, heading = driver.path.point_at(s), driver.path.heading_at(s)
-        return driver._way_hits(s - s_now, len(s), centre, heading, (2.0 + s_now, 10.0 + lateral_m, 0.0), 1.4)
+        return driver._way_hits((s - s_now, len(s), centre, heading), (2.0 + s_now, 10.0 + lateral_m, 0.0), 1.4)
 
     hits, offsets = way_hits(10.0, 2.4), driver.offsets
     # On its line and straight: nothing pending, the way is the line, and lines 1.6 m or more
@@ -253,3 +253,28 @@ def test_the_way_check_passes_a_driver_settled_on_a_clear_line_and_flags_one_too
     # On the path 1.5 m before the disc: no way off it is quick enough (the path's own way is
     # its line, which the line's check flags).
     assert way_hits(15.5, 0.0)[offsets != 0.0].all()
+
+
+@pytest.mark.parametrize(("s_now", "lateral_m", "held_m"), [(10.0, 2.4, 2.4), (11.0, 0.5, 2.4), (12.0, 0.0, 0.0), (15.5, 0.0, 0.0)])
+@pytest.mark.parametrize("can_hold", [False, True])
+def test_following_only_the_ways_that_can_decide_decides_as_following_every_way(
+    s_now: float, lateral_m: float, held_m: float, can_hold: bool
+):
+    driver = _committed(_disc_ahead(10.1, 1.35), held_m)
+    s = s_now + driver._s_rel
+    stations = (s - s_now, len(s), driver.path.point_at(s), driver.path.heading_at(s))
+    pose = (2.0 + s_now, 10.0 + lateral_m, 0.0)
+    rng = np.random.default_rng(int(s_now))
+    terrain = rng.choice([0.0, 1000.0], len(driver.offsets), p=[0.8, 0.2]) + rng.uniform(0.0, 3.0, len(driver.offsets))
+    detour = 0.08 * driver.offsets**2 * 10.0
+    held = int(np.argmin(np.abs(driver.offsets - held_m)))
+
+    def decision(total: np.ndarray) -> object:  # choose_offset's: the hold, else the best and its ties
+        best = total.min()
+        if can_hold and total[held] <= best * 1.15 + 1e-6:
+            return "hold"
+        return best, tuple(np.flatnonzero(total <= best + 1e-6))
+
+    every = (terrain + driver._way_hits(stations, pose, 1.4) * 1000.0) + detour
+    some = driver._way_totals(terrain, detour, (held, can_hold), stations, pose, 1.4)
+    assert decision(some) == decision(every)

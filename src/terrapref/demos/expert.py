@@ -338,14 +338,18 @@ class ExpertDriver:
         near = len(s) if self._sight is not None else upto
         hits_lethal = _offset_hits(centre, normal, self._lethal_lat, near, self.world.raster, self.world.resolution_m, self._lethal)
         terrain = terrain + hits_lethal * c.lethal_cost
-        if pose is not None:
-            terrain = terrain + self._way_hits(s - s_now, near, centre, heading, pose, v_mps or c.speed_mps) * c.lethal_cost
         span = (last - first + 1) * self.sample_step_m + 2.0 * c.pursuit_m
-        total = terrain + c.deviation_cost * self.offsets**2 * span
+        detour = c.deviation_cost * self.offsets**2 * span
+        held = int(np.argmin(np.abs(self.offsets - self.offset)))
+        if pose is None:
+            total = terrain + detour
+        else:  # the ways there, of the offsets that can decide
+            can_hold = self.offset != 0.0 and not hits_lethal[held]
+            stations = (s - s_now, near, centre, heading)
+            total = self._way_totals(terrain, detour, (held, can_hold), stations, pose, v_mps or c.speed_mps)
         best = float(total.min())
         # Hold the current side unless another is clearly cheaper (no dithering); among equal
         # candidates prefer the smaller offset, then a coin toss between left and right.
-        held = int(np.argmin(np.abs(self.offsets - self.offset)))
         if self.offset != 0.0 and total[held] <= best * (1 + c.switch_margin) + 1e-6 and not hits_lethal[held]:
             return float(self.offsets[held])
         ties = np.flatnonzero(total <= best + 1e-6)
@@ -356,21 +360,37 @@ class ExpertDriver:
             ties = same_side  # keep to the side already taken
         return float(self.offsets[ties[self.rng.integers(len(ties))]] if len(ties) > 1 else self.offsets[ties[0]])
 
-    def _way_hits(
-        self, s_rel: np.ndarray, upto: int, centre: np.ndarray, heading: np.ndarray, pose: tuple[float, float, float], v_mps: float
+    def _way_totals(
+        self,
+        terrain: np.ndarray,
+        detour: np.ndarray,
+        held: tuple[int, bool],
+        stations: tuple,
+        pose: tuple[float, float, float],
+        v_mps: float,
     ) -> np.ndarray:
-        """(O,): whether the way to each candidate offset, from ``pose`` at ``v_mps`` through the
-        stick's pending moves, runs the footprint over lethal terrain before the station ``upto``
-        (the line's own check's reach; :func:`_way_hits`)."""
+        """``terrain + detour`` (O,), with the lethal cost added to the terrain of each offset whose
+        way there from ``pose`` at ``v_mps`` runs over lethal terrain, where it can decide
+        (:func:`_way_totals`). ``held``: the held offset's index, and whether it may be held.
+        ``stations``: the path's stations' distances from the vehicle's [m], how many of them the
+        line's check reads, their points and headings."""
+        costs = (terrain, detour, held[0], held[1], self.config.switch_margin, self.config.lethal_cost)
+        return _way_totals(costs, *self._way_args(stations, pose, v_mps))
+
+    def _way_hits(self, stations: tuple, pose: tuple[float, float, float], v_mps: float) -> np.ndarray:
+        """(O,): whether the way to each candidate offset runs over lethal terrain (:func:`_way_hit`)."""
+        return _way_hits(*self._way_args(stations, pose, v_mps))
+
+    def _way_args(self, stations: tuple, pose: tuple[float, float, float], v_mps: float) -> tuple:
+        """The arguments of :func:`_way_hits` for the driver as it is now."""
+        s_rel, upto, centre, heading = stations
         c = self.config
         hand = (c.pursuit_m, c.max_yaw_rate_rps, c.stick_rate_rps2 * self.dt, c.deadzone_rps, self.stick)
         pending = np.array(self._queue, dtype=np.float64)
-        ticks = VehicleConfig().control_rate_hz * self.dt
-        stations = (s_rel, centre, heading)
-        reach = float(s_rel[upto - 1])
-        args = (self._foot, self.world.raster, self.world.resolution_m, self._lethal)
+        ticks = max(1, round(VehicleConfig().control_rate_hz * self.dt))
         start = (float(pose[0]), float(pose[1]), float(pose[2]))  # a plain tuple: one compiled form for a Pose and any other
-        return _way_hits(self.offsets, start, float(v_mps), self.dt, max(1, round(ticks)), hand, pending, stations, reach, *args)
+        ground = (self._foot, self.world.raster, self.world.resolution_m, self._lethal)
+        return self.offsets, start, float(v_mps), (self.dt, ticks, hand, pending), (s_rel, centre, heading), float(s_rel[upto - 1]), ground
 
     def _costs(self, centre: np.ndarray, normal: np.ndarray, lat: np.ndarray, upto: int) -> np.ndarray:
         """``cost[_classes(centre, normal, lat, upto)].mean(axis=2).sum(axis=1)`` (O,): each offset's
@@ -546,59 +566,110 @@ def _along(s: float, s_rel: np.ndarray, centre: np.ndarray, heading: np.ndarray)
 
 
 @njit(cache=True, nogil=True)
+def _way_totals(
+    costs: tuple[np.ndarray, np.ndarray, int, bool, float, float],
+    offsets: np.ndarray,
+    pose: tuple[float, float, float],
+    v: float,
+    hand: tuple[float, int, tuple[float, float, float, float, float], np.ndarray],
+    stations: tuple[np.ndarray, np.ndarray, np.ndarray],
+    reach: float,
+    ground: tuple[np.ndarray, np.ndarray, float, np.ndarray],
+) -> np.ndarray:
+    """The offsets' totals, ``terrain + detour``, with ``lethal_cost`` added to the terrain of each
+    offset whose way there runs over lethal terrain (:func:`_way_hit`; ``costs``: terrain,
+    detour, the held offset's index and whether it may be held, the switch margin, the lethal
+    cost).
+
+    Only the ways that can decide are followed: the held offset's; if it is then held whatever
+    the others' ways (within the margin of the least total without them), no other; else the
+    others' from the cheapest up, until the next one's total is past the best so far by more
+    than the margin. Those not followed cost more than the best by the margin whatever their
+    way, so the best, the hold and the ties are the same as with every way followed.
+    """
+    terrain, detour, held, can_hold, margin, lethal_cost = costs
+    total = terrain + detour
+    order = np.argsort(total)
+    least = total[order[0]]
+    if _way_hit(offsets[held], pose, v, hand, stations, reach, ground):
+        total[held] = (terrain[held] + lethal_cost) + detour[held]
+    best = total[held]
+    if can_hold and best <= least * (1.0 + margin) + 1e-6:
+        return total
+    for i in order:
+        if i == held:
+            continue
+        if total[i] > best * (1.0 + margin) + 1e-6:
+            break
+        if _way_hit(offsets[i], pose, v, hand, stations, reach, ground):
+            total[i] = (terrain[i] + lethal_cost) + detour[i]
+        best = min(best, total[i])
+    return total
+
+
+@njit(cache=True, nogil=True)
 def _way_hits(
     offsets: np.ndarray,
     pose: tuple[float, float, float],
     v: float,
-    dt: float,
-    ticks: int,
-    hand: tuple[float, float, float, float, float],
-    pending: np.ndarray,
+    hand: tuple[float, int, tuple[float, float, float, float, float], np.ndarray],
     stations: tuple[np.ndarray, np.ndarray, np.ndarray],
     reach: float,
-    foot: np.ndarray,
-    raster: np.ndarray,
-    res: float,
-    lethal: np.ndarray,
+    ground: tuple[np.ndarray, np.ndarray, float, np.ndarray],
 ) -> np.ndarray:
-    """(O,): whether the driver's way to each offset in ``offsets`` [m] runs the points ``foot``
-    [m] across its axle over lethal terrain.
-
-    The way is the driver's own steering imagined without its tremor: from ``pose`` at a steady
-    ``v`` [m/s], each camera period ``dt`` [s] a pure-pursuit yaw rate toward the offset's line,
-    through its reaction delay (the yaw rates already ``pending``, then this one) and its stick
-    (``hand``: pursuit distance [m], largest yaw rate [rad/s], the stick's largest move a period,
-    its deadzone, where it is now), held over ``ticks`` steps of the vehicle. ``stations``: the
-    path's stations ahead, their distances from the vehicle's along the path [m], points (S, 2)
-    and headings (S,) (the pursuit's target is held at the last). It ends past ``reach`` [m]
-    along the path, or once on the line, straight and with nothing pending (the line's own check
-    takes over there).
-    """
-    pursuit_m, max_w, stick_step, deadzone, stick0 = hand
-    delay = pending.shape[0]
-    queue = np.empty(delay + 1)
-    ground, h = (foot, raster, res, lethal), dt / ticks
+    """(O,): :func:`_way_hit` of each offset in ``offsets``."""
     out = np.zeros(offsets.shape[0], np.bool_)
     for o in range(offsets.shape[0]):
-        off = offsets[o]
-        x, y, yaw = pose
-        s, stick = 0.0, stick0
-        queue[:delay] = pending
-        for _ in range(400):
-            if s > reach or _settled(x, y, yaw, s, off, stick, queue[:delay], stations):
-                break
-            w = _pursuit_rate(x, y, yaw, s + pursuit_m, off, v, stations)
-            queue[delay] = 0.0 if abs(w) < deadzone else min(max(w, -max_w), max_w)
-            wanted = queue[0]
-            queue[:delay] = queue[1:]
-            stick = min(max(wanted, stick - stick_step, -max_w), stick + stick_step, max_w)
-            if wanted == 0.0 and abs(stick) <= stick_step:
-                stick = 0.0
-            x, y, yaw, s, hit = _ticks(x, y, yaw, s, v * h, stick * h, ticks, stations, ground)
-            if hit:
-                out[o] = True
-                break
+        out[o] = _way_hit(offsets[o], pose, v, hand, stations, reach, ground)
     return out
+
+
+@njit(cache=True, nogil=True)
+def _way_hit(
+    off: float,
+    pose: tuple[float, float, float],
+    v: float,
+    hand: tuple[float, int, tuple[float, float, float, float, float], np.ndarray],
+    stations: tuple[np.ndarray, np.ndarray, np.ndarray],
+    reach: float,
+    ground: tuple[np.ndarray, np.ndarray, float, np.ndarray],
+) -> bool:
+    """Whether the driver's way to the offset ``off`` [m] runs the points across its axle
+    (``ground``: those points [m], the class raster, its cell size [m], the lethal classes) over
+    lethal terrain.
+
+    The way is the driver's own steering imagined without its tremor: from ``pose`` at a steady
+    ``v`` [m/s], each camera period a pure-pursuit yaw rate toward the offset's line, through its
+    reaction delay and its stick, held over the vehicle's ticks (``hand``: the period [s], the
+    ticks in it, the stick's pursuit distance [m], largest yaw rate [rad/s], largest move a
+    period, deadzone and where it is now, and the yaw rates already pending). ``stations``: the
+    path's stations, their distances from the vehicle's along the path [m], points (S, 2) and
+    headings (S,) (the pursuit's target is held at the last). It ends past ``reach`` [m] along
+    the path, or once on the line, straight and with nothing pending (the line's own check
+    takes over there), or after 400 periods.
+    """
+    dt, ticks, stick_hand, pending = hand
+    pursuit_m, max_w, stick_step, deadzone, stick = stick_hand
+    delay = pending.shape[0]
+    queue = np.empty(delay + 1)
+    queue[:delay] = pending
+    h = dt / ticks
+    x, y, yaw = pose
+    s = 0.0
+    for _ in range(400):
+        if s > reach or _settled(x, y, yaw, s, off, stick, queue[:delay], stations):
+            return False
+        w = _pursuit_rate(x, y, yaw, s + pursuit_m, off, v, stations)
+        queue[delay] = 0.0 if abs(w) < deadzone else min(max(w, -max_w), max_w)
+        wanted = queue[0]
+        queue[:delay] = queue[1:]
+        stick = min(max(wanted, stick - stick_step, -max_w), stick + stick_step, max_w)
+        if wanted == 0.0 and abs(stick) <= stick_step:
+            stick = 0.0
+        x, y, yaw, s, hit = _ticks(x, y, yaw, s, v * h, stick * h, ticks, stations, ground)
+        if hit:
+            return True
+    return False
 
 
 @njit(cache=True, nogil=True, inline="always")
