@@ -173,7 +173,7 @@ def _shape_geometry(elevation: np.ndarray, rows: np.ndarray, cols: np.ndarray, r
     dx, dy = np.zeros_like(elevation), np.zeros_like(elevation)
     dx[:, :-1], dy[:-1, :] = np.diff(elevation, axis=1), np.diff(elevation, axis=0)
     run = np.full(elevation.shape, res, dtype=np.float32)
-    disc = np.empty((*elevation.shape, kernels.DISC_SUMS))
+    disc = np.empty((*elevation.shape, kernels.DISC_SUMS), np.float32)  # as the map keeps its sums
     kernels.disc_sums((dx, run, dy, run), 3, np.arange(elevation.size), disc)  # every difference read
     out = np.empty((len(rows), 3))
     kernels.shape_geometry((dx, run, known, dy, run, known), 1.0 / 0.03**2, disc, rows, cols, out)

@@ -255,7 +255,7 @@ class SegmentationRenderer:
         if that is nearer."""
         x, y, yaw = _finite(pose)
         cam, c = self.camera, self.camera.config
-        flat = np.asarray(flat_of(flat_index), dtype=np.int64).reshape(-1)
+        flat = read_only(np.asarray(flat_of(flat_index), dtype=np.int64).reshape(-1))
         if flat.size and (flat.min() < 0 or flat.max() >= c.width_px * c.height_px):
             raise IndexError("a pixel index is outside the image")
         reach = c.max_range_m if max_range_m is None else min(c.max_range_m, max_range_m)
@@ -308,6 +308,14 @@ class PixelSet:
             self._rows, self._cols = rows_and_columns(self.flat, config.width_px, renderer._row0, renderer._valid_flat)
             self._camera = config
         return self._rows, self._cols
+
+
+def read_only(a: np.ndarray) -> np.ndarray:
+    """A read-only view of ``a``: a compiled loop then sees one type of array, whichever the
+    caller passed (a kept pixel set's or a fresh one), and is compiled once."""
+    view = a.view()
+    view.setflags(write=False)
+    return view
 
 
 def flat_of(flat_index: np.ndarray | PixelSet) -> np.ndarray:

@@ -26,6 +26,7 @@ import numpy as np
 from numba import njit
 
 from terrapref.camera import CameraConfig, PinholeCamera, PixelSet, SegmentationView, flat_of
+from terrapref.camera.render import read_only
 from terrapref.camera.render_compiled import row_col
 from terrapref.perception.model import LabelErrors
 from terrapref.terrain import ClassTable
@@ -109,14 +110,14 @@ class FrameLabelErrors:
     def apply(self, base: SegmentationView, flat_index: np.ndarray | PixelSet) -> np.ndarray:
         """The class ids the robot's segmentation gives at pixels ``flat_index`` (row * width + col) of ``base``."""
         n, e = self.noise, self.noise.errors
-        flat = np.ascontiguousarray(flat_of(flat_index), dtype=np.int64).reshape(-1)
+        flat = read_only(np.ascontiguousarray(flat_of(flat_index), dtype=np.int64).reshape(-1))
         source = _displaced(flat, n.width, n.height, np.uint64(self.boundary_seed), e.boundary_px) if e.boundary_px else flat
         ids = np.ascontiguousarray(base.pixels(source), dtype=np.uint8).reshape(-1)
         out = _errors(
             ids,
             flat,
             n.width,
-            n.far,
+            read_only(n.far),
             np.uint64(self.conf_seed),
             n.tile_of_row,
             n.tile_of_col,
