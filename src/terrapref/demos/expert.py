@@ -375,14 +375,14 @@ class ExpertDriver:
         ``stations``: the path's stations' distances from the vehicle's [m], how many of them the
         line's check reads, their points and headings."""
         costs = (terrain, detour, held[0], held[1], self.config.switch_margin, self.config.lethal_cost)
-        return _way_totals(costs, *self._way_args(stations, pose, v_mps))
+        return _way_totals(costs, self.offsets, self._way(stations, pose, v_mps))
 
     def _way_hits(self, stations: tuple, pose: tuple[float, float, float], v_mps: float) -> np.ndarray:
         """(O,): whether the way to each candidate offset runs over lethal terrain (:func:`_way_hit`)."""
-        return _way_hits(*self._way_args(stations, pose, v_mps))
+        return _way_hits(self.offsets, self._way(stations, pose, v_mps))
 
-    def _way_args(self, stations: tuple, pose: tuple[float, float, float], v_mps: float) -> tuple:
-        """The arguments of :func:`_way_hits` for the driver as it is now."""
+    def _way(self, stations: tuple, pose: tuple[float, float, float], v_mps: float) -> tuple:
+        """The way's start, hand and ground (:func:`_way_hit`) for the driver as it is now."""
         s_rel, upto, centre, heading = stations
         c = self.config
         hand = (c.pursuit_m, c.max_yaw_rate_rps, c.stick_rate_rps2 * self.dt, c.deadzone_rps, self.stick)
@@ -390,7 +390,7 @@ class ExpertDriver:
         ticks = max(1, round(VehicleConfig().control_rate_hz * self.dt))
         start = (float(pose[0]), float(pose[1]), float(pose[2]))  # a plain tuple: one compiled form for a Pose and any other
         ground = (self._foot, self.world.raster, self.world.resolution_m, self._lethal)
-        return self.offsets, start, float(v_mps), (self.dt, ticks, hand, pending), (s_rel, centre, heading), float(s_rel[upto - 1]), ground
+        return start, float(v_mps), (self.dt, ticks, hand, pending), (s_rel, centre, heading), float(s_rel[upto - 1]), ground
 
     def _costs(self, centre: np.ndarray, normal: np.ndarray, lat: np.ndarray, upto: int) -> np.ndarray:
         """``cost[_classes(centre, normal, lat, upto)].mean(axis=2).sum(axis=1)`` (O,): each offset's
@@ -569,12 +569,7 @@ def _along(s: float, s_rel: np.ndarray, centre: np.ndarray, heading: np.ndarray)
 def _way_totals(
     costs: tuple[np.ndarray, np.ndarray, int, bool, float, float],
     offsets: np.ndarray,
-    pose: tuple[float, float, float],
-    v: float,
-    hand: tuple[float, int, tuple[float, float, float, float, float], np.ndarray],
-    stations: tuple[np.ndarray, np.ndarray, np.ndarray],
-    reach: float,
-    ground: tuple[np.ndarray, np.ndarray, float, np.ndarray],
+    way: tuple,
 ) -> np.ndarray:
     """The offsets' totals, ``terrain + detour``, with ``lethal_cost`` added to the terrain of each
     offset whose way there runs over lethal terrain (:func:`_way_hit`; ``costs``: terrain,
@@ -591,7 +586,7 @@ def _way_totals(
     total = terrain + detour
     order = np.argsort(total)
     least = total[order[0]]
-    if _way_hit(offsets[held], pose, v, hand, stations, reach, ground):
+    if _way_hit(offsets[held], way):
         total[held] = (terrain[held] + lethal_cost) + detour[held]
     best = total[held]
     if can_hold and best <= least * (1.0 + margin) + 1e-6:
@@ -601,7 +596,7 @@ def _way_totals(
             continue
         if total[i] > best * (1.0 + margin) + 1e-6:
             break
-        if _way_hit(offsets[i], pose, v, hand, stations, reach, ground):
+        if _way_hit(offsets[i], way):
             total[i] = (terrain[i] + lethal_cost) + detour[i]
         best = min(best, total[i])
     return total
@@ -610,33 +605,20 @@ def _way_totals(
 @njit(cache=True, nogil=True)
 def _way_hits(
     offsets: np.ndarray,
-    pose: tuple[float, float, float],
-    v: float,
-    hand: tuple[float, int, tuple[float, float, float, float, float], np.ndarray],
-    stations: tuple[np.ndarray, np.ndarray, np.ndarray],
-    reach: float,
-    ground: tuple[np.ndarray, np.ndarray, float, np.ndarray],
+    way: tuple,
 ) -> np.ndarray:
     """(O,): :func:`_way_hit` of each offset in ``offsets``."""
     out = np.zeros(offsets.shape[0], np.bool_)
     for o in range(offsets.shape[0]):
-        out[o] = _way_hit(offsets[o], pose, v, hand, stations, reach, ground)
+        out[o] = _way_hit(offsets[o], way)
     return out
 
 
 @njit(cache=True, nogil=True)
-def _way_hit(
-    off: float,
-    pose: tuple[float, float, float],
-    v: float,
-    hand: tuple[float, int, tuple[float, float, float, float, float], np.ndarray],
-    stations: tuple[np.ndarray, np.ndarray, np.ndarray],
-    reach: float,
-    ground: tuple[np.ndarray, np.ndarray, float, np.ndarray],
-) -> bool:
-    """Whether the driver's way to the offset ``off`` [m] runs the points across its axle
-    (``ground``: those points [m], the class raster, its cell size [m], the lethal classes) over
-    lethal terrain.
+def _way_hit(off: float, way: tuple) -> bool:
+    """Whether the driver's way to the offset ``off`` [m] runs the points across its axle over
+    lethal terrain. ``way``: ``pose``, ``v``, ``hand``, ``stations``, ``reach`` and ``ground``
+    (those points [m], the class raster, its cell size [m], the lethal classes) as below.
 
     The way is the driver's own steering imagined without its tremor: from ``pose`` at a steady
     ``v`` [m/s], each camera period a pure-pursuit yaw rate toward the offset's line, through its
@@ -648,6 +630,7 @@ def _way_hit(
     the path, or once on the line, straight and with nothing pending (the line's own check
     takes over there), or after 400 periods.
     """
+    pose, v, hand, stations, reach, ground = way
     dt, ticks, stick_hand, pending = hand
     pursuit_m, max_w, stick_step, deadzone, stick = stick_hand
     delay = pending.shape[0]
