@@ -250,6 +250,7 @@ class ExpertDriver:
         self.config = config or ExpertConfig()
         self._given_world = world  # the scenario's raster, when the caller already has it
         self.dt = 1.0 / camera_rate_hz
+        self._vehicle_steps = max(1, round(VehicleConfig().control_rate_hz * self.dt))  # the vehicle's steps a camera period
         c = self.config
         self.offsets = np.round(np.arange(-c.max_offset_m, c.max_offset_m + 1e-9, c.offset_step_m), 6)
         foot = np.linspace(-c.half_width_m, c.half_width_m, 5)
@@ -304,7 +305,7 @@ class ExpertDriver:
     def choose_offset(self, s_now: float, pose: tuple[float, float, float] | None = None, v_mps: float | None = None) -> float:
         """The lateral offset [m] (left positive) to hold over the terrain ahead; with the vehicle's
         ``pose`` and speed ``v_mps``, an offset it cannot reach from there without running over
-        lethal terrain costs as lethal terrain on its line does (:func:`_way_hits`)."""
+        lethal terrain costs as lethal terrain on its line does (:func:`_way_totals`)."""
         c = self.config
         s = s_now + self._s_rel  # (S,)
         valid = s <= self.path.length_m
@@ -387,10 +388,9 @@ class ExpertDriver:
         c = self.config
         hand = (c.pursuit_m, c.max_yaw_rate_rps, c.stick_rate_rps2 * self.dt, c.deadzone_rps, self.stick)
         pending = np.array(self._queue, dtype=np.float64)
-        ticks = max(1, round(VehicleConfig().control_rate_hz * self.dt))
         start = (float(pose[0]), float(pose[1]), float(pose[2]))  # a plain tuple: one compiled form for a Pose and any other
         ground = (self._foot, self.world.raster, self.world.resolution_m, self._lethal)
-        return start, float(v_mps), (self.dt, ticks, hand, pending), (s_rel, centre, heading), float(s_rel[upto - 1]), ground
+        return start, float(v_mps), (self.dt, self._vehicle_steps, hand, pending), (s_rel, centre, heading), float(s_rel[upto - 1]), ground
 
     def _costs(self, centre: np.ndarray, normal: np.ndarray, lat: np.ndarray, upto: int) -> np.ndarray:
         """``cost[_classes(centre, normal, lat, upto)].mean(axis=2).sum(axis=1)`` (O,): each offset's
@@ -710,7 +710,7 @@ def _ticks(
         x, y, yaw = x + step_m * math.cos(yaw + 0.5 * turn), y + step_m * math.sin(yaw + 0.5 * turn), yaw + turn
         sin, cos = math.sin(yaw), math.cos(yaw)
         for f in range(foot.shape[0]):
-            row, col = np.int64(math.floor((y + foot[f] * cos) / res)), np.int64(math.floor((x - foot[f] * sin) / res))
+            row, col = _cell_beside(x, y, foot[f], -sin, cos, res)
             hit |= lethal[raster[row, col] if 0 <= col < n_cols and 0 <= row < n_rows else UNKNOWN]
         px, py, ph = _along(s, stations[0], stations[1], stations[2])
         s += (x - px) * math.cos(ph) + (y - py) * math.sin(ph)  # the pose's projection, a step at a time

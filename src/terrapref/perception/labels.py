@@ -62,7 +62,8 @@ class LabelNoise:
             self.conf_cum[t, : len(row)] = np.cumsum([p for _, p in row])
             self.conf_to[t, : len(row)] = [classes.id_of(seen) for seen, _ in row]
         cut = errors.max_range_m is not None and not range_in_view
-        self.far = far_pixels(camera.config, errors.max_range_m) if cut else np.zeros(0, dtype=np.bool_)
+        # Read-only either way, as the kept masks are: the compiled loop takes one form of it.
+        self.far = far_pixels(camera.config, errors.max_range_m) if cut else read_only(np.zeros(0, dtype=np.bool_))
         # The confusion tile of each pixel: row // region * tiles across + col // region, from two
         # tables (an integer division per pixel cost more than the rest of its errors).
         region = errors.region_px
@@ -117,7 +118,7 @@ class FrameLabelErrors:
             ids,
             flat,
             n.width,
-            read_only(n.far),
+            n.far,
             np.uint64(self.conf_seed),
             n.tile_of_row,
             n.tile_of_col,
