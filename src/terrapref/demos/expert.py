@@ -342,16 +342,16 @@ class ExpertDriver:
         span = (last - first + 1) * self.sample_step_m + 2.0 * c.pursuit_m
         detour = c.deviation_cost * self.offsets**2 * span
         held = int(np.argmin(np.abs(self.offsets - self.offset)))
+        can_hold = self.offset != 0.0 and not hits_lethal[held]
         if pose is None:
             total = terrain + detour
         else:  # the ways there, of the offsets that can decide
-            can_hold = self.offset != 0.0 and not hits_lethal[held]
             stations = (s - s_now, near, centre, heading)
             total = self._way_totals(terrain, detour, (held, can_hold), stations, pose, v_mps or c.speed_mps)
         best = float(total.min())
         # Hold the current side unless another is clearly cheaper (no dithering); among equal
         # candidates prefer the smaller offset, then a coin toss between left and right.
-        if self.offset != 0.0 and total[held] <= best * (1 + c.switch_margin) + 1e-6 and not hits_lethal[held]:
+        if can_hold and total[held] <= best * (1 + c.switch_margin) + 1e-6:
             return float(self.offsets[held])
         ties = np.flatnonzero(total <= best + 1e-6)
         mags = np.abs(self.offsets[ties])
