@@ -268,13 +268,28 @@ def _tilt_along(scenario) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def test_teach_relief_shows_each_relief_situation_on_its_own_leg() -> None:
     """teach_relief is the default table's teaching course with relief (`course --relief`): every
-    terrain situation of the flat course, and each relief situation alone on its own leg: mounds
-    on the path whose steepest grade is the one designed, banks whose side slope under the path
-    is, a ramp, and each class beside a bank."""
+    terrain lesson of the flat course (each strip and lone patch once), and each relief situation
+    alone on its own leg: mounds on the path whose steepest grade is the one designed, banks whose
+    side slope under the path is, a ramp, and each class beside a bank; a terrain situation's
+    trail shorter only where it does not meet relief, all of it within the relief budget (about 7
+    minutes at the default driver's pace there)."""
+    from dataclasses import replace
+
     from terrapref.demos.relief_style import ReliefStyle
     from terrapref.scenario import resolve_scenario
     from terrapref.scenario.path import ReferencePath
-    from terrapref.scenario.teaching import BODY_M, HALF_M, RELIEF_DEG, START_M, designed_course, relief_course
+    from terrapref.scenario.teaching import (
+        BODY_M,
+        HALF_M,
+        RELIEF_BUDGET_M,
+        RELIEF_DEG,
+        RELIEF_HALF_M,
+        RELIEF_KINDS,
+        START_M,
+        course_length,
+        designed_course,
+        relief_course,
+    )
     from terrapref.vehicle import VehicleConfig
 
     assert BODY_M == (VehicleConfig().half_width_m, VehicleConfig().wheelbase_m)  # the body the situations are built for
@@ -284,7 +299,16 @@ def test_teach_relief_shows_each_relief_situation_on_its_own_leg() -> None:
     course, items = relief_course(classes, name="teach_relief")
     assert hilly.to_dict() == parse_scenario(course.data(), "teach_relief.yaml", classes).to_dict()  # as make_courses writes it
     flat_items = designed_course(classes)[1]
-    assert [i for i in items if i.kind not in ("mound", "bank", "ramp", "rough", "slope")] == flat_items  # every terrain lesson kept
+    terrain = [replace(i, legs_m=None) for i in items if i.kind not in RELIEF_KINDS]
+    compact = designed_course(classes, "compact")[1]  # the compact design's strips and lone patches: each once
+    # Every terrain lesson: each pair on both sides and each lane, as on the flat course; each
+    # strip (every class beside lethal terrain) and each lone patch once, as in its compact design.
+    assert [i for i in terrain if i.kind in ("pair", "lane")] == [i for i in flat_items if i.kind in ("pair", "lane")]
+    assert [i for i in terrain if i.kind in ("strip", "lone")] == [i for i in compact if i.kind in ("strip", "lone")]
+    for k, item in enumerate(items):  # a side that meets a relief situation keeps the flat course's trail
+        meets = [k + d in range(len(items)) and items[k + d].kind in RELIEF_KINDS for d in (-1, 1)]
+        assert item.legs_m == tuple(HALF_M[item.kind] if m or item.kind in RELIEF_KINDS else RELIEF_HALF_M[item.kind] for m in meets)
+    assert course_length(items) == pytest.approx(hilly.path_length_m(), abs=0.01) and course_length(items) <= RELIEF_BUDGET_M
     kinds = [i.kind for i in items]
     assert kinds.count("mound") == 2 and kinds.count("bank") == 2 and kinds.count("ramp") == 1 and kinds.count("rough") == 1
     assert sorted(i.classes[0] for i in items if i.kind == "slope") == sorted(classes.terrain_names)
@@ -293,8 +317,8 @@ def test_teach_relief_shows_each_relief_situation_on_its_own_leg() -> None:
     rough, step = world.roughness_at(centre), np.abs(np.diff(world.height_at(centre), append=0.0))  # a step: the rise over 0.1 m
     at = START_M
     for item in items:
-        mid = at + HALF_M[item.kind]
-        leg = np.abs(s - mid) < HALF_M[item.kind] - 0.5
+        mid = at + item.before_m
+        leg = (s > at + 0.5) & (s < at + item.length_m - 0.5)
         if item.kind == "mound":  # the steepest grade on the path, on its flank, is the one designed
             assert grade[leg].max() == pytest.approx(item.deg, abs=0.6)
         elif item.kind in ("bank", "slope"):  # the path runs on the flank: its side slope there is the one designed
@@ -305,7 +329,7 @@ def test_teach_relief_shows_each_relief_situation_on_its_own_leg() -> None:
         elif item.kind == "rough":  # rougher than the default relief style slows past, with no step the vehicle cannot climb
             middle = np.abs(s - mid) < 3.0
             assert np.median(rough[middle]) > ReliefStyle().rough_m and step[leg].max() < 0.5 * VehicleConfig().max_step_m
-        at += 2 * HALF_M[item.kind]
+        at += item.length_m
     assert {i.deg for i in items if i.kind == "mound"} == {RELIEF_DEG["gentle mound"], RELIEF_DEG["steep mound"]}
 
 
@@ -318,15 +342,18 @@ def test_course_relief_gives_a_tables_teaching_course_its_relief_situations_and_
     from terrapref.cli import main
     from terrapref.scenario import load_scenario
     from terrapref.scenario.relief_layout import relief_for
-    from terrapref.scenario.teaching import designed_course
+    from terrapref.scenario.teaching import RELIEF_PACE_MPS, designed_course
 
     small = str(REPO / "examples" / "classes" / "small.yaml")
     assert main(["course", "--classes", small, "--relief", "3", "--out", str(tmp_path / "hilly.yaml")]) == 0
     hilly = load_scenario(tmp_path / "hilly.yaml")
+    minutes = hilly.path_length_m() / RELIEF_PACE_MPS / 60  # timed at the pace a driver keeps on relief, not the flat 1 m/s
+    assert f"expected drive about {minutes:.1f} minutes at {RELIEF_PACE_MPS:g} m/s on relief" in capsys.readouterr().out
     flat = parse_scenario(designed_course(hilly.classes)[0].data(), "flat.yaml", hilly.classes)  # `course` without --relief
-    assert not flat.has_relief and [z.label for z in hilly.zones] == [z.label for z in flat.zones]  # every terrain lesson, in order
     designed = designed_course(hilly.classes, relief=True)[0]
     situations = parse_scenario(designed.data(), "situations.yaml", hilly.classes)
+    labels = [z.label for z in hilly.zones]  # the terrain lessons, in order: the flat course's (each strip and lone patch once)
+    assert not flat.has_relief and labels == [z.label for z in situations.zones] and set(labels) <= {z.label for z in flat.zones}
     own = [e.to_dict() for e in situations.relief]
     assert hilly.to_dict()["relief"] == own + relief_for(situations, 3)
     assert len(own) == 6 + len(hilly.classes.terrain_names)  # two mounds, two banks, a ramp, a rough patch, a bank beside each class

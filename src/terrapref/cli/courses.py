@@ -15,6 +15,8 @@ from terrapref.fileio import check_distinct, check_distinct_outputs, check_figur
 
 if TYPE_CHECKING:  # for the hints only: the command line imports what a command needs when it runs
     from terrapref.learning.identify import FollowUp
+    from terrapref.scenario import Scenario
+    from terrapref.scenario.teaching import Situation
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
@@ -172,12 +174,10 @@ def show_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_course(args: argparse.Namespace) -> int:
-    from collections import Counter
-
     from terrapref.plots import save_map
     from terrapref.scenario import parse_scenario
     from terrapref.scenario.relief_layout import relief_for
-    from terrapref.scenario.teaching import DRIVER_SPEED_MPS, designed_course, follow_up_after, relief_course
+    from terrapref.scenario.teaching import designed_course, follow_up_after, relief_course
     from terrapref.terrain import default_classes
     from terrapref.world import rasterise
 
@@ -221,15 +221,27 @@ def _cmd_course(args: argparse.Namespace) -> int:
         f"# terrapref course ({source}); it carries its class table (classes:), so no command needs --classes for it.\n" + course.to_yaml(),
     )
     save_map(figure, scenario, rasterise(scenario))
-    length = scenario.path_length_m()
-    kinds = Counter(item.kind for item in items)
     print(f"{scenario.name}: {scenario.description}")
-    print(
-        f"  {len(items)} situations ({', '.join(f'{n} {k}' for k, n in kinds.items())}); path {length:.0f} m; "
-        f"expected drive about {length / DRIVER_SPEED_MPS / 60:.1f} minutes at {DRIVER_SPEED_MPS:g} m/s"
-    )
+    print(f"  {_drive_line(scenario, items)}")
     print(f"wrote {out} and {figure} (record it: terrapref record {out} --out DIR)")
     return 0
+
+
+def _drive_line(scenario: Scenario, items: Sequence[Situation]) -> str:
+    """What a course shows and how long its drive is expected to take: at the teaching driver's
+    speed, or on relief at the pace the default driver keeps there."""
+    from collections import Counter
+
+    from terrapref.scenario.teaching import DRIVER_SPEED_MPS, RELIEF_PACE_MPS
+
+    kinds = Counter(item.kind for item in items)
+    pace = RELIEF_PACE_MPS if scenario.has_relief else DRIVER_SPEED_MPS
+    where = " on relief (the default driver's pace there)" if scenario.has_relief else ""
+    length = scenario.path_length_m()
+    return (
+        f"{len(items)} situations ({', '.join(f'{n} {k}' for k, n in kinds.items())}); path {length:.0f} m; "
+        f"expected drive about {length / pace / 60:.1f} minutes at {pace:g} m/s{where}"
+    )
 
 
 def _drives_of_one_table(args: argparse.Namespace, paths: Sequence[Path]) -> list:

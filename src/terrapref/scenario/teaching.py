@@ -19,7 +19,11 @@ path of a gentle and of a steep grade, a bank beside the path (the path on its f
 and of a steep side slope, a ramp up and down across the way, a rough patch across the way (short
 noise: rocks and ruts), and each feature class as a flat patch beside the path against the path's
 own ground sloping across the way as a bank of the background. Which of them a driver goes
-round, and how it slows on them, is its relief style.
+round, and how it slows on them, is its relief style. So that all of it fits in a drive of about
+7 minutes (:data:`RELIEF_BUDGET_M`; up to 3 feature classes), a course with relief shows each
+strip and each lethal class alone once, the sides alternating, and gives the terrain situations a
+little less trail where they do not meet a relief situation (:data:`RELIEF_HALF_M`); its full
+design still shows every pair on both sides (beyond 3 feature classes it is compact, and longer).
 
 Pairs grow as K(K-1)/2. The course shows each pair once on each side, each strip with the
 lethal terrain once on each side, each lethal class alone twice (once a little left of the path,
@@ -41,7 +45,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from terrapref.scenario.builder import CourseBuilder, trail
@@ -49,6 +53,10 @@ from terrapref.terrain import ClassTable
 
 DRIVER_SPEED_MPS = 1.0  # the speed a teaching drive is timed at (the synthetic driver's)
 BUDGET_M = 600.0  # the longest full design [m]: 10 minutes at 1 m/s
+# A course with relief is driven slower: the default driver and relief style average about 0.85 m/s
+# on one (grades, bumps and the situations' detours; teach_relief's 354 m in 414 s) [m/s].
+RELIEF_PACE_MPS = 0.85
+RELIEF_BUDGET_M = 7 * 60 * RELIEF_PACE_MPS  # the longest full design with relief [m]: 7 minutes at that pace
 LANE = 8  # situations between two turns round
 HALF_M = {
     "lone": 6.0,
@@ -61,6 +69,12 @@ HALF_M = {
     "slope": 6.5,
     "rough": 6.5,
 }  # half a leg [m]
+# Half a leg of a course with relief [m]: a terrain situation has a metre less trail round it than on
+# the flat course (a pair's patches, 8 m long at most, still clear their leg's ends by 3.5 m, a
+# lane's 6 m by 2.5 m), except on a side that faces a relief situation, which keeps the flat
+# course's, as the relief situations keep theirs: with less, what a driver does on relief is read
+# as its answer to the next terrain situation (a drive priced 8 deg grades it drove over).
+RELIEF_HALF_M = {**HALF_M, "lone": 5.5, "lane": 5.5, "pair": 7.5, "strip": 7.5}
 RELIEF_KINDS = ("mound", "bank", "ramp", "rough", "slope")  # the situations of relief (module docstring)
 MOUND_RADIUS_M = 3.0  # a mound on the path: its radius; its height sets its steepest grade [m]
 BANK_WIDTH_M, BANK_LENGTH_M = 5.0, 9.0  # a bank beside the path: its full width and length; the path on its flank [m]
@@ -97,16 +111,28 @@ class Situation:
             ``lone`` (one class) or ``lane`` (wall, class, wall; or the class alone without lethal classes).
         classes: the classes, left to right.
         offset_m: a lone patch's lateral offset, left positive [m].
+        deg: a relief situation's steepest grade or side slope [deg].
+        legs_m: the trail before and after its centre [m]; None: its kind's half leg on the flat
+            course (:data:`HALF_M`) each.
     """
 
     kind: str
     classes: tuple[str, ...]
     offset_m: float = 0.0
     deg: float = 0.0
+    legs_m: tuple[float, float] | None = None
+
+    @property
+    def before_m(self) -> float:
+        return HALF_M[self.kind] if self.legs_m is None else self.legs_m[0]
+
+    @property
+    def after_m(self) -> float:
+        return HALF_M[self.kind] if self.legs_m is None else self.legs_m[1]
 
     @property
     def length_m(self) -> float:
-        return 2 * HALF_M[self.kind]
+        return self.before_m + self.after_m
 
     @property
     def label(self) -> str:
@@ -117,6 +143,8 @@ class Situation:
             return f"bank {self.deg:g} deg {side}"
         if self.kind == "slope":
             return f"{self.classes[0]} {side} vs bank {self.deg:g} deg"
+        if self.kind == "rough":
+            return "rough patch"
         return {"pair": " vs ", "strip": " | ", "lone": "", "lane": " | "}[self.kind].join(self.classes)
 
 
@@ -148,19 +176,21 @@ def balanced_pairs(names: Sequence[str]) -> list[tuple[str, str]]:
 def situations(classes: ClassTable, full: bool | None = None, relief: bool = False) -> list[Situation]:
     """The situations of ``classes``' teaching course, in driving order.
 
-    ``full``: each pair on both sides (True), once (False), or whichever fits
-    :data:`BUDGET_M` (None); ``relief``: with the relief situations (:func:`relief_situations`)."""
+    ``full``: each pair on both sides (True), once (False), or whichever fits the budget (None);
+    ``relief``: with the relief situations (:func:`relief_situations`), each strip and each lethal
+    class alone once (the sides alternating, as in the compact design), on the legs of a course
+    with relief (:func:`_relief_legs`)."""
     terrain, lethal = list(classes.terrain_names), list(classes.lethal)
     if not terrain:
         raise ValueError("the class table has no feature class (neither background nor lethal) to teach")
-    full = fits(classes) if full is None else full
+    full = fits(classes, relief) if full is None else full
     pairs = balanced_pairs(terrain)
     if full:
         pairs += [(b, a) for a, b in pairs]
     strips = []
     for k, middle in enumerate(terrain):
         others = [t for t in terrain if t != middle] or [classes.background]
-        for side in (1, -1) if full else ((1, -1)[k % 2],):
+        for side in (1, -1) if full and not relief else ((1, -1)[k % 2],):
             neighbour = others[(k + (side < 0)) % len(others)]
             if lethal:
                 wall = lethal[len(strips) % len(lethal)]
@@ -169,12 +199,24 @@ def situations(classes: ClassTable, full: bool | None = None, relief: bool = Fal
                 strips.append(Situation("strip", (neighbour, middle, others[(k + 1 + (side < 0)) % len(others)])))
     lone = []
     for k, name in enumerate([*terrain, *lethal]):
-        sides = (1, -1) if full and name in lethal else ((1, -1)[k % 2],)
+        sides = (1, -1) if full and name in lethal and not relief else ((1, -1)[k % 2],)
         lone += [Situation("lone", (name,), side * LONE_OFFSET_M) for side in sides]
     lanes = [
         Situation("lane", (lethal[k % len(lethal)], name, lethal[k % len(lethal)]) if lethal else (name,)) for k, name in enumerate(terrain)
     ]
-    return _interleave([[Situation("pair", p) for p in pairs], strips, lone, lanes, relief_situations(classes) if relief else []])
+    items = _interleave([[Situation("pair", p) for p in pairs], strips, lone, lanes, relief_situations(classes) if relief else []])
+    return _relief_legs(items) if relief else items
+
+
+def _relief_legs(items: Sequence[Situation]) -> list[Situation]:
+    """``items`` on the legs of a course with relief: a terrain situation's trail
+    (:data:`RELIEF_HALF_M`) as long as the flat course's on a side that faces a relief situation."""
+
+    def half(k: int, side: int) -> float:
+        kind, beside = items[k].kind, items[k + side].kind if 0 <= k + side < len(items) else None
+        return HALF_M[kind] if beside in RELIEF_KINDS else RELIEF_HALF_M[kind]
+
+    return [replace(s, legs_m=(half(k, -1), half(k, 1))) for k, s in enumerate(items)]
 
 
 def relief_situations(classes: ClassTable) -> list[Situation]:
@@ -239,9 +281,10 @@ RELIEF_LESSONS = {
 }
 
 
-def fits(classes: ClassTable) -> bool:
-    """Whether the full design of ``classes``' course stays within :data:`BUDGET_M`."""
-    return course_length(situations(classes, True)) <= BUDGET_M
+def fits(classes: ClassTable, relief: bool = False) -> bool:
+    """Whether the full design of ``classes``' course stays within :data:`BUDGET_M`, or with
+    ``relief`` (its relief situations) within :data:`RELIEF_BUDGET_M`."""
+    return course_length(situations(classes, True, relief)) <= (RELIEF_BUDGET_M if relief else BUDGET_M)
 
 
 def follow_up_course(
@@ -324,7 +367,7 @@ def build_course(classes: ClassTable, items: Sequence[Situation], name: str, des
     order = {n: k for k, n in enumerate(classes.names)}
     s, pairs = START_M, 0
     for k, item in enumerate(items):
-        s += HALF_M[item.kind]
+        s += item.before_m
         zid = str(k + 1)
         if item.kind in RELIEF_KINDS:  # no zone: evaluate finds relief zones by the ground's own tilt
             place_relief(c, item, s)
@@ -345,7 +388,7 @@ def build_course(classes: ClassTable, items: Sequence[Situation], name: str, des
             c.rect(right, s, -STRIP_M / 2 - 2.25, 7.0, 4.5)
             # Beside the background, leaving the strip for it is every driver's choice.
             c.zone(zid, item.label, s, (11.0, 17.0), "avoid" if classes.background in item.classes else "best")
-        s += HALF_M[item.kind]
+        s += item.after_m
     return c
 
 
@@ -390,7 +433,7 @@ def designed_course(
     Raises:
         ValueError: the table has no feature class to teach.
     """
-    full = fits(classes) if design == "auto" else design == "full"
+    full = fits(classes, relief) if design == "auto" else design == "full"
     items = situations(classes, full, relief)
     text = description(classes, full) + (f" {RELIEF_DESCRIPTION}" if relief else "")
     return build_course(classes, items, name, text), items
