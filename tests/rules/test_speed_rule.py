@@ -417,11 +417,11 @@ def test_the_fit_recovers_a_top_speed_on_rough_ground_and_says_which_roughness_i
     assert fit is not None and fit.lag_frames == 2 and fit.error_mps == pytest.approx(0.0, abs=1e-6)
     m, shown = fit.model, fit.rough
     assert m.rough_mps == pytest.approx(0.8) and m.slows_on_rough and shown is not None and shown.frames >= 10
-    assert shown.alike_m == (0.01, 0.025) and m.rough_m == 0.025  # the bands below 0.03 m alike; the roughest of them kept
+    assert shown.alike_m == (0.01, 0.025) and m.rough_m == 0.0175  # the six bands below 0.03 m alike; the middle one kept
     low, high = shown.interval
     assert low - 1e-9 <= 0.8 <= high + 1e-9
     line = next(x for x in SpeedRule(SpeedConfig(), m, fit).lines(FEATURES.feature_classes, frozenset()) if x.startswith("rough"))
-    assert line.startswith("rough ground: at most 0.80 m/s where the ground within 1 m ahead is rougher than 0.025 m (95% CI")
+    assert line.startswith("rough ground: at most 0.80 m/s where the ground within 1 m ahead is rougher than 0.0175 m (95% CI")
     assert line.endswith("the drive cannot tell a roughness of 0.01-0.025 m from it")
     kept = fit_speed(Drive(*_drive(DRIVER, track), None, rough), K, (LETHAL,))
     assert kept is not None and not kept.model.slows_on_rough and kept.rough is not None and kept.rough.interval is None

@@ -44,8 +44,8 @@ LEVEL_DEG = 3.0  # a way whose grade stays within this of level shows its class'
 ROUGH_PREVIEW_M = 1.0
 ROUGH_BANDS_M = (0.01, 0.0125, 0.015, 0.0175, 0.02, 0.025, 0.03, 0.035, 0.04)  # the roughness past which the fit tries a top speed [m]
 # Rough-ground bands whose speeds' mean error is within this of the best's explain a drive alike [m/s]:
-# the fit keeps the roughest of them, so that the planner slows only on ground as rough as the drive
-# slowed on, not on the roughness between that it never showed (which a noisy map reads on smooth ground).
+# the drive showed no ground between them, and the fit keeps the middle one, not the smoothest (which
+# slows on roughness the drive never showed, as a noisy map reads smooth ground) nor the roughest.
 ROUGH_ALIKE_MPS = 0.001
 
 
@@ -227,7 +227,7 @@ class Rough(NamedTuple):
     terrain and slower than the terrain and grades ask, on ground past the roughness learned
     (or past the smoothest band tried, where nothing was learned); the top speed's 95% interval
     (None: not learned); and the roughness bands [m] that explain the drive alike (within
-    :data:`ROUGH_ALIKE_MPS`; the drive cannot tell them apart), the roughest of them kept."""
+    :data:`ROUGH_ALIKE_MPS`; the drive cannot tell them apart), the middle one kept."""
 
     frames: int = 0
     interval: tuple[float, float] | None = None
@@ -281,7 +281,7 @@ def fit_speed(drive: Drive, k: int, lethal: tuple[int, ...]) -> SpeedFit | None:
     ground: for each band of :data:`ROUGH_BANDS_M`, the median speed of the frames on one column
     alone, nearly straight, away from lethal terrain, slower than the terrain and grades ask
     and past the band within :data:`ROUGH_PREVIEW_M`; where any explains the frames better than
-    none, the roughest of those that explain them as well as the best (:data:`ROUGH_ALIKE_MPS`)
+    none, the middle one of those that explain them as well as the best (:data:`ROUGH_ALIKE_MPS`)
     is kept. A
     class counts where it meets any one of the footprint's points (``min_points`` 1), as the
     driver reads its footprint: a model that asked for two passed at full speed the patches its
@@ -482,9 +482,9 @@ def _fit_rough(model: SpeedModel, frames: _Frames, steady: np.ndarray) -> tuple[
         return model, Rough(int(np.count_nonzero(slowed & (roughness > ROUGH_BANDS_M[0]))))
     best_error = min(t[0] for t in better)
     alike = [t for t in better if t[0] <= best_error + ROUGH_ALIKE_MPS]
-    _, kept, rows = alike[-1]  # the roughest band that explains the drive as well as the best
+    _, kept, rows = alike[len(alike) // 2]  # the middle band of those that explain the drive as well as the best
     interval = _interval(v[rows], rows) if frames.intervals else None
-    return kept, Rough(len(rows), interval, (alike[0][1].rough_m, kept.rough_m))
+    return kept, Rough(len(rows), interval, (alike[0][1].rough_m, alike[-1][1].rough_m))
 
 
 def _interval(v: np.ndarray, rows: np.ndarray, resamples: int = 200) -> tuple[float, float]:
