@@ -402,6 +402,32 @@ def test_the_fit_recovers_what_grades_shed_up_and_down():
     assert line.startswith(f"grades: nothing learned up ({kept.grade_frames[0]} frames on one class past 3 deg up: slowing there explains")
 
 
+def test_rough_bands_within_a_millimetre_per_second_of_the_best_are_alike_and_the_middle_one_is_kept():
+    """As below, with the frames that see one spot a little rough (0.011 m) within a metre ahead a
+    little slow: at 1.18 m/s the smoothest band explains them best by a hair (under 1 mm/s of mean
+    error), so every band below 0.03 m still explains the drive alike and the middle one is kept,
+    not the smoothest; at 1.15 m/s it explains them better by more, and it alone is kept."""
+    from terrapref.rules.speed.model import roughest
+
+    track = _track()
+    track_rough = np.zeros(len(track))
+    track_rough[70:90], track_rough[64] = 0.03, 0.011
+    way, curvature, _, frame = _drive(DRIVER, track)
+    rough = _grades(track_rough)
+    target = replace(DRIVER, rough_m=0.02, rough_mps=0.8).predict(way, curvature, None, rough)
+    seeing = np.flatnonzero((roughest(rough) > 0.01) & (roughest(rough) < 0.02))
+    assert len(seeing) >= 3
+    kept = {}
+    for slow in (1.18, 1.15):
+        v = np.concatenate([np.full(2, target[0]), target[:-2]])
+        v[seeing + 2] = slow  # two frames later: the driver's lag
+        fit = fit_speed(Drive(way, curvature, v, frame, None, rough), K, (LETHAL,))
+        assert fit is not None and fit.lag_frames == 2 and fit.rough is not None
+        kept[slow] = (fit.rough.alike_m, fit.model.rough_m)
+    assert kept[1.18] == ((0.01, 0.025), 0.0175)
+    assert kept[1.15] == ((0.01, 0.01), 0.01)
+
+
 def test_the_fit_recovers_a_top_speed_on_rough_ground_and_says_which_roughness_it_cannot_tell():
     """The long background stretch (frames 60-110) is rough (0.03 m) from frame 70 to 90; the
     driver keeps 0.8 m/s there past 0.02 m. The drive shows nothing between the smooth ground's 0

@@ -352,7 +352,7 @@ def test_course_relief_gives_a_tables_teaching_course_its_relief_situations_and_
     flat = parse_scenario(designed_course(hilly.classes)[0].data(), "flat.yaml", hilly.classes)  # `course` without --relief
     designed = designed_course(hilly.classes, relief=True)[0]
     situations = parse_scenario(designed.data(), "situations.yaml", hilly.classes)
-    labels = [z.label for z in hilly.zones]  # the terrain lessons, in order: the flat course's (each strip and lone patch once)
+    labels = [z.label for z in hilly.zones]  # the terrain lessons of `course` without relief's seed, each one the flat course shows
     assert not flat.has_relief and labels == [z.label for z in situations.zones] and set(labels) <= {z.label for z in flat.zones}
     own = [e.to_dict() for e in situations.relief]
     assert hilly.to_dict()["relief"] == own + relief_for(situations, 3)

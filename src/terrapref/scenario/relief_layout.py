@@ -19,7 +19,8 @@ those that fit in it, a bump or a dip only where no larger one fits:
 
 and the whole map gentle noise (0.1 m, 15 m across). The same course and seed give the same
 relief. ``genrelief:SEED`` is ``gen:SEED``'s layout with the relief of seed SEED; the packaged
-``teach_relief`` is ``teach_course``'s with the relief of seed 0.
+``teach_relief`` is the default table's teaching course with relief situations
+(terrapref.scenario.teaching) with the relief of seed 0 between them.
 """
 
 from __future__ import annotations

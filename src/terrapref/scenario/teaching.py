@@ -20,10 +20,11 @@ and of a steep side slope, a ramp up and down across the way, a rough patch acro
 noise: rocks and ruts), and each feature class as a flat patch beside the path against the path's
 own ground sloping across the way as a bank of the background. Which of them a driver goes
 round, and how it slows on them, is its relief style. So that all of it fits in a drive of about
-7 minutes (:data:`RELIEF_BUDGET_M`; up to 3 feature classes), a course with relief shows each
-strip and each lethal class alone once, the sides alternating, and gives the terrain situations a
-little less trail where they do not meet a relief situation (:data:`RELIEF_HALF_M`); its full
-design still shows every pair on both sides (beyond 3 feature classes it is compact, and longer).
+7 minutes (:data:`RELIEF_BUDGET_M`: up to 3 feature classes and one lethal class), a course with
+relief shows each strip and each lethal class alone once, the sides alternating, in either
+design, and gives the terrain situations a little less trail where they do not meet a relief
+situation (:data:`RELIEF_HALF_M`); its full design still shows every pair on both sides (a larger
+table gets the compact design, and a longer drive).
 
 Pairs grow as K(K-1)/2. The course shows each pair once on each side, each strip with the
 lethal terrain once on each side, each lethal class alone twice (once a little left of the path,
@@ -69,11 +70,12 @@ HALF_M = {
     "slope": 6.5,
     "rough": 6.5,
 }  # half a leg [m]
-# Half a leg of a course with relief [m]: a terrain situation has a metre less trail round it than on
-# the flat course (a pair's patches, 8 m long at most, still clear their leg's ends by 3.5 m, a
-# lane's 6 m by 2.5 m), except on a side that faces a relief situation, which keeps the flat
-# course's, as the relief situations keep theirs: with less, what a driver does on relief is read
-# as its answer to the next terrain situation (a drive priced 8 deg grades it drove over).
+# Half a leg of a course with relief [m]: a pair or strip has 1 m less trail before and after it than
+# on the flat course, a lone patch or lane 0.5 m (a pair's patches, 8 m long at most, still clear
+# their leg's ends by 3.5 m, a lane's 6 m by 2.5 m), except on a side that faces a relief
+# situation, which keeps the flat course's, as the relief situations keep theirs: with less, the
+# driver moves over for the next terrain situation while still on the relief, and the fit reads
+# that as going round the relief (a drive priced 8 deg grades it drove over).
 RELIEF_HALF_M = {**HALF_M, "lone": 5.5, "lane": 5.5, "pair": 7.5, "strip": 7.5}
 RELIEF_KINDS = ("mound", "bank", "ramp", "rough", "slope")  # the situations of relief (module docstring)
 MOUND_RADIUS_M = 3.0  # a mound on the path: its radius; its height sets its steepest grade [m]
@@ -427,8 +429,9 @@ def designed_course(
 ) -> tuple[CourseBuilder, list[Situation]]:
     """The teaching course of ``classes`` in ``design`` (``terrapref course --design``): ``full``
     (every pair once on each side), ``compact`` (every pair once, sides balanced) or ``auto`` (full
-    while it stays within :data:`BUDGET_M`); with the relief situations where ``relief``; with its
-    situations in driving order.
+    while it stays within :data:`BUDGET_M`, or with relief :data:`RELIEF_BUDGET_M`); with the
+    relief situations where ``relief`` (each strip and lethal lone patch then once in either
+    design); with its situations in driving order.
 
     Raises:
         ValueError: the table has no feature class to teach.
