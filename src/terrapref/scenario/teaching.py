@@ -186,13 +186,14 @@ def situations(classes: ClassTable, full: bool | None = None, relief: bool = Fal
     if not terrain:
         raise ValueError("the class table has no feature class (neither background nor lethal) to teach")
     full = fits(classes, relief) if full is None else full
+    both_sides = full and not relief  # strips and lethal lone patches on each side, or once with relief
     pairs = balanced_pairs(terrain)
     if full:
         pairs += [(b, a) for a, b in pairs]
     strips = []
     for k, middle in enumerate(terrain):
         others = [t for t in terrain if t != middle] or [classes.background]
-        for side in (1, -1) if full and not relief else ((1, -1)[k % 2],):
+        for side in (1, -1) if both_sides else ((1, -1)[k % 2],):
             neighbour = others[(k + (side < 0)) % len(others)]
             if lethal:
                 wall = lethal[len(strips) % len(lethal)]
@@ -201,7 +202,7 @@ def situations(classes: ClassTable, full: bool | None = None, relief: bool = Fal
                 strips.append(Situation("strip", (neighbour, middle, others[(k + 1 + (side < 0)) % len(others)])))
     lone = []
     for k, name in enumerate([*terrain, *lethal]):
-        sides = (1, -1) if full and name in lethal and not relief else ((1, -1)[k % 2],)
+        sides = (1, -1) if both_sides and name in lethal else ((1, -1)[k % 2],)
         lone += [Situation("lone", (name,), side * LONE_OFFSET_M) for side in sides]
     lanes = [
         Situation("lane", (lethal[k % len(lethal)], name, lethal[k % len(lethal)]) if lethal else (name,)) for k, name in enumerate(terrain)
