@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from helpers import flat_depth
-from terrapref.camera import CameraConfig, PinholeCamera
+from terrapref.camera import CameraConfig, PinholeCamera, relief_compiled
+from terrapref.camera import render as render_module
 from terrapref.camera.relief_compiled import step_lengths
 from terrapref.camera.render import SegmentationRenderer
 from terrapref.scenario import FORMAT, parse_scenario
@@ -262,3 +263,35 @@ def test_a_newton_step_that_overshoots_a_post_is_settled_on_its_near_face_not_th
     face = x0 + drop[0] * lean
     assert 0.2 < drop[0] < 1.0 and 5.0 < face < 5.025
     assert abs(cz - drop[0] - height_at(heights, 1.0 / res, face, 0.1)) <= 0.01 * SETTLE_M
+
+
+def test_a_frame_of_more_segments_than_the_march_first_makes_room_for_agrees_with_each_rays_own_march() -> None:
+    """A tall, narrow frame over short bumps: each column's ground comes in more segments than the
+    march first keeps room for (64 a column), so it grows its lists; the frame still agrees with
+    every pixel's own ray as a frame of the usual size does."""
+    relief = [{"noise": {"amplitude_m": 0.1, "wavelength_m": 0.8, "seed": 2}}]
+    ground = world(relief)
+    # fy = 1000 px: a row's ground is under the bumps' two-cell steps out to the 12 m range.
+    camera = PinholeCamera(
+        CameraConfig(width_px=8, height_px=1000, hfov_deg=math.degrees(2 * math.atan(4 / 1000)), pitch_deg=20.0, max_range_m=12.0)
+    )
+    renderer = SegmentationRenderer(camera, ground)
+    pose = Pose(10.0, 20.0, 0.0)
+    attitude = Vehicle(pose, ground=ground).attitude
+    axes, centre = renderer.placement(pose, attitude)
+    heights, steps, shift, span = render_module._march_ground(ground)
+    planes = relief_compiled._planes(axes, renderer._ray_a)
+    below = float(ground.height_at(centre[None, :2])[0]) - centre[2]
+    march = (planes, -below, max(-below, 0.2), camera.fy, camera.cy, camera.config.max_range_m, centre, renderer._ray_b)
+    _, segments = relief_compiled._march(*march, (heights, 1.0 / ground.resolution_m, steps, shift, span), camera.shape)
+    assert len(segments[0]) > 64 * camera.config.width_px
+    ids, depth = renderer.render_with_depth(pose, attitude)
+    pixels = np.random.default_rng(0).choice(ids.size, 2000, replace=False)
+    expected_ids, expected_depth = marched(renderer, pose, attitude, pixels)
+    got_ids, got_depth = ids.reshape(-1)[pixels], depth.reshape(-1)[pixels]
+    assert (expected_ids != UNKNOWN).sum() > 1000
+    assert (got_ids == expected_ids).mean() >= 0.995
+    both = ~np.isnan(got_depth) & ~np.isnan(expected_depth)
+    assert (np.isnan(got_depth) == np.isnan(expected_depth)).mean() >= 0.99
+    close = np.abs(got_depth[both] - expected_depth[both]) <= np.maximum(0.01 * expected_depth[both], 0.02)
+    assert close.mean() >= 0.995

@@ -13,8 +13,9 @@ of the image up: the rows whose centres lie between two samples' rows see the gr
 them, where the pixel's ray meets the segment joining the two ground points (the ground is taken
 as straight between samples, so on a plane every pixel is exact). A sample projecting below the
 rows already filled is hidden (behind a crest) and fills nothing. Along a segment the inverse of
-the depth is affine in the row's ray offset, so the march writes each pixel's inverse depth with
-one multiply-add.
+the depth is affine in the row's ray offset, so the march keeps the segments alone (each one's
+column, the rows it fills, the inverse depth at its lowest row and its change per row) and writes
+no pixel: a frame is row-major, and writing it a column at a time touches a cache line a pixel.
 
 The step after a sample is the longer of two: the ground of about one pixel row of a flat
 ground's image there, ``(u^2 + c^2) / (c fy)`` for a camera ``c`` over the ground (a crest
@@ -23,8 +24,11 @@ ground, taken as straight, stays within a tolerance of the height field around t
 (:func:`step_lengths`, from the field's curvature, at least two cells: a wall or a ledge is
 walked two cells a step, smooth ground in longer strides).
 
-**Shade**, one image row at a time: each pixel's depth from its inverse, the range check and
-the class of its ground point, in loops the compiler vectorises, as the flat renderer's.
+**Shade**, one image row at a time: each pixel's inverse depth from its column's segment over
+that row (the segments sorted by their first row, so that each row takes up those that begin
+there), then its depth, the range check and the class of its ground point, in loops the compiler
+vectorises, as the flat renderer's. The same depths, bit for bit, as writing each pixel in the
+march gave.
 
 The march's loops over the columns are split so that the compiler vectorises the arithmetic
 (the height field's four corners are read in a loop of their own). Float64 in the march; the
@@ -130,8 +134,8 @@ def render_relief(
     clearance = max(-below, 0.2)
     planes = _planes(axes, ray_a)
     ground = (heights, per_m, steps, shift, span)
-    filled = _march(planes, -below, clearance, fy, cy, max_range_m, centre, ray_b, ground, depth)
-    _shade(filled, axes, centre, ray_a, ray_b, max_range_m, per_m, raster, nx, x_max, y_max, unknown, ids, depth)
+    filled, segments = _march(planes, -below, clearance, fy, cy, max_range_m, centre, ray_b, ground, depth.shape)
+    _shade(filled, segments, axes, centre, ray_a, ray_b, max_range_m, per_m, raster, nx, x_max, y_max, unknown, ids, depth)
 
 
 @njit(cache=True, nogil=True)
@@ -180,19 +184,20 @@ def _march(
     centre: np.ndarray,
     ray_b: np.ndarray,
     ground: tuple[np.ndarray, float, np.ndarray, int, tuple[float, float]],
-    depth: np.ndarray,
-) -> np.ndarray:
-    """Walk every column's plane (``planes``, :func:`_planes`) out from the ground under the
-    camera (``drop`` [m] below the optical centre) to the first sample past ``max_range_m``,
-    writing each row's inverse depth [1/m] into ``depth`` (H, W) from the bottom row up.
-    ``ground``: the height field, its cells per metre, the step lengths and their block's
-    shift (:func:`step_lengths`), and the field's lowest and highest heights. Returns each column's lowest row left unwritten, (W,).
+    shape: tuple[int, int],
+) -> tuple[np.ndarray, Segments]:
+    """Walk every column's plane (``planes``, :func:`_planes`) of a frame of ``shape`` (H, W) out
+    from the ground under the camera (``drop`` [m] below the optical centre) to the first sample
+    past ``max_range_m``, its rows filled from the bottom up. ``ground``: the height field, its
+    cells per metre, the step lengths and their block's shift (:func:`step_lengths`), and the
+    field's lowest and highest heights. Returns each column's lowest row left unfilled, (W,), and
+    the segments that fill the rest (:data:`Segments`).
 
     A sample at a time for every column, rather than a column at a time: a column's sample
     waits on its last (the drop it predicts), and neighbouring columns read neighbouring
     cells."""
     heights, per_m, steps, shift, span = ground
-    height, width = depth.shape
+    height, width = shape
     hx, hy, mx, my, dh, fh, dm, fm = planes[0], planes[1], planes[2], planes[3], planes[4], planes[5], planes[6], planes[7]
     row = np.where(planes[8] != 0.0, height - 1, -1)
     live = planes[8] != 0.0
@@ -211,6 +216,7 @@ def _march(
     ny, nx = heights.shape
     where = (centre[0] * per_m - 0.5, centre[1] * per_m - 0.5, per_m, nx - 1.0 - 1e-9, ny - 1.0 - 1e-9, nx, shift, steps.shape[1])
     per_row, clearance2, cap = 1.0 / (clearance * fy), clearance * clearance, 2.0 * max_range_m + 1.0
+    segments, n_segments = _no_segments(64 * width), 0
     first = True
     while n_live > 0:
         _where(u, ratio, last, before, hx, hy, mx, my, where, new, fu, fv, cell, block)
@@ -220,12 +226,36 @@ def _march(
         _project(new, u, dh, dm, fh, fm, wd, wf, stop, fy, cy)
         before, last, new = last, new, before
         if not first:
-            n_live -= _fill(row, live, stop, (vd, vf, wd, wf), u, max_range_m, ray_b, depth)
+            if n_segments + width > segments[0].shape[0]:  # a sample adds at most one a column
+                segments = _more_segments(segments, n_segments)
+            stopped, n_segments = _fill(row, live, stop, (vd, vf, wd, wf), u, max_range_m, ray_b, segments, n_segments)
+            n_live -= stopped
         first = False
         vd, wd = wd, vd
         vf, wf = wf, vf
         _advance(u, taken, ratio, longest, per_row, clearance2, cap)
-    return row
+    cols, firsts, lasts, inverses, changes = segments
+    return row, (cols[:n_segments], firsts[:n_segments], lasts[:n_segments], inverses[:n_segments], changes[:n_segments])
+
+
+Segments = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+"""Segments of image columns that see the ground (:func:`_fill`): each one's column, first and
+last row, its inverse depth at its last row [1/m] and that inverse's fall per row up."""
+
+
+@njit(cache=True, nogil=True)
+def _no_segments(room: int) -> Segments:
+    """Room for ``room`` segments (:data:`Segments`)."""
+    return np.empty(room, np.int64), np.empty(room, np.int64), np.empty(room, np.int64), np.empty(room), np.empty(room)
+
+
+@njit(cache=True, nogil=True)
+def _more_segments(segments: Segments, held: int) -> Segments:
+    """``segments``, the first ``held`` of them kept, with twice the room."""
+    grown = _no_segments(2 * segments[0].shape[0])
+    grown[0][:held], grown[1][:held], grown[2][:held] = segments[0][:held], segments[1][:held], segments[2][:held]
+    grown[3][:held], grown[4][:held] = segments[3][:held], segments[4][:held]
+    return grown
 
 
 @njit(cache=True, nogil=True)
@@ -237,19 +267,21 @@ def _fill(
     u: np.ndarray,
     max_range_m: float,
     ray_b: np.ndarray,
-    depth: np.ndarray,
-) -> int:
+    segments: Segments,
+    held: int,
+) -> tuple[int, int]:
     """Fill each live column's rows from ``row`` up to ``stop`` (its sample's, :func:`_project`)
-    with their inverse depths [1/m] in ``depth`` (H, W), and move ``row`` past them; ``samples``:
-    each column's last sample and this one, down and forward (``vd``, ``vf``, ``wd``, ``wf``).
-    A column stops (``live``) at the image's top row or with its sample past ``max_range_m``.
-    Returns how many stopped."""
+    and move ``row`` past them; ``samples``: each column's last sample and this one, down and
+    forward (``vd``, ``vf``, ``wd``, ``wf``). The rows filled are added to ``segments``, after the
+    ``held`` there (:data:`Segments`): row ``last - k`` of a segment has the inverse depth
+    ``inverse - k * change``. A column stops (``live``) at the image's top row or with its sample
+    past ``max_range_m``. Returns how many stopped, and how many segments there are."""
     vd, vf, wd, wf = samples
-    height, width = depth.shape
-    flat_depth = depth.reshape(-1)
+    cols, firsts, lasts, inverses, changes = segments
+    height = ray_b.shape[0]
     down = ray_b[1] - ray_b[0] if height > 1 else 0.0  # the ray offset's change from one row to the next
     stopped = 0
-    for col in range(width):
+    for col in range(row.shape[0]):
         if not live[col]:
             continue
         r = row[col]
@@ -264,16 +296,13 @@ def _fill(
                 p, q = dd / cross, -df / cross
             else:
                 p, q = 1.0 / f, 0.0
-            inverse, change = p + q * ray_b[r], q * down
-            at = np.uint64(r * width + col)
-            for k in range(r + 1 - lo):  # each row's value on its own: no chain of additions to wait on
-                flat_depth[at] = inverse - k * change
-                at -= np.uint64(width)
+            cols[held], firsts[held], lasts[held], inverses[held], changes[held] = col, lo, r, p + q * ray_b[r], q * down
+            held += 1
             row[col] = lo - 1
         if row[col] < 0 or u[col] > max_range_m:
             live[col] = False
             stopped += 1
-    return stopped
+    return stopped, held
 
 
 @njit(cache=True, nogil=True)
@@ -484,6 +513,7 @@ def _advance(
 @njit(cache=True, nogil=True)
 def _shade(
     filled: np.ndarray,
+    segments: Segments,
     axes: np.ndarray,
     centre: np.ndarray,
     ray_a: np.ndarray,
@@ -498,8 +528,8 @@ def _shade(
     ids: np.ndarray,
     depth: np.ndarray,
 ) -> None:
-    """Turn the inverse depths the march wrote (rows below ``filled`` (W,)) into depths, NaN where
-    none or out of range, and classes, row by row."""
+    """Each pixel's depth, NaN where none or out of range, and class, row by row, from the inverse
+    depths of its column's ``segments`` (:data:`Segments`; rows below ``filled`` (W,))."""
     height, width = ids.shape
     top = filled.min()
     lowest = filled.astype(np.int32)  # compared in 32 bits, as wide as the float32 lanes it masks
@@ -516,17 +546,38 @@ def _shade(
     cells = np.empty(width, np.uint32)
     nx32 = np.uint32(nx)
     zero, one, nan = np.float32(0.0), np.float32(1.0), np.float32(np.nan)
+    # Each column's segment over the row, its last row, inverse there and fall per row up (a
+    # column with none reads an inverse of 0: no ground); the segments by their first row.
+    cols, firsts, lasts, inverses, changes = segments
+    starts = np.zeros(height + 1, np.int64)
+    for i in range(cols.shape[0]):
+        starts[firsts[i] + 1] += 1
+    starts = np.cumsum(starts)
+    n = cols.shape[0]
+    by_col, by_last, by_inverse, by_change = np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n), np.empty(n)
+    placed = starts[:-1].copy()
+    for i in range(n):
+        k = placed[firsts[i]]
+        by_col[k], by_last[k], by_inverse[k], by_change[k] = cols[i], lasts[i], inverses[i], changes[i]
+        placed[firsts[i]] = k + 1
+    seg_last, seg_inverse, seg_change = np.zeros(width, np.int64), np.zeros(width), np.zeros(width)
+    row_inverse = np.empty(width, np.float32)
     for row in range(height):
         out_ids, out_depth = ids[row], depth[row]
+        for k in range(starts[row], starts[row + 1]):
+            col = by_col[k]
+            seg_last[col], seg_inverse[col], seg_change[col] = by_last[k], by_inverse[k], by_change[k]
         if row <= top:
             out_ids[:] = unknown
             out_depth[:] = np.nan
             continue
+        for col in range(width):
+            row_inverse[col] = seg_inverse[col] - (seg_last[col] - row) * seg_change[col]
         b, row32 = ray_b[row], np.int32(row)
         kx, ky = np.float32((b * axes[1, 0] + axes[2, 0]) * per_m), np.float32((b * axes[1, 1] + axes[2, 1]) * per_m)
         bb = np.float32(b * b / range2)
         for col in range(width):
-            inverse = out_depth[col]
+            inverse = row_inverse[col]
             # Within range: depth^2 (1 + a^2 + b^2) <= R^2.
             seen = (row32 > lowest[col]) & (inverse > zero) & (inverse * inverse >= reach[col] + bb)
             along = one / inverse if seen else zero
