@@ -186,12 +186,11 @@ def _march(
     ground: tuple[np.ndarray, float, np.ndarray, int, tuple[float, float]],
     shape: tuple[int, int],
 ) -> tuple[np.ndarray, Segments]:
-    """Walk every column's plane (``planes``, :func:`_planes`) of a frame of ``shape`` (H, W) out
-    from the ground under the camera (``drop`` [m] below the optical centre) to the first sample
-    past ``max_range_m``, its rows filled from the bottom up. ``ground``: the height field, its
-    cells per metre, the step lengths and their block's shift (:func:`step_lengths`), and the
-    field's lowest and highest heights. Returns each column's lowest row left unfilled, (W,), and
-    the segments that fill the rest (:data:`Segments`).
+    """Walk every column's plane (``planes``, :func:`_planes`) of a frame of ``shape`` (H, W) from
+    the ground under the camera (``drop`` [m] below it) to the first sample past ``max_range_m``,
+    filling its rows from the bottom up. ``ground``: the height field, its cells per metre, the
+    step lengths and their block's shift (:func:`step_lengths`), its lowest and highest heights.
+    Returns each column's lowest row left unfilled (W,) and the :data:`Segments` filling the rest.
 
     A sample at a time for every column, rather than a column at a time: a column's sample
     waits on its last (the drop it predicts), and neighbouring columns read neighbouring
@@ -226,16 +225,14 @@ def _march(
         _project(new, u, dh, dm, fh, fm, wd, wf, stop, fy, cy)
         before, last, new = last, new, before
         if not first:
-            if n_segments + width > segments[0].shape[0]:  # a sample adds at most one a column
-                segments = _more_segments(segments, n_segments)
+            segments = _with_room(segments, n_segments, width)
             stopped, n_segments = _fill(row, live, stop, (vd, vf, wd, wf), u, max_range_m, ray_b, segments, n_segments)
             n_live -= stopped
         first = False
         vd, wd = wd, vd
         vf, wf = wf, vf
         _advance(u, taken, ratio, longest, per_row, clearance2, cap)
-    cols, firsts, lasts, inverses, changes = segments
-    return row, (cols[:n_segments], firsts[:n_segments], lasts[:n_segments], inverses[:n_segments], changes[:n_segments])
+    return row, _taken(segments, n_segments)
 
 
 Segments = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
@@ -249,9 +246,19 @@ def _no_segments(room: int) -> Segments:
     return np.empty(room, np.int64), np.empty(room, np.int64), np.empty(room, np.int64), np.empty(room), np.empty(room)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _taken(segments: Segments, held: int) -> Segments:
+    """The first ``held`` of ``segments``."""
+    cols, firsts, lasts, inverses, changes = segments
+    return cols[:held], firsts[:held], lasts[:held], inverses[:held], changes[:held]
+
+
 @njit(cache=True, nogil=True)
-def _more_segments(segments: Segments, held: int) -> Segments:
-    """``segments``, the first ``held`` of them kept, with twice the room."""
+def _with_room(segments: Segments, held: int, width: int) -> Segments:
+    """``segments`` (the first ``held`` of them taken) with room for a sample's, at most one for
+    each of ``width`` columns: as they are where there is, else the ``held`` in twice the room."""
+    if held + width <= segments[0].shape[0]:
+        return segments
     grown = _no_segments(2 * segments[0].shape[0])
     grown[0][:held], grown[1][:held], grown[2][:held] = segments[0][:held], segments[1][:held], segments[2][:held]
     grown[3][:held], grown[4][:held] = segments[3][:held], segments[4][:held]
@@ -534,13 +541,7 @@ def _shade(
     top = filled.min()
     lowest = filled.astype(np.int32)  # compared in 32 bits, as wide as the float32 lanes it masks
     range2 = max_range_m * max_range_m
-    # Per column: the ray's change per metre of depth in padded-raster cells, and (1 + a^2) / R^2.
-    ax, ay, reach = np.empty(width, np.float32), np.empty(width, np.float32), np.empty(width, np.float32)
-    for col in range(width):
-        a = ray_a[col]
-        ax[col] = a * axes[0, 0] * per_m
-        ay[col] = a * axes[0, 1] * per_m
-        reach[col] = (1.0 + a * a) / range2
+    ax, ay, reach = _column_rays(ray_a, axes, per_m, range2)
     x0, y0 = np.float32(centre[0] * per_m + 1.0), np.float32(centre[1] * per_m + 1.0)
     xm, ym = np.float32(x_max), np.float32(y_max)
     cells = np.empty(width, np.uint32)
@@ -548,25 +549,13 @@ def _shade(
     zero, one, nan = np.float32(0.0), np.float32(1.0), np.float32(np.nan)
     # Each column's segment over the row, its last row, inverse there and fall per row up (a
     # column with none reads an inverse of 0: no ground); the segments by their first row.
-    cols, firsts, lasts, inverses, changes = segments
-    starts = np.zeros(height + 1, np.int64)
-    for i in range(cols.shape[0]):
-        starts[firsts[i] + 1] += 1
-    starts = np.cumsum(starts)
-    n = cols.shape[0]
-    by_col, by_last, by_inverse, by_change = np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n), np.empty(n)
-    placed = starts[:-1].copy()
-    for i in range(n):
-        k = placed[firsts[i]]
-        by_col[k], by_last[k], by_inverse[k], by_change[k] = cols[i], lasts[i], inverses[i], changes[i]
-        placed[firsts[i]] = k + 1
+    starts, (by_col, by_last, by_inverse, by_change) = _by_first_row(segments, height)
     seg_last, seg_inverse, seg_change = np.zeros(width, np.int64), np.zeros(width), np.zeros(width)
     row_inverse = np.empty(width, np.float32)
     for row in range(height):
         out_ids, out_depth = ids[row], depth[row]
-        for k in range(starts[row], starts[row + 1]):
-            col = by_col[k]
-            seg_last[col], seg_inverse[col], seg_change[col] = by_last[k], by_inverse[k], by_change[k]
+        for k in range(starts[row], starts[row + 1]):  # the segments that begin on this row
+            seg_last[by_col[k]], seg_inverse[by_col[k]], seg_change[by_col[k]] = by_last[k], by_inverse[k], by_change[k]
         if row <= top:
             out_ids[:] = unknown
             out_depth[:] = np.nan
@@ -587,3 +576,38 @@ def _shade(
             out_depth[col] = along if seen else nan
         for col in range(width):
             out_ids[col] = raster[cells[col]]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _by_first_row(segments: Segments, height: int) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """The ``segments`` (:data:`Segments`) of a frame ``height`` rows tall in the order of their
+    first row (a counting sort: the order they came in kept among those of a row), and where each
+    row's begin in that order, (height + 1,): their columns, last rows, inverses and changes."""
+    cols, firsts, lasts, inverses, changes = segments
+    n = cols.shape[0]
+    starts = np.zeros(height + 1, np.int64)
+    for i in range(n):
+        starts[firsts[i] + 1] += 1
+    starts = np.cumsum(starts)
+    by_col, by_last, by_inverse, by_change = np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n), np.empty(n)
+    placed = starts[:-1].copy()
+    for i in range(n):
+        k = placed[firsts[i]]
+        by_col[k], by_last[k], by_inverse[k], by_change[k] = cols[i], lasts[i], inverses[i], changes[i]
+        placed[firsts[i]] = k + 1
+    return starts, (by_col, by_last, by_inverse, by_change)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _column_rays(ray_a: np.ndarray, axes: np.ndarray, per_m: float, range2: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per column of ray offset ``ray_a`` (W,): its ray's change along x and y per metre of depth
+    in raster cells (``per_m`` a metre; ``axes`` the camera's), and (1 + a^2) / R^2 (``range2``: R^2),
+    float32."""
+    width = ray_a.shape[0]
+    ax, ay, reach = np.empty(width, np.float32), np.empty(width, np.float32), np.empty(width, np.float32)
+    for col in range(width):
+        a = ray_a[col]
+        ax[col] = a * axes[0, 0] * per_m
+        ay[col] = a * axes[0, 1] * per_m
+        reach[col] = (1.0 + a * a) / range2
+    return ax, ay, reach
