@@ -83,6 +83,38 @@ def test_a_wall_hides_the_ground_behind_it_as_far_as_its_crests_shadow() -> None
     np.testing.assert_allclose(depth[near, column], expected[near, column], rtol=1e-5)
 
 
+@pytest.mark.parametrize("height_m", [2.0, 20.0, 1000.0])
+def test_a_wall_taller_than_the_view_fills_every_row_above_its_foot_at_the_depth_of_its_plane(height_m: float) -> None:
+    """A wall across the view 10 m ahead of a camera 1 m up, pitched 30 deg down: a pixel whose ray
+    meets the plane x = 10 below the wall's top sees the wall, at depth 10 / r_x (r: the ray per
+    metre of depth), within the march's step there: the face is taken as straight from the last
+    sample before it to the first on its top, a pixel row's ground apart ((u^2 + 1) / 320 for u
+    metres along the column's plane: 0.32 m, 3.2%, ahead; 0.63 m, 4.5%, at the frame's sides,
+    each side of the face).
+    A wall 20 m or 1 km high rises past the plane of the optical centre before its top, where no
+    sample of the march is in front of the camera: its face still fills every row up to the top
+    of the image, not the sky."""
+    walled = world([{"plateau": {"polygon": [[20.0, 0.0], [60.0, 0.0], [60.0, 40.0], [20.0, 40.0]], "height_m": height_m, "edge_m": 0.0}}])
+    renderer = SegmentationRenderer(PinholeCamera(), walled)
+    vehicle = Vehicle(Pose(10.0, 20.0, 0.0), ground=walled)
+    ids, depth = renderer.render_with_depth(vehicle.pose, vehicle.attitude)
+    axes, centre = renderer.placement(vehicle.pose, vehicle.attitude)
+    camera = renderer.camera
+    cols, rows = np.meshgrid(np.arange(camera.config.width_px), np.arange(camera.config.height_px))
+    a, b = (cols + 0.5 - camera.cx) / camera.fx, (rows + 0.5 - camera.cy) / camera.fy
+    rays = a[..., None] * axes[0] + b[..., None] * axes[1] + axes[2]
+    with np.errstate(divide="ignore"):
+        at = np.where(rays[..., 0] > 0, (20.0 - centre[0]) / rays[..., 0], np.inf)  # depth at the plane x = 20
+    hit_z = centre[2] + at * rays[..., 2]
+    # The face, a cell clear of its foot and top (the field is bilinear: each edge a slope over a cell).
+    face = (hit_z > 0.1) & (hit_z < height_m - 0.1) & (at * np.linalg.norm(rays, axis=-1) < camera.config.max_range_m - 0.5)
+    assert face[0].all() == (height_m > 10.0) and face.sum() > 20_000
+    assert (ids[face] == walled.classes.id_of("grass")).all()
+    ahead = face & (np.abs(a) <= 0.25)  # within 14 deg of the optical axis
+    np.testing.assert_allclose(depth[ahead], at[ahead], rtol=0.035)
+    np.testing.assert_allclose(depth[face], at[face], rtol=0.09)
+
+
 def test_on_a_ramp_the_horizon_moves_by_the_grade_and_the_ramp_ahead_looks_as_flat_ground_does() -> None:
     """A ramp of grade 0.2 from x = 5 to 55 m: the body pitches up by atan(0.2), so the level
     horizon drops in the image from cy - fy tan(30 deg) to cy - fy tan(30 deg - atan(0.2)); the

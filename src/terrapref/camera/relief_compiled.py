@@ -45,6 +45,10 @@ from numba import njit
 
 from terrapref.world.height_compiled import height_at
 
+# A sample is in front of the camera when it lies more than this [m] ahead of the plane of its
+# optical centre (the plane of the image, moved to the centre).
+IN_FRONT_M = 1e-9
+
 # A Newton step that moves a column's drop by more than this [m] is checked and, if need be,
 # settled by a bracketing search (:func:`settle_drops`).
 SETTLE_M = 0.01
@@ -293,6 +297,8 @@ def _fill(
             continue
         r = row[col]
         lo = max(stop[col], 0)
+        if wf[col] <= IN_FRONT_M < vf[col] and vd[col] + (wd[col] - vd[col]) * vf[col] / (vf[col] - wf[col]) < 0.0:
+            lo = 0  # up a face past the plane of the optical centre (a wall taller than the view): it fills the rows to the top
         if lo <= r:
             # Rows lo..r see this sample or nearer: their rays meet the segment from the last
             # sample at depth cross / (dd - b df), so 1 / depth = p + q b.
@@ -498,7 +504,7 @@ def _project(
         d = u[col] * dh[col] + drop[col] * dm[col]
         f = u[col] * fh[col] + drop[col] * fm[col]
         wd[col], wf[col] = d, f
-        at = min(max(d / f * fy + cy - 0.5, -1.0), 1e9) if f > 1e-9 else 1e9
+        at = min(max(d / f * fy + cy - 0.5, -1.0), 1e9) if f > IN_FRONT_M else 1e9
         stop[col] = np.int64(math.ceil(at))
 
 
