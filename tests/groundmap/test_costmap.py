@@ -188,3 +188,27 @@ def test_an_exported_recording_carries_the_costmap_a_model_sees_in_it(tmp_path, 
     assert main(["export", str(rec), "--format", "mcap", "--model", str(plain), "--out", str(tmp_path / "c.mcap")]) == 2
     one_line_error(capsys, "c.safetensors", "no offset rule")
     assert not (tmp_path / "c.mcap").exists()
+
+
+def test_an_evaluations_run_on_relief_carries_its_depth_and_the_heights_its_costmap_gathered(tmp_path, capsys):
+    """`evaluate --mcap` renders each run's frames again at the poses driven: on relief with the
+    body's attitude there and each frame's depth image (on /terrapref/depth), so that the GridMap's
+    height layers hold what the planner's map gathered from them, as the planner saw them."""
+    from rosbags.highlevel import AnyReader
+
+    from helpers import TINY_RELIEF
+    from terrapref.cli import main
+    from terrapref.interop.ros_messages import grid_map_layer
+
+    config = ClassifierConfig(hidden=8, skip=True)
+    model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE))
+    out = tmp_path / "ev"
+    argv = ["evaluate", str(model), str(TINY_RELIEF), "--seeds", "1", "--no-driver", "--workers", "1", "--out", str(out), "--mcap"]
+    assert main(argv) == 0
+    (run,) = (out / "runs").glob("*seed0.mcap")
+    with AnyReader([run]) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+        grids = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages() if c.topic == "/terrapref/grid_map"]
+    assert counts["/terrapref/labels"] > 30 and counts.get("/terrapref/depth") == counts["/terrapref/labels"]
+    elevation = grid_map_layer(grids[-1], "elevation")
+    assert np.isfinite(elevation).sum() > 100 and np.nanmax(elevation) > 0.2  # the mound, 0.4 m high, seen

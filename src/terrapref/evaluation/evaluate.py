@@ -34,9 +34,10 @@ from terrapref.perception import PerceptionModel
 from terrapref.planner.model import Model
 from terrapref.rules import speed_rule
 from terrapref.scenario import AVOID, resolve_scenario
+from terrapref.sim import SimConfig
 from terrapref.terrain import ClassTable, PreferenceProfile
-from terrapref.vehicle import Pose
-from terrapref.vehicle.ground import drivable
+from terrapref.vehicle import Pose, VehicleConfig
+from terrapref.vehicle.ground import LEVEL, Attitude, GroundContact, drivable
 
 
 @dataclass(frozen=True)
@@ -241,8 +242,9 @@ def _course_runs(results: list[RunResult], name: str, evidence: _Evidence | None
 
 
 def _write_runs(results: list[RunResult], folder: Path, model) -> None:
-    """Each planner run as an MCAP file, its camera frames rendered again at the poses driven;
-    with an offset rule, the costmap of the ground those frames show, once a second."""
+    """Each planner run as an MCAP file, its camera frames rendered again at the poses driven (on
+    relief with the body's attitude there, and their depth images); with an offset rule, the
+    costmap of the ground those frames show, once a second."""
     from terrapref.camera import SegmentationRenderer
     from terrapref.interop.mcap_export import RunFrames, costmaps_of, write_mcap
     from terrapref.planner import Planner
@@ -254,23 +256,59 @@ def _write_runs(results: list[RunResult], folder: Path, model) -> None:
         if r.driver != PLANNER or run is None:
             continue
         scenario, world = scenario_and_world(r.scenario, model.classes)  # cached: the runs of one course share a raster
-        renderer = SegmentationRenderer(camera, world)
-        poses = run.poses
+        seen = _RunView(SegmentationRenderer(camera, world), run.poses, SimConfig.driving(None).vehicle)  # the runs' vehicle
+        depth, attitude = (seen.depth, seen.attitude) if world.has_relief else (None, None)
         frames = RunFrames(
-            times=0.1 * np.arange(len(poses)),
-            poses=poses,
+            times=0.1 * np.arange(len(run.poses)),
+            poses=run.poses,
             commands=run.commands,
-            image=lambda i, poses=poses, renderer=renderer: renderer.render(Pose(*poses[i])),
+            image=seen.image,
             chosen=run.index,
             path=scenario.waypoints,
             camera=model.camera,
             classes=model.classes,
             preference=model.features.preference,
             probs=run.probs,
-            costmap=costmaps_of(planner, poses) if planner.ground_map is not None else None,
+            costmap=costmaps_of(planner, run.poses, depth, attitude) if planner.ground_map is not None else None,
             stops=run.stops or None,
+            depth=depth,
+            attitude=attitude,
         )
         write_mcap(folder / f"{file_stem(r.scenario)}_seed{r.seed}.mcap", frames, robot_file=False)
+
+
+class _RunView:
+    """A run's camera frames rendered again at its ``poses`` (F, 3) by ``renderer``: on relief
+    with the body of ``vehicle`` resting on the ground at each pose, as it rode there, and with
+    its depth image; each frame rendered once however often it is asked for (in order)."""
+
+    def __init__(self, renderer, poses: np.ndarray, vehicle: VehicleConfig) -> None:
+        self._renderer, self._poses = renderer, poses
+        self._contact = GroundContact(renderer.world, vehicle) if renderer.relief else None
+        self._at, self._frame = -1, (np.empty(0), None)
+
+    def attitude(self, i: int) -> Attitude:
+        """The body's attitude at pose ``i`` (level on flat ground)."""
+        return self._contact.attitude(Pose(*self._poses[i])) if self._contact is not None else LEVEL
+
+    def image(self, i: int) -> np.ndarray:
+        """Frame ``i``'s class ids (H, W) uint8."""
+        return self._rendered(i)[0]
+
+    def depth(self, i: int) -> np.ndarray | None:
+        """Frame ``i``'s depth image (H, W) float32 [m, NaN: none]; None on flat ground."""
+        return self._rendered(i)[1]
+
+    def _rendered(self, i: int) -> tuple[np.ndarray, np.ndarray | None]:
+        if i != self._at:
+            pose = Pose(*self._poses[i])
+            self._frame = (
+                self._renderer.render_with_depth(pose, self.attitude(i))
+                if self._contact is not None
+                else (self._renderer.render(pose), None)
+            )
+            self._at = i
+        return self._frame
 
 
 def file_stem(scenario: str) -> str:
