@@ -582,3 +582,16 @@ def test_a_relief_drive_kept_in_memory_featurises_as_written(tmp_path: Path):
     assert build_dataset([a], recipe.features(), rules=rules_with(recipe)).fingerprint == (
         build_dataset([b], recipe.features(), rules=rules_with(recipe)).fingerprint
     )
+
+
+def test_inspect_of_a_file_says_it_is_not_a_recording_and_where_a_model_goes(tmp_path: Path, capsys):
+    """A model file handed to `inspect` (which reads recordings) is refused in one line that says
+    what a recording is and that `info` shows a model; a missing folder is said to be missing."""
+    from helpers import linear_model, one_line_error
+    from terrapref.cli import main
+
+    model = linear_model(tmp_path / "m.safetensors")
+    assert main(["inspect", str(model)]) == 2
+    one_line_error(capsys, "m.safetensors", "a file, not a recording")
+    assert main(["inspect", str(tmp_path / "nothing")]) == 2
+    one_line_error(capsys, "nothing", "no such recording directory")

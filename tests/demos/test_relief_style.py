@@ -64,11 +64,13 @@ def test_named_styles_and_pairs_over_them_are_read():
         ("roll=8", "expected NAME or k=v pairs"),
         ("roll_deg=eight", "roll_deg: expected a number"),
         ("roll_deg=nan", "roll_deg: expected a number"),
-        ("roll_deg=95", "roll_deg and grade_deg must lie in (0, 90) deg"),
-        ("rough_mps=0", "rough_mps and rough_m > 0"),
-        ("up_mps_per_deg=-0.1", "must be >= 0"),
+        ("roll_deg=95", "roll_deg must lie in (0, 90) deg, got 95"),  # each message names the field it is about
+        ("grade_deg=0", "grade_deg must lie in (0, 90) deg, got 0"),
+        ("rough_mps=0", "rough_mps must be > 0, got 0"),
+        ("default,rough_m=0", "rough_m must be > 0, got 0"),
+        ("up_mps_per_deg=-0.1", "up_mps_per_deg must lie in [0, 0.2]"),
         ("roll_deg=8,roll_deg=9", "roll_deg is given twice"),
-        ("default,up_mps_per_deg=10", "must be at most 0.2"),  # a driver that crawls up any grade
+        ("default,down_mps_per_deg=10", "down_mps_per_deg must lie in [0, 0.2]"),  # a driver that crawls down any grade
         ("none,roll_deg=8", "none (relief driven as if it were flat) takes no k=v changes"),
     ],
 )
@@ -147,6 +149,8 @@ def test_record_stores_the_relief_style_and_refuses_a_bad_one(tmp_path, capsys):
     capsys.readouterr()
     assert main(["record", str(course), "--relief-style", "roll_deg=91", "--out", str(tmp_path / "bad"), "--quiet"]) == 2
     one_line_error(capsys, "--relief-style", "roll_deg")
+    assert main(["record", str(course), "--relief-style", "default,rough_mps=1e9", "--out", str(tmp_path / "bad"), "--quiet"]) == 2
+    one_line_error(capsys, "--relief-style", "rough_mps: 1e+09 m/s is above the vehicle's top speed, 2 m/s")  # a cap never reached
     assert not (tmp_path / "bad").exists()
 
 

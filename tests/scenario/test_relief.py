@@ -337,7 +337,8 @@ def test_teach_relief_shows_each_relief_situation_on_its_own_leg() -> None:
 def test_course_relief_gives_a_tables_teaching_course_its_relief_situations_and_relief_between(tmp_path, capsys) -> None:
     """`terrapref course --relief [SEED]`: the table's course with its relief situations (each
     class against a bank), their own relief, and the relief of the seed between the situations
-    (teach_relief's way); a negative seed is refused in one line."""
+    (teach_relief's way), and the command that records it with a relief style; a seed
+    genrelief:SEED would refuse is refused in one line."""
     from helpers import REPO
     from terrapref.cli import main
     from terrapref.scenario import load_scenario
@@ -348,7 +349,10 @@ def test_course_relief_gives_a_tables_teaching_course_its_relief_situations_and_
     assert main(["course", "--classes", small, "--relief", "3", "--out", str(tmp_path / "hilly.yaml")]) == 0
     hilly = load_scenario(tmp_path / "hilly.yaml")
     minutes = hilly.path_length_m() / RELIEF_PACE_MPS / 60  # timed at the pace a driver keeps on relief, not the flat 1 m/s
-    assert f"expected drive about {minutes:.1f} minutes at {RELIEF_PACE_MPS:g} m/s on relief" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert f"expected drive about {minutes:.1f} minutes at {RELIEF_PACE_MPS:g} m/s on relief" in printed
+    # The command it prints records a driver with a relief style (one without drives relief as if flat).
+    assert f"(record it: terrapref record {tmp_path / 'hilly.yaml'} --relief-style default --out DIR)" in printed
     flat = parse_scenario(designed_course(hilly.classes)[0].data(), "flat.yaml", hilly.classes)  # `course` without --relief
     designed = designed_course(hilly.classes, relief=True)[0]
     situations = parse_scenario(designed.data(), "situations.yaml", hilly.classes)
@@ -358,5 +362,9 @@ def test_course_relief_gives_a_tables_teaching_course_its_relief_situations_and_
     assert hilly.to_dict()["relief"] == own + relief_for(situations, 3)
     assert len(own) == 6 + len(hilly.classes.terrain_names)  # two mounds, two banks, a ramp, a rough patch, a bank beside each class
     capsys.readouterr()
-    assert main(["course", "--relief", "-1", "--out", str(tmp_path / "bad.yaml")]) == 2
-    assert capsys.readouterr().err.strip() == "error: --relief: expected a seed >= 0, got -1"
+    for seed in ("-1", str(2**63)):  # the seeds genrelief:SEED takes
+        assert main(["course", "--relief", seed, "--out", str(tmp_path / "bad.yaml")]) == 2
+        assert (
+            capsys.readouterr().err.strip() == f"error: --relief: expected a seed from 0 to 2^63 - 1, as genrelief:SEED takes, got {seed}"
+        )
+    assert not (tmp_path / "bad.yaml").exists()

@@ -189,8 +189,8 @@ def _cmd_course(args: argparse.Namespace) -> int:
     for path in (out, figure):
         check_output(path, "--out", inputs, force=args.force)
     table = class_table(args)
-    if args.relief is not None and args.relief < 0:
-        raise UserError("--relief", f"expected a seed >= 0, got {args.relief}")
+    if args.relief is not None and not 0 <= args.relief < 2**63:
+        raise UserError("--relief", f"expected a seed from 0 to 2^63 - 1, as genrelief:SEED takes, got {args.relief}")
     if args.after is not None:
         recs = _drives_of_one_table(args, args.after)
         table = recs[0].classes
@@ -223,7 +223,8 @@ def _cmd_course(args: argparse.Namespace) -> int:
     save_map(figure, scenario, rasterise(scenario))
     print(f"{scenario.name}: {scenario.description}")
     print(f"  {_drive_line(scenario, items)}")
-    print(f"wrote {out} and {figure} (record it: terrapref record {out} --out DIR)")
+    style = " --relief-style default" if scenario.has_relief else ""  # a driver without one drives relief as if flat
+    print(f"wrote {out} and {figure} (record it: terrapref record {out}{style} --out DIR)")
     return 0
 
 

@@ -84,6 +84,11 @@ def _evaluation(args: argparse.Namespace) -> Evaluation:
     meta = getattr(getattr(model, "model", None), "meta", {})
     style, speeds = _driver_of(args.style, given, trained_driver(meta))
     relief = parse_relief_style(args.relief_style)[1] if args.relief_style is not None else trained_relief(meta)
+    if args.relief_style is not None:
+        from terrapref.demos.speed_style import check_rough_speed
+        from terrapref.vehicle import VehicleConfig
+
+        check_rough_speed(relief, VehicleConfig().max_speed_mps)  # the vehicle the runs drive
     STYLES.get(style, "--style")
     if given:  # checked against the model's table and the vehicle before any run (the trained driver's were when it drove)
         from terrapref.vehicle import VehicleConfig

@@ -522,6 +522,12 @@ class _Frames:
 def _read_meta(root: Path) -> dict:
     """The recording's meta.json, which must declare this format."""
     meta_path = root / META
+    if root.is_file():  # a model, a dataset, a log: say what a recording is, and where the file goes
+        raise UserError(
+            str(root),
+            "a file, not a recording (a recording is the folder `terrapref record` or `drive` writes; "
+            "`terrapref info FILE` shows a model or a dataset)",
+        )
     if not root.is_dir():
         raise UserError(str(root), "no such recording directory")
     try:

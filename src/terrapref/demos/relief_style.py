@@ -63,15 +63,18 @@ class ReliefStyle:
             value = getattr(self, f.name)
             if not (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)):
                 raise ValueError(f"{f.name} must be a finite number, got {value!r}")
-        if not (0.0 < self.roll_deg < 90.0 and 0.0 < self.grade_deg < 90.0):
-            raise ValueError(f"roll_deg and grade_deg must lie in (0, 90) deg, got {self.roll_deg:g} and {self.grade_deg:g}")
-        if min(self.up_mps_per_deg, self.down_mps_per_deg) < 0.0 or self.rough_mps <= 0.0 or self.rough_m <= 0.0:
-            raise ValueError("up_mps_per_deg and down_mps_per_deg must be >= 0, rough_mps and rough_m > 0")
-        if max(self.up_mps_per_deg, self.down_mps_per_deg) > MAX_SHED_MPS_PER_DEG:
-            raise ValueError(
-                f"up_mps_per_deg and down_mps_per_deg must be at most {MAX_SHED_MPS_PER_DEG:g} "
-                f"(a vehicle's whole top speed shed over 10 deg), got {self.up_mps_per_deg:g} and {self.down_mps_per_deg:g}"
-            )
+        for name in ("roll_deg", "grade_deg"):
+            if not 0.0 < getattr(self, name) < 90.0:
+                raise ValueError(f"{name} must lie in (0, 90) deg, got {getattr(self, name):g}")
+        for name in ("up_mps_per_deg", "down_mps_per_deg"):
+            if not 0.0 <= getattr(self, name) <= MAX_SHED_MPS_PER_DEG:
+                raise ValueError(
+                    f"{name} must lie in [0, {MAX_SHED_MPS_PER_DEG:g}] (at most a vehicle's whole top speed shed over 10 deg), "
+                    f"got {getattr(self, name):g}"
+                )
+        for name in ("rough_mps", "rough_m"):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name):g}")
 
     def to_dict(self) -> dict[str, Any]:
         return to_plain(self)

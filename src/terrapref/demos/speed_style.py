@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from terrapref.demos.expert import STYLES, ExpertConfig
+from terrapref.demos.relief_style import ReliefStyle
 from terrapref.errors import UserError
 from terrapref.terrain import ClassTable
 from terrapref.vehicle import MIN_CRUISE_MPS as MIN_SPEED_MPS
@@ -127,7 +128,15 @@ def driver_style(
     fastest = max(config.speed_mps, float(max((v for v in table if v == v), default=0.0)))
     if fastest > max_speed_mps + 1e-9:
         raise UserError(blame, f"a cruising speed of {fastest:g} m/s is above the vehicle's {max_speed_mps:g} m/s")
+    check_rough_speed(config.relief, max_speed_mps)
     return config
+
+
+def check_rough_speed(relief: ReliefStyle | None, max_speed_mps: float) -> None:
+    """Refuse a relief style whose top speed on rough ground is above the vehicle's top speed: a
+    cap the driver never reaches, most likely a slip of the hand (``rough_mps=1e9``)."""
+    if relief is not None and relief.rough_mps > max_speed_mps + 1e-9:
+        raise UserError(FLAGS["relief"], f"rough_mps: {relief.rough_mps:g} m/s is above the vehicle's top speed, {max_speed_mps:g} m/s")
 
 
 def _check_drivable(config: ExpertConfig, classes: ClassTable, table: np.ndarray, blame: Callable[[str], str]) -> None:

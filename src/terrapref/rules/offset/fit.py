@@ -252,7 +252,8 @@ def relief_price_intervals(theta: np.ndarray, covariance: np.ndarray, columns: i
     """The 95% intervals (R, 2) of :func:`relief_prices` of the fitted ``theta`` (the terrain
     ``columns``, the detour's price last among them, then ``count`` relief columns, then the
     gate) with its ``covariance``, by the delta method: each price a sum of relief weights over
-    the detour's; NaN where the detour is priced at 0 (nothing is on its scale)."""
+    the detour's, and never below 0, as the fit holds every price (a band's weight is at least 0:
+    steeper ground costs no less); NaN where the detour is priced at 0 (nothing is on its scale)."""
     detour, half = columns - 1, count // 2
     out = np.full((count, 2), np.nan)
     if theta[detour] == 0.0:
@@ -265,7 +266,7 @@ def relief_price_intervals(theta: np.ndarray, covariance: np.ndarray, columns: i
         gradient = picked / theta[detour]
         gradient[detour] -= price / theta[detour]
         spread = z * math.sqrt(max(gradient @ covariance @ gradient, 0.0))
-        out[k] = price - spread, price + spread
+        out[k] = max(price - spread, 0.0), price + spread
     return out
 
 
