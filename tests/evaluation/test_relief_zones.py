@@ -51,6 +51,23 @@ def test_a_mound_on_the_path_is_one_relief_zone_where_its_flanks_tilt_the_body_p
     assert relief_zones(path, rasterise(_scenario([]))) == []  # flat ground: none
 
 
+def test_a_bump_under_one_side_that_tilts_the_body_past_4_deg_for_a_single_read_is_no_relief_zone():
+    """A knob 0.2 m across and 0.15 m high under the left wheels' line rolls the body past 4 deg
+    only while its centre line passes it (a tenth of a metre): one read of the path's, every
+    0.25 m, a zone of no length that every run would pass alike. Zones are at least 1 m long
+    (RELIEF_MIN_M); the same knob twice as wide, 0.25 m high, tilts it past 4 deg over a longer stretch and is one."""
+    from terrapref.evaluation.scoring import RELIEF_MIN_M, RELIEF_STEP_M
+    from terrapref.vehicle import VehicleConfig
+
+    left = 10.0 + VehicleConfig().half_width_m
+    knob = _scenario([{"mound": {"center": [20.0, left], "radius": 0.1, "height_m": 0.15}}])
+    path = ReferencePath(knob.waypoints)
+    assert relief_zones(path, rasterise(knob)) == [] and RELIEF_MIN_M >= 4 * RELIEF_STEP_M
+    wider = _scenario([{"mound": {"center": [20.0, left], "radius": 1.0, "height_m": 0.25}}])
+    ((s0, s1),) = relief_zones(path, rasterise(wider))
+    assert s1 - s0 >= RELIEF_MIN_M and s0 < 18.0 < s1  # 18 m along: the knob's centre
+
+
 @pytest.mark.parametrize(("lateral", "choice"), [(0.0, "over"), (0.4, "over"), (1.5, "left"), (-2.0, "right")])
 def test_a_run_passes_a_relief_zone_over_it_or_round_it_by_its_mean_offset(lateral, choice):
     scenario = _scenario([MOUND])

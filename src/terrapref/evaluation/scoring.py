@@ -400,11 +400,13 @@ def grade_along(trace: np.ndarray, mid: np.ndarray, world: WorldMap, max_step_m:
 
 # A relief zone: a stretch of the path whose own ground would tilt the body, heading along the
 # path, past this angle across or along [deg] (the gentlest band the offset rule prices), its
-# stretches less than RELIEF_GAP_M apart joined. Its choice: where the run's reference point
-# held, on average over the stretch, more than RELIEF_SIDE_M off the path, the side it went round
-# by (``left``, ``right``); else ``over``.
+# stretches less than RELIEF_GAP_M apart joined, and at least RELIEF_MIN_M long (a crest or a
+# dip of a single read past the angle is no stretch to go round or over, and every run passes
+# it alike). Its choice: where the run's reference point held, on average over the stretch, more
+# than RELIEF_SIDE_M off the path, the side it went round by (``left``, ``right``); else ``over``.
 RELIEF_ZONE_DEG = 4.0
 RELIEF_GAP_M = 5.0
+RELIEF_MIN_M = 1.0
 RELIEF_SIDE_M = 0.5
 RELIEF_STEP_M = 0.25  # the path is read this often [m]
 RELIEF_CHOICES = ("over", "left", "right")
@@ -450,7 +452,7 @@ def relief_zones(path: ReferencePath, world: WorldMap) -> list[tuple[float, floa
             out[-1] = (out[-1][0], float(s[i]))
         else:
             out.append((float(s[i]), float(s[i])))
-    return [(round(a, 3), round(b, 3)) for a, b in out]
+    return [(round(a, 3), round(b, 3)) for a, b in out if b - a >= RELIEF_MIN_M]
 
 
 def score_relief_zones(
