@@ -300,6 +300,7 @@ class _RunView:
         return self._rendered(i)[1]
 
     def _rendered(self, i: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """Frame ``i``'s class ids and depth image (None on flat ground), rendered when first asked."""
         if i != self._at:
             pose = Pose(*self._poses[i])
             self._frame = (
