@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 from terrapref.demos.relief_style import RELIEF_STYLES, ReliefStyle
 from terrapref.evaluation.runner import PLANNER, RunResult, summarise
+from terrapref.evaluation.scoring import RELIEF_MIN_M, RELIEF_ZONE_DEG
 from terrapref.evaluation.speed import SpeedComparison
 from terrapref.evaluation.stats import rate_text
 from terrapref.report.reproduce_speed import SPEEDS, SpeedPart, speeds_text
@@ -53,7 +54,7 @@ def relief_lines(part: ReliefPart, results: list[RunResult], figure: str) -> lis
         f"Recipe teach taught by one drive of `{COURSE}` by the synthetic driver of the same order at {speeds_text(part.speeds)} "
         f"and relief style `{part.style}` ({RELIEF_STYLES.entry(part.style).doc}); {part.seeds} training seed(s); planner and driver "
         f"each drive {', '.join(f'`{c}`' for c in part.courses)} once per seed, clean frames. Relief zones: stretches of the "
-        "path whose ground tilts the body past 4 deg, passed over or round on one side.",
+        f"path, {RELIEF_MIN_M:g} m or more, whose ground tilts the body past {RELIEF_ZONE_DEG:g} deg, passed over or round on one side.",
         "",
         "| measure | planner against its driver |",
         "|---|---|",
