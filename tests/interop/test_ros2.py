@@ -312,7 +312,11 @@ def system(tmp_path_factory, short_recording):
             text=True,
             timeout=120,
         )
-        _wait(lambda: idle_heard.get("costmap"), timeout_s=5.0, what="the idle node's costmap")
+        # A node on a slow machine decides on the frames it kept up with after the log has ended:
+        # its markers are awaited, not read as they stood when `play` returned.
+        _wait(
+            lambda: idle_heard.get("costmap") and idle_heard.get("trajectories"), timeout_s=20.0, what="the idle node's costmap and markers"
+        )
         out["play"], out["idle_heard"] = play, idle_heard
         idle_listener.close()
     finally:
