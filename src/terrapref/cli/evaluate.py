@@ -63,11 +63,12 @@ def _evaluation(args: argparse.Namespace) -> Evaluation:
     the driver's speeds against the model's table and the vehicle)."""
     from terrapref.demos.expert import STYLES
     from terrapref.demos.relief_style import parse_relief_style
-    from terrapref.demos.speed_style import driver_style, parse_speeds
+    from terrapref.demos.speed_style import check_rough_speed, driver_style, parse_speeds
     from terrapref.evaluation.evaluate import Evaluation, scoring_profile
     from terrapref.evaluation.speed import trained_driver, trained_relief
     from terrapref.planner.model import Model
     from terrapref.terrain import PreferenceProfile
+    from terrapref.vehicle import VehicleConfig
 
     try:
         frames = sorted({int(f) for f in args.frames.split(",") if f.strip()}) if args.frames else []
@@ -84,16 +85,12 @@ def _evaluation(args: argparse.Namespace) -> Evaluation:
     meta = getattr(getattr(model, "model", None), "meta", {})
     style, speeds = _driver_of(args.style, given, trained_driver(meta))
     relief = parse_relief_style(args.relief_style)[1] if args.relief_style is not None else trained_relief(meta)
+    top_mps = VehicleConfig().max_speed_mps  # the vehicle the runs drive
     if args.relief_style is not None:
-        from terrapref.demos.speed_style import check_rough_speed
-        from terrapref.vehicle import VehicleConfig
-
-        check_rough_speed(relief, VehicleConfig().max_speed_mps)  # the vehicle the runs drive
+        check_rough_speed(relief, top_mps)
     STYLES.get(style, "--style")
     if given:  # checked against the model's table and the vehicle before any run (the trained driver's were when it drove)
-        from terrapref.vehicle import VehicleConfig
-
-        driver_style(style, scored.order, model.classes, VehicleConfig().max_speed_mps, {"speeds": given})
+        driver_style(style, scored.order, model.classes, top_mps, {"speeds": given})
     return Evaluation(
         args.model,
         tuple(args.scenarios),

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from terrapref.camera import PinholeCamera
+from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.demos.relief_style import ReliefStyle
 from terrapref.errors import UserError
 from terrapref.evaluation.runner import (
@@ -280,36 +280,32 @@ def _write_runs(results: list[RunResult], folder: Path, model) -> None:
 class _RunView:
     """A run's camera frames rendered again at its ``poses`` (F, 3) by ``renderer``: on relief
     with the body of ``vehicle`` resting on the ground at each pose, as it rode there, and with
-    its depth image; each frame rendered once however often it is asked for (in order)."""
+    its depth image; each frame one view (rendered once however often it is read), asked for in order."""
 
     def __init__(self, renderer, poses: np.ndarray, vehicle: VehicleConfig) -> None:
         self._renderer, self._poses = renderer, poses
         self._contact = GroundContact(renderer.world, vehicle) if renderer.relief else None
-        self._at, self._frame = -1, (np.empty(0), None)
+        self._at, self._view = -1, None
 
     def attitude(self, i: int) -> Attitude:
         """The body's attitude at pose ``i`` (level on flat ground)."""
-        return self._contact.attitude(Pose(*self._poses[i])) if self._contact is not None else LEVEL
+        return self._seen(i).attitude
 
     def image(self, i: int) -> np.ndarray:
         """Frame ``i``'s class ids (H, W) uint8."""
-        return self._rendered(i)[0]
+        return self._seen(i).image
 
     def depth(self, i: int) -> np.ndarray | None:
-        """Frame ``i``'s depth image (H, W) float32 [m, NaN: none]; None on flat ground."""
-        return self._rendered(i)[1]
+        """Frame ``i``'s depth image (H, W) float32 [m, NaN: none]."""
+        return self._seen(i).depth
 
-    def _rendered(self, i: int) -> tuple[np.ndarray, np.ndarray | None]:
-        """Frame ``i``'s class ids and depth image (None on flat ground), rendered when first asked."""
+    def _seen(self, i: int) -> SegmentationView:
+        """Frame ``i``'s view, made when first asked for."""
         if i != self._at:
             pose = Pose(*self._poses[i])
-            self._frame = (
-                self._renderer.render_with_depth(pose, self.attitude(i))
-                if self._contact is not None
-                else (self._renderer.render(pose), None)
-            )
-            self._at = i
-        return self._frame
+            attitude = self._contact.attitude(pose) if self._contact is not None else LEVEL
+            self._view, self._at = SegmentationView(self._renderer, pose, attitude=attitude), i
+        return self._view
 
 
 def file_stem(scenario: str) -> str:
