@@ -7,6 +7,7 @@ import pytest
 
 from terrapref.cli import main
 from terrapref.errors import UserError
+from terrapref.evaluation.scoring import ReliefZoneResult, RunMetrics, ZoneResult
 from terrapref.evaluation.stats import cluster_bootstrap, wilson
 from terrapref.report.select import SelectionSize, count_orders, layout_interval, parse_orders, write_selection_report
 from terrapref.terrain import default_classes
@@ -168,3 +169,107 @@ def test_large_runs_a_selection_beyond_the_bound(tmp_path, capsys, monkeypatch):
     assert main(argv) == 2 and "--large" in capsys.readouterr().err
     assert main([*argv, "--large"]) == 2
     assert "run_selection: started" in capsys.readouterr().err
+
+
+# --- relief: the relief styles as one more dimension of the drivers ------------------------------
+
+
+def _relief_run(choices: list[str], zone_choice: str = "mud") -> RunMetrics:
+    zones = [ZoneResult("z0", "pair mud/rock", "mud", zone_choice, zone_choice == "mud", False, {}, speed_mps=0.8)]
+    relief = [ReliefZoneResult(10.0 * k, 10.0 * k + 3.0, c, 0.0) for k, c in enumerate(choices)]
+    return RunMetrics(True, 0, 10.0, 0.0, 0.0, 0.0, {}, zones=zones, relief_zones=relief)
+
+
+def test_a_relief_run_gives_a_row_per_relief_zone_beside_its_terrain_zones():
+    from terrapref.report.select import RELIEF_ZONE, _zone_rows
+
+    who = {"recipe": "teach", "order": ORDER, "seed": 0, "scenario": "genrelief:101", "perception": "clean", "relief_style": "bold"}
+    rows = _zone_rows(who, _relief_run(["over", "right", "left"]), _relief_run(["over", "left", "left"], "rock"))
+    terrain, relief = rows[0], rows[1:]
+    assert (terrain["kind"], terrain["choice"], terrain["driver_choice"], terrain["agrees"]) == ("pair", "mud", "rock", False)
+    assert [(r["kind"], r["choice"], r["driver_choice"], r["agrees"]) for r in relief] == [
+        (RELIEF_ZONE, "over", "over", True),
+        (RELIEF_ZONE, "right", "left", False),
+        (RELIEF_ZONE, "left", "left", True),
+    ]
+    assert all(r["success"] is None and r["relief_style"] == "bold" for r in relief)  # no zone success of their own
+    flat = _zone_rows(who, _relief_run([]), _relief_run([]))
+    assert [r["kind"] for r in flat] == ["pair"]
+
+
+def test_select_md_gives_a_table_per_relief_style_with_the_relief_zones_apart(tmp_path, monkeypatch):
+    import terrapref.report.select as select_report
+
+    rows = []
+    for style, misses in (("default", 0), ("bold", 2)):
+        for i in range(8):
+            kind = "relief" if i < 4 else "lone"
+            rows.append(
+                {
+                    **_zones({f"genrelief:{i % 2}": 0}, 1)[0],
+                    "scenario": f"genrelief:{i % 2}",
+                    "relief_style": style,
+                    "kind": kind,
+                    "agrees": not (kind == "relief" and i < misses),
+                    "success": None if kind == "relief" else True,
+                    "driver_success": None if kind == "relief" else True,
+                }
+            )
+    saved = {
+        "selection": {
+            "recipes": ["teach"],
+            "orders": [ORDER],
+            "seeds": 1,
+            "layouts": ["genrelief:0", "genrelief:1"],
+            "style": "default",
+            "relief_styles": ["default", "bold"],
+        },
+        "zones": rows,
+        "runs": [
+            {"recipe": "teach", "order": ORDER, "seed": 0, "scenario": "genrelief:0", "collisions": 0, "relief_style": s}
+            for s in ("default", "bold")
+        ],
+        "engine": "local, 1 worker",
+        "train_s": 1.0,
+        "eval_s": 2.0,
+    }
+    drawn = {}
+    monkeypatch.setattr(select_report, "save_intervals", lambda path, rows, *a, **kw: drawn.update(labels=[r.label for r in rows]))
+    text = write_selection_report(tmp_path, saved).read_text()
+    assert "## Relief style `default`" in text and "## Relief style `bold`" in text
+    bold = text[text.index("## Relief style `bold`") :]
+    row = next(line for line in bold.splitlines() if line.startswith("| teach | mud > rock > water"))
+    cells = [c.strip() for c in row.split("|")]
+    assert cells[5].startswith("100.0% (4/4") and cells[6].startswith("50.0% (2/4")  # lone zones, then relief zones
+    assert cells[7].startswith("100.0% (4/4")  # zone success: the terrain zones alone
+    assert drawn["labels"] == ["teach, all orders, relief default", "teach, all orders, relief bold"]
+
+
+def test_the_size_counts_each_relief_style_as_a_driver_of_its_own():
+    size = SelectionSize.of(recipes=1, orders=3, seeds=1, courses=6, perceptions=2, random_speeds=False).with_relief(3)
+    assert (size.models, size.drivers, size.runs) == (9, 9, (9 * 2 + 9) * 6)
+    assert size.describe(2).startswith("9 models (1 recipe x 3 orders x 1 seed x 3 relief styles) and 162 closed-loop runs on 6 layouts")
+    from terrapref.report.select import RELIEF_MODEL_CORE_S, RELIEF_RUN_CORE_S
+
+    assert size.core_s == 9 * RELIEF_MODEL_CORE_S + 162 * RELIEF_RUN_CORE_S  # a relief drive is longer, a relief run renders depth
+
+
+def test_the_layouts_have_relief_when_the_drivers_have_relief_styles():
+    from terrapref.report.select import Selection, job_folder
+
+    assert Selection(("teach",), (tuple(ORDER),), 1, 101, 2).layouts == ["gen:101", "gen:102"]
+    assert Selection(("teach",), (tuple(ORDER),), 1, 101, 2, relief_styles=("bold",)).layouts == ["genrelief:101", "genrelief:102"]
+    a, b = (job_folder(Path("out"), ORDER, 0, relief=s) for s in ("default", "default,roll_deg=10"))
+    assert a.name == "mu_ro_wa_s0_relief-default" and b.name == "mu_ro_wa_s0_relief-default_roll_deg_10"
+
+
+@pytest.mark.parametrize(
+    "styles, word",
+    [("steep", "steep"), ("default;default", "distinct"), ("default;;bold", "distinct"), ("rough_mps=1e9", "rough_mps")],
+)
+def test_select_refuses_a_bad_relief_style_before_any_work(tmp_path, capsys, styles: str, word: str):
+    out = tmp_path / "sel"
+    assert main(["select", "--relief-style", styles, "--orders", "mud,rock,water", "--seeds", "1", "--out", str(out)]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith("error: --relief-style") and word in line
+    assert not out.exists()

@@ -190,8 +190,9 @@ def _cmd_select(args: argparse.Namespace) -> int:
         raise UserError("--taught-under", "'same' needs exactly one --perception model")
     taught_under = perceptions[0] if args.taught_under == "same" else perception_model(args.taught_under, "--taught-under", table)
     speeds = _select_speeds(args.speeds, table)
+    relief_styles = _select_relief_styles(args.relief_style)
     engine = grid_engine(args)
-    _announce_size(args, len(names), table, len(perceptions), engine)
+    _announce_size(args, len(names), table, len(perceptions), engine, len(relief_styles))
     try:
         orders = parse_orders(args.orders, table)
     except ValueError as exc:
@@ -201,7 +202,7 @@ def _cmd_select(args: argparse.Namespace) -> int:
     if len(set(orders)) != len(orders):
         raise UserError("--orders", f"names an order twice: {args.orders!r}")
     with output_folder(args.out, args.force):
-        course = _selection_course(args, table)
+        course = _selection_course(args, table, bool(relief_styles))
         t0 = time.perf_counter()
         selection = Selection(
             tuple(names),
@@ -216,13 +217,32 @@ def _cmd_select(args: argparse.Namespace) -> int:
             course,
             args.follow_up,
             speeds,
+            relief_styles,
         )
         path = run_selection(args.out, selection, engine, log=lambda m: print(m, flush=True))
         print(f"done ({time.perf_counter() - t0:.0f} s): {path}")
         return 0
 
 
-def _announce_size(args: argparse.Namespace, recipes: int, table: ClassTable | None, perceptions: int, engine: Engine) -> None:
+def _select_relief_styles(text: str | None) -> tuple[str, ...]:
+    """``--relief-style`` checked before any work: relief styles as record takes them, separated by ';' (none given: flat)."""
+    if text is None:
+        return ()
+    from terrapref.demos.relief_style import parse_relief_style
+    from terrapref.demos.speed_style import check_rough_speed
+    from terrapref.vehicle import VehicleConfig
+
+    styles = tuple(t.strip() for t in text.split(";"))
+    if not all(styles) or len(set(styles)) != len(styles):
+        raise UserError("--relief-style", f"expected distinct relief styles separated by ';', got {text!r}")
+    for style in styles:
+        check_rough_speed(parse_relief_style(style)[1], VehicleConfig().max_speed_mps)
+    return styles
+
+
+def _announce_size(
+    args: argparse.Namespace, recipes: int, table: ClassTable | None, perceptions: int, engine: Engine, relief_styles: int = 0
+) -> None:
     """Print at once how many models and runs the selection makes and about how long they take,
     counted without drawing or listing the orders; refuse one beyond the bound unless --large."""
     from terrapref.report.select import LARGE_MODELS, LARGE_RUNS, SelectionSize, count_orders
@@ -231,7 +251,7 @@ def _announce_size(args: argparse.Namespace, recipes: int, table: ClassTable | N
         orders = count_orders(args.orders, table)
     except ValueError as exc:
         raise UserError("--orders", str(exc)) from None
-    size = SelectionSize.of(recipes, orders, args.seeds, args.courses, perceptions, args.speeds == "random")
+    size = SelectionSize.of(recipes, orders, args.seeds, args.courses, perceptions, args.speeds == "random").with_relief(relief_styles)
     print(f"select: {size.describe(engine.n_workers if engine.address is None else None)}", flush=True)
     if size.large and not args.large:
         raise UserError(
@@ -241,19 +261,20 @@ def _announce_size(args: argparse.Namespace, recipes: int, table: ClassTable | N
         )
 
 
-def _selection_course(args: argparse.Namespace, table) -> str | None:
+def _selection_course(args: argparse.Namespace, table, relief: bool = False) -> str | None:
     """The course every recipe demonstrates in ``select``: ``--course``, or with ``--classes`` the
-    table's teaching course (written into OUT); None: each recipe's own."""
+    table's teaching course (written into OUT); None: each recipe's own. With ``relief``, the
+    teaching course with relief: ``teach_relief``, or the table's (as ``course --relief 0`` writes it)."""
     if args.course is not None:
         from terrapref.scenario import resolve_scenario
 
         resolve_scenario(args.course, table)  # checked before any work
         return str(Path(args.course).resolve()) if Path(args.course).exists() else args.course
     if table is None:
-        return None
+        return "teach_relief" if relief else None
     from terrapref.scenario.teaching import write_teaching_course
 
-    return str(write_teaching_course(args.out, table))
+    return str(write_teaching_course(args.out, table, relief))
 
 
 def select_parser(sub: argparse._SubParsersAction) -> None:
@@ -268,13 +289,7 @@ def select_parser(sub: argparse._SubParsersAction) -> None:
         help="'all' (every order of the feature classes, the lethal ones last: six for the default table), 'random:N' (N of them "
         "drawn at random, the same N every time) or orders separated by ';', e.g. 'rock,mud,water;water,mud,rock' (default: all)",
     )
-    p.add_argument("--style", default="default", help="the synthetic driver's style (default: default; terrapref record --help lists them)")
-    p.add_argument(
-        "--speeds",
-        metavar="random|CLASS=MPS,...",
-        help="the driver's cruising speeds: drawn for each order and seed (random), or given by class; SELECT.md then "
-        "reports the planner's speed against its driver's",
-    )
+    _add_select_driver_args(p)
     p.add_argument("--seeds", type=int, default=5, help="training seeds per recipe and order (default: 5)")
     p.add_argument(
         "--first", type=int, default=1000, help="first generated layout (1000-1999: for choosing; 2000 on: for confirming; default: 1000)"
@@ -313,3 +328,22 @@ def select_parser(sub: argparse._SubParsersAction) -> None:
     add_engine_args(p)
     add_force_arg(p)
     p.set_defaults(func=_cmd_select)
+
+
+def _add_select_driver_args(p: argparse.ArgumentParser) -> None:
+    """``select``'s flags of the synthetic drivers: their style, speeds and relief styles."""
+    p.add_argument("--style", default="default", help="the synthetic driver's style (default: default; terrapref record --help lists them)")
+    p.add_argument(
+        "--speeds",
+        metavar="random|CLASS=MPS,...",
+        help="the driver's cruising speeds: drawn for each order and seed (random), or given by class; SELECT.md then "
+        "reports the planner's speed against its driver's",
+    )
+    p.add_argument(
+        "--relief-style",
+        metavar="STYLE;STYLE...",
+        help="relief styles, as record takes them, separated by ';' (e.g. 'default;bold;cautious'): each order and seed's driver "
+        "drives with each in turn, demonstrating the relief teaching course (teach_relief, or the table's with relief), and the "
+        "models and drivers drive the same layouts with relief (genrelief:N); SELECT.md adds the relief zones and the speed by "
+        "grade band (default: none, flat layouts)",
+    )

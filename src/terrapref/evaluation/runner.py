@@ -13,14 +13,14 @@ import functools
 import math
 import os
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, fields, replace
 
 import numpy as np
 
 from terrapref.demos.expert import ExpertConfig, ExpertDriver
 from terrapref.demos.relief_style import ReliefStyle
-from terrapref.evaluation.scoring import RunMetrics, ZoneResult, ZoneScoring, score_run
+from terrapref.evaluation.scoring import ReliefZoneResult, RunMetrics, ZoneResult, ZoneScoring, score_run
 from terrapref.evaluation.stats import wilson
 from terrapref.grid import Engine, run_grid
 from terrapref.perception import PerceivedDriver, Perceiver, PerceptionModel
@@ -439,6 +439,15 @@ def zone_agrees(planner_zone: ZoneResult, driver_zone: ZoneResult) -> bool:
     return planner_zone.choice == driver_zone.choice and not (planner_zone.touched_lethal and not driver_zone.touched_lethal)
 
 
+def relief_agreement(mine: Sequence[ReliefZoneResult] | None, theirs: Sequence[ReliefZoneResult] | None) -> tuple[bool, ...] | None:
+    """Per relief zone, whether the planner's run (``mine``) passed it as the driver's run of the same
+    course (``theirs``) did: over it, or round it on the same side; None where either run has no
+    relief zones or they differ in number (not the same course)."""
+    if mine is None or theirs is None or len(mine) != len(theirs):
+        return None
+    return tuple(m.choice == t.choice for m, t in zip(mine, theirs, strict=True))
+
+
 def annotate_agreement(results: list[RunResult]) -> list[RunResult]:
     """The results, every planner run given the choice the synthetic driver made in each zone of the
     same run (scenario and seed: the same start) and whether it agreed; runs without a driver run,
@@ -453,10 +462,8 @@ def _with_agreement(run: RunResult, ref: RunResult | None) -> RunResult:
         return run
     by_id = {z.id: z for z in ref.metrics.zones}
     agreement = tuple(ZoneAgreement(by_id[z.id].choice, zone_agrees(z, by_id[z.id])) for z in run.metrics.zones)
-    relief = None
-    mine, theirs = run.metrics.relief_zones, ref.metrics.relief_zones
-    if mine is not None and theirs is not None and len(mine) == len(theirs):  # the same course: the same relief zones
-        relief = tuple(ZoneAgreement(t.choice, m.choice == t.choice) for m, t in zip(mine, theirs))
+    agrees = relief_agreement(run.metrics.relief_zones, ref.metrics.relief_zones)
+    relief = None if agrees is None else tuple(ZoneAgreement(t.choice, a) for t, a in zip(ref.metrics.relief_zones, agrees, strict=True))
     return replace(run, agreement=agreement, relief_agreement=relief)
 
 

@@ -8,6 +8,13 @@ equals the driver's in the same zone of the same layout (terrapref.evaluation.ru
 Layouts ``gen:1000``-``gen:1999`` are where recipes are chosen; a choice is confirmed on layouts
 no choice has seen (``gen:2000`` and on, docs/learning.md). Both the trainings and the runs are
 grids (terrapref.grid), so ``--engine ray`` spreads them over a cluster.
+
+With relief styles (``--relief-style``), each is one more dimension of the drivers: every order
+and seed's driver, with each relief style in turn, demonstrates the relief teaching course
+(``teach_relief``, or a class table's ``terrapref course --relief``), and the models and drivers
+drive the same layouts with relief (``genrelief:N``). The relief zones (the stretches of the path
+that tilt the body past 4 deg, terrapref.evaluation.scoring.relief_zones) are scored beside the
+terrain zones, as ``evaluate`` scores them.
 """
 
 from __future__ import annotations
@@ -23,7 +30,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, run_many, zone_agrees
+from terrapref.demos.relief_style import ReliefStyle, parse_relief_style
+from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult, RunSpec, relief_agreement, run_many, zone_agrees
+from terrapref.evaluation.scoring import RunMetrics
 from terrapref.evaluation.speed import SpeedComparison, driver_lateral_limit, run_fields
 from terrapref.evaluation.stats import cluster_bootstrap, rate_text
 from terrapref.fileio import write_text_atomic
@@ -48,6 +57,9 @@ LARGE_RUNS = 100_000
 # The rates of the estimate `select` prints before it starts, as docs/benchmarks.md states and measures them.
 MODEL_CORE_S = 40.0  # one model: its order and seed's demonstration and its training [s of one core]
 RUN_CORE_S = 0.8  # one closed-loop run of a generated layout, the planner's or the driver's [s of one core]
+RELIEF_MODEL_CORE_S = 120.0  # the same with relief: a drive of the relief teaching course and its training ...
+RELIEF_RUN_CORE_S = 12.0  # ... and a run of a generated layout with relief (its frames rendered with depth)
+RELIEF_ZONE = "relief"  # the zone kind of a relief zone in select.json's rows (beside generate.zone_kind's)
 
 
 @dataclass(frozen=True)
@@ -66,6 +78,7 @@ class Selection:
     course: str | None = None  # the course every recipe demonstrates (None: each recipe's own)
     follow_up: bool = False  # also drive a follow-up course of the pairs the demonstrations left open
     speeds: str | None = None  # the driver's cruising speeds: ``random`` (drawn per order and seed) or CLASS=MPS,...; None: the style's
+    relief_styles: tuple[str, ...] = ()  # the drivers' relief styles, as record takes them (none: flat layouts and courses)
 
     @property
     def driven_under(self) -> tuple[PerceptionModel, ...]:
@@ -74,7 +87,14 @@ class Selection:
 
     @property
     def layouts(self) -> list[str]:
-        return [f"gen:{self.first + i}" for i in range(self.courses)]
+        """The generated layouts: ``gen:N``, or with relief styles ``genrelief:N`` (the same layouts with relief)."""
+        family = "genrelief" if self.relief_styles else "gen"
+        return [f"{family}:{self.first + i}" for i in range(self.courses)]
+
+    @property
+    def relief_drivers(self) -> tuple[str | None, ...]:
+        """Each relief style the drivers drive with, in turn (None alone: flat, no relief style)."""
+        return self.relief_styles or (None,)
 
 
 def parse_orders(text: str, classes: ClassTable | None = None) -> tuple[tuple[str, ...], ...]:
@@ -126,7 +146,9 @@ class SelectionSize(NamedTuple):
         courses: the generated layouts each model and driver drives.
         perceptions: the perception models every model drives them under, in turn.
         drivers: the distinct synthetic drivers driving them (one per order; per order and seed
-            where the speeds are drawn for each).
+            where the speeds are drawn for each; each of those per relief style).
+        relief_styles: the relief styles each order and seed's driver drives with in turn (0:
+            none, flat courses and layouts).
     """
 
     recipes: int
@@ -135,14 +157,19 @@ class SelectionSize(NamedTuple):
     courses: int
     perceptions: int
     drivers: int
+    relief_styles: int = 0
 
     @classmethod
     def of(cls, recipes: int, orders: int, seeds: int, courses: int, perceptions: int, random_speeds: bool) -> SelectionSize:
         return cls(recipes, orders, seeds, courses, perceptions, orders * seeds if random_speeds else orders)
 
+    def with_relief(self, styles: int) -> SelectionSize:
+        """The same selection with each driver driving with ``styles`` relief styles in turn (0: flat)."""
+        return self._replace(drivers=self.drivers * max(styles, 1), relief_styles=styles)
+
     @property
     def models(self) -> int:
-        return self.recipes * self.orders * self.seeds
+        return self.recipes * self.orders * self.seeds * max(self.relief_styles, 1)
 
     @property
     def runs(self) -> int:
@@ -151,7 +178,10 @@ class SelectionSize(NamedTuple):
 
     @property
     def core_s(self) -> float:
-        """The estimated time of it all on one core [s] (:data:`MODEL_CORE_S`, :data:`RUN_CORE_S`)."""
+        """The estimated time of it all on one core [s] (:data:`MODEL_CORE_S`, :data:`RUN_CORE_S`, or
+        on relief :data:`RELIEF_MODEL_CORE_S`, :data:`RELIEF_RUN_CORE_S`)."""
+        if self.relief_styles:
+            return self.models * RELIEF_MODEL_CORE_S + self.runs * RELIEF_RUN_CORE_S
         return self.models * MODEL_CORE_S + self.runs * RUN_CORE_S
 
     @property
@@ -165,7 +195,8 @@ class SelectionSize(NamedTuple):
         where = f"about {_rough_duration(self.core_s)} of one core"
         if workers is not None:
             where = f"about {_rough_duration(self.core_s / workers)} on {workers} worker{'s' if workers > 1 else ''} ({where})"
-        factors = " x ".join(_count(n, what) for n, what in ((self.recipes, "recipe"), (self.orders, "order"), (self.seeds, "seed")))
+        named = ((self.recipes, "recipe"), (self.orders, "order"), (self.seeds, "seed"), (self.relief_styles, "relief style"))
+        factors = " x ".join(_count(n, what) for n, what in named if n or what != "relief style")
         return f"{_count(self.models, 'model')} ({factors}) and {_count(self.runs, 'closed-loop run')} on {_count(self.courses, 'layout')}: {where}"
 
 
@@ -219,6 +250,12 @@ class _OrderJob:
     course: str | None = None  # the course demonstrated (None: each recipe's own)
     follow_up: bool = False  # and a follow-up course of what it left open
     speeds: tuple[tuple[str, float], ...] = ()  # the driver's cruising speeds by class (none: its style's)
+    relief: str | None = None  # the driver's relief style, as record takes it (None: flat)
+
+
+def relief_of(text: str | None) -> ReliefStyle | None:
+    """The relief style ``text`` names (as ``record --relief-style`` takes it); None for None (flat) and ``none``."""
+    return None if text is None else parse_relief_style(text)[1]
 
 
 def job_speeds(sel: Selection, order_index: int, seed: int) -> tuple[tuple[str, float], ...]:
@@ -257,18 +294,31 @@ def _train(job: _OrderJob) -> list[str]:
         classes=job.classes,
         follow_up=job.follow_up,
         speeds=job.speeds,
+        relief=relief_of(job.relief),
     )
     return [str(run_recipe(recipe_named(r), job.workdir, setup).model) for r in job.recipes]
 
 
 def job_folder(
-    out: Path, order: Sequence[str], seed: int, taught_under: PerceptionModel | None = None, lethal: str | None = "non_traversable"
+    out: Path,
+    order: Sequence[str],
+    seed: int,
+    taught_under: PerceptionModel | None = None,
+    lethal: str | None = "non_traversable",
+    relief: str | None = None,
 ) -> Path:
     """The work folder of one order and seed in a selection's ``out``: its demonstrations, and
     each recipe's model in ``<recipe>/model.safetensors`` (drives recorded under a perception
-    model in a folder of their own). ``lethal``: the order's lethal column, left out of the name."""
+    model, or with a ``relief`` style, in a folder of their own). ``lethal``: the order's lethal
+    column, left out of the name."""
     tail = f"_{perception_tag(taught_under)}" if taught_under is not None and taught_under.active else ""
+    tail += f"_relief-{_tag(relief)}" if relief is not None else ""
     return out / "work" / f"{order_tag(order, lethal)}_s{seed}{tail}"
+
+
+def _tag(text: str) -> str:
+    """``text`` in a folder name: letters, digits, ``-``, ``_`` and ``.`` kept, the rest ``_``."""
+    return "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in text)
 
 
 def order_tag(order: Sequence[str], lethal: str | None = "non_traversable") -> str:
@@ -302,7 +352,8 @@ def perception_tag(model: PerceptionModel) -> str:
 
 
 def _describe(job: _OrderJob) -> str:
-    return f"recipes {', '.join(job.recipes)}, order {'>'.join(job.order)}, seed {job.seed}"
+    relief = f", relief style {job.relief}" if job.relief is not None else ""
+    return f"recipes {', '.join(job.recipes)}, order {'>'.join(job.order)}, seed {job.seed}{relief}"
 
 
 def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None, log: Callable[[str], None] = print) -> Path:
@@ -321,8 +372,12 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
         for path, m in models.items()
         for c in layouts
     ]
-    drivers = dict.fromkeys((tuple(m.job.order), m.job.speeds) for m in models.values())  # each driver once
-    specs += [RunSpec(c, 0, EXPERT, None, o, style=sel.style, classes=sel.classes, speeds=v) for o, v in drivers for c in layouts]
+    drivers = dict.fromkeys((tuple(m.job.order), m.job.speeds, m.job.relief) for m in models.values())  # each driver once
+    specs += [
+        RunSpec(c, 0, EXPERT, None, o, style=sel.style, classes=sel.classes, speeds=v, relief=relief_of(rs))
+        for o, v, rs in drivers
+        for c in layouts
+    ]
     log(f"[2/2] closed-loop runs: {len(specs)} on {len(layouts)} layouts ...")
     results = run_many(specs, progress=every_tenth(log), engine=engine)
     t_eval = time.perf_counter() - t0 - t_train
@@ -341,6 +396,7 @@ def run_selection(out: str | Path, sel: Selection, engine: Engine | None = None,
             **({"course": sel.course} if sel.course is not None else {}),
             **({"follow_up": True} if sel.follow_up else {}),
             **({"speeds": sel.speeds} if sel.speeds is not None else {}),
+            **({"relief_styles": list(sel.relief_styles)} if sel.relief_styles else {}),
         },
         "engine": engine.describe(),
         "zones": rows,
@@ -363,33 +419,31 @@ def _train_all(out: Path, sel: Selection, engine: Engine, log: Callable[[str], N
             tuple(o),
             s,
             sel.style,
-            str(job_folder(out, o, s, sel.taught_under, (sel.classes or default_classes()).lethal_column)),
+            str(job_folder(out, o, s, sel.taught_under, (sel.classes or default_classes()).lethal_column, rs)),
             sel.taught_under,
             sel.classes,
             sel.course,
             sel.follow_up,
             job_speeds(sel, i, s),
+            rs,
         )
+        for rs in sel.relief_drivers
         for i, o in enumerate(sel.orders)
         for s in range(sel.seeds)
     ]
+    relief = f" x {len(sel.relief_styles)} relief styles" if sel.relief_styles else ""
     log(
         f"[1/2] demonstrations and training: {len(jobs) * len(sel.recipes)} models ({len(sel.recipes)} recipes x {len(sel.orders)} orders "
-        f"x {sel.seeds} seeds) on {engine.describe()} ..."
+        f"x {sel.seeds} seeds{relief}) on {engine.describe()} ..."
     )
     trained = run_grid(_train, jobs, engine, lambda k, n: log(f"      trained {k}/{n} order-and-seed jobs"), describe=_describe)
     return {m: _Model(r, j) for j, ms in zip(jobs, trained, strict=True) for r, m in zip(j.recipes, ms, strict=True)}
 
 
 def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict[str, _Model]) -> tuple[list[dict], list[dict]]:
-    """select.json's rows: every planner zone beside the same order's driver in the same zone, and every planner run's collisions."""
-    driver = {
-        (tuple(s.profile), s.speeds, r.scenario, z.id): z
-        for s, r in zip(specs, results, strict=True)
-        if r.driver == EXPERT
-        for z in r.metrics.zones
-    }
-    driver_runs = {(tuple(s.profile), s.speeds, r.scenario): r.metrics for s, r in zip(specs, results, strict=True) if r.driver == EXPERT}
+    """select.json's rows: every planner zone beside the same driver in the same zone (on relief,
+    every relief zone too), and every planner run's collisions."""
+    driver_runs = {_driver_key(s, r.scenario): r.metrics for s, r in zip(specs, results, strict=True) if r.driver == EXPERT}
     limits: dict[str, float | None] = {}  # by model file: its driver's lateral-acceleration limit
     rows, runs = [], []
     for spec, r in zip(specs, results, strict=True):
@@ -402,10 +456,10 @@ def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict
             "seed": model.job.seed,
             "scenario": r.scenario,
             "perception": spec.perceived_as,
+            **({"relief_style": model.job.relief} if model.job.relief is not None else {}),
         }
-        m = r.metrics
-        speeds = model.job.speeds
-        dm = driver_runs[(tuple(spec.profile), speeds, r.scenario)]
+        m, speeds = r.metrics, model.job.speeds
+        dm = driver_runs[_driver_key(spec, r.scenario, model.job)]
         if spec.model_path not in limits:
             limits[spec.model_path] = driver_lateral_limit(model.job.style, speeds, Model.load(spec.model_path).rules)
         runs.append(
@@ -423,26 +477,49 @@ def _zones_and_runs(specs: list[RunSpec], results: list[RunResult], models: dict
                 **({"speeds": [list(p) for p in speeds]} if speeds else {}),
             }
         )
-        for z in r.metrics.zones:
-            d = driver[(tuple(spec.profile), speeds, r.scenario, z.id)]
-            rows.append(
-                {
-                    **who,
-                    "zone": z.id,
-                    "kind": zone_kind(z.label),
-                    "choice": z.choice,
-                    "driver_choice": d.choice,
-                    "agrees": zone_agrees(z, d),
-                    "success": z.success,
-                    "driver_success": d.success,
-                    "speed_mps": z.speed_mps,
-                    "driver_speed_mps": d.speed_mps,
-                }
-            )
+        rows += _zone_rows(who, m, dm)
     return rows, runs
 
 
+def _driver_key(spec: RunSpec, scenario: str, job: _OrderJob | None = None) -> tuple:
+    """Which driver run a run is compared with: its order, speeds and relief style (a planner run's
+    from the ``job`` that trained its model), and the layout."""
+    if job is None:
+        return tuple(spec.profile), spec.speeds, spec.relief, scenario
+    return tuple(job.order), job.speeds, relief_of(job.relief), scenario
+
+
+def _zone_rows(who: dict, mine: RunMetrics, theirs: RunMetrics) -> list[dict]:
+    """A planner run's zone rows beside its driver's run of the same layout: each terrain zone, and
+    on relief each relief zone (kind :data:`RELIEF_ZONE`; no success or speed of its own)."""
+    driver = {z.id: z for z in theirs.zones}
+    rows = []
+    for z in mine.zones:
+        d = driver[z.id]
+        rows.append(
+            {
+                **who,
+                "zone": z.id,
+                "kind": zone_kind(z.label),
+                "choice": z.choice,
+                "driver_choice": d.choice,
+                "agrees": zone_agrees(z, d),
+                "success": z.success,
+                "driver_success": d.success,
+                "speed_mps": z.speed_mps,
+                "driver_speed_mps": d.speed_mps,
+            }
+        )
+    agrees = relief_agreement(mine.relief_zones, theirs.relief_zones) or ()
+    for i, (z, d, a) in enumerate(zip(mine.relief_zones or (), theirs.relief_zones or (), agrees, strict=False)):
+        zone = {"zone": f"relief{i}", "kind": RELIEF_ZONE, "choice": z.choice, "driver_choice": d.choice, "agrees": a}
+        rows.append({**who, **zone, "success": None, "driver_success": None, "from_m": z.from_m, "to_m": z.to_m})
+    return rows
+
+
 def _rate(rows: Sequence[dict], key: str) -> str:
+    """The rate of ``key`` over the rows that have it (a relief zone has no success of its own)."""
+    rows = [r for r in rows if r.get(key) is not None]
     return rate_text(sum(r[key] for r in rows), len(rows))
 
 
@@ -489,18 +566,21 @@ def write_selection_report(out: Path, saved: dict) -> Path:
     lines = _selection_preamble(sel, seen)
     points: list[RateRow] = []
     targets: list[float] = []
-    for name in seen:
-        part = [r for r in rows if r.get("perception", "clean") == name]
-        part_runs = [r for r in runs if r.get("perception", "clean") == name]
-        if len(seen) > 1:
-            lines += [f"## Perception `{name}`", ""]
-        # Several perception models: a bar per recipe and model in the figure (the orders are in the tables).
-        table, bars = _selection_table(sel, part, part_runs, order_bars=len(seen) == 1)
+    styles = sel.get("relief_styles") or [None]
+    for name, style in itertools.product(seen, styles):
+        part = [r for r in rows if r.get("perception", "clean") == name and r.get("relief_style") == style]
+        part_runs = [r for r in runs if r.get("perception", "clean") == name and r.get("relief_style") == style]
+        heading = ", ".join(x for x in (f"perception `{name}`" if len(seen) > 1 else "", f"relief style `{style}`" if style else "") if x)
+        if heading:
+            lines += [f"## {heading[0].upper()}{heading[1:]}", ""]
+        # Several perception models or relief styles: a bar per recipe and each in the figure (the orders are in the tables).
+        table, bars = _selection_table(sel, part, part_runs, order_bars=len(seen) == 1 and len(styles) == 1)
         lines += table + [""]
-        if sel.get("speeds") is not None:
+        if sel.get("speeds") is not None or style is not None:
             lines += speed_section(part, part_runs, _table_of(sel).background) + [""]
         for label, rate, interval in bars:
-            points.append(RateRow(f"{label}, {name}" if len(seen) > 1 else label, rate, interval))
+            tail = ", ".join(x for x in (name if len(seen) > 1 else "", f"relief {style}" if len(styles) > 1 else "") if x)
+            points.append(RateRow(f"{label}, {tail}" if tail else label, rate, interval))
             targets.append(TARGET if name == "clean" else PERCEIVED_TARGET)
     lines += [
         f"Training {saved['train_s']:.0f} s, runs {saved['eval_s']:.0f} s (wall; {saved['engine']}).",
@@ -532,6 +612,7 @@ def _selection_preamble(sel: dict, seen: list[str]) -> list[str]:
         "intervals over all zones; the layouts column resamples whole layouts instead (a cluster bootstrap: a layout's zones are "
         "alike across seeds), the spread another set of layouts would show.",
         "",
+        *_relief_preamble(sel),
         f"The demonstrations recorded: {_perception_line(sel.get('taught_under'))}. The models drive the layouts receiving "
         + ", then ".join(f"`{name}`" for name in seen)
         + " (terrapref.perception); the driver always sees the truth.",
@@ -556,6 +637,20 @@ def _selection_preamble(sel: dict, seen: list[str]) -> list[str]:
             "",
         ]
     return lines
+
+
+def _relief_preamble(sel: dict) -> list[str]:
+    """SELECT.md's words on relief: the drivers' relief styles and what a relief zone is (none on flat layouts)."""
+    styles = sel.get("relief_styles")
+    if not styles:
+        return []
+    return [
+        f"Relief: every order and seed's driver drives with each relief style in turn ({', '.join(f'`{s}`' for s in styles)}), "
+        "on the relief teaching course and on the layouts with relief. Relief zones are the stretches of the path that tilt "
+        "the body past 4 deg (at least 1 m long); the planner agrees in one when it goes over it, or round it on the same side, as "
+        "its driver did; they have no zone success or speed of their own (the speed by grade band below compares whole runs).",
+        "",
+    ]
 
 
 def speed_section(rows: Sequence[dict], runs: Sequence[dict], background: str) -> list[str]:

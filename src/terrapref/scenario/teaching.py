@@ -480,14 +480,16 @@ def _follow_up_items(classes: ClassTable, pairs: Sequence[tuple[str, str]], reli
     return _interleave([follow_up(classes, pairs), [RELIEF_LESSONS[r] for r in relief]])
 
 
-def write_teaching_course(folder: str | Path, classes: ClassTable) -> Path:
+def write_teaching_course(folder: str | Path, classes: ClassTable, relief: bool = False) -> Path:
     """The teaching course of ``classes`` written as ``folder/teaching_course.yaml`` (the folder
-    made if need be), for the commands that demonstrate it; its absolute path."""
+    made if need be), for the commands that demonstrate it; its absolute path. ``relief``: the
+    course with relief (:func:`relief_course`, seed 0, as ``teach_relief`` is the default table's)."""
     from terrapref.fileio import write_text_atomic
 
     path = Path(folder).resolve() / "teaching_course.yaml"
     path.parent.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(path, teaching_course(classes).to_yaml())
+    course = relief_course(classes)[0] if relief else teaching_course(classes)
+    write_text_atomic(path, course.to_yaml())
     return path
 
 
