@@ -212,7 +212,10 @@ class MemoryRecordingWriter:
     """A :class:`RecordingWriter` that keeps the run in memory: the same frames, labels and
     metadata, with each frame's segmentation as the simulation's view (rendered only as far as
     it is read), and no files. For the synthetic driver's demonstrations inside a job that only
-    featurises them: :meth:`recording` gives the :class:`Recording` to featurise.
+    featurises them: :meth:`recording` gives the :class:`Recording` to featurise. A frame that
+    carries a depth image (on relief: rendered whole) is kept as a file would keep it: its class
+    ids, its depth in whole millimetres (16 bits a pixel, 0.6 MB a 640x480 frame, not float32's
+    1.2 MB) and the body's attitude.
 
     Args:
         target: where the recording would have been written (its name in datasets and models).
@@ -226,6 +229,7 @@ class MemoryRecordingWriter:
         self.scenario = scenario
         self._rows: list[tuple[float, tuple[float, float, float], tuple[float, float], int]] = []
         self._views: list[SegmentationView] = []
+        self._depths: list[np.ndarray | None] = []  # each frame's depth image [mm, 0: no return], None: none
 
     @property
     def count(self) -> int:
@@ -245,7 +249,13 @@ class MemoryRecordingWriter:
         self._rows.append(
             (round(float(time_s), 6), (float(pose[0]), float(pose[1]), float(pose[2])), (float(command[0]), float(command[1])), int(label))
         )
-        self._views.append(as_view(image))
+        view = as_view(image)
+        if view.carries_depth:  # kept as the file keeps it: the class ids, whole millimetres, the attitude
+            self._depths.append(depth_to_millimetres(view.depth))
+            view = SegmentationView.of(view.image, None, view.attitude)
+        else:
+            self._depths.append(None)
+        self._views.append(view)
 
     def close(self, summary: dict[str, Any] | None = None) -> None:
         self.meta.update(status="complete", frames=self.count)
@@ -269,6 +279,7 @@ class MemoryRecordingWriter:
             image_files=(),
             complete=self.meta["status"] == "complete",
             views=tuple(self._views),
+            kept_depths=tuple(self._depths) if any(d is not None for d in self._depths) else (),
         )
 
 
@@ -284,6 +295,8 @@ class Recording:
         complete: False if the run did not finish (crash, kill, interruption).
         views: for a recording kept in memory (:class:`MemoryRecordingWriter`), each frame's
             segmentation as the simulation rendered it; None for one read from disk.
+        kept_depths: for a recording kept in memory, each frame's depth image in whole
+            millimetres (uint16, 0: no return; None: the frame carries none); empty when no frame does.
         folder: the identity (device, inode) of the folder it was read from: a recording
             replaced while it is read (``record --force`` into it) is another folder, and each
             image read checks it, so a reader sees one whole recording or fails clearly.
@@ -306,6 +319,7 @@ class Recording:
     folder: tuple[int, int] | None = None
     depth_files: tuple[str | None, ...] = ()
     attitudes: np.ndarray | None = None
+    kept_depths: tuple[np.ndarray | None, ...] = ()
 
     def __len__(self) -> int:
         return len(self.times)
@@ -379,7 +393,7 @@ class Recording:
     def has_depth(self) -> bool:
         """Whether any frame carries a depth image (a drive on relief, a log with a depth topic)."""
         if self.views is not None:
-            return any(view.carries_depth for view in self.views)
+            return bool(self.kept_depths)
         return any(name is not None for name in self.depth_files)
 
     def depth(self, i: int) -> np.ndarray | None:
@@ -388,8 +402,8 @@ class Recording:
         depth so rounded too: the same frames either way); None for a frame without one. An
         unreadable or foreign file is a UserError."""
         if self.views is not None:
-            view = self.views[i]
-            return millimetres_to_depth(depth_to_millimetres(view.depth)) if view.carries_depth else None
+            kept = self.kept_depths[i] if self.kept_depths else None
+            return millimetres_to_depth(kept) if kept is not None else None
         name = self.depth_files[i] if self.depth_files else None
         if name is None:
             return None
