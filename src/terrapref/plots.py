@@ -213,8 +213,12 @@ def _draw_contours(ax: plt.Axes, world: WorldMap, rows: slice = slice(None), col
     entry = Line2D([], [], color="black", lw=0.7, label="height contours [m]")
     if not len(levels):  # relief too slight for a contour between its lowest and highest cell
         return entry
-    lines = ax.contour(x, y, z, levels=levels, colors="black", linewidths=0.7, alpha=0.6, zorder=PATH_ZORDER - 1)
-    ax.clabel(lines, fmt=lambda v: f"{v:g} m", fontsize=6, inline=True)
+    # Solid lines below zero too (monochrome contours are dashed there by default, and a label's
+    # minus sign read as one more dash), and a true minus sign in the labels.
+    lines = ax.contour(
+        x, y, z, levels=levels, colors="black", linewidths=0.7, alpha=0.6, zorder=PATH_ZORDER - 1, negative_linestyles="solid"
+    )
+    ax.clabel(lines, fmt=lambda v: f"{v:g} m".replace("-", "\u2212"), fontsize=6, inline=True)
     return entry
 
 
@@ -647,7 +651,8 @@ def save_speed_profile(
     for label, s, v, colour in series:
         ax.plot(s, v, color=colour, lw=1.2, label=label)
     ax.set_ylabel("speed [m/s]")
-    ax.set_ylim(0, max([2.1, *(float(np.max(v)) + 0.1 for _, _, v, _ in series if len(v))]))
+    top = max((float(np.max(v)) for _, _, v, _ in series if len(v)), default=0.0)
+    ax.set_ylim(0, max(0.5, 1.15 * top))  # the speeds driven fill the panel, with room above the fastest
     ax.set_title(title, fontsize=10)
     ax.legend(fontsize=8)
     if heights is not None:

@@ -349,10 +349,16 @@ def test_inspect_says_quit_and_not_reached(tmp_path: Path):
         writer.append(frame.time_s, frame.pose, frame.image, (1.0, 0.0), 10)
         frame = sim.step((1.0, 0.0))
     writer.close({"completed": False, "quit": True})
-    lines = summarise(read_recording(tmp_path / "rec")).lines()
+    summary = summarise(read_recording(tmp_path / "rec"))
+    lines = summary.lines()
     assert lines[0].endswith("quit by the driver")
     zone_lines = [line for line in lines if line.endswith("not reached")]
     assert zone_lines and all(" -> -" in line for line in zone_lines)
+    # A long label (a triple of long class names) keeps the table in line: every arrow in one column.
+    long = replace(summary.zones[0][0], label="non_traversable | water | non_traversable", choice="water", success=True)
+    lines = replace(summary, zones=[(long, True), *summary.zones]).lines()
+    table = lines[lines.index("zones      (id, label: expected -> choice)") + 1 : -1]
+    assert len(table) == len(summary.zones) + 1 and len({line.index(" -> ") for line in table}) == 1
 
 
 def test_sigterm_during_record_force_says_so_and_keeps_the_old_recording(tmp_path, tiny_recording):

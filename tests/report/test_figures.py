@@ -227,6 +227,9 @@ def test_relief_is_drawn_as_hillshade_and_labelled_contours_and_a_flat_map_as_be
         if has_relief:
             assert "height contours [m]" in names and len(contours) == 1 and len(contours[0].levels) >= 3
             assert any(t.get_text().endswith(" m") for t in ax.texts)  # the contours' heights
+            below = [t.get_text() for t in ax.texts if t.get_text().startswith("\u2212")]
+            assert below and not any("-" in t.get_text() for t in ax.texts)  # below zero: a true minus, not a dash
+            assert all(dashes is None for _, dashes in contours[0].get_linestyle())  # solid lines below zero too
             flat_colours = scenario.classes.palette()[world.raster] / 255.0
             assert shown.shape == flat_colours.shape and np.abs(shown - flat_colours).max() > 0.1  # shaded
         else:
@@ -261,3 +264,17 @@ def test_a_zones_inset_draws_the_ground_within_its_window_alone_as_the_whole_map
     levels = [tuple(c.levels) for ax in (whole_ax, inset_ax) for c in ax.collections if isinstance(c, ContourSet)]
     assert len(levels) == 2 and set(levels[1]) <= set(levels[0])
     plt.close(fig)
+
+
+def test_the_speed_figure_is_scaled_to_the_speeds_driven(tmp_path, monkeypatch):
+    """Speeds under 1 m/s fill the panel (an axis to the vehicle's 2 m/s had squeezed them into its lower half)."""
+    import numpy as np
+
+    from terrapref.plots import save_speed_profile
+
+    kept = _kept_figure(monkeypatch)
+    s = np.linspace(0.0, 40.0, 50)
+    series = [("driver", s, 0.6 + 0.3 * np.sin(s / 5.0), "k"), ("planner", s, np.full(50, 0.7), "tab:red")]
+    save_speed_profile(tmp_path / "speed.png", series, "speed", [("mud", 10.0, 15.0)])
+    low, high = kept["fig"].axes[0].get_ylim()
+    assert low == 0.0 and 0.9 < high <= 1.1

@@ -55,9 +55,14 @@ class RecordingSummary:
             out.append(f"  {i:3d}: {self.control.w_rps[i]:+5.2f}  {int(n):6d}  {'#' * round(40 * int(n) / peak)}")
         if self.zones:
             out.append("zones      (id, label: expected -> choice)")
+            # Columns as wide as their longest entry: a long label (a triple of long class names) keeps the table in line.
+            label_w = max(len(z.label) for z, _ in self.zones)
+            expect_w = max(len(z.expect) for z, _ in self.zones)
+            choice_w = max(len(z.choice if r else "-") for z, r in self.zones)
             for z, reached in self.zones:
                 verdict = ("ok" if z.success else "MISS") if reached else "not reached"
-                out.append(f"  {z.id:>4s} {z.label:32s} {z.expect:>16s} -> {z.choice if reached else '-':<16s} {verdict}")
+                choice = z.choice if reached else "-"
+                out.append(f"  {z.id:>4s} {z.label:{label_w}s} {z.expect:>{expect_w}s} -> {choice:<{choice_w}s} {verdict}")
             scored = [z for z, r in self.zones if r]
             out.append(f"zone success {sum(z.success for z in scored)}/{len(scored)} reached ({len(self.zones)} zones)")
         return out
