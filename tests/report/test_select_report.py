@@ -273,3 +273,27 @@ def test_select_refuses_a_bad_relief_style_before_any_work(tmp_path, capsys, sty
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert line.startswith("error: --relief-style") and word in line
     assert not out.exists()
+
+
+def test_select_with_relief_styles_teaches_on_the_relief_course_and_judges_relief_layouts(tmp_path, monkeypatch):
+    """The default table's drivers demonstrate `teach_relief`; a table's own, its course with relief, written into OUT."""
+    from terrapref.scenario import load_scenario
+
+    seen = {}
+
+    def started(out, selection, *args, **kwargs):
+        seen["selection"] = selection
+        if Path(selection.course).exists():  # a table's course, written into OUT (removed with it when the command fails)
+            seen["has_relief"], seen["folder"] = load_scenario(selection.course).has_relief, Path(selection.course).parent
+        raise UserError("run_selection", "started")
+
+    monkeypatch.setattr("terrapref.report.select.run_selection", started)
+    argv = ["select", "--orders", "mud,rock,water", "--seeds", "1", "--courses", "2", "--relief-style", "bold;default,roll_deg=10"]
+    assert main([*argv, "--out", str(tmp_path / "a")]) == 2
+    sel = seen["selection"]
+    assert sel.course == "teach_relief" and sel.relief_styles == ("bold", "default,roll_deg=10")
+    assert sel.layouts == ["genrelief:1000", "genrelief:1001"]
+    table = Path(__file__).parents[2] / "examples" / "classes" / "rellis3d.yaml"
+    order = "mud,water,dirt,gravel,puddle,bush"
+    assert main([*argv[:2], order, *argv[3:], "--classes", str(table), "--out", str(tmp_path / "b")]) == 2
+    assert seen["has_relief"] and seen["folder"].name == "b"
