@@ -234,7 +234,7 @@ def test_select_md_gives_a_table_per_relief_style_with_the_relief_zones_apart(tm
         "eval_s": 2.0,
     }
     drawn = {}
-    monkeypatch.setattr(select_report, "save_intervals", lambda path, rows, *a, **kw: drawn.update(labels=[r.label for r in rows]))
+    monkeypatch.setattr(select_report, "save_intervals", lambda path, rows, *a, **kw: drawn.update(bars={r.label: r.rate for r in rows}))
     text = write_selection_report(tmp_path, saved).read_text()
     assert "## Relief style `default`" in text and "## Relief style `bold`" in text
     bold = text[text.index("## Relief style `bold`") :]
@@ -242,7 +242,12 @@ def test_select_md_gives_a_table_per_relief_style_with_the_relief_zones_apart(tm
     cells = [c.strip() for c in row.split("|")]
     assert cells[5].startswith("100.0% (4/4") and cells[6].startswith("50.0% (2/4")  # lone zones, then relief zones
     assert cells[7].startswith("100.0% (4/4")  # zone success: the terrain zones alone
-    assert drawn["labels"] == ["teach, all orders, relief default", "teach, all orders, relief bold"]
+    assert drawn["bars"] == {  # terrain zones and relief zones apart, each with its target
+        "teach, all orders, terrain zones, relief default": 1.0,
+        "teach, all orders, relief zones, relief default": 1.0,
+        "teach, all orders, terrain zones, relief bold": 1.0,
+        "teach, all orders, relief zones, relief bold": 0.5,
+    }
 
 
 def test_the_size_counts_each_relief_style_as_a_driver_of_its_own():

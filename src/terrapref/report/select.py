@@ -578,6 +578,9 @@ def write_selection_report(out: Path, saved: dict) -> Path:
         lines += table + [""]
         if sel.get("speeds") is not None or style is not None:
             lines += speed_section(part, part_runs, _table_of(sel).background) + [""]
+        if style is not None:  # on relief, the terrain zones and the relief zones apart: each has its target
+            alls = [label for label, _, _ in bars if label.endswith(", all orders")]
+            bars = [(f"{label}, {what} zones", *_interval_of(sub)) for label in alls for what, sub in _relief_split(part, label)]
         for label, rate, interval in bars:
             tail = ", ".join(x for x in (name if len(seen) > 1 else "", f"relief {style}" if len(styles) > 1 else "") if x)
             points.append(RateRow(f"{label}, {tail}" if tail else label, rate, interval))
@@ -637,6 +640,20 @@ def _selection_preamble(sel: dict, seen: list[str]) -> list[str]:
             "",
         ]
     return lines
+
+
+def _relief_split(rows: list[dict], label: str) -> list[tuple[str, list[dict]]]:
+    """The rows of a figure's bar (``label``: a recipe's, all orders) as its terrain zones and its relief zones."""
+    mine = [r for r in rows if label == f"{r['recipe']}, all orders"]
+    return [("terrain", [r for r in mine if r["kind"] != RELIEF_ZONE]), ("relief", [r for r in mine if r["kind"] == RELIEF_ZONE])]
+
+
+def _interval_of(rows: list[dict]) -> tuple[float, tuple[float, float]]:
+    """Agreement of ``rows`` and its interval resampling layouts, as a figure's bar takes them (nothing: 0, (0, 0))."""
+    if not rows:
+        return 0.0, (0.0, 0.0)
+    rate, lo, hi = layout_interval(rows)
+    return rate, (lo, hi)
 
 
 def _relief_preamble(sel: dict) -> list[str]:
