@@ -57,7 +57,7 @@ LARGE_RUNS = 100_000
 # The rates of the estimate `select` prints before it starts, as docs/benchmarks.md states and measures them.
 MODEL_CORE_S = 40.0  # one model: its order and seed's demonstration and its training [s of one core]
 RUN_CORE_S = 0.8  # one closed-loop run of a generated layout, the planner's or the driver's [s of one core]
-RELIEF_MODEL_CORE_S = 120.0  # the same with relief: a drive of the relief teaching course and its training ...
+RELIEF_MODEL_CORE_S = 115.0  # the same with relief: a drive of the relief teaching course and its training ...
 RELIEF_RUN_CORE_S = 12.0  # ... and a run of a generated layout with relief (its frames rendered with depth)
 RELIEF_ZONE = "relief"  # the zone kind of a relief zone in select.json's rows (beside generate.zone_kind's)
 
