@@ -302,3 +302,11 @@ def test_select_with_relief_styles_teaches_on_the_relief_course_and_judges_relie
     order = "mud,water,dirt,gravel,puddle,bush"
     assert main([*argv[:2], order, *argv[3:], "--classes", str(table), "--out", str(tmp_path / "b")]) == 2
     assert seen["has_relief"] and seen["folder"].name == "b"
+
+
+def test_a_kind_of_zone_no_layout_had_is_no_bar_at_nothing():
+    """Relief layouts whose paths tilted the body nowhere past 4 deg have no relief zones: no bar, not one drawn at 0%."""
+    from terrapref.report.select import _relief_bars
+
+    rows = _zones({"genrelief:0": 1, "genrelief:1": 0}, 10)
+    assert [label for label, _, _ in _relief_bars(["teach"], rows)] == ["teach, all orders, terrain zones"]

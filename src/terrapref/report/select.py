@@ -312,13 +312,13 @@ def job_folder(
     model, or with a ``relief`` style, in a folder of their own). ``lethal``: the order's lethal
     column, left out of the name."""
     tail = f"_{perception_tag(taught_under)}" if taught_under is not None and taught_under.active else ""
-    tail += f"_relief-{_tag(relief)}" if relief is not None else ""
+    tail += f"_relief-{_folder_safe(relief, keep='-_.')}" if relief is not None else ""
     return out / "work" / f"{order_tag(order, lethal)}_s{seed}{tail}"
 
 
-def _tag(text: str) -> str:
-    """``text`` in a folder name: letters, digits, ``-``, ``_`` and ``.`` kept, the rest ``_``."""
-    return "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in text)
+def _folder_safe(text: str, keep: str = "-_") -> str:
+    """``text`` in a folder name: letters, digits and the characters of ``keep`` kept, the rest ``_``."""
+    return "".join(ch if ch.isalnum() or ch in keep else "_" for ch in text)
 
 
 def order_tag(order: Sequence[str], lethal: str | None = "non_traversable") -> str:
@@ -348,7 +348,7 @@ def _table_of(sel: dict) -> ClassTable:
 def perception_tag(model: PerceptionModel) -> str:
     """A short name of a perception model for folder names: a preset's name, else a file's stem."""
     name = Path(model.name).stem if model.name not in PRESETS else model.name
-    return "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in name.replace(":", "-"))
+    return _folder_safe(name.replace(":", "-"))
 
 
 def _describe(job: _OrderJob) -> str:
@@ -578,9 +578,8 @@ def write_selection_report(out: Path, saved: dict) -> Path:
         lines += table + [""]
         if sel.get("speeds") is not None or style is not None:
             lines += speed_section(part, part_runs, _table_of(sel).background) + [""]
-        if style is not None:  # on relief, the terrain zones and the relief zones apart: each has its target
-            alls = [label for label, _, _ in bars if label.endswith(", all orders")]
-            bars = [(f"{label}, {what} zones", *_interval_of(sub)) for label in alls for what, sub in _relief_split(part, label)]
+        if style is not None:  # on relief, each recipe's terrain zones and relief zones apart: each has its target
+            bars = _relief_bars(sel["recipes"], part)
         for label, rate, interval in bars:
             tail = ", ".join(x for x in (name if len(seen) > 1 else "", f"relief {style}" if len(styles) > 1 else "") if x)
             points.append(RateRow(f"{label}, {tail}" if tail else label, rate, interval))
@@ -642,18 +641,16 @@ def _selection_preamble(sel: dict, seen: list[str]) -> list[str]:
     return lines
 
 
-def _relief_split(rows: list[dict], label: str) -> list[tuple[str, list[dict]]]:
-    """The rows of a figure's bar (``label``: a recipe's, all orders) as its terrain zones and its relief zones."""
-    mine = [r for r in rows if label == f"{r['recipe']}, all orders"]
-    return [("terrain", [r for r in mine if r["kind"] != RELIEF_ZONE]), ("relief", [r for r in mine if r["kind"] == RELIEF_ZONE])]
-
-
-def _interval_of(rows: list[dict]) -> tuple[float, tuple[float, float]]:
-    """Agreement of ``rows`` and its interval resampling layouts, as a figure's bar takes them (nothing: 0, (0, 0))."""
-    if not rows:
-        return 0.0, (0.0, 0.0)
-    rate, lo, hi = layout_interval(rows)
-    return rate, (lo, hi)
+def _relief_bars(recipes: Sequence[str], rows: list[dict]) -> list[tuple[str, float, tuple[float, float]]]:
+    """The figure's bars on relief: each recipe's agreement over all orders on its terrain zones and
+    on its relief zones apart, with their intervals resampling layouts (a kind no zone of is left out)."""
+    bars = []
+    for recipe, relief in itertools.product(recipes, (False, True)):
+        sub = [r for r in rows if r["recipe"] == recipe and (r["kind"] == RELIEF_ZONE) == relief]
+        if sub:
+            rate, lo, hi = layout_interval(sub)
+            bars.append((f"{recipe}, all orders, {'relief' if relief else 'terrain'} zones", rate, (lo, hi)))
+    return bars
 
 
 def _relief_preamble(sel: dict) -> list[str]:
