@@ -37,6 +37,12 @@ def _zones(misses_by_layout: dict[str, int], zones_per_layout: int = 40) -> list
     return rows
 
 
+def _saved(rows: list[dict], runs: list[dict], layouts: list[str], seeds: int = 5, **selection) -> dict:
+    """select.json's content for ``rows`` and ``runs`` of one recipe and order on ``layouts``."""
+    sel = {"recipes": ["teach"], "orders": [ORDER], "seeds": seeds, "layouts": layouts, "style": "default", **selection}
+    return {"selection": sel, "zones": rows, "runs": runs, "engine": "local, 1 worker", "train_s": 1.0, "eval_s": 2.0}
+
+
 def test_misses_gathered_on_a_few_layouts_widen_the_layout_interval_beyond_wilsons():
     gathered = _zones({f"gen:{i}": (12 if i < 2 else 0) for i in range(20)})
     spread = _zones({f"gen:{i}": (2 if i < 4 else 1) for i in range(20)})  # the same 24 misses, on every layout
@@ -59,14 +65,8 @@ def test_the_layout_interval_resamples_layouts_not_zones():
 
 def test_select_md_gives_both_intervals_per_order(tmp_path):
     rows = _zones({f"gen:{i}": (6 if i == 0 else 0) for i in range(4)})
-    saved = {
-        "selection": {"recipes": ["teach"], "orders": [ORDER], "seeds": 5, "layouts": [f"gen:{i}" for i in range(4)], "style": "default"},
-        "zones": rows,
-        "runs": [{"recipe": "teach", "order": ORDER, "seed": 0, "scenario": "gen:0", "collisions": 0}],
-        "engine": "local, 1 worker",
-        "train_s": 1.0,
-        "eval_s": 2.0,
-    }
+    runs = [{"recipe": "teach", "order": ORDER, "seed": 0, "scenario": "gen:0", "collisions": 0}]
+    saved = _saved(rows, runs, [f"gen:{i}" for i in range(4)])
     text = write_selection_report(tmp_path, saved).read_text()
     rate, lo, hi = layout_interval(rows)
     row = next(line for line in text.splitlines() if line.startswith("| teach | mud > rock > water"))
@@ -79,24 +79,10 @@ def test_the_figure_marks_each_row_with_its_own_target(tmp_path, monkeypatch):
     import terrapref.report.select as select_report
 
     rows = [dict(r, perception=name) for name in ("clean", "field") for r in _zones({"gen:0": 1, "gen:1": 0})]
-    saved = {
-        "selection": {
-            "recipes": ["teach"],
-            "orders": [ORDER],
-            "seeds": 5,
-            "layouts": ["gen:0", "gen:1"],
-            "style": "default",
-            "perceptions": [{"name": "clean"}, {"name": "field"}],
-        },
-        "zones": rows,
-        "runs": [
-            {"recipe": "teach", "order": ORDER, "seed": 0, "scenario": "gen:0", "collisions": 0, "perception": p}
-            for p in ("clean", "field")
-        ],
-        "engine": "local, 1 worker",
-        "train_s": 1.0,
-        "eval_s": 2.0,
-    }
+    runs = [
+        {"recipe": "teach", "order": ORDER, "seed": 0, "scenario": "gen:0", "collisions": 0, "perception": p} for p in ("clean", "field")
+    ]
+    saved = _saved(rows, runs, ["gen:0", "gen:1"], perceptions=[{"name": "clean"}, {"name": "field"}])
     drawn = {}
     monkeypatch.setattr(
         select_report,
@@ -215,24 +201,11 @@ def test_select_md_gives_a_table_per_relief_style_with_the_relief_zones_apart(tm
                     "driver_success": None if kind == "relief" else True,
                 }
             )
-    saved = {
-        "selection": {
-            "recipes": ["teach"],
-            "orders": [ORDER],
-            "seeds": 1,
-            "layouts": ["genrelief:0", "genrelief:1"],
-            "style": "default",
-            "relief_styles": ["default", "bold"],
-        },
-        "zones": rows,
-        "runs": [
-            {"recipe": "teach", "order": ORDER, "seed": 0, "scenario": "genrelief:0", "collisions": 0, "relief_style": s}
-            for s in ("default", "bold")
-        ],
-        "engine": "local, 1 worker",
-        "train_s": 1.0,
-        "eval_s": 2.0,
-    }
+    runs = [
+        {"recipe": "teach", "order": ORDER, "seed": 0, "scenario": "genrelief:0", "collisions": 0, "relief_style": s}
+        for s in ("default", "bold")
+    ]
+    saved = _saved(rows, runs, ["genrelief:0", "genrelief:1"], seeds=1, relief_styles=["default", "bold"])
     drawn = {}
     monkeypatch.setattr(select_report, "save_intervals", lambda path, rows, *a, **kw: drawn.update(bars={r.label: r.rate for r in rows}))
     text = write_selection_report(tmp_path, saved).read_text()
