@@ -23,6 +23,7 @@ from terrapref.learning.model_file import load_model, save_model
 from terrapref.learning.network import ClassifierConfig
 from terrapref.planner import Planner
 from terrapref.planner.registry import load_policy
+from terrapref.rules.offset import fit as offset_fit
 from terrapref.rules.offset.features import OffsetFeatures, gated
 from terrapref.rules.offset.fit import OffsetUtility, fit_offset_utility, fit_softmax, soft_labels
 from terrapref.rules.offset.geometry import OffsetGeometry
@@ -252,6 +253,31 @@ def test_the_offset_fit_picks_the_near_distance_that_explains_the_labels():
     assert soft_labels(np.array([0.0]), offsets, 0.3).sum() == pytest.approx(1.0)
     with pytest.raises(ValueError):
         fit_offset_utility(features, near, np.full(n, np.nan), offsets)
+
+
+def test_on_relief_the_near_distance_is_chosen_on_frames_with_nothing_steep_on_the_path(monkeypatch):
+    """A driver that leaves the path 4 m before a mud patch, and six times as many frames before
+    slopes: in the frames a fit reads, ground past the first relief band is a patch on the path,
+    and the near distance is measured to the slope's gentle foot, 2.5 m short of the part the
+    driver goes round. Read on every frame, those frames say the driver reacts at 2.5 m."""
+    rng = np.random.default_rng(1)
+    offsets = OffsetGeometry().offsets
+    n, m = 200, 6
+    near = rng.uniform(1.0, 10.0, (m + 1) * n)
+    features = np.zeros(((m + 1) * n, len(offsets), K + 2))
+    features[:n, :, 3] = np.where(np.abs(offsets) < 1.0, 2.0, 0.0)  # mud near the path
+    features[:, :, 5] = offsets**2 * 7.0
+    swerve = 1.4 * rng.choice([-1.0, 1.0], (m + 1) * n)
+    intent = np.where(near > np.repeat([4.0, 2.5], [n, m * n]), 0.0, swerve)
+    bands = (4.0, 8.0)
+    relief = np.zeros(((m + 1) * n, len(offsets), 2 * len(bands)))
+    relief[n:, :, :2] = np.where(np.abs(offsets) < 1.0, 2.0, 0.0)[:, None]  # 2 m past 4 and 8 deg of side slope
+    fit = fit_offset_utility(features, near, intent, offsets, relief=(relief, bands))
+    assert fit.near_m == 4.0 and min(fit.losses, key=fit.losses.get) == 4.0 and fit.samples == (m + 1) * n
+    assert fit.relief[0] + fit.relief[1] < 0  # the slope's price is still fitted on every frame
+    # With fewer level frames than it takes to choose on, every frame is read, and the slopes' frames choose.
+    monkeypatch.setattr(offset_fit, "LEVEL_FRAMES_LEAST", n + 1)
+    assert fit_offset_utility(features, near, intent, offsets, relief=(relief, bands)).near_m == 2.5
 
 
 def _drive(stage: OffsetSteering, scenario, camera: PinholeCamera, seconds: float) -> np.ndarray:

@@ -4,7 +4,12 @@ Each frame's label is the offset the driver was steering for, read when the reco
 featurised (:func:`terrapref.rules.offset.steering.intent_offsets`). A softmax over the candidate
 offsets, ``p(d) ~ exp(weights . gated(features)(d))``, is fitted to Gaussian soft labels
 (``sigma_m``) around that offset by Newton's method with a small ridge, once for each candidate
-near distance; the near distance of the lowest loss is kept.
+near distance; the near distance of the lowest loss is kept. On relief the losses compared are
+those of the frames with nothing steep on the path ahead (:func:`level_frames`): in the frames a
+fit reads, ground past the first relief band is a patch on the path as terrain is, but driving,
+only ground past the first band the fit prices is (``OffsetSteering.steep_deg``), and a driver
+who keeps to the path over slopes it takes would read as one who leaves the path only once a
+patch is near.
 
 The relief prices come with 95% intervals: the fitted weights' covariance by the sandwich of
 an M-estimator, its meat summed over blocks of :data:`INTERVAL_BLOCK_FRAMES` consecutive frames
@@ -68,7 +73,8 @@ class OffsetFit:
         near_m: the chosen near distance [m].
         loss: mean cross-entropy of the soft labels at that near distance (to 12 decimals, as
             the weights).
-        losses: the loss at every candidate near distance.
+        losses: the loss at every candidate near distance, the one compared: on relief, that
+            of the frames with nothing steep on the path ahead (:func:`level_frames`), without the ridge.
         samples: frames fitted.
         relief: the relief columns' weights, for frames read with them; else None.
         relief_shown: the steepest bands the frames showed (OffsetUtility.relief_shown).
@@ -192,19 +198,20 @@ def fit_offset_utility(
     columns = X.shape[2]
     if relief is not None:
         X = np.concatenate([X, relief[0][keep].astype(np.float64)], axis=2)
-    best: tuple[np.ndarray, float, float, np.ndarray] | None = None
+    judged = None if relief is None else level_frames(relief[0][keep], offsets, len(relief[1]))
+    best: tuple[np.ndarray, float, float, np.ndarray, float] | None = None
     losses = {}
     for candidate in config.near_candidates:
-        gate = (offsets**2)[None, :, None] * (near > candidate)[:, None, None]
+        gated_x = np.concatenate([X, (offsets**2)[None, :, None] * (near > candidate)[:, None, None]], axis=2)
         if relief is None:
-            theta, loss = fit_softmax(np.concatenate([X, gate], axis=2), Y, config.l2)
+            theta, loss = fit_softmax(gated_x, Y, config.l2)
             free = np.ones(len(theta), dtype=bool)
         else:
-            theta, loss, free = _fit_steeper_costs_more(np.concatenate([X, gate], axis=2), Y, config.l2, range(columns, X.shape[2]))
-        losses[candidate] = loss
-        if best is None or loss < best[1] - 1e-9:
-            best = (theta, loss, candidate, free)
-    theta, loss, chosen, free = best
+            theta, loss, free = _fit_steeper_costs_more(gated_x, Y, config.l2, range(columns, X.shape[2]))
+        losses[candidate] = loss if judged is None else _data_loss(gated_x[judged], Y[judged], theta)
+        if best is None or losses[candidate] < best[4] - 1e-9:
+            best = (theta, loss, candidate, free, losses[candidate])
+    theta, loss, chosen, free, _ = best
     interval = None
     if relief is not None:
         gate = (offsets**2)[None, :, None] * (near > chosen)[:, None, None]
@@ -221,6 +228,23 @@ def fit_offset_utility(
     priced = theta[columns:-1] if relief is not None else None
     shown = relief_shown(relief[0][keep], relief[1]) if relief is not None else None
     return OffsetFit(weights, chosen, round(loss, WEIGHT_DECIMALS), losses, int(keep.sum()), priced, shown, interval)
+
+
+LEVEL_FRAMES_LEAST = 200  # the fewest frames with nothing steep ahead that the near distance is chosen on; fewer: on all
+
+
+def level_frames(columns: np.ndarray, offsets: np.ndarray, bands: int) -> np.ndarray | None:
+    """The frames (N,) bool whose relief ``columns`` (N, O, 2 * ``bands``: side slope past each
+    band, then grade) count no ground past the first band on the path itself (the offset nearest
+    0 of ``offsets``); None where fewer than :data:`LEVEL_FRAMES_LEAST` do."""
+    centre = int(np.argmin(np.abs(offsets)))
+    level = (columns[:, centre, 0] == 0) & (columns[:, centre, bands] == 0)
+    return level if level.sum() >= LEVEL_FRAMES_LEAST else None
+
+
+def _data_loss(X: np.ndarray, Y: np.ndarray, theta: np.ndarray) -> float:
+    """The mean cross-entropy of the soft labels ``Y`` (N, O) under ``softmax(X @ theta)``, without the ridge."""
+    return float(-(Y * _log_softmax(X, theta)[0]).sum() / len(Y))
 
 
 def weight_covariance(X: np.ndarray, Y: np.ndarray, theta: np.ndarray, free: np.ndarray, l2: float, block_frames: int) -> np.ndarray:
