@@ -196,10 +196,11 @@ def fit_offset_utility(
         raise ValueError("no frame has an intended offset to fit")
     X, near, Y = features[keep].astype(np.float64), near_m[keep], soft_labels(intent[keep], offsets, config.sigma_m)
     columns = X.shape[2]
-    if relief is not None:
-        X = np.concatenate([X, relief[0][keep].astype(np.float64)], axis=2)
-    judged = None if relief is None else level_frames(relief[0][keep], offsets, len(relief[1]))
-    best: tuple[np.ndarray, float, float, np.ndarray, float] | None = None
+    kept = None if relief is None else relief[0][keep]  # the fitted frames' relief columns
+    if kept is not None:
+        X = np.concatenate([X, kept.astype(np.float64)], axis=2)
+    judged = None if kept is None else level_frames(kept, offsets, len(relief[1]))
+    best: tuple[np.ndarray, float, float, np.ndarray, np.ndarray] | None = None
     losses = {}
     for candidate in config.near_candidates:
         gated_x = np.concatenate([X, (offsets**2)[None, :, None] * (near > candidate)[:, None, None]], axis=2)
@@ -209,13 +210,12 @@ def fit_offset_utility(
         else:
             theta, loss, free = _fit_steeper_costs_more(gated_x, Y, config.l2, range(columns, X.shape[2]))
         losses[candidate] = loss if judged is None else _data_loss(gated_x[judged], Y[judged], theta)
-        if best is None or losses[candidate] < best[4] - 1e-9:
-            best = (theta, loss, candidate, free, losses[candidate])
-    theta, loss, chosen, free, _ = best
+        if best is None or losses[candidate] < losses[best[2]] - 1e-9:
+            best = (theta, loss, candidate, free, gated_x)
+    theta, loss, chosen, free, gated_x = best
     interval = None
     if relief is not None:
-        gate = (offsets**2)[None, :, None] * (near > chosen)[:, None, None]
-        covariance = weight_covariance(np.concatenate([X, gate], axis=2), Y, theta, free, config.l2, INTERVAL_BLOCK_FRAMES)
+        covariance = weight_covariance(gated_x, Y, theta, free, config.l2, INTERVAL_BLOCK_FRAMES)
         interval = np.round(relief_price_intervals(theta, covariance, columns, X.shape[2] - columns), INTERVAL_DECIMALS)
         if not np.isfinite(interval).all():  # a detour priced at 0: prices on its scale are not told
             interval = None
@@ -226,7 +226,7 @@ def fit_offset_utility(
     theta = np.round(theta, WEIGHT_DECIMALS)
     weights = np.concatenate([theta[:columns], theta[-1:]])  # the relief columns' weights stand between those and the gate
     priced = theta[columns:-1] if relief is not None else None
-    shown = relief_shown(relief[0][keep], relief[1]) if relief is not None else None
+    shown = relief_shown(kept, relief[1]) if kept is not None else None
     return OffsetFit(weights, chosen, round(loss, WEIGHT_DECIMALS), losses, int(keep.sum()), priced, shown, interval)
 
 
