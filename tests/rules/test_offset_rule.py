@@ -280,6 +280,79 @@ def test_on_relief_the_near_distance_is_chosen_on_frames_with_nothing_steep_on_t
     assert fit_offset_utility(features, near, intent, offsets, relief=(relief, bands)).near_m == 2.5
 
 
+def _relief_drive(rng: np.random.Generator, n: int) -> tuple[np.ndarray, ...]:
+    """Frames of a driver that goes round mud near the path (the first ``n``, no relief in view)
+    and, as many again, along a slope with mud at the footprint's edge: the features, near
+    distances, intended offsets and relief columns (2 m past each of two bands near the path)."""
+    offsets = OffsetGeometry().offsets
+    near = rng.uniform(1.0, 10.0, 2 * n)
+    features = np.zeros((2 * n, len(offsets), K + 2))
+    features[:, :, 3] = np.where(np.abs(offsets) < 1.0, 2.0, 0.0)  # mud near the path
+    features[:, :, 5] = offsets**2 * 7.0
+    intent = np.where(near > 4.0, 0.0, 1.4 * rng.choice([-1.0, 1.0], 2 * n))
+    relief = np.zeros((2 * n, len(offsets), 4))
+    relief[n:, :, :2] = np.where(np.abs(offsets) < 1.5, 2.0, 0.0)[:, None]
+    return features, near, intent, relief
+
+
+def test_on_relief_the_terrain_is_priced_on_the_frames_with_no_relief_in_view(monkeypatch):
+    """The frames with relief in view may show the terrain otherwise (a line held along a slope,
+    the vehicle wandering onto the patch at its edge): the terrain's weights come from the other
+    frames alone, the same whatever the driver did on the slopes; the relief's from every frame."""
+    offsets, bands = OffsetGeometry().offsets, (4.0, 8.0)
+    features, near, intent, relief = _relief_drive(np.random.default_rng(3), 300)
+    fit = fit_offset_utility(features, near, intent, offsets, relief=(relief, bands))
+    wandering = intent.copy()
+    wandering[300:] = 0.4  # on the slopes, a few tenths of a metre onto the mud whatever is near
+    moved = fit_offset_utility(features, near, wandering, offsets, relief=(relief, bands))
+    terrain = [0, 1, 2, 3, 5, 6]  # the classes, the detour and the gate (4: ground never seen, priced with relief)
+    assert fit.near_m == moved.near_m == 4.0
+    np.testing.assert_array_equal(moved.weights[terrain], fit.weights[terrain])
+    assert fit.weights[3] < 0 and not np.array_equal(moved.relief, fit.relief)
+    assert fit.relief_interval is not None and (fit.relief_interval[:, 0] <= fit.relief_interval[:, 1]).all()
+    # With fewer such frames than it takes, every weight is fitted on every frame, and the slopes' frames move the mud's price.
+    monkeypatch.setattr(offset_fit, "FLAT_FRAMES_LEAST", 301)
+    joint = fit_offset_utility(features, near, intent, offsets, relief=(relief, bands))
+    joint_moved = fit_offset_utility(features, near, wandering, offsets, relief=(relief, bands))
+    assert joint_moved.weights[3] / joint_moved.weights[5] < 0.9 * joint.weights[3] / joint.weights[5]
+
+
+def test_the_staged_fits_relief_intervals_cover_the_true_price_when_frames_come_in_runs():
+    """As the intervals of a fit of every weight at once (test above): drives simulated from a
+    known utility (a terrain column, ground never seen, the detour, two relief columns, the gate),
+    half their frames with no relief in view, each frame repeated for 10 in a row; the terrain's
+    weights fitted on those, the rest on every frame (terrapref.rules.offset.fit.fit_staged). The
+    95% intervals, carrying the detour's spread from the first stage, cover both true prices at
+    once in about 0.95^2 of drives (50 of these 60); taking each frame as independent evidence,
+    in far fewer (11)."""
+    from terrapref.rules.offset.fit import fit_staged, relief_price_intervals, relief_prices, staged_covariance
+
+    rng = np.random.default_rng(11)
+    truth = np.array([-1.0, -0.5, -2.0, -2.4, -1.6, 0.0])  # terrain, never seen, detour, side slope and grade past band 1, gate
+    price = relief_prices(truth[3:5], truth[2])
+    offsets, runs, repeat, drives = 7, 200, 10, 60
+    second = np.array([1, 3, 4])
+    covered = naive_covered = 0
+    for _ in range(drives):
+        X = rng.uniform(0.0, 1.0, size=(runs, offsets, 6))
+        X[:, :, 2] = (np.linspace(-1.5, 1.5, offsets) ** 2)[None, :]  # the detour: the offset squared
+        X[: runs // 2, :, 3:5] = 0.0  # no relief in view
+        X[:, :, 5] = 0.0  # no gate
+        X = np.repeat(X, repeat, axis=0)
+        z = X @ truth
+        p = np.exp(z - z.max(axis=1, keepdims=True))
+        p /= p.sum(axis=1, keepdims=True)
+        Y = np.eye(offsets)[np.repeat(np.array([rng.choice(offsets, p=row) for row in p[::repeat]]), repeat)]
+        flat = ~X[:, :, 3:5].any(axis=(1, 2))
+        theta, _, free, first = fit_staged(X, Y, flat, 3, 1e-6)
+        for block in (50, 1):
+            covariance = staged_covariance(X, Y, (theta, free), (flat, second, first), 1e-6, block)
+            interval = relief_price_intervals(theta, covariance, 3, 2)
+            inside = bool(((interval[:, 0] <= price) & (price <= interval[:, 1])).all())
+            covered, naive_covered = (covered + inside, naive_covered) if block == 50 else (covered, naive_covered + inside)
+    assert covered >= 0.75 * drives and naive_covered < 0.5 * covered
+
+
 def _drive(stage: OffsetSteering, scenario, camera: PinholeCamera, seconds: float) -> np.ndarray:
     from terrapref.scenario.path import PathTracker
     from terrapref.world import rasterise

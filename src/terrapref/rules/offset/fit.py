@@ -11,10 +11,20 @@ only ground past the first band the fit prices is (``OffsetSteering.steep_deg``)
 who keeps to the path over slopes it takes would read as one who leaves the path only once a
 patch is near.
 
+On relief the weights are then fitted in two stages, where enough frames have no relief in view
+(:func:`flat_frames`): the terrain's (each class, the detour, the gate) on those frames alone,
+then the relief bands' and the never-seen ground's on every frame with the terrain's held. A
+driver's terrain order and its prices are what they are without relief (SPEC 19); fitted on
+every frame at once, the frames where a drive holds a line along a slope with a patch's edge
+beside it (the vehicle wandering a few tenths of a metre onto it) read as a driver for whom the
+classes are cheap, and priced them at a third to a half of its own.
+
 The relief prices come with 95% intervals: the fitted weights' covariance by the sandwich of
 an M-estimator, its meat summed over blocks of :data:`INTERVAL_BLOCK_FRAMES` consecutive frames
 (a drive's frames follow one another, so neighbours are not independent evidence), carried to
-each printed price (a band's weight and those below it, over the detour's) by the delta method.
+each printed price (a band's weight and those below it, over the detour's) by the delta method;
+for a staged fit, the sandwich of the two stages' estimating equations stacked
+(:func:`staged_covariance`), so that the detour's own spread, from the first stage, is carried.
 
 Float64 NumPy throughout, and the problem is convex: NumPy's exp, its sums and BLAS's matrix
 products may differ in their last bits between CPUs and thread counts, the Newton steps do not
@@ -97,17 +107,20 @@ def soft_labels(intent: np.ndarray, offsets: np.ndarray, sigma_m: float) -> np.n
     return y / y.sum(axis=1, keepdims=True)
 
 
-def fit_softmax(X: np.ndarray, Y: np.ndarray, l2: float = 1e-3, iterations: int = 50) -> tuple[np.ndarray, float]:
-    """Weights (P,) maximising the soft-label log-likelihood of ``softmax(X @ weights)`` less ``l2 |weights|^2``.
+def fit_softmax(
+    X: np.ndarray, Y: np.ndarray, l2: float = 1e-3, iterations: int = 50, base: np.ndarray | None = None
+) -> tuple[np.ndarray, float]:
+    """Weights (P,) maximising the soft-label log-likelihood of ``softmax(base + X @ weights)`` less ``l2 |weights|^2``.
 
-    ``X`` (N, O, P) features, ``Y`` (N, O) soft labels. Newton steps with a backtracking line
-    search; the problem is convex, so the result does not depend on where it starts.
+    ``X`` (N, O, P) features, ``Y`` (N, O) soft labels, ``base`` (N, O) the utility of weights
+    held (None: none). Newton steps with a backtracking line search; the problem is convex, so
+    the result does not depend on where it starts.
     """
     n, o, p = X.shape
     rows = X.reshape(n * o, p)  # every (frame, offset) row: the sums over both as matrix products
 
     def evaluate(theta: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-        logp, prob = _log_softmax(X, theta)
+        logp, prob = _log_softmax(X, theta, base)
         loss = -(Y * logp).sum() / n + l2 * theta @ theta
         grad = (prob - Y).reshape(-1) @ rows / n + 2 * l2 * theta
         return loss, grad, _hessian(X, prob, l2)
@@ -129,9 +142,9 @@ def fit_softmax(X: np.ndarray, Y: np.ndarray, l2: float = 1e-3, iterations: int 
     return theta, float(evaluate(theta)[0])
 
 
-def _log_softmax(X: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The log-probabilities and probabilities (N, O) of ``softmax(X @ theta)`` over the offsets."""
-    z = X @ theta
+def _log_softmax(X: np.ndarray, theta: np.ndarray, base: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The log-probabilities and probabilities (N, O) of ``softmax(base + X @ theta)`` over the offsets (``base`` None: 0)."""
+    z = X @ theta if base is None else base + X @ theta
     z = z - z.max(axis=1, keepdims=True)
     logp = z - np.log(np.exp(z).sum(axis=1, keepdims=True))
     return logp, np.exp(logp)
@@ -145,15 +158,17 @@ def _hessian(X: np.ndarray, prob: np.ndarray, l2: float) -> np.ndarray:
     return ((rows * prob.reshape(-1, 1)).T @ rows - mean.T @ mean) / n + 2 * l2 * np.eye(p)
 
 
-def _fit_steeper_costs_more(X: np.ndarray, Y: np.ndarray, l2: float, relief: range) -> tuple[np.ndarray, float, np.ndarray]:
-    """:func:`fit_softmax` with the relief columns' weights (``relief``) at most 0: each band past
+def _fit_steeper_costs_more(
+    X: np.ndarray, Y: np.ndarray, l2: float, relief: range, base: np.ndarray | None = None
+) -> tuple[np.ndarray, float, np.ndarray]:
+    """:func:`fit_softmax` (over ``base``) with the relief columns' weights (``relief``) at most 0: each band past
     the one below it adds a price, never takes one off, so steeper ground never costs less than
     gentler (a drive that shows no reason to go round some relief says nothing for driving onto it).
     The columns whose weight comes out positive are held at 0 and the rest fitted again, until
     none does. The weights, the loss, and which columns were fitted (not held)."""
     free = np.ones(X.shape[2], dtype=bool)
     while True:
-        fitted, loss = fit_softmax(X[:, :, free], Y, l2)
+        fitted, loss = fit_softmax(X[:, :, free], Y, l2, base=base)
         theta = np.zeros(X.shape[2])
         theta[free] = fitted
         positive = [j for j in relief if free[j] and theta[j] > 0.0]
@@ -213,12 +228,11 @@ def fit_offset_utility(
         if best is None or losses[candidate] < losses[best[2]] - 1e-9:
             best = (theta, loss, candidate, free, gated_x)
     theta, loss, chosen, free, gated_x = best
-    interval = None
-    if relief is not None:
-        covariance = weight_covariance(gated_x, Y, theta, free, config.l2, INTERVAL_BLOCK_FRAMES)
-        interval = np.round(relief_price_intervals(theta, covariance, columns, X.shape[2] - columns), INTERVAL_DECIMALS)
-        if not np.isfinite(interval).all():  # a detour priced at 0: prices on its scale are not told
-            interval = None
+    flat = None if kept is None else flat_frames(kept)
+    first = None
+    if flat is not None:
+        theta, loss, free, first = fit_staged(gated_x, Y, flat, columns, config.l2)
+    interval = None if relief is None else _relief_interval(gated_x, Y, (theta, free), (flat, first), columns, config.l2)
     # NumPy's exp, sums and matrix products may differ in the last bits between CPUs; the convex
     # fit does not amplify them, and rounding leaves the same weights (and losses) everywhere but
     # at a rounding boundary.
@@ -231,6 +245,66 @@ def fit_offset_utility(
 
 
 LEVEL_FRAMES_LEAST = 200  # the fewest frames with nothing steep ahead that the near distance is chosen on; fewer: on all
+FLAT_FRAMES_LEAST = 200  # the fewest frames with no relief in view that the terrain's prices are fitted on; fewer: on all
+
+
+def flat_frames(columns: np.ndarray) -> np.ndarray | None:
+    """The frames (N,) bool whose relief ``columns`` (N, O, R) count nothing at any offset: no
+    ground past the first band anywhere in the way ahead; None where fewer than
+    :data:`FLAT_FRAMES_LEAST` are."""
+    flat = ~columns.any(axis=(1, 2))
+    return flat if flat.sum() >= FLAT_FRAMES_LEAST else None
+
+
+def _staged_columns(width: int, columns: int) -> np.ndarray:
+    """The columns of a gated relief fit's ``width`` that its second stage fits (:func:`fit_staged`):
+    the ground never seen (the ``columns``' last but one), then the relief columns (all between
+    the ``columns`` and the gate)."""
+    return np.r_[columns - 2, columns : width - 1]
+
+
+def fit_staged(X: np.ndarray, Y: np.ndarray, flat: np.ndarray, columns: int, l2: float) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+    """The weights of a fit on relief in two stages (module docstring): those of the terrain (the
+    classes, the detour, the gate) fitted to the ``flat`` frames alone, with the ground never
+    seen there, then those of the ground never seen and of relief (:func:`_staged_columns`) to
+    every frame with the terrain's held. ``X`` (N, O, P): the gated columns, ``columns`` of them
+    the terrain's and never seen's. The weights (P,), the loss over every frame, which weights
+    were fitted (not held at 0 by the second stage), and the first stage's weights (P; 0 for relief)."""
+    second = _staged_columns(X.shape[2], columns)
+    first_columns = np.setdiff1d(np.arange(X.shape[2]), second[1:])
+    first = np.zeros(X.shape[2])
+    first[first_columns], _ = fit_softmax(X[flat][:, :, first_columns], Y[flat], l2)
+    theta = first.copy()
+    theta[second[0]] = 0.0
+    base = X @ theta
+    theta[second], _, fitted = _fit_steeper_costs_more(X[:, :, second], Y, l2, range(1, len(second)), base)
+    free = np.ones(X.shape[2], dtype=bool)
+    free[second] = fitted
+    return theta, _data_loss(X, Y, theta) + l2 * float(theta @ theta), free, first
+
+
+def _relief_interval(
+    X: np.ndarray,
+    Y: np.ndarray,
+    fitted: tuple[np.ndarray, np.ndarray],
+    staged: tuple[np.ndarray | None, np.ndarray | None],
+    columns: int,
+    l2: float,
+) -> np.ndarray | None:
+    """The 95% intervals (R, 2) of the relief prices of the weights and which were ``fitted``
+    (:func:`fit_offset_utility`) to the gated ``X`` and ``Y``: by :func:`staged_covariance` where
+    the fit was ``staged`` (its flat frames and first stage's weights; None: not staged), else
+    by :func:`weight_covariance`; None where the detour is priced at 0 (prices on its scale are
+    not told)."""
+    theta, free = fitted
+    flat, first = staged
+    if flat is None or first is None:
+        covariance = weight_covariance(X, Y, theta, free, l2, INTERVAL_BLOCK_FRAMES)
+    else:
+        stages = (flat, _staged_columns(X.shape[2], columns), first)
+        covariance = staged_covariance(X, Y, fitted, stages, l2, INTERVAL_BLOCK_FRAMES)
+    interval = np.round(relief_price_intervals(theta, covariance, columns, X.shape[2] - 1 - columns), INTERVAL_DECIMALS)
+    return interval if np.isfinite(interval).all() else None
 
 
 def level_frames(columns: np.ndarray, offsets: np.ndarray, bands: int) -> np.ndarray | None:
@@ -262,6 +336,53 @@ def weight_covariance(X: np.ndarray, Y: np.ndarray, theta: np.ndarray, free: np.
     inverse = np.linalg.inv(_hessian(Xf, prob, l2))
     out = np.zeros((len(theta), len(theta)))
     out[np.ix_(free, free)] = inverse @ (blocks.T @ blocks) @ inverse / n**2
+    return out
+
+
+def staged_covariance(
+    X: np.ndarray,
+    Y: np.ndarray,
+    fitted: tuple[np.ndarray, np.ndarray],
+    stages: tuple[np.ndarray, np.ndarray, np.ndarray],
+    l2: float,
+    block_frames: int,
+) -> np.ndarray:
+    """The covariance (P, P) of the weights a staged fit (:func:`fit_staged`) ``fitted`` (theta,
+    and which were fitted) to ``X`` (N, O, P) and ``Y`` (N, O), ``stages`` its flat frames, the
+    columns of its second stage and its first stage's weights: the sandwich J^-1 M J^-T of the
+    two stages' estimating equations stacked. The first stage's are the scores of its weights on
+    the flat frames under its own utility (the ground never seen's there a weight of its own),
+    the second's those of its columns on every frame under the whole utility; J is their
+    Jacobian, block triangular (the second stage's equations move with the terrain's weights,
+    not the reverse), and M sums the outer products of the scores summed over blocks of
+    ``block_frames`` consecutive frames, as :func:`weight_covariance` does. Weights held have no variance."""
+    theta, free = fitted
+    flat, second, first = stages
+    n = X.shape[0]
+    ones = np.setdiff1d(np.arange(X.shape[2]), second[1:])  # the first stage's columns; never seen among them
+    twos = second[free[second]]
+    _, alone = _log_softmax(X, first)  # on the flat frames, the first stage's utility (their relief columns are 0)
+    _, whole = _log_softmax(X, theta)
+    scores = np.concatenate(
+        [
+            np.matmul((alone - Y)[:, None, :], X[:, :, ones])[:, 0, :] * flat[:, None],
+            np.matmul((whole - Y)[:, None, :], X[:, :, twos])[:, 0, :],
+        ],
+        axis=1,
+    )
+    blocks = np.zeros((-(-n // block_frames), scores.shape[1]))
+    np.add.at(blocks, np.arange(n) // block_frames, scores)
+    t = len(ones)
+    jacobian = n * _hessian(X[:, :, np.r_[ones, twos]], whole, l2)
+    jacobian[:t, t:] = 0.0
+    jacobian[t:, np.flatnonzero(ones == second[0])] = 0.0  # the second stage's equations hold no first-stage weight of never seen
+    jacobian[:t, :t] = flat.sum() * _hessian(X[flat][:, :, ones], alone[flat], l2)
+    inverse = np.linalg.inv(jacobian)
+    stacked = inverse @ (blocks.T @ blocks) @ inverse.T
+    kept = np.flatnonzero(np.r_[ones != second[0], np.ones(len(twos), dtype=bool)])  # never seen's first-stage weight dropped
+    both = np.r_[ones[ones != second[0]], twos]
+    out = np.zeros((len(theta), len(theta)))
+    out[np.ix_(both, both)] = stacked[np.ix_(kept, kept)]
     return out
 
 
