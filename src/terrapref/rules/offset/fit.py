@@ -330,13 +330,24 @@ def weight_covariance(X: np.ndarray, Y: np.ndarray, theta: np.ndarray, free: np.
     n = X.shape[0]
     Xf = X[:, :, free]
     _, prob = _log_softmax(Xf, theta[free])
-    scores = np.matmul((prob - Y)[:, None, :], Xf)[:, 0, :]  # (N, q)
-    blocks = np.zeros((-(-n // block_frames), Xf.shape[2]))
-    np.add.at(blocks, np.arange(n) // block_frames, scores)
     inverse = np.linalg.inv(_hessian(Xf, prob, l2))
     out = np.zeros((len(theta), len(theta)))
-    out[np.ix_(free, free)] = inverse @ (blocks.T @ blocks) @ inverse / n**2
+    out[np.ix_(free, free)] = inverse @ _block_meat(_scores(Xf, Y, prob), block_frames) @ inverse / n**2
     return out
+
+
+def _scores(X: np.ndarray, Y: np.ndarray, prob: np.ndarray) -> np.ndarray:
+    """Each frame's gradient of its loss (N, P): the soft labels ``Y`` (N, O) against the
+    probabilities ``prob`` (N, O) over the columns ``X`` (N, O, P)."""
+    return np.matmul((prob - Y)[:, None, :], X)[:, 0, :]
+
+
+def _block_meat(scores: np.ndarray, block_frames: int) -> np.ndarray:
+    """The sandwich's meat (P, P): the frames' ``scores`` (N, P) summed over blocks of
+    ``block_frames`` consecutive frames, and those sums' outer products summed."""
+    blocks = np.zeros((-(-scores.shape[0] // block_frames), scores.shape[1]))
+    np.add.at(blocks, np.arange(scores.shape[0]) // block_frames, scores)
+    return blocks.T @ blocks
 
 
 def staged_covariance(
@@ -363,22 +374,14 @@ def staged_covariance(
     twos = second[free[second]]
     _, alone = _log_softmax(X, first)  # on the flat frames, the first stage's utility (their relief columns are 0)
     _, whole = _log_softmax(X, theta)
-    scores = np.concatenate(
-        [
-            np.matmul((alone - Y)[:, None, :], X[:, :, ones])[:, 0, :] * flat[:, None],
-            np.matmul((whole - Y)[:, None, :], X[:, :, twos])[:, 0, :],
-        ],
-        axis=1,
-    )
-    blocks = np.zeros((-(-n // block_frames), scores.shape[1]))
-    np.add.at(blocks, np.arange(n) // block_frames, scores)
+    scores = np.concatenate([_scores(X[:, :, ones], Y, alone) * flat[:, None], _scores(X[:, :, twos], Y, whole)], axis=1)
     t = len(ones)
     jacobian = n * _hessian(X[:, :, np.r_[ones, twos]], whole, l2)
     jacobian[:t, t:] = 0.0
     jacobian[t:, np.flatnonzero(ones == second[0])] = 0.0  # the second stage's equations hold no first-stage weight of never seen
     jacobian[:t, :t] = flat.sum() * _hessian(X[flat][:, :, ones], alone[flat], l2)
     inverse = np.linalg.inv(jacobian)
-    stacked = inverse @ (blocks.T @ blocks) @ inverse.T
+    stacked = inverse @ _block_meat(scores, block_frames) @ inverse.T
     kept = np.flatnonzero(np.r_[ones != second[0], np.ones(len(twos), dtype=bool)])  # never seen's first-stage weight dropped
     both = np.r_[ones[ones != second[0]], twos]
     out = np.zeros((len(theta), len(theta)))
