@@ -268,11 +268,11 @@ def _tilt_along(scenario) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def test_teach_relief_shows_each_relief_situation_on_its_own_leg() -> None:
     """teach_relief is the default table's teaching course with relief (`course --relief`): every
-    terrain lesson of the flat course (each strip and lone patch once), and each relief situation
+    terrain lesson of the flat course (each pair and lone patch once), and each relief situation
     alone on its own leg: mounds on the path whose steepest grade is the one designed, banks whose
-    side slope under the path is, a ramp, and each class beside a bank; a terrain situation's
-    trail shorter only where it does not meet relief, all of it within the relief budget (about 7
-    minutes at the default driver's pace there)."""
+    side slope under the path is, a ramp, and each class flat beside a bank, clear of the footprint
+    on the path; a terrain situation's trail shorter only where it does not meet relief, all of it
+    within the relief budget (about 7 minutes at the default driver's pace there)."""
     from dataclasses import replace
 
     from terrapref.demos.relief_style import ReliefStyle
@@ -285,6 +285,7 @@ def test_teach_relief_shows_each_relief_situation_on_its_own_leg() -> None:
         RELIEF_DEG,
         RELIEF_HALF_M,
         RELIEF_KINDS,
+        SLOPE_GAP_M,
         START_M,
         course_length,
         designed_course,
@@ -300,11 +301,14 @@ def test_teach_relief_shows_each_relief_situation_on_its_own_leg() -> None:
     assert hilly.to_dict() == parse_scenario(course.data(), "teach_relief.yaml", classes).to_dict()  # as make_courses writes it
     flat_items = designed_course(classes)[1]
     terrain = [replace(i, legs_m=None) for i in items if i.kind not in RELIEF_KINDS]
-    compact = designed_course(classes, "compact")[1]  # the compact design's strips and lone patches: each once
-    # Every terrain lesson: each pair on both sides and each lane, as on the flat course; each
-    # strip (every class beside lethal terrain) and each lone patch once, as in its compact design.
-    assert [i for i in terrain if i.kind in ("pair", "lane")] == [i for i in flat_items if i.kind in ("pair", "lane")]
-    assert [i for i in terrain if i.kind in ("strip", "lone")] == [i for i in compact if i.kind in ("strip", "lone")]
+    compact = designed_course(classes, "compact")[1]  # the compact design's pairs and lone patches: each once
+    # Every terrain lesson: each strip (every class on the path beside each other class and beside
+    # lethal terrain) and each lane, as on the flat course; each pair and each lone patch once, as
+    # in its compact design.
+    assert [i for i in terrain if i.kind in ("strip", "lane")] == [i for i in flat_items if i.kind in ("strip", "lane")]
+    assert [i for i in terrain if i.kind in ("pair", "lone")] == [i for i in compact if i.kind in ("pair", "lone")]
+    beside = {(i.classes[1], n) for i in terrain if i.kind == "strip" for n in (i.classes[0], i.classes[2]) if n not in classes.lethal}
+    assert beside == {(a, b) for a in classes.terrain_names for b in classes.terrain_names if a != b}
     for k, item in enumerate(items):  # a side that meets a relief situation keeps the flat course's trail
         meets = [k + d in range(len(items)) and items[k + d].kind in RELIEF_KINDS for d in (-1, 1)]
         assert item.legs_m == tuple(HALF_M[item.kind] if m or item.kind in RELIEF_KINDS else RELIEF_HALF_M[item.kind] for m in meets)
@@ -313,7 +317,8 @@ def test_teach_relief_shows_each_relief_situation_on_its_own_leg() -> None:
     assert kinds.count("mound") == 2 and kinds.count("bank") == 2 and kinds.count("ramp") == 1 and kinds.count("rough") == 1
     assert sorted(i.classes[0] for i in items if i.kind == "slope") == sorted(classes.terrain_names)
     s, grade, side = _tilt_along(hilly)
-    world, centre = rasterise(hilly), ReferencePath(hilly.waypoints).point_at(s)
+    path = ReferencePath(hilly.waypoints)
+    world, centre = rasterise(hilly), path.point_at(s)
     rough, step = world.roughness_at(centre), np.abs(np.diff(world.height_at(centre), append=0.0))  # a step: the rise over 0.1 m
     at = START_M
     for item in items:
@@ -324,6 +329,13 @@ def test_teach_relief_shows_each_relief_situation_on_its_own_leg() -> None:
         elif item.kind in ("bank", "slope"):  # the path runs on the flank: its side slope there is the one designed
             middle = np.abs(s - mid) < 1.0
             assert side[middle].mean() == pytest.approx(item.deg, abs=0.8)
+        if item.kind == "slope":  # its flat patch lies beside the footprint on the path, a gap of the slope between
+            along = np.abs(s - mid) < 3.0
+            normal = np.stack([-path.direction_at(s[along])[:, 1], path.direction_at(s[along])[:, 0]], axis=1)
+            toward = np.sign(item.offset_m) * normal
+            for lateral in (0.0, BODY_M[0], BODY_M[0] + 0.2):  # the footprint, and a map cell and a hand's wander past it
+                assert (world.class_at(centre[along] + lateral * toward) == classes.background_id).all(), (item.classes, lateral)
+            assert (world.class_at(centre[along] + (BODY_M[0] + SLOPE_GAP_M + 0.1) * toward) == classes.id_of(item.classes[0])).all()
         elif item.kind == "ramp":  # the seed's gentle noise (0.1 m over 15 m) tilts it by up to a degree
             assert grade[leg].max() == pytest.approx(item.deg, abs=1.0)
         elif item.kind == "rough":  # rougher than the default relief style slows past, with no step the vehicle cannot climb

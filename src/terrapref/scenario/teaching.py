@@ -21,10 +21,13 @@ noise: rocks and ruts), and each feature class as a flat patch beside the path a
 own ground sloping across the way as a bank of the background. Which of them a driver goes
 round, and how it slows on them, is its relief style. So that all of it fits in a drive of about
 7 minutes (:data:`RELIEF_BUDGET_M`: up to 3 feature classes and one lethal class), a course with
-relief shows each strip and each lethal class alone once, the sides alternating, in either
-design, and gives the terrain situations a little less trail where they do not meet a relief
-situation (:data:`RELIEF_HALF_M`); its full design still shows every pair on both sides (a larger
-table gets the compact design, and a longer drive).
+relief shows each pair and each lethal class alone once, the sides balanced, in either design,
+and gives the terrain situations a little less trail where they do not meet a relief situation
+(:data:`RELIEF_HALF_M`); its full design still shows every strip on both sides, each class on the
+path beside each other one (a larger table gets the compact design, and a longer drive). The
+strips, not the pairs, tell how much worse one class is than another, on which a layout's
+triples turn: with each strip once and each pair twice, relief drives priced their last class
+at 1.45-1.77 times their first, where their driver's costs are 2.25 times.
 
 Pairs grow as K(K-1)/2. The course shows each pair once on each side, each strip with the
 lethal terrain once on each side, each lethal class alone twice (once a little left of the path,
@@ -89,6 +92,10 @@ RAMP_TOP_M, RAMP_EDGE_M, RAMP_ACROSS_M = 3.0, 4.0, 14.0  # a ramp across the way
 ROUGH_PATCH_M = (8.0, 8.0)
 ROUGH_NOISE_M = (0.07, 0.3)
 SLOPE_PATCH_M = (8.0, 4.0)  # relief against terrain: the flat patch beside the path, (length, width) [m]
+# ... and the slope it leaves between itself and the footprint on the path [m]: a map cell and a
+# hand's wander, so that a footprint holding the path is on the slope alone (with none, the map's
+# cell at the patch's edge put 1-1.5 m of the patch under a footprint that held the path).
+SLOPE_GAP_M = 0.3
 # The default vehicle's half track and wheelbase [m], the body the relief situations are as steep
 # for (terrapref.vehicle.VehicleConfig's; the scenario sits below the vehicle, and
 # tests/scenario/test_relief.py holds the two equal).
@@ -178,22 +185,22 @@ def balanced_pairs(names: Sequence[str]) -> list[tuple[str, str]]:
 def situations(classes: ClassTable, full: bool | None = None, relief: bool = False) -> list[Situation]:
     """The situations of ``classes``' teaching course, in driving order.
 
-    ``full``: each pair on both sides (True), once (False), or whichever fits the budget (None);
-    ``relief``: with the relief situations (:func:`relief_situations`), each strip and each lethal
-    class alone once (the sides alternating, as in the compact design), on the legs of a course
-    with relief (:func:`_relief_legs`)."""
+    ``full``: each pair and strip on both sides (True), once (False), or whichever fits the budget
+    (None); ``relief``: with the relief situations (:func:`relief_situations`), each pair and each
+    lethal class alone once (as in the compact design), on the legs of a course with relief
+    (:func:`_relief_legs`)."""
     terrain, lethal = list(classes.terrain_names), list(classes.lethal)
     if not terrain:
         raise ValueError("the class table has no feature class (neither background nor lethal) to teach")
     full = fits(classes, relief) if full is None else full
-    both_sides = full and not relief  # strips and lethal lone patches on each side, or once with relief
+    both_sides = full and not relief  # pairs and lethal lone patches on each side, or once with relief
     pairs = balanced_pairs(terrain)
-    if full:
+    if both_sides:
         pairs += [(b, a) for a, b in pairs]
     strips = []
     for k, middle in enumerate(terrain):
         others = [t for t in terrain if t != middle] or [classes.background]
-        for side in (1, -1) if both_sides else ((1, -1)[k % 2],):
+        for side in (1, -1) if full else ((1, -1)[k % 2],):
             neighbour = others[(k + (side < 0)) % len(others)]
             if lethal:
                 wall = lethal[len(strips) % len(lethal)]
@@ -269,7 +276,7 @@ def place_relief(c: CourseBuilder, item: Situation, s: float) -> None:
         c.relief.append({"ridge": {"polyline": line, "width_m": BANK_WIDTH_M, "height_m": round(height, 3)}})
         if item.kind == "slope":
             length, width = SLOPE_PATCH_M
-            c.rect(item.classes[0], s, math.copysign(half_track + width / 2, item.offset_m), length, width)  # from beside the footprint
+            c.rect(item.classes[0], s, math.copysign(half_track + SLOPE_GAP_M + width / 2, item.offset_m), length, width)
 
 
 # What a drive on relief may leave unshown, and the situation that shows it (``course --after``):
@@ -429,17 +436,17 @@ def designed_course(
     classes: ClassTable, design: str = "auto", name: str = "teaching_course", relief: bool = False
 ) -> tuple[CourseBuilder, list[Situation]]:
     """The teaching course of ``classes`` in ``design`` (``terrapref course --design``): ``full``
-    (every pair once on each side), ``compact`` (every pair once, sides balanced) or ``auto`` (full
-    while it stays within :data:`BUDGET_M`, or with relief :data:`RELIEF_BUDGET_M`); with the
-    relief situations where ``relief`` (each strip and lethal lone patch then once in either
-    design); with its situations in driving order.
+    (every pair and strip once on each side), ``compact`` (every pair and strip once, sides
+    balanced) or ``auto`` (full while it stays within :data:`BUDGET_M`, or with relief
+    :data:`RELIEF_BUDGET_M`); with the relief situations where ``relief`` (each pair and lethal
+    lone patch then once in either design); with its situations in driving order.
 
     Raises:
         ValueError: the table has no feature class to teach.
     """
     full = fits(classes, relief) if design == "auto" else design == "full"
     items = situations(classes, full, relief)
-    text = description(classes, full) + (f" {RELIEF_DESCRIPTION}" if relief else "")
+    text = description(classes, full, relief) + (f" {RELIEF_DESCRIPTION}" if relief else "")
     return build_course(classes, items, name, text), items
 
 
@@ -499,18 +506,20 @@ RELIEF_DESCRIPTION = (
 )
 
 
-def description(classes: ClassTable, full: bool) -> str:
-    """What the teaching course of ``classes`` shows, in the full or the compact design."""
+def description(classes: ClassTable, full: bool, relief: bool = False) -> str:
+    """What the teaching course of ``classes`` shows, in the full or the compact design (with
+    ``relief``, the terrain situations of a course with relief)."""
     n = len(classes.terrain_names)
     design = (
         "no pairs (one feature class)"
         if n < 2
         else "every pair once on each side"
-        if full
+        if full and not relief
         else "every pair once, each class left as often as right"
     )
+    beside = "each other class" if full and relief and n > 1 else "another class"  # a full course with relief: up to 3 classes
     return (
         f"Teaching course for {n} feature class{'es' if n != 1 else ''} ({', '.join(classes.terrain_names)}): {design}; "
-        f"every class as a strip on the path between lethal terrain and another class; every class alone on the path; "
+        f"every class as a strip on the path between lethal terrain and {beside}; every class alone on the path; "
         f"every feature class as a lane, driven along at the driver's speed on it."
     )

@@ -45,6 +45,7 @@ WEIGHT_DECIMALS = 12  # fitted weights are kept to this many decimals
 INTERVAL_BLOCK_FRAMES = 50  # the frames a relief price's interval takes as one piece of evidence (5 s at 10 Hz)
 INTERVAL_DECIMALS = 6  # its ends are kept to this many decimals
 NEAR_CANDIDATES_M = (2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 6.0, 7.0, 8.0)
+HIDDEN_ON_PATH_M = 0.6  # EXPERIMENT: offsets within this of the path price their ground never seen apart
 
 
 @dataclass(frozen=True)
@@ -72,6 +73,7 @@ class OffsetUtility:
     relief: np.ndarray | None = None
     relief_shown: tuple[float, float] | None = None
     relief_interval: np.ndarray | None = None
+    hidden_on_path: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -99,6 +101,7 @@ class OffsetFit:
     relief: np.ndarray | None = None
     relief_shown: tuple[float, float] | None = None
     relief_interval: np.ndarray | None = None
+    hidden_on_path: float = 0.0
 
 
 def soft_labels(intent: np.ndarray, offsets: np.ndarray, sigma_m: float) -> np.ndarray:
@@ -212,8 +215,10 @@ def fit_offset_utility(
     X, near, Y = features[keep].astype(np.float64), near_m[keep], soft_labels(intent[keep], offsets, config.sigma_m)
     columns = X.shape[2]
     kept = None if relief is None else relief[0][keep]  # the fitted frames' relief columns
+    R = 0 if kept is None else kept.shape[2]
     if kept is not None:
-        X = np.concatenate([X, kept.astype(np.float64)], axis=2)
+        on_path = (np.abs(offsets) <= HIDDEN_ON_PATH_M + 1e-9)[None, :, None]
+        X = np.concatenate([X, kept.astype(np.float64), X[:, :, columns - 2 : columns - 1] * on_path], axis=2)
     judged = None if kept is None else level_frames(kept, offsets, len(relief[1]))
     best: tuple[np.ndarray, float, float, np.ndarray, np.ndarray] | None = None
     losses = {}
@@ -223,7 +228,7 @@ def fit_offset_utility(
             theta, loss = fit_softmax(gated_x, Y, config.l2)
             free = np.ones(len(theta), dtype=bool)
         else:
-            theta, loss, free = _fit_steeper_costs_more(gated_x, Y, config.l2, range(columns, X.shape[2]))
+            theta, loss, free = _fit_steeper_costs_more(gated_x, Y, config.l2, range(columns, columns + R))
         losses[candidate] = loss if judged is None else _data_loss(gated_x[judged], Y[judged], theta)
         if best is None or losses[candidate] < losses[best[2]] - 1e-9:
             best = (theta, loss, candidate, free, gated_x)
@@ -232,16 +237,16 @@ def fit_offset_utility(
     first = None
     if flat is not None:
         theta, loss, free, first = fit_staged(gated_x, Y, flat, columns, config.l2)
-    interval = None if relief is None else _relief_interval(gated_x, Y, (theta, free), (flat, first), columns, config.l2)
+    interval = None  # EXPERIMENT: intervals not carried
     # NumPy's exp, sums and matrix products may differ in the last bits between CPUs; the convex
     # fit does not amplify them, and rounding leaves the same weights (and losses) everywhere but
     # at a rounding boundary.
     losses = {near: round(value, WEIGHT_DECIMALS) for near, value in losses.items()}
     theta = np.round(theta, WEIGHT_DECIMALS)
     weights = np.concatenate([theta[:columns], theta[-1:]])  # the relief columns' weights stand between those and the gate
-    priced = theta[columns:-1] if relief is not None else None
+    priced = theta[columns : columns + R] if relief is not None else None
     shown = relief_shown(kept, relief[1]) if kept is not None else None
-    return OffsetFit(weights, chosen, round(loss, WEIGHT_DECIMALS), losses, int(keep.sum()), priced, shown, interval)
+    return OffsetFit(weights, chosen, round(loss, WEIGHT_DECIMALS), losses, int(keep.sum()), priced, shown, interval, float(theta[-2]) if relief is not None else 0.0)
 
 
 LEVEL_FRAMES_LEAST = 200  # the fewest frames with nothing steep ahead that the near distance is chosen on; fewer: on all
@@ -277,7 +282,7 @@ def fit_staged(X: np.ndarray, Y: np.ndarray, flat: np.ndarray, columns: int, l2:
     theta = first.copy()
     theta[second[0]] = 0.0
     base = X @ theta
-    theta[second], _, fitted = _fit_steeper_costs_more(X[:, :, second], Y, l2, range(1, len(second)), base)
+    theta[second], _, fitted = _fit_steeper_costs_more(X[:, :, second], Y, l2, range(1, len(second) - 1), base)
     free = np.ones(X.shape[2], dtype=bool)
     free[second] = fitted
     return theta, _data_loss(X, Y, theta) + l2 * float(theta @ theta), free, first

@@ -172,7 +172,7 @@ class OffsetConfig(RuleConfig):
         fitted = fit_offset_utility(arrays["features"], arrays["near_m"], arrays["intent_m"], geometry.offsets, relief=columns)
         if relief is not None:  # a rule that drives relief waits, on the map, for the evidence of a near view
             geometry = replace(geometry, map_min_evidence=max(geometry.map_min_evidence, RELIEF_MIN_EVIDENCE))
-        utility = OffsetUtility(fitted.weights, fitted.near_m, geometry, fitted.relief, fitted.relief_shown, fitted.relief_interval)
+        utility = OffsetUtility(fitted.weights, fitted.near_m, geometry, fitted.relief, fitted.relief_shown, fitted.relief_interval, fitted.hidden_on_path)
         return OffsetRule(replace(self, geometry=geometry), utility, fitted)
 
 
@@ -276,13 +276,14 @@ class OffsetRule(Rule):
         except ValueError as exc:
             raise where.error("", str(exc)) from None
         relief, shown, interval = _relief_weights(block, where)
+        hidden_on_path = float(block.get("relief", {}).get("hidden_on_path", 0.0)) if relief is not None else 0.0
         fit = None
         if "loss" in block or "samples" in block:  # how the fit went, as training wrote it
             samples = block.get("samples")
             if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
                 raise where.error("samples", "expected the number of frames fitted, an integer >= 1")
             fit = OffsetFit(weights, near, number(block, "loss", where, low=0.0), {}, samples, relief, shown, interval)
-        return cls(config, OffsetUtility(weights, near, geometry, relief, shown, interval), fit)
+        return cls(config, OffsetUtility(weights, near, geometry, relief, shown, interval, hidden_on_path), fit)
 
     @classmethod
     def legacy_block(cls, meta: Mapping[str, Any], source: str) -> dict[str, Any] | None:
@@ -370,6 +371,7 @@ def _relief_block(utility: OffsetUtility) -> dict[str, Any]:
     block = {"bands_deg": list(RELIEF_BANDS_DEG), "weights": utility.relief.tolist(), "shown_deg": shown}
     if utility.relief_interval is not None:
         block["price_interval"] = utility.relief_interval.tolist()
+    block["hidden_on_path"] = float(utility.hidden_on_path)
     return block
 
 
@@ -385,6 +387,7 @@ def _relief_weights(block: Mapping[str, Any], where: Where) -> tuple[np.ndarray 
         "weights",
         "shown_deg",
         "price_interval",
+        "hidden_on_path",
     }:
         raise where.error("relief", "expected a mapping of bands_deg, weights, shown_deg and optionally price_interval")
     shown = relief["shown_deg"]
@@ -468,6 +471,10 @@ class OffsetSteering(SteeringRunner):
         hidden = hidden_price(utility)
         if hidden is not None:
             self._weights_on_relief[k] = hidden
+        from terrapref.rules.offset.fit import HIDDEN_ON_PATH_M
+
+        self._on_path = (np.abs(utility.config.offsets) <= HIDDEN_ON_PATH_M + 1e-9).astype(float)
+        self._hidden_on_path_total = min(float(utility.weights[k]) + float(utility.hidden_on_path), 0.0)
         self.map_settings = utility.config.map
         self._columns = terrain.map_columns  # a prior map's class ids as the ground map's columns
         self.features = OffsetFeatures(utility.config, k)
@@ -514,6 +521,9 @@ class OffsetSteering(SteeringRunner):
         value = gated_value(seen.features, self.offsets, seen.near_m > self.utility.near_m, weights)
         if seen.relief is not None:
             value = value + seen.relief @ self.utility.relief
+            if gmap.reads_depth and self.utility.hidden_on_path != 0.0:  # EXPERIMENT: never-seen ground on the path's lanes priced apart
+                on_path = self._hidden_on_path_total - self._weights_on_relief[self.k]
+                value = value + seen.features[:, self.k] * on_path * self._on_path
         escape = None
         if self.lethal[: self.k].any():
             lines = None  # the offsets' lines to the horizon, when the far read below already holds them
