@@ -237,7 +237,7 @@ def fit_offset_utility(
     first = None
     if flat is not None:
         theta, loss, free, first = fit_staged(gated_x, Y, flat, columns, config.l2)
-    interval = None  # EXPERIMENT: intervals not carried
+    interval = None if relief is None else _relief_interval(gated_x, Y, (theta, free), (flat, first), (columns, R), config.l2)
     # NumPy's exp, sums and matrix products may differ in the last bits between CPUs; the convex
     # fit does not amplify them, and rounding leaves the same weights (and losses) everywhere but
     # at a rounding boundary.
@@ -293,22 +293,24 @@ def _relief_interval(
     Y: np.ndarray,
     fitted: tuple[np.ndarray, np.ndarray],
     staged: tuple[np.ndarray | None, np.ndarray | None],
-    columns: int,
+    widths: tuple[int, int],
     l2: float,
 ) -> np.ndarray | None:
     """The 95% intervals (R, 2) of the relief prices of the weights and which were ``fitted``
-    (:func:`fit_offset_utility`) to the gated ``X`` and ``Y``: by :func:`staged_covariance` where
+    (:func:`fit_offset_utility`) to the gated ``X`` and ``Y`` (``widths``: its terrain's columns,
+    the detour's last, and how many relief columns follow them): by :func:`staged_covariance` where
     the fit was ``staged`` (its flat frames and first stage's weights; None: not staged), else
     by :func:`weight_covariance`; None where the detour is priced at 0 (prices on its scale are
     not told)."""
     theta, free = fitted
     flat, first = staged
+    columns, count = widths
     if flat is None or first is None:
         covariance = weight_covariance(X, Y, theta, free, l2, INTERVAL_BLOCK_FRAMES)
     else:
         stages = (flat, _staged_columns(X.shape[2], columns), first)
         covariance = staged_covariance(X, Y, fitted, stages, l2, INTERVAL_BLOCK_FRAMES)
-    interval = np.round(relief_price_intervals(theta, covariance, columns, X.shape[2] - 1 - columns), INTERVAL_DECIMALS)
+    interval = np.round(relief_price_intervals(theta, covariance, columns, count), INTERVAL_DECIMALS)
     return interval if np.isfinite(interval).all() else None
 
 
