@@ -564,6 +564,7 @@ def test_an_offset_utility_that_prices_relief_keeps_its_prices_in_the_file_and_b
         "weights": relief.tolist(),
         "shown_deg": [22.0, None],
         "price_interval": interval.tolist(),
+        "hidden_on_path": 0.0,
     }
     meta = {**model_meta(), "rules": [block], "drives": "offset"}
     back = Planner(load_model(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), meta))).rule
@@ -590,6 +591,7 @@ def test_an_offset_utility_that_prices_relief_keeps_its_prices_in_the_file_and_b
         ({"weights": [10**400] * (2 * len(RELIEF_BANDS_DEG))}, "rules[0].relief.weights"),
         ({"weights": [True] * (2 * len(RELIEF_BANDS_DEG))}, "rules[0].relief.weights"),
         ({"extra": 1}, "rules[0].relief"),
+        ({"hidden_on_path": math.nan}, "rules[0].hidden_on_path"),
     ):
         bad_block = {**block, "relief": {**block["relief"], **change}}
         bad = save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), {**meta, "rules": [bad_block]})

@@ -71,7 +71,7 @@ from terrapref.rules.base import (
     vector,
 )
 from terrapref.rules.offset.features import FIRST_BAND, RELIEF_BANDS_DEG, OffsetFeatures
-from terrapref.rules.offset.fit import OffsetFit, OffsetUtility, fit_offset_utility, relief_prices
+from terrapref.rules.offset.fit import HIDDEN_ON_PATH_M, OffsetFit, OffsetUtility, fit_offset_utility, relief_prices
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.offset.offsets_compiled import gated_value
 from terrapref.rules.offset.reach_compiled import lethal_hits, swept_reach
@@ -172,7 +172,9 @@ class OffsetConfig(RuleConfig):
         fitted = fit_offset_utility(arrays["features"], arrays["near_m"], arrays["intent_m"], geometry.offsets, relief=columns)
         if relief is not None:  # a rule that drives relief waits, on the map, for the evidence of a near view
             geometry = replace(geometry, map_min_evidence=max(geometry.map_min_evidence, RELIEF_MIN_EVIDENCE))
-        utility = OffsetUtility(fitted.weights, fitted.near_m, geometry, fitted.relief, fitted.relief_shown, fitted.relief_interval, fitted.hidden_on_path)
+        utility = OffsetUtility(
+            fitted.weights, fitted.near_m, geometry, fitted.relief, fitted.relief_shown, fitted.relief_interval, fitted.hidden_on_path
+        )
         return OffsetRule(replace(self, geometry=geometry), utility, fitted)
 
 
@@ -276,7 +278,7 @@ class OffsetRule(Rule):
         except ValueError as exc:
             raise where.error("", str(exc)) from None
         relief, shown, interval = _relief_weights(block, where)
-        hidden_on_path = float(block.get("relief", {}).get("hidden_on_path", 0.0)) if relief is not None else 0.0
+        hidden_on_path = number(block["relief"], "hidden_on_path", where, 0.0) if relief is not None else 0.0
         fit = None
         if "loss" in block or "samples" in block:  # how the fit went, as training wrote it
             samples = block.get("samples")
@@ -338,11 +340,13 @@ class OffsetRule(Rule):
                 f"{', with its 95% interval; held: no spread, held at 0 or past no ground the drive showed' if u.relief_interval is not None else ''}): "
                 f"{shown}; {told}"
             )
-        hidden = hidden_price(u)
+        hidden = hidden_prices(u)
         if detour != 0.0 and hidden is not None:
+            beside, on_path = (p / detour + 0.0 for p in hidden)
             lines.append(
-                f"relief, ground not yet seen (behind a crest, a mound, a bank): {hidden / detour + 0.0:.1f} per metre, "
-                "as the classes' (ground the camera has not shown, on a map that reads depth)"
+                f"relief, ground not yet seen (behind a crest, a mound, a bank): {beside:.1f} per metre beside the path, "
+                f"{on_path:.1f} on its own lanes (within {HIDDEN_ON_PATH_M:g} m of it), as the classes' "
+                "(ground the camera has not shown, on a map that reads depth)"
             )
         g = self.config.geometry
         if g.map_min_evidence > 0.0:  # a vote at r metres weighs 1 / (1 + (r / map_range_m)^2) (terrapref.groundmap.map)
@@ -389,7 +393,7 @@ def _relief_weights(block: Mapping[str, Any], where: Where) -> tuple[np.ndarray 
         "price_interval",
         "hidden_on_path",
     }:
-        raise where.error("relief", "expected a mapping of bands_deg, weights, shown_deg and optionally price_interval")
+        raise where.error("relief", "expected a mapping of bands_deg, weights, shown_deg and optionally price_interval and hidden_on_path")
     shown = relief["shown_deg"]
     if not (isinstance(shown, list) and len(shown) == 2 and all(v is None or v in RELIEF_BANDS_DEG for v in shown)):
         raise where.error("relief.shown_deg", "expected two of the bands (side slope, grade), each or null")
@@ -415,6 +419,16 @@ def steep_from(utility: OffsetUtility) -> tuple[float, float]:
     half = len(RELIEF_BANDS_DEG)
     first = [np.flatnonzero(weights) for weights in (utility.relief[:half], utility.relief[half:])]
     return tuple(float(RELIEF_BANDS_DEG[f[0]]) if len(f) else math.inf for f in first)
+
+
+def hidden_prices(utility: OffsetUtility) -> tuple[float, float] | None:
+    """The weights of a metre of ground never seen on a map that reads depth, beside the path and
+    on its own lanes (the offsets within :data:`HIDDEN_ON_PATH_M` of it), as a utility fitted on
+    relief weighs them, each at most 0; None for one fitted on flat ground (:func:`hidden_price`)."""
+    beside = hidden_price(utility)
+    if beside is None:
+        return None
+    return beside, min(float(utility.weights[len(utility.weights) - 3]) + float(utility.hidden_on_path), 0.0)
 
 
 def hidden_price(utility: OffsetUtility) -> float | None:
@@ -471,10 +485,10 @@ class OffsetSteering(SteeringRunner):
         hidden = hidden_price(utility)
         if hidden is not None:
             self._weights_on_relief[k] = hidden
-        from terrapref.rules.offset.fit import HIDDEN_ON_PATH_M
-
+        # Ground never seen on the path's own lanes, priced apart from beside them (hidden_prices).
         self._on_path = (np.abs(utility.config.offsets) <= HIDDEN_ON_PATH_M + 1e-9).astype(float)
-        self._hidden_on_path_total = min(float(utility.weights[k]) + float(utility.hidden_on_path), 0.0)
+        prices = hidden_prices(utility)
+        self._on_path_extra = 0.0 if prices is None else prices[1] - prices[0]
         self.map_settings = utility.config.map
         self._columns = terrain.map_columns  # a prior map's class ids as the ground map's columns
         self.features = OffsetFeatures(utility.config, k)
@@ -521,9 +535,8 @@ class OffsetSteering(SteeringRunner):
         value = gated_value(seen.features, self.offsets, seen.near_m > self.utility.near_m, weights)
         if seen.relief is not None:
             value = value + seen.relief @ self.utility.relief
-            if gmap.reads_depth and self.utility.hidden_on_path != 0.0:  # EXPERIMENT: never-seen ground on the path's lanes priced apart
-                on_path = self._hidden_on_path_total - self._weights_on_relief[self.k]
-                value = value + seen.features[:, self.k] * on_path * self._on_path
+            if gmap.reads_depth and self._on_path_extra != 0.0:
+                value = value + seen.features[:, self.k] * (self._on_path_extra * self._on_path)
         escape = None
         if self.lethal[: self.k].any():
             lines = None  # the offsets' lines to the horizon, when the far read below already holds them
