@@ -337,22 +337,23 @@ def test_ground_a_depth_reading_map_has_not_seen_is_priced_as_the_relief_drive_p
     path 3 m ahead and 3 m of unseen ground past it: a relief utility whose drive priced unseen
     ground at nothing or above holds the offset it holds when that ground is seen background,
     and one whose drive priced it high goes round it. A utility fitted on flat ground prices it as
-    an average class, on either map, and goes round it."""
+    an average class, on either map, and goes round it. One whose drive priced it dear beside the
+    path but not on the path's own lanes (a mound's hidden ground, driven over) holds its offset."""
     from test_offset_rule import CONTROL, DRIVER_LIKE, K
 
     from terrapref.rules.offset.features import RELIEF_BANDS_DEG
     from terrapref.rules.offset.fit import OffsetUtility
-    from terrapref.rules.offset.rule import OffsetSteering, hidden_price
+    from terrapref.rules.offset.rule import OffsetSteering, hidden_price, hidden_prices
     from terrapref.scenario.path import ReferencePath
 
     camera, path, pose = PinholeCamera(), ReferencePath(np.array([[1.0, 15.0], [59.0, 15.0]])), Pose(17.0, 15.0, 0.0)
     flat = GroundMap(camera, _terrain(()))
     flat.update(SegmentationView.of(np.zeros((camera.config.height_px, camera.config.width_px), dtype=np.uint8)), pose)
 
-    def relief_utility(unseen_weight: float) -> OffsetUtility:
+    def relief_utility(unseen_weight: float, on_path: float = 0.0) -> OffsetUtility:
         weights = np.array(DRIVER_LIKE)
         weights[K] = unseen_weight
-        return OffsetUtility(weights, 5.0, relief=np.zeros(2 * len(RELIEF_BANDS_DEG)), relief_shown=(22.0, 22.0))
+        return OffsetUtility(weights, 5.0, relief=np.zeros(2 * len(RELIEF_BANDS_DEG)), relief_shown=(22.0, 22.0), hidden_on_path=on_path)
 
     def held(gmap: GroundMap, unseen: bool, utility: OffsetUtility | None = None) -> float:
         """The offset held after one frame on ``gmap``, its cells seen background but for the speck
@@ -375,6 +376,9 @@ def test_ground_a_depth_reading_map_has_not_seen_is_priced_as_the_relief_drive_p
     assert hidden_price(relief_utility(0.5)) == 0.0 and hidden_price(relief_utility(-2.0)) == -2.0
     assert held(relief, True, relief_utility(0.5)) == held(relief, False, relief_utility(0.5))
     assert abs(held(relief, True, relief_utility(-2.0))) > abs(held(relief, False, relief_utility(-2.0))) + 0.5
+    # Priced dear beside the path but not on its own lanes (a mound's hidden ground, driven over).
+    assert hidden_prices(relief_utility(-2.0, 2.5)) == (-2.0, 0.0) and hidden_prices(relief_utility(-2.0, 0.5)) == (-2.0, -1.5)
+    assert held(relief, True, relief_utility(-2.0, 2.5)) == held(relief, False, relief_utility(-2.0, 2.5))
     assert abs(held(flat, unseen=True)) > abs(held(flat, unseen=False)) + 0.5
     relief.reset()
     assert not relief.reads_depth  # a new run starts as a map that has read no depth

@@ -27,7 +27,7 @@ from terrapref.rules.offset import fit as offset_fit
 from terrapref.rules.offset.features import OffsetFeatures, gated
 from terrapref.rules.offset.fit import OffsetUtility, fit_offset_utility, fit_softmax, soft_labels
 from terrapref.rules.offset.geometry import OffsetGeometry
-from terrapref.rules.offset.rule import OffsetConfig, OffsetSteering
+from terrapref.rules.offset.rule import OffsetConfig, OffsetSteering, hidden_prices
 from terrapref.rules.offset.steering import intent_offsets, steer
 from terrapref.scenario import parse_scenario
 from terrapref.scenario.path import ReferencePath
@@ -317,6 +317,26 @@ def test_on_relief_the_terrain_is_priced_on_the_frames_with_no_relief_in_view(mo
     assert joint_moved.weights[3] / joint_moved.weights[5] < 0.9 * joint.weights[3] / joint.weights[5]
 
 
+def test_on_relief_ground_never_seen_is_priced_apart_on_the_paths_lanes_and_beside_them():
+    """A driver who keeps off a bank's crest, past which it cannot see, yet drives over a mound
+    into the ground the mound hides: one price for ground never seen would split the difference;
+    the fit prices it dear beside the path and cheap on the path's own lanes, and the rule, on a
+    map that reads depth, prices it so (:func:`hidden_prices`)."""
+    rng, n = np.random.default_rng(5), 300
+    offsets = OffsetGeometry().offsets
+    features, near, intent, relief = _relief_drive(rng, n)
+    intent[n:] = 0.0  # relief in view, nothing else near: on the path
+    lanes = np.abs(offsets) <= offset_fit.HIDDEN_ON_PATH_M + 1e-9
+    mound, bank = slice(n, n + n // 2), slice(n + n // 2, 2 * n)
+    features[n:, :, 3] = 0.0
+    features[mound, :, 4] = np.where(lanes, 3.0, 0.0)  # the ground a mound on the path hides
+    features[bank, :, 4] = np.where(offsets > offset_fit.HIDDEN_ON_PATH_M, 4.0, 0.0)  # past a bank's crest on the right
+    intent[bank] = -0.6  # kept to the left of the bank's foot
+    fit = fit_offset_utility(features, near, intent, offsets, relief=(relief, (4.0, 8.0)))
+    beside, on_path = hidden_prices(OffsetUtility(fit.weights, fit.near_m, relief=fit.relief, hidden_on_path=fit.hidden_on_path))
+    assert fit.hidden_on_path > 0.0 and beside < on_path <= 0.0
+
+
 def test_the_staged_fits_relief_intervals_cover_the_true_price_when_frames_come_in_runs():
     """As the intervals of a fit of every weight at once (test above): drives simulated from a
     known utility (a terrain column, ground never seen, the detour, two relief columns, the gate),
@@ -557,26 +577,33 @@ def test_an_offset_utility_that_prices_relief_keeps_its_prices_in_the_file_and_b
     relief = -np.linspace(0.0, 0.5, 2 * len(RELIEF_BANDS_DEG))
     interval = np.stack([np.arange(20.0), np.arange(20.0) + 0.5], axis=1)
     interval[0] = 0.0  # a band held at 0
-    rule = OffsetRule(OffsetConfig(), OffsetUtility(np.array(DRIVER_LIKE), 5.0, OffsetGeometry(), relief, (22.0, math.nan), interval))
+    rule = OffsetRule(
+        OffsetConfig(), OffsetUtility(np.array(DRIVER_LIKE), 5.0, OffsetGeometry(), relief, (22.0, math.nan), interval, -0.25)
+    )
     block = rule.header()
     assert block["relief"] == {
         "bands_deg": list(RELIEF_BANDS_DEG),
         "weights": relief.tolist(),
         "shown_deg": [22.0, None],
         "price_interval": interval.tolist(),
-        "hidden_on_path": 0.0,
+        "hidden_on_path": -0.25,
     }
     meta = {**model_meta(), "rules": [block], "drives": "offset"}
     back = Planner(load_model(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), meta))).rule
     np.testing.assert_array_equal(back.utility.relief, relief)
     np.testing.assert_array_equal(back.utility.relief_interval, interval)
+    assert back.utility.hidden_on_path == -0.25
     assert back.utility.relief_shown[0] == 22.0 and math.isnan(back.utility.relief_shown[1])
     assert "(19.0 to 19.5)" in back.relief_lines()[1] and "with its 95% interval" in back.relief_lines()[0]
     assert ": 4 0.0 held, 6 " in back.relief_lines()[0]
-    older = {**block, "relief": {k: v for k, v in block["relief"].items() if k != "price_interval"}}  # a file before intervals
+    older = {
+        **block,
+        "relief": {k: v for k, v in block["relief"].items() if k not in ("price_interval", "hidden_on_path")},
+    }  # a file before either
     older_meta = {**meta, "rules": [older]}
     before = Planner(load_model(save_model(tmp_path / "old.safetensors", config, skip_path_weights(config), older_meta))).rule
     assert before.utility.relief_interval is None and " to " not in before.relief_lines()[0]
+    assert before.utility.hidden_on_path == 0.0
     assert "relief" not in OffsetRule(OffsetConfig(), OffsetUtility(np.array(DRIVER_LIKE), 5.0)).header()
     for change, field in (
         ({"bands_deg": [5.0, 10.0]}, "rules[0].relief.bands_deg"),
@@ -591,7 +618,8 @@ def test_an_offset_utility_that_prices_relief_keeps_its_prices_in_the_file_and_b
         ({"weights": [10**400] * (2 * len(RELIEF_BANDS_DEG))}, "rules[0].relief.weights"),
         ({"weights": [True] * (2 * len(RELIEF_BANDS_DEG))}, "rules[0].relief.weights"),
         ({"extra": 1}, "rules[0].relief"),
-        ({"hidden_on_path": math.nan}, "rules[0].hidden_on_path"),
+        ({"hidden_on_path": math.nan}, "rules[0].relief.hidden_on_path"),
+        ({"hidden_on_path": "1"}, "rules[0].relief.hidden_on_path"),
     ):
         bad_block = {**block, "relief": {**block["relief"], **change}}
         bad = save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), {**meta, "rules": [bad_block]})

@@ -45,7 +45,7 @@ WEIGHT_DECIMALS = 12  # fitted weights are kept to this many decimals
 INTERVAL_BLOCK_FRAMES = 50  # the frames a relief price's interval takes as one piece of evidence (5 s at 10 Hz)
 INTERVAL_DECIMALS = 6  # its ends are kept to this many decimals
 NEAR_CANDIDATES_M = (2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 6.0, 7.0, 8.0)
-HIDDEN_ON_PATH_M = 0.6  # EXPERIMENT: offsets within this of the path price their ground never seen apart
+HIDDEN_ON_PATH_M = 0.6  # offsets within this of the path (the body's half width) price ground never seen apart, on relief
 
 
 @dataclass(frozen=True)
@@ -65,6 +65,10 @@ class OffsetUtility:
         relief_interval: the 95% interval (R, 2) of each band's price as it is printed (its
             weight and those of the bands below it, over the detour's price: :func:`relief_prices`);
             None: not known (a utility without relief, or a file written before intervals).
+        hidden_on_path: what a metre never seen weighs on the offsets within
+            :data:`HIDDEN_ON_PATH_M` of the path beyond its weight elsewhere (``weights``'
+            never-seen column): a mound hides ground on the path that a driver drives into, a
+            bank's crest ground beside it that the same driver keeps off; 0 without relief.
     """
 
     weights: np.ndarray
@@ -91,6 +95,7 @@ class OffsetFit:
         relief: the relief columns' weights, for frames read with them; else None.
         relief_shown: the steepest bands the frames showed (OffsetUtility.relief_shown).
         relief_interval: the 95% intervals of the relief prices (OffsetUtility.relief_interval).
+        hidden_on_path: ground never seen on the path's lanes (OffsetUtility.hidden_on_path).
     """
 
     weights: np.ndarray
@@ -206,7 +211,8 @@ def fit_offset_utility(
     """Fit the offset utility to frames' offset features (N, O, K + 2), near distances (N,)
     and intended offsets (N,) over the candidate ``offsets`` (O,) [m], with their relief columns
     when given (``relief``: the columns (N, O, R) and the bands [deg] they count past, side slope
-    then grade); frames without an intended offset (NaN) are left out; ``config`` None: the
+    then grade; with them, the metres never seen on the offsets within :data:`HIDDEN_ON_PATH_M`
+    get a column of their own, after the relief columns); frames without an intended offset (NaN) are left out; ``config`` None: the
     default fit."""
     config = config or OffsetFitConfig()
     keep = np.isfinite(intent)
@@ -273,8 +279,8 @@ def flat_frames(columns: np.ndarray) -> np.ndarray | None:
 
 def _staged_columns(width: int, columns: int) -> np.ndarray:
     """The columns of a gated relief fit's ``width`` that its second stage fits (:func:`fit_staged`):
-    the ground never seen (the ``columns``' last but one), then the relief columns (all between
-    the ``columns`` and the gate)."""
+    the ground never seen (the ``columns``' last but one), then the relief columns and the ground
+    never seen on the path's lanes (all between the ``columns`` and the gate)."""
     return np.r_[columns - 2, columns : width - 1]
 
 

@@ -278,7 +278,7 @@ class OffsetRule(Rule):
         except ValueError as exc:
             raise where.error("", str(exc)) from None
         relief, shown, interval = _relief_weights(block, where)
-        hidden_on_path = number(block["relief"], "hidden_on_path", where, 0.0) if relief is not None else 0.0
+        hidden_on_path = _hidden_on_path(block, where) if relief is not None else 0.0
         fit = None
         if "loss" in block or "samples" in block:  # how the fit went, as training wrote it
             samples = block.get("samples")
@@ -409,6 +409,14 @@ def _relief_weights(block: Mapping[str, Any], where: Where) -> tuple[np.ndarray 
         if interval is None or (interval[:, 0] > interval[:, 1]).any():
             raise where.error("relief.price_interval", f"expected {len(weights)} pairs of finite numbers, low then high")
     return weights, (roll, grade), interval
+
+
+def _hidden_on_path(block: Mapping[str, Any], where: Where) -> float:
+    """The relief block's ``hidden_on_path`` (0 in a file written before it was fitted)."""
+    value = block["relief"].get("hidden_on_path", 0.0)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise where.error("relief.hidden_on_path", "expected a finite number")
+    return float(value)
 
 
 def steep_from(utility: OffsetUtility) -> tuple[float, float]:
