@@ -31,7 +31,9 @@ little unseen ground beside patches to price it, and an unknown cell is, on aver
 On a map that reads depth (relief), unseen ground is mostly ground that a crest, a mound or a bank
 hides from the camera, and how much a driver minds it is their own: one drives on over a mound to
 see, a cautious one goes round what it cannot see past. A utility fitted on relief has seen plenty
-of hidden ground, and there it prices it as its drive did (:func:`hidden_price`, at most 0); one
+of hidden ground, and there it prices it as its drive did, on the path's own lanes and beside
+them apart (:func:`hidden_prices`, each at most 0): a mound hides ground on the path that a
+driver drives into, a bank's crest ground beside it that the same driver keeps off; one
 fitted on flat ground has not, and prices it as on flat ground. Priced as an average class, the
 ground behind every mound on the path made a detour worth it, for a driver who drives over
 mounds, as soon as anything (a mislabelled speck) lifted the gate. The stop rule still keeps the
