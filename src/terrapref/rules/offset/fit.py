@@ -252,17 +252,8 @@ def fit_offset_utility(
     weights = np.concatenate([theta[:columns], theta[-1:]])  # the relief columns' weights stand between those and the gate
     priced = theta[columns : columns + R] if relief is not None else None
     shown = relief_shown(kept, relief[1]) if kept is not None else None
-    return OffsetFit(
-        weights,
-        chosen,
-        round(loss, WEIGHT_DECIMALS),
-        losses,
-        int(keep.sum()),
-        priced,
-        shown,
-        interval,
-        float(theta[-2]) if relief is not None else 0.0,
-    )
+    hidden_on_path = float(theta[-2]) if relief is not None else 0.0  # the lanes' own never-seen column stands just before the gate
+    return OffsetFit(weights, chosen, round(loss, WEIGHT_DECIMALS), losses, int(keep.sum()), priced, shown, interval, hidden_on_path)
 
 
 LEVEL_FRAMES_LEAST = 200  # the fewest frames with nothing steep ahead that the near distance is chosen on; fewer: on all
