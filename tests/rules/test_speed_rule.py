@@ -309,6 +309,25 @@ def test_a_class_shown_mostly_at_its_edge_is_learned_at_its_own_speed_from_the_f
     assert fit.model.speeds_mps[ROCK] == pytest.approx(0.8) and fit.model.speeds_mps[WATER] == pytest.approx(0.5)
 
 
+def test_a_class_shown_well_inside_only_between_lethal_walls_is_learned_there_not_at_its_edges():
+    """Rock shown well inside only as a lane between lethal walls (1.0 m beside the footprint),
+    which the driver drives at rock's speed, and otherwise only at its edge, brushing water and
+    driven at water's speed: the lane's frames give rock's speed, not the edge's."""
+    truth, seen = _track(), _track()
+    for start in np.flatnonzero((truth[1:, 2] == ROCK) & (truth[:-1, 2] != ROCK)) + 1:
+        lane, edge = slice(start, start + 15), slice(start + 15, start + 30)
+        truth[lane, 5], truth[lane, 8] = LETHAL, LETHAL  # the outer rings: walls 1 m beside the footprint
+        seen[lane, 5], seen[lane, 8] = LETHAL, LETHAL
+        truth[edge, 0] = WATER  # the footprint's right edge: the driver's speed there is water's
+        seen[edge, 6] = WATER  # the map puts it in the ring's right point, just beyond the footprint
+    v = _drive(DRIVER, truth)[2]
+    way, curvature, _, frame = _drive(DRIVER, seen)
+    fit = fit_speed(Drive(way, curvature, v, frame), K, (LETHAL,))
+    assert fit is not None
+    assert fit.model.near_lethal_mps is None  # the driver does not slow beside the walls
+    assert fit.model.speeds_mps[ROCK] == pytest.approx(0.8) and fit.model.speeds_mps[WATER] == pytest.approx(0.5)
+
+
 def test_a_lag_pairs_frames_only_within_one_recording():
     way, curvature, v, _ = _drive(DRIVER, _track())
     half = len(v) // 2

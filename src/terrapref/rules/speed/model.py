@@ -406,16 +406,20 @@ def _cruising(
     """Each column's cruising speed (NaN: not shown, or lethal) and its interval, from the frames
     ``on`` it alone, steady, and of those the frames well inside it (its column alone within the
     nearer ring too), each (K + 1, N): well inside it, level and away from lethal terrain
-    (``near``) where the drive shows enough such frames; else anywhere on it alone, level and
-    away from lethal terrain; else on grades; else beside lethal terrain too (a lane between
-    lethal walls). A frame at a patch's edge is the driver's or not by a few centimetres of
-    where the map puts the edge: the driver, brushing the next patch, drives at that patch's
-    speed there, and a class the drive shows mostly at its edges was learned at its neighbour's."""
+    (``near``) where the drive shows enough such frames; else well inside it and level, beside
+    lethal terrain too (a lane between lethal walls); else anywhere on it alone, level and away
+    from lethal terrain; else on grades; else beside lethal terrain too. A frame at a patch's
+    edge is the driver's or not by a few centimetres of where the map puts the edge: the driver,
+    brushing the next patch, drives at that patch's speed there, and a class the drive shows
+    mostly at its edges was learned at its neighbour's (a strip's detour onto it, driven at the
+    strip's speed, was most of a class's frames away from lethal terrain on a course that shows
+    each pair once)."""
     alone, inside = on
     speeds: list[float] = []
     intervals: list[tuple[float, float] | None] = []
     for col in range(frames.k + 1):
-        for rows_on, where in ((inside, ~near & level), (alone, ~near & level), (alone, ~near), (alone, level), (alone, None)):
+        tries = ((inside, ~near & level), (inside, level), (alone, ~near & level), (alone, ~near), (alone, level), (alone, None))
+        for rows_on, where in tries:
             rows = np.flatnonzero(rows_on[col] & (True if where is None else where))
             if len(rows) >= MIN_FRAMES:
                 break
