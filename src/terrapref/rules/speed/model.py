@@ -417,8 +417,8 @@ def _cruising(
     alone, inside = on
     speeds: list[float] = []
     intervals: list[tuple[float, float] | None] = []
+    tries = ((inside, ~near & level), (inside, level), (alone, ~near & level), (alone, ~near), (alone, level), (alone, None))
     for col in range(frames.k + 1):
-        tries = ((inside, ~near & level), (inside, level), (alone, ~near & level), (alone, ~near), (alone, level), (alone, None))
         for rows_on, where in tries:
             rows = np.flatnonzero(rows_on[col] & (True if where is None else where))
             if len(rows) >= MIN_FRAMES:
