@@ -315,7 +315,7 @@ def test_a_frame_of_more_segments_than_the_march_first_makes_room_for_agrees_wit
     planes = relief_compiled._planes(axes, renderer._ray_a)
     below = float(ground.height_at(centre[None, :2])[0]) - centre[2]
     march = (planes, -below, max(-below, 0.2), camera.fy, camera.cy, camera.config.max_range_m, centre, renderer._ray_b)
-    _, segments = relief_compiled._march(*march, (heights, 1.0 / ground.resolution_m, steps, shift, span), camera.shape)
+    _, segments, _ = relief_compiled._march(*march, (heights, 1.0 / ground.resolution_m, steps, shift, span), camera.shape)
     assert len(segments[0]) > 64 * camera.config.width_px
     ids, depth = renderer.render_with_depth(pose, attitude)
     pixels = np.random.default_rng(0).choice(ids.size, 2000, replace=False)

@@ -25,8 +25,8 @@ ground, taken as straight, stays within a tolerance of the height field around t
 walked two cells a step, smooth ground in longer strides).
 
 **Shade**, one image row at a time: each pixel's inverse depth from its column's segment over
-that row (the segments sorted by their first row, so that each row takes up those that begin
-there), then its depth, the range check and the class of its ground point, in loops the compiler
+that row (the march chains the segments that begin on each row, so that each row takes up
+those that begin there, with no sort), then its depth, the range check and the class of its ground point, in loops the compiler
 vectorises, as the flat renderer's. The same depths, bit for bit, as writing each pixel in the
 march gave.
 
@@ -138,8 +138,8 @@ def render_relief(
     clearance = max(-below, 0.2)
     planes = _planes(axes, ray_a)
     ground = (heights, per_m, steps, shift, span)
-    filled, segments = _march(planes, -below, clearance, fy, cy, max_range_m, centre, ray_b, ground, depth.shape)
-    _shade(filled, segments, axes, centre, ray_a, ray_b, max_range_m, per_m, raster, nx, x_max, y_max, unknown, ids, depth)
+    filled, segments, heads = _march(planes, -below, clearance, fy, cy, max_range_m, centre, ray_b, ground, depth.shape)
+    _shade(filled, segments, heads, axes, centre, ray_a, ray_b, max_range_m, per_m, raster, nx, x_max, y_max, unknown, ids, depth)
 
 
 @njit(cache=True, nogil=True)
@@ -189,12 +189,13 @@ def _march(
     ray_b: np.ndarray,
     ground: tuple[np.ndarray, float, np.ndarray, int, tuple[float, float]],
     shape: tuple[int, int],
-) -> tuple[np.ndarray, Segments]:
+) -> tuple[np.ndarray, Segments, np.ndarray]:
     """Walk every column's plane (``planes``, :func:`_planes`) of a frame of ``shape`` (H, W) from
     the ground under the camera (``drop`` [m] below it) to the first sample past ``max_range_m``,
     filling its rows from the bottom up. ``ground``: the height field, its cells per metre, the
     step lengths and their block's shift (:func:`step_lengths`), its lowest and highest heights.
-    Returns each column's lowest row left unfilled (W,) and the :data:`Segments` filling the rest.
+    Returns each column's lowest row left unfilled (W,), the :data:`Segments` filling the rest,
+    and the first of those that begin on each row (H,), -1 for none.
 
     A sample at a time for every column, rather than a column at a time: a column's sample
     waits on its last (the drop it predicts), and neighbouring columns read neighbouring
@@ -220,6 +221,7 @@ def _march(
     where = (centre[0] * per_m - 0.5, centre[1] * per_m - 0.5, per_m, nx - 1.0 - 1e-9, ny - 1.0 - 1e-9, nx, shift, steps.shape[1])
     per_row, clearance2, cap = 1.0 / (clearance * fy), clearance * clearance, 2.0 * max_range_m + 1.0
     segments, n_segments = _no_segments(64 * width), 0
+    heads = np.full(height, -1, np.int64)
     first = True
     while n_live > 0:
         _where(u, ratio, last, before, hx, hy, mx, my, where, new, fu, fv, cell, block)
@@ -230,18 +232,20 @@ def _march(
         before, last, new = last, new, before
         if not first:
             segments = _with_room(segments, n_segments, width)
-            stopped, n_segments = _fill(row, live, stop, (vd, vf, wd, wf), u, max_range_m, ray_b, segments, n_segments)
+            stopped, n_segments = _fill(row, live, stop, (vd, vf, wd, wf), u, max_range_m, ray_b, segments, n_segments, heads)
             n_live -= stopped
         first = False
         vd, wd = wd, vd
         vf, wf = wf, vf
         _advance(u, taken, ratio, longest, per_row, clearance2, cap)
-    return row, _taken(segments, n_segments)
+    return row, _taken(segments, n_segments), heads
 
 
 Segments = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
-"""Segments of image columns that see the ground (:func:`_fill`): each one's column, first and
-last row, its inverse depth at its last row [1/m] and that inverse's fall per row up."""
+"""Segments of image columns that see the ground (:func:`_fill`): each one's column, the next
+segment that begins on the same row as it (-1 for none; the first is in the march's ``heads``),
+its last row, its inverse depth at its last row [1/m] and that inverse's fall per row up. A
+column's segments begin on different rows, so a row's chain holds each column once at most."""
 
 
 @njit(cache=True, nogil=True)
@@ -253,8 +257,8 @@ def _no_segments(room: int) -> Segments:
 @njit(cache=True, nogil=True, inline="always")
 def _taken(segments: Segments, held: int) -> Segments:
     """The first ``held`` of ``segments``."""
-    cols, firsts, lasts, inverses, changes = segments
-    return cols[:held], firsts[:held], lasts[:held], inverses[:held], changes[:held]
+    cols, nexts, lasts, inverses, changes = segments
+    return cols[:held], nexts[:held], lasts[:held], inverses[:held], changes[:held]
 
 
 @njit(cache=True, nogil=True)
@@ -280,15 +284,16 @@ def _fill(
     ray_b: np.ndarray,
     segments: Segments,
     held: int,
+    heads: np.ndarray,
 ) -> tuple[int, int]:
     """Fill each live column's rows from ``row`` up to ``stop`` (its sample's, :func:`_project`)
     and move ``row`` past them; ``samples``: each column's last sample and this one, down and
     forward (``vd``, ``vf``, ``wd``, ``wf``). The rows filled are added to ``segments``, after the
-    ``held`` there (:data:`Segments`): row ``last - k`` of a segment has the inverse depth
-    ``inverse - k * change``. A column stops (``live``) at the image's top row or with its sample
-    past ``max_range_m``. Returns how many stopped, and how many segments there are."""
+    ``held`` there (:data:`Segments`), each at the head of its first row's chain (``heads``):
+    row ``last - k`` of a segment has the inverse depth ``inverse - k * change``. A column stops
+    (``live``) at the image's top row or with its sample past ``max_range_m``. Returns how many stopped, and how many segments there are."""
     vd, vf, wd, wf = samples
-    cols, firsts, lasts, inverses, changes = segments
+    cols, nexts, lasts, inverses, changes = segments
     height = ray_b.shape[0]
     down = ray_b[1] - ray_b[0] if height > 1 else 0.0  # the ray offset's change from one row to the next
     stopped = 0
@@ -309,7 +314,8 @@ def _fill(
                 p, q = dd / cross, -df / cross
             else:
                 p, q = 1.0 / f, 0.0
-            cols[held], firsts[held], lasts[held], inverses[held], changes[held] = col, lo, r, p + q * ray_b[r], q * down
+            cols[held], nexts[held], lasts[held], inverses[held], changes[held] = col, heads[lo], r, p + q * ray_b[r], q * down
+            heads[lo] = held
             held += 1
             row[col] = lo - 1
         if row[col] < 0 or u[col] > max_range_m:
@@ -527,6 +533,7 @@ def _advance(
 def _shade(
     filled: np.ndarray,
     segments: Segments,
+    heads: np.ndarray,
     axes: np.ndarray,
     centre: np.ndarray,
     ray_a: np.ndarray,
@@ -542,7 +549,8 @@ def _shade(
     depth: np.ndarray,
 ) -> None:
     """Each pixel's depth, NaN where none or out of range, and class, row by row, from the inverse
-    depths of its column's ``segments`` (:data:`Segments`; rows below ``filled`` (W,))."""
+    depths of its column's ``segments`` (:data:`Segments`, ``heads`` the first to begin on each
+    row; rows below ``filled`` (W,))."""
     height, width = ids.shape
     top = filled.min()
     lowest = filled.astype(np.int32)  # compared in 32 bits, as wide as the float32 lanes it masks
@@ -554,14 +562,16 @@ def _shade(
     nx32 = np.uint32(nx)
     zero, one, nan = np.float32(0.0), np.float32(1.0), np.float32(np.nan)
     # Each column's segment over the row, its last row, inverse there and fall per row up (a
-    # column with none reads an inverse of 0: no ground); the segments by their first row.
-    starts, (by_col, by_last, by_inverse, by_change) = _by_first_row(segments, height)
+    # column with none reads an inverse of 0: no ground).
+    cols, nexts, lasts, inverses, changes = segments
     seg_last, seg_inverse, seg_change = np.zeros(width, np.int64), np.zeros(width), np.zeros(width)
     row_inverse = np.empty(width, np.float32)
     for row in range(height):
         out_ids, out_depth = ids[row], depth[row]
-        for k in range(starts[row], starts[row + 1]):  # the segments that begin on this row
-            seg_last[by_col[k]], seg_inverse[by_col[k]], seg_change[by_col[k]] = by_last[k], by_inverse[k], by_change[k]
+        k = heads[row]
+        while k >= 0:  # the segments that begin on this row
+            seg_last[cols[k]], seg_inverse[cols[k]], seg_change[cols[k]] = lasts[k], inverses[k], changes[k]
+            k = nexts[k]
         if row <= top:
             out_ids[:] = unknown
             out_depth[:] = np.nan
@@ -582,26 +592,6 @@ def _shade(
             out_depth[col] = along if seen else nan
         for col in range(width):
             out_ids[col] = raster[cells[col]]
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _by_first_row(segments: Segments, height: int) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
-    """The ``segments`` (:data:`Segments`) of a frame ``height`` rows tall in the order of their
-    first row (a counting sort: the order they came in kept among those of a row), and where each
-    row's begin in that order, (height + 1,): their columns, last rows, inverses and changes."""
-    cols, firsts, lasts, inverses, changes = segments
-    n = cols.shape[0]
-    starts = np.zeros(height + 1, np.int64)
-    for i in range(n):
-        starts[firsts[i] + 1] += 1
-    starts = np.cumsum(starts)
-    by_col, by_last, by_inverse, by_change = np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n), np.empty(n)
-    placed = starts[:-1].copy()
-    for i in range(n):
-        k = placed[firsts[i]]
-        by_col[k], by_last[k], by_inverse[k], by_change[k] = cols[i], lasts[i], inverses[i], changes[i]
-        placed[firsts[i]] = k + 1
-    return starts, (by_col, by_last, by_inverse, by_change)
 
 
 @njit(cache=True, nogil=True, inline="always")
