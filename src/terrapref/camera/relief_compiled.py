@@ -195,11 +195,9 @@ def _march(
     filling its rows from the bottom up. ``ground``: the height field, its cells per metre, the
     step lengths and their block's shift (:func:`step_lengths`), its lowest and highest heights.
     Returns each column's lowest row left unfilled (W,), the :data:`Segments` filling the rest,
-    and the first of those that begin on each row (H,), -1 for none.
-
-    A sample at a time for every column, rather than a column at a time: a column's sample
-    waits on its last (the drop it predicts), and neighbouring columns read neighbouring
-    cells."""
+    and the first of those that begin on each row (H,), -1 for none. A sample at a time for every
+    column, rather than a column at a time: a column's sample waits on its last (the drop it
+    predicts), and neighbouring columns read neighbouring cells."""
     heights, per_m, steps, shift, span = ground
     height, width = shape
     hx, hy, mx, my, dh, fh, dm, fm = planes[0], planes[1], planes[2], planes[3], planes[4], planes[5], planes[6], planes[7]
@@ -220,8 +218,7 @@ def _march(
     ny, nx = heights.shape
     where = (centre[0] * per_m - 0.5, centre[1] * per_m - 0.5, per_m, nx - 1.0 - 1e-9, ny - 1.0 - 1e-9, nx, shift, steps.shape[1])
     per_row, clearance2, cap = 1.0 / (clearance * fy), clearance * clearance, 2.0 * max_range_m + 1.0
-    segments, n_segments = _no_segments(64 * width), 0
-    heads = np.full(height, -1, np.int64)
+    segments, n_segments, heads = _no_segments(64 * width), 0, np.full(height, -1, np.int64)
     first = True
     while n_live > 0:
         _where(u, ratio, last, before, hx, hy, mx, my, where, new, fu, fv, cell, block)
@@ -563,15 +560,11 @@ def _shade(
     zero, one, nan = np.float32(0.0), np.float32(1.0), np.float32(np.nan)
     # Each column's segment over the row, its last row, inverse there and fall per row up (a
     # column with none reads an inverse of 0: no ground).
-    cols, nexts, lasts, inverses, changes = segments
     seg_last, seg_inverse, seg_change = np.zeros(width, np.int64), np.zeros(width), np.zeros(width)
     row_inverse = np.empty(width, np.float32)
     for row in range(height):
         out_ids, out_depth = ids[row], depth[row]
-        k = heads[row]
-        while k >= 0:  # the segments that begin on this row
-            seg_last[cols[k]], seg_inverse[cols[k]], seg_change[cols[k]] = lasts[k], inverses[k], changes[k]
-            k = nexts[k]
+        _take_up(heads[row], segments, seg_last, seg_inverse, seg_change)
         if row <= top:
             out_ids[:] = unknown
             out_depth[:] = np.nan
@@ -592,6 +585,17 @@ def _shade(
             out_depth[col] = along if seen else nan
         for col in range(width):
             out_ids[col] = raster[cells[col]]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _take_up(first: int, segments: Segments, seg_last: np.ndarray, seg_inverse: np.ndarray, seg_change: np.ndarray) -> None:
+    """The segments of a row's chain (:data:`Segments`, from ``first``; -1: none) set as their
+    columns' segment: each one's last row, inverse depth there and its fall per row up."""
+    cols, nexts, lasts, inverses, changes = segments
+    k = first
+    while k >= 0:
+        seg_last[cols[k]], seg_inverse[cols[k]], seg_change[cols[k]] = lasts[k], inverses[k], changes[k]
+        k = nexts[k]
 
 
 @njit(cache=True, nogil=True, inline="always")
