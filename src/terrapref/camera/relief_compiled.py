@@ -26,9 +26,9 @@ walked two cells a step, smooth ground in longer strides).
 
 **Shade**, one image row at a time: each pixel's inverse depth from its column's segment over
 that row (the march chains the segments that begin on each row, so that each row takes up
-those that begin there, with no sort), then its depth, the range check and the class of its ground point, in loops the compiler
-vectorises, as the flat renderer's. The same depths, bit for bit, as writing each pixel in the
-march gave.
+those that begin there, with no sort), then its depth, the range check and the class of its
+ground point, in loops the compiler vectorises, as the flat renderer's. The same depths, bit for
+bit, as writing each pixel in the march gave.
 
 The march's loops over the columns are split so that the compiler vectorises the arithmetic
 (the height field's four corners are read in a loop of their own). Float64 in the march; the
@@ -288,7 +288,8 @@ def _fill(
     forward (``vd``, ``vf``, ``wd``, ``wf``). The rows filled are added to ``segments``, after the
     ``held`` there (:data:`Segments`), each at the head of its first row's chain (``heads``):
     row ``last - k`` of a segment has the inverse depth ``inverse - k * change``. A column stops
-    (``live``) at the image's top row or with its sample past ``max_range_m``. Returns how many stopped, and how many segments there are."""
+    (``live``) at the image's top row or with its sample past ``max_range_m``. Returns how many
+    stopped, and how many segments there are."""
     vd, vf, wd, wf = samples
     cols, nexts, lasts, inverses, changes = segments
     height = ray_b.shape[0]
