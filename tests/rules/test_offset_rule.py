@@ -317,6 +317,32 @@ def test_on_relief_the_terrain_is_priced_on_the_frames_with_no_relief_in_view(mo
     assert joint_moved.weights[3] / joint_moved.weights[5] < 0.9 * joint.weights[3] / joint.weights[5]
 
 
+def test_on_relief_the_slopes_are_priced_on_the_frames_with_no_class_in_view(monkeypatch):
+    """A driver that drives over a slope on the path when nothing else is near, and holds a line
+    1.4 m off beside the same slope where a patch's edge is near the footprint: the second frames
+    show the patch, not the slope. Relief is priced on the frames with no class in view, so the
+    slope costs nothing; read on every frame, it would be priced for the patch's sake."""
+    rng, n = np.random.default_rng(7), 300
+    offsets, bands = OffsetGeometry().offsets, (4.0, 8.0)
+    features, near, intent, relief = _relief_drive(rng, n)
+    near = np.concatenate([near, rng.uniform(1.0, 10.0, n)])
+    features = np.concatenate([features, np.zeros((n, len(offsets), K + 2))])
+    features[:, :, 5] = offsets**2 * 7.0
+    intent = np.concatenate([intent, np.full(n, 1.4)])
+    relief = np.concatenate([relief, np.zeros((n, len(offsets), 4))])
+    slope = np.where(np.abs(offsets) < 1.2, 2.0, 0.0)[:, None]
+    features[n : 2 * n, :, 3] = 0.0  # the slope alone, driven over
+    intent[n : 2 * n] = 0.0
+    relief[n:, :, :2] = slope
+    features[2 * n :, :, 3] = np.where((np.abs(offsets) > 0.6) & (np.abs(offsets) < 1.0), 0.5, 0.0)  # a patch's edge
+    fit = fit_offset_utility(features, near, intent, offsets, relief=(relief, bands))
+    assert fit.weights[3] < 0 and (fit.relief == 0.0).all()
+    monkeypatch.setattr(offset_fit, "TERRAIN_FREE_FRAMES_LEAST", n + 1)  # too few such frames: relief read on every frame
+    every = fit_offset_utility(features, near, intent, offsets, relief=(relief, bands))
+    np.testing.assert_array_equal(every.weights[[0, 1, 2, 3, 5]], fit.weights[[0, 1, 2, 3, 5]])
+    assert every.relief[0] + every.relief[1] < 0
+
+
 def test_on_relief_ground_never_seen_is_priced_apart_on_the_paths_lanes_and_beside_them():
     """A driver who keeps off a bank's crest, past which it cannot see, yet drives over a mound
     into the ground the mound hides: one price for ground never seen would split the difference;
@@ -364,9 +390,9 @@ def test_the_staged_fits_relief_intervals_cover_the_true_price_when_frames_come_
         p /= p.sum(axis=1, keepdims=True)
         Y = np.eye(offsets)[np.repeat(np.array([rng.choice(offsets, p=row) for row in p[::repeat]]), repeat)]
         flat = ~X[:, :, 3:5].any(axis=(1, 2))
-        theta, _, free, first = fit_staged(X, Y, flat, 3, 1e-6)
+        theta, _, free, first = fit_staged(X, Y, (flat, None), 3, 1e-6)
         for block in (50, 1):
-            covariance = staged_covariance(X, Y, (theta, free), (flat, second, first), 1e-6, block)
+            covariance = staged_covariance(X, Y, (theta, free), ((flat, None), second, first), 1e-6, block)
             interval = relief_price_intervals(theta, covariance, 3, 2)
             inside = bool(((interval[:, 0] <= price) & (price <= interval[:, 1])).all())
             covered, naive_covered = (covered + inside, naive_covered) if block == 50 else (covered, naive_covered + inside)

@@ -13,11 +13,15 @@ patch is near.
 
 On relief the weights are then fitted in two stages, where enough frames have no relief in view
 (:func:`flat_frames`): the terrain's (each class, the detour, the gate) on those frames alone,
-then the relief bands' and the never-seen ground's on every frame with the terrain's held. A
-driver's terrain order and its prices are what they are without relief (SPEC 19); fitted on
-every frame at once, the frames where a drive holds a line along a slope with a patch's edge
-beside it (the vehicle wandering a few tenths of a metre onto it) read as a driver for whom the
-classes are cheap, and priced them at a third to a half of its own.
+then the relief bands' and the never-seen ground's, with the terrain's held, on the frames with
+no class in view (:func:`terrain_free_frames`; every frame where too few have none). A driver's
+terrain order and its prices are what they are without relief (SPEC 19); fitted on every frame
+at once, the frames where a drive holds a line along a slope with a patch's edge beside it (the
+vehicle wandering a few tenths of a metre onto it) read as a driver for whom the classes are
+cheap, and priced them at a third to a half of its own. The same frames, read for relief, price
+slopes a driver takes without a second look: a line held a few tenths of a metre off a patch's
+edge reads as one held off the slope beyond it, and a bold driver's grades came out priced as
+dearly as a careful one's.
 
 The relief prices come with 95% intervals: the fitted weights' covariance by the sandwich of
 an M-estimator, its meat summed over blocks of :data:`INTERVAL_BLOCK_FRAMES` consecutive frames
@@ -240,10 +244,11 @@ def fit_offset_utility(
             best = (theta, loss, candidate, free, gated_x)
     theta, loss, chosen, free, gated_x = best
     flat = None if kept is None else flat_frames(kept)
+    plain = None if kept is None else terrain_free_frames(X, columns - 2)
     first = None
     if flat is not None:
-        theta, loss, free, first = fit_staged(gated_x, Y, flat, columns, config.l2)
-    interval = None if relief is None else _relief_interval(gated_x, Y, (theta, free), (flat, first), (columns, R), config.l2)
+        theta, loss, free, first = fit_staged(gated_x, Y, (flat, plain), columns, config.l2)
+    interval = None if relief is None else _relief_interval(gated_x, Y, (theta, free), ((flat, plain), first), (columns, R), config.l2)
     # NumPy's exp, sums and matrix products may differ in the last bits between CPUs; the convex
     # fit does not amplify them, and rounding leaves the same weights (and losses) everywhere but
     # at a rounding boundary.
@@ -258,6 +263,7 @@ def fit_offset_utility(
 
 LEVEL_FRAMES_LEAST = 200  # the fewest frames with nothing steep ahead that the near distance is chosen on; fewer: on all
 FLAT_FRAMES_LEAST = 200  # the fewest frames with no relief in view that the terrain's prices are fitted on; fewer: on all
+TERRAIN_FREE_FRAMES_LEAST = 200  # the fewest frames with no class in view that relief's prices are fitted on; fewer: on all
 
 
 def flat_frames(columns: np.ndarray) -> np.ndarray | None:
@@ -268,6 +274,14 @@ def flat_frames(columns: np.ndarray) -> np.ndarray | None:
     return flat if flat.sum() >= FLAT_FRAMES_LEAST else None
 
 
+def terrain_free_frames(X: np.ndarray, classes: int) -> np.ndarray | None:
+    """The frames (N,) bool whose columns ``X`` (N, O, P), the first ``classes`` of them the
+    terrain classes', count no class at any offset: nothing but relief and ground never seen to
+    choose a way by; None where fewer than :data:`TERRAIN_FREE_FRAMES_LEAST` are."""
+    free = ~X[:, :, :classes].any(axis=(1, 2))
+    return free if free.sum() >= TERRAIN_FREE_FRAMES_LEAST else None
+
+
 def _staged_columns(width: int, columns: int) -> np.ndarray:
     """The columns of a gated relief fit's ``width`` that its second stage fits (:func:`fit_staged`):
     the ground never seen (the ``columns``' last but one), then the relief columns and the ground
@@ -275,21 +289,26 @@ def _staged_columns(width: int, columns: int) -> np.ndarray:
     return np.r_[columns - 2, columns : width - 1]
 
 
-def fit_staged(X: np.ndarray, Y: np.ndarray, flat: np.ndarray, columns: int, l2: float) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+def fit_staged(
+    X: np.ndarray, Y: np.ndarray, frames: tuple[np.ndarray, np.ndarray | None], columns: int, l2: float
+) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
     """The weights of a fit on relief in two stages (module docstring): those of the terrain (the
-    classes, the detour, the gate) fitted to the ``flat`` frames alone, with the ground never
-    seen there, then those of the ground never seen and of relief (:func:`_staged_columns`) to
-    every frame with the terrain's held. ``X`` (N, O, P): the gated columns, ``columns`` of them
-    the terrain's and never seen's. The weights (P,), the loss over every frame, which weights
-    were fitted (not held at 0 by the second stage), and the first stage's weights (P; 0 for relief)."""
+    classes, the detour, the gate) fitted to the ``frames``' first (N,) bool, those with no relief
+    in view, alone, with the ground never seen there, then those of the ground never seen and of
+    relief (:func:`_staged_columns`) with the terrain's held, to the ``frames``' second (those
+    with no class in view; None: every frame). ``X`` (N, O, P): the gated columns, ``columns`` of
+    them the terrain's and never seen's. The weights (P,), the loss over every frame, which
+    weights were fitted (not held at 0 by the second stage), and the first stage's weights (P; 0
+    for relief)."""
+    flat, plain = frames
     second = _staged_columns(X.shape[2], columns)
     first_columns = np.setdiff1d(np.arange(X.shape[2]), second[1:])
     first = np.zeros(X.shape[2])
     first[first_columns], _ = fit_softmax(X[flat][:, :, first_columns], Y[flat], l2)
     theta = first.copy()
     theta[second[0]] = 0.0
-    base = X @ theta
-    theta[second], _, fitted = _fit_steeper_costs_more(X[:, :, second], Y, l2, range(1, len(second) - 1), base)
+    Xp, Yp = (X, Y) if plain is None else (X[plain], Y[plain])
+    theta[second], _, fitted = _fit_steeper_costs_more(Xp[:, :, second], Yp, l2, range(1, len(second) - 1), Xp @ theta)
     free = np.ones(X.shape[2], dtype=bool)
     free[second] = fitted
     return theta, _data_loss(X, Y, theta) + l2 * float(theta @ theta), free, first
@@ -299,7 +318,7 @@ def _relief_interval(
     X: np.ndarray,
     Y: np.ndarray,
     fitted: tuple[np.ndarray, np.ndarray],
-    staged: tuple[np.ndarray | None, np.ndarray | None],
+    staged: tuple[tuple[np.ndarray | None, np.ndarray | None], np.ndarray | None],
     widths: tuple[int, int],
     l2: float,
 ) -> np.ndarray | None:
@@ -310,12 +329,12 @@ def _relief_interval(
     by :func:`weight_covariance`; None where the detour is priced at 0 (prices on its scale are
     not told)."""
     theta, free = fitted
-    flat, first = staged
+    (flat, plain), first = staged
     columns, count = widths
     if flat is None or first is None:
         covariance = weight_covariance(X, Y, theta, free, l2, INTERVAL_BLOCK_FRAMES)
     else:
-        stages = (flat, _staged_columns(X.shape[2], columns), first)
+        stages = ((flat, plain), _staged_columns(X.shape[2], columns), first)
         covariance = staged_covariance(X, Y, fitted, stages, l2, INTERVAL_BLOCK_FRAMES)
     interval = np.round(relief_price_intervals(theta, covariance, columns, count), INTERVAL_DECIMALS)
     return interval if np.isfinite(interval).all() else None
@@ -368,29 +387,29 @@ def staged_covariance(
     X: np.ndarray,
     Y: np.ndarray,
     fitted: tuple[np.ndarray, np.ndarray],
-    stages: tuple[np.ndarray, np.ndarray, np.ndarray],
+    stages: tuple[tuple[np.ndarray, np.ndarray | None], np.ndarray, np.ndarray],
     l2: float,
     block_frames: int,
 ) -> np.ndarray:
     """The covariance (P, P) of the weights a staged fit (:func:`fit_staged`) ``fitted`` (theta,
-    and which were fitted) to ``X`` (N, O, P) and ``Y`` (N, O), ``stages`` its flat frames, the
-    columns of its second stage and its first stage's weights: the sandwich J^-1 M J^-T of the
-    two stages' estimating equations stacked. The first stage's are the scores of its weights on
-    the flat frames under its own utility (the ground never seen's there a weight of its own),
-    the second's those of its columns on every frame under the whole utility; J is their
+    and which were fitted) to ``X`` (N, O, P) and ``Y`` (N, O), ``stages`` the frames of each
+    stage (None: every frame), the columns of its second stage and its first stage's weights: the
+    sandwich J^-1 M J^-T of the two stages' estimating equations stacked. The first stage's are
+    the scores of its weights on its frames under its own utility (the ground never seen's there
+    a weight of its own), the second's those of its columns on its frames under the whole utility; J is their
     Jacobian, block triangular (the second stage's equations move with the terrain's weights,
     not the reverse), and M sums the outer products of the scores summed over blocks of
     ``block_frames`` consecutive frames, as :func:`weight_covariance` does. Weights held have no variance."""
     theta, free = fitted
-    flat, second, first = stages
-    n = X.shape[0]
+    (flat, plain), second, first = stages
+    plain = np.ones(X.shape[0], dtype=bool) if plain is None else plain
     ones = np.setdiff1d(np.arange(X.shape[2]), second[1:])  # the first stage's columns; never seen among them
     twos = second[free[second]]
     _, alone = _log_softmax(X, first)  # on the flat frames, the first stage's utility (their relief columns are 0)
     _, whole = _log_softmax(X, theta)
-    scores = np.concatenate([_scores(X[:, :, ones], Y, alone) * flat[:, None], _scores(X[:, :, twos], Y, whole)], axis=1)
+    scores = np.concatenate([_scores(X[:, :, ones], Y, alone) * flat[:, None], _scores(X[:, :, twos], Y, whole) * plain[:, None]], axis=1)
     t = len(ones)
-    jacobian = n * _hessian(X[:, :, np.r_[ones, twos]], whole, l2)
+    jacobian = plain.sum() * _hessian(X[plain][:, :, np.r_[ones, twos]], whole[plain], l2)
     jacobian[:t, t:] = 0.0
     jacobian[t:, np.flatnonzero(ones == second[0])] = 0.0  # the second stage's equations hold no first-stage weight of never seen
     jacobian[:t, :t] = flat.sum() * _hessian(X[flat][:, :, ones], alone[flat], l2)
