@@ -314,7 +314,7 @@ def test_teach_relief_shows_each_relief_situation_on_its_own_leg() -> None:
         assert item.legs_m == tuple(HALF_M[item.kind] if m or item.kind in RELIEF_KINDS else RELIEF_HALF_M[item.kind] for m in meets)
     assert course_length(items) == pytest.approx(hilly.path_length_m(), abs=0.01) and course_length(items) <= RELIEF_BUDGET_M
     kinds = [i.kind for i in items]
-    assert kinds.count("mound") == 2 and kinds.count("bank") == 2 and kinds.count("ramp") == 1 and kinds.count("rough") == 1
+    assert kinds.count("mound") == 3 and kinds.count("bank") == 2 and kinds.count("ramp") == 1 and kinds.count("rough") == 1
     assert sorted(i.classes[0] for i in items if i.kind == "slope") == sorted(classes.terrain_names)
     s, grade, side = _tilt_along(hilly)
     path = ReferencePath(hilly.waypoints)
@@ -342,7 +342,10 @@ def test_teach_relief_shows_each_relief_situation_on_its_own_leg() -> None:
             middle = np.abs(s - mid) < 3.0
             assert np.median(rough[middle]) > ReliefStyle().rough_m and step[leg].max() < 0.5 * VehicleConfig().max_step_m
         at += item.length_m
-    assert {i.deg for i in items if i.kind == "mound"} == {RELIEF_DEG["gentle mound"], RELIEF_DEG["steep mound"]}
+    # Three mounds, the gentle and the steep among the relief situations and one between them last,
+    # each alone on its leg: grades at three steepnesses with no class in view.
+    assert [i.deg for i in items if i.kind == "mound"] == [RELIEF_DEG[k] for k in ("gentle mound", "steep mound", "middle mound")]
+    assert items[-1].kind == "mound" and items[-1].deg == RELIEF_DEG["middle mound"]
 
 
 @pytest.mark.slow  # a whole drive, course or training end to end; the default run keeps the test suite's time
@@ -372,7 +375,7 @@ def test_course_relief_gives_a_tables_teaching_course_its_relief_situations_and_
     assert not flat.has_relief and labels == [z.label for z in situations.zones] and set(labels) <= {z.label for z in flat.zones}
     own = [e.to_dict() for e in situations.relief]
     assert hilly.to_dict()["relief"] == own + relief_for(situations, 3)
-    assert len(own) == 6 + len(hilly.classes.terrain_names)  # two mounds, two banks, a ramp, a rough patch, a bank beside each class
+    assert len(own) == 7 + len(hilly.classes.terrain_names)  # three mounds, two banks, a ramp, a rough patch, a bank beside each class
     capsys.readouterr()
     for seed in ("-1", str(2**63)):  # the seeds genrelief:SEED takes
         assert main(["course", "--relief", seed, "--out", str(tmp_path / "bad.yaml")]) == 2

@@ -15,9 +15,10 @@ when the course shows
 
 With relief (``terrapref course --relief``, the packaged ``teach_relief``) it also shows each
 relief situation alone and relief against terrain (:func:`relief_situations`): a mound on the
-path of a gentle and of a steep grade, a bank beside the path (the path on its flank) of a gentle
-and of a steep side slope, a ramp up and down across the way, a rough patch across the way (short
-noise: rocks and ruts), and each feature class as a flat patch beside the path against the path's
+path of a gentle and of a steep grade (and, last on the course, one of a grade between them: the
+three with no class in view, where the relief prices are fitted), a bank beside the path (the
+path on its flank) of a gentle and of a steep side slope, a ramp up and down across the way, a
+rough patch across the way (short noise: rocks and ruts), and each feature class as a flat patch beside the path against the path's
 own ground sloping across the way as a bank of the background. Which of them a driver goes
 round, and how it slows on them, is its relief style. So that all of it fits in a drive of about
 7 minutes (:data:`RELIEF_BUDGET_M`: up to 3 feature classes and one lethal class), a course with
@@ -58,7 +59,7 @@ from terrapref.terrain import ClassTable
 DRIVER_SPEED_MPS = 1.0  # the speed a teaching drive is timed at (the synthetic driver's)
 BUDGET_M = 600.0  # the longest full design [m]: 10 minutes at 1 m/s
 # A course with relief is driven slower: the default driver and relief style average about 0.85 m/s
-# on one (grades, bumps and the situations' detours; teach_relief's 354 m in 414 s) [m/s].
+# on one (grades, bumps and the situations' detours; teach_relief's 355 m in 410-416 s) [m/s].
 RELIEF_PACE_MPS = 0.85
 RELIEF_BUDGET_M = 7 * 60 * RELIEF_PACE_MPS  # the longest full design with relief [m]: 7 minutes at that pace
 LANE = 8  # situations between two turns round
@@ -67,19 +68,19 @@ HALF_M = {
     "lane": 6.0,
     "pair": 8.5,
     "strip": 8.5,
-    "mound": 6.5,
+    "mound": 5.0,
     "bank": 6.5,
     "ramp": 6.5,
     "slope": 6.5,
     "rough": 6.5,
 }  # half a leg [m]
 # Half a leg of a course with relief [m]: a pair or strip has 1 m less trail before and after it than
-# on the flat course, a lone patch or lane 0.5 m (a pair's patches, 8 m long at most, still clear
-# their leg's ends by 3.5 m, a lane's 6 m by 2.5 m), except on a side that faces a relief
+# on the flat course, a lone patch or lane 1 m (a pair's patches, 8 m long at most, still clear
+# their leg's ends by 3.5 m, a lane's 6 m by 2 m), except on a side that faces a relief
 # situation, which keeps the flat course's, as the relief situations keep theirs: with less, the
 # driver moves over for the next terrain situation while still on the relief, and the fit reads
 # that as going round the relief (a drive priced 8 deg grades it drove over).
-RELIEF_HALF_M = {**HALF_M, "lone": 5.5, "lane": 5.5, "pair": 7.5, "strip": 7.5}
+RELIEF_HALF_M = {**HALF_M, "lone": 5.0, "lane": 5.0, "pair": 7.5, "strip": 7.5}
 RELIEF_KINDS = ("mound", "bank", "ramp", "rough", "slope")  # the situations of relief (module docstring)
 MOUND_RADIUS_M = 3.0  # a mound on the path: its radius; its height sets its steepest grade [m]
 BANK_WIDTH_M, BANK_LENGTH_M = 5.0, 9.0  # a bank beside the path: its full width and length; the path on its flank [m]
@@ -100,7 +101,15 @@ SLOPE_GAP_M = 0.3
 # for (terrapref.vehicle.VehicleConfig's; the scenario sits below the vehicle, and
 # tests/scenario/test_relief.py holds the two equal).
 BODY_M = (0.6, 1.0)
-RELIEF_DEG = {"gentle mound": 8.0, "steep mound": 16.0, "gentle bank": 10.0, "steep bank": 16.0, "ramp": 7.0, "slope": 14.0}
+RELIEF_DEG = {
+    "gentle mound": 8.0,
+    "steep mound": 16.0,
+    "middle mound": 12.0,
+    "gentle bank": 10.0,
+    "steep bank": 16.0,
+    "ramp": 7.0,
+    "slope": 14.0,
+}
 START_M, END_M = 8.0, 5.0  # trail before the first situation and after the last [m]
 PAIR_SIZES = ((8.0, 5.0), (7.0, 5.5), (7.5, 5.0), (8.0, 5.5))  # (length, width) of a pair's patches [m]
 STRIP_M = 2.8  # width of a strip on the path [m]
@@ -187,8 +196,8 @@ def situations(classes: ClassTable, full: bool | None = None, relief: bool = Fal
 
     ``full``: each pair and strip on both sides (True), once (False), or whichever fits the budget
     (None); ``relief``: with the relief situations (:func:`relief_situations`), each pair and each
-    lethal class alone once (as in the compact design), on the legs of a course with relief
-    (:func:`_relief_legs`)."""
+    lethal class alone once (as in the compact design), and last a mound between the gentle and
+    the steep one, on the legs of a course with relief (:func:`_relief_legs`)."""
     terrain, lethal = list(classes.terrain_names), list(classes.lethal)
     if not terrain:
         raise ValueError("the class table has no feature class (neither background nor lethal) to teach")
@@ -215,7 +224,9 @@ def situations(classes: ClassTable, full: bool | None = None, relief: bool = Fal
         Situation("lane", (lethal[k % len(lethal)], name, lethal[k % len(lethal)]) if lethal else (name,)) for k, name in enumerate(terrain)
     ]
     items = _interleave([[Situation("pair", p) for p in pairs], strips, lone, lanes, relief_situations(classes) if relief else []])
-    return _relief_legs(items) if relief else items
+    if not relief:
+        return items
+    return _relief_legs([*items, Situation("mound", (), 0.0, RELIEF_DEG["middle mound"])])
 
 
 def _relief_legs(items: Sequence[Situation]) -> list[Situation]:
@@ -501,7 +512,7 @@ def write_teaching_course(folder: str | Path, classes: ClassTable, relief: bool 
 
 
 RELIEF_DESCRIPTION = (
-    "With relief: a gentle and a steep mound on the path, a gentle and a steep bank beside it, a ramp up and down, a rough patch, "
+    "With relief: a gentle, a steep and, last, a middle mound on the path, a gentle and a steep bank beside it, a ramp up and down, a rough patch, "
     "each feature class flat beside the path against a bank of the background, and bumps and dips between the situations."
 )
 
