@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 
 FIRST, FRAMES = 200, 40  # the short recording's frames published: the drive comes up to the non_traversable patch
+IDLE_FRAMES = 20  # the first of them, that `terrapref play` publishes to the node that waited (at a quarter of real time)
 LOOPBACK = (
     '<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>'
     "<AllowMulticast>false</AllowMulticast></General><Discovery><ParticipantIndex>auto</ParticipantIndex>"
@@ -222,6 +223,12 @@ def system(tmp_path_factory, short_recording):
         attitude=lambda i: LEVEL,
     )
     bag = write_bag(root / "drive.mcap", frames)  # the robot file beside it names the depth topic
+    first = slice(0, IDLE_FRAMES)
+    idle_bag = write_bag(
+        root / "idle.mcap",
+        replace(frames, times=frames.times[first], poses=frames.poses[first], commands=frames.commands[first], chosen=frames.chosen[first]),
+        robot_file=False,
+    )
     robot = root / "drive.mcap.robot.yaml"
     with robot.open("a") as f:  # the base ramps its speed itself: the command sent is the decision's, as the runtime's
         f.write("limits: {max_accel_mps2: null}\n")
@@ -299,7 +306,7 @@ def system(tmp_path_factory, short_recording):
                 "-c",
                 "import sys; from terrapref.cli import main; sys.exit(main())",
                 "play",
-                str(bag),
+                str(idle_bag),
                 "--robot",
                 str(robot),
                 "--rate",
