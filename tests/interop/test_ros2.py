@@ -701,3 +701,51 @@ def test_a_simulated_clock_that_stops_is_seen_by_the_wall_clock(monkeypatch):
     clock.on_clock(SimpleNamespace(clock=SimpleNamespace(sec=10, nanosec=100_000_000)))  # the same time again is not moving on
     assert clock.still_s() == pytest.approx(1.6)
     assert ros2.NodeClock(sim=False).still_s() == 0.0
+
+
+def test_a_message_heard_as_the_node_subscribes_finds_its_publishers_made(tmp_path):
+    """A latched path that comes the moment the node subscribes to it, before the node has made
+    the rest of its endpoints, is taken and answered on ``~/arrived``: the node makes its
+    publishers before its subscriptions (a player's path that beat them was once said as "internal
+    error handling a message (KeyError: 'arrived')")."""
+    from types import SimpleNamespace
+
+    from test_offset_rule import DRIVER_LIKE, _offset_meta
+
+    from helpers import skip_path_weights
+    from terrapref.interop.dds import MessageTypes
+    from terrapref.interop.node_core import NodeOptions, PlannerNodeCore
+    from terrapref.interop.robot import load_robot
+    from terrapref.interop.ros2 import Names, NodeClock, _Node
+    from terrapref.interop.ros_messages import path_message, typestore
+    from terrapref.learning.model_file import load_model, save_model
+    from terrapref.learning.network import ClassifierConfig
+
+    ts = typestore()
+
+    class Latched:
+        """A participant whose subscriptions to a path hear one the moment they are made."""
+
+        def __init__(self) -> None:
+            self.types, self.domain, self.on_error, self.published = MessageTypes(ts), 0, None, []
+
+        def writer(self, topic: str, msgtype: str, profile) -> SimpleNamespace:
+            return SimpleNamespace(publish=lambda msg: self.published.append((topic, msg)))
+
+        def subscribe(self, topic: str, msgtype: str, profile, callback, newest_only: bool = False) -> SimpleNamespace:
+            if msgtype == "nav_msgs/msg/Path":
+                callback(path_message(ts, [(0.0, 0.0), (10.0, 0.0)]))
+            return SimpleNamespace()
+
+    config = ClassifierConfig(hidden=8, skip=True)
+    model = load_model(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE)))
+    (tmp_path / "robot.yaml").write_text(
+        "format: terrapref-robot/1\ntopics: {segmentation: /seg, camera_info: /info, odometry: /odom, command: /cmd, path: /plan}\n"
+        "camera: {height_m: 1.0, pitch_deg: 30.0}\nlabels: terrapref\n"
+    )
+    core = PlannerNodeCore(model, load_robot(tmp_path / "robot.yaml"), None)
+    dds = Latched()
+    _Node(core, NodeOptions(), Names({}), NodeClock(False), dds)
+    assert np.asarray(core.path).tolist() == [[0.0, 0.0], [10.0, 0.0]]  # the path was taken
+    arrived = [msg.data for topic, msg in dds.published if topic.endswith("/arrived")]
+    assert arrived == [False]

@@ -320,20 +320,20 @@ class _Node:
             "clock": clock.on_clock,
         }
         core.on_decision = self.on_decision
+        # Publishers first: a subscription may hear a message (a latched path) the moment it is
+        # made, and its handler publishes (~/arrived, a command).
         for e in self.endpoints:
             if e.publishes:
                 self.writers[e.role] = self.dds.writer(e.topic, e.msgtypes[0], e.profile)
-            else:
-                for msgtype in e.msgtypes:
-                    handle = handlers[e.role]
-                    callback = (
-                        (lambda msg, handle=handle, msgtype=msgtype: handle(msg, msgtype))
-                        if e.role in ("segmentation", "odometry")
-                        else handle
-                    )
-                    self.readers.setdefault(e.role, []).append(
-                        self.dds.subscribe(e.topic, msgtype, e.profile, callback, newest_only=e.role == "segmentation")
-                    )
+        for e in (e for e in self.endpoints if not e.publishes):
+            for msgtype in e.msgtypes:
+                handle = handlers[e.role]
+                callback = (
+                    (lambda msg, handle=handle, msgtype=msgtype: handle(msg, msgtype)) if e.role in ("segmentation", "odometry") else handle
+                )
+                self.readers.setdefault(e.role, []).append(
+                    self.dds.subscribe(e.topic, msgtype, e.profile, callback, newest_only=e.role == "segmentation")
+                )
         self.publish_mount()
         self.publish_arrived()
         limits, stop = robot.limits, robot.stop
