@@ -235,10 +235,10 @@ def system(tmp_path_factory, short_recording):
 
     previous_uri = os.environ.get("CYCLONEDDS_URI")
     os.environ["CYCLONEDDS_URI"] = LOOPBACK  # this process's participants, before its first one
-    driven, idle = _domains()
+    driven, idle_domain = _domains()
     env = {**os.environ, "CYCLONEDDS_URI": LOOPBACK, "TERRAPREF_DEBUG": ""}
     idle_node = _node(
-        model, robot, {**env, "ROS_DOMAIN_ID": str(idle)}, "-p", "use_sim_time:=true", "-p", "stamped:=true", sigint_ignored=True
+        model, robot, {**env, "ROS_DOMAIN_ID": str(idle_domain)}, "-p", "use_sim_time:=true", "-p", "stamped:=true", sigint_ignored=True
     )
     idle_log: list[str] = []  # read as it comes: the node says it waits, then play starts
     idle_reader = threading.Thread(target=lambda: idle_log.extend(idle_node.stderr), daemon=True)
@@ -266,6 +266,54 @@ def system(tmp_path_factory, short_recording):
     live_client = threading.Thread(target=_watch, args=(live_port, live), daemon=True)
     live_client.start()
     out = {"model": model, "bag": bag, "rec": rec, "depth": millimetres_to_depth(depth_to_millimetres(level))}  # as 16UC1 carries it
+    idle_done: dict[str, BaseException | None] = {"error": None}
+
+    def drive_idle() -> None:
+        """The idle node heard nobody for its first seconds; now `terrapref play` drives it, and a
+        subscriber sees it drive: in its own domain, beside the other node's drive."""
+        try:
+            idle_heard, idle_listener = _Heard(), Participant(idle_domain, MessageTypes(typestore()))
+            readers = _listen(idle_listener, idle_heard)
+            # From the start of both nodes: the idle one says so once it has heard nobody for 5 s.
+            _wait(lambda: all(r.get_matched_publications() for r in readers), timeout_s=60.0, what="the idle node's publications")
+            _wait(
+                lambda: any("/clock: no publisher" in line for line in idle_log),
+                timeout_s=60.0,
+                what="the idle node to say nobody publishes",
+            )
+            play = subprocess.run(
+                [
+                    sys.executable,
+                    "-c",
+                    "import sys; from terrapref.cli import main; sys.exit(main())",
+                    "play",
+                    str(idle_bag),
+                    "--robot",
+                    str(robot),
+                    "--rate",
+                    "0.25",  # a quarter of real time: a node starved of a core (a busy machine) still hears and decides on some frames
+                    "--delay",
+                    "0.5",
+                ],
+                env={**env, "ROS_DOMAIN_ID": str(idle_domain)},
+                capture_output=True,
+                text=True,
+                timeout=120,
+            )
+            # A node on a slow machine decides on the frames it kept up with after the log has ended:
+            # its markers are awaited, not read as they stood when `play` returned.
+            _wait(
+                lambda: idle_heard.get("costmap") and idle_heard.get("trajectories"),
+                timeout_s=20.0,
+                what="the idle node's costmap and markers",
+            )
+            out["play"], out["idle_heard"] = play, idle_heard
+            idle_listener.close()
+        except BaseException as exc:  # re-raised by the fixture once the thread is joined
+            idle_done["error"] = exc
+
+    idle = threading.Thread(target=drive_idle, daemon=True)
+    idle.start()
     player = listener = None
     try:
         player = BagPlayer(
@@ -295,37 +343,9 @@ def system(tmp_path_factory, short_recording):
         out["heard"] = heard
         # Its part is done: Ctrl-C now (it is awaited below), for a costmap a second heard is a costly message to read.
         node.send_signal(signal.SIGINT)
-        # The idle node heard nobody for its first seconds; now `terrapref play` drives it, and a subscriber sees it drive.
-        idle_heard, idle_listener = _Heard(), Participant(idle, MessageTypes(typestore()))
-        readers = _listen(idle_listener, idle_heard)
-        _wait(lambda: all(r.get_matched_publications() for r in readers), what="the idle node's publications")
-        _wait(lambda: any("/clock: no publisher" in line for line in idle_log), what="the idle node to say nobody publishes")
-        play = subprocess.run(
-            [
-                sys.executable,
-                "-c",
-                "import sys; from terrapref.cli import main; sys.exit(main())",
-                "play",
-                str(idle_bag),
-                "--robot",
-                str(robot),
-                "--rate",
-                "0.25",  # a quarter of real time: a node starved of a core (a busy machine) still hears and decides on some frames
-                "--delay",
-                "0.5",
-            ],
-            env={**env, "ROS_DOMAIN_ID": str(idle)},
-            capture_output=True,
-            text=True,
-            timeout=120,
-        )
-        # A node on a slow machine decides on the frames it kept up with after the log has ended:
-        # its markers are awaited, not read as they stood when `play` returned.
-        _wait(
-            lambda: idle_heard.get("costmap") and idle_heard.get("trajectories"), timeout_s=20.0, what="the idle node's costmap and markers"
-        )
-        out["play"], out["idle_heard"] = play, idle_heard
-        idle_listener.close()
+        idle.join()
+        if idle_done.get("error") is not None:
+            raise idle_done["error"]
     finally:
         for proc in (node, idle_node):
             proc.send_signal(signal.SIGINT)
