@@ -226,7 +226,7 @@ def situations(classes: ClassTable, full: bool | None = None, relief: bool = Fal
     items = _interleave([[Situation("pair", p) for p in pairs], strips, lone, lanes, relief_situations(classes) if relief else []])
     if not relief:
         return items
-    return _relief_legs([*items, Situation("mound", (), 0.0, RELIEF_DEG["middle mound"])])
+    return _relief_legs([*items, LAST_MOUND])
 
 
 def _relief_legs(items: Sequence[Situation]) -> list[Situation]:
@@ -243,7 +243,8 @@ def _relief_legs(items: Sequence[Situation]) -> list[Situation]:
 def relief_situations(classes: ClassTable) -> list[Situation]:
     """The relief situations (module docstring) of ``classes``' teaching course: two mounds, two
     banks (one on each side), a ramp, a rough patch, and each feature class against a bank, sides
-    alternating; each shows the steepest grade or side slope :data:`RELIEF_DEG` gives it."""
+    alternating; each shows the steepest grade or side slope :data:`RELIEF_DEG` gives it. The
+    course ends with one more, after every other situation (:data:`LAST_MOUND`)."""
     d = RELIEF_DEG
     items = [
         Situation("mound", (), 0.0, d["gentle mound"]),
@@ -254,6 +255,12 @@ def relief_situations(classes: ClassTable) -> list[Situation]:
         Situation("rough", (), 0.0, 0.0),
     ]
     return items + [Situation("slope", (name,), (1.0, -1.0)[k % 2], d["slope"]) for k, name in enumerate(classes.terrain_names)]
+
+
+LAST_MOUND = Situation("mound", (), 0.0, RELIEF_DEG["middle mound"])
+"""The last situation of a course with relief (:func:`situations`): a mound between the gentle and
+the steep one, so that the drive shows grades at three steepnesses with no class in view; last,
+so that nothing before it moves."""
 
 
 def place_relief(c: CourseBuilder, item: Situation, s: float) -> None:

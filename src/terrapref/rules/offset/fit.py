@@ -244,9 +244,9 @@ def fit_offset_utility(
             best = (theta, loss, candidate, free, gated_x)
     theta, loss, chosen, free, gated_x = best
     flat = None if kept is None else flat_frames(kept)
-    plain = None if kept is None else terrain_free_frames(X, columns - 2)
-    first = None
+    first = plain = None
     if flat is not None:
+        plain = terrain_free_frames(X, columns - 2)
         theta, loss, free, first = fit_staged(gated_x, Y, (flat, plain), columns, config.l2)
     interval = None if relief is None else _relief_interval(gated_x, Y, (theta, free), ((flat, plain), first), (columns, R), config.l2)
     # NumPy's exp, sums and matrix products may differ in the last bits between CPUs; the convex
