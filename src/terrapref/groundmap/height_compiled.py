@@ -230,7 +230,10 @@ def depth_frame(
       weighted means and the weights' sums). The attitude's error is left out of these: it tilts
       all the frame's returns as one plane through the camera, which changes a difference over
       a cell by a few millimetres (0.035 of its run for 2 deg). Gathered over frames whose
-      attitudes erred differently, differences agree where heights do not.
+      attitudes erred differently, differences agree where heights do not; but each frame's
+      differences read the ground tilted by its own error (2 deg of a camera's jitter is 2 deg
+      of grade in that frame), and their means keep what of it the frames weighed most did not
+      average out.
 
     ``scratch``: ``slot`` (n * n,) int32, all -1 (each cell's row of the frame's sums), left all
     -1, and room for the sums ((N, :data:`FRAME_SUMS`) float64). The cells the frame's returns
