@@ -467,8 +467,9 @@ def save_evaluation(path: str | Path, runs: CourseRuns, title: str) -> Path:
             bbox={"facecolor": colour, "alpha": 0.85, "pad": 1, "lw": 0},
         )
     seeds = max(len(driver), len(planner))
-    tracks = [Line2D([], [], color="grey", ls="--", label="driver")] if len(driver) else []  # none with --no-driver
-    tracks += [Line2D([], [], color="grey", label="planner")]
+    key = _seed_colour(0) if seeds == 1 else "grey"  # one seed: the key in its colour; more: the style alone, each seed's colour below
+    tracks = [Line2D([], [], color=key, ls="--", label="driver (dashed)")] if len(driver) else []  # none with --no-driver
+    tracks += [Line2D([], [], color=key, label="planner (solid)")]
     tracks += [Line2D([], [], color=_seed_colour(k), lw=3, label=f"seed {k}") for k in range(seeds)] if seeds > 1 else []
     tracks += [
         Patch(facecolor="none", edgecolor="lime", label="zone met in every run"),
@@ -635,25 +636,31 @@ def save_speed_profile(
     colour), over the stretches ``spans`` (label, first and last progress [m]: the zones) shaded;
     with ``heights`` (one per series: the ground's height [m] under it at each progress), a
     panel below of height along the path, in the same colours."""
-    if heights is None:
-        fig, ax = plt.subplots(figsize=(9, 3.6), dpi=120)
-        axes = [ax]
-    else:
-        fig, axes = plt.subplots(2, 1, figsize=(9, 5.4), dpi=120, sharex=True, gridspec_kw={"height_ratios": [3, 2]})
-        ax = axes[0]
+    panels = [2.7] + ([1.8] if heights is not None else [])  # [in]: speed, and height below it on relief
+    strip = [1.1] if spans else []  # the zones' names [in], upright in a band of their own above the speeds
+    fig, axes = plt.subplots(
+        len(strip + panels),
+        1,
+        figsize=(9, sum(strip + panels) + 0.9),
+        dpi=120,
+        sharex=True,
+        gridspec_kw={"height_ratios": strip + panels},
+        squeeze=False,
+        layout="constrained",
+    )
+    axes = list(axes[:, 0])
+    if spans:
+        _name_spans(axes.pop(0), spans)
+    ax = axes[0]
     for a in axes:
         for label, s0, s1 in spans:
             a.axvspan(s0, s1, color="0.85", lw=0)
-    for label, s0, s1 in spans:  # upright, each over its own stretch: side by side they would run into one another
-        ax.text(
-            (s0 + s1) / 2, 0.02, label, transform=ax.get_xaxis_transform(), rotation=90, ha="center", va="bottom", fontsize=7, color="0.35"
-        )
     for label, s, v, colour in series:
         ax.plot(s, v, color=colour, lw=1.2, label=label)
     ax.set_ylabel("speed [m/s]")
     top = max((float(np.max(v)) for _, _, v, _ in series if len(v)), default=0.0)
     ax.set_ylim(0, max(0.5, 1.15 * top))  # the speeds driven fill the panel, with room above the fastest
-    ax.set_title(title, fontsize=10)
+    fig.suptitle(title, fontsize=10)
     ax.legend(fontsize=8)
     if heights is not None:
         for (label, s, _, colour), z in zip(series, heights, strict=True):
@@ -662,5 +669,21 @@ def save_speed_profile(
     for a in axes:
         a.grid(alpha=0.3)
     axes[-1].set_xlabel("progress along the path [m]")
-    fig.tight_layout()
     return _save(fig, path)
+
+
+SPAN_NAME_WIDTH = 18  # characters per line of a zone's name over its stretch
+
+
+def _name_spans(ax: plt.Axes, spans: Sequence[tuple[str, float, float]]) -> None:
+    """The band above a speed panel: each zone's stretch shaded and its name upright over it,
+    clear of the speeds drawn below."""
+    for label, s0, s1 in spans:
+        ax.axvspan(s0, s1, color="0.85", lw=0)
+        name = "\n".join(textwrap.wrap(label, SPAN_NAME_WIDTH, max_lines=2, placeholder=" ...")) or label
+        ax.text((s0 + s1) / 2, 0.04, name, rotation=90, ha="center", va="bottom", fontsize=6.5, color="0.25", linespacing=1.0)
+    ax.set_ylim(0, 1)
+    ax.set_yticks([])
+    for side in ("top", "right", "left"):
+        ax.spines[side].set_visible(False)
+    ax.tick_params(axis="x", bottom=False)

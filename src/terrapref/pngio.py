@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -55,6 +56,35 @@ def depth_preview(depth: np.ndarray, height_px: int) -> np.ndarray:
     out = np.full((height_px, depth.shape[1], 3), 255, dtype=np.uint8)
     out[: depth.shape[0]] = rgb
     return out
+
+
+DEPTH_KEY_WIDTH_PX = 120
+
+
+def depth_key(depth: np.ndarray, height_px: int) -> np.ndarray:
+    """The scale beside :func:`depth_preview`'s picture (height_px, DEPTH_KEY_WIDTH_PX, 3) uint8:
+    its shades from near to its farthest return with their depths [m], and nothing seen's colour."""
+    from PIL import ImageDraw
+
+    seen = np.isfinite(depth)
+    far = float(depth[seen].max()) if seen.any() else 1.0
+    band = Image.new("RGB", (DEPTH_KEY_WIDTH_PX, height_px), (245, 245, 245))
+    draw = ImageDraw.Draw(band)
+    draw.text((10, 6), "depth [m]", fill=(20, 20, 20))
+    top, bar = 24, max(20, min(height_px - 60, 260))
+    for i in range(bar):  # the shades as the preview draws them: by the square root of depth over the farthest
+        shade = int(235.0 - 200.0 * i / (bar - 1))
+        draw.line((10, top + i, 24, top + i), fill=(shade, shade, shade))
+    draw.rectangle((10, top, 24, top + bar - 1), outline=(60, 60, 60))
+    ticks = [d for d in (0.0, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0) if d < 0.85 * far] + [far]
+    for d in ticks:
+        y = top + round((bar - 1) * math.sqrt(d / far))
+        draw.line((24, y, 28, y), fill=(60, 60, 60))
+        draw.text((32, y - 5), f"{d:.3g}", fill=(20, 20, 20))
+    y = top + bar + 12
+    draw.rectangle((10, y, 24, y + 14), fill=(150, 170, 200), outline=(60, 60, 60))
+    draw.text((32, y + 1), "nothing seen", fill=(20, 20, 20))
+    return np.asarray(band)
 
 
 LEGEND_WIDTH_PX = 170

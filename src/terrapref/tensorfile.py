@@ -44,6 +44,8 @@ def read_tensor_file(path: str | Path, fmt: str, missing: str, unreadable: str) 
         UserError: naming the file, and the field where one is at fault.
     """
     source = str(path)
+    if Path(path).is_dir():
+        raise UserError(source, "a folder, not a file")
     if not Path(path).is_file():
         raise UserError(source, missing)
     try:

@@ -178,6 +178,17 @@ def test_a_model_with_nan_weights_is_refused(tmp_path: Path, capsys):
     _one_error(capsys, str(path), "weights.layers.1.weight")
 
 
+@pytest.mark.parametrize(
+    "kind,needle", [("recording", "a recording folder, not a model file; `terrapref train`"), ("checkpoints", "epoch_NNN")]
+)
+def test_a_folder_given_as_a_model_says_what_it_is(tmp_path: Path, capsys, recording, kind, needle):
+    folder = recording if kind == "recording" else tmp_path / "m.checkpoints"
+    folder.mkdir(exist_ok=True)
+    assert main(["evaluate", str(folder), "demo_course", "--seeds", "1", "--out", str(tmp_path / "e")]) == 2
+    _one_error(capsys, str(folder), needle)
+    assert not (tmp_path / "e").exists()
+
+
 def _contents(folder: Path) -> dict[str, bytes]:
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 

@@ -1,10 +1,13 @@
-"""`terrapref record --disturb`: the recording carries the pushes and stays labelled by the driver."""
+"""`terrapref record --disturb`: the recording carries the pushes and stays labelled by the driver;
+`--relief-style` on a flat course is said to show nothing."""
 
 from __future__ import annotations
 
 import json
 
-from helpers import TINY_COURSE
+import pytest
+
+from helpers import TINY_COURSE, TINY_RELIEF
 from terrapref.cli import main
 from terrapref.demos.recording import read_recording
 
@@ -39,3 +42,12 @@ def test_disturb_help_names_the_rate_a_recording_stores_by_default():
     for name in ("record", "drive"):
         help_text = next(a.help for a in commands[name]._actions if "--disturb" in a.option_strings)
         assert re.findall(r"default: the recommended protocol's ([0-9.]+)", help_text) == [f"{stored:g}"], (name, help_text)
+
+
+@pytest.mark.parametrize("course,flat", [(TINY_COURSE, True), (TINY_RELIEF, False)])
+def test_a_relief_style_on_a_flat_course_is_said_to_show_nothing(tmp_path, capsys, course, flat):
+    out = tmp_path / "rec"
+    assert main(["record", str(course), "--relief-style", "cautious", "--out", str(out), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert ("is flat: the relief style is kept with the recording but no frame shows it" in err) == flat, err
+    assert read_recording(out).meta["driver"]["config"]["relief"]["roll_deg"] > 0  # kept either way

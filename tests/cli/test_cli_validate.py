@@ -13,7 +13,7 @@ from PIL import Image
 
 from helpers import REPO
 from terrapref.cli import main
-from terrapref.pngio import LEGEND_WIDTH_PX
+from terrapref.pngio import DEPTH_KEY_WIDTH_PX, LEGEND_WIDTH_PX
 from terrapref.scenario import packaged_scenarios, resolve_scenario
 from terrapref.terrain import UNKNOWN
 from terrapref.world import rasterise
@@ -427,7 +427,9 @@ def test_render_of_a_relief_course_writes_the_depth_image_and_shows_it_beside_th
     assert (mm[labels != UNKNOWN] > 0).all()
     assert 300 < mm[mm > 0].min() and mm.max() <= 30_000
     with Image.open(col) as im:
-        assert im.size == (640 + LEGEND_WIDTH_PX + 640, 480)
+        assert im.size == (640 + LEGEND_WIDTH_PX + 640 + DEPTH_KEY_WIDTH_PX, 480)
+        bar = np.asarray(im.convert("L"))[30:250, -DEPTH_KEY_WIDTH_PX + 17]  # the depth key's shades, near at the top
+    assert (np.diff(bar.astype(int)) <= 0).all() and int(bar[0]) - int(bar[-1]) > 150
 
 
 def test_render_defaults_to_the_start_pose(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

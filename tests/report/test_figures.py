@@ -211,6 +211,24 @@ def test_the_evaluation_figure_gives_each_seed_its_colour_and_keeps_its_legend_o
     assert {"seed 0", "seed 1"} <= {t.get_text() for t in legend.get_texts()}
 
 
+def test_with_one_seed_the_evaluation_legend_shows_the_tracks_in_the_colour_they_are_drawn(tmp_path, monkeypatch):
+    from matplotlib.lines import Line2D
+
+    from terrapref.plots import CourseRuns, save_evaluation
+
+    scenario = resolve_scenario("demo_course")
+    track = [scenario.waypoints]
+    kept = _kept_figure(monkeypatch)
+    save_evaluation(tmp_path / "ev.png", CourseRuns(scenario, rasterise(scenario), track, track, {"1": (1, 1)}), "t")
+    overview = kept["fig"].axes[0]
+    runs = [line for line in overview.lines if line.get_label().startswith("_") and len(line.get_xdata()) == len(track[0])]
+    drawn = {line.get_linestyle(): matplotlib.colors.to_hex(line.get_color()) for line in runs}
+    handles = [h for h in overview.get_legend().legend_handles if isinstance(h, Line2D)]
+    key = {h.get_label(): (h.get_linestyle(), matplotlib.colors.to_hex(h.get_color())) for h in handles}
+    assert len(runs) == 2 and key["driver (dashed)"] == ("--", drawn["--"]) and key["planner (solid)"] == ("-", drawn["-"])
+    assert not any(label.startswith("seed ") for label in key)
+
+
 def test_relief_is_drawn_as_hillshade_and_labelled_contours_and_a_flat_map_as_before():
     import numpy as np
     from matplotlib.contour import ContourSet
@@ -276,5 +294,32 @@ def test_the_speed_figure_is_scaled_to_the_speeds_driven(tmp_path, monkeypatch):
     s = np.linspace(0.0, 40.0, 50)
     series = [("driver", s, 0.6 + 0.3 * np.sin(s / 5.0), "k"), ("planner", s, np.full(50, 0.7), "tab:red")]
     save_speed_profile(tmp_path / "speed.png", series, "speed", [("mud", 10.0, 15.0)])
-    low, high = kept["fig"].axes[0].get_ylim()
+    speed = next(a for a in kept["fig"].axes if a.get_ylabel() == "speed [m/s]")
+    low, high = speed.get_ylim()
     assert low == 0.0 and 0.9 < high <= 1.1
+
+
+def test_the_speed_figures_zone_names_stand_above_the_speeds_never_over_them(tmp_path, monkeypatch):
+    """Each zone's name, however long, is upright over its stretch in a band of its own: none
+    crosses the panels the speeds and heights are drawn in."""
+    import numpy as np
+
+    from terrapref.plots import save_speed_profile
+
+    kept = _kept_figure(monkeypatch)
+    s = np.linspace(0.0, 200.0, 400)
+    series = [("driver", s, 1.0 + 0.3 * np.sin(s / 9.0), "k"), ("planner", s, np.full(400, 1.2), "tab:red")]
+    spans = [(f"{k}: mud vs rock on a bank too steep to drive along, with a long label", 15.0 * k, 15.0 * k + 6.0) for k in range(1, 13)]
+    save_speed_profile(tmp_path / "speed.png", series, "speed", spans, [np.sin(s / 30.0), np.sin(s / 31.0)])
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    fig = kept["fig"]
+    renderer = FigureCanvasAgg(fig).get_renderer()  # closed once saved: drawn again as it was saved
+    fig.draw(renderer)
+    panels = [a for a in fig.axes if a.get_ylabel()]
+    names = [t for a in fig.axes for t in a.texts if t.get_text()]
+    assert [a.get_ylabel() for a in panels] == ["speed [m/s]", "ground height [m]"] and len(names) == len(spans)
+    for name in names:
+        box = name.get_window_extent(renderer)
+        assert all(not box.overlaps(a.get_window_extent(renderer)) for a in panels), name.get_text()
+        assert box.y0 >= panels[0].get_window_extent(renderer).y1

@@ -10,7 +10,10 @@ from terrapref.configargs import finite_float
 from terrapref.errors import UserError
 from terrapref.grid import ENGINES, Engine
 
-SCENARIO_HELP = "a packaged scenario's name (terrapref scenarios lists them), gen:N for generated layout N, or a scenario file"
+SCENARIO_HELP = (
+    "a packaged scenario's name (terrapref scenarios lists them), gen:N for generated layout N, genrelief:N for "
+    "generated layout N with relief, or a scenario file"
+)
 PERCEPTION_HELP = (
     "what the planner receives instead of the truth: a preset (clean, rellis, field; terrapref perception lists them) "
     "or a terrapref-perception/1 file"

@@ -80,7 +80,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
     import numpy as np
 
     from terrapref.camera import PinholeCamera, SegmentationRenderer
-    from terrapref.pngio import depth_preview, depth_to_millimetres, preview_with_legend, write_png_atomic
+    from terrapref.pngio import depth_key, depth_preview, depth_to_millimetres, preview_with_legend, write_png_atomic
     from terrapref.scenario import resolve_scenario
     from terrapref.vehicle import Pose, Vehicle
     from terrapref.world import rasterise
@@ -128,16 +128,17 @@ def _cmd_render(args: argparse.Namespace) -> int:
     if args.preview:
         preview = preview_with_legend(image, scenario.classes)
         if depth is not None:
-            preview = np.concatenate([preview, depth_preview(depth, preview.shape[0])], axis=1)
+            h = preview.shape[0]
+            preview = np.concatenate([preview, depth_preview(depth, h), depth_key(depth, h)], axis=1)
         write_png_atomic(args.preview, preview)
-        shown = "the image, a legend" + (" and the depth image (near light, far dark)" if depth is not None else "")
+        shown = "the image, a legend" + (" and the depth image with its scale (near light, far dark)" if depth is not None else "")
         print(f"wrote {args.preview} (colour preview: {shown})")
     return 0
 
 
 def render_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("render", help="render the segmentation camera image at a pose")
-    p.add_argument("scenario", metavar="SCENARIO", help="packaged scenario name or file")
+    p.add_argument("scenario", metavar="SCENARIO", help=SCENARIO_HELP)
     p.add_argument("--pose", nargs=3, type=finite_float, metavar=("X", "Y", "YAW_DEG"), help="vehicle pose [m, m, deg]; default: the start")
     p.add_argument("--out", required=True, type=Path, help="single-channel PNG of class ids")
     p.add_argument(

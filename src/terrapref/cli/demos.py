@@ -45,6 +45,8 @@ def _cmd_record(args: argparse.Namespace) -> int:
     profile = (
         PreferenceProfile.parse(args.profile, scenario.classes) if args.profile is not None else PreferenceProfile.default(scenario.classes)
     )
+    if args.relief_style is not None and not scenario.has_relief:
+        print(f"note: {args.scenario} is flat: the relief style is kept with the recording but no frame shows it", file=sys.stderr)
     drive = DriveSetup.of(scenario)
     expert = driver_style(args.style, profile.order, scenario.classes, drive.sim.vehicle.max_speed_mps, _style_flags(args))
     disturbance = _disturbance(args.disturb)

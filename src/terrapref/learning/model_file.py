@@ -112,6 +112,8 @@ def read_model_file(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
         UserError: besides the file's own problems, a weight that is NaN or infinite, naming the
             tensor: a policy of such weights scores every trajectory NaN and drives nowhere.
     """
+    if Path(path).is_dir():
+        raise UserError(str(path), _folder_problem(Path(path)))
     weights, meta = read_tensor_file(path, FORMAT, "no such model file", "not a safetensors model file")
     for name, value in weights.items():
         if value.dtype.kind == "f" and not np.isfinite(value).all():
@@ -119,6 +121,18 @@ def read_model_file(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
             raise UserError(str(path), f"{bad} of its {value.size} weights are NaN or infinite", field=f"weights.{name}")
     meta.setdefault("kind", CLASSIFIER)
     return weights, meta
+
+
+def _folder_problem(path: Path) -> str:
+    """What to say of a folder given as a model: a recording is taught into one by ``train``; a
+    training's checkpoints are model files inside it."""
+    from terrapref.demos.recording import is_recording
+
+    if is_recording(path):
+        return "a recording folder, not a model file; `terrapref train` makes a model of a recording"
+    if path.name.endswith(".checkpoints"):
+        return "a folder of a training's checkpoints, not a model file; name one of them (epoch_NNN.safetensors)"
+    return "a folder, not a model file"
 
 
 def load_model(path: str | Path) -> LoadedModel:
