@@ -9,7 +9,7 @@ named recipe for one epoch (both utility fits), one closed-loop run of each mode
 synthetic driver, one run through the ``field`` perception model (label errors, a tilted
 camera), and a few frames of the default recipe's model on a course with relief (its height
 field and noise, the relief renderer with depth, the height layer's votes, geometry and grades), its
-costmap, and of the synthetic driver with a relief style there, and a whole flat frame. What it writes goes to a temporary folder and is removed.
+costmap, the ground's roughness an evaluation scores speed by, and of the synthetic driver with a relief style there, and a whole flat frame. What it writes goes to a temporary folder and is removed.
 """
 
 from __future__ import annotations
@@ -77,6 +77,7 @@ def _relief_frames(model_path: Path, frames: int = 5) -> None:
     GradeCheck(1).arrived(0.0, 0.0, 0.0, 0.0)  # the grades read ahead, checked once there
     gmap.read_shape()  # the sums a re-centred map works out afresh
     gmap.beside_attitudes(np.zeros((1, 2)), np.array([[0.0, 1.0]]), np.zeros(1))  # the relief an offset rule learned prices
+    sim.world.roughness_at(np.zeros((1, 2)))  # an evaluation's speed by roughness band on relief
     expert = ExpertDriver(ExpertConfig(relief=ReliefStyle()))
     expert.reset(sim.scenario, np.random.default_rng(0))
     for _ in range(frames):
