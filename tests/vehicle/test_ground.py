@@ -1,6 +1,7 @@
 """The vehicle on relief (SPEC 19) against closed-form answers: its pitch and roll on a ramp of
 known grade, its height, its speed up a grade, a ledge just under and just over the step it
-climbs, a side slope past its roll limit; and the run's counts of tips and times stuck."""
+climbs, a side slope past its roll limit, a wall thinner than a tick's distance, a ledge under
+the rear wheels, a turn into a bank; and the run's counts of tips and times stuck."""
 
 from __future__ import annotations
 
@@ -96,6 +97,65 @@ def test_a_ledge_under_the_step_it_climbs_is_climbed_and_one_over_it_holds_the_v
         assert vehicle.pose.yaw == pytest.approx(1.0) and not vehicle.stuck
     else:
         assert not vehicle.stuck and vehicle.pose.x > 14.0 and vehicle.attitude.z_m == pytest.approx(height_m, abs=1e-6)
+
+
+def wall(x_m: float, width_m: float, height_m: float = 2.0) -> dict:
+    """A wall ``width_m`` thick from x = ``x_m``, ``height_m`` high, across the whole map."""
+    return {"plateau": {"polygon": [[x_m, -5], [x_m + width_m, -5], [x_m + width_m, 25], [x_m, 25]], "height_m": height_m, "edge_m": 0.0}}
+
+
+def thin_wall_world() -> WorldMap:
+    """A wall 2 m high and one 5 cm cell thick from x = 12 m, across the whole map."""
+    data = copy.deepcopy(FLAT)
+    data["world"]["resolution_m"] = 0.05
+    data["relief"] = [wall(12.0, 0.05)]
+    return rasterise(parse_scenario(data, "ground_test.yaml"))
+
+
+@pytest.mark.parametrize("start_x", [8.0, 8.03, 8.07])
+def test_a_wall_one_cell_thick_is_not_driven_through_straight_on(start_x: float) -> None:
+    vehicle = Vehicle(Pose(start_x, 10.0, 0.0), ground=thin_wall_world(), speed_mps=2.0)
+    _drive(vehicle, Command(2.0, 0.0), 4.0)
+    assert vehicle.stuck and vehicle.pose.x + 0.5 < 12.0 and vehicle.attitude.z_m == 0.0
+
+
+@pytest.mark.parametrize(("yaw", "v"), [(0.0, 0.2), (0.2, 0.5), (0.2, 1.0)])
+def test_a_wall_one_cell_thick_is_not_climbed_turning_slowly_beside_it(yaw: float, v: float) -> None:
+    # Stopped with the front wheels 16 cm short of the wall and turning while creeping on, a front
+    # wheel's way runs sideways into the wall, where a probe straight ahead of it does not look:
+    # no wheel ever stands on it.
+    vehicle = Vehicle(Pose(11.33, 10.0, yaw), ground=thin_wall_world())
+    vehicle.set_command(Command(v, 0.6))
+    heights = []
+    for _ in range(90):
+        vehicle.tick()
+        heights.append(max(vehicle.contact._wheels(vehicle.pose)))
+    assert max(heights) <= vehicle.config.max_step_m and vehicle.stuck and not vehicle.tipped
+
+
+def test_a_ledge_under_the_rear_wheels_holds_the_vehicle_the_front_wheels_stand_on() -> None:
+    # Started with the front wheels up a 0.5 m ledge (26.6 deg of pitch, within its limit), the
+    # rear wheels cannot climb it: the vehicle is held with them at its foot.
+    vehicle = Vehicle(Pose(11.8, 10.0, 0.0), ground=world(ledge(0.5)))
+    assert vehicle.attitude.pitch_rad == pytest.approx(-math.atan(0.5), abs=1e-6) and not vehicle.tipped
+    _drive(vehicle, Command(1.0, 0.0), 4.0)
+    assert vehicle.stuck and 11.8 < vehicle.pose.x - 0.5 < 12.0
+    assert vehicle.attitude.pitch_rad == pytest.approx(-math.atan(0.5), abs=1e-6)
+
+
+def test_a_turn_in_place_that_would_swing_a_wheel_onto_a_wall_is_held() -> None:
+    # Alongside a wall 10 cm beside its left wheels, a turn either way swings a left corner (the
+    # front one turning left, the rear one turning right) 18 cm out, onto the wall: the vehicle
+    # does not turn. Along the wall it drives freely.
+    beside = {"plateau": {"polygon": [[-5, 10.7], [40, 10.7], [40, 11.2], [-5, 11.2]], "height_m": 2.0, "edge_m": 0.0}}
+    for w in (1.0, -1.0):
+        turning = Vehicle(Pose(10.0, 10.0, 0.0), ground=world(beside))
+        assert not turning.tipped and turning.attitude.z_m == 0.0
+        _drive(turning, Command(0.0, w), 1.0)
+        assert turning.stuck and abs(turning.pose.yaw) < 0.1 and turning.attitude.z_m < 0.15
+    along = Vehicle(Pose(10.0, 10.0, 0.0), ground=world(beside))
+    _drive(along, Command(1.0, 0.0), 2.0)
+    assert not along.stuck and along.pose.x > 11.0 and along.attitude.z_m == 0.0
 
 
 def test_a_side_slope_past_the_roll_limit_tips_the_vehicle_and_one_within_it_does_not() -> None:

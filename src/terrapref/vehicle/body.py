@@ -14,8 +14,9 @@ class Vehicle:
     acceleration limits, so ``speed_mps`` (what the vehicle does) may differ from
     ``command.v`` (what it was told). On ``ground`` with relief (terrapref.vehicle.ground) the
     body takes its attitude from the ground each tick, a grade caps its speed, a step too high
-    ahead holds it where it stands (``stuck``, turning in place still possible) and an attitude
-    past its limits is ``tipped``; without it the ground is the plane z = 0.
+    ahead, or on any wheel's way, holds it where it stands (``stuck``: turning in place still
+    possible where no wheel's way climbs one) and an attitude past its limits is ``tipped``;
+    without it the ground is the plane z = 0.
     """
 
     def __init__(self, pose: Pose, config: VehicleConfig | None = None, speed_mps: float = 0.0, ground: Ground | None = None) -> None:
@@ -46,12 +47,22 @@ class Vehicle:
         self.stuck = contact is not None and v > 0.0 and contact.blocked(self.pose)
         if self.stuck:
             v1 = v = 0.0
+        pose = self._move(v)
+        if contact is not None and contact.climbs(self.pose, pose):  # a wheel's way climbs a step: turn in place, or hold
+            self.stuck, v1 = True, 0.0
+            pose = self._move(v := 0.0)
+            if contact.climbs(self.pose, pose):
+                pose = self.pose
         self.speed_mps = v1
         self.step_m = v * c.dt_s
-        x, y, yaw = integrate_unicycle(self.pose, Command(v, self.command.w), self.config.dt_s)
-        self.pose = Pose(x, y, wrap_angle(yaw))
+        self.pose = pose
         self._settle()
         return self.pose
+
+    def _move(self, v: float) -> Pose:
+        """The pose one controller period on at forward speed ``v`` [m/s] and the held yaw rate."""
+        x, y, yaw = integrate_unicycle(self.pose, Command(v, self.command.w), self.config.dt_s)
+        return Pose(x, y, wrap_angle(yaw))
 
     def _settle(self) -> None:
         """The body's attitude on the ground at its pose, whether it has tipped, and its top speed there."""

@@ -12,8 +12,12 @@ with the left side up. Driving up a grade of ``g`` rad, the pitch is ``-g``.
 
 Limits (:class:`~terrapref.vehicle.kinematics.VehicleConfig`): past ``max_roll_deg`` or
 ``max_pitch_deg`` the vehicle has tipped; ground rising by more than ``max_step_m`` just ahead of
-a front wheel stops it where it stands (stuck): it can still turn in place. Up a grade its top
-speed is that of a drive of constant power (:meth:`GroundContact.top_speed_mps`).
+a front wheel stops it where it stands (stuck): it can still turn in place. No wheel climbs more
+than ``max_step_m`` on its way either, whichever way it moves (a wall thinner than a tick's
+distance, a ledge under the rear wheels, a turn into a bank): ground read every half cell along
+each wheel's way, and a cell past it, so that nothing is stepped over between two ticks or
+climbed a little at a time. Up a grade its top speed is that of a drive of constant power
+(:meth:`GroundContact.top_speed_mps`).
 """
 
 from __future__ import annotations
@@ -71,15 +75,39 @@ class GroundContact:
         # Long enough that a ledge one grid cell wide (a rasterised vertical step) is seen whole
         # from some tick: the distance of one tick at top speed, and a cell.
         self.probe_m = config.max_speed_mps * config.dt_s + ground.resolution_m
+        self.resolution_m = ground.resolution_m
 
-    def _wheels(self, pose: Pose) -> tuple[float, float, float, float]:
-        """The ground's height [m] under the front-left, front-right, rear-left and rear-right wheels."""
+    def _wheel_points(self, pose: Pose) -> tuple[tuple[float, float], ...]:
+        """Where the front-left, front-right, rear-left and rear-right wheels touch the ground (x, y) [m]."""
         x, y, yaw = pose
         cos, sin = math.cos(yaw), math.sin(yaw)
         ax, ay = self.half_length_m * cos, self.half_length_m * sin  # half the wheelbase, along
         cx, cy = -self.half_width_m * sin, self.half_width_m * cos  # half the track, to the left
+        return (x + ax + cx, y + ay + cy), (x + ax - cx, y + ay - cy), (x - ax + cx, y - ay + cy), (x - ax - cx, y - ay - cy)
+
+    def _wheels(self, pose: Pose) -> tuple[float, float, float, float]:
+        """The ground's height [m] under the front-left, front-right, rear-left and rear-right wheels."""
         z = self.height_at
-        return z(x + ax + cx, y + ay + cy), z(x + ax - cx, y + ay - cy), z(x - ax + cx, y - ay + cy), z(x - ax - cx, y - ay - cy)
+        (a, b), (c, d), (e, f), (g, h) = self._wheel_points(pose)
+        return z(a, b), z(c, d), z(e, f), z(g, h)
+
+    def _rise_along(self, x: float, y: float, dx: float, dy: float) -> float:
+        """The largest rise of the ground [m] from (x, y) along the way (dx, dy) from it, read every
+        half cell to the way's end (inclusive)."""
+        z, n = self.height_at, max(1, math.ceil(2.0 * math.hypot(dx, dy) / self.resolution_m))
+        return max(z(x + dx * k / n, y + dy * k / n) for k in range(1, n + 1)) - z(x, y)
+
+    def climbs(self, before: Pose, after: Pose) -> bool:
+        """Whether a wheel, moving from ``before`` to ``after``, would climb more than the step the
+        vehicle climbs: the ground along each wheel's way and a cell past it, over the ground
+        under the wheel at ``before``."""
+        limit, cell = self.config.max_step_m, self.resolution_m
+        for (x0, y0), (x1, y1) in zip(self._wheel_points(before), self._wheel_points(after), strict=True):
+            dx, dy = x1 - x0, y1 - y0
+            way = math.hypot(dx, dy)
+            if way > 0.0 and self._rise_along(x0, y0, dx * (1.0 + cell / way), dy * (1.0 + cell / way)) > limit:
+                return True
+        return False
 
     def attitude(self, pose: Pose) -> Attitude:
         """The body's height and orientation at ``pose``."""
@@ -90,7 +118,7 @@ class GroundContact:
 
     def rise_ahead_m(self, pose: Pose) -> float:
         """The largest rise of the ground [m] from a front wheel (or the middle of the front axle)
-        to ``probe_m`` ahead of it: the step the vehicle is about to climb."""
+        within ``probe_m`` ahead of it: the step the vehicle is about to climb."""
         x, y, yaw = pose
         cos, sin = math.cos(yaw), math.sin(yaw)
         ax, ay = self.half_length_m * cos, self.half_length_m * sin
@@ -98,7 +126,7 @@ class GroundContact:
         rise = -math.inf
         for side in (-1.0, 0.0, 1.0):
             wx, wy = x + ax - side * self.half_width_m * sin, y + ay + side * self.half_width_m * cos
-            rise = max(rise, self.height_at(wx + px, wy + py) - self.height_at(wx, wy))
+            rise = max(rise, self._rise_along(wx, wy, px, py))
         return rise
 
     def blocked(self, pose: Pose) -> bool:
