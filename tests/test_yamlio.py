@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import pytest
+import yaml
+
 from terrapref.scenario import FORMAT, parse_scenario
 from terrapref.yamlio import dump_yaml, load_yaml_text
 
@@ -25,3 +28,20 @@ def test_a_scenario_with_exponents_reads_as_with_decimals():
     decimals = text.replace("2e1", "20.0").replace("1e1", "10.0").replace("1e-1", "0.1")
     read, expected = parse_scenario(load_yaml_text(text), "e.yaml"), parse_scenario(load_yaml_text(decimals), "e.yaml")
     assert (read.size_m, read.resolution_m) == (expected.size_m, expected.resolution_m) == ((20.0, 10.0), 0.1)
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "a: 1\nb: 2\na: 3\n",  # block style, another line
+        "relief: [{mound: {height_m: 0.4, height_m: 900}}]\n",  # flow style, the same line
+        "{a: 1, b: {c: 2, c: 2}}\n",  # the same value twice is still a key given twice
+    ],
+)
+def test_a_key_given_twice_in_one_mapping_is_refused_on_one_line_as_on_two(text: str):
+    with pytest.raises(yaml.YAMLError, match=r"given twice \(first at line 1\)"):
+        load_yaml_text(text)
+
+
+def test_the_same_key_in_two_mappings_on_one_line_is_not_a_key_given_twice():
+    assert load_yaml_text("a: [{x: 1}, {x: 2}]\n") == {"a": [{"x": 1}, {"x": 2}]}

@@ -29,11 +29,12 @@ class _UniqueKeyLoader(_SafeLoader):
                 continue
             key = self.construct_object(key_node, deep=True)
             try:
-                line = first.setdefault(key, key_node.start_mark.line + 1)
+                line = first.get(key)
             except TypeError:  # an unhashable key: the base loader says so
                 continue
-            if line != key_node.start_mark.line + 1:
+            if line is not None:  # on another line or the same one (a flow mapping: {a: 1, a: 2})
                 raise yaml.constructor.ConstructorError(None, None, f"key {key!r} given twice (first at line {line})", key_node.start_mark)
+            first[key] = key_node.start_mark.line + 1
         return super().construct_mapping(node, deep)
 
 
