@@ -5,6 +5,7 @@ sampling between cell centres; and a flat scenario's world as it always was."""
 from __future__ import annotations
 
 import copy
+import math
 from typing import Any
 
 import numpy as np
@@ -15,7 +16,7 @@ from terrapref.scenario import FORMAT, parse_scenario
 from terrapref.scenario.relief import Noise
 from terrapref.sim import Simulation
 from terrapref.terrain import default_classes
-from terrapref.vehicle.ground import drivable, start_attitude
+from terrapref.vehicle.ground import drivable, start_attitude, start_pose
 from terrapref.world import WorldMap, rasterise
 from terrapref.world.relief import height_field, noise_height
 
@@ -157,6 +158,30 @@ def test_a_start_that_would_tip_the_vehicle_is_refused(height_m: float, refused:
         "bank.yaml: start: (1, 5) stands the vehicle at roll 51.3 deg, pitch 0.0 deg, "
         "past the vehicle's limits (25 deg of roll, 30 of pitch); start it on gentler ground"
     ]
+
+
+@pytest.mark.parametrize(("height_m", "refused"), [(0.6, True), (0.58, False)])
+def test_a_start_that_would_tip_the_vehicle_begun_as_a_later_seed_begins_is_refused(height_m: float, refused: bool) -> None:
+    """A ridge along the path beside the start: 0.6 m rolls the vehicle 22.6 deg at the start but
+    past 25 deg 0.25 m toward the ridge, where an evaluation's later seeds may begin; 0.58 m stays
+    within the limit wherever they begin, and no seed's run begins tipped."""
+    ridge = {"ridge": {"polyline": [[0.0, 6.0], [20.0, 6.0]], "width_m": 3.0, "height_m": height_m}}
+    scenario = parse_scenario({**copy.deepcopy(FLAT), "relief": [ridge]}, "ridge.yaml")
+    assert math.degrees(start_attitude(scenario).roll_rad) < 23.0
+    if refused:
+        with pytest.raises(ScenarioError) as err:
+            drivable(scenario)
+        (line,) = err.value.lines()
+        assert line.startswith(
+            "ridge.yaml: start: (1, 5) begun 0.25 m to its side, 0 deg off its heading (as an evaluation's later seeds may be)"
+        )
+        assert "roll 25.4 deg" in line
+        return
+    assert drivable(scenario, seeds=40) is scenario
+    sim = Simulation(scenario)
+    for seed in range(40):
+        sim.reset(start_pose(scenario.start, seed))
+        assert not sim.vehicle.tipped and sim.tips == 0
 
 
 @pytest.mark.parametrize(

@@ -149,7 +149,7 @@ def evaluate_model(
     ev = evaluation
     model = Model.load(ev.model_path).policy  # C, or a learned baseline (linear, CNN)
     for name in ev.scenarios:
-        drivable(resolve_scenario(name, model.classes))  # fail early, with the file and field, before any run
+        drivable(resolve_scenario(name, model.classes), seeds=ev.seeds)  # fail early, with the file and field, before any run
     profile = scoring_profile(model, ev.profile, ev.model_path)
     results = annotate_agreement(run_many(ev.specs(profile, model.classes), progress=progress, engine=engine, watch=watch))
     evidence = _evidence(model, ev.scenarios)

@@ -4,13 +4,13 @@ comparison) over seeds, score every zone (SPEC 12), and collect the paths for fi
 Each (scenario, seed, driver) run is independent, so runs are spread over worker processes
 or a Ray cluster (terrapref.grid).
 Seed 0 starts exactly at the scenario's start; other seeds start up to 0.3 m to the side and
-3 degrees off, and seed the synthetic driver's noise.
+3 degrees off (terrapref.vehicle.ground.start_pose, where a start is checked against them), and
+seed the synthetic driver's noise.
 """
 
 from __future__ import annotations
 
 import functools
-import math
 import os
 from collections import Counter
 from collections.abc import Callable, Sequence
@@ -34,7 +34,8 @@ from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.sim import EpisodeLog, SimConfig, Simulation, run_episode
 from terrapref.sim.loop import settle
 from terrapref.terrain import ClassTable, PreferenceProfile
-from terrapref.vehicle import Pose, VehicleConfig
+from terrapref.vehicle import VehicleConfig
+from terrapref.vehicle.ground import start_pose
 from terrapref.world import WorldMap, rasterise
 
 PLANNER = "planner"  # a model file: C, or a learned baseline (linear, CNN)
@@ -252,15 +253,6 @@ class Summary:
                 else {}
             ),
         }
-
-
-def start_pose(start: tuple[float, float, float], seed: int) -> Pose:
-    if seed == 0:
-        return Pose(*start)
-    rng = np.random.default_rng([seed, 7919])
-    x, y, yaw = start
-    lat, dyaw = rng.uniform(-0.3, 0.3), math.radians(rng.uniform(-3.0, 3.0))
-    return Pose(x - lat * math.sin(yaw), y + lat * math.cos(yaw), yaw + dyaw)
 
 
 @functools.lru_cache(maxsize=16)

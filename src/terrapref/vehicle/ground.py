@@ -25,6 +25,8 @@ from __future__ import annotations
 import math
 from typing import NamedTuple, Protocol
 
+import numpy as np
+
 from terrapref.vehicle.kinematics import Pose, VehicleConfig
 
 
@@ -153,19 +155,45 @@ class GroundContact:
 
 
 START_REACH_M = 3.0  # the ground read round a start for the attitude there: past the wheels of any vehicle of ours [m]
+START_SHIFT_M = 0.3  # an evaluation's seeds after the first begin up to this far to the side of the start [m]
+START_SHIFT_DEG = 3.0  # and up to this far off its heading [deg]
 
 
-def start_attitude(scenario, config: VehicleConfig | None = None) -> Attitude:
+def start_pose(start: tuple[float, float, float], seed: int) -> Pose:
+    """Where an evaluation's run of ``seed`` begins: seed 0 at ``start``, each later one up to
+    :data:`START_SHIFT_M` to its side and :data:`START_SHIFT_DEG` off its heading."""
+    if seed == 0:
+        return Pose(*start)
+    rng = np.random.default_rng([seed, 7919])
+    x, y, yaw = start
+    lat, dyaw = rng.uniform(-START_SHIFT_M, START_SHIFT_M), math.radians(rng.uniform(-START_SHIFT_DEG, START_SHIFT_DEG))
+    return Pose(x - lat * math.sin(yaw), y + lat * math.cos(yaw), yaw + dyaw)
+
+
+def start_poses(start: tuple[float, float, float], seeds: int = 0) -> tuple[Pose, ...]:
+    """The start, then poses round it where a run may begin: every centimetre to either side of it
+    within :data:`START_SHIFT_M`, each on the start's heading and :data:`START_SHIFT_DEG` off it;
+    then where ``seeds`` runs of an evaluation begin (:func:`start_pose`)."""
+    x, y, yaw = start
+    steps = round(START_SHIFT_M / 0.01)
+    shifts = [START_SHIFT_M * k / steps for k in range(-steps, steps + 1)]
+    turns = (0.0, -math.radians(START_SHIFT_DEG), math.radians(START_SHIFT_DEG))
+    around = (Pose(x - lat * math.sin(yaw), y + lat * math.cos(yaw), yaw + turn) for lat in shifts for turn in turns)
+    return (Pose(*start), *around, *(start_pose(start, seed) for seed in range(1, seeds)))
+
+
+def start_attitude(scenario, config: VehicleConfig | None = None, poses: tuple[Pose, ...] | None = None):
     """The body's attitude at ``scenario``'s start (a :class:`terrapref.scenario.Scenario`), as the
     simulator's vehicle of ``config`` (default: the default vehicle) would stand there: from the
     height field's cells round the start, each the value the whole field gives it (read from them,
     the attitude is the simulator's to rounding), so a large map need not be built to check where
-    a run would begin. Level on a scenario without relief."""
+    a run would begin. Level on a scenario without relief. With ``poses`` (within
+    :data:`START_SHIFT_M` of the start), the attitude at each of them instead, in their order."""
     from terrapref.world.height_compiled import height_at
     from terrapref.world.relief import height_field
 
     if not scenario.has_relief:
-        return LEVEL
+        return LEVEL if poses is None else tuple(LEVEL for _ in poses)
     config = config or VehicleConfig()
     res, (ny, nx) = scenario.resolution_m, scenario.grid_shape
     reach = math.ceil(START_REACH_M / res)
@@ -180,13 +208,21 @@ def start_attitude(scenario, config: VehicleConfig | None = None) -> Attitude:
         def height_at_point(self, x: float, y: float) -> float:
             return height_at(part, 1.0 / res, x - x0, y - y0)
 
-    return GroundContact(Part(), config).attitude(Pose(*scenario.start))
+    contact = GroundContact(Part(), config)
+    return contact.attitude(Pose(*scenario.start)) if poses is None else tuple(contact.attitude(pose) for pose in poses)
 
 
-def drivable(scenario, config: VehicleConfig | None = None):
+def _past_by(attitude: Attitude, config: VehicleConfig) -> float:
+    """How far ``attitude`` is toward the nearer of ``config``'s limits: 1 at a limit."""
+    return max(abs(attitude.roll_rad) / math.radians(config.max_roll_deg), abs(attitude.pitch_rad) / math.radians(config.max_pitch_deg))
+
+
+def drivable(scenario, config: VehicleConfig | None = None, seeds: int = 0):
     """``scenario`` (a :class:`terrapref.scenario.Scenario`), where a run may begin at its start: a
     start whose ground tips the vehicle of ``config`` (default: the default vehicle) past its roll
-    or pitch limit is refused, as one on lethal terrain is (a run would count a tip before it moved).
+    or pitch limit is refused, as one on lethal terrain is (a run would count a tip before it moved);
+    so is one where it would tip begun a little to the side or off the heading, as an evaluation's
+    seeds after the first begin (:func:`start_poses`; with ``seeds``, where each of that many does).
 
     Raises:
         ScenarioError: naming the scenario's ``start``.
@@ -194,13 +230,22 @@ def drivable(scenario, config: VehicleConfig | None = None):
     from terrapref.errors import ScenarioError
 
     config = config or VehicleConfig()
-    attitude = start_attitude(scenario, config)
-    if not GroundContact.past_limits(attitude, config):
+    poses = start_poses(scenario.start, seeds)
+    attitudes = start_attitude(scenario, config, poses)
+    tipped = [(pose, attitude) for pose, attitude in zip(poses, attitudes, strict=True) if GroundContact.past_limits(attitude, config)]
+    if not tipped:
         return scenario
-    x, y, _ = scenario.start
+    worst = tipped[0] if tipped[0][0] is poses[0] else max(tipped, key=lambda t: _past_by(t[1], config))
+    (px, py, pyaw), attitude = worst
+    x, y, yaw = scenario.start
+    where = (
+        ""
+        if worst[0] is poses[0]
+        else f" begun {math.hypot(px - x, py - y):.2f} m to its side, {math.degrees(abs(pyaw - yaw)):g} deg off its heading (as an evaluation's later seeds may be),"
+    )
     raise ScenarioError(
         scenario.source or scenario.name,
-        f"({x:g}, {y:g}) stands the vehicle at roll {math.degrees(abs(attitude.roll_rad)):.1f} deg, pitch "
+        f"({x:g}, {y:g}){where} stands the vehicle at roll {math.degrees(abs(attitude.roll_rad)):.1f} deg, pitch "
         f"{math.degrees(abs(attitude.pitch_rad)):.1f} deg, past the vehicle's limits ({config.max_roll_deg:g} deg of roll, "
         f"{config.max_pitch_deg:g} of pitch); start it on gentler ground",
         field="start",
