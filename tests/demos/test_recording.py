@@ -464,6 +464,9 @@ def test_the_meta_module_examples_run():
 # --- depth images (relief) ------------------------------------------------------------------------
 
 
+DROP = object()  # an entry taken out of a frame record
+
+
 def _lines(rec: Path) -> list[dict]:
     return [json.loads(line) for line in (rec / FRAMES).read_text().splitlines()]
 
@@ -539,17 +542,41 @@ def test_a_missing_depth_image_is_named_and_at_the_end_is_a_cut_frame(tmp_path: 
         ("depth", "depth/../meta.json", "expected a file name under depth/"),
         ("attitude", [0.0, 0.1], "expected 3 finite numbers"),
         ("attitude", [0.0, None, 0.1], "expected 3 finite numbers"),
+        ("attitude", [0.0, 100.0, 0.0], "expected each within +-pi/2"),
+        ("attitude", [0.0, 0.0, -1.6], "expected each within +-pi/2"),
+        ("attitude", DROP, "missing: a frame on relief carries its depth image and its attitude together"),
+        ("depth", DROP, "missing: a frame on relief carries its depth image and its attitude together"),
+        (("depth", "attitude"), DROP, "has no depth image where the frame before it had one"),
     ],
 )
 def test_a_wrong_depth_or_attitude_entry_is_one_line_naming_the_field(tmp_path: Path, relief_recording: Path, key, value, message):
     rec = tmp_path / "rec"
     shutil.copytree(relief_recording, rec)
     lines = _lines(rec)
-    lines[1][key] = value
+    for k in key if isinstance(key, tuple) else (key,):
+        if value is DROP:
+            del lines[1][k]
+        else:
+            lines[1][k] = value
+    key = key[0] if isinstance(key, tuple) else key
     (rec / FRAMES).write_text("".join(json.dumps(line) + "\n" for line in lines))
     with pytest.raises(UserError) as err:
         read_recording(rec)
     assert len(err.value.lines()) == 1 and err.value.problems[0].field == f"line 2.{key}" and message in err.value.problems[0].message
+
+
+def test_a_relief_recording_whose_frames_all_lost_their_attitude_is_refused_at_its_first_line(tmp_path: Path, relief_recording: Path):
+    # Kept, the depth images would be placed in the ground maps as seen from a level body: each
+    # relief frame's attitude is what places them.
+    rec = tmp_path / "rec"
+    shutil.copytree(relief_recording, rec)
+    lines = [{k: v for k, v in line.items() if k != "attitude"} for line in _lines(rec)]
+    (rec / FRAMES).write_text("".join(json.dumps(line) + "\n" for line in lines))
+    with pytest.raises(UserError) as err:
+        read_recording(rec)
+    assert err.value.lines() == [
+        f"{rec / FRAMES}: line 1.attitude: missing: a frame on relief carries its depth image and its attitude together"
+    ]
 
 
 def test_a_depth_file_that_is_not_16_bit_millimetres_is_named_when_read(tmp_path: Path, relief_recording: Path):

@@ -461,6 +461,10 @@ def _frame_problem(row: dict) -> tuple[str, str] | None:
     attitude = row.get("attitude")
     if attitude is not None and not (isinstance(attitude, list) and len(attitude) == 3 and all(finite(x) for x in attitude)):
         return "attitude", "expected 3 finite numbers: z [m], pitch and roll [rad]"
+    if attitude is not None and not all(abs(a) < 0.5 * math.pi for a in attitude[1:]):
+        return "attitude", f"pitch {attitude[1]:g} and roll {attitude[2]:g} rad: expected each within +-pi/2 (a body on its wheels)"
+    if (depth is None) != (attitude is None):
+        return ("attitude" if attitude is None else "depth"), "missing: a frame on relief carries its depth image and its attitude together"
     return None
 
 
@@ -616,6 +620,13 @@ def _check_frame(row: dict, previous: dict | None, frames_path: Path, line_no: i
     problem = _frame_problem(row)
     if problem:
         raise UserError(str(frames_path), problem[1], field=f"line {line_no}.{problem[0]}")
+    if previous is not None and (row.get("depth") is None) != (previous.get("depth") is None):
+        raise UserError(
+            str(frames_path),
+            f"{'has no' if row.get('depth') is None else 'has a'} depth image where the frame before it "
+            f"{'had one' if row.get('depth') is None else 'had none'}; a recording's frames all carry depth, or none does",
+            field=f"line {line_no}.depth",
+        )
     if previous is not None and not row["t"] > previous["t"]:
         raise UserError(
             str(frames_path), f"time {row['t']} does not follow {previous['t']}; frames must be in time order", field=f"line {line_no}.t"
