@@ -196,8 +196,12 @@ def test_a_start_that_would_tip_the_vehicle_begun_as_a_later_seed_begins_is_refu
             {"plateau": {"polygon": [[12.0, 5.0], [12.03, 5.0], [12.0, 5.03]], "height_m": 1.0, "edge_m": 0.0}},
             "relief[0].plateau.polygon: is smaller than one cell of the map (0.1 m square)",
         ),
+        (
+            {"noise": {"amplitude_m": 0.2, "wavelength_m": 1.0, "seed": 1, "polygon": [[12.0, 5.0], [12.03, 5.0], [12.0, 5.03]]}},
+            "relief[0].noise.polygon: is smaller than one cell of the map (0.1 m square)",
+        ),
     ],
-    ids=["mound", "ridge", "plateau"],
+    ids=["mound", "ridge", "plateau", "noise"],
 )
 def test_relief_finer_than_the_grid_is_refused_rather_than_lost_between_the_cells(entry: dict, problem: str) -> None:
     with pytest.raises(ScenarioError) as err:

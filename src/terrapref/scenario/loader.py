@@ -560,6 +560,14 @@ def _relief_points(c: _Checker, value: Any, field: str, minimum: int) -> np.ndar
     return pts
 
 
+def _cell_sized(c: _Checker, polygon: Polygon | None, f: str, world: _World) -> Polygon | None:
+    """``polygon`` (an entry's ``polygon``), refused (None) where it is smaller than one cell of the map."""
+    if polygon is not None and world.resolution_m is not None and _area(polygon.vertices) < world.resolution_m**2:
+        c.fail(f"{f}.polygon", f"is smaller than one cell of the map ({world.resolution_m:g} m square): the ground would not change")
+        return None
+    return polygon
+
+
 def _noise(c: _Checker, spec: Any, f: str, world: _World) -> Noise | None:
     """A ``noise`` entry: amplitude [m], wavelength [m] of at least two cells, integer seed, and
     optionally the polygon it stays inside."""
@@ -568,7 +576,7 @@ def _noise(c: _Checker, spec: Any, f: str, world: _World) -> Noise | None:
         return None
     polygon = None
     if "polygon" in spec:
-        polygon = _relief_polygon(c, spec["polygon"], f)
+        polygon = _cell_sized(c, _relief_polygon(c, spec["polygon"], f), f, world)
         if polygon is None:
             return None
     amplitude = _relief_height(c, spec["amplitude_m"], f"{f}.amplitude_m", positive=True)
@@ -620,10 +628,7 @@ def _plateau(c: _Checker, spec: Any, f: str, world: _World) -> Plateau | None:
     spec = c.mapping(spec, f, {"polygon", "height_m", "edge_m"})
     if spec is None:
         return None
-    polygon = _relief_polygon(c, spec["polygon"], f)
-    if polygon is not None and world.resolution_m is not None and _area(polygon.vertices) < world.resolution_m**2:
-        c.fail(f"{f}.polygon", f"is smaller than one cell of the map ({world.resolution_m:g} m square): the ground would not change")
-        polygon = None
+    polygon = _cell_sized(c, _relief_polygon(c, spec["polygon"], f), f, world)
     height = _relief_height(c, spec["height_m"], f"{f}.height_m")
     edge = c.number(spec["edge_m"], f"{f}.edge_m")
     if edge is not None and edge < 0:
