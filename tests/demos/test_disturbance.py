@@ -105,6 +105,34 @@ def test_pushes_stay_within_the_configured_ranges():
     assert 0.5 < share < 1.0  # pushes cover most frames at this rate
 
 
+@pytest.mark.parametrize(("v", "share"), [(0.0, 0.0), (0.05, 0.25), (0.1, 0.5), (0.2, 1.0), (0.3, 1.0), (1.6, 1.0)])
+def test_a_push_turns_a_crawling_vehicle_in_proportion_to_its_speed(v: float, share: float):
+    """Below FULL_PUSH_MPS (0.2 m/s) a push is the ground's on a vehicle rolling slowly: a share of
+    it, as the command's speed is of 0.2 m/s; at and above it, whole (every speed style's)."""
+    from terrapref.demos.disturbance import FULL_PUSH_MPS
+
+    assert FULL_PUSH_MPS == 0.2
+    config = DisturbanceConfig(rate_hz=1000.0, min_yaw_rate_rps=0.5, max_yaw_rate_rps=0.5)
+    d = Disturber(config, np.random.default_rng(0), DT)
+    out = d(Command(v, 0.1))
+    assert abs(d.push) == 0.5 and out.v == v
+    assert out.w == pytest.approx(0.1 + d.push * share, abs=1e-12)
+
+
+def test_a_driver_crawling_up_a_grade_through_pushes_still_reaches_the_goal(tmp_path: Path, capsys: pytest.CaptureFixture[str]):
+    """A relief style that sheds 0.2 m/s per degree crawls (0.1 m/s) over tiny_relief's mound;
+    with whole pushes at a crawl the vehicle was turned round within centimetres and drove off its
+    line until the time ran out ("timed out")."""
+    from helpers import TINY_RELIEF
+    from terrapref.cli import main
+
+    out = tmp_path / "rec"
+    assert main(["record", str(TINY_RELIEF), "--relief-style", "default,up_mps_per_deg=0.2", "--out", str(out), "--quiet"]) == 0
+    assert "reached the goal" in capsys.readouterr().out
+    rec = read_recording(out)
+    assert rec.commands[:, 0].min() < 0.2 and any("executed" in json.loads(line) for line in (out / FRAMES).read_text().splitlines())
+
+
 def test_push_rate_matches_rate_hz():
     config = DisturbanceConfig(rate_hz=0.5, min_duration_s=0.1, max_duration_s=0.1)
     pushes, _ = _pushes(config, 20000, seed=1)

@@ -19,6 +19,15 @@ import numpy as np
 from terrapref.records import to_plain
 from terrapref.vehicle import Command
 
+# A push is what the ground does to a rolling vehicle (a rut, a slip): where the command's speed
+# [m/s] is slower than this, it turns the vehicle in proportion to that speed, and with none not
+# at all (the command's speed rather than the vehicle's, so that a push at a drive's start is
+# whole). Pure pursuit's own correction is the speed times a curvature, so a whole push at a
+# crawl up a grade (0.1 m/s) would turn the vehicle round within centimetres, faster than the
+# driver's steering turns it back. No speed style cruises slower (water's 0.3 m/s is the
+# slowest), nor does the cautious relief style up the teaching course's grades (0.24 m/s).
+FULL_PUSH_MPS = 0.2
+
 
 @dataclass(frozen=True)
 class DisturbanceConfig:
@@ -91,4 +100,5 @@ class Disturber:
         self.left_s -= self.dt
         if self.left_out:  # its time passes without a push, so that the pushes after it are drawn as before
             return command
-        return Command(command[0], float(np.clip(command[1] + self.push, -c.max_command_rps, c.max_command_rps)))
+        push = self.push * min(1.0, max(float(command[0]), 0.0) / FULL_PUSH_MPS)  # a rut or a slip turns the vehicle as it rolls
+        return Command(command[0], float(np.clip(command[1] + push, -c.max_command_rps, c.max_command_rps)))
