@@ -49,10 +49,9 @@ class Vehicle:
             v1 = v = 0.0
         pose = self._move(v)
         if contact is not None and contact.climbs(self.pose, pose):  # a wheel's way climbs a step: turn in place, or hold
-            self.stuck, v1 = True, 0.0
-            pose = self._move(v := 0.0)
-            if contact.climbs(self.pose, pose):
-                pose = self.pose
+            turn = self._move(0.0) if v > 0.0 else None
+            pose = turn if turn is not None and not contact.climbs(self.pose, turn) else self.pose
+            self.stuck, v1, v = True, 0.0, 0.0
         self.speed_mps = v1
         self.step_m = v * c.dt_s
         self.pose = pose

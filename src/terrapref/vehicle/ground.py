@@ -165,35 +165,42 @@ def start_pose(start: tuple[float, float, float], seed: int) -> Pose:
     if seed == 0:
         return Pose(*start)
     rng = np.random.default_rng([seed, 7919])
+    return _shifted(start, rng.uniform(-START_SHIFT_M, START_SHIFT_M), math.radians(rng.uniform(-START_SHIFT_DEG, START_SHIFT_DEG)))
+
+
+def _shifted(start: tuple[float, float, float], lateral_m: float, turn_rad: float) -> Pose:
+    """``start`` moved ``lateral_m`` to its left (negative: right) and turned ``turn_rad``."""
     x, y, yaw = start
-    lat, dyaw = rng.uniform(-START_SHIFT_M, START_SHIFT_M), math.radians(rng.uniform(-START_SHIFT_DEG, START_SHIFT_DEG))
-    return Pose(x - lat * math.sin(yaw), y + lat * math.cos(yaw), yaw + dyaw)
+    return Pose(x - lateral_m * math.sin(yaw), y + lateral_m * math.cos(yaw), yaw + turn_rad)
 
 
 def start_poses(start: tuple[float, float, float], seeds: int = 0) -> tuple[Pose, ...]:
     """The start, then poses round it where a run may begin: every centimetre to either side of it
     within :data:`START_SHIFT_M`, each on the start's heading and :data:`START_SHIFT_DEG` off it;
     then where ``seeds`` runs of an evaluation begin (:func:`start_pose`)."""
-    x, y, yaw = start
     steps = round(START_SHIFT_M / 0.01)
     shifts = [START_SHIFT_M * k / steps for k in range(-steps, steps + 1)]
     turns = (0.0, -math.radians(START_SHIFT_DEG), math.radians(START_SHIFT_DEG))
-    around = (Pose(x - lat * math.sin(yaw), y + lat * math.cos(yaw), yaw + turn) for lat in shifts for turn in turns)
+    around = (_shifted(start, lat, turn) for lat in shifts for turn in turns)
     return (Pose(*start), *around, *(start_pose(start, seed) for seed in range(1, seeds)))
 
 
-def start_attitude(scenario, config: VehicleConfig | None = None, poses: tuple[Pose, ...] | None = None):
+def start_attitude(scenario, config: VehicleConfig | None = None) -> Attitude:
     """The body's attitude at ``scenario``'s start (a :class:`terrapref.scenario.Scenario`), as the
     simulator's vehicle of ``config`` (default: the default vehicle) would stand there: from the
     height field's cells round the start, each the value the whole field gives it (read from them,
     the attitude is the simulator's to rounding), so a large map need not be built to check where
-    a run would begin. Level on a scenario without relief. With ``poses`` (within
-    :data:`START_SHIFT_M` of the start), the attitude at each of them instead, in their order."""
+    a run would begin. Level on a scenario without relief."""
+    return start_attitudes(scenario, (Pose(*scenario.start),), config)[0]
+
+
+def start_attitudes(scenario, poses: tuple[Pose, ...], config: VehicleConfig | None = None) -> tuple[Attitude, ...]:
+    """:func:`start_attitude` at each of ``poses`` (within :data:`START_SHIFT_M` of the start), in their order."""
     from terrapref.world.height_compiled import height_at
     from terrapref.world.relief import height_field
 
     if not scenario.has_relief:
-        return LEVEL if poses is None else tuple(LEVEL for _ in poses)
+        return tuple(LEVEL for _ in poses)
     config = config or VehicleConfig()
     res, (ny, nx) = scenario.resolution_m, scenario.grid_shape
     reach = math.ceil(START_REACH_M / res)
@@ -209,7 +216,7 @@ def start_attitude(scenario, config: VehicleConfig | None = None, poses: tuple[P
             return height_at(part, 1.0 / res, x - x0, y - y0)
 
     contact = GroundContact(Part(), config)
-    return contact.attitude(Pose(*scenario.start)) if poses is None else tuple(contact.attitude(pose) for pose in poses)
+    return tuple(contact.attitude(pose) for pose in poses)
 
 
 def _past_by(attitude: Attitude, config: VehicleConfig) -> float:
@@ -231,7 +238,7 @@ def drivable(scenario, config: VehicleConfig | None = None, seeds: int = 0):
 
     config = config or VehicleConfig()
     poses = start_poses(scenario.start, seeds)
-    attitudes = start_attitude(scenario, config, poses)
+    attitudes = start_attitudes(scenario, poses, config)
     tipped = [(pose, attitude) for pose, attitude in zip(poses, attitudes, strict=True) if GroundContact.past_limits(attitude, config)]
     if not tipped:
         return scenario
