@@ -332,7 +332,8 @@ def _modules() -> dict[str, Path]:
 def test_no_module_uses_a_private_name_of_another():
     modules = _modules()
     assert len(modules) > 50, "the scan sees the modules"
-    found = {f"{name}: {used}" for name, path in modules.items() for used in _private_uses(ast.parse(path.read_text()), name, set(modules))}
+    names = set(modules)
+    found = {f"{name}: {used}" for name, path in modules.items() for used in _private_uses(_parsed(path), name, names)}
     assert not found, "private names used outside their module (make them public where they belong): " + ", ".join(sorted(found))
 
 
