@@ -147,7 +147,8 @@ def classifier_from(weights: dict[str, np.ndarray], meta: dict, source: str) -> 
     classifier, features = header.classifier, header.features
     # The header's member count is checked against the weights before shapes are built from it.
     members = {name.split(".")[1] for name in weights if name.startswith(f"{MEMBERS}.")}
-    if members != ({str(j) for j in range(classifier.members)} if classifier.members > 1 else set()):
+    claimed = classifier.members if classifier.members > 1 else 0  # counted first: a huge claim is refused at once
+    if len(members) != claimed or members != {str(j) for j in range(claimed)}:
         raise UserError(
             source, f"header says {classifier.members} member(s), the weights hold {len(members) or 1}", field="classifier.members"
         )
