@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 FIRST, FRAMES = 200, 40  # the short recording's frames published: the drive comes up to the non_traversable patch
-IDLE_FRAMES = 20  # the first of them, that `terrapref play` publishes to the node that waited (at a quarter of real time)
+IDLE_FRAMES = 10  # the first of them, that `terrapref play` publishes to the node that waited (at a quarter of real time)
 LOOPBACK = (
     '<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>'
     "<AllowMulticast>false</AllowMulticast></General><Discovery><ParticipantIndex>auto</ParticipantIndex>"
