@@ -124,17 +124,15 @@ def test_a_driver_crawling_up_a_grade_through_pushes_still_reaches_the_goal(tmp_
     with whole pushes at a crawl the vehicle was turned round within centimetres and drove off its
     line until the time ran out ("timed out"). Driven as `terrapref record` drives it, with the
     recommended pushes, kept in memory."""
-    from dataclasses import replace
-
     from helpers import TINY_RELIEF
+    from terrapref.demos.expert import ExpertConfig
     from terrapref.demos.recording import MemoryRecordingWriter
     from terrapref.demos.relief_style import parse_relief_style
     from terrapref.demos.session import DriveSetup
     from terrapref.recipes import DEFAULT_RECIPE, RECIPES
 
     setup = DriveSetup.of(resolve_scenario(str(TINY_RELIEF)))
-    config = ExpertDriver().config
-    config = replace(config, relief=parse_relief_style("default,up_mps_per_deg=0.2")[1])
+    config = ExpertConfig(relief=parse_relief_style("default,up_mps_per_deg=0.2")[1])  # the default style, as record's
     pushes = RECIPES[DEFAULT_RECIPE].disturbance
     pushed = []
 

@@ -620,11 +620,12 @@ def _check_frame(row: dict, previous: dict | None, frames_path: Path, line_no: i
     problem = _frame_problem(row)
     if problem:
         raise UserError(str(frames_path), problem[1], field=f"line {line_no}.{problem[0]}")
-    if previous is not None and (row.get("depth") is None) != (previous.get("depth") is None):
+    lost = row.get("depth") is None
+    if previous is not None and lost != (previous.get("depth") is None):
         raise UserError(
             str(frames_path),
-            f"{'has no' if row.get('depth') is None else 'has a'} depth image where the frame before it "
-            f"{'had one' if row.get('depth') is None else 'had none'}; a recording's frames all carry depth, or none does",
+            f"{'has no' if lost else 'has a'} depth image where the frame before it {'had one' if lost else 'had none'}; "
+            "a recording's frames all carry depth, or none does",
             field=f"line {line_no}.depth",
         )
     if previous is not None and not row["t"] > previous["t"]:

@@ -242,12 +242,12 @@ def drivable(scenario, config: VehicleConfig | None = None, seeds: int = 0):
     tipped = [(pose, attitude) for pose, attitude in zip(poses, attitudes, strict=True) if GroundContact.past_limits(attitude, config)]
     if not tipped:
         return scenario
-    worst = tipped[0] if tipped[0][0] is poses[0] else max(tipped, key=lambda t: _past_by(t[1], config))
-    (px, py, pyaw), attitude = worst
+    at_start = tipped[0][0] is poses[0]  # the start itself tips it: said as it is, whatever tips more beside it
+    (px, py, pyaw), attitude = tipped[0] if at_start else max(tipped, key=lambda t: _past_by(t[1], config))
     x, y, yaw = scenario.start
     where = (
         ""
-        if worst[0] is poses[0]
+        if at_start
         else f" begun {math.hypot(px - x, py - y):.2f} m to its side, {math.degrees(abs(pyaw - yaw)):g} deg off its heading (as an evaluation's later seeds may be),"
     )
     raise ScenarioError(
