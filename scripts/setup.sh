@@ -30,5 +30,16 @@ if [ "$(cat .venv/.terrapref-modules 2>/dev/null)" != "$modules" ]; then
   .venv/bin/python -m terrapref.warm_up
   echo "$modules" > .venv/.terrapref-modules
 fi
+# The tests' bytecode too: pytest compiles each test module with its asserts rewritten and
+# keeps the result beside it; made here, on a fresh clone, rather than by every worker of the
+# first test run. Done again when a test file changes (pytest itself recompiles any stale one);
+# a test file that does not compile is left for the test run to report.
+tests=$(find tests -name '*.py' | sort | xargs sha256sum | sha256sum | cut -d' ' -f1)
+if [ "$(cat .venv/.terrapref-tests 2>/dev/null)" != "$tests" ]; then
+  if env -u PYTHONDONTWRITEBYTECODE .venv/bin/python -m pytest -q --collect-only -p no:xdist \
+    -p no:cacheprovider > /dev/null 2>&1; then
+    echo "$tests" > .venv/.terrapref-tests
+  fi
+fi
 # ROS 1 (Debian's packages) for `terrapref ros1` and its test; never fails the set-up.
 bash scripts/setup_ros1.sh
