@@ -71,7 +71,8 @@ def test_a_class_liked_better_than_the_background_costs_nothing():
 
 def test_the_costmaps_layers_hold_each_cells_speed_and_the_height_layers_geometry():
     """The speed of each cell's column (lethal 0, never seen NaN), and the elevation written into
-    the height layer with the slope of a plane through it, over exactly the costmap's cells."""
+    the height layer with the slope of a plane through it and the roughness the frames read,
+    over exactly the costmap's cells."""
     stage, gmap = _seen_patches()
     res = gmap.settings.map_resolution_m
     elevation = gmap.layer("elevation")
@@ -82,6 +83,8 @@ def test_the_costmaps_layers_hold_each_cells_speed_and_the_height_layers_geometr
     for axis, rise in (("x", 0.2 * res), ("y", 0.0)):  # and the differences between neighbours the frames showed
         gmap.layer(f"d{axis}")[...], gmap.layer(f"d{axis}_run")[...], gmap.layer(f"d{axis}_weight")[...] = rise * 1e4, res * 1e4, 1e4
     gmap.read_shape()
+    gmap.layer("rough")[...], gmap.layer("rough_weight")[...] = 0.02**2, 1.0  # the frames read 2 cm of roughness ...
+    gmap.layer("rough_weight")[:, :5] = 0.0  # ... save in the first five columns
     costmap = stage.costmap(gmap)
     speeds = np.array([0.0, 0.4, 0.6, 0.8, 1.5, np.nan])  # K = 4 columns, the background, never seen
     full = with_layers(costmap, gmap, speeds, 2.0)
@@ -96,7 +99,8 @@ def test_the_costmaps_layers_hold_each_cells_speed_and_the_height_layers_geometr
     np.testing.assert_array_equal(full.layers["elevation"], elevation[r0 : r0 + h, c0 : c0 + w])
     inner = full.layers["slope"][3:-3, 3:-3]
     np.testing.assert_allclose(inner, np.arctan(0.2), atol=1e-4)
-    assert np.nanmax(full.layers["roughness"]) < 1e-4
+    rough = gmap.layer("rough_weight")[r0 : r0 + h, c0 : c0 + w] > 0
+    assert rough.any() and np.allclose(full.layers["roughness"][rough], 0.02) and np.isnan(full.layers["roughness"][~rough]).all()
     assert "speed" not in with_layers(costmap, gmap, None, 2.0).layers
     # A speed rule that sheds 0.03 m/s per degree of grade: each cell's speed less that for its
     # slope's degrees (11.3), down to the least; lethal and never-seen ground as they were.

@@ -62,12 +62,44 @@ def test_the_height_layer_holds_the_ramps_heights_and_its_slope_is_the_grade() -
     ahead = np.array([[x, y] for x in np.arange(19.0, 24.0, 0.5) for y in (14.0, 15.0, 16.0)])
     geometry = gmap.geometry_at(ahead)
     assert np.degrees(geometry[:, 0]) == pytest.approx(np.full(len(ahead), math.degrees(math.atan(0.2))), abs=1.0)
-    assert (geometry[:, 1] < 0.01).all()  # a plane: no roughness
+    rough = geometry[:, 1]  # read by the frames within 5 m of the camera: a plane, no roughness
+    assert np.isfinite(rough[ahead[:, 0] <= 21.0]).all() and (rough[np.isfinite(rough)] < 0.01).all()
     step = geometry[:, 2]  # across a cell's neighbours: the grade's rise over two cells, where the frames show the gradients round it
     # Differences between the mean returns of neighbouring cells, each return anywhere in its cell: 0.2 times 0.1-0.3 m.
     known = step[np.isfinite(step)]
     assert len(known) >= 25 and np.median(known) == pytest.approx(0.04, abs=0.005) and (known < 0.06).all()
     assert not GeometryLimits.of(VehicleConfig()).lethal(geometry).any()
+
+
+def test_rough_ground_reads_as_rough_as_it_is_though_each_frame_is_placed_a_decimetre_off() -> None:
+    """A rough patch (short noise, 0.3 m across) driven up to in frames whose poses err by 0.1 m
+    each (as a robot's localisation does from frame to frame): the heights fused over the frames
+    are blurred into smoother ground than there is, but each frame alone is not moved against
+    itself, so the roughness the frames read is the patch's, within a fifth, on the ground the
+    frames saw within their range; smooth ground beside it reads smooth."""
+    scenario = copy.deepcopy(RAMP)
+    patch = [[18.0, 11.0], [26.0, 11.0], [26.0, 19.0], [18.0, 19.0]]
+    scenario["relief"] = [{"noise": {"amplitude_m": 0.06, "wavelength_m": 0.3, "seed": 3, "polygon": patch}}]
+    world = rasterise(parse_scenario(scenario, "height_test.yaml"))
+    camera = PinholeCamera()
+    renderer, gmap = SegmentationRenderer(camera, world), GroundMap(camera, _terrain(()))
+    gmap.height_settings = HeightSettings(depth_error_per_m2=0.0, attitude_error_deg=0.0)
+    rng = np.random.default_rng(0)
+    for x in np.arange(12.0, 19.0, 0.2):
+        vehicle = Vehicle(Pose(x, 15.0, 0.0), ground=world)
+        ids, depth = renderer.render_with_depth(vehicle.pose, vehicle.attitude)
+        dx, dy = rng.normal(0.0, 0.1, 2)
+        believed = Pose(x + dx, 15.0 + dy, 0.0)
+        gmap.update(SegmentationView.of(ids), believed, DepthImage(depth, *renderer.placement(believed, vehicle.attitude)))
+    on_patch = np.array([[x, y] for x in np.arange(19.0, 22.0, 0.25) for y in np.arange(13.5, 16.6, 0.25)])
+    truth, read = world.roughness_at(on_patch), gmap.roughness_at(on_patch)
+    assert np.median(truth) > 0.01 and np.isfinite(read).all()
+    assert np.median(read) == pytest.approx(np.median(truth), rel=0.2)
+    res = gmap.settings.map_resolution_m
+    blurred = geometry_of_cells(gmap.heights, *gmap._cells_under(on_patch), res, gmap.height_settings)[:, 1]
+    assert np.nanmedian(blurred) < 0.7 * np.median(truth)  # the fused heights' roughness
+    smooth = gmap.roughness_at(np.array([[15.0, y] for y in np.arange(13.5, 16.6, 0.25)]) + [2.5, 0.0])
+    assert np.isfinite(smooth).all() and (smooth < 0.003).all()
 
 
 def test_the_sums_over_each_cells_disc_are_those_of_the_differences_read_as_the_map_moves() -> None:
@@ -216,7 +248,18 @@ def test_a_near_return_outweighs_a_far_one_by_the_inverse_of_their_variances() -
         pixels = (np.zeros(1, np.int64), np.zeros(1, np.int64), (offset / depth)[None, :])
         image = np.full((1, 1), depth, np.float32)
         kernels.depth_frame(
-            image, pixels, np.eye(3), centre, (0.0, 0.0, 1.0 / res), 30.0, settings.errors, votes, tuple(layers), shape, (slot, sums)
+            image,
+            pixels,
+            np.eye(3),
+            centre,
+            (0.0, 0.0, 1.0 / res),
+            30.0,
+            settings.errors,
+            votes,
+            tuple(layers),
+            shape,
+            (slot, sums),
+            (np.zeros((n, n), np.float32), np.zeros((n, n), np.float32), 3, settings.rough_range_m),
         )
 
     def weight(across_m: float, z: float) -> float:

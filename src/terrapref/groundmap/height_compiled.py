@@ -202,6 +202,7 @@ def depth_frame(
     heights: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     shape: tuple[np.ndarray, ...],
     scratch: tuple[np.ndarray, np.ndarray],
+    rough: tuple[np.ndarray, np.ndarray, int, float],
 ) -> np.ndarray:
     """Fold one frame's depth image into a ground map's height layers and its ground's shape.
 
@@ -233,7 +234,8 @@ def depth_frame(
       attitudes erred differently, differences agree where heights do not; but each frame's
       differences read the ground tilted by its own error (2 deg of a camera's jitter is 2 deg
       of grade in that frame), and their means keep what of it the frames weighed most did not
-      average out.
+      average out;
+    - in ``rough`` the cell's roughness as this frame alone shows it (:func:`_fold_roughness`).
 
     ``scratch``: ``slot`` (n * n,) int32, all -1 (each cell's row of the frame's sums), left all
     -1, and room for the sums ((N, :data:`FRAME_SUMS`) float64). The cells the frame's returns
@@ -242,6 +244,7 @@ def depth_frame(
     count, touched = _gather_returns(depth, pixels, axes, centre, grid, max_range_m, errors, votes, slot, sums)
     _fold_heights(heights, sums, touched, count)
     _fold_shape(shape, sums, slot, touched, count)
+    _fold_roughness(rough, sums, slot, touched, count, (centre[0], centre[1]), errors)
     for i in range(count):
         slot[touched[i]] = -1
     return touched[:count]
@@ -383,6 +386,85 @@ def _fold_difference(
     mean[row, col] = np.float64(mean[row, col]) + (rise - np.float64(mean[row, col])) * share
     mean_run[row, col] = np.float64(mean_run[row, col]) + (run - np.float64(mean_run[row, col])) * share
     weight[row, col] = total
+
+
+# A frame's roughness of a cell is read from at least this many of its cells in the cell's disc,
+# and weighed as if the ground were at least this rough [m^2] (so that the frames whose returns
+# are known best, not those which happen to find the ground smoothest, weigh most).
+ROUGH_LEAST_CELLS = 6
+ROUGH_FLOOR_M2 = 1e-4
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _fold_roughness(
+    rough: tuple[np.ndarray, np.ndarray, int, float],
+    sums: np.ndarray,
+    slot: np.ndarray,
+    touched: np.ndarray,
+    count: int,
+    centre: tuple[float, float],
+    errors: tuple[float, float, float],
+) -> None:
+    """:func:`depth_frame`'s roughness, read within the frame: its returns are not moved against
+    each other by its pose's error or its attitude's, which blur heights fused over frames into
+    smoother ground than there is. ``rough``: the mean and weight layers, the disc's reach in
+    cells, and the range [m] across the ground from the optical centre ``centre`` (x, y) within
+    which a cell is read. For each cell whose mean return lies within it, the plane fitted through
+    the frame's mean returns (:func:`_fold_shape` made them) of the cells within the reach (a
+    disc) and the mean squared deviation about it, less the share of the depth noise it holds
+    (the mean variance of those means by the depth's error, ``errors``' base taken out of what
+    :func:`_gather_returns` weighed them by, times (m - 3) / m over m cells); folded into the cell's mean of them, each weighed by m over the
+    square of that variance plus :data:`ROUGH_FLOOR_M2`."""
+    mean, weight, reach, range_m = rough
+    base2 = errors[0] * errors[0]
+    n = mean.shape[0]
+    disc = np.empty((2 * reach + 1) ** 2, np.int64)  # the disc's cells as offsets of flat indices
+    size = 0
+    for dr in range(-reach, reach + 1):
+        for dc in range(-reach, reach + 1):
+            if dr * dr + dc * dc <= reach * reach:
+                disc[size] = dr * n + dc
+                size += 1
+    for i in range(count):
+        x0, y0 = sums[i, SUM_WX], sums[i, SUM_WY]
+        t = touched[i]
+        r0, c0 = t // n, t % n
+        if (x0 - centre[0]) ** 2 + (y0 - centre[1]) ** 2 > range_m * range_m or not (reach <= r0 < n - reach and reach <= c0 < n - reach):
+            continue
+        m = sx = sy = sz = sxx = syy = sxy = sxz = syz = szz = noise = 0.0
+        for k in range(size):
+            j = slot[t + disc[k]]
+            if j < 0:
+                continue
+            x, y, z = sums[j, SUM_WX] - x0, sums[j, SUM_WY] - y0, sums[j, SUM_WZ]
+            m, sx, sy, sz = m + 1.0, sx + x, sy + y, sz + z
+            sxx, syy, sxy, sxz, syz, szz = sxx + x * x, syy + y * y, sxy + x * y, sxz + x * z, syz + y * z, szz + z * z
+            noise += sums[j, SUM_W] - base2 / sums[j, SUM_COUNT]
+        if m < ROUGH_LEAST_CELLS:
+            continue
+        _, deviation = plane_fit((m, sx, sy, sz, sxx, syy, sxy, sxz, syz, szz))
+        if math.isnan(deviation):
+            continue
+        variance = noise / m
+        w = m / (variance + ROUGH_FLOOR_M2) ** 2
+        total = np.float64(weight[r0, c0]) + w
+        held = np.float64(mean[r0, c0])
+        mean[r0, c0] = held + (deviation * deviation - variance * (m - 3.0) / m - held) * (w / total)
+        weight[r0, c0] = total
+
+
+@njit(cache=True, nogil=True)
+def read_roughness(rough: tuple[np.ndarray, np.ndarray], rows: np.ndarray, cols: np.ndarray, out: np.ndarray) -> None:
+    """The roughness [m] of the cells (``rows``, ``cols``) into ``out`` (N,), as the frames read
+    it (``rough``: the mean and weight layers, :func:`depth_frame`): the square root of the mean,
+    0 where the noise took it below 0; NaN where no frame read it or off the grid."""
+    mean, weight = rough
+    n = mean.shape[0]
+    for i in range(rows.shape[0]):
+        r, c = rows[i], cols[i]
+        out[i] = np.nan
+        if 0 <= r < n and 0 <= c < n and weight[r, c] > 0:
+            out[i] = math.sqrt(max(np.float64(mean[r, c]), 0.0))
 
 
 # Each cell's sums over its disc (the ``disc`` layer, terrapref.groundmap.layers): the read

@@ -83,6 +83,11 @@ LAYERS: tuple[Layer, ...] = (
     # and runs and how many are known, along x and then y (height_compiled.DISC_SUMS): kept up to
     # date as the differences are read, so that a cell's gradient is two quotients.
     Layer("disc", np.float32, 0.0, values=6),
+    # The ground's roughness as each frame alone shows it, fused over frames
+    # (terrapref.groundmap.height_compiled.depth_frame): the weighted mean of the frames' squared
+    # roughness less what their depth noise adds [m^2], and the weights' sum (0: never read).
+    Layer("rough", np.float32, 0.0),
+    Layer("rough_weight", np.float32, 0.0),
     # 1 where the ground's geometry is past the vehicle's limits (terrapref.groundmap.height):
     # the cell reads as lethal whatever its evidence.
     Layer("blocked", np.uint8, 0),

@@ -21,7 +21,6 @@ from terrapref.groundmap.height import (
     Heights,
     HeightSettings,
     disc_reach,
-    geometry_of_cells,
 )
 from terrapref.groundmap.layers import LAYERS, Layer
 from terrapref.groundmap.settings import MapSettings
@@ -134,6 +133,7 @@ class GroundMap:
             tuple(self.heights),
             self._shape,
             (self._slot, self._sums),
+            (self._layers["rough"], self._layers["rough_weight"], disc_reach(h, res), h.rough_range_m),
         )
         kernels.map_vote_cells(
             self.evidence, self.stamp, self._cells, self._vote_cell, self._vote_column, self._pixel_weight, self.frame, self._fade
@@ -191,11 +191,12 @@ class GroundMap:
 
     def roughness_at(self, points: np.ndarray) -> np.ndarray:
         """The roughness [m] (...) of the cells under the world points (..., 2), as :meth:`geometry_at`
-        reads it (from the heights alone); NaN where unknown or off the map."""
+        reads it (as the frames read it, each alone); NaN where unknown or off the map."""
         if self.origin is None:
             return np.full(np.shape(points)[:-1], np.nan)
         rows, cols = self._cells_under(points)
-        rough = geometry_of_cells(self.heights, rows, cols, self.settings.map_resolution_m, self.height_settings)[:, 1]
+        rough = np.empty(len(rows))
+        height_kernels.read_roughness((self._layers["rough"], self._layers["rough_weight"]), rows, cols, rough)
         return rough.reshape(np.shape(points)[:-1])
 
     def gradient_at(self, points: np.ndarray) -> np.ndarray:
@@ -260,10 +261,13 @@ class GroundMap:
         """Slope [rad], roughness [m] and step [m] (N, 3) of the cells (``rows``, ``cols``): the
         slope and the step from the ground's shape (the height differences the frames show,
         :func:`terrapref.groundmap.height_compiled.shape_geometry`), what the limits are checked
-        against; the roughness from the heights (:func:`geometry_of_cells`). NaN where unknown."""
+        against; the roughness as the frames read it (terrapref.groundmap.height_compiled.depth_frame).
+        NaN where unknown."""
         out = self._shape_geometry(rows, cols)
-        heights = geometry_of_cells(self.heights, rows, cols, self.settings.map_resolution_m, self.height_settings)
-        out[:, 1] = heights[:, 1]
+        rough = np.empty(len(rows))
+        rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
+        height_kernels.read_roughness((self._layers["rough"], self._layers["rough_weight"]), rows, cols, rough)
+        out[:, 1] = rough
         return out
 
     def _shape_geometry(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
