@@ -413,8 +413,9 @@ def _fold_roughness(
     the frame's mean returns (:func:`_fold_shape` made them) of the cells within the reach (a
     disc) and the mean squared deviation about it, less the share of the depth noise it holds
     (the mean variance of those means by the depth's error, ``errors``' base taken out of what
-    :func:`_gather_returns` weighed them by, times (m - 3) / m over m cells); folded into the cell's mean of them, each weighed by m over the
-    square of that variance plus :data:`ROUGH_FLOOR_M2`."""
+    :func:`_gather_returns` weighed them by, times (m - 3) / m over m cells); folded into the
+    cell's mean of them, each weighed by m over the square of that variance plus
+    :data:`ROUGH_FLOOR_M2`."""
     mean, weight, reach, range_m = rough
     base2 = errors[0] * errors[0]
     n = mean.shape[0]
