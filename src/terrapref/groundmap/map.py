@@ -194,10 +194,7 @@ class GroundMap:
         reads it (as the frames read it, each alone); NaN where unknown or off the map."""
         if self.origin is None:
             return np.full(np.shape(points)[:-1], np.nan)
-        rows, cols = self._cells_under(points)
-        rough = np.empty(len(rows))
-        height_kernels.read_roughness((self._layers["rough"], self._layers["rough_weight"]), rows, cols, rough)
-        return rough.reshape(np.shape(points)[:-1])
+        return self._roughness_of(*self._cells_under(points)).reshape(np.shape(points)[:-1])
 
     def gradient_at(self, points: np.ndarray) -> np.ndarray:
         """The ground's gradient (rise per metre along x, along y) (..., 2) under the world points
@@ -264,10 +261,14 @@ class GroundMap:
         against; the roughness as the frames read it (terrapref.groundmap.height_compiled.depth_frame).
         NaN where unknown."""
         out = self._shape_geometry(rows, cols)
-        rough = np.empty(len(rows))
+        out[:, 1] = self._roughness_of(rows, cols)
+        return out
+
+    def _roughness_of(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """The roughness [m] (N,) of the cells (``rows``, ``cols``) as the frames read it; NaN where unknown."""
+        out = np.empty(len(rows))
         rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
-        height_kernels.read_roughness((self._layers["rough"], self._layers["rough_weight"]), rows, cols, rough)
-        out[:, 1] = rough
+        height_kernels.read_roughness((self._layers["rough"], self._layers["rough_weight"]), rows, cols, out)
         return out
 
     def _shape_geometry(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
