@@ -15,7 +15,7 @@ from test_offset_rule import _terrain
 
 from terrapref.camera import PinholeCamera, SegmentationView
 from terrapref.camera.render import SegmentationRenderer
-from terrapref.groundmap.height import DepthImage, GeometryLimits, Heights, HeightSettings, geometry_of_cells
+from terrapref.groundmap.height import DepthImage, GeometryLimits, Heights, HeightSettings, trusted_elevation
 from terrapref.groundmap.map import GroundMap
 from terrapref.rules.speed.model import CHORD_M, CHORD_WEIGHTS, SpeedModel, body_grade
 from terrapref.rules.speed.rule import LearnedSpeed, SpeedConfig, SpeedRule
@@ -95,9 +95,6 @@ def test_rough_ground_reads_as_rough_as_it_is_though_each_frame_is_placed_a_deci
     truth, read = world.roughness_at(on_patch), gmap.roughness_at(on_patch)
     assert np.median(truth) > 0.01 and np.isfinite(read).all()
     assert np.median(read) == pytest.approx(np.median(truth), rel=0.2)
-    res = gmap.settings.map_resolution_m
-    blurred = geometry_of_cells(gmap.heights, *gmap._cells_under(on_patch), res, gmap.height_settings)[:, 1]
-    assert np.nanmedian(blurred) < 0.7 * np.median(truth)  # the fused heights' roughness
     smooth = gmap.roughness_at(np.array([[15.0, y] for y in np.arange(13.5, 16.6, 0.25)]) + [2.5, 0.0])
     assert np.isfinite(smooth).all() and (smooth < 0.003).all()
 
@@ -155,26 +152,18 @@ def test_the_gradient_and_the_bodys_grade_on_the_ramp_are_its_grade_heading_alon
     assert flat.speed(gmap, (21.0, 15.0, 0.0), 0.0, 1.0) == 1.0
 
 
-def _trusted(elevation: np.ndarray) -> Heights:
-    """``elevation`` as height layers whose known cells each hold four returns that agree."""
-    returns = np.where(np.isnan(elevation), 0, 4).astype(np.uint32)
-    return Heights(elevation, returns, np.zeros(elevation.shape, dtype=np.float32))
-
-
 def test_a_cell_counts_once_enough_returns_agree() -> None:
     """A ledge of 0.5 m seen through returns that disagree by 0.2 m (a far, noisy return each)
-    is not yet trusted, and blocks nothing; with agreeing returns it is, and does."""
+    is not yet trusted; with agreeing returns it is; with one return a cell it is not yet."""
     elevation = np.zeros((20, 20), dtype=np.float32)
     elevation[:, 10:] = 0.5
     returns = np.full(elevation.shape, 3, dtype=np.uint32)
     noisy = Heights(elevation, returns, np.full(elevation.shape, 2 * 0.2**2, dtype=np.float32))  # std 0.2 m, error 0.115 m
     agreeing = Heights(elevation, returns, np.full(elevation.shape, 2 * 0.01**2, dtype=np.float32))  # error 0.006 m
-    limits = GeometryLimits.of(VehicleConfig())
-    cells = (np.array([10]), np.array([9]))
-    assert np.isnan(geometry_of_cells(noisy, *cells, 0.1, HeightSettings())).all()
-    assert limits.lethal(geometry_of_cells(agreeing, *cells, 0.1, HeightSettings())).all()
+    assert np.isnan(trusted_elevation(noisy, HeightSettings())).all()
+    np.testing.assert_array_equal(trusted_elevation(agreeing, HeightSettings()), elevation)
     single = Heights(elevation, np.ones(elevation.shape, dtype=np.uint32), np.zeros(elevation.shape, dtype=np.float32))
-    assert np.isnan(geometry_of_cells(single, *cells, 0.1, HeightSettings())).all()  # one return: not yet
+    assert np.isnan(trusted_elevation(single, HeightSettings())).all()
 
 
 @pytest.mark.parametrize(("height_m", "lethal"), [(0.14, False), (0.16, True)])
@@ -183,43 +172,39 @@ def test_a_step_one_centimetre_over_the_limit_is_lethal_and_one_under_is_not(hei
     elevation[:, 10:] = height_m  # a ledge between columns 9 and 10 of 0.1 m cells
     limits = GeometryLimits.of(VehicleConfig())
     assert limits.max_step_m == 0.15 and limits.max_slope_rad == pytest.approx(math.radians(25.0))
-    at_ledge = geometry_of_cells(_trusted(elevation), np.array([10, 10]), np.array([9, 10]), 0.1, HeightSettings())
-    assert at_ledge[:, 2] == pytest.approx([height_m, height_m], abs=1e-6)
-    assert (at_ledge[:, 0] < limits.max_slope_rad).all()  # the plane over the ledge is not what decides
-    assert limits.lethal(at_ledge).tolist() == [lethal, lethal]
-    away = geometry_of_cells(_trusted(elevation), np.array([10, 10]), np.array([3, 16]), 0.1, HeightSettings())
-    assert not limits.lethal(away).any() and (away[:, 2] == 0).all()
-    # The same ground as the frames' differences between neighbours give it, which the ground map blocks by.
+    # The ground as the frames' differences between neighbours give it, which the ground map blocks by:
+    # at the ledge (columns 9 and 10) and away from it (3 and 16).
     shaped = _shape_geometry(elevation, np.array([10, 10, 10, 10]), np.array([9, 10, 3, 16]))
-    assert shaped[:2, 2] == pytest.approx([height_m, height_m], abs=1e-6) and (shaped[:2, 0] < limits.max_slope_rad).all()
+    assert shaped[:2, 2] == pytest.approx([height_m, height_m], abs=1e-6)
+    assert (shaped[:2, 0] < limits.max_slope_rad).all()  # the slope over the ledge is not what decides
     assert limits.lethal(shaped).tolist() == [lethal, lethal, False, False] and (shaped[2:, 2] == 0).all()
 
 
 def _shape_geometry(elevation: np.ndarray, rows: np.ndarray, cols: np.ndarray, res: float = 0.1) -> np.ndarray:
     """Slope, NaN and step (terrapref.groundmap.height_compiled.shape_geometry) of the cells (``rows``,
-    ``cols``) of ground of heights ``elevation`` on 0.1 m cells, as the differences between its
-    neighbours, each known to 1 mm (weighing 1 / 0.001^2), give them."""
+    ``cols``) of ground of heights ``elevation`` (NaN: never seen) on 0.1 m cells, as the differences
+    between its neighbours, each known to 1 mm (weighing 1 / 0.001^2) where both are seen, give them."""
     from terrapref.groundmap import height_compiled as kernels
 
-    known = np.full(elevation.shape, 1e6, dtype=np.float32)
-    dx, dy = np.zeros_like(elevation), np.zeros_like(elevation)
+    dx, dy = np.full_like(elevation, np.nan), np.full_like(elevation, np.nan)
     dx[:, :-1], dy[:-1, :] = np.diff(elevation, axis=1), np.diff(elevation, axis=0)
+    known_x, known_y = (np.where(np.isnan(d), 0.0, 1e6).astype(np.float32) for d in (dx, dy))
     run = np.full(elevation.shape, res, dtype=np.float32)
     disc = np.empty((*elevation.shape, kernels.DISC_SUMS), np.float32)  # as the map keeps its sums
     kernels.disc_sums((dx, run, dy, run), 3, np.arange(elevation.size), disc)  # every difference read
     out = np.empty((len(rows), 3))
-    kernels.shape_geometry((dx, run, known, dy, run, known), 1.0 / 0.03**2, disc, rows, cols, out)
+    kernels.shape_geometry((dx, run, known_x, dy, run, known_y), 1.0 / 0.03**2, disc, rows, cols, out)
     return out
 
 
 def test_unseen_ground_has_no_geometry_and_is_not_lethal() -> None:
     elevation = np.full((20, 20), np.nan, dtype=np.float32)
     elevation[5, 5] = 0.0  # one cell: no plane, no step
-    geometry = geometry_of_cells(_trusted(elevation), np.array([5, 15, -1]), np.array([5, 15, 3]), 0.1, HeightSettings())
+    geometry = _shape_geometry(elevation, np.array([5, 15, 0]), np.array([5, 15, 3]))
     assert np.isnan(geometry).all() and not GeometryLimits.of(VehicleConfig()).lethal(geometry).any()
-    elevation[5, 6] = 0.5  # two: a step between them, still too few for a plane
-    pair = geometry_of_cells(_trusted(elevation), np.array([5]), np.array([5]), 0.1, HeightSettings())
-    assert np.isnan(pair[0, :2]).all() and pair[0, 2] == 0.5
+    elevation[5, 6] = 0.5  # two: a step between them, still too few differences for a slope
+    pair = _shape_geometry(elevation, np.array([5]), np.array([5]))
+    assert np.isnan(pair[0, :2]).all() and pair[0, 2] == pytest.approx(0.5)
 
 
 def test_a_near_return_outweighs_a_far_one_by_the_inverse_of_their_variances() -> None:
@@ -228,7 +213,6 @@ def test_a_near_return_outweighs_a_far_one_by_the_inverse_of_their_variances() -
     weighted mean; two agreeing returns 10 m off (each 0.17 m uncertain) are not trusted at 3 cm,
     and two 2 m off (0.037 m each) are."""
     from terrapref.groundmap import height_compiled as kernels
-    from terrapref.groundmap.height import trusted_elevation
 
     settings = HeightSettings()
     n, res = 40, 0.1

@@ -31,7 +31,7 @@ returns of the cells round a cell, less the share of the depth's noise in it, an
 frames that saw the cell within ``rough_range_m``, the least noisy weighing most (the ``rough``
 layers): a pose off by a decimetre from frame to frame shifts each frame's returns by a third of
 a rough patch's bumps, and heights fused over such frames read it half as rough as it is. The
-speed rule and the costmap read it; :func:`geometry_of_cells` still reads it from heights given.
+speed rule and the costmap read it.
 
 Ground the vehicle cannot cross within its limits is lethal, from its config and never learned
 (:class:`GeometryLimits`): a slope past its roll or its pitch limit, whichever is smaller (a
@@ -207,7 +207,7 @@ def trusted_elevation(heights: Heights, settings: HeightSettings) -> np.ndarray:
     ``min_returns`` returns (and 2), and the standard error of their mean at most
     ``max_error_m``, both as the sensor's errors put it (the inverse of the weights' sum) and
     as their spread shows it (the weighted variance over one less than their count)
-    (terrapref.groundmap.height_compiled.trusted_window, which :func:`geometry_of_cells` reads too)."""
+    (terrapref.groundmap.height_compiled.trusted_window)."""
     n_rows, n_cols = heights.elevation.shape
     return kernels.trusted_window(*_trust(heights, settings), (0, n_rows), (0, n_cols))
 
@@ -222,13 +222,3 @@ def _trust(heights: Heights, settings: HeightSettings) -> tuple[tuple[np.ndarray
 def disc_reach(settings: HeightSettings, res_m: float) -> int:
     """The radius, in cells of ``res_m``, of the disc a cell's plane is fitted in."""
     return max(1, int(math.floor(settings.radius_m / res_m + 1e-9)))
-
-
-def geometry_of_cells(heights: Heights, rows: np.ndarray, cols: np.ndarray, res_m: float, settings: HeightSettings) -> np.ndarray:
-    """Slope [rad], roughness [m] and step [m] of the cells (``rows``, ``cols``), (N, 3), from the
-    elevations trusted round them (``settings``, as :func:`trusted_elevation` trusts them; only
-    those round the cells asked are worked out); NaN where unknown."""
-    out = np.empty((len(rows), 3))
-    rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
-    kernels.heights_geometry(*_trust(heights, settings), rows, cols, disc_reach(settings, res_m), res_m, out)
-    return out

@@ -1,7 +1,8 @@
 """The ground map's height layer, compiled (Numba) (terrapref.groundmap.height): depth returns
 voting their heights into cells, and a cell's geometry read from the cells round it as grid_map's
-traversability filters read it (a plane fitted within a radius: its slope and the returns'
-deviation from it; the height range within the radius: the step)."""
+traversability filters read it (the slope of the gradient within a radius, from the differences
+between neighbours; the returns' deviation from a plane fitted within the radius in each frame:
+the roughness; the height range over the cell and its neighbours: the step)."""
 
 from __future__ import annotations
 
@@ -11,59 +12,6 @@ import numpy as np
 from numba import njit
 
 from terrapref.world.height_compiled import plane_fit
-
-
-@njit(cache=True, nogil=True)
-def cell_geometry(trusted: np.ndarray, rows: np.ndarray, cols: np.ndarray, reach: int, res: float, out: np.ndarray) -> None:
-    """Slope [rad], roughness [m] and step [m] of the cells (``rows``, ``cols``) into ``out`` (N, 3),
-    from the cells with a ``trusted`` elevation (rows, columns) float32 [m, NaN: not trusted] within
-    ``reach`` cells (a disc) of each. The least-squares plane z = a x + b y + c through them gives
-    the slope, atan(sqrt(a^2 + b^2)), and the roughness, the standard deviation of their heights
-    about it. The step is the height range over the cell and its eight neighbours (a slope adds
-    little to it there: 0.13 m over a 25 deg slope of 0.1 m cells). A cell no return fell in still
-    has a geometry from the cells round it (the ground between the returns of far, sparsely
-    sampled ground); slope and roughness are NaN where fewer than three cells of the disc are
-    trusted, the step where fewer than two of the nine are."""
-    n_rows, n_cols = trusted.shape
-    for i in range(rows.shape[0]):
-        r0, c0 = rows[i], cols[i]
-        out[i, 0] = out[i, 1] = out[i, 2] = np.nan
-        if not (0 <= r0 < n_rows and 0 <= c0 < n_cols):
-            continue
-        sums, near, step = _disc(trusted, r0, c0, reach, res)
-        if sums[0] >= 3.0:
-            out[i, 0], out[i, 1] = plane_fit(sums)
-        if near >= 2:
-            out[i, 2] = step
-
-
-@njit(cache=True, nogil=True)
-def heights_geometry(
-    heights: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-    trust: tuple[float, float, bool],
-    rows: np.ndarray,
-    cols: np.ndarray,
-    reach: int,
-    res: float,
-    out: np.ndarray,
-) -> None:
-    """:func:`cell_geometry` of the cells (``rows``, ``cols``) of the height layers ``heights``
-    from the elevations trusted (:func:`trusted_window`, ``trust``) in the window round them alone."""
-    n_rows, n_cols = heights[0].shape
-    r0, r1, c0, c1 = n_rows, -1, n_cols, -1
-    for i in range(rows.shape[0]):
-        if 0 <= rows[i] < n_rows and 0 <= cols[i] < n_cols:
-            r0, r1, c0, c1 = min(r0, rows[i]), max(r1, rows[i]), min(c0, cols[i]), max(c1, cols[i])
-    if r1 < 0:
-        out[:] = np.nan
-        return
-    r0, c0, r1, c1 = max(r0 - reach, 0), max(c0 - reach, 0), min(r1 + reach + 1, n_rows), min(c1 + reach + 1, n_cols)
-    trusted = trusted_window(heights, trust, (r0, r1), (c0, c1))
-    window_rows, window_cols = np.full(rows.shape[0], -1, np.int64), np.full(rows.shape[0], -1, np.int64)
-    for i in range(rows.shape[0]):
-        if 0 <= rows[i] < n_rows and 0 <= cols[i] < n_cols:
-            window_rows[i], window_cols[i] = rows[i] - r0, cols[i] - c0
-    cell_geometry(trusted, window_rows, window_cols, reach, res, out)
 
 
 @njit(cache=True, nogil=True)
@@ -106,28 +54,6 @@ def _disc_columns(reach: int, dr: int, c0: int, n_cols: int) -> tuple[int, int]:
     cells within ``reach`` of the centre: dr^2 + dc^2 <= reach^2)."""
     span = int(math.sqrt(reach * reach - dr * dr) + 1e-9)
     return max(-span, -c0), min(span, n_cols - 1 - c0) + 1
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _disc(trusted: np.ndarray, r0: int, c0: int, reach: int, res: float) -> tuple[tuple[float, ...], int, float]:
-    """The normal equations' sums (m, x, y, z, xx, yy, xy, xz, yz, zz; x, y the offsets from cell
-    (r0, c0) [m]) over the trusted cells within ``reach`` of it, how many of its nine (the cell
-    and its neighbours) are trusted, and their height range."""
-    n_rows, n_cols = trusted.shape
-    m = sx = sy = sz = sxx = syy = sxy = sxz = syz = szz = 0.0
-    near, low, high = 0, np.inf, -np.inf
-    for dr in range(*_disc_rows(reach, r0, n_rows)):
-        r = r0 + dr
-        for dc in range(*_disc_columns(reach, dr, c0, n_cols)):
-            z = np.float64(trusted[r, c0 + dc])
-            if math.isnan(z):
-                continue
-            x, y = dc * res, dr * res
-            m, sx, sy, sz = m + 1.0, sx + x, sy + y, sz + z
-            sxx, syy, sxy, sxz, syz, szz = sxx + x * x, syy + y * y, sxy + x * y, sxz + x * z, syz + y * z, szz + z * z
-            if abs(dr) <= 1 and abs(dc) <= 1:
-                near, low, high = near + 1, min(low, z), max(high, z)
-    return (m, sx, sy, sz, sxx, syy, sxy, sxz, syz, szz), near, high - low
 
 
 @njit(cache=True, nogil=True)
