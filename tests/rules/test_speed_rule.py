@@ -29,7 +29,7 @@ from terrapref.features import FeatureConfig, UtilityFeaturizer
 from terrapref.groundmap.map import GroundMap
 from terrapref.learning.model_file import load_model, save_model
 from terrapref.learning.network import ClassifierConfig
-from terrapref.planner import Planner
+from terrapref.planner import Planner, PlannerDriver
 from terrapref.rules import ArgmaxRule, HeaderContext, OffsetConfig, OffsetRule, RuleContext, chosen_rule, driving_rule, speed_rule
 from terrapref.rules.base import SPEED, STEERING, Where
 from terrapref.rules.offset.fit import OffsetUtility
@@ -37,6 +37,7 @@ from terrapref.rules.speed.model import MIN_SPEED_MPS, STATIONS, Drive, Rough, S
 from terrapref.rules.speed.rule import LearnedSpeed, SpeedConfig, SpeedRule
 from terrapref.scenario import AVOID, Scenario, parse_scenario
 from terrapref.scenario.path import ReferencePath
+from terrapref.sim import Simulation, run_episode
 from terrapref.terrain import default_classes
 from terrapref.world import rasterise
 
@@ -608,7 +609,8 @@ def _scenario(terrain: list[dict]) -> Scenario:
     )
 
 
-ALL_MUD = _scenario([{"class": "mud", "rectangle": {"center": [20.0, 10.0], "size": [40.0, 20.0]}}])
+ALL_MUD_TERRAIN = [{"class": "mud", "rectangle": {"center": [20.0, 10.0], "size": [40.0, 20.0]}}]
+ALL_MUD = _scenario(ALL_MUD_TERRAIN)
 MUD_LEFT = _scenario([{"class": "mud", "rectangle": {"center": [20.0, 14.0], "size": [40.0, 6.0]}}])  # y from 11 m
 AT = (8.0, 10.0, 0.0)  # 6 m along the path
 
@@ -697,6 +699,24 @@ def test_the_yaw_rate_keeps_to_the_lateral_limit_while_the_vehicle_may_still_spe
     runner.commanded(2.0)
     runner.reset()  # a new path: no speed commanded yet
     assert runner.yaw_rate(0.5, 0.9, speed_mps=0.5) == pytest.approx(0.45)
+
+
+def test_a_way_the_stop_rule_steers_onto_is_driven_no_harder_sideways_than_the_drive_went(tmp_path: Path):
+    """A lethal block ahead covers the footprint's left 0.3 m: the stop rule steers the planner
+    onto the nearest free way, which at the mud's 0.9 m/s would go harder sideways than the drive's
+    0.05 m/s^2; it drives that way's arc slower instead, and touches nothing."""
+    classifier = ClassifierConfig(hidden=8, skip=True)
+    rule = SpeedRule(SpeedConfig(), replace(MODEL, drive_lateral_mps2=0.05))
+    meta = {**model_meta(), "rules": [rule.header()], "drives": "argmax"}
+    planner = Planner(load_model(save_model(tmp_path / "speed.safetensors", classifier, skip_path_weights(classifier), meta)))
+    block = {"class": "non_traversable", "rectangle": {"center": [12.0, 10.8], "size": [2.0, 1.0]}}
+    driver = PlannerDriver(planner, keep=True)
+    log = run_episode(Simulation(_scenario([*ALL_MUD_TERRAIN, block])), driver, np.random.default_rng(0))
+    assert log.collisions == 0
+    sideways = [abs(d.command.v * d.command.w) for d in driver.decisions]
+    assert max(sideways) <= 0.05 + 1e-9
+    steered = [d.command for d in driver.decisions if d.stop is None and abs(d.command.w) > 0.05 / 0.9 + 1e-9]
+    assert steered and all(c.v < 0.9 for c in steered)  # turned harder than the rule's own turns at 0.9 m/s, slower
 
 
 def test_the_runner_never_exceeds_the_rules_top_speed():

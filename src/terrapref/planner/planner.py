@@ -265,17 +265,30 @@ class Planner:
         self, choice: Choice, view: SegmentationView, pose: Pose, time_s: float | None, state: PathState
     ) -> tuple[Choice, str | None]:
         """``choice`` and why the stop rule stops instead (None: it does not); where the choice's
-        own way is not free and another is, ``choice`` steered onto the nearest free one (a turn
-        back to the path blocked one way, turned the other way where that is free); the speed
-        rule is told the speed commanded."""
+        own way is not free and another is, ``choice`` steered onto the nearest free one, no harder
+        sideways than the speed rule's lateral limit (:meth:`_within_lateral`) (a turn back to the
+        path blocked one way, turned the other way where that is free); the speed rule is told
+        the speed commanded."""
         stop, way = self.stop_rule.check(self._stop_map, view, pose, choice.command.v, choice.command.w, time_s)
         if stop is None and state.turn_rps is not None and choice.command.v > 0:
             choice, stop = self._free_turn(choice, pose)
         elif stop is None and way != choice.command.w:
-            choice = Choice(int(self.control.label_of(way)), Command(choice.command.v, way))
+            choice = Choice(int(self.control.label_of(way)), Command(*self._within_lateral(choice.command.v, way)))
         if self.speed is not None:
             self.speed.commanded(0.0 if stop else choice.command.v)
         return choice, stop
+
+    def _within_lateral(self, v_mps: float, w_rps: float) -> tuple[float, float]:
+        """(``v_mps``, ``w_rps``) no harder sideways than the speed rule's lateral limit
+        (SpeedModel.lateral_limit_mps2: the drive's): the same arc, slower where it would be. The
+        stop rule's ways span the stick's range at the speed commanded, and the nearest free one
+        may turn harder than anything the driver did at that speed; slower, the way is still free
+        (the same arc, a shorter stopping distance)."""
+        limit = self.speed.rule.model.lateral_limit_mps2 if self.speed is not None else None
+        if limit is None or v_mps <= 0 or abs(v_mps * w_rps) <= limit:
+            return v_mps, w_rps
+        scale = math.sqrt(limit / abs(v_mps * w_rps))
+        return v_mps * scale, w_rps * scale
 
     def _free_turn(self, choice: Choice, pose: Pose) -> tuple[Choice, str | None]:
         """A turn back to the path on its own arc where that is free, else the other way round

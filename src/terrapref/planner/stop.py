@@ -25,8 +25,9 @@ its command, the planner commands v = 0 instead when:
   as no frame arrives to check.
 
 Where it does not stop, the command is driven on its own way if that is free, else on the free
-way nearest to it (the same speed, the nearest yaw rate: :meth:`StopRule.way_rps`): a vehicle
-never drives a way the rule reads as blocked because another was free.
+way nearest to it (the same speed, the nearest yaw rate: :meth:`StopRule.way_rps`; the planner
+drives it slower where it turns harder sideways than its speed rule's lateral limit: the same
+arc): a vehicle never drives a way the rule reads as blocked because another was free.
 
 The planner moves on by itself once the reason has cleared (a free way, for ``resume_after_s``). The reasons'
 names are terrapref.stops'.
