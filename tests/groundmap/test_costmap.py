@@ -71,7 +71,7 @@ def test_a_class_liked_better_than_the_background_costs_nothing():
 
 def test_the_costmaps_layers_hold_each_cells_speed_and_the_height_layers_geometry():
     """The speed of each cell's column (lethal 0, never seen NaN), and the elevation written into
-    the height layer with the slope of a plane through it and the roughness the frames read,
+    the height layer where trusted with the slope of a plane through it and the roughness the frames read,
     over exactly the costmap's cells."""
     stage, gmap = _seen_patches()
     res = gmap.settings.map_resolution_m
@@ -97,6 +97,11 @@ def test_the_costmaps_layers_hold_each_cells_speed_and_the_height_layers_geometr
     assert (full.layers["speed"][costmap.cost == LETHAL_COST] == 0.0).all()
     assert np.isnan(full.layers["speed"][costmap.cost == UNKNOWN_COST]).all()
     np.testing.assert_array_equal(full.layers["elevation"], elevation[r0 : r0 + h, c0 : c0 + w])
+    gmap.layer("returns")[:, : c0 + 4] = 1  # one return a cell is not yet trusted: the layer says nothing there
+    once = with_layers(costmap, gmap, speeds, 2.0).layers["elevation"]
+    assert np.isnan(once[:, :4]).all()
+    np.testing.assert_array_equal(once[:, 4:], elevation[r0 : r0 + h, c0 + 4 : c0 + w])
+    gmap.layer("returns")[...] = 3
     inner = full.layers["slope"][3:-3, 3:-3]
     np.testing.assert_allclose(inner, np.arctan(0.2), atol=1e-4)
     rough = gmap.layer("rough_weight")[r0 : r0 + h, c0 : c0 + w] > 0

@@ -18,6 +18,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from terrapref.groundmap.height import trusted_elevation
+
 if TYPE_CHECKING:
     from terrapref.groundmap.map import GroundMap
 
@@ -127,7 +129,7 @@ def with_layers(
     """``costmap`` (of ``ground_map``'s cells) with its other layers over the same cells: the
     ``speed`` [m/s] a speed rule drives each cell's column at (``speeds_mps``, (K + 2,): the K
     terrain columns, the background, NaN for ground never seen; 0 on lethal ground; None: no
-    speed rule, no layer) up to the robot's ``top_mps``, and the height layer's ``elevation`` with the ``slope``, ``roughness``
+    speed rule, no layer) up to the robot's ``top_mps``, and the height layer's ``elevation`` where trusted (terrapref.groundmap.height.trusted_elevation) with the ``slope``, ``roughness``
     and ``step`` read from it as the map's height settings say (terrapref.groundmap.height), NaN
     where unknown. ``shed``: the speed a speed rule sheds per degree of grade [m/s per deg], the
     more of up and down, and the least it slows to [m/s]; a cell's speed is then its column's
@@ -145,7 +147,7 @@ def with_layers(
     rows, cols = np.mgrid[r0 : r0 + h, c0 : c0 + w]
     if speeds_mps is not None:
         layers["speed"] = np.asarray(speeds_mps, dtype=np.float32)[ground_map.cells[r0 : r0 + h, c0 : c0 + w]]
-    layers["elevation"] = ground_map.layer("elevation")[r0 : r0 + h, c0 : c0 + w].copy()
+    layers["elevation"] = trusted_elevation(ground_map.heights, ground_map.height_settings, (slice(r0, r0 + h), slice(c0, c0 + w)))
     if np.isfinite(layers["elevation"]).any():
         geometry = ground_map.geometry_of(rows.ravel(), cols.ravel()).reshape(h, w, 3)
     else:

@@ -202,14 +202,16 @@ class Heights(NamedTuple):
     weight: np.ndarray | None = None
 
 
-def trusted_elevation(heights: Heights, settings: HeightSettings) -> np.ndarray:
-    """Each cell's elevation where it is trusted, else NaN: (n, n) float32. Trusted: at least
+def trusted_elevation(heights: Heights, settings: HeightSettings, window: tuple[slice, slice] | None = None) -> np.ndarray:
+    """Each cell's elevation where it is trusted, else NaN: (n, n) float32, or over ``window``
+    (rows, columns: slices of steps of one within the layers) alone. Trusted: at least
     ``min_returns`` returns (and 2), and the standard error of their mean at most
     ``max_error_m``, both as the sensor's errors put it (the inverse of the weights' sum) and
     as their spread shows it (the weighted variance over one less than their count)
     (terrapref.groundmap.height_compiled.trusted_window)."""
+    rows, cols = window if window is not None else (slice(None), slice(None))
     n_rows, n_cols = heights.elevation.shape
-    return kernels.trusted_window(*_trust(heights, settings), (0, n_rows), (0, n_cols))
+    return kernels.trusted_window(*_trust(heights, settings), rows.indices(n_rows)[:2], cols.indices(n_cols)[:2])
 
 
 def _trust(heights: Heights, settings: HeightSettings) -> tuple[tuple[np.ndarray, ...], tuple[float, float, bool]]:
