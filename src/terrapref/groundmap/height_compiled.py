@@ -352,6 +352,9 @@ def _fold_roughness(
             if dr * dr + dc * dc <= reach * reach:
                 disc[size] = dr * n + dc
                 size += 1
+    depth_var = np.empty(count)  # each cell's mean return's variance by the depth's error alone
+    for i in range(count):
+        depth_var[i] = sums[i, SUM_W] - base2 / sums[i, SUM_COUNT]
     for i in range(count):
         x0, y0 = sums[i, SUM_WX], sums[i, SUM_WY]
         t = touched[i]
@@ -366,7 +369,7 @@ def _fold_roughness(
             x, y, z = sums[j, SUM_WX] - x0, sums[j, SUM_WY] - y0, sums[j, SUM_WZ]
             m, sx, sy, sz = m + 1.0, sx + x, sy + y, sz + z
             sxx, syy, sxy, sxz, syz, szz = sxx + x * x, syy + y * y, sxy + x * y, sxz + x * z, syz + y * z, szz + z * z
-            noise += sums[j, SUM_W] - base2 / sums[j, SUM_COUNT]
+            noise += depth_var[j]
         if m < ROUGH_LEAST_CELLS:
             continue
         _, deviation = plane_fit((m, sx, sy, sz, sxx, syy, sxy, sxz, syz, szz))
