@@ -15,9 +15,36 @@ def test_numbers_with_an_exponent_and_no_dot_are_numbers_as_yaml_1_2_reads_them(
     assert read == {"a": 0.05, "b": 1000.0, "c": -20.0, "d": 0.05, "e": "5e-2", "f": "e5", "g": 12}
 
 
+def test_numbers_are_what_yaml_1_2_reads_as_numbers_and_nothing_else():
+    """YAML 1.1's forms (PyYAML's) are strings: 1:30 is not 90, 2_0 not 20, 010 not 8; a dot
+    with an exponent is a number (2.5e1)."""
+    read = load_yaml_text("a: 2.5e1\nb: 1:30\nc: 2_0\nd: 010\ne: 0x1f\nf: 0o17\ng: .inf\nh: -.Inf\ni: .5\nj: 0b11\nk: 1.\n")
+    assert read == {"a": 25.0, "b": "1:30", "c": "2_0", "d": 10, "e": 31, "f": 15, "g": float("inf"), "h": float("-inf")} | {
+        "i": 0.5,
+        "j": "0b11",
+        "k": 1.0,
+    }
+    assert load_yaml_text("a: .nan")["a"] != load_yaml_text("a: .nan")["a"]  # NaN
+
+
 def test_a_string_that_reads_as_a_number_is_written_quoted_and_read_back_a_string():
-    data = {"name": "1e5", "id": "12", "x": 0.05, "y": 1e-7, "z": 1e20}
+    data = {"name": "1e5", "id": "12", "x": 0.05, "y": 1e-7, "z": 1e20, "w": "2.5e1", "v": ".5"}
     assert load_yaml_text(dump_yaml(data)) == data
+
+
+def test_aliases_that_repeat_a_million_values_are_refused_before_anything_is_built():
+    """A few hundred bytes of aliases of aliases stand for billions of values, which a message
+    quoting one of them would expand; a few aliases are read as YAML reads them."""
+    levels = ["a0: &l0 [x, x, x, x, x, x, x, x, x, x]"]
+    levels += [f"a{i}: &l{i} [{', '.join([f'*l{i - 1}'] * 10)}]" for i in range(1, 7)]
+    with pytest.raises(yaml.YAMLError, match="aliases repeat more than 1,000,000 values"):
+        load_yaml_text("\n".join(levels) + "\nnoise_m: *l6\n")
+    assert load_yaml_text("a: &p [1, 2]\nb: *p\nc: {d: *p}\n") == {"a": [1, 2], "b": [1, 2], "c": {"d": [1, 2]}}
+
+
+def test_a_whole_number_too_long_to_read_is_refused_at_its_line():
+    with pytest.raises(yaml.YAMLError, match="a whole number of 5,001 digits"):
+        load_yaml_text("a: 1\nb: " + "1" * 5001 + "\n")
 
 
 def test_a_scenario_with_exponents_reads_as_with_decimals():

@@ -10,7 +10,6 @@ set (labels are re-derived from the recorded continuous w) without driving again
 from __future__ import annotations
 
 import hashlib
-import math
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -20,7 +19,7 @@ import numpy as np
 
 from terrapref.camera import CameraConfig, PinholeCamera, SegmentationRenderer, SegmentationView
 from terrapref.demos.recording import Recording, read_recording, require_meta
-from terrapref.errors import UserError
+from terrapref.errors import UserError, finite_number
 from terrapref.features import FeatureConfig, UtilityFeaturizer
 from terrapref.scenario import Scenario, parse_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
@@ -264,7 +263,7 @@ def _max_speed(meta: dict) -> float:
     sim = meta.get("sim")
     vehicle = sim.get("vehicle") if isinstance(sim, dict) else None
     v = vehicle.get("max_speed_mps") if isinstance(vehicle, dict) else None
-    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0 else 1.0
+    return float(v) if finite_number(v) and v > 0 else 1.0
 
 
 def on_map(poses: np.ndarray, scenario: Scenario) -> np.ndarray:

@@ -6,9 +6,48 @@ else reaching the user would be a bug.
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
+
+
+def finite_number(value: object) -> bool:
+    """Whether ``value`` is a number (an int or a float, not a bool) that is finite as a float: an
+    integer beyond the float range (YAML and JSON read 1 followed by 400 zeros as one) is not."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
+def printed(value: object) -> str:
+    """``repr(value)``, safe for integers too long to print (Python limits int-to-text conversion)."""
+    try:
+        return repr(value)
+    except ValueError:
+        return "a very large number"
+
+
+def described(value: object) -> str:
+    """A value from a file as an error message names it, in a few words whatever its size: a
+    number or a short string as it is, a long string, a list or a mapping by its kind."""
+    if value is None:
+        return "nothing"
+    if isinstance(value, bool):
+        return f"boolean {value}"
+    if isinstance(value, (int, float)):
+        text = printed(value)
+        return f"number {text}" if len(text) < 40 else "a very large number"
+    if isinstance(value, str):
+        return f"string {value!r}" if len(value) < 40 else "a string"
+    if isinstance(value, list):
+        return f"a list of {len(value)}"
+    if isinstance(value, dict):
+        return "a mapping"
+    return type(value).__name__
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,7 @@ import numpy as np
 from safetensors import SafetensorError, safe_open
 from safetensors.numpy import save_file
 
-from terrapref.errors import UserError
+from terrapref.errors import UserError, described
 from terrapref.fileio import atomic_path
 
 META_KEY = "terrapref"
@@ -60,5 +60,5 @@ def read_tensor_file(path: str | Path, fmt: str, missing: str, unreadable: str) 
         raise UserError(source, "missing terrapref metadata", field="metadata") from None
     if not isinstance(meta, dict) or meta.get("format") != fmt:
         got = meta.get("format") if isinstance(meta, dict) else None
-        raise UserError(source, f"expected {fmt!r}, got {got!r}", field="format")
+        raise UserError(source, f"expected {fmt!r}, got {described(got)}", field="format")
     return tensors, meta

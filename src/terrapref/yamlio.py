@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 from typing import Any
@@ -12,6 +13,7 @@ from terrapref.errors import UserError
 
 MAX_FILE_BYTES = 50_000_000
 MAX_DEPTH = 200  # mappings and lists inside one another; no terrapref file needs more than a handful
+MAX_ALIASED = 1_000_000  # values that aliases may repeat in one file
 
 
 # libyaml's parser where PyYAML was built with it (its wheels are): the same documents read about
@@ -39,15 +41,43 @@ class _UniqueKeyLoader(_SafeLoader):
 
 
 class _Dumper(yaml.SafeDumper):
-    """PyYAML's safe dumper, quoting what the loader would read as a number (:data:`_EXPONENT`)."""
+    """PyYAML's safe dumper, quoting what the loader would read as a number (:data:`_FLOAT`)."""
 
 
-# YAML 1.2 reads 5e-2 and 1E3 as numbers; PyYAML, by YAML 1.1, wants a dot in the mantissa
-# (5.0e-2) and reads them as strings: a file written by another tool would be refused field by field.
-# The dumper knows it too, so that a string such as "1e5" is written quoted and read back a string.
-_EXPONENT = re.compile(r"^[-+]?[0-9][0-9_]*[eE][-+]?[0-9]+$")
+# Numbers as YAML 1.2's core schema reads them: PyYAML follows YAML 1.1, which wants a dot in an
+# exponent's mantissa (it reads 5e-2 and 2.5e1 as strings, so that a file written by another tool
+# would be refused field by field) and reads 1:30 as 90, 2_0 as 20 and 010 as 8. The dumper knows
+# the same forms, so that a string such as "1e5" is written quoted and read back a string.
+_INT = re.compile(r"^(?:[-+]?[0-9]+|0o[0-7]+|0x[0-9a-fA-F]+)$")
+_FLOAT = re.compile(r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$")
+
+
+def _int(loader: yaml.BaseLoader, node: yaml.ScalarNode) -> int:
+    text = loader.construct_scalar(node)
+    if text.startswith(("0o", "0x")):
+        return int(text[2:], 8 if text[1] == "o" else 16)
+    try:
+        return int(text, 10)
+    except ValueError:  # past the digits Python turns into a number from text
+        raise yaml.constructor.ConstructorError(None, None, f"a whole number of {len(text):,} digits", node.start_mark) from None
+
+
+def _float(loader: yaml.BaseLoader, node: yaml.ScalarNode) -> float:
+    text = loader.construct_scalar(node).lower()
+    if text.endswith(".inf"):
+        return -math.inf if text.startswith("-") else math.inf
+    return math.nan if text == ".nan" else float(text)
+
+
 for _cls in (_UniqueKeyLoader, _Dumper):
-    _cls.add_implicit_resolver("tag:yaml.org,2002:float", _EXPONENT, list("-+0123456789"))
+    _cls.yaml_implicit_resolvers = {
+        first: [(tag, rx) for tag, rx in resolvers if tag not in ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float")]
+        for first, resolvers in _cls.yaml_implicit_resolvers.items()
+    }
+    _cls.add_implicit_resolver("tag:yaml.org,2002:int", _INT, list("-+0123456789"))
+    _cls.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT, list("-+.0123456789"))
+_UniqueKeyLoader.add_constructor("tag:yaml.org,2002:int", _int)
+_UniqueKeyLoader.add_constructor("tag:yaml.org,2002:float", _float)
 
 
 def dump_yaml(data: Any, **options: Any) -> str:
@@ -70,15 +100,33 @@ def load_yaml_text(text: str) -> Any:
 def _check_depth(text: str) -> None:
     """Refuse nesting deeper than :data:`MAX_DEPTH` before anything is built from it: the parser's
     events come one by one, while building the nested objects recurses (in libyaml's composer, in
-    C, past what its stack holds)."""
-    depth = 0
+    C, past what its stack holds). Refuse aliases that repeat more than :data:`MAX_ALIASED`
+    values in all, too (a few hundred bytes of aliases of aliases stand for billions of values,
+    which whatever reads them, a message quoting one included, would expand)."""
+    depth = aliased = values = 0
+    opened: list[tuple[str | None, int]] = []  # each open collection's anchor and the values before it
+    sizes: dict[str, int] = {}  # each anchor's values, its own nested ones included
     for event in yaml.parse(text, Loader=_SafeLoader):
-        if isinstance(event, _OPEN):
+        if isinstance(event, yaml.AliasEvent):
+            aliased += sizes.get(event.anchor, 1)
+            values += sizes.get(event.anchor, 1)
+            if aliased > MAX_ALIASED:
+                raise yaml.composer.ComposerError(None, None, f"aliases repeat more than {MAX_ALIASED:,} values", event.start_mark)
+        elif isinstance(event, yaml.ScalarEvent):
+            values += 1
+            if event.anchor is not None:
+                sizes[event.anchor] = 1
+        elif isinstance(event, _OPEN):
             depth += 1
             if depth > MAX_DEPTH:
                 raise yaml.parser.ParserError(None, None, f"nested more than {MAX_DEPTH} levels deep", event.start_mark)
+            opened.append((event.anchor, values))
+            values += 1
         elif isinstance(event, _CLOSE):
             depth -= 1
+            anchor, before = opened.pop()
+            if anchor is not None:
+                sizes[anchor] = values - before
 
 
 def read_yaml_mapping(path: str | Path, expected_format: str | None = None) -> dict[str, Any]:

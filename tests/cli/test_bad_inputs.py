@@ -237,6 +237,40 @@ _ROBOT = (
 )
 
 
+_HUGE = "1" + "0" * 400  # a whole number past the float range, as YAML reads it
+_SCENARIO = (
+    "format: terrapref-scenario/1\nname: r\nworld: {size_m: [20, 10], resolution_m: 0.1, background: grass}\n"
+    "path: {waypoints: [[1, 5], [19, 5]]}\n"
+)
+
+
+@pytest.mark.parametrize(
+    ("name", "text", "needles"),
+    [
+        ("p.yaml", f"format: terrapref-perception/1\ndepth: {{noise_m: {_HUGE}}}\n", ("depth.noise_m", "a very large number")),
+        ("p.yaml", f"format: terrapref-perception/1\nlabels: {{boundary_px: {_HUGE}}}\n", ("labels.boundary_px", "a very large number")),
+        ("p.yaml", "format: terrapref-perception/1\ndepth: {dropout_rate: 1.0}\n", ("depth.dropout_rate", "[0, 0.99]")),
+        ("p.yaml", "format: terrapref-perception/1\ndepth: {max_range_m: 0.5}\n", ("depth.max_range_m", "[1, ")),
+        ("r.yaml", _ROBOT.replace("height_m: 1.0", f"height_m: {_HUGE}") + "labels: rellis3d\n", ("camera.height_m",)),
+        ("r.yaml", _ROBOT + f"labels: rellis3d\nlimits: {{max_speed_mps: {_HUGE}}}\n", ("limits.max_speed_mps",)),
+        ("r.yaml", _ROBOT.replace("command: /cmd", "command: /odom") + "labels: rellis3d\n", ("topics.command", "topics.odometry")),
+        ("r.yaml", _ROBOT.replace("command: /cmd", "command: /c md") + "labels: rellis3d\n", ("topics.command", "topic name")),
+        ("s.yaml", _SCENARIO + "relief: [{mound: {center: [8, 5], radius: 2, height_m: 0}}]\n", ("relief[0].mound.height_m", "not be 0")),
+        ("s.yaml", _SCENARIO + "relief: [{noise: {amplitude_m: 0.5, wavelength_m: 1e308, seed: 1}}]\n", ("wavelength_m", "at most")),
+    ],
+)
+def test_a_number_no_file_could_mean_is_refused_naming_the_file_and_the_field(tmp_path: Path, capsys, name, text, needles):
+    """A whole number past what a float holds, relief that changes nothing, depth with no return,
+    a topic two roles share: refused in one line naming the file and the field, exit 2."""
+    path = tmp_path / name
+    path.write_text(text)
+    assert main(["validate", str(path)]) == 2
+    said = capsys.readouterr()
+    errors = [line for line in (said.out + said.err).splitlines() if line.startswith("error:")]  # validate reports on stdout
+    assert len(errors) == 1 and all(n in errors[0] for n in (str(path), *needles)), said
+    assert "internal error" not in said.err and "Traceback" not in said.err
+
+
 @pytest.mark.parametrize("kind", ["scenario", "perception", "robot", "label map", "class table"])
 def test_a_yaml_file_with_a_key_given_twice_is_refused_naming_the_key_and_its_lines(tmp_path: Path, capsys, kind):
     # PyYAML keeps the last of two equal keys; RELLIS grass (3) would be imported as mud.
@@ -302,6 +336,12 @@ def test_a_recording_whose_camera_has_no_focal_length_is_refused(tmp_path: Path,
         (["train", "REC", "REC", "--out", "OUT/m.safetensors"], ("REC", "given twice")),
         (["featurize", "REC", "REC/", "--out", "OUT/d.safetensors"], ("REC", "given twice")),
         (["evaluate", "M", "demo_course", "demo_course", "--out", "OUT/e"], ("demo_course", "given twice")),
+        (
+            ["evaluate", "M", "demo_course", "--no-driver", "--relief-style", "cautious", "--out", "OUT/e"],
+            ("--relief-style", "--no-driver"),
+        ),
+        (["evaluate", "M", "demo_course", "--no-driver", "--style", "shaky", "--out", "OUT/e"], ("--style", "--no-driver")),
+        (["render", "demo_course", "--pose", "-1e9", "0", "0", "--out", "OUT/s.png"], ("--pose", "within 30 m")),
     ],
 )
 def test_values_that_cannot_be_right_and_inputs_given_twice_are_refused_before_any_work(tmp_path: Path, capsys, recording, argv, needles):

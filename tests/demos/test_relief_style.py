@@ -72,6 +72,8 @@ def test_named_styles_and_pairs_over_them_are_read():
         ("roll_deg=8,roll_deg=9", "roll_deg is given twice"),
         ("default,down_mps_per_deg=10", "down_mps_per_deg must lie in [0, 0.2]"),  # a driver that crawls down any grade
         ("none,roll_deg=8", "none (relief driven as if it were flat) takes no k=v changes"),
+        ("roll_deg=1_0", "roll_deg: expected a number"),  # Python's float() reads 1_0 as 10; a file's number does not
+        ("default,rough_m=1e308", "rough_m must be at most 1 m"),  # no ground would ever be rough
     ],
 )
 def test_a_bad_relief_style_is_refused_naming_the_flag(text: str, says: str):
@@ -169,7 +171,10 @@ def test_a_models_relief_style_is_that_of_its_recordings_driver_and_the_comparis
     assert trained_relief(meta(cautious.to_dict(), cautious.to_dict())) == cautious
     assert trained_relief(meta(None)) is None  # a driver that drove relief as if flat
     assert trained_relief(meta(cautious.to_dict(), ReliefStyle().to_dict())) is None  # a mix
-    assert trained_relief(meta({**cautious.to_dict(), "roll_deg": "steep"})) is None  # not readable: none, never a guess
+    with pytest.raises(
+        UserError, match=r"^m.safetensors: data.recordings\[\].driver.config.relief: .* cannot be read; give .*--relief-style"
+    ):
+        trained_relief(meta({**cautious.to_dict(), "roll_deg": "steep"}), "m.safetensors")  # not readable: said, never a flat driver
     specs = Evaluation("m.safetensors", ("relief_hazards",), 1, relief=cautious).specs(PreferenceProfile.default())
     assert [s.relief for s in specs if s.driver == EXPERT] == [cautious] and all(s.relief is None for s in specs if s.driver != EXPERT)
 

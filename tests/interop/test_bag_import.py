@@ -162,10 +162,16 @@ def test_a_missing_topic_or_a_wrong_type_names_the_bag_and_the_field(tmp_path: P
     write_robot(robot, robot_yaml().replace(TOPICS["odometry"], "/warthog/odom"))
     assert main(["import", bag, "--robot", str(robot), "--out", str(tmp_path / "a")]) == 2
     _one_line(capsys, bag, "topics.odometry", "/warthog/odom", "is not in the bag")
-    write_robot(robot, robot_yaml().replace(f"odometry: {TOPICS['odometry']}", f"odometry: {TOPICS['command']}"))
+    write_robot(robot, robot_yaml(command=False).replace(f"odometry: {TOPICS['odometry']}", f"odometry: {TOPICS['command']}"))
     assert main(["import", bag, "--robot", str(robot), "--out", str(tmp_path / "b")]) == 2
     _one_line(capsys, bag, "topics.odometry", "geometry_msgs/msg/Twist")
-    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+    write_robot(robot, robot_yaml().replace(f"odometry: {TOPICS['odometry']}", f"odometry: {TOPICS['command']}"))
+    assert main(["import", bag, "--robot", str(robot), "--out", str(tmp_path / "c")]) == 2  # two roles, one topic: the file says
+    _one_line(capsys, str(robot), "topics.", "each role comes on a topic of its own")
+    write_robot(robot, robot_yaml().replace(f"odometry: {TOPICS['odometry']}", "odometry: /warthog/odom pose"))
+    assert main(["import", bag, "--robot", str(robot), "--out", str(tmp_path / "d")]) == 2  # not a ROS name
+    _one_line(capsys, str(robot), "topics.odometry", "expected a topic name")
+    assert not any((tmp_path / d).exists() for d in "abcd")
 
 
 def test_every_missing_or_mistyped_topic_is_named_in_one_message(tmp_path: Path, logs, capsys):
@@ -173,7 +179,9 @@ def test_every_missing_or_mistyped_topic_is_named_in_one_message(tmp_path: Path,
     robot = tmp_path / "robot.yaml"
     write_robot(
         robot,
-        robot_yaml().replace(TOPICS["odometry"], "/warthog/odom").replace(f"command: {TOPICS['command']}", f"command: {TOPICS['path']}"),
+        robot_yaml(path_topic=False)  # the path's topic named as the command's alone (two roles on one topic are the file's own error)
+        .replace(TOPICS["odometry"], "/warthog/odom")
+        .replace(f"command: {TOPICS['command']}", f"command: {TOPICS['path']}"),
     )
     assert main(["import", bag, "--robot", str(robot), "--out", str(tmp_path / "a")]) == 2
     _one_line(capsys, bag, "topics.odometry /warthog/odom is not in the bag", f"topics.command {TOPICS['path']} has type nav_msgs/msg/Path")

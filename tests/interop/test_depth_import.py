@@ -100,6 +100,7 @@ class DepthLog:
     offset_s: float = 0.0  # each depth image's stamp minus its label image's [s]
     every: int = 1  # a depth image with every so many label images
     depth_info: CameraConfig | None = None  # a calibration of the depth images' own, on DEPTH_INFO
+    empty: bool = False  # every depth image without a return (all 0)
 
 
 def _robot(folder: Path, depth_info: bool = False) -> Path:
@@ -114,7 +115,7 @@ def _robot(folder: Path, depth_info: bool = False) -> Path:
 
 def _depth_message(ts, stamped, log: DepthLog):
     data = KNOWN_MM if log.encoding != "32FC1" else _metres_with_no_returns()
-    data = np.resize(data, log.shape)
+    data = np.resize(data, log.shape) * (not log.empty)
     m = _msg(log.encoding, data)
     return ts.types["sensor_msgs/msg/Image"](
         header=stamped, height=m.height, width=m.width, encoding=m.encoding, is_bigendian=0, step=m.step, data=m.data
@@ -190,6 +191,17 @@ def test_a_label_image_takes_the_depth_image_of_the_nearest_stamp_within_50_ms_a
     assert len(rec) == FRAMES // 2 and rec.has_depth
     np.testing.assert_allclose(rec.times, 0.2 * np.arange(FRAMES // 2), atol=1e-6)
     assert 0.1 > DEPTH_PAIRING_S
+
+
+def test_a_depth_topic_without_a_single_return_is_imported_with_a_warning(tmp_path: Path, capsys):
+    """A depth topic whose every image holds no return (a wrong encoding or unit, a covered lens)
+    is not taken silently for depth: the import's report says so."""
+    bag = _write_log(tmp_path / "empty.mcap", DepthLog(empty=True))
+    assert main(["import", str(bag), "--robot", str(_robot(tmp_path)), "--out", str(tmp_path / "rec")]) == 0
+    assert f"WARNING: {FRAMES} of them hold no return at all" in capsys.readouterr().out
+    bag = _write_log(tmp_path / "full.mcap", DepthLog())
+    assert main(["import", str(bag), "--robot", str(_robot(tmp_path)), "--out", str(tmp_path / "full")]) == 0
+    assert "WARNING" not in capsys.readouterr().out
 
 
 def _one_line(capsys, *words: str) -> str:

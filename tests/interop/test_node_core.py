@@ -369,7 +369,7 @@ def test_the_rules_settings_come_from_the_robot_file_then_the_nodes_parameters(s
     assert nested_rule_params(lambda name, default: {"~stop": {"margin_m": 0.6}}.get(name, default)) == {"stop.margin_m": 0.6}
     with pytest.raises(UserError, match=r"^--ros-args: stop.brakes: the stop rule has no setting 'brakes'"):
         NodeOptions().with_rule_params({"stop.brakes": 1.0}, "--ros-args")
-    with pytest.raises(UserError, match=r"^--ros-args: stop.arcs: expected a whole number, got 21.5"):
+    with pytest.raises(UserError, match=r"^--ros-args: stop.arcs: expected a whole number, got number 21.5"):
         NodeOptions().with_rule_params({"stop.arcs": 21.5}, "--ros-args")  # not cut to 21
     with pytest.raises(UserError, match=r"^stop.decel_mps2: "):
         NodeOptions().with_rule_params({"stop.decel_mps2": -1.0}, "--ros-args").applied_to(robot)

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from terrapref.camera.pinhole import CameraConfig
-from terrapref.errors import ConfigError, Problem
+from terrapref.errors import ConfigError, Problem, finite_number
 from terrapref.yamlio import read_yaml_mapping
 
 _FIELDS = {f.name for f in fields(CameraConfig)}
@@ -34,7 +34,7 @@ _ROS = {
 
 
 def _number(value: object) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    return finite_number(value)
 
 
 def _matrix(data: dict, key: str, size: int, problems: list[Problem]) -> np.ndarray | None:

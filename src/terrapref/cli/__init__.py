@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import functools
 import os
+import re
 import signal
 import sys
 import threading
@@ -61,10 +62,17 @@ COMMANDS = (
 )
 """Each command's parser, in the order `terrapref --help` lists them."""
 
+_NEGATIVE_NUMBER = re.compile(r"^-(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?$")
+
 
 class _Parser(argparse.ArgumentParser):
     """argparse, with its refusals (a missing argument, a value of the wrong type, an unknown
-    choice) as one line on stderr and exit code 2, like every other error of the command line."""
+    choice) as one line on stderr and exit code 2, like every other error of the command line;
+    a negative number with an exponent (``--pose -1e3 5 0``) is a number, not an option."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = _NEGATIVE_NUMBER
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"error: {self.prog}: {message} (see {self.prog} --help)\n")

@@ -70,6 +70,10 @@ def _evaluation(args: argparse.Namespace) -> Evaluation:
     from terrapref.terrain import PreferenceProfile
     from terrapref.vehicle import VehicleConfig
 
+    if args.no_driver:  # the flags that set the comparison driver set nothing without one
+        for flag, value in (("--style", args.style), ("--speeds", args.speeds), ("--relief-style", args.relief_style)):
+            if value is not None:
+                raise UserError(flag, "sets the driver the planner is compared with, which --no-driver leaves out")
     try:
         frames = sorted({int(f) for f in args.frames.split(",") if f.strip()}) if args.frames else []
     except ValueError:
@@ -84,7 +88,7 @@ def _evaluation(args: argparse.Namespace) -> Evaluation:
     given = parse_speeds(args.speeds) if args.speeds is not None else ()
     meta = getattr(getattr(model, "model", None), "meta", {})
     style, speeds = _driver_of(args.style, given, trained_driver(meta))
-    relief = parse_relief_style(args.relief_style)[1] if args.relief_style is not None else trained_relief(meta)
+    relief = parse_relief_style(args.relief_style)[1] if args.relief_style is not None else trained_relief(meta, args.model)
     top_mps = VehicleConfig().max_speed_mps  # the vehicle the runs drive
     if args.relief_style is not None:
         check_rough_speed(relief, top_mps)

@@ -45,7 +45,7 @@ import numpy as np
 import yaml
 
 from terrapref.camera import SegmentationView, as_view
-from terrapref.errors import UserError
+from terrapref.errors import UserError, finite_number
 from terrapref.fileio import new_folder, replace_dir, write_text_atomic
 from terrapref.pngio import depth_to_millimetres, millimetres_to_depth, read_depth_png, read_label_png, write_png_atomic
 from terrapref.vehicle.ground import LEVEL, Attitude
@@ -442,7 +442,7 @@ def _frame_problem(row: dict) -> tuple[str, str] | None:
     """(field, message) of the first thing wrong with one frame record, or None."""
 
     def finite(v: object) -> bool:
-        return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+        return finite_number(v)
 
     if not finite(row["t"]):
         return "t", "expected a finite time [s]"

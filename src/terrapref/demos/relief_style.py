@@ -19,6 +19,7 @@ Named styles (:data:`RELIEF_STYLES`), and ``k=v`` pairs over one::
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
 from typing import Any
@@ -26,13 +27,15 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from terrapref.errors import UserError
+from terrapref.errors import UserError, described, finite_number
 from terrapref.records import to_plain
 from terrapref.registry import Registry
 from terrapref.world.height_compiled import height_at, roughness
 from terrapref.world.raster import rough_reach
 
 NO_RELIEF_STYLE = "none"  # --relief-style none: a driver that drives relief as if it were flat
+MAX_ROUGH_M = 1.0  # the roughest ground a relief style may call smooth [m]: a metre's spread of heights about their plane
+_NUMBER = re.compile(r"^[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?$")  # a k=v pair's number
 MAX_SHED_MPS_PER_DEG = 0.2  # the most speed a relief style sheds per degree of grade [m/s per deg]: 2 m/s over 10 deg
 
 
@@ -61,8 +64,8 @@ class ReliefStyle:
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
-            if not (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)):
-                raise ValueError(f"{f.name} must be a finite number, got {value!r}")
+            if not (finite_number(value)):
+                raise ValueError(f"{f.name} must be a finite number, got {described(value)}")
         for name in ("roll_deg", "grade_deg"):
             if not 0.0 < getattr(self, name) < 90.0:
                 raise ValueError(f"{name} must lie in (0, 90) deg, got {getattr(self, name):g}")
@@ -75,6 +78,8 @@ class ReliefStyle:
         for name in ("rough_mps", "rough_m"):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name):g}")
+        if self.rough_m > MAX_ROUGH_M:
+            raise ValueError(f"rough_m must be at most {MAX_ROUGH_M:g} m, got {self.rough_m:g}")
 
     def to_dict(self) -> dict[str, Any]:
         return to_plain(self)
@@ -142,10 +147,7 @@ def parse_relief_style(text: str, source: str = "--relief-style") -> tuple[str, 
             raise UserError(source, f"expected NAME or k=v pairs with k one of {', '.join(known)}; got {item!r}")
         if key in given:
             raise UserError(source, f"{key} is given twice")
-        try:
-            number = float(value)
-        except ValueError:
-            number = math.nan
+        number = float(value) if _NUMBER.match(value) else math.nan  # a number as a file writes one (float() takes 1_0 too)
         if not math.isfinite(number):
             raise UserError(source, f"{key}: expected a number, got {value!r}")
         changes[key] = number

@@ -25,7 +25,7 @@ import numpy as np
 
 from terrapref.demos.expert import STYLES, ExpertConfig
 from terrapref.demos.relief_style import ReliefStyle
-from terrapref.errors import UserError
+from terrapref.errors import UserError, described
 from terrapref.terrain import ClassTable
 from terrapref.vehicle import MIN_CRUISE_MPS as MIN_SPEED_MPS
 from terrapref.yamlio import read_yaml_mapping
@@ -68,7 +68,7 @@ def read_style_file(path: str | Path) -> tuple[str, dict[str, Any]]:
             value = data[name]
             optional = name in ("lateral_accel_mps2", "near_lethal_mps")
             if not (_number(value) or (optional and value is None)):
-                raise UserError(source, f"expected a number{' or null' if optional else ''}, got {value!r}", field=name)
+                raise UserError(source, f"expected a number{' or null' if optional else ''}, got {described(value)}", field=name)
             changes[name] = None if value is None else float(value)
     if "speeds" in data:
         speeds = data["speeds"]

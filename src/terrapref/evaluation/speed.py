@@ -20,6 +20,7 @@ import numpy as np
 
 from terrapref.demos.expert import ExpertConfig
 from terrapref.demos.relief_style import ReliefStyle
+from terrapref.errors import UserError
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult
 from terrapref.evaluation.scoring import GRADE_BAND_DEG, GRADE_BANDS, ROUGH_BAND_M, ROUGH_BANDS, RunMetrics
 from terrapref.evaluation.stats import cluster_bootstrap, rate_text
@@ -280,16 +281,25 @@ def _recorded_drivers(meta: Mapping[str, Any]) -> list[Any]:
     return [r.get("driver") if isinstance(r, Mapping) else None for r in recordings]
 
 
-def trained_relief(meta: Mapping[str, Any]) -> ReliefStyle | None:
+def trained_relief(meta: Mapping[str, Any], source: str = "") -> ReliefStyle | None:
     """The relief style of the synthetic driver a model's recordings were driven by, when every
     recording names the same one (terrapref.demos.relief_style); None where none names one (it
-    drove relief as if it were flat), for a person's drives, a mix, or a style this code cannot read."""
+    drove relief as if it were flat), for a person's drives or a mix. A style named that this
+    code cannot read (a damaged file, another version's) is a UserError naming ``source``: a
+    driver that drove relief as if flat is not what the model learned from."""
     drivers = _recorded_drivers(meta)
     configs = [d.get("config") if isinstance(d, Mapping) and d.get("kind") == "expert" else None for d in drivers]
     found = [c.get("relief") if isinstance(c, Mapping) else None for c in configs]
-    if not found or any(f != found[0] for f in found):
+    if not found or any(f != found[0] for f in found) or found[0] is None:
         return None
-    return ReliefStyle.written(found[0])
+    style = ReliefStyle.written(found[0])
+    if style is None:
+        raise UserError(
+            source,
+            "the relief style of the driver its recordings were driven by cannot be read; give the driver's with --relief-style",
+            field="data.recordings[].driver.config.relief",
+        )
+    return style
 
 
 RUN_XY_STEP_S = 0.1  # a run's kept path (RunResult.xy): its reference point every third 30 Hz tick [s]

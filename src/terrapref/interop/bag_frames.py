@@ -336,6 +336,7 @@ class DepthImages:
     pairing: DepthPairing = field(default_factory=lambda: DepthPairing(DEPTH_HELD))  # depth (H, W) uint16 [mm, 0: none] by stamp
     paired: int = 0  # label images paired so far
     largest_offset_s: float = 0.0  # the largest stamp difference of a pair [s]
+    returns: int = 0  # paired images holding at least one return
 
     def take_in(self, bag: Bag, conn, t_ns: int, msg, shift_s: float) -> None:
         """Decode and hold a depth message of the log (received at ``t_ns`` [ns]); its stamp moved
@@ -354,14 +355,21 @@ class DepthImages:
             return None
         offset, mm = paired
         self.paired += 1
+        self.returns += bool(mm.any())
         self.largest_offset_s = max(self.largest_offset_s, offset)
         return millimetres_to_depth(mm)
 
     def summary(self) -> str:
         """What the frames' depth images are, for the import's report."""
+        empty = self.paired - self.returns
         return (
             f"{self.paired} frames carry a depth image of {self.topic} "
             f"(paired by stamp, at most {1000 * self.largest_offset_s:.0f} ms apart; {1000 * DEPTH_PAIRING_S:.0f} ms allowed)"
+            + (
+                f"; WARNING: {empty} of them hold no return at all (every pixel 0, NaN, negative or out of range: check the topic's encoding and units)"
+                if empty
+                else ""
+            )
         )
 
 

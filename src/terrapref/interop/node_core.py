@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from terrapref.errors import UserError
+from terrapref.errors import UserError, described
 from terrapref.groundmap.costmap import Costmap
 from terrapref.interop.depth_pairing import DEPTH_PAIRING_S, DepthPairing
 from terrapref.interop.labels import unlisted_message
@@ -551,7 +551,7 @@ class NodeOptions:
                 raise UserError(origin, f"the stop rule has no setting {name!r}; its settings: {', '.join(names)}", field=str(key))
             problem = stop_value_problem(name, value)
             if problem is not None:
-                raise UserError(origin, f"{problem}, got {value!r}", field=str(key))
+                raise UserError(origin, f"{problem}, got {described(value)}", field=str(key))
         given = tuple((str(k).removeprefix("stop."), v) for k, v in stop.items())
         return replace(self, rules=RuleSettings.parse(rules, origin, RULES) if rules else self.rules, stop=self.stop + given)
 

@@ -55,14 +55,14 @@ Relative file names are relative to the robot file.
 
 from __future__ import annotations
 
-import math
+import re
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-from terrapref.errors import ConfigError, Problem, UserError
+from terrapref.errors import ConfigError, Problem, UserError, described, finite_number
 from terrapref.interop.labels import LabelMap, load_label_map
 from terrapref.planner.stop import StopConfig
 from terrapref.rules import RULES
@@ -74,6 +74,7 @@ from terrapref.vehicle import VehicleConfig
 from terrapref.yamlio import load_yaml_text, read_yaml_mapping
 
 ROBOT_FORMAT = "terrapref-robot/1"
+_TOPIC_NAME = re.compile(r"^(?:/[A-Za-z_][A-Za-z0-9_]*)+$")  # a global ROS name
 _TOP = {"format", "topics", "camera", "labels", "path_file", "profile", "max_gap_s", "description", "stop", "limits", "rules"}
 LIMITS = ("max_speed_mps", "max_yaw_rate_rps", "max_accel_mps2")  # the robot's limits a file (or a node's parameters) may set
 _TOPICS_REQUIRED = ("segmentation", "camera_info", "odometry")
@@ -119,7 +120,7 @@ class RobotConfig:
 
 
 def _number(value: object) -> float | None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+    if not finite_number(value):
         return None
     return float(value)
 
@@ -225,8 +226,14 @@ def _check_topics(topics: object, problems: list[Problem]) -> dict[str, str]:
     for key, value in topics.items():
         if key not in _TOPICS:
             problems.append(Problem(f"topics.{key}", f"unknown key; expected {', '.join(sorted(_TOPICS))}"))
-        elif not isinstance(value, str) or not value.startswith("/"):
-            problems.append(Problem(f"topics.{key}", "expected a topic name such as /robot/odom"))
+        elif not isinstance(value, str) or not _TOPIC_NAME.match(value):
+            shown = f"; got {described(value)}" if isinstance(value, str) else ""
+            problems.append(
+                Problem(
+                    f"topics.{key}",
+                    f"expected a topic name such as /robot/odom (ROS's: words of letters, digits and _ after each /){shown}",
+                )
+            )
         else:
             out[key] = value
     problems += [Problem(f"topics.{k}", "missing") for k in _TOPICS_REQUIRED if k not in topics]
@@ -234,6 +241,11 @@ def _check_topics(topics: object, problems: list[Problem]) -> dict[str, str]:
         problems.append(Problem("topics.depth_info", "is the depth images' calibration; name their topic as topics.depth too"))
     if "depth" in out and out["depth"] == out.get("segmentation"):
         problems.append(Problem("topics.depth", "is the segmentation topic; the depth images come on a topic of their own"))
+    roles: dict[str, str] = {}
+    for key, value in out.items():  # each role its own topic (a topic holds one kind of message)
+        if value in roles and {key, roles[value]} != {"depth", "segmentation"}:
+            problems.append(Problem(f"topics.{key}", f"is topics.{roles[value]}'s topic too; each role comes on a topic of its own"))
+        roles.setdefault(value, key)
     return out
 
 

@@ -51,7 +51,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from terrapref.errors import ConfigError, Problem, UserError
+from terrapref.errors import ConfigError, Problem, UserError, described, finite_number
 from terrapref.records import to_plain
 from terrapref.terrain import ClassTable
 from terrapref.yamlio import read_yaml_mapping
@@ -286,7 +286,9 @@ _SCHEMA: dict[str, dict[str, tuple[str, float, float]]] = {
     },
     "camera": {"pitch_jitter_deg": (_NUMBER, 0.0, 30.0), "roll_jitter_deg": (_NUMBER, 0.0, 30.0), "jitter_time_s": (_NUMBER, 0.0, 1e4)},
     "frames": {"delay": (_INT, 0, 100), "late_rate": (_NUMBER, 0.0, 1.0), "drop_rate": (_NUMBER, 0.0, 1.0)},
-    "depth": {"noise_m": (_NUMBER, 0.0, 10.0), "dropout_rate": (_NUMBER, 0.0, 1.0), "max_range_m": (_OPTIONAL, 0.1, 1e6)},
+    # A depth camera that drops every return, or sees no farther than the ground nearest its mount
+    # (about 1 m ahead), gives no depth at all: refused, not taken for flat ground.
+    "depth": {"noise_m": (_NUMBER, 0.0, 10.0), "dropout_rate": (_NUMBER, 0.0, 0.99), "max_range_m": (_OPTIONAL, 1.0, 1e6)},
 }
 _TOP = {"format", "description", *_SCHEMA}
 
@@ -349,8 +351,8 @@ def _check(value: Any, spec: _Field, where: str, classes: ClassTable, problems: 
     kind, low, high = spec
 
     def number(v: Any, at: str) -> float | None:
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            problems.append(Problem(at, f"expected a finite number, got {v!r}"))
+        if not finite_number(v):
+            problems.append(Problem(at, f"expected a finite number, got {described(v)}"))
             return None
         if not low <= v <= high:
             problems.append(Problem(at, f"must be in [{low:g}, {high:g}], got {v:g}"))
@@ -359,10 +361,10 @@ def _check(value: Any, spec: _Field, where: str, classes: ClassTable, problems: 
 
     def integer(v: Any, at: str) -> int | None:
         if isinstance(v, bool) or not isinstance(v, int):
-            problems.append(Problem(at, f"expected a whole number, got {v!r}"))
+            problems.append(Problem(at, f"expected a whole number, got {described(v)}"))
             return None
         if not low <= v <= high:
-            problems.append(Problem(at, f"must be in [{low:g}, {high:g}], got {v}"))
+            problems.append(Problem(at, f"must be in [{low:g}, {high:g}], got {described(v)}"))
             return None
         return int(v)
 
@@ -379,7 +381,7 @@ def _check(value: Any, spec: _Field, where: str, classes: ClassTable, problems: 
         return _BAD if n is None else n
     if kind == _RANGE_PX:
         if not isinstance(value, list) or len(value) != 2:
-            problems.append(Problem(where, f"expected [min, max] in pixels, got {value!r}"))
+            problems.append(Problem(where, f"expected [min, max] in pixels, got {described(value)}"))
             return _BAD
         pair = [integer(v, f"{where}[{i}]") for i, v in enumerate(value)]
         return _BAD if None in pair else (pair[0], pair[1])

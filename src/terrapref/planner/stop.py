@@ -42,6 +42,7 @@ import numpy as np
 from numba import njit
 
 from terrapref.camera import PinholeCamera, PixelSet, SegmentationView
+from terrapref.errors import finite_number
 from terrapref.groundmap.columns import TerrainColumns
 from terrapref.groundmap.map import GroundMap
 from terrapref.groundmap.map_compiled import UNSETTLED, MapLayers, map_decide
@@ -115,7 +116,7 @@ class StopConfig:
             self.off_path_m,
             *(() if self.goal_yaw_tolerance_deg is None else (self.goal_yaw_tolerance_deg,)),
         )
-        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in finite):
+        if not all(finite_number(v) for v in finite):
             raise ValueError("the stop rule's settings must be finite numbers")
         if self.goal_tolerance_m <= 0 or self.off_path_m <= self.goal_tolerance_m:
             raise ValueError("the stop rule needs goal_tolerance_m > 0 and off_path_m greater than it")

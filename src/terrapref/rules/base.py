@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView
-from terrapref.errors import UserError
+from terrapref.errors import UserError, finite_number
 from terrapref.features import FeatureConfig, UtilityFeaturizer
 from terrapref.groundmap.columns import TerrainColumns
 from terrapref.groundmap.map import GroundMap
@@ -333,7 +333,7 @@ def number(
 ) -> float:
     """A finite number field of a block (``default`` when absent, if given), >= ``low`` (> 0 with ``positive``)."""
     value = block.get(name, default)
-    ok = not isinstance(value, bool) and isinstance(value, (int, float)) and np.isfinite(value) and value >= low
+    ok = finite_number(value) and value >= low
     if not ok or (positive and value <= 0):
         raise where.error(
             name,

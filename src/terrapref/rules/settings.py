@@ -14,12 +14,11 @@ where the setting came from.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from terrapref.errors import ConfigError, UserError
+from terrapref.errors import ConfigError, UserError, described, finite_number
 from terrapref.registry import Registry
 from terrapref.rules.base import Rule
 
@@ -150,7 +149,7 @@ def _kind_of(registry: Registry[type[Rule]], rule: str, name: str, origin: str, 
 
 
 def _number(value: object, origin: str, key: str) -> float:
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    ok = finite_number(value)
     if not ok:
-        raise UserError(origin, f"expected a finite number, got {value!r}", field=key)
+        raise UserError(origin, f"expected a finite number, got {described(value)}", field=key)
     return float(value)

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from terrapref.errors import ConfigError, Problem, ScenarioError, UserError
+from terrapref.errors import ConfigError, Problem, ScenarioError, UserError, described, printed
 from terrapref.scenario.model import AVOID, BEST, Scenario, TerrainPatch, Zone, grid_shape
 from terrapref.scenario.relief import RELIEF_KINDS, Mound, Noise, Plateau, ReliefEntry, Ridge
 from terrapref.scenario.shapes import Circle, Polygon, Rectangle, Shape
@@ -30,6 +30,7 @@ _REQUIRED_KEYS = frozenset({"format", "name", "world", "path"})
 _SHAPE_KEYS = ("polygon", "circle", "rectangle")
 MAX_RELIEF_M = 1000.0  # the largest height or noise amplitude of one relief entry [m]
 MAX_RELIEF_REACH_M = 1e6  # relief's points lie within this distance of the map [m]
+MAX_WAVELENGTH_M = 1e4  # the longest wavelength of noise [m]
 
 
 class _Checker:
@@ -59,7 +60,7 @@ class _Checker:
         """``value`` as a mapping of the ``required`` and ``optional`` keys, each other key failed
         with the message ``unknown``; None after any failure."""
         if not isinstance(value, dict):
-            self.fail(field, f"expected a mapping, got {_describe(value)}")
+            self.fail(field, f"expected a mapping, got {described(value)}")
             return None
         ok = True
         for key in sorted(required - set(value), key=str):
@@ -72,7 +73,7 @@ class _Checker:
 
     def number(self, value: Any, field: str, *, positive: bool = False) -> float | None:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            self.fail(field, f"expected a number, got {_describe(value)}")
+            self.fail(field, f"expected a number, got {described(value)}")
             return None
         try:
             x = float(value)
@@ -89,21 +90,21 @@ class _Checker:
 
     def vector(self, value: Any, field: str, length: int, *, positive: bool = False) -> tuple[float, ...] | None:
         if not isinstance(value, list) or len(value) != length:
-            self.fail(field, f"expected a list of {length} numbers, got {_describe(value)}")
+            self.fail(field, f"expected a list of {length} numbers, got {described(value)}")
             return None
         items = [self.number(v, f"{field}[{i}]", positive=positive) for i, v in enumerate(value)]
         return None if any(v is None for v in items) else tuple(items)  # type: ignore[arg-type]
 
     def points(self, value: Any, field: str, minimum: int) -> np.ndarray | None:
         if not isinstance(value, list) or len(value) < minimum:
-            self.fail(field, f"expected a list of at least {minimum} [x, y] points, got {_describe(value)}")
+            self.fail(field, f"expected a list of at least {minimum} [x, y] points, got {described(value)}")
             return None
         pts = [self.vector(p, f"{field}[{i}]", 2) for i, p in enumerate(value)]
         return None if any(p is None for p in pts) else np.array(pts, dtype=float)
 
     def text(self, value: Any, field: str) -> str | None:
         if not isinstance(value, str):
-            self.fail(field, f"expected a string, got {_describe(value)}")
+            self.fail(field, f"expected a string, got {described(value)}")
             return None
         return value
 
@@ -174,35 +175,10 @@ def _join(field: str, key: str) -> str:
     return f"{field}.{key}" if field else key
 
 
-def _repr(value: Any) -> str:
-    """``repr(value)``, safe for integers too long to print (Python limits int-to-text conversion)."""
-    try:
-        return repr(value)
-    except ValueError:
-        return "a very large number"
-
-
 def _key_text(key: Any) -> str:
     """A mapping key as it appears in a field path, kept on one printable line."""
-    text = key if isinstance(key, str) else _repr(key)
+    text = key if isinstance(key, str) else printed(key)
     return text if text.isprintable() else repr(text)
-
-
-def _describe(value: Any) -> str:
-    if value is None:
-        return "nothing"
-    if isinstance(value, bool):
-        return f"boolean {value}"
-    if isinstance(value, (int, float)):
-        text = _repr(value)
-        return f"number {text}" if len(text) < 40 else "a very large number"
-    if isinstance(value, str):
-        return f"string {value!r}" if len(value) < 40 else "a string"
-    if isinstance(value, list):
-        return f"a list of {len(value)}"
-    if isinstance(value, dict):
-        return "a mapping"
-    return type(value).__name__
 
 
 def _on_map(p: np.ndarray, size_m: tuple[float, float]) -> np.ndarray:
@@ -278,11 +254,11 @@ class _World:
 def _header(c: _Checker, data: dict[str, Any], source: str) -> dict[str, Any]:
     """Check the format and the top-level keys; a foreign format is refused at once, alone."""
     if not isinstance(data, Mapping):
-        c.fail("", f"expected a mapping of scenario fields, got {_describe(data)}")
+        c.fail("", f"expected a mapping of scenario fields, got {described(data)}")
         raise ScenarioError(source, c.problems)
     if data.get("format") != FORMAT:
         got = data.get("format")
-        c.fail("format", f"{'missing' if got is None else _repr(got) + ' is not supported'}; expected {FORMAT!r}")
+        c.fail("format", f"{'missing' if got is None else printed(got) + ' is not supported'}; expected {FORMAT!r}")
         raise ScenarioError(source, c.problems)
     top = c.mapping(data, "", _REQUIRED_KEYS, _TOP_KEYS - _REQUIRED_KEYS)
     return data if top is None else top
@@ -323,7 +299,7 @@ def _description(c: _Checker, data: dict[str, Any]) -> Any:
     """The optional free-text description ("" when absent)."""
     description = data.get("description", "")
     if not isinstance(description, str):
-        c.fail("description", f"expected a string, got {_describe(description)}")
+        c.fail("description", f"expected a string, got {described(description)}")
     return description
 
 
@@ -362,7 +338,7 @@ def _raster_size(c: _Checker, size: tuple[float, ...], resolution_m: float) -> t
 def _terrain(c: _Checker, raw: Any, size_m: tuple[float, float] | None, classes: ClassTable) -> list[TerrainPatch]:
     """The ``terrain`` list: one class and one shape per patch."""
     if not isinstance(raw, list):
-        c.fail("terrain", f"expected a list, got {_describe(raw)}")
+        c.fail("terrain", f"expected a list, got {described(raw)}")
         return []
     patches: list[TerrainPatch] = []
     for i, item in enumerate(raw):
@@ -467,7 +443,7 @@ def _zones(c: _Checker, raw: Any, size_m: tuple[float, float] | None, classes: C
     if raw is None:
         raw = []
     if not isinstance(raw, list):
-        c.fail("zones", f"expected a list, got {_describe(raw)}")
+        c.fail("zones", f"expected a list, got {described(raw)}")
         return []
     zones: list[Zone] = []
     seen: dict[str, int] = {}
@@ -487,9 +463,9 @@ def _zones(c: _Checker, raw: Any, size_m: tuple[float, float] | None, classes: C
 def _zone_id(c: _Checker, raw: Any, field: str, seen: dict[str, int]) -> str | None:
     """A zone's id as text (an integer id is accepted), or None if invalid or already in ``seen``."""
     if isinstance(raw, bool) or not isinstance(raw, (str, int)):
-        c.fail(f"{field}.id", f"expected a string, got {_describe(raw)}")
+        c.fail(f"{field}.id", f"expected a string, got {described(raw)}")
         return None
-    zid = raw if isinstance(raw, str) else _repr(raw)
+    zid = raw if isinstance(raw, str) else printed(raw)
     if zid in seen:
         c.fail(f"{field}.id", f"duplicate zone id {zid!r} (also zones[{seen[zid]}])")
         return None
@@ -500,10 +476,10 @@ def _zone(c: _Checker, item: dict, field: str, zid: str, size_m: tuple[float, fl
     """One zone with a checked id: its label, what the planner should do there, and its shape."""
     label = item.get("label", "")
     if not isinstance(label, str):
-        c.fail(f"{field}.label", f"expected a string, got {_describe(label)}")
+        c.fail(f"{field}.label", f"expected a string, got {described(label)}")
     expect = item["expect"]
     if not isinstance(expect, str) or expect not in {AVOID, BEST, *classes.names}:
-        c.fail(f"{field}.expect", f"{_repr(expect)} is neither 'avoid', 'best' nor a known class ({', '.join(classes.names)})")
+        c.fail(f"{field}.expect", f"{printed(expect)} is neither 'avoid', 'best' nor a known class ({', '.join(classes.names)})")
         expect = None
     shape = c.shape(item, field, size_m)
     if shape is not None and expect is not None and isinstance(label, str):
@@ -516,7 +492,7 @@ def _relief(c: _Checker, raw: Any, world: _World) -> list[ReliefEntry]:
     if raw is None:
         raw = []
     if not isinstance(raw, list):
-        c.fail("relief", f"expected a list, got {_describe(raw)}")
+        c.fail("relief", f"expected a list, got {described(raw)}")
         return []
     entries: list[ReliefEntry] = []
     for i, item in enumerate(raw):
@@ -538,10 +514,13 @@ def _relief(c: _Checker, raw: Any, world: _World) -> list[ReliefEntry]:
 
 
 def _relief_height(c: _Checker, value: Any, field: str, *, positive: bool = False) -> float | None:
-    """A height [m] of at most :data:`MAX_RELIEF_M` either way."""
+    """A height [m] of at most :data:`MAX_RELIEF_M` either way, and not 0 (relief that leaves the ground as it was)."""
     x = c.number(value, field, positive=positive)
     if x is not None and abs(x) > MAX_RELIEF_M:
         c.fail(field, f"must be at most {MAX_RELIEF_M:g} m either way")
+        return None
+    if x == 0:
+        c.fail(field, "must not be 0: the ground would not change")
         return None
     return x
 
@@ -585,9 +564,13 @@ def _noise(c: _Checker, spec: Any, f: str, world: _World) -> Noise | None:
         # Finer noise than two cells is aliased on the grid: the ground would not be what was asked.
         c.fail(f"{f}.wavelength_m", f"must be at least two cells (2 x world.resolution_m = {2 * world.resolution_m:g} m)")
         wavelength = None
+    elif wavelength is not None and wavelength > MAX_WAVELENGTH_M:
+        # Hills far wider than any map leave it flat to within the noise's rounding.
+        c.fail(f"{f}.wavelength_m", f"must be at most {MAX_WAVELENGTH_M:g} m")
+        wavelength = None
     seed = spec["seed"]
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
-        c.fail(f"{f}.seed", f"expected an integer from 0 to 2^63 - 1, got {_describe(seed)}")
+        c.fail(f"{f}.seed", f"expected an integer from 0 to 2^63 - 1, got {described(seed)}")
         seed = None
     if amplitude is None or wavelength is None or seed is None:
         return None

@@ -50,7 +50,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView
-from terrapref.errors import UserError
+from terrapref.errors import UserError, finite_number
 from terrapref.features import UtilityFeaturizer
 from terrapref.groundmap.costmap import Costmap, costmap_of
 from terrapref.groundmap.height import DepthImage
@@ -416,7 +416,7 @@ def _relief_weights(block: Mapping[str, Any], where: Where) -> tuple[np.ndarray 
 def _hidden_on_path(block: Mapping[str, Any], where: Where) -> float:
     """The relief block's ``hidden_on_path`` (0 in a file written before it was fitted)."""
     value = block["relief"].get("hidden_on_path", 0.0)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+    if not finite_number(value):
         raise where.error("relief.hidden_on_path", "expected a finite number")
     return float(value)
 

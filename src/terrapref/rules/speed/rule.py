@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from terrapref.camera import PinholeCamera, SegmentationView
+from terrapref.errors import finite_number
 from terrapref.features import UtilityFeaturizer
 from terrapref.groundmap.columns import TerrainColumns
 from terrapref.groundmap.height import DepthImage
@@ -491,7 +492,7 @@ def _points(block: Mapping[str, Any], where: Where) -> int:
 
 
 def _number(value: object) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    return finite_number(value)
 
 
 class LearnedSpeed(SpeedRunner):
