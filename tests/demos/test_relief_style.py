@@ -292,3 +292,12 @@ def test_the_offset_rule_learns_the_side_slope_a_driver_goes_round_from_its_driv
     prices, detour = _relief_prices(tmp_path, "bold")
     bold = prices[at] / detour
     assert cautious > 1.5**2 > 3 * bold and cautious > 10 * bold
+
+
+def test_evaluate_says_so_when_a_relief_style_is_given_for_flat_courses_alone(capsys):
+    from terrapref.cli.evaluate import _note_flat
+
+    _note_flat(["demo_course"], None)
+    assert "note: demo_course: flat, so the driver's relief style changes no run" in capsys.readouterr().err
+    _note_flat(["demo_course", "relief_demo"], None)
+    assert capsys.readouterr().err == ""

@@ -89,6 +89,8 @@ def _evaluation(args: argparse.Namespace) -> Evaluation:
     meta = getattr(getattr(model, "model", None), "meta", {})
     style, speeds = _driver_of(args.style, given, trained_driver(meta))
     relief = parse_relief_style(args.relief_style)[1] if args.relief_style is not None else trained_relief(meta, args.model)
+    if args.relief_style is not None and relief is not None:
+        _note_flat(args.scenarios, model.classes)
     top_mps = VehicleConfig().max_speed_mps  # the vehicle the runs drive
     if args.relief_style is not None:
         check_rough_speed(relief, top_mps)
@@ -171,6 +173,19 @@ def _driver_of(
     if style is None and trained is not None:
         return trained[0], tuple({**dict(trained[1]), **dict(given)}.items())
     return style or "default", given
+
+
+def _note_flat(scenarios: Sequence[str], classes) -> None:
+    """Say so where ``--relief-style`` is given for courses that are all flat (as record does)."""
+    from terrapref.scenario import resolve_scenario
+
+    for name in scenarios:
+        try:
+            if resolve_scenario(name, classes).has_relief:
+                return
+        except UserError:  # read with the runs, which say what is wrong with it
+            return
+    print(f"note: {', '.join(scenarios)}: flat, so the driver's relief style changes no run", file=sys.stderr)
 
 
 def _check_frames(frames: Sequence[int], scenarios: Sequence[str], classes) -> None:

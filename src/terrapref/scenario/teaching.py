@@ -536,8 +536,9 @@ def description(classes: ClassTable, full: bool, relief: bool = False) -> str:
         else "every pair once, each class left as often as right"
     )
     beside = "each other class" if full and relief and n > 1 else "another class"  # a full course with relief: up to 3 classes
+    strip = f"between lethal terrain and {beside}" if classes.lethal else "between two other classes"  # a table without lethal classes
     return (
         f"Teaching course for {n} feature class{'es' if n != 1 else ''} ({', '.join(classes.terrain_names)}): {design}; "
-        f"every class as a strip on the path between lethal terrain and {beside}; every class alone on the path; "
+        f"every class as a strip on the path {strip}; every class alone on the path; "
         f"every feature class as a lane, driven along at the driver's speed on it."
     )
