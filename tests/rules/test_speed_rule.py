@@ -422,25 +422,6 @@ def test_the_fit_recovers_what_grades_shed_up_and_down():
     assert line.startswith(f"grades: nothing learned up ({kept.grade_frames[0]} frames on one class past 3 deg up: slowing there explains")
 
 
-def test_cruising_speeds_are_read_back_to_level_from_ground_within_the_level_band():
-    """Rolling ground that never leaves the level band (2 deg up, 1.5 deg down) still slows a
-    driver that sheds per degree: read as it is, grass came out 0.06 m/s slow and each degree's
-    shed a third short. Read back to level by what the grades shed, the fit recovers both."""
-    track = _track()
-    track_grades = np.where(np.arange(len(track)) % 20 < 10, 2.0, -1.5)
-    track_grades[62:78], track_grades[90:106] = 6.0, -8.0
-    way, curvature, _, frame = _drive(DRIVER, track)
-    grade = _grades(track_grades)
-    target = replace(DRIVER, up_mps_per_deg=0.03, down_mps_per_deg=0.02).predict(way, curvature, grade)
-    v = np.concatenate([np.full(2, target[0]), target[:-2]])
-    fit = fit_speed(Drive(way, curvature, v, frame, grade), K, (LETHAL,))
-    assert fit is not None and fit.lag_frames == 2
-    m = fit.model
-    assert m.speeds_mps[BACKGROUND] == pytest.approx(1.6, abs=0.002)
-    assert m.up_mps_per_deg == pytest.approx(0.03, abs=0.0005) and m.down_mps_per_deg == pytest.approx(0.02, abs=0.0005)
-    assert fit.error_mps < 0.002
-
-
 def test_rough_bands_within_a_millimetre_per_second_of_the_best_are_alike_and_the_middle_one_is_kept():
     """As below, with the frames that see one spot a little rough (0.011 m) within a metre ahead a
     little slow: at 1.18 m/s the smoothest band explains them best by a hair (under 1 mm/s of mean

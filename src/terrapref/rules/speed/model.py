@@ -38,7 +38,6 @@ MIN_FRAMES = 10  # frames a cruising speed, a bend or a lethal neighbour needs t
 MIN_SPEED_MPS = MIN_CRUISE_MPS  # the slowest the rule commands while it drives [m/s]
 SLOWEST_PERCENTILE = 5  # the slowest speed a drive showed: this percentile of its speeds while moving (not a moment's)
 LEVEL_DEG = 3.0  # a way whose grade stays within this of level shows its class's cruising speed; steeper, what a grade sheds [deg]
-LEVEL_PASSES = 4  # times the cruising speeds are read back to level by what the grades shed, and the grades fitted again
 # Roughness is read on the way's first metre: a depth camera's far returns scatter (under
 # `field`, smooth ground 2-3 m ahead reads as rough as a patch of 0.01-0.02 m does at the vehicle),
 # while ground under the footprint has been seen from close by.
@@ -361,12 +360,18 @@ def _fit_at(frames: _Frames, preview_m: float) -> tuple[SpeedModel, tuple[tuple[
     inside = steady & np.all((wide == first[:, None]) | (wide > k), axis=1)
     climb, descent = steepest(grade, upto, len(way))
     on = (first[:, None] == np.arange(k + 1)).T
-    level = (climb < LEVEL_DEG) & (descent < LEVEL_DEG)
-    shown, intervals = _cruising(frames, (steady & on, inside & on), near, level)
-    if all(math.isnan(s) for s in shown):
+    speeds, intervals = _cruising(frames, (steady & on, inside & on), near, (climb < LEVEL_DEG) & (descent < LEVEL_DEG))
+    known = [s for s in speeds if not math.isnan(s)]
+    if not known:
         return None
-    speeds = _filled(shown, lethal, v)
-    base = SpeedModel(speeds, preview_m, None, None, None, lethal)
+    # A class never shown steady is driven at the slowest speed the drive showed, not at a class's
+    # it may be far faster than (a drive that showed only its grass steady). A lethal column's speed
+    # is never read; it stays the slowest known, so that a drive that showed every other class
+    # steady fits the model it always did.
+    slowest = min(known)
+    unseen_mps = min(slowest, float(np.percentile(v, SLOWEST_PERCENTILE)))
+    speeds = [(slowest if col in lethal else unseen_mps) if math.isnan(s) else s for col, s in enumerate(speeds)]
+    base = SpeedModel(tuple(speeds), preview_m, None, None, None, lethal)
     terrain_v = base.predict(way, curvature)
     bend = (terrain_v > 1.1 * v) & (np.abs(curvature) >= BEND_CURVATURE) & ~near
     best, best_error = base, float(np.mean(np.abs(terrain_v - v)))
@@ -388,21 +393,11 @@ def _fit_at(frames: _Frames, preview_m: float) -> tuple[SpeedModel, tuple[tuple[
             best, best_error = trial, error
     grades = _Grades()
     if grade is not None:
-        best, grades, intervals = _graded(best, (best_error, intervals), frames, (steady, on, inside, near, level), (climb, descent, upto))
+        best, grades = _fit_grades(best, best_error, frames, steady & ~near, (climb, descent))
     shown = None
     if rough is not None:
         best, shown = _fit_rough(best, frames, steady & ~near)
     return best, tuple(intervals), grades, shown
-
-
-def _filled(speeds: list[float], lethal: tuple[int, ...], v: np.ndarray) -> tuple[float, ...]:
-    """Each column's cruising speed, those not shown (NaN) filled in: a class never shown steady is
-    driven at the slowest speed the drive showed, not at a class's it may be far faster than (a
-    drive that showed only its grass steady). A lethal column's speed is never read; it stays the
-    slowest known, so that a drive that showed every other class steady fits the model it always did."""
-    slowest = min(s for s in speeds if not math.isnan(s))
-    unseen_mps = min(slowest, float(np.percentile(v, SLOWEST_PERCENTILE)))
-    return tuple((slowest if col in lethal else unseen_mps) if math.isnan(s) else s for col, s in enumerate(speeds))
 
 
 def _cruising(
@@ -445,55 +440,12 @@ def steepest(grade: np.ndarray | None, upto: int, n: int) -> tuple[np.ndarray, n
     return np.maximum(g.max(axis=1, initial=0.0), 0.0), np.maximum(-g.min(axis=1, initial=0.0), 0.0)
 
 
-def _graded(
-    model: SpeedModel, fitted: tuple[float, list], frames: _Frames, rows: tuple[np.ndarray, ...], steep: tuple[np.ndarray, np.ndarray, int]
-) -> tuple[SpeedModel, _Grades, list]:
-    """``model`` (its error and its cruising speeds' intervals ``fitted``) with what grades shed
-    (:func:`_fit_grades`), and its cruising speeds, where it explains ``frames`` better so, read
-    back to level: a way within :data:`LEVEL_DEG` of level is not flat, and a driver that sheds
-    per degree drove it slower than its class's speed. The rates are read against the speeds, the
-    speeds (each frame's speed plus what its grades shed) against the rates, :data:`LEVEL_PASSES`
-    times, then kept as a whole where they explain the frames better than the speeds as read.
-    ``rows``: the frames steady, on each column, inside it, near lethal terrain, level;
-    ``steep``: each way's steepest grade up and down [deg], and the stations of the preview."""
-    steady, on, inside, near, level = rows
-    climb, descent, upto = steep
-    error, intervals = fitted
-    keep = steady & ~near
-    plain, grades = _fit_grades(model, error, frames, keep, (climb, descent))
-    trial, read = model, intervals
-    for _ in range(LEVEL_PASSES):
-        rated, _ = _fit_grades(trial, 0.0, frames, keep, (climb, descent), accept=False)
-        if not rated.sheds_on_grades:
-            break
-        back = frames._replace(v=frames.v + rated.shed(frames.grade[:, :upto]).max(axis=1))
-        shown, read = _cruising(back, (steady & on, inside & on), near, level)
-        trial = replace(model, speeds_mps=_filled(shown, model.lethal, back.v))
-    if trial is model:
-        return plain, grades, intervals
-    leveled, leveled_grades = _fit_grades(trial, _error(trial, frames), frames, keep, (climb, descent))
-    if _error(leveled, frames) < _error(plain, frames) - 1e-9:
-        return leveled, leveled_grades, read
-    return plain, grades, intervals
-
-
-def _error(model: SpeedModel, frames: _Frames) -> float:
-    """The mean absolute error [m/s] of ``model``'s speeds on ``frames`` (their grades included)."""
-    return float(np.mean(np.abs(model.predict(frames.way, frames.curvature, frames.grade) - frames.v)))
-
-
 def _fit_grades(
-    model: SpeedModel,
-    error: float,
-    frames: _Frames,
-    steady: np.ndarray,
-    steepest: tuple[np.ndarray, np.ndarray],
-    accept: bool = True,
+    model: SpeedModel, error: float, frames: _Frames, steady: np.ndarray, steepest: tuple[np.ndarray, np.ndarray]
 ) -> tuple[SpeedModel, _Grades]:
     """``model`` with what grades shed, up and down, each kept where it explains ``frames`` better
-    than none (:func:`fit_speed`), or wherever the drive shows it without ``accept``; ``steady``:
-    the frames on one column alone, nearly straight, with no lethal terrain near; ``steepest``:
-    each way's steepest grade up and down [deg]."""
+    than none (:func:`fit_speed`); ``steady``: the frames on one column alone, nearly straight,
+    with no lethal terrain near; ``steepest``: each way's steepest grade up and down [deg]."""
     way, curvature, v, grade = frames.way, frames.curvature, frames.v, frames.grade
     level_v = model.predict(way, curvature)  # what the terrain alone asks for
     intervals: list[tuple[float, float] | None] = [None, None]
@@ -507,7 +459,7 @@ def _fit_grades(
         per_deg = np.maximum((level_v[rows] - v[rows]) / along[rows], 0.0)
         trial = replace(model, **{name: float(np.median(per_deg))})
         trial_error = float(np.mean(np.abs(trial.predict(way, curvature, grade) - v)))
-        if trial_error < error - 1e-9 or not accept:
+        if trial_error < error - 1e-9:
             model, error = trial, trial_error
             intervals[i] = _interval(per_deg, rows) if frames.intervals else None
     return model, _Grades(model.up_mps_per_deg, model.down_mps_per_deg, (intervals[0], intervals[1]), (counts[0], counts[1]))
