@@ -4,6 +4,7 @@ into recordings that inspect, featurize and train accept; every bad bag or robot
 from __future__ import annotations
 
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -588,6 +589,12 @@ def test_replay_compares_the_models_speed_with_the_operators(tmp_path: Path, fas
     assert v_error < 0.2  # it learned the operator's speed (slowing where its speed rule says so), not 1 m/s
     lines = summary_lines(taught)
     assert f"mean |v| error {v_error:.3f} m/s over {len(rec)} frames" in lines[0] and "|v|" not in lines[2]
+    # On a robot whose limits hold it to 0.3 m/s (its robot file's, as its node takes them), the replay's planner too.
+    from terrapref.interop.runtime import RobotSettings
+    from terrapref.vehicle import VehicleConfig
+
+    slow = replay(Model.load(fast["model"]), rec, robot=RobotSettings(limits=replace(VehicleConfig(), max_speed_mps=0.8)))
+    assert max(slow["series"]["v_model"]) <= 0.8 + 1e-9 < max(taught["series"]["v_model"])
 
 
 # --- speed without commands: the odometry's twist, or differences of its poses ----------------

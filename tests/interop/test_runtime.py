@@ -48,6 +48,30 @@ def test_a_frame_stamped_far_ahead_of_the_clock_is_refused(cruising):
     assert runtime.decide(GRASS, 10.0 + FRAME_AHEAD_S / 2, (5.0, 0.0, 0.0), now_s=10.0) is not None  # a little ahead is skew
 
 
+@pytest.mark.parametrize("clock", [float("nan"), float("inf"), float("-inf")])
+def test_a_clock_that_is_not_a_number_of_seconds_is_refused_and_changes_nothing(cruising, clock):
+    """A NaN or infinite clock skipped the check against frames from the future, and a frame
+    stamped 1e9 s then made every later frame look old."""
+    runtime = _runtime(cruising)
+    with pytest.raises(ValueError, match="clock must be a finite number"):
+        runtime.decide(GRASS, 1e9, (5.0, 0.0, 0.0), now_s=clock)
+    assert runtime.last is None and runtime.decide(GRASS, 2.0, (5.0, 0.0, 0.0), now_s=2.0) is not None
+    assert runtime.status_at(clock) == ((0.0, 0.0), "stale")  # nothing is fresh by such a clock ...
+    assert runtime.status_at(2.1) == ((pytest.approx(0.1), 0.0), None)  # ... and the next call is as if it never came
+
+
+@pytest.mark.parametrize("speed", [1e6, -1e6, 3.6])
+def test_an_odometry_speed_past_any_the_robot_drives_is_refused_not_ramped_from(cruising, speed):
+    """The commands rise from the robot's speed by its odometry no faster than its acceleration:
+    a speed of 1e6 m/s (or 3.6, km/h given for m/s at 1 m/s) would have let full speed out at once."""
+    runtime = _runtime(cruising)
+    with pytest.raises(ValueError, match="past any this robot drives"):
+        runtime.decide(GRASS, 1.0, (5.0, 0.0, 0.0), speed_mps=speed, now_s=1.0)
+    runtime.decide(GRASS, 1.0, (5.0, 0.0, 0.0), speed_mps=0.0, now_s=1.0)
+    assert runtime.status_at(1.01)[0].v == pytest.approx(0.01)  # from standstill, at 1 m/s^2
+    assert runtime.decide(GRASS, 1.1, (5.0, 0.0, 0.0), speed_mps=2.5, now_s=1.1) is not None  # odometry a little past the top: taken
+
+
 def test_a_decision_from_the_future_does_not_latch_the_command(cruising):
     """Without a clock to check frames against, a frame stamped 1e6 s is decided on; the first
     command asked for at the clock's time is a stop, and the next frame stamped by that clock is

@@ -87,6 +87,27 @@ def test_bad_settings_are_refused(bad: dict):
         StopConfig(**bad)
 
 
+@pytest.mark.parametrize(
+    ("name", "value"),
+    [
+        ("step_m", 5.0),
+        ("step_m", 1e9),
+        ("look_m", 1e9),
+        ("arcs", 10**8),
+        ("decel_mps2", 1e3),
+        ("blind_after_s", 1e9),
+        ("lethal_evidence", 1e300),
+    ],
+)
+def test_settings_past_what_they_can_mean_are_refused_naming_the_setting(name: str, value: float):
+    """A step of 5 m between the points checked along each way stepped over the lethal ground
+    ahead (the vehicle drove at it at full speed); a look 1e9 m ahead asked for 75 GB; 10^8 arcs
+    never finished a decision."""
+    with pytest.raises(ValueError, match=f"^{name} must be at most"):
+        StopConfig(**{name: value})
+    StopConfig(**{name: {"arcs": 201}.get(name, 0.5 if name == "step_m" else 10.0)})  # the bound itself is taken
+
+
 # --- stopping in the simulator ---------------------------------------------------------------------
 
 

@@ -60,6 +60,7 @@ def _replay_into(args: argparse.Namespace, model, robot, out: Path) -> int:
     from terrapref.demos.recording import read_recording
     from terrapref.interop.bag_import import ImportOptions, import_bag
     from terrapref.interop.replay import replay, summary_lines, write_replay
+    from terrapref.interop.runtime import RobotSettings
     from terrapref.learning.model_file import check_compatible
     from terrapref.progress import Progress
 
@@ -71,7 +72,8 @@ def _replay_into(args: argparse.Namespace, model, robot, out: Path) -> int:
     print(f"imported {report.frames} frames ({report.duration_s:.0f} s) into {rec_dir}")
     rec = read_recording(rec_dir)
     bar = Progress("replay", len(rec))
-    result = replay(model, rec, progress=lambda k, n: bar.update(k, f"{k}/{n} frames"))
+    settings = RobotSettings(robot.stop, robot.limits, rules=robot.rules)  # the robot file's, as its node takes them
+    result = replay(model, rec, progress=lambda k, n: bar.update(k, f"{k}/{n} frames"), robot=settings)
     bar.close()
     write_replay(result, out, f"{Path(args.model).name} on {Path(args.bag).name}")
     for line in summary_lines(result):

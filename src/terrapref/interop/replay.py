@@ -26,8 +26,9 @@ import numpy as np
 from terrapref.camera import CameraConfig
 from terrapref.dataset import at_set_speed  # the dataset's own: the replay compares ways as training labels them
 from terrapref.demos.recording import Recording
+from terrapref.errors import UserError
 from terrapref.fileio import atomic_path, write_bytes_atomic
-from terrapref.interop.runtime import SPEED_WINDOW_S, DepthFrame, PlannerRuntime, odometry_speed_mps
+from terrapref.interop.runtime import SPEED_WINDOW_S, DepthFrame, PlannerRuntime, RobotSettings, odometry_speed_mps
 from terrapref.planner.model import Model
 from terrapref.vehicle import Pose
 
@@ -80,14 +81,16 @@ def frame_speeds(times: np.ndarray, poses: np.ndarray) -> np.ndarray:
     return out
 
 
-def replay(model: Model, rec: Recording, progress=None) -> dict:
+def replay(model: Model, rec: Recording, progress=None, robot: RobotSettings | None = None) -> dict:
     """Decide on every frame of ``rec`` with ``model``; the metrics and the per-frame series.
 
     A frame that carries a depth image is decided on with it and the body's attitude the
-    recording holds (level where it holds none), as a robot's node would hand them over.
-    A model trained for another camera than the log's is refused (UserError).
+    recording holds (level where it holds none), as a robot's node would hand them over; the
+    runtime has the ``robot``'s settings (its stop rule, limits and rules' settings, as its robot
+    file gives them to a node; None: the defaults). A model trained for another camera than the
+    log's is refused (UserError).
     """
-    runtime = PlannerRuntime(model, camera=CameraConfig.from_dict(rec.meta["camera"]))
+    runtime = PlannerRuntime(model, camera=CameraConfig.from_dict(rec.meta["camera"]), robot=robot)
     path = np.asarray(rec.meta.get("path") or rec.scenario["path"]["waypoints"], dtype=float)
     runtime.set_path(path)
     control = model.features.preference.control
@@ -137,8 +140,10 @@ def _decisions(runtime: PlannerRuntime, rec: Recording, n_terrain: int, progress
         depth = rec.depth(i)
         seen = DepthFrame(depth, rec.attitude(i)) if depth is not None else None
         speed = None if np.isnan(speeds[i]) else float(speeds[i])
-        # never None: read_recording refuses times that do not grow
-        d = runtime.decide(rec.image(i), float(rec.times[i]), tuple(rec.poses[i]), speed, depth=seen)
+        try:  # never None: read_recording refuses times that do not grow
+            d = runtime.decide(rec.image(i), float(rec.times[i]), tuple(rec.poses[i]), speed, depth=seen)
+        except ValueError as exc:  # a frame the robot's runtime refuses (its odometry past the robot file's limits, say)
+            raise UserError(str(rec.path), f"frame {i}: {exc}") from None
         chosen[i] = d.index
         commands[i] = d.command
         c_best[i] = int(np.argmax(d.probs))

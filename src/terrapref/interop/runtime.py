@@ -36,6 +36,7 @@ from typing import NamedTuple
 import numpy as np
 
 from terrapref.camera import CameraConfig
+from terrapref.errors import finite_number
 from terrapref.groundmap.costmap import Costmap
 from terrapref.interop.labels import LabelMap, unlisted_message
 from terrapref.learning.model_file import LoadedModel
@@ -49,6 +50,7 @@ from terrapref.vehicle import Command, Pose, VehicleConfig
 from terrapref.vehicle.ground import LEVEL, Attitude
 
 STOP = Command(0.0, 0.0)
+ODOMETRY_SLACK = 1.5  # an odometry speed past this times the robot's top speed (and 0.5 m/s) is refused, not ramped from
 FRAME_AHEAD_S = 1.0  # by default, a frame (or a decision) stamped further ahead of the caller's clock is refused [s]
 UNKNOWN_IDS = ("error", "unknown")  # what the runtime makes of an id no table or map names (PlannerRuntime's unknown_ids)
 
@@ -204,7 +206,9 @@ class PlannerRuntime:
             ValueError: a frame stamped more than ``ahead_s`` ahead of ``now_s`` (its
                 clock and the caller's disagree: kept, it would make every later frame look old),
                 counted in :attr:`refused`; or a frame the runtime cannot read (size, type, ids,
-                a depth image of another size or not of floats, an attitude not finite).
+                a depth image of another size or not of floats, an attitude not finite); a
+                clock not finite; a speed past :data:`ODOMETRY_SLACK` times the robot's top
+                speed (and 0.5 m/s), which the commands would rise from at once.
         """
         if self.planner.path is None:
             raise RuntimeError("call set_path() before decide()")
@@ -215,7 +219,11 @@ class PlannerRuntime:
             raise ValueError("stamp and pose must be finite")
         if speed_mps is not None and not math.isfinite(speed_mps):
             raise ValueError(f"speed must be finite, got {speed_mps!r}")
-        if now_s is not None and math.isfinite(now_s) and stamp_s > now_s + self.ahead_s:
+        top = self.limits.max_speed_mps
+        if speed_mps is not None and abs(speed_mps) > ODOMETRY_SLACK * top + 0.5:  # the speed the commands rise from
+            raise ValueError(f"speed {speed_mps:g} m/s is past any this robot drives (its top speed {top:g} m/s): odometry in other units?")
+        _check_clock(now_s)
+        if now_s is not None and stamp_s > now_s + self.ahead_s:
             self.refused["stamped ahead of the clock"] += 1
             raise ValueError(
                 f"a frame stamped {stamp_s - now_s:.3g} s ahead of the clock; refused (another clock, or use_sim_time unset while a log plays?)"
@@ -299,7 +307,11 @@ class PlannerRuntime:
         """The command to send at ``now_s`` and why it stops (None while it drives): the last
         decision's while it is fresh (its speed rising no faster than the robot's acceleration
         from the last command given out), else a stop for ``stale`` frames. A decision stamped
-        more than ``ahead_s`` after ``now_s`` is dropped, counted in :attr:`refused`."""
+        more than ``ahead_s`` after ``now_s`` is dropped, counted in :attr:`refused`. At a clock
+        that is not a finite number of seconds, a stop for ``stale`` (nothing is fresh by it),
+        which changes nothing for the next call."""
+        if not (finite_number(now_s) and math.isfinite(now_s)):
+            return STOP, STALE
         if self.last is not None and now_s - self.last.stamp_s < -self.ahead_s:
             self.refused["decisions the clock found in its future"] += 1
             self.last = None  # a later frame stamped by the clock is then taken, not ignored as older
@@ -320,6 +332,12 @@ class PlannerRuntime:
                 v, w = allowed, w * (allowed / v)
         self._sent = (now_s, v)
         return Command(v, w)
+
+
+def _check_clock(now_s: float | None) -> None:
+    """A ValueError where the caller's clock ``now_s`` is given and not a finite number of seconds."""
+    if now_s is not None and not (finite_number(now_s) and math.isfinite(now_s)):
+        raise ValueError(f"the clock must be a finite number of seconds, got {now_s!r}")
 
 
 SPEED_WINDOW_S = 0.2  # a robot's speed at a frame: its odometry's forward motion over this long before the frame's stamp [s]

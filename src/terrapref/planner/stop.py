@@ -53,6 +53,19 @@ from terrapref.stops import BLIND, NO_FREE_WAY, NO_FREE_WAY_GEOMETRY, held_too_l
 from terrapref.terrain import UNKNOWN
 from terrapref.vehicle import Pose
 
+# Past these a setting no longer means what it says: a way checked in steps longer than half a
+# metre passes over a lethal strip between two of them; a look at ground 50 m ahead, a few hundred
+# ways or an evidence past what the map's votes add up to are settings no robot means.
+STOP_BOUNDS = {"step_m": 0.5, "look_m": 50.0, "arcs": 201, "decel_mps2": 20.0, "blind_after_s": 10.0, "lethal_evidence": 1e6}
+STOP_BOUND_REASONS = {
+    "step_m": "a longer step passes over a lethal strip between two points it checks",
+    "look_m": "farther than a camera shows the ground",
+    "arcs": "more ways than a frame's time allows",
+    "decel_mps2": "about twice the braking of a wheeled vehicle",
+    "blind_after_s": "blind that long, the vehicle has not stopped for it",
+    "lethal_evidence": "more than the map's votes add up to",
+}
+
 
 @dataclass(frozen=True)
 class StopConfig:
@@ -140,6 +153,9 @@ class StopConfig:
                 "the stop rule needs reaction_s, margin_m, blind_after_s, resume_after_s and lethal_evidence >= 0, decel_mps2, look_m and "
                 "step_m > 0, seen_share in (0, 1] and at least one arc"
             )
+        for name, most in STOP_BOUNDS.items():
+            if getattr(self, name) > most:
+                raise ValueError(f"{name} must be at most {most:g}, got {getattr(self, name):g}: {STOP_BOUND_REASONS[name]}")
 
     def stopping_distance_m(self, v_mps: float) -> float:
         """Distance [m] from a frame to standing still, at ``v_mps``, plus the margin."""
