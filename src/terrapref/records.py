@@ -33,6 +33,8 @@ from dataclasses import fields, is_dataclass
 from enum import Enum
 from typing import Any, TypeVar, Union, get_args, get_origin, get_type_hints
 
+from terrapref.errors import described
+
 R = TypeVar("R")
 
 
@@ -73,7 +75,18 @@ def from_plain(cls: type[R], data: Mapping[str, Any]) -> R:
     if not isinstance(data, Mapping):
         return cls(**data)  # the constructor's own TypeError, as for any caller
     hints = _hints(cls)
+    for key, value in data.items():  # a number field given another kind of value, named (the constructor's comparisons would not)
+        if hints.get(key) in (int, float) and (isinstance(value, bool) or not isinstance(value, (int, float))):
+            raise FieldError(key, f"expected a number, got {described(value)}")
     return cls(**{key: _typed(hints[key], value) if key in hints else value for key, value in data.items()})
+
+
+class FieldError(TypeError):
+    """A field of a record's mapping that holds another kind of value than the record's."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(f"{field}: {message}")
+        self.field, self.message = field, message
 
 
 @functools.cache

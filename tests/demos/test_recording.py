@@ -154,9 +154,20 @@ def test_cut_last_line_is_dropped_and_reads_as_partial(tmp_path: Path):
     text = path.read_text()
     last_start = text.rstrip("\n").rfind("\n") + 1
     path.write_text(text[: last_start + (len(text) - last_start) // 2])  # half of the last line
+    with pytest.raises(UserError, match="a cut last line; meta.json says the complete run has 4 frames"):
+        read_recording(out)  # a finished run's file cut afterwards: not taken for a shorter run
+    _mark_partial(out)  # as a recorder killed before it finished leaves it
     rec = read_recording(out)
     assert not rec.complete
     _assert_frames_equal(rec, frames[:3])
+
+
+def _mark_partial(folder: Path) -> None:
+    """``folder``'s meta.json as a recorder killed before it finished leaves it."""
+    meta = json.loads((folder / META).read_text())
+    meta["status"] = "partial"
+    meta.pop("frames", None)
+    (folder / META).write_text(json.dumps(meta))
 
 
 def test_recording_never_closed_reads_as_partial(tmp_path: Path):
@@ -527,6 +538,7 @@ def test_a_missing_depth_image_is_named_and_at_the_end_is_a_cut_frame(tmp_path: 
     shutil.copytree(relief_recording, rec)
     n = len(_lines(rec))
     (rec / "depth" / f"{n - 1:06d}.png").unlink()  # killed between the depth image and its line
+    _mark_partial(rec)
     cut = read_recording(rec)
     assert len(cut) == n - 1 and not cut.complete
     (rec / "depth" / "000003.png").unlink()
@@ -632,3 +644,28 @@ def test_inspect_of_a_file_says_it_is_not_a_recording_and_where_a_model_goes(tmp
     one_line_error(capsys, "m.safetensors", "a file, not a recording")
     assert main(["inspect", str(tmp_path / "nothing")]) == 2
     one_line_error(capsys, "nothing", "no such recording directory")
+
+
+@pytest.mark.parametrize("declared", ["many", -1, 2.5, True])
+def test_a_complete_recordings_frame_count_that_is_not_a_count_is_refused(tmp_path: Path, declared):
+    """A count meta.json cannot mean turned the check of a finished run's frames off."""
+    out = tmp_path / "rec"
+    _write(out, _frames(3))
+    meta = json.loads((out / META).read_text())
+    (out / META).write_text(json.dumps({**meta, "frames": declared}))
+    with pytest.raises(UserError, match="expected the number of frames") as err:
+        read_recording(out)
+    assert err.value.problems[0].field == "frames" and err.value.source.endswith(META)
+
+
+def test_a_camera_number_written_as_text_is_named_field_by_field(tmp_path: Path):
+    """meta.json's camera.width_px as "640": named, not a comparison's TypeError about camera."""
+    out = tmp_path / "rec"
+    _write(out, _frames(2))
+    meta = json.loads((out / META).read_text())
+    meta["camera"]["width_px"] = "640"
+    (out / META).write_text(json.dumps(meta))
+    with pytest.raises(UserError) as err:
+        read_recording(out).camera  # noqa: B018
+    problem = err.value.problems[0]
+    assert problem.field == "camera.width_px" and problem.message == "expected a number, got string '640'"

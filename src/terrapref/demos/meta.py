@@ -36,7 +36,7 @@ from terrapref.demos.relief_style import ReliefStyle
 from terrapref.errors import Problem, UserError
 from terrapref.features import PreferenceSetConfig
 from terrapref.perception import PerceptionModel
-from terrapref.records import to_plain
+from terrapref.records import FieldError, to_plain
 from terrapref.registry import Registry
 from terrapref.sim import SimConfig
 from terrapref.terrain import ClassTable, PreferenceProfile, default_classes
@@ -421,6 +421,8 @@ def _parsed(data: dict[str, Any], key: str, parse: Callable[[dict], Any], source
         return parse(value)
     except UserError:
         raise
+    except FieldError as exc:
+        raise UserError(source, exc.message, field=f"{key}.{exc.field}") from None
     except (TypeError, ValueError, KeyError, AttributeError) as exc:
         raise UserError(source, f"invalid ({type(exc).__name__}: {exc})", field=key) from None
 

@@ -45,7 +45,7 @@ import numpy as np
 import yaml
 
 from terrapref.camera import SegmentationView, as_view
-from terrapref.errors import UserError, finite_number
+from terrapref.errors import UserError, described, finite_number
 from terrapref.fileio import new_folder, replace_dir, write_text_atomic
 from terrapref.pngio import depth_to_millimetres, millimetres_to_depth, read_depth_png, read_label_png, write_png_atomic
 from terrapref.vehicle.ground import LEVEL, Attitude
@@ -635,12 +635,19 @@ def _check_frame(row: dict, previous: dict | None, frames_path: Path, line_no: i
 
 
 def _is_complete(meta: dict, frames: _Frames, frames_path: Path) -> bool:
-    """Whether the run finished; a finished run must hold the frames its meta.json declares."""
-    complete = meta.get("status") == "complete" and not frames.cut
+    """Whether the run finished; a finished run must hold the frames its meta.json declares, and
+    no cut last line (which only a recorder killed before it finished leaves)."""
+    if meta.get("status") != "complete":
+        return False
     f = len(frames.rows)
     declared = meta.get("frames")
-    if complete and isinstance(declared, int) and declared != f:
+    if declared is not None and (isinstance(declared, bool) or not isinstance(declared, int) or declared < 0):
+        raise UserError(str(frames_path.parent / META), f"expected the number of frames, got {described(declared)}", field="frames")
+    if frames.cut or (declared is not None and declared != f):
+        said = f"{declared} frames" if declared is not None else "it finished"
         raise UserError(
-            str(frames_path), f"holds {f} frames; meta.json says the complete run has {declared} (truncated or edited?)", field="frames"
+            str(frames_path),
+            f"holds {f} frames{' and a cut last line' if frames.cut else ''}; meta.json says the complete run has {said} (truncated or edited?)",
+            field="frames",
         )
-    return complete
+    return True
