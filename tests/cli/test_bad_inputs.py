@@ -343,6 +343,7 @@ def test_a_recording_whose_camera_has_no_focal_length_is_refused(tmp_path: Path,
         ),
         (["evaluate", "M", "demo_course", "--no-driver", "--style", "shaky", "--out", "OUT/e"], ("--style", "--no-driver")),
         (["render", "demo_course", "--pose", "-1e9", "0", "0", "--out", "OUT/s.png"], ("--pose", "within 30 m")),
+        (["course", "--name", "", "--out", "OUT/c.yaml"], ("--name", "letters, digits")),  # not a silent teaching_course
     ],
 )
 def test_values_that_cannot_be_right_and_inputs_given_twice_are_refused_before_any_work(tmp_path: Path, capsys, recording, argv, needles):

@@ -142,7 +142,7 @@ def test_select_says_at_once_how_much_it_would_make_and_refuses_an_absurd_size(t
     )
     assert "years on 2 workers" in captured.out
     (line,) = captured.err.strip().splitlines()
-    assert line.startswith("error: --orders: 18,144,000 models") and "--large" in line and "internal error" not in line
+    assert line.startswith("error: --orders, --seeds, --courses: 18,144,000 models") and "--large" in line and "internal error" not in line
     assert not out.exists()
 
 

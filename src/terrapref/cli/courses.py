@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -189,6 +190,8 @@ def _cmd_course(args: argparse.Namespace) -> int:
     inputs = [p for p in (args.classes, *(args.after or ())) if p is not None]
     for path in (out, figure):
         check_output(path, "--out", inputs, force=args.force)
+    if args.name is not None and not re.fullmatch(r"[A-Za-z0-9_-]+", args.name):  # a scenario's name, as validate holds it
+        raise UserError("--name", f"a scenario's name is letters, digits, _ and -; got {args.name!r}")
     table = class_table(args)
     if args.relief is not None and not 0 <= args.relief < 2**63:
         raise UserError("--relief", f"expected a seed from 0 to 2^63 - 1, as genrelief:SEED takes, got {args.relief}")

@@ -135,11 +135,11 @@ def _export_bag(args: argparse.Namespace, out: Path) -> None:
     what = "ROS 1 bag; rosbag play it" if args.format == "rosbag1" else "ROS 2 MCAP; open it in Foxglove"
     if not frames.classes.same_classes(default_classes()):
         print(
-            f"wrote {out} ({what}), {out.name}.robot.yaml and its label map {out.name}.labels.yaml "
+            f"wrote {out} ({what}), {out}.robot.yaml and its label map {out}.labels.yaml "
             f"(terrapref import {out} --robot {out}.robot.yaml --classes FILE, the recording's class table)"
         )
     else:
-        print(f"wrote {out} ({what}) and {out.name}.robot.yaml (terrapref import {out} --robot {out}.robot.yaml)")
+        print(f"wrote {out} ({what}) and {out}.robot.yaml (terrapref import {out} --robot {out}.robot.yaml)")
 
 
 def _export_onnx(args: argparse.Namespace, out: Path) -> None:

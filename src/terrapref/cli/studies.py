@@ -255,7 +255,7 @@ def _announce_size(
     print(f"select: {size.describe(engine.n_workers if engine.address is None else None)}", flush=True)
     if size.large and not args.large:
         raise UserError(
-            "--orders",
+            "--orders, --seeds, --courses",
             f"{size.models:,} models and {size.runs:,} runs are more than {LARGE_MODELS:,} models or {LARGE_RUNS:,} runs: "
             "name fewer orders (random:N), seeds or layouts, or add --large to run them all",
         )
