@@ -72,6 +72,25 @@ def test_an_odometry_speed_past_any_the_robot_drives_is_refused_not_ramped_from(
     assert runtime.decide(GRASS, 1.1, (5.0, 0.0, 0.0), speed_mps=2.5, now_s=1.1) is not None  # odometry a little past the top: taken
 
 
+@pytest.mark.parametrize(
+    ("call", "says"),
+    [
+        ({"stamp_s": "1.0"}, "stamp_s must be a finite number"),
+        ({"stamp_s": None}, "stamp_s must be a finite number"),
+        ({"pose": (5.0, 0.0)}, "pose must be 3 finite numbers"),
+        ({"pose": (5.0, "0", 0.0)}, "pose must be 3 finite numbers"),
+        ({"depth": np.zeros((480, 640), np.float32)}, "depth must be a DepthFrame"),
+    ],
+)
+def test_an_argument_of_the_wrong_kind_is_named(cruising, call: dict, says: str):
+    """Python's own TypeError and AttributeError named no argument."""
+    runtime = _runtime(cruising)
+    args = {"image": GRASS, "stamp_s": 1.0, "pose": (5.0, 0.0, 0.0), **call}
+    with pytest.raises(ValueError, match=says):
+        runtime.decide(**args)
+    assert runtime.decide(GRASS, np.float32(1.0), np.array([5.0, 0.0, 0.0], np.float32), speed_mps=np.float32(0.5)) is not None
+
+
 def test_a_decision_from_the_future_does_not_latch_the_command(cruising):
     """Without a clock to check frames against, a frame stamped 1e6 s is decided on; the first
     command asked for at the clock's time is a stop, and the next frame stamped by that clock is

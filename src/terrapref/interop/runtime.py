@@ -29,6 +29,7 @@ the depth returns lie, gather the ground's heights, and block ground past the ro
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
@@ -36,7 +37,6 @@ from typing import NamedTuple
 import numpy as np
 
 from terrapref.camera import CameraConfig
-from terrapref.errors import finite_number
 from terrapref.groundmap.costmap import Costmap
 from terrapref.interop.labels import LabelMap, unlisted_message
 from terrapref.learning.model_file import LoadedModel
@@ -213,11 +213,15 @@ class PlannerRuntime:
         if self.planner.path is None:
             raise RuntimeError("call set_path() before decide()")
         image = self._ids(np.asarray(image))
+        if depth is not None and not isinstance(depth, DepthFrame):
+            raise ValueError(f"depth must be a DepthFrame (its image and the body's attitude), got {type(depth).__name__}")
         depth_image, attitude = self._depth(depth)
+        if len(pose) != 3 or not all(_finite(v) for v in pose):
+            raise ValueError(f"pose must be 3 finite numbers (x [m], y [m], yaw [rad]), got {pose!r}")
         pose = Pose(*(float(v) for v in pose))
-        if not (math.isfinite(stamp_s) and all(math.isfinite(v) for v in pose)):
-            raise ValueError("stamp and pose must be finite")
-        if speed_mps is not None and not math.isfinite(speed_mps):
+        if not _finite(stamp_s):
+            raise ValueError(f"stamp_s must be a finite number of seconds, got {stamp_s!r}")
+        if speed_mps is not None and not _finite(speed_mps):
             raise ValueError(f"speed must be finite, got {speed_mps!r}")
         top = self.limits.max_speed_mps
         if speed_mps is not None and abs(speed_mps) > ODOMETRY_SLACK * top + 0.5:  # the speed the commands rise from
@@ -310,7 +314,7 @@ class PlannerRuntime:
         more than ``ahead_s`` after ``now_s`` is dropped, counted in :attr:`refused`. At a clock
         that is not a finite number of seconds, a stop for ``stale`` (nothing is fresh by it),
         which changes nothing for the next call."""
-        if not (finite_number(now_s) and math.isfinite(now_s)):
+        if not _finite(now_s):
             return STOP, STALE
         if self.last is not None and now_s - self.last.stamp_s < -self.ahead_s:
             self.refused["decisions the clock found in its future"] += 1
@@ -334,9 +338,19 @@ class PlannerRuntime:
         return Command(v, w)
 
 
+def _finite(value: object) -> bool:
+    """Whether ``value`` is a real number (NumPy's too, a bool not) that is finite as a float."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:
+        return False
+
+
 def _check_clock(now_s: float | None) -> None:
     """A ValueError where the caller's clock ``now_s`` is given and not a finite number of seconds."""
-    if now_s is not None and not (finite_number(now_s) and math.isfinite(now_s)):
+    if now_s is not None and not _finite(now_s):
         raise ValueError(f"the clock must be a finite number of seconds, got {now_s!r}")
 
 
