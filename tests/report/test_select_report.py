@@ -146,6 +146,22 @@ def test_select_says_at_once_how_much_it_would_make_and_refuses_an_absurd_size(t
     assert not out.exists()
 
 
+@pytest.mark.parametrize(
+    ("flags", "needle"),
+    [
+        (["--orders", "mud,mud,water"], "--orders"),
+        (["--orders", "lava,rock,water"], "'lava'"),
+        (["--course", "nosuch_course"], "nosuch_course"),
+    ],
+)
+def test_orders_and_a_course_that_cannot_be_read_are_refused_before_the_plan_is_said(tmp_path, capsys, flags, needle):
+    """One line, the error's: no plan of a selection that will not run before it."""
+    out = tmp_path / "sel"
+    assert main(["select", *flags, "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("\n") == 1 and needle in captured.err and not out.exists()
+
+
 def test_large_runs_a_selection_beyond_the_bound(tmp_path, capsys, monkeypatch):
     def started(*args, **kwargs):
         raise UserError("run_selection", "started")

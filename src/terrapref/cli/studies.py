@@ -171,8 +171,7 @@ def _cmd_select(args: argparse.Namespace) -> int:
 
     from terrapref.demos.expert import STYLES
     from terrapref.recipes import recipe_named
-    from terrapref.report.select import Selection, parse_orders, run_selection
-    from terrapref.terrain import PreferenceProfile
+    from terrapref.report.select import Selection, run_selection
 
     names = [n.strip() for n in args.recipes.split(",") if n.strip()]
     if not names or len(set(names)) != len(names):
@@ -192,15 +191,14 @@ def _cmd_select(args: argparse.Namespace) -> int:
     speeds = _select_speeds(args.speeds, table)
     relief_styles = _select_relief_styles(args.relief_style)
     engine = grid_engine(args)
+    if args.orders != "all" and not args.orders.startswith("random:"):  # orders named one by one: read before the plan is said
+        _orders(args.orders, table)
+    if args.course is not None:
+        from terrapref.scenario import resolve_scenario
+
+        resolve_scenario(args.course, table)
     _announce_size(args, len(names), table, len(perceptions), engine, len(relief_styles))
-    try:
-        orders = parse_orders(args.orders, table)
-    except ValueError as exc:
-        raise UserError("--orders", str(exc)) from None
-    for o in orders:
-        PreferenceProfile.parse(list(o), table, source="--orders")
-    if len(set(orders)) != len(orders):
-        raise UserError("--orders", f"names an order twice: {args.orders!r}")
+    orders = _orders(args.orders, table)
     with output_folder(args.out, args.force):
         course = _selection_course(args, table, bool(relief_styles))
         t0 = time.perf_counter()
@@ -238,6 +236,23 @@ def _select_relief_styles(text: str | None) -> tuple[str, ...]:
     for style in styles:
         check_rough_speed(parse_relief_style(style)[1], VehicleConfig().max_speed_mps)
     return styles
+
+
+def _orders(text: str, table: ClassTable | None) -> tuple[tuple[str, ...], ...]:
+    """The orders ``--orders`` names (terrapref.report.select.parse_orders), each a preference
+    order of the table's classes, none twice; a UserError naming the flag."""
+    from terrapref.report.select import parse_orders
+    from terrapref.terrain import PreferenceProfile
+
+    try:
+        orders = parse_orders(text, table)
+    except ValueError as exc:
+        raise UserError("--orders", str(exc)) from None
+    for o in orders:
+        PreferenceProfile.parse(list(o), table, source="--orders")
+    if len(set(orders)) != len(orders):
+        raise UserError("--orders", f"names an order twice: {text!r}")
+    return orders
 
 
 def _announce_size(
