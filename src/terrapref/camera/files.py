@@ -33,14 +33,10 @@ _ROS = {
 }
 
 
-def _number(value: object) -> bool:
-    return finite_number(value)
-
-
 def _matrix(data: dict, key: str, size: int, problems: list[Problem]) -> np.ndarray | None:
     m = data.get(key)
     values = m.get("data") if isinstance(m, dict) else None
-    if not (isinstance(values, list) and len(values) == size and all(_number(v) for v in values)):
+    if not (isinstance(values, list) and len(values) == size and all(finite_number(v) for v in values)):
         problems.append(Problem(f"{key}.data", f"expected {size} finite numbers"))
         return None
     return np.asarray(values, dtype=float)
@@ -71,7 +67,7 @@ def camera_from_mapping(data: dict, source: str) -> CameraConfig:
                 )
         mount = {key: data[key] for key in _MOUNT if key in data}
         for key, v in mount.items():
-            if not _number(v):
+            if not finite_number(v):
                 problems.append(Problem(key, "expected a finite number"))
         if problems:
             raise ConfigError(source, problems)
@@ -92,7 +88,7 @@ def camera_from_mapping(data: dict, source: str) -> CameraConfig:
     unknown = sorted(set(data) - _FIELDS)
     problems += [Problem(k, f"unknown key; expected {', '.join(sorted(_FIELDS))} (or a ROS camera_info file)") for k in unknown]
     for key, v in data.items():
-        if key in _FIELDS and not (v is None and key in ("fx", "fy", "cx", "cy")) and not _number(v):
+        if key in _FIELDS and not (v is None and key in ("fx", "fy", "cx", "cy")) and not finite_number(v):
             problems.append(Problem(key, "expected a finite number"))
     if problems:
         raise ConfigError(source, problems)

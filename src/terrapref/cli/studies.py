@@ -191,14 +191,14 @@ def _cmd_select(args: argparse.Namespace) -> int:
     speeds = _select_speeds(args.speeds, table)
     relief_styles = _select_relief_styles(args.relief_style)
     engine = grid_engine(args)
-    if args.orders != "all" and not args.orders.startswith("random:"):  # orders named one by one: read before the plan is said
-        _orders(args.orders, table)
-    if args.course is not None:
+    named = args.orders != "all" and not args.orders.startswith("random:")  # orders named one by one: read before the plan is said
+    orders = _orders(args.orders, table) if named else None
+    if args.course is not None:  # checked before any work, and before the plan is said
         from terrapref.scenario import resolve_scenario
 
         resolve_scenario(args.course, table)
     _announce_size(args, len(names), table, len(perceptions), engine, len(relief_styles))
-    orders = _orders(args.orders, table)
+    orders = orders or _orders(args.orders, table)  # all or random:N, counted before they are drawn
     with output_folder(args.out, args.force):
         course = _selection_course(args, table, bool(relief_styles))
         t0 = time.perf_counter()
@@ -280,10 +280,7 @@ def _selection_course(args: argparse.Namespace, table, relief: bool = False) -> 
     """The course every recipe demonstrates in ``select``: ``--course``, or with ``--classes`` the
     table's teaching course (written into OUT); None: each recipe's own. With ``relief``, the
     teaching course with relief: ``teach_relief``, or the table's (as ``course --relief 0`` writes it)."""
-    if args.course is not None:
-        from terrapref.scenario import resolve_scenario
-
-        resolve_scenario(args.course, table)  # checked before any work
+    if args.course is not None:  # read before the plan was said
         return str(Path(args.course).resolve()) if Path(args.course).exists() else args.course
     if table is None:
         return "teach_relief" if relief else None

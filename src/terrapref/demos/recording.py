@@ -441,14 +441,11 @@ class Recording:
 def _frame_problem(row: dict) -> tuple[str, str] | None:
     """(field, message) of the first thing wrong with one frame record, or None."""
 
-    def finite(v: object) -> bool:
-        return finite_number(v)
-
-    if not finite(row["t"]):
+    if not finite_number(row["t"]):
         return "t", "expected a finite time [s]"
     for key, size in (("pose", 3), ("cmd", 2)):
         v = row[key]
-        if not (isinstance(v, list) and len(v) == size and all(finite(x) for x in v)):
+        if not (isinstance(v, list) and len(v) == size and all(finite_number(x) for x in v)):
             return key, f"expected {size} finite numbers"
     if isinstance(row["label"], bool) or not isinstance(row["label"], int) or row["label"] < 0:
         return "label", "expected an integer >= 0"
@@ -459,7 +456,7 @@ def _frame_problem(row: dict) -> tuple[str, str] | None:
     if depth is not None and (not isinstance(depth, str) or not depth.startswith(f"{DEPTH}/") or ".." in depth):
         return "depth", f"expected a file name under {DEPTH}/"
     attitude = row.get("attitude")
-    if attitude is not None and not (isinstance(attitude, list) and len(attitude) == 3 and all(finite(x) for x in attitude)):
+    if attitude is not None and not (isinstance(attitude, list) and len(attitude) == 3 and all(finite_number(x) for x in attitude)):
         return "attitude", "expected 3 finite numbers: z [m], pitch and roll [rad]"
     if attitude is not None and not all(abs(a) < 0.5 * math.pi for a in attitude[1:]):
         return "attitude", f"pitch {attitude[1]:g} and roll {attitude[2]:g} rad: expected each within +-pi/2 (a body on its wheels)"

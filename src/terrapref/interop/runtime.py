@@ -29,7 +29,6 @@ the depth returns lie, gather the ground's heights, and block ground past the ro
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
@@ -37,6 +36,7 @@ from typing import NamedTuple
 import numpy as np
 
 from terrapref.camera import CameraConfig
+from terrapref.errors import finite_number
 from terrapref.groundmap.costmap import Costmap
 from terrapref.interop.labels import LabelMap, unlisted_message
 from terrapref.learning.model_file import LoadedModel
@@ -339,13 +339,8 @@ class PlannerRuntime:
 
 
 def _finite(value: object) -> bool:
-    """Whether ``value`` is a real number (NumPy's too, a bool not) that is finite as a float."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        return False
-    try:
-        return math.isfinite(float(value))
-    except OverflowError:
-        return False
+    """:func:`terrapref.errors.finite_number`, NumPy's scalars taken as the Python numbers they hold."""
+    return finite_number(value.item() if isinstance(value, np.generic) else value)
 
 
 def _check_clock(now_s: float | None) -> None:

@@ -324,7 +324,7 @@ class SpeedRule(Rule):
     def from_header(cls, block: Mapping[str, Any], context: HeaderContext, where: Where) -> SpeedRule:
         k = context.features.n_terrain
         speeds = block.get("speeds_mps")
-        if not (isinstance(speeds, list) and len(speeds) == k + 1 and all(_number(v) and v > 0 for v in speeds)):
+        if not (isinstance(speeds, list) and len(speeds) == k + 1 and all(finite_number(v) and v > 0 for v in speeds)):
             raise where.error("speeds_mps", f"expected {k + 1} cruising speeds > 0 [m/s], one per terrain column and the background")
         lethal = block.get("lethal", [])
         if not (isinstance(lethal, list) and all(isinstance(c, int) and not isinstance(c, bool) and 0 <= c <= k for c in lethal)):
@@ -459,7 +459,9 @@ class SpeedRule(Rule):
 
 def _interval_of(value: object) -> tuple[float, float] | None:
     """An interval a block keeps: two numbers, else None (not given, or not readable)."""
-    return (float(value[0]), float(value[1])) if isinstance(value, list) and len(value) == 2 and all(_number(x) for x in value) else None
+    return (
+        (float(value[0]), float(value[1])) if isinstance(value, list) and len(value) == 2 and all(finite_number(x) for x in value) else None
+    )
 
 
 def _grade_intervals(value: object) -> tuple[tuple[float, float] | None, tuple[float, float] | None]:
@@ -474,7 +476,7 @@ def _rough_shown(block: Mapping[str, Any]) -> Rough | None:
         return None
     frames = block["rough_frames"]
     alike = _interval_of(block.get("rough_alike_m"))
-    return Rough(int(frames) if _number(frames) and frames >= 0 else 0, _interval_of(block.get("rough_interval")), alike)
+    return Rough(int(frames) if finite_number(frames) and frames >= 0 else 0, _interval_of(block.get("rough_interval")), alike)
 
 
 def _grade_frames(value: object) -> tuple[int, int]:
@@ -489,10 +491,6 @@ def _points(block: Mapping[str, Any], where: Where) -> int:
     if isinstance(points, bool) or not isinstance(points, int) or not 1 <= points <= 5:
         raise where.error("min_points", "expected an integer from 1 to 5: the footprint points a class must hold to count")
     return points
-
-
-def _number(value: object) -> bool:
-    return finite_number(value)
 
 
 class LearnedSpeed(SpeedRunner):
