@@ -29,6 +29,8 @@ from terrapref.scenario import parse_scenario, resolve_scenario
 from terrapref.scenario.generate import generate_course, zone_kind
 from terrapref.scenario.teaching import (
     BUDGET_M,
+    FOLLOW_UP_M,
+    LETHAL_LONE,
     LONE_OFFSET_M,
     Situation,
     balanced_pairs,
@@ -37,6 +39,7 @@ from terrapref.scenario.teaching import (
     designed_course,
     follow_up,
     follow_up_after,
+    neighbours_within,
     situations,
     teaching_course,
 )
@@ -267,9 +270,10 @@ def test_the_full_design_shows_everything_on_both_sides(table):
     assert all(
         middle in terrain and (left in terrain or right in terrain) and middle not in (left, right) for left, middle, right in strips
     )
-    # Each lethal class alone on both sides; each feature class alone once and as a lane once, between walls of one lethal class.
+    # Lethal terrain alone on both sides (the first lethal class: the lethal classes share one
+    # column); each feature class alone once and as a lane once, between walls of one lethal class.
     assert Counter((s.classes[0], s.offset_m) for s in lone if s.classes[0] in lethal) == {
-        (c, o): 1 for c in lethal for o in (LONE_OFFSET_M, -LONE_OFFSET_M)
+        (lethal[0], o): 1 for o in (LONE_OFFSET_M, -LONE_OFFSET_M)
     }
     assert Counter(s.classes[0] for s in lone if s.classes[0] in terrain) == {c: 1 for c in terrain}
     lanes = [s.classes for s in situations(table, full=True) if s.kind == "lane"]
@@ -287,9 +291,11 @@ def test_the_compact_design_shows_each_pair_once_balanced(example):
     assert sorted(walls) == sorted(EXAMPLE_LETHAL)  # six strips: each lethal class once
     on_left = sum(left in EXAMPLE_LETHAL for left, _, _ in strips)
     assert abs(on_left - (len(strips) - on_left)) <= 1
-    assert Counter(s.classes[0] for s in lone) == {c: 1 for c in (*EXAMPLE_TERRAIN, *EXAMPLE_LETHAL)}
-    positive = sum(s.offset_m > 0 for s in lone)
-    assert abs(positive - (len(lone) - positive)) <= 1
+    # Each feature class alone once, and lethal terrain alone twice (LETHAL_LONE): its first two classes.
+    assert Counter(s.classes[0] for s in lone) == {c: 1 for c in (*EXAMPLE_TERRAIN, *EXAMPLE_LETHAL[:LETHAL_LONE])}
+    for kind in (EXAMPLE_TERRAIN, EXAMPLE_LETHAL):
+        positive = sum(s.offset_m > 0 for s in lone if s.classes[0] in kind)
+        assert abs(positive - (sum(s.classes[0] in kind for s in lone) - positive)) <= 1
     # Each kind spread over the whole drive: every third of it has pairs, strips and lone patches.
     items = situations(example, full=False)
     thirds = [items[i * len(items) // 3 : (i + 1) * len(items) // 3] for i in range(3)]
@@ -357,7 +363,23 @@ def test_a_follow_up_is_named_after_the_courses_driven(example):
     assert "the drive of a left open" in follow_up_after(example, pairs, ["a"])[0].description
     course, items = follow_up_after(example, [("dirt", "bush")], ["a"], neighbours=[("water", "dirt")])
     assert items == follow_up(example, [("dirt", "bush"), ("water", "dirt")])
-    assert "left open (dirt vs bush), beside their neighbours in the learned order (water vs dirt), each both ways" in course.description
+    assert (
+        "left open (dirt vs bush), beside their neighbours in the learned order (water vs dirt), each once, the sides" in course.description
+    )
+
+
+def test_a_follow_up_shows_neighbours_within_its_length_and_every_open_pair(example):
+    """The neighbours beside the open pairs stop where the course would pass FOLLOW_UP_M; the
+    open pairs are all shown, however long."""
+    pairs = list(itertools.combinations(EXAMPLE_TERRAIN, 2))
+    few, many = pairs[:2], pairs[2:]
+    shown = neighbours_within(example, few, many)
+    assert shown == many[: len(shown)] and 0 < len(shown) < len(many)
+    assert course_length(follow_up(example, [*few, *shown])) <= FOLLOW_UP_M
+    assert course_length(follow_up(example, [*few, *many[: len(shown) + 1]])) > FOLLOW_UP_M
+    assert neighbours_within(example, pairs, many) == []
+    assert course_length(follow_up(example, pairs)) > FOLLOW_UP_M
+    assert neighbours_within(example, few, many[:1]) == many[:1]
 
 
 def test_a_table_without_feature_classes_has_no_teaching_course(tmp_path, capsys):
@@ -370,22 +392,17 @@ def test_a_table_without_feature_classes_has_no_teaching_course(tmp_path, capsys
     assert not (tmp_path / "c.yaml").exists()
 
 
-def test_a_follow_up_shows_each_open_pair_both_ways_and_the_background_as_lone_patches(example):
+def test_a_follow_up_shows_each_open_pair_once_sides_alternating_and_the_background_as_lone_patches(example):
     items = follow_up(example, [("grass", "mud"), ("lethal", "grass"), ("mud", "lethal"), ("dirt", "gravel")])
-    lone = [("lone", (c,), o) for c in ("mud", "tree") for o in (LONE_OFFSET_M, -LONE_OFFSET_M)]
-    pairs = [("pair", p, 0.0) for p in (("mud", "tree"), ("tree", "mud"), ("dirt", "gravel"), ("gravel", "dirt"))]
+    lone = [("lone", ("mud",), LONE_OFFSET_M), ("lone", ("tree",), -LONE_OFFSET_M)]
+    pairs = [("pair", ("mud", "tree"), 0.0), ("pair", ("gravel", "dirt"), 0.0)]
     assert [(s.kind, s.classes, s.offset_m) for s in items] == lone + pairs  # the lethal column: its first class
     scenario = parse_scenario(build_course(example, items, "more", "follow-up").data(), "more", example)
     assert [z.label for z in scenario.zones] == [s.label for s in items]
     # The default table's lethal column is its own class.
     d = default_classes()
     items = follow_up(d, [("grass", "non_traversable"), ("water", "non_traversable")])
-    assert [s.classes for s in items] == [
-        ("non_traversable",),
-        ("non_traversable",),
-        ("water", "non_traversable"),
-        ("non_traversable", "water"),
-    ]
+    assert [(s.classes, s.offset_m) for s in items] == [(("non_traversable",), LONE_OFFSET_M), (("non_traversable", "water"), 0.0)]
 
 
 # --- Generated layouts ---------------------------------------------------------------------------
@@ -785,19 +802,26 @@ def test_course_after_names_what_no_further_course_settles_and_writes_nothing(tm
 
 
 @pytest.mark.slow
-def test_the_readmes_follow_up_loop_on_the_example_table_ends_after_one_follow_up(tmp_path, capsys):
-    """README "Your own classes": the teaching drive, the follow-up course it asks for, and then
-    nothing left open, as the README says (a follow-up of the open pairs alone reopened one the
-    teaching drive had identified)."""
+def test_the_readmes_follow_up_loop_on_the_example_table_ends_after_two_follow_ups(tmp_path, capsys):
+    """README "Your own classes": the teaching drive, the follow-up course it asks for, the one
+    the two drives ask for (a pair the first follow-up's frames moved), and then nothing left
+    open, as the README says; the three drives within 12 minutes."""
     profile = "mud,water,dirt,bush,puddle,gravel,lethal"
-    course, me, more, me_more, more2 = (tmp_path / n for n in ("course.yaml", "me", "more.yaml", "me_more", "more2.yaml"))
+    course, me, more, me_more, more2, me_more2, more3 = (
+        tmp_path / n for n in ("course.yaml", "me", "more.yaml", "me_more", "more2.yaml", "me_more2", "more3.yaml")
+    )
     assert main(["course", "--classes", str(EXAMPLE), "--out", str(course)]) == 0
     assert main(["record", str(course), "--profile", profile, "--out", str(me), "--quiet"]) == 0
     assert main(["course", "--after", str(me), "--out", str(more)]) == 0
     assert main(["record", str(more), "--profile", profile, "--out", str(me_more), "--quiet"]) == 0
-    capsys.readouterr()
     assert main(["course", "--after", str(me), str(me_more), "--out", str(more2)]) == 0
-    assert "the drives together identified every pair of classes" in capsys.readouterr().out and not more2.exists()
+    assert main(["record", str(more2), "--profile", profile, "--out", str(me_more2), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["course", "--after", str(me), str(me_more), str(me_more2), "--out", str(more3)]) == 0
+    assert "the drives together identified every pair of classes" in capsys.readouterr().out and not more3.exists()
+    from terrapref.demos.recording import read_recording
+
+    assert sum(read_recording(r).duration_s for r in (me, me_more, me_more2)) <= 12 * 60  # simulated time, not the test's
 
 
 def test_a_scenario_carrying_a_bad_table_is_refused_naming_the_field(tmp_path, capsys):

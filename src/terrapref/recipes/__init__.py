@@ -292,10 +292,12 @@ def follow_up_plan(
     leaves (:func:`~terrapref.learning.identify.plan_follow_up`): the drives featurised (with
     ``recipe.features(features)``; ``cache`` and ``frames``, the progress by frame, as
     build_dataset takes them) and steadied as ``recipe`` trains; the report ``inspect`` prints
-    of all of them, and of all but the last."""
+    of all of them, and of all but the last. Its neighbours are those the course can show
+    (:func:`~terrapref.scenario.teaching.neighbours_within`)."""
     from terrapref.learning.identify import plan_follow_up
     from terrapref.learning.train import comparisons_by_drive, identify
     from terrapref.recipes.lessons import relief_plan
+    from terrapref.scenario.teaching import neighbours_within
 
     cache = {} if cache is None else cache  # the drives before the last are featurised once for both reports
     steady = recipe.train.data.steady_labels
@@ -309,7 +311,8 @@ def follow_up_plan(
     last = str(recordings[-1].path)
     plan = plan_follow_up(identify(pooled, steady=steady), comparisons_by_drive(pooled, steady), earlier, last)
     relief, relief_left, on_relief = relief_plan(pooled, before, last)
-    return replace(plan, relief=relief, relief_left=relief_left, on_relief=on_relief)
+    neighbours = neighbours_within(recordings[0].classes, plan.open, plan.neighbours, relief)
+    return replace(plan, neighbours=tuple(neighbours), relief=relief, relief_left=relief_left, on_relief=on_relief)
 
 
 def _follow_up(

@@ -8,7 +8,8 @@ when the course shows
 - every feature class as a **strip** on the path between lethal terrain and another class (the
   driver keeps to the strip or moves over: how much worse one class is than another against a
   2 m detour, and every class beside lethal terrain);
-- every class **alone** on the path (driven through or passed on the background);
+- every feature class **alone** on the path (driven through or passed on the background), and
+  lethal terrain alone (passed on the background) at most :data:`LETHAL_LONE` times;
 - every feature class as a **lane**: on the path between lethal walls too wide to pass round
   (or, in a table without lethal classes, across the whole way), so that every driver drives
   along it at its own speed on that class (SPEC 18).
@@ -22,7 +23,7 @@ rough patch across the way (short noise: rocks and ruts), and each feature class
 own ground sloping across the way as a bank of the background. Which of them a driver goes
 round, and how it slows on them, is its relief style. So that all of it fits in a drive of about
 7 minutes (:data:`RELIEF_BUDGET_M`: up to 3 feature classes and one lethal class), a course with
-relief shows each pair and each lethal class alone once, the sides balanced, in either design,
+relief shows each pair and each lethal class alone once (two at most), the sides balanced, in either design,
 and gives the terrain situations a little less trail where they do not meet a relief situation
 (:data:`RELIEF_HALF_M`); its full design still shows every strip on both sides, each class on the
 path beside each other one (a larger table gets the compact design, and a longer drive). The
@@ -31,19 +32,21 @@ triples turn: with each strip once and each pair twice, relief drives priced the
 at 1.45-1.77 times their first, where their driver's costs are 2.25 times.
 
 Pairs grow as K(K-1)/2. The course shows each pair once on each side, each strip with the
-lethal terrain once on each side, each lethal class alone twice (once a little left of the path,
-once a little right) and each feature class alone once and as a lane once, while that drive stays
+lethal terrain once on each side, the first lethal class alone twice (once a little left of the
+path, once a little right) and each feature class alone once and as a lane once, while that drive stays
 within :data:`BUDGET_M` (10 minutes at the driver's 1 m/s: up to 4 feature classes). Beyond it
 the course is *compact*: each pair once, with every class on the left as often as on the right
-(to within one), each strip, each lone patch and each lane once, the sides alternating (the
-lengths of both designs: docs/classes.md).
+(to within one), each strip, each feature class alone, each lane and the first two lethal classes
+alone once, the sides alternating (the lengths of both designs: docs/classes.md). The lethal
+classes share one column of the features, and each is a strip's wall and a lane's walls.
 
 Situations sit on straight legs; the trail bends a little between them (keeping to the path is
 part of the lesson) and turns round every :data:`LANE` situations, so that a long course folds
 into a compact map.
 
 :func:`follow_up` makes a short course of the pairs a drive left open and their neighbours in
-the learned order (``terrapref course --after REC``).
+the learned order (``terrapref course --after REC``), each once, the neighbours as many as keep it
+within :data:`FOLLOW_UP_M`.
 """
 
 from __future__ import annotations
@@ -63,6 +66,14 @@ BUDGET_M = 600.0  # the longest full design [m]: 10 minutes at 1 m/s
 RELIEF_PACE_MPS = 0.85
 RELIEF_BUDGET_M = 7 * 60 * RELIEF_PACE_MPS  # the longest full design with relief [m]: 7 minutes at that pace
 LANE = 8  # situations between two turns round
+# Lethal terrain alone on the path: at most this many patches (the first lethal classes, the sides
+# alternating; one class on both sides in the full design). The lethal classes share one column of
+# the features, and each is still shown as a strip's wall and a lane's walls.
+LETHAL_LONE = 2
+# The longest follow-up course the neighbours of its open pairs may make it [m]: 2.25 minutes at
+# the driver's 1 m/s, so that a table of six feature classes is taught in 12 minutes with its
+# follow-up (the open pairs themselves are always shown).
+FOLLOW_UP_M = 135.0
 HALF_M = {
     "lone": 6.0,
     "lane": 6.0,
@@ -217,9 +228,10 @@ def situations(classes: ClassTable, full: bool | None = None, relief: bool = Fal
             else:
                 strips.append(Situation("strip", (neighbour, middle, others[(k + 1 + (side < 0)) % len(others)])))
     lone = []
-    for k, name in enumerate([*terrain, *lethal]):
-        sides = (1, -1) if both_sides and name in lethal else ((1, -1)[k % 2],)
-        lone += [Situation("lone", (name,), side * LONE_OFFSET_M) for side in sides]
+    for k, name in enumerate(terrain):
+        lone.append(Situation("lone", (name,), (1, -1)[k % 2] * LONE_OFFSET_M))
+    walls = [(name, side) for k, name in enumerate(lethal, len(terrain)) for side in ((1, -1) if both_sides else ((1, -1)[k % 2],))]
+    lone += [Situation("lone", (name,), side * LONE_OFFSET_M) for name, side in walls[:LETHAL_LONE]]
     lanes = [
         Situation("lane", (lethal[k % len(lethal)], name, lethal[k % len(lethal)]) if lethal else (name,)) for k, name in enumerate(terrain)
     ]
@@ -315,6 +327,18 @@ def fits(classes: ClassTable, relief: bool = False) -> bool:
     return course_length(situations(classes, True, relief)) <= (RELIEF_BUDGET_M if relief else BUDGET_M)
 
 
+def neighbours_within(
+    classes: ClassTable, open_pairs: Sequence[tuple[str, str]], neighbours: Sequence[tuple[str, str]], relief: Sequence[str] = ()
+) -> list[tuple[str, str]]:
+    """The first of ``neighbours`` that a follow-up course of ``open_pairs`` and the ``relief``
+    lessons can show within :data:`FOLLOW_UP_M` (the open pairs and the lessons are shown whatever
+    their length: a pair left unshown would read as one a drive could not settle)."""
+    shown = list(neighbours)
+    while shown and course_length(_follow_up_items(classes, [*open_pairs, *shown], relief)) > FOLLOW_UP_M:
+        shown.pop()
+    return shown
+
+
 def follow_up_course(
     classes: ClassTable,
     open_pairs: Sequence[tuple[str, str]],
@@ -333,7 +357,7 @@ def follow_up_course(
     if open_pairs:
         listed = "; ".join(f"{a} vs {b}" for a, b in open_pairs)
         beside = f", beside their neighbours in the learned order ({'; '.join(f'{a} vs {b}' for a, b in neighbours)})" if neighbours else ""
-        parts.append(f"the pairs {what} left open ({listed}){beside}, each both ways round")
+        parts.append(f"the pairs {what} left open ({listed}){beside}, each once, the sides alternating")
     if relief:
         parts.append(f"the relief {'left' if open_pairs else what + ' left'} unshown ({', '.join(relief)})")
     items = _follow_up_items(classes, [*open_pairs, *neighbours], relief)
@@ -342,15 +366,17 @@ def follow_up_course(
 
 def follow_up(classes: ClassTable, open_pairs: Sequence[tuple[str, str]]) -> list[Situation]:
     """A short course of only ``open_pairs`` (class names; the background means "alone on the
-    path"): each pair on both sides, each class against the background alone twice."""
+    path"): each pair once, the sides alternating from pair to pair (the first as given), a class
+    against the background as a lone patch."""
     out = []
-    for a, b in open_pairs:
+    for k, (a, b) in enumerate(open_pairs):
+        side = (1, -1)[k % 2]
         if classes.background in (a, b):
             name = b if a == classes.background else a
-            out += [Situation("lone", (_concrete(classes, name),), side * LONE_OFFSET_M) for side in (1, -1)]
+            out.append(Situation("lone", (_concrete(classes, name),), side * LONE_OFFSET_M))
         else:
             a, b = (_concrete(classes, n) for n in (a, b))
-            out += [Situation("pair", (a, b)), Situation("pair", (b, a))]
+            out.append(Situation("pair", (a, b) if side > 0 else (b, a)))
     return out
 
 
@@ -537,8 +563,11 @@ def description(classes: ClassTable, full: bool, relief: bool = False) -> str:
     )
     beside = "each other class" if full and relief and n > 1 else "another class"  # a full course with relief: up to 3 classes
     strip = f"between lethal terrain and {beside}" if classes.lethal else "between two other classes"  # a table without lethal classes
+    alone = "every class alone on the path"
+    if len(classes.lethal) > LETHAL_LONE:  # the others shown as walls
+        alone = f"every feature class alone on the path, and lethal terrain ({', '.join(classes.lethal[:LETHAL_LONE])})"
     return (
         f"Teaching course for {n} feature class{'es' if n != 1 else ''} ({', '.join(classes.terrain_names)}): {design}; "
-        f"every class as a strip on the path {strip}; every class alone on the path; "
+        f"every class as a strip on the path {strip}; {alone}; "
         f"every feature class as a lane, driven along at the driver's speed on it."
     )
