@@ -230,8 +230,8 @@ def situations(classes: ClassTable, full: bool | None = None, relief: bool = Fal
     lone = []
     for k, name in enumerate(terrain):
         lone.append(Situation("lone", (name,), (1, -1)[k % 2] * LONE_OFFSET_M))
-    walls = [(name, side) for k, name in enumerate(lethal, len(terrain)) for side in ((1, -1) if both_sides else ((1, -1)[k % 2],))]
-    lone += [Situation("lone", (name,), side * LONE_OFFSET_M) for name, side in walls[:LETHAL_LONE]]
+    lethal_alone = [(name, side) for k, name in enumerate(lethal, len(terrain)) for side in ((1, -1) if both_sides else ((1, -1)[k % 2],))]
+    lone += [Situation("lone", (name,), side * LONE_OFFSET_M) for name, side in lethal_alone[:LETHAL_LONE]]
     lanes = [
         Situation("lane", (lethal[k % len(lethal)], name, lethal[k % len(lethal)]) if lethal else (name,)) for k, name in enumerate(terrain)
     ]
