@@ -372,6 +372,11 @@ def test_a_style_file_without_a_base_starts_from_the_default_driver(tmp_path):
         ("ranked_speeds_mps: [1.0]\n", "ranked_speeds_mps"),
         ("ranked_speeds_mps: [1.0, slow]\n", "ranked_speeds_mps"),
         ("ranked_speeds_mps: {fast: 1.0, slow: 0.5}\n", "ranked_speeds_mps"),
+        # past what a float holds, and not finite: named here, not an internal error or another field's message
+        ("speeds: {grass: 1" + "0" * 400 + "}\n", "speeds"),
+        ("ranked_speeds_mps: [1" + "0" * 400 + ", 0.5]\n", "ranked_speeds_mps"),
+        ("preview_m: 1" + "0" * 400 + "\n", "preview_m"),
+        ("near_lethal_mps: .nan\n", "near_lethal_mps"),
     ],
 )
 def test_a_bad_style_file_is_a_user_error_naming_the_file_and_field(tmp_path, text: str, field: str):

@@ -64,7 +64,7 @@ class ReliefStyle:
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
-            if not (finite_number(value)):
+            if not finite_number(value):
                 raise ValueError(f"{f.name} must be a finite number, got {described(value)}")
         for name in ("roll_deg", "grade_deg"):
             if not 0.0 < getattr(self, name) < 90.0:

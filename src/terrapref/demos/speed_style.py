@@ -25,7 +25,7 @@ import numpy as np
 
 from terrapref.demos.expert import STYLES, ExpertConfig
 from terrapref.demos.relief_style import ReliefStyle
-from terrapref.errors import UserError, described
+from terrapref.errors import UserError, described, finite_number
 from terrapref.terrain import ClassTable
 from terrapref.vehicle import MIN_CRUISE_MPS as MIN_SPEED_MPS
 from terrapref.yamlio import read_yaml_mapping
@@ -67,26 +67,22 @@ def read_style_file(path: str | Path) -> tuple[str, dict[str, Any]]:
         if name in data:
             value = data[name]
             optional = name in ("lateral_accel_mps2", "near_lethal_mps")
-            if not (_number(value) or (optional and value is None)):
-                raise UserError(source, f"expected a number{' or null' if optional else ''}, got {described(value)}", field=name)
+            if not (finite_number(value) or (optional and value is None)):
+                raise UserError(source, f"expected a finite number{' or null' if optional else ''}, got {described(value)}", field=name)
             changes[name] = None if value is None else float(value)
     if "speeds" in data:
         speeds = data["speeds"]
-        if not isinstance(speeds, dict) or not all(isinstance(k, str) and _number(v) for k, v in speeds.items()):
+        if not isinstance(speeds, dict) or not all(isinstance(k, str) and finite_number(v) for k, v in speeds.items()):
             raise UserError(source, "expected a mapping of class names to speeds in m/s", field="speeds")
         changes["speeds"] = tuple((k, float(v)) for k, v in speeds.items())
     if "ranked_speeds_mps" in data:
         ranked = data["ranked_speeds_mps"]
-        if not (isinstance(ranked, list) and len(ranked) == 2 and all(_number(v) for v in ranked)):
+        if not (isinstance(ranked, list) and len(ranked) == 2 and all(finite_number(v) for v in ranked)):
             raise UserError(
                 source, "expected [fastest, slowest]: the most and the least preferred class's speeds", field="ranked_speeds_mps"
             )
         changes["ranked_speeds_mps"] = (float(ranked[0]), float(ranked[1]))
     return base, changes
-
-
-def _number(value: object) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def driver_style(
