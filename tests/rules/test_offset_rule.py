@@ -25,16 +25,7 @@ from terrapref.planner import Planner
 from terrapref.planner.registry import load_policy
 from terrapref.rules.offset import fit as offset_fit
 from terrapref.rules.offset.features import OffsetFeatures, gated
-from terrapref.rules.offset.fit import (
-    DECISION_WEIGHT,
-    OffsetFitConfig,
-    OffsetFrames,
-    OffsetUtility,
-    decision_frames,
-    fit_offset_utility,
-    fit_softmax,
-    soft_labels,
-)
+from terrapref.rules.offset.fit import OffsetUtility, fit_offset_utility, fit_softmax, soft_labels
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.offset.rule import OffsetConfig, OffsetSteering, hidden_prices
 from terrapref.rules.offset.steering import intent_offsets, steer
@@ -245,57 +236,6 @@ def test_the_softmax_fit_recovers_the_weights_that_made_the_labels():
     np.testing.assert_allclose(theta, truth, atol=1e-6)
 
 
-def test_a_frame_weighted_k_times_counts_as_k_copies_of_it():
-    rng = np.random.default_rng(4)
-    X = rng.normal(size=(300, 7, 3))
-    Y = soft_labels(rng.uniform(-1.5, 1.5, 300), np.linspace(-1.5, 1.5, 7), 0.3)
-    weights = rng.integers(1, 4, 300).astype(float)
-    copies = np.repeat(np.arange(300), weights.astype(int))
-    weighted, _ = fit_softmax(X, Y, 1e-3, weights=weights)
-    repeated, _ = fit_softmax(X[copies], Y[copies], 1e-3)
-    np.testing.assert_allclose(weighted, repeated, atol=1e-9)
-    np.testing.assert_array_equal(fit_softmax(X, Y, 1e-3, weights=np.ones(300))[0], fit_softmax(X, Y, 1e-3)[0])
-
-
-def test_the_driver_decides_when_something_comes_near_and_where_nothing_is():
-    """Two recordings at 10 Hz: a patch comes within 4 m at 1.0 s; the next thing on the path
-    takes a passed one's place while within (the distance jumps); the second recording starts
-    with something near."""
-    times = np.r_[np.arange(60) * 0.1, np.arange(30) * 0.1]
-    near = np.r_[np.full(5, 10.0), np.full(5, 6.0), np.linspace(4.0, 0.1, 30), np.linspace(3.5, 1.5, 20), np.full(30, 2.0)]
-    deciding = decision_frames(near, times, 4.0)
-    assert deciding[:5].all() and not deciding[5:10].any()  # nothing within 7 m: the detour's gate
-    assert deciding[10:30].all() and not deciding[30:40].any()  # 2 s after the patch came within 4 m
-    assert deciding[40:60].all()  # the next thing, 3.5 m ahead as the last is passed
-    assert deciding[60:80].all() and not deciding[80:].any()  # a recording that starts with it near
-
-
-def test_the_frames_where_the_driver_decides_count_more_than_those_that_hold_it():
-    """A driver that takes the rock beside a mud patch when it comes near, and then holds its
-    line for 12 s whatever the prices of the frames after say: fitted on every frame alike,
-    the held frames pull the prices; with the frames' times they count a fifth as much."""
-    rng = np.random.default_rng(5)
-    offsets = OffsetGeometry().offsets
-    n = 2000
-    times = np.arange(n) * 0.1
-    near = np.where((np.arange(n) % 140) < 20, 20.0, 3.0)  # a patch within 3 m for 12 s of every 14
-    features = np.zeros((n, len(offsets), K + 2))
-    features[:, :, 2] = np.where(offsets > 0.6, rng.uniform(1.0, 3.0, (n, 1)), 0.0)  # rock to the right
-    features[:, :, 3] = np.where(np.abs(offsets) <= 0.6, 2.0, 0.0)  # mud on the path
-    features[:, :, 5] = offsets**2 * 7.0
-    intent = np.where(near > 10.0, 0.0, 1.0)
-    alike = fit_offset_utility(OffsetFrames(features, near, intent), offsets)
-    weighted = fit_offset_utility(OffsetFrames(features, near, intent, times_s=times), offsets)
-    assert weighted.near_m == alike.near_m and weighted.samples == alike.samples == n
-    deciding = decision_frames(near, times, alike.near_m)
-    assert 0 < deciding.sum() < n
-    copies = np.repeat(np.arange(n), np.where(deciding, int(DECISION_WEIGHT), 1))
-    pinned = OffsetFitConfig(near_candidates=(alike.near_m,))
-    repeated = fit_offset_utility(OffsetFrames(features[copies], near[copies], intent[copies]), offsets, pinned)
-    np.testing.assert_allclose(weighted.weights, repeated.weights, atol=1e-8)
-    assert not np.allclose(weighted.weights, alike.weights, atol=1e-3)
-
-
 def test_the_offset_fit_picks_the_near_distance_that_explains_the_labels():
     """Frames where the driver keeps to the path while a patch is far and swerves once it is near."""
     rng = np.random.default_rng(1)
@@ -307,12 +247,12 @@ def test_the_offset_fit_picks_the_near_distance_that_explains_the_labels():
     features[:, :, 3] = np.where(np.abs(offsets) < 1.0, 2.0, 0.0)  # 2 m of mud near the path, on every frame
     features[:, :, 5] = offsets**2 * 7.0
     intent = np.where(near > 4.0, 0.0, 1.4 * rng.choice([-1.0, 1.0], n))
-    fit = fit_offset_utility(OffsetFrames(features, near, intent), offsets)
+    fit = fit_offset_utility(features, near, intent, offsets)
     assert fit.near_m == 4.0 and fit.samples == n
     assert fit.weights[3] < 0 and fit.weights[-1] < 0  # mud costs; far from a patch, so does leaving the path
     assert soft_labels(np.array([0.0]), offsets, 0.3).sum() == pytest.approx(1.0)
     with pytest.raises(ValueError):
-        fit_offset_utility(OffsetFrames(features, near, np.full(n, np.nan)), offsets)
+        fit_offset_utility(features, near, np.full(n, np.nan), offsets)
 
 
 def test_on_relief_the_near_distance_is_chosen_on_frames_with_nothing_steep_on_the_path(monkeypatch):
@@ -332,12 +272,12 @@ def test_on_relief_the_near_distance_is_chosen_on_frames_with_nothing_steep_on_t
     bands = (4.0, 8.0)
     relief = np.zeros(((m + 1) * n, len(offsets), 2 * len(bands)))
     relief[n:, :, :2] = np.where(np.abs(offsets) < 1.0, 2.0, 0.0)[:, None]  # 2 m past 4 and 8 deg of side slope
-    fit = fit_offset_utility(OffsetFrames(features, near, intent, (relief, bands)), offsets)
+    fit = fit_offset_utility(features, near, intent, offsets, relief=(relief, bands))
     assert fit.near_m == 4.0 and min(fit.losses, key=fit.losses.get) == 4.0 and fit.samples == (m + 1) * n
     assert fit.relief[0] + fit.relief[1] < 0  # the slope's price is still fitted on every frame
     # With fewer level frames than it takes to choose on, every frame is read, and the slopes' frames choose.
     monkeypatch.setattr(offset_fit, "LEVEL_FRAMES_LEAST", n + 1)
-    assert fit_offset_utility(OffsetFrames(features, near, intent, (relief, bands)), offsets).near_m == 2.5
+    assert fit_offset_utility(features, near, intent, offsets, relief=(relief, bands)).near_m == 2.5
 
 
 def _relief_drive(rng: np.random.Generator, n: int) -> tuple[np.ndarray, ...]:
@@ -361,10 +301,10 @@ def test_on_relief_the_terrain_is_priced_on_the_frames_with_no_relief_in_view(mo
     frames alone, the same whatever the driver did on the slopes; the relief's from every frame."""
     offsets, bands = OffsetGeometry().offsets, (4.0, 8.0)
     features, near, intent, relief = _relief_drive(np.random.default_rng(3), 300)
-    fit = fit_offset_utility(OffsetFrames(features, near, intent, (relief, bands)), offsets)
+    fit = fit_offset_utility(features, near, intent, offsets, relief=(relief, bands))
     wandering = intent.copy()
     wandering[300:] = 0.4  # on the slopes, a few tenths of a metre onto the mud whatever is near
-    moved = fit_offset_utility(OffsetFrames(features, near, wandering, (relief, bands)), offsets)
+    moved = fit_offset_utility(features, near, wandering, offsets, relief=(relief, bands))
     terrain = [0, 1, 2, 3, 5, 6]  # the classes, the detour and the gate (4: ground never seen, priced with relief)
     assert fit.near_m == moved.near_m == 4.0
     np.testing.assert_array_equal(moved.weights[terrain], fit.weights[terrain])
@@ -372,8 +312,8 @@ def test_on_relief_the_terrain_is_priced_on_the_frames_with_no_relief_in_view(mo
     assert fit.relief_interval is not None and (fit.relief_interval[:, 0] <= fit.relief_interval[:, 1]).all()
     # With fewer such frames than it takes, every weight is fitted on every frame, and the slopes' frames move the mud's price.
     monkeypatch.setattr(offset_fit, "FLAT_FRAMES_LEAST", 301)
-    joint = fit_offset_utility(OffsetFrames(features, near, intent, (relief, bands)), offsets)
-    joint_moved = fit_offset_utility(OffsetFrames(features, near, wandering, (relief, bands)), offsets)
+    joint = fit_offset_utility(features, near, intent, offsets, relief=(relief, bands))
+    joint_moved = fit_offset_utility(features, near, wandering, offsets, relief=(relief, bands))
     assert joint_moved.weights[3] / joint_moved.weights[5] < 0.9 * joint.weights[3] / joint.weights[5]
 
 
@@ -395,10 +335,10 @@ def test_on_relief_the_slopes_are_priced_on_the_frames_with_no_class_in_view(mon
     intent[n : 2 * n] = 0.0
     relief[n:, :, :2] = slope
     features[2 * n :, :, 3] = np.where((np.abs(offsets) > 0.6) & (np.abs(offsets) < 1.0), 0.5, 0.0)  # a patch's edge
-    fit = fit_offset_utility(OffsetFrames(features, near, intent, (relief, bands)), offsets)
+    fit = fit_offset_utility(features, near, intent, offsets, relief=(relief, bands))
     assert fit.weights[3] < 0 and (fit.relief == 0.0).all()
     monkeypatch.setattr(offset_fit, "TERRAIN_FREE_FRAMES_LEAST", n + 1)  # too few such frames: relief read on every frame
-    every = fit_offset_utility(OffsetFrames(features, near, intent, (relief, bands)), offsets)
+    every = fit_offset_utility(features, near, intent, offsets, relief=(relief, bands))
     np.testing.assert_array_equal(every.weights[[0, 1, 2, 3, 5]], fit.weights[[0, 1, 2, 3, 5]])
     assert every.relief[0] + every.relief[1] < 0
 
@@ -418,7 +358,7 @@ def test_on_relief_ground_never_seen_is_priced_apart_on_the_paths_lanes_and_besi
     features[mound, :, 4] = np.where(lanes, 3.0, 0.0)  # the ground a mound on the path hides
     features[bank, :, 4] = np.where(offsets > offset_fit.HIDDEN_ON_PATH_M, 4.0, 0.0)  # past a bank's crest on the right
     intent[bank] = -0.6  # kept to the left of the bank's foot
-    fit = fit_offset_utility(OffsetFrames(features, near, intent, (relief, (4.0, 8.0))), offsets)
+    fit = fit_offset_utility(features, near, intent, offsets, relief=(relief, (4.0, 8.0)))
     beside, on_path = hidden_prices(OffsetUtility(fit.weights, fit.near_m, relief=fit.relief, hidden_on_path=fit.hidden_on_path))
     assert fit.hidden_on_path > 0.0 and beside < on_path <= 0.0
 
@@ -846,38 +786,6 @@ def test_the_offset_rules_arrays_survive_a_dataset_file_and_bad_values_are_refus
     assert exc.value.problems[0].field == "rules.offset.features"
 
 
-def test_a_dataset_with_its_frames_times_counts_the_deciding_ones_and_the_model_file_says_so(tmp_path):
-    """Featurised with each frame's time, the fit counts the frames where the driver decides
-    more (a dataset without times, as before, counts all alike); ``train`` and ``info`` say how
-    many, the file keeps it, and a count that cannot be is refused naming its field."""
-    from terrapref.learning.train import FitData
-    from terrapref.rules.offset.rule import OffsetRule
-
-    data = _offset_dataset(200)
-    arrays = data.rules["offset"]
-    arrays["near_m"] = np.where(np.arange(200) % 50 < 10, 20.0, 3.0).astype(np.float32)
-    alike = OffsetConfig().fit(FitData(data, mirror=False))
-    timed = {**arrays, "time_s": (np.arange(200) * 0.1).astype(np.float32)}
-    meta = {**data.meta, "rules": {"offset": {**data.meta["rules"]["offset"], "arrays": {**OffsetConfig.arrays}}}}
-    meta["rules"]["offset"]["arrays"].pop("relief_m")
-    with_times = Dataset(data.U, data.labels, data.w, data.source, meta, {"offset": timed})
-    rule = OffsetConfig().fit(FitData(load_dataset(save_dataset(with_times, tmp_path / "d.safetensors")), mirror=False))
-    assert alike.fit.deciding == 0 and "decides" not in alike.describe(("a",) * K, frozenset())
-    assert 0 < rule.fit.deciding < rule.fit.samples == alike.fit.samples == 198
-    assert not np.allclose(rule.utility.weights, alike.utility.weights)
-    assert f"the {rule.fit.deciding} where the driver decides counted 5 times" in rule.describe(("a",) * K, frozenset())
-    config = ClassifierConfig(hidden=8, skip=True)
-    meta = {**model_meta(), "rules": [rule.header()], "drives": "offset"}
-    back = Planner(load_model(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), meta))).rule
-    assert back.fit.deciding == rule.fit.deciding and back.fit.samples == 198
-    for bad in (-1, 199, True, 2.5):
-        meta = {**model_meta(), "rules": [{**rule.header(), "deciding": bad}], "drives": "offset"}
-        with pytest.raises(UserError) as exc:
-            load_policy(save_model(tmp_path / "bad.safetensors", config, skip_path_weights(config), meta))
-        assert exc.value.problems[0].field == "rules[0].deciding"
-    assert isinstance(back, OffsetRule)
-
-
 def test_a_rule_fitted_on_relief_waits_for_a_near_views_evidence_and_its_planner_keeps_one_map(tmp_path):
     """Fitted on a drive whose frames carried depth (relief columns), the rule's map counts a cell
     once it holds RELIEF_MIN_EVIDENCE, written in its file; fitted on flat ground it keeps the
@@ -962,7 +870,7 @@ def _fit_case() -> np.ndarray:
     near = rng.uniform(1.0, 12.0, n)
     value = np.concatenate([features, (offsets**2)[None, :, None] * (near > 5.0)[:, None, None]], axis=2) @ DRIVER_LIKE
     intent = offsets[np.argmax(value + rng.gumbel(size=value.shape), axis=1)]
-    return fit_offset_utility(OffsetFrames(features, near, intent), offsets).weights
+    return fit_offset_utility(features, near, intent, offsets).weights
 
 
 CPU_CHECK = CpuCheck.of("corridor fit", _FIT.format(tests=[str(TESTS), str(Path(__file__).resolve().parent)]), SETTINGS)

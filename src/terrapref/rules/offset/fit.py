@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import NamedTuple
 
 import numpy as np
 
@@ -51,12 +50,6 @@ INTERVAL_BLOCK_FRAMES = 50  # the frames a relief price's interval takes as one 
 INTERVAL_DECIMALS = 6  # its ends are kept to this many decimals
 NEAR_CANDIDATES_M = (2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 6.0, 7.0, 8.0)
 HIDDEN_ON_PATH_M = 0.6  # offsets within this of the path (the body's half width) price ground never seen apart, on relief
-# The distance to the first thing on the path grows by more than this from one frame to the next
-# when a new thing is first (the map's stations are 0.25 m apart; approaching, it shrinks) [m].
-NEW_FIRST_M = 1.0
-DECISION_S = 2.0  # how long after something comes within the near distance the driver's frames show its decision [s]
-CLEAR_M = 3.0  # and the frames with nothing within the near distance and this much more (the detour's gate)
-DECISION_WEIGHT = 5.0  # how much a frame where the driver decides counts against one that holds a decision
 
 
 @dataclass(frozen=True)
@@ -107,8 +100,6 @@ class OffsetFit:
         relief_shown: the steepest bands the frames showed (OffsetUtility.relief_shown).
         relief_interval: the 95% intervals of the relief prices (OffsetUtility.relief_interval).
         hidden_on_path: ground never seen on the path's lanes (OffsetUtility.hidden_on_path).
-        deciding: of the frames fitted, those where the driver decides (:func:`decision_frames`),
-            counted :data:`DECISION_WEIGHT` times; 0: every frame counted alike.
     """
 
     weights: np.ndarray
@@ -120,7 +111,6 @@ class OffsetFit:
     relief_shown: tuple[float, float] | None = None
     relief_interval: np.ndarray | None = None
     hidden_on_path: float = 0.0
-    deciding: int = 0
 
 
 def soft_labels(intent: np.ndarray, offsets: np.ndarray, sigma_m: float) -> np.ndarray:
@@ -130,12 +120,7 @@ def soft_labels(intent: np.ndarray, offsets: np.ndarray, sigma_m: float) -> np.n
 
 
 def fit_softmax(
-    X: np.ndarray,
-    Y: np.ndarray,
-    l2: float = 1e-3,
-    iterations: int = 50,
-    base: np.ndarray | None = None,
-    weights: np.ndarray | None = None,
+    X: np.ndarray, Y: np.ndarray, l2: float = 1e-3, iterations: int = 50, base: np.ndarray | None = None
 ) -> tuple[np.ndarray, float]:
     """Weights (P,) maximising the soft-label log-likelihood of ``softmax(base + X @ weights)`` less ``l2 |weights|^2``.
 
@@ -145,13 +130,12 @@ def fit_softmax(
     """
     n, o, p = X.shape
     rows = X.reshape(n * o, p)  # every (frame, offset) row: the sums over both as matrix products
-    w = np.ones(n) if weights is None else weights / weights.mean()
 
     def evaluate(theta: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
         logp, prob = _log_softmax(X, theta, base)
-        loss = -(w[:, None] * Y * logp).sum() / n + l2 * theta @ theta
-        grad = ((prob - Y) * w[:, None]).reshape(-1) @ rows / n + 2 * l2 * theta
-        return loss, grad, _hessian(X, prob, l2, None if weights is None else w)
+        loss = -(Y * logp).sum() / n + l2 * theta @ theta
+        grad = (prob - Y).reshape(-1) @ rows / n + 2 * l2 * theta
+        return loss, grad, _hessian(X, prob, l2)
 
     theta = np.zeros(p)
     loss = math.inf
@@ -178,15 +162,12 @@ def _log_softmax(X: np.ndarray, theta: np.ndarray, base: np.ndarray | None = Non
     return logp, np.exp(logp)
 
 
-def _hessian(X: np.ndarray, prob: np.ndarray, l2: float, w: np.ndarray | None = None) -> np.ndarray:
-    """The Hessian (P, P) of :func:`fit_softmax`'s objective at the probabilities ``prob`` (N, O),
-    the frames weighted by ``w`` (N,) (None: alike)."""
+def _hessian(X: np.ndarray, prob: np.ndarray, l2: float) -> np.ndarray:
+    """The Hessian (P, P) of :func:`fit_softmax`'s objective at the probabilities ``prob`` (N, O)."""
     n, o, p = X.shape
     rows = X.reshape(n * o, p)
     mean = np.matmul(prob[:, None, :], X)[:, 0, :]  # (N, P): each frame's expected features
-    if w is None:
-        return ((rows * prob.reshape(-1, 1)).T @ rows - mean.T @ mean) / n + 2 * l2 * np.eye(p)
-    return ((rows * (prob * w[:, None]).reshape(-1, 1)).T @ rows - (mean * w[:, None]).T @ mean) / n + 2 * l2 * np.eye(p)
+    return ((rows * prob.reshape(-1, 1)).T @ rows - mean.T @ mean) / n + 2 * l2 * np.eye(p)
 
 
 def _fit_steeper_costs_more(
@@ -223,60 +204,25 @@ class OffsetFitConfig:
     near_candidates: tuple[float, ...] = NEAR_CANDIDATES_M
 
 
-def decision_frames(near_m: np.ndarray, times_s: np.ndarray, near: float) -> np.ndarray:
-    """Which frames (N,) bool show the driver deciding: those less than :data:`DECISION_S` after
-    something comes within ``near`` (the distance ``near_m`` (N,) to the first thing on the path
-    falls to ``near`` or below, or a recording starts with it there, or it grows by more than
-    :data:`NEW_FIRST_M` while within), and those where nothing is within ``near + CLEAR_M``.
-    A recording starts wherever ``times_s`` (N,) does not increase."""
-    n = len(near_m)
-    index = np.arange(n)
-    start = np.ones(n, dtype=bool)
-    start[1:] = times_s[1:] <= times_s[:-1]
-    within = near_m <= near
-    onset = within & (start | ~np.roll(within, 1) | (near_m > np.roll(near_m, 1) + NEW_FIRST_M))
-    last_start = np.maximum.accumulate(np.where(start, index, 0))
-    last_onset = np.maximum.accumulate(np.where(onset, index, -1))
-    deciding = (last_onset >= last_start) & (times_s - times_s[np.maximum(last_onset, 0)] < DECISION_S - 5e-4)
-    return deciding | (near_m > near + CLEAR_M)
-
-
-class OffsetFrames(NamedTuple):
-    """The frames the offset utility is fitted to.
-
-    Attributes:
-        features: (N, O, K + 2) each frame's offset features (terrapref.rules.offset.features).
-        near_m: (N,) the distance along the path to the first thing on it [m] (inf: none).
-        intent: (N,) the offset the driver was steering for [m] (NaN: left out).
-        relief: the relief columns (N, O, R) and the bands [deg] they count past, side slope then
-            grade; None: a drive on flat ground.
-        times_s: (N,) each frame's time from its recording's first [s] (the recordings' frames in
-            order, one recording after another); None: not known, and every frame counts alike.
-    """
-
-    features: np.ndarray
-    near_m: np.ndarray
-    intent: np.ndarray
-    relief: tuple[np.ndarray, tuple[float, ...]] | None = None
-    times_s: np.ndarray | None = None
-
-
-def fit_offset_utility(frames: OffsetFrames, offsets: np.ndarray, config: OffsetFitConfig | None = None) -> OffsetFit:
-    """Fit the offset utility to ``frames`` over the candidate ``offsets`` (O,) [m]; frames
-    without an intended offset (NaN) are left out; ``config`` None: the default fit. With relief
-    columns, the metres never seen on the offsets within :data:`HIDDEN_ON_PATH_M` get a column
-    of their own, after the relief columns. On flat ground, with the frames' times, the weights
-    are fitted again at the chosen near distance with the frames where the driver decides
-    (:func:`decision_frames`) counted :data:`DECISION_WEIGHT` times: the frames after a decision
-    repeat it, and counted each as a fresh choice they widen the gaps between the classes'
-    prices past what the driver's choices need."""
+def fit_offset_utility(
+    features: np.ndarray,
+    near_m: np.ndarray,
+    intent: np.ndarray,
+    offsets: np.ndarray,
+    config: OffsetFitConfig | None = None,
+    relief: tuple[np.ndarray, tuple[float, ...]] | None = None,
+) -> OffsetFit:
+    """Fit the offset utility to frames' offset features (N, O, K + 2), near distances (N,)
+    and intended offsets (N,) over the candidate ``offsets`` (O,) [m], with their relief columns
+    when given (``relief``: the columns (N, O, R) and the bands [deg] they count past, side slope
+    then grade; with them, the metres never seen on the offsets within :data:`HIDDEN_ON_PATH_M`
+    get a column of their own, after the relief columns); frames without an intended offset (NaN) are left out; ``config`` None: the
+    default fit."""
     config = config or OffsetFitConfig()
-    relief = frames.relief
-    keep = np.isfinite(frames.intent)
+    keep = np.isfinite(intent)
     if not keep.any():
         raise ValueError("no frame has an intended offset to fit")
-    X, near = frames.features[keep].astype(np.float64), frames.near_m[keep]
-    Y = soft_labels(frames.intent[keep], offsets, config.sigma_m)
+    X, near, Y = features[keep].astype(np.float64), near_m[keep], soft_labels(intent[keep], offsets, config.sigma_m)
     columns = X.shape[2]
     kept = None if relief is None else relief[0][keep]  # the fitted frames' relief columns
     R = 0 if kept is None else kept.shape[2]
@@ -284,11 +230,19 @@ def fit_offset_utility(frames: OffsetFrames, offsets: np.ndarray, config: Offset
         on_path = (np.abs(offsets) <= HIDDEN_ON_PATH_M + 1e-9)[None, :, None]
         X = np.concatenate([X, kept.astype(np.float64), X[:, :, columns - 2 : columns - 1] * on_path], axis=2)
     judged = None if kept is None else level_frames(kept, offsets, len(relief[1]))
-    theta, loss, chosen, free, gated_x, losses = _fit_near(X, near, Y, offsets, config, None if kept is None else (columns, R, judged))
-    deciding = np.zeros(len(Y), dtype=bool)
-    if relief is None and frames.times_s is not None:
-        deciding = decision_frames(frames.near_m, frames.times_s, chosen)[keep]
-        theta, loss = fit_softmax(gated_x, Y, config.l2, weights=np.where(deciding, DECISION_WEIGHT, 1.0))
+    best: tuple[np.ndarray, float, float, np.ndarray, np.ndarray] | None = None
+    losses = {}
+    for candidate in config.near_candidates:
+        gated_x = np.concatenate([X, (offsets**2)[None, :, None] * (near > candidate)[:, None, None]], axis=2)
+        if relief is None:
+            theta, loss = fit_softmax(gated_x, Y, config.l2)
+            free = np.ones(len(theta), dtype=bool)
+        else:
+            theta, loss, free = _fit_steeper_costs_more(gated_x, Y, config.l2, range(columns, columns + R))
+        losses[candidate] = loss if judged is None else _data_loss(gated_x[judged], Y[judged], theta)
+        if best is None or losses[candidate] < losses[best[2]] - 1e-9:
+            best = (theta, loss, candidate, free, gated_x)
+    theta, loss, chosen, free, gated_x = best
     flat = None if kept is None else flat_frames(kept)
     first = plain = None
     if flat is not None:
@@ -304,31 +258,7 @@ def fit_offset_utility(frames: OffsetFrames, offsets: np.ndarray, config: Offset
     priced = theta[columns : columns + R] if relief is not None else None
     shown = relief_shown(kept, relief[1]) if kept is not None else None
     hidden_on_path = float(theta[-2]) if relief is not None else 0.0  # the lanes' own never-seen column stands just before the gate
-    fitted = (int(keep.sum()), int(deciding.sum()))
-    return OffsetFit(weights, chosen, round(loss, WEIGHT_DECIMALS), losses, fitted[0], priced, shown, interval, hidden_on_path, fitted[1])
-
-
-def _fit_near(X: np.ndarray, near: np.ndarray, Y: np.ndarray, offsets: np.ndarray, config: OffsetFitConfig, relief: tuple | None) -> tuple:
-    """The weights, loss, near distance, fitted columns (as :func:`_fit_steeper_costs_more`) and
-    gated columns of the lowest loss over ``config.near_candidates``, and every candidate's loss:
-    ``X`` (N, O, P) the frames' columns, ``near`` (N,), ``Y`` (N, O) soft labels; ``relief``: the
-    first relief column, how many there are, and the frames whose losses are compared (None:
-    all); None: no relief columns."""
-    best: tuple | None = None
-    losses = {}
-    for candidate in config.near_candidates:
-        gated_x = np.concatenate([X, (offsets**2)[None, :, None] * (near > candidate)[:, None, None]], axis=2)
-        if relief is None:
-            theta, loss = fit_softmax(gated_x, Y, config.l2)
-            free = np.ones(len(theta), dtype=bool)
-            losses[candidate] = loss
-        else:
-            columns, count, judged = relief
-            theta, loss, free = _fit_steeper_costs_more(gated_x, Y, config.l2, range(columns, columns + count))
-            losses[candidate] = loss if judged is None else _data_loss(gated_x[judged], Y[judged], theta)
-        if best is None or losses[candidate] < losses[best[2]] - 1e-9:
-            best = (theta, loss, candidate, free, gated_x)
-    return (*best, losses)
+    return OffsetFit(weights, chosen, round(loss, WEIGHT_DECIMALS), losses, int(keep.sum()), priced, shown, interval, hidden_on_path)
 
 
 LEVEL_FRAMES_LEAST = 200  # the fewest frames with nothing steep ahead that the near distance is chosen on; fewer: on all

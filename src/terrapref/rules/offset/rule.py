@@ -73,15 +73,7 @@ from terrapref.rules.base import (
     vector,
 )
 from terrapref.rules.offset.features import FIRST_BAND, RELIEF_BANDS_DEG, OffsetFeatures
-from terrapref.rules.offset.fit import (
-    DECISION_WEIGHT,
-    HIDDEN_ON_PATH_M,
-    OffsetFit,
-    OffsetFrames,
-    OffsetUtility,
-    fit_offset_utility,
-    relief_prices,
-)
+from terrapref.rules.offset.fit import HIDDEN_ON_PATH_M, OffsetFit, OffsetUtility, fit_offset_utility, relief_prices
 from terrapref.rules.offset.geometry import OffsetGeometry
 from terrapref.rules.offset.offsets_compiled import gated_value
 from terrapref.rules.offset.reach_compiled import lethal_hits, swept_reach
@@ -128,13 +120,7 @@ class OffsetConfig(RuleConfig):
     """
 
     type: ClassVar[str] = "offset"
-    arrays: ClassVar[dict[str, str]] = {
-        "features": "finite >= 0",
-        "near_m": "no NaN",
-        "intent_m": "no inf",
-        "relief_m": "finite >= 0",
-        "time_s": "finite >= 0",
-    }
+    arrays: ClassVar[dict[str, str]] = {"features": "finite >= 0", "near_m": "no NaN", "intent_m": "no inf", "relief_m": "finite >= 0"}
     without_data: ClassVar[str] = "the model gets no offset rule and drives C's trajectories"
 
     switch_margin: float = 0.15
@@ -185,9 +171,7 @@ class OffsetConfig(RuleConfig):
         if relief is not None and relief.shape[2] != 2 * len(RELIEF_BANDS_DEG):
             raise UserError("offset rule", f"relief columns of {relief.shape[2]} bands; this version reads {2 * len(RELIEF_BANDS_DEG)}")
         columns = (relief, RELIEF_BANDS_DEG) if relief is not None else None
-        # time_s is absent from datasets featurised before the fit read it: there every frame counts alike.
-        frames = OffsetFrames(arrays["features"], arrays["near_m"], arrays["intent_m"], columns, arrays.get("time_s"))
-        fitted = fit_offset_utility(frames, geometry.offsets)
+        fitted = fit_offset_utility(arrays["features"], arrays["near_m"], arrays["intent_m"], geometry.offsets, relief=columns)
         if relief is not None:  # a rule that drives relief waits, on the map, for the evidence of a near view
             geometry = replace(geometry, map_min_evidence=max(geometry.map_min_evidence, RELIEF_MIN_EVIDENCE))
         utility = OffsetUtility(
@@ -239,8 +223,7 @@ class OffsetReader(FrameReader):
         ok[ok] &= np.abs(recording.times[ahead[ok]] - recording.times[keep[ok]] - delay * period) < 0.5 * period
         later[ok] = recording.commands[ahead[ok]]
         intent = intent_offsets(recording.poses[keep], later, self.progress, path, self.offsets.offsets, self.geometry.intent_pursuit_m)
-        times = recording.times[keep] - recording.times[0]  # from the recording's first frame
-        out = {"features": self.features, "near_m": self.near, "intent_m": intent.astype(np.float32), "time_s": times.astype(np.float32)}
+        out = {"features": self.features, "near_m": self.near, "intent_m": intent.astype(np.float32)}
         return out if self.relief is None else {**out, "relief_m": self.relief}
 
 
@@ -274,7 +257,6 @@ class OffsetRule(Rule):
             "near_m": u.near_m,
             **({"relief": _relief_block(u)} if u.relief is not None else {}),
             **({"loss": self.fit.loss, "samples": self.fit.samples} if self.fit is not None else {}),
-            **({"deciding": self.fit.deciding} if self.fit is not None and self.fit.deciding else {}),
         }
 
     @classmethod
@@ -304,13 +286,7 @@ class OffsetRule(Rule):
             samples = block.get("samples")
             if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
                 raise where.error("samples", "expected the number of frames fitted, an integer >= 1")
-            deciding = block.get("deciding", 0)
-            if isinstance(deciding, bool) or not isinstance(deciding, int) or not 0 <= deciding <= samples:
-                raise where.error(
-                    "deciding", "expected how many of the frames fitted show the driver deciding, an integer from 0 to samples"
-                )
-            loss = number(block, "loss", where, low=0.0)
-            fit = OffsetFit(weights, near, loss, {}, samples, relief, shown, interval, deciding=deciding)
+            fit = OffsetFit(weights, near, number(block, "loss", where, low=0.0), {}, samples, relief, shown, interval)
         return cls(config, OffsetUtility(weights, near, geometry, relief, shown, interval, hidden_on_path), fit)
 
     @classmethod
@@ -330,8 +306,6 @@ class OffsetRule(Rule):
         w = self.utility.weights
         prices = ", ".join(f"{c} {p / w[len(names) + 1]:.1f}{' (lethal: ruled out)' if c in lethal else ''}" for c, p in zip(names, w))
         fitted = f"fitted to {self.fit.samples} frames, " if self.fit is not None else ""
-        if self.fit is not None and self.fit.deciding:
-            fitted = f"fitted to {self.fit.samples} frames (the {self.fit.deciding} where the driver decides counted {DECISION_WEIGHT:g} times), "
         text = (
             f"offset rule: {fitted}near distance {self.utility.near_m:g} m; each class's price per metre, "
             f"relative to the detour's per m^2 of offset per metre: {prices}"
