@@ -36,6 +36,7 @@ from terrapref.scenario.teaching import (
     balanced_pairs,
     build_course,
     course_length,
+    description,
     designed_course,
     follow_up,
     follow_up_after,
@@ -311,6 +312,21 @@ def test_a_table_without_lethal_classes_puts_feature_classes_either_side_of_a_st
     assert Counter(s.classes[0] for s in lone) == {c: 1 for c in table.terrain_names}
     lanes = [s for s in situations(table, full=True) if s.kind == "lane"]  # without walls: each class across the whole way
     assert sorted(s.classes for s in lanes) == sorted((c,) for c in table.terrain_names)
+
+
+@pytest.mark.parametrize(
+    ("table", "full"),
+    [(default_classes(), True), (_synthetic(2, lethal=2), True), (_synthetic(4, lethal=3), True), (load_classes(EXAMPLE), False)],
+    ids=["default", "2+2 full", "4+3 full", "example compact"],
+)
+def test_the_description_names_the_lethal_classes_the_course_shows_alone(table, full):
+    """What a course's description says is shown alone is what its situations show alone."""
+    alone = list(dict.fromkeys(s.classes[0] for s in situations(table, full=full) if s.kind == "lone" and s.classes[0] in table.lethal))
+    text = description(table, full)
+    if alone == list(table.lethal):
+        assert "every class alone on the path" in text
+    else:
+        assert f"every feature class alone on the path, and lethal terrain ({', '.join(alone)})" in text
 
 
 def test_the_design_is_full_while_it_fits_the_budget(example):

@@ -230,8 +230,7 @@ def situations(classes: ClassTable, full: bool | None = None, relief: bool = Fal
     lone = []
     for k, name in enumerate(terrain):
         lone.append(Situation("lone", (name,), (1, -1)[k % 2] * LONE_OFFSET_M))
-    lethal_alone = [(name, side) for k, name in enumerate(lethal, len(terrain)) for side in ((1, -1) if both_sides else ((1, -1)[k % 2],))]
-    lone += [Situation("lone", (name,), side * LONE_OFFSET_M) for name, side in lethal_alone[:LETHAL_LONE]]
+    lone += [Situation("lone", (name,), side * LONE_OFFSET_M) for name, side in _lethal_alone(lethal, len(terrain), both_sides)]
     lanes = [
         Situation("lane", (lethal[k % len(lethal)], name, lethal[k % len(lethal)]) if lethal else (name,)) for k, name in enumerate(terrain)
     ]
@@ -319,6 +318,14 @@ RELIEF_LESSONS = {
     "grades": Situation("ramp", (), 0.0, RELIEF_DEG["ramp"]),
     "rough ground": Situation("rough", (), 0.0, 0.0),
 }
+
+
+def _lethal_alone(lethal: Sequence[str], first: int, both_sides: bool) -> list[tuple[str, int]]:
+    """The lethal classes a teaching course shows alone on the path, each with its side (+1 or
+    -1), at most :data:`LETHAL_LONE`: the first on both sides (``both_sides``), or each once, the
+    sides alternating on from the feature classes' lone patches (``first`` of them)."""
+    sides = [(name, side) for k, name in enumerate(lethal, first) for side in ((1, -1) if both_sides else ((1, -1)[k % 2],))]
+    return sides[:LETHAL_LONE]
 
 
 def fits(classes: ClassTable, relief: bool = False) -> bool:
@@ -564,8 +571,9 @@ def description(classes: ClassTable, full: bool, relief: bool = False) -> str:
     beside = "each other class" if full and relief and n > 1 else "another class"  # a full course with relief: up to 3 classes
     strip = f"between lethal terrain and {beside}" if classes.lethal else "between two other classes"  # a table without lethal classes
     alone = "every class alone on the path"
-    if len(classes.lethal) > LETHAL_LONE:  # the others shown as walls
-        alone = f"every feature class alone on the path, and lethal terrain ({', '.join(classes.lethal[:LETHAL_LONE])})"
+    shown = list(dict.fromkeys(name for name, _ in _lethal_alone(classes.lethal, n, full and not relief)))
+    if shown != list(classes.lethal):  # the others shown as walls
+        alone = f"every feature class alone on the path, and lethal terrain ({', '.join(shown)})"
     return (
         f"Teaching course for {n} feature class{'es' if n != 1 else ''} ({', '.join(classes.terrain_names)}): {design}; "
         f"every class as a strip on the path {strip}; {alone}; "
