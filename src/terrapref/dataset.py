@@ -426,13 +426,21 @@ def load_dataset(path: str | Path) -> Dataset:
             raise UserError(str(path), "missing tensor", field=key)
     _check_tensors(tensors, str(path))
     try:
-        FeatureConfig.from_dict(meta["features"])
+        features = FeatureConfig.from_dict(meta["features"])
         CameraConfig.from_dict(meta["camera"])
         ClassTable.from_dict(meta["classes"], str(path))
     except KeyError as exc:
         raise UserError(str(path), "missing", field=str(exc.args[0])) from None
     except (TypeError, ValueError, AttributeError) as exc:
         raise UserError(str(path), f"invalid configuration ({type(exc).__name__}: {exc})", field="metadata") from None
+    shape = (features.preference.m, features.n_features)
+    if tensors["U"].shape[1:] != shape:
+        raise UserError(
+            str(path),
+            f"expected {shape[0]} trajectories x {shape[1]} features ({', '.join(features.column_names)}) per sample, "
+            f"as its features say; got {tensors['U'].shape[1]} x {tensors['U'].shape[2]}",
+            field="U",
+        )
     if not (meta.get("profile") is None or isinstance(meta.get("profile"), list)):  # None: the drives declared none
         raise UserError(str(path), "expected a list of class names", field="profile")
     rules = _rule_arrays(tensors, meta, str(path))

@@ -43,7 +43,17 @@ def test_bad_flags(tmp_path: Path, capsys, monkeypatch, argv, needle):
     _one_error(capsys, needle)
 
 
-@pytest.mark.parametrize("flags,needle", [(["--n-steps", "-5"], "--n-steps"), (["--dt", "nan"], "--dt")])
+@pytest.mark.parametrize(
+    "flags,needle",
+    [
+        (["--n-steps", "-5"], "--n-steps"),
+        (["--dt", "nan"], "--dt"),
+        (["--n-steps", "5"], "--n-steps: the look-ahead starts 2.4 s"),  # the second stage's look-ahead past the trajectories
+        (["--n-steps", "100000"], "--n-steps"),
+        (["--dt", "0.01"], "--dt: the look-ahead"),
+        (["--dt", "1e9"], "--dt: the look-ahead"),
+    ],
+)
 def test_bad_featurize_flags(tmp_path: Path, capsys, recording, flags, needle):
     try:
         code = main(["featurize", str(recording), "--out", str(tmp_path / "d.safetensors"), *flags])
@@ -77,6 +87,19 @@ def _damage(rec: Path, how: str) -> None:
         meta = json.loads((rec / "meta.json").read_text())
         meta["camera"] = "x"
         (rec / "meta.json").write_text(json.dumps(meta))
+    elif how == "far pose":
+        row = json.loads(lines[5])
+        row["pose"] = [1e300, 1e300, 0.0]
+        lines[5] = json.dumps(row)
+        frames.write_text("\n".join(lines) + "\n")
+    elif how == "unknown class in profile":
+        meta = json.loads((rec / "meta.json").read_text())
+        meta["profile"] = ["lava", *meta["profile"][1:]]
+        (rec / "meta.json").write_text(json.dumps(meta))
+    elif how == "nan steering grid":
+        meta = json.loads((rec / "meta.json").read_text())
+        meta["preference_set"]["control"]["w_rps"] = [float("nan")] * len(meta["preference_set"]["control"]["w_rps"])
+        (rec / "meta.json").write_text(json.dumps(meta))
     elif how == "no profile":
         meta = json.loads((rec / "meta.json").read_text())
         meta.pop("profile")
@@ -98,6 +121,9 @@ def _damage(rec: Path, how: str) -> None:
         ("truncated", "frames.jsonl"),
         ("reversed", "frames.jsonl"),
         ("nan pose", "line 6.pose"),
+        ("far pose", "line 6.pose: expected x and y [m] and a heading [rad] within"),
+        ("unknown class in profile", "meta.json: profile: unknown or background class 'lava'"),
+        ("nan steering grid", "preference_set"),
         ("empty", "frames.jsonl"),
         ("scenario list", "scenario.yaml"),
         ("camera str", "camera"),
@@ -149,6 +175,7 @@ def _dataset_with(tmp_path: Path, **change) -> Path:
         ({"labels": np.zeros(49, np.int64)}, "labels:"),
         ({"w": np.full(50, np.inf, np.float32)}, "w:"),
         ({"labels": np.full(50, 10)}, "same label"),
+        ({"U": np.full((50, 21, 3), 0.5, np.float32)}, "U: expected 21 trajectories x 5 features"),  # not what its features say
     ],
 )
 def test_a_broken_or_degenerate_dataset_is_refused_before_training(tmp_path: Path, capsys, change, needle):
@@ -427,3 +454,77 @@ def test_the_command_lines_own_refusals_are_one_line(capsys, argv: list[str], ne
     text = capsys.readouterr().err
     assert text.count("\n") == 1 and text.startswith("error: ") and "usage:" not in text, text
     assert all(n in text for n in needles) and "--help)" in text, text
+
+
+@pytest.mark.parametrize("how", ["unknown class in profile", "far pose"])
+def test_a_recording_refused_by_featurize_is_refused_by_train_inspect_and_course_after(tmp_path: Path, capsys, recording, how):
+    rec = tmp_path / "rec"
+    shutil.copytree(recording, rec)
+    _damage(rec, how)
+    for argv in (
+        ["train", str(rec), "--out", str(tmp_path / "m.safetensors"), "--epochs", "1"],
+        ["inspect", str(rec), "--out", str(tmp_path / "i.png")],
+        ["course", "--after", str(rec), "--out", str(tmp_path / "c.yaml")],
+    ):
+        assert main(argv) == 2
+        _one_error(capsys, str(rec))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec"]
+
+
+@pytest.fixture(scope="module")
+def featurized(recording, tmp_path_factory) -> Path:
+    """The tiny recording featurised for the default recipe (its rules' arrays with it)."""
+    out = tmp_path_factory.mktemp("featurized") / "d.safetensors"
+    assert main(["featurize", str(recording), "--out", str(out)]) == 0
+    return out
+
+
+def test_samples_with_no_intended_offset_are_refused_before_training(tmp_path: Path, capsys, featurized):
+    from terrapref.dataset import FORMAT
+    from terrapref.tensorfile import read_tensor_file, write_tensor_file
+
+    tensors, meta = read_tensor_file(featurized, FORMAT, "no such file", "not a dataset")
+    tensors["rules.offset.intent_m"] = np.full_like(
+        tensors["rules.offset.intent_m"], np.nan
+    )  # NaN is allowed: a frame whose intent is unknown
+    data = write_tensor_file(tmp_path / "nan_intent.safetensors", tensors, meta)
+    assert main(["train", str(data), "--out", str(tmp_path / "m.safetensors"), "--epochs", "1"]) == 2
+    _one_error(capsys, str(data), "rules.offset.intent_m: no sample holds an intended offset")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["nan_intent.safetensors"]
+
+
+def test_samples_whose_trajectories_end_before_the_look_ahead_are_refused_by_a_recipe_with_one(tmp_path: Path, capsys, recording):
+    data = tmp_path / "short.safetensors"
+    assert main(["featurize", str(recording), "--out", str(data), "--recipe", "paper", "--n-steps", "1"]) == 0  # the paper's has none
+    assert main(["train", str(data), "--out", str(tmp_path / "m.safetensors"), "--epochs", "1"]) == 2
+    _one_error(capsys, str(data), "features.preference: the look-ahead starts 2.4 s", "past trajectories of 1 steps")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["short.safetensors"]
+
+
+@pytest.mark.parametrize("beside", ["m.loss.png", "m.checkpoints"])
+def test_train_keeps_what_lies_where_it_writes_beside_the_model_unless_forced(tmp_path: Path, capsys, beside):
+    from helpers import dataset_file
+
+    data = dataset_file(tmp_path / "d.safetensors", n=60)
+    kept = tmp_path / beside
+    if beside.endswith(".png"):
+        kept.write_text("mine")
+    else:
+        kept.mkdir()
+        (kept / "notes.txt").write_text("mine")
+    argv = ["train", str(data), "--out", str(tmp_path / "m.safetensors"), "--epochs", "1"]
+    assert main(argv) == 2
+    _one_error(capsys, str(kept), "--out", "pass --force")
+    assert not (tmp_path / "m.safetensors").exists()
+    assert (kept.read_text() if kept.is_file() else (kept / "notes.txt").read_text()) == "mine"
+    assert main([*argv, "--force"]) == 0
+    assert (tmp_path / "m.safetensors").exists() and not (kept / "notes.txt").exists()
+
+
+def test_export_refuses_a_frame_with_a_class_id_its_table_does_not_have(tmp_path: Path, capsys, recording):
+    rec = tmp_path / "rec"
+    shutil.copytree(recording, rec)
+    _damage(rec, "class 200")
+    assert main(["export", str(rec), "--format", "mcap", "--out", str(tmp_path / "r.mcap")]) == 2
+    _one_error(capsys, "000003.png", "class ids [200]")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec"]

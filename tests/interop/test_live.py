@@ -269,6 +269,9 @@ def test_live_pace_and_wait_go_with_live(tmp_path, capsys):
     base = ["evaluate", str(model), "demo_course", "--seeds", "1", "--no-driver", "--out", str(tmp_path / "ev")]
     assert main([*base, "--live-pace", "1"]) == 2
     one_line_error(capsys, "--live-pace: goes with --live")
+    for flag, value in (("--live-port", "99999"), ("--live-host", "0.0.0.0")):  # an address for a view not asked for
+        assert main([*base, flag, value]) == 2
+        one_line_error(capsys, f"{flag}: goes with --live")
     assert main([*base, "--live", "--live-port", "0", "--live-pace", "0"]) == 2
     one_line_error(capsys, "--live-pace: expected a factor of real time > 0")
     assert not (tmp_path / "ev").exists()

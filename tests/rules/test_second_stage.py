@@ -120,7 +120,7 @@ def test_invalid_second_stage_configs(config):
 
 def test_a_second_stage_beyond_the_trajectories_is_refused(setup):
     featurizer, camera, _ = setup
-    with pytest.raises(ValueError, match="within the trajectories"):
+    with pytest.raises(ValueError, match="past trajectories of"):
         SecondStageScores(SecondStageConfig(after_s=10.0), featurizer, camera, UTILITY)
 
 

@@ -55,6 +55,9 @@ def add_engine_args(p: argparse.ArgumentParser) -> None:
     )
 
 
+LIVE_HOST, LIVE_PORT = "127.0.0.1", 8765  # where the live view listens unless told
+
+
 def add_live_args(p: argparse.ArgumentParser, note: str, paced: bool = False) -> None:
     """--live and its address; with ``paced`` (simulated runs), --live-pace and --live-wait too."""
     p.add_argument(
@@ -63,10 +66,8 @@ def add_live_args(p: argparse.ArgumentParser, note: str, paced: bool = False) ->
         help=f"serve the planner's channels live (those of the MCAP export) on Foxglove's WebSocket protocol "
         f"(subprotocol foxglove.sdk.v1, or foxglove.websocket.v1 for older viewers); {note}",
     )
-    p.add_argument(
-        "--live-host", default="127.0.0.1", help="address the live view listens on (default 127.0.0.1; 0.0.0.0: every interface)"
-    )
-    p.add_argument("--live-port", type=int, default=8765, help="port of the live view (default 8765, Foxglove's; 0: a free one)")
+    p.add_argument("--live-host", default=None, help=f"address the live view listens on (default {LIVE_HOST}; 0.0.0.0: every interface)")
+    p.add_argument("--live-port", type=int, default=None, help=f"port of the live view (default {LIVE_PORT}, Foxglove's; 0: a free one)")
     if paced:
         p.add_argument(
             "--live-pace",
@@ -177,16 +178,24 @@ def live_view(args: argparse.Namespace):
     """The live view that --live asks for (its address printed), or None."""
     pace, wait = getattr(args, "live_pace", None), getattr(args, "live_wait", False)
     if not args.live:
-        if pace is not None or wait:
-            raise UserError("--live-pace" if pace is not None else "--live-wait", "goes with --live")
+        given = {
+            "--live-pace": pace is not None,
+            "--live-wait": wait,
+            "--live-host": args.live_host is not None,
+            "--live-port": args.live_port is not None,
+        }
+        flag = next((f for f, on in given.items() if on), None)
+        if flag is not None:
+            raise UserError(flag, "goes with --live")
         return None
-    if not 0 <= args.live_port <= 65535:
-        raise UserError("--live-port", f"expected a port in [0, 65535], got {args.live_port}")
+    host, port = args.live_host or LIVE_HOST, LIVE_PORT if args.live_port is None else args.live_port
+    if not 0 <= port <= 65535:
+        raise UserError("--live-port", f"expected a port in [0, 65535], got {port}")
     if pace is not None and not pace > 0:
         raise UserError("--live-pace", f"expected a factor of real time > 0 (1: as driven), got {pace:g}")
     from terrapref.interop.live import LiveView
 
-    view = LiveView(args.live_host, args.live_port, pace=pace or 0.0, wait=wait)
+    view = LiveView(host, port, pace=pace or 0.0, wait=wait)
     paced = f"; frames at {pace:g}x real time" if pace else ""
     waiting = "; waiting for a viewer before the first run" if wait else ""
     print(f"live view: {view.url} (Foxglove: Open connection, Foxglove WebSocket{paced}){waiting}", flush=True)
@@ -219,3 +228,28 @@ def incidents(log) -> str:
             f"(roll at most {relief['max_roll_deg']:g} deg, pitch {relief['max_pitch_deg']:g} deg)"
         )
     return line
+
+
+def featurize_features(args: argparse.Namespace, recipe):
+    """The features ``featurize`` computes for ``recipe`` (a terrapref.recipes.Recipe): its own, with
+    ``--distance-mode`` and the trajectories' ``--n-steps`` and ``--dt``, refused where the recipe's
+    second stage would look ahead past them."""
+    import math
+    from dataclasses import replace
+
+    from terrapref.rules.second.rule import check_lookahead
+
+    features = replace(recipe.features(), distance_mode=args.distance_mode)
+    if args.n_steps is None and args.dt is None:
+        return features
+    if args.n_steps is not None and args.n_steps < 1:
+        raise UserError("--n-steps", f"must be an integer >= 1, got {args.n_steps}")
+    if args.dt is not None and not (math.isfinite(args.dt) and args.dt > 0):
+        raise UserError("--dt", f"must be a finite number of seconds > 0, got {args.dt}")
+    pref = features.preference
+    try:
+        pref = replace(pref, n_steps=pref.n_steps if args.n_steps is None else args.n_steps, dt_s=pref.dt_s if args.dt is None else args.dt)
+        check_lookahead(recipe.rules, pref.n_steps, pref.dt_s)
+    except ValueError as exc:
+        raise UserError("--n-steps" if args.n_steps is not None else "--dt", str(exc)) from None
+    return replace(features, preference=pref)

@@ -16,6 +16,7 @@ from terrapref.cli.common import (
     by_recording,
     check_table,
     class_table,
+    featurize_features,
     incidents,
     live_view,
     perception_model,
@@ -335,7 +336,6 @@ def inspect_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_featurize(args: argparse.Namespace) -> int:
-    from dataclasses import replace
 
     from terrapref.dataset import build_dataset, save_dataset
     from terrapref.demos.recording import read_recording
@@ -352,17 +352,7 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
     from terrapref.recipes import DEFAULT_RECIPE, recipe_named
 
     recipe = recipe_named(args.recipe or DEFAULT_RECIPE)
-    features = replace(recipe.features(), distance_mode=args.distance_mode)
-    pref = features.preference
-    if args.n_steps is not None or args.dt is not None:
-        if args.n_steps is not None and args.n_steps < 1:
-            raise UserError("--n-steps", f"must be an integer >= 1, got {args.n_steps}")
-        if args.dt is not None and not (math.isfinite(args.dt) and args.dt > 0):
-            raise UserError("--dt", f"must be a finite number of seconds > 0, got {args.dt}")
-        pref = replace(
-            pref, n_steps=args.n_steps if args.n_steps is not None else pref.n_steps, dt_s=args.dt if args.dt is not None else pref.dt_s
-        )
-        features = replace(features, preference=pref)
+    features = featurize_features(args, recipe)
     camera = None
     if args.camera:
         from terrapref.camera.files import load_camera

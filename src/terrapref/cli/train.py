@@ -29,12 +29,14 @@ def _cmd_train(args: argparse.Namespace) -> int:
     recipe = replace(recipe, rules=rules_with(recipe, getattr(args, "second_stage", None), getattr(args, "stage_weight", None)))
     check_distinct(args.data, "recording or dataset")
     check_output(args.out, "--out", args.data, force=args.force)
+    _check_beside(Path(args.out), args.data, args.force)
     if args.classes is not None:  # recordings before they are featurised
         from terrapref.demos.recording import read_recording
 
         for path in (p for p in args.data if p.is_dir()):
             check_table(args, read_recording(path).classes, path)
     data = _training_data(args, recipe)
+    _check_rule_data(data, recipe, args.data[0])
     if args.classes is not None:
         from terrapref.terrain import ClassTable
 
@@ -70,6 +72,42 @@ def _cmd_train(args: argparse.Namespace) -> int:
         raise
     _report_training(args, config, data, result)
     return 0
+
+
+def _check_beside(out: Path, inputs: list[Path], force: bool) -> None:
+    """Refuse, before any work, the files training writes beside the model (its loss curve and its
+    checkpoints' folder) where they exist, unless ``force``, as the model itself is."""
+    curve, checkpoints = out.with_suffix(".loss.png"), out.with_name(out.stem + ".checkpoints")
+    check_output(curve, "--out", inputs)
+    check_output(checkpoints, "--out", inputs, folder=True)
+    for path, what in ((curve, "its loss curve"), (checkpoints, "its checkpoints")):
+        if path.exists() and not force:
+            raise UserError(
+                str(path), f"exists; training writes {what} there: choose another --out, or pass --force to replace it", field="--out"
+            )
+
+
+def _check_rule_data(data: Dataset, recipe: Recipe, source: Path) -> None:
+    """Refuse samples the recipe's rules cannot be fitted to, before any work: a second stage whose
+    look-ahead starts past the samples' trajectories, offsets with no intended one to fit to."""
+    import numpy as np
+
+    from terrapref.rules.second.rule import check_lookahead
+
+    pref = data.feature_config.preference
+    try:
+        check_lookahead(recipe.rules, pref.n_steps, pref.dt_s)
+    except ValueError as exc:
+        raise UserError(
+            str(source), f"{exc}; featurize with more steps, or train without the second stage", field="features.preference"
+        ) from None
+    found = data.rule_data("offset")
+    if found is not None and not np.isfinite(found[1]["intent_m"]).any():
+        raise UserError(
+            str(source),
+            "no sample holds an intended offset (all NaN): the offset rule has nothing to fit to",
+            field="rules.offset.intent_m",
+        )
 
 
 def _train_config(args: argparse.Namespace, recipe: Recipe) -> TrainConfig:

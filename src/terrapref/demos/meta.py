@@ -387,6 +387,11 @@ class RecordingMeta:
         profile = data.get("profile")
         if profile is not None and not (isinstance(profile, list) and all(isinstance(p, str) for p in profile)):
             raise UserError(source, "expected a list of class names", field="profile")
+        if profile is not None:  # an order of the recording's own classes, each once
+            try:
+                PreferenceProfile.parse(profile, classes, source)
+            except UserError as exc:
+                raise UserError(source, exc.problems[0].message, field="profile") from None
         perception = _perception(data["perception"], source, classes) if "perception" in data else None
         path = _path(data["path"], source, "path", 2) if "path" in data else None
         f = _Fields(data, source, "")

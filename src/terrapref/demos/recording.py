@@ -438,6 +438,9 @@ class Recording:
         return np.stack([self.image(i) for i in range(len(self))]) if len(self) else np.zeros((0, 0, 0), np.uint8)
 
 
+MAX_POSE = 1e7  # a frame's pose: x and y [m] and heading [rad] within this of 0 (UTM coordinates fit)
+
+
 def _frame_problem(row: dict) -> tuple[str, str] | None:
     """(field, message) of the first thing wrong with one frame record, or None."""
 
@@ -447,6 +450,8 @@ def _frame_problem(row: dict) -> tuple[str, str] | None:
         v = row[key]
         if not (isinstance(v, list) and len(v) == size and all(finite_number(x) for x in v)):
             return key, f"expected {size} finite numbers"
+    if not all(abs(x) <= MAX_POSE for x in row["pose"]):
+        return "pose", f"expected x and y [m] and a heading [rad] within +-{MAX_POSE:g} (a place on Earth), got {row['pose']}"
     if isinstance(row["label"], bool) or not isinstance(row["label"], int) or row["label"] < 0:
         return "label", "expected an integer >= 0"
     image = row["image"]

@@ -38,6 +38,7 @@ from __future__ import annotations
 import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -79,7 +80,7 @@ from terrapref.interop.ros_messages import (
 )
 from terrapref.stops import REASONS
 from terrapref.terrain import ClassTable, default_classes
-from terrapref.terrain.classes import UNKNOWN
+from terrapref.terrain.classes import UNKNOWN, ForeignIds
 from terrapref.vehicle.ground import LEVEL, Attitude
 
 if TYPE_CHECKING:
@@ -450,7 +451,7 @@ def recording_frames(rec) -> RunFrames:
         times=rec.times,
         poses=rec.poses,
         commands=rec.commands,
-        image=rec.image,
+        image=partial(_known_ids, rec, ForeignIds(classes)),
         chosen=rec.labels,
         path=path,
         camera=CameraConfig.from_dict(rec.meta["camera"]),
@@ -460,6 +461,17 @@ def recording_frames(rec) -> RunFrames:
         depth=rec.depth if rec.has_depth else None,
         attitude=rec.attitude if rec.has_depth else None,
     )
+
+
+def _known_ids(rec, foreign: ForeignIds, i: int) -> np.ndarray:
+    """Frame ``i``'s class ids, refused where one is none of the recording's classes (``foreign``)."""
+    from terrapref.errors import UserError
+
+    ids = rec.image(i)
+    unknown = foreign(ids)
+    if unknown:
+        raise UserError(str(rec.path / rec.image_files[i]), f"holds class ids {unknown[:5]} that the class table does not have")
+    return ids
 
 
 def _declared_order(profile: object) -> tuple[str, ...] | None:

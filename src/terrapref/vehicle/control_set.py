@@ -25,8 +25,8 @@ class ControlSet:
 
     def __post_init__(self) -> None:
         w = np.asarray(self.w_rps)
-        if len(w) < 2 or np.any(np.diff(w) <= 0):
-            raise ValueError("w_rps must have at least 2 strictly ascending values")
+        if len(w) < 2 or not np.all(np.isfinite(w)) or not np.all(np.diff(w) > 0):
+            raise ValueError("w_rps must have at least 2 finite, strictly ascending values")
         if not self.v_mps > 0:
             raise ValueError("v_mps must be > 0")
         object.__setattr__(self, "_grid", np.asarray(self.w_rps, dtype=float))  # label_of's, made once

@@ -53,6 +53,17 @@ class LookaheadConfig:
     def to_dict(self) -> dict:
         return to_plain(self)
 
+    def step(self, n_steps: int, dt_s: float) -> int:
+        """The trajectories' step (of ``dt_s`` [s]) the second piece starts at, for trajectories of
+        ``n_steps``; ValueError where that lies outside them (from the first step to the last)."""
+        step = int(round(self.after_s / dt_s)) if math.isfinite(self.after_s / dt_s) else -1
+        if not 1 <= step < n_steps:
+            raise ValueError(
+                f"the look-ahead starts {self.after_s:g} s along each trajectory, at step {step} of {dt_s:g} s, "
+                f"past trajectories of {n_steps} steps (it must start at step 1 to {n_steps - 1})"
+            )
+        return step
+
     @classmethod
     def from_dict(cls, data: dict) -> LookaheadConfig:
         return cls(float(data["after_s"]), int(data["stride"]))
@@ -63,9 +74,7 @@ class Lookahead:
 
     def __init__(self, config: LookaheadConfig, featurizer: UtilityFeaturizer, camera: PinholeCamera) -> None:
         pset = featurizer.pset
-        step = int(round(config.after_s / featurizer.config.preference.dt_s))
-        if not 1 <= step < pset.config.n_steps:
-            raise ValueError(f"the look-ahead's after_s must be within the trajectories (1 to {pset.config.n_steps - 1} steps of dt)")
+        step = config.step(pset.config.n_steps, featurizer.config.preference.dt_s)
         k = featurizer.config.n_terrain
         self.config = config
         self.featurizer = featurizer

@@ -115,6 +115,14 @@ class SecondStageConfig(RuleConfig):
         return SecondStageRule(config, utility, "lookahead" if look is not None else "frames")
 
 
+def check_lookahead(rules: Sequence[RuleConfig], n_steps: int, dt_s: float) -> None:
+    """ValueError where a second stage among ``rules`` would start its look-ahead outside
+    trajectories of ``n_steps`` steps of ``dt_s`` [s] (LookaheadConfig.step)."""
+    for rule in rules:
+        if isinstance(rule, SecondStageConfig):
+            rule.lookahead_config.step(n_steps, dt_s)
+
+
 def with_second_stage(
     rules: Sequence[RuleConfig], on: bool | None = None, weight: float | None = None, recipe: str = "the recipe"
 ) -> tuple[RuleConfig, ...]:
