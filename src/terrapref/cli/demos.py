@@ -336,7 +336,6 @@ def inspect_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_featurize(args: argparse.Namespace) -> int:
-
     from terrapref.dataset import build_dataset, save_dataset
     from terrapref.demos.recording import read_recording
     from terrapref.progress import Progress
