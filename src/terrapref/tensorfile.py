@@ -18,6 +18,7 @@ from terrapref.errors import UserError, described
 from terrapref.fileio import atomic_path
 
 META_KEY = "terrapref"
+REASON_CHARS = 160  # the most of a parser's reason an error line quotes
 
 
 def write_tensor_file(path: str | Path, tensors: dict[str, np.ndarray], meta: dict) -> Path:
@@ -53,7 +54,9 @@ def read_tensor_file(path: str | Path, fmt: str, missing: str, unreadable: str) 
             header = fh.metadata() or {}
             tensors = {k: fh.get_tensor(k) for k in fh.keys()}
     except (SafetensorError, OSError, ValueError) as exc:
-        raise UserError(source, f"{unreadable} ({exc})") from None
+        reason = str(exc)  # a damaged header's reason quotes the header, kilobytes of it
+        reason = reason if len(reason) <= REASON_CHARS else reason[: REASON_CHARS - 3] + "..."
+        raise UserError(source, f"{unreadable} ({reason})") from None
     try:
         meta = json.loads(header[META_KEY])
     except (KeyError, json.JSONDecodeError):

@@ -528,3 +528,15 @@ def test_export_refuses_a_frame_with_a_class_id_its_table_does_not_have(tmp_path
     assert main(["export", str(rec), "--format", "mcap", "--out", str(tmp_path / "r.mcap")]) == 2
     _one_error(capsys, "000003.png", "class ids [200]")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rec"]
+
+
+def test_a_damaged_header_is_refused_in_a_line_of_readable_length(tmp_path: Path, capsys):
+    from helpers import dataset_file
+
+    data = dataset_file(tmp_path / "d.safetensors", n=60)
+    raw = bytearray(data.read_bytes())
+    raw[20:30] = b"@" * 10  # inside the JSON header: the parser's reason quotes the header whole
+    data.write_bytes(bytes(raw))
+    assert main(["train", str(data), "--out", str(tmp_path / "m.safetensors"), "--epochs", "1"]) == 2
+    line = _one_error(capsys, str(data))
+    assert len(line) < 400, line
