@@ -77,7 +77,9 @@ def _cmd_train(args: argparse.Namespace) -> int:
 def _check_beside(out: Path, inputs: list[Path], force: bool) -> None:
     """Refuse, before any work, the files training writes beside the model (its loss curve and its
     checkpoints' folder) where they exist, unless ``force``, as the model itself is."""
-    curve, checkpoints = out.with_suffix(".loss.png"), out.with_name(out.stem + ".checkpoints")
+    from terrapref.learning.pipeline import checkpoints_path, loss_curve_path
+
+    curve, checkpoints = loss_curve_path(out), checkpoints_path(out)
     check_output(curve, "--out", inputs)
     check_output(checkpoints, "--out", inputs, folder=True)
     for path, what in ((curve, "its loss curve"), (checkpoints, "its checkpoints")):
@@ -183,12 +185,13 @@ def _report_training(args: argparse.Namespace, config: TrainConfig, data: Datase
     """The loss curve beside the model, the chosen epochs and what the demonstrations show."""
     from dataclasses import asdict
 
+    from terrapref.learning.pipeline import loss_curve_path
     from terrapref.plots import save_loss_curve
     from terrapref.rules.base import STEERING
     from terrapref.terrain import ClassTable
 
     members = config.classifier.members
-    curve = Path(args.out).with_suffix(".loss.png")
+    curve = loss_curve_path(args.out)
     save_loss_curve(
         curve,
         [([asdict(h) for h in r.history], r.best_epoch) for r in result.members or [result]],

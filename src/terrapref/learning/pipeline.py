@@ -67,6 +67,17 @@ def model_header(config: TrainConfig, result: TrainResult, source: ModelHeader) 
     )
 
 
+def checkpoints_path(out: str | Path) -> Path:
+    """The folder of a training's checkpoints, beside its model ``out``."""
+    out = Path(out)
+    return out.with_name(out.stem + ".checkpoints")
+
+
+def loss_curve_path(out: str | Path) -> Path:
+    """The figure of a training's losses, beside its model ``out``."""
+    return Path(out).with_suffix(".loss.png")
+
+
 def interrupted_path(out: str | Path) -> Path:
     """Where an interrupted training leaves its best model so far: beside ``out``, never over it."""
     out = Path(out)
@@ -80,7 +91,7 @@ class _Checkpoints:
     file of the run carries (:func:`source_header`, with the member count)."""
 
     def __init__(self, out: Path, header: ModelHeader, write: bool) -> None:
-        self.final = out.with_name(out.stem + ".checkpoints")
+        self.final = checkpoints_path(out)
         self.header, self.write = header, write
         self.folder = new_folder(self.final, "") if write else None
         self.best: dict[int, tuple[float, int, ClassifierConfig, dict]] = {}  # member -> (loss, epoch, classifier, weights)
