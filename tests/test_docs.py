@@ -257,8 +257,13 @@ def test_the_example_courses_lengths_in_the_docs_are_what_the_code_builds() -> N
         "README.md: the example table's course": (readme, f"# its teaching course: {_course_text(rellis_m)} at 1 m/s"),
         "docs/classes.md: the example table's course": (
             " ".join(classes.split()),
-            f"gives a {rellis_m:,.0f} m course: {kinds['pair']} pairs, {kinds['strip']} strips, {kinds['lone']} lone patches, "
-            f"{kinds['lane']} lanes, about {rellis_m / 60:.1f} minutes at 1 m/s",
+            f"gives a {rellis_m:,.0f} m course: "
+            + ", ".join(
+                f"{kinds[k]} {name}"
+                for k, name in (("pair", "pairs"), ("strip", "strips"), ("lone", "lone patches"), ("lane", "lanes"))
+                if kinds[k]
+            )
+            + f", about {rellis_m / 60:.1f} minutes at 1 m/s",
         ),
         "docs/results.md: small.yaml's course": (
             " ".join(results.split()),

@@ -13,7 +13,7 @@ from terrapref.rules.offset.features import RELIEF_BANDS_DEG
 from terrapref.rules.speed.model import STATIONS
 from terrapref.scenario import parse_scenario
 from terrapref.scenario.relief import Mound, Noise, Plateau, Ridge
-from terrapref.scenario.teaching import RELIEF_LESSONS, follow_up_after
+from terrapref.scenario.teaching import RELIEF_LESSONS, Beside, follow_up_after
 from terrapref.terrain import default_classes
 
 N, B = 40, len(RELIEF_BANDS_DEG)
@@ -63,7 +63,7 @@ def test_a_lesson_unshown_before_the_last_drive_and_after_it_is_left():
 
 def test_a_follow_up_of_relief_alone_places_each_lessons_situation():
     classes = default_classes()
-    course, items = follow_up_after(classes, [], ["teach_relief"], relief=tuple(RELIEF_LESSONS))
+    course, items = follow_up_after(classes, [], ["teach_relief"], beside=Beside(relief=tuple(RELIEF_LESSONS)))
     assert items == list(RELIEF_LESSONS.values())
     scenario = parse_scenario(course.data(), "more.yaml", classes)
     assert [type(e) for e in scenario.relief] == [Ridge, Mound, Plateau, Noise]  # a bank, a mound, a ramp, a rough patch

@@ -12,6 +12,7 @@ import json
 import math
 import re
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -28,18 +29,23 @@ from terrapref.report.select import parse_orders
 from terrapref.scenario import parse_scenario, resolve_scenario
 from terrapref.scenario.generate import generate_course, zone_kind
 from terrapref.scenario.teaching import (
+    BRACKET_SIZES_M,
     BUDGET_M,
     FOLLOW_UP_M,
+    LADDER_HALF_M,
     LETHAL_LONE,
     LONE_OFFSET_M,
+    Beside,
     Situation,
     balanced_pairs,
     build_course,
     course_length,
     description,
     designed_course,
+    fits,
     follow_up,
     follow_up_after,
+    ladder,
     neighbours_within,
     situations,
     teaching_course,
@@ -287,20 +293,16 @@ def test_the_compact_design_shows_each_pair_once_balanced(example):
     assert Counter(frozenset(p) for p in pairs) == {frozenset(p): 1 for p in itertools.combinations(EXAMPLE_TERRAIN, 2)}
     left, right = Counter(a for a, _ in pairs), Counter(b for _, b in pairs)
     assert all(abs(left[c] - right[c]) <= 1 for c in EXAMPLE_TERRAIN)
-    assert Counter(middle for _, middle, _ in strips) == {c: 1 for c in EXAMPLE_TERRAIN}
-    walls = [left if left in EXAMPLE_LETHAL else right for left, _, right in strips]
-    assert sorted(walls) == sorted(EXAMPLE_LETHAL)  # six strips: each lethal class once
-    on_left = sum(left in EXAMPLE_LETHAL for left, _, _ in strips)
-    assert abs(on_left - (len(strips) - on_left)) <= 1
+    assert strips == []  # left to the follow-up's ladder
     # Each feature class alone once, and lethal terrain alone twice (LETHAL_LONE): its first two classes.
     assert Counter(s.classes[0] for s in lone) == {c: 1 for c in (*EXAMPLE_TERRAIN, *EXAMPLE_LETHAL[:LETHAL_LONE])}
     for kind in (EXAMPLE_TERRAIN, EXAMPLE_LETHAL):
         positive = sum(s.offset_m > 0 for s in lone if s.classes[0] in kind)
         assert abs(positive - (sum(s.classes[0] in kind for s in lone) - positive)) <= 1
-    # Each kind spread over the whole drive: every third of it has pairs, strips and lone patches.
+    # Each kind spread over the whole drive: every third of it has pairs, lone patches and lanes.
     items = situations(example, full=False)
     thirds = [items[i * len(items) // 3 : (i + 1) * len(items) // 3] for i in range(3)]
-    assert all({s.kind for s in third} == {"pair", "strip", "lone", "lane"} for third in thirds)
+    assert all({s.kind for s in third} == {"pair", "lone", "lane"} for third in thirds)
     assert sorted(s.classes[1] for s in items if s.kind == "lane") == sorted(EXAMPLE_TERRAIN)
 
 
@@ -377,11 +379,47 @@ def test_a_follow_up_is_named_after_the_courses_driven(example):
     assert "3 drives of courses/a.yaml and b together left open (grass vs mud)" in course.description
     assert follow_up_after(example, pairs, ["a"], "more")[0].name == "more"
     assert "the drive of a left open" in follow_up_after(example, pairs, ["a"])[0].description
-    course, items = follow_up_after(example, [("dirt", "bush")], ["a"], neighbours=[("water", "dirt")])
+    course, items = follow_up_after(example, [("dirt", "bush")], ["a"], beside=Beside(neighbours=[("water", "dirt")]))
     assert items == follow_up(example, [("dirt", "bush"), ("water", "dirt")])
     assert (
         "left open (dirt vs bush), beside their neighbours in the learned order (water vs dirt), each once, the sides" in course.description
     )
+
+
+def test_a_compact_course_leaves_its_strips_to_the_ladder_and_a_fitting_table_keeps_them():
+    """A table too large for the full design drives no strip; --design compact of a table whose
+    full design fits, and a compact course with relief, keep each strip once."""
+    large, fitting = _synthetic(6, lethal=2), _synthetic(3, lethal=1)
+    assert not fits(large) and fits(fitting)
+    assert [s for s in situations(large, full=False) if s.kind == "strip"] == []
+    assert "no strip (its follow-up shows the learned order's)" in description(large, False)
+    for table, items in ((fitting, situations(fitting, full=False)), (large, situations(large, full=False, relief=True))):
+        assert Counter(s.classes[1] for s in items if s.kind == "strip") == {c: 1 for c in table.terrain_names}
+
+
+def test_the_ladder_puts_each_class_beside_the_next_better_and_the_best_alone_at_two_sizes(example):
+    order = ["mud", "lethal", "water", "gravel", "grass", "dirt"]  # other names than feature classes are passed over
+    items = ladder(example, order)
+    strips, lone = [s for s in items if s.kind == "strip"], [s for s in items if s.kind == "lone"]
+    wall = example.lethal[0]
+    assert [s.classes for s in strips] == [(wall, "water", "mud"), ("water", "gravel", wall), (wall, "dirt", "gravel")]
+    assert [(s.classes, s.offset_m, s.size_m) for s in lone] == [
+        (("mud",), LONE_OFFSET_M, BRACKET_SIZES_M[0]),
+        (("mud",), -LONE_OFFSET_M, BRACKET_SIZES_M[1]),
+    ]
+    assert ladder(example, []) == [] and ladder(example, ["lethal"]) == []
+    # The brackets are rectangles of their sizes, scored as lone patches; the course says what it shows.
+    course, shown = follow_up_after(example, [("dirt", "bush")], ["teaching_course"], beside=Beside(order=order))
+    unshortened = [replace(s, legs_m=None) for s in shown]
+    assert sorted(map(repr, unshortened)) == sorted(map(repr, [*follow_up(example, [("dirt", "bush")]), *items]))
+    assert "the order the drive of teaching_course learned (mud > water > gravel > dirt) as strips" in course.description
+    # With a ladder, each situation has the shorter trail; without one, its kind's.
+    assert all(s.legs_m == (LADDER_HALF_M[s.kind],) * 2 for s in shown)
+    assert all(s.legs_m is None for s in follow_up_after(example, [("dirt", "bush")], ["teaching_course"])[1])
+    scenario = parse_scenario(course.data(), "more", example)
+    assert [z.label for z in scenario.zones] == [s.label for s in shown]
+    mud = [p for p in course.data()["terrain"] if p["class"] == "mud" and "rectangle" in p]
+    assert set(BRACKET_SIZES_M) <= {tuple(p["rectangle"]["size"]) for p in mud}  # beside the strip mud is the better side of
 
 
 def test_a_follow_up_shows_neighbours_within_its_length_and_every_open_pair(example):
@@ -817,27 +855,50 @@ def test_course_after_names_what_no_further_course_settles_and_writes_nothing(tm
     assert list(tmp_path.iterdir()) == []
 
 
+def test_the_ladder_follows_one_drive_of_a_table_too_large_for_the_full_design(tmp_path, capsys, monkeypatch, fig7_recording):
+    """After one drive of a compact course (no strips) the follow-up shows the learned order's
+    ladder instead of the open pairs' neighbours; after two drives, or of a table whose full design
+    fits, it does not."""
+    import terrapref.scenario.teaching as teaching
+    from terrapref.demos.recording import read_recording
+    from terrapref.recipes import DEFAULT_RECIPE, follow_up_plan, recipe_named
+
+    rec, recipe = read_recording(fig7_recording), recipe_named(DEFAULT_RECIPE)
+    as_drawn = follow_up_plan([rec], recipe)
+    assert as_drawn.ladder == ()  # the default table's full design fits
+    monkeypatch.setattr(teaching, "fits", lambda classes, relief=False: False)
+    plan = follow_up_plan([rec], recipe)
+    learned = list(plan.ladder)
+    assert learned and set(learned) <= set(rec.classes.terrain_names) and plan.neighbours == () and plan.anything
+    assert plan.open == as_drawn.open
+    assert follow_up_plan([rec, rec], recipe).ladder == ()
+    more = tmp_path / "more.yaml"
+    assert main(["course", "--after", str(fig7_recording), "--out", str(more)]) == 0
+    printed = capsys.readouterr().out
+    assert f"it shows the order the drive learned ({' > '.join(learned)}) as strips, and {learned[0]} alone at two sizes" in printed
+    labels = [z.label for z in resolve_scenario(str(more)).zones]
+    assert f"{rec.classes.lethal[0]} | {learned[1]} | {learned[0]}" in labels  # the first step: the second class on the path
+
+
 @pytest.mark.slow
-def test_the_readmes_follow_up_loop_on_the_example_table_ends_after_two_follow_ups(tmp_path, capsys):
-    """README "Your own classes": the teaching drive, the follow-up course it asks for, the one
-    the two drives ask for (a pair the first follow-up's frames moved), and then nothing left
-    open, as the README says; the three drives within 12 minutes."""
-    profile = "mud,water,dirt,bush,puddle,gravel,lethal"
-    course, me, more, me_more, more2, me_more2, more3 = (
-        tmp_path / n for n in ("course.yaml", "me", "more.yaml", "me_more", "more2.yaml", "me_more2", "more3.yaml")
-    )
-    assert main(["course", "--classes", str(EXAMPLE), "--out", str(course)]) == 0
-    assert main(["record", str(course), "--profile", profile, "--out", str(me), "--quiet"]) == 0
-    assert main(["course", "--after", str(me), "--out", str(more)]) == 0
-    assert main(["record", str(more), "--profile", profile, "--out", str(me_more), "--quiet"]) == 0
-    assert main(["course", "--after", str(me), str(me_more), "--out", str(more2)]) == 0
-    assert main(["record", str(more2), "--profile", profile, "--out", str(me_more2), "--quiet"]) == 0
-    capsys.readouterr()
-    assert main(["course", "--after", str(me), str(me_more), str(me_more2), "--out", str(more3)]) == 0
-    assert "the drives together identified every pair of classes" in capsys.readouterr().out and not more3.exists()
+def test_the_readmes_follow_up_loop_on_the_example_table_ends_after_one_follow_up(tmp_path, capsys):
+    """README "Your own classes": the teaching drive, the follow-up course it asks for (its open
+    pairs and the ladder), and then nothing a further course settles, as the README says; the two
+    drives within 12 minutes."""
     from terrapref.demos.recording import read_recording
 
-    assert sum(read_recording(r).duration_s for r in (me, me_more, me_more2)) <= 12 * 60  # simulated time, not the test's
+    profile = "mud,water,dirt,bush,puddle,gravel,lethal"
+    course, me, more, me_more, more2 = (tmp_path / n for n in ("course.yaml", "me", "more.yaml", "me_more", "more2.yaml"))
+    assert main(["course", "--classes", str(EXAMPLE), "--out", str(course)]) == 0
+    assert main(["record", str(course), "--profile", profile, "--out", str(me), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["course", "--after", str(me), "--out", str(more)]) == 0
+    assert "it shows the order the drive learned (mud > water > dirt > bush > puddle > gravel) as strips" in capsys.readouterr().out
+    assert main(["record", str(more), "--profile", profile, "--out", str(me_more), "--quiet"]) == 0
+    assert main(["course", "--after", str(me), str(me_more), "--out", str(more2)]) == 0
+    printed = capsys.readouterr().out
+    assert "open that no further course settles (above); nothing written" in printed and not more2.exists()
+    assert sum(read_recording(r).duration_s for r in (me, me_more)) <= 12 * 60  # simulated time, not the test's
 
 
 def test_a_scenario_carrying_a_bad_table_is_refused_naming_the_field(tmp_path, capsys):

@@ -179,7 +179,7 @@ def _cmd_course(args: argparse.Namespace) -> int:
     from terrapref.plots import save_map
     from terrapref.scenario import parse_scenario
     from terrapref.scenario.relief_layout import relief_for
-    from terrapref.scenario.teaching import designed_course, follow_up_after, relief_course
+    from terrapref.scenario.teaching import Beside, designed_course, follow_up_after, relief_course
     from terrapref.terrain import default_classes
     from terrapref.world import rasterise
 
@@ -202,7 +202,7 @@ def _cmd_course(args: argparse.Namespace) -> int:
         if not _says_what_is_left(plan, args.after):
             return 0
         courses = [str(r.meta.get("scenario")) for r in recs]
-        course, items = follow_up_after(table, plan.open, courses, args.name, plan.neighbours, plan.relief)
+        course, items = follow_up_after(table, plan.open, courses, args.name, Beside(plan.neighbours, plan.relief, plan.ladder))
     else:
         table = table or default_classes()
         try:
@@ -287,7 +287,7 @@ def _follow_up_plan(recs: Sequence) -> FollowUp:
 def _says_what_is_left(plan: FollowUp, paths: Sequence[Path]) -> bool:
     """Print what the drives left open, what no further course settles and why; whether a follow-up course is to be written."""
     drives = "drives together" if len(paths) > 1 else "drive"
-    left = len(plan.open) + len(plan.left) + len(plan.relief) + len(plan.relief_left)
+    left = len(plan.open) + len(plan.left) + len(plan.relief) + len(plan.relief_left) + len(plan.ladder)
     if not left:
         print(
             f"{', '.join(map(str, paths))}: the {drives} identified every pair of classes"
@@ -303,6 +303,11 @@ def _says_what_is_left(plan: FollowUp, paths: Sequence[Path]) -> bool:
     if plan.open:
         neighbours = f"; beside them, their neighbours in the learned order: {_pairs(plan.neighbours)}" if plan.neighbours else ""
         print(f"the {drives} left {_count(plan.open, 'pair')} open for a follow-up: {_pairs(plan.open)}{neighbours}")
+    if plan.ladder:
+        print(
+            f"a compact teaching course leaves its strips to the follow-up: it shows the order the {drives} learned "
+            f"({' > '.join(plan.ladder)}) as strips, and {plan.ladder[0]} alone at two sizes"
+        )
     if plan.relief:
         print(f"the {drives} left relief unshown for a follow-up: {', '.join(plan.relief)}")
     elif plan.on_relief and not plan.relief_left:
@@ -328,7 +333,8 @@ def course_parser(sub: argparse._SubParsersAction) -> None:
         nargs="+",
         metavar="REC",
         help="recordings of the teaching course (and of the follow-ups since, in the order driven): write a short course "
-        "of the pairs their drives together left unidentified, beside their neighbours in the learned order, and of the "
+        "of the pairs their drives together left unidentified, beside their neighbours in the learned order (after one drive "
+        "of a compact teaching course, beside the ladder of that order instead), and of the "
         "relief drives on relief left unshown (a steep bank or mound, a ramp, a rough patch), or say what no further "
         "course settles (train on all the recordings after)",
     )

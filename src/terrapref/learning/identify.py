@@ -366,6 +366,9 @@ class FollowUp:
             left unshown that a further drive can still show.
         relief_left: one line per relief lesson left unshown that no further course shows, saying why.
         on_relief: whether the drives were on relief (their frames carry depth).
+        ladder: the learned order's feature classes, best first, whose ladder the course shows
+            (terrapref.scenario.teaching.ladder): after the one drive of a compact teaching
+            course, which leaves its strips to it; empty otherwise.
     """
 
     open: tuple[tuple[str, str], ...] = ()
@@ -375,11 +378,12 @@ class FollowUp:
     relief: tuple[str, ...] = ()
     relief_left: tuple[str, ...] = ()
     on_relief: bool = False
+    ladder: tuple[str, ...] = ()
 
     @property
     def anything(self) -> bool:
         """Whether a follow-up course has something to show."""
-        return bool(self.open or self.relief)
+        return bool(self.open or self.relief or self.ladder)
 
 
 def plan_follow_up(

@@ -292,12 +292,14 @@ def follow_up_plan(
     leaves (:func:`~terrapref.learning.identify.plan_follow_up`): the drives featurised (with
     ``recipe.features(features)``; ``cache`` and ``frames``, the progress by frame, as
     build_dataset takes them) and steadied as ``recipe`` trains; the report ``inspect`` prints
-    of all of them, and of all but the last. Its neighbours are those the course can show
-    (:func:`~terrapref.scenario.teaching.neighbours_within`)."""
+    of all of them, and of all but the last. After one drive of a table whose teaching course is
+    compact, on flat ground, it shows the ladder of the learned order in place of the open
+    pairs' neighbours (:func:`~terrapref.scenario.teaching.ladder`); else its neighbours are
+    those the course can show (:func:`~terrapref.scenario.teaching.neighbours_within`)."""
     from terrapref.learning.identify import plan_follow_up
     from terrapref.learning.train import comparisons_by_drive, identify
     from terrapref.recipes.lessons import relief_plan
-    from terrapref.scenario.teaching import neighbours_within
+    from terrapref.scenario.teaching import fits, neighbours_within
 
     cache = {} if cache is None else cache  # the drives before the last are featurised once for both reports
     steady = recipe.train.data.steady_labels
@@ -309,9 +311,14 @@ def follow_up_plan(
     before = dataset(recordings[:-1]) if len(recordings) > 1 else None
     earlier = identify(before, steady=steady) if before is not None else None
     last = str(recordings[-1].path)
-    plan = plan_follow_up(identify(pooled, steady=steady), comparisons_by_drive(pooled, steady), earlier, last)
+    learned = identify(pooled, steady=steady)
+    plan = plan_follow_up(learned, comparisons_by_drive(pooled, steady), earlier, last)
     relief, relief_left, on_relief = relief_plan(pooled, before, last)
-    neighbours = neighbours_within(recordings[0].classes, plan.open, plan.neighbours, relief)
+    classes = recordings[0].classes
+    if len(recordings) == 1 and not on_relief and not fits(classes):
+        order = tuple(c for c in learned.order if c in classes.terrain_names)
+        return replace(plan, neighbours=(), relief=relief, relief_left=relief_left, ladder=order)
+    neighbours = neighbours_within(classes, plan.open, plan.neighbours, relief)
     return replace(plan, neighbours=tuple(neighbours), relief=relief, relief_left=relief_left, on_relief=on_relief)
 
 
@@ -327,19 +334,20 @@ def _follow_up(
     (written as ``workdir/<course>_more.yaml``); none when they identify every pair. ``cache``
     keeps the recordings' features for training (build_dataset)."""
     from terrapref.fileio import write_text_atomic
-    from terrapref.scenario.teaching import follow_up_course
+    from terrapref.scenario.teaching import Beside, follow_up_course
 
     plan = follow_up_plan(recordings, recipe, setup.features, cache)
-    if not plan.open:
+    if not (plan.open or plan.ladder):
         return []
     scenario = resolve_scenario(str(setup.course), setup.classes)
     name = f"{scenario.name}_more"
-    course = follow_up_course(scenario.classes, plan.open, name, [scenario.name], neighbours=plan.neighbours)
+    course = follow_up_course(scenario.classes, plan.open, name, [scenario.name], Beside(plan.neighbours, order=plan.ladder))
     path = workdir / f"{name}_s{setup.seed}_{'_'.join(c[:2] for c in (setup.profile.order if setup.profile else ()))}.yaml"
     workdir.mkdir(parents=True, exist_ok=True)
     write_text_atomic(path, course.to_yaml())
     if log:
-        log(f"follow-up course: {len(plan.open)} pairs open ({', '.join(f'{a} vs {b}' for a, b in plan.open)})")
+        ladder = f"; the ladder of {' > '.join(plan.ladder)}" if plan.ladder else ""
+        log(f"follow-up course: {len(plan.open)} pairs open ({', '.join(f'{a} vs {b}' for a, b in plan.open)}){ladder}")
     return demonstrate(replace(recipe, demonstrations=1), workdir, replace(setup, course=str(path)), log, write=False)
 
 

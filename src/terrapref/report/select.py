@@ -635,7 +635,7 @@ def _selection_preamble(sel: dict, seen: list[str]) -> list[str]:
         course = f"`{Path(sel['course']).name}`" if "course" in sel else "its own course"
         lines += [
             f"Every recipe demonstrated {course}"
-            f"{', then a follow-up course of the pairs its drive left open, beside their neighbours' if sel.get('follow_up') else ''}.",
+            f"{', then a follow-up course of the pairs its drive left open, beside their neighbours (or the ladder of the order it learned)' if sel.get('follow_up') else ''}.",
             "",
         ]
     return lines

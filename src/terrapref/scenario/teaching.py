@@ -7,7 +7,8 @@ when the course shows
   better side);
 - every feature class as a **strip** on the path between lethal terrain and another class (the
   driver keeps to the strip or moves over: how much worse one class is than another against a
-  2 m detour, and every class beside lethal terrain);
+  2 m detour, and every class beside lethal terrain); a compact course (below) leaves its strips
+  to the follow-up, which shows them along the order its drive learned;
 - every feature class **alone** on the path (driven through or passed on the background), and
   lethal terrain alone (passed on the background) at most :data:`LETHAL_LONE` times;
 - every feature class as a **lane**: on the path between lethal walls too wide to pass round
@@ -36,8 +37,12 @@ lethal terrain once on each side, the first lethal class alone twice (once a lit
 path, once a little right) and each feature class alone once and as a lane once, while that drive stays
 within :data:`BUDGET_M` (10 minutes at the driver's 1 m/s: up to 4 feature classes). Beyond it
 the course is *compact*: each pair once, with every class on the left as often as on the right
-(to within one), each strip, each feature class alone, each lane and the first two lethal classes
-alone once, the sides alternating (the lengths of both designs: docs/classes.md). The lethal
+(to within one), each feature class alone, each lane and the first two lethal classes alone once,
+the sides alternating, and no strip (the lengths of both designs: docs/classes.md). Its follow-up
+shows the strips instead, where they tell most: the **ladder** of the order its drive learned
+(:func:`ladder`), each class on the path beside the next better one, and the best class alone at
+two sizes that bracket its price. A course with relief, and the compact design of a table whose
+full design fits (``--design compact``), keep each strip once. The lethal
 classes share one column of the features, and each is a strip's wall and a lane's walls.
 
 Situations sit on straight legs; the trail bends a little between them (keeping to the path is
@@ -46,7 +51,8 @@ into a compact map.
 
 :func:`follow_up` makes a short course of the pairs a drive left open and their neighbours in
 the learned order (``terrapref course --after REC``), each once, the neighbours as many as keep it
-within :data:`FOLLOW_UP_M`.
+within :data:`FOLLOW_UP_M`; after the one drive of a compact course, the pairs it left open and
+the ladder instead (the ladder shows every neighbour's step).
 """
 
 from __future__ import annotations
@@ -92,6 +98,10 @@ HALF_M = {
 # driver moves over for the next terrain situation while still on the relief, and the fit reads
 # that as going round the relief (a drive priced 8 deg grades it drove over).
 RELIEF_HALF_M = {**HALF_M, "lone": 5.0, "lane": 5.0, "pair": 7.5, "strip": 7.5}
+# Half a leg of a follow-up that shows the ladder [m]: the same 1 m less trail round each pair,
+# strip and lone patch (it comes after a compact teaching course, so that the two drives of a
+# table of six feature classes stay within 12 minutes).
+LADDER_HALF_M = {**HALF_M, "lone": 5.0, "pair": 7.5, "strip": 7.5}
 RELIEF_KINDS = ("mound", "bank", "ramp", "rough", "slope")  # the situations of relief (module docstring)
 MOUND_RADIUS_M = 3.0  # a mound on the path: its radius; its height sets its steepest grade [m]
 BANK_WIDTH_M, BANK_LENGTH_M = 5.0, 9.0  # a bank beside the path: its full width and length; the path on its flank [m]
@@ -125,6 +135,11 @@ START_M, END_M = 8.0, 5.0  # trail before the first situation and after the last
 PAIR_SIZES = ((8.0, 5.0), (7.0, 5.5), (7.5, 5.0), (8.0, 5.5))  # (length, width) of a pair's patches [m]
 STRIP_M = 2.8  # width of a strip on the path [m]
 LONE_OFFSET_M = 0.3  # a lone patch lies this far left or right of the path [m]
+# The ladder's best class alone, (length, width) [m]: wider than the teaching course's lone patch
+# (3.0 by 2.6 m, gone round by a driver pricing the class above about 6.8 on the detour's scale),
+# gone round above about 10.7 and 17.3 (the synthetic driver goes round a patch L m long when its
+# price times L exceeds d^2 (L + 5), d = W / 2 - 0.3 + 0.6 the least offset that clears it).
+BRACKET_SIZES_M = ((3.0, 3.4), (2.5, 4.2))
 LANE_M, LANE_WIDTH_M = 6.0, 4.0  # a lane's length and width: lethal walls more than 1 m from a 1.2 m vehicle on its middle [m]
 LANE_WALL_M = 9.0  # each wall's width: no driver leaves the path that far (8 m at most) [m]
 BAND_WIDTH_M = 20.0  # a lane without lethal walls: the class across the whole way [m]
@@ -143,6 +158,7 @@ class Situation:
         deg: a relief situation's steepest grade or side slope [deg].
         legs_m: the trail before and after its centre [m]; None: its kind's half leg on the flat
             course (:data:`HALF_M`) each.
+        size_m: a lone patch's (length, width) as a rectangle [m]; None: the class's lone shape.
     """
 
     kind: str
@@ -150,6 +166,7 @@ class Situation:
     offset_m: float = 0.0
     deg: float = 0.0
     legs_m: tuple[float, float] | None = None
+    size_m: tuple[float, float] | None = None
 
     @property
     def before_m(self) -> float:
@@ -205,7 +222,8 @@ def balanced_pairs(names: Sequence[str]) -> list[tuple[str, str]]:
 def situations(classes: ClassTable, full: bool | None = None, relief: bool = False) -> list[Situation]:
     """The situations of ``classes``' teaching course, in driving order.
 
-    ``full``: each pair and strip on both sides (True), once (False), or whichever fits the budget
+    ``full``: each pair and strip on both sides (True), once (False; no strip where the full
+    design does not fit: the follow-up shows the :func:`ladder`), or whichever fits the budget
     (None); ``relief``: with the relief situations (:func:`relief_situations`), each pair and each
     lethal class alone once (as in the compact design), and last a mound between the gentle and
     the steep one, on the legs of a course with relief (:func:`_relief_legs`)."""
@@ -218,7 +236,7 @@ def situations(classes: ClassTable, full: bool | None = None, relief: bool = Fal
     if both_sides:
         pairs += [(b, a) for a, b in pairs]
     strips = []
-    for k, middle in enumerate(terrain):
+    for k, middle in enumerate(terrain if full or relief or fits(classes) else ()):  # else the follow-up shows the ladder
         others = [t for t in terrain if t != middle] or [classes.background]
         for side in (1, -1) if full else ((1, -1)[k % 2],):
             neighbour = others[(k + (side < 0)) % len(others)]
@@ -341,34 +359,71 @@ def neighbours_within(
     lessons can show within :data:`FOLLOW_UP_M` (the open pairs and the lessons are shown whatever
     their length: a pair left unshown would read as one a drive could not settle)."""
     shown = list(neighbours)
-    while shown and course_length(_follow_up_items(classes, [*open_pairs, *shown], relief)) > FOLLOW_UP_M:
+    while shown and course_length(_follow_up_items(classes, open_pairs, Beside(shown, relief))) > FOLLOW_UP_M:
         shown.pop()
     return shown
 
 
+@dataclass(frozen=True)
+class Beside:
+    """What a follow-up course shows beside the open pairs.
+
+    Attributes:
+        neighbours: the pairs' neighbours in the learned order
+            (:func:`~terrapref.learning.identify.bracketed`), which keep what is identified so.
+        relief: the relief lessons (:data:`RELIEF_LESSONS`) the drives left unshown.
+        order: the learned order (best first), whose :func:`ladder` the course shows; empty: none.
+    """
+
+    neighbours: Sequence[tuple[str, str]] = ()
+    relief: Sequence[str] = ()
+    order: Sequence[str] = ()
+
+
 def follow_up_course(
-    classes: ClassTable,
-    open_pairs: Sequence[tuple[str, str]],
-    name: str,
-    courses: Sequence[str],
-    neighbours: Sequence[tuple[str, str]] = (),
-    relief: Sequence[str] = (),
+    classes: ClassTable, open_pairs: Sequence[tuple[str, str]], name: str, courses: Sequence[str], beside: Beside = Beside()
 ) -> CourseBuilder:
     """The follow-up course of ``open_pairs``, which the drives of ``courses`` (each drive's
-    course, by name) left open together, and of their ``neighbours`` in the learned order
-    (:func:`~terrapref.learning.identify.bracketed`), which keep what is identified so; and of
-    the ``relief`` lessons (:data:`RELIEF_LESSONS`) they left unshown."""
+    course, by name) left open together, and of what it shows ``beside`` them."""
+    neighbours, relief, order = beside.neighbours, beside.relief, beside.order
     driven = " and ".join(dict.fromkeys(courses))
     what = f"the drive of {driven}" if len(courses) == 1 else f"{len(courses)} drives of {driven} together"
     parts = []
     if open_pairs:
         listed = "; ".join(f"{a} vs {b}" for a, b in open_pairs)
-        beside = f", beside their neighbours in the learned order ({'; '.join(f'{a} vs {b}' for a, b in neighbours)})" if neighbours else ""
-        parts.append(f"the pairs {what} left open ({listed}){beside}, each once, the sides alternating")
+        with_them = f", beside their neighbours in the learned order ({'; '.join(f'{a} vs {b}' for a, b in neighbours)})" if neighbours else ""
+        parts.append(f"the pairs {what} left open ({listed}){with_them}, each once, the sides alternating")
     if relief:
         parts.append(f"the relief {'left' if open_pairs else what + ' left'} unshown ({', '.join(relief)})")
-    items = _follow_up_items(classes, [*open_pairs, *neighbours], relief)
+    steps = [c for c in order if c in classes.terrain_names]
+    if steps:
+        parts.append(
+            f"the order {what} learned ({' > '.join(steps)}) as strips, each class on the path between the next better one "
+            f"and {_ladder_wall(classes)}, and {steps[0]} alone at two sizes"
+        )
+    items = _follow_up_items(classes, open_pairs, beside)
     return build_course(classes, items, name, f"Follow-up course: {'; and '.join(parts)}.")
+
+
+def ladder(classes: ClassTable, order: Sequence[str]) -> list[Situation]:
+    """The ladder of ``order`` (feature classes, best first; other names are passed over): each
+    class as a strip on the path beside the next better one, lethal terrain (or, in a table
+    without lethal classes, the background) on its other side, the sides alternating; then the
+    best class alone at the two sizes of :data:`BRACKET_SIZES_M`, left and right of the path.
+
+    A compact teaching course's pairs say which class of two a driver takes, not by how much; the
+    strips say how much worse each step of the order is against a 2 m detour, on which a layout's
+    triples turn, and the two lone patches bound the best class's price from above as well as
+    from below (nothing else on either course does: too wide to go round, a pair tells only the
+    order)."""
+    steps = [c for c in order if c in classes.terrain_names]
+    wall = _ladder_wall(classes)
+    out = []
+    for k, (better, worse) in enumerate(zip(steps, steps[1:])):
+        out.append(Situation("strip", (wall, worse, better) if k % 2 == 0 else (better, worse, wall)))
+    for side, size in zip((1, -1), BRACKET_SIZES_M if steps else ()):
+        out.append(Situation("lone", (steps[0],), side * LONE_OFFSET_M, size_m=size))
+    return out
 
 
 def follow_up(classes: ClassTable, open_pairs: Sequence[tuple[str, str]]) -> list[Situation]:
@@ -434,7 +489,10 @@ def build_course(classes: ClassTable, items: Sequence[Situation], name: str, des
             place_relief(c, item, s)
         elif item.kind == "lone":
             name_ = item.classes[0]
-            _lone(c, name_, order[name_], s, item.offset_m)
+            if item.size_m is None:
+                _lone(c, name_, order[name_], s, item.offset_m)
+            else:
+                c.rect(name_, s, item.offset_m, *item.size_m)
             c.zone(zid, item.label, s, (9.0, 9.0), "avoid")
         elif item.kind == "lane":
             _lane(c, item.classes, s)
@@ -517,25 +575,32 @@ def relief_course(
 
 
 def follow_up_after(
-    classes: ClassTable,
-    open_pairs: Sequence[tuple[str, str]],
-    courses: Sequence[str],
-    name: str | None = None,
-    neighbours: Sequence[tuple[str, str]] = (),
-    relief: Sequence[str] = (),
+    classes: ClassTable, open_pairs: Sequence[tuple[str, str]], courses: Sequence[str], name: str | None = None, beside: Beside = Beside()
 ) -> tuple[CourseBuilder, list[Situation]]:
     """The follow-up course of ``open_pairs``, which drives of ``courses`` (each drive's course, by
-    name) left open together (``terrapref course --after``), beside their ``neighbours`` in the
-    learned order, and of the ``relief`` lessons they left unshown, with its situations in driving
-    order; named ``name``, by default the first course's name followed by ``_more``."""
-    course = follow_up_course(classes, open_pairs, name or f"{Path(courses[0]).name}_more", courses, neighbours, relief)
-    return course, _follow_up_items(classes, [*open_pairs, *neighbours], relief)
+    name) left open together (``terrapref course --after``), and of what it shows ``beside`` them
+    (:func:`follow_up_course`), with its situations in driving order; named ``name``, by default
+    the first course's name followed by ``_more``."""
+    course = follow_up_course(classes, open_pairs, name or f"{Path(courses[0]).name}_more", courses, beside)
+    return course, _follow_up_items(classes, open_pairs, beside)
 
 
-def _follow_up_items(classes: ClassTable, pairs: Sequence[tuple[str, str]], relief: Sequence[str]) -> list[Situation]:
-    """A follow-up course's situations in driving order: ``pairs``' (:func:`follow_up`) and the
-    ``relief`` lessons' (:data:`RELIEF_LESSONS`), each spread over the course."""
-    return _interleave([follow_up(classes, pairs), [RELIEF_LESSONS[r] for r in relief]])
+def _follow_up_items(classes: ClassTable, open_pairs: Sequence[tuple[str, str]], beside: Beside = Beside()) -> list[Situation]:
+    """A follow-up course's situations in driving order: ``open_pairs``' and the neighbours'
+    (:func:`follow_up`), the relief lessons' (:data:`RELIEF_LESSONS`) and the :func:`ladder`
+    of the learned order, each spread over the course; with a ladder, on the shorter trail of
+    :data:`LADDER_HALF_M`."""
+    pairs = follow_up(classes, [*open_pairs, *beside.neighbours])
+    items = _interleave([pairs, [RELIEF_LESSONS[r] for r in beside.relief], ladder(classes, beside.order)])
+    if not beside.order:
+        return items
+    return [replace(s, legs_m=(LADDER_HALF_M[s.kind],) * 2) for s in items]
+
+
+def _ladder_wall(classes: ClassTable) -> str:
+    """The class on a ladder strip's outer side: the first lethal class, or without lethal
+    classes the background."""
+    return classes.lethal[0] if classes.lethal else classes.background
 
 
 def write_teaching_course(folder: str | Path, classes: ClassTable, relief: bool = False) -> Path:
@@ -570,12 +635,14 @@ def description(classes: ClassTable, full: bool, relief: bool = False) -> str:
     )
     beside = "each other class" if full and relief and n > 1 else "another class"  # a full course with relief: up to 3 classes
     strip = f"between lethal terrain and {beside}" if classes.lethal else "between two other classes"  # a table without lethal classes
+    shown = full or relief or fits(classes)
+    strips = f"every class as a strip on the path {strip}" if shown else "no strip (its follow-up shows the learned order's)"
     alone = "every class alone on the path"
     shown = list(dict.fromkeys(name for name, _ in _lethal_alone(classes.lethal, n, full and not relief)))
     if shown != list(classes.lethal):  # the others shown as walls
         alone = f"every feature class alone on the path, and lethal terrain ({', '.join(shown)})"
     return (
         f"Teaching course for {n} feature class{'es' if n != 1 else ''} ({', '.join(classes.terrain_names)}): {design}; "
-        f"every class as a strip on the path {strip}; {alone}; "
+        f"{strips}; {alone}; "
         f"every feature class as a lane, driven along at the driver's speed on it."
     )
