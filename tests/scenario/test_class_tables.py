@@ -855,7 +855,7 @@ def test_course_after_names_what_no_further_course_settles_and_writes_nothing(tm
     assert list(tmp_path.iterdir()) == []
 
 
-def test_the_ladder_follows_one_drive_of_a_table_too_large_for_the_full_design(tmp_path, capsys, monkeypatch, fig7_recording):
+def test_the_ladder_follows_one_drive_of_a_table_too_large_for_the_full_design(tmp_path, capsys, monkeypatch, short_recording):
     """After one drive of a compact course (no strips) the follow-up shows the learned order's
     ladder instead of the open pairs' neighbours; after two drives, or of a table whose full design
     fits, it does not."""
@@ -863,17 +863,17 @@ def test_the_ladder_follows_one_drive_of_a_table_too_large_for_the_full_design(t
     from terrapref.demos.recording import read_recording
     from terrapref.recipes import DEFAULT_RECIPE, follow_up_plan, recipe_named
 
-    rec, recipe = read_recording(fig7_recording), recipe_named(DEFAULT_RECIPE)
-    as_drawn = follow_up_plan([rec], recipe)
+    rec, recipe, cache = read_recording(short_recording), recipe_named(DEFAULT_RECIPE), {}  # the drive featurised once
+    as_drawn = follow_up_plan([rec], recipe, cache=cache)
     assert as_drawn.ladder == ()  # the default table's full design fits
     monkeypatch.setattr(teaching, "fits", lambda classes, relief=False: False)
-    plan = follow_up_plan([rec], recipe)
+    plan = follow_up_plan([rec], recipe, cache=cache)
     learned = list(plan.ladder)
     assert learned and set(learned) <= set(rec.classes.terrain_names) and plan.neighbours == () and plan.anything
     assert plan.open == as_drawn.open
-    assert follow_up_plan([rec, rec], recipe).ladder == ()
+    assert follow_up_plan([rec, rec], recipe, cache=cache).ladder == ()
     more = tmp_path / "more.yaml"
-    assert main(["course", "--after", str(fig7_recording), "--out", str(more)]) == 0
+    assert main(["course", "--after", str(short_recording), "--out", str(more)]) == 0
     printed = capsys.readouterr().out
     assert f"it shows the order the drive learned ({' > '.join(learned)}) as strips, and {learned[0]} alone at two sizes" in printed
     labels = [z.label for z in resolve_scenario(str(more)).zones]
