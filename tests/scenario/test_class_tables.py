@@ -46,6 +46,7 @@ from terrapref.scenario.teaching import (
     follow_up,
     follow_up_after,
     ladder,
+    ladder_follows,
     neighbours_within,
     situations,
     teaching_course,
@@ -390,10 +391,16 @@ def test_a_compact_course_leaves_its_strips_to_the_ladder_and_a_fitting_table_ke
     """A table too large for the full design drives no strip; --design compact of a table whose
     full design fits, and a compact course with relief, keep each strip once."""
     large, fitting = _synthetic(6, lethal=2), _synthetic(3, lethal=1)
-    assert not fits(large) and fits(fitting)
+    unwalled = _synthetic(6, lethal=0)  # a ladder's strips would have the background beside them
+    assert not fits(large) and fits(fitting) and not fits(unwalled)
+    assert [ladder_follows(t) for t in (large, fitting, unwalled)] == [True, False, False]
     assert [s for s in situations(large, full=False) if s.kind == "strip"] == []
     assert "no strip (its follow-up shows the learned order's)" in description(large, False)
-    for table, items in ((fitting, situations(fitting, full=False)), (large, situations(large, full=False, relief=True))):
+    for table, items in (
+        (fitting, situations(fitting, full=False)),
+        (large, situations(large, full=False, relief=True)),
+        (unwalled, situations(unwalled, full=False)),
+    ):
         assert Counter(s.classes[1] for s in items if s.kind == "strip") == {c: 1 for c in table.terrain_names}
 
 
@@ -408,6 +415,11 @@ def test_the_ladder_puts_each_class_beside_the_next_better_and_the_best_alone_at
         (("mud",), -LONE_OFFSET_M, BRACKET_SIZES_M[1]),
     ]
     assert ladder(example, []) == [] and ladder(example, ["lethal"]) == []
+    # One class: no step, its two sizes alone; no ladder: the trail as the open pairs' own.
+    course, shown = follow_up_after(example, [("dirt", "bush")], ["a"], beside=Beside(order=["grass", "mud", "lethal"]))
+    assert [s.kind for s in shown].count("strip") == 0 and [s.size_m for s in shown if s.kind == "lone"] == list(BRACKET_SIZES_M)
+    assert "mud, the best class the drive of a learned, alone at two sizes" in course.description
+    assert all(s.legs_m is None for s in follow_up_after(example, [("dirt", "bush")], ["a"], beside=Beside(order=["lethal"]))[1])
     # The brackets are rectangles of their sizes, scored as lone patches; the course says what it shows.
     course, shown = follow_up_after(example, [("dirt", "bush")], ["teaching_course"], beside=Beside(order=order))
     unshortened = [replace(s, legs_m=None) for s in shown]
@@ -866,7 +878,7 @@ def test_the_ladder_follows_one_drive_of_a_table_too_large_for_the_full_design(t
     rec, recipe, cache = read_recording(short_recording), recipe_named(DEFAULT_RECIPE), {}  # the drive featurised once
     as_drawn = follow_up_plan([rec], recipe, cache=cache)
     assert as_drawn.ladder == ()  # the default table's full design fits
-    monkeypatch.setattr(teaching, "fits", lambda classes, relief=False: False)
+    monkeypatch.setattr(teaching, "ladder_follows", lambda classes: True)  # as for a table of more classes (read when called)
     plan = follow_up_plan([rec], recipe, cache=cache)
     learned = list(plan.ladder)
     assert learned and set(learned) <= set(rec.classes.terrain_names) and plan.neighbours == () and plan.anything
@@ -875,7 +887,7 @@ def test_the_ladder_follows_one_drive_of_a_table_too_large_for_the_full_design(t
     more = tmp_path / "more.yaml"
     assert main(["course", "--after", str(short_recording), "--out", str(more)]) == 0
     printed = capsys.readouterr().out
-    assert f"it shows the order the drive learned ({' > '.join(learned)}) as strips, and {learned[0]} alone at two sizes" in printed
+    assert f"its first follow-up shows the order the drive learned ({' > '.join(learned)}) as strips, and {learned[0]} alone" in printed
     labels = [z.label for z in resolve_scenario(str(more)).zones]
     assert f"{rec.classes.lethal[0]} | {learned[1]} | {learned[0]}" in labels  # the first step: the second class on the path
 
@@ -893,7 +905,7 @@ def test_the_readmes_follow_up_loop_on_the_example_table_ends_after_one_follow_u
     assert main(["record", str(course), "--profile", profile, "--out", str(me), "--quiet"]) == 0
     capsys.readouterr()
     assert main(["course", "--after", str(me), "--out", str(more)]) == 0
-    assert "it shows the order the drive learned (mud > water > dirt > bush > puddle > gravel) as strips" in capsys.readouterr().out
+    assert "shows the order the drive learned (mud > water > dirt > bush > puddle > gravel) as strips" in capsys.readouterr().out
     assert main(["record", str(more), "--profile", profile, "--out", str(me_more), "--quiet"]) == 0
     assert main(["course", "--after", str(me), str(me_more), "--out", str(more2)]) == 0
     printed = capsys.readouterr().out

@@ -304,9 +304,12 @@ def _says_what_is_left(plan: FollowUp, paths: Sequence[Path]) -> bool:
         neighbours = f"; beside them, their neighbours in the learned order: {_pairs(plan.neighbours)}" if plan.neighbours else ""
         print(f"the {drives} left {_count(plan.open, 'pair')} open for a follow-up: {_pairs(plan.open)}{neighbours}")
     if plan.ladder:
+        if not plan.open:
+            print(f"the {drives} identified every pair of classes")
+        strips = f"as strips, and {plan.ladder[0]} " if len(plan.ladder) > 1 else ""
         print(
-            f"a compact teaching course leaves its strips to the follow-up: it shows the order the {drives} learned "
-            f"({' > '.join(plan.ladder)}) as strips, and {plan.ladder[0]} alone at two sizes"
+            f"the table has too many feature classes for the full design, so its first follow-up shows the order the {drives} "
+            f"learned ({' > '.join(plan.ladder)}) {strips}alone at two sizes"
         )
     if plan.relief:
         print(f"the {drives} left relief unshown for a follow-up: {', '.join(plan.relief)}")
@@ -333,8 +336,8 @@ def course_parser(sub: argparse._SubParsersAction) -> None:
         nargs="+",
         metavar="REC",
         help="recordings of the teaching course (and of the follow-ups since, in the order driven): write a short course "
-        "of the pairs their drives together left unidentified, beside their neighbours in the learned order (after one drive "
-        "of a compact teaching course, beside the ladder of that order instead), and of the "
+        "of the pairs their drives together left unidentified, beside their neighbours in the learned order (after the first "
+        "drive of a table too large for the full design, beside the ladder of that order instead), and of the "
         "relief drives on relief left unshown (a steep bank or mound, a ramp, a rough patch), or say what no further "
         "course settles (train on all the recordings after)",
     )

@@ -292,14 +292,16 @@ def follow_up_plan(
     leaves (:func:`~terrapref.learning.identify.plan_follow_up`): the drives featurised (with
     ``recipe.features(features)``; ``cache`` and ``frames``, the progress by frame, as
     build_dataset takes them) and steadied as ``recipe`` trains; the report ``inspect`` prints
-    of all of them, and of all but the last. After one drive of a table whose teaching course is
-    compact, on flat ground, it shows the ladder of the learned order in place of the open
-    pairs' neighbours (:func:`~terrapref.scenario.teaching.ladder`); else its neighbours are
-    those the course can show (:func:`~terrapref.scenario.teaching.neighbours_within`)."""
+    of all of them, and of all but the last. After the first drive of a table whose compact
+    course leaves its strips to the follow-up (:func:`~terrapref.scenario.teaching.ladder_follows`;
+    whatever course that drive was of), on flat ground, it shows the ladder of the learned order
+    in place of the open pairs' neighbours (:func:`~terrapref.scenario.teaching.ladder`); else
+    its neighbours are those the course can show
+    (:func:`~terrapref.scenario.teaching.neighbours_within`)."""
     from terrapref.learning.identify import plan_follow_up
     from terrapref.learning.train import comparisons_by_drive, identify
     from terrapref.recipes.lessons import relief_plan
-    from terrapref.scenario.teaching import fits, neighbours_within
+    from terrapref.scenario.teaching import ladder_follows, neighbours_within
 
     cache = {} if cache is None else cache  # the drives before the last are featurised once for both reports
     steady = recipe.train.data.steady_labels
@@ -315,7 +317,7 @@ def follow_up_plan(
     plan = plan_follow_up(learned, comparisons_by_drive(pooled, steady), earlier, last)
     relief, relief_left, on_relief = relief_plan(pooled, before, last)
     classes = recordings[0].classes
-    if len(recordings) == 1 and not on_relief and not fits(classes):
+    if len(recordings) == 1 and not on_relief and ladder_follows(classes):
         order = tuple(c for c in learned.order if c in classes.terrain_names)
         return replace(plan, neighbours=(), relief=relief, relief_left=relief_left, ladder=order)
     neighbours = neighbours_within(classes, plan.open, plan.neighbours, relief)
@@ -346,8 +348,9 @@ def _follow_up(
     workdir.mkdir(parents=True, exist_ok=True)
     write_text_atomic(path, course.to_yaml())
     if log:
-        ladder = f"; the ladder of {' > '.join(plan.ladder)}" if plan.ladder else ""
-        log(f"follow-up course: {len(plan.open)} pairs open ({', '.join(f'{a} vs {b}' for a, b in plan.open)}){ladder}")
+        shown = [f"{len(plan.open)} pairs open ({', '.join(f'{a} vs {b}' for a, b in plan.open)})"] if plan.open else []
+        shown += [f"the ladder of {' > '.join(plan.ladder)}"] if plan.ladder else []
+        log(f"follow-up course: {'; '.join(shown)}")
     return demonstrate(replace(recipe, demonstrations=1), workdir, replace(setup, course=str(path)), log, write=False)
 
 

@@ -41,8 +41,10 @@ the course is *compact*: each pair once, with every class on the left as often a
 the sides alternating, and no strip (the lengths of both designs: docs/classes.md). Its follow-up
 shows the strips instead, where they tell most: the **ladder** of the order its drive learned
 (:func:`ladder`), each class on the path beside the next better one, and the best class alone at
-two sizes that bracket its price. A course with relief, and the compact design of a table whose
-full design fits (``--design compact``), keep each strip once. The lethal
+two sizes that bracket its price (:func:`ladder_follows`: a table with a lethal class for the
+strips' wall). A compact course with relief, and the compact design of any other table
+(``--design compact`` of one whose full design fits, or one without lethal classes), keep each
+strip once. The lethal
 classes share one column of the features, and each is a strip's wall and a lane's walls.
 
 Situations sit on straight legs; the trail bends a little between them (keeping to the path is
@@ -51,8 +53,9 @@ into a compact map.
 
 :func:`follow_up` makes a short course of the pairs a drive left open and their neighbours in
 the learned order (``terrapref course --after REC``), each once, the neighbours as many as keep it
-within :data:`FOLLOW_UP_M`; after the one drive of a compact course, the pairs it left open and
-the ladder instead (the ladder shows every neighbour's step).
+within :data:`FOLLOW_UP_M`; after the first drive of a table whose compact course leaves its
+strips to it, the pairs it left open and the ladder instead (the ladder shows every neighbour's
+step), whatever course that drive was of.
 """
 
 from __future__ import annotations
@@ -222,8 +225,8 @@ def balanced_pairs(names: Sequence[str]) -> list[tuple[str, str]]:
 def situations(classes: ClassTable, full: bool | None = None, relief: bool = False) -> list[Situation]:
     """The situations of ``classes``' teaching course, in driving order.
 
-    ``full``: each pair and strip on both sides (True), once (False; no strip where the full
-    design does not fit: the follow-up shows the :func:`ladder`), or whichever fits the budget
+    ``full``: each pair and strip on both sides (True), once (False; no strip where the
+    follow-up shows the :func:`ladder`, :func:`ladder_follows`), or whichever fits the budget
     (None); ``relief``: with the relief situations (:func:`relief_situations`), each pair and each
     lethal class alone once (as in the compact design), and last a mound between the gentle and
     the steep one, on the legs of a course with relief (:func:`_relief_legs`)."""
@@ -236,7 +239,7 @@ def situations(classes: ClassTable, full: bool | None = None, relief: bool = Fal
     if both_sides:
         pairs += [(b, a) for a, b in pairs]
     strips = []
-    for k, middle in enumerate(terrain if full or relief or fits(classes) else ()):  # else the follow-up shows the ladder
+    for k, middle in enumerate(terrain if full or relief or not ladder_follows(classes) else ()):
         others = [t for t in terrain if t != middle] or [classes.background]
         for side in (1, -1) if full else ((1, -1)[k % 2],):
             neighbour = others[(k + (side < 0)) % len(others)]
@@ -346,6 +349,14 @@ def _lethal_alone(lethal: Sequence[str], first: int, both_sides: bool) -> list[t
     return sides[:LETHAL_LONE]
 
 
+def ladder_follows(classes: ClassTable) -> bool:
+    """Whether ``classes``' compact teaching course leaves its strips to the follow-up's
+    :func:`ladder`: a table too large for the full design, with a lethal class for the ladder's
+    wall (without one, a strip's other side would be the background, which most drivers take over
+    any class, and the strip would show no step of the order)."""
+    return bool(classes.lethal) and not fits(classes)
+
+
 def fits(classes: ClassTable, relief: bool = False) -> bool:
     """Whether the full design of ``classes``' course stays within :data:`BUDGET_M`, or with
     ``relief`` (its relief situations) within :data:`RELIEF_BUDGET_M`."""
@@ -391,16 +402,20 @@ def follow_up_course(
     parts = []
     if open_pairs:
         listed = "; ".join(f"{a} vs {b}" for a, b in open_pairs)
-        with_them = f", beside their neighbours in the learned order ({'; '.join(f'{a} vs {b}' for a, b in neighbours)})" if neighbours else ""
+        with_them = (
+            f", beside their neighbours in the learned order ({'; '.join(f'{a} vs {b}' for a, b in neighbours)})" if neighbours else ""
+        )
         parts.append(f"the pairs {what} left open ({listed}){with_them}, each once, the sides alternating")
     if relief:
         parts.append(f"the relief {'left' if open_pairs else what + ' left'} unshown ({', '.join(relief)})")
     steps = [c for c in order if c in classes.terrain_names]
-    if steps:
+    if len(steps) > 1:
         parts.append(
             f"the order {what} learned ({' > '.join(steps)}) as strips, each class on the path between the next better one "
             f"and {_ladder_wall(classes)}, and {steps[0]} alone at two sizes"
         )
+    elif steps:
+        parts.append(f"{steps[0]}, the best class {what} learned, alone at two sizes")
     items = _follow_up_items(classes, open_pairs, beside)
     return build_course(classes, items, name, f"Follow-up course: {'; and '.join(parts)}.")
 
@@ -590,16 +605,16 @@ def _follow_up_items(classes: ClassTable, open_pairs: Sequence[tuple[str, str]],
     (:func:`follow_up`), the relief lessons' (:data:`RELIEF_LESSONS`) and the :func:`ladder`
     of the learned order, each spread over the course; with a ladder, on the shorter trail of
     :data:`LADDER_HALF_M`."""
-    pairs = follow_up(classes, [*open_pairs, *beside.neighbours])
-    items = _interleave([pairs, [RELIEF_LESSONS[r] for r in beside.relief], ladder(classes, beside.order)])
-    if not beside.order:
+    pairs, rungs = follow_up(classes, [*open_pairs, *beside.neighbours]), ladder(classes, beside.order)
+    items = _interleave([pairs, [RELIEF_LESSONS[r] for r in beside.relief], rungs])
+    if not rungs:
         return items
     return [replace(s, legs_m=(LADDER_HALF_M[s.kind],) * 2) for s in items]
 
 
 def _ladder_wall(classes: ClassTable) -> str:
-    """The class on a ladder strip's outer side: the first lethal class, or without lethal
-    classes the background."""
+    """The class on a ladder strip's outer side: the first lethal class (the background for a
+    table without one, which :func:`ladder_follows` gives no ladder)."""
     return classes.lethal[0] if classes.lethal else classes.background
 
 
@@ -635,7 +650,7 @@ def description(classes: ClassTable, full: bool, relief: bool = False) -> str:
     )
     beside = "each other class" if full and relief and n > 1 else "another class"  # a full course with relief: up to 3 classes
     strip = f"between lethal terrain and {beside}" if classes.lethal else "between two other classes"  # a table without lethal classes
-    shown = full or relief or fits(classes)
+    shown = full or relief or not ladder_follows(classes)
     strips = f"every class as a strip on the path {strip}" if shown else "no strip (its follow-up shows the learned order's)"
     alone = "every class alone on the path"
     shown = list(dict.fromkeys(name for name, _ in _lethal_alone(classes.lethal, n, full and not relief)))
