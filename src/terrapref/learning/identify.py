@@ -367,8 +367,9 @@ class FollowUp:
         relief_left: one line per relief lesson left unshown that no further course shows, saying why.
         on_relief: whether the drives were on relief (their frames carry depth).
         ladder: the learned order's feature classes, best first, whose ladder the course shows
-            (terrapref.scenario.teaching.ladder): after the one drive of a compact teaching
-            course, which leaves its strips to it; empty otherwise.
+            (terrapref.scenario.teaching.ladder): after the first drive of a table whose compact
+            course leaves its strips to it (terrapref.scenario.teaching.ladder_follows); empty
+            otherwise.
     """
 
     open: tuple[tuple[str, str], ...] = ()

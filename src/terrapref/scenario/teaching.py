@@ -7,8 +7,9 @@ when the course shows
   better side);
 - every feature class as a **strip** on the path between lethal terrain and another class (the
   driver keeps to the strip or moves over: how much worse one class is than another against a
-  2 m detour, and every class beside lethal terrain); a compact course (below) leaves its strips
-  to the follow-up, which shows them along the order its drive learned;
+  2 m detour, and every class beside lethal terrain); the compact course of a table with lethal
+  classes (below) leaves its strips to the follow-up, which shows them along the order its drive
+  learned;
 - every feature class **alone** on the path (driven through or passed on the background), and
   lethal terrain alone (passed on the background) at most :data:`LETHAL_LONE` times;
 - every feature class as a **lane**: on the path between lethal walls too wide to pass round
