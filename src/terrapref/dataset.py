@@ -25,6 +25,7 @@ from terrapref.scenario import Scenario, parse_scenario
 from terrapref.scenario.path import PathTracker, ReferencePath
 from terrapref.tensorfile import read_tensor_file, write_tensor_file
 from terrapref.terrain import ClassTable
+from terrapref.terrain.classes import ForeignIds
 from terrapref.world import rasterise
 
 FORMAT = "terrapref-dataset/2"
@@ -193,9 +194,7 @@ def _read_frames(
     readers: list,
 ) -> Iterator[tuple[int, np.ndarray]]:
     """(j, U of the j-th of the ``keep`` frames), in order, each frame also given to the rules' ``readers``."""
-    known = np.zeros(256, dtype=bool)
-    known[[c.id for c in recording.classes.classes]] = True
-    known[255] = True
+    foreign = ForeignIds(recording.classes)
     rec_camera = CameraConfig.from_dict(recording.meta["camera"])
     shape = (rec_camera.height_px, rec_camera.width_px)
     tracker = PathTracker(path)
@@ -206,7 +205,7 @@ def _read_frames(
     v_max = _max_speed(recording.meta)
     for j, i in enumerate(keep):
         pose = tuple(recording.poses[i])
-        view = _frame_view(recording, i, renderer, pose, shape, known)
+        view = _frame_view(recording, i, renderer, pose, shape, foreign)
         gap_s = recording.times[i] - recording.times[keep[j - 1]] if j > 0 else 0.0
         s = tracker.update(recording.poses[i, :2], ahead_m=v_max * gap_s + 2.0 if gap_s > 1.5 * period else None)
         frame_u = featurizer(view, pose, path, s)
@@ -216,7 +215,7 @@ def _read_frames(
 
 
 def _frame_view(
-    recording: Recording, i: int, renderer: SegmentationRenderer | None, pose: tuple, shape: tuple[int, int], known: np.ndarray
+    recording: Recording, i: int, renderer: SegmentationRenderer | None, pose: tuple, shape: tuple[int, int], foreign: ForeignIds
 ) -> SegmentationView:
     """Frame ``i`` as the featurizer reads it, with its depth image and the body's attitude where
     it carries one (a recording without an attitude is taken as level): re-rendered under
@@ -233,11 +232,12 @@ def _frame_view(
     if recording.views is not None:
         return recording.view(i)
     image = recording.image(i)
-    if image.shape != shape or not known[image].all():
+    unknown = foreign(image) if image.shape == shape else []
+    if image.shape != shape or unknown:
         what = (
             f"is {image.shape[1]} x {image.shape[0]}, the camera's {shape[1]} x {shape[0]}"
             if image.shape != shape
-            else f"holds class ids {sorted(set(np.unique(image).tolist()) - set(np.flatnonzero(known).tolist()))[:5]} that the class table does not have"
+            else f"holds class ids {unknown[:5]} that the class table does not have"
         )
         raise UserError(str(recording.path / recording.image_files[i]), what)
     depth = recording.depth(i)
