@@ -451,6 +451,18 @@ def test_trees_wider_than_every_fitted_offset_are_escaped_beyond_them(camera):
     assert _clearance(_drive(stuck, scenario, camera, 34.0), (16.0, 10.0), (2.5, 7.0)) == 0.0  # without escape it drives in
 
 
+def test_trees_beside_the_vehicle_and_others_ahead_on_the_other_side_are_no_wall_to_escape(camera):
+    # Trees 3 m wide along the right of the path (their edge on it), then trees on the left 1.4 m
+    # from it: every fitted offset meets one or the other somewhere 11 m ahead, but no offset
+    # meets both at once. The vehicle holds left of the first and comes back between; taken for
+    # a wall across the way, it made for an escape 4.2 m right, across the first trees, and ran into them.
+    right = {"class": "non_traversable", "rectangle": {"center": [11.5, 8.5], "size": [9.0, 3.0]}}
+    left = {"class": "non_traversable", "rectangle": {"center": [21.5, 15.0], "size": [7.0, 7.2]}}
+    poses = _drive(OffsetSteering(OffsetUtility(DRIVER_LIKE, 5.0), camera, _terrain((0,)), CONTROL), _scenario([right, left]), camera, 27.0)
+    assert _clearance(poses, (11.5, 8.5), (9.0, 3.0)) > 0.6 and _clearance(poses, (21.5, 15.0), (7.0, 7.2)) > 0.6
+    assert np.abs(poses[:, 1] - 10.0).max() < 3.0  # never out for an escape
+
+
 def _taken(scenario, camera: PinholeCamera, pose, held: float, speed_mps: float | None = None) -> float:
     """The offset a fresh rule holds after one frame seen at ``pose`` (on the test path, which
     starts at x = 2 m), holding ``held`` before it, the vehicle going at ``speed_mps``."""

@@ -19,8 +19,10 @@ candidate offset d. The rule then:
    falls short of the best by at most the same margin: at speed, a swap of sides costs more
    ground than the check prices, and under a robot's pose noise such swaps left it too late to
    get round;
-4. but first, when lethal terrain lies across every offset the utility was fitted on, as far
-   ahead as the offset features read (a lethal patch wider than they reach), takes the nearest offset
+4. but first, when lethal terrain lies across every offset the utility was fitted on at once,
+   somewhere as far ahead as the offset features read (a lethal patch wider than they reach; not
+   one patch beside the vehicle and another ahead on the other side, which the held offset and
+   then another get round), takes the nearest offset
    beyond them on the side of the offset held, up to ``escape_factor`` times as far, that is clear
    of it, and holds it while it stays clear; the utility cannot price those offsets, so they serve
    only to get round lethal terrain;
@@ -552,7 +554,7 @@ class OffsetSteering(SteeringRunner):
             lines = None  # the offsets' lines to the horizon, when the far read below already holds them
             if self._lines(gmap, self._outermost, path, progress_m, self._far_stations).all():  # the outermost two first: cheaper
                 far = self._hits(gmap, self.offsets, path, progress_m, self._far_stations)
-                if far.any(axis=1).all():
+                if far.all(axis=0).any():  # across every offset at once: not two patches, one beside and one ahead
                     escape = self._escape(gmap, value, path, progress_m)
                 if len(self._line_stations) <= far.shape[1]:
                     lines = far[:, : len(self._line_stations)].any(axis=1)  # the same stations, from the same start and step
