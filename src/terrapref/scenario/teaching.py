@@ -240,7 +240,7 @@ def situations(classes: ClassTable, full: bool | None = None, relief: bool = Fal
     if both_sides:
         pairs += [(b, a) for a, b in pairs]
     strips = []
-    for k, middle in enumerate(terrain if full or relief or not ladder_follows(classes) else ()):
+    for k, middle in enumerate(terrain if shows_strips(classes, full, relief) else ()):
         others = [t for t in terrain if t != middle] or [classes.background]
         for side in (1, -1) if full else ((1, -1)[k % 2],):
             neighbour = others[(k + (side < 0)) % len(others)]
@@ -356,6 +356,12 @@ def ladder_follows(classes: ClassTable) -> bool:
     wall (without one, a strip's other side would be the background, which most drivers take over
     any class, and the strip would show no step of the order)."""
     return bool(classes.lethal) and not fits(classes)
+
+
+def shows_strips(classes: ClassTable, full: bool, relief: bool) -> bool:
+    """Whether ``classes``' teaching course of the ``full`` design or not, with ``relief`` or not,
+    shows its strips: all but the compact course whose follow-up shows the :func:`ladder`."""
+    return full or relief or not ladder_follows(classes)
 
 
 def fits(classes: ClassTable, relief: bool = False) -> bool:
@@ -651,8 +657,11 @@ def description(classes: ClassTable, full: bool, relief: bool = False) -> str:
     )
     beside = "each other class" if full and relief and n > 1 else "another class"  # a full course with relief: up to 3 classes
     strip = f"between lethal terrain and {beside}" if classes.lethal else "between two other classes"  # a table without lethal classes
-    shown = full or relief or not ladder_follows(classes)
-    strips = f"every class as a strip on the path {strip}" if shown else "no strip (its follow-up shows the learned order's)"
+    strips = (
+        f"every class as a strip on the path {strip}"
+        if shows_strips(classes, full, relief)
+        else "no strip (its follow-up shows the learned order's)"
+    )
     alone = "every class alone on the path"
     shown = list(dict.fromkeys(name for name, _ in _lethal_alone(classes.lethal, n, full and not relief)))
     if shown != list(classes.lethal):  # the others shown as walls
