@@ -97,3 +97,31 @@ def test_a_route_keeps_off_the_maps_edge_and_a_path_that_ends_where_it_starts_is
     assert ReferencePath(route.waypoints).resampled(0.05)[0][:, 1].min() > 0.8  # never within 0.9 m (less a cell) of the edge
     with pytest.raises(RouteError, match="ends in the search cell it starts in"):
         plan_route(costmap, ReferencePath(np.array([[10.0, 10.0], [10.1, 10.1]])), prices.detour_price, prices.span_m)
+
+
+@pytest.mark.parametrize("resolution_m", [0.25, 0.7, 1.0, 2.0])
+def test_coarse_search_cells_keep_the_clearance_from_lethal_terrain(resolution_m):
+    # Trees across the path with a gap 1 m wide at y 12-13: narrower than the vehicle and its
+    # clearance (2 x 0.9 m), refused at every cell size; a gap of 3.2 m (y 12-15.2) is taken, every
+    # cell centre on the way at least 0.9 m from the trees.
+    config = RouteConfig(resolution_m=resolution_m)
+    narrow = [_band("non_traversable", (19.0, 21.0), (0.0, 12.0)), _band("non_traversable", (19.0, 21.0), (13.0, 20.0))]
+    with pytest.raises(RouteError, match="cuts the path's start from its end"):
+        _route(narrow, config)
+    route, costmap = _route(
+        [_band("non_traversable", (19.0, 21.0), (0.0, 12.0)), _band("non_traversable", (19.0, 21.0), (15.2, 20.0))], config
+    )
+    grid = route.cell_m
+    centres = (np.floor((route.waypoints - costmap.origin) / grid) + 0.5) * grid + costmap.origin  # the cells the route passes
+    across = np.maximum(np.abs(centres[:, 0] - 20.0) - 1.0, 0)
+    above = np.hypot(across, np.maximum(15.2 - centres[:, 1], 0))  # to the trees at y 15.2-20 ...
+    below = np.hypot(across, np.maximum(centres[:, 1] - 12.0, 0))  # ... and at y 0-12
+    assert min(above.min(), below.min()) >= 0.9 - 1e-9
+
+
+def test_no_diagonal_step_slips_between_lethal_cells_that_meet_at_a_corner():
+    # A wall of 1 m trees, each touching the next at a corner only, across the path.
+    wall = [_band("non_traversable", (15.0 + i, 16.0 + i), (i, i + 1.0)) for i in range(20)]
+    for resolution_m in (0.25, 1.0, 2.0):
+        with pytest.raises(RouteError, match="cuts the path's start from its end"):
+            _route(wall, RouteConfig(resolution_m=resolution_m))

@@ -12,8 +12,9 @@ k at ``-w_k`` and an offset of d metres held for L metres of path at ``-w_detour
 span)``, the span standing for swerving out and back. So a metre of route at distance d from
 the reference path costs ``price(cell) - w_detour * d^2``, and a step from distance d1 to d2
 costs ``-w_detour * span / 2 * |d2^2 - d1^2|`` more (out to d and back: the span's share).
-A cell's price is the mean over the vehicle's footprint across it; cells within half the
-vehicle's width plus a margin of lethal terrain, or off the map, are not entered. The search
+A cell's price is the mean over the vehicle's footprint across it; a cell whose centre lies
+within half the vehicle's width plus a margin of lethal terrain, or of the map's edge, is not
+entered, at any cell size. The search
 is Dijkstra's over the 8-connected grid (networkx).
 """
 
@@ -184,20 +185,31 @@ def _footprint_price(grid: Costmap, config: RouteConfig) -> np.ndarray:
 
 
 def _blocked(grid: Costmap, config: RouteConfig) -> np.ndarray:
-    """Cells the vehicle's centre may not enter: within the half width and margin of lethal
-    terrain, of ground the map does not hold, or of the map's edge."""
-    bad = ((grid.cost == LETHAL_COST) | (grid.cost == UNKNOWN_COST)).astype(float)
-    return _disc_mean(bad, (config.half_width_m + config.lethal_margin_m) / grid.resolution_m, outside=1.0) > 0
+    """Cells the vehicle's centre may not enter: those whose centre lies within the half width
+    and margin of any point of a cell of lethal terrain, of ground the map does not hold, or
+    beyond the map's edge. Measured to the nearest point of such a cell, not to its centre, so
+    that the clearance holds at any cell size: a search cell is lethal when any of the map's
+    cells within it is (:func:`coarsened`), and the lethal cell may lie at its near side."""
+    bad = (grid.cost == LETHAL_COST) | (grid.cost == UNKNOWN_COST)
+    reach = (config.half_width_m + config.lethal_margin_m) / grid.resolution_m  # in cells
+    r = math.ceil(reach + 0.5)
+    h, w = bad.shape
+    padded = np.pad(bad, r, mode="constant", constant_values=True)
+    out = bad.copy()
+    for i in range(-r, r + 1):
+        for j in range(-r, r + 1):
+            if math.hypot(max(abs(i) - 0.5, 0.0), max(abs(j) - 0.5, 0.0)) < reach:
+                out |= padded[r + i : r + i + h, r + j : r + j + w]
+    return out
 
 
-def _disc_mean(a: np.ndarray, radius_cells: float, outside: float | None = None) -> np.ndarray:
-    """The mean of ``a`` over a disc of ``radius_cells`` around each cell; beyond the edges,
-    ``outside`` (None: the nearest cell's value)."""
+def _disc_mean(a: np.ndarray, radius_cells: float) -> np.ndarray:
+    """The mean of ``a`` over a disc of ``radius_cells`` around each cell; beyond the edges, the nearest cell's value."""
     r = int(math.floor(radius_cells))
     if r == 0:
         return a.copy()
     offsets = [(i, j) for i in range(-r, r + 1) for j in range(-r, r + 1) if i * i + j * j <= radius_cells**2 + 1e-9]
-    padded = np.pad(a, r, mode="edge") if outside is None else np.pad(a, r, mode="constant", constant_values=outside)
+    padded = np.pad(a, r, mode="edge")
     h, w = a.shape
     return sum(padded[r + i : r + i + h, r + j : r + j + w] for i, j in offsets) / len(offsets)
 
