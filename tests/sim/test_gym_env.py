@@ -443,6 +443,22 @@ def test_a_start_anywhere_along_the_path():
         env.reset(options={"start": (-50.0, -50.0, 0.0)})
 
 
+def test_a_jittered_start_is_drawn_again_where_it_would_touch_lethal_terrain_or_leave_the_map():
+    # Trees from 1 m left of the start (y 6-8): the footprint, 0.6 m each side, reaches them when
+    # the jitter moves the start more than 0.4 m left; the start itself is clear. A path that starts
+    # 0.1 m from the map's western edge: a draw more than 0.1 m west falls off the map.
+    trees = {"class": "non_traversable", "rectangle": {"center": [3.0, 7.0], "size": [6.0, 2.0]}}
+    near_trees = _scenario([trees], size=(40.0, 10.0), waypoints=[[2.0, 5.0], [38.0, 5.0]])
+    near_edge = _scenario(size=(40.0, 10.0), waypoints=[[0.1, 5.0], [38.0, 5.0]])
+    for scenario in (near_trees, near_edge):
+        env = _env(scenario, start_jitter_m=0.5, start_yaw_jitter_rad=0.1, image_size=SMALL)
+        for seed in range(40):
+            env.reset(seed=seed)
+            x, y, _ = env.sim.vehicle.pose
+            assert not env.sim.started_in_contact and 0.0 <= x <= 40.0 and 0.0 <= y <= 10.0
+            assert abs(x - scenario.start[0]) <= 0.5 and abs(y - scenario.start[1]) <= 0.5
+
+
 def test_the_off_map_penalty_is_charged_once_per_exit():
     env = _env(terminate_off_map=False)
     env.reset(options={"start": (1.0, 5.0, math.pi)})  # 1 m from the western edge, facing it

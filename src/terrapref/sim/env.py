@@ -36,7 +36,7 @@ from gymnasium.error import InvalidAction, ResetNeeded
 from terrapref.camera import CameraConfig
 from terrapref.perception import Perceiver, PerceptionModel, load_perception
 from terrapref.scenario import Scenario, resolve_scenario
-from terrapref.sim.loop import SimConfig, Simulation
+from terrapref.sim.loop import Frame, SimConfig, Simulation
 from terrapref.terrain import ClassTable, load_classes
 from terrapref.terrain.profile import PreferenceProfile
 from terrapref.vehicle import Command, ControlSet, Pose, wrap_angle
@@ -46,6 +46,7 @@ ENV_ID_CONTINUOUS = "terrapref/OffRoadNavContinuous-v1"
 MAX_EPISODE_STEPS = 7200  # 12 simulated minutes at 10 Hz: twice the longest packaged course at 1 m/s, plus a minute
 RANDOM_COURSE = "gen:*"  # a freshly generated course at every reset
 RANDOM_COURSE_SEEDS = (1_000_000, 2_000_000)  # far from the layouts the docs choose and measure on (below 10,000)
+START_DRAWS = 20  # jittered starts drawn at a reset before the start unjittered is taken
 WAYPOINT_RANGE_M = 50.0  # waypoints and offsets are clipped to this, so the spaces are course-independent
 TOP_DOWN_SPAN_M = 30.0  # side of the square around the vehicle that the top-down view shows
 _SIM_CACHE = 4  # simulations kept for courses seen recently (rasterising one costs 50-130 ms)
@@ -307,32 +308,7 @@ class OffRoadNavEnv(gym.Env):
             course = f"gen:{int(self.np_random.integers(*RANDOM_COURSE_SEEDS))}"
         self.sim = self._simulation(course if course is not None else self._draw_course())
         path = self.sim.path
-        if options.get("start") is not None:
-            try:
-                start = np.asarray(options["start"], dtype=float)
-            except (TypeError, ValueError):
-                start = np.zeros(0)
-            if start.shape != (3,) or not np.isfinite(start).all():
-                raise ValueError(f"reset options: 'start' must be three finite numbers (x [m], y [m], yaw [rad]), got {options['start']!r}")
-            sx, sy = self.sim.scenario.size_m
-            if not (0.0 <= start[0] <= sx and 0.0 <= start[1] <= sy):
-                raise ValueError(f"reset options: 'start' ({start[0]:g}, {start[1]:g}) is off the {sx:g} x {sy:g} m map")
-            pose = Pose(*map(float, start))
-            self._progress_m = path.project(start[:2])[0]  # anywhere along the path
-        else:
-            x, y, yaw = self.sim.scenario.start
-            dx, dy = self.np_random.uniform(-1.0, 1.0, 2) * self.start_jitter_m
-            dyaw = self.np_random.uniform(-1.0, 1.0) * self.start_yaw_jitter_rad
-            pose = Pose(x + dx, y + dy, yaw + dyaw)
-            self._progress_m = path.project(np.array(pose[:2]), 0.0, 5.0)[0]
-        frame = self.sim.reset(pose)
-        if self.sim.started_in_contact:
-            where = "'start'" if options.get("start") is not None else f"the start of {self.sim.scenario.name!r}"
-            self._started = False
-            raise ValueError(
-                f"reset: {where} ({pose[0]:.2f}, {pose[1]:.2f}) puts the vehicle's footprint on lethal terrain; "
-                "start it clear of lethal terrain"
-            )
+        frame, pose = self._start(options.get("start"))
         if self.perception.active:
             # The first observation is the first frame as the robot's camera and localisation give
             # it; its timing applies from the first step on.
@@ -347,6 +323,52 @@ class OffRoadNavEnv(gym.Env):
         terms = dict.fromkeys(("progress", "cross_track", "collision", "off_map", "goal", "terrain"), 0.0)
         self._last_obs = self._observation(frame.view, frame.pose)
         return self._last_obs, self._info(terms, success=False, off_map=False)
+
+    def _start(self, given: Any) -> tuple[Frame, Pose]:
+        """The simulation reset at the start ``given`` in reset's options (None: the scenario's own
+        start, jittered): its first frame and the pose. A jittered start is drawn again, up to
+        :data:`START_DRAWS` times, where it falls off the map or puts the footprint on lethal
+        terrain (the scenario's file vouches for its own start alone), else the start unjittered."""
+        path = self.sim.path
+        if given is not None:
+            try:
+                start = np.asarray(given, dtype=float)
+            except (TypeError, ValueError):
+                start = np.zeros(0)
+            if start.shape != (3,) or not np.isfinite(start).all():
+                raise ValueError(f"reset options: 'start' must be three finite numbers (x [m], y [m], yaw [rad]), got {given!r}")
+            if not self._on_map(start[0], start[1]):
+                sx, sy = self.sim.scenario.size_m
+                raise ValueError(f"reset options: 'start' ({start[0]:g}, {start[1]:g}) is off the {sx:g} x {sy:g} m map")
+            pose = Pose(*map(float, start))
+            self._progress_m = path.project(start[:2])[0]  # anywhere along the path
+            frame = self.sim.reset(pose)
+        else:
+            x, y, yaw = self.sim.scenario.start
+            for _ in range(START_DRAWS):
+                dx, dy = self.np_random.uniform(-1.0, 1.0, 2) * self.start_jitter_m
+                dyaw = self.np_random.uniform(-1.0, 1.0) * self.start_yaw_jitter_rad
+                pose = Pose(x + dx, y + dy, yaw + dyaw)
+                if self._on_map(pose.x, pose.y):
+                    frame = self.sim.reset(pose)
+                    if not self.sim.started_in_contact:
+                        break
+            else:
+                pose = Pose(x, y, yaw)
+                frame = self.sim.reset(pose)
+            self._progress_m = path.project(np.array(pose[:2]), 0.0, 5.0)[0]
+        if self.sim.started_in_contact:
+            where = "'start'" if given is not None else f"the start of {self.sim.scenario.name!r}"
+            self._started = False
+            raise ValueError(
+                f"reset: {where} ({pose[0]:.2f}, {pose[1]:.2f}) puts the vehicle's footprint on lethal terrain; "
+                "start it clear of lethal terrain"
+            )
+        return frame, pose
+
+    def _on_map(self, x: float, y: float) -> bool:
+        sx, sy = self.sim.scenario.size_m
+        return 0.0 <= x <= sx and 0.0 <= y <= sy
 
     def step(self, action: Any) -> tuple[dict, float, bool, bool, dict]:
         if not self._started:
