@@ -54,6 +54,10 @@ def read_tensor_file(path: str | Path, fmt: str, missing: str, unreadable: str) 
             header = fh.metadata() or {}
             tensors = {k: fh.get_tensor(k) for k in fh.keys()}
     except (SafetensorError, OSError, ValueError) as exc:
+        if Path(path).suffix.lower() == ".onnx":
+            raise UserError(
+                source, f"{unreadable}: an ONNX file (as `terrapref export` writes); give the .safetensors file it was exported from"
+            ) from None
         reason = str(exc)  # a damaged header's reason quotes the header, kilobytes of it
         reason = reason if len(reason) <= REASON_CHARS else reason[: REASON_CHARS - 3] + "..."
         raise UserError(source, f"{unreadable} ({reason})") from None

@@ -8,7 +8,7 @@ import numpy as np
 import onnxruntime as ort
 import pytest
 
-from helpers import linear_model, model_meta
+from helpers import linear_model, model_meta, one_line_error
 from terrapref.camera import CameraConfig
 from terrapref.cli import main
 from terrapref.errors import UserError
@@ -59,6 +59,18 @@ def _model(path: Path, config: ClassifierConfig, seed: int = 0, utility: bool = 
 
 
 # --- ONNX ------------------------------------------------------------------------------------
+
+
+def test_an_onnx_export_given_where_a_model_file_is_wanted_is_named_as_one(tmp_path: Path, capsys):
+    onnx = export_onnx(load_model(_model(tmp_path / "m.safetensors", CONFIGS[0])), tmp_path / "m.onnx")
+    for argv in (["export", str(onnx), "--format", "onnx", "--out", str(tmp_path / "again.onnx")], ["info", str(onnx)]):
+        code = main(argv)
+        if argv[0] == "info":  # info reads an ONNX file as what it is
+            assert code == 0 and "C exported as ONNX" in capsys.readouterr().out
+            continue
+        assert code == 2
+        one_line_error(capsys, "m.onnx", "an ONNX file (as `terrapref export` writes); give the .safetensors file it was exported from")
+    assert not (tmp_path / "again.onnx").exists()
 
 
 @pytest.mark.parametrize("config", CONFIGS, ids=["paper", "teach", "tanh-skip", "flat-elu-ignore"])

@@ -378,6 +378,9 @@ def test_bad_construction_arguments():
             OffRoadNavEnv(**{"scenario": _scenario(), **kwargs})
     with pytest.raises(ValueError, match="finite"):
         RewardConfig(goal_reward=float("nan"))
+    for size in ((10.5, 20), "abc", (0, 5), (48,), (True, 64)):  # never truncated to whole pixels, nor read as digits
+        with pytest.raises(ValueError, match="image_size must be None or two whole numbers"):
+            OffRoadNavEnv(_scenario(), image_size=size)
 
 
 # --- the clients people use --------------------------------------------------------------------

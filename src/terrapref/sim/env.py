@@ -148,6 +148,14 @@ class EnvConfig:
             raise ValueError("n_waypoints must be >= 1 and waypoint_spacing_m > 0")
         if not (self.start_jitter_m >= 0 and self.start_yaw_jitter_rad >= 0):
             raise ValueError("start_jitter_m and start_yaw_jitter_rad must be >= 0")
+        size = self.image_size
+        whole = (
+            isinstance(size, (tuple, list))
+            and len(size) == 2
+            and all(isinstance(n, (int, np.integer)) and not isinstance(n, bool) for n in size)
+        )
+        if size is not None and not (whole and min(size) >= 1):
+            raise ValueError(f"image_size must be None or two whole numbers (height, width) [px], got {size!r}")
 
     def with_options(self, **options: Any) -> EnvConfig:
         """This config with the fields named in ``options`` changed (as an env's keywords change it)."""
