@@ -15,10 +15,11 @@ from terrapref.groundmap.costmap import LETHAL_COST
 from terrapref.interop.robot import load_waypoints
 from terrapref.learning.model_file import save_model
 from terrapref.learning.network import ClassifierConfig
-from terrapref.planner.route import RouteConfig, RouteError, plan_route
+from terrapref.planner.model import Model
+from terrapref.planner.route import RouteConfig, RouteError, plan_route, route_over
 from terrapref.rules.offset.fit import OffsetUtility
 from terrapref.rules.offset.rule import OffsetSteering
-from terrapref.scenario import load_scenario
+from terrapref.scenario import load_scenario, parse_scenario
 from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import default_classes
 from terrapref.world import rasterise
@@ -125,3 +126,27 @@ def test_no_diagonal_step_slips_between_lethal_cells_that_meet_at_a_corner():
     for resolution_m in (0.25, 1.0, 2.0):
         with pytest.raises(RouteError, match="cuts the path's start from its end"):
             _route(wall, RouteConfig(resolution_m=resolution_m))
+
+
+@pytest.mark.parametrize("height_m", [0.14, 0.16])
+def test_a_ledge_the_vehicle_cannot_climb_is_gone_round_and_one_it_can_is_crossed(tmp_path, height_m):
+    # A sill 0.5 m thick across the path (x 20-20.5, y 0-14: the path at y 10, the way round from
+    # y 14 up); the default vehicle climbs 0.15 m. The prior map's heights are known, as its classes are.
+    data = {
+        "format": "terrapref-scenario/1",
+        "name": "ledge",
+        "world": {"size_m": [40.0, 20.0], "resolution_m": 0.05, "background": "grass"},
+        "terrain": [],
+        "path": {"waypoints": [[2.0, 10.0], [38.0, 10.0]]},
+        "relief": [{"plateau": {"polygon": [[20.0, 0.0], [20.5, 0.0], [20.5, 14.0], [20.0, 14.0]], "height_m": height_m, "edge_m": 0.0}}],
+    }
+    config = ClassifierConfig(hidden=8, skip=True)
+    model = Model.load(save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), _offset_meta(DRIVER_LIKE)))
+    route = route_over(parse_scenario(data), model)
+    if height_m < 0.15:
+        assert route.max_offset_m < 0.3  # straight over it
+        return
+    dense = ReferencePath(route.waypoints).resampled(0.05)[0]
+    at_ledge = dense[np.abs(dense[:, 0] - 20.25) < 0.3]
+    assert len(at_ledge) and (at_ledge[:, 1] >= 14.0 + 0.9 - 0.25).all()  # round its end, clear by the margin (less a cell)
+    assert not np.isfinite(route.along_path_cost)  # the path itself meets the ledge

@@ -14,20 +14,24 @@ the reference path costs ``price(cell) - w_detour * d^2``, and a step from dista
 costs ``-w_detour * span / 2 * |d2^2 - d1^2|`` more (out to d and back: the span's share).
 A cell's price is the mean over the vehicle's footprint across it; a cell whose centre lies
 within half the vehicle's width plus a margin of lethal terrain, or of the map's edge, is not
-entered, at any cell size. The search
+entered, at any cell size. On a map with relief, ground past the vehicle's limits (a slope it
+may not tilt to, a step it does not climb: :func:`past_limits`) is lethal terrain too. The search
 is Dijkstra's over the 8-connected grid (networkx).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from terrapref.groundmap.costmap import LETHAL_COST, MAX_COST, UNKNOWN_COST, Costmap
+from terrapref.groundmap.height import GeometryLimits, HeightSettings
+from terrapref.groundmap.settings import MapSettings
 from terrapref.scenario.path import ReferencePath
+from terrapref.vehicle import VehicleConfig
 
 if TYPE_CHECKING:
     from terrapref.planner.model import Model
@@ -112,8 +116,36 @@ def route_over(scenario: Scenario, model: Model, config: RouteConfig | None = No
         raise ValueError(
             f"drives by rule {planner.rule.type}, which learned no prices of the ground to route with (train with recipe teach)"
         )
-    costmap = prices.prior(world if world is not None else rasterise(scenario))
+    world = world if world is not None else rasterise(scenario)
+    costmap = prices.prior(world)
+    if world.height is not None:  # ground past the vehicle's limits is lethal, as the planner's map blocks it
+        limits = GeometryLimits.of(VehicleConfig())
+        past = past_limits(world.height, world.resolution_m, limits)
+        costmap = replace(costmap, cost=np.where(past, np.int8(LETHAL_COST), costmap.cost))
     return plan_route(costmap, ReferencePath(scenario.waypoints), prices.detour_price, prices.span_m, config=config)
+
+
+def past_limits(height: np.ndarray, resolution_m: float, limits: GeometryLimits) -> np.ndarray:
+    """Which cells of a prior map's ``height`` (H, W) [m, cells ``resolution_m`` wide] are past
+    the vehicle's ``limits``, read as the planner's height layer reads the ground, in cells of
+    its map's size (the prior's heights averaged within each): a slope steeper than the vehicle
+    may tilt (the chords across the cell over the height layer's radius each way, along x and
+    along y: it may cross the cell in any heading), or a step higher than it climbs (the height's
+    range over the cell and its eight neighbours)."""
+    factor = max(1, round(MapSettings().map_resolution_m / resolution_m))
+    h, w = (n // factor * factor for n in height.shape)
+    cell = resolution_m * factor
+    blocks = height[:h, :w].astype(np.float64).reshape(h // factor, factor, w // factor, factor).mean(axis=(1, 3))
+    k = max(1, round(HeightSettings().radius_m / cell))
+    edge = np.pad(blocks, k, mode="edge")
+    bh, bw = blocks.shape
+    gx = (edge[k : k + bh, 2 * k :] - edge[k : k + bh, :bw]) / (2 * k * cell)
+    gy = (edge[2 * k :, k : k + bw] - edge[:bh, k : k + bw]) / (2 * k * cell)
+    near = np.lib.stride_tricks.sliding_window_view(edge[k - 1 : k + bh + 1, k - 1 : k + bw + 1], (3, 3))  # (bh, bw, 3, 3)
+    past = (np.arctan(np.hypot(gx, gy)) > limits.max_slope_rad) | (near.max(axis=(2, 3)) - near.min(axis=(2, 3)) > limits.max_step_m)
+    out = np.zeros(height.shape, dtype=bool)
+    out[:h, :w] = np.repeat(np.repeat(past, factor, axis=0), factor, axis=1)
+    return out
 
 
 def routed_scenario(scenario: Scenario, route: Route, by: str) -> dict:
