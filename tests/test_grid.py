@@ -66,6 +66,20 @@ def test_workers_fork_after_this_process_made_a_relief_noise(tmp_path):
     assert done.returncode == 0 and done.stdout.strip() == "True", done.stderr[-2000:]
 
 
+def stopped_inside_compiled_code(job: int) -> int:
+    """A job whose stop (Ctrl-C) arrives while compiled code runs: numba hands it back as a
+    SystemError raised while the KeyboardInterrupt is being handled."""
+    try:
+        raise KeyboardInterrupt
+    except KeyboardInterrupt:
+        raise SystemError("CPUDispatcher(<function f>) returned a result with an exception set") from None
+
+
+def test_a_stop_inside_compiled_code_stops_the_grid_rather_than_failing_a_job():
+    with pytest.raises(KeyboardInterrupt):
+        run_grid(stopped_inside_compiled_code, [0], Engine(workers=1))
+
+
 def test_a_bad_input_in_a_job_is_the_users_error_naming_the_file():
     with pytest.raises(UserError, match="input_0.yaml"):
         run_grid(bad_input, [0, 1], Engine(workers=2))

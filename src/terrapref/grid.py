@@ -98,7 +98,24 @@ def _guarded(fn: Callable[[J], R], job: J) -> tuple[bool, Any]:
     except UserError as exc:
         return False, exc
     except Exception as exc:  # noqa: BLE001 - reported with the job's inputs by run_grid
+        stop = _stop_within(exc)
+        if stop is not None:  # a stop (Ctrl-C, SIGTERM) that arrived inside compiled code comes back wrapped
+            raise stop from None
         return False, (f"{type(exc).__name__}: {exc}", traceback.format_exc())
+
+
+def _stop_within(exc: BaseException) -> BaseException | None:
+    """The stop (an exception that is not an :class:`Exception`, as KeyboardInterrupt) in ``exc``'s
+    chain of causes and contexts, if any: a signal handled while compiled code runs surfaces as
+    a SystemError whose context is the stop."""
+    seen: set[int] = set()
+    link: BaseException | None = exc
+    while link is not None and id(link) not in seen:
+        seen.add(id(link))
+        if not isinstance(link, Exception):
+            return link
+        link = link.__cause__ or link.__context__
+    return None
 
 
 def run_grid(
