@@ -55,6 +55,25 @@ def add_engine_args(p: argparse.ArgumentParser) -> None:
     )
 
 
+def add_large_arg(p: argparse.ArgumentParser, command: str) -> None:
+    """--large, the same for every command that trains and drives many models (:func:`announce_workload`)."""
+    p.add_argument(
+        "--large",
+        action="store_true",
+        help=f"run more than 1,000 models or 100,000 runs ({command} first prints how many, and about how long)",
+    )
+
+
+def announce_workload(command: str, workload, engine: Engine, large: bool, flags: str, fewer: str) -> None:
+    """Print at once how many models and closed-loop runs ``command`` makes and about how long
+    they take on ``engine``'s workers (a terrapref.report.workload.Workload); refuse one beyond the
+    bound unless ``large`` (--large), naming ``flags``, the flags that set its size, and what to
+    name ``fewer`` of."""
+    print(f"{command}: {workload.describe(engine.n_workers if engine.address is None else None)}", flush=True)
+    if workload.large and not large:
+        raise UserError(flags, f"{workload.refusal()}: name fewer {fewer}, or add --large to run them all")
+
+
 LIVE_HOST, LIVE_PORT = "127.0.0.1", 8765  # where the live view listens unless told
 
 

@@ -11,6 +11,8 @@ from terrapref.cli.common import (
     add_classes_arg,
     add_engine_args,
     add_force_arg,
+    add_large_arg,
+    announce_workload,
     grid_engine,
     perception_list,
     perception_model,
@@ -28,7 +30,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     import time
 
     from terrapref.recipes import recipe_named
-    from terrapref.report.reproduce import Reproduction, reproduce
+    from terrapref.report.reproduce import Reproduction, reproduce, reproduction_workload
     from terrapref.terrain import PreferenceProfile
 
     if args.seeds < 1:
@@ -42,19 +44,27 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     recipes = tuple(recipe_named(n, "--recipes") for n in names)
     perceptions = perception_list(args.perception)
     check_output(args.out, "--out", folder=True)
+    engine = grid_engine(args)
+    setup = Reproduction(
+        recipes,
+        args.seeds,
+        args.eval_seeds,
+        profile or PreferenceProfile.default(),
+        args.write_recordings,
+        perceptions,
+        speed_seeds=min(2, args.seeds),
+        relief_seeds=1,
+    )
+    announce_workload(
+        "reproduce",
+        reproduction_workload(setup),
+        engine,
+        args.large,
+        "--seeds, --eval-seeds, --recipes",
+        "seeds, evaluation seeds or recipes",
+    )
     with output_folder(args.out, args.force):
-        engine = grid_engine(args)
         t0 = time.perf_counter()
-        setup = Reproduction(
-            recipes,
-            args.seeds,
-            args.eval_seeds,
-            profile or PreferenceProfile.default(),
-            args.write_recordings,
-            perceptions,
-            speed_seeds=min(2, args.seeds),
-            relief_seeds=1,
-        )
         report = reproduce(args.out, setup, engine, log=lambda m: print(m, flush=True))
         print(f"wrote {report} ({time.perf_counter() - t0:.0f} s)")
         return 0
@@ -83,6 +93,7 @@ def reproduce_parser(sub: argparse._SubParsersAction) -> None:
         help="perception models (presets or files, separated by commas) every recipe's models drive the test courses under, "
         "for the report's table of what a robot sees (default: clean,rellis,field)",
     )
+    add_large_arg(p, "reproduce")
     add_engine_args(p)
     add_force_arg(p)
     p.set_defaults(func=_cmd_reproduce)
@@ -93,7 +104,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from terrapref.extras import check
-    from terrapref.report.study import run_study
+    from terrapref.report.study import run_study, study_workload
     from terrapref.report.study_plan import FULL, QUICK, for_table, with_perception
     from terrapref.terrain import default_classes
 
@@ -122,8 +133,9 @@ def _cmd_study(args: argparse.Namespace) -> int:
         if perceptions is not None:
             plan = with_perception(plan, perceptions)
     check_output(args.out, "--out", folder=True)
+    engine = grid_engine(args)
+    announce_workload("study", study_workload(plan), engine, args.large, "--seeds", "seeds")
     with output_folder(args.out, args.force):
-        engine = grid_engine(args)
         t0 = time.perf_counter()
         path = run_study(args.out, plan, engine, log=lambda m: print(m, flush=True))
         print(f"wrote {path} ({time.perf_counter() - t0:.0f} s)")
@@ -148,6 +160,7 @@ def study_parser(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="each teaching drive is followed by a drive of the course of what it left open, and the model learns from both",
     )
+    add_large_arg(p, "study")
     add_engine_args(p)
     add_force_arg(p)
     p.set_defaults(func=_cmd_study)
@@ -260,20 +273,14 @@ def _announce_size(
 ) -> None:
     """Print at once how many models and runs the selection makes and about how long they take,
     counted without drawing or listing the orders; refuse one beyond the bound unless --large."""
-    from terrapref.report.select import LARGE_MODELS, LARGE_RUNS, SelectionSize, count_orders
+    from terrapref.report.select import SelectionSize, count_orders
 
     try:
         orders = count_orders(args.orders, table)
     except ValueError as exc:
         raise UserError("--orders", str(exc)) from None
     size = SelectionSize.of(recipes, orders, args.seeds, args.courses, perceptions, args.speeds == "random").with_relief(relief_styles)
-    print(f"select: {size.describe(engine.n_workers if engine.address is None else None)}", flush=True)
-    if size.large and not args.large:
-        raise UserError(
-            "--orders, --seeds, --courses",
-            f"{size.models:,} models and {size.runs:,} runs are more than {LARGE_MODELS:,} models or {LARGE_RUNS:,} runs: "
-            "name fewer orders (random:N), seeds or layouts, or add --large to run them all",
-        )
+    announce_workload("select", size.workload, engine, args.large, "--orders, --seeds, --courses", "orders (random:N), seeds or layouts")
 
 
 def _selection_course(args: argparse.Namespace, table, relief: bool = False) -> str | None:
@@ -331,11 +338,7 @@ def select_parser(sub: argparse._SubParsersAction) -> None:
         help="after each demonstration, the driver also drives a follow-up course of the pairs it left unidentified "
         "(terrapref course --after), and the model trains on both",
     )
-    p.add_argument(
-        "--large",
-        action="store_true",
-        help="run a selection of more than 1,000 models or 100,000 runs (select first prints how many, and about how long)",
-    )
+    add_large_arg(p, "select")
     add_classes_arg(p)
     add_engine_args(p)
     add_force_arg(p)
