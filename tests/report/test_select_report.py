@@ -151,6 +151,11 @@ def test_select_says_at_once_how_much_it_would_make_and_refuses_an_absurd_size(t
     [
         (["--orders", "mud,mud,water"], "--orders"),
         (["--orders", "lava,rock,water"], "'lava'"),
+        (["--orders", "non_traversable,rock,mud,water"], "lethal column 'non_traversable' before rock, mud, water"),
+        (["--orders", "rock,mud,water;mud,non_traversable,rock,water"], "lethal column 'non_traversable' before rock, water"),
+        (["--orders", "rock,,mud"], "empty class"),
+        (["--orders", "rock,mud,water;;mud,rock,water"], "empty order"),
+        (["--orders", "rock,mud,water;"], "empty order"),
         (["--course", "nosuch_course"], "nosuch_course"),
     ],
 )

@@ -99,7 +99,7 @@ class Selection:
 def parse_orders(text: str, classes: ClassTable | None = None) -> tuple[tuple[str, ...], ...]:
     """``all`` (every order of the feature classes, the lethal column last), ``random:N`` (N of
     them drawn at random, with :data:`RANDOM_ORDERS_SEED`) or ``a,b,c;d,e,f`` (the lethal column
-    appended if missing)."""
+    appended if missing); a ValueError for an empty item (``rock,,mud``, ``a,b;;c,d``)."""
     classes = classes or default_classes()
     last = (classes.lethal_column,) if classes.lethal else ()
     if text == "all":  # in the order of the table's profile
@@ -109,7 +109,11 @@ def parse_orders(text: str, classes: ClassTable | None = None) -> tuple[tuple[st
         return tuple((*order, *last) for order in _draw_orders(classes.terrain_names, n, np.random.default_rng(RANDOM_ORDERS_SEED)))
     orders = []
     for item in text.split(";"):
-        names = tuple(n.strip() for n in item.split(",") if n.strip())
+        names = tuple(n.strip() for n in item.split(","))
+        if not all(names):
+            raise ValueError(
+                f"has an empty {'order' if not item.strip() else 'class'}: {text!r}; expected orders separated by ';', each of classes separated by ','"
+            )
         orders.append(names if not last or last[0] in names else (*names, *last))
     return tuple(orders)
 
