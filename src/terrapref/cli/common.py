@@ -4,6 +4,7 @@ view and --force, their help texts, and the checks of their values (each before 
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from terrapref.configargs import finite_float
@@ -226,6 +227,13 @@ def watching(view):
     from terrapref.interop.live import watching
 
     return watching(view)
+
+
+def warn_partial(recording) -> None:
+    """A warning line for a recording cut short (Ctrl-C, a write that failed: terrapref.demos.recording),
+    which the commands that read it use as far as it goes."""
+    if not recording.complete:
+        print(f"warning: {recording.path} is partial; using its {len(recording)} frames", file=sys.stderr)
 
 
 def by_recording(bar):

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from terrapref.cli.common import SCENARIO_HELP, add_classes_arg, add_force_arg, check_table, class_table
+from terrapref.cli.common import SCENARIO_HELP, add_classes_arg, add_force_arg, check_table, class_table, warn_partial
 from terrapref.configargs import finite_float
 from terrapref.errors import UserError
 from terrapref.fileio import check_distinct, check_distinct_outputs, check_figure, check_output, write_text_atomic
@@ -266,6 +266,8 @@ def _drives_of_one_table(args: argparse.Namespace, paths: Sequence[Path]) -> lis
                 f"({', '.join(recs[0].classes.names)}): give drives of one table",
                 field="classes",
             )
+    for rec in recs:
+        warn_partial(rec)
     return recs
 
 

@@ -20,6 +20,7 @@ from terrapref.cli.common import (
     incidents,
     live_view,
     perception_model,
+    warn_partial,
 )
 from terrapref.configargs import finite_float
 from terrapref.errors import UserError
@@ -346,8 +347,7 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
     for r in recordings:
         if args.classes is not None:
             check_table(args, r.classes, r.path)
-        if not r.complete:
-            print(f"warning: {r.path} is partial; using its {len(r)} frames", file=sys.stderr)
+        warn_partial(r)
     from terrapref.recipes import DEFAULT_RECIPE, recipe_named
 
     recipe = recipe_named(args.recipe or DEFAULT_RECIPE)
