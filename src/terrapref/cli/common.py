@@ -30,6 +30,14 @@ CLASSES_CHECK_HELP = (
 )
 
 
+def output_path(text: str) -> Path:
+    """An output flag's value (``--out``): a path, refused when empty (Path reads ``""`` as the
+    current folder, which nobody writing ``--out ""`` means)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"expected a path, got {text!r}")
+    return Path(text)
+
+
 def add_classes_arg(p: argparse.ArgumentParser, check: bool = False) -> None:
     """--classes FILE: the table files are read with, or (``check``) the one they must have been made for."""
     p.add_argument("--classes", metavar="FILE", help=CLASSES_CHECK_HELP if check else CLASSES_HELP)
@@ -140,6 +148,8 @@ def perception_model(spec: str | None, flag: str = "--perception", classes=None)
     """The perception model of ``--perception PRESET|FILE`` (None when not given), checked before any work."""
     if spec is None:
         return None
+    if not spec.strip():
+        raise UserError(flag, f"expected a preset ({', '.join(_presets())}) or a terrapref-perception/1 file, got {spec!r}")
     from terrapref.perception import load_perception
 
     try:
@@ -150,10 +160,19 @@ def perception_model(spec: str | None, flag: str = "--perception", classes=None)
         raise
 
 
+def _presets() -> tuple[str, ...]:
+    from terrapref.perception import PRESETS
+
+    return tuple(PRESETS)
+
+
 def perception_list(text: str, classes=None) -> tuple:
-    """The perception models of a comma-separated ``--perception`` list (blank items skipped),
-    each checked before any work; one named twice is refused."""
-    models = tuple(perception_model(n, classes=classes) for n in (x.strip() for x in text.split(",")) if n)
+    """The perception models of a comma-separated ``--perception`` list, each checked before any
+    work; an empty item and one named twice are refused."""
+    names = [x.strip() for x in text.split(",")]
+    if not all(names):
+        raise UserError("--perception", f"has an empty item: {text!r}; expected perception models separated by commas")
+    models = tuple(perception_model(n, classes=classes) for n in names)
     if len({p.name for p in models}) != len(models):
         raise UserError("--perception", f"names a perception model twice: {text!r}")
     return models

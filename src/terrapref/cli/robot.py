@@ -6,7 +6,7 @@ import argparse
 import math
 from pathlib import Path
 
-from terrapref.cli.common import add_classes_arg, add_force_arg, add_live_args, check_table, live_view
+from terrapref.cli.common import add_classes_arg, add_force_arg, add_live_args, check_table, live_view, output_path
 from terrapref.configargs import finite_float
 from terrapref.errors import Terminated, UserError
 from terrapref.fileio import check_output, write_text_atomic
@@ -240,7 +240,12 @@ def route_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--model", required=True, help="a model with an offset rule (recipe teach): its class prices and price of leaving the path"
     )
-    p.add_argument("--out", required=True, help="the scenario with the route as its path (.yaml); a figure is written beside it (.png)")
+    p.add_argument(
+        "--out",
+        type=output_path,
+        required=True,
+        help="the scenario with the route as its path (.yaml); a figure is written beside it (.png)",
+    )
     p.add_argument(
         "--resolution",
         type=finite_float,

@@ -14,6 +14,7 @@ from terrapref.cli.common import (
     add_large_arg,
     announce_workload,
     grid_engine,
+    output_path,
     perception_list,
     perception_model,
     teachable_table,
@@ -72,7 +73,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
 
 def reproduce_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("reproduce", help="demonstrate, train and evaluate end to end; write REPORT.md with Tables 1 and 2")
-    p.add_argument("--out", required=True, type=Path, help="folder for REPORT.md, its figures and the work")
+    p.add_argument("--out", required=True, type=output_path, help="folder for REPORT.md, its figures and the work")
     p.add_argument("--seeds", type=int, default=5, help="training seeds per recipe (default 5)")
     p.add_argument("--eval-seeds", type=int, default=1, help="evaluation runs per model and scenario (default 1)")
     p.add_argument(
@@ -144,7 +145,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
 
 def study_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("study", help="baselines, data efficiency, profiles, robustness and ablations; write STUDY.md")
-    p.add_argument("--out", required=True, type=Path, help="folder for STUDY.md, its figures and the work")
+    p.add_argument("--out", required=True, type=output_path, help="folder for STUDY.md, its figures and the work")
     p.add_argument("--quick", action="store_true", help="one seed and fewer levels (its time: docs/benchmarks.md)")
     p.add_argument("--seeds", type=int, help="training seeds (default: 3, or 1 with --quick)")
     p.add_argument("--recipe", metavar="NAME", help="the recipe section 6 teaches every order and style with (default: teach)")
@@ -197,7 +198,7 @@ def _cmd_select(args: argparse.Namespace) -> int:
         if value < low:
             raise UserError(flag, f"must be an integer >= {low}, got {value}")
     check_output(args.out, "--out", folder=True)
-    perceptions = perception_list(args.perception or "clean", table)
+    perceptions = perception_list("clean" if args.perception is None else args.perception, table)
     if args.taught_under == "same" and len(perceptions) != 1:
         raise UserError("--taught-under", "'same' needs exactly one --perception model")
     taught_under = perceptions[0] if args.taught_under == "same" else perception_model(args.taught_under, "--taught-under", table)
@@ -300,7 +301,7 @@ def select_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "select", help="compare recipes: train each for every order and seed, drive generated layouts, report agreement with the driver"
     )
-    p.add_argument("--out", required=True, type=Path, help="folder for SELECT.md, select.json, select.png and the work")
+    p.add_argument("--out", required=True, type=output_path, help="folder for SELECT.md, select.json, select.png and the work")
     p.add_argument("--recipes", default="teach", help="recipe names separated by commas (terrapref recipes; default: teach)")
     p.add_argument(
         "--orders",

@@ -9,7 +9,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from terrapref.cli.common import add_classes_arg, add_force_arg, by_recording, check_table, warn_partial
+from terrapref.cli.common import add_classes_arg, add_force_arg, by_recording, check_table, output_path, warn_partial
 from terrapref.configargs import finite_float
 from terrapref.errors import UserError
 from terrapref.fileio import check_distinct, check_output
@@ -240,7 +240,7 @@ def train_parser(sub: argparse._SubParsersAction, flags: bool = True) -> None:
         type=Path,
         help="recording directories (featurised as the recipe needs) or dataset files from `terrapref featurize`",
     )
-    p.add_argument("--out", required=True, type=Path, help="model file (.safetensors)")
+    p.add_argument("--out", required=True, type=output_path, help="model file (.safetensors)")
     p.add_argument("--recipe", default=None, metavar="NAME", help="a named recipe (`terrapref recipes`; default: teach)")
     p.add_argument("--verbose", action="store_true", help="print every epoch (default: every tenth)")
     add_classes_arg(p, check=True)
