@@ -237,7 +237,8 @@ def _cmd_select(args: argparse.Namespace) -> int:
 
 
 def _select_relief_styles(text: str | None) -> tuple[str, ...]:
-    """``--relief-style`` checked before any work: relief styles as record takes them, separated by ';' (none given: flat)."""
+    """``--relief-style`` checked before any work: relief styles as record takes them, separated by ';'
+    (none given: flat), no two of them the same style (``default`` and ``roll_deg=12``: the default's roll)."""
     if text is None:
         return ()
     from terrapref.demos.relief_style import parse_relief_style
@@ -247,8 +248,15 @@ def _select_relief_styles(text: str | None) -> tuple[str, ...]:
     styles = tuple(t.strip() for t in text.split(";"))
     if not all(styles) or len(set(styles)) != len(styles):
         raise UserError("--relief-style", f"expected distinct relief styles separated by ';', got {text!r}")
+    seen: dict[object, str] = {}
     for style in styles:
-        check_rough_speed(parse_relief_style(style)[1], VehicleConfig().max_speed_mps)
+        parsed = parse_relief_style(style)[1]
+        check_rough_speed(parsed, VehicleConfig().max_speed_mps)
+        if parsed in seen:
+            raise UserError(
+                "--relief-style", f"{seen[parsed]!r} and {style!r} are the same relief style: each would teach the same models twice"
+            )
+        seen[parsed] = style
     return styles
 
 
