@@ -108,7 +108,7 @@ def _cmd_play(args: argparse.Namespace) -> int:
 
     check("ros2", "terrapref play")
     from terrapref.interop.dds import domain_id
-    from terrapref.interop.play import BagPlayer
+    from terrapref.interop.play import BagPlayer, RobotTopics
     from terrapref.interop.robot import load_robot_topics
     from terrapref.progress import Progress
 
@@ -121,11 +121,8 @@ def _cmd_play(args: argparse.Namespace) -> int:
     if not 1 <= args.max_gap <= 1e9:
         raise UserError("--max-gap", f"expected [1, 1e9] s of log, got {args.max_gap:g}")
     domain = domain_id()
-    topics = set(args.topics) if args.topics else None
-    if args.robot:  # what the node reads, and the transforms that place it; the log's commands and markers stay out
-        roles = load_robot_topics(args.robot)
-        topics = (topics or set()) | {t for role, t in roles.items() if role != "command"}
-    player = BagPlayer(args.bag, domain, topics, optional={"/tf", "/tf_static"} if args.robot else ())
+    robot = RobotTopics(args.robot, load_robot_topics(args.robot)) if args.robot else None  # what the node reads, and the transforms
+    player = BagPlayer(args.bag, domain, set(args.topics) if args.topics else None, robot)
     first, last = player.span_ns
     span_s = (last - first) * 1e-9
     print(
