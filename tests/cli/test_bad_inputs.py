@@ -358,6 +358,9 @@ def test_a_recording_whose_camera_has_no_focal_length_is_refused(tmp_path: Path,
     "argv, needles",
     [
         (["record", "demo_course", "--profile", "", "--out", "OUT/r"], ("--profile", "exactly once")),
+        (["record", "demo_course", "--profile", "non_traversable,rock,mud,water", "--out", "OUT/r"], ("--profile", "lethal", "last")),
+        (["record", "demo_course", "--profile", "rock,non_traversable,mud,water", "--out", "OUT/r"], ("--profile", "before mud, water")),
+        (["record", "demo_course", "--profile", "rock,,mud,water,non_traversable", "--out", "OUT/r"], ("--profile", "empty item")),
         (["train", "REC", "--hidden", "100000000", "--out", "OUT/m.safetensors"], ("--hidden", "weights", "at most")),
         (["render", "demo_course", "--pose", "1e308", "0", "0", "--out", "OUT/s.png"], ("--pose", "within 30 m")),
         (["evaluate", "M", "demo_course", "--frames", "5,99999", "--out", "OUT/e"], ("--frames", "99999", "time limit")),
@@ -371,6 +374,10 @@ def test_a_recording_whose_camera_has_no_focal_length_is_refused(tmp_path: Path,
         (["evaluate", "M", "demo_course", "--no-driver", "--style", "shaky", "--out", "OUT/e"], ("--style", "--no-driver")),
         (["render", "demo_course", "--pose", "-1e9", "0", "0", "--out", "OUT/s.png"], ("--pose", "within 30 m")),
         (["course", "--name", "", "--out", "OUT/c.yaml"], ("--name", "letters, digits")),  # not a silent teaching_course
+        (["select", "--perception", "", "--out", "OUT/s"], ("--perception", "empty item")),  # not a silent clean
+        (["select", "--perception", "clean,,field", "--out", "OUT/s"], ("--perception", "empty item")),
+        (["select", "--taught-under", "", "--out", "OUT/s"], ("--taught-under", "a preset")),
+        (["reproduce", "--perception", "clean,", "--out", "OUT/r"], ("--perception", "empty item")),
     ],
 )
 def test_values_that_cannot_be_right_and_inputs_given_twice_are_refused_before_any_work(tmp_path: Path, capsys, recording, argv, needles):
@@ -383,6 +390,29 @@ def test_values_that_cannot_be_right_and_inputs_given_twice_are_refused_before_a
     assert main(argv) == 2
     _one_error(capsys, *(swap.get(n, n) for n in needles))
     assert not any(out.iterdir())
+
+
+def _commands_with(flag: str) -> list[str]:
+    """Every command of the command line that takes ``flag``."""
+    import argparse
+
+    from terrapref.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return sorted(name for name, parser in sub.choices.items() if flag in parser._option_string_actions)
+
+
+def test_an_empty_output_path_is_refused_by_every_command_that_writes_one(tmp_path: Path, capsys, monkeypatch):
+    """``--out ""`` is not the current folder: every command refuses it in one line naming the flag."""
+    commands = _commands_with("--out")
+    assert {"record", "train", "evaluate", "select", "study", "reproduce", "import", "export", "route"} <= set(commands)
+    monkeypatch.chdir(tmp_path)
+    for command in commands:
+        with pytest.raises(SystemExit) as refused:  # argparse's refusal (terrapref.cli._Parser): one line
+            main([command, "--out", ""])
+        assert refused.value.code == 2, command
+        _one_error(capsys, f"terrapref {command}: argument --out", "expected a path")
+    assert list(tmp_path.iterdir()) == []
 
 
 def _full_disk_after(writes: int):

@@ -120,3 +120,103 @@ def test_max_gap_is_checked(tmp_path: Path, offline, capsys):
     bag = _log(tmp_path / "log", [0.0])
     assert main(["play", str(bag), "--max-gap", "0.5"]) == 2
     one_line_error(capsys, "--max-gap", "[1, 1e9]")
+
+
+# --- play --robot: what the node reads, checked as import checks it, and the transforms ---------------
+
+ROBOT_TOPICS = {
+    "segmentation": ("/robot/seg/labels", "sensor_msgs/msg/Image"),
+    "camera_info": ("/robot/camera/camera_info", "sensor_msgs/msg/CameraInfo"),
+    "odometry": ("/robot/odom", "nav_msgs/msg/Odometry"),
+    "command": ("/robot/cmd_vel", "geometry_msgs/msg/Twist"),
+}
+TF = {"/tf": "tf2_msgs/msg/TFMessage", "/tf_static": "tf2_msgs/msg/TFMessage", "/robot/markers": "std_msgs/msg/String"}
+
+
+def _robot_log(folder: Path, types: dict[str, str], counts: dict[str, int] | None = None) -> Path:
+    """A ROS 2 MCAP log of zeroed messages of ``types`` (topic -> type), ``counts`` of each (default
+    3), at 0.1 s apart; its file."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    from terrapref.interop.ros_messages import typestore, zeroed
+
+    ts = typestore()
+    with Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        for topic, msgtype in types.items():
+            conn = writer.add_connection(topic, msgtype, typestore=ts)
+            for i in range((counts or {}).get(topic, 3)):
+                writer.write(conn, 10**9 + i * 10**8, ts.serialize_cdr(zeroed(ts, msgtype), msgtype))
+    return next(folder.glob("*.mcap"))
+
+
+def _robot_file(folder: Path) -> Path:
+    """A robot file naming :data:`ROBOT_TOPICS` (play reads only its topics)."""
+    path = folder / "robot.yaml"
+    topics = "".join(f"  {role}: {topic}\n" for role, (topic, _) in ROBOT_TOPICS.items())
+    path.write_text(f"format: terrapref-robot/1\ntopics:\n{topics}")
+    return path
+
+
+def test_play_robot_plays_what_the_node_reads_and_the_transforms_not_the_commands_or_markers(tmp_path: Path, offline, capsys):
+    bag = _robot_log(tmp_path / "log", {**{t: m for t, m in ROBOT_TOPICS.values()}, **TF})
+    assert main(["play", str(bag), "--robot", str(_robot_file(tmp_path)), "--delay", "0"]) == 0
+    played = {topic for topic, _ in offline.sent} - {"/clock"}
+    assert played == {"/robot/seg/labels", "/robot/camera/camera_info", "/robot/odom", "/tf", "/tf_static"}
+    assert "played 15 messages on 5 topics" in capsys.readouterr().out
+
+
+def test_play_robot_plays_a_log_without_transforms(tmp_path: Path, offline, capsys):
+    bag = _robot_log(tmp_path / "log", {t: m for t, m in ROBOT_TOPICS.values()})
+    assert main(["play", str(bag), "--robot", str(_robot_file(tmp_path)), "--delay", "0"]) == 0
+    assert {topic for topic, _ in offline.sent} - {"/clock"} == {"/robot/seg/labels", "/robot/camera/camera_info", "/robot/odom"}
+
+
+@pytest.mark.parametrize(
+    ("types", "counts", "words"),
+    [
+        ({"/robot/seg/labels": "std_msgs/msg/String"}, {}, ("topics.segmentation /robot/seg/labels has type std_msgs/msg/String",)),
+        ({}, {"/robot/seg/labels": 0}, ("topics.segmentation /robot/seg/labels has no messages",)),
+        ({}, {"/robot/odom": 0, "/robot/camera/camera_info": 0}, ("topics.camera_info", "has no messages; topics.odometry")),
+    ],
+    ids=["an image topic of another type", "an image topic without messages", "two topics without messages"],
+)
+def test_play_robot_refuses_the_topics_import_refuses_in_import_s_words(tmp_path: Path, offline, capsys, types, counts, words):
+    from synthetic_bag import robot_yaml, write_robot
+
+    bag = _robot_log(tmp_path / "log", {**{t: m for t, m in ROBOT_TOPICS.values()}, **types}, counts)
+    assert main(["play", str(bag), "--robot", str(_robot_file(tmp_path)), "--delay", "0"]) == 2
+    line = one_line_error(capsys, str(bag), "topics", *words)
+    assert offline.sent == []
+    (tmp_path / "full").mkdir()
+    robot = write_robot(tmp_path / "full" / "robot.yaml", robot_yaml(path_topic=False))  # the same topics, a file import reads whole
+    assert main(["import", str(bag), "--robot", str(robot), "--out", str(tmp_path / "rec")]) == 2
+    assert one_line_error(capsys, str(bag)).split(" (topics in ")[0] == line.split(" (topics in ")[0]
+
+
+@pytest.mark.parametrize("content", [b"\x89MCAP0\r\n", b"12345678", b""], ids=["the magic alone", "garbage", "empty"])
+def test_a_log_that_is_no_log_is_refused_by_play_as_import_refuses_it(tmp_path: Path, offline, capsys, content: bytes):
+    from synthetic_bag import robot_yaml, write_robot
+
+    bag = tmp_path / "broken.mcap"
+    bag.write_bytes(content)
+    assert main(["play", str(bag), "--delay", "0"]) == 2
+    played = one_line_error(capsys, str(bag))
+    robot = write_robot(tmp_path / "robot.yaml", robot_yaml())
+    assert main(["import", str(bag), "--robot", str(robot), "--out", str(tmp_path / "rec")]) == 2
+    assert one_line_error(capsys, str(bag)) == played
+    assert offline.sent == []
+
+
+def test_play_robot_plays_every_topic_of_an_exported_recording_its_robot_file_names(tmp_path: Path, offline, capsys, tiny_recording):
+    """`export --format mcap` writes a log and the robot file of its node: played with it, every
+    topic the node reads and the transforms go out, the log's commands do not."""
+    from terrapref.interop.robot import load_robot_topics
+
+    bag = tmp_path / "drive.mcap"
+    assert main(["export", str(tiny_recording), "--format", "mcap", "--out", str(bag)]) == 0
+    robot = Path(f"{bag}.robot.yaml")
+    capsys.readouterr()
+    assert main(["play", str(bag), "--robot", str(robot), "--delay", "0"]) == 0
+    topics = load_robot_topics(robot)
+    played = {topic for topic, _ in offline.sent} - {"/clock"}
+    assert played == {t for role, t in topics.items() if role != "command"} | {"/tf", "/tf_static"}

@@ -151,6 +151,11 @@ def test_select_says_at_once_how_much_it_would_make_and_refuses_an_absurd_size(t
     [
         (["--orders", "mud,mud,water"], "--orders"),
         (["--orders", "lava,rock,water"], "'lava'"),
+        (["--orders", "non_traversable,rock,mud,water"], "lethal column 'non_traversable' before rock, mud, water"),
+        (["--orders", "rock,mud,water;mud,non_traversable,rock,water"], "lethal column 'non_traversable' before rock, water"),
+        (["--orders", "rock,,mud"], "empty class"),
+        (["--orders", "rock,mud,water;;mud,rock,water"], "empty order"),
+        (["--orders", "rock,mud,water;"], "empty order"),
         (["--course", "nosuch_course"], "nosuch_course"),
     ],
 )
@@ -259,7 +264,14 @@ def test_the_layouts_have_relief_when_the_drivers_have_relief_styles():
 
 @pytest.mark.parametrize(
     "styles, word",
-    [("steep", "steep"), ("default;default", "distinct"), ("default;;bold", "distinct"), ("rough_mps=1e9", "rough_mps")],
+    [
+        ("steep", "steep"),
+        ("default;default", "distinct"),
+        ("default;;bold", "distinct"),
+        ("rough_mps=1e9", "rough_mps"),
+        ("default;roll_deg=12", "'default' and 'roll_deg=12' are the same relief style"),  # the default's own roll: the models twice
+        ("bold;default,roll_deg=12;default", "'default,roll_deg=12' and 'default' are the same"),
+    ],
 )
 def test_select_refuses_a_bad_relief_style_before_any_work(tmp_path, capsys, styles: str, word: str):
     out = tmp_path / "sel"

@@ -178,6 +178,7 @@ ELEVEN = ["grass", *(f"c{i}" for i in range(MAX_TERRAIN_CLASSES + 1)), "tree"]
         (("grass", ["tree"], ["grass", "avoid", "tree"]), "classes[1].name", ["'avoid'", "reserved", "zone"]),
         (("grass", ["tree"], ["grass", "best", "tree"]), "classes[1].name", ["'best'", "reserved", "zone"]),
         (("grass", ["tree"], ["grass", "'True'", "tree"], ["True", "tree"]), "profile", ["True, tree", "exactly once"]),
+        (("grass", ["tree", "log"], ["grass", "mud", "tree", "log"], ["lethal", "mud"]), "profile", ["'lethal'", "last"]),
     ],
     ids=[
         "11 feature classes",
@@ -196,6 +197,7 @@ ELEVEN = ["grass", *(f"c{i}" for i in range(MAX_TERRAIN_CLASSES + 1)), "tree"]
         "a class named avoid",
         "a class named best",
         "a boolean in the profile",
+        "profile puts the lethal column first",
     ],
 )
 def test_a_bad_table_is_refused_naming_the_file_and_field(tmp_path, table, field, words):
@@ -215,6 +217,7 @@ def test_the_constructor_checks_what_from_dict_checks():
         ("grass", ("grass",), ("mud", "tree")),
         ("grass", ("tree",), ("mud",)),
         ("grass", ("tree",), ("mud", "lethal")),
+        ("grass", ("tree",), ("tree", "mud")),
     ):
         with pytest.raises(ValueError):
             ClassTable(classes, background, lethal, profile)

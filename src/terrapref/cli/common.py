@@ -4,6 +4,7 @@ view and --force, their help texts, and the checks of their values (each before 
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from terrapref.configargs import finite_float
@@ -27,6 +28,14 @@ CLASSES_CHECK_HELP = (
     "the class table the files must have been made for (a terrapref-classes/1 file); a file made for another is refused. "
     "Files carry their own table, so this is a check, not a setting"
 )
+
+
+def output_path(text: str) -> Path:
+    """An output flag's value (``--out``): a path, refused when empty (Path reads ``""`` as the
+    current folder, which nobody writing ``--out ""`` means)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"expected a path, got {text!r}")
+    return Path(text)
 
 
 def add_classes_arg(p: argparse.ArgumentParser, check: bool = False) -> None:
@@ -53,6 +62,25 @@ def add_engine_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--address", metavar="HOST:PORT", help="a Ray cluster to run the jobs on (ray start --head on one machine); with --engine ray"
     )
+
+
+def add_large_arg(p: argparse.ArgumentParser, command: str) -> None:
+    """--large, the same for every command that trains and drives many models (:func:`announce_workload`)."""
+    p.add_argument(
+        "--large",
+        action="store_true",
+        help=f"run more than 1,000 models or 100,000 runs ({command} first prints how many, and about how long)",
+    )
+
+
+def announce_workload(command: str, workload, engine: Engine, large: bool, flags: str, fewer: str) -> None:
+    """Print at once how many models and closed-loop runs ``command`` makes and about how long
+    they take on ``engine``'s workers (a terrapref.report.workload.Workload); refuse one beyond the
+    bound unless ``large`` (--large), naming ``flags``, the flags that set its size, and what to
+    name ``fewer`` of."""
+    print(f"{command}: {workload.describe(engine.n_workers if engine.address is None else None)}", flush=True)
+    if workload.large and not large:
+        raise UserError(flags, f"{workload.refusal()}: name fewer {fewer}, or add --large to run them all")
 
 
 LIVE_HOST, LIVE_PORT = "127.0.0.1", 8765  # where the live view listens unless told
@@ -120,6 +148,8 @@ def perception_model(spec: str | None, flag: str = "--perception", classes=None)
     """The perception model of ``--perception PRESET|FILE`` (None when not given), checked before any work."""
     if spec is None:
         return None
+    if not spec.strip():
+        raise UserError(flag, f"expected a preset ({', '.join(_presets())}) or a terrapref-perception/1 file, got {spec!r}")
     from terrapref.perception import load_perception
 
     try:
@@ -130,10 +160,19 @@ def perception_model(spec: str | None, flag: str = "--perception", classes=None)
         raise
 
 
+def _presets() -> tuple[str, ...]:
+    from terrapref.perception import PRESETS
+
+    return tuple(PRESETS)
+
+
 def perception_list(text: str, classes=None) -> tuple:
-    """The perception models of a comma-separated ``--perception`` list (blank items skipped),
-    each checked before any work; one named twice is refused."""
-    models = tuple(perception_model(n, classes=classes) for n in (x.strip() for x in text.split(",")) if n)
+    """The perception models of a comma-separated ``--perception`` list, each checked before any
+    work; an empty item and one named twice are refused."""
+    names = [x.strip() for x in text.split(",")]
+    if not all(names):
+        raise UserError("--perception", f"has an empty item: {text!r}; expected perception models separated by commas")
+    models = tuple(perception_model(n, classes=classes) for n in names)
     if len({p.name for p in models}) != len(models):
         raise UserError("--perception", f"names a perception model twice: {text!r}")
     return models
@@ -207,6 +246,13 @@ def watching(view):
     from terrapref.interop.live import watching
 
     return watching(view)
+
+
+def warn_partial(recording) -> None:
+    """A warning line for a recording cut short (Ctrl-C, a write that failed: terrapref.demos.recording),
+    which the commands that read it use as far as it goes."""
+    if not recording.complete:
+        print(f"warning: {recording.path} is partial; using its {len(recording)} frames", file=sys.stderr)
 
 
 def by_recording(bar):

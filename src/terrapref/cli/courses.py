@@ -9,7 +9,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from terrapref.cli.common import SCENARIO_HELP, add_classes_arg, add_force_arg, check_table, class_table
+from terrapref.cli.common import SCENARIO_HELP, add_classes_arg, add_force_arg, check_table, class_table, output_path, warn_partial
 from terrapref.configargs import finite_float
 from terrapref.errors import UserError
 from terrapref.fileio import check_distinct, check_distinct_outputs, check_figure, check_output, write_text_atomic
@@ -141,7 +141,7 @@ def render_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("render", help="render the segmentation camera image at a pose")
     p.add_argument("scenario", metavar="SCENARIO", help=SCENARIO_HELP)
     p.add_argument("--pose", nargs=3, type=finite_float, metavar=("X", "Y", "YAW_DEG"), help="vehicle pose [m, m, deg]; default: the start")
-    p.add_argument("--out", required=True, type=Path, help="single-channel PNG of class ids")
+    p.add_argument("--out", required=True, type=output_path, help="single-channel PNG of class ids")
     p.add_argument(
         "--preview", type=Path, help="also write a colour preview PNG (with the depth image beside it on relief or with --depth)"
     )
@@ -169,7 +169,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
 def show_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("show", help="draw the map top-down with the path, the start and the zones")
     p.add_argument("scenario", metavar="SCENARIO", help=SCENARIO_HELP)
-    p.add_argument("--out", required=True, type=Path, help="figure file (.png, .pdf or .svg)")
+    p.add_argument("--out", required=True, type=output_path, help="figure file (.png, .pdf or .svg)")
     add_classes_arg(p)
     add_force_arg(p)
     p.set_defaults(func=_cmd_show)
@@ -266,6 +266,8 @@ def _drives_of_one_table(args: argparse.Namespace, paths: Sequence[Path]) -> lis
                 f"({', '.join(recs[0].classes.names)}): give drives of one table",
                 field="classes",
             )
+    for rec in recs:
+        warn_partial(rec)
     return recs
 
 
@@ -329,7 +331,7 @@ def _pairs(pairs: Sequence[tuple[str, str]]) -> str:
 
 def course_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("course", help="write the teaching course of a class table (or, with --after, a follow-up of what drives left open)")
-    p.add_argument("--out", required=True, type=Path, help="scenario file to write (.yaml); a top-down figure goes beside it (.png)")
+    p.add_argument("--out", required=True, type=output_path, help="scenario file to write (.yaml); a top-down figure goes beside it (.png)")
     p.add_argument(
         "--after",
         type=Path,

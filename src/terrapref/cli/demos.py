@@ -19,7 +19,9 @@ from terrapref.cli.common import (
     featurize_features,
     incidents,
     live_view,
+    output_path,
     perception_model,
+    warn_partial,
 )
 from terrapref.configargs import finite_float
 from terrapref.errors import UserError
@@ -144,7 +146,7 @@ def record_parser(sub: argparse._SubParsersAction) -> None:
         "none, or not given: it drives relief as if it were flat (docs/cli.md, Relief)",
     )
     p.add_argument("--seed", type=int, default=0, help="seeds the driver's hand and the pushes (default 0)")
-    p.add_argument("--out", required=True, type=Path, help="recording directory to create")
+    p.add_argument("--out", required=True, type=output_path, help="recording directory to create")
     p.add_argument("--force", action="store_true", help="replace an existing recording at --out")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.add_argument(
@@ -324,7 +326,7 @@ def _print_what_the_drive_shows(rec) -> None:
 def inspect_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("inspect", help="summarise a recording and draw its driven path")
     p.add_argument("recording", metavar="DIR", type=Path, help="a recording folder (from record, drive or import)")
-    p.add_argument("--out", type=Path, help="top-down PNG (default: DIR/driven_path.png)")
+    p.add_argument("--out", type=output_path, help="top-down PNG (default: DIR/driven_path.png)")
     p.add_argument(
         "--no-preference",
         action="store_true",
@@ -346,8 +348,7 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
     for r in recordings:
         if args.classes is not None:
             check_table(args, r.classes, r.path)
-        if not r.complete:
-            print(f"warning: {r.path} is partial; using its {len(r)} frames", file=sys.stderr)
+        warn_partial(r)
     from terrapref.recipes import DEFAULT_RECIPE, recipe_named
 
     recipe = recipe_named(args.recipe or DEFAULT_RECIPE)
@@ -368,7 +369,7 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
 def featurize_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("featurize", help="turn recordings into a training set (U, label)")
     p.add_argument("recordings", nargs="+", metavar="DIR", type=Path, help="recording folders (from record, drive or import)")
-    p.add_argument("--out", required=True, type=Path, help="dataset file (.safetensors)")
+    p.add_argument("--out", required=True, type=output_path, help="dataset file (.safetensors)")
     p.add_argument(
         "--distance-mode",
         choices=["progress", "window", "paper"],

@@ -19,6 +19,7 @@ from terrapref.cli.common import (
     class_table,
     grid_engine,
     live_view,
+    output_path,
     perception_model,
     watching,
 )
@@ -222,7 +223,7 @@ def evaluate_parser(sub: argparse._SubParsersAction) -> None:
         default=3,
         help="runs per scenario (default 3): seed 0 starts at the scenario's start, the others up to 0.3 m and 3 degrees off it",
     )
-    p.add_argument("--out", required=True, type=Path, help="folder for metrics.json and the figures")
+    p.add_argument("--out", required=True, type=output_path, help="folder for metrics.json and the figures")
     p.add_argument(
         "--profile",
         help="resolve `best` zones, and drive the synthetic driver, under this order instead of the model's "

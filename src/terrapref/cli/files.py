@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from terrapref.cli.common import add_classes_arg, add_force_arg, check_table, class_table
+from terrapref.cli.common import add_classes_arg, add_force_arg, check_table, class_table, output_path
 from terrapref.configargs import finite_float
 from terrapref.errors import UserError
 from terrapref.fileio import check_output, output_folder
@@ -32,7 +32,7 @@ def import_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("import", help="turn a ROS 1 bag, ROS 2 bag (sqlite3 or MCAP) of a drive into a recording")
     p.add_argument("bag", help="a .bag file, a ROS 2 bag folder, or a .mcap / .db3 file")
     p.add_argument("--robot", required=True, help="terrapref-robot/1 file: topics, camera mounting, label map")
-    p.add_argument("--out", required=True, help="recording folder to create")
+    p.add_argument("--out", type=output_path, required=True, help="recording folder to create")
     p.add_argument("--rate", type=finite_float, default=10.0, help="frames per second to keep (default 10, the planner's rate)")
     p.add_argument("--force", action="store_true", help="replace an existing recording at --out (only once the import succeeds)")
     p.add_argument(
@@ -91,7 +91,7 @@ def replay_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("bag", help="a .bag file, a ROS 2 bag folder, or a .mcap / .db3 file")
     p.add_argument("--robot", required=True, help="terrapref-robot/1 file")
     p.add_argument("--model", required=True, help="model file (terrapref train)")
-    p.add_argument("--out", required=True, help="folder for replay.json, replay.png and the imported recording")
+    p.add_argument("--out", type=output_path, required=True, help="folder for replay.json, replay.png and the imported recording")
     p.add_argument("--rate", type=finite_float, default=10.0, help="frames per second to replay (default 10)")
     add_force_arg(p)
     p.set_defaults(func=_cmd_replay)
@@ -196,7 +196,7 @@ def export_parser(sub: argparse._SubParsersAction) -> None:
         required=True,
         help="onnx: the classifier C; mcap: the recording's frames as ROS 2 messages; rosbag1: the same as a ROS 1 bag (rosbag play)",
     )
-    p.add_argument("--out", required=True, help="output file")
+    p.add_argument("--out", type=output_path, required=True, help="output file")
     p.add_argument(
         "--model",
         help="with --format mcap or rosbag1: also write the costmap this model (with an offset rule) prices the recording's ground with, "

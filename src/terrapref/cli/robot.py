@@ -6,7 +6,7 @@ import argparse
 import math
 from pathlib import Path
 
-from terrapref.cli.common import add_classes_arg, add_force_arg, add_live_args, check_table, live_view
+from terrapref.cli.common import add_classes_arg, add_force_arg, add_live_args, check_table, live_view, output_path
 from terrapref.configargs import finite_float
 from terrapref.errors import Terminated, UserError
 from terrapref.fileio import check_output, write_text_atomic
@@ -108,7 +108,7 @@ def _cmd_play(args: argparse.Namespace) -> int:
 
     check("ros2", "terrapref play")
     from terrapref.interop.dds import domain_id
-    from terrapref.interop.play import BagPlayer
+    from terrapref.interop.play import BagPlayer, RobotTopics
     from terrapref.interop.robot import load_robot_topics
     from terrapref.progress import Progress
 
@@ -121,11 +121,8 @@ def _cmd_play(args: argparse.Namespace) -> int:
     if not 1 <= args.max_gap <= 1e9:
         raise UserError("--max-gap", f"expected [1, 1e9] s of log, got {args.max_gap:g}")
     domain = domain_id()
-    topics = set(args.topics) if args.topics else None
-    if args.robot:  # what the node reads, and the transforms that place it; the log's commands and markers stay out
-        roles = load_robot_topics(args.robot)
-        topics = (topics or set()) | {t for role, t in roles.items() if role != "command"}
-    player = BagPlayer(args.bag, domain, topics, optional={"/tf", "/tf_static"} if args.robot else ())
+    robot = RobotTopics(args.robot, load_robot_topics(args.robot)) if args.robot else None  # what the node reads, and the transforms
+    player = BagPlayer(args.bag, domain, set(args.topics) if args.topics else None, robot)
     first, last = player.span_ns
     span_s = (last - first) * 1e-9
     print(
@@ -240,7 +237,12 @@ def route_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--model", required=True, help="a model with an offset rule (recipe teach): its class prices and price of leaving the path"
     )
-    p.add_argument("--out", required=True, help="the scenario with the route as its path (.yaml); a figure is written beside it (.png)")
+    p.add_argument(
+        "--out",
+        type=output_path,
+        required=True,
+        help="the scenario with the route as its path (.yaml); a figure is written beside it (.png)",
+    )
     p.add_argument(
         "--resolution",
         type=finite_float,

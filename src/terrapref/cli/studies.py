@@ -11,7 +11,10 @@ from terrapref.cli.common import (
     add_classes_arg,
     add_engine_args,
     add_force_arg,
+    add_large_arg,
+    announce_workload,
     grid_engine,
+    output_path,
     perception_list,
     perception_model,
     teachable_table,
@@ -28,7 +31,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     import time
 
     from terrapref.recipes import recipe_named
-    from terrapref.report.reproduce import Reproduction, reproduce
+    from terrapref.report.reproduce import Reproduction, reproduce, reproduction_workload
     from terrapref.terrain import PreferenceProfile
 
     if args.seeds < 1:
@@ -42,19 +45,27 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     recipes = tuple(recipe_named(n, "--recipes") for n in names)
     perceptions = perception_list(args.perception)
     check_output(args.out, "--out", folder=True)
+    engine = grid_engine(args)
+    setup = Reproduction(
+        recipes,
+        args.seeds,
+        args.eval_seeds,
+        profile or PreferenceProfile.default(),
+        args.write_recordings,
+        perceptions,
+        speed_seeds=min(2, args.seeds),
+        relief_seeds=1,
+    )
+    announce_workload(
+        "reproduce",
+        reproduction_workload(setup),
+        engine,
+        args.large,
+        "--seeds, --eval-seeds, --recipes",
+        "seeds, evaluation seeds or recipes",
+    )
     with output_folder(args.out, args.force):
-        engine = grid_engine(args)
         t0 = time.perf_counter()
-        setup = Reproduction(
-            recipes,
-            args.seeds,
-            args.eval_seeds,
-            profile or PreferenceProfile.default(),
-            args.write_recordings,
-            perceptions,
-            speed_seeds=min(2, args.seeds),
-            relief_seeds=1,
-        )
         report = reproduce(args.out, setup, engine, log=lambda m: print(m, flush=True))
         print(f"wrote {report} ({time.perf_counter() - t0:.0f} s)")
         return 0
@@ -62,7 +73,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
 
 def reproduce_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("reproduce", help="demonstrate, train and evaluate end to end; write REPORT.md with Tables 1 and 2")
-    p.add_argument("--out", required=True, type=Path, help="folder for REPORT.md, its figures and the work")
+    p.add_argument("--out", required=True, type=output_path, help="folder for REPORT.md, its figures and the work")
     p.add_argument("--seeds", type=int, default=5, help="training seeds per recipe (default 5)")
     p.add_argument("--eval-seeds", type=int, default=1, help="evaluation runs per model and scenario (default 1)")
     p.add_argument(
@@ -83,6 +94,7 @@ def reproduce_parser(sub: argparse._SubParsersAction) -> None:
         help="perception models (presets or files, separated by commas) every recipe's models drive the test courses under, "
         "for the report's table of what a robot sees (default: clean,rellis,field)",
     )
+    add_large_arg(p, "reproduce")
     add_engine_args(p)
     add_force_arg(p)
     p.set_defaults(func=_cmd_reproduce)
@@ -93,7 +105,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from terrapref.extras import check
-    from terrapref.report.study import run_study
+    from terrapref.report.study import run_study, study_workload
     from terrapref.report.study_plan import FULL, QUICK, for_table, with_perception
     from terrapref.terrain import default_classes
 
@@ -122,8 +134,9 @@ def _cmd_study(args: argparse.Namespace) -> int:
         if perceptions is not None:
             plan = with_perception(plan, perceptions)
     check_output(args.out, "--out", folder=True)
+    engine = grid_engine(args)
+    announce_workload("study", study_workload(plan), engine, args.large, "--seeds", "seeds")
     with output_folder(args.out, args.force):
-        engine = grid_engine(args)
         t0 = time.perf_counter()
         path = run_study(args.out, plan, engine, log=lambda m: print(m, flush=True))
         print(f"wrote {path} ({time.perf_counter() - t0:.0f} s)")
@@ -132,7 +145,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
 
 def study_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("study", help="baselines, data efficiency, profiles, robustness and ablations; write STUDY.md")
-    p.add_argument("--out", required=True, type=Path, help="folder for STUDY.md, its figures and the work")
+    p.add_argument("--out", required=True, type=output_path, help="folder for STUDY.md, its figures and the work")
     p.add_argument("--quick", action="store_true", help="one seed and fewer levels (its time: docs/benchmarks.md)")
     p.add_argument("--seeds", type=int, help="training seeds (default: 3, or 1 with --quick)")
     p.add_argument("--recipe", metavar="NAME", help="the recipe section 6 teaches every order and style with (default: teach)")
@@ -148,6 +161,7 @@ def study_parser(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="each teaching drive is followed by a drive of the course of what it left open, and the model learns from both",
     )
+    add_large_arg(p, "study")
     add_engine_args(p)
     add_force_arg(p)
     p.set_defaults(func=_cmd_study)
@@ -184,7 +198,7 @@ def _cmd_select(args: argparse.Namespace) -> int:
         if value < low:
             raise UserError(flag, f"must be an integer >= {low}, got {value}")
     check_output(args.out, "--out", folder=True)
-    perceptions = perception_list(args.perception or "clean", table)
+    perceptions = perception_list("clean" if args.perception is None else args.perception, table)
     if args.taught_under == "same" and len(perceptions) != 1:
         raise UserError("--taught-under", "'same' needs exactly one --perception model")
     taught_under = perceptions[0] if args.taught_under == "same" else perception_model(args.taught_under, "--taught-under", table)
@@ -223,7 +237,8 @@ def _cmd_select(args: argparse.Namespace) -> int:
 
 
 def _select_relief_styles(text: str | None) -> tuple[str, ...]:
-    """``--relief-style`` checked before any work: relief styles as record takes them, separated by ';' (none given: flat)."""
+    """``--relief-style`` checked before any work: relief styles as record takes them, separated by ';'
+    (none given: flat), no two of them the same style (``default`` and ``roll_deg=12``: the default's roll)."""
     if text is None:
         return ()
     from terrapref.demos.relief_style import parse_relief_style
@@ -233,8 +248,15 @@ def _select_relief_styles(text: str | None) -> tuple[str, ...]:
     styles = tuple(t.strip() for t in text.split(";"))
     if not all(styles) or len(set(styles)) != len(styles):
         raise UserError("--relief-style", f"expected distinct relief styles separated by ';', got {text!r}")
+    seen: dict[object, str] = {}
     for style in styles:
-        check_rough_speed(parse_relief_style(style)[1], VehicleConfig().max_speed_mps)
+        parsed = parse_relief_style(style)[1]
+        check_rough_speed(parsed, VehicleConfig().max_speed_mps)
+        if parsed in seen:
+            raise UserError(
+                "--relief-style", f"{seen[parsed]!r} and {style!r} are the same relief style: each would teach the same models twice"
+            )
+        seen[parsed] = style
     return styles
 
 
@@ -260,20 +282,14 @@ def _announce_size(
 ) -> None:
     """Print at once how many models and runs the selection makes and about how long they take,
     counted without drawing or listing the orders; refuse one beyond the bound unless --large."""
-    from terrapref.report.select import LARGE_MODELS, LARGE_RUNS, SelectionSize, count_orders
+    from terrapref.report.select import SelectionSize, count_orders
 
     try:
         orders = count_orders(args.orders, table)
     except ValueError as exc:
         raise UserError("--orders", str(exc)) from None
     size = SelectionSize.of(recipes, orders, args.seeds, args.courses, perceptions, args.speeds == "random").with_relief(relief_styles)
-    print(f"select: {size.describe(engine.n_workers if engine.address is None else None)}", flush=True)
-    if size.large and not args.large:
-        raise UserError(
-            "--orders, --seeds, --courses",
-            f"{size.models:,} models and {size.runs:,} runs are more than {LARGE_MODELS:,} models or {LARGE_RUNS:,} runs: "
-            "name fewer orders (random:N), seeds or layouts, or add --large to run them all",
-        )
+    announce_workload("select", size.workload, engine, args.large, "--orders, --seeds, --courses", "orders (random:N), seeds or layouts")
 
 
 def _selection_course(args: argparse.Namespace, table, relief: bool = False) -> str | None:
@@ -293,7 +309,7 @@ def select_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "select", help="compare recipes: train each for every order and seed, drive generated layouts, report agreement with the driver"
     )
-    p.add_argument("--out", required=True, type=Path, help="folder for SELECT.md, select.json, select.png and the work")
+    p.add_argument("--out", required=True, type=output_path, help="folder for SELECT.md, select.json, select.png and the work")
     p.add_argument("--recipes", default="teach", help="recipe names separated by commas (terrapref recipes; default: teach)")
     p.add_argument(
         "--orders",
@@ -331,11 +347,7 @@ def select_parser(sub: argparse._SubParsersAction) -> None:
         help="after each demonstration, the driver also drives a follow-up course of the pairs it left unidentified "
         "(terrapref course --after), and the model trains on both",
     )
-    p.add_argument(
-        "--large",
-        action="store_true",
-        help="run a selection of more than 1,000 models or 100,000 runs (select first prints how many, and about how long)",
-    )
+    add_large_arg(p, "select")
     add_classes_arg(p)
     add_engine_args(p)
     add_force_arg(p)

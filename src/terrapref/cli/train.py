@@ -9,7 +9,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from terrapref.cli.common import add_classes_arg, add_force_arg, by_recording, check_table
+from terrapref.cli.common import add_classes_arg, add_force_arg, by_recording, check_table, output_path, warn_partial
 from terrapref.configargs import finite_float
 from terrapref.errors import UserError
 from terrapref.fileio import check_distinct, check_output
@@ -132,7 +132,7 @@ def _training_data(args: argparse.Namespace, recipe: Recipe) -> Dataset:
     from terrapref.progress import Progress
 
     recordings = [p for p in args.data if p.is_dir()]
-    _warn_lethal_contact(recordings)
+    _warn_recordings(recordings)
     bar = Progress("featurize", len(recordings), enabled=bool(recordings))
     data = training_data(args.data, recipe.features(), recipe.rules, progress=by_recording(bar))
     bar.close()
@@ -140,12 +140,14 @@ def _training_data(args: argparse.Namespace, recipe: Recipe) -> Dataset:
     return data
 
 
-def _warn_lethal_contact(recordings: list[Path]) -> None:
-    """A warning for each recording whose drive had lethal terrain under the footprint."""
+def _warn_recordings(recordings: list[Path]) -> None:
+    """A warning for each recording cut short, and for each whose drive had lethal terrain under the footprint."""
     from terrapref.demos.recording import read_recording
 
     for path in recordings:
-        contact = read_recording(path).lethal_contact()
+        recording = read_recording(path)
+        warn_partial(recording)
+        contact = recording.lethal_contact()
         if contact is not None:
             print(
                 f"warning: {path}: the drive had lethal terrain under the vehicle ({contact}); the model learns from it as driven",
@@ -238,7 +240,7 @@ def train_parser(sub: argparse._SubParsersAction, flags: bool = True) -> None:
         type=Path,
         help="recording directories (featurised as the recipe needs) or dataset files from `terrapref featurize`",
     )
-    p.add_argument("--out", required=True, type=Path, help="model file (.safetensors)")
+    p.add_argument("--out", required=True, type=output_path, help="model file (.safetensors)")
     p.add_argument("--recipe", default=None, metavar="NAME", help="a named recipe (`terrapref recipes`; default: teach)")
     p.add_argument("--verbose", action="store_true", help="print every epoch (default: every tenth)")
     add_classes_arg(p, check=True)

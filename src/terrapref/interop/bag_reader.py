@@ -10,7 +10,7 @@ failure of the reader a one-line UserError.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -91,6 +91,48 @@ def _definition_types(connection) -> dict:
     return {}
 
 
+def open_log(path: Path):
+    """:func:`open_reader` over ``path``, every failure of the reader on a damaged or foreign file
+    a one-line UserError naming it, as ``import``, ``replay`` and ``play`` refuse it."""
+    source = str(path)
+    if not path.exists():
+        raise UserError(source, "no such file or folder")
+    try:
+        return open_reader(path)
+    except UserError:  # the robot extra is missing
+        raise
+    except Exception as exc:  # the reader's errors on a damaged or foreign file are many kinds
+        raise UserError(source, f"not a readable ROS 1 bag, ROS 2 bag or MCAP file ({one_line(exc)})") from None
+
+
+def check_log_topics(reader, topics: Mapping[str, str], roles: Sequence[str], source: str, robot_source: str) -> None:
+    """Every topic of ``roles`` in ``topics`` (a robot file's, by role; the file ``robot_source``) is
+    in the log ``reader`` opened (``source``), of a type it may have, with messages; what is not
+    is said at once, every topic in one message, in the order of :data:`TYPES` (``import`` and
+    ``play --robot`` alike)."""
+    problems = [p for role in TYPES if role in roles and (p := topic_problem(reader, topics[role], role))]
+    if problems:
+        have = sorted({c.topic for c in reader.connections})
+        shown = ", ".join(have[:12]) + (" ..." if len(have) > 12 else "")
+        raise UserError(source, f"{'; '.join(problems)} (topics in {robot_source}; the bag has {shown or 'no topics'})", field="topics")
+
+
+def topic_problem(reader, topic: str, role: str) -> str | None:
+    """What is wrong with ``topic`` as the topic of ``role`` in the log ``reader`` opened (None: nothing)."""
+    conns = [c for c in reader.connections if c.topic == topic]
+    if not conns and topic in reader.unreadable:
+        msgtype, why = reader.unreadable[topic]
+        return f"topics.{role} {topic} has type {msgtype}, whose definition in the log cannot be read ({why})"
+    if not conns:
+        return f"topics.{role} {topic} is not in the bag"
+    wrong = sorted({c.msgtype for c in conns if c.msgtype not in TYPES[role]})
+    if wrong:
+        return f"topics.{role} {topic} has type {', '.join(wrong)}, expected {' or '.join(TYPES[role])}"
+    if sum(c.msgcount for c in conns) == 0:
+        return f"topics.{role} {topic} has no messages"
+    return None
+
+
 def read_messages(reader, connections: list, source: str) -> Iterator[tuple[Any, int, Any]]:
     """(connection, log time [ns], message) of ``connections`` in the log's order, deserialised,
     from a reader :func:`open_reader` opened. A damaged chunk or message stops the read with a
@@ -124,45 +166,18 @@ class Bag:
 
     def __init__(self, path: Path) -> None:
         self.source = str(path)
-        if not path.exists():
-            raise UserError(self.source, "no such bag")
-        try:
-            self.reader = open_reader(path)
-        except UserError:  # the robot extra is missing
-            raise
-        except Exception as exc:  # the reader's errors on a damaged or foreign file are many kinds
-            raise UserError(self.source, f"not a readable ROS 1 bag, ROS 2 bag or MCAP file ({one_line(exc)})") from None
+        self.reader = open_log(path)
         self.unreadable: dict[str, tuple[str, str]] = self.reader.unreadable  # topic -> (type, why)
 
     def check_topics(self, robot: RobotConfig, roles: Sequence[str]) -> None:
         """Every topic of ``roles`` in the robot file is in the bag, of a type it may have, with
-        messages; what is not is said at once, every topic in one message."""
-        problems = [p for role in roles if (p := self._topic_problem(robot.topics[role], role))]
-        if problems:
-            have = sorted({c.topic for c in self.reader.connections})
-            shown = ", ".join(have[:12]) + (" ..." if len(have) > 12 else "")
-            raise UserError(
-                self.source, f"{'; '.join(problems)} (topics in {robot.source}; the bag has {shown or 'no topics'})", field="topics"
-            )
-
-    def _topic_problem(self, topic: str, role: str) -> str | None:
-        conns = [c for c in self.reader.connections if c.topic == topic]
-        if not conns and topic in self.unreadable:
-            msgtype, why = self.unreadable[topic]
-            return f"topics.{role} {topic} has type {msgtype}, whose definition in the log cannot be read ({why})"
-        if not conns:
-            return f"topics.{role} {topic} is not in the bag"
-        wrong = sorted({c.msgtype for c in conns if c.msgtype not in TYPES[role]})
-        if wrong:
-            return f"topics.{role} {topic} has type {', '.join(wrong)}, expected {' or '.join(TYPES[role])}"
-        if sum(c.msgcount for c in conns) == 0:
-            return f"topics.{role} {topic} has no messages"
-        return None
+        messages (:func:`check_log_topics`)."""
+        check_log_topics(self.reader, robot.topics, roles, self.source, robot.source)
 
     def connections(self, topic: str, role: str, source: str) -> list:
         """The connections of ``topic``, checked as the topic of ``role`` that the robot file
         ``source`` names; a problem is a UserError naming the field."""
-        problem = self._topic_problem(topic, role)
+        problem = topic_problem(self.reader, topic, role)
         if problem:
             raise UserError(self.source, f"{problem} (topics in {source})", field=f"topics.{role}")
         return [c for c in self.reader.connections if c.topic == topic]

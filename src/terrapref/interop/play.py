@@ -40,39 +40,51 @@ class Message:
     msg: Any
 
 
+@dataclass(frozen=True)
+class RobotTopics:
+    """What a robot file's node reads (``play --robot``): its topics by role (terrapref.interop.robot.load_robot_topics), from ``source``."""
+
+    source: str
+    topics: dict[str, str]
+
+    @property
+    def played(self) -> dict[str, str]:
+        """The topics played, by role: all but the command (the log's commands stay off the node's topics)."""
+        return {role: topic for role, topic in self.topics.items() if role != "command"}
+
+
 class BagPlayer:
     """A ROS 2 log's topics as ROS 2 publishers on one participant.
 
     Args:
         path: a ROS 2 bag folder or MCAP file.
         domain: the DDS domain (ROS_DOMAIN_ID).
-        topics: the topics to play (default: all of them); a name the log does not hold is a
-            UserError, unless it is one of ``optional``.
+        topics: the topics to play (default: all of them, or with ``robot`` none besides its);
+            a name the log does not hold is a UserError.
+        robot: also play what this robot file's node reads, each topic checked as ``import``
+            checks it (in the log, of a type its role may have, with messages), and the log's
+            /tf and /tf_static where it holds them.
     """
 
-    def __init__(self, path: str | Path, domain: int, topics: Collection[str] | None = None, optional: Collection[str] = ()) -> None:
-        from terrapref.interop.bag_reader import open_reader
+    def __init__(self, path: str | Path, domain: int, topics: Collection[str] | None = None, robot: RobotTopics | None = None) -> None:
+        from terrapref.interop.bag_reader import check_log_topics, open_log
 
         self.path = Path(path)
         self.published = 0  # messages published so far (what a play that stops half-way did)
         self.skipped_s = 0.0  # [s of log] the clock jumped over in gaps longer than the longest played
-        if not self.path.exists():
-            raise UserError(str(path), "no such file or folder")
-        if self.path.suffix == ".bag":
+        if self.path.suffix == ".bag" and self.path.exists():
             raise UserError(
                 str(path), "a ROS 1 bag: terrapref play publishes ROS 2 logs (a bag folder or .mcap); play ROS 1 bags with rosbag play"
             )
-        try:
-            self.reader = open_reader(self.path)
-        except UserError:
-            raise
-        except Exception as exc:  # rosbags' errors on what is not a readable log vary with the flaw
-            raise UserError(str(path), f"not a readable ROS 2 bag or MCAP ({' '.join(str(exc).split())[:160]})") from None
+        self.reader = open_log(self.path)
         held = {c.topic for c in self.reader.connections}
         if topics is not None:
-            missing = sorted(set(topics) - held - set(optional))
+            missing = sorted(set(topics) - held)
             if missing:
                 raise UserError(str(path), f"holds no topic {', '.join(missing)} (asked for); it holds {', '.join(sorted(held))}")
+        if robot is not None:
+            check_log_topics(self.reader, robot.played, list(robot.played), str(path), robot.source)
+            topics = {*(topics or ()), *robot.played.values(), *({"/tf", "/tf_static"} & held)}
         # A /clock the log recorded is left out: the player's own /clock keeps the log's time.
         self.connections = [c for c in self.reader.connections if (topics is None or c.topic in topics) and c.topic != "/clock"]
         if not sum(c.msgcount for c in self.connections):  # (an empty log's first and last times are not times)

@@ -32,6 +32,7 @@ from terrapref.recipes import OURS, PAPER, TEACH, Recipe, RecipeSetup, run_recip
 from terrapref.report.reproduce_relief import FIGURE_COURSE as RELIEF_FIGURE_COURSE
 from terrapref.report.reproduce_relief import ReliefPart, relief_lines
 from terrapref.report.reproduce_speed import SpeedPart, run_speed_part, speed_figure, speed_lines
+from terrapref.report.workload import Workload, core_seconds, count
 from terrapref.scenario import packaged_scenarios, resolve_scenario
 from terrapref.terrain import ClassTable, PreferenceProfile
 from terrapref.vehicle import VehicleConfig
@@ -42,6 +43,11 @@ if TYPE_CHECKING:
 TEST_SET = ("test_course",)
 PAPER_VEHICLE = VehicleConfig.paper()  # the reproduction is driven in the paper's setting: 1 m/s, commands applied at once
 TRACK_COLOURS = ("orange", "red", "magenta", "limegreen")  # the planners' tracks, by recipe
+# The rates of the estimate `reproduce` prints before it starts, of one core, as docs/benchmarks.md measures them.
+MODEL_CORE_S = 12.0  # one recipe's model for one seed: its demonstrations, corrections and training
+RUN_CORE_S = 0.6  # one closed-loop run of the courses (train_course, test_course, the figures' variations)
+SPEED_SEED_CORE_S = 44.0  # one seed of the speed part: its teaching drive, its model and their runs
+RELIEF_SEED_CORE_S = 228.0  # one seed of the relief part: its drive of teach_relief, its model and their runs
 
 
 def variations() -> list[str]:
@@ -205,6 +211,16 @@ def _train_all(setup: Reproduction, out: Path, engine: Engine, log: Callable[[st
 
 def _evaluate(setup: Reproduction, trained: list[RecipeModel], engine: Engine, log: Callable[[str], None]) -> list[RecipeRun]:
     """Rule 2: every model and the synthetic driver on every course, the planners' agreement with the driver."""
+    specs = evaluation_specs(setup, trained)
+    log(f"[2/3] closed-loop evaluation: {len(specs)} runs ...")
+    results = annotate_agreement(run_many(specs, progress=every_tenth(log), engine=engine))
+    return [_recipe_run(r, spec, trained) for r, spec in zip(results, specs, strict=True)]
+
+
+def evaluation_specs(setup: Reproduction, trained: list[RecipeModel]) -> list[RunSpec]:
+    """The runs of rule 2, the longest first (no core idles at the end): every model on every
+    course, again on the test courses under each perception model that perturbs anything, and the
+    synthetic driver on every course once per seed."""
     specs = [
         RunSpec(sc, e, PLANNER, t.model, setup.profile.order, vehicle=PAPER_VEHICLE)
         for t in trained
@@ -222,10 +238,26 @@ def _evaluate(setup: Reproduction, trained: list[RecipeModel], engine: Engine, l
     specs += [
         RunSpec(sc, s, EXPERT, None, setup.profile.order, vehicle=PAPER_VEHICLE) for sc in setup.scenarios for s in range(setup.seeds)
     ]
-    specs.sort(key=lambda sp: -scenario_length(sp.scenario))  # longest first: no core idles at the end
-    log(f"[2/3] closed-loop evaluation: {len(specs)} runs ...")
-    results = annotate_agreement(run_many(specs, progress=every_tenth(log), engine=engine))
-    return [_recipe_run(r, spec, trained) for r, spec in zip(results, specs, strict=True)]
+    return sorted(specs, key=lambda sp: -scenario_length(sp.scenario))
+
+
+def reproduction_workload(setup: Reproduction) -> Workload:
+    """How much ``setup`` trains and drives, counted without listing a job (any number of seeds):
+    the models and runs of rules 1 and 2 (:func:`evaluation_specs`), and those of the speed and
+    relief parts, at the rates of :data:`MODEL_CORE_S` and the like."""
+    taught = any(r.name == TEACH.name for r in setup.recipes)
+    speed, relief = (setup.speed_seeds, setup.relief_seeds) if taught else (0, 0)
+    models = len(setup.recipes) * setup.seeds
+    perceived = sum(p.active for p in setup.perceptions) * len((*TEST_SET, *variations()))
+    runs = (models * (len(setup.scenarios) + perceived)) * setup.eval_seeds + setup.seeds * len(setup.scenarios)
+    relief_courses = ReliefPart(relief, setup.profile.order).courses if relief else ()
+    part_runs = (speed * len((*TEST_SET, *variations())) + relief * len(relief_courses)) * 2  # each model's and its driver's
+    factors = f"{count(len(setup.recipes), 'recipe')} x {count(setup.seeds, 'seed')}"
+    if speed or relief:
+        factors += f", and {speed + relief} of recipe teach for the speed and relief parts"
+    core_s = core_seconds((models, MODEL_CORE_S), (runs, RUN_CORE_S), (speed, SPEED_SEED_CORE_S), (relief, RELIEF_SEED_CORE_S))
+    where = count(len(setup.scenarios) + len(relief_courses), "course")
+    return Workload(models + speed + relief, factors, runs + part_runs, core_s, where)
 
 
 def _recipe_run(result: RunResult, spec: RunSpec, trained: list[RecipeModel]) -> RecipeRun:

@@ -40,8 +40,9 @@ from terrapref.grid import Engine, run_grid
 from terrapref.perception import PRESETS, PerceptionModel
 from terrapref.planner.model import Model
 from terrapref.plots import RateRow, save_intervals
-from terrapref.progress import duration_text, every_tenth
+from terrapref.progress import every_tenth
 from terrapref.recipes import RecipeSetup, recipe_named, run_recipe
+from terrapref.report.workload import Workload, core_seconds, count
 from terrapref.scenario.generate import zone_kind
 from terrapref.terrain import ClassTable, PreferenceProfile, default_classes
 from terrapref.terrain.classes import LETHAL_COLUMN
@@ -52,8 +53,6 @@ BACKGROUND_SPEEDS_MPS = (1.0, 2.0)  # `--speeds random`: the range of the backgr
 FEATURE_SPEEDS_MPS = (0.3, 1.5)  # and of every feature class's [m/s]
 TARGET = 0.95  # agreement the default recipe must keep on clean frames
 PERCEIVED_TARGET = 0.90  # and under a perception model's errors (docs/perception.md)
-LARGE_MODELS = 1_000  # a selection of more models than this, or of more runs than LARGE_RUNS, is run only when asked (--large)
-LARGE_RUNS = 100_000
 # The rates of the estimate `select` prints before it starts, as docs/benchmarks.md states and measures them.
 MODEL_CORE_S = 40.0  # one model: its order and seed's demonstration and its training [s of one core]
 RUN_CORE_S = 0.8  # one closed-loop run of a generated layout, the planner's or the driver's [s of one core]
@@ -100,7 +99,7 @@ class Selection:
 def parse_orders(text: str, classes: ClassTable | None = None) -> tuple[tuple[str, ...], ...]:
     """``all`` (every order of the feature classes, the lethal column last), ``random:N`` (N of
     them drawn at random, with :data:`RANDOM_ORDERS_SEED`) or ``a,b,c;d,e,f`` (the lethal column
-    appended if missing)."""
+    appended if missing); a ValueError for an empty item (``rock,,mud``, ``a,b;;c,d``)."""
     classes = classes or default_classes()
     last = (classes.lethal_column,) if classes.lethal else ()
     if text == "all":  # in the order of the table's profile
@@ -110,7 +109,11 @@ def parse_orders(text: str, classes: ClassTable | None = None) -> tuple[tuple[st
         return tuple((*order, *last) for order in _draw_orders(classes.terrain_names, n, np.random.default_rng(RANDOM_ORDERS_SEED)))
     orders = []
     for item in text.split(";"):
-        names = tuple(n.strip() for n in item.split(",") if n.strip())
+        names = tuple(n.strip() for n in item.split(","))
+        if not all(names):
+            raise ValueError(
+                f"has an empty {'order' if not item.strip() else 'class'}: {text!r}; expected orders separated by ';', each of classes separated by ','"
+            )
         orders.append(names if not last or last[0] in names else (*names, *last))
     return tuple(orders)
 
@@ -181,37 +184,25 @@ class SelectionSize(NamedTuple):
         """The estimated time of it all on one core [s] (:data:`MODEL_CORE_S`, :data:`RUN_CORE_S`, or
         on relief :data:`RELIEF_MODEL_CORE_S`, :data:`RELIEF_RUN_CORE_S`)."""
         if self.relief_styles:
-            return self.models * RELIEF_MODEL_CORE_S + self.runs * RELIEF_RUN_CORE_S
-        return self.models * MODEL_CORE_S + self.runs * RUN_CORE_S
+            return core_seconds((self.models, RELIEF_MODEL_CORE_S), (self.runs, RELIEF_RUN_CORE_S))
+        return core_seconds((self.models, MODEL_CORE_S), (self.runs, RUN_CORE_S))
+
+    @property
+    def workload(self) -> Workload:
+        """The models, the runs and their time, as every command of many models says them (terrapref.report.workload)."""
+        named = ((self.recipes, "recipe"), (self.orders, "order"), (self.seeds, "seed"), (self.relief_styles, "relief style"))
+        factors = " x ".join(count(n, what) for n, what in named if n or what != "relief style")
+        return Workload(self.models, factors, self.runs, self.core_s, count(self.courses, "layout"))
 
     @property
     def large(self) -> bool:
-        """Beyond :data:`LARGE_MODELS` models or :data:`LARGE_RUNS` runs: run only when asked."""
-        return self.models > LARGE_MODELS or self.runs > LARGE_RUNS
+        """Beyond the bound of terrapref.report.workload: run only when asked."""
+        return self.workload.large
 
     def describe(self, workers: int | None) -> str:
         """One line: the models, the runs and about how long they take on ``workers`` cores
         (None: a cluster's, unknown here: one core's time alone)."""
-        where = f"about {_rough_duration(self.core_s)} of one core"
-        if workers is not None:
-            where = f"about {_rough_duration(self.core_s / workers)} on {workers} worker{'s' if workers > 1 else ''} ({where})"
-        named = ((self.recipes, "recipe"), (self.orders, "order"), (self.seeds, "seed"), (self.relief_styles, "relief style"))
-        factors = " x ".join(_count(n, what) for n, what in named if n or what != "relief style")
-        return f"{_count(self.models, 'model')} ({factors}) and {_count(self.runs, 'closed-loop run')} on {_count(self.courses, 'layout')}: {where}"
-
-
-def _count(n: int, what: str) -> str:
-    """``1 seed``, ``5 seeds``, ``3,628,800 orders``."""
-    return f"{n:,} {what}{'s' if n != 1 else ''}"
-
-
-def _rough_duration(seconds: float) -> str:
-    """A duration for an estimate: minutes and hours as :func:`duration_text` gives them, then days, then years."""
-    if seconds < 2 * 86400:
-        return duration_text(seconds)
-    if seconds < 2 * 365 * 86400:
-        return f"{seconds / 86400:,.0f} days"
-    return f"{seconds / (365 * 86400):,.0f} years"
+        return self.workload.describe(workers)
 
 
 def _draw_orders(names: tuple[str, ...], n: int, rng: np.random.Generator) -> list[tuple[str, ...]]:

@@ -48,6 +48,7 @@ from terrapref.records import to_plain
 from terrapref.report.reproduce import scenario_length
 from terrapref.report.study_plan import DEMONSTRATIONS, FULL, StudyPlan, TrainedModel, TrainJob, course_name
 from terrapref.report.study_report import ModelVariant, RunTag, StudyRun, agreement, write_study
+from terrapref.report.workload import Workload, core_seconds, count
 from terrapref.terrain import ClassTable, PreferenceProfile
 
 if TYPE_CHECKING:
@@ -56,6 +57,13 @@ if TYPE_CHECKING:
 
 LEARNED = ("C", "linear", "cnn")  # methods trained from demonstrations
 
+
+# The rates of the estimate `study` prints before it starts, of one core, as docs/benchmarks.md measures them.
+DEMONSTRATION_CORE_S = 9.0  # one seed and profile's demonstrations, featurised
+TRAINED_CORE_S = 5.0  # one model trained from them (C, the linear model or the CNN)
+TAUGHT_CORE_S = 40.0  # one teaching drive and its model (select's rate: recipe teach on its course)
+RUN_CORE_S = 0.6  # one closed-loop run of a course or a generated layout
+SWEPT_RUN_CORE_S = 3.5  # one run of the robustness sweep (a part of a preset, at a multiple of it)
 
 PARTS = ("labels", "pose", "camera", "frames")  # the parts of a perception model the robustness sweep varies one at a time
 SWEEP_FLOOR = 0.9  # a part's sweep stops at the first level where agreement falls below this
@@ -243,6 +251,31 @@ def teach_jobs(plan: StudyPlan, work: Path) -> list[TeachJob]:
         for s in range(plan.seeds)
         for o, st in combos
     ]
+
+
+def study_workload(plan: StudyPlan) -> Workload:
+    """How much ``plan`` trains and drives, counted without listing a job (any number of seeds):
+    per seed the models of :func:`_train_jobs` and :func:`teach_jobs`, and the runs of
+    :func:`_evaluation_runs` and, at most (a part drops out early), of :func:`_sweep`."""
+    per_seed = len(LEARNED) * (1 + len(plan.minutes)) + (plan.alt is not None) + 2 + len(plan.horizons) + len(plan.widths)
+    drives = len(plan.orders) + sum(style != "default" for style in plan.styles)  # an order and style each: teach_jobs' combos
+    active = sum(model.active for model in plan.perceptions())
+    base = load_perception(plan.sweep_base, plan.classes) if plan.sweep_base is not None else None
+    parts = sum(base.part(part).active for part in PARTS) if base is not None else 0
+    alt = int(plan.alt is not None)
+    runs = len(plan.scenarios()) * plan.seeds * (per_seed + 2 * alt + 3 + alt)  # _course_runs: the models, the three drivers
+    runs += len(plan.layouts) * (drives + plan.seeds * (drives + len(plan.orders) * active))  # _layout_runs
+    swept = len(plan.layouts) * plan.seeds * len(plan.orders) * parts * len(plan.sweep)
+    core_s = core_seconds(
+        (plan.seeds * (1 + alt), DEMONSTRATION_CORE_S),
+        (plan.seeds * per_seed, TRAINED_CORE_S),
+        (plan.seeds * drives, TAUGHT_CORE_S),
+        (runs, RUN_CORE_S),
+        (swept, SWEPT_RUN_CORE_S),
+    )
+    factors = f"{count(plan.seeds, 'seed')} x {per_seed + drives} models a seed"
+    where = f"{count(len(plan.scenarios()), 'course')} and {count(len(plan.layouts), 'layout')}"
+    return Workload(plan.seeds * (per_seed + drives), factors, runs + swept, core_s, where, up_to=swept > 0)
 
 
 # -- the study -------------------------------------------------------------------------------

@@ -71,6 +71,8 @@ class ClassTable:
             raise ValueError(f"{len(self.terrain_names)} feature classes (neither background nor lethal); at most {MAX_TERRAIN_CLASSES}")
         if sorted(self.profile) != sorted(self.feature_names):
             raise ValueError(f"profile must list each of {', '.join(self.feature_names)} exactly once")
+        if self.lethal_column is not None and self.profile[-1] != self.lethal_column:
+            raise ValueError(f"profile must put the lethal column {self.lethal_column!r} last (it is lethal to every driver)")
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -194,14 +196,17 @@ class ClassTable:
             raise ConfigError(source, problems)
         ordered = tuple(sorted(classes, key=lambda c: c.id))
         columns = _columns(ordered, background, tuple(lethal))
+        last = _lethal_column(tuple(lethal))
+        in_id_order = sorted(columns, key=lambda n: n == last)  # the columns in id order, the lethal one last
         try:  # the table's own checks first, with its columns as a stand-in profile
-            cls(ordered, background, tuple(lethal), columns)
+            cls(ordered, background, tuple(lethal), tuple(in_id_order))
         except ValueError as exc:
             raise ConfigError(source, str(exc), field="classes") from None
-        # Without a profile: the classes in id order, the lethal column last.
-        profile = data.get("profile", sorted(columns, key=lambda n: n == _lethal_column(tuple(lethal))))
+        profile = data.get("profile", in_id_order)
         if not isinstance(profile, list) or not all(isinstance(p, str) for p in profile) or sorted(profile) != sorted(columns):
             raise ConfigError(source, f"must list each of {', '.join(columns)} exactly once, most preferred first", field="profile")
+        if last is not None and profile[-1] != last:
+            raise ConfigError(source, f"must put the lethal column {last!r} last (it is lethal to every driver)", field="profile")
         return cls(ordered, background, tuple(lethal), tuple(profile))
 
 

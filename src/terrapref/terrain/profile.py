@@ -20,11 +20,13 @@ class PreferenceProfile:
         """Parse ``"mud,rock,water,non_traversable"`` (or a list) and check it against the class table.
 
         The profile must name every feature class exactly once, so that any zone's ``best``
-        resolves to one class.
+        resolves to one class, and the lethal column last (it is lethal to every driver: no zone
+        expects it), as the table's own profile has it; an empty item is refused, not skipped.
         """
         classes = classes or default_classes()
-        names = [s.strip() for s in text.split(",")] if isinstance(text, str) else list(text)
-        names = [n for n in names if n]
+        names = ([s.strip() for s in text.split(",")] if text.strip() else []) if isinstance(text, str) else list(text)
+        if not all(names):
+            raise ConfigError(source, f"has an empty item: {text!r}; expected the classes separated by commas, most preferred first")
         unknown = [n for n in names if n not in classes.feature_names]
         if unknown:
             raise ConfigError(
@@ -32,6 +34,10 @@ class PreferenceProfile:
             )
         if sorted(names) != sorted(classes.feature_names):
             raise ConfigError(source, f"must list each of {', '.join(classes.feature_names)} exactly once")
+        lethal = classes.lethal_column
+        if lethal is not None and names[-1] != lethal:
+            after = ", ".join(names[names.index(lethal) + 1 :])
+            raise ConfigError(source, f"puts the lethal column {lethal!r} before {after}: it is lethal to every driver and comes last")
         return cls(tuple(names))
 
     @classmethod
