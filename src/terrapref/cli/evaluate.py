@@ -266,7 +266,7 @@ def _cmd_perception(args: argparse.Namespace) -> int:
             print(f"{name}: {model.summary()}")
         print(
             "(terrapref perception NAME|FILE prints one in full; --perception takes a preset, a file, or NAME:PART "
-            "for one part alone: labels, pose, camera or frames)"
+            "for one part alone: labels, pose, camera, frames or depth)"
         )
         return 0
     for i, spec in enumerate(args.models):

@@ -449,7 +449,7 @@ def preset(name: str) -> PerceptionModel:
 def load_perception(spec: str | Path | PerceptionModel | None, classes: ClassTable | None = None) -> PerceptionModel:
     """A perception model: a preset's name, a ``terrapref-perception/1`` file, a model as it is, or None (clean).
 
-    ``SPEC:PART`` (``field:pose``) keeps only one part of it: labels, pose, camera or frames.
+    ``SPEC:PART`` (``field:pose``) keeps only one part of it: labels, pose, camera, frames or depth.
 
     With ``classes``, a confusion that names a class the table lacks is refused.
     """
