@@ -56,12 +56,22 @@ def _labels(path: Path, classes: ClassTable | None) -> object:
     return load_label_map(path, classes or default_classes(), source=str(path))
 
 
+def _style(path: Path, classes: ClassTable | None) -> object:
+    from terrapref.demos.speed_style import driver_style
+    from terrapref.terrain import default_classes
+    from terrapref.vehicle import VehicleConfig
+
+    table = classes or default_classes()  # its speeds checked against the table, for the table's own order
+    return driver_style(str(path), table.profile, table, VehicleConfig().max_speed_mps)
+
+
 KINDS: dict[str, FileKind] = {
     "scenario": FileKind("terrapref-scenario/1", "scenario", frozenset({"world", "path", "terrain", "zones"}), _scenario),
     "classes": FileKind("terrapref-classes/1", "class table", frozenset({"background", "lethal"}), _classes),
     "perception": FileKind("terrapref-perception/1", "perception model", frozenset({"pose", "frames"}), _perception),
     "robot": FileKind("terrapref-robot/1", "robot file", frozenset({"topics"}), _robot),
     "labels": FileKind("terrapref-labels/1", "label map", frozenset({"ids", "colors", "unlisted"}), _labels),
+    "style": FileKind("terrapref-driver-style/1", "driver style", frozenset({"base", "speeds", "ranked_speeds_mps"}), _style),
 }
 """Every kind ``validate`` reads, by the name ``--template`` takes."""
 

@@ -284,7 +284,14 @@ def test_validate_needs_a_file(capsys: pytest.CaptureFixture[str]) -> None:
 
 # --- validate: every kind of file, and templates to start from ----------------------------------
 
-KINDS = {"scenario": "scenario", "classes": "class table", "perception": "perception model", "robot": "robot file", "labels": "label map"}
+KINDS = {
+    "scenario": "scenario",
+    "classes": "class table",
+    "perception": "perception model",
+    "robot": "robot file",
+    "labels": "label map",
+    "style": "driver style",
+}
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -302,6 +309,9 @@ def test_each_template_is_a_file_of_its_kind_that_validate_accepts(tmp_path: Pat
         ("perception", "drop_rate: 0.05", "drop_rate: 2", "frames.drop_rate: must be in [0, 1], got 2"),
         ("robot", "height_m: 1.0", "height_m: -1.0", "camera.height_m: ..."),
         ("labels", "2: mud", "2: lava", "ids: class 'lava' is not in the class table ..."),
+        ("style", "mud: 0.5", "mud: 5", "speeds.mud: a cruising speed of 5 m/s is above the vehicle's 2 m/s"),
+        ("style", "base: default", "base: fast", "base: 'fast' is not a style ..."),
+        ("style", "rock: 1.0", "lava: 1.0", "speeds: class 'lava' is not in the class table ..."),
         ("robot", "format: terrapref-robot/1\n", "", "format: missing; expected 'terrapref-robot/1'"),
     ],
 )
@@ -335,7 +345,8 @@ def test_validate_refuses_a_file_of_no_known_kind(tmp_path: Path, capsys: pytest
     code, out, _ = run_cli(capsys, "validate", str(path))
     assert code == 2 and out == [
         f"error: {path}: format: 'terrapref-model/1' is not a file terrapref reads here; expected one of "
-        "terrapref-scenario/1, terrapref-classes/1, terrapref-perception/1, terrapref-robot/1, terrapref-labels/1"
+        "terrapref-scenario/1, terrapref-classes/1, terrapref-perception/1, terrapref-robot/1, terrapref-labels/1, "
+        "terrapref-driver-style/1"
     ]
     assert run_cli(capsys, "validate", "--template", "robot", str(path))[0] == 2
 

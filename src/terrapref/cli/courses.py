@@ -58,19 +58,21 @@ def _is_file(name: str) -> bool:
 
 
 def validate_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("validate", help="check scenarios, class tables, perception models, robot files and label maps (each by its format)")
+    p = sub.add_parser(
+        "validate", help="check scenarios, class tables, perception models, robot files, label maps and driver styles (each by its format)"
+    )
     p.add_argument(
         "files",
         nargs="*",
         metavar="FILE",
         help="files to check, each read as its format: field says (terrapref-scenario/1, -classes/1, -perception/1, -robot/1, "
-        "-labels/1), packaged scenarios' names, or generated layouts (gen:SEED, genrelief:SEED)",
+        "-labels/1, -driver-style/1), packaged scenarios' names, or generated layouts (gen:SEED, genrelief:SEED)",
     )
     p.add_argument(
         "--template",
         metavar="KIND",
-        choices=("scenario", "classes", "perception", "robot", "labels"),
-        help="print a commented file of this kind to start from (scenario, classes, perception, robot, labels): "
+        choices=("scenario", "classes", "perception", "robot", "labels", "style"),
+        help="print a commented file of this kind to start from (scenario, classes, perception, robot, labels, style): "
         "terrapref validate --template robot > robot.yaml",
     )
     add_classes_arg(p)

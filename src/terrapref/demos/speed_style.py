@@ -123,7 +123,9 @@ def driver_style(
     _check_drivable(config, classes, table, lambda name: FLAGS["speeds"] if name in named else source)
     fastest = max(config.speed_mps, float(max((v for v in table if v == v), default=0.0)))
     if fastest > max_speed_mps + 1e-9:
-        raise UserError(blame, f"a cruising speed of {fastest:g} m/s is above the vehicle's {max_speed_mps:g} m/s")
+        over = [c.name for c in classes.classes if table[c.id] == fastest and dict(config.speeds).get(c.name) == fastest]
+        where = "" if not over else over[0] if "speeds" in flags else f"speeds.{over[0]}"  # the class it is given for
+        raise UserError(blame, f"a cruising speed of {fastest:g} m/s is above the vehicle's {max_speed_mps:g} m/s", field=where)
     check_rough_speed(config.relief, max_speed_mps)
     return config
 
