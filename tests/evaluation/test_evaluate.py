@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -273,6 +274,34 @@ def test_cli_evaluate_speeds_change_only_the_classes_they_name_of_the_models_dri
     ]:
         assert main(["evaluate", str(model), "demo_course", "--seeds", "1", "--out", str(tmp_path / "ev"), *flags]) == 2
         assert (compared[-1].style, dict(compared[-1].speeds)) == (style, expected), flags
+
+
+def test_cli_evaluate_compares_with_a_style_files_driver_given_or_trained(tmp_path: Path, capsys, monkeypatch):
+    """A style file given to --style, or the one the model's recordings were driven with (its
+    name recorded, the file perhaps gone), is the comparison driver: its preset, speeds and fields."""
+    style = tmp_path / "mine.yaml"
+    style.write_text("format: terrapref-driver-style/1\nbase: wide\nspeeds: {grass: 1.6, mud: 0.5}\nlateral_accel_mps2: 0.8\n")
+    driver = ExpertInfo.of(0, "gone.yaml", ExpertConfig(speeds=(("grass", 1.2),), lateral_accel_mps2=0.7, preview_m=2.0)).to_dict()
+    config = ClassifierConfig(hidden=8, skip=True)
+    meta = {**model_meta(), "data": {"fingerprint": "0" * 16, "samples": 1, "recordings": [{"path": "rec0", "driver": driver}]}}
+    model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), meta)
+    compared: list[Evaluation] = []
+
+    def read_driver(evaluation: Evaluation, *args, **kwargs) -> dict:  # the driver is all this test asks about: no runs
+        compared.append(evaluation)
+        raise UserError("runs", "not driven here")
+
+    monkeypatch.setattr("terrapref.evaluation.evaluate.evaluate_model", read_driver)
+    for flags, expected in [
+        (["--style", str(style), "--speeds", "mud=0.4"], ("wide", {"grass": 1.6, "mud": 0.4}, 0.8, 4.0)),
+        ([], ("default", {"grass": 1.2}, 0.7, 2.0)),
+    ]:
+        assert main(["evaluate", str(model), "demo_course", "--seeds", "1", "--out", str(tmp_path / "ev"), *flags]) == 2
+        one_line_error(capsys, "not driven here")
+        ev = compared[-1]
+        spec = ev.specs(PreferenceProfile.parse(ROCK_FIRST.split(","), default_classes()))[-1]
+        driven = replace(ExpertConfig.styled(spec.style, None, spec.speeds), **dict(spec.driver_changes))
+        assert (ev.style, dict(ev.speeds), driven.lateral_accel_mps2, driven.preview_m) == expected, flags
 
 
 def test_cli_evaluate_zero_seeds_is_a_user_error(model_path: Path, tmp_path: Path, capsys):

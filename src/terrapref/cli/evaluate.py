@@ -6,7 +6,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from terrapref.cli.common import (
     PERCEPTION_HELP,
@@ -28,6 +28,7 @@ from terrapref.fileio import check_distinct, check_output, output_folder
 
 if TYPE_CHECKING:
     from terrapref.evaluation.evaluate import Evaluation
+    from terrapref.evaluation.speed import TrainedDriver
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
@@ -88,7 +89,7 @@ def _evaluation(args: argparse.Namespace) -> Evaluation:
     perception = perception_model(args.perception, classes=model.classes)
     given = parse_speeds(args.speeds) if args.speeds is not None else ()
     meta = getattr(getattr(model, "model", None), "meta", {})
-    style, speeds = _driver_of(args.style, given, trained_driver(meta))
+    style, speeds, changes = _driver_of(args.style, given, trained_driver(meta))
     relief = parse_relief_style(args.relief_style)[1] if args.relief_style is not None else trained_relief(meta, args.model)
     if args.relief_style is not None and relief is not None:
         _note_flat(args.scenarios, model.classes)
@@ -96,8 +97,10 @@ def _evaluation(args: argparse.Namespace) -> Evaluation:
     if args.relief_style is not None:
         check_rough_speed(relief, top_mps)
     STYLES.get(style, "--style")
-    if given:  # checked against the model's table and the vehicle before any run (the trained driver's were when it drove)
-        driver_style(style, scored.order, model.classes, top_mps, {"speeds": given})
+    if (
+        given or args.style is not None
+    ):  # checked against the model's table and the vehicle before any run (the trained driver's were when it drove)
+        driver_style(args.style or style, scored.order, model.classes, top_mps, {"speeds": given} if given else None)
     return Evaluation(
         args.model,
         tuple(args.scenarios),
@@ -106,6 +109,7 @@ def _evaluation(args: argparse.Namespace) -> Evaluation:
         with_driver=not args.no_driver,
         style=style,
         speeds=speeds,
+        driver_changes=changes,
         frames=tuple(frames),
         mcap=args.mcap,
         perception=perception,
@@ -166,14 +170,24 @@ def _print_results(evaluation: Evaluation, metrics: dict, args: argparse.Namespa
 
 
 def _driver_of(
-    style: str | None, given: tuple[tuple[str, float], ...], trained: tuple[str, tuple[tuple[str, float], ...]] | None
-) -> tuple[str, tuple[tuple[str, float], ...]]:
-    """The comparison driver's style and speeds by class: without ``--style``, the model's own
-    synthetic driver (``trained``) where it has one, the classes ``--speeds`` names (``given``)
-    changed and the others kept; else the style given (or the default) with the speeds given."""
+    style: str | None, given: tuple[tuple[str, float], ...], trained: TrainedDriver | None
+) -> tuple[str, tuple[tuple[str, float], ...], tuple[tuple[str, Any], ...]]:
+    """The comparison driver's style (a preset), speeds by class and other fields over the
+    style's: without ``--style``, the model's own synthetic driver (``trained``) where it has
+    one, the classes ``--speeds`` names (``given``) changed and the others kept; else the style
+    given (or the default; a style file: its preset and what it changes) with the speeds given."""
+    from terrapref.demos.expert import STYLES
+    from terrapref.demos.speed_style import read_style_file
+
     if style is None and trained is not None:
-        return trained[0], tuple({**dict(trained[1]), **dict(given)}.items())
-    return style or "default", given
+        return trained[0], tuple({**dict(trained[1]), **dict(given)}.items()), trained[2]
+    if style is None or style in STYLES.names():
+        return style or "default", given, ()
+    if not style.endswith((".yaml", ".yml")) and not Path(style).exists():
+        STYLES.get(style, "--style")  # neither a preset nor a file: refused, naming the presets
+    base, changes = read_style_file(style)
+    speeds = tuple({**dict(changes.pop("speeds", ())), **dict(given)}.items())
+    return base, speeds, tuple(changes.items())
 
 
 def _note_flat(scenarios: Sequence[str], classes) -> None:
@@ -234,7 +248,7 @@ def evaluate_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--style",
         help="the synthetic driver's style for the comparison runs (agreement, speed; default: the style and speeds of the "
-        "synthetic driver the model was trained from, else default)",
+        "synthetic driver the model was trained from, else default), or a terrapref-driver-style/1 file",
     )
     p.add_argument(
         "--speeds",

@@ -7,6 +7,7 @@ import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -53,6 +54,8 @@ class Evaluation:
         with_driver: also drive the synthetic driver, for the agreement with it.
         style: the synthetic driver's style.
         speeds: the synthetic driver's cruising speeds by class, over its style's [m/s].
+        driver_changes: the synthetic driver's other :class:`ExpertConfig` fields over its
+            style's (a style file's).
         relief: the synthetic driver's relief style (terrapref.demos.relief_style); None: it
             drives relief as if it were flat.
         frames: decision numbers of seed 0 to draw.
@@ -67,6 +70,7 @@ class Evaluation:
     with_driver: bool = True
     style: str = "default"
     speeds: tuple[tuple[str, float], ...] = ()
+    driver_changes: tuple[tuple[str, Any], ...] = ()
     frames: tuple[int, ...] = ()
     mcap: bool = False
     perception: PerceptionModel | None = None
@@ -97,7 +101,18 @@ class Evaluation:
         ]
         if self.with_driver:
             specs += [
-                RunSpec(name, seed, EXPERT, None, profile.order, style=self.style, classes=classes, speeds=self.speeds, relief=self.relief)
+                RunSpec(
+                    name,
+                    seed,
+                    EXPERT,
+                    None,
+                    profile.order,
+                    style=self.style,
+                    classes=classes,
+                    speeds=self.speeds,
+                    relief=self.relief,
+                    driver_changes=self.driver_changes,
+                )
                 for name in self.scenarios
                 for seed in range(self.seeds)
             ]
@@ -155,7 +170,7 @@ def evaluate_model(
     evidence = _evidence(model, ev.scenarios)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    limit = driver_lateral_limit(ev.style, ev.speeds, model.rules)
+    limit = driver_lateral_limit(ev.style, ev.speeds, model.rules, ev.driver_changes)
     metrics = _metrics(ev, profile, results, evidence, limit, model.classes.background)
     beyond = {r.scenario: sorted(set(ev.frames) - {f.number for f in r.frames}) for r in results if r.driver == PLANNER and r.seed == 0}
     if any(beyond.values()):
@@ -213,6 +228,7 @@ def _metrics(
         "seeds": ev.seeds,
         "driver_style": ev.style,
         "driver_speeds": {name: v for name, v in ev.speeds},
+        **({"driver_changes": dict(ev.driver_changes)} if ev.driver_changes else {}),  # a style file's fields
         **({"driver_relief": ev.relief.to_dict()} if ev.relief is not None else {}),  # its relief style, where it has one
         "perception": ev.perceived.to_dict(),
         "unidentified_pairs": [f"{p.first} vs {p.second}" for p in evidence.identified.unidentified()] if evidence is not None else None,

@@ -15,6 +15,7 @@ import os
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, fields, replace
+from typing import Any
 
 import numpy as np
 
@@ -61,6 +62,7 @@ class RunSpec:
     speeds: tuple[tuple[str, float], ...] = ()  # the synthetic driver's cruising speeds by class, over its style's (EXPERT runs)
     perception_draw: int = 0  # which draw of the perception model's errors (terrapref.perception.run_stream)
     relief: ReliefStyle | None = None  # the synthetic driver's relief style (EXPERT runs; None: it drives relief as if flat)
+    driver_changes: tuple[tuple[str, Any], ...] = ()  # the synthetic driver's other ExpertConfig fields over its style's (EXPERT runs)
 
     @property
     def perceived_as(self) -> str:
@@ -286,7 +288,7 @@ def drivers() -> list[str]:
 def _expert(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: PreferenceProfile) -> tuple[Simulation, Driver]:
     """The synthetic driver of the run's profile and style, on the cached raster (not a new one)."""
     return Simulation(scenario, config=SimConfig.driving(spec.vehicle), world=world), ExpertDriver(
-        replace(ExpertConfig.styled(spec.style, profile.order, spec.speeds), relief=spec.relief), world=world
+        replace(ExpertConfig.styled(spec.style, profile.order, spec.speeds), **dict(spec.driver_changes), relief=spec.relief), world=world
     )
 
 

@@ -12,13 +12,13 @@ Rows are plain mappings, as select.json keeps them: a zone row has ``scenario``,
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from terrapref.demos.expert import ExpertConfig
+from terrapref.demos.expert import STYLES, ExpertConfig
 from terrapref.demos.relief_style import ReliefStyle
 from terrapref.errors import UserError
 from terrapref.evaluation.runner import EXPERT, PLANNER, RunResult
@@ -204,11 +204,14 @@ class SpeedComparison:
         return out
 
 
-def driver_lateral_limit(style: str, speeds: tuple[tuple[str, float], ...], rules: Sequence[Rule]) -> float | None:
-    """The lateral acceleration [m/s^2] a driver keeps: its style's limit in bends, else (a style
-    without one) the largest its teaching drive showed, which a model's speed rule keeps; None
-    where neither is known (a model without a speed rule)."""
-    own = ExpertConfig.styled(style, None, speeds).lateral_accel_mps2
+def driver_lateral_limit(
+    style: str, speeds: tuple[tuple[str, float], ...], rules: Sequence[Rule], changes: tuple[tuple[str, Any], ...] = ()
+) -> float | None:
+    """The lateral acceleration [m/s^2] a driver keeps: its style's limit in bends (``changes``:
+    :class:`ExpertConfig` fields over the style's, a style file's), else (a style without one)
+    the largest its teaching drive showed, which a model's speed rule keeps; None where neither
+    is known (a model without a speed rule)."""
+    own = replace(ExpertConfig.styled(style, None, speeds), **dict(changes)).lateral_accel_mps2
     if own is not None:
         return own
     rule = speed_rule(rules)
@@ -256,9 +259,14 @@ def _estimate(groups: Mapping[str, list[float]]) -> Estimate:
     return Estimate(mean, low, high, sum(len(v) for v in groups.values()))
 
 
-def trained_driver(meta: Mapping[str, Any]) -> tuple[str, tuple[tuple[str, float], ...]] | None:
-    """The synthetic driver a model's recordings were driven by: its style and cruising speeds by
-    class, when every recording names the same; None for a person's drives or a mix."""
+TrainedDriver = tuple[str, tuple[tuple[str, float], ...], tuple[tuple[str, Any], ...]]  # style, speeds by class, other fields
+
+
+def trained_driver(meta: Mapping[str, Any]) -> TrainedDriver | None:
+    """The synthetic driver a model's recordings were driven by, when every recording names the
+    same: its style (a preset), its cruising speeds by class and the :class:`ExpertConfig`
+    fields it changed over the preset's (a driver of a style file: every field its recording
+    holds, over the default preset's); None for a person's drives, a mix, or a driver unreadable."""
     drivers = _recorded_drivers(meta)
     if not drivers or not all(isinstance(d, Mapping) and d.get("kind") == "expert" for d in drivers):
         return None
@@ -268,7 +276,27 @@ def trained_driver(meta: Mapping[str, Any]) -> tuple[str, tuple[tuple[str, float
     style, speeds = next(iter(found))
     if not isinstance(style, str) or not all(len(p) == 2 and isinstance(p[0], str) and isinstance(p[1], (int, float)) for p in speeds):
         return None
-    return style, tuple((str(n), float(v)) for n, v in speeds)
+    speeds = tuple((str(n), float(v)) for n, v in speeds)
+    if style in STYLES.names():
+        return style, speeds, ()
+    changes = {_recorded_changes(d.get("config") or {}) for d in drivers}  # a style file's: it may be gone; its recordings hold it
+    return ("default", speeds, changes.pop()) if len(changes) == 1 and None not in changes else None
+
+
+def _recorded_changes(config: Mapping[str, Any]) -> tuple[tuple[str, Any], ...] | None:
+    """A recorded driver's fields but its profile, speeds and relief, as :class:`ExpertConfig`
+    takes them; None where they do not make one."""
+    if not isinstance(config, Mapping):
+        return None
+    kept = {f.name for f in fields(ExpertConfig)} - {"profile", "speeds", "relief"}
+    changes = tuple((k, tuple(v) if isinstance(v, list) else v) for k, v in config.items() if k in kept)
+    if not all(v is None or isinstance(v, (int, float)) or all(isinstance(x, (int, float)) for x in v) for _, v in changes):
+        return None  # hand-edited: not fields a driver takes
+    try:
+        ExpertConfig(**dict(changes))
+    except (TypeError, ValueError):
+        return None
+    return changes
 
 
 def _recorded_drivers(meta: Mapping[str, Any]) -> list[Any]:
