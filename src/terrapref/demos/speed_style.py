@@ -62,27 +62,36 @@ def read_style_file(path: str | Path) -> tuple[str, dict[str, Any]]:
     base = data.get("base", "default")
     if base not in STYLES.names():
         raise UserError(source, f"{base!r} is not a style ({', '.join(STYLES.names())})", field="base")
-    changes: dict[str, Any] = {}
-    for name in _NUMBERS:
-        if name in data:
-            value = data[name]
-            optional = name in ("lateral_accel_mps2", "near_lethal_mps")
-            if not (finite_number(value) or (optional and value is None)):
-                raise UserError(source, f"expected a finite number{' or null' if optional else ''}, got {described(value)}", field=name)
-            changes[name] = None if value is None else float(value)
+    changes: dict[str, Any] = {name: _file_number(source, name, data[name]) for name in _NUMBERS if name in data}
     if "speeds" in data:
         speeds = data["speeds"]
-        if not isinstance(speeds, dict) or not all(isinstance(k, str) and finite_number(v) for k, v in speeds.items()):
+        if not isinstance(speeds, dict) or not all(isinstance(k, str) for k in speeds):
             raise UserError(source, "expected a mapping of class names to speeds in m/s", field="speeds")
-        changes["speeds"] = tuple((k, float(v)) for k, v in speeds.items())
+        changes["speeds"] = tuple((k, _file_number(source, f"speeds.{k}", v)) for k, v in speeds.items())
     if "ranked_speeds_mps" in data:
         ranked = data["ranked_speeds_mps"]
-        if not (isinstance(ranked, list) and len(ranked) == 2 and all(finite_number(v) for v in ranked)):
+        if not (isinstance(ranked, list) and len(ranked) == 2):
             raise UserError(
                 source, "expected [fastest, slowest]: the most and the least preferred class's speeds", field="ranked_speeds_mps"
             )
-        changes["ranked_speeds_mps"] = (float(ranked[0]), float(ranked[1]))
+        changes["ranked_speeds_mps"] = tuple(_file_number(source, f"ranked_speeds_mps[{i}]", v) for i, v in enumerate(ranked))
     return base, changes
+
+
+_AT_LEAST_0 = ("near_lethal_m",)  # a file's numbers that may be 0; the others must be > 0
+_NULLABLE = ("lateral_accel_mps2", "near_lethal_mps")  # a file's numbers that may be null
+
+
+def _file_number(source: str, field: str, value: Any) -> float | None:
+    """A style file's number at ``field``, checked: finite, > 0 (>= 0 where 0 means something),
+    null where null means something; anything else is a UserError naming the file and the field."""
+    if value is None and field in _NULLABLE:
+        return None
+    if not finite_number(value):
+        raise UserError(source, f"expected a finite number{' or null' if field in _NULLABLE else ''}, got {described(value)}", field=field)
+    if float(value) < 0 or (float(value) == 0 and field not in _AT_LEAST_0):
+        raise UserError(source, f"must be {'>= 0' if field in _AT_LEAST_0 else '> 0'}, got {float(value):g}", field=field)
+    return float(value)
 
 
 def driver_style(
@@ -125,7 +134,12 @@ def driver_style(
     if fastest > max_speed_mps + 1e-9:
         over = [c.name for c in classes.classes if table[c.id] == fastest and dict(config.speeds).get(c.name) == fastest]
         where = "" if not over else over[0] if "speeds" in flags else f"speeds.{over[0]}"  # the class it is given for
+        where = where or ("speed_mps" if source != "--style" and config.speed_mps == fastest else "")
         raise UserError(blame, f"a cruising speed of {fastest:g} m/s is above the vehicle's {max_speed_mps:g} m/s", field=where)
+    if config.near_lethal_mps is not None and config.near_lethal_mps > max_speed_mps + 1e-9:  # a cap it never reaches
+        raise UserError(
+            source, f"{config.near_lethal_mps:g} m/s is above the vehicle's top speed, {max_speed_mps:g} m/s", field="near_lethal_mps"
+        )
     check_rough_speed(config.relief, max_speed_mps)
     return config
 
