@@ -213,6 +213,18 @@ def test_train_and_save_writes_the_model_and_every_checkpoint(tmp_path: Path):
         assert_weights_equal(ck.weights, weights)
 
 
+def test_a_diverged_fit_is_one_error_naming_the_model_and_leaves_nothing_behind(tmp_path: Path):
+    """A learning rate that sends the weights to NaN in the first epoch: one error naming the
+    model and --lr, and no checkpoints folder, no interrupted model of weights no command could read."""
+    from terrapref.errors import UserError
+
+    out = tmp_path / "pref.safetensors"
+    with pytest.raises(UserError) as err:
+        train_and_save(random_dataset(400), out, train_config(epochs=2, batch_size=64, hidden=16, lr=1e300))
+    assert err.value.source == str(out) and "diverged" in str(err.value) and "--lr" in str(err.value)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_train_and_save_without_checkpoints(tmp_path: Path):
     out = tmp_path / "pref.safetensors"
     train_and_save(random_dataset(100), out, train_config(epochs=1), options=RunOptions(checkpoints=False))

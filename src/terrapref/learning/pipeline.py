@@ -8,7 +8,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import numpy as np
+
 from terrapref.dataset import Dataset
+from terrapref.errors import UserError
 from terrapref.fileio import new_folder, replace_dir
 from terrapref.learning.header import CHECKPOINT, INTERRUPTED, DataSource, Interruption, MemberRun, ModelHeader
 from terrapref.learning.model_file import write_model
@@ -91,12 +94,17 @@ class _Checkpoints:
     file of the run carries (:func:`source_header`, with the member count)."""
 
     def __init__(self, out: Path, header: ModelHeader, write: bool) -> None:
-        self.final = checkpoints_path(out)
+        self.out, self.final = out, checkpoints_path(out)
         self.header, self.write = header, write
         self.folder = new_folder(self.final, "") if write else None
         self.best: dict[int, tuple[float, int, ClassifierConfig, dict]] = {}  # member -> (loss, epoch, classifier, weights)
 
     def __call__(self, member: int, classifier: ClassifierConfig, weights: dict, m: EpochMetrics) -> None:
+        if not all(np.isfinite(v).all() for v in weights.values()):  # diverged: nothing of it is worth keeping
+            which = f"member {member + 1}'s epoch {m.epoch}" if self.header.member_count != 1 else f"epoch {m.epoch}"
+            raise UserError(
+                str(self.out), f"not written: the fit diverged ({which}'s weights are not finite); a smaller --lr may help", field="--lr"
+            )
         loss = m.val_loss if not math.isnan(m.val_loss) else m.train_loss
         if member not in self.best or loss < self.best[member][0]:
             self.best[member] = (loss, m.epoch, classifier, weights)
@@ -122,8 +130,11 @@ class _Checkpoints:
             shutil.rmtree(self.folder, ignore_errors=True)
 
     def keep_partial(self) -> None:
-        """An interrupted run's checkpoints stay, beside the old ones, as ``.checkpoints.interrupted``."""
-        if self.folder is not None and self.folder.exists():
+        """An interrupted run's checkpoints stay, beside the old ones, as ``.checkpoints.interrupted``
+        (a run that wrote none leaves no folder)."""
+        if self.folder is not None and self.folder.exists() and not any(self.folder.iterdir()):
+            self.discard()
+        elif self.folder is not None and self.folder.exists():
             replace_dir(self.folder, self.final.with_name(self.final.name + ".interrupted"))
 
     def interrupted_model(self, out: Path) -> Path | None:
