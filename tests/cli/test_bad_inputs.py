@@ -111,6 +111,11 @@ def _damage(rec: Path, how: str) -> None:
         Image.fromarray(image).save(path)
     elif how == "rgb frame":
         Image.fromarray(np.zeros((480, 640, 3), np.uint8)).save(rec / "images" / "000003.png")
+    elif how == "label 99":  # past the preference set's 21 trajectories: inspect's histogram would drop it unseen
+        row = json.loads(lines[5])
+        row["label"] = 99
+        lines[5] = json.dumps(row)
+        frames.write_text("\n".join(lines) + "\n")
     elif how == "small frame":
         Image.fromarray(np.zeros((48, 64), np.uint8)).save(rec / "images" / "000003.png")
 
@@ -122,6 +127,7 @@ def _damage(rec: Path, how: str) -> None:
         ("reversed", "frames.jsonl"),
         ("nan pose", "line 6.pose"),
         ("far pose", "line 6.pose: expected x and y [m] and a heading [rad] within"),
+        ("label 99", "line 6.label: 99 is not one of the preference set's 21 trajectories (0-20)"),
         ("unknown class in profile", "meta.json: profile: unknown or background class 'lava'"),
         ("nan steering grid", "preference_set"),
         ("empty", "frames.jsonl"),
@@ -486,7 +492,7 @@ def test_the_command_lines_own_refusals_are_one_line(capsys, argv: list[str], ne
     assert all(n in text for n in needles) and "--help)" in text, text
 
 
-@pytest.mark.parametrize("how", ["unknown class in profile", "far pose"])
+@pytest.mark.parametrize("how", ["unknown class in profile", "far pose", "label 99"])
 def test_a_recording_refused_by_featurize_is_refused_by_train_inspect_and_course_after(tmp_path: Path, capsys, recording, how):
     rec = tmp_path / "rec"
     shutil.copytree(recording, rec)

@@ -470,11 +470,13 @@ def _frame_problem(row: dict) -> tuple[str, str] | None:
     return None
 
 
-def _check_meta(meta: dict, path: Path) -> None:
-    """The configuration a recording must carry, parsed once here so every later use is safe."""
+def _check_meta(meta: dict, path: Path) -> int | None:
+    """The configuration a recording must carry, parsed once here so every later use is safe;
+    the number of trajectories its labels index (None: it names no preference set)."""
     from terrapref.demos.meta import RecordingMeta
 
-    RecordingMeta.from_dict(meta, str(path))
+    parsed = RecordingMeta.from_dict(meta, str(path))
+    return parsed.preference_set.m if parsed.preference_set is not None else None
 
 
 def require_meta(recording: Recording, *keys: str) -> None:
@@ -494,8 +496,8 @@ def read_recording(path: str | Path) -> Recording:
     folder = _folder_identity(root)
     meta = _read_meta(root)
     scenario = _read_scenario(root)
-    _check_meta(meta, root / META)
-    frames = _read_frames(root)
+    trajectories = _check_meta(meta, root / META)
+    frames = _read_frames(root, trajectories)
     complete = _is_complete(meta, frames, root / FRAMES)
     if _folder_identity(root) != folder:  # what was read may be of two recordings
         raise UserError(str(root), "was replaced or removed while it was being read (another command wrote it); run this again")
@@ -585,8 +587,9 @@ def _frames_text(frames_path: Path) -> str:
         raise UserError(str(frames_path), f"unreadable ({exc.strerror or exc})") from None
 
 
-def _read_frames(root: Path) -> _Frames:
-    """Every frame record, checked, up to the first one a kill cut short (which is dropped)."""
+def _read_frames(root: Path, trajectories: int | None = None) -> _Frames:
+    """Every frame record, checked (a label among ``trajectories``, where known), up to the first
+    one a kill cut short (which is dropped)."""
     frames_path = root / FRAMES
     lines = _frames_text(frames_path).split("\n")
     rows: list[dict] = []
@@ -599,6 +602,12 @@ def _read_frames(root: Path) -> _Frames:
                 return _Frames(tuple(rows), cut=True)
             raise UserError(str(frames_path), f"line {n + 1} is not a frame record", field=f"line {n + 1}")
         _check_frame(row, rows[-1] if rows else None, frames_path, n + 1)
+        if trajectories is not None and row["label"] >= trajectories:
+            raise UserError(
+                str(frames_path),
+                f"{row['label']} is not one of the preference set's {trajectories} trajectories (0-{trajectories - 1})",
+                field=f"line {n + 1}.label",
+            )
         for key in ("image", "depth"):
             if row.get(key) is not None and not (root / row[key]).exists():
                 if n >= len(lines) - 2:
