@@ -281,6 +281,16 @@ def test_select_refuses_a_bad_relief_style_before_any_work(tmp_path, capsys, sty
     assert not out.exists()
 
 
+def test_select_refuses_a_driver_style_file_saying_where_one_goes(tmp_path, capsys):
+    style = tmp_path / "mine.yaml"
+    style.write_text("format: terrapref-driver-style/1\nbase: wide\n")
+    out = tmp_path / "sel"
+    assert main(["select", "--style", str(style), "--orders", "mud,rock,water", "--seeds", "1", "--out", str(out)]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith("error: --style") and "select takes a preset" in line and "record and evaluate" in line
+    assert not out.exists()
+
+
 def test_select_with_relief_styles_teaches_on_the_relief_course_and_judges_relief_layouts(tmp_path, monkeypatch):
     """The default table's drivers demonstrate `teach_relief`; a table's own, its course with relief, written into OUT."""
     from terrapref.scenario import load_scenario

@@ -193,6 +193,10 @@ def _cmd_select(args: argparse.Namespace) -> int:
     for n in names:
         recipe_named(n, "--recipes")
     table = teachable_table(args)
+    if args.style not in STYLES and (args.style.endswith((".yaml", ".yml")) or Path(args.style).exists()):
+        raise UserError(
+            "--style", f"{args.style}: select takes a preset ({', '.join(STYLES.names())}); a style file is for record and evaluate"
+        )
     STYLES.get(args.style, "--style")
     for flag, value, low in (("--seeds", args.seeds, 1), ("--courses", args.courses, 1), ("--first", args.first, 0)):
         if value < low:
