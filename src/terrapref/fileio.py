@@ -114,6 +114,23 @@ def check_figure(out: str | Path, flag: str) -> None:
         raise UserError(str(out), f"a figure needs one of the suffixes {', '.join(FIGURE_FORMATS)}", field=flag)
 
 
+def check_tensor_file(out: str | Path, flag: str) -> None:
+    """A model or dataset (safetensors) is never named ``.onnx``: every command reads a file of
+    that suffix as ONNX, so the file would be refused where it is used.
+
+    Raises:
+        UserError: ``out``'s suffix is ``.onnx`` (naming ``flag``).
+    """
+    from terrapref.errors import UserError
+
+    if Path(out).suffix.lower() == ".onnx":
+        raise UserError(
+            str(out),
+            "a .onnx file is read as ONNX; name the file .safetensors (terrapref export --format onnx makes the ONNX file)",
+            field=flag,
+        )
+
+
 def check_distinct_outputs(outputs: Sequence[tuple[str, str | Path | None]]) -> None:
     """Refuse two output flags of one command that name the same file: the second written would
     replace the first. ``outputs``: (flag, path) pairs, a path None where the flag was not given.

@@ -384,6 +384,8 @@ def test_a_recording_whose_camera_has_no_focal_length_is_refused(tmp_path: Path,
         (["select", "--perception", "clean,,field", "--out", "OUT/s"], ("--perception", "empty item")),
         (["select", "--taught-under", "", "--out", "OUT/s"], ("--taught-under", "a preset")),
         (["reproduce", "--perception", "clean,", "--out", "OUT/r"], ("--perception", "empty item")),
+        (["train", "REC", "--out", "OUT/m.onnx"], ("--out", "read as ONNX", ".safetensors")),  # info would then refuse it
+        (["featurize", "REC", "--out", "OUT/d.onnx"], ("--out", "read as ONNX", ".safetensors")),
     ],
 )
 def test_values_that_cannot_be_right_and_inputs_given_twice_are_refused_before_any_work(tmp_path: Path, capsys, recording, argv, needles):

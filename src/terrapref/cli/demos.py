@@ -25,7 +25,7 @@ from terrapref.cli.common import (
 )
 from terrapref.configargs import finite_float
 from terrapref.errors import UserError
-from terrapref.fileio import check_distinct, check_figure, check_output
+from terrapref.fileio import check_distinct, check_figure, check_output, check_tensor_file
 
 
 def _cmd_record(args: argparse.Namespace) -> int:
@@ -343,6 +343,7 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
     from terrapref.progress import Progress
 
     check_distinct(args.recordings, "recording")
+    check_tensor_file(args.out, "--out")
     check_output(args.out, "--out", [*args.recordings, *([args.camera] if args.camera else [])], force=args.force)
     recordings = [read_recording(p) for p in args.recordings]
     for r in recordings:

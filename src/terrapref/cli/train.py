@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 from terrapref.cli.common import add_classes_arg, add_force_arg, by_recording, check_table, output_path, warn_partial
 from terrapref.configargs import finite_float
 from terrapref.errors import UserError
-from terrapref.fileio import check_distinct, check_output
+from terrapref.fileio import check_distinct, check_output, check_tensor_file
 
 if TYPE_CHECKING:  # for the hints only: the command line imports what a command needs when it runs
     from terrapref.dataset import Dataset
@@ -28,6 +28,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     config = _train_config(args, recipe)
     recipe = replace(recipe, rules=rules_with(recipe, getattr(args, "second_stage", None), getattr(args, "stage_weight", None)))
     check_distinct(args.data, "recording or dataset")
+    check_tensor_file(args.out, "--out")
     check_output(args.out, "--out", args.data, force=args.force)
     _check_beside(Path(args.out), args.data, args.force)
     if args.classes is not None:  # recordings before they are featurised
