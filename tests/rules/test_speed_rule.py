@@ -894,8 +894,8 @@ def _meta(*drivers: dict | None) -> dict:
 def test_the_trained_driver_is_the_one_synthetic_driver_of_every_recording():
     speeds = (("mud", 0.6), ("rock", 0.8))
     wide = ExpertInfo.of(0, "wide", ExpertConfig(speeds=speeds)).to_dict()
-    assert trained_driver(_meta(wide, ExpertInfo.of(1, "wide", ExpertConfig(speeds=speeds)).to_dict())) == ("wide", speeds)
-    assert trained_driver(_meta(ExpertInfo.of(0, "default", ExpertConfig()).to_dict())) == ("default", ())
+    assert trained_driver(_meta(wide, ExpertInfo.of(1, "wide", ExpertConfig(speeds=speeds)).to_dict())) == ("wide", speeds, ())
+    assert trained_driver(_meta(ExpertInfo.of(0, "default", ExpertConfig()).to_dict())) == ("default", (), ())
     other = ExpertInfo.of(0, "wide", ExpertConfig(speeds=(("mud", 0.7),))).to_dict()
     assert trained_driver(_meta(wide, other)) is None  # two drivers' speeds
     assert trained_driver(_meta(wide, ExpertInfo.of(0, "default", ExpertConfig(speeds=speeds)).to_dict())) is None  # two styles
