@@ -254,9 +254,10 @@ def test_cli_evaluate_bad_driver_speeds_are_refused_before_any_run(model_path: P
     assert not (tmp_path / "ev").exists()
 
 
-def test_cli_evaluate_speeds_change_only_the_classes_they_name_of_the_models_driver(tmp_path: Path, capsys, monkeypatch):
-    speeds = (("grass", 1.6), ("mud", 0.5), ("water", 0.3))
-    driver = ExpertInfo.of(0, "wide", ExpertConfig(speeds=speeds)).to_dict()
+def _model_of_driver(tmp_path: Path, monkeypatch, driver: dict) -> tuple[Path, list[Evaluation]]:
+    """A model whose one recording was driven by ``driver`` (an ExpertInfo's dict), and the list
+    each evaluation of it lands in: evaluate_model is replaced by one that records the evaluation
+    (the driver is all these tests ask about) and drives no run."""
     config = ClassifierConfig(hidden=8, skip=True)
     meta = {**model_meta(), "data": {"fingerprint": "0" * 16, "samples": 1, "recordings": [{"path": "rec0", "driver": driver}]}}
     model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), meta)
@@ -267,6 +268,13 @@ def test_cli_evaluate_speeds_change_only_the_classes_they_name_of_the_models_dri
         raise UserError("runs", "not driven here")
 
     monkeypatch.setattr("terrapref.evaluation.evaluate.evaluate_model", read_driver)
+    return model, compared
+
+
+def test_cli_evaluate_speeds_change_only_the_classes_they_name_of_the_models_driver(tmp_path: Path, capsys, monkeypatch):
+    speeds = (("grass", 1.6), ("mud", 0.5), ("water", 0.3))
+    driver = ExpertInfo.of(0, "wide", ExpertConfig(speeds=speeds)).to_dict()
+    model, compared = _model_of_driver(tmp_path, monkeypatch, driver)
     for flags, style, expected in [
         (["--speeds", "grass=1.2"], "wide", {"grass": 1.2, "mud": 0.5, "water": 0.3}),
         ([], "wide", dict(speeds)),
@@ -282,16 +290,7 @@ def test_cli_evaluate_compares_with_a_style_files_driver_given_or_trained(tmp_pa
     style = tmp_path / "mine.yaml"
     style.write_text("format: terrapref-driver-style/1\nbase: wide\nspeeds: {grass: 1.6, mud: 0.5}\nlateral_accel_mps2: 0.8\n")
     driver = ExpertInfo.of(0, "gone.yaml", ExpertConfig(speeds=(("grass", 1.2),), lateral_accel_mps2=0.7, preview_m=2.0)).to_dict()
-    config = ClassifierConfig(hidden=8, skip=True)
-    meta = {**model_meta(), "data": {"fingerprint": "0" * 16, "samples": 1, "recordings": [{"path": "rec0", "driver": driver}]}}
-    model = save_model(tmp_path / "m.safetensors", config, skip_path_weights(config), meta)
-    compared: list[Evaluation] = []
-
-    def read_driver(evaluation: Evaluation, *args, **kwargs) -> dict:  # the driver is all this test asks about: no runs
-        compared.append(evaluation)
-        raise UserError("runs", "not driven here")
-
-    monkeypatch.setattr("terrapref.evaluation.evaluate.evaluate_model", read_driver)
+    model, compared = _model_of_driver(tmp_path, monkeypatch, driver)
     for flags, expected in [
         (["--style", str(style), "--speeds", "mud=0.4"], ("wide", {"grass": 1.6, "mud": 0.4}, 0.8, 4.0)),
         ([], ("default", {"grass": 1.2}, 0.7, 2.0)),
