@@ -97,9 +97,8 @@ def _evaluation(args: argparse.Namespace) -> Evaluation:
     if args.relief_style is not None:
         check_rough_speed(relief, top_mps)
     STYLES.get(style, "--style")
-    if (
-        given or args.style is not None
-    ):  # checked against the model's table and the vehicle before any run (the trained driver's were when it drove)
+    # Checked against the model's table and the vehicle before any run (the trained driver's were when it drove).
+    if given or args.style is not None:
         driver_style(args.style or style, scored.order, model.classes, top_mps, {"speeds": given} if given else None)
     return Evaluation(
         args.model,
@@ -177,13 +176,13 @@ def _driver_of(
     one, the classes ``--speeds`` names (``given``) changed and the others kept; else the style
     given (or the default; a style file: its preset and what it changes) with the speeds given."""
     from terrapref.demos.expert import STYLES
-    from terrapref.demos.speed_style import read_style_file
+    from terrapref.demos.speed_style import names_style_file, read_style_file
 
     if style is None and trained is not None:
         return trained[0], tuple({**dict(trained[1]), **dict(given)}.items()), trained[2]
     if style is None or style in STYLES.names():
         return style or "default", given, ()
-    if not style.endswith((".yaml", ".yml")) and not Path(style).exists():
+    if not names_style_file(style):
         STYLES.get(style, "--style")  # neither a preset nor a file: refused, naming the presets
     base, changes = read_style_file(style)
     speeds = tuple({**dict(changes.pop("speeds", ())), **dict(given)}.items())

@@ -184,6 +184,7 @@ def _cmd_select(args: argparse.Namespace) -> int:
     import time
 
     from terrapref.demos.expert import STYLES
+    from terrapref.demos.speed_style import names_style_file
     from terrapref.recipes import recipe_named
     from terrapref.report.select import Selection, run_selection
 
@@ -193,7 +194,7 @@ def _cmd_select(args: argparse.Namespace) -> int:
     for n in names:
         recipe_named(n, "--recipes")
     table = teachable_table(args)
-    if args.style not in STYLES and (args.style.endswith((".yaml", ".yml")) or Path(args.style).exists()):
+    if args.style not in STYLES and names_style_file(args.style):
         raise UserError(
             "--style", f"{args.style}: select takes a preset ({', '.join(STYLES.names())}); a style file is for record and evaluate"
         )

@@ -52,6 +52,12 @@ def parse_speeds(text: str, source: str = "--speeds") -> tuple[tuple[str, float]
     return tuple(pairs)
 
 
+def names_style_file(style: str) -> bool:
+    """Whether ``style`` (a --style value that is no preset) names a style file: a YAML name, or
+    a file that exists."""
+    return style.endswith((".yaml", ".yml")) or Path(style).exists()
+
+
 def read_style_file(path: str | Path) -> tuple[str, dict[str, Any]]:
     """The preset a style file starts from and the :class:`ExpertConfig` fields it changes."""
     source = str(path)
@@ -110,7 +116,7 @@ def driver_style(
     """
     source, file_changes = ("--style", {}) if style in STYLES.names() else (style, None)
     if file_changes is None:
-        if not style.endswith((".yaml", ".yml")) and not Path(style).exists():
+        if not names_style_file(style):
             raise UserError("--style", f"{style!r} is neither a style ({', '.join(STYLES.names())}) nor a style file")
         style, file_changes = read_style_file(source)
     flags = changes or {}
