@@ -309,6 +309,14 @@ def test_cli_evaluate_zero_seeds_is_a_user_error(model_path: Path, tmp_path: Pat
     one_line_error(capsys, "--seeds")
 
 
+def test_cli_evaluate_refuses_an_absurd_number_of_seeds_before_any_run(model_path: Path, tmp_path: Path, capsys):
+    out = tmp_path / "ev"
+    rc = main(["evaluate", str(model_path), "demo_course", "--seeds", "10000000", "--out", str(out), "--workers", "1"])
+    assert rc == 2
+    assert "20,000,000 runs" in one_line_error(capsys, "--seeds")
+    assert not out.exists()
+
+
 def test_cli_evaluate_bad_frames_is_a_user_error(model_path: Path, tmp_path: Path, capsys):
     rc = main(
         ["evaluate", str(model_path), "demo_course", "--seeds", "1", "--out", str(tmp_path / "ev"), "--frames", "5,x", "--workers", "1"]

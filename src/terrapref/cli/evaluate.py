@@ -31,12 +31,26 @@ if TYPE_CHECKING:
     from terrapref.evaluation.speed import TrainedDriver
 
 
+def _check_runs(args: argparse.Namespace) -> None:
+    """Refuse more closed-loop runs than a command runs unasked (:data:`LARGE_RUNS`, as ``select``
+    and ``study`` bound theirs), before anything is read or written."""
+    from terrapref.report.workload import LARGE_RUNS
+
+    per_seed = len(args.scenarios) * (1 if args.no_driver else 2)
+    if args.seeds * per_seed > LARGE_RUNS:
+        raise UserError(
+            "--seeds",
+            f"{args.seeds:,} seeds make {args.seeds * per_seed:,} runs, more than {LARGE_RUNS:,}: name fewer seeds or scenarios",
+        )
+
+
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from terrapref.evaluation.evaluate import evaluate_model
     from terrapref.progress import Progress
 
     if args.seeds < 1:
         raise UserError("--seeds", "must be >= 1")
+    _check_runs(args)
     check_distinct(args.scenarios, "scenario")
     check_output(args.out, "--out", [args.model, *args.scenarios], folder=True)
     engine = grid_engine(args)
