@@ -76,14 +76,19 @@ def test_every_argument_of_every_command_says_what_it_is():
     assert not silent, silent
 
 
-@pytest.mark.parametrize("flag", ["--out", "--preview"])
-def test_render_refuses_a_lossy_image_name_before_writing(tmp_path: Path, capsys, flag: str):
-    outputs = {"--out": tmp_path / "seg.png", "--preview": tmp_path / "view.png"} | {flag: tmp_path / "seg.jpg"}
-    assert main(["render", "demo_course", "--out", str(outputs["--out"]), "--preview", str(outputs["--preview"])]) == 2
-    assert (
-        _error(capsys)
-        == f"error: {tmp_path / 'seg.jpg'}: {flag}: render writes PNG (class ids need a lossless format): give it the suffix .png"
-    )
+@pytest.mark.parametrize(
+    ("flag", "why"),
+    [
+        ("--out", "class ids need a lossless format"),
+        ("--preview", "its one format for the colour preview"),
+        ("--depth", "millimetres need a lossless 16-bit format"),
+    ],
+)
+def test_render_refuses_a_lossy_image_name_before_writing(tmp_path: Path, capsys, flag: str, why: str):
+    outputs = {"--out": tmp_path / "seg.png", "--preview": tmp_path / "view.png", "--depth": tmp_path / "depth.png"}
+    outputs[flag] = tmp_path / "seg.jpg"
+    assert main(["render", "demo_course", *(a for f, p in outputs.items() for a in (f, str(p)))]) == 2
+    assert _error(capsys) == f"error: {tmp_path / 'seg.jpg'}: {flag}: render writes PNG ({why}): give it the suffix .png"
     assert list(tmp_path.iterdir()) == []
 
 

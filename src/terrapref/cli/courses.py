@@ -79,6 +79,14 @@ def validate_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_cmd_validate)
 
 
+# Why each image render writes is a PNG, whatever its name says.
+PNG_ONLY = {
+    "--out": "class ids need a lossless format",
+    "--depth": "millimetres need a lossless 16-bit format",
+    "--preview": "its one format for the colour preview",
+}
+
+
 def _cmd_render(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -97,8 +105,8 @@ def _cmd_render(args: argparse.Namespace) -> int:
     if args.depth:
         check_output(args.depth, "--depth", [args.scenario, args.out, *([args.preview] if args.preview else [])], force=args.force)
     for flag, path in (("--out", args.out), ("--preview", args.preview), ("--depth", args.depth)):
-        if path is not None and Path(path).suffix.lower() != ".png":  # a lossy format would change the class ids
-            raise UserError(str(path), "render writes PNG (class ids need a lossless format): give it the suffix .png", field=flag)
+        if path is not None and Path(path).suffix.lower() != ".png":
+            raise UserError(str(path), f"render writes PNG ({PNG_ONLY[flag]}): give it the suffix .png", field=flag)
     scenario = resolve_scenario(args.scenario, class_table(args))
     x, y, yaw_deg = args.pose if args.pose is not None else (scenario.start[0], scenario.start[1], math.degrees(scenario.start[2]))
     camera = PinholeCamera()
