@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -299,7 +298,7 @@ def test_cli_evaluate_compares_with_a_style_files_driver_given_or_trained(tmp_pa
         one_line_error(capsys, "not driven here")
         ev = compared[-1]
         spec = ev.specs(PreferenceProfile.parse(ROCK_FIRST.split(","), default_classes()))[-1]
-        driven = replace(ExpertConfig.styled(spec.style, None, spec.speeds), **dict(spec.driver_changes))
+        driven = ExpertConfig.styled(spec.style, None, spec.speeds, spec.driver_changes)
         assert (ev.style, dict(ev.speeds), driven.lateral_accel_mps2, driven.preview_m) == expected, flags
 
 

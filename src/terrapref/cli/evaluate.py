@@ -31,17 +31,16 @@ if TYPE_CHECKING:
     from terrapref.evaluation.speed import TrainedDriver
 
 
-def _check_runs(args: argparse.Namespace) -> None:
-    """Refuse more closed-loop runs than a command runs unasked (:data:`LARGE_RUNS`, as ``select``
-    and ``study`` bound theirs), before anything is read or written."""
+def _checked_runs(args: argparse.Namespace) -> int:
+    """The closed-loop runs ``evaluate`` makes (each scenario and seed once, twice with the
+    driver); more than a command runs unasked (:data:`LARGE_RUNS`, as ``select`` and ``study``
+    bound theirs) are refused, before anything is read or written."""
     from terrapref.report.workload import LARGE_RUNS
 
-    per_seed = len(args.scenarios) * (1 if args.no_driver else 2)
-    if args.seeds * per_seed > LARGE_RUNS:
-        raise UserError(
-            "--seeds",
-            f"{args.seeds:,} seeds make {args.seeds * per_seed:,} runs, more than {LARGE_RUNS:,}: name fewer seeds or scenarios",
-        )
+    runs = len(args.scenarios) * args.seeds * (1 if args.no_driver else 2)
+    if runs > LARGE_RUNS:
+        raise UserError("--seeds", f"{args.seeds:,} seeds make {runs:,} runs, more than {LARGE_RUNS:,}: name fewer seeds or scenarios")
+    return runs
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
@@ -50,7 +49,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
     if args.seeds < 1:
         raise UserError("--seeds", "must be >= 1")
-    _check_runs(args)
+    runs = _checked_runs(args)
     check_distinct(args.scenarios, "scenario")
     check_output(args.out, "--out", [args.model, *args.scenarios], folder=True)
     engine = grid_engine(args)
@@ -60,7 +59,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         check("robot", "--mcap", "rosbags")  # before the runs, not after them
     evaluation = _evaluation(args)  # every input checked before the first run
     with output_folder(args.out, args.force):
-        bar = Progress("evaluate", len(args.scenarios) * args.seeds * (1 if args.no_driver else 2))
+        bar = Progress("evaluate", runs)
         view = live_view(args)
         try:
             metrics = evaluate_model(

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any, NamedTuple
 
@@ -140,13 +141,17 @@ class ExpertConfig:
 
     @classmethod
     def styled(
-        cls, style: str = "default", profile: tuple[str, ...] | None = None, speeds: tuple[tuple[str, float], ...] = ()
+        cls,
+        style: str = "default",
+        profile: tuple[str, ...] | None = None,
+        speeds: tuple[tuple[str, float], ...] = (),
+        changes: Mapping[str, Any] | Sequence[tuple[str, Any]] = (),
     ) -> ExpertConfig:
-        """The driver of a named style (:data:`STYLES`) with a preference ``profile``, and ``speeds``
-        by class over its style's; an unknown style is a ValueError listing the styles."""
-        changes = STYLES[style].changes
+        """The driver of a named style (:data:`STYLES`) with a preference ``profile``, other fields
+        over its style's (``changes``: a style file's) and ``speeds`` by class over those; an
+        unknown style is a ValueError listing the styles."""
         base = cls() if profile is None else cls(profile=tuple(profile))
-        return replace(base, **changes).with_speeds(speeds)
+        return replace(base, **{**STYLES[style].changes, **dict(changes)}).with_speeds(speeds)
 
     def with_speeds(self, speeds: tuple[tuple[str, float], ...]) -> ExpertConfig:
         """This driver with ``speeds`` by class over its own (the classes not named keep theirs)."""

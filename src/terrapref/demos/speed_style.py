@@ -121,7 +121,7 @@ def driver_style(
         style, file_changes = read_style_file(source)
     flags = changes or {}
     try:
-        config = replace(ExpertConfig.styled(style, profile), **file_changes)
+        config = ExpertConfig.styled(style, profile, changes=file_changes)
     except ValueError as exc:
         raise UserError(source, str(exc)) from None
     for field, value in flags.items():

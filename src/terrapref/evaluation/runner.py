@@ -288,7 +288,7 @@ def drivers() -> list[str]:
 def _expert(spec: RunSpec, scenario: Scenario, world: WorldMap, profile: PreferenceProfile) -> tuple[Simulation, Driver]:
     """The synthetic driver of the run's profile and style, on the cached raster (not a new one)."""
     return Simulation(scenario, config=SimConfig.driving(spec.vehicle), world=world), ExpertDriver(
-        replace(ExpertConfig.styled(spec.style, profile.order, spec.speeds), **dict(spec.driver_changes), relief=spec.relief), world=world
+        replace(ExpertConfig.styled(spec.style, profile.order, spec.speeds, spec.driver_changes), relief=spec.relief), world=world
     )
 
 

@@ -12,7 +12,7 @@ Rows are plain mappings, as select.json keeps them: a zone row has ``scenario``,
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -211,7 +211,7 @@ def driver_lateral_limit(
     :class:`ExpertConfig` fields over the style's, a style file's), else (a style without one)
     the largest its teaching drive showed, which a model's speed rule keeps; None where neither
     is known (a model without a speed rule)."""
-    own = replace(ExpertConfig.styled(style, None, speeds), **dict(changes)).lateral_accel_mps2
+    own = ExpertConfig.styled(style, None, speeds, changes).lateral_accel_mps2
     if own is not None:
         return own
     rule = speed_rule(rules)
