@@ -329,3 +329,19 @@ def test_any_command_writing_beside_a_killed_replacement_first_puts_the_old_outp
     assert error.startswith(f"error: {tmp_path / 'robot.yaml'}")
     assert _visible(tmp_path) == {"ev": OLD, "ev.partial": {"metrics.json": "new"}}
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ev", "ev.partial"]
+
+
+def test_a_killed_commands_scratch_folder_is_removed_by_the_next_command_and_a_held_one_is_not(tmp_path, capsys):
+    from terrapref.fileio import release_folder
+
+    left = new_folder(tmp_path / "run.mcap", ".writing")
+    (left / "run.bag").write_bytes(b"x" * 1000)
+    release_folder(left, remove=False)  # as a kill leaves it: nobody holds it
+    held = new_folder(tmp_path / "rec", ".importing")  # a command still writing it
+    mine = tmp_path / ".cache.abcdefgh"  # a user's own folder of the same shape, without the mark
+    mine.mkdir()
+    check_output(tmp_path / "other.mcap", "--out")
+    assert not left.exists() and held.is_dir() and mine.is_dir()
+    assert f"note: {tmp_path / 'run.mcap'}: removed {left.name}, what a stopped command left unfinished" in capsys.readouterr().err
+    release_folder(held)
+    assert not held.exists()

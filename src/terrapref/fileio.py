@@ -70,10 +70,31 @@ def atomic_path(path: str | Path, fsync: bool = False) -> Iterator[Path]:
 
 def new_folder(beside: Path, suffix: str) -> Path:
     """A new hidden folder in ``beside``'s folder, named after it, for writing what will replace
-    it; with the permissions the umask gives any folder (a temporary folder's are 0700)."""
+    it; with the permissions the umask gives any folder (a temporary folder's are 0700). It is
+    marked as scratch and held (locked) by this process until :func:`release_folder` (or
+    :func:`replace_dir`, which puts it in place) lets go of it: one that nobody holds was left by
+    a killed command, and the next command that checks an output beside it removes it."""
     folder = Path(tempfile.mkdtemp(prefix=f".{beside.name}.", suffix=suffix, dir=beside.parent))
     os.chmod(folder, 0o777 & ~_umask())
+    fd = _lock(folder)
+    assert fd is not None  # made just now
+    _HELD_SCRATCH[folder] = fd
+    (folder / _SCRATCH_MARK).touch()
     return folder
+
+
+def holds_nothing(folder: Path) -> bool:
+    """Whether ``folder`` (one :func:`new_folder` made, or any) holds nothing written into it."""
+    return all(p.name == _SCRATCH_MARK for p in folder.iterdir())
+
+
+def release_folder(folder: Path, remove: bool = True) -> None:
+    """Let go of a folder :func:`new_folder` made, removing it (and what it holds) unless not ``remove``."""
+    if remove:
+        shutil.rmtree(folder, ignore_errors=True)
+    fd = _HELD_SCRATCH.pop(Path(folder), None)
+    if fd is not None:
+        os.close(fd)
 
 
 def replace_dir(new: str | Path, target: str | Path) -> Path:
@@ -81,9 +102,11 @@ def replace_dir(new: str | Path, target: str | Path) -> Path:
     beside ``target``: ``target`` is at every moment the old folder or the new one (or, after a
     kill between two renames, the next command puts the new one there), never half of either."""
     new, target = Path(new), Path(target)
+    (new / _SCRATCH_MARK).unlink(missing_ok=True)  # a folder new_folder made is scratch no more
     with _folder_held(target.parent):
         _recover(target.parent)
         _swap(new, target)
+    release_folder(new, remove=False)
     return target
 
 
@@ -163,7 +186,7 @@ def check_output(out: str | Path, flag: str, inputs: Sequence[str | Path] = (), 
 
     out = Path(out)
     for beside in {_existing_parent(out), *(p.parent for p in map(Path, inputs) if p.exists())}:
-        if beside.is_dir() and _journals(beside):  # a command killed while it replaced something here
+        if beside.is_dir() and (_journals(beside) or _scratch_folders(beside)):  # a command killed while it wrote here
             with _folder_held(beside):
                 _recover(beside)
     target = out.resolve()
@@ -271,6 +294,9 @@ def output_folder(out: str | Path, force: bool, flag: str = "--out") -> Iterator
 _REPLACING = ".replacing"  # a command writes NAME in place: holds old/ (what it replaces) or fresh/ (nothing was there)
 _SWAPPING = ".swapping"  # a finished folder is put at NAME: holds new/ until it is there, and old/
 _JOURNAL = re.compile(r"\.(?P<name>.+)\.[a-z0-9_]{8}(?P<kind>\.replacing|\.swapping)")  # tempfile.mkdtemp's 8 characters
+_SCRATCH = re.compile(r"\.(?P<name>.+)\.[a-z0-9_]{8}(\.[a-z]+)?")  # new_folder's names (its mark inside says it is one)
+_SCRATCH_MARK = ".terrapref-scratch"
+_HELD_SCRATCH: dict[Path, int] = {}  # the scratch folders this process made and holds, and their locks
 
 
 @dataclass
@@ -321,6 +347,7 @@ def _journals(folder: Path) -> list[tuple[Path, str, str]]:
 def _recover(folder: Path) -> set[str]:
     """Finish what every journal in ``folder`` (held by the caller) whose command was killed
     says, each in one line on stderr; the names of the outputs whose commands still run."""
+    _remove_scratch(folder)
     running: set[str] = set()
     for path, name, kind in _journals(folder):
         fd = _lock(path)
@@ -337,6 +364,34 @@ def _recover(folder: Path) -> set[str]:
         if note:
             print(note, file=sys.stderr)
     return running
+
+
+def _scratch_folders(folder: Path) -> list[Path]:
+    """The scratch folders (:func:`new_folder`) in ``folder``, held or not."""
+    with os.scandir(folder) as entries:
+        found = [
+            Path(e.path)
+            for e in entries
+            if _SCRATCH.fullmatch(e.name) and not _JOURNAL.fullmatch(e.name) and e.is_dir(follow_symlinks=False)
+        ]
+    return sorted(path for path in found if (path / _SCRATCH_MARK).is_file())
+
+
+def _remove_scratch(folder: Path) -> None:
+    """Remove the scratch folders (:func:`new_folder`) in ``folder`` that no command holds, each
+    said in one line on stderr: a killed command's unfinished output."""
+    for path in _scratch_folders(folder):
+        fd = _lock(path)
+        if fd is None:  # its command is running
+            continue
+        try:
+            shutil.rmtree(path, ignore_errors=True)
+        finally:
+            os.close(fd)
+        print(
+            f"note: {path.parent / _SCRATCH.fullmatch(path.name)['name']}: removed {path.name}, what a stopped command left unfinished",
+            file=sys.stderr,
+        )
 
 
 def _begin(out: Path, force: bool, flag: str, running: bool) -> _Journal:

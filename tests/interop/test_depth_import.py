@@ -87,6 +87,17 @@ def test_another_depth_encoding_is_refused_naming_the_log_the_topic_and_the_enco
     assert "/cam/depth" in line and repr(encoding) in line and "1.500 s into the log" in line and "32FC1" in line
 
 
+def test_a_step_shorter_than_a_row_and_data_shorter_than_the_rows_are_each_named():
+    short_step = _msg("16UC1", KNOWN_MM)
+    short_step.step = KNOWN_MM.shape[1] * 2 - 4  # the data would hold its rows; the step is not a row's
+    with pytest.raises(UserError, match=r"depth step of \d+ bytes is shorter than a row of \d+ pixels of 2 bytes"):
+        depth_metres(short_step, "/cam/depth", "log.mcap")
+    cut = _msg("16UC1", KNOWN_MM)
+    cut.data = cut.data[:-1]
+    with pytest.raises(UserError, match=r"depth data of \d+ bytes does not hold \d+ rows of \d+"):
+        depth_metres(cut, "/cam/depth", "log.mcap")
+
+
 # --- a small log with a depth topic -----------------------------------------------------------------
 
 
@@ -272,6 +283,18 @@ def test_an_exported_relief_recording_imports_back_with_its_depth_and_attitude(t
     for name, arrays in a.rules.items():
         for key, array in arrays.items():
             np.testing.assert_allclose(b.rules[name][key], array, atol=1e-6, err_msg=f"{name}.{key}")
+
+
+def test_export_refuses_a_depth_image_of_another_size_than_the_camera_as_featurize_does(tmp_path: Path, relief_recording: Path, capsys):
+    from PIL import Image
+
+    short = _first_frames(relief_recording, tmp_path / "rec", 8)
+    name = read_recording(short).depth_files[5]
+    Image.fromarray(np.asarray(Image.open(short / name))[::2, ::2].copy()).save(short / name)
+    out = tmp_path / "run.mcap"
+    assert main(["export", str(short), "--format", "mcap", "--out", str(out)]) == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1] == f"error: {short / name}: is 320 x 240, the camera's 640 x 480"
+    assert not out.exists()
 
 
 def test_replay_hands_each_frames_depth_and_attitude_to_the_runtime(tmp_path: Path, relief_recording: Path, monkeypatch):

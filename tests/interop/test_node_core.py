@@ -296,7 +296,16 @@ def test_the_robots_limits_and_goal_come_from_its_file_then_its_parameters(setup
         NodeOptions().resolved(lambda name, default: -1.0 if name == "~max_speed_mps" else default)
     with pytest.raises(UserError, match="~goal_tolerance_m"):  # beyond the off-path distance
         NodeOptions().resolved(lambda name, default: 50.0 if name == "~goal_tolerance_m" else default)
-    for bad, field in (("limits: {max_speed_mps: fast}", "limits.max_speed_mps"), ("limits: {top: 1}", "limits.top")):
+    with pytest.raises(UserError, match=r"~max_speed_mps: expected 0.1 to 30, got 1e\+09"):
+        NodeOptions().resolved(lambda name, default: 1e9 if name == "~max_speed_mps" else default)
+    for bad, field in (
+        ("limits: {max_speed_mps: fast}", "limits.max_speed_mps"),
+        ("limits: {top: 1}", "limits.top"),
+        ("limits: {max_speed_mps: 1e-9}", "limits.max_speed_mps"),  # no robot drives that slow, or 1e9 m/s fast
+        ("limits: {max_speed_mps: 1e9}", "limits.max_speed_mps"),
+        ("limits: {max_accel_mps2: 1e12}", "limits.max_accel_mps2"),
+        ("limits: {max_yaw_rate_rps: 0.001}", "limits.max_yaw_rate_rps"),
+    ):
         (tmp_path / "bad.yaml").write_text(text.replace("limits: {max_speed_mps: 1.2, max_accel_mps2: 0.5}", bad))
         with pytest.raises(ConfigError) as raised:
             load_robot(tmp_path / "bad.yaml")

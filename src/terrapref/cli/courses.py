@@ -222,8 +222,8 @@ def _cmd_course(args: argparse.Namespace) -> int:
                 course, items = designed_course(table, args.design, args.name or "teaching_course")
         except ValueError as exc:
             raise UserError(str(args.classes or "classes"), str(exc), field="classes") from None
-    if args.relief is not None and args.after is not None:  # a follow-up's relief: between its situations
-        course.relief = relief_for(parse_scenario(course.data(), str(out), table), args.relief)
+    if args.relief is not None and args.after is not None:  # a follow-up's relief: between its situations, beside their own
+        course.relief = [*course.relief, *relief_for(parse_scenario(course.data(), str(out), table), args.relief)]
     scenario = parse_scenario(course.data(), str(out), table)  # checked as every command will read it
     source = (
         f"--classes {args.classes}"

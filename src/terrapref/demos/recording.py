@@ -34,7 +34,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from functools import cached_property
@@ -46,7 +45,7 @@ import yaml
 
 from terrapref.camera import SegmentationView, as_view
 from terrapref.errors import UserError, described, finite_number
-from terrapref.fileio import new_folder, replace_dir, write_text_atomic
+from terrapref.fileio import new_folder, release_folder, replace_dir, write_text_atomic
 from terrapref.pngio import depth_to_millimetres, millimetres_to_depth, read_depth_png, read_label_png, write_png_atomic
 from terrapref.vehicle.ground import LEVEL, Attitude
 from terrapref.yamlio import dump_yaml, load_yaml_text
@@ -121,7 +120,7 @@ class RecordingWriter:
             self._frames = open(self.dir / FRAMES, "a", buffering=1)
         except OSError as exc:  # a full disk before the first frame: nothing is left behind
             if made:
-                shutil.rmtree(self.dir, ignore_errors=True)
+                release_folder(self.dir)
             raise OSError(exc.errno, exc.strerror or str(exc), str(self.target)) from None
         self.count = 0
         self._made = made
@@ -195,7 +194,7 @@ class RecordingWriter:
         writer made its folder."""
         self._frames.close()
         if self.count == 0 and self._made:
-            shutil.rmtree(self.dir, ignore_errors=True)
+            release_folder(self.dir)
             return
         if self.dir != self.target:
             self.dir = self.partial_dir = replace_dir(self.dir, self.target.with_name(self.target.name + ".partial"))

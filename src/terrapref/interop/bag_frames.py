@@ -41,6 +41,7 @@ import heapq
 import math
 from collections import Counter
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -77,6 +78,9 @@ SPEED_SOURCES = {  # where each frame's speed (v, w) comes from, as the report n
     "poses": f"differences of odometry poses over {2 * POSE_DIFFERENCE_HALF_S:g} s",
 }
 CLOCK_TOLERANCE_S = 5.0  # header stamps this far from the log's receive times are on another clock (simulated time)
+MAX_HEIGHT_M = 1e5  # an odometry pose higher or lower than this [m] is in other units, or garbage
+UNIT_QUATERNION_LEAST = 1e-6  # a quaternion shorter than this turns the body no known way
+UNIT_QUATERNION_SLACK = 1e-3  # a quaternion's length further than this from 1 is normalised, and said so
 DEPTH_HELD = 128  # depth images held at most while they wait for label images near their stamps (the newest kept)
 
 
@@ -144,6 +148,7 @@ class Streams:
     receive_shift_s: float = 0.0  # added to a receive time to put it on the header stamps' clock
     odom_attitude: np.ndarray | None = None  # (N, 3) the body's z [m], pitch, roll [rad] at each pose (None: level)
     depth_info: object = None  # the depth topic's first camera_info (None: none named)
+    notes: list[str] = field(default_factory=list)  # what reading them left out or put right, for the report
 
 
 def read_small_topics(bag: Bag, robot: RobotConfig) -> Streams:
@@ -174,7 +179,10 @@ def read_small_topics(bag: Bag, robot: RobotConfig) -> Streams:
         raise UserError(bag.source, f"topic {topics['camera_info']} holds no camera calibration", field="topics.camera_info")
     if len(read.odom_t) < 2:
         raise UserError(bag.source, f"topic {topics['odometry']} has fewer than two poses", field="topics.odometry")
-    return read.streams()
+    streams = read.checked(bag.source, topics["odometry"])
+    if len(streams.odom_t) < 2:
+        raise UserError(bag.source, f"topic {topics['odometry']} has fewer than two usable poses", field="topics.odometry")
+    return streams
 
 
 @dataclass
@@ -193,6 +201,8 @@ class _SmallTopics:
     static: dict[str, tuple[str, np.ndarray, np.ndarray]] = field(default_factory=dict)  # child -> (parent, t, R)
     stamp_minus_receive: list[float] = field(default_factory=list)  # of stamped odometry [s]
     cmd_received: list[bool] = field(default_factory=list)  # each command timed by receive time (Twist carries no stamp)
+    unturned: int = 0  # poses whose quaternion is zero or not finite (left out)
+    rescaled: int = 0  # poses whose quaternion was not of unit length (normalised)
 
     def take(self, role: str, conn, t_ns: int, msg) -> None:
         """Keep what ``msg`` (of ``role``, from ``conn``, at bag time ``t_ns`` [ns]) says."""
@@ -202,8 +212,11 @@ class _SmallTopics:
             if stamp > 0:
                 self.stamp_minus_receive.append(stamp - t_ns * 1e-9)
             self.odom_t.append(message_time_s(msg, t_ns))
-            self.odom.append((pose.position.x, pose.position.y, yaw_rad(pose.orientation)))
-            self.odom_attitude.append((pose.position.z, *pitch_roll_rad(pose.orientation)))
+            turn = self._unit(pose.orientation)
+            x, y = (pose.position.x, pose.position.y) if turn is not None else (math.nan, math.nan)  # no heading: left out
+            turn = turn or SimpleNamespace(x=0.0, y=0.0, z=0.0, w=1.0)
+            self.odom.append((x, y, yaw_rad(turn)))
+            self.odom_attitude.append((pose.position.z, *pitch_roll_rad(turn)))
             moving = msg.twist.twist if conn.msgtype == "nav_msgs/msg/Odometry" else None  # in the robot's own frame: x ahead
             self.odom_twist.append((moving.linear.x, moving.angular.z) if moving is not None else (math.nan, math.nan))
         elif role == "command":
@@ -220,6 +233,47 @@ class _SmallTopics:
             self.depth_info = msg
         elif role == "tf_static":
             self.static.update(static_transforms(msg))
+
+    def _unit(self, q) -> SimpleNamespace | None:
+        """The quaternion ``q`` (x, y, z, w) of unit length, counted where it had to be normalised;
+        None (counted) for one that is zero or not finite, which turns the body no known way."""
+        n = math.sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w)
+        if not (math.isfinite(n) and n > UNIT_QUATERNION_LEAST):
+            self.unturned += 1
+            return None
+        self.rescaled += abs(n - 1.0) > UNIT_QUATERNION_SLACK
+        return SimpleNamespace(x=q.x / n, y=q.y / n, z=q.z / n, w=q.w / n)
+
+    def checked(self, source: str, topic: str) -> Streams:
+        """:meth:`streams`, with what was left out or put right said in its notes; odometry heights
+        no robot reaches, or stamps that jump against the log's own clock, are a UserError about
+        ``source`` (the bag) and ``topic`` (the odometry's)."""
+        z = np.array([a[0] for a in self.odom_attitude], dtype=float)
+        high = np.flatnonzero(np.isfinite(z) & (np.abs(z) > MAX_HEIGHT_M))
+        if len(high):
+            raise UserError(
+                source,
+                f"topic {topic}: a pose {z[high[0]]:g} m high; expected heights within +-{MAX_HEIGHT_M:g} m (odometry in other units?)",
+                field="topics.odometry",
+            )
+        jumps = np.diff(self.stamp_minus_receive)
+        if len(jumps) and np.abs(jumps).max() > CLOCK_TOLERANCE_S:
+            at = int(np.argmax(np.abs(jumps)))
+            raise UserError(
+                source,
+                f"topic {topic}: header stamps jump by {jumps[at]:+.1f} s against the log's receive times (a clock reset, "
+                "or two runs in one log): cut the log at the jump and import each part",
+                field="topics.odometry",
+            )
+        streams = self.streams()
+        unknown = len(self.odom_t) - len(streams.odom_t) - self.unturned
+        if self.unturned:
+            streams.notes.append(f"left out {self.unturned} pose(s) of {topic} whose orientation is a zero or non-finite quaternion")
+        if unknown:
+            streams.notes.append(f"left out {unknown} pose(s) of {topic} with a non-finite position or stamp")
+        if self.rescaled:
+            streams.notes.append(f"normalised {self.rescaled} quaternion(s) of {topic} that were not of unit length")
+        return streams
 
     def streams(self) -> Streams:
         """The streams without non-finite samples, each sorted by time, yaw unwrapped."""
@@ -390,7 +444,9 @@ class Frames:
     unmapped: int = 0  # pixels whose id the label map does not list
     unknown: int = 0  # pixels unknown after mapping
     last_t: float = -math.inf  # the stamp of the last frame kept [s]
+    due_t: float | None = None  # when the next frame is due at the recording's rate [s] (None: before the first)
     t_first: float | None = None  # the stamp of the first frame kept [s]
+    times: list[float] = field(default_factory=list)  # the stamps of the frames kept [s]
     image_span: tuple[float, float] = (math.inf, -math.inf)  # the images' first and last stamps [s]
     speeds: list[float] = field(default_factory=list)  # the speed of each frame kept [m/s]
 
@@ -416,14 +472,18 @@ class Frames:
         seen = image if depth is None else SegmentationView.of(image, self._undistorted(depth), self._attitude_at(t))
         self.writer.append(t - self.t_first, pose, seen, (v, w), int(c.control.label_of(w_set)))
         self.speeds.append(v)
+        self.times.append(t)
         self.last_t = t
+        # The frames keep to a grid at the recording's rate; after a gap it starts again there.
+        period = 1.0 / c.rate_hz
+        self.due_t = t + period if self.due_t is None or t > self.due_t + period else self.due_t + period
 
     def _skip_reason(self, t: float, vw: tuple[float, float] | None) -> str | None:
         """Why the image stamped ``t`` [s], whose (v, w) is ``vw``, makes no frame, or None."""
         rate_hz, odom_t = self.conversion.rate_hz, self.streams.odom_t
         if t <= self.last_t:
             return "images out of order beyond the reorder buffer"
-        if t - self.last_t < 0.75 / rate_hz:  # a quarter period of slack for stamp jitter
+        if self.due_t is not None and t < self.due_t - 0.25 / rate_hz:  # a quarter period of slack for stamp jitter
             return f"images thinned to {rate_hz:g} Hz"
         j = self._odom_index(t)
         if j == 0 or j == len(odom_t):
@@ -508,7 +568,8 @@ class Frames:
             )
         report.frames = writer.count
         report.speed_mps = (min(self.speeds), float(np.mean(self.speeds)), max(self.speeds))
-        report.duration_s = float(self.last_t - self.t_first) + 1.0 / self.conversion.rate_hz
+        # As the recording reads it: frames x their median step (0.1 s with one frame).
+        report.duration_s = len(self.times) * (float(np.median(np.diff(self.times))) if len(self.times) > 1 else 0.1)
         report.unmapped_share = self.unmapped / max(self.pixels, 1)
         report.unknown_share = self.unknown / max(self.pixels, 1)
         if self.depth is not None:

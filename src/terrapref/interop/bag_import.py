@@ -16,7 +16,6 @@ complete; an error leaves nothing behind.
 from __future__ import annotations
 
 import math
-import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,11 +27,12 @@ from terrapref.demos.meta import ImportedInfo, RecordingMeta, SimMeta
 from terrapref.demos.recording import RecordingWriter, is_recording
 from terrapref.errors import UserError
 from terrapref.features import PreferenceSetConfig
-from terrapref.fileio import new_folder, replace_dir
+from terrapref.fileio import new_folder, release_folder, replace_dir
 from terrapref.interop.bag_frames import Conversion, DepthImages, Frames, ImportReport, Motion, Streams, read_small_topics, stream_images
 from terrapref.interop.bag_reader import Bag
 from terrapref.interop.robot import RobotConfig, load_waypoints
 from terrapref.interop.ros_decode import camera_from_info, check_depth_info
+from terrapref.interop.runtime import ODOMETRY_SLACK
 from terrapref.progress import Progress
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.terrain.profile import PreferenceProfile
@@ -132,7 +132,7 @@ def import_bag(
         replace_dir(tmp / "rec", out)
     finally:
         bag.close()
-        shutil.rmtree(tmp, ignore_errors=True)
+        release_folder(tmp)
     return report
 
 
@@ -149,8 +149,10 @@ def _import(req: _Request, out: Path, show_progress: bool, report: ImportReport)
         )
     seg_conns = bag.connections(robot.topics["segmentation"], "segmentation", robot.source)
     streams = read_small_topics(bag, robot)
+    report.notes.extend(streams.notes)
     if robot.command_topic is not None and len(streams.cmd_t) == 0:
         raise UserError(bag.source, f"topic {robot.command_topic} holds no usable command", field="topics.command")
+    _check_command_speeds(streams, robot, bag.source)
     motion = Motion.of(streams, robot, bag.source, report)
     if streams.receive_shift_s:
         report.notes.append(
@@ -182,6 +184,22 @@ def _import(req: _Request, out: Path, show_progress: bool, report: ImportReport)
         frames.writer.abort()  # nothing half-written: a replaced recording stays as it was
         raise
     frames.close(bag.source, progress)
+
+
+def _check_command_speeds(streams: Streams, robot: RobotConfig, source: str) -> None:
+    """Refuse commands faster than any this robot drives (as the runtime refuses such odometry):
+    speeds in other units, or garbage, would make every frame's label a straight line."""
+    if not len(streams.cmd):
+        return
+    fastest = float(np.abs(streams.cmd[:, 0]).max())
+    top = robot.limits.max_speed_mps
+    if fastest > ODOMETRY_SLACK * top + 0.5:
+        raise UserError(
+            source,
+            f"topic {robot.command_topic}: a command of {fastest:g} m/s is past any this robot drives (its top speed "
+            f"{top:g} m/s, limits.max_speed_mps in {robot.source}): commands in other units?",
+            field="topics.command",
+        )
 
 
 def _depth_images(req: _Request, streams: Streams, camera: CameraConfig) -> DepthImages | None:

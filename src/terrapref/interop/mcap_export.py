@@ -35,7 +35,6 @@ same dataset.
 
 from __future__ import annotations
 
-import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
@@ -48,7 +47,7 @@ from terrapref.camera import CameraConfig
 from terrapref.extras import needs
 from terrapref.features import PreferenceSetConfig
 from terrapref.features.preference_set import forward_simulate
-from terrapref.fileio import new_folder, write_text_atomic
+from terrapref.fileio import new_folder, release_folder, write_text_atomic
 from terrapref.groundmap.costmap import Costmap
 from terrapref.interop.ros_messages import (
     EPOCH_S,
@@ -213,7 +212,7 @@ def write_bag(
         written = _write_ros1(tmpdir / "run.bag", run, progress) if ros1 else _write_ros2(tmpdir / "bag", run, progress)
         written.replace(out)
     finally:
-        shutil.rmtree(tmpdir, ignore_errors=True)
+        release_folder(tmpdir)
     if robot_file:
         labels = "terrapref   # the ids are terrapref's own classes"
         if not run.classes.same_classes(default_classes()):  # the ids are another table's: a map of them by name, beside the robot file
@@ -447,31 +446,45 @@ def recording_frames(rec) -> RunFrames:
 
     classes = rec.classes
     path = np.asarray(rec.meta.get("path") or rec.scenario["path"]["waypoints"], dtype=float)
+    camera = CameraConfig.from_dict(rec.meta["camera"])
     return RunFrames(
         times=rec.times,
         poses=rec.poses,
         commands=rec.commands,
-        image=partial(_known_ids, rec, ForeignIds(classes)),
+        image=partial(_known_ids, rec, ForeignIds(classes), (camera.height_px, camera.width_px)),
         chosen=rec.labels,
         path=path,
-        camera=CameraConfig.from_dict(rec.meta["camera"]),
+        camera=camera,
         classes=classes,
         preference=PreferenceSetConfig.from_dict(rec.meta["preference_set"]),
         profile=_declared_order(rec.meta.get("profile")),
-        depth=rec.depth if rec.has_depth else None,
+        depth=partial(_sized_depth, rec, (camera.height_px, camera.width_px)) if rec.has_depth else None,
         attitude=rec.attitude if rec.has_depth else None,
     )
 
 
-def _known_ids(rec, foreign: ForeignIds, i: int) -> np.ndarray:
-    """Frame ``i``'s class ids, refused where one is none of the recording's classes (``foreign``)."""
+def _known_ids(rec, foreign: ForeignIds, shape: tuple[int, int], i: int) -> np.ndarray:
+    """Frame ``i``'s class ids, refused where the image is not the camera's ``shape`` (H, W) or
+    an id is none of the recording's classes (``foreign``), as featurize refuses them."""
     from terrapref.errors import UserError
 
     ids = rec.image(i)
+    if ids.shape != shape:
+        raise UserError(str(rec.path / rec.image_files[i]), f"is {ids.shape[1]} x {ids.shape[0]}, the camera's {shape[1]} x {shape[0]}")
     unknown = foreign(ids)
     if unknown:
         raise UserError(str(rec.path / rec.image_files[i]), f"holds class ids {unknown[:5]} that the class table does not have")
     return ids
+
+
+def _sized_depth(rec, shape: tuple[int, int], i: int) -> np.ndarray | None:
+    """Frame ``i``'s depth image, refused where it is not the camera's ``shape`` (H, W)."""
+    from terrapref.errors import UserError
+
+    depth = rec.depth(i)
+    if depth is not None and depth.shape != shape:
+        raise UserError(str(rec.path / rec.depth_files[i]), f"is {depth.shape[1]} x {depth.shape[0]}, the camera's {shape[1]} x {shape[0]}")
+    return depth
 
 
 def _declared_order(profile: object) -> tuple[str, ...] | None:

@@ -33,7 +33,7 @@ from terrapref.errors import UserError, described
 from terrapref.groundmap.costmap import Costmap
 from terrapref.interop.depth_pairing import DEPTH_PAIRING_S, DepthPairing
 from terrapref.interop.labels import unlisted_message
-from terrapref.interop.robot import LIMITS, RobotConfig, stop_value_problem
+from terrapref.interop.robot import LIMITS, RobotConfig, limit_problem, stop_value_problem
 from terrapref.interop.ros_decode import (
     camera_from_info,
     check_depth_info,
@@ -600,6 +600,10 @@ class NodeOptions:
     def _settings(self, stop: StopConfig, limits: VehicleConfig, origin: dict[str, str]) -> tuple[StopConfig, VehicleConfig]:
         """``stop`` and ``limits`` with the robot's parameters given here in their place."""
         given = {name: getattr(self, name) for name in ROBOT_PARAMETERS if getattr(self, name) is not None}
+        for name in LIMITS:
+            problem = limit_problem(name, given[name]) if name in given else None
+            if problem is not None:
+                raise UserError(origin.get(name, name), problem)
         stop_names = {f.name for f in fields(StopConfig)}
         try:
             return (

@@ -71,6 +71,7 @@ from terrapref.scenario.path import ReferencePath
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.terrain.profile import PreferenceProfile
 from terrapref.vehicle import VehicleConfig
+from terrapref.vehicle.kinematics import MIN_CRUISE_MPS
 from terrapref.yamlio import load_yaml_text, read_yaml_mapping
 
 ROBOT_FORMAT = "terrapref-robot/1"
@@ -198,6 +199,25 @@ def _stop(block: object, source: str) -> StopConfig:
         raise ConfigError(source, str(exc), field="stop") from None
 
 
+LIMIT_RANGES = {  # the least and the most a robot file or a node's parameter may set each limit to
+    "max_speed_mps": (MIN_CRUISE_MPS, 30.0),
+    "max_yaw_rate_rps": (0.05, 10.0),
+    "max_accel_mps2": (0.05, 50.0),
+}
+
+
+def limit_problem(name: str, value: object) -> str | None:
+    """What is wrong with ``value`` for the robot's limit ``name`` (one of :data:`LIMITS`); None: nothing."""
+    least, most = LIMIT_RANGES[name]
+    if value is None and name == "max_accel_mps2":  # a base that ramps its speed itself
+        return None
+    if _number(value) is None:
+        return "expected a finite number" + (" (or null)" if name == "max_accel_mps2" else "")
+    if not least <= value <= most:
+        return f"expected {least:g} to {most:g}, got {value:g}"
+    return None
+
+
 def _limits(block: object, source: str) -> VehicleConfig:
     """The robot's limits from the file's ``limits`` block (absent: the default vehicle's)."""
     if block is None:
@@ -207,8 +227,9 @@ def _limits(block: object, source: str) -> VehicleConfig:
     for key, value in block.items():
         if key not in LIMITS:
             raise ConfigError(source, f"unknown key; expected {', '.join(LIMITS)}", field=f"limits.{key}")
-        if not (value is None and key == "max_accel_mps2") and _number(value) is None:
-            raise ConfigError(source, "expected a finite number" + (" (or null)" if key == "max_accel_mps2" else ""), field=f"limits.{key}")
+        problem = limit_problem(key, value)
+        if problem is not None:
+            raise ConfigError(source, problem, field=f"limits.{key}")
     try:
         return VehicleConfig(**block)
     except ValueError as exc:

@@ -213,23 +213,46 @@ def check_depth_info(depth_info, info, robot: RobotConfig, source: str) -> None:
 
 def _undistortion(k: np.ndarray, d: np.ndarray, model: str, shape: tuple[int, int], source: str) -> np.ndarray:
     """The nearest-pixel undistortion map (H, W) of a lens of intrinsics ``k`` (3, 3) and
-    distortion ``d`` (plumb_bob's k1, k2, p1, p2[, k3]): the flat index of each pinhole pixel in
-    the lens's image of ``shape`` (H, W), -1 where it falls outside; another model is a UserError."""
+    distortion ``d`` (plumb_bob's k1, k2, p1, p2[, k3]; rational_polynomial's k1, k2, p1, p2, k3,
+    k4, k5, k6, the last three dividing the radial factor): the flat index of each pinhole pixel
+    in the lens's image of ``shape`` (H, W), -1 where it falls outside; another model, too few or
+    non-finite coefficients, or a lens that would show less than half the image, is a UserError."""
     fx, fy, cx, cy = k[0, 0], k[1, 1], k[0, 2], k[1, 2]
     height, width = shape
-    if model not in ("plumb_bob", "rational_polynomial") or d.size < 4:
-        raise UserError(source, f"camera_info: distortion model {model!r} is not supported (plumb_bob is)", field="topics.camera_info")
+    if model not in ("plumb_bob", "rational_polynomial"):
+        raise UserError(
+            source,
+            f"camera_info: distortion model {model!r} is not supported (plumb_bob and rational_polynomial are)",
+            field="topics.camera_info",
+        )
+    if d.size < 4 or not np.isfinite(d).all():
+        raise UserError(
+            source,
+            f"camera_info: {model} distortion {d.tolist()}: expected at least 4 finite coefficients (k1, k2, p1, p2, ...)",
+            field="topics.camera_info",
+        )
     k1, k2, p1, p2 = d[:4]
     k3 = d[4] if d.size > 4 else 0.0
+    k4, k5, k6 = (d[5:8].tolist() + [0.0, 0.0, 0.0])[:3] if model == "rational_polynomial" else (0.0, 0.0, 0.0)
     v, u = np.mgrid[0:height, 0:width].astype(float)
     x, y = (u - cx) / fx, (v - cy) / fy
     r2 = x * x + y * y
-    radial = 1 + k1 * r2 + k2 * r2**2 + k3 * r2**3
-    xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
-    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
-    ud, vd = np.rint(fx * xd + cx).astype(np.int64), np.rint(fy * yd + cy).astype(np.int64)
-    inside = (ud >= 0) & (ud < width) & (vd >= 0) & (vd < height)
-    return np.where(inside, vd * width + ud, -1)  # -1: the pinhole pixel falls outside the lens's image
+    with np.errstate(all="ignore"):  # a wild lens overflows; its pixels fall outside and are counted below
+        below = 1 + k4 * r2 + k5 * r2**2 + k6 * r2**3
+        radial = (1 + k1 * r2 + k2 * r2**2 + k3 * r2**3) / np.where(below > 0, below, np.nan)
+        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+        ud, vd = np.rint(fx * xd + cx), np.rint(fy * yd + cy)
+        inside = (ud >= 0) & (ud < width) & (vd >= 0) & (vd < height)
+    if np.count_nonzero(inside) < inside.size / 2:
+        raise UserError(
+            source,
+            f"camera_info: {model} distortion {d.tolist()} maps {100 * (1 - np.count_nonzero(inside) / inside.size):.0f}% of the "
+            "image outside the lens's own image: not a calibration",
+            field="topics.camera_info",
+        )
+    flat = np.where(inside, vd, 0).astype(np.int64) * width + np.where(inside, ud, 0).astype(np.int64)
+    return np.where(inside, flat, -1)  # -1: the pinhole pixel falls outside the lens's image
 
 
 def label_ids(msg, msgtype: str, topic: str, source: str, labels: LabelMap | None = None, t_s: float | None = None) -> np.ndarray:
@@ -254,12 +277,7 @@ def label_ids(msg, msgtype: str, topic: str, source: str, labels: LabelMap | Non
             raise UserError(
                 source, f"topic {topic}: {msg.encoding} colour images need a colour table (colors) in the label map", field="labels"
             )
-        data = np.frombuffer(bytes(msg.data), dtype=np.uint8)
-        if step < 3 * w or len(data) < step * h:
-            raise UserError(
-                source, f"topic {topic}: image data of {len(data)} bytes does not hold {h} rows of {step}", field="topics.segmentation"
-            )
-        rgb = data[: step * h].reshape(h, step)[:, : 3 * w].reshape(h, w, 3)
+        rgb = _rows(msg, (h, w, step), 3, (source, f"topic {topic}: image", "topics.segmentation")).reshape(h, w, 3)
         return labels.decode_rgb(rgb[..., ::-1] if encoding == "bgr8" else rgb)
     else:
         raise UserError(
@@ -267,12 +285,7 @@ def label_ids(msg, msgtype: str, topic: str, source: str, labels: LabelMap | Non
             f"topic {topic}: image encoding {msg.encoding!r}; label ids come as mono8 or mono16 (or rgb8 with a colour table)",
             field="topics.segmentation",
         )
-    data = np.frombuffer(bytes(msg.data), dtype=np.uint8)
-    if step < w * dtype.itemsize or len(data) < step * h:
-        raise UserError(
-            source, f"topic {topic}: image data of {len(data)} bytes does not hold {h} rows of {step}", field="topics.segmentation"
-        )
-    rows = data[: step * h].reshape(h, step)[:, : w * dtype.itemsize]
+    rows = _rows(msg, (h, w, step), dtype.itemsize, (source, f"topic {topic}: image", "topics.segmentation"))
     return np.ascontiguousarray(rows).view(dtype).reshape(h, w).astype(np.uint16 if dtype.itemsize == 2 else np.uint8)
 
 
@@ -325,10 +338,11 @@ def depth_metres(msg, topic: str, source: str, t_s: float | None = None) -> np.n
         )
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
     dtype = np.dtype(("f4" if encoding == "32FC1" else "u2")).newbyteorder(">" if msg.is_bigendian else "<")
-    data = np.frombuffer(bytes(msg.data), dtype=np.uint8)
-    if step < w * dtype.itemsize or len(data) < step * h:
-        raise UserError(source, f"{where}: depth data of {len(data)} bytes does not hold {h} rows of {step}", field="topics.depth")
-    values = np.ascontiguousarray(data[: step * h].reshape(h, step)[:, : w * dtype.itemsize]).view(dtype).reshape(h, w)
+    values = (
+        np.ascontiguousarray(_rows(msg, (h, w, step), dtype.itemsize, (source, f"{where}: depth", "topics.depth")))
+        .view(dtype)
+        .reshape(h, w)
+    )
     if encoding == "16UC1":
         return millimetres_to_depth(values)
     metres = values.astype(np.float32)
@@ -355,6 +369,20 @@ def registered_depth(msg, topic: str, source: str, shape: tuple[int, int], t_s: 
             field="topics.depth",
         )
     return depth
+
+
+def _rows(msg, size: tuple[int, int, int], pixel_bytes: int, about: tuple[str, str, str]) -> np.ndarray:
+    """The bytes (H, W * ``pixel_bytes``) of an Image ``msg``'s rows, its padding cut (``size``: its
+    height, width and step); a step shorter than a row, or data shorter than the rows, is a
+    UserError (``about``: the log, what the message is, the field)."""
+    h, w, step = size
+    source, what, field = about
+    data = np.frombuffer(bytes(msg.data), dtype=np.uint8)
+    if step < w * pixel_bytes:
+        raise UserError(source, f"{what} step of {step} bytes is shorter than a row of {w} pixels of {pixel_bytes} bytes", field=field)
+    if len(data) < step * h:
+        raise UserError(source, f"{what} data of {len(data)} bytes does not hold {h} rows of {step}", field=field)
+    return data[: step * h].reshape(h, step)[:, : w * pixel_bytes]
 
 
 def undistorted(image: np.ndarray, undistort: np.ndarray | None, fill: float | int) -> np.ndarray:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import shutil
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -12,7 +11,7 @@ import numpy as np
 
 from terrapref.dataset import Dataset
 from terrapref.errors import UserError
-from terrapref.fileio import new_folder, replace_dir
+from terrapref.fileio import holds_nothing, new_folder, release_folder, replace_dir
 from terrapref.learning.header import CHECKPOINT, INTERRUPTED, DataSource, Interruption, MemberRun, ModelHeader
 from terrapref.learning.model_file import write_model
 from terrapref.learning.network import ClassifierConfig, member_prefix
@@ -127,12 +126,12 @@ class _Checkpoints:
     def discard(self) -> None:
         """A run that could not write its files leaves none of them."""
         if self.folder is not None:
-            shutil.rmtree(self.folder, ignore_errors=True)
+            release_folder(self.folder)
 
     def keep_partial(self) -> None:
         """An interrupted run's checkpoints stay, beside the old ones, as ``.checkpoints.interrupted``
         (a run that wrote none leaves no folder)."""
-        if self.folder is not None and self.folder.exists() and not any(self.folder.iterdir()):
+        if self.folder is not None and self.folder.exists() and holds_nothing(self.folder):
             self.discard()
         elif self.folder is not None and self.folder.exists():
             replace_dir(self.folder, self.final.with_name(self.final.name + ".interrupted"))
