@@ -848,3 +848,10 @@ def test_replay_reads_the_robots_speed_as_a_node_reads_it_from_odometry():
         poses = np.stack([sign * 1.5 * t * np.cos(yaw), sign * 1.5 * t * np.sin(yaw), np.full_like(t, yaw)], axis=1)
         speeds = frame_speeds(t, poses)
         assert np.isnan(speeds[:2]).all() and speeds[2:] == pytest.approx(1.5)
+
+
+def test_info_of_an_imported_log_says_its_frames_are_the_robots_own(imported, capsys):
+    _, rec = imported["mcap"]
+    capsys.readouterr()
+    assert main(["info", str(rec.path)]) == 0
+    assert "perception      the robot's own (the log's label images and odometry, as imported)" in capsys.readouterr().out

@@ -72,6 +72,34 @@ def test_a_follow_up_of_relief_alone_places_each_lessons_situation():
     )
 
 
+HILL = {
+    "format": "terrapref-scenario/1",
+    "name": "hill",
+    "world": {"size_m": [40.0, 20.0], "resolution_m": 0.05, "background": "grass"},
+    "terrain": [],
+    "relief": [{"plateau": {"polygon": [[16.0, -10.0], [24.0, -10.0], [24.0, 30.0], [16.0, 30.0]], "height_m": 1.0, "edge_m": 6.0}}],
+    "path": {"waypoints": [[5.0, 10.0], [35.0, 10.0]]},
+}
+
+
+def test_a_follow_up_with_relief_between_its_situations_keeps_its_lessons_relief(tmp_path, capsys):
+    """`course --after REC --relief` adds relief between the follow-up's situations; the bank, the
+    mound and the rough patch the drive left unshown stay (they were replaced by it)."""
+    import yaml
+
+    from terrapref.cli import main
+
+    course, rec, more = (tmp_path / n for n in ("hill.yaml", "rec", "more.yaml"))
+    course.write_text(yaml.safe_dump(HILL))
+    assert main(["record", str(course), "--relief-style", "cautious", "--style", "shaky", "--out", str(rec), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["course", "--after", str(rec), "--relief", "5", "--out", str(more)]) == 0
+    kinds = [next(iter(e)) for e in yaml.safe_load(more.read_text())["relief"]]
+    assert kinds[:3] == ["ridge", "mound", "noise"] and len(kinds) > 3, kinds
+    # The record line it prints drives the follow-up as the drive was driven.
+    assert f"record it: terrapref record {more} --style shaky --relief-style cautious --out DIR" in capsys.readouterr().out
+
+
 @pytest.mark.slow
 def test_course_after_a_drive_of_a_hill_shows_the_relief_it_left_unshown_and_the_loop_ends(tmp_path, capsys):
     """A drive over one ramp up and down shows grades and nothing else of relief: `course --after`
@@ -80,16 +108,8 @@ def test_course_after_a_drive_of_a_hill_shows_the_relief_it_left_unshown_and_the
 
     from terrapref.cli import main
 
-    hill = {
-        "format": "terrapref-scenario/1",
-        "name": "hill",
-        "world": {"size_m": [40.0, 20.0], "resolution_m": 0.05, "background": "grass"},
-        "terrain": [],
-        "relief": [{"plateau": {"polygon": [[16.0, -10.0], [24.0, -10.0], [24.0, 30.0], [16.0, 30.0]], "height_m": 1.0, "edge_m": 6.0}}],
-        "path": {"waypoints": [[5.0, 10.0], [35.0, 10.0]]},
-    }
     course, rec, more, rec_more, more2 = (tmp_path / n for n in ("hill.yaml", "rec", "more.yaml", "rec_more", "more2.yaml"))
-    course.write_text(yaml.safe_dump(hill))
+    course.write_text(yaml.safe_dump(HILL))
     assert main(["record", str(course), "--relief-style", "default", "--out", str(rec), "--quiet"]) == 0
     capsys.readouterr()
     assert main(["course", "--after", str(rec), "--out", str(more)]) == 0

@@ -186,6 +186,7 @@ def show_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_course(args: argparse.Namespace) -> int:
+    from terrapref.evaluation.speed import driver_flags
     from terrapref.plots import save_map
     from terrapref.scenario import parse_scenario
     from terrapref.scenario.relief_layout import relief_for
@@ -237,8 +238,8 @@ def _cmd_course(args: argparse.Namespace) -> int:
     save_map(figure, scenario, rasterise(scenario))
     print(f"{scenario.name}: {scenario.description}")
     print(f"  {_drive_line(scenario, items)}")
-    style = " --relief-style default" if scenario.has_relief else ""  # a driver without one drives relief as if flat
-    print(f"wrote {out} and {figure} (record it: terrapref record {out}{style} --out DIR)")
+    drivers = [r.meta.get("driver") for r in recs] if args.after is not None else []  # drive a follow-up as its drives were
+    print(f"wrote {out} and {figure} (record it: terrapref record {out}{driver_flags(drivers, scenario.has_relief)} --out DIR)")
     return 0
 
 
@@ -358,8 +359,8 @@ def course_parser(sub: argparse._SubParsersAction) -> None:
         choices=("auto", "full", "compact"),
         default="auto",
         help="full: every pair once on each side; compact: every pair once, sides balanced; auto (default): full while "
-        "the drive stays within 10 minutes at 1 m/s (with --relief: 7 minutes at 0.85 m/s, each strip and lethal lone "
-        "patch once in either design)",
+        "the drive stays within 10 minutes at 1 m/s (with --relief: 7 minutes at 0.85 m/s, each pair and lethal lone "
+        "patch once in either design, the full one still with every strip on both sides)",
     )
     p.add_argument("--name", help="the scenario's name (default: teaching_course, or the course driven + _more)")
     p.add_argument(

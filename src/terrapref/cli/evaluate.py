@@ -80,7 +80,7 @@ def _evaluation(args: argparse.Namespace) -> Evaluation:
     from terrapref.demos.relief_style import parse_relief_style
     from terrapref.demos.speed_style import check_rough_speed, driver_style, parse_speeds
     from terrapref.evaluation.evaluate import Evaluation, scoring_profile
-    from terrapref.evaluation.speed import trained_driver, trained_relief
+    from terrapref.evaluation.speed import relief_named_by_some, trained_driver, trained_relief
     from terrapref.planner.model import Model
     from terrapref.terrain import PreferenceProfile
     from terrapref.vehicle import VehicleConfig
@@ -106,6 +106,12 @@ def _evaluation(args: argparse.Namespace) -> Evaluation:
     relief = parse_relief_style(args.relief_style)[1] if args.relief_style is not None else trained_relief(meta, args.model)
     if args.relief_style is not None and relief is not None:
         _note_flat(args.scenarios, model.classes)
+    if args.relief_style is None and relief is None and relief_named_by_some(meta):
+        print(
+            f"note: {args.model}: some of its recordings' drivers took relief by a style and some as if flat; the comparison "
+            "driver takes it as if flat: give --relief-style",
+            file=sys.stderr,
+        )
     top_mps = VehicleConfig().max_speed_mps  # the vehicle the runs drive
     if args.relief_style is not None:
         check_rough_speed(relief, top_mps)
@@ -170,7 +176,7 @@ def _print_results(evaluation: Evaluation, metrics: dict, args: argparse.Namespa
     for name, numbers in metrics.get("frames_beyond_the_run", {}).items():
         print(f"note: --frames {','.join(map(str, numbers))}: {name}'s run (seed 0) ended before them; no picture", file=sys.stderr)
     guesses = [z for z in zones if z.get("rests_on_unidentified")]
-    if metrics.get("unidentified_pairs"):
+    if metrics.get("unidentified_pairs") and guesses:  # a pair no zone here turns on changes nothing of these runs
         print(
             f"note: the model's demonstrations did not identify {', '.join(metrics['unidentified_pairs'])}; "
             f"{len(guesses)} of {len(zones)} zone runs rest on them (marked in metrics.json)"

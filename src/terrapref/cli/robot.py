@@ -216,7 +216,8 @@ def _cmd_route(args: argparse.Namespace) -> int:
         tracks=[("route", route.waypoints, "tab:blue")],
         title=f"{scenario.name}: route priced by {Path(args.model).name}",
     )
-    along = "meets lethal terrain" if not math.isfinite(route.along_path_cost) else f"{route.along_path_cost:.1f}"
+    blocked = "lethal terrain or ground past the vehicle's limits" if world.has_relief else "lethal terrain"
+    along = f"meets {blocked}" if not math.isfinite(route.along_path_cost) else f"{route.along_path_cost:.1f}"
     print(
         f"route: {route.length_m:.1f} m (path {scenario.path_length_m():.1f} m), up to {route.max_offset_m:.1f} m from the path; "
         f"price {route.cost:.1f} (the path itself: {along}); searched in {route.cell_m:g} m cells"
@@ -232,7 +233,9 @@ def route_parser(sub: argparse._SubParsersAction) -> None:
         help="plan a global route over a scenario's map, priced with a model's learned preference, as waypoints the planner follows",
     )
     p.add_argument(
-        "scenario", help="the course (packaged name, file or gen:N): its terrain stands in for a prior map such as labelled aerial imagery"
+        "scenario",
+        help="the course (packaged name, file, gen:N or genrelief:N): its terrain (and relief) stands in for a prior map such as "
+        "labelled aerial imagery",
     )
     p.add_argument(
         "--model", required=True, help="a model with an offset rule (recipe teach): its class prices and price of leaving the path"

@@ -374,5 +374,5 @@ def _add_select_driver_args(p: argparse.ArgumentParser) -> None:
         help="relief styles, as record takes them, separated by ';' (e.g. 'default;bold;cautious'): each order and seed's driver "
         "drives with each in turn, demonstrating the relief teaching course (teach_relief, or the table's with relief), and the "
         "models and drivers drive the same layouts with relief (genrelief:N); SELECT.md adds the relief zones and the speed by "
-        "grade band (default: none, flat layouts)",
+        "grade band and by roughness band (default: none, flat layouts)",
     )

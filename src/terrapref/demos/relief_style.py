@@ -95,8 +95,21 @@ class ReliefStyle:
             return None
 
     def describe(self) -> str:
-        """Where it goes round, in words."""
-        return f"round side slopes past {self.roll_deg:g} deg and grades past {self.grade_deg:g} deg"
+        """The style as ``--relief-style`` takes it, then where it goes round and how it slows, in words."""
+        return (
+            f"{self.as_flag()} (round side slopes past {self.roll_deg:g} deg and grades past {self.grade_deg:g} deg; "
+            f"{self.up_mps_per_deg:g} m/s less a deg up, {self.down_mps_per_deg:g} down; {self.rough_mps:g} m/s on ground "
+            f"rougher than {self.rough_m:g} m)"
+        )
+
+    def as_flag(self) -> str:
+        """The style as ``--relief-style`` takes it: the named style it is, else its fields that
+        differ from the default's as ``k=v`` pairs."""
+        for name in RELIEF_STYLES.names():
+            if replace(ReliefStyle(), **RELIEF_STYLES[name]) == self:
+                return name
+        base = ReliefStyle()
+        return ",".join(f"{f.name}={getattr(self, f.name)!r}" for f in fields(self) if getattr(self, f.name) != getattr(base, f.name))
 
     def speed(self, v_mps: float, grade_rad: float, rough_m: float, least_mps: float) -> float:
         """The speed [m/s] it drives at where its terrain's speed is ``v_mps``, on a grade of

@@ -283,6 +283,29 @@ def trained_driver(meta: Mapping[str, Any]) -> TrainedDriver | None:
     return ("default", speeds, changes.pop()) if len(changes) == 1 and None not in changes else None
 
 
+def driver_flags(drivers: Sequence[Any], relief: bool) -> str:
+    """The flags of ``terrapref record`` (`` --style S --speeds ... --relief-style R``, each where it
+    is not the default) that drive another course as the synthetic driver of recordings whose
+    driver entries are ``drivers`` drove theirs, where they all name the same; on a course with
+    ``relief``, a relief style always (the default's where they name none): a driver without one
+    drives relief as if it were flat. Empty for a person's drives or a mix."""
+    meta = {"data": {"recordings": [{"driver": d} for d in drivers]}}
+    driver = trained_driver(meta)
+    flags = ""
+    if driver is not None:
+        style, speeds, _ = driver
+        flags += f" --style {style}" if style != "default" else ""
+        if speeds and speeds != tuple(ExpertConfig.styled(style, ()).speeds):
+            flags += " --speeds " + ",".join(f"{name}={v:g}" for name, v in speeds)
+    try:
+        named = trained_relief(meta)
+    except UserError:
+        named = None
+    if relief or named is not None:
+        flags += f" --relief-style {named.as_flag() if named is not None else 'default'}"
+    return flags
+
+
 def _recorded_changes(config: Mapping[str, Any]) -> tuple[tuple[str, Any], ...] | None:
     """A recorded driver's fields but its profile, speeds and relief, as :class:`ExpertConfig`
     takes them; None where they do not make one."""
@@ -328,6 +351,13 @@ def trained_relief(meta: Mapping[str, Any], source: str = "") -> ReliefStyle | N
             field="data.recordings[].driver.config.relief",
         )
     return style
+
+
+def relief_named_by_some(meta: Mapping[str, Any]) -> bool:
+    """Whether some of a model's recordings name a relief style for their synthetic driver and some none."""
+    drivers = _recorded_drivers(meta)
+    named = [isinstance(d, Mapping) and isinstance(d.get("config"), Mapping) and d["config"].get("relief") is not None for d in drivers]
+    return any(named) and not all(named)
 
 
 RUN_XY_STEP_S = 0.1  # a run's kept path (RunResult.xy): its reference point every third 30 Hz tick [s]

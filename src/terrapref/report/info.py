@@ -94,6 +94,7 @@ def info_lines(path: str | Path) -> list[str]:
 
 def _recording_lines(p: Path) -> list[str]:
     """A recording folder: completeness, frames, course, driver."""
+    from terrapref.demos.meta import ImportedInfo
     from terrapref.demos.recording import read_recording
 
     rec = read_recording(p)
@@ -104,14 +105,17 @@ def _recording_lines(p: Path) -> list[str]:
         f"frames          {len(rec)} ({rec.duration_s:.1f} s)",
         f"scenario        {m.get('scenario')}",
         f"driver          {driver.describe() if driver is not None else '?'}",
-        f"perception      {_perception(rec.perception)}",
+        f"perception      {_perception(rec.perception, imported=isinstance(driver, ImportedInfo))}",
         f"created         {m.get('created', '?')}",
     ]
     return lines + _common(m)
 
 
-def _perception(name: str) -> str:
-    """The perception model a recording's frames went through, said in words."""
+def _perception(name: str, imported: bool = False) -> str:
+    """The perception model a recording's frames went through, said in words; an ``imported`` log's
+    frames are what the robot's own segmentation and localisation gave."""
+    if imported:
+        return "the robot's own (the log's label images and odometry, as imported)"
     if name == "clean":
         return "clean (the simulator's own labels and poses)"
     return f"{name} (what the robot's camera and localisation would have given; the driver saw the truth)"

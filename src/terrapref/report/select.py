@@ -663,7 +663,7 @@ def speed_section(rows: Sequence[dict], runs: Sequence[dict], background: str) -
     zones passed by counted for the ``background`` class)."""
     compared = SpeedComparison.of(rows, runs, background)
     lines = [
-        "Speed against the driver (each order and seed with its own cruising speeds): per class the driver took, the mean "
+        "Speed against the driver (each order and seed's model against its own driver): per class the driver took, the mean "
         "absolute error of the mean speed through a zone over the zones where the planner took it too; 95% intervals "
         "resampling layouts.",
         "",
@@ -678,8 +678,9 @@ def _selection_table(
     bars of the figure: (label, agreement, its interval resampling layouts), each recipe's over all
     orders, and with ``order_bars`` each order's too when there is one recipe."""
     kinds = sorted({r["kind"] for r in rows})
+    every = " (terrain and relief zones)" if RELIEF_ZONE in kinds else ""  # each kind has its own column after them
     lines = [
-        "| recipe | order | agreement with the driver | agreement, layouts resampled | "
+        f"| recipe | order | agreement with the driver{every} | agreement, layouts resampled | "
         + " | ".join(f"agreement, {k} zones" for k in kinds)
         + " | zone success | the driver's zone success | collisions | runs completed | stops per 100 m | per seed |",
         "|---|---|---|---|" + "---|" * len(kinds) + "---|---|---|---|---|---|",
