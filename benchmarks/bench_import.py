@@ -45,7 +45,6 @@ def main() -> None:
     args = parser.parse_args()
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the tests' generator of robot logs
     from synthetic_bag import robot_yaml, write_robot, write_synthetic_bag
-
     from terrapref.demos.recording import read_recording
 
     work = args.out or Path(tempfile.mkdtemp(prefix="terrapref-bench-import-"))
