@@ -483,7 +483,8 @@ class Frames:
         rate_hz, odom_t = self.conversion.rate_hz, self.streams.odom_t
         if t <= self.last_t:
             return "images out of order beyond the reorder buffer"
-        if self.due_t is not None and t < self.due_t - 0.25 / rate_hz:  # a quarter period of slack for stamp jitter
+        # On a grid at the rate, a quarter period of slack for stamp jitter; never two frames within half a period.
+        if self.due_t is not None and (t < self.due_t - 0.25 / rate_hz or t - self.last_t < 0.5 / rate_hz):
             return f"images thinned to {rate_hz:g} Hz"
         j = self._odom_index(t)
         if j == 0 or j == len(odom_t):
