@@ -57,7 +57,7 @@ def test_a_speed_filter_decodes_as_nav2_reads_it_to_the_learned_speed(percent: b
     speed = np.array([[0.3, 1.0, np.nan], [2.0, 0.0, 1.55]])
     info, mask = speed_filter(ts, header(ts, 0.0, "odom"), speed, 2.0, "/terrapref/speed_mask", percent)
     assert info.type == (SPEED_PERCENT if percent else SPEED_ABSOLUTE) and info.filter_mask_topic == "/terrapref/speed_mask"
-    assert mask.dtype == np.int8 and mask[0, 2] == -1  # unknown: no limit
+    assert mask.dtype == np.int8 and mask[0, 2] == 0  # unknown: no limit, as Nav2 reads 0 (-1 is an invalid cell to it)
     assert (mask[np.isfinite(speed)] >= 1).all()  # a learned speed, even 0 (lethal ground), is never "no limit" (0)
     limit = info.base + info.multiplier * mask.astype(float)
     as_mps = limit / 100.0 * 2.0 if percent else limit

@@ -723,11 +723,9 @@ def test_a_simulated_clock_that_stops_is_seen_by_the_wall_clock(monkeypatch):
     assert ros2.NodeClock(sim=False).still_s() == 0.0
 
 
-def test_a_message_heard_as_the_node_subscribes_finds_its_publishers_made(tmp_path):
-    """A latched path that comes the moment the node subscribes to it, before the node has made
-    the rest of its endpoints, is taken and answered on ``~/arrived``: the node makes its
-    publishers before its subscriptions (a player's path that beat them was once said as "internal
-    error handling a message (KeyError: 'arrived')")."""
+def _node_on_a_fake_participant(tmp_path, **options):
+    """A node (its core, and a participant that records what it publishes and hands a latched
+    path to a subscription the moment it is made) with a small model, no DDS."""
     from types import SimpleNamespace
 
     from test_offset_rule import DRIVER_LIKE, _offset_meta
@@ -765,7 +763,61 @@ def test_a_message_heard_as_the_node_subscribes_finds_its_publishers_made(tmp_pa
     )
     core = PlannerNodeCore(model, load_robot(tmp_path / "robot.yaml"), None)
     dds = Latched()
-    _Node(core, NodeOptions(), Names({}), NodeClock(False), dds)
+    return core, _Node(core, NodeOptions(**options), Names({}), NodeClock(False), dds), dds
+
+
+def test_a_message_heard_as_the_node_subscribes_finds_its_publishers_made(tmp_path):
+    """A latched path that comes the moment the node subscribes to it, before the node has made
+    the rest of its endpoints, is taken and answered on ``~/arrived``: the node makes its
+    publishers before its subscriptions (a player's path that beat them was once said as "internal
+    error handling a message (KeyError: 'arrived')")."""
+    core, _, dds = _node_on_a_fake_participant(tmp_path)
     assert np.asarray(core.path).tolist() == [[0.0, 0.0], [10.0, 0.0]]  # the path was taken
     arrived = [msg.data for topic, msg in dds.published if topic.endswith("/arrived")]
     assert arrived == [False]
+
+
+def test_the_speed_filters_info_is_sent_again_only_when_it_changes(tmp_path):
+    """Nav2 takes each CostmapFilterInfo as a new filter (it warns and subscribes to the mask
+    again): the node sends it once, latched, and the mask with every costmap."""
+    from types import SimpleNamespace
+
+    core, node, dds = _node_on_a_fake_participant(tmp_path)
+    speed = np.array([[1.0, np.nan], [0.5, 2.0]])
+    grid = SimpleNamespace(
+        cost=np.zeros((2, 2), np.int8),
+        resolution_m=0.1,
+        origin=(0.0, 0.0),
+        top_speed_mps=2.0,
+        layers={"speed": speed},
+        grid_layers=lambda: {"speed": speed.astype(np.float32)},
+    )
+    core.costmap = lambda: grid
+    for _ in range(3):
+        node.publish_costmap()
+    topics = [topic.rsplit("/", 1)[-1] for topic, _ in dds.published]
+    assert topics.count("speed_filter_info") == 1 and topics.count("speed_mask") == 3
+    mask = [msg for topic, msg in dds.published if topic.endswith("/speed_mask")][-1]
+    assert list(mask.data) == [50, 0, 25, 100]  # percent of the top speed; unseen 0, no limit
+
+
+def test_a_command_sent_by_the_timer_carries_the_stamp_of_the_decision_it_sends(tmp_path, monkeypatch):
+    """The timer's command is stamped with the frame of the decision in force when it takes the
+    lock: one made between the timer's tick and then is the one sent, with its own stamp (it
+    once went out with the frame before's)."""
+    import contextlib
+
+    core, node, dds = _node_on_a_fake_participant(tmp_path, stamped=True)
+    node.last_stamp = 1.0
+    lock = core.lock
+
+    @contextlib.contextmanager
+    def decided_meanwhile():
+        with lock:
+            node.last_stamp = 2.0  # a decision that took the lock first
+            yield
+
+    monkeypatch.setattr(type(core), "lock", property(lambda self: decided_meanwhile()))
+    node.publish_command()
+    (sent,) = [msg for topic, msg in dds.published if topic.endswith("cmd")]
+    assert sent.header.stamp.sec == 2

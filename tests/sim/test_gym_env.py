@@ -343,6 +343,22 @@ def test_reset_options():
             env.reset(options=bad)
 
 
+def test_a_refused_reset_leaves_no_episode_to_step_on():
+    """After a reset that was refused, step() asks for a reset rather than going on with the episode before it."""
+    from gymnasium.error import ResetNeeded
+
+    env = OffRoadNavEnv(_scenario(), image_size=SMALL)
+    env.reset(seed=0)
+    env.step(10)
+    for bad in ({"start": (1.0, float("nan"), 0.0)}, {"start": (500.0, 1.0, 0.0)}, {"course": "x"}):
+        with pytest.raises(ValueError):
+            env.reset(options=bad)
+        with pytest.raises(ResetNeeded, match="call reset"):
+            env.step(10)
+    _, info = env.reset(seed=0)
+    assert set(info["reward_terms"]) == set(env.step(10)[4]["reward_terms"])  # the same terms at a reset as at a step
+
+
 def test_render_modes():
     with pytest.raises(ValueError, match="render_mode"):
         OffRoadNavEnv(_scenario(), render_mode="bogus")
@@ -474,3 +490,24 @@ def test_reset_options_draw_a_generated_course():
     assert env.reset(seed=0, options={"scenario": "gen:*"})[1]["scenario"].startswith("gen_")
     with pytest.raises(ValueError, match="course name or a Scenario"):
         env.reset(options={"scenario": ["demo_course"]})
+
+
+def test_on_relief_a_tip_or_a_time_stuck_ends_the_episode_as_an_entry_onto_lethal_terrain_does():
+    """relief_hazards: driving straight at its ledge, the vehicle is held by a step too high; driving
+    along its bank's slope, it tips; each ends the episode with the collision's price. A start
+    that puts the body past its roll limit is refused, as one on lethal terrain is."""
+    env = OffRoadNavEnv("relief_hazards", image_size=SMALL)
+    env.reset(seed=0)
+    for _ in range(400):
+        _, reward, terminated, truncated, info = env.step(10)  # straight on
+        if terminated or truncated:
+            break
+    assert terminated and info["stuck"] == 1 and info["tips"] == 0 and info["reward_terms"]["collision"] == -10.0
+    env.reset(seed=0, options={"start": (33.0, 14.0, 0.0)})  # beside the bank, on its slope
+    for _ in range(100):
+        _, reward, terminated, truncated, info = env.step(10)
+        if terminated or truncated:
+            break
+    assert terminated and info["tips"] == 1 and info["reward_terms"]["collision"] == -10.0
+    with pytest.raises(ValueError, match="past its roll or pitch limit"):
+        env.reset(options={"start": (40.0, 12.4, 0.0)})

@@ -304,6 +304,7 @@ class _Node:
         self.arrived: bool | None = None  # what ~/arrived last said
         self.clock_said = False  # a /clock that stopped has been said
         self.odom_frame = "odom"  # the odometry's frame, which the costmap is in
+        self.filter_said: tuple | None = None  # the speed filter's info last published (latched: sent again only when it changes)
         self.shapes = TrajectoryShapes(core.model)
         self.failed = threading.Event()
         dds.on_error = self._on_error
@@ -385,12 +386,13 @@ class _Node:
             tf_message(self.ts, camera_mount(self.ts, mount, t_s=self.clock.now() - EPOCH_S, frames=MOUNT_FRAMES))
         )
 
-    def publish_command(self, stamp: float) -> None:
+    def publish_command(self) -> None:
         """The command in force now (a stop once its frame is ``hold_s`` old by the node's clock),
         stamped with its frame; each time the planner stops, or moves on, the log says so and why."""
         from terrapref.interop.ros_messages import twist
 
         with self.core.lock:  # a decision's command and the timer's never cross (the lock a decision is made under)
+            stamp = self.last_stamp  # read under the lock: a decision between the timer's tick and here is the one sent
             (v, w), reason = self.core.status_at(self.clock.now())
             self.log.status(reason)
             msg = twist(self.ts, float(v), float(w))
@@ -401,7 +403,7 @@ class _Node:
     def on_decision(self, decision) -> None:
         """Each decision, whether its image or the odometry it waited for brought it."""
         self.last_stamp = decision.stamp_s
-        self.publish_command(decision.stamp_s)
+        self.publish_command()
         self.writers["trajectories"].publish(self.markers(decision))
         self.publish_arrived()
 
@@ -513,7 +515,10 @@ class _Node:
         if "speed" in grid.layers and grid.top_speed_mps is not None:
             mask_topic = next(e.topic for e in self.endpoints if e.role == "speed_mask")
             info, mask = speed_filter(self.ts, stamped, grid.layers["speed"], grid.top_speed_mps, mask_topic)
-            self.writers["speed_filter_info"].publish(info)
+            said = (info.type, info.filter_mask_topic, info.base, info.multiplier)
+            if said != self.filter_said:  # Nav2 takes each new info as a new filter: it warns and subscribes again
+                self.writers["speed_filter_info"].publish(info)
+                self.filter_said = said
             self.writers["speed_mask"].publish(occupancy_grid(self.ts, stamped, mask, grid.resolution_m, grid.origin))
 
     def check_publishers(self) -> None:
@@ -536,7 +541,7 @@ class _Node:
             time.sleep(period)
             now = time.monotonic()
             if self.last_stamp is not None:
-                self.publish_command(self.last_stamp)
+                self.publish_command()
             self.check_clock()
             if now >= next_costmap:
                 next_costmap = now + COSTMAP_PERIOD_S

@@ -321,18 +321,22 @@ def grid_map_layer(msg: Message, name: str) -> np.ndarray:
 SPEED_PERCENT, SPEED_ABSOLUTE = 1, 2  # CostmapFilterInfo's types of a speed filter: percent of the top speed, or m/s
 
 
+SPEED_MASK_NO_LIMIT = 0  # Nav2's speed-filter mask value for no limit (its filter_values.hpp)
+
+
 def speed_filter(
     ts: Typestore, stamped: Message, speed_mps: np.ndarray, top_mps: float, mask_topic: str, percent: bool = True
 ) -> tuple[Message, np.ndarray]:
     """Nav2's speed filter of ``speed_mps`` (H, W) [m/s, NaN unknown]: its nav2_msgs/CostmapFilterInfo
     (naming ``mask_topic``) and the mask's values (H, W) int8 for an OccupancyGrid. Nav2 reads a
-    cell's limit as ``base + multiplier * value`` and 0 or -1 as no limit: in percent of
-    ``top_mps`` (type 1: base 0, multiplier 1) or in m/s (type 2: base 0, multiplier
-    ``top_mps / 100``), each value rounded to the nearest step and at least 1 (a learned speed
-    is never "no limit"); unknown ground -1."""
+    cell's limit as ``base + multiplier * value`` and 0 as no limit: in percent of ``top_mps``
+    (type 1: base 0, multiplier 1) or in m/s (type 2: base 0, multiplier ``top_mps / 100``), each
+    value rounded to the nearest step and at least 1 (a learned speed is never "no limit");
+    unknown ground 0, no limit (Nav2's speed filter takes -1 as an invalid cell: it logs an
+    error and keeps the last limit)."""
     known = np.isfinite(speed_mps)
     share = np.clip(np.where(known, speed_mps, 0.0) / top_mps, 0.0, 1.0)
-    mask = np.where(known, np.maximum(np.round(100.0 * share), 1), -1).astype(np.int8)
+    mask = np.where(known, np.maximum(np.round(100.0 * share), 1), SPEED_MASK_NO_LIMIT).astype(np.int8)
     info = ts.types["nav2_msgs/msg/CostmapFilterInfo"](
         header=stamped,
         type=SPEED_PERCENT if percent else SPEED_ABSOLUTE,

@@ -64,7 +64,9 @@ class RewardConfig:
             detour earns nothing for the stretch it skipped).
         path_band_m: half-width of the band around the path in which progress is credited [m].
         cross_track_weight: per metre of distance from the path, every step.
-        collision_penalty: per entry of the footprint onto lethal terrain.
+        collision_penalty: per entry of the footprint onto lethal terrain; on relief, per tip past
+            the vehicle's roll or pitch limit and per time a step too high holds it, as every
+            summary counts them.
         contact_penalty: per second with lethal terrain under the footprint (when the episode
             goes on after an entry: ``terminate_on_lethal`` False).
         off_map_penalty: each time the vehicle leaves the map.
@@ -108,7 +110,7 @@ class EnvConfig:
         waypoint_spacing_m: their spacing along the path [m].
         reward: the reward's terms; None: :class:`RewardConfig`'s defaults.
         profile: the preference order the terrain reward follows (names, text, or a profile); None: the table's default.
-        terminate_on_lethal: end the episode on entering lethal terrain.
+        terminate_on_lethal: end the episode on entering lethal terrain (on relief, on a tip or a time stuck too).
         terminate_off_map: end the episode on leaving the map.
         start_jitter_m: the start is moved up to this far in x and y at each reset [m].
         start_yaw_jitter_rad: and turned up to this much [rad].
@@ -303,6 +305,7 @@ class OffRoadNavEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
         super().reset(seed=seed)
+        self._started = False  # a reset refused below leaves no episode to step on, not the last one
         if options is not None and not isinstance(options, Mapping):
             raise ValueError(f"reset options: expected a dict with 'scenario' and/or 'start', got {type(options).__name__}")
         options = dict(options or {})
@@ -328,7 +331,7 @@ class OffRoadNavEnv(gym.Env):
             abs(path.project(np.array(pose[:2]), self._progress_m - 2.0, self._progress_m + 2.0)[1]) <= self.reward_config.path_band_m
         )
         self._credited_m = self._progress_m
-        terms = dict.fromkeys(("progress", "cross_track", "collision", "off_map", "goal", "terrain"), 0.0)
+        terms = dict.fromkeys(("progress", "cross_track", "collision", "contact", "off_map", "goal", "terrain"), 0.0)
         self._last_obs = self._observation(frame.view, frame.pose)
         return self._last_obs, self._info(terms, success=False, off_map=False)
 
@@ -359,19 +362,19 @@ class OffRoadNavEnv(gym.Env):
                 pose = Pose(x + dx, y + dy, yaw + dyaw)
                 if self._on_map(pose.x, pose.y):
                     frame = self.sim.reset(pose)
-                    if not self.sim.started_in_contact:
+                    if not (self.sim.started_in_contact or self.sim.tips):
                         break
             else:
                 pose = Pose(x, y, yaw)
                 frame = self.sim.reset(pose)
             self._progress_m = path.project(np.array(pose[:2]), 0.0, 5.0)[0]
-        if self.sim.started_in_contact:
+        if self.sim.started_in_contact or self.sim.tips:
             where = "'start'" if given is not None else f"the start of {self.sim.scenario.name!r}"
             self._started = False
-            raise ValueError(
-                f"reset: {where} ({pose[0]:.2f}, {pose[1]:.2f}) puts the vehicle's footprint on lethal terrain; "
-                "start it clear of lethal terrain"
+            what = (
+                "the vehicle's footprint on lethal terrain" if self.sim.started_in_contact else "the vehicle past its roll or pitch limit"
             )
+            raise ValueError(f"reset: {where} ({pose[0]:.2f}, {pose[1]:.2f}) puts {what}; start it clear of it")
         return frame, pose
 
     def _on_map(self, x: float, y: float) -> bool:
@@ -382,10 +385,12 @@ class OffRoadNavEnv(gym.Env):
         if not self._started:
             raise ResetNeeded("call reset() before step()")
         if self._ended:
-            raise ResetNeeded("the episode has ended (goal, lethal terrain or off the map); call reset() before step()")
+            raise ResetNeeded(
+                "the episode has ended (goal, lethal terrain, a tip or a time stuck, or off the map); call reset() before step()"
+            )
         command = self._command(action)  # checked before anything changes, so a bad action leaves the env as it was
         sim, cfg = self.sim, self.reward_config
-        tick0, collisions0, contact0 = len(sim.trace) - 1, sim.collisions, sim.contact_s
+        tick0, collisions0, contact0 = len(sim.trace) - 1, sim.collisions + sim.tips + sim.stuck, sim.contact_s
         frame = sim.step(command)
         trace = np.array(sim.trace[tick0:], dtype=float)
         hops = np.hypot(*np.diff(trace[:, :2], axis=0).T)
@@ -404,7 +409,7 @@ class OffRoadNavEnv(gym.Env):
         self._credited_m += advance
         left_map = off_map and not self._off_map
         self._off_map = off_map
-        collided = sim.collisions - collisions0
+        collided = sim.collisions + sim.tips + sim.stuck - collisions0  # on relief a tip or a time stuck counts as an entry
         end = sim.path.waypoints[-1]
         success = (
             math.hypot(trace[-1, 0] - end[0], trace[-1, 1] - end[1]) <= sim.config.goal_radius_m
@@ -491,6 +496,8 @@ class OffRoadNavEnv(gym.Env):
             "scenario": self.sim.scenario.name,
             "is_success": bool(success),
             "collisions": self.sim.collisions,
+            "tips": self.sim.tips,  # on relief: entries past the roll or pitch limit
+            "stuck": self.sim.stuck,  # and times a step too high held the vehicle
             "off_map": off_map,
             "progress_m": self._credited_m,
             "path_position_m": self._progress_m,
