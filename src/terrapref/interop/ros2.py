@@ -303,8 +303,8 @@ class _Node:
         self.last_stamp: float | None = None  # the frame of the command in force
         self.arrived: bool | None = None  # what ~/arrived last said
         self.clock_said = False  # a /clock that stopped has been said
-        self.odom_frame = "odom"  # the odometry's frame, which the costmap is in
-        self.filter_said: tuple | None = None  # the speed filter's info last published (latched: sent again only when it changes)
+        # The odometry's frame, which the costmap is in; the speed filter's info last sent (latched: again only when it changes).
+        self.odom_frame, self.filter_said = "odom", None
         self.shapes = TrajectoryShapes(core.model)
         self.failed = threading.Event()
         dds.on_error = self._on_error
