@@ -303,8 +303,7 @@ class _Node:
         self.last_stamp: float | None = None  # the frame of the command in force
         self.arrived: bool | None = None  # what ~/arrived last said
         self.clock_said = False  # a /clock that stopped has been said
-        # The odometry's frame, which the costmap is in; the speed filter's info last sent (latched: again only when it changes).
-        self.odom_frame, self.filter_said = "odom", None
+        self.odom_frame, self.filter_said = "odom", None  # the costmap's frame; the speed filter's info last sent
         self.shapes = TrajectoryShapes(core.model)
         self.failed = threading.Event()
         dds.on_error = self._on_error
