@@ -69,10 +69,16 @@ def test_a_pose_higher_than_any_robot_goes_is_refused_naming_the_topic():
 def test_stamps_that_jump_against_the_logs_clock_are_refused():
     stamps = [1000.0 + 0.1 * i for i in range(6)]
     stamps[3:] = [s - 1000.0 for s in stamps[3:]]  # a simulator's clock reset halfway
-    with pytest.raises(UserError, match=r"topics.odometry: topic /odom: header stamps jump by -1000.0 s"):
+    with pytest.raises(UserError, match=r"topics.odometry: topic /odom: header stamps jump by -999.9 s"):
         _read([_odometry(s, 0.1 * i) for i, s in enumerate(stamps)]).checked("log.mcap", "/odom")
-    # Stamps on another clock throughout (simulated time recorded by wall clock) are not a jump.
+    # Stamps on another clock throughout (simulated time recorded by wall clock) are not a jump,
+    # nor a simulator paused for 30 s while the log went on recording.
     _read([_odometry(5.0 + 0.1 * i, 0.1 * i) for i in range(6)]).checked("log.mcap", "/odom")
+    paused = [100.0 + 0.1 * i + (30.0 if i >= 3 else 0.0) for i in range(6)]
+    _read([_odometry(5.0 + 0.1 * i, 0.1 * i) for i in range(6)], receive_s=paused).checked("log.mcap", "/odom")
+    ahead = [1000.0 + 0.1 * i + (60.0 if i >= 3 else 0.0) for i in range(6)]  # a clock set forward
+    with pytest.raises(UserError, match=r"header stamps jump by \+60.0 s"):
+        _read([_odometry(s, 0.1 * i) for i, s in enumerate(ahead)]).checked("log.mcap", "/odom")
 
 
 def test_a_command_faster_than_any_this_robot_drives_is_refused(tmp_path: Path):

@@ -200,6 +200,7 @@ class _SmallTopics:
     depth_info: object = None  # the depth topic's first camera_info
     static: dict[str, tuple[str, np.ndarray, np.ndarray]] = field(default_factory=dict)  # child -> (parent, t, R)
     stamp_minus_receive: list[float] = field(default_factory=list)  # of stamped odometry [s]
+    stamped_received: list[float] = field(default_factory=list)  # when the log received each of those [s]
     cmd_received: list[bool] = field(default_factory=list)  # each command timed by receive time (Twist carries no stamp)
     unturned: int = 0  # poses whose quaternion is zero or not finite (left out)
     rescaled: int = 0  # poses whose quaternion was not of unit length (normalised)
@@ -211,6 +212,7 @@ class _SmallTopics:
             stamp = message_time_s(msg, 0)
             if stamp > 0:
                 self.stamp_minus_receive.append(stamp - t_ns * 1e-9)
+                self.stamped_received.append(t_ns * 1e-9)
             self.odom_t.append(message_time_s(msg, t_ns))
             turn = self._unit(pose.orientation)
             x, y = (pose.position.x, pose.position.y) if turn is not None else (math.nan, math.nan)  # no heading: left out
@@ -256,9 +258,13 @@ class _SmallTopics:
                 f"topic {topic}: a pose {z[high[0]]:g} m high; expected heights within +-{MAX_HEIGHT_M:g} m (odometry in other units?)",
                 field="topics.odometry",
             )
-        jumps = np.diff(self.stamp_minus_receive)
-        if len(jumps) and np.abs(jumps).max() > CLOCK_TOLERANCE_S:
-            at = int(np.argmax(np.abs(jumps)))
+        # A clock reset sends the stamps back, or ahead of the log's own clock; a simulator paused
+        # while the log records only holds them still, which is no jump.
+        ahead = np.diff(self.stamp_minus_receive)
+        back = ahead + np.diff(self.stamped_received)  # each stamp less the one before
+        jumps = np.where(back < -CLOCK_TOLERANCE_S, back, np.where(ahead > CLOCK_TOLERANCE_S, ahead, 0.0))
+        if len(jumps) and jumps.any():
+            at = int(np.flatnonzero(jumps)[0])
             raise UserError(
                 source,
                 f"topic {topic}: header stamps jump by {jumps[at]:+.1f} s against the log's receive times (a clock reset, "
