@@ -267,7 +267,11 @@ def trained_driver(meta: Mapping[str, Any]) -> TrainedDriver | None:
     same: its style (a preset), its cruising speeds by class and the :class:`ExpertConfig`
     fields it changed over the preset's (a driver of a style file: every field its recording
     holds, over the default preset's); None for a person's drives, a mix, or a driver unreadable."""
-    drivers = _recorded_drivers(meta)
+    return _common_driver(_recorded_drivers(meta))
+
+
+def _common_driver(drivers: Sequence[Any]) -> TrainedDriver | None:
+    """:func:`trained_driver` of recordings whose driver entries are ``drivers``."""
     if not drivers or not all(isinstance(d, Mapping) and d.get("kind") == "expert" for d in drivers):
         return None
     found = {(d.get("style", "default"), tuple(tuple(p) for p in (d.get("config") or {}).get("speeds") or ())) for d in drivers}
@@ -289,8 +293,7 @@ def driver_flags(drivers: Sequence[Any], relief: bool) -> str:
     driver entries are ``drivers`` drove theirs, where they all name the same; on a course with
     ``relief``, a relief style always (the default's where they name none): a driver without one
     drives relief as if it were flat. Empty for a person's drives or a mix."""
-    meta = {"data": {"recordings": [{"driver": d} for d in drivers]}}
-    driver = trained_driver(meta)
+    driver = _common_driver(drivers)
     flags = ""
     if driver is not None:
         style, speeds, _ = driver
@@ -298,7 +301,7 @@ def driver_flags(drivers: Sequence[Any], relief: bool) -> str:
         if speeds and speeds != tuple(ExpertConfig.styled(style, ()).speeds):
             flags += " --speeds " + ",".join(f"{name}={v:g}" for name, v in speeds)
     try:
-        named = trained_relief(meta)
+        named = _common_relief(drivers)
     except UserError:
         named = None
     if relief or named is not None:
@@ -338,9 +341,19 @@ def trained_relief(meta: Mapping[str, Any], source: str = "") -> ReliefStyle | N
     drove relief as if it were flat), for a person's drives or a mix. A style named that this
     code cannot read (a damaged file, another version's) is a UserError naming ``source``: a
     driver that drove relief as if flat is not what the model learned from."""
-    drivers = _recorded_drivers(meta)
+    return _common_relief(_recorded_drivers(meta), source)
+
+
+def _recorded_reliefs(drivers: Sequence[Any]) -> list[Any]:
+    """The relief style each synthetic driver of ``drivers`` (recordings' driver entries) names, as
+    written (None: none, it drove relief as if flat, or a person drove)."""
     configs = [d.get("config") if isinstance(d, Mapping) and d.get("kind") == "expert" else None for d in drivers]
-    found = [c.get("relief") if isinstance(c, Mapping) else None for c in configs]
+    return [c.get("relief") if isinstance(c, Mapping) else None for c in configs]
+
+
+def _common_relief(drivers: Sequence[Any], source: str = "") -> ReliefStyle | None:
+    """:func:`trained_relief` of recordings whose driver entries are ``drivers``."""
+    found = _recorded_reliefs(drivers)
     if not found or any(f != found[0] for f in found) or found[0] is None:
         return None
     style = ReliefStyle.written(found[0])
@@ -355,8 +368,7 @@ def trained_relief(meta: Mapping[str, Any], source: str = "") -> ReliefStyle | N
 
 def relief_named_by_some(meta: Mapping[str, Any]) -> bool:
     """Whether some of a model's recordings name a relief style for their synthetic driver and some none."""
-    drivers = _recorded_drivers(meta)
-    named = [isinstance(d, Mapping) and isinstance(d.get("config"), Mapping) and d["config"].get("relief") is not None for d in drivers]
+    named = [found is not None for found in _recorded_reliefs(_recorded_drivers(meta))]
     return any(named) and not all(named)
 
 

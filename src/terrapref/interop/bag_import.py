@@ -32,7 +32,7 @@ from terrapref.interop.bag_frames import Conversion, DepthImages, Frames, Import
 from terrapref.interop.bag_reader import Bag
 from terrapref.interop.robot import RobotConfig, load_waypoints
 from terrapref.interop.ros_decode import camera_from_info, check_depth_info
-from terrapref.interop.runtime import ODOMETRY_SLACK
+from terrapref.interop.runtime import fastest_plausible_mps
 from terrapref.progress import Progress
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.terrain.profile import PreferenceProfile
@@ -193,7 +193,7 @@ def _check_command_speeds(streams: Streams, robot: RobotConfig, source: str) -> 
         return
     fastest = float(np.abs(streams.cmd[:, 0]).max())
     top = robot.limits.max_speed_mps
-    if fastest > ODOMETRY_SLACK * top + 0.5:
+    if fastest > fastest_plausible_mps(top):
         raise UserError(
             source,
             f"topic {robot.command_topic}: a command of {fastest:g} m/s is past any this robot drives (its top speed "

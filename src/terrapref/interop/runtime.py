@@ -51,6 +51,14 @@ from terrapref.vehicle.ground import LEVEL, Attitude
 
 STOP = Command(0.0, 0.0)
 ODOMETRY_SLACK = 1.5  # an odometry speed past this times the robot's top speed (and 0.5 m/s) is refused, not ramped from
+
+
+def fastest_plausible_mps(top_mps: float) -> float:
+    """The fastest an odometry speed or a logged command of a robot whose top speed is ``top_mps``
+    may be [m/s]: faster is in other units, or garbage (:data:`ODOMETRY_SLACK`)."""
+    return ODOMETRY_SLACK * top_mps + 0.5
+
+
 FRAME_AHEAD_S = 1.0  # by default, a frame (or a decision) stamped further ahead of the caller's clock is refused [s]
 UNKNOWN_IDS = ("error", "unknown")  # what the runtime makes of an id no table or map names (PlannerRuntime's unknown_ids)
 
@@ -224,7 +232,7 @@ class PlannerRuntime:
         if speed_mps is not None and not _finite(speed_mps):
             raise ValueError(f"speed must be finite, got {speed_mps!r}")
         top = self.limits.max_speed_mps
-        if speed_mps is not None and abs(speed_mps) > ODOMETRY_SLACK * top + 0.5:  # the speed the commands rise from
+        if speed_mps is not None and abs(speed_mps) > fastest_plausible_mps(top):  # the speed the commands rise from
             raise ValueError(f"speed {speed_mps:g} m/s is past any this robot drives (its top speed {top:g} m/s): odometry in other units?")
         _check_clock(now_s)
         if now_s is not None and stamp_s > now_s + self.ahead_s:

@@ -390,7 +390,7 @@ class OffRoadNavEnv(gym.Env):
             )
         command = self._command(action)  # checked before anything changes, so a bad action leaves the env as it was
         sim, cfg = self.sim, self.reward_config
-        tick0, collisions0, contact0 = len(sim.trace) - 1, sim.collisions + sim.tips + sim.stuck, sim.contact_s
+        tick0, incidents0, contact0 = len(sim.trace) - 1, sim.incidents, sim.contact_s
         frame = sim.step(command)
         trace = np.array(sim.trace[tick0:], dtype=float)
         hops = np.hypot(*np.diff(trace[:, :2], axis=0).T)
@@ -409,7 +409,7 @@ class OffRoadNavEnv(gym.Env):
         self._credited_m += advance
         left_map = off_map and not self._off_map
         self._off_map = off_map
-        collided = sim.collisions + sim.tips + sim.stuck - collisions0  # on relief a tip or a time stuck counts as an entry
+        collided = sim.incidents - incidents0  # on relief a tip or a time stuck counts as an entry
         end = sim.path.waypoints[-1]
         success = (
             math.hypot(trace[-1, 0] - end[0], trace[-1, 1] - end[1]) <= sim.config.goal_radius_m

@@ -235,6 +235,12 @@ class Simulation:
         self.max_pitch_deg = max(self.max_pitch_deg, abs(math.degrees(attitude.pitch_rad)))
 
     @property
+    def incidents(self) -> int:
+        """Entries onto lethal terrain, tips and times stuck so far: what counts against a run's
+        safety (as :attr:`terrapref.evaluation.scoring.RunMetrics.incidents` counts a run's)."""
+        return self.collisions + self.tips + self.stuck
+
+    @property
     def reached_goal(self) -> bool:
         end = self.path.waypoints[-1]
         x, y, _ = self.vehicle.pose
