@@ -147,6 +147,19 @@ def test_a_broken_recording_is_refused_by_featurize(tmp_path: Path, capsys, reco
     assert not (tmp_path / "d.safetensors").exists()
 
 
+def test_inspect_finds_a_damaged_frame_before_it_replaces_the_figure(tmp_path: Path, capsys, recording):
+    """``inspect --out F --force`` reads every frame for what the drive shows: a damaged one is one
+    error line, and the figure already at F is left as it was."""
+    rec = tmp_path / "rec"
+    shutil.copytree(recording, rec)
+    _damage(rec, "class 200")
+    figure = tmp_path / "driven.png"
+    figure.write_bytes(b"an earlier figure")
+    assert main(["inspect", str(rec), "--out", str(figure), "--force"]) == 2
+    _one_error(capsys, "000003.png")
+    assert figure.read_bytes() == b"an earlier figure"
+
+
 def test_a_recording_that_declares_no_order_is_featurized(tmp_path: Path, recording):
     """No ``profile`` in its metadata: a drive whose order nobody declared (a person's, a robot's log), not a broken file."""
     rec = tmp_path / "rec"

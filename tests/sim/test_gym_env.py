@@ -300,8 +300,21 @@ def test_a_list_of_courses_and_generated_courses():
     assert seen == {"demo_course", "fig7_rock_vs_non_traversable_left"}
     gen = gym.make(ENV_ID, scenario="gen:*", image_size=SMALL)
     names = [gen.reset(seed=seed)[1]["scenario"] for seed in (1, 2, 1)]
-    assert names[0] == names[2] != names[1] and all(n.startswith("gen_") for n in names)  # gen:N is named gen_N
+    assert names[0] == names[2] != names[1] and all(n.startswith("gen:") for n in names)  # named as gym.make takes it
     assert all(1_000_000 <= int(n[4:]) < 2_000_000 for n in names)
+    again = gym.make(ENV_ID, scenario=names[1], image_size=SMALL)
+    assert again.reset(seed=0)[1]["scenario"] == names[1]
+
+
+@pytest.mark.parametrize(
+    "scenario,needle",
+    [(5, "got int"), (["demo_course", 5], "got int"), ("no_such_course", "no_such_course"), ("gen:-1", "gen:-1")],
+)
+def test_a_course_that_is_not_one_is_a_value_error_naming_it(scenario, needle):
+    from terrapref.sim.env import OffRoadNavEnv
+
+    with pytest.raises(ValueError, match=needle):
+        OffRoadNavEnv(scenario, image_size=SMALL)
 
 
 def test_a_class_table_of_ones_own_reads_course_names_and_perception():
@@ -487,7 +500,7 @@ def test_the_off_map_penalty_is_charged_once_per_exit():
 
 def test_reset_options_draw_a_generated_course():
     env = gym.make(ENV_ID, scenario="demo_course", image_size=SMALL)
-    assert env.reset(seed=0, options={"scenario": "gen:*"})[1]["scenario"].startswith("gen_")
+    assert env.reset(seed=0, options={"scenario": "gen:*"})[1]["scenario"].startswith("gen:")
     with pytest.raises(ValueError, match="course name or a Scenario"):
         env.reset(options={"scenario": ["demo_course"]})
 

@@ -276,19 +276,21 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
     if getattr(args, "classes", None) is not None:
         check_table(args, rec.classes, args.recording)
     summary = summarise(rec)
-    for line in summary.lines():
-        print(line)
     out = args.out or rec.path / "driven_path.png"
     check_figure(out, "--out")
+    # Every frame is read before the figure is written: a damaged one leaves the old figure as it was.
+    shows = [] if args.no_preference else _what_the_drive_shows(rec)
+    for line in summary.lines():
+        print(line)
     save_driven_path(summary, rec, out)
     print(f"wrote {out}")
-    if not args.no_preference:
-        _print_what_the_drive_shows(rec)
+    for line in shows:
+        print(line)
     return 0
 
 
-def _print_what_the_drive_shows(rec) -> None:
-    """The identifiability report of a recording (featurised as the default recipe would), before any training."""
+def _what_the_drive_shows(rec) -> list[str]:
+    """The lines of the identifiability report of a recording (featurised as the default recipe would), before any training."""
     from terrapref.dataset import build_dataset
     from terrapref.learning.train import FitData, identify
     from terrapref.progress import Progress
@@ -297,30 +299,27 @@ def _print_what_the_drive_shows(rec) -> None:
     from terrapref.rules.offset.rule import OffsetConfig
 
     if len(rec) == 0:
-        print("what the drive shows: nothing (no frames)")
-        return
+        return ["what the drive shows: nothing (no frames)"]
     recipe = recipe_named(DEFAULT_RECIPE)
     bar = Progress("featurize", len(rec), unit="frames")
     dataset = build_dataset(
         [rec], recipe.features(), rules=recipe.rules, progress=lambda p: bar.update(p.frames_done, f"{p.frames_done}/{p.frames} frames")
     )
     bar.close()
-    print(f"what the drive shows (recipe {DEFAULT_RECIPE}'s features, {len(dataset)} frames):")
-    for line in identify(dataset, steady=recipe.train.data.steady_labels).lines_with_order(rec.meta.get("profile")):
-        print(f"  {line}")
+    lines = [f"what the drive shows (recipe {DEFAULT_RECIPE}'s features, {len(dataset)} frames):"]
+    lines += [f"  {line}" for line in identify(dataset, steady=recipe.train.data.steady_labels).lines_with_order(rec.meta.get("profile"))]
     speed = next((rule for rule in recipe.rules if isinstance(rule, SpeedConfig)), None)
     fitted = speed.fit(FitData(dataset, mirror=False)) if speed is not None else None
     if fitted is not None:
         lethal = frozenset({rec.classes.lethal_column} if rec.classes.lethal else ())
-        print("  the speed it shows: " + "; ".join(fitted.lines(dataset.feature_config.feature_classes, lethal)))
-        for warning in fitted.warnings(dataset.feature_config.feature_classes, lethal):
-            print(f"  warning: {warning}")
+        lines.append("  the speed it shows: " + "; ".join(fitted.lines(dataset.feature_config.feature_classes, lethal)))
+        lines += [f"  warning: {warning}" for warning in fitted.warnings(dataset.feature_config.feature_classes, lethal)]
     offset = next((rule for rule in recipe.rules if isinstance(rule, OffsetConfig)), None)
     found = dataset.rule_data(offset.type) if offset is not None else None
     if found is not None and "relief_m" in found[1]:  # a drive on relief: the steering's prices of it
         steering = offset.fit(FitData(dataset, mirror=False))
-        for line in steering.relief_lines() if steering is not None else ():
-            print(f"  {line}")
+        lines += [f"  {line}" for line in (steering.relief_lines() if steering is not None else ())]
+    return lines
 
 
 def inspect_parser(sub: argparse._SubParsersAction) -> None:

@@ -34,6 +34,7 @@ from gymnasium import spaces
 from gymnasium.error import InvalidAction, ResetNeeded
 
 from terrapref.camera import CameraConfig
+from terrapref.errors import UserError, one_line
 from terrapref.perception import Perceiver, PerceptionModel, load_perception
 from terrapref.scenario import Scenario, resolve_scenario
 from terrapref.sim.loop import Frame, SimConfig, Simulation
@@ -232,6 +233,7 @@ class OffRoadNavEnv(gym.Env):
         # The first course fixes the class table and the camera; every later course must share them.
         first = self._simulation(self.courses[0] if self.courses[0] != RANDOM_COURSE else "gen:0")
         self.sim = first
+        self._course = self.courses[0] if isinstance(self.courses[0], str) else first.scenario.name
         self.classes = first.scenario.classes
         self.profile = _profile(config.profile, self.classes)
         self._terrain_cost = self._terrain_costs()
@@ -285,7 +287,10 @@ class OffRoadNavEnv(gym.Env):
         if key in self._sims:
             self._sims.move_to_end(key)
             return self._sims[key]
-        scenario = resolve_scenario(course, self._table) if isinstance(course, str) else course
+        try:
+            scenario = resolve_scenario(course, self._table) if isinstance(course, str) else course
+        except UserError as error:  # a course name or file that is not one: refused as any bad argument is
+            raise ValueError(one_line(error)) from error
         table, which = (self.classes, "the first course's") if hasattr(self, "classes") else (self._table, "classes=")
         if table is not None and not scenario.classes.same_classes(table):
             raise ValueError(f"scenario {scenario.name!r}: its class table differs from {which}; one env needs one table")
@@ -317,7 +322,9 @@ class OffRoadNavEnv(gym.Env):
             raise ValueError(f"reset options: 'scenario' must be a course name or a Scenario, got {type(course).__name__}")
         if course == RANDOM_COURSE:
             course = f"gen:{int(self.np_random.integers(*RANDOM_COURSE_SEEDS))}"
-        self.sim = self._simulation(course if course is not None else self._draw_course())
+        course = course if course is not None else self._draw_course()
+        self.sim = self._simulation(course)
+        self._course = course if isinstance(course, str) else self.sim.scenario.name  # as info names it (gym.make takes it back)
         path = self.sim.path
         frame, pose = self._start(options.get("start"))
         if self.perception.active:
@@ -493,7 +500,7 @@ class OffRoadNavEnv(gym.Env):
 
     def _info(self, terms: dict[str, float], success: bool, off_map: bool) -> dict[str, Any]:
         return {
-            "scenario": self.sim.scenario.name,
+            "scenario": self._course,
             "is_success": bool(success),
             "collisions": self.sim.collisions,
             "tips": self.sim.tips,  # on relief: entries past the roll or pitch limit
@@ -531,9 +538,14 @@ class OffRoadNavEnv(gym.Env):
 
 def _courses(scenario: str | Scenario | Sequence[str | Scenario]) -> tuple[str | Scenario, ...]:
     """The courses a reset draws from: one, or several; never none."""
+    if not isinstance(scenario, (str, Scenario, Sequence)):
+        raise ValueError(f"scenario: expected a course name, a Scenario or a list of them, got {type(scenario).__name__}")
     courses = (scenario,) if isinstance(scenario, (str, Scenario)) else tuple(scenario)
     if not courses:
         raise ValueError("scenario: name at least one course")
+    odd = next((c for c in courses if not isinstance(c, (str, Scenario))), None)
+    if odd is not None:
+        raise ValueError(f"scenario: expected course names or Scenarios, got {type(odd).__name__}")
     return courses
 
 
