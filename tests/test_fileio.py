@@ -345,3 +345,22 @@ def test_a_killed_commands_scratch_folder_is_removed_by_the_next_command_and_a_h
     assert f"note: {tmp_path / 'run.mcap'}: removed {left.name}, what a stopped command left unfinished" in capsys.readouterr().err
     release_folder(held)
     assert not held.exists()
+
+
+def test_a_scratch_folder_its_command_removes_while_the_next_looks_is_passed_over(tmp_path, monkeypatch, capsys):
+    """A stopped ``record --force`` removes its own folder as it lets go of it; the next command,
+    listing the folders beside its output at that moment, finds it gone when it goes to lock it:
+    that is no error (it once ended a ``record --force`` with "No such file or directory")."""
+    import terrapref.fileio as fileio
+
+    going = new_folder(tmp_path / "rec", ".new")
+    lock = fileio._lock
+
+    def removed_first(path):
+        if path == going:  # its command's rmtree wins the race
+            fileio.release_folder(going)
+        return lock(path)
+
+    monkeypatch.setattr(fileio, "_lock", removed_first)
+    check_output(tmp_path / "rec", "--out", folder=True)
+    assert not going.exists() and "error" not in capsys.readouterr().err

@@ -350,7 +350,10 @@ def _recover(folder: Path) -> set[str]:
     _remove_scratch(folder)
     running: set[str] = set()
     for path, name, kind in _journals(folder):
-        fd = _lock(path)
+        try:
+            fd = _lock(path)
+        except FileNotFoundError:  # its command finished with it and removed it meanwhile
+            continue
         if fd is None:  # its command is running
             running.add(name)
             continue
@@ -381,7 +384,10 @@ def _remove_scratch(folder: Path) -> None:
     """Remove the scratch folders (:func:`new_folder`) in ``folder`` that no command holds, each
     said in one line on stderr: a killed command's unfinished output."""
     for path in _scratch_folders(folder):
-        fd = _lock(path)
+        try:
+            fd = _lock(path)
+        except FileNotFoundError:  # its command let go of it and removed it meanwhile (a stopped record's)
+            continue
         if fd is None:  # its command is running
             continue
         try:
