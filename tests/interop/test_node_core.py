@@ -499,3 +499,13 @@ def test_a_depth_camera_of_its_own_calibration_must_be_the_label_cameras_and_fra
         ) as raised:
             then(label_info if depth_first else other)
         assert raised.value.problems[0].field == "topics.depth_info"
+
+
+def test_a_rate_too_low_for_the_hold_is_refused():
+    """At 1 Hz with a hold of 0.3 s, a stop once a command's hold runs out would wait up to a second."""
+    from terrapref.errors import UserError
+    from terrapref.interop.node_core import NodeOptions
+
+    with pytest.raises(UserError, match=r"~rate: expected at least 1 / hold_s = 3.33333 Hz"):
+        NodeOptions().resolved(lambda name, default: {"~rate": 1.0}.get(name, default))
+    assert NodeOptions(rate=2.0, hold_s=0.5).resolved(lambda name, default: default).rate == 2.0

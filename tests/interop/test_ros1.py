@@ -294,3 +294,31 @@ def test_without_rosbags_the_node_says_once_that_its_grid_map_needs_the_robot_ex
         "terrapref: ~grid_map (grid_map_msgs/GridMap): needs the robot extra: pip install 'terrapref[robot]' "
         "(rosbags is not installed); the costmap goes out as an OccupancyGrid only"
     ]
+
+
+def test_the_node_ends_with_a_stop_that_stays_the_last_command(monkeypatch, capsys):
+    """As ROS shuts the node down (Ctrl-C, SIGTERM) while it commands motion, its last command is
+    a stop, given a moment to go out, and neither its ticks nor a decision send another after it."""
+    import threading
+
+    import terrapref.interop.ros1 as ros1
+    from terrapref.interop.node_core import NodeOptions
+
+    class Twist:
+        def __init__(self) -> None:
+            self.linear, self.angular = SimpleNamespace(x=0.0), SimpleNamespace(z=0.0)
+
+    sent: list[tuple[float, float]] = []
+    node = object.__new__(ros1._Node)  # the node's parts close() and the commands use, without a ROS master
+    node.rospy = SimpleNamespace(get_time=lambda: 5.0)
+    node.core = SimpleNamespace(lock=threading.RLock(), status_at=lambda now_s: ((1.5, 0.1), None), skipped={}, decided=3)
+    node.opts, node.Twist, node.ended, node.done, node.last_stamp = NodeOptions(), Twist, False, threading.Event(), 4.9
+    node.log = SimpleNamespace(status=lambda reason: None)
+    node.cmd_pub = SimpleNamespace(publish=lambda msg: sent.append((msg.linear.x, msg.angular.z)))
+    monkeypatch.setattr(ros1, "STOP_DELIVERY_S", 0.0)
+    monkeypatch.setattr("terrapref.interop.node_core.report_line", lambda core, command: "decided 3")
+    node.publish_command(4.9)
+    node.close()
+    node.publish_command(4.9)
+    assert sent == [(1.5, 0.1), (0.0, 0.0)] and node.done.is_set()
+    assert capsys.readouterr().out == "decided 3\n"

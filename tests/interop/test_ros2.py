@@ -748,7 +748,10 @@ def _node_on_a_fake_participant(tmp_path, **options):
             self.types, self.domain, self.on_error, self.published = MessageTypes(ts), 0, None, []
 
         def writer(self, topic: str, msgtype: str, profile) -> SimpleNamespace:
-            return SimpleNamespace(publish=lambda msg: self.published.append((topic, msg)))
+            return SimpleNamespace(publish=lambda msg: self.published.append((topic, msg)), delivered=lambda timeout_s: True)
+
+        def close(self) -> None:
+            self.published.append(("closed", None))
 
         def subscribe(self, topic: str, msgtype: str, profile, callback, newest_only: bool = False) -> SimpleNamespace:
             if msgtype == "nav_msgs/msg/Path":
@@ -821,3 +824,29 @@ def test_a_command_sent_by_the_timer_carries_the_stamp_of_the_decision_it_sends(
     node.publish_command()
     (sent,) = [msg for topic, msg in dds.published if topic.endswith("cmd")]
     assert sent.header.stamp.sec == 2
+
+
+def test_the_node_ends_with_a_stop_that_stays_the_last_command(tmp_path, monkeypatch):
+    """A base that keeps its last command until told otherwise would drive on after the node had
+    gone: the node's last command, sent before it leaves the domain, is a stop, and nothing it
+    would send after (a decision or the timer's tick on the way out) goes out."""
+    from terrapref.vehicle import Command
+
+    core, node, dds = _node_on_a_fake_participant(tmp_path)
+    monkeypatch.setattr(core, "status_at", lambda now_s: (Command(1.5, 0.1), None))
+    node.last_stamp = 1.0
+    node.publish_command()
+    node.close()
+    node.publish_command()
+    sent = [(topic, msg) for topic, msg in dds.published if topic.endswith("cmd") or topic == "closed"]
+    assert [(topic, msg and (msg.linear.x, msg.angular.z)) for topic, msg in sent] == [
+        ("/cmd", (1.5, 0.1)),
+        ("/cmd", (0.0, 0.0)),
+        ("closed", None),
+    ]
+
+
+def test_a_node_that_never_commanded_ends_without_a_command(tmp_path):
+    core, node, dds = _node_on_a_fake_participant(tmp_path)
+    node.close()
+    assert not [msg for topic, msg in dds.published if topic.endswith("cmd")]

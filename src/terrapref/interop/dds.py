@@ -200,6 +200,16 @@ class Writer:
         """Send ``msg`` (a rosbags message of the writer's type)."""
         self._writer.write(self.types.to_idl(msg, self.msgtype))
 
+    def delivered(self, timeout_s: float) -> bool:
+        """Wait until every reliable subscription has what was sent, at most ``timeout_s``; whether it has."""
+        from cyclonedds.util import duration
+
+        try:
+            self._writer.wait_for_acks(duration(seconds=timeout_s))
+        except Exception:  # noqa: BLE001  (cyclonedds raises on a timeout: not delivered in time)
+            return False
+        return True
+
     def matched(self) -> int:
         """How many subscriptions this publisher reaches now."""
         return len(self._writer.get_matched_subscriptions())

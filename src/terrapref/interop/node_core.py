@@ -574,6 +574,12 @@ class NodeOptions:
             v = values[name]
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and 0 < v <= top):
                 raise UserError(origin[name], f"expected a number in (0, {top:g}], got {v!r}")
+        if values["rate"] * values["hold_s"] < 1.0:  # the stop once a command's hold runs out goes out at the next tick
+            raise UserError(
+                origin["rate"],
+                f"expected at least 1 / hold_s = {1.0 / values['hold_s']:g} Hz, so that a command held {values['hold_s']:g} s "
+                f"after its frame is followed by a stop within a tick; got {values['rate']!r}",
+            )
         for name in ROBOT_PARAMETERS:
             v = values[name]
             if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0)):

@@ -43,6 +43,7 @@ ROS_PACKAGES = (
     "ros-core python3-rospy python3-geometry-msgs python3-sensor-msgs python3-nav-msgs python3-visualization-msgs python3-std-msgs"
 )
 COSTMAP_PERIOD_S = 1.0
+STOP_DELIVERY_S = 0.5  # how long the node gives its last stop command to go out as it ends [s]
 DEPTH_BUFFER_BYTES = 1 << 24  # a depth subscriber's receive buffer: a 32FC1 image of 2 megapixels
 
 
@@ -85,7 +86,7 @@ def run_node(model_path: str, robot_path: str, options: NodeOptions | None = Non
     if live is not None:
         core.watch(live)
     node = _Node(rospy, core, model, robot, opts)
-    rospy.on_shutdown(node.report)
+    rospy.on_shutdown(node.close)
     rospy.spin()
     node.done.set()
     if node.failure:
@@ -132,6 +133,7 @@ class _Node:
         self.failure: list[UserError] = []
         self.log = NodeLog(rospy.loginfo, rospy.logwarn, rospy.logerr)
         self.last_stamp: float | None = None  # the frame of the command in force
+        self.ended = False  # the node has sent its last command, a stop
         self.Twist, self.TwistStamped, self.OccupancyGrid = Twist, TwistStamped, OccupancyGrid
         self.image_types = {
             "sensor_msgs/Image": (Image, "sensor_msgs/msg/Image"),
@@ -171,16 +173,11 @@ class _Node:
     def publish_command(self, stamp_s: float) -> None:
         """The command in force now (a stop once its frame is ``hold_s`` old), stamped with its frame;
         each time the planner stops, or moves on, the log says so and why."""
+        if self.ended:  # the stop the node ended with stays the last command
+            return
         (v, w), reason = self.core.status_at(self.rospy.get_time())
         self.log.status(reason)
-        twist = self.Twist()
-        twist.linear.x, twist.angular.z = float(v), float(w)
-        if not self.opts.stamped:
-            self.cmd_pub.publish(twist)
-            return
-        msg = self.TwistStamped()
-        msg.header.stamp, msg.header.frame_id, msg.twist = self.rospy.Time.from_sec(stamp_s), "base_link", twist
-        self.cmd_pub.publish(msg)
+        self.cmd_pub.publish(self._twist_message(v, w, stamp_s))
 
     def on_decision(self, decision) -> None:
         """Each decision, whether its image or the odometry it waited for brought it."""
@@ -275,10 +272,30 @@ class _Node:
         if self.grid_maps is not None:
             self.grid_maps.publish(grid, stamp)
 
-    def report(self) -> None:
+    def close(self) -> None:
+        """As ROS shuts the node down: a stop, once it has commanded anything (a base that keeps
+        its last command until told otherwise would drive on at it after the node had gone),
+        given a moment to go out, then the line of what it decided and skipped."""
         from terrapref.interop.node_core import report_line
 
+        self.done.set()
+        with self.core.lock:
+            self.ended = True
+            if self.last_stamp is not None:
+                self.cmd_pub.publish(self._twist_message(0.0, 0.0, self.rospy.get_time()))
+        if self.last_stamp is not None:
+            time.sleep(STOP_DELIVERY_S)  # rospy sends from a thread of its own; teardown would drop what waits
         print(report_line(self.core, "ros1"), flush=True)
+
+    def _twist_message(self, v: float, w: float, stamp_s: float):
+        """The command (v, w) as the node publishes it: a Twist, or a TwistStamped stamped ``stamp_s`` in base_link."""
+        twist = self.Twist()
+        twist.linear.x, twist.angular.z = float(v), float(w)
+        if not self.opts.stamped:
+            return twist
+        msg = self.TwistStamped()
+        msg.header.stamp, msg.header.frame_id, msg.twist = self.rospy.Time.from_sec(stamp_s), "base_link", twist
+        return msg
 
 
 class _TrajectoryMarkers:

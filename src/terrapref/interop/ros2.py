@@ -54,6 +54,7 @@ NODE_NAME = "terrapref"
 COSTMAP_PERIOD_S = 1.0  # between two costmaps [s]
 SILENT_AFTER_S = 5.0  # an input topic without a publisher this long after the start is said [s]
 MARKER_LIFETIME_S = 0.5
+STOP_DELIVERY_S = 1.0  # the longest the node waits, as it ends, for its last stop command to reach the base [s]
 MOUNT_FRAMES = ("terrapref_camera_link", "terrapref_camera_optical")  # the node's own names: never a second parent in the robot's tree
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 POSE_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped")
@@ -303,6 +304,7 @@ class _Node:
         self.last_stamp: float | None = None  # the frame of the command in force
         self.arrived: bool | None = None  # what ~/arrived last said
         self.clock_said = False  # a /clock that stopped has been said
+        self.ended = False  # the node has sent its last command, a stop
         self.odom_frame, self.filter_said = "odom", None  # the costmap's frame; the speed filter's info last sent
         self.shapes = TrajectoryShapes(core.model)
         self.failed = threading.Event()
@@ -391,6 +393,8 @@ class _Node:
         from terrapref.interop.ros_messages import twist
 
         with self.core.lock:  # a decision's command and the timer's never cross (the lock a decision is made under)
+            if self.ended:  # the stop the node ended with stays the last command
+                return
             stamp = self.last_stamp  # read under the lock: a decision between the timer's tick and here is the one sent
             (v, w), reason = self.core.status_at(self.clock.now())
             self.log.status(reason)
@@ -559,6 +563,26 @@ class _Node:
         elif still <= self.core.watchdog.limit_s:
             self.clock_said = False
 
+    def publish_stop(self) -> None:
+        """A zero command as the node ends, once it has commanded anything, waited on until the
+        base has it (a second at most): a base that keeps its last command until told otherwise
+        would drive on at it after the node had gone."""
+        from terrapref.interop.ros_messages import twist
+
+        with self.core.lock:
+            self.ended = True
+            if self.last_stamp is None:
+                return
+            msg = twist(self.ts, 0.0, 0.0)
+            if self.opts.stamped:
+                msg = self.ts.types["geometry_msgs/msg/TwistStamped"](header=self.header(self.clock.now(), "base_link"), twist=msg)
+            self.writers["command"].publish(msg)
+        if not self.writers["command"].delivered(STOP_DELIVERY_S):
+            self.log.warn(f"the last stop command was not acknowledged within {STOP_DELIVERY_S:g} s")
+
     def close(self) -> None:
-        """Leave the domain: subscribers see the node's publishers go."""
-        self.dds.close()
+        """Send a stop, then leave the domain: subscribers see the node's publishers go."""
+        try:
+            self.publish_stop()
+        finally:
+            self.dds.close()
