@@ -322,3 +322,22 @@ def test_the_node_ends_with_a_stop_that_stays_the_last_command(monkeypatch, caps
     node.publish_command(4.9)
     assert sent == [(1.5, 0.1), (0.0, 0.0)] and node.done.is_set()
     assert capsys.readouterr().out == "decided 3\n"
+
+
+def test_an_exported_ros1_bag_reads_with_ros1s_own_rosbag(tmp_path, tiny_recording):
+    """``export --format rosbag1`` writes lz4 chunks that ROS 1's own reader (roslz4: ``rosbag
+    play``, the rosbag Python API) decompresses; rosbags' default lz4 frames it refuses as
+    "malformed data to decompress"."""
+    from terrapref.cli import main
+
+    out = tmp_path / "run.bag"
+    assert main(["export", str(tiny_recording), "--format", "rosbag1", "--out", str(out)]) == 0
+    reader = (
+        "import sys, collections; from terrapref.interop.ros1 import import_rospy; import_rospy(); import rosbag\n"
+        "with rosbag.Bag(sys.argv[1]) as bag:\n"
+        "    print(bag.get_compression_info().compression, collections.Counter(t for t, _, _ in bag.read_messages())['/terrapref/labels'])"
+    )
+    got = subprocess.run([sys.executable, "-c", reader, str(out)], capture_output=True, text=True, timeout=120)
+    assert got.returncode == 0, got.stderr[-1000:]
+    frames = sum(1 for _ in (tiny_recording / "frames.jsonl").open())
+    assert got.stdout.split() == ["lz4", str(frames)]

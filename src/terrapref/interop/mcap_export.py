@@ -246,10 +246,21 @@ def _write_ros1(path: Path, run: RunFrames, progress: Callable[[int, int], None]
 
     ts = typestore(ros1=True)
     writer = Writer(path)
-    writer.set_compression(Writer.CompressionFormat.LZ4)  # a ROS 1 bag's own chunk compression (zstd is not one): rosbag play reads it
+    writer.set_compression(Writer.CompressionFormat.LZ4)  # a ROS 1 bag's own chunk compression (zstd is not one)
+    writer.compressor = roslz4_frame  # the frames rosbag play reads (rosbags' own take none of what it needs)
     with writer:
         _write_frames(add_topics(writer, ts, _topics_of(run, ros1=True), ros1=True), Scene.of(ts, run, ros1=True), progress)
     return path
+
+
+def roslz4_frame(data: bytes) -> bytes:
+    """``data`` as one LZ4 frame that ROS 1's own reader (roslz4, which ``rosbag play`` and the
+    rosbag Python API use) decompresses: blocks independent of each other, a checksum of the
+    content, and no content size in the header; a frame with any of these otherwise is refused
+    as "malformed data"."""
+    import lz4.frame
+
+    return lz4.frame.compress(data, 0, store_size=False, content_checksum=True, block_linked=False)
 
 
 def _write_frames(topics: Topics, scene: Scene, progress: Callable[[int, int], None] | None) -> None:
