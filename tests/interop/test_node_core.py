@@ -3,6 +3,7 @@ ROS: messages built with rosbags' ROS 2 types stand in for rospy's or rclpy's.""
 
 from __future__ import annotations
 
+import math
 import re
 from types import SimpleNamespace
 
@@ -509,3 +510,19 @@ def test_a_rate_too_low_for_the_hold_is_refused():
     with pytest.raises(UserError, match=r"~rate: expected at least 1 / hold_s = 3.33333 Hz"):
         NodeOptions().resolved(lambda name, default: {"~rate": 1.0}.get(name, default))
     assert NodeOptions(rate=2.0, hold_s=0.5).resolved(lambda name, default: default).rate == 2.0
+
+
+def test_odometry_without_a_heading_is_refused_and_one_not_of_unit_length_normalised(setup):
+    """A zero or non-finite quaternion turns the body no known way (tf2 refuses it): read as a
+    heading of 0 it once drove the robot on a heading it never reported. One of another length is
+    the same turn, normalised."""
+    from terrapref.interop.ros_messages import quaternion
+
+    core, _ = _core(setup)
+    x, y, _ = POSES[0]
+    for xyzw in ((0.0, 0.0, 0.0, 0.0), (0.0, 0.0, float("nan"), 1.0)):
+        with pytest.raises(ValueError, match="zero or non-finite quaternion"):
+            core.on_odometry(odometry(TS, header(TS, 0.0, "odom"), pose(TS, x, y, quaternion(TS, xyzw))))
+    assert not core.odometry
+    core.on_odometry(odometry(TS, header(TS, 0.0, "odom"), pose(TS, x, y, quaternion(TS, (0.0, 0.0, 2.0, 2.0)))))
+    assert core.odometry[-1][3] == pytest.approx(math.pi / 2)

@@ -60,6 +60,7 @@ from terrapref.interop.ros_decode import (
     registered_depth,
     static_transforms,
     undistorted,
+    unit_quaternion,
     yaw_rad,
 )
 from terrapref.pngio import depth_to_millimetres, millimetres_to_depth
@@ -79,8 +80,6 @@ SPEED_SOURCES = {  # where each frame's speed (v, w) comes from, as the report n
 }
 CLOCK_TOLERANCE_S = 5.0  # header stamps this far from the log's receive times are on another clock (simulated time)
 MAX_HEIGHT_M = 1e5  # an odometry pose higher or lower than this [m] is in other units, or garbage
-UNIT_QUATERNION_LEAST = 1e-6  # a quaternion shorter than this turns the body no known way
-UNIT_QUATERNION_SLACK = 1e-3  # a quaternion's length further than this from 1 is normalised, and said so
 DEPTH_HELD = 128  # depth images held at most while they wait for label images near their stamps (the newest kept)
 
 
@@ -239,12 +238,10 @@ class _SmallTopics:
     def _unit(self, q) -> SimpleNamespace | None:
         """The quaternion ``q`` (x, y, z, w) of unit length, counted where it had to be normalised;
         None (counted) for one that is zero or not finite, which turns the body no known way."""
-        n = math.sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w)
-        if not (math.isfinite(n) and n > UNIT_QUATERNION_LEAST):
-            self.unturned += 1
-            return None
-        self.rescaled += abs(n - 1.0) > UNIT_QUATERNION_SLACK
-        return SimpleNamespace(x=q.x / n, y=q.y / n, z=q.z / n, w=q.w / n)
+        unit, rescaled = unit_quaternion(q)
+        self.unturned += unit is None
+        self.rescaled += rescaled
+        return unit
 
     def checked(self, source: str, topic: str) -> Streams:
         """:meth:`streams`, with what was left out or put right said in its notes; odometry heights

@@ -43,6 +43,7 @@ from terrapref.interop.ros_decode import (
     registered_depth,
     stamp_s,
     undistorted,
+    unit_quaternion,
     yaw_rad,
 )
 from terrapref.interop.runtime import SPEED_WINDOW_S, DepthFrame, PlannerRuntime, RobotSettings, RuntimeDecision, odometry_speed_mps
@@ -274,10 +275,13 @@ class PlannerNodeCore:
                 )
             if self.odometry and t < self.odometry[-1][0]:
                 return None  # an older pose than one kept: odometry arrives in order or not at all
+            turn, _ = unit_quaternion(p.orientation)  # one not of unit length is normalised, as tf2 does
+            if turn is None:
+                raise ValueError("odometry whose orientation is a zero or non-finite quaternion (no heading); skipped")
             # The body's height, pitch and roll beside the pose, as import keeps them: a planar odometry's are level.
-            tilt = (float(p.position.z), *pitch_roll_rad(p.orientation))
+            tilt = (float(p.position.z), *pitch_roll_rad(turn))
             tilt = tuple(a if math.isfinite(a) else 0.0 for a in tilt)
-            self.odometry.append((t, float(p.position.x), float(p.position.y), yaw_rad(p.orientation), *tilt))
+            self.odometry.append((t, float(p.position.x), float(p.position.y), yaw_rad(turn), *tilt))
             while self.odometry and self.odometry[0][0] < t - ODOMETRY_KEPT_S:
                 self.odometry.popleft()
             return self._resume()

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import io
 import math
+from types import SimpleNamespace
 
 import numpy as np
 from PIL import Image as PILImage
@@ -48,6 +49,19 @@ def message_time_s(msg, fallback_ns: int, shift_s: float = 0.0) -> float:
     stamp = msg.header.stamp
     ns = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
     return ns * 1e-9 if ns > 0 else fallback_ns * 1e-9 + shift_s
+
+
+UNIT_QUATERNION_LEAST = 1e-6  # a quaternion shorter than this turns the body no known way
+UNIT_QUATERNION_SLACK = 1e-3  # a quaternion's length further than this from 1 is normalised, and said so
+
+
+def unit_quaternion(q) -> tuple[SimpleNamespace | None, bool]:
+    """The quaternion ``q`` (x, y, z, w) of unit length (None for one that is zero or not finite,
+    which turns the body no known way: tf2 refuses it too), and whether it had to be normalised."""
+    n = math.sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w)
+    if not (math.isfinite(n) and n > UNIT_QUATERNION_LEAST):
+        return None, False
+    return SimpleNamespace(x=q.x / n, y=q.y / n, z=q.z / n, w=q.w / n), abs(n - 1.0) > UNIT_QUATERNION_SLACK
 
 
 def yaw_rad(q) -> float:
