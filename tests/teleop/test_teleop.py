@@ -820,6 +820,8 @@ def test_drive_disturb_0_turns_the_pushes_off(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(teleop, "run_session", scripted)
     assert main(["drive", "demo_course", "--disturb", "0", "--record", str(tmp_path / "rec")]) == 0
     assert read_recording(tmp_path / "rec").meta["driver"]["disturbance"] is None
+    assert main(["drive", "demo_course", "--disturb", "0", "--record", str(tmp_path / "rec")]) == 2  # its refusal names the flag given
+    assert "choose another --record or pass --force" in capsys.readouterr().err
     assert drawn and not any(o.alerts for o in drawn) and "push" not in capsys.readouterr().out
     assert main(["drive", "demo_course", "--disturb", "2", "--seed", "3"]) == 0
     assert re.search(

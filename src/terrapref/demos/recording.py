@@ -89,10 +89,16 @@ class RecordingWriter:
         meta: configuration to store (camera, control set, scenario name, driver...): a
             :class:`~terrapref.demos.meta.RecordingMeta`, or the entries its ``to_dict`` gives.
         scenario: the scenario mapping (``Scenario.to_dict()``) to store beside it.
+        flag: the command's option that named ``out_dir``, as its refusal names it.
     """
 
     def __init__(
-        self, out_dir: str | Path, meta: RecordingMeta | dict[str, Any], scenario: dict[str, Any], overwrite: bool = False
+        self,
+        out_dir: str | Path,
+        meta: RecordingMeta | dict[str, Any],
+        scenario: dict[str, Any],
+        overwrite: bool = False,
+        flag: str = "--out",
     ) -> None:
         self.target = Path(out_dir)
         self.dir = self.target
@@ -102,7 +108,9 @@ class RecordingWriter:
                 raise UserError(str(self.target), "exists and is not a directory")
             if is_recording(self.target):
                 if not overwrite:
-                    raise UserError(str(self.target), "a recording already exists here; choose another --out or pass --force to replace it")
+                    raise UserError(
+                        str(self.target), f"a recording already exists here; choose another {flag} or pass --force to replace it"
+                    )
                 self.dir = new_folder(self.target, ".new")
             elif any(self.target.iterdir()):
                 raise UserError(str(self.target), "directory is not empty and holds no recording; refusing to write into it")

@@ -695,7 +695,7 @@ def _open_recording(setup: _Setup, options: TeleopOptions) -> RecordingWriter | 
         HumanInfo(INPUT, pushes, options.seed) if setup.planner is None else RideAlongInfo(INPUT, pushes, options.seed, str(options.model))
     )
     meta = setup.drive.meta(driver, setup.profile, options.perception)
-    return RecordingWriter(options.record_dir, meta, setup.scenario.to_dict(), overwrite=options.overwrite)
+    return RecordingWriter(options.record_dir, meta, setup.scenario.to_dict(), overwrite=options.overwrite, flag="--record")
 
 
 def _disturber(options: TeleopOptions, frame_dt_s: float) -> Disturber | None:
