@@ -303,8 +303,7 @@ class _Node:
         self.log = NodeLog(_stderr("INFO", names.node), _stderr("WARN", names.node), _stderr("ERROR", names.node), prefix="")
         self.last_stamp: float | None = None  # the frame of the command in force
         self.arrived: bool | None = None  # what ~/arrived last said
-        self.clock_said = False  # a /clock that stopped has been said
-        self.ended = False  # the node has sent its last command, a stop
+        self.clock_said, self.ended = False, False  # a /clock that stopped has been said; the last command, a stop, sent
         self.odom_frame, self.filter_said = "odom", None  # the costmap's frame; the speed filter's info last sent
         self.shapes = TrajectoryShapes(core.model)
         self.failed = threading.Event()
