@@ -526,3 +526,26 @@ def test_odometry_without_a_heading_is_refused_and_one_not_of_unit_length_normal
     assert not core.odometry
     core.on_odometry(odometry(TS, header(TS, 0.0, "odom"), pose(TS, x, y, quaternion(TS, (0.0, 0.0, 2.0, 2.0)))))
     assert core.odometry[-1][3] == pytest.approx(math.pi / 2)
+
+
+def test_a_problem_is_said_once_whatever_numbers_it_carries_and_each_refusal_is_counted(setup):
+    """A pose refused for its speed, each a little different, was said once a frame, each line
+    ending "(said once ...)", and the closing line left the refused frames out."""
+    from terrapref.interop.node_core import NodeLog, report_line
+
+    said: list[str] = []
+    log = NodeLog(said.append, said.append, said.append)
+    core, _ = _core(setup)
+
+    def refused(speed: float):
+        raise ValueError(f"speed {speed:g} m/s is past any this robot drives")
+
+    for speed in (3.598, 3.61, 1e3):
+        assert log.guarded(lambda speed=speed: refused(speed)) is None
+    log.guarded(lambda: (_ for _ in ()).throw(ValueError("an image of 48 x 64, expected 480 x 640")))
+    assert said == [
+        "terrapref: speed 3.598 m/s is past any this robot drives (said once; such messages are skipped)",
+        "terrapref: an image of 48 x 64, expected 480 x 640 (said once; such messages are skipped)",
+    ]
+    assert report_line(core, "ros2", log) == "terrapref ros2: 0 frames decided on; skipped: 4 messages refused (the log says why)"
+    assert report_line(core, "ros2") == "terrapref ros2: 0 frames decided on; skipped: none"

@@ -313,10 +313,10 @@ def test_the_node_ends_with_a_stop_that_stays_the_last_command(monkeypatch, caps
     node.rospy = SimpleNamespace(get_time=lambda: 5.0)
     node.core = SimpleNamespace(lock=threading.RLock(), status_at=lambda now_s: ((1.5, 0.1), None), skipped={}, decided=3)
     node.opts, node.Twist, node.ended, node.done, node.last_stamp = NodeOptions(), Twist, False, threading.Event(), 4.9
-    node.log = SimpleNamespace(status=lambda reason: None)
+    node.log = SimpleNamespace(status=lambda reason: None, refused=0)
     node.cmd_pub = SimpleNamespace(publish=lambda msg: sent.append((msg.linear.x, msg.angular.z)))
     monkeypatch.setattr(ros1, "STOP_DELIVERY_S", 0.0)
-    monkeypatch.setattr("terrapref.interop.node_core.report_line", lambda core, command: "decided 3")
+    monkeypatch.setattr("terrapref.interop.node_core.report_line", lambda core, command, log: "decided 3")
     node.publish_command(4.9)
     node.close()
     node.publish_command(4.9)

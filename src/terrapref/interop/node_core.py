@@ -20,6 +20,7 @@ control set's, at its speed.
 from __future__ import annotations
 
 import math
+import re
 import threading
 import time
 from collections import deque
@@ -636,6 +637,9 @@ class NodeOptions:
         return topic
 
 
+_NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|\b(?:nan|inf)\b", re.IGNORECASE)  # a number in a problem's words
+
+
 class NodeLog:
     """What a node says about its work, whatever its transport: each problem with an incoming
     message once (such messages are skipped, not a traceback per frame), and each time the
@@ -652,11 +656,15 @@ class NodeLog:
         self.info, self.warn, self.error, self.prefix = info, warn, error, prefix
         self.said: set[str] = set()
         self.stop_reason: str | None = None  # why the command in force stops (None: it drives)
+        self.refused = 0  # messages skipped for a problem said (guarded)
 
     def say(self, problem: str) -> None:
-        """``problem`` with an incoming message, logged the first time only."""
-        if problem not in self.said:
-            self.said.add(problem)
+        """``problem`` with an incoming message, logged the first time only: the first time a
+        problem of its kind comes, that is, the same words with other numbers in them (a pose
+        from the future, each a little further ahead, is one problem)."""
+        kind = _NUMBER.sub("#", problem)
+        if kind not in self.said:
+            self.said.add(kind)
             self.error(f"{self.prefix}{problem} (said once; such messages are skipped)")
 
     def guarded(self, handle: Callable[[], Any]) -> Any:
@@ -665,6 +673,7 @@ class NodeLog:
         try:
             return handle()
         except (UserError, ValueError) as exc:
+            self.refused += 1
             self.say(exc.lines()[0] if isinstance(exc, UserError) else str(exc))
             return None
 
@@ -678,10 +687,13 @@ class NodeLog:
                 self.warn(f"{self.prefix}stopping: {reason} ({REASONS.get(reason, reason)})")
 
 
-def report_line(core: PlannerNodeCore, command: str) -> str:
-    """The line a node prints when it ends: frames decided on, and those skipped and why."""
-    skipped = ", ".join(f"{n} {why}" for why, n in core.skipped.items() if n) or "none"
-    return f"terrapref {command}: {core.decided} frames decided on; skipped: {skipped}"
+def report_line(core: PlannerNodeCore, command: str, log: NodeLog | None = None) -> str:
+    """The line a node prints when it ends: frames decided on, and those skipped and why (with
+    the node's ``log``, the messages it refused for a problem it said)."""
+    counts = [f"{n} {why}" for why, n in core.skipped.items() if n]
+    if log is not None and log.refused:
+        counts.append(f"{log.refused} message{'s' if log.refused != 1 else ''} refused (the log says why)")
+    return f"terrapref {command}: {core.decided} frames decided on; skipped: {', '.join(counts) or 'none'}"
 
 
 class TrajectoryShapes:

@@ -285,7 +285,7 @@ class _Node:
                 self.cmd_pub.publish(self._twist_message(0.0, 0.0, self.rospy.get_time()))
         if self.last_stamp is not None:
             time.sleep(STOP_DELIVERY_S)  # rospy sends from a thread of its own; teardown would drop what waits
-        print(report_line(self.core, "ros1"), flush=True)
+        print(report_line(self.core, "ros1", self.log), flush=True)
 
     def _twist_message(self, v: float, w: float, stamp_s: float):
         """The command (v, w) as the node publishes it: a Twist, or a TwistStamped stamped ``stamp_s`` in base_link."""

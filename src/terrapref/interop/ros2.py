@@ -231,7 +231,7 @@ def run_node(
             node.spin(stop or threading.Event())
     finally:
         node.close()
-        print(report_line(core, "ros2"), flush=True)
+        print(report_line(core, "ros2", node.log), flush=True)
     if node.failure:
         raise node.failure[0]
 
