@@ -683,6 +683,12 @@ def test_ros_args_set_parameters_and_remap_names():
         (["play", "nowhere.mcap"], {}, ["nowhere.mcap", "no such file"]),
         (["play", "drive.bag"], {}, ["ROS 1 bag", "rosbag play"]),
         (["play", "nowhere.mcap", "--rate", "0"], {}, ["--rate"]),
+        (["ros2", "--model", "M", "--robot", "R", "--ros-args", "-p", "rate:=1"], {}, ["-p rate", "1 / hold_s"]),
+        (["ros2", "--model", "M", "--robot", "R", "--cmd-topic", "a b"], {}, ["--cmd-topic", "ROS topic name"]),
+        (["ros2", "--model", "M", "--robot", "R", "--ros-args", "-p", "cmd_topic:=/a//b"], {}, ["-p cmd_topic", "ROS topic name"]),
+        (["ros2", "--model", "M", "--robot", "R", "--ros-args", "-r", "/c:=bad?name"], {}, ["-r /c:=bad?name"]),
+        (["ros2", "--model", "M", "--robot", "R", "--ros-args", "-r", "~/costmap:=/a/{b}"], {}, ["-r ~/costmap:=/a/{b}"]),
+        (["ros2", "--model", "M", "--robot", "R", "--ros-args", "-r", "__node:=9abc"], {}, ["__node:=9abc", "not starting with a digit"]),
     ],
 )
 def test_a_bad_argument_is_one_line_naming_it(argv, env, words, capsys, monkeypatch, tmp_path):

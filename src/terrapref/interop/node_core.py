@@ -34,7 +34,7 @@ from terrapref.errors import UserError, described
 from terrapref.groundmap.costmap import Costmap
 from terrapref.interop.depth_pairing import DEPTH_PAIRING_S, DepthPairing
 from terrapref.interop.labels import unlisted_message
-from terrapref.interop.robot import LIMITS, RobotConfig, limit_problem, stop_value_problem
+from terrapref.interop.robot import GIVEN_TOPIC_NAME, LIMITS, RobotConfig, limit_problem, stop_value_problem
 from terrapref.interop.ros_decode import (
     camera_from_info,
     check_depth_info,
@@ -592,6 +592,10 @@ class NodeOptions:
         for name in ("path_file", "cmd_topic"):
             if values[name] is not None and (not isinstance(values[name], str) or not values[name]):
                 raise UserError(origin[name], f"expected a non-empty string, got {values[name]!r}")
+        if values["cmd_topic"] is not None and not GIVEN_TOPIC_NAME.match(values["cmd_topic"]):
+            raise UserError(
+                origin["cmd_topic"], f"expected a ROS topic name (letters, digits and _ between slashes), got {values['cmd_topic']!r}"
+            )
         resolved = NodeOptions(**values, rules=self.rules, stop=self.stop)
         resolved._settings(StopConfig(), VehicleConfig(), origin)  # checked together now, over the defaults
         return resolved

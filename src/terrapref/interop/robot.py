@@ -76,6 +76,9 @@ from terrapref.yamlio import load_yaml_text, read_yaml_mapping
 
 ROBOT_FORMAT = "terrapref-robot/1"
 _TOPIC_NAME = re.compile(r"^(?:/[A-Za-z_][A-Za-z0-9_]*)+$")  # a global ROS name
+# A topic name as a node's option or remapping may give it: global, relative to the node's
+# namespace, or private (``~/x`` in ROS 2, ``~x`` in ROS 1).
+GIVEN_TOPIC_NAME = re.compile(r"^(?:~/?|/)?[A-Za-z_][A-Za-z0-9_]*(?:/[A-Za-z_][A-Za-z0-9_]*)*$")
 _TOP = {"format", "topics", "camera", "labels", "path_file", "profile", "max_gap_s", "description", "stop", "limits", "rules"}
 LIMITS = ("max_speed_mps", "max_yaw_rate_rps", "max_accel_mps2")  # the robot's limits a file (or a node's parameters) may set
 _TOPICS_REQUIRED = ("segmentation", "camera_info", "odometry")

@@ -48,6 +48,7 @@ from terrapref.interop.node_core import (
     Watchdog,
     report_line,
 )
+from terrapref.interop.robot import GIVEN_TOPIC_NAME
 from terrapref.interop.ros_decode import time_s
 
 NODE_NAME = "terrapref"
@@ -137,12 +138,16 @@ class Names:
     def __init__(self, remaps: Mapping[str, str]) -> None:
         self.node = remaps.get("__node", NODE_NAME)
         self.namespace = "/" + remaps.get("__ns", "/").strip("/")
-        if not self.node.replace("_", "").isalnum() or not all(
-            p.replace("_", "").isalnum() for p in self.namespace.strip("/").split("/") if p
-        ):
-            raise UserError("--ros-args", f"-r __node:={self.node} / __ns:={self.namespace}: names are letters, digits and _")
+        if not GIVEN_TOPIC_NAME.match(self.node) or "/" in self.node or not GIVEN_TOPIC_NAME.match(self.namespace.lstrip("/") or "x"):
+            raise UserError(
+                "--ros-args", f"-r __node:={self.node} / __ns:={self.namespace}: names are letters, digits and _, not starting with a digit"
+            )
         self.fqn = self.namespace.rstrip("/") + "/" + self.node
-        self.remaps = {self._expand(a): self._expand(b) for a, b in remaps.items() if a not in ("__node", "__ns")}
+        rules = {a: b for a, b in remaps.items() if a not in ("__node", "__ns")}
+        odd = next(((a, b) for a, b in rules.items() if not (GIVEN_TOPIC_NAME.match(a) and GIVEN_TOPIC_NAME.match(b))), None)
+        if odd is not None:
+            raise UserError("--ros-args", f"-r {odd[0]}:={odd[1]}: expected ROS topic names (letters, digits and _ between slashes)")
+        self.remaps = {self._expand(a): self._expand(b) for a, b in rules.items()}
 
     def _expand(self, name: str) -> str:
         if name.startswith("~"):
