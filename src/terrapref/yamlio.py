@@ -129,6 +129,16 @@ def _check_depth(text: str) -> None:
                 sizes[anchor] = values - before
 
 
+def read_capped(path: str | Path) -> bytes:
+    """The bytes of the file ``path``, refused (ValueError) past :data:`MAX_FILE_BYTES`, read no
+    further than that: a device that never ends (``/dev/zero``) is not read into memory whole."""
+    with open(path, "rb") as f:
+        raw = f.read(MAX_FILE_BYTES + 1)
+    if len(raw) > MAX_FILE_BYTES:
+        raise ValueError(f"file too large (more than {MAX_FILE_BYTES:,} bytes)")
+    return raw
+
+
 def read_yaml_mapping(path: str | Path, expected_format: str | None = None) -> dict[str, Any]:
     """Read a YAML file whose top level is a mapping, optionally checking its ``format`` key.
 
@@ -137,15 +147,15 @@ def read_yaml_mapping(path: str | Path, expected_format: str | None = None) -> d
     """
     source = str(path)
     try:
-        raw = Path(path).read_bytes()
+        raw = read_capped(path)
     except FileNotFoundError:
         raise UserError(source, "no such file") from None
     except IsADirectoryError:
         raise UserError(source, "is a directory, expected a file") from None
     except OSError as exc:
         raise UserError(source, f"cannot read: {exc.strerror}") from None
-    if len(raw) > MAX_FILE_BYTES:
-        raise UserError(source, f"file too large ({len(raw)} bytes)")
+    except ValueError as exc:
+        raise UserError(source, str(exc)) from None
     if not raw.strip():
         raise UserError(source, "empty file")
     if b"\x00" in raw:

@@ -99,3 +99,20 @@ def test_frames_are_kept_at_the_rate_asked_for(tmp_path: Path, rate_hz: float):
     kept = (len(times) - 1) / (times[-1] - times[0])  # frames a second between the first and the last
     assert abs(kept - rate_hz) <= 0.1 * rate_hz, (kept, np.diff(times))
     assert report.duration_s == pytest.approx(len(times) * np.median(np.diff(times)), rel=1e-3)
+
+
+@pytest.mark.parametrize("field", ["labels", "path_file"])
+def test_a_device_that_never_ends_named_in_a_robot_file_is_refused_without_reading_it_whole(tmp_path: Path, monkeypatch, field: str):
+    """``/dev/zero`` as the label map or the path file was read into memory whole (a MemoryError
+    under a memory limit, all the memory without one); a file is read no further than its cap."""
+    import terrapref.yamlio as yamlio
+    from terrapref.interop.robot import load_waypoints
+
+    monkeypatch.setattr(yamlio, "MAX_FILE_BYTES", 1_000_000)  # the cap, smaller: the test reads 1 MB of zeros, not 50
+    if field == "path_file":
+        with pytest.raises(UserError, match=r"path_file: /dev/zero: unreadable \(file too large"):
+            load_waypoints(Path("/dev/zero"), "robot.yaml")
+        return
+    text = robot_yaml(labels="/dev/zero")
+    with pytest.raises(UserError, match="labels.*file too large"):
+        load_robot(write_robot(tmp_path / "robot.yaml", text))

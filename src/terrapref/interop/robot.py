@@ -72,7 +72,7 @@ from terrapref.terrain import ClassTable, default_classes
 from terrapref.terrain.profile import PreferenceProfile
 from terrapref.vehicle import VehicleConfig
 from terrapref.vehicle.kinematics import MIN_CRUISE_MPS
-from terrapref.yamlio import load_yaml_text, read_yaml_mapping
+from terrapref.yamlio import load_yaml_text, read_capped, read_yaml_mapping
 
 ROBOT_FORMAT = "terrapref-robot/1"
 _TOPIC_NAME = re.compile(r"^(?:/[A-Za-z_][A-Za-z0-9_]*)+$")  # a global ROS name
@@ -340,7 +340,7 @@ def load_waypoints(path: Path, source: str) -> np.ndarray:
     scenario file (its ``path: waypoints``, as ``terrapref route`` writes)."""
     data = None
     try:
-        data = load_yaml_text(path.read_text())
+        data = load_yaml_text(read_capped(path).decode("utf-8"))
     except FileNotFoundError:
         raise UserError(source, f"{path}: no such file", field="path_file") from None
     except (OSError, UnicodeDecodeError, ValueError, yaml.YAMLError) as exc:
