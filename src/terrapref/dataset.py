@@ -308,7 +308,9 @@ def build_dataset(
             raise UserError(
                 str(rec.path / "meta.json"), f"differs from {first.path} in classes; featurise them separately", field="classes"
             )
-    profile = _declared_order([(str(r.path / "meta.json"), str(r.path), r.meta) for r in recordings], "featurise them separately")
+    profile = _declared_order(
+        [(str(r.path / "meta.json"), str(r.path), r.meta) for r in recordings], "record the drives with the same --profile"
+    )
     # The terrain columns are the recordings' class table's.
     require_meta(first, "classes")
     features = replace(features, feature_classes=first.classes.feature_names)
@@ -400,7 +402,12 @@ def _declared_order(files: Sequence[tuple[str, str, dict]], advice: str) -> list
     declared = [(source, name, meta["profile"]) for source, name, meta in files if meta.get("profile") is not None]
     for source, _, order in declared[1:]:
         if order != declared[0][2]:
-            raise UserError(source, f"differs from {declared[0][1]} in profile; {advice}", field="profile")
+            raise UserError(
+                source,
+                f"declares the order {' > '.join(order)}, {declared[0][1]} {' > '.join(declared[0][2])}: one model learns one "
+                f"driver's order; {advice}",
+                field="profile",
+            )
     return declared[0][2] if declared else None
 
 
@@ -515,7 +522,7 @@ def merge_datasets(sets: list[tuple[str, Dataset]]) -> Dataset:
         for key in ("features", "camera", "classes", "rules"):
             if d.meta.get(key) != first.meta.get(key):
                 raise UserError(name, f"differs from {first_name} in {key}; featurise all recordings the same way", field=key)
-    profile = _declared_order([(name, name, d.meta) for name, d in sets], "featurise all recordings the same way")
+    profile = _declared_order([(name, name, d.meta) for name, d in sets], "featurise drives of one order together")
     if len(sets) == 1:
         return first
     # Each dataset's recordings are numbered after those of the datasets before it: by the

@@ -591,3 +591,17 @@ def test_a_damaged_header_is_refused_in_a_line_of_readable_length(tmp_path: Path
     assert main(["train", str(data), "--out", str(tmp_path / "m.safetensors"), "--epochs", "1"]) == 2
     line = _one_error(capsys, str(data))
     assert len(line) < 400, line
+
+
+def test_drives_of_two_orders_are_refused_naming_both_and_what_to_do(tmp_path: Path, capsys, recording):
+    """A follow-up recorded without the first drive's --profile declares another order: the refusal
+    names both orders and says to record with the same --profile (it once said to featurise them
+    separately, which teaches neither drive's lesson together)."""
+    other = tmp_path / "other"
+    shutil.copytree(recording, other)
+    meta = json.loads((other / "meta.json").read_text())
+    first = list(meta["profile"])
+    meta["profile"] = [*first[:-1][::-1], first[-1]]
+    (other / "meta.json").write_text(json.dumps(meta))
+    assert main(["featurize", str(recording), str(other), "--out", str(tmp_path / "d.safetensors")]) == 2
+    _one_error(capsys, "profile", " > ".join(meta["profile"]), " > ".join(first), "record the drives with the same --profile")

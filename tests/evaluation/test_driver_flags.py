@@ -20,6 +20,10 @@ def test_the_flags_drive_a_follow_up_as_the_drives_were_driven():
         f" --speeds grass=1.2 --relief-style {own}"
     )
     assert driver_flags([{"kind": "human"}], relief=False) == ""  # a person's drive: no synthetic driver to name
+    # The order the drives declared: recorded in another, the follow-up could not be trained with them.
+    order = ["puddle", "mud", "gravel", "boulders"]
+    assert driver_flags([_driver()] * 2, relief=False, profiles=[order, None]) == " --profile puddle,mud,gravel,boulders"
+    assert driver_flags([_driver()] * 2, relief=False, profiles=[order, order[::-1]]) == ""  # two orders: none to name
 
 
 def test_a_mix_of_drivers_with_and_without_a_relief_style_is_told():

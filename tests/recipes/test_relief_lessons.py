@@ -97,7 +97,11 @@ def test_a_follow_up_with_relief_between_its_situations_keeps_its_lessons_relief
     kinds = [next(iter(e)) for e in yaml.safe_load(more.read_text())["relief"]]
     assert kinds[:3] == ["ridge", "mound", "noise"] and len(kinds) > 3, kinds
     # The record line it prints drives the follow-up as the drive was driven.
-    assert f"record it: terrapref record {more} --style shaky --relief-style cautious --out DIR" in capsys.readouterr().out
+    printed = capsys.readouterr().out  # and in the order it was driven in: recorded in another, it could not be trained with it
+    assert (
+        f"record it: terrapref record {more} --profile mud,rock,water,non_traversable --style shaky --relief-style cautious --out DIR"
+        in printed
+    )
 
 
 @pytest.mark.slow

@@ -238,8 +238,9 @@ def _cmd_course(args: argparse.Namespace) -> int:
     save_map(figure, scenario, rasterise(scenario))
     print(f"{scenario.name}: {scenario.description}")
     print(f"  {_drive_line(scenario, items)}")
-    drivers = [r.meta.get("driver") for r in recs] if args.after is not None else []  # drive a follow-up as its drives were
-    print(f"wrote {out} and {figure} (record it: terrapref record {out}{driver_flags(drivers, scenario.has_relief)} --out DIR)")
+    drives = [(r.meta.get("driver"), r.meta.get("profile")) for r in recs] if args.after is not None else []  # as they were driven
+    flags = driver_flags([d for d, _ in drives], scenario.has_relief, [p for _, p in drives])
+    print(f"wrote {out} and {figure} (record it: terrapref record {out}{flags} --out DIR)")
     return 0
 
 

@@ -287,14 +287,17 @@ def _common_driver(drivers: Sequence[Any]) -> TrainedDriver | None:
     return ("default", speeds, changes.pop()) if len(changes) == 1 and None not in changes else None
 
 
-def driver_flags(drivers: Sequence[Any], relief: bool) -> str:
-    """The flags of ``terrapref record`` (`` --style S --speeds ... --relief-style R``, each where it
-    is not the default) that drive another course as the synthetic driver of recordings whose
-    driver entries are ``drivers`` drove theirs, where they all name the same; on a course with
+def driver_flags(drivers: Sequence[Any], relief: bool, profiles: Sequence[Any] = ()) -> str:
+    """The flags of ``terrapref record`` (`` --profile P --style S --speeds ... --relief-style R``,
+    each where it is not the default) that drive another course as the synthetic driver of
+    recordings whose driver entries are ``drivers`` drove theirs, where they all name the same;
+    the order their ``profiles`` (each recording's declared order, None: none) declare, where
+    one is (a follow-up recorded in another order cannot be trained with them); on a course with
     ``relief``, a relief style always (the default's where they name none): a driver without one
     drives relief as if it were flat. Empty for a person's drives or a mix."""
     driver = _common_driver(drivers)
-    flags = ""
+    declared = {tuple(p) for p in profiles if isinstance(p, (list, tuple)) and p}
+    flags = f" --profile {','.join(next(iter(declared)))}" if len(declared) == 1 else ""
     if driver is not None:
         style, speeds, _ = driver
         flags += f" --style {style}" if style != "default" else ""
