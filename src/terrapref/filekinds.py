@@ -96,17 +96,18 @@ def kind_of(path: str | Path) -> FileKind:
     raise UserError(str(path), f"{got}; expected one of {', '.join(k.format for k in KINDS.values())}", field="format")
 
 
-def check_file(path: str | Path, classes: ClassTable | None = None) -> FileKind:
+def check_file(path: str | Path, classes: ClassTable | None = None) -> tuple[FileKind, list[str]]:
     """Read ``path`` as its kind's reader reads it (scenarios, perception models, robot files and
     label maps with ``classes``, the default table when None; a scenario's start checked as the
-    commands that drive it check it); its kind when it is sound.
+    commands that drive it check it); its kind when it is sound, and what a reader should know of
+    it that is no error (a class table's: :meth:`ClassTable.notes`).
 
     Raises:
         UserError: every problem the reader finds, each naming the file and the field.
     """
     kind = kind_of(path)
-    kind.check(Path(path), classes)
-    return kind
+    read = kind.check(Path(path), classes)
+    return kind, (read.notes() if isinstance(read, ClassTable) else [])
 
 
 def template(name: str) -> str:

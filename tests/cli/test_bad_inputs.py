@@ -35,6 +35,8 @@ def _one_error(capsys, *needles: str) -> str:
         (["show", "gen:-1", "--out", "m.png"], "gen:-1"),
         (["record", "demo_course", "--seed", "-1", "--out", "r1"], "--seed"),
         (["show", "demo_course", "--out", "map.xyz"], "--out"),
+        (["record", "demo_course", "--profile", "mud,rock,water", "--out", "r1"], "exactly once; 'non_traversable' is missing"),
+        (["record", "gen:7", "--profile", "sand,mud,rock,water", "--out", "r1"], "(your own class table? give its --classes FILE)"),
     ],
 )
 def test_bad_flags(tmp_path: Path, capsys, monkeypatch, argv, needle):

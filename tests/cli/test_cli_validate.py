@@ -299,13 +299,21 @@ def test_each_template_is_a_file_of_its_kind_that_validate_accepts(tmp_path: Pat
     code, out, err = run_cli(capsys, "validate", "--template", kind)
     assert code == 0 and err == [] and out[0].startswith("# ")  # commented
     path = write(tmp_path, f"{kind}.yaml", "\n".join(out) + "\n")  # terrapref validate --template KIND > FILE
-    assert run_cli(capsys, "validate", str(path)) == (0, [f"{path}: ok ({KINDS[kind]})"], [])
+    said = ["  note: background grass; feature classes mud, gravel; lethal tree"] if kind == "classes" else []  # a table in a line
+    assert run_cli(capsys, "validate", str(path)) == (0, [f"{path}: ok ({KINDS[kind]})", *said], [])
 
 
 @pytest.mark.parametrize(
     "kind,old,new,line",
     [
         ("classes", "id: 2, name: gravel", "id: 300, name: gravel", "classes[2].id: must be an integer in 0..254"),
+        ("classes", "lethal: [tree]", "lethal: [rocks]", "lethal: must be a list of distinct known class names; unknown class 'rocks'"),
+        (
+            "classes",
+            "id: 2, name: gravel",
+            "id: 1, name: gravel",
+            "classes: class names and ids must be unique; id 1 is given to more than one class",
+        ),
         ("perception", "drop_rate: 0.05", "drop_rate: 2", "frames.drop_rate: must be in [0, 1], got 2"),
         ("robot", "height_m: 1.0", "height_m: -1.0", "camera.height_m: ..."),
         ("labels", "2: mud", "2: lava", "ids: class 'lava' is not in the class table ..."),
@@ -333,7 +341,12 @@ def test_validate_reads_a_label_map_and_a_perception_file_with_the_given_table(c
     table, labels, field = (str(examples / n) for n in ("rellis3d.yaml", "rellis3d_labels.yaml", "rellis3d_field.yaml"))
     assert run_cli(capsys, "validate", table, labels, field, "--classes", table) == (
         0,
-        [f"{table}: ok (class table)", f"{labels}: ok (label map)", f"{field}: ok (perception model)"],
+        [
+            f"{table}: ok (class table)",
+            "  note: background grass; feature classes dirt, gravel, mud, puddle, water, bush; lethal tree, log, fence, building, vehicle, person",
+            f"{labels}: ok (label map)",
+            f"{field}: ok (perception model)",
+        ],
         [],
     )
     code, out, _ = run_cli(capsys, "validate", labels)  # the default table has no 'building'
@@ -499,3 +512,31 @@ def test_render_non_finite_pose_is_a_user_error(tmp_path: Path, capsys: pytest.C
     err = capsys.readouterr().err.splitlines()
     assert refused.value.code == 2
     assert len(err) == 1 and err[0].startswith("error: terrapref render: argument --pose: ") and "is not a finite number" in err[0]
+
+
+@pytest.mark.parametrize(
+    "change, note",
+    [
+        ("lethal: [tree]", "no lethal class: the planner may drive over every class"),
+        ("color: [120, 120, 120]", "mud and gravel have the same colour [120, 120, 120]: no figure tells them apart"),
+    ],
+)
+def test_validate_notes_what_a_table_is_that_is_no_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], change: str, note: str
+) -> None:
+    """A table whose lethal line was left out, or two classes of one colour, are valid tables a
+    newcomer rarely means: validate says so beside the ok."""
+    main(["validate", "--template", "classes"])
+    text = capsys.readouterr().out
+    if change.startswith("lethal"):
+        text = text.replace(change, "lethal: []", 1)
+    else:  # gravel given mud's colour
+        mud = next(line for line in text.splitlines() if "name: mud" in line)
+        gravel = next(line for line in text.splitlines() if "name: gravel" in line)
+        colour = mud[mud.index("color:") :].rstrip("}").strip()
+        text = text.replace(mud, mud.replace(colour, change), 1).replace(
+            gravel, gravel.replace(gravel[gravel.index("color:") :].rstrip("}").strip(), change), 1
+        )
+    path = write(tmp_path, "table.yaml", text)
+    code, out, _ = run_cli(capsys, "validate", str(path))
+    assert code == 0 and out[0] == f"{path}: ok (class table)" and any(line.startswith(f"  note: {note}") for line in out[1:]), out

@@ -36,8 +36,10 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     table = class_table(args)
     for name in args.files:
         try:
+            notes = []
             if _is_file(name):
-                kind = check_file(name, table).title
+                found, notes = check_file(name, table)
+                kind = found.title
             else:  # a packaged scenario's name, or a generated layout's (gen:SEED, genrelief:SEED)
                 drivable(resolve_scenario(name, table))
                 kind = KINDS["scenario"].title
@@ -46,7 +48,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
                 print(f"error: {line}")  # in the report's order, beside the files that are ok
             status = 2
         else:
-            print(f"{name}: ok ({kind})")
+            print(f"{name}: ok ({kind})" + "".join(f"\n  note: {note}" for note in notes))
     return status
 
 

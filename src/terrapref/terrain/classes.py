@@ -56,8 +56,9 @@ class ClassTable:
     def __post_init__(self) -> None:
         names = [c.name for c in self.classes]
         ids = [c.id for c in self.classes]
-        if len(set(names)) != len(names) or len(set(ids)) != len(ids):
-            raise ValueError("class names and ids must be unique")
+        twice = [n for n in names if names.count(n) > 1] + [f"id {i}" for i in ids if ids.count(i) > 1]
+        if twice:
+            raise ValueError(f"class names and ids must be unique; {twice[0]} is given to more than one class")
         for name in (self.background, *self.lethal):
             if name not in names:
                 raise ValueError(f"unknown class {name!r}")
@@ -77,6 +78,26 @@ class ClassTable:
     @property
     def names(self) -> tuple[str, ...]:
         return tuple(c.name for c in self.classes)
+
+    def notes(self) -> list[str]:
+        """What the table's author should know that is no error: its background and its feature and
+        lethal classes in one line, then a table with nothing lethal (every class may be driven
+        over, at a price the drive teaches), one with no class to teach an order of (the teaching
+        course has nothing to show), and classes drawn in the same colour (no figure tells them apart)."""
+        said = [
+            f"background {self.background}; feature classes {', '.join(self.terrain_names) or 'none'}; "
+            f"lethal {', '.join(self.lethal) or 'none'}"
+        ]
+        if not self.lethal:
+            said.append("no lethal class: the planner may drive over every class, at the price a drive teaches it")
+        if not self.terrain_names:
+            said.append("no feature class besides the background: a drive has no order of classes to teach (course refuses it)")
+        colours: dict[tuple[int, int, int], str] = {}
+        for c in self.classes:
+            if c.color in colours:
+                said.append(f"{colours[c.color]} and {c.name} have the same colour {list(c.color)}: no figure tells them apart")
+            colours.setdefault(c.color, c.name)
+        return said
 
     def id_of(self, name: str) -> int:
         for c in self.classes:
@@ -188,10 +209,7 @@ class ClassTable:
         if not isinstance(background, str) or background not in names:
             problems.append(Problem("background", f"unknown class {background!r}"))
         lethal = data.get("lethal", [])
-        if not isinstance(lethal, list) or any(not isinstance(v, str) or v not in names for v in lethal) or len(set(lethal)) != len(lethal):
-            problems.append(Problem("lethal", "must be a list of distinct known class names"))
-        elif background in lethal:
-            problems.append(Problem("lethal", f"names the background class {background!r}, which cannot be lethal"))
+        problems += _lethal_problems(lethal, names, background)
         if problems:
             raise ConfigError(source, problems)
         ordered = tuple(sorted(classes, key=lambda c: c.id))
@@ -204,10 +222,23 @@ class ClassTable:
             raise ConfigError(source, str(exc), field="classes") from None
         profile = data.get("profile", in_id_order)
         if not isinstance(profile, list) or not all(isinstance(p, str) for p in profile) or sorted(profile) != sorted(columns):
-            raise ConfigError(source, f"must list each of {', '.join(columns)} exactly once, most preferred first", field="profile")
+            left = [c for c in columns if not isinstance(profile, list) or c not in profile]
+            which = f" ({left[0]!r} is missing)" if isinstance(profile, list) and left else ""
+            raise ConfigError(source, f"must list each of {', '.join(columns)} exactly once, most preferred first{which}", field="profile")
         if last is not None and profile[-1] != last:
             raise ConfigError(source, f"must put the lethal column {last!r} last (it is lethal to every driver)", field="profile")
         return cls(ordered, background, tuple(lethal), tuple(profile))
+
+
+def _lethal_problems(lethal: object, names: set[str], background: object) -> list[Problem]:
+    """What is wrong with a table's ``lethal`` entry, the table's class ``names`` and ``background`` given."""
+    odd = [v for v in lethal if not isinstance(v, str) or v not in names] if isinstance(lethal, list) else []
+    if not isinstance(lethal, list) or odd or len(set(lethal)) != len(lethal):
+        which = f"; unknown class {odd[0]!r}" if odd else ("; a class named twice" if isinstance(lethal, list) else "")
+        return [Problem("lethal", f"must be a list of distinct known class names{which}")]
+    if background in lethal:
+        return [Problem("lethal", f"names the background class {background!r}, which cannot be lethal")]
+    return []
 
 
 def _lethal_column(lethal: tuple[str, ...]) -> str | None:

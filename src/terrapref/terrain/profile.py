@@ -30,10 +30,14 @@ class PreferenceProfile:
         unknown = [n for n in names if n not in classes.feature_names]
         if unknown:
             raise ConfigError(
-                source, f"unknown or background class {unknown[0]!r}; expected a permutation of {', '.join(classes.feature_names)}"
+                source,
+                f"unknown or background class {unknown[0]!r}; expected a permutation of {', '.join(classes.feature_names)}"
+                + (" (your own class table? give its --classes FILE)" if unknown[0] not in classes.names else ""),
             )
         if sorted(names) != sorted(classes.feature_names):
-            raise ConfigError(source, f"must list each of {', '.join(classes.feature_names)} exactly once")
+            left = [n for n in classes.feature_names if n not in names]
+            which = f"{left[0]!r} is missing" if left else f"{next(n for n in names if names.count(n) > 1)!r} is named twice"
+            raise ConfigError(source, f"must list each of {', '.join(classes.feature_names)} exactly once; {which}")
         lethal = classes.lethal_column
         if lethal is not None and names[-1] != lethal:
             after = ", ".join(names[names.index(lethal) + 1 :])
