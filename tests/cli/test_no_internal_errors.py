@@ -62,11 +62,17 @@ def test_the_node_skips_a_path_of_no_length_and_keeps_the_one_in_force(tmp_path:
     )
     core = PlannerNodeCore(load_model(linear_model(tmp_path / "m.safetensors")), load_robot(robot))
     ts = typestore()
-    core.on_path(path_message(ts, [(5.0, 15.0), (5.0, 15.0)]))
+    said = core.on_path(path_message(ts, [(5.0, 15.0), (5.0, 15.0)]))  # what is wrong, for the node to say
+    assert said == "a path of 2 pose(s), fewer than two distinct points; no path yet: nothing is commanded"
     assert core.path is None and core.skipped["paths of fewer than two distinct points"] == 1
-    core.on_path(path_message(ts, [(5.0, 15.0), (30.0, 15.0)]))
-    core.on_path(path_message(ts, [(7.0, 1.0), (7.0, 1.0), (7.0, 1.0)]))
-    assert core.path.tolist() == [[5.0, 15.0], [30.0, 15.0]] and core.skipped["paths of fewer than two distinct points"] == 2
+    assert core.on_path(path_message(ts, [(5.0, 15.0), (30.0, 15.0)])) is None
+    said = core.on_path(path_message(ts, [(7.0, 1.0), (7.0, 1.0), (7.0, 1.0)]))
+    assert said == "a path of 3 pose(s), fewer than two distinct points; the path in force stays"
+    assert (
+        core.on_path(path_message(ts, [(7.0, 1.0), (float("nan"), 1.0)]))
+        == "a path with a point that is not a number; the path in force stays"
+    )
+    assert core.path.tolist() == [[5.0, 15.0], [30.0, 15.0]] and core.skipped["paths of fewer than two distinct points"] == 3
 
 
 def test_a_path_file_of_no_length_is_refused_naming_it(tmp_path: Path):

@@ -242,21 +242,26 @@ class PlannerNodeCore:
             self.depth.put(t, depth)
             return self._resume()
 
-    def on_path(self, msg) -> None:
-        """A nav_msgs/Path of two distinct points or more (re)sets the reference path; another is skipped (counted)."""
+    def on_path(self, msg) -> str | None:
+        """A nav_msgs/Path of two distinct points or more (re)sets the reference path; another is
+        skipped (counted), and what is wrong with it returned, for the node to say."""
         with self._lock:
             xy = path_xy(msg)
             try:
                 ReferencePath(xy)
             except ValueError:  # fewer than two distinct finite points: the path in force stays
                 self.skipped["paths of fewer than two distinct points"] += 1
-                return
+                finite = np.isfinite(xy).all()
+                why = "with a point that is not a number" if not finite else f"of {len(xy)} pose(s), fewer than two distinct points"
+                stays = "the path in force stays" if self.path is not None else "no path yet: nothing is commanded"
+                return f"a path {why}; {stays}"
             if self.path is not None and np.array_equal(xy, self.path):
-                return  # the path in force, sent again (a planner's periodic plan, a latched topic heard twice): the progress along it stays
+                return None  # the path in force, sent again (a planner's periodic plan, a latched topic heard twice): the progress along it stays
             self.path = xy
             self._live = None  # the live view shows a new run along the new path
             if self.runtime is not None:
                 self.runtime.set_path(xy)
+            return None
 
     def on_odometry(self, msg, now_s: float | None = None) -> RuntimeDecision | None:
         """nav_msgs/Odometry, or a PoseStamped / PoseWithCovarianceStamped; the decision on an

@@ -196,7 +196,9 @@ class _Node:
                 self.log.info("terrapref: arrived at the end of the path (goal)")
 
     def on_path(self, msg) -> None:
-        self.core.on_path(msg)
+        problem = self.core.on_path(msg)
+        if problem is not None:
+            self.log.say(problem)
         self.publish_arrived()
 
     def on_camera_info(self, msg) -> None:

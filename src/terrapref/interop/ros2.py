@@ -427,7 +427,9 @@ class _Node:
 
     def on_path(self, msg) -> None:
         """A path message: the core's to take; a new path means not arrived."""
-        self.core.on_path(msg)
+        problem = self.core.on_path(msg)
+        if problem is not None:
+            self.log.say(problem)
         self.publish_arrived()
 
     def markers(self, decision) -> Any:
