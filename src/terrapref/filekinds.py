@@ -44,9 +44,12 @@ def _perception(path: Path, classes: ClassTable | None) -> object:
 
 
 def _robot(path: Path, classes: ClassTable | None) -> object:
-    from terrapref.interop.robot import load_robot
+    from terrapref.interop.robot import load_robot, load_waypoints
 
-    return load_robot(path, classes)
+    robot = load_robot(path, classes)
+    if robot.path_file:  # read as a node reads it when it starts
+        load_waypoints(robot.path_file, robot.source)
+    return robot
 
 
 def _labels(path: Path, classes: ClassTable | None) -> object:

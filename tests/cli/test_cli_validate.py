@@ -540,3 +540,24 @@ def test_validate_notes_what_a_table_is_that_is_no_error(
     path = write(tmp_path, "table.yaml", text)
     code, out, _ = run_cli(capsys, "validate", str(path))
     assert code == 0 and out[0] == f"{path}: ok (class table)" and any(line.startswith(f"  note: {note}") for line in out[1:]), out
+
+
+@pytest.mark.parametrize(
+    "line, error",
+    [
+        (
+            "rules: {speed: {class_max_mps: {mud: -1}}}",
+            "rules.speed.class_max_mps.mud: expected at least 0.1 m/s, the least cruising speed, got -1",
+        ),
+        ("path_file: nowhere.yaml", "path_file: "),
+    ],
+)
+def test_validate_refuses_a_robot_file_the_node_would_refuse(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], line: str, error: str
+) -> None:
+    """What a node refuses as it starts, whatever the model: a top speed on a class below the
+    least cruising speed, a path file that is not there (validate said ok to both)."""
+    main(["validate", "--template", "robot"])
+    path = write(tmp_path, "robot.yaml", capsys.readouterr().out + line + "\n")
+    code, out, _ = run_cli(capsys, "validate", str(path))
+    assert code == 2 and out[0].startswith(f"error: {path}: {error}"), out

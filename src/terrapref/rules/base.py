@@ -250,6 +250,12 @@ class Rule(abc.ABC):
     def runner(self, context: RuleContext) -> SteeringRunner | SpeedRunner:
         """This rule bound to one planner (a runner of its kind)."""
 
+    @classmethod
+    def setting_problem(cls, name: str, value: float) -> str | None:
+        """What is wrong with ``value`` for the setting ``name`` whatever the model (a robot file
+        or a node's parameter is refused for it before any model is read); None: nothing."""
+        return None
+
     def with_settings(self, values: Mapping[str, Any], names: tuple[str, ...], lethal: frozenset[str]) -> Rule:
         """This rule with a robot's ``values`` of its :attr:`settable` settings in place of its
         file's (``names``: the terrain columns' classes; ``lethal``: the lethal ones). A value the

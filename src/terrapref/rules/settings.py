@@ -56,6 +56,9 @@ class RuleSettings:
                 expected = f"{rule}.{name}.CLASS" if kind == PER_CLASS else f"{rule}.{name}"
                 raise UserError(origin, f"expected {expected}", field=str(key))
             number = _number(value, origin, str(key))
+            problem = registry[rule].setting_problem(name, number)
+            if problem is not None:
+                raise UserError(origin, f"{problem}, got {number:g}", field=str(key))
             named = values.setdefault(rule, {})
             if kind == PER_CLASS:
                 named.setdefault(name, {})[cls_name] = number

@@ -261,6 +261,13 @@ class SpeedRule(Rule):
     fit: SpeedFit | None = None
     background: str = "background"  # the class table's background class, by name (the last terrain column's)
 
+    @classmethod
+    def setting_problem(cls, name: str, value: float) -> str | None:
+        """A top speed of 0 or less, or on a class one below the least cruising speed the rule commands."""
+        if name == "max_speed_mps":
+            return "expected a top speed > 0 [m/s]" if not value > 0 else None
+        return f"expected at least {MIN_SPEED_MPS:g} m/s, the least cruising speed" if value < MIN_SPEED_MPS else None
+
     def with_settings(self, values: Mapping[str, Any], names: tuple[str, ...], lethal: frozenset[str]) -> SpeedRule:
         """The rule no faster than ``values`` say: overall (``max_speed_mps``) and on each class
         named (``class_max_mps``: the cruising speed learned there, capped). A class it keeps no
