@@ -638,6 +638,14 @@ def test_each_message_type_is_cdr_identical_to_rosbags_and_announces_its_rihs01(
     assert dds_topic("/terrapref/cmd_vel") == "rt/terrapref/cmd_vel"
 
 
+def test_a_number_in_exponent_form_is_a_number_as_ros_2_reads_it():
+    """YAML 1.1 reads ``1e-9`` (no point) as a string; ROS 2's parameter parser as a double."""
+    from terrapref.interop.ros2 import RosArgs
+
+    params = RosArgs.parse(["-p", "stop.decel_mps2:=2e0", "-p", "hold_s:=5E-1", "-p", "cmd_topic:=e5"]).params
+    assert params == {"stop.decel_mps2": 2.0, "hold_s": 0.5, "cmd_topic": "e5"}
+
+
 def test_ros_args_set_parameters_and_remap_names():
     from terrapref.errors import UserError
     from terrapref.interop.node_core import NodeOptions

@@ -24,6 +24,7 @@ player died) would otherwise hold the last command for ever.
 from __future__ import annotations
 
 import contextlib
+import re
 import signal
 import sys
 import threading
@@ -100,10 +101,7 @@ class RosArgs:
                     raise UserError(
                         "--ros-args", f"-p {name}: no such parameter; the node's are {', '.join(PARAMETERS)}, and RULE.NAME (its rules')"
                     )
-                try:
-                    params[name] = yaml.safe_load(value) if value else ""
-                except yaml.YAMLError:
-                    params[name] = value
+                params[name] = _param_value(value)
             else:
                 if not name or not value:
                     raise UserError("--ros-args", f"-r {name}:={value}: expected FROM:=TO, both names")
@@ -125,6 +123,21 @@ class RosArgs:
         if not isinstance(value, bool):
             raise UserError("-p use_sim_time", f"expected true or false, got {value!r}")
         return value
+
+
+def _param_value(text: str) -> Any:
+    """A ``-p`` value as ROS 2 reads it: YAML, but a number in exponent form without a point
+    (``1e-9``, a string to YAML 1.1) a number too."""
+    try:
+        value = yaml.safe_load(text) if text else ""
+    except yaml.YAMLError:
+        return text
+    if isinstance(value, str) and _EXPONENT.fullmatch(value.strip()):
+        return float(value)
+    return value
+
+
+_EXPONENT = re.compile(r"[-+]?\d+[eE][-+]?\d+")
 
 
 class Names:
