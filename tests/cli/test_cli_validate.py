@@ -280,6 +280,9 @@ def test_validate_mixed_good_and_bad_files(tmp_path: Path, capsys: pytest.Captur
 def test_validate_needs_a_file(capsys: pytest.CaptureFixture[str]) -> None:
     code, out, err = run_cli(capsys, "validate")
     assert (code, out) == (2, []) and len(err) == 1 and "--template KIND" in err[0]
+    # A template is of the default table's classes: --classes beside it was ignored without a word.
+    code, out, err = run_cli(capsys, "validate", "--template", "labels", "--classes", str(REPO / "examples" / "classes" / "small.yaml"))
+    assert (code, out) == (2, []) and len(err) == 1 and "of the default table's classes" in err[0]
 
 
 # --- validate: every kind of file, and templates to start from ----------------------------------

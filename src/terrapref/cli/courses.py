@@ -26,8 +26,8 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     from terrapref.vehicle.ground import drivable
 
     if args.template is not None:
-        if args.files:
-            raise UserError("--template", "prints a template to start from; give it alone, or FILEs to check without it")
+        if args.files or args.classes is not None:
+            raise UserError("--template", "prints a template of the default table's classes; give it alone, or FILEs to check")
         print(template(args.template), end="")
         return 0
     if not args.files:
