@@ -549,3 +549,19 @@ def test_a_problem_is_said_once_whatever_numbers_it_carries_and_each_refusal_is_
     ]
     assert report_line(core, "ros2", log) == "terrapref ros2: 0 frames decided on; skipped: 4 messages refused (the log says why)"
     assert report_line(core, "ros2") == "terrapref ros2: 0 frames decided on; skipped: none"
+
+
+def test_a_robot_file_whose_camera_is_mounted_by_tf_is_refused_as_the_node_starts(setup, tmp_path):
+    """Import reads the camera's mounting from a log's /tf_static; the nodes read no tf, and such a
+    robot file once ended a node at its first camera_info, saying no transform was in /tf_static."""
+    from terrapref.errors import UserError
+    from terrapref.interop.node_core import PlannerNodeCore
+
+    model, _, path, _ = setup
+    robot = tmp_path / "robot.yaml"
+    robot.write_text(
+        "format: terrapref-robot/1\ntopics: {segmentation: /seg, camera_info: /info, odometry: /odom, command: /cmd}\n"
+        "camera: {tf: base_link}\nlabels: terrapref\n"
+    )
+    with pytest.raises(UserError, match=r"robot.yaml: camera: tf: the nodes read no /tf_static; give the camera's height_m"):
+        PlannerNodeCore(model, load_robot(robot), path)

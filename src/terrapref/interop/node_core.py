@@ -127,6 +127,12 @@ class PlannerNodeCore:
         watchdog: Watchdog | None = None,
     ) -> None:
         self.model, self.robot, self.stop = model, robot, robot.stop
+        if "tf" in robot.camera:  # import reads the mounting from a log's /tf_static; a node reads no tf
+            raise UserError(
+                robot.source,
+                "tf: the nodes read no /tf_static; give the camera's height_m and pitch_deg (and forward_m, yaw_deg) for them",
+                field="camera",
+            )
         Model.of(model).rules_with(robot.rules)  # a setting the model's rules cannot take is refused now, not at the first frame
         self.settings = RobotSettings(robot.stop, robot.limits, hold_s, ahead_s, robot.rules)
         self.hold_s, self.ahead_s = hold_s, ahead_s
