@@ -220,3 +220,27 @@ def test_play_robot_plays_every_topic_of_an_exported_recording_its_robot_file_na
     topics = load_robot_topics(robot)
     played = {topic for topic, _ in offline.sent} - {"/clock"}
     assert played == {t for role, t in topics.items() if role != "command"} | {"/tf", "/tf_static"}
+
+
+def test_ctrl_c_ends_a_play_started_with_sigint_ignored(tmp_path: Path, offline, monkeypatch, capsys):
+    """A script's background job inherits SIGINT ignored: play went on to the log's end on Ctrl-C
+    (kill -INT), where the node ends; it now ends there too, saying what it published."""
+    import os
+    import signal
+
+    bag = _log(tmp_path / "log", [0.1 * i for i in range(50)])
+    sleep = offline.clock.sleep
+
+    def interrupted(seconds: float) -> None:
+        sleep(seconds)
+        if offline.clock.t > 1.0:
+            os.kill(os.getpid(), signal.SIGINT)
+
+    monkeypatch.setattr(offline.clock, "sleep", interrupted)
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        code = main(["play", str(bag), "--delay", "0"])
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert code != 0 and 0 < len(_played(offline.sent)) < 50
+    assert "then stopped" in capsys.readouterr().err

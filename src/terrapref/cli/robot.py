@@ -110,6 +110,7 @@ def _cmd_play(args: argparse.Namespace) -> int:
     from terrapref.interop.dds import domain_id
     from terrapref.interop.play import BagPlayer, RobotTopics
     from terrapref.interop.robot import load_robot_topics
+    from terrapref.interop.ros2 import interruptible
     from terrapref.progress import Progress
 
     if not 0.01 <= args.rate <= 100:
@@ -133,14 +134,15 @@ def _cmd_play(args: argparse.Namespace) -> int:
     bar = Progress("play", span_s, "s")
     ended = False
     try:
-        player.play(
-            rate=args.rate,
-            clock_hz=args.clock,
-            delay_s=args.delay,
-            progress=lambda ns: bar.update(ns * 1e-9, f"{ns * 1e-9:.1f} of {span_s:.1f} s"),
-            max_gap_s=args.max_gap,
-            log=lambda line: print(f"play: {line}", flush=True),
-        )
+        with interruptible():  # Ctrl-C ends it even where it was started with SIGINT ignored (a script's background job)
+            player.play(
+                rate=args.rate,
+                clock_hz=args.clock,
+                delay_s=args.delay,
+                progress=lambda ns: bar.update(ns * 1e-9, f"{ns * 1e-9:.1f} of {span_s:.1f} s"),
+                max_gap_s=args.max_gap,
+                log=lambda line: print(f"play: {line}", flush=True),
+            )
         ended = True
     finally:  # stopped (Ctrl-C, a damaged log) or not: what was published
         bar.close(f"{player.published} messages published" + ("" if ended else ", then stopped"))

@@ -245,7 +245,7 @@ def run_node(
         core.watch(live)
     node = _Node(core, opts, names, clock, Participant(domain, MessageTypes(typestore())))
     try:
-        with _interruptible():
+        with interruptible():
             node.spin(stop or threading.Event())
     finally:
         node.close()
@@ -255,11 +255,11 @@ def run_node(
 
 
 @contextlib.contextmanager
-def _interruptible() -> Iterator[None]:
-    """SIGINT raises KeyboardInterrupt while the node runs, as rclpy's nodes (and rospy's) install
-    for themselves: a node started by a script in the background inherits SIGINT ignored, and
-    ``ros2 launch`` or a supervisor's SIGINT would then never end it. Off the main thread (a node
-    run in-process, ended by ``stop``) nothing is installed."""
+def interruptible() -> Iterator[None]:
+    """SIGINT raises KeyboardInterrupt while the node (or ``play``) runs, as rclpy's nodes (and
+    rospy's) install for themselves: one started by a script in the background inherits SIGINT
+    ignored, and ``ros2 launch`` or a supervisor's SIGINT would then never end it. Off the main
+    thread (a node run in-process, ended by ``stop``) nothing is installed."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
