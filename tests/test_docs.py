@@ -224,7 +224,8 @@ def _feature_table(k: int) -> ClassTable:
 
 
 def test_the_table_of_teaching_course_lengths_is_what_the_code_builds() -> None:
-    from terrapref.scenario.teaching import course_length, fits, situations
+    from terrapref.scenario import parse_scenario
+    from terrapref.scenario.teaching import designed_course, fits
 
     text = (DOCS / "classes.md").read_text(encoding="utf-8")
     rows = re.findall(r"^\| (\d+) \| (\d+) \| ([^|]+) \| ([^|]+) \| (full|compact) \|$", text, flags=re.MULTILINE)
@@ -233,7 +234,8 @@ def test_the_table_of_teaching_course_lengths_is_what_the_code_builds() -> None:
     for row in rows:
         k = int(row[0])
         table = _feature_table(k)
-        cells = [_course_text(course_length(situations(table, full))).replace("about ", "") for full in (True, False)]
+        built = [parse_scenario(designed_course(table, design)[0].data(), "course", table) for design in ("full", "compact")]
+        cells = [_course_text(course.path_length_m()).replace("about ", "") for course in built]  # as `course` prints them
         expected = (str(k), str(k * (k - 1) // 2), *cells, "full" if fits(table) else "compact")
         if row != expected:
             wrong.append(f"docs/classes.md: | {' | '.join(row)} | should be | {' | '.join(expected)} |")
