@@ -306,7 +306,10 @@ def build_dataset(
     for rec in recordings[1:]:
         if rec.meta.get("classes") != first.meta.get("classes"):
             raise UserError(
-                str(rec.path / "meta.json"), f"differs from {first.path} in classes; featurise them separately", field="classes"
+                str(rec.path / "meta.json"),
+                f"a drive of another class table ({', '.join(rec.classes.names)}) than {first.path}'s "
+                f"({', '.join(first.classes.names)}); one model learns one table: featurise and train them apart",
+                field="classes",
             )
     profile = _declared_order(
         [(str(r.path / "meta.json"), str(r.path), r.meta) for r in recordings], "record the drives with the same --profile"

@@ -607,3 +607,19 @@ def test_drives_of_two_orders_are_refused_naming_both_and_what_to_do(tmp_path: P
     (other / "meta.json").write_text(json.dumps(meta))
     assert main(["featurize", str(recording), str(other), "--out", str(tmp_path / "d.safetensors")]) == 2
     _one_error(capsys, "profile", " > ".join(meta["profile"]), " > ".join(first), "record the drives with the same --profile")
+
+
+def test_drives_of_two_class_tables_are_refused_naming_both(tmp_path: Path, capsys, recording):
+    from helpers import REPO
+    from terrapref.terrain import load_classes
+
+    other = tmp_path / "other"
+    shutil.copytree(recording, other)
+    meta = json.loads((other / "meta.json").read_text())
+    small = load_classes(REPO / "examples" / "classes" / "small.yaml")
+    meta["classes"], meta["profile"] = small.to_dict(), list(small.profile)
+    (other / "meta.json").write_text(json.dumps(meta))
+    assert main(["featurize", str(recording), str(other), "--out", str(tmp_path / "d.safetensors")]) == 2
+    _one_error(
+        capsys, "classes", "another class table (grass, mud, tree)", "(grass, non_traversable, water, rock, mud)", "train them apart"
+    )
