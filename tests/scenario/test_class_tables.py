@@ -585,7 +585,10 @@ def test_course_writes_a_tables_teaching_course_that_carries_the_table(tmp_path,
     default_file = REPO / "src" / "terrapref" / "data" / "classes.yaml"
     assert main(["show", str(out), "--classes", str(default_file), "--out", str(tmp_path / "map2.png")]) == 2
     line = _one_error(
-        capsys, str(out), "classes: the scenario carries the class table of grass, mud, tree", "not the one given (grass, non_traversable"
+        capsys,
+        str(out),
+        "classes: the scenario carries the class table of grass, mud, tree",
+        "not the one it is read with (grass, non_traversable",
     )
     assert not (tmp_path / "map2.png").exists(), line
 

@@ -281,7 +281,9 @@ def _carried_table(c: _Checker, data: dict[str, Any], source: str, given: ClassT
         raise ScenarioError(source, c.problems) from None
     if given is not None and not carried.same_classes(given):
         c.fail(
-            "classes", f"the scenario carries the class table of {', '.join(carried.names)}, not the one given ({', '.join(given.names)})"
+            "classes",
+            f"the scenario carries the class table of {', '.join(carried.names)}, not the one it is read with "
+            f"({', '.join(given.names)}: --classes, or the model's)",
         )
         raise ScenarioError(source, c.problems)
     return given or carried
