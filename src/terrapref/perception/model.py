@@ -398,7 +398,9 @@ def _confusion(value: Any, where: str, classes: ClassTable, number, problems: li
     for true, row in value.items():
         at = f"{where}.{true}"
         if true not in classes.names:
-            problems.append(Problem(at, f"unknown class {true!r}; classes: {', '.join(classes.names)}"))
+            problems.append(
+                Problem(at, f"unknown class {true!r}; classes: {', '.join(classes.names)} (your own class table? give its --classes FILE)")
+            )
             continue
         if not isinstance(row, dict) or not row:
             problems.append(Problem(at, "expected a mapping of class name to share"))
