@@ -78,6 +78,16 @@ def test_32fc1_metres_read_as_the_same_depth_and_every_kind_of_no_return_is_nan(
         np.testing.assert_array_equal(got, millimetres_to_depth(KNOWN_MM))
 
 
+def test_32fc1_depth_in_millimetres_is_refused_saying_so():
+    """Millimetres in a 32FC1 image were taken as metres: the ground kilometres away, and the robot
+    stopped with no free way, with no hint of the units."""
+    millimetres = np.where(KNOWN_MM > 0, KNOWN_MM, 0).astype(np.float32)
+    with pytest.raises(
+        UserError, match=r"topics.depth: topic /cam/depth: depth of a median \d+ m, millimetres as it seems; 32FC1 is metres"
+    ):
+        depth_metres(_msg("32FC1", millimetres), "/cam/depth", "log.mcap")
+
+
 @pytest.mark.parametrize("encoding", ["mono8", "mono16", "rgb8", "64FC1"])
 def test_another_depth_encoding_is_refused_naming_the_log_the_topic_and_the_encoding(encoding: str):
     with pytest.raises(UserError) as err:

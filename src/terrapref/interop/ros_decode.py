@@ -330,6 +330,8 @@ def _decode_png(msg, topic: str, source: str, t_s: float | None) -> np.ndarray:
     return ids.astype(np.uint16) if ids.dtype != np.uint8 else ids
 
 
+MILLIMETRES_LIKE_M = 500.0  # a 32FC1 depth image whose returns' median lies past this [m] holds millimetres, not metres
+DEPTH_CHECK_STRIDE = 61  # every this many pixels of a depth image are sampled for that check
 DEPTH_ENCODINGS = ("32FC1", "16UC1")  # REP 118: metres as float32; millimetres as uint16, 0 where nothing is seen
 
 
@@ -360,6 +362,15 @@ def depth_metres(msg, topic: str, source: str, t_s: float | None = None) -> np.n
     if encoding == "16UC1":
         return millimetres_to_depth(values)
     metres = values.astype(np.float32)
+    sample = metres.reshape(-1)[::DEPTH_CHECK_STRIDE]  # a sample of the returns for a check (a prime stride: no row's pattern)
+    seen = sample[np.isfinite(sample) & (sample > 0)]
+    if len(seen) and float(np.median(seen)) > MILLIMETRES_LIKE_M:
+        raise UserError(
+            source,
+            f"{where}: depth of a median {float(np.median(seen)):g} m, millimetres as it seems; 32FC1 is metres (REP 118), "
+            "millimetres come as 16UC1",
+            field="topics.depth",
+        )
     return np.where(np.isfinite(metres) & (metres > 0), metres, np.float32(np.nan)).astype(np.float32)
 
 
