@@ -570,7 +570,9 @@ def save_intervals(
     x = np.arange(len(labels))
     rates = np.array([r.rate for r in rows], dtype=float)
     lo, hi = (np.array(v, dtype=float) for v in zip(*intervals)) if len(intervals) else (np.zeros(0), np.zeros(0))
-    ax.errorbar(x, rates, yerr=np.stack([rates - lo, hi - rates]), fmt="o", color="tab:blue", capsize=5, lw=1.5)
+    bars = ax.errorbar(x, rates, yerr=np.stack([rates - lo, hi - rates]), fmt="o", color="tab:blue", capsize=5, lw=1.5)
+    for artist in (bars.lines[0], *bars.lines[1], *bars.lines[2]):
+        artist.set_clip_on(False)  # a point at 100% drawn whole on the axis's top edge, not cut in half
     for xi, r, h in zip(x, rates, hi):
         ax.text(xi + 0.08, r, f"{r:.1%}", ha="left", va="center", fontsize=8)
     bottom = float(np.nanmin(lo)) if len(lo) else 0.0
