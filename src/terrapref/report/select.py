@@ -539,7 +539,7 @@ def layout_interval(rows: Sequence[dict]) -> tuple[float, float, float]:
 
 def _drives(sel: dict) -> str:
     """What each model was taught from, in a few words."""
-    return "one drive and its follow-up" if sel.get("follow_up") else "one drive"
+    return "one drive and, where it left pairs open, its follow-up" if sel.get("follow_up") else "one drive"
 
 
 def _perception_line(model: dict | None) -> str:
@@ -626,7 +626,7 @@ def _selection_preamble(sel: dict, seen: list[str]) -> list[str]:
         course = f"`{Path(sel['course']).name}`" if "course" in sel else "its own course"
         lines += [
             f"Every recipe demonstrated {course}"
-            f"{', then a follow-up course of the pairs its drive left open, beside their neighbours (or the ladder of the order it learned)' if sel.get('follow_up') else ''}.",
+            f"{', then, where its drive left pairs open, a follow-up course of them, beside their neighbours (or the ladder of the order it learned)' if sel.get('follow_up') else ''}.",
             "",
         ]
     return lines
