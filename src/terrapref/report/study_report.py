@@ -587,7 +587,7 @@ def teaching_section(plan: StudyPlan, runs: list[StudyRun], figs: Path) -> list[
         rows,
         "agreement with its driver",
         target=0.95,
-        title=f"one drive of {course}: agreement on unseen layouts, by order and driver style",
+        title=f"one drive of {course}{' and its follow-up' if plan.follow_up else ''}: agreement on unseen layouts, by order and driver style",
     )
     return lines + ["", "![teaching](figures/teaching.png)", ""]
 
