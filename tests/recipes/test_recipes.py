@@ -282,9 +282,14 @@ def test_datasets_made_differently_are_refused_naming_the_file_and_field(field: 
         merge_datasets([("first.safetensors", a), ("second.safetensors", b)])
     error = caught.value
     assert error.source == "second.safetensors" and [p.field for p in error.problems] == [field]
-    assert error.lines() == [
-        f"second.safetensors: {field}: differs from first.safetensors in {field}; featurise all recordings the same way"
-    ]
+    if field == "profile":  # two drivers' orders: both named
+        expected = (
+            "second.safetensors: profile: declares the order water > rock > mud > non_traversable, first.safetensors "
+            "mud > rock > water > non_traversable: one model learns one driver's order; featurise drives of one order together"
+        )
+    else:
+        expected = f"second.safetensors: {field}: differs from first.safetensors in {field}; featurise all recordings the same way"
+    assert error.lines() == [expected]
 
 
 def test_a_dataset_that_declares_no_order_joins_one_that_does():
