@@ -82,6 +82,7 @@ HILL = {
 }
 
 
+@pytest.mark.slow  # a whole drive of a relief course, then its follow-up
 def test_a_follow_up_with_relief_between_its_situations_keeps_its_lessons_relief(tmp_path, capsys):
     """`course --after REC --relief` adds relief between the follow-up's situations; the bank, the
     mound and the rough patch the drive left unshown stay (they were replaced by it)."""

@@ -873,6 +873,7 @@ def test_course_after_names_what_no_further_course_settles_and_writes_nothing(tm
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow  # whole drives of two courses; the ladder's own situations are tested apart in the default run
 def test_the_ladder_follows_one_drive_of_a_table_too_large_for_the_full_design(tmp_path, capsys, monkeypatch, short_recording):
     """After one drive of a compact course (no strips) the follow-up shows the learned order's
     ladder instead of the open pairs' neighbours; after two drives, or of a table whose full design
