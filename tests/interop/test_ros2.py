@@ -864,3 +864,18 @@ def test_a_node_that_never_commanded_ends_without_a_command(tmp_path):
     core, node, dds = _node_on_a_fake_participant(tmp_path)
     node.close()
     assert not [msg for topic, msg in dds.published if topic.endswith("cmd")]
+
+
+def test_a_stop_that_cannot_be_sent_is_said_and_the_node_leaves_the_domain_all_the_same(tmp_path, capsys):
+    from types import SimpleNamespace
+
+    core, node, dds = _node_on_a_fake_participant(tmp_path)
+    node.last_stamp = 1.0
+
+    def broken(msg):
+        raise RuntimeError("the participant is gone")
+
+    node.writers["command"] = SimpleNamespace(publish=broken, delivered=lambda timeout_s: True)
+    node.close()
+    assert dds.published[-1] == ("closed", None)
+    assert "the last stop command could not be sent (RuntimeError: the participant is gone)" in capsys.readouterr().err

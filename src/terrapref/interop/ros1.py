@@ -283,8 +283,11 @@ class _Node:
         self.done.set()
         with self.core.lock:
             self.ended = True
-            if self.last_stamp is not None:
-                self.cmd_pub.publish(self._twist_message(0.0, 0.0, self.rospy.get_time()))
+            try:
+                if self.last_stamp is not None:
+                    self.cmd_pub.publish(self._twist_message(0.0, 0.0, self.rospy.get_time()))
+            except Exception as exc:  # noqa: BLE001  (said: the node ends all the same)
+                self.log.warn(f"terrapref: the last stop command could not be sent ({type(exc).__name__}: {exc})")
         if self.last_stamp is not None:
             time.sleep(STOP_DELIVERY_S)  # rospy sends from a thread of its own; teardown would drop what waits
         print(report_line(self.core, "ros1", self.log), flush=True)

@@ -603,5 +603,7 @@ class _Node:
         """Send a stop, then leave the domain: subscribers see the node's publishers go."""
         try:
             self.publish_stop()
+        except Exception as exc:  # noqa: BLE001  (said: the node ends all the same, and the base's own timeout is left to stop it)
+            self.log.warn(f"the last stop command could not be sent ({type(exc).__name__}: {exc})")
         finally:
             self.dds.close()
