@@ -565,3 +565,17 @@ def test_a_robot_file_whose_camera_is_mounted_by_tf_is_refused_as_the_node_start
     )
     with pytest.raises(UserError, match=r"robot.yaml: camera: tf: the nodes read no /tf_static; give the camera's height_m"):
         PlannerNodeCore(model, load_robot(robot), path)
+
+
+def test_a_label_image_on_another_clock_than_the_odometry_is_refused_saying_so(setup):
+    """A segmentation node that does not copy the camera's stamp sends 0: each image was counted as
+    without odometry at its stamp, and nothing was said while the node ran."""
+    core, told = _core(setup)
+    core.on_odometry(_odom(0))
+    zero = compressed_image(TS, header(TS, 0.0, "camera_optical"), "png", png(setup[3][0]))
+    zero.header.stamp.sec, zero.header.stamp.nanosec = 0, 0
+    with pytest.raises(ValueError, match=r"before the newest odometry \(stamped 0, or on another clock than the odometry's\?\)"):
+        core.on_image("sensor_msgs/msg/CompressedImage", zero)
+    assert told == [] and core.skipped["without odometry at the stamp"] == 0
+    late = compressed_image(TS, header(TS, -1.0, "camera_optical"), "png", png(setup[3][0]))  # a second late: counted, not refused
+    assert core.on_image("sensor_msgs/msg/CompressedImage", late) is None and core.skipped["without odometry at the stamp"] == 1

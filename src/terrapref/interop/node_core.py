@@ -393,6 +393,11 @@ class PlannerNodeCore:
                     f"an image stamped {t - now_s:.3g} s ahead of the node's clock; refused (another clock, or use_sim_time unset while a log plays?)"
                 )
             pose = self.pose_at(t)
+            if pose is None and self.odometry and t < self.odometry[0][0] - ODOMETRY_KEPT_S:  # not late: on another clock
+                raise ValueError(
+                    f"a label image stamped {self.odometry[-1][0] - t:.3g} s before the newest odometry (stamped 0, or on another "
+                    "clock than the odometry's?); skipped"
+                )
             if pose is None and not (self.odometry and 0 < t - self.odometry[-1][0] <= ODOMETRY_WAIT_S):
                 self.skipped["without odometry at the stamp"] += 1
                 return None
