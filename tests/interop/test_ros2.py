@@ -697,6 +697,7 @@ def test_ros_args_set_parameters_and_remap_names():
         (["ros2", "--model", "M", "--robot", "R", "--ros-args", "-r", "/c:=bad?name"], {}, ["-r /c:=bad?name"]),
         (["ros2", "--model", "M", "--robot", "R", "--ros-args", "-r", "~/costmap:=/a/{b}"], {}, ["-r ~/costmap:=/a/{b}"]),
         (["ros2", "--model", "M", "--robot", "R", "--ros-args", "-r", "__node:=9abc"], {}, ["__node:=9abc", "not starting with a digit"]),
+        (["ros2", "--model", "M", "--robot", "R", "--ros-args", "-r", "__ns:=/~/robot"], {}, ["__ns:=/~/robot", "letters, digits and _"]),
     ],
 )
 def test_a_bad_argument_is_one_line_naming_it(argv, env, words, capsys, monkeypatch, tmp_path):

@@ -138,6 +138,7 @@ def _param_value(text: str) -> Any:
 
 
 _EXPONENT = re.compile(r"[-+]?\d+[eE][-+]?\d+")
+_ROS_WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")  # a node's name, or a part of a namespace
 
 
 class Names:
@@ -151,7 +152,7 @@ class Names:
     def __init__(self, remaps: Mapping[str, str]) -> None:
         self.node = remaps.get("__node", NODE_NAME)
         self.namespace = "/" + remaps.get("__ns", "/").strip("/")
-        if not GIVEN_TOPIC_NAME.match(self.node) or "/" in self.node or not GIVEN_TOPIC_NAME.match(self.namespace.lstrip("/") or "x"):
+        if not _ROS_WORD.fullmatch(self.node) or not all(_ROS_WORD.fullmatch(p) for p in self.namespace.strip("/").split("/") if p):
             raise UserError(
                 "--ros-args", f"-r __node:={self.node} / __ns:={self.namespace}: names are letters, digits and _, not starting with a digit"
             )
@@ -407,18 +408,22 @@ class _Node:
     def publish_command(self) -> None:
         """The command in force now (a stop once its frame is ``hold_s`` old by the node's clock),
         stamped with its frame; each time the planner stops, or moves on, the log says so and why."""
-        from terrapref.interop.ros_messages import twist
-
         with self.core.lock:  # a decision's command and the timer's never cross (the lock a decision is made under)
             if self.ended:  # the stop the node ended with stays the last command
                 return
             stamp = self.last_stamp  # read under the lock: a decision between the timer's tick and here is the one sent
             (v, w), reason = self.core.status_at(self.clock.now())
             self.log.status(reason)
-            msg = twist(self.ts, float(v), float(w))
-            if self.opts.stamped:
-                msg = self.ts.types["geometry_msgs/msg/TwistStamped"](header=self.header(stamp, "base_link"), twist=msg)
-            self.writers["command"].publish(msg)
+            self.writers["command"].publish(self.command_message(float(v), float(w), stamp))
+
+    def command_message(self, v: float, w: float, stamp_s: float) -> Any:
+        """The command (v, w) as the node publishes it: a Twist, or with ``stamped`` a TwistStamped stamped ``stamp_s`` in base_link."""
+        from terrapref.interop.ros_messages import twist
+
+        msg = twist(self.ts, v, w)
+        if self.opts.stamped:
+            msg = self.ts.types["geometry_msgs/msg/TwistStamped"](header=self.header(stamp_s, "base_link"), twist=msg)
+        return msg
 
     def on_decision(self, decision) -> None:
         """Each decision, whether its image or the odometry it waited for brought it."""
@@ -586,16 +591,11 @@ class _Node:
         """A zero command as the node ends, once it has commanded anything, waited on until the
         base has it (a second at most): a base that keeps its last command until told otherwise
         would drive on at it after the node had gone."""
-        from terrapref.interop.ros_messages import twist
-
         with self.core.lock:
             self.ended = True
             if self.last_stamp is None:
                 return
-            msg = twist(self.ts, 0.0, 0.0)
-            if self.opts.stamped:
-                msg = self.ts.types["geometry_msgs/msg/TwistStamped"](header=self.header(self.clock.now(), "base_link"), twist=msg)
-            self.writers["command"].publish(msg)
+            self.writers["command"].publish(self.command_message(0.0, 0.0, self.clock.now()))
         if not self.writers["command"].delivered(STOP_DELIVERY_S):
             self.log.warn(f"the last stop command was not acknowledged within {STOP_DELIVERY_S:g} s")
 

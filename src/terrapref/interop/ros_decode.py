@@ -364,11 +364,11 @@ def depth_metres(msg, topic: str, source: str, t_s: float | None = None) -> np.n
     metres = values.astype(np.float32)
     sample = metres.reshape(-1)[::DEPTH_CHECK_STRIDE]  # a sample of the returns for a check (a prime stride: no row's pattern)
     seen = sample[np.isfinite(sample) & (sample > 0)]
-    if len(seen) and float(np.median(seen)) > MILLIMETRES_LIKE_M:
+    median = float(np.median(seen)) if len(seen) else 0.0
+    if median > MILLIMETRES_LIKE_M:
         raise UserError(
             source,
-            f"{where}: depth of a median {float(np.median(seen)):g} m, millimetres as it seems; 32FC1 is metres (REP 118), "
-            "millimetres come as 16UC1",
+            f"{where}: depth of a median {median:g} m, millimetres as it seems; 32FC1 is metres (REP 118), millimetres come as 16UC1",
             field="topics.depth",
         )
     return np.where(np.isfinite(metres) & (metres > 0), metres, np.float32(np.nan)).astype(np.float32)

@@ -280,8 +280,9 @@ class SpeedRule(Rule):
         for name, cap in caps.items():
             if name not in columns:
                 raise ValueError(f"no speed is kept for {name!r}; the classes: {', '.join(columns)}")
-            if cap < MIN_SPEED_MPS:
-                raise ValueError(f"{name}: expected at least {MIN_SPEED_MPS:g} m/s, the least cruising speed")
+            problem = self.setting_problem("class_max_mps", cap)
+            if problem is not None:
+                raise ValueError(f"{name}: {problem}")
         speeds = list(rule.model.speeds_mps)
         for name, cap in caps.items():
             speeds[columns[name]] = min(speeds[columns[name]], float(cap))
