@@ -34,6 +34,21 @@ def test_the_drivers_order_survives_an_export_and_an_import(tmp_path: Path, orde
     assert read_recording(tmp_path / "back").meta["profile"] == ORDER
 
 
+def test_an_export_is_named_as_its_format_and_replaces_an_earlier_ones_label_map(tmp_path: Path, ordered_recording: Path, capsys):
+    """Readers know a file's format by its name: a bag named .mcap (or the reverse) is refused, in
+    one line naming --out, before anything is written. With --force, an earlier export's label map
+    (of another class table) goes with it: the new bag of terrapref's own ids needs none."""
+    for fmt, name in (("rosbag1", "run.mcap"), ("mcap", "run.bag"), ("mcap", "run.txt"), ("onnx", "m.safetensors")):
+        assert main(["export", str(ordered_recording), "--format", fmt, "--out", str(tmp_path / name)]) == 2
+        one_line_error(capsys, name, "--out", f"--format {fmt}")
+    assert not list(tmp_path.iterdir())
+    bag = tmp_path / "run.mcap"
+    stale = Path(f"{bag}.labels.yaml")
+    stale.write_text("format: terrapref-labels/1\nids: {0: dirt}\n")
+    assert main(["export", str(ordered_recording), "--format", "mcap", "--out", str(bag), "--force"]) == 0
+    assert bag.is_file() and Path(f"{bag}.robot.yaml").is_file() and not stale.exists()
+
+
 def test_an_import_with_no_declared_order_says_so_and_its_model_names_none(tmp_path: Path, ordered_recording: Path, capsys):
     bag = tmp_path / "run.mcap"
     assert main(["export", str(ordered_recording), "--format", "mcap", "--out", str(bag)]) == 0

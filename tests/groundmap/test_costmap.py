@@ -204,9 +204,11 @@ def test_an_evaluations_run_on_relief_carries_its_depth_and_the_heights_its_cost
     body's attitude there and each frame's depth image (on /terrapref/depth), so that the GridMap's
     height layers hold what the planner's map gathered from them, as the planner saw them."""
     from rosbags.highlevel import AnyReader
+    from rosbags.interfaces import QosDurability
 
     from helpers import TINY_RELIEF
     from terrapref.cli import main
+    from terrapref.interop.mcap_export import COSTMAP_TOPICS
     from terrapref.interop.ros_messages import grid_map_layer
 
     config = ClassifierConfig(hidden=8, skip=True)
@@ -218,6 +220,19 @@ def test_an_evaluations_run_on_relief_carries_its_depth_and_the_heights_its_cost
     with AnyReader([run]) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
         grids = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages() if c.topic == "/terrapref/grid_map"]
+        latched = {
+            c.topic for c in reader.connections if [q.durability for q in c.ext.offered_qos_profiles] == [QosDurability.TRANSIENT_LOCAL]
+        }
+        odometry = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages() if c.topic == "/terrapref/odom"]
     assert counts["/terrapref/labels"] > 30 and counts.get("/terrapref/depth") == counts["/terrapref/labels"]
+    # The maps are offered as a map server offers them: Nav2 and RViz subscribe transient-local.
+    assert latched == {"/tf_static"} | {topic for topic, _ in COSTMAP_TOPICS.values()}
+    # The odometry's twist is the body's motion between its poses (in base_link: forward and turning).
+    xy = np.array([(m.pose.pose.position.x, m.pose.pose.position.y) for m in odometry])
+    stamps = np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in odometry])
+    speed = np.array([m.twist.twist.linear.x for m in odometry])
+    travelled = np.linalg.norm(np.diff(xy, axis=0), axis=1).sum() / (stamps[-1] - stamps[0])
+    assert np.mean(speed) == pytest.approx(travelled, rel=0.05) and travelled > 0.3
+    assert all(m.twist.twist.linear.y == m.twist.twist.angular.x == 0.0 for m in odometry)
     elevation = grid_map_layer(grids[-1], "elevation")
     assert np.isfinite(elevation).sum() > 100 and np.nanmax(elevation) > 0.2  # the mound, 0.4 m high, seen

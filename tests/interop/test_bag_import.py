@@ -739,6 +739,8 @@ def test_an_export_stamps_its_images_in_the_optical_frame_and_latches_its_static
         conns = {c.topic: c for c in reader.connections}
         assert [q.durability for q in conns["/tf_static"].ext.offered_qos_profiles] == [QosDurability.TRANSIENT_LOCAL]
         assert conns["/tf"].ext.offered_qos_profiles == []
+        assert "/terrapref/status" not in conns  # a recording: no planner's status to say
+        info = reader.deserialize(next(reader.messages(connections=[conns["/terrapref/camera_info"]]))[2], "sensor_msgs/msg/CameraInfo")
         frames = {
             topic: reader.deserialize(raw, conns[topic].msgtype).header.frame_id
             for topic in ("/terrapref/labels", "/terrapref/camera_info")
@@ -747,6 +749,9 @@ def test_an_export_stamps_its_images_in_the_optical_frame_and_latches_its_static
         static = next(reader.messages(connections=[conns["/tf_static"]]))
         tf_message = reader.deserialize(static[2], "tf2_msgs/msg/TFMessage")
     assert set(frames.values()) == {"camera_optical"}
+    # K in ROS's pixel coordinates, a pixel's centre at its index: the centred camera's centre at 319.5, 239.5.
+    fx, fy, cx, cy = CameraConfig.from_dict(rec.meta["camera"]).intrinsics
+    assert (info.k[2], info.k[5], info.p[2], info.p[6]) == (cx - 0.5, cy - 0.5, cx - 0.5, cy - 0.5) and info.k[0] == fx
     # The optical axes, carried to base_link through the chain, are the camera model's.
     static = static_transforms(tf_message)
     assert static["camera_link"][0] == "base_link" and static["camera_optical"][0] == "camera_link"

@@ -90,3 +90,19 @@ def test_an_export_of_the_tables_recording_imports_back_only_with_its_table(log,
     assert main(["import", str(out), "--robot", str(robot), "--classes", str(TABLE), "--out", str(log["root"] / "back")]) == 0
     a, b = read_recording(rec_dir), read_recording(log["root"] / "back")
     assert len(a) == len(b) and all(np.array_equal(a.image(i), b.image(i)) for i in range(0, len(a), 10))
+
+
+def test_a_robot_files_label_map_of_another_table_than_the_models_names_the_model(tmp_path, table):
+    """A log of terrapref's own ids replayed, or a node run, with a model of the example table: the
+    robot file's label map names classes the model's table lacks, and the refusal says whose table
+    it was read with, not only that the robot file is at fault."""
+    from synthetic_bag import robot_yaml, write_robot
+
+    from terrapref.errors import UserError
+    from terrapref.interop.robot import load_robot
+
+    robot = write_robot(tmp_path / "robot.yaml", robot_yaml(labels="terrapref"))
+    with pytest.raises(UserError) as err:
+        load_robot(robot, table, "--model m.safetensors")
+    (line,) = str(err.value).splitlines()
+    assert line.startswith(f"{robot}: labels: ") and "is not in the class table" in line and "of --model m.safetensors" in line

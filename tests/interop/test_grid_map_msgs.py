@@ -103,3 +103,41 @@ def test_written_to_ros2_and_ros1_bags_each_reads_back_with_its_types_hash(tmp_p
         assert back.info.header.frame_id == "odom"
         assert conn.digest == GRID_MAP_MD5 == ts1.gendefhash("grid_map_msgs/msg/GridMap", {})[1]
         np.testing.assert_array_equal(grid_map_layer(back, "speed"), _layers()["speed"])
+
+
+def test_a_files_maps_are_offered_transient_local_and_the_filters_info_written_once(tmp_path: Path) -> None:
+    """Nav2's speed filter subscribes to its info and mask transient-local, as costmaps subscribe
+    to a map: a file offers every map topic so (latched in ROS 1), and writes the filter's info
+    only when it changes (Nav2 takes each info as a new filter and subscribes again)."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.interfaces import QosDurability
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    from terrapref.interop.mcap_export import COSTMAP_TOPICS, TOPICS
+    from terrapref.interop.ros_messages import add_topics
+
+    ts = typestore()
+    with Writer(tmp_path / "ros2", version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        topics = add_topics(writer, ts, TOPICS)
+        stamped = header(ts, 0.0, "odom")
+        for t in range(3):  # three costmaps a second apart, the filter's info the same, then another
+            info, _ = speed_filter(ts, stamped, _layers()["speed"], 2.0 if t < 2 else 1.5, "/terrapref/speed_mask", percent=t < 2)
+            topics.write_changed("speed_filter_info", t, info, (info.type, info.base, info.multiplier))
+    with AnyReader([tmp_path / "ros2"]) as reader:
+        latched = {
+            c.topic for c in reader.connections if [q.durability for q in c.ext.offered_qos_profiles] == [QosDurability.TRANSIENT_LOCAL]
+        }
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    assert latched == {topic for topic, _ in COSTMAP_TOPICS.values()} | {"/tf_static"}
+    assert counts["/terrapref/speed_filter_info"] == 2
+    ts1 = typestore(ros1=True)
+    with Writer1(tmp_path / "ros1.bag") as writer:
+        add_topics(
+            writer,
+            ts1,
+            {role: (topic, msgtype) for role, (topic, msgtype) in TOPICS.items() if role in ("costmap", "grid_map", "tf")},
+            ros1=True,
+        )
+    with AnyReader([tmp_path / "ros1.bag"]) as reader:
+        assert {c.topic: c.ext.latching for c in reader.connections} == {"/terrapref/costmap": 1, "/terrapref/grid_map": 1, "/tf": None}

@@ -46,3 +46,30 @@ def test_a_lens_that_would_show_less_than_half_the_image_is_refused():
 def test_too_few_coefficients_are_named_as_such():
     with pytest.raises(UserError, match=r"plumb_bob distortion \[0.1, 0.0\]: expected at least 4"):
         _lens([0.1, 0.0], "plumb_bob")
+
+
+def test_a_centred_cameras_info_in_ros_pixel_coordinates_is_the_simulators_camera(tmp_path):
+    """ROS (as OpenCV) puts a pixel's centre at its index, terrapref at index + 0.5: a centred
+    640 x 480 camera's CameraInfo says 319.5, 239.5, and is the camera the simulator's models are
+    trained for; the calibration export writes reads back as the same camera."""
+    from types import SimpleNamespace
+
+    from synthetic_bag import robot_yaml, write_robot
+    from terrapref.camera import CameraConfig
+    from terrapref.interop.robot import load_robot
+    from terrapref.interop.ros_decode import camera_from_info
+    from terrapref.interop.ros_messages import camera_info, header, typestore
+
+    robot = load_robot(write_robot(tmp_path / "robot.yaml", robot_yaml()))
+    sim = CameraConfig(mount_height_m=robot.camera["height_m"], pitch_deg=robot.camera["pitch_deg"])
+
+    def read(k: list[float]) -> CameraConfig:
+        info = SimpleNamespace(width=640, height=480, k=k, d=[0.0] * 5, distortion_model="plumb_bob")
+        return camera_from_info(info, robot, "log.mcap")[0]
+
+    assert read([320.0, 0, 319.5, 0, 320.0, 239.5, 0, 0, 1]).same_geometry(sim)
+    assert not read([320.0, 0, 320.0, 0, 320.0, 240.0, 0, 0, 1]).same_geometry(sim)  # half a pixel off: another camera
+    ts = typestore()
+    written = camera_info(ts, header(ts, 0.0, "camera_optical"), sim)
+    assert (written.k[2], written.k[5]) == (319.5, 239.5)
+    assert read(list(written.k)).same_geometry(sim)

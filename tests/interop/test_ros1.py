@@ -76,6 +76,7 @@ PLAYER = textwrap.dedent('''
         time.sleep(0.05)
     from terrapref.camera import CameraConfig
     fx, fy, cx, cy = CameraConfig().intrinsics  # the camera the model was trained for
+    cx, cy = cx - 0.5, cy - 0.5  # in ROS's pixel coordinates, a pixel's centre at its index
     info = CameraInfo(width=640, height=480, distortion_model="plumb_bob", D=[0.0] * 5,
                       K=[fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0], P=[fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0])
     info.header.frame_id = "camera"

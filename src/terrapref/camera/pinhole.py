@@ -13,6 +13,10 @@ import numpy as np
 
 from terrapref.records import from_plain, to_plain
 
+ROS_PIXEL_CENTRE_PX = 0.5
+"""ROS's CameraInfo, as OpenCV, puts pixel (col, row)'s centre at (col, row): its principal point is
+this camera's less this much on each axis (an image 640 px wide centred at 319.5, here at 320)."""
+
 MAX_IMAGE_PX = 4096
 """The largest image side a camera may have [px]: a 4K segmentation; the planner's per-pixel tables
 of a larger one would not fit a robot's memory, and a size read from a file is bounded by it."""

@@ -49,7 +49,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     from terrapref.planner.model import Model
 
     model = Model.load(args.model)
-    robot = load_robot(args.robot, model.classes)
+    robot = load_robot(args.robot, model.classes, f"--model {args.model}")
     out = Path(args.out)
     check_output(out, "--out", [args.bag, args.model, args.robot], folder=True)
     with output_folder(out, args.force):  # refused (another camera) or stopped: nothing unfinished is left at OUT
@@ -97,10 +97,16 @@ def replay_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_cmd_replay)
 
 
+EXPORT_SUFFIXES = {"onnx": ".onnx", "mcap": ".mcap", "rosbag1": ".bag"}  # what each format's readers know its files by
+
+
 def _cmd_export(args: argparse.Namespace) -> int:
     out = Path(args.out)
     inputs = [args.input] + ([args.model] if args.model else [])
     check_output(out, "--out", inputs, force=args.force)
+    suffix = EXPORT_SUFFIXES[args.format]
+    if out.suffix.lower() != suffix:  # import, replay and play know a file's format by its name
+        raise UserError(str(out), f"--format {args.format} writes a {suffix} file, which its readers know by that name", field="--out")
     if args.format in ("mcap", "rosbag1"):
         check_output(Path(f"{out}.robot.yaml"), "--out", inputs, force=args.force)
         check_output(Path(f"{out}.labels.yaml"), "--out", inputs, force=args.force)

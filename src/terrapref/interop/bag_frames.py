@@ -68,10 +68,10 @@ from terrapref.progress import Progress
 from terrapref.terrain.classes import UNKNOWN
 from terrapref.vehicle import ControlSet, wrap_angle
 from terrapref.vehicle.ground import Attitude
+from terrapref.vehicle.kinematics import POSE_DIFFERENCE_HALF_S, pose_velocities
 
 REORDER_FRAMES = 16  # images held back to put slightly out-of-order stamps right
 MIN_SPEED_MPS = 0.1  # slower than this the operator is stopped: no trajectory choice
-POSE_DIFFERENCE_HALF_S = 0.1  # a pose's motion: the poses this long before and after it, differenced (centred, over 0.2 s)
 STILL_TWIST_MOVED_M = 1.0  # an Odometry whose twist is zero throughout while its pose goes farther than this never filled it
 SPEED_SOURCES = {  # where each frame's speed (v, w) comes from, as the report names it
     "commands": "the commands",
@@ -345,7 +345,7 @@ class Motion:
                 "(its driver fills no twist): the speed is measured by differences of its poses"
             )
         report.speed_source = "poses"
-        vw = _pose_differences(streams.odom_t, poses)
+        vw = pose_velocities(streams.odom_t, poses, POSE_DIFFERENCE_HALF_S)
         known = np.isfinite(vw).all(axis=1)
         if not known.any():
             odometry = robot.topics["odometry"]
@@ -358,25 +358,6 @@ class Motion:
             k = int(np.searchsorted(self.t, t, side="right")) - 1
             return None if k < 0 else (float(self.vw[k, 0]), float(self.vw[k, 1]))
         return float(np.interp(t, self.t, self.vw[:, 0])), float(np.interp(t, self.t, self.vw[:, 1]))
-
-
-def _pose_differences(t: np.ndarray, poses: np.ndarray) -> np.ndarray:
-    """(v [m/s], w [rad/s]) (N, 2) at each of ``poses`` (N, 3: x, y, unwrapped yaw) stamped ``t`` (N,) [s], sorted.
-
-    A centred difference of the poses POSE_DIFFERENCE_HALF_S before and after each one
-    (interpolated; one-sided at the log's ends), over a window rather than between neighbours so
-    that jitter in the stamps and positions averages out: v is the displacement along the heading
-    (negative when reversing) over dt, w the yaw change, wrapped, over dt. NaN where dt is 0.
-    """
-    lo = np.maximum(t - POSE_DIFFERENCE_HALF_S, t[0])
-    hi = np.minimum(t + POSE_DIFFERENCE_HALF_S, t[-1])
-    before = np.stack([np.interp(lo, t, poses[:, k]) for k in range(3)], axis=1)
-    after = np.stack([np.interp(hi, t, poses[:, k]) for k in range(3)], axis=1)
-    step = after - before
-    forward = step[:, 0] * np.cos(poses[:, 2]) + step[:, 1] * np.sin(poses[:, 2])
-    turn = wrap_angle(step[:, 2])
-    dt = np.where(hi > lo, hi - lo, math.nan)
-    return np.stack([forward / dt, turn / dt], axis=1)
 
 
 @dataclass

@@ -89,6 +89,10 @@ class LiveView:
         """Send ``msg`` on the channel of ``role``, logged at ``t_ns`` [ns] (what a file's writer does)."""
         self.channels[role].log(bytes(self.ts.serialize_cdr(msg, TOPICS[role][1])), log_time=t_ns)
 
+    def write_changed(self, role: str, t_ns: int, msg: Message, content: object) -> None:
+        """Send ``msg`` as :meth:`write` does, changed or not: a viewer that joins later has it within a second."""
+        self.write(role, t_ns, msg)
+
     def wait_for_viewer(self) -> None:
         """Block until a viewer has subscribed to a channel (at once when one has)."""
         while not any(channel.has_sinks() for channel in self.channels.values()):

@@ -81,6 +81,7 @@ from terrapref.stops import REASONS
 from terrapref.terrain import ClassTable, default_classes
 from terrapref.terrain.classes import UNKNOWN, ForeignIds
 from terrapref.vehicle.ground import LEVEL, Attitude
+from terrapref.vehicle.kinematics import pose_velocities
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
@@ -143,6 +144,8 @@ def _topics_of(run: RunFrames, ros1: bool) -> dict[str, tuple[str, str]]:
     frames carry depth, with the costmap's where it has one (a ROS 1 bag's costmap as
     OccupancyGrid and GridMap alone: Foxglove's Grid and Nav2's filter are ROS 2's)."""
     topics = {**_TOPICS, **(DEPTH_TOPIC if run.depth is not None else {})}
+    if run.probs is None:  # no planner drove: no status to say
+        del topics["status"]
     if run.costmap is not None:
         topics |= {role: COSTMAP_TOPICS[role] for role in (ROS1_COSTMAP_ROLES if ros1 else COSTMAP_TOPICS)}
     return topics
@@ -160,6 +163,7 @@ class Scene:
     markers: list[Message]  # one visualization_msgs/Marker per trajectory
     marker_array: Message
     ros1: bool = False  # ROS 1 messages (headers with seq, CameraInfo's matrices in upper case)
+    velocity: np.ndarray | None = None  # (F, 2) each frame's v [m/s] and w [rad/s], from the poses (the odometry's twist)
 
     @classmethod
     def of(cls, ts: Typestore, run: RunFrames, ros1: bool = False) -> Scene:
@@ -182,7 +186,10 @@ class Scene:
             for j in range(c.m)
         ]
         t0_s = float(run.times[0]) if len(run.times) else 0.0
-        return cls(ts, run, t0_s, run.classes.palette(), markers, ts.types["visualization_msgs/msg/MarkerArray"](markers=markers), ros1)
+        velocity = _velocities(run.times, run.poses)
+        return cls(
+            ts, run, t0_s, run.classes.palette(), markers, ts.types["visualization_msgs/msg/MarkerArray"](markers=markers), ros1, velocity
+        )
 
     def header(self, t_s: float, frame_id: str) -> Message:
         """std_msgs/Header stamped ``t_s`` [s] after the first frame, in ``frame_id``."""
@@ -191,6 +198,17 @@ class Scene:
     def bag_ns(self, t_s: float) -> int:
         """Bag time [ns] of the run's time ``t_s`` [s]."""
         return int(round((EPOCH_S + t_s - self.t0_s) * 1e9))
+
+
+def _velocities(times: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """Each frame's v [m/s] and w [rad/s] (F, 2), as ``import`` measures a log's motion from its
+    poses (:func:`~terrapref.vehicle.kinematics.pose_velocities`); 0 where the frames' times
+    cannot tell (one frame, or one stamp)."""
+    if len(times) < 2:
+        return np.zeros((len(times), 2))
+    poses = np.asarray(poses, dtype=float)
+    unwrapped = np.column_stack([poses[:, :2], np.unwrap(poses[:, 2])])
+    return np.nan_to_num(pose_velocities(np.asarray(times, dtype=float), unwrapped), nan=0.0)
 
 
 def write_mcap(out: str | Path, run: RunFrames, robot_file: bool = True, progress: Callable[[int, int], None] | None = None) -> Path:
@@ -215,8 +233,10 @@ def write_bag(
         release_folder(tmpdir)
     if robot_file:
         labels = "terrapref   # the ids are terrapref's own classes"
-        if not run.classes.same_classes(default_classes()):  # the ids are another table's: a map of them by name, beside the robot file
-            labels_file = out.with_name(out.name + ".labels.yaml")
+        labels_file = out.with_name(out.name + ".labels.yaml")
+        if run.classes.same_classes(default_classes()):
+            labels_file.unlink(missing_ok=True)  # an earlier file's, replaced (--force): this bag's ids need no map
+        else:  # the ids are another table's: a map of them by name, beside the robot file
             write_text_atomic(labels_file, _label_map_yaml(run.classes))
             labels = f"{labels_file.name}   # the ids of the class table the run was made with (terrapref import --classes FILE)"
         write_text_atomic(out.with_name(out.name + ".robot.yaml"), _robot_yaml(run.camera, labels, run.profile, run.depth is not None))
@@ -297,6 +317,7 @@ class FrameData:
     stop: str | None = None  # why the planner stopped (None: it drove), when a planner drove
     depth: np.ndarray | None = None  # (H, W) [m, NaN where nothing is seen], when the frame carries one
     attitude: Attitude | None = None  # the body's height, pitch and roll (None: level at height 0)
+    velocity: tuple[float, float] | None = None  # the body's v [m/s] and w [rad/s], the odometry's twist (None: not known, 0)
 
 
 def _write_frame(topics: Topics, scene: Scene, i: int) -> None:
@@ -319,6 +340,7 @@ def _write_frame(topics: Topics, scene: Scene, i: int) -> None:
             run.stops[i] if run.stops is not None else None,
             run.depth(i) if run.depth is not None else None,
             run.attitude(i) if run.attitude is not None else None,
+            (float(scene.velocity[i, 0]), float(scene.velocity[i, 1])),
         ),
     )
 
@@ -335,7 +357,7 @@ def _write_costmap(topics: Topics, scene: Scene, t: float, ns: int, costmap: Cos
     if "speed" in costmap.layers and costmap.top_speed_mps is not None:
         mask_topic = COSTMAP_TOPICS["speed_mask"][0]
         info, mask = speed_filter(ts, scene.header(t, "odom"), costmap.layers["speed"], costmap.top_speed_mps, mask_topic)
-        topics.write("speed_filter_info", ns, info)
+        topics.write_changed("speed_filter_info", ns, info, (info.type, info.filter_mask_topic, info.base, info.multiplier))
         topics.write("speed_mask", ns, occupancy_grid(ts, scene.header(t, "odom"), mask, res, origin))
 
 
@@ -349,7 +371,7 @@ def write_frame(topics: Topics, scene: Scene, frame: FrameData) -> None:
     turn = rpy_quaternion(ts, roll, pitch, yaw)
     # The pose first: a player sends messages of one stamp in the order written, and a node that
     # interpolates odometry to an image's stamp needs the pose of that stamp when the image comes.
-    topics.write("odom", ns, odometry(ts, scene.header(t, "odom"), pose(ts, x, y, turn, z)))
+    topics.write("odom", ns, odometry(ts, scene.header(t, "odom"), pose(ts, x, y, turn, z), frame.velocity))
     topics.write("tf", ns, tf_message(ts, [transform(ts, scene.header(t, "odom"), "base_link", (x, y, z), turn)]))
     optical = scene.header(t, OPTICAL_FRAME)
     topics.write("camera_info", ns, camera_info(ts, optical, scene.run.camera, scene.ros1))

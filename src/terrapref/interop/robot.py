@@ -129,8 +129,10 @@ def _number(value: object) -> float | None:
     return float(value)
 
 
-def load_robot(path: str | Path, classes: ClassTable | None = None) -> RobotConfig:
-    """Read and check a robot file; every problem names the file and the field (exit 2 in the CLI)."""
+def load_robot(path: str | Path, classes: ClassTable | None = None, table_of: str | None = None) -> RobotConfig:
+    """Read and check a robot file; every problem names the file and the field (exit 2 in the CLI).
+    ``table_of`` says whose class table ``classes`` is (a model's, say), where its label map
+    names a class the table lacks."""
     classes = classes or default_classes()
     source = str(path)
     data = read_yaml_mapping(path, ROBOT_FORMAT)
@@ -141,7 +143,7 @@ def load_robot(path: str | Path, classes: ClassTable | None = None) -> RobotConf
     if problems:
         raise ConfigError(source, problems)
     here = Path(path).parent
-    labels = _load_labels(data["labels"], here, classes, source)
+    labels = _load_labels(data["labels"], here, classes, source, table_of)
     profile_data = data.get("profile")
     profile = PreferenceProfile.parse(profile_data, classes, f"{source}: profile") if profile_data is not None else None
     path_file = data.get("path_file")
@@ -324,15 +326,16 @@ def _other_problems(data: dict) -> list[Problem]:
     return problems
 
 
-def _load_labels(ref: str, here: Path, classes: ClassTable, source: str) -> LabelMap:
+def _load_labels(ref: str, here: Path, classes: ClassTable, source: str, table_of: str | None = None) -> LabelMap:
     """The label map ``ref`` names: a packaged one, or a file (a relative name is in ``here``,
-    the robot file's folder)."""
+    the robot file's folder), of the class table ``classes`` (``table_of``'s, where given)."""
     if Path(ref).suffix in (".yaml", ".yml") and not Path(ref).is_absolute():
         ref = str(here / ref)
     try:
         return load_label_map(ref, classes, source=f"{source}: labels")
     except UserError as exc:
-        raise ConfigError(source, exc.lines()[0], field="labels") from None
+        whose = f" (the class table of {table_of}: a model of another table than the log's?)" if table_of and "not in the class table" in str(exc) else ""
+        raise ConfigError(source, exc.lines()[0] + whose, field="labels") from None
 
 
 def load_waypoints(path: Path, source: str) -> np.ndarray:

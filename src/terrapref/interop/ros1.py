@@ -70,7 +70,7 @@ def run_node(model_path: str, robot_path: str, options: NodeOptions | None = Non
     from terrapref.learning.model_file import load_model
 
     model = load_model(model_path)
-    robot = load_robot(robot_path, model.classes)
+    robot = load_robot(robot_path, model.classes, f"the model {model_path}")
     check_master(os.environ.get("ROS_MASTER_URI", DEFAULT_MASTER_URI))  # rospy would wait for one for ever
     rospy.init_node("terrapref", anonymous=False)
     opts = (options or NodeOptions()).with_rule_params(nested_rule_params(rospy.get_param), "~RULE/NAME")

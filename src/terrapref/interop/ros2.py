@@ -234,7 +234,7 @@ def run_node(
     clock = NodeClock(args.use_sim_time)
     domain = domain_id()
     model = load_model(model_path)
-    robot = opts.applied_to(load_robot(robot_path, model.classes))
+    robot = opts.applied_to(load_robot(robot_path, model.classes, f"the model {model_path}"))
     path = (
         load_waypoints(Path(opts.path_file), "path_file")
         if opts.path_file

@@ -18,6 +18,7 @@ import numpy as np
 from PIL import Image as PILImage
 
 from terrapref.camera import CameraConfig
+from terrapref.camera.pinhole import ROS_PIXEL_CENTRE_PX
 from terrapref.errors import UserError, one_line
 from terrapref.interop.labels import LabelMap
 from terrapref.interop.robot import RobotConfig
@@ -190,6 +191,7 @@ def camera_from_info(
         max_range_m=cam["max_range_m"],
     )
     hfov = math.degrees(2 * math.atan(width / (2 * fx)))
+    cx, cy = cx + ROS_PIXEL_CENTRE_PX, cy + ROS_PIXEL_CENTRE_PX  # K's principal point in this camera's pixel coordinates
     camera = CameraConfig(width_px=width, height_px=height, hfov_deg=hfov, fx=fx, fy=fy, cx=cx, cy=cy, **mount)
     # A centred pinhole with square pixels is written by its field of view, as terrapref's own
     # cameras are, so that a model trained in the simulator and a log of the same camera match.

@@ -13,12 +13,13 @@ from __future__ import annotations
 import io
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from PIL import Image as PILImage
 
+from terrapref.camera.pinhole import ROS_PIXEL_CENTRE_PX
 from terrapref.extras import needs
 from terrapref.pngio import depth_to_millimetres
 
@@ -100,6 +101,7 @@ class Topics:
     typestore: Typestore
     connections: dict[str, Any]
     ros1: bool = False
+    said: dict[str, Any] = field(default_factory=dict)  # what :meth:`write_changed` last wrote, by role
 
     def write(self, role: str, t_ns: int, msg: Message) -> None:
         """Write ``msg`` on the connection of ``role`` at bag time ``t_ns`` [ns]."""
@@ -107,14 +109,35 @@ class Topics:
         data = self.typestore.serialize_ros1(msg, conn.msgtype) if self.ros1 else self.typestore.serialize_cdr(msg, conn.msgtype)
         self.writer.write(conn, t_ns, data)
 
+    def write_changed(self, role: str, t_ns: int, msg: Message, content: Any) -> None:
+        """Write ``msg`` as :meth:`write` does where its ``content`` differs from the last written on
+        ``role`` (or none was): Nav2 takes each speed filter info as a new filter, and subscribes
+        to its mask again."""
+        if self.said.get(role) != content:
+            self.write(role, t_ns, msg)
+            self.said[role] = content
 
-LATCHED_TOPICS = frozenset({"/tf_static"})  # published once and kept for late subscribers
+
+# Kept for late subscribers, as a robot's static transform publisher and map servers keep theirs:
+# the static transforms, and the maps a run writes (the costmap and its layers, and Nav2's speed
+# filter, whose info and mask Nav2 subscribes to transient-local and would not hear otherwise).
+LATCHED_TOPICS = frozenset(
+    {
+        "/tf_static",
+        "/terrapref/costmap",
+        "/terrapref/costmap_grid",
+        "/terrapref/grid_map",
+        "/terrapref/speed_filter_info",
+        "/terrapref/speed_mask",
+    }
+)
 
 
 def add_topics(writer: Any, ts: Typestore, topics: dict[str, tuple[str, str]], ros1: bool = False) -> Topics:
     """Connections for ``{role: (topic, msgtype)}``, added to ``writer`` in that order; the topics
     of :data:`LATCHED_TOPICS` offered latched (ROS 1) or transient-local (ROS 2), so that a bag's
-    player hands them to subscribers that come late, as a robot's static transform publisher does."""
+    player hands them to subscribers that come late, and to those that ask for them
+    transient-local (a transient-local subscription does not match a volatile publisher)."""
     connections = {
         role: writer.add_connection(topic, msgtype, typestore=ts, **(_latched(ros1) if topic in LATCHED_TOPICS else {}))
         for role, (topic, msgtype) in topics.items()
@@ -382,20 +405,23 @@ def foxglove_grid(ts: Typestore, t_s: float, frame_id: str, costmap: Costmap) ->
     )
 
 
-def odometry(ts: Typestore, stamped: Message, base_pose: Message) -> Message:
-    """nav_msgs/Odometry of base_link at ``base_pose`` in the frame of the header ``stamped``;
-    zero covariances and twist."""
+def odometry(ts: Typestore, stamped: Message, base_pose: Message, velocity: tuple[float, float] | None = None) -> Message:
+    """nav_msgs/Odometry of base_link at ``base_pose`` in the frame of the header ``stamped``, its
+    twist (in base_link) the ``velocity`` v [m/s] forward and w [rad/s] (None: 0); zero covariances."""
     T = ts.types
+    v, w = velocity if velocity is not None else (0.0, 0.0)
     at = T["geometry_msgs/msg/PoseWithCovariance"](pose=base_pose, covariance=np.zeros(36))
-    still = T["geometry_msgs/msg/TwistWithCovariance"](
-        twist=T["geometry_msgs/msg/Twist"](linear=vector3(ts), angular=vector3(ts)), covariance=np.zeros(36)
+    moving = T["geometry_msgs/msg/TwistWithCovariance"](
+        twist=T["geometry_msgs/msg/Twist"](linear=vector3(ts, v, 0.0, 0.0), angular=vector3(ts, 0.0, 0.0, w)), covariance=np.zeros(36)
     )
-    return T["nav_msgs/msg/Odometry"](header=stamped, child_frame_id="base_link", pose=at, twist=still)
+    return T["nav_msgs/msg/Odometry"](header=stamped, child_frame_id="base_link", pose=at, twist=moving)
 
 
 def camera_info(ts: Typestore, stamped: Message, camera: CameraConfig, ros1: bool = False) -> Message:
-    """sensor_msgs/CameraInfo of ``camera``: its image size and K, no distortion."""
+    """sensor_msgs/CameraInfo of ``camera``: its image size and K (its principal point in ROS's
+    pixel coordinates: :data:`~terrapref.camera.pinhole.ROS_PIXEL_CENTRE_PX`), no distortion."""
     fx, fy, cx, cy = camera.intrinsics
+    cx, cy = cx - ROS_PIXEL_CENTRE_PX, cy - ROS_PIXEL_CENTRE_PX
     roi = ts.types["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
     matrices = {
         "d": np.zeros(5),

@@ -12,6 +12,7 @@ if TYPE_CHECKING:
     import numpy as np
 
 
+POSE_DIFFERENCE_HALF_S = 0.1  # a pose's motion: the poses this long before and after it, differenced (centred, over 0.2 s)
 MIN_CRUISE_MPS = 0.1  # the slowest a driver cruises, or the planner's speed rule commands while it drives [m/s]; slower is standing
 
 
@@ -33,6 +34,27 @@ class Command(NamedTuple):
 def wrap_angle(a: float | np.ndarray) -> float | np.ndarray:
     """Angle (or angles, element by element) wrapped to [-pi, pi)."""
     return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def pose_velocities(t: np.ndarray, poses: np.ndarray, half_s: float = POSE_DIFFERENCE_HALF_S) -> np.ndarray:
+    """(v [m/s], w [rad/s]) (N, 2) at each of ``poses`` (N, 3: x, y, unwrapped yaw) stamped ``t`` (N,) [s], sorted.
+
+    A centred difference of the poses ``half_s`` before and after each one (interpolated;
+    one-sided at the ends), over a window rather than between neighbours so that jitter in the
+    stamps and positions averages out: v is the displacement along the heading (negative when
+    reversing) over dt, w the yaw change, wrapped, over dt. NaN where dt is 0.
+    """
+    import numpy as np
+
+    lo = np.maximum(t - half_s, t[0])
+    hi = np.minimum(t + half_s, t[-1])
+    before = np.stack([np.interp(lo, t, poses[:, k]) for k in range(3)], axis=1)
+    after = np.stack([np.interp(hi, t, poses[:, k]) for k in range(3)], axis=1)
+    step = after - before
+    forward = step[:, 0] * np.cos(poses[:, 2]) + step[:, 1] * np.sin(poses[:, 2])
+    turn = wrap_angle(step[:, 2])
+    dt = np.where(hi > lo, hi - lo, math.nan)
+    return np.stack([forward / dt, turn / dt], axis=1)
 
 
 def pure_pursuit_yaw_rate(speed_mps: float, sin_alpha: float, distance_m: float) -> float:
