@@ -182,3 +182,44 @@ def test_a_ray_address_where_nothing_answers_is_refused_in_one_line(tmp_path, ca
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "--address" in err[0] and words in err[0], err
     assert not (tmp_path / "e").exists()
+
+
+def slow_mark(path: str) -> int:
+    """A job that writes ``path`` after two seconds."""
+    import time
+
+    time.sleep(2.0)
+    Path(path).write_text("done")
+    return 0
+
+
+def test_a_killed_commands_workers_end_with_it(tmp_path):
+    """`kill -9` of a command with workers: they end with it, and write nothing more into its
+    output (they used to finish their jobs there, and hold its lock, for ever)."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    marks = [str(tmp_path / f"mark{i}") for i in range(2)]
+    script = (
+        "import sys; sys.path.insert(0, 'tests'); import test_grid as t; from terrapref.grid import Engine, run_grid; "
+        f"print('started', flush=True); run_grid(t.slow_mark, {marks!r}, Engine('local', 2))"
+    )
+    with subprocess.Popen([sys.executable, "-c", script], cwd=Path(__file__).parent.parent, stdout=subprocess.PIPE, text=True) as proc:
+        assert proc.stdout.readline().strip() == "started"
+        time.sleep(0.7)  # the workers forked and in their jobs
+        workers = [int(pid) for pid in subprocess.run(["pgrep", "-P", str(proc.pid)], capture_output=True, text=True).stdout.split()]
+        proc.send_signal(signal.SIGKILL)
+    assert len(workers) == 2
+    time.sleep(2.5)  # past the jobs' end
+    assert not any(Path(mark).exists() for mark in marks)
+    assert not any(_running(pid) for pid in workers)
+
+
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` runs (an ended one not yet reaped, a zombie, does not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError):
+        return False

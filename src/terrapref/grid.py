@@ -167,13 +167,49 @@ def _run_local(fn: Callable, jobs: list, workers: int, progress: Callable[[int, 
     from functools import partial
 
     outcomes: list[tuple[bool, Any] | None] = [None] * len(jobs)
-    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=mp.get_context("fork")) as pool:
+    with ProcessPoolExecutor(
+        max_workers=min(workers, len(jobs)), mp_context=mp.get_context("fork"), initializer=die_with_parent, initargs=(os.getpid(),)
+    ) as pool:
         futures = {pool.submit(partial(_guarded, fn), job): i for i, job in enumerate(jobs)}
         for done, fut in enumerate(as_completed(futures), start=1):
             outcomes[futures[fut]] = fut.result()
             if progress:
                 progress(done, len(jobs))
     return outcomes  # type: ignore[return-value]
+
+
+PARENT_WATCH_S = 0.5  # how often a worker without Linux's parent-death signal looks for its parent
+
+
+def die_with_parent(parent: int) -> None:
+    """End this worker when the process ``parent`` that started it ends: a command killed outright
+    (``kill -9``, the out-of-memory killer) would otherwise leave its workers finishing their jobs
+    into its output and holding its output's lock, so that nothing could take its place. Linux's
+    parent-death signal where there is one (SIGKILL: the worker's jobs are the command's, and
+    nothing of theirs is kept); elsewhere a thread that looks for the parent twice a second."""
+    import signal
+
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        armed = libc.prctl(1, int(signal.SIGKILL), 0, 0, 0) == 0  # 1: PR_SET_PDEATHSIG
+    except (OSError, AttributeError):  # not Linux
+        armed = False
+    if os.getppid() != parent:  # gone before the signal was armed
+        os._exit(1)
+    if not armed:
+        import threading
+
+        threading.Thread(target=_watch_parent, args=(parent,), name="parent-watch", daemon=True).start()
+
+
+def _watch_parent(parent: int) -> None:
+    import time
+
+    while os.getppid() == parent:
+        time.sleep(PARENT_WATCH_S)
+    os._exit(1)
 
 
 def start_ray(engine: Engine) -> bool:

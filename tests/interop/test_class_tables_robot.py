@@ -97,7 +97,6 @@ def test_a_robot_files_label_map_of_another_table_than_the_models_names_the_mode
     robot file's label map names classes the model's table lacks, and the refusal says whose table
     it was read with, not only that the robot file is at fault."""
     from synthetic_bag import robot_yaml, write_robot
-
     from terrapref.errors import UserError
     from terrapref.interop.robot import load_robot
 

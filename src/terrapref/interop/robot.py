@@ -334,7 +334,11 @@ def _load_labels(ref: str, here: Path, classes: ClassTable, source: str, table_o
     try:
         return load_label_map(ref, classes, source=f"{source}: labels")
     except UserError as exc:
-        whose = f" (the class table of {table_of}: a model of another table than the log's?)" if table_of and "not in the class table" in str(exc) else ""
+        whose = (
+            f" (the class table of {table_of}: a model of another table than the log's?)"
+            if table_of and "not in the class table" in str(exc)
+            else ""
+        )
         raise ConfigError(source, exc.lines()[0] + whose, field="labels") from None
 
 
