@@ -152,11 +152,40 @@ def test_select_refuses_bad_flags_before_any_work(tmp_path, capsys):
         (["--speeds", "nosuch=1"], "--speeds"),
         (["--speeds", "grass=3"], "--speeds"),
         (["--speeds", "fast"], "--speeds"),
+        (["--first", str(2**63 - 1), "--courses", "2"], "--first"),  # the second layout's seed would be past 2^63 - 1
     ):
         assert main(["select", "--out", str(out), *argv]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and flag in err[0]
     assert not out.exists()
+
+
+def test_select_refuses_an_output_that_holds_an_input_or_a_course_of_another_table(tmp_path, capsys, monkeypatch):
+    """With --force an output folder is replaced whole: one holding an input file would take it
+    with it, and the current folder cannot be replaced. A course of another class table than
+    the selection's is refused before any training."""
+    from terrapref.terrain import load_classes
+
+    out = tmp_path / "sel"
+    out.mkdir()
+    (out / "p.yaml").write_text("format: terrapref-perception/1\nframes: {drop_rate: 0.1}\n")
+    assert main(["select", "--out", str(out), "--perception", str(out / "p.yaml"), "--force"]) == 2
+    one_line = capsys.readouterr().err.strip().splitlines()
+    assert len(one_line) == 1 and "--out" in one_line[0] and "holds the input" in one_line[0] and (out / "p.yaml").exists()
+    monkeypatch.chdir(out)
+    assert main(["select", "--out", ".", "--force"]) == 2
+    assert "is the current folder" in capsys.readouterr().err
+    table = tmp_path / "t.yaml"
+    table.write_text(
+        "format: terrapref-classes/1\nclasses:\n  - {id: 0, name: grass, color: [0, 160, 0]}\n  - {id: 1, name: mud, color: [120, 80, 40]}\n  - {id: 2, name: tree, color: [0, 60, 0]}\nbackground: grass\nlethal: [tree]\n"
+    )
+    load_classes(table)  # a table of its own
+    course = tmp_path / "c.yaml"
+    assert main(["course", "--classes", str(table), "--out", str(course)]) == 0
+    capsys.readouterr()
+    assert main(["select", "--course", str(course), "--out", str(tmp_path / "s2")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(course) in err[0] and "class table" in err[0] and not (tmp_path / "s2").exists()
 
 
 @pytest.mark.slow

@@ -197,6 +197,12 @@ def check_output(out: str | Path, flag: str, inputs: Sequence[str | Path] = (), 
             raise UserError(str(out), f"is also an input; {flag} must name a new {'folder' if folder else 'file'}", field=flag)
         if given.is_dir() and target.is_relative_to(given.resolve()):
             raise UserError(str(out), f"lies inside the input {given}; {flag} must name a place outside it", field=flag)
+        if folder and given.resolve().is_relative_to(target):  # replaced whole with --force: the input with it
+            raise UserError(
+                str(out), f"holds the input {given}, which a new output would replace; {flag} must name another folder", field=flag
+            )
+    if folder and out.exists() and Path.cwd().resolve().is_relative_to(target):  # a folder in use cannot be replaced
+        raise UserError(str(out), f"is the current folder or holds it; {flag} must name a folder elsewhere", field=flag)
     special = _special_file(out)
     if special:
         raise UserError(str(out), f"is a {special}; {flag} must name a {'folder' if folder else 'regular file'}", field=flag)

@@ -178,6 +178,21 @@ def perception_list(text: str, classes=None) -> tuple:
     return models
 
 
+def given_files(args: argparse.Namespace, *flags: str) -> list[str]:
+    """The files that the ``flags`` (attribute names of ``args``: a file, or a list of them and
+    presets separated by commas, a file's part after ':') name and that exist: the inputs an
+    output folder must not hold."""
+    out = []
+    for flag in flags:
+        value = getattr(args, flag, None)
+        for item in (value or "").split(",") if isinstance(value, str) else ():
+            for name in (item.strip(), item.strip().rsplit(":", 1)[0]):
+                if name and Path(name).exists():
+                    out.append(name)
+                    break
+    return out
+
+
 def grid_engine(args: argparse.Namespace) -> Engine:
     """The grid engine of ``--engine``, ``--workers`` and ``--address``, checked before any work."""
     if args.workers is not None and args.workers < 1:

@@ -13,6 +13,8 @@ from terrapref.cli.common import (
     add_force_arg,
     add_large_arg,
     announce_workload,
+    check_table,
+    given_files,
     grid_engine,
     output_path,
     perception_list,
@@ -44,7 +46,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
         raise UserError("--recipes", f"expected distinct recipe names separated by commas, got {args.recipes!r}")
     recipes = tuple(recipe_named(n, "--recipes") for n in names)
     perceptions = perception_list(args.perception)
-    check_output(args.out, "--out", folder=True)
+    check_output(args.out, "--out", given_files(args, "classes", "perception", "taught_under", "course"), folder=True)
     engine = grid_engine(args)
     setup = Reproduction(
         recipes,
@@ -133,7 +135,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
         plan = replace(plan, follow_up=args.follow_up)
         if perceptions is not None:
             plan = with_perception(plan, perceptions)
-    check_output(args.out, "--out", folder=True)
+    check_output(args.out, "--out", given_files(args, "classes", "perception", "taught_under", "course"), folder=True)
     engine = grid_engine(args)
     announce_workload("study", study_workload(plan), engine, args.large, "--seeds", "seeds")
     with output_folder(args.out, args.force):
@@ -202,7 +204,9 @@ def _cmd_select(args: argparse.Namespace) -> int:
     for flag, value, low in (("--seeds", args.seeds, 1), ("--courses", args.courses, 1), ("--first", args.first, 0)):
         if value < low:
             raise UserError(flag, f"must be an integer >= {low}, got {value}")
-    check_output(args.out, "--out", folder=True)
+    if args.first + args.courses > 2**63:  # a generated layout's seed
+        raise UserError("--first", f"the last layout would be gen:{args.first + args.courses - 1}; a layout's seed is at most 2^63 - 1")
+    check_output(args.out, "--out", given_files(args, "classes", "perception", "taught_under", "course"), folder=True)
     perceptions = perception_list("clean" if args.perception is None else args.perception, table)
     if args.taught_under == "same" and len(perceptions) != 1:
         raise UserError("--taught-under", "'same' needs exactly one --perception model")
@@ -215,7 +219,9 @@ def _cmd_select(args: argparse.Namespace) -> int:
     if args.course is not None:  # checked before any work, and before the plan is said
         from terrapref.scenario import resolve_scenario
 
-        resolve_scenario(args.course, table)
+        check_table(
+            args, resolve_scenario(args.course, table).classes, args.course
+        )  # a course made for another table: refused now, not after the training
     _announce_size(args, len(names), table, len(perceptions), engine, len(relief_styles))
     orders = orders or _orders(args.orders, table)  # all or random:N, counted before they are drawn
     with output_folder(args.out, args.force):
