@@ -143,6 +143,7 @@ def test_select_refuses_bad_flags_before_any_work(tmp_path, capsys):
     out = tmp_path / "sel"
     for argv, flag in (
         (["--recipes", "teach,nope"], "--recipes"),
+        (["--recipes", "teach,"], "--recipes"),
         (["--orders", "mud,lava"], "--orders"),
         (["--seeds", "0"], "--seeds"),
         (["--orders", "mud,rock,water;mud,rock,water,non_traversable"], "--orders"),

@@ -42,12 +42,20 @@ def test_the_reproduction_workload_counts_the_models_and_runs_it_lists():
     assert size.runs == len(evaluation_specs(setup, trained)) + parts and not size.up_to
 
 
-def test_a_workload_beyond_the_bound_is_large_and_says_so_in_one_line():
+def test_a_workload_beyond_the_bound_is_large_and_says_so_in_one_line(monkeypatch):
+    monkeypatch.setattr("os.cpu_count", lambda: 4)
     assert not Workload(1_000, "", 100_000, 1.0, "").large
     assert Workload(1_001, "", 1, 1.0, "").large and Workload(1, "", 100_001, 1.0, "").large
     huge = Workload(10**400, "x", 10**401, float("inf"), "1 course")
     assert huge.describe(2).endswith(": more than a billion years on 2 workers (more than a billion years of one core)")
     assert "\n" not in huge.refusal()
+
+
+def test_workers_beyond_the_machines_cores_make_it_no_faster(monkeypatch):
+    monkeypatch.setattr("os.cpu_count", lambda: 2)
+    work = Workload(1, "1 recipe", 10, 600.0, "2 layouts")
+    assert work.describe(2).endswith(": about 5 min 0 s on 2 workers (about 10 min 0 s of one core)")
+    assert work.describe(1000).endswith(": about 5 min 0 s on 1000 workers, 2 cores here (about 10 min 0 s of one core)")
 
 
 @pytest.mark.parametrize("command", ["study", "reproduce"])

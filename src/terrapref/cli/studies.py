@@ -41,8 +41,8 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     if args.eval_seeds < 1:
         raise UserError("--eval-seeds", "must be >= 1")
     profile = PreferenceProfile.parse(args.profile) if args.profile is not None else None
-    names = [n.strip() for n in args.recipes.split(",") if n.strip()]
-    if not names or len(set(names)) != len(names):
+    names = [n.strip() for n in args.recipes.split(",")]
+    if not all(names) or len(set(names)) != len(names):  # an empty item, as --orders and --perception refuse one
         raise UserError("--recipes", f"expected distinct recipe names separated by commas, got {args.recipes!r}")
     recipes = tuple(recipe_named(n, "--recipes") for n in names)
     perceptions = perception_list(args.perception)
@@ -190,8 +190,8 @@ def _cmd_select(args: argparse.Namespace) -> int:
     from terrapref.recipes import recipe_named
     from terrapref.report.select import Selection, run_selection
 
-    names = [n.strip() for n in args.recipes.split(",") if n.strip()]
-    if not names or len(set(names)) != len(names):
+    names = [n.strip() for n in args.recipes.split(",")]
+    if not all(names) or len(set(names)) != len(names):  # an empty item, as --orders and --perception refuse one
         raise UserError("--recipes", f"expected distinct recipe names separated by commas, got {args.recipes!r}")
     for n in names:
         recipe_named(n, "--recipes")

@@ -5,6 +5,7 @@ bound beyond which it runs only when asked (``--large``)."""
 from __future__ import annotations
 
 import math
+import os
 from typing import NamedTuple
 
 from terrapref.progress import duration_text
@@ -38,11 +39,14 @@ class Workload(NamedTuple):
         return self.models > LARGE_MODELS or self.runs > LARGE_RUNS
 
     def describe(self, workers: int | None) -> str:
-        """One line: the models, the runs and about how long they take on ``workers`` cores
-        (None: a cluster's, unknown here: one core's time alone)."""
+        """One line: the models, the runs and about how long they take on ``workers`` workers, as
+        many at once as this machine has cores (None: a cluster's, unknown here: one core's time
+        alone)."""
         when = f"{rough_duration(self.core_s)} of one core"
         if workers is not None:
-            when = f"{rough_duration(self.core_s / workers)} on {workers} worker{'s' if workers > 1 else ''} ({when})"
+            cores = min(workers, os.cpu_count() or 1)  # workers beyond the cores share them: no faster
+            more = f", {cores} core{'s' if cores > 1 else ''} here" if cores < workers else ""
+            when = f"{rough_duration(self.core_s / cores)} on {workers} worker{'s' if workers > 1 else ''}{more} ({when})"
         runs = f"{'up to ' if self.up_to else ''}{count(self.runs, 'closed-loop run')}"
         return f"{count(self.models, 'model')} ({self.factors}) and {runs} on {self.where}: {when}"
 
