@@ -148,11 +148,15 @@ def test_select_refuses_bad_flags_before_any_work(tmp_path, capsys):
         (["--seeds", "0"], "--seeds"),
         (["--orders", "mud,rock,water;mud,rock,water,non_traversable"], "--orders"),
         (["--style", "sleepy"], "--style"),
+        (["--style", ""], "unknown driver style ''"),
         (["--first", "-1"], "--first"),
         (["--address", "h:1"], "--address"),
         (["--speeds", "nosuch=1"], "--speeds"),
         (["--speeds", "grass=3"], "--speeds"),
         (["--speeds", "fast"], "--speeds"),
+        (["--speeds", "mud=0"], "class 'mud'"),
+        (["--engine", "ray", "--address", "127.0.0.1:99999"], "expected HOST:PORT"),
+        (["--perception", "field:foo"], "NAME:PART (labels, pose"),
         (["--first", str(2**63 - 1), "--courses", "2"], "--first"),  # the second layout's seed would be past 2^63 - 1
     ):
         assert main(["select", "--out", str(out), *argv]) == 2

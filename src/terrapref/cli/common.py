@@ -219,7 +219,7 @@ def _check_ray_address(address: str) -> None:
     import socket
 
     host, _, port = address.removeprefix("ray://").rpartition(":")
-    if not host or not port.isdigit():
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
         raise UserError("--address", f"expected HOST:PORT of a Ray head (ray start --head), got {address!r}")
     try:
         with socket.create_connection((host, int(port)), timeout=5.0):

@@ -48,6 +48,8 @@ def parse_speeds(text: str, source: str = "--speeds") -> tuple[tuple[str, float]
             raise UserError(source, f"expected CLASS=SPEED entries in m/s separated by commas, e.g. grass=1.6,mud=0.5; got {item!r}")
         if name in dict(pairs):
             raise UserError(source, f"class {name!r} is given twice")
+        if speed <= 0:
+            raise UserError(source, f"class {name!r}: a cruising speed is > 0 m/s, got {value.strip()}")
         pairs.append((name, speed))
     return tuple(pairs)
 
@@ -55,7 +57,7 @@ def parse_speeds(text: str, source: str = "--speeds") -> tuple[tuple[str, float]
 def names_style_file(style: str) -> bool:
     """Whether ``style`` (a --style value that is no preset) names a style file: a YAML name, or
     a file that exists."""
-    return style.endswith((".yaml", ".yml")) or Path(style).exists()
+    return bool(style.strip()) and (style.endswith((".yaml", ".yml")) or Path(style).exists())  # "" is no file ('.' exists)
 
 
 def read_style_file(path: str | Path) -> tuple[str, dict[str, Any]]:

@@ -473,7 +473,8 @@ def load_perception(spec: str | Path | PerceptionModel | None, classes: ClassTab
     else:
         path = Path(spec)
         if not path.exists() and not path.suffix:
-            raise UserError("--perception", f"no preset or file {str(spec)!r}; presets: {', '.join(PRESETS)}")
+            parts = f", each keeping one part as NAME:PART ({', '.join(_SECTIONS)})" if head else ""
+            raise UserError("--perception", f"no preset or file {str(spec)!r}; presets: {', '.join(PRESETS)}{parts}")
         model = parse_perception(read_yaml_mapping(path, FORMAT), str(path), classes or default_classes())
     if classes is not None:
         check_classes(model, classes, model.name)

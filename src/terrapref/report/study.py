@@ -353,7 +353,7 @@ def _demonstrate(ws: _Workspace) -> None:
             jobs.append(DemonstrationJob(str(base), s, order, tuple(sets), plan.demo_course(), plan.classes))
     ws.log(
         f"[1/5] demonstrations and featurisation: {plan.seeds} seed(s) x {len(profiles)} profile(s) x {DEMONSTRATIONS.demonstrations} runs "
-        f"of {course_name(plan.demo_course())}, {sum(len(j.sets) for j in jobs)} sets ..."
+        f"of {course_name(plan.demo_course())}: {len(jobs)} demonstration sets, featurised as {sum(len(j.sets) for j in jobs)} datasets ..."
     )
     ws.map(_demonstration_job, jobs, "demonstration set")
 
