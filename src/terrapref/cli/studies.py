@@ -201,11 +201,7 @@ def _cmd_select(args: argparse.Namespace) -> int:
             "--style", f"{args.style}: select takes a preset ({', '.join(STYLES.names())}); a style file is for record and evaluate"
         )
     STYLES.get(args.style, "--style")
-    for flag, value, low in (("--seeds", args.seeds, 1), ("--courses", args.courses, 1), ("--first", args.first, 0)):
-        if value < low:
-            raise UserError(flag, f"must be an integer >= {low}, got {value}")
-    if args.first + args.courses > 2**63:  # a generated layout's seed
-        raise UserError("--first", f"the last layout would be gen:{args.first + args.courses - 1}; a layout's seed is at most 2^63 - 1")
+    _check_select_sizes(args)
     check_output(args.out, "--out", given_files(args, "classes", "perception", "taught_under", "course"), folder=True)
     perceptions = perception_list("clean" if args.perception is None else args.perception, table)
     if args.taught_under == "same" and len(perceptions) != 1:
@@ -216,12 +212,10 @@ def _cmd_select(args: argparse.Namespace) -> int:
     engine = grid_engine(args)
     named = args.orders != "all" and not args.orders.startswith("random:")  # orders named one by one: read before the plan is said
     orders = _orders(args.orders, table) if named else None
-    if args.course is not None:  # checked before any work, and before the plan is said
+    if args.course is not None:  # checked before any work, and before the plan is said: one of another table too
         from terrapref.scenario import resolve_scenario
 
-        check_table(
-            args, resolve_scenario(args.course, table).classes, args.course
-        )  # a course made for another table: refused now, not after the training
+        check_table(args, resolve_scenario(args.course, table).classes, args.course)
     _announce_size(args, len(names), table, len(perceptions), engine, len(relief_styles))
     orders = orders or _orders(args.orders, table)  # all or random:N, counted before they are drawn
     with output_folder(args.out, args.force):
@@ -245,6 +239,15 @@ def _cmd_select(args: argparse.Namespace) -> int:
         path = run_selection(args.out, selection, engine, log=lambda m: print(m, flush=True))
         print(f"done ({time.perf_counter() - t0:.0f} s): {path}")
         return 0
+
+
+def _check_select_sizes(args: argparse.Namespace) -> None:
+    """``--seeds``, ``--courses`` and ``--first`` checked before any work, the last layout's seed among them."""
+    for flag, value, low in (("--seeds", args.seeds, 1), ("--courses", args.courses, 1), ("--first", args.first, 0)):
+        if value < low:
+            raise UserError(flag, f"must be an integer >= {low}, got {value}")
+    if args.first + args.courses > 2**63:  # a generated layout's seed
+        raise UserError("--first", f"the last layout would be gen:{args.first + args.courses - 1}; a layout's seed is at most 2^63 - 1")
 
 
 def _select_relief_styles(text: str | None) -> tuple[str, ...]:
