@@ -219,10 +219,10 @@ def test_a_ray_address_where_nothing_answers_is_refused_in_one_line(tmp_path, ca
 
 
 def slow_mark(path: str) -> int:
-    """A job that writes ``path`` after two seconds."""
+    """A job that writes ``path`` after a second and a half."""
     import time
 
-    time.sleep(2.0)
+    time.sleep(1.5)
     Path(path).write_text("done")
     return 0
 
@@ -238,15 +238,18 @@ def test_a_killed_commands_workers_end_with_it(tmp_path):
     marks = [str(tmp_path / f"mark{i}") for i in range(2)]
     script = (
         "import sys; sys.path.insert(0, 'tests'); import test_grid as t; from terrapref.grid import Engine, run_grid; "
-        f"print('started', flush=True); run_grid(t.slow_mark, {marks!r}, Engine('local', 2))"
+        f"run_grid(t.slow_mark, {marks!r}, Engine('local', 2))"
     )
-    with subprocess.Popen([sys.executable, "-c", script], cwd=Path(__file__).parent.parent, stdout=subprocess.PIPE, text=True) as proc:
-        assert proc.stdout.readline().strip() == "started"
-        time.sleep(0.7)  # the workers forked and in their jobs
-        workers = [int(pid) for pid in subprocess.run(["pgrep", "-P", str(proc.pid)], capture_output=True, text=True).stdout.split()]
+    with subprocess.Popen([sys.executable, "-c", script], cwd=Path(__file__).parent.parent) as proc:
+        workers: list[int] = []
+        for _ in range(300):  # until both workers have forked (at most 30 s)
+            workers = [int(pid) for pid in subprocess.run(["pgrep", "-P", str(proc.pid)], capture_output=True, text=True).stdout.split()]
+            if len(workers) == 2:
+                break
+            time.sleep(0.1)
         proc.send_signal(signal.SIGKILL)
     assert len(workers) == 2
-    time.sleep(2.5)  # past the jobs' end
+    time.sleep(2.0)  # past the jobs' end, had they gone on
     assert not any(Path(mark).exists() for mark in marks)
     assert not any(_running(pid) for pid in workers)
 
