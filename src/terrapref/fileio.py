@@ -85,7 +85,25 @@ def new_folder(beside: Path, suffix: str) -> Path:
 
 def holds_nothing(folder: Path) -> bool:
     """Whether ``folder`` (one :func:`new_folder` made, or any) holds nothing written into it."""
-    return all(p.name == _SCRATCH_MARK for p in folder.iterdir())
+    return all(p.name in (_SCRATCH_MARK, _KEEP_MARK) for p in folder.iterdir())
+
+
+def keep_if_stopped(folder: Path) -> None:
+    """Mark a folder :func:`new_folder` made as worth keeping: one a killed command left (a
+    recording's frames, a person's driving among them) is moved to ``NAME.partial`` by the next
+    command that checks an output beside it, not removed."""
+    (Path(folder) / _KEEP_MARK).touch()
+
+
+def free_partial(target: str | Path) -> Path:
+    """Where an unfinished output of ``target`` is kept: ``TARGET.partial``, or, where an earlier
+    one is there, ``TARGET.partial-2``, ``-3`` and so on (an earlier one is never replaced)."""
+    target = Path(target)
+    partial, n = target.with_name(target.name + ".partial"), 1
+    while partial.exists() or partial.is_symlink():
+        n += 1
+        partial = target.with_name(f"{target.name}.partial-{n}")
+    return partial
 
 
 def release_folder(folder: Path, remove: bool = True) -> None:
@@ -103,6 +121,7 @@ def replace_dir(new: str | Path, target: str | Path) -> Path:
     kill between two renames, the next command puts the new one there), never half of either."""
     new, target = Path(new), Path(target)
     (new / _SCRATCH_MARK).unlink(missing_ok=True)  # a folder new_folder made is scratch no more
+    (new / _KEEP_MARK).unlink(missing_ok=True)
     with _folder_held(target.parent):
         _recover(target.parent)
         _swap(new, target)
@@ -302,6 +321,7 @@ _SWAPPING = ".swapping"  # a finished folder is put at NAME: holds new/ until it
 _JOURNAL = re.compile(r"\.(?P<name>.+)\.[a-z0-9_]{8}(?P<kind>\.replacing|\.swapping)")  # tempfile.mkdtemp's 8 characters
 _SCRATCH = re.compile(r"\.(?P<name>.+)\.[a-z0-9_]{8}(\.[a-z]+)?")  # new_folder's names (its mark inside says it is one)
 _SCRATCH_MARK = ".terrapref-scratch"
+_KEEP_MARK = ".terrapref-keep"  # a scratch folder a killed command left is kept as NAME.partial (keep_if_stopped)
 _HELD_SCRATCH: dict[Path, int] = {}  # the scratch folders this process made and holds, and their locks
 
 
@@ -388,7 +408,8 @@ def _scratch_folders(folder: Path) -> list[Path]:
 
 def _remove_scratch(folder: Path) -> None:
     """Remove the scratch folders (:func:`new_folder`) in ``folder`` that no command holds, each
-    said in one line on stderr: a killed command's unfinished output."""
+    said in one line on stderr: a killed command's unfinished output; one marked to keep
+    (:func:`keep_if_stopped`) is moved to ``NAME.partial`` (:func:`free_partial`) instead."""
     for path in _scratch_folders(folder):
         try:
             fd = _lock(path)
@@ -396,14 +417,20 @@ def _remove_scratch(folder: Path) -> None:
             continue
         if fd is None:  # its command is running
             continue
+        name = path.parent / _SCRATCH.fullmatch(path.name)["name"]
         try:
-            shutil.rmtree(path, ignore_errors=True)
+            if (path / _KEEP_MARK).is_file():  # a recording's frames: kept where a stopped one's are
+                kept = free_partial(name)
+                os.replace(path, kept)  # its name no scratch's from here on; then its marks go
+                for mark in (_SCRATCH_MARK, _KEEP_MARK):
+                    (kept / mark).unlink(missing_ok=True)
+                said = f"kept what a stopped command left unfinished as {kept}"
+            else:
+                shutil.rmtree(path, ignore_errors=True)
+                said = f"removed {path.name}, what a stopped command left unfinished"
         finally:
             os.close(fd)
-        print(
-            f"note: {path.parent / _SCRATCH.fullmatch(path.name)['name']}: removed {path.name}, what a stopped command left unfinished",
-            file=sys.stderr,
-        )
+        print(f"note: {name}: {said}", file=sys.stderr)
 
 
 def _begin(out: Path, force: bool, flag: str, running: bool) -> _Journal:
@@ -445,7 +472,7 @@ def _put_back(journal: Path, target: Path) -> str | None:
     old, fresh = journal / "old", journal / "fresh"
     if not old.exists() and not fresh.exists():  # complete, or never begun
         return None
-    partial = target.with_name(target.name + ".partial")
+    partial = free_partial(target)
     kept = target.is_dir() and any(target.iterdir())
     if kept:
         _swap(target, partial)

@@ -340,6 +340,38 @@ def test_force_keeps_the_old_recording_until_the_new_one_is_complete(tmp_path: P
     new = read_recording(out)
     assert new.complete and new.meta["scenario"] == "c" and len(new) == 1
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rec", "rec.partial"]
+    # Another that ends early is kept beside the first one, which it never replaces.
+    fourth = RecordingWriter(out, {"scenario": "d"}, {"name": "d"}, overwrite=True)
+    fourth.append(0.0, (0.0, 0.0, 0.0), np.ones((4, 4), np.uint8), (1.0, 0.0), 10)
+    fourth.abort()
+    assert fourth.partial_dir == tmp_path / "rec.partial-2" and len(read_recording(tmp_path / "rec.partial")) == 3
+
+
+def test_a_replacement_killed_outright_is_kept_as_a_partial_recording(tmp_path, capsys):
+    """`kill -9` of `record --force` or `drive --record --force` leaves its frames in a hidden
+    folder; the next command that writes beside it keeps them as OUT.partial, as a stopped
+    recording's are (they used to be removed: a person's driving among them)."""
+    from terrapref.demos.recording import RecordingWriter, read_recording
+    from terrapref.fileio import check_output
+
+    out = tmp_path / "rec"
+    first = RecordingWriter(out, {"scenario": "a"}, {"name": "a"})
+    first.append(0.0, (1.0, 2.0, 0.0), np.zeros((4, 4), np.uint8), (1.0, 0.0), 10)
+    first.close()
+    killed = (
+        "import os, sys, numpy as np; from terrapref.demos.recording import RecordingWriter\n"
+        f"w = RecordingWriter({str(out)!r}, {{'scenario': 'b'}}, {{'name': 'b'}}, overwrite=True)\n"
+        "for i in range(3): w.append(0.1 * i, (0.0, 0.0, 0.0), np.ones((4, 4), np.uint8), (1.0, 0.1), 11)\n"
+        "os._exit(9)  # killed: nothing of its own clean-up runs\n"
+    )
+    assert subprocess.run([sys.executable, "-c", killed]).returncode == 9
+    assert any(p.name.startswith(".rec.") for p in tmp_path.iterdir())
+    check_output(tmp_path / "other.safetensors", "--out")  # any command writing beside it
+    assert f"note: {out}: kept what a stopped command left unfinished as {out}.partial" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec", "rec.partial"]
+    kept = read_recording(tmp_path / "rec.partial")
+    assert not kept.complete and len(kept) == 3 and read_recording(out).meta["scenario"] == "a"
+    assert [p.name for p in (tmp_path / "rec.partial").iterdir() if p.name.startswith(".")] == []  # a plain recording
 
 
 def test_inspect_says_quit_and_not_reached(tmp_path: Path):

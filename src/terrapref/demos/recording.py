@@ -45,7 +45,7 @@ import yaml
 
 from terrapref.camera import SegmentationView, as_view
 from terrapref.errors import UserError, described, finite_number
-from terrapref.fileio import new_folder, release_folder, replace_dir, write_text_atomic
+from terrapref.fileio import free_partial, keep_if_stopped, new_folder, release_folder, replace_dir, write_text_atomic
 from terrapref.pngio import depth_to_millimetres, millimetres_to_depth, read_depth_png, read_label_png, write_png_atomic
 from terrapref.vehicle.ground import LEVEL, Attitude
 from terrapref.yamlio import dump_yaml, load_yaml_text
@@ -171,6 +171,8 @@ class RecordingWriter:
         except OSError as exc:
             raise OSError(exc.errno, exc.strerror or str(exc), str(self.dir / FRAMES)) from None
         self.count += 1
+        if self.count == 1 and self.dir != self.target:  # a replacement with a frame: kept if the command is killed
+            keep_if_stopped(self.dir)
 
     def _depth(self, view: SegmentationView) -> dict[str, Any]:
         """Write ``view``'s depth image (as whole millimetres) for the next frame; its line's entries."""
@@ -205,7 +207,7 @@ class RecordingWriter:
             release_folder(self.dir)
             return
         if self.dir != self.target:
-            self.dir = self.partial_dir = replace_dir(self.dir, self.target.with_name(self.target.name + ".partial"))
+            self.dir = self.partial_dir = replace_dir(self.dir, free_partial(self.target))
 
     def __enter__(self) -> RecordingWriter:
         return self
