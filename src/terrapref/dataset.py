@@ -552,8 +552,40 @@ def training_data(
     sets: list[tuple[str, Dataset]] = []
     if recordings:
         sets.append((str(recordings[0].path), build_dataset(recordings, features, rules=rules, progress=progress)))
-    sets += [(str(p), load_dataset(p)) for p in paths if not Path(p).is_dir()]
-    return merge_datasets(sets)
+    files = [(str(p), load_dataset(p)) for p in paths if not Path(p).is_dir()]
+    merged = merge_datasets(sets + files)
+    names = [str(r.path) for r in recordings]  # each drive by the input it came from
+    names += [f"{entry.get('path', 'a drive')} (in {name})" for name, d in files for entry in d.meta.get("recordings") or []]
+    check_distinct_drives(merged, names)
+    return merged
+
+
+def check_distinct_drives(data: Dataset, names: Sequence[str] = ()) -> None:
+    """Refuse one drive given twice under two names (a copy of a recording, or a recording beside
+    a dataset featurised from it): its samples would count twice, its intervals read twice as
+    tight, and its frames land in training and validation both. A drive is known by its samples;
+    ``names`` name the drives by their sources (default: the paths the dataset lists).
+
+    Raises:
+        UserError: naming the second of the two and the first.
+    """
+    names = list(names) or [str(r.get("path", "")) for r in data.meta.get("recordings") or []]
+
+    def name(i: int) -> str:
+        return names[i] if i < len(names) and names[i] else f"recording {i + 1}"
+
+    seen: dict[str, int] = {}
+    order = np.argsort(data.source, kind="stable")
+    for chunk in np.split(order, np.flatnonzero(np.diff(data.source[order])) + 1):
+        if not len(chunk):
+            continue
+        drive = hashlib.sha256(np.ascontiguousarray(data.U[chunk]).tobytes() + np.ascontiguousarray(data.labels[chunk]).tobytes())
+        i, key = int(data.source[chunk[0]]), drive.hexdigest()
+        if key in seen:
+            raise UserError(
+                name(i), f"holds the same drive as {name(seen[key])}: its frames would count twice; give each drive once", field="frames"
+            )
+        seen[key] = i
 
 
 def check_learnable(data: Dataset, source: str | Path) -> None:

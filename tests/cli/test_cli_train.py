@@ -91,6 +91,19 @@ def test_a_featurized_recording_trains_as_the_recording_does(tmp_path: Path, cap
     from_data, from_rec = load_model(tmp_path / "from_data.safetensors"), load_model(tmp_path / "from_rec.safetensors")
     assert [b["type"] for b in from_data.meta["rules"]] == ["second_stage", "offset", "speed"]
     assert from_data.meta["rules"] == from_rec.meta["rules"]
+    # One drive under two names (the recording beside its dataset, or a copy of it) would count twice: refused.
+    import shutil
+
+    shutil.copytree(rec, tmp_path / "copy")
+    capsys.readouterr()
+    for inputs, second, first in ((data, rec, "(in "), (rec, tmp_path / "copy", str(rec))):
+        assert main(["train", str(inputs), str(second), "--out", str(tmp_path / "twice.safetensors"), "--epochs", "1"]) == 2
+        error = capsys.readouterr().err.strip().splitlines()[-1]  # after the featurising's progress
+        assert error.startswith("error: ") and "holds the same drive as" in error and first in error and "Traceback" not in error
+    assert main(["featurize", str(rec), str(tmp_path / "copy"), "--out", str(tmp_path / "d2.safetensors")]) == 2
+    error = capsys.readouterr().err.strip().splitlines()[-1]
+    assert error.startswith(f"error: {tmp_path / 'copy'}: frames: holds the same drive as {rec}")
+    assert not (tmp_path / "twice.safetensors").exists() and not (tmp_path / "d2.safetensors").exists()
 
 
 def test_cli_train_on_two_dataset_files(tmp_path: Path, capsys):

@@ -337,7 +337,7 @@ def inspect_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_featurize(args: argparse.Namespace) -> int:
-    from terrapref.dataset import build_dataset, save_dataset
+    from terrapref.dataset import build_dataset, check_distinct_drives, save_dataset
     from terrapref.demos.recording import read_recording
     from terrapref.progress import Progress
 
@@ -361,6 +361,7 @@ def _cmd_featurize(args: argparse.Namespace) -> int:
     bar = Progress("featurize", len(recordings))
     dataset = build_dataset(recordings, features, camera, recipe.rules, progress=by_recording(bar))
     bar.close()
+    check_distinct_drives(dataset)
     save_dataset(dataset, args.out)
     print(f"wrote {args.out}: {len(dataset)} samples from {len(recordings)} recordings (fingerprint {dataset.fingerprint})")
     return 0
