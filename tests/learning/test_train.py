@@ -223,6 +223,10 @@ def test_a_diverged_fit_is_one_error_naming_the_model_and_leaves_nothing_behind(
         train_and_save(random_dataset(400), out, train_config(epochs=2, batch_size=64, hidden=16, lr=1e300))
     assert err.value.source == str(out) and "diverged" in str(err.value) and "--lr" in str(err.value)
     assert list(tmp_path.iterdir()) == []
+    # One that diverges with weights still finite: its loss gives it away (it was written, at chance).
+    with pytest.raises(UserError, match=r"diverged \(epoch \d's training loss is .*\); a smaller --lr may help") as err:
+        train_and_save(random_dataset(400), out, train_config(epochs=2, batch_size=64, hidden=16, lr=1e10))
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_train_and_save_without_checkpoints(tmp_path: Path):

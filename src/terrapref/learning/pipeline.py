@@ -86,6 +86,11 @@ def interrupted_path(out: str | Path) -> Path:
     return out.with_name(f"{out.stem}.interrupted{out.suffix}")
 
 
+# A training loss past this has diverged: a softmax over the 21 trajectories starts near ln 21 (3.0)
+# and a fit that merely overfits stays within tens; --lr 1e10 took it to 7.5e52 with finite weights.
+DIVERGED_LOSS = 1e3
+
+
 class _Checkpoints:
     """Every epoch written as it is made, into a fresh folder beside the model's; swapped in for
     the old one only when training completes, so a retrain never mixes two runs' checkpoints.
@@ -99,11 +104,11 @@ class _Checkpoints:
         self.best: dict[int, tuple[float, int, ClassifierConfig, dict]] = {}  # member -> (loss, epoch, classifier, weights)
 
     def __call__(self, member: int, classifier: ClassifierConfig, weights: dict, m: EpochMetrics) -> None:
-        if not all(np.isfinite(v).all() for v in weights.values()):  # diverged: nothing of it is worth keeping
+        finite = all(np.isfinite(v).all() for v in weights.values())
+        if not finite or not m.train_loss <= DIVERGED_LOSS:  # diverged: nothing of it is worth keeping
             which = f"member {member + 1}'s epoch {m.epoch}" if self.header.member_count != 1 else f"epoch {m.epoch}"
-            raise UserError(
-                str(self.out), f"not written: the fit diverged ({which}'s weights are not finite); a smaller --lr may help", field="--lr"
-            )
+            why = f"{which}'s weights are not finite" if not finite else f"{which}'s training loss is {m.train_loss:.3g}"
+            raise UserError(str(self.out), f"not written: the fit diverged ({why}); a smaller --lr may help", field="--lr")
         loss = m.val_loss if not math.isnan(m.val_loss) else m.train_loss
         if member not in self.best or loss < self.best[member][0]:
             self.best[member] = (loss, m.epoch, classifier, weights)
