@@ -411,6 +411,18 @@ def test_riding_along_records_only_the_takeover_and_train_accepts_it(tmp_path):
     assert main(["train", str(demo), str(out), "--out", str(tmp_path / "m2.safetensors"), "--epochs", "1"]) == 0
 
 
+def test_riding_along_without_taking_over_records_nothing_and_says_so(tmp_path):
+    """The planner drove the whole run: no correction, so no recording (it used to end in a
+    refusal that blamed a perception file or a drive ended before its first frame)."""
+    from helpers import linear_model
+
+    model = linear_model(tmp_path / "m.safetensors")
+    out = tmp_path / "corrections"
+    result, drivers, _ = ride_along(out, model, {40: [pygame.event.Event(pygame.QUIT)]})
+    assert set(drivers) == {"planner"} and result.frames == 0 and result.planner_frames == 40
+    assert result.record_dir is None and not out.exists()
+
+
 def test_riding_along_with_a_missing_model_is_one_line(tmp_path, capsys):
     from terrapref.cli import main
 
@@ -1061,3 +1073,13 @@ def test_on_relief_the_window_shows_the_bodys_attitude_and_warns_on_a_steep_bank
     assert re.fullmatch(r"roll 2[0-2] deg left side up \(tips at 25\), pitch \d deg nose (up|down) \(tips at 30\)", last.hud[-1])
     assert last.alerts[0].startswith("NEAR TIPPING: roll 2")
     assert len(np.unique(insets[-1], axis=0)) > 5  # grass lit, in shadow and flat: not the one colour of a flat map
+
+
+def test_a_set_speed_past_the_vehicles_is_refused_naming_the_flag(tmp_path, capsys):
+    from helpers import one_line_error
+    from terrapref.cli import main
+
+    for speed in ("0", "-1", "9"):
+        assert main(["drive", "demo_course", "--speed", speed, "--record", str(tmp_path / "rec")]) == 2
+        one_line_error(capsys, "--speed", "(0, 2] m/s")
+    assert not (tmp_path / "rec").exists()

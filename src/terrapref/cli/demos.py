@@ -184,6 +184,11 @@ def _cmd_drive(args: argparse.Namespace) -> int:
             check_table(args, riding, args.model)
     scenario = drivable(resolve_scenario(args.scenario, class_table(args) or riding))
     profile = PreferenceProfile.parse(args.profile, scenario.classes) if args.profile is not None else None
+    from terrapref.demos.session import DriveSetup
+
+    top = DriveSetup.of(scenario, person=True).sim.vehicle.max_speed_mps
+    if not 0.0 < args.speed <= top:
+        raise UserError("--speed", f"expected a speed in (0, {top:g}] m/s, the vehicle's top speed, got {args.speed:g}")
     if args.record is not None:
         check_output(args.record, "--record", [args.scenario, *([args.model] if args.model else [])], folder=True)
     perception = perception_model(args.perception, classes=scenario.classes)
@@ -211,6 +216,7 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     edge = f", {result.edge_frames} frames held at the map's edge (not recorded)" if result.edge_frames else ""
     edge += f", {result.pushes} push{'es' if result.pushes != 1 else ''} (--disturb 0: none)" if result.pushes else ""
     if args.model is not None:
+        where = where or (", so nothing was recorded" if args.record is not None else "")
         print(
             f"rode along: the planner drove {result.planner_frames} frames, you {result.frames} (corrections){where}; "
             f"{state}, {incidents(result)}{edge}"

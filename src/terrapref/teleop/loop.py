@@ -39,7 +39,7 @@ import math
 import os
 import sys
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -628,7 +628,11 @@ def run_session(scenario: Scenario | str, options: TeleopOptions) -> TeleopResul
         session.run(options.max_frames, options.script, options.realtime)
         end = session.show_end(options.screenshot)
         result = session.result(options.record_dir)
-        recorder.close(_summary(result))
+        if setup.planner is not None and writer is not None and writer.count == 0:  # rode along, never took over
+            writer.abort()  # no correction: no recording (an old one at the folder stays)
+            result = replace(result, record_dir=None)
+        else:
+            recorder.close(_summary(result))
         writer = None
         if options.realtime and end is not None:
             pygame.time.wait(1000)  # let the driver see how the run ended before the window closes
