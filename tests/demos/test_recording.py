@@ -439,6 +439,36 @@ def test_sigterm_during_record_force_says_so_and_keeps_the_old_recording(tmp_pat
     assert read_recording(tmp_path / "rec.partial").complete is False
 
 
+def test_a_first_recording_stopped_says_where_its_frames_are(tmp_path):
+    """Stopped (SIGTERM, as Ctrl-C), a first recording keeps its frames at OUT, marked partial,
+    and says so: it said only "terminated"."""
+    out = tmp_path / "rec"
+    command = [
+        sys.executable,
+        "-c",
+        "import sys; from terrapref.cli import main; sys.exit(main())",
+        "record",
+        "demo_course",
+        "--out",
+        str(out),
+        "--quiet",
+    ]
+    child = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        while not (out / "images").is_dir() or len(list((out / "images").glob("*.png"))) < 20:  # no time limit: 20 frames or an exit
+            if child.poll() is not None:
+                pytest.fail(f"the recorder exited ({child.returncode}) before 20 frames: {child.stderr.read()}")
+            time.sleep(0.005)
+        child.send_signal(signal.SIGTERM)
+        _, err = child.communicate()
+    finally:
+        child.kill()
+        child.wait()
+    kept = read_recording(out)
+    assert child.returncode == 143 and not kept.complete and len(kept) >= 20
+    assert re.search(rf"note: {re.escape(str(out))} keeps the \d+ frames recorded before it was stopped \(partial\)", err), err
+
+
 def test_a_run_stopped_before_its_first_frame_leaves_no_recording(tmp_path):
     out = tmp_path / "rec"
     writer = RecordingWriter(out, {"camera": {}}, {"format": "terrapref-scenario/1"})

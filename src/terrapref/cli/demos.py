@@ -74,8 +74,9 @@ def _cmd_record(args: argparse.Namespace) -> int:
             print(f"note: {args.out} keeps the recording it held", file=sys.stderr)
         elif writer.partial_dir is not None:
             print(f"note: {args.out} keeps the recording it held; the unfinished new one is in {writer.partial_dir}", file=sys.stderr)
-        elif isinstance(exc, OSError):
-            print(f"note: {args.out} keeps the {writer.count} frames recorded before the write failed (partial)", file=sys.stderr)
+        elif writer.count:  # a first recording: what was recorded stays, marked partial
+            why = "the write failed" if isinstance(exc, OSError) else "it was stopped"
+            print(f"note: {args.out} keeps the {writer.count} frames recorded before {why} (partial)", file=sys.stderr)
         raise
     bar.close("done")
     state = "reached the goal" if log.completed else "timed out"

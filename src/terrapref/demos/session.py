@@ -162,6 +162,8 @@ def abort_recording(writer: RecordingWriter) -> None:
     writer.abort()
     if writer.partial_dir is not None:
         print(f"note: {writer.target} keeps the recording it held; the unfinished new one is in {writer.partial_dir}", file=sys.stderr)
+    elif writer.count and writer.dir.exists():  # a first recording: what was recorded stays, marked partial
+        print(f"note: {writer.target} keeps the {writer.count} frames recorded before it was stopped (partial)", file=sys.stderr)
 
 
 def record_run(
