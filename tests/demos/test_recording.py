@@ -455,7 +455,9 @@ def test_a_first_recording_stopped_says_where_its_frames_are(tmp_path):
     ]
     child = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        while not (out / "images").is_dir() or len(list((out / "images").glob("*.png"))) < 20:  # no time limit: 20 frames or an exit
+        while (
+            not (out / "frames.jsonl").is_file() or (out / "frames.jsonl").read_text().count("\n") < 20
+        ):  # no time limit: 20 frames or an exit
             if child.poll() is not None:
                 pytest.fail(f"the recorder exited ({child.returncode}) before 20 frames: {child.stderr.read()}")
             time.sleep(0.005)
